@@ -21,15 +21,16 @@ import sympy as sp
 
 from modelgen.errors import ModelError
 
-# C99 keywords plus names the generated code itself uses; a state called
-# ``double`` or ``P`` would not compile or would shadow generated names.
+# C99 keywords: a state called ``double`` would not compile.  Names only ever
+# appear in generated code as struct members (params->name) or strings, so no
+# other name needs reserving; identifiers starting with an underscore are
+# reserved to the C implementation and refused.
 C_KEYWORDS = frozenset(
     """auto break case char const continue default do double else enum extern
     float for goto if inline int long register restrict return short signed
     sizeof static struct switch typedef union unsigned void volatile while
     _Bool _Complex _Imaginary""".split()
 )
-RESERVED_NAMES = frozenset({"P", "x", "z", "params", "status", "i", "j", "k", "n"})
 _IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 #: Functions an equation may use; anything else is an unknown symbol.
@@ -56,8 +57,8 @@ def check_identifier(name: str, where: str) -> None:
         raise ModelError(f"{where}: {name!r} is not a valid C identifier")
     if name in C_KEYWORDS or keyword.iskeyword(name):
         raise ModelError(f"{where}: {name!r} is a C or Python keyword")
-    if name in RESERVED_NAMES or name.startswith("mg_"):
-        raise ModelError(f"{where}: {name!r} is reserved by the generated code")
+    if name.startswith("_"):
+        raise ModelError(f"{where}: {name!r} starts with an underscore, which C reserves")
     if name in ALLOWED_FUNCTIONS:
         raise ModelError(f"{where}: {name!r} is the name of a function")
 
@@ -198,7 +199,7 @@ class ErrorModel:
         from a model file name the line.
         """
         where = _Locator(name, locations or {})
-        check_identifier(name, where("name", "model name"))
+        check_identifier(name, where("model", "model name"))
         states, noises, parameters = tuple(states), tuple(noises), tuple(parameters)
         measurements = tuple(measurements)
         if not states:
@@ -242,6 +243,10 @@ class ErrorModel:
             )
             for i, m in enumerate(measurements)
         }
+        for i, w in enumerate(noises):
+            _check_not_negative(noise_psd[w.name], where(f"noises[{i}].psd", f"noise {w.name!r} psd"))
+        for i, m in enumerate(measurements):
+            _check_not_negative(meas_var[m.name], where(f"measurements[{i}].variance", f"measurement {m.name!r} variance"))
         return cls(
             name=name,
             states=states,
@@ -301,6 +306,45 @@ def _check_declarations(
                 raise ModelError(f"{place}: value {p.value!r} is not finite")
 
 
+def _check_not_negative(statistic: sp.Expr, where: str) -> None:
+    """Refuse a power spectral density or variance that is a negative number."""
+    if statistic.is_number and statistic.is_negative:
+        raise ModelError(f"{where}: {statistic} is negative (a variance or spectral density must be >= 0)")
+
+
+#: Operators an equation may contain; anything else (attribute access, indexing,
+#: strings, keywords) is refused before the text reaches sympy's eval-based parser.
+_ALLOWED_OPERATORS = frozenset({"+", "-", "*", "/", "**", "(", ")", ","})
+
+
+def _check_tokens(text: str, where: str) -> None:
+    """Allow only names, numbers and arithmetic in equation text.
+
+    sympy's ``parse_expr`` evaluates its input as Python, so ``x.subs(...)``
+    or ``x.__class__`` in a model file would run.  A model file is data: only
+    identifiers, numbers and ``+ - * / ** ( ) ,`` may appear.
+    """
+    import io
+    import tokenize
+
+    try:
+        tokens = list(tokenize.generate_tokens(io.StringIO(text).readline))
+    except (tokenize.TokenError, SyntaxError, IndentationError) as exc:
+        raise ModelError(f"{where}: cannot parse {text!r} ({exc})") from None
+    skip = {tokenize.NEWLINE, tokenize.NL, tokenize.ENDMARKER, tokenize.INDENT, tokenize.DEDENT}
+    for tok in tokens:
+        if tok.type in skip or tok.type == tokenize.NUMBER:
+            continue
+        if tok.type == tokenize.NAME and not keyword.iskeyword(tok.string):
+            continue
+        if tok.type == tokenize.OP and tok.string in _ALLOWED_OPERATORS:
+            continue
+        raise ModelError(
+            f"{where}: {tok.string!r} is not allowed in {text!r} "
+            "(an expression may use only declared names, numbers, + - * / ** ( ) and functions)"
+        )
+
+
 def parse_expression(text: str | sp.Expr | float | int, namespace: Mapping[str, sp.Symbol], where: str) -> sp.Expr:
     """Parse an equation, refusing any symbol not in ``namespace``.
 
@@ -315,6 +359,7 @@ def parse_expression(text: str | sp.Expr | float | int, namespace: Mapping[str, 
     elif isinstance(text, str):
         from sympy.parsing.sympy_parser import parse_expr, standard_transformations
 
+        _check_tokens(text, where)
         local = dict(namespace)
         global_ns = {
             "Integer": sp.Integer,

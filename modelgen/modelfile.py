@@ -41,7 +41,13 @@ def _plain(node: yaml.Node, path: str, lines: dict[str, str], filename: str) -> 
         return out
     if isinstance(node, yaml.SequenceNode):
         return [_plain(item, f"{path}[{i}]", lines, filename) for i, item in enumerate(node.value)]
-    return yaml.SafeLoader(" ").construct_object(node) if node.tag != "tag:yaml.org,2002:str" else node.value
+    if node.tag == "tag:yaml.org,2002:str":
+        return node.value
+    try:
+        return yaml.SafeLoader(" ").construct_object(node)
+    except yaml.YAMLError as exc:  # e.g. an unknown tag such as !!python/object
+        problem = getattr(exc, "problem", None) or exc
+        raise ModelError(f"{filename}:{node.start_mark.line + 1}: key {path!r}: {problem}") from None
 
 
 def load_model_text(text: str, filename: str = "<model>") -> ErrorModel:
@@ -49,6 +55,10 @@ def load_model_text(text: str, filename: str = "<model>") -> ErrorModel:
     try:
         root = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        if mark is not None:
+            problem = " ".join(str(p) for p in (getattr(exc, "context", None), getattr(exc, "problem", None)) if p)
+            raise ModelError(f"{filename}:{mark.line + 1}: not valid YAML ({problem}, column {mark.column + 1})") from None
         raise ModelError(f"{filename}: not valid YAML ({exc})") from None
     if not isinstance(root, yaml.MappingNode):
         raise ModelError(f"{filename}: a model file must be a mapping with keys {sorted(_TOP_KEYS)}")
@@ -76,9 +86,14 @@ def load_model_text(text: str, filename: str = "<model>") -> ErrorModel:
                 raise ModelError(f"{place}: {key}[{i}] has unknown field {extra[0]!r} (allowed: {sorted(fields)})")
             if key == "parameters" and "value" in entry and not _is_number(entry["value"]):
                 raise ModelError(f"{place}: parameter {entry['name']!r} value {entry['value']!r} is not a number")
+            if key == "measurements" and "expression" not in entry:
+                raise ModelError(f"{place}: measurement {entry['name']!r} has no 'expression'")
             if key == "noises" and "psd" in entry and isinstance(entry["psd"], bool):
                 raise ModelError(f"{place}: noise {entry['name']!r} psd {entry['psd']!r} is not numeric")
-            fields_in = {k: (str(v) if k in {"psd", "expression", "variance"} else v) for k, v in entry.items()}
+            fields_in = {
+                k: (_scalar_text(v, lines.get(f"{key}[{i}].{k}", place), f"{key}[{i}].{k}") if k in {"psd", "expression", "variance"} else v)
+                for k, v in entry.items()
+            }
             if "value" in fields_in:
                 fields_in["value"] = float(fields_in["value"])
             built.append(cls(**fields_in))
@@ -87,7 +102,7 @@ def load_model_text(text: str, filename: str = "<model>") -> ErrorModel:
     dynamics = data["dynamics"]
     if not isinstance(dynamics, dict):
         raise ModelError(f"{lines['dynamics']}: 'dynamics' must map each state to its right-hand side")
-    dynamics = {k: (str(v) if not isinstance(v, str) else v) for k, v in dynamics.items()}
+    dynamics = {k: _scalar_text(v, lines.get(f"dynamics.{k}", filename), f"dynamics.{k}") for k, v in dynamics.items()}
     notes = data.get("notes") or []
     return ErrorModel.build(
         name=str(data["model"]),
@@ -102,6 +117,16 @@ def load_model_text(text: str, filename: str = "<model>") -> ErrorModel:
         notes=[str(n) for n in notes] if isinstance(notes, list) else [str(notes)],
         locations=lines,
     )
+
+
+def _scalar_text(value: Any, place: str, key: str) -> str:
+    """The text of one scalar expression; a list, mapping or empty value is refused."""
+    if value is None or (isinstance(value, str) and not value.strip()):
+        raise ModelError(f"{place}: {key!r} is empty (expected one expression)")
+    if isinstance(value, (list, dict)):
+        kind = f"a list of {len(value)} items" if isinstance(value, list) else "a mapping"
+        raise ModelError(f"{place}: {key!r} is {kind}; dimension mismatch (expected one scalar expression)")
+    return value if isinstance(value, str) else str(value)
 
 
 def _is_number(value: Any) -> bool:

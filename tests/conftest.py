@@ -1,0 +1,46 @@
+"""Shared fixtures: the paper's model, derived once per session."""
+
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def paper_model():
+    from modelgen.modelfile import load_model
+
+    return load_model("ned_doppler18")
+
+
+@pytest.fixture(scope="session")
+def paper_derived(paper_model):
+    from modelgen.derivation import derive
+
+    return derive(paper_model)
+
+
+@pytest.fixture(scope="session")
+def level_flight():
+    """Seed 000's level-flight operating point (east at 30 N), with Table 1 statistics."""
+    import numpy as np
+
+    values = dict(
+        latitude=np.radians(30.0),
+        velocity_north=0.0,
+        velocity_east=500 / 3.6,
+        velocity_down=0.0,
+        specific_force_north=0.0,
+        specific_force_east=0.0,
+        specific_force_down=-9.78,
+        c11=0.0, c12=-1.0, c13=0.0, c21=1.0, c22=0.0, c23=0.0, c31=0.0, c32=0.0, c33=1.0,
+    )
+    for axis in "xyz":
+        values[f"gyro_markov_rate_{axis}"] = 1 / 3600
+        values[f"gyro_markov_sigma_{axis}"] = np.radians(0.1) / 3600
+        values[f"accel_markov_rate_{axis}"] = 1 / 1800
+        values[f"accel_markov_sigma_{axis}"] = 9.78e-4
+    values["doppler_noise_sigma_north"] = 0.5
+    values["doppler_noise_sigma_east"] = 0.5
+    return values
