@@ -49,7 +49,8 @@ class DerivedModel:
     def structure(self, matrix: str) -> np.ndarray:
         """Boolean mask of the structurally nonzero entries of F, G or H."""
         m = getattr(self, matrix)
-        return np.array([[m[i, j] != 0 for j in range(m.shape[1])] for i in range(m.shape[0])], dtype=bool)
+        mask = [[m[i, j] != 0 for j in range(m.shape[1])] for i in range(m.shape[0])]
+        return np.array(mask, dtype=bool).reshape(m.shape)
 
     @cached_property
     def _numeric(self) -> Callable[..., tuple]:

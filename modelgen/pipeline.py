@@ -57,9 +57,12 @@ def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -
 
 def paper_scenario(derived: DerivedModel) -> Scenario:
     """Seed 000's 4-hour scenario: level flight, Table 1 errors, T = 60 s."""
-    from modelgen.analysis.scenario import paper_check_scenario
+    from modelgen.analysis.budget import load_error_budget
+    from modelgen.analysis.scenario import load_scenario, operating_point
 
-    return paper_check_scenario(derived)
+    flight, budget = load_scenario(), load_error_budget()
+    values = {**budget.parameters, **operating_point(flight)}
+    return Scenario(values, budget.initial_covariance(derived.model), step=flight.step_s, steps=flight.steps)
 
 
 def check(
