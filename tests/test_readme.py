@@ -1,0 +1,33 @@
+"""The README's model example works as documented, and so does its error message."""
+
+import re
+
+from click.testing import CliRunner
+
+from modelgen.cli import main
+
+from conftest import REPO
+
+
+def readme_model() -> str:
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    return re.search(r"```yaml\n(.*?)```", text, re.S).group(1)
+
+
+def test_readme_example_generates_and_passes_the_compiled_check(tmp_path):
+    path = tmp_path / "schuler_loop.yaml"
+    path.write_text(readme_model())
+    result = CliRunner().invoke(main, ["generate", str(path), "--out", str(tmp_path / "gen"), "--check"])
+    assert result.exit_code == 0, result.output
+    assert "check c" in result.output and "FAILED" not in result.output
+    assert (tmp_path / "gen" / "schuler_loop" / "schuler_loop.c").is_file()
+
+
+def test_readme_error_message_is_what_modelgen_prints(tmp_path):
+    path = tmp_path / "schuler_loop.yaml"
+    path.write_text(readme_model().replace("dV_n: g*phi_e + nabla", "dV_n: g*phi_e + nablaa"))
+    result = CliRunner().invoke(main, ["generate", str(path), "--out", str(tmp_path / "gen")])
+    assert result.exit_code == 2
+    documented = re.search(r"modelgen: error: schuler_loop\.yaml:(\d+): (.*)", (REPO / "README.md").read_text()).groups()
+    assert f"{path}:{documented[0]}: {documented[1]}" in result.output
+    assert not (tmp_path / "gen").exists()
