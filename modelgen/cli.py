@@ -94,6 +94,58 @@ def generate(models: tuple[str, ...], out_root: str, taylor_order: int, scalar: 
 
 
 @main.command()
+@click.option("--out", "out_root", default="generated", show_default=True, type=click.Path(file_okay=False), help="Root folder for generated code.")
+@click.option("--report", "report_dir", default="report", show_default=True, type=click.Path(file_okay=False), help="Folder for the reports.")
+@click.option("--no-figures", is_flag=True, help="Skip the covariance-analysis figures.")
+def run(out_root: str, report_dir: str, no_figures: bool) -> None:
+    """The main job, end to end on the core paper's 18-state model.
+
+    Derives the model, verifies it entry by entry against the paper's table,
+    generates Python and C for every built-in model into OUT/<model>/,
+    compiles the C strictly and checks both against the numpy reference, runs
+    the paper's covariance analysis (Table 2, Figs 2-7) and writes
+    REPORT/README.md with links to everything.
+    """
+    from pathlib import Path
+
+    from modelgen.analysis.report import run_covariance_analysis
+    from modelgen.derivation import derive as derive_model
+    from modelgen.modelfile import load_model
+    from modelgen.pipeline import generate_and_check_all, run_report, write_text_atomically
+    from modelgen.verification import verify as verify_model, write_verification_report
+
+    report = Path(report_dir)
+    try:
+        click.echo("derive ned_doppler18 ...")
+        derived = derive_model(load_model("ned_doppler18"))
+        click.echo("verify against the paper's table ...")
+        result = verify_model(derived)
+        md, js = write_verification_report(result, report)
+        counts = result.counts()
+        summary = (
+            f"{len(result.entries)} entries: "
+            + ", ".join(f"{counts[k]} {k}" for k in counts)
+            + f"; {len(result.unexplained)} unexplained. Differences:\n\n"
+            + "\n".join(f"- {e.matrix}({e.row},{e.column}) {e.status}: {e.classification} - {e.reason}" for e in result.differences)
+            + f"\n\nFull report: [{md.name}]({md.name}), machine-readable: [{js.name}]({js.name})."
+        )
+        runs = generate_and_check_all(Path(out_root), progress=click.echo)
+        click.echo("covariance analysis (Table 2, Figs 2-7) ...")
+        analysis = run_covariance_analysis(report / "covariance", figures=not no_figures, progress=click.echo)
+        section = "## Covariance analysis (Table 2 analogue)\n\n" + analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)"
+        text = run_report(summary, runs, Path(out_root), [section])
+        write_text_atomically(report / "README.md", text)
+    except ModelError as exc:
+        fail(exc)
+    click.echo(text)
+    failed = [r.generation.derived.model.name for r in runs if not r.passed]
+    if failed or result.unexplained:
+        click.echo(f"modelgen run: FAILED ({', '.join(failed) or 'unexplained paper differences'})", err=True)
+        sys.exit(1)
+    click.echo(f"modelgen run: ok; report in {report / 'README.md'}, code in {out_root}/")
+
+
+@main.command()
 @click.argument("model", default="ned_doppler18")
 @click.option("--out", "out_dir", default="report", show_default=True, type=click.Path(file_okay=False), help="Folder for verification.md and verification.json.")
 def verify(model: str, out_dir: str) -> None:
@@ -132,6 +184,57 @@ def verify(model: str, out_dir: str) -> None:
     if result.unexplained:
         click.echo(f"{len(result.unexplained)} unexplained difference(s)", err=True)
         sys.exit(1)
+
+
+@main.command()
+@click.argument("model", default="ned_doppler18")
+@click.option("--scenario", "scenario_file", type=click.Path(dir_okay=False), help="Scenario YAML: step, parameters, steps or segments.")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Parameter value for every segment (repeatable; overrides the scenario file).")
+@click.option("--step", type=float, default=None, help="Step T in seconds (default: the scenario's, else 60).")
+@click.option("--steps", type=int, default=None, help="Steps of a one-segment scenario (default: the scenario's, else the number of states).")
+@click.option("--weak", "weak_rtol", type=float, default=1e-3, show_default=True, help="Relative singular value below which a direction is weakly observable.")
+def observability(model: str, scenario_file: str | None, assignments: tuple[str, ...], step: float | None, steps: int | None, weak_rtol: float) -> None:
+    """Rank of MODEL's observability matrix over a scenario, and the directions it cannot see.
+
+    Builds O = [H; H Phi; H Phi^2; ...] from the derived F and H at the
+    scenario's operating point(s) and names the unobservable and weakly
+    observable directions as combinations of states.
+    """
+    from modelgen.derivation import derive as derive_model
+    from modelgen.modelfile import load_model
+    from modelgen.observability import analyse, command_line_scenario, format_report
+
+    try:
+        derived = derive_model(load_model(model))
+        scenario = command_line_scenario(scenario_file, assignments, step, steps, default_steps=derived.n_states)
+        report = analyse(derived, scenario, weak_rtol=weak_rtol)
+    except ModelError as exc:
+        fail(exc)
+    click.echo(format_report(report))
+
+
+
+@main.command()
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="report/covariance", show_default=True, help="Directory for table2.md, table2.csv and the Fig 2-7 PNGs.")
+@click.option("--no-figures", is_flag=True, help="Skip the PNG figures.")
+@click.option("--no-sensitivity", is_flag=True, help="Skip the sensitivity study.")
+def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool) -> None:
+    """Reproduce the core paper's covariance analysis: Table 2 and Figs 2-7.
+
+    Pure inertial (16 states), optimal Doppler-aided filter (18 states) and the
+    four suboptimal filters (true covariance against the 18-state truth model);
+    prints our Table 2 beside the paper's with the ratio ours/paper.
+    """
+    from modelgen.analysis.report import run_covariance_analysis
+
+    try:
+        report = run_covariance_analysis(
+            out_dir, sensitivity=not no_sensitivity, figures=not no_figures, progress=lambda m: click.echo(m, err=True)
+        )
+    except ModelError as exc:
+        fail(exc)
+    click.echo(report.table)
+    click.echo("wrote " + ", ".join(str(p) for p in report.files))
 
 
 if __name__ == "__main__":
