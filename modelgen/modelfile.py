@@ -64,6 +64,10 @@ def load_model_text(text: str, filename: str = "<model>") -> ErrorModel:
         raise ModelError(f"{filename}: a model file must be a mapping with keys {sorted(_TOP_KEYS)}")
     lines: dict[str, str] = {}
     data = _plain(root, "", lines, filename)
+    if "base" in data:  # a new state set made from another model (modelgen.transform_file)
+        from modelgen.transform_file import load_transformed_model
+
+        return load_transformed_model(data, lines, filename, load_model)
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
         raise ModelError(f"{lines[unknown[0]]}: unknown key {unknown[0]!r} (expected one of {sorted(_TOP_KEYS)})")
