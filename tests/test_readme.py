@@ -31,3 +31,15 @@ def test_readme_error_message_is_what_modelgen_prints(tmp_path):
     documented = re.search(r"modelgen: error: schuler_loop\.yaml:(\d+): (.*)", (REPO / "README.md").read_text()).groups()
     assert f"{path}:{documented[0]}: {documented[1]}" in result.output
     assert not (tmp_path / "gen").exists()
+
+
+def test_readme_transform_example_builds_a_14_state_model(tmp_path):
+    from modelgen.derivation import derive
+    from modelgen.modelfile import load_model
+
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    example = re.findall(r"```yaml\n(.*?)```", text, re.S)[1]
+    path = tmp_path / "reduced.yaml"
+    path.write_text(example)
+    derived = derive(load_model(path))
+    assert derived.n_states == 14 and derived.model.state_names[-1] == "doppler_scale_factor"
