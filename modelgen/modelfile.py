@@ -92,6 +92,8 @@ def load_model_text(text: str, filename: str = "<model>") -> ErrorModel:
                 raise ModelError(f"{place}: parameter {entry['name']!r} value {entry['value']!r} is not a number")
             if key == "measurements" and "expression" not in entry:
                 raise ModelError(f"{place}: measurement {entry['name']!r} has no 'expression'")
+            if key == "noises" and "psd" not in entry:
+                raise ModelError(f"{place}: noise {entry['name']!r} has no 'psd' (its power spectral density)")
             if key == "noises" and "psd" in entry and isinstance(entry["psd"], bool):
                 raise ModelError(f"{place}: noise {entry['name']!r} psd {entry['psd']!r} is not numeric")
             fields_in = {
