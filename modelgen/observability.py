@@ -173,13 +173,15 @@ def command_line_scenario(
     step: float | None = None,
     steps: int | None = None,
     default_steps: int = 1,
+    base_values: Mapping[str, float] | None = None,
 ) -> Scenario:
     """The scenario of ``modelgen observability``: a file, overridden by options.
 
     ``assignments`` are ``NAME=VALUE`` strings applied to every segment;
     ``step`` and ``steps`` replace the file's (``steps`` only for a
     one-segment scenario).  Without a file: one segment of ``default_steps``
-    steps of 60 s unless given.
+    steps of 60 s unless given, at ``base_values`` (e.g. the paper's level
+    flight) overridden by the assignments.
     """
     overrides: dict[str, float] = {}
     for text in assignments:
@@ -190,7 +192,7 @@ def command_line_scenario(
             overrides[name.strip()] = float(value)
         except ValueError:
             raise ModelError(f"--set {text!r}: expected NAME=VALUE with a number as VALUE") from None
-    base = load_scenario(path) if path is not None else single_segment({}, 60.0, default_steps)
+    base = load_scenario(path) if path is not None else single_segment(dict(base_values or {}), 60.0, default_steps)
     if steps is not None and len(base.segments) > 1:
         raise ModelError("--steps applies to a one-segment scenario; this scenario has segments")
     new_step = _positive_number(step, "--step") if step is not None else base.step
