@@ -289,6 +289,14 @@ def test_cli_reports_rank_and_names_longitude_for_the_doppler_model(tmp_path, ne
 
 
 def test_cli_missing_operating_point_is_an_error_naming_the_parameter():
-    result = CliRunner().invoke(main, ["observability", "ned_doppler18"])
+    result = CliRunner().invoke(main, ["observability", "ins_gps15"])
     assert result.exit_code == 2
-    assert "latitude" in result.output
+    assert "no value for parameter" in result.output
+
+
+def test_cli_defaults_to_the_papers_level_flight_for_the_paper_model():
+    result = CliRunner().invoke(main, ["observability", "ned_doppler18"])
+    assert result.exit_code == 0, result.output
+    assert "level flight" in result.output
+    assert "rank of the observability matrix: 12 of 18" in result.output
+    assert "+1.000*longitude_error" in result.output
