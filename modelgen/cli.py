@@ -20,6 +20,15 @@ def main() -> None:
     """Turn inertial-navigation error models into verified Kalman-filter code."""
 
 
+def _paper_operating_point(derived) -> dict[str, float] | None:
+    """The paper's level-flight values, when they cover every parameter of the model."""
+    from modelgen.pipeline import paper_scenario
+
+    values = dict(paper_scenario(derived).parameters) if derived.model.frame == "NED" else {}
+    needed = {p.name for p in derived.model.parameters if p.value is None}
+    return values if values and needed <= set(values) else None
+
+
 def fail(exc: Exception) -> None:
     """Print a bad-input error the way a user wants to read it, and exit 2."""
     click.echo(f"modelgen: error: {exc}", err=True)
@@ -206,7 +215,12 @@ def observability(model: str, scenario_file: str | None, assignments: tuple[str,
 
     try:
         derived = derive_model(load_model(model))
-        scenario = command_line_scenario(scenario_file, assignments, step, steps, default_steps=derived.n_states)
+        base = _paper_operating_point(derived) if scenario_file is None else None
+        if base:
+            click.echo("scenario: the core paper's level flight (30 N, east, 300 km/h, Table 1 statistics)")
+        scenario = command_line_scenario(
+            scenario_file, assignments, step, steps, default_steps=derived.n_states, base_values=base
+        )
         report = analyse(derived, scenario, weak_rtol=weak_rtol)
     except ModelError as exc:
         fail(exc)
@@ -235,6 +249,33 @@ def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool) -> None:
         fail(exc)
     click.echo(report.table)
     click.echo("wrote " + ", ".join(str(p) for p in report.files))
+
+
+@main.command()
+@click.option("--profile", default="profile_000", show_default=True, help="Scenario file, or a built-in one (modelgen/data/profile_*.yaml).")
+@click.option("--hours", type=float, default=None, help="Fly only the first HOURS of the profile (default: all of it).")
+@click.option("--runs", type=int, default=20, show_default=True, help="Monte Carlo runs (0: none).")
+@click.option("--imu-rate", type=float, default=None, help="IMU rate in Hz (default: the scenario's).")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="report/simulation", show_default=True, help="Directory for summary.md and the PNG figures.")
+def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | None, seed: int, out_dir: str) -> None:
+    """Fly a scenario: truth, IMU/Doppler/GPS, strapdown, filter in three correction modes, Monte Carlo.
+
+    Writes summary.md (errors per correction mode, NEES test, timings) and PNG figures.
+    """
+    from modelgen.simulation.report import simulate as run_simulation
+    from modelgen.simulation.scenario import load_scenario
+
+    try:
+        scenario = load_scenario(profile)
+        changes = {"imu_rate": imu_rate} if imu_rate else {}
+        if hours is not None:
+            changes["hours"] = hours
+        summary = run_simulation(scenario.with_changes(**changes), out_dir, runs=runs, seed=seed,
+                                 echo=lambda m: click.echo(m, err=True))
+    except ModelError as exc:
+        fail(exc)
+    click.echo(f"wrote {summary}")
 
 
 if __name__ == "__main__":

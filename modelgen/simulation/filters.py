@@ -1,0 +1,258 @@
+"""The Kalman filters the integration can run, behind one small protocol.
+
+The integration (``modelgen.simulation.integration``) needs only this from a
+filter:
+
+    transition(parameters, period) -> (Phi, Qd)   discretize F, G, Q at an operating point
+    predict(Phi, Qd)                               x = Phi x, P = Phi P Phi^T + Qd
+    update(z, H, R)                                Joseph-form update; raises ModelError
+                                                   on a refused input, state unchanged
+    state, covariance                              copies of x and P
+    set_state(x)                                   overwrite x (closed-loop reset)
+
+Three implementations plug in:
+
+* :class:`ReferenceFilter` -- ``modelgen.reference`` (dense numpy) with
+  ``modelgen.discretization`` and ``modelgen.derivation``;
+* :class:`GeneratedPythonFilter` -- a module written by ``modelgen generate``
+  (``generated/<model>/<model>.py``: parameter_vector, system_matrix,
+  noise_input_matrix, noise_psd, discretize, predict, update);
+* :class:`GeneratedCFilter` -- the compiled generated C (``<model>.c``) through
+  ``modelgen.codegen.build.CompiledFilter`` (ctypes).  The C update takes H and
+  R from its own matrices, evaluated at the parameters of the last
+  :meth:`transition`, which is where the integration also takes H and R from.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping, Protocol
+
+import numpy as np
+
+from modelgen import reference
+from modelgen.derivation import DerivedModel, parameter_vector
+from modelgen.discretization import taylor_discretization, taylor_process_noise
+from modelgen.errors import ModelError
+
+
+class KalmanFilter(Protocol):
+    """What the integration needs from a filter (see the module docstring)."""
+
+    def transition(self, parameters: Mapping[str, float], period: float) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def predict(self, transition_matrix: np.ndarray, process_noise: np.ndarray) -> None: ...
+
+    def update(self, measurement: np.ndarray, measurement_matrix: np.ndarray, measurement_noise: np.ndarray) -> None: ...
+
+    @property
+    def state(self) -> np.ndarray: ...
+
+    @property
+    def covariance(self) -> np.ndarray: ...
+
+    def set_state(self, x: np.ndarray) -> None: ...
+
+
+def check_finite_measurement(z: np.ndarray, H: np.ndarray, R: np.ndarray, where: str) -> None:
+    """Refuse a measurement that would poison the filter (NaN/inf anywhere)."""
+    for label, value in (("measurement", z), ("measurement matrix", H), ("measurement noise", R)):
+        if not np.all(np.isfinite(value)):
+            raise ModelError(f"{where}: non-finite {label} refused ({np.asarray(value).ravel()[:6]}...)")
+
+
+class ReferenceFilter:
+    """Dense numpy filter: derivation + Taylor discretization + modelgen.reference."""
+
+    name = "reference"
+
+    def __init__(self, derived: DerivedModel, x0: np.ndarray, P0: np.ndarray, taylor_order: int = 9):
+        self.derived = derived
+        self.matrices = ModelMatrices(derived)
+        self.taylor_order = taylor_order
+        self._x = np.array(x0, float)
+        self._P = np.array(P0, float)
+
+    def transition(self, parameters, period):
+        m = self.matrices(parameters)
+        phi, gamma = taylor_discretization(m["F"], m["G"], period, self.taylor_order)
+        return phi, taylor_process_noise(gamma, m["Q"], period)
+
+    def predict(self, transition_matrix, process_noise):
+        self._x = transition_matrix @ self._x
+        P = reference.predict_covariance(self._P, transition_matrix, process_noise)
+        self._P = 0.5 * (P + P.T)
+
+    def update(self, measurement, measurement_matrix, measurement_noise):
+        check_finite_measurement(measurement, measurement_matrix, measurement_noise, "reference filter")
+        x, P = reference.update(self._x, self._P, measurement, measurement_matrix, measurement_noise)
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+            raise ModelError("reference filter: update produced non-finite values; state kept")
+        self._x, self._P = x, 0.5 * (P + P.T)
+
+    @property
+    def state(self):
+        return self._x.copy()
+
+    @property
+    def covariance(self):
+        return self._P.copy()
+
+    def set_state(self, x):
+        self._x = np.array(x, float)
+
+
+class GeneratedPythonFilter:
+    """The generated Python module (``modelgen generate``) behind the protocol."""
+
+    name = "generated-python"
+
+    def __init__(self, module, x0: np.ndarray, P0: np.ndarray):
+        for needed in ("parameter_vector", "system_matrix", "noise_input_matrix", "noise_psd", "discretize",
+                       "predict", "update", "measurement_variance"):
+            if not hasattr(module, needed):
+                raise ModelError(f"generated module {getattr(module, '__name__', module)!r} lacks {needed}()")
+        self.module = module
+        self._x = np.array(x0, float)
+        self._P = np.array(P0, float)
+
+    @classmethod
+    def from_file(cls, path: str | Path, x0, P0) -> "GeneratedPythonFilter":
+        from modelgen.codegen.build import load_python_module  # sibling of simulation in the chain
+
+        return cls(load_python_module(Path(path)), x0, P0)
+
+    def transition(self, parameters, period):
+        g = self.module
+        p = g.parameter_vector({k: v for k, v in parameters.items() if k in g.PARAMETER_NAMES})
+        return g.discretize(g.system_matrix(p), g.noise_input_matrix(p), g.noise_psd(p), period)
+
+    def predict(self, transition_matrix, process_noise):
+        self._x, self._P = self.module.predict(self._x, self._P, transition_matrix, process_noise)
+
+    def update(self, measurement, measurement_matrix, measurement_noise):
+        check_finite_measurement(measurement, measurement_matrix, measurement_noise, "generated Python filter")
+        try:
+            self._x, self._P = self.module.update(self._x, self._P, np.asarray(measurement, float),
+                                                  measurement_matrix, np.diag(measurement_noise).copy())
+        except ValueError as exc:
+            raise ModelError(f"generated Python filter refused the update: {exc}") from None
+
+    @property
+    def state(self):
+        return self._x.copy()
+
+    @property
+    def covariance(self):
+        return self._P.copy()
+
+    def set_state(self, x):
+        self._x = np.array(x, float)
+
+
+class GeneratedCFilter:
+    """The compiled generated C filter (ctypes, ``modelgen.codegen.build``) behind the protocol.
+
+    The C computes its own transition in :meth:`transition` (matrices_evaluate +
+    discretize); :meth:`predict` applies that transition.  Its update uses H and
+    R from the same evaluated matrices, so every model measurement must be
+    present (a subset of rows is refused).
+    """
+
+    name = "generated-c"
+
+    def __init__(self, compiled, x0: np.ndarray, P0: np.ndarray):
+        self.compiled = compiled
+        self._last_transition: np.ndarray | None = None
+        status = self.compiled.set_state(np.asarray(x0, float), np.asarray(P0, float))
+        if status:
+            raise ModelError(f"generated C filter refused the initial covariance (status {status})")
+
+    @classmethod
+    def from_folder(cls, folder: str | Path, derived: DerivedModel, x0, P0, build_dir: str | Path | None = None,
+                    options=None):
+        from modelgen.codegen.build import build_c_filter  # sibling of simulation in the chain
+
+        sizes = {
+            "n": derived.n_states,
+            "nw": derived.n_noises,
+            "nm": derived.n_measurements,
+            "nnz_f": int(derived.structure("F").sum()),
+            "nnz_g": int(derived.structure("G").sum()),
+            "nnz_h": int(derived.structure("H").sum()),
+        }
+        model = derived.model
+        compiled = build_c_filter(Path(folder), model.name, sizes, model.parameter_names,
+                                  Path(build_dir) if build_dir else None, options=options)
+        return cls(compiled, x0, P0)
+
+    def transition(self, parameters, period):
+        known = {name for name, _ in self.compiled.params._fields_}
+        self.compiled.set_parameters({k: float(v) for k, v in parameters.items() if k in known})
+        status = self.compiled.discretize(period)
+        if status != 0:
+            raise ModelError(f"generated C filter refused the step T = {period} (status {status})")
+        self._last_transition = self.compiled.Phi
+        return self._last_transition, self.compiled.Qd
+
+    def predict(self, transition_matrix, process_noise):
+        if self._last_transition is None or not np.array_equal(transition_matrix, self._last_transition):
+            raise ModelError("generated C filter: predict() applies the transition computed by its own transition()")
+        status = self.compiled.predict()
+        if status:
+            raise ModelError(f"generated C filter: predict returned status {status}")
+
+    def update(self, measurement, measurement_matrix, measurement_noise):
+        check_finite_measurement(measurement, measurement_matrix, measurement_noise, "generated C filter")
+        if len(measurement) != self.compiled.nm:
+            raise ModelError(f"generated C filter: needs all {self.compiled.nm} measurements, got {len(measurement)}")
+        status = self.compiled.update(np.asarray(measurement, float))
+        if status != 0:
+            raise ModelError(f"generated C filter refused the update (status {status}); state kept")
+
+    @property
+    def state(self):
+        return self.compiled.x
+
+    @property
+    def covariance(self):
+        return self.compiled.P
+
+    def set_state(self, x):
+        self.compiled.set_state(np.asarray(x, float), self.compiled.P)
+
+
+def named_parameters(derived: DerivedModel, available: Mapping[str, float], validate: bool = True) -> dict[str, float]:
+    """The model's parameters from a larger vocabulary; a missing one is refused by name."""
+    chosen = {name: available[name] for name in derived.model.parameter_names if name in available}
+    if validate:
+        parameter_vector(derived.model, chosen)  # raises ModelError naming any parameter without a value
+    return chosen
+
+
+class ModelMatrices:
+    """F, G, Q, H, R of a derived model as a fast function of a parameter mapping.
+
+    ``DerivedModel.numeric`` validates its input on every call; a filter cycle
+    evaluates the matrices thousands of times with parameters already checked
+    once (:func:`named_parameters`), so this compiles the same expressions once
+    (sympy lambdify with common subexpressions) and only looks values up.
+    """
+
+    def __init__(self, derived: DerivedModel):
+        import sympy as sp
+
+        model = derived.model
+        self.derived = derived
+        self.names = model.parameter_names
+        self.defaults = model.parameter_defaults()
+        self.shapes = [derived.F.shape, derived.G.shape, derived.Q.shape, derived.H.shape, derived.R.shape]
+        self._function = sp.lambdify(model.parameter_symbols, [derived.F, derived.G, derived.Q, derived.H, derived.R],
+                                     modules="numpy", cse=True)
+
+    def __call__(self, values: Mapping[str, float]) -> dict[str, np.ndarray]:
+        args = [values[name] if name in values else self.defaults[name] for name in self.names]
+        out = {}
+        for key, value, shape in zip("F G Q H R".split(), self._function(*args), self.shapes):
+            out[key] = np.broadcast_to(np.asarray(value, dtype=float), shape).copy()
+        return out

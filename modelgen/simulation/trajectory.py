@@ -1,0 +1,337 @@
+"""Flight profiles to truth trajectories and ideal IMU increments on WGS-84.
+
+A profile is a start state and a list of segments; within a segment the
+controls are constant: horizontal (along-track) acceleration, turn rate
+(heading rate), vertical acceleration (rate of change of the down velocity,
+which is how the core paper describes its climb and level-off, seed 000 §3) and
+roll rate.  Horizontal ground speed, heading, down velocity, roll and height
+are then closed-form in time; latitude and longitude are integrated (RK4 on the
+IMU grid).  The body x axis points along the velocity (pitch = flight-path
+angle, no angle of attack or sideslip), so the attitude is
+C_b^n = Rz(heading) Ry(flight-path angle) Rx(roll).
+
+The ideal IMU outputs are what a perfect strapdown IMU delivers: the angle
+increment  Delta theta_k = int omega_ib^b dt  and the velocity increment
+Delta v_k = int f^b dt  over each sample interval, with
+omega_ib^b = omega_nb^b + C_n^b (omega_ie^n + omega_en^n) and
+f^b = C_n^b (dv^n/dt + (2 omega_ie^n + omega_en^n) x v^n - g^n).
+Both integrals are evaluated by 3-point Gauss-Legendre quadrature, split at
+segment boundaries, so they are exact to ~1e-15 relative for these smooth
+integrands: the increments carry the coning and sculling of the true motion,
+which the mechanization must then resolve.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from modelgen.errors import ModelError
+from modelgen.simulation import earth
+from modelgen.simulation.jit import compiled
+from modelgen.simulation.rotation import euler_quaternion, rotate_vector
+
+# Column layout of the recorded truth (one row per record time).
+TRUTH_COLUMNS = (
+    "time",
+    "latitude",
+    "longitude",
+    "height",
+    "velocity_north",
+    "velocity_east",
+    "velocity_down",
+    "q0",
+    "q1",
+    "q2",
+    "q3",
+)
+MINIMUM_SPEED = 1.0  # m/s; the flight-path angle is undefined for a hovering vehicle
+
+
+@dataclass(frozen=True)
+class Segment:
+    """Constant controls over ``duration`` seconds (SI units, angles in rad)."""
+
+    name: str
+    duration: float
+    horizontal_acceleration: float = 0.0  # d(ground speed)/dt [m/s^2]
+    turn_rate: float = 0.0  # d(heading)/dt [rad/s]
+    vertical_acceleration: float = 0.0  # d(V_down)/dt [m/s^2]
+    roll_rate: float = 0.0  # d(roll)/dt [rad/s]
+
+
+@dataclass(frozen=True)
+class FlightProfile:
+    """Start state plus segments; see the module docstring for the kinematics."""
+
+    name: str
+    latitude: float  # rad
+    longitude: float  # rad
+    height: float  # m
+    ground_speed: float  # horizontal speed, m/s
+    heading: float  # rad, from north towards east
+    velocity_down: float  # m/s (negative = climbing)
+    roll: float  # rad
+    segments: tuple[Segment, ...]
+
+    @property
+    def duration(self) -> float:
+        return float(sum(s.duration for s in self.segments))
+
+    def truncated(self, duration: float) -> "FlightProfile":
+        """The same flight flown for only the first ``duration`` seconds."""
+        if duration <= 0:
+            raise ModelError(f"profile {self.name!r}: duration must be positive, got {duration}")
+        kept, left = [], duration
+        for s in self.segments:
+            if left <= 0:
+                break
+            kept.append(Segment(s.name, min(s.duration, left), s.horizontal_acceleration, s.turn_rate,
+                                s.vertical_acceleration, s.roll_rate))
+            left -= s.duration
+        if left > 1e-9:  # longer than the profile: extend the last segment (its controls held)
+            last = kept[-1]
+            kept[-1] = Segment(last.name, last.duration + left, last.horizontal_acceleration, last.turn_rate,
+                               last.vertical_acceleration, last.roll_rate)
+        return FlightProfile(self.name, self.latitude, self.longitude, self.height, self.ground_speed,
+                             self.heading, self.velocity_down, self.roll, tuple(kept))
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Truth and ideal IMU increments of one flight.
+
+    ``delta_theta[k]`` and ``delta_velocity[k]`` are the increments over
+    ``[k dt, (k+1) dt]``; ``truth`` rows are taken every ``record_every``
+    samples (row j at time ``j * record_every * dt``), columns :data:`TRUTH_COLUMNS`.
+    """
+
+    profile: FlightProfile
+    imu_rate: float
+    record_every: int
+    delta_theta: np.ndarray
+    delta_velocity: np.ndarray
+    truth: np.ndarray
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.imu_rate
+
+    @property
+    def n_samples(self) -> int:
+        return self.delta_theta.shape[0]
+
+    @property
+    def record_period(self) -> float:
+        return self.record_every / self.imu_rate
+
+    def truth_column(self, name: str) -> np.ndarray:
+        return self.truth[:, TRUTH_COLUMNS.index(name)]
+
+    def initial_state(self) -> np.ndarray:
+        """Truth at t = 0: latitude, longitude, height, v_NED (3), q_b^n (4)."""
+        return self.truth[0, 1:].copy()
+
+
+def segment_table(profile: FlightProfile) -> np.ndarray:
+    """Per segment: start time, controls and the closed-form state at its start.
+
+    Columns: start, a_h, turn_rate, a_v, roll_rate, V_h0, heading0, V_d0, roll0, h0.
+    """
+    rows = []
+    t, vh, psi, vd, roll, h = 0.0, profile.ground_speed, profile.heading, profile.velocity_down, profile.roll, profile.height
+    for s in profile.segments:
+        rows.append([t, s.horizontal_acceleration, s.turn_rate, s.vertical_acceleration, s.roll_rate, vh, psi, vd, roll, h])
+        T = s.duration
+        end_speed = vh + s.horizontal_acceleration * T
+        if min(vh, end_speed) < MINIMUM_SPEED and math.hypot(min(vh, end_speed), vd) < MINIMUM_SPEED:
+            raise ModelError(f"profile {profile.name!r}, segment {s.name!r}: speed falls below {MINIMUM_SPEED} m/s")
+        if end_speed < 0 or vh < 0:
+            raise ModelError(f"profile {profile.name!r}, segment {s.name!r}: ground speed becomes negative")
+        h = h - vd * T - 0.5 * s.vertical_acceleration * T * T
+        vh, psi, vd, roll = end_speed, psi + s.turn_rate * T, vd + s.vertical_acceleration * T, roll + s.roll_rate * T
+        t += T
+        if abs(roll) >= math.radians(89.0):
+            raise ModelError(f"profile {profile.name!r}, segment {s.name!r}: roll reaches {math.degrees(roll):.1f} deg")
+    return np.array(rows, dtype=float)
+
+
+@compiled
+def _segment_index(t, starts, hint):
+    """Index of the segment containing time t (segments are half-open, the last is closed)."""
+    i = hint
+    n = starts.shape[0]
+    while i + 1 < n and t >= starts[i + 1]:
+        i += 1
+    while i > 0 and t < starts[i]:
+        i -= 1
+    return i
+
+
+@compiled
+def _kinematics(t, table, i):
+    """Closed-form motion at time t in segment i: the values needed by the integrands."""
+    tau = t - table[i, 0]
+    a_h, turn, a_v, roll_rate = table[i, 1], table[i, 2], table[i, 3], table[i, 4]
+    vh = table[i, 5] + a_h * tau
+    psi = table[i, 6] + turn * tau
+    vd = table[i, 7] + a_v * tau
+    roll = table[i, 8] + roll_rate * tau
+    h = table[i, 9] - table[i, 7] * tau - 0.5 * a_v * tau * tau
+    return vh, psi, vd, roll, h, a_h, turn, a_v, roll_rate
+
+
+@compiled
+def _position_rate(t, lat, table, i):
+    vh, psi, vd, roll, h, a_h, turn, a_v, rr = _kinematics(t, table, i)
+    return earth.position_rates(lat, h, vh * math.cos(psi), vh * math.sin(psi), vd)
+
+
+@compiled
+def _integrands(t, lat, table, i):
+    """omega_ib^b and f^b at time t (latitude supplied by the caller)."""
+    vh, psi, vd, roll, h, a_h, turn, a_v, roll_rate = _kinematics(t, table, i)
+    cpsi, spsi = math.cos(psi), math.sin(psi)
+    vn, ve = vh * cpsi, vh * spsi
+    speed2 = vh * vh + vd * vd
+    pitch = math.atan2(-vd, vh)
+    pitch_rate = (-vh * a_v + vd * a_h) / speed2
+    q0, q1, q2, q3 = euler_quaternion(roll, pitch, psi)
+    sr, cr = math.sin(roll), math.cos(roll)
+    sp, cp = math.sin(pitch), math.cos(pitch)
+    # omega_nb^b from the Euler angle rates (ZYX sequence)
+    wx = roll_rate - turn * sp
+    wy = pitch_rate * cr + turn * cp * sr
+    wz = -pitch_rate * sr + turn * cp * cr
+    ie_n, ie_e, ie_d = earth.earth_rate_ned(lat)
+    en_n, en_e, en_d = earth.transport_rate_ned(lat, h, vn, ve)
+    # C_n^b (omega_ie + omega_en): rotate by the conjugate quaternion
+    bx, by, bz = rotate_vector(q0, -q1, -q2, -q3, ie_n + en_n, ie_e + en_e, ie_d + en_d)
+    # f^n = dv/dt + (2 omega_ie + omega_en) x v - g
+    dvn = a_h * cpsi - vh * turn * spsi
+    dve = a_h * spsi + vh * turn * cpsi
+    dvd = a_v
+    ox, oy, oz = 2.0 * ie_n + en_n, 2.0 * ie_e + en_e, 2.0 * ie_d + en_d
+    fn = dvn + (oy * vd - oz * ve)
+    fe = dve + (oz * vn - ox * vd)
+    fd = dvd + (ox * ve - oy * vn) - earth.normal_gravity(lat, h)
+    fx, fy, fz = rotate_vector(q0, -q1, -q2, -q3, fn, fe, fd)
+    return wx + bx, wy + by, wz + bz, fx, fy, fz
+
+
+@compiled
+def _hermite(s, h, p0, m0, p1, m1):
+    s2 = s * s
+    s3 = s2 * s
+    return (2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * h * m0 + (-2 * s3 + 3 * s2) * p1 + (s3 - s2) * h * m1
+
+
+@compiled
+def _generate(table, lat0, lon0, dt, n_samples, record_every, delta_theta, delta_velocity, truth):
+    """The sample loop: RK4 latitude/longitude, Gauss-Legendre increments, truth records."""
+    starts = table[:, 0]
+    gl_x0 = -math.sqrt(0.6)
+    gl_x2 = math.sqrt(0.6)
+    gl_w0 = 5.0 / 9.0
+    gl_w1 = 8.0 / 9.0
+    lat, lon = lat0, lon0
+    seg = 0
+    rec = 0
+    for k in range(n_samples + 1):
+        t0 = k * dt
+        seg = _segment_index(t0, starts, seg)
+        if k % record_every == 0:
+            vh, psi, vd, roll, h, a_h, turn, a_v, rr = _kinematics(t0, table, seg)
+            q0, q1, q2, q3 = euler_quaternion(roll, math.atan2(-vd, vh), psi)
+            truth[rec, 0] = t0
+            truth[rec, 1] = lat
+            truth[rec, 2] = lon
+            truth[rec, 3] = h
+            truth[rec, 4] = vh * math.cos(psi)
+            truth[rec, 5] = vh * math.sin(psi)
+            truth[rec, 6] = vd
+            truth[rec, 7] = q0
+            truth[rec, 8] = q1
+            truth[rec, 9] = q2
+            truth[rec, 10] = q3
+            rec += 1
+        if k == n_samples:
+            break
+        t1 = (k + 1) * dt
+        # RK4 for latitude and longitude over [t0, t1]
+        i0 = seg
+        im = _segment_index(t0 + 0.5 * dt, starts, seg)
+        i1 = _segment_index(t1, starts, seg)
+        k1a, k1o, _ = _position_rate(t0, lat, table, i0)
+        k2a, k2o, _ = _position_rate(t0 + 0.5 * dt, lat + 0.5 * dt * k1a, table, im)
+        k3a, k3o, _ = _position_rate(t0 + 0.5 * dt, lat + 0.5 * dt * k2a, table, im)
+        k4a, k4o, _ = _position_rate(t1, lat + dt * k3a, table, i1)
+        lat1 = lat + dt / 6.0 * (k1a + 2 * k2a + 2 * k3a + k4a)
+        lon1 = lon + dt / 6.0 * (k1o + 2 * k2o + 2 * k3o + k4o)
+        m1, _, _ = _position_rate(t1, lat1, table, i1)
+        # increments, split at segment boundaries
+        sx = sy = sz = vx = vy = vz = 0.0
+        a = t0
+        i = seg
+        while a < t1:
+            i = _segment_index(a, starts, i)
+            b = t1
+            if i + 1 < starts.shape[0] and starts[i + 1] < t1:
+                b = starts[i + 1]
+            half = 0.5 * (b - a)
+            mid = 0.5 * (a + b)
+            for node in range(3):
+                if node == 0:
+                    x, w = gl_x0, gl_w0
+                elif node == 1:
+                    x, w = 0.0, gl_w1
+                else:
+                    x, w = gl_x2, gl_w0
+                t = mid + half * x
+                lat_t = _hermite((t - t0) / dt, dt, lat, k1a, lat1, m1)
+                # nodes lie strictly inside [a, b], hence inside segment i
+                wx, wy, wz, fx, fy, fz = _integrands(t, lat_t, table, i)
+                sx += w * half * wx
+                sy += w * half * wy
+                sz += w * half * wz
+                vx += w * half * fx
+                vy += w * half * fy
+                vz += w * half * fz
+            a = b
+        delta_theta[k, 0] = sx
+        delta_theta[k, 1] = sy
+        delta_theta[k, 2] = sz
+        delta_velocity[k, 0] = vx
+        delta_velocity[k, 1] = vy
+        delta_velocity[k, 2] = vz
+        lat, lon = lat1, lon1
+    return rec
+
+
+def generate_trajectory(profile: FlightProfile, imu_rate: float, record_rate: float) -> Trajectory:
+    """Truth at ``record_rate`` and ideal increments at ``imu_rate`` for a whole profile.
+
+    ``imu_rate / record_rate`` must be a whole number (truth rows fall on IMU
+    sample times); the flight lasts ``floor(duration * imu_rate)`` samples.
+    """
+    if imu_rate <= 0 or record_rate <= 0:
+        raise ModelError(f"profile {profile.name!r}: rates must be positive (imu {imu_rate}, record {record_rate})")
+    ratio = imu_rate / record_rate
+    record_every = int(round(ratio))
+    if record_every < 1 or abs(ratio - record_every) > 1e-9 * ratio:
+        raise ModelError(
+            f"profile {profile.name!r}: IMU rate {imu_rate} Hz is not a whole multiple of the record rate {record_rate} Hz"
+        )
+    if not profile.segments:
+        raise ModelError(f"profile {profile.name!r}: has no segments")
+    table = segment_table(profile)
+    n_samples = int(math.floor(profile.duration * imu_rate + 1e-6))
+    n_records = n_samples // record_every + 1
+    delta_theta = np.empty((n_samples, 3))
+    delta_velocity = np.empty((n_samples, 3))
+    truth = np.empty((n_records, len(TRUTH_COLUMNS)))
+    _generate(table, profile.latitude, profile.longitude, 1.0 / imu_rate, n_samples, record_every,
+              delta_theta, delta_velocity, truth)
+    return Trajectory(profile, float(imu_rate), record_every, delta_theta, delta_velocity, truth)

@@ -1,0 +1,61 @@
+"""Scenario files: the core paper's profile loads; bad files are refused by key."""
+
+import math
+
+import pytest
+import yaml
+
+from modelgen.errors import ModelError
+from modelgen.simulation.scenario import KMH, load_scenario, load_scenario_data
+from modelgen.simulation.trajectory import generate_trajectory
+
+
+def test_paper_profile_loads_with_its_reasoned_values():
+    s = load_scenario("profile_000")
+    assert s.profile.duration == pytest.approx(4 * 3600)
+    assert s.profile.ground_speed == pytest.approx(300 * KMH)
+    assert s.profile.velocity_down == pytest.approx(-100 * KMH)
+    assert s.imu_rate == 300 and s.doppler.period == 60.0
+    assert s.imu_budget.gyro_constant_drift == pytest.approx(math.radians(0.1) / 3600)
+
+
+def test_paper_profile_levels_off_at_0_4_h_and_flies_east():
+    s = load_scenario("profile_000").with_changes(hours=0.5)
+    t = generate_trajectory(s.profile, 10.0, 1.0)
+    at = lambda hours: t.truth[int(hours * 3600)]  # noqa: E731
+    assert at(0.45)[6] == pytest.approx(0.0, abs=1e-9)  # level
+    assert at(0.45)[3] == pytest.approx(100 / 3.6 * 720 * 1.5, rel=1e-9)  # 5.56 km climb + 2.78 km level-off
+    assert at(0.45)[1] == pytest.approx(math.radians(30.0), abs=1e-9)  # due east
+
+
+def data():
+    with open(load_scenario("profile_000").source_file) as f:
+        return yaml.safe_load(f)
+
+
+def test_unknown_key_is_refused_with_its_place():
+    d = data()
+    d["imu"]["gyro_drift_typo_dph"] = 1.0
+    with pytest.raises(ModelError, match=r"imu: unknown key 'gyro_drift_typo_dph'"):
+        load_scenario_data(d, "x.yaml")
+
+
+def test_non_number_is_refused_with_its_key():
+    d = data()
+    d["start"]["latitude_deg"] = "north"
+    with pytest.raises(ModelError, match=r"start.latitude_deg: 'north' is not a number"):
+        load_scenario_data(d, "x.yaml")
+
+
+def test_segment_needs_exactly_one_duration():
+    d = data()
+    d["segments"][0]["duration_s"] = 5.0
+    with pytest.raises(ModelError, match="segments\\[0\\]: give exactly one of"):
+        load_scenario_data(d, "x.yaml")
+
+
+def test_unknown_state_axis_is_refused():
+    d = data()
+    d["filter"]["states"]["attitude"]["heading_error"] = "sideways"
+    with pytest.raises(ModelError, match="heading_error: 'sideways' is not one of"):
+        load_scenario_data(d, "x.yaml")
