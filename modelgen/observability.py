@@ -39,10 +39,10 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-import yaml
 
 from modelgen.derivation import DerivedModel
 from modelgen.discretization import van_loan_discretization
+from modelgen.datafiles import read_yaml
 from modelgen.errors import ModelError
 
 DEFAULT_UNOBSERVABLE_RTOL = 1e-11
@@ -157,14 +157,7 @@ def scenario_from_data(data: Any, where: str = "scenario") -> Scenario:
 
 def load_scenario(path: str | Path) -> Scenario:
     """Read a scenario YAML file (see :func:`scenario_from_data`)."""
-    path = Path(path)
-    if not path.is_file():
-        raise ModelError(f"{path}: no such scenario file")
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        raise ModelError(f"{path}: not valid YAML ({exc})") from None
-    return scenario_from_data(data, str(path))
+    return scenario_from_data(read_yaml(path, "scenario file"), str(path))
 
 
 def command_line_scenario(

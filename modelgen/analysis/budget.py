@@ -8,7 +8,7 @@ from typing import Mapping
 
 import numpy as np
 
-from modelgen.analysis.datafiles import data_path, read_yaml, require
+from modelgen.datafiles import data_path, read_yaml, require
 from modelgen.analysis.units import to_si
 from modelgen.errors import ModelError
 from modelgen.model import ErrorModel

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from modelgen.analysis.datafiles import data_path, read_yaml, require
+from modelgen.datafiles import data_path, read_yaml, require
 from modelgen.analysis.units import to_si
 from modelgen.errors import ModelError
 

@@ -15,8 +15,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import yaml
 
+from modelgen.datafiles import read_yaml
 from modelgen.errors import ModelError
 from modelgen.simulation.doppler import DopplerSettings, JanusBeams, Outage
 from modelgen.simulation.gps import GpsSettings
@@ -324,8 +324,4 @@ def load_scenario(path: str | Path) -> Scenario:
             p = Path(str(candidate))
     if not p.exists():
         raise ModelError(f"{path}: no such scenario file, and not a built-in one ({', '.join(builtin_scenarios())})")
-    try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        raise ModelError(f"{p}: not valid YAML ({exc})") from None
-    return load_scenario_data(data, str(p))
+    return load_scenario_data(read_yaml(p, "scenario file"), str(p))

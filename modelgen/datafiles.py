@@ -1,4 +1,4 @@
-"""Reading the analysis data files (YAML in ``modelgen/data``) with useful errors."""
+"""Reading YAML data files (error budgets, scenarios, profiles) with useful errors."""
 
 from __future__ import annotations
 
@@ -16,11 +16,11 @@ def data_path(filename: str) -> Path:
     return Path(str(resources.files("modelgen") / "data" / filename))
 
 
-def read_yaml(path: str | Path) -> dict[str, Any]:
+def read_yaml(path: str | Path, what: str = "data file") -> dict[str, Any]:
     """A YAML mapping from ``path``; ModelError naming the file otherwise."""
     path = Path(path)
     if not path.is_file():
-        raise ModelError(f"{path}: no such data file")
+        raise ModelError(f"{path}: no such {what}")
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as exc:
