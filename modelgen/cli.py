@@ -67,9 +67,16 @@ def derive(model: str) -> None:
 @click.option("--out", "out_root", default="generated", show_default=True, type=click.Path(file_okay=False), help="Root folder; code goes to OUT/<model>/.")
 @click.option("--taylor-order", default=9, show_default=True, help="Terms of the Taylor series for Phi and Gamma (eqs. 10-11).")
 @click.option("--scalar", type=click.Choice(["double", "float"]), default="double", show_default=True, help="C scalar type.")
+@click.option("--form", type=click.Choice(["covariance", "ud"]), default="covariance", show_default=True, help="Store P, or its UD factors (Thornton time update, Bierman measurement update).")
+@click.option("--storage", type=click.Choice(["full", "packed"]), default="full", show_default=True, help="P as N x N or as its packed upper triangle (covariance form).")
+@click.option("--update", type=click.Choice(["vector", "sequential"]), default="vector", show_default=True, help="All measurements at once (Cholesky solve) or one scalar at a time (covariance form).")
+@click.option("--covariance-update", type=click.Choice(["joseph", "standard"]), default="joseph", show_default=True, help="Joseph form or P - K H P (covariance form).")
 @click.option("--all", "all_models", is_flag=True, help="Generate every built-in model.")
 @click.option("--check/--no-check", default=False, help="Also compile the C and run it beside the numpy reference.")
-def generate(models: tuple[str, ...], out_root: str, taylor_order: int, scalar: str, all_models: bool, check: bool) -> None:
+def generate(
+    models: tuple[str, ...], out_root: str, taylor_order: int, scalar: str, form: str, storage: str, update: str,
+    covariance_update: str, all_models: bool, check: bool,
+) -> None:
     """Generate Python and C99 filter code for MODELS (files or built-in names).
 
     Each model is derived, its code rendered from templates/ and written
@@ -83,12 +90,17 @@ def generate(models: tuple[str, ...], out_root: str, taylor_order: int, scalar: 
 
     names = list(models) or (builtin_models() if all_models else ["ned_doppler18"])
     try:
-        options = CodegenOptions(taylor_order=taylor_order, scalar=scalar)
+        options = CodegenOptions(
+            taylor_order=taylor_order, scalar=scalar, form=form, storage=storage, update=update, covariance_update=covariance_update
+        )
         for name in names:
             result = generate_model(name, Path(out_root), options)
             click.echo(f"{result.derived.model.name}: wrote {', '.join(sorted(result.code.files))} to {result.folder}")
+            click.echo(f"  filter: {options.describe()}")
             for kernel, cost in result.code.costs.items():
                 click.echo(f"  {kernel}: {cost}")
+            if check and scalar == "float":
+                click.echo("  check: float code is checked against the double reference by `modelgen embedded`")
             if check and scalar == "double":
                 for r in check_code(result.derived, result.folder, options=options):
                     verdict = "ok" if r.passed(CONFORMANCE_TOLERANCE) else "FAILED"
@@ -106,7 +118,8 @@ def generate(models: tuple[str, ...], out_root: str, taylor_order: int, scalar: 
 @click.option("--out", "out_root", default="generated", show_default=True, type=click.Path(file_okay=False), help="Root folder for generated code.")
 @click.option("--report", "report_dir", default="report", show_default=True, type=click.Path(file_okay=False), help="Folder for the reports.")
 @click.option("--no-figures", is_flag=True, help="Skip the covariance-analysis figures.")
-def run(out_root: str, report_dir: str, no_figures: bool) -> None:
+@click.option("--simulate/--no-simulate", "with_simulation", default=True, show_default=True, help="Also fly the paper's 4-h profile once (300 Hz strapdown, Doppler filter).")
+def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool) -> None:
     """The main job, end to end on the core paper's 18-state model.
 
     Derives the model, verifies it entry by entry against the paper's table,
@@ -141,8 +154,15 @@ def run(out_root: str, report_dir: str, no_figures: bool) -> None:
         runs = generate_and_check_all(Path(out_root), progress=click.echo)
         click.echo("covariance analysis (Table 2, Figs 2-7) ...")
         analysis = run_covariance_analysis(report / "covariance", figures=not no_figures, progress=click.echo)
-        section = "## Covariance analysis (Table 2 analogue)\n\n" + analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)"
-        text = run_report(summary, runs, Path(out_root), [section])
+        sections = ["## Covariance analysis (Table 2 analogue)\n\n" + analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)"]
+        if with_simulation:
+            from modelgen.simulation.report import simulate as run_simulation
+            from modelgen.simulation.scenario import load_scenario as load_profile
+
+            click.echo("simulate the paper's flight (profile_000, one run) ...")
+            sim = run_simulation(load_profile("profile_000"), report / "simulation", runs=1, seed=1, echo=click.echo)
+            sections.append(f"## Simulation\n\nThe paper's profile flown once: [simulation/{Path(sim).name}](simulation/{Path(sim).name}) and its figures.")
+        text = run_report(summary, runs, Path(out_root), sections)
         write_text_atomically(report / "README.md", text)
     except ModelError as exc:
         fail(exc)
@@ -152,6 +172,47 @@ def run(out_root: str, report_dir: str, no_figures: bool) -> None:
         click.echo(f"modelgen run: FAILED ({', '.join(failed) or 'unexplained paper differences'})", err=True)
         sys.exit(1)
     click.echo(f"modelgen run: ok; report in {report / 'README.md'}, code in {out_root}/")
+
+
+@main.command()
+@click.argument("model", default="ned_doppler18")
+@click.option("--out", "out_dir", default="report", show_default=True, type=click.Path(file_okay=False), help="Folder for embedded.md.")
+@click.option("--qemu/--no-qemu", default=True, help="Also run the arm-linux-gnueabihf build under qemu-arm against the reference.")
+def embedded(model: str, out_dir: str, qemu: bool) -> None:
+    """Build MODEL's filter (float: default, UD, packed sequential) for a Cortex-M4F; report size and stack.
+
+    Links a bare-metal image with no heap (the map must show no malloc, free
+    or printf), reads .text/.data/.bss and the worst-case stack, and with
+    --qemu runs the same code under qemu-arm over the paper's scenario
+    against the double reference.  Writes OUT/embedded.md.
+    """
+    from modelgen.derivation import derive as derive_model
+    from modelgen.embedded import FLOAT_TOLERANCE, embedded_report
+    from modelgen.modelfile import load_model
+    from modelgen.pipeline import paper_scenario, synthetic_scenario
+
+    try:
+        derived = derive_model(load_model(model))
+        scenario = None
+        if qemu:
+            scenario = paper_scenario(derived) if derived.model.name == "ned_doppler18" else synthetic_scenario(derived)
+        report = embedded_report(derived, scenario, out_dir)
+    except ModelError as exc:
+        fail(exc)
+    for slug, b in report.builds.items():
+        click.echo(
+            f"{slug}: filter .text {b.filter_object.text} .data {b.filter_object.data} .bss {b.filter_object.bss}; "
+            f"image .bss {b.image.bss}; worst-case stack predict {b.worst_case_stack.get(derived.model.name + '_predict')} B, "
+            f"update {b.worst_case_stack.get(derived.model.name + '_update', '-')} B; heap/stdio: {', '.join(b.forbidden_symbols) or 'none'}"
+        )
+    failed = False
+    for r in report.runs:
+        ok = r.within(FLOAT_TOLERANCE if r.options.scalar == "float" else 1e-12) and r.positive_definite_where_resolvable
+        failed |= not ok
+        click.echo(f"{r.options.slug()} on qemu-arm: max scaled dP {r.max_scaled_P:.2e}, dx {r.max_scaled_x:.2e} -> {'ok' if ok else 'FAILED'}")
+    click.echo(f"wrote {report.markdown}")
+    if failed or any(b.forbidden_symbols for b in report.builds.values()):
+        sys.exit(1)
 
 
 @main.command()

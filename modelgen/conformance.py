@@ -26,6 +26,8 @@ import numpy as np
 
 from modelgen import reference
 from modelgen.codegen.build import build_c_filter, load_python_module
+from modelgen.codegen.layout import ModelSizes
+from modelgen.codegen.options import CodegenOptions
 from modelgen.derivation import DerivedModel, parameter_vector
 from modelgen.discretization import DEFAULT_TAYLOR_ORDER, taylor_discretization, taylor_process_noise
 from modelgen.errors import ModelError
@@ -146,18 +148,16 @@ def python_run(module_path: Path, derived: DerivedModel, scenario: Scenario) -> 
     return out
 
 
-def c_run(folder: Path, derived: DerivedModel, scenario: Scenario, build_dir: Path | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """x and P after every step, by the compiled generated C."""
+def c_run(
+    folder: Path,
+    derived: DerivedModel,
+    scenario: Scenario,
+    build_dir: Path | None = None,
+    options: CodegenOptions | None = None,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """x and P after every step, by the compiled generated C (generated with ``options``)."""
     model = derived.model
-    sizes = {
-        "n": derived.n_states,
-        "nw": derived.n_noises,
-        "nm": derived.n_measurements,
-        "nnz_f": int(derived.structure("F").sum()),
-        "nnz_g": int(derived.structure("G").sum()),
-        "nnz_h": int(derived.structure("H").sum()),
-    }
-    filt = build_c_filter(Path(folder), model.name, sizes, model.parameter_names, build_dir)
+    filt = build_c_filter(Path(folder), model.name, ModelSizes.of(derived), model.parameter_names, build_dir, options=options)
     filt.set_parameters(_named_parameters(derived, scenario))
     if filt.discretize(scenario.step) != 0:
         raise ModelError(f"generated C for {model.name!r} refused the step T = {scenario.step}")
@@ -195,16 +195,20 @@ def check_generated(
     derived: DerivedModel,
     scenario: Scenario,
     build_dir: Path | None = None,
-    order: int = DEFAULT_TAYLOR_ORDER,
+    options: CodegenOptions | None = None,
 ) -> list[ConformanceResult]:
     """Run reference, generated Python and generated C; compare each to the reference.
 
-    ``order`` must be the Taylor order the code was generated with.
+    ``options`` must be those the code was generated with (Taylor order,
+    storage, update form); the scalar type must be double.
     """
+    options = options or CodegenOptions()
+    if options.scalar != "double":
+        raise ModelError("the reference check needs double-precision code; float is checked by `modelgen embedded`")
     folder = Path(folder)
-    ref = reference_run(derived, scenario, order)
+    ref = reference_run(derived, scenario, options.taylor_order)
     name = derived.model.name
     return [
         compare("python", python_run(folder / f"{name}.py", derived, scenario), ref),
-        compare("c", c_run(folder, derived, scenario, build_dir), ref),
+        compare("c", c_run(folder, derived, scenario, build_dir, options), ref),
     ]

@@ -74,7 +74,7 @@ def check(
     if scenario is None:
         scenario = paper_scenario(derived) if derived.model.name == "ned_doppler18" else synthetic_scenario(derived)
     with tempfile.TemporaryDirectory(prefix="modelgen-check-") as build_dir:
-        return check_generated(folder, derived, scenario, Path(build_dir), options.taylor_order)
+        return check_generated(folder, derived, scenario, Path(build_dir), options)
 
 
 @dataclass(frozen=True)

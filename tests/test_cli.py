@@ -62,7 +62,7 @@ def test_generate_writes_python_and_c(runner, tmp_path):
 
 def test_run_does_the_main_job_end_to_end(runner, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    result = runner.invoke(main, ["run", "--no-figures"])
+    result = runner.invoke(main, ["run", "--no-figures", "--no-simulate"])
     assert result.exit_code == 0, result.output
     assert "modelgen run: ok" in result.output
     report = (tmp_path / "report" / "README.md").read_text()

@@ -2,8 +2,9 @@
 
 The C is compiled with the system compiler in strict C99 mode
 (``-std=c99 -Wall -Wextra -Werror -pedantic``) into a shared library and
-loaded with ctypes; the struct layouts are rebuilt from the model's sizes,
-which the header also states, so no header parser is needed.
+loaded with ctypes; the struct layouts are rebuilt from the model's sizes and
+the code-generation options by ``layout.c_layout``, the description the
+header itself was rendered from, so no header parser is needed.
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from types import ModuleType
 
 import numpy as np
 
+from modelgen.codegen.layout import ModelSizes, c_layout
+from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
 
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
@@ -57,67 +60,78 @@ def load_python_module(path: Path) -> ModuleType:
     return module
 
 
+def _ctypes_struct(name: str, fields, real) -> type:
+    """A ctypes Structure with the members of a layout field list."""
+
+    def array(dims):
+        t = real
+        for d in reversed(dims):
+            t = t * d.value
+        return t
+
+    return type(name, (ctypes.Structure,), {"_fields_": [(f.name, array(f.dims)) for f in fields]})
+
+
+def _model_sizes(sizes: dict[str, int] | ModelSizes) -> ModelSizes:
+    if isinstance(sizes, ModelSizes):
+        return sizes
+    return ModelSizes(**{k: int(sizes[k]) for k in ("n", "nw", "nm", "nnz_f", "nnz_g", "nnz_h")})
+
+
 class CompiledFilter:
     """A generated C filter loaded through ctypes.
 
     Holds its own params, matrices, transition, filter and workspace structs,
-    exactly as an embedded caller would.
+    exactly as an embedded caller would.  Their members come from
+    ``layout.c_layout`` -- the same description the header was rendered from
+    -- so every option combination loads the same way; the covariance is set
+    and read through the generated set_covariance/get_covariance, whatever
+    its storage (full, packed or U D U^T).
     """
 
-    def __init__(self, library: Path, model: str, sizes: dict[str, int], parameter_names: list[str], scalar: str = "double"):
+    def __init__(
+        self,
+        library: Path,
+        model: str,
+        sizes: dict[str, int] | ModelSizes,
+        parameter_names: list[str],
+        scalar: str = "double",
+        options: CodegenOptions | None = None,
+    ):
+        options = options or CodegenOptions(scalar=scalar)
+        self.options = options
         self.model = model
         self.lib = ctypes.CDLL(str(library))
-        real = ctypes.c_double if scalar == "double" else ctypes.c_float
-        self.dtype = np.float64 if scalar == "double" else np.float32
-        n = sizes["n"]
-        dims = {k: max(v, 1) for k, v in sizes.items()}
-        mat = real * n * n
-
-        class Params(ctypes.Structure):
-            _fields_ = [(name, real) for name in parameter_names]
-
-        class Matrices(ctypes.Structure):
-            _fields_ = [
-                ("F", real * sizes["nnz_f"]),
-                ("G", real * dims["nnz_g"]),
-                ("q", real * dims["nw"]),
-                ("H", real * dims["nnz_h"]),
-                ("r", real * dims["nm"]),
-            ]
-
-        class Transition(ctypes.Structure):
-            _fields_ = [("Phi", mat), ("Qd", mat)]
-
-        class Filter(ctypes.Structure):
-            _fields_ = [("x", real * n), ("P", mat)]
-
-        class Workspace(ctypes.Structure):
-            _fields_ = [
-                ("A", mat),
-                ("B", mat),
-                ("S", mat),
-                ("Gamma", real * dims["nw"] * n),
-                ("M", mat),
-                ("Pn", mat),
-                ("xn", real * n),
-                ("HP", real * n * dims["nm"]),
-                ("L", real * dims["nm"] * dims["nm"]),
-                ("K", real * dims["nm"] * n),
-                ("C", real * dims["nm"] * n),
-                ("nu", real * dims["nm"]),
-            ]
-
-        self.params, self.matrices = Params(), Matrices()
-        self.transition, self.filter, self.workspace = Transition(), Filter(), Workspace()
-        self.n, self.nm = n, sizes["nm"]
+        real = ctypes.c_double if options.scalar == "double" else ctypes.c_float
+        self.dtype = np.float64 if options.scalar == "double" else np.float32
+        sizes = _model_sizes(sizes)
+        layout = c_layout(sizes, options, model.upper())
+        Params = type("Params", (ctypes.Structure,), {"_fields_": [(name, real) for name in parameter_names]})
+        self.params = Params()
+        self.matrices = _ctypes_struct("Matrices", layout.matrices, real)()
+        self.transition = _ctypes_struct("Transition", layout.transition, real)()
+        self.filter = _ctypes_struct("Filter", layout.filter, real)()
+        self.workspace = _ctypes_struct("Workspace", layout.workspace, real)()
+        self.n, self.nm, self.nw = sizes.n, sizes.nm, sizes.nw
         self.real = real
+        self._square = real * sizes.n * sizes.n
         getattr(self.lib, f"{model}_default_params")(ctypes.byref(self.params))
-        self._discretize = getattr(self.lib, f"{model}_discretize")
-        self._discretize.argtypes = [ctypes.c_void_p, real, ctypes.c_void_p, ctypes.c_void_p]
-        self._discretize.restype = ctypes.c_int
+        self._discretize = self._function("discretize", [ctypes.c_void_p, real, ctypes.c_void_p, ctypes.c_void_p])
+        self._predict = self._function("predict", [ctypes.c_void_p] * 3)
+        self._set_covariance = self._function("set_covariance", [ctypes.c_void_p] * 3)
+        self._get_covariance = getattr(self.lib, f"{model}_get_covariance")
+        self._get_covariance.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+        self._get_covariance.restype = None
         self._update = getattr(self.lib, f"{model}_update", None)
         if self._update is not None:
+            self._update.argtypes = [ctypes.c_void_p] * 4
             self._update.restype = ctypes.c_int
+
+    def _function(self, name: str, argtypes: list) -> ctypes._CFuncPtr:
+        fn = getattr(self.lib, f"{self.model}_{name}")
+        fn.argtypes = argtypes
+        fn.restype = ctypes.c_int
+        return fn
 
     # -- the filter cycle --------------------------------------------------
     def set_parameters(self, values: dict[str, float]) -> None:
@@ -130,10 +144,8 @@ class CompiledFilter:
             ctypes.addressof(self.matrices), T, ctypes.addressof(self.transition), ctypes.addressof(self.workspace)
         )
 
-    def predict(self) -> None:
-        getattr(self.lib, f"{self.model}_predict")(
-            ctypes.byref(self.filter), ctypes.byref(self.transition), ctypes.byref(self.workspace)
-        )
+    def predict(self) -> int:
+        return self._predict(ctypes.byref(self.filter), ctypes.byref(self.transition), ctypes.byref(self.workspace))
 
     def update(self, z: np.ndarray) -> int:
         if self._update is None:
@@ -142,9 +154,12 @@ class CompiledFilter:
         return self._update(ctypes.byref(self.filter), zc, ctypes.byref(self.matrices), ctypes.byref(self.workspace))
 
     # -- views ---------------------------------------------------------------
-    def set_state(self, x: np.ndarray, P: np.ndarray) -> None:
+    def set_state(self, x: np.ndarray, P: np.ndarray) -> int:
+        """Set x and P (through the generated set_covariance); returns its status."""
         self._view(self.filter.x)[:] = x
-        self._view(self.filter.P)[:] = P
+        buffer = self._square()
+        np.ctypeslib.as_array(buffer)[:] = np.asarray(P, dtype=float)
+        return self._set_covariance(ctypes.byref(self.filter), buffer, ctypes.byref(self.workspace))
 
     def _view(self, array) -> np.ndarray:
         return np.ctypeslib.as_array(array)
@@ -155,7 +170,9 @@ class CompiledFilter:
 
     @property
     def P(self) -> np.ndarray:
-        return self._view(self.filter.P).astype(float)
+        buffer = self._square()
+        self._get_covariance(ctypes.byref(self.filter), buffer)
+        return np.ctypeslib.as_array(buffer).astype(float)
 
     @property
     def Phi(self) -> np.ndarray:
@@ -163,11 +180,28 @@ class CompiledFilter:
 
     @property
     def Qd(self) -> np.ndarray:
-        return self._view(self.transition.Qd).astype(float)
+        """Q_d as a full matrix, whatever the transition stores."""
+        if self.options.ud:
+            gamma = self._view(self.transition.Gamma).astype(float)[:, : self.nw]
+            return (gamma * self._view(self.transition.qw).astype(float)[: self.nw]) @ gamma.T
+        qd = self._view(self.transition.Qd).astype(float)
+        if not self.options.packed:
+            return qd
+        full = np.zeros((self.n, self.n))
+        full[np.triu_indices(self.n)] = qd
+        return full + np.triu(full, 1).T
 
 
-def build_c_filter(folder: Path, model: str, sizes: dict[str, int], parameter_names: list[str], build_dir: Path | None = None) -> CompiledFilter:
-    """Compile ``folder/<model>.c`` strictly and load it."""
+def build_c_filter(
+    folder: Path,
+    model: str,
+    sizes: dict[str, int] | ModelSizes,
+    parameter_names: list[str],
+    build_dir: Path | None = None,
+    options: CodegenOptions | None = None,
+    extra_flags: tuple[str, ...] = ("-O2",),
+) -> CompiledFilter:
+    """Compile ``folder/<model>.c`` strictly and load it (``options``: those it was generated with)."""
     build_dir = Path(build_dir or tempfile.mkdtemp(prefix="modelgen-build-"))
-    library = compile_shared_library([Path(folder) / f"{model}.c"], build_dir / f"lib{model}.so")
-    return CompiledFilter(library, model, sizes, parameter_names)
+    library = compile_shared_library([Path(folder) / f"{model}.c"], build_dir / f"lib{model}.so", extra_flags)
+    return CompiledFilter(library, model, sizes, parameter_names, options=options)

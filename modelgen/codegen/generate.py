@@ -1,8 +1,11 @@
 """Code generation: derived model -> Python module and C99 header/source.
 
 The pipeline is expression (``expressions``), structure and kernels
-(``structure``, ``kernels``), printer (``printers``) and template
-(``templates/*.j2``), as in SymForce's and CasADi's generators.  This module
+(``structure``, ``kernels``), memory layout (``layout``), printer
+(``printers``) and template (``templates/*.j2``), as in SymForce's and
+CasADi's generators; ``options`` says which filter variant is wanted.  Besides
+the code, the C folder gets a CMakeLists.txt, a Makefile and a README with a
+usage example, so that it can be dropped into another build as it is.  This module
 only assembles the template context and writes the files, atomically: the
 output folder is built next to its destination and renamed into place, so a
 failure never leaves a half-written ``generated/<model>/``.
@@ -15,6 +18,7 @@ import os
 import shutil
 import tempfile
 from dataclasses import dataclass, field
+from typing import Callable
 from importlib import resources
 from pathlib import Path
 
@@ -24,32 +28,25 @@ import sympy as sp
 from modelgen import __version__
 from modelgen.codegen.expressions import Block, eliminate_common_subexpressions
 from modelgen.codegen.kernels import (
+    KernelBlock,
     OperationCount,
-    c_predict,
+    c_covariance_predict,
+    c_state_predict,
+    c_ud_weights,
     discretize_cost,
     python_predict_cost,
     python_predict_plan,
+    thornton_cost,
     update_cost,
 )
+from modelgen.codegen.layout import CLayout, ModelSizes, c_layout
+from modelgen.codegen.options import CodegenOptions
 from modelgen.codegen.printers import CPrinter, PyPrinter
 from modelgen.codegen.structure import FilterStructure, filter_structure
 from modelgen.derivation import DerivedModel
-from modelgen.discretization import DEFAULT_TAYLOR_ORDER
 from modelgen.errors import ModelError
 
-
-@dataclass(frozen=True)
-class CodegenOptions:
-    """Choices that shape the generated code."""
-
-    taylor_order: int = DEFAULT_TAYLOR_ORDER
-    scalar: str = "double"  # C scalar type: double or float
-
-    def __post_init__(self) -> None:
-        if self.scalar not in ("double", "float"):
-            raise ModelError(f"scalar type must be 'double' or 'float', not {self.scalar!r}")
-        if not 1 <= self.taylor_order <= 30:
-            raise ModelError(f"Taylor order must be between 1 and 30, not {self.taylor_order}")
+__all__ = ["CodegenOptions", "GeneratedCode", "generate_code", "render_c_template", "write_atomically", "template_folder"]
 
 
 @dataclass(frozen=True)
@@ -116,9 +113,13 @@ def _table(values: list[int]) -> str:
 def _c_tables(structure: FilterStructure) -> dict[str, object]:
     n = structure.n_states
     f_entries = structure.entries("F")
+    h_entries = structure.entries("H")
     row_start = [0]
     for i in range(n):
         row_start.append(row_start[-1] + sum(1 for r, _ in f_entries if r == i))
+    h_row_start = [0]
+    for a in range(structure.H.shape[0]):
+        h_row_start.append(h_row_start[-1] + sum(1 for r, _ in h_entries if r == a))
     unit = set(structure.unit_rows)
     active = [(i, j) for i, j in structure.entries("Phi") if i not in unit]
     qd = [(i, j) for i, j in structure.entries("Qd") if i <= j]
@@ -127,9 +128,10 @@ def _c_tables(structure: FilterStructure) -> dict[str, object]:
         "F_col": _table([j for _, j in f_entries]),
         "G_row": _table([i for i, _ in structure.entries("G")]),
         "G_col": _table([j for _, j in structure.entries("G")]),
-        "H_row": _table([i for i, _ in structure.entries("H")]),
-        "H_col": _table([j for _, j in structure.entries("H")]),
+        "H_row": _table([i for i, _ in h_entries]),
+        "H_col": _table([j for _, j in h_entries]),
         "F_row_start": _table(row_start),
+        "H_row_start": _table(h_row_start),
         "n_active": len(active),
         "active_row": _table([i for i, _ in active]),
         "active_col": _table([j for _, j in active]),
@@ -142,9 +144,99 @@ def _c_tables(structure: FilterStructure) -> dict[str, object]:
     }
 
 
-def generate_code(derived: DerivedModel, options: CodegenOptions | None = None) -> GeneratedCode:
-    """Render the Python module and the C header/source for ``derived``."""
-    options = options or CodegenOptions()
+def _accessors(packed: bool) -> tuple[Callable[[str, str, str], str], Callable[[str, str, str], str]]:
+    """C text for entry (i, j) of a symmetric matrix: (i <= j only, any i, j)."""
+    if packed:
+        return (lambda base, i, j: f"{base}[PACKED_UPPER({i}, {j})]", lambda base, i, j: f"{base}[PACKED_ANY({i}, {j})]")
+    return (lambda base, i, j: f"{base}[{i}][{j}]", lambda base, i, j: f"{base}[{i}][{j}]")
+
+
+def _c_parts(options: CodegenOptions, has_measurements: bool) -> list[str]:
+    """Templates included by c_source.c.j2, chosen by the options."""
+    parts = ["c_predict_ud.c.j2" if options.ud else "c_predict_covariance.c.j2"]
+    if has_measurements:
+        if options.ud:
+            parts.append("c_update_bierman.c.j2")
+        elif options.update == "sequential":
+            parts.append("c_update_sequential.c.j2")
+        else:
+            parts.append("c_update_vector.c.j2")
+    return parts
+
+
+def _block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, object]]:
+    """Static C functions for the unrolled kernel pieces, with the parameters each uses."""
+    out = []
+    for block in blocks:
+        params = [
+            f"const {prefix}_filter *f" if block.uses("f") else None,
+            f"const {prefix}_transition *t" if block.uses("t") else None,
+            f"{prefix}_workspace *w",
+        ]
+        out.append(
+            {
+                "name": block.name,
+                "signature": ", ".join(p for p in params if p),
+                "arguments": ", ".join(a for a, p in zip(("f", "t", "w"), params) if p),
+                "lines": list(block.lines),
+                "checked": block.checked,
+            }
+        )
+    return out
+
+
+def _structs(layout: CLayout) -> list[dict[str, object]]:
+    return [
+        {"name": "matrices", "doc": "Structural nonzeros of F, G, H (row, column pairs in the tables below).", "fields": layout.matrices},
+        {"name": "transition", "doc": "The transition over one step T (from discretize).", "fields": layout.transition},
+        {"name": "filter", "doc": "The filter state: estimate and covariance (or its factors).", "fields": layout.filter},
+        {
+            "name": "workspace",
+            "doc": "Scratch memory for the functions below; contents are not meaningful between calls.",
+            "fields": layout.workspace,
+        },
+    ]
+
+
+def _struct_bytes(fields, scalar_size: int) -> int:
+    total = 0
+    for f in fields:
+        count = 1
+        for d in f.dims:
+            count *= d.value
+        total += count * scalar_size
+    return total
+
+
+def _costs(structure: FilterStructure, options: CodegenOptions, evaluate_ops: int, nm: int) -> dict[str, OperationCount]:
+    n = structure.n_states
+    _, _, state_cost = c_state_predict(structure)
+    if options.ud:
+        _, weights_cost = c_ud_weights(structure)
+        sweep = thornton_cost(structure)
+        predict = OperationCount(
+            state_cost.multiplications + weights_cost.multiplications + sweep.multiplications,
+            state_cost.additions + weights_cost.additions + sweep.additions,
+        )
+    else:
+        _, cov_cost = c_covariance_predict(structure, options.packed)
+        predict = OperationCount(
+            state_cost.multiplications + cov_cost.multiplications, state_cost.additions + cov_cost.additions
+        )
+    costs = {
+        "matrices_evaluate": OperationCount(evaluate_ops, 0),
+        "discretize": discretize_cost(structure, options.taylor_order),
+        "predict (C)": predict,
+        "predict (Python)": python_predict_cost(structure),
+        "predict (dense, for comparison)": OperationCount(2 * n**3 + n, 2 * n * n * (n - 1) + n * n),
+    }
+    if nm:
+        costs["update"] = update_cost(structure, options)
+    return costs
+
+
+def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dict, dict[str, OperationCount]]:
+    """Template contexts for the C files and the Python module, and the kernel costs."""
     model = derived.model
     if derived.nonlinear:
         raise ModelError(
@@ -157,17 +249,9 @@ def generate_code(derived: DerivedModel, options: CodegenOptions | None = None) 
     targets, exprs = _evaluation_outputs(derived, structure)
     block = eliminate_common_subexpressions(exprs)
     n, nw, nm = derived.n_states, derived.n_noises, derived.n_measurements
-
-    predict_state, predict_covariance, c_predict_cost = c_predict(structure)
-    costs = {
-        "matrices_evaluate": OperationCount(block.operation_count, 0),
-        "discretize": discretize_cost(structure, options.taylor_order),
-        "predict (C)": c_predict_cost,
-        "predict (Python)": python_predict_cost(structure),
-        "predict (dense, for comparison)": OperationCount(2 * n**3 + n, 2 * n * n * (n - 1) + n * n),
-    }
-    if nm:
-        costs["update"] = update_cost(structure)
+    sizes = ModelSizes.of(derived)
+    prefix = model.name.upper()
+    costs = _costs(structure, options, block.operation_count, nm)
     cost_lines = [
         f"{name}: {cost}" if name != "matrices_evaluate" else f"{name}: {cost.multiplications} operations after CSE"
         for name, cost in costs.items()
@@ -197,33 +281,82 @@ def generate_code(derived: DerivedModel, options: CodegenOptions | None = None) 
         "taylor_order": options.taylor_order,
         "state_names": model.state_names,
         "cost_lines": cost_lines,
+        "description": options.describe(),
         "banner_c": "/* GENERATED FILE - DO NOT EDIT (modelgen) */",
         "banner_python": "# GENERATED FILE - DO NOT EDIT (modelgen)",
+        "banner_hash": "# GENERATED FILE - DO NOT EDIT (modelgen)",
     }
 
+    packed = options.packed and not options.ud
+    at_upper, at_any = _accessors(packed)
+    state_lines, state_commit, _ = c_state_predict(structure)
+    layout = c_layout(sizes, options, prefix)
+    parts = _c_parts(options, bool(nm))
+    one = "1.0F" if options.scalar == "float" else "1.0"
+    epsilon = "FLT_EPSILON" if options.scalar == "float" else "DBL_EPSILON"
+    scalar_size = 4 if options.scalar == "float" else 8
     c_printer = CPrinter(options.scalar, {p.sym: f"params->{p.name}" for p in model.parameters})
     c_context = {
         **common,
         "p": model.name,
-        "P": model.name.upper(),
-        "guard": f"MODELGEN_{model.name.upper()}_H",
+        "P": prefix,
+        "guard": f"MODELGEN_{prefix}_H",
         "scalar": options.scalar,
-        "one": "1.0F" if options.scalar == "float" else "1.0",
+        "one": one,
         "zero": "0.0F" if options.scalar == "float" else "0.0",
         "sqrt": "sqrtf" if options.scalar == "float" else "sqrt",
         "parameters": parameters,
-        "nnz_f": int(structure.F.sum()),
-        "nnz_g": int(structure.G.sum()),
-        "nnz_h": int(structure.H.sum()),
+        "nnz_f": sizes.nnz_f,
+        "nnz_g": sizes.nnz_g,
+        "nnz_h": sizes.nnz_h,
+        "n_packed": sizes.packed,
+        "n_upper": max(sizes.upper, 1),
+        "n_upper_real": sizes.upper,
+        "n_weights": n + nw,
+        "dim_f": max(sizes.nnz_f, 1),
         "dim_w": max(nw, 1),
         "dim_m": max(nm, 1),
-        "dim_g": max(int(structure.G.sum()), 1),
-        "dim_h": max(int(structure.H.sum()), 1),
+        "dim_g": max(sizes.nnz_g, 1),
+        "dim_h": max(sizes.nnz_h, 1),
         "index_type": index_type,
         "tables": tables,
+        "structs": _structs(layout),
+        "form_macro": "FORM_UD" if options.ud else "FORM_COVARIANCE",
+        "ud": options.ud,
+        "sequential": options.sequential,
+        "packed": packed,
+        "joseph": options.covariance_update == "joseph",
+        "at_upper": at_upper,
+        "at_any": at_any,
+        "pivot_tolerance": f"(16 * N * {epsilon})",
+        "update_doc": (
+            "Bierman, one scalar measurement after another"
+            if options.ud
+            else ("one scalar measurement after another" if options.update == "sequential" else "all at once, Cholesky solve")
+            + (", Joseph form" if options.covariance_update == "joseph" else ", standard form")
+        ),
+        "part_templates": parts,
+        "source_templates": ["c_source.c.j2", *parts],
         "evaluate": _print_block(block, targets, c_printer),
-        "predict_state": predict_state,
-        "predict_covariance": predict_covariance,
+        "predict_state": state_lines,
+        "predict_state_check": [
+            f"check += {ref} - {ref};"
+            for ref in [line.split(" = ")[0] for line in state_lines] + [f"f->x[{i}]" for i in structure.unit_rows]
+        ],
+        "free_parameters": [p.name for p in model.parameters if p.value is None],
+        "probe": next((i, j) for i, j in structure.entries("Phi") if i not in set(structure.unit_rows))
+        if len(structure.unit_rows) < n
+        else (0, 0),
+        "predict_state_commit": state_commit,
+        "predict_blocks": _block_functions(
+            c_ud_weights(structure)[0] if options.ud else c_covariance_predict(structure, packed)[0], model.name
+        ),
+        "struct_bytes": {s["name"]: _struct_bytes(s["fields"], scalar_size) for s in _structs(layout)},
+        "first_free_parameter": next((p.name for p in model.parameters if p.value is None), None),
+        "example_value": _c_number(0.5, options.scalar),
+        "example_variance": _c_number(1e-4, options.scalar),
+        "example_step": _c_number(1.0, options.scalar),
+        "example_z": ", ".join(_c_number(0.1 * (k + 1) * (-1) ** k, options.scalar) for k in range(max(nm, 1))),
     }
 
     py_printer = PyPrinter({p.sym: f"p[{k}]" for k, p in enumerate(model.parameters)})
@@ -256,13 +389,34 @@ def generate_code(derived: DerivedModel, options: CodegenOptions | None = None) 
         + "}",
     }
 
+    return c_context, py_context, costs
+
+
+def generate_code(derived: DerivedModel, options: CodegenOptions | None = None) -> GeneratedCode:
+    """Render the Python module, the C header/source and the C build files for ``derived``."""
+    options = options or CodegenOptions()
+    model = derived.model
+    c_context, py_context, costs = _contexts(derived, options)
     env = _environment()
     files = {
         f"{model.name}.py": env.get_template("python_module.py.j2").render(py_context),
         f"{model.name}.h": env.get_template("c_header.h.j2").render(c_context),
         f"{model.name}.c": env.get_template("c_source.c.j2").render(c_context),
+        "CMakeLists.txt": env.get_template("c_cmakelists.txt.j2").render(c_context),
+        "Makefile": env.get_template("c_makefile.j2").render(c_context),
+        "README.md": env.get_template("c_readme.md.j2").render(c_context),
     }
     return GeneratedCode(model=model.name, files=files, costs=costs)
+
+
+def render_c_template(derived: DerivedModel, options: CodegenOptions, template: str, **extra: object) -> str:
+    """Render another C template (test driver, firmware main) with the filter's context.
+
+    Used for files that go with a generated filter but are not part of it,
+    so that they always agree with its names, sizes and scalar type.
+    """
+    c_context, _, _ = _contexts(derived, options)
+    return _environment().get_template(template).render({**c_context, **extra})
 
 
 def _py_tuple(names: list[str]) -> str:

@@ -3,7 +3,10 @@
 Everything structural is decided here, in Python, so that the templates only
 lay out text.  The covariance prediction P = Phi P Phi^T + Q_d is unrolled for
 C over the structural nonzeros of Phi, skips rows of Phi that are exactly
-e_i, and computes each (i, j) pair of the symmetric result once.  The Python
+e_i, and computes each (i, j) pair of the symmetric result once, in full or
+packed storage.  The UD form's product Phi U is unrolled the same way; its
+Gram-Schmidt sweep and the measurement updates are loops in the templates,
+and their costs are counted here.  The Python
 kernel does the same work vectorized by row class (unit, diagonal, general).
 """
 
@@ -13,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from modelgen.codegen.layout import packed_index, upper_index
+from modelgen.codegen.options import CodegenOptions
 from modelgen.codegen.structure import FilterStructure
 
 
@@ -44,43 +49,84 @@ def _row_classes(structure: FilterStructure) -> tuple[list[int], list[int], list
     return unit, diagonal, general
 
 
-def c_predict(structure: FilterStructure) -> tuple[list[str], list[str], OperationCount]:
-    """Unrolled C statements for x = Phi x and P = Phi P Phi^T + Q_d.
+def _p_ref(base: str, n: int, packed: bool, i: int, j: int) -> str:
+    """C reference to entry (i, j) of a symmetric matrix in full or packed storage."""
+    if packed:
+        return f"{base}[{packed_index(n, i, j)}]"
+    return f"{base}[{i}][{j}]"
 
-    Returns (state lines, covariance lines, cost).  The covariance lines use
-    ``M`` (= Phi P, rows that are not unit rows) and ``Pn`` (upper triangle of
-    the result) from the caller-owned workspace ``w``.
+
+def c_state_predict(structure: FilterStructure) -> tuple[list[str], list[str], OperationCount]:
+    """Unrolled x_n = Phi x over the structural nonzeros of Phi.
+
+    Returns (lines into ``w->xn``, commit lines into ``f->x``, cost); rows of
+    Phi that are e_i leave their state as it is, so they appear in neither.
     """
-    n = structure.n_states
     rows = structure.rows("Phi")
     unit = set(structure.unit_rows)
     mul = add = 0
-    state_lines = []
-    for i in range(n):
+    lines, commit = [], []
+    for i in range(structure.n_states):
         if i in unit:
             continue
         terms = [f"t->Phi[{i}][{k}]*f->x[{k}]" for k in rows[i]]
         mul += len(terms)
         add += len(terms) - 1
-        state_lines.append(f"w->xn[{i}] = {_sum(terms)};")
-    for i in range(n):
-        if i not in unit:
-            state_lines.append(f"f->x[{i}] = w->xn[{i}];")
+        lines.append(f"w->xn[{i}] = {_sum(terms)};")
+        commit.append(f"f->x[{i}] = w->xn[{i}];")
+    return lines, commit, OperationCount(mul, add)
 
-    cov_lines = []
+
+@dataclass(frozen=True)
+class KernelBlock:
+    """Straight-line statements that become one small static C function.
+
+    The unrolled kernels are split row by row so that each C function stays
+    short: static analysers (cppcheck's value flow) slow down sharply on one
+    function of thousands of statements, and compilers inline the pieces back
+    into their single caller anyway.
+    """
+
+    name: str
+    lines: tuple[str, ...]
+    checked: bool = False  # the statements use a local ``v`` and sum ``check``, which the function returns
+
+    def uses(self, pointer: str) -> bool:
+        """Whether the statements read or write through ``pointer`` (``f``, ``t``, ``w``)."""
+        return any(f"{pointer}->" in line for line in self.lines)
+
+
+def c_covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[KernelBlock], OperationCount]:
+    """Unrolled C statements for P_n = Phi P Phi^T + Q_d (upper triangle), by row.
+
+    ``M`` (= Phi P) is formed only for the rows of Phi that are not e_i (the
+    others are rows of P itself); ``Pn`` gets each (i, j), i <= j, once.
+    """
+    n = structure.n_states
+    rows = structure.rows("Phi")
+    unit = set(structure.unit_rows)
+    mul = add = 0
+    blocks = []
+
+    def P(i: int, j: int) -> str:
+        return _p_ref("f->P", n, packed, i, j)
+
     for i in range(n):  # M = Phi P, only the rows that are not copies of P
         if i in unit:
             continue
+        lines = []
         for col in range(n):
-            terms = [f"t->Phi[{i}][{k}]*f->P[{k}][{col}]" for k in rows[i]]
+            terms = [f"t->Phi[{i}][{k}]*{P(k, col)}" for k in rows[i]]
             mul += len(terms)
             add += len(terms) - 1
-            cov_lines.append(f"w->M[{i}][{col}] = {_sum(terms)};")
+            lines.append(f"w->M[{i}][{col}] = {_sum(terms)};")
+        blocks.append(KernelBlock(f"phi_times_p_row_{i}", tuple(lines)))
 
     def m_ref(i: int, col: int) -> str:
-        return f"f->P[{i}][{col}]" if i in unit else f"w->M[{i}][{col}]"
+        return P(i, col) if i in unit else f"w->M[{i}][{col}]"
 
     for i in range(n):  # Pn = M Phi^T + Q_d, upper triangle only
+        lines = []
         for j in range(i, n):
             if j in unit:
                 terms = [m_ref(i, j)]
@@ -89,10 +135,57 @@ def c_predict(structure: FilterStructure) -> tuple[list[str], list[str], Operati
                 mul += len(terms)
             add += len(terms) - 1
             if structure.Qd[i, j]:
-                terms.append(f"t->Qd[{i}][{j}]")
+                terms.append(_p_ref("t->Qd", n, packed, i, j))
                 add += 1
-            cov_lines.append(f"w->Pn[{i}][{j}] = {_sum(terms)};")
-    return state_lines, cov_lines, OperationCount(mul, add)
+            # the new value is stored (mirrored in full storage, so that the
+            # commit is one copy) and checked for finiteness while in a register
+            stores = f"{_p_ref('w->Pn', n, packed, i, j)} = v;"
+            if not packed and i != j:
+                stores += f" w->Pn[{j}][{i}] = v;"
+            lines.append(f"v = {_sum(terms)}; {stores} check += v - v;")
+        blocks.append(KernelBlock(f"propagate_row_{i}", tuple(lines), checked=True))
+    return blocks, OperationCount(mul, add)
+
+
+def c_ud_weights(structure: FilterStructure) -> tuple[list[KernelBlock], OperationCount]:
+    """Unrolled W[:, :N] = Phi U for Thornton's time update (U unit upper, packed), by row.
+
+    W(i, k) = sum over l in row i of Phi with l <= k of Phi(i, l) U(l, k),
+    U(l, l) = 1: entries with no term are zero, a unit row of Phi copies U.
+    """
+    n = structure.n_states
+    rows = structure.rows("Phi")
+    mul = add = 0
+    blocks = []
+    for i in range(n):
+        lines = []
+        for k in range(n):
+            terms = []
+            for l in rows[i]:
+                if l > k:
+                    continue
+                if l == k:  # the unit diagonal of U
+                    terms.append(f"t->Phi[{i}][{l}]")
+                else:
+                    terms.append(f"t->Phi[{i}][{l}]*f->U[{upper_index(n, l, k)}]")
+                    mul += 1
+            add += max(len(terms) - 1, 0)
+            lines.append(f"w->W[{i}][{k}] = {_sum(terms)};")
+        blocks.append(KernelBlock(f"phi_times_u_row_{i}", tuple(lines)))
+    return blocks, OperationCount(mul, add)
+
+
+def thornton_cost(structure: FilterStructure) -> OperationCount:
+    """Flops of the modified weighted Gram-Schmidt over W = [Phi U, Gamma]."""
+    n, nw = structure.n_states, structure.G.shape[1]
+    width = n + nw
+    mul = add = 0
+    for i in range(n):
+        mul += 2 * width  # weighted row and its squared norm
+        add += width
+        mul += i * (2 * width + 1)  # dot product, scaling, elimination
+        add += i * 2 * width
+    return OperationCount(mul, add)
 
 
 def python_predict_plan(structure: FilterStructure) -> dict[str, list[int]]:
@@ -127,18 +220,35 @@ def discretize_cost(structure: FilterStructure, order: int) -> OperationCount:
     return OperationCount(mul, add)
 
 
-def update_cost(structure: FilterStructure) -> OperationCount:
-    """Flops of the vector update with Cholesky solve and factored Joseph form."""
+def update_cost(structure: FilterStructure, options: CodegenOptions | None = None) -> OperationCount:
+    """Flops of the measurement update chosen by ``options`` (default: vector, Joseph)."""
+    options = options or CodegenOptions()
     n = structure.n_states
     m = structure.H.shape[0]
     nnz_h = int(structure.H.sum())
     pairs = n * (n + 1) // 2
+    if options.ud:  # Bierman, per scalar measurement
+        mul = add = 0
+        for a in range(m):
+            cols = list(np.flatnonzero(structure.H[a]))
+            mul += sum(n - c for c in cols) + n + len(cols)  # f = U^T h, v = D f, H x
+            add += sum(n - c for c in cols) + len(cols)
+            mul += n * 3 + (n * (n - 1) // 2) * 2 + n  # alpha, lambda, D; U and b; gain times innovation
+            add += n + (n * (n - 1) // 2) * 2 + n
+        return OperationCount(mul, add)
+    if options.update == "sequential":
+        per_pair = 3 if options.covariance_update == "joseph" else 1
+        mul = nnz_h * n + 2 * nnz_h + m * (2 * n + pairs * per_pair + (n if per_pair == 3 else 0))
+        add = nnz_h * n + 2 * nnz_h + m * (n + pairs * per_pair)
+        return OperationCount(mul, add)
     mul = nnz_h * n  # H P
     mul += m * nnz_h  # S
     mul += m * m * m // 3 + m * m * n  # Cholesky + solves
     mul += nnz_h + n * m  # innovation, state
-    mul += n * n * m  # B = P - K (H P)
-    mul += n * nnz_h  # C = B H^T
-    mul += pairs * 3 * m  # C K^T and K R K^T
+    if options.covariance_update == "joseph":
+        mul += n * m * m  # K S
+        mul += pairs * 3 * m  # (K S) K^T - K (H P) - (H P)^T K^T
+    else:
+        mul += pairs * m  # P - K (H P), upper triangle
     add = mul  # one addition per multiplication, to within m terms
     return OperationCount(mul, add)

@@ -172,17 +172,10 @@ class GeneratedCFilter:
     def from_folder(cls, folder: str | Path, derived: DerivedModel, x0, P0, build_dir: str | Path | None = None,
                     options=None):
         from modelgen.codegen.build import build_c_filter  # sibling of simulation in the chain
+        from modelgen.codegen.layout import ModelSizes
 
-        sizes = {
-            "n": derived.n_states,
-            "nw": derived.n_noises,
-            "nm": derived.n_measurements,
-            "nnz_f": int(derived.structure("F").sum()),
-            "nnz_g": int(derived.structure("G").sum()),
-            "nnz_h": int(derived.structure("H").sum()),
-        }
         model = derived.model
-        compiled = build_c_filter(Path(folder), model.name, sizes, model.parameter_names,
+        compiled = build_c_filter(Path(folder), model.name, ModelSizes.of(derived), model.parameter_names,
                                   Path(build_dir) if build_dir else None, options=options)
         return cls(compiled, x0, P0)
 

@@ -3,7 +3,6 @@
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
@@ -38,12 +37,17 @@ def test_generated_c_calls_no_allocator(paper_code):
 
 
 def test_every_file_says_it_is_generated_from_which_model_and_template(paper_code):
+    assert set(paper_code.files) == {
+        "ned_doppler18.py", "ned_doppler18.h", "ned_doppler18.c", "CMakeLists.txt", "Makefile", "README.md"
+    }
     for name, text in paper_code.files.items():
         head = text[:1500]
-        assert "GENERATED FILE - DO NOT EDIT" in head
-        assert "model 'ned_doppler18'" in head
-        assert ".j2" in head
-        assert "predict (C):" in head and "flops" in head
+        assert "GENERATED FILE - DO NOT EDIT" in head, name
+        assert "model 'ned_doppler18'" in head, name
+        assert ".j2" in head, name
+        if name.endswith((".c", ".h", ".py")):
+            assert "predict (C):" in head and "flops" in head, name
+    assert "predict (C):" in paper_code.files["README.md"]
 
 
 def test_structured_prediction_costs_at_most_a_third_of_dense(paper_code):

@@ -1,0 +1,61 @@
+/* Benchmark harness: one implementation's glue (BENCH_GLUE) around a common loop.
+ *
+ *   harness INPUT callgrind predict|update ITERATIONS   (valgrind --toggle-collect=bench_*_once)
+ *   harness INPUT time predict|update ITERATIONS        (prints ns per call)
+ *
+ * INPUT holds Phi, Q_d, P (N x N each), x (N), H (M x N), r (M), z (M) as
+ * doubles.  Before every call the filter state is restored from a saved copy
+ * (outside the measured function), so each call sees the same numbers.
+ */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+static double in_Phi[BENCH_N][BENCH_N], in_Qd[BENCH_N][BENCH_N], in_P[BENCH_N][BENCH_N], in_x[BENCH_N], in_H[BENCH_M][BENCH_N], in_r[BENCH_M], in_z[BENCH_M];
+
+#include BENCH_GLUE
+
+static double now(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+int main(int argc, char **argv)
+{
+    FILE *f;
+    long it, iterations;
+    int predict;
+    double start, restore_only, total;
+    if (argc < 5) return 2;
+    f = fopen(argv[1], "rb");
+    if (!f) return 2;
+    if (fread(in_Phi, sizeof in_Phi, 1, f) != 1 || fread(in_Qd, sizeof in_Qd, 1, f) != 1 || fread(in_P, sizeof in_P, 1, f) != 1
+        || fread(in_x, sizeof in_x, 1, f) != 1 || fread(in_H, sizeof in_H, 1, f) != 1 || fread(in_r, sizeof in_r, 1, f) != 1
+        || fread(in_z, sizeof in_z, 1, f) != 1) return 2;
+    fclose(f);
+    setup();
+    predict = strcmp(argv[3], "predict") == 0;
+    iterations = atol(argv[4]);
+    if (strcmp(argv[2], "callgrind") == 0) {
+        for (it = 0; it < iterations; ++it) {
+            restore();
+            if (predict) bench_predict_once(); else bench_update_once();
+        }
+        printf("%g\n", checksum());
+        return 0;
+    }
+    start = now();
+    for (it = 0; it < iterations; ++it) restore();
+    restore_only = now() - start;
+    start = now();
+    for (it = 0; it < iterations; ++it) {
+        restore();
+        if (predict) bench_predict_once(); else bench_update_once();
+    }
+    total = now() - start;
+    printf("%.3f %g\n", 1e9 * (total - restore_only) / (double)iterations, checksum());
+    return 0;
+}

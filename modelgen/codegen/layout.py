@@ -1,0 +1,179 @@
+"""Memory layout of the generated C structs, decided once for C and Python.
+
+The header template renders these field lists and ``build.CompiledFilter``
+rebuilds the same structs with ctypes from them, so the two can never
+disagree whatever the options.  Every array has a compile-time size; a
+dimension that would be zero (a model without noises or measurements) is
+rounded up to one so that the C stays valid.
+
+Packed storage keeps the upper triangle row by row:
+``(i, j), i <= j -> i (2N - i - 1) / 2 + j`` (``packed_index``).  The UD form
+keeps the strictly upper part of U the same way:
+``(i, j), i < j -> i (2N - i - 3) / 2 + j - 1`` (``upper_index``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from modelgen.codegen.options import CodegenOptions
+
+
+@dataclass(frozen=True)
+class ModelSizes:
+    """The sizes that fix every struct: states, noises, measurements, nonzeros."""
+
+    n: int
+    nw: int
+    nm: int
+    nnz_f: int
+    nnz_g: int
+    nnz_h: int
+
+    @classmethod
+    def of(cls, derived) -> "ModelSizes":
+        """Sizes of a ``DerivedModel``."""
+        return cls(
+            n=derived.n_states,
+            nw=derived.n_noises,
+            nm=derived.n_measurements,
+            nnz_f=int(np.count_nonzero(derived.structure("F"))),
+            nnz_g=int(np.count_nonzero(derived.structure("G"))),
+            nnz_h=int(np.count_nonzero(derived.structure("H"))),
+        )
+
+    @property
+    def packed(self) -> int:
+        return self.n * (self.n + 1) // 2
+
+    @property
+    def upper(self) -> int:
+        return self.n * (self.n - 1) // 2
+
+
+def packed_index(n: int, i: int, j: int) -> int:
+    """Index of (i, j) of a symmetric N x N matrix in packed upper storage."""
+    if i > j:
+        i, j = j, i
+    return i * (2 * n - i - 1) // 2 + j
+
+
+def upper_index(n: int, i: int, j: int) -> int:
+    """Index of U(i, j), i < j, in packed strictly-upper storage."""
+    if not i < j:
+        raise ValueError(f"U({i}, {j}) is not strictly upper")
+    return i * (2 * n - i - 3) // 2 + j - 1
+
+
+@dataclass(frozen=True)
+class Dim:
+    """One array dimension: the C text (a macro where one exists) and its value."""
+
+    text: str
+    value: int
+
+
+@dataclass(frozen=True)
+class Field:
+    """One struct member: scalar array of the given dimensions."""
+
+    name: str
+    dims: tuple[Dim, ...]
+    comment: str = ""
+
+    @property
+    def declarator(self) -> str:
+        return self.name + "".join(f"[{d.text}]" for d in self.dims)
+
+
+@dataclass(frozen=True)
+class CLayout:
+    """Members of the matrices, transition, filter and workspace structs."""
+
+    matrices: tuple[Field, ...]
+    transition: tuple[Field, ...]
+    filter: tuple[Field, ...]
+    workspace: tuple[Field, ...]
+
+
+def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout:
+    """The struct members for ``options``; ``prefix`` is the upper-case model name."""
+    N = Dim(f"{prefix}_N_STATES", sizes.n)
+    NP = Dim(f"{prefix}_N_PACKED", sizes.packed)
+    NU = Dim(f"{prefix}_N_UPPER", max(sizes.upper, 1))
+    NWT = Dim(f"{prefix}_N_WEIGHTS", sizes.n + sizes.nw)
+    nnz_f = Dim(f"{prefix}_NNZ_F", max(sizes.nnz_f, 1))
+    dim_g = Dim(str(max(sizes.nnz_g, 1)), max(sizes.nnz_g, 1))
+    dim_h = Dim(str(max(sizes.nnz_h, 1)), max(sizes.nnz_h, 1))
+    dim_w = Dim(str(max(sizes.nw, 1)), max(sizes.nw, 1))
+    dim_m = Dim(str(max(sizes.nm, 1)), max(sizes.nm, 1))
+    symmetric = (NP,) if options.packed else (N, N)
+
+    matrices = (
+        Field("F", (nnz_f,)),
+        Field("G", (dim_g,)),
+        Field("q", (dim_w,), "continuous noise PSD, diag(Q)"),
+        Field("H", (dim_h,)),
+        Field("r", (dim_m,), "measurement variance, diag(R)"),
+    )
+    if options.ud:
+        transition = (
+            Field("Phi", (N, N), "transition matrix"),
+            Field("Gamma", (N, dim_w), "noise input matrix of the step"),
+            Field("qw", (dim_w,), "discrete noise weights q / T: Q_d = Gamma diag(qw) Gamma^T"),
+        )
+        filt = (
+            Field("x", (N,)),
+            Field("U", (NU,), "strictly upper part of the unit upper triangular U, packed by rows"),
+            Field("D", (N,), "diagonal of D: P = U D U^T"),
+        )
+        workspace = (
+            Field("A", (N, N)),
+            Field("B", (N, N)),
+            Field("S", (N, N)),
+            Field("W", (N, NWT), "Thornton: [Phi U, Gamma]"),
+            Field("Dw", (NWT,), "Thornton: weights [D, qw]"),
+            Field("Wd", (NWT,), "Thornton: one row of W times the weights"),
+            Field("Un", (NU,)),
+            Field("Dn", (N,)),
+            Field("xn", (N,)),
+            Field("f", (N,), "Bierman: U^T h"),
+            Field("v", (N,), "Bierman: D U^T h"),
+            Field("b", (N,), "Bierman: unscaled gain"),
+        )
+        return CLayout(matrices, transition, filt, workspace)
+
+    transition = (
+        Field("Phi", (N, N), "transition matrix"),
+        Field("Qd", symmetric, "Gamma (Q/T) Gamma^T" + (", packed upper triangle" if options.packed else "")),
+    )
+    filt = (
+        Field("x", (N,)),
+        Field("P", symmetric, "covariance" + (", packed upper triangle" if options.packed else "")),
+    )
+    workspace = [
+        Field("A", (N, N)),
+        Field("B", (N, N)),
+        Field("S", (N, N)),
+        Field("Gamma", (N, dim_w)),
+        Field("M", (N, N), "Phi P"),
+        Field("Pn", symmetric, "new covariance before it is committed"),
+        Field("xn", (N,)),
+    ]
+    if options.update == "vector":
+        workspace += [
+            Field("HP", (dim_m, N)),
+            Field("L", (dim_m, dim_m), "Cholesky factor of the innovation covariance"),
+            Field("K", (N, dim_m)),
+            Field("C", (N, dim_m), "K S (Joseph form)"),
+            Field("S_innovation", (dim_m, dim_m), "innovation covariance H P H^T + R"),
+            Field("nu", (dim_m,)),
+        ]
+    else:
+        workspace += [
+            Field("ph", (N,), "P h^T of one scalar measurement"),
+            Field("k", (N,), "gain of one scalar measurement"),
+        ]
+    return CLayout(matrices, transition, filt, tuple(workspace))

@@ -1,0 +1,107 @@
+"""What the generated C may be asked to be: the code-generation options.
+
+The options only change the C; the generated Python module is always the
+double-precision numpy filter (it is the readable twin of the default C).
+
+* ``scalar`` -- ``double`` or ``float`` (every array, constant and math call).
+* ``form`` -- ``covariance`` (P is stored) or ``ud`` (P = U D U^T is stored:
+  U unit upper triangular, D diagonal; Thornton's modified weighted
+  Gram-Schmidt time update and Bierman's scalar measurement update keep D >= 0
+  by construction, which is what makes single precision safe).
+* ``storage`` -- ``full`` N x N array or ``packed`` upper triangle
+  (N (N + 1) / 2 entries, row by row) for P, Q_d and the workspace copies.
+* ``update`` -- ``vector``: all measurements at once with a small Cholesky
+  solve of the innovation covariance; ``sequential``: one scalar measurement
+  after another, no matrix inverse and no square root (valid because R is
+  diagonal, which every model's measurement_variance makes it).
+* ``covariance_update`` -- ``joseph`` (I-KH) P (I-KH)^T + K R K^T, first-order
+  insensitive to errors in K, or ``standard`` P - K H P (cheaper).
+
+``storage``, ``update`` and ``covariance_update`` describe the covariance
+form; the UD form always stores U packed and updates by Bierman, so they do
+not apply to it (``describe`` says what the code really does).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from modelgen.discretization import DEFAULT_TAYLOR_ORDER
+from modelgen.errors import ModelError
+
+SCALARS = ("double", "float")
+FORMS = ("covariance", "ud")
+STORAGES = ("full", "packed")
+UPDATES = ("vector", "sequential")
+COVARIANCE_UPDATES = ("joseph", "standard")
+
+
+@dataclass(frozen=True)
+class CodegenOptions:
+    """Choices that shape the generated code (see the module docstring)."""
+
+    taylor_order: int = DEFAULT_TAYLOR_ORDER
+    scalar: str = "double"
+    form: str = "covariance"
+    storage: str = "full"
+    update: str = "vector"
+    covariance_update: str = "joseph"
+
+    def __post_init__(self) -> None:
+        for field, allowed in (
+            ("scalar", SCALARS),
+            ("form", FORMS),
+            ("storage", STORAGES),
+            ("update", UPDATES),
+            ("covariance_update", COVARIANCE_UPDATES),
+        ):
+            value = getattr(self, field)
+            if value not in allowed:
+                label = "scalar type" if field == "scalar" else field.replace("_", " ")
+                raise ModelError(f"{label} must be one of {', '.join(map(repr, allowed))}, not {value!r}")
+        if not isinstance(self.taylor_order, int) or not 1 <= self.taylor_order <= 30:
+            raise ModelError(f"Taylor order must be between 1 and 30, not {self.taylor_order}")
+
+    @property
+    def ud(self) -> bool:
+        return self.form == "ud"
+
+    @property
+    def packed(self) -> bool:
+        """True when P (or U) is stored as a packed triangle."""
+        return self.ud or self.storage == "packed"
+
+    @property
+    def sequential(self) -> bool:
+        return self.ud or self.update == "sequential"
+
+    def describe(self) -> str:
+        """One line saying what the generated filter does, for file headers and reports."""
+        if self.ud:
+            return (
+                f"{self.scalar}, UD factorized (P = U D U^T, U packed): Thornton MWGS time update, "
+                "Bierman sequential scalar measurement update"
+            )
+        update = (
+            "vector measurement update (Cholesky solve)" if self.update == "vector" else "sequential scalar measurement updates"
+        )
+        form = "Joseph-form" if self.covariance_update == "joseph" else "standard-form"
+        return f"{self.scalar}, covariance form, {self.storage} storage, {update}, {form} covariance update"
+
+    def slug(self) -> str:
+        """Short identifier of the combination (file and test names)."""
+        if self.ud:
+            return f"{self.scalar}-ud"
+        return f"{self.scalar}-{self.storage}-{self.update}-{self.covariance_update}"
+
+
+def all_combinations(scalar: str = "double") -> list[CodegenOptions]:
+    """Every supported combination for one scalar type (8 covariance forms + UD)."""
+    out = [
+        CodegenOptions(scalar=scalar, storage=s, update=u, covariance_update=c)
+        for s in STORAGES
+        for u in UPDATES
+        for c in COVARIANCE_UPDATES
+    ]
+    out.append(CodegenOptions(scalar=scalar, form="ud"))
+    return out

@@ -1,0 +1,55 @@
+"""The generated filter, cross-built for ARM and run under qemu-arm, tracks the double reference."""
+
+import pytest
+
+from embedded_support import in_parallel, require_tools
+from modelgen.codegen import toolchain
+from modelgen.codegen.options import CodegenOptions
+from modelgen.embedded import EMBEDDED_OPTIONS, FLOAT_TOLERANCE, qemu_run, report_markdown
+from modelgen.pipeline import CONFORMANCE_TOLERANCE, paper_scenario
+
+pytestmark = require_tools(toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
+
+DOUBLE = CodegenOptions()
+
+
+@pytest.fixture(scope="module")
+def runs(paper_derived, tmp_path_factory):
+    root = tmp_path_factory.mktemp("qemu")
+    scenario = paper_scenario(paper_derived)
+    assert scenario.steps == 240 and scenario.step == 60.0
+    options = [*EMBEDDED_OPTIONS, DOUBLE]
+    return dict(zip((o.slug() for o in options), in_parallel(lambda o: qemu_run(paper_derived, scenario, o, root), options)))
+
+
+@pytest.mark.parametrize("options", EMBEDDED_OPTIONS, ids=lambda o: o.slug())
+def test_float_filter_on_arm_stays_within_tolerance_of_double_reference(runs, options):
+    run = runs[options.slug()]
+    assert run.steps == 240 and run.statuses_ok
+    assert run.max_scaled_P < FLOAT_TOLERANCE and run.max_scaled_x < FLOAT_TOLERANCE, (run.max_scaled_P, run.max_scaled_x)
+    assert run.symmetric
+
+
+def test_float_covariance_is_positive_definite_wherever_float_can_resolve_it(runs):
+    run = runs[EMBEDDED_OPTIONS[0].slug()]
+    assert len(run.resolvable_steps) >= 230  # all but the first, nearly singular steps
+    assert run.positive_definite_where_resolvable, run.not_positive_definite
+
+
+def test_float_ud_filter_stays_positive_definite_at_every_step(runs):
+    run = runs[EMBEDDED_OPTIONS[1].slug()]
+    assert run.min_D is not None and run.min_D > 0
+    assert run.not_positive_definite == []
+
+
+def test_double_filter_on_arm_matches_reference_to_conformance_tolerance(runs):
+    run = runs[DOUBLE.slug()]
+    assert run.statuses_ok and run.symmetric
+    assert run.max_scaled_P < CONFORMANCE_TOLERANCE and run.max_scaled_x < CONFORMANCE_TOLERANCE
+    assert run.not_positive_definite == []
+
+
+def test_report_gives_measured_error_and_verdict(runs):
+    text = report_markdown("ned_doppler18", {}, list(runs.values()))
+    assert "qemu-arm" in text and f"{runs[EMBEDDED_OPTIONS[0].slug()].max_scaled_P:.2e}" in text
+    assert "FAILED" not in text
