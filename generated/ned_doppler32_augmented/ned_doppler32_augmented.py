@@ -233,6 +233,7 @@ _QD_ROWS, _QD_COLS = [0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1
 
 def predict(x, P, Phi, Qd):
     """x = Phi x and P = Phi P Phi^T + Q_d, skipping the structural zeros of Phi."""
+    _check_shapes("predict", x=(x, (N_STATES,)), P=(P, (N_STATES, N_STATES)), Phi=(Phi, (N_STATES, N_STATES)), Qd=(Qd, (N_STATES, N_STATES)))
     g, c, d = _GENERAL_ROWS, _GENERAL_COLUMNS, _DIAGONAL_ROWS
     x_new = x.copy()
     x_new[g] = Phi[np.ix_(g, c)] @ x[c]
@@ -248,6 +249,14 @@ def predict(x, P, Phi, Qd):
     return x_new, upper + np.triu(upper, 1).T
 
 
+def _check_shapes(function, **arrays):
+    """Refuse an argument of the wrong shape, naming it (numpy would broadcast or fail obscurely)."""
+    for name, (value, expected) in arrays.items():
+        shape = np.shape(value)
+        if shape != expected:
+            raise ValueError(f"{function}: {name} has shape {shape}, expected {expected}")
+
+
 def update(x, P, z, H, r):
     """Kalman update: gain, state, Joseph-form covariance (seed 000, eq. (12)).
 
@@ -256,6 +265,8 @@ def update(x, P, z, H, r):
     definite.
     """
     z = np.asarray(z, dtype=float)
+    m = z.shape[0] if z.ndim == 1 else -1
+    _check_shapes("update", x=(x, (N_STATES,)), P=(P, (N_STATES, N_STATES)), z=(z, (m,)), H=(H, (m, N_STATES)), r=(r, (m,)))
     if not (np.all(np.isfinite(z)) and np.all(np.isfinite(H)) and np.all(np.isfinite(r))):
         raise ValueError("non-finite measurement, measurement matrix or variance")
     HP = H @ P

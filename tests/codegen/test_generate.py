@@ -108,3 +108,15 @@ def test_failed_write_leaves_previous_output_intact(tmp_path):
         write_atomically(folder, Exploding())
     assert (folder / "a.txt").read_text() == "old"
     assert sorted(p.name for p in folder.parent.iterdir()) == ["m"]
+
+
+def test_generated_python_refuses_arguments_of_the_wrong_shape(paper_code, tmp_path):
+    import numpy as np
+
+    write_atomically(tmp_path / "shape", paper_code.files)
+    gen = load_python_module(tmp_path / "shape" / "ned_doppler18.py")
+    x, P = np.zeros(18), np.eye(18)
+    with pytest.raises(ValueError, match=r"update: H has shape \(2, 17\), expected \(2, 18\)"):
+        gen.update(x, P, np.zeros(2), np.zeros((2, 17)), np.ones(2))
+    with pytest.raises(ValueError, match=r"predict: P has shape \(17, 17\)"):
+        gen.predict(x, np.eye(17), np.eye(18), np.zeros((18, 18)))
