@@ -53,16 +53,25 @@ def parameter_vector(values):
 
 def system_matrix(p):
     """F = df/dx at the operating point p."""
-    t0 = 1.0/p[7]
-    t1 = t0*p[1]
-    t2 = t1*math.tan(p[0])
-    t3 = t0*p[2]
+    latitude = p[0]
+    velocity_east = p[1]
+    velocity_north = p[2]
+    specific_force_east = p[3]
+    specific_force_north = p[4]
+    specific_force_up = p[5]
+    earth_rate = p[6]
+    earth_radius = p[7]
+    gravity = p[8]
+    t0 = 1.0/earth_radius
+    t1 = t0*velocity_east
+    t2 = t1*math.tan(latitude)
+    t3 = t0*velocity_north
     t4 = -t3
-    t5 = p[8]*t0
+    t5 = gravity*t0
     t6 = -t5
-    t7 = p[6]*math.sin(p[0])
+    t7 = earth_rate*math.sin(latitude)
     t8 = t2 + 2*t7
-    t9 = p[6]*math.cos(p[0])
+    t9 = earth_rate*math.cos(latitude)
     t10 = t1 + 2*t9
     t11 = t2 + t7
     t12 = t1 + t9
@@ -79,18 +88,18 @@ def system_matrix(p):
     out[3, 0] = t6
     out[3, 4] = t8
     out[3, 5] = -t10
-    out[3, 7] = -p[5]
-    out[3, 8] = p[4]
+    out[3, 7] = -specific_force_up
+    out[3, 8] = specific_force_north
     out[4, 1] = t6
     out[4, 3] = -t8
     out[4, 5] = t4
-    out[4, 6] = p[5]
-    out[4, 8] = -p[3]
+    out[4, 6] = specific_force_up
+    out[4, 8] = -specific_force_east
     out[5, 2] = 2*t5
     out[5, 3] = t10
     out[5, 4] = t3
-    out[5, 6] = -p[4]
-    out[5, 7] = p[3]
+    out[5, 6] = -specific_force_north
+    out[5, 7] = specific_force_east
     out[6, 7] = t11
     out[6, 8] = -t12
     out[7, 6] = -t11
@@ -117,30 +126,46 @@ def noise_input_matrix(p):
 
 def measurement_matrix(p):
     """H = dh/dx at the operating point p."""
+    line_of_sight_east_1 = p[13]
+    line_of_sight_north_1 = p[14]
+    line_of_sight_up_1 = p[15]
+    line_of_sight_east_2 = p[17]
+    line_of_sight_north_2 = p[18]
+    line_of_sight_up_2 = p[19]
+    line_of_sight_east_3 = p[21]
+    line_of_sight_north_3 = p[22]
+    line_of_sight_up_3 = p[23]
+    line_of_sight_east_4 = p[25]
+    line_of_sight_north_4 = p[26]
+    line_of_sight_up_4 = p[27]
     out = np.zeros((4, 11))
-    out[0, 0] = p[13]
-    out[0, 1] = p[14]
-    out[0, 2] = p[15]
+    out[0, 0] = line_of_sight_east_1
+    out[0, 1] = line_of_sight_north_1
+    out[0, 2] = line_of_sight_up_1
     out[0, 9] = 1
-    out[1, 0] = p[17]
-    out[1, 1] = p[18]
-    out[1, 2] = p[19]
+    out[1, 0] = line_of_sight_east_2
+    out[1, 1] = line_of_sight_north_2
+    out[1, 2] = line_of_sight_up_2
     out[1, 9] = 1
-    out[2, 0] = p[21]
-    out[2, 1] = p[22]
-    out[2, 2] = p[23]
+    out[2, 0] = line_of_sight_east_3
+    out[2, 1] = line_of_sight_north_3
+    out[2, 2] = line_of_sight_up_3
     out[2, 9] = 1
-    out[3, 0] = p[25]
-    out[3, 1] = p[26]
-    out[3, 2] = p[27]
+    out[3, 0] = line_of_sight_east_4
+    out[3, 1] = line_of_sight_north_4
+    out[3, 2] = line_of_sight_up_4
     out[3, 9] = 1
     return out
 
 
 def noise_psd(p):
     """diag(Q): continuous noise power spectral densities."""
-    t0 = p[9]*p[9]
-    t1 = p[10]*p[10]
+    gyro_angle_random_walk = p[9]
+    accel_velocity_random_walk = p[10]
+    clock_bias_psd = p[11]
+    clock_drift_psd = p[12]
+    t0 = gyro_angle_random_walk*gyro_angle_random_walk
+    t1 = accel_velocity_random_walk*accel_velocity_random_walk
     out = np.zeros((8,))
     out[0] = t0
     out[1] = t0
@@ -148,18 +173,22 @@ def noise_psd(p):
     out[3] = t1
     out[4] = t1
     out[5] = t1
-    out[6] = p[11]
-    out[7] = p[12]
+    out[6] = clock_bias_psd
+    out[7] = clock_drift_psd
     return out
 
 
 def measurement_variance(p):
     """diag(R): measurement noise variances."""
+    pseudorange_sigma_1 = p[16]
+    pseudorange_sigma_2 = p[20]
+    pseudorange_sigma_3 = p[24]
+    pseudorange_sigma_4 = p[28]
     out = np.zeros((4,))
-    out[0] = p[16]*p[16]
-    out[1] = p[20]*p[20]
-    out[2] = p[24]*p[24]
-    out[3] = p[28]*p[28]
+    out[0] = pseudorange_sigma_1*pseudorange_sigma_1
+    out[1] = pseudorange_sigma_2*pseudorange_sigma_2
+    out[2] = pseudorange_sigma_3*pseudorange_sigma_3
+    out[3] = pseudorange_sigma_4*pseudorange_sigma_4
     return out
 
 

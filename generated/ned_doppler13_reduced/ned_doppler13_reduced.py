@@ -53,18 +53,35 @@ def parameter_vector(values):
 
 def system_matrix(p):
     """F = df/dx at the operating point p."""
-    t0 = p[16]*math.sin(p[0])
-    t1 = math.tan(p[0])
-    t2 = 1.0/p[17]
-    t3 = p[2]*t2
+    latitude = p[0]
+    velocity_north = p[1]
+    velocity_east = p[2]
+    velocity_down = p[3]
+    specific_force_north = p[4]
+    specific_force_east = p[5]
+    specific_force_down = p[6]
+    c11 = p[7]
+    c12 = p[8]
+    c21 = p[10]
+    c22 = p[11]
+    c31 = p[13]
+    c32 = p[14]
+    earth_rate = p[16]
+    earth_radius = p[17]
+    gyro_markov_rate_x = p[18]
+    gyro_markov_rate_y = p[19]
+    t0 = earth_rate*math.sin(latitude)
+    t1 = math.tan(latitude)
+    t2 = 1.0/earth_radius
+    t3 = velocity_east*t2
     t4 = t1*t3
     t5 = t0 + t4
-    t6 = p[1]*t2
-    t7 = math.cos(p[0])
-    t8 = p[16]*t7
+    t6 = velocity_north*t2
+    t7 = math.cos(latitude)
+    t8 = earth_rate*t7
     t9 = t3 + t8
     t10 = 1.0/(t7*t7)
-    t11 = p[3]*t2
+    t11 = velocity_down*t2
     t12 = 2*t0
     t13 = 2*t8
     t14 = 1.0/t7
@@ -73,55 +90,62 @@ def system_matrix(p):
     out[0, 2] = t6
     out[0, 4] = t2
     out[0, 5] = -t0
-    out[0, 7] = p[7]
-    out[0, 8] = p[8]
-    out[0, 9] = p[7]
-    out[0, 10] = p[8]
+    out[0, 7] = c11
+    out[0, 8] = c12
+    out[0, 9] = c11
+    out[0, 10] = c12
     out[1, 0] = t5
     out[1, 2] = t9
     out[1, 3] = -t2
-    out[1, 7] = p[10]
-    out[1, 8] = p[11]
-    out[1, 9] = p[10]
-    out[1, 10] = p[11]
+    out[1, 7] = c21
+    out[1, 8] = c22
+    out[1, 9] = c21
+    out[1, 10] = c22
     out[2, 0] = -t6
     out[2, 1] = -t9
     out[2, 4] = -t1*t2
     out[2, 5] = -t10*t3 - t8
-    out[2, 7] = p[13]
-    out[2, 8] = p[14]
-    out[2, 9] = p[13]
-    out[2, 10] = p[14]
-    out[3, 1] = -p[6]
-    out[3, 2] = p[5]
+    out[2, 7] = c31
+    out[2, 8] = c32
+    out[2, 9] = c31
+    out[2, 10] = c32
+    out[3, 1] = -specific_force_down
+    out[3, 2] = specific_force_east
     out[3, 3] = t11
     out[3, 4] = -t12 - 2*t4
-    out[3, 5] = -p[2]*p[2]*t10*t2 - p[2]*t13
-    out[4, 0] = p[6]
-    out[4, 2] = -p[4]
+    out[3, 5] = -velocity_east*velocity_east*t10*t2 - velocity_east*t13
+    out[4, 0] = specific_force_down
+    out[4, 2] = -specific_force_north
     out[4, 3] = t12 + t4
     out[4, 4] = t1*t6 + t11
-    out[4, 5] = -p[3]*t12 + p[2]*t10*t6 + p[1]*t13
+    out[4, 5] = -velocity_down*t12 + velocity_east*t10*t6 + velocity_north*t13
     out[5, 3] = t2
     out[6, 4] = t14*t2
     out[6, 5] = t14*t4
-    out[9, 9] = -p[18]
-    out[10, 10] = -p[19]
+    out[9, 9] = -gyro_markov_rate_x
+    out[10, 10] = -gyro_markov_rate_y
     return out
 
 
 def noise_input_matrix(p):
     """G = df/dw at the operating point p."""
+    c11 = p[7]
+    c12 = p[8]
+    c13 = p[9]
+    c21 = p[10]
+    c22 = p[11]
+    c23 = p[12]
+    c33 = p[15]
     out = np.zeros((13, 6))
-    out[0, 2] = p[9]
-    out[1, 2] = p[12]
-    out[2, 2] = p[15]
-    out[3, 3] = p[7]
-    out[3, 4] = p[8]
-    out[3, 5] = p[9]
-    out[4, 3] = p[10]
-    out[4, 4] = p[11]
-    out[4, 5] = p[12]
+    out[0, 2] = c13
+    out[1, 2] = c23
+    out[2, 2] = c33
+    out[3, 3] = c11
+    out[3, 4] = c12
+    out[3, 5] = c13
+    out[4, 3] = c21
+    out[4, 4] = c22
+    out[4, 5] = c23
     out[9, 0] = 1
     out[10, 1] = 1
     return out
@@ -139,21 +163,35 @@ def measurement_matrix(p):
 
 def noise_psd(p):
     """diag(Q): continuous noise power spectral densities."""
+    gyro_markov_rate_x = p[18]
+    gyro_markov_rate_y = p[19]
+    gyro_markov_rate_z = p[20]
+    gyro_markov_sigma_x = p[21]
+    gyro_markov_sigma_y = p[22]
+    gyro_markov_sigma_z = p[23]
+    accel_markov_rate_x = p[24]
+    accel_markov_rate_y = p[25]
+    accel_markov_rate_z = p[26]
+    accel_markov_sigma_x = p[27]
+    accel_markov_sigma_y = p[28]
+    accel_markov_sigma_z = p[29]
     out = np.zeros((6,))
-    out[0] = 2*p[18]*p[21]*p[21]
-    out[1] = 2*p[19]*p[22]*p[22]
-    out[2] = 2*p[23]*p[23]/p[20]
-    out[3] = 2*p[27]*p[27]/p[24]
-    out[4] = 2*p[28]*p[28]/p[25]
-    out[5] = 2*p[29]*p[29]/p[26]
+    out[0] = 2*gyro_markov_rate_x*gyro_markov_sigma_x*gyro_markov_sigma_x
+    out[1] = 2*gyro_markov_rate_y*gyro_markov_sigma_y*gyro_markov_sigma_y
+    out[2] = 2*gyro_markov_sigma_z*gyro_markov_sigma_z/gyro_markov_rate_z
+    out[3] = 2*accel_markov_sigma_x*accel_markov_sigma_x/accel_markov_rate_x
+    out[4] = 2*accel_markov_sigma_y*accel_markov_sigma_y/accel_markov_rate_y
+    out[5] = 2*accel_markov_sigma_z*accel_markov_sigma_z/accel_markov_rate_z
     return out
 
 
 def measurement_variance(p):
     """diag(R): measurement noise variances."""
+    doppler_noise_sigma_north = p[30]
+    doppler_noise_sigma_east = p[31]
     out = np.zeros((2,))
-    out[0] = p[30]*p[30]
-    out[1] = p[31]*p[31]
+    out[0] = doppler_noise_sigma_north*doppler_noise_sigma_north
+    out[1] = doppler_noise_sigma_east*doppler_noise_sigma_east
     return out
 
 

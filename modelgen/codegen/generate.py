@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -359,7 +360,6 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
         "example_z": ", ".join(_c_number(0.1 * (k + 1) * (-1) ** k, options.scalar) for k in range(max(nm, 1))),
     }
 
-    py_printer = PyPrinter({p.sym: f"p[{k}]" for k, p in enumerate(model.parameters)})
     functions = []
     for name, doc, matrix, entries, shape in (
         ("system_matrix", "F = df/dx at the operating point p.", derived.F, structure.entries("F"), f"({n}, {n})"),
@@ -371,7 +371,10 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
         fn_block = eliminate_common_subexpressions([matrix[i, j] for i, j in entries])
         vector = shape.endswith(",)")
         fn_targets = [f"{i}" if vector else f"{i}, {j}" for i, j in entries]
-        functions.append({"name": name, "doc": doc, "shape": shape, **_print_block(fn_block, fn_targets, py_printer)})
+        locals_, printer = _python_parameter_locals(model, fn_block)
+        functions.append(
+            {"name": name, "doc": doc, "shape": shape, "parameters": locals_, **_print_block(fn_block, fn_targets, printer)}
+        )
 
     qd_entries = structure.entries("Qd")
     py_context = {
@@ -417,6 +420,29 @@ def render_c_template(derived: DerivedModel, options: CodegenOptions, template: 
     """
     c_context, _, _ = _contexts(derived, options)
     return _environment().get_template(template).render({**c_context, **extra})
+
+
+_PYTHON_TAKEN = re.compile(r"^(t\d+|p|out|np|math)$")
+
+
+def _python_parameter_locals(model, block: Block) -> tuple[list[tuple[str, int]], PyPrinter]:
+    """Parameters a generated Python function uses, unpacked into locals named as in the model.
+
+    ``latitude = p[0]`` reads better than ``p[0]`` in every expression; a
+    parameter whose name would clash with the function's own names (``p``,
+    ``out``, ``np``, ``math``, temporaries ``t<k>``) stays ``p[k]``.
+    """
+    used = set().union(*(e.free_symbols for _, e in block.temporaries), *(e.free_symbols for e in block.outputs))
+    renames, locals_ = {}, []
+    for k, par in enumerate(model.parameters):
+        if par.sym not in used:
+            continue
+        if _PYTHON_TAKEN.match(par.name):
+            renames[par.sym] = f"p[{k}]"
+        else:
+            renames[par.sym] = par.name
+            locals_.append((par.name, k))
+    return locals_, PyPrinter(renames)
 
 
 def _py_tuple(names: list[str]) -> str:
