@@ -33,6 +33,7 @@ flight, a linear error system in the tests) and a filter
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Callable, Protocol
@@ -105,8 +106,9 @@ class RunResult:
     innovations: list[tuple[float, float]] = field(default_factory=list)  # (time, normalized squared innovation)
 
 
+@functools.lru_cache(maxsize=64)
 def gate_threshold(probability: float, dimension: int) -> float:
-    """chi-square quantile for the gate; infinity when gating is off."""
+    """chi-square quantile for the gate; infinity when gating is off (cached: asked every update)."""
     if probability <= 0:
         return math.inf
     return float(chi2.ppf(probability, dimension))
