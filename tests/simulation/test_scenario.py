@@ -59,3 +59,37 @@ def test_unknown_state_axis_is_refused():
     d["filter"]["states"]["attitude"]["heading_error"] = "sideways"
     with pytest.raises(ModelError, match="heading_error: 'sideways' is not one of"):
         load_scenario_data(d, "x.yaml")
+
+
+def test_paper_profile_and_covariance_error_budget_transcribe_table_1_identically():
+    """Table 1 is written twice (the simulation's profile_000.yaml in the scenario's
+    vocabulary, the analysis's error_budget_000.yaml keyed by model state); this
+    keeps the two from drifting apart, so simulation and covariance analysis fly one system."""
+    from modelgen.analysis.budget import load_error_budget
+
+    s, budget = load_scenario("profile_000"), load_error_budget()
+    sigma, parameter = budget.initial_sigma, budget.parameters
+    imu = s.imu_budget
+    pairs = {
+        "initial attitude north": (s.initial_errors.attitude[0], sigma["attitude_error_north"]),
+        "initial attitude east": (s.initial_errors.attitude[1], sigma["attitude_error_east"]),
+        "initial heading": (s.initial_errors.attitude[2], sigma["heading_error"]),
+        "initial velocity": (s.initial_errors.velocity, sigma["velocity_error_north"]),
+    }
+    for axis in "xyz":
+        pairs |= {
+            f"gyro constant {axis}": (imu.gyro_constant_drift, sigma[f"gyro_constant_drift_{axis}"]),
+            f"gyro Markov {axis}": (imu.gyro_markov_drift, parameter[f"gyro_markov_sigma_{axis}"]),
+            f"gyro Markov time {axis}": (imu.gyro_markov_correlation_time, 1 / parameter[f"gyro_markov_rate_{axis}"]),
+            f"accelerometer Markov {axis}": (imu.accel_markov_bias, parameter[f"accel_markov_sigma_{axis}"]),
+            f"accelerometer Markov time {axis}": (imu.accel_markov_correlation_time,
+                                                  1 / parameter[f"accel_markov_rate_{axis}"]),
+        }
+    for axis in ("north", "east"):
+        pairs |= {
+            f"Doppler bias {axis}": (s.doppler.bias, sigma[f"doppler_velocity_bias_{axis}"]),
+            f"Doppler white noise {axis}": (s.doppler.white_noise, parameter[f"doppler_noise_sigma_{axis}"]),
+        }
+    differing = {name: pair for name, pair in pairs.items() if pair[0] != pytest.approx(pair[1], rel=1e-12, abs=0)}
+    assert not differing
+    assert s.initial_errors.position == 0 and sigma["latitude_error"] == 0
