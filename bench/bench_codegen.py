@@ -8,6 +8,9 @@ same operating point and covariance for every implementation:
 * instructions per covariance prediction and per measurement update, counted
   by valgrind's callgrind (deterministic, so repeatable on a busy machine);
 * wall time per call (best of a few runs);
+* memory: the storage each implementation needs beyond the model inputs
+  (filter state, workspace, static temporaries) and the peak stack of one
+  call (stack painting in bench/harness.c);
 * code-generation wall time of each tool for both models (in-process after
   imports, as each tool is used from a script; for modelgen also the whole
   ``modelgen generate`` process, start-up and imports included).
@@ -162,6 +165,7 @@ static void restore(void) {{ filt = saved; }}
 __attribute__((noinline)) void bench_predict_once(void) {{ if ({model}_predict(&filt, &tr, &ws)) abort(); }}
 __attribute__((noinline)) void bench_update_once(void) {{ if ({model}_update(&filt, in_z, &mat, &ws)) abort(); }}
 static double checksum(void) {{ return filt.P[0][0] + filt.x[0]; }}
+static unsigned long storage_bytes(void) {{ return (unsigned long)(sizeof filt + sizeof ws); }}
 """
 
 
@@ -174,6 +178,7 @@ static void restore(void) { memcpy(x, in_x, sizeof x); memcpy(P, in_P, sizeof P)
 __attribute__((noinline)) void bench_predict_once(void) { dense_predict(x, P, (const double (*)[N])in_Phi, (const double (*)[N])in_Qd); }
 __attribute__((noinline)) void bench_update_once(void) { if (dense_update(x, P, in_z, (const double (*)[N])in_H, in_r)) abort(); }
 static double checksum(void) { return P[0][0] + x[0]; }
+static unsigned long storage_bytes(void) { return (unsigned long)(sizeof x + sizeof P) + dense_scratch_bytes(); }
 """
 
 
@@ -218,6 +223,7 @@ static void restore(void) {{ }}
 __attribute__((noinline)) void bench_predict_once(void) {{ {name}_predict(arg_p, res, iw, w, 0); }}
 __attribute__((noinline)) void bench_update_once(void) {{ {name}_update(arg_u, res, iw, w, 0); }}
 static double checksum(void) {{ return pn_v[0] + xn_v[0]; }}
+static unsigned long storage_bytes(void) {{ return (unsigned long)(sizeof p_v + sizeof x_v + sizeof pn_v + sizeof xn_v + sizeof iw + sizeof w); }}
 """
 
 
@@ -248,6 +254,7 @@ static void restore(void) {{ }}
 extern "C" __attribute__((noinline)) void bench_predict_once(void) {{ sym::{camel}Predict<double>(phi_v, p_v, qd_v, x_v, &pn_v, &xn_v); }}
 extern "C" __attribute__((noinline)) void bench_update_once(void) {{ sym::{camel}Update<double>(p_v, h_v, r_v, x_v, z_v, &pn_v, &xn_v); }}
 static double checksum(void) {{ return pn_v[0] + xn_v[0]; }}
+static unsigned long storage_bytes(void) {{ return (unsigned long)(sizeof p_v + sizeof x_v + sizeof pn_v + sizeof xn_v); }}
 """
 
 
@@ -284,6 +291,12 @@ def wall_ns(exe: Path, data: Path, what: str) -> float:
     iterations = 20000 if what == "predict" else 20000
     best = min(float(run([str(exe), str(data), "time", what, str(iterations)]).stdout.split()[0]) for _ in range(3))
     return best
+
+
+def memory_bytes(exe: Path, data: Path, what: str) -> tuple[int, int]:
+    """(peak stack of one call, storage) as the harness measures them (bench/harness.c)."""
+    stack, storage = run([str(exe), str(data), "memory", what, "1"]).stdout.split()[:2]
+    return int(stack), int(storage)
 
 
 def numpy_wall_ns(p: dict, what: str) -> float:
@@ -387,7 +400,8 @@ def main() -> int:
             work = root / name
             work.mkdir()
             data = input_file(p, work)
-            res = {"n": p["n"], "m": p["m"], "codegen": {}, "instructions": {}, "wall_ns": {}}
+            res = {"n": p["n"], "m": p["m"], "codegen": {}, "instructions": {}, "wall_ns": {}, "stack_bytes": {},
+                   "storage_bytes": {}}
 
             progress(f"{name}: modelgen code generation (derive + Python and C)")
             total, gen_only, gen_folder = modelgen_codegen(name, work / "modelgen")
@@ -423,6 +437,7 @@ def main() -> int:
                     progress(f"{name}: callgrind {impl} {what}")
                     res["instructions"][f"{impl} {what}"] = callgrind_instructions(exe, data, what)
                     res["wall_ns"][f"{impl} {what}"] = wall_ns(exe, data, what)
+                    res["stack_bytes"][f"{impl} {what}"], res["storage_bytes"][impl] = memory_bytes(exe, data, what)
             for what in ("predict", "update"):
                 res["wall_ns"][f"numpy {what}"] = numpy_wall_ns(p, what)
             results[name] = res
@@ -447,6 +462,10 @@ def report(name: str, res: dict) -> None:
             continue
         cells = [f"{v:12.0f}" if v is not None else f"{'-':>12}" for v in ins + ns]
         print(f"  {impl:<12} " + " ".join(cells))
+    print(f"  {'memory [B]':<12} {'storage':>12} {'stack pred.':>12} {'stack upd.':>12}")
+    for impl, static in res["storage_bytes"].items():
+        stacks = [res["stack_bytes"][f"{impl} {w}"] for w in ("predict", "update")]
+        print(f"  {impl:<12} {static:12d} {stacks[0]:12d} {stacks[1]:12d}")
     print("  code generation [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in res["codegen"].items()))
 
 
@@ -459,6 +478,10 @@ def summary(results: dict) -> None:
             parts = [f"{other} {g / ins[f'{other} {what}']:.3f}" for other in ("dense", "symforce", "casadi") if f"{other} {what}" in ins]
             parts_ns = [f"{other} {ns[f'generated {what}'] / ns[f'{other} {what}']:.3f}" for other in ("dense", "symforce", "casadi", "numpy") if f"{other} {what}" in ns]
             print(f"  {name} {what}: instructions vs " + ", ".join(parts) + "; wall time vs " + ", ".join(parts_ns))
+        memory = {impl: static + max(res["stack_bytes"][f"{impl} {w}"] for w in ("predict", "update"))
+                  for impl, static in res["storage_bytes"].items()}
+        parts = [f"{other} {memory['generated'] / memory[other]:.3f}" for other in ("dense", "symforce", "casadi") if other in memory]
+        print(f"  {name} memory (storage + peak stack): " + ", ".join(parts))
     print("targets")
     for name, res in results.items():
         ins = res["instructions"]

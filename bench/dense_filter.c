@@ -13,6 +13,11 @@
 
 static double T1[N][N], T2[N][N], PHt[N][M], S[M][M], L[M][M], K[N][M], A[N][N], xn[N];
 
+unsigned long dense_scratch_bytes(void)
+{
+    return (unsigned long)(sizeof T1 + sizeof T2 + sizeof PHt + sizeof S + sizeof L + sizeof K + sizeof A + sizeof xn);
+}
+
 void dense_predict(double x[N], double P[N][N], const double Phi[N][N], const double Qd[N][N])
 {
     int i, j, k;

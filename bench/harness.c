@@ -2,10 +2,19 @@
  *
  *   harness INPUT callgrind predict|update ITERATIONS   (valgrind --toggle-collect=bench_*_once)
  *   harness INPUT time predict|update ITERATIONS        (prints ns per call)
+ *   harness INPUT memory predict|update 1               (prints peak stack bytes of one call, storage bytes)
  *
  * INPUT holds Phi, Q_d, P (N x N each), x (N), H (M x N), r (M), z (M) as
  * doubles.  Before every call the filter state is restored from a saved copy
  * (outside the measured function), so each call sees the same numbers.
+ *
+ * Peak stack is measured by stack painting, as on a microcontroller: a
+ * noinline function fills a block below the caller's frame with a pattern,
+ * the measured call runs from the same frame, and a second noinline function
+ * with the identical frame layout counts how much of the pattern was
+ * overwritten.  Storage is what the glue's storage_bytes() counts: the filter
+ * state and scratch memory each implementation needs beyond the model inputs
+ * (Phi, Q_d, H, r, z) that every harness holds alike.
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -15,6 +24,25 @@
 static double in_Phi[BENCH_N][BENCH_N], in_Qd[BENCH_N][BENCH_N], in_P[BENCH_N][BENCH_N], in_x[BENCH_N], in_H[BENCH_M][BENCH_N], in_r[BENCH_M], in_z[BENCH_M];
 
 #include BENCH_GLUE
+
+#define STACK_PAINT_BYTES 262144
+#define STACK_PATTERN 0xA5
+
+static __attribute__((noinline)) void paint_stack(void)
+{
+    volatile unsigned char block[STACK_PAINT_BYTES];
+    size_t i;
+    for (i = 0; i < STACK_PAINT_BYTES; ++i) block[i] = STACK_PATTERN;
+}
+
+static __attribute__((noinline)) size_t painted_stack_used(void)
+{
+    volatile unsigned char block[STACK_PAINT_BYTES];
+    size_t i;
+    for (i = 0; i < STACK_PAINT_BYTES && block[i] == STACK_PATTERN; ++i) {
+    }
+    return STACK_PAINT_BYTES - i;
+}
 
 static double now(void)
 {
@@ -45,6 +73,13 @@ int main(int argc, char **argv)
             if (predict) bench_predict_once(); else bench_update_once();
         }
         printf("%g\n", checksum());
+        return 0;
+    }
+    if (strcmp(argv[2], "memory") == 0) {
+        restore();
+        paint_stack();
+        if (predict) bench_predict_once(); else bench_update_once();
+        printf("%lu %lu %g\n", (unsigned long)painted_stack_used(), storage_bytes(), checksum());
         return 0;
     }
     start = now();

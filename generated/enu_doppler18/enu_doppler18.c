@@ -232,8 +232,9 @@ void enu_doppler18_matrices_evaluate(const enu_doppler18_params *params, enu_dop
     m->r[2] = params->doppler_noise_sigma_up*params->doppler_noise_sigma_up;
 }
 
-int enu_doppler18_discretize(const enu_doppler18_matrices *m, enu_doppler18_scalar T, enu_doppler18_transition *t, enu_doppler18_workspace *w)
+int enu_doppler18_discretize(const enu_doppler18_matrices *m, enu_doppler18_scalar T, enu_doppler18_transition *t, enu_doppler18_workspace *work)
 {
+    enu_doppler18_discretize_scratch *w = &work->discretize;
     int i, j, k, e, c;
     enu_doppler18_scalar check = 0.0;
     if (!isfinite(T)) {
@@ -323,7 +324,7 @@ int enu_doppler18_discretize(const enu_doppler18_matrices *m, enu_doppler18_scal
     return (check != 0.0) ? ENU_DOPPLER18_ERR_NONFINITE : ENU_DOPPLER18_OK;
 }
 
-static void phi_times_p_row_0(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_0(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[0][0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] + t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] + t->Phi[0][6]*f->P[6][0] + t->Phi[0][8]*f->P[8][0] + t->Phi[0][9]*f->P[9][0] + t->Phi[0][10]*f->P[10][0] + t->Phi[0][11]*f->P[11][0] + t->Phi[0][12]*f->P[12][0] + t->Phi[0][13]*f->P[13][0] + t->Phi[0][14]*f->P[14][0] + t->Phi[0][15]*f->P[15][0] + t->Phi[0][16]*f->P[16][0] + t->Phi[0][17]*f->P[17][0];
     w->M[0][1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] + t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] + t->Phi[0][6]*f->P[6][1] + t->Phi[0][8]*f->P[8][1] + t->Phi[0][9]*f->P[9][1] + t->Phi[0][10]*f->P[10][1] + t->Phi[0][11]*f->P[11][1] + t->Phi[0][12]*f->P[12][1] + t->Phi[0][13]*f->P[13][1] + t->Phi[0][14]*f->P[14][1] + t->Phi[0][15]*f->P[15][1] + t->Phi[0][16]*f->P[16][1] + t->Phi[0][17]*f->P[17][1];
@@ -345,7 +346,7 @@ static void phi_times_p_row_0(const enu_doppler18_filter *f, const enu_doppler18
     w->M[0][17] = t->Phi[0][0]*f->P[0][17] + t->Phi[0][1]*f->P[1][17] + t->Phi[0][2]*f->P[2][17] + t->Phi[0][3]*f->P[3][17] + t->Phi[0][4]*f->P[4][17] + t->Phi[0][5]*f->P[5][17] + t->Phi[0][6]*f->P[6][17] + t->Phi[0][8]*f->P[8][17] + t->Phi[0][9]*f->P[9][17] + t->Phi[0][10]*f->P[10][17] + t->Phi[0][11]*f->P[11][17] + t->Phi[0][12]*f->P[12][17] + t->Phi[0][13]*f->P[13][17] + t->Phi[0][14]*f->P[14][17] + t->Phi[0][15]*f->P[15][17] + t->Phi[0][16]*f->P[16][17] + t->Phi[0][17]*f->P[17][17];
 }
 
-static void phi_times_p_row_1(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_1(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[1][0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] + t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] + t->Phi[1][6]*f->P[6][0] + t->Phi[1][8]*f->P[8][0] + t->Phi[1][9]*f->P[9][0] + t->Phi[1][10]*f->P[10][0] + t->Phi[1][11]*f->P[11][0] + t->Phi[1][12]*f->P[12][0] + t->Phi[1][13]*f->P[13][0] + t->Phi[1][14]*f->P[14][0] + t->Phi[1][15]*f->P[15][0] + t->Phi[1][16]*f->P[16][0] + t->Phi[1][17]*f->P[17][0];
     w->M[1][1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] + t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] + t->Phi[1][6]*f->P[6][1] + t->Phi[1][8]*f->P[8][1] + t->Phi[1][9]*f->P[9][1] + t->Phi[1][10]*f->P[10][1] + t->Phi[1][11]*f->P[11][1] + t->Phi[1][12]*f->P[12][1] + t->Phi[1][13]*f->P[13][1] + t->Phi[1][14]*f->P[14][1] + t->Phi[1][15]*f->P[15][1] + t->Phi[1][16]*f->P[16][1] + t->Phi[1][17]*f->P[17][1];
@@ -367,7 +368,7 @@ static void phi_times_p_row_1(const enu_doppler18_filter *f, const enu_doppler18
     w->M[1][17] = t->Phi[1][0]*f->P[0][17] + t->Phi[1][1]*f->P[1][17] + t->Phi[1][2]*f->P[2][17] + t->Phi[1][3]*f->P[3][17] + t->Phi[1][4]*f->P[4][17] + t->Phi[1][5]*f->P[5][17] + t->Phi[1][6]*f->P[6][17] + t->Phi[1][8]*f->P[8][17] + t->Phi[1][9]*f->P[9][17] + t->Phi[1][10]*f->P[10][17] + t->Phi[1][11]*f->P[11][17] + t->Phi[1][12]*f->P[12][17] + t->Phi[1][13]*f->P[13][17] + t->Phi[1][14]*f->P[14][17] + t->Phi[1][15]*f->P[15][17] + t->Phi[1][16]*f->P[16][17] + t->Phi[1][17]*f->P[17][17];
 }
 
-static void phi_times_p_row_2(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_2(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[2][0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] + t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] + t->Phi[2][6]*f->P[6][0] + t->Phi[2][8]*f->P[8][0] + t->Phi[2][9]*f->P[9][0] + t->Phi[2][10]*f->P[10][0] + t->Phi[2][11]*f->P[11][0] + t->Phi[2][12]*f->P[12][0] + t->Phi[2][13]*f->P[13][0] + t->Phi[2][14]*f->P[14][0] + t->Phi[2][15]*f->P[15][0] + t->Phi[2][16]*f->P[16][0] + t->Phi[2][17]*f->P[17][0];
     w->M[2][1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] + t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] + t->Phi[2][6]*f->P[6][1] + t->Phi[2][8]*f->P[8][1] + t->Phi[2][9]*f->P[9][1] + t->Phi[2][10]*f->P[10][1] + t->Phi[2][11]*f->P[11][1] + t->Phi[2][12]*f->P[12][1] + t->Phi[2][13]*f->P[13][1] + t->Phi[2][14]*f->P[14][1] + t->Phi[2][15]*f->P[15][1] + t->Phi[2][16]*f->P[16][1] + t->Phi[2][17]*f->P[17][1];
@@ -389,7 +390,7 @@ static void phi_times_p_row_2(const enu_doppler18_filter *f, const enu_doppler18
     w->M[2][17] = t->Phi[2][0]*f->P[0][17] + t->Phi[2][1]*f->P[1][17] + t->Phi[2][2]*f->P[2][17] + t->Phi[2][3]*f->P[3][17] + t->Phi[2][4]*f->P[4][17] + t->Phi[2][5]*f->P[5][17] + t->Phi[2][6]*f->P[6][17] + t->Phi[2][8]*f->P[8][17] + t->Phi[2][9]*f->P[9][17] + t->Phi[2][10]*f->P[10][17] + t->Phi[2][11]*f->P[11][17] + t->Phi[2][12]*f->P[12][17] + t->Phi[2][13]*f->P[13][17] + t->Phi[2][14]*f->P[14][17] + t->Phi[2][15]*f->P[15][17] + t->Phi[2][16]*f->P[16][17] + t->Phi[2][17]*f->P[17][17];
 }
 
-static void phi_times_p_row_3(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_3(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[3][0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] + t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] + t->Phi[3][6]*f->P[6][0] + t->Phi[3][8]*f->P[8][0] + t->Phi[3][9]*f->P[9][0] + t->Phi[3][10]*f->P[10][0] + t->Phi[3][11]*f->P[11][0] + t->Phi[3][12]*f->P[12][0] + t->Phi[3][13]*f->P[13][0] + t->Phi[3][14]*f->P[14][0] + t->Phi[3][15]*f->P[15][0] + t->Phi[3][16]*f->P[16][0] + t->Phi[3][17]*f->P[17][0];
     w->M[3][1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] + t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] + t->Phi[3][6]*f->P[6][1] + t->Phi[3][8]*f->P[8][1] + t->Phi[3][9]*f->P[9][1] + t->Phi[3][10]*f->P[10][1] + t->Phi[3][11]*f->P[11][1] + t->Phi[3][12]*f->P[12][1] + t->Phi[3][13]*f->P[13][1] + t->Phi[3][14]*f->P[14][1] + t->Phi[3][15]*f->P[15][1] + t->Phi[3][16]*f->P[16][1] + t->Phi[3][17]*f->P[17][1];
@@ -411,7 +412,7 @@ static void phi_times_p_row_3(const enu_doppler18_filter *f, const enu_doppler18
     w->M[3][17] = t->Phi[3][0]*f->P[0][17] + t->Phi[3][1]*f->P[1][17] + t->Phi[3][2]*f->P[2][17] + t->Phi[3][3]*f->P[3][17] + t->Phi[3][4]*f->P[4][17] + t->Phi[3][5]*f->P[5][17] + t->Phi[3][6]*f->P[6][17] + t->Phi[3][8]*f->P[8][17] + t->Phi[3][9]*f->P[9][17] + t->Phi[3][10]*f->P[10][17] + t->Phi[3][11]*f->P[11][17] + t->Phi[3][12]*f->P[12][17] + t->Phi[3][13]*f->P[13][17] + t->Phi[3][14]*f->P[14][17] + t->Phi[3][15]*f->P[15][17] + t->Phi[3][16]*f->P[16][17] + t->Phi[3][17]*f->P[17][17];
 }
 
-static void phi_times_p_row_4(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_4(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[4][0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] + t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] + t->Phi[4][6]*f->P[6][0] + t->Phi[4][8]*f->P[8][0] + t->Phi[4][9]*f->P[9][0] + t->Phi[4][10]*f->P[10][0] + t->Phi[4][11]*f->P[11][0] + t->Phi[4][12]*f->P[12][0] + t->Phi[4][13]*f->P[13][0] + t->Phi[4][14]*f->P[14][0] + t->Phi[4][15]*f->P[15][0] + t->Phi[4][16]*f->P[16][0] + t->Phi[4][17]*f->P[17][0];
     w->M[4][1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] + t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] + t->Phi[4][6]*f->P[6][1] + t->Phi[4][8]*f->P[8][1] + t->Phi[4][9]*f->P[9][1] + t->Phi[4][10]*f->P[10][1] + t->Phi[4][11]*f->P[11][1] + t->Phi[4][12]*f->P[12][1] + t->Phi[4][13]*f->P[13][1] + t->Phi[4][14]*f->P[14][1] + t->Phi[4][15]*f->P[15][1] + t->Phi[4][16]*f->P[16][1] + t->Phi[4][17]*f->P[17][1];
@@ -433,7 +434,7 @@ static void phi_times_p_row_4(const enu_doppler18_filter *f, const enu_doppler18
     w->M[4][17] = t->Phi[4][0]*f->P[0][17] + t->Phi[4][1]*f->P[1][17] + t->Phi[4][2]*f->P[2][17] + t->Phi[4][3]*f->P[3][17] + t->Phi[4][4]*f->P[4][17] + t->Phi[4][5]*f->P[5][17] + t->Phi[4][6]*f->P[6][17] + t->Phi[4][8]*f->P[8][17] + t->Phi[4][9]*f->P[9][17] + t->Phi[4][10]*f->P[10][17] + t->Phi[4][11]*f->P[11][17] + t->Phi[4][12]*f->P[12][17] + t->Phi[4][13]*f->P[13][17] + t->Phi[4][14]*f->P[14][17] + t->Phi[4][15]*f->P[15][17] + t->Phi[4][16]*f->P[16][17] + t->Phi[4][17]*f->P[17][17];
 }
 
-static void phi_times_p_row_5(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_5(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[5][0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] + t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] + t->Phi[5][6]*f->P[6][0] + t->Phi[5][8]*f->P[8][0] + t->Phi[5][9]*f->P[9][0] + t->Phi[5][10]*f->P[10][0] + t->Phi[5][11]*f->P[11][0] + t->Phi[5][12]*f->P[12][0] + t->Phi[5][13]*f->P[13][0] + t->Phi[5][14]*f->P[14][0] + t->Phi[5][15]*f->P[15][0] + t->Phi[5][16]*f->P[16][0] + t->Phi[5][17]*f->P[17][0];
     w->M[5][1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] + t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] + t->Phi[5][6]*f->P[6][1] + t->Phi[5][8]*f->P[8][1] + t->Phi[5][9]*f->P[9][1] + t->Phi[5][10]*f->P[10][1] + t->Phi[5][11]*f->P[11][1] + t->Phi[5][12]*f->P[12][1] + t->Phi[5][13]*f->P[13][1] + t->Phi[5][14]*f->P[14][1] + t->Phi[5][15]*f->P[15][1] + t->Phi[5][16]*f->P[16][1] + t->Phi[5][17]*f->P[17][1];
@@ -455,7 +456,7 @@ static void phi_times_p_row_5(const enu_doppler18_filter *f, const enu_doppler18
     w->M[5][17] = t->Phi[5][0]*f->P[0][17] + t->Phi[5][1]*f->P[1][17] + t->Phi[5][2]*f->P[2][17] + t->Phi[5][3]*f->P[3][17] + t->Phi[5][4]*f->P[4][17] + t->Phi[5][5]*f->P[5][17] + t->Phi[5][6]*f->P[6][17] + t->Phi[5][8]*f->P[8][17] + t->Phi[5][9]*f->P[9][17] + t->Phi[5][10]*f->P[10][17] + t->Phi[5][11]*f->P[11][17] + t->Phi[5][12]*f->P[12][17] + t->Phi[5][13]*f->P[13][17] + t->Phi[5][14]*f->P[14][17] + t->Phi[5][15]*f->P[15][17] + t->Phi[5][16]*f->P[16][17] + t->Phi[5][17]*f->P[17][17];
 }
 
-static void phi_times_p_row_6(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_6(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[6][0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] + t->Phi[6][3]*f->P[3][0] + t->Phi[6][4]*f->P[4][0] + t->Phi[6][5]*f->P[5][0] + t->Phi[6][6]*f->P[6][0] + t->Phi[6][8]*f->P[8][0] + t->Phi[6][9]*f->P[9][0] + t->Phi[6][10]*f->P[10][0] + t->Phi[6][11]*f->P[11][0] + t->Phi[6][12]*f->P[12][0] + t->Phi[6][13]*f->P[13][0] + t->Phi[6][14]*f->P[14][0] + t->Phi[6][15]*f->P[15][0] + t->Phi[6][16]*f->P[16][0] + t->Phi[6][17]*f->P[17][0];
     w->M[6][1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] + t->Phi[6][3]*f->P[3][1] + t->Phi[6][4]*f->P[4][1] + t->Phi[6][5]*f->P[5][1] + t->Phi[6][6]*f->P[6][1] + t->Phi[6][8]*f->P[8][1] + t->Phi[6][9]*f->P[9][1] + t->Phi[6][10]*f->P[10][1] + t->Phi[6][11]*f->P[11][1] + t->Phi[6][12]*f->P[12][1] + t->Phi[6][13]*f->P[13][1] + t->Phi[6][14]*f->P[14][1] + t->Phi[6][15]*f->P[15][1] + t->Phi[6][16]*f->P[16][1] + t->Phi[6][17]*f->P[17][1];
@@ -477,7 +478,7 @@ static void phi_times_p_row_6(const enu_doppler18_filter *f, const enu_doppler18
     w->M[6][17] = t->Phi[6][0]*f->P[0][17] + t->Phi[6][1]*f->P[1][17] + t->Phi[6][2]*f->P[2][17] + t->Phi[6][3]*f->P[3][17] + t->Phi[6][4]*f->P[4][17] + t->Phi[6][5]*f->P[5][17] + t->Phi[6][6]*f->P[6][17] + t->Phi[6][8]*f->P[8][17] + t->Phi[6][9]*f->P[9][17] + t->Phi[6][10]*f->P[10][17] + t->Phi[6][11]*f->P[11][17] + t->Phi[6][12]*f->P[12][17] + t->Phi[6][13]*f->P[13][17] + t->Phi[6][14]*f->P[14][17] + t->Phi[6][15]*f->P[15][17] + t->Phi[6][16]*f->P[16][17] + t->Phi[6][17]*f->P[17][17];
 }
 
-static void phi_times_p_row_7(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_7(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[7][0] = t->Phi[7][0]*f->P[0][0] + t->Phi[7][1]*f->P[1][0] + t->Phi[7][2]*f->P[2][0] + t->Phi[7][3]*f->P[3][0] + t->Phi[7][4]*f->P[4][0] + t->Phi[7][5]*f->P[5][0] + t->Phi[7][6]*f->P[6][0] + t->Phi[7][7]*f->P[7][0] + t->Phi[7][8]*f->P[8][0] + t->Phi[7][9]*f->P[9][0] + t->Phi[7][10]*f->P[10][0] + t->Phi[7][11]*f->P[11][0] + t->Phi[7][12]*f->P[12][0] + t->Phi[7][13]*f->P[13][0] + t->Phi[7][14]*f->P[14][0] + t->Phi[7][15]*f->P[15][0] + t->Phi[7][16]*f->P[16][0] + t->Phi[7][17]*f->P[17][0];
     w->M[7][1] = t->Phi[7][0]*f->P[0][1] + t->Phi[7][1]*f->P[1][1] + t->Phi[7][2]*f->P[2][1] + t->Phi[7][3]*f->P[3][1] + t->Phi[7][4]*f->P[4][1] + t->Phi[7][5]*f->P[5][1] + t->Phi[7][6]*f->P[6][1] + t->Phi[7][7]*f->P[7][1] + t->Phi[7][8]*f->P[8][1] + t->Phi[7][9]*f->P[9][1] + t->Phi[7][10]*f->P[10][1] + t->Phi[7][11]*f->P[11][1] + t->Phi[7][12]*f->P[12][1] + t->Phi[7][13]*f->P[13][1] + t->Phi[7][14]*f->P[14][1] + t->Phi[7][15]*f->P[15][1] + t->Phi[7][16]*f->P[16][1] + t->Phi[7][17]*f->P[17][1];
@@ -499,7 +500,7 @@ static void phi_times_p_row_7(const enu_doppler18_filter *f, const enu_doppler18
     w->M[7][17] = t->Phi[7][0]*f->P[0][17] + t->Phi[7][1]*f->P[1][17] + t->Phi[7][2]*f->P[2][17] + t->Phi[7][3]*f->P[3][17] + t->Phi[7][4]*f->P[4][17] + t->Phi[7][5]*f->P[5][17] + t->Phi[7][6]*f->P[6][17] + t->Phi[7][7]*f->P[7][17] + t->Phi[7][8]*f->P[8][17] + t->Phi[7][9]*f->P[9][17] + t->Phi[7][10]*f->P[10][17] + t->Phi[7][11]*f->P[11][17] + t->Phi[7][12]*f->P[12][17] + t->Phi[7][13]*f->P[13][17] + t->Phi[7][14]*f->P[14][17] + t->Phi[7][15]*f->P[15][17] + t->Phi[7][16]*f->P[16][17] + t->Phi[7][17]*f->P[17][17];
 }
 
-static void phi_times_p_row_8(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_8(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[8][0] = t->Phi[8][0]*f->P[0][0] + t->Phi[8][1]*f->P[1][0] + t->Phi[8][2]*f->P[2][0] + t->Phi[8][3]*f->P[3][0] + t->Phi[8][4]*f->P[4][0] + t->Phi[8][5]*f->P[5][0] + t->Phi[8][6]*f->P[6][0] + t->Phi[8][8]*f->P[8][0] + t->Phi[8][9]*f->P[9][0] + t->Phi[8][10]*f->P[10][0] + t->Phi[8][11]*f->P[11][0] + t->Phi[8][12]*f->P[12][0] + t->Phi[8][13]*f->P[13][0] + t->Phi[8][14]*f->P[14][0] + t->Phi[8][15]*f->P[15][0] + t->Phi[8][16]*f->P[16][0] + t->Phi[8][17]*f->P[17][0];
     w->M[8][1] = t->Phi[8][0]*f->P[0][1] + t->Phi[8][1]*f->P[1][1] + t->Phi[8][2]*f->P[2][1] + t->Phi[8][3]*f->P[3][1] + t->Phi[8][4]*f->P[4][1] + t->Phi[8][5]*f->P[5][1] + t->Phi[8][6]*f->P[6][1] + t->Phi[8][8]*f->P[8][1] + t->Phi[8][9]*f->P[9][1] + t->Phi[8][10]*f->P[10][1] + t->Phi[8][11]*f->P[11][1] + t->Phi[8][12]*f->P[12][1] + t->Phi[8][13]*f->P[13][1] + t->Phi[8][14]*f->P[14][1] + t->Phi[8][15]*f->P[15][1] + t->Phi[8][16]*f->P[16][1] + t->Phi[8][17]*f->P[17][1];
@@ -521,7 +522,7 @@ static void phi_times_p_row_8(const enu_doppler18_filter *f, const enu_doppler18
     w->M[8][17] = t->Phi[8][0]*f->P[0][17] + t->Phi[8][1]*f->P[1][17] + t->Phi[8][2]*f->P[2][17] + t->Phi[8][3]*f->P[3][17] + t->Phi[8][4]*f->P[4][17] + t->Phi[8][5]*f->P[5][17] + t->Phi[8][6]*f->P[6][17] + t->Phi[8][8]*f->P[8][17] + t->Phi[8][9]*f->P[9][17] + t->Phi[8][10]*f->P[10][17] + t->Phi[8][11]*f->P[11][17] + t->Phi[8][12]*f->P[12][17] + t->Phi[8][13]*f->P[13][17] + t->Phi[8][14]*f->P[14][17] + t->Phi[8][15]*f->P[15][17] + t->Phi[8][16]*f->P[16][17] + t->Phi[8][17]*f->P[17][17];
 }
 
-static void phi_times_p_row_12(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_12(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[12][0] = t->Phi[12][12]*f->P[12][0];
     w->M[12][1] = t->Phi[12][12]*f->P[12][1];
@@ -543,7 +544,7 @@ static void phi_times_p_row_12(const enu_doppler18_filter *f, const enu_doppler1
     w->M[12][17] = t->Phi[12][12]*f->P[12][17];
 }
 
-static void phi_times_p_row_13(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_13(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[13][0] = t->Phi[13][13]*f->P[13][0];
     w->M[13][1] = t->Phi[13][13]*f->P[13][1];
@@ -565,7 +566,7 @@ static void phi_times_p_row_13(const enu_doppler18_filter *f, const enu_doppler1
     w->M[13][17] = t->Phi[13][13]*f->P[13][17];
 }
 
-static void phi_times_p_row_14(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_14(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[14][0] = t->Phi[14][14]*f->P[14][0];
     w->M[14][1] = t->Phi[14][14]*f->P[14][1];
@@ -587,7 +588,7 @@ static void phi_times_p_row_14(const enu_doppler18_filter *f, const enu_doppler1
     w->M[14][17] = t->Phi[14][14]*f->P[14][17];
 }
 
-static void phi_times_p_row_15(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_15(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[15][0] = t->Phi[15][15]*f->P[15][0];
     w->M[15][1] = t->Phi[15][15]*f->P[15][1];
@@ -609,7 +610,7 @@ static void phi_times_p_row_15(const enu_doppler18_filter *f, const enu_doppler1
     w->M[15][17] = t->Phi[15][15]*f->P[15][17];
 }
 
-static void phi_times_p_row_16(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_16(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[16][0] = t->Phi[16][16]*f->P[16][0];
     w->M[16][1] = t->Phi[16][16]*f->P[16][1];
@@ -631,7 +632,7 @@ static void phi_times_p_row_16(const enu_doppler18_filter *f, const enu_doppler1
     w->M[16][17] = t->Phi[16][16]*f->P[16][17];
 }
 
-static void phi_times_p_row_17(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static void phi_times_p_row_17(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     w->M[17][0] = t->Phi[17][17]*f->P[17][0];
     w->M[17][1] = t->Phi[17][17]*f->P[17][1];
@@ -654,7 +655,7 @@ static void phi_times_p_row_17(const enu_doppler18_filter *f, const enu_doppler1
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_0(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_0(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[0][0]*t->Phi[0][0] + w->M[0][1]*t->Phi[0][1] + w->M[0][2]*t->Phi[0][2] + w->M[0][3]*t->Phi[0][3] + w->M[0][4]*t->Phi[0][4] + w->M[0][5]*t->Phi[0][5] + w->M[0][6]*t->Phi[0][6] + w->M[0][8]*t->Phi[0][8] + w->M[0][9]*t->Phi[0][9] + w->M[0][10]*t->Phi[0][10] + w->M[0][11]*t->Phi[0][11] + w->M[0][12]*t->Phi[0][12] + w->M[0][13]*t->Phi[0][13] + w->M[0][14]*t->Phi[0][14] + w->M[0][15]*t->Phi[0][15] + w->M[0][16]*t->Phi[0][16] + w->M[0][17]*t->Phi[0][17] + t->Qd[0][0]; w->Pn[0][0] = v; check += v - v;
@@ -679,7 +680,7 @@ static enu_doppler18_scalar propagate_row_0(const enu_doppler18_transition *t, e
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_1(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_1(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[1][0]*t->Phi[1][0] + w->M[1][1]*t->Phi[1][1] + w->M[1][2]*t->Phi[1][2] + w->M[1][3]*t->Phi[1][3] + w->M[1][4]*t->Phi[1][4] + w->M[1][5]*t->Phi[1][5] + w->M[1][6]*t->Phi[1][6] + w->M[1][8]*t->Phi[1][8] + w->M[1][9]*t->Phi[1][9] + w->M[1][10]*t->Phi[1][10] + w->M[1][11]*t->Phi[1][11] + w->M[1][12]*t->Phi[1][12] + w->M[1][13]*t->Phi[1][13] + w->M[1][14]*t->Phi[1][14] + w->M[1][15]*t->Phi[1][15] + w->M[1][16]*t->Phi[1][16] + w->M[1][17]*t->Phi[1][17] + t->Qd[1][1]; w->Pn[1][1] = v; check += v - v;
@@ -703,7 +704,7 @@ static enu_doppler18_scalar propagate_row_1(const enu_doppler18_transition *t, e
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_2(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_2(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[2][0]*t->Phi[2][0] + w->M[2][1]*t->Phi[2][1] + w->M[2][2]*t->Phi[2][2] + w->M[2][3]*t->Phi[2][3] + w->M[2][4]*t->Phi[2][4] + w->M[2][5]*t->Phi[2][5] + w->M[2][6]*t->Phi[2][6] + w->M[2][8]*t->Phi[2][8] + w->M[2][9]*t->Phi[2][9] + w->M[2][10]*t->Phi[2][10] + w->M[2][11]*t->Phi[2][11] + w->M[2][12]*t->Phi[2][12] + w->M[2][13]*t->Phi[2][13] + w->M[2][14]*t->Phi[2][14] + w->M[2][15]*t->Phi[2][15] + w->M[2][16]*t->Phi[2][16] + w->M[2][17]*t->Phi[2][17] + t->Qd[2][2]; w->Pn[2][2] = v; check += v - v;
@@ -726,7 +727,7 @@ static enu_doppler18_scalar propagate_row_2(const enu_doppler18_transition *t, e
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_3(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_3(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[3][0]*t->Phi[3][0] + w->M[3][1]*t->Phi[3][1] + w->M[3][2]*t->Phi[3][2] + w->M[3][3]*t->Phi[3][3] + w->M[3][4]*t->Phi[3][4] + w->M[3][5]*t->Phi[3][5] + w->M[3][6]*t->Phi[3][6] + w->M[3][8]*t->Phi[3][8] + w->M[3][9]*t->Phi[3][9] + w->M[3][10]*t->Phi[3][10] + w->M[3][11]*t->Phi[3][11] + w->M[3][12]*t->Phi[3][12] + w->M[3][13]*t->Phi[3][13] + w->M[3][14]*t->Phi[3][14] + w->M[3][15]*t->Phi[3][15] + w->M[3][16]*t->Phi[3][16] + w->M[3][17]*t->Phi[3][17] + t->Qd[3][3]; w->Pn[3][3] = v; check += v - v;
@@ -748,7 +749,7 @@ static enu_doppler18_scalar propagate_row_3(const enu_doppler18_transition *t, e
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_4(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_4(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[4][0]*t->Phi[4][0] + w->M[4][1]*t->Phi[4][1] + w->M[4][2]*t->Phi[4][2] + w->M[4][3]*t->Phi[4][3] + w->M[4][4]*t->Phi[4][4] + w->M[4][5]*t->Phi[4][5] + w->M[4][6]*t->Phi[4][6] + w->M[4][8]*t->Phi[4][8] + w->M[4][9]*t->Phi[4][9] + w->M[4][10]*t->Phi[4][10] + w->M[4][11]*t->Phi[4][11] + w->M[4][12]*t->Phi[4][12] + w->M[4][13]*t->Phi[4][13] + w->M[4][14]*t->Phi[4][14] + w->M[4][15]*t->Phi[4][15] + w->M[4][16]*t->Phi[4][16] + w->M[4][17]*t->Phi[4][17] + t->Qd[4][4]; w->Pn[4][4] = v; check += v - v;
@@ -769,7 +770,7 @@ static enu_doppler18_scalar propagate_row_4(const enu_doppler18_transition *t, e
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_5(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_5(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[5][0]*t->Phi[5][0] + w->M[5][1]*t->Phi[5][1] + w->M[5][2]*t->Phi[5][2] + w->M[5][3]*t->Phi[5][3] + w->M[5][4]*t->Phi[5][4] + w->M[5][5]*t->Phi[5][5] + w->M[5][6]*t->Phi[5][6] + w->M[5][8]*t->Phi[5][8] + w->M[5][9]*t->Phi[5][9] + w->M[5][10]*t->Phi[5][10] + w->M[5][11]*t->Phi[5][11] + w->M[5][12]*t->Phi[5][12] + w->M[5][13]*t->Phi[5][13] + w->M[5][14]*t->Phi[5][14] + w->M[5][15]*t->Phi[5][15] + w->M[5][16]*t->Phi[5][16] + w->M[5][17]*t->Phi[5][17] + t->Qd[5][5]; w->Pn[5][5] = v; check += v - v;
@@ -789,7 +790,7 @@ static enu_doppler18_scalar propagate_row_5(const enu_doppler18_transition *t, e
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_6(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_6(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[6][0]*t->Phi[6][0] + w->M[6][1]*t->Phi[6][1] + w->M[6][2]*t->Phi[6][2] + w->M[6][3]*t->Phi[6][3] + w->M[6][4]*t->Phi[6][4] + w->M[6][5]*t->Phi[6][5] + w->M[6][6]*t->Phi[6][6] + w->M[6][8]*t->Phi[6][8] + w->M[6][9]*t->Phi[6][9] + w->M[6][10]*t->Phi[6][10] + w->M[6][11]*t->Phi[6][11] + w->M[6][12]*t->Phi[6][12] + w->M[6][13]*t->Phi[6][13] + w->M[6][14]*t->Phi[6][14] + w->M[6][15]*t->Phi[6][15] + w->M[6][16]*t->Phi[6][16] + w->M[6][17]*t->Phi[6][17] + t->Qd[6][6]; w->Pn[6][6] = v; check += v - v;
@@ -808,7 +809,7 @@ static enu_doppler18_scalar propagate_row_6(const enu_doppler18_transition *t, e
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_7(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_7(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[7][0]*t->Phi[7][0] + w->M[7][1]*t->Phi[7][1] + w->M[7][2]*t->Phi[7][2] + w->M[7][3]*t->Phi[7][3] + w->M[7][4]*t->Phi[7][4] + w->M[7][5]*t->Phi[7][5] + w->M[7][6]*t->Phi[7][6] + w->M[7][7]*t->Phi[7][7] + w->M[7][8]*t->Phi[7][8] + w->M[7][9]*t->Phi[7][9] + w->M[7][10]*t->Phi[7][10] + w->M[7][11]*t->Phi[7][11] + w->M[7][12]*t->Phi[7][12] + w->M[7][13]*t->Phi[7][13] + w->M[7][14]*t->Phi[7][14] + w->M[7][15]*t->Phi[7][15] + w->M[7][16]*t->Phi[7][16] + w->M[7][17]*t->Phi[7][17] + t->Qd[7][7]; w->Pn[7][7] = v; check += v - v;
@@ -826,7 +827,7 @@ static enu_doppler18_scalar propagate_row_7(const enu_doppler18_transition *t, e
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_8(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_8(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[8][0]*t->Phi[8][0] + w->M[8][1]*t->Phi[8][1] + w->M[8][2]*t->Phi[8][2] + w->M[8][3]*t->Phi[8][3] + w->M[8][4]*t->Phi[8][4] + w->M[8][5]*t->Phi[8][5] + w->M[8][6]*t->Phi[8][6] + w->M[8][8]*t->Phi[8][8] + w->M[8][9]*t->Phi[8][9] + w->M[8][10]*t->Phi[8][10] + w->M[8][11]*t->Phi[8][11] + w->M[8][12]*t->Phi[8][12] + w->M[8][13]*t->Phi[8][13] + w->M[8][14]*t->Phi[8][14] + w->M[8][15]*t->Phi[8][15] + w->M[8][16]*t->Phi[8][16] + w->M[8][17]*t->Phi[8][17] + t->Qd[8][8]; w->Pn[8][8] = v; check += v - v;
@@ -843,7 +844,7 @@ static enu_doppler18_scalar propagate_row_8(const enu_doppler18_transition *t, e
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_9(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_9(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = f->P[9][9]; w->Pn[9][9] = v; check += v - v;
@@ -859,7 +860,7 @@ static enu_doppler18_scalar propagate_row_9(const enu_doppler18_filter *f, const
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_10(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_10(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = f->P[10][10]; w->Pn[10][10] = v; check += v - v;
@@ -874,7 +875,7 @@ static enu_doppler18_scalar propagate_row_10(const enu_doppler18_filter *f, cons
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_11(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_11(const enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = f->P[11][11]; w->Pn[11][11] = v; check += v - v;
@@ -888,7 +889,7 @@ static enu_doppler18_scalar propagate_row_11(const enu_doppler18_filter *f, cons
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_12(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_12(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[12][12]*t->Phi[12][12] + t->Qd[12][12]; w->Pn[12][12] = v; check += v - v;
@@ -901,7 +902,7 @@ static enu_doppler18_scalar propagate_row_12(const enu_doppler18_transition *t, 
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_13(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_13(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[13][13]*t->Phi[13][13] + t->Qd[13][13]; w->Pn[13][13] = v; check += v - v;
@@ -913,7 +914,7 @@ static enu_doppler18_scalar propagate_row_13(const enu_doppler18_transition *t, 
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_14(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_14(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[14][14]*t->Phi[14][14] + t->Qd[14][14]; w->Pn[14][14] = v; check += v - v;
@@ -924,7 +925,7 @@ static enu_doppler18_scalar propagate_row_14(const enu_doppler18_transition *t, 
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_15(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_15(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[15][15]*t->Phi[15][15] + t->Qd[15][15]; w->Pn[15][15] = v; check += v - v;
@@ -934,7 +935,7 @@ static enu_doppler18_scalar propagate_row_15(const enu_doppler18_transition *t, 
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_16(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_16(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[16][16]*t->Phi[16][16] + t->Qd[16][16]; w->Pn[16][16] = v; check += v - v;
@@ -943,15 +944,16 @@ static enu_doppler18_scalar propagate_row_16(const enu_doppler18_transition *t, 
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static enu_doppler18_scalar propagate_row_17(const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+static enu_doppler18_scalar propagate_row_17(const enu_doppler18_transition *t, enu_doppler18_filter_scratch *w)
 {
     enu_doppler18_scalar v, check = 0.0;
     v = w->M[17][17]*t->Phi[17][17] + t->Qd[17][17]; w->Pn[17][17] = v; check += v - v;
     return check;
 }
 
-int enu_doppler18_predict(enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w)
+int enu_doppler18_predict(enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *work)
 {
+    enu_doppler18_filter_scratch *w = &work->filter;
     enu_doppler18_scalar check = 0.0;
     /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
     w->xn[0] = t->Phi[0][0]*f->x[0] + t->Phi[0][1]*f->x[1] + t->Phi[0][2]*f->x[2] + t->Phi[0][3]*f->x[3] + t->Phi[0][4]*f->x[4] + t->Phi[0][5]*f->x[5] + t->Phi[0][6]*f->x[6] + t->Phi[0][8]*f->x[8] + t->Phi[0][9]*f->x[9] + t->Phi[0][10]*f->x[10] + t->Phi[0][11]*f->x[11] + t->Phi[0][12]*f->x[12] + t->Phi[0][13]*f->x[13] + t->Phi[0][14]*f->x[14] + t->Phi[0][15]*f->x[15] + t->Phi[0][16]*f->x[16] + t->Phi[0][17]*f->x[17];
@@ -1044,11 +1046,11 @@ check += propagate_row_17(t, w);
     return ENU_DOPPLER18_OK;
 }
 
-int enu_doppler18_set_covariance(enu_doppler18_filter *f, const enu_doppler18_scalar P[N * N], enu_doppler18_workspace *w)
+int enu_doppler18_set_covariance(enu_doppler18_filter *f, const enu_doppler18_scalar P[N * N], enu_doppler18_workspace *work)
 {
     int i, j;
     enu_doppler18_scalar check = 0.0;
-    (void)w;
+    (void)work;
     for (i = 0; i < N; ++i) {
         for (j = i; j < N; ++j) {
             check += P[i * N + j] - P[i * N + j];
@@ -1076,8 +1078,9 @@ void enu_doppler18_get_covariance(const enu_doppler18_filter *f, enu_doppler18_s
     }
 }
 
-int enu_doppler18_update(enu_doppler18_filter *f, const enu_doppler18_scalar z[3], const enu_doppler18_matrices *m, enu_doppler18_workspace *w)
+int enu_doppler18_update(enu_doppler18_filter *f, const enu_doppler18_scalar z[3], const enu_doppler18_matrices *m, enu_doppler18_workspace *work)
 {
+    enu_doppler18_filter_scratch *w = &work->filter;
     int i, j, a, b, e;
     enu_doppler18_scalar check = 0.0;
     for (a = 0; a < ENU_DOPPLER18_N_MEASUREMENTS; ++a) {

@@ -100,12 +100,16 @@ typedef struct {
     enu_doppler18_scalar P[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES]; /* covariance */
 } enu_doppler18_filter;
 
-/* Scratch memory for the functions below; contents are not meaningful between calls. */
+/* Scratch memory of discretize. */
 typedef struct {
-    enu_doppler18_scalar A[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES];
-    enu_doppler18_scalar B[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES];
-    enu_doppler18_scalar S[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES];
+    enu_doppler18_scalar A[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES]; /* (F T)^k / k! */
+    enu_doppler18_scalar B[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES]; /* the next term */
+    enu_doppler18_scalar S[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES]; /* sum of the terms / (k + 1), for Gamma */
     enu_doppler18_scalar Gamma[ENU_DOPPLER18_N_STATES][9];
+} enu_doppler18_discretize_scratch;
+
+/* Scratch memory of predict, update and set_covariance. */
+typedef struct {
     enu_doppler18_scalar M[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES]; /* Phi P */
     enu_doppler18_scalar Pn[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES]; /* new covariance before it is committed */
     enu_doppler18_scalar xn[ENU_DOPPLER18_N_STATES];
@@ -115,6 +119,14 @@ typedef struct {
     enu_doppler18_scalar C[ENU_DOPPLER18_N_STATES][3]; /* K S (Joseph form) */
     enu_doppler18_scalar S_innovation[3][3]; /* innovation covariance H P H^T + R */
     enu_doppler18_scalar nu[3];
+} enu_doppler18_filter_scratch;
+
+/* Scratch memory for the functions below; contents are not meaningful between
+   calls.  discretize and the filter steps never run at the same time, so they
+   share it. */
+typedef union {
+    enu_doppler18_discretize_scratch discretize;
+    enu_doppler18_filter_scratch filter;
 } enu_doppler18_workspace;
 
 extern const unsigned char enu_doppler18_F_row[73], enu_doppler18_F_col[73];
@@ -130,23 +142,23 @@ void enu_doppler18_matrices_evaluate(const enu_doppler18_params *params, enu_dop
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)).
    Refuses a non-finite or non-positive T, non-finite matrices (ERR_NONFINITE)
    and a negative noise PSD (ERR_NOT_POSITIVE); on error *t must not be used. */
-int enu_doppler18_discretize(const enu_doppler18_matrices *m, enu_doppler18_scalar T, enu_doppler18_transition *t, enu_doppler18_workspace *w);
+int enu_doppler18_discretize(const enu_doppler18_matrices *m, enu_doppler18_scalar T, enu_doppler18_transition *t, enu_doppler18_workspace *work);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
    Refuses non-finite entries; on error f is unchanged. */
-int enu_doppler18_set_covariance(enu_doppler18_filter *f, const enu_doppler18_scalar P[ENU_DOPPLER18_N_STATES * ENU_DOPPLER18_N_STATES], enu_doppler18_workspace *w);
+int enu_doppler18_set_covariance(enu_doppler18_filter *f, const enu_doppler18_scalar P[ENU_DOPPLER18_N_STATES * ENU_DOPPLER18_N_STATES], enu_doppler18_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
 void enu_doppler18_get_covariance(const enu_doppler18_filter *f, enu_doppler18_scalar P[ENU_DOPPLER18_N_STATES * ENU_DOPPLER18_N_STATES]);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
    (ERR_NONFINITE) and f is left unchanged. */
-int enu_doppler18_predict(enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *w);
+int enu_doppler18_predict(enu_doppler18_filter *f, const enu_doppler18_transition *t, enu_doppler18_workspace *work);
 
 /* Kalman update with the measurements z (all at once, Cholesky solve, Joseph form).
    Refuses non-finite z, H or R (ERR_NONFINITE), a negative variance r or a
    non-positive innovation variance (ERR_NOT_POSITIVE); on error f is unchanged. */
-int enu_doppler18_update(enu_doppler18_filter *f, const enu_doppler18_scalar z[3], const enu_doppler18_matrices *m, enu_doppler18_workspace *w);
+int enu_doppler18_update(enu_doppler18_filter *f, const enu_doppler18_scalar z[3], const enu_doppler18_matrices *m, enu_doppler18_workspace *work);
 
 #endif /* MODELGEN_ENU_DOPPLER18_H */

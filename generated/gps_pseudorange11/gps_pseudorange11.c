@@ -166,8 +166,9 @@ void gps_pseudorange11_matrices_evaluate(const gps_pseudorange11_params *params,
     m->r[3] = params->pseudorange_sigma_4*params->pseudorange_sigma_4;
 }
 
-int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *m, gps_pseudorange11_scalar T, gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *m, gps_pseudorange11_scalar T, gps_pseudorange11_transition *t, gps_pseudorange11_workspace *work)
 {
+    gps_pseudorange11_discretize_scratch *w = &work->discretize;
     int i, j, k, e, c;
     gps_pseudorange11_scalar check = 0.0;
     if (!isfinite(T)) {
@@ -257,7 +258,7 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *m, gps_pseudo
     return (check != 0.0) ? GPS_PSEUDORANGE11_ERR_NONFINITE : GPS_PSEUDORANGE11_OK;
 }
 
-static void phi_times_p_row_0(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static void phi_times_p_row_0(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     w->M[0][0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] + t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] + t->Phi[0][6]*f->P[6][0] + t->Phi[0][7]*f->P[7][0] + t->Phi[0][8]*f->P[8][0];
     w->M[0][1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] + t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] + t->Phi[0][6]*f->P[6][1] + t->Phi[0][7]*f->P[7][1] + t->Phi[0][8]*f->P[8][1];
@@ -272,7 +273,7 @@ static void phi_times_p_row_0(const gps_pseudorange11_filter *f, const gps_pseud
     w->M[0][10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] + t->Phi[0][3]*f->P[3][10] + t->Phi[0][4]*f->P[4][10] + t->Phi[0][5]*f->P[5][10] + t->Phi[0][6]*f->P[6][10] + t->Phi[0][7]*f->P[7][10] + t->Phi[0][8]*f->P[8][10];
 }
 
-static void phi_times_p_row_1(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static void phi_times_p_row_1(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     w->M[1][0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] + t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] + t->Phi[1][6]*f->P[6][0] + t->Phi[1][7]*f->P[7][0] + t->Phi[1][8]*f->P[8][0];
     w->M[1][1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] + t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] + t->Phi[1][6]*f->P[6][1] + t->Phi[1][7]*f->P[7][1] + t->Phi[1][8]*f->P[8][1];
@@ -287,7 +288,7 @@ static void phi_times_p_row_1(const gps_pseudorange11_filter *f, const gps_pseud
     w->M[1][10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] + t->Phi[1][3]*f->P[3][10] + t->Phi[1][4]*f->P[4][10] + t->Phi[1][5]*f->P[5][10] + t->Phi[1][6]*f->P[6][10] + t->Phi[1][7]*f->P[7][10] + t->Phi[1][8]*f->P[8][10];
 }
 
-static void phi_times_p_row_2(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static void phi_times_p_row_2(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     w->M[2][0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] + t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] + t->Phi[2][6]*f->P[6][0] + t->Phi[2][7]*f->P[7][0] + t->Phi[2][8]*f->P[8][0];
     w->M[2][1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] + t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] + t->Phi[2][6]*f->P[6][1] + t->Phi[2][7]*f->P[7][1] + t->Phi[2][8]*f->P[8][1];
@@ -302,7 +303,7 @@ static void phi_times_p_row_2(const gps_pseudorange11_filter *f, const gps_pseud
     w->M[2][10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] + t->Phi[2][3]*f->P[3][10] + t->Phi[2][4]*f->P[4][10] + t->Phi[2][5]*f->P[5][10] + t->Phi[2][6]*f->P[6][10] + t->Phi[2][7]*f->P[7][10] + t->Phi[2][8]*f->P[8][10];
 }
 
-static void phi_times_p_row_3(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static void phi_times_p_row_3(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     w->M[3][0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] + t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] + t->Phi[3][6]*f->P[6][0] + t->Phi[3][7]*f->P[7][0] + t->Phi[3][8]*f->P[8][0];
     w->M[3][1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] + t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] + t->Phi[3][6]*f->P[6][1] + t->Phi[3][7]*f->P[7][1] + t->Phi[3][8]*f->P[8][1];
@@ -317,7 +318,7 @@ static void phi_times_p_row_3(const gps_pseudorange11_filter *f, const gps_pseud
     w->M[3][10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] + t->Phi[3][3]*f->P[3][10] + t->Phi[3][4]*f->P[4][10] + t->Phi[3][5]*f->P[5][10] + t->Phi[3][6]*f->P[6][10] + t->Phi[3][7]*f->P[7][10] + t->Phi[3][8]*f->P[8][10];
 }
 
-static void phi_times_p_row_4(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static void phi_times_p_row_4(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     w->M[4][0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] + t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] + t->Phi[4][6]*f->P[6][0] + t->Phi[4][7]*f->P[7][0] + t->Phi[4][8]*f->P[8][0];
     w->M[4][1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] + t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] + t->Phi[4][6]*f->P[6][1] + t->Phi[4][7]*f->P[7][1] + t->Phi[4][8]*f->P[8][1];
@@ -332,7 +333,7 @@ static void phi_times_p_row_4(const gps_pseudorange11_filter *f, const gps_pseud
     w->M[4][10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] + t->Phi[4][3]*f->P[3][10] + t->Phi[4][4]*f->P[4][10] + t->Phi[4][5]*f->P[5][10] + t->Phi[4][6]*f->P[6][10] + t->Phi[4][7]*f->P[7][10] + t->Phi[4][8]*f->P[8][10];
 }
 
-static void phi_times_p_row_5(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static void phi_times_p_row_5(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     w->M[5][0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] + t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] + t->Phi[5][6]*f->P[6][0] + t->Phi[5][7]*f->P[7][0] + t->Phi[5][8]*f->P[8][0];
     w->M[5][1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] + t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] + t->Phi[5][6]*f->P[6][1] + t->Phi[5][7]*f->P[7][1] + t->Phi[5][8]*f->P[8][1];
@@ -347,7 +348,7 @@ static void phi_times_p_row_5(const gps_pseudorange11_filter *f, const gps_pseud
     w->M[5][10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] + t->Phi[5][3]*f->P[3][10] + t->Phi[5][4]*f->P[4][10] + t->Phi[5][5]*f->P[5][10] + t->Phi[5][6]*f->P[6][10] + t->Phi[5][7]*f->P[7][10] + t->Phi[5][8]*f->P[8][10];
 }
 
-static void phi_times_p_row_6(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static void phi_times_p_row_6(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     w->M[6][0] = t->Phi[6][6]*f->P[6][0] + t->Phi[6][7]*f->P[7][0] + t->Phi[6][8]*f->P[8][0];
     w->M[6][1] = t->Phi[6][6]*f->P[6][1] + t->Phi[6][7]*f->P[7][1] + t->Phi[6][8]*f->P[8][1];
@@ -362,7 +363,7 @@ static void phi_times_p_row_6(const gps_pseudorange11_filter *f, const gps_pseud
     w->M[6][10] = t->Phi[6][6]*f->P[6][10] + t->Phi[6][7]*f->P[7][10] + t->Phi[6][8]*f->P[8][10];
 }
 
-static void phi_times_p_row_7(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static void phi_times_p_row_7(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     w->M[7][0] = t->Phi[7][6]*f->P[6][0] + t->Phi[7][7]*f->P[7][0] + t->Phi[7][8]*f->P[8][0];
     w->M[7][1] = t->Phi[7][6]*f->P[6][1] + t->Phi[7][7]*f->P[7][1] + t->Phi[7][8]*f->P[8][1];
@@ -377,7 +378,7 @@ static void phi_times_p_row_7(const gps_pseudorange11_filter *f, const gps_pseud
     w->M[7][10] = t->Phi[7][6]*f->P[6][10] + t->Phi[7][7]*f->P[7][10] + t->Phi[7][8]*f->P[8][10];
 }
 
-static void phi_times_p_row_8(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static void phi_times_p_row_8(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     w->M[8][0] = t->Phi[8][6]*f->P[6][0] + t->Phi[8][7]*f->P[7][0] + t->Phi[8][8]*f->P[8][0];
     w->M[8][1] = t->Phi[8][6]*f->P[6][1] + t->Phi[8][7]*f->P[7][1] + t->Phi[8][8]*f->P[8][1];
@@ -392,7 +393,7 @@ static void phi_times_p_row_8(const gps_pseudorange11_filter *f, const gps_pseud
     w->M[8][10] = t->Phi[8][6]*f->P[6][10] + t->Phi[8][7]*f->P[7][10] + t->Phi[8][8]*f->P[8][10];
 }
 
-static void phi_times_p_row_9(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static void phi_times_p_row_9(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     w->M[9][0] = t->Phi[9][9]*f->P[9][0] + t->Phi[9][10]*f->P[10][0];
     w->M[9][1] = t->Phi[9][9]*f->P[9][1] + t->Phi[9][10]*f->P[10][1];
@@ -408,7 +409,7 @@ static void phi_times_p_row_9(const gps_pseudorange11_filter *f, const gps_pseud
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_0(const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static gps_pseudorange11_scalar propagate_row_0(const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[0][0]*t->Phi[0][0] + w->M[0][1]*t->Phi[0][1] + w->M[0][2]*t->Phi[0][2] + w->M[0][3]*t->Phi[0][3] + w->M[0][4]*t->Phi[0][4] + w->M[0][5]*t->Phi[0][5] + w->M[0][6]*t->Phi[0][6] + w->M[0][7]*t->Phi[0][7] + w->M[0][8]*t->Phi[0][8] + t->Qd[0][0]; w->Pn[0][0] = v; check += v - v;
@@ -426,7 +427,7 @@ static gps_pseudorange11_scalar propagate_row_0(const gps_pseudorange11_transiti
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_1(const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static gps_pseudorange11_scalar propagate_row_1(const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[1][0]*t->Phi[1][0] + w->M[1][1]*t->Phi[1][1] + w->M[1][2]*t->Phi[1][2] + w->M[1][3]*t->Phi[1][3] + w->M[1][4]*t->Phi[1][4] + w->M[1][5]*t->Phi[1][5] + w->M[1][6]*t->Phi[1][6] + w->M[1][7]*t->Phi[1][7] + w->M[1][8]*t->Phi[1][8] + t->Qd[1][1]; w->Pn[1][1] = v; check += v - v;
@@ -443,7 +444,7 @@ static gps_pseudorange11_scalar propagate_row_1(const gps_pseudorange11_transiti
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_2(const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static gps_pseudorange11_scalar propagate_row_2(const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[2][0]*t->Phi[2][0] + w->M[2][1]*t->Phi[2][1] + w->M[2][2]*t->Phi[2][2] + w->M[2][3]*t->Phi[2][3] + w->M[2][4]*t->Phi[2][4] + w->M[2][5]*t->Phi[2][5] + w->M[2][6]*t->Phi[2][6] + w->M[2][7]*t->Phi[2][7] + w->M[2][8]*t->Phi[2][8] + t->Qd[2][2]; w->Pn[2][2] = v; check += v - v;
@@ -459,7 +460,7 @@ static gps_pseudorange11_scalar propagate_row_2(const gps_pseudorange11_transiti
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_3(const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static gps_pseudorange11_scalar propagate_row_3(const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[3][0]*t->Phi[3][0] + w->M[3][1]*t->Phi[3][1] + w->M[3][2]*t->Phi[3][2] + w->M[3][3]*t->Phi[3][3] + w->M[3][4]*t->Phi[3][4] + w->M[3][5]*t->Phi[3][5] + w->M[3][6]*t->Phi[3][6] + w->M[3][7]*t->Phi[3][7] + w->M[3][8]*t->Phi[3][8] + t->Qd[3][3]; w->Pn[3][3] = v; check += v - v;
@@ -474,7 +475,7 @@ static gps_pseudorange11_scalar propagate_row_3(const gps_pseudorange11_transiti
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_4(const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static gps_pseudorange11_scalar propagate_row_4(const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[4][0]*t->Phi[4][0] + w->M[4][1]*t->Phi[4][1] + w->M[4][2]*t->Phi[4][2] + w->M[4][3]*t->Phi[4][3] + w->M[4][4]*t->Phi[4][4] + w->M[4][5]*t->Phi[4][5] + w->M[4][6]*t->Phi[4][6] + w->M[4][7]*t->Phi[4][7] + w->M[4][8]*t->Phi[4][8] + t->Qd[4][4]; w->Pn[4][4] = v; check += v - v;
@@ -488,7 +489,7 @@ static gps_pseudorange11_scalar propagate_row_4(const gps_pseudorange11_transiti
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_5(const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static gps_pseudorange11_scalar propagate_row_5(const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[5][0]*t->Phi[5][0] + w->M[5][1]*t->Phi[5][1] + w->M[5][2]*t->Phi[5][2] + w->M[5][3]*t->Phi[5][3] + w->M[5][4]*t->Phi[5][4] + w->M[5][5]*t->Phi[5][5] + w->M[5][6]*t->Phi[5][6] + w->M[5][7]*t->Phi[5][7] + w->M[5][8]*t->Phi[5][8] + t->Qd[5][5]; w->Pn[5][5] = v; check += v - v;
@@ -501,7 +502,7 @@ static gps_pseudorange11_scalar propagate_row_5(const gps_pseudorange11_transiti
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_6(const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static gps_pseudorange11_scalar propagate_row_6(const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[6][6]*t->Phi[6][6] + w->M[6][7]*t->Phi[6][7] + w->M[6][8]*t->Phi[6][8] + t->Qd[6][6]; w->Pn[6][6] = v; check += v - v;
@@ -513,7 +514,7 @@ static gps_pseudorange11_scalar propagate_row_6(const gps_pseudorange11_transiti
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_7(const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static gps_pseudorange11_scalar propagate_row_7(const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[7][6]*t->Phi[7][6] + w->M[7][7]*t->Phi[7][7] + w->M[7][8]*t->Phi[7][8] + t->Qd[7][7]; w->Pn[7][7] = v; check += v - v;
@@ -524,7 +525,7 @@ static gps_pseudorange11_scalar propagate_row_7(const gps_pseudorange11_transiti
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_8(const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static gps_pseudorange11_scalar propagate_row_8(const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[8][6]*t->Phi[8][6] + w->M[8][7]*t->Phi[8][7] + w->M[8][8]*t->Phi[8][8] + t->Qd[8][8]; w->Pn[8][8] = v; check += v - v;
@@ -534,7 +535,7 @@ static gps_pseudorange11_scalar propagate_row_8(const gps_pseudorange11_transiti
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_9(const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static gps_pseudorange11_scalar propagate_row_9(const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[9][9]*t->Phi[9][9] + w->M[9][10]*t->Phi[9][10] + t->Qd[9][9]; w->Pn[9][9] = v; check += v - v;
@@ -543,15 +544,16 @@ static gps_pseudorange11_scalar propagate_row_9(const gps_pseudorange11_transiti
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_10(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+static gps_pseudorange11_scalar propagate_row_10(const gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_filter_scratch *w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = f->P[10][10] + t->Qd[10][10]; w->Pn[10][10] = v; check += v - v;
     return check;
 }
 
-int gps_pseudorange11_predict(gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w)
+int gps_pseudorange11_predict(gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *work)
 {
+    gps_pseudorange11_filter_scratch *w = &work->filter;
     gps_pseudorange11_scalar check = 0.0;
     /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
     w->xn[0] = t->Phi[0][0]*f->x[0] + t->Phi[0][1]*f->x[1] + t->Phi[0][2]*f->x[2] + t->Phi[0][3]*f->x[3] + t->Phi[0][4]*f->x[4] + t->Phi[0][5]*f->x[5] + t->Phi[0][6]*f->x[6] + t->Phi[0][7]*f->x[7] + t->Phi[0][8]*f->x[8];
@@ -615,11 +617,11 @@ check += propagate_row_10(f, t, w);
     return GPS_PSEUDORANGE11_OK;
 }
 
-int gps_pseudorange11_set_covariance(gps_pseudorange11_filter *f, const gps_pseudorange11_scalar P[N * N], gps_pseudorange11_workspace *w)
+int gps_pseudorange11_set_covariance(gps_pseudorange11_filter *f, const gps_pseudorange11_scalar P[N * N], gps_pseudorange11_workspace *work)
 {
     int i, j;
     gps_pseudorange11_scalar check = 0.0;
-    (void)w;
+    (void)work;
     for (i = 0; i < N; ++i) {
         for (j = i; j < N; ++j) {
             check += P[i * N + j] - P[i * N + j];
@@ -647,8 +649,9 @@ void gps_pseudorange11_get_covariance(const gps_pseudorange11_filter *f, gps_pse
     }
 }
 
-int gps_pseudorange11_update(gps_pseudorange11_filter *f, const gps_pseudorange11_scalar z[4], const gps_pseudorange11_matrices *m, gps_pseudorange11_workspace *w)
+int gps_pseudorange11_update(gps_pseudorange11_filter *f, const gps_pseudorange11_scalar z[4], const gps_pseudorange11_matrices *m, gps_pseudorange11_workspace *work)
 {
+    gps_pseudorange11_filter_scratch *w = &work->filter;
     int i, j, a, b, e;
     gps_pseudorange11_scalar check = 0.0;
     for (a = 0; a < GPS_PSEUDORANGE11_N_MEASUREMENTS; ++a) {

@@ -92,12 +92,16 @@ typedef struct {
     gps_pseudorange11_scalar P[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES]; /* covariance */
 } gps_pseudorange11_filter;
 
-/* Scratch memory for the functions below; contents are not meaningful between calls. */
+/* Scratch memory of discretize. */
 typedef struct {
-    gps_pseudorange11_scalar A[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES];
-    gps_pseudorange11_scalar B[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES];
-    gps_pseudorange11_scalar S[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES];
+    gps_pseudorange11_scalar A[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES]; /* (F T)^k / k! */
+    gps_pseudorange11_scalar B[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES]; /* the next term */
+    gps_pseudorange11_scalar S[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES]; /* sum of the terms / (k + 1), for Gamma */
     gps_pseudorange11_scalar Gamma[GPS_PSEUDORANGE11_N_STATES][8];
+} gps_pseudorange11_discretize_scratch;
+
+/* Scratch memory of predict, update and set_covariance. */
+typedef struct {
     gps_pseudorange11_scalar M[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES]; /* Phi P */
     gps_pseudorange11_scalar Pn[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES]; /* new covariance before it is committed */
     gps_pseudorange11_scalar xn[GPS_PSEUDORANGE11_N_STATES];
@@ -107,6 +111,14 @@ typedef struct {
     gps_pseudorange11_scalar C[GPS_PSEUDORANGE11_N_STATES][4]; /* K S (Joseph form) */
     gps_pseudorange11_scalar S_innovation[4][4]; /* innovation covariance H P H^T + R */
     gps_pseudorange11_scalar nu[4];
+} gps_pseudorange11_filter_scratch;
+
+/* Scratch memory for the functions below; contents are not meaningful between
+   calls.  discretize and the filter steps never run at the same time, so they
+   share it. */
+typedef union {
+    gps_pseudorange11_discretize_scratch discretize;
+    gps_pseudorange11_filter_scratch filter;
 } gps_pseudorange11_workspace;
 
 extern const unsigned char gps_pseudorange11_F_row[31], gps_pseudorange11_F_col[31];
@@ -122,23 +134,23 @@ void gps_pseudorange11_matrices_evaluate(const gps_pseudorange11_params *params,
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)).
    Refuses a non-finite or non-positive T, non-finite matrices (ERR_NONFINITE)
    and a negative noise PSD (ERR_NOT_POSITIVE); on error *t must not be used. */
-int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *m, gps_pseudorange11_scalar T, gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w);
+int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *m, gps_pseudorange11_scalar T, gps_pseudorange11_transition *t, gps_pseudorange11_workspace *work);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
    Refuses non-finite entries; on error f is unchanged. */
-int gps_pseudorange11_set_covariance(gps_pseudorange11_filter *f, const gps_pseudorange11_scalar P[GPS_PSEUDORANGE11_N_STATES * GPS_PSEUDORANGE11_N_STATES], gps_pseudorange11_workspace *w);
+int gps_pseudorange11_set_covariance(gps_pseudorange11_filter *f, const gps_pseudorange11_scalar P[GPS_PSEUDORANGE11_N_STATES * GPS_PSEUDORANGE11_N_STATES], gps_pseudorange11_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
 void gps_pseudorange11_get_covariance(const gps_pseudorange11_filter *f, gps_pseudorange11_scalar P[GPS_PSEUDORANGE11_N_STATES * GPS_PSEUDORANGE11_N_STATES]);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
    (ERR_NONFINITE) and f is left unchanged. */
-int gps_pseudorange11_predict(gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *w);
+int gps_pseudorange11_predict(gps_pseudorange11_filter *f, const gps_pseudorange11_transition *t, gps_pseudorange11_workspace *work);
 
 /* Kalman update with the measurements z (all at once, Cholesky solve, Joseph form).
    Refuses non-finite z, H or R (ERR_NONFINITE), a negative variance r or a
    non-positive innovation variance (ERR_NOT_POSITIVE); on error f is unchanged. */
-int gps_pseudorange11_update(gps_pseudorange11_filter *f, const gps_pseudorange11_scalar z[4], const gps_pseudorange11_matrices *m, gps_pseudorange11_workspace *w);
+int gps_pseudorange11_update(gps_pseudorange11_filter *f, const gps_pseudorange11_scalar z[4], const gps_pseudorange11_matrices *m, gps_pseudorange11_workspace *work);
 
 #endif /* MODELGEN_GPS_PSEUDORANGE11_H */

@@ -217,8 +217,9 @@ void ins_gps15_matrices_evaluate(const ins_gps15_params *params, ins_gps15_matri
     m->r[5] = params->gps_position_sigma_up*params->gps_position_sigma_up;
 }
 
-int ins_gps15_discretize(const ins_gps15_matrices *m, ins_gps15_scalar T, ins_gps15_transition *t, ins_gps15_workspace *w)
+int ins_gps15_discretize(const ins_gps15_matrices *m, ins_gps15_scalar T, ins_gps15_transition *t, ins_gps15_workspace *work)
 {
+    ins_gps15_discretize_scratch *w = &work->discretize;
     int i, j, k, e, c;
     ins_gps15_scalar check = 0.0;
     if (!isfinite(T)) {
@@ -308,7 +309,7 @@ int ins_gps15_discretize(const ins_gps15_matrices *m, ins_gps15_scalar T, ins_gp
     return (check != 0.0) ? INS_GPS15_ERR_NONFINITE : INS_GPS15_OK;
 }
 
-static void phi_times_p_row_0(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *w)
+static void phi_times_p_row_0(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     w->M[0][0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] + t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] + t->Phi[0][6]*f->P[6][0] + t->Phi[0][8]*f->P[8][0] + t->Phi[0][9]*f->P[9][0] + t->Phi[0][10]*f->P[10][0] + t->Phi[0][11]*f->P[11][0] + t->Phi[0][12]*f->P[12][0] + t->Phi[0][13]*f->P[13][0] + t->Phi[0][14]*f->P[14][0];
     w->M[0][1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] + t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] + t->Phi[0][6]*f->P[6][1] + t->Phi[0][8]*f->P[8][1] + t->Phi[0][9]*f->P[9][1] + t->Phi[0][10]*f->P[10][1] + t->Phi[0][11]*f->P[11][1] + t->Phi[0][12]*f->P[12][1] + t->Phi[0][13]*f->P[13][1] + t->Phi[0][14]*f->P[14][1];
@@ -327,7 +328,7 @@ static void phi_times_p_row_0(const ins_gps15_filter *f, const ins_gps15_transit
     w->M[0][14] = t->Phi[0][0]*f->P[0][14] + t->Phi[0][1]*f->P[1][14] + t->Phi[0][2]*f->P[2][14] + t->Phi[0][3]*f->P[3][14] + t->Phi[0][4]*f->P[4][14] + t->Phi[0][5]*f->P[5][14] + t->Phi[0][6]*f->P[6][14] + t->Phi[0][8]*f->P[8][14] + t->Phi[0][9]*f->P[9][14] + t->Phi[0][10]*f->P[10][14] + t->Phi[0][11]*f->P[11][14] + t->Phi[0][12]*f->P[12][14] + t->Phi[0][13]*f->P[13][14] + t->Phi[0][14]*f->P[14][14];
 }
 
-static void phi_times_p_row_1(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *w)
+static void phi_times_p_row_1(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     w->M[1][0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] + t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] + t->Phi[1][6]*f->P[6][0] + t->Phi[1][8]*f->P[8][0] + t->Phi[1][9]*f->P[9][0] + t->Phi[1][10]*f->P[10][0] + t->Phi[1][11]*f->P[11][0] + t->Phi[1][12]*f->P[12][0] + t->Phi[1][13]*f->P[13][0] + t->Phi[1][14]*f->P[14][0];
     w->M[1][1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] + t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] + t->Phi[1][6]*f->P[6][1] + t->Phi[1][8]*f->P[8][1] + t->Phi[1][9]*f->P[9][1] + t->Phi[1][10]*f->P[10][1] + t->Phi[1][11]*f->P[11][1] + t->Phi[1][12]*f->P[12][1] + t->Phi[1][13]*f->P[13][1] + t->Phi[1][14]*f->P[14][1];
@@ -346,7 +347,7 @@ static void phi_times_p_row_1(const ins_gps15_filter *f, const ins_gps15_transit
     w->M[1][14] = t->Phi[1][0]*f->P[0][14] + t->Phi[1][1]*f->P[1][14] + t->Phi[1][2]*f->P[2][14] + t->Phi[1][3]*f->P[3][14] + t->Phi[1][4]*f->P[4][14] + t->Phi[1][5]*f->P[5][14] + t->Phi[1][6]*f->P[6][14] + t->Phi[1][8]*f->P[8][14] + t->Phi[1][9]*f->P[9][14] + t->Phi[1][10]*f->P[10][14] + t->Phi[1][11]*f->P[11][14] + t->Phi[1][12]*f->P[12][14] + t->Phi[1][13]*f->P[13][14] + t->Phi[1][14]*f->P[14][14];
 }
 
-static void phi_times_p_row_2(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *w)
+static void phi_times_p_row_2(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     w->M[2][0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] + t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] + t->Phi[2][6]*f->P[6][0] + t->Phi[2][8]*f->P[8][0] + t->Phi[2][9]*f->P[9][0] + t->Phi[2][10]*f->P[10][0] + t->Phi[2][11]*f->P[11][0] + t->Phi[2][12]*f->P[12][0] + t->Phi[2][13]*f->P[13][0] + t->Phi[2][14]*f->P[14][0];
     w->M[2][1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] + t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] + t->Phi[2][6]*f->P[6][1] + t->Phi[2][8]*f->P[8][1] + t->Phi[2][9]*f->P[9][1] + t->Phi[2][10]*f->P[10][1] + t->Phi[2][11]*f->P[11][1] + t->Phi[2][12]*f->P[12][1] + t->Phi[2][13]*f->P[13][1] + t->Phi[2][14]*f->P[14][1];
@@ -365,7 +366,7 @@ static void phi_times_p_row_2(const ins_gps15_filter *f, const ins_gps15_transit
     w->M[2][14] = t->Phi[2][0]*f->P[0][14] + t->Phi[2][1]*f->P[1][14] + t->Phi[2][2]*f->P[2][14] + t->Phi[2][3]*f->P[3][14] + t->Phi[2][4]*f->P[4][14] + t->Phi[2][5]*f->P[5][14] + t->Phi[2][6]*f->P[6][14] + t->Phi[2][8]*f->P[8][14] + t->Phi[2][9]*f->P[9][14] + t->Phi[2][10]*f->P[10][14] + t->Phi[2][11]*f->P[11][14] + t->Phi[2][12]*f->P[12][14] + t->Phi[2][13]*f->P[13][14] + t->Phi[2][14]*f->P[14][14];
 }
 
-static void phi_times_p_row_3(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *w)
+static void phi_times_p_row_3(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     w->M[3][0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] + t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] + t->Phi[3][6]*f->P[6][0] + t->Phi[3][8]*f->P[8][0] + t->Phi[3][9]*f->P[9][0] + t->Phi[3][10]*f->P[10][0] + t->Phi[3][11]*f->P[11][0] + t->Phi[3][12]*f->P[12][0] + t->Phi[3][13]*f->P[13][0] + t->Phi[3][14]*f->P[14][0];
     w->M[3][1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] + t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] + t->Phi[3][6]*f->P[6][1] + t->Phi[3][8]*f->P[8][1] + t->Phi[3][9]*f->P[9][1] + t->Phi[3][10]*f->P[10][1] + t->Phi[3][11]*f->P[11][1] + t->Phi[3][12]*f->P[12][1] + t->Phi[3][13]*f->P[13][1] + t->Phi[3][14]*f->P[14][1];
@@ -384,7 +385,7 @@ static void phi_times_p_row_3(const ins_gps15_filter *f, const ins_gps15_transit
     w->M[3][14] = t->Phi[3][0]*f->P[0][14] + t->Phi[3][1]*f->P[1][14] + t->Phi[3][2]*f->P[2][14] + t->Phi[3][3]*f->P[3][14] + t->Phi[3][4]*f->P[4][14] + t->Phi[3][5]*f->P[5][14] + t->Phi[3][6]*f->P[6][14] + t->Phi[3][8]*f->P[8][14] + t->Phi[3][9]*f->P[9][14] + t->Phi[3][10]*f->P[10][14] + t->Phi[3][11]*f->P[11][14] + t->Phi[3][12]*f->P[12][14] + t->Phi[3][13]*f->P[13][14] + t->Phi[3][14]*f->P[14][14];
 }
 
-static void phi_times_p_row_4(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *w)
+static void phi_times_p_row_4(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     w->M[4][0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] + t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] + t->Phi[4][6]*f->P[6][0] + t->Phi[4][8]*f->P[8][0] + t->Phi[4][9]*f->P[9][0] + t->Phi[4][10]*f->P[10][0] + t->Phi[4][11]*f->P[11][0] + t->Phi[4][12]*f->P[12][0] + t->Phi[4][13]*f->P[13][0] + t->Phi[4][14]*f->P[14][0];
     w->M[4][1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] + t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] + t->Phi[4][6]*f->P[6][1] + t->Phi[4][8]*f->P[8][1] + t->Phi[4][9]*f->P[9][1] + t->Phi[4][10]*f->P[10][1] + t->Phi[4][11]*f->P[11][1] + t->Phi[4][12]*f->P[12][1] + t->Phi[4][13]*f->P[13][1] + t->Phi[4][14]*f->P[14][1];
@@ -403,7 +404,7 @@ static void phi_times_p_row_4(const ins_gps15_filter *f, const ins_gps15_transit
     w->M[4][14] = t->Phi[4][0]*f->P[0][14] + t->Phi[4][1]*f->P[1][14] + t->Phi[4][2]*f->P[2][14] + t->Phi[4][3]*f->P[3][14] + t->Phi[4][4]*f->P[4][14] + t->Phi[4][5]*f->P[5][14] + t->Phi[4][6]*f->P[6][14] + t->Phi[4][8]*f->P[8][14] + t->Phi[4][9]*f->P[9][14] + t->Phi[4][10]*f->P[10][14] + t->Phi[4][11]*f->P[11][14] + t->Phi[4][12]*f->P[12][14] + t->Phi[4][13]*f->P[13][14] + t->Phi[4][14]*f->P[14][14];
 }
 
-static void phi_times_p_row_5(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *w)
+static void phi_times_p_row_5(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     w->M[5][0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] + t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] + t->Phi[5][6]*f->P[6][0] + t->Phi[5][8]*f->P[8][0] + t->Phi[5][9]*f->P[9][0] + t->Phi[5][10]*f->P[10][0] + t->Phi[5][11]*f->P[11][0] + t->Phi[5][12]*f->P[12][0] + t->Phi[5][13]*f->P[13][0] + t->Phi[5][14]*f->P[14][0];
     w->M[5][1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] + t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] + t->Phi[5][6]*f->P[6][1] + t->Phi[5][8]*f->P[8][1] + t->Phi[5][9]*f->P[9][1] + t->Phi[5][10]*f->P[10][1] + t->Phi[5][11]*f->P[11][1] + t->Phi[5][12]*f->P[12][1] + t->Phi[5][13]*f->P[13][1] + t->Phi[5][14]*f->P[14][1];
@@ -422,7 +423,7 @@ static void phi_times_p_row_5(const ins_gps15_filter *f, const ins_gps15_transit
     w->M[5][14] = t->Phi[5][0]*f->P[0][14] + t->Phi[5][1]*f->P[1][14] + t->Phi[5][2]*f->P[2][14] + t->Phi[5][3]*f->P[3][14] + t->Phi[5][4]*f->P[4][14] + t->Phi[5][5]*f->P[5][14] + t->Phi[5][6]*f->P[6][14] + t->Phi[5][8]*f->P[8][14] + t->Phi[5][9]*f->P[9][14] + t->Phi[5][10]*f->P[10][14] + t->Phi[5][11]*f->P[11][14] + t->Phi[5][12]*f->P[12][14] + t->Phi[5][13]*f->P[13][14] + t->Phi[5][14]*f->P[14][14];
 }
 
-static void phi_times_p_row_6(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *w)
+static void phi_times_p_row_6(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     w->M[6][0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] + t->Phi[6][3]*f->P[3][0] + t->Phi[6][4]*f->P[4][0] + t->Phi[6][5]*f->P[5][0] + t->Phi[6][6]*f->P[6][0] + t->Phi[6][8]*f->P[8][0] + t->Phi[6][9]*f->P[9][0] + t->Phi[6][10]*f->P[10][0] + t->Phi[6][11]*f->P[11][0] + t->Phi[6][12]*f->P[12][0] + t->Phi[6][13]*f->P[13][0] + t->Phi[6][14]*f->P[14][0];
     w->M[6][1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] + t->Phi[6][3]*f->P[3][1] + t->Phi[6][4]*f->P[4][1] + t->Phi[6][5]*f->P[5][1] + t->Phi[6][6]*f->P[6][1] + t->Phi[6][8]*f->P[8][1] + t->Phi[6][9]*f->P[9][1] + t->Phi[6][10]*f->P[10][1] + t->Phi[6][11]*f->P[11][1] + t->Phi[6][12]*f->P[12][1] + t->Phi[6][13]*f->P[13][1] + t->Phi[6][14]*f->P[14][1];
@@ -441,7 +442,7 @@ static void phi_times_p_row_6(const ins_gps15_filter *f, const ins_gps15_transit
     w->M[6][14] = t->Phi[6][0]*f->P[0][14] + t->Phi[6][1]*f->P[1][14] + t->Phi[6][2]*f->P[2][14] + t->Phi[6][3]*f->P[3][14] + t->Phi[6][4]*f->P[4][14] + t->Phi[6][5]*f->P[5][14] + t->Phi[6][6]*f->P[6][14] + t->Phi[6][8]*f->P[8][14] + t->Phi[6][9]*f->P[9][14] + t->Phi[6][10]*f->P[10][14] + t->Phi[6][11]*f->P[11][14] + t->Phi[6][12]*f->P[12][14] + t->Phi[6][13]*f->P[13][14] + t->Phi[6][14]*f->P[14][14];
 }
 
-static void phi_times_p_row_7(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *w)
+static void phi_times_p_row_7(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     w->M[7][0] = t->Phi[7][0]*f->P[0][0] + t->Phi[7][1]*f->P[1][0] + t->Phi[7][2]*f->P[2][0] + t->Phi[7][3]*f->P[3][0] + t->Phi[7][4]*f->P[4][0] + t->Phi[7][5]*f->P[5][0] + t->Phi[7][6]*f->P[6][0] + t->Phi[7][7]*f->P[7][0] + t->Phi[7][8]*f->P[8][0] + t->Phi[7][9]*f->P[9][0] + t->Phi[7][10]*f->P[10][0] + t->Phi[7][11]*f->P[11][0] + t->Phi[7][12]*f->P[12][0] + t->Phi[7][13]*f->P[13][0] + t->Phi[7][14]*f->P[14][0];
     w->M[7][1] = t->Phi[7][0]*f->P[0][1] + t->Phi[7][1]*f->P[1][1] + t->Phi[7][2]*f->P[2][1] + t->Phi[7][3]*f->P[3][1] + t->Phi[7][4]*f->P[4][1] + t->Phi[7][5]*f->P[5][1] + t->Phi[7][6]*f->P[6][1] + t->Phi[7][7]*f->P[7][1] + t->Phi[7][8]*f->P[8][1] + t->Phi[7][9]*f->P[9][1] + t->Phi[7][10]*f->P[10][1] + t->Phi[7][11]*f->P[11][1] + t->Phi[7][12]*f->P[12][1] + t->Phi[7][13]*f->P[13][1] + t->Phi[7][14]*f->P[14][1];
@@ -460,7 +461,7 @@ static void phi_times_p_row_7(const ins_gps15_filter *f, const ins_gps15_transit
     w->M[7][14] = t->Phi[7][0]*f->P[0][14] + t->Phi[7][1]*f->P[1][14] + t->Phi[7][2]*f->P[2][14] + t->Phi[7][3]*f->P[3][14] + t->Phi[7][4]*f->P[4][14] + t->Phi[7][5]*f->P[5][14] + t->Phi[7][6]*f->P[6][14] + t->Phi[7][7]*f->P[7][14] + t->Phi[7][8]*f->P[8][14] + t->Phi[7][9]*f->P[9][14] + t->Phi[7][10]*f->P[10][14] + t->Phi[7][11]*f->P[11][14] + t->Phi[7][12]*f->P[12][14] + t->Phi[7][13]*f->P[13][14] + t->Phi[7][14]*f->P[14][14];
 }
 
-static void phi_times_p_row_8(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *w)
+static void phi_times_p_row_8(const ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     w->M[8][0] = t->Phi[8][0]*f->P[0][0] + t->Phi[8][1]*f->P[1][0] + t->Phi[8][2]*f->P[2][0] + t->Phi[8][3]*f->P[3][0] + t->Phi[8][4]*f->P[4][0] + t->Phi[8][5]*f->P[5][0] + t->Phi[8][6]*f->P[6][0] + t->Phi[8][8]*f->P[8][0] + t->Phi[8][9]*f->P[9][0] + t->Phi[8][10]*f->P[10][0] + t->Phi[8][11]*f->P[11][0] + t->Phi[8][12]*f->P[12][0] + t->Phi[8][13]*f->P[13][0] + t->Phi[8][14]*f->P[14][0];
     w->M[8][1] = t->Phi[8][0]*f->P[0][1] + t->Phi[8][1]*f->P[1][1] + t->Phi[8][2]*f->P[2][1] + t->Phi[8][3]*f->P[3][1] + t->Phi[8][4]*f->P[4][1] + t->Phi[8][5]*f->P[5][1] + t->Phi[8][6]*f->P[6][1] + t->Phi[8][8]*f->P[8][1] + t->Phi[8][9]*f->P[9][1] + t->Phi[8][10]*f->P[10][1] + t->Phi[8][11]*f->P[11][1] + t->Phi[8][12]*f->P[12][1] + t->Phi[8][13]*f->P[13][1] + t->Phi[8][14]*f->P[14][1];
@@ -480,7 +481,7 @@ static void phi_times_p_row_8(const ins_gps15_filter *f, const ins_gps15_transit
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_0(const ins_gps15_transition *t, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_0(const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = w->M[0][0]*t->Phi[0][0] + w->M[0][1]*t->Phi[0][1] + w->M[0][2]*t->Phi[0][2] + w->M[0][3]*t->Phi[0][3] + w->M[0][4]*t->Phi[0][4] + w->M[0][5]*t->Phi[0][5] + w->M[0][6]*t->Phi[0][6] + w->M[0][8]*t->Phi[0][8] + w->M[0][9]*t->Phi[0][9] + w->M[0][10]*t->Phi[0][10] + w->M[0][11]*t->Phi[0][11] + w->M[0][12]*t->Phi[0][12] + w->M[0][13]*t->Phi[0][13] + w->M[0][14]*t->Phi[0][14] + t->Qd[0][0]; w->Pn[0][0] = v; check += v - v;
@@ -502,7 +503,7 @@ static ins_gps15_scalar propagate_row_0(const ins_gps15_transition *t, ins_gps15
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_1(const ins_gps15_transition *t, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_1(const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = w->M[1][0]*t->Phi[1][0] + w->M[1][1]*t->Phi[1][1] + w->M[1][2]*t->Phi[1][2] + w->M[1][3]*t->Phi[1][3] + w->M[1][4]*t->Phi[1][4] + w->M[1][5]*t->Phi[1][5] + w->M[1][6]*t->Phi[1][6] + w->M[1][8]*t->Phi[1][8] + w->M[1][9]*t->Phi[1][9] + w->M[1][10]*t->Phi[1][10] + w->M[1][11]*t->Phi[1][11] + w->M[1][12]*t->Phi[1][12] + w->M[1][13]*t->Phi[1][13] + w->M[1][14]*t->Phi[1][14] + t->Qd[1][1]; w->Pn[1][1] = v; check += v - v;
@@ -523,7 +524,7 @@ static ins_gps15_scalar propagate_row_1(const ins_gps15_transition *t, ins_gps15
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_2(const ins_gps15_transition *t, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_2(const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = w->M[2][0]*t->Phi[2][0] + w->M[2][1]*t->Phi[2][1] + w->M[2][2]*t->Phi[2][2] + w->M[2][3]*t->Phi[2][3] + w->M[2][4]*t->Phi[2][4] + w->M[2][5]*t->Phi[2][5] + w->M[2][6]*t->Phi[2][6] + w->M[2][8]*t->Phi[2][8] + w->M[2][9]*t->Phi[2][9] + w->M[2][10]*t->Phi[2][10] + w->M[2][11]*t->Phi[2][11] + w->M[2][12]*t->Phi[2][12] + w->M[2][13]*t->Phi[2][13] + w->M[2][14]*t->Phi[2][14] + t->Qd[2][2]; w->Pn[2][2] = v; check += v - v;
@@ -543,7 +544,7 @@ static ins_gps15_scalar propagate_row_2(const ins_gps15_transition *t, ins_gps15
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_3(const ins_gps15_transition *t, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_3(const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = w->M[3][0]*t->Phi[3][0] + w->M[3][1]*t->Phi[3][1] + w->M[3][2]*t->Phi[3][2] + w->M[3][3]*t->Phi[3][3] + w->M[3][4]*t->Phi[3][4] + w->M[3][5]*t->Phi[3][5] + w->M[3][6]*t->Phi[3][6] + w->M[3][8]*t->Phi[3][8] + w->M[3][9]*t->Phi[3][9] + w->M[3][10]*t->Phi[3][10] + w->M[3][11]*t->Phi[3][11] + w->M[3][12]*t->Phi[3][12] + w->M[3][13]*t->Phi[3][13] + w->M[3][14]*t->Phi[3][14] + t->Qd[3][3]; w->Pn[3][3] = v; check += v - v;
@@ -562,7 +563,7 @@ static ins_gps15_scalar propagate_row_3(const ins_gps15_transition *t, ins_gps15
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_4(const ins_gps15_transition *t, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_4(const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = w->M[4][0]*t->Phi[4][0] + w->M[4][1]*t->Phi[4][1] + w->M[4][2]*t->Phi[4][2] + w->M[4][3]*t->Phi[4][3] + w->M[4][4]*t->Phi[4][4] + w->M[4][5]*t->Phi[4][5] + w->M[4][6]*t->Phi[4][6] + w->M[4][8]*t->Phi[4][8] + w->M[4][9]*t->Phi[4][9] + w->M[4][10]*t->Phi[4][10] + w->M[4][11]*t->Phi[4][11] + w->M[4][12]*t->Phi[4][12] + w->M[4][13]*t->Phi[4][13] + w->M[4][14]*t->Phi[4][14] + t->Qd[4][4]; w->Pn[4][4] = v; check += v - v;
@@ -580,7 +581,7 @@ static ins_gps15_scalar propagate_row_4(const ins_gps15_transition *t, ins_gps15
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_5(const ins_gps15_transition *t, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_5(const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = w->M[5][0]*t->Phi[5][0] + w->M[5][1]*t->Phi[5][1] + w->M[5][2]*t->Phi[5][2] + w->M[5][3]*t->Phi[5][3] + w->M[5][4]*t->Phi[5][4] + w->M[5][5]*t->Phi[5][5] + w->M[5][6]*t->Phi[5][6] + w->M[5][8]*t->Phi[5][8] + w->M[5][9]*t->Phi[5][9] + w->M[5][10]*t->Phi[5][10] + w->M[5][11]*t->Phi[5][11] + w->M[5][12]*t->Phi[5][12] + w->M[5][13]*t->Phi[5][13] + w->M[5][14]*t->Phi[5][14] + t->Qd[5][5]; w->Pn[5][5] = v; check += v - v;
@@ -597,7 +598,7 @@ static ins_gps15_scalar propagate_row_5(const ins_gps15_transition *t, ins_gps15
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_6(const ins_gps15_transition *t, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_6(const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = w->M[6][0]*t->Phi[6][0] + w->M[6][1]*t->Phi[6][1] + w->M[6][2]*t->Phi[6][2] + w->M[6][3]*t->Phi[6][3] + w->M[6][4]*t->Phi[6][4] + w->M[6][5]*t->Phi[6][5] + w->M[6][6]*t->Phi[6][6] + w->M[6][8]*t->Phi[6][8] + w->M[6][9]*t->Phi[6][9] + w->M[6][10]*t->Phi[6][10] + w->M[6][11]*t->Phi[6][11] + w->M[6][12]*t->Phi[6][12] + w->M[6][13]*t->Phi[6][13] + w->M[6][14]*t->Phi[6][14] + t->Qd[6][6]; w->Pn[6][6] = v; check += v - v;
@@ -613,7 +614,7 @@ static ins_gps15_scalar propagate_row_6(const ins_gps15_transition *t, ins_gps15
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_7(const ins_gps15_transition *t, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_7(const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = w->M[7][0]*t->Phi[7][0] + w->M[7][1]*t->Phi[7][1] + w->M[7][2]*t->Phi[7][2] + w->M[7][3]*t->Phi[7][3] + w->M[7][4]*t->Phi[7][4] + w->M[7][5]*t->Phi[7][5] + w->M[7][6]*t->Phi[7][6] + w->M[7][7]*t->Phi[7][7] + w->M[7][8]*t->Phi[7][8] + w->M[7][9]*t->Phi[7][9] + w->M[7][10]*t->Phi[7][10] + w->M[7][11]*t->Phi[7][11] + w->M[7][12]*t->Phi[7][12] + w->M[7][13]*t->Phi[7][13] + w->M[7][14]*t->Phi[7][14] + t->Qd[7][7]; w->Pn[7][7] = v; check += v - v;
@@ -628,7 +629,7 @@ static ins_gps15_scalar propagate_row_7(const ins_gps15_transition *t, ins_gps15
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_8(const ins_gps15_transition *t, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_8(const ins_gps15_transition *t, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = w->M[8][0]*t->Phi[8][0] + w->M[8][1]*t->Phi[8][1] + w->M[8][2]*t->Phi[8][2] + w->M[8][3]*t->Phi[8][3] + w->M[8][4]*t->Phi[8][4] + w->M[8][5]*t->Phi[8][5] + w->M[8][6]*t->Phi[8][6] + w->M[8][8]*t->Phi[8][8] + w->M[8][9]*t->Phi[8][9] + w->M[8][10]*t->Phi[8][10] + w->M[8][11]*t->Phi[8][11] + w->M[8][12]*t->Phi[8][12] + w->M[8][13]*t->Phi[8][13] + w->M[8][14]*t->Phi[8][14] + t->Qd[8][8]; w->Pn[8][8] = v; check += v - v;
@@ -642,7 +643,7 @@ static ins_gps15_scalar propagate_row_8(const ins_gps15_transition *t, ins_gps15
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_9(const ins_gps15_filter *f, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_9(const ins_gps15_filter *f, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = f->P[9][9]; w->Pn[9][9] = v; check += v - v;
@@ -655,7 +656,7 @@ static ins_gps15_scalar propagate_row_9(const ins_gps15_filter *f, ins_gps15_wor
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_10(const ins_gps15_filter *f, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_10(const ins_gps15_filter *f, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = f->P[10][10]; w->Pn[10][10] = v; check += v - v;
@@ -667,7 +668,7 @@ static ins_gps15_scalar propagate_row_10(const ins_gps15_filter *f, ins_gps15_wo
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_11(const ins_gps15_filter *f, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_11(const ins_gps15_filter *f, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = f->P[11][11]; w->Pn[11][11] = v; check += v - v;
@@ -678,7 +679,7 @@ static ins_gps15_scalar propagate_row_11(const ins_gps15_filter *f, ins_gps15_wo
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_12(const ins_gps15_filter *f, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_12(const ins_gps15_filter *f, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = f->P[12][12]; w->Pn[12][12] = v; check += v - v;
@@ -688,7 +689,7 @@ static ins_gps15_scalar propagate_row_12(const ins_gps15_filter *f, ins_gps15_wo
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_13(const ins_gps15_filter *f, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_13(const ins_gps15_filter *f, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = f->P[13][13]; w->Pn[13][13] = v; check += v - v;
@@ -697,15 +698,16 @@ static ins_gps15_scalar propagate_row_13(const ins_gps15_filter *f, ins_gps15_wo
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gps15_scalar propagate_row_14(const ins_gps15_filter *f, ins_gps15_workspace *w)
+static ins_gps15_scalar propagate_row_14(const ins_gps15_filter *f, ins_gps15_filter_scratch *w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = f->P[14][14]; w->Pn[14][14] = v; check += v - v;
     return check;
 }
 
-int ins_gps15_predict(ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *w)
+int ins_gps15_predict(ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *work)
 {
+    ins_gps15_filter_scratch *w = &work->filter;
     ins_gps15_scalar check = 0.0;
     /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
     w->xn[0] = t->Phi[0][0]*f->x[0] + t->Phi[0][1]*f->x[1] + t->Phi[0][2]*f->x[2] + t->Phi[0][3]*f->x[3] + t->Phi[0][4]*f->x[4] + t->Phi[0][5]*f->x[5] + t->Phi[0][6]*f->x[6] + t->Phi[0][8]*f->x[8] + t->Phi[0][9]*f->x[9] + t->Phi[0][10]*f->x[10] + t->Phi[0][11]*f->x[11] + t->Phi[0][12]*f->x[12] + t->Phi[0][13]*f->x[13] + t->Phi[0][14]*f->x[14];
@@ -774,11 +776,11 @@ check += propagate_row_14(f, w);
     return INS_GPS15_OK;
 }
 
-int ins_gps15_set_covariance(ins_gps15_filter *f, const ins_gps15_scalar P[N * N], ins_gps15_workspace *w)
+int ins_gps15_set_covariance(ins_gps15_filter *f, const ins_gps15_scalar P[N * N], ins_gps15_workspace *work)
 {
     int i, j;
     ins_gps15_scalar check = 0.0;
-    (void)w;
+    (void)work;
     for (i = 0; i < N; ++i) {
         for (j = i; j < N; ++j) {
             check += P[i * N + j] - P[i * N + j];
@@ -806,8 +808,9 @@ void ins_gps15_get_covariance(const ins_gps15_filter *f, ins_gps15_scalar P[N * 
     }
 }
 
-int ins_gps15_update(ins_gps15_filter *f, const ins_gps15_scalar z[6], const ins_gps15_matrices *m, ins_gps15_workspace *w)
+int ins_gps15_update(ins_gps15_filter *f, const ins_gps15_scalar z[6], const ins_gps15_matrices *m, ins_gps15_workspace *work)
 {
+    ins_gps15_filter_scratch *w = &work->filter;
     int i, j, a, b, e;
     ins_gps15_scalar check = 0.0;
     for (a = 0; a < INS_GPS15_N_MEASUREMENTS; ++a) {

@@ -92,12 +92,16 @@ typedef struct {
     ins_gps15_scalar P[INS_GPS15_N_STATES][INS_GPS15_N_STATES]; /* covariance */
 } ins_gps15_filter;
 
-/* Scratch memory for the functions below; contents are not meaningful between calls. */
+/* Scratch memory of discretize. */
 typedef struct {
-    ins_gps15_scalar A[INS_GPS15_N_STATES][INS_GPS15_N_STATES];
-    ins_gps15_scalar B[INS_GPS15_N_STATES][INS_GPS15_N_STATES];
-    ins_gps15_scalar S[INS_GPS15_N_STATES][INS_GPS15_N_STATES];
+    ins_gps15_scalar A[INS_GPS15_N_STATES][INS_GPS15_N_STATES]; /* (F T)^k / k! */
+    ins_gps15_scalar B[INS_GPS15_N_STATES][INS_GPS15_N_STATES]; /* the next term */
+    ins_gps15_scalar S[INS_GPS15_N_STATES][INS_GPS15_N_STATES]; /* sum of the terms / (k + 1), for Gamma */
     ins_gps15_scalar Gamma[INS_GPS15_N_STATES][6];
+} ins_gps15_discretize_scratch;
+
+/* Scratch memory of predict, update and set_covariance. */
+typedef struct {
     ins_gps15_scalar M[INS_GPS15_N_STATES][INS_GPS15_N_STATES]; /* Phi P */
     ins_gps15_scalar Pn[INS_GPS15_N_STATES][INS_GPS15_N_STATES]; /* new covariance before it is committed */
     ins_gps15_scalar xn[INS_GPS15_N_STATES];
@@ -107,6 +111,14 @@ typedef struct {
     ins_gps15_scalar C[INS_GPS15_N_STATES][6]; /* K S (Joseph form) */
     ins_gps15_scalar S_innovation[6][6]; /* innovation covariance H P H^T + R */
     ins_gps15_scalar nu[6];
+} ins_gps15_filter_scratch;
+
+/* Scratch memory for the functions below; contents are not meaningful between
+   calls.  discretize and the filter steps never run at the same time, so they
+   share it. */
+typedef union {
+    ins_gps15_discretize_scratch discretize;
+    ins_gps15_filter_scratch filter;
 } ins_gps15_workspace;
 
 extern const unsigned char ins_gps15_F_row[58], ins_gps15_F_col[58];
@@ -122,23 +134,23 @@ void ins_gps15_matrices_evaluate(const ins_gps15_params *params, ins_gps15_matri
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)).
    Refuses a non-finite or non-positive T, non-finite matrices (ERR_NONFINITE)
    and a negative noise PSD (ERR_NOT_POSITIVE); on error *t must not be used. */
-int ins_gps15_discretize(const ins_gps15_matrices *m, ins_gps15_scalar T, ins_gps15_transition *t, ins_gps15_workspace *w);
+int ins_gps15_discretize(const ins_gps15_matrices *m, ins_gps15_scalar T, ins_gps15_transition *t, ins_gps15_workspace *work);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
    Refuses non-finite entries; on error f is unchanged. */
-int ins_gps15_set_covariance(ins_gps15_filter *f, const ins_gps15_scalar P[INS_GPS15_N_STATES * INS_GPS15_N_STATES], ins_gps15_workspace *w);
+int ins_gps15_set_covariance(ins_gps15_filter *f, const ins_gps15_scalar P[INS_GPS15_N_STATES * INS_GPS15_N_STATES], ins_gps15_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
 void ins_gps15_get_covariance(const ins_gps15_filter *f, ins_gps15_scalar P[INS_GPS15_N_STATES * INS_GPS15_N_STATES]);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
    (ERR_NONFINITE) and f is left unchanged. */
-int ins_gps15_predict(ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *w);
+int ins_gps15_predict(ins_gps15_filter *f, const ins_gps15_transition *t, ins_gps15_workspace *work);
 
 /* Kalman update with the measurements z (all at once, Cholesky solve, Joseph form).
    Refuses non-finite z, H or R (ERR_NONFINITE), a negative variance r or a
    non-positive innovation variance (ERR_NOT_POSITIVE); on error f is unchanged. */
-int ins_gps15_update(ins_gps15_filter *f, const ins_gps15_scalar z[6], const ins_gps15_matrices *m, ins_gps15_workspace *w);
+int ins_gps15_update(ins_gps15_filter *f, const ins_gps15_scalar z[6], const ins_gps15_matrices *m, ins_gps15_workspace *work);
 
 #endif /* MODELGEN_INS_GPS15_H */

@@ -163,8 +163,9 @@ void ned_doppler13_reduced_matrices_evaluate(const ned_doppler13_reduced_params 
     m->r[1] = params->doppler_noise_sigma_east*params->doppler_noise_sigma_east;
 }
 
-int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *m, ned_doppler13_reduced_scalar T, ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *m, ned_doppler13_reduced_scalar T, ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *work)
 {
+    ned_doppler13_reduced_discretize_scratch *w = &work->discretize;
     int i, j, k, e, c;
     ned_doppler13_reduced_scalar check = 0.0;
     if (!isfinite(T)) {
@@ -254,7 +255,7 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *m, ne
     return (check != 0.0) ? NED_DOPPLER13_REDUCED_ERR_NONFINITE : NED_DOPPLER13_REDUCED_OK;
 }
 
-static void phi_times_p_row_0(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static void phi_times_p_row_0(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     w->M[0][0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] + t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] + t->Phi[0][7]*f->P[7][0] + t->Phi[0][8]*f->P[8][0] + t->Phi[0][9]*f->P[9][0] + t->Phi[0][10]*f->P[10][0];
     w->M[0][1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] + t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] + t->Phi[0][7]*f->P[7][1] + t->Phi[0][8]*f->P[8][1] + t->Phi[0][9]*f->P[9][1] + t->Phi[0][10]*f->P[10][1];
@@ -271,7 +272,7 @@ static void phi_times_p_row_0(const ned_doppler13_reduced_filter *f, const ned_d
     w->M[0][12] = t->Phi[0][0]*f->P[0][12] + t->Phi[0][1]*f->P[1][12] + t->Phi[0][2]*f->P[2][12] + t->Phi[0][3]*f->P[3][12] + t->Phi[0][4]*f->P[4][12] + t->Phi[0][5]*f->P[5][12] + t->Phi[0][7]*f->P[7][12] + t->Phi[0][8]*f->P[8][12] + t->Phi[0][9]*f->P[9][12] + t->Phi[0][10]*f->P[10][12];
 }
 
-static void phi_times_p_row_1(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static void phi_times_p_row_1(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     w->M[1][0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] + t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] + t->Phi[1][7]*f->P[7][0] + t->Phi[1][8]*f->P[8][0] + t->Phi[1][9]*f->P[9][0] + t->Phi[1][10]*f->P[10][0];
     w->M[1][1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] + t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] + t->Phi[1][7]*f->P[7][1] + t->Phi[1][8]*f->P[8][1] + t->Phi[1][9]*f->P[9][1] + t->Phi[1][10]*f->P[10][1];
@@ -288,7 +289,7 @@ static void phi_times_p_row_1(const ned_doppler13_reduced_filter *f, const ned_d
     w->M[1][12] = t->Phi[1][0]*f->P[0][12] + t->Phi[1][1]*f->P[1][12] + t->Phi[1][2]*f->P[2][12] + t->Phi[1][3]*f->P[3][12] + t->Phi[1][4]*f->P[4][12] + t->Phi[1][5]*f->P[5][12] + t->Phi[1][7]*f->P[7][12] + t->Phi[1][8]*f->P[8][12] + t->Phi[1][9]*f->P[9][12] + t->Phi[1][10]*f->P[10][12];
 }
 
-static void phi_times_p_row_2(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static void phi_times_p_row_2(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     w->M[2][0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] + t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] + t->Phi[2][7]*f->P[7][0] + t->Phi[2][8]*f->P[8][0] + t->Phi[2][9]*f->P[9][0] + t->Phi[2][10]*f->P[10][0];
     w->M[2][1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] + t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] + t->Phi[2][7]*f->P[7][1] + t->Phi[2][8]*f->P[8][1] + t->Phi[2][9]*f->P[9][1] + t->Phi[2][10]*f->P[10][1];
@@ -305,7 +306,7 @@ static void phi_times_p_row_2(const ned_doppler13_reduced_filter *f, const ned_d
     w->M[2][12] = t->Phi[2][0]*f->P[0][12] + t->Phi[2][1]*f->P[1][12] + t->Phi[2][2]*f->P[2][12] + t->Phi[2][3]*f->P[3][12] + t->Phi[2][4]*f->P[4][12] + t->Phi[2][5]*f->P[5][12] + t->Phi[2][7]*f->P[7][12] + t->Phi[2][8]*f->P[8][12] + t->Phi[2][9]*f->P[9][12] + t->Phi[2][10]*f->P[10][12];
 }
 
-static void phi_times_p_row_3(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static void phi_times_p_row_3(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     w->M[3][0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] + t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] + t->Phi[3][7]*f->P[7][0] + t->Phi[3][8]*f->P[8][0] + t->Phi[3][9]*f->P[9][0] + t->Phi[3][10]*f->P[10][0];
     w->M[3][1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] + t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] + t->Phi[3][7]*f->P[7][1] + t->Phi[3][8]*f->P[8][1] + t->Phi[3][9]*f->P[9][1] + t->Phi[3][10]*f->P[10][1];
@@ -322,7 +323,7 @@ static void phi_times_p_row_3(const ned_doppler13_reduced_filter *f, const ned_d
     w->M[3][12] = t->Phi[3][0]*f->P[0][12] + t->Phi[3][1]*f->P[1][12] + t->Phi[3][2]*f->P[2][12] + t->Phi[3][3]*f->P[3][12] + t->Phi[3][4]*f->P[4][12] + t->Phi[3][5]*f->P[5][12] + t->Phi[3][7]*f->P[7][12] + t->Phi[3][8]*f->P[8][12] + t->Phi[3][9]*f->P[9][12] + t->Phi[3][10]*f->P[10][12];
 }
 
-static void phi_times_p_row_4(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static void phi_times_p_row_4(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     w->M[4][0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] + t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] + t->Phi[4][7]*f->P[7][0] + t->Phi[4][8]*f->P[8][0] + t->Phi[4][9]*f->P[9][0] + t->Phi[4][10]*f->P[10][0];
     w->M[4][1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] + t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] + t->Phi[4][7]*f->P[7][1] + t->Phi[4][8]*f->P[8][1] + t->Phi[4][9]*f->P[9][1] + t->Phi[4][10]*f->P[10][1];
@@ -339,7 +340,7 @@ static void phi_times_p_row_4(const ned_doppler13_reduced_filter *f, const ned_d
     w->M[4][12] = t->Phi[4][0]*f->P[0][12] + t->Phi[4][1]*f->P[1][12] + t->Phi[4][2]*f->P[2][12] + t->Phi[4][3]*f->P[3][12] + t->Phi[4][4]*f->P[4][12] + t->Phi[4][5]*f->P[5][12] + t->Phi[4][7]*f->P[7][12] + t->Phi[4][8]*f->P[8][12] + t->Phi[4][9]*f->P[9][12] + t->Phi[4][10]*f->P[10][12];
 }
 
-static void phi_times_p_row_5(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static void phi_times_p_row_5(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     w->M[5][0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] + t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] + t->Phi[5][7]*f->P[7][0] + t->Phi[5][8]*f->P[8][0] + t->Phi[5][9]*f->P[9][0] + t->Phi[5][10]*f->P[10][0];
     w->M[5][1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] + t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] + t->Phi[5][7]*f->P[7][1] + t->Phi[5][8]*f->P[8][1] + t->Phi[5][9]*f->P[9][1] + t->Phi[5][10]*f->P[10][1];
@@ -356,7 +357,7 @@ static void phi_times_p_row_5(const ned_doppler13_reduced_filter *f, const ned_d
     w->M[5][12] = t->Phi[5][0]*f->P[0][12] + t->Phi[5][1]*f->P[1][12] + t->Phi[5][2]*f->P[2][12] + t->Phi[5][3]*f->P[3][12] + t->Phi[5][4]*f->P[4][12] + t->Phi[5][5]*f->P[5][12] + t->Phi[5][7]*f->P[7][12] + t->Phi[5][8]*f->P[8][12] + t->Phi[5][9]*f->P[9][12] + t->Phi[5][10]*f->P[10][12];
 }
 
-static void phi_times_p_row_6(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static void phi_times_p_row_6(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     w->M[6][0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] + t->Phi[6][3]*f->P[3][0] + t->Phi[6][4]*f->P[4][0] + t->Phi[6][5]*f->P[5][0] + t->Phi[6][6]*f->P[6][0] + t->Phi[6][7]*f->P[7][0] + t->Phi[6][8]*f->P[8][0] + t->Phi[6][9]*f->P[9][0] + t->Phi[6][10]*f->P[10][0];
     w->M[6][1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] + t->Phi[6][3]*f->P[3][1] + t->Phi[6][4]*f->P[4][1] + t->Phi[6][5]*f->P[5][1] + t->Phi[6][6]*f->P[6][1] + t->Phi[6][7]*f->P[7][1] + t->Phi[6][8]*f->P[8][1] + t->Phi[6][9]*f->P[9][1] + t->Phi[6][10]*f->P[10][1];
@@ -373,7 +374,7 @@ static void phi_times_p_row_6(const ned_doppler13_reduced_filter *f, const ned_d
     w->M[6][12] = t->Phi[6][0]*f->P[0][12] + t->Phi[6][1]*f->P[1][12] + t->Phi[6][2]*f->P[2][12] + t->Phi[6][3]*f->P[3][12] + t->Phi[6][4]*f->P[4][12] + t->Phi[6][5]*f->P[5][12] + t->Phi[6][6]*f->P[6][12] + t->Phi[6][7]*f->P[7][12] + t->Phi[6][8]*f->P[8][12] + t->Phi[6][9]*f->P[9][12] + t->Phi[6][10]*f->P[10][12];
 }
 
-static void phi_times_p_row_9(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static void phi_times_p_row_9(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     w->M[9][0] = t->Phi[9][9]*f->P[9][0];
     w->M[9][1] = t->Phi[9][9]*f->P[9][1];
@@ -390,7 +391,7 @@ static void phi_times_p_row_9(const ned_doppler13_reduced_filter *f, const ned_d
     w->M[9][12] = t->Phi[9][9]*f->P[9][12];
 }
 
-static void phi_times_p_row_10(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static void phi_times_p_row_10(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     w->M[10][0] = t->Phi[10][10]*f->P[10][0];
     w->M[10][1] = t->Phi[10][10]*f->P[10][1];
@@ -408,7 +409,7 @@ static void phi_times_p_row_10(const ned_doppler13_reduced_filter *f, const ned_
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_0(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_0(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = w->M[0][0]*t->Phi[0][0] + w->M[0][1]*t->Phi[0][1] + w->M[0][2]*t->Phi[0][2] + w->M[0][3]*t->Phi[0][3] + w->M[0][4]*t->Phi[0][4] + w->M[0][5]*t->Phi[0][5] + w->M[0][7]*t->Phi[0][7] + w->M[0][8]*t->Phi[0][8] + w->M[0][9]*t->Phi[0][9] + w->M[0][10]*t->Phi[0][10] + t->Qd[0][0]; w->Pn[0][0] = v; check += v - v;
@@ -428,7 +429,7 @@ static ned_doppler13_reduced_scalar propagate_row_0(const ned_doppler13_reduced_
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_1(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_1(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = w->M[1][0]*t->Phi[1][0] + w->M[1][1]*t->Phi[1][1] + w->M[1][2]*t->Phi[1][2] + w->M[1][3]*t->Phi[1][3] + w->M[1][4]*t->Phi[1][4] + w->M[1][5]*t->Phi[1][5] + w->M[1][7]*t->Phi[1][7] + w->M[1][8]*t->Phi[1][8] + w->M[1][9]*t->Phi[1][9] + w->M[1][10]*t->Phi[1][10] + t->Qd[1][1]; w->Pn[1][1] = v; check += v - v;
@@ -447,7 +448,7 @@ static ned_doppler13_reduced_scalar propagate_row_1(const ned_doppler13_reduced_
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_2(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_2(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = w->M[2][0]*t->Phi[2][0] + w->M[2][1]*t->Phi[2][1] + w->M[2][2]*t->Phi[2][2] + w->M[2][3]*t->Phi[2][3] + w->M[2][4]*t->Phi[2][4] + w->M[2][5]*t->Phi[2][5] + w->M[2][7]*t->Phi[2][7] + w->M[2][8]*t->Phi[2][8] + w->M[2][9]*t->Phi[2][9] + w->M[2][10]*t->Phi[2][10] + t->Qd[2][2]; w->Pn[2][2] = v; check += v - v;
@@ -465,7 +466,7 @@ static ned_doppler13_reduced_scalar propagate_row_2(const ned_doppler13_reduced_
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_3(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_3(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = w->M[3][0]*t->Phi[3][0] + w->M[3][1]*t->Phi[3][1] + w->M[3][2]*t->Phi[3][2] + w->M[3][3]*t->Phi[3][3] + w->M[3][4]*t->Phi[3][4] + w->M[3][5]*t->Phi[3][5] + w->M[3][7]*t->Phi[3][7] + w->M[3][8]*t->Phi[3][8] + w->M[3][9]*t->Phi[3][9] + w->M[3][10]*t->Phi[3][10] + t->Qd[3][3]; w->Pn[3][3] = v; check += v - v;
@@ -482,7 +483,7 @@ static ned_doppler13_reduced_scalar propagate_row_3(const ned_doppler13_reduced_
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_4(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_4(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = w->M[4][0]*t->Phi[4][0] + w->M[4][1]*t->Phi[4][1] + w->M[4][2]*t->Phi[4][2] + w->M[4][3]*t->Phi[4][3] + w->M[4][4]*t->Phi[4][4] + w->M[4][5]*t->Phi[4][5] + w->M[4][7]*t->Phi[4][7] + w->M[4][8]*t->Phi[4][8] + w->M[4][9]*t->Phi[4][9] + w->M[4][10]*t->Phi[4][10] + t->Qd[4][4]; w->Pn[4][4] = v; check += v - v;
@@ -498,7 +499,7 @@ static ned_doppler13_reduced_scalar propagate_row_4(const ned_doppler13_reduced_
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_5(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_5(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = w->M[5][0]*t->Phi[5][0] + w->M[5][1]*t->Phi[5][1] + w->M[5][2]*t->Phi[5][2] + w->M[5][3]*t->Phi[5][3] + w->M[5][4]*t->Phi[5][4] + w->M[5][5]*t->Phi[5][5] + w->M[5][7]*t->Phi[5][7] + w->M[5][8]*t->Phi[5][8] + w->M[5][9]*t->Phi[5][9] + w->M[5][10]*t->Phi[5][10] + t->Qd[5][5]; w->Pn[5][5] = v; check += v - v;
@@ -513,7 +514,7 @@ static ned_doppler13_reduced_scalar propagate_row_5(const ned_doppler13_reduced_
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_6(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_6(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = w->M[6][0]*t->Phi[6][0] + w->M[6][1]*t->Phi[6][1] + w->M[6][2]*t->Phi[6][2] + w->M[6][3]*t->Phi[6][3] + w->M[6][4]*t->Phi[6][4] + w->M[6][5]*t->Phi[6][5] + w->M[6][6]*t->Phi[6][6] + w->M[6][7]*t->Phi[6][7] + w->M[6][8]*t->Phi[6][8] + w->M[6][9]*t->Phi[6][9] + w->M[6][10]*t->Phi[6][10] + t->Qd[6][6]; w->Pn[6][6] = v; check += v - v;
@@ -527,7 +528,7 @@ static ned_doppler13_reduced_scalar propagate_row_6(const ned_doppler13_reduced_
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_7(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_7(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = f->P[7][7]; w->Pn[7][7] = v; check += v - v;
@@ -540,7 +541,7 @@ static ned_doppler13_reduced_scalar propagate_row_7(const ned_doppler13_reduced_
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_8(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_8(const ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = f->P[8][8]; w->Pn[8][8] = v; check += v - v;
@@ -552,7 +553,7 @@ static ned_doppler13_reduced_scalar propagate_row_8(const ned_doppler13_reduced_
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_9(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_9(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = w->M[9][9]*t->Phi[9][9] + t->Qd[9][9]; w->Pn[9][9] = v; check += v - v;
@@ -563,7 +564,7 @@ static ned_doppler13_reduced_scalar propagate_row_9(const ned_doppler13_reduced_
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_10(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_10(const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = w->M[10][10]*t->Phi[10][10] + t->Qd[10][10]; w->Pn[10][10] = v; check += v - v;
@@ -573,7 +574,7 @@ static ned_doppler13_reduced_scalar propagate_row_10(const ned_doppler13_reduced
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_11(const ned_doppler13_reduced_filter *f, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_11(const ned_doppler13_reduced_filter *f, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = f->P[11][11]; w->Pn[11][11] = v; check += v - v;
@@ -582,15 +583,16 @@ static ned_doppler13_reduced_scalar propagate_row_11(const ned_doppler13_reduced
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler13_reduced_scalar propagate_row_12(const ned_doppler13_reduced_filter *f, ned_doppler13_reduced_workspace *w)
+static ned_doppler13_reduced_scalar propagate_row_12(const ned_doppler13_reduced_filter *f, ned_doppler13_reduced_filter_scratch *w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = f->P[12][12]; w->Pn[12][12] = v; check += v - v;
     return check;
 }
 
-int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *w)
+int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *work)
 {
+    ned_doppler13_reduced_filter_scratch *w = &work->filter;
     ned_doppler13_reduced_scalar check = 0.0;
     /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
     w->xn[0] = t->Phi[0][0]*f->x[0] + t->Phi[0][1]*f->x[1] + t->Phi[0][2]*f->x[2] + t->Phi[0][3]*f->x[3] + t->Phi[0][4]*f->x[4] + t->Phi[0][5]*f->x[5] + t->Phi[0][7]*f->x[7] + t->Phi[0][8]*f->x[8] + t->Phi[0][9]*f->x[9] + t->Phi[0][10]*f->x[10];
@@ -655,11 +657,11 @@ check += propagate_row_12(f, w);
     return NED_DOPPLER13_REDUCED_OK;
 }
 
-int ned_doppler13_reduced_set_covariance(ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_scalar P[N * N], ned_doppler13_reduced_workspace *w)
+int ned_doppler13_reduced_set_covariance(ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_scalar P[N * N], ned_doppler13_reduced_workspace *work)
 {
     int i, j;
     ned_doppler13_reduced_scalar check = 0.0;
-    (void)w;
+    (void)work;
     for (i = 0; i < N; ++i) {
         for (j = i; j < N; ++j) {
             check += P[i * N + j] - P[i * N + j];
@@ -687,8 +689,9 @@ void ned_doppler13_reduced_get_covariance(const ned_doppler13_reduced_filter *f,
     }
 }
 
-int ned_doppler13_reduced_update(ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_scalar z[2], const ned_doppler13_reduced_matrices *m, ned_doppler13_reduced_workspace *w)
+int ned_doppler13_reduced_update(ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_scalar z[2], const ned_doppler13_reduced_matrices *m, ned_doppler13_reduced_workspace *work)
 {
+    ned_doppler13_reduced_filter_scratch *w = &work->filter;
     int i, j, a, b, e;
     ned_doppler13_reduced_scalar check = 0.0;
     for (a = 0; a < NED_DOPPLER13_REDUCED_N_MEASUREMENTS; ++a) {

@@ -174,8 +174,9 @@ void ned_doppler18_matrices_evaluate(const ned_doppler18_params *params, ned_dop
     m->r[1] = params->doppler_noise_sigma_east*params->doppler_noise_sigma_east;
 }
 
-int ned_doppler18_discretize(const ned_doppler18_matrices *m, ned_doppler18_scalar T, ned_doppler18_transition *t, ned_doppler18_workspace *w)
+int ned_doppler18_discretize(const ned_doppler18_matrices *m, ned_doppler18_scalar T, ned_doppler18_transition *t, ned_doppler18_workspace *work)
 {
+    ned_doppler18_discretize_scratch *w = &work->discretize;
     int i, j, k, e, c;
     ned_doppler18_scalar check = 0.0;
     if (!isfinite(T)) {
@@ -265,7 +266,7 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *m, ned_doppler18_scal
     return (check != 0.0) ? NED_DOPPLER18_ERR_NONFINITE : NED_DOPPLER18_OK;
 }
 
-static void phi_times_p_row_0(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_0(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[0][0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] + t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] + t->Phi[0][7]*f->P[7][0] + t->Phi[0][8]*f->P[8][0] + t->Phi[0][9]*f->P[9][0] + t->Phi[0][10]*f->P[10][0] + t->Phi[0][11]*f->P[11][0] + t->Phi[0][12]*f->P[12][0] + t->Phi[0][13]*f->P[13][0] + t->Phi[0][14]*f->P[14][0] + t->Phi[0][15]*f->P[15][0];
     w->M[0][1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] + t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] + t->Phi[0][7]*f->P[7][1] + t->Phi[0][8]*f->P[8][1] + t->Phi[0][9]*f->P[9][1] + t->Phi[0][10]*f->P[10][1] + t->Phi[0][11]*f->P[11][1] + t->Phi[0][12]*f->P[12][1] + t->Phi[0][13]*f->P[13][1] + t->Phi[0][14]*f->P[14][1] + t->Phi[0][15]*f->P[15][1];
@@ -287,7 +288,7 @@ static void phi_times_p_row_0(const ned_doppler18_filter *f, const ned_doppler18
     w->M[0][17] = t->Phi[0][0]*f->P[0][17] + t->Phi[0][1]*f->P[1][17] + t->Phi[0][2]*f->P[2][17] + t->Phi[0][3]*f->P[3][17] + t->Phi[0][4]*f->P[4][17] + t->Phi[0][5]*f->P[5][17] + t->Phi[0][7]*f->P[7][17] + t->Phi[0][8]*f->P[8][17] + t->Phi[0][9]*f->P[9][17] + t->Phi[0][10]*f->P[10][17] + t->Phi[0][11]*f->P[11][17] + t->Phi[0][12]*f->P[12][17] + t->Phi[0][13]*f->P[13][17] + t->Phi[0][14]*f->P[14][17] + t->Phi[0][15]*f->P[15][17];
 }
 
-static void phi_times_p_row_1(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_1(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[1][0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] + t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] + t->Phi[1][7]*f->P[7][0] + t->Phi[1][8]*f->P[8][0] + t->Phi[1][9]*f->P[9][0] + t->Phi[1][10]*f->P[10][0] + t->Phi[1][11]*f->P[11][0] + t->Phi[1][12]*f->P[12][0] + t->Phi[1][13]*f->P[13][0] + t->Phi[1][14]*f->P[14][0] + t->Phi[1][15]*f->P[15][0];
     w->M[1][1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] + t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] + t->Phi[1][7]*f->P[7][1] + t->Phi[1][8]*f->P[8][1] + t->Phi[1][9]*f->P[9][1] + t->Phi[1][10]*f->P[10][1] + t->Phi[1][11]*f->P[11][1] + t->Phi[1][12]*f->P[12][1] + t->Phi[1][13]*f->P[13][1] + t->Phi[1][14]*f->P[14][1] + t->Phi[1][15]*f->P[15][1];
@@ -309,7 +310,7 @@ static void phi_times_p_row_1(const ned_doppler18_filter *f, const ned_doppler18
     w->M[1][17] = t->Phi[1][0]*f->P[0][17] + t->Phi[1][1]*f->P[1][17] + t->Phi[1][2]*f->P[2][17] + t->Phi[1][3]*f->P[3][17] + t->Phi[1][4]*f->P[4][17] + t->Phi[1][5]*f->P[5][17] + t->Phi[1][7]*f->P[7][17] + t->Phi[1][8]*f->P[8][17] + t->Phi[1][9]*f->P[9][17] + t->Phi[1][10]*f->P[10][17] + t->Phi[1][11]*f->P[11][17] + t->Phi[1][12]*f->P[12][17] + t->Phi[1][13]*f->P[13][17] + t->Phi[1][14]*f->P[14][17] + t->Phi[1][15]*f->P[15][17];
 }
 
-static void phi_times_p_row_2(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_2(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[2][0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] + t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] + t->Phi[2][7]*f->P[7][0] + t->Phi[2][8]*f->P[8][0] + t->Phi[2][9]*f->P[9][0] + t->Phi[2][10]*f->P[10][0] + t->Phi[2][11]*f->P[11][0] + t->Phi[2][12]*f->P[12][0] + t->Phi[2][13]*f->P[13][0] + t->Phi[2][14]*f->P[14][0] + t->Phi[2][15]*f->P[15][0];
     w->M[2][1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] + t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] + t->Phi[2][7]*f->P[7][1] + t->Phi[2][8]*f->P[8][1] + t->Phi[2][9]*f->P[9][1] + t->Phi[2][10]*f->P[10][1] + t->Phi[2][11]*f->P[11][1] + t->Phi[2][12]*f->P[12][1] + t->Phi[2][13]*f->P[13][1] + t->Phi[2][14]*f->P[14][1] + t->Phi[2][15]*f->P[15][1];
@@ -331,7 +332,7 @@ static void phi_times_p_row_2(const ned_doppler18_filter *f, const ned_doppler18
     w->M[2][17] = t->Phi[2][0]*f->P[0][17] + t->Phi[2][1]*f->P[1][17] + t->Phi[2][2]*f->P[2][17] + t->Phi[2][3]*f->P[3][17] + t->Phi[2][4]*f->P[4][17] + t->Phi[2][5]*f->P[5][17] + t->Phi[2][7]*f->P[7][17] + t->Phi[2][8]*f->P[8][17] + t->Phi[2][9]*f->P[9][17] + t->Phi[2][10]*f->P[10][17] + t->Phi[2][11]*f->P[11][17] + t->Phi[2][12]*f->P[12][17] + t->Phi[2][13]*f->P[13][17] + t->Phi[2][14]*f->P[14][17] + t->Phi[2][15]*f->P[15][17];
 }
 
-static void phi_times_p_row_3(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_3(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[3][0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] + t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] + t->Phi[3][7]*f->P[7][0] + t->Phi[3][8]*f->P[8][0] + t->Phi[3][9]*f->P[9][0] + t->Phi[3][10]*f->P[10][0] + t->Phi[3][11]*f->P[11][0] + t->Phi[3][12]*f->P[12][0] + t->Phi[3][13]*f->P[13][0] + t->Phi[3][14]*f->P[14][0] + t->Phi[3][15]*f->P[15][0];
     w->M[3][1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] + t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] + t->Phi[3][7]*f->P[7][1] + t->Phi[3][8]*f->P[8][1] + t->Phi[3][9]*f->P[9][1] + t->Phi[3][10]*f->P[10][1] + t->Phi[3][11]*f->P[11][1] + t->Phi[3][12]*f->P[12][1] + t->Phi[3][13]*f->P[13][1] + t->Phi[3][14]*f->P[14][1] + t->Phi[3][15]*f->P[15][1];
@@ -353,7 +354,7 @@ static void phi_times_p_row_3(const ned_doppler18_filter *f, const ned_doppler18
     w->M[3][17] = t->Phi[3][0]*f->P[0][17] + t->Phi[3][1]*f->P[1][17] + t->Phi[3][2]*f->P[2][17] + t->Phi[3][3]*f->P[3][17] + t->Phi[3][4]*f->P[4][17] + t->Phi[3][5]*f->P[5][17] + t->Phi[3][7]*f->P[7][17] + t->Phi[3][8]*f->P[8][17] + t->Phi[3][9]*f->P[9][17] + t->Phi[3][10]*f->P[10][17] + t->Phi[3][11]*f->P[11][17] + t->Phi[3][12]*f->P[12][17] + t->Phi[3][13]*f->P[13][17] + t->Phi[3][14]*f->P[14][17] + t->Phi[3][15]*f->P[15][17];
 }
 
-static void phi_times_p_row_4(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_4(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[4][0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] + t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] + t->Phi[4][7]*f->P[7][0] + t->Phi[4][8]*f->P[8][0] + t->Phi[4][9]*f->P[9][0] + t->Phi[4][10]*f->P[10][0] + t->Phi[4][11]*f->P[11][0] + t->Phi[4][12]*f->P[12][0] + t->Phi[4][13]*f->P[13][0] + t->Phi[4][14]*f->P[14][0] + t->Phi[4][15]*f->P[15][0];
     w->M[4][1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] + t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] + t->Phi[4][7]*f->P[7][1] + t->Phi[4][8]*f->P[8][1] + t->Phi[4][9]*f->P[9][1] + t->Phi[4][10]*f->P[10][1] + t->Phi[4][11]*f->P[11][1] + t->Phi[4][12]*f->P[12][1] + t->Phi[4][13]*f->P[13][1] + t->Phi[4][14]*f->P[14][1] + t->Phi[4][15]*f->P[15][1];
@@ -375,7 +376,7 @@ static void phi_times_p_row_4(const ned_doppler18_filter *f, const ned_doppler18
     w->M[4][17] = t->Phi[4][0]*f->P[0][17] + t->Phi[4][1]*f->P[1][17] + t->Phi[4][2]*f->P[2][17] + t->Phi[4][3]*f->P[3][17] + t->Phi[4][4]*f->P[4][17] + t->Phi[4][5]*f->P[5][17] + t->Phi[4][7]*f->P[7][17] + t->Phi[4][8]*f->P[8][17] + t->Phi[4][9]*f->P[9][17] + t->Phi[4][10]*f->P[10][17] + t->Phi[4][11]*f->P[11][17] + t->Phi[4][12]*f->P[12][17] + t->Phi[4][13]*f->P[13][17] + t->Phi[4][14]*f->P[14][17] + t->Phi[4][15]*f->P[15][17];
 }
 
-static void phi_times_p_row_5(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_5(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[5][0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] + t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] + t->Phi[5][7]*f->P[7][0] + t->Phi[5][8]*f->P[8][0] + t->Phi[5][9]*f->P[9][0] + t->Phi[5][10]*f->P[10][0] + t->Phi[5][11]*f->P[11][0] + t->Phi[5][12]*f->P[12][0] + t->Phi[5][13]*f->P[13][0] + t->Phi[5][14]*f->P[14][0] + t->Phi[5][15]*f->P[15][0];
     w->M[5][1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] + t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] + t->Phi[5][7]*f->P[7][1] + t->Phi[5][8]*f->P[8][1] + t->Phi[5][9]*f->P[9][1] + t->Phi[5][10]*f->P[10][1] + t->Phi[5][11]*f->P[11][1] + t->Phi[5][12]*f->P[12][1] + t->Phi[5][13]*f->P[13][1] + t->Phi[5][14]*f->P[14][1] + t->Phi[5][15]*f->P[15][1];
@@ -397,7 +398,7 @@ static void phi_times_p_row_5(const ned_doppler18_filter *f, const ned_doppler18
     w->M[5][17] = t->Phi[5][0]*f->P[0][17] + t->Phi[5][1]*f->P[1][17] + t->Phi[5][2]*f->P[2][17] + t->Phi[5][3]*f->P[3][17] + t->Phi[5][4]*f->P[4][17] + t->Phi[5][5]*f->P[5][17] + t->Phi[5][7]*f->P[7][17] + t->Phi[5][8]*f->P[8][17] + t->Phi[5][9]*f->P[9][17] + t->Phi[5][10]*f->P[10][17] + t->Phi[5][11]*f->P[11][17] + t->Phi[5][12]*f->P[12][17] + t->Phi[5][13]*f->P[13][17] + t->Phi[5][14]*f->P[14][17] + t->Phi[5][15]*f->P[15][17];
 }
 
-static void phi_times_p_row_6(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_6(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[6][0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] + t->Phi[6][3]*f->P[3][0] + t->Phi[6][4]*f->P[4][0] + t->Phi[6][5]*f->P[5][0] + t->Phi[6][6]*f->P[6][0] + t->Phi[6][7]*f->P[7][0] + t->Phi[6][8]*f->P[8][0] + t->Phi[6][9]*f->P[9][0] + t->Phi[6][10]*f->P[10][0] + t->Phi[6][11]*f->P[11][0] + t->Phi[6][12]*f->P[12][0] + t->Phi[6][13]*f->P[13][0] + t->Phi[6][14]*f->P[14][0] + t->Phi[6][15]*f->P[15][0];
     w->M[6][1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] + t->Phi[6][3]*f->P[3][1] + t->Phi[6][4]*f->P[4][1] + t->Phi[6][5]*f->P[5][1] + t->Phi[6][6]*f->P[6][1] + t->Phi[6][7]*f->P[7][1] + t->Phi[6][8]*f->P[8][1] + t->Phi[6][9]*f->P[9][1] + t->Phi[6][10]*f->P[10][1] + t->Phi[6][11]*f->P[11][1] + t->Phi[6][12]*f->P[12][1] + t->Phi[6][13]*f->P[13][1] + t->Phi[6][14]*f->P[14][1] + t->Phi[6][15]*f->P[15][1];
@@ -419,7 +420,7 @@ static void phi_times_p_row_6(const ned_doppler18_filter *f, const ned_doppler18
     w->M[6][17] = t->Phi[6][0]*f->P[0][17] + t->Phi[6][1]*f->P[1][17] + t->Phi[6][2]*f->P[2][17] + t->Phi[6][3]*f->P[3][17] + t->Phi[6][4]*f->P[4][17] + t->Phi[6][5]*f->P[5][17] + t->Phi[6][6]*f->P[6][17] + t->Phi[6][7]*f->P[7][17] + t->Phi[6][8]*f->P[8][17] + t->Phi[6][9]*f->P[9][17] + t->Phi[6][10]*f->P[10][17] + t->Phi[6][11]*f->P[11][17] + t->Phi[6][12]*f->P[12][17] + t->Phi[6][13]*f->P[13][17] + t->Phi[6][14]*f->P[14][17] + t->Phi[6][15]*f->P[15][17];
 }
 
-static void phi_times_p_row_10(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_10(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[10][0] = t->Phi[10][10]*f->P[10][0];
     w->M[10][1] = t->Phi[10][10]*f->P[10][1];
@@ -441,7 +442,7 @@ static void phi_times_p_row_10(const ned_doppler18_filter *f, const ned_doppler1
     w->M[10][17] = t->Phi[10][10]*f->P[10][17];
 }
 
-static void phi_times_p_row_11(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_11(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[11][0] = t->Phi[11][11]*f->P[11][0];
     w->M[11][1] = t->Phi[11][11]*f->P[11][1];
@@ -463,7 +464,7 @@ static void phi_times_p_row_11(const ned_doppler18_filter *f, const ned_doppler1
     w->M[11][17] = t->Phi[11][11]*f->P[11][17];
 }
 
-static void phi_times_p_row_12(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_12(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[12][0] = t->Phi[12][12]*f->P[12][0];
     w->M[12][1] = t->Phi[12][12]*f->P[12][1];
@@ -485,7 +486,7 @@ static void phi_times_p_row_12(const ned_doppler18_filter *f, const ned_doppler1
     w->M[12][17] = t->Phi[12][12]*f->P[12][17];
 }
 
-static void phi_times_p_row_13(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_13(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[13][0] = t->Phi[13][13]*f->P[13][0];
     w->M[13][1] = t->Phi[13][13]*f->P[13][1];
@@ -507,7 +508,7 @@ static void phi_times_p_row_13(const ned_doppler18_filter *f, const ned_doppler1
     w->M[13][17] = t->Phi[13][13]*f->P[13][17];
 }
 
-static void phi_times_p_row_14(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_14(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[14][0] = t->Phi[14][14]*f->P[14][0];
     w->M[14][1] = t->Phi[14][14]*f->P[14][1];
@@ -529,7 +530,7 @@ static void phi_times_p_row_14(const ned_doppler18_filter *f, const ned_doppler1
     w->M[14][17] = t->Phi[14][14]*f->P[14][17];
 }
 
-static void phi_times_p_row_15(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static void phi_times_p_row_15(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     w->M[15][0] = t->Phi[15][15]*f->P[15][0];
     w->M[15][1] = t->Phi[15][15]*f->P[15][1];
@@ -552,7 +553,7 @@ static void phi_times_p_row_15(const ned_doppler18_filter *f, const ned_doppler1
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_0(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_0(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[0][0]*t->Phi[0][0] + w->M[0][1]*t->Phi[0][1] + w->M[0][2]*t->Phi[0][2] + w->M[0][3]*t->Phi[0][3] + w->M[0][4]*t->Phi[0][4] + w->M[0][5]*t->Phi[0][5] + w->M[0][7]*t->Phi[0][7] + w->M[0][8]*t->Phi[0][8] + w->M[0][9]*t->Phi[0][9] + w->M[0][10]*t->Phi[0][10] + w->M[0][11]*t->Phi[0][11] + w->M[0][12]*t->Phi[0][12] + w->M[0][13]*t->Phi[0][13] + w->M[0][14]*t->Phi[0][14] + w->M[0][15]*t->Phi[0][15] + t->Qd[0][0]; w->Pn[0][0] = v; check += v - v;
@@ -577,7 +578,7 @@ static ned_doppler18_scalar propagate_row_0(const ned_doppler18_transition *t, n
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_1(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_1(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[1][0]*t->Phi[1][0] + w->M[1][1]*t->Phi[1][1] + w->M[1][2]*t->Phi[1][2] + w->M[1][3]*t->Phi[1][3] + w->M[1][4]*t->Phi[1][4] + w->M[1][5]*t->Phi[1][5] + w->M[1][7]*t->Phi[1][7] + w->M[1][8]*t->Phi[1][8] + w->M[1][9]*t->Phi[1][9] + w->M[1][10]*t->Phi[1][10] + w->M[1][11]*t->Phi[1][11] + w->M[1][12]*t->Phi[1][12] + w->M[1][13]*t->Phi[1][13] + w->M[1][14]*t->Phi[1][14] + w->M[1][15]*t->Phi[1][15] + t->Qd[1][1]; w->Pn[1][1] = v; check += v - v;
@@ -601,7 +602,7 @@ static ned_doppler18_scalar propagate_row_1(const ned_doppler18_transition *t, n
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_2(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_2(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[2][0]*t->Phi[2][0] + w->M[2][1]*t->Phi[2][1] + w->M[2][2]*t->Phi[2][2] + w->M[2][3]*t->Phi[2][3] + w->M[2][4]*t->Phi[2][4] + w->M[2][5]*t->Phi[2][5] + w->M[2][7]*t->Phi[2][7] + w->M[2][8]*t->Phi[2][8] + w->M[2][9]*t->Phi[2][9] + w->M[2][10]*t->Phi[2][10] + w->M[2][11]*t->Phi[2][11] + w->M[2][12]*t->Phi[2][12] + w->M[2][13]*t->Phi[2][13] + w->M[2][14]*t->Phi[2][14] + w->M[2][15]*t->Phi[2][15] + t->Qd[2][2]; w->Pn[2][2] = v; check += v - v;
@@ -624,7 +625,7 @@ static ned_doppler18_scalar propagate_row_2(const ned_doppler18_transition *t, n
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_3(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_3(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[3][0]*t->Phi[3][0] + w->M[3][1]*t->Phi[3][1] + w->M[3][2]*t->Phi[3][2] + w->M[3][3]*t->Phi[3][3] + w->M[3][4]*t->Phi[3][4] + w->M[3][5]*t->Phi[3][5] + w->M[3][7]*t->Phi[3][7] + w->M[3][8]*t->Phi[3][8] + w->M[3][9]*t->Phi[3][9] + w->M[3][10]*t->Phi[3][10] + w->M[3][11]*t->Phi[3][11] + w->M[3][12]*t->Phi[3][12] + w->M[3][13]*t->Phi[3][13] + w->M[3][14]*t->Phi[3][14] + w->M[3][15]*t->Phi[3][15] + t->Qd[3][3]; w->Pn[3][3] = v; check += v - v;
@@ -646,7 +647,7 @@ static ned_doppler18_scalar propagate_row_3(const ned_doppler18_transition *t, n
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_4(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_4(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[4][0]*t->Phi[4][0] + w->M[4][1]*t->Phi[4][1] + w->M[4][2]*t->Phi[4][2] + w->M[4][3]*t->Phi[4][3] + w->M[4][4]*t->Phi[4][4] + w->M[4][5]*t->Phi[4][5] + w->M[4][7]*t->Phi[4][7] + w->M[4][8]*t->Phi[4][8] + w->M[4][9]*t->Phi[4][9] + w->M[4][10]*t->Phi[4][10] + w->M[4][11]*t->Phi[4][11] + w->M[4][12]*t->Phi[4][12] + w->M[4][13]*t->Phi[4][13] + w->M[4][14]*t->Phi[4][14] + w->M[4][15]*t->Phi[4][15] + t->Qd[4][4]; w->Pn[4][4] = v; check += v - v;
@@ -667,7 +668,7 @@ static ned_doppler18_scalar propagate_row_4(const ned_doppler18_transition *t, n
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_5(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_5(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[5][0]*t->Phi[5][0] + w->M[5][1]*t->Phi[5][1] + w->M[5][2]*t->Phi[5][2] + w->M[5][3]*t->Phi[5][3] + w->M[5][4]*t->Phi[5][4] + w->M[5][5]*t->Phi[5][5] + w->M[5][7]*t->Phi[5][7] + w->M[5][8]*t->Phi[5][8] + w->M[5][9]*t->Phi[5][9] + w->M[5][10]*t->Phi[5][10] + w->M[5][11]*t->Phi[5][11] + w->M[5][12]*t->Phi[5][12] + w->M[5][13]*t->Phi[5][13] + w->M[5][14]*t->Phi[5][14] + w->M[5][15]*t->Phi[5][15] + t->Qd[5][5]; w->Pn[5][5] = v; check += v - v;
@@ -687,7 +688,7 @@ static ned_doppler18_scalar propagate_row_5(const ned_doppler18_transition *t, n
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_6(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_6(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[6][0]*t->Phi[6][0] + w->M[6][1]*t->Phi[6][1] + w->M[6][2]*t->Phi[6][2] + w->M[6][3]*t->Phi[6][3] + w->M[6][4]*t->Phi[6][4] + w->M[6][5]*t->Phi[6][5] + w->M[6][6]*t->Phi[6][6] + w->M[6][7]*t->Phi[6][7] + w->M[6][8]*t->Phi[6][8] + w->M[6][9]*t->Phi[6][9] + w->M[6][10]*t->Phi[6][10] + w->M[6][11]*t->Phi[6][11] + w->M[6][12]*t->Phi[6][12] + w->M[6][13]*t->Phi[6][13] + w->M[6][14]*t->Phi[6][14] + w->M[6][15]*t->Phi[6][15] + t->Qd[6][6]; w->Pn[6][6] = v; check += v - v;
@@ -706,7 +707,7 @@ static ned_doppler18_scalar propagate_row_6(const ned_doppler18_transition *t, n
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_7(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_7(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = f->P[7][7]; w->Pn[7][7] = v; check += v - v;
@@ -724,7 +725,7 @@ static ned_doppler18_scalar propagate_row_7(const ned_doppler18_filter *f, const
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_8(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_8(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = f->P[8][8]; w->Pn[8][8] = v; check += v - v;
@@ -741,7 +742,7 @@ static ned_doppler18_scalar propagate_row_8(const ned_doppler18_filter *f, const
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_9(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_9(const ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = f->P[9][9]; w->Pn[9][9] = v; check += v - v;
@@ -757,7 +758,7 @@ static ned_doppler18_scalar propagate_row_9(const ned_doppler18_filter *f, const
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_10(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_10(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[10][10]*t->Phi[10][10] + t->Qd[10][10]; w->Pn[10][10] = v; check += v - v;
@@ -772,7 +773,7 @@ static ned_doppler18_scalar propagate_row_10(const ned_doppler18_transition *t, 
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_11(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_11(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[11][11]*t->Phi[11][11] + t->Qd[11][11]; w->Pn[11][11] = v; check += v - v;
@@ -786,7 +787,7 @@ static ned_doppler18_scalar propagate_row_11(const ned_doppler18_transition *t, 
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_12(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_12(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[12][12]*t->Phi[12][12] + t->Qd[12][12]; w->Pn[12][12] = v; check += v - v;
@@ -799,7 +800,7 @@ static ned_doppler18_scalar propagate_row_12(const ned_doppler18_transition *t, 
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_13(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_13(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[13][13]*t->Phi[13][13] + t->Qd[13][13]; w->Pn[13][13] = v; check += v - v;
@@ -811,7 +812,7 @@ static ned_doppler18_scalar propagate_row_13(const ned_doppler18_transition *t, 
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_14(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_14(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[14][14]*t->Phi[14][14] + t->Qd[14][14]; w->Pn[14][14] = v; check += v - v;
@@ -822,7 +823,7 @@ static ned_doppler18_scalar propagate_row_14(const ned_doppler18_transition *t, 
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_15(const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_15(const ned_doppler18_transition *t, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[15][15]*t->Phi[15][15] + t->Qd[15][15]; w->Pn[15][15] = v; check += v - v;
@@ -832,7 +833,7 @@ static ned_doppler18_scalar propagate_row_15(const ned_doppler18_transition *t, 
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_16(const ned_doppler18_filter *f, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_16(const ned_doppler18_filter *f, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = f->P[16][16]; w->Pn[16][16] = v; check += v - v;
@@ -841,15 +842,16 @@ static ned_doppler18_scalar propagate_row_16(const ned_doppler18_filter *f, ned_
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler18_scalar propagate_row_17(const ned_doppler18_filter *f, ned_doppler18_workspace *w)
+static ned_doppler18_scalar propagate_row_17(const ned_doppler18_filter *f, ned_doppler18_filter_scratch *w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = f->P[17][17]; w->Pn[17][17] = v; check += v - v;
     return check;
 }
 
-int ned_doppler18_predict(ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w)
+int ned_doppler18_predict(ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *work)
 {
+    ned_doppler18_filter_scratch *w = &work->filter;
     ned_doppler18_scalar check = 0.0;
     /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
     w->xn[0] = t->Phi[0][0]*f->x[0] + t->Phi[0][1]*f->x[1] + t->Phi[0][2]*f->x[2] + t->Phi[0][3]*f->x[3] + t->Phi[0][4]*f->x[4] + t->Phi[0][5]*f->x[5] + t->Phi[0][7]*f->x[7] + t->Phi[0][8]*f->x[8] + t->Phi[0][9]*f->x[9] + t->Phi[0][10]*f->x[10] + t->Phi[0][11]*f->x[11] + t->Phi[0][12]*f->x[12] + t->Phi[0][13]*f->x[13] + t->Phi[0][14]*f->x[14] + t->Phi[0][15]*f->x[15];
@@ -936,11 +938,11 @@ check += propagate_row_17(f, w);
     return NED_DOPPLER18_OK;
 }
 
-int ned_doppler18_set_covariance(ned_doppler18_filter *f, const ned_doppler18_scalar P[N * N], ned_doppler18_workspace *w)
+int ned_doppler18_set_covariance(ned_doppler18_filter *f, const ned_doppler18_scalar P[N * N], ned_doppler18_workspace *work)
 {
     int i, j;
     ned_doppler18_scalar check = 0.0;
-    (void)w;
+    (void)work;
     for (i = 0; i < N; ++i) {
         for (j = i; j < N; ++j) {
             check += P[i * N + j] - P[i * N + j];
@@ -968,8 +970,9 @@ void ned_doppler18_get_covariance(const ned_doppler18_filter *f, ned_doppler18_s
     }
 }
 
-int ned_doppler18_update(ned_doppler18_filter *f, const ned_doppler18_scalar z[2], const ned_doppler18_matrices *m, ned_doppler18_workspace *w)
+int ned_doppler18_update(ned_doppler18_filter *f, const ned_doppler18_scalar z[2], const ned_doppler18_matrices *m, ned_doppler18_workspace *work)
 {
+    ned_doppler18_filter_scratch *w = &work->filter;
     int i, j, a, b, e;
     ned_doppler18_scalar check = 0.0;
     for (a = 0; a < NED_DOPPLER18_N_MEASUREMENTS; ++a) {

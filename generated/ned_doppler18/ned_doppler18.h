@@ -95,12 +95,16 @@ typedef struct {
     ned_doppler18_scalar P[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* covariance */
 } ned_doppler18_filter;
 
-/* Scratch memory for the functions below; contents are not meaningful between calls. */
+/* Scratch memory of discretize. */
 typedef struct {
-    ned_doppler18_scalar A[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES];
-    ned_doppler18_scalar B[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES];
-    ned_doppler18_scalar S[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES];
+    ned_doppler18_scalar A[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* (F T)^k / k! */
+    ned_doppler18_scalar B[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* the next term */
+    ned_doppler18_scalar S[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* sum of the terms / (k + 1), for Gamma */
     ned_doppler18_scalar Gamma[NED_DOPPLER18_N_STATES][6];
+} ned_doppler18_discretize_scratch;
+
+/* Scratch memory of predict, update and set_covariance. */
+typedef struct {
     ned_doppler18_scalar M[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* Phi P */
     ned_doppler18_scalar Pn[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* new covariance before it is committed */
     ned_doppler18_scalar xn[NED_DOPPLER18_N_STATES];
@@ -110,6 +114,14 @@ typedef struct {
     ned_doppler18_scalar C[NED_DOPPLER18_N_STATES][2]; /* K S (Joseph form) */
     ned_doppler18_scalar S_innovation[2][2]; /* innovation covariance H P H^T + R */
     ned_doppler18_scalar nu[2];
+} ned_doppler18_filter_scratch;
+
+/* Scratch memory for the functions below; contents are not meaningful between
+   calls.  discretize and the filter steps never run at the same time, so they
+   share it. */
+typedef union {
+    ned_doppler18_discretize_scratch discretize;
+    ned_doppler18_filter_scratch filter;
 } ned_doppler18_workspace;
 
 extern const unsigned char ned_doppler18_F_row[54], ned_doppler18_F_col[54];
@@ -125,23 +137,23 @@ void ned_doppler18_matrices_evaluate(const ned_doppler18_params *params, ned_dop
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)).
    Refuses a non-finite or non-positive T, non-finite matrices (ERR_NONFINITE)
    and a negative noise PSD (ERR_NOT_POSITIVE); on error *t must not be used. */
-int ned_doppler18_discretize(const ned_doppler18_matrices *m, ned_doppler18_scalar T, ned_doppler18_transition *t, ned_doppler18_workspace *w);
+int ned_doppler18_discretize(const ned_doppler18_matrices *m, ned_doppler18_scalar T, ned_doppler18_transition *t, ned_doppler18_workspace *work);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
    Refuses non-finite entries; on error f is unchanged. */
-int ned_doppler18_set_covariance(ned_doppler18_filter *f, const ned_doppler18_scalar P[NED_DOPPLER18_N_STATES * NED_DOPPLER18_N_STATES], ned_doppler18_workspace *w);
+int ned_doppler18_set_covariance(ned_doppler18_filter *f, const ned_doppler18_scalar P[NED_DOPPLER18_N_STATES * NED_DOPPLER18_N_STATES], ned_doppler18_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
 void ned_doppler18_get_covariance(const ned_doppler18_filter *f, ned_doppler18_scalar P[NED_DOPPLER18_N_STATES * NED_DOPPLER18_N_STATES]);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
    (ERR_NONFINITE) and f is left unchanged. */
-int ned_doppler18_predict(ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *w);
+int ned_doppler18_predict(ned_doppler18_filter *f, const ned_doppler18_transition *t, ned_doppler18_workspace *work);
 
 /* Kalman update with the measurements z (all at once, Cholesky solve, Joseph form).
    Refuses non-finite z, H or R (ERR_NONFINITE), a negative variance r or a
    non-positive innovation variance (ERR_NOT_POSITIVE); on error f is unchanged. */
-int ned_doppler18_update(ned_doppler18_filter *f, const ned_doppler18_scalar z[2], const ned_doppler18_matrices *m, ned_doppler18_workspace *w);
+int ned_doppler18_update(ned_doppler18_filter *f, const ned_doppler18_scalar z[2], const ned_doppler18_matrices *m, ned_doppler18_workspace *work);
 
 #endif /* MODELGEN_NED_DOPPLER18_H */

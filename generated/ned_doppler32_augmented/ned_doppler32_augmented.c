@@ -218,8 +218,9 @@ void ned_doppler32_augmented_matrices_evaluate(const ned_doppler32_augmented_par
     m->r[1] = params->doppler_noise_sigma_east*params->doppler_noise_sigma_east;
 }
 
-int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *m, ned_doppler32_augmented_scalar T, ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *m, ned_doppler32_augmented_scalar T, ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *work)
 {
+    ned_doppler32_augmented_discretize_scratch *w = &work->discretize;
     int i, j, k, e, c;
     ned_doppler32_augmented_scalar check = 0.0;
     if (!isfinite(T)) {
@@ -309,7 +310,7 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *m
     return (check != 0.0) ? NED_DOPPLER32_AUGMENTED_ERR_NONFINITE : NED_DOPPLER32_AUGMENTED_OK;
 }
 
-static void phi_times_p_row_0(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_0(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[0][0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] + t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] + t->Phi[0][7]*f->P[7][0] + t->Phi[0][8]*f->P[8][0] + t->Phi[0][9]*f->P[9][0] + t->Phi[0][10]*f->P[10][0] + t->Phi[0][11]*f->P[11][0] + t->Phi[0][12]*f->P[12][0] + t->Phi[0][13]*f->P[13][0] + t->Phi[0][14]*f->P[14][0] + t->Phi[0][15]*f->P[15][0] + t->Phi[0][18]*f->P[18][0] + t->Phi[0][19]*f->P[19][0] + t->Phi[0][20]*f->P[20][0] + t->Phi[0][21]*f->P[21][0] + t->Phi[0][22]*f->P[22][0] + t->Phi[0][23]*f->P[23][0] + t->Phi[0][24]*f->P[24][0] + t->Phi[0][25]*f->P[25][0] + t->Phi[0][26]*f->P[26][0] + t->Phi[0][27]*f->P[27][0] + t->Phi[0][28]*f->P[28][0] + t->Phi[0][29]*f->P[29][0];
     w->M[0][1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] + t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] + t->Phi[0][7]*f->P[7][1] + t->Phi[0][8]*f->P[8][1] + t->Phi[0][9]*f->P[9][1] + t->Phi[0][10]*f->P[10][1] + t->Phi[0][11]*f->P[11][1] + t->Phi[0][12]*f->P[12][1] + t->Phi[0][13]*f->P[13][1] + t->Phi[0][14]*f->P[14][1] + t->Phi[0][15]*f->P[15][1] + t->Phi[0][18]*f->P[18][1] + t->Phi[0][19]*f->P[19][1] + t->Phi[0][20]*f->P[20][1] + t->Phi[0][21]*f->P[21][1] + t->Phi[0][22]*f->P[22][1] + t->Phi[0][23]*f->P[23][1] + t->Phi[0][24]*f->P[24][1] + t->Phi[0][25]*f->P[25][1] + t->Phi[0][26]*f->P[26][1] + t->Phi[0][27]*f->P[27][1] + t->Phi[0][28]*f->P[28][1] + t->Phi[0][29]*f->P[29][1];
@@ -345,7 +346,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *f, const ned
     w->M[0][31] = t->Phi[0][0]*f->P[0][31] + t->Phi[0][1]*f->P[1][31] + t->Phi[0][2]*f->P[2][31] + t->Phi[0][3]*f->P[3][31] + t->Phi[0][4]*f->P[4][31] + t->Phi[0][5]*f->P[5][31] + t->Phi[0][7]*f->P[7][31] + t->Phi[0][8]*f->P[8][31] + t->Phi[0][9]*f->P[9][31] + t->Phi[0][10]*f->P[10][31] + t->Phi[0][11]*f->P[11][31] + t->Phi[0][12]*f->P[12][31] + t->Phi[0][13]*f->P[13][31] + t->Phi[0][14]*f->P[14][31] + t->Phi[0][15]*f->P[15][31] + t->Phi[0][18]*f->P[18][31] + t->Phi[0][19]*f->P[19][31] + t->Phi[0][20]*f->P[20][31] + t->Phi[0][21]*f->P[21][31] + t->Phi[0][22]*f->P[22][31] + t->Phi[0][23]*f->P[23][31] + t->Phi[0][24]*f->P[24][31] + t->Phi[0][25]*f->P[25][31] + t->Phi[0][26]*f->P[26][31] + t->Phi[0][27]*f->P[27][31] + t->Phi[0][28]*f->P[28][31] + t->Phi[0][29]*f->P[29][31];
 }
 
-static void phi_times_p_row_1(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_1(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[1][0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] + t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] + t->Phi[1][7]*f->P[7][0] + t->Phi[1][8]*f->P[8][0] + t->Phi[1][9]*f->P[9][0] + t->Phi[1][10]*f->P[10][0] + t->Phi[1][11]*f->P[11][0] + t->Phi[1][12]*f->P[12][0] + t->Phi[1][13]*f->P[13][0] + t->Phi[1][14]*f->P[14][0] + t->Phi[1][15]*f->P[15][0] + t->Phi[1][18]*f->P[18][0] + t->Phi[1][19]*f->P[19][0] + t->Phi[1][20]*f->P[20][0] + t->Phi[1][21]*f->P[21][0] + t->Phi[1][22]*f->P[22][0] + t->Phi[1][23]*f->P[23][0] + t->Phi[1][24]*f->P[24][0] + t->Phi[1][25]*f->P[25][0] + t->Phi[1][26]*f->P[26][0] + t->Phi[1][27]*f->P[27][0] + t->Phi[1][28]*f->P[28][0] + t->Phi[1][29]*f->P[29][0];
     w->M[1][1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] + t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] + t->Phi[1][7]*f->P[7][1] + t->Phi[1][8]*f->P[8][1] + t->Phi[1][9]*f->P[9][1] + t->Phi[1][10]*f->P[10][1] + t->Phi[1][11]*f->P[11][1] + t->Phi[1][12]*f->P[12][1] + t->Phi[1][13]*f->P[13][1] + t->Phi[1][14]*f->P[14][1] + t->Phi[1][15]*f->P[15][1] + t->Phi[1][18]*f->P[18][1] + t->Phi[1][19]*f->P[19][1] + t->Phi[1][20]*f->P[20][1] + t->Phi[1][21]*f->P[21][1] + t->Phi[1][22]*f->P[22][1] + t->Phi[1][23]*f->P[23][1] + t->Phi[1][24]*f->P[24][1] + t->Phi[1][25]*f->P[25][1] + t->Phi[1][26]*f->P[26][1] + t->Phi[1][27]*f->P[27][1] + t->Phi[1][28]*f->P[28][1] + t->Phi[1][29]*f->P[29][1];
@@ -381,7 +382,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *f, const ned
     w->M[1][31] = t->Phi[1][0]*f->P[0][31] + t->Phi[1][1]*f->P[1][31] + t->Phi[1][2]*f->P[2][31] + t->Phi[1][3]*f->P[3][31] + t->Phi[1][4]*f->P[4][31] + t->Phi[1][5]*f->P[5][31] + t->Phi[1][7]*f->P[7][31] + t->Phi[1][8]*f->P[8][31] + t->Phi[1][9]*f->P[9][31] + t->Phi[1][10]*f->P[10][31] + t->Phi[1][11]*f->P[11][31] + t->Phi[1][12]*f->P[12][31] + t->Phi[1][13]*f->P[13][31] + t->Phi[1][14]*f->P[14][31] + t->Phi[1][15]*f->P[15][31] + t->Phi[1][18]*f->P[18][31] + t->Phi[1][19]*f->P[19][31] + t->Phi[1][20]*f->P[20][31] + t->Phi[1][21]*f->P[21][31] + t->Phi[1][22]*f->P[22][31] + t->Phi[1][23]*f->P[23][31] + t->Phi[1][24]*f->P[24][31] + t->Phi[1][25]*f->P[25][31] + t->Phi[1][26]*f->P[26][31] + t->Phi[1][27]*f->P[27][31] + t->Phi[1][28]*f->P[28][31] + t->Phi[1][29]*f->P[29][31];
 }
 
-static void phi_times_p_row_2(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_2(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[2][0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] + t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] + t->Phi[2][7]*f->P[7][0] + t->Phi[2][8]*f->P[8][0] + t->Phi[2][9]*f->P[9][0] + t->Phi[2][10]*f->P[10][0] + t->Phi[2][11]*f->P[11][0] + t->Phi[2][12]*f->P[12][0] + t->Phi[2][13]*f->P[13][0] + t->Phi[2][14]*f->P[14][0] + t->Phi[2][15]*f->P[15][0] + t->Phi[2][18]*f->P[18][0] + t->Phi[2][19]*f->P[19][0] + t->Phi[2][20]*f->P[20][0] + t->Phi[2][21]*f->P[21][0] + t->Phi[2][22]*f->P[22][0] + t->Phi[2][23]*f->P[23][0] + t->Phi[2][24]*f->P[24][0] + t->Phi[2][25]*f->P[25][0] + t->Phi[2][26]*f->P[26][0] + t->Phi[2][27]*f->P[27][0] + t->Phi[2][28]*f->P[28][0] + t->Phi[2][29]*f->P[29][0];
     w->M[2][1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] + t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] + t->Phi[2][7]*f->P[7][1] + t->Phi[2][8]*f->P[8][1] + t->Phi[2][9]*f->P[9][1] + t->Phi[2][10]*f->P[10][1] + t->Phi[2][11]*f->P[11][1] + t->Phi[2][12]*f->P[12][1] + t->Phi[2][13]*f->P[13][1] + t->Phi[2][14]*f->P[14][1] + t->Phi[2][15]*f->P[15][1] + t->Phi[2][18]*f->P[18][1] + t->Phi[2][19]*f->P[19][1] + t->Phi[2][20]*f->P[20][1] + t->Phi[2][21]*f->P[21][1] + t->Phi[2][22]*f->P[22][1] + t->Phi[2][23]*f->P[23][1] + t->Phi[2][24]*f->P[24][1] + t->Phi[2][25]*f->P[25][1] + t->Phi[2][26]*f->P[26][1] + t->Phi[2][27]*f->P[27][1] + t->Phi[2][28]*f->P[28][1] + t->Phi[2][29]*f->P[29][1];
@@ -417,7 +418,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *f, const ned
     w->M[2][31] = t->Phi[2][0]*f->P[0][31] + t->Phi[2][1]*f->P[1][31] + t->Phi[2][2]*f->P[2][31] + t->Phi[2][3]*f->P[3][31] + t->Phi[2][4]*f->P[4][31] + t->Phi[2][5]*f->P[5][31] + t->Phi[2][7]*f->P[7][31] + t->Phi[2][8]*f->P[8][31] + t->Phi[2][9]*f->P[9][31] + t->Phi[2][10]*f->P[10][31] + t->Phi[2][11]*f->P[11][31] + t->Phi[2][12]*f->P[12][31] + t->Phi[2][13]*f->P[13][31] + t->Phi[2][14]*f->P[14][31] + t->Phi[2][15]*f->P[15][31] + t->Phi[2][18]*f->P[18][31] + t->Phi[2][19]*f->P[19][31] + t->Phi[2][20]*f->P[20][31] + t->Phi[2][21]*f->P[21][31] + t->Phi[2][22]*f->P[22][31] + t->Phi[2][23]*f->P[23][31] + t->Phi[2][24]*f->P[24][31] + t->Phi[2][25]*f->P[25][31] + t->Phi[2][26]*f->P[26][31] + t->Phi[2][27]*f->P[27][31] + t->Phi[2][28]*f->P[28][31] + t->Phi[2][29]*f->P[29][31];
 }
 
-static void phi_times_p_row_3(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_3(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[3][0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] + t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] + t->Phi[3][7]*f->P[7][0] + t->Phi[3][8]*f->P[8][0] + t->Phi[3][9]*f->P[9][0] + t->Phi[3][10]*f->P[10][0] + t->Phi[3][11]*f->P[11][0] + t->Phi[3][12]*f->P[12][0] + t->Phi[3][13]*f->P[13][0] + t->Phi[3][14]*f->P[14][0] + t->Phi[3][15]*f->P[15][0] + t->Phi[3][18]*f->P[18][0] + t->Phi[3][19]*f->P[19][0] + t->Phi[3][20]*f->P[20][0] + t->Phi[3][21]*f->P[21][0] + t->Phi[3][22]*f->P[22][0] + t->Phi[3][23]*f->P[23][0] + t->Phi[3][24]*f->P[24][0] + t->Phi[3][25]*f->P[25][0] + t->Phi[3][26]*f->P[26][0] + t->Phi[3][27]*f->P[27][0] + t->Phi[3][28]*f->P[28][0] + t->Phi[3][29]*f->P[29][0];
     w->M[3][1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] + t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] + t->Phi[3][7]*f->P[7][1] + t->Phi[3][8]*f->P[8][1] + t->Phi[3][9]*f->P[9][1] + t->Phi[3][10]*f->P[10][1] + t->Phi[3][11]*f->P[11][1] + t->Phi[3][12]*f->P[12][1] + t->Phi[3][13]*f->P[13][1] + t->Phi[3][14]*f->P[14][1] + t->Phi[3][15]*f->P[15][1] + t->Phi[3][18]*f->P[18][1] + t->Phi[3][19]*f->P[19][1] + t->Phi[3][20]*f->P[20][1] + t->Phi[3][21]*f->P[21][1] + t->Phi[3][22]*f->P[22][1] + t->Phi[3][23]*f->P[23][1] + t->Phi[3][24]*f->P[24][1] + t->Phi[3][25]*f->P[25][1] + t->Phi[3][26]*f->P[26][1] + t->Phi[3][27]*f->P[27][1] + t->Phi[3][28]*f->P[28][1] + t->Phi[3][29]*f->P[29][1];
@@ -453,7 +454,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *f, const ned
     w->M[3][31] = t->Phi[3][0]*f->P[0][31] + t->Phi[3][1]*f->P[1][31] + t->Phi[3][2]*f->P[2][31] + t->Phi[3][3]*f->P[3][31] + t->Phi[3][4]*f->P[4][31] + t->Phi[3][5]*f->P[5][31] + t->Phi[3][7]*f->P[7][31] + t->Phi[3][8]*f->P[8][31] + t->Phi[3][9]*f->P[9][31] + t->Phi[3][10]*f->P[10][31] + t->Phi[3][11]*f->P[11][31] + t->Phi[3][12]*f->P[12][31] + t->Phi[3][13]*f->P[13][31] + t->Phi[3][14]*f->P[14][31] + t->Phi[3][15]*f->P[15][31] + t->Phi[3][18]*f->P[18][31] + t->Phi[3][19]*f->P[19][31] + t->Phi[3][20]*f->P[20][31] + t->Phi[3][21]*f->P[21][31] + t->Phi[3][22]*f->P[22][31] + t->Phi[3][23]*f->P[23][31] + t->Phi[3][24]*f->P[24][31] + t->Phi[3][25]*f->P[25][31] + t->Phi[3][26]*f->P[26][31] + t->Phi[3][27]*f->P[27][31] + t->Phi[3][28]*f->P[28][31] + t->Phi[3][29]*f->P[29][31];
 }
 
-static void phi_times_p_row_4(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_4(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[4][0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] + t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] + t->Phi[4][7]*f->P[7][0] + t->Phi[4][8]*f->P[8][0] + t->Phi[4][9]*f->P[9][0] + t->Phi[4][10]*f->P[10][0] + t->Phi[4][11]*f->P[11][0] + t->Phi[4][12]*f->P[12][0] + t->Phi[4][13]*f->P[13][0] + t->Phi[4][14]*f->P[14][0] + t->Phi[4][15]*f->P[15][0] + t->Phi[4][18]*f->P[18][0] + t->Phi[4][19]*f->P[19][0] + t->Phi[4][20]*f->P[20][0] + t->Phi[4][21]*f->P[21][0] + t->Phi[4][22]*f->P[22][0] + t->Phi[4][23]*f->P[23][0] + t->Phi[4][24]*f->P[24][0] + t->Phi[4][25]*f->P[25][0] + t->Phi[4][26]*f->P[26][0] + t->Phi[4][27]*f->P[27][0] + t->Phi[4][28]*f->P[28][0] + t->Phi[4][29]*f->P[29][0];
     w->M[4][1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] + t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] + t->Phi[4][7]*f->P[7][1] + t->Phi[4][8]*f->P[8][1] + t->Phi[4][9]*f->P[9][1] + t->Phi[4][10]*f->P[10][1] + t->Phi[4][11]*f->P[11][1] + t->Phi[4][12]*f->P[12][1] + t->Phi[4][13]*f->P[13][1] + t->Phi[4][14]*f->P[14][1] + t->Phi[4][15]*f->P[15][1] + t->Phi[4][18]*f->P[18][1] + t->Phi[4][19]*f->P[19][1] + t->Phi[4][20]*f->P[20][1] + t->Phi[4][21]*f->P[21][1] + t->Phi[4][22]*f->P[22][1] + t->Phi[4][23]*f->P[23][1] + t->Phi[4][24]*f->P[24][1] + t->Phi[4][25]*f->P[25][1] + t->Phi[4][26]*f->P[26][1] + t->Phi[4][27]*f->P[27][1] + t->Phi[4][28]*f->P[28][1] + t->Phi[4][29]*f->P[29][1];
@@ -489,7 +490,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *f, const ned
     w->M[4][31] = t->Phi[4][0]*f->P[0][31] + t->Phi[4][1]*f->P[1][31] + t->Phi[4][2]*f->P[2][31] + t->Phi[4][3]*f->P[3][31] + t->Phi[4][4]*f->P[4][31] + t->Phi[4][5]*f->P[5][31] + t->Phi[4][7]*f->P[7][31] + t->Phi[4][8]*f->P[8][31] + t->Phi[4][9]*f->P[9][31] + t->Phi[4][10]*f->P[10][31] + t->Phi[4][11]*f->P[11][31] + t->Phi[4][12]*f->P[12][31] + t->Phi[4][13]*f->P[13][31] + t->Phi[4][14]*f->P[14][31] + t->Phi[4][15]*f->P[15][31] + t->Phi[4][18]*f->P[18][31] + t->Phi[4][19]*f->P[19][31] + t->Phi[4][20]*f->P[20][31] + t->Phi[4][21]*f->P[21][31] + t->Phi[4][22]*f->P[22][31] + t->Phi[4][23]*f->P[23][31] + t->Phi[4][24]*f->P[24][31] + t->Phi[4][25]*f->P[25][31] + t->Phi[4][26]*f->P[26][31] + t->Phi[4][27]*f->P[27][31] + t->Phi[4][28]*f->P[28][31] + t->Phi[4][29]*f->P[29][31];
 }
 
-static void phi_times_p_row_5(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_5(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[5][0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] + t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] + t->Phi[5][7]*f->P[7][0] + t->Phi[5][8]*f->P[8][0] + t->Phi[5][9]*f->P[9][0] + t->Phi[5][10]*f->P[10][0] + t->Phi[5][11]*f->P[11][0] + t->Phi[5][12]*f->P[12][0] + t->Phi[5][13]*f->P[13][0] + t->Phi[5][14]*f->P[14][0] + t->Phi[5][15]*f->P[15][0] + t->Phi[5][18]*f->P[18][0] + t->Phi[5][19]*f->P[19][0] + t->Phi[5][20]*f->P[20][0] + t->Phi[5][21]*f->P[21][0] + t->Phi[5][22]*f->P[22][0] + t->Phi[5][23]*f->P[23][0] + t->Phi[5][24]*f->P[24][0] + t->Phi[5][25]*f->P[25][0] + t->Phi[5][26]*f->P[26][0] + t->Phi[5][27]*f->P[27][0] + t->Phi[5][28]*f->P[28][0] + t->Phi[5][29]*f->P[29][0];
     w->M[5][1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] + t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] + t->Phi[5][7]*f->P[7][1] + t->Phi[5][8]*f->P[8][1] + t->Phi[5][9]*f->P[9][1] + t->Phi[5][10]*f->P[10][1] + t->Phi[5][11]*f->P[11][1] + t->Phi[5][12]*f->P[12][1] + t->Phi[5][13]*f->P[13][1] + t->Phi[5][14]*f->P[14][1] + t->Phi[5][15]*f->P[15][1] + t->Phi[5][18]*f->P[18][1] + t->Phi[5][19]*f->P[19][1] + t->Phi[5][20]*f->P[20][1] + t->Phi[5][21]*f->P[21][1] + t->Phi[5][22]*f->P[22][1] + t->Phi[5][23]*f->P[23][1] + t->Phi[5][24]*f->P[24][1] + t->Phi[5][25]*f->P[25][1] + t->Phi[5][26]*f->P[26][1] + t->Phi[5][27]*f->P[27][1] + t->Phi[5][28]*f->P[28][1] + t->Phi[5][29]*f->P[29][1];
@@ -525,7 +526,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *f, const ned
     w->M[5][31] = t->Phi[5][0]*f->P[0][31] + t->Phi[5][1]*f->P[1][31] + t->Phi[5][2]*f->P[2][31] + t->Phi[5][3]*f->P[3][31] + t->Phi[5][4]*f->P[4][31] + t->Phi[5][5]*f->P[5][31] + t->Phi[5][7]*f->P[7][31] + t->Phi[5][8]*f->P[8][31] + t->Phi[5][9]*f->P[9][31] + t->Phi[5][10]*f->P[10][31] + t->Phi[5][11]*f->P[11][31] + t->Phi[5][12]*f->P[12][31] + t->Phi[5][13]*f->P[13][31] + t->Phi[5][14]*f->P[14][31] + t->Phi[5][15]*f->P[15][31] + t->Phi[5][18]*f->P[18][31] + t->Phi[5][19]*f->P[19][31] + t->Phi[5][20]*f->P[20][31] + t->Phi[5][21]*f->P[21][31] + t->Phi[5][22]*f->P[22][31] + t->Phi[5][23]*f->P[23][31] + t->Phi[5][24]*f->P[24][31] + t->Phi[5][25]*f->P[25][31] + t->Phi[5][26]*f->P[26][31] + t->Phi[5][27]*f->P[27][31] + t->Phi[5][28]*f->P[28][31] + t->Phi[5][29]*f->P[29][31];
 }
 
-static void phi_times_p_row_6(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_6(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[6][0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] + t->Phi[6][3]*f->P[3][0] + t->Phi[6][4]*f->P[4][0] + t->Phi[6][5]*f->P[5][0] + t->Phi[6][6]*f->P[6][0] + t->Phi[6][7]*f->P[7][0] + t->Phi[6][8]*f->P[8][0] + t->Phi[6][9]*f->P[9][0] + t->Phi[6][10]*f->P[10][0] + t->Phi[6][11]*f->P[11][0] + t->Phi[6][12]*f->P[12][0] + t->Phi[6][13]*f->P[13][0] + t->Phi[6][14]*f->P[14][0] + t->Phi[6][15]*f->P[15][0] + t->Phi[6][18]*f->P[18][0] + t->Phi[6][19]*f->P[19][0] + t->Phi[6][20]*f->P[20][0] + t->Phi[6][21]*f->P[21][0] + t->Phi[6][22]*f->P[22][0] + t->Phi[6][23]*f->P[23][0] + t->Phi[6][24]*f->P[24][0] + t->Phi[6][25]*f->P[25][0] + t->Phi[6][26]*f->P[26][0] + t->Phi[6][27]*f->P[27][0] + t->Phi[6][28]*f->P[28][0] + t->Phi[6][29]*f->P[29][0];
     w->M[6][1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] + t->Phi[6][3]*f->P[3][1] + t->Phi[6][4]*f->P[4][1] + t->Phi[6][5]*f->P[5][1] + t->Phi[6][6]*f->P[6][1] + t->Phi[6][7]*f->P[7][1] + t->Phi[6][8]*f->P[8][1] + t->Phi[6][9]*f->P[9][1] + t->Phi[6][10]*f->P[10][1] + t->Phi[6][11]*f->P[11][1] + t->Phi[6][12]*f->P[12][1] + t->Phi[6][13]*f->P[13][1] + t->Phi[6][14]*f->P[14][1] + t->Phi[6][15]*f->P[15][1] + t->Phi[6][18]*f->P[18][1] + t->Phi[6][19]*f->P[19][1] + t->Phi[6][20]*f->P[20][1] + t->Phi[6][21]*f->P[21][1] + t->Phi[6][22]*f->P[22][1] + t->Phi[6][23]*f->P[23][1] + t->Phi[6][24]*f->P[24][1] + t->Phi[6][25]*f->P[25][1] + t->Phi[6][26]*f->P[26][1] + t->Phi[6][27]*f->P[27][1] + t->Phi[6][28]*f->P[28][1] + t->Phi[6][29]*f->P[29][1];
@@ -561,7 +562,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *f, const ned
     w->M[6][31] = t->Phi[6][0]*f->P[0][31] + t->Phi[6][1]*f->P[1][31] + t->Phi[6][2]*f->P[2][31] + t->Phi[6][3]*f->P[3][31] + t->Phi[6][4]*f->P[4][31] + t->Phi[6][5]*f->P[5][31] + t->Phi[6][6]*f->P[6][31] + t->Phi[6][7]*f->P[7][31] + t->Phi[6][8]*f->P[8][31] + t->Phi[6][9]*f->P[9][31] + t->Phi[6][10]*f->P[10][31] + t->Phi[6][11]*f->P[11][31] + t->Phi[6][12]*f->P[12][31] + t->Phi[6][13]*f->P[13][31] + t->Phi[6][14]*f->P[14][31] + t->Phi[6][15]*f->P[15][31] + t->Phi[6][18]*f->P[18][31] + t->Phi[6][19]*f->P[19][31] + t->Phi[6][20]*f->P[20][31] + t->Phi[6][21]*f->P[21][31] + t->Phi[6][22]*f->P[22][31] + t->Phi[6][23]*f->P[23][31] + t->Phi[6][24]*f->P[24][31] + t->Phi[6][25]*f->P[25][31] + t->Phi[6][26]*f->P[26][31] + t->Phi[6][27]*f->P[27][31] + t->Phi[6][28]*f->P[28][31] + t->Phi[6][29]*f->P[29][31];
 }
 
-static void phi_times_p_row_10(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_10(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[10][0] = t->Phi[10][10]*f->P[10][0];
     w->M[10][1] = t->Phi[10][10]*f->P[10][1];
@@ -597,7 +598,7 @@ static void phi_times_p_row_10(const ned_doppler32_augmented_filter *f, const ne
     w->M[10][31] = t->Phi[10][10]*f->P[10][31];
 }
 
-static void phi_times_p_row_11(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_11(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[11][0] = t->Phi[11][11]*f->P[11][0];
     w->M[11][1] = t->Phi[11][11]*f->P[11][1];
@@ -633,7 +634,7 @@ static void phi_times_p_row_11(const ned_doppler32_augmented_filter *f, const ne
     w->M[11][31] = t->Phi[11][11]*f->P[11][31];
 }
 
-static void phi_times_p_row_12(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_12(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[12][0] = t->Phi[12][12]*f->P[12][0];
     w->M[12][1] = t->Phi[12][12]*f->P[12][1];
@@ -669,7 +670,7 @@ static void phi_times_p_row_12(const ned_doppler32_augmented_filter *f, const ne
     w->M[12][31] = t->Phi[12][12]*f->P[12][31];
 }
 
-static void phi_times_p_row_13(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_13(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[13][0] = t->Phi[13][13]*f->P[13][0];
     w->M[13][1] = t->Phi[13][13]*f->P[13][1];
@@ -705,7 +706,7 @@ static void phi_times_p_row_13(const ned_doppler32_augmented_filter *f, const ne
     w->M[13][31] = t->Phi[13][13]*f->P[13][31];
 }
 
-static void phi_times_p_row_14(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_14(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[14][0] = t->Phi[14][14]*f->P[14][0];
     w->M[14][1] = t->Phi[14][14]*f->P[14][1];
@@ -741,7 +742,7 @@ static void phi_times_p_row_14(const ned_doppler32_augmented_filter *f, const ne
     w->M[14][31] = t->Phi[14][14]*f->P[14][31];
 }
 
-static void phi_times_p_row_15(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static void phi_times_p_row_15(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     w->M[15][0] = t->Phi[15][15]*f->P[15][0];
     w->M[15][1] = t->Phi[15][15]*f->P[15][1];
@@ -778,7 +779,7 @@ static void phi_times_p_row_15(const ned_doppler32_augmented_filter *f, const ne
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[0][0]*t->Phi[0][0] + w->M[0][1]*t->Phi[0][1] + w->M[0][2]*t->Phi[0][2] + w->M[0][3]*t->Phi[0][3] + w->M[0][4]*t->Phi[0][4] + w->M[0][5]*t->Phi[0][5] + w->M[0][7]*t->Phi[0][7] + w->M[0][8]*t->Phi[0][8] + w->M[0][9]*t->Phi[0][9] + w->M[0][10]*t->Phi[0][10] + w->M[0][11]*t->Phi[0][11] + w->M[0][12]*t->Phi[0][12] + w->M[0][13]*t->Phi[0][13] + w->M[0][14]*t->Phi[0][14] + w->M[0][15]*t->Phi[0][15] + w->M[0][18]*t->Phi[0][18] + w->M[0][19]*t->Phi[0][19] + w->M[0][20]*t->Phi[0][20] + w->M[0][21]*t->Phi[0][21] + w->M[0][22]*t->Phi[0][22] + w->M[0][23]*t->Phi[0][23] + w->M[0][24]*t->Phi[0][24] + w->M[0][25]*t->Phi[0][25] + w->M[0][26]*t->Phi[0][26] + w->M[0][27]*t->Phi[0][27] + w->M[0][28]*t->Phi[0][28] + w->M[0][29]*t->Phi[0][29] + t->Qd[0][0]; w->Pn[0][0] = v; check += v - v;
@@ -817,7 +818,7 @@ static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmen
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_1(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_1(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[1][0]*t->Phi[1][0] + w->M[1][1]*t->Phi[1][1] + w->M[1][2]*t->Phi[1][2] + w->M[1][3]*t->Phi[1][3] + w->M[1][4]*t->Phi[1][4] + w->M[1][5]*t->Phi[1][5] + w->M[1][7]*t->Phi[1][7] + w->M[1][8]*t->Phi[1][8] + w->M[1][9]*t->Phi[1][9] + w->M[1][10]*t->Phi[1][10] + w->M[1][11]*t->Phi[1][11] + w->M[1][12]*t->Phi[1][12] + w->M[1][13]*t->Phi[1][13] + w->M[1][14]*t->Phi[1][14] + w->M[1][15]*t->Phi[1][15] + w->M[1][18]*t->Phi[1][18] + w->M[1][19]*t->Phi[1][19] + w->M[1][20]*t->Phi[1][20] + w->M[1][21]*t->Phi[1][21] + w->M[1][22]*t->Phi[1][22] + w->M[1][23]*t->Phi[1][23] + w->M[1][24]*t->Phi[1][24] + w->M[1][25]*t->Phi[1][25] + w->M[1][26]*t->Phi[1][26] + w->M[1][27]*t->Phi[1][27] + w->M[1][28]*t->Phi[1][28] + w->M[1][29]*t->Phi[1][29] + t->Qd[1][1]; w->Pn[1][1] = v; check += v - v;
@@ -855,7 +856,7 @@ static ned_doppler32_augmented_scalar propagate_row_1(const ned_doppler32_augmen
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_2(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_2(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[2][0]*t->Phi[2][0] + w->M[2][1]*t->Phi[2][1] + w->M[2][2]*t->Phi[2][2] + w->M[2][3]*t->Phi[2][3] + w->M[2][4]*t->Phi[2][4] + w->M[2][5]*t->Phi[2][5] + w->M[2][7]*t->Phi[2][7] + w->M[2][8]*t->Phi[2][8] + w->M[2][9]*t->Phi[2][9] + w->M[2][10]*t->Phi[2][10] + w->M[2][11]*t->Phi[2][11] + w->M[2][12]*t->Phi[2][12] + w->M[2][13]*t->Phi[2][13] + w->M[2][14]*t->Phi[2][14] + w->M[2][15]*t->Phi[2][15] + w->M[2][18]*t->Phi[2][18] + w->M[2][19]*t->Phi[2][19] + w->M[2][20]*t->Phi[2][20] + w->M[2][21]*t->Phi[2][21] + w->M[2][22]*t->Phi[2][22] + w->M[2][23]*t->Phi[2][23] + w->M[2][24]*t->Phi[2][24] + w->M[2][25]*t->Phi[2][25] + w->M[2][26]*t->Phi[2][26] + w->M[2][27]*t->Phi[2][27] + w->M[2][28]*t->Phi[2][28] + w->M[2][29]*t->Phi[2][29] + t->Qd[2][2]; w->Pn[2][2] = v; check += v - v;
@@ -892,7 +893,7 @@ static ned_doppler32_augmented_scalar propagate_row_2(const ned_doppler32_augmen
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_3(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_3(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[3][0]*t->Phi[3][0] + w->M[3][1]*t->Phi[3][1] + w->M[3][2]*t->Phi[3][2] + w->M[3][3]*t->Phi[3][3] + w->M[3][4]*t->Phi[3][4] + w->M[3][5]*t->Phi[3][5] + w->M[3][7]*t->Phi[3][7] + w->M[3][8]*t->Phi[3][8] + w->M[3][9]*t->Phi[3][9] + w->M[3][10]*t->Phi[3][10] + w->M[3][11]*t->Phi[3][11] + w->M[3][12]*t->Phi[3][12] + w->M[3][13]*t->Phi[3][13] + w->M[3][14]*t->Phi[3][14] + w->M[3][15]*t->Phi[3][15] + w->M[3][18]*t->Phi[3][18] + w->M[3][19]*t->Phi[3][19] + w->M[3][20]*t->Phi[3][20] + w->M[3][21]*t->Phi[3][21] + w->M[3][22]*t->Phi[3][22] + w->M[3][23]*t->Phi[3][23] + w->M[3][24]*t->Phi[3][24] + w->M[3][25]*t->Phi[3][25] + w->M[3][26]*t->Phi[3][26] + w->M[3][27]*t->Phi[3][27] + w->M[3][28]*t->Phi[3][28] + w->M[3][29]*t->Phi[3][29] + t->Qd[3][3]; w->Pn[3][3] = v; check += v - v;
@@ -928,7 +929,7 @@ static ned_doppler32_augmented_scalar propagate_row_3(const ned_doppler32_augmen
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_4(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_4(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[4][0]*t->Phi[4][0] + w->M[4][1]*t->Phi[4][1] + w->M[4][2]*t->Phi[4][2] + w->M[4][3]*t->Phi[4][3] + w->M[4][4]*t->Phi[4][4] + w->M[4][5]*t->Phi[4][5] + w->M[4][7]*t->Phi[4][7] + w->M[4][8]*t->Phi[4][8] + w->M[4][9]*t->Phi[4][9] + w->M[4][10]*t->Phi[4][10] + w->M[4][11]*t->Phi[4][11] + w->M[4][12]*t->Phi[4][12] + w->M[4][13]*t->Phi[4][13] + w->M[4][14]*t->Phi[4][14] + w->M[4][15]*t->Phi[4][15] + w->M[4][18]*t->Phi[4][18] + w->M[4][19]*t->Phi[4][19] + w->M[4][20]*t->Phi[4][20] + w->M[4][21]*t->Phi[4][21] + w->M[4][22]*t->Phi[4][22] + w->M[4][23]*t->Phi[4][23] + w->M[4][24]*t->Phi[4][24] + w->M[4][25]*t->Phi[4][25] + w->M[4][26]*t->Phi[4][26] + w->M[4][27]*t->Phi[4][27] + w->M[4][28]*t->Phi[4][28] + w->M[4][29]*t->Phi[4][29] + t->Qd[4][4]; w->Pn[4][4] = v; check += v - v;
@@ -963,7 +964,7 @@ static ned_doppler32_augmented_scalar propagate_row_4(const ned_doppler32_augmen
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_5(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_5(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[5][0]*t->Phi[5][0] + w->M[5][1]*t->Phi[5][1] + w->M[5][2]*t->Phi[5][2] + w->M[5][3]*t->Phi[5][3] + w->M[5][4]*t->Phi[5][4] + w->M[5][5]*t->Phi[5][5] + w->M[5][7]*t->Phi[5][7] + w->M[5][8]*t->Phi[5][8] + w->M[5][9]*t->Phi[5][9] + w->M[5][10]*t->Phi[5][10] + w->M[5][11]*t->Phi[5][11] + w->M[5][12]*t->Phi[5][12] + w->M[5][13]*t->Phi[5][13] + w->M[5][14]*t->Phi[5][14] + w->M[5][15]*t->Phi[5][15] + w->M[5][18]*t->Phi[5][18] + w->M[5][19]*t->Phi[5][19] + w->M[5][20]*t->Phi[5][20] + w->M[5][21]*t->Phi[5][21] + w->M[5][22]*t->Phi[5][22] + w->M[5][23]*t->Phi[5][23] + w->M[5][24]*t->Phi[5][24] + w->M[5][25]*t->Phi[5][25] + w->M[5][26]*t->Phi[5][26] + w->M[5][27]*t->Phi[5][27] + w->M[5][28]*t->Phi[5][28] + w->M[5][29]*t->Phi[5][29] + t->Qd[5][5]; w->Pn[5][5] = v; check += v - v;
@@ -997,7 +998,7 @@ static ned_doppler32_augmented_scalar propagate_row_5(const ned_doppler32_augmen
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_6(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_6(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[6][0]*t->Phi[6][0] + w->M[6][1]*t->Phi[6][1] + w->M[6][2]*t->Phi[6][2] + w->M[6][3]*t->Phi[6][3] + w->M[6][4]*t->Phi[6][4] + w->M[6][5]*t->Phi[6][5] + w->M[6][6]*t->Phi[6][6] + w->M[6][7]*t->Phi[6][7] + w->M[6][8]*t->Phi[6][8] + w->M[6][9]*t->Phi[6][9] + w->M[6][10]*t->Phi[6][10] + w->M[6][11]*t->Phi[6][11] + w->M[6][12]*t->Phi[6][12] + w->M[6][13]*t->Phi[6][13] + w->M[6][14]*t->Phi[6][14] + w->M[6][15]*t->Phi[6][15] + w->M[6][18]*t->Phi[6][18] + w->M[6][19]*t->Phi[6][19] + w->M[6][20]*t->Phi[6][20] + w->M[6][21]*t->Phi[6][21] + w->M[6][22]*t->Phi[6][22] + w->M[6][23]*t->Phi[6][23] + w->M[6][24]*t->Phi[6][24] + w->M[6][25]*t->Phi[6][25] + w->M[6][26]*t->Phi[6][26] + w->M[6][27]*t->Phi[6][27] + w->M[6][28]*t->Phi[6][28] + w->M[6][29]*t->Phi[6][29] + t->Qd[6][6]; w->Pn[6][6] = v; check += v - v;
@@ -1030,7 +1031,7 @@ static ned_doppler32_augmented_scalar propagate_row_6(const ned_doppler32_augmen
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_7(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_7(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[7][7]; w->Pn[7][7] = v; check += v - v;
@@ -1062,7 +1063,7 @@ static ned_doppler32_augmented_scalar propagate_row_7(const ned_doppler32_augmen
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_8(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_8(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[8][8]; w->Pn[8][8] = v; check += v - v;
@@ -1093,7 +1094,7 @@ static ned_doppler32_augmented_scalar propagate_row_8(const ned_doppler32_augmen
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_9(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_9(const ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[9][9]; w->Pn[9][9] = v; check += v - v;
@@ -1123,7 +1124,7 @@ static ned_doppler32_augmented_scalar propagate_row_9(const ned_doppler32_augmen
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_10(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_10(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[10][10]*t->Phi[10][10] + t->Qd[10][10]; w->Pn[10][10] = v; check += v - v;
@@ -1152,7 +1153,7 @@ static ned_doppler32_augmented_scalar propagate_row_10(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_11(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_11(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[11][11]*t->Phi[11][11] + t->Qd[11][11]; w->Pn[11][11] = v; check += v - v;
@@ -1180,7 +1181,7 @@ static ned_doppler32_augmented_scalar propagate_row_11(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_12(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_12(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[12][12]*t->Phi[12][12] + t->Qd[12][12]; w->Pn[12][12] = v; check += v - v;
@@ -1207,7 +1208,7 @@ static ned_doppler32_augmented_scalar propagate_row_12(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_13(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_13(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[13][13]*t->Phi[13][13] + t->Qd[13][13]; w->Pn[13][13] = v; check += v - v;
@@ -1233,7 +1234,7 @@ static ned_doppler32_augmented_scalar propagate_row_13(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_14(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_14(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[14][14]*t->Phi[14][14] + t->Qd[14][14]; w->Pn[14][14] = v; check += v - v;
@@ -1258,7 +1259,7 @@ static ned_doppler32_augmented_scalar propagate_row_14(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_15(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_15(const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[15][15]*t->Phi[15][15] + t->Qd[15][15]; w->Pn[15][15] = v; check += v - v;
@@ -1282,7 +1283,7 @@ static ned_doppler32_augmented_scalar propagate_row_15(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_16(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_16(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[16][16]; w->Pn[16][16] = v; check += v - v;
@@ -1305,7 +1306,7 @@ static ned_doppler32_augmented_scalar propagate_row_16(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_17(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_17(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[17][17]; w->Pn[17][17] = v; check += v - v;
@@ -1327,7 +1328,7 @@ static ned_doppler32_augmented_scalar propagate_row_17(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_18(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_18(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[18][18]; w->Pn[18][18] = v; check += v - v;
@@ -1348,7 +1349,7 @@ static ned_doppler32_augmented_scalar propagate_row_18(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_19(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_19(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[19][19]; w->Pn[19][19] = v; check += v - v;
@@ -1368,7 +1369,7 @@ static ned_doppler32_augmented_scalar propagate_row_19(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_20(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_20(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[20][20]; w->Pn[20][20] = v; check += v - v;
@@ -1387,7 +1388,7 @@ static ned_doppler32_augmented_scalar propagate_row_20(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_21(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_21(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[21][21]; w->Pn[21][21] = v; check += v - v;
@@ -1405,7 +1406,7 @@ static ned_doppler32_augmented_scalar propagate_row_21(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_22(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_22(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[22][22]; w->Pn[22][22] = v; check += v - v;
@@ -1422,7 +1423,7 @@ static ned_doppler32_augmented_scalar propagate_row_22(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_23(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_23(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[23][23]; w->Pn[23][23] = v; check += v - v;
@@ -1438,7 +1439,7 @@ static ned_doppler32_augmented_scalar propagate_row_23(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_24(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_24(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[24][24]; w->Pn[24][24] = v; check += v - v;
@@ -1453,7 +1454,7 @@ static ned_doppler32_augmented_scalar propagate_row_24(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_25(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_25(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[25][25]; w->Pn[25][25] = v; check += v - v;
@@ -1467,7 +1468,7 @@ static ned_doppler32_augmented_scalar propagate_row_25(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_26(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_26(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[26][26]; w->Pn[26][26] = v; check += v - v;
@@ -1480,7 +1481,7 @@ static ned_doppler32_augmented_scalar propagate_row_26(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_27(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_27(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[27][27]; w->Pn[27][27] = v; check += v - v;
@@ -1492,7 +1493,7 @@ static ned_doppler32_augmented_scalar propagate_row_27(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_28(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_28(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[28][28]; w->Pn[28][28] = v; check += v - v;
@@ -1503,7 +1504,7 @@ static ned_doppler32_augmented_scalar propagate_row_28(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_29(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_29(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[29][29]; w->Pn[29][29] = v; check += v - v;
@@ -1513,7 +1514,7 @@ static ned_doppler32_augmented_scalar propagate_row_29(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_30(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_30(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[30][30]; w->Pn[30][30] = v; check += v - v;
@@ -1522,15 +1523,16 @@ static ned_doppler32_augmented_scalar propagate_row_30(const ned_doppler32_augme
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_31(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_workspace *w)
+static ned_doppler32_augmented_scalar propagate_row_31(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_filter_scratch *w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[31][31]; w->Pn[31][31] = v; check += v - v;
     return check;
 }
 
-int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w)
+int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *work)
 {
+    ned_doppler32_augmented_filter_scratch *w = &work->filter;
     ned_doppler32_augmented_scalar check = 0.0;
     /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
     w->xn[0] = t->Phi[0][0]*f->x[0] + t->Phi[0][1]*f->x[1] + t->Phi[0][2]*f->x[2] + t->Phi[0][3]*f->x[3] + t->Phi[0][4]*f->x[4] + t->Phi[0][5]*f->x[5] + t->Phi[0][7]*f->x[7] + t->Phi[0][8]*f->x[8] + t->Phi[0][9]*f->x[9] + t->Phi[0][10]*f->x[10] + t->Phi[0][11]*f->x[11] + t->Phi[0][12]*f->x[12] + t->Phi[0][13]*f->x[13] + t->Phi[0][14]*f->x[14] + t->Phi[0][15]*f->x[15] + t->Phi[0][18]*f->x[18] + t->Phi[0][19]*f->x[19] + t->Phi[0][20]*f->x[20] + t->Phi[0][21]*f->x[21] + t->Phi[0][22]*f->x[22] + t->Phi[0][23]*f->x[23] + t->Phi[0][24]*f->x[24] + t->Phi[0][25]*f->x[25] + t->Phi[0][26]*f->x[26] + t->Phi[0][27]*f->x[27] + t->Phi[0][28]*f->x[28] + t->Phi[0][29]*f->x[29];
@@ -1645,11 +1647,11 @@ check += propagate_row_31(f, w);
     return NED_DOPPLER32_AUGMENTED_OK;
 }
 
-int ned_doppler32_augmented_set_covariance(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_scalar P[N * N], ned_doppler32_augmented_workspace *w)
+int ned_doppler32_augmented_set_covariance(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_scalar P[N * N], ned_doppler32_augmented_workspace *work)
 {
     int i, j;
     ned_doppler32_augmented_scalar check = 0.0;
-    (void)w;
+    (void)work;
     for (i = 0; i < N; ++i) {
         for (j = i; j < N; ++j) {
             check += P[i * N + j] - P[i * N + j];
@@ -1677,8 +1679,9 @@ void ned_doppler32_augmented_get_covariance(const ned_doppler32_augmented_filter
     }
 }
 
-int ned_doppler32_augmented_update(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_scalar z[2], const ned_doppler32_augmented_matrices *m, ned_doppler32_augmented_workspace *w)
+int ned_doppler32_augmented_update(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_scalar z[2], const ned_doppler32_augmented_matrices *m, ned_doppler32_augmented_workspace *work)
 {
+    ned_doppler32_augmented_filter_scratch *w = &work->filter;
     int i, j, a, b, e;
     ned_doppler32_augmented_scalar check = 0.0;
     for (a = 0; a < NED_DOPPLER32_AUGMENTED_N_MEASUREMENTS; ++a) {

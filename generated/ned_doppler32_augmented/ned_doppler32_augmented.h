@@ -101,12 +101,16 @@ typedef struct {
     ned_doppler32_augmented_scalar P[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* covariance */
 } ned_doppler32_augmented_filter;
 
-/* Scratch memory for the functions below; contents are not meaningful between calls. */
+/* Scratch memory of discretize. */
 typedef struct {
-    ned_doppler32_augmented_scalar A[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES];
-    ned_doppler32_augmented_scalar B[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES];
-    ned_doppler32_augmented_scalar S[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES];
+    ned_doppler32_augmented_scalar A[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* (F T)^k / k! */
+    ned_doppler32_augmented_scalar B[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* the next term */
+    ned_doppler32_augmented_scalar S[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* sum of the terms / (k + 1), for Gamma */
     ned_doppler32_augmented_scalar Gamma[NED_DOPPLER32_AUGMENTED_N_STATES][6];
+} ned_doppler32_augmented_discretize_scratch;
+
+/* Scratch memory of predict, update and set_covariance. */
+typedef struct {
     ned_doppler32_augmented_scalar M[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* Phi P */
     ned_doppler32_augmented_scalar Pn[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* new covariance before it is committed */
     ned_doppler32_augmented_scalar xn[NED_DOPPLER32_AUGMENTED_N_STATES];
@@ -116,6 +120,14 @@ typedef struct {
     ned_doppler32_augmented_scalar C[NED_DOPPLER32_AUGMENTED_N_STATES][2]; /* K S (Joseph form) */
     ned_doppler32_augmented_scalar S_innovation[2][2]; /* innovation covariance H P H^T + R */
     ned_doppler32_augmented_scalar nu[2];
+} ned_doppler32_augmented_filter_scratch;
+
+/* Scratch memory for the functions below; contents are not meaningful between
+   calls.  discretize and the filter steps never run at the same time, so they
+   share it. */
+typedef union {
+    ned_doppler32_augmented_discretize_scratch discretize;
+    ned_doppler32_augmented_filter_scratch filter;
 } ned_doppler32_augmented_workspace;
 
 extern const unsigned char ned_doppler32_augmented_F_row[87], ned_doppler32_augmented_F_col[87];
@@ -131,23 +143,23 @@ void ned_doppler32_augmented_matrices_evaluate(const ned_doppler32_augmented_par
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)).
    Refuses a non-finite or non-positive T, non-finite matrices (ERR_NONFINITE)
    and a negative noise PSD (ERR_NOT_POSITIVE); on error *t must not be used. */
-int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *m, ned_doppler32_augmented_scalar T, ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w);
+int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *m, ned_doppler32_augmented_scalar T, ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *work);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
    Refuses non-finite entries; on error f is unchanged. */
-int ned_doppler32_augmented_set_covariance(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_scalar P[NED_DOPPLER32_AUGMENTED_N_STATES * NED_DOPPLER32_AUGMENTED_N_STATES], ned_doppler32_augmented_workspace *w);
+int ned_doppler32_augmented_set_covariance(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_scalar P[NED_DOPPLER32_AUGMENTED_N_STATES * NED_DOPPLER32_AUGMENTED_N_STATES], ned_doppler32_augmented_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
 void ned_doppler32_augmented_get_covariance(const ned_doppler32_augmented_filter *f, ned_doppler32_augmented_scalar P[NED_DOPPLER32_AUGMENTED_N_STATES * NED_DOPPLER32_AUGMENTED_N_STATES]);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
    (ERR_NONFINITE) and f is left unchanged. */
-int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *w);
+int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_transition *t, ned_doppler32_augmented_workspace *work);
 
 /* Kalman update with the measurements z (all at once, Cholesky solve, Joseph form).
    Refuses non-finite z, H or R (ERR_NONFINITE), a negative variance r or a
    non-positive innovation variance (ERR_NOT_POSITIVE); on error f is unchanged. */
-int ned_doppler32_augmented_update(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_scalar z[2], const ned_doppler32_augmented_matrices *m, ned_doppler32_augmented_workspace *w);
+int ned_doppler32_augmented_update(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_scalar z[2], const ned_doppler32_augmented_matrices *m, ned_doppler32_augmented_workspace *work);
 
 #endif /* MODELGEN_NED_DOPPLER32_AUGMENTED_H */

@@ -92,12 +92,16 @@ typedef struct {
     ned_inertial16_scalar P[NED_INERTIAL16_N_STATES][NED_INERTIAL16_N_STATES]; /* covariance */
 } ned_inertial16_filter;
 
-/* Scratch memory for the functions below; contents are not meaningful between calls. */
+/* Scratch memory of discretize. */
 typedef struct {
-    ned_inertial16_scalar A[NED_INERTIAL16_N_STATES][NED_INERTIAL16_N_STATES];
-    ned_inertial16_scalar B[NED_INERTIAL16_N_STATES][NED_INERTIAL16_N_STATES];
-    ned_inertial16_scalar S[NED_INERTIAL16_N_STATES][NED_INERTIAL16_N_STATES];
+    ned_inertial16_scalar A[NED_INERTIAL16_N_STATES][NED_INERTIAL16_N_STATES]; /* (F T)^k / k! */
+    ned_inertial16_scalar B[NED_INERTIAL16_N_STATES][NED_INERTIAL16_N_STATES]; /* the next term */
+    ned_inertial16_scalar S[NED_INERTIAL16_N_STATES][NED_INERTIAL16_N_STATES]; /* sum of the terms / (k + 1), for Gamma */
     ned_inertial16_scalar Gamma[NED_INERTIAL16_N_STATES][6];
+} ned_inertial16_discretize_scratch;
+
+/* Scratch memory of predict, update and set_covariance. */
+typedef struct {
     ned_inertial16_scalar M[NED_INERTIAL16_N_STATES][NED_INERTIAL16_N_STATES]; /* Phi P */
     ned_inertial16_scalar Pn[NED_INERTIAL16_N_STATES][NED_INERTIAL16_N_STATES]; /* new covariance before it is committed */
     ned_inertial16_scalar xn[NED_INERTIAL16_N_STATES];
@@ -107,6 +111,14 @@ typedef struct {
     ned_inertial16_scalar C[NED_INERTIAL16_N_STATES][1]; /* K S (Joseph form) */
     ned_inertial16_scalar S_innovation[1][1]; /* innovation covariance H P H^T + R */
     ned_inertial16_scalar nu[1];
+} ned_inertial16_filter_scratch;
+
+/* Scratch memory for the functions below; contents are not meaningful between
+   calls.  discretize and the filter steps never run at the same time, so they
+   share it. */
+typedef union {
+    ned_inertial16_discretize_scratch discretize;
+    ned_inertial16_filter_scratch filter;
 } ned_inertial16_workspace;
 
 extern const unsigned char ned_inertial16_F_row[54], ned_inertial16_F_col[54];
@@ -122,19 +134,19 @@ void ned_inertial16_matrices_evaluate(const ned_inertial16_params *params, ned_i
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)).
    Refuses a non-finite or non-positive T, non-finite matrices (ERR_NONFINITE)
    and a negative noise PSD (ERR_NOT_POSITIVE); on error *t must not be used. */
-int ned_inertial16_discretize(const ned_inertial16_matrices *m, ned_inertial16_scalar T, ned_inertial16_transition *t, ned_inertial16_workspace *w);
+int ned_inertial16_discretize(const ned_inertial16_matrices *m, ned_inertial16_scalar T, ned_inertial16_transition *t, ned_inertial16_workspace *work);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
    Refuses non-finite entries; on error f is unchanged. */
-int ned_inertial16_set_covariance(ned_inertial16_filter *f, const ned_inertial16_scalar P[NED_INERTIAL16_N_STATES * NED_INERTIAL16_N_STATES], ned_inertial16_workspace *w);
+int ned_inertial16_set_covariance(ned_inertial16_filter *f, const ned_inertial16_scalar P[NED_INERTIAL16_N_STATES * NED_INERTIAL16_N_STATES], ned_inertial16_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
 void ned_inertial16_get_covariance(const ned_inertial16_filter *f, ned_inertial16_scalar P[NED_INERTIAL16_N_STATES * NED_INERTIAL16_N_STATES]);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
    (ERR_NONFINITE) and f is left unchanged. */
-int ned_inertial16_predict(ned_inertial16_filter *f, const ned_inertial16_transition *t, ned_inertial16_workspace *w);
+int ned_inertial16_predict(ned_inertial16_filter *f, const ned_inertial16_transition *t, ned_inertial16_workspace *work);
 
 
 #endif /* MODELGEN_NED_INERTIAL16_H */

@@ -111,7 +111,10 @@ class CompiledFilter:
         self.matrices = _ctypes_struct("Matrices", layout.matrices, real)()
         self.transition = _ctypes_struct("Transition", layout.transition, real)()
         self.filter = _ctypes_struct("Filter", layout.filter, real)()
-        self.workspace = _ctypes_struct("Workspace", layout.workspace, real)()
+        self.workspace = type("Workspace", (ctypes.Union,), {"_fields_": [
+            ("discretize", _ctypes_struct("DiscretizeScratch", layout.discretize_scratch, real)),
+            ("filter", _ctypes_struct("FilterScratch", layout.filter_scratch, real)),
+        ]})()
         self.n, self.nm, self.nw = sizes.n, sizes.nm, sizes.nw
         self.real = real
         self._square = real * sizes.n * sizes.n

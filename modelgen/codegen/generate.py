@@ -172,7 +172,7 @@ def _block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, o
         params = [
             f"const {prefix}_filter *f" if block.uses("f") else None,
             f"const {prefix}_transition *t" if block.uses("t") else None,
-            f"{prefix}_workspace *w",
+            f"{prefix}_filter_scratch *w",
         ]
         out.append(
             {
@@ -191,10 +191,11 @@ def _structs(layout: CLayout) -> list[dict[str, object]]:
         {"name": "matrices", "doc": "Structural nonzeros of F, G, H (row, column pairs in the tables below).", "fields": layout.matrices},
         {"name": "transition", "doc": "The transition over one step T (from discretize).", "fields": layout.transition},
         {"name": "filter", "doc": "The filter state: estimate and covariance (or its factors).", "fields": layout.filter},
+        {"name": "discretize_scratch", "doc": "Scratch memory of discretize.", "fields": layout.discretize_scratch},
         {
-            "name": "workspace",
-            "doc": "Scratch memory for the functions below; contents are not meaningful between calls.",
-            "fields": layout.workspace,
+            "name": "filter_scratch",
+            "doc": "Scratch memory of predict, update and set_covariance.",
+            "fields": layout.filter_scratch,
         },
     ]
 
@@ -207,6 +208,13 @@ def _struct_bytes(fields, scalar_size: int) -> int:
             count *= d.value
         total += count * scalar_size
     return total
+
+
+def _all_struct_bytes(layout: CLayout, scalar_size: int) -> dict[str, int]:
+    """Bytes of each struct, and of the workspace union (the larger scratch struct)."""
+    sizes = {s["name"]: _struct_bytes(s["fields"], scalar_size) for s in _structs(layout)}
+    sizes["workspace"] = max(sizes["discretize_scratch"], sizes["filter_scratch"])
+    return sizes
 
 
 def _costs(structure: FilterStructure, options: CodegenOptions, evaluate_ops: int, nm: int) -> dict[str, OperationCount]:
@@ -352,7 +360,7 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
         "predict_blocks": _block_functions(
             c_ud_weights(structure)[0] if options.ud else c_covariance_predict(structure, packed)[0], model.name
         ),
-        "struct_bytes": {s["name"]: _struct_bytes(s["fields"], scalar_size) for s in _structs(layout)},
+        "struct_bytes": _all_struct_bytes(layout, scalar_size),
         "first_free_parameter": next((p.name for p in model.parameters if p.value is None), None),
         "example_value": _c_number(0.5, options.scalar),
         "example_variance": _c_number(1e-4, options.scalar),

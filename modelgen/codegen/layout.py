@@ -90,12 +90,18 @@ class Field:
 
 @dataclass(frozen=True)
 class CLayout:
-    """Members of the matrices, transition, filter and workspace structs."""
+    """Members of the matrices, transition, filter and scratch structs.
+
+    The workspace is a union of two scratch structs: the discretization's and
+    the filter steps' (predict, update, set_covariance).  They never run at the
+    same time, so the caller keeps only the larger of the two.
+    """
 
     matrices: tuple[Field, ...]
     transition: tuple[Field, ...]
     filter: tuple[Field, ...]
-    workspace: tuple[Field, ...]
+    discretize_scratch: tuple[Field, ...]
+    filter_scratch: tuple[Field, ...]
 
 
 def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout:
@@ -129,10 +135,12 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout
             Field("U", (NU,), "strictly upper part of the unit upper triangular U, packed by rows"),
             Field("D", (N,), "diagonal of D: P = U D U^T"),
         )
-        workspace = (
-            Field("A", (N, N)),
-            Field("B", (N, N)),
-            Field("S", (N, N)),
+        discretize_scratch = (
+            Field("A", (N, N), "(F T)^k / k!"),
+            Field("B", (N, N), "the next term"),
+            Field("S", (N, N), "sum of the terms / (k + 1), for Gamma"),
+        )
+        filter_scratch = (
             Field("W", (N, NWT), "Thornton: [Phi U, Gamma]"),
             Field("Dw", (NWT,), "Thornton: weights [D, qw]"),
             Field("Wd", (NWT,), "Thornton: one row of W times the weights"),
@@ -143,7 +151,7 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout
             Field("v", (N,), "Bierman: D U^T h"),
             Field("b", (N,), "Bierman: unscaled gain"),
         )
-        return CLayout(matrices, transition, filt, workspace)
+        return CLayout(matrices, transition, filt, discretize_scratch, filter_scratch)
 
     transition = (
         Field("Phi", (N, N), "transition matrix"),
@@ -153,17 +161,19 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout
         Field("x", (N,)),
         Field("P", symmetric, "covariance" + (", packed upper triangle" if options.packed else "")),
     )
-    workspace = [
-        Field("A", (N, N)),
-        Field("B", (N, N)),
-        Field("S", (N, N)),
+    discretize_scratch = (
+        Field("A", (N, N), "(F T)^k / k!"),
+        Field("B", (N, N), "the next term"),
+        Field("S", (N, N), "sum of the terms / (k + 1), for Gamma"),
         Field("Gamma", (N, dim_w)),
+    )
+    filter_scratch = [
         Field("M", (N, N), "Phi P"),
         Field("Pn", symmetric, "new covariance before it is committed"),
         Field("xn", (N,)),
     ]
     if options.update == "vector":
-        workspace += [
+        filter_scratch += [
             Field("HP", (dim_m, N)),
             Field("L", (dim_m, dim_m), "Cholesky factor of the innovation covariance"),
             Field("K", (N, dim_m)),
@@ -172,8 +182,8 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout
             Field("nu", (dim_m,)),
         ]
     else:
-        workspace += [
+        filter_scratch += [
             Field("ph", (N,), "P h^T of one scalar measurement"),
             Field("k", (N,), "gain of one scalar measurement"),
         ]
-    return CLayout(matrices, transition, filt, tuple(workspace))
+    return CLayout(matrices, transition, filt, discretize_scratch, tuple(filter_scratch))

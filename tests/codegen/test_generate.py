@@ -120,3 +120,24 @@ def test_generated_python_refuses_arguments_of_the_wrong_shape(paper_code, tmp_p
         gen.update(x, P, np.zeros(2), np.zeros((2, 17)), np.ones(2))
     with pytest.raises(ValueError, match=r"predict: P has shape \(17, 17\)"):
         gen.predict(x, np.eye(17), np.eye(18), np.zeros((18, 18)))
+
+
+@pytest.mark.parametrize("form", ["covariance", "ud"])
+def test_workspace_is_only_as_large_as_the_larger_scratch_and_the_readme_states_its_size(paper_derived, tmp_path, form):
+    """discretize and the filter steps share the workspace (a union), so the caller
+    keeps max(discretize scratch, filter scratch), and the README's byte count is
+    what the compiler allocates."""
+    code = generate_code(paper_derived, CodegenOptions(form=form))
+    write_atomically(tmp_path / "out", code.files)
+    probe = tmp_path / "sizes.c"
+    probe.write_text(
+        '#include <stdio.h>\n#include "ned_doppler18.h"\n'
+        "int main(void) { printf(\"%lu %lu %lu\\n\", (unsigned long)sizeof(ned_doppler18_workspace),"
+        " (unsigned long)sizeof(ned_doppler18_discretize_scratch), (unsigned long)sizeof(ned_doppler18_filter_scratch));"
+        " return 0; }\n"
+    )
+    exe = tmp_path / "sizes"
+    subprocess.run([compiler(), *STRICT_FLAGS, "-I", str(tmp_path / "out"), str(probe), "-o", str(exe)], check=True)
+    workspace, discretize, filter_steps = map(int, subprocess.run([str(exe)], capture_output=True, text=True).stdout.split())
+    assert workspace == max(discretize, filter_steps) < discretize + filter_steps
+    assert f"ned_doppler18_workspace ({workspace} bytes)" in code.files["README.md"].replace("\n", " ")
