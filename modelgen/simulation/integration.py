@@ -47,7 +47,7 @@ from modelgen.simulation import earth
 from modelgen.simulation.doppler import DopplerRecord, simulate_doppler
 from modelgen.simulation.error_layout import ErrorLayout, build_layout, frame_matrix
 from modelgen.simulation.filters import KalmanFilter, ModelMatrices, named_parameters
-from modelgen.simulation.gps import GpsRecord, simulate_position_velocity
+from modelgen.simulation.gps import GpsRecord, PseudorangeRecord, simulate_position_velocity, simulate_pseudoranges
 from modelgen.simulation.imu import ImuErrorHistory, corrupt_increments
 from modelgen.simulation.rotation import quaternion_product, quaternion_to_dcm, rotation_vectors_to_quaternions
 from modelgen.simulation.scenario import Scenario
@@ -224,6 +224,7 @@ class SensorData:
     altitude_reference: np.ndarray  # at record times
     doppler: DopplerRecord | None
     gps: GpsRecord | None
+    pseudoranges: PseudorangeRecord | None = None  # every record time (aiding: pseudorange)
 
 
 def perturbed_initial_state(truth0: np.ndarray, attitude: np.ndarray, velocity: np.ndarray,
@@ -252,8 +253,13 @@ def simulate_sensors(scenario: Scenario, trajectory: Trajectory, rng: np.random.
     truth = trajectory.truth
     altitude = truth[:, 3] + scenario.altitude_noise * rng.standard_normal(len(truth))
     record_period = trajectory.record_period
-    doppler = gps = None
-    if scenario.filter.aiding == "doppler":
+    doppler = gps = pseudoranges = None
+    if scenario.filter.aiding == "pseudorange":
+        # a pseudo-range INS is initialized from a 3-D fix: height and vertical velocity errors too
+        initial[2] += ie.position * rng.standard_normal()
+        initial[5] += ie.velocity * rng.standard_normal()
+        pseudoranges = simulate_pseudoranges(truth[:, 0], truth[:, 1:4], scenario.pseudorange, rng, scenario.constellation)
+    elif scenario.filter.aiding == "doppler":
         step = _whole_ratio(scenario.doppler.period, record_period, "doppler period")
         rows = np.arange(0, len(truth), step)
         doppler = simulate_doppler(truth[rows, 0], truth[rows, 4:7], truth[rows, 7:11], scenario.doppler, rng)
@@ -261,7 +267,7 @@ def simulate_sensors(scenario: Scenario, trajectory: Trajectory, rng: np.random.
         step = _whole_ratio(scenario.gps.period, record_period, "gps period")
         rows = np.arange(0, len(truth), step)
         gps = simulate_position_velocity(truth[rows, 0], truth[rows, 1:4], truth[rows, 4:7], scenario.gps, rng)
-    return SensorData(trajectory, dtheta, dvel, history, initial, altitude, doppler, gps)
+    return SensorData(trajectory, dtheta, dvel, history, initial, altitude, doppler, gps, pseudoranges)
 
 
 def _whole_ratio(a: float, b: float, what: str) -> int:
@@ -437,6 +443,8 @@ def initial_covariance(layout: ErrorLayout, scenario: Scenario, truth0: np.ndarr
 
 def scenario_layout(scenario: Scenario, derived: DerivedModel, trajectory: Trajectory) -> ErrorLayout:
     """The error layout, its sign conventions identified at the flight's start."""
+    if scenario.filter.aiding == "pseudorange":  # mapped explicitly by modelgen.simulation.pseudorange
+        return ErrorLayout(derived, {})
     truth0 = trajectory.initial_state()
     frame = derived.model.frame or "NED"
     values = operating_point(truth0, np.array([0.0, 0.0, -earth.normal_gravity(truth0[0], truth0[2])]), frame, scenario)
@@ -477,6 +485,10 @@ def run_scenario(scenario: Scenario, derived: DerivedModel, trajectory: Trajecto
     mode = mode or scenario.filter.mode
     layout = layout or scenario_layout(scenario, derived, trajectory)
     sensors = sensors or simulate_sensors(truth_scenario or scenario, trajectory, rng)
+    if scenario.filter.aiding == "pseudorange":
+        from modelgen.simulation.pseudorange import run_pseudorange_scenario  # it builds on this module
+
+        return run_pseudorange_scenario(scenario, derived, trajectory, sensors, make_filter, mode, progress)
     mapping = scenario.filter.measurements.get(scenario.filter.aiding)
     if not mapping:
         raise ModelError(f"scenario {scenario.name!r}: filter.measurements.{scenario.filter.aiding} is missing")

@@ -141,8 +141,7 @@ def run_monte_carlo(scenario: Scenario, runs: int, seed: int = 0, mode: str | No
     if runs < 1:
         raise ModelError(f"Monte Carlo: need at least one run, got {runs}")
     mode = mode or scenario.filter.mode
-    aiding_period = scenario.doppler.period if scenario.filter.aiding == "doppler" else scenario.gps.period
-    store_every = store_every or max(1, int(round(aiding_period / scenario.filter.period)))
+    store_every = store_every or max(1, int(round(scenario.aiding_period / scenario.filter.period)))
     seeds = np.random.SeedSequence(seed).spawn(runs)
     start = time.perf_counter()
     outputs = []

@@ -245,13 +245,14 @@ def _summary(scenario, model_name, conventions, trajectory, results, errors, mc,
         "",
         f"Scenario `{scenario.name}` ({scenario.source_file}), {scenario.profile.duration / 3600:.2f} h, "
         f"IMU {scenario.imu_rate:g} Hz with {scenario.coning}-sample coning/sculling, filter model `{model_name}`, "
-        f"aiding {scenario.filter.aiding} every "
-        f"{scenario.doppler.period if scenario.filter.aiding == 'doppler' else scenario.gps.period:g} s, "
+        f"aiding {scenario.filter.aiding} every {scenario.aiding_period:g} s, "
         f"filter cycle {scenario.filter.period:g} s.",
         "",
-        "Sign conventions identified from the model's F and H (+1: as the simulation defines them; "
-        "see modelgen/simulation/error_layout.py): "
-        + ", ".join(f"{k} {v:+.0f}" for k, v in conventions.items()) + ".",
+        ("Sign conventions identified from the model's F and H (+1: as the simulation defines them; "
+         "see modelgen/simulation/error_layout.py): " + ", ".join(f"{k} {v:+.0f}" for k, v in conventions.items()) + "."
+         if conventions else
+         "Error states mapped explicitly (psi-angle attitude, ENU position in metres, receiver clock ranges; "
+         "see modelgen/simulation/pseudorange.py)."),
         "",
         "## Correction modes (one run, identical sensor data)",
         "",

@@ -19,7 +19,7 @@ from typing import Any
 from modelgen.datafiles import read_yaml
 from modelgen.errors import ModelError
 from modelgen.simulation.doppler import DopplerSettings, JanusBeams, Outage
-from modelgen.simulation.gps import GpsSettings
+from modelgen.simulation.gps import Constellation, GpsSettings, PseudorangeSettings
 from modelgen.simulation.imu import ImuErrorBudget
 from modelgen.simulation.strapdown import ALGORITHMS, VerticalDamping
 from modelgen.simulation.trajectory import FlightProfile, Segment
@@ -83,6 +83,14 @@ class Scenario:
     gps: GpsSettings
     filter: FilterSettings
     source_file: str = ""
+    pseudorange: PseudorangeSettings = field(default_factory=PseudorangeSettings)  # aiding: pseudorange
+    constellation: Constellation = field(default_factory=Constellation)
+
+    @property
+    def aiding_period(self) -> float:
+        """Seconds between two measurements of the aiding sensor the filter uses."""
+        return {"doppler": self.doppler.period, "gps": self.gps.period,
+                "pseudorange": self.pseudorange.period}[self.filter.aiding]
 
     def with_changes(self, **changes: Any) -> "Scenario":
         """A copy with some fields replaced (``hours=`` truncates the flight)."""
@@ -186,6 +194,40 @@ def _mapping(s: _Section, key: str, allowed: dict[str, tuple[str, ...]]) -> dict
                 raise ModelError(f"{where}.{name}: {axis!r} is not one of {', '.join(allowed[group])}")
         out[str(group)] = {str(k): str(v) for k, v in entries.items()}
     return out
+
+
+def _pseudorange(s: _Section) -> tuple[PseudorangeSettings, Constellation]:
+    """The pseudo-range receiver (seed 003) and its constellation; defaults when the section is absent."""
+    c = s.section("constellation")
+    constellation = Constellation(
+        satellites=int(c.number("satellites", 24.0)),
+        planes=int(c.number("planes", 6.0)),
+        phasing=int(c.number("phasing", 1.0)),
+        inclination=c.number("inclination_deg", 55.0 * DEG, DEG),  # defaults are SI
+        radius=c.number("orbit_radius_m", 26_559_700.0),
+    )
+    c.done()
+    if constellation.satellites < 1 or constellation.planes < 1 or constellation.satellites % constellation.planes:
+        raise ModelError(f"{c.where}: {constellation.satellites} satellites do not fill {constellation.planes} planes")
+    settings = PseudorangeSettings(
+        period=s.number("period_s", 1.0),
+        noise=s.number("noise_m", 3.0),
+        clock_bias=s.number("clock_bias_m", 3.0e4),
+        clock_drift=s.number("clock_drift_mps", 3.0),
+        clock_bias_psd=s.number("clock_bias_psd_m2ps", 0.1),
+        clock_drift_psd=s.number("clock_drift_psd_m2ps3", 0.01),
+        elevation_mask=s.number("elevation_mask_deg", 10.0 * DEG, DEG),
+    )
+    s.done()
+    if not settings.period > 0:
+        raise ModelError(f"{s.where}.period_s: must be positive, got {settings.period}")
+    for key, value in (("noise_m", settings.noise), ("clock_bias_m", settings.clock_bias), ("clock_drift_mps", settings.clock_drift),
+                       ("clock_bias_psd_m2ps", settings.clock_bias_psd), ("clock_drift_psd_m2ps3", settings.clock_drift_psd)):
+        if value < 0:
+            raise ModelError(f"{s.where}.{key}: must not be negative, got {value}")
+    if not 0 <= settings.elevation_mask < math.pi / 2:
+        raise ModelError(f"{s.where}.elevation_mask_deg: must be in [0, 90)")
+    return settings, constellation
 
 
 def load_scenario_data(data: Any, filename: str) -> Scenario:
@@ -292,10 +334,12 @@ def load_scenario_data(data: Any, filename: str) -> Scenario:
     )
     gp.done()
 
+    pseudorange, constellation = _pseudorange(top.section("pseudorange"))
+
     fi = top.section("filter")
     filt = FilterSettings(
         model=fi.text("model"),
-        aiding=fi.text("aiding", "doppler", ("doppler", "gps")),
+        aiding=fi.text("aiding", "doppler", ("doppler", "gps", "pseudorange")),
         period=fi.number("period_s", 1.0),
         mode=fi.text("mode", "closed_loop", MODES),
         gate_probability=fi.number("gate_probability", 0.9999),
@@ -307,7 +351,7 @@ def load_scenario_data(data: Any, filename: str) -> Scenario:
     fi.done()
     top.done()
     return Scenario(name, title, profile, imu_rate, coning, budget, initial, altitude_noise, damping, doppler, gps,
-                    filt, filename)
+                    filt, filename, pseudorange, constellation)
 
 
 def builtin_scenarios() -> list[str]:
