@@ -161,7 +161,7 @@ def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool)
 
             click.echo("simulate the paper's flight (profile_000, one run) ...")
             sim = run_simulation(load_profile("profile_000"), report / "simulation", runs=1, seed=1, echo=click.echo)
-            sections.append(f"## Simulation\n\nThe paper's profile flown once: [simulation/{Path(sim).name}](simulation/{Path(sim).name}) and its figures.")
+            sections.append(f"## Simulation\n\nThe paper's profile flown once with the generated C filter: [simulation/{Path(sim).name}](simulation/{Path(sim).name}) and its figures.")
         text = run_report(summary, runs, Path(out_root), sections)
         write_text_atomically(report / "README.md", text)
     except ModelError as exc:
@@ -318,8 +318,10 @@ def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool) -> None:
 @click.option("--runs", type=int, default=20, show_default=True, help="Monte Carlo runs (0: none).")
 @click.option("--imu-rate", type=float, default=None, help="IMU rate in Hz (default: the scenario's).")
 @click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--filter", "implementation", type=click.Choice(["c", "python", "reference"]), default="c", show_default=True, help="Filter of the correction-mode runs: the generated C (compiled now), the generated Python, or the numpy reference.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="report/simulation", show_default=True, help="Directory for summary.md and the PNG figures.")
-def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | None, seed: int, out_dir: str) -> None:
+def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | None, seed: int, out_dir: str,
+             implementation: str) -> None:
     """Fly a scenario: truth, IMU/Doppler/GPS, strapdown, filter in three correction modes, Monte Carlo.
 
     Writes summary.md (errors per correction mode, NEES test, timings) and PNG figures.
@@ -333,7 +335,7 @@ def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | Non
         if hours is not None:
             changes["hours"] = hours
         summary = run_simulation(scenario.with_changes(**changes), out_dir, runs=runs, seed=seed,
-                                 echo=lambda m: click.echo(m, err=True))
+                                 echo=lambda m: click.echo(m, err=True), implementation=implementation)
     except ModelError as exc:
         fail(exc)
     click.echo(f"wrote {summary}")

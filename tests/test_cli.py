@@ -71,3 +71,20 @@ def test_run_does_the_main_job_end_to_end(runner, tmp_path, monkeypatch):
     assert (tmp_path / "report" / "verification.json").is_file()
     assert (tmp_path / "report" / "covariance" / "table2.csv").is_file()
     assert (tmp_path / "generated" / "ned_doppler18" / "ned_doppler18.c").is_file()
+
+
+def test_simulate_flies_a_profile_with_the_generated_c_filter_and_writes_summary_and_figures(runner, tmp_path):
+    out = tmp_path / "sim"
+    result = runner.invoke(main, ["simulate", "--hours", "0.1", "--imu-rate", "20", "--runs", "2", "--filter", "c",
+                                  "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    summary = (out / "summary.md").read_text()
+    assert "Filter: the generated C" in summary and "| closed_loop |" in summary and "NEES" in summary
+    assert {"trajectory.png", "correction_modes.png", "filter_errors.png", "monte_carlo.png", "nees.png"} <= {
+        p.name for p in out.iterdir()}
+    assert not [p for p in out.rglob("*.so")]  # the filter was built in a temporary folder
+
+
+def test_simulate_refuses_an_unknown_filter_implementation(runner, tmp_path):
+    result = runner.invoke(main, ["simulate", "--filter", "fortran", "--out", str(tmp_path)])
+    assert result.exit_code != 0 and "fortran" in result.output

@@ -26,7 +26,7 @@ Three implementations plug in:
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Mapping, Protocol
+from typing import Callable, Mapping, Protocol
 
 import numpy as np
 
@@ -116,12 +116,6 @@ class GeneratedPythonFilter:
         self._x = np.array(x0, float)
         self._P = np.array(P0, float)
 
-    @classmethod
-    def from_file(cls, path: str | Path, x0, P0) -> "GeneratedPythonFilter":
-        from modelgen.codegen.build import load_python_module  # sibling of simulation in the chain
-
-        return cls(load_python_module(Path(path)), x0, P0)
-
     def transition(self, parameters, period):
         g = self.module
         p = g.parameter_vector({k: v for k, v in parameters.items() if k in g.PARAMETER_NAMES})
@@ -168,17 +162,6 @@ class GeneratedCFilter:
         if status:
             raise ModelError(f"generated C filter refused the initial covariance (status {status})")
 
-    @classmethod
-    def from_folder(cls, folder: str | Path, derived: DerivedModel, x0, P0, build_dir: str | Path | None = None,
-                    options=None):
-        from modelgen.codegen.build import build_c_filter  # sibling of simulation in the chain
-        from modelgen.codegen.layout import ModelSizes
-
-        model = derived.model
-        compiled = build_c_filter(Path(folder), model.name, ModelSizes.of(derived), model.parameter_names,
-                                  Path(build_dir) if build_dir else None, options=options)
-        return cls(compiled, x0, P0)
-
     def transition(self, parameters, period):
         known = {name for name, _ in self.compiled.params._fields_}
         self.compiled.set_parameters({k: float(v) for k, v in parameters.items() if k in known})
@@ -213,6 +196,37 @@ class GeneratedCFilter:
 
     def set_state(self, x):
         self.compiled.set_state(np.asarray(x, float), self.compiled.P)
+
+
+IMPLEMENTATIONS = ("c", "python", "reference")
+
+
+def filter_factory(derived: DerivedModel, implementation: str, work_dir: str | Path) -> Callable[[np.ndarray, np.ndarray], KalmanFilter]:
+    """A maker of fresh filters (x0, P0) -> filter for ``implementation``.
+
+    ``c`` and ``python`` are the code ``modelgen generate`` writes for the
+    model (default options), generated into ``work_dir`` now and compiled or
+    imported once; every filter made shares that code but has its own state.
+    ``reference`` is the dense numpy filter.
+    """
+    if implementation not in IMPLEMENTATIONS:
+        raise ModelError(f"simulation: unknown filter implementation {implementation!r} "
+                         f"(choose from {', '.join(IMPLEMENTATIONS)})")
+    if implementation == "reference":
+        return lambda x0, P0: ReferenceFilter(derived, x0, P0)
+    from modelgen.codegen.build import CompiledFilter, compile_shared_library, load_python_module  # siblings
+    from modelgen.codegen.generate import generate_code, write_atomically
+    from modelgen.codegen.layout import ModelSizes
+
+    model = derived.model
+    folder = Path(work_dir) / model.name
+    write_atomically(folder, generate_code(derived).files)
+    if implementation == "python":
+        module = load_python_module(folder / f"{model.name}.py")
+        return lambda x0, P0: GeneratedPythonFilter(module, x0, P0)
+    library = compile_shared_library([folder / f"{model.name}.c"], folder / f"lib{model.name}.so")
+    sizes = ModelSizes.of(derived)
+    return lambda x0, P0: GeneratedCFilter(CompiledFilter(library, model.name, sizes, model.parameter_names), x0, P0)
 
 
 def named_parameters(derived: DerivedModel, available: Mapping[str, float], validate: bool = True) -> dict[str, float]:

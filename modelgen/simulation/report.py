@@ -1,15 +1,16 @@
 """`modelgen simulate`: run a scenario, write PNG figures and a Markdown summary.
 
 What it does, in order: generate the truth and ideal IMU data; simulate one
-set of sensors; run the filter on it in the three correction modes (open loop,
-closed loop, seed 003's accumulated correction) plus the free INS; run a Monte
-Carlo ensemble (both cores) and test its NEES; plot and summarize.  Progress
-goes to ``echo``.
+set of sensors; run the filter (the generated C by default) on it in the
+three correction modes (open loop, closed loop, seed 003's accumulated
+correction) plus the free INS; run a Monte Carlo ensemble (both cores) and
+test its NEES; plot and summarize.  Progress goes to ``echo``.
 """
 
 from __future__ import annotations
 
 import math
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +21,7 @@ import numpy as np
 from modelgen.derivation import derive
 from modelgen.modelfile import load_model
 from modelgen.simulation import earth
-from modelgen.simulation.filters import ReferenceFilter
+from modelgen.simulation.filters import filter_factory
 from modelgen.simulation.integration import MODES, RunResult, run_scenario, scenario_layout, simulate_sensors
 from modelgen.simulation.jit import HAVE_NUMBA
 from modelgen.simulation.montecarlo import MonteCarloResult, run_monte_carlo
@@ -66,8 +67,14 @@ def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, in
 
 
 def simulate(scenario: Scenario, out_dir: Path, runs: int = 20, seed: int = 0, workers: int = 2,
-             echo: Callable[[str], None] = print) -> Path:
-    """Run everything (module docstring) and return the summary's path."""
+             echo: Callable[[str], None] = print, implementation: str = "c") -> Path:
+    """Run everything (module docstring) and return the summary's path.
+
+    ``implementation`` is the filter of the three correction-mode runs: the
+    generated ``c`` (compiled now) or ``python``, or the numpy ``reference``.
+    The Monte Carlo runs use the reference, which the tests hold to the
+    generated code within 1e-12.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -89,12 +96,17 @@ def simulate(scenario: Scenario, out_dir: Path, runs: int = 20, seed: int = 0, w
     timings["sensors (IMU errors, aiding)"] = time.perf_counter() - t
 
     results: dict[str, RunResult] = {}
-    for mode in MODES:
+    with tempfile.TemporaryDirectory(prefix="modelgen-simulate-") as code_dir:
         t = time.perf_counter()
-        results[mode] = run_scenario(scenario, derived, trajectory, rng, lambda x, P: ReferenceFilter(derived, x, P),
-                                     mode=mode, sensors=sensors, layout=layout,
-                                     progress=_echo_progress(echo, f"{mode} filter"))
-        timings[f"mechanization + filter, {mode}"] = time.perf_counter() - t
+        make_filter = filter_factory(derived, implementation, code_dir)
+        timings[f"filter code ({implementation}: generate, compile or import)"] = time.perf_counter() - t
+        echo(f"  filter: {implementation} ({timings[f'filter code ({implementation}: generate, compile or import)']:.1f} s to build)")
+        for mode in MODES:
+            t = time.perf_counter()
+            results[mode] = run_scenario(scenario, derived, trajectory, rng, make_filter,
+                                         mode=mode, sensors=sensors, layout=layout,
+                                         progress=_echo_progress(echo, f"{mode} filter"))
+            timings[f"mechanization + filter, {mode}"] = time.perf_counter() - t
     errors = {mode: navigation_errors(r.outputs, trajectory) for mode, r in results.items()}
     errors["free INS"] = navigation_errors(results["open_loop"].raw_outputs, trajectory)
 
@@ -114,7 +126,7 @@ def simulate(scenario: Scenario, out_dir: Path, runs: int = 20, seed: int = 0, w
         figures.append(_plot_monte_carlo(monte_carlo, out_dir / "monte_carlo.png"))
         figures.append(_plot_nees(monte_carlo, out_dir / "nees.png"))
     summary = out_dir / "summary.md"
-    summary.write_text(_summary(scenario, derived.model.name, layout.conventions, trajectory, results, errors,
+    summary.write_text(_summary(scenario, derived.model.name, implementation, layout.conventions, trajectory, results, errors,
                                 monte_carlo, timings, figures), encoding="utf-8")
     echo(f"  wrote {summary} and {len(figures)} figures")
     return summary
@@ -239,7 +251,14 @@ def _plot_nees(mc: MonteCarloResult, path: Path) -> Path:
 # -- summary ------------------------------------------------------------------------
 
 
-def _summary(scenario, model_name, conventions, trajectory, results, errors, mc, timings, figures) -> str:
+_IMPLEMENTATION_TEXT = {
+    "c": "the generated C (modelgen generate, default options), compiled for this run and called through ctypes",
+    "python": "the generated Python module (modelgen generate, default options)",
+    "reference": "the dense numpy reference filter (modelgen/reference.py)",
+}
+
+
+def _summary(scenario, model_name, implementation, conventions, trajectory, results, errors, mc, timings, figures) -> str:
     lines = [
         f"# Simulation: {scenario.title or scenario.name}",
         "",
@@ -255,6 +274,8 @@ def _summary(scenario, model_name, conventions, trajectory, results, errors, mc,
          "see modelgen/simulation/pseudorange.py)."),
         "",
         "## Correction modes (one run, identical sensor data)",
+        "",
+        f"Filter: {_IMPLEMENTATION_TEXT[implementation]}.",
         "",
         "| output | final horizontal position error [m] | rms horizontal velocity error, last hour [m/s] | "
         "final heading error [arcsec] | updates | gate rejections | outage skips | refused |",
@@ -282,6 +303,8 @@ def _summary(scenario, model_name, conventions, trajectory, results, errors, mc,
         rms, sigma = mc.ensemble_rms(), mc.mean_sigma()
         lines += [
             f"## Monte Carlo ({mc.runs} runs, {mc.mode}, {mc.seconds:.1f} s)",
+            "",
+            "Filter: the numpy reference (the tests hold the generated code to it within 1e-12).",
             "",
             f"Ensemble mean NEES inside the 95 % chi-square band [{test.lower:.2f}, {test.upper:.2f}] "
             f"(n = {test.dimension}) at {100 * test.fraction_inside:.0f} % of the {len(test.times)} stored times: "

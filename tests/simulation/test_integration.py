@@ -9,7 +9,7 @@ import pytest
 
 from modelgen.errors import ModelError
 from modelgen.simulation.doppler import Outage
-from modelgen.simulation.filters import GeneratedCFilter, GeneratedPythonFilter, ReferenceFilter
+from modelgen.simulation.filters import ReferenceFilter, filter_factory
 from modelgen.simulation.integration import (
     Measurement,
     initial_covariance,
@@ -187,16 +187,14 @@ def test_reference_filter_refuses_non_finite_measurement_with_state_unchanged(pa
 
 
 @pytest.fixture(scope="module")
-def generated_folder(paper_derived, tmp_path_factory):
-    from modelgen.codegen.generate import generate_code, write_atomically
-
-    folder = tmp_path_factory.mktemp("generated") / "ned_doppler18"
-    write_atomically(folder, generate_code(paper_derived).files)
-    return folder
+def generated_filters(paper_derived, tmp_path_factory):
+    """Makers of the generated Python and C filters, as `modelgen simulate --filter` builds them."""
+    return {implementation: filter_factory(paper_derived, implementation, tmp_path_factory.mktemp(implementation))
+            for implementation in ("python", "c")}
 
 
-def test_generated_python_filter_runs_the_flight_like_the_reference(short_flight, paper_derived, generated_folder):
-    make = lambda x, P: GeneratedPythonFilter.from_file(generated_folder / "ned_doppler18.py", x, P)  # noqa: E731
+def test_generated_python_filter_runs_the_flight_like_the_reference(short_flight, paper_derived, generated_filters):
+    make = generated_filters["python"]
     generated = run(short_flight, paper_derived, make_filter=make)
     reference = run(short_flight, paper_derived)
     assert generated.updates == reference.updates == 30
@@ -205,8 +203,8 @@ def test_generated_python_filter_runs_the_flight_like_the_reference(short_flight
 
 
 @pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None, reason="no C compiler")
-def test_generated_c_filter_runs_the_flight_like_the_reference(short_flight, paper_derived, generated_folder, tmp_path):
-    make = lambda x, P: GeneratedCFilter.from_folder(generated_folder, paper_derived, x, P, tmp_path)  # noqa: E731
+def test_generated_c_filter_runs_the_flight_like_the_reference(short_flight, paper_derived, generated_filters):
+    make = generated_filters["c"]
     generated = run(short_flight, paper_derived, make_filter=make)
     reference = run(short_flight, paper_derived)
     assert generated.updates == reference.updates == 30
@@ -217,6 +215,11 @@ def test_generated_c_filter_runs_the_flight_like_the_reference(short_flight, pap
     state, covariance = kalman.state, kalman.covariance
     assert kalman.compiled.update(np.array([np.nan, 0.0])) != 0
     assert np.array_equal(kalman.state, state) and np.array_equal(kalman.covariance, covariance)
+
+
+def test_unknown_filter_implementation_is_refused_by_name(paper_derived, tmp_path):
+    with pytest.raises(ModelError, match="unknown filter implementation 'fortran'"):
+        filter_factory(paper_derived, "fortran", tmp_path)
 
 
 def test_seed_001_set_up_runs_ins_gps15_at_20_hz_with_a_300_hz_mechanization():
