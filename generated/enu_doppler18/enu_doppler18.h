@@ -146,7 +146,8 @@ int enu_doppler18_discretize(const enu_doppler18_matrices *m, enu_doppler18_scal
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
-   Refuses non-finite entries; on error f is unchanged. */
+   Refuses non-finite entries (ERR_NONFINITE) and a P that is not positive semidefinite
+   (ERR_NOT_POSITIVE); on error f is unchanged. */
 int enu_doppler18_set_covariance(enu_doppler18_filter *f, const enu_doppler18_scalar P[ENU_DOPPLER18_N_STATES * ENU_DOPPLER18_N_STATES], enu_doppler18_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */

@@ -138,7 +138,8 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *m, gps_pseudo
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
-   Refuses non-finite entries; on error f is unchanged. */
+   Refuses non-finite entries (ERR_NONFINITE) and a P that is not positive semidefinite
+   (ERR_NOT_POSITIVE); on error f is unchanged. */
 int gps_pseudorange11_set_covariance(gps_pseudorange11_filter *f, const gps_pseudorange11_scalar P[GPS_PSEUDORANGE11_N_STATES * GPS_PSEUDORANGE11_N_STATES], gps_pseudorange11_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */

@@ -138,7 +138,8 @@ int ins_gps15_discretize(const ins_gps15_matrices *m, ins_gps15_scalar T, ins_gp
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
-   Refuses non-finite entries; on error f is unchanged. */
+   Refuses non-finite entries (ERR_NONFINITE) and a P that is not positive semidefinite
+   (ERR_NOT_POSITIVE); on error f is unchanged. */
 int ins_gps15_set_covariance(ins_gps15_filter *f, const ins_gps15_scalar P[INS_GPS15_N_STATES * INS_GPS15_N_STATES], ins_gps15_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */

@@ -141,7 +141,8 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *m, ne
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
-   Refuses non-finite entries; on error f is unchanged. */
+   Refuses non-finite entries (ERR_NONFINITE) and a P that is not positive semidefinite
+   (ERR_NOT_POSITIVE); on error f is unchanged. */
 int ned_doppler13_reduced_set_covariance(ned_doppler13_reduced_filter *f, const ned_doppler13_reduced_scalar P[NED_DOPPLER13_REDUCED_N_STATES * NED_DOPPLER13_REDUCED_N_STATES], ned_doppler13_reduced_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */

@@ -141,7 +141,8 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *m, ned_doppler18_scal
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
-   Refuses non-finite entries; on error f is unchanged. */
+   Refuses non-finite entries (ERR_NONFINITE) and a P that is not positive semidefinite
+   (ERR_NOT_POSITIVE); on error f is unchanged. */
 int ned_doppler18_set_covariance(ned_doppler18_filter *f, const ned_doppler18_scalar P[NED_DOPPLER18_N_STATES * NED_DOPPLER18_N_STATES], ned_doppler18_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */

@@ -147,7 +147,8 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *m
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
-   Refuses non-finite entries; on error f is unchanged. */
+   Refuses non-finite entries (ERR_NONFINITE) and a P that is not positive semidefinite
+   (ERR_NOT_POSITIVE); on error f is unchanged. */
 int ned_doppler32_augmented_set_covariance(ned_doppler32_augmented_filter *f, const ned_doppler32_augmented_scalar P[NED_DOPPLER32_AUGMENTED_N_STATES * NED_DOPPLER32_AUGMENTED_N_STATES], ned_doppler32_augmented_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */

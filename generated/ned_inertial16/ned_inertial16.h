@@ -138,7 +138,8 @@ int ned_inertial16_discretize(const ned_inertial16_matrices *m, ned_inertial16_s
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is read).
-   Refuses non-finite entries; on error f is unchanged. */
+   Refuses non-finite entries (ERR_NONFINITE) and a P that is not positive semidefinite
+   (ERR_NOT_POSITIVE); on error f is unchanged. */
 int ned_inertial16_set_covariance(ned_inertial16_filter *f, const ned_inertial16_scalar P[NED_INERTIAL16_N_STATES * NED_INERTIAL16_N_STATES], ned_inertial16_workspace *work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */

@@ -164,6 +164,10 @@ class CompiledFilter:
         np.ctypeslib.as_array(buffer)[:] = np.asarray(P, dtype=float)
         return self._set_covariance(ctypes.byref(self.filter), buffer, ctypes.byref(self.workspace))
 
+    def set_estimate(self, x: np.ndarray) -> None:
+        """Overwrite x alone, as a C caller does through the filter struct (e.g. after feedback)."""
+        self._view(self.filter.x)[:] = x
+
     def _view(self, array) -> np.ndarray:
         return np.ctypeslib.as_array(array)
 

@@ -345,7 +345,7 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
             + (", Joseph form" if options.covariance_update == "joseph" else ", standard form")
         ),
         "part_templates": parts,
-        "source_templates": ["c_source.c.j2", *parts],
+        "source_templates": ["c_source.c.j2", *parts, "c_udu_factor.c.j2"],
         "evaluate": _print_block(block, targets, c_printer),
         "predict_state": state_lines,
         "predict_state_check": [

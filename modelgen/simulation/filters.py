@@ -195,7 +195,7 @@ class GeneratedCFilter:
         return self.compiled.P
 
     def set_state(self, x):
-        self.compiled.set_state(np.asarray(x, float), self.compiled.P)
+        self.compiled.set_estimate(np.asarray(x, float))
 
 
 IMPLEMENTATIONS = ("c", "python", "reference")

@@ -130,6 +130,22 @@ def test_ud_factorization_round_trips_and_refuses_indefinite_covariance(librarie
     assert bytes(filt.filter)[8 * n :] == before[8 * n :]  # U and D untouched (x is set by the caller first)
 
 
+@pytest.mark.parametrize("options", [o for o in COMBINATIONS if not o.ud], ids=lambda o: o.slug())
+def test_covariance_form_refuses_a_covariance_that_is_not_positive_semidefinite(libraries, paper_derived, scenario,
+                                                                                 options):
+    """Every diagonal entry positive but a correlation beyond 1: only a factorization sees it."""
+    n = paper_derived.n_states
+    filt = CompiledFilter(libraries[options.slug()], paper_derived.model.name, ModelSizes.of(paper_derived),
+                          paper_derived.model.parameter_names, options=options)
+    P0 = scenario.initial_covariance  # semidefinite: the paper's zero initial velocity and position variances
+    assert np.any(np.diag(P0) == 0) and filt.set_state(np.zeros(n), P0) == 0
+    before = filt.P.copy()
+    correlated = P0.copy()
+    correlated[0, 1] = correlated[1, 0] = 1.01 * np.sqrt(P0[0, 0] * P0[1, 1])
+    assert filt.set_state(np.zeros(n), correlated) == 2  # ERR_NOT_POSITIVE
+    assert np.array_equal(filt.P, before)
+
+
 @pytest.mark.parametrize("options", [o for o in COMBINATIONS if o.sequential], ids=lambda o: o.slug())
 def test_sequential_and_ud_updates_need_no_square_root(paper_derived, options):
     source = generate_code(paper_derived, options).files["ned_doppler18.c"]
