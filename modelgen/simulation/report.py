@@ -298,6 +298,17 @@ def _summary(scenario, model_name, implementation, conventions, trajectory, resu
         f"and {np.max(np.abs(cl.attitude - ac.attitude)) / ARCSEC:.3g} arcsec in attitude.",
         "",
     ]
+    free_ins = np.hypot(*errors["free INS"].position[-1])
+    for mode, result in results.items():
+        offered = result.updates + len(result.rejected)
+        if offered and len(result.rejected) > 0.01 * offered:
+            why = (f"In this mode the INS runs uncorrected and its error reaches {free_ins:.3g} m; the terms the "
+                   "first-order error model neglects grow with the square of the error and exceed the filter's "
+                   "sigma.  Closed-loop feedback keeps the errors small enough for the model to hold."
+                   if mode != "closed_loop" else
+                   "With feedback the errors stay small, so this points at the filter's tuning or model.")
+            lines += [f"**{mode}: the gate rejected {len(result.rejected)} of {offered} measurements "
+                      f"({100 * len(result.rejected) / offered:.0f} %).**  {why}", ""]
     if mc is not None:
         test = mc.nees_test(0.95, start_time=mc.times[1] if len(mc.times) > 1 else 0.0)
         rms, sigma = mc.ensemble_rms(), mc.mean_sigma()

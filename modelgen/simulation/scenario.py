@@ -298,7 +298,8 @@ def load_scenario_data(data: Any, filename: str) -> Scenario:
     tau = alt.number("loop_time_constant_s", 100.0)
     if tau <= 0:
         raise ModelError(f"{alt.where}.loop_time_constant_s: must be positive")
-    damping = VerticalDamping(k1=2 * 0.707 / tau, k2=1.0 / tau**2)
+    damped = alt.text("vertical_channel", "damped", ("damped", "free"))
+    damping = VerticalDamping(k1=2 * 0.707 / tau, k2=1.0 / tau**2) if damped == "damped" else VerticalDamping(0.0, 0.0)
     alt.done()
 
     dop = top.section("doppler")

@@ -93,3 +93,13 @@ def test_paper_profile_and_covariance_error_budget_transcribe_table_1_identicall
     differing = {name: pair for name, pair in pairs.items() if pair[0] != pytest.approx(pair[1], rel=1e-12, abs=0)}
     assert not differing
     assert s.initial_errors.position == 0 and sigma["latitude_error"] == 0
+
+
+def test_seed_001_profile_flies_a_free_vertical_channel_like_its_model_and_bad_values_are_refused():
+    s = load_scenario("profile_001")
+    assert s.vertical_damping.k1 == 0 and s.vertical_damping.k2 == 0  # ins_gps15 models no baro loop
+    assert load_scenario("profile_000").vertical_damping.k2 > 0  # the paper's model has no vertical channel
+    d = data()
+    d["altitude_reference"]["vertical_channel"] = "baro"
+    with pytest.raises(ModelError, match="vertical_channel"):
+        load_scenario_data(d, "x.yaml")
