@@ -7,7 +7,10 @@ Measures, for the core paper's flight (profile_000) at 300 Hz:
     (extrapolated per sample) -- the ratio is the speed-up the compilation buys,
   * one complete closed-loop filtered run (sensors, mechanization, 18-state filter
     every 1 s, Doppler every 60 s),
-  * a Monte Carlo ensemble on two worker processes.
+  * a Monte Carlo ensemble on two worker processes;
+  * memory: the peak resident size the flight adds to the process, against
+    the size of the IMU increments themselves (the data any simulation of
+    this flight must hold).
 
 Usage: python bench/bench_simulation.py [--hours 4] [--rate 300] [--runs 8]
 """
@@ -15,6 +18,7 @@ Usage: python bench/bench_simulation.py [--hours 4] [--rate 300] [--runs 8]
 from __future__ import annotations
 
 import argparse
+import resource
 import time
 
 import numpy as np
@@ -42,6 +46,11 @@ def progress(label):
     return report
 
 
+def peak_rss_bytes() -> int:
+    """Peak resident set size of this process so far (Linux reports kilobytes)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--hours", type=float, default=4.0)
@@ -58,6 +67,7 @@ def main() -> None:
     tiny = generate_trajectory(scenario.profile.truncated(10.0), args.rate, 1.0)
     Strapdown(tiny.initial_state(), args.rate, scenario.coning).run(tiny.delta_theta, tiny.delta_velocity, 0, tiny.n_samples)
 
+    rss_before = peak_rss_bytes()
     t = time.perf_counter()
     trajectory = generate_trajectory(scenario.profile, scenario.imu_rate, 1.0 / scenario.filter.period)
     t_trajectory = time.perf_counter() - t
@@ -94,6 +104,10 @@ def main() -> None:
     print(f"  sensors: {t_sensors:.2f} s; closed-loop filtered run: {t_run:.2f} s "
           f"({result.updates} Doppler updates, {len(result.times) - 1} filter cycles)", flush=True)
     print(f"  whole 4-h flight (trajectory + sensors + run): {t_trajectory + t_sensors + t_run:.2f} s", flush=True)
+    increments = trajectory.delta_theta.nbytes + trajectory.delta_velocity.nbytes
+    added = peak_rss_bytes() - rss_before
+    print(f"  memory: the flight added {added / 2**20:.0f} MiB to the peak resident size; the IMU increments are "
+          f"{increments / 2**20:.0f} MiB -> ratio {added / increments:.2f}", flush=True)
 
     if args.runs:
         t = time.perf_counter()
