@@ -98,13 +98,6 @@ def corrupt_increments(delta_theta: np.ndarray, delta_velocity: np.ndarray, dt: 
     gyro_markov = markov_sequence(n, budget.gyro_markov_drift, budget.gyro_markov_correlation_time, dt, rng)
     accel_markov = markov_sequence(n, budget.accel_markov_bias, budget.accel_markov_correlation_time, dt, rng)
 
-    measured_theta = delta_theta * (1.0 + gyro_scale) + (gyro_markov + gyro_constant) * dt
-    measured_velocity = delta_velocity * (1.0 + accel_scale) + (accel_markov + accel_constant) * dt
-    if budget.gyro_white_noise > 0:
-        measured_theta += budget.gyro_white_noise * math.sqrt(dt) * rng.standard_normal((n, 3))
-    if budget.accel_white_noise > 0:
-        measured_velocity += budget.accel_white_noise * math.sqrt(dt) * rng.standard_normal((n, 3))
-
     rows = np.arange(0, n + 1, record_every)
     last = np.minimum(rows, n - 1)  # the error rate at the final record time is the last sample's
     history = ImuErrorHistory(
@@ -115,4 +108,23 @@ def corrupt_increments(delta_theta: np.ndarray, delta_velocity: np.ndarray, dt: 
         gyro_scale_factor=gyro_scale,
         accel_scale_factor=accel_scale,
     )
+    # in place where the arrays are no longer needed: a 4-h, 300 Hz flight has
+    # 100 MB per (n, 3) array, and the result is bit for bit the plain formula
+    # delta (1 + k) + (markov + constant) dt + sigma sqrt(dt) noise
+    measured_theta = delta_theta * (1.0 + gyro_scale)
+    gyro_markov += gyro_constant
+    gyro_markov *= dt
+    measured_theta += gyro_markov
+    del gyro_markov
+    measured_velocity = delta_velocity * (1.0 + accel_scale)
+    accel_markov += accel_constant
+    accel_markov *= dt
+    measured_velocity += accel_markov
+    del accel_markov
+    for measured, sigma in ((measured_theta, budget.gyro_white_noise), (measured_velocity, budget.accel_white_noise)):
+        if sigma > 0:
+            noise = rng.standard_normal((n, 3))
+            noise *= sigma * math.sqrt(dt)
+            measured += noise
+            del noise
     return measured_theta, measured_velocity, history
