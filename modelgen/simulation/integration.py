@@ -260,21 +260,31 @@ def simulate_sensors(scenario: Scenario, trajectory: Trajectory, rng: np.random.
         initial[5] += ie.velocity * rng.standard_normal()
         pseudoranges = simulate_pseudoranges(truth[:, 0], truth[:, 1:4], scenario.pseudorange, rng, scenario.constellation)
     elif scenario.filter.aiding == "doppler":
-        step = _whole_ratio(scenario.doppler.period, record_period, "doppler period")
+        step = whole_ratio(scenario.doppler.period, record_period, "doppler period")
         rows = np.arange(0, len(truth), step)
         doppler = simulate_doppler(truth[rows, 0], truth[rows, 4:7], truth[rows, 7:11], scenario.doppler, rng)
     else:
-        step = _whole_ratio(scenario.gps.period, record_period, "gps period")
+        step = whole_ratio(scenario.gps.period, record_period, "gps period")
         rows = np.arange(0, len(truth), step)
         gps = simulate_position_velocity(truth[rows, 0], truth[rows, 1:4], truth[rows, 4:7], scenario.gps, rng)
     return SensorData(trajectory, dtheta, dvel, history, initial, altitude, doppler, gps, pseudoranges)
 
 
-def _whole_ratio(a: float, b: float, what: str) -> int:
+def whole_ratio(a: float, b: float, what: str) -> int:
+    """a / b for a sensor period a that must be a whole multiple of the filter period b."""
     ratio = a / b
     if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6 * ratio:
         raise ModelError(f"scenario: {what} {a} s is not a whole multiple of the filter period {b} s")
     return int(round(ratio))
+
+
+def samples_per_cycle(trajectory: Trajectory, coning: str) -> int:
+    """IMU samples per filter cycle, refused unless a whole number of coning updates."""
+    samples = trajectory.record_every
+    if samples % ALGORITHMS[coning][1]:
+        raise ModelError(f"scenario: {samples} IMU samples per filter cycle is not a multiple of "
+                         f"the {coning}-sample update")
+    return samples
 
 
 def operating_point(nav: np.ndarray, specific_force: np.ndarray, frame: str, scenario: Scenario) -> dict[str, float]:
@@ -334,10 +344,7 @@ class StrapdownNavigator:
     def __init__(self, scenario: Scenario, layout: ErrorLayout, sensors: SensorData, mapping: dict[str, str]):
         self.scenario, self.layout, self.sensors = scenario, layout, sensors
         trajectory = sensors.trajectory
-        self.samples_per_cycle = trajectory.record_every
-        if self.samples_per_cycle % ALGORITHMS[scenario.coning][1]:
-            raise ModelError(f"scenario: {self.samples_per_cycle} IMU samples per filter cycle is not a multiple of "
-                             f"the {scenario.coning}-sample update")
+        self.samples_per_cycle = samples_per_cycle(trajectory, scenario.coning)
         self.strapdown = Strapdown(sensors.initial_navigation, trajectory.imu_rate, scenario.coning,
                                    scenario.vertical_damping)
         self.sensor_compensation = np.zeros(3)  # Doppler bias fed back (closed loop), NED

@@ -47,8 +47,8 @@ by the accumulator in accumulated mode (eq. (3)).  The line-of-sight unit
 vectors e_k (ENU, receiver to satellite) of that epoch go to the model
 through :meth:`PseudorangeNavigator.parameters`, so H is evaluated per epoch.
 
-The vertical channel is free (no barometer): the model has no altitude
-reference, the pseudo-ranges bound it.
+The vertical channel is the scenario's (``altitude_reference``); profile_003
+flies it free, as the model assumes: no barometer, the pseudo-ranges bound it.
 """
 
 from __future__ import annotations
@@ -70,10 +70,12 @@ from modelgen.simulation.integration import (
     measurement_function,
     operating_point,
     run_filter,
+    samples_per_cycle,
+    whole_ratio,
 )
 from modelgen.simulation.rotation import misalignment, rotate_attitude
 from modelgen.simulation.scenario import Scenario
-from modelgen.simulation.strapdown import ALGORITHMS, Strapdown
+from modelgen.simulation.strapdown import Strapdown
 from modelgen.simulation.trajectory import Trajectory
 
 #: the model's states, in the order the navigator maps them (pseudorange_model(n), gps_pseudorange11)
@@ -165,15 +167,8 @@ class PseudorangeNavigator:
         self.satellites = satellite_count(derived)
         trajectory = sensors.trajectory
         self.period = trajectory.record_period
-        self.samples_per_cycle = trajectory.record_every
-        if self.samples_per_cycle % ALGORITHMS[scenario.coning][1]:
-            raise ModelError(f"scenario: {self.samples_per_cycle} IMU samples per filter cycle is not a multiple of "
-                             f"the {scenario.coning}-sample update")
-        ratio = scenario.pseudorange.period / self.period
-        if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6 * ratio:
-            raise ModelError(f"scenario {scenario.name!r}: pseudorange period {scenario.pseudorange.period} s is not a "
-                             f"whole multiple of the filter period {self.period} s")
-        self.every = int(round(ratio))
+        self.samples_per_cycle = samples_per_cycle(trajectory, scenario.coning)
+        self.every = whole_ratio(scenario.pseudorange.period, self.period, "pseudorange period")
         visible = np.isfinite(record.pseudoranges[::self.every]).sum(axis=1)
         if visible.min() < self.satellites:
             j = int(np.argmin(visible))
@@ -182,7 +177,8 @@ class PseudorangeNavigator:
                 f"{int(visible[j])} satellites are above the {math.degrees(scenario.pseudorange.elevation_mask):g} deg "
                 f"elevation mask at t = {record.times[j * self.every]:g} s ({int(visible.min())}..{int(visible.max())} "
                 f"visible over the flight)")
-        self.strapdown = Strapdown(sensors.initial_navigation, trajectory.imu_rate, scenario.coning, None)
+        self.strapdown = Strapdown(sensors.initial_navigation, trajectory.imu_rate, scenario.coning,
+                                   scenario.vertical_damping)
         self.clock = np.zeros(2)  # (b^, d^): the navigator's own clock estimate [m, m/s]
         self.cycle = 0
         self.selected = np.arange(self.satellites)
@@ -191,8 +187,9 @@ class PseudorangeNavigator:
     # -- navigator protocol ------------------------------------------------------------
     def advance(self, cycle: int) -> None:
         start = (cycle - 1) * self.samples_per_cycle
+        heights = self.sensors.altitude_reference
         self.strapdown.run(self.sensors.delta_theta, self.sensors.delta_velocity, start,
-                           start + self.samples_per_cycle)
+                           start + self.samples_per_cycle, (heights[cycle - 1], heights[cycle]))
         self.clock[0] += self.clock[1] * self.period
         self.cycle = cycle
 

@@ -72,8 +72,8 @@ def simulate(scenario: Scenario, out_dir: Path, runs: int = 20, seed: int = 0, w
 
     ``implementation`` is the filter of the three correction-mode runs: the
     generated ``c`` (compiled now) or ``python``, or the numpy ``reference``.
-    The Monte Carlo runs use the reference, which the tests hold to the
-    generated code within 1e-12.
+    The Monte Carlo runs use the reference, which the conformance tests hold
+    to the generated code within 1e-12 (scaled covariance difference).
     """
     import matplotlib
 
@@ -99,8 +99,8 @@ def simulate(scenario: Scenario, out_dir: Path, runs: int = 20, seed: int = 0, w
     with tempfile.TemporaryDirectory(prefix="modelgen-simulate-") as code_dir:
         t = time.perf_counter()
         make_filter = filter_factory(derived, implementation, code_dir)
-        timings[f"filter code ({implementation}: generate, compile or import)"] = time.perf_counter() - t
-        echo(f"  filter: {implementation} ({timings[f'filter code ({implementation}: generate, compile or import)']:.1f} s to build)")
+        build = timings[f"filter code ({implementation}: generate, compile or import)"] = time.perf_counter() - t
+        echo(f"  filter: {implementation} ({build:.1f} s to build)")
         for mode in MODES:
             t = time.perf_counter()
             results[mode] = run_scenario(scenario, derived, trajectory, rng, make_filter,
@@ -302,9 +302,9 @@ def _summary(scenario, model_name, implementation, conventions, trajectory, resu
     for mode, result in results.items():
         offered = result.updates + len(result.rejected)
         if offered and len(result.rejected) > 0.01 * offered:
-            why = (f"In this mode the INS runs uncorrected and its error reaches {free_ins:.3g} m; the terms the "
-                   "first-order error model neglects grow with the square of the error and exceed the filter's "
-                   "sigma.  Closed-loop feedback keeps the errors small enough for the model to hold."
+            why = (f"In this mode the INS runs uncorrected and its error reaches {free_ins:.3g} m; at that size the "
+                   "terms the first-order error model neglects (they grow with the square of the error) can exceed "
+                   "the filter's sigma.  Closed-loop feedback keeps the errors small enough for the model to hold."
                    if mode != "closed_loop" else
                    "With feedback the errors stay small, so this points at the filter's tuning or model.")
             lines += [f"**{mode}: the gate rejected {len(result.rejected)} of {offered} measurements "
@@ -315,7 +315,8 @@ def _summary(scenario, model_name, implementation, conventions, trajectory, resu
         lines += [
             f"## Monte Carlo ({mc.runs} runs, {mc.mode}, {mc.seconds:.1f} s)",
             "",
-            "Filter: the numpy reference (the tests hold the generated code to it within 1e-12).",
+            "Filter: the numpy reference (the conformance tests hold the generated code to it within 1e-12, "
+            "scaled covariance difference).",
             "",
             f"Ensemble mean NEES inside the 95 % chi-square band [{test.lower:.2f}, {test.upper:.2f}] "
             f"(n = {test.dimension}) at {100 * test.fraction_inside:.0f} % of the {len(test.times)} stored times: "

@@ -95,9 +95,10 @@ def test_paper_profile_and_covariance_error_budget_transcribe_table_1_identicall
     assert s.initial_errors.position == 0 and sigma["latitude_error"] == 0
 
 
-def test_seed_001_profile_flies_a_free_vertical_channel_like_its_model_and_bad_values_are_refused():
-    s = load_scenario("profile_001")
-    assert s.vertical_damping.k1 == 0 and s.vertical_damping.k2 == 0  # ins_gps15 models no baro loop
+def test_gps_profiles_fly_a_free_vertical_channel_like_their_models_and_bad_values_are_refused():
+    for name in ("profile_001", "profile_003"):  # ins_gps15 and gps_pseudorange11 model no baro loop
+        s = load_scenario(name)
+        assert s.vertical_damping.k1 == 0 and s.vertical_damping.k2 == 0, name
     assert load_scenario("profile_000").vertical_damping.k2 > 0  # the paper's model has no vertical channel
     d = data()
     d["altitude_reference"]["vertical_channel"] = "baro"
