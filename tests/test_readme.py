@@ -43,3 +43,14 @@ def test_readme_transform_example_builds_a_14_state_model(tmp_path):
     path.write_text(example)
     derived = derive(load_model(path))
     assert derived.n_states == 14 and derived.model.state_names[-1] == "doppler_scale_factor"
+
+
+def test_readme_test_command_is_what_ci_runs():
+    """README's second command is the one .ci/run runs (CI runs what users are told to run)."""
+    import re
+
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    commands = re.findall(r"```sh\n(pip install [^\n]+)\n```", readme)
+    assert len(commands) >= 2, commands
+    assert commands[1] in (REPO / ".ci" / "run").read_text(encoding="utf-8")
+    assert all("-c constraints.txt" in c for c in commands[:2])
