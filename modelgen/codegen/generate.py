@@ -14,10 +14,7 @@ failure never leaves a half-written ``generated/<model>/``.
 from __future__ import annotations
 
 import json
-import os
 import re
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from typing import Callable
 from importlib import resources
@@ -46,6 +43,7 @@ from modelgen.codegen.printers import CPrinter, PyPrinter
 from modelgen.codegen.structure import FilterStructure, filter_structure
 from modelgen.derivation import DerivedModel
 from modelgen.errors import ModelError
+from modelgen.output import write_atomically  # noqa: F401  (re-exported: the one atomic writer lives in modelgen.output)
 
 __all__ = ["CodegenOptions", "GeneratedCode", "generate_code", "render_c_template", "write_atomically", "template_folder"]
 
@@ -457,28 +455,3 @@ def _py_tuple(names: list[str]) -> str:
     if not names:
         return "()"
     return "(" + ", ".join(json.dumps(x) for x in names) + ("," if len(names) == 1 else "") + ")"
-
-
-def write_atomically(folder: Path, files: dict[str, str]) -> Path:
-    """Replace ``folder`` by exactly ``files``, never leaving it half-written."""
-    folder = Path(folder)
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
-    try:
-        for name, text in sorted(files.items()):
-            target = staging / name
-            target.parent.mkdir(parents=True, exist_ok=True)
-            target.write_text(text, encoding="utf-8", newline="\n")
-        old = None
-        if folder.exists():
-            old = folder.with_name(f".{folder.name}.old")
-            if old.exists():
-                shutil.rmtree(old)
-            os.replace(folder, old)
-        os.replace(staging, folder)
-        if old is not None:
-            shutil.rmtree(old)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return folder

@@ -1,0 +1,402 @@
+"""The one writer of modelgen's output: whole files and whole folders, never lost, never half-written.
+
+A generated folder ``OUT/<model>/`` is replaced as a unit: the new files are
+written into a staging folder next to it (``OUT/.<model>.modelgen-staging-*``)
+and swapped in by two renames, so at any moment the folder holds either the
+complete old output or the complete new one.
+
+The folder may also hold files modelgen did not write (a user's ``main.c``, a
+``build/`` folder).  To tell them apart, every write leaves a manifest,
+``OUT/<model>/.modelgen-manifest.json``, with the sha256 of each file written.
+On the next write:
+
+- an entry that the manifest does not list is the user's: it is carried over
+  into the new folder untouched (it is renamed, never copied or deleted);
+- a listed file whose content changed since (the user edited generated code)
+  stops the write with a message naming it, unless ``force``;
+- a user entry with the name of a file about to be generated stops the write
+  unless ``force`` (which overwrites it);
+- an existing non-empty folder with no manifest stops the write unless
+  ``force``; with ``force`` all its entries count as the user's (kept unless
+  they collide with a generated file).
+
+Concurrent writers of one folder are serialized by ``fcntl.flock`` on
+``OUT/.<model>.lock``, which is removed when the writer is done (a lock file
+left by a killed process is harmless: the next writer reuses it).  A folder
+``OUT/.<model>.old`` left by a killed process is recovered by the next writer.
+The swap itself runs with SIGINT/SIGTERM/SIGHUP held back, so an interrupt is
+acted on only once the folder is whole.  Files and folders get the user's
+umask.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import hashlib
+import json
+import os
+import shutil
+import signal
+import tempfile
+import threading
+from contextlib import contextmanager
+from pathlib import Path, PurePosixPath
+from typing import Iterator, Mapping
+
+from modelgen import __version__
+from modelgen.errors import ModelError
+
+#: Name of the manifest inside every folder modelgen writes.
+MANIFEST_NAME = ".modelgen-manifest.json"
+
+#: Infix of staging folder names; only folders so named are ever cleaned up as leftovers.
+STAGING_INFIX = "modelgen-staging-"
+
+_HELD_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+
+
+def current_umask() -> int:
+    """The process umask (read by setting and restoring it: there is no getter)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def sha256_text(text: str) -> str:
+    """The sha256 of ``text`` as written (UTF-8)."""
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def sha256_file(path: Path) -> str:
+    """The sha256 of a file's bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for chunk in iter(lambda: handle.read(1 << 16), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def manifest_text(files: Mapping[str, str]) -> str:
+    """The manifest for ``files`` (name -> text): byte-stable, no timestamps."""
+    body = {
+        "generator": "modelgen",
+        "version": __version__,
+        "files": {name: sha256_text(text) for name, text in sorted(files.items())},
+    }
+    return json.dumps(body, indent=2, sort_keys=True) + "\n"
+
+
+def read_manifest(folder: Path) -> dict[str, str] | None:
+    """Relative path -> sha256 of the files modelgen wrote into ``folder``; None without a manifest."""
+    path = Path(folder) / MANIFEST_NAME
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError):
+        raise ModelError(f"{path}: not a modelgen manifest (not valid JSON); remove it or pass --force") from None
+    files = data.get("files") if isinstance(data, dict) else None
+    if not isinstance(files, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in files.items()):
+        raise ModelError(f"{path}: not a modelgen manifest (no 'files' mapping); remove it or pass --force")
+    return {_safe_relative(path, name): digest for name, digest in files.items()}
+
+
+def _safe_relative(manifest: Path, name: str) -> str:
+    """A manifest entry, refused if it points outside its folder (the manifest is untrusted too)."""
+    parts = PurePosixPath(name).parts
+    if not parts or PurePosixPath(name).is_absolute() or ".." in parts or name != str(PurePosixPath(name)):
+        raise ModelError(f"{manifest}: entry {name!r} is not a plain relative path")
+    return name
+
+
+def _entries(folder: Path, owned: set[str], prefix: str = "") -> list[str]:
+    """Relative paths of the largest subtrees of ``folder`` that no owned file lies in (the user's entries)."""
+    found = []
+    with os.scandir(folder) as scan:
+        for entry in sorted(scan, key=lambda e: e.name):
+            rel = f"{prefix}{entry.name}"
+            if rel == MANIFEST_NAME or rel in owned:
+                continue
+            if entry.is_dir(follow_symlinks=False) and any(o.startswith(rel + "/") for o in owned):
+                found += _entries(Path(entry.path), owned, rel + "/")
+            else:
+                found.append(rel)
+    return found
+
+
+def _collides(user_entry: str, new_files: set[str]) -> bool:
+    """True if a user's entry has the path of a new file, or lies on its way."""
+    return any(
+        user_entry == name or name.startswith(user_entry + "/") or user_entry.startswith(name + "/") for name in new_files
+    )
+
+
+def plan_carry_over(folder: Path, new_files: set[str], force: bool) -> tuple[list[str], list[str]]:
+    """Which entries of the existing ``folder`` are kept, and which ``force`` lets the new files overwrite.
+
+    Returns (carried, overwritten) as relative paths; raises ModelError for
+    anything that would lose a user's work without ``force``.
+    """
+    folder = Path(folder)
+    if not folder.exists() and not folder.is_symlink():
+        return [], []
+    if folder.is_symlink() or not folder.is_dir():
+        raise ModelError(f"{folder}: exists and is not a folder; modelgen will not replace it")
+    try:
+        manifest = read_manifest(folder)
+    except ModelError:
+        if not force:
+            raise
+        manifest = None
+    owned = set(manifest or {})
+    user = _entries(folder, owned)
+    if manifest is None and user and not force:
+        raise ModelError(
+            f"{folder}: exists, is not empty and was not written by modelgen (no {MANIFEST_NAME}); "
+            "modelgen never deletes files it did not write: move them away, or pass --force to write into it "
+            "(files that do not collide with generated ones are kept)"
+        )
+    changed = []
+    for name in sorted(owned):
+        path = folder / name
+        if path.is_symlink() or path.is_dir() or (path.exists() and sha256_file(path) != manifest[name]):
+            changed.append(name)
+    if changed and not force:
+        raise ModelError(
+            f"{folder / changed[0]}: changed since modelgen wrote it; copy your changes elsewhere, "
+            "or pass --force to overwrite it"
+        )
+    overwritten = [u for u in user if _collides(u, new_files)]
+    if overwritten and not force:
+        raise ModelError(
+            f"{folder / overwritten[0]}: was not written by modelgen and a generated file would replace it; "
+            "rename it, or pass --force to overwrite it"
+        )
+    return [u for u in user if u not in overwritten], overwritten + changed
+
+
+@contextmanager
+def folder_lock(folder: Path) -> Iterator[Path]:
+    """Hold an exclusive lock on writing ``folder`` (``<parent>/.<name>.lock``), waiting for any other writer.
+
+    The lock file is removed on release; a writer that finds the file it locked
+    already unlinked or replaced takes the lock again, so removal is safe.
+    """
+    folder = Path(folder)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    path = folder.with_name(f".{folder.name}.lock")
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            same = os.path.samestat(os.fstat(fd), os.stat(path))
+        except FileNotFoundError:
+            same = False
+        except BaseException:
+            os.close(fd)
+            raise
+        if same:
+            break
+        os.close(fd)
+    try:
+        yield path
+    finally:
+        try:
+            os.unlink(path)
+        except FileNotFoundError:
+            pass
+        finally:
+            os.close(fd)
+
+
+@contextmanager
+def signals_held() -> Iterator[None]:
+    """Delay SIGINT, SIGTERM and SIGHUP (in the main thread) until the block is done."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def _apply_umask_to_folder(path: Path) -> None:
+    """Give a folder the mode a plain mkdir would (mkdtemp makes it 0700 whatever the umask)."""
+    os.chmod(path, 0o777 & ~current_umask())
+
+
+def _write_text(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "x", encoding="utf-8", newline="\n") as handle:
+        handle.write(text)
+
+
+def _move_entries(source: Path, target: Path, entries: list[str]) -> list[str]:
+    """Rename each entry from ``source`` into ``target`` (same file system); the entries that could not move."""
+    stuck = []
+    for rel in entries:
+        src, dst = source / rel, target / rel
+        if not (src.exists() or src.is_symlink()):
+            continue
+        if dst.exists() or dst.is_symlink():
+            stuck.append(rel)
+            continue
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        os.rename(src, dst)
+    return stuck
+
+
+def _remove_owned(old: Path, owned: set[str], overwritten: list[str]) -> None:
+    """Delete what modelgen wrote in ``old`` (and what --force said to overwrite); keep anything else.
+
+    Raises ModelError if something else is still there, leaving it in place.
+    """
+    for rel in overwritten:
+        path = old / rel
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+        elif path.exists() or path.is_symlink():
+            path.unlink()
+    for rel in sorted(owned | {MANIFEST_NAME}):
+        path = old / rel
+        if path.is_dir() and not path.is_symlink():
+            continue  # a folder where a generated file was: the user's, left for the check below
+        if path.exists() or path.is_symlink():
+            path.unlink()
+    for dirpath, dirnames, filenames in os.walk(old, topdown=False):
+        if not os.listdir(dirpath):
+            os.rmdir(dirpath)
+    if old.exists():
+        raise ModelError(f"{old}: kept, because it still holds files modelgen did not write; move them back by hand")
+
+
+def _remove_staging_leftovers(folder: Path) -> None:
+    """Staging folders of an interrupted writer (only modelgen creates names with STAGING_INFIX)."""
+    for path in folder.parent.glob(f".{folder.name}.{STAGING_INFIX}*"):
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+
+
+def recover_interrupted(folder: Path) -> None:
+    """Finish or undo the swap of a writer that was killed (call with the folder's lock held)."""
+    folder = Path(folder)
+    _remove_staging_leftovers(folder)
+    old = folder.with_name(f".{folder.name}.old")
+    if not old.is_dir() or old.is_symlink():
+        return
+    if not folder.exists():
+        os.rename(old, folder)  # killed between the two renames: the old output comes back
+        return
+    try:
+        owned = set(read_manifest(old) or {})
+    except ModelError:
+        owned = set()
+    _move_entries(old, folder, _entries(old, owned))
+    _remove_owned(old, owned, [])
+
+
+class FolderUpdate:
+    """Replace ``folder`` by new files in two steps: ``stage`` (writable, checkable), then ``commit``.
+
+    Use as a context manager: it holds the folder's lock, and on leaving it
+    (normally, by an exception or by KeyboardInterrupt) removes a staging
+    folder that was not committed, so nothing half-written is ever left.
+    """
+
+    def __init__(self, folder: Path, force: bool = False) -> None:
+        self.folder = Path(folder)
+        self.force = force
+        self.staging: Path | None = None
+        self.files: dict[str, str] = {}
+        self._lock = None
+
+    def __enter__(self) -> "FolderUpdate":
+        self._lock = folder_lock(self.folder)
+        self._lock.__enter__()
+        try:
+            recover_interrupted(self.folder)
+        except BaseException:
+            self._lock.__exit__(None, None, None)
+            raise
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        try:
+            if self.staging is not None:
+                shutil.rmtree(self.staging, ignore_errors=True)
+                self.staging = None
+        finally:
+            self._lock.__exit__(*exc_info)
+
+    def stage(self, files: Mapping[str, str]) -> Path:
+        """Check that nothing of the user's would be lost, then write ``files`` and the manifest into a staging folder."""
+        names = set(files)
+        for name in names:
+            _safe_relative(self.folder / name, name)
+        plan_carry_over(self.folder, names, self.force)
+        self.staging = Path(tempfile.mkdtemp(prefix=f".{self.folder.name}.{STAGING_INFIX}", dir=self.folder.parent))
+        _apply_umask_to_folder(self.staging)
+        written = {}
+        for name, text in sorted(files.items()):
+            _write_text(self.staging / name, text)
+            written[name] = text
+        _write_text(self.staging / MANIFEST_NAME, manifest_text(written))
+        self.files = written
+        return self.staging
+
+    def commit(self) -> Path:
+        """Swap the staged files in, carrying the user's entries over; return the folder."""
+        if self.staging is None:
+            raise RuntimeError("commit() without stage()")
+        carried, overwritten = plan_carry_over(self.folder, set(self.files), self.force)
+        for extra in _entries(self.staging, set(self.files)):  # e.g. __pycache__ from checking the staged code
+            path = self.staging / extra
+            shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
+        old = self.folder.with_name(f".{self.folder.name}.old")
+        with signals_held():
+            if self.folder.exists():
+                try:
+                    owned = set(read_manifest(self.folder) or {})
+                except ModelError:
+                    owned = set()  # --force over a broken manifest: every entry is the user's
+                os.rename(self.folder, old)
+                os.rename(self.staging, self.folder)
+                self.staging = None
+                _move_entries(old, self.folder, carried)
+                _remove_owned(old, owned, overwritten)
+            else:
+                os.rename(self.staging, self.folder)
+                self.staging = None
+        return self.folder
+
+
+def write_atomically(folder: Path, files: Mapping[str, str], force: bool = False) -> Path:
+    """Replace ``folder`` by ``files`` (name -> text) plus a manifest, keeping the user's own files.
+
+    See the module docstring for what is kept, what is refused and what
+    ``force`` overrides.  A failure leaves the previous folder as it was.
+    """
+    with FolderUpdate(folder, force) as update:
+        update.stage(files)
+        return update.commit()
+
+
+def write_text_atomically(path: Path, text: str) -> Path:
+    """Write one file through a temporary file and a rename: readers see the old or the new text, never a part."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.is_dir() and not path.is_symlink():
+        raise OSError(errno.EISDIR, "is a folder, not a file", str(path))
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
+            handle.write(text)
+        os.chmod(tmp, 0o666 & ~current_umask())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
