@@ -1,0 +1,342 @@
+"""The navigator configuration (YAML): logs, mounting, noise in data-sheet units, switches.
+
+A configuration is untrusted data: it is read with ``yaml.safe_load``
+semantics (no tags, nothing runs), every key is checked against the schema
+below, and every refusal names the file and line.  Noise densities are given
+in the units of the data sheet (``deg/s/sqrt(Hz)``, ``ug/sqrt(Hz)``,
+``deg/sqrt(h)`` ...) together with an explicit multiplying ``factor``; the
+SI value the filter uses is ``value * unit * factor``, and the report prints
+all three.  See ``modelgen/data/replay_drive_0708.yaml`` for a complete,
+commented example.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from modelgen.errors import ModelError
+from modelgen.navigator.logs import ACCEL_UNITS, GYRO_UNITS, STANDARD_GRAVITY, ImuColumns
+
+DEG = math.pi / 180.0
+MICRO_G = 1e-6 * STANDARD_GRAVITY
+
+# Accepted units of each noise density, as the factor to the SI unit the model uses.
+NOISE_UNITS: dict[str, dict[str, float]] = {
+    # gyro white noise (angle random walk) -> rad/sqrt(s)
+    "gyro_white": {"rad/sqrt(s)": 1.0, "rad/s/sqrt(Hz)": 1.0, "deg/s/sqrt(Hz)": DEG,
+                   "deg/sqrt(h)": DEG / 60.0, "deg/h/sqrt(Hz)": DEG / 3600.0},
+    # accelerometer white noise (velocity random walk) -> m/s/sqrt(s)
+    "accel_white": {"m/s/sqrt(s)": 1.0, "m/s^2/sqrt(Hz)": 1.0, "ug/sqrt(Hz)": MICRO_G,
+                    "mg/sqrt(Hz)": 1e3 * MICRO_G, "m/s/sqrt(h)": 1.0 / 60.0},
+    # gyro bias random-walk driving noise -> rad/s/sqrt(s)
+    "gyro_bias_driving": {"rad/s/sqrt(s)": 1.0, "rad/s^2/sqrt(Hz)": 1.0, "deg/s^2/sqrt(Hz)": DEG,
+                          "deg/h/sqrt(s)": DEG / 3600.0},
+    # accelerometer bias random-walk driving noise -> m/s^2/sqrt(s)
+    "accel_bias_driving": {"m/s^2/sqrt(s)": 1.0, "m/s^3/sqrt(Hz)": 1.0, "ug/s/sqrt(Hz)": MICRO_G,
+                           "ug/sqrt(Hz)": MICRO_G},
+}
+
+SCHEMA: dict[str, set[str]] = {
+    "": {"navigator", "description", "model", "imu", "gnss", "noise", "initial", "alignment", "filter",
+         "zupt", "nhc", "outages", "output"},
+    "imu": {"file", "columns", "units", "time_offset_s", "gap_factor", "rotation_to_body_deg"},
+    "imu.columns": {"count", "time", "accel", "gyro"},
+    "imu.units": {"accel", "gyro"},
+    "imu.rotation_to_body_deg": {"roll", "pitch", "yaw"},
+    "gnss": {"file", "lever_arm_m", "quality_factor", "minimum_sigma_position_m", "minimum_sigma_velocity_m_s"},
+    "noise": set(NOISE_UNITS),
+    **{f"noise.{k}": {"value", "unit", "factor", "why"} for k in NOISE_UNITS},
+    "initial": {"roll_pitch_sigma_deg", "heading_extra_sigma_deg", "velocity_sigma_m_s", "position_sigma_m",
+                "height_sigma_m", "gyro_bias_sigma_deg_s", "accel_bias_sigma_ug"},
+    "alignment": {"rest_speed_m_s", "rest_window_s", "heading_speed_m_s"},
+    "filter": {"predict_period_s", "nis_gate_probability", "gate_release_epochs"},
+    "zupt": {"enabled", "window_s", "gyro_max_deg_s", "accel_std_max_m_s2", "speed_max_m_s", "sigma_m_s"},
+    "nhc": {"enabled", "sigma_lateral_m_s", "sigma_vertical_m_s", "speed_min_m_s"},
+    "outages": {"first_after_s", "length_s", "period_s", "end_margin_s", "windows"},
+    "output": {"folder"},
+}
+
+
+@dataclass(frozen=True)
+class NoiseEntry:
+    """One noise density: data-sheet value and unit, the stated factor, and the SI result."""
+
+    value: float
+    unit: str
+    factor: float
+    si: float
+    why: str
+
+
+@dataclass(frozen=True)
+class NavigatorConfig:
+    """Everything the navigator needs, validated and in SI units (angles in radians)."""
+
+    path: str
+    name: str
+    model: str
+    imu_file: Path
+    imu_columns: ImuColumns
+    time_offset: float
+    gap_factor: float
+    rotation_to_body: tuple[float, float, float]  # roll, pitch, yaw [rad]
+    gnss_file: Path
+    lever_arm: tuple[float, float, float]  # IMU to antenna, body axes [m]
+    quality_factor: dict[int, float]
+    minimum_sigma_position: float
+    minimum_sigma_velocity: float
+    noise: dict[str, NoiseEntry]
+    roll_pitch_sigma: float
+    heading_extra_sigma: float
+    velocity_sigma: float
+    position_sigma: float
+    height_sigma: float
+    gyro_bias_sigma: float
+    accel_bias_sigma: float
+    rest_speed: float
+    rest_window: float
+    heading_speed: float
+    predict_period: float
+    nis_gate_probability: float
+    gate_release_epochs: int
+    zupt_enabled: bool
+    zupt_window: float
+    zupt_gyro_max: float
+    zupt_accel_std_max: float
+    zupt_speed_max: float
+    zupt_sigma: float
+    nhc_enabled: bool
+    nhc_sigma_lateral: float
+    nhc_sigma_vertical: float
+    nhc_speed_min: float
+    outage_schedule: dict[str, float] | None
+    outage_windows: list[tuple[float, float]] | None
+
+
+def _line_map(node: yaml.Node, prefix: str, lines: dict[str, int]) -> None:
+    """Record the 1-based line of every key path ('a.b.c') in a composed YAML tree."""
+    if isinstance(node, yaml.MappingNode):
+        for key, value in node.value:
+            path = f"{prefix}.{key.value}" if prefix else str(key.value)
+            lines[path] = key.start_mark.line + 1
+            _line_map(value, path, lines)
+
+
+class _Reader:
+    """Typed access to the loaded mapping, every error naming file:line and key."""
+
+    def __init__(self, path: Path, data: dict[str, Any], lines: dict[str, int]):
+        self.path, self.data, self.lines = path, data, lines
+
+    def where(self, key: str) -> str:
+        """'file:line' of a key path, or of the closest enclosing key that has a line."""
+        probe = key
+        while probe and probe not in self.lines:
+            probe = probe.rpartition(".")[0]
+        return f"{self.path}:{self.lines[probe]}" if probe else str(self.path)
+
+    def get(self, key: str, default: Any = ...) -> Any:
+        """The raw value at a key path; ModelError if missing and no default."""
+        node: Any = self.data
+        for part in key.split("."):
+            if not isinstance(node, dict) or part not in node:
+                if default is ...:
+                    raise ModelError(f"{self.where(key)}: missing key {key!r}")
+                return default
+            node = node[part]
+        return node
+
+    def number(self, key: str, default: Any = ..., positive: bool = False, non_negative: bool = False) -> float:
+        """A finite float at a key path (optionally > 0 or >= 0)."""
+        value = self.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ModelError(f"{self.where(key)}: {key} must be a finite number, got {value!r}")
+        if positive and value <= 0:
+            raise ModelError(f"{self.where(key)}: {key} must be positive, got {value!r}")
+        if non_negative and value < 0:
+            raise ModelError(f"{self.where(key)}: {key} must not be negative, got {value!r}")
+        return float(value)
+
+    def integer(self, key: str, default: Any = ..., minimum: int = 0) -> int:
+        """An int at a key path, at least ``minimum``."""
+        value = self.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            raise ModelError(f"{self.where(key)}: {key} must be an integer >= {minimum}, got {value!r}")
+        return value
+
+    def flag(self, key: str, default: Any = ...) -> bool:
+        """A boolean at a key path."""
+        value = self.get(key, default)
+        if not isinstance(value, bool):
+            raise ModelError(f"{self.where(key)}: {key} must be true or false, got {value!r}")
+        return value
+
+    def text(self, key: str, default: Any = ...) -> str:
+        """A string at a key path."""
+        value = self.get(key, default)
+        if not isinstance(value, str):
+            raise ModelError(f"{self.where(key)}: {key} must be text, got {value!r}")
+        return value
+
+    def vector(self, key: str, length: int) -> tuple[float, ...]:
+        """A list of ``length`` finite numbers."""
+        value = self.get(key)
+        if (not isinstance(value, list) or len(value) != length
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+            raise ModelError(f"{self.where(key)}: {key} must be a list of {length} finite numbers, got {value!r}")
+        return tuple(float(v) for v in value)
+
+    def file(self, key: str) -> Path:
+        """A data file path, relative to the configuration's folder; it must exist."""
+        name = self.text(key)
+        path = (self.path.parent / name) if not Path(name).is_absolute() else Path(name)
+        if not path.is_file():
+            raise ModelError(f"{self.where(key)}: {key}: no such file {str(path)!r}")
+        return path
+
+
+def _check_keys(reader: _Reader) -> None:
+    """Refuse any key the schema does not know, naming it and its line."""
+    def walk(node: Any, prefix: str) -> None:
+        if prefix not in SCHEMA:
+            return
+        if not isinstance(node, dict):
+            raise ModelError(f"{reader.where(prefix)}: {prefix or 'the file'} must be a mapping")
+        for key, value in node.items():
+            path = f"{prefix}.{key}" if prefix else str(key)
+            if key not in SCHEMA[prefix]:
+                known = ", ".join(sorted(SCHEMA[prefix]))
+                raise ModelError(f"{reader.where(path)}: unknown key {key!r} in {prefix or 'the configuration'} "
+                                 f"(known: {known})")
+            walk(value, path)
+    walk(reader.data, "")
+
+
+def _noise(reader: _Reader, kind: str) -> NoiseEntry:
+    """One noise density converted to SI with its stated factor."""
+    key = f"noise.{kind}"
+    unit = reader.text(f"{key}.unit")
+    if unit not in NOISE_UNITS[kind]:
+        raise ModelError(f"{reader.where(key + '.unit')}: {key}.unit {unit!r} cannot be parsed "
+                         f"(accepted: {', '.join(NOISE_UNITS[kind])})")
+    value = reader.number(f"{key}.value", positive=True)
+    factor = reader.number(f"{key}.factor", positive=True)
+    return NoiseEntry(value, unit, factor, value * NOISE_UNITS[kind][unit] * factor, reader.text(f"{key}.why", ""))
+
+
+def _outages(reader: _Reader) -> tuple[dict[str, float] | None, list[tuple[float, float]] | None]:
+    """Either a schedule (first_after_s, length_s, period_s, end_margin_s) or a list of windows, or none."""
+    raw = reader.get("outages", None)
+    if raw is None:
+        return None, None
+    if "windows" in raw:
+        if set(raw) != {"windows"}:
+            raise ModelError(f"{reader.where('outages')}: outages: give either windows or a schedule, not both")
+        windows = raw["windows"]
+        if not isinstance(windows, list):
+            raise ModelError(f"{reader.where('outages.windows')}: outages.windows must be a list of [start_s, length_s]")
+        out = []
+        for item in windows:
+            if (not isinstance(item, list) or len(item) != 2
+                    or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in item)
+                    or item[1] <= 0):
+                raise ModelError(f"{reader.where('outages.windows')}: each outage window is [start_s, length_s > 0], "
+                                 f"got {item!r}")
+            out.append((float(item[0]), float(item[1])))
+        return None, out
+    schedule = {k: reader.number(f"outages.{k}", positive=k in ("length_s", "period_s"), non_negative=True)
+                for k in ("first_after_s", "length_s", "period_s", "end_margin_s")}
+    if schedule["length_s"] >= schedule["period_s"]:
+        raise ModelError(f"{reader.where('outages.length_s')}: outages.length_s must be shorter than period_s")
+    return schedule, None
+
+
+def load_config(path: str | Path) -> NavigatorConfig:
+    """Read and validate a navigator configuration file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ModelError(f"{path}: cannot be read as UTF-8 text ({exc})") from None
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
+        raise ModelError(f"{where}: not valid YAML ({getattr(exc, 'problem', exc)})") from None
+    if not isinstance(data, dict):
+        raise ModelError(f"{path}: expected a mapping at the top level")
+    lines: dict[str, int] = {}
+    _line_map(node, "", lines)
+    r = _Reader(path, data, lines)
+    _check_keys(r)
+    accel_unit, gyro_unit = r.text("imu.units.accel"), r.text("imu.units.gyro")
+    if accel_unit not in ACCEL_UNITS:
+        raise ModelError(f"{r.where('imu.units.accel')}: accelerometer unit {accel_unit!r} cannot be parsed "
+                         f"(accepted: {', '.join(ACCEL_UNITS)})")
+    if gyro_unit not in GYRO_UNITS:
+        raise ModelError(f"{r.where('imu.units.gyro')}: gyro unit {gyro_unit!r} cannot be parsed "
+                         f"(accepted: {', '.join(GYRO_UNITS)})")
+    count = r.integer("imu.columns.count", minimum=7)
+    accel = tuple(int(v) for v in r.vector("imu.columns.accel", 3))
+    gyro = tuple(int(v) for v in r.vector("imu.columns.gyro", 3))
+    columns = ImuColumns(count, r.integer("imu.columns.time", minimum=1), accel, gyro, accel_unit, gyro_unit)  # type: ignore[arg-type]
+    if max(columns.time, *accel, *gyro) > count or min(*accel, *gyro) < 1:
+        raise ModelError(f"{r.where('imu.columns')}: column numbers must be within 1..{count}")
+    quality_raw = r.get("gnss.quality_factor")
+    if not isinstance(quality_raw, dict) or not quality_raw:
+        raise ModelError(f"{r.where('gnss.quality_factor')}: gnss.quality_factor must map RTKLIB Q values to factors")
+    quality = {}
+    for q, factor in quality_raw.items():
+        if isinstance(q, bool) or not isinstance(q, int) or isinstance(factor, bool) or not isinstance(factor, (int, float)) \
+                or not math.isfinite(factor) or factor <= 0:
+            raise ModelError(f"{r.where('gnss.quality_factor')}: gnss.quality_factor entry {q!r}: {factor!r} must be "
+                             "an integer Q and a positive factor")
+        quality[q] = float(factor)
+    rotation = r.get("imu.rotation_to_body_deg")
+    schedule, windows = _outages(r)
+    return NavigatorConfig(
+        path=str(path), name=r.text("navigator"), model=r.text("model"),
+        imu_file=r.file("imu.file"), imu_columns=columns,
+        time_offset=r.number("imu.time_offset_s", 0.0), gap_factor=r.number("imu.gap_factor", 3.0, positive=True),
+        rotation_to_body=tuple(r.number(f"imu.rotation_to_body_deg.{k}") * DEG for k in ("roll", "pitch", "yaw"))
+        if rotation is not None else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
+        gnss_file=r.file("gnss.file"), lever_arm=r.vector("gnss.lever_arm_m", 3),  # type: ignore[arg-type]
+        quality_factor=quality,
+        minimum_sigma_position=r.number("gnss.minimum_sigma_position_m", non_negative=True),
+        minimum_sigma_velocity=r.number("gnss.minimum_sigma_velocity_m_s", non_negative=True),
+        noise={kind: _noise(r, kind) for kind in NOISE_UNITS},
+        roll_pitch_sigma=r.number("initial.roll_pitch_sigma_deg", positive=True) * DEG,
+        heading_extra_sigma=r.number("initial.heading_extra_sigma_deg", non_negative=True) * DEG,
+        velocity_sigma=r.number("initial.velocity_sigma_m_s", positive=True),
+        position_sigma=r.number("initial.position_sigma_m", positive=True),
+        height_sigma=r.number("initial.height_sigma_m", positive=True),
+        gyro_bias_sigma=r.number("initial.gyro_bias_sigma_deg_s", positive=True) * DEG,
+        accel_bias_sigma=r.number("initial.accel_bias_sigma_ug", positive=True) * MICRO_G,
+        rest_speed=r.number("alignment.rest_speed_m_s", positive=True),
+        rest_window=r.number("alignment.rest_window_s", positive=True),
+        heading_speed=r.number("alignment.heading_speed_m_s", positive=True),
+        predict_period=r.number("filter.predict_period_s", positive=True),
+        nis_gate_probability=r.number("filter.nis_gate_probability", positive=True),
+        gate_release_epochs=r.integer("filter.gate_release_epochs", minimum=1),
+        zupt_enabled=r.flag("zupt.enabled"), zupt_window=r.number("zupt.window_s", positive=True),
+        zupt_gyro_max=r.number("zupt.gyro_max_deg_s", positive=True) * DEG,
+        zupt_accel_std_max=r.number("zupt.accel_std_max_m_s2", positive=True),
+        zupt_speed_max=r.number("zupt.speed_max_m_s", positive=True),
+        zupt_sigma=r.number("zupt.sigma_m_s", positive=True),
+        nhc_enabled=r.flag("nhc.enabled"), nhc_sigma_lateral=r.number("nhc.sigma_lateral_m_s", positive=True),
+        nhc_sigma_vertical=r.number("nhc.sigma_vertical_m_s", positive=True),
+        nhc_speed_min=r.number("nhc.speed_min_m_s", non_negative=True),
+        outage_schedule=schedule, outage_windows=windows,
+    )
+
+
+def builtin_config_path() -> Path:
+    """The configuration that flies the built-in drive (``modelgen replay`` with no arguments)."""
+    return Path(__file__).resolve().parent.parent / "data" / "replay_drive_0708.yaml"
