@@ -3,21 +3,124 @@
 Each subcommand is a thin wrapper: it parses options, calls one module's
 public function and prints where the results went.  ``modelgen run`` is the
 main job: derive, verify, generate, compile-check and report.
+
+Errors are handled once, in ``ModelgenGroup.invoke`` (the error boundary):
+bad input of any kind (model, scenario, unreadable or unwritable file)
+prints ``modelgen: error: <file>[:line]: <what>`` and exits 2, a failed
+check exits 1, an interrupt exits 130 and an internal error exits 3; no
+traceback is shown unless ``--debug`` is given.  Usage errors keep click's
+exit code 2.
 """
 
 from __future__ import annotations
 
+import errno
+import os
+import subprocess
 import sys
+import traceback
+import warnings
+from types import TracebackType
 
 import click
 
 from modelgen.errors import ModelError
 
+#: Exit codes of every command (README, "Commands").
+EXIT_CHECK_FAILED = 1
+EXIT_BAD_INPUT = 2
+EXIT_INTERNAL_ERROR = 3
+EXIT_INTERRUPTED = 130
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+_PRINTER_MODULES = (os.path.join("sympy", "printing"), os.path.join("modelgen", "codegen", "printers.py"))
+
+
+def _raised_while_printing(tb: TracebackType | None) -> bool:
+    """True if the traceback passes through a code printer (sympy's or modelgen's)."""
+    return any(any(m in frame.filename for m in _PRINTER_MODULES) for frame, _ in traceback.walk_tb(tb))
+
+
+def _os_error_message(exc: OSError) -> str:
+    """``<file>: <what>`` for an OSError, naming both files of a rename."""
+    what = exc.strerror or str(exc)
+    if exc.errno == errno.ENOSPC:
+        what += " (the file system is full; nothing was half-written)"
+    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        what += " (choose a writable folder with --out)"
+    if exc.filename is not None and exc.filename2 is not None:
+        return f"{exc.filename} -> {exc.filename2}: {what}"
+    if exc.filename is not None:
+        return f"{exc.filename}: {what}"
+    return what
+
+
+def error_message(exc: BaseException) -> tuple[str, int] | None:
+    """The user's message and exit code for an exception the boundary handles, else None (internal error)."""
+    if isinstance(exc, ModelError):
+        return str(exc), EXIT_BAD_INPUT
+    if isinstance(exc, UnicodeError):
+        reason = exc.reason if isinstance(exc, UnicodeDecodeError) else str(exc)
+        return f"input is not UTF-8 text ({reason})", EXIT_BAD_INPUT
+    if isinstance(exc, OSError):
+        return _os_error_message(exc), EXIT_BAD_INPUT
+    if isinstance(exc, RecursionError):
+        return "input nested too deeply to process (Python's recursion limit was reached)", EXIT_BAD_INPUT
+    if isinstance(exc, MemoryError):
+        return "out of memory: the input is too large to process", EXIT_BAD_INPUT
+    if isinstance(exc, subprocess.TimeoutExpired):
+        command = exc.cmd if isinstance(exc.cmd, str) else " ".join(map(str, exc.cmd))
+        return f"{command}: did not finish within {exc.timeout:g} s", EXIT_BAD_INPUT
+    if isinstance(exc, (NotImplementedError, TypeError, ValueError)) and _raised_while_printing(exc.__traceback__):
+        return f"an expression cannot be printed as code: {exc}", EXIT_BAD_INPUT
+    return None
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Python warnings as one line, the way users read modelgen's messages."""
+    click.echo(f"modelgen: warning: {message}", err=True)
+
+
+class ModelgenGroup(click.Group):
+    """The command group, with the one error boundary around every command."""
+
+    def invoke(self, ctx: click.Context):
+        debug = bool(ctx.params.get("debug"))
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            try:
+                return super().invoke(ctx)
+            except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+                raise
+            except KeyboardInterrupt:
+                if debug:
+                    raise
+                click.echo("modelgen: interrupted", err=True)
+                raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
+            except Exception as exc:  # the one place that turns failures into messages
+                if debug or (isinstance(exc, OSError) and exc.errno == errno.EPIPE):
+                    raise
+                handled = error_message(exc)
+                if handled is None:
+                    click.echo(
+                        f"modelgen: error: internal error: {type(exc).__name__}: {exc} "
+                        "(run `modelgen --debug ...` for the traceback, and please report it)",
+                        err=True,
+                    )
+                    raise click.exceptions.Exit(EXIT_INTERNAL_ERROR) from None
+                message, code = handled
+                click.echo(f"modelgen: error: {message}", err=True)
+                raise click.exceptions.Exit(code) from None
+
+
+@click.group(cls=ModelgenGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="modelgen")
-def main() -> None:
-    """Turn inertial-navigation error models into verified Kalman-filter code."""
+@click.option("--debug", is_flag=True, help="Show the Python traceback of an error instead of a one-line message.")
+def main(debug: bool) -> None:
+    """Turn inertial-navigation error models into verified Kalman-filter code.
+
+    Exit codes: 0 ok, 1 a check failed, 2 bad input or usage (the message
+    names the file and line), 3 internal error, 130 interrupted.
+    """
 
 
 def _paper_operating_point(derived) -> dict[str, float] | None:
@@ -27,12 +130,6 @@ def _paper_operating_point(derived) -> dict[str, float] | None:
     values = dict(paper_scenario(derived).parameters) if derived.model.frame == "NED" else {}
     needed = {p.name for p in derived.model.parameters if p.value is None}
     return values if values and needed <= set(values) else None
-
-
-def fail(exc: Exception) -> None:
-    """Print a bad-input error the way a user wants to read it, and exit 2."""
-    click.echo(f"modelgen: error: {exc}", err=True)
-    sys.exit(2)
 
 
 @main.command()
@@ -45,10 +142,7 @@ def derive(model: str) -> None:
     from modelgen.derivation import derive as derive_model
     from modelgen.modelfile import load_model
 
-    try:
-        derived = derive_model(load_model(model))
-    except ModelError as exc:
-        fail(exc)
+    derived = derive_model(load_model(model))
     m = derived.model
     click.echo(f"model {m.name}: {derived.n_states} states, {derived.n_noises} noises, {derived.n_measurements} measurements")
     for label, matrix, rows, cols in (
@@ -72,46 +166,52 @@ def derive(model: str) -> None:
 @click.option("--update", type=click.Choice(["vector", "sequential"]), default="vector", show_default=True, help="All measurements at once (Cholesky solve) or one scalar at a time (covariance form).")
 @click.option("--covariance-update", type=click.Choice(["joseph", "standard"]), default="joseph", show_default=True, help="Joseph form or P - K H P (covariance form).")
 @click.option("--all", "all_models", is_flag=True, help="Generate every built-in model.")
-@click.option("--check/--no-check", default=False, help="Also compile the C and run it beside the numpy reference.")
+@click.option("--check/--no-check", default=False, help="Also compile the C and run it beside the numpy reference, in a staging folder: only code that passes replaces OUT/<model>/ (a failure exits 1 and keeps the previous output).")
+@click.option("--force", is_flag=True, help="Overwrite files in OUT/<model>/ that modelgen did not write or that were edited since (files with other names are always kept).")
 def generate(
     models: tuple[str, ...], out_root: str, taylor_order: int, scalar: str, form: str, storage: str, update: str,
-    covariance_update: str, all_models: bool, check: bool,
+    covariance_update: str, all_models: bool, check: bool, force: bool,
 ) -> None:
     """Generate Python and C99 filter code for MODELS (files or built-in names).
 
     Each model is derived, its code rendered from templates/ and written
     atomically to OUT/<model>/: a failure leaves the previous output intact.
+    OUT/<model>/.modelgen-manifest.json records the files modelgen wrote and
+    their sha256.  Files and folders it did not write (your main.c, a build/
+    folder) are kept.  If a generated file was edited since, or a file of
+    yours has the name of a generated file, or the folder exists without a
+    manifest, nothing is written unless --force is given.  Concurrent runs
+    into one folder wait for each other (lock file OUT/.<model>.lock).
     """
     from pathlib import Path
 
     from modelgen.codegen.generate import CodegenOptions
     from modelgen.modelfile import builtin_models
-    from modelgen.pipeline import CONFORMANCE_TOLERANCE, check as check_code, generate as generate_model
+    from modelgen.pipeline import CONFORMANCE_TOLERANCE, generate as generate_model
 
     names = list(models) or (builtin_models() if all_models else ["ned_doppler18"])
-    try:
-        options = CodegenOptions(
-            taylor_order=taylor_order, scalar=scalar, form=form, storage=storage, update=update, covariance_update=covariance_update
-        )
-        for name in names:
-            result = generate_model(name, Path(out_root), options)
-            click.echo(f"{result.derived.model.name}: wrote {', '.join(sorted(result.code.files))} to {result.folder}")
-            click.echo(f"  filter: {options.describe()}")
-            for kernel, cost in result.code.costs.items():
-                click.echo(f"  {kernel}: {cost}")
-            if check and scalar == "float":
-                click.echo("  check: float code is checked against the double reference by `modelgen embedded`")
-            if check and scalar == "double":
-                for r in check_code(result.derived, result.folder, options=options):
-                    verdict = "ok" if r.passed(CONFORMANCE_TOLERANCE) else "FAILED"
-                    click.echo(
-                        f"  check {r.implementation}: {r.steps} steps, max scaled dP {r.max_scaled_P:.2e}, "
-                        f"dx {r.max_scaled_x:.2e} -> {verdict}"
-                    )
-                    if verdict != "ok":
-                        sys.exit(1)
-    except ModelError as exc:
-        fail(exc)
+    options = CodegenOptions(
+        taylor_order=taylor_order, scalar=scalar, form=form, storage=storage, update=update, covariance_update=covariance_update
+    )
+    for name in names:
+        result = generate_model(name, Path(out_root), options, force=force, with_check=check and scalar == "double")
+        model_name = result.derived.model.name
+        click.echo(f"{model_name}: {', '.join(sorted(result.code.files))}")
+        click.echo(f"  filter: {options.describe()}")
+        for kernel, cost in result.code.costs.items():
+            click.echo(f"  {kernel}: {cost}")
+        if check and scalar == "float":
+            click.echo("  check: float code is checked against the double reference by `modelgen embedded`")
+        for r in result.checks:
+            verdict = "ok" if r.passed(CONFORMANCE_TOLERANCE) else "FAILED"
+            click.echo(
+                f"  check {r.implementation}: {r.steps} steps, max scaled dP {r.max_scaled_P:.2e}, "
+                f"dx {r.max_scaled_x:.2e} -> {verdict}"
+            )
+        if not result.written:
+            click.echo(f"{model_name}: check FAILED; {result.folder} was left as it was", err=True)
+            sys.exit(EXIT_CHECK_FAILED)
+        click.echo(f"  wrote {result.folder}")
 
 
 @main.command()
@@ -119,7 +219,8 @@ def generate(
 @click.option("--report", "report_dir", default="report", show_default=True, type=click.Path(file_okay=False), help="Folder for the reports.")
 @click.option("--no-figures", is_flag=True, help="Skip the covariance-analysis figures.")
 @click.option("--simulate/--no-simulate", "with_simulation", default=True, show_default=True, help="Also fly the paper's 4-h profile once (300 Hz strapdown, Doppler filter).")
-def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool) -> None:
+@click.option("--force", is_flag=True, help="As for generate: overwrite files in OUT/<model>/ that modelgen did not write or that were edited.")
+def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool, force: bool) -> None:
     """The main job, end to end on the core paper's 18-state model.
 
     Derives the model, verifies it entry by entry against the paper's table,
@@ -133,39 +234,37 @@ def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool)
     from modelgen.analysis.report import run_covariance_analysis
     from modelgen.derivation import derive as derive_model
     from modelgen.modelfile import load_model
-    from modelgen.pipeline import generate_and_check_all, run_report, write_text_atomically
+    from modelgen.output import write_text_atomically
+    from modelgen.pipeline import generate_and_check_all, run_report
     from modelgen.verification import verify as verify_model, write_verification_report
 
     report = Path(report_dir)
-    try:
-        click.echo("derive ned_doppler18 ...")
-        derived = derive_model(load_model("ned_doppler18"))
-        click.echo("verify against the paper's table ...")
-        result = verify_model(derived)
-        md, js = write_verification_report(result, report)
-        counts = result.counts()
-        summary = (
-            f"{len(result.entries)} entries: "
-            + ", ".join(f"{counts[k]} {k}" for k in counts)
-            + f"; {len(result.unexplained)} unexplained. Differences:\n\n"
-            + "\n".join(f"- {e.matrix}({e.row},{e.column}) {e.status}: {e.classification} - {e.reason}" for e in result.differences)
-            + f"\n\nFull report: [{md.name}]({md.name}), machine-readable: [{js.name}]({js.name})."
-        )
-        runs = generate_and_check_all(Path(out_root), progress=click.echo)
-        click.echo("covariance analysis (Table 2, Figs 2-7) ...")
-        analysis = run_covariance_analysis(report / "covariance", figures=not no_figures, progress=click.echo)
-        sections = ["## Covariance analysis (Table 2 analogue)\n\n" + analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)"]
-        if with_simulation:
-            from modelgen.simulation.report import simulate as run_simulation
-            from modelgen.simulation.scenario import load_scenario as load_profile
+    click.echo("derive ned_doppler18 ...")
+    derived = derive_model(load_model("ned_doppler18"))
+    click.echo("verify against the paper's table ...")
+    result = verify_model(derived)
+    md, js = write_verification_report(result, report)
+    counts = result.counts()
+    summary = (
+        f"{len(result.entries)} entries: "
+        + ", ".join(f"{counts[k]} {k}" for k in counts)
+        + f"; {len(result.unexplained)} unexplained. Differences:\n\n"
+        + "\n".join(f"- {e.matrix}({e.row},{e.column}) {e.status}: {e.classification} - {e.reason}" for e in result.differences)
+        + f"\n\nFull report: [{md.name}]({md.name}), machine-readable: [{js.name}]({js.name})."
+    )
+    runs = generate_and_check_all(Path(out_root), progress=click.echo, force=force)
+    click.echo("covariance analysis (Table 2, Figs 2-7) ...")
+    analysis = run_covariance_analysis(report / "covariance", figures=not no_figures, progress=click.echo)
+    sections = ["## Covariance analysis (Table 2 analogue)\n\n" + analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)"]
+    if with_simulation:
+        from modelgen.simulation.report import simulate as run_simulation
+        from modelgen.simulation.scenario import load_scenario as load_profile
 
-            click.echo("simulate the paper's flight (profile_000, one run) ...")
-            sim = run_simulation(load_profile("profile_000"), report / "simulation", runs=1, seed=1, echo=click.echo)
-            sections.append(f"## Simulation\n\nThe paper's profile flown once with the generated C filter: [simulation/{Path(sim).name}](simulation/{Path(sim).name}) and its figures.")
-        text = run_report(summary, runs, Path(out_root), sections)
-        write_text_atomically(report / "README.md", text)
-    except ModelError as exc:
-        fail(exc)
+        click.echo("simulate the paper's flight (profile_000, one run) ...")
+        sim = run_simulation(load_profile("profile_000"), report / "simulation", runs=1, seed=1, echo=click.echo)
+        sections.append(f"## Simulation\n\nThe paper's profile flown once with the generated C filter: [simulation/{Path(sim).name}](simulation/{Path(sim).name}) and its figures.")
+    text = run_report(summary, runs, Path(out_root), sections)
+    write_text_atomically(report / "README.md", text)
     click.echo(text)
     failed = [r.generation.derived.model.name for r in runs if not r.passed]
     if failed or result.unexplained:
@@ -191,14 +290,11 @@ def embedded(model: str, out_dir: str, qemu: bool) -> None:
     from modelgen.modelfile import load_model
     from modelgen.pipeline import paper_scenario, synthetic_scenario
 
-    try:
-        derived = derive_model(load_model(model))
-        scenario = None
-        if qemu:
-            scenario = paper_scenario(derived) if derived.model.name == "ned_doppler18" else synthetic_scenario(derived)
-        report = embedded_report(derived, scenario, out_dir)
-    except ModelError as exc:
-        fail(exc)
+    derived = derive_model(load_model(model))
+    scenario = None
+    if qemu:
+        scenario = paper_scenario(derived) if derived.model.name == "ned_doppler18" else synthetic_scenario(derived)
+    report = embedded_report(derived, scenario, out_dir)
     for slug, b in report.builds.items():
         click.echo(
             f"{slug}: filter .text {b.filter_object.text} .data {b.filter_object.data} .bss {b.filter_object.bss}; "
@@ -232,15 +328,12 @@ def verify(model: str, out_dir: str) -> None:
     from modelgen.paper_table import paper_table_path
     from modelgen.verification import verify as verify_model, write_verification_report
 
-    try:
-        loaded = load_model(model)
-        if paper_table_path(loaded.name) is None:
-            click.echo(f"model {loaded.name}: no paper table to verify against (only the built-in paper model has one)")
-            return
-        result = verify_model(derive_model(loaded))
-        markdown, data = write_verification_report(result, out_dir)
-    except ModelError as exc:
-        fail(exc)
+    loaded = load_model(model)
+    if paper_table_path(loaded.name) is None:
+        click.echo(f"model {loaded.name}: no paper table to verify against (only the built-in paper model has one)")
+        return
+    result = verify_model(derive_model(loaded))
+    markdown, data = write_verification_report(result, out_dir)
     counts = result.counts()
     click.echo(f"model {result.model} against {result.table}: {len(result.entries)} entries, " + ", ".join(f"{n} {s}" for s, n in counts.items()))
     for e in result.differences:
@@ -274,17 +367,14 @@ def observability(model: str, scenario_file: str | None, assignments: tuple[str,
     from modelgen.modelfile import load_model
     from modelgen.observability import analyse, command_line_scenario, format_report
 
-    try:
-        derived = derive_model(load_model(model))
-        base = _paper_operating_point(derived) if scenario_file is None else None
-        if base:
-            click.echo("scenario: the core paper's level flight (30 N, east, 300 km/h, Table 1 statistics)")
-        scenario = command_line_scenario(
-            scenario_file, assignments, step, steps, default_steps=derived.n_states, base_values=base
-        )
-        report = analyse(derived, scenario, weak_rtol=weak_rtol)
-    except ModelError as exc:
-        fail(exc)
+    derived = derive_model(load_model(model))
+    base = _paper_operating_point(derived) if scenario_file is None else None
+    if base:
+        click.echo("scenario: the core paper's level flight (30 N, east, 300 km/h, Table 1 statistics)")
+    scenario = command_line_scenario(
+        scenario_file, assignments, step, steps, default_steps=derived.n_states, base_values=base
+    )
+    report = analyse(derived, scenario, weak_rtol=weak_rtol)
     click.echo(format_report(report))
 
 
@@ -302,12 +392,9 @@ def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool) -> None:
     """
     from modelgen.analysis.report import run_covariance_analysis
 
-    try:
-        report = run_covariance_analysis(
-            out_dir, sensitivity=not no_sensitivity, figures=not no_figures, progress=lambda m: click.echo(m, err=True)
-        )
-    except ModelError as exc:
-        fail(exc)
+    report = run_covariance_analysis(
+        out_dir, sensitivity=not no_sensitivity, figures=not no_figures, progress=lambda m: click.echo(m, err=True)
+    )
     click.echo(report.table)
     click.echo("wrote " + ", ".join(str(p) for p in report.files))
 
@@ -329,17 +416,14 @@ def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | Non
     from modelgen.simulation.report import simulate as run_simulation
     from modelgen.simulation.scenario import load_scenario
 
-    try:
-        scenario = load_scenario(profile)
-        changes = {"imu_rate": imu_rate} if imu_rate else {}
-        if hours is not None:
-            changes["hours"] = hours
-        summary = run_simulation(scenario.with_changes(**changes), out_dir, runs=runs, seed=seed,
-                                 echo=lambda m: click.echo(m, err=True), implementation=implementation)
-    except ModelError as exc:
-        fail(exc)
+    scenario = load_scenario(profile)
+    changes = {"imu_rate": imu_rate} if imu_rate else {}
+    if hours is not None:
+        changes["hours"] = hours
+    summary = run_simulation(scenario.with_changes(**changes), out_dir, runs=runs, seed=seed,
+                             echo=lambda m: click.echo(m, err=True), implementation=implementation)
     click.echo(f"wrote {summary}")
 
 
 if __name__ == "__main__":
-    main()
+    main(prog_name="modelgen")

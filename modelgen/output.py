@@ -25,7 +25,8 @@ Concurrent writers of one folder are serialized by ``fcntl.flock`` on
 left by a killed process is harmless: the next writer reuses it).  A folder
 ``OUT/.<model>.old`` left by a killed process is recovered by the next writer.
 The swap itself runs with SIGINT/SIGTERM/SIGHUP held back, so an interrupt is
-acted on only once the folder is whole.  Files and folders get the user's
+acted on only once the folder is whole; an interrupt at any other moment
+removes the staging folder and leaves the previous output as it was.  Files and folders get the user's
 umask.
 """
 
@@ -212,15 +213,26 @@ def folder_lock(folder: Path) -> Iterator[Path]:
 
 @contextmanager
 def signals_held() -> Iterator[None]:
-    """Delay SIGINT, SIGTERM and SIGHUP (in the main thread) until the block is done."""
+    """Hold SIGINT, SIGTERM and SIGHUP back until the block is done, then act on them.
+
+    The Python handlers are swapped for one that only records the signal (a
+    signal mask would not do: a process-wide signal may go to a BLAS thread,
+    and Python then runs its handler in the main thread anyway).
+    """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD_SIGNALS)
+    received: list[int] = []
+    previous = {}
+    for signum in _HELD_SIGNALS:
+        previous[signum] = signal.signal(signum, lambda number, frame: received.append(number))
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+        for signum in dict.fromkeys(received):
+            signal.raise_signal(signum)
 
 
 def _apply_umask_to_folder(path: Path) -> None:

@@ -9,17 +9,17 @@ operating point, which checks the code, not the navigation.
 
 from __future__ import annotations
 
-import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from modelgen.codegen.generate import CodegenOptions, GeneratedCode, generate_code, write_atomically
+from modelgen.codegen.generate import CodegenOptions, GeneratedCode, generate_code
 from modelgen.conformance import ConformanceResult, Scenario, check_generated
 from modelgen.derivation import DerivedModel, derive
 from modelgen.modelfile import load_model
+from modelgen.output import FolderUpdate
 
 #: The C and Python must agree with the reference to this scaled difference.
 CONFORMANCE_TOLERANCE = 1e-12
@@ -27,25 +27,66 @@ CONFORMANCE_TOLERANCE = 1e-12
 
 @dataclass(frozen=True)
 class GenerationResult:
+    """One model's generated code and where it went.
+
+    ``checks`` holds the conformance results when the code was checked;
+    ``written`` is False when a failing check kept the previous output.
+    """
+
     derived: DerivedModel
     code: GeneratedCode
     folder: Path
+    checks: tuple[ConformanceResult, ...] = ()
+    written: bool = True
+
+    @property
+    def passed(self) -> bool:
+        """True if every check (if any was run) is within tolerance."""
+        return checks_passed(self.checks)
 
 
-def generate(model: str | Path, out_root: Path = Path("generated"), options: CodegenOptions | None = None) -> GenerationResult:
-    """Load, derive and generate one model into ``out_root/<model>/`` atomically."""
+def checks_passed(results) -> bool:
+    """The pass criterion of ``--check``: every implementation within the conformance tolerance."""
+    return all(r.passed() for r in results)
+
+
+def generate(
+    model: str | Path,
+    out_root: Path = Path("generated"),
+    options: CodegenOptions | None = None,
+    force: bool = False,
+    with_check: bool = False,
+) -> GenerationResult:
+    """Load, derive and generate one model into ``out_root/<model>/`` atomically.
+
+    The code is written to a staging folder beside the output (see
+    ``modelgen.output``).  With ``with_check`` it is compiled and checked
+    there, and it replaces the previous output only if the check passes: a
+    failing check leaves the last good output as it was.  ``force`` lets the
+    new files overwrite files in the folder that modelgen did not write or
+    that were edited since.
+    """
     derived = derive(load_model(model))
+    options = options or CodegenOptions()
     code = generate_code(derived, options)
-    folder = write_atomically(Path(out_root) / derived.model.name, code.files)
-    return GenerationResult(derived, code, folder)
+    folder = Path(out_root) / derived.model.name
+    with FolderUpdate(folder, force=force) as update:
+        staged = update.stage(code.files)
+        checks = tuple(check(derived, staged, options=options)) if with_check else ()
+        if not checks_passed(checks):
+            return GenerationResult(derived, code, folder, checks, written=False)
+        update.commit()
+    return GenerationResult(derived, code, folder, checks)
 
 
 def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -> Scenario:
-    """A well-conditioned operating point for checking code of any model.
+    """A well-conditioned operating point for checking code of a model without a ``check:`` section.
 
     Parameters without a default are drawn from [0.2, 1.0]; the step is
     chosen so that ||F T|| is about 0.5, which keeps the Taylor series and the
-    covariance well scaled whatever the model's units.
+    covariance well scaled whatever the model's units.  It checks the code,
+    not the navigation (an attitude matrix drawn so is no rotation), and says
+    so in its label.
     """
     rng = np.random.default_rng(seed)
     values = {p.name: float(rng.uniform(0.2, 1.0)) for p in derived.model.parameters if p.value is None}
@@ -53,7 +94,8 @@ def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -
     norm = float(np.linalg.norm(F, 2))
     step = 0.5 / norm if norm > 0 else 1.0
     x0 = rng.standard_normal(derived.n_states)
-    return Scenario(values, np.eye(derived.n_states), step=step, steps=steps, seed=seed, initial_state=x0)
+    label = "synthetic operating point (the model declares no check: section; parameters drawn from [0.2, 1])"
+    return Scenario(values, np.eye(derived.n_states), step=step, steps=steps, seed=seed, initial_state=x0, label=label)
 
 
 def paper_scenario(derived: DerivedModel) -> Scenario:
@@ -63,16 +105,41 @@ def paper_scenario(derived: DerivedModel) -> Scenario:
 
     flight, budget = load_scenario(), load_error_budget()
     values = {**budget.parameters, **operating_point(flight)}
-    return Scenario(values, budget.initial_covariance(derived.model), step=flight.step_s, steps=flight.steps)
+    label = "the core paper's scenario (seed 000: level flight east at 30 N, Table 1, 240 steps of 60 s)"
+    return Scenario(values, budget.initial_covariance(derived.model), step=flight.step_s, steps=flight.steps, label=label)
+
+
+def declared_scenario(derived: DerivedModel) -> Scenario | None:
+    """The scenario of the model file's ``check:`` section (modelgen.checkspec), if it has one.
+
+    The initial state is drawn from N(0, P(0)) with the section's seed, so the
+    state propagation is exercised too, not only the covariance.
+    """
+    spec = derived.model.check
+    if spec is None:
+        return None
+    P0 = spec.covariance(derived.model.state_names, derived.model.name)
+    rng = np.random.default_rng(spec.seed + 1)  # not the measurement stream's seed
+    x0 = np.sqrt(np.diag(P0)) * rng.standard_normal(derived.n_states)
+    label = f"the model's check scenario ({spec.steps} steps of {spec.step_s:g} s)"
+    return Scenario(spec.parameter_values(), P0, step=spec.step_s, steps=spec.steps, seed=spec.seed, initial_state=x0, label=label)
+
+
+def check_scenario(derived: DerivedModel) -> Scenario:
+    """What ``--check`` flies: the model's declared scenario, else the synthetic one (labelled so)."""
+    return declared_scenario(derived) or synthetic_scenario(derived)
 
 
 def check(
     derived: DerivedModel, folder: Path, scenario: Scenario | None = None, options: CodegenOptions | None = None
 ) -> list[ConformanceResult]:
-    """Compile the generated C and run it and the Python beside the reference."""
+    """Compile the generated C and run it and the Python beside the reference.
+
+    Each result carries its own tolerance, computed from the run's
+    conditioning (modelgen.conformance.conformance_tolerance).
+    """
     options = options or CodegenOptions()
-    if scenario is None:
-        scenario = paper_scenario(derived) if derived.model.name == "ned_doppler18" else synthetic_scenario(derived)
+    scenario = scenario or check_scenario(derived)
     with tempfile.TemporaryDirectory(prefix="modelgen-check-") as build_dir:
         return check_generated(folder, derived, scenario, Path(build_dir), options)
 
@@ -86,18 +153,18 @@ class ModelRun:
 
     @property
     def passed(self) -> bool:
-        return all(r.passed(CONFORMANCE_TOLERANCE) for r in self.checks)
+        return checks_passed(self.checks)
 
 
-def generate_and_check_all(out_root: Path, progress=print) -> list[ModelRun]:
-    """Generate every built-in model into ``out_root`` and check its code."""
+def generate_and_check_all(out_root: Path, progress=print, force: bool = False) -> list[ModelRun]:
+    """Generate every built-in model into ``out_root``, checked before it replaces the previous output."""
     from modelgen.modelfile import builtin_models
 
     runs = []
     for name in builtin_models():
         progress(f"generate + check {name} ...")
-        result = generate(name, out_root)
-        runs.append(ModelRun(result, check(result.derived, result.folder)))
+        result = generate(name, out_root, force=force, with_check=True)
+        runs.append(ModelRun(result, list(result.checks)))
     return runs
 
 
@@ -130,18 +197,3 @@ def run_report(verification_summary: str, runs: list[ModelRun], out_root: Path, 
     for section in extra_sections:
         lines += [section, ""]
     return "\n".join(lines).rstrip() + "\n"
-
-
-def write_text_atomically(path: Path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file and a rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
