@@ -15,7 +15,7 @@ import numpy as np
 import sympy as sp
 
 from modelgen.errors import ModelError
-from modelgen.model import ErrorModel
+from modelgen.model import ErrorModel, nonlinear_variables
 
 
 @dataclass(frozen=True)
@@ -119,11 +119,10 @@ def derive(model: ErrorModel) -> DerivedModel:
         R = sp.zeros(0, 0)
     Q = sp.diag(*[model.noise_psd[n] for n in model.noise_names]) if model.noises else sp.zeros(0, 0)
 
-    nonlinear = tuple(
-        name
-        for name, rhs in zip(model.state_names, f)
-        if any(sp.diff(rhs, a, b) != 0 for a in (*x, *w) for b in (*x, *w) if rhs.has(a) and rhs.has(b))
-    )
+    # ErrorModel.build refuses nonlinear equations (one rule for every command);
+    # this stays as a guard for models assembled around build, by the same rule.
+    errors_and_noises = {*model.state_symbols, *model.noise_symbols}
+    nonlinear = tuple(name for name, rhs in zip(model.state_names, f) if nonlinear_variables(rhs, errors_and_noises))
     return DerivedModel(
         model=model,
         F=_tidy(F),

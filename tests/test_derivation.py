@@ -6,7 +6,7 @@ import sympy as sp
 
 from modelgen.derivation import derive, parameter_vector
 from modelgen.errors import ModelError
-from modelgen.model import ErrorModel, Noise, Parameter, State
+from modelgen.model import ErrorModel, Measurement, Noise, Parameter, State
 
 
 def test_paper_model_has_the_papers_dimensions(paper_derived):
@@ -54,15 +54,38 @@ def test_markov_noise_psd_is_two_mu_sigma_squared(paper_derived):
     assert sp.simplify(paper_derived.Q[0, 0] - 2 * mu * sigma**2) == 0
 
 
-def test_nonlinear_equation_is_flagged():
+@pytest.mark.parametrize(
+    "dynamics, measurement",
+    [
+        ({"a": "a*b", "b": "k*b + w"}, "a"),  # product of two states
+        ({"a": "a*w", "b": "k*b + w"}, "a"),  # state times noise
+        ({"a": "sin(b)", "b": "k*b + w"}, "a"),
+        ({"a": "k*a", "b": "k*b + w"}, "b**2 + b"),  # nonlinear measurement, the same rule
+        ({"a": "k*a", "b": "k*b + w"}, "sqrt(a)"),
+    ],
+)
+def test_nonlinear_equation_or_measurement_is_refused_when_the_model_is_built(dynamics, measurement):
+    with pytest.raises(ModelError, match="not linear"):
+        ErrorModel.build(
+            "toy",
+            states=[State("a"), State("b")],
+            noises=[Noise("w")],
+            parameters=[Parameter("k")],
+            dynamics=dynamics,
+            measurements=[Measurement("z", expression=measurement)],
+        )
+
+
+def test_linear_equations_with_nonlinear_parameters_are_accepted():
     model = ErrorModel.build(
         "toy",
         states=[State("a"), State("b")],
         noises=[Noise("w")],
         parameters=[Parameter("k")],
-        dynamics={"a": "a*b", "b": "k*b + w"},
+        dynamics={"a": "sin(k)**2*a + b/cos(k)", "b": "-k*b + sqrt(k)*w"},
+        measurements=[Measurement("z", expression="a*exp(k) - b")],
     )
-    assert derive(model).nonlinear == ("a",)
+    assert derive(model).nonlinear == ()
 
 
 def test_missing_and_unknown_parameters_are_refused(paper_model):
