@@ -6,6 +6,8 @@ model, the declaration or equation, and the offending name).
 
 from __future__ import annotations
 
+import re
+
 import pytest
 import sympy as sp
 
@@ -154,3 +156,169 @@ def test_paper_symbol_names_that_are_sympy_functions_mean_the_declared_symbol():
 def test_check_identifier_accepts_spelled_out_names():
     for name in ("attitude_error_north", "gyro_markov_drift_x", "x1", "c11"):
         check_identifier(name, "here")
+
+
+# -- issue 10: nothing undefined, oversized, colliding or hidden gets through -------------------
+
+
+def equation(rhs: str) -> str:
+    """The refusal message for ``rhs`` as the velocity equation of the toy model."""
+    return refused(".", dynamics={"dx": "dv", "dv": rhs})
+
+
+@pytest.mark.parametrize(
+    "rhs, problem",
+    [
+        ("0/0*dv", "undefined or infinite"),
+        ("dv/(1-1)", "undefined or infinite"),
+        ("dv/(mu-mu)", "undefined or infinite"),
+        ("log(0)*dv", "undefined or infinite"),
+        ("tan(pi/2)*dv", "undefined or infinite"),
+        ("sqrt(-4)*dv", "complex"),
+        ("asin(2)*dv", "not a finite real number"),
+        ("exp(1000)*dv", "not a finite real number"),
+        ("dv/(sin(mu)**2 + cos(mu)**2 - 1)", "divides by .* which is zero"),
+    ],
+)
+def test_undefined_infinite_or_complex_equation_is_refused_naming_it(rhs, problem):
+    msg = equation(rhs)
+    assert re.search(problem, msg) and "d(dv)/dt" in msg
+
+
+@pytest.mark.parametrize(
+    "field, text",
+    [("psd", "log(0)*mu"), ("variance", "sqrt(-1)"), ("expression", "dx/(2-2)")],
+)
+def test_undefined_statistic_or_measurement_is_refused(field, text):
+    if field == "psd":
+        refused("psd.*undefined", noises=[Noise("accel_noise", symbol="w", psd=text)])
+    else:
+        refused(f"{'variance' if field == 'variance' else 'position_difference'}.*(complex|undefined)",
+                measurements=[Measurement("position_difference", **{field: text})])
+
+
+def test_negative_psd_expression_is_refused_but_zero_and_unknown_sign_are_accepted():
+    refused("negative", noises=[Noise("accel_noise", symbol="w", psd="-sigma**2")])
+    refused("negative", measurements=[Measurement("position_difference", expression="dx", variance="-(mu**2 + 1)")])
+    build(noises=[Noise("accel_noise", symbol="w", psd="0")])
+    build(noises=[Noise("accel_noise", symbol="w", psd="2*mu*sigma**2")])
+
+
+@pytest.mark.parametrize(
+    "rhs, problem",
+    [
+        ("10**10**10*dv", "power of a power"),
+        ("2**65*dv", "exponent 65"),
+        ("mu**(-100)*dv", "exponent"),
+        ("mu**(1/0)*dv", "exponent"),
+        ("Float(1, 100000000)*dv", "unknown function.*Float"),
+        ("Rational(1, 0)*dv", "unknown function.*Rational"),
+        ("Integer(10)**Integer(10)*dv", "unknown function.*Integer"),
+        ("1e400*dv", "beyond the range of a double"),
+        ("1" + "0" * 60 + "*dv", "at most 40"),
+        ("1j*dv", "not a decimal number"),
+        ("0x10*dv", "not a decimal number"),
+        ("-" * 500 + "dv", "nested more than 100"),
+        ("dv" + " + dv" * 200, "nested more than 100"),
+        ("(" * 300 + "dv" + ")" * 300, "cannot parse"),
+        ("(mu + sigma + 1)**64*(mu + sigma + 2)**64*dv", "more than 10000 terms"),
+        ("dv" + " + 0" * 5000, "at most 10000 are accepted"),
+    ],
+    ids=lambda v: v if len(v) < 30 else f"{v[:12]}...{len(v)}chars",
+)
+def test_pathological_expression_is_refused_quickly_before_sympy_evaluates_it(rhs, problem):
+    import time
+
+    start = time.perf_counter()
+    msg = equation(rhs)
+    assert re.search(problem, msg), msg
+    assert len(msg) < 400  # a huge expression is quoted in part
+    assert time.perf_counter() - start < 5
+
+
+def test_limits_leave_ordinary_expressions_alone():
+    m = build(dynamics={"dx": "dv", "dv": "-mu**2*dv/(1 + mu)**(3/2) + 2.5e-3*sigma**-2*w + mu**sigma*dv + (mu + 1)**64*dv"})
+    assert m.dynamics["velocity_error"].has(sp.Symbol("w", real=True))
+
+
+def test_too_many_states_are_refused_before_any_equation_is_parsed():
+    states = [State(f"s{i}") for i in range(1001)]
+    msg = refused("1001 states declared; at most 1000", states=states, dynamics={})
+    assert "'toy'" in msg
+
+
+@pytest.mark.parametrize(
+    "name, collision",
+    [
+        ("N", "macro of the generated C"),
+        ("N_ACTIVE", "macro of the generated C"),
+        ("NAN", "C standard library"),
+        ("INFINITY", "C standard library"),
+        ("HUGE_VAL", "C standard library"),
+        ("errno", "C standard library"),
+        ("EOF", "C standard library"),
+        ("NULL", "C standard library"),
+        ("FLT_EPSILON", "C standard library"),
+        ("offsetof", "C standard library"),
+        ("bool", "C standard library"),
+        ("size_t", "C standard library"),
+        ("isnan", "C standard library"),
+        ("stdout", "C standard library"),
+        ("M_PI", "POSIX or compiler-predefined"),
+        ("linux", "POSIX or compiler-predefined"),
+        ("unix", "POSIX or compiler-predefined"),
+        ("i386", "POSIX or compiler-predefined"),
+        ("np", "generated Python module"),
+        ("math", "generated Python module"),
+        ("PARAMETER_NAMES", "generated Python module"),
+    ],
+)
+def test_parameter_name_colliding_with_generated_code_is_refused_naming_the_collision(name, collision):
+    msg = refused("collides with", parameters=[Parameter(name, symbol="mu", value=0.5), Parameter("sigma")])
+    assert repr(name) in msg and collision in msg
+
+
+@pytest.mark.parametrize("name", ["math", "stdio", "string", "float", "stdlib", "assert", "limits", "stdint", "errno", "time", "unistd"])
+def test_model_named_like_a_standard_header_is_refused(name):
+    msg = refused("model name", name=name)
+    assert repr(name) in msg and ("keyword" in msg or "collides with" in msg)
+
+
+@pytest.mark.parametrize("name", ["numpy", "os", "sys", "json", "scipy", "sympy", "modelgen"])
+def test_model_named_like_a_python_module_is_refused(name):
+    msg = refused("collides with", name=name)
+    assert "Python module" in msg or "Python" in msg
+
+
+def test_reserved_identifiers_are_refused():
+    refused("underscore", parameters=[Parameter("__linux__", symbol="mu"), Parameter("sigma")])
+    refused("underscore", parameters=[Parameter("_Reserved", symbol="mu"), Parameter("sigma")])
+
+
+@pytest.mark.parametrize(
+    "char", ["\x00", "\x1b", "\r", "\x0b", "\x0c", "\x7f", "\x85", "\u202a", "\u202e", "\u2066", "\u2069", "\u200f", "\u2028"]
+)
+@pytest.mark.parametrize("field", ["title", "source", "unit", "description"])
+def test_control_characters_in_free_text_are_refused_naming_the_field(char, field):
+    text = f"before{char}after"
+    if field in ("title", "source"):
+        msg = refused("control character", **{field: text})
+    else:
+        msg = refused("control character", states=[State("position_error", symbol="dx", **{field: text}), State("velocity_error", symbol="dv")])
+    assert field in msg and f"U+{ord(char):04X}" in msg
+
+
+def test_line_feed_and_tab_are_allowed_in_descriptions_and_notes_but_not_in_a_title_or_unit():
+    build(notes=["first line\nsecond\tline"], states=[State("position_error", symbol="dx", description="a\nb\tc"), State("velocity_error", symbol="dv")])
+    refused("title.*U\\+000A", title="two\nlines")
+    refused("unit.*U\\+0009", states=[State("position_error", unit="m\t", symbol="dx"), State("velocity_error", symbol="dv")])
+    refused("notes\\[1\\].*U\\+001B", notes=["fine", "\x1b[31mred"])
+
+
+@pytest.mark.parametrize(
+    "text",
+    ['a*/b', 'say """hi"""', "C:\\models\\new\\toy", "{{ model }} {% if %}", "# not a comment", "it's \"quoted\"", "*/ int x; /*", "ünïcødé µ°"],
+)
+def test_awkward_but_visible_free_text_loads(text):
+    m = build(title=text, source=text, notes=[text], states=[State("position_error", unit=text, description=text, symbol="dx"), State("velocity_error", symbol="dv")])
+    assert m.title == text and m.states[0].description == text
