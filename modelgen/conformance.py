@@ -14,6 +14,9 @@ of the correlation coefficient.  The *elementwise* relative difference
 correlation coefficient is tiny (1e-6), where it measures the rounding of a
 nearly cancelling sum rather than a disagreement, so the pass criterion is
 the scaled one.
+
+The tolerance is computed per run (:func:`conformance_tolerance`), from how
+much the run's own arithmetic cancels: see :func:`step_conditioning`.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ class Scenario:
     steps: int = 240
     seed: int = 0
     initial_state: np.ndarray | None = None  # zeros when None
+    label: str = "synthetic operating point"  # what the scenario is, for reports
 
     def x0(self) -> np.ndarray:
         n = self.initial_covariance.shape[0]
@@ -60,10 +64,13 @@ class ConformanceResult:
     max_elementwise_P: float  # max |dP_ij| / |P_ij|, for information
     symmetric: bool
     positive_definite: bool
+    tolerance: float = float("nan")  # this run's bound (conformance_tolerance); nan: none computed
+    scenario: str = ""  # the scenario's label: what was flown
 
-    def passed(self, tolerance: float) -> bool:
-        """Scaled differences below ``tolerance``, P symmetric and positive definite."""
-        return self.max_scaled_P < tolerance and self.max_scaled_x < tolerance and self.symmetric and self.positive_definite
+    def passed(self, tolerance: float | None = None) -> bool:
+        """Scaled differences below ``tolerance`` (default: the run's own), P symmetric and positive definite."""
+        limit = self.tolerance if tolerance is None else tolerance
+        return self.max_scaled_P < limit and self.max_scaled_x < limit and self.symmetric and self.positive_definite
 
 
 def relative_difference(value: np.ndarray, ref: np.ndarray) -> float:
@@ -179,14 +186,20 @@ def _named_parameters(derived: DerivedModel, scenario: Scenario) -> dict[str, fl
     return dict(zip(derived.model.parameter_names, values))
 
 
-def compare(name: str, run: list[tuple[np.ndarray, np.ndarray]], ref: list[tuple[np.ndarray, np.ndarray]]) -> ConformanceResult:
+def compare(
+    name: str,
+    run: list[tuple[np.ndarray, np.ndarray]],
+    ref: list[tuple[np.ndarray, np.ndarray]],
+    tolerance: float = float("nan"),
+    scenario: str = "",
+) -> ConformanceResult:
     """Worst relative differences of ``run`` against ``ref`` over all steps."""
     scaled = [scaled_differences(x, P, xr, Pr) for (x, P), (xr, Pr) in zip(run, ref)]
     elementwise = max(relative_difference(P, Pr) for (_, P), (_, Pr) in zip(run, ref))
     symmetric = all(np.array_equal(P, P.T) for _, P in run)
     positive = all(is_positive_definite(P) for _, P in run)
     return ConformanceResult(
-        name, len(run), max(s[0] for s in scaled), max(s[1] for s in scaled), elementwise, symmetric, positive
+        name, len(run), max(s[0] for s in scaled), max(s[1] for s in scaled), elementwise, symmetric, positive, tolerance, scenario
     )
 
 
@@ -207,8 +220,112 @@ def check_generated(
         raise ModelError("the reference check needs double-precision code; float is checked by `modelgen embedded`")
     folder = Path(folder)
     ref = reference_run(derived, scenario, options.taylor_order)
+    tol = scenario_tolerance(derived, scenario, options.taylor_order)
     name = derived.model.name
     return [
-        compare("python", python_run(folder / f"{name}.py", derived, scenario), ref),
-        compare("c", c_run(folder, derived, scenario, build_dir, options), ref),
+        compare("python", python_run(folder / f"{name}.py", derived, scenario), ref, tol, scenario.label),
+        compare("c", c_run(folder, derived, scenario, build_dir, options), ref, tol, scenario.label),
     ]
+
+
+# -- the pass criterion --------------------------------------------------------
+
+#: Unit roundoff of IEEE double and single precision (round to nearest).
+DOUBLE_UNIT_ROUNDOFF = 2.0**-53
+FLOAT_UNIT_ROUNDOFF = 2.0**-24
+
+
+def _scaled_magnitude(magnitude: np.ndarray, result_diagonal: np.ndarray) -> float:
+    """max_ij magnitude_ij / sqrt(d_i d_j) over the entries whose variances are positive."""
+    s = np.sqrt(np.maximum(result_diagonal, 0.0))
+    keep = s > 0
+    if not keep.any():
+        return 0.0
+    return float((magnitude[np.ix_(keep, keep)] / np.outer(s[keep], s[keep])).max())
+
+
+def _scaled_state(magnitude: np.ndarray, result_diagonal: np.ndarray) -> float:
+    """max_i magnitude_i / sqrt(d_i) over the states whose variances are positive."""
+    s = np.sqrt(np.maximum(result_diagonal, 0.0))
+    keep = s > 0
+    return float((magnitude[keep] / s[keep]).max()) if keep.any() else 0.0
+
+
+def step_conditioning(derived: DerivedModel, scenario: Scenario, order: int = DEFAULT_TAYLOR_ORDER) -> np.ndarray:
+    """rho_k for every step k: how much that step's arithmetic cancels, in scaled units.
+
+    A sum of m products computed in floating point has an error of at most
+    gamma_m = m u / (1 - m u) times the sum of the *absolute values* of its
+    terms (Higham, Accuracy and Stability of Numerical Algorithms, 2nd ed.,
+    sec. 3.1).  Divided by sqrt(P_ii P_jj) of the result, that sum of absolute
+    values is the factor by which the step can magnify one rounding:
+
+    * discretization: Phi = sum_k (F T)^k / k! is bounded entrywise by
+      |Phi|_abs = sum_k (|F| T)^k / k! (the Taylor order used by the code);
+    * prediction P' = Phi P Phi^T + Q_d: |Phi|_abs |P| |Phi|_abs^T + |Q_d|,
+      scaled by P';
+    * Joseph update P+ = A P' A^T + K R K^T, A = I - K H:
+      |A| |P'| |A|^T + |K| |R| |K|^T, scaled by P+ (the Joseph form is
+      insensitive to first order to an error in K, so the gain's own
+      conditioning does not enter);
+    * state: |Phi|_abs |x| / sqrt(P'_ii) and (|x'| + |K| (|z| + |H| |x'|)) / sqrt(P+_ii).
+
+    rho_k is the sum of the three (prediction, update, state): 1 for a step
+    without cancellation, large where a measurement removes most of a
+    variance or correlations near +-1 make a covariance entry a difference of
+    large terms (an ill-conditioned P).
+    """
+    m = derived.numeric(scenario.parameters)
+    F, n = m["F"], derived.n_states
+    phi, gamma = taylor_discretization(F, m["G"], scenario.step, order)
+    qd = taylor_process_noise(gamma, m["Q"], scenario.step)
+    phi_abs = taylor_discretization(np.abs(F), np.zeros((n, 0)), scenario.step, order)[0]
+    H, R = m["H"], m["R"]
+    x, P = scenario.x0(), scenario.initial_covariance.copy()
+    rho = []
+    for z in measurement_sequence(derived, scenario):
+        x_pred = phi @ x
+        P_pred = reference.predict_covariance(P, phi, qd)
+        rho_P = _scaled_magnitude(phi_abs @ np.abs(P) @ phi_abs.T + np.abs(qd), np.diag(P_pred))
+        rho_x = _scaled_state(phi_abs @ np.abs(x), np.diag(P_pred))
+        x, P = x_pred, P_pred
+        if derived.n_measurements:
+            x, P = reference.update(x_pred, P_pred, z, H, R)
+            K = P_pred @ H.T @ np.linalg.inv(H @ P_pred @ H.T + R)
+            A = np.eye(n) - K @ H
+            rho_P += _scaled_magnitude(np.abs(A) @ np.abs(P_pred) @ np.abs(A).T + np.abs(K) @ np.abs(R) @ np.abs(K).T, np.diag(P))
+            x_terms = np.abs(x_pred) + np.abs(K) @ (np.abs(z) + np.abs(H) @ np.abs(x_pred))
+            rho_x += _scaled_state(x_terms, np.diag(P))
+        rho.append(rho_P + rho_x)
+    return np.array(rho)
+
+
+def conformance_tolerance(rho: np.ndarray, n_states: int, unit_roundoff: float, implementations: int) -> float:
+    """Largest scaled difference two correct implementations can show over a run.
+
+    Every entry of P, x is a sum of at most 2n + 1 products per step (Phi P,
+    then (Phi P) Phi^T, plus Q_d; the same for A P' A^T + K R K^T), so one step
+    adds an error of at most gamma_{2n+1} rho_k ~ (2n + 1) u rho_k in scaled
+    units (:func:`step_conditioning`).  The errors of earlier steps are carried
+    forward by (I - K H) Phi, which for a stable filter contracts (the
+    Joseph-form Riccati recursion is numerically stable: Verhaegen & Van
+    Dooren, IEEE TAC 31(10), 1986), so they add up at most linearly:
+
+        tolerance = implementations * (2n + 1) * u * sum_k rho_k.
+
+    ``implementations`` is 2 when two double-precision codes are compared
+    (each may be off by the bound) and 1 for float against the double
+    reference (whose own error is 2^29 times smaller).  For a step without
+    cancellation rho_k ~ 3 and this is cond x unit roundoff x steps with
+    cond ~ 1; an ill-conditioned P raises rho_k and the bound with it.  The
+    bound is a worst case: rounding errors of random sign grow like
+    sqrt(terms), so measured differences sit one to three orders below it.
+    """
+    return float(implementations * (2 * n_states + 1) * unit_roundoff * float(np.sum(rho)))
+
+
+def scenario_tolerance(
+    derived: DerivedModel, scenario: Scenario, order: int = DEFAULT_TAYLOR_ORDER, unit_roundoff: float = DOUBLE_UNIT_ROUNDOFF, implementations: int = 2
+) -> float:
+    """:func:`conformance_tolerance` of ``scenario``: two double codes by default, (u_float, 1) for float."""
+    return conformance_tolerance(step_conditioning(derived, scenario, order), derived.n_states, unit_roundoff, implementations)
