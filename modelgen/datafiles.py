@@ -18,16 +18,56 @@ def data_path(filename: str) -> Path:
 
 def read_yaml(path: str | Path, what: str = "data file") -> dict[str, Any]:
     """A YAML mapping from ``path``; ModelError naming the file otherwise."""
+    return read_yaml_with_lines(path, what)[0]
+
+
+def read_yaml_with_lines(path: str | Path, what: str = "data file") -> tuple[dict[str, Any], dict[str, str]]:
+    """A YAML mapping from ``path`` and the ``file:line`` of each key (see ``key_lines``)."""
     path = Path(path)
+    if path.is_dir():
+        raise ModelError(f"{path}: is a folder, not a {what}")
     if not path.is_file():
         raise ModelError(f"{path}: no such {what}")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ModelError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    try:
+        data = yaml.safe_load(text)
+        lines = key_lines(text, str(path))
     except yaml.YAMLError as exc:
         raise ModelError(f"{path}: not valid YAML ({exc})") from None
     if not isinstance(data, dict):
         raise ModelError(f"{path}: expected a mapping at the top level")
-    return data
+    return data, lines
+
+
+def key_lines(text: str, filename: str) -> dict[str, str]:
+    """``file:line`` of every key and list item, by dotted path (``doppler.period_s``, ``segments[0].duration_h``).
+
+    An aliased node is walked once (at its anchor), so an alias bomb costs
+    no more than its text.
+    """
+    root = yaml.compose(text, Loader=yaml.SafeLoader)
+    lines: dict[str, str] = {}
+    seen: set[int] = set()
+    pending = [(root, "")] if root is not None else []
+    while pending:
+        node, path = pending.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        if isinstance(node, yaml.MappingNode):
+            for key, value in node.value:
+                sub = f"{path}.{key.value}" if path else str(key.value)
+                lines.setdefault(sub, f"{filename}:{key.start_mark.line + 1}")
+                pending.append((value, sub))
+        elif isinstance(node, yaml.SequenceNode):
+            for i, item in enumerate(node.value):
+                sub = f"{path}[{i}]"
+                lines.setdefault(sub, f"{filename}:{item.start_mark.line + 1}")
+                pending.append((item, sub))
+    return lines
 
 
 def require(data: dict[str, Any], key: str, where: str) -> Any:

@@ -42,7 +42,7 @@ import numpy as np
 
 from modelgen.derivation import DerivedModel
 from modelgen.discretization import van_loan_discretization
-from modelgen.datafiles import read_yaml
+from modelgen.datafiles import read_yaml_with_lines
 from modelgen.errors import ModelError
 
 DEFAULT_UNOBSERVABLE_RTOL = 1e-11
@@ -123,31 +123,37 @@ def single_segment(values: Mapping[str, float], step: float, steps: int) -> Scen
     return Scenario(step=float(step), segments=(Segment(dict(values), int(steps)),))
 
 
-def scenario_from_data(data: Any, where: str = "scenario") -> Scenario:
+def scenario_from_data(data: Any, where: str = "scenario", lines: dict[str, str] | None = None) -> Scenario:
     """Build a scenario from plain data (as read from YAML).
 
     Keys: ``step`` (s, required), ``parameters`` (values shared by all
     segments), and either ``steps`` (one segment) or ``segments`` (a list of
     ``{steps: N, parameters: {...}}`` that override the shared values).
+    ``lines`` (key -> ``file:line``) puts the line into messages.
     """
+    lines = lines or {}
+
+    def at(key: str) -> str:
+        return f"{lines[key]}: {key}" if key in lines else f"{where}: {key}"
+
     if not isinstance(data, dict):
         raise ModelError(f"{where}: a scenario must be a mapping with keys step, parameters, steps or segments")
     allowed = {"step", "parameters", "steps", "segments", "description"}
     unknown = sorted(set(data) - allowed)
     if unknown:
         raise ModelError(f"{where}: unknown key {unknown[0]!r} (expected one of {sorted(allowed)})")
-    step = _positive_number(data.get("step"), f"{where}: step")
-    shared = _values(data.get("parameters") or {}, f"{where}: parameters")
+    step = _positive_number(data.get("step"), at("step"))
+    shared = _values(data.get("parameters") or {}, at("parameters"))
     if ("segments" in data) == ("steps" in data):
         raise ModelError(f"{where}: give either 'steps' (one segment) or 'segments', not both or neither")
     if "steps" in data:
-        return Scenario(step, (Segment(shared, _positive_int(data["steps"], f"{where}: steps")),))
+        return Scenario(step, (Segment(shared, _positive_int(data["steps"], at("steps"))),))
     raw = data["segments"]
     if not isinstance(raw, list) or not raw:
         raise ModelError(f"{where}: 'segments' must be a non-empty list")
     segments = []
     for i, seg in enumerate(raw):
-        place = f"{where}: segments[{i}]"
+        place = at(f"segments[{i}]")
         if not isinstance(seg, dict) or set(seg) - {"steps", "parameters"} or "steps" not in seg:
             raise ModelError(f"{place}: a segment is a mapping with 'steps' and optional 'parameters'")
         values = {**shared, **_values(seg.get("parameters") or {}, f"{place}.parameters")}
@@ -157,7 +163,8 @@ def scenario_from_data(data: Any, where: str = "scenario") -> Scenario:
 
 def load_scenario(path: str | Path) -> Scenario:
     """Read a scenario YAML file (see :func:`scenario_from_data`)."""
-    return scenario_from_data(read_yaml(path, "scenario file"), str(path))
+    data, lines = read_yaml_with_lines(path, "scenario file")
+    return scenario_from_data(data, str(path), lines)
 
 
 def command_line_scenario(

@@ -140,7 +140,7 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
         )
     step = to_si(require(data, "step_s", where), "s", f"{where}: step_s")
     duration = to_si(require(data, "duration_h", where), "h", f"{where}: duration_h")
-    if step <= 0 or duration <= 0 or abs(duration / step - round(duration / step)) > 1e-9:
+    if not (0 < step < math.inf and 0 < duration < math.inf) or abs(duration / step - round(duration / step)) > 1e-9:
         raise ModelError(f"{where}: duration_h must be a positive whole number of steps step_s")
     return Scenario(
         name=str(require(data, "scenario", where)),

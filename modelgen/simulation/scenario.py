@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 
-from modelgen.datafiles import read_yaml
+from modelgen.datafiles import read_yaml_with_lines
 from modelgen.errors import ModelError
 from modelgen.simulation.doppler import DopplerSettings, JanusBeams, Outage
 from modelgen.simulation.gps import Constellation, GpsSettings, PseudorangeSettings
@@ -95,6 +95,10 @@ class Scenario:
     def with_changes(self, **changes: Any) -> "Scenario":
         """A copy with some fields replaced (``hours=`` truncates the flight)."""
         hours = changes.pop("hours", None)
+        if hours is not None and not (math.isfinite(hours) and hours > 0):
+            raise ModelError(f"--hours: must be a positive number of hours, got {hours:g}")
+        if "imu_rate" in changes and not (math.isfinite(changes["imu_rate"]) and changes["imu_rate"] > 0):
+            raise ModelError(f"--imu-rate: must be a positive rate in Hz, got {changes['imu_rate']:g}")
         out = replace(self, **changes)
         if hours is not None:
             out = replace(out, profile=out.profile.truncated(hours * HOUR))
@@ -104,28 +108,42 @@ class Scenario:
 class _Section:
     """Reads one mapping of the file, converting units and refusing what is unknown."""
 
-    def __init__(self, data: Any, where: str):
+    def __init__(self, data: Any, where: str, lines: dict[str, str] | None = None, path: str = ""):
+        self.lines, self.path = lines or {}, path
         if data is None:
             data = {}
         if not isinstance(data, dict):
-            raise ModelError(f"{where}: must be a mapping, got {type(data).__name__}")
+            raise ModelError(f"{self.lines.get(path, where)}: {path or where} must be a mapping, got {type(data).__name__}")
         self.data, self.where, self.used = data, where, set()
 
-    def number(self, key: str, default: float | None = None, scale: float = 1.0) -> float:
+    def at(self, key: str) -> str:
+        """Where ``key`` of this section is, for messages: ``file:line: doppler.period_s`` when the line is known."""
+        full = f"{self.path}.{key}" if self.path else key
+        line = self.lines.get(full)
+        return f"{line}: {full}" if line else f"{self.where}.{key}"
+
+    def number(
+        self, key: str, default: float | None = None, scale: float = 1.0, positive: bool = False, non_negative: bool = False
+    ) -> float:
+        """A finite number (times ``scale``); ``positive``/``non_negative`` refuse periods, rates and sigmas that make no sense."""
         self.used.add(key)
         if key not in self.data:
             if default is None:
-                raise ModelError(f"{self.where}: missing key {key!r}")
+                raise ModelError(f"{self.lines.get(self.path, self.where)}: missing key {key!r}")
             return default
         value = self.data[key]
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             try:
                 value = float(str(value))
             except ValueError:
-                raise ModelError(f"{self.where}.{key}: {value!r} is not a number") from None
+                raise ModelError(f"{self.at(key)}: {value!r} is not a number") from None
         value = float(value)
         if not math.isfinite(value):
-            raise ModelError(f"{self.where}.{key}: {value!r} is not finite")
+            raise ModelError(f"{self.at(key)}: {value!r} is not finite")
+        if positive and not value > 0:
+            raise ModelError(f"{self.at(key)}: must be positive, got {value:g}")
+        if non_negative and value < 0:
+            raise ModelError(f"{self.at(key)}: must not be negative, got {value:g}")
         return value * scale
 
     def text(self, key: str, default: str | None = None, choices: tuple[str, ...] = ()) -> str:
@@ -141,7 +159,7 @@ class _Section:
 
     def section(self, key: str) -> "_Section":
         self.used.add(key)
-        return _Section(self.data.get(key), f"{self.where}.{key}")
+        return _Section(self.data.get(key), f"{self.where}.{key}", self.lines, f"{self.path}.{key}" if self.path else key)
 
     def raw(self, key: str, default: Any = None) -> Any:
         self.used.add(key)
@@ -210,7 +228,7 @@ def _pseudorange(s: _Section) -> tuple[PseudorangeSettings, Constellation]:
     if constellation.satellites < 1 or constellation.planes < 1 or constellation.satellites % constellation.planes:
         raise ModelError(f"{c.where}: {constellation.satellites} satellites do not fill {constellation.planes} planes")
     settings = PseudorangeSettings(
-        period=s.number("period_s", 1.0),
+        period=s.number("period_s", 1.0, positive=True),
         noise=s.number("noise_m", 3.0),
         clock_bias=s.number("clock_bias_m", 3.0e4),
         clock_drift=s.number("clock_drift_mps", 3.0),
@@ -230,9 +248,9 @@ def _pseudorange(s: _Section) -> tuple[PseudorangeSettings, Constellation]:
     return settings, constellation
 
 
-def load_scenario_data(data: Any, filename: str) -> Scenario:
-    """Build a :class:`Scenario` from parsed YAML (see the module docstring)."""
-    top = _Section(data, filename)
+def load_scenario_data(data: Any, filename: str, lines: dict[str, str] | None = None) -> Scenario:
+    """Build a :class:`Scenario` from parsed YAML (see the module docstring); ``lines`` locates keys for messages."""
+    top = _Section(data, filename, lines)
     name = top.text("profile")
     title = top.text("title", "")
     top.text("source", "")
@@ -243,7 +261,7 @@ def load_scenario_data(data: Any, filename: str) -> Scenario:
     if not isinstance(raw_segments, list) or not raw_segments:
         raise ModelError(f"{filename}: 'segments' must be a non-empty list")
     for i, raw in enumerate(raw_segments):
-        s = _Section(raw, f"{filename}: segments[{i}]")
+        s = _Section(raw, f"{filename}: segments[{i}]", lines, f"segments[{i}]")
         segments.append(Segment(
             name=s.text("name", f"segment {i + 1}"),
             duration=_duration(s),
@@ -268,18 +286,18 @@ def load_scenario_data(data: Any, filename: str) -> Scenario:
 
     imu = top.section("imu")
     g = imu.number("g_mps2", 9.80665)
-    imu_rate = imu.number("rate_hz")
+    imu_rate = imu.number("rate_hz", positive=True)
     coning = imu.text("coning", "two", tuple(ALGORITHMS))
     budget = ImuErrorBudget(
         gyro_constant_drift=imu.number("gyro_constant_drift_dph", 0.0, DPH),
         gyro_markov_drift=imu.number("gyro_markov_drift_dph", 0.0, DPH),
-        gyro_markov_correlation_time=imu.number("gyro_markov_correlation_time_h", math.inf, HOUR),
-        gyro_white_noise=imu.number("gyro_white_noise_dpsh", 0.0, DEG / math.sqrt(HOUR)),
+        gyro_markov_correlation_time=imu.number("gyro_markov_correlation_time_h", math.inf, HOUR, positive=True),
+        gyro_white_noise=imu.number("gyro_white_noise_dpsh", 0.0, DEG / math.sqrt(HOUR), non_negative=True),
         gyro_scale_factor=imu.number("gyro_scale_factor_ppm", 0.0, 1e-6),
         accel_constant_bias=imu.number("accelerometer_constant_bias_g", 0.0, g),
         accel_markov_bias=imu.number("accelerometer_markov_bias_g", 0.0, g),
-        accel_markov_correlation_time=imu.number("accelerometer_markov_correlation_time_h", math.inf, HOUR),
-        accel_white_noise=imu.number("accelerometer_white_noise_mps_per_sqrt_h", 0.0, 1.0 / math.sqrt(HOUR)),
+        accel_markov_correlation_time=imu.number("accelerometer_markov_correlation_time_h", math.inf, HOUR, positive=True),
+        accel_white_noise=imu.number("accelerometer_white_noise_mps_per_sqrt_h", 0.0, 1.0 / math.sqrt(HOUR), non_negative=True),
         accel_scale_factor=imu.number("accelerometer_scale_factor_ppm", 0.0, 1e-6),
     )
     imu.done()
@@ -294,7 +312,7 @@ def load_scenario_data(data: Any, filename: str) -> Scenario:
     ie.done()
 
     alt = top.section("altitude_reference")
-    altitude_noise = alt.number("noise_m", 0.0)
+    altitude_noise = alt.number("noise_m", 0.0, non_negative=True)
     tau = alt.number("loop_time_constant_s", 100.0)
     if tau <= 0:
         raise ModelError(f"{alt.where}.loop_time_constant_s: must be positive")
@@ -308,18 +326,18 @@ def load_scenario_data(data: Any, filename: str) -> Scenario:
     janus = JanusBeams(
         azimuth=beams.number("azimuth_deg", 45.0, DEG),
         depression=beams.number("depression_deg", 65.0, DEG),
-        wavelength=beams.number("wavelength_m", 0.0225),
-        frequency_noise=beams.number("frequency_noise_hz", 10.0),
+        wavelength=beams.number("wavelength_m", 0.0225, positive=True),
+        frequency_noise=beams.number("frequency_noise_hz", 10.0, non_negative=True),
         frequency_bias=beams.number("frequency_bias_hz", 0.0),
         mounting_error=beams.number("mounting_error_arcmin", 0.0, ARCMIN),
     )
     del configuration
     beams.done()
     doppler = DopplerSettings(
-        period=dop.number("period_s", 60.0),
+        period=dop.number("period_s", 60.0, positive=True),
         measurement=dop.text("measurement", "ned", ("ned", "beams")),
         bias=dop.number("bias_kmh", 0.0, KMH),
-        white_noise=dop.number("white_noise_mps", 0.0),
+        white_noise=dop.number("white_noise_mps", 0.0, non_negative=True),
         beams=janus,
         outages=_outages(dop, "outages"),
     )
@@ -327,10 +345,10 @@ def load_scenario_data(data: Any, filename: str) -> Scenario:
 
     gp = top.section("gps")
     gps = GpsSettings(
-        period=gp.number("period_s", 1.0),
-        position_noise=gp.number("position_noise_m", 5.0),
-        height_noise=gp.number("height_noise_m", 8.0),
-        velocity_noise=gp.number("velocity_noise_mps", 0.05),
+        period=gp.number("period_s", 1.0, positive=True),
+        position_noise=gp.number("position_noise_m", 5.0, non_negative=True),
+        height_noise=gp.number("height_noise_m", 8.0, non_negative=True),
+        velocity_noise=gp.number("velocity_noise_mps", 0.05, non_negative=True),
         outages=_outages(gp, "outages"),
     )
     gp.done()
@@ -341,7 +359,7 @@ def load_scenario_data(data: Any, filename: str) -> Scenario:
     filt = FilterSettings(
         model=fi.text("model"),
         aiding=fi.text("aiding", "doppler", ("doppler", "gps", "pseudorange")),
-        period=fi.number("period_s", 1.0),
+        period=fi.number("period_s", 1.0, positive=True),
         mode=fi.text("mode", "closed_loop", MODES),
         gate_probability=fi.number("gate_probability", 0.9999),
         states=_mapping(fi, "states", {k: AXES[k] for k in STATE_ROLES}),
@@ -369,4 +387,5 @@ def load_scenario(path: str | Path) -> Scenario:
             p = Path(str(candidate))
     if not p.exists():
         raise ModelError(f"{path}: no such scenario file, and not a built-in one ({', '.join(builtin_scenarios())})")
-    return load_scenario_data(read_yaml(p, "scenario file"), str(p))
+    data, lines = read_yaml_with_lines(p, "scenario file")
+    return load_scenario_data(data, str(p), lines)
