@@ -258,7 +258,11 @@ def embedded_report(derived: DerivedModel, scenario: Scenario | None, out_dir: P
     """Build every option combination for the Cortex-M4F and (given a scenario) run it under qemu-arm."""
     missing = toolchain.missing_tools(*FIRMWARE_TOOLS, *(CROSS_TOOLS if scenario is not None else ()))
     if missing:
-        raise ModelError(f"missing tools: {', '.join(missing)} (Debian: gcc-arm-none-eabi libnewlib-arm-none-eabi gcc-arm-linux-gnueabihf qemu-user)")
+        skip = ", or pass --no-qemu to skip the qemu-arm run" if set(missing) & set(CROSS_TOOLS) else ""
+        raise ModelError(
+            f"missing tools: {', '.join(missing)}; install them (Debian/Ubuntu: apt-get install gcc-arm-none-eabi "
+            f"libnewlib-arm-none-eabi gcc-arm-linux-gnueabihf libc6-dev-armhf-cross qemu-user){skip}"
+        )
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     report = EmbeddedReport(out_dir / "embedded.md")
