@@ -48,7 +48,7 @@ SCHEMA: dict[str, set[str]] = {
     "imu.columns": {"count", "time", "accel", "gyro"},
     "imu.units": {"accel", "gyro"},
     "imu.rotation_to_body_deg": {"roll", "pitch", "yaw"},
-    "gnss": {"file", "lever_arm_m", "quality_factor", "minimum_sigma_position_m", "minimum_sigma_velocity_m_s"},
+    "gnss": {"file", "lever_arm_m", "velocity_latency_s", "quality_factor", "minimum_sigma_position_m", "minimum_sigma_velocity_m_s"},
     "noise": set(NOISE_UNITS),
     **{f"noise.{k}": {"value", "unit", "factor", "why"} for k in NOISE_UNITS},
     "initial": {"roll_pitch_sigma_deg", "heading_extra_sigma_deg", "velocity_sigma_m_s", "position_sigma_m",
@@ -87,6 +87,7 @@ class NavigatorConfig:
     rotation_to_body: tuple[float, float, float]  # roll, pitch, yaw [rad]
     gnss_file: Path
     lever_arm: tuple[float, float, float]  # IMU to antenna, body axes [m]
+    velocity_latency: float  # GNSS velocity is the velocity this long before its epoch [s]
     quality_factor: dict[int, float]
     minimum_sigma_position: float
     minimum_sigma_velocity: float
@@ -308,7 +309,7 @@ def load_config(path: str | Path) -> NavigatorConfig:
         rotation_to_body=tuple(r.number(f"imu.rotation_to_body_deg.{k}") * DEG for k in ("roll", "pitch", "yaw"))
         if rotation is not None else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
         gnss_file=r.file("gnss.file"), lever_arm=r.vector("gnss.lever_arm_m", 3),  # type: ignore[arg-type]
-        quality_factor=quality,
+        velocity_latency=r.number("gnss.velocity_latency_s", 0.0, non_negative=True), quality_factor=quality,
         minimum_sigma_position=r.number("gnss.minimum_sigma_position_m", non_negative=True),
         minimum_sigma_velocity=r.number("gnss.minimum_sigma_velocity_m_s", non_negative=True),
         noise={kind: _noise(r, kind) for kind in NOISE_UNITS},

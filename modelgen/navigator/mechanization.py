@@ -1,0 +1,206 @@
+"""Strapdown mechanization in the local-level NED frame at the IMU rate (WGS-84, normal gravity).
+
+The navigation state is one float array ``nav`` of :data:`NAV_SIZE` entries:
+the body-to-NED attitude quaternion (scalar first), the NED velocity [m/s],
+latitude and longitude [rad] and height [m].  :func:`mechanize` advances it
+over a run of IMU samples; the same arithmetic, line for line, is the C
+navigator's (``templates/navigator_c.c.j2``), so that both trajectories agree
+to rounding.
+
+Per sample k (interval t[k-1] -> t[k], dt the actual interval, so dropped
+samples are bridged):
+
+* increments by the trapezoid rule of the bias-corrected body rates and
+  specific forces: dtheta = (w[k-1] + w[k]) dt / 2, dv = (f[k-1] + f[k]) dt / 2;
+* two-sample coning dtheta + dtheta_prev x dtheta / 12 and sculling
+  dv + dtheta x dv / 2 + (dtheta_prev x dv + dv_prev x dtheta) / 12
+  (Savage, Strapdown Analytics, ch. 7);
+* velocity: v += C_b^n dv - (2 omega_ie + omega_en) x v dt + g dt, with
+  Somigliana normal gravity at the current latitude and height;
+* attitude: q = q(-omega_in dt) * q * q(dtheta), normalized;
+* position: latitude, longitude, height from the mean of the old and new velocity.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from modelgen.simulation.earth import EARTH_RATE, ECCENTRICITY_SQUARED, SEMI_MAJOR_AXIS
+from modelgen.simulation.jit import compiled
+
+NAV_SIZE = 10  # q0 q1 q2 q3, vN vE vD, latitude, longitude, height
+EQUATORIAL_GRAVITY = 9.7803253359
+SOMIGLIANA_K = 0.00193185265241
+FLATTENING = 1.0 / 298.257223563
+GRAVITY_RATIO_M = 0.00344978650684  # omega^2 a^2 b / GM (WGS-84)
+
+
+@compiled
+def gravity(latitude: float, height: float) -> float:
+    """Normal gravity along +Down [m/s^2]: Somigliana with the second-order free-air correction."""
+    s2 = math.sin(latitude) ** 2
+    g0 = EQUATORIAL_GRAVITY * (1.0 + SOMIGLIANA_K * s2) / math.sqrt(1.0 - ECCENTRICITY_SQUARED * s2)
+    a = SEMI_MAJOR_AXIS
+    factor = 1.0 - 2.0 * height / a * (1.0 + FLATTENING + GRAVITY_RATIO_M - 2.0 * FLATTENING * s2)
+    return g0 * (factor + 3.0 * height * height / (a * a))
+
+
+@compiled
+def radii(latitude: float) -> tuple[float, float]:
+    """Meridian and prime-vertical radii of curvature R_M, R_N [m]."""
+    s = math.sin(latitude)
+    w2 = 1.0 - ECCENTRICITY_SQUARED * s * s
+    w = math.sqrt(w2)
+    return SEMI_MAJOR_AXIS * (1.0 - ECCENTRICITY_SQUARED) / (w2 * w), SEMI_MAJOR_AXIS / w
+
+
+@compiled
+def quaternion_to_dcm(q0: float, q1: float, q2: float, q3: float) -> np.ndarray:
+    """C_b^n of a body-to-NED quaternion (scalar first)."""
+    c = np.empty((3, 3))
+    c[0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
+    c[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
+    c[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
+    c[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
+    c[1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
+    c[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
+    c[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
+    c[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
+    c[2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
+    return c
+
+
+@compiled
+def _rotation_quaternion(x: float, y: float, z: float) -> tuple[float, float, float, float]:
+    """Quaternion of a rotation vector (exact half-angle form; series below 1e-8 rad)."""
+    angle2 = x * x + y * y + z * z
+    if angle2 < 1e-16:
+        s = 0.5 - angle2 / 48.0
+        return 1.0 - angle2 / 8.0, s * x, s * y, s * z
+    angle = math.sqrt(angle2)
+    s = math.sin(0.5 * angle) / angle
+    return math.cos(0.5 * angle), s * x, s * y, s * z
+
+
+@compiled
+def _multiply(a0, a1, a2, a3, b0, b1, b2, b3):
+    """Quaternion product a * b (scalar first)."""
+    return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
+            a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+            a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
+            a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
+
+
+@compiled
+def mechanize(nav: np.ndarray, history: np.ndarray, time: np.ndarray, force: np.ndarray, rate: np.ndarray,
+              start: int, stop: int, gyro_bias: np.ndarray, accel_bias: np.ndarray, mean_force: np.ndarray) -> None:
+    """Advance ``nav`` over samples start..stop-1 (each from the sample before it), in place.
+
+    ``force``, ``rate``: body-axis specific force and angular rate samples.
+    ``history``: the previous interval's dtheta (0:3) and dv (3:6), for the
+    coning and sculling terms (zeros before the first interval).
+    ``mean_force``: the NED specific-force increment sum (0:3) and the time
+    (3) are added to it, for the filter's operating point.
+    """
+    q0, q1, q2, q3 = nav[0], nav[1], nav[2], nav[3]
+    vn, ve, vd = nav[4], nav[5], nav[6]
+    lat, lon, h = nav[7], nav[8], nav[9]
+    pt0, pt1, pt2, pv0, pv1, pv2 = history[0], history[1], history[2], history[3], history[4], history[5]
+    for k in range(start, stop):
+        dt = time[k] - time[k - 1]
+        t0 = 0.5 * (rate[k - 1, 0] + rate[k, 0]) * dt - gyro_bias[0] * dt
+        t1 = 0.5 * (rate[k - 1, 1] + rate[k, 1]) * dt - gyro_bias[1] * dt
+        t2 = 0.5 * (rate[k - 1, 2] + rate[k, 2]) * dt - gyro_bias[2] * dt
+        u0 = 0.5 * (force[k - 1, 0] + force[k, 0]) * dt - accel_bias[0] * dt
+        u1 = 0.5 * (force[k - 1, 1] + force[k, 1]) * dt - accel_bias[1] * dt
+        u2 = 0.5 * (force[k - 1, 2] + force[k, 2]) * dt - accel_bias[2] * dt
+        # coning (two-sample, previous interval) and sculling with the rotation term
+        c0 = t0 + (pt1 * t2 - pt2 * t1) / 12.0
+        c1 = t1 + (pt2 * t0 - pt0 * t2) / 12.0
+        c2 = t2 + (pt0 * t1 - pt1 * t0) / 12.0
+        s0 = u0 + 0.5 * (t1 * u2 - t2 * u1) + ((pt1 * u2 - pt2 * u1) + (pv1 * t2 - pv2 * t1)) / 12.0
+        s1 = u1 + 0.5 * (t2 * u0 - t0 * u2) + ((pt2 * u0 - pt0 * u2) + (pv2 * t0 - pv0 * t2)) / 12.0
+        s2 = u2 + 0.5 * (t0 * u1 - t1 * u0) + ((pt0 * u1 - pt1 * u0) + (pv0 * t1 - pv1 * t0)) / 12.0
+        pt0, pt1, pt2, pv0, pv1, pv2 = t0, t1, t2, u0, u1, u2
+        # earth and transport rates at the start of the interval
+        rm, rn = radii(lat)
+        sl, cl = math.sin(lat), math.cos(lat)
+        wie0, wie2 = EARTH_RATE * cl, -EARTH_RATE * sl
+        wen0 = ve / (rn + h)
+        wen1 = -vn / (rm + h)
+        wen2 = -ve * sl / cl / (rn + h)
+        # velocity
+        c = quaternion_to_dcm(q0, q1, q2, q3)
+        fn = c[0, 0] * s0 + c[0, 1] * s1 + c[0, 2] * s2
+        fe = c[1, 0] * s0 + c[1, 1] * s1 + c[1, 2] * s2
+        fd = c[2, 0] * s0 + c[2, 1] * s1 + c[2, 2] * s2
+        mean_force[0] += fn
+        mean_force[1] += fe
+        mean_force[2] += fd
+        mean_force[3] += dt
+        a0, a1, a2 = 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2
+        g = gravity(lat, h)
+        vn_new = vn + fn - (a1 * vd - a2 * ve) * dt
+        ve_new = ve + fe - (a2 * vn - a0 * vd) * dt
+        vd_new = vd + fd - (a0 * ve - a1 * vn) * dt + g * dt
+        # attitude: body rotation, then the navigation frame's rotation
+        r0, r1, r2, r3 = _rotation_quaternion(c0, c1, c2)
+        q0, q1, q2, q3 = _multiply(q0, q1, q2, q3, r0, r1, r2, r3)
+        n0, n1, n2, n3 = _rotation_quaternion(-(wie0 + wen0) * dt, -wen1 * dt, -(wie2 + wen2) * dt)
+        q0, q1, q2, q3 = _multiply(n0, n1, n2, n3, q0, q1, q2, q3)
+        norm = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+        q0, q1, q2, q3 = q0 / norm, q1 / norm, q2 / norm, q3 / norm
+        # position from the mean velocity
+        mvn, mve, mvd = 0.5 * (vn + vn_new), 0.5 * (ve + ve_new), 0.5 * (vd + vd_new)
+        h_new = h - mvd * dt
+        mh = 0.5 * (h + h_new)
+        lat_new = lat + mvn / (rm + mh) * dt
+        lon = lon + mve / ((rn + mh) * cl) * dt
+        lat, h = lat_new, h_new
+        vn, ve, vd = vn_new, ve_new, vd_new
+    nav[0], nav[1], nav[2], nav[3] = q0, q1, q2, q3
+    nav[4], nav[5], nav[6] = vn, ve, vd
+    nav[7], nav[8], nav[9] = lat, lon, h
+    history[0], history[1], history[2], history[3], history[4], history[5] = pt0, pt1, pt2, pv0, pv1, pv2
+
+
+def euler_to_dcm(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """C_b^n (body to navigation) of the aerospace z-y-x Euler angles."""
+    cr, sr, cp, sp, cy, sy = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw), math.sin(yaw)
+    return np.array([[cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy],
+                     [cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy],
+                     [-sp, sr * cp, cr * cp]])
+
+
+def dcm_to_quaternion(c: np.ndarray) -> np.ndarray:
+    """Quaternion (scalar first, q0 >= 0) of a rotation matrix (Shepperd's method)."""
+    trace = c[0, 0] + c[1, 1] + c[2, 2]
+    candidates = [trace, c[0, 0], c[1, 1], c[2, 2]]
+    i = int(np.argmax(candidates))
+    if i == 0:
+        s = 2.0 * math.sqrt(1.0 + trace)
+        q = [0.25 * s, (c[2, 1] - c[1, 2]) / s, (c[0, 2] - c[2, 0]) / s, (c[1, 0] - c[0, 1]) / s]
+    elif i == 1:
+        s = 2.0 * math.sqrt(1.0 + c[0, 0] - c[1, 1] - c[2, 2])
+        q = [(c[2, 1] - c[1, 2]) / s, 0.25 * s, (c[0, 1] + c[1, 0]) / s, (c[0, 2] + c[2, 0]) / s]
+    elif i == 2:
+        s = 2.0 * math.sqrt(1.0 + c[1, 1] - c[0, 0] - c[2, 2])
+        q = [(c[0, 2] - c[2, 0]) / s, (c[0, 1] + c[1, 0]) / s, 0.25 * s, (c[1, 2] + c[2, 1]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + c[2, 2] - c[0, 0] - c[1, 1])
+        q = [(c[1, 0] - c[0, 1]) / s, (c[0, 2] + c[2, 0]) / s, (c[1, 2] + c[2, 1]) / s, 0.25 * s]
+    out = np.array(q)
+    return out if out[0] >= 0 else -out
+
+
+def dcm_to_euler(c: np.ndarray) -> tuple[float, float, float]:
+    """Roll, pitch, yaw [rad] of C_b^n."""
+    return (math.atan2(c[2, 1], c[2, 2]), -math.asin(max(-1.0, min(1.0, c[2, 0]))), math.atan2(c[1, 0], c[0, 0]))
+
+
+def level_from_accelerometers(mean_force: np.ndarray) -> tuple[float, float]:
+    """Roll and pitch [rad] of a body at rest from its mean specific force (which points up: f = -g)."""
+    fx, fy, fz = (float(v) for v in mean_force)
+    return math.atan2(-fy, -fz), math.atan2(fx, math.hypot(fy, fz))

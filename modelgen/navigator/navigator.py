@@ -1,0 +1,326 @@
+"""The forward, real-time navigator loop: alignment, mechanization, filter, GNSS/ZUPT/NHC updates.
+
+Nothing from the future is used: every decision at time t uses IMU samples up
+to t and GNSS epochs up to t (the zero-velocity detector's window ends at the
+current sample; a GNSS epoch is applied at the first IMU sample at or after it,
+extrapolated to that sample by its own velocity).  Outputs are written at every
+GNSS epoch (inside outages too), at that IMU sample, at the antenna.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy.stats import chi2
+
+from modelgen.errors import ModelError
+from modelgen.navigator.config import NavigatorConfig
+from modelgen.navigator.errorstate import NED_TO_ENU, ErrorStateFilter, feedback
+from modelgen.navigator.logs import GnssLog, ImuLog
+from modelgen.navigator.mechanization import (NAV_SIZE, dcm_to_euler, dcm_to_quaternion, euler_to_dcm,
+                                              level_from_accelerometers, mechanize, quaternion_to_dcm, radii)
+from modelgen.navigator.outages import in_outage, outage_windows
+
+HISTORY = 16  # INS velocities kept (one per covariance step) for the GNSS velocity latency
+OUTPUT_FIELDS = ("time", "latitude", "longitude", "height", "v_north", "v_east", "v_down", "roll", "pitch", "yaw",
+                 "sigma_north", "sigma_east", "sigma_up", "gyro_bias_x", "gyro_bias_y", "gyro_bias_z",
+                 "accel_bias_x", "accel_bias_y", "accel_bias_z", "in_outage", "gnss_used", "nis")
+
+
+@dataclass
+class Flight:
+    """What a flight produced: per-epoch outputs and the counts the report states."""
+
+    outputs: np.ndarray  # (epochs, len(OUTPUT_FIELDS))
+    outages: list[tuple[float, float]]  # absolute (start, end)
+    first_epoch: float  # time of the first GNSS epoch kept [s]
+    alignment_time: float
+    gnss_nis: list[float] = field(default_factory=list)  # NIS of every GNSS update tried outside outages
+    gate: float = 0.0
+    counts: dict[str, int] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Inputs:
+    """The logs prepared for the loop: body-axis IMU, aligned times, GNSS epochs after the first IMU sample."""
+
+    time: np.ndarray
+    force: np.ndarray  # body axes [m/s^2]
+    rate: np.ndarray  # body axes [rad/s]
+    gnss: GnssLog
+    notes: list[str]
+
+
+def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
+    """Rotate the IMU into body axes, shift its time, drop GNSS epochs outside the IMU span (noted)."""
+    if gnss.velocity is None:
+        raise ModelError(f"{gnss.path}: the navigator needs GNSS velocities (vn, ve, vu columns)")
+    # The data's convention (checked on the drive: the vehicle is level at rest only this way):
+    # the angles rotate body axes into IMU axes, C = euler(angles) maps body -> IMU, so a
+    # sample in IMU axes is C^T v in body axes.
+    to_imu = euler_to_dcm(*config.rotation_to_body)
+    time = imu.time + config.time_offset
+    keep = (gnss.time >= time[0]) & (gnss.time <= time[-1])
+    notes = list(imu.notes) + list(gnss.notes)
+    dropped_before = int(np.sum(gnss.time < time[0]))
+    if dropped_before:
+        notes.append(f"{gnss.path}: {dropped_before} GNSS epoch(s) before the first IMU sample not used")
+    dropped_after = int(np.sum(gnss.time > time[-1]))
+    if dropped_after:
+        notes.append(f"{gnss.path}: {dropped_after} GNSS epoch(s) after the last IMU sample not used")
+    if not keep.any():
+        raise ModelError(f"{gnss.path}: no GNSS epoch inside the IMU log's time span "
+                         f"({time[0]:.3f} .. {time[-1]:.3f} s)")
+    kept = GnssLog(gnss.path, gnss.time[keep], gnss.latitude[keep], gnss.longitude[keep], gnss.height[keep],
+                   gnss.quality[keep], gnss.satellites[keep], gnss.sigma_position[keep], gnss.velocity[keep],
+                   gnss.sigma_velocity[keep], gnss.notes)
+    return Inputs(time, imu.specific_force @ to_imu, imu.angular_rate @ to_imu, kept, notes)
+
+
+def stationary_mask(time: np.ndarray, force: np.ndarray, rate: np.ndarray, gyro_bias: np.ndarray,
+                    window: float, gyro_max: float, accel_std_max: float) -> np.ndarray:
+    """Per sample: the window of ``window`` seconds ending there is still (causal, IMU only)."""
+    n = max(2, int(round(window / float(np.median(np.diff(time))))))
+    rate_norm = np.linalg.norm(rate - gyro_bias, axis=1)
+    force_norm = np.linalg.norm(force, axis=1)
+    still = np.zeros(len(time), dtype=bool)
+    if len(time) < n:
+        return still
+    windows_rate = np.lib.stride_tricks.sliding_window_view(rate_norm, n).max(axis=1)
+    windows_force = np.lib.stride_tricks.sliding_window_view(force_norm, n).std(axis=1)
+    still[n - 1:] = (windows_rate < gyro_max) & (windows_force < accel_std_max)
+    return still
+
+
+def _gnss_sigmas(config: NavigatorConfig, gnss: GnssLog, j: int) -> np.ndarray | None:
+    """[sigma_vE, sigma_vN, sigma_vU, sigma_pN, sigma_pE, sigma_pU] of epoch j, or None if its Q is not used."""
+    factor = config.quality_factor.get(int(gnss.quality[j]))
+    if factor is None:
+        return None
+    sv, sp = gnss.sigma_velocity[j], gnss.sigma_position[j]
+    v = np.maximum(np.array([sv[1], sv[0], sv[2]]) * factor, config.minimum_sigma_velocity)
+    p = np.maximum(np.array([sp[0], sp[1], sp[2]]) * factor, config.minimum_sigma_position)
+    return np.concatenate([v, p])
+
+
+def antenna(nav: np.ndarray, lever: np.ndarray, rate_body: np.ndarray) -> tuple[float, float, float, np.ndarray]:
+    """Antenna latitude, longitude, height and NED velocity from the IMU state and the lever arm."""
+    c = quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])
+    offset = c @ lever
+    rm, rn = radii(nav[7])
+    lat = nav[7] + offset[0] / (rm + nav[9])
+    lon = nav[8] + offset[1] / ((rn + nav[9]) * math.cos(nav[7]))
+    velocity = nav[4:7] + c @ np.cross(rate_body, lever)
+    return lat, lon, nav[9] - offset[2], velocity
+
+
+def _alignment(config: NavigatorConfig, inputs: Inputs) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """(GNSS epoch, IMU sample) of the start, the initial navigation state and gyro bias.
+
+    Heading is the GNSS course at the first epoch faster than heading_speed; roll,
+    pitch and the gyro bias come from the IMU samples of the last rest_window
+    seconds before that, while the GNSS speed was below rest_speed.
+    """
+    g = inputs.gnss
+    speed = np.hypot(g.velocity[:, 0], g.velocity[:, 1])
+    usable = np.array([config.quality_factor.get(int(q)) is not None for q in g.quality])
+    moving = np.nonzero((speed >= config.heading_speed) & usable)[0]
+    if len(moving) == 0:
+        raise ModelError(f"{g.path}: the vehicle never moves faster than {config.heading_speed} m/s: "
+                         "no heading for the alignment")
+    j = int(moving[0])
+    rest = np.nonzero(speed[:j] < config.rest_speed)[0]
+    if len(rest) == 0:
+        raise ModelError(f"{g.path}: no GNSS epoch at rest (speed < {config.rest_speed} m/s) before "
+                         f"t = {g.time[j]:.2f} s: the IMU cannot be levelled")
+    rest_end = g.time[rest[-1]]
+    samples = (inputs.time <= rest_end) & (inputs.time >= rest_end - config.rest_window)
+    if np.count_nonzero(samples) < 10:
+        raise ModelError(f"{g.path}: fewer than 10 IMU samples at rest before t = {rest_end:.2f} s")
+    roll, pitch = level_from_accelerometers(inputs.force[samples].mean(axis=0))
+    yaw = math.atan2(g.velocity[j, 1], g.velocity[j, 0])
+    gyro_bias = inputs.rate[samples].mean(axis=0)
+    k = int(np.searchsorted(inputs.time, g.time[j]))
+    c = euler_to_dcm(roll, pitch, yaw)
+    nav = np.zeros(NAV_SIZE)
+    nav[0:4] = dcm_to_quaternion(c)
+    nav[4:7] = g.velocity[j]
+    rm, rn = radii(g.latitude[j])
+    offset = c @ np.asarray(config.lever_arm)
+    nav[7] = g.latitude[j] - offset[0] / (rm + g.height[j])
+    nav[8] = g.longitude[j] - offset[1] / ((rn + g.height[j]) * math.cos(g.latitude[j]))
+    nav[9] = g.height[j] + offset[2]
+    return j, k, nav, gyro_bias
+
+
+def initial_covariance(config: NavigatorConfig, nav: np.ndarray, heading_sigma: float) -> np.ndarray:
+    """P0: attitude, velocity, position (as dL, dlambda, dh), gyro and accelerometer biases."""
+    rm, rn = radii(nav[7])
+    sigmas = [config.roll_pitch_sigma, config.roll_pitch_sigma, heading_sigma,
+              *[config.velocity_sigma] * 3,
+              config.position_sigma / (rm + nav[9]), config.position_sigma / ((rn + nav[9]) * math.cos(nav[7])),
+              config.height_sigma, *[config.gyro_bias_sigma] * 3, *[config.accel_bias_sigma] * 3]
+    return np.diag(np.square(sigmas))
+
+
+def _gnss_measurement(nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, g: GnssLog, j: int,
+                      t: float, delayed_velocity: np.ndarray) -> np.ndarray:
+    """z = antenna(INS) - GNSS: [vE, vN, vU] [m/s], [N, E, U] [m].
+
+    The GNSS position is extrapolated by its velocity from its epoch to the IMU
+    sample time t; the GNSS velocity is compared with the INS velocity
+    ``delayed_velocity`` of its latency earlier (the velocity error is taken as
+    constant over that latency, so H is the model's).
+    """
+    lat, lon, h, v = antenna(nav, lever, rate)
+    v = v - nav[4:7] + delayed_velocity
+    dt = t - g.time[j]
+    vg = g.velocity[j]
+    rm, rn = radii(g.latitude[j])
+    lat_g = g.latitude[j] + vg[0] * dt / (rm + g.height[j])
+    lon_g = g.longitude[j] + vg[1] * dt / ((rn + g.height[j]) * math.cos(g.latitude[j]))
+    h_g = g.height[j] - vg[2] * dt
+    rm, rn = radii(nav[7])
+    return np.array([v[1] - vg[1], v[0] - vg[0], -(v[2] - vg[2]),
+                     (lat - lat_g) * (rm + nav[9]), (lon - lon_g) * (rn + nav[9]) * math.cos(nav[7]), h - h_g])
+
+
+def _nhc_rows(nav: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """z = body lateral and vertical velocity, and H = [-C_n^b [v x], C_n^b, 0] rows y, z (ENU states)."""
+    c_nb = (NED_TO_ENU @ quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])).T  # ENU -> body
+    v = NED_TO_ENU @ nav[4:7]
+    skew = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    H = np.zeros((2, 15))
+    H[:, 0:3] = -(c_nb @ skew)[1:3]
+    H[:, 3:6] = c_nb[1:3]
+    return (c_nb @ v)[1:3], H
+
+
+def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[float], None] | None = None) -> Flight:
+    """Fly the whole log forward in real time; return the per-epoch outputs."""
+    g = inputs.gnss
+    time, force, rate = inputs.time, inputs.force, inputs.rate
+    lever = np.asarray(config.lever_arm, float)
+    windows = outage_windows(config.outage_schedule, config.outage_windows, float(g.time[0]), float(g.time[-1]))
+    outage = in_outage(g.time, windows)
+    j0, k, nav, gyro_bias = _alignment(config, inputs)
+    accel_bias = np.zeros(3)
+    speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
+    sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))
+    heading_sigma = math.hypot(math.atan2(sv, speed0), config.heading_extra_sigma)
+    noise = {"gyro_angle_random_walk": config.noise["gyro_white"].si,
+             "accel_velocity_random_walk": config.noise["accel_white"].si,
+             "gyro_bias_driving_noise": config.noise["gyro_bias_driving"].si,
+             "accel_bias_driving_noise": config.noise["accel_bias_driving"].si}
+    kf = ErrorStateFilter(module, initial_covariance(config, nav, heading_sigma), noise)
+    still = (stationary_mask(time, force, rate, gyro_bias, config.zupt_window, config.zupt_gyro_max,
+                             config.zupt_accel_std_max) if config.zupt_enabled else np.zeros(len(time), bool))
+    step = max(1, int(round(config.predict_period / float(np.median(np.diff(time))))))
+    gates = {m: float(chi2.ppf(config.nis_gate_probability, m)) for m in (2, 3, 6)}
+    history = np.zeros(6)
+    outputs = []
+    gnss_nis: list[float] = []
+    counts = {"gnss_updates": 0, "gnss_rejected": 0, "gnss_released": 0, "gnss_quality_skipped": 0,
+              "zupt_updates": 0, "nhc_updates": 0, "predicts": 0}
+    rejected_run = 0
+    last_sigmas = _gnss_sigmas(config, g, j0)
+    if last_sigmas is None:
+        last_sigmas = np.full(6, 1.0)
+    mean_force = np.zeros(4)
+    velocity_history = np.tile(np.r_[time[k], nav[4:7]][:, None], (1, HISTORY))  # time, vN, vE, vD per column
+    velocity_history[0] -= np.arange(HISTORY)[::-1] * 1e-3
+    n_epochs = len(g.time)
+    for j in range(j0, n_epochs):
+        target = int(np.searchsorted(time, g.time[j]))
+        if target >= len(time):
+            break
+        while k < target:
+            stop = min(target, k + step)
+            mean_force[:] = 0.0
+            mechanize(nav, history, time, force, rate, k + 1, stop + 1, gyro_bias, accel_bias, mean_force)
+            period = time[stop] - time[k]
+            k = stop
+            kf.predict(kf.parameters(nav, mean_force[0:3] / mean_force[3], last_sigmas), period)
+            counts["predicts"] += 1
+            _remember(velocity_history, time[k], nav)
+            speed = float(np.linalg.norm(nav[4:7]))
+            if still[k] and speed < config.zupt_speed_max:
+                v_enu = NED_TO_ENU @ nav[4:7]
+                H = np.zeros((3, 15))
+                H[:, 3:6] = np.eye(3)
+                if kf.update(v_enu, H, np.full(3, config.zupt_sigma**2), gates[3]).accepted:
+                    counts["zupt_updates"] += 1
+                    _reset(kf, nav, gyro_bias, accel_bias)
+            elif config.nhc_enabled and speed > config.nhc_speed_min:
+                z, H = _nhc_rows(nav)
+                r = np.array([config.nhc_sigma_lateral**2, config.nhc_sigma_vertical**2])
+                if kf.update(z, H, r, gates[2]).accepted:
+                    counts["nhc_updates"] += 1
+                    _reset(kf, nav, gyro_bias, accel_bias)
+        used = 0
+        nis = float("nan")
+        sigmas = _gnss_sigmas(config, g, j)
+        if not outage[j] and sigmas is None:
+            counts["gnss_quality_skipped"] += 1
+        elif not outage[j]:
+            last_sigmas = sigmas
+            delayed = np.array([np.interp(time[k] - config.velocity_latency, velocity_history[0], velocity_history[1 + i])
+                                for i in range(3)])
+            z = _gnss_measurement(nav, lever, rate[k] - gyro_bias, g, j, time[k], delayed)
+            p = kf.parameters(nav, mean_force[0:3] / max(mean_force[3], 1e-9), sigmas)
+            H = module.measurement_matrix(p)
+            r = np.square(sigmas)
+            gate = gates[6] if rejected_run < config.gate_release_epochs else math.inf
+            result = kf.update(z, H, r, gate)
+            nis = result.nis
+            gnss_nis.append(nis)
+            if result.accepted:
+                counts["gnss_updates"] += 1
+                if rejected_run >= config.gate_release_epochs:
+                    counts["gnss_released"] += 1
+                rejected_run = 0
+                used = 1
+                _reset(kf, nav, gyro_bias, accel_bias)
+            else:
+                counts["gnss_rejected"] += 1
+                rejected_run += 1
+        outputs.append(_record(time[k], nav, lever, rate[k] - gyro_bias, kf.P, gyro_bias, accel_bias,
+                               bool(outage[j]), used, nis))
+        if progress is not None and (j - j0) % 200 == 0:
+            progress((j - j0) / max(1, n_epochs - j0))
+    if progress is not None:
+        progress(1.0)
+    return Flight(np.array(outputs), windows, float(g.time[0]), float(g.time[j0]), gnss_nis, gates[6], counts,
+                  list(inputs.notes))
+
+
+def _remember(history: np.ndarray, t: float, nav: np.ndarray) -> None:
+    """Shift the INS velocity history by one column and store (t, v) last (oldest first)."""
+    history[:, :-1] = history[:, 1:]
+    history[0, -1] = t
+    history[1:, -1] = nav[4:7]
+
+
+def _reset(kf: ErrorStateFilter, nav: np.ndarray, gyro_bias: np.ndarray, accel_bias: np.ndarray) -> None:
+    """Feed the estimate back and zero the error state (closed loop)."""
+    feedback(nav, kf.x, gyro_bias, accel_bias)
+    kf.x = np.zeros_like(kf.x)
+
+
+def _record(t: float, nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, P: np.ndarray, gyro_bias: np.ndarray,
+            accel_bias: np.ndarray, outage: bool, used: int, nis: float) -> list[float]:
+    """One output row (OUTPUT_FIELDS): antenna position, velocity, attitude, 1-sigma position, biases."""
+    lat, lon, h, v = antenna(nav, lever, rate)
+    roll, pitch, yaw = dcm_to_euler(quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3]))
+    rm, rn = radii(nav[7])
+    sn = math.sqrt(max(P[6, 6], 0.0)) * (rm + nav[9])
+    se = math.sqrt(max(P[7, 7], 0.0)) * (rn + nav[9]) * math.cos(nav[7])
+    su = math.sqrt(max(P[8, 8], 0.0))
+    return [t, lat, lon, h, v[0], v[1], v[2], roll, pitch, yaw, sn, se, su, *gyro_bias, *accel_bias,
+            float(outage), float(used), nis]
+
+
