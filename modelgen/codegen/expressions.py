@@ -50,3 +50,37 @@ def sparse_block(matrix: sp.Matrix, entries: list[tuple[int, int]]) -> Block:
 def diagonal_block(matrix: sp.Matrix) -> Block:
     """CSE block over the diagonal of a (diagonal) noise matrix."""
     return eliminate_common_subexpressions([matrix[i, i] for i in range(matrix.shape[0])])
+
+
+@dataclass(frozen=True)
+class Pole:
+    """A denominator of the model's expressions that vanishes at some operating points.
+
+    ``function`` (``cos`` or ``sin``) of ``argument`` divides somewhere:
+    tan, sec, cot, csc or a negative power of cos or sin.  In floating point
+    cos(pi/2) is 6e-17, not 0, so latitude 90 degrees gives tan = 1.6e16
+    and a finite but meaningless F; the generated code therefore refuses an
+    operating point where the denominator is zero within its rounding error
+    (|value| <= 4 eps max(1, |argument|)), instead of relying on a NaN.
+    """
+
+    function: str
+    argument: sp.Expr
+
+    @property
+    def denominator(self) -> sp.Expr:
+        return (sp.cos if self.function == "cos" else sp.sin)(self.argument)
+
+
+def poles(exprs: list[sp.Expr]) -> list[Pole]:
+    """The trigonometric denominators of ``exprs``, each once, in a deterministic order."""
+    found: set[tuple[str, sp.Expr]] = set()
+    for expr in exprs:
+        for node in sp.preorder_traversal(sp.sympify(expr)):
+            if isinstance(node, (sp.tan, sp.sec)):
+                found.add(("cos", node.args[0]))
+            elif isinstance(node, (sp.cot, sp.csc)):
+                found.add(("sin", node.args[0]))
+            elif isinstance(node, sp.Pow) and node.exp.is_negative and isinstance(node.base, (sp.cos, sp.sin)):
+                found.add(("cos" if isinstance(node.base, sp.cos) else "sin", node.base.args[0]))
+    return [Pole(f, a) for f, a in sorted(found, key=lambda item: (item[0], sp.srepr(item[1])))]

@@ -24,7 +24,8 @@ import jinja2
 import sympy as sp
 
 from modelgen import __version__
-from modelgen.codegen.expressions import Block, eliminate_common_subexpressions
+from modelgen.codegen.escape import FILTERS
+from modelgen.codegen.expressions import Block, eliminate_common_subexpressions, poles
 from modelgen.codegen.kernels import (
     KernelBlock,
     OperationCount,
@@ -42,6 +43,7 @@ from modelgen.codegen.options import CodegenOptions
 from modelgen.codegen.printers import CPrinter, PyPrinter
 from modelgen.codegen.structure import FilterStructure, filter_structure
 from modelgen.derivation import DerivedModel
+from modelgen.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, series_range
 from modelgen.errors import ModelError
 from modelgen.output import write_atomically  # noqa: F401  (re-exported: the one atomic writer lives in modelgen.output)
 
@@ -66,14 +68,17 @@ def template_folder() -> Path:
 
 
 def _environment() -> jinja2.Environment:
-    return jinja2.Environment(
+    """The templates' environment, with one escaping filter per output language (``escape``)."""
+    env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(str(template_folder())),
         undefined=jinja2.StrictUndefined,
         trim_blocks=True,
         lstrip_blocks=True,
         keep_trailing_newline=True,
-        autoescape=False,
+        autoescape=False,  # HTML escaping: none of the output languages is HTML (see escape)
     )
+    env.filters.update(FILTERS)
+    return env
 
 
 def _evaluation_outputs(derived: DerivedModel, structure: FilterStructure) -> tuple[list[str], list[sp.Expr]]:
@@ -269,7 +274,7 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
             "name": p.name,
             "symbol": p.symbol,
             "unit": p.unit,
-            "description": p.description.replace("*/", "* /"),
+            "description": p.description,
             "default": _c_number(p.value, options.scalar),
         }
         for p in model.parameters
@@ -312,6 +317,9 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
         "one": one,
         "zero": "0.0F" if options.scalar == "float" else "0.0",
         "sqrt": "sqrtf" if options.scalar == "float" else "sqrt",
+        "fabs": "fabsf" if options.scalar == "float" else "fabs",
+        "half": "0.5F" if options.scalar == "float" else "0.5",
+        "epsilon": epsilon,
         "parameters": parameters,
         "nnz_f": sizes.nnz_f,
         "nnz_g": sizes.nnz_g,
@@ -345,6 +353,11 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
         "part_templates": parts,
         "source_templates": ["c_source.c.j2", *parts, "c_udu_factor.c.j2"],
         "evaluate": _print_block(block, targets, c_printer),
+        "poles": [
+            {"text": str(pole.denominator), "value": c_printer.doprint(pole.denominator), "argument": c_printer.doprint(pole.argument)}
+            for pole in poles(exprs)
+        ],
+        "series_range": _c_number(series_range(options.taylor_order, FLOAT_ROUNDOFF if options.scalar == "float" else DOUBLE_ROUNDOFF), options.scalar),
         "predict_state": state_lines,
         "predict_state_check": [
             f"check += {ref} - {ref};"
@@ -377,9 +390,20 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
         fn_block = eliminate_common_subexpressions([matrix[i, j] for i, j in entries])
         vector = shape.endswith(",)")
         fn_targets = [f"{i}" if vector else f"{i}, {j}" for i, j in entries]
-        locals_, printer = _python_parameter_locals(model, fn_block)
+        fn_poles = poles([matrix[i, j] for i, j in entries])
+        locals_, printer = _python_parameter_locals(model, fn_block, [p.argument for p in fn_poles])
         functions.append(
-            {"name": name, "doc": doc, "shape": shape, "parameters": locals_, **_print_block(fn_block, fn_targets, printer)}
+            {
+                "name": name,
+                "doc": doc,
+                "shape": shape,
+                "parameters": locals_,
+                "poles": [
+                    {"text": str(p.denominator), "value": printer.doprint(p.denominator), "argument": printer.doprint(p.argument)}
+                    for p in fn_poles
+                ],
+                **_print_block(fn_block, fn_targets, printer),
+            }
         )
 
     qd_entries = structure.entries("Qd")
@@ -387,6 +411,9 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
         **common,
         "functions": functions,
         "plan": python_predict_plan(structure),
+        "series_range": repr(series_range(options.taylor_order, DOUBLE_ROUNDOFF)),
+        "f_entries": repr(structure.entries("F")),
+        "f_columns": repr([[int(j) for j in row] for row in structure.rows("F")]),
         "qd_rows": [i for i, _ in qd_entries],
         "qd_cols": [j for _, j in qd_entries],
         "state_names_tuple": _py_tuple(model.state_names),
@@ -431,14 +458,16 @@ def render_c_template(derived: DerivedModel, options: CodegenOptions, template: 
 _PYTHON_TAKEN = re.compile(r"^(t\d+|p|out|np|math)$")
 
 
-def _python_parameter_locals(model, block: Block) -> tuple[list[tuple[str, int]], PyPrinter]:
+def _python_parameter_locals(model, block: Block, extra: list[sp.Expr] = ()) -> tuple[list[tuple[str, int]], PyPrinter]:
     """Parameters a generated Python function uses, unpacked into locals named as in the model.
 
     ``latitude = p[0]`` reads better than ``p[0]`` in every expression; a
     parameter whose name would clash with the function's own names (``p``,
     ``out``, ``np``, ``math``, temporaries ``t<k>``) stays ``p[k]``.
     """
-    used = set().union(*(e.free_symbols for _, e in block.temporaries), *(e.free_symbols for e in block.outputs))
+    used = set().union(
+        *(e.free_symbols for _, e in block.temporaries), *(e.free_symbols for e in block.outputs), *(e.free_symbols for e in extra)
+    )
     renames, locals_ = {}, []
     for k, par in enumerate(model.parameters):
         if par.sym not in used:

@@ -139,6 +139,9 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout
             Field("A", (N, N), "(F T)^k / k!"),
             Field("B", (N, N), "the next term"),
             Field("S", (N, N), "sum of the terms / (k + 1), for Gamma"),
+        Field("scale", (N,), "balancing: d of ||F||_D = ||D^-1 F D||"),
+        Field("row_sum", (N,), "balancing: off-diagonal row sums of D^-1 |F| D"),
+        Field("col_sum", (N,), "balancing: off-diagonal column sums of D^-1 |F| D"),
         )
         filter_scratch = (
             Field("W", (N, NWT), "Thornton: [Phi U, Gamma]"),
@@ -165,6 +168,9 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout
         Field("A", (N, N), "(F T)^k / k!"),
         Field("B", (N, N), "the next term"),
         Field("S", (N, N), "sum of the terms / (k + 1), for Gamma"),
+        Field("scale", (N,), "balancing: d of ||F||_D = ||D^-1 F D||"),
+        Field("row_sum", (N,), "balancing: off-diagonal row sums of D^-1 |F| D"),
+        Field("col_sum", (N,), "balancing: off-diagonal column sums of D^-1 |F| D"),
         Field("Gamma", (N, dim_w)),
     )
     filter_scratch = [
