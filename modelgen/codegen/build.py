@@ -137,10 +137,13 @@ class CompiledFilter:
         return fn
 
     # -- the filter cycle --------------------------------------------------
-    def set_parameters(self, values: dict[str, float]) -> None:
+    def set_parameters(self, values: dict[str, float]) -> int:
+        """Set parameters and evaluate the matrices; returns matrices_evaluate's status."""
         for name, value in values.items():
             setattr(self.params, name, value)
-        getattr(self.lib, f"{self.model}_matrices_evaluate")(ctypes.byref(self.params), ctypes.byref(self.matrices))
+        evaluate = getattr(self.lib, f"{self.model}_matrices_evaluate")
+        evaluate.restype = ctypes.c_int
+        return int(evaluate(ctypes.byref(self.params), ctypes.byref(self.matrices)))
 
     def discretize(self, T: float) -> int:
         return self._discretize(
