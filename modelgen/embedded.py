@@ -27,9 +27,10 @@ Positive definiteness in single precision.  P is checked through its
 correlation matrix C = D^-1/2 P D^-1/2 (Cholesky in double of the float
 values).  Entry errors of size e move the eigenvalues of C by at most N e
 (Weyl), so a float P can only be required to be positive definite where the
-reference's smallest correlation eigenvalue exceeds N times the run's float
-tolerance; the
-paper's scenario starts from exact zero velocity and position variances, and
+reference's smallest correlation eigenvalue exceeds N times the run's
+measured largest entry error e (the measured one, not the a-priori
+tolerance: the tolerance is a worst case 100 times the measured error, and
+N times it would excuse every step of the paper's scenario); the paper's scenario starts from exact zero velocity and position variances, and
 right after the first update that eigenvalue is 3e-8, below float
 resolution.  The UD form does not need this allowance: its P = U D U^T is
 positive definite exactly when every D_i > 0, which is checked at every step.
@@ -97,8 +98,8 @@ class QemuRun:
 
     @property
     def resolvable_steps(self) -> list[int]:
-        """Steps whose reference P is far enough from singular for float to resolve it."""
-        limit = self.n_states * self.tolerance
+        """Steps whose reference P is far enough from singular for float to resolve it (Weyl, module doc)."""
+        limit = self.n_states * self.max_scaled_P
         return [k for k, lam in enumerate(self.reference_min_correlation_eigenvalue) if lam > limit]
 
     @property

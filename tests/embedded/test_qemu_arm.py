@@ -54,3 +54,56 @@ def test_report_gives_measured_error_and_verdict(runs):
     text = report_markdown("ned_doppler18", {}, list(runs.values()))
     assert "qemu-arm" in text and f"{runs[EMBEDDED_OPTIONS[0].slug()].max_scaled_P:.2e}" in text
     assert "FAILED" not in text
+
+
+@pytest.fixture(scope="module")
+def gnss21_runs(tmp_path_factory):
+    """The 21-state INS/GNSS filter in float (covariance and U-D) at the IMU step 5 ms and the GNSS step 1 s."""
+    import dataclasses
+
+    from modelgen.derivation import derive
+    from modelgen.modelfile import load_model
+    from modelgen.pipeline import check_scenario
+
+    derived = derive(load_model("ins_gnss21"))
+    declared = check_scenario(derived)
+    assert declared.step == 1.0
+    root = tmp_path_factory.mktemp("gnss21")
+    cases = [(step, options) for step in (0.005, 1.0) for options in EMBEDDED_OPTIONS]
+
+    def run(case):
+        step, options = case
+        scenario = dataclasses.replace(declared, step=step, steps=100)
+        return qemu_run(derived, scenario, options, root / f"{step:g}")
+
+    for step in (0.005, 1.0):
+        (root / f"{step:g}").mkdir()
+    return dict(zip(((s, o.slug()) for s, o in cases), in_parallel(run, cases)))
+
+
+@pytest.mark.parametrize("step", [0.005, 1.0], ids=["5ms", "1s"])
+@pytest.mark.parametrize("options", EMBEDDED_OPTIONS, ids=lambda o: o.slug())
+def test_21_state_ins_gnss_float_filter_meets_its_stated_tolerance(gnss21_runs, step, options):
+    run = gnss21_runs[(step, options.slug())]
+    assert run.steps == 100 and run.statuses_ok and run.symmetric
+    assert run.tolerance < 1e-2  # (2n + 1) u_float sum rho over 100 steps: a bound, stated in the report
+    assert run.within(), (run.max_scaled_P, run.max_scaled_x, run.tolerance)
+    assert run.positive_definite_where_resolvable
+
+
+def test_report_names_the_single_precision_form_to_use(gnss21_runs):
+    from modelgen.embedded import recommended_form
+
+    runs = [r for (step, _), r in gnss21_runs.items() if step == 1.0]
+    text = recommended_form(runs)
+    best = min(runs, key=lambda r: max(r.max_scaled_P, r.max_scaled_x))
+    assert f"--form {best.options.form}" in text
+    failing = [dataclass_replace_within(r) for r in runs]
+    assert "No single-precision form" in recommended_form(failing)
+
+
+def dataclass_replace_within(run):
+    """The same run judged against a tolerance it cannot meet (to see the report say so)."""
+    import dataclasses
+
+    return dataclasses.replace(run, tolerance=run.max_scaled_P / 2)
