@@ -129,3 +129,26 @@ def test_a_transform_file_naming_an_unknown_state_in_its_check_section_is_refuse
     )
     with pytest.raises(ModelError, match="unknown state\\(s\\) gyro_markov_drift_zz"):
         load_model(tmp_path / "t.yaml")
+
+
+AUGMENT = (
+    "model: scaled\nbase: ned_doppler18\ntransforms:\n  - augment:\n      states: [{name: doppler_scale_factor, symbol: k_d}]\n"
+    "      equations: {k_d: '0'}\n      measurement_terms: {Z_n: '-V_n*k_d'}\n"
+)
+
+
+def test_an_added_state_without_a_sigma_leaves_the_transform_without_a_check_scenario(tmp_path):
+    """Nothing to inherit for the new state: the model loads, and --check falls back to the labelled synthetic scenario."""
+    (tmp_path / "t.yaml").write_text(AUGMENT)
+    model = load_model(tmp_path / "t.yaml")
+    assert model.check is None
+    assert check_scenario(derive(model)).label.startswith("synthetic")
+
+
+def test_a_transform_check_section_must_complete_the_inherited_one(tmp_path):
+    (tmp_path / "t.yaml").write_text(AUGMENT + "check:\n  steps: 10\n")
+    with pytest.raises(ModelError, match="no sigma for state\\(s\\) doppler_scale_factor"):
+        load_model(tmp_path / "t.yaml")
+    (tmp_path / "t.yaml").write_text(AUGMENT + "check:\n  steps: 10\n  initial_sigma:\n    doppler_scale_factor: 1.0e-3\n")
+    model = load_model(tmp_path / "t.yaml")
+    assert model.check.steps == 10 and model.check.step_s == 60.0
