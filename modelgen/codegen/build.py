@@ -106,7 +106,8 @@ class CompiledFilter:
         self.dtype = np.float64 if options.scalar == "double" else np.float32
         sizes = _model_sizes(sizes)
         layout = c_layout(sizes, options, model.upper())
-        Params = type("Params", (ctypes.Structure,), {"_fields_": [(name, real) for name in parameter_names]})
+        fields = [(name, real) for name in parameter_names] or [("unused_", real)]  # C has no empty structs
+        Params = type("Params", (ctypes.Structure,), {"_fields_": fields})
         self.params = Params()
         self.matrices = _ctypes_struct("Matrices", layout.matrices, real)()
         self.transition = _ctypes_struct("Transition", layout.transition, real)()

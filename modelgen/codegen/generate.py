@@ -372,6 +372,8 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
             c_ud_weights(structure)[0] if options.ud else c_covariance_predict(structure, packed)[0], model.name
         ),
         "struct_bytes": _all_struct_bytes(layout, scalar_size),
+        "predict_reads_transition": bool(state_lines)
+        or any(block.uses("t") for block in (c_ud_weights(structure)[0] if options.ud else c_covariance_predict(structure, packed)[0])),
         "first_free_parameter": next((p.name for p in model.parameters if p.value is None), None),
         "example_value": _c_number(0.5, options.scalar),
         "example_variance": _c_number(1e-4, options.scalar),

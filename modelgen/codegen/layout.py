@@ -110,7 +110,7 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout
     NP = Dim(f"{prefix}_N_PACKED", sizes.packed)
     NU = Dim(f"{prefix}_N_UPPER", max(sizes.upper, 1))
     NWT = Dim(f"{prefix}_N_WEIGHTS", sizes.n + sizes.nw)
-    nnz_f = Dim(f"{prefix}_NNZ_F", max(sizes.nnz_f, 1))
+    nnz_f = Dim(f"{prefix}_NNZ_F", sizes.nnz_f) if sizes.nnz_f else Dim("1", 1)  # C has no zero-size arrays
     dim_g = Dim(str(max(sizes.nnz_g, 1)), max(sizes.nnz_g, 1))
     dim_h = Dim(str(max(sizes.nnz_h, 1)), max(sizes.nnz_h, 1))
     dim_w = Dim(str(max(sizes.nw, 1)), max(sizes.nw, 1))
