@@ -75,6 +75,17 @@ def error_message(exc: BaseException) -> tuple[str, int] | None:
     return None
 
 
+def _forget_nested_interrupt() -> None:
+    """Clear CPython's "unhandled KeyboardInterrupt" flag, so that the process exits 130.
+
+    CPython sets that flag whenever a KeyboardInterrupt leaves code run by
+    ``eval``/``exec`` of a string (sympy's parser, ``lambdify``), even when
+    the exception is caught later, and then ends the process by SIGINT
+    instead of with its exit code.  Every string ``exec`` resets the flag first.
+    """
+    exec("pass")  # noqa: S102 - a constant string: resets the flag, runs nothing
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """Python warnings as one line, the way users read modelgen's messages."""
     click.echo(f"modelgen: warning: {message}", err=True)
@@ -95,6 +106,7 @@ class ModelgenGroup(click.Group):
                 if debug:
                     raise
                 click.echo("modelgen: interrupted", err=True)
+                _forget_nested_interrupt()
                 raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
             except Exception as exc:  # the one place that turns failures into messages
                 if debug or (isinstance(exc, OSError) and exc.errno == errno.EPIPE):

@@ -88,3 +88,232 @@ def test_simulate_flies_a_profile_with_the_generated_c_filter_and_writes_summary
 def test_simulate_refuses_an_unknown_filter_implementation(runner, tmp_path):
     result = runner.invoke(main, ["simulate", "--filter", "fortran", "--out", str(tmp_path)])
     assert result.exit_code != 0 and "fortran" in result.output
+
+
+# -- output is never lost (issue 10, item 6) ----------------------------------------------------
+
+TOY = """\
+model: toy_loop
+parameters:
+  - {name: rate, symbol: k, value: 0.5}
+  - {name: sigma, symbol: s, value: 0.1}
+states:
+  - {name: x_state, symbol: x}
+noises:
+  - {name: w_noise, symbol: w, psd: "s**2"}
+dynamics:
+  x: -k*x + w
+measurements:
+  - {name: z_meas, symbol: z, expression: x, variance: "s**2"}
+"""
+
+
+def _toy(tmp_path, rate="0.5"):
+    path = tmp_path / "toy.yaml"
+    path.write_text(TOY.replace("value: 0.5", f"value: {rate}"))
+    return path
+
+
+def _snapshot(folder):
+    return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+
+
+def _hidden(root):
+    return sorted(p.name for p in root.iterdir() if p.name.startswith("."))
+
+
+def test_a_failing_check_exits_1_and_keeps_the_previous_output(runner, tmp_path, monkeypatch):
+    import dataclasses
+
+    from modelgen import pipeline
+
+    out = tmp_path / "out"
+    assert runner.invoke(main, ["generate", str(_toy(tmp_path)), "--out", str(out), "--check"]).exit_code == 0
+    before = _snapshot(out / "toy_loop")
+    real_check = pipeline.check
+
+    def strict_check(derived, folder, scenario=None, options=None):  # the check really runs, against a zero tolerance
+        assert folder != out / "toy_loop"  # checked in the staging folder, not in place
+        return [dataclasses.replace(r, tolerance=0.0) for r in real_check(derived, folder, scenario, options)]
+
+    monkeypatch.setattr(pipeline, "check", strict_check)
+    result = runner.invoke(main, ["generate", str(_toy(tmp_path, "0.25")), "--out", str(out), "--check"])
+    assert result.exit_code == 1, result.output
+    assert "-> FAILED" in result.output and "was left as it was" in result.output
+    assert _snapshot(out / "toy_loop") == before
+    assert _hidden(out) == []
+
+
+def test_a_check_that_raises_keeps_the_previous_output(runner, tmp_path, monkeypatch):
+    from modelgen import pipeline
+    from modelgen.errors import ModelError
+
+    out = tmp_path / "out"
+    assert runner.invoke(main, ["generate", str(_toy(tmp_path)), "--out", str(out)]).exit_code == 0
+    before = _snapshot(out / "toy_loop")
+
+    def broken_check(*args, **kwargs):
+        raise ModelError("generated C for 'toy_loop' refused the step T = 0")
+
+    monkeypatch.setattr(pipeline, "check", broken_check)
+    result = runner.invoke(main, ["generate", str(_toy(tmp_path, "0.25")), "--out", str(out), "--check"])
+    assert result.exit_code == 2
+    assert "modelgen: error: generated C for 'toy_loop' refused the step" in result.output
+    assert _snapshot(out / "toy_loop") == before and _hidden(out) == []
+
+
+def test_a_full_disk_gives_one_line_exit_2_and_nothing_half_written(runner, tmp_path, monkeypatch):
+    import errno
+
+    from modelgen import output
+
+    out = tmp_path / "out"
+    assert runner.invoke(main, ["generate", str(_toy(tmp_path)), "--out", str(out)]).exit_code == 0
+    before = _snapshot(out / "toy_loop")
+    written = []
+
+    def full(path, text):
+        written.append(path)
+        if len(written) == 3:
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        path.write_text(text)
+
+    monkeypatch.setattr(output, "_write_text", full)
+    result = runner.invoke(main, ["generate", str(_toy(tmp_path, "0.25")), "--out", str(out)])
+    assert result.exit_code == 2
+    assert f"modelgen: error: {written[-1]}: No space left on device" in result.output
+    assert "Traceback" not in result.output
+    assert _snapshot(out / "toy_loop") == before and _hidden(out) == []
+
+
+# -- one error boundary (issue 10, item 9) -------------------------------------------------------
+
+
+def test_an_internal_error_exits_3_without_traceback_and_debug_shows_it(runner, tmp_path, monkeypatch):
+    import modelgen.derivation
+
+    def bug(model):
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(modelgen.derivation, "derive", bug)
+    result = runner.invoke(main, ["derive"])
+    assert result.exit_code == 3
+    assert "modelgen: error: internal error: RuntimeError: a bug" in result.output and "--debug" in result.output
+    debug = runner.invoke(main, ["--debug", "derive"])
+    assert isinstance(debug.exception, RuntimeError)
+
+
+def test_debug_lets_a_bad_input_error_through_with_its_traceback(runner, tmp_path):
+    from modelgen.errors import ModelError
+
+    result = runner.invoke(main, ["--debug", "derive", str(tmp_path / "nope.yaml")])
+    assert isinstance(result.exception, ModelError) and "nope.yaml" in str(result.exception)
+
+
+def test_interrupt_exits_130_and_says_so(runner, monkeypatch):
+    import modelgen.modelfile
+
+    def interrupted(name):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(modelgen.modelfile, "load_model", interrupted)
+    result = runner.invoke(main, ["derive"])
+    assert result.exit_code == 130
+    assert "modelgen: interrupted" in result.output
+
+
+def test_python_warnings_are_printed_as_modelgen_warnings(runner, monkeypatch):
+    import warnings
+
+    import modelgen.derivation
+
+    real = modelgen.derivation.derive
+
+    def noisy(model):
+        warnings.warn("model has 900 states: the generated C will be about 40 MB")
+        return real(model)
+
+    monkeypatch.setattr(modelgen.derivation, "derive", noisy)
+    result = runner.invoke(main, ["derive"])
+    assert result.exit_code == 0
+    assert "modelgen: warning: model has 900 states: the generated C will be about 40 MB" in result.output
+
+
+def test_printer_errors_become_bad_input_errors():
+    import sympy as sp
+    from sympy.printing.c import C99CodePrinter
+
+    from modelgen.cli import EXIT_BAD_INPUT, error_message
+
+    try:
+        C99CodePrinter({"strict": True}).doprint(sp.Integral(sp.Symbol("x"), sp.Symbol("x")))
+    except Exception as exc:  # noqa: BLE001 - whatever sympy raises, it comes from its printer
+        message, code = error_message(exc)
+    assert code == EXIT_BAD_INPUT and message.startswith("an expression cannot be printed as code")
+    assert error_message(TypeError("not from a printer")) is None  # a bug elsewhere stays an internal error
+
+
+@pytest.mark.parametrize("module", ["modelgen", "modelgen.cli"])
+def test_python_dash_m_runs_the_command_line(module):
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0 and "Usage: modelgen" in result.stdout and "--debug" in result.stdout
+
+
+def test_generate_into_a_path_below_a_file_is_a_one_line_error(runner, tmp_path):
+    (tmp_path / "file").write_text("x")
+    result = runner.invoke(main, ["generate", str(_toy(tmp_path)), "--out", str(tmp_path / "file" / "sub")])
+    assert result.exit_code == 2
+    assert result.output.startswith("modelgen: error: ") and "Not a directory" in result.output
+
+
+
+def test_concurrent_generates_into_one_folder_all_succeed_and_leave_it_whole(tmp_path):
+    import subprocess
+    import sys
+
+    model, out = _toy(tmp_path), tmp_path / "out"
+    command = [sys.executable, "-m", "modelgen", "generate", str(model), "--out", str(out)]
+    for _ in range(3):
+        procs = [subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for _ in range(8)]
+        results = [(p.wait(180), p.stdout.read()) for p in procs]
+        assert [code for code, _ in results] == [0] * 8, results
+        assert not any("Traceback" in text for _, text in results)
+        assert sorted(p.name for p in (out / "toy_loop").iterdir()) == sorted(
+            [".modelgen-manifest.json", "CMakeLists.txt", "Makefile", "README.md", "toy_loop.c", "toy_loop.h", "toy_loop.py"]
+        )
+        assert _hidden(out) == []
+
+
+def test_sigint_during_generate_exits_130_and_leaves_nothing_half_written(tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    model, out = _toy(tmp_path), tmp_path / "out"
+    subprocess.run([sys.executable, "-m", "modelgen", "generate", str(model), "--out", str(out)], check=True,
+                   capture_output=True, timeout=120)
+    before = _snapshot(out / "toy_loop")
+    (out / "toy_loop" / "main.c").write_text("int main(void) { return 0; }\n")
+    codes = []
+    for delay in (0.5, 1.0, 1.5, 2.0):
+        proc = subprocess.Popen([sys.executable, "-m", "modelgen", "generate", str(_toy(tmp_path, "0.25")), "--out", str(out), "--check"],
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
+        code, text = proc.wait(120), proc.stdout.read()
+        # 130: interrupted, nothing written; 0 or death by SIGINT: the signal came after the output was complete
+        assert code in (0, 130, -signal.SIGINT), text
+        codes.append(code)
+        assert "Traceback" not in text
+        if code == 130:
+            assert "modelgen: interrupted" in text
+        after = _snapshot(out / "toy_loop")
+        assert after["main.c"] == b"int main(void) { return 0; }\n"
+        del after["main.c"]
+        assert after.keys() == before.keys()  # the old or the new output, whole
+        assert _hidden(out) == []
+    assert 130 in codes  # at least one run was really interrupted mid-way
