@@ -98,13 +98,21 @@ def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -
     return Scenario(values, np.eye(derived.n_states), step=step, steps=steps, seed=seed, initial_state=x0, label=label)
 
 
-def paper_scenario(derived: DerivedModel) -> Scenario:
-    """Seed 000's 4-hour scenario: level flight, Table 1 errors, T = 60 s."""
+def paper_parameters() -> dict[str, float]:
+    """Seed 000's level-flight operating point and Table 1 statistics, by ned_doppler18 parameter name."""
     from modelgen.analysis.budget import load_error_budget
     from modelgen.analysis.scenario import load_scenario, operating_point
 
+    return {**load_error_budget().parameters, **operating_point(load_scenario())}
+
+
+def paper_scenario(derived: DerivedModel) -> Scenario:
+    """Seed 000's 4-hour scenario: level flight, Table 1 errors, T = 60 s."""
+    from modelgen.analysis.budget import load_error_budget
+    from modelgen.analysis.scenario import load_scenario
+
     flight, budget = load_scenario(), load_error_budget()
-    values = {**budget.parameters, **operating_point(flight)}
+    values = paper_parameters()
     label = "the core paper's scenario (seed 000: level flight east at 30 N, Table 1, 240 steps of 60 s)"
     return Scenario(values, budget.initial_covariance(derived.model), step=flight.step_s, steps=flight.steps, label=label)
 
