@@ -20,6 +20,7 @@ import subprocess
 import sys
 import traceback
 import warnings
+from pathlib import Path
 from types import TracebackType
 
 import click
@@ -86,6 +87,14 @@ def _forget_nested_interrupt() -> None:
     exec("pass")  # noqa: S102 - a constant string: resets the flag, runs nothing
 
 
+def _mapped_echo(update, err: bool = False):
+    """``click.echo`` that shows paths in a report's staging folder as their final paths."""
+    return lambda message: click.echo(str(message).replace(str(update.staging), str(update.folder)), err=err)
+
+
+_FORCE_REPORT_HELP = "Overwrite report files of the same name that modelgen did not write or that were edited since."
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """Python warnings as one line, the way users read modelgen's messages."""
     click.echo(f"modelgen: warning: {message}", err=True)
@@ -137,9 +146,9 @@ def main(debug: bool) -> None:
 
 def _paper_operating_point(derived) -> dict[str, float] | None:
     """The paper's level-flight values, when they cover every parameter of the model."""
-    from modelgen.pipeline import paper_scenario
+    from modelgen.pipeline import paper_parameters
 
-    values = dict(paper_scenario(derived).parameters) if derived.model.frame == "NED" else {}
+    values = paper_parameters() if derived.model.frame == "NED" else {}
     needed = {p.name for p in derived.model.parameters if p.value is None}
     return values if values and needed <= set(values) else None
 
@@ -233,7 +242,7 @@ def generate(
 @click.option("--report", "report_dir", default="report", show_default=True, type=click.Path(file_okay=False), help="Folder for the reports.")
 @click.option("--no-figures", is_flag=True, help="Skip the covariance-analysis figures.")
 @click.option("--simulate/--no-simulate", "with_simulation", default=True, show_default=True, help="Also fly the paper's 4-h profile once (300 Hz strapdown, Doppler filter).")
-@click.option("--force", is_flag=True, help="As for generate: overwrite files in OUT/<model>/ that modelgen did not write or that were edited.")
+@click.option("--force", is_flag=True, help="As for generate: overwrite files in OUT/<model>/ and in REPORT that modelgen did not write or that were edited.")
 def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool, force: bool) -> None:
     """The main job, end to end on the core paper's 18-state model.
 
@@ -245,6 +254,24 @@ def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool,
     """
     from pathlib import Path
 
+    from modelgen.output import ReportUpdate
+
+    with ReportUpdate(Path(report_dir), force=force) as staged:
+        text, runs, result = _run_into(staged, out_root, no_figures, with_simulation, force)
+        staged.commit()
+    report = Path(report_dir)
+    click.echo(text)
+    failed = [r.generation.derived.model.name for r in runs if not r.passed]
+    if failed or result.unexplained:
+        click.echo(f"modelgen run: FAILED ({', '.join(failed) or 'unexplained paper differences'})", err=True)
+        sys.exit(EXIT_CHECK_FAILED)
+    click.echo(f"modelgen run: ok; report in {report / 'README.md'}, code in {out_root}/")
+
+
+def _run_into(staged, out_root: str, no_figures: bool, with_simulation: bool, force: bool):
+    """The main job's steps, writing the report into the staging folder of ``staged``."""
+    from pathlib import Path
+
     from modelgen.analysis.report import run_covariance_analysis
     from modelgen.derivation import derive as derive_model
     from modelgen.modelfile import load_model
@@ -252,7 +279,8 @@ def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool,
     from modelgen.pipeline import generate_and_check_all, run_report
     from modelgen.verification import verify as verify_model, write_verification_report
 
-    report = Path(report_dir)
+    echo = _mapped_echo(staged)
+    report = staged.staging
     click.echo("derive ned_doppler18 ...")
     derived = derive_model(load_model("ned_doppler18"))
     click.echo("verify against the paper's table ...")
@@ -268,30 +296,26 @@ def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool,
     )
     runs = generate_and_check_all(Path(out_root), progress=click.echo, force=force)
     click.echo("covariance analysis (Table 2, Figs 2-7) ...")
-    analysis = run_covariance_analysis(report / "covariance", figures=not no_figures, progress=click.echo)
+    analysis = run_covariance_analysis(report / "covariance", figures=not no_figures, progress=echo)
     sections = ["## Covariance analysis (Table 2 analogue)\n\n" + analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)"]
     if with_simulation:
         from modelgen.simulation.report import simulate as run_simulation
         from modelgen.simulation.scenario import load_scenario as load_profile
 
         click.echo("simulate the paper's flight (profile_000, one run) ...")
-        sim = run_simulation(load_profile("profile_000"), report / "simulation", runs=1, seed=1, echo=click.echo)
+        sim = run_simulation(load_profile("profile_000"), report / "simulation", runs=1, seed=1, echo=echo)
         sections.append(f"## Simulation\n\nThe paper's profile flown once with the generated C filter: [simulation/{Path(sim).name}](simulation/{Path(sim).name}) and its figures.")
     text = run_report(summary, runs, Path(out_root), sections)
     write_text_atomically(report / "README.md", text)
-    click.echo(text)
-    failed = [r.generation.derived.model.name for r in runs if not r.passed]
-    if failed or result.unexplained:
-        click.echo(f"modelgen run: FAILED ({', '.join(failed) or 'unexplained paper differences'})", err=True)
-        sys.exit(1)
-    click.echo(f"modelgen run: ok; report in {report / 'README.md'}, code in {out_root}/")
+    return text, runs, result
 
 
 @main.command()
 @click.argument("model", default="ned_doppler18")
 @click.option("--out", "out_dir", default="report", show_default=True, type=click.Path(file_okay=False), help="Folder for embedded.md.")
 @click.option("--qemu/--no-qemu", default=True, help="Also run the arm-linux-gnueabihf build under qemu-arm against the reference.")
-def embedded(model: str, out_dir: str, qemu: bool) -> None:
+@click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
+def embedded(model: str, out_dir: str, qemu: bool, force: bool) -> None:
     """Build MODEL's filter (float: default, UD, packed sequential) for a Cortex-M4F; report size and stack.
 
     Links a bare-metal image with no heap (the map must show no malloc, free
@@ -302,6 +326,7 @@ def embedded(model: str, out_dir: str, qemu: bool) -> None:
     from modelgen.derivation import derive as derive_model
     from modelgen.embedded import embedded_report, recommended_form
     from modelgen.modelfile import load_model
+    from modelgen.output import ReportUpdate
     from modelgen.pipeline import check_scenario
 
     derived = derive_model(load_model(model))
@@ -309,7 +334,10 @@ def embedded(model: str, out_dir: str, qemu: bool) -> None:
     if qemu:
         scenario = check_scenario(derived)
         click.echo(f"scenario: {scenario.label}")
-    report = embedded_report(derived, scenario, out_dir)
+    with ReportUpdate(Path(out_dir), force=force) as staged:
+        report = embedded_report(derived, scenario, staged.staging)
+        markdown = staged.final(report.markdown)
+        staged.commit()
     for slug, b in report.builds.items():
         click.echo(
             f"{slug}: filter .text {b.filter_object.text} .data {b.filter_object.data} .bss {b.filter_object.bss}; "
@@ -326,7 +354,7 @@ def embedded(model: str, out_dir: str, qemu: bool) -> None:
         )
     if report.runs:
         click.echo(recommended_form(report.runs).replace("**", ""))
-    click.echo(f"wrote {report.markdown}")
+    click.echo(f"wrote {markdown}")
     if failed or any(b.forbidden_symbols for b in report.builds.values()):
         sys.exit(1)
 
@@ -334,7 +362,8 @@ def embedded(model: str, out_dir: str, qemu: bool) -> None:
 @main.command()
 @click.argument("model", default="ned_doppler18")
 @click.option("--out", "out_dir", default="report", show_default=True, type=click.Path(file_okay=False), help="Folder for verification.md and verification.json.")
-def verify(model: str, out_dir: str) -> None:
+@click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
+def verify(model: str, out_dir: str, force: bool) -> None:
     """Check MODEL's derived F, G, H against the paper's printed table.
 
     Every entry is compared symbolically after converting to the paper's units
@@ -345,6 +374,7 @@ def verify(model: str, out_dir: str) -> None:
     """
     from modelgen.derivation import derive as derive_model
     from modelgen.modelfile import load_model
+    from modelgen.output import ReportUpdate
     from modelgen.paper_table import paper_table_path
     from modelgen.verification import verify as verify_model, write_verification_report
 
@@ -353,7 +383,9 @@ def verify(model: str, out_dir: str) -> None:
         click.echo(f"model {loaded.name}: no paper table to verify against (only the built-in paper model has one)")
         return
     result = verify_model(derive_model(loaded))
-    markdown, data = write_verification_report(result, out_dir)
+    with ReportUpdate(Path(out_dir), force=force) as staged:
+        markdown, data = (staged.final(p) for p in write_verification_report(result, staged.staging))
+        staged.commit()
     counts = result.counts()
     click.echo(f"model {result.model} against {result.table}: {len(result.entries)} entries, " + ", ".join(f"{n} {s}" for s, n in counts.items()))
     for e in result.differences:
@@ -403,7 +435,8 @@ def observability(model: str, scenario_file: str | None, assignments: tuple[str,
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="report/covariance", show_default=True, help="Directory for table2.md, table2.csv and the Fig 2-7 PNGs.")
 @click.option("--no-figures", is_flag=True, help="Skip the PNG figures.")
 @click.option("--no-sensitivity", is_flag=True, help="Skip the sensitivity study.")
-def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool) -> None:
+@click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
+def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool, force: bool) -> None:
     """Reproduce the core paper's covariance analysis: Table 2 and Figs 2-7.
 
     Pure inertial (16 states), optimal Doppler-aided filter (18 states) and the
@@ -411,12 +444,16 @@ def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool) -> None:
     prints our Table 2 beside the paper's with the ratio ours/paper.
     """
     from modelgen.analysis.report import run_covariance_analysis
+    from modelgen.output import ReportUpdate
 
-    report = run_covariance_analysis(
-        out_dir, sensitivity=not no_sensitivity, figures=not no_figures, progress=lambda m: click.echo(m, err=True)
-    )
+    with ReportUpdate(Path(out_dir), force=force) as staged:
+        report = run_covariance_analysis(
+            staged.staging, sensitivity=not no_sensitivity, figures=not no_figures, progress=_mapped_echo(staged, err=True)
+        )
+        files = [staged.final(p) for p in report.files]
+        staged.commit()
     click.echo(report.table)
-    click.echo("wrote " + ", ".join(str(p) for p in report.files))
+    click.echo("wrote " + ", ".join(str(p) for p in files))
 
 
 @main.command()
@@ -427,21 +464,27 @@ def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool) -> None:
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--filter", "implementation", type=click.Choice(["c", "python", "reference"]), default="c", show_default=True, help="Filter of the correction-mode runs: the generated C (compiled now), the generated Python, or the numpy reference.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="report/simulation", show_default=True, help="Directory for summary.md and the PNG figures.")
+@click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
 def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | None, seed: int, out_dir: str,
-             implementation: str) -> None:
+             implementation: str, force: bool) -> None:
     """Fly a scenario: truth, IMU/Doppler/GPS, strapdown, filter in three correction modes, Monte Carlo.
 
     Writes summary.md (errors per correction mode, NEES test, timings) and PNG figures.
     """
     from modelgen.simulation.report import simulate as run_simulation
+    from modelgen.output import ReportUpdate
     from modelgen.simulation.scenario import load_scenario
 
     scenario = load_scenario(profile)
     changes = {"imu_rate": imu_rate} if imu_rate is not None else {}
     if hours is not None:
         changes["hours"] = hours
-    summary = run_simulation(scenario.with_changes(**changes), out_dir, runs=runs, seed=seed,
-                             echo=lambda m: click.echo(m, err=True), implementation=implementation)
+    scenario = scenario.with_changes(**changes)
+    with ReportUpdate(Path(out_dir), force=force) as staged:
+        summary = run_simulation(scenario, staged.staging, runs=runs, seed=seed,
+                                 echo=_mapped_echo(staged, err=True), implementation=implementation)
+        summary = staged.final(summary)
+        staged.commit()
     click.echo(f"wrote {summary}")
 
 

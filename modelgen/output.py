@@ -178,15 +178,16 @@ def plan_carry_over(folder: Path, new_files: set[str], force: bool) -> tuple[lis
 
 
 @contextmanager
-def folder_lock(folder: Path) -> Iterator[Path]:
-    """Hold an exclusive lock on writing ``folder`` (``<parent>/.<name>.lock``), waiting for any other writer.
+def folder_lock(folder: Path, path: Path | None = None) -> Iterator[Path]:
+    """Hold an exclusive lock on writing ``folder``, waiting for any other writer.
 
-    The lock file is removed on release; a writer that finds the file it locked
-    already unlinked or replaced takes the lock again, so removal is safe.
+    The lock file is ``path``, by default ``<parent>/.<name>.lock``.  It is
+    removed on release; a writer that finds the file it locked already
+    unlinked or replaced takes the lock again, so removal is safe.
     """
     folder = Path(folder)
     folder.parent.mkdir(parents=True, exist_ok=True)
-    path = folder.with_name(f".{folder.name}.lock")
+    path = Path(path) if path is not None else folder.with_name(f".{folder.name}.lock")
     while True:
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
         try:
@@ -412,3 +413,112 @@ def write_text_atomically(path: Path, text: str) -> Path:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+#: Lock and staging names inside a report folder.
+REPORT_LOCK = ".modelgen.lock"
+REPORT_STAGING_PREFIX = f".{STAGING_INFIX}"
+
+
+def _owned_unchanged(folder: Path, rel: str) -> bool:
+    """True if ``folder/rel`` is a file modelgen wrote and nobody edited: a manifest in one of its parents lists its hash."""
+    target = folder / rel
+    if not target.is_file() or target.is_symlink():
+        return False
+    digest = sha256_file(target)
+    target = target.absolute()
+    for level in target.parents:  # a report written inside another (covariance/ inside run's report/) counts
+        try:
+            manifest = read_manifest(level) or {}
+        except (ModelError, OSError):
+            manifest = {}
+        if manifest.get(target.relative_to(level).as_posix()) == digest:
+            return True
+    return False
+
+
+class ReportUpdate:
+    """Write a report folder through a staging folder inside it, then merge the new files in.
+
+    Reports share their folder with whatever else is there (``--out .`` is
+    allowed), so unlike ``FolderUpdate`` nothing is carried or removed: the
+    new files are renamed into place one by one, a file of the same name is
+    replaced only if modelgen wrote it and it was not edited since (or with
+    ``force``), and the folder's manifest lists every report file modelgen
+    wrote.  Staging, lock (``.modelgen.lock``) and, if modelgen made the
+    folder and wrote nothing, the folder itself are removed on the way out.
+    """
+
+    def __init__(self, folder: Path, force: bool = False) -> None:
+        self.folder = Path(folder)
+        self.force = force
+        self.staging: Path | None = None
+        self._created = False
+        self._lock = None
+
+    def __enter__(self) -> "ReportUpdate":
+        if self.folder.exists() and not self.folder.is_dir():
+            raise OSError(errno.ENOTDIR, "exists and is not a folder", str(self.folder))
+        self._created = not self.folder.exists()
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self._lock = folder_lock(self.folder, self.folder / REPORT_LOCK)
+        self._lock.__enter__()
+        try:
+            for leftover in self.folder.glob(f"{REPORT_STAGING_PREFIX}*"):
+                if leftover.is_dir() and not leftover.is_symlink():
+                    shutil.rmtree(leftover)
+            self.staging = Path(tempfile.mkdtemp(prefix=REPORT_STAGING_PREFIX, dir=self.folder))
+            _apply_umask_to_folder(self.staging)
+        except BaseException:
+            self.__exit__(None, None, None)
+            raise
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        try:
+            if self.staging is not None:
+                shutil.rmtree(self.staging, ignore_errors=True)
+                self.staging = None
+        finally:
+            self._lock.__exit__(*exc_info)
+            if self._created and self.folder.is_dir() and not any(self.folder.iterdir()):
+                self.folder.rmdir()
+
+    def final(self, path: Path | str) -> Path:
+        """Where a file written into the staging folder will be once committed."""
+        return self.folder / Path(path).relative_to(self.staging)
+
+    def commit(self) -> list[Path]:
+        """Check that no file of the user's would be replaced, then move the staged files in; their final paths."""
+        staged = sorted(
+            p.relative_to(self.staging).as_posix() for p in self.staging.rglob("*") if p.is_file() or p.is_symlink()
+        )
+        for rel in staged:
+            target = self.folder / rel
+            exists = target.exists() or target.is_symlink()
+            if exists and not self.force and (target.is_dir() or not _owned_unchanged(self.folder, rel)):
+                raise ModelError(
+                    f"{target}: was not written by modelgen, or was edited since; move it away, "
+                    "choose another folder with --out, or pass --force to overwrite it"
+                )
+            for parent in list(PurePosixPath(rel).parents)[:-1]:
+                if (self.folder / parent).exists() and not (self.folder / parent).is_dir():
+                    raise ModelError(f"{self.folder / parent}: is a file where the report needs a folder")
+        try:
+            manifest = read_manifest(self.folder) or {}
+        except ModelError:
+            if not self.force:
+                raise
+            manifest = {}
+        with signals_held():
+            for rel in staged:
+                target = self.folder / rel
+                target.parent.mkdir(parents=True, exist_ok=True)
+                if target.is_dir() and not target.is_symlink():
+                    shutil.rmtree(target)  # only reached with force
+                os.replace(self.staging / rel, target)
+                manifest[rel] = sha256_file(target)
+            kept = {k: v for k, v in manifest.items() if (self.folder / k).is_file()}
+            body = {"generator": "modelgen", "version": __version__, "files": dict(sorted(kept.items()))}
+            write_text_atomically(self.folder / MANIFEST_NAME, json.dumps(body, indent=2, sort_keys=True) + "\n")
+        return [self.folder / rel for rel in staged]

@@ -257,3 +257,58 @@ def test_sigint_during_the_swap_is_acted_on_after_it(tmp_path):
                 os.rename = real
     assert {p.read_text() for p in folder.iterdir() if p.name != MANIFEST_NAME} == {"new\n"}
     assert leftovers(tmp_path) == []
+
+
+# -- report folders: shared with the user's files, merged file by file ---------------------------
+
+from modelgen.output import ReportUpdate  # noqa: E402
+
+
+def _report(folder, files, force=False):
+    with ReportUpdate(folder, force) as staged:
+        for name, text in files.items():
+            (staged.staging / name).parent.mkdir(parents=True, exist_ok=True)
+            (staged.staging / name).write_text(text)
+        return staged.commit()
+
+
+def test_a_report_replaces_its_own_files_and_keeps_the_users(tmp_path):
+    (tmp_path / "README.md").write_text("the user's project")
+    _report(tmp_path, {"verification.md": "v1", "sub/table.csv": "1"})
+    _report(tmp_path, {"verification.md": "v2", "sub/table.csv": "2"})
+    assert (tmp_path / "verification.md").read_text() == "v2" and (tmp_path / "sub" / "table.csv").read_text() == "2"
+    assert (tmp_path / "README.md").read_text() == "the user's project"
+    assert leftovers(tmp_path) == []
+
+
+def test_a_report_never_replaces_a_user_file_of_the_same_name_without_force(tmp_path):
+    (tmp_path / "README.md").write_text("the user's project")
+    with pytest.raises(ModelError, match=r"README\.md: was not written by modelgen.*--force"):
+        _report(tmp_path, {"README.md": "report", "other.md": "x"})
+    assert (tmp_path / "README.md").read_text() == "the user's project"
+    assert not (tmp_path / "other.md").exists() and leftovers(tmp_path) == []
+    _report(tmp_path, {"README.md": "report"}, force=True)
+    assert (tmp_path / "README.md").read_text() == "report"
+
+
+def test_an_edited_report_file_is_not_replaced_without_force(tmp_path):
+    _report(tmp_path, {"summary.md": "v1"})
+    (tmp_path / "summary.md").write_text("my notes")
+    with pytest.raises(ModelError, match="edited since"):
+        _report(tmp_path, {"summary.md": "v2"})
+    assert (tmp_path / "summary.md").read_text() == "my notes"
+
+
+def test_a_nested_report_written_separately_counts_as_modelgens(tmp_path):
+    _report(tmp_path / "covariance", {"table2.md": "alone"})
+    _report(tmp_path, {"covariance/table2.md": "from run"})
+    _report(tmp_path / "covariance", {"table2.md": "alone again"})
+    assert (tmp_path / "covariance" / "table2.md").read_text() == "alone again"
+
+
+def test_a_report_that_fails_leaves_no_folder_it_created(tmp_path):
+    with pytest.raises(RuntimeError):
+        with ReportUpdate(tmp_path / "report") as staged:
+            (staged.staging / "half.md").write_text("half")
+            raise RuntimeError("the analysis failed")
+    assert not (tmp_path / "report").exists()
