@@ -19,9 +19,7 @@ Public API (used by ``modelgen verify`` and ``modelgen run``)::
 from __future__ import annotations
 
 import json
-import os
 import random
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,6 +28,7 @@ import sympy as sp
 
 from modelgen.derivation import DerivedModel
 from modelgen.errors import ModelError
+from modelgen.output import write_text_atomically
 from modelgen.paper_table import (
     MATRICES,
     STATUSES,
@@ -359,21 +358,9 @@ def write_verification_report(result: VerificationResult, folder: str | Path) ->
     folder.mkdir(parents=True, exist_ok=True)
     markdown = folder / "verification.md"
     data = folder / "verification.json"
-    _write_atomically(markdown, result.to_markdown())
-    _write_atomically(data, result.to_json())
+    write_text_atomically(markdown, result.to_markdown())
+    write_text_atomically(data, result.to_json())
     return markdown, data
-
-
-def _write_atomically(path: Path, text: str) -> None:
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8", newline="\n") as stream:
-            stream.write(text)
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-        raise
 
 
 def _cell(text: str | None, code: bool = True) -> str:
