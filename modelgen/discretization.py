@@ -27,11 +27,13 @@ for any finite T; Q_d stays the paper's Gamma (Q/T) Gamma^T.
 s is the smallest integer with theta = ||F||_D h <= theta_N, where
 
 * ||F||_D = max_i sum_j |F_ij| d_j / d_i is the infinity norm of D^-1 F D,
-  D = diag(d) a power-of-two diagonal scaling from eight Jacobi sweeps of
-  Osborne's balancing (each d_i moves by at most 2^8 per sweep).  Any D
+  D = diag(d) a power-of-two diagonal scaling from sixteen Jacobi sweeps of
+  Osborne's balancing (each d_i moves by at most 2^8 per sweep and stays
+  within 2^-40..2^40).  Any D
   gives a valid norm; balancing makes it independent of the units chosen
   for each state (unscaled, g = 9.8 m/s^2 from tilt into velocity makes
-  ||F T|| about 650 at T = 60 s for the paper's model; balanced it is 1.2);
+  ||F T|| about 650 at T = 60 s for the paper's model; balanced it is
+  0.16, the Schuler rate times T);
 * theta_N is the largest theta for which the remainder of the series,
   at most theta^(N+1) / (N+1)! * (N+2) / (N+2-theta) in that norm, is below
   the unit roundoff u (2^-53 in double, 2^-24 in float): 0.12 for N = 9 in
@@ -39,9 +41,10 @@ s is the smallest integer with theta = ||F||_D h <= theta_N, where
 
 So the truncation error of Phi(h) is below u ||Phi(h)||_D, the series for
 Psi converges faster still, and what remains is the rounding of s
-doublings.  Measured against scipy's expm on the paper's model, the largest
-error of Phi is below 1e-13 of its largest entry for T <= 60 s and below
-1e-10 up to T = 1 day (tests/test_discretization.py).  The generated C and
+doublings (s = 1 at the paper's 60 s step, 11 at one day).  Measured
+against scipy's expm on the paper's model, the largest error of Phi is below
+1e-15 of its largest entry up to T = 600 s and below 1e-11 up to T = 1 day
+(tests/test_discretization.py states 1e-13 and 1e-10).  The generated C and
 Python compute the same D, norm and s, so the three agree.  s is capped at
 64 (||F||_D T up to about 2e18): beyond, e^{F T} is refused as not
 representable.
@@ -56,8 +59,9 @@ from scipy.linalg import expm
 
 DEFAULT_TAYLOR_ORDER = 9  # seed 000, eq. (10): terms up to F^9 T^9 / 9!
 MAX_DOUBLINGS = 64  # T / 2^64: far below any step a navigation filter takes
-BALANCING_SWEEPS = 8
+BALANCING_SWEEPS = 16
 MAX_SWEEP_EXPONENT = 8  # a scale moves by at most 2^8 per sweep
+MAX_SCALE_EXPONENT = 40  # and stays within 2^-40..2^40 (a ratio d_j / d_i fits a float)
 DOUBLE_ROUNDOFF = 2.0**-53
 FLOAT_ROUNDOFF = 2.0**-24
 
@@ -84,22 +88,30 @@ def series_range(order: int, unit_roundoff: float = DOUBLE_ROUNDOFF) -> float:
 def sweep_exponent(row: float, column: float) -> int:
     """Power of two k by which Osborne's balancing scales a state: 2^k ~ sqrt(row / column), bounded.
 
-    From frexp's exponent e of row / column, k = floor(e / 2) in
-    [-MAX_SWEEP_EXPONENT, MAX_SWEEP_EXPONENT]; 0 when either sum is zero (a
-    state that drives nothing or is driven by nothing keeps its scale).
-    Integer arithmetic on exponents, so C and Python agree exactly.
+    With e the difference of frexp's exponents of row and column (log2 of
+    their ratio to within one), k = floor(e / 2), within
+    [-MAX_SWEEP_EXPONENT, MAX_SWEEP_EXPONENT].  A state that drives others
+    but is driven by none (row 0: a random constant or a bias) takes the
+    lower bound, one driven but driving none (column 0) the upper bound: the
+    norm shrinks the further they go.  Integer arithmetic on exponents, so
+    C and Python agree exactly.
     """
-    if not (row > 0.0 and column > 0.0):
-        return 0
-    _, e = math.frexp(row / column)
-    return max(-MAX_SWEEP_EXPONENT, min(MAX_SWEEP_EXPONENT, e // 2))
+    if row > 0.0 and column > 0.0:
+        e = math.frexp(row)[1] - math.frexp(column)[1]  # log2(row / column) within 1, never overflowing
+        return max(-MAX_SWEEP_EXPONENT, min(MAX_SWEEP_EXPONENT, e // 2))
+    if column > 0.0:
+        return -MAX_SWEEP_EXPONENT
+    if row > 0.0:
+        return MAX_SWEEP_EXPONENT
+    return 0
 
 
 def balanced_norm(F: np.ndarray) -> float:
     """||F||_D = max_i sum_j |F_ij| d_j / d_i with D from Osborne's balancing (module docstring).
 
-    Written as loops in the order the generated C uses, so that both round
-    the same way.
+    Each d_i stays within 2^-MAX_SCALE_EXPONENT..2^MAX_SCALE_EXPONENT, so
+    that no ratio d_j / d_i overflows, even in single precision.  Written as
+    loops in the order the generated C uses, so that both round the same way.
     """
     n = F.shape[0]
     size = np.abs(np.asarray(F, dtype=float))
@@ -111,7 +123,9 @@ def balanced_norm(F: np.ndarray) -> float:
                 if i != j and size[i, j] != 0.0:
                     row[i] += size[i, j] * d[j] / d[i]
                     column[j] += size[i, j] * d[j] / d[i]
-        d = [math.ldexp(d[i], sweep_exponent(row[i], column[i])) for i in range(n)]
+        for i in range(n):
+            exponent = math.frexp(d[i])[1] - 1 + sweep_exponent(row[i], column[i])
+            d[i] = math.ldexp(1.0, max(-MAX_SCALE_EXPONENT, min(MAX_SCALE_EXPONENT, exponent)))
     return max((sum(size[i, j] * d[j] / d[i] for j in range(n) if size[i, j] != 0.0) for i in range(n)), default=0.0)
 
 

@@ -33,6 +33,7 @@ from modelgen.codegen.kernels import (
     c_state_predict,
     c_ud_weights,
     discretize_cost,
+    doubling_cost,
     python_predict_cost,
     python_predict_plan,
     thornton_cost,
@@ -238,6 +239,7 @@ def _costs(structure: FilterStructure, options: CodegenOptions, evaluate_ops: in
     costs = {
         "matrices_evaluate": OperationCount(evaluate_ops, 0),
         "discretize": discretize_cost(structure, options.taylor_order),
+        "discretize, each doubling (long steps)": doubling_cost(structure),
         "predict (C)": predict,
         "predict (Python)": python_predict_cost(structure),
         "predict (dense, for comparison)": OperationCount(2 * n**3 + n, 2 * n * n * (n - 1) + n * n),

@@ -217,7 +217,19 @@ def discretize_cost(structure: FilterStructure, order: int) -> OperationCount:
     pairs = n * (n + 1) // 2
     mul += pairs * 2 * nw
     add += pairs * nw
+    if np.any(structure.F):  # 16 balancing sweeps and the norm over F (modelgen.discretization)
+        off = nnz_f - int(np.trace(structure.F.astype(int)))
+        mul += 16 * 2 * off + 2 * nnz_f
+        add += 16 * 2 * off + nnz_f
     return OperationCount(mul, add)
+
+
+def doubling_cost(structure: FilterStructure) -> OperationCount:
+    """Flops of one doubling of discretize: Phi^2 and (S + Phi S) / 2 over the active entries of Phi."""
+    n = structure.n_states
+    unit = set(structure.unit_rows)
+    active = sum(1 for i, _ in structure.entries("Phi") if i not in unit)
+    return OperationCount(active * (2 * n + 1), active * (2 * n))
 
 
 def update_cost(structure: FilterStructure, options: CodegenOptions | None = None) -> OperationCount:
