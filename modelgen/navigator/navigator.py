@@ -21,13 +21,13 @@ from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator.errorstate import NED_TO_ENU, ErrorStateFilter, feedback
 from modelgen.navigator.logs import GnssLog, ImuLog
 from modelgen.navigator.mechanization import (NAV_SIZE, dcm_to_euler, dcm_to_quaternion, euler_to_dcm,
-                                              level_from_accelerometers, mechanize, quaternion_to_dcm, radii)
+                                              gravity, level_from_accelerometers, mechanize, quaternion_to_dcm, radii)
 from modelgen.navigator.outages import in_outage, outage_windows
 
 HISTORY = 16  # INS velocities kept (one per covariance step) for the GNSS velocity latency
 OUTPUT_FIELDS = ("time", "latitude", "longitude", "height", "v_north", "v_east", "v_down", "roll", "pitch", "yaw",
                  "sigma_north", "sigma_east", "sigma_up", "gyro_bias_x", "gyro_bias_y", "gyro_bias_z",
-                 "accel_bias_x", "accel_bias_y", "accel_bias_z", "in_outage", "gnss_used", "nis")
+                 "accel_bias_x", "accel_bias_y", "accel_bias_z", "in_outage", "gnss_used", "nis", "gnss_quality")
 
 
 @dataclass
@@ -118,8 +118,8 @@ def antenna(nav: np.ndarray, lever: np.ndarray, rate_body: np.ndarray) -> tuple[
     return lat, lon, nav[9] - offset[2], velocity
 
 
-def _alignment(config: NavigatorConfig, inputs: Inputs) -> tuple[int, int, np.ndarray, np.ndarray]:
-    """(GNSS epoch, IMU sample) of the start, the initial navigation state and gyro bias.
+def _alignment(config: NavigatorConfig, inputs: Inputs) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray]:
+    """(GNSS epoch, IMU sample) of the start, the initial navigation state, gyro and accelerometer bias.
 
     Heading is the GNSS course at the first epoch faster than heading_speed; roll,
     pitch and the gyro bias come from the IMU samples of the last rest_window
@@ -144,6 +144,12 @@ def _alignment(config: NavigatorConfig, inputs: Inputs) -> tuple[int, int, np.nd
     roll, pitch = level_from_accelerometers(inputs.force[samples].mean(axis=0))
     yaw = math.atan2(g.velocity[j, 1], g.velocity[j, 0])
     gyro_bias = inputs.rate[samples].mean(axis=0)
+    # At rest the specific force's magnitude is normal gravity: the excess is an
+    # accelerometer bias along the measured direction (the part across it is
+    # indistinguishable from tilt and is left to the filter).
+    mean_force = inputs.force[samples].mean(axis=0)
+    norm = float(np.linalg.norm(mean_force))
+    accel_bias = (norm - gravity(g.latitude[j], g.height[j])) * mean_force / norm
     k = int(np.searchsorted(inputs.time, g.time[j]))
     c = euler_to_dcm(roll, pitch, yaw)
     nav = np.zeros(NAV_SIZE)
@@ -154,7 +160,7 @@ def _alignment(config: NavigatorConfig, inputs: Inputs) -> tuple[int, int, np.nd
     nav[7] = g.latitude[j] - offset[0] / (rm + g.height[j])
     nav[8] = g.longitude[j] - offset[1] / ((rn + g.height[j]) * math.cos(g.latitude[j]))
     nav[9] = g.height[j] + offset[2]
-    return j, k, nav, gyro_bias
+    return j, k, nav, gyro_bias, accel_bias
 
 
 def initial_covariance(config: NavigatorConfig, nav: np.ndarray, heading_sigma: float) -> np.ndarray:
@@ -207,8 +213,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
     lever = np.asarray(config.lever_arm, float)
     windows = outage_windows(config.outage_schedule, config.outage_windows, float(g.time[0]), float(g.time[-1]))
     outage = in_outage(g.time, windows)
-    j0, k, nav, gyro_bias = _alignment(config, inputs)
-    accel_bias = np.zeros(3)
+    j0, k, nav, gyro_bias, accel_bias = _alignment(config, inputs)
     speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
     sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))
     heading_sigma = math.hypot(math.atan2(sv, speed0), config.heading_extra_sigma)
@@ -289,7 +294,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
                 counts["gnss_rejected"] += 1
                 rejected_run += 1
         outputs.append(_record(time[k], nav, lever, rate[k] - gyro_bias, kf.P, gyro_bias, accel_bias,
-                               bool(outage[j]), used, nis))
+                               bool(outage[j]), used, nis, int(g.quality[j])))
         if progress is not None and (j - j0) % 200 == 0:
             progress((j - j0) / max(1, n_epochs - j0))
     if progress is not None:
@@ -312,7 +317,7 @@ def _reset(kf: ErrorStateFilter, nav: np.ndarray, gyro_bias: np.ndarray, accel_b
 
 
 def _record(t: float, nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, P: np.ndarray, gyro_bias: np.ndarray,
-            accel_bias: np.ndarray, outage: bool, used: int, nis: float) -> list[float]:
+            accel_bias: np.ndarray, outage: bool, used: int, nis: float, quality: int) -> list[float]:
     """One output row (OUTPUT_FIELDS): antenna position, velocity, attitude, 1-sigma position, biases."""
     lat, lon, h, v = antenna(nav, lever, rate)
     roll, pitch, yaw = dcm_to_euler(quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3]))
@@ -321,6 +326,6 @@ def _record(t: float, nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, P: n
     se = math.sqrt(max(P[7, 7], 0.0)) * (rn + nav[9]) * math.cos(nav[7])
     su = math.sqrt(max(P[8, 8], 0.0))
     return [t, lat, lon, h, v[0], v[1], v[2], roll, pitch, yaw, sn, se, su, *gyro_bias, *accel_bias,
-            float(outage), float(used), nis]
+            float(outage), float(used), nis, float(quality)]
 
 

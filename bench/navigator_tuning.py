@@ -1,0 +1,101 @@
+#!/usr/bin/env python
+"""Tuning the replay navigator's noise factors from innovation consistency (issue 13, item 4).
+
+The built-in drive is flown with GNSS present everywhere (no simulated
+outages) and without the NIS gate, for a grid of one common multiplying factor
+on the data-sheet white noises (gyro angle random walk and accelerometer
+velocity random walk together: one vibration environment; a 4 x 4 grid of
+separate factors showed a valley along which the two trade off against each
+other, so the data cannot tell them apart).  For each flight the score is the median NIS of the 6-row GNSS update
+against the chi-square median for 6 degrees of freedom (5.35): a consistent
+filter has its innovations as large as it predicts them.  The factor with the
+median NIS closest to 5.35 (in ratio) is chosen; then, with it, the
+non-holonomic constraint's sigma is chosen the same way from the NIS of the
+2-row NHC update (chi-square median for 2 degrees of freedom, 1.39).
+
+No outage is flown and no outage error is computed here: the choice cannot
+see them.  Prints a table and the chosen values, which go into
+modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
+
+    python bench/navigator_tuning.py
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import chi2
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+FACTORS = (3.0, 5.0, 7.0, 10.0)
+NHC_SIGMAS = (0.03, 0.05, 0.1)
+
+
+def _flight(args: tuple[float, float, float, str]) -> tuple[float, float, float, float, float]:
+    """Median GNSS NIS and median NHC NIS of one flight without outages or gate."""
+    from modelgen.codegen.build import load_python_module
+    from modelgen.navigator import errorstate
+    from modelgen.navigator.config import builtin_config_path, load_config
+    from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
+    from modelgen.navigator.navigator import fly, prepare
+
+    gyro, accel, nhc, module_path = args
+    config = load_config(builtin_config_path())
+    noise = dict(config.noise)
+    for kind, factor in (("gyro_white", gyro), ("accel_white", accel)):
+        entry = noise[kind]
+        noise[kind] = dataclasses.replace(entry, factor=factor, si=entry.si / entry.factor * factor)
+    config = dataclasses.replace(config, noise=noise, outage_schedule=None, outage_windows=None,
+                                 nis_gate_probability=1.0, nhc_sigma_lateral=nhc, nhc_sigma_vertical=nhc)
+    nhc_nis: list[float] = []
+    original = errorstate.ErrorStateFilter.update
+
+    def recording(self, z, H, r, gate):
+        result = original(self, z, H, r, gate)
+        if len(z) == 2:
+            nhc_nis.append(result.nis)
+        return result
+
+    errorstate.ErrorStateFilter.update = recording
+    inputs = prepare(config, read_imu_csv(config.imu_file, config.imu_columns), read_rtklib_pos(config.gnss_file))
+    flight = fly(config, inputs, load_python_module(Path(module_path)))
+    return gyro, accel, nhc, float(np.median(flight.gnss_nis)), float(np.median(nhc_nis)) if nhc_nis else math.nan
+
+
+def main() -> None:
+    """Run the grid (two processes), print the table and the choice."""
+    import tempfile
+
+    from modelgen.navigator.config import builtin_config_path, load_config
+    from modelgen.navigator.errorstate import generate_filter_module, model_path
+
+    base = load_config(builtin_config_path())
+    module = generate_filter_module(model_path(base.model, base.path), Path(tempfile.mkdtemp(prefix="tuning-")))
+    path = str(module.__file__)
+    target6, target2 = chi2.ppf(0.5, 6), chi2.ppf(0.5, 2)
+    nhc0 = base.nhc_sigma_lateral
+    with ProcessPoolExecutor(2) as pool:
+        rows = list(pool.map(_flight, [(k, k, nhc0, path) for k in FACTORS]))
+    print(f"stage 1: median GNSS NIS (target {target6:.2f}), NHC sigma {nhc0} m/s")
+    print("factor  median NIS")
+    for g, _, _, nis, _ in rows:
+        print(f"{g:6g}  {nis:10.2f}")
+    g, a, _, nis, _ = min(rows, key=lambda row: abs(math.log(row[3] / target6)))
+    print(f"chosen: gyro_white factor {g:g}, accel_white factor {a:g} (median NIS {nis:.2f})")
+    with ProcessPoolExecutor(2) as pool:
+        rows2 = list(pool.map(_flight, [(g, a, s, path) for s in NHC_SIGMAS]))
+    print(f"stage 2: median NHC NIS (target {target2:.2f})")
+    for _, _, s, nis6, nis2 in rows2:
+        print(f"NHC sigma {s:5.2f} m/s: median NHC NIS {nis2:7.2f}, median GNSS NIS {nis6:6.2f}")
+    best = min(rows2, key=lambda row: abs(math.log(row[4] / target2)))
+    print(f"chosen: NHC sigma {best[2]:g} m/s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,39 @@
+"""`modelgen replay`: fly a recorded drive with the navigator and write report/replay/."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from modelgen.navigator.config import builtin_config_path
+
+
+@click.command("replay")
+@click.argument("config", required=False, type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("report/replay"),
+              show_default=True, help="folder of the report (replaced as a whole)")
+@click.option("--no-figures", is_flag=True, help="skip the SVG figures")
+@click.option("--force", is_flag=True, help="replace an output folder modelgen did not write")
+def replay(config: Path | None, out: Path, no_figures: bool, force: bool) -> None:
+    """Fly a GNSS/IMU log with the generated navigator (default: the built-in car drive).
+
+    CONFIG is a navigator configuration (YAML); without it the built-in drive
+    (modelgen/data/replay_drive_0708.yaml, 549 s, 11 simulated GNSS outages)
+    is flown.  Writes the trajectory (.pos, .csv), summary.md, summary.json and
+    figures into --out.
+    """
+    from modelgen.navigator.replay import run_replay
+
+    result = run_replay(config or builtin_config_path(), out, echo=lambda m: click.echo(m, err=True),
+                        with_figures=not no_figures, force=force)
+    s = result.summary
+    click.echo(f"{s['outage_count']} outages: end-of-outage horizontal error RMS "
+               f"{s['horizontal_error_end_rms_m']:.2f} m (median {s['horizontal_error_end_median_m']:.2f} m, "
+               f"max {s['horizontal_error_end_max_m']:.2f} m), "
+               f"{100 * s['outage_ends_inside_3sigma_fraction']:.0f} % inside 3 sigma; "
+               f"horizontal RMS outside outages {s['horizontal_rms_outside_outages_m']:.3f} m"
+               if s["outage_count"] else
+               f"no outages; horizontal RMS {s['horizontal_rms_outside_outages_m']:.3f} m")
+    click.echo(f"navigator {result.timings['fly_s']:.2f} s, total {result.timings['total_s']:.2f} s; "
+               f"report in {result.folder}")

@@ -1,0 +1,236 @@
+"""A flight's files: RTKLIB .pos and CSV trajectories, summary.md/json, SVG figures.
+
+Everything is rendered in memory first and written as one folder by
+:func:`modelgen.output.write_atomically` (staging folder + rename), so a failed
+or interrupted replay never leaves a half-written report.  Figures are SVG
+(text) so that they go through the same writer.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from modelgen.navigator.config import NavigatorConfig
+from modelgen.navigator.logs import GnssLog
+from modelgen.navigator.mechanization import radii
+from modelgen.navigator.metrics import COLUMN, Errors
+from modelgen.navigator.navigator import OUTPUT_FIELDS, Flight
+
+DEAD_RECKONING_Q = 6  # RTKLIB's solution quality code for dead reckoning
+
+
+def _gpst(t: float) -> str:
+    """'YYYY/MM/DD hh:mm:ss.sss' of seconds since 1970 on the GPST calendar scale."""
+    whole = math.floor(t)
+    millis = int(round((t - whole) * 1000.0))
+    if millis == 1000:
+        whole, millis = whole + 1, 0
+    return time.strftime("%Y/%m/%d %H:%M:%S", time.gmtime(whole)) + f".{millis:03d}"
+
+
+def pos_text(flight: Flight, config: NavigatorConfig) -> str:
+    """The trajectory (antenna) in RTKLIB's lat/lon/height .pos format with velocities."""
+    lines = [f"% program   : modelgen replay ({config.name}, model {config.model})",
+             "% solution  : forward real-time GNSS/INS, antenna position; Q 6 = dead reckoning (no GNSS update)",
+             "% (lat/lon/height=WGS84/ellipsoidal as in the input solution, Q=1:fix,2:float,5:single,6:dr)",
+             "%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
+             "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio    vn(m/s)    ve(m/s)    vu(m/s)"]
+    c = COLUMN
+    for row in flight.outputs:
+        q = int(row[c["gnss_quality"]]) if row[c["gnss_used"]] else DEAD_RECKONING_Q
+        lines.append(f"{_gpst(row[c['time']])} {math.degrees(row[c['latitude']]):14.9f} "
+                     f"{math.degrees(row[c['longitude']]):14.9f} {row[c['height']]:10.4f} {q:3d} {0:3d} "
+                     f"{row[c['sigma_north']]:8.4f} {row[c['sigma_east']]:8.4f} {row[c['sigma_up']]:8.4f} "
+                     f"{0.0:8.4f} {0.0:8.4f} {0.0:8.4f} {0.0:6.2f} {0.0:6.1f} "
+                     f"{row[c['v_north']]:10.5f} {row[c['v_east']]:10.5f} {-row[c['v_down']]:10.5f}")
+    return "\n".join(lines) + "\n"
+
+
+def csv_text(flight: Flight, errors: Errors) -> str:
+    """Every output field plus the errors against RTK, one row per output epoch, degrees for angles."""
+    angles = {"latitude", "longitude", "roll", "pitch", "yaw"}
+    header = [f"{n}_deg" if n in angles else n for n in OUTPUT_FIELDS]
+    header += ["error_north_m", "error_east_m", "error_up_m", "error_horizontal_m", "sigma_horizontal_m"]
+    rows = [",".join(header)]
+    for i, row in enumerate(flight.outputs):
+        values = [math.degrees(v) if n in angles else v for n, v in zip(OUTPUT_FIELDS, row)]
+        values += [errors.north[i], errors.east[i], errors.up[i], errors.horizontal[i], errors.sigma_horizontal[i]]
+        rows.append(",".join(f"{v:.10g}" for v in values))
+    return "\n".join(rows) + "\n"
+
+
+def _svg(fig) -> str:
+    """A matplotlib figure as SVG text without a date (reproducible)."""
+    buffer = io.StringIO()
+    fig.savefig(buffer, format="svg", metadata={"Date": None})
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return buffer.getvalue()
+
+
+def figures(flight: Flight, errors: Errors, reference: GnssLog) -> dict[str, str]:
+    """track.svg (local map, outages marked), error.svg (horizontal error and 3 sigma), biases.svg."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rm, rn = radii(float(reference.latitude[0]))
+    lat0, lon0 = reference.latitude[0], reference.longitude[0]
+
+    def local(lat, lon):
+        return (lon - lon0) * rn * math.cos(lat0), (lat - lat0) * rm
+
+    o = flight.outputs
+    t_rel = o[:, COLUMN["time"]] - flight.first_epoch
+    out: dict[str, str] = {}
+    fig, ax = plt.subplots(figsize=(7, 7))
+    ex, ny = local(reference.latitude, reference.longitude)
+    ax.plot(ex, ny, color="0.6", lw=2.5, label="RTK (reference)")
+    nx, nyy = local(o[:, COLUMN["latitude"]], o[:, COLUMN["longitude"]])
+    ax.plot(nx, nyy, color="C0", lw=0.8, label="navigator")
+    for k, (start, end) in enumerate(flight.outages):
+        inside = (o[:, COLUMN["time"]] >= start) & (o[:, COLUMN["time"]] < end)
+        ax.plot(nx[inside], nyy[inside], color="C3", lw=1.5, label="navigator, GNSS outage" if k == 0 else None)
+        if inside.any():
+            ax.annotate(str(k + 1), (nx[inside][-1], nyy[inside][-1]), fontsize=8, color="C3")
+    ax.set_aspect("equal")
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    ax.set_title("Track on a local map (outages in red, numbered at their end)")
+    ax.legend(loc="best", fontsize=8)
+    out["track.svg"] = _svg(fig)
+
+    fig, ax = plt.subplots(figsize=(9, 4))
+    ax.semilogy(t_rel, np.maximum(errors.horizontal, 1e-4), color="C0", lw=0.8, label="horizontal error")
+    ax.semilogy(t_rel, np.maximum(3 * errors.sigma_horizontal, 1e-4), color="C1", lw=0.8, label="filter 3 sigma")
+    for start, end in flight.outages:
+        ax.axvspan(start - flight.first_epoch, end - flight.first_epoch, color="C3", alpha=0.12)
+    ax.set_xlabel("time since the first GNSS epoch [s]")
+    ax.set_ylabel("[m]")
+    ax.set_title("Horizontal error at the antenna against RTK (outages shaded)")
+    ax.legend(fontsize=8)
+    out["error.svg"] = _svg(fig)
+
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    for i, axis in enumerate("xyz"):
+        a1.plot(t_rel, np.degrees(o[:, COLUMN[f"gyro_bias_{axis}"]]), lw=0.8, label=axis)
+        a2.plot(t_rel, o[:, COLUMN[f"accel_bias_{axis}"]] / 9.80665 * 1e3, lw=0.8, label=axis)
+    a1.set_ylabel("gyro bias [deg/s]")
+    a2.set_ylabel("accelerometer bias [mg]")
+    a2.set_xlabel("time since the first GNSS epoch [s]")
+    a1.legend(fontsize=8)
+    a1.set_title("Bias estimates (body axes)")
+    out["biases.svg"] = _svg(fig)
+    return out
+
+
+def _fmt(value: object, digits: int = 2) -> str:
+    """A number for the Markdown tables."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
+
+
+def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, float], latency: float) -> str:
+    """summary.md: outage table, targets, tuning and how it was chosen, counts and notes."""
+    lines = [f"# Replay: {config.name}", "",
+             f"Configuration `{Path(config.path).name}`, model `{config.model}` (generated filter, closed loop). "
+             "Forward real-time filter: nothing after a moment is used at that moment. The error is measured at the "
+             "antenna against the RTK solution interpolated to each output time (all RTK epochs, including those "
+             "hidden during the outages).", "",
+             "## Outages", "",
+             "| # | start_s | duration_s | distance_m | horizontal_error_end_m | error_3d_end_m | horizontal_error_max_m "
+             "| sigma_horizontal_end_m | inside 3 sigma | drift 5 s | drift 10 s | drift 15 s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for k, r in enumerate(summary["outages"], start=1):
+        lines.append(f"| {k} | {_fmt(r['start_s'], 1)} | {_fmt(r['duration_s'], 1)} | {_fmt(r['distance_m'], 1)} | "
+                     f"{_fmt(r['horizontal_error_end_m'])} | {_fmt(r['error_3d_end_m'])} | "
+                     f"{_fmt(r['horizontal_error_max_m'])} | {_fmt(r['sigma_horizontal_end_m'])} | "
+                     f"{'yes' if r['inside_3sigma'] else 'no'} | {_fmt(r['drift_5s_m'])} | {_fmt(r['drift_10s_m'])} | "
+                     f"{_fmt(r['drift_15s_m'])} |")
+    end_rms = summary["horizontal_error_end_rms_m"]
+    outside = summary["horizontal_rms_outside_outages_m"]
+    inside = summary["outage_ends_inside_3sigma_fraction"]
+
+    def verdict(ok: bool) -> str:
+        return "met" if ok else "missed"
+
+    lines += ["", "## Targets (issue 13)", "",
+              "| quantity | reached | target | anchor (published 15-state filter) | |",
+              "|---|---|---|---|---|",
+              f"| end-of-outage horizontal error, RMS | {_fmt(end_rms)} m | <= 5.0 m | 7.44 m | "
+              f"{verdict(end_rms is not None and end_rms <= 5.0)} |",
+              f"| end-of-outage horizontal error, median / max | {_fmt(summary['horizontal_error_end_median_m'])} / "
+              f"{_fmt(summary['horizontal_error_end_max_m'])} m | | 7.02 / 13.35 m | |",
+              f"| horizontal RMS outside outages | {_fmt(outside, 3)} m | <= 0.10 m | 0.057 m | "
+              f"{verdict(outside <= 0.10)} |",
+              f"| outage ends inside the filter's 3 sigma | {_fmt(100 * inside if inside is not None else None, 0)} % "
+              f"| >= 90 % | | {verdict(inside is not None and inside >= 0.9)} |",
+              f"| navigator wall time (Python) | {_fmt(timings.get('fly_s'), 2)} s | | 11.9 s | |", ""]
+    lines += ["## Tuning and how it was chosen", "",
+              "IMU noise = data-sheet value x unit x stated factor (configuration `noise`):", "",
+              "| noise | data sheet | factor | SI value used | why |", "|---|---|---|---|---|"]
+    for kind, entry in config.noise.items():
+        lines.append(f"| {kind} | {entry.value:g} {entry.unit} | {entry.factor:g} | {entry.si:.4g} | {entry.why} |")
+    lines += ["",
+              "The factors are chosen from the consistency of the GNSS innovations while GNSS is present (run "
+              "`python bench/navigator_tuning.py`: the drive flown without outages and without the gate, the median "
+              "NIS of the 6-row GNSS update against the chi-square median for 6 degrees of freedom, 5.35); the "
+              "outage errors play no part in the choice.",
+              f"GNSS NIS in this flight (outside outages): mean {_fmt(summary['gnss_nis_mean'])}, median "
+              f"{_fmt(summary['gnss_nis_median'])}; gate {_fmt(summary['gnss_nis_gate'])} (chi-square, 6 degrees of "
+              f"freedom, probability {config.nis_gate_probability}); after {config.gate_release_epochs} rejected "
+              "epochs in a row the next one is accepted.",
+              f"GNSS velocity latency used {config.velocity_latency:.3f} s; estimated from the .pos file alone "
+              f"(velocity against position differences): {latency:.3f} s.",
+              f"GNSS sigmas: the receiver's, times {config.quality_factor} by quality Q, floors "
+              f"{config.minimum_sigma_position} m and {config.minimum_sigma_velocity} m/s.",
+              f"ZUPT {'on' if config.zupt_enabled else 'off'} (sigma {config.zupt_sigma} m/s), NHC "
+              f"{'on' if config.nhc_enabled else 'off'} (sigma {config.nhc_sigma_lateral} / "
+              f"{config.nhc_sigma_vertical} m/s above {config.nhc_speed_min} m/s).", "",
+              "## Estimated biases (end of the drive, body axes)", "",
+              f"gyro [deg/s]: {', '.join(f'{v:.4f}' for v in summary['final_gyro_bias_deg_s'])}; "
+              f"accelerometer [mg]: {', '.join(f'{v:.2f}' for v in summary['final_accel_bias_mg'])}.", "",
+              "## Counts", "",
+              ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in summary["counts"].items())
+              + f"; alignment at {summary['alignment_time_s']} s after the first GNSS epoch; "
+              f"{summary['epochs']} output epochs.", ""]
+    if summary["notes"]:
+        lines += ["## Input notes", ""] + [f"- {n}" for n in summary["notes"]] + [""]
+    lines += ["## Files", "",
+              "`trajectory.pos` (RTKLIB format: opens in RTKLIB's rtkplot), `trajectory.csv`, `summary.json`, "
+              "`track.svg`, `error.svg`, `biases.svg`.", "",
+              "![track](track.svg)", "", "![error](error.svg)", "", "![biases](biases.svg)", ""]
+    return "\n".join(lines)
+
+
+def report_files(flight: Flight, errors: Errors, summary: dict, config: NavigatorConfig, reference: GnssLog,
+                 timings: dict[str, float], latency: float, with_figures: bool = True) -> dict[str, str]:
+    """Every file of report/replay/ as name -> text."""
+    record = dict(summary)
+    record["timings_s"] = timings
+    record["gnss_velocity_latency_estimated_s"] = latency
+    record["noise"] = {k: {"value": e.value, "unit": e.unit, "factor": e.factor, "si": e.si, "why": e.why}
+                       for k, e in config.noise.items()}
+    files = {"summary.md": summary_markdown(summary, config, timings, latency),
+             "summary.json": json.dumps(record, indent=2, allow_nan=False, default=_json_default) + "\n",
+             "trajectory.pos": pos_text(flight, config),
+             "trajectory.csv": csv_text(flight, errors)}
+    if with_figures:
+        files.update(figures(flight, errors, reference))
+    return files
+
+
+def _json_default(value: object) -> object:
+    """numpy scalars to plain numbers for json."""
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return value.item()
+    raise TypeError(f"not JSON serializable: {type(value).__name__}")
