@@ -2,8 +2,10 @@
 
 The generated code multiplies only where a product can be nonzero.  Which
 entries can be nonzero follows from the symbolic F, G, H alone: an entry of
-Phi = sum_k (F T)^k / k! can be nonzero only if state j reaches state i along
-a path of at most ``order`` nonzero F entries.  A state whose row of F is
+Phi = e^{F T} can be nonzero only if state j reaches state i along a path of
+nonzero F entries.  The Taylor series of order N alone reaches paths of at
+most N entries, but its doublings (scaling and squaring, see
+modelgen.discretization) reach any length, so the pattern is the closure.  A state whose row of F is
 empty (a random constant) has Phi row e_i exactly: its products are copies.
 """
 
@@ -60,7 +62,7 @@ def filter_structure(F: np.ndarray, G: np.ndarray, H: np.ndarray, order: int) ->
     F = np.asarray(F, dtype=bool)
     G = np.asarray(G, dtype=bool)
     H = np.asarray(H, dtype=bool)
-    phi = reachability(F, order)
+    phi = reachability(F, max(order, F.shape[0]))  # the closure: doublings reach paths longer than the order
     # Gamma = T sum_{k<=order} (F T)^k/(k+1)! G has the pattern of Phi G.
     gamma = (phi.astype(np.int64) @ G.astype(np.int64)) > 0 if G.size else np.zeros((F.shape[0], 0), bool)
     qd = (gamma.astype(np.int64) @ gamma.T.astype(np.int64)) > 0 if G.size else np.zeros_like(F)

@@ -73,3 +73,38 @@ def test_generated_python_discretize_is_the_reference(case, T):
     phi_exact, qd_exact = exact_noise(m, T)
     assert relative_error(phi, phi_exact) < bound(T)
     assert relative_error(qd, qd_exact) < 10 * bound(T)
+
+
+def chain_model(n: int) -> str:
+    """x_0' = x_1, ..., x_{n-2}' = x_{n-1}, x_{n-1}' = -x_{n-1}/tau: paths up to n - 1 entries long."""
+    states = "\n".join(f"  - {{name: s{k}, symbol: x{k}, unit: m}}" for k in range(n))
+    dynamics = "\n".join(f"  x{k}: x{k + 1}" for k in range(n - 1))
+    return f"""
+model: chain
+parameters:
+  - {{name: tau, symbol: tau, value: 5.0}}
+states:
+{states}
+dynamics:
+{dynamics}
+  x{n - 1}: -x{n - 1}/tau
+"""
+
+
+def test_paths_longer_than_the_taylor_order_reach_phi_in_c_and_python(tmp_path):
+    """A 12-state chain: e^{F T} links the ends by a path of 11 entries, longer than the order 9."""
+    from modelgen.modelfile import load_model_text
+
+    derived = derive(load_model_text(chain_model(12), filename="chain.yaml"))
+    built = build(derived, tmp_path / "out")
+    m = derived.numeric({})
+    T = 20.0
+    phi_exact = exact(m["F"], m["G"], T)[0]
+    c = built.c_filter(CodegenOptions())
+    assert c.set_parameters({}) == 0 and c.discretize(T) == 0
+    py = built.python
+    p = py.parameter_vector({})
+    phi_python, _ = py.discretize(py.system_matrix(p), py.noise_input_matrix(p), py.noise_psd(p), T)
+    for phi in (c.Phi, phi_python):
+        assert phi[0, 11] > 0  # the far corner is there
+        assert relative_error(phi, phi_exact) < 1e-13
