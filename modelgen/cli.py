@@ -488,5 +488,10 @@ def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | Non
     click.echo(f"wrote {summary}")
 
 
+from modelgen.navigator.cli import replay  # noqa: E402  (issue 13: `modelgen replay`)
+
+main.add_command(replay)
+
+
 if __name__ == "__main__":
     main(prog_name="modelgen")
