@@ -54,7 +54,7 @@ SCHEMA: dict[str, set[str]] = {
     "initial": {"roll_pitch_sigma_deg", "heading_extra_sigma_deg", "velocity_sigma_m_s", "position_sigma_m",
                 "height_sigma_m", "gyro_bias_sigma_deg_s", "accel_bias_sigma_ug"},
     "alignment": {"rest_speed_m_s", "rest_window_s", "heading_speed_m_s"},
-    "filter": {"predict_period_s", "nis_gate_probability", "gate_release_epochs"},
+    "filter": {"predict_period_s", "nis_gate_probability", "gate_action", "gate_release_epochs"},
     "zupt": {"enabled", "window_s", "gyro_max_deg_s", "accel_std_max_m_s2", "speed_max_m_s", "sigma_m_s"},
     "nhc": {"enabled", "sigma_lateral_m_s", "sigma_vertical_m_s", "speed_min_m_s"},
     "outages": {"first_after_s", "length_s", "period_s", "end_margin_s", "windows"},
@@ -104,6 +104,7 @@ class NavigatorConfig:
     heading_speed: float
     predict_period: float
     nis_gate_probability: float
+    gate_action: str  # "reject" or "deweight" an update above the gate
     gate_release_epochs: int
     zupt_enabled: bool
     zupt_window: float
@@ -257,6 +258,22 @@ def _outages(reader: _Reader) -> tuple[dict[str, float] | None, list[tuple[float
     return schedule, None
 
 
+def _probability(reader: _Reader, key: str) -> float:
+    """A probability in (0, 1]; 1 means no gate."""
+    value = reader.number(key, positive=True)
+    if value > 1.0:
+        raise ModelError(f"{reader.where(key)}: {key} must be a probability in (0, 1], got {value!r}")
+    return value
+
+
+def _choice(reader: _Reader, key: str, choices: tuple[str, ...]) -> str:
+    """A text value that must be one of ``choices``."""
+    value = reader.text(key)
+    if value not in choices:
+        raise ModelError(f"{reader.where(key)}: {key} must be one of {', '.join(choices)}, got {value!r}")
+    return value
+
+
 def load_config(path: str | Path) -> NavigatorConfig:
     """Read and validate a navigator configuration file."""
     path = Path(path)
@@ -324,7 +341,8 @@ def load_config(path: str | Path) -> NavigatorConfig:
         rest_window=r.number("alignment.rest_window_s", positive=True),
         heading_speed=r.number("alignment.heading_speed_m_s", positive=True),
         predict_period=r.number("filter.predict_period_s", positive=True),
-        nis_gate_probability=r.number("filter.nis_gate_probability", positive=True),
+        nis_gate_probability=_probability(r, "filter.nis_gate_probability"),
+        gate_action=_choice(r, "filter.gate_action", ("reject", "deweight")),
         gate_release_epochs=r.integer("filter.gate_release_epochs", minimum=1),
         zupt_enabled=r.flag("zupt.enabled"), zupt_window=r.number("zupt.window_s", positive=True),
         zupt_gyro_max=r.number("zupt.gyro_max_deg_s", positive=True) * DEG,

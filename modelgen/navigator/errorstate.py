@@ -105,16 +105,25 @@ class ErrorStateFilter:
         Phi, Qd = g.discretize(g.system_matrix(p), g.noise_input_matrix(p), g.noise_psd(p), period)
         self.x, self.P = g.predict(self.x, self.P, Phi, Qd)
 
-    def update(self, z: np.ndarray, H: np.ndarray, r: np.ndarray, gate: float) -> Update:
-        """Gate on the NIS (innovation z - H x against H P H^T + R), then the generated update."""
+    def update(self, z: np.ndarray, H: np.ndarray, r: np.ndarray, gate: float, deweight: bool = False) -> Update:
+        """Gate on the NIS (innovation z - H x against H P H^T + R), then the generated update.
+
+        Above the gate the update is refused, or with ``deweight`` made with R
+        scaled by NIS / gate (so that it would just pass the gate: a robust,
+        Huber-like weight instead of a hard rejection).
+        """
         nu = z - H @ self.x
         S = H @ self.P @ H.T + np.diag(r)
         try:
             nis = float(nu @ np.linalg.solve(S, nu))
         except np.linalg.LinAlgError:
             raise ModelError("navigator: singular innovation covariance") from None
-        if not math.isfinite(nis) or nis > gate:
+        if not math.isfinite(nis):
             return Update(nis, len(z), False)
+        if nis > gate:
+            if not deweight:
+                return Update(nis, len(z), False)
+            r = r * (nis / gate)
         try:
             self.x, self.P = self.module.update(self.x, self.P, z, H, r)
         except ValueError as exc:

@@ -229,9 +229,10 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
     history = np.zeros(6)
     outputs = []
     gnss_nis: list[float] = []
-    counts = {"gnss_updates": 0, "gnss_rejected": 0, "gnss_released": 0, "gnss_quality_skipped": 0,
+    counts = {"gnss_updates": 0, "gnss_rejected": 0, "gnss_released": 0, "gnss_deweighted": 0, "gnss_quality_skipped": 0,
               "zupt_updates": 0, "nhc_updates": 0, "predicts": 0}
     rejected_run = 0
+    deweight = config.gate_action == "deweight"
     last_sigmas = _gnss_sigmas(config, g, j0)
     if last_sigmas is None:
         last_sigmas = np.full(6, 1.0)
@@ -257,13 +258,13 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
                 v_enu = NED_TO_ENU @ nav[4:7]
                 H = np.zeros((3, 15))
                 H[:, 3:6] = np.eye(3)
-                if kf.update(v_enu, H, np.full(3, config.zupt_sigma**2), gates[3]).accepted:
+                if kf.update(v_enu, H, np.full(3, config.zupt_sigma**2), gates[3], deweight).accepted:
                     counts["zupt_updates"] += 1
                     _reset(kf, nav, gyro_bias, accel_bias)
             elif config.nhc_enabled and speed > config.nhc_speed_min:
                 z, H = _nhc_rows(nav)
                 r = np.array([config.nhc_sigma_lateral**2, config.nhc_sigma_vertical**2])
-                if kf.update(z, H, r, gates[2]).accepted:
+                if kf.update(z, H, r, gates[2], deweight).accepted:
                     counts["nhc_updates"] += 1
                     _reset(kf, nav, gyro_bias, accel_bias)
         used = 0
@@ -280,11 +281,13 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
             H = module.measurement_matrix(p)
             r = np.square(sigmas)
             gate = gates[6] if rejected_run < config.gate_release_epochs else math.inf
-            result = kf.update(z, H, r, gate)
+            result = kf.update(z, H, r, gate, deweight)
             nis = result.nis
             gnss_nis.append(nis)
             if result.accepted:
                 counts["gnss_updates"] += 1
+                if nis > gates[6]:
+                    counts["gnss_deweighted"] += 1
                 if rejected_run >= config.gate_release_epochs:
                     counts["gnss_released"] += 1
                 rejected_run = 0
