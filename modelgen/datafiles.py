@@ -37,6 +37,8 @@ def read_yaml_with_lines(path: str | Path, what: str = "data file") -> tuple[dic
         lines = key_lines(text, str(path))
     except yaml.YAMLError as exc:
         raise ModelError(f"{path}: not valid YAML ({exc})") from None
+    except RecursionError:
+        raise ModelError(f"{path}: nested too deeply to read") from None
     if not isinstance(data, dict):
         raise ModelError(f"{path}: expected a mapping at the top level")
     return data, lines

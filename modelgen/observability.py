@@ -243,6 +243,11 @@ def observability_matrix(derived: DerivedModel, scenario: Scenario) -> np.ndarra
     return np.vstack(blocks)
 
 
+#: Rows of O (steps x measurements) above which the analysis is refused: ~1 GB of doubles
+#: for a 100-state model, and far more steps than any direction needs to show up.
+MAX_OBSERVABILITY_ROWS = 1_000_000
+
+
 def analyse(
     derived: DerivedModel,
     scenario: Scenario,
@@ -256,6 +261,12 @@ def analyse(
     if not 0 < unobservable_rtol < weak_rtol < 1:
         raise ModelError(f"need 0 < unobservable_rtol < weak_rtol < 1, got {unobservable_rtol}, {weak_rtol}")
     names = tuple(derived.model.state_names)
+    rows = scenario.n_steps * max(derived.n_measurements, 1)
+    if rows > MAX_OBSERVABILITY_ROWS:
+        raise ModelError(
+            f"scenario of {scenario.n_steps} steps: the observability matrix would have {rows} rows "
+            f"(limit {MAX_OBSERVABILITY_ROWS}); use fewer steps or a longer step"
+        )
     O = observability_matrix(derived, scenario)
     column_scale = _column_scales(O, names, scales)
     _, s, vt = np.linalg.svd(O * column_scale, full_matrices=True)
