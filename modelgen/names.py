@@ -141,6 +141,10 @@ def name_collision(name: str, model_name: bool = False) -> str | None:
         return "a Python keyword"
     if name.startswith("__") or (len(name) > 1 and name[0] == "_" and name[1].isupper()):
         return "an identifier C reserves for the implementation (C99 7.1.3)"
+    if model_name and name in C_HEADERS:
+        return f"the C header <{name}.h>, which the generated {name}.h would shadow"
+    if model_name and name.lower() in PYTHON_MODULES:
+        return f"the Python module {name!r}, which the generated {name}.py would shadow"
     if name in C_LIBRARY:
         return "a C standard library macro or identifier"
     if name in C_PLATFORM:
@@ -149,8 +153,4 @@ def name_collision(name: str, model_name: bool = False) -> str | None:
         return "a macro of the generated C"
     if name in GENERATOR_PYTHON:
         return "a name the generated Python module uses"
-    if model_name and name in C_HEADERS:
-        return f"the C header <{name}.h>, which the generated {name}.h would shadow"
-    if model_name and name.lower() in PYTHON_MODULES:
-        return f"the Python module {name!r}, which the generated {name}.py would shadow"
     return None

@@ -25,10 +25,12 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from modelgen import transform
+from modelgen.checkspec import build_check_spec, merge_check_sections, parse_check_section
 from modelgen.errors import ModelError
-from modelgen.model import ErrorModel, Noise, Parameter, State, check_identifier
+from modelgen.model import ErrorModel, Noise, Parameter, State, check_free_text, check_identifier
+from modelgen.modelfile import free_text, notes_text
 
-TOP_KEYS = {"model", "title", "base", "transforms", "notes", "source"}
+TOP_KEYS = {"model", "title", "base", "transforms", "notes", "source", "check"}
 STEPS = {
     "keep_states": {"states", "measurements"},
     "markov_to_white": {"states", "strength"},
@@ -92,6 +94,7 @@ def load_transformed_model(
     base = str(data["base"])
     relative = Path(filename).parent / base
     model = load_base(relative if relative.suffix in (".yaml", ".yml") and relative.exists() else base)
+    base_check = model.check
     steps = data.get("transforms") or []
     if not isinstance(steps, list):
         raise ModelError(f"{lines.get('transforms', filename)}: 'transforms' must be a list of steps")
@@ -107,13 +110,38 @@ def load_transformed_model(
         if extra:
             raise ModelError(f"{where}: {step} has unknown argument {extra[0]!r} (allowed: {sorted(STEPS[step])})")
         model = _apply(model, step, args, f"{where} ({step})")
-    notes = data.get("notes") or []
     name = str(data["model"])
-    check_identifier(name, f"{lines.get('model', filename)}: model name")
+    check_identifier(name, f"{lines.get('model', filename)}: model name", model_name=True)
+    title = free_text(data, "title", lines, filename, model.title)
+    source = free_text(data, "source", lines, filename, f"{model.source}; transformed from {base}")
+    notes = notes_text(data, lines, filename)
+    for key, text in (("title", title), ("source", source), *((f"notes[{i}]", n) for i, n in enumerate(notes))):
+        check_free_text(text, f"{lines.get(key, lines.get(key.split('[')[0], filename))}: model {name!r}, {key}", multiline=key != "title")
+    model = replace(model, check=inherited_check(base_check, data, lines, filename, model))
     return replace(
         model,
         name=name,
-        title=str(data.get("title", model.title)),
-        source=str(data.get("source", f"{model.source}; transformed from {base}")),
-        notes=(*model.notes, *(str(n) for n in (notes if isinstance(notes, list) else [notes]))),
+        title=title,
+        source=source,
+        notes=(*model.notes, *notes),
     )
+
+
+def inherited_check(base_check: Any, data: Mapping[str, Any], lines: Mapping[str, str], filename: str, model: ErrorModel) -> Any:
+    """The base model's check scenario with this file's ``check:`` laid over it (modelgen.checkspec).
+
+    Without a ``check:`` of its own the file inherits the base's scenario when
+    that still gives every parameter and state a value, and has none otherwise
+    (an added state needs a sigma only the file can give); with one, the
+    merged scenario must be complete.
+    """
+    own = parse_check_section(data["check"], lines, filename) if "check" in data else None
+    if own is not None:  # this file's own names must exist; only inherited ones may name removed states
+        build_check_spec({"step_s": 1.0, "steps": 1, **own, "parameters": own.get("parameters", {})}, model, lines.get("check", filename), partial=True)
+    merged = merge_check_sections(base_check.as_section() if base_check is not None else None, own)
+    if own is None:
+        try:  # the base's scenario, if it still covers every state and parameter; else none (synthetic, labelled)
+            return build_check_spec(merged, model, lines.get("check", filename), inherited=True)
+        except ModelError:
+            return None
+    return build_check_spec(merged, model, lines.get("check", filename), inherited=True)

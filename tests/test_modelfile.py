@@ -203,3 +203,148 @@ def test_source_document_models_describe_every_state_and_give_every_statistic(na
         assert w.psd != "1", w.name  # the default PSD would be a silent assumption
     for m in model.measurements:
         assert m.variance != "1", m.name
+
+
+# -- issue 10: hostile files are refused with the file name, never a traceback or a hang ----------
+
+
+def test_binary_file_is_refused_naming_the_file(tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_bytes(bytes(range(256)))
+    with pytest.raises(ModelError, match=r"m\.yaml:1: contains a NUL byte"):
+        load_model(path)
+
+
+def test_utf16_file_is_refused_asking_for_utf8(tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_text(BASE, encoding="utf-16")
+    with pytest.raises(ModelError, match=r"m\.yaml: is encoded as UTF-16.*UTF-8"):
+        load_model(path)
+
+
+def test_invalid_utf8_is_refused_naming_the_line_and_byte(tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_bytes(BASE.replace("title", "x").encode().replace(b"unit: m/s}", b"unit: m/s\xe9}"))
+    with pytest.raises(ModelError, match=rf"m\.yaml:{LINE['velocity_error']}: is not UTF-8 text \(byte 0xe9"):
+        load_model(path)
+
+
+def test_a_utf8_byte_order_mark_is_accepted(tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_bytes(b"\xef\xbb\xbf" + BASE.encode())
+    assert load_model(path).name == "toy"
+
+
+def test_directory_given_as_a_model_is_refused(tmp_path):
+    (tmp_path / "m.yaml").mkdir()
+    with pytest.raises(ModelError, match=r"m\.yaml: is a directory, not a model file"):
+        load_model(tmp_path / "m.yaml")
+
+
+def test_file_over_one_megabyte_is_refused_before_it_is_parsed(tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_text(BASE + "# padding\n" * 110_000)
+    with pytest.raises(ModelError, match=r"m\.yaml: \d+ bytes; a model file may have at most 1000000"):
+        load_model(path)
+
+
+def test_unreadable_file_is_refused_naming_it(tmp_path):
+    import os
+
+    path = tmp_path / "m.yaml"
+    path.write_text(BASE)
+    path.chmod(0)
+    try:
+        if os.access(path, os.R_OK):  # root reads anything
+            pytest.skip("running as root: permissions do not apply")
+        with pytest.raises(ModelError, match=r"m\.yaml: cannot read the model file \(Permission denied\)"):
+            load_model(path)
+    finally:
+        path.chmod(0o644)
+
+
+def test_yaml_alias_bomb_is_refused_without_expanding_it():
+    bomb = "model: toy\nnotes: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
+        f"n{i}: &{chr(98 + i)} [*{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}]\n"
+        for i in range(9)
+    )
+    refusal(bomb, r"^model\.yaml:3: ", r"aliases \(\*a\)")
+
+
+def test_any_alias_is_refused_naming_its_line():
+    refusal(edit("  dx: dv\n  dv: -mu*dv + w", "  dx: &rhs dv\n  dv: *rhs"), rf"^model\.yaml:{LINE['dv']}: ", r"\*rhs", "aliases")
+
+
+def test_recursive_alias_and_deep_nesting_are_refused():
+    refusal("model: toy\nstates: &s [*s]\n", "model.yaml")
+    refusal("model: toy\nnotes: " + "[" * 5000 + "]" * 5000 + "\n", "model.yaml", "not valid")
+
+
+def test_control_character_from_a_yaml_escape_is_refused_with_its_line():
+    refusal(edit("model: toy\n", 'model: toy\ntitle: "run \\e[2J \\x00 this"\n'), r"^model\.yaml:2: ", "title", "U\\+001B")
+    refusal(edit("unit: m/s}", 'unit: m/s, description: "a\\u202eb"}'), rf"^model\.yaml:{LINE['velocity_error']}: ", "description", "U\\+202E")
+
+
+def test_raw_control_character_in_the_file_is_refused_with_its_line():
+    refusal(edit("model: toy\n", "model: toy\ntitle: a\x1bb\n"), r"^model\.yaml:2: not valid YAML \(character U\+001B")
+
+
+def test_free_text_must_be_text():
+    refusal(edit("model: toy\n", "model: toy\ntitle: [a, b]\n"), r"^model\.yaml:2: 'title' must be text")
+
+
+def test_nonlinear_measurement_is_refused_like_nonlinear_dynamics():
+    refusal(edit("expression: dx,", "expression: dv**2 + dv,"), rf"^model\.yaml:{LINE['meas']}: ", "measurement 'position_difference'", "not linear")
+    refusal(edit("  dv: -mu*dv + w", "  dv: -mu*dv*dx + w"), rf"^model\.yaml:{LINE['dv']}: ", r"d\(dv\)/dt", "not linear")
+
+
+@pytest.mark.parametrize(
+    "rhs, problem",
+    [("0/0*dv", "undefined"), ("dv/(1-1)", "undefined"), ("log(0)*dv", "undefined"), ("sqrt(-2)*dv", "complex"), ("10**10**10*dv", "power of a power"), ("Float(1, 100000000)*dv", "unknown function")],
+)
+def test_undefined_or_pathological_equation_names_its_line(rhs, problem):
+    refusal(edit("  dv: -mu*dv + w", f"  dv: {rhs}"), rf"^model\.yaml:{LINE['dv']}: ", r"d\(dv\)/dt", problem)
+
+
+def test_negative_psd_expression_names_its_line():
+    refusal(edit('psd: "2*mu*sig**2"', 'psd: "-2*sig**2"'), rf"^model\.yaml:{LINE['noise']}: ", "negative")
+
+
+@pytest.mark.parametrize("name, collision", [("N", "generated C"), ("NAN", "C standard library"), ("linux", "POSIX"), ("errno", "C standard library")])
+def test_colliding_parameter_name_names_its_line(name, collision):
+    refusal(edit("{name: rate,", f"{{name: {name},"), rf"^model\.yaml:{LINE['rate']}: ", "collides with", collision)
+
+
+def test_model_named_like_a_header_names_its_line():
+    refusal(edit("model: toy", "model: math"), rf"^model\.yaml:{LINE['model']}: ", "collides with", "math")
+
+
+def write_transform(path, model, base):
+    path.write_text(f"model: {model}\nbase: {base}\ntransforms:\n  - keep_states: {{states: [dx, dv]}}\n")
+
+
+def test_transform_whose_base_is_itself_is_refused(tmp_path):
+    write_transform(tmp_path / "a.yaml", "a", "a.yaml")
+    with pytest.raises(ModelError, match=r"a\.yaml: the chain of base models loops back on itself \(.*a\.yaml -> .*a\.yaml\)"):
+        load_model(tmp_path / "a.yaml")
+
+
+def test_transform_cycle_through_two_files_is_refused(tmp_path):
+    write_transform(tmp_path / "a.yaml", "a", "b.yaml")
+    write_transform(tmp_path / "b.yaml", "b", "a.yaml")
+    with pytest.raises(ModelError, match=r"loops back on itself \(.*a\.yaml -> .*b\.yaml -> .*a\.yaml\)"):
+        load_model(tmp_path / "a.yaml")
+
+
+def test_transform_of_a_file_twice_in_a_chain_without_a_cycle_loads(tmp_path):
+    (tmp_path / "base.yaml").write_text(BASE)
+    write_transform(tmp_path / "a.yaml", "a", "base.yaml")
+    write_transform(tmp_path / "b.yaml", "b", "a.yaml")
+    assert load_model(tmp_path / "b.yaml").state_names == ["position_error", "velocity_error"]
+
+
+def test_transform_free_text_is_checked():
+    with pytest.raises(ModelError, match=r"file\.yaml:2: model 'small', title.*U\+001B"):
+        load_model_text('model: small\ntitle: "a\\eb"\nbase: ned_doppler18\n', "file.yaml")
+    with pytest.raises(ModelError, match=r"collides with"):
+        load_model_text("model: stdio\nbase: ned_doppler18\n", "file.yaml")
