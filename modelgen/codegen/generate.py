@@ -356,7 +356,7 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
         "source_templates": ["c_source.c.j2", *parts, "c_udu_factor.c.j2"],
         "evaluate": _print_block(block, targets, c_printer),
         "poles": [
-            {"text": str(pole.denominator), "value": c_printer.doprint(pole.denominator), "argument": c_printer.doprint(pole.argument)}
+            {"text": _named(pole.denominator, model), "value": c_printer.doprint(pole.denominator), "argument": c_printer.doprint(pole.argument)}
             for pole in poles(exprs)
         ],
         "series_range": _c_number(series_range(options.taylor_order, FLOAT_ROUNDOFF if options.scalar == "float" else DOUBLE_ROUNDOFF), options.scalar),
@@ -403,7 +403,7 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
                 "shape": shape,
                 "parameters": locals_,
                 "poles": [
-                    {"text": str(p.denominator), "value": printer.doprint(p.denominator), "argument": printer.doprint(p.argument)}
+                    {"text": _named(p.denominator, model), "value": printer.doprint(p.denominator), "argument": printer.doprint(p.argument)}
                     for p in fn_poles
                 ],
                 **_print_block(fn_block, fn_targets, printer),
@@ -482,6 +482,11 @@ def _python_parameter_locals(model, block: Block, extra: list[sp.Expr] = ()) -> 
             renames[par.sym] = par.name
             locals_.append((par.name, k))
     return locals_, PyPrinter(renames)
+
+
+def _named(expr: sp.Expr, model) -> str:
+    """``expr`` as text with parameters by name (``cos(latitude)``, not ``cos(phi)``), for messages."""
+    return str(expr.subs({p.sym: sp.Symbol(p.name) for p in model.parameters}, simultaneous=True))
 
 
 def _py_tuple(names: list[str]) -> str:
