@@ -13,6 +13,7 @@ check, and its answer says what the name collides with.
 
 from __future__ import annotations
 
+import builtins
 import keyword
 import sys
 
@@ -99,17 +100,19 @@ C_PLATFORM = frozenset(
 #: modelgen/codegen/*.py): macros of the source file and of the test driver.
 GENERATOR_C = frozenset(
     """N M N_ACTIVE N_UNIT_ROWS N_QD N_PARAMS DIM_M HUGE_SCALAR PACKED_UPPER PACKED_ANY
-    STRICT_UPPER""".split()
+    STRICT_UPPER MAX_DOUBLINGS SERIES_RANGE""".split()
 )
 
 #: Names of the generated Python module (templates/python_module.py.j2): its
-#: imports, module-level names and the names its functions use.
+#: imports, module-level names and the names its functions use, and every
+#: Python builtin (a parameter becomes a local that would shadow one).
 GENERATOR_PYTHON = frozenset(
-    """np math numpy p out MODEL N_STATES N_NOISES N_MEASUREMENTS TAYLOR_ORDER STATE_NAMES
-    NOISE_NAMES MEASUREMENT_NAMES PARAMETER_NAMES PARAMETER_DEFAULTS parameter_vector
-    system_matrix noise_input_matrix measurement_matrix noise_psd measurement_variance
-    discretize predict update float len set sorted range ValueError""".split()
-)
+    """np math numpy p out MODEL TITLE SOURCE N_STATES N_NOISES N_MEASUREMENTS TAYLOR_ORDER
+    SERIES_RANGE PSD_TOLERANCE STATE_NAMES NOISE_NAMES MEASUREMENT_NAMES PARAMETER_NAMES
+    PARAMETER_DEFAULTS SingularOperatingPoint parameter_vector system_matrix
+    noise_input_matrix measurement_matrix noise_psd measurement_variance discretize predict
+    update""".split()
+) | frozenset(name for name in dir(builtins) if not name.startswith("_"))
 
 #: C99 standard headers (C99 7.1.2) and common POSIX headers: a model named
 #: like one generates ``<name>.h``, which the generated folder's include path

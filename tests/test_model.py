@@ -322,3 +322,21 @@ def test_line_feed_and_tab_are_allowed_in_descriptions_and_notes_but_not_in_a_ti
 def test_awkward_but_visible_free_text_loads(text):
     m = build(title=text, source=text, notes=[text], states=[State("position_error", unit=text, description=text, symbol="dx"), State("velocity_error", symbol="dv")])
     assert m.title == text and m.states[0].description == text
+
+
+def test_every_macro_and_module_name_the_templates_define_is_refused_as_a_model_name():
+    """The name lists in modelgen.names stay in step with the templates and printers."""
+    from pathlib import Path
+
+    from modelgen.names import name_collision
+
+    root = Path(__file__).resolve().parents[1]
+    sources = [*(root / "templates").glob("*.j2"), *(root / "modelgen" / "codegen").glob("*.py")]
+    macros = {m for path in sources for m in re.findall(r"#define +([A-Za-z_][A-Za-z0-9_]*)", path.read_text())}
+    module_text = (root / "templates" / "python_module.py.j2").read_text()
+    module_names = set(re.findall(r"^([A-Za-z][A-Za-z0-9_]*) *=", module_text, re.M))
+    module_names |= set(re.findall(r"^(?:def|class) +([A-Za-z][A-Za-z0-9_]*)", module_text, re.M))
+    module_names |= set(re.findall(r"^import +([a-z]+)", module_text, re.M))
+    assert macros and module_names
+    free = sorted(n for n in macros | module_names if not n.startswith("_") and name_collision(n) is None)
+    assert not free, f"generated names a model could also use: {free}"
