@@ -36,7 +36,7 @@ class Flight:
 
     outputs: np.ndarray  # (epochs, len(OUTPUT_FIELDS))
     outages: list[tuple[float, float]]  # absolute (start, end)
-    first_epoch: float  # time of the first GNSS epoch kept [s]
+    first_epoch: float  # the GNSS file's first epoch [s] (outage schedule and report times count from it)
     alignment_time: float
     gnss_nis: list[float] = field(default_factory=list)  # NIS of every GNSS update tried outside outages
     gate: float = 0.0
@@ -53,6 +53,7 @@ class Inputs:
     rate: np.ndarray  # body axes [rad/s]
     gnss: GnssLog
     notes: list[str]
+    first_epoch: float  # the GNSS file's first epoch [s]: the outage schedule and the report count from it
 
 
 def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
@@ -78,7 +79,7 @@ def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
     kept = GnssLog(gnss.path, gnss.time[keep], gnss.latitude[keep], gnss.longitude[keep], gnss.height[keep],
                    gnss.quality[keep], gnss.satellites[keep], gnss.sigma_position[keep], gnss.velocity[keep],
                    gnss.sigma_velocity[keep], gnss.notes)
-    return Inputs(time, imu.specific_force @ to_imu, imu.angular_rate @ to_imu, kept, notes)
+    return Inputs(time, imu.specific_force @ to_imu, imu.angular_rate @ to_imu, kept, notes, float(gnss.time[0]))
 
 
 def stationary_mask(time: np.ndarray, force: np.ndarray, rate: np.ndarray, gyro_bias: np.ndarray,
@@ -211,7 +212,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
     g = inputs.gnss
     time, force, rate = inputs.time, inputs.force, inputs.rate
     lever = np.asarray(config.lever_arm, float)
-    windows = outage_windows(config.outage_schedule, config.outage_windows, float(g.time[0]), float(g.time[-1]))
+    windows = outage_windows(config.outage_schedule, config.outage_windows, inputs.first_epoch, float(g.time[-1]))
     outage = in_outage(g.time, windows)
     j0, k, nav, gyro_bias, accel_bias = _alignment(config, inputs)
     speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
@@ -302,7 +303,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
             progress((j - j0) / max(1, n_epochs - j0))
     if progress is not None:
         progress(1.0)
-    return Flight(np.array(outputs), windows, float(g.time[0]), float(g.time[j0]), gnss_nis, gates[6], counts,
+    return Flight(np.array(outputs), windows, inputs.first_epoch, float(g.time[j0]), gnss_nis, gates[6], counts,
                   list(inputs.notes))
 
 
