@@ -383,6 +383,8 @@ def _check_declarations(
                 value = float(p.value)
             except (TypeError, ValueError):
                 raise ModelError(f"{place}: value {p.value!r} is not a number") from None
+            except OverflowError:
+                raise ModelError(f"{place}: value {str(p.value)[:20]}... is beyond the range of a double") from None
             if value != value or value in (float("inf"), float("-inf")):
                 raise ModelError(f"{place}: value {p.value!r} is not finite")
 
@@ -414,12 +416,24 @@ def nonlinear_variables(expr: sp.Expr, variables: set[sp.Symbol]) -> list[sp.Sym
 
 
 def _check_linear(expr: sp.Expr, variables: set[sp.Symbol], where: str, what: str) -> None:
-    """Refuse an equation that a linear Kalman filter cannot represent (see :func:`nonlinear_variables`)."""
+    """Refuse an equation that a linear Kalman filter cannot represent.
+
+    Refused: a nonlinear term (see :func:`nonlinear_variables`), and a term
+    that depends on none of ``variables`` (``dv + 1``, ``g``): the error model
+    dx/dt = F x + G w, z = H x + v has no place for it, and the derivation
+    would drop it without a word.
+    """
     bad = nonlinear_variables(expr, variables)
     if bad:
         raise ModelError(
             f"{where}: {expr} is not linear in the {what} (nonlinear in {', '.join(map(str, bad))}); "
             "a linear Kalman filter cannot be generated from it, and it is not linearized silently"
+        )
+    constant = expr.subs({v: 0 for v in variables})
+    if constant != 0:
+        raise ModelError(
+            f"{where}: {expr} has a term, {_excerpt(str(constant))}, that depends on none of the {what}; "
+            "a linear error model (F x + G w, H x + v) cannot represent it, and it is not dropped silently"
         )
 
 

@@ -70,6 +70,8 @@ def _plain(
     except yaml.YAMLError as exc:  # e.g. an unknown tag such as !!python/object
         problem = getattr(exc, "problem", None) or exc
         raise ModelError(f"{filename}:{node.start_mark.line + 1}: key {path!r}: {problem}") from None
+    except (ValueError, OverflowError) as exc:  # e.g. an integer of more than 4300 digits
+        raise ModelError(f"{filename}:{node.start_mark.line + 1}: key {path!r}: cannot read {node.value[:20]!r}... ({exc})") from None
 
 
 def load_model_text(text: str, filename: str = "<model>", _loading: tuple[str, ...] = ()) -> ErrorModel:
@@ -133,6 +135,9 @@ def load_model_text(text: str, filename: str = "<model>", _loading: tuple[str, .
                 raise ModelError(f"{place}: measurement {entry['name']!r} has no 'expression'")
             if key == "noises" and "psd" not in entry:
                 raise ModelError(f"{place}: noise {entry['name']!r} has no 'psd' (its power spectral density)")
+            for text_field in ("unit", "description"):
+                if isinstance(entry.get(text_field), (list, dict)):
+                    raise ModelError(f"{place}: {key}[{i}] {text_field!r} must be text, not a list or mapping")
             if key == "noises" and "psd" in entry and isinstance(entry["psd"], bool):
                 raise ModelError(f"{place}: noise {entry['name']!r} psd {entry['psd']!r} is not numeric")
             fields_in = {
@@ -140,7 +145,7 @@ def load_model_text(text: str, filename: str = "<model>", _loading: tuple[str, .
                 for k, v in entry.items()
             }
             if "value" in fields_in:
-                fields_in["value"] = float(fields_in["value"])
+                fields_in["value"] = _as_float(fields_in["value"])
             built.append(cls(**fields_in))
         items[key] = built
 
@@ -210,6 +215,14 @@ def _is_number(value: Any) -> bool:
     except ValueError:
         return False
     return True
+
+
+def _as_float(value: Any) -> float:
+    """A parameter value as a float; an integer beyond a double becomes inf, which is then refused."""
+    try:
+        return float(value)
+    except OverflowError:
+        return float("inf") if int(value) > 0 else float("-inf")
 
 
 #: Deepest nesting of YAML flow collections (``[`` and ``{``) accepted.  PyYAML

@@ -62,10 +62,12 @@ def test_markov_noise_psd_is_two_mu_sigma_squared(paper_derived):
         ({"a": "sin(b)", "b": "k*b + w"}, "a"),
         ({"a": "k*a", "b": "k*b + w"}, "b**2 + b"),  # nonlinear measurement, the same rule
         ({"a": "k*a", "b": "k*b + w"}, "sqrt(a)"),
+        ({"a": "k*a + 1", "b": "k*b + w"}, "a"),  # a constant forcing: no place in F x + G w
+        ({"a": "k*a", "b": "k*b + w"}, "a + k"),  # a constant offset: no place in H x + v
     ],
 )
-def test_nonlinear_equation_or_measurement_is_refused_when_the_model_is_built(dynamics, measurement):
-    with pytest.raises(ModelError, match="not linear"):
+def test_nonlinear_or_constant_term_is_refused_when_the_model_is_built(dynamics, measurement):
+    with pytest.raises(ModelError, match="not linear|depends on none of"):
         ErrorModel.build(
             "toy",
             states=[State("a"), State("b")],

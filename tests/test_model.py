@@ -332,7 +332,7 @@ def test_every_macro_and_module_name_the_templates_define_is_refused_as_a_model_
 
     root = Path(__file__).resolve().parents[1]
     sources = [*(root / "templates").glob("*.j2"), *(root / "modelgen" / "codegen").glob("*.py")]
-    macros = {m for path in sources for m in re.findall(r"#define +([A-Za-z_][A-Za-z0-9_]*)", path.read_text())}
+    macros = {m for path in sources for m in re.findall(r"#define +([A-Za-z_][A-Za-z0-9_]*)(?=[\s(]|$)", path.read_text(), re.M)}
     module_text = (root / "templates" / "python_module.py.j2").read_text()
     module_names = set(re.findall(r"^([A-Za-z][A-Za-z0-9_]*) *=", module_text, re.M))
     module_names |= set(re.findall(r"^(?:def|class) +([A-Za-z][A-Za-z0-9_]*)", module_text, re.M))
