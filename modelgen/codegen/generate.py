@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import re
+import warnings
 from dataclasses import dataclass, field
 from typing import Callable
 from importlib import resources
@@ -34,6 +35,7 @@ from modelgen.codegen.kernels import (
     c_ud_weights,
     discretize_cost,
     doubling_cost,
+    estimated_code_bytes,
     python_predict_cost,
     python_predict_plan,
     thornton_cost,
@@ -260,6 +262,7 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
     structure = filter_structure(
         derived.structure("F"), derived.structure("G"), derived.structure("H"), options.taylor_order
     )
+    warn_if_large(model.name, structure)
     targets, exprs = _evaluation_outputs(derived, structure)
     block = eliminate_common_subexpressions(exprs)
     n, nw, nm = derived.n_states, derived.n_noises, derived.n_measurements
@@ -430,6 +433,31 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
     }
 
     return c_context, py_context, costs
+
+
+class GeneratedSizeWarning(UserWarning):
+    """The model's generated code will be unusually large (see :data:`LARGE_CODE_BYTES`)."""
+
+
+#: Above this estimated size of the generated files a model gets a warning: 2 MB is about
+#: 13 times the paper's 18-state model (160 kB), or roughly 110,000 unrolled flops in
+#: predict; straight-line C of that size takes gcc -O2 minutes and hundreds of MB, and its
+#: object code no longer fits the flash of a typical Cortex-M4 (1 MB).
+LARGE_CODE_BYTES = 2_000_000
+
+
+def warn_if_large(name: str, structure: FilterStructure) -> None:
+    """``warnings.warn`` a :class:`GeneratedSizeWarning` with the expected size when above the threshold."""
+    expected = estimated_code_bytes(structure)
+    if expected > LARGE_CODE_BYTES:
+        warnings.warn(
+            f"model {name!r} is large: its generated code will be about {expected / 1e6:.1f} MB "
+            f"({structure.n_states} states, {int(structure.Phi.sum())} structural nonzeros in Phi), "
+            f"above the {LARGE_CODE_BYTES / 1e6:.0f} MB at which compiling it gets slow and it outgrows "
+            "a microcontroller's flash; a reduced model (keep_states, markov_to_white) is smaller",
+            GeneratedSizeWarning,
+            stacklevel=3,
+        )
 
 
 def generate_code(derived: DerivedModel, options: CodegenOptions | None = None) -> GeneratedCode:

@@ -1,0 +1,44 @@
+"""Large models are announced: a warning gives the expected size of the generated code before it is built."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from modelgen.codegen import generate as generate_module
+from modelgen.codegen.generate import GeneratedSizeWarning, LARGE_CODE_BYTES, generate_code, warn_if_large
+from modelgen.codegen.kernels import estimated_code_bytes
+from modelgen.codegen.structure import filter_structure
+from modelgen.derivation import derive
+from modelgen.modelfile import load_model
+
+
+def structure_of(derived):
+    return filter_structure(derived.structure("F"), derived.structure("G"), derived.structure("H"), 9)
+
+
+@pytest.mark.parametrize("name", ["ned_doppler18", "ned_doppler32_augmented"])
+def test_estimate_is_within_a_quarter_of_what_is_written(name, paper_derived):
+    derived = paper_derived if name == "ned_doppler18" else derive(load_model(name))
+    written = sum(len(text) for text in generate_code(derived).files.values())
+    assert abs(estimated_code_bytes(structure_of(derived)) / written - 1) < 0.25
+
+
+def test_the_paper_model_is_not_large(paper_derived):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GeneratedSizeWarning)
+        generate_code(paper_derived)
+
+
+def test_a_dense_eighty_state_model_is_announced_with_its_size():
+    n = 80
+    structure = filter_structure(np.ones((n, n), bool), np.eye(n, dtype=bool), np.zeros((0, n), bool), 9)
+    assert estimated_code_bytes(structure) > LARGE_CODE_BYTES
+    with pytest.warns(GeneratedSizeWarning, match=r"'big' is large: its generated code will be about \d+\.\d MB .*80 states.*2 MB"):
+        warn_if_large("big", structure)
+
+
+def test_generate_warns_before_building_when_above_the_threshold(paper_derived, monkeypatch):
+    monkeypatch.setattr(generate_module, "LARGE_CODE_BYTES", 100_000)
+    with pytest.warns(GeneratedSizeWarning, match="about 0.2 MB"):
+        generate_code(paper_derived)
