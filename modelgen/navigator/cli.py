@@ -15,7 +15,9 @@ from modelgen.navigator.config import builtin_config_path
               show_default=True, help="folder of the report (replaced as a whole)")
 @click.option("--no-figures", is_flag=True, help="skip the SVG figures")
 @click.option("--force", is_flag=True, help="replace an output folder modelgen did not write")
-def replay(config: Path | None, out: Path, no_figures: bool, force: bool) -> None:
+@click.option("--navigator", type=click.Choice(["c", "python", "both"]), default="c", show_default=True,
+              help="the generated C navigator, the Python reference, or both (compared)")
+def replay(config: Path | None, out: Path, no_figures: bool, force: bool, navigator: str) -> None:
     """Fly a GNSS/IMU log with the generated navigator (default: the built-in car drive).
 
     CONFIG is a navigator configuration (YAML); without it the built-in drive
@@ -26,7 +28,7 @@ def replay(config: Path | None, out: Path, no_figures: bool, force: bool) -> Non
     from modelgen.navigator.replay import run_replay
 
     result = run_replay(config or builtin_config_path(), out, echo=lambda m: click.echo(m, err=True),
-                        with_figures=not no_figures, force=force)
+                        with_figures=not no_figures, force=force, navigator=navigator)
     s = result.summary
     click.echo(f"{s['outage_count']} outages: end-of-outage horizontal error RMS "
                f"{s['horizontal_error_end_rms_m']:.2f} m (median {s['horizontal_error_end_median_m']:.2f} m, "
@@ -35,5 +37,7 @@ def replay(config: Path | None, out: Path, no_figures: bool, force: bool) -> Non
                f"horizontal RMS outside outages {s['horizontal_rms_outside_outages_m']:.3f} m"
                if s["outage_count"] else
                f"no outages; horizontal RMS {s['horizontal_rms_outside_outages_m']:.3f} m")
-    click.echo(f"navigator {result.timings['fly_s']:.2f} s, total {result.timings['total_s']:.2f} s; "
+    if "c_python_max_difference_m" in s:
+        click.echo(f"C and Python trajectories agree within {s['c_python_max_difference_m']:.3g} m")
+    click.echo(f"navigator ({s['navigator']}) {result.timings['fly_s']:.2f} s, total {result.timings['total_s']:.2f} s; "
                f"report in {result.folder}")

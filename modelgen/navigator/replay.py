@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
-import time
+import time  # noqa: I001
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import tempfile
+
+import numpy as np
+
+from modelgen.errors import ModelError
+from modelgen.navigator.cnav import build_c_navigator, fly_c
 from modelgen.navigator.config import NavigatorConfig, load_config
 from modelgen.navigator.errorstate import generate_filter_module, model_path
 from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
@@ -27,9 +33,19 @@ class ReplayResult:
     timings: dict[str, float]
 
 
+NAVIGATORS = ("c", "python", "both")
+
+
 def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], None] = print,
-               with_figures: bool = True, force: bool = False) -> ReplayResult:
-    """Fly the configuration's logs and, if ``out`` is given, write the report folder there atomically."""
+               with_figures: bool = True, force: bool = False, navigator: str = "c") -> ReplayResult:
+    """Fly the configuration's logs and, if ``out`` is given, write the report folder there atomically.
+
+    ``navigator``: the generated C navigator (compiled now), the Python
+    reference, or both (the report then states their largest difference; the
+    C flight is the one reported).
+    """
+    if navigator not in NAVIGATORS:
+        raise ModelError(f"replay: unknown navigator {navigator!r} (choose from {', '.join(NAVIGATORS)})")
     timings: dict[str, float] = {}
     start = time.perf_counter()
     config = load_config(config_path)
@@ -38,22 +54,41 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     gnss = read_rtklib_pos(config.gnss_file)
     inputs = prepare(config, imu, gnss)
     timings["read_s"] = time.perf_counter() - start
-    mark = time.perf_counter()
-    echo(f"  generating the {config.model} filter with modelgen")
-    module = generate_filter_module(model_path(config.model, config.path))
-    timings["generate_s"] = time.perf_counter() - mark
-    mark = time.perf_counter()
-    state = {"next": 0.0}
+    model_file = model_path(config.model, config.path)
+    flights: dict[str, Flight] = {}
+    if navigator in ("python", "both"):
+        mark = time.perf_counter()
+        echo(f"  generating the {config.model} filter (Python) with modelgen")
+        module = generate_filter_module(model_file)
+        timings["generate_python_s"] = time.perf_counter() - mark
+        mark = time.perf_counter()
+        state = {"next": 0.0}
 
-    def progress(fraction: float) -> None:
-        if fraction >= state["next"]:
-            echo(f"  flying: {100 * fraction:5.1f} %  ({time.perf_counter() - mark:.1f} s)")
-            state["next"] = fraction + 0.25
+        def progress(fraction: float) -> None:
+            if fraction >= state["next"]:
+                echo(f"  flying (Python): {100 * fraction:5.1f} %  ({time.perf_counter() - mark:.1f} s)")
+                state["next"] = fraction + 0.25
 
-    flight = fly(config, inputs, module, progress)
-    timings["fly_s"] = time.perf_counter() - mark
+        flights["python"] = fly(config, inputs, module, progress)
+        timings["fly_python_s"] = time.perf_counter() - mark
+    if navigator in ("c", "both"):
+        mark = time.perf_counter()
+        echo(f"  generating and compiling the {config.model} C navigator")
+        with tempfile.TemporaryDirectory(prefix="modelgen-replay-") as build:
+            compiled = build_c_navigator(model_file, Path(build) / "navigator")
+            timings["generate_compile_c_s"] = time.perf_counter() - mark
+            mark = time.perf_counter()
+            echo("  flying (C)")
+            flights["c"], timings["fly_c_cpu_s"] = fly_c(config, inputs, compiled)
+            timings["fly_c_s"] = time.perf_counter() - mark
+    flight = flights["c"] if "c" in flights else flights["python"]
+    timings["fly_s"] = timings.get("fly_c_s", timings.get("fly_python_s", 0.0))
     errors = errors_against_reference(flight, inputs.gnss)
     result = summary(flight, errors, inputs.gnss)
+    result["navigator"] = "c" if "c" in flights else "python"
+    if len(flights) == 2:
+        result["c_python_max_difference_m"] = max_position_difference(flights["c"], flights["python"])
+        echo(f"  C and Python trajectories: largest difference {result['c_python_max_difference_m']:.3g} m")
     folder = None
     if out is not None:
         files = report_files(flight, errors, result, config, inputs.gnss, timings, velocity_latency(inputs.gnss),
@@ -61,3 +96,16 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         folder = write_atomically(Path(out), files, force=force)
     timings["total_s"] = time.perf_counter() - start
     return ReplayResult(config, flight, result, folder, timings)
+
+
+def max_position_difference(a: Flight, b: Flight) -> float:
+    """Largest 3-D distance [m] between two flights' antenna positions at the same output epochs."""
+    from modelgen.navigator.mechanization import radii
+
+    if a.outputs.shape != b.outputs.shape or not np.array_equal(a.outputs[:, 0], b.outputs[:, 0]):
+        raise ModelError("replay: the C and Python flights have different output epochs")
+    rm, rn = radii(float(a.outputs[0, 1]))
+    north = (a.outputs[:, 1] - b.outputs[:, 1]) * rm
+    east = (a.outputs[:, 2] - b.outputs[:, 2]) * rn * np.cos(a.outputs[:, 1])
+    up = a.outputs[:, 3] - b.outputs[:, 3]
+    return float(np.sqrt(north**2 + east**2 + up**2).max())

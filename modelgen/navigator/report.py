@@ -142,7 +142,8 @@ def _fmt(value: object, digits: int = 2) -> str:
 def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, float], latency: float) -> str:
     """summary.md: outage table, targets, tuning and how it was chosen, counts and notes."""
     lines = [f"# Replay: {config.name}", "",
-             f"Configuration `{Path(config.path).name}`, model `{config.model}` (generated filter, closed loop). "
+             f"Configuration `{Path(config.path).name}`, model `{config.model}` (generated filter, closed loop), "
+             f"{'generated C' if summary.get('navigator') == 'c' else 'Python reference'} navigator. "
              "Forward real-time filter: nothing after a moment is used at that moment. The error is measured at the "
              "antenna against the RTK solution interpolated to each output time (all RTK epochs, including those "
              "hidden during the outages).", "",
@@ -174,7 +175,13 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
               f"{verdict(outside <= 0.10)} |",
               f"| outage ends inside the filter's 3 sigma | {_fmt(100 * inside if inside is not None else None, 0)} % "
               f"| >= 90 % | | {verdict(inside is not None and inside >= 0.9)} |",
-              f"| navigator wall time (Python) | {_fmt(timings.get('fly_s'), 2)} s | | 11.9 s | |", ""]
+              f"| navigator CPU time, C, whole log | {_fmt(timings.get('fly_c_cpu_s'), 3)} s | <= 0.5 s (549 s drive) | | "
+              f"{verdict(timings['fly_c_cpu_s'] <= 0.5) if 'fly_c_cpu_s' in timings else ''} |",
+              f"| navigator wall time, Python reference | {_fmt(timings.get('fly_python_s'), 2)} s | | 11.9 s | |",
+              f"| C against Python, largest antenna-position difference | "
+              f"{_fmt(summary.get('c_python_max_difference_m'), 9) if 'c_python_max_difference_m' in summary else 'not flown'}"
+              f" m | <= 0.001 m | | {verdict(summary.get('c_python_max_difference_m', 1.0) <= 1e-3) if 'c_python_max_difference_m' in summary else ''} |",
+              ""]
     lines += ["## Tuning and how it was chosen", "",
               "IMU noise = data-sheet value x unit x stated factor (configuration `noise`):", "",
               "| noise | data sheet | factor | SI value used | why |", "|---|---|---|---|---|"]

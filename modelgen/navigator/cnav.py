@@ -1,0 +1,164 @@
+"""The C navigator: generated from templates around the generated filter, compiled, driven by ctypes.
+
+:func:`generate_c_navigator` writes ``<model>.h/.c`` (modelgen's filter) and
+``<model>_navigator.h/.c`` (templates/navigator_header.h.j2,
+navigator_source.c.j2) into a folder; :func:`build_c_navigator` compiles them
+strictly (C99, -Wall -Wextra -Werror -pedantic) into a shared library;
+:func:`fly_c` flies a log with it, with the same alignment as the Python
+navigator (done in Python and handed over as the start state), and returns a
+:class:`~modelgen.navigator.navigator.Flight` like :func:`~modelgen.navigator.navigator.fly`.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import time
+from pathlib import Path
+
+import jinja2
+import numpy as np
+from scipy.stats import chi2
+
+from modelgen import __version__
+from modelgen.codegen.build import compile_shared_library
+from modelgen.codegen.generate import generate_code, template_folder
+from modelgen.errors import ModelError
+from modelgen.navigator.config import NavigatorConfig
+from modelgen.navigator.navigator import Flight, Inputs, _alignment, initial_covariance
+from modelgen.navigator.outages import in_outage, outage_windows
+from modelgen.output import write_atomically
+
+N_CONFIG, N_OUTPUT, N_GNSS = 34, 23, 13
+COUNT_NAMES = ("gnss_updates", "gnss_rejected", "gnss_released", "gnss_deweighted", "gnss_quality_skipped",
+               "zupt_updates", "nhc_updates", "predicts")
+
+
+def render_navigator(model: str) -> dict[str, str]:
+    """The navigator's header and source for the generated filter named ``model``."""
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(template_folder())), undefined=jinja2.StrictUndefined,
+                             keep_trailing_newline=True)
+    context = {"p": model, "P": model.upper(), "version": __version__}
+    return {f"{model}_navigator.h": env.get_template("navigator_header.h.j2").render(context),
+            f"{model}_navigator.c": env.get_template("navigator_source.c.j2").render(context)}
+
+
+def generate_c_navigator(model_file: Path, folder: Path) -> Path:
+    """Write the filter and the navigator C for the model file into ``folder`` (atomically)."""
+    from modelgen.derivation import derive
+    from modelgen.modelfile import load_model
+
+    derived = derive(load_model(model_file))
+    files = {name: text for name, text in generate_code(derived).files.items() if name.endswith((".c", ".h"))}
+    files.update(render_navigator(derived.model.name))
+    return write_atomically(Path(folder), files)
+
+
+class CNavigator:
+    """The compiled navigator library (one model)."""
+
+    def __init__(self, library: Path, model: str):
+        self.model = model
+        self.lib = ctypes.CDLL(str(library))
+        self.size = int(self._fn("navigator_size", [], ctypes.c_ulong)())
+        dp = ctypes.POINTER(ctypes.c_double)
+        self.configure = self._fn("navigator_configure", [ctypes.c_void_p, dp])
+        self.prime = self._fn("navigator_prime", [ctypes.c_void_p, dp, dp], None)
+        self.start = self._fn("navigator_start", [ctypes.c_void_p, ctypes.c_double, dp, dp, dp, dp, dp, dp])
+        self.run = self._fn("navigator_run", [ctypes.c_void_p, ctypes.c_long, dp, dp, dp, ctypes.c_long,
+                                              ctypes.c_long, dp, ctypes.POINTER(ctypes.c_long),
+                                              ctypes.POINTER(ctypes.c_int), dp, dp])
+        self.counts = self._fn("navigator_counts", [ctypes.c_void_p, ctypes.POINTER(ctypes.c_long)], None)
+
+    def _fn(self, name: str, argtypes: list, restype=ctypes.c_int):
+        function = getattr(self.lib, f"{self.model}_{name}")
+        function.argtypes = argtypes
+        function.restype = restype
+        return function
+
+
+def build_c_navigator(model_file: Path, folder: Path) -> CNavigator:
+    """Generate, compile (strict C99, -O2) and load the navigator for a model file."""
+    folder = generate_c_navigator(model_file, folder)
+    model = next(p.stem for p in folder.glob("*_navigator.c")).removesuffix("_navigator")
+    library = compile_shared_library([folder / f"{model}.c", folder / f"{model}_navigator.c"],
+                                     folder / f"lib{model}_navigator.so")
+    return CNavigator(library, model)
+
+
+def config_array(config: NavigatorConfig, window: int, step: int) -> np.ndarray:
+    """The C configuration array (its layout is documented in the generated header)."""
+    gates = {m: float(chi2.ppf(config.nis_gate_probability, m)) for m in (2, 3, 6)}
+    cfg = np.zeros(N_CONFIG)
+    cfg[0:3] = config.lever_arm
+    cfg[3] = config.velocity_latency
+    cfg[4], cfg[5], cfg[6] = gates[2], gates[3], gates[6]
+    cfg[7] = 1.0 if config.gate_action == "deweight" else 0.0
+    cfg[8], cfg[9], cfg[10] = float(config.zupt_enabled), config.zupt_speed_max, config.zupt_sigma
+    cfg[11], cfg[12] = float(config.nhc_enabled), config.nhc_speed_min
+    cfg[13], cfg[14] = config.nhc_sigma_lateral, config.nhc_sigma_vertical
+    cfg[15], cfg[16], cfg[17], cfg[18] = config.zupt_gyro_max, config.zupt_accel_std_max, window, step
+    cfg[19] = config.noise["gyro_white"].si
+    cfg[20] = config.noise["accel_white"].si
+    cfg[21] = config.noise["gyro_bias_driving"].si
+    cfg[22] = config.noise["accel_bias_driving"].si
+    cfg[23], cfg[24] = config.minimum_sigma_position, config.minimum_sigma_velocity
+    for q, factor in config.quality_factor.items():
+        if 0 <= q <= 7:
+            cfg[25 + q] = factor
+    cfg[33] = config.gate_release_epochs
+    return cfg
+
+
+def _pointer(array: np.ndarray, kind=ctypes.c_double):
+    return array.ctypes.data_as(ctypes.POINTER(kind))
+
+
+def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tuple[Flight, float]:
+    """Fly the log with the C navigator; return the flight and the CPU time of the C run [s]."""
+    g = inputs.gnss
+    time_, force, rate = (np.ascontiguousarray(a, dtype=float) for a in (inputs.time, inputs.force, inputs.rate))
+    windows = outage_windows(config.outage_schedule, config.outage_windows, inputs.first_epoch, float(g.time[-1]))
+    outage = in_outage(g.time, windows)
+    j0, k0, nav, gyro_bias, accel_bias = _alignment(config, inputs)
+    speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
+    sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))
+    P0 = initial_covariance(config, nav, math.hypot(math.atan2(sv, speed0), config.heading_extra_sigma))
+    median_dt = float(np.median(np.diff(time_)))
+    window = max(2, int(round(config.zupt_window / median_dt)))
+    step = max(1, int(round(config.predict_period / median_dt)))
+    state = ctypes.create_string_buffer(navigator.size)
+    cfg = config_array(config, window, step)
+    if navigator.configure(state, _pointer(cfg)):
+        raise ModelError(f"{config.path}: the C navigator refused its configuration (ZUPT window {window} samples)")
+    for k in range(max(0, k0 - window + 1), k0 + 1):
+        navigator.prime(state, _pointer(np.ascontiguousarray(force[k])), _pointer(np.ascontiguousarray(rate[k])))
+    status = navigator.start(state, float(time_[k0]), _pointer(np.ascontiguousarray(force[k0])),
+                             _pointer(np.ascontiguousarray(rate[k0])), _pointer(np.ascontiguousarray(nav)),
+                             _pointer(np.ascontiguousarray(gyro_bias)), _pointer(np.ascontiguousarray(accel_bias)),
+                             _pointer(np.ascontiguousarray(P0)))
+    if status:
+        raise ModelError(f"C navigator: start refused (status {status})")
+    epochs = np.arange(j0, len(g.time))
+    target = np.searchsorted(time_, g.time[epochs]).astype(np.int64)
+    epochs, target = epochs[target < len(time_)], target[target < len(time_)]
+    use = (~outage[epochs]).astype(np.int32)
+    gnss = np.column_stack([g.latitude, g.longitude, g.height, g.velocity, g.quality, g.sigma_position,
+                            g.sigma_velocity])[epochs]
+    gnss = np.ascontiguousarray(gnss)
+    out = np.full((len(epochs), N_OUTPUT), np.nan)
+    t_gnss = np.ascontiguousarray(g.time[epochs])
+    cpu = time.process_time()
+    status = navigator.run(state, len(time_), _pointer(time_), _pointer(force), _pointer(rate), int(k0),
+                           len(epochs), _pointer(t_gnss), _pointer(target, ctypes.c_long), _pointer(use, ctypes.c_int),
+                           _pointer(gnss), _pointer(out))
+    cpu = time.process_time() - cpu
+    if status:
+        raise ModelError(f"C navigator: a filter step failed (status {status})")
+    raw = (ctypes.c_long * len(COUNT_NAMES))()
+    navigator.counts(state, raw)
+    out = out[~np.isnan(out[:, 0])]  # epochs after the last IMU sample are not flown
+    nis = out[(out[:, 19] == 0) & ~np.isnan(out[:, 21]), 21]
+    counts = dict(zip(COUNT_NAMES, (int(v) for v in raw)))
+    return Flight(out, windows, inputs.first_epoch, float(g.time[j0]), list(nis), float(cfg[6]), counts,
+                  list(inputs.notes)), cpu
