@@ -25,6 +25,7 @@ import jinja2
 import sympy as sp
 
 from modelgen import __version__
+from modelgen.codegen.contract import contract_markdown, contract_text
 from modelgen.codegen.escape import FILTERS
 from modelgen.codegen.expressions import Block, eliminate_common_subexpressions, poles
 from modelgen.codegen.kernels import (
@@ -302,6 +303,8 @@ def _contexts(derived: DerivedModel, options: CodegenOptions) -> tuple[dict, dic
         "banner_c": "/* GENERATED FILE - DO NOT EDIT (modelgen) */",
         "banner_python": "# GENERATED FILE - DO NOT EDIT (modelgen)",
         "banner_hash": "# GENERATED FILE - DO NOT EDIT (modelgen)",
+        "contract_text": contract_text("  "),
+        "contract_markdown": contract_markdown(),
     }
 
     packed = options.packed and not options.ud

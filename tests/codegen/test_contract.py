@@ -186,3 +186,16 @@ def test_a_parameter_that_makes_an_expression_infinite_is_refused_by_both(builds
     assert c.set_parameters(flat) == 1
     with pytest.raises(ValueError, match="system_matrix"):
         built.python.system_matrix(built.python.parameter_vector(flat))
+
+
+def test_the_contract_table_is_written_into_the_python_docstring_and_the_readme(builds):
+    from modelgen.codegen.contract import CONTRACT, contract_markdown
+
+    built = builds[FAMILIES[0].slug()]
+    docstring = " ".join(built.python.__doc__.split())
+    readme = built.code.files["README.md"]
+    for function, refused, status in CONTRACT:
+        assert f"{function}: {refused} -> C {status}" in docstring
+    for row in contract_markdown():
+        assert row in readme
+        assert row.count("|") == 4  # no cell holds a pipe
