@@ -52,3 +52,15 @@ def test_no_generated_folder_without_a_model():
     models = set(builtin_models())
     stray = [p.name for p in (REPO / "generated").iterdir() if p.is_dir() and p.name not in models]
     assert not stray, f"generated/ has folders for unknown models: {stray}"
+
+
+@pytest.mark.parametrize("name", builtin_models())
+def test_committed_generated_folder_has_a_manifest_of_exactly_its_files(name):
+    """Without it, `modelgen run` on a fresh clone would refuse to replace generated/<model>/ (issue 10, item 6)."""
+    from modelgen.output import read_manifest, sha256_file
+
+    folder = REPO / "generated" / name
+    manifest = read_manifest(folder)
+    assert manifest is not None, f"generated/{name} has no {MANIFEST_NAME}: run `modelgen generate --all --force` once"
+    on_disk = {p.name: sha256_file(p) for p in folder.iterdir() if p.is_file() and p.name != MANIFEST_NAME}
+    assert manifest == on_disk, f"generated/{name}/{MANIFEST_NAME} does not match the files: run `modelgen generate --all`"
