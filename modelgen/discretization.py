@@ -57,6 +57,8 @@ import math
 import numpy as np
 from scipy.linalg import expm
 
+from modelgen.errors import ModelError
+
 DEFAULT_TAYLOR_ORDER = 9  # seed 000, eq. (10): terms up to F^9 T^9 / 9!
 MAX_DOUBLINGS = 64  # T / 2^64: far below any step a navigation filter takes
 BALANCING_SWEEPS = 16
@@ -130,12 +132,12 @@ def balanced_norm(F: np.ndarray) -> float:
 
 
 def doublings(norm: float, T: float, order: int, unit_roundoff: float = DOUBLE_ROUNDOFF) -> int:
-    """Smallest s with norm * T / 2^s <= series_range(order); ValueError beyond MAX_DOUBLINGS."""
+    """Smallest s with norm * T / 2^s <= series_range(order); ModelError beyond MAX_DOUBLINGS."""
     theta = series_range(order, unit_roundoff)
     for s in range(MAX_DOUBLINGS + 1):
         if norm * math.ldexp(T, -s) <= theta:
             return s
-    raise ValueError(
+    raise ModelError(
         f"discretize: e^(F T) is not representable: ||F||*T = {norm * T:.3g} needs more than "
         f"{MAX_DOUBLINGS} doublings of the Taylor series"
     )
@@ -156,12 +158,12 @@ def _taylor_terms(F: np.ndarray, h: float, order: int) -> tuple[np.ndarray, np.n
 
 
 def check_step(T: float) -> float:
-    """T as a float, or ValueError when it is not finite and positive."""
+    """T as a float, or ModelError (a ValueError) when it is not finite and positive."""
     T = float(T)
     if not math.isfinite(T):
-        raise ValueError(f"discretize: step T is not finite ({T})")
+        raise ModelError(f"discretize: step T is not finite ({T})")
     if not T > 0.0:
-        raise ValueError(f"discretize: step T must be positive, not {T}")
+        raise ModelError(f"discretize: step T must be positive, not {T}")
     return T
 
 
@@ -170,28 +172,29 @@ def taylor_discretization_with_doublings(
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Phi, Gamma and the number s of doublings used (module docstring).
 
-    ValueError for an order below 1, a non-finite or non-positive T, a
+    ModelError (a ValueError) for an order below 1, a non-finite or non-positive T, a
     non-finite F or G, or an e^(F T) that is not representable.
     """
     if order < 1:
-        raise ValueError(f"Taylor order must be at least 1, got {order}")
+        raise ModelError(f"Taylor order must be at least 1, got {order}")
     T = check_step(T)
     if not (np.all(np.isfinite(F)) and np.all(np.isfinite(G))):
-        raise ValueError("discretize: F or G has a non-finite entry")
+        raise ModelError("discretize: F or G has a non-finite entry")
     s = doublings(balanced_norm(F), T, order)
-    phi, series = _taylor_terms(F, math.ldexp(T, -s), order)
-    for _ in range(s):
-        series = 0.5 * (series + phi @ series)  # Psi(2h) / (2h)
-        phi = phi @ phi
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below, with a message
+        phi, series = _taylor_terms(F, math.ldexp(T, -s), order)
+        for _ in range(s):
+            series = 0.5 * (series + phi @ series)  # Psi(2h) / (2h)
+            phi = phi @ phi
     if not (np.all(np.isfinite(phi)) and np.all(np.isfinite(series))):
-        raise ValueError(f"discretize: e^(F T) overflows at T = {T!r}")
+        raise ModelError(f"discretize: e^(F T) overflows at T = {T!r} (is the operating point singular?)")
     return phi, T * series @ G, s
 
 
 def taylor_discretization(F: np.ndarray, G: np.ndarray, T: float, order: int = DEFAULT_TAYLOR_ORDER) -> tuple[np.ndarray, np.ndarray]:
     """Phi and Gamma by the series of eqs. (10) and (11), with scaling and squaring.
 
-    Accurate for any finite T (module docstring); ValueError as
+    Accurate for any finite T (module docstring); ModelError as
     :func:`taylor_discretization_with_doublings`.
     """
     phi, gamma, _ = taylor_discretization_with_doublings(F, G, T, order)
