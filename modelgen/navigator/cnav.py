@@ -12,7 +12,10 @@ navigator (done in Python and handed over as the start state), and returns a
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import math
+import os
+import tempfile
 import time
 from pathlib import Path
 
@@ -84,6 +87,40 @@ def build_c_navigator(model_file: Path, folder: Path) -> CNavigator:
     library = compile_shared_library([folder / f"{model}.c", folder / f"{model}_navigator.c"],
                                      folder / f"lib{model}_navigator.so")
     return CNavigator(library, model)
+
+
+def cache_folder() -> Path:
+    """Where compiled navigators are kept between runs: $XDG_CACHE_HOME/modelgen/navigator (or ~/.cache/...)."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "modelgen" / "navigator"
+
+
+def cached_c_navigator(model_file: Path, echo=lambda message: None) -> tuple[CNavigator, bool]:
+    """The compiled navigator for a model file, from the cache when its inputs are unchanged.
+
+    The key is the sha256 of the model file, the navigator templates, the filter
+    templates and modelgen's version: any change compiles anew (the one-time
+    compile).  Returns the navigator and whether it came from the cache.
+    """
+    digest = hashlib.sha256(__version__.encode())
+    digest.update(Path(model_file).read_bytes())
+    for template in sorted(Path(template_folder()).glob("*.j2")):
+        digest.update(template.name.encode() + template.read_bytes())
+    folder = cache_folder() / digest.hexdigest()[:20]
+    libraries = list(folder.glob("lib*_navigator.so")) if folder.is_dir() else []
+    if libraries:
+        model = libraries[0].name[3:].removesuffix("_navigator.so")
+        return CNavigator(libraries[0], model), True
+    echo("  generating and compiling the C navigator (once; cached in " + str(cache_folder()) + ")")
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=folder.parent, prefix=".build-") as build:
+        navigator = build_c_navigator(model_file, Path(build) / "navigator")
+        try:
+            os.rename(Path(build) / "navigator", folder)
+        except OSError:  # another process cached it first: use theirs
+            pass
+    libraries = list(folder.glob("lib*_navigator.so"))
+    return (CNavigator(libraries[0], navigator.model) if libraries else navigator), False
 
 
 def config_array(config: NavigatorConfig, window: int, step: int) -> np.ndarray:

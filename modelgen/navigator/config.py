@@ -277,6 +277,8 @@ def _choice(reader: _Reader, key: str, choices: tuple[str, ...]) -> str:
 def load_config(path: str | Path) -> NavigatorConfig:
     """Read and validate a navigator configuration file."""
     path = Path(path)
+    if not path.is_file():
+        raise ModelError(f"{path}: no such navigator configuration file")
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:

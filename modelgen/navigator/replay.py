@@ -7,12 +7,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-import tempfile
-
 import numpy as np
 
 from modelgen.errors import ModelError
-from modelgen.navigator.cnav import build_c_navigator, fly_c
+from modelgen.navigator.cnav import cached_c_navigator, fly_c
 from modelgen.navigator.config import NavigatorConfig, load_config
 from modelgen.navigator.errorstate import generate_filter_module, model_path
 from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
@@ -73,14 +71,12 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         timings["fly_python_s"] = time.perf_counter() - mark
     if navigator in ("c", "both"):
         mark = time.perf_counter()
-        echo(f"  generating and compiling the {config.model} C navigator")
-        with tempfile.TemporaryDirectory(prefix="modelgen-replay-") as build:
-            compiled = build_c_navigator(model_file, Path(build) / "navigator")
-            timings["generate_compile_c_s"] = time.perf_counter() - mark
-            mark = time.perf_counter()
-            echo("  flying (C)")
-            flights["c"], timings["fly_c_cpu_s"] = fly_c(config, inputs, compiled)
-            timings["fly_c_s"] = time.perf_counter() - mark
+        compiled, cached = cached_c_navigator(model_file, echo)
+        timings["generate_compile_c_s"] = 0.0 if cached else time.perf_counter() - mark
+        mark = time.perf_counter()
+        echo("  flying (C)")
+        flights["c"], timings["fly_c_cpu_s"] = fly_c(config, inputs, compiled)
+        timings["fly_c_s"] = time.perf_counter() - mark
     flight = flights["c"] if "c" in flights else flights["python"]
     timings["fly_s"] = timings.get("fly_c_s", timings.get("fly_python_s", 0.0))
     errors = errors_against_reference(flight, inputs.gnss)

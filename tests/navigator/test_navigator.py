@@ -106,3 +106,33 @@ def test_replay_cli_writes_the_report_files(tmp_path):
     assert pos[0].startswith("%") and len([line for line in pos if not line.startswith("%")]) == len(
         (out / "trajectory.csv").read_text().splitlines()) - 1
     assert "| 1 | 14.0 | 15.0 |" in (out / "summary.md").read_text()
+
+
+@pytest.fixture(scope="module")
+def excerpt_both():
+    from modelgen.navigator.replay import run_replay
+
+    return run_replay(DATA / "excerpt.yaml", None, echo=lambda _: None, navigator="both")
+
+
+def test_c_navigator_agrees_with_the_python_navigator_within_1_mm(excerpt_both):
+    """Generated C (compiled strictly) against the Python reference at every output epoch of the excerpt."""
+    assert excerpt_both.summary["navigator"] == "c"
+    assert excerpt_both.summary["c_python_max_difference_m"] <= 1e-3
+
+
+def test_c_navigator_outage_error_is_within_the_same_band(excerpt_both):
+    record = excerpt_both.summary["outages"][0]
+    assert 0.5 <= record["horizontal_error_end_m"] <= 6.0
+    assert excerpt_both.summary["counts"]["gnss_updates"] == 240 - 60 - 55  # epochs after alignment, outside outage
+
+
+def test_c_navigator_source_is_c99_without_heap(tmp_path):
+    from modelgen.navigator.cnav import generate_c_navigator
+    from modelgen.navigator.errorstate import model_path
+
+    folder = generate_c_navigator(model_path("ins_gps15_nav", str(DATA / "excerpt.yaml")), tmp_path / "nav")
+    source = (folder / "ins_gps15_nav_navigator.c").read_text()
+    for forbidden in ("malloc", "calloc", "realloc", "free("):
+        assert forbidden not in source
+    assert "GENERATED FILE - DO NOT EDIT" in source
