@@ -13,11 +13,17 @@ median NIS closest to 5.35 (in ratio) is chosen; then, with it, the
 non-holonomic constraint's sigma is chosen the same way from the NIS of the
 2-row NHC update (chi-square median for 2 degrees of freedom, 1.39).
 
+Stage 3 (the generated C navigator, which flies identically and 100 times
+faster) chooses the NHC's angular-rate limit and the NIS gate probability,
+again with GNSS everywhere, by the horizontal RMS against the receiver's own
+solution and the number of de-weighted GNSS epochs.
+
 No outage is flown and no outage error is computed here: the choice cannot
 see them.  Prints a table and the chosen values, which go into
 modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
 
-    python bench/navigator_tuning.py
+    python bench/navigator_tuning.py            # all stages (about 5 minutes)
+    python bench/navigator_tuning.py --stage3   # stage 3 only (seconds)
 """
 
 from __future__ import annotations
@@ -95,7 +101,36 @@ def main() -> None:
         print(f"NHC sigma {s:5.2f} m/s: median NHC NIS {nis2:7.2f}, median GNSS NIS {nis6:6.2f}")
     best = min(rows2, key=lambda row: abs(math.log(row[4] / target2)))
     print(f"chosen: NHC sigma {best[2]:g} m/s")
+    stage3()
+
+
+def stage3() -> None:
+    """NHC angular-rate limit and gate probability from GNSS-present flights of the C navigator."""
+    from modelgen.navigator.cnav import cached_c_navigator, fly_c
+    from modelgen.navigator.config import DEG, builtin_config_path, load_config
+    from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
+    from modelgen.navigator.metrics import errors_against_reference, summary
+    from modelgen.navigator.navigator import prepare
+
+    base = load_config(builtin_config_path())
+    inputs = prepare(base, read_imu_csv(base.imu_file, base.imu_columns), read_rtklib_pos(base.gnss_file))
+    navigator, _ = cached_c_navigator(model_path(base.model, base.path))
+    print("stage 3: GNSS everywhere, C navigator")
+    print("gate probability    NHC rate limit  median NIS  RMS vs receiver [m]  de-weighted epochs")
+    for probability in (0.9999, 1 - 1e-6, 1 - 1e-9, 1.0):
+        for rate in (1e9, 20.0, 10.0, 5.0):
+            config = dataclasses.replace(base, outage_schedule=None, outage_windows=None,
+                                         nis_gate_probability=probability, nhc_rate_max=rate * DEG)
+            flight, _ = fly_c(config, inputs, navigator)
+            s = summary(flight, errors_against_reference(flight, inputs.gnss), inputs.gnss)
+            print(f"{probability:<18.12g}  {'none' if rate > 1e8 else f'{rate:g} deg/s':>14}  "
+                  f"{s['gnss_nis_median']:10.2f}  {s['horizontal_rms_outside_outages_m']:19.3f}  "
+                  f"{s['counts']['gnss_deweighted']:18d}")
 
 
 if __name__ == "__main__":
-    main()
+    if sys.argv[1:] == ["--stage3"]:
+        stage3()
+    else:
+        main()

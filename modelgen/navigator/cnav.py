@@ -32,7 +32,7 @@ from modelgen.navigator.navigator import Flight, Inputs, _alignment, initial_cov
 from modelgen.navigator.outages import in_outage, outage_windows
 from modelgen.output import write_atomically
 
-N_CONFIG, N_OUTPUT, N_GNSS = 34, 23, 13
+N_CONFIG, N_OUTPUT, N_GNSS = 35, 23, 13
 COUNT_NAMES = ("gnss_updates", "gnss_rejected", "gnss_released", "gnss_deweighted", "gnss_quality_skipped",
                "zupt_updates", "nhc_updates", "predicts")
 
@@ -144,6 +144,7 @@ def config_array(config: NavigatorConfig, window: int, step: int) -> np.ndarray:
         if 0 <= q <= 7:
             cfg[25 + q] = factor
     cfg[33] = config.gate_release_epochs
+    cfg[34] = config.nhc_rate_max
     return cfg
 
 

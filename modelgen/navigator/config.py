@@ -56,7 +56,7 @@ SCHEMA: dict[str, set[str]] = {
     "alignment": {"rest_speed_m_s", "rest_window_s", "heading_speed_m_s"},
     "filter": {"predict_period_s", "nis_gate_probability", "gate_action", "gate_release_epochs"},
     "zupt": {"enabled", "window_s", "gyro_max_deg_s", "accel_std_max_m_s2", "speed_max_m_s", "sigma_m_s"},
-    "nhc": {"enabled", "sigma_lateral_m_s", "sigma_vertical_m_s", "speed_min_m_s"},
+    "nhc": {"enabled", "sigma_lateral_m_s", "sigma_vertical_m_s", "speed_min_m_s", "rate_max_deg_s"},
     "outages": {"first_after_s", "length_s", "period_s", "end_margin_s", "windows"},
     "output": {"folder"},
 }
@@ -116,6 +116,7 @@ class NavigatorConfig:
     nhc_sigma_lateral: float
     nhc_sigma_vertical: float
     nhc_speed_min: float
+    nhc_rate_max: float  # NHC only while the bias-corrected angular rate is below this [rad/s]
     outage_schedule: dict[str, float] | None
     outage_windows: list[tuple[float, float]] | None
 
@@ -354,6 +355,7 @@ def load_config(path: str | Path) -> NavigatorConfig:
         nhc_enabled=r.flag("nhc.enabled"), nhc_sigma_lateral=r.number("nhc.sigma_lateral_m_s", positive=True),
         nhc_sigma_vertical=r.number("nhc.sigma_vertical_m_s", positive=True),
         nhc_speed_min=r.number("nhc.speed_min_m_s", non_negative=True),
+        nhc_rate_max=r.number("nhc.rate_max_deg_s", 1e9, positive=True) * DEG,
         outage_schedule=schedule, outage_windows=windows,
     )
 

@@ -262,7 +262,8 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
                 if kf.update(v_enu, H, np.full(3, config.zupt_sigma**2), gates[3], deweight).accepted:
                     counts["zupt_updates"] += 1
                     _reset(kf, nav, gyro_bias, accel_bias)
-            elif config.nhc_enabled and speed > config.nhc_speed_min:
+            elif (config.nhc_enabled and speed > config.nhc_speed_min
+                  and float(np.linalg.norm(rate[k] - gyro_bias)) < config.nhc_rate_max):
                 z, H = _nhc_rows(nav)
                 r = np.array([config.nhc_sigma_lateral**2, config.nhc_sigma_vertical**2])
                 if kf.update(z, H, r, gates[2], deweight).accepted:
