@@ -100,14 +100,16 @@ C_PLATFORM = frozenset(
 #: modelgen/codegen/*.py): macros of the source file and of the test driver.
 GENERATOR_C = frozenset(
     """N M N_ACTIVE N_UNIT_ROWS N_QD N_PARAMS DIM_M HUGE_SCALAR PACKED_UPPER PACKED_ANY
-    STRICT_UPPER MAX_DOUBLINGS SERIES_RANGE""".split()
+    STRICT_UPPER MAX_DOUBLINGS SERIES_RANGE NM""".split()
 )
 
 #: Names of the generated Python module (templates/python_module.py.j2): its
 #: imports, module-level names and the names its functions use, and every
-#: Python builtin (a parameter becomes a local that would shadow one).
+#: Python builtin (a parameter becomes a local that would shadow one).  The
+#: argument ``p``, the result ``out`` and temporaries ``t<k>`` are not listed:
+#: the generator keeps a parameter so named as ``p[k]`` (codegen/generate.py).
 GENERATOR_PYTHON = frozenset(
-    """np math numpy p out MODEL TITLE SOURCE N_STATES N_NOISES N_MEASUREMENTS TAYLOR_ORDER
+    """np math numpy MODEL TITLE SOURCE N_STATES N_NOISES N_MEASUREMENTS TAYLOR_ORDER
     SERIES_RANGE PSD_TOLERANCE STATE_NAMES NOISE_NAMES MEASUREMENT_NAMES PARAMETER_NAMES
     PARAMETER_DEFAULTS SingularOperatingPoint parameter_vector system_matrix
     noise_input_matrix measurement_matrix noise_psd measurement_variance discretize predict
