@@ -11,6 +11,8 @@ user would run it) under a time limit and a memory limit, and fails on:
 - code execution: hostile payloads try to create a file named ``PWNED``;
 - partial output: a staging or backup folder, or a temporary file, left behind;
 - a ``present``/``absent`` path that is not as the case says.
+
+The selected cases run on every core at once (see ``_Runner``).
 """
 
 from __future__ import annotations
@@ -21,6 +23,9 @@ import resource
 import signal
 import subprocess
 import sys
+import tempfile
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
@@ -44,6 +49,7 @@ def _load_cases() -> list[tuple[str, dict]]:
 
 
 CASES = _load_cases()
+CASE_BY_KEY = {f"{category}/{case['id']}": case for category, case in CASES}
 
 
 def _file_bytes(spec: object) -> bytes:
@@ -78,7 +84,8 @@ def _limit_memory() -> None:
     os.setsid()
 
 
-def _run(argv: list[str], cwd: Path, timeout: float) -> subprocess.CompletedProcess:
+def _run(argv: list[str], cwd: Path, timeout: float) -> subprocess.CompletedProcess | None:
+    """Run ``modelgen ARGV`` as a user would; None when it outlived ``timeout``."""
     env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONDONTWRITEBYTECODE": "1"}
     process = subprocess.Popen(
         [sys.executable, "-m", "modelgen.cli", *map(str, argv)],
@@ -90,7 +97,7 @@ def _run(argv: list[str], cwd: Path, timeout: float) -> subprocess.CompletedProc
     except subprocess.TimeoutExpired:
         os.killpg(process.pid, signal.SIGKILL)
         process.communicate()
-        pytest.fail(f"hang: modelgen {' '.join(map(str, argv))} ran longer than {timeout} s")
+        return None
     return subprocess.CompletedProcess(argv, process.returncode, out.decode("utf-8", "replace"), err.decode("utf-8", "replace"))
 
 
@@ -105,9 +112,79 @@ def _leftovers(folder: Path, laid: set[Path]) -> list[str]:
     return found
 
 
-def _check_run(step: dict, result: subprocess.CompletedProcess) -> None:
+@dataclass
+class CaseOutcome:
+    """What running one case left: each step's result, and the state of its folder."""
+
+    results: list[tuple[dict, subprocess.CompletedProcess | None]] = field(default_factory=list)
+    pwned: list[str] = field(default_factory=list)
+    leftovers: list[str] = field(default_factory=list)
+    missing: list[str] = field(default_factory=list)
+    unexpected: list[str] = field(default_factory=list)
+
+
+def _execute(case: dict) -> CaseOutcome:
+    """Lay out a case in a fresh folder, run its steps in order and inspect what is left."""
+    outcome = CaseOutcome()
+    with tempfile.TemporaryDirectory(prefix="modelgen-corpus-") as name:
+        folder = Path(name)
+        laid = _lay_out(folder, case.get("files") or {})
+        for step in case.get("runs") or [case]:
+            timeout = float(step.get("timeout", case.get("timeout", DEFAULT_TIMEOUT_S)))
+            result = _run(step["argv"], folder, timeout)
+            outcome.results.append((step, result))
+            if result is None or result.returncode != step["exit"]:
+                break
+        outcome.pwned = sorted(str(p.relative_to(folder)) for p in folder.rglob("PWNED*"))
+        outcome.leftovers = _leftovers(folder, laid)
+        outcome.missing = [p for p in case.get("present") or [] if not (folder / p).exists()]
+        outcome.unexpected = [p for p in case.get("absent") or [] if (folder / p).exists()]
+    return outcome
+
+
+class _Runner:
+    """Runs the selected cases on every core, so that the corpus costs minutes, not ten.
+
+    Cases are independent processes in folders of their own; each test waits
+    only for its own case, so failures are still reported one case at a time.
+    """
+
+    def __init__(self) -> None:
+        self._pool: ThreadPoolExecutor | None = None
+        self._futures: dict[str, Future] = {}
+
+    def outcome(self, request: pytest.FixtureRequest, key: str) -> CaseOutcome:
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=os.cpu_count() or 1)
+            selected = [item.callspec.id for item in request.session.items
+                        if getattr(item, "originalname", None) == "test_corpus_case_behaves_as_stated"]
+            for case_key in selected:
+                self._futures[case_key] = self._pool.submit(_execute, CASE_BY_KEY[case_key])
+        if key not in self._futures:
+            self._futures[key] = self._pool.submit(_execute, CASE_BY_KEY[key])
+        return self._futures[key].result()
+
+
+    def cancel_pending(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+RUNNER = _Runner()
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _stop_queued_cases_when_the_module_ends():
+    """With -x or Ctrl-C, cases not yet started are dropped instead of run at exit."""
+    yield
+    RUNNER.cancel_pending()
+
+
+def _check_run(step: dict, result: subprocess.CompletedProcess | None) -> None:
+    command = f"modelgen {' '.join(map(str, step['argv']))}"
+    assert result is not None, f"hang: {command} ran longer than its timeout"
     output = result.stdout + result.stderr
-    shown = f"modelgen {' '.join(map(str, step['argv']))}\n--- output ---\n{output[-3000:]}"
+    shown = f"{command}\n--- output ---\n{output[-3000:]}"
     assert "Traceback" not in output, f"traceback reached the user:\n{shown}"
     assert result.returncode == step["exit"], f"exit {result.returncode}, expected {step['exit']}:\n{shown}"
     fragments = step.get("message") or []
@@ -125,16 +202,12 @@ def test_corpus_holds_at_least_one_hundred_well_formed_cases():
         assert all("argv" in s and "exit" in s for s in steps), f"{category}/{case['id']}: argv and exit"
 
 
-@pytest.mark.parametrize("category,case", CASES, ids=[f"{c}/{case['id']}" for c, case in CASES])
-def test_corpus_case_behaves_as_stated(category: str, case: dict, tmp_path: Path):
-    laid = _lay_out(tmp_path, case.get("files") or {})
-    for step in case.get("runs") or [case]:
-        result = _run(step["argv"], tmp_path, float(step.get("timeout", case.get("timeout", DEFAULT_TIMEOUT_S))))
+@pytest.mark.parametrize("key", list(CASE_BY_KEY))
+def test_corpus_case_behaves_as_stated(key: str, request: pytest.FixtureRequest):
+    outcome = RUNNER.outcome(request, key)
+    for step, result in outcome.results:
         _check_run(step, result)
-    pwned = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("PWNED*"))
-    assert not pwned, f"a payload ran: {pwned}"
-    assert not _leftovers(tmp_path, laid), f"left behind: {_leftovers(tmp_path, laid)}"
-    for path in case.get("present") or []:
-        assert (tmp_path / path).exists(), f"{path} should exist"
-    for path in case.get("absent") or []:
-        assert not (tmp_path / path).exists(), f"{path} should not exist"
+    assert not outcome.pwned, f"a payload ran: {outcome.pwned}"
+    assert not outcome.leftovers, f"left behind: {outcome.leftovers}"
+    assert not outcome.missing, f"should exist: {outcome.missing}"
+    assert not outcome.unexpected, f"should not exist: {outcome.unexpected}"
