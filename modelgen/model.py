@@ -410,7 +410,7 @@ def nonlinear_variables(expr: sp.Expr, variables: set[sp.Symbol]) -> list[sp.Sym
     bad = []
     for a in present:
         slope = sp.diff(expr, a)
-        if any(slope.has(b) and sp.diff(slope, b) != 0 for b in present):
+        if any(sp.diff(slope, b) != 0 for b in sorted(slope.free_symbols & variables, key=str)):
             bad.append(a)
     return bad
 
@@ -429,7 +429,7 @@ def _check_linear(expr: sp.Expr, variables: set[sp.Symbol], where: str, what: st
             f"{where}: {expr} is not linear in the {what} (nonlinear in {', '.join(map(str, bad))}); "
             "a linear Kalman filter cannot be generated from it, and it is not linearized silently"
         )
-    constant = expr.subs({v: 0 for v in variables})
+    constant = expr.xreplace({v: sp.S.Zero for v in expr.free_symbols & variables})
     if constant != 0:
         raise ModelError(
             f"{where}: {expr} has a term, {_excerpt(str(constant))}, that depends on none of the {what}; "
@@ -628,12 +628,26 @@ def _finite_real(e: sp.Expr) -> bool:
 
 
 def _is_zero(e: sp.Expr) -> bool:
-    """Whether a denominator is identically zero, simplifying it if it is small."""
+    """Whether a denominator is identically zero (``sin(k)**2 + cos(k)**2 - 1``).
+
+    sympy's assumptions decide most cases.  Otherwise the denominator is
+    evaluated at a generic point: a clearly nonzero value proves it is not
+    identically zero, without the cost of ``simplify`` (seconds per
+    expression).  Only a denominator that vanishes there, and is small, is
+    simplified to decide.
+    """
     if e.is_zero:
         return True
-    if e.is_zero is False or sp.count_ops(e) > 40:
+    if e.is_zero is False:
         return False
-    return sp.simplify(e) == 0
+    point = {s: sp.Rational(3 + 2 * k, 7 + 3 * k) for k, s in enumerate(sorted(e.free_symbols, key=str))}
+    try:
+        value = complex(e.subs(point).evalf(30))
+        if value == value and abs(value) > 1e-20 and abs(value) != float("inf"):
+            return False
+    except (TypeError, ValueError, ArithmeticError, RecursionError):
+        pass
+    return sp.count_ops(e) <= 40 and sp.simplify(e) == 0
 
 
 def _expanded_terms(expr: sp.Expr) -> int:
