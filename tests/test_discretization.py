@@ -162,3 +162,12 @@ def test_gamma_process_noise_agrees_with_van_loan_over_four_hours(level_matrices
 def test_order_below_one_is_refused(level_matrices):
     with pytest.raises(ValueError):
         taylor_discretization(level_matrices["F"], level_matrices["G"], 60.0, 0)
+
+
+def test_vectorized_sweep_exponents_equal_the_scalar_rule():
+    from modelgen.discretization import sweep_exponents
+
+    rng = np.random.default_rng(2)
+    row = np.where(rng.random(200) < 0.2, 0.0, 10.0 ** rng.uniform(-30, 30, 200))
+    column = np.where(rng.random(200) < 0.2, 0.0, 10.0 ** rng.uniform(-30, 30, 200))
+    assert list(sweep_exponents(row, column)) == [sweep_exponent(r, c) for r, c in zip(row, column)]

@@ -217,10 +217,10 @@ def discretize_cost(structure: FilterStructure, order: int) -> OperationCount:
     pairs = n * (n + 1) // 2
     mul += pairs * 2 * nw
     add += pairs * nw
-    if np.any(structure.F):  # 16 balancing sweeps and the norm over F (modelgen.discretization)
+    if np.any(structure.F):  # up to 8 balancing sweeps and the norm over F (modelgen.discretization)
         off = nnz_f - int(np.trace(structure.F.astype(int)))
-        mul += 16 * 2 * off + 2 * nnz_f
-        add += 16 * 2 * off + nnz_f
+        mul += 8 * 2 * off + 2 * nnz_f
+        add += 8 * 2 * off + nnz_f
     return OperationCount(mul, add)
 
 
