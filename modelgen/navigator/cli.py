@@ -17,7 +17,9 @@ from modelgen.navigator.config import builtin_config_path
 @click.option("--force", is_flag=True, help="replace an output folder modelgen did not write")
 @click.option("--navigator", type=click.Choice(["c", "python", "both"]), default="c", show_default=True,
               help="the generated C navigator, the Python reference, or both (compared)")
-def replay(config: Path | None, out: Path, no_figures: bool, force: bool, navigator: str) -> None:
+@click.option("--embedded", is_flag=True,
+              help="also build for Cortex-M4F (float filter; size, stack) and replay under qemu-arm against the double C")
+def replay(config: Path | None, out: Path, no_figures: bool, force: bool, navigator: str, embedded: bool) -> None:
     """Fly a GNSS/IMU log with the generated navigator (default: the built-in car drive).
 
     CONFIG is a navigator configuration (YAML); without it the built-in drive
@@ -28,7 +30,7 @@ def replay(config: Path | None, out: Path, no_figures: bool, force: bool, naviga
     from modelgen.navigator.replay import run_replay
 
     result = run_replay(config or builtin_config_path(), out, echo=lambda m: click.echo(m, err=True),
-                        with_figures=not no_figures, force=force, navigator=navigator)
+                        with_figures=not no_figures, force=force, navigator=navigator, embedded=embedded)
     s = result.summary
     click.echo(f"{s['outage_count']} outages: end-of-outage horizontal error RMS "
                f"{s['horizontal_error_end_rms_m']:.2f} m (median {s['horizontal_error_end_median_m']:.2f} m, "

@@ -17,6 +17,7 @@ import math
 import os
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import jinja2
@@ -152,8 +153,29 @@ def _pointer(array: np.ndarray, kind=ctypes.c_double):
     return array.ctypes.data_as(ctypes.POINTER(kind))
 
 
-def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tuple[Flight, float]:
-    """Fly the log with the C navigator; return the flight and the CPU time of the C run [s]."""
+@dataclass
+class LogArrays:
+    """Everything the C navigator is given for one log, as contiguous arrays (shared by ctypes and qemu runs)."""
+
+    cfg: np.ndarray
+    nav: np.ndarray
+    gyro_bias: np.ndarray
+    accel_bias: np.ndarray
+    P0: np.ndarray
+    time: np.ndarray
+    force: np.ndarray
+    rate: np.ndarray
+    k0: int
+    j0: int
+    t_gnss: np.ndarray
+    target: np.ndarray  # int64
+    use: np.ndarray  # int32
+    gnss: np.ndarray  # (epochs, 13)
+    windows: list[tuple[float, float]]
+
+
+def log_arrays(config: NavigatorConfig, inputs: Inputs) -> LogArrays:
+    """The alignment (as the Python navigator does it) and the log, laid out for the C navigator."""
     g = inputs.gnss
     time_, force, rate = (np.ascontiguousarray(a, dtype=float) for a in (inputs.time, inputs.force, inputs.rate))
     windows = outage_windows(config.outage_schedule, config.outage_windows, inputs.first_epoch, float(g.time[-1]))
@@ -165,38 +187,46 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tup
     median_dt = float(np.median(np.diff(time_)))
     window = max(2, int(round(config.zupt_window / median_dt)))
     step = max(1, int(round(config.predict_period / median_dt)))
-    state = ctypes.create_string_buffer(navigator.size)
-    cfg = config_array(config, window, step)
-    if navigator.configure(state, _pointer(cfg)):
-        raise ModelError(f"{config.path}: the C navigator refused its configuration (ZUPT window {window} samples)")
-    for k in range(max(0, k0 - window + 1), k0 + 1):
-        navigator.prime(state, _pointer(np.ascontiguousarray(force[k])), _pointer(np.ascontiguousarray(rate[k])))
-    status = navigator.start(state, float(time_[k0]), _pointer(np.ascontiguousarray(force[k0])),
-                             _pointer(np.ascontiguousarray(rate[k0])), _pointer(np.ascontiguousarray(nav)),
-                             _pointer(np.ascontiguousarray(gyro_bias)), _pointer(np.ascontiguousarray(accel_bias)),
-                             _pointer(np.ascontiguousarray(P0)))
-    if status:
-        raise ModelError(f"C navigator: start refused (status {status})")
     epochs = np.arange(j0, len(g.time))
     target = np.searchsorted(time_, g.time[epochs]).astype(np.int64)
     epochs, target = epochs[target < len(time_)], target[target < len(time_)]
-    use = (~outage[epochs]).astype(np.int32)
     gnss = np.column_stack([g.latitude, g.longitude, g.height, g.velocity, g.quality, g.sigma_position,
                             g.sigma_velocity])[epochs]
-    gnss = np.ascontiguousarray(gnss)
-    out = np.full((len(epochs), N_OUTPUT), np.nan)
-    t_gnss = np.ascontiguousarray(g.time[epochs])
+    contiguous = np.ascontiguousarray
+    return LogArrays(config_array(config, window, step), contiguous(nav, dtype=float), contiguous(gyro_bias),
+                     contiguous(accel_bias), contiguous(P0), time_, force, rate, int(k0), int(j0),
+                     contiguous(g.time[epochs]), contiguous(target), contiguous((~outage[epochs]).astype(np.int32)),
+                     contiguous(gnss), windows)
+
+
+def flight_from_outputs(out: np.ndarray, arrays: LogArrays, inputs: Inputs, counts: dict[str, int]) -> Flight:
+    """A Flight from the C output records (rows never written, after the log's end, dropped)."""
+    out = out[~np.isnan(out[:, 0])]
+    nis = out[(out[:, 19] == 0) & ~np.isnan(out[:, 21]), 21]
+    return Flight(out, arrays.windows, inputs.first_epoch, float(inputs.gnss.time[arrays.j0]), list(nis),
+                  float(arrays.cfg[6]), counts, list(inputs.notes))
+
+
+def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tuple[Flight, float]:
+    """Fly the log with the C navigator; return the flight and the CPU time of the C run [s]."""
+    a = log_arrays(config, inputs)
+    state = ctypes.create_string_buffer(navigator.size)
+    if navigator.configure(state, _pointer(a.cfg)):
+        raise ModelError(f"{config.path}: the C navigator refused its configuration (ZUPT window {a.cfg[17]:g} samples)")
+    for k in range(max(0, a.k0 - int(a.cfg[17]) + 1), a.k0 + 1):
+        navigator.prime(state, _pointer(a.force[k]), _pointer(a.rate[k]))
+    status = navigator.start(state, float(a.time[a.k0]), _pointer(a.force[a.k0]), _pointer(a.rate[a.k0]),
+                             _pointer(a.nav), _pointer(a.gyro_bias), _pointer(a.accel_bias), _pointer(a.P0))
+    if status:
+        raise ModelError(f"C navigator: start refused (status {status})")
+    out = np.full((len(a.t_gnss), N_OUTPUT), np.nan)
     cpu = time.process_time()
-    status = navigator.run(state, len(time_), _pointer(time_), _pointer(force), _pointer(rate), int(k0),
-                           len(epochs), _pointer(t_gnss), _pointer(target, ctypes.c_long), _pointer(use, ctypes.c_int),
-                           _pointer(gnss), _pointer(out))
+    status = navigator.run(state, len(a.time), _pointer(a.time), _pointer(a.force), _pointer(a.rate), a.k0,
+                           len(a.t_gnss), _pointer(a.t_gnss), _pointer(a.target, ctypes.c_long),
+                           _pointer(a.use, ctypes.c_int), _pointer(a.gnss), _pointer(out))
     cpu = time.process_time() - cpu
     if status:
         raise ModelError(f"C navigator: a filter step failed (status {status})")
     raw = (ctypes.c_long * len(COUNT_NAMES))()
     navigator.counts(state, raw)
-    out = out[~np.isnan(out[:, 0])]  # epochs after the last IMU sample are not flown
-    nis = out[(out[:, 19] == 0) & ~np.isnan(out[:, 21]), 21]
-    counts = dict(zip(COUNT_NAMES, (int(v) for v in raw)))
-    return Flight(out, windows, inputs.first_epoch, float(g.time[j0]), list(nis), float(cfg[6]), counts,
-                  list(inputs.notes)), cpu
+    return flight_from_outputs(out, a, inputs, dict(zip(COUNT_NAMES, (int(v) for v in raw)))), cpu

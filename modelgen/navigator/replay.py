@@ -32,10 +32,13 @@ class ReplayResult:
 
 
 NAVIGATORS = ("c", "python", "both")
+#: Stated tolerance of the single-precision filter build against the double C navigator, antenna position, every epoch.
+EMBEDDED_TOLERANCE_M = 0.01
 
 
 def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], None] = print,
-               with_figures: bool = True, force: bool = False, navigator: str = "c") -> ReplayResult:
+               with_figures: bool = True, force: bool = False, navigator: str = "c",
+               embedded: bool = False) -> ReplayResult:
     """Fly the configuration's logs and, if ``out`` is given, write the report folder there atomically.
 
     ``navigator``: the generated C navigator (compiled now), the Python
@@ -77,6 +80,16 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         echo("  flying (C)")
         flights["c"], timings["fly_c_cpu_s"] = fly_c(config, inputs, compiled)
         timings["fly_c_s"] = time.perf_counter() - mark
+    if embedded:
+        if "c" not in flights:
+            raise ModelError("replay: --embedded compares with the C navigator (use --navigator c or both)")
+        from modelgen.navigator.cnav import log_arrays
+        from modelgen.navigator.embedded import embedded_replay
+
+        mark = time.perf_counter()
+        echo("  Cortex-M4F build (float filter) and the log under qemu-arm")
+        arm = embedded_replay(model_file, log_arrays(config, inputs), flights["c"].outputs)
+        timings["embedded_s"] = time.perf_counter() - mark
     flight = flights["c"] if "c" in flights else flights["python"]
     timings["fly_s"] = timings.get("fly_c_s", timings.get("fly_python_s", 0.0))
     errors = errors_against_reference(flight, inputs.gnss)
@@ -85,6 +98,14 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     if len(flights) == 2:
         result["c_python_max_difference_m"] = max_position_difference(flights["c"], flights["python"])
         echo(f"  C and Python trajectories: largest difference {result['c_python_max_difference_m']:.3g} m")
+    if embedded:
+        result["embedded"] = {"cortex_m4f_text_bytes": arm.text, "cortex_m4f_data_bytes": arm.data,
+                              "cortex_m4f_bss_bytes": arm.bss, "navigator_struct_bytes": arm.navigator_struct_bytes,
+                              "worst_case_stack_bytes": arm.worst_case_stack, "heap_or_stdio_symbols": arm.forbidden_symbols,
+                              "qemu_max_position_difference_m": arm.max_position_difference_m,
+                              "tolerance_m": EMBEDDED_TOLERANCE_M}
+        echo(f"  qemu-arm (float filter) against the double C navigator: largest difference "
+             f"{arm.max_position_difference_m:.2g} m")
     folder = None
     if out is not None:
         files = report_files(flight, errors, result, config, inputs.gnss, timings, velocity_latency(inputs.gnss),
