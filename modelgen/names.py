@@ -97,10 +97,11 @@ C_PLATFORM = frozenset(
 )
 
 #: Names the generator itself defines or uses in generated C (templates/*.j2,
-#: modelgen/codegen/*.py): macros of the source file and of the test driver.
+#: modelgen/codegen/*.py): macros of the source file, the test driver and the
+#: navigator.  tests/test_model.py fails when a template defines one not listed.
 GENERATOR_C = frozenset(
     """N M N_ACTIVE N_UNIT_ROWS N_QD N_PARAMS DIM_M HUGE_SCALAR PACKED_UPPER PACKED_ANY
-    STRICT_UPPER MAX_DOUBLINGS SERIES_RANGE NM""".split()
+    STRICT_UPPER MAX_DOUBLINGS SERIES_RANGE NM MAX_IMU MAX_EPOCHS""".split()
 )
 
 #: Names of the generated Python module (templates/python_module.py.j2): its
