@@ -6,6 +6,8 @@ at load), the Python module imported, and no file named PWNED may appear.
 """
 
 import ctypes
+import shutil
+import subprocess
 
 import pytest
 import yaml
@@ -97,3 +99,14 @@ def test_markdown_text_cannot_open_markup():
 def test_hash_comment_cannot_continue_a_makefile_comment_or_open_a_cmake_bracket():
     assert hash_comment("path\\") == "path\\ "
     assert hash_comment("[[bracket") == " [[bracket"
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="no make")
+@pytest.mark.parametrize("text", [C_LINE_SPLICE, "C:\\path\\to\\"], ids=["line_splice", "windows_path"])
+def test_a_title_ending_in_a_backslash_does_not_swallow_the_next_makefile_line(text, tmp_path):
+    """A backslash at the end of a Makefile comment continues it: the CFLAGS line after the title would vanish."""
+    built = build_text(model_text(text), tmp_path / "out")
+    assert hash_comment(text) in built.code.files["Makefile"] and hash_comment(text) in built.code.files["CMakeLists.txt"]
+    dry_run = subprocess.run(["make", "-n", "-C", str(built.folder)], capture_output=True, text=True, env={"PATH": "/usr/bin:/bin"})
+    assert dry_run.returncode == 0, dry_run.stderr
+    assert "-std=c99" in dry_run.stdout
