@@ -8,7 +8,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 130 operations after CSE
- *   discretize: 18252 mul + 16281 add = 34533 flops
+ *   discretize: 19438 mul + 17394 add = 36832 flops
+ *   discretize, each doubling (long steps): 5920 mul + 5760 add = 11680 flops
  *   predict (C): 3906 mul + 3588 add = 7494 flops
  *   predict (Python): 6048 mul + 5832 add = 11880 flops
  *   predict (dense, for comparison): 11682 mul + 11340 add = 23022 flops
@@ -39,6 +40,11 @@ static const unsigned char F_row_start[N + 1] = { 0, 10, 21, 32, 42, 52, 61, 63,
 #define N_ACTIVE 160
 static const unsigned char active_row[N_ACTIVE] = { 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 12, 13, 14, 15, 16, 17 };
 static const unsigned char active_col[N_ACTIVE] = { 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 12, 13, 14, 15, 16, 17 };
+/* Halvings of T that discretize may take before it gives up (T / 2^64), and the
+   largest ||F h||_D for which the Taylor remainder of order TAYLOR_ORDER is below
+   the unit roundoff (modelgen.discretization.series_range). */
+#define MAX_DOUBLINGS 64
+#define SERIES_RANGE 0.11483164143919657
 /* Rows of Phi that are exactly e_i (states with an empty row of F). */
 #define N_UNIT_ROWS 3
 static const unsigned char unit_row[N_UNIT_ROWS] = { 9, 10, 11 };
@@ -88,154 +94,187 @@ void enu_doppler18_default_params(enu_doppler18_params *params)
     params->doppler_noise_sigma_up = 0.0;
 }
 
-void enu_doppler18_matrices_evaluate(const enu_doppler18_params *params, enu_doppler18_matrices *m)
+/* 1 when a denominator (cos of a tan or sec, ...) is zero within its rounding
+   error: at latitude 90 degrees cos is 6e-17, not 0, and tan a finite 1.6e16. */
+static int pole(const enu_doppler18_scalar value, const enu_doppler18_scalar argument)
 {
-    const enu_doppler18_scalar t0 = params->earth_rate*sin(params->latitude);
-    const enu_doppler18_scalar t1 = tan(params->latitude);
-    const enu_doppler18_scalar t2 = 1.0/(params->prime_vertical_radius + params->height);
-    const enu_doppler18_scalar t3 = t2*params->velocity_east;
-    const enu_doppler18_scalar t4 = t1*t3;
-    const enu_doppler18_scalar t5 = t0 + t4;
-    const enu_doppler18_scalar t6 = cos(params->latitude);
-    const enu_doppler18_scalar t7 = params->earth_rate*t6;
-    const enu_doppler18_scalar t8 = t3 + t7;
-    const enu_doppler18_scalar t9 = 1.0/(params->meridian_radius + params->height);
-    const enu_doppler18_scalar t10 = params->height*params->height;
-    const enu_doppler18_scalar t11 = 2*params->height;
-    const enu_doppler18_scalar t12 = 1.0/(params->meridian_radius*params->meridian_radius + params->meridian_radius*t11 + t10);
-    const enu_doppler18_scalar t13 = t12*params->velocity_north;
-    const enu_doppler18_scalar t14 = -params->c11;
-    const enu_doppler18_scalar t15 = -params->c12;
-    const enu_doppler18_scalar t16 = -params->c13;
-    const enu_doppler18_scalar t17 = t9*params->velocity_north;
-    const enu_doppler18_scalar t18 = -t17;
-    const enu_doppler18_scalar t19 = 1.0/(params->prime_vertical_radius*params->prime_vertical_radius + params->prime_vertical_radius*t11 + t10);
-    const enu_doppler18_scalar t20 = t19*params->velocity_east;
-    const enu_doppler18_scalar t21 = -params->c21;
-    const enu_doppler18_scalar t22 = -params->c22;
-    const enu_doppler18_scalar t23 = -params->c23;
-    const enu_doppler18_scalar t24 = t1*t2;
-    const enu_doppler18_scalar t25 = 1.0/(t6*t6);
-    const enu_doppler18_scalar t26 = t25*t3;
-    const enu_doppler18_scalar t27 = t1*t20;
-    const enu_doppler18_scalar t28 = -params->c31;
-    const enu_doppler18_scalar t29 = -params->c32;
-    const enu_doppler18_scalar t30 = -params->c33;
-    const enu_doppler18_scalar t31 = 2*t0;
-    const enu_doppler18_scalar t32 = 2*t7;
-    const enu_doppler18_scalar t33 = params->velocity_east*params->velocity_east;
-    const enu_doppler18_scalar t34 = t19*t33;
-    const enu_doppler18_scalar t35 = 1.0/t6;
-    const enu_doppler18_scalar t36 = params->gyro_angle_random_walk*params->gyro_angle_random_walk;
-    m->F[0] = t5;
-    m->F[1] = -t8;
-    m->F[2] = -t9;
-    m->F[3] = t13;
-    m->F[4] = t14;
-    m->F[5] = t15;
-    m->F[6] = t16;
-    m->F[7] = t14;
-    m->F[8] = t15;
-    m->F[9] = t16;
-    m->F[10] = -t5;
-    m->F[11] = t18;
-    m->F[12] = t2;
-    m->F[13] = -t0;
-    m->F[14] = -t20;
-    m->F[15] = t21;
-    m->F[16] = t22;
-    m->F[17] = t23;
-    m->F[18] = t21;
-    m->F[19] = t22;
-    m->F[20] = t23;
-    m->F[21] = t8;
-    m->F[22] = t17;
-    m->F[23] = t24;
-    m->F[24] = t26 + t7;
-    m->F[25] = -t27;
-    m->F[26] = t28;
-    m->F[27] = t29;
-    m->F[28] = t30;
-    m->F[29] = t28;
-    m->F[30] = t29;
-    m->F[31] = t30;
-    m->F[32] = -params->specific_force_up;
-    m->F[33] = params->specific_force_north;
-    m->F[34] = -t2*params->velocity_up + t24*params->velocity_north;
-    m->F[35] = t31 + t4;
-    m->F[36] = -t3 - t32;
-    m->F[37] = t26*params->velocity_north + t31*params->velocity_up + t32*params->velocity_north;
-    m->F[38] = t19*params->velocity_east*params->velocity_up - t27*params->velocity_north;
-    m->F[39] = params->c11;
-    m->F[40] = params->c12;
-    m->F[41] = params->c13;
-    m->F[42] = params->specific_force_up;
-    m->F[43] = -params->specific_force_east;
-    m->F[44] = -t31 - 2*t4;
-    m->F[45] = -t9*params->velocity_up;
-    m->F[46] = t18;
-    m->F[47] = -t2*t25*t33 - t32*params->velocity_east;
-    m->F[48] = t1*t34 + t13*params->velocity_up;
-    m->F[49] = params->c21;
-    m->F[50] = params->c22;
-    m->F[51] = params->c23;
-    m->F[52] = -params->specific_force_north;
-    m->F[53] = params->specific_force_east;
-    m->F[54] = 2*t3 + t32;
-    m->F[55] = 2*t17;
-    m->F[56] = -t31*params->velocity_east;
-    m->F[57] = 2*params->gravity*t2 - t12*params->velocity_north*params->velocity_north - t34;
-    m->F[58] = params->c31;
-    m->F[59] = params->c32;
-    m->F[60] = params->c33;
-    m->F[61] = t9;
-    m->F[62] = -t13;
-    m->F[63] = t2*t35;
-    m->F[64] = t35*t4;
-    m->F[65] = -t20*t35;
-    m->F[66] = 1;
-    m->F[67] = -params->gyro_markov_rate_x;
-    m->F[68] = -params->gyro_markov_rate_y;
-    m->F[69] = -params->gyro_markov_rate_z;
-    m->F[70] = -params->accel_markov_rate_x;
-    m->F[71] = -params->accel_markov_rate_y;
-    m->F[72] = -params->accel_markov_rate_z;
-    m->G[0] = t14;
-    m->G[1] = t15;
-    m->G[2] = t16;
-    m->G[3] = t21;
-    m->G[4] = t22;
-    m->G[5] = t23;
-    m->G[6] = t28;
-    m->G[7] = t29;
-    m->G[8] = t30;
-    m->G[9] = 1;
-    m->G[10] = 1;
-    m->G[11] = 1;
-    m->G[12] = 1;
-    m->G[13] = 1;
-    m->G[14] = 1;
-    m->H[0] = 1;
-    m->H[1] = 1;
-    m->H[2] = 1;
-    m->q[0] = t36;
-    m->q[1] = t36;
-    m->q[2] = t36;
-    m->q[3] = 2*params->gyro_markov_rate_x*params->gyro_markov_sigma_x*params->gyro_markov_sigma_x;
-    m->q[4] = 2*params->gyro_markov_rate_y*params->gyro_markov_sigma_y*params->gyro_markov_sigma_y;
-    m->q[5] = 2*params->gyro_markov_rate_z*params->gyro_markov_sigma_z*params->gyro_markov_sigma_z;
-    m->q[6] = 2*params->accel_markov_rate_x*params->accel_markov_sigma_x*params->accel_markov_sigma_x;
-    m->q[7] = 2*params->accel_markov_rate_y*params->accel_markov_sigma_y*params->accel_markov_sigma_y;
-    m->q[8] = 2*params->accel_markov_rate_z*params->accel_markov_sigma_z*params->accel_markov_sigma_z;
-    m->r[0] = params->doppler_noise_sigma_east*params->doppler_noise_sigma_east;
-    m->r[1] = params->doppler_noise_sigma_north*params->doppler_noise_sigma_north;
-    m->r[2] = params->doppler_noise_sigma_up*params->doppler_noise_sigma_up;
+    const enu_doppler18_scalar size = fabs(argument) > 1.0 ? fabs(argument) : 1.0;
+    return fabs(value) <= 4 * DBL_EPSILON * size;
+}
+
+int enu_doppler18_matrices_evaluate(const enu_doppler18_params *params, enu_doppler18_matrices *m)
+{
+    int e;
+    enu_doppler18_scalar check = 0.0;
+    if (pole(cos(params->latitude), params->latitude)) {
+        return ENU_DOPPLER18_ERR_NONFINITE; /* cos(latitude) = 0: singular operating point */
+    }
+    {
+        const enu_doppler18_scalar t0 = params->earth_rate*sin(params->latitude);
+        const enu_doppler18_scalar t1 = tan(params->latitude);
+        const enu_doppler18_scalar t2 = 1.0/(params->prime_vertical_radius + params->height);
+        const enu_doppler18_scalar t3 = t2*params->velocity_east;
+        const enu_doppler18_scalar t4 = t1*t3;
+        const enu_doppler18_scalar t5 = t0 + t4;
+        const enu_doppler18_scalar t6 = cos(params->latitude);
+        const enu_doppler18_scalar t7 = params->earth_rate*t6;
+        const enu_doppler18_scalar t8 = t3 + t7;
+        const enu_doppler18_scalar t9 = 1.0/(params->meridian_radius + params->height);
+        const enu_doppler18_scalar t10 = params->height*params->height;
+        const enu_doppler18_scalar t11 = 2*params->height;
+        const enu_doppler18_scalar t12 = 1.0/(params->meridian_radius*params->meridian_radius + params->meridian_radius*t11 + t10);
+        const enu_doppler18_scalar t13 = t12*params->velocity_north;
+        const enu_doppler18_scalar t14 = -params->c11;
+        const enu_doppler18_scalar t15 = -params->c12;
+        const enu_doppler18_scalar t16 = -params->c13;
+        const enu_doppler18_scalar t17 = t9*params->velocity_north;
+        const enu_doppler18_scalar t18 = -t17;
+        const enu_doppler18_scalar t19 = 1.0/(params->prime_vertical_radius*params->prime_vertical_radius + params->prime_vertical_radius*t11 + t10);
+        const enu_doppler18_scalar t20 = t19*params->velocity_east;
+        const enu_doppler18_scalar t21 = -params->c21;
+        const enu_doppler18_scalar t22 = -params->c22;
+        const enu_doppler18_scalar t23 = -params->c23;
+        const enu_doppler18_scalar t24 = t1*t2;
+        const enu_doppler18_scalar t25 = 1.0/(t6*t6);
+        const enu_doppler18_scalar t26 = t25*t3;
+        const enu_doppler18_scalar t27 = t1*t20;
+        const enu_doppler18_scalar t28 = -params->c31;
+        const enu_doppler18_scalar t29 = -params->c32;
+        const enu_doppler18_scalar t30 = -params->c33;
+        const enu_doppler18_scalar t31 = 2*t0;
+        const enu_doppler18_scalar t32 = 2*t7;
+        const enu_doppler18_scalar t33 = params->velocity_east*params->velocity_east;
+        const enu_doppler18_scalar t34 = t19*t33;
+        const enu_doppler18_scalar t35 = 1.0/t6;
+        const enu_doppler18_scalar t36 = params->gyro_angle_random_walk*params->gyro_angle_random_walk;
+        m->F[0] = t5;
+        m->F[1] = -t8;
+        m->F[2] = -t9;
+        m->F[3] = t13;
+        m->F[4] = t14;
+        m->F[5] = t15;
+        m->F[6] = t16;
+        m->F[7] = t14;
+        m->F[8] = t15;
+        m->F[9] = t16;
+        m->F[10] = -t5;
+        m->F[11] = t18;
+        m->F[12] = t2;
+        m->F[13] = -t0;
+        m->F[14] = -t20;
+        m->F[15] = t21;
+        m->F[16] = t22;
+        m->F[17] = t23;
+        m->F[18] = t21;
+        m->F[19] = t22;
+        m->F[20] = t23;
+        m->F[21] = t8;
+        m->F[22] = t17;
+        m->F[23] = t24;
+        m->F[24] = t26 + t7;
+        m->F[25] = -t27;
+        m->F[26] = t28;
+        m->F[27] = t29;
+        m->F[28] = t30;
+        m->F[29] = t28;
+        m->F[30] = t29;
+        m->F[31] = t30;
+        m->F[32] = -params->specific_force_up;
+        m->F[33] = params->specific_force_north;
+        m->F[34] = -t2*params->velocity_up + t24*params->velocity_north;
+        m->F[35] = t31 + t4;
+        m->F[36] = -t3 - t32;
+        m->F[37] = t26*params->velocity_north + t31*params->velocity_up + t32*params->velocity_north;
+        m->F[38] = t19*params->velocity_east*params->velocity_up - t27*params->velocity_north;
+        m->F[39] = params->c11;
+        m->F[40] = params->c12;
+        m->F[41] = params->c13;
+        m->F[42] = params->specific_force_up;
+        m->F[43] = -params->specific_force_east;
+        m->F[44] = -t31 - 2*t4;
+        m->F[45] = -t9*params->velocity_up;
+        m->F[46] = t18;
+        m->F[47] = -t2*t25*t33 - t32*params->velocity_east;
+        m->F[48] = t1*t34 + t13*params->velocity_up;
+        m->F[49] = params->c21;
+        m->F[50] = params->c22;
+        m->F[51] = params->c23;
+        m->F[52] = -params->specific_force_north;
+        m->F[53] = params->specific_force_east;
+        m->F[54] = 2*t3 + t32;
+        m->F[55] = 2*t17;
+        m->F[56] = -t31*params->velocity_east;
+        m->F[57] = 2*params->gravity*t2 - t12*params->velocity_north*params->velocity_north - t34;
+        m->F[58] = params->c31;
+        m->F[59] = params->c32;
+        m->F[60] = params->c33;
+        m->F[61] = t9;
+        m->F[62] = -t13;
+        m->F[63] = t2*t35;
+        m->F[64] = t35*t4;
+        m->F[65] = -t20*t35;
+        m->F[66] = 1;
+        m->F[67] = -params->gyro_markov_rate_x;
+        m->F[68] = -params->gyro_markov_rate_y;
+        m->F[69] = -params->gyro_markov_rate_z;
+        m->F[70] = -params->accel_markov_rate_x;
+        m->F[71] = -params->accel_markov_rate_y;
+        m->F[72] = -params->accel_markov_rate_z;
+        m->G[0] = t14;
+        m->G[1] = t15;
+        m->G[2] = t16;
+        m->G[3] = t21;
+        m->G[4] = t22;
+        m->G[5] = t23;
+        m->G[6] = t28;
+        m->G[7] = t29;
+        m->G[8] = t30;
+        m->G[9] = 1;
+        m->G[10] = 1;
+        m->G[11] = 1;
+        m->G[12] = 1;
+        m->G[13] = 1;
+        m->G[14] = 1;
+        m->H[0] = 1;
+        m->H[1] = 1;
+        m->H[2] = 1;
+        m->q[0] = t36;
+        m->q[1] = t36;
+        m->q[2] = t36;
+        m->q[3] = 2*params->gyro_markov_rate_x*params->gyro_markov_sigma_x*params->gyro_markov_sigma_x;
+        m->q[4] = 2*params->gyro_markov_rate_y*params->gyro_markov_sigma_y*params->gyro_markov_sigma_y;
+        m->q[5] = 2*params->gyro_markov_rate_z*params->gyro_markov_sigma_z*params->gyro_markov_sigma_z;
+        m->q[6] = 2*params->accel_markov_rate_x*params->accel_markov_sigma_x*params->accel_markov_sigma_x;
+        m->q[7] = 2*params->accel_markov_rate_y*params->accel_markov_sigma_y*params->accel_markov_sigma_y;
+        m->q[8] = 2*params->accel_markov_rate_z*params->accel_markov_sigma_z*params->accel_markov_sigma_z;
+        m->r[0] = params->doppler_noise_sigma_east*params->doppler_noise_sigma_east;
+        m->r[1] = params->doppler_noise_sigma_north*params->doppler_noise_sigma_north;
+        m->r[2] = params->doppler_noise_sigma_up*params->doppler_noise_sigma_up;
+    }
+    for (e = 0; e < ENU_DOPPLER18_NNZ_F; ++e) {
+        check += m->F[e] - m->F[e];
+    }
+    for (e = 0; e < ENU_DOPPLER18_NNZ_G; ++e) {
+        check += m->G[e] - m->G[e];
+    }
+    for (e = 0; e < ENU_DOPPLER18_NNZ_H; ++e) {
+        check += m->H[e] - m->H[e];
+    }
+    for (e = 0; e < ENU_DOPPLER18_N_NOISES; ++e) {
+        check += m->q[e] - m->q[e];
+    }
+    for (e = 0; e < ENU_DOPPLER18_N_MEASUREMENTS; ++e) {
+        check += m->r[e] - m->r[e];
+    }
+    return (check != 0.0) ? ENU_DOPPLER18_ERR_NONFINITE : ENU_DOPPLER18_OK;
 }
 
 int enu_doppler18_discretize(const enu_doppler18_matrices *m, enu_doppler18_scalar T, enu_doppler18_transition *t, enu_doppler18_workspace *work)
 {
     enu_doppler18_discretize_scratch *w = &work->discretize;
-    int i, j, k, e, c;
+    int i, j, e, c;
+    int k, halvings, d, changed;
+    enu_doppler18_scalar norm;
     enu_doppler18_scalar check = 0.0;
     if (!isfinite(T)) {
         return ENU_DOPPLER18_ERR_NONFINITE;
@@ -260,36 +299,118 @@ int enu_doppler18_discretize(const enu_doppler18_matrices *m, enu_doppler18_scal
             return ENU_DOPPLER18_ERR_NOT_POSITIVE;
         }
     }
+    /* Scaling and squaring (modelgen/discretization.py): theta = ||F||_D h
+       with D from 8 Jacobi sweeps of Osborne's balancing in powers of two,
+       h = T / 2^s for the smallest s with theta <= SERIES_RANGE (Taylor
+       remainder below the unit roundoff); the series over h, then s doublings
+       Phi(2h) = Phi(h)^2 and S(2h) = (S(h) + Phi(h) S(h)) / 2, where
+       h S(h) = int_0^h e^{F s} ds. */
     for (i = 0; i < N; ++i) {
-        for (j = 0; j < N; ++j) {
-            const enu_doppler18_scalar delta = (i == j) ? 1.0 : 0.0;
-            w->A[i][j] = delta;   /* (F T)^k / k! */
-            t->Phi[i][j] = delta; /* sum of the terms, eq. (10) */
-            w->S[i][j] = delta;   /* sum of the terms / (k + 1), eq. (11) */
+        w->scale[i] = 1.0;
+    }
+    for (k = 0, changed = 1; k < 8 && changed; ++k) {
+        changed = 0; /* a sweep that changes no scale is a fixed point: stop */
+        for (i = 0; i < N; ++i) {
+            w->row_sum[i] = 0.0;
+            w->col_sum[i] = 0.0;
+        }
+        for (i = 0; i < N; ++i) {
+            for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
+                j = enu_doppler18_F_col[c];
+                if (j != i) {
+                    const enu_doppler18_scalar v = fabs(m->F[c]) * w->scale[j] / w->scale[i];
+                    w->row_sum[i] += v;
+                    w->col_sum[j] += v;
+                }
+            }
+        }
+        for (i = 0; i < N; ++i) {
+            int step = 0, exponent, column_exponent;
+            if (w->row_sum[i] > 0.0 && w->col_sum[i] > 0.0) {
+                (void)frexp(w->row_sum[i], &step);
+                (void)frexp(w->col_sum[i], &column_exponent);
+                step -= column_exponent; /* log2(row / column) within 1 */
+                step = (step >= 0) ? step / 2 : -((1 - step) / 2); /* floor(step / 2) */
+                step = step > 8 ? 8 : (step < -8 ? -8 : step);
+            } else if (w->col_sum[i] > 0.0) {
+                step = -8; /* drives others, driven by none */
+            } else if (w->row_sum[i] > 0.0) {
+                step = 8; /* driven, drives none */
+            }
+            (void)frexp(w->scale[i], &exponent);
+            exponent += step - 1;
+            exponent = exponent > 40 ? 40 : (exponent < -40 ? -40 : exponent);
+            if (ldexp(1.0, exponent) != w->scale[i]) {
+                changed = 1;
+            }
+            w->scale[i] = ldexp(1.0, exponent);
         }
     }
-    for (k = 1; k <= ENU_DOPPLER18_TAYLOR_ORDER; ++k) {
-        const enu_doppler18_scalar h = T / (enu_doppler18_scalar)k;
+    norm = 0.0;
+    for (i = 0; i < N; ++i) {
+        enu_doppler18_scalar v = 0.0;
+        for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
+            v += fabs(m->F[c]) * w->scale[enu_doppler18_F_col[c]] / w->scale[i];
+        }
+        norm = v > norm ? v : norm;
+    }
+    for (halvings = 0; !(norm * ldexp(T, -halvings) <= SERIES_RANGE); ++halvings) {
+        if (halvings == MAX_DOUBLINGS) {
+            return ENU_DOPPLER18_ERR_NONFINITE; /* e^{F T} is not representable */
+        }
+    }
+    {
+        const enu_doppler18_scalar h = ldexp(T, -halvings);
+        for (i = 0; i < N; ++i) {
+            for (j = 0; j < N; ++j) {
+                const enu_doppler18_scalar delta = (i == j) ? 1.0 : 0.0;
+                w->A[i][j] = delta;   /* (F h)^k / k! */
+                t->Phi[i][j] = delta; /* sum of the terms, eq. (10) */
+                w->S[i][j] = delta;   /* sum of the terms / (k + 1), eq. (11) */
+            }
+        }
+        for (k = 1; k <= ENU_DOPPLER18_TAYLOR_ORDER; ++k) {
+            const enu_doppler18_scalar hk = h / (enu_doppler18_scalar)k;
+            for (e = 0; e < N_ACTIVE; ++e) {
+                enu_doppler18_scalar v = 0.0;
+                i = active_row[e];
+                j = active_col[e];
+                for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
+                    v += m->F[c] * w->A[enu_doppler18_F_col[c]][j];
+                }
+                w->B[i][j] = v * hk;
+            }
+            for (e = 0; e < N_ACTIVE; ++e) {
+                i = active_row[e];
+                j = active_col[e];
+                w->A[i][j] = w->B[i][j];
+                t->Phi[i][j] += w->B[i][j];
+                w->S[i][j] += w->B[i][j] / (enu_doppler18_scalar)(k + 1);
+            }
+            if (k == 1) {
+                for (e = 0; e < N_UNIT_ROWS; ++e) {
+                    w->A[unit_row[e]][unit_row[e]] = 0.0; /* (F h)^k e_i = 0 for k >= 1 */
+                }
+            }
+        }
+    }
+    for (d = 0; d < halvings; ++d) {
         for (e = 0; e < N_ACTIVE; ++e) {
-            enu_doppler18_scalar s = 0.0;
+            enu_doppler18_scalar phi = 0.0, psi = 0.0;
             i = active_row[e];
             j = active_col[e];
-            for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
-                s += m->F[c] * w->A[enu_doppler18_F_col[c]][j];
+            for (c = 0; c < N; ++c) {
+                phi += t->Phi[i][c] * t->Phi[c][j];
+                psi += t->Phi[i][c] * w->S[c][j];
             }
-            w->B[i][j] = s * h;
+            w->B[i][j] = phi;
+            w->A[i][j] = 0.5 * (w->S[i][j] + psi);
         }
         for (e = 0; e < N_ACTIVE; ++e) {
             i = active_row[e];
             j = active_col[e];
-            w->A[i][j] = w->B[i][j];
-            t->Phi[i][j] += w->B[i][j];
-            w->S[i][j] += w->B[i][j] / (enu_doppler18_scalar)(k + 1);
-        }
-        if (k == 1) {
-            for (e = 0; e < N_UNIT_ROWS; ++e) {
-                w->A[unit_row[e]][unit_row[e]] = 0.0; /* (F T)^k e_i = 0 for k >= 1 */
-            }
+            t->Phi[i][j] = w->B[i][j];
+            w->S[i][j] = w->A[i][j];
         }
     }
     for (e = 0; e < N_ACTIVE; ++e) {
@@ -1052,7 +1173,7 @@ int enu_doppler18_set_covariance(enu_doppler18_filter *f, const enu_doppler18_sc
     int i, j, k;
     enu_doppler18_scalar check = 0.0;
     for (i = 0; i < N; ++i) {
-        for (j = i; j < N; ++j) {
+        for (j = 0; j < N; ++j) {
             check += P[i * N + j] - P[i * N + j];
         }
     }
@@ -1060,8 +1181,27 @@ int enu_doppler18_set_covariance(enu_doppler18_filter *f, const enu_doppler18_sc
         return ENU_DOPPLER18_ERR_NONFINITE;
     }
     /* factored only to test that P is positive semidefinite (U in M, D in xn) */
+    /* The contract (README, "Generated code"), tol = 16 N eps: P_ii >= 0,
+       |P_ij - P_ji| <= tol sqrt(P_ii P_jj) and |P_ij| <= sqrt(P_ii P_jj) (1 + tol),
+       so that a zero variance carries no correlation. */
+    for (i = 0; i < N; ++i) {
+        if (!(P[i * N + i] >= 0.0)) {
+            return ENU_DOPPLER18_ERR_NOT_POSITIVE;
+        }
+    }
+    for (i = 0; i < N; ++i) {
+        for (j = i + 1; j < N; ++j) {
+            const enu_doppler18_scalar bound = sqrt(P[i * N + i] * P[j * N + j]);
+            if (fabs(P[i * N + j] - P[j * N + i]) > (16 * N * DBL_EPSILON) * bound
+                || fabs(P[i * N + j]) > bound * (1.0 + (16 * N * DBL_EPSILON))) {
+                return ENU_DOPPLER18_ERR_NOT_POSITIVE;
+            }
+        }
+    }
     /* P = U D U^T column by column from the last one; a pivot that rounding
-       made slightly negative (within 16 N eps of the diagonal) is zero. */
+       made slightly negative (within 16 N eps of the diagonal) is zero, and
+       then what is left of its column must be zero too (within the same
+       tolerance), else P is indefinite. */
     for (j = N - 1; j >= 0; --j) {
         enu_doppler18_scalar pivot = P[j * N + j];
         for (k = j + 1; k < N; ++k) {
@@ -1078,6 +1218,9 @@ int enu_doppler18_set_covariance(enu_doppler18_filter *f, const enu_doppler18_sc
             enu_doppler18_scalar s = P[i * N + j];
             for (k = j + 1; k < N; ++k) {
                 s -= w->xn[k] * w->M[i][k] * w->M[j][k];
+            }
+            if (!(pivot > 0.0) && fabs(s) > (16 * N * DBL_EPSILON) * sqrt(P[i * N + i] * P[j * N + j])) {
+                return ENU_DOPPLER18_ERR_NOT_POSITIVE;
             }
             w->M[i][j] = (pivot > 0.0) ? s / pivot : 0.0;
             check += w->M[i][j] - w->M[i][j];

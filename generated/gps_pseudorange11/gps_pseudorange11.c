@@ -8,7 +8,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 37 operations after CSE
- *   discretize: 5390 mul + 4686 add = 10076 flops
+ *   discretize: 5948 mul + 5213 add = 11161 flops
+ *   discretize, each doubling (long steps): 1495 mul + 1430 add = 2925 flops
  *   predict (C): 1061 mul + 934 add = 1995 flops
  *   predict (Python): 2420 mul + 2321 add = 4741 flops
  *   predict (dense, for comparison): 2673 mul + 2541 add = 5214 flops
@@ -39,6 +40,11 @@ static const unsigned char F_row_start[N + 1] = { 0, 3, 6, 9, 14, 19, 24, 26, 28
 #define N_ACTIVE 65
 static const unsigned char active_row[N_ACTIVE] = { 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 9, 9 };
 static const unsigned char active_col[N_ACTIVE] = { 0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8, 9, 10 };
+/* Halvings of T that discretize may take before it gives up (T / 2^64), and the
+   largest ||F h||_D for which the Taylor remainder of order TAYLOR_ORDER is below
+   the unit roundoff (modelgen.discretization.series_range). */
+#define MAX_DOUBLINGS 64
+#define SERIES_RANGE 0.11483164143919657
 /* Rows of Phi that are exactly e_i (states with an empty row of F). */
 #define N_UNIT_ROWS 1
 static const unsigned char unit_row[N_UNIT_ROWS] = { 10 };
@@ -80,96 +86,129 @@ void gps_pseudorange11_default_params(gps_pseudorange11_params *params)
     params->pseudorange_sigma_4 = 0.0;
 }
 
-void gps_pseudorange11_matrices_evaluate(const gps_pseudorange11_params *params, gps_pseudorange11_matrices *m)
+/* 1 when a denominator (cos of a tan or sec, ...) is zero within its rounding
+   error: at latitude 90 degrees cos is 6e-17, not 0, and tan a finite 1.6e16. */
+static int pole(const gps_pseudorange11_scalar value, const gps_pseudorange11_scalar argument)
 {
-    const gps_pseudorange11_scalar t0 = 1.0/params->earth_radius;
-    const gps_pseudorange11_scalar t1 = t0*params->velocity_east;
-    const gps_pseudorange11_scalar t2 = t1*tan(params->latitude);
-    const gps_pseudorange11_scalar t3 = t0*params->velocity_north;
-    const gps_pseudorange11_scalar t4 = -t3;
-    const gps_pseudorange11_scalar t5 = params->gravity*t0;
-    const gps_pseudorange11_scalar t6 = -t5;
-    const gps_pseudorange11_scalar t7 = params->earth_rate*sin(params->latitude);
-    const gps_pseudorange11_scalar t8 = t2 + 2*t7;
-    const gps_pseudorange11_scalar t9 = params->earth_rate*cos(params->latitude);
-    const gps_pseudorange11_scalar t10 = t1 + 2*t9;
-    const gps_pseudorange11_scalar t11 = t2 + t7;
-    const gps_pseudorange11_scalar t12 = t1 + t9;
-    const gps_pseudorange11_scalar t13 = params->gyro_angle_random_walk*params->gyro_angle_random_walk;
-    const gps_pseudorange11_scalar t14 = params->accel_velocity_random_walk*params->accel_velocity_random_walk;
-    m->F[0] = t2;
-    m->F[1] = -t1;
-    m->F[2] = 1;
-    m->F[3] = -t2;
-    m->F[4] = t4;
-    m->F[5] = 1;
-    m->F[6] = t1;
-    m->F[7] = t3;
-    m->F[8] = 1;
-    m->F[9] = t6;
-    m->F[10] = t8;
-    m->F[11] = -t10;
-    m->F[12] = -params->specific_force_up;
-    m->F[13] = params->specific_force_north;
-    m->F[14] = t6;
-    m->F[15] = -t8;
-    m->F[16] = t4;
-    m->F[17] = params->specific_force_up;
-    m->F[18] = -params->specific_force_east;
-    m->F[19] = 2*t5;
-    m->F[20] = t10;
-    m->F[21] = t3;
-    m->F[22] = -params->specific_force_north;
-    m->F[23] = params->specific_force_east;
-    m->F[24] = t11;
-    m->F[25] = -t12;
-    m->F[26] = -t11;
-    m->F[27] = t4;
-    m->F[28] = t12;
-    m->F[29] = t3;
-    m->F[30] = 1;
-    m->G[0] = 1;
-    m->G[1] = 1;
-    m->G[2] = 1;
-    m->G[3] = -1;
-    m->G[4] = -1;
-    m->G[5] = -1;
-    m->G[6] = 1;
-    m->G[7] = 1;
-    m->H[0] = params->line_of_sight_east_1;
-    m->H[1] = params->line_of_sight_north_1;
-    m->H[2] = params->line_of_sight_up_1;
-    m->H[3] = 1;
-    m->H[4] = params->line_of_sight_east_2;
-    m->H[5] = params->line_of_sight_north_2;
-    m->H[6] = params->line_of_sight_up_2;
-    m->H[7] = 1;
-    m->H[8] = params->line_of_sight_east_3;
-    m->H[9] = params->line_of_sight_north_3;
-    m->H[10] = params->line_of_sight_up_3;
-    m->H[11] = 1;
-    m->H[12] = params->line_of_sight_east_4;
-    m->H[13] = params->line_of_sight_north_4;
-    m->H[14] = params->line_of_sight_up_4;
-    m->H[15] = 1;
-    m->q[0] = t13;
-    m->q[1] = t13;
-    m->q[2] = t13;
-    m->q[3] = t14;
-    m->q[4] = t14;
-    m->q[5] = t14;
-    m->q[6] = params->clock_bias_psd;
-    m->q[7] = params->clock_drift_psd;
-    m->r[0] = params->pseudorange_sigma_1*params->pseudorange_sigma_1;
-    m->r[1] = params->pseudorange_sigma_2*params->pseudorange_sigma_2;
-    m->r[2] = params->pseudorange_sigma_3*params->pseudorange_sigma_3;
-    m->r[3] = params->pseudorange_sigma_4*params->pseudorange_sigma_4;
+    const gps_pseudorange11_scalar size = fabs(argument) > 1.0 ? fabs(argument) : 1.0;
+    return fabs(value) <= 4 * DBL_EPSILON * size;
+}
+
+int gps_pseudorange11_matrices_evaluate(const gps_pseudorange11_params *params, gps_pseudorange11_matrices *m)
+{
+    int e;
+    gps_pseudorange11_scalar check = 0.0;
+    if (pole(cos(params->latitude), params->latitude)) {
+        return GPS_PSEUDORANGE11_ERR_NONFINITE; /* cos(latitude) = 0: singular operating point */
+    }
+    {
+        const gps_pseudorange11_scalar t0 = 1.0/params->earth_radius;
+        const gps_pseudorange11_scalar t1 = t0*params->velocity_east;
+        const gps_pseudorange11_scalar t2 = t1*tan(params->latitude);
+        const gps_pseudorange11_scalar t3 = t0*params->velocity_north;
+        const gps_pseudorange11_scalar t4 = -t3;
+        const gps_pseudorange11_scalar t5 = params->gravity*t0;
+        const gps_pseudorange11_scalar t6 = -t5;
+        const gps_pseudorange11_scalar t7 = params->earth_rate*sin(params->latitude);
+        const gps_pseudorange11_scalar t8 = t2 + 2*t7;
+        const gps_pseudorange11_scalar t9 = params->earth_rate*cos(params->latitude);
+        const gps_pseudorange11_scalar t10 = t1 + 2*t9;
+        const gps_pseudorange11_scalar t11 = t2 + t7;
+        const gps_pseudorange11_scalar t12 = t1 + t9;
+        const gps_pseudorange11_scalar t13 = params->gyro_angle_random_walk*params->gyro_angle_random_walk;
+        const gps_pseudorange11_scalar t14 = params->accel_velocity_random_walk*params->accel_velocity_random_walk;
+        m->F[0] = t2;
+        m->F[1] = -t1;
+        m->F[2] = 1;
+        m->F[3] = -t2;
+        m->F[4] = t4;
+        m->F[5] = 1;
+        m->F[6] = t1;
+        m->F[7] = t3;
+        m->F[8] = 1;
+        m->F[9] = t6;
+        m->F[10] = t8;
+        m->F[11] = -t10;
+        m->F[12] = -params->specific_force_up;
+        m->F[13] = params->specific_force_north;
+        m->F[14] = t6;
+        m->F[15] = -t8;
+        m->F[16] = t4;
+        m->F[17] = params->specific_force_up;
+        m->F[18] = -params->specific_force_east;
+        m->F[19] = 2*t5;
+        m->F[20] = t10;
+        m->F[21] = t3;
+        m->F[22] = -params->specific_force_north;
+        m->F[23] = params->specific_force_east;
+        m->F[24] = t11;
+        m->F[25] = -t12;
+        m->F[26] = -t11;
+        m->F[27] = t4;
+        m->F[28] = t12;
+        m->F[29] = t3;
+        m->F[30] = 1;
+        m->G[0] = 1;
+        m->G[1] = 1;
+        m->G[2] = 1;
+        m->G[3] = -1;
+        m->G[4] = -1;
+        m->G[5] = -1;
+        m->G[6] = 1;
+        m->G[7] = 1;
+        m->H[0] = params->line_of_sight_east_1;
+        m->H[1] = params->line_of_sight_north_1;
+        m->H[2] = params->line_of_sight_up_1;
+        m->H[3] = 1;
+        m->H[4] = params->line_of_sight_east_2;
+        m->H[5] = params->line_of_sight_north_2;
+        m->H[6] = params->line_of_sight_up_2;
+        m->H[7] = 1;
+        m->H[8] = params->line_of_sight_east_3;
+        m->H[9] = params->line_of_sight_north_3;
+        m->H[10] = params->line_of_sight_up_3;
+        m->H[11] = 1;
+        m->H[12] = params->line_of_sight_east_4;
+        m->H[13] = params->line_of_sight_north_4;
+        m->H[14] = params->line_of_sight_up_4;
+        m->H[15] = 1;
+        m->q[0] = t13;
+        m->q[1] = t13;
+        m->q[2] = t13;
+        m->q[3] = t14;
+        m->q[4] = t14;
+        m->q[5] = t14;
+        m->q[6] = params->clock_bias_psd;
+        m->q[7] = params->clock_drift_psd;
+        m->r[0] = params->pseudorange_sigma_1*params->pseudorange_sigma_1;
+        m->r[1] = params->pseudorange_sigma_2*params->pseudorange_sigma_2;
+        m->r[2] = params->pseudorange_sigma_3*params->pseudorange_sigma_3;
+        m->r[3] = params->pseudorange_sigma_4*params->pseudorange_sigma_4;
+    }
+    for (e = 0; e < GPS_PSEUDORANGE11_NNZ_F; ++e) {
+        check += m->F[e] - m->F[e];
+    }
+    for (e = 0; e < GPS_PSEUDORANGE11_NNZ_G; ++e) {
+        check += m->G[e] - m->G[e];
+    }
+    for (e = 0; e < GPS_PSEUDORANGE11_NNZ_H; ++e) {
+        check += m->H[e] - m->H[e];
+    }
+    for (e = 0; e < GPS_PSEUDORANGE11_N_NOISES; ++e) {
+        check += m->q[e] - m->q[e];
+    }
+    for (e = 0; e < GPS_PSEUDORANGE11_N_MEASUREMENTS; ++e) {
+        check += m->r[e] - m->r[e];
+    }
+    return (check != 0.0) ? GPS_PSEUDORANGE11_ERR_NONFINITE : GPS_PSEUDORANGE11_OK;
 }
 
 int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *m, gps_pseudorange11_scalar T, gps_pseudorange11_transition *t, gps_pseudorange11_workspace *work)
 {
     gps_pseudorange11_discretize_scratch *w = &work->discretize;
-    int i, j, k, e, c;
+    int i, j, e, c;
+    int k, halvings, d, changed;
+    gps_pseudorange11_scalar norm;
     gps_pseudorange11_scalar check = 0.0;
     if (!isfinite(T)) {
         return GPS_PSEUDORANGE11_ERR_NONFINITE;
@@ -194,36 +233,118 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *m, gps_pseudo
             return GPS_PSEUDORANGE11_ERR_NOT_POSITIVE;
         }
     }
+    /* Scaling and squaring (modelgen/discretization.py): theta = ||F||_D h
+       with D from 8 Jacobi sweeps of Osborne's balancing in powers of two,
+       h = T / 2^s for the smallest s with theta <= SERIES_RANGE (Taylor
+       remainder below the unit roundoff); the series over h, then s doublings
+       Phi(2h) = Phi(h)^2 and S(2h) = (S(h) + Phi(h) S(h)) / 2, where
+       h S(h) = int_0^h e^{F s} ds. */
     for (i = 0; i < N; ++i) {
-        for (j = 0; j < N; ++j) {
-            const gps_pseudorange11_scalar delta = (i == j) ? 1.0 : 0.0;
-            w->A[i][j] = delta;   /* (F T)^k / k! */
-            t->Phi[i][j] = delta; /* sum of the terms, eq. (10) */
-            w->S[i][j] = delta;   /* sum of the terms / (k + 1), eq. (11) */
+        w->scale[i] = 1.0;
+    }
+    for (k = 0, changed = 1; k < 8 && changed; ++k) {
+        changed = 0; /* a sweep that changes no scale is a fixed point: stop */
+        for (i = 0; i < N; ++i) {
+            w->row_sum[i] = 0.0;
+            w->col_sum[i] = 0.0;
+        }
+        for (i = 0; i < N; ++i) {
+            for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
+                j = gps_pseudorange11_F_col[c];
+                if (j != i) {
+                    const gps_pseudorange11_scalar v = fabs(m->F[c]) * w->scale[j] / w->scale[i];
+                    w->row_sum[i] += v;
+                    w->col_sum[j] += v;
+                }
+            }
+        }
+        for (i = 0; i < N; ++i) {
+            int step = 0, exponent, column_exponent;
+            if (w->row_sum[i] > 0.0 && w->col_sum[i] > 0.0) {
+                (void)frexp(w->row_sum[i], &step);
+                (void)frexp(w->col_sum[i], &column_exponent);
+                step -= column_exponent; /* log2(row / column) within 1 */
+                step = (step >= 0) ? step / 2 : -((1 - step) / 2); /* floor(step / 2) */
+                step = step > 8 ? 8 : (step < -8 ? -8 : step);
+            } else if (w->col_sum[i] > 0.0) {
+                step = -8; /* drives others, driven by none */
+            } else if (w->row_sum[i] > 0.0) {
+                step = 8; /* driven, drives none */
+            }
+            (void)frexp(w->scale[i], &exponent);
+            exponent += step - 1;
+            exponent = exponent > 40 ? 40 : (exponent < -40 ? -40 : exponent);
+            if (ldexp(1.0, exponent) != w->scale[i]) {
+                changed = 1;
+            }
+            w->scale[i] = ldexp(1.0, exponent);
         }
     }
-    for (k = 1; k <= GPS_PSEUDORANGE11_TAYLOR_ORDER; ++k) {
-        const gps_pseudorange11_scalar h = T / (gps_pseudorange11_scalar)k;
+    norm = 0.0;
+    for (i = 0; i < N; ++i) {
+        gps_pseudorange11_scalar v = 0.0;
+        for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
+            v += fabs(m->F[c]) * w->scale[gps_pseudorange11_F_col[c]] / w->scale[i];
+        }
+        norm = v > norm ? v : norm;
+    }
+    for (halvings = 0; !(norm * ldexp(T, -halvings) <= SERIES_RANGE); ++halvings) {
+        if (halvings == MAX_DOUBLINGS) {
+            return GPS_PSEUDORANGE11_ERR_NONFINITE; /* e^{F T} is not representable */
+        }
+    }
+    {
+        const gps_pseudorange11_scalar h = ldexp(T, -halvings);
+        for (i = 0; i < N; ++i) {
+            for (j = 0; j < N; ++j) {
+                const gps_pseudorange11_scalar delta = (i == j) ? 1.0 : 0.0;
+                w->A[i][j] = delta;   /* (F h)^k / k! */
+                t->Phi[i][j] = delta; /* sum of the terms, eq. (10) */
+                w->S[i][j] = delta;   /* sum of the terms / (k + 1), eq. (11) */
+            }
+        }
+        for (k = 1; k <= GPS_PSEUDORANGE11_TAYLOR_ORDER; ++k) {
+            const gps_pseudorange11_scalar hk = h / (gps_pseudorange11_scalar)k;
+            for (e = 0; e < N_ACTIVE; ++e) {
+                gps_pseudorange11_scalar v = 0.0;
+                i = active_row[e];
+                j = active_col[e];
+                for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
+                    v += m->F[c] * w->A[gps_pseudorange11_F_col[c]][j];
+                }
+                w->B[i][j] = v * hk;
+            }
+            for (e = 0; e < N_ACTIVE; ++e) {
+                i = active_row[e];
+                j = active_col[e];
+                w->A[i][j] = w->B[i][j];
+                t->Phi[i][j] += w->B[i][j];
+                w->S[i][j] += w->B[i][j] / (gps_pseudorange11_scalar)(k + 1);
+            }
+            if (k == 1) {
+                for (e = 0; e < N_UNIT_ROWS; ++e) {
+                    w->A[unit_row[e]][unit_row[e]] = 0.0; /* (F h)^k e_i = 0 for k >= 1 */
+                }
+            }
+        }
+    }
+    for (d = 0; d < halvings; ++d) {
         for (e = 0; e < N_ACTIVE; ++e) {
-            gps_pseudorange11_scalar s = 0.0;
+            gps_pseudorange11_scalar phi = 0.0, psi = 0.0;
             i = active_row[e];
             j = active_col[e];
-            for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
-                s += m->F[c] * w->A[gps_pseudorange11_F_col[c]][j];
+            for (c = 0; c < N; ++c) {
+                phi += t->Phi[i][c] * t->Phi[c][j];
+                psi += t->Phi[i][c] * w->S[c][j];
             }
-            w->B[i][j] = s * h;
+            w->B[i][j] = phi;
+            w->A[i][j] = 0.5 * (w->S[i][j] + psi);
         }
         for (e = 0; e < N_ACTIVE; ++e) {
             i = active_row[e];
             j = active_col[e];
-            w->A[i][j] = w->B[i][j];
-            t->Phi[i][j] += w->B[i][j];
-            w->S[i][j] += w->B[i][j] / (gps_pseudorange11_scalar)(k + 1);
-        }
-        if (k == 1) {
-            for (e = 0; e < N_UNIT_ROWS; ++e) {
-                w->A[unit_row[e]][unit_row[e]] = 0.0; /* (F T)^k e_i = 0 for k >= 1 */
-            }
+            t->Phi[i][j] = w->B[i][j];
+            w->S[i][j] = w->A[i][j];
         }
     }
     for (e = 0; e < N_ACTIVE; ++e) {
@@ -623,7 +744,7 @@ int gps_pseudorange11_set_covariance(gps_pseudorange11_filter *f, const gps_pseu
     int i, j, k;
     gps_pseudorange11_scalar check = 0.0;
     for (i = 0; i < N; ++i) {
-        for (j = i; j < N; ++j) {
+        for (j = 0; j < N; ++j) {
             check += P[i * N + j] - P[i * N + j];
         }
     }
@@ -631,8 +752,27 @@ int gps_pseudorange11_set_covariance(gps_pseudorange11_filter *f, const gps_pseu
         return GPS_PSEUDORANGE11_ERR_NONFINITE;
     }
     /* factored only to test that P is positive semidefinite (U in M, D in xn) */
+    /* The contract (README, "Generated code"), tol = 16 N eps: P_ii >= 0,
+       |P_ij - P_ji| <= tol sqrt(P_ii P_jj) and |P_ij| <= sqrt(P_ii P_jj) (1 + tol),
+       so that a zero variance carries no correlation. */
+    for (i = 0; i < N; ++i) {
+        if (!(P[i * N + i] >= 0.0)) {
+            return GPS_PSEUDORANGE11_ERR_NOT_POSITIVE;
+        }
+    }
+    for (i = 0; i < N; ++i) {
+        for (j = i + 1; j < N; ++j) {
+            const gps_pseudorange11_scalar bound = sqrt(P[i * N + i] * P[j * N + j]);
+            if (fabs(P[i * N + j] - P[j * N + i]) > (16 * N * DBL_EPSILON) * bound
+                || fabs(P[i * N + j]) > bound * (1.0 + (16 * N * DBL_EPSILON))) {
+                return GPS_PSEUDORANGE11_ERR_NOT_POSITIVE;
+            }
+        }
+    }
     /* P = U D U^T column by column from the last one; a pivot that rounding
-       made slightly negative (within 16 N eps of the diagonal) is zero. */
+       made slightly negative (within 16 N eps of the diagonal) is zero, and
+       then what is left of its column must be zero too (within the same
+       tolerance), else P is indefinite. */
     for (j = N - 1; j >= 0; --j) {
         gps_pseudorange11_scalar pivot = P[j * N + j];
         for (k = j + 1; k < N; ++k) {
@@ -649,6 +789,9 @@ int gps_pseudorange11_set_covariance(gps_pseudorange11_filter *f, const gps_pseu
             gps_pseudorange11_scalar s = P[i * N + j];
             for (k = j + 1; k < N; ++k) {
                 s -= w->xn[k] * w->M[i][k] * w->M[j][k];
+            }
+            if (!(pivot > 0.0) && fabs(s) > (16 * N * DBL_EPSILON) * sqrt(P[i * N + i] * P[j * N + j])) {
+                return GPS_PSEUDORANGE11_ERR_NOT_POSITIVE;
             }
             w->M[i][j] = (pivot > 0.0) ? s / pivot : 0.0;
             check += w->M[i][j] - w->M[i][j];

@@ -8,7 +8,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 113 operations after CSE
- *   discretize: 11655 mul + 10575 add = 22230 flops
+ *   discretize: 12667 mul + 11529 add = 24196 flops
+ *   discretize, each doubling (long steps): 3937 mul + 3810 add = 7747 flops
  *   predict (C): 2670 mul + 2526 add = 5196 flops
  *   predict (Python): 4050 mul + 4005 add = 8055 flops
  *   predict (dense, for comparison): 6765 mul + 6525 add = 13290 flops
@@ -39,6 +40,11 @@ static const unsigned char F_row_start[N + 1] = { 0, 7, 15, 23, 33, 43, 52, 54, 
 #define N_ACTIVE 127
 static const unsigned char active_row[N_ACTIVE] = { 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8, 8 };
 static const unsigned char active_col[N_ACTIVE] = { 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 0, 1, 2, 3, 4, 5, 6, 8, 9, 10, 11, 12, 13, 14 };
+/* Halvings of T that discretize may take before it gives up (T / 2^64), and the
+   largest ||F h||_D for which the Taylor remainder of order TAYLOR_ORDER is below
+   the unit roundoff (modelgen.discretization.series_range). */
+#define MAX_DOUBLINGS 64
+#define SERIES_RANGE 0.11483164143919657
 /* Rows of Phi that are exactly e_i (states with an empty row of F). */
 #define N_UNIT_ROWS 6
 static const unsigned char unit_row[N_UNIT_ROWS] = { 9, 10, 11, 12, 13, 14 };
@@ -80,147 +86,180 @@ void ins_gps15_default_params(ins_gps15_params *params)
     params->gps_position_sigma_up = 0.0;
 }
 
-void ins_gps15_matrices_evaluate(const ins_gps15_params *params, ins_gps15_matrices *m)
+/* 1 when a denominator (cos of a tan or sec, ...) is zero within its rounding
+   error: at latitude 90 degrees cos is 6e-17, not 0, and tan a finite 1.6e16. */
+static int pole(const ins_gps15_scalar value, const ins_gps15_scalar argument)
 {
-    const ins_gps15_scalar t0 = params->earth_rate*sin(params->latitude);
-    const ins_gps15_scalar t1 = tan(params->latitude);
-    const ins_gps15_scalar t2 = 1.0/(params->prime_vertical_radius + params->height);
-    const ins_gps15_scalar t3 = t2*params->velocity_east;
-    const ins_gps15_scalar t4 = t1*t3;
-    const ins_gps15_scalar t5 = t0 + t4;
-    const ins_gps15_scalar t6 = cos(params->latitude);
-    const ins_gps15_scalar t7 = params->earth_rate*t6;
-    const ins_gps15_scalar t8 = t3 + t7;
-    const ins_gps15_scalar t9 = params->meridian_radius + params->height;
-    const ins_gps15_scalar t10 = 1.0/t9;
-    const ins_gps15_scalar t11 = params->height*params->height;
-    const ins_gps15_scalar t12 = 2*params->height;
-    const ins_gps15_scalar t13 = 1.0/(params->meridian_radius*params->meridian_radius + params->meridian_radius*t12 + t11);
-    const ins_gps15_scalar t14 = t13*params->velocity_north;
-    const ins_gps15_scalar t15 = -params->c11;
-    const ins_gps15_scalar t16 = -params->c12;
-    const ins_gps15_scalar t17 = -params->c13;
-    const ins_gps15_scalar t18 = t10*params->velocity_north;
-    const ins_gps15_scalar t19 = -t18;
-    const ins_gps15_scalar t20 = 1.0/(params->prime_vertical_radius*params->prime_vertical_radius + params->prime_vertical_radius*t12 + t11);
-    const ins_gps15_scalar t21 = t20*params->velocity_east;
-    const ins_gps15_scalar t22 = -params->c21;
-    const ins_gps15_scalar t23 = -params->c22;
-    const ins_gps15_scalar t24 = -params->c23;
-    const ins_gps15_scalar t25 = t1*t2;
-    const ins_gps15_scalar t26 = 1.0/(t6*t6);
-    const ins_gps15_scalar t27 = t26*t3;
-    const ins_gps15_scalar t28 = t1*t21;
-    const ins_gps15_scalar t29 = -params->c31;
-    const ins_gps15_scalar t30 = -params->c32;
-    const ins_gps15_scalar t31 = -params->c33;
-    const ins_gps15_scalar t32 = 2*t0;
-    const ins_gps15_scalar t33 = 2*t7;
-    const ins_gps15_scalar t34 = params->velocity_east*params->velocity_east;
-    const ins_gps15_scalar t35 = t20*t34;
-    const ins_gps15_scalar t36 = 1.0/t6;
-    const ins_gps15_scalar t37 = params->gyro_angle_random_walk*params->gyro_angle_random_walk;
-    const ins_gps15_scalar t38 = params->accel_velocity_random_walk*params->accel_velocity_random_walk;
-    m->F[0] = t5;
-    m->F[1] = -t8;
-    m->F[2] = -t10;
-    m->F[3] = t14;
-    m->F[4] = t15;
-    m->F[5] = t16;
-    m->F[6] = t17;
-    m->F[7] = -t5;
-    m->F[8] = t19;
-    m->F[9] = t2;
-    m->F[10] = -t0;
-    m->F[11] = -t21;
-    m->F[12] = t22;
-    m->F[13] = t23;
-    m->F[14] = t24;
-    m->F[15] = t8;
-    m->F[16] = t18;
-    m->F[17] = t25;
-    m->F[18] = t27 + t7;
-    m->F[19] = -t28;
-    m->F[20] = t29;
-    m->F[21] = t30;
-    m->F[22] = t31;
-    m->F[23] = -params->specific_force_up;
-    m->F[24] = params->specific_force_north;
-    m->F[25] = -t2*params->velocity_up + t25*params->velocity_north;
-    m->F[26] = t32 + t4;
-    m->F[27] = -t3 - t33;
-    m->F[28] = t27*params->velocity_north + t32*params->velocity_up + t33*params->velocity_north;
-    m->F[29] = t20*params->velocity_east*params->velocity_up - t28*params->velocity_north;
-    m->F[30] = params->c11;
-    m->F[31] = params->c12;
-    m->F[32] = params->c13;
-    m->F[33] = params->specific_force_up;
-    m->F[34] = -params->specific_force_east;
-    m->F[35] = -t32 - 2*t4;
-    m->F[36] = -t10*params->velocity_up;
-    m->F[37] = t19;
-    m->F[38] = -t2*t26*t34 - t33*params->velocity_east;
-    m->F[39] = t1*t35 + t14*params->velocity_up;
-    m->F[40] = params->c21;
-    m->F[41] = params->c22;
-    m->F[42] = params->c23;
-    m->F[43] = -params->specific_force_north;
-    m->F[44] = params->specific_force_east;
-    m->F[45] = 2*t3 + t33;
-    m->F[46] = 2*t18;
-    m->F[47] = -t32*params->velocity_east;
-    m->F[48] = 2*params->gravity*t2 - t13*params->velocity_north*params->velocity_north - t35;
-    m->F[49] = params->c31;
-    m->F[50] = params->c32;
-    m->F[51] = params->c33;
-    m->F[52] = t10;
-    m->F[53] = -t14;
-    m->F[54] = t2*t36;
-    m->F[55] = t36*t4;
-    m->F[56] = -t21*t36;
-    m->F[57] = 1;
-    m->G[0] = t15;
-    m->G[1] = t16;
-    m->G[2] = t17;
-    m->G[3] = t22;
-    m->G[4] = t23;
-    m->G[5] = t24;
-    m->G[6] = t29;
-    m->G[7] = t30;
-    m->G[8] = t31;
-    m->G[9] = params->c11;
-    m->G[10] = params->c12;
-    m->G[11] = params->c13;
-    m->G[12] = params->c21;
-    m->G[13] = params->c22;
-    m->G[14] = params->c23;
-    m->G[15] = params->c31;
-    m->G[16] = params->c32;
-    m->G[17] = params->c33;
-    m->H[0] = 1;
-    m->H[1] = 1;
-    m->H[2] = 1;
-    m->H[3] = t9;
-    m->H[4] = params->prime_vertical_radius*t6 + params->height*t6;
-    m->H[5] = 1;
-    m->q[0] = t37;
-    m->q[1] = t37;
-    m->q[2] = t37;
-    m->q[3] = t38;
-    m->q[4] = t38;
-    m->q[5] = t38;
-    m->r[0] = params->gps_velocity_sigma_east*params->gps_velocity_sigma_east;
-    m->r[1] = params->gps_velocity_sigma_north*params->gps_velocity_sigma_north;
-    m->r[2] = params->gps_velocity_sigma_up*params->gps_velocity_sigma_up;
-    m->r[3] = params->gps_position_sigma_north*params->gps_position_sigma_north;
-    m->r[4] = params->gps_position_sigma_east*params->gps_position_sigma_east;
-    m->r[5] = params->gps_position_sigma_up*params->gps_position_sigma_up;
+    const ins_gps15_scalar size = fabs(argument) > 1.0 ? fabs(argument) : 1.0;
+    return fabs(value) <= 4 * DBL_EPSILON * size;
+}
+
+int ins_gps15_matrices_evaluate(const ins_gps15_params *params, ins_gps15_matrices *m)
+{
+    int e;
+    ins_gps15_scalar check = 0.0;
+    if (pole(cos(params->latitude), params->latitude)) {
+        return INS_GPS15_ERR_NONFINITE; /* cos(latitude) = 0: singular operating point */
+    }
+    {
+        const ins_gps15_scalar t0 = params->earth_rate*sin(params->latitude);
+        const ins_gps15_scalar t1 = tan(params->latitude);
+        const ins_gps15_scalar t2 = 1.0/(params->prime_vertical_radius + params->height);
+        const ins_gps15_scalar t3 = t2*params->velocity_east;
+        const ins_gps15_scalar t4 = t1*t3;
+        const ins_gps15_scalar t5 = t0 + t4;
+        const ins_gps15_scalar t6 = cos(params->latitude);
+        const ins_gps15_scalar t7 = params->earth_rate*t6;
+        const ins_gps15_scalar t8 = t3 + t7;
+        const ins_gps15_scalar t9 = params->meridian_radius + params->height;
+        const ins_gps15_scalar t10 = 1.0/t9;
+        const ins_gps15_scalar t11 = params->height*params->height;
+        const ins_gps15_scalar t12 = 2*params->height;
+        const ins_gps15_scalar t13 = 1.0/(params->meridian_radius*params->meridian_radius + params->meridian_radius*t12 + t11);
+        const ins_gps15_scalar t14 = t13*params->velocity_north;
+        const ins_gps15_scalar t15 = -params->c11;
+        const ins_gps15_scalar t16 = -params->c12;
+        const ins_gps15_scalar t17 = -params->c13;
+        const ins_gps15_scalar t18 = t10*params->velocity_north;
+        const ins_gps15_scalar t19 = -t18;
+        const ins_gps15_scalar t20 = 1.0/(params->prime_vertical_radius*params->prime_vertical_radius + params->prime_vertical_radius*t12 + t11);
+        const ins_gps15_scalar t21 = t20*params->velocity_east;
+        const ins_gps15_scalar t22 = -params->c21;
+        const ins_gps15_scalar t23 = -params->c22;
+        const ins_gps15_scalar t24 = -params->c23;
+        const ins_gps15_scalar t25 = t1*t2;
+        const ins_gps15_scalar t26 = 1.0/(t6*t6);
+        const ins_gps15_scalar t27 = t26*t3;
+        const ins_gps15_scalar t28 = t1*t21;
+        const ins_gps15_scalar t29 = -params->c31;
+        const ins_gps15_scalar t30 = -params->c32;
+        const ins_gps15_scalar t31 = -params->c33;
+        const ins_gps15_scalar t32 = 2*t0;
+        const ins_gps15_scalar t33 = 2*t7;
+        const ins_gps15_scalar t34 = params->velocity_east*params->velocity_east;
+        const ins_gps15_scalar t35 = t20*t34;
+        const ins_gps15_scalar t36 = 1.0/t6;
+        const ins_gps15_scalar t37 = params->gyro_angle_random_walk*params->gyro_angle_random_walk;
+        const ins_gps15_scalar t38 = params->accel_velocity_random_walk*params->accel_velocity_random_walk;
+        m->F[0] = t5;
+        m->F[1] = -t8;
+        m->F[2] = -t10;
+        m->F[3] = t14;
+        m->F[4] = t15;
+        m->F[5] = t16;
+        m->F[6] = t17;
+        m->F[7] = -t5;
+        m->F[8] = t19;
+        m->F[9] = t2;
+        m->F[10] = -t0;
+        m->F[11] = -t21;
+        m->F[12] = t22;
+        m->F[13] = t23;
+        m->F[14] = t24;
+        m->F[15] = t8;
+        m->F[16] = t18;
+        m->F[17] = t25;
+        m->F[18] = t27 + t7;
+        m->F[19] = -t28;
+        m->F[20] = t29;
+        m->F[21] = t30;
+        m->F[22] = t31;
+        m->F[23] = -params->specific_force_up;
+        m->F[24] = params->specific_force_north;
+        m->F[25] = -t2*params->velocity_up + t25*params->velocity_north;
+        m->F[26] = t32 + t4;
+        m->F[27] = -t3 - t33;
+        m->F[28] = t27*params->velocity_north + t32*params->velocity_up + t33*params->velocity_north;
+        m->F[29] = t20*params->velocity_east*params->velocity_up - t28*params->velocity_north;
+        m->F[30] = params->c11;
+        m->F[31] = params->c12;
+        m->F[32] = params->c13;
+        m->F[33] = params->specific_force_up;
+        m->F[34] = -params->specific_force_east;
+        m->F[35] = -t32 - 2*t4;
+        m->F[36] = -t10*params->velocity_up;
+        m->F[37] = t19;
+        m->F[38] = -t2*t26*t34 - t33*params->velocity_east;
+        m->F[39] = t1*t35 + t14*params->velocity_up;
+        m->F[40] = params->c21;
+        m->F[41] = params->c22;
+        m->F[42] = params->c23;
+        m->F[43] = -params->specific_force_north;
+        m->F[44] = params->specific_force_east;
+        m->F[45] = 2*t3 + t33;
+        m->F[46] = 2*t18;
+        m->F[47] = -t32*params->velocity_east;
+        m->F[48] = 2*params->gravity*t2 - t13*params->velocity_north*params->velocity_north - t35;
+        m->F[49] = params->c31;
+        m->F[50] = params->c32;
+        m->F[51] = params->c33;
+        m->F[52] = t10;
+        m->F[53] = -t14;
+        m->F[54] = t2*t36;
+        m->F[55] = t36*t4;
+        m->F[56] = -t21*t36;
+        m->F[57] = 1;
+        m->G[0] = t15;
+        m->G[1] = t16;
+        m->G[2] = t17;
+        m->G[3] = t22;
+        m->G[4] = t23;
+        m->G[5] = t24;
+        m->G[6] = t29;
+        m->G[7] = t30;
+        m->G[8] = t31;
+        m->G[9] = params->c11;
+        m->G[10] = params->c12;
+        m->G[11] = params->c13;
+        m->G[12] = params->c21;
+        m->G[13] = params->c22;
+        m->G[14] = params->c23;
+        m->G[15] = params->c31;
+        m->G[16] = params->c32;
+        m->G[17] = params->c33;
+        m->H[0] = 1;
+        m->H[1] = 1;
+        m->H[2] = 1;
+        m->H[3] = t9;
+        m->H[4] = params->prime_vertical_radius*t6 + params->height*t6;
+        m->H[5] = 1;
+        m->q[0] = t37;
+        m->q[1] = t37;
+        m->q[2] = t37;
+        m->q[3] = t38;
+        m->q[4] = t38;
+        m->q[5] = t38;
+        m->r[0] = params->gps_velocity_sigma_east*params->gps_velocity_sigma_east;
+        m->r[1] = params->gps_velocity_sigma_north*params->gps_velocity_sigma_north;
+        m->r[2] = params->gps_velocity_sigma_up*params->gps_velocity_sigma_up;
+        m->r[3] = params->gps_position_sigma_north*params->gps_position_sigma_north;
+        m->r[4] = params->gps_position_sigma_east*params->gps_position_sigma_east;
+        m->r[5] = params->gps_position_sigma_up*params->gps_position_sigma_up;
+    }
+    for (e = 0; e < INS_GPS15_NNZ_F; ++e) {
+        check += m->F[e] - m->F[e];
+    }
+    for (e = 0; e < INS_GPS15_NNZ_G; ++e) {
+        check += m->G[e] - m->G[e];
+    }
+    for (e = 0; e < INS_GPS15_NNZ_H; ++e) {
+        check += m->H[e] - m->H[e];
+    }
+    for (e = 0; e < INS_GPS15_N_NOISES; ++e) {
+        check += m->q[e] - m->q[e];
+    }
+    for (e = 0; e < INS_GPS15_N_MEASUREMENTS; ++e) {
+        check += m->r[e] - m->r[e];
+    }
+    return (check != 0.0) ? INS_GPS15_ERR_NONFINITE : INS_GPS15_OK;
 }
 
 int ins_gps15_discretize(const ins_gps15_matrices *m, ins_gps15_scalar T, ins_gps15_transition *t, ins_gps15_workspace *work)
 {
     ins_gps15_discretize_scratch *w = &work->discretize;
-    int i, j, k, e, c;
+    int i, j, e, c;
+    int k, halvings, d, changed;
+    ins_gps15_scalar norm;
     ins_gps15_scalar check = 0.0;
     if (!isfinite(T)) {
         return INS_GPS15_ERR_NONFINITE;
@@ -245,36 +284,118 @@ int ins_gps15_discretize(const ins_gps15_matrices *m, ins_gps15_scalar T, ins_gp
             return INS_GPS15_ERR_NOT_POSITIVE;
         }
     }
+    /* Scaling and squaring (modelgen/discretization.py): theta = ||F||_D h
+       with D from 8 Jacobi sweeps of Osborne's balancing in powers of two,
+       h = T / 2^s for the smallest s with theta <= SERIES_RANGE (Taylor
+       remainder below the unit roundoff); the series over h, then s doublings
+       Phi(2h) = Phi(h)^2 and S(2h) = (S(h) + Phi(h) S(h)) / 2, where
+       h S(h) = int_0^h e^{F s} ds. */
     for (i = 0; i < N; ++i) {
-        for (j = 0; j < N; ++j) {
-            const ins_gps15_scalar delta = (i == j) ? 1.0 : 0.0;
-            w->A[i][j] = delta;   /* (F T)^k / k! */
-            t->Phi[i][j] = delta; /* sum of the terms, eq. (10) */
-            w->S[i][j] = delta;   /* sum of the terms / (k + 1), eq. (11) */
+        w->scale[i] = 1.0;
+    }
+    for (k = 0, changed = 1; k < 8 && changed; ++k) {
+        changed = 0; /* a sweep that changes no scale is a fixed point: stop */
+        for (i = 0; i < N; ++i) {
+            w->row_sum[i] = 0.0;
+            w->col_sum[i] = 0.0;
+        }
+        for (i = 0; i < N; ++i) {
+            for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
+                j = ins_gps15_F_col[c];
+                if (j != i) {
+                    const ins_gps15_scalar v = fabs(m->F[c]) * w->scale[j] / w->scale[i];
+                    w->row_sum[i] += v;
+                    w->col_sum[j] += v;
+                }
+            }
+        }
+        for (i = 0; i < N; ++i) {
+            int step = 0, exponent, column_exponent;
+            if (w->row_sum[i] > 0.0 && w->col_sum[i] > 0.0) {
+                (void)frexp(w->row_sum[i], &step);
+                (void)frexp(w->col_sum[i], &column_exponent);
+                step -= column_exponent; /* log2(row / column) within 1 */
+                step = (step >= 0) ? step / 2 : -((1 - step) / 2); /* floor(step / 2) */
+                step = step > 8 ? 8 : (step < -8 ? -8 : step);
+            } else if (w->col_sum[i] > 0.0) {
+                step = -8; /* drives others, driven by none */
+            } else if (w->row_sum[i] > 0.0) {
+                step = 8; /* driven, drives none */
+            }
+            (void)frexp(w->scale[i], &exponent);
+            exponent += step - 1;
+            exponent = exponent > 40 ? 40 : (exponent < -40 ? -40 : exponent);
+            if (ldexp(1.0, exponent) != w->scale[i]) {
+                changed = 1;
+            }
+            w->scale[i] = ldexp(1.0, exponent);
         }
     }
-    for (k = 1; k <= INS_GPS15_TAYLOR_ORDER; ++k) {
-        const ins_gps15_scalar h = T / (ins_gps15_scalar)k;
+    norm = 0.0;
+    for (i = 0; i < N; ++i) {
+        ins_gps15_scalar v = 0.0;
+        for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
+            v += fabs(m->F[c]) * w->scale[ins_gps15_F_col[c]] / w->scale[i];
+        }
+        norm = v > norm ? v : norm;
+    }
+    for (halvings = 0; !(norm * ldexp(T, -halvings) <= SERIES_RANGE); ++halvings) {
+        if (halvings == MAX_DOUBLINGS) {
+            return INS_GPS15_ERR_NONFINITE; /* e^{F T} is not representable */
+        }
+    }
+    {
+        const ins_gps15_scalar h = ldexp(T, -halvings);
+        for (i = 0; i < N; ++i) {
+            for (j = 0; j < N; ++j) {
+                const ins_gps15_scalar delta = (i == j) ? 1.0 : 0.0;
+                w->A[i][j] = delta;   /* (F h)^k / k! */
+                t->Phi[i][j] = delta; /* sum of the terms, eq. (10) */
+                w->S[i][j] = delta;   /* sum of the terms / (k + 1), eq. (11) */
+            }
+        }
+        for (k = 1; k <= INS_GPS15_TAYLOR_ORDER; ++k) {
+            const ins_gps15_scalar hk = h / (ins_gps15_scalar)k;
+            for (e = 0; e < N_ACTIVE; ++e) {
+                ins_gps15_scalar v = 0.0;
+                i = active_row[e];
+                j = active_col[e];
+                for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
+                    v += m->F[c] * w->A[ins_gps15_F_col[c]][j];
+                }
+                w->B[i][j] = v * hk;
+            }
+            for (e = 0; e < N_ACTIVE; ++e) {
+                i = active_row[e];
+                j = active_col[e];
+                w->A[i][j] = w->B[i][j];
+                t->Phi[i][j] += w->B[i][j];
+                w->S[i][j] += w->B[i][j] / (ins_gps15_scalar)(k + 1);
+            }
+            if (k == 1) {
+                for (e = 0; e < N_UNIT_ROWS; ++e) {
+                    w->A[unit_row[e]][unit_row[e]] = 0.0; /* (F h)^k e_i = 0 for k >= 1 */
+                }
+            }
+        }
+    }
+    for (d = 0; d < halvings; ++d) {
         for (e = 0; e < N_ACTIVE; ++e) {
-            ins_gps15_scalar s = 0.0;
+            ins_gps15_scalar phi = 0.0, psi = 0.0;
             i = active_row[e];
             j = active_col[e];
-            for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
-                s += m->F[c] * w->A[ins_gps15_F_col[c]][j];
+            for (c = 0; c < N; ++c) {
+                phi += t->Phi[i][c] * t->Phi[c][j];
+                psi += t->Phi[i][c] * w->S[c][j];
             }
-            w->B[i][j] = s * h;
+            w->B[i][j] = phi;
+            w->A[i][j] = 0.5 * (w->S[i][j] + psi);
         }
         for (e = 0; e < N_ACTIVE; ++e) {
             i = active_row[e];
             j = active_col[e];
-            w->A[i][j] = w->B[i][j];
-            t->Phi[i][j] += w->B[i][j];
-            w->S[i][j] += w->B[i][j] / (ins_gps15_scalar)(k + 1);
-        }
-        if (k == 1) {
-            for (e = 0; e < N_UNIT_ROWS; ++e) {
-                w->A[unit_row[e]][unit_row[e]] = 0.0; /* (F T)^k e_i = 0 for k >= 1 */
-            }
+            t->Phi[i][j] = w->B[i][j];
+            w->S[i][j] = w->A[i][j];
         }
     }
     for (e = 0; e < N_ACTIVE; ++e) {
@@ -782,7 +903,7 @@ int ins_gps15_set_covariance(ins_gps15_filter *f, const ins_gps15_scalar P[N * N
     int i, j, k;
     ins_gps15_scalar check = 0.0;
     for (i = 0; i < N; ++i) {
-        for (j = i; j < N; ++j) {
+        for (j = 0; j < N; ++j) {
             check += P[i * N + j] - P[i * N + j];
         }
     }
@@ -790,8 +911,27 @@ int ins_gps15_set_covariance(ins_gps15_filter *f, const ins_gps15_scalar P[N * N
         return INS_GPS15_ERR_NONFINITE;
     }
     /* factored only to test that P is positive semidefinite (U in M, D in xn) */
+    /* The contract (README, "Generated code"), tol = 16 N eps: P_ii >= 0,
+       |P_ij - P_ji| <= tol sqrt(P_ii P_jj) and |P_ij| <= sqrt(P_ii P_jj) (1 + tol),
+       so that a zero variance carries no correlation. */
+    for (i = 0; i < N; ++i) {
+        if (!(P[i * N + i] >= 0.0)) {
+            return INS_GPS15_ERR_NOT_POSITIVE;
+        }
+    }
+    for (i = 0; i < N; ++i) {
+        for (j = i + 1; j < N; ++j) {
+            const ins_gps15_scalar bound = sqrt(P[i * N + i] * P[j * N + j]);
+            if (fabs(P[i * N + j] - P[j * N + i]) > (16 * N * DBL_EPSILON) * bound
+                || fabs(P[i * N + j]) > bound * (1.0 + (16 * N * DBL_EPSILON))) {
+                return INS_GPS15_ERR_NOT_POSITIVE;
+            }
+        }
+    }
     /* P = U D U^T column by column from the last one; a pivot that rounding
-       made slightly negative (within 16 N eps of the diagonal) is zero. */
+       made slightly negative (within 16 N eps of the diagonal) is zero, and
+       then what is left of its column must be zero too (within the same
+       tolerance), else P is indefinite. */
     for (j = N - 1; j >= 0; --j) {
         ins_gps15_scalar pivot = P[j * N + j];
         for (k = j + 1; k < N; ++k) {
@@ -808,6 +948,9 @@ int ins_gps15_set_covariance(ins_gps15_filter *f, const ins_gps15_scalar P[N * N
             ins_gps15_scalar s = P[i * N + j];
             for (k = j + 1; k < N; ++k) {
                 s -= w->xn[k] * w->M[i][k] * w->M[j][k];
+            }
+            if (!(pivot > 0.0) && fabs(s) > (16 * N * DBL_EPSILON) * sqrt(P[i * N + i] * P[j * N + j])) {
+                return INS_GPS15_ERR_NOT_POSITIVE;
             }
             w->M[i][j] = (pivot > 0.0) ? s / pivot : 0.0;
             check += w->M[i][j] - w->M[i][j];

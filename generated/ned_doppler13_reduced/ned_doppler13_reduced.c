@@ -8,7 +8,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 73 operations after CSE
- *   discretize: 7280 mul + 6513 add = 13793 flops
+ *   discretize: 7900 mul + 7095 add = 14995 flops
+ *   discretize, each doubling (long steps): 1971 mul + 1898 add = 3869 flops
  *   predict (C): 1330 mul + 1199 add = 2529 flops
  *   predict (Python): 2054 mul + 1989 add = 4043 flops
  *   predict (dense, for comparison): 4407 mul + 4225 add = 8632 flops
@@ -39,6 +40,11 @@ static const unsigned char F_row_start[N + 1] = { 0, 8, 15, 23, 28, 33, 34, 36, 
 #define N_ACTIVE 73
 static const unsigned char active_row[N_ACTIVE] = { 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 9, 10 };
 static const unsigned char active_col[N_ACTIVE] = { 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 9, 10 };
+/* Halvings of T that discretize may take before it gives up (T / 2^64), and the
+   largest ||F h||_D for which the Taylor remainder of order TAYLOR_ORDER is below
+   the unit roundoff (modelgen.discretization.series_range). */
+#define MAX_DOUBLINGS 64
+#define SERIES_RANGE 0.11483164143919657
 /* Rows of Phi that are exactly e_i (states with an empty row of F). */
 #define N_UNIT_ROWS 4
 static const unsigned char unit_row[N_UNIT_ROWS] = { 7, 8, 11, 12 };
@@ -83,90 +89,123 @@ void ned_doppler13_reduced_default_params(ned_doppler13_reduced_params *params)
     params->doppler_noise_sigma_east = 0.0;
 }
 
-void ned_doppler13_reduced_matrices_evaluate(const ned_doppler13_reduced_params *params, ned_doppler13_reduced_matrices *m)
+/* 1 when a denominator (cos of a tan or sec, ...) is zero within its rounding
+   error: at latitude 90 degrees cos is 6e-17, not 0, and tan a finite 1.6e16. */
+static int pole(const ned_doppler13_reduced_scalar value, const ned_doppler13_reduced_scalar argument)
 {
-    const ned_doppler13_reduced_scalar t0 = params->earth_rate*sin(params->latitude);
-    const ned_doppler13_reduced_scalar t1 = tan(params->latitude);
-    const ned_doppler13_reduced_scalar t2 = 1.0/params->earth_radius;
-    const ned_doppler13_reduced_scalar t3 = params->velocity_east*t2;
-    const ned_doppler13_reduced_scalar t4 = t1*t3;
-    const ned_doppler13_reduced_scalar t5 = t0 + t4;
-    const ned_doppler13_reduced_scalar t6 = params->velocity_north*t2;
-    const ned_doppler13_reduced_scalar t7 = cos(params->latitude);
-    const ned_doppler13_reduced_scalar t8 = params->earth_rate*t7;
-    const ned_doppler13_reduced_scalar t9 = t3 + t8;
-    const ned_doppler13_reduced_scalar t10 = 1.0/(t7*t7);
-    const ned_doppler13_reduced_scalar t11 = params->velocity_down*t2;
-    const ned_doppler13_reduced_scalar t12 = 2*t0;
-    const ned_doppler13_reduced_scalar t13 = 2*t8;
-    const ned_doppler13_reduced_scalar t14 = 1.0/t7;
-    m->F[0] = -t5;
-    m->F[1] = t6;
-    m->F[2] = t2;
-    m->F[3] = -t0;
-    m->F[4] = params->c11;
-    m->F[5] = params->c12;
-    m->F[6] = params->c11;
-    m->F[7] = params->c12;
-    m->F[8] = t5;
-    m->F[9] = t9;
-    m->F[10] = -t2;
-    m->F[11] = params->c21;
-    m->F[12] = params->c22;
-    m->F[13] = params->c21;
-    m->F[14] = params->c22;
-    m->F[15] = -t6;
-    m->F[16] = -t9;
-    m->F[17] = -t1*t2;
-    m->F[18] = -t10*t3 - t8;
-    m->F[19] = params->c31;
-    m->F[20] = params->c32;
-    m->F[21] = params->c31;
-    m->F[22] = params->c32;
-    m->F[23] = -params->specific_force_down;
-    m->F[24] = params->specific_force_east;
-    m->F[25] = t11;
-    m->F[26] = -t12 - 2*t4;
-    m->F[27] = -params->velocity_east*params->velocity_east*t10*t2 - params->velocity_east*t13;
-    m->F[28] = params->specific_force_down;
-    m->F[29] = -params->specific_force_north;
-    m->F[30] = t12 + t4;
-    m->F[31] = t1*t6 + t11;
-    m->F[32] = -params->velocity_down*t12 + params->velocity_east*t10*t6 + params->velocity_north*t13;
-    m->F[33] = t2;
-    m->F[34] = t14*t2;
-    m->F[35] = t14*t4;
-    m->F[36] = -params->gyro_markov_rate_x;
-    m->F[37] = -params->gyro_markov_rate_y;
-    m->G[0] = params->c13;
-    m->G[1] = params->c23;
-    m->G[2] = params->c33;
-    m->G[3] = params->c11;
-    m->G[4] = params->c12;
-    m->G[5] = params->c13;
-    m->G[6] = params->c21;
-    m->G[7] = params->c22;
-    m->G[8] = params->c23;
-    m->G[9] = 1;
-    m->G[10] = 1;
-    m->H[0] = 1;
-    m->H[1] = -1;
-    m->H[2] = 1;
-    m->H[3] = -1;
-    m->q[0] = 2*params->gyro_markov_rate_x*params->gyro_markov_sigma_x*params->gyro_markov_sigma_x;
-    m->q[1] = 2*params->gyro_markov_rate_y*params->gyro_markov_sigma_y*params->gyro_markov_sigma_y;
-    m->q[2] = 2*params->gyro_markov_sigma_z*params->gyro_markov_sigma_z/params->gyro_markov_rate_z;
-    m->q[3] = 2*params->accel_markov_sigma_x*params->accel_markov_sigma_x/params->accel_markov_rate_x;
-    m->q[4] = 2*params->accel_markov_sigma_y*params->accel_markov_sigma_y/params->accel_markov_rate_y;
-    m->q[5] = 2*params->accel_markov_sigma_z*params->accel_markov_sigma_z/params->accel_markov_rate_z;
-    m->r[0] = params->doppler_noise_sigma_north*params->doppler_noise_sigma_north;
-    m->r[1] = params->doppler_noise_sigma_east*params->doppler_noise_sigma_east;
+    const ned_doppler13_reduced_scalar size = fabs(argument) > 1.0 ? fabs(argument) : 1.0;
+    return fabs(value) <= 4 * DBL_EPSILON * size;
+}
+
+int ned_doppler13_reduced_matrices_evaluate(const ned_doppler13_reduced_params *params, ned_doppler13_reduced_matrices *m)
+{
+    int e;
+    ned_doppler13_reduced_scalar check = 0.0;
+    if (pole(cos(params->latitude), params->latitude)) {
+        return NED_DOPPLER13_REDUCED_ERR_NONFINITE; /* cos(latitude) = 0: singular operating point */
+    }
+    {
+        const ned_doppler13_reduced_scalar t0 = params->earth_rate*sin(params->latitude);
+        const ned_doppler13_reduced_scalar t1 = tan(params->latitude);
+        const ned_doppler13_reduced_scalar t2 = 1.0/params->earth_radius;
+        const ned_doppler13_reduced_scalar t3 = params->velocity_east*t2;
+        const ned_doppler13_reduced_scalar t4 = t1*t3;
+        const ned_doppler13_reduced_scalar t5 = t0 + t4;
+        const ned_doppler13_reduced_scalar t6 = params->velocity_north*t2;
+        const ned_doppler13_reduced_scalar t7 = cos(params->latitude);
+        const ned_doppler13_reduced_scalar t8 = params->earth_rate*t7;
+        const ned_doppler13_reduced_scalar t9 = t3 + t8;
+        const ned_doppler13_reduced_scalar t10 = 1.0/(t7*t7);
+        const ned_doppler13_reduced_scalar t11 = params->velocity_down*t2;
+        const ned_doppler13_reduced_scalar t12 = 2*t0;
+        const ned_doppler13_reduced_scalar t13 = 2*t8;
+        const ned_doppler13_reduced_scalar t14 = 1.0/t7;
+        m->F[0] = -t5;
+        m->F[1] = t6;
+        m->F[2] = t2;
+        m->F[3] = -t0;
+        m->F[4] = params->c11;
+        m->F[5] = params->c12;
+        m->F[6] = params->c11;
+        m->F[7] = params->c12;
+        m->F[8] = t5;
+        m->F[9] = t9;
+        m->F[10] = -t2;
+        m->F[11] = params->c21;
+        m->F[12] = params->c22;
+        m->F[13] = params->c21;
+        m->F[14] = params->c22;
+        m->F[15] = -t6;
+        m->F[16] = -t9;
+        m->F[17] = -t1*t2;
+        m->F[18] = -t10*t3 - t8;
+        m->F[19] = params->c31;
+        m->F[20] = params->c32;
+        m->F[21] = params->c31;
+        m->F[22] = params->c32;
+        m->F[23] = -params->specific_force_down;
+        m->F[24] = params->specific_force_east;
+        m->F[25] = t11;
+        m->F[26] = -t12 - 2*t4;
+        m->F[27] = -params->velocity_east*params->velocity_east*t10*t2 - params->velocity_east*t13;
+        m->F[28] = params->specific_force_down;
+        m->F[29] = -params->specific_force_north;
+        m->F[30] = t12 + t4;
+        m->F[31] = t1*t6 + t11;
+        m->F[32] = -params->velocity_down*t12 + params->velocity_east*t10*t6 + params->velocity_north*t13;
+        m->F[33] = t2;
+        m->F[34] = t14*t2;
+        m->F[35] = t14*t4;
+        m->F[36] = -params->gyro_markov_rate_x;
+        m->F[37] = -params->gyro_markov_rate_y;
+        m->G[0] = params->c13;
+        m->G[1] = params->c23;
+        m->G[2] = params->c33;
+        m->G[3] = params->c11;
+        m->G[4] = params->c12;
+        m->G[5] = params->c13;
+        m->G[6] = params->c21;
+        m->G[7] = params->c22;
+        m->G[8] = params->c23;
+        m->G[9] = 1;
+        m->G[10] = 1;
+        m->H[0] = 1;
+        m->H[1] = -1;
+        m->H[2] = 1;
+        m->H[3] = -1;
+        m->q[0] = 2*params->gyro_markov_rate_x*params->gyro_markov_sigma_x*params->gyro_markov_sigma_x;
+        m->q[1] = 2*params->gyro_markov_rate_y*params->gyro_markov_sigma_y*params->gyro_markov_sigma_y;
+        m->q[2] = 2*params->gyro_markov_sigma_z*params->gyro_markov_sigma_z/params->gyro_markov_rate_z;
+        m->q[3] = 2*params->accel_markov_sigma_x*params->accel_markov_sigma_x/params->accel_markov_rate_x;
+        m->q[4] = 2*params->accel_markov_sigma_y*params->accel_markov_sigma_y/params->accel_markov_rate_y;
+        m->q[5] = 2*params->accel_markov_sigma_z*params->accel_markov_sigma_z/params->accel_markov_rate_z;
+        m->r[0] = params->doppler_noise_sigma_north*params->doppler_noise_sigma_north;
+        m->r[1] = params->doppler_noise_sigma_east*params->doppler_noise_sigma_east;
+    }
+    for (e = 0; e < NED_DOPPLER13_REDUCED_NNZ_F; ++e) {
+        check += m->F[e] - m->F[e];
+    }
+    for (e = 0; e < NED_DOPPLER13_REDUCED_NNZ_G; ++e) {
+        check += m->G[e] - m->G[e];
+    }
+    for (e = 0; e < NED_DOPPLER13_REDUCED_NNZ_H; ++e) {
+        check += m->H[e] - m->H[e];
+    }
+    for (e = 0; e < NED_DOPPLER13_REDUCED_N_NOISES; ++e) {
+        check += m->q[e] - m->q[e];
+    }
+    for (e = 0; e < NED_DOPPLER13_REDUCED_N_MEASUREMENTS; ++e) {
+        check += m->r[e] - m->r[e];
+    }
+    return (check != 0.0) ? NED_DOPPLER13_REDUCED_ERR_NONFINITE : NED_DOPPLER13_REDUCED_OK;
 }
 
 int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *m, ned_doppler13_reduced_scalar T, ned_doppler13_reduced_transition *t, ned_doppler13_reduced_workspace *work)
 {
     ned_doppler13_reduced_discretize_scratch *w = &work->discretize;
-    int i, j, k, e, c;
+    int i, j, e, c;
+    int k, halvings, d, changed;
+    ned_doppler13_reduced_scalar norm;
     ned_doppler13_reduced_scalar check = 0.0;
     if (!isfinite(T)) {
         return NED_DOPPLER13_REDUCED_ERR_NONFINITE;
@@ -191,36 +230,118 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *m, ne
             return NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE;
         }
     }
+    /* Scaling and squaring (modelgen/discretization.py): theta = ||F||_D h
+       with D from 8 Jacobi sweeps of Osborne's balancing in powers of two,
+       h = T / 2^s for the smallest s with theta <= SERIES_RANGE (Taylor
+       remainder below the unit roundoff); the series over h, then s doublings
+       Phi(2h) = Phi(h)^2 and S(2h) = (S(h) + Phi(h) S(h)) / 2, where
+       h S(h) = int_0^h e^{F s} ds. */
     for (i = 0; i < N; ++i) {
-        for (j = 0; j < N; ++j) {
-            const ned_doppler13_reduced_scalar delta = (i == j) ? 1.0 : 0.0;
-            w->A[i][j] = delta;   /* (F T)^k / k! */
-            t->Phi[i][j] = delta; /* sum of the terms, eq. (10) */
-            w->S[i][j] = delta;   /* sum of the terms / (k + 1), eq. (11) */
+        w->scale[i] = 1.0;
+    }
+    for (k = 0, changed = 1; k < 8 && changed; ++k) {
+        changed = 0; /* a sweep that changes no scale is a fixed point: stop */
+        for (i = 0; i < N; ++i) {
+            w->row_sum[i] = 0.0;
+            w->col_sum[i] = 0.0;
+        }
+        for (i = 0; i < N; ++i) {
+            for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
+                j = ned_doppler13_reduced_F_col[c];
+                if (j != i) {
+                    const ned_doppler13_reduced_scalar v = fabs(m->F[c]) * w->scale[j] / w->scale[i];
+                    w->row_sum[i] += v;
+                    w->col_sum[j] += v;
+                }
+            }
+        }
+        for (i = 0; i < N; ++i) {
+            int step = 0, exponent, column_exponent;
+            if (w->row_sum[i] > 0.0 && w->col_sum[i] > 0.0) {
+                (void)frexp(w->row_sum[i], &step);
+                (void)frexp(w->col_sum[i], &column_exponent);
+                step -= column_exponent; /* log2(row / column) within 1 */
+                step = (step >= 0) ? step / 2 : -((1 - step) / 2); /* floor(step / 2) */
+                step = step > 8 ? 8 : (step < -8 ? -8 : step);
+            } else if (w->col_sum[i] > 0.0) {
+                step = -8; /* drives others, driven by none */
+            } else if (w->row_sum[i] > 0.0) {
+                step = 8; /* driven, drives none */
+            }
+            (void)frexp(w->scale[i], &exponent);
+            exponent += step - 1;
+            exponent = exponent > 40 ? 40 : (exponent < -40 ? -40 : exponent);
+            if (ldexp(1.0, exponent) != w->scale[i]) {
+                changed = 1;
+            }
+            w->scale[i] = ldexp(1.0, exponent);
         }
     }
-    for (k = 1; k <= NED_DOPPLER13_REDUCED_TAYLOR_ORDER; ++k) {
-        const ned_doppler13_reduced_scalar h = T / (ned_doppler13_reduced_scalar)k;
+    norm = 0.0;
+    for (i = 0; i < N; ++i) {
+        ned_doppler13_reduced_scalar v = 0.0;
+        for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
+            v += fabs(m->F[c]) * w->scale[ned_doppler13_reduced_F_col[c]] / w->scale[i];
+        }
+        norm = v > norm ? v : norm;
+    }
+    for (halvings = 0; !(norm * ldexp(T, -halvings) <= SERIES_RANGE); ++halvings) {
+        if (halvings == MAX_DOUBLINGS) {
+            return NED_DOPPLER13_REDUCED_ERR_NONFINITE; /* e^{F T} is not representable */
+        }
+    }
+    {
+        const ned_doppler13_reduced_scalar h = ldexp(T, -halvings);
+        for (i = 0; i < N; ++i) {
+            for (j = 0; j < N; ++j) {
+                const ned_doppler13_reduced_scalar delta = (i == j) ? 1.0 : 0.0;
+                w->A[i][j] = delta;   /* (F h)^k / k! */
+                t->Phi[i][j] = delta; /* sum of the terms, eq. (10) */
+                w->S[i][j] = delta;   /* sum of the terms / (k + 1), eq. (11) */
+            }
+        }
+        for (k = 1; k <= NED_DOPPLER13_REDUCED_TAYLOR_ORDER; ++k) {
+            const ned_doppler13_reduced_scalar hk = h / (ned_doppler13_reduced_scalar)k;
+            for (e = 0; e < N_ACTIVE; ++e) {
+                ned_doppler13_reduced_scalar v = 0.0;
+                i = active_row[e];
+                j = active_col[e];
+                for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
+                    v += m->F[c] * w->A[ned_doppler13_reduced_F_col[c]][j];
+                }
+                w->B[i][j] = v * hk;
+            }
+            for (e = 0; e < N_ACTIVE; ++e) {
+                i = active_row[e];
+                j = active_col[e];
+                w->A[i][j] = w->B[i][j];
+                t->Phi[i][j] += w->B[i][j];
+                w->S[i][j] += w->B[i][j] / (ned_doppler13_reduced_scalar)(k + 1);
+            }
+            if (k == 1) {
+                for (e = 0; e < N_UNIT_ROWS; ++e) {
+                    w->A[unit_row[e]][unit_row[e]] = 0.0; /* (F h)^k e_i = 0 for k >= 1 */
+                }
+            }
+        }
+    }
+    for (d = 0; d < halvings; ++d) {
         for (e = 0; e < N_ACTIVE; ++e) {
-            ned_doppler13_reduced_scalar s = 0.0;
+            ned_doppler13_reduced_scalar phi = 0.0, psi = 0.0;
             i = active_row[e];
             j = active_col[e];
-            for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
-                s += m->F[c] * w->A[ned_doppler13_reduced_F_col[c]][j];
+            for (c = 0; c < N; ++c) {
+                phi += t->Phi[i][c] * t->Phi[c][j];
+                psi += t->Phi[i][c] * w->S[c][j];
             }
-            w->B[i][j] = s * h;
+            w->B[i][j] = phi;
+            w->A[i][j] = 0.5 * (w->S[i][j] + psi);
         }
         for (e = 0; e < N_ACTIVE; ++e) {
             i = active_row[e];
             j = active_col[e];
-            w->A[i][j] = w->B[i][j];
-            t->Phi[i][j] += w->B[i][j];
-            w->S[i][j] += w->B[i][j] / (ned_doppler13_reduced_scalar)(k + 1);
-        }
-        if (k == 1) {
-            for (e = 0; e < N_UNIT_ROWS; ++e) {
-                w->A[unit_row[e]][unit_row[e]] = 0.0; /* (F T)^k e_i = 0 for k >= 1 */
-            }
+            t->Phi[i][j] = w->B[i][j];
+            w->S[i][j] = w->A[i][j];
         }
     }
     for (e = 0; e < N_ACTIVE; ++e) {
@@ -663,7 +784,7 @@ int ned_doppler13_reduced_set_covariance(ned_doppler13_reduced_filter *f, const 
     int i, j, k;
     ned_doppler13_reduced_scalar check = 0.0;
     for (i = 0; i < N; ++i) {
-        for (j = i; j < N; ++j) {
+        for (j = 0; j < N; ++j) {
             check += P[i * N + j] - P[i * N + j];
         }
     }
@@ -671,8 +792,27 @@ int ned_doppler13_reduced_set_covariance(ned_doppler13_reduced_filter *f, const 
         return NED_DOPPLER13_REDUCED_ERR_NONFINITE;
     }
     /* factored only to test that P is positive semidefinite (U in M, D in xn) */
+    /* The contract (README, "Generated code"), tol = 16 N eps: P_ii >= 0,
+       |P_ij - P_ji| <= tol sqrt(P_ii P_jj) and |P_ij| <= sqrt(P_ii P_jj) (1 + tol),
+       so that a zero variance carries no correlation. */
+    for (i = 0; i < N; ++i) {
+        if (!(P[i * N + i] >= 0.0)) {
+            return NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE;
+        }
+    }
+    for (i = 0; i < N; ++i) {
+        for (j = i + 1; j < N; ++j) {
+            const ned_doppler13_reduced_scalar bound = sqrt(P[i * N + i] * P[j * N + j]);
+            if (fabs(P[i * N + j] - P[j * N + i]) > (16 * N * DBL_EPSILON) * bound
+                || fabs(P[i * N + j]) > bound * (1.0 + (16 * N * DBL_EPSILON))) {
+                return NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE;
+            }
+        }
+    }
     /* P = U D U^T column by column from the last one; a pivot that rounding
-       made slightly negative (within 16 N eps of the diagonal) is zero. */
+       made slightly negative (within 16 N eps of the diagonal) is zero, and
+       then what is left of its column must be zero too (within the same
+       tolerance), else P is indefinite. */
     for (j = N - 1; j >= 0; --j) {
         ned_doppler13_reduced_scalar pivot = P[j * N + j];
         for (k = j + 1; k < N; ++k) {
@@ -689,6 +829,9 @@ int ned_doppler13_reduced_set_covariance(ned_doppler13_reduced_filter *f, const 
             ned_doppler13_reduced_scalar s = P[i * N + j];
             for (k = j + 1; k < N; ++k) {
                 s -= w->xn[k] * w->M[i][k] * w->M[j][k];
+            }
+            if (!(pivot > 0.0) && fabs(s) > (16 * N * DBL_EPSILON) * sqrt(P[i * N + i] * P[j * N + j])) {
+                return NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE;
             }
             w->M[i][j] = (pivot > 0.0) ? s / pivot : 0.0;
             check += w->M[i][j] - w->M[i][j];
