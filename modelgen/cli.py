@@ -33,7 +33,7 @@ EXIT_BAD_INPUT = 2
 EXIT_INTERNAL_ERROR = 3
 EXIT_INTERRUPTED = 130
 
-_PRINTER_MODULES = (os.path.join("sympy", "printing"), os.path.join("modelgen", "codegen", "printers.py"))
+_PRINTER_MODULES = (os.path.join("sympy", "printing"), os.path.join("modelgen", "codegen", "backends"))
 
 
 def _raised_while_printing(tb: TracebackType | None) -> bool:
@@ -146,7 +146,7 @@ def main(debug: bool) -> None:
 
 def _paper_operating_point(derived) -> dict[str, float] | None:
     """The paper's level-flight values, when they cover every parameter of the model."""
-    from modelgen.pipeline import paper_parameters
+    from modelgen.jobs import paper_parameters
 
     values = paper_parameters() if derived.model.frame == "NED" else {}
     needed = {p.name for p in derived.model.parameters if p.value is None}
@@ -160,8 +160,8 @@ def derive(model: str) -> None:
 
     MODEL is a model file (YAML) or the name of a built-in model.
     """
-    from modelgen.derivation import derive as derive_model
-    from modelgen.modelfile import load_model
+    from modelgen.derive.symbolic import derive as derive_model
+    from modelgen.model.loading import load_model
 
     derived = derive_model(load_model(model))
     m = derived.model
@@ -207,8 +207,8 @@ def generate(
     from pathlib import Path
 
     from modelgen.codegen.generate import CodegenOptions
-    from modelgen.modelfile import builtin_models
-    from modelgen.pipeline import generate as generate_model
+    from modelgen.model.loading import builtin_models
+    from modelgen.jobs import generate as generate_model
 
     names = list(models) or (builtin_models() if all_models else ["ned_doppler18"])
     options = CodegenOptions(
@@ -254,7 +254,7 @@ def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool,
     """
     from pathlib import Path
 
-    from modelgen.output import ReportUpdate
+    from modelgen.fileio.output import ReportUpdate
 
     with ReportUpdate(Path(report_dir), force=force) as staged:
         text, runs, result = _run_into(staged, out_root, no_figures, with_simulation, force)
@@ -273,11 +273,11 @@ def _run_into(staged, out_root: str, no_figures: bool, with_simulation: bool, fo
     from pathlib import Path
 
     from modelgen.analysis.report import run_covariance_analysis
-    from modelgen.derivation import derive as derive_model
-    from modelgen.modelfile import load_model
-    from modelgen.output import write_text_atomically
-    from modelgen.pipeline import generate_and_check_all, run_report
-    from modelgen.verification import verify as verify_model, write_verification_report
+    from modelgen.derive.symbolic import derive as derive_model
+    from modelgen.model.loading import load_model
+    from modelgen.fileio.output import write_text_atomically
+    from modelgen.jobs import generate_and_check_all, run_report
+    from modelgen.checks.paper_check import verify as verify_model, write_verification_report
 
     echo = _mapped_echo(staged)
     report = staged.staging
@@ -323,11 +323,11 @@ def embedded(model: str, out_dir: str, qemu: bool, force: bool) -> None:
     --qemu runs the same code under qemu-arm over the model's check scenario
     against the double reference.  Writes OUT/embedded.md.
     """
-    from modelgen.derivation import derive as derive_model
-    from modelgen.embedded import embedded_report, recommended_form
-    from modelgen.modelfile import load_model
-    from modelgen.output import ReportUpdate
-    from modelgen.pipeline import check_scenario
+    from modelgen.derive.symbolic import derive as derive_model
+    from modelgen.checks.embedded_check import embedded_report, recommended_form
+    from modelgen.model.loading import load_model
+    from modelgen.fileio.output import ReportUpdate
+    from modelgen.jobs import check_scenario
 
     derived = derive_model(load_model(model))
     scenario = None
@@ -372,11 +372,11 @@ def verify(model: str, out_dir: str, force: bool) -> None:
     OUT/verification.json.  Models without a paper table are reported and
     skipped (exit 0); exit 1 if a difference has no annotation (unexplained).
     """
-    from modelgen.derivation import derive as derive_model
-    from modelgen.modelfile import load_model
-    from modelgen.output import ReportUpdate
-    from modelgen.paper_table import paper_table_path
-    from modelgen.verification import verify as verify_model, write_verification_report
+    from modelgen.derive.symbolic import derive as derive_model
+    from modelgen.model.loading import load_model
+    from modelgen.fileio.output import ReportUpdate
+    from modelgen.checks.paper_table import paper_table_path
+    from modelgen.checks.paper_check import verify as verify_model, write_verification_report
 
     loaded = load_model(model)
     if paper_table_path(loaded.name) is None:
@@ -415,9 +415,9 @@ def observability(model: str, scenario_file: str | None, assignments: tuple[str,
     scenario's operating point(s) and names the unobservable and weakly
     observable directions as combinations of states.
     """
-    from modelgen.derivation import derive as derive_model
-    from modelgen.modelfile import load_model
-    from modelgen.observability import analyse, command_line_scenario, format_report
+    from modelgen.derive.symbolic import derive as derive_model
+    from modelgen.model.loading import load_model
+    from modelgen.analysis.observability import analyse, command_line_scenario, format_report
 
     derived = derive_model(load_model(model))
     base = _paper_operating_point(derived) if scenario_file is None else None
@@ -444,7 +444,7 @@ def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool, force: bool
     prints our Table 2 beside the paper's with the ratio ours/paper.
     """
     from modelgen.analysis.report import run_covariance_analysis
-    from modelgen.output import ReportUpdate
+    from modelgen.fileio.output import ReportUpdate
 
     with ReportUpdate(Path(out_dir), force=force) as staged:
         report = run_covariance_analysis(
@@ -472,7 +472,7 @@ def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | Non
     Writes summary.md (errors per correction mode, NEES test, timings) and PNG figures.
     """
     from modelgen.simulation.report import simulate as run_simulation
-    from modelgen.output import ReportUpdate
+    from modelgen.fileio.output import ReportUpdate
     from modelgen.simulation.scenario import load_scenario
 
     scenario = load_scenario(profile)

@@ -14,6 +14,10 @@ def test_wheel_contains_templates_models_and_data(tmp_path):
     )
     (wheel,) = tmp_path.glob("modelgen-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
+    backend_templates = sorted((REPO / "modelgen" / "codegen" / "backends").rglob("*.j2"))
+    assert {p.parent.name for p in backend_templates} == {"templates", "harness"}
+    for template in backend_templates:
+        assert template.relative_to(REPO).as_posix() in names
     for template in (REPO / "templates").glob("*.j2"):
         assert f"modelgen/templates/{template.name}" in names
     for model in (REPO / "modelgen" / "models").glob("*.yaml"):

@@ -42,16 +42,6 @@ def eliminate_common_subexpressions(exprs: list[sp.Expr], prefix: str = "t") -> 
     return Block(tuple((s, e) for s, e in temps), tuple(reduced))
 
 
-def sparse_block(matrix: sp.Matrix, entries: list[tuple[int, int]]) -> Block:
-    """CSE block over the listed (structurally nonzero) entries of ``matrix``."""
-    return eliminate_common_subexpressions([matrix[i, j] for i, j in entries])
-
-
-def diagonal_block(matrix: sp.Matrix) -> Block:
-    """CSE block over the diagonal of a (diagonal) noise matrix."""
-    return eliminate_common_subexpressions([matrix[i, i] for i in range(matrix.shape[0])])
-
-
 @dataclass(frozen=True)
 class Pole:
     """A denominator of the model's expressions that vanishes at some operating points.

@@ -1,7 +1,9 @@
 """The filter kernels: what each generated function computes, with its cost.
 
 Everything structural is decided here, in Python, so that the templates only
-lay out text.  The covariance prediction P = Phi P Phi^T + Q_d is unrolled for
+lay out text.  The kernels are language-neutral descriptions (``Ref``,
+``Assign``, ``CheckedAssign``, ``KernelBlock``: targets, sums of products,
+row blocks); each backend prints them (``backends/c/printer.py``).  The covariance prediction P = Phi P Phi^T + Q_d is unrolled for
 C over the structural nonzeros of Phi, skips rows of Phi that are exactly
 e_i, and computes each (i, j) pair of the symmetric result once, in full or
 packed storage.  The UD form's product Phi U is unrolled the same way; its
@@ -36,31 +38,60 @@ class OperationCount:
         return f"{self.multiplications} mul + {self.additions} add = {self.total} flops"
 
 
-def _sum(terms: list[str]) -> str:
-    return " + ".join(terms) if terms else "0"
+@dataclass(frozen=True)
+class Ref:
+    """One entry of an array that a kernel reads or writes, in a language-neutral form.
+
+    ``owner`` names the object the array lives in (``filter``, ``transition``,
+    ``scratch``), ``array`` the member, ``index`` its storage indices (already
+    flattened for packed storage).  A backend prints it (C: ``t->Phi[i][k]``).
+    """
+
+    owner: str
+    array: str
+    index: tuple[int, ...]
 
 
-def _row_classes(structure: FilterStructure) -> tuple[list[int], list[int], list[int]]:
-    """Split Phi's rows into exact unit rows, diagonal-only rows and general rows."""
-    n = structure.n_states
-    unit = list(structure.unit_rows)
-    diagonal = [i for i in range(n) if i not in unit and list(np.flatnonzero(structure.Phi[i])) == [i]]
-    general = [i for i in range(n) if i not in unit and i not in diagonal]
-    return unit, diagonal, general
+#: A product of factors; an empty sum of terms is zero.
+Term = tuple[Ref, ...]
 
 
-def _p_ref(base: str, n: int, packed: bool, i: int, j: int) -> str:
-    """C reference to entry (i, j) of a symmetric matrix in full or packed storage."""
+@dataclass(frozen=True)
+class Assign:
+    """``target = sum of terms``."""
+
+    target: Ref
+    terms: tuple[Term, ...]
+
+
+@dataclass(frozen=True)
+class CheckedAssign:
+    """``v = sum of terms``, stored into every target and checked for finiteness while in a register."""
+
+    targets: tuple[Ref, ...]
+    terms: tuple[Term, ...]
+
+
+Statement = Assign | CheckedAssign
+
+
+def _symmetric(owner: str, array: str, n: int, packed: bool, i: int, j: int) -> Ref:
+    """Entry (i, j) of a symmetric matrix in full or packed storage."""
     if packed:
-        return f"{base}[{packed_index(n, i, j)}]"
-    return f"{base}[{i}][{j}]"
+        return Ref(owner, array, (packed_index(n, i, j),))
+    return Ref(owner, array, (i, j))
 
 
-def c_state_predict(structure: FilterStructure) -> tuple[list[str], list[str], OperationCount]:
+def _phi(i: int, k: int) -> Ref:
+    return Ref("transition", "Phi", (i, k))
+
+
+def state_predict(structure: FilterStructure) -> tuple[list[Assign], list[Assign], OperationCount]:
     """Unrolled x_n = Phi x over the structural nonzeros of Phi.
 
-    Returns (lines into ``w->xn``, commit lines into ``f->x``, cost); rows of
-    Phi that are e_i leave their state as it is, so they appear in neither.
+    Returns (assignments into the scratch ``xn``, commit assignments into the
+    filter's ``x``, cost); rows of Phi that are e_i leave their state as it
+    is, so they appear in neither.
     """
     rows = structure.rows("Phi")
     unit = set(structure.unit_rows)
@@ -69,17 +100,17 @@ def c_state_predict(structure: FilterStructure) -> tuple[list[str], list[str], O
     for i in range(structure.n_states):
         if i in unit:
             continue
-        terms = [f"t->Phi[{i}][{k}]*f->x[{k}]" for k in rows[i]]
+        terms = tuple((_phi(i, k), Ref("filter", "x", (k,))) for k in rows[i])
         mul += len(terms)
         add += len(terms) - 1
-        lines.append(f"w->xn[{i}] = {_sum(terms)};")
-        commit.append(f"f->x[{i}] = w->xn[{i}];")
+        lines.append(Assign(Ref("scratch", "xn", (i,)), terms))
+        commit.append(Assign(Ref("filter", "x", (i,)), ((Ref("scratch", "xn", (i,)),),)))
     return lines, commit, OperationCount(mul, add)
 
 
 @dataclass(frozen=True)
 class KernelBlock:
-    """Straight-line statements that become one small static C function.
+    """Straight-line statements that become one small function of the generated code.
 
     The unrolled kernels are split row by row so that each C function stays
     short: static analysers (cppcheck's value flow) slow down sharply on one
@@ -88,16 +119,24 @@ class KernelBlock:
     """
 
     name: str
-    lines: tuple[str, ...]
-    checked: bool = False  # the statements use a local ``v`` and sum ``check``, which the function returns
+    statements: tuple[Statement, ...]
+    checked: bool = False  # CheckedAssign statements: the function sums and returns the check
 
-    def uses(self, pointer: str) -> bool:
-        """Whether the statements read or write through ``pointer`` (``f``, ``t``, ``w``)."""
-        return any(f"{pointer}->" in line for line in self.lines)
+    def owners(self) -> set[str]:
+        """The objects (``filter``, ``transition``, ``scratch``) the statements read or write."""
+        refs = set()
+        for s in self.statements:
+            refs.update(s.targets if isinstance(s, CheckedAssign) else (s.target,))
+            refs.update(r for term in s.terms for r in term)
+        return {r.owner for r in refs}
+
+    def uses(self, owner: str) -> bool:
+        """Whether the statements read or write an array of ``owner``."""
+        return owner in self.owners()
 
 
-def c_covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[KernelBlock], OperationCount]:
-    """Unrolled C statements for P_n = Phi P Phi^T + Q_d (upper triangle), by row.
+def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[KernelBlock], OperationCount]:
+    """Unrolled P_n = Phi P Phi^T + Q_d (upper triangle), by row.
 
     ``M`` (= Phi P) is formed only for the rows of Phi that are not e_i (the
     others are rows of P itself); ``Pn`` gets each (i, j), i <= j, once.
@@ -108,46 +147,46 @@ def c_covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list
     mul = add = 0
     blocks = []
 
-    def P(i: int, j: int) -> str:
-        return _p_ref("f->P", n, packed, i, j)
+    def P(i: int, j: int) -> Ref:
+        return _symmetric("filter", "P", n, packed, i, j)
 
     for i in range(n):  # M = Phi P, only the rows that are not copies of P
         if i in unit:
             continue
         lines = []
         for col in range(n):
-            terms = [f"t->Phi[{i}][{k}]*{P(k, col)}" for k in rows[i]]
+            terms = tuple((_phi(i, k), P(k, col)) for k in rows[i])
             mul += len(terms)
             add += len(terms) - 1
-            lines.append(f"w->M[{i}][{col}] = {_sum(terms)};")
+            lines.append(Assign(Ref("scratch", "M", (i, col)), terms))
         blocks.append(KernelBlock(f"phi_times_p_row_{i}", tuple(lines)))
 
-    def m_ref(i: int, col: int) -> str:
-        return P(i, col) if i in unit else f"w->M[{i}][{col}]"
+    def m_ref(i: int, col: int) -> Ref:
+        return P(i, col) if i in unit else Ref("scratch", "M", (i, col))
 
     for i in range(n):  # Pn = M Phi^T + Q_d, upper triangle only
         lines = []
         for j in range(i, n):
             if j in unit:
-                terms = [m_ref(i, j)]
+                terms = [(m_ref(i, j),)]
             else:
-                terms = [f"{m_ref(i, col)}*t->Phi[{j}][{col}]" for col in rows[j]]
+                terms = [(m_ref(i, col), _phi(j, col)) for col in rows[j]]
                 mul += len(terms)
             add += len(terms) - 1
             if structure.Qd[i, j]:
-                terms.append(_p_ref("t->Qd", n, packed, i, j))
+                terms.append((_symmetric("transition", "Qd", n, packed, i, j),))
                 add += 1
             # the new value is stored (mirrored in full storage, so that the
             # commit is one copy) and checked for finiteness while in a register
-            stores = f"{_p_ref('w->Pn', n, packed, i, j)} = v;"
+            targets = [_symmetric("scratch", "Pn", n, packed, i, j)]
             if not packed and i != j:
-                stores += f" w->Pn[{j}][{i}] = v;"
-            lines.append(f"v = {_sum(terms)}; {stores} check += v - v;")
+                targets.append(Ref("scratch", "Pn", (j, i)))
+            lines.append(CheckedAssign(tuple(targets), tuple(terms)))
         blocks.append(KernelBlock(f"propagate_row_{i}", tuple(lines), checked=True))
     return blocks, OperationCount(mul, add)
 
 
-def c_ud_weights(structure: FilterStructure) -> tuple[list[KernelBlock], OperationCount]:
+def ud_weights(structure: FilterStructure) -> tuple[list[KernelBlock], OperationCount]:
     """Unrolled W[:, :N] = Phi U for Thornton's time update (U unit upper, packed), by row.
 
     W(i, k) = sum over l in row i of Phi with l <= k of Phi(i, l) U(l, k),
@@ -165,12 +204,12 @@ def c_ud_weights(structure: FilterStructure) -> tuple[list[KernelBlock], Operati
                 if l > k:
                     continue
                 if l == k:  # the unit diagonal of U
-                    terms.append(f"t->Phi[{i}][{l}]")
+                    terms.append((_phi(i, l),))
                 else:
-                    terms.append(f"t->Phi[{i}][{l}]*f->U[{upper_index(n, l, k)}]")
+                    terms.append((_phi(i, l), Ref("filter", "U", (upper_index(n, l, k),))))
                     mul += 1
             add += max(len(terms) - 1, 0)
-            lines.append(f"w->W[{i}][{k}] = {_sum(terms)};")
+            lines.append(Assign(Ref("scratch", "W", (i, k)), tuple(terms)))
         blocks.append(KernelBlock(f"phi_times_u_row_{i}", tuple(lines)))
     return blocks, OperationCount(mul, add)
 
@@ -186,6 +225,15 @@ def thornton_cost(structure: FilterStructure) -> OperationCount:
         mul += i * (2 * width + 1)  # dot product, scaling, elimination
         add += i * 2 * width
     return OperationCount(mul, add)
+
+
+def _row_classes(structure: FilterStructure) -> tuple[list[int], list[int], list[int]]:
+    """Split Phi's rows into exact unit rows, diagonal-only rows and general rows."""
+    n = structure.n_states
+    unit = list(structure.unit_rows)
+    diagonal = [i for i in range(n) if i not in unit and list(np.flatnonzero(structure.Phi[i])) == [i]]
+    general = [i for i in range(n) if i not in unit and i not in diagonal]
+    return unit, diagonal, general
 
 
 def python_predict_plan(structure: FilterStructure) -> dict[str, list[int]]:
@@ -217,7 +265,7 @@ def discretize_cost(structure: FilterStructure, order: int) -> OperationCount:
     pairs = n * (n + 1) // 2
     mul += pairs * 2 * nw
     add += pairs * nw
-    if np.any(structure.F):  # up to 8 balancing sweeps and the norm over F (modelgen.discretization)
+    if np.any(structure.F):  # up to 8 balancing sweeps and the norm over F (modelgen.derive.discretization)
         off = nnz_f - int(np.trace(structure.F.astype(int)))
         mul += 8 * 2 * off + 2 * nnz_f
         add += 8 * 2 * off + nnz_f

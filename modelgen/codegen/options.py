@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from modelgen.discretization import DEFAULT_TAYLOR_ORDER
+from modelgen.derive.discretization import DEFAULT_TAYLOR_ORDER
 from modelgen.errors import ModelError
 
 SCALARS = ("double", "float")

@@ -31,7 +31,7 @@ import numpy as np
 from modelgen.codegen.build import STRICT_FLAGS, compiler
 from modelgen.codegen.generate import generate_code, render_c_template, write_atomically
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derivation import DerivedModel
+from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 
 ARM_EMBEDDED_CC = "arm-none-eabi-gcc"

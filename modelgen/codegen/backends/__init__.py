@@ -1,0 +1,84 @@
+"""Backends: each output language of the generated filter as one package (``c``, ``python``).
+
+A backend turns the language-neutral :class:`~modelgen.codegen.description.FilterDescription`
+into files: it owns its expression printer, literals, template context,
+product templates (``<lang>/templates/``) and the list of files it writes;
+templates that only test or drive the product (a C test driver, firmware
+main) live apart in ``<lang>/harness/``.  ``BACKENDS`` lists them in the order
+their files are rendered; README.md in this folder is the recipe for a new one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import jinja2
+
+from modelgen.codegen.description import FilterDescription
+from modelgen.codegen.escape import FILTERS
+
+
+def environment(*folders: Path) -> jinja2.Environment:
+    """The templates' environment over ``folders``, with one escaping filter per output language (``escape``)."""
+    env = jinja2.Environment(
+        loader=jinja2.FileSystemLoader([str(f) for f in folders]),
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+        autoescape=False,  # HTML escaping: none of the output languages is HTML (see escape)
+    )
+    env.filters.update(FILTERS)
+    return env
+
+
+@dataclass(frozen=True)
+class Backend:
+    """One output language: its context builder, template folders and file list.
+
+    ``files`` maps an output file name (``{p}`` is the model's name) to the
+    product template that renders it; ``harness`` holds the templates that
+    drive or test the product and are rendered on request only.
+    """
+
+    name: str
+    context: Callable[[FilterDescription], dict[str, object]]
+    templates: Path
+    files: tuple[tuple[str, str], ...]
+    harness: Path | None = None
+
+    def environment(self) -> jinja2.Environment:
+        """The jinja2 environment over the product (and harness) templates."""
+        return environment(*[f for f in (self.templates, self.harness) if f is not None])
+
+    def render(self, description: FilterDescription) -> dict[str, str]:
+        """Every product file of this backend for one filter: file name -> text."""
+        env, context = self.environment(), self.context(description)
+        name = description.model.name
+        return {file.format(p=name): env.get_template(t).render(context) for file, t in self.files}
+
+    def render_template(self, description: FilterDescription, template: str, **extra: object) -> str:
+        """One more template (harness or product) with this backend's context and ``extra``."""
+        return self.environment().get_template(template).render({**self.context(description), **extra})
+
+    def template_paths(self) -> list[Path]:
+        """Every template file of the backend (for caches keyed on the templates)."""
+        folders = [f for f in (self.templates, self.harness) if f is not None]
+        return sorted(p for f in folders for p in f.glob("*.j2"))
+
+
+def backends() -> tuple[Backend, ...]:
+    """The registered backends, in the order their files are rendered."""
+    from modelgen.codegen.backends import c, python
+
+    return (python.BACKEND, c.BACKEND)
+
+
+def backend(name: str) -> Backend:
+    """The backend called ``name`` (``c``, ``python``)."""
+    for b in backends():
+        if b.name == name:
+            return b
+    raise KeyError(f"no backend {name!r}; there are {', '.join(b.name for b in backends())}")

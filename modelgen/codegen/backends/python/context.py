@@ -1,0 +1,84 @@
+"""The Python module template's context: one CSE'd function per model matrix, the vectorized prediction plan."""
+
+from __future__ import annotations
+
+import json
+
+from modelgen.codegen.backends.python.printer import parameter_locals
+from modelgen.codegen.description import FilterDescription, named
+from modelgen.codegen.expressions import Block, eliminate_common_subexpressions, poles
+from modelgen.codegen.kernels import python_predict_plan
+from modelgen.derive.discretization import DOUBLE_ROUNDOFF, series_range
+
+BANNER = "# GENERATED FILE - DO NOT EDIT (modelgen)"
+
+
+def _print_block(block: Block, targets: list[str], printer) -> dict[str, list[tuple[str, str]]]:
+    return {
+        "temporaries": [(str(s), printer.doprint(e)) for s, e in block.temporaries],
+        "outputs": [(t, printer.doprint(e)) for t, e in zip(targets, block.outputs)],
+    }
+
+
+def py_tuple(names: list[str]) -> str:
+    """A Python tuple literal of strings (``("a",)`` for one)."""
+    if not names:
+        return "()"
+    return "(" + ", ".join(json.dumps(x) for x in names) + ("," if len(names) == 1 else "") + ")"
+
+
+def matrix_functions(description: FilterDescription) -> list[dict[str, object]]:
+    """One generated function per model matrix (F, G, H, diag Q, diag R), each with its own CSE."""
+    derived, structure, model = description.derived, description.structure, description.model
+    n, nw, nm = derived.n_states, derived.n_noises, derived.n_measurements
+    functions = []
+    for name, doc, matrix, entries, shape in (
+        ("system_matrix", "F = df/dx at the operating point p.", derived.F, structure.entries("F"), f"({n}, {n})"),
+        ("noise_input_matrix", "G = df/dw at the operating point p.", derived.G, structure.entries("G"), f"({n}, {nw})"),
+        ("measurement_matrix", "H = dh/dx at the operating point p.", derived.H, structure.entries("H"), f"({nm}, {n})"),
+        ("noise_psd", "diag(Q): continuous noise power spectral densities.", derived.Q, [(k, k) for k in range(nw)], f"({nw},)"),
+        ("measurement_variance", "diag(R): measurement noise variances.", derived.R, [(k, k) for k in range(nm)], f"({nm},)"),
+    ):
+        fn_block = eliminate_common_subexpressions([matrix[i, j] for i, j in entries])
+        vector = shape.endswith(",)")
+        fn_targets = [f"{i}" if vector else f"{i}, {j}" for i, j in entries]
+        fn_poles = poles([matrix[i, j] for i, j in entries])
+        locals_, printer = parameter_locals(model, fn_block, [p.argument for p in fn_poles])
+        functions.append(
+            {
+                "name": name,
+                "doc": doc,
+                "shape": shape,
+                "parameters": locals_,
+                "poles": [
+                    {"text": named(p.denominator, model), "value": printer.doprint(p.denominator), "argument": printer.doprint(p.argument)}
+                    for p in fn_poles
+                ],
+                **_print_block(fn_block, fn_targets, printer),
+            }
+        )
+    return functions
+
+
+def python_context(description: FilterDescription) -> dict[str, object]:
+    """Everything python_module.py.j2 reads (always the double-precision numpy filter)."""
+    structure, model, options = description.structure, description.model, description.options
+    qd_entries = structure.entries("Qd")
+    return {
+        **description.shared_context(),
+        "banner_python": BANNER,
+        "functions": matrix_functions(description),
+        "plan": python_predict_plan(structure),
+        "series_range": repr(series_range(options.taylor_order, DOUBLE_ROUNDOFF)),
+        "f_rows": repr([i for i, _ in structure.entries("F")]),
+        "f_cols": repr([j for _, j in structure.entries("F")]),
+        "qd_rows": [i for i, _ in qd_entries],
+        "qd_cols": [j for _, j in qd_entries],
+        "state_names_tuple": py_tuple(model.state_names),
+        "noise_names_tuple": py_tuple(model.noise_names),
+        "measurement_names_tuple": py_tuple(model.measurement_names),
+        "parameter_names_tuple": py_tuple(model.parameter_names),
+        "parameter_defaults_dict": "{"
+        + ", ".join(f"{json.dumps(p.name)}: {float(p.value)!r}" for p in model.parameters if p.value is not None)
+        + "}",
+    }

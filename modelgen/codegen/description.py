@@ -1,0 +1,167 @@
+"""The language-neutral description of one generated filter, shared by every backend.
+
+Everything a backend needs that does not depend on the output language is
+decided here once: the structure (``structure``), the common-subexpression
+block of the model matrices (``expressions``), the kernels (``kernels``), the
+sizes and index tables of the sparse matrices (``layout``), the operation
+counts and the parameters.  A backend (``backends/<lang>/``) only prints it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import sympy as sp
+
+from modelgen import __version__
+from modelgen.codegen.contract import contract_markdown, contract_text
+from modelgen.codegen.expressions import Block, Pole, eliminate_common_subexpressions, poles
+from modelgen.codegen.kernels import (
+    OperationCount,
+    covariance_predict,
+    discretize_cost,
+    doubling_cost,
+    python_predict_cost,
+    state_predict,
+    thornton_cost,
+    ud_weights,
+    update_cost,
+)
+from modelgen.codegen.layout import ModelSizes
+from modelgen.codegen.options import CodegenOptions
+from modelgen.codegen.structure import FilterStructure, filter_structure
+from modelgen.derive.symbolic import DerivedModel
+from modelgen.errors import ModelError
+
+#: Name of the model-matrix evaluation in the operation counts (the C function's name).
+EVALUATE = "matrices_evaluate"
+
+
+@dataclass(frozen=True)
+class MatrixTarget:
+    """Where one evaluated entry goes: the k-th structural nonzero of ``matrix`` (F, G, H, q, r)."""
+
+    matrix: str
+    k: int
+
+
+@dataclass(frozen=True)
+class FilterDescription:
+    """One model and one choice of options, with everything derived from them that backends share."""
+
+    derived: DerivedModel
+    options: CodegenOptions
+    structure: FilterStructure
+
+    @property
+    def model(self):
+        return self.derived.model
+
+    @cached_property
+    def sizes(self) -> ModelSizes:
+        return ModelSizes.of(self.derived)
+
+    @cached_property
+    def evaluation(self) -> tuple[list[MatrixTarget], list[sp.Expr], Block]:
+        """Targets, expressions and CSE block of every nonzero model-matrix entry (F, G, H, diag Q, diag R)."""
+        derived, structure = self.derived, self.structure
+        targets: list[MatrixTarget] = []
+        exprs: list[sp.Expr] = []
+        for name, matrix in (("F", derived.F), ("G", derived.G), ("H", derived.H)):
+            for k, (i, j) in enumerate(structure.entries(name)):
+                targets.append(MatrixTarget(name, k))
+                exprs.append(matrix[i, j])
+        for name, matrix in (("q", derived.Q), ("r", derived.R)):
+            for k in range(matrix.shape[0]):
+                targets.append(MatrixTarget(name, k))
+                exprs.append(matrix[k, k])
+        return targets, exprs, eliminate_common_subexpressions(exprs)
+
+    @cached_property
+    def poles(self) -> list[Pole]:
+        """Denominators of the evaluated expressions that vanish at some operating points."""
+        return poles(self.evaluation[1])
+
+    @property
+    def packed(self) -> bool:
+        """Whether P, Q_d and the workspace copies are packed (the UD form packs U, not P)."""
+        return self.options.packed and not self.options.ud
+
+    @cached_property
+    def predict_blocks(self):
+        """The unrolled covariance (or UD weight) prediction, row by row, and its cost."""
+        if self.options.ud:
+            return ud_weights(self.structure)
+        return covariance_predict(self.structure, self.packed)
+
+    @cached_property
+    def state_predict(self):
+        """The unrolled x_n = Phi x: (assignments, commits, cost)."""
+        return state_predict(self.structure)
+
+    @cached_property
+    def costs(self) -> dict[str, OperationCount]:
+        """Operation counts per call of each generated function (written into the file headers)."""
+        structure, options = self.structure, self.options
+        n = structure.n_states
+        state_cost = self.state_predict[2]
+        kernel_cost = self.predict_blocks[1]
+        extra = thornton_cost(structure) if options.ud else OperationCount(0, 0)
+        predict = OperationCount(
+            state_cost.multiplications + kernel_cost.multiplications + extra.multiplications,
+            state_cost.additions + kernel_cost.additions + extra.additions,
+        )
+        costs = {
+            EVALUATE: OperationCount(self.evaluation[2].operation_count, 0),
+            "discretize": discretize_cost(structure, options.taylor_order),
+            "discretize, each doubling (long steps)": doubling_cost(structure),
+            "predict (C)": predict,
+            "predict (Python)": python_predict_cost(structure),
+            "predict (dense, for comparison)": OperationCount(2 * n**3 + n, 2 * n * n * (n - 1) + n * n),
+        }
+        if self.derived.n_measurements:
+            costs["update"] = update_cost(structure, options)
+        return costs
+
+    def cost_lines(self) -> list[str]:
+        """The operation counts as the lines of a file header."""
+        return [
+            f"{name}: {cost}" if name != EVALUATE else f"{name}: {cost.multiplications} operations after CSE"
+            for name, cost in self.costs.items()
+        ]
+
+    def shared_context(self) -> dict[str, object]:
+        """Template variables every backend uses alike."""
+        model, derived = self.model, self.derived
+        return {
+            "model": model,
+            "version": __version__,
+            "n_states": derived.n_states,
+            "n_noises": derived.n_noises,
+            "n_measurements": derived.n_measurements,
+            "taylor_order": self.options.taylor_order,
+            "state_names": model.state_names,
+            "cost_lines": self.cost_lines(),
+            "description": self.options.describe(),
+            "contract_text": contract_text("  "),
+            "contract_markdown": contract_markdown(),
+        }
+
+
+def describe_filter(derived: DerivedModel, options: CodegenOptions) -> FilterDescription:
+    """The description of ``derived``'s filter under ``options``; refuses a model that is not linear."""
+    if derived.nonlinear:
+        raise ModelError(
+            f"model {derived.model.name!r}: equations of {', '.join(derived.nonlinear)} are not linear in the "
+            "error states and noises; a linear Kalman filter cannot be generated"
+        )
+    structure = filter_structure(
+        derived.structure("F"), derived.structure("G"), derived.structure("H"), options.taylor_order
+    )
+    return FilterDescription(derived, options, structure)
+
+
+def named(expr: sp.Expr, model) -> str:
+    """``expr`` as text with parameters by name (``cos(latitude)``, not ``cos(phi)``), for messages."""
+    return str(expr.subs({p.sym: sp.Symbol(p.name) for p in model.parameters}, simultaneous=True))
