@@ -26,7 +26,8 @@ j - i, the summed coefficients 2/3 (N = 2); 9/8 and 9/20 (N = 3, lags 1, 2);
 214/105, 92/105, 54/105 (N = 4, lags 1, 2, 3).  Only the per-lag sums are fixed
 by pure coning; they are split equally over the pairs of the same lag.  (Tables
 that print 33/80, 57/80 for N = 3 or 736/945 ... for N = 4 give one order less
-under pure coning -- checked numerically by the coning test.)
+under pure coning -- checked numerically by the coning test, which drives
+this module's own mechanization, ``_mechanize``, with a coning motion.)
 
 Velocity uses the same samples: the body velocity increment is
 dv + 1/2 th x dv (rotation compensation) + the sculling term, which has the
@@ -133,88 +134,6 @@ def _coning_sculling(th, dv, code, prev_th, prev_dv, have_previous, with_velocit
         s1 = k1 * (p12[4] + p23[4] + p34[4]) + k2 * (p13[4] + p24[4]) + k3 * p14[4]
         s2 = k1 * (p12[5] + p23[5] + p34[5]) + k2 * (p13[5] + p24[5]) + k3 * p14[5]
     return c0, c1, c2, s0, s1, s2
-
-
-@compiled
-def integrate_body_attitude(q, delta_theta, code, samples_per_update):
-    """Attitude relative to a non-rotating frame from angle increments alone.
-
-    The attitude part of the mechanization without earth or transport rate:
-    the coning test (tests/simulation) drives it with a classical coning motion.
-    Returns the final quaternion.
-    """
-    th = np.zeros((4, 3))
-    dv = np.zeros((4, 3))
-    prev = np.zeros(3)
-    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
-    have_previous = False
-    n = delta_theta.shape[0] // samples_per_update
-    for u in range(n):
-        sx = sy = sz = 0.0
-        for j in range(samples_per_update):
-            for a in range(3):
-                th[j, a] = delta_theta[u * samples_per_update + j, a]
-            sx += th[j, 0]
-            sy += th[j, 1]
-            sz += th[j, 2]
-        c0, c1, c2, _, _, _ = _coning_sculling(th, dv, code, prev, prev, have_previous, False)
-        r0, r1, r2, r3 = rotation_vector_quaternion(sx + c0, sy + c1, sz + c2)
-        q0, q1, q2, q3 = quaternion_multiply(q0, q1, q2, q3, r0, r1, r2, r3)
-        norm = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-        q0, q1, q2, q3 = q0 / norm, q1 / norm, q2 / norm, q3 / norm
-        for a in range(3):
-            prev[a] = th[samples_per_update - 1, a]
-        have_previous = True
-    out = np.empty(4)
-    out[0], out[1], out[2], out[3] = q0, q1, q2, q3
-    return out
-
-
-@compiled
-def integrate_body_velocity(q, delta_theta, delta_velocity, code, samples_per_update):
-    """Attitude and velocity in a non-rotating, gravity-free frame from increments.
-
-    The velocity part of the mechanization without earth, transport rate or
-    gravity: the sculling test drives it with a classical sculling motion.
-    Returns (final quaternion, final velocity).
-    """
-    th = np.zeros((4, 3))
-    dv = np.zeros((4, 3))
-    prev_th = np.zeros(3)
-    prev_dv = np.zeros(3)
-    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
-    v = np.zeros(3)
-    have_previous = False
-    N = samples_per_update
-    for u in range(delta_theta.shape[0] // N):
-        sx = sy = sz = wx = wy = wz = 0.0
-        for j in range(N):
-            for a in range(3):
-                th[j, a] = delta_theta[u * N + j, a]
-                dv[j, a] = delta_velocity[u * N + j, a]
-            sx += th[j, 0]
-            sy += th[j, 1]
-            sz += th[j, 2]
-            wx += dv[j, 0]
-            wy += dv[j, 1]
-            wz += dv[j, 2]
-        c0, c1, c2, s0, s1, s2 = _coning_sculling(th, dv, code, prev_th, prev_dv, have_previous, True)
-        rx, ry, rz = _cross(sx, sy, sz, wx, wy, wz)
-        fx, fy, fz = rotate_vector(q0, q1, q2, q3, wx + 0.5 * rx + s0, wy + 0.5 * ry + s1, wz + 0.5 * rz + s2)
-        v[0] += fx
-        v[1] += fy
-        v[2] += fz
-        r0, r1, r2, r3 = rotation_vector_quaternion(sx + c0, sy + c1, sz + c2)
-        q0, q1, q2, q3 = quaternion_multiply(q0, q1, q2, q3, r0, r1, r2, r3)
-        norm = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-        q0, q1, q2, q3 = q0 / norm, q1 / norm, q2 / norm, q3 / norm
-        for a in range(3):
-            prev_th[a] = th[N - 1, a]
-            prev_dv[a] = dv[N - 1, a]
-        have_previous = True
-    out = np.empty(4)
-    out[0], out[1], out[2], out[3] = q0, q1, q2, q3
-    return out, v
 
 
 @compiled
