@@ -19,8 +19,8 @@ from modelgen.analysis.report import run_covariance_analysis  # noqa: E402
 from modelgen.analysis.scenario import load_scenario  # noqa: E402
 from modelgen.analysis.scenario import operating_point  # noqa: E402
 from modelgen.analysis.systems import PaperModels, analyse_systems  # noqa: E402
-from modelgen import reference  # noqa: E402
-from modelgen.discretization import taylor_discretization, taylor_process_noise  # noqa: E402
+from modelgen.derive import reference  # noqa: E402
+from modelgen.derive.discretization import taylor_discretization, taylor_process_noise  # noqa: E402
 
 
 def naive_optimal_filter(models: PaperModels, scenario, budget) -> None:

@@ -23,8 +23,8 @@ import time
 
 import numpy as np
 
-from modelgen.derivation import derive
-from modelgen.modelfile import load_model
+from modelgen.derive.symbolic import derive
+from modelgen.model.loading import load_model
 from modelgen.simulation.filters import ReferenceFilter
 from modelgen.simulation.integration import run_scenario, scenario_layout, simulate_sensors
 from modelgen.simulation.jit import HAVE_NUMBA

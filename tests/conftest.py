@@ -9,14 +9,14 @@ REPO = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="session")
 def paper_model():
-    from modelgen.modelfile import load_model
+    from modelgen.model.loading import load_model
 
     return load_model("ned_doppler18")
 
 
 @pytest.fixture(scope="session")
 def paper_derived(paper_model):
-    from modelgen.derivation import derive
+    from modelgen.derive.symbolic import derive
 
     return derive(paper_model)
 

@@ -125,18 +125,18 @@ def _hidden(root):
 def test_a_failing_check_exits_1_and_keeps_the_previous_output(runner, tmp_path, monkeypatch):
     import dataclasses
 
-    from modelgen import pipeline
+    from modelgen import jobs
 
     out = tmp_path / "out"
     assert runner.invoke(main, ["generate", str(_toy(tmp_path)), "--out", str(out), "--check"]).exit_code == 0
     before = _snapshot(out / "toy_loop")
-    real_check = pipeline.check
+    real_check = jobs.check
 
     def strict_check(derived, folder, scenario=None, options=None):  # the check really runs, against a zero tolerance
         assert folder != out / "toy_loop"  # checked in the staging folder, not in place
         return [dataclasses.replace(r, tolerance=0.0) for r in real_check(derived, folder, scenario, options)]
 
-    monkeypatch.setattr(pipeline, "check", strict_check)
+    monkeypatch.setattr(jobs, "check", strict_check)
     result = runner.invoke(main, ["generate", str(_toy(tmp_path, "0.25")), "--out", str(out), "--check"])
     assert result.exit_code == 1, result.output
     assert "-> FAILED" in result.output and "was left as it was" in result.output
@@ -145,7 +145,7 @@ def test_a_failing_check_exits_1_and_keeps_the_previous_output(runner, tmp_path,
 
 
 def test_a_check_that_raises_keeps_the_previous_output(runner, tmp_path, monkeypatch):
-    from modelgen import pipeline
+    from modelgen import jobs
     from modelgen.errors import ModelError
 
     out = tmp_path / "out"
@@ -155,7 +155,7 @@ def test_a_check_that_raises_keeps_the_previous_output(runner, tmp_path, monkeyp
     def broken_check(*args, **kwargs):
         raise ModelError("generated C for 'toy_loop' refused the step T = 0")
 
-    monkeypatch.setattr(pipeline, "check", broken_check)
+    monkeypatch.setattr(jobs, "check", broken_check)
     result = runner.invoke(main, ["generate", str(_toy(tmp_path, "0.25")), "--out", str(out), "--check"])
     assert result.exit_code == 2
     assert "modelgen: error: generated C for 'toy_loop' refused the step" in result.output
@@ -165,7 +165,7 @@ def test_a_check_that_raises_keeps_the_previous_output(runner, tmp_path, monkeyp
 def test_a_full_disk_gives_one_line_exit_2_and_nothing_half_written(runner, tmp_path, monkeypatch):
     import errno
 
-    from modelgen import output
+    from modelgen.fileio import output
 
     out = tmp_path / "out"
     assert runner.invoke(main, ["generate", str(_toy(tmp_path)), "--out", str(out)]).exit_code == 0
@@ -190,12 +190,12 @@ def test_a_full_disk_gives_one_line_exit_2_and_nothing_half_written(runner, tmp_
 
 
 def test_an_internal_error_exits_3_without_traceback_and_debug_shows_it(runner, tmp_path, monkeypatch):
-    import modelgen.derivation
+    import modelgen.derive.symbolic
 
     def bug(model):
         raise RuntimeError("a bug")
 
-    monkeypatch.setattr(modelgen.derivation, "derive", bug)
+    monkeypatch.setattr(modelgen.derive.symbolic, "derive", bug)
     result = runner.invoke(main, ["derive"])
     assert result.exit_code == 3
     assert "modelgen: error: internal error: RuntimeError: a bug" in result.output and "--debug" in result.output
@@ -211,12 +211,12 @@ def test_debug_lets_a_bad_input_error_through_with_its_traceback(runner, tmp_pat
 
 
 def test_interrupt_exits_130_and_says_so(runner, monkeypatch):
-    import modelgen.modelfile
+    import modelgen.model.loading
 
     def interrupted(name):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(modelgen.modelfile, "load_model", interrupted)
+    monkeypatch.setattr(modelgen.model.loading, "load_model", interrupted)
     result = runner.invoke(main, ["derive"])
     assert result.exit_code == 130
     assert "modelgen: interrupted" in result.output
@@ -225,15 +225,15 @@ def test_interrupt_exits_130_and_says_so(runner, monkeypatch):
 def test_python_warnings_are_printed_as_modelgen_warnings(runner, monkeypatch):
     import warnings
 
-    import modelgen.derivation
+    import modelgen.derive.symbolic
 
-    real = modelgen.derivation.derive
+    real = modelgen.derive.symbolic.derive
 
     def noisy(model):
         warnings.warn("model has 900 states: the generated C will be about 40 MB")
         return real(model)
 
-    monkeypatch.setattr(modelgen.derivation, "derive", noisy)
+    monkeypatch.setattr(modelgen.derive.symbolic, "derive", noisy)
     result = runner.invoke(main, ["derive"])
     assert result.exit_code == 0
     assert "modelgen: warning: model has 900 states: the generated C will be about 40 MB" in result.output

@@ -11,9 +11,9 @@ from importlib.metadata import version
 import pytest
 
 from modelgen.codegen.generate import generate_code
-from modelgen.derivation import derive
-from modelgen.modelfile import builtin_models, load_model
-from modelgen.output import MANIFEST_NAME
+from modelgen.derive.symbolic import derive
+from modelgen.model.loading import builtin_models, load_model
+from modelgen.fileio.output import MANIFEST_NAME
 
 from conftest import REPO
 
@@ -57,7 +57,7 @@ def test_no_generated_folder_without_a_model():
 @pytest.mark.parametrize("name", builtin_models())
 def test_committed_generated_folder_has_a_manifest_of_exactly_its_files(name):
     """Without it, `modelgen run` on a fresh clone would refuse to replace generated/<model>/ (issue 10, item 6)."""
-    from modelgen.output import read_manifest, sha256_file
+    from modelgen.fileio.output import read_manifest, sha256_file
 
     folder = REPO / "generated" / name
     manifest = read_manifest(folder)

@@ -34,8 +34,8 @@ def test_readme_error_message_is_what_modelgen_prints(tmp_path):
 
 
 def test_readme_transform_example_builds_a_14_state_model(tmp_path):
-    from modelgen.derivation import derive
-    from modelgen.modelfile import load_model
+    from modelgen.derive.symbolic import derive
+    from modelgen.model.loading import load_model
 
     text = (REPO / "README.md").read_text(encoding="utf-8")
     example = re.findall(r"```yaml\n(.*?)```", text, re.S)[1]

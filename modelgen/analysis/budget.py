@@ -8,10 +8,10 @@ from typing import Mapping
 
 import numpy as np
 
-from modelgen.datafiles import data_path, read_yaml, require
-from modelgen.analysis.units import to_si
+from modelgen.fileio.datafiles import data_path, read_yaml, require
+from modelgen.model.units import to_si
 from modelgen.errors import ModelError
-from modelgen.model import ErrorModel
+from modelgen.model.declaration import ErrorModel
 
 BUDGET_FILE = "error_budget_000.yaml"
 

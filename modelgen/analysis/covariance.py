@@ -24,8 +24,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from modelgen.derivation import DerivedModel
-from modelgen.discretization import taylor_discretization, taylor_process_noise
+from modelgen.derive.symbolic import DerivedModel
+from modelgen.derive.discretization import taylor_discretization, taylor_process_noise
 from modelgen.errors import ModelError
 
 
@@ -47,7 +47,7 @@ class DiscreteSystem:
 def model_values(derived: DerivedModel, values: Mapping[str, float]) -> dict[str, float]:
     """The entries of ``values`` that are parameters of this model.
 
-    Reduced models (``modelgen.transform``) drop parameters they no longer
+    Reduced models (``modelgen.model.transform``) drop parameters they no longer
     use, so one value set for the full model serves all of them.
     """
     names = set(derived.model.parameter_names)

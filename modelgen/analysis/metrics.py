@@ -31,7 +31,7 @@ from scipy.interpolate import CubicSpline
 from scipy.optimize import brentq
 from scipy.special import erf
 
-from modelgen.analysis.units import from_si
+from modelgen.model.units import from_si
 
 #: (state name, output name, unit) of the error standard deviations reported
 REPORTED_STATES: tuple[tuple[str, str, str], ...] = (

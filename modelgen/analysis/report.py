@@ -81,7 +81,7 @@ def _inputs(scenario: Scenario, budget: ErrorBudget, inferred: float) -> str:
 
 _READING = """\
 How the paper's filters were read (modelgen/analysis/suboptimal.py):
-- I: the 13-state model made by modelgen.transform: the vertical gyro's random constant dropped and its variance
+- I: the 13-state model made by modelgen.model.transform: the vertical gyro's random constant dropped and its variance
   lumped into the vertical Markov drift, which together with the three accelerometer Markov biases is replaced
   by white noise of the low-frequency-equivalent strength 2 sigma^2/mu.
 - II: the full model with a piecewise-constant gain, recomputed every N = 6 steps and every N = 2 steps while

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from modelgen.datafiles import data_path, read_yaml, require
-from modelgen.analysis.units import to_si
+from modelgen.fileio.datafiles import data_path, read_yaml, require
+from modelgen.model.units import to_si
 from modelgen.errors import ModelError
 
 SCENARIO_FILE = "scenario_000.yaml"

@@ -21,7 +21,7 @@ from modelgen.analysis.metrics import final_values
 from modelgen.analysis.scenario import Scenario
 from modelgen.analysis.suboptimal import PAPER_FILTERS, FilterDesign
 from modelgen.analysis.systems import PURE_INERTIAL, PaperModels, analyse_systems
-from modelgen.analysis.units import to_si
+from modelgen.model.units import to_si
 
 SYSTEM_ORDER = ("optimal", "suboptimal_1", "suboptimal_2", "suboptimal_3", "suboptimal_4", PURE_INERTIAL)
 

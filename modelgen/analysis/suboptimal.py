@@ -2,7 +2,7 @@
 
 Each design says which error sources the filter leaves out and how often it
 recomputes its gain; its model is MADE from the 18-state model with
-``modelgen.transform`` (never retyped):
+``modelgen.model.transform`` (never retyped):
 
 * optimal: the 18-state model itself, gain every step (eq. (12));
 * I  (13 states): "the vertical gyro drift and the three accelerometer biases
@@ -46,8 +46,8 @@ import numpy as np
 
 from modelgen.analysis.scenario import Scenario
 from modelgen.errors import ModelError
-from modelgen.model import ErrorModel
-from modelgen.transform import keep_states, markov_to_white
+from modelgen.model.declaration import ErrorModel
+from modelgen.model.transform import keep_states, markov_to_white
 
 
 @dataclass(frozen=True)

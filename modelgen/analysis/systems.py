@@ -2,7 +2,7 @@
 
 :class:`PaperModels` derives the symbolic matrices of every model once (the
 18-state truth, its 16-state pure-inertial form and each filter's reduced
-model, all made by ``modelgen.transform``); :func:`analyse_systems` then only
+model, all made by ``modelgen.model.transform``); :func:`analyse_systems` then only
 evaluates, discretizes and runs the recursions for one scenario and budget,
 so sensitivity studies are cheap.
 """
@@ -26,10 +26,10 @@ from modelgen.analysis.covariance import (
 from modelgen.analysis.metrics import navigation_errors
 from modelgen.analysis.scenario import Scenario, operating_point
 from modelgen.analysis.suboptimal import PAPER_FILTERS, FilterDesign, filter_model, filter_parameters, gain_schedule
-from modelgen.derivation import DerivedModel, derive
-from modelgen.model import ErrorModel
-from modelgen.modelfile import load_model
-from modelgen.transform import keep_states
+from modelgen.derive.symbolic import DerivedModel, derive
+from modelgen.model.declaration import ErrorModel
+from modelgen.model.loading import load_model
+from modelgen.model.transform import keep_states
 
 PURE_INERTIAL = "pure_inertial"
 DOPPLER_STATES = ("doppler_velocity_bias_north", "doppler_velocity_bias_east")

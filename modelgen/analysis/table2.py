@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Sequence
 
-from modelgen.datafiles import data_path, read_yaml, require
+from modelgen.fileio.datafiles import data_path, read_yaml, require
 from modelgen.analysis.systems import PURE_INERTIAL, SystemResult
 from modelgen.analysis.metrics import final_values
 from modelgen.errors import ModelError

@@ -9,6 +9,9 @@ counts and the parameters.  A backend (``backends/<lang>/``) only prints it.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -146,6 +149,8 @@ class FilterDescription:
             "description": self.options.describe(),
             "contract_text": contract_text("  "),
             "contract_markdown": contract_markdown(),
+            "model_hash": model_hash(model),
+            "indices": index_names(model),
         }
 
 
@@ -160,6 +165,32 @@ def describe_filter(derived: DerivedModel, options: CodegenOptions) -> FilterDes
         derived.structure("F"), derived.structure("G"), derived.structure("H"), options.taylor_order
     )
     return FilterDescription(derived, options, structure)
+
+
+def model_hash(model) -> str:
+    """First 16 hex digits of the sha256 of the canonical model declaration (sorted JSON of every field).
+
+    Written into the generated code so that a program can tell which model its
+    filter was generated from; any change to the declaration changes it.
+    """
+    canonical = json.dumps(dataclasses.asdict(model), sort_keys=True, default=repr, ensure_ascii=True)
+    return hashlib.sha256(canonical.encode("utf-8")).hexdigest()[:16]
+
+
+def index_names(model) -> dict[str, list[dict[str, str]]]:
+    """State, noise and measurement index names (upper case), with unit and description, by kind.
+
+    Refuses (ModelError) two names of one kind that differ only in case: their
+    index macros would be the same.
+    """
+    out = {}
+    for kind, items in (("state", model.states), ("noise", model.noises), ("measurement", model.measurements)):
+        upper = [q.name.upper() for q in items]
+        if len(set(upper)) != len(upper):
+            clash = sorted({u for u in upper if upper.count(u) > 1})
+            raise ModelError(f"model {model.name!r}: {kind} names differ only in case ({', '.join(clash)}); index names would clash")
+        out[kind] = [{"name": q.name, "index": u, "unit": q.unit, "description": q.description} for q, u in zip(items, upper)]
+    return out
 
 
 def named(expr: sp.Expr, model) -> str:

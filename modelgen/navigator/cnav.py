@@ -31,7 +31,7 @@ from modelgen.errors import ModelError
 from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator.navigator import Flight, Inputs, _alignment, initial_covariance
 from modelgen.navigator.outages import in_outage, outage_windows
-from modelgen.output import write_atomically
+from modelgen.fileio.output import write_atomically
 
 N_CONFIG, N_OUTPUT, N_GNSS = 35, 23, 13
 COUNT_NAMES = ("gnss_updates", "gnss_rejected", "gnss_released", "gnss_deweighted", "gnss_quality_skipped",
@@ -49,8 +49,8 @@ def render_navigator(model: str) -> dict[str, str]:
 
 def generate_c_navigator(model_file: Path, folder: Path) -> Path:
     """Write the filter and the navigator C for the model file into ``folder`` (atomically)."""
-    from modelgen.derivation import derive
-    from modelgen.modelfile import load_model
+    from modelgen.derive.symbolic import derive
+    from modelgen.model.loading import load_model
 
     derived = derive(load_model(model_file))
     files = {name: text for name, text in generate_code(derived).files.items() if name.endswith((".c", ".h"))}

@@ -53,8 +53,8 @@ class EmbeddedReplay:
 
 def write_sources(model_file: Path, folder: Path) -> str:
     """Float filter, navigator and qemu driver sources into ``folder``; returns the model name."""
-    from modelgen.derivation import derive
-    from modelgen.modelfile import load_model
+    from modelgen.derive.symbolic import derive
+    from modelgen.model.loading import load_model
 
     derived = derive(load_model(model_file))
     name = derived.model.name

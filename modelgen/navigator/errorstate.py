@@ -37,7 +37,7 @@ def model_path(name: str, config_path: str) -> Path:
     here = Path(__file__).resolve().parent / "models" / f"{name}.yaml"
     if here.is_file():
         return here
-    from modelgen.modelfile import builtin_model_path
+    from modelgen.model.loading import builtin_model_path
 
     builtin = builtin_model_path(name)
     if builtin is not None:
@@ -52,8 +52,8 @@ def generate_filter_module(model_file: Path, work_dir: Path | None = None) -> Mo
     """Generate the model's Python filter with modelgen's generator and import it."""
     from modelgen.codegen.build import load_python_module
     from modelgen.codegen.generate import generate_code, write_atomically
-    from modelgen.derivation import derive
-    from modelgen.modelfile import load_model
+    from modelgen.derive.symbolic import derive
+    from modelgen.model.loading import load_model
 
     derived = derive(load_model(model_file))
     names = [s.name for s in derived.model.states]

@@ -17,7 +17,7 @@ from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
 from modelgen.navigator.metrics import errors_against_reference, summary, velocity_latency
 from modelgen.navigator.navigator import Flight, fly, prepare
 from modelgen.navigator.report import report_files
-from modelgen.output import write_atomically
+from modelgen.fileio.output import write_atomically
 
 
 @dataclass

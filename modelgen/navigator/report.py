@@ -1,7 +1,7 @@
 """A flight's files: RTKLIB .pos and CSV trajectories, summary.md/json, SVG figures.
 
 Everything is rendered in memory first and written as one folder by
-:func:`modelgen.output.write_atomically` (staging folder + rename), so a failed
+:func:`modelgen.fileio.output.write_atomically` (staging folder + rename), so a failed
 or interrupted replay never leaves a half-written report.  Figures are SVG
 (text) so that they go through the same writer.
 """

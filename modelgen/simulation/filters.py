@@ -12,8 +12,8 @@ filter:
 
 Three implementations plug in:
 
-* :class:`ReferenceFilter` -- ``modelgen.reference`` (dense numpy) with
-  ``modelgen.discretization`` and ``modelgen.derivation``;
+* :class:`ReferenceFilter` -- ``modelgen.derive.reference`` (dense numpy) with
+  ``modelgen.derive.discretization`` and ``modelgen.derive.symbolic``;
 * :class:`GeneratedPythonFilter` -- a module written by ``modelgen generate``
   (``generated/<model>/<model>.py``: parameter_vector, system_matrix,
   noise_input_matrix, noise_psd, discretize, predict, update);
@@ -30,9 +30,9 @@ from typing import Callable, Mapping, Protocol
 
 import numpy as np
 
-from modelgen import reference
-from modelgen.derivation import DerivedModel, parameter_vector
-from modelgen.discretization import taylor_discretization, taylor_process_noise
+from modelgen.derive import reference
+from modelgen.derive.symbolic import DerivedModel, parameter_vector
+from modelgen.derive.discretization import taylor_discretization, taylor_process_noise
 from modelgen.errors import ModelError
 
 
@@ -62,7 +62,7 @@ def check_finite_measurement(z: np.ndarray, H: np.ndarray, R: np.ndarray, where:
 
 
 class ReferenceFilter:
-    """Dense numpy filter: derivation + Taylor discretization + modelgen.reference."""
+    """Dense numpy filter: derivation + Taylor discretization + modelgen.derive.reference."""
 
     name = "reference"
 

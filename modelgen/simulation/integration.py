@@ -41,7 +41,7 @@ from typing import Callable, Protocol
 import numpy as np
 from scipy.stats import chi2
 
-from modelgen.derivation import DerivedModel
+from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.simulation import earth
 from modelgen.simulation.doppler import DopplerRecord, simulate_doppler

@@ -28,9 +28,9 @@ from typing import Callable
 import numpy as np
 from scipy.stats import chi2
 
-from modelgen.derivation import derive
+from modelgen.derive.symbolic import derive
 from modelgen.errors import ModelError
-from modelgen.modelfile import load_model
+from modelgen.model.loading import load_model
 from modelgen.simulation.filters import ReferenceFilter
 from modelgen.simulation.integration import run_scenario, scenario_layout
 from modelgen.simulation.scenario import Scenario

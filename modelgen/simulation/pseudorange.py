@@ -2,7 +2,7 @@
 
 :class:`PseudorangeNavigator` implements the Navigator protocol of
 :mod:`modelgen.simulation.integration` for seed 003's INS/GPS pseudo-range
-model (``gps_pseudorange11``, ``modelgen.library.pseudorange_model(n)``):
+model (``gps_pseudorange11``, ``modelgen.model.library.pseudorange_model(n)``):
 the same :class:`~modelgen.simulation.strapdown.Strapdown` mechanization as
 the Doppler/GPS navigator, plus a receiver-clock estimate, with the errors
 mapped explicitly onto the model's states (its header fixes them):
@@ -58,7 +58,7 @@ from typing import Callable
 
 import numpy as np
 
-from modelgen.derivation import DerivedModel
+from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.simulation import earth
 from modelgen.simulation.error_layout import frame_matrix
@@ -152,7 +152,7 @@ def satellite_count(derived: DerivedModel) -> int:
     model = derived.model
     if tuple(model.state_names) != STATE_NAMES:
         raise ModelError(f"pseudorange aiding: model {model.name!r} does not have the 11 states of "
-                         f"modelgen.library.pseudorange_model ({', '.join(STATE_NAMES)})")
+                         f"modelgen.model.library.pseudorange_model ({', '.join(STATE_NAMES)})")
     return len(model.measurement_names)
 
 

@@ -18,8 +18,8 @@ from typing import Callable
 
 import numpy as np
 
-from modelgen.derivation import derive
-from modelgen.modelfile import load_model
+from modelgen.derive.symbolic import derive
+from modelgen.model.loading import load_model
 from modelgen.simulation import earth
 from modelgen.simulation.filters import filter_factory
 from modelgen.simulation.integration import MODES, RunResult, run_scenario, scenario_layout, simulate_sensors
@@ -254,7 +254,7 @@ def _plot_nees(mc: MonteCarloResult, path: Path) -> Path:
 _IMPLEMENTATION_TEXT = {
     "c": "the generated C (modelgen generate, default options), compiled for this run and called through ctypes",
     "python": "the generated Python module (modelgen generate, default options)",
-    "reference": "the dense numpy reference filter (modelgen/reference.py)",
+    "reference": "the dense numpy reference filter (modelgen/derive/reference.py)",
 }
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 
-from modelgen.datafiles import read_yaml_with_lines
+from modelgen.fileio.datafiles import read_yaml_with_lines
 from modelgen.errors import ModelError
 from modelgen.simulation.doppler import DopplerSettings, JanusBeams, Outage
 from modelgen.simulation.gps import Constellation, GpsSettings, PseudorangeSettings

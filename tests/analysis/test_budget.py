@@ -7,9 +7,9 @@ import math
 import pytest
 
 from modelgen.analysis.budget import load_error_budget
-from modelgen.analysis.units import ARCSEC_PER_RAD, to_si
+from modelgen.model.units import ARCSEC_PER_RAD, to_si
 from modelgen.errors import ModelError
-from modelgen.transform import keep_states
+from modelgen.model.transform import keep_states
 
 DEG_PER_HOUR = math.radians(1.0) / 3600.0
 

@@ -17,7 +17,7 @@ from modelgen.analysis.covariance import (
 from modelgen.analysis.scenario import load_scenario, operating_point
 from modelgen.analysis.suboptimal import PAPER_FILTERS, filter_parameters
 from modelgen.analysis.systems import paper_models
-from modelgen.discretization import van_loan_discretization
+from modelgen.derive.discretization import van_loan_discretization
 from modelgen.errors import ModelError
 
 STEPS = 60  # one hour is enough to exercise every recursion

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derivation import parameter_vector
+from modelgen.derive.symbolic import parameter_vector
 from tests.codegen.generated_support import build
 
 FAMILIES = [

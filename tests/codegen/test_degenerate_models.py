@@ -14,8 +14,8 @@ import pytest
 from modelgen.codegen.build import compile_shared_library
 from modelgen.codegen.generate import generate_code
 from modelgen.codegen.options import all_combinations
-from modelgen.derivation import derive
-from modelgen.modelfile import load_model_text
+from modelgen.derive.symbolic import derive
+from modelgen.model.loading import load_model_text
 from tests.codegen.generated_support import Built, build, write_files
 
 MODELS = {

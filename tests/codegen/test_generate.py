@@ -8,9 +8,9 @@ import pytest
 
 from modelgen.codegen.build import STRICT_FLAGS, compiler, load_python_module
 from modelgen.codegen.generate import CodegenOptions, generate_code, write_atomically
-from modelgen.derivation import derive
+from modelgen.derive.symbolic import derive
 from modelgen.errors import ModelError
-from modelgen.model import ErrorModel, Noise, Parameter, State
+from modelgen.model.declaration import ErrorModel, Noise, Parameter, State
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +57,7 @@ def test_structured_prediction_costs_at_most_a_third_of_dense(paper_code):
 
 def test_generation_is_byte_identical_across_processes_and_hash_seeds(tmp_path):
     script = (
-        "import sys; from modelgen.pipeline import generate; from pathlib import Path; "
+        "import sys; from modelgen.jobs import generate; from pathlib import Path; "
         "generate('ned_doppler18', Path(sys.argv[1]))"
     )
     outputs = []
@@ -83,7 +83,7 @@ def test_generated_python_matrices_equal_derived_ones(paper_code, paper_derived,
 
 
 def test_nonlinear_model_is_refused_before_writing(tmp_path):
-    with pytest.raises(ModelError, match="not linear"):  # refused as the model is built (modelgen.model)
+    with pytest.raises(ModelError, match="not linear"):  # refused as the model is built (modelgen.model.declaration)
         model = ErrorModel.build(
             "toy", [State("a"), State("b")], [Noise("w")], [Parameter("k")], {"a": "a*b", "b": "k*b + w"}
         )

@@ -3,7 +3,7 @@
 Each combination is generated, compiled (in parallel, -O1 to keep the suite
 fast) and run through ctypes over the core paper's 4-hour scenario.  Double
 precision must agree with the dense numpy reference to the conformance
-tolerance; single precision must stay within modelgen.embedded.FLOAT_TOLERANCE
+tolerance; single precision must stay within modelgen.checks.embedded_check.FLOAT_TOLERANCE
 of it (the justification is in that module's docstring).
 """
 
@@ -16,11 +16,11 @@ from modelgen.codegen.build import CompiledFilter, compile_shared_library
 from modelgen.codegen.generate import generate_code, write_atomically
 from modelgen.codegen.layout import ModelSizes, packed_index, upper_index
 from modelgen.codegen.options import CodegenOptions, all_combinations
-from modelgen.conformance import compare, measurement_sequence, reference_run, scenario_tolerance
-from modelgen.derivation import parameter_vector
-from modelgen.embedded import float_tolerance, smallest_correlation_eigenvalue
+from modelgen.checks.code_check import compare, measurement_sequence, reference_run, scenario_tolerance
+from modelgen.derive.symbolic import parameter_vector
+from modelgen.checks.embedded_check import float_tolerance, smallest_correlation_eigenvalue
 from modelgen.errors import ModelError
-from modelgen.pipeline import paper_scenario
+from modelgen.jobs import paper_scenario
 
 COMBINATIONS = all_combinations("double") + all_combinations("float")
 
@@ -178,7 +178,7 @@ def test_every_combination_generates_byte_identical_output_across_processes(pape
 
     script = (
         "import sys; from modelgen.codegen.generate import generate_code; from modelgen.codegen.options import all_combinations; "
-        "from modelgen.derivation import derive; from modelgen.modelfile import load_model; import hashlib; "
+        "from modelgen.derive.symbolic import derive; from modelgen.model.loading import load_model; import hashlib; "
         "d = derive(load_model('ned_doppler18')); "
         "print(hashlib.sha256(repr([sorted(generate_code(d, o).files.items()) for o in all_combinations('float')[::3]]).encode()).hexdigest())"
     )
@@ -199,9 +199,9 @@ def test_every_combination_generates_byte_identical_output_across_processes(pape
     ids=lambda v: v if isinstance(v, str) else v.slug(),
 )
 def test_other_models_match_the_reference_in_other_combinations(name, options, tmp_path):
-    from modelgen.derivation import derive
-    from modelgen.modelfile import load_model
-    from modelgen.pipeline import synthetic_scenario
+    from modelgen.derive.symbolic import derive
+    from modelgen.model.loading import load_model
+    from modelgen.jobs import synthetic_scenario
 
     derived = derive(load_model(name))
     scenario = synthetic_scenario(derived, steps=60)

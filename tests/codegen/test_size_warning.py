@@ -9,8 +9,8 @@ from modelgen.codegen import generate as generate_module
 from modelgen.codegen.generate import GeneratedSizeWarning, LARGE_CODE_BYTES, generate_code, warn_if_large
 from modelgen.codegen.kernels import estimated_code_bytes
 from modelgen.codegen.structure import filter_structure
-from modelgen.derivation import derive
-from modelgen.modelfile import load_model
+from modelgen.derive.symbolic import derive
+from modelgen.model.loading import load_model
 
 
 def structure_of(derived):

@@ -4,7 +4,7 @@ import pytest
 
 from embedded_support import in_parallel, require_tools
 from modelgen.codegen import toolchain
-from modelgen.embedded import EMBEDDED_OPTIONS, firmware, report_markdown
+from modelgen.checks.embedded_check import EMBEDDED_OPTIONS, firmware, report_markdown
 
 pytestmark = require_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_EMBEDDED_SIZE)
 

@@ -5,8 +5,8 @@ import pytest
 from embedded_support import in_parallel, require_tools
 from modelgen.codegen import toolchain
 from modelgen.codegen.options import CodegenOptions
-from modelgen.embedded import EMBEDDED_OPTIONS, qemu_run, report_markdown
-from modelgen.pipeline import paper_scenario
+from modelgen.checks.embedded_check import EMBEDDED_OPTIONS, qemu_run, report_markdown
+from modelgen.jobs import paper_scenario
 
 pytestmark = require_tools(toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
 
@@ -61,9 +61,9 @@ def gnss21_runs(tmp_path_factory):
     """The 21-state INS/GNSS filter in float (covariance and U-D) at the IMU step 5 ms and the GNSS step 1 s."""
     import dataclasses
 
-    from modelgen.derivation import derive
-    from modelgen.modelfile import load_model
-    from modelgen.pipeline import check_scenario
+    from modelgen.derive.symbolic import derive
+    from modelgen.model.loading import load_model
+    from modelgen.jobs import check_scenario
 
     derived = derive(load_model("ins_gnss21"))
     declared = check_scenario(derived)
@@ -92,7 +92,7 @@ def test_21_state_ins_gnss_float_filter_meets_its_stated_tolerance(gnss21_runs, 
 
 
 def test_report_names_the_single_precision_form_to_use(gnss21_runs):
-    from modelgen.embedded import recommended_form
+    from modelgen.checks.embedded_check import recommended_form
 
     runs = [r for (step, _), r in gnss21_runs.items() if step == 1.0]
     text = recommended_form(runs)

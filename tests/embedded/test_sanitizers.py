@@ -12,9 +12,9 @@ import pytest
 from embedded_support import IN_CI, in_parallel, sanitizers_available
 from modelgen.codegen import toolchain
 from modelgen.codegen.options import CodegenOptions
-from modelgen.conformance import reference_run, scenario_tolerance
-from modelgen.embedded import compare_run, scenario_inputs
-from modelgen.pipeline import paper_scenario
+from modelgen.checks.code_check import reference_run, scenario_tolerance
+from modelgen.checks.embedded_check import compare_run, scenario_inputs
+from modelgen.jobs import paper_scenario
 
 pytestmark = pytest.mark.skipif(not IN_CI and not sanitizers_available(), reason="the host compiler cannot build ASan/UBSan programs (libasan/libubsan absent)")
 

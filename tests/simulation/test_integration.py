@@ -225,8 +225,8 @@ def test_unknown_filter_implementation_is_refused_by_name(paper_derived, tmp_pat
 def test_seed_001_set_up_runs_ins_gps15_at_20_hz_with_a_300_hz_mechanization():
     # profile_001: 300 Hz strapdown (three-sample, 15 samples per cycle), 20 Hz GPS position and
     # velocity into the 15-state ENU model; its gyro bias enters as -C eps (measured - true).
-    from modelgen.derivation import derive
-    from modelgen.modelfile import load_model
+    from modelgen.derive.symbolic import derive
+    from modelgen.model.loading import load_model
 
     scenario = load_scenario("profile_001").with_changes(hours=1 / 60)
     derived = derive(load_model(scenario.filter.model))

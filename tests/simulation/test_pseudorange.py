@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from modelgen.derivation import derive
+from modelgen.derive.symbolic import derive
 from modelgen.errors import ModelError
-from modelgen.library import pseudorange_model
-from modelgen.modelfile import load_model
+from modelgen.model.library import pseudorange_model
+from modelgen.model.loading import load_model
 from modelgen.simulation import earth
 from modelgen.simulation.filters import ReferenceFilter
 from modelgen.simulation.gps import PseudorangeSettings
@@ -23,7 +23,7 @@ from modelgen.simulation.pseudorange import (
 )
 from modelgen.simulation.scenario import InitialErrors, load_scenario, load_scenario_data
 from modelgen.simulation.trajectory import generate_trajectory
-from modelgen.datafiles import read_yaml
+from modelgen.fileio.datafiles import read_yaml
 
 IMU_RATE = 50.0  # low rate: the flight has no coning motion; keeps the file fast
 

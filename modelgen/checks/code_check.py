@@ -1,0 +1,331 @@
+"""Checking generated code against the numpy reference, step by step.
+
+Both the generated Python module and the compiled C library run the same
+scenario as ``modelgen.derive.reference`` (derived matrices, Taylor discretization,
+predict, Joseph update): a fixed operating point, ``steps`` steps of ``T``
+seconds with a measurement update after every prediction and measurements
+drawn from a seeded generator.
+
+Two measures of agreement are kept.  The *scaled* difference divides each
+|Delta P_ij| by sqrt(P_ii P_jj) (and |Delta x_i| by sqrt(P_ii)): for a diagonal
+entry it is the plain relative difference, for an off-diagonal entry the error
+of the correlation coefficient.  The *elementwise* relative difference
+|Delta P_ij| / |P_ij| is also reported; it is ill-conditioned for entries whose
+correlation coefficient is tiny (1e-6), where it measures the rounding of a
+nearly cancelling sum rather than a disagreement, so the pass criterion is
+the scaled one.
+
+The tolerance is computed per run (:func:`conformance_tolerance`), from how
+much the run's own arithmetic cancels: see :func:`step_conditioning`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+
+from modelgen.derive import reference
+from modelgen.codegen.build import build_c_filter, load_python_module
+from modelgen.codegen.layout import ModelSizes
+from modelgen.codegen.options import CodegenOptions
+from modelgen.derive.symbolic import DerivedModel, parameter_vector
+from modelgen.derive.discretization import DEFAULT_TAYLOR_ORDER, taylor_discretization, taylor_process_noise
+from modelgen.errors import ModelError
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A constant operating point flown for ``steps`` filter cycles."""
+
+    parameters: Mapping[str, float]
+    initial_covariance: np.ndarray
+    step: float = 60.0
+    steps: int = 240
+    seed: int = 0
+    initial_state: np.ndarray | None = None  # zeros when None
+    label: str = "synthetic operating point"  # what the scenario is, for reports
+
+    def x0(self) -> np.ndarray:
+        n = self.initial_covariance.shape[0]
+        return np.zeros(n) if self.initial_state is None else np.asarray(self.initial_state, dtype=float).copy()
+
+
+@dataclass(frozen=True)
+class ConformanceResult:
+    """Largest relative differences between an implementation and the reference."""
+
+    implementation: str
+    steps: int
+    max_scaled_P: float  # max |dP_ij| / sqrt(P_ii P_jj)
+    max_scaled_x: float  # max |dx_i| / sqrt(P_ii)
+    max_elementwise_P: float  # max |dP_ij| / |P_ij|, for information
+    symmetric: bool
+    positive_definite: bool
+    tolerance: float = float("nan")  # this run's bound (conformance_tolerance); nan: none computed
+    scenario: str = ""  # the scenario's label: what was flown
+
+    def passed(self, tolerance: float | None = None) -> bool:
+        """Scaled differences below ``tolerance`` (default: the run's own), P symmetric and positive definite."""
+        limit = self.tolerance if tolerance is None else tolerance
+        return self.max_scaled_P < limit and self.max_scaled_x < limit and self.symmetric and self.positive_definite
+
+
+def relative_difference(value: np.ndarray, ref: np.ndarray) -> float:
+    """max |value - ref| / |ref| over entries; an exact zero must stay zero."""
+    diff = np.abs(value - ref)
+    scale = np.abs(ref)
+    nonzero = scale > 0
+    worst = float(np.max(diff[nonzero] / scale[nonzero])) if nonzero.any() else 0.0
+    if np.any(diff[~nonzero] > 0):
+        worst = float("inf")
+    return worst
+
+
+def scaled_differences(x: np.ndarray, P: np.ndarray, x_ref: np.ndarray, P_ref: np.ndarray) -> tuple[float, float]:
+    """(max |dP_ij|/sqrt(P_ii P_jj), max |dx_i|/sqrt(P_ii)) against the reference."""
+    sigma = np.sqrt(np.diag(P_ref))
+    dP = np.abs(P - P_ref) / np.outer(sigma, sigma)
+    dx = np.abs(x - x_ref) / sigma
+    return float(dP.max()), float(dx.max())
+
+
+def is_positive_definite(P: np.ndarray) -> bool:
+    """Cholesky of the correlation matrix succeeds.
+
+    The states mix radians and metres per second, so the raw eigenvalues of P
+    span 20 orders of magnitude and rounding makes the smallest one's sign
+    meaningless; the correlation matrix D^-1/2 P D^-1/2 is scale-free.
+    """
+    d = np.diag(P)
+    if np.any(d <= 0) or not np.all(np.isfinite(P)):
+        return False
+    s = 1 / np.sqrt(d)
+    try:
+        np.linalg.cholesky(P * np.outer(s, s))
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def measurement_sequence(derived: DerivedModel, scenario: Scenario) -> np.ndarray:
+    """Seeded measurements, scaled by the measurement noise, one row per step."""
+    rng = np.random.default_rng(scenario.seed)
+    r = np.diag(derived.numeric(scenario.parameters)["R"])
+    return rng.standard_normal((scenario.steps, derived.n_measurements)) * np.sqrt(np.maximum(r, 0.0))
+
+
+Stepper = Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def reference_run(derived: DerivedModel, scenario: Scenario, order: int = DEFAULT_TAYLOR_ORDER) -> list[tuple[np.ndarray, np.ndarray]]:
+    """x and P after every step, by the dense numpy reference."""
+    m = derived.numeric(scenario.parameters)
+    phi, gamma = taylor_discretization(m["F"], m["G"], scenario.step, order)
+    qd = taylor_process_noise(gamma, m["Q"], scenario.step)
+    x = scenario.x0()
+    P = scenario.initial_covariance.copy()
+    out = []
+    for z in measurement_sequence(derived, scenario):
+        x = phi @ x
+        P = reference.predict_covariance(P, phi, qd)
+        if derived.n_measurements:
+            x, P = reference.update(x, P, z, m["H"], m["R"])
+        out.append((x, P))
+    return out
+
+
+def python_run(module_path: Path, derived: DerivedModel, scenario: Scenario) -> list[tuple[np.ndarray, np.ndarray]]:
+    """x and P after every step, by the generated Python module."""
+    gen = load_python_module(module_path)
+    p = gen.parameter_vector(_named_parameters(derived, scenario))
+    F, G, H = gen.system_matrix(p), gen.noise_input_matrix(p), gen.measurement_matrix(p)
+    q, r = gen.noise_psd(p), gen.measurement_variance(p)
+    phi, qd = gen.discretize(F, G, q, scenario.step)
+    x = scenario.x0()
+    P = scenario.initial_covariance.copy()
+    out = []
+    for z in measurement_sequence(derived, scenario):
+        x, P = gen.predict(x, P, phi, qd)
+        if derived.n_measurements:
+            x, P = gen.update(x, P, z, H, r)
+        out.append((x, P))
+    return out
+
+
+def c_run(
+    folder: Path,
+    derived: DerivedModel,
+    scenario: Scenario,
+    build_dir: Path | None = None,
+    options: CodegenOptions | None = None,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """x and P after every step, by the compiled generated C (generated with ``options``)."""
+    model = derived.model
+    filt = build_c_filter(Path(folder), model.name, ModelSizes.of(derived), model.parameter_names, build_dir, options=options)
+    filt.set_parameters(_named_parameters(derived, scenario))
+    if filt.discretize(scenario.step) != 0:
+        raise ModelError(f"generated C for {model.name!r} refused the step T = {scenario.step}")
+    filt.set_state(scenario.x0(), scenario.initial_covariance)
+    out = []
+    for z in measurement_sequence(derived, scenario):
+        filt.predict()
+        if derived.n_measurements:
+            status = filt.update(z)
+            if status != 0:
+                raise ModelError(f"generated C update returned status {status}")
+        out.append((filt.x, filt.P))
+    return out
+
+
+def _named_parameters(derived: DerivedModel, scenario: Scenario) -> dict[str, float]:
+    """Every parameter by its spelled-out name, defaults filled in."""
+    values = parameter_vector(derived.model, scenario.parameters)
+    return dict(zip(derived.model.parameter_names, values))
+
+
+def compare(
+    name: str,
+    run: list[tuple[np.ndarray, np.ndarray]],
+    ref: list[tuple[np.ndarray, np.ndarray]],
+    tolerance: float = float("nan"),
+    scenario: str = "",
+) -> ConformanceResult:
+    """Worst relative differences of ``run`` against ``ref`` over all steps."""
+    scaled = [scaled_differences(x, P, xr, Pr) for (x, P), (xr, Pr) in zip(run, ref)]
+    elementwise = max(relative_difference(P, Pr) for (_, P), (_, Pr) in zip(run, ref))
+    symmetric = all(np.array_equal(P, P.T) for _, P in run)
+    positive = all(is_positive_definite(P) for _, P in run)
+    return ConformanceResult(
+        name, len(run), max(s[0] for s in scaled), max(s[1] for s in scaled), elementwise, symmetric, positive, tolerance, scenario
+    )
+
+
+def check_generated(
+    folder: Path,
+    derived: DerivedModel,
+    scenario: Scenario,
+    build_dir: Path | None = None,
+    options: CodegenOptions | None = None,
+) -> list[ConformanceResult]:
+    """Run reference, generated Python and generated C; compare each to the reference.
+
+    ``options`` must be those the code was generated with (Taylor order,
+    storage, update form); the scalar type must be double.
+    """
+    options = options or CodegenOptions()
+    if options.scalar != "double":
+        raise ModelError("the reference check needs double-precision code; float is checked by `modelgen embedded`")
+    folder = Path(folder)
+    ref = reference_run(derived, scenario, options.taylor_order)
+    tol = scenario_tolerance(derived, scenario, options.taylor_order)
+    name = derived.model.name
+    return [
+        compare("python", python_run(folder / f"{name}.py", derived, scenario), ref, tol, scenario.label),
+        compare("c", c_run(folder, derived, scenario, build_dir, options), ref, tol, scenario.label),
+    ]
+
+
+# -- the pass criterion --------------------------------------------------------
+
+#: Unit roundoff of IEEE double and single precision (round to nearest).
+DOUBLE_UNIT_ROUNDOFF = 2.0**-53
+FLOAT_UNIT_ROUNDOFF = 2.0**-24
+
+
+def _scaled_magnitude(magnitude: np.ndarray, result_diagonal: np.ndarray) -> float:
+    """max_ij magnitude_ij / sqrt(d_i d_j) over the entries whose variances are positive."""
+    s = np.sqrt(np.maximum(result_diagonal, 0.0))
+    keep = s > 0
+    if not keep.any():
+        return 0.0
+    return float((magnitude[np.ix_(keep, keep)] / np.outer(s[keep], s[keep])).max())
+
+
+def _scaled_state(magnitude: np.ndarray, result_diagonal: np.ndarray) -> float:
+    """max_i magnitude_i / sqrt(d_i) over the states whose variances are positive."""
+    s = np.sqrt(np.maximum(result_diagonal, 0.0))
+    keep = s > 0
+    return float((magnitude[keep] / s[keep]).max()) if keep.any() else 0.0
+
+
+def step_conditioning(derived: DerivedModel, scenario: Scenario, order: int = DEFAULT_TAYLOR_ORDER) -> np.ndarray:
+    """rho_k for every step k: how much that step's arithmetic cancels, in scaled units.
+
+    A sum of m products computed in floating point has an error of at most
+    gamma_m = m u / (1 - m u) times the sum of the *absolute values* of its
+    terms (Higham, Accuracy and Stability of Numerical Algorithms, 2nd ed.,
+    sec. 3.1).  Divided by sqrt(P_ii P_jj) of the result, that sum of absolute
+    values is the factor by which the step can magnify one rounding:
+
+    * discretization: Phi = sum_k (F T)^k / k! is bounded entrywise by
+      |Phi|_abs = sum_k (|F| T)^k / k! (the Taylor order used by the code);
+    * prediction P' = Phi P Phi^T + Q_d: |Phi|_abs |P| |Phi|_abs^T + |Q_d|,
+      scaled by P';
+    * Joseph update P+ = A P' A^T + K R K^T, A = I - K H:
+      |A| |P'| |A|^T + |K| |R| |K|^T, scaled by P+ (the Joseph form is
+      insensitive to first order to an error in K, so the gain's own
+      conditioning does not enter);
+    * state: |Phi|_abs |x| / sqrt(P'_ii) and (|x'| + |K| (|z| + |H| |x'|)) / sqrt(P+_ii).
+
+    rho_k is the sum of the three (prediction, update, state): 1 for a step
+    without cancellation, large where a measurement removes most of a
+    variance or correlations near +-1 make a covariance entry a difference of
+    large terms (an ill-conditioned P).
+    """
+    m = derived.numeric(scenario.parameters)
+    F, n = m["F"], derived.n_states
+    phi, gamma = taylor_discretization(F, m["G"], scenario.step, order)
+    qd = taylor_process_noise(gamma, m["Q"], scenario.step)
+    phi_abs = taylor_discretization(np.abs(F), np.zeros((n, 0)), scenario.step, order)[0]
+    H, R = m["H"], m["R"]
+    x, P = scenario.x0(), scenario.initial_covariance.copy()
+    rho = []
+    for z in measurement_sequence(derived, scenario):
+        x_pred = phi @ x
+        P_pred = reference.predict_covariance(P, phi, qd)
+        rho_P = _scaled_magnitude(phi_abs @ np.abs(P) @ phi_abs.T + np.abs(qd), np.diag(P_pred))
+        rho_x = _scaled_state(phi_abs @ np.abs(x), np.diag(P_pred))
+        x, P = x_pred, P_pred
+        if derived.n_measurements:
+            x, P = reference.update(x_pred, P_pred, z, H, R)
+            K = P_pred @ H.T @ np.linalg.inv(H @ P_pred @ H.T + R)
+            A = np.eye(n) - K @ H
+            rho_P += _scaled_magnitude(np.abs(A) @ np.abs(P_pred) @ np.abs(A).T + np.abs(K) @ np.abs(R) @ np.abs(K).T, np.diag(P))
+            x_terms = np.abs(x_pred) + np.abs(K) @ (np.abs(z) + np.abs(H) @ np.abs(x_pred))
+            rho_x += _scaled_state(x_terms, np.diag(P))
+        rho.append(rho_P + rho_x)
+    return np.array(rho)
+
+
+def conformance_tolerance(rho: np.ndarray, n_states: int, unit_roundoff: float, implementations: int) -> float:
+    """Largest scaled difference two correct implementations can show over a run.
+
+    Every entry of P, x is a sum of at most 2n + 1 products per step (Phi P,
+    then (Phi P) Phi^T, plus Q_d; the same for A P' A^T + K R K^T), so one step
+    adds an error of at most gamma_{2n+1} rho_k ~ (2n + 1) u rho_k in scaled
+    units (:func:`step_conditioning`).  The errors of earlier steps are carried
+    forward by (I - K H) Phi, which for a stable filter contracts (the
+    Joseph-form Riccati recursion is numerically stable: Verhaegen & Van
+    Dooren, IEEE TAC 31(10), 1986), so they add up at most linearly:
+
+        tolerance = implementations * (2n + 1) * u * sum_k rho_k.
+
+    ``implementations`` is 2 when two double-precision codes are compared
+    (each may be off by the bound) and 1 for float against the double
+    reference (whose own error is 2^29 times smaller).  For a step without
+    cancellation rho_k ~ 3 and this is cond x unit roundoff x steps with
+    cond ~ 1; an ill-conditioned P raises rho_k and the bound with it.  The
+    bound is a worst case: rounding errors of random sign grow like
+    sqrt(terms), so measured differences sit one to three orders below it.
+    """
+    return float(implementations * (2 * n_states + 1) * unit_roundoff * float(np.sum(rho)))
+
+
+def scenario_tolerance(
+    derived: DerivedModel, scenario: Scenario, order: int = DEFAULT_TAYLOR_ORDER, unit_roundoff: float = DOUBLE_UNIT_ROUNDOFF, implementations: int = 2
+) -> float:
+    """:func:`conformance_tolerance` of ``scenario``: two double codes by default, (u_float, 1) for float."""
+    return conformance_tolerance(step_conditioning(derived, scenario, order), derived.n_states, unit_roundoff, implementations)

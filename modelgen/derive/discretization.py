@@ -1,0 +1,237 @@
+"""Continuous -> discrete: transition matrix Phi and process noise.
+
+Two methods, so that each checks the other:
+
+* the paper's truncated Taylor series (seed 000, eqs. (10)-(11)),
+  Phi = sum_{k=0..N} (F T)^k / k!,  Gamma = T sum_{k=0..N} (F T)^k / (k+1)! G,
+  with the discrete noise covariance Gamma (Q/T) Gamma^T.  Dividing the
+  continuous power spectral density Q by T turns it into the covariance of the
+  equivalent white sequence W(k) held over one step, so that
+  Gamma Q_k Gamma^T ~ T G Q G^T to first order.  The series is summed with
+  scaling and squaring, so that it stays accurate for any finite T (below);
+* the exact matrix exponential, with Van Loan's method for
+  Q_d = int_0^T e^{F s} G Q G^T e^{F^T s} ds.
+
+Scaling and squaring.  Truncated at order N, the series is only accurate
+while F T is small: with the paper's order 9, Phi of the 18-state model is
+64 % off at T = 3600 s.  So the series is summed over h = T / 2^s and then
+doubled s times:
+
+    Phi(2h) = Phi(h)^2,   Psi(2h) = Psi(h) + Phi(h) Psi(h),
+
+where Psi(h) = int_0^h e^{F s} ds = h sum_k (F h)^k / (k+1)! is the series of
+eq. (11) and Gamma = Psi(T) G.  Both identities are exact, so Phi and Gamma
+converge to e^{F T} and int_0^T e^{F s} ds G, the limits of eqs. (10)-(11),
+for any finite T; Q_d stays the paper's Gamma (Q/T) Gamma^T.
+
+s is the smallest integer with theta = ||F||_D h <= theta_N, where
+
+* ||F||_D = max_i sum_j |F_ij| d_j / d_i is the infinity norm of D^-1 F D,
+  D = diag(d) a power-of-two diagonal scaling from at most eight Jacobi
+  sweeps of Osborne's balancing (fewer when a sweep changes nothing) (each d_i moves by at most 2^8 per sweep and stays
+  within 2^-40..2^40).  Any D
+  gives a valid norm; balancing makes it independent of the units chosen
+  for each state (unscaled, g = 9.8 m/s^2 from tilt into velocity makes
+  ||F T|| about 650 at T = 60 s for the paper's model; balanced it is
+  0.16, the Schuler rate times T);
+* theta_N is the largest theta for which the remainder of the series,
+  at most theta^(N+1) / (N+1)! * (N+2) / (N+2-theta) in that norm, is below
+  the unit roundoff u (2^-53 in double, 2^-24 in float): 0.12 for N = 9 in
+  double.
+
+So the truncation error of Phi(h) is below u ||Phi(h)||_D, the series for
+Psi converges faster still, and what remains is the rounding of s
+doublings (s = 1 at the paper's 60 s step, 11 at one day).  Measured
+against scipy's expm on the paper's model, the largest error of Phi is below
+1e-15 of its largest entry up to T = 600 s and below 1e-11 up to T = 1 day
+(tests/derive/test_discretization.py states 1e-13 and 1e-10).  The generated C and
+Python compute the same D, norm and s, so the three agree.  s is capped at
+64 (||F||_D T up to about 2e18): beyond, e^{F T} is refused as not
+representable.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from scipy.linalg import expm
+
+from modelgen.errors import ModelError
+
+DEFAULT_TAYLOR_ORDER = 9  # seed 000, eq. (10): terms up to F^9 T^9 / 9!
+MAX_DOUBLINGS = 64  # T / 2^64: far below any step a navigation filter takes
+BALANCING_SWEEPS = 8
+MAX_SWEEP_EXPONENT = 8  # a scale moves by at most 2^8 per sweep
+MAX_SCALE_EXPONENT = 40  # and stays within 2^-40..2^40 (a ratio d_j / d_i fits a float)
+DOUBLE_ROUNDOFF = 2.0**-53
+FLOAT_ROUNDOFF = 2.0**-24
+
+
+@functools.lru_cache(maxsize=None)
+def series_range(order: int, unit_roundoff: float = DOUBLE_ROUNDOFF) -> float:
+    """Largest theta = ||F h|| for which the Taylor remainder after ``order`` is below ``unit_roundoff``.
+
+    The remainder sum_{k>N} theta^k / k! is at most
+    theta^(N+1) / (N+1)! * (N+2) / (N+2-theta); bisection on theta in [0, N+1].
+    """
+    def remainder(theta: float) -> float:
+        return theta ** (order + 1) / math.factorial(order + 1) * (order + 2) / (order + 2 - theta)
+
+    low, high = 0.0, float(order + 1)
+    for _ in range(200):
+        mid = 0.5 * (low + high)
+        if remainder(mid) <= unit_roundoff:
+            low = mid
+        else:
+            high = mid
+    return low
+
+
+def sweep_exponent(row: float, column: float) -> int:
+    """Power of two k by which Osborne's balancing scales a state: 2^k ~ sqrt(row / column), bounded.
+
+    With e the difference of frexp's exponents of row and column (log2 of
+    their ratio to within one), k = floor(e / 2), within
+    [-MAX_SWEEP_EXPONENT, MAX_SWEEP_EXPONENT].  A state that drives others
+    but is driven by none (row 0: a random constant or a bias) takes the
+    lower bound, one driven but driving none (column 0) the upper bound: the
+    norm shrinks the further they go.  Integer arithmetic on exponents, so
+    C and Python agree exactly.
+    """
+    if row > 0.0 and column > 0.0:
+        e = math.frexp(row)[1] - math.frexp(column)[1]  # log2(row / column) within 1, never overflowing
+        return max(-MAX_SWEEP_EXPONENT, min(MAX_SWEEP_EXPONENT, e // 2))
+    if column > 0.0:
+        return -MAX_SWEEP_EXPONENT
+    if row > 0.0:
+        return MAX_SWEEP_EXPONENT
+    return 0
+
+
+def sweep_exponents(row: np.ndarray, column: np.ndarray) -> np.ndarray:
+    """:func:`sweep_exponent` of every state at once (the same integers)."""
+    both = (row > 0.0) & (column > 0.0)
+    ratio = np.minimum(np.maximum((np.frexp(row)[1] - np.frexp(column)[1]) // 2, -MAX_SWEEP_EXPONENT), MAX_SWEEP_EXPONENT)
+    lone = np.where(column > 0.0, -MAX_SWEEP_EXPONENT, np.where(row > 0.0, MAX_SWEEP_EXPONENT, 0))
+    return np.where(both, ratio, lone).astype(np.int64)
+
+
+def balanced_norm(F: np.ndarray) -> float:
+    """||F||_D = max_i sum_j |F_ij| d_j / d_i with D from Osborne's balancing (module docstring).
+
+    Each d_i stays within 2^-MAX_SCALE_EXPONENT..2^MAX_SCALE_EXPONENT, so
+    that no ratio d_j / d_i overflows, even in single precision.  The sums
+    run over the nonzero entries row by row (``np.bincount`` adds in that
+    order), as the loops of the generated C do, so that both round alike.
+    """
+    F = np.asarray(F, dtype=float)
+    rows, cols = np.nonzero(F)
+    if not rows.size:
+        return 0.0
+    size = np.abs(F[rows, cols])
+    off = rows != cols
+    off_rows, off_cols, off_size = rows[off], cols[off], size[off]
+    n = F.shape[0]
+    exponent = np.zeros(n, dtype=np.int64)  # d = 2^exponent
+    for _ in range(BALANCING_SWEEPS):
+        d = np.ldexp(1.0, exponent)
+        v = off_size * d[off_cols] / d[off_rows]
+        row = np.bincount(off_rows, weights=v, minlength=n)
+        column = np.bincount(off_cols, weights=v, minlength=n)
+        new = np.minimum(np.maximum(exponent + sweep_exponents(row, column), -MAX_SCALE_EXPONENT), MAX_SCALE_EXPONENT)
+        if np.array_equal(new, exponent):
+            break  # a fixed point: further sweeps change nothing
+        exponent = new
+    d = np.ldexp(1.0, exponent)
+    return float(np.bincount(rows, weights=size * d[cols] / d[rows], minlength=n).max())
+
+
+def doublings(norm: float, T: float, order: int, unit_roundoff: float = DOUBLE_ROUNDOFF) -> int:
+    """Smallest s with norm * T / 2^s <= series_range(order); ModelError beyond MAX_DOUBLINGS."""
+    theta = series_range(order, unit_roundoff)
+    for s in range(MAX_DOUBLINGS + 1):
+        if norm * math.ldexp(T, -s) <= theta:
+            return s
+    raise ModelError(
+        f"discretize: e^(F T) is not representable: ||F||*T = {norm * T:.3g} needs more than "
+        f"{MAX_DOUBLINGS} doublings of the Taylor series"
+    )
+
+
+def _taylor_terms(F: np.ndarray, h: float, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """(Phi, sum (F h)^k / (k+1)!) over one step h."""
+    n = F.shape[0]
+    Fh = F * h
+    term = np.eye(n)  # (F h)^k / k!
+    phi = np.eye(n)
+    series = np.eye(n)  # sum (F h)^k / (k+1)!
+    for k in range(1, order + 1):
+        term = term @ Fh / k
+        phi = phi + term
+        series = series + term / (k + 1)
+    return phi, series
+
+
+def check_step(T: float) -> float:
+    """T as a float, or ModelError (a ValueError) when it is not finite and positive."""
+    T = float(T)
+    if not math.isfinite(T):
+        raise ModelError(f"discretize: step T is not finite ({T})")
+    if not T > 0.0:
+        raise ModelError(f"discretize: step T must be positive, not {T}")
+    return T
+
+
+def taylor_discretization_with_doublings(
+    F: np.ndarray, G: np.ndarray, T: float, order: int = DEFAULT_TAYLOR_ORDER
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Phi, Gamma and the number s of doublings used (module docstring).
+
+    ModelError (a ValueError) for an order below 1, a non-finite or non-positive T, a
+    non-finite F or G, or an e^(F T) that is not representable.
+    """
+    if order < 1:
+        raise ModelError(f"Taylor order must be at least 1, got {order}")
+    T = check_step(T)
+    if not (np.all(np.isfinite(F)) and np.all(np.isfinite(G))):
+        raise ModelError("discretize: F or G has a non-finite entry")
+    s = doublings(balanced_norm(F), T, order)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below, with a message
+        phi, series = _taylor_terms(F, math.ldexp(T, -s), order)
+        for _ in range(s):
+            series = 0.5 * (series + phi @ series)  # Psi(2h) / (2h)
+            phi = phi @ phi
+    if not (np.all(np.isfinite(phi)) and np.all(np.isfinite(series))):
+        raise ModelError(f"discretize: e^(F T) overflows at T = {T!r} (is the operating point singular?)")
+    return phi, T * series @ G, s
+
+
+def taylor_discretization(F: np.ndarray, G: np.ndarray, T: float, order: int = DEFAULT_TAYLOR_ORDER) -> tuple[np.ndarray, np.ndarray]:
+    """Phi and Gamma by the series of eqs. (10) and (11), with scaling and squaring.
+
+    Accurate for any finite T (module docstring); ModelError as
+    :func:`taylor_discretization_with_doublings`.
+    """
+    phi, gamma, _ = taylor_discretization_with_doublings(F, G, T, order)
+    return phi, gamma
+
+
+def taylor_process_noise(gamma: np.ndarray, Q: np.ndarray, T: float) -> np.ndarray:
+    """Gamma (Q/T) Gamma^T: the discrete process noise of eq. (9)."""
+    qd = gamma @ (Q / T) @ gamma.T
+    return 0.5 * (qd + qd.T)
+
+
+def van_loan_discretization(F: np.ndarray, G: np.ndarray, Q: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact Phi = e^{F T} and Q_d by Van Loan's block exponential (1978)."""
+    n = F.shape[0]
+    block = np.zeros((2 * n, 2 * n))
+    block[:n, :n] = -F
+    block[:n, n:] = G @ Q @ G.T
+    block[n:, n:] = F.T
+    e = expm(block * T)
+    phi = e[n:, n:].T
+    qd = phi @ e[:n, n:]
+    return phi, 0.5 * (qd + qd.T)

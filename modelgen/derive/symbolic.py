@@ -1,0 +1,139 @@
+"""Automatic derivation of F, G, H, Q, R from a model's equations.
+
+F = df/dx, G = df/dw and H = dh/dx are Jacobians evaluated at zero error and
+zero noise (the error equations are linear in x and w, so this is exact for
+them and the first-order linearization otherwise).  Nothing is typed by hand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Callable, Mapping
+
+import numpy as np
+import sympy as sp
+
+from modelgen.errors import ModelError
+from modelgen.model.declaration import ErrorModel, nonlinear_variables
+
+
+@dataclass(frozen=True)
+class DerivedModel:
+    """The symbolic matrices of ``dx/dt = F x + G w``, ``z = H x + v``.
+
+    ``Q`` is the continuous noise power spectral density matrix (diagonal,
+    from each noise's ``psd``) and ``R`` the measurement noise covariance.
+    """
+
+    model: ErrorModel
+    F: sp.Matrix
+    G: sp.Matrix
+    H: sp.Matrix
+    Q: sp.Matrix
+    R: sp.Matrix
+    nonlinear: tuple[str, ...] = ()
+
+    @property
+    def n_states(self) -> int:
+        return self.F.shape[0]
+
+    @property
+    def n_noises(self) -> int:
+        return self.G.shape[1]
+
+    @property
+    def n_measurements(self) -> int:
+        return self.H.shape[0]
+
+    def structure(self, matrix: str) -> np.ndarray:
+        """Boolean mask of the structurally nonzero entries of F, G or H."""
+        m = getattr(self, matrix)
+        mask = [[m[i, j] != 0 for j in range(m.shape[1])] for i in range(m.shape[0])]
+        return np.array(mask, dtype=bool).reshape(m.shape)
+
+    @cached_property
+    def _numeric(self) -> Callable[..., tuple]:
+        params = self.model.parameter_symbols
+        return sp.lambdify(params, [self.F, self.G, self.H, self.Q, self.R], modules="numpy", cse=True)
+
+    def numeric(self, values: Mapping[str, float]) -> dict[str, np.ndarray]:
+        """F, G, H, Q, R as float arrays at the given parameter values.
+
+        ``values`` maps parameter names to numbers; parameters with a default
+        in the model may be omitted.
+        """
+        args = parameter_vector(self.model, values)
+        F, G, H, Q, R = self._numeric(*args)
+        shapes = {
+            "F": self.F.shape,
+            "G": self.G.shape,
+            "H": self.H.shape,
+            "Q": self.Q.shape,
+            "R": self.R.shape,
+        }
+        out = {}
+        for key, value in zip("F G H Q R".split(), (F, G, H, Q, R)):
+            out[key] = np.broadcast_to(np.asarray(value, dtype=float), shapes[key]).copy()
+        return out
+
+
+def parameter_vector(model: ErrorModel, values: Mapping[str, float]) -> list[float]:
+    """Parameter values in model order, defaults filled in, unknowns refused."""
+    known = {p.name for p in model.parameters} | {p.symbol for p in model.parameters}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ModelError(f"model {model.name!r}: unknown parameter(s) {', '.join(unknown)}")
+    out = []
+    for p in model.parameters:
+        if p.name in values:
+            v = values[p.name]
+        elif p.symbol in values:
+            v = values[p.symbol]
+        elif p.value is not None:
+            v = p.value
+        else:
+            raise ModelError(f"model {model.name!r}: no value for parameter {p.name!r} ({p.symbol})")
+        v = float(v)
+        if not np.isfinite(v):
+            raise ModelError(f"model {model.name!r}: parameter {p.name!r} is not finite ({v})")
+        out.append(v)
+    return out
+
+
+def derive(model: ErrorModel) -> DerivedModel:
+    """Derive F, G, H, Q, R from the model's equations (see module doc)."""
+    x = sp.Matrix(model.state_symbols)
+    w = sp.Matrix(model.noise_symbols) if model.noises else sp.zeros(0, 1)
+    f = sp.Matrix([model.dynamics[name] for name in model.state_names])
+    zero = {s: 0 for s in (*model.state_symbols, *model.noise_symbols)}
+
+    F = f.jacobian(x).subs(zero)
+    G = f.jacobian(w).subs(zero) if model.noises else sp.zeros(len(x), 0)
+    if model.measurements:
+        h = sp.Matrix([model.measurement_expressions[m.name] for m in model.measurements])
+        H = h.jacobian(x).subs(zero)
+        R = sp.diag(*[model.measurement_variance[m.name] for m in model.measurements])
+    else:
+        H = sp.zeros(0, len(x))
+        R = sp.zeros(0, 0)
+    Q = sp.diag(*[model.noise_psd[n] for n in model.noise_names]) if model.noises else sp.zeros(0, 0)
+
+    # ErrorModel.build refuses nonlinear equations (one rule for every command);
+    # this stays as a guard for models assembled around build, by the same rule.
+    errors_and_noises = {*model.state_symbols, *model.noise_symbols}
+    nonlinear = tuple(name for name, rhs in zip(model.state_names, f) if nonlinear_variables(rhs, errors_and_noises))
+    return DerivedModel(
+        model=model,
+        F=_tidy(F),
+        G=_tidy(G),
+        H=_tidy(H),
+        Q=_tidy(Q),
+        R=_tidy(R),
+        nonlinear=nonlinear,
+    )
+
+
+def _tidy(m: sp.Matrix) -> sp.Matrix:
+    """Expand products so that equal entries print identically everywhere."""
+    return m.applyfunc(lambda e: sp.expand(e) if e != 0 else sp.S.Zero)
