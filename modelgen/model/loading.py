@@ -18,6 +18,8 @@ import yaml
 from modelgen.model.check_scenario import build_check_spec, parse_check_section
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State
+from modelgen.model.file_fields import free_text, notes_text
+from modelgen.model.transform_file import load_transformed_model
 
 _ITEM_FIELDS = {
     "states": (State, {"name", "symbol", "unit", "description"}),
@@ -103,7 +105,6 @@ def load_model_text(text: str, filename: str = "<model>", _loading: tuple[str, .
     except RecursionError:
         raise ModelError(f"{filename}: not valid as a model (nested too deeply)") from None
     if "base" in data:  # a new state set made from another model (modelgen.model.transform_file)
-        from modelgen.model.transform_file import load_transformed_model
 
         def load_base(path: str | Path) -> ErrorModel:
             return load_model(path, _loading=(*_loading, filename))
@@ -175,24 +176,6 @@ def _with_check_scenario(model: ErrorModel, data: dict, lines: dict[str, str], f
         return model
     section = parse_check_section(data["check"], lines, filename)
     return replace(model, check=build_check_spec(section, model, lines.get("check", filename)))
-
-
-def free_text(data: dict, key: str, lines: dict[str, str], filename: str, default: str = "") -> str:
-    """A top-level free-text field (title, source, frame) as text; a list or mapping is refused."""
-    value = data.get(key, default)
-    if isinstance(value, (list, dict)):
-        raise ModelError(f"{lines.get(key, filename)}: {key!r} must be text, not a {'list' if isinstance(value, list) else 'mapping'}")
-    return "" if value is None else str(value)
-
-
-def notes_text(data: dict, lines: dict[str, str], filename: str) -> list[str]:
-    """The ``notes`` field as a list of texts (one text or a list of texts)."""
-    notes = data.get("notes") or []
-    notes = notes if isinstance(notes, list) else [notes]
-    for i, note in enumerate(notes):
-        if isinstance(note, (list, dict)):
-            raise ModelError(f"{lines.get(f'notes[{i}]', lines.get('notes', filename))}: notes[{i}] must be text")
-    return [str(n) for n in notes]
 
 
 def _scalar_text(value: Any, place: str, key: str) -> str:

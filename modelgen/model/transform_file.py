@@ -28,7 +28,7 @@ from modelgen.model import transform
 from modelgen.model.check_scenario import build_check_spec, merge_check_sections, parse_check_section
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel, Noise, Parameter, State, check_free_text, check_identifier
-from modelgen.model.loading import free_text, notes_text
+from modelgen.model.file_fields import free_text, notes_text
 
 TOP_KEYS = {"model", "title", "base", "transforms", "notes", "source", "check"}
 STEPS = {

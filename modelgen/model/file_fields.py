@@ -1,0 +1,29 @@
+"""Free-text fields common to both kinds of model file (a model, and a transform of one).
+
+``title``, ``source``, ``frame`` and ``notes`` are read the same way whether
+the file declares a model (:mod:`modelgen.model.loading`) or makes one from a
+base model (:mod:`modelgen.model.transform_file`); both import them from here,
+so neither file reader depends on the other's internals.
+"""
+
+from __future__ import annotations
+
+from modelgen.errors import ModelError
+
+
+def free_text(data: dict, key: str, lines: dict[str, str], filename: str, default: str = "") -> str:
+    """A top-level free-text field (title, source, frame) as text; a list or mapping is refused."""
+    value = data.get(key, default)
+    if isinstance(value, (list, dict)):
+        raise ModelError(f"{lines.get(key, filename)}: {key!r} must be text, not a {'list' if isinstance(value, list) else 'mapping'}")
+    return "" if value is None else str(value)
+
+
+def notes_text(data: dict, lines: dict[str, str], filename: str) -> list[str]:
+    """The ``notes`` field as a list of texts (one text or a list of texts)."""
+    notes = data.get("notes") or []
+    notes = notes if isinstance(notes, list) else [notes]
+    for i, note in enumerate(notes):
+        if isinstance(note, (list, dict)):
+            raise ModelError(f"{lines.get(f'notes[{i}]', lines.get('notes', filename))}: notes[{i}] must be text")
+    return [str(n) for n in notes]
