@@ -4,16 +4,17 @@
 ``<model>_navigator.h/.c`` (templates/navigator_header.h.j2,
 navigator_source.c.j2) into a folder; :func:`build_c_navigator` compiles them
 strictly (C99, -Wall -Wextra -Werror -pedantic) into a shared library;
-:func:`fly_c` flies a log with it, with the same alignment as the Python
-navigator (done in Python and handed over as the start state), and returns a
+:func:`fly_c` flies a log with it from its first IMU sample and returns a
 :class:`~modelgen.navigator.navigator.Flight` like :func:`~modelgen.navigator.navigator.fly`.
+The C aligns itself (roll, pitch and biases at rest, heading from the GNSS
+course) by the rules and arithmetic of :func:`~modelgen.navigator.navigator.align`;
+Python hands it only the configuration and the logs.
 """
 
 from __future__ import annotations
 
 import ctypes
 import hashlib
-import math
 import os
 import tempfile
 import time
@@ -29,13 +30,24 @@ from modelgen.codegen.build import compile_shared_library
 from modelgen.codegen.generate import generate_code, template_folder
 from modelgen.errors import ModelError
 from modelgen.navigator.config import NavigatorConfig
-from modelgen.navigator.navigator import Flight, Inputs, _alignment, initial_covariance
+from modelgen.navigator.navigator import Flight, Inputs
 from modelgen.navigator.outages import in_outage, outage_windows
 from modelgen.fileio.output import write_atomically
 
-N_CONFIG, N_OUTPUT, N_GNSS = 35, 23, 13
+N_CONFIG, N_OUTPUT, N_GNSS, N_ALIGNMENT = 45, 23, 13, 6
 COUNT_NAMES = ("gnss_updates", "gnss_rejected", "gnss_released", "gnss_deweighted", "gnss_quality_skipped",
                "zupt_updates", "nhc_updates", "predicts")
+ALIGNMENT_NAMES = ("time", "roll", "pitch", "heading", "rest_end", "rest_samples")
+#: IMU samples the C keeps for its alignment ({P}_NAV_REST_MAX in the header): the rest window must fit
+REST_MAX = 1024
+#: the C's alignment statuses (header: {P}_NAV_ERR_*)
+ALIGNMENT_ERRORS = {
+    11: "a usable GNSS epoch faster than alignment.heading_speed_m_s came before any epoch at rest "
+        "(slower than alignment.rest_speed_m_s): the IMU cannot be levelled",
+    12: "fewer than 10 IMU samples in the rest window before the first fast epoch",
+    13: f"the rest window held more IMU samples than the C navigator keeps ({REST_MAX}): shorten "
+        "alignment.rest_window_s",
+}
 
 
 def render_navigator(model: str) -> dict[str, str]:
@@ -67,11 +79,9 @@ class CNavigator:
         self.size = int(self._fn("navigator_size", [], ctypes.c_ulong)())
         dp = ctypes.POINTER(ctypes.c_double)
         self.configure = self._fn("navigator_configure", [ctypes.c_void_p, dp])
-        self.prime = self._fn("navigator_prime", [ctypes.c_void_p, dp, dp], None)
-        self.start = self._fn("navigator_start", [ctypes.c_void_p, ctypes.c_double, dp, dp, dp, dp, dp, dp])
-        self.run = self._fn("navigator_run", [ctypes.c_void_p, ctypes.c_long, dp, dp, dp, ctypes.c_long,
-                                              ctypes.c_long, dp, ctypes.POINTER(ctypes.c_long),
-                                              ctypes.POINTER(ctypes.c_int), dp, dp])
+        self.run = self._fn("navigator_run", [ctypes.c_void_p, ctypes.c_long, dp, dp, dp, ctypes.c_long, dp,
+                                              ctypes.POINTER(ctypes.c_long), ctypes.POINTER(ctypes.c_int), dp, dp])
+        self.alignment = self._fn("navigator_alignment", [ctypes.c_void_p, dp])
         self.counts = self._fn("navigator_counts", [ctypes.c_void_p, ctypes.POINTER(ctypes.c_long)], None)
 
     def _fn(self, name: str, argtypes: list, restype=ctypes.c_int):
@@ -124,8 +134,15 @@ def cached_c_navigator(model_file: Path, echo=lambda message: None) -> tuple[CNa
     return (CNavigator(libraries[0], navigator.model) if libraries else navigator), False
 
 
-def config_array(config: NavigatorConfig, window: int, step: int) -> np.ndarray:
-    """The C configuration array (its layout is documented in the generated header)."""
+def config_array(config: NavigatorConfig, window: int, step: int, rest_samples: int = 0) -> np.ndarray:
+    """The C configuration array (its layout is documented in the generated header).
+
+    ``rest_samples``: IMU samples in the rest window at the log's median rate;
+    refused if the C cannot keep them.
+    """
+    if rest_samples + 1 > REST_MAX:
+        raise ModelError(f"{config.path}: alignment.rest_window_s = {config.rest_window:g} s is {rest_samples} IMU "
+                         f"samples; the C navigator keeps at most {REST_MAX - 1} for its alignment")
     gates = {m: float(chi2.ppf(config.nis_gate_probability, m)) for m in (2, 3, 6)}
     cfg = np.zeros(N_CONFIG)
     cfg[0:3] = config.lever_arm
@@ -146,6 +163,10 @@ def config_array(config: NavigatorConfig, window: int, step: int) -> np.ndarray:
             cfg[25 + q] = factor
     cfg[33] = config.gate_release_epochs
     cfg[34] = config.nhc_rate_max
+    cfg[35], cfg[36], cfg[37] = config.rest_speed, config.rest_window, config.heading_speed
+    cfg[38], cfg[39] = config.roll_pitch_sigma, config.heading_extra_sigma
+    cfg[40], cfg[41], cfg[42] = config.velocity_sigma, config.position_sigma, config.height_sigma
+    cfg[43], cfg[44] = config.gyro_bias_sigma, config.accel_bias_sigma
     return cfg
 
 
@@ -158,15 +179,9 @@ class LogArrays:
     """Everything the C navigator is given for one log, as contiguous arrays (shared by ctypes and qemu runs)."""
 
     cfg: np.ndarray
-    nav: np.ndarray
-    gyro_bias: np.ndarray
-    accel_bias: np.ndarray
-    P0: np.ndarray
     time: np.ndarray
     force: np.ndarray
     rate: np.ndarray
-    k0: int
-    j0: int
     t_gnss: np.ndarray
     target: np.ndarray  # int64
     use: np.ndarray  # int32
@@ -175,36 +190,46 @@ class LogArrays:
 
 
 def log_arrays(config: NavigatorConfig, inputs: Inputs) -> LogArrays:
-    """The alignment (as the Python navigator does it) and the log, laid out for the C navigator."""
+    """The log laid out for the C navigator: every IMU sample and every GNSS epoch inside the IMU span."""
     g = inputs.gnss
     time_, force, rate = (np.ascontiguousarray(a, dtype=float) for a in (inputs.time, inputs.force, inputs.rate))
     windows = outage_windows(config.outage_schedule, config.outage_windows, inputs.first_epoch, float(g.time[-1]))
     outage = in_outage(g.time, windows)
-    j0, k0, nav, gyro_bias, accel_bias = _alignment(config, inputs)
-    speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
-    sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))
-    P0 = initial_covariance(config, nav, math.hypot(math.atan2(sv, speed0), config.heading_extra_sigma))
     median_dt = float(np.median(np.diff(time_)))
     window = max(2, int(round(config.zupt_window / median_dt)))
     step = max(1, int(round(config.predict_period / median_dt)))
-    epochs = np.arange(j0, len(g.time))
+    rest_samples = int(np.ceil(config.rest_window / median_dt)) + 1
+    epochs = np.arange(len(g.time))
     target = np.searchsorted(time_, g.time[epochs]).astype(np.int64)
     epochs, target = epochs[target < len(time_)], target[target < len(time_)]
     gnss = np.column_stack([g.latitude, g.longitude, g.height, g.velocity, g.quality, g.sigma_position,
                             g.sigma_velocity])[epochs]
     contiguous = np.ascontiguousarray
-    return LogArrays(config_array(config, window, step), contiguous(nav, dtype=float), contiguous(gyro_bias),
-                     contiguous(accel_bias), contiguous(P0), time_, force, rate, int(k0), int(j0),
+    return LogArrays(config_array(config, window, step, rest_samples), time_, force, rate,
                      contiguous(g.time[epochs]), contiguous(target), contiguous((~outage[epochs]).astype(np.int32)),
                      contiguous(gnss), windows)
 
 
-def flight_from_outputs(out: np.ndarray, arrays: LogArrays, inputs: Inputs, counts: dict[str, int]) -> Flight:
-    """A Flight from the C output records (rows never written, after the log's end, dropped)."""
+def alignment_error(inputs: Inputs, status: int) -> ModelError:
+    """The error for a C navigator status (an alignment status names its rule)."""
+    if status in ALIGNMENT_ERRORS:
+        return ModelError(f"{inputs.gnss.path}: C navigator alignment: {ALIGNMENT_ERRORS[status]}")
+    return ModelError(f"C navigator: a filter step failed (status {status})")
+
+
+def not_aligned_error(config: NavigatorConfig, inputs: Inputs) -> ModelError:
+    """The error when the log ended before the C navigator aligned."""
+    return ModelError(f"{inputs.gnss.path}: the vehicle never moves faster than {config.heading_speed} m/s with a "
+                      "used GNSS quality: no heading for the alignment")
+
+
+def flight_from_outputs(out: np.ndarray, arrays: LogArrays, inputs: Inputs, counts: dict[str, int],
+                        alignment: dict[str, float]) -> Flight:
+    """A Flight from the C output records (rows before the alignment and after the log's end dropped)."""
     out = out[~np.isnan(out[:, 0])]
     nis = out[(out[:, 19] == 0) & ~np.isnan(out[:, 21]), 21]
-    return Flight(out, arrays.windows, inputs.first_epoch, float(inputs.gnss.time[arrays.j0]), list(nis),
-                  float(arrays.cfg[6]), counts, list(inputs.notes))
+    return Flight(out, arrays.windows, inputs.first_epoch, alignment["time"], list(nis),
+                  float(arrays.cfg[6]), counts, list(inputs.notes), alignment)
 
 
 def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tuple[Flight, float]:
@@ -212,21 +237,20 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tup
     a = log_arrays(config, inputs)
     state = ctypes.create_string_buffer(navigator.size)
     if navigator.configure(state, _pointer(a.cfg)):
-        raise ModelError(f"{config.path}: the C navigator refused its configuration (ZUPT window {a.cfg[17]:g} samples)")
-    for k in range(max(0, a.k0 - int(a.cfg[17]) + 1), a.k0 + 1):
-        navigator.prime(state, _pointer(a.force[k]), _pointer(a.rate[k]))
-    status = navigator.start(state, float(a.time[a.k0]), _pointer(a.force[a.k0]), _pointer(a.rate[a.k0]),
-                             _pointer(a.nav), _pointer(a.gyro_bias), _pointer(a.accel_bias), _pointer(a.P0))
-    if status:
-        raise ModelError(f"C navigator: start refused (status {status})")
+        raise ModelError(f"{config.path}: the C navigator refused its configuration (ZUPT window {a.cfg[17]:g} "
+                         "samples, alignment speeds and window, initial sigmas)")
     out = np.full((len(a.t_gnss), N_OUTPUT), np.nan)
     cpu = time.process_time()
-    status = navigator.run(state, len(a.time), _pointer(a.time), _pointer(a.force), _pointer(a.rate), a.k0,
+    status = navigator.run(state, len(a.time), _pointer(a.time), _pointer(a.force), _pointer(a.rate),
                            len(a.t_gnss), _pointer(a.t_gnss), _pointer(a.target, ctypes.c_long),
                            _pointer(a.use, ctypes.c_int), _pointer(a.gnss), _pointer(out))
     cpu = time.process_time() - cpu
     if status:
-        raise ModelError(f"C navigator: a filter step failed (status {status})")
+        raise alignment_error(inputs, status)
+    result = np.full(N_ALIGNMENT, np.nan)
+    if not navigator.alignment(state, _pointer(result)):
+        raise not_aligned_error(config, inputs)
     raw = (ctypes.c_long * len(COUNT_NAMES))()
     navigator.counts(state, raw)
-    return flight_from_outputs(out, a, inputs, dict(zip(COUNT_NAMES, (int(v) for v in raw)))), cpu
+    alignment = {name: float(v) for name, v in zip(ALIGNMENT_NAMES, result)}
+    return flight_from_outputs(out, a, inputs, dict(zip(COUNT_NAMES, (int(v) for v in raw))), alignment), cpu

@@ -42,6 +42,30 @@ class Flight:
     gate: float = 0.0
     counts: dict[str, int] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    #: the alignment: time (the GNSS epoch it completed at) [s], roll, pitch, heading [rad], rest_end [s], rest_samples
+    alignment: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class Alignment:
+    """The initial alignment (:func:`align`): where the flight starts and with what."""
+
+    epoch: int  # GNSS epoch it completed at (index into Inputs.gnss)
+    sample: int  # IMU sample the flight starts at (first at or after that epoch)
+    nav: np.ndarray
+    gyro_bias: np.ndarray
+    accel_bias: np.ndarray
+    roll: float
+    pitch: float
+    heading: float
+    time: float  # the epoch's time [s]
+    rest_end: float  # end of the rest window: the last epoch at rest before [s]
+    rest_samples: int  # IMU samples in the rest window
+
+    def record(self) -> dict[str, float]:
+        """The values Flight.alignment holds (the C navigator reports the same)."""
+        return {"time": self.time, "roll": self.roll, "pitch": self.pitch, "heading": self.heading,
+                "rest_end": self.rest_end, "rest_samples": float(self.rest_samples)}
 
 
 @dataclass
@@ -119,12 +143,15 @@ def antenna(nav: np.ndarray, lever: np.ndarray, rate_body: np.ndarray) -> tuple[
     return lat, lon, nav[9] - offset[2], velocity
 
 
-def _alignment(config: NavigatorConfig, inputs: Inputs) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray]:
-    """(GNSS epoch, IMU sample) of the start, the initial navigation state, gyro and accelerometer bias.
+def align(config: NavigatorConfig, inputs: Inputs) -> Alignment:
+    """The start: GNSS epoch and IMU sample, the initial navigation state, gyro and accelerometer bias.
 
-    Heading is the GNSS course at the first epoch faster than heading_speed; roll,
-    pitch and the gyro bias come from the IMU samples of the last rest_window
-    seconds before that, while the GNSS speed was below rest_speed.
+    Heading is the GNSS course at the first epoch at least heading_speed fast
+    (horizontal) whose quality is used; roll, pitch and the gyro bias come from
+    the IMU samples of the rest_window seconds up to the last epoch before it
+    slower than rest_speed.  The generated C navigator does the same itself
+    (templates/navigator_source.c.j2, ``align``), from its per-sample and
+    per-epoch calls.
     """
     g = inputs.gnss
     speed = np.hypot(g.velocity[:, 0], g.velocity[:, 1])
@@ -161,7 +188,8 @@ def _alignment(config: NavigatorConfig, inputs: Inputs) -> tuple[int, int, np.nd
     nav[7] = g.latitude[j] - offset[0] / (rm + g.height[j])
     nav[8] = g.longitude[j] - offset[1] / ((rn + g.height[j]) * math.cos(g.latitude[j]))
     nav[9] = g.height[j] + offset[2]
-    return j, k, nav, gyro_bias, accel_bias
+    return Alignment(j, k, nav, gyro_bias, accel_bias, roll, pitch, yaw, float(g.time[j]), float(rest_end),
+                     int(np.count_nonzero(samples)))
 
 
 def initial_covariance(config: NavigatorConfig, nav: np.ndarray, heading_sigma: float) -> np.ndarray:
@@ -214,7 +242,8 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
     lever = np.asarray(config.lever_arm, float)
     windows = outage_windows(config.outage_schedule, config.outage_windows, inputs.first_epoch, float(g.time[-1]))
     outage = in_outage(g.time, windows)
-    j0, k, nav, gyro_bias, accel_bias = _alignment(config, inputs)
+    start = align(config, inputs)
+    j0, k, nav, gyro_bias, accel_bias = start.epoch, start.sample, start.nav, start.gyro_bias, start.accel_bias
     speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
     sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))
     heading_sigma = math.hypot(math.atan2(sv, speed0), config.heading_extra_sigma)
@@ -305,7 +334,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
     if progress is not None:
         progress(1.0)
     return Flight(np.array(outputs), windows, inputs.first_epoch, float(g.time[j0]), gnss_nis, gates[6], counts,
-                  list(inputs.notes))
+                  list(inputs.notes), start.record())
 
 
 def _remember(history: np.ndarray, t: float, nav: np.ndarray) -> None:

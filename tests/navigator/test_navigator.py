@@ -128,6 +128,59 @@ def test_c_navigator_outage_error_is_within_the_same_band(excerpt_both):
     assert excerpt_both.summary["counts"]["gnss_updates"] == 240 - 60 - 55  # epochs after alignment, outside outage
 
 
+def _excerpt_inputs():
+    from modelgen.navigator.config import load_config
+    from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
+    from modelgen.navigator.navigator import prepare
+
+    config = load_config(DATA / "excerpt.yaml")
+    return config, prepare(config, read_imu_csv(config.imu_file, config.imu_columns, config.gap_factor),
+                           read_rtklib_pos(config.gnss_file))
+
+
+def test_c_navigator_aligns_itself_like_the_python_reference(excerpt_both):
+    """The C levels and takes its heading from its own IMU and GNSS calls: same epoch, angles to 1e-12 rad.
+
+    The alignment completes at the excerpt's epoch 13.75 s (999 IMU samples in the
+    10 s rest window ending 2 s before), 0.25 s before its outage starts.
+    """
+    from modelgen.navigator.navigator import align
+
+    config, inputs = _excerpt_inputs()
+    python = align(config, inputs).record()
+    c = excerpt_both.flight.alignment
+    assert c["time"] == python["time"] == excerpt_both.flight.alignment_time
+    assert c["time"] - inputs.first_epoch == pytest.approx(13.75, abs=1e-6)
+    assert c["rest_end"] == python["rest_end"] and c["rest_samples"] == python["rest_samples"] == 999
+    for angle in ("roll", "pitch", "heading"):
+        assert abs(c[angle] - python[angle]) <= 1e-12, angle
+    assert excerpt_both.flight.outputs[0, 0] >= c["time"]  # no record before the alignment
+
+
+def test_c_and_python_refuse_to_align_without_an_epoch_at_rest():
+    """GNSS starting when the vehicle already moves: neither navigator can level the IMU; both say so."""
+    from dataclasses import replace
+
+    from modelgen.errors import ModelError
+    from modelgen.navigator.cnav import cached_c_navigator, fly_c
+    from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.navigator import align
+
+    config, inputs = _excerpt_inputs()
+    g = inputs.gnss
+    keep = g.time >= align(config, inputs).time
+    moving = replace(g, time=g.time[keep], latitude=g.latitude[keep], longitude=g.longitude[keep],
+                     height=g.height[keep], quality=g.quality[keep], satellites=g.satellites[keep],
+                     sigma_position=g.sigma_position[keep], velocity=g.velocity[keep],
+                     sigma_velocity=g.sigma_velocity[keep])
+    late = replace(inputs, gnss=moving)
+    with pytest.raises(ModelError, match="at rest"):
+        align(config, late)
+    navigator, _ = cached_c_navigator(model_path(config.model, config.path))
+    with pytest.raises(ModelError, match="at rest"):
+        fly_c(config, late, navigator)
+
+
 def test_c_navigator_source_is_c99_without_heap(tmp_path):
     from modelgen.navigator.cnav import generate_c_navigator
     from modelgen.navigator.errorstate import model_path
@@ -150,14 +203,10 @@ def _arm_tools_missing() -> list[str]:
 def test_float_filter_navigator_under_qemu_arm_stays_within_1_cm_of_the_double_c(excerpt_both):
     """Cortex-M4F build without heap, and the excerpt under qemu-arm: 5e-5 m when written, tolerance 1 cm."""
     from modelgen.navigator.cnav import log_arrays
-    from modelgen.navigator.config import load_config
     from modelgen.navigator.embedded import embedded_replay
     from modelgen.navigator.errorstate import model_path
-    from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
-    from modelgen.navigator.navigator import prepare
 
-    config = load_config(DATA / "excerpt.yaml")
-    inputs = prepare(config, read_imu_csv(config.imu_file, config.imu_columns), read_rtklib_pos(config.gnss_file))
+    config, inputs = _excerpt_inputs()
     result = embedded_replay(model_path(config.model, config.path), log_arrays(config, inputs),
                              excerpt_both.flight.outputs)
     assert result.forbidden_symbols == []
