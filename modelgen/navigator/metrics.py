@@ -122,6 +122,11 @@ def summary(flight: Flight, errors: Errors, reference: GnssLog) -> dict[str, obj
         "final_gyro_bias_deg_s": [float(math.degrees(v)) for v in final[COLUMN["gyro_bias_x"]:COLUMN["gyro_bias_z"] + 1]],
         "final_accel_bias_mg": [float(v / 9.80665 * 1e3) for v in final[COLUMN["accel_bias_x"]:COLUMN["accel_bias_z"] + 1]],
         "alignment_time_s": round(flight.alignment_time - flight.first_epoch, 3),
+        "alignment": ({"roll_deg": math.degrees(flight.alignment["roll"]),
+                       "pitch_deg": math.degrees(flight.alignment["pitch"]),
+                       "heading_deg": math.degrees(flight.alignment["heading"]),
+                       "rest_end_s": round(flight.alignment["rest_end"] - flight.first_epoch, 3),
+                       "rest_samples": int(flight.alignment["rest_samples"])} if flight.alignment else None),
         "notes": list(flight.notes),
     }
 

@@ -139,6 +139,20 @@ def _fmt(value: object, digits: int = 2) -> str:
     return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
 
 
+def _alignment_lines(summary: dict) -> list[str]:
+    """The alignment as the navigator that flew did it (the C aligns itself, by the Python reference's rules)."""
+    a = summary.get("alignment")
+    if not a:
+        return []
+    return ["## Alignment", "",
+            f"By the {'Python' if summary.get('navigator') == 'python' else 'C'} navigator itself, from its IMU and GNSS calls: roll "
+            f"{a['roll_deg']:.4f} deg and pitch {a['pitch_deg']:.4f} deg from the mean specific force of the "
+            f"{a['rest_samples']} IMU samples of the rest window ending at the last GNSS epoch at rest "
+            f"({a['rest_end_s']} s), which also give the gyro bias and the accelerometer bias along gravity; heading "
+            f"{a['heading_deg']:.3f} deg from the GNSS course at {summary['alignment_time_s']} s, the first used epoch "
+            "faster than the heading speed.", ""]
+
+
 def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, float], latency: float) -> str:
     """summary.md: outage table, targets, tuning and how it was chosen, counts and notes."""
     lines = [f"# Replay: {config.name}", "",
@@ -221,7 +235,7 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
               "## Counts", "",
               ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in summary["counts"].items())
               + f"; alignment at {summary['alignment_time_s']} s after the first GNSS epoch; "
-              f"{summary['epochs']} output epochs.", ""]
+              f"{summary['epochs']} output epochs.", "", *_alignment_lines(summary)]
     if "embedded" in summary:
         e = summary["embedded"]
         stack = ", ".join(f"`{k}` {v} B" for k, v in e["worst_case_stack_bytes"].items())

@@ -155,6 +155,7 @@ def test_c_navigator_aligns_itself_like_the_python_reference(excerpt_both):
     for angle in ("roll", "pitch", "heading"):
         assert abs(c[angle] - python[angle]) <= 1e-12, angle
     assert excerpt_both.flight.outputs[0, 0] >= c["time"]  # no record before the alignment
+    assert excerpt_both.summary["alignment"]["rest_samples"] == 999
 
 
 def test_c_and_python_refuse_to_align_without_an_epoch_at_rest():
