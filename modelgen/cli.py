@@ -144,15 +144,6 @@ def main(debug: bool) -> None:
     """
 
 
-def _paper_operating_point(derived) -> dict[str, float] | None:
-    """The paper's level-flight values, when they cover every parameter of the model."""
-    from modelgen.jobs import paper_parameters
-
-    values = paper_parameters() if derived.model.frame == "NED" else {}
-    needed = {p.name for p in derived.model.parameters if p.value is None}
-    return values if values and needed <= set(values) else None
-
-
 @main.command()
 @click.argument("model", default="ned_doppler18")
 def derive(model: str) -> None:
@@ -160,10 +151,9 @@ def derive(model: str) -> None:
 
     MODEL is a model file (YAML) or the name of a built-in model.
     """
-    from modelgen.derive.symbolic import derive as derive_model
-    from modelgen.model.loading import load_model
+    from modelgen.jobs import load_and_derive
 
-    derived = derive_model(load_model(model))
+    derived = load_and_derive(model)
     m = derived.model
     click.echo(f"model {m.name}: {derived.n_states} states, {derived.n_noises} noises, {derived.n_measurements} measurements")
     for label, matrix, rows, cols in (
@@ -206,8 +196,7 @@ def generate(
     """
     from pathlib import Path
 
-    from modelgen.codegen.generate import CodegenOptions
-    from modelgen.model.loading import builtin_models
+    from modelgen.jobs import CodegenOptions, builtin_models
     from modelgen.jobs import generate as generate_model
 
     names = list(models) or (builtin_models() if all_models else ["ned_doppler18"])
@@ -255,59 +244,18 @@ def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool,
     from pathlib import Path
 
     from modelgen.fileio.output import ReportUpdate
+    from modelgen.jobs import main_job
 
     with ReportUpdate(Path(report_dir), force=force) as staged:
-        text, runs, result = _run_into(staged, out_root, no_figures, with_simulation, force)
+        job = main_job(staged.staging, Path(out_root), figures=not no_figures, with_simulation=with_simulation,
+                       force=force, progress=click.echo, echo=_mapped_echo(staged))
         staged.commit()
     report = Path(report_dir)
-    click.echo(text)
-    failed = [r.generation.derived.model.name for r in runs if not r.passed]
-    if failed or result.unexplained:
-        click.echo(f"modelgen run: FAILED ({', '.join(failed) or 'unexplained paper differences'})", err=True)
+    click.echo(job.text)
+    if job.failed_models or job.verification.unexplained:
+        click.echo(f"modelgen run: FAILED ({', '.join(job.failed_models) or 'unexplained paper differences'})", err=True)
         sys.exit(EXIT_CHECK_FAILED)
     click.echo(f"modelgen run: ok; report in {report / 'README.md'}, code in {out_root}/")
-
-
-def _run_into(staged, out_root: str, no_figures: bool, with_simulation: bool, force: bool):
-    """The main job's steps, writing the report into the staging folder of ``staged``."""
-    from pathlib import Path
-
-    from modelgen.analysis.report import run_covariance_analysis
-    from modelgen.derive.symbolic import derive as derive_model
-    from modelgen.model.loading import load_model
-    from modelgen.fileio.output import write_text_atomically
-    from modelgen.jobs import generate_and_check_all, run_report
-    from modelgen.checks.paper_check import verify as verify_model, write_verification_report
-
-    echo = _mapped_echo(staged)
-    report = staged.staging
-    click.echo("derive ned_doppler18 ...")
-    derived = derive_model(load_model("ned_doppler18"))
-    click.echo("verify against the paper's table ...")
-    result = verify_model(derived)
-    md, js = write_verification_report(result, report)
-    counts = result.counts()
-    summary = (
-        f"{len(result.entries)} entries: "
-        + ", ".join(f"{counts[k]} {k}" for k in counts)
-        + f"; {len(result.unexplained)} unexplained. Differences:\n\n"
-        + "\n".join(f"- {e.matrix}({e.row},{e.column}) {e.status}: {e.classification} - {e.reason}" for e in result.differences)
-        + f"\n\nFull report: [{md.name}]({md.name}), machine-readable: [{js.name}]({js.name})."
-    )
-    runs = generate_and_check_all(Path(out_root), progress=click.echo, force=force)
-    click.echo("covariance analysis (Table 2, Figs 2-7) ...")
-    analysis = run_covariance_analysis(report / "covariance", figures=not no_figures, progress=echo)
-    sections = ["## Covariance analysis (Table 2 analogue)\n\n" + analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)"]
-    if with_simulation:
-        from modelgen.simulation.report import simulate as run_simulation
-        from modelgen.simulation.scenario import load_scenario as load_profile
-
-        click.echo("simulate the paper's flight (profile_000, one run) ...")
-        sim = run_simulation(load_profile("profile_000"), report / "simulation", runs=1, seed=1, echo=echo)
-        sections.append(f"## Simulation\n\nThe paper's profile flown once with the generated C filter: [simulation/{Path(sim).name}](simulation/{Path(sim).name}) and its figures.")
-    text = run_report(summary, runs, Path(out_root), sections)
-    write_text_atomically(report / "README.md", text)
-    return text, runs, result
 
 
 @main.command()
@@ -323,16 +271,11 @@ def embedded(model: str, out_dir: str, qemu: bool, force: bool) -> None:
     --qemu runs the same code under qemu-arm over the model's check scenario
     against the double reference.  Writes OUT/embedded.md.
     """
-    from modelgen.derive.symbolic import derive as derive_model
-    from modelgen.checks.embedded_check import embedded_report, recommended_form
-    from modelgen.model.loading import load_model
     from modelgen.fileio.output import ReportUpdate
-    from modelgen.jobs import check_scenario
+    from modelgen.jobs import embedded_inputs, embedded_report, recommended_form
 
-    derived = derive_model(load_model(model))
-    scenario = None
-    if qemu:
-        scenario = check_scenario(derived)
+    derived, scenario = embedded_inputs(model, qemu)
+    if scenario is not None:
         click.echo(f"scenario: {scenario.label}")
     with ReportUpdate(Path(out_dir), force=force) as staged:
         report = embedded_report(derived, scenario, staged.staging)
@@ -372,17 +315,13 @@ def verify(model: str, out_dir: str, force: bool) -> None:
     OUT/verification.json.  Models without a paper table are reported and
     skipped (exit 0); exit 1 if a difference has no annotation (unexplained).
     """
-    from modelgen.derive.symbolic import derive as derive_model
-    from modelgen.model.loading import load_model
     from modelgen.fileio.output import ReportUpdate
-    from modelgen.checks.paper_table import paper_table_path
-    from modelgen.checks.paper_check import verify as verify_model, write_verification_report
+    from modelgen.jobs import paper_check_of, write_verification_report
 
-    loaded = load_model(model)
-    if paper_table_path(loaded.name) is None:
-        click.echo(f"model {loaded.name}: no paper table to verify against (only the built-in paper model has one)")
+    name, result = paper_check_of(model)
+    if result is None:
+        click.echo(f"model {name}: no paper table to verify against (only the built-in paper model has one)")
         return
-    result = verify_model(derive_model(loaded))
     with ReportUpdate(Path(out_dir), force=force) as staged:
         markdown, data = (staged.final(p) for p in write_verification_report(result, staged.staging))
         staged.commit()
@@ -415,19 +354,13 @@ def observability(model: str, scenario_file: str | None, assignments: tuple[str,
     scenario's operating point(s) and names the unobservable and weakly
     observable directions as combinations of states.
     """
-    from modelgen.derive.symbolic import derive as derive_model
-    from modelgen.model.loading import load_model
-    from modelgen.analysis.observability import analyse, command_line_scenario, format_report
+    from modelgen.jobs import load_and_derive, observability_report, paper_operating_point
 
-    derived = derive_model(load_model(model))
-    base = _paper_operating_point(derived) if scenario_file is None else None
+    derived = load_and_derive(model)
+    base = paper_operating_point(derived) if scenario_file is None else None
     if base:
         click.echo("scenario: the core paper's level flight (30 N, east, 300 km/h, Table 1 statistics)")
-    scenario = command_line_scenario(
-        scenario_file, assignments, step, steps, default_steps=derived.n_states, base_values=base
-    )
-    report = analyse(derived, scenario, weak_rtol=weak_rtol)
-    click.echo(format_report(report))
+    click.echo(observability_report(derived, scenario_file, assignments, step, steps, weak_rtol, base))
 
 
 
@@ -443,11 +376,11 @@ def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool, force: bool
     four suboptimal filters (true covariance against the 18-state truth model);
     prints our Table 2 beside the paper's with the ratio ours/paper.
     """
-    from modelgen.analysis.report import run_covariance_analysis
     from modelgen.fileio.output import ReportUpdate
+    from modelgen.jobs import covariance_analysis
 
     with ReportUpdate(Path(out_dir), force=force) as staged:
-        report = run_covariance_analysis(
+        report = covariance_analysis(
             staged.staging, sensitivity=not no_sensitivity, figures=not no_figures, progress=_mapped_echo(staged, err=True)
         )
         files = [staged.final(p) for p in report.files]
@@ -471,18 +404,12 @@ def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | Non
 
     Writes summary.md (errors per correction mode, NEES test, timings) and PNG figures.
     """
-    from modelgen.simulation.report import simulate as run_simulation
     from modelgen.fileio.output import ReportUpdate
-    from modelgen.simulation.scenario import load_scenario
+    from modelgen.jobs import flight_scenario, simulate_flight
 
-    scenario = load_scenario(profile)
-    changes = {"imu_rate": imu_rate} if imu_rate is not None else {}
-    if hours is not None:
-        changes["hours"] = hours
-    scenario = scenario.with_changes(**changes)
+    scenario = flight_scenario(profile, hours, imu_rate)
     with ReportUpdate(Path(out_dir), force=force) as staged:
-        summary = run_simulation(scenario, staged.staging, runs=runs, seed=seed,
-                                 echo=_mapped_echo(staged, err=True), implementation=implementation)
+        summary = simulate_flight(scenario, staged.staging, runs, seed, implementation, echo=_mapped_echo(staged, err=True))
         summary = staged.final(summary)
         staged.commit()
     click.echo(f"wrote {summary}")

@@ -1,4 +1,11 @@
-"""The end-to-end job: model -> derived matrices -> code -> compiled check.
+"""The jobs: what each command does, composed from the layers below.
+
+Every command of :mod:`modelgen.cli` calls one function here and prints what
+it returns.  A job loads and derives a model once and hands the
+:class:`~modelgen.derive.symbolic.DerivedModel` to every step that needs it
+(paper check, code generation, covariance analysis, simulation): no step
+derives it again, and no step recognises a model by its name; which model is
+the paper's comes from the paper table's data (its ``model:`` key).
 
 ``generate`` writes one model's code into ``generated/<model>/``;
 ``check`` compiles it and runs it beside the numpy reference over the
@@ -7,6 +14,7 @@ declares the paper's level flight, Table 1 initial errors, 240 steps of 60 s).
 A user model without one is checked over a synthetic operating point, which
 checks the code, not the navigation, and is labelled so.  The pass criterion
 is computed per run from its conditioning (modelgen.checks.code_check).
+:func:`main_job` is ``modelgen run``.
 """
 
 from __future__ import annotations
@@ -17,11 +25,45 @@ from pathlib import Path
 
 import numpy as np
 
-from modelgen.codegen.generate import CodegenOptions, GeneratedCode, generate_code
 from modelgen.checks.code_check import ConformanceResult, Scenario, check_generated
+from modelgen.checks.paper_check import VerificationResult, verify, write_verification_report
+from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model, paper_table_path
+from modelgen.codegen.generate import CodegenOptions, GeneratedCode, generate_code
 from modelgen.derive.symbolic import DerivedModel, derive
-from modelgen.model.loading import load_model
-from modelgen.fileio.output import FolderUpdate
+from modelgen.fileio.datafiles import data_path
+from modelgen.fileio.output import FolderUpdate, write_text_atomically
+from modelgen.model.loading import builtin_models, load_model
+
+__all__ = ["CodegenOptions", "builtin_models"]  # the command line builds options and lists models through the jobs
+
+
+def load_and_derive(model: str | Path) -> DerivedModel:
+    """A model file, or a built-in model by name, loaded and derived: the first step of every job."""
+    return derive(load_model(model))
+
+
+class DerivedModels:
+    """Models derived at most once in a job, by the reference (file or built-in name) they were loaded from.
+
+    The main job derives the paper's model first and registers it, so that
+    code generation, the covariance analysis and the simulation all get that
+    same object instead of deriving the model again.
+    """
+
+    def __init__(self) -> None:
+        self._derived: dict[str, DerivedModel] = {}
+
+    def add(self, reference: str | Path, derived: DerivedModel) -> DerivedModel:
+        """Remember ``derived`` as the model loaded from ``reference``; returns it."""
+        self._derived[str(reference)] = derived
+        return derived
+
+    def get(self, reference: str | Path) -> DerivedModel:
+        """The model loaded from ``reference``, derived on first use."""
+        key = str(reference)
+        if key not in self._derived:
+            self._derived[key] = load_and_derive(reference)
+        return self._derived[key]
 
 
 
@@ -51,13 +93,15 @@ def checks_passed(results) -> bool:
 
 
 def generate(
-    model: str | Path,
+    model: str | Path | DerivedModel,
     out_root: Path = Path("generated"),
     options: CodegenOptions | None = None,
     force: bool = False,
     with_check: bool = False,
 ) -> GenerationResult:
     """Load, derive and generate one model into ``out_root/<model>/`` atomically.
+
+    ``model`` is a model file, a built-in name, or a model already derived.
 
     The code is written to a staging folder beside the output (see
     ``modelgen.fileio.output``).  With ``with_check`` it is compiled and checked
@@ -66,7 +110,7 @@ def generate(
     new files overwrite files in the folder that modelgen did not write or
     that were edited since.
     """
-    derived = derive(load_model(model))
+    derived = model if isinstance(model, DerivedModel) else load_and_derive(model)
     options = options or CodegenOptions()
     code = generate_code(derived, options)
     folder = Path(out_root) / derived.model.name
@@ -164,14 +208,18 @@ class ModelRun:
         return checks_passed(self.checks)
 
 
-def generate_and_check_all(out_root: Path, progress=print, force: bool = False) -> list[ModelRun]:
-    """Generate every built-in model into ``out_root``, checked before it replaces the previous output."""
-    from modelgen.model.loading import builtin_models
+def generate_and_check_all(
+    out_root: Path, progress=print, force: bool = False, models: DerivedModels | None = None
+) -> list[ModelRun]:
+    """Generate every built-in model into ``out_root``, checked before it replaces the previous output.
 
+    ``models`` holds the models the caller has derived already (they are not derived again).
+    """
+    models = models if models is not None else DerivedModels()
     runs = []
     for name in builtin_models():
         progress(f"generate + check {name} ...")
-        result = generate(name, out_root, force=force, with_check=True)
+        result = generate(models.get(name), out_root, force=force, with_check=True)
         runs.append(ModelRun(result, list(result.checks)))
     return runs
 
@@ -208,3 +256,143 @@ def run_report(verification_summary: str, runs: list[ModelRun], out_root: Path, 
     for section in extra_sections:
         lines += [section, ""]
     return "\n".join(lines).rstrip() + "\n"
+
+
+def paper_operating_point(derived: DerivedModel) -> dict[str, float] | None:
+    """The paper's level-flight values, when they cover every parameter of the model."""
+    values = paper_parameters() if derived.model.frame == "NED" else {}
+    needed = {p.name for p in derived.model.parameters if p.value is None}
+    return values if values and needed <= set(values) else None
+
+
+def verification_summary(result: VerificationResult, markdown: Path, data: Path) -> str:
+    """The paper check in a few lines for the main job's report, with links to the full reports."""
+    counts = result.counts()
+    return (
+        f"{len(result.entries)} entries: "
+        + ", ".join(f"{counts[k]} {k}" for k in counts)
+        + f"; {len(result.unexplained)} unexplained. Differences:\n\n"
+        + "\n".join(f"- {e.matrix}({e.row},{e.column}) {e.status}: {e.classification} - {e.reason}" for e in result.differences)
+        + f"\n\nFull report: [{markdown.name}]({markdown.name}), machine-readable: [{data.name}]({data.name})."
+    )
+
+
+@dataclass(frozen=True)
+class MainJobResult:
+    """What ``modelgen run`` did: the report's text, each model's run and the paper check."""
+
+    text: str
+    runs: list[ModelRun]
+    verification: VerificationResult
+
+    @property
+    def failed_models(self) -> list[str]:
+        """Names of the models whose generated code failed its check."""
+        return [r.generation.derived.model.name for r in self.runs if not r.passed]
+
+
+def main_job(
+    report: Path, out_root: Path, figures: bool = True, with_simulation: bool = True, force: bool = False,
+    progress=print, echo=print,
+) -> MainJobResult:
+    """``modelgen run``: the paper's model derived once, then checked, generated, analysed and flown.
+
+    The paper's model is the one the paper table names (data, not code).  It
+    is derived here and handed to the paper check, to code generation (with
+    every other built-in model), to the covariance analysis and to the
+    simulation.  The report goes into ``report`` (the caller's staging
+    folder); ``progress`` announces the steps and ``echo`` relays the steps'
+    own messages.
+    """
+    from modelgen.analysis.report import run_covariance_analysis
+    from modelgen.analysis.systems import PaperModels
+
+    paper_model = paper_table_model(data_path(CORE_PAPER_TABLE))
+    models = DerivedModels()
+    progress(f"derive {paper_model} ...")
+    derived = models.add(paper_model, load_and_derive(paper_model))
+    progress("verify against the paper's table ...")
+    result = verify(derived)
+    summary = verification_summary(result, *write_verification_report(result, report))
+    runs = generate_and_check_all(Path(out_root), progress=progress, force=force, models=models)
+    progress("covariance analysis (Table 2, Figs 2-7) ...")
+    analysis = run_covariance_analysis(
+        report / "covariance", figures=figures, progress=echo, models=PaperModels.build(truth=derived)
+    )
+    sections = ["## Covariance analysis (Table 2 analogue)\n\n" + analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)"]
+    if with_simulation:
+        from modelgen.simulation.flight_report import simulate
+        from modelgen.simulation.scenario import load_profile
+
+        progress("simulate the paper's flight (profile_000, one run) ...")
+        profile = load_profile("profile_000")
+        sim = simulate(profile, report / "simulation", runs=1, seed=1, echo=echo, derived=models.get(profile.filter.model))
+        sections.append(f"## Simulation\n\nThe paper's profile flown once with the generated C filter: [simulation/{Path(sim).name}](simulation/{Path(sim).name}) and its figures.")
+    text = run_report(summary, runs, Path(out_root), sections)
+    write_text_atomically(report / "README.md", text)
+    return MainJobResult(text, runs, result)
+
+
+def paper_check_of(model: str | Path) -> tuple[str, VerificationResult | None]:
+    """``modelgen verify``: the model's name and its paper check (None: no paper table names this model)."""
+    loaded = load_model(model)
+    if paper_table_path(loaded.name) is None:
+        return loaded.name, None
+    return loaded.name, verify(derive(loaded))
+
+
+def embedded_inputs(model: str | Path, qemu: bool):
+    """``modelgen embedded``'s inputs: the derived model and, with ``qemu``, the check scenario it flies (else None)."""
+    derived = load_and_derive(model)
+    return derived, (check_scenario(derived) if qemu else None)
+
+
+def embedded_report(derived: DerivedModel, scenario: Scenario | None, folder: Path):
+    """``modelgen embedded``: the Cortex-M4F builds and the qemu runs (an :class:`EmbeddedReport`) into ``folder``."""
+    from modelgen.checks.embedded_check import embedded_report as build_and_run
+
+    return build_and_run(derived, scenario, folder)
+
+
+def recommended_form(runs) -> str:
+    """Which single-precision form to use, from the measured qemu runs (modelgen.checks.embedded_check)."""
+    from modelgen.checks.embedded_check import recommended_form as recommend
+
+    return recommend(runs)
+
+
+def observability_report(
+    derived: DerivedModel, scenario_file: str | None, assignments: tuple[str, ...], step: float | None,
+    steps: int | None, weak_rtol: float, base_values: dict[str, float] | None,
+) -> str:
+    """``modelgen observability``: the text report of the model's observability over the command's scenario."""
+    from modelgen.analysis.observability import analyse, command_line_scenario, format_report
+
+    scenario = command_line_scenario(
+        scenario_file, assignments, step, steps, default_steps=derived.n_states, base_values=base_values
+    )
+    return format_report(analyse(derived, scenario, weak_rtol=weak_rtol))
+
+
+def covariance_analysis(folder: Path, sensitivity: bool, figures: bool, progress=None):
+    """``modelgen covariance``: Table 2 and Figs 2-7 into ``folder`` (a :class:`CovarianceReport`)."""
+    from modelgen.analysis.report import run_covariance_analysis
+
+    return run_covariance_analysis(folder, sensitivity=sensitivity, figures=figures, progress=progress)
+
+
+def flight_scenario(profile: str, hours: float | None = None, imu_rate: float | None = None):
+    """``modelgen simulate``'s scenario: a profile (file or built-in name), optionally shortened or at another IMU rate."""
+    from modelgen.simulation.scenario import load_profile
+
+    changes: dict[str, float] = {"imu_rate": imu_rate} if imu_rate is not None else {}
+    if hours is not None:
+        changes["hours"] = hours
+    return load_profile(profile).with_changes(**changes)
+
+
+def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation: str, echo=print) -> Path:
+    """``modelgen simulate``: fly the scenario (truth, sensors, filter, Monte Carlo) into ``folder``; the summary's path."""
+    from modelgen.simulation.flight_report import simulate
+
+    return simulate(scenario, folder, runs=runs, seed=seed, echo=echo, implementation=implementation)

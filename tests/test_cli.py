@@ -190,12 +190,12 @@ def test_a_full_disk_gives_one_line_exit_2_and_nothing_half_written(runner, tmp_
 
 
 def test_an_internal_error_exits_3_without_traceback_and_debug_shows_it(runner, tmp_path, monkeypatch):
-    import modelgen.derive.symbolic
+    from modelgen import jobs
 
     def bug(model):
         raise RuntimeError("a bug")
 
-    monkeypatch.setattr(modelgen.derive.symbolic, "derive", bug)
+    monkeypatch.setattr(jobs, "derive", bug)
     result = runner.invoke(main, ["derive"])
     assert result.exit_code == 3
     assert "modelgen: error: internal error: RuntimeError: a bug" in result.output and "--debug" in result.output
@@ -211,12 +211,12 @@ def test_debug_lets_a_bad_input_error_through_with_its_traceback(runner, tmp_pat
 
 
 def test_interrupt_exits_130_and_says_so(runner, monkeypatch):
-    import modelgen.model.loading
+    from modelgen import jobs
 
     def interrupted(name):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(modelgen.model.loading, "load_model", interrupted)
+    monkeypatch.setattr(jobs, "load_model", interrupted)
     result = runner.invoke(main, ["derive"])
     assert result.exit_code == 130
     assert "modelgen: interrupted" in result.output
@@ -225,15 +225,15 @@ def test_interrupt_exits_130_and_says_so(runner, monkeypatch):
 def test_python_warnings_are_printed_as_modelgen_warnings(runner, monkeypatch):
     import warnings
 
-    import modelgen.derive.symbolic
+    from modelgen import jobs
 
-    real = modelgen.derive.symbolic.derive
+    real = jobs.derive
 
     def noisy(model):
         warnings.warn("model has 900 states: the generated C will be about 40 MB")
         return real(model)
 
-    monkeypatch.setattr(modelgen.derive.symbolic, "derive", noisy)
+    monkeypatch.setattr(jobs, "derive", noisy)
     result = runner.invoke(main, ["derive"])
     assert result.exit_code == 0
     assert "modelgen: warning: model has 900 states: the generated C will be about 40 MB" in result.output

@@ -19,7 +19,7 @@ from modelgen.analysis.figures import write_figures
 from modelgen.analysis.inference import infer_doppler_noise
 from modelgen.analysis.scenario import Scenario, load_scenario
 from modelgen.analysis.sensitivity import SensitivityResult, default_cases, markdown_sensitivity, run_sensitivity
-from modelgen.analysis.systems import SystemResult, analyse_systems, paper_models
+from modelgen.analysis.systems import PaperModels, SystemResult, analyse_systems, paper_models
 from modelgen.analysis.table2 import COLUMNS, Row, csv_text, load_paper_table, markdown_improvement, markdown_table, table_rows
 
 #: a cell counts as reproduced within this fraction of the paper's value; the
@@ -112,15 +112,21 @@ def run_covariance_analysis(
     sensitivity: bool = True,
     figures: bool = True,
     progress: Callable[[str], None] | None = None,
+    models: PaperModels | None = None,
 ) -> CovarianceReport:
-    """Compute the six systems of Table 2 and write table2.md, table2.csv and Figs 2-7 into ``out_dir``."""
+    """Compute the six systems of Table 2 and write table2.md, table2.csv and Figs 2-7 into ``out_dir``.
+
+    ``models`` are the paper's derived models when the caller has them (the
+    main job builds them from the model it derived once); by default they are
+    derived here.
+    """
     say = progress or (lambda message: None)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     scenario, budget, paper = load_scenario(), load_error_budget(), load_paper_table()
 
     say("deriving the 18-state model and the reduced models made from it")
-    models = paper_models()
+    models = models if models is not None else paper_models()
     say("covariance analysis: pure inertial, optimal, suboptimal I-IV (4 h, 240 steps)")
     results = analyse_systems(models, scenario, budget)
     rows = table_rows(results, paper)

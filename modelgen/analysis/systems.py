@@ -45,15 +45,18 @@ class PaperModels:
     designs: tuple[FilterDesign, ...]
 
     @classmethod
-    def build(cls, full: ErrorModel | None = None, designs: Sequence[FilterDesign] = PAPER_FILTERS) -> "PaperModels":
-        full = full if full is not None else load_model("ned_doppler18")
+    def build(
+        cls, full: ErrorModel | None = None, designs: Sequence[FilterDesign] = PAPER_FILTERS, truth: DerivedModel | None = None
+    ) -> "PaperModels":
+        """Derive the paper's systems from ``full`` (or from ``truth``, the full model already derived)."""
+        full = truth.model if truth is not None else (full if full is not None else load_model("ned_doppler18"))
         pure = keep_states(
             full,
             [s for s in full.state_names if s not in DOPPLER_STATES],
             name=f"{full.name}_pure_inertial",
             title="pure-inertial form (Doppler states and measurements dropped)",
         )
-        truth = derive(full)
+        truth = truth if truth is not None else derive(full)
         filters = {d.key: (truth if not d.reduced else derive(filter_model(full, d))) for d in designs}
         return cls(truth, derive(pure), filters, tuple(designs))
 

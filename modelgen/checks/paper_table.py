@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -22,6 +21,7 @@ import sympy as sp
 import yaml
 
 from modelgen.errors import ModelError
+from modelgen.fileio.datafiles import data_path
 from modelgen.model.declaration import parse_expression
 
 MATRICES = ("F", "G", "H")
@@ -135,19 +135,31 @@ class PaperTable:
     inconsistencies: tuple[str, ...]
 
 
-def data_folder() -> Path:
-    """The package folder holding paper tables and other data files."""
-    return Path(str(resources.files("modelgen") / "data"))
+#: The core paper's table of F, G, H entries; its ``model:`` key names the paper's model.
+CORE_PAPER_TABLE = "paper_000_table.yaml"
+
+
+def _table_header(path: Path) -> dict[str, Any]:
+    """The top-level mapping of a paper table file (empty if it is not YAML or not a mapping)."""
+    try:
+        header = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError:
+        return {}
+    return header if isinstance(header, dict) else {}
+
+
+def paper_table_model(path: str | Path) -> str:
+    """The model a paper table was written for (its ``model:`` key): which model is the paper's is data."""
+    model = _table_header(Path(path)).get("model")
+    if not isinstance(model, str) or not model:
+        raise ModelError(f"{Path(path).name}: a paper table needs 'model: <model name>'")
+    return model
 
 
 def paper_table_path(model_name: str) -> Path | None:
     """The paper table written for the model ``model_name``, if there is one."""
-    for path in sorted(data_folder().glob("paper_*_table.yaml")):
-        try:
-            header = yaml.safe_load(path.read_text(encoding="utf-8"))
-        except yaml.YAMLError:
-            continue
-        if isinstance(header, dict) and header.get("model") == model_name:
+    for path in sorted(data_path().glob("paper_*_table.yaml")):
+        if _table_header(path).get("model") == model_name:
             return path
     return None
 

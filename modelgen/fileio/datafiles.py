@@ -11,9 +11,21 @@ import yaml
 from modelgen.errors import ModelError
 
 
-def data_path(filename: str) -> Path:
-    """Path of a file shipped in ``modelgen/data``."""
-    return Path(str(resources.files("modelgen") / "data" / filename))
+def package_path(*parts: str) -> Path:
+    """Path of a file or folder shipped inside the installed package (``models``, ``data``...).
+
+    The one lookup of shipped files: it goes through ``importlib.resources``,
+    so it finds them in a source checkout, an editable install and a wheel alike.
+    """
+    place = resources.files("modelgen")
+    for part in parts:
+        place = place / part
+    return Path(str(place))
+
+
+def data_path(filename: str = "") -> Path:
+    """Path of a file shipped in ``modelgen/data`` (the folder itself without a file name)."""
+    return package_path("data", filename) if filename else package_path("data")
 
 
 def read_yaml(path: str | Path, what: str = "data file") -> dict[str, Any]:

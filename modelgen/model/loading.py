@@ -9,7 +9,6 @@ file has been validated.
 from __future__ import annotations
 
 from dataclasses import replace
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +16,7 @@ import yaml
 
 from modelgen.model.check_scenario import build_check_spec, parse_check_section
 from modelgen.errors import ModelError
+from modelgen.fileio.datafiles import package_path
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State
 from modelgen.model.file_fields import free_text, notes_text
 from modelgen.model.transform_file import load_transformed_model
@@ -323,10 +323,10 @@ def load_model(path: str | Path, _loading: tuple[str, ...] = ()) -> ErrorModel:
 
 def builtin_models() -> list[str]:
     """Names of the models shipped in ``modelgen/models``."""
-    folder = resources.files("modelgen") / "models"
-    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
+    return sorted(p.name[:-5] for p in package_path("models").iterdir() if p.name.endswith(".yaml"))
 
 
 def builtin_model_path(name: str) -> Path | None:
-    candidate = resources.files("modelgen") / "models" / f"{name}.yaml"
-    return Path(str(candidate)) if candidate.is_file() else None
+    """The file of the built-in model ``name``, or None if there is no such model."""
+    candidate = package_path("models", f"{name}.yaml")
+    return candidate if candidate.is_file() else None
