@@ -109,13 +109,15 @@ def cache_folder() -> Path:
 def cached_c_navigator(model_file: Path, echo=lambda message: None) -> tuple[CNavigator, bool]:
     """The compiled navigator for a model file, from the cache when its inputs are unchanged.
 
-    The key is the sha256 of the model file, the navigator templates, the filter
-    templates and modelgen's version: any change compiles anew (the one-time
-    compile).  Returns the navigator and whether it came from the cache.
+    The key is the sha256 of the model file, the navigator templates, the filter's
+    templates and printer (everything under modelgen/codegen/backends) and
+    modelgen's version: any change compiles anew (the one-time compile).  Returns the navigator and whether it came from the cache.
     """
     digest = hashlib.sha256(__version__.encode())
     digest.update(Path(model_file).read_bytes())
-    for template in sorted(Path(template_folder()).glob("*.j2")):
+    backends = Path(__file__).resolve().parent.parent / "codegen" / "backends"  # the filter's templates and printer
+    sources = sorted(Path(template_folder()).glob("*.j2")) + sorted(backends.rglob("*.j2")) + sorted(backends.rglob("*.py"))
+    for template in sources:
         digest.update(template.name.encode() + template.read_bytes())
     folder = cache_folder() / digest.hexdigest()[:20]
     libraries = list(folder.glob("lib*_navigator.so")) if folder.is_dir() else []
