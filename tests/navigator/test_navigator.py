@@ -182,6 +182,30 @@ def test_c_and_python_refuse_to_align_without_an_epoch_at_rest():
         fly_c(config, late, navigator)
 
 
+def test_a_rest_window_longer_than_the_c_keeps_is_refused():
+    """20 s at 100 Hz is more than the C's REST_MAX samples: refused before flying, and by the C itself."""
+    import ctypes
+    from dataclasses import replace
+
+    from modelgen.errors import ModelError
+    from modelgen.navigator.cnav import N_OUTPUT, REST_MAX, _pointer, cached_c_navigator, log_arrays
+    from modelgen.navigator.errorstate import model_path
+
+    config, inputs = _excerpt_inputs()
+    with pytest.raises(ModelError, match=f"at most {REST_MAX - 1}"):
+        log_arrays(replace(config, rest_window=20.0), inputs)
+    a = log_arrays(config, inputs)
+    a.cfg[36] = 20.0  # past the Python check: the C notices that its ring lost samples of the window
+    navigator, _ = cached_c_navigator(model_path(config.model, config.path))
+    state = ctypes.create_string_buffer(navigator.size)
+    assert navigator.configure(state, _pointer(a.cfg)) == 0
+    out = np.full((len(a.t_gnss), N_OUTPUT), np.nan)
+    status = navigator.run(state, len(a.time), _pointer(a.time), _pointer(a.force), _pointer(a.rate), len(a.t_gnss),
+                           _pointer(a.t_gnss), _pointer(a.target, ctypes.c_long), _pointer(a.use, ctypes.c_int),
+                           _pointer(a.gnss), _pointer(out))
+    assert status == 13 and np.isnan(out[:, 0]).all()
+
+
 def test_c_navigator_source_is_c99_without_heap(tmp_path):
     from modelgen.navigator.cnav import generate_c_navigator
     from modelgen.navigator.errorstate import model_path
