@@ -26,10 +26,10 @@ import numpy as np
 from modelgen.derive.symbolic import derive
 from modelgen.model.loading import load_model
 from modelgen.simulation.filters import ReferenceFilter
-from modelgen.simulation.integration import run_scenario, scenario_layout, simulate_sensors
+from modelgen.simulation.flight import fly_profile, profile_layout, simulate_sensors
 from modelgen.simulation.jit import HAVE_NUMBA
 from modelgen.simulation.montecarlo import run_monte_carlo
-from modelgen.simulation.scenario import load_scenario
+from modelgen.simulation.scenario import load_profile
 from modelgen.simulation.strapdown import ALGORITHMS, Strapdown, _mechanize
 from modelgen.simulation.trajectory import generate_trajectory
 
@@ -59,17 +59,17 @@ def main() -> None:
     parser.add_argument("--baseline-samples", type=int, default=30000)
     args = parser.parse_args()
 
-    scenario = load_scenario("profile_000").with_changes(hours=args.hours, imu_rate=args.rate)
+    scenario = load_profile("profile_000").with_changes(hours=args.hours, imu_rate=args.rate)
     derived = derive(load_model(scenario.filter.model))
     print(f"numba: {HAVE_NUMBA}; {args.hours} h at {args.rate:g} Hz", flush=True)
 
     # warm-up (compilation or cache load) on a tiny flight, not timed
-    tiny = generate_trajectory(scenario.profile.truncated(10.0), args.rate, 1.0)
+    tiny = generate_trajectory(scenario.path.truncated(10.0), args.rate, 1.0)
     Strapdown(tiny.initial_state(), args.rate, scenario.coning).run(tiny.delta_theta, tiny.delta_velocity, 0, tiny.n_samples)
 
     rss_before = peak_rss_bytes()
     t = time.perf_counter()
-    trajectory = generate_trajectory(scenario.profile, scenario.imu_rate, 1.0 / scenario.filter.period)
+    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0 / scenario.filter.period)
     t_trajectory = time.perf_counter() - t
     print(f"  trajectory: {trajectory.n_samples:,} IMU samples in {t_trajectory:.2f} s", flush=True)
 
@@ -92,14 +92,14 @@ def main() -> None:
     print(f"  baseline (plain Python, {n} samples, extrapolated): {t_python:.1f} s -> compiled is "
           f"{t_python / t_mech:.0f}x faster", flush=True)
 
-    layout = scenario_layout(scenario, derived, trajectory)
+    layout = profile_layout(scenario, derived, trajectory)
     rng = np.random.default_rng(0)
     t = time.perf_counter()
     sensors = simulate_sensors(scenario, trajectory, rng)
     t_sensors = time.perf_counter() - t
     t = time.perf_counter()
-    result = run_scenario(scenario, derived, trajectory, rng, lambda x, P: ReferenceFilter(derived, x, P),
-                          mode="closed_loop", sensors=sensors, layout=layout, progress=progress("filtered run"))
+    result = fly_profile(scenario, derived, trajectory, rng, lambda x, P: ReferenceFilter(derived, x, P),
+                         mode="closed_loop", sensors=sensors, layout=layout, progress=progress("filtered run"))
     t_run = time.perf_counter() - t
     print(f"  sensors: {t_sensors:.2f} s; closed-loop filtered run: {t_run:.2f} s "
           f"({result.updates} Doppler updates, {len(result.times) - 1} filter cycles)", flush=True)
@@ -111,7 +111,7 @@ def main() -> None:
 
     if args.runs:
         t = time.perf_counter()
-        mc = run_monte_carlo(scenario, args.runs, seed=1, workers=2, progress=progress("Monte Carlo"))
+        mc = run_monte_carlo(scenario, derived, args.runs, seed=1, workers=2, progress=progress("Monte Carlo"))
         t_mc = time.perf_counter() - t
         test = mc.nees_test(0.95, start_time=60.0)
         print(f"  Monte Carlo: {args.runs} runs on 2 workers in {t_mc:.1f} s ({t_mc / args.runs:.1f} s per run); "

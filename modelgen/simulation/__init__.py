@@ -2,10 +2,11 @@
 
 Data flows one way through the modules:
 
-    scenario (profile_*.yaml) -> trajectory (truth, ideal IMU increments on WGS-84, ``earth``)
-    -> imu, doppler, gps (sensor errors) -> strapdown (mechanization)
-    -> integration (filter, correction modes, faults; ``filters``, ``error_layout``)
-    -> montecarlo (ensembles, NEES) -> report (`modelgen simulate`: figures, summary).
+    scenario (flight profile, profile_*.yaml; ``profile_keys``) -> trajectory (truth, ideal IMU increments
+    on WGS-84, ``earth``) -> imu and the aiding sensor (``sensors``: a registry of plug-ins, ``aiding``;
+    ``doppler``, ``gps``, ``pseudorange``) -> strapdown (mechanization) -> flight (sensors drawn, the
+    sensor's navigator, ``ins_aiding``) -> filter_loop (correction modes, faults; ``filters``,
+    ``error_layout``) -> montecarlo (ensembles, NEES) -> flight_report (`modelgen simulate`).
 
 Hot loops are compiled with numba when it is installed (``jit``).
 """

@@ -22,8 +22,11 @@ Two measurement models are offered:
   with a random-constant bias and white noise per axis.  This is exactly the
   18-state model's measurement, used for the consistency (NEES) tests.
 * ``beams`` -- the physical four-beam radar above; its body velocity is
-  resolved with the INS attitude by the integration, so the attitude-induced
+  resolved with the INS attitude by the navigator, so the attitude-induced
   error is present (and not modelled by the 18-state filter).
+
+:data:`DOPPLER` is the sensor's plug-in (:class:`DopplerAiding`): its profile
+keys, noise, simulation and measurement function.
 """
 
 from __future__ import annotations
@@ -34,6 +37,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from modelgen.errors import ModelError
+from modelgen.simulation.ins_aiding import NavigationQuantitySensor
+from modelgen.simulation.profile_keys import ARCMIN, DEG, KMH, Outage, ProfileSection, read_outages, valid_mask
 from modelgen.simulation.rotation import quaternion_to_dcm, rotation_vectors_to_quaternions
 
 
@@ -53,14 +58,6 @@ class JanusBeams:
         cd, sd = math.cos(self.depression), math.sin(self.depression)
         az = np.array([self.azimuth, -self.azimuth, math.pi - self.azimuth, math.pi + self.azimuth])
         return np.stack([cd * np.cos(az), cd * np.sin(az), np.full(4, sd)], axis=1)
-
-
-@dataclass(frozen=True)
-class Outage:
-    """Measurements in [start, end) seconds are marked invalid."""
-
-    start: float
-    end: float
 
 
 @dataclass(frozen=True)
@@ -110,13 +107,6 @@ def attitude_induced_error(velocity_ned: np.ndarray, attitude_error: np.ndarray)
     return -np.cross(attitude_error, velocity_ned)
 
 
-def valid_mask(times: np.ndarray, outages: tuple[Outage, ...]) -> np.ndarray:
-    valid = np.ones(times.shape, bool)
-    for o in outages:
-        valid &= ~((times >= o.start) & (times < o.end))
-    return valid
-
-
 def simulate_doppler(times: np.ndarray, velocity_ned: np.ndarray, attitude: np.ndarray, settings: DopplerSettings,
                      rng: np.random.Generator) -> DopplerRecord:
     """Doppler outputs at ``times`` from the true NED velocity and true attitude q_b^n."""
@@ -136,3 +126,63 @@ def simulate_doppler(times: np.ndarray, velocity_ned: np.ndarray, attitude: np.n
     shifts = doppler_shift(body_velocity, actual, beams.wavelength)
     shifts = shifts + beams.frequency_bias * rng.standard_normal(4) + beams.frequency_noise * rng.standard_normal((n, 4))
     return DopplerRecord(times, velocity_from_shifts(shifts, nominal, beams.wavelength), np.zeros((n, 3)), valid, "body")
+
+
+class DopplerAiding(NavigationQuantitySensor):
+    """The Doppler radar as an aiding-sensor plug-in (profile section ``doppler``, ``filter.aiding: doppler``).
+
+    Its bias is a random constant per NED axis ("ned" model) with model states
+    in the error-layout group ``doppler_bias``; the "beams" model's body
+    velocity is resolved with the INS attitude (the attitude-induced error).
+    """
+
+    name = "doppler"
+    bias_group = "doppler_bias"
+
+    def read_settings(self, section: ProfileSection) -> DopplerSettings:
+        beams = section.section("beams")
+        beams.text("configuration", "janus4", ("janus4",))
+        janus = JanusBeams(
+            azimuth=beams.number("azimuth_deg", 45.0, DEG),
+            depression=beams.number("depression_deg", 65.0, DEG),
+            wavelength=beams.number("wavelength_m", 0.0225, positive=True),
+            frequency_noise=beams.number("frequency_noise_hz", 10.0, non_negative=True),
+            frequency_bias=beams.number("frequency_bias_hz", 0.0),
+            mounting_error=beams.number("mounting_error_arcmin", 0.0, ARCMIN),
+        )
+        beams.done()
+        settings = DopplerSettings(
+            period=section.number("period_s", 60.0, positive=True),
+            measurement=section.text("measurement", "ned", ("ned", "beams")),
+            bias=section.number("bias_kmh", 0.0, KMH),
+            white_noise=section.number("white_noise_mps", 0.0, non_negative=True),
+            beams=janus,
+            outages=read_outages(section, "outages"),
+        )
+        section.done()
+        return settings
+
+    def period(self, settings: DopplerSettings) -> float:
+        return settings.period
+
+    def noise_parameters(self, settings: DopplerSettings) -> dict[str, float]:
+        return {"doppler_noise_sigma_north": settings.white_noise, "doppler_noise_sigma_east": settings.white_noise}
+
+    def simulate_at(self, settings: DopplerSettings, truth: np.ndarray, rng: np.random.Generator) -> DopplerRecord:
+        return simulate_doppler(truth[:, 0], truth[:, 4:7], truth[:, 7:11], settings, rng)
+
+    def fix(self, record: DopplerRecord, epoch: int, navigation: np.ndarray) -> tuple[np.ndarray, None]:
+        velocity = record.velocity[epoch]
+        if record.frame == "body":  # resolve with the INS attitude (attitude-induced error)
+            velocity = quaternion_to_dcm(navigation[6:10]) @ velocity
+        return velocity, None
+
+    def true_bias(self, record: DopplerRecord) -> np.ndarray:
+        return record.bias[0]
+
+    def bias_sigma(self, settings: DopplerSettings) -> float:
+        return settings.bias
+
+
+#: the registry entry (modelgen.simulation.sensors)
+DOPPLER = DopplerAiding()

@@ -1,6 +1,6 @@
-"""The Kalman filters the integration can run, behind one small protocol.
+"""The Kalman filters the filter loop can run, behind one small protocol.
 
-The integration (``modelgen.simulation.integration``) needs only this from a
+The filter loop (``modelgen.simulation.filter_loop``) needs only this from a
 filter:
 
     transition(parameters, period) -> (Phi, Qd)   discretize F, G, Q at an operating point
@@ -20,7 +20,7 @@ Three implementations plug in:
 * :class:`GeneratedCFilter` -- the compiled generated C (``<model>.c``) through
   ``modelgen.codegen.build.CompiledFilter`` (ctypes).  The C update takes H and
   R from its own matrices, evaluated at the parameters of the last
-  :meth:`transition`, which is where the integration also takes H and R from.
+  :meth:`transition`, which is where the filter loop also takes H and R from.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from modelgen.errors import ModelError
 
 
 class KalmanFilter(Protocol):
-    """What the integration needs from a filter (see the module docstring)."""
+    """What the filter loop needs from a filter (see the module docstring)."""
 
     def transition(self, parameters: Mapping[str, float], period: float) -> tuple[np.ndarray, np.ndarray]: ...
 

@@ -11,18 +11,23 @@
 * :class:`Constellation` -- a simple Walker 24/6/1 constellation (55 deg,
   26 560 km circular orbits) in earth-fixed axes; signal travel time and
   earth rotation during it are ignored (metre-level, irrelevant here).
+
+:data:`GPS` is the position/velocity receiver's plug-in (:class:`GpsAiding`);
+the pseudo-range receiver's is in :mod:`modelgen.simulation.pseudorange`
+with its navigator.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from modelgen.errors import ModelError
 from modelgen.simulation import earth
-from modelgen.simulation.doppler import Outage, valid_mask
+from modelgen.simulation.ins_aiding import NavigationQuantitySensor
+from modelgen.simulation.profile_keys import Outage, ProfileSection, read_outages, valid_mask
 
 
 @dataclass(frozen=True)
@@ -98,6 +103,7 @@ class PseudorangeSettings:
     clock_bias_psd: float = 0.1  # m^2/s, white noise on b' (white frequency noise)
     clock_drift_psd: float = 0.01  # m^2/s^3, white noise on d' (random-walk frequency)
     elevation_mask: float = math.radians(10.0)
+    constellation: Constellation = field(default_factory=Constellation)
 
 
 @dataclass(frozen=True)
@@ -134,8 +140,9 @@ def elevation(user: np.ndarray, satellite: np.ndarray) -> np.ndarray:
 
 
 def simulate_pseudoranges(times: np.ndarray, position: np.ndarray, settings: PseudorangeSettings,
-                          rng: np.random.Generator, constellation: Constellation = Constellation()) -> PseudorangeRecord:
-    """rho = |r_sat - r_user| + b + noise for every visible satellite at ``times``."""
+                          rng: np.random.Generator, constellation: Constellation | None = None) -> PseudorangeRecord:
+    """rho = |r_sat - r_user| + b + noise for every visible satellite at ``times`` (default: the settings' constellation)."""
+    constellation = settings.constellation if constellation is None else constellation
     n = len(times)
     dt = float(times[1] - times[0]) if n > 1 else settings.period
     bias, drift = clock_sequence(n, dt, settings, rng)
@@ -165,3 +172,41 @@ def solve_position(pseudoranges: np.ndarray, satellites: np.ndarray, guess: np.n
         if np.linalg.norm(dx) < 1e-6:
             break
     return x[:3], float(x[3])
+
+
+class GpsAiding(NavigationQuantitySensor):
+    """The position/velocity receiver as an aiding-sensor plug-in (profile section ``gps``, ``filter.aiding: gps``)."""
+
+    name = "gps"
+
+    def read_settings(self, section: ProfileSection) -> GpsSettings:
+        settings = GpsSettings(
+            period=section.number("period_s", 1.0, positive=True),
+            position_noise=section.number("position_noise_m", 5.0, non_negative=True),
+            height_noise=section.number("height_noise_m", 8.0, non_negative=True),
+            velocity_noise=section.number("velocity_noise_mps", 0.05, non_negative=True),
+            outages=read_outages(section, "outages"),
+        )
+        section.done()
+        return settings
+
+    def period(self, settings: GpsSettings) -> float:
+        return settings.period
+
+    def noise_parameters(self, settings: GpsSettings) -> dict[str, float]:
+        return {
+            "gps_velocity_sigma_east": settings.velocity_noise, "gps_velocity_sigma_north": settings.velocity_noise,
+            "gps_velocity_sigma_up": settings.velocity_noise,
+            "gps_position_sigma_north": settings.position_noise, "gps_position_sigma_east": settings.position_noise,
+            "gps_position_sigma_up": settings.height_noise,
+        }
+
+    def simulate_at(self, settings: GpsSettings, truth: np.ndarray, rng: np.random.Generator) -> GpsRecord:
+        return simulate_position_velocity(truth[:, 0], truth[:, 1:4], truth[:, 4:7], settings, rng)
+
+    def fix(self, record: GpsRecord, epoch: int, navigation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return record.velocity[epoch], record.position[epoch]
+
+
+#: the registry entry (modelgen.simulation.sensors)
+GPS = GpsAiding()

@@ -4,7 +4,7 @@ Each run draws its own sensor errors and initial errors from a per-run
 generator (``numpy.random.SeedSequence(seed).spawn(N)``), so results do not
 depend on how runs are spread over processes.  Runs go to a
 ``ProcessPoolExecutor`` (two workers by default: the machine's two cores); each
-worker builds the trajectory and the derived model once.
+worker builds the trajectory once and takes the derived model from the caller.
 
 Consistency (Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to
 Tracking and Navigation*, 2001, §5.4): with e the estimation error and P the
@@ -28,12 +28,11 @@ from typing import Callable
 import numpy as np
 from scipy.stats import chi2
 
-from modelgen.derive.symbolic import derive
+from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
-from modelgen.model.loading import load_model
 from modelgen.simulation.filters import ReferenceFilter
-from modelgen.simulation.integration import run_scenario, scenario_layout
-from modelgen.simulation.scenario import Scenario
+from modelgen.simulation.flight import fly_profile, profile_layout
+from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.trajectory import generate_trajectory
 
 
@@ -104,49 +103,49 @@ class MonteCarloResult:
 _WORKER: dict = {}
 
 
-def _prepare(scenario: Scenario, truth_scenario: Scenario | None = None) -> dict:
-    derived = derive(load_model(scenario.filter.model))
-    trajectory = generate_trajectory(scenario.profile, scenario.imu_rate, 1.0 / scenario.filter.period)
-    layout = scenario_layout(scenario, derived, trajectory)
-    return {"scenario": scenario, "truth_scenario": truth_scenario, "derived": derived, "trajectory": trajectory,
+def _prepare(profile: FlightProfile, derived: DerivedModel, truth_profile: FlightProfile | None = None) -> dict:
+    """What every run of a worker shares: the trajectory and the error layout."""
+    trajectory = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
+    layout = profile_layout(profile, derived, trajectory)
+    return {"profile": profile, "truth_profile": truth_profile, "derived": derived, "trajectory": trajectory,
             "layout": layout}
 
 
-def _init_worker(scenario: Scenario, truth_scenario: Scenario | None) -> None:
+def _init_worker(profile: FlightProfile, derived: DerivedModel, truth_profile: FlightProfile | None) -> None:
     _WORKER.clear()
-    _WORKER.update(_prepare(scenario, truth_scenario))
+    _WORKER.update(_prepare(profile, derived, truth_profile))
 
 
 def _one_run(seed: np.random.SeedSequence, mode: str, store_every: int, context: dict | None = None) -> tuple:
     c = context if context is not None else _WORKER
     derived = c["derived"]
-    result = run_scenario(c["scenario"], derived, c["trajectory"], np.random.default_rng(seed),
-                          lambda x, P: ReferenceFilter(derived, x, P), mode=mode, layout=c["layout"],
-                          truth_scenario=c["truth_scenario"])
+    result = fly_profile(c["profile"], derived, c["trajectory"], np.random.default_rng(seed),
+                         lambda x, P: ReferenceFilter(derived, x, P), mode=mode, layout=c["layout"],
+                         truth_profile=c["truth_profile"])
     rows = slice(None, None, store_every)
     return (result.times[rows], result.estimation_error[rows], result.sigma[rows], result.nees[rows],
             len(result.rejected), result.updates)
 
 
-def run_monte_carlo(scenario: Scenario, runs: int, seed: int = 0, mode: str | None = None, workers: int = 2,
-                    store_every: int | None = None, progress: Callable[[int, int], None] | None = None,
-                    truth_scenario: Scenario | None = None) -> MonteCarloResult:
-    """``runs`` independent flights of ``scenario`` (see the module docstring).
+def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, seed: int = 0, mode: str | None = None,
+                    workers: int = 2, store_every: int | None = None, progress: Callable[[int, int], None] | None = None,
+                    truth_profile: FlightProfile | None = None) -> MonteCarloResult:
+    """``runs`` independent flights of ``profile`` with the filter model ``derived`` (module docstring).
 
-    ``truth_scenario`` (same flight) draws the sensors from a different error
+    ``truth_profile`` (same flight) draws the sensors from a different error
     budget than the filter assumes: a mis-modelled filter.
     """
     import time
 
     if runs < 1:
         raise ModelError(f"Monte Carlo: need at least one run, got {runs}")
-    mode = mode or scenario.filter.mode
-    store_every = store_every or max(1, int(round(scenario.aiding_period / scenario.filter.period)))
+    mode = mode or profile.filter.mode
+    store_every = store_every or max(1, int(round(profile.aiding_period / profile.filter.period)))
     seeds = np.random.SeedSequence(seed).spawn(runs)
     start = time.perf_counter()
     outputs = []
     if workers <= 1:
-        context = _prepare(scenario, truth_scenario)
+        context = _prepare(profile, derived, truth_profile)
         for i, s in enumerate(seeds):
             outputs.append(_one_run(s, mode, store_every, context))
             if progress:
@@ -155,18 +154,17 @@ def run_monte_carlo(scenario: Scenario, runs: int, seed: int = 0, mode: str | No
         method = "fork" if "fork" in multiprocessing.get_all_start_methods() else None
         ctx = multiprocessing.get_context(method)
         with ProcessPoolExecutor(max_workers=min(workers, runs, os.cpu_count() or 1), mp_context=ctx,
-                                 initializer=_init_worker, initargs=(scenario, truth_scenario)) as pool:
+                                 initializer=_init_worker, initargs=(profile, derived, truth_profile)) as pool:
             futures = [pool.submit(_one_run, s, mode, store_every) for s in seeds]
             for i, f in enumerate(futures):
                 outputs.append(f.result())
                 if progress:
                     progress(i + 1, runs)
     seconds = time.perf_counter() - start
-    derived_names = load_model(scenario.filter.model).state_names
     return MonteCarloResult(
-        scenario=scenario.name,
+        scenario=profile.name,
         mode=mode,
-        state_names=derived_names,
+        state_names=list(derived.model.state_names),
         times=outputs[0][0],
         errors=np.stack([o[1] for o in outputs]),
         sigma=np.stack([o[2] for o in outputs]),

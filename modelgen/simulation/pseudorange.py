@@ -1,8 +1,10 @@
 """Pseudo-range aiding (seed 003): the simulated INS against the 11-state model.
 
-:class:`PseudorangeNavigator` implements the Navigator protocol of
-:mod:`modelgen.simulation.integration` for seed 003's INS/GPS pseudo-range
-model (``gps_pseudorange11``, ``modelgen.model.library.pseudorange_model(n)``):
+:data:`PSEUDORANGE` is the pseudo-range receiver's aiding-sensor plug-in
+(profile section ``pseudorange`` with its ``constellation``, ``filter.aiding:
+pseudorange``).  :class:`PseudorangeNavigator`, its measurement function,
+implements the Navigator protocol of :mod:`modelgen.simulation.filter_loop` for seed 003's INS/GPS pseudo-range
+model (``gps_pseudorange11``, ``modelgen.model.pseudorange.pseudorange_model(n)``):
 the same :class:`~modelgen.simulation.strapdown.Strapdown` mechanization as
 the Doppler/GPS navigator, plus a receiver-clock estimate, with the errors
 mapped explicitly onto the model's states (its header fixes them):
@@ -42,7 +44,7 @@ Measurement each pseudo-range epoch (seed 003 eqs. (3), (7), (8)): the n
 visible satellites of highest elevation seen from the INS position (n = the
 model's satellite count), z_k = rho_k - b^_c - |r_s,k - r_c|, with r_c the
 corrected INS position and b^_c the clock estimate of the output the
-integration hands in: raw in closed loop (the clock is fed back), corrected
+filter loop hands in: raw in closed loop (the clock is fed back), corrected
 by the accumulator in accumulated mode (eq. (3)).  The line-of-sight unit
 vectors e_k (ENU, receiver to satellite) of that epoch go to the model
 through :meth:`PseudorangeNavigator.parameters`, so H is evaluated per epoch.
@@ -54,7 +56,7 @@ flies it free, as the model assumes: no barometer, the pseudo-ranges bound it.
 from __future__ import annotations
 
 import math
-from typing import Callable
+from typing import Any
 
 import numpy as np
 
@@ -62,19 +64,21 @@ from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.simulation import earth
 from modelgen.simulation.error_layout import frame_matrix
-from modelgen.simulation.filters import KalmanFilter, named_parameters
-from modelgen.simulation.integration import (
-    Measurement,
-    RunResult,
+from modelgen.simulation.aiding import (
+    FilterMaker,
+    Progress,
     SensorData,
     measurement_function,
     operating_point,
-    run_filter,
     samples_per_cycle,
     whole_ratio,
 )
+from modelgen.simulation.error_layout import ErrorLayout
+from modelgen.simulation.filter_loop import Measurement, RunResult, run_filter
+from modelgen.simulation.filters import named_parameters
+from modelgen.simulation.gps import Constellation, PseudorangeRecord, PseudorangeSettings, simulate_pseudoranges
+from modelgen.simulation.profile_keys import DEG, ProfileSection
 from modelgen.simulation.rotation import misalignment, rotate_attitude
-from modelgen.simulation.scenario import Scenario
 from modelgen.simulation.strapdown import Strapdown
 from modelgen.simulation.trajectory import Trajectory
 
@@ -152,29 +156,30 @@ def satellite_count(derived: DerivedModel) -> int:
     model = derived.model
     if tuple(model.state_names) != STATE_NAMES:
         raise ModelError(f"pseudorange aiding: model {model.name!r} does not have the 11 states of "
-                         f"modelgen.model.library.pseudorange_model ({', '.join(STATE_NAMES)})")
+                         f"modelgen.model.pseudorange.pseudorange_model ({', '.join(STATE_NAMES)})")
     return len(model.measurement_names)
 
 
 class PseudorangeNavigator:
     """The simulated INS with a pseudo-range receiver and a clock estimate (module docstring)."""
 
-    def __init__(self, scenario: Scenario, derived: DerivedModel, sensors: SensorData):
-        record = sensors.pseudoranges
-        if record is None:
+    def __init__(self, scenario: Any, derived: DerivedModel, sensors: SensorData):
+        record = sensors.aiding
+        if not isinstance(record, PseudorangeRecord):
             raise ModelError(f"scenario {scenario.name!r}: no simulated pseudo-ranges (filter.aiding must be pseudorange)")
         self.scenario, self.derived, self.sensors, self.record = scenario, derived, sensors, record
+        self.settings: PseudorangeSettings = scenario.sensors[PSEUDORANGE.name]
         self.satellites = satellite_count(derived)
         trajectory = sensors.trajectory
         self.period = trajectory.record_period
         self.samples_per_cycle = samples_per_cycle(trajectory, scenario.coning)
-        self.every = whole_ratio(scenario.pseudorange.period, self.period, "pseudorange period")
+        self.every = whole_ratio(self.settings.period, self.period, "pseudorange period")
         visible = np.isfinite(record.pseudoranges[::self.every]).sum(axis=1)
         if visible.min() < self.satellites:
             j = int(np.argmin(visible))
             raise ModelError(
                 f"scenario {scenario.name!r}: model {derived.model.name!r} fuses {self.satellites} pseudo-ranges, but only "
-                f"{int(visible[j])} satellites are above the {math.degrees(scenario.pseudorange.elevation_mask):g} deg "
+                f"{int(visible[j])} satellites are above the {math.degrees(self.settings.elevation_mask):g} deg "
                 f"elevation mask at t = {record.times[j * self.every]:g} s ({int(visible.min())}..{int(visible.max())} "
                 f"visible over the flight)")
         self.strapdown = Strapdown(sensors.initial_navigation, trajectory.imu_rate, scenario.coning,
@@ -183,6 +188,7 @@ class PseudorangeNavigator:
         self.cycle = 0
         self.selected = np.arange(self.satellites)
         self.line_of_sight = np.tile([0.0, 0.0, 1.0], (self.satellites, 1))
+        self.noise = scenario.noise_parameters()
 
     # -- navigator protocol ------------------------------------------------------------
     def advance(self, cycle: int) -> None:
@@ -207,15 +213,12 @@ class PseudorangeNavigator:
     def parameters(self, corrected_output: np.ndarray) -> dict[str, float]:
         if self.cycle % self.every == 0:
             self._select(corrected_output)
-        values = operating_point(corrected_output[:10], self.strapdown.specific_force, "ENU", self.scenario)
-        settings = self.scenario.pseudorange
-        values["clock_bias_psd"] = settings.clock_bias_psd
-        values["clock_drift_psd"] = settings.clock_drift_psd
+        values = operating_point(corrected_output[:10], self.strapdown.specific_force, "ENU", self.scenario.imu_budget,
+                                 self.noise)
         for k, (east, north, up) in enumerate(self.line_of_sight, start=1):
             values[f"line_of_sight_east_{k}"] = float(east)
             values[f"line_of_sight_north_{k}"] = float(north)
             values[f"line_of_sight_up_{k}"] = float(up)
-            values[f"pseudorange_sigma_{k}"] = settings.noise
         return named_parameters(self.derived, values, validate=self.cycle <= 1)
 
     def _select(self, nav: np.ndarray) -> None:
@@ -242,15 +245,15 @@ class PseudorangeNavigator:
                                clock - corrected_output[CLOCK_BIAS:CLOCK_DRIFT + 1]])
 
 
-def initial_covariance(scenario: Scenario, truth0: np.ndarray) -> np.ndarray:
+def initial_covariance(scenario: Any, truth0: np.ndarray) -> np.ndarray:
     """P0 of the 11 states from the scenario's initial errors (psi = phi - dtheta couples attitude and position).
 
-    Drawn independently (``integration.simulate_sensors``): phi about N, E, D,
+    Drawn independently (``flight.simulate_sensors`` and :meth:`PseudorangeAiding.simulate`): phi about N, E, D,
     velocity and position errors per axis (the vertical ones only with
     pseudo-range aiding: a 3-D fix initializes the INS); the receiver clock
     bias and drift.
     """
-    ie, clock = scenario.initial_errors, scenario.pseudorange
+    ie, clock = scenario.initial_errors, scenario.sensors[PSEUDORANGE.name]
     lat, h = truth0[0], truth0[2]
     meridian, prime_vertical = earth.radii_of_curvature(lat)
     # independent variables u = (dr_E, dr_N, dr_U, dv_E, dv_N, dv_U, phi_E, phi_N, phi_U, b, d)
@@ -264,12 +267,79 @@ def initial_covariance(scenario: Scenario, truth0: np.ndarray) -> np.ndarray:
     return J @ np.diag(sigma**2) @ J.T
 
 
-def run_pseudorange_scenario(scenario: Scenario, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
-                             make_filter: Callable[[np.ndarray, np.ndarray], KalmanFilter], mode: str,
-                             progress: Callable[[int, int], None] | None = None) -> RunResult:
-    """The correction-mode loop with a :class:`PseudorangeNavigator`; every state is fed back."""
-    navigator = PseudorangeNavigator(scenario, derived, sensors)
-    kalman = make_filter(np.zeros(len(STATE_NAMES)), initial_covariance(scenario, trajectory.initial_state()))
-    return run_filter(navigator, kalman, measurement_function(derived), mode, len(trajectory.truth) - 1,
-                      trajectory.record_period, np.ones(len(STATE_NAMES), bool), scenario.filter.gate_probability,
-                      getattr(kalman, "name", type(kalman).__name__), progress)
+class PseudorangeAiding:
+    """The pseudo-range receiver as an aiding-sensor plug-in (module docstring); every state is fed back."""
+
+    name = "pseudorange"
+    quantities: tuple[str, ...] = ()  # the rows are the model's satellites, mapped here
+
+    def read_settings(self, section: ProfileSection) -> PseudorangeSettings:
+        """The receiver (seed 003) and its constellation; defaults when the section is absent."""
+        c = section.section("constellation")
+        constellation = Constellation(
+            satellites=int(c.number("satellites", 24.0)),
+            planes=int(c.number("planes", 6.0)),
+            phasing=int(c.number("phasing", 1.0)),
+            inclination=c.number("inclination_deg", 55.0 * DEG, DEG),  # defaults are SI
+            radius=c.number("orbit_radius_m", 26_559_700.0),
+        )
+        c.done()
+        if constellation.satellites < 1 or constellation.planes < 1 or constellation.satellites % constellation.planes:
+            raise ModelError(f"{c.where}: {constellation.satellites} satellites do not fill {constellation.planes} planes")
+        settings = PseudorangeSettings(
+            period=section.number("period_s", 1.0, positive=True),
+            noise=section.number("noise_m", 3.0),
+            clock_bias=section.number("clock_bias_m", 3.0e4),
+            clock_drift=section.number("clock_drift_mps", 3.0),
+            clock_bias_psd=section.number("clock_bias_psd_m2ps", 0.1),
+            clock_drift_psd=section.number("clock_drift_psd_m2ps3", 0.01),
+            elevation_mask=section.number("elevation_mask_deg", 10.0 * DEG, DEG),
+            constellation=constellation,
+        )
+        section.done()
+        where = section.where
+        for key, value in (("noise_m", settings.noise), ("clock_bias_m", settings.clock_bias),
+                           ("clock_drift_mps", settings.clock_drift), ("clock_bias_psd_m2ps", settings.clock_bias_psd),
+                           ("clock_drift_psd_m2ps3", settings.clock_drift_psd)):
+            if value < 0:
+                raise ModelError(f"{where}.{key}: must not be negative, got {value}")
+        if not 0 <= settings.elevation_mask < math.pi / 2:
+            raise ModelError(f"{where}.elevation_mask_deg: must be in [0, 90)")
+        return settings
+
+    def period(self, settings: PseudorangeSettings) -> float:
+        return settings.period
+
+    def noise_parameters(self, settings: PseudorangeSettings) -> dict[str, float]:
+        """Clock noise and one range sigma per satellite the constellation can offer."""
+        out = {"clock_bias_psd": settings.clock_bias_psd, "clock_drift_psd": settings.clock_drift_psd}
+        for k in range(1, settings.constellation.satellites + 1):
+            out[f"pseudorange_sigma_{k}"] = settings.noise
+        return out
+
+    def simulate(self, profile: Any, trajectory: Trajectory, initial_navigation: np.ndarray,
+                 rng: np.random.Generator) -> PseudorangeRecord:
+        """Ranges at every record time; a pseudo-range INS is initialized from a 3-D fix (height and
+        vertical velocity errors drawn too)."""
+        ie = profile.initial_errors
+        initial_navigation[2] += ie.position * rng.standard_normal()
+        initial_navigation[5] += ie.velocity * rng.standard_normal()
+        truth = trajectory.truth
+        return simulate_pseudoranges(truth[:, 0], truth[:, 1:4], profile.sensors[self.name], rng)
+
+    def layout(self, profile: Any, derived: DerivedModel, trajectory: Trajectory) -> ErrorLayout:
+        """No layout from the profile: the states are mapped explicitly by this module."""
+        return ErrorLayout(derived, {})
+
+    def fly(self, profile: Any, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
+            layout: ErrorLayout, make_filter: FilterMaker, mode: str, progress: Progress | None) -> RunResult:
+        """The correction-mode loop with a :class:`PseudorangeNavigator`; every state is fed back."""
+        navigator = PseudorangeNavigator(profile, derived, sensors)
+        kalman = make_filter(np.zeros(len(STATE_NAMES)), initial_covariance(profile, trajectory.initial_state()))
+        return run_filter(navigator, kalman, measurement_function(derived), mode, len(trajectory.truth) - 1,
+                          trajectory.record_period, np.ones(len(STATE_NAMES), bool), profile.filter.gate_probability,
+                          getattr(kalman, "name", type(kalman).__name__), progress)
+
+
+#: the registry entry (modelgen.simulation.sensors)
+PSEUDORANGE = PseudorangeAiding()

@@ -1,10 +1,13 @@
-"""Scenario files (modelgen/data/profile_*.yaml): flight profile, sensors, filter.
+"""Flight profiles (modelgen/data/profile_*.yaml): the flight, the IMU, the aiding sensor, the filter.
 
-A scenario file is data: the flight profile (start state and segments), the IMU
-error budget, initial errors, the aiding sensors and the filter set-up, every
-number with its unit in its key name (``_deg``, ``_kmh``, ``_dph``...).  This
-module turns it into SI dataclasses and refuses unknown keys, missing keys and
-non-numbers with a message naming the file and the key.
+A flight-profile file is data: the flight path (start state and segments),
+the IMU error budget, initial errors, the aiding sensors' sections and the
+filter set-up, every number with its unit in its key name (``_deg``,
+``_kmh``, ``_dph``...).  :func:`load_profile` turns it into a
+:class:`FlightProfile` (SI dataclasses) and refuses unknown keys, missing keys
+and non-numbers with a message naming the file and the key.  Each aiding
+sensor reads its own section (:mod:`modelgen.simulation.sensors`): the
+sections and ``filter.aiding`` names this loader accepts are the registry's.
 """
 
 from __future__ import annotations
@@ -13,39 +16,31 @@ import math
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
-
-from modelgen.fileio.datafiles import read_yaml_with_lines
 from modelgen.errors import ModelError
-from modelgen.simulation.doppler import DopplerSettings, JanusBeams, Outage
-from modelgen.simulation.gps import Constellation, GpsSettings, PseudorangeSettings
+from modelgen.fileio.datafiles import read_yaml_with_lines
+from modelgen.simulation.aiding import AidingSensor
 from modelgen.simulation.imu import ImuErrorBudget
+from modelgen.simulation.profile_keys import ARCMIN, ARCSEC, DEG, DPH, HOUR, KMH, ProfileSection
+from modelgen.simulation.sensors import SENSORS
 from modelgen.simulation.strapdown import ALGORITHMS, VerticalDamping
-from modelgen.simulation.trajectory import FlightProfile, Segment
+from modelgen.simulation.trajectory import FlightPath, Segment
 
-DEG = math.pi / 180.0
-ARCSEC = DEG / 3600.0
-ARCMIN = DEG / 60.0
-HOUR = 3600.0
-KMH = 1000.0 / 3600.0
-DPH = DEG / HOUR  # deg/h -> rad/s
+__all__ = ["ARCMIN", "ARCSEC", "DEG", "DPH", "HOUR", "KMH", "FilterSettings", "FlightProfile", "InitialErrors",
+           "builtin_profiles", "load_profile", "load_profile_data"]
 
 MODES = ("open_loop", "closed_loop", "accumulated")
-STATE_ROLES = ("attitude", "velocity", "position", "gyro_constant", "gyro_markov", "accelerometer_constant",
-               "accelerometer_markov", "doppler_bias")
+NED_AXES = ("north", "east", "down", "up")
 AXES = {
-    "attitude": ("north", "east", "down", "up"),
-    "velocity": ("north", "east", "down", "up"),
+    "attitude": NED_AXES,
+    "velocity": NED_AXES,
     "position": ("latitude", "longitude", "height"),
     "gyro_constant": ("x", "y", "z"),
     "gyro_markov": ("x", "y", "z"),
     "accelerometer_constant": ("x", "y", "z"),
     "accelerometer_markov": ("x", "y", "z"),
-    "doppler_bias": ("north", "east", "down", "up"),
 }
-SENSOR_QUANTITIES = ("velocity_north", "velocity_east", "velocity_down", "velocity_up", "latitude", "longitude",
-                     "height", "position_north", "position_east")
 
 
 @dataclass(frozen=True)
@@ -59,6 +54,8 @@ class InitialErrors:
 
 @dataclass(frozen=True)
 class FilterSettings:
+    """The filter's model, its aiding sensor (a registry name), cycle, correction mode, gate and state mapping."""
+
     model: str = "ned_doppler18"
     aiding: str = "doppler"
     period: float = 1.0
@@ -69,30 +66,52 @@ class FilterSettings:
 
 
 @dataclass(frozen=True)
-class Scenario:
+class FlightProfile:
+    """One flight-profile file: the flight path, the IMU, every registered sensor's settings, the filter."""
+
     name: str
     title: str
-    profile: FlightProfile
+    path: FlightPath
     imu_rate: float
     coning: str
     imu_budget: ImuErrorBudget
     initial_errors: InitialErrors
     altitude_noise: float
     vertical_damping: VerticalDamping
-    doppler: DopplerSettings
-    gps: GpsSettings
     filter: FilterSettings
+    sensors: Mapping[str, Any]  # registry name -> that sensor's settings (defaults when its section is absent)
     source_file: str = ""
-    pseudorange: PseudorangeSettings = field(default_factory=PseudorangeSettings)  # aiding: pseudorange
-    constellation: Constellation = field(default_factory=Constellation)
+
+    @property
+    def aiding_sensor(self) -> AidingSensor:
+        """The plug-in of the sensor the filter uses (``filter.aiding``)."""
+        return SENSORS[self.filter.aiding]
+
+    @property
+    def aiding_settings(self) -> Any:
+        """The settings of the sensor the filter uses."""
+        return self.sensors[self.filter.aiding]
 
     @property
     def aiding_period(self) -> float:
         """Seconds between two measurements of the aiding sensor the filter uses."""
-        return {"doppler": self.doppler.period, "gps": self.gps.period,
-                "pseudorange": self.pseudorange.period}[self.filter.aiding]
+        return self.aiding_sensor.period(self.aiding_settings)
 
-    def with_changes(self, **changes: Any) -> "Scenario":
+    def noise_parameters(self) -> dict[str, float]:
+        """Every sensor's noise as model parameter values (a model picks the names it has); where two
+        sensors set the same name, the aiding sensor's value holds."""
+        out: dict[str, float] = {}
+        for name, settings in self.sensors.items():
+            if name != self.filter.aiding:
+                out.update(SENSORS[name].noise_parameters(settings))
+        out.update(self.aiding_sensor.noise_parameters(self.aiding_settings))
+        return out
+
+    def with_sensor(self, name: str, settings: Any) -> "FlightProfile":
+        """A copy with one sensor's settings replaced."""
+        return replace(self, sensors={**self.sensors, name: settings})
+
+    def with_changes(self, **changes: Any) -> "FlightProfile":
         """A copy with some fields replaced (``hours=`` truncates the flight)."""
         hours = changes.pop("hours", None)
         if hours is not None and not (math.isfinite(hours) and hours > 0):
@@ -101,77 +120,12 @@ class Scenario:
             raise ModelError(f"--imu-rate: must be a positive rate in Hz, got {changes['imu_rate']:g}")
         out = replace(self, **changes)
         if hours is not None:
-            out = replace(out, profile=out.profile.truncated(hours * HOUR))
+            out = replace(out, path=out.path.truncated(hours * HOUR))
         return out
 
 
-class _Section:
-    """Reads one mapping of the file, converting units and refusing what is unknown."""
-
-    def __init__(self, data: Any, where: str, lines: dict[str, str] | None = None, path: str = ""):
-        self.lines, self.path = lines or {}, path
-        if data is None:
-            data = {}
-        if not isinstance(data, dict):
-            raise ModelError(f"{self.lines.get(path, where)}: {path or where} must be a mapping, got {type(data).__name__}")
-        self.data, self.where, self.used = data, where, set()
-
-    def at(self, key: str) -> str:
-        """Where ``key`` of this section is, for messages: ``file:line: doppler.period_s`` when the line is known."""
-        full = f"{self.path}.{key}" if self.path else key
-        line = self.lines.get(full)
-        return f"{line}: {full}" if line else f"{self.where}.{key}"
-
-    def number(
-        self, key: str, default: float | None = None, scale: float = 1.0, positive: bool = False, non_negative: bool = False
-    ) -> float:
-        """A finite number (times ``scale``); ``positive``/``non_negative`` refuse periods, rates and sigmas that make no sense."""
-        self.used.add(key)
-        if key not in self.data:
-            if default is None:
-                raise ModelError(f"{self.lines.get(self.path, self.where)}: missing key {key!r}")
-            return default
-        value = self.data[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            try:
-                value = float(str(value))
-            except ValueError:
-                raise ModelError(f"{self.at(key)}: {value!r} is not a number") from None
-        value = float(value)
-        if not math.isfinite(value):
-            raise ModelError(f"{self.at(key)}: {value!r} is not finite")
-        if positive and not value > 0:
-            raise ModelError(f"{self.at(key)}: must be positive, got {value:g}")
-        if non_negative and value < 0:
-            raise ModelError(f"{self.at(key)}: must not be negative, got {value:g}")
-        return value * scale
-
-    def text(self, key: str, default: str | None = None, choices: tuple[str, ...] = ()) -> str:
-        self.used.add(key)
-        if key not in self.data:
-            if default is None:
-                raise ModelError(f"{self.where}: missing key {key!r}")
-            return default
-        value = str(self.data[key])
-        if choices and value not in choices:
-            raise ModelError(f"{self.where}.{key}: {value!r} is not one of {', '.join(choices)}")
-        return value
-
-    def section(self, key: str) -> "_Section":
-        self.used.add(key)
-        return _Section(self.data.get(key), f"{self.where}.{key}", self.lines, f"{self.path}.{key}" if self.path else key)
-
-    def raw(self, key: str, default: Any = None) -> Any:
-        self.used.add(key)
-        return self.data.get(key, default)
-
-    def done(self) -> None:
-        unknown = sorted(set(self.data) - self.used)
-        if unknown:
-            raise ModelError(f"{self.where}: unknown key {unknown[0]!r} (known: {', '.join(sorted(self.used))})")
-
-
-def _duration(s: _Section) -> float:
+def _duration(s: ProfileSection) -> float:
+    """A segment's duration from exactly one of duration_h, duration_s."""
     has_h, has_s = "duration_h" in s.data, "duration_s" in s.data
     if has_h == has_s:
         raise ModelError(f"{s.where}: give exactly one of duration_h, duration_s")
@@ -181,22 +135,8 @@ def _duration(s: _Section) -> float:
     return value
 
 
-def _outages(s: _Section, key: str) -> tuple[Outage, ...]:
-    raw = s.raw(key, []) or []
-    if not isinstance(raw, list):
-        raise ModelError(f"{s.where}.{key}: must be a list of {{start_s, end_s}}")
-    out = []
-    for i, item in enumerate(raw):
-        o = _Section(item, f"{s.where}.{key}[{i}]")
-        start, end = o.number("start_s"), o.number("end_s")
-        o.done()
-        if end <= start:
-            raise ModelError(f"{o.where}: end_s must be after start_s")
-        out.append(Outage(start, end))
-    return tuple(out)
-
-
-def _mapping(s: _Section, key: str, allowed: dict[str, tuple[str, ...]]) -> dict[str, dict[str, str]]:
+def _mapping(s: ProfileSection, key: str, allowed: dict[str, tuple[str, ...]]) -> dict[str, dict[str, str]]:
+    """``filter.states`` / ``filter.measurements``: group -> {model name: axis or quantity}, checked against ``allowed``."""
     raw = s.raw(key, {}) or {}
     if not isinstance(raw, dict):
         raise ModelError(f"{s.where}.{key}: must be a mapping")
@@ -214,43 +154,9 @@ def _mapping(s: _Section, key: str, allowed: dict[str, tuple[str, ...]]) -> dict
     return out
 
 
-def _pseudorange(s: _Section) -> tuple[PseudorangeSettings, Constellation]:
-    """The pseudo-range receiver (seed 003) and its constellation; defaults when the section is absent."""
-    c = s.section("constellation")
-    constellation = Constellation(
-        satellites=int(c.number("satellites", 24.0)),
-        planes=int(c.number("planes", 6.0)),
-        phasing=int(c.number("phasing", 1.0)),
-        inclination=c.number("inclination_deg", 55.0 * DEG, DEG),  # defaults are SI
-        radius=c.number("orbit_radius_m", 26_559_700.0),
-    )
-    c.done()
-    if constellation.satellites < 1 or constellation.planes < 1 or constellation.satellites % constellation.planes:
-        raise ModelError(f"{c.where}: {constellation.satellites} satellites do not fill {constellation.planes} planes")
-    settings = PseudorangeSettings(
-        period=s.number("period_s", 1.0, positive=True),
-        noise=s.number("noise_m", 3.0),
-        clock_bias=s.number("clock_bias_m", 3.0e4),
-        clock_drift=s.number("clock_drift_mps", 3.0),
-        clock_bias_psd=s.number("clock_bias_psd_m2ps", 0.1),
-        clock_drift_psd=s.number("clock_drift_psd_m2ps3", 0.01),
-        elevation_mask=s.number("elevation_mask_deg", 10.0 * DEG, DEG),
-    )
-    s.done()
-    if not settings.period > 0:
-        raise ModelError(f"{s.where}.period_s: must be positive, got {settings.period}")
-    for key, value in (("noise_m", settings.noise), ("clock_bias_m", settings.clock_bias), ("clock_drift_mps", settings.clock_drift),
-                       ("clock_bias_psd_m2ps", settings.clock_bias_psd), ("clock_drift_psd_m2ps3", settings.clock_drift_psd)):
-        if value < 0:
-            raise ModelError(f"{s.where}.{key}: must not be negative, got {value}")
-    if not 0 <= settings.elevation_mask < math.pi / 2:
-        raise ModelError(f"{s.where}.elevation_mask_deg: must be in [0, 90)")
-    return settings, constellation
-
-
-def load_scenario_data(data: Any, filename: str, lines: dict[str, str] | None = None) -> Scenario:
-    """Build a :class:`Scenario` from parsed YAML (see the module docstring); ``lines`` locates keys for messages."""
-    top = _Section(data, filename, lines)
+def load_profile_data(data: Any, filename: str, lines: dict[str, str] | None = None) -> FlightProfile:
+    """Build a :class:`FlightProfile` from parsed YAML (module docstring); ``lines`` locates keys for messages."""
+    top = ProfileSection(data, filename, lines)
     name = top.text("profile")
     title = top.text("title", "")
     top.text("source", "")
@@ -261,7 +167,7 @@ def load_scenario_data(data: Any, filename: str, lines: dict[str, str] | None = 
     if not isinstance(raw_segments, list) or not raw_segments:
         raise ModelError(f"{filename}: 'segments' must be a non-empty list")
     for i, raw in enumerate(raw_segments):
-        s = _Section(raw, f"{filename}: segments[{i}]", lines, f"segments[{i}]")
+        s = ProfileSection(raw, f"{filename}: segments[{i}]", lines, f"segments[{i}]")
         segments.append(Segment(
             name=s.text("name", f"segment {i + 1}"),
             duration=_duration(s),
@@ -271,7 +177,7 @@ def load_scenario_data(data: Any, filename: str, lines: dict[str, str] | None = 
             roll_rate=s.number("roll_rate_dps", 0.0, DEG),
         ))
         s.done()
-    profile = FlightProfile(
+    path = FlightPath(
         name=name,
         latitude=start.number("latitude_deg", scale=DEG),
         longitude=start.number("longitude_deg", scale=DEG),
@@ -320,72 +226,51 @@ def load_scenario_data(data: Any, filename: str, lines: dict[str, str] | None = 
     damping = VerticalDamping(k1=2 * 0.707 / tau, k2=1.0 / tau**2) if damped == "damped" else VerticalDamping(0.0, 0.0)
     alt.done()
 
-    dop = top.section("doppler")
-    beams = dop.section("beams")
-    configuration = beams.text("configuration", "janus4", ("janus4",))
-    janus = JanusBeams(
-        azimuth=beams.number("azimuth_deg", 45.0, DEG),
-        depression=beams.number("depression_deg", 65.0, DEG),
-        wavelength=beams.number("wavelength_m", 0.0225, positive=True),
-        frequency_noise=beams.number("frequency_noise_hz", 10.0, non_negative=True),
-        frequency_bias=beams.number("frequency_bias_hz", 0.0),
-        mounting_error=beams.number("mounting_error_arcmin", 0.0, ARCMIN),
-    )
-    del configuration
-    beams.done()
-    doppler = DopplerSettings(
-        period=dop.number("period_s", 60.0, positive=True),
-        measurement=dop.text("measurement", "ned", ("ned", "beams")),
-        bias=dop.number("bias_kmh", 0.0, KMH),
-        white_noise=dop.number("white_noise_mps", 0.0, non_negative=True),
-        beams=janus,
-        outages=_outages(dop, "outages"),
-    )
-    dop.done()
-
-    gp = top.section("gps")
-    gps = GpsSettings(
-        period=gp.number("period_s", 1.0, positive=True),
-        position_noise=gp.number("position_noise_m", 5.0, non_negative=True),
-        height_noise=gp.number("height_noise_m", 8.0, non_negative=True),
-        velocity_noise=gp.number("velocity_noise_mps", 0.05, non_negative=True),
-        outages=_outages(gp, "outages"),
-    )
-    gp.done()
-
-    pseudorange, constellation = _pseudorange(top.section("pseudorange"))
+    sensors = {sensor_name: sensor.read_settings(top.section(sensor_name)) for sensor_name, sensor in SENSORS.items()}
 
     fi = top.section("filter")
     filt = FilterSettings(
         model=fi.text("model"),
-        aiding=fi.text("aiding", "doppler", ("doppler", "gps", "pseudorange")),
+        aiding=fi.text("aiding", "doppler", tuple(SENSORS)),
         period=fi.number("period_s", 1.0, positive=True),
         mode=fi.text("mode", "closed_loop", MODES),
         gate_probability=fi.number("gate_probability", 0.9999),
-        states=_mapping(fi, "states", {k: AXES[k] for k in STATE_ROLES}),
-        measurements=_mapping(fi, "measurements", {"doppler": SENSOR_QUANTITIES, "gps": SENSOR_QUANTITIES}),
+        states=_mapping(fi, "states", state_roles()),
+        measurements=_mapping(fi, "measurements", {n: s.quantities for n, s in SENSORS.items() if s.quantities}),
     )
     if not 0 <= filt.gate_probability < 1:
         raise ModelError(f"{fi.where}.gate_probability: must be in [0, 1)")
     fi.done()
     top.done()
-    return Scenario(name, title, profile, imu_rate, coning, budget, initial, altitude_noise, damping, doppler, gps,
-                    filt, filename, pseudorange, constellation)
+    return FlightProfile(name, title, path, imu_rate, coning, budget, initial, altitude_noise, damping, filt, sensors,
+                         filename)
 
 
-def builtin_scenarios() -> list[str]:
+def state_roles() -> dict[str, tuple[str, ...]]:
+    """The groups ``filter.states`` may name, with their axes: navigation and IMU errors, and each
+    registered sensor's own bias group (NED axes)."""
+    roles = dict(AXES)
+    for sensor in SENSORS.values():
+        group = getattr(sensor, "bias_group", None)
+        if group:
+            roles[group] = NED_AXES
+    return roles
+
+
+def builtin_profiles() -> list[str]:
+    """Names of the flight profiles shipped in modelgen/data (``profile_000``...)."""
     folder = resources.files("modelgen") / "data"
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.startswith("profile_") and p.name.endswith(".yaml"))
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Load a scenario file, or a built-in one by name (``profile_000``)."""
+def load_profile(path: str | Path) -> FlightProfile:
+    """Load a flight-profile file, or a built-in one by name (``profile_000``)."""
     p = Path(path)
     if not p.exists() and p.suffix == "":
         candidate = resources.files("modelgen") / "data" / f"{p.name}.yaml"
         if candidate.is_file():
             p = Path(str(candidate))
     if not p.exists():
-        raise ModelError(f"{path}: no such scenario file, and not a built-in one ({', '.join(builtin_scenarios())})")
+        raise ModelError(f"{path}: no such scenario file, and not a built-in one ({', '.join(builtin_profiles())})")
     data, lines = read_yaml_with_lines(p, "scenario file")
-    return load_scenario_data(data, str(p), lines)
+    return load_profile_data(data, str(p), lines)

@@ -1,6 +1,7 @@
-"""Flight profiles to truth trajectories and ideal IMU increments on WGS-84.
+"""Flight paths to truth trajectories and ideal IMU increments on WGS-84.
 
-A profile is a start state and a list of segments; within a segment the
+A flight path (the ``start`` and ``segments`` of a flight profile) is a
+start state and a list of segments; within a segment the
 controls are constant: horizontal (along-track) acceleration, turn rate
 (heading rate), vertical acceleration (rate of change of the down velocity,
 which is how the core paper describes its climb and level-off, seed 000 §3) and
@@ -63,7 +64,7 @@ class Segment:
 
 
 @dataclass(frozen=True)
-class FlightProfile:
+class FlightPath:
     """Start state plus segments; see the module docstring for the kinematics."""
 
     name: str
@@ -80,7 +81,7 @@ class FlightProfile:
     def duration(self) -> float:
         return float(sum(s.duration for s in self.segments))
 
-    def truncated(self, duration: float) -> "FlightProfile":
+    def truncated(self, duration: float) -> "FlightPath":
         """The same flight flown for only the first ``duration`` seconds."""
         if duration <= 0:
             raise ModelError(f"profile {self.name!r}: duration must be positive, got {duration}")
@@ -95,7 +96,7 @@ class FlightProfile:
             last = kept[-1]
             kept[-1] = Segment(last.name, last.duration + left, last.horizontal_acceleration, last.turn_rate,
                                last.vertical_acceleration, last.roll_rate)
-        return FlightProfile(self.name, self.latitude, self.longitude, self.height, self.ground_speed,
+        return FlightPath(self.name, self.latitude, self.longitude, self.height, self.ground_speed,
                              self.heading, self.velocity_down, self.roll, tuple(kept))
 
 
@@ -108,7 +109,7 @@ class Trajectory:
     samples (row j at time ``j * record_every * dt``), columns :data:`TRUTH_COLUMNS`.
     """
 
-    profile: FlightProfile
+    path: FlightPath
     imu_rate: float
     record_every: int
     delta_theta: np.ndarray
@@ -135,7 +136,7 @@ class Trajectory:
         return self.truth[0, 1:].copy()
 
 
-def segment_table(profile: FlightProfile) -> np.ndarray:
+def segment_table(profile: FlightPath) -> np.ndarray:
     """Per segment: start time, controls and the closed-form state at its start.
 
     Columns: start, a_h, turn_rate, a_v, roll_rate, V_h0, heading0, V_d0, roll0, h0.
@@ -310,7 +311,7 @@ def _generate(table, lat0, lon0, dt, n_samples, record_every, delta_theta, delta
     return rec
 
 
-def generate_trajectory(profile: FlightProfile, imu_rate: float, record_rate: float) -> Trajectory:
+def generate_trajectory(profile: FlightPath, imu_rate: float, record_rate: float) -> Trajectory:
     """Truth at ``record_rate`` and ideal increments at ``imu_rate`` for a whole profile.
 
     ``imu_rate / record_rate`` must be a whole number (truth rows fall on IMU

@@ -8,17 +8,13 @@ import numpy as np
 import pytest
 
 from modelgen.errors import ModelError
-from modelgen.simulation.doppler import Outage
+from modelgen.simulation.doppler import DOPPLER
+from modelgen.simulation.filter_loop import Measurement, run_filter
 from modelgen.simulation.filters import ReferenceFilter, filter_factory
-from modelgen.simulation.integration import (
-    Measurement,
-    initial_covariance,
-    run_filter,
-    run_scenario,
-    scenario_layout,
-    simulate_sensors,
-)
-from modelgen.simulation.scenario import load_scenario
+from modelgen.simulation.flight import fly_profile, profile_layout, simulate_sensors
+from modelgen.simulation.ins_aiding import initial_covariance
+from modelgen.simulation.profile_keys import Outage
+from modelgen.simulation.scenario import load_profile
 from modelgen.simulation.trajectory import generate_trajectory
 
 
@@ -107,9 +103,9 @@ def test_accumulation_without_extrapolation_is_not_closed_loop(linear_case):
 @pytest.fixture(scope="module")
 def short_flight(paper_derived):
     """Half an hour of the paper's flight at a 20 Hz IMU, Doppler every 60 s."""
-    scenario = load_scenario("profile_000").with_changes(hours=0.5, imu_rate=20.0, coning="two")
-    trajectory = generate_trajectory(scenario.profile, scenario.imu_rate, 1.0 / scenario.filter.period)
-    layout = scenario_layout(scenario, paper_derived, trajectory)
+    scenario = load_profile("profile_000").with_changes(hours=0.5, imu_rate=20.0, coning="two")
+    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0 / scenario.filter.period)
+    layout = profile_layout(scenario, paper_derived, trajectory)
     sensors = simulate_sensors(scenario, trajectory, np.random.default_rng(11))
     return scenario, trajectory, layout, sensors
 
@@ -118,12 +114,12 @@ def run(flight, derived, sensors=None, mode="closed_loop", make_filter=None, **s
     scenario, trajectory, layout, base = flight
     scenario = scenario.with_changes(**scenario_changes) if scenario_changes else scenario
     make_filter = make_filter or (lambda x, P: ReferenceFilter(derived, x, P))
-    return run_scenario(scenario, derived, trajectory, np.random.default_rng(0), make_filter, mode=mode,
-                        sensors=sensors or base, layout=layout)
+    return fly_profile(scenario, derived, trajectory, np.random.default_rng(0), make_filter, mode=mode,
+                       sensors=sensors or base, layout=layout)
 
 
 def with_doppler(sensors, **changes):
-    return dataclasses.replace(sensors, doppler=dataclasses.replace(sensors.doppler, **changes))
+    return dataclasses.replace(sensors, aiding=dataclasses.replace(sensors.aiding, **changes))
 
 
 def test_layout_identifies_the_paper_models_sign_conventions(short_flight):
@@ -139,7 +135,7 @@ def test_layout_identifies_the_paper_models_sign_conventions(short_flight):
 def test_doppler_outage_skips_the_updates_it_covers(short_flight, paper_derived):
     scenario, trajectory, layout, sensors = short_flight
     outage = Outage(600.0, 1200.0)  # measurements at 600, 660, ..., 1140 s
-    valid = ~((sensors.doppler.times >= 600.0) & (sensors.doppler.times < 1200.0))
+    valid = ~((sensors.aiding.times >= 600.0) & (sensors.aiding.times < 1200.0))
     result = run(short_flight, paper_derived, with_doppler(sensors, valid=valid))
     assert result.skipped == 10
     assert result.updates == 30 - 10
@@ -147,14 +143,14 @@ def test_doppler_outage_skips_the_updates_it_covers(short_flight, paper_derived)
     assert east_velocity_sigma[1140] > 1.5 * east_velocity_sigma[540]  # no update: uncertainty grows
     assert east_velocity_sigma[1260] < east_velocity_sigma[1140]  # first update after the outage
     # the scenario file's outage list produces the same mask
-    dop = dataclasses.replace(scenario.doppler, outages=(outage,))
-    again = simulate_sensors(scenario.with_changes(doppler=dop), trajectory, np.random.default_rng(11))
-    assert np.array_equal(again.doppler.valid, valid)
+    dop = dataclasses.replace(scenario.sensors["doppler"], outages=(outage,))
+    again = simulate_sensors(scenario.with_sensor("doppler", dop), trajectory, np.random.default_rng(11))
+    assert np.array_equal(again.aiding.valid, valid)
 
 
 def test_innovation_gate_rejects_an_injected_outlier_and_counts_it(short_flight, paper_derived):
     sensors = short_flight[3]
-    velocity = sensors.doppler.velocity.copy()
+    velocity = sensors.aiding.velocity.copy()
     velocity[15] += [0.0, 20.0, 0.0]  # 20 m/s east at t = 900 s
     outlier = with_doppler(sensors, velocity=velocity)
     gated = run(short_flight, paper_derived, outlier)
@@ -168,7 +164,7 @@ def test_innovation_gate_rejects_an_injected_outlier_and_counts_it(short_flight,
 
 def test_non_finite_measurement_is_refused_and_the_run_goes_on(short_flight, paper_derived):
     sensors = short_flight[3]
-    velocity = sensors.doppler.velocity.copy()
+    velocity = sensors.aiding.velocity.copy()
     velocity[10, 0] = np.nan
     result = run(short_flight, paper_derived, with_doppler(sensors, velocity=velocity))
     assert result.refused == [600.0]
@@ -211,7 +207,7 @@ def test_generated_c_filter_runs_the_flight_like_the_reference(short_flight, pap
     assert np.allclose(generated.sigma, reference.sigma, rtol=1e-8, atol=1e-300)
     assert np.allclose(generated.estimation_error, reference.estimation_error, rtol=1e-6, atol=1e-9 * np.abs(reference.estimation_error).max(axis=0))
     # the C itself refuses a non-finite measurement, leaving its state unchanged
-    kalman = make(np.zeros(18), initial_covariance(short_flight[2], short_flight[0], short_flight[1].initial_state()))
+    kalman = make(np.zeros(18), initial_covariance(short_flight[2], short_flight[0], short_flight[1].initial_state(), DOPPLER))
     state, covariance = kalman.state, kalman.covariance
     assert kalman.compiled.update(np.array([np.nan, 0.0])) != 0
     assert np.array_equal(kalman.state, state) and np.array_equal(kalman.covariance, covariance)
@@ -228,13 +224,13 @@ def test_seed_001_set_up_runs_ins_gps15_at_20_hz_with_a_300_hz_mechanization():
     from modelgen.derive.symbolic import derive
     from modelgen.model.loading import load_model
 
-    scenario = load_scenario("profile_001").with_changes(hours=1 / 60)
+    scenario = load_profile("profile_001").with_changes(hours=1 / 60)
     derived = derive(load_model(scenario.filter.model))
-    trajectory = generate_trajectory(scenario.profile, scenario.imu_rate, 1.0 / scenario.filter.period)
-    layout = scenario_layout(scenario, derived, trajectory)
+    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0 / scenario.filter.period)
+    layout = profile_layout(scenario, derived, trajectory)
     assert layout.conventions == {"attitude": 1.0, "gyro_constant": 1.0, "accelerometer_constant": 1.0}
-    result = run_scenario(scenario, derived, trajectory, np.random.default_rng(3),
-                          lambda x, P: ReferenceFilter(derived, x, P), layout=layout)
+    result = fly_profile(scenario, derived, trajectory, np.random.default_rng(3),
+                         lambda x, P: ReferenceFilter(derived, x, P), layout=layout)
     assert result.updates + len(result.rejected) == 60 * 20
     assert np.all(np.isfinite(result.nees[1:]))
     # position error of the corrected output is at the GPS noise level, not the free INS's

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from modelgen.simulation.montecarlo import run_monte_carlo
-from modelgen.simulation.scenario import load_scenario
+from modelgen.simulation.scenario import load_profile
 
 CHECK_TIMES = (400.0, 800.0, 1200.0)  # s; the Doppler updates every 60 s
 
@@ -14,7 +14,7 @@ CHECK_TIMES = (400.0, 800.0, 1200.0)  # s; the Doppler updates every 60 s
 @pytest.fixture(scope="module")
 def scenario():
     # 20 min of the paper's flight (the climb), 50 Hz IMU, Doppler every 60 s.
-    return load_scenario("profile_000").with_changes(hours=1 / 3, imu_rate=50.0)
+    return load_profile("profile_000").with_changes(hours=1 / 3, imu_rate=50.0)
 
 
 def mean_nees_at(result, times, confidence=0.99):
@@ -23,14 +23,14 @@ def mean_nees_at(result, times, confidence=0.99):
     return test.mean_nees[rows], test
 
 
-def test_optimal_filter_passes_the_nees_test_on_both_cores(scenario):
+def test_optimal_filter_passes_the_nees_test_on_both_cores(scenario, paper_derived):
     # 16 runs on two worker processes.  At each check time N * mean NEES is
     # chi-square with 16 x 18 degrees of freedom for a consistent filter; the
     # two-sided 99 % band is [14.4, 22.1] for the mean.  (Checked at a few
     # separated times: the random-constant states make the NEES of one
     # ensemble strongly correlated in time, so "fraction of all times inside"
     # is a weak statistic for 16 runs.)
-    result = run_monte_carlo(scenario, runs=16, seed=1, workers=2)
+    result = run_monte_carlo(scenario, paper_derived, runs=16, seed=1, workers=2)
     values, test = mean_nees_at(result, CHECK_TIMES)
     assert result.runs == 16 and test.dimension == 18
     assert np.all((values > test.lower) & (values < test.upper)), (values, test.lower, test.upper)
@@ -39,18 +39,19 @@ def test_optimal_filter_passes_the_nees_test_on_both_cores(scenario):
     assert 0.7 < np.median(ratio) < 1.3
 
 
-def test_filter_with_understated_doppler_noise_fails_the_nees_test(scenario):
+def test_filter_with_understated_doppler_noise_fails_the_nees_test(scenario, paper_derived):
     # The sensors are drawn with a Doppler 4x noisier than the filter believes:
     # the filter is over-confident and the ensemble NEES leaves its band.
     short = scenario.with_changes(hours=1 / 6)
-    noisy = dataclasses.replace(short.doppler, white_noise=4 * short.doppler.white_noise)
-    result = run_monte_carlo(short, runs=8, seed=1, workers=2, truth_scenario=short.with_changes(doppler=noisy))
+    doppler = short.sensors["doppler"]
+    noisy = dataclasses.replace(doppler, white_noise=4 * doppler.white_noise)
+    result = run_monte_carlo(short, paper_derived, runs=8, seed=1, workers=2, truth_profile=short.with_sensor("doppler", noisy))
     values, test = mean_nees_at(result, (300.0, 600.0))
     assert np.all(values > test.upper), (values, test.upper)
 
 
-def test_runs_do_not_depend_on_the_number_of_workers(scenario):
+def test_runs_do_not_depend_on_the_number_of_workers(scenario, paper_derived):
     short = scenario.with_changes(hours=0.05)
-    one = run_monte_carlo(short, runs=2, seed=9, workers=1)
-    two = run_monte_carlo(short, runs=2, seed=9, workers=2)
+    one = run_monte_carlo(short, paper_derived, runs=2, seed=9, workers=1)
+    two = run_monte_carlo(short, paper_derived, runs=2, seed=9, workers=2)
     assert np.array_equal(one.errors, two.errors)

@@ -8,20 +8,19 @@ import pytest
 
 from modelgen.derive.symbolic import derive
 from modelgen.errors import ModelError
-from modelgen.model.library import pseudorange_model
+from modelgen.model.pseudorange import pseudorange_model
 from modelgen.model.loading import load_model
 from modelgen.simulation import earth
 from modelgen.simulation.filters import ReferenceFilter
-from modelgen.simulation.gps import PseudorangeSettings
 from modelgen.simulation.imu import ImuErrorBudget
-from modelgen.simulation.integration import run_scenario, simulate_sensors
+from modelgen.simulation.flight import fly_profile, simulate_sensors
 from modelgen.simulation.montecarlo import run_monte_carlo
 from modelgen.simulation.pseudorange import (
     PseudorangeNavigator,
     corrected_navigation,
     navigation_error_states,
 )
-from modelgen.simulation.scenario import InitialErrors, load_scenario, load_scenario_data
+from modelgen.simulation.scenario import InitialErrors, load_profile, load_profile_data
 from modelgen.simulation.trajectory import generate_trajectory
 from modelgen.fileio.datafiles import read_yaml
 
@@ -30,7 +29,7 @@ IMU_RATE = 50.0  # low rate: the flight has no coning motion; keeps the file fas
 
 @pytest.fixture(scope="module")
 def scenario():
-    s = load_scenario("profile_003")
+    s = load_profile("profile_003")
     return s.with_changes(imu_rate=IMU_RATE, hours=240 / 3600)
 
 
@@ -41,15 +40,15 @@ def derived(scenario):
 
 @pytest.fixture(scope="module")
 def trajectory(scenario):
-    return generate_trajectory(scenario.profile, scenario.imu_rate, 1.0 / scenario.filter.period)
+    return generate_trajectory(scenario.path, scenario.imu_rate, 1.0 / scenario.filter.period)
 
 
 def perfect(scenario):
     """The same flight with error-free IMU, initial state, receiver and clock."""
-    return scenario.with_changes(
-        imu_budget=ImuErrorBudget(), initial_errors=InitialErrors(),
-        pseudorange=PseudorangeSettings(noise=0.0, clock_bias=0.0, clock_drift=0.0, clock_bias_psd=0.0,
-                                        clock_drift_psd=0.0))
+    receiver = dataclasses.replace(scenario.sensors["pseudorange"], noise=0.0, clock_bias=0.0, clock_drift=0.0,
+                                   clock_bias_psd=0.0, clock_drift_psd=0.0)
+    return scenario.with_changes(imu_budget=ImuErrorBudget(), initial_errors=InitialErrors()).with_sensor(
+        "pseudorange", receiver)
 
 
 def reference(derived):
@@ -122,7 +121,7 @@ def test_perfect_sensors_give_zero_measurements_and_zero_estimation_error(scenar
         navigator.parameters(raw)
         assert np.max(np.abs(navigator.measurement(k, raw, np.zeros(11)).z)) < 1e-4  # m, of ~2e7 m ranges
     for mode in ("open_loop", "closed_loop", "accumulated"):
-        result = run_scenario(scenario, derived, trajectory, None, reference(derived), mode=mode, sensors=sensors)
+        result = fly_profile(scenario, derived, trajectory, None, reference(derived), mode=mode, sensors=sensors)
         assert result.updates == len(trajectory.truth) - 1
         assert np.max(np.abs(result.estimation_error[:, :3])) < 1e-3, mode  # m
         assert np.max(np.abs(result.estimation_error[:, 3:6])) < 1e-5, mode  # m/s
@@ -134,7 +133,7 @@ def test_filter_is_consistent_nees_in_the_chi_square_band_and_position_within_3_
     # 20 runs: the errors are correlated in time, so the fraction of times
     # inside the band is a noisy statistic with few runs (6 runs of this
     # seed gave 81 %; 20 runs give 96-100 % for seeds 3-6)
-    mc = run_monte_carlo(scenario, runs=20, seed=3, workers=1)
+    mc = run_monte_carlo(scenario, derive(load_model(scenario.filter.model)), runs=20, seed=3, workers=1)
     test = mc.nees_test(0.95, start_time=1.0)
     assert test.passed(), (test.fraction_inside, np.mean(test.mean_nees))
     assert 0.8 * test.dimension < np.mean(test.mean_nees) < 1.2 * test.dimension
@@ -149,7 +148,7 @@ def test_accumulated_correction_agrees_with_closed_loop_within_a_tenth_of_sigma(
     difference that must stay negligible against the filter's own uncertainty.
     """
     sensors = simulate_sensors(scenario, trajectory, np.random.default_rng(5))
-    closed, accumulated = (run_scenario(scenario, derived, trajectory, None, reference(derived), mode=m, sensors=sensors)
+    closed, accumulated = (fly_profile(scenario, derived, trajectory, None, reference(derived), mode=m, sensors=sensors)
                            for m in ("closed_loop", "accumulated"))
     meridian, prime_vertical = earth.radii_of_curvature(trajectory.truth[0, 1])
     d = closed.outputs - accumulated.outputs
@@ -168,26 +167,26 @@ def test_accumulated_correction_agrees_with_closed_loop_within_a_tenth_of_sigma(
 def test_model_with_more_satellites_than_visible_is_refused_naming_the_counts(scenario, trajectory):
     derived = derive(pseudorange_model(16))
     with pytest.raises(ModelError, match=r"fuses 16 pseudo-ranges, but only \d+ satellites are above the 10 deg"):
-        run_scenario(scenario, derived, trajectory, np.random.default_rng(0), reference(derived))
+        fly_profile(scenario, derived, trajectory, np.random.default_rng(0), reference(derived))
 
 
 def test_model_without_the_pseudorange_states_is_refused(scenario, trajectory):
     derived = derive(load_model("ins_gps15"))
     with pytest.raises(ModelError, match="does not have the 11 states"):
-        run_scenario(scenario, derived, trajectory, np.random.default_rng(0), reference(derived))
+        fly_profile(scenario, derived, trajectory, np.random.default_rng(0), reference(derived))
 
 
 def test_unknown_key_in_the_pseudorange_section_is_refused_by_name(scenario):
     data = read_yaml(scenario.source_file, "scenario file")
     data["pseudorange"]["clock_noise"] = 1.0
     with pytest.raises(ModelError, match=r"pseudorange: unknown key 'clock_noise'"):
-        load_scenario_data(data, "profile_003.yaml")
+        load_profile_data(data, "profile_003.yaml")
 
 
 def test_profile_003_flies_the_pseudorange_filter_with_the_models_noise_values():
-    s = load_scenario("profile_003")
+    s = load_profile("profile_003")
     assert (s.filter.aiding, s.filter.model) == ("pseudorange", "gps_pseudorange11")
-    assert s.profile.duration == pytest.approx(0.6 * 3600)
-    assert s.pseudorange.clock_bias_psd == pytest.approx(2e-19 / 2 * 299792458.0**2, rel=0.01)
-    assert s.pseudorange.clock_drift_psd == pytest.approx(2 * math.pi**2 * 2e-20 * 299792458.0**2, rel=0.01)
+    assert s.path.duration == pytest.approx(0.6 * 3600)
+    assert s.sensors["pseudorange"].clock_bias_psd == pytest.approx(2e-19 / 2 * 299792458.0**2, rel=0.01)
+    assert s.sensors["pseudorange"].clock_drift_psd == pytest.approx(2 * math.pi**2 * 2e-20 * 299792458.0**2, rel=0.01)
     assert s.imu_budget.gyro_constant_drift == s.imu_budget.accel_markov_bias == 0.0

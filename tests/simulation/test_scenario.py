@@ -6,22 +6,22 @@ import pytest
 import yaml
 
 from modelgen.errors import ModelError
-from modelgen.simulation.scenario import KMH, load_scenario, load_scenario_data
+from modelgen.simulation.scenario import KMH, load_profile, load_profile_data
 from modelgen.simulation.trajectory import generate_trajectory
 
 
 def test_paper_profile_loads_with_its_reasoned_values():
-    s = load_scenario("profile_000")
-    assert s.profile.duration == pytest.approx(4 * 3600)
-    assert s.profile.ground_speed == pytest.approx(300 * KMH)
-    assert s.profile.velocity_down == pytest.approx(-100 * KMH)
-    assert s.imu_rate == 300 and s.doppler.period == 60.0
+    s = load_profile("profile_000")
+    assert s.path.duration == pytest.approx(4 * 3600)
+    assert s.path.ground_speed == pytest.approx(300 * KMH)
+    assert s.path.velocity_down == pytest.approx(-100 * KMH)
+    assert s.imu_rate == 300 and s.sensors["doppler"].period == 60.0
     assert s.imu_budget.gyro_constant_drift == pytest.approx(math.radians(0.1) / 3600)
 
 
 def test_paper_profile_levels_off_at_0_4_h_and_flies_east():
-    s = load_scenario("profile_000").with_changes(hours=0.5)
-    t = generate_trajectory(s.profile, 10.0, 1.0)
+    s = load_profile("profile_000").with_changes(hours=0.5)
+    t = generate_trajectory(s.path, 10.0, 1.0)
     at = lambda hours: t.truth[int(hours * 3600)]  # noqa: E731
     assert at(0.45)[6] == pytest.approx(0.0, abs=1e-9)  # level
     assert at(0.45)[3] == pytest.approx(100 / 3.6 * 720 * 1.5, rel=1e-9)  # 5.56 km climb + 2.78 km level-off
@@ -29,7 +29,7 @@ def test_paper_profile_levels_off_at_0_4_h_and_flies_east():
 
 
 def data():
-    with open(load_scenario("profile_000").source_file) as f:
+    with open(load_profile("profile_000").source_file) as f:
         return yaml.safe_load(f)
 
 
@@ -37,28 +37,28 @@ def test_unknown_key_is_refused_with_its_place():
     d = data()
     d["imu"]["gyro_drift_typo_dph"] = 1.0
     with pytest.raises(ModelError, match=r"imu: unknown key 'gyro_drift_typo_dph'"):
-        load_scenario_data(d, "x.yaml")
+        load_profile_data(d, "x.yaml")
 
 
 def test_non_number_is_refused_with_its_key():
     d = data()
     d["start"]["latitude_deg"] = "north"
     with pytest.raises(ModelError, match=r"start.latitude_deg: 'north' is not a number"):
-        load_scenario_data(d, "x.yaml")
+        load_profile_data(d, "x.yaml")
 
 
 def test_segment_needs_exactly_one_duration():
     d = data()
     d["segments"][0]["duration_s"] = 5.0
     with pytest.raises(ModelError, match="segments\\[0\\]: give exactly one of"):
-        load_scenario_data(d, "x.yaml")
+        load_profile_data(d, "x.yaml")
 
 
 def test_unknown_state_axis_is_refused():
     d = data()
     d["filter"]["states"]["attitude"]["heading_error"] = "sideways"
     with pytest.raises(ModelError, match="heading_error: 'sideways' is not one of"):
-        load_scenario_data(d, "x.yaml")
+        load_profile_data(d, "x.yaml")
 
 
 def test_paper_profile_and_covariance_error_budget_transcribe_table_1_identically():
@@ -67,7 +67,7 @@ def test_paper_profile_and_covariance_error_budget_transcribe_table_1_identicall
     keeps the two from drifting apart, so simulation and covariance analysis fly one system."""
     from modelgen.analysis.budget import load_error_budget
 
-    s, budget = load_scenario("profile_000"), load_error_budget()
+    s, budget = load_profile("profile_000"), load_error_budget()
     sigma, parameter = budget.initial_sigma, budget.parameters
     imu = s.imu_budget
     pairs = {
@@ -87,8 +87,8 @@ def test_paper_profile_and_covariance_error_budget_transcribe_table_1_identicall
         }
     for axis in ("north", "east"):
         pairs |= {
-            f"Doppler bias {axis}": (s.doppler.bias, sigma[f"doppler_velocity_bias_{axis}"]),
-            f"Doppler white noise {axis}": (s.doppler.white_noise, parameter[f"doppler_noise_sigma_{axis}"]),
+            f"Doppler bias {axis}": (s.sensors["doppler"].bias, sigma[f"doppler_velocity_bias_{axis}"]),
+            f"Doppler white noise {axis}": (s.sensors["doppler"].white_noise, parameter[f"doppler_noise_sigma_{axis}"]),
         }
     differing = {name: pair for name, pair in pairs.items() if pair[0] != pytest.approx(pair[1], rel=1e-12, abs=0)}
     assert not differing
@@ -97,10 +97,10 @@ def test_paper_profile_and_covariance_error_budget_transcribe_table_1_identicall
 
 def test_gps_profiles_fly_a_free_vertical_channel_like_their_models_and_bad_values_are_refused():
     for name in ("profile_001", "profile_003"):  # ins_gps15 and gps_pseudorange11 model no baro loop
-        s = load_scenario(name)
+        s = load_profile(name)
         assert s.vertical_damping.k1 == 0 and s.vertical_damping.k2 == 0, name
-    assert load_scenario("profile_000").vertical_damping.k2 > 0  # the paper's model has no vertical channel
+    assert load_profile("profile_000").vertical_damping.k2 > 0  # the paper's model has no vertical channel
     d = data()
     d["altitude_reference"]["vertical_channel"] = "baro"
     with pytest.raises(ModelError, match="vertical_channel"):
-        load_scenario_data(d, "x.yaml")
+        load_profile_data(d, "x.yaml")

@@ -9,7 +9,7 @@ from modelgen.errors import ModelError
 from modelgen.simulation import earth
 from modelgen.simulation.rotation import navigation_frame_attitude_error, quaternion_to_dcm
 from modelgen.simulation.strapdown import Strapdown
-from modelgen.simulation.trajectory import FlightProfile, Segment, generate_trajectory
+from modelgen.simulation.trajectory import FlightPath, Segment, generate_trajectory
 
 CONE_HALF_ANGLE = math.radians(1.0)
 CONE_RATE = 2 * math.pi * 5.0  # 5 Hz coning
@@ -182,10 +182,10 @@ def test_sculling_error_falls_with_the_sampling_interval_by_the_algorithms_order
     assert ratio == pytest.approx(2.0**order, rel=0.1)
 
 
-def manoeuvring_profile() -> FlightProfile:
+def manoeuvring_profile() -> FlightPath:
     """1 h: climb, level-off, a rolled 90-deg turn, acceleration, cruise (all controls exercised)."""
     d = math.radians
-    return FlightProfile(
+    return FlightPath(
         "test", d(30.0), d(120.0), 0.0, 300 / 3.6, d(90.0), -100 / 3.6, 0.0,
         (
             Segment("climb", 600.0),

@@ -1,4 +1,4 @@
-"""`modelgen simulate`: run a scenario, write PNG figures and a Markdown summary.
+"""`modelgen simulate`: fly a flight profile, write PNG figures and a Markdown summary.
 
 What it does, in order: generate the truth and ideal IMU data; simulate one
 set of sensors; run the filter (the generated C by default) on it in the
@@ -18,15 +18,16 @@ from typing import Callable
 
 import numpy as np
 
-from modelgen.derive.symbolic import derive
+from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.model.loading import load_model
 from modelgen.simulation import earth
+from modelgen.simulation.filter_loop import MODES, RunResult
 from modelgen.simulation.filters import filter_factory
-from modelgen.simulation.integration import MODES, RunResult, run_scenario, scenario_layout, simulate_sensors
+from modelgen.simulation.flight import fly_profile, profile_layout, simulate_sensors
 from modelgen.simulation.jit import HAVE_NUMBA
 from modelgen.simulation.montecarlo import MonteCarloResult, run_monte_carlo
 from modelgen.simulation.rotation import dcm_to_euler, navigation_frame_attitude_error, quaternion_to_dcm
-from modelgen.simulation.scenario import Scenario
+from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.trajectory import Trajectory, generate_trajectory
 
 ARCSEC = math.pi / 180 / 3600
@@ -66,14 +67,16 @@ def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, in
     return report
 
 
-def simulate(scenario: Scenario, out_dir: Path, runs: int = 20, seed: int = 0, workers: int = 2,
-             echo: Callable[[str], None] = print, implementation: str = "c") -> Path:
+def simulate(scenario: FlightProfile, out_dir: Path, runs: int = 20, seed: int = 0, workers: int = 2,
+             echo: Callable[[str], None] = print, implementation: str = "c", derived: DerivedModel | None = None) -> Path:
     """Run everything (module docstring) and return the summary's path.
 
     ``implementation`` is the filter of the three correction-mode runs: the
     generated ``c`` (compiled now) or ``python``, or the numpy ``reference``.
     The Monte Carlo runs use the reference, which the conformance tests hold
     to the generated code within 1e-12 (scaled covariance difference).
+    ``derived`` is the scenario's filter model when the caller has derived it
+    already (the main job hands its model down instead of deriving it again).
     """
     import matplotlib
 
@@ -81,15 +84,15 @@ def simulate(scenario: Scenario, out_dir: Path, runs: int = 20, seed: int = 0, w
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
-    derived = derive(load_model(scenario.filter.model))
+    derived = derived if derived is not None else derive(load_model(scenario.filter.model))
 
-    echo(f"modelgen simulate: {scenario.name}, {scenario.profile.duration / 3600:.2f} h, IMU {scenario.imu_rate:g} Hz "
+    echo(f"modelgen simulate: {scenario.name}, {scenario.path.duration / 3600:.2f} h, IMU {scenario.imu_rate:g} Hz "
          f"({'numba' if HAVE_NUMBA else 'pure Python: slow'}), filter {derived.model.name}, {runs} Monte Carlo runs")
     t = time.perf_counter()
-    trajectory = generate_trajectory(scenario.profile, scenario.imu_rate, 1.0 / scenario.filter.period)
+    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0 / scenario.filter.period)
     timings["trajectory (truth + ideal IMU)"] = time.perf_counter() - t
     echo(f"  trajectory: {trajectory.n_samples} IMU samples in {timings['trajectory (truth + ideal IMU)']:.1f} s")
-    layout = scenario_layout(scenario, derived, trajectory)
+    layout = profile_layout(scenario, derived, trajectory)
     rng = np.random.default_rng(seed)
     t = time.perf_counter()
     sensors = simulate_sensors(scenario, trajectory, rng)
@@ -103,9 +106,9 @@ def simulate(scenario: Scenario, out_dir: Path, runs: int = 20, seed: int = 0, w
         echo(f"  filter: {implementation} ({build:.1f} s to build)")
         for mode in MODES:
             t = time.perf_counter()
-            results[mode] = run_scenario(scenario, derived, trajectory, rng, make_filter,
-                                         mode=mode, sensors=sensors, layout=layout,
-                                         progress=_echo_progress(echo, f"{mode} filter"))
+            results[mode] = fly_profile(scenario, derived, trajectory, rng, make_filter,
+                                        mode=mode, sensors=sensors, layout=layout,
+                                        progress=_echo_progress(echo, f"{mode} filter"))
             timings[f"mechanization + filter, {mode}"] = time.perf_counter() - t
     errors = {mode: navigation_errors(r.outputs, trajectory) for mode, r in results.items()}
     errors["free INS"] = navigation_errors(results["open_loop"].raw_outputs, trajectory)
@@ -113,7 +116,7 @@ def simulate(scenario: Scenario, out_dir: Path, runs: int = 20, seed: int = 0, w
     monte_carlo = None
     if runs > 0:
         t = time.perf_counter()
-        monte_carlo = run_monte_carlo(scenario, runs, seed=seed + 1, workers=workers,
+        monte_carlo = run_monte_carlo(scenario, derived, runs, seed=seed + 1, workers=workers,
                                       progress=_echo_progress(echo, "Monte Carlo runs"))
         timings[f"Monte Carlo ({runs} runs, {workers} workers)"] = time.perf_counter() - t
 
@@ -154,7 +157,7 @@ def _plot_trajectory(trajectory: Trajectory, path: Path) -> Path:
         ax[1, 1].plot(hours, euler[:, i], label=name)
     ax[1, 1].set(xlabel="time [h]", ylabel="deg", title="attitude")
     ax[1, 1].legend()
-    fig.suptitle(f"Flight profile {trajectory.profile.name}")
+    fig.suptitle(f"Flight profile {trajectory.path.name}")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -262,7 +265,7 @@ def _summary(scenario, model_name, implementation, conventions, trajectory, resu
     lines = [
         f"# Simulation: {scenario.title or scenario.name}",
         "",
-        f"Scenario `{scenario.name}` ({scenario.source_file}), {scenario.profile.duration / 3600:.2f} h, "
+        f"Scenario `{scenario.name}` ({scenario.source_file}), {scenario.path.duration / 3600:.2f} h, "
         f"IMU {scenario.imu_rate:g} Hz with {scenario.coning}-sample coning/sculling, filter model `{model_name}`, "
         f"aiding {scenario.filter.aiding} every {scenario.aiding_period:g} s, "
         f"filter cycle {scenario.filter.period:g} s.",
