@@ -15,8 +15,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
 
 from modelgen.analysis.budget import load_error_budget  # noqa: E402
-from modelgen.analysis.report import run_covariance_analysis  # noqa: E402
-from modelgen.analysis.scenario import load_scenario  # noqa: E402
+from modelgen.analysis.covariance_report import run_covariance_analysis  # noqa: E402
+from modelgen.analysis.scenario import load_analysis_scenario  # noqa: E402
 from modelgen.analysis.scenario import operating_point  # noqa: E402
 from modelgen.analysis.systems import PaperModels, analyse_systems  # noqa: E402
 from modelgen.derive import reference  # noqa: E402
@@ -35,7 +35,7 @@ def naive_optimal_filter(models: PaperModels, scenario, budget) -> None:
 
 
 def main() -> None:
-    scenario, budget = load_scenario(), load_error_budget()
+    scenario, budget = load_analysis_scenario(), load_error_budget()
     t0 = time.perf_counter()
     models = PaperModels.build()
     t1 = time.perf_counter()

@@ -145,17 +145,17 @@ def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -
 def paper_parameters() -> dict[str, float]:
     """Seed 000's level-flight operating point and Table 1 statistics, by ned_doppler18 parameter name."""
     from modelgen.analysis.budget import load_error_budget
-    from modelgen.analysis.scenario import load_scenario, operating_point
+    from modelgen.analysis.scenario import load_analysis_scenario, operating_point
 
-    return {**load_error_budget().parameters, **operating_point(load_scenario())}
+    return {**load_error_budget().parameters, **operating_point(load_analysis_scenario())}
 
 
 def paper_scenario(derived: DerivedModel) -> Scenario:
     """Seed 000's 4-hour scenario: level flight, Table 1 errors, T = 60 s."""
     from modelgen.analysis.budget import load_error_budget
-    from modelgen.analysis.scenario import load_scenario
+    from modelgen.analysis.scenario import load_analysis_scenario
 
-    flight, budget = load_scenario(), load_error_budget()
+    flight, budget = load_analysis_scenario(), load_error_budget()
     values = paper_parameters()
     label = "the core paper's scenario (seed 000: level flight east at 30 N, Table 1, 240 steps of 60 s)"
     return Scenario(values, budget.initial_covariance(derived.model), step=flight.step_s, steps=flight.steps, label=label)
@@ -304,7 +304,7 @@ def main_job(
     folder); ``progress`` announces the steps and ``echo`` relays the steps'
     own messages.
     """
-    from modelgen.analysis.report import run_covariance_analysis
+    from modelgen.analysis.covariance_report import run_covariance_analysis
     from modelgen.analysis.systems import PaperModels
 
     paper_model = paper_table_model(data_path(CORE_PAPER_TABLE))
@@ -376,7 +376,7 @@ def observability_report(
 
 def covariance_analysis(folder: Path, sensitivity: bool, figures: bool, progress=None):
     """``modelgen covariance``: Table 2 and Figs 2-7 into ``folder`` (a :class:`CovarianceReport`)."""
-    from modelgen.analysis.report import run_covariance_analysis
+    from modelgen.analysis.covariance_report import run_covariance_analysis
 
     return run_covariance_analysis(folder, sensitivity=sensitivity, figures=figures, progress=progress)
 

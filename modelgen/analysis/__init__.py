@@ -6,5 +6,5 @@ Data flow: scenario and error budget (YAML in ``modelgen/data``) -> the
 optimal filter, true covariance of suboptimal filters) -> Table 2 analogue,
 sensitivity table and Figs 2-7 analogues.
 
-Entry point: :func:`modelgen.analysis.report.run_covariance_analysis`.
+Entry point: :func:`modelgen.analysis.covariance_report.run_covariance_analysis`.
 """

@@ -16,14 +16,14 @@ from scipy.optimize import brentq
 from modelgen.analysis.budget import ErrorBudget
 from modelgen.analysis.covariance import discretize, optimal_filter_covariance
 from modelgen.analysis.metrics import navigation_errors
-from modelgen.analysis.scenario import Scenario, operating_point
+from modelgen.analysis.scenario import AnalysisScenario, operating_point
 from modelgen.analysis.systems import PaperModels
 from modelgen.errors import ModelError
 
 DOPPLER_NOISE_PARAMETERS = ("doppler_noise_sigma_north", "doppler_noise_sigma_east")
 
 
-def optimal_velocity_error(models: PaperModels, scenario: Scenario, budget: ErrorBudget, doppler_sigma: float) -> float:
+def optimal_velocity_error(models: PaperModels, scenario: AnalysisScenario, budget: ErrorBudget, doppler_sigma: float) -> float:
     """Mean of the optimal filter's final dV_n, dV_e errors (nmile/h) for a Doppler noise rms (m/s)."""
     noise = {p: doppler_sigma for p in DOPPLER_NOISE_PARAMETERS}
     values = {**budget.parameters, **noise, **operating_point(scenario)}
@@ -34,7 +34,7 @@ def optimal_velocity_error(models: PaperModels, scenario: Scenario, budget: Erro
 
 
 def infer_doppler_noise(
-    models: PaperModels, scenario: Scenario, budget: ErrorBudget, target_velocity_error: float
+    models: PaperModels, scenario: AnalysisScenario, budget: ErrorBudget, target_velocity_error: float
 ) -> float:
     """Doppler noise rms (m/s) giving the target optimal velocity error (nmile/h)."""
     low, high = 1e-3, 10.0

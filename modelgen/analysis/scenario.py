@@ -1,4 +1,4 @@
-"""The flight scenario: operating point (model parameters) and flight phases.
+"""The analysis scenario (scenario_000.yaml): operating point (model parameters) and flight phases.
 
 The core paper evaluates F at one level-flight operating point for the whole
 run (seed 000, section 3: "we use the level-flight attitude matrix"); the
@@ -33,8 +33,8 @@ class Phase:
 
 
 @dataclass(frozen=True)
-class Scenario:
-    """Everything about the flight that the covariance analysis needs (SI)."""
+class AnalysisScenario:
+    """Everything about the flight that the covariance analysis needs (SI): the analysis scenario."""
 
     name: str
     latitude: float  # rad
@@ -78,7 +78,7 @@ def specific_force_ned(
     return np.cross(2.0 * w_ie + w_en, velocity_ned) - np.array([0.0, 0.0, gravity])
 
 
-def operating_point(scenario: Scenario) -> dict[str, float]:
+def operating_point(scenario: AnalysisScenario) -> dict[str, float]:
     """Model parameter values (ned_doppler18 names) of the level-flight point."""
     v = np.asarray(scenario.velocity_ned, dtype=float)
     if scenario.specific_force == "kinematic":
@@ -107,7 +107,7 @@ def _velocity(entry: dict, where: str) -> tuple[float, float, float]:
     return tuple(to_si(require(vel, k, f"{where}.velocity_kmh"), "km/h", f"{where}.velocity_kmh.{k}") for k in ("north", "east", "down"))  # type: ignore[return-value]
 
 
-def load_scenario(path: str | Path | None = None) -> Scenario:
+def load_analysis_scenario(path: str | Path | None = None) -> AnalysisScenario:
     """Read a scenario file (default: the core paper's, ``scenario_000.yaml``)."""
     path = Path(path) if path is not None else data_path(SCENARIO_FILE)
     data = read_yaml(path)
@@ -142,7 +142,7 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
     duration = to_si(require(data, "duration_h", where), "h", f"{where}: duration_h")
     if not (0 < step < math.inf and 0 < duration < math.inf) or abs(duration / step - round(duration / step)) > 1e-9:
         raise ModelError(f"{where}: duration_h must be a positive whole number of steps step_s")
-    return Scenario(
+    return AnalysisScenario(
         name=str(require(data, "scenario", where)),
         latitude=to_si(require(start, "latitude_deg", f"{where}: start"), "deg", f"{where}: start.latitude_deg"),
         duration_s=duration,

@@ -18,7 +18,7 @@ from typing import Callable, Sequence
 
 from modelgen.analysis.budget import ErrorBudget
 from modelgen.analysis.metrics import final_values
-from modelgen.analysis.scenario import Scenario
+from modelgen.analysis.scenario import AnalysisScenario
 from modelgen.analysis.suboptimal import PAPER_FILTERS, FilterDesign
 from modelgen.analysis.systems import PURE_INERTIAL, PaperModels, analyse_systems
 from modelgen.model.units import to_si
@@ -29,7 +29,7 @@ SYSTEM_ORDER = ("optimal", "suboptimal_1", "suboptimal_2", "suboptimal_3", "subo
 @dataclass(frozen=True)
 class SensitivityCase:
     label: str
-    scenario: Scenario
+    scenario: AnalysisScenario
     budget: ErrorBudget
     designs: tuple[FilterDesign, ...] = PAPER_FILTERS
 
@@ -44,12 +44,12 @@ def _with_doppler_noise(budget: ErrorBudget, sigma: float) -> ErrorBudget:
     return budget.with_parameters(doppler_noise_sigma_north=sigma, doppler_noise_sigma_east=sigma)
 
 
-def _with_speed(scenario: Scenario, kmh: float) -> Scenario:
+def _with_speed(scenario: AnalysisScenario, kmh: float) -> AnalysisScenario:
     north, _, down = scenario.velocity_ned
     return replace(scenario, velocity_ned=(north, to_si(kmh, "km/h"), down))
 
 
-def default_cases(scenario: Scenario, budget: ErrorBudget) -> list[SensitivityCase]:
+def default_cases(scenario: AnalysisScenario, budget: ErrorBudget) -> list[SensitivityCase]:
     """The cases of table2.md's sensitivity section."""
     sigma = budget.parameters["doppler_noise_sigma_north"]
     speed = scenario.velocity_ned[1] * 3.6

@@ -44,7 +44,7 @@ from typing import Mapping
 
 import numpy as np
 
-from modelgen.analysis.scenario import Scenario
+from modelgen.analysis.scenario import AnalysisScenario
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel
 from modelgen.model.transform import keep_states, markov_to_white
@@ -130,7 +130,7 @@ def filter_parameters(
     return out
 
 
-def gain_schedule(design: FilterDesign, scenario: Scenario) -> np.ndarray:
+def gain_schedule(design: FilterDesign, scenario: AnalysisScenario) -> np.ndarray:
     """recompute[k]: is the gain for the update at step k+1 computed afresh?
 
     Segments of N steps (eqs. (13)-(14)): the gain computed at the start of a

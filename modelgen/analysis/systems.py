@@ -24,7 +24,7 @@ from modelgen.analysis.covariance import (
     true_error_covariance,
 )
 from modelgen.analysis.metrics import navigation_errors
-from modelgen.analysis.scenario import Scenario, operating_point
+from modelgen.analysis.scenario import AnalysisScenario, operating_point
 from modelgen.analysis.suboptimal import PAPER_FILTERS, FilterDesign, filter_model, filter_parameters, gain_schedule
 from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.model.declaration import ErrorModel
@@ -94,7 +94,7 @@ class SystemResult:
     errors: dict[str, np.ndarray]  # time series in the paper's units, see metrics.py
 
 
-def analyse_systems(models: PaperModels, scenario: Scenario, budget: ErrorBudget) -> dict[str, SystemResult]:
+def analyse_systems(models: PaperModels, scenario: AnalysisScenario, budget: ErrorBudget) -> dict[str, SystemResult]:
     """Run all systems for 4 h; keys: the designs' keys, then ``pure_inertial``."""
     values = {**budget.parameters, **operating_point(scenario)}
     steps, T, order = scenario.steps, scenario.step_s, scenario.taylor_order

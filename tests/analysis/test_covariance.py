@@ -14,7 +14,7 @@ from modelgen.analysis.covariance import (
     selection_matrix,
     true_error_covariance,
 )
-from modelgen.analysis.scenario import load_scenario, operating_point
+from modelgen.analysis.scenario import load_analysis_scenario, operating_point
 from modelgen.analysis.suboptimal import PAPER_FILTERS, filter_parameters
 from modelgen.analysis.systems import paper_models
 from modelgen.derive.discretization import van_loan_discretization
@@ -25,7 +25,7 @@ STEPS = 60  # one hour is enough to exercise every recursion
 
 @pytest.fixture(scope="module")
 def setup():
-    models, scenario, budget = paper_models(), load_scenario(), load_error_budget()
+    models, scenario, budget = paper_models(), load_analysis_scenario(), load_error_budget()
     values = {**budget.parameters, **operating_point(scenario)}
     truth = discretize(models.truth, values, scenario.step_s, scenario.taylor_order)
     return models, scenario, budget, values, truth, budget.initial_covariance(models.truth.model)

@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from modelgen.analysis.scenario import load_scenario, operating_point, specific_force_ned
+from modelgen.analysis.scenario import load_analysis_scenario, operating_point, specific_force_ned
 from modelgen.errors import ModelError
 
 
 def test_paper_scenario_is_4_hours_of_60_s_steps_at_30_north_flying_east():
-    s = load_scenario()
+    s = load_analysis_scenario()
     assert s.steps == 240 and s.step_s == 60.0 and s.taylor_order == 9
     assert math.degrees(s.latitude) == pytest.approx(30.0)
     assert s.velocity_ned == pytest.approx((0.0, 300 / 3.6, 0.0))
@@ -21,7 +21,7 @@ def test_paper_scenario_is_4_hours_of_60_s_steps_at_30_north_flying_east():
 
 
 def test_manoeuvre_phases_are_the_first_0_4_hours():
-    s = load_scenario()
+    s = load_analysis_scenario()
     assert s.manoeuvring(0.0) and s.manoeuvring(0.39 * 3600)
     assert not s.manoeuvring(0.4 * 3600) and not s.manoeuvring(3.0 * 3600)
 
@@ -40,7 +40,7 @@ def test_specific_force_flying_east_has_coriolis_and_transport_terms():
 
 
 def test_operating_point_gives_every_operating_parameter_of_the_model(paper_model):
-    values = operating_point(load_scenario())
+    values = operating_point(load_analysis_scenario())
     needed = {p.name for p in paper_model.parameters if p.value is None and not ("markov" in p.name or "noise" in p.name)}
     assert needed <= set(values)
     assert values["c12"] == -1.0 and values["c21"] == 1.0 and values["c33"] == 1.0
@@ -69,16 +69,16 @@ phases: []
 def test_scenario_with_a_non_rotation_attitude_matrix_is_refused(tmp_path):
     path = _write(tmp_path, BASE.replace("MATRIX", "[[1, 0, 0], [0, 2, 0], [0, 0, 1]]"))
     with pytest.raises(ModelError, match="attitude_matrix is not a rotation matrix"):
-        load_scenario(path)
+        load_analysis_scenario(path)
 
 
 def test_scenario_missing_key_is_named(tmp_path):
     path = _write(tmp_path, BASE.replace("MATRIX", "[[1, 0, 0], [0, 1, 0], [0, 0, 1]]").replace("step_s: 60.0\n", ""))
     with pytest.raises(ModelError, match="missing key 'step_s'"):
-        load_scenario(path)
+        load_analysis_scenario(path)
 
 
 def test_scenario_duration_not_a_whole_number_of_steps_is_refused(tmp_path):
     path = _write(tmp_path, BASE.replace("MATRIX", "[[1, 0, 0], [0, 1, 0], [0, 0, 1]]").replace("step_s: 60.0", "step_s: 7.0"))
     with pytest.raises(ModelError, match="whole number of steps"):
-        load_scenario(path)
+        load_analysis_scenario(path)

@@ -3,19 +3,19 @@
 from __future__ import annotations
 
 from modelgen.analysis.budget import load_error_budget
-from modelgen.analysis.scenario import load_scenario
+from modelgen.analysis.scenario import load_analysis_scenario
 from modelgen.analysis.sensitivity import default_cases, markdown_sensitivity, run_sensitivity
 from modelgen.analysis.systems import PURE_INERTIAL, paper_models
 
 
 def test_cases_cover_every_lost_value_and_design_reading():
-    labels = " ".join(c.label for c in default_cases(load_scenario(), load_error_budget()))
+    labels = " ".join(c.label for c in default_cases(load_analysis_scenario(), load_error_budget()))
     for word in ("Doppler noise", "3000 km/h", "earth radius", "specific force", "driving strength", "N = 6"):
         assert word in labels
 
 
 def test_more_doppler_noise_worsens_every_integrated_system_but_not_pure_inertial():
-    cases = default_cases(load_scenario(), load_error_budget())
+    cases = default_cases(load_analysis_scenario(), load_error_budget())
     low, base, high = (next(c for c in cases if c.label.startswith(p)) for p in ("Doppler noise x0.5", "baseline", "Doppler noise x2"))
     res = run_sensitivity([low, base, high], paper_models())
     for k in ("optimal", "suboptimal_1", "suboptimal_2", "suboptimal_3", "suboptimal_4"):

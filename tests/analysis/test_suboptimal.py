@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from modelgen.analysis.budget import load_error_budget
-from modelgen.analysis.scenario import load_scenario
+from modelgen.analysis.scenario import load_analysis_scenario
 from modelgen.analysis.suboptimal import PAPER_FILTERS, filter_model, filter_parameters, gain_schedule
 from modelgen.errors import ModelError
 
@@ -43,7 +43,7 @@ def test_lumped_vertical_drift_has_the_rms_of_constant_and_markov_parts():
 
 
 def test_piecewise_gain_every_2_steps_while_manoeuvring_then_every_6():
-    flags = gain_schedule(DESIGNS["suboptimal_2"], load_scenario())
+    flags = gain_schedule(DESIGNS["suboptimal_2"], load_analysis_scenario())
     starts = np.flatnonzero(flags)
     assert list(starts[:13]) == [0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24]
     assert list(starts[13:16]) == [30, 36, 42]
@@ -51,9 +51,9 @@ def test_piecewise_gain_every_2_steps_while_manoeuvring_then_every_6():
 
 
 def test_every_step_gain_for_the_optimal_filter():
-    assert gain_schedule(DESIGNS["optimal"], load_scenario()).all()
+    assert gain_schedule(DESIGNS["optimal"], load_analysis_scenario()).all()
 
 
 def test_bad_gain_period_is_refused():
     with pytest.raises(ModelError, match="'suboptimal_2'.*positive integer"):
-        gain_schedule(replace(DESIGNS["suboptimal_2"], gain_period=0), load_scenario())
+        gain_schedule(replace(DESIGNS["suboptimal_2"], gain_period=0), load_analysis_scenario())

@@ -31,7 +31,7 @@ import pytest
 
 from modelgen.analysis.budget import load_error_budget
 from modelgen.analysis.metrics import final_values
-from modelgen.analysis.scenario import load_scenario
+from modelgen.analysis.scenario import load_analysis_scenario
 from modelgen.analysis.systems import PURE_INERTIAL, analyse_systems, paper_models
 from modelgen.analysis.table2 import COLUMNS, IMPROVEMENT_COLUMNS, load_paper_table, table_rows
 
@@ -75,7 +75,7 @@ GAPS = {
 
 @pytest.fixture(scope="module")
 def results():
-    return analyse_systems(paper_models(), load_scenario(), load_error_budget())
+    return analyse_systems(paper_models(), load_analysis_scenario(), load_error_budget())
 
 
 @pytest.fixture(scope="module")

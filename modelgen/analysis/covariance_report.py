@@ -17,7 +17,7 @@ from typing import Callable
 from modelgen.analysis.budget import ErrorBudget, load_error_budget
 from modelgen.analysis.figures import write_figures
 from modelgen.analysis.inference import infer_doppler_noise
-from modelgen.analysis.scenario import Scenario, load_scenario
+from modelgen.analysis.scenario import AnalysisScenario, load_analysis_scenario
 from modelgen.analysis.sensitivity import SensitivityResult, default_cases, markdown_sensitivity, run_sensitivity
 from modelgen.analysis.systems import PaperModels, SystemResult, analyse_systems, paper_models
 from modelgen.analysis.table2 import COLUMNS, Row, csv_text, load_paper_table, markdown_improvement, markdown_table, table_rows
@@ -56,7 +56,7 @@ def _gaps(rows: list[Row]) -> str:
     return "\n".join(out) if out else "none"
 
 
-def _inputs(scenario: Scenario, budget: ErrorBudget, inferred: float) -> str:
+def _inputs(scenario: AnalysisScenario, budget: ErrorBudget, inferred: float) -> str:
     v = scenario.velocity_ned
     used = budget.parameters["doppler_noise_sigma_north"]
     return "\n".join(
@@ -123,7 +123,7 @@ def run_covariance_analysis(
     say = progress or (lambda message: None)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    scenario, budget, paper = load_scenario(), load_error_budget(), load_paper_table()
+    scenario, budget, paper = load_analysis_scenario(), load_error_budget(), load_paper_table()
 
     say("deriving the 18-state model and the reduced models made from it")
     models = models if models is not None else paper_models()
