@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from modelgen.simulation.earth import EARTH_RATE, ECCENTRICITY_SQUARED, SEMI_MAJOR_AXIS
+from modelgen.model.wgs84 import EARTH_RATE, ECCENTRICITY_SQUARED, SEMI_MAJOR_AXIS
 from modelgen.simulation.jit import compiled
 
 NAV_SIZE = 10  # q0 q1 q2 q3, vN vE vD, latitude, longitude, height

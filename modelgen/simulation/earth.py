@@ -14,20 +14,19 @@ import math
 
 import numpy as np
 
+from modelgen.model.wgs84 import (  # noqa: F401  (the one WGS-84 module: modelgen.model.wgs84)
+    EARTH_RATE,
+    ECCENTRICITY_SQUARED,
+    EQUATORIAL_GRAVITY,
+    FLATTENING,
+    GRAVITATIONAL_CONSTANT,
+    GRAVITY_RATIO_M,
+    SEMI_MAJOR_AXIS,
+    SEMI_MINOR_AXIS,
+    SOMIGLIANA_K,
+)
 from modelgen.simulation.jit import compiled
 
-# WGS-84 defining constants (NIMA TR8350.2).
-SEMI_MAJOR_AXIS = 6378137.0  # a [m]
-FLATTENING = 1.0 / 298.257223563  # f
-EARTH_RATE = 7.292115e-5  # omega_ie [rad/s]
-GRAVITATIONAL_CONSTANT = 3.986004418e14  # GM [m^3/s^2]
-ECCENTRICITY_SQUARED = FLATTENING * (2.0 - FLATTENING)  # e^2
-SEMI_MINOR_AXIS = SEMI_MAJOR_AXIS * (1.0 - FLATTENING)  # b [m]
-# Somigliana's normal gravity on the ellipsoid: g0 = g_e (1 + k sin^2 L) / sqrt(1 - e^2 sin^2 L).
-EQUATORIAL_GRAVITY = 9.7803253359  # g_e [m/s^2]
-SOMIGLIANA_K = 0.00193185265241
-# m = omega^2 a^2 b / GM, used in the free-air height correction.
-GRAVITY_RATIO_M = EARTH_RATE**2 * SEMI_MAJOR_AXIS**2 * SEMI_MINOR_AXIS / GRAVITATIONAL_CONSTANT
 SPEED_OF_LIGHT = 299792458.0  # [m/s]
 
 

@@ -18,7 +18,8 @@ from click.testing import CliRunner
 from modelgen.cli import main
 from modelgen.derive.symbolic import derive
 from modelgen.errors import ModelError
-from modelgen.model.library import level_flight, pseudorange_model, pseudorange_parameters
+from modelgen.model.operating_point import level_flight, pseudorange_parameters
+from modelgen.model.pseudorange import pseudorange_model
 from modelgen.model.declaration import ErrorModel, Measurement, State
 from modelgen.model.loading import load_model
 from modelgen.analysis.observability import (

@@ -35,11 +35,12 @@ import numpy as np
 import pytest
 
 from modelgen.analysis.budget import load_error_budget
-from modelgen.analysis.scenario import load_scenario, operating_point, specific_force_ned
+from modelgen.analysis.scenario import load_analysis_scenario, operating_point, specific_force_ned
 from modelgen.derive.symbolic import derive
 from modelgen.derive.discretization import taylor_discretization, taylor_process_noise
 from modelgen.model.frames import NED_TO_ENU, body_axes_map, ned_to_enu_transformation
-from modelgen.model.library import earth_radii, level_attitude
+from modelgen.model.operating_point import level_attitude
+from modelgen.model.wgs84 import earth_radii
 from modelgen.model.loading import load_model
 from modelgen.derive.reference import predict_covariance
 from modelgen.model.transform import keep_states
@@ -50,7 +51,7 @@ HOURS = (1, 2, 4)
 
 @pytest.fixture(scope="module")
 def case():
-    scenario = load_scenario()
+    scenario = load_analysis_scenario()
     budget = load_error_budget()
     ned = load_model("ned_inertial16")
     enu = load_model("enu_doppler18")

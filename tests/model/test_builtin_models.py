@@ -21,16 +21,11 @@ import sympy as sp
 
 from modelgen.derive.symbolic import derive
 from modelgen.errors import ModelError
-from modelgen.model.library import (
-    WGS84_ECCENTRICITY_SQUARED,
-    WGS84_SEMI_MAJOR_AXIS,
-    earth_radii,
-    level_attitude,
-    level_flight,
-    line_of_sight,
-    pseudorange_model,
-    pseudorange_parameters,
-)
+from modelgen.model.operating_point import level_attitude, level_flight, line_of_sight, pseudorange_parameters
+from modelgen.model.pseudorange import pseudorange_model
+from modelgen.model.wgs84 import ECCENTRICITY_SQUARED as WGS84_ECCENTRICITY_SQUARED
+from modelgen.model.wgs84 import SEMI_MAJOR_AXIS as WGS84_SEMI_MAJOR_AXIS
+from modelgen.model.wgs84 import earth_radii
 from modelgen.model.loading import load_model
 from modelgen.model.transform import keep_states
 

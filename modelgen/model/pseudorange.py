@@ -1,137 +1,19 @@
-"""Models built in code, where the state or measurement set has a size.
+"""The INS/GPS pseudo-range model (seed 003), built in code for any number of satellites.
 
 The model files in ``modelgen/models`` cover fixed state sets.  Seed 003's
 INS/GPS pseudo-range filter has one measurement per tracked satellite, so it
 is built here for any number of satellites by :func:`pseudorange_model`;
 ``modelgen/models/gps_pseudorange11.yaml`` is its 4-satellite instance (a test
-checks that both derive to the same matrices).
-
-Also here: the WGS-84 radii of curvature and the line-of-sight unit vector,
-which turn a latitude or a satellite's azimuth and elevation into the
-operating-point parameters these models take.
+checks that both derive to the same matrices).  The line-of-sight parameter
+values for given satellites come from
+:func:`modelgen.model.operating_point.pseudorange_parameters`.
 """
 
 from __future__ import annotations
 
-import math
-
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State
-
-#: WGS-84 semi-major axis (m) and first eccentricity squared.
-WGS84_SEMI_MAJOR_AXIS = 6378137.0
-WGS84_ECCENTRICITY_SQUARED = 6.69437999014e-3
-WGS84_EARTH_RATE = 7.2921151467e-5
-
-
-def earth_radii(latitude: float) -> tuple[float, float]:
-    """WGS-84 meridian and prime-vertical radii of curvature (R_M, R_N) in metres.
-
-    R_M = a (1 - e^2) / (1 - e^2 sin^2 L)^(3/2),  R_N = a / (1 - e^2 sin^2 L)^(1/2).
-    """
-    s2 = math.sin(latitude) ** 2
-    w = 1.0 - WGS84_ECCENTRICITY_SQUARED * s2
-    return (
-        WGS84_SEMI_MAJOR_AXIS * (1.0 - WGS84_ECCENTRICITY_SQUARED) / w**1.5,
-        WGS84_SEMI_MAJOR_AXIS / math.sqrt(w),
-    )
-
-
-def line_of_sight(azimuth: float, elevation: float) -> tuple[float, float, float]:
-    """Unit vector from the receiver to a satellite, in East-North-Up components.
-
-    ``azimuth`` is measured from north towards east, ``elevation`` above the
-    local horizontal (radians): e = (cos El sin Az, cos El cos Az, sin El).
-    """
-    return (
-        math.cos(elevation) * math.sin(azimuth),
-        math.cos(elevation) * math.cos(azimuth),
-        math.sin(elevation),
-    )
-
-
-def pseudorange_parameters(azimuths_elevations: list[tuple[float, float]]) -> dict[str, float]:
-    """The line-of-sight parameters of :func:`pseudorange_model` for given satellites."""
-    values: dict[str, float] = {}
-    for k, (az, el) in enumerate(azimuths_elevations, start=1):
-        east, north, up = line_of_sight(az, el)
-        values[f"line_of_sight_east_{k}"] = east
-        values[f"line_of_sight_north_{k}"] = north
-        values[f"line_of_sight_up_{k}"] = up
-    return values
-
-
-def level_attitude(frame: str, heading: float) -> list[list[float]]:
-    """C_b^n of a level vehicle with the given heading (rad, from north towards east).
-
-    Body axes follow each frame's usual convention: forward-right-down for
-    NED models (seed 000: heading east gives [[0,-1,0],[1,0,0],[0,0,1]]),
-    right-forward-up for ENU models (Qin).
-    """
-    c, s = math.cos(heading), math.sin(heading)
-    if frame == "NED":
-        return [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
-    if frame == "ENU":
-        return [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]
-    raise ModelError(f"level_attitude: frame must be 'NED' or 'ENU', not {frame!r}")
-
-
-def level_flight(
-    model: ErrorModel,
-    latitude: float,
-    speed: float,
-    heading: float,
-    height: float = 0.0,
-    gravity: float = 9.80665,
-    spherical_earth: bool = False,
-) -> dict[str, float]:
-    """Operating-point parameter values for steady level flight, for any library model.
-
-    Sets whichever of these the model has (by parameter name): latitude,
-    height, velocities, specific forces, attitude matrix c11..c33 (see
-    :func:`level_attitude`), earth radii, gravity.  The specific force is the
-    one steady flight needs, f^n = -g^n + (2 w_ie + w_en) x v (so the
-    Eotvos and transport terms are in it), with w_en from the model's own
-    radii: WGS-84 R_M, R_N, or the model's ``earth_radius`` (or, with
-    ``spherical_earth``, R_M = R_N = the WGS-84 semi-major axis).  Error
-    statistics (sensor and measurement noise) are not operating-point values
-    and are left to the caller.
-    """
-    frame = model.frame
-    if frame not in ("NED", "ENU"):
-        raise ModelError(f"level_flight: model {model.name!r} has frame {frame!r}, expected NED or ENU")
-    defaults = model.parameter_defaults()
-    names = set(model.parameter_names)
-    earth_rate = defaults.get("earth_rate", WGS84_EARTH_RATE)
-    if "earth_radius" in names:
-        r_m = r_n = defaults.get("earth_radius", WGS84_SEMI_MAJOR_AXIS)
-    elif spherical_earth:
-        r_m = r_n = WGS84_SEMI_MAJOR_AXIS
-    else:
-        r_m, r_n = earth_radii(latitude)
-    h = height if "height" in names else 0.0
-    v_n, v_e = speed * math.cos(heading), speed * math.sin(heading)
-    sin_l, cos_l, tan_l = math.sin(latitude), math.cos(latitude), math.tan(latitude)
-    # f = (2 w_ie + w_en) x v + (0, 0, g) in ENU, with v = (v_e, v_n, 0) and
-    # 2 w_ie + w_en = (-v_n/(R_M+h), 2W cos L + v_e/(R_N+h), 2W sin L + v_e tan L/(R_N+h)).
-    w = (-v_n / (r_m + h), 2 * earth_rate * cos_l + v_e / (r_n + h), 2 * earth_rate * sin_l + v_e * tan_l / (r_n + h))
-    f_east, f_north, f_up = -w[2] * v_n, w[2] * v_e, gravity + w[0] * v_n - w[1] * v_e
-    values = {
-        "latitude": latitude,
-        "height": height,
-        "gravity": gravity,
-        "meridian_radius": r_m,
-        "prime_vertical_radius": r_n,
-    }
-    if frame == "NED":
-        values.update(velocity_north=v_n, velocity_east=v_e, velocity_down=0.0)
-        values.update(specific_force_north=f_north, specific_force_east=f_east, specific_force_down=-f_up)
-    else:
-        values.update(velocity_east=v_e, velocity_north=v_n, velocity_up=0.0)
-        values.update(specific_force_east=f_east, specific_force_north=f_north, specific_force_up=f_up)
-    attitude = level_attitude(frame, heading)
-    values.update({f"c{i + 1}{j + 1}": attitude[i][j] for i in range(3) for j in range(3)})
-    return {k: v for k, v in values.items() if k in names}
+from modelgen.model.wgs84 import GPS_EARTH_RATE, SEMI_MAJOR_AXIS
 
 
 # -- seed 003: INS/GPS pseudo-range model ---------------------------------------
@@ -167,8 +49,8 @@ _PSEUDORANGE_PARAMETERS = (
     Parameter("specific_force_east", "m/s^2", "specific force along east", "f_E"),
     Parameter("specific_force_north", "m/s^2", "specific force along north", "f_N"),
     Parameter("specific_force_up", "m/s^2", "specific force along up (about +g in level flight)", "f_U"),
-    Parameter("earth_rate", "rad/s", "earth rotation rate (WGS-84)", "omega_ie", WGS84_EARTH_RATE),
-    Parameter("earth_radius", "m", "earth radius of the spherical psi-angle model", "R", WGS84_SEMI_MAJOR_AXIS),
+    Parameter("earth_rate", "rad/s", "earth rotation rate (WGS-84)", "omega_ie", GPS_EARTH_RATE),
+    Parameter("earth_radius", "m", "earth radius of the spherical psi-angle model", "R", SEMI_MAJOR_AXIS),
     Parameter("gravity", "m/s^2", "gravity magnitude (gravity-error gradient g/R, 2g/R)", "g", 9.80665),
     Parameter("gyro_angle_random_walk", "rad/sqrt(s)", "gyro white noise, PSD N_g^2 (all axes)", "N_g"),
     Parameter("accel_velocity_random_walk", "m/s/sqrt(s)", "accelerometer white noise, PSD N_a^2 (all axes)", "N_a"),
@@ -239,7 +121,7 @@ def pseudorange_model(n_satellites: int, name: str | None = None) -> ErrorModel:
           Z_k = e_k . dr + I_t + eta_k,   H_k = [e_k^T  0  0  1  0].
       (The brief's [-e_k^T ... 1 0] is the same row with e_k pointing from
       the satellite to the receiver.)  e_k = (e_k_x, e_k_y, e_k_z) are
-      parameters (east, north, up), see :func:`line_of_sight`.
+      parameters (east, north, up), see :func:`modelgen.model.operating_point.line_of_sight`.
 
     ``name`` defaults to ``gps_pseudorange11_<n>sat``.
     """
@@ -278,5 +160,5 @@ def pseudorange_model(n_satellites: int, name: str | None = None) -> ErrorModel:
         title=f"INS/GPS pseudo-range, 11-state error model (psi-angle, ENU, metres), {n_satellites} satellites",
         source="seed 003, Zou, Zhuang, Ding (2001), section 3; dynamics: psi-angle model (Benson 1975)",
         frame="ENU",
-        notes=("Built by modelgen.model.library.pseudorange_model.",),
+        notes=("Built by modelgen.model.pseudorange.pseudorange_model.",),
     )
