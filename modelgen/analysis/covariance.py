@@ -26,6 +26,7 @@ import numpy as np
 
 from modelgen.derive.symbolic import DerivedModel
 from modelgen.derive.discretization import taylor_discretization, taylor_process_noise
+from modelgen.derive.reference import kalman_gain
 from modelgen.errors import ModelError
 
 
@@ -73,12 +74,6 @@ def propagate_covariance(system: DiscreteSystem, P0: np.ndarray, steps: int) -> 
     return out
 
 
-def _gain(P_pred: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """K = P H^T (H P H^T + R)^-1 (eq. (12), (14))."""
-    S = H @ P_pred @ H.T + R
-    return np.linalg.solve(S, H @ P_pred).T
-
-
 def _joseph(P_pred: np.ndarray, K: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.ndarray:
     """(I - K H) P (I - K H)^T + K R K^T: correct for any gain K (eq. (12))."""
     A = np.eye(P_pred.shape[0]) - K @ H
@@ -116,7 +111,7 @@ def filter_gains(
     for k in range(steps):
         P_pred = phi @ P @ phi.T + qd
         if recompute[k]:
-            K = _gain(P_pred, H, R)
+            K = kalman_gain(P_pred, H, R)  # eq. (14)
         gains[k] = K
         P = _joseph(P_pred, K, H, R)
         history[k + 1] = P
