@@ -29,10 +29,11 @@ from pathlib import Path
 import numpy as np
 
 from modelgen.codegen.build import STRICT_FLAGS, compiler
-from modelgen.codegen.generate import generate_code, render_c_template, write_atomically
+from modelgen.codegen.generate import generate_code, render_c_template
 from modelgen.codegen.options import CodegenOptions
 from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
+from modelgen.fileio.output import write_atomically
 
 ARM_EMBEDDED_CC = "arm-none-eabi-gcc"
 ARM_EMBEDDED_SIZE = "arm-none-eabi-size"

@@ -51,7 +51,8 @@ def model_path(name: str, config_path: str) -> Path:
 def generate_filter_module(model_file: Path, work_dir: Path | None = None) -> ModuleType:
     """Generate the model's Python filter with modelgen's generator and import it."""
     from modelgen.codegen.build import load_python_module
-    from modelgen.codegen.generate import generate_code, write_atomically
+    from modelgen.codegen.generate import generate_code
+    from modelgen.fileio.output import write_atomically
     from modelgen.derive.symbolic import derive
     from modelgen.model.loading import load_model
 

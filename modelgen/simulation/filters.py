@@ -215,7 +215,8 @@ def filter_factory(derived: DerivedModel, implementation: str, work_dir: str | P
     if implementation == "reference":
         return lambda x0, P0: ReferenceFilter(derived, x0, P0)
     from modelgen.codegen.build import CompiledFilter, compile_shared_library, load_python_module  # siblings
-    from modelgen.codegen.generate import generate_code, write_atomically
+    from modelgen.codegen.generate import generate_code
+    from modelgen.fileio.output import write_atomically
     from modelgen.codegen.layout import ModelSizes
 
     model = derived.model
