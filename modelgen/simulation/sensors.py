@@ -3,10 +3,25 @@
 Each entry follows :class:`modelgen.simulation.aiding.AidingSensor` and lives
 in one module: the Doppler radar (:mod:`modelgen.simulation.doppler`), the GPS
 position/velocity receiver (:mod:`modelgen.simulation.gps`) and the GPS
-pseudo-range receiver (:mod:`modelgen.simulation.pseudorange`).  Adding a
-sensor is writing its module and calling :func:`register_sensor` (or adding it
-to :data:`SENSORS` here); the profile loader, the flight and the report then
-know it without any other change.
+pseudo-range receiver (:mod:`modelgen.simulation.pseudorange`).  The profile
+loader, the flight and the report ask the profile's sensor object, so a new
+sensor touches no other module.  How to add one:
+
+1. Write its module: a settings dataclass (SI), a record of what it outputs per
+   epoch (``times``, ``valid``...), and its plug-in.  A sensor of velocity
+   and/or position subclasses
+   :class:`~modelgen.simulation.ins_aiding.NavigationQuantitySensor` and gives
+   ``name``, ``read_settings`` (its profile section, read with
+   :class:`~modelgen.simulation.profile_keys.ProfileSection`), ``period``,
+   ``noise_parameters``, ``simulate_at`` and ``fix``; any other sensor
+   implements :class:`~modelgen.simulation.aiding.AidingSensor` with its own
+   navigator, as ``pseudorange`` does.
+2. Register it: add it to :data:`SENSORS` here, or call :func:`register_sensor`
+   before loading a profile (tests/simulation/test_aiding_sensors.py flies a
+   toy sensor that way).
+3. In the profile: a section of the sensor's name, ``filter.aiding: <name>``
+   and ``filter.measurements.<name>`` mapping the model's measurements to
+   navigation quantities.
 """
 
 from __future__ import annotations
