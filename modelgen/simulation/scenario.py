@@ -14,12 +14,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
 from modelgen.errors import ModelError
-from modelgen.fileio.datafiles import read_yaml_with_lines
+from modelgen.fileio.datafiles import data_path, read_yaml_with_lines
 from modelgen.simulation.aiding import AidingSensor
 from modelgen.simulation.imu import ImuErrorBudget
 from modelgen.simulation.profile_keys import ARCMIN, ARCSEC, DEG, DPH, HOUR, KMH, ProfileSection
@@ -259,7 +258,7 @@ def state_roles() -> dict[str, tuple[str, ...]]:
 
 def builtin_profiles() -> list[str]:
     """Names of the flight profiles shipped in modelgen/data (``profile_000``...)."""
-    folder = resources.files("modelgen") / "data"
+    folder = data_path()
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.startswith("profile_") and p.name.endswith(".yaml"))
 
 
@@ -267,9 +266,9 @@ def load_profile(path: str | Path) -> FlightProfile:
     """Load a flight-profile file, or a built-in one by name (``profile_000``)."""
     p = Path(path)
     if not p.exists() and p.suffix == "":
-        candidate = resources.files("modelgen") / "data" / f"{p.name}.yaml"
+        candidate = data_path(f"{p.name}.yaml")
         if candidate.is_file():
-            p = Path(str(candidate))
+            p = candidate
     if not p.exists():
         raise ModelError(f"{path}: no such scenario file, and not a built-in one ({', '.join(builtin_profiles())})")
     data, lines = read_yaml_with_lines(p, "scenario file")
