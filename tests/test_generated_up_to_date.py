@@ -49,9 +49,45 @@ def test_committed_generated_code_matches_generator(name):
 
 
 def test_no_generated_folder_without_a_model():
-    models = set(builtin_models())
+    models = set(builtin_models()) | {"options"}
     stray = [p.name for p in (REPO / "generated").iterdir() if p.is_dir() and p.name not in models]
     assert not stray, f"generated/ has folders for unknown models: {stray}"
+
+
+@pytest.fixture(scope="module")
+def golden():
+    from modelgen.codegen.golden import GOLDEN_MODEL, golden_files
+
+    return golden_files(derive(load_model(GOLDEN_MODEL)))
+
+
+def test_every_option_family_has_a_committed_golden_folder_and_no_other(golden):
+    """float, UD, packed, sequential and standard form each differ from the default files."""
+    from modelgen.codegen.golden import GOLDEN_OPTIONS
+    from modelgen.codegen.options import FORMS, SCALARS, STORAGES, UPDATES
+
+    covered = {(o.scalar, o.form, o.storage, o.update, o.covariance_update) for o in GOLDEN_OPTIONS}
+    for family, values in (("scalar", SCALARS), ("form", FORMS), ("storage", STORAGES), ("update", UPDATES)):
+        index = ("scalar", "form", "storage", "update").index(family)
+        assert {c[index] for c in covered} | {"double", "covariance", "full", "vector"} >= set(values), family
+    assert {c[4] for c in covered} >= {"standard"}
+    on_disk = {p.name for p in (REPO / "generated" / "options").iterdir() if p.is_dir()}
+    assert on_disk == set(golden), "generated/options differs: run `python -m modelgen.codegen.golden generated/options`"
+
+
+def test_committed_option_golden_files_match_generator(golden):
+    mismatched = {p: (v, version(p)) for p, v in _pinned_versions().items() if version(p) != v}
+    if mismatched:
+        pytest.skip(f"generated/ was made with {mismatched} (pinned, installed): install with -c constraints.txt")
+    for folder_name, files in golden.items():
+        folder = REPO / "generated" / "options" / folder_name
+        committed = {p.name for p in folder.iterdir() if p.is_file() and p.name != MANIFEST_NAME}
+        assert committed == set(files), f"generated/options/{folder_name}: files differ"
+        for filename, text in files.items():
+            assert (folder / filename).read_text(encoding="utf-8") == text, (
+                f"generated/options/{folder_name}/{filename} is stale: "
+                "run `python -m modelgen.codegen.golden generated/options` and commit"
+            )
 
 
 @pytest.mark.parametrize("name", builtin_models())

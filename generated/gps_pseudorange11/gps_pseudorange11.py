@@ -60,6 +60,33 @@ NOISE_NAMES = ("gyro_white_noise_east", "gyro_white_noise_north", "gyro_white_no
 MEASUREMENT_NAMES = ("pseudorange_difference_1", "pseudorange_difference_2", "pseudorange_difference_3", "pseudorange_difference_4")
 PARAMETER_NAMES = ("latitude", "velocity_east", "velocity_north", "specific_force_east", "specific_force_north", "specific_force_up", "earth_rate", "earth_radius", "gravity", "gyro_angle_random_walk", "accel_velocity_random_walk", "clock_bias_psd", "clock_drift_psd", "line_of_sight_east_1", "line_of_sight_north_1", "line_of_sight_up_1", "pseudorange_sigma_1", "line_of_sight_east_2", "line_of_sight_north_2", "line_of_sight_up_2", "pseudorange_sigma_2", "line_of_sight_east_3", "line_of_sight_north_3", "line_of_sight_up_3", "pseudorange_sigma_3", "line_of_sight_east_4", "line_of_sight_north_4", "line_of_sight_up_4", "pseudorange_sigma_4")
 PARAMETER_DEFAULTS = {"earth_rate": 7.2921151467e-05, "earth_radius": 6378137.0, "gravity": 9.80665}
+MODEL_HASH = "6015dcab4c499be1"  # sha256 of the canonical model declaration, first 16 hex digits
+MODELGEN_VERSION = "0.1.0"
+
+# State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.
+STATE_POSITION_ERROR_EAST = 0  # [m] east position error in the local-level frame (X_p)
+STATE_POSITION_ERROR_NORTH = 1  # [m] north position error in the local-level frame (X_p)
+STATE_POSITION_ERROR_UP = 2  # [m] up position error in the local-level frame (X_p)
+STATE_VELOCITY_ERROR_EAST = 3  # [m/s] east velocity error (X_v)
+STATE_VELOCITY_ERROR_NORTH = 4  # [m/s] north velocity error (X_v)
+STATE_VELOCITY_ERROR_UP = 5  # [m/s] up velocity error (X_v)
+STATE_ATTITUDE_ERROR_EAST = 6  # [rad] platform attitude error about east, psi-angle (X_phi)
+STATE_ATTITUDE_ERROR_NORTH = 7  # [rad] platform attitude error about north, psi-angle (X_phi)
+STATE_ATTITUDE_ERROR_UP = 8  # [rad] platform attitude error about up, psi-angle (X_phi)
+STATE_CLOCK_BIAS_RANGE = 9  # [m] receiver clock bias times c (I_t, 'clock-difference range')
+STATE_CLOCK_DRIFT_RANGE = 10  # [m/s] receiver clock drift times c (I_f, 'frequency-difference range')
+NOISE_GYRO_WHITE_NOISE_EAST = 0  # [rad/sqrt(s)] gyro white noise resolved east
+NOISE_GYRO_WHITE_NOISE_NORTH = 1  # [rad/sqrt(s)] gyro white noise resolved north
+NOISE_GYRO_WHITE_NOISE_UP = 2  # [rad/sqrt(s)] gyro white noise resolved up
+NOISE_ACCEL_WHITE_NOISE_EAST = 3  # [m/s/sqrt(s)] accelerometer white noise resolved east
+NOISE_ACCEL_WHITE_NOISE_NORTH = 4  # [m/s/sqrt(s)] accelerometer white noise resolved north
+NOISE_ACCEL_WHITE_NOISE_UP = 5  # [m/s/sqrt(s)] accelerometer white noise resolved up
+NOISE_CLOCK_BIAS_NOISE = 6  # [m/sqrt(s)] white noise driving the clock bias range
+NOISE_CLOCK_DRIFT_NOISE = 7  # [m/s/sqrt(s)] white noise driving the clock drift range
+MEASUREMENT_PSEUDORANGE_DIFFERENCE_1 = 0  # [m] measured (clock-corrected) minus INS-computed pseudo-range to satellite 1, eq. (8)
+MEASUREMENT_PSEUDORANGE_DIFFERENCE_2 = 1  # [m] measured (clock-corrected) minus INS-computed pseudo-range to satellite 2, eq. (8)
+MEASUREMENT_PSEUDORANGE_DIFFERENCE_3 = 2  # [m] measured (clock-corrected) minus INS-computed pseudo-range to satellite 3, eq. (8)
+MEASUREMENT_PSEUDORANGE_DIFFERENCE_4 = 3  # [m] measured (clock-corrected) minus INS-computed pseudo-range to satellite 4, eq. (8)
 SERIES_RANGE = 0.11483164143919657  # largest ||F h||_D with a Taylor remainder below 2^-53
 _F_ROWS = np.array([0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 6, 6, 7, 7, 8, 8, 9], dtype=np.int64)  # structural nonzeros of F, row by row
 _F_COLS = np.array([1, 2, 3, 0, 2, 4, 0, 1, 5, 0, 4, 5, 7, 8, 1, 3, 5, 6, 8, 2, 3, 4, 6, 7, 7, 8, 6, 8, 6, 7, 10], dtype=np.int64)
@@ -280,6 +307,11 @@ def measurement_variance(p):
     return out
 
 
+def matrices_evaluate(p):
+    """F, G, H, diag(Q), diag(R) at the operating point p, as the C's matrices_evaluate (full matrices)."""
+    return system_matrix(p), noise_input_matrix(p), measurement_matrix(p), noise_psd(p), measurement_variance(p)
+
+
 def _balanced_norm(F):
     """max_i sum_j |F_ij| d_j / d_i, D from 8 Jacobi sweeps of Osborne's balancing in powers of two.
 
@@ -415,6 +447,34 @@ def update(x, P, z, H, r):
     P_new = upper + np.triu(upper, 1).T
     _check_finite("update", result=P_new, x_result=x_new)
     return x_new, P_new
+
+
+def update_masked(x, P, z, H, r, mask=None):
+    """Kalman update with the measurements whose mask entry is true, as the C's update_masked.
+
+    Returns (x, P, innovation, nis): innovation is z - H x before the update
+    for the used measurements and 0 for the others, nis the normalized
+    innovation squared nu^T S^-1 nu over the used ones.  mask None uses all;
+    z, H and r of an unused measurement are ignored (NaN allowed).
+    """
+    z = np.asarray(z, dtype=float)
+    m = z.shape[0] if z.ndim == 1 else -1
+    used = np.ones(m, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    _check_shapes("update_masked", z=(z, (m,)), mask=(used, (m,)), H=(H, (m, N_STATES)), r=(r, (m,)))
+    H, r = np.asarray(H, dtype=float), np.asarray(r, dtype=float)
+    innovation = np.zeros(m)
+    if not used.any():
+        return np.asarray(x, dtype=float).copy(), np.asarray(P, dtype=float).copy(), innovation, 0.0
+    x_new, P_new = update(x, P, z[used], H[used], r[used])
+    nu = z[used] - H[used] @ np.asarray(x, dtype=float)
+    S = H[used] @ np.asarray(P, dtype=float) @ H[used].T + np.diag(r[used])
+    innovation[used] = nu
+    return x_new, P_new, innovation, float(nu @ np.linalg.solve(S, nu))
+
+
+def reset_error_state(x):
+    """Closed-loop feedback, as the C's reset_error_state: the error estimate after it is applied (zeros; P unchanged)."""
+    return np.zeros_like(np.asarray(x, dtype=float))
 
 
 # -- the contract: what every function refuses, as the C does --------------

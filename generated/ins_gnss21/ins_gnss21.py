@@ -60,6 +60,55 @@ NOISE_NAMES = ("gyro_white_noise_x", "gyro_white_noise_y", "gyro_white_noise_z",
 MEASUREMENT_NAMES = ("gnss_position_difference_north", "gnss_position_difference_east", "gnss_position_difference_down", "gnss_velocity_difference_north", "gnss_velocity_difference_east", "gnss_velocity_difference_down")
 PARAMETER_NAMES = ("latitude", "height", "velocity_north", "velocity_east", "velocity_down", "c11", "c12", "c13", "c21", "c22", "c23", "c31", "c32", "c33", "body_specific_force_x", "body_specific_force_y", "body_specific_force_z", "body_rate_x", "body_rate_y", "body_rate_z", "lever_arm_x", "lever_arm_y", "lever_arm_z", "earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "gyro_angle_random_walk", "accel_velocity_random_walk", "gyro_bias_rate", "gyro_bias_sigma", "accel_bias_rate", "accel_bias_sigma", "gyro_scale_factor_rate", "gyro_scale_factor_sigma", "accel_scale_factor_rate", "accel_scale_factor_sigma", "gnss_position_sigma_north", "gnss_position_sigma_east", "gnss_position_sigma_down", "gnss_velocity_sigma_north", "gnss_velocity_sigma_east", "gnss_velocity_sigma_down")
 PARAMETER_DEFAULTS = {"earth_rate": 7.2921151467e-05}
+MODEL_HASH = "5fd023a39228cfe9"  # sha256 of the canonical model declaration, first 16 hex digits
+MODELGEN_VERSION = "0.1.0"
+
+# State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.
+STATE_POSITION_ERROR_NORTH = 0  # [m] north position error
+STATE_POSITION_ERROR_EAST = 1  # [m] east position error
+STATE_POSITION_ERROR_DOWN = 2  # [m] down position error
+STATE_VELOCITY_ERROR_NORTH = 3  # [m/s] north velocity error
+STATE_VELOCITY_ERROR_EAST = 4  # [m/s] east velocity error
+STATE_VELOCITY_ERROR_DOWN = 5  # [m/s] down velocity error
+STATE_ATTITUDE_ERROR_NORTH = 6  # [rad] phi-angle attitude error about north
+STATE_ATTITUDE_ERROR_EAST = 7  # [rad] phi-angle attitude error about east
+STATE_ATTITUDE_ERROR_DOWN = 8  # [rad] phi-angle attitude error about down
+STATE_GYRO_BIAS_X = 9  # [rad/s] x gyro bias (Gauss-Markov)
+STATE_GYRO_BIAS_Y = 10  # [rad/s] y gyro bias (Gauss-Markov)
+STATE_GYRO_BIAS_Z = 11  # [rad/s] z gyro bias (Gauss-Markov)
+STATE_ACCEL_BIAS_X = 12  # [m/s^2] x accelerometer bias (Gauss-Markov)
+STATE_ACCEL_BIAS_Y = 13  # [m/s^2] y accelerometer bias (Gauss-Markov)
+STATE_ACCEL_BIAS_Z = 14  # [m/s^2] z accelerometer bias (Gauss-Markov)
+STATE_GYRO_SCALE_FACTOR_X = 15  # [1] x gyro scale-factor error (Gauss-Markov)
+STATE_GYRO_SCALE_FACTOR_Y = 16  # [1] y gyro scale-factor error (Gauss-Markov)
+STATE_GYRO_SCALE_FACTOR_Z = 17  # [1] z gyro scale-factor error (Gauss-Markov)
+STATE_ACCEL_SCALE_FACTOR_X = 18  # [1] x accelerometer scale-factor error (Gauss-Markov)
+STATE_ACCEL_SCALE_FACTOR_Y = 19  # [1] y accelerometer scale-factor error (Gauss-Markov)
+STATE_ACCEL_SCALE_FACTOR_Z = 20  # [1] z accelerometer scale-factor error (Gauss-Markov)
+NOISE_GYRO_WHITE_NOISE_X = 0  # [rad/sqrt(s)] x gyro angle random walk
+NOISE_GYRO_WHITE_NOISE_Y = 1  # [rad/sqrt(s)] y gyro angle random walk
+NOISE_GYRO_WHITE_NOISE_Z = 2  # [rad/sqrt(s)] z gyro angle random walk
+NOISE_ACCEL_WHITE_NOISE_X = 3  # [m/s/sqrt(s)] x accelerometer velocity random walk
+NOISE_ACCEL_WHITE_NOISE_Y = 4  # [m/s/sqrt(s)] y accelerometer velocity random walk
+NOISE_ACCEL_WHITE_NOISE_Z = 5  # [m/s/sqrt(s)] z accelerometer velocity random walk
+NOISE_GYRO_BIAS_DRIVING_NOISE_X = 6  # [rad/s/sqrt(s)] drives the x gyro bias
+NOISE_GYRO_BIAS_DRIVING_NOISE_Y = 7  # [rad/s/sqrt(s)] drives the y gyro bias
+NOISE_GYRO_BIAS_DRIVING_NOISE_Z = 8  # [rad/s/sqrt(s)] drives the z gyro bias
+NOISE_ACCEL_BIAS_DRIVING_NOISE_X = 9  # [m/s^2/sqrt(s)] drives the x accelerometer bias
+NOISE_ACCEL_BIAS_DRIVING_NOISE_Y = 10  # [m/s^2/sqrt(s)] drives the y accelerometer bias
+NOISE_ACCEL_BIAS_DRIVING_NOISE_Z = 11  # [m/s^2/sqrt(s)] drives the z accelerometer bias
+NOISE_GYRO_SCALE_FACTOR_DRIVING_NOISE_X = 12  # [1/sqrt(s)] drives the x gyro scale factor
+NOISE_GYRO_SCALE_FACTOR_DRIVING_NOISE_Y = 13  # [1/sqrt(s)] drives the y gyro scale factor
+NOISE_GYRO_SCALE_FACTOR_DRIVING_NOISE_Z = 14  # [1/sqrt(s)] drives the z gyro scale factor
+NOISE_ACCEL_SCALE_FACTOR_DRIVING_NOISE_X = 15  # [1/sqrt(s)] drives the x accelerometer scale factor
+NOISE_ACCEL_SCALE_FACTOR_DRIVING_NOISE_Y = 16  # [1/sqrt(s)] drives the y accelerometer scale factor
+NOISE_ACCEL_SCALE_FACTOR_DRIVING_NOISE_Z = 17  # [1/sqrt(s)] drives the z accelerometer scale factor
+MEASUREMENT_GNSS_POSITION_DIFFERENCE_NORTH = 0  # [m] 
+MEASUREMENT_GNSS_POSITION_DIFFERENCE_EAST = 1  # [m] 
+MEASUREMENT_GNSS_POSITION_DIFFERENCE_DOWN = 2  # [m] 
+MEASUREMENT_GNSS_VELOCITY_DIFFERENCE_NORTH = 3  # [m/s] 
+MEASUREMENT_GNSS_VELOCITY_DIFFERENCE_EAST = 4  # [m/s] 
+MEASUREMENT_GNSS_VELOCITY_DIFFERENCE_DOWN = 5  # [m/s] 
 SERIES_RANGE = 0.11483164143919657  # largest ||F h||_D with a Taylor remainder below 2^-53
 _F_ROWS = np.array([0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 8, 8, 8, 8, 8, 8, 8, 8, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20], dtype=np.int64)  # structural nonzeros of F, row by row
 _F_COLS = np.array([1, 2, 3, 0, 2, 4, 0, 1, 5, 4, 5, 7, 8, 12, 13, 14, 18, 19, 20, 3, 5, 6, 8, 12, 13, 14, 18, 19, 20, 2, 3, 4, 6, 7, 12, 13, 14, 18, 19, 20, 4, 7, 8, 9, 10, 11, 15, 16, 17, 3, 6, 8, 9, 10, 11, 15, 16, 17, 4, 6, 7, 9, 10, 11, 15, 16, 17, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20], dtype=np.int64)
@@ -469,6 +518,11 @@ def measurement_variance(p):
     return out
 
 
+def matrices_evaluate(p):
+    """F, G, H, diag(Q), diag(R) at the operating point p, as the C's matrices_evaluate (full matrices)."""
+    return system_matrix(p), noise_input_matrix(p), measurement_matrix(p), noise_psd(p), measurement_variance(p)
+
+
 def _balanced_norm(F):
     """max_i sum_j |F_ij| d_j / d_i, D from 8 Jacobi sweeps of Osborne's balancing in powers of two.
 
@@ -604,6 +658,34 @@ def update(x, P, z, H, r):
     P_new = upper + np.triu(upper, 1).T
     _check_finite("update", result=P_new, x_result=x_new)
     return x_new, P_new
+
+
+def update_masked(x, P, z, H, r, mask=None):
+    """Kalman update with the measurements whose mask entry is true, as the C's update_masked.
+
+    Returns (x, P, innovation, nis): innovation is z - H x before the update
+    for the used measurements and 0 for the others, nis the normalized
+    innovation squared nu^T S^-1 nu over the used ones.  mask None uses all;
+    z, H and r of an unused measurement are ignored (NaN allowed).
+    """
+    z = np.asarray(z, dtype=float)
+    m = z.shape[0] if z.ndim == 1 else -1
+    used = np.ones(m, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    _check_shapes("update_masked", z=(z, (m,)), mask=(used, (m,)), H=(H, (m, N_STATES)), r=(r, (m,)))
+    H, r = np.asarray(H, dtype=float), np.asarray(r, dtype=float)
+    innovation = np.zeros(m)
+    if not used.any():
+        return np.asarray(x, dtype=float).copy(), np.asarray(P, dtype=float).copy(), innovation, 0.0
+    x_new, P_new = update(x, P, z[used], H[used], r[used])
+    nu = z[used] - H[used] @ np.asarray(x, dtype=float)
+    S = H[used] @ np.asarray(P, dtype=float) @ H[used].T + np.diag(r[used])
+    innovation[used] = nu
+    return x_new, P_new, innovation, float(nu @ np.linalg.solve(S, nu))
+
+
+def reset_error_state(x):
+    """Closed-loop feedback, as the C's reset_error_state: the error estimate after it is applied (zeros; P unchanged)."""
+    return np.zeros_like(np.asarray(x, dtype=float))
 
 
 # -- the contract: what every function refuses, as the C does --------------

@@ -60,6 +60,37 @@ NOISE_NAMES = ("gyro_white_noise_x", "gyro_white_noise_y", "gyro_white_noise_z",
 MEASUREMENT_NAMES = ("velocity_difference_east", "velocity_difference_north", "velocity_difference_up", "position_difference_north", "position_difference_east", "position_difference_up")
 PARAMETER_NAMES = ("latitude", "height", "velocity_east", "velocity_north", "velocity_up", "specific_force_east", "specific_force_north", "specific_force_up", "c11", "c12", "c13", "c21", "c22", "c23", "c31", "c32", "c33", "earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "gyro_angle_random_walk", "accel_velocity_random_walk", "gps_velocity_sigma_east", "gps_velocity_sigma_north", "gps_velocity_sigma_up", "gps_position_sigma_north", "gps_position_sigma_east", "gps_position_sigma_up")
 PARAMETER_DEFAULTS = {"earth_rate": 7.2921151467e-05, "gravity": 9.80665}
+MODEL_HASH = "6108228e93e2abba"  # sha256 of the canonical model declaration, first 16 hex digits
+MODELGEN_VERSION = "0.1.0"
+
+# State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.
+STATE_ATTITUDE_ERROR_EAST = 0  # [rad] misalignment angle about east (phi_E)
+STATE_ATTITUDE_ERROR_NORTH = 1  # [rad] misalignment angle about north (phi_N)
+STATE_ATTITUDE_ERROR_UP = 2  # [rad] misalignment angle about up, azimuth error (phi_U)
+STATE_VELOCITY_ERROR_EAST = 3  # [m/s] east velocity error (delta v_E)
+STATE_VELOCITY_ERROR_NORTH = 4  # [m/s] north velocity error (delta v_N)
+STATE_VELOCITY_ERROR_UP = 5  # [m/s] up velocity error (delta v_U)
+STATE_LATITUDE_ERROR = 6  # [rad] latitude error (delta L)
+STATE_LONGITUDE_ERROR = 7  # [rad] longitude error (delta lambda)
+STATE_HEIGHT_ERROR = 8  # [m] height error (delta h)
+STATE_GYRO_CONSTANT_DRIFT_X = 9  # [rad/s] x gyro random-constant drift (bias)
+STATE_GYRO_CONSTANT_DRIFT_Y = 10  # [rad/s] y gyro random-constant drift (bias)
+STATE_GYRO_CONSTANT_DRIFT_Z = 11  # [rad/s] z gyro random-constant drift (bias)
+STATE_ACCEL_CONSTANT_BIAS_X = 12  # [m/s^2] x accelerometer random-constant bias
+STATE_ACCEL_CONSTANT_BIAS_Y = 13  # [m/s^2] y accelerometer random-constant bias
+STATE_ACCEL_CONSTANT_BIAS_Z = 14  # [m/s^2] z accelerometer random-constant bias
+NOISE_GYRO_WHITE_NOISE_X = 0  # [rad/sqrt(s)] x gyro white noise (angle random walk)
+NOISE_GYRO_WHITE_NOISE_Y = 1  # [rad/sqrt(s)] y gyro white noise (angle random walk)
+NOISE_GYRO_WHITE_NOISE_Z = 2  # [rad/sqrt(s)] z gyro white noise (angle random walk)
+NOISE_ACCEL_WHITE_NOISE_X = 3  # [m/s/sqrt(s)] x accelerometer white noise (velocity random walk)
+NOISE_ACCEL_WHITE_NOISE_Y = 4  # [m/s/sqrt(s)] y accelerometer white noise (velocity random walk)
+NOISE_ACCEL_WHITE_NOISE_Z = 5  # [m/s/sqrt(s)] z accelerometer white noise (velocity random walk)
+MEASUREMENT_VELOCITY_DIFFERENCE_EAST = 0  # [m/s] 
+MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = 1  # [m/s] 
+MEASUREMENT_VELOCITY_DIFFERENCE_UP = 2  # [m/s] 
+MEASUREMENT_POSITION_DIFFERENCE_NORTH = 3  # [m] 
+MEASUREMENT_POSITION_DIFFERENCE_EAST = 4  # [m] 
+MEASUREMENT_POSITION_DIFFERENCE_UP = 5  # [m] 
 SERIES_RANGE = 0.11483164143919657  # largest ||F h||_D with a Taylor remainder below 2^-53
 _F_ROWS = np.array([0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 7, 7, 7, 8], dtype=np.int64)  # structural nonzeros of F, row by row
 _F_COLS = np.array([1, 2, 4, 8, 9, 10, 11, 0, 2, 3, 6, 8, 9, 10, 11, 0, 1, 3, 6, 8, 9, 10, 11, 1, 2, 3, 4, 5, 6, 8, 12, 13, 14, 0, 2, 3, 4, 5, 6, 8, 12, 13, 14, 0, 1, 3, 4, 6, 8, 12, 13, 14, 4, 8, 3, 6, 8, 5], dtype=np.int64)
@@ -335,6 +366,11 @@ def measurement_variance(p):
     return out
 
 
+def matrices_evaluate(p):
+    """F, G, H, diag(Q), diag(R) at the operating point p, as the C's matrices_evaluate (full matrices)."""
+    return system_matrix(p), noise_input_matrix(p), measurement_matrix(p), noise_psd(p), measurement_variance(p)
+
+
 def _balanced_norm(F):
     """max_i sum_j |F_ij| d_j / d_i, D from 8 Jacobi sweeps of Osborne's balancing in powers of two.
 
@@ -470,6 +506,34 @@ def update(x, P, z, H, r):
     P_new = upper + np.triu(upper, 1).T
     _check_finite("update", result=P_new, x_result=x_new)
     return x_new, P_new
+
+
+def update_masked(x, P, z, H, r, mask=None):
+    """Kalman update with the measurements whose mask entry is true, as the C's update_masked.
+
+    Returns (x, P, innovation, nis): innovation is z - H x before the update
+    for the used measurements and 0 for the others, nis the normalized
+    innovation squared nu^T S^-1 nu over the used ones.  mask None uses all;
+    z, H and r of an unused measurement are ignored (NaN allowed).
+    """
+    z = np.asarray(z, dtype=float)
+    m = z.shape[0] if z.ndim == 1 else -1
+    used = np.ones(m, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    _check_shapes("update_masked", z=(z, (m,)), mask=(used, (m,)), H=(H, (m, N_STATES)), r=(r, (m,)))
+    H, r = np.asarray(H, dtype=float), np.asarray(r, dtype=float)
+    innovation = np.zeros(m)
+    if not used.any():
+        return np.asarray(x, dtype=float).copy(), np.asarray(P, dtype=float).copy(), innovation, 0.0
+    x_new, P_new = update(x, P, z[used], H[used], r[used])
+    nu = z[used] - H[used] @ np.asarray(x, dtype=float)
+    S = H[used] @ np.asarray(P, dtype=float) @ H[used].T + np.diag(r[used])
+    innovation[used] = nu
+    return x_new, P_new, innovation, float(nu @ np.linalg.solve(S, nu))
+
+
+def reset_error_state(x):
+    """Closed-loop feedback, as the C's reset_error_state: the error estimate after it is applied (zeros; P unchanged)."""
+    return np.zeros_like(np.asarray(x, dtype=float))
 
 
 # -- the contract: what every function refuses, as the C does --------------

@@ -60,6 +60,50 @@ NOISE_NAMES = ("gyro_markov_noise_x", "gyro_markov_noise_y", "gyro_markov_noise_
 MEASUREMENT_NAMES = ("velocity_difference_north", "velocity_difference_east")
 PARAMETER_NAMES = ("latitude", "velocity_north", "velocity_east", "velocity_down", "specific_force_north", "specific_force_east", "specific_force_down", "c11", "c12", "c13", "c21", "c22", "c23", "c31", "c32", "c33", "earth_rate", "earth_radius", "gyro_markov_rate_x", "gyro_markov_rate_y", "gyro_markov_rate_z", "gyro_markov_sigma_x", "gyro_markov_sigma_y", "gyro_markov_sigma_z", "accel_markov_rate_x", "accel_markov_rate_y", "accel_markov_rate_z", "accel_markov_sigma_x", "accel_markov_sigma_y", "accel_markov_sigma_z", "doppler_noise_sigma_north", "doppler_noise_sigma_east", "body_rate_x", "body_rate_y", "body_rate_z", "body_specific_force_x", "body_specific_force_y", "body_specific_force_z")
 PARAMETER_DEFAULTS = {"earth_rate": 7.2921151467e-05, "earth_radius": 6378137.0}
+MODEL_HASH = "bf152cb7325a72ad"  # sha256 of the canonical model declaration, first 16 hex digits
+MODELGEN_VERSION = "0.1.0"
+
+# State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.
+STATE_ATTITUDE_ERROR_NORTH = 0  # [rad] attitude error about north
+STATE_ATTITUDE_ERROR_EAST = 1  # [rad] attitude error about east
+STATE_HEADING_ERROR = 2  # [rad] attitude (azimuth) error about down
+STATE_VELOCITY_ERROR_NORTH = 3  # [m/s] north velocity error
+STATE_VELOCITY_ERROR_EAST = 4  # [m/s] east velocity error
+STATE_LATITUDE_ERROR = 5  # [rad] latitude error
+STATE_LONGITUDE_ERROR = 6  # [rad] longitude error
+STATE_GYRO_CONSTANT_DRIFT_X = 7  # [rad/s] x gyro random-constant drift, eq. (2)
+STATE_GYRO_CONSTANT_DRIFT_Y = 8  # [rad/s] y gyro random-constant drift, eq. (2)
+STATE_GYRO_CONSTANT_DRIFT_Z = 9  # [rad/s] z gyro random-constant drift, eq. (2)
+STATE_GYRO_MARKOV_DRIFT_X = 10  # [rad/s] x gyro first-order Markov drift, eq. (3)
+STATE_GYRO_MARKOV_DRIFT_Y = 11  # [rad/s] y gyro first-order Markov drift, eq. (3)
+STATE_GYRO_MARKOV_DRIFT_Z = 12  # [rad/s] z gyro first-order Markov drift, eq. (3)
+STATE_ACCEL_MARKOV_BIAS_X = 13  # [m/s^2] x accelerometer Markov bias, eq. (4)
+STATE_ACCEL_MARKOV_BIAS_Y = 14  # [m/s^2] y accelerometer Markov bias, eq. (4)
+STATE_ACCEL_MARKOV_BIAS_Z = 15  # [m/s^2] z accelerometer Markov bias, eq. (4)
+STATE_DOPPLER_VELOCITY_BIAS_NORTH = 16  # [m/s] Doppler velocity bias, north (random constant)
+STATE_DOPPLER_VELOCITY_BIAS_EAST = 17  # [m/s] Doppler velocity bias, east (random constant)
+STATE_GYRO_SCALE_FACTOR_X = 18  # [1] 
+STATE_GYRO_SCALE_FACTOR_Y = 19  # [1] 
+STATE_GYRO_SCALE_FACTOR_Z = 20  # [1] 
+STATE_GYRO_MISALIGNMENT_XY = 21  # [rad] 
+STATE_GYRO_MISALIGNMENT_XZ = 22  # [rad] 
+STATE_GYRO_MISALIGNMENT_YX = 23  # [rad] 
+STATE_GYRO_MISALIGNMENT_YZ = 24  # [rad] 
+STATE_GYRO_MISALIGNMENT_ZX = 25  # [rad] 
+STATE_GYRO_MISALIGNMENT_ZY = 26  # [rad] 
+STATE_ACCEL_SCALE_FACTOR_X = 27  # [1] 
+STATE_ACCEL_SCALE_FACTOR_Y = 28  # [1] 
+STATE_ACCEL_SCALE_FACTOR_Z = 29  # [1] 
+STATE_DOPPLER_SCALE_FACTOR = 30  # [1] 
+STATE_DOPPLER_BORESIGHT_AZIMUTH = 31  # [rad] 
+NOISE_GYRO_MARKOV_NOISE_X = 0  # [rad/s/sqrt(s)] driving noise of eps_r_x, eq. (5)
+NOISE_GYRO_MARKOV_NOISE_Y = 1  # [rad/s/sqrt(s)] driving noise of eps_r_y, eq. (5)
+NOISE_GYRO_MARKOV_NOISE_Z = 2  # [rad/s/sqrt(s)] driving noise of eps_r_z, eq. (5)
+NOISE_ACCEL_MARKOV_NOISE_X = 3  # [m/s^2/sqrt(s)] driving noise of nabla_x, eq. (5)
+NOISE_ACCEL_MARKOV_NOISE_Y = 4  # [m/s^2/sqrt(s)] driving noise of nabla_y, eq. (5)
+NOISE_ACCEL_MARKOV_NOISE_Z = 5  # [m/s^2/sqrt(s)] driving noise of nabla_z, eq. (5)
+MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = 0  # [m/s] 
+MEASUREMENT_VELOCITY_DIFFERENCE_EAST = 1  # [m/s] 
 SERIES_RANGE = 0.11483164143919657  # largest ||F h||_D with a Taylor remainder below 2^-53
 _F_ROWS = np.array([0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 6, 6, 10, 11, 12, 13, 14, 15], dtype=np.int64)  # structural nonzeros of F, row by row
 _F_COLS = np.array([1, 2, 4, 5, 7, 8, 9, 10, 11, 12, 18, 19, 20, 21, 22, 23, 24, 25, 26, 0, 2, 3, 7, 8, 9, 10, 11, 12, 18, 19, 20, 21, 22, 23, 24, 25, 26, 0, 1, 4, 5, 7, 8, 9, 10, 11, 12, 18, 19, 20, 21, 22, 23, 24, 25, 26, 1, 2, 3, 4, 5, 13, 14, 15, 27, 28, 29, 0, 2, 3, 4, 5, 13, 14, 15, 27, 28, 29, 3, 4, 5, 10, 11, 12, 13, 14, 15], dtype=np.int64)
@@ -340,6 +384,11 @@ def measurement_variance(p):
     return out
 
 
+def matrices_evaluate(p):
+    """F, G, H, diag(Q), diag(R) at the operating point p, as the C's matrices_evaluate (full matrices)."""
+    return system_matrix(p), noise_input_matrix(p), measurement_matrix(p), noise_psd(p), measurement_variance(p)
+
+
 def _balanced_norm(F):
     """max_i sum_j |F_ij| d_j / d_i, D from 8 Jacobi sweeps of Osborne's balancing in powers of two.
 
@@ -475,6 +524,34 @@ def update(x, P, z, H, r):
     P_new = upper + np.triu(upper, 1).T
     _check_finite("update", result=P_new, x_result=x_new)
     return x_new, P_new
+
+
+def update_masked(x, P, z, H, r, mask=None):
+    """Kalman update with the measurements whose mask entry is true, as the C's update_masked.
+
+    Returns (x, P, innovation, nis): innovation is z - H x before the update
+    for the used measurements and 0 for the others, nis the normalized
+    innovation squared nu^T S^-1 nu over the used ones.  mask None uses all;
+    z, H and r of an unused measurement are ignored (NaN allowed).
+    """
+    z = np.asarray(z, dtype=float)
+    m = z.shape[0] if z.ndim == 1 else -1
+    used = np.ones(m, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    _check_shapes("update_masked", z=(z, (m,)), mask=(used, (m,)), H=(H, (m, N_STATES)), r=(r, (m,)))
+    H, r = np.asarray(H, dtype=float), np.asarray(r, dtype=float)
+    innovation = np.zeros(m)
+    if not used.any():
+        return np.asarray(x, dtype=float).copy(), np.asarray(P, dtype=float).copy(), innovation, 0.0
+    x_new, P_new = update(x, P, z[used], H[used], r[used])
+    nu = z[used] - H[used] @ np.asarray(x, dtype=float)
+    S = H[used] @ np.asarray(P, dtype=float) @ H[used].T + np.diag(r[used])
+    innovation[used] = nu
+    return x_new, P_new, innovation, float(nu @ np.linalg.solve(S, nu))
+
+
+def reset_error_state(x):
+    """Closed-loop feedback, as the C's reset_error_state: the error estimate after it is applied (zeros; P unchanged)."""
+    return np.zeros_like(np.asarray(x, dtype=float))
 
 
 # -- the contract: what every function refuses, as the C does --------------

@@ -130,6 +130,10 @@ class CompiledFilter:
         if self._update is not None:
             self._update.argtypes = [ctypes.c_void_p] * 4
             self._update.restype = ctypes.c_int
+            self._update_masked = self._function("update_masked", [ctypes.c_void_p] * 7)
+        self._reset = getattr(self.lib, f"{model}_reset_error_state")
+        self._reset.argtypes = [ctypes.c_void_p]
+        self._reset.restype = None
 
     def _function(self, name: str, argtypes: list) -> ctypes._CFuncPtr:
         fn = getattr(self.lib, f"{self.model}_{name}")
@@ -159,6 +163,24 @@ class CompiledFilter:
             raise ModelError(f"model {self.model!r} has no measurements")
         zc = (self.real * max(self.nm, 1))(*[float(v) for v in z])
         return self._update(ctypes.byref(self.filter), zc, ctypes.byref(self.matrices), ctypes.byref(self.workspace))
+
+    def update_masked(self, z: np.ndarray, mask: np.ndarray | None) -> tuple[int, np.ndarray, float]:
+        """The generated update_masked: (status, innovation before the update, NIS); mask None uses all."""
+        if self._update is None:
+            raise ModelError(f"model {self.model!r} has no measurements")
+        dim = max(self.nm, 1)
+        zc = (self.real * dim)(*[float(v) for v in z])
+        maskc = None if mask is None else (ctypes.c_ubyte * dim)(*[1 if v else 0 for v in mask])
+        innovation, nis = (self.real * dim)(), self.real(np.nan)
+        status = self._update_masked(
+            ctypes.byref(self.filter), zc, maskc, ctypes.byref(self.matrices), innovation, ctypes.byref(nis),
+            ctypes.byref(self.workspace),
+        )
+        return int(status), np.array(innovation[: self.nm], dtype=float), float(nis.value)
+
+    def reset_error_state(self) -> None:
+        """The generated reset_error_state: x := 0 after feedback, P unchanged."""
+        self._reset(ctypes.byref(self.filter))
 
     # -- views ---------------------------------------------------------------
     def set_state(self, x: np.ndarray, P: np.ndarray) -> int:

@@ -153,6 +153,7 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout
             Field("f", (N,), "Bierman: U^T h"),
             Field("v", (N,), "Bierman: D U^T h"),
             Field("b", (N,), "Bierman: unscaled gain"),
+            Field("nu0", (dim_m,), "innovation z - H x before the update"),
         )
         return CLayout(matrices, transition, filt, discretize_scratch, filter_scratch)
 
@@ -186,10 +187,12 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout
             Field("C", (N, dim_m), "K S (Joseph form)"),
             Field("S_innovation", (dim_m, dim_m), "innovation covariance H P H^T + R"),
             Field("nu", (dim_m,)),
+            Field("y", (dim_m,), "L^-1 nu, for the NIS"),
         ]
     else:
         filter_scratch += [
             Field("ph", (N,), "P h^T of one scalar measurement"),
             Field("k", (N,), "gain of one scalar measurement"),
         ]
+    filter_scratch.append(Field("nu0", (dim_m,), "innovation z - H x before the update"))
     return CLayout(matrices, transition, filt, discretize_scratch, tuple(filter_scratch))

@@ -48,6 +48,7 @@ class Backend:
     templates: Path
     files: tuple[tuple[str, str], ...]
     harness: Path | None = None
+    finish: Callable[[str, str], str] | None = None  # (file name, text) -> text, e.g. line wrapping
 
     def environment(self) -> jinja2.Environment:
         """The jinja2 environment over the product (and harness) templates."""
@@ -57,7 +58,10 @@ class Backend:
         """Every product file of this backend for one filter: file name -> text."""
         env, context = self.environment(), self.context(description)
         name = description.model.name
-        return {file.format(p=name): env.get_template(t).render(context) for file, t in self.files}
+        files = {file.format(p=name): env.get_template(t).render(context) for file, t in self.files}
+        if self.finish is not None:
+            files = {file: self.finish(file, text) for file, text in files.items()}
+        return files
 
     def render_template(self, description: FilterDescription, template: str, **extra: object) -> str:
         """One more template (harness or product) with this backend's context and ``extra``."""

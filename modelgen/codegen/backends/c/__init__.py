@@ -13,14 +13,22 @@ from pathlib import Path
 
 from modelgen.codegen.backends import Backend
 from modelgen.codegen.backends.c.context import c_context
+from modelgen.codegen.backends.c.printer import wrap_c
 
 HERE = Path(__file__).resolve().parent
+
+
+def finish(name: str, text: str) -> str:
+    """C sources and headers wrapped to 100 columns; the build files and README as rendered."""
+    return wrap_c(text) if name.endswith((".c", ".h")) else text
+
 
 BACKEND = Backend(
     name="c",
     context=c_context,
     templates=HERE / "templates",
     harness=HERE / "harness",
+    finish=finish,
     files=(
         ("{p}.h", "c_header.h.j2"),
         ("{p}.c", "c_source.c.j2"),

@@ -57,14 +57,14 @@ def index_tables(structure: FilterStructure) -> dict[str, object]:
 
 def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, object]]:
     """Static C functions for the unrolled kernel pieces, with the parameters each uses."""
-    types = {"filter": f"const {prefix}_filter", "transition": f"const {prefix}_transition", "scratch": f"{prefix}_filter_scratch"}
+    types = {"filter": f"const {prefix}_filter", "transition": f"const {prefix}_transition", "scratch": f"{prefix}_filter_scratch"}  # noqa: E501
     out = []
     for block in blocks:
         owners = [o for o in ("filter", "transition") if block.uses(o)] + ["scratch"]
         out.append(
             {
                 "name": block.name,
-                "signature": ", ".join(f"{types[o]} *{POINTERS[o]}" for o in owners),
+                "signature": ", ".join(f"{types[o]} *restrict {POINTERS[o]}" for o in owners),
                 "arguments": ", ".join(POINTERS[o] for o in owners),
                 "lines": [c_statement(s) for s in block.statements],
                 "checked": block.checked,
@@ -138,7 +138,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
     index_type = "unsigned char" if tables["max_index"] < 256 else "unsigned short"
     spell = scalar_spellings(options.scalar)
     packed = description.packed
-    at_upper, at_any = accessors(packed)
+    at_upper, at_any = accessors(packed, prefix)
     layout = c_layout(sizes, options, prefix)
     printer = CPrinter(options.scalar, {p.sym: f"params->{p.name}" for p in model.parameters})
     targets, _, block = description.evaluation
@@ -187,7 +187,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "joseph": options.covariance_update == "joseph",
         "at_upper": at_upper,
         "at_any": at_any,
-        "pivot_tolerance": f"(16 * N * {spell['epsilon']})",
+        "pivot_tolerance": f"(16 * {prefix}_N_STATES * {spell['epsilon']})",
         "update_doc": _update_doc(description),
         "part_templates": parts,
         "source_templates": ["c_source.c.j2", *parts, "c_udu_factor.c.j2"],

@@ -60,8 +60,66 @@ def c_statement(statement: Statement) -> str:
     return f"v = {c_sum(statement.terms)}; {stores} check += v - v;"
 
 
-def accessors(packed: bool) -> tuple[Callable[[str, str, str], str], Callable[[str, str, str], str]]:
+def accessors(packed: bool, prefix: str) -> tuple[Callable[[str, str, str], str], Callable[[str, str, str], str]]:
     """C text for entry (i, j) of a symmetric matrix: (i <= j only, any i, j), for the loop templates."""
     if packed:
-        return (lambda base, i, j: f"{base}[PACKED_UPPER({i}, {j})]", lambda base, i, j: f"{base}[PACKED_ANY({i}, {j})]")
+        return (
+            lambda base, i, j: f"{base}[{prefix}_PACKED_UPPER({i}, {j})]",
+            lambda base, i, j: f"{base}[{prefix}_PACKED_ANY({i}, {j})]",
+        )
     return (lambda base, i, j: f"{base}[{i}][{j}]", lambda base, i, j: f"{base}[{i}][{j}]")
+
+
+#: Longest line of the generated C (tests/codegen/test_c_contract.py checks it).
+LINE_WIDTH = 100
+
+
+def wrap_line(line: str, width: int = LINE_WIDTH) -> list[str]:
+    """``line`` broken at spaces into lines of at most ``width`` columns where C allows it.
+
+    A space may become a line break anywhere in C code and inside a block
+    comment; preprocessor lines, string literals and ``//`` comments are left
+    whole.  Continuations are indented 8 more columns (``*   `` inside a
+    comment block whose lines start with ``*``).
+    """
+    if len(line) <= width:
+        return [line]
+    body = line.lstrip(" ")
+    indent = line[: len(line) - len(body)]
+    if body.startswith("#define") and " /* " in body and body.endswith("*/") and '"' not in body:
+        directive, comment = body.split(" /* ", 1)  # the comment goes on the lines above the macro
+        return wrap_line(indent + "/* " + comment, width) + [indent + directive.rstrip(" ")]
+    if body.startswith("#") or '"' in body or "//" in body:
+        return [line]
+    continuation = indent + ("*   " if body.startswith("* ") else " " * 8)
+    room = width - len(continuation)
+    words = [piece for word in body.split(" ") for piece in _split_product(word, room)]
+    lines, current = [], indent + words[0]
+    for word in words[1:]:
+        if len(current) + 1 + len(word) > width and current.strip() not in ("", "*"):
+            lines.append(current.rstrip(" "))
+            current = continuation + word
+        else:
+            current += " " + word
+    lines.append(current)
+    return lines
+
+
+def _split_product(word: str, room: int) -> list[str]:
+    """A product longer than ``room`` split after its ``*`` (a break is then a space, which C allows)."""
+    if len(word) <= room or "*" not in word or "/*" in word or "*/" in word:
+        return [word]
+    pieces, current = [], ""
+    for factor in word.split("*"):
+        candidate = f"{current}*{factor}" if current else factor
+        if current and len(candidate) + 1 > room:
+            pieces.append(current + "*")
+            current = factor
+        else:
+            current = candidate
+    return pieces + [current]
+
+
+def wrap_c(text: str, width: int = LINE_WIDTH) -> str:
+    """Every line of a C file wrapped by :func:`wrap_line`."""
+    return "\n".join(out for line in text.split("\n") for out in wrap_line(line, width))
