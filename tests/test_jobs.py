@@ -1,0 +1,71 @@
+"""The jobs hand derived models to each other; which model is the paper's comes from data."""
+
+from __future__ import annotations
+
+import ast
+
+import pytest
+
+from conftest import REPO
+from modelgen import jobs
+from modelgen.errors import ModelError
+
+
+def test_a_model_is_derived_once_per_job_and_the_same_object_is_handed_out(monkeypatch, paper_derived):
+    calls = []
+
+    def counting(model):
+        calls.append(str(model))
+        return paper_derived
+
+    monkeypatch.setattr(jobs, "load_and_derive", counting)
+    models = jobs.DerivedModels()
+    first = models.get("ned_doppler18")
+    assert models.get("ned_doppler18") is first and calls == ["ned_doppler18"]
+
+
+def test_a_model_the_caller_derived_is_not_derived_again(monkeypatch, paper_derived):
+    monkeypatch.setattr(jobs, "load_and_derive", lambda model: pytest.fail(f"{model} derived again"))
+    models = jobs.DerivedModels()
+    models.add("ned_doppler18", paper_derived)
+    assert models.get("ned_doppler18") is paper_derived
+
+
+def test_generate_takes_a_derived_model_without_deriving_it_again(monkeypatch, tmp_path, paper_derived):
+    monkeypatch.setattr(jobs, "load_and_derive", lambda model: pytest.fail(f"{model} derived again"))
+    result = jobs.generate(paper_derived, tmp_path)
+    assert result.derived is paper_derived and (tmp_path / "ned_doppler18" / "ned_doppler18.c").is_file()
+
+
+def test_the_papers_model_is_the_one_its_table_names(tmp_path):
+    from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model
+    from modelgen.fileio.datafiles import data_path
+
+    assert paper_table_model(data_path(CORE_PAPER_TABLE)) == "ned_doppler18"
+    table = tmp_path / "paper_999_table.yaml"
+    table.write_text("model: my_model\n")
+    assert paper_table_model(table) == "my_model"
+    table.write_text("source: no model key\n")
+    with pytest.raises(ModelError, match="needs 'model: <model name>'"):
+        paper_table_model(table)
+
+
+def _builtin_model_names() -> set[str]:
+    return {p.stem for p in (REPO / "modelgen" / "models").glob("*.yaml")}
+
+
+def test_no_code_compares_anything_with_a_built_in_models_name():
+    """A model's role (the paper's model...) is data: no ``x == "ned_doppler18"`` in the package."""
+    names = _builtin_model_names()
+    found = []
+    for path in (REPO / "modelgen").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Compare):
+                operands = [node.left, *node.comparators]
+                literals = {o.value for o in operands if isinstance(o, ast.Constant) and isinstance(o.value, str)}
+                for o in operands:
+                    if isinstance(o, (ast.Tuple, ast.List, ast.Set)):
+                        literals |= {e.value for e in o.elts if isinstance(e, ast.Constant) and isinstance(e.value, str)}
+                if literals & names:
+                    found.append(f"{path.relative_to(REPO)}:{node.lineno}")
+    assert not found, found
