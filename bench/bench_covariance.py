@@ -21,6 +21,8 @@ from modelgen.analysis.scenario import operating_point  # noqa: E402
 from modelgen.analysis.systems import PaperModels, analyse_systems  # noqa: E402
 from modelgen.derive import reference  # noqa: E402
 from modelgen.derive.discretization import taylor_discretization, taylor_process_noise  # noqa: E402
+from modelgen.derive.symbolic import derive  # noqa: E402
+from modelgen.model.loading import load_model  # noqa: E402
 
 
 def naive_optimal_filter(models: PaperModels, scenario, budget) -> None:
@@ -37,14 +39,14 @@ def naive_optimal_filter(models: PaperModels, scenario, budget) -> None:
 def main() -> None:
     scenario, budget = load_analysis_scenario(), load_error_budget()
     t0 = time.perf_counter()
-    models = PaperModels.build()
+    models = PaperModels.build(derive(load_model("ned_doppler18")))
     t1 = time.perf_counter()
     repeats = 5
     for _ in range(repeats):
         analyse_systems(models, scenario, budget)
     t2 = time.perf_counter()
     with tempfile.TemporaryDirectory() as out:
-        run_covariance_analysis(out, sensitivity=True, figures=True)
+        run_covariance_analysis(out, models, sensitivity=True, figures=True)
     t3 = time.perf_counter()
     naive_optimal_filter(models, scenario, budget)
     t4 = time.perf_counter()

@@ -316,9 +316,7 @@ def main_job(
     summary = verification_summary(result, *write_verification_report(result, report))
     runs = generate_and_check_all(Path(out_root), progress=progress, force=force, models=models)
     progress("covariance analysis (Table 2, Figs 2-7) ...")
-    analysis = run_covariance_analysis(
-        report / "covariance", figures=figures, progress=echo, models=PaperModels.build(truth=derived)
-    )
+    analysis = run_covariance_analysis(report / "covariance", PaperModels.build(derived), figures=figures, progress=echo)
     sections = ["## Covariance analysis (Table 2 analogue)\n\n" + analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)"]
     if with_simulation:
         from modelgen.simulation.flight_report import simulate
@@ -377,8 +375,13 @@ def observability_report(
 def covariance_analysis(folder: Path, sensitivity: bool, figures: bool, progress=None):
     """``modelgen covariance``: Table 2 and Figs 2-7 into ``folder`` (a :class:`CovarianceReport`)."""
     from modelgen.analysis.covariance_report import run_covariance_analysis
+    from modelgen.analysis.systems import PaperModels
 
-    return run_covariance_analysis(folder, sensitivity=sensitivity, figures=figures, progress=progress)
+    say = progress or (lambda message: None)
+    paper_model = paper_table_model(data_path(CORE_PAPER_TABLE))
+    say(f"deriving {paper_model} and the reduced models made from it")
+    models = PaperModels.build(load_and_derive(paper_model))
+    return run_covariance_analysis(folder, models, sensitivity=sensitivity, figures=figures, progress=progress)
 
 
 def flight_scenario(profile: str, hours: float | None = None, imu_rate: float | None = None):

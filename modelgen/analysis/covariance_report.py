@@ -1,6 +1,6 @@
 """The covariance analysis of the core paper, end to end: Table 2, sensitivity, Figs 2-7.
 
-``run_covariance_analysis(out_dir)`` computes the six systems, writes
+``run_covariance_analysis(out_dir, models)`` computes the six systems, writes
 ``table2.md`` (our Table 2 beside the paper's with ratios ours/paper,
 improvement ratios, the values we chose, the sensitivity section),
 ``table2.csv`` and the Fig 2-7 analogues (PNG).  Text output is byte-stable:
@@ -19,7 +19,7 @@ from modelgen.analysis.figures import write_figures
 from modelgen.analysis.inference import infer_doppler_noise
 from modelgen.analysis.scenario import AnalysisScenario, load_analysis_scenario
 from modelgen.analysis.sensitivity import SensitivityResult, default_cases, markdown_sensitivity, run_sensitivity
-from modelgen.analysis.systems import PaperModels, SystemResult, analyse_systems, paper_models
+from modelgen.analysis.systems import PaperModels, SystemResult, analyse_systems
 from modelgen.analysis.table2 import COLUMNS, Row, csv_text, load_paper_table, markdown_improvement, markdown_table, table_rows
 
 #: a cell counts as reproduced within this fraction of the paper's value; the
@@ -108,25 +108,22 @@ Known limits of the comparison:
 
 def run_covariance_analysis(
     out_dir: str | Path,
+    models: PaperModels,
     *,
     sensitivity: bool = True,
     figures: bool = True,
     progress: Callable[[str], None] | None = None,
-    models: PaperModels | None = None,
 ) -> CovarianceReport:
     """Compute the six systems of Table 2 and write table2.md, table2.csv and Figs 2-7 into ``out_dir``.
 
-    ``models`` are the paper's derived models when the caller has them (the
-    main job builds them from the model it derived once); by default they are
-    derived here.
+    ``models`` are the paper's systems built from the 18-state model the
+    caller derived (:meth:`PaperModels.build`); nothing is derived here by name.
     """
     say = progress or (lambda message: None)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     scenario, budget, paper = load_analysis_scenario(), load_error_budget(), load_paper_table()
 
-    say("deriving the 18-state model and the reduced models made from it")
-    models = models if models is not None else paper_models()
     say("covariance analysis: pure inertial, optimal, suboptimal I-IV (4 h, 240 steps)")
     results = analyse_systems(models, scenario, budget)
     rows = table_rows(results, paper)

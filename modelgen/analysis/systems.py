@@ -10,7 +10,6 @@ so sensitivity studies are cheap.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Sequence
 
 import numpy as np
@@ -27,8 +26,6 @@ from modelgen.analysis.metrics import navigation_errors
 from modelgen.analysis.scenario import AnalysisScenario, operating_point
 from modelgen.analysis.suboptimal import PAPER_FILTERS, FilterDesign, filter_model, filter_parameters, gain_schedule
 from modelgen.derive.symbolic import DerivedModel, derive
-from modelgen.model.declaration import ErrorModel
-from modelgen.model.loading import load_model
 from modelgen.model.transform import keep_states
 
 PURE_INERTIAL = "pure_inertial"
@@ -45,18 +42,15 @@ class PaperModels:
     designs: tuple[FilterDesign, ...]
 
     @classmethod
-    def build(
-        cls, full: ErrorModel | None = None, designs: Sequence[FilterDesign] = PAPER_FILTERS, truth: DerivedModel | None = None
-    ) -> "PaperModels":
-        """Derive the paper's systems from ``full`` (or from ``truth``, the full model already derived)."""
-        full = truth.model if truth is not None else (full if full is not None else load_model("ned_doppler18"))
+    def build(cls, truth: DerivedModel, designs: Sequence[FilterDesign] = PAPER_FILTERS) -> "PaperModels":
+        """The paper's systems made from ``truth``, the full 18-state model the caller derived."""
+        full = truth.model
         pure = keep_states(
             full,
             [s for s in full.state_names if s not in DOPPLER_STATES],
             name=f"{full.name}_pure_inertial",
             title="pure-inertial form (Doppler states and measurements dropped)",
         )
-        truth = truth if truth is not None else derive(full)
         filters = {d.key: (truth if not d.reduced else derive(filter_model(full, d))) for d in designs}
         return cls(truth, derive(pure), filters, tuple(designs))
 
@@ -74,12 +68,6 @@ class PaperModels:
 def _structure(design: FilterDesign) -> tuple:
     """What determines a design's filter model (not its gain schedule)."""
     return (design.white_states, design.lumps, design.whitening if design.white_states else None)
-
-
-@lru_cache(maxsize=1)
-def paper_models() -> PaperModels:
-    """The built-in 18-state model and the paper's filters, derived once per process."""
-    return PaperModels.build()
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,6 @@ from modelgen.analysis.covariance import (
 )
 from modelgen.analysis.scenario import load_analysis_scenario, operating_point
 from modelgen.analysis.suboptimal import PAPER_FILTERS, filter_parameters
-from modelgen.analysis.systems import paper_models
 from modelgen.derive.discretization import van_loan_discretization
 from modelgen.errors import ModelError
 
@@ -24,8 +23,8 @@ STEPS = 60  # one hour is enough to exercise every recursion
 
 
 @pytest.fixture(scope="module")
-def setup():
-    models, scenario, budget = paper_models(), load_analysis_scenario(), load_error_budget()
+def setup(paper_systems):
+    models, scenario, budget = paper_systems, load_analysis_scenario(), load_error_budget()
     values = {**budget.parameters, **operating_point(scenario)}
     truth = discretize(models.truth, values, scenario.step_s, scenario.taylor_order)
     return models, scenario, budget, values, truth, budget.initial_covariance(models.truth.model)

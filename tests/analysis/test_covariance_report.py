@@ -7,9 +7,9 @@ import csv
 from modelgen.analysis.covariance_report import run_covariance_analysis
 
 
-def test_text_outputs_are_byte_stable_and_list_every_system(tmp_path):
-    first = run_covariance_analysis(tmp_path / "a", sensitivity=False, figures=False)
-    second = run_covariance_analysis(tmp_path / "b", sensitivity=False, figures=False)
+def test_text_outputs_are_byte_stable_and_list_every_system(tmp_path, paper_systems):
+    first = run_covariance_analysis(tmp_path / "a", paper_systems, sensitivity=False, figures=False)
+    second = run_covariance_analysis(tmp_path / "b", paper_systems, sensitivity=False, figures=False)
     for name in ("table2.md", "table2.csv"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
     for label in ("DI (optimal)", "DI (sub I)", "DI (sub II)", "DI (sub III)", "DI (sub IV)", "I (inertial)"):
@@ -21,8 +21,8 @@ def test_text_outputs_are_byte_stable_and_list_every_system(tmp_path):
     assert second.files == [tmp_path / "b" / "table2.md", tmp_path / "b" / "table2.csv"]
 
 
-def test_figures_2_to_7_are_written_as_png(tmp_path):
-    report = run_covariance_analysis(tmp_path, sensitivity=False, figures=True)
+def test_figures_2_to_7_are_written_as_png(tmp_path, paper_systems):
+    report = run_covariance_analysis(tmp_path, paper_systems, sensitivity=False, figures=True)
     pngs = sorted(p.name for p in report.files if p.suffix == ".png")
     assert [name[:4] for name in pngs] == ["fig2", "fig3", "fig4", "fig5", "fig6", "fig7"]
     for p in report.files:

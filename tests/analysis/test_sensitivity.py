@@ -5,7 +5,7 @@ from __future__ import annotations
 from modelgen.analysis.budget import load_error_budget
 from modelgen.analysis.scenario import load_analysis_scenario
 from modelgen.analysis.sensitivity import default_cases, markdown_sensitivity, run_sensitivity
-from modelgen.analysis.systems import PURE_INERTIAL, paper_models
+from modelgen.analysis.systems import PURE_INERTIAL
 
 
 def test_cases_cover_every_lost_value_and_design_reading():
@@ -14,10 +14,10 @@ def test_cases_cover_every_lost_value_and_design_reading():
         assert word in labels
 
 
-def test_more_doppler_noise_worsens_every_integrated_system_but_not_pure_inertial():
+def test_more_doppler_noise_worsens_every_integrated_system_but_not_pure_inertial(paper_systems):
     cases = default_cases(load_analysis_scenario(), load_error_budget())
     low, base, high = (next(c for c in cases if c.label.startswith(p)) for p in ("Doppler noise x0.5", "baseline", "Doppler noise x2"))
-    res = run_sensitivity([low, base, high], paper_models())
+    res = run_sensitivity([low, base, high], paper_systems)
     for k in ("optimal", "suboptimal_1", "suboptimal_2", "suboptimal_3", "suboptimal_4"):
         ceps = [r.final[k]["position_cep"] for r in res]
         assert ceps[0] < ceps[1] < ceps[2], k

@@ -32,7 +32,7 @@ import pytest
 from modelgen.analysis.budget import load_error_budget
 from modelgen.analysis.metrics import final_values
 from modelgen.analysis.scenario import load_analysis_scenario
-from modelgen.analysis.systems import PURE_INERTIAL, analyse_systems, paper_models
+from modelgen.analysis.systems import PURE_INERTIAL, analyse_systems
 from modelgen.analysis.table2 import COLUMNS, IMPROVEMENT_COLUMNS, load_paper_table, table_rows
 
 CORE_BAND, FIT_BAND, SUBOPTIMAL_BAND = 0.05, 0.01, 0.15
@@ -74,8 +74,8 @@ GAPS = {
 
 
 @pytest.fixture(scope="module")
-def results():
-    return analyse_systems(paper_models(), load_analysis_scenario(), load_error_budget())
+def results(paper_systems):
+    return analyse_systems(paper_systems, load_analysis_scenario(), load_error_budget())
 
 
 @pytest.fixture(scope="module")
