@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from modelgen.checks.code_check import ConformanceResult, Scenario, check_generated
+from modelgen.checks.code_check import ConformanceResult, CheckScenario, check_generated
 from modelgen.checks.paper_check import VerificationResult, verify, write_verification_report
 from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model, paper_table_path
 from modelgen.codegen.generate import CodegenOptions, GeneratedCode, generate_code
@@ -123,7 +123,7 @@ def generate(
     return GenerationResult(derived, code, folder, checks)
 
 
-def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -> Scenario:
+def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -> CheckScenario:
     """A well-conditioned operating point for checking code of a model without a ``check:`` section.
 
     Parameters without a default are drawn from [0.2, 1.0]; the step is
@@ -139,7 +139,7 @@ def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -
     step = 0.5 / norm if norm > 0 else 1.0
     x0 = rng.standard_normal(derived.n_states)
     label = "synthetic operating point (the model declares no check: section; parameters drawn from [0.2, 1])"
-    return Scenario(values, np.eye(derived.n_states), step=step, steps=steps, seed=seed, initial_state=x0, label=label)
+    return CheckScenario(values, np.eye(derived.n_states), step=step, steps=steps, seed=seed, initial_state=x0, label=label)
 
 
 def paper_parameters() -> dict[str, float]:
@@ -150,7 +150,7 @@ def paper_parameters() -> dict[str, float]:
     return {**load_error_budget().parameters, **operating_point(load_analysis_scenario())}
 
 
-def paper_scenario(derived: DerivedModel) -> Scenario:
+def paper_scenario(derived: DerivedModel) -> CheckScenario:
     """Seed 000's 4-hour scenario: level flight, Table 1 errors, T = 60 s."""
     from modelgen.analysis.budget import load_error_budget
     from modelgen.analysis.scenario import load_analysis_scenario
@@ -158,10 +158,10 @@ def paper_scenario(derived: DerivedModel) -> Scenario:
     flight, budget = load_analysis_scenario(), load_error_budget()
     values = paper_parameters()
     label = "the core paper's scenario (seed 000: level flight east at 30 N, Table 1, 240 steps of 60 s)"
-    return Scenario(values, budget.initial_covariance(derived.model), step=flight.step_s, steps=flight.steps, label=label)
+    return CheckScenario(values, budget.initial_covariance(derived.model), step=flight.step_s, steps=flight.steps, label=label)
 
 
-def declared_scenario(derived: DerivedModel) -> Scenario | None:
+def declared_scenario(derived: DerivedModel) -> CheckScenario | None:
     """The scenario of the model file's ``check:`` section (modelgen.model.check_scenario), if it has one.
 
     The initial state is drawn from N(0, P(0)) with the section's seed, so the
@@ -174,16 +174,16 @@ def declared_scenario(derived: DerivedModel) -> Scenario | None:
     rng = np.random.default_rng(spec.seed + 1)  # not the measurement stream's seed
     x0 = np.sqrt(np.diag(P0)) * rng.standard_normal(derived.n_states)
     label = f"the model's check scenario ({spec.steps} steps of {spec.step_s:g} s)"
-    return Scenario(spec.parameter_values(), P0, step=spec.step_s, steps=spec.steps, seed=spec.seed, initial_state=x0, label=label)
+    return CheckScenario(spec.parameter_values(), P0, step=spec.step_s, steps=spec.steps, seed=spec.seed, initial_state=x0, label=label)
 
 
-def check_scenario(derived: DerivedModel) -> Scenario:
+def check_scenario(derived: DerivedModel) -> CheckScenario:
     """What ``--check`` flies: the model's declared scenario, else the synthetic one (labelled so)."""
     return declared_scenario(derived) or synthetic_scenario(derived)
 
 
 def check(
-    derived: DerivedModel, folder: Path, scenario: Scenario | None = None, options: CodegenOptions | None = None
+    derived: DerivedModel, folder: Path, scenario: CheckScenario | None = None, options: CodegenOptions | None = None
 ) -> list[ConformanceResult]:
     """Compile the generated C and run it and the Python beside the reference.
 
@@ -324,7 +324,7 @@ def main_job(
 
         progress("simulate the paper's flight (profile_000, one run) ...")
         profile = load_profile("profile_000")
-        sim = simulate(profile, report / "simulation", runs=1, seed=1, echo=echo, derived=models.get(profile.filter.model))
+        sim = simulate(profile, models.get(profile.filter.model), report / "simulation", runs=1, seed=1, echo=echo)
         sections.append(f"## Simulation\n\nThe paper's profile flown once with the generated C filter: [simulation/{Path(sim).name}](simulation/{Path(sim).name}) and its figures.")
     text = run_report(summary, runs, Path(out_root), sections)
     write_text_atomically(report / "README.md", text)
@@ -345,7 +345,7 @@ def embedded_inputs(model: str | Path, qemu: bool):
     return derived, (check_scenario(derived) if qemu else None)
 
 
-def embedded_report(derived: DerivedModel, scenario: Scenario | None, folder: Path):
+def embedded_report(derived: DerivedModel, scenario: CheckScenario | None, folder: Path):
     """``modelgen embedded``: the Cortex-M4F builds and the qemu runs (an :class:`EmbeddedReport`) into ``folder``."""
     from modelgen.checks.embedded_check import embedded_report as build_and_run
 
@@ -398,4 +398,5 @@ def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation
     """``modelgen simulate``: fly the scenario (truth, sensors, filter, Monte Carlo) into ``folder``; the summary's path."""
     from modelgen.simulation.flight_report import simulate
 
-    return simulate(scenario, folder, runs=runs, seed=seed, echo=echo, implementation=implementation)
+    derived = load_and_derive(scenario.filter.model)
+    return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation)

@@ -18,8 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from modelgen.derive.symbolic import DerivedModel, derive
-from modelgen.model.loading import load_model
+from modelgen.derive.symbolic import DerivedModel
 from modelgen.simulation import earth
 from modelgen.simulation.filter_loop import MODES, RunResult
 from modelgen.simulation.filters import filter_factory
@@ -67,16 +66,16 @@ def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, in
     return report
 
 
-def simulate(scenario: FlightProfile, out_dir: Path, runs: int = 20, seed: int = 0, workers: int = 2,
-             echo: Callable[[str], None] = print, implementation: str = "c", derived: DerivedModel | None = None) -> Path:
-    """Run everything (module docstring) and return the summary's path.
+def simulate(scenario: FlightProfile, derived: DerivedModel, out_dir: Path, runs: int = 20, seed: int = 0,
+             workers: int = 2, echo: Callable[[str], None] = print, implementation: str = "c") -> Path:
+    """Fly ``scenario`` with its filter model ``derived`` (module docstring); the summary's path.
 
     ``implementation`` is the filter of the three correction-mode runs: the
     generated ``c`` (compiled now) or ``python``, or the numpy ``reference``.
     The Monte Carlo runs use the reference, which the conformance tests hold
     to the generated code within 1e-12 (scaled covariance difference).
-    ``derived`` is the scenario's filter model when the caller has derived it
-    already (the main job hands its model down instead of deriving it again).
+    ``derived`` is the profile's ``filter.model``, derived by the caller (the
+    main job hands down the model it derived once).
     """
     import matplotlib
 
@@ -84,7 +83,6 @@ def simulate(scenario: FlightProfile, out_dir: Path, runs: int = 20, seed: int =
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
-    derived = derived if derived is not None else derive(load_model(scenario.filter.model))
 
     echo(f"modelgen simulate: {scenario.name}, {scenario.path.duration / 3600:.2f} h, IMU {scenario.imu_rate:g} Hz "
          f"({'numba' if HAVE_NUMBA else 'pure Python: slow'}), filter {derived.model.name}, {runs} Monte Carlo runs")
