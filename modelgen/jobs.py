@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from modelgen.checks.code_check import ConformanceResult, Scenario, check_generated
+from modelgen.checks.code_check import ConformanceResult, CheckScenario, check_generated
 from modelgen.checks.paper_check import VerificationResult, verify, write_verification_report
 from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model, paper_table_path
 from modelgen.codegen.generate import CodegenOptions, GeneratedCode, generate_code
@@ -123,7 +123,7 @@ def generate(
     return GenerationResult(derived, code, folder, checks)
 
 
-def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -> Scenario:
+def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -> CheckScenario:
     """A well-conditioned operating point for checking code of a model without a ``check:`` section.
 
     Parameters without a default are drawn from [0.2, 1.0]; the step is
@@ -139,7 +139,7 @@ def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -
     step = 0.5 / norm if norm > 0 else 1.0
     x0 = rng.standard_normal(derived.n_states)
     label = "synthetic operating point (the model declares no check: section; parameters drawn from [0.2, 1])"
-    return Scenario(values, np.eye(derived.n_states), step=step, steps=steps, seed=seed, initial_state=x0, label=label)
+    return CheckScenario(values, np.eye(derived.n_states), step=step, steps=steps, seed=seed, initial_state=x0, label=label)
 
 
 def paper_parameters() -> dict[str, float]:
@@ -150,7 +150,7 @@ def paper_parameters() -> dict[str, float]:
     return {**load_error_budget().parameters, **operating_point(load_analysis_scenario())}
 
 
-def paper_scenario(derived: DerivedModel) -> Scenario:
+def paper_scenario(derived: DerivedModel) -> CheckScenario:
     """Seed 000's 4-hour scenario: level flight, Table 1 errors, T = 60 s."""
     from modelgen.analysis.budget import load_error_budget
     from modelgen.analysis.scenario import load_analysis_scenario
@@ -158,10 +158,10 @@ def paper_scenario(derived: DerivedModel) -> Scenario:
     flight, budget = load_analysis_scenario(), load_error_budget()
     values = paper_parameters()
     label = "the core paper's scenario (seed 000: level flight east at 30 N, Table 1, 240 steps of 60 s)"
-    return Scenario(values, budget.initial_covariance(derived.model), step=flight.step_s, steps=flight.steps, label=label)
+    return CheckScenario(values, budget.initial_covariance(derived.model), step=flight.step_s, steps=flight.steps, label=label)
 
 
-def declared_scenario(derived: DerivedModel) -> Scenario | None:
+def declared_scenario(derived: DerivedModel) -> CheckScenario | None:
     """The scenario of the model file's ``check:`` section (modelgen.model.check_scenario), if it has one.
 
     The initial state is drawn from N(0, P(0)) with the section's seed, so the
@@ -174,16 +174,16 @@ def declared_scenario(derived: DerivedModel) -> Scenario | None:
     rng = np.random.default_rng(spec.seed + 1)  # not the measurement stream's seed
     x0 = np.sqrt(np.diag(P0)) * rng.standard_normal(derived.n_states)
     label = f"the model's check scenario ({spec.steps} steps of {spec.step_s:g} s)"
-    return Scenario(spec.parameter_values(), P0, step=spec.step_s, steps=spec.steps, seed=spec.seed, initial_state=x0, label=label)
+    return CheckScenario(spec.parameter_values(), P0, step=spec.step_s, steps=spec.steps, seed=spec.seed, initial_state=x0, label=label)
 
 
-def check_scenario(derived: DerivedModel) -> Scenario:
+def check_scenario(derived: DerivedModel) -> CheckScenario:
     """What ``--check`` flies: the model's declared scenario, else the synthetic one (labelled so)."""
     return declared_scenario(derived) or synthetic_scenario(derived)
 
 
 def check(
-    derived: DerivedModel, folder: Path, scenario: Scenario | None = None, options: CodegenOptions | None = None
+    derived: DerivedModel, folder: Path, scenario: CheckScenario | None = None, options: CodegenOptions | None = None
 ) -> list[ConformanceResult]:
     """Compile the generated C and run it and the Python beside the reference.
 
@@ -345,7 +345,7 @@ def embedded_inputs(model: str | Path, qemu: bool):
     return derived, (check_scenario(derived) if qemu else None)
 
 
-def embedded_report(derived: DerivedModel, scenario: Scenario | None, folder: Path):
+def embedded_report(derived: DerivedModel, scenario: CheckScenario | None, folder: Path):
     """``modelgen embedded``: the Cortex-M4F builds and the qemu runs (an :class:`EmbeddedReport`) into ``folder``."""
     from modelgen.checks.embedded_check import embedded_report as build_and_run
 

@@ -58,7 +58,7 @@ class Segment:
 
 
 @dataclass(frozen=True)
-class Scenario:
+class ObservabilityScenario:
     """Step length T (s) and the piecewise-constant segments, in time order."""
 
     step: float
@@ -118,12 +118,12 @@ class ObservabilityReport:
 
 
 # -- scenarios -------------------------------------------------------------------
-def single_segment(values: Mapping[str, float], step: float, steps: int) -> Scenario:
+def single_segment(values: Mapping[str, float], step: float, steps: int) -> ObservabilityScenario:
     """A scenario with one constant operating point."""
-    return Scenario(step=float(step), segments=(Segment(dict(values), int(steps)),))
+    return ObservabilityScenario(step=float(step), segments=(Segment(dict(values), int(steps)),))
 
 
-def scenario_from_data(data: Any, where: str = "scenario", lines: dict[str, str] | None = None) -> Scenario:
+def scenario_from_data(data: Any, where: str = "scenario", lines: dict[str, str] | None = None) -> ObservabilityScenario:
     """Build a scenario from plain data (as read from YAML).
 
     Keys: ``step`` (s, required), ``parameters`` (values shared by all
@@ -147,7 +147,7 @@ def scenario_from_data(data: Any, where: str = "scenario", lines: dict[str, str]
     if ("segments" in data) == ("steps" in data):
         raise ModelError(f"{where}: give either 'steps' (one segment) or 'segments', not both or neither")
     if "steps" in data:
-        return Scenario(step, (Segment(shared, _positive_int(data["steps"], at("steps"))),))
+        return ObservabilityScenario(step, (Segment(shared, _positive_int(data["steps"], at("steps"))),))
     raw = data["segments"]
     if not isinstance(raw, list) or not raw:
         raise ModelError(f"{where}: 'segments' must be a non-empty list")
@@ -158,10 +158,10 @@ def scenario_from_data(data: Any, where: str = "scenario", lines: dict[str, str]
             raise ModelError(f"{place}: a segment is a mapping with 'steps' and optional 'parameters'")
         values = {**shared, **_values(seg.get("parameters") or {}, f"{place}.parameters")}
         segments.append(Segment(values, _positive_int(seg["steps"], f"{place}.steps")))
-    return Scenario(step, tuple(segments))
+    return ObservabilityScenario(step, tuple(segments))
 
 
-def load_scenario(path: str | Path) -> Scenario:
+def load_scenario(path: str | Path) -> ObservabilityScenario:
     """Read a scenario YAML file (see :func:`scenario_from_data`)."""
     data, lines = read_yaml_with_lines(path, "scenario file")
     return scenario_from_data(data, str(path), lines)
@@ -174,7 +174,7 @@ def command_line_scenario(
     steps: int | None = None,
     default_steps: int = 1,
     base_values: Mapping[str, float] | None = None,
-) -> Scenario:
+) -> ObservabilityScenario:
     """The scenario of ``modelgen observability``: a file, overridden by options.
 
     ``assignments`` are ``NAME=VALUE`` strings applied to every segment;
@@ -200,7 +200,7 @@ def command_line_scenario(
         Segment({**seg.values, **overrides}, _positive_int(steps, "--steps") if steps is not None else seg.steps)
         for seg in base.segments
     )
-    return Scenario(new_step, segments)
+    return ObservabilityScenario(new_step, segments)
 
 
 def _positive_number(value: Any, where: str) -> float:
@@ -227,7 +227,7 @@ def _values(data: Any, where: str) -> dict[str, float]:
 
 
 # -- the observability matrix ------------------------------------------------------
-def observability_matrix(derived: DerivedModel, scenario: Scenario) -> np.ndarray:
+def observability_matrix(derived: DerivedModel, scenario: ObservabilityScenario) -> np.ndarray:
     """O = [H_0; H_1 Phi_0; ...] over all steps of the scenario (see module doc)."""
     if derived.n_measurements == 0:
         raise ModelError(f"model {derived.model.name!r} has no measurements: nothing is observable")
@@ -250,7 +250,7 @@ MAX_OBSERVABILITY_ROWS = 1_000_000
 
 def analyse(
     derived: DerivedModel,
-    scenario: Scenario,
+    scenario: ObservabilityScenario,
     scales: Mapping[str, float] | None = None,
     unobservable_rtol: float = DEFAULT_UNOBSERVABLE_RTOL,
     weak_rtol: float = DEFAULT_WEAK_RTOL,

@@ -37,8 +37,12 @@ from modelgen.errors import ModelError
 
 
 @dataclass(frozen=True)
-class Scenario:
-    """A constant operating point flown for ``steps`` filter cycles."""
+class CheckScenario:
+    """What a code check flies: a constant operating point for ``steps`` filter cycles.
+
+    Built from a model file's ``check:`` section (:mod:`modelgen.model.check_scenario`),
+    the paper's scenario, or a synthetic operating point (:mod:`modelgen.jobs`).
+    """
 
     parameters: Mapping[str, float]
     initial_covariance: np.ndarray
@@ -110,7 +114,7 @@ def is_positive_definite(P: np.ndarray) -> bool:
     return True
 
 
-def measurement_sequence(derived: DerivedModel, scenario: Scenario) -> np.ndarray:
+def measurement_sequence(derived: DerivedModel, scenario: CheckScenario) -> np.ndarray:
     """Seeded measurements, scaled by the measurement noise, one row per step."""
     rng = np.random.default_rng(scenario.seed)
     r = np.diag(derived.numeric(scenario.parameters)["R"])
@@ -120,7 +124,7 @@ def measurement_sequence(derived: DerivedModel, scenario: Scenario) -> np.ndarra
 Stepper = Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
-def reference_run(derived: DerivedModel, scenario: Scenario, order: int = DEFAULT_TAYLOR_ORDER) -> list[tuple[np.ndarray, np.ndarray]]:
+def reference_run(derived: DerivedModel, scenario: CheckScenario, order: int = DEFAULT_TAYLOR_ORDER) -> list[tuple[np.ndarray, np.ndarray]]:
     """x and P after every step, by the dense numpy reference."""
     m = derived.numeric(scenario.parameters)
     phi, gamma = taylor_discretization(m["F"], m["G"], scenario.step, order)
@@ -137,7 +141,7 @@ def reference_run(derived: DerivedModel, scenario: Scenario, order: int = DEFAUL
     return out
 
 
-def python_run(module_path: Path, derived: DerivedModel, scenario: Scenario) -> list[tuple[np.ndarray, np.ndarray]]:
+def python_run(module_path: Path, derived: DerivedModel, scenario: CheckScenario) -> list[tuple[np.ndarray, np.ndarray]]:
     """x and P after every step, by the generated Python module."""
     gen = load_python_module(module_path)
     p = gen.parameter_vector(_named_parameters(derived, scenario))
@@ -158,7 +162,7 @@ def python_run(module_path: Path, derived: DerivedModel, scenario: Scenario) -> 
 def c_run(
     folder: Path,
     derived: DerivedModel,
-    scenario: Scenario,
+    scenario: CheckScenario,
     build_dir: Path | None = None,
     options: CodegenOptions | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -180,7 +184,7 @@ def c_run(
     return out
 
 
-def _named_parameters(derived: DerivedModel, scenario: Scenario) -> dict[str, float]:
+def _named_parameters(derived: DerivedModel, scenario: CheckScenario) -> dict[str, float]:
     """Every parameter by its spelled-out name, defaults filled in."""
     values = parameter_vector(derived.model, scenario.parameters)
     return dict(zip(derived.model.parameter_names, values))
@@ -206,7 +210,7 @@ def compare(
 def check_generated(
     folder: Path,
     derived: DerivedModel,
-    scenario: Scenario,
+    scenario: CheckScenario,
     build_dir: Path | None = None,
     options: CodegenOptions | None = None,
 ) -> list[ConformanceResult]:
@@ -251,7 +255,7 @@ def _scaled_state(magnitude: np.ndarray, result_diagonal: np.ndarray) -> float:
     return float((magnitude[keep] / s[keep]).max()) if keep.any() else 0.0
 
 
-def step_conditioning(derived: DerivedModel, scenario: Scenario, order: int = DEFAULT_TAYLOR_ORDER) -> np.ndarray:
+def step_conditioning(derived: DerivedModel, scenario: CheckScenario, order: int = DEFAULT_TAYLOR_ORDER) -> np.ndarray:
     """rho_k for every step k: how much that step's arithmetic cancels, in scaled units.
 
     A sum of m products computed in floating point has an error of at most
@@ -325,7 +329,7 @@ def conformance_tolerance(rho: np.ndarray, n_states: int, unit_roundoff: float, 
 
 
 def scenario_tolerance(
-    derived: DerivedModel, scenario: Scenario, order: int = DEFAULT_TAYLOR_ORDER, unit_roundoff: float = DOUBLE_UNIT_ROUNDOFF, implementations: int = 2
+    derived: DerivedModel, scenario: CheckScenario, order: int = DEFAULT_TAYLOR_ORDER, unit_roundoff: float = DOUBLE_UNIT_ROUNDOFF, implementations: int = 2
 ) -> float:
     """:func:`conformance_tolerance` of ``scenario``: two double codes by default, (u_float, 1) for float."""
     return conformance_tolerance(step_conditioning(derived, scenario, order), derived.n_states, unit_roundoff, implementations)

@@ -51,18 +51,18 @@ import numpy as np
 
 from modelgen.codegen import toolchain
 from modelgen.codegen.options import CodegenOptions
-from modelgen.checks.code_check import FLOAT_UNIT_ROUNDOFF, Scenario, measurement_sequence, reference_run, scaled_differences, scenario_tolerance
+from modelgen.checks.code_check import FLOAT_UNIT_ROUNDOFF, CheckScenario, measurement_sequence, reference_run, scaled_differences, scenario_tolerance
 from modelgen.derive.symbolic import DerivedModel, parameter_vector
 from modelgen.errors import ModelError
 
 
 
-def float_tolerance(derived: DerivedModel, scenario: Scenario, order: int) -> float:
+def float_tolerance(derived: DerivedModel, scenario: CheckScenario, order: int) -> float:
     """Scaled float-vs-double difference allowed over ``scenario`` (see module doc)."""
     return scenario_tolerance(derived, scenario, order, FLOAT_UNIT_ROUNDOFF, 1)
 
 
-def double_tolerance(derived: DerivedModel, scenario: Scenario, order: int) -> float:
+def double_tolerance(derived: DerivedModel, scenario: CheckScenario, order: int) -> float:
     """The double check's tolerance (two double implementations), for the double build under qemu."""
     return scenario_tolerance(derived, scenario, order)
 
@@ -122,12 +122,12 @@ class QemuRun:
         return self.statuses_ok and self.max_scaled_P < limit and self.max_scaled_x < limit and self.symmetric
 
 
-def scenario_inputs(derived: DerivedModel, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
+def scenario_inputs(derived: DerivedModel, scenario: CheckScenario) -> tuple[np.ndarray, np.ndarray]:
     """(parameter vector in the params struct's order, measurements per step)."""
     return parameter_vector(derived.model, scenario.parameters), measurement_sequence(derived, scenario)
 
 
-def qemu_run(derived: DerivedModel, scenario: Scenario, options: CodegenOptions, workdir: Path) -> QemuRun:
+def qemu_run(derived: DerivedModel, scenario: CheckScenario, options: CodegenOptions, workdir: Path) -> QemuRun:
     """Generate, cross-build, run under qemu-arm and compare every step with the reference."""
     workdir = Path(workdir)
     name = derived.model.name
@@ -272,7 +272,7 @@ class EmbeddedReport:
     runs: list[QemuRun] = field(default_factory=list)
 
 
-def embedded_report(derived: DerivedModel, scenario: Scenario | None, out_dir: Path, options: tuple[CodegenOptions, ...] = REPORT_OPTIONS) -> EmbeddedReport:
+def embedded_report(derived: DerivedModel, scenario: CheckScenario | None, out_dir: Path, options: tuple[CodegenOptions, ...] = REPORT_OPTIONS) -> EmbeddedReport:
     """Build every option combination for the Cortex-M4F and (given a scenario) run it under qemu-arm."""
     missing = toolchain.missing_tools(*FIRMWARE_TOOLS, *(CROSS_TOOLS if scenario is not None else ()))
     if missing:

@@ -23,7 +23,7 @@ from modelgen.model.pseudorange import pseudorange_model
 from modelgen.model.declaration import ErrorModel, Measurement, State
 from modelgen.model.loading import load_model
 from modelgen.analysis.observability import (
-    Scenario,
+    ObservabilityScenario,
     Segment,
     _readable_basis,
     analyse,
@@ -107,7 +107,7 @@ def test_doppler_aided_level_flight_has_rank_12_and_a_turn_raises_it_to_16(ned):
     # the rank does not depend on the window once it is longer than the state dimension
     assert analyse(ned, single_segment(ned_values(model, EAST), 60.0, 18)).rank == 12
 
-    turn = Scenario(60.0, (Segment(ned_values(model, EAST), 60), Segment(ned_values(model, NORTH), 60)))
+    turn = ObservabilityScenario(60.0, (Segment(ned_values(model, EAST), 60), Segment(ned_values(model, NORTH), 60)))
     report = analyse(ned, turn)
     assert report.rank == 16
     assert set(report.unobservable_states()) == {"longitude_error", "accel_markov_bias_z"}
@@ -147,7 +147,7 @@ def test_ins_gps_at_constant_heading_has_rank_12_with_the_classic_three_ambiguit
 
 def test_a_turn_makes_the_ins_gps_model_fully_observable(ins_gps):
     model = ins_gps.model
-    turn = Scenario(1.0, (Segment(gps_values(model, EAST), 60), Segment(gps_values(model, NORTH), 60)))
+    turn = ObservabilityScenario(1.0, (Segment(gps_values(model, EAST), 60), Segment(gps_values(model, NORTH), 60)))
     report = analyse(ins_gps, turn)
     assert report.rank == 15 and report.unobservable == ()
 
