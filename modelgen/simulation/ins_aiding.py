@@ -19,6 +19,7 @@ estimate back into the sensor's compensation like the IMU's.
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from typing import Any
 
 import numpy as np
@@ -52,7 +53,7 @@ QUANTITIES = {
 }
 
 
-class NavigationQuantitySensor:
+class NavigationQuantitySensor(ABC):
     """Base of the plug-ins whose output is NED velocity and/or geodetic position (module docstring).
 
     A subclass sets ``name`` and overrides :meth:`read_settings`,
@@ -66,32 +67,32 @@ class NavigationQuantitySensor:
     bias_group: str | None = None  # error-layout group of the sensor's own bias states, if any
 
     # -- what a subclass gives ---------------------------------------------------------
+    @abstractmethod
     def read_settings(self, section: ProfileSection) -> Any:
         """Its settings (SI) from its profile section."""
-        raise NotImplementedError(f"sensor {self.name!r}: read_settings")
 
+    @abstractmethod
     def period(self, settings: Any) -> float:
         """Seconds between two of its measurements."""
-        raise NotImplementedError(f"sensor {self.name!r}: period")
 
     def noise_parameters(self, settings: Any) -> dict[str, float]:
         """Model parameters its measurement noise sets."""
         return {}
 
+    @abstractmethod
     def simulate_at(self, settings: Any, truth: np.ndarray, rng: np.random.Generator) -> Any:
         """Its record at the truth rows ``truth`` (columns of ``trajectory.TRUTH_COLUMNS``).
 
         The record has ``times`` and ``valid`` (outages) per epoch.
         """
-        raise NotImplementedError(f"sensor {self.name!r}: simulate_at")
 
+    @abstractmethod
     def fix(self, record: Any, epoch: int, navigation: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Measurement function: its output at ``epoch`` as (NED velocity, (lat, lon, h)), None for what it lacks.
 
         ``navigation`` is the INS output the filter sees (lat, lon, h, v_NED,
         q_b^n): a sensor that measures in body axes resolves with its attitude.
         """
-        raise NotImplementedError(f"sensor {self.name!r}: fix")
 
     def true_bias(self, record: Any) -> np.ndarray:
         """The true bias (NED, 3) of the sensor's bias states."""
