@@ -7,7 +7,7 @@ the language-neutral ``description``, then one backend per output language
 ``options`` says which filter variant is wanted.  Besides the code, the C
 folder gets a CMakeLists.txt, a Makefile and a README with a usage example,
 so that it can be dropped into another build as it is.  The files are
-written atomically (``modelgen.output.write_atomically``): the output folder
+written atomically (``modelgen.fileio.output.write_atomically``): the output folder
 is built next to its destination and renamed into place, so a failure never
 leaves a half-written ``generated/<model>/``.
 """
