@@ -7,4 +7,6 @@ optimal filter, true covariance of suboptimal filters) -> Table 2 analogue,
 sensitivity table and Figs 2-7 analogues.
 
 Entry point: :func:`modelgen.analysis.covariance_report.run_covariance_analysis`.
+The observability of a model over a scenario (``modelgen observability``)
+is :mod:`modelgen.analysis.observability`.
 """
