@@ -18,10 +18,9 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import sympy as sp
-import yaml
 
 from modelgen.errors import ModelError
-from modelgen.fileio.datafiles import data_path
+from modelgen.fileio.datafiles import data_path, read_yaml
 from modelgen.model.declaration import parse_expression
 
 MATRICES = ("F", "G", "H")
@@ -142,10 +141,9 @@ CORE_PAPER_TABLE = "paper_000_table.yaml"
 def _table_header(path: Path) -> dict[str, Any]:
     """The top-level mapping of a paper table file (empty if it is not YAML or not a mapping)."""
     try:
-        header = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError:
+        return read_yaml(path, "paper-table file")
+    except ModelError:
         return {}
-    return header if isinstance(header, dict) else {}
 
 
 def paper_table_model(path: str | Path) -> str:
@@ -168,14 +166,7 @@ def load_paper_table(path: str | Path) -> PaperTable:
     """Read, validate and parse a paper-table data file (see module doc)."""
     path = Path(path)
     where = path.name
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ModelError(f"{path}: no such paper-table file") from None
-    except yaml.YAMLError as exc:
-        raise ModelError(f"{where}: not valid YAML ({exc})") from None
-    if not isinstance(data, dict):
-        raise ModelError(f"{where}: a paper table must be a mapping")
+    data = read_yaml(path, "paper-table file")
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
         raise ModelError(f"{where}: unknown key {unknown[0]!r} (expected one of {sorted(_TOP_KEYS)})")
