@@ -1,7 +1,7 @@
 """Under AddressSanitizer and UndefinedBehaviorSanitizer the generated C keeps its contract.
 
-The test driver (templates/c_test_driver.c.j2) checks in C that every refused
-call returns its code and leaves the filter byte-for-byte unchanged, and that
+The test driver (modelgen/codegen/backends/c/harness/c_test_driver.c.j2) checks
+in C that every refused call returns its code and leaves the filter byte-for-byte unchanged, and that
 every accepted call leaves it finite; the fuzz mode feeds seeded random and
 hostile values (NaN, +-Inf, huge, tiny, zero, negative variances).
 """
