@@ -34,7 +34,7 @@ from modelgen.fileio.datafiles import data_path
 from modelgen.fileio.output import FolderUpdate, write_text_atomically
 from modelgen.model.loading import builtin_models, load_model
 
-__all__ = ["CodegenOptions", "builtin_models"]  # the command line builds options and lists models through the jobs
+# CodegenOptions and builtin_models are used by the command line through this module (it imports only jobs).
 
 
 def load_and_derive(model: str | Path) -> DerivedModel:
