@@ -11,7 +11,7 @@ import pytest
 
 from modelgen.navigator.mechanization import NAV_SIZE, dcm_to_quaternion, euler_to_dcm, gravity, mechanize
 from modelgen.navigator.outages import outage_windows
-from modelgen.simulation.earth import EARTH_RATE
+from modelgen.model.wgs84 import EARTH_RATE
 
 DATA = Path(__file__).parent / "data"
 
