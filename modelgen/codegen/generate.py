@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 
 from modelgen.codegen.backends import backend, backends
@@ -27,7 +26,10 @@ from modelgen.codegen.structure import FilterStructure
 from modelgen.derive.symbolic import DerivedModel
 from modelgen.fileio.output import write_atomically  # noqa: F401  (re-exported: the one atomic writer lives in modelgen.fileio.output)
 
-__all__ = ["CodegenOptions", "GeneratedCode", "generate_code", "render_c_template", "write_atomically", "template_folder"]
+__all__ = [
+    "CodegenOptions", "GeneratedCode", "generate_code", "render_c_template", "write_atomically", "template_folder",
+    "harness_folder",
+]
 
 
 @dataclass(frozen=True)
@@ -40,11 +42,13 @@ class GeneratedCode:
 
 
 def template_folder() -> Path:
-    """The navigator's templates: installed (wheel) or the repository's templates/ (editable)."""
-    packaged = resources.files("modelgen") / "templates"
-    if packaged.is_dir():
-        return Path(str(packaged))
-    return Path(__file__).resolve().parents[2] / "templates"
+    """The C backend's product templates (the filter's and the navigator's header and source)."""
+    return backend("c").templates
+
+
+def harness_folder() -> Path:
+    """The C backend's harness templates (test driver, firmware main, navigator driver)."""
+    return backend("c").harness
 
 
 class GeneratedSizeWarning(UserWarning):

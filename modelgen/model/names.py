@@ -96,7 +96,7 @@ C_PLATFORM = frozenset(
     EEXIST EINVAL ENOSPC EPIPE""".split()
 )
 
-#: Names the generator itself defines or uses in generated C (templates/*.j2,
+#: Names the generator itself defines or uses in generated C (modelgen/codegen/backends/c/*/*.j2,
 #: modelgen/codegen/*.py): macros of the source file, the test driver and the
 #: navigator.  tests/model/test_declaration.py fails when a template defines one not listed.
 GENERATOR_C = frozenset(
@@ -104,7 +104,7 @@ GENERATOR_C = frozenset(
     STRICT_UPPER MAX_DOUBLINGS SERIES_RANGE NM MAX_IMU MAX_EPOCHS""".split()
 )
 
-#: Names of the generated Python module (templates/python_module.py.j2): its
+#: Names of the generated Python module (backends/python/templates/python_module.py.j2): its
 #: imports, module-level names and the names its functions use, and every
 #: Python builtin (a parameter becomes a local that would shadow one).  The
 #: argument ``p``, the result ``out`` and temporaries ``t<k>`` are not listed:

@@ -1,7 +1,7 @@
 """The C navigator: generated from templates around the generated filter, compiled, driven by ctypes.
 
 :func:`generate_c_navigator` writes ``<model>.h/.c`` (modelgen's filter) and
-``<model>_navigator.h/.c`` (templates/navigator_header.h.j2,
+``<model>_navigator.h/.c`` (codegen/backends/c/templates/navigator_header.h.j2,
 navigator_source.c.j2) into a folder; :func:`build_c_navigator` compiles them
 strictly (C99, -Wall -Wextra -Werror -pedantic) into a shared library;
 :func:`fly_c` flies a log with it from its first IMU sample and returns a

@@ -27,7 +27,7 @@ import numpy as np
 from modelgen import __version__
 from modelgen.codegen import toolchain
 from modelgen.codegen.build import STRICT_FLAGS
-from modelgen.codegen.generate import generate_code, template_folder
+from modelgen.codegen.generate import generate_code, harness_folder
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
 from modelgen.navigator.cnav import N_OUTPUT, LogArrays, render_navigator
@@ -64,7 +64,7 @@ def write_sources(model_file: Path, folder: Path) -> str:
             (folder / file_name).write_text(text)
     for file_name, text in render_navigator(name).items():
         (folder / file_name).write_text(text)
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(template_folder())), undefined=jinja2.StrictUndefined,
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(harness_folder())), undefined=jinja2.StrictUndefined,
                              keep_trailing_newline=True)
     driver = env.get_template("navigator_driver.c.j2").render(p=name, P=name.upper(), version=__version__,
                                                               max_imu=MAX_IMU, max_epochs=MAX_EPOCHS)
@@ -73,7 +73,7 @@ def write_sources(model_file: Path, folder: Path) -> str:
 
 
 def encode(a: LogArrays) -> bytes:
-    """The driver's stdin (layout in templates/navigator_driver.c.j2)."""
+    """The driver's stdin (layout in modelgen/codegen/backends/c/harness/navigator_driver.c.j2)."""
     if len(a.time) > MAX_IMU or len(a.t_gnss) > MAX_EPOCHS:
         raise ModelError(f"embedded replay: the driver holds at most {MAX_IMU} IMU samples and {MAX_EPOCHS} epochs")
     parts = [struct.pack("<4q", len(a.time), len(a.t_gnss), 0, 0)]
