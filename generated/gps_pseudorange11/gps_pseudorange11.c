@@ -83,7 +83,7 @@ static const unsigned char active_col[GPS_PSEUDORANGE11_N_ACTIVE] = { 0, 1, 2, 3
         5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8, 9, 10 };
 /* Halvings of T that discretize may take before it gives up (T / 2^64), and the
    largest ||F h||_D for which the Taylor remainder of order TAYLOR_ORDER is below
-   the unit roundoff (modelgen.discretization.series_range). */
+   the unit roundoff (modelgen.derive.discretization.series_range). */
 #define GPS_PSEUDORANGE11_MAX_DOUBLINGS 64
 #define GPS_PSEUDORANGE11_SERIES_RANGE 0.11483164143919657
 /* Rows of Phi that are exactly e_i (states with an empty row of F). */
@@ -283,7 +283,7 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
             return GPS_PSEUDORANGE11_ERR_NOT_POSITIVE;
         }
     }
-    /* Scaling and squaring (modelgen/discretization.py): theta = ||F||_D h
+    /* Scaling and squaring (modelgen/derive/discretization.py): theta = ||F||_D h
        with D from 8 Jacobi sweeps of Osborne's balancing in powers of two,
        h = T / 2^s for the smallest s with theta <= SERIES_RANGE (Taylor
        remainder below the unit roundoff); the series over h, then s doublings

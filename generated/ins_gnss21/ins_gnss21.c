@@ -122,7 +122,7 @@ static const unsigned char active_col[INS_GNSS21_N_ACTIVE] = { 0, 1, 2, 3, 4, 5,
         12, 13, 14, 15, 16, 17, 18, 19, 20 };
 /* Halvings of T that discretize may take before it gives up (T / 2^64), and the
    largest ||F h||_D for which the Taylor remainder of order TAYLOR_ORDER is below
-   the unit roundoff (modelgen.discretization.series_range). */
+   the unit roundoff (modelgen.derive.discretization.series_range). */
 #define INS_GNSS21_MAX_DOUBLINGS 64
 #define INS_GNSS21_SERIES_RANGE 0.11483164143919657
 /* Rows of Phi that are exactly e_i (states with an empty row of F). */
@@ -518,7 +518,7 @@ int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scal
             return INS_GNSS21_ERR_NOT_POSITIVE;
         }
     }
-    /* Scaling and squaring (modelgen/discretization.py): theta = ||F||_D h
+    /* Scaling and squaring (modelgen/derive/discretization.py): theta = ||F||_D h
        with D from 8 Jacobi sweeps of Osborne's balancing in powers of two,
        h = T / 2^s for the smallest s with theta <= SERIES_RANGE (Taylor
        remainder below the unit roundoff); the series over h, then s doublings

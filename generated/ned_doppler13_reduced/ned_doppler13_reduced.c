@@ -81,7 +81,7 @@ static const unsigned char active_col[NED_DOPPLER13_REDUCED_N_ACTIVE] = { 0, 1, 
         9, 10, 9, 10 };
 /* Halvings of T that discretize may take before it gives up (T / 2^64), and the
    largest ||F h||_D for which the Taylor remainder of order TAYLOR_ORDER is below
-   the unit roundoff (modelgen.discretization.series_range). */
+   the unit roundoff (modelgen.derive.discretization.series_range). */
 #define NED_DOPPLER13_REDUCED_MAX_DOUBLINGS 64
 #define NED_DOPPLER13_REDUCED_SERIES_RANGE 0.11483164143919657
 /* Rows of Phi that are exactly e_i (states with an empty row of F). */
@@ -285,7 +285,7 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restr
             return NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE;
         }
     }
-    /* Scaling and squaring (modelgen/discretization.py): theta = ||F||_D h
+    /* Scaling and squaring (modelgen/derive/discretization.py): theta = ||F||_D h
        with D from 8 Jacobi sweeps of Osborne's balancing in powers of two,
        h = T / 2^s for the smallest s with theta <= SERIES_RANGE (Taylor
        remainder below the unit roundoff); the series over h, then s doublings

@@ -333,7 +333,7 @@ def _balanced_norm(F):
     """max_i sum_j |F_ij| d_j / d_i, D from 8 Jacobi sweeps of Osborne's balancing in powers of two.
 
     The same sums, in the same order (bincount adds in entry order), as the
-    C discretize and modelgen.discretization.balanced_norm, so all three
+    C discretize and modelgen.derive.discretization.balanced_norm, so all three
     choose the same s.
     """
     if not _F_ROWS.size:

@@ -115,7 +115,7 @@ static const unsigned char active_col[NED_DOPPLER32_AUGMENTED_N_ACTIVE] = { 0, 1
         23, 24, 25, 26, 27, 28, 29, 10, 11, 12, 13, 14, 15 };
 /* Halvings of T that discretize may take before it gives up (T / 2^64), and the
    largest ||F h||_D for which the Taylor remainder of order TAYLOR_ORDER is below
-   the unit roundoff (modelgen.discretization.series_range). */
+   the unit roundoff (modelgen.derive.discretization.series_range). */
 #define NED_DOPPLER32_AUGMENTED_MAX_DOUBLINGS 64
 #define NED_DOPPLER32_AUGMENTED_SERIES_RANGE 0.11483164143919657
 /* Rows of Phi that are exactly e_i (states with an empty row of F). */
@@ -377,7 +377,7 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
             return NED_DOPPLER32_AUGMENTED_ERR_NOT_POSITIVE;
         }
     }
-    /* Scaling and squaring (modelgen/discretization.py): theta = ||F||_D h
+    /* Scaling and squaring (modelgen/derive/discretization.py): theta = ||F||_D h
        with D from 8 Jacobi sweeps of Osborne's balancing in powers of two,
        h = T / 2^s for the smallest s with theta <= SERIES_RANGE (Taylor
        remainder below the unit roundoff); the series over h, then s doublings

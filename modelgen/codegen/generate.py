@@ -18,7 +18,7 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from modelgen.codegen.backends import backend, backends
+from modelgen.codegen.backends.registry import backend, backends
 from modelgen.codegen.description import FilterDescription, describe_filter
 from modelgen.codegen.kernels import OperationCount, estimated_code_bytes
 from modelgen.codegen.options import CodegenOptions

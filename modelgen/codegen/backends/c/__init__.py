@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from modelgen.codegen.backends import Backend
+from modelgen.codegen.backends.base import Backend
 from modelgen.codegen.backends.c.context import c_context
 from modelgen.codegen.backends.c.printer import wrap_c
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from modelgen.codegen.backends import Backend
+from modelgen.codegen.backends.base import Backend
 from modelgen.codegen.backends.python.context import python_context
 
 HERE = Path(__file__).resolve().parent

@@ -1,0 +1,66 @@
+"""The interface every backend implements: ``Backend`` and the jinja2 environment of its templates."""
+
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import jinja2
+
+from modelgen.codegen.description import FilterDescription
+from modelgen.codegen.escape import FILTERS
+
+
+def environment(*folders: Path) -> jinja2.Environment:
+    """The templates' environment over ``folders``, with one escaping filter per output language (``escape``)."""
+    env = jinja2.Environment(
+        loader=jinja2.FileSystemLoader([str(f) for f in folders]),
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+        autoescape=False,  # HTML escaping: none of the output languages is HTML (see escape)
+    )
+    env.filters.update(FILTERS)
+    return env
+
+
+@dataclass(frozen=True)
+class Backend:
+    """One output language: its context builder, template folders and file list.
+
+    ``files`` maps an output file name (``{p}`` is the model's name) to the
+    product template that renders it; ``harness`` holds the templates that
+    drive or test the product and are rendered on request only.
+    """
+
+    name: str
+    context: Callable[[FilterDescription], dict[str, object]]
+    templates: Path
+    files: tuple[tuple[str, str], ...]
+    harness: Path | None = None
+    finish: Callable[[str, str], str] | None = None  # (file name, text) -> text, e.g. line wrapping
+
+    def environment(self) -> jinja2.Environment:
+        """The jinja2 environment over the product (and harness) templates."""
+        return environment(*[f for f in (self.templates, self.harness) if f is not None])
+
+    def render(self, description: FilterDescription) -> dict[str, str]:
+        """Every product file of this backend for one filter: file name -> text."""
+        env, context = self.environment(), self.context(description)
+        name = description.model.name
+        files = {file.format(p=name): env.get_template(t).render(context) for file, t in self.files}
+        if self.finish is not None:
+            files = {file: self.finish(file, text) for file, text in files.items()}
+        return files
+
+    def render_template(self, description: FilterDescription, template: str, **extra: object) -> str:
+        """One more template (harness or product) with this backend's context and ``extra``."""
+        return self.environment().get_template(template).render({**self.context(description), **extra})
+
+    def template_paths(self) -> list[Path]:
+        """Every template file of the backend (for caches keyed on the templates)."""
+        folders = [f for f in (self.templates, self.harness) if f is not None]
+        return sorted(p for f in folders for p in f.glob("*.j2"))
