@@ -20,6 +20,7 @@ from typing import Any
 import yaml
 
 from modelgen.errors import ModelError
+from modelgen.fileio.datafiles import data_path
 from modelgen.navigator.logs import ACCEL_UNITS, GYRO_UNITS, STANDARD_GRAVITY, ImuColumns
 
 DEG = math.pi / 180.0
@@ -362,4 +363,4 @@ def load_config(path: str | Path) -> NavigatorConfig:
 
 def builtin_config_path() -> Path:
     """The configuration that flies the built-in drive (``modelgen replay`` with no arguments)."""
-    return Path(__file__).resolve().parent.parent / "data" / "replay_drive_0708.yaml"
+    return data_path("replay_drive_0708.yaml")

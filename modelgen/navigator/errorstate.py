@@ -25,16 +25,16 @@ from types import ModuleType
 import numpy as np
 
 from modelgen.errors import ModelError
+from modelgen.fileio.datafiles import package_path
+from modelgen.model.frames import NED_TO_ENU
 from modelgen.navigator.mechanization import dcm_to_quaternion, quaternion_to_dcm, radii
 
-# NED <-> ENU axis permutation (its own inverse).
-NED_TO_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 N_STATES = 15
 
 
 def model_path(name: str, config_path: str) -> Path:
     """The model file: a built-in navigator model, a built-in modelgen model, or a path."""
-    here = Path(__file__).resolve().parent / "models" / f"{name}.yaml"
+    here = package_path("navigator", "models", f"{name}.yaml")
     if here.is_file():
         return here
     from modelgen.model.loading import builtin_model_path

@@ -17,8 +17,9 @@ import numpy as np
 from scipy.stats import chi2
 
 from modelgen.errors import ModelError
+from modelgen.model.frames import NED_TO_ENU
 from modelgen.navigator.config import NavigatorConfig
-from modelgen.navigator.errorstate import NED_TO_ENU, ErrorStateFilter, feedback
+from modelgen.navigator.errorstate import ErrorStateFilter, feedback
 from modelgen.navigator.logs import GnssLog, ImuLog
 from modelgen.navigator.mechanization import (NAV_SIZE, dcm_to_euler, dcm_to_quaternion, euler_to_dcm,
                                               gravity, level_from_accelerometers, mechanize, quaternion_to_dcm, radii)
