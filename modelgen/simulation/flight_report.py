@@ -66,9 +66,9 @@ def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, in
     return report
 
 
-def simulate(scenario: FlightProfile, derived: DerivedModel, out_dir: Path, runs: int = 20, seed: int = 0,
+def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs: int = 20, seed: int = 0,
              workers: int = 2, echo: Callable[[str], None] = print, implementation: str = "c") -> Path:
-    """Fly ``scenario`` with its filter model ``derived`` (module docstring); the summary's path.
+    """Fly ``profile`` with its filter model ``derived`` (module docstring); the summary's path.
 
     ``implementation`` is the filter of the three correction-mode runs: the
     generated ``c`` (compiled now) or ``python``, or the numpy ``reference``.
@@ -84,16 +84,16 @@ def simulate(scenario: FlightProfile, derived: DerivedModel, out_dir: Path, runs
     out_dir.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
 
-    echo(f"modelgen simulate: {scenario.name}, {scenario.path.duration / 3600:.2f} h, IMU {scenario.imu_rate:g} Hz "
+    echo(f"modelgen simulate: {profile.name}, {profile.path.duration / 3600:.2f} h, IMU {profile.imu_rate:g} Hz "
          f"({'numba' if HAVE_NUMBA else 'pure Python: slow'}), filter {derived.model.name}, {runs} Monte Carlo runs")
     t = time.perf_counter()
-    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0 / scenario.filter.period)
+    trajectory = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
     timings["trajectory (truth + ideal IMU)"] = time.perf_counter() - t
     echo(f"  trajectory: {trajectory.n_samples} IMU samples in {timings['trajectory (truth + ideal IMU)']:.1f} s")
-    layout = profile_layout(scenario, derived, trajectory)
+    layout = profile_layout(profile, derived, trajectory)
     rng = np.random.default_rng(seed)
     t = time.perf_counter()
-    sensors = simulate_sensors(scenario, trajectory, rng)
+    sensors = simulate_sensors(profile, trajectory, rng)
     timings["sensors (IMU errors, aiding)"] = time.perf_counter() - t
 
     results: dict[str, RunResult] = {}
@@ -104,7 +104,7 @@ def simulate(scenario: FlightProfile, derived: DerivedModel, out_dir: Path, runs
         echo(f"  filter: {implementation} ({build:.1f} s to build)")
         for mode in MODES:
             t = time.perf_counter()
-            results[mode] = fly_profile(scenario, derived, trajectory, rng, make_filter,
+            results[mode] = fly_profile(profile, derived, trajectory, rng, make_filter,
                                         mode=mode, sensors=sensors, layout=layout,
                                         progress=_echo_progress(echo, f"{mode} filter"))
             timings[f"mechanization + filter, {mode}"] = time.perf_counter() - t
@@ -114,20 +114,20 @@ def simulate(scenario: FlightProfile, derived: DerivedModel, out_dir: Path, runs
     monte_carlo = None
     if runs > 0:
         t = time.perf_counter()
-        monte_carlo = run_monte_carlo(scenario, derived, runs, seed=seed + 1, workers=workers,
+        monte_carlo = run_monte_carlo(profile, derived, runs, seed=seed + 1, workers=workers,
                                       progress=_echo_progress(echo, "Monte Carlo runs"))
         timings[f"Monte Carlo ({runs} runs, {workers} workers)"] = time.perf_counter() - t
 
     figures = [
         _plot_trajectory(trajectory, out_dir / "trajectory.png"),
         _plot_modes(errors, out_dir / "correction_modes.png"),
-        _plot_filter(results[scenario.filter.mode], derived.model.state_names, out_dir / "filter_errors.png"),
+        _plot_filter(results[profile.filter.mode], derived.model.state_names, out_dir / "filter_errors.png"),
     ]
     if monte_carlo is not None:
         figures.append(_plot_monte_carlo(monte_carlo, out_dir / "monte_carlo.png"))
         figures.append(_plot_nees(monte_carlo, out_dir / "nees.png"))
     summary = out_dir / "summary.md"
-    summary.write_text(_summary(scenario, derived.model.name, implementation, layout.conventions, trajectory, results, errors,
+    summary.write_text(_summary(profile, derived.model.name, implementation, layout.conventions, trajectory, results, errors,
                                 monte_carlo, timings, figures), encoding="utf-8")
     echo(f"  wrote {summary} and {len(figures)} figures")
     return summary
@@ -259,14 +259,14 @@ _IMPLEMENTATION_TEXT = {
 }
 
 
-def _summary(scenario, model_name, implementation, conventions, trajectory, results, errors, mc, timings, figures) -> str:
+def _summary(profile, model_name, implementation, conventions, trajectory, results, errors, mc, timings, figures) -> str:
     lines = [
-        f"# Simulation: {scenario.title or scenario.name}",
+        f"# Simulation: {profile.title or profile.name}",
         "",
-        f"Scenario `{scenario.name}` ({scenario.source_file}), {scenario.path.duration / 3600:.2f} h, "
-        f"IMU {scenario.imu_rate:g} Hz with {scenario.coning}-sample coning/sculling, filter model `{model_name}`, "
-        f"aiding {scenario.filter.aiding} every {scenario.aiding_period:g} s, "
-        f"filter cycle {scenario.filter.period:g} s.",
+        f"Scenario `{profile.name}` ({profile.source_file}), {profile.path.duration / 3600:.2f} h, "
+        f"IMU {profile.imu_rate:g} Hz with {profile.coning}-sample coning/sculling, filter model `{model_name}`, "
+        f"aiding {profile.filter.aiding} every {profile.aiding_period:g} s, "
+        f"filter cycle {profile.filter.period:g} s.",
         "",
         ("Sign conventions identified from the model's F and H (+1: as the simulation defines them; "
          "see modelgen/simulation/error_layout.py): " + ", ".join(f"{k} {v:+.0f}" for k, v in conventions.items()) + "."
