@@ -2583,8 +2583,8 @@ void enu_doppler18_get_covariance(const enu_doppler18_filter *restrict f, enu_do
     }
 }
 
-int enu_doppler18_update_masked(enu_doppler18_filter *restrict f, const enu_doppler18_scalar
-        z[restrict 3],
+int enu_doppler18_update_masked(enu_doppler18_filter *restrict f,
+                const enu_doppler18_scalar z[restrict 3],
                 const unsigned char *restrict mask, const enu_doppler18_matrices *restrict m,
                 enu_doppler18_scalar *restrict innovation, enu_doppler18_scalar *restrict nis,
                 enu_doppler18_workspace *restrict work)
@@ -2755,7 +2755,8 @@ int enu_doppler18_update_masked(enu_doppler18_filter *restrict f, const enu_dopp
     return ENU_DOPPLER18_OK;
 }
 
-int enu_doppler18_update(enu_doppler18_filter *restrict f, const enu_doppler18_scalar z[restrict 3],
+int enu_doppler18_update(enu_doppler18_filter *restrict f,
+                const enu_doppler18_scalar z[restrict 3],
                 const enu_doppler18_matrices *restrict m, enu_doppler18_workspace *restrict work)
 {
     return enu_doppler18_update_masked(f, z, NULL, m, NULL, NULL, work);

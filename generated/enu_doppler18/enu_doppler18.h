@@ -137,12 +137,12 @@ typedef struct {
             gyro Markov drift */
     enu_doppler18_scalar gyro_markov_rate_z; /* mu_eps_z [1/s] inverse correlation time of the z
             gyro Markov drift */
-    enu_doppler18_scalar gyro_markov_sigma_x; /* sigma_eps_x [rad/s] rms of the x gyro Markov drift
-            */
-    enu_doppler18_scalar gyro_markov_sigma_y; /* sigma_eps_y [rad/s] rms of the y gyro Markov drift
-            */
-    enu_doppler18_scalar gyro_markov_sigma_z; /* sigma_eps_z [rad/s] rms of the z gyro Markov drift
-            */
+    enu_doppler18_scalar gyro_markov_sigma_x; /* sigma_eps_x [rad/s] rms of the x gyro Markov
+            drift */
+    enu_doppler18_scalar gyro_markov_sigma_y; /* sigma_eps_y [rad/s] rms of the y gyro Markov
+            drift */
+    enu_doppler18_scalar gyro_markov_sigma_z; /* sigma_eps_z [rad/s] rms of the z gyro Markov
+            drift */
     enu_doppler18_scalar accel_markov_rate_x; /* mu_nabla_x [1/s] inverse correlation time of the x
             accelerometer bias */
     enu_doppler18_scalar accel_markov_rate_y; /* mu_nabla_y [1/s] inverse correlation time of the y
@@ -174,10 +174,10 @@ typedef struct {
 
 /* The transition over one step T (from discretize). */
 typedef struct {
-    enu_doppler18_scalar Phi[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES]; /* transition matrix
-            */
-    enu_doppler18_scalar Qd[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES]; /* Gamma (Q/T) Gamma^T
-            */
+    enu_doppler18_scalar Phi[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES]; /* transition
+            matrix */
+    enu_doppler18_scalar Qd[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES]; /* Gamma (Q/T)
+            Gamma^T */
 } enu_doppler18_transition;
 
 /* The filter state: estimate and covariance (or its factors). */
@@ -292,9 +292,10 @@ int enu_doppler18_predict(enu_doppler18_filter *restrict f, const enu_doppler18_
 /* Kalman update with all the measurements z (all at once, Cholesky solve, Joseph form):
    enu_doppler18_update_masked with mask, innovation and nis NULL.  z has
    ENU_DOPPLER18_N_MEASUREMENTS entries (units by ENU_DOPPLER18_MEASUREMENT_*).
-   Returns ENU_DOPPLER18_OK, ENU_DOPPLER18_ERR_NONFINITE or ENU_DOPPLER18_ERR_NOT_POSITIVE as below.
-           */
-int enu_doppler18_update(enu_doppler18_filter *restrict f, const enu_doppler18_scalar z[restrict 3],
+   Returns ENU_DOPPLER18_OK, ENU_DOPPLER18_ERR_NONFINITE or ENU_DOPPLER18_ERR_NOT_POSITIVE as
+           below. */
+int enu_doppler18_update(enu_doppler18_filter *restrict f,
+                const enu_doppler18_scalar z[restrict 3],
                 const enu_doppler18_matrices *restrict m, enu_doppler18_workspace *restrict work);
 
 /* Kalman update with the measurements z[a] whose mask[a] is nonzero (an outage
@@ -307,8 +308,8 @@ int enu_doppler18_update(enu_doppler18_filter *restrict f, const enu_doppler18_s
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int enu_doppler18_update_masked(enu_doppler18_filter *restrict f, const enu_doppler18_scalar
-        z[restrict 3],
+int enu_doppler18_update_masked(enu_doppler18_filter *restrict f,
+                const enu_doppler18_scalar z[restrict 3],
                 const unsigned char *restrict mask, const enu_doppler18_matrices *restrict m,
                 enu_doppler18_scalar *restrict innovation, enu_doppler18_scalar *restrict nis,
                 enu_doppler18_workspace *restrict work);

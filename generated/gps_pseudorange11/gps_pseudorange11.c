@@ -1182,8 +1182,8 @@ void gps_pseudorange11_get_covariance(const gps_pseudorange11_filter *restrict f
     }
 }
 
-int gps_pseudorange11_update_masked(gps_pseudorange11_filter *restrict f, const
-        gps_pseudorange11_scalar z[restrict 4],
+int gps_pseudorange11_update_masked(gps_pseudorange11_filter *restrict f,
+                const gps_pseudorange11_scalar z[restrict 4],
                 const unsigned char *restrict mask, const gps_pseudorange11_matrices *restrict m,
                 gps_pseudorange11_scalar *restrict innovation, gps_pseudorange11_scalar *restrict
                         nis,
@@ -1355,8 +1355,8 @@ int gps_pseudorange11_update_masked(gps_pseudorange11_filter *restrict f, const
     return GPS_PSEUDORANGE11_OK;
 }
 
-int gps_pseudorange11_update(gps_pseudorange11_filter *restrict f, const gps_pseudorange11_scalar
-        z[restrict 4],
+int gps_pseudorange11_update(gps_pseudorange11_filter *restrict f,
+                const gps_pseudorange11_scalar z[restrict 4],
                 const gps_pseudorange11_matrices *restrict m, gps_pseudorange11_workspace *restrict
                         work)
 {

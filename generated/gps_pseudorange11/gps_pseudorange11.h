@@ -290,8 +290,8 @@ int gps_pseudorange11_predict(gps_pseudorange11_filter *restrict f, const
    GPS_PSEUDORANGE11_N_MEASUREMENTS entries (units by GPS_PSEUDORANGE11_MEASUREMENT_*).
    Returns GPS_PSEUDORANGE11_OK, GPS_PSEUDORANGE11_ERR_NONFINITE or
            GPS_PSEUDORANGE11_ERR_NOT_POSITIVE as below. */
-int gps_pseudorange11_update(gps_pseudorange11_filter *restrict f, const gps_pseudorange11_scalar
-        z[restrict 4],
+int gps_pseudorange11_update(gps_pseudorange11_filter *restrict f,
+                const gps_pseudorange11_scalar z[restrict 4],
                 const gps_pseudorange11_matrices *restrict m, gps_pseudorange11_workspace *restrict
                         work);
 
@@ -305,8 +305,8 @@ int gps_pseudorange11_update(gps_pseudorange11_filter *restrict f, const gps_pse
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int gps_pseudorange11_update_masked(gps_pseudorange11_filter *restrict f, const
-        gps_pseudorange11_scalar z[restrict 4],
+int gps_pseudorange11_update_masked(gps_pseudorange11_filter *restrict f,
+                const gps_pseudorange11_scalar z[restrict 4],
                 const unsigned char *restrict mask, const gps_pseudorange11_matrices *restrict m,
                 gps_pseudorange11_scalar *restrict innovation, gps_pseudorange11_scalar *restrict
                         nis,

@@ -3450,7 +3450,8 @@ void ins_gnss21_get_covariance(const ins_gnss21_filter *restrict f, ins_gnss21_s
     }
 }
 
-int ins_gnss21_update_masked(ins_gnss21_filter *restrict f, const ins_gnss21_scalar z[restrict 6],
+int ins_gnss21_update_masked(ins_gnss21_filter *restrict f,
+                const ins_gnss21_scalar z[restrict 6],
                 const unsigned char *restrict mask, const ins_gnss21_matrices *restrict m,
                 ins_gnss21_scalar *restrict innovation, ins_gnss21_scalar *restrict nis,
                 ins_gnss21_workspace *restrict work)
@@ -3621,7 +3622,8 @@ int ins_gnss21_update_masked(ins_gnss21_filter *restrict f, const ins_gnss21_sca
     return INS_GNSS21_OK;
 }
 
-int ins_gnss21_update(ins_gnss21_filter *restrict f, const ins_gnss21_scalar z[restrict 6],
+int ins_gnss21_update(ins_gnss21_filter *restrict f,
+                const ins_gnss21_scalar z[restrict 6],
                 const ins_gnss21_matrices *restrict m, ins_gnss21_workspace *restrict work)
 {
     return ins_gnss21_update_masked(f, z, NULL, m, NULL, NULL, work);

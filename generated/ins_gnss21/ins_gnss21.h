@@ -297,7 +297,8 @@ int ins_gnss21_predict(ins_gnss21_filter *restrict f, const ins_gnss21_transitio
    ins_gnss21_update_masked with mask, innovation and nis NULL.  z has
    INS_GNSS21_N_MEASUREMENTS entries (units by INS_GNSS21_MEASUREMENT_*).
    Returns INS_GNSS21_OK, INS_GNSS21_ERR_NONFINITE or INS_GNSS21_ERR_NOT_POSITIVE as below. */
-int ins_gnss21_update(ins_gnss21_filter *restrict f, const ins_gnss21_scalar z[restrict 6],
+int ins_gnss21_update(ins_gnss21_filter *restrict f,
+                const ins_gnss21_scalar z[restrict 6],
                 const ins_gnss21_matrices *restrict m, ins_gnss21_workspace *restrict work);
 
 /* Kalman update with the measurements z[a] whose mask[a] is nonzero (an outage
@@ -310,7 +311,8 @@ int ins_gnss21_update(ins_gnss21_filter *restrict f, const ins_gnss21_scalar z[r
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int ins_gnss21_update_masked(ins_gnss21_filter *restrict f, const ins_gnss21_scalar z[restrict 6],
+int ins_gnss21_update_masked(ins_gnss21_filter *restrict f,
+                const ins_gnss21_scalar z[restrict 6],
                 const unsigned char *restrict mask, const ins_gnss21_matrices *restrict m,
                 ins_gnss21_scalar *restrict innovation, ins_gnss21_scalar *restrict nis,
                 ins_gnss21_workspace *restrict work);

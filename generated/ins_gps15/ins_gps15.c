@@ -1907,7 +1907,8 @@ void ins_gps15_get_covariance(const ins_gps15_filter *restrict f, ins_gps15_scal
     }
 }
 
-int ins_gps15_update_masked(ins_gps15_filter *restrict f, const ins_gps15_scalar z[restrict 6],
+int ins_gps15_update_masked(ins_gps15_filter *restrict f,
+                const ins_gps15_scalar z[restrict 6],
                 const unsigned char *restrict mask, const ins_gps15_matrices *restrict m,
                 ins_gps15_scalar *restrict innovation, ins_gps15_scalar *restrict nis,
                 ins_gps15_workspace *restrict work)
@@ -2078,7 +2079,8 @@ int ins_gps15_update_masked(ins_gps15_filter *restrict f, const ins_gps15_scalar
     return INS_GPS15_OK;
 }
 
-int ins_gps15_update(ins_gps15_filter *restrict f, const ins_gps15_scalar z[restrict 6],
+int ins_gps15_update(ins_gps15_filter *restrict f,
+                const ins_gps15_scalar z[restrict 6],
                 const ins_gps15_matrices *restrict m, ins_gps15_workspace *restrict work)
 {
     return ins_gps15_update_masked(f, z, NULL, m, NULL, NULL, work);

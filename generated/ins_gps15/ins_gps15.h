@@ -152,8 +152,8 @@ typedef struct {
     ins_gps15_scalar S[INS_GPS15_N_STATES][INS_GPS15_N_STATES]; /* sum of the terms / (k + 1), for
             Gamma */
     ins_gps15_scalar scale[INS_GPS15_N_STATES]; /* balancing: d of ||F||_D = ||D^-1 F D|| */
-    ins_gps15_scalar row_sum[INS_GPS15_N_STATES]; /* balancing: off-diagonal row sums of D^-1 |F| D
-            */
+    ins_gps15_scalar row_sum[INS_GPS15_N_STATES]; /* balancing: off-diagonal row sums of D^-1 |F|
+            D */
     ins_gps15_scalar col_sum[INS_GPS15_N_STATES]; /* balancing: off-diagonal column sums of D^-1 |F|
             D */
     ins_gps15_scalar Gamma[INS_GPS15_N_STATES][6];
@@ -252,7 +252,8 @@ int ins_gps15_predict(ins_gps15_filter *restrict f, const ins_gps15_transition *
    ins_gps15_update_masked with mask, innovation and nis NULL.  z has
    INS_GPS15_N_MEASUREMENTS entries (units by INS_GPS15_MEASUREMENT_*).
    Returns INS_GPS15_OK, INS_GPS15_ERR_NONFINITE or INS_GPS15_ERR_NOT_POSITIVE as below. */
-int ins_gps15_update(ins_gps15_filter *restrict f, const ins_gps15_scalar z[restrict 6],
+int ins_gps15_update(ins_gps15_filter *restrict f,
+                const ins_gps15_scalar z[restrict 6],
                 const ins_gps15_matrices *restrict m, ins_gps15_workspace *restrict work);
 
 /* Kalman update with the measurements z[a] whose mask[a] is nonzero (an outage
@@ -265,7 +266,8 @@ int ins_gps15_update(ins_gps15_filter *restrict f, const ins_gps15_scalar z[rest
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int ins_gps15_update_masked(ins_gps15_filter *restrict f, const ins_gps15_scalar z[restrict 6],
+int ins_gps15_update_masked(ins_gps15_filter *restrict f,
+                const ins_gps15_scalar z[restrict 6],
                 const unsigned char *restrict mask, const ins_gps15_matrices *restrict m,
                 ins_gps15_scalar *restrict innovation, ins_gps15_scalar *restrict nis,
                 ins_gps15_workspace *restrict work);

@@ -147,8 +147,8 @@ int ned_doppler13_reduced_matrices_evaluate(const ned_doppler13_reduced_params *
     int e;
     ned_doppler13_reduced_scalar check = 0.0;
     if (pole(cos(params->latitude), params->latitude)) {
-        return NED_DOPPLER13_REDUCED_ERR_NONFINITE; /* cos(latitude) = 0: singular operating point
-                */
+        return NED_DOPPLER13_REDUCED_ERR_NONFINITE; /* cos(latitude) = 0: singular operating
+                point */
     }
     {
         const ned_doppler13_reduced_scalar t0 = params->earth_rate*sin(params->latitude);
@@ -1408,8 +1408,8 @@ void ned_doppler13_reduced_get_covariance(const ned_doppler13_reduced_filter *re
     }
 }
 
-int ned_doppler13_reduced_update_masked(ned_doppler13_reduced_filter *restrict f, const
-        ned_doppler13_reduced_scalar z[restrict 2],
+int ned_doppler13_reduced_update_masked(ned_doppler13_reduced_filter *restrict f,
+                const ned_doppler13_reduced_scalar z[restrict 2],
                 const unsigned char *restrict mask, const ned_doppler13_reduced_matrices *restrict
                         m,
                 ned_doppler13_reduced_scalar *restrict innovation, ned_doppler13_reduced_scalar
@@ -1584,8 +1584,8 @@ int ned_doppler13_reduced_update_masked(ned_doppler13_reduced_filter *restrict f
     return NED_DOPPLER13_REDUCED_OK;
 }
 
-int ned_doppler13_reduced_update(ned_doppler13_reduced_filter *restrict f, const
-        ned_doppler13_reduced_scalar z[restrict 2],
+int ned_doppler13_reduced_update(ned_doppler13_reduced_filter *restrict f,
+                const ned_doppler13_reduced_scalar z[restrict 2],
                 const ned_doppler13_reduced_matrices *restrict m, ned_doppler13_reduced_workspace
                         *restrict work)
 {

@@ -260,8 +260,8 @@ void ned_doppler13_reduced_get_state(const ned_doppler13_reduced_filter *restric
 /* Set the state estimate to x (NED_DOPPLER13_REDUCED_N_STATES entries, units by
         NED_DOPPLER13_REDUCED_STATE_*); the
    covariance is not touched.  Refuses a non-finite entry (ERR_NONFINITE); on
-   error f is unchanged.  Returns NED_DOPPLER13_REDUCED_OK or NED_DOPPLER13_REDUCED_ERR_NONFINITE.
-           */
+   error f is unchanged.  Returns NED_DOPPLER13_REDUCED_OK or
+           NED_DOPPLER13_REDUCED_ERR_NONFINITE. */
 int ned_doppler13_reduced_set_state(ned_doppler13_reduced_filter *restrict f, const
         ned_doppler13_reduced_scalar x[restrict NED_DOPPLER13_REDUCED_N_STATES]);
 
@@ -282,8 +282,8 @@ int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, cons
    NED_DOPPLER13_REDUCED_N_MEASUREMENTS entries (units by NED_DOPPLER13_REDUCED_MEASUREMENT_*).
    Returns NED_DOPPLER13_REDUCED_OK, NED_DOPPLER13_REDUCED_ERR_NONFINITE or
            NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE as below. */
-int ned_doppler13_reduced_update(ned_doppler13_reduced_filter *restrict f, const
-        ned_doppler13_reduced_scalar z[restrict 2],
+int ned_doppler13_reduced_update(ned_doppler13_reduced_filter *restrict f,
+                const ned_doppler13_reduced_scalar z[restrict 2],
                 const ned_doppler13_reduced_matrices *restrict m, ned_doppler13_reduced_workspace
                         *restrict work);
 
@@ -297,8 +297,8 @@ int ned_doppler13_reduced_update(ned_doppler13_reduced_filter *restrict f, const
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int ned_doppler13_reduced_update_masked(ned_doppler13_reduced_filter *restrict f, const
-        ned_doppler13_reduced_scalar z[restrict 2],
+int ned_doppler13_reduced_update_masked(ned_doppler13_reduced_filter *restrict f,
+                const ned_doppler13_reduced_scalar z[restrict 2],
                 const unsigned char *restrict mask, const ned_doppler13_reduced_matrices *restrict
                         m,
                 ned_doppler13_reduced_scalar *restrict innovation, ned_doppler13_reduced_scalar

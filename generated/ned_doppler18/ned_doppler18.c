@@ -2019,8 +2019,8 @@ void ned_doppler18_get_covariance(const ned_doppler18_filter *restrict f, ned_do
     }
 }
 
-int ned_doppler18_update_masked(ned_doppler18_filter *restrict f, const ned_doppler18_scalar
-        z[restrict 2],
+int ned_doppler18_update_masked(ned_doppler18_filter *restrict f,
+                const ned_doppler18_scalar z[restrict 2],
                 const unsigned char *restrict mask, const ned_doppler18_matrices *restrict m,
                 ned_doppler18_scalar *restrict innovation, ned_doppler18_scalar *restrict nis,
                 ned_doppler18_workspace *restrict work)
@@ -2191,7 +2191,8 @@ int ned_doppler18_update_masked(ned_doppler18_filter *restrict f, const ned_dopp
     return NED_DOPPLER18_OK;
 }
 
-int ned_doppler18_update(ned_doppler18_filter *restrict f, const ned_doppler18_scalar z[restrict 2],
+int ned_doppler18_update(ned_doppler18_filter *restrict f,
+                const ned_doppler18_scalar z[restrict 2],
                 const ned_doppler18_matrices *restrict m, ned_doppler18_workspace *restrict work)
 {
     return ned_doppler18_update_masked(f, z, NULL, m, NULL, NULL, work);

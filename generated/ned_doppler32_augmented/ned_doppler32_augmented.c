@@ -190,8 +190,8 @@ int ned_doppler32_augmented_matrices_evaluate(const ned_doppler32_augmented_para
     int e;
     ned_doppler32_augmented_scalar check = 0.0;
     if (pole(cos(params->latitude), params->latitude)) {
-        return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE; /* cos(latitude) = 0: singular operating point
-                */
+        return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE; /* cos(latitude) = 0: singular operating
+                point */
     }
     {
         const ned_doppler32_augmented_scalar t0 = params->earth_rate*sin(params->latitude);
@@ -4237,8 +4237,8 @@ void ned_doppler32_augmented_get_covariance(const ned_doppler32_augmented_filter
     }
 }
 
-int ned_doppler32_augmented_update_masked(ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_scalar z[restrict 2],
+int ned_doppler32_augmented_update_masked(ned_doppler32_augmented_filter *restrict f,
+                const ned_doppler32_augmented_scalar z[restrict 2],
                 const unsigned char *restrict mask, const ned_doppler32_augmented_matrices *restrict
                         m,
                 ned_doppler32_augmented_scalar *restrict innovation, ned_doppler32_augmented_scalar
@@ -4413,8 +4413,8 @@ int ned_doppler32_augmented_update_masked(ned_doppler32_augmented_filter *restri
     return NED_DOPPLER32_AUGMENTED_OK;
 }
 
-int ned_doppler32_augmented_update(ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_scalar z[restrict 2],
+int ned_doppler32_augmented_update(ned_doppler32_augmented_filter *restrict f,
+                const ned_doppler32_augmented_scalar z[restrict 2],
                 const ned_doppler32_augmented_matrices *restrict m,
                         ned_doppler32_augmented_workspace *restrict work)
 {

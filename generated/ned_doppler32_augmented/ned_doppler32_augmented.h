@@ -118,8 +118,8 @@ typedef struct {
     ned_doppler32_augmented_scalar velocity_north; /* V_n [m/s] north ground speed */
     ned_doppler32_augmented_scalar velocity_east; /* V_e [m/s] east ground speed */
     ned_doppler32_augmented_scalar velocity_down; /* V_d [m/s] down ground speed */
-    ned_doppler32_augmented_scalar specific_force_north; /* a_n [m/s^2] specific force along north
-            */
+    ned_doppler32_augmented_scalar specific_force_north; /* a_n [m/s^2] specific force along
+            north */
     ned_doppler32_augmented_scalar specific_force_east; /* a_e [m/s^2] specific force along east */
     ned_doppler32_augmented_scalar specific_force_down; /* a_d [m/s^2] specific force along down
             (about -g in level flight) */
@@ -200,11 +200,11 @@ typedef struct {
 /* Scratch memory of discretize. */
 typedef struct {
     ned_doppler32_augmented_scalar
-            A[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* (F T)^k / k!
-            */
+            A[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* (F T)^k /
+            k! */
     ned_doppler32_augmented_scalar
-            B[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* the next term
-            */
+            B[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* the next
+            term */
     ned_doppler32_augmented_scalar
             S[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* sum of the
             terms / (k + 1), for Gamma */
@@ -319,8 +319,8 @@ int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, 
    NED_DOPPLER32_AUGMENTED_N_MEASUREMENTS entries (units by NED_DOPPLER32_AUGMENTED_MEASUREMENT_*).
    Returns NED_DOPPLER32_AUGMENTED_OK, NED_DOPPLER32_AUGMENTED_ERR_NONFINITE or
            NED_DOPPLER32_AUGMENTED_ERR_NOT_POSITIVE as below. */
-int ned_doppler32_augmented_update(ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_scalar z[restrict 2],
+int ned_doppler32_augmented_update(ned_doppler32_augmented_filter *restrict f,
+                const ned_doppler32_augmented_scalar z[restrict 2],
                 const ned_doppler32_augmented_matrices *restrict m,
                         ned_doppler32_augmented_workspace *restrict work);
 
@@ -334,8 +334,8 @@ int ned_doppler32_augmented_update(ned_doppler32_augmented_filter *restrict f, c
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int ned_doppler32_augmented_update_masked(ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_scalar z[restrict 2],
+int ned_doppler32_augmented_update_masked(ned_doppler32_augmented_filter *restrict f,
+                const ned_doppler32_augmented_scalar z[restrict 2],
                 const unsigned char *restrict mask, const ned_doppler32_augmented_matrices *restrict
                         m,
                 ned_doppler32_augmented_scalar *restrict innovation, ned_doppler32_augmented_scalar

@@ -115,12 +115,12 @@ typedef struct {
             gyro Markov drift */
     ned_inertial16_scalar gyro_markov_rate_z; /* mu_eps_z [1/s] inverse correlation time of the z
             gyro Markov drift */
-    ned_inertial16_scalar gyro_markov_sigma_x; /* sigma_eps_x [rad/s] rms of the x gyro Markov drift
-            */
-    ned_inertial16_scalar gyro_markov_sigma_y; /* sigma_eps_y [rad/s] rms of the y gyro Markov drift
-            */
-    ned_inertial16_scalar gyro_markov_sigma_z; /* sigma_eps_z [rad/s] rms of the z gyro Markov drift
-            */
+    ned_inertial16_scalar gyro_markov_sigma_x; /* sigma_eps_x [rad/s] rms of the x gyro Markov
+            drift */
+    ned_inertial16_scalar gyro_markov_sigma_y; /* sigma_eps_y [rad/s] rms of the y gyro Markov
+            drift */
+    ned_inertial16_scalar gyro_markov_sigma_z; /* sigma_eps_z [rad/s] rms of the z gyro Markov
+            drift */
     ned_inertial16_scalar accel_markov_rate_x; /* mu_nabla_x [1/s] inverse correlation time of the x
             accelerometer bias */
     ned_inertial16_scalar accel_markov_rate_y; /* mu_nabla_y [1/s] inverse correlation time of the y
@@ -164,8 +164,8 @@ typedef struct {
     ned_inertial16_scalar B[NED_INERTIAL16_N_STATES][NED_INERTIAL16_N_STATES]; /* the next term */
     ned_inertial16_scalar S[NED_INERTIAL16_N_STATES][NED_INERTIAL16_N_STATES]; /* sum of the terms /
             (k + 1), for Gamma */
-    ned_inertial16_scalar scale[NED_INERTIAL16_N_STATES]; /* balancing: d of ||F||_D = ||D^-1 F D||
-            */
+    ned_inertial16_scalar scale[NED_INERTIAL16_N_STATES]; /* balancing: d of ||F||_D = ||D^-1 F
+            D|| */
     ned_inertial16_scalar row_sum[NED_INERTIAL16_N_STATES]; /* balancing: off-diagonal row sums of
             D^-1 |F| D */
     ned_inertial16_scalar col_sum[NED_INERTIAL16_N_STATES]; /* balancing: off-diagonal column sums
@@ -241,8 +241,8 @@ int ned_inertial16_set_covariance(ned_inertial16_filter *restrict f, const ned_i
 void ned_inertial16_get_covariance(const ned_inertial16_filter *restrict f, ned_inertial16_scalar
         P[restrict NED_INERTIAL16_N_STATES * NED_INERTIAL16_N_STATES]);
 
-/* The state estimate x (NED_INERTIAL16_N_STATES entries, units by NED_INERTIAL16_STATE_*) into x.
-        */
+/* The state estimate x (NED_INERTIAL16_N_STATES entries, units by NED_INERTIAL16_STATE_*) into
+        x. */
 void ned_inertial16_get_state(const ned_inertial16_filter *restrict f, ned_inertial16_scalar
         x[restrict NED_INERTIAL16_N_STATES]);
 

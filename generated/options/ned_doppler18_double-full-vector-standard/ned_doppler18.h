@@ -123,12 +123,12 @@ typedef struct {
             gyro Markov drift */
     ned_doppler18_scalar gyro_markov_rate_z; /* mu_eps_z [1/s] inverse correlation time of the z
             gyro Markov drift */
-    ned_doppler18_scalar gyro_markov_sigma_x; /* sigma_eps_x [rad/s] rms of the x gyro Markov drift
-            */
-    ned_doppler18_scalar gyro_markov_sigma_y; /* sigma_eps_y [rad/s] rms of the y gyro Markov drift
-            */
-    ned_doppler18_scalar gyro_markov_sigma_z; /* sigma_eps_z [rad/s] rms of the z gyro Markov drift
-            */
+    ned_doppler18_scalar gyro_markov_sigma_x; /* sigma_eps_x [rad/s] rms of the x gyro Markov
+            drift */
+    ned_doppler18_scalar gyro_markov_sigma_y; /* sigma_eps_y [rad/s] rms of the y gyro Markov
+            drift */
+    ned_doppler18_scalar gyro_markov_sigma_z; /* sigma_eps_z [rad/s] rms of the z gyro Markov
+            drift */
     ned_doppler18_scalar accel_markov_rate_x; /* mu_nabla_x [1/s] inverse correlation time of the x
             accelerometer bias */
     ned_doppler18_scalar accel_markov_rate_y; /* mu_nabla_y [1/s] inverse correlation time of the y
@@ -141,10 +141,10 @@ typedef struct {
             bias */
     ned_doppler18_scalar accel_markov_sigma_z; /* sigma_nabla_z [m/s^2] rms of the z accelerometer
             bias */
-    ned_doppler18_scalar doppler_noise_sigma_north; /* sigma_eta_n [m/s] Doppler white noise (north)
-            */
-    ned_doppler18_scalar doppler_noise_sigma_east; /* sigma_eta_e [m/s] Doppler white noise (east)
-            */
+    ned_doppler18_scalar doppler_noise_sigma_north; /* sigma_eta_n [m/s] Doppler white noise
+            (north) */
+    ned_doppler18_scalar doppler_noise_sigma_east; /* sigma_eta_e [m/s] Doppler white noise
+            (east) */
 } ned_doppler18_params;
 
 /* Structural nonzeros of F, G, H (row, column pairs in the tables below). */
@@ -158,10 +158,10 @@ typedef struct {
 
 /* The transition over one step T (from discretize). */
 typedef struct {
-    ned_doppler18_scalar Phi[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* transition matrix
-            */
-    ned_doppler18_scalar Qd[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* Gamma (Q/T) Gamma^T
-            */
+    ned_doppler18_scalar Phi[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* transition
+            matrix */
+    ned_doppler18_scalar Qd[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* Gamma (Q/T)
+            Gamma^T */
 } ned_doppler18_transition;
 
 /* The filter state: estimate and covariance (or its factors). */
@@ -276,9 +276,10 @@ int ned_doppler18_predict(ned_doppler18_filter *restrict f, const ned_doppler18_
 /* Kalman update with all the measurements z (all at once, Cholesky solve, standard form):
    ned_doppler18_update_masked with mask, innovation and nis NULL.  z has
    NED_DOPPLER18_N_MEASUREMENTS entries (units by NED_DOPPLER18_MEASUREMENT_*).
-   Returns NED_DOPPLER18_OK, NED_DOPPLER18_ERR_NONFINITE or NED_DOPPLER18_ERR_NOT_POSITIVE as below.
-           */
-int ned_doppler18_update(ned_doppler18_filter *restrict f, const ned_doppler18_scalar z[restrict 2],
+   Returns NED_DOPPLER18_OK, NED_DOPPLER18_ERR_NONFINITE or NED_DOPPLER18_ERR_NOT_POSITIVE as
+           below. */
+int ned_doppler18_update(ned_doppler18_filter *restrict f,
+                const ned_doppler18_scalar z[restrict 2],
                 const ned_doppler18_matrices *restrict m, ned_doppler18_workspace *restrict work);
 
 /* Kalman update with the measurements z[a] whose mask[a] is nonzero (an outage
@@ -291,8 +292,8 @@ int ned_doppler18_update(ned_doppler18_filter *restrict f, const ned_doppler18_s
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int ned_doppler18_update_masked(ned_doppler18_filter *restrict f, const ned_doppler18_scalar
-        z[restrict 2],
+int ned_doppler18_update_masked(ned_doppler18_filter *restrict f,
+                const ned_doppler18_scalar z[restrict 2],
                 const unsigned char *restrict mask, const ned_doppler18_matrices *restrict m,
                 ned_doppler18_scalar *restrict innovation, ned_doppler18_scalar *restrict nis,
                 ned_doppler18_workspace *restrict work);

@@ -94,6 +94,8 @@ def wrap_line(line: str, width: int = LINE_WIDTH) -> list[str]:
     continuation = indent + ("*   " if body.startswith("* ") else " " * 8)
     room = width - len(continuation)
     words = [piece for word in body.split(" ") for piece in _split_product(word, room)]
+    if len(words) > 1 and words[-1] == "*/":  # a comment's end stays with its last word
+        words[-2:] = [words[-2] + " */"]
     lines, current = [], indent + words[0]
     for word in words[1:]:
         if len(current) + 1 + len(word) > width and current.strip() not in ("", "*"):
