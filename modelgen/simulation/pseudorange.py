@@ -49,7 +49,7 @@ by the accumulator in accumulated mode (eq. (3)).  The line-of-sight unit
 vectors e_k (ENU, receiver to satellite) of that epoch go to the model
 through :meth:`PseudorangeNavigator.parameters`, so H is evaluated per epoch.
 
-The vertical channel is the scenario's (``altitude_reference``); profile_003
+The vertical channel is the profile's (``altitude_reference``); profile_003
 flies it free, as the model assumes: no barometer, the pseudo-ranges bound it.
 """
 
@@ -163,32 +163,32 @@ def satellite_count(derived: DerivedModel) -> int:
 class PseudorangeNavigator:
     """The simulated INS with a pseudo-range receiver and a clock estimate (module docstring)."""
 
-    def __init__(self, scenario: Any, derived: DerivedModel, sensors: SensorData):
+    def __init__(self, profile: Any, derived: DerivedModel, sensors: SensorData):
         record = sensors.aiding
         if not isinstance(record, PseudorangeRecord):
-            raise ModelError(f"scenario {scenario.name!r}: no simulated pseudo-ranges (filter.aiding must be pseudorange)")
-        self.scenario, self.derived, self.sensors, self.record = scenario, derived, sensors, record
-        self.settings: PseudorangeSettings = scenario.sensors[PSEUDORANGE.name]
+            raise ModelError(f"scenario {profile.name!r}: no simulated pseudo-ranges (filter.aiding must be pseudorange)")
+        self.profile, self.derived, self.sensors, self.record = profile, derived, sensors, record
+        self.settings: PseudorangeSettings = profile.sensors[PSEUDORANGE.name]
         self.satellites = satellite_count(derived)
         trajectory = sensors.trajectory
         self.period = trajectory.record_period
-        self.samples_per_cycle = samples_per_cycle(trajectory, scenario.coning)
+        self.samples_per_cycle = samples_per_cycle(trajectory, profile.coning)
         self.every = whole_ratio(self.settings.period, self.period, "pseudorange period")
         visible = np.isfinite(record.pseudoranges[::self.every]).sum(axis=1)
         if visible.min() < self.satellites:
             j = int(np.argmin(visible))
             raise ModelError(
-                f"scenario {scenario.name!r}: model {derived.model.name!r} fuses {self.satellites} pseudo-ranges, but only "
+                f"scenario {profile.name!r}: model {derived.model.name!r} fuses {self.satellites} pseudo-ranges, but only "
                 f"{int(visible[j])} satellites are above the {math.degrees(self.settings.elevation_mask):g} deg "
                 f"elevation mask at t = {record.times[j * self.every]:g} s ({int(visible.min())}..{int(visible.max())} "
                 f"visible over the flight)")
-        self.strapdown = Strapdown(sensors.initial_navigation, trajectory.imu_rate, scenario.coning,
-                                   scenario.vertical_damping)
+        self.strapdown = Strapdown(sensors.initial_navigation, trajectory.imu_rate, profile.coning,
+                                   profile.vertical_damping)
         self.clock = np.zeros(2)  # (b^, d^): the navigator's own clock estimate [m, m/s]
         self.cycle = 0
         self.selected = np.arange(self.satellites)
         self.line_of_sight = np.tile([0.0, 0.0, 1.0], (self.satellites, 1))
-        self.noise = scenario.noise_parameters()
+        self.noise = profile.noise_parameters()
 
     # -- navigator protocol ------------------------------------------------------------
     def advance(self, cycle: int) -> None:
@@ -213,7 +213,7 @@ class PseudorangeNavigator:
     def parameters(self, corrected_output: np.ndarray) -> dict[str, float]:
         if self.cycle % self.every == 0:
             self._select(corrected_output)
-        values = operating_point(corrected_output[:10], self.strapdown.specific_force, "ENU", self.scenario.imu_budget,
+        values = operating_point(corrected_output[:10], self.strapdown.specific_force, "ENU", self.profile.imu_budget,
                                  self.noise)
         for k, (east, north, up) in enumerate(self.line_of_sight, start=1):
             values[f"line_of_sight_east_{k}"] = float(east)
@@ -245,15 +245,15 @@ class PseudorangeNavigator:
                                clock - corrected_output[CLOCK_BIAS:CLOCK_DRIFT + 1]])
 
 
-def initial_covariance(scenario: Any, truth0: np.ndarray) -> np.ndarray:
-    """P0 of the 11 states from the scenario's initial errors (psi = phi - dtheta couples attitude and position).
+def initial_covariance(profile: Any, truth0: np.ndarray) -> np.ndarray:
+    """P0 of the 11 states from the profile's initial errors (psi = phi - dtheta couples attitude and position).
 
     Drawn independently (``flight.simulate_sensors`` and :meth:`PseudorangeAiding.simulate`): phi about N, E, D,
     velocity and position errors per axis (the vertical ones only with
     pseudo-range aiding: a 3-D fix initializes the INS); the receiver clock
     bias and drift.
     """
-    ie, clock = scenario.initial_errors, scenario.sensors[PSEUDORANGE.name]
+    ie, clock = profile.initial_errors, profile.sensors[PSEUDORANGE.name]
     lat, h = truth0[0], truth0[2]
     meridian, prime_vertical = earth.radii_of_curvature(lat)
     # independent variables u = (dr_E, dr_N, dr_U, dv_E, dv_N, dv_U, phi_E, phi_N, phi_U, b, d)
