@@ -1,4 +1,4 @@
-"""Memory layout of the generated C structs, decided once for C and Python.
+"""Memory layout of the generated C structs, decided once for C and Python (ctypes).
 
 The header template renders these field lists and ``build.CompiledFilter``
 rebuilds the same structs with ctypes from them, so the two can never
@@ -69,7 +69,7 @@ def upper_index(n: int, i: int, j: int) -> int:
 
 @dataclass(frozen=True)
 class Dim:
-    """One array dimension: the C text (a macro where one exists) and its value."""
+    """One array dimension: its symbolic name (the generated size macro where one exists) and its value."""
 
     text: str
     value: int
@@ -83,9 +83,6 @@ class Field:
     dims: tuple[Dim, ...]
     comment: str = ""
 
-    @property
-    def declarator(self) -> str:
-        return self.name + "".join(f"[{d.text}]" for d in self.dims)
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from modelgen.codegen.backends.c.literals import c_number, scalar_bytes, scalar_spellings
-from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c_ref, c_statement
+from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c_declarator, c_ref, c_statement
 from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.kernels import KernelBlock
 from modelgen.codegen.layout import CLayout, c_layout
@@ -73,8 +73,8 @@ def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, ob
     return out
 
 
-def structs(layout: CLayout) -> list[dict[str, object]]:
-    """The header's structs, in order, with their doc comments."""
+def _struct_list(layout: CLayout) -> list[dict[str, object]]:
+    """The header's structs, in order, with their doc comments and layout fields."""
     return [
         {"name": "matrices", "doc": "Structural nonzeros of F, G, H (row, column pairs in the tables below).", "fields": layout.matrices},
         {"name": "transition", "doc": "The transition over one step T (from discretize).", "fields": layout.transition},
@@ -85,6 +85,14 @@ def structs(layout: CLayout) -> list[dict[str, object]]:
             "doc": "Scratch memory of predict, update and set_covariance.",
             "fields": layout.filter_scratch,
         },
+    ]
+
+
+def structs(layout: CLayout) -> list[dict[str, object]]:
+    """The header's structs with each member printed as a C declarator."""
+    return [
+        {**s, "fields": [{"declarator": c_declarator(f), "comment": f.comment} for f in s["fields"]]}
+        for s in _struct_list(layout)
     ]
 
 
@@ -100,7 +108,7 @@ def _struct_bytes(fields, scalar_size: int) -> int:
 
 def struct_bytes(layout: CLayout, scalar_size: int) -> dict[str, int]:
     """Bytes of each struct, and of the workspace union (the larger scratch struct)."""
-    sizes = {s["name"]: _struct_bytes(s["fields"], scalar_size) for s in structs(layout)}
+    sizes = {s["name"]: _struct_bytes(s["fields"], scalar_size) for s in _struct_list(layout)}
     sizes["workspace"] = max(sizes["discretize_scratch"], sizes["filter_scratch"])
     return sizes
 

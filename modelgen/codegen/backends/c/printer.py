@@ -60,6 +60,11 @@ def c_statement(statement: Statement) -> str:
     return f"v = {c_sum(statement.terms)}; {stores} check += v - v;"
 
 
+def c_declarator(field) -> str:
+    """``P[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]``: a struct member with its dimensions."""
+    return field.name + "".join(f"[{d.text}]" for d in field.dims)
+
+
 def accessors(packed: bool, prefix: str) -> tuple[Callable[[str, str, str], str], Callable[[str, str, str], str]]:
     """C text for entry (i, j) of a symmetric matrix: (i <= j only, any i, j), for the loop templates."""
     if packed:
