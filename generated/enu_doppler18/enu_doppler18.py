@@ -36,12 +36,16 @@ and leaves its filter unchanged:
     sqrt(P_ii P_jj); abs(P_ij) > sqrt(P_ii P_jj) (1 + tol), so a zero variance carries
     no correlation; P not positive semidefinite within tol -> C ERR_NOT_POSITIVE, Python
     ValueError
+  - set_state (C only): a NaN or infinite entry of x -> C ERR_NONFINITE, Python
+    ValueError
   - predict: non-finite x, Phi or Q_d, or a non-finite result -> C ERR_NONFINITE, Python
     ValueError
   - update: non-finite x, z, H or r, or a non-finite result -> C ERR_NONFINITE, Python
     ValueError
   - update: r < 0 (UD form: r <= 0); an innovation variance that is not positive -> C
     ERR_NOT_POSITIVE, Python ValueError
+  - update_masked: as update, over the used measurements only: an unused one's z, H row
+    and r are not read (NaN allowed) -> C as update, Python ValueError
 """
 
 import math

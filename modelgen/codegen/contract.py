@@ -19,9 +19,11 @@ CONTRACT: tuple[tuple[str, str, str], ...] = (
     ("discretize", "T <= 0; a negative noise PSD q", "ERR_NOT_POSITIVE"),
     ("set_covariance / predict, update (P argument)", "a NaN or infinite entry of P", "ERR_NONFINITE"),
     ("set_covariance / predict, update (P argument)", "P_ii < 0; abs(P_ij - P_ji) > tol sqrt(P_ii P_jj); abs(P_ij) > sqrt(P_ii P_jj) (1 + tol), so a zero variance carries no correlation; P not positive semidefinite within tol", "ERR_NOT_POSITIVE"),
+    ("set_state (C only)", "a NaN or infinite entry of x", "ERR_NONFINITE"),
     ("predict", "non-finite x, Phi or Q_d, or a non-finite result", "ERR_NONFINITE"),
     ("update", "non-finite x, z, H or r, or a non-finite result", "ERR_NONFINITE"),
     ("update", "r < 0 (UD form: r <= 0); an innovation variance that is not positive", "ERR_NOT_POSITIVE"),
+    ("update_masked", "as update, over the used measurements only: an unused one's z, H row and r are not read (NaN allowed)", "as update"),
 )
 
 

@@ -189,3 +189,22 @@ def test_masked_update_equals_the_update_with_the_used_rows_and_reports_innovati
     np.testing.assert_allclose(c.x, x_all, rtol=1e-9, atol=1e-12)
     c.reset_error_state()
     assert not c.x.any()
+
+
+@pytest.mark.parametrize(
+    "options", [o for o in all_combinations("double") if o.slug() in ("double-full-vector-joseph", "double-full-sequential-standard", "double-ud")],
+    ids=lambda o: o.slug(),
+)
+def test_masked_update_refuses_a_nan_in_a_used_row_and_leaves_filter_and_outputs_unchanged(options, paper_derived, tmp_path):
+    files = generate_code(paper_derived, options).files
+    folder = write_files(tmp_path, files)
+    library = compile_shared_library([folder / "ned_doppler18.c"], folder / "libned_doppler18.so")
+    model = paper_derived.model
+    c = CompiledFilter(library, model.name, ModelSizes.of(paper_derived), model.parameter_names, options=options)
+    assert c.set_parameters({q.name: 0.6 if q.name == "latitude" else 20.0 for q in model.parameters if q.value is None}) == 0
+    assert c.set_state(np.full(18, 0.01), np.eye(18) * 1e-2) == 0
+    x, P = c.x, c.P
+    status, innovation, nis = c.update_masked(np.array([0.3, np.nan]), [0, 1])
+    assert status == 1  # ERR_NONFINITE
+    assert np.array_equal(c.x, x) and np.array_equal(c.P, P)
+    assert not innovation.any() and np.isnan(nis)  # the outputs were not written
