@@ -231,15 +231,17 @@ def generate(
 @click.option("--report", "report_dir", default="report", show_default=True, type=click.Path(file_okay=False), help="Folder for the reports.")
 @click.option("--no-figures", is_flag=True, help="Skip the covariance-analysis figures.")
 @click.option("--simulate/--no-simulate", "with_simulation", default=True, show_default=True, help="Also fly the paper's 4-h profile once (300 Hz strapdown, Doppler filter).")
+@click.option("--replay/--no-replay", "with_replay", default=True, show_default=True, help="Also fly the recorded car drive with the generated C navigator (modelgen replay).")
 @click.option("--force", is_flag=True, help="As for generate: overwrite files in OUT/<model>/ and in REPORT that modelgen did not write or that were edited.")
-def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool, force: bool) -> None:
+def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool, with_replay: bool, force: bool) -> None:
     """The main job, end to end on the core paper's 18-state model.
 
     Derives the model, verifies it entry by entry against the paper's table,
     generates Python and C for every built-in model into OUT/<model>/,
     compiles the C strictly and checks both against the numpy reference, runs
-    the paper's covariance analysis (Table 2, Figs 2-7) and writes
-    REPORT/README.md with links to everything.
+    the paper's covariance analysis (Table 2, Figs 2-7), flies the paper's
+    profile and the recorded car drive, and writes REPORT/README.md with
+    links to everything.
     """
     from pathlib import Path
 
@@ -248,7 +250,7 @@ def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool,
 
     with ReportUpdate(Path(report_dir), force=force) as staged:
         job = main_job(staged.staging, Path(out_root), figures=not no_figures, with_simulation=with_simulation,
-                       force=force, progress=click.echo, echo=_mapped_echo(staged))
+                       force=force, progress=click.echo, echo=_mapped_echo(staged), with_replay=with_replay)
         staged.commit()
     report = Path(report_dir)
     click.echo(job.text)

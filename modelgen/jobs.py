@@ -293,7 +293,7 @@ class MainJobResult:
 
 def main_job(
     report: Path, out_root: Path, figures: bool = True, with_simulation: bool = True, force: bool = False,
-    progress=print, echo=print,
+    progress=print, echo=print, with_replay: bool = True,
 ) -> MainJobResult:
     """``modelgen run``: the paper's model derived once, then checked, generated, analysed and flown.
 
@@ -326,9 +326,32 @@ def main_job(
         profile = load_profile("profile_000")
         sim = simulate(profile, models.get(profile.filter.model), report / "simulation", runs=1, seed=1, echo=echo)
         sections.append(f"## Simulation\n\nThe paper's profile flown once with the generated C filter: [simulation/{Path(sim).name}](simulation/{Path(sim).name}) and its figures.")
+    if with_replay:
+        progress("replay the recorded car drive with the generated C navigator ...")
+        sections.append(replay_section(report / "replay", echo))
     text = run_report(summary, runs, Path(out_root), sections)
     write_text_atomically(report / "README.md", text)
     return MainJobResult(text, runs, result)
+
+
+def replay_section(folder: Path, echo=print) -> str:
+    """Fly the built-in recorded drive (``modelgen replay``) into ``folder``; the report's section on it."""
+    from modelgen.navigator.config import builtin_config_path
+    from modelgen.navigator.replay import run_replay
+
+    s = run_replay(builtin_config_path(), folder, echo=echo).summary
+    return "\n".join([
+        "## Recorded car drive (real IMU and RTK GNSS)",
+        "",
+        f"The generated C navigator ({s['navigator']}) flown forward in real time over the recorded drive with "
+        f"{s['outage_count']} simulated GNSS outages: end-of-outage horizontal error RMS "
+        f"{s['horizontal_error_end_rms_m']:.2f} m (median {s['horizontal_error_end_median_m']:.2f} m, max "
+        f"{s['horizontal_error_end_max_m']:.2f} m), {100 * s['outage_ends_inside_3sigma_fraction']:.0f} % of outage "
+        f"ends inside the filter's 3 sigma, horizontal RMS against RTK outside outages "
+        f"{s['horizontal_rms_outside_outages_m']:.3f} m.",
+        "",
+        "Details: [replay/summary.md](replay/summary.md)",
+    ])
 
 
 def paper_check_of(model: str | Path) -> tuple[str, VerificationResult | None]:

@@ -46,7 +46,7 @@ ALLOWED: dict[str, set[str]] = {
     "analysis": _DERIVED,
     "simulation": _DERIVED | {"codegen"},
     "navigator": _DERIVED | {"codegen", "simulation"},
-    "jobs": _DERIVED | {"codegen", "checks", "analysis", "simulation"},
+    "jobs": _DERIVED | {"codegen", "checks", "analysis", "simulation", "navigator"},
     "cli": _FLOOR | {"fileio", "jobs", "navigator"},
     "__main__": {"cli"},
 }
