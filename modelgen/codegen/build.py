@@ -234,7 +234,15 @@ def build_c_filter(
     options: CodegenOptions | None = None,
     extra_flags: tuple[str, ...] = ("-O2",),
 ) -> CompiledFilter:
-    """Compile ``folder/<model>.c`` strictly and load it (``options``: those it was generated with)."""
-    build_dir = Path(build_dir or tempfile.mkdtemp(prefix="modelgen-build-"))
-    library = compile_shared_library([Path(folder) / f"{model}.c"], build_dir / f"lib{model}.so", extra_flags)
-    return CompiledFilter(library, model, sizes, parameter_names, options=options)
+    """Compile ``folder/<model>.c`` strictly and load it (``options``: those it was generated with).
+
+    Without ``build_dir`` the library is built in a temporary folder that is
+    removed once it is loaded (a loaded library stays mapped), so nothing is
+    left in the system's temporary folder.
+    """
+    if build_dir is not None:
+        library = compile_shared_library([Path(folder) / f"{model}.c"], Path(build_dir) / f"lib{model}.so", extra_flags)
+        return CompiledFilter(library, model, sizes, parameter_names, options=options)
+    with tempfile.TemporaryDirectory(prefix="modelgen-build-") as temporary:
+        library = compile_shared_library([Path(folder) / f"{model}.c"], Path(temporary) / f"lib{model}.so", extra_flags)
+        return CompiledFilter(library, model, sizes, parameter_names, options=options)

@@ -60,9 +60,13 @@ def generate_filter_module(model_file: Path, work_dir: Path | None = None) -> Mo
     names = [s.name for s in derived.model.states]
     if len(names) != N_STATES or names[9] != "gyro_constant_drift_x" or names[14] != "accel_constant_bias_z":
         raise ModelError(f"{model_file}: the navigator needs the 15 states of ins_gps15 in its order, got {names}")
-    folder = Path(work_dir or tempfile.mkdtemp(prefix="modelgen-replay-")) / derived.model.name
-    write_atomically(folder, generate_code(derived).files)
-    return load_python_module(folder / f"{derived.model.name}.py")
+    name = derived.model.name
+    if work_dir is not None:
+        write_atomically(Path(work_dir) / name, generate_code(derived).files)
+        return load_python_module(Path(work_dir) / name / f"{name}.py")
+    with tempfile.TemporaryDirectory(prefix="modelgen-replay-") as temporary:  # an imported module needs no file
+        write_atomically(Path(temporary) / name, generate_code(derived).files)
+        return load_python_module(Path(temporary) / name / f"{name}.py")
 
 
 @dataclass
