@@ -33,6 +33,7 @@ from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator.navigator import Flight, Inputs
 from modelgen.navigator.outages import in_outage, outage_windows
 from modelgen.fileio.output import write_atomically
+from modelgen.model import wgs84
 
 N_CONFIG, N_OUTPUT, N_GNSS, N_ALIGNMENT = 45, 23, 13, 6
 COUNT_NAMES = ("gnss_updates", "gnss_rejected", "gnss_released", "gnss_deweighted", "gnss_quality_skipped",
@@ -50,11 +51,18 @@ ALIGNMENT_ERRORS = {
 }
 
 
+def earth_constants() -> dict[str, str]:
+    """The WGS-84 constants the C navigator uses, printed from :mod:`modelgen.model.wgs84` to round-trip exactly."""
+    names = ("EARTH_RATE", "SEMI_MAJOR_AXIS", "FLATTENING", "EQUATORIAL_GRAVITY", "SOMIGLIANA_K", "GRAVITY_RATIO_M",
+             "ECCENTRICITY_SQUARED")
+    return {name: repr(float(getattr(wgs84, name))) for name in names}
+
+
 def render_navigator(model: str) -> dict[str, str]:
     """The navigator's header and source for the generated filter named ``model``."""
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(template_folder())), undefined=jinja2.StrictUndefined,
                              keep_trailing_newline=True)
-    context = {"p": model, "P": model.upper(), "version": __version__}
+    context = {"p": model, "P": model.upper(), "version": __version__, "wgs84": earth_constants()}
     return {f"{model}_navigator.h": env.get_template("navigator_header.h.j2").render(context),
             f"{model}_navigator.c": env.get_template("navigator_source.c.j2").render(context)}
 

@@ -27,33 +27,12 @@ import math
 
 import numpy as np
 
-from modelgen.model.wgs84 import EARTH_RATE, ECCENTRICITY_SQUARED, SEMI_MAJOR_AXIS
+from modelgen.model.wgs84 import EARTH_RATE
+from modelgen.simulation.earth import normal_gravity as gravity  # Somigliana with the free-air terms, +Down
+from modelgen.simulation.earth import radii_of_curvature as radii  # R_M, R_N
 from modelgen.simulation.jit import compiled
 
 NAV_SIZE = 10  # q0 q1 q2 q3, vN vE vD, latitude, longitude, height
-EQUATORIAL_GRAVITY = 9.7803253359
-SOMIGLIANA_K = 0.00193185265241
-FLATTENING = 1.0 / 298.257223563
-GRAVITY_RATIO_M = 0.00344978650684  # omega^2 a^2 b / GM (WGS-84)
-
-
-@compiled
-def gravity(latitude: float, height: float) -> float:
-    """Normal gravity along +Down [m/s^2]: Somigliana with the second-order free-air correction."""
-    s2 = math.sin(latitude) ** 2
-    g0 = EQUATORIAL_GRAVITY * (1.0 + SOMIGLIANA_K * s2) / math.sqrt(1.0 - ECCENTRICITY_SQUARED * s2)
-    a = SEMI_MAJOR_AXIS
-    factor = 1.0 - 2.0 * height / a * (1.0 + FLATTENING + GRAVITY_RATIO_M - 2.0 * FLATTENING * s2)
-    return g0 * (factor + 3.0 * height * height / (a * a))
-
-
-@compiled
-def radii(latitude: float) -> tuple[float, float]:
-    """Meridian and prime-vertical radii of curvature R_M, R_N [m]."""
-    s = math.sin(latitude)
-    w2 = 1.0 - ECCENTRICITY_SQUARED * s * s
-    w = math.sqrt(w2)
-    return SEMI_MAJOR_AXIS * (1.0 - ECCENTRICITY_SQUARED) / (w2 * w), SEMI_MAJOR_AXIS / w
 
 
 @compiled
