@@ -48,7 +48,9 @@ def read_yaml_with_lines(path: str | Path, what: str = "data file") -> tuple[dic
         data = yaml.safe_load(text)
         lines = key_lines(text, str(path))
     except yaml.YAMLError as exc:
-        raise ModelError(f"{path}: not valid YAML ({exc})") from None
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
+        raise ModelError(f"{where}: not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
     except RecursionError:
         raise ModelError(f"{path}: nested too deeply to read") from None
     if not isinstance(data, dict):

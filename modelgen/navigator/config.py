@@ -17,10 +17,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 
 from modelgen.errors import ModelError
-from modelgen.fileio.datafiles import data_path
+from modelgen.fileio.datafiles import data_path, read_yaml_with_lines
 from modelgen.navigator.logs import ACCEL_UNITS, GYRO_UNITS, STANDARD_GRAVITY, ImuColumns
 
 DEG = math.pi / 180.0
@@ -122,19 +121,10 @@ class NavigatorConfig:
     outage_windows: list[tuple[float, float]] | None
 
 
-def _line_map(node: yaml.Node, prefix: str, lines: dict[str, int]) -> None:
-    """Record the 1-based line of every key path ('a.b.c') in a composed YAML tree."""
-    if isinstance(node, yaml.MappingNode):
-        for key, value in node.value:
-            path = f"{prefix}.{key.value}" if prefix else str(key.value)
-            lines[path] = key.start_mark.line + 1
-            _line_map(value, path, lines)
-
-
 class _Reader:
     """Typed access to the loaded mapping, every error naming file:line and key."""
 
-    def __init__(self, path: Path, data: dict[str, Any], lines: dict[str, int]):
+    def __init__(self, path: Path, data: dict[str, Any], lines: dict[str, str]):
         self.path, self.data, self.lines = path, data, lines
 
     def where(self, key: str) -> str:
@@ -142,7 +132,7 @@ class _Reader:
         probe = key
         while probe and probe not in self.lines:
             probe = probe.rpartition(".")[0]
-        return f"{self.path}:{self.lines[probe]}" if probe else str(self.path)
+        return self.lines[probe] if probe else str(self.path)
 
     def get(self, key: str, default: Any = ...) -> Any:
         """The raw value at a key path; ModelError if missing and no default."""
@@ -279,23 +269,7 @@ def _choice(reader: _Reader, key: str, choices: tuple[str, ...]) -> str:
 def load_config(path: str | Path) -> NavigatorConfig:
     """Read and validate a navigator configuration file."""
     path = Path(path)
-    if not path.is_file():
-        raise ModelError(f"{path}: no such navigator configuration file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ModelError(f"{path}: cannot be read as UTF-8 text ({exc})") from None
-    try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
-        raise ModelError(f"{where}: not valid YAML ({getattr(exc, 'problem', exc)})") from None
-    if not isinstance(data, dict):
-        raise ModelError(f"{path}: expected a mapping at the top level")
-    lines: dict[str, int] = {}
-    _line_map(node, "", lines)
+    data, lines = read_yaml_with_lines(path, "navigator configuration file")
     r = _Reader(path, data, lines)
     _check_keys(r)
     accel_unit, gyro_unit = r.text("imu.units.accel"), r.text("imu.units.gyro")
