@@ -24,4 +24,9 @@ def test_wheel_contains_templates_models_and_data(tmp_path):
         assert f"modelgen/models/{model.name}" in names
     for data in (REPO / "modelgen" / "data").glob("*.yaml"):
         assert f"modelgen/data/{data.name}" in names
+    shipped = [p for p in (REPO / "modelgen" / "data" / "drives").rglob("*") if p.is_file()]
+    shipped += list((REPO / "modelgen" / "navigator" / "models").glob("*.yaml"))
+    assert len(shipped) >= 5, "the recorded drive (logs, README, LICENSE) and the navigator's model"
+    for path in shipped:  # modelgen replay with no arguments flies these after a plain pip install
+        assert path.relative_to(REPO).as_posix() in names
     assert not any(n.startswith(("tests/", "generated/", "bench/")) for n in names)
