@@ -356,12 +356,15 @@ def observability(model: str, scenario_file: str | None, assignments: tuple[str,
     scenario's operating point(s) and names the unobservable and weakly
     observable directions as combinations of states.
     """
-    from modelgen.jobs import load_and_derive, observability_report, paper_operating_point
+    from modelgen.jobs import load_and_derive, observability_defaults, observability_report
 
     derived = load_and_derive(model)
-    base = paper_operating_point(derived) if scenario_file is None else None
-    if base:
-        click.echo("scenario: the core paper's level flight (30 N, east, 300 km/h, Table 1 statistics)")
+    defaults = observability_defaults(derived) if scenario_file is None else None
+    base = None
+    if defaults:
+        label, base, default_step = defaults
+        step = step if step is not None else default_step
+        click.echo(f"scenario: {label}")
     click.echo(observability_report(derived, scenario_file, assignments, step, steps, weak_rtol, base))
 
 

@@ -265,6 +265,21 @@ def paper_operating_point(derived: DerivedModel) -> dict[str, float] | None:
     return values if values and needed <= set(values) else None
 
 
+def observability_defaults(derived: DerivedModel) -> tuple[str, dict[str, float], float | None] | None:
+    """The operating point ``modelgen observability`` uses without a scenario file: label, values, step.
+
+    The core paper's level flight where it covers the model's parameters, else
+    the model file's own check scenario (its values and step), else none.
+    """
+    paper = paper_operating_point(derived)
+    if paper:
+        return "the core paper's level flight (30 N, east, 300 km/h, Table 1 statistics)", paper, None
+    spec = derived.model.check
+    if spec is not None:
+        return f"the model's check scenario (steps of {spec.step_s:g} s)", spec.parameter_values(), spec.step_s
+    return None
+
+
 def verification_summary(result: VerificationResult, markdown: Path, data: Path) -> str:
     """The paper check in a few lines for the main job's report, with links to the full reports."""
     counts = result.counts()

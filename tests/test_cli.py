@@ -319,3 +319,11 @@ def test_sigint_during_generate_exits_130_and_leaves_nothing_half_written(tmp_pa
         assert after.keys() == before.keys()  # the old or the new output, whole
         assert _hidden(out) == []
     assert 130 in codes  # at least one run was really interrupted mid-way
+
+
+def test_observability_without_scenario_uses_the_models_check_scenario(runner):
+    """A model the paper's level flight does not cover is analysed at its own check scenario, not refused."""
+    result = runner.invoke(main, ["observability", "ins_gnss21"])
+    assert result.exit_code == 0, result.output
+    assert "scenario: the model's check scenario (steps of 1 s)" in result.output
+    assert "rank of the observability matrix: 19 of 21" in result.output  # level, unaccelerated: tilt ~ accel bias

@@ -289,10 +289,24 @@ def test_cli_reports_rank_and_names_longitude_for_the_doppler_model(tmp_path, ne
     assert result.output.strip() == format_report(report)
 
 
-def test_cli_missing_operating_point_is_an_error_naming_the_parameter():
-    result = CliRunner().invoke(main, ["observability", "ins_gps15"])
+def test_cli_missing_operating_point_is_an_error_naming_the_parameter(tmp_path):
+    """A model with neither the paper's parameters nor a check scenario needs --set or --scenario."""
+    model = tmp_path / "tilt.yaml"
+    model.write_text(
+        "model: tilt\nparameters:\n  - {name: gravity, symbol: g}\nstates:\n  - {name: tilt, symbol: a}\n"
+        "  - {name: velocity_error, symbol: v}\ndynamics:\n  a: 0\n  v: g*a\n"
+        "measurements:\n  - {name: velocity_measured, symbol: z, expression: v, variance: '1'}\n",
+        encoding="utf-8",
+    )
+    result = CliRunner().invoke(main, ["observability", str(model)])
     assert result.exit_code == 2
-    assert "no value for parameter" in result.output
+    assert "no value for parameter" in result.output and "gravity" in result.output
+
+
+def test_cli_uses_the_models_check_scenario_when_the_paper_does_not_cover_it():
+    result = CliRunner().invoke(main, ["observability", "ins_gps15"])
+    assert result.exit_code == 0, result.output
+    assert "scenario: the model's check scenario" in result.output
 
 
 def test_cli_defaults_to_the_papers_level_flight_for_the_paper_model():
