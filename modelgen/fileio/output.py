@@ -311,6 +311,13 @@ def recover_interrupted(folder: Path) -> None:
     _remove_owned(old, owned, [])
 
 
+def _discard_staging(staging: Path | None) -> None:
+    """Remove a staging folder that was not committed (modelgen made it); None for the caller to keep."""
+    if staging is not None:
+        shutil.rmtree(staging, ignore_errors=True)
+    return None
+
+
 class FolderUpdate:
     """Replace ``folder`` by new files in two steps: ``stage`` (writable, checkable), then ``commit``.
 
@@ -338,9 +345,7 @@ class FolderUpdate:
 
     def __exit__(self, *exc_info) -> None:
         try:
-            if self.staging is not None:
-                shutil.rmtree(self.staging, ignore_errors=True)
-                self.staging = None
+            self.staging = _discard_staging(self.staging)
         finally:
             self._lock.__exit__(*exc_info)
 
@@ -476,9 +481,7 @@ class ReportUpdate:
 
     def __exit__(self, *exc_info) -> None:
         try:
-            if self.staging is not None:
-                shutil.rmtree(self.staging, ignore_errors=True)
-                self.staging = None
+            self.staging = _discard_staging(self.staging)
         finally:
             self._lock.__exit__(*exc_info)
             if self._created and self.folder.is_dir() and not any(self.folder.iterdir()):
