@@ -1,12 +1,30 @@
-"""What the expression printers of every backend share: small integer powers as products.
+"""What the expression printers of every backend share.
 
-``x*x`` and ``1.0/(x*x)`` are cheaper than ``pow`` on every target and bit
-for bit the same in the C and the Python outputs.
+Small integer powers print as products: ``x*x`` and ``1.0/(x*x)`` are cheaper
+than ``pow`` on every target and bit for bit the same in the C and the Python
+outputs.  Parameters print under the name the backend gives them (a struct
+member, a local, a vector entry): :class:`RenamedSymbols`.
 """
 
 from __future__ import annotations
 
+from typing import Mapping
+
 import sympy as sp
+
+
+class RenamedSymbols:
+    """Printer mix-in: a symbol in ``renames`` prints as its new name, any other as sympy prints it."""
+
+    renames: dict[sp.Symbol, str]
+
+    def _init_renames(self, renames: Mapping[sp.Symbol, str] | None) -> None:
+        self.renames = dict(renames or {})
+
+    def _print_Symbol(self, expr: sp.Symbol) -> str:
+        if expr in self.renames:
+            return self.renames[expr]
+        return super()._print_Symbol(expr)  # type: ignore[misc]
 
 
 def small_power(printer, expr: sp.Pow, one: str) -> str | None:

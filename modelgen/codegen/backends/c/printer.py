@@ -13,7 +13,7 @@ import sympy as sp
 from sympy.codegen.ast import float32, float64, real
 from sympy.printing.c import C99CodePrinter
 
-from modelgen.codegen.backends.printing import small_power
+from modelgen.codegen.backends.printing import RenamedSymbols, small_power
 from modelgen.codegen.kernels import Assign, CheckedAssign, Ref, Statement, Term
 
 SCALAR_TYPES = {"double": float64, "float": float32}
@@ -22,18 +22,13 @@ SCALAR_TYPES = {"double": float64, "float": float32}
 POINTERS = {"filter": "f", "transition": "t", "scratch": "w"}
 
 
-class CPrinter(C99CodePrinter):
+class CPrinter(RenamedSymbols, C99CodePrinter):
     """C99 printer with parameters renamed to struct members."""
 
     def __init__(self, scalar: str = "double", renames: Mapping[sp.Symbol, str] | None = None):
         super().__init__({"type_aliases": {real: SCALAR_TYPES[scalar]}})
         self.scalar = scalar
-        self.renames = dict(renames or {})
-
-    def _print_Symbol(self, expr: sp.Symbol) -> str:
-        if expr in self.renames:
-            return self.renames[expr]
-        return super()._print_Symbol(expr)
+        self._init_renames(renames)
 
     def _print_Pow(self, expr: sp.Pow) -> str:
         one = "1.0F" if self.scalar == "float" else "1.0"

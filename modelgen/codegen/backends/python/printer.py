@@ -8,21 +8,16 @@ from typing import Mapping
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
-from modelgen.codegen.backends.printing import small_power
+from modelgen.codegen.backends.printing import RenamedSymbols, small_power
 from modelgen.codegen.expressions import Block
 
 
-class PyPrinter(PythonCodePrinter):
+class PyPrinter(RenamedSymbols, PythonCodePrinter):
     """Python printer (math module) with parameters renamed to locals or vector entries."""
 
     def __init__(self, renames: Mapping[sp.Symbol, str] | None = None):
         super().__init__({"fully_qualified_modules": True})
-        self.renames = dict(renames or {})
-
-    def _print_Symbol(self, expr: sp.Symbol) -> str:
-        if expr in self.renames:
-            return self.renames[expr]
-        return super()._print_Symbol(expr)
+        self._init_renames(renames)
 
     def _print_Pow(self, expr: sp.Pow) -> str:
         text = small_power(self, expr, "1.0")
