@@ -160,5 +160,5 @@ def run_covariance_analysis(
     files[1].write_text(csv_text(rows), encoding="utf-8")
     if figures:
         say("drawing Figs 2-7")
-        files += write_figures(results, scenario.times_h(), out)
+        files += write_figures(results, scenario.times_h(), out, paper=paper, designs=models.designs)
     return CovarianceReport(results, rows, sens, inferred, markdown, table, files)
