@@ -21,6 +21,7 @@ from modelgen.analysis.scenario import AnalysisScenario, load_analysis_scenario
 from modelgen.analysis.sensitivity import SensitivityResult, default_cases, markdown_sensitivity, run_sensitivity
 from modelgen.analysis.systems import PaperModels, SystemResult, analyse_systems
 from modelgen.analysis.table2 import COLUMNS, Row, csv_text, load_paper_table, markdown_improvement, markdown_table, table_rows
+from modelgen.model.sources import cite_sources
 
 #: a cell counts as reproduced within this fraction of the paper's value; the
 #: same bands, and why, are in tests/analysis/test_table2.py
@@ -153,7 +154,7 @@ def run_covariance_analysis(
         parts.append(
             "## Sensitivity\n\n4-h values with one choice changed at a time (CEP in nmile).\n\n" + markdown_sensitivity(sens)
         )
-    markdown = "\n\n".join(parts) + "\n"
+    markdown = cite_sources("\n\n".join(parts) + "\n")
 
     files = [out / "table2.md", out / "table2.csv"]
     files[0].write_text(markdown, encoding="utf-8")
