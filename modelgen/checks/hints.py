@@ -37,16 +37,25 @@ HINT_KINDS = ("sign_flip", "unit_factor", "transposed", "misplaced", "missing_te
 #: M = 180*3600/pi: radians to arc-seconds, and also rad/s to deg/h.
 ARCSECONDS_PER_RADIAN = sp.Integer(180 * 3600) / sp.pi
 
-#: The unit factors a written entry is most often missing, by name.  A ratio
+@dataclass(frozen=True)
+class NamedFactor:
+    """A unit conversion factor a written entry may be missing: its short name, value and meaning."""
+
+    name: str
+    value: sp.Expr
+    meaning: str
+
+
+#: The unit factors a written entry is most often missing.  A ratio
 #: written/derived equal to one of these is reported as a unit-factor hint.
-UNIT_FACTORS: Mapping[str, sp.Expr] = {
-    "M = 180*3600/pi (rad -> arcsec, rad/s -> deg/h)": ARCSECONDS_PER_RADIAN,
-    "1/M (arcsec -> rad, deg/h -> rad/s)": 1 / ARCSECONDS_PER_RADIAN,
-    "180/pi (rad -> deg)": sp.Integer(180) / sp.pi,
-    "pi/180 (deg -> rad)": sp.pi / 180,
-    "3600 (s -> h, per second -> per hour)": sp.Integer(3600),
-    "1/3600 (h -> s, per hour -> per second)": sp.Rational(1, 3600),
-}
+UNIT_FACTORS: tuple[NamedFactor, ...] = (
+    NamedFactor("M", ARCSECONDS_PER_RADIAN, "180*3600/pi: rad -> arcsec, rad/s -> deg/h"),
+    NamedFactor("1/M", 1 / ARCSECONDS_PER_RADIAN, "pi/(180*3600): arcsec -> rad, deg/h -> rad/s"),
+    NamedFactor("180/pi", sp.Integer(180) / sp.pi, "rad -> deg"),
+    NamedFactor("pi/180", sp.pi / 180, "deg -> rad"),
+    NamedFactor("3600", sp.Integer(3600), "s -> h, per second -> per hour"),
+    NamedFactor("1/3600", sp.Rational(1, 3600), "h -> s, per hour -> per second"),
+)
 
 _DIGITS = 30
 _POINTS = 3
@@ -110,7 +119,7 @@ def sign_flip(written: sp.Expr, derived: sp.Expr) -> Hint | None:
     """The written entry is the derived one with the opposite sign."""
     if _is_zero(derived) or not same(written, -derived):
         return None
-    return Hint("sign_flip", f"sign flip: the written entry is -1 times the derived {sp.sstr(derived)}")
+    return Hint("sign_flip", "sign flip: the written entry is the derived one with the opposite sign")
 
 
 def constant_ratio(written: sp.Expr, derived: sp.Expr) -> sp.Expr | None:
@@ -124,16 +133,17 @@ def constant_ratio(written: sp.Expr, derived: sp.Expr) -> sp.Expr | None:
     return first
 
 
-def unit_factor(written: sp.Expr, derived: sp.Expr, factors: Mapping[str, sp.Expr] = UNIT_FACTORS) -> Hint | None:
-    """written = f * derived (or -f * derived) for a named unit factor f."""
+def unit_factor(written: sp.Expr, derived: sp.Expr, factors: tuple[NamedFactor, ...] = UNIT_FACTORS) -> Hint | None:
+    """written = f * derived (or -f * derived) for a named unit factor f: a unit conversion applied or forgotten."""
     ratio = constant_ratio(written, derived)
     if ratio is None:
         return None
-    for name, factor in factors.items():
-        value = sp.N(factor, _DIGITS)
-        for sign, words in ((1, ""), (-1, " and the sign is flipped")):
+    for factor in factors:
+        value = sp.N(factor.value, _DIGITS)
+        for sign, words in ((1, ""), (-1, ", and the sign is flipped")):
             if abs(ratio - sign * value) <= _RELATIVE_ZERO * abs(value):
-                return Hint("unit_factor", f"unit factor: written = {'-' if sign < 0 else ''}{name} x derived{words}")
+                text = f"unit factor: written = {'-' if sign < 0 else ''}{factor.name} x derived ({factor.name} = {factor.meaning}){words}"
+                return Hint("unit_factor", text)
     return None
 
 
@@ -212,7 +222,7 @@ def difference_hints(
     derived: sp.Expr | None,
     key: Key | None = None,
     derived_entries: Mapping[Key, sp.Expr] | None = None,
-    factors: Mapping[str, sp.Expr] = UNIT_FACTORS,
+    factors: tuple[NamedFactor, ...] = UNIT_FACTORS,
 ) -> tuple[Hint, ...]:
     """Every hint for one differing entry, in the order of :data:`HINT_KINDS`.
 
