@@ -307,22 +307,28 @@ def embedded(model: str, out_dir: str, qemu: bool, force: bool) -> None:
 @main.command()
 @click.argument("model", default="ned_doppler18")
 @click.option("--out", "out_dir", default="report", show_default=True, type=click.Path(file_okay=False), help="Folder for verification.md and verification.json.")
+@click.option("--table", "table_file", type=click.Path(dir_okay=False), default=None, help="Your own table of F, G, H entries (YAML; README 'Verifying your own paper').")
+@click.option("--complete", is_flag=True, default=None, help="Also report every derived nonzero the table does not list (default only for the built-in paper table).")
 @click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
-def verify(model: str, out_dir: str, force: bool) -> None:
-    """Check MODEL's derived F, G, H against the paper's printed table.
+def verify(model: str, out_dir: str, table_file: str | None, complete: bool | None, force: bool) -> None:
+    """Check MODEL's derived F, G, H against a paper's printed table.
 
-    Every entry is compared symbolically after converting to the paper's units
+    Every entry is compared symbolically after converting to the table's units
     (M = 180*3600/pi); each difference is listed with the classification and
-    reason recorded in the table file.  Writes OUT/verification.md and
-    OUT/verification.json.  Models without a paper table are reported and
-    skipped (exit 0); exit 1 if a difference has no annotation (unexplained).
+    reason recorded in the table file, and an unexplained one with automatic
+    hints (sign flip, unit factor, transposed or misplaced entry, missing
+    term).  Without --table the built-in paper table of MODEL is used; with
+    it, only the entries the table lists are compared unless --complete.
+    Writes OUT/verification.md and OUT/verification.json.  Models without a
+    paper table are reported and skipped (exit 0); exit 1 if a difference has
+    no annotation (unexplained).
     """
     from modelgen.fileio.output import ReportUpdate
     from modelgen.jobs import paper_check_of, write_verification_report
 
-    name, result = paper_check_of(model)
+    name, result = paper_check_of(model, table_file, complete or None)
     if result is None:
-        click.echo(f"model {name}: no paper table to verify against (only the built-in paper model has one)")
+        click.echo(f"model {name}: no paper table to verify against (only the built-in paper model has one; give yours with --table)")
         return
     with ReportUpdate(Path(out_dir), force=force) as staged:
         markdown, data = (staged.final(p) for p in write_verification_report(result, staged.staging))
@@ -331,6 +337,8 @@ def verify(model: str, out_dir: str, force: bool) -> None:
     click.echo(f"model {result.model} against {result.table}: {len(result.entries)} entries, " + ", ".join(f"{n} {s}" for s, n in counts.items()))
     for e in result.differences:
         click.echo(f"  {e.label} {e.status}: {e.classification} - {e.reason}")
+        for hint in e.hints:
+            click.echo(f"    hint: {hint}")
     for e in result.equation_1_checks:
         if e.is_difference:
             click.echo(f"  {e.label} {e.status} from eq. (1): {e.classification} - {e.reason}")

@@ -369,12 +369,21 @@ def replay_section(folder: Path, echo=print) -> str:
     ])
 
 
-def paper_check_of(model: str | Path) -> tuple[str, VerificationResult | None]:
-    """``modelgen verify``: the model's name and its paper check (None: no paper table names this model)."""
+def paper_check_of(
+    model: str | Path, table: str | Path | None = None, complete: bool | None = None
+) -> tuple[str, VerificationResult | None]:
+    """``modelgen verify``: the model's name and its paper check (None: no table given and none names this model).
+
+    ``table`` is a user's table file (README "Verifying your own paper");
+    ``complete`` (default: only for the shipped table) also compares the
+    derived nonzeros the table does not list.
+    """
     loaded = load_model(model)
-    if paper_table_path(loaded.name) is None:
+    if table is None and paper_table_path(loaded.name) is None:
         return loaded.name, None
-    return loaded.name, verify(derive(loaded))
+    if complete is None:
+        complete = table is None
+    return loaded.name, verify(derive(loaded), table, complete=complete)
 
 
 def embedded_inputs(model: str | Path, qemu: bool):

@@ -10,6 +10,13 @@ derived_only); every non-match gets the classification and reason a human
 wrote in the table file, or "unexplained" if there is none.  The model is
 never bent to the paper: a difference is reported, not hidden.
 
+A user's own table (``verify(derived, "my_table.yaml", complete=False)``)
+is completed from the model (see :mod:`modelgen.checks.paper_table`) and only
+the entries it lists are compared unless ``complete``.  Every unexplained
+difference gets the automatic hints of :mod:`modelgen.checks.hints` (sign
+flip, unit factor, transposed or misplaced entry, missing term); records that
+have hints carry a ``hints`` field.
+
 Public API (used by ``modelgen verify`` and ``modelgen run``)::
 
     result = verify(derived)                    # table found from derived.model.name
@@ -29,6 +36,7 @@ import sympy as sp
 from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.fileio.output import write_text_atomically
+from modelgen.checks.hints import difference_hints
 from modelgen.checks.paper_table import (
     MATRICES,
     STATUSES,
@@ -88,6 +96,7 @@ class EntryComparison:
     classification: str | None
     reason: str | None
     reading: str | None
+    hints: tuple[str, ...] = ()
 
     @property
     def label(self) -> str:
@@ -102,8 +111,11 @@ class EntryComparison:
         return self.classification == UNEXPLAINED
 
     def record(self) -> dict[str, Any]:
-        """The entry as a JSON-ready dict with exactly :data:`RECORD_FIELDS`."""
-        return {name: getattr(self, name) for name in RECORD_FIELDS}
+        """The entry as a JSON-ready dict: :data:`RECORD_FIELDS`, plus ``hints`` where there are any."""
+        record = {name: getattr(self, name) for name in RECORD_FIELDS}
+        if self.hints:
+            record["hints"] = list(self.hints)
+        return record
 
 
 @dataclass(frozen=True)
@@ -174,19 +186,24 @@ class VerificationResult:
 
 
 # -- the comparison -----------------------------------------------------------
-def verify(derived: DerivedModel, table_path: str | Path | None = None) -> VerificationResult:
+def verify(derived: DerivedModel, table_path: str | Path | None = None, complete: bool = True) -> VerificationResult:
     """Compare ``derived`` with a paper's printed table of F, G, H entries.
 
     ``table_path`` defaults to the table written for ``derived.model.name``
     (see :func:`modelgen.checks.paper_table.paper_table_path`); a model without one
-    is refused with a ModelError.  Takes about a second for the 18-state model.
+    is refused with a ModelError.  A table given by path is read as a user
+    table, completed from the model.  ``complete`` also compares every derived
+    nonzero the table does not list (as ``derived_only``); otherwise only the
+    listed entries are compared.  Takes about a second for the 18-state model.
     """
     model = derived.model
     if table_path is None:
         table_path = paper_table_path(model.name)
         if table_path is None:
             raise ModelError(f"model {model.name!r}: no paper table in modelgen/data/ to verify it against")
-    table = load_paper_table(table_path)
+        table = load_paper_table(table_path)
+    else:
+        table = load_paper_table(table_path, model)
     scale = _unit_scales(derived, table)
     quantities = _quantity_names(derived)
     value = {table.unit_symbol: table.unit_value}
@@ -205,12 +222,15 @@ def verify(derived: DerivedModel, table_path: str | Path | None = None) -> Verif
         note = None
         if paper is None:
             status = "derived_only"
+        elif derived_value == 0 and paper.value == 0:
+            status = "match"  # a table may list an entry as 0
         elif derived_value == 0:
             status = "paper_only"
         else:
             equal, note = _equal(paper.value, derived_value, value)
             status = "match" if equal else "differ"
         classification = reason = None
+        hints: tuple[str, ...] = ()
         if status != "match":
             annotation: Annotation | None = annotations.get((against, key, status))
             if annotation is not None:
@@ -219,6 +239,7 @@ def verify(derived: DerivedModel, table_path: str | Path | None = None) -> Verif
             else:
                 classification = UNEXPLAINED
                 reason = f"no annotation for this {status} in {table.name}" + (f" ({note})" if note else "")
+                hints = _hints(key, paper, derived_value)
         m, i, j = key
         return EntryComparison(
             matrix=m,
@@ -234,10 +255,21 @@ def verify(derived: DerivedModel, table_path: str | Path | None = None) -> Verif
             classification=classification,
             reason=reason,
             reading=(f"printed {paper.expression!r} read as {paper.reading!r}: {paper.why}" if paper and paper.reading else None),
+            hints=hints,
         )
 
+    derived_entries: dict[Key, sp.Expr] = {}
+
+    def _hints(key: Key, paper: PaperEntry | None, derived_value: sp.Expr) -> tuple[str, ...]:
+        """The automatic hints of an unexplained difference, all in the paper's units with M as a number."""
+        if not derived_entries:
+            derived_entries.update({k: derived_in_paper_units(k).xreplace(value) for k in _derived_nonzeros(derived)})
+        written = paper.value.xreplace(value) if paper else None
+        found = difference_hints(written, derived_value.xreplace(value), key, derived_entries)
+        return tuple(h.text for h in found)
+
     paper_entries = {e.key: e for e in table.entries}
-    keys = set(paper_entries) | _derived_nonzeros(derived)
+    keys = set(paper_entries) | (_derived_nonzeros(derived) if complete else set())
     entries = tuple(compare(k, paper_entries.get(k), "table") for k in sorted(keys, key=_order))
     checks = tuple(
         compare(e.key, e, "equation_1")
@@ -399,9 +431,10 @@ def _markdown(result: VerificationResult) -> str:
     if result.differences:
         lines += ["| entry | status | classification | paper | derived | reason |", "|---|---|---|---|---|---|"]
         for e in result.differences:
+            reason = e.reason if not e.hints else f"{e.reason}; hint: {'; '.join(e.hints)}"
             lines.append(
                 f"| {e.label} | {e.status} | {_cell(e.classification, False)} | {_cell(e.paper_expression)} "
-                f"| {_cell(e.derived_expression)} | {_cell(e.reason, False)} |"
+                f"| {_cell(e.derived_expression)} | {_cell(reason, False)} |"
             )
     else:
         lines.append("None.")

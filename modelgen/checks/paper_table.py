@@ -8,6 +8,14 @@ module validates that file, parses every expression in the paper's symbols
 and resolves the printed cross-references ("F(2,1) = -F(1,2)").  It knows
 nothing about any derived model; :mod:`modelgen.checks.paper_check` does the
 comparison.
+
+A user's own table (``modelgen verify MODEL --table FILE``) is read with the
+model it describes (``load_paper_table(path, model)``): then only ``entries``
+is required; ``shape`` and ``symbols`` default to the model's, the unit factor
+to ``M = 180*3600/pi``, and every state, noise and measurement a table does
+not list in ``state_units``/``noise_units``/``measurement_units`` keeps the
+model's SI unit (factor 1).  The format is documented in README "Verifying
+your own paper" and ``modelgen/data/verify_table.schema.json``.
 """
 
 from __future__ import annotations
@@ -21,7 +29,7 @@ import sympy as sp
 
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml
-from modelgen.model.declaration import parse_expression
+from modelgen.model.declaration import ErrorModel, parse_expression
 
 MATRICES = ("F", "G", "H")
 STATUSES = ("match", "differ", "paper_only", "derived_only")
@@ -52,6 +60,9 @@ _TOP_KEYS = {
     "annotations",
     "paper_inconsistencies",
 }
+#: The unit factor a user table gets when it declares none: arc-seconds per radian.
+DEFAULT_UNIT_FACTOR = {"symbol": "M", "value": "180*3600/pi"}
+_UNIT_KINDS = (("state_units", "state", "states"), ("noise_units", "noise", "noises"), ("measurement_units", "measurement", "measurements"))
 
 Key = tuple[str, int, int]  # (matrix, row, col), 1-based as printed
 
@@ -162,14 +173,20 @@ def paper_table_path(model_name: str) -> Path | None:
     return None
 
 
-def load_paper_table(path: str | Path) -> PaperTable:
-    """Read, validate and parse a paper-table data file (see module doc)."""
+def load_paper_table(path: str | Path, model: ErrorModel | None = None) -> PaperTable:
+    """Read, validate and parse a paper-table data file (see module doc).
+
+    Without ``model`` every key of the full format is required (the shipped
+    paper tables); with it, a partial user table is completed from the model.
+    """
     path = Path(path)
     where = path.name
     data = read_yaml(path, "paper-table file")
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
         raise ModelError(f"{where}: unknown key {unknown[0]!r} (expected one of {sorted(_TOP_KEYS)})")
+    if model is not None:
+        data = _completed_from_model(data, model, where)
     for key in ("model", "shape", "unit_factor", "symbols", "state_units", "entries"):
         if key not in data:
             raise ModelError(f"{where}: missing required key {key!r}")
@@ -223,6 +240,51 @@ def load_paper_table(path: str | Path) -> PaperTable:
         annotations=annotations,
         inconsistencies=inconsistencies,
     )
+
+
+def _completed_from_model(data: dict[str, Any], model: ErrorModel, where: str) -> dict[str, Any]:
+    """A user table with every key the model can supply filled in (the file's own values win).
+
+    ``model`` must match the model the table names; ``symbols`` maps each of the
+    model's parameter symbols to itself, plus the table's own spellings; a
+    quantity missing from a ``*_units`` list keeps its SI unit (factor 1);
+    entries without ``printed`` show their expression.
+    """
+    named = data.get("model")
+    if named is not None and named != model.name:
+        raise ModelError(f"{where}: the table is written for model {named!r}, not {model.name!r}")
+    n, k, m = len(model.states), len(model.noises), len(model.measurements)
+    out = dict(data)
+    out["model"] = model.name
+    out.setdefault("shape", {"F": [n, n], "G": [n, k], "H": [m, n]})
+    out.setdefault("unit_factor", dict(DEFAULT_UNIT_FACTOR))
+    out.setdefault("source", f"the table {where}")
+    own = _mapping(data.get("symbols") or {}, f"{where}: symbols")
+    out["symbols"] = {**{p.symbol: p.symbol for p in model.parameters}, **own}
+    for kind, field, plural in _UNIT_KINDS:
+        listed: dict[str, dict] = {}
+        for i, item in enumerate(_list(data.get(kind) or [], f"{where}: {kind}")):
+            item = _mapping(item, f"{where}: {kind}[{i}]", {field, "factor"}, {"paper_unit", "reasoning"})
+            listed[str(item[field])] = item
+        quantities = getattr(model, plural)
+        unknown = sorted(set(listed) - {q.symbol for q in quantities})
+        if unknown:
+            raise ModelError(f"{where}: {kind} names {unknown[0]!r}, which is not one of the {plural} of model {model.name!r}")
+        out[kind] = [
+            {
+                field: q.symbol,
+                "factor": listed[q.symbol]["factor"] if q.symbol in listed else 1,
+                "paper_unit": listed.get(q.symbol, {}).get("paper_unit", q.unit),
+                "reasoning": listed.get(q.symbol, {}).get("reasoning", "declared by the table" if q.symbol in listed else "the model's SI unit (default)"),
+            }
+            for q in quantities
+        ]
+    if "entries" in data:
+        out["entries"] = [
+            {**item, "printed": item.get("expression", "")} if isinstance(item, dict) and "printed" not in item else item
+            for item in _list(data["entries"], f"{where}: entries")
+        ]
+    return out
 
 
 # -- validation helpers -------------------------------------------------------
