@@ -1,0 +1,479 @@
+"""The cross-check: a hand-written error model against its twin derived from the navigation equations.
+
+Each built-in hand-written model (``ned_doppler18``, ``ins_gps15`` ...) has a
+twin that declares the navigation equations instead of the error equations
+(``<model>_twin.yaml``, same states in the same order); modelgen derives the
+twin's error model.  This module compares the two F, G, H entry by entry and
+says, for every entry, whether they agree and, where they do not, why:
+
+``equal``
+    the hand entry is the derived one;
+``convention``
+    they agree once a declared sign convention is applied (a state or noise
+    the hand model defines with the opposite sign, e.g. gyro drift as
+    "true minus measured": x_hand = -x_twin negates its row and column);
+``approximation``
+    the hand entry is the derived one without terms that a named
+    approximation the twin declares drops (single Earth radius, no gravity
+    variation ...); ``term`` is the dropped part, ``magnitude`` its size at
+    the hand model's check scenario;
+``hand_model_error``
+    the difference is declared an error of the hand model in the pair's data
+    (fixed there, or reported when the hand model is the paper's);
+``unexplained``
+    none of these: the report shows automatic hints
+    (:mod:`modelgen.checks.hints`).
+
+``derived`` is always the full first-order linearization: the twin's entry
+plus every term its declared approximations drop.  What explains a
+difference is data (``modelgen/data/crosscheck.yaml``: conventions,
+hand-model errors, the mapping of the twin's parameters onto the hand
+model's) and the derivation engine's list of neglected terms; nothing is
+matched by the name of a model.
+
+Public API (used by ``modelgen run`` and the tests)::
+
+    pairs = load_pairs()                          # modelgen/data/crosscheck.yaml
+    result = cross_check(pairs[0], hand, twin, neglected)   # two DerivedModels
+    write_crosscheck_report([result, ...], folder)         # crosscheck.md + .json
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from itertools import combinations
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+
+import sympy as sp
+
+from modelgen.checks.hints import difference_hints, same
+from modelgen.derive.symbolic import DerivedModel
+from modelgen.errors import ModelError
+from modelgen.fileio.datafiles import data_path, read_yaml
+from modelgen.fileio.output import write_text_atomically
+from modelgen.model.declaration import ErrorModel, parse_expression
+
+#: The data file listing every (hand-written model, twin) pair and what explains their differences.
+PAIRS_FILE = "crosscheck.yaml"
+MATRICES = ("F", "G", "H")
+STATUSES = ("equal", "approximation", "convention", "hand_model_error", "unexplained")
+#: Fields of every record of crosscheck.json, in this order.
+RECORD_FIELDS = ("model", "matrix", "row", "column", "hand", "derived", "status", "term", "magnitude", "reason")
+#: Most neglected terms of one entry tried together when matching a hand entry (subsets, smallest first).
+MAX_COMBINED_APPROXIMATIONS = 4
+
+_PAIR_KEYS = {"hand", "twin", "symbols", "conventions", "hand_model_errors"}
+_CONVENTION_KEYS = {"name", "states", "noises", "reason"}
+_ERROR_KEYS = {"matrix", "row", "column", "reason", "fixed"}
+
+
+# -- the data ------------------------------------------------------------------
+@dataclass(frozen=True)
+class Convention:
+    """A stated convention: the hand model defines these states/noises with the opposite sign to the twin's."""
+
+    name: str
+    states: tuple[str, ...]
+    noises: tuple[str, ...]
+    reason: str
+
+
+@dataclass(frozen=True)
+class HandModelError:
+    """An entry of the hand model declared wrong (row/column by symbol); ``fixed`` if the hand model was corrected."""
+
+    matrix: str
+    row: str
+    column: str
+    reason: str
+    fixed: bool = False
+
+
+@dataclass(frozen=True)
+class Pair:
+    """One hand-written model and its twin, with what may explain their differences.
+
+    ``symbols`` maps a parameter symbol of the twin to an expression in the
+    hand model's parameter symbols (a twin parameter spelled like a hand
+    parameter needs no entry).
+    """
+
+    hand: str
+    twin: str
+    symbols: Mapping[str, str] = field(default_factory=dict)
+    conventions: tuple[Convention, ...] = ()
+    hand_model_errors: tuple[HandModelError, ...] = ()
+
+
+@dataclass(frozen=True)
+class NeglectedTerm:
+    """A term of the full first-order derivation that a declared approximation drops.
+
+    ``row`` and ``column`` are 0-based indices into the twin's F, G or H;
+    ``term`` is in the twin's parameter symbols.
+    """
+
+    matrix: str
+    row: int
+    column: int
+    term: sp.Expr
+    approximation: str
+
+
+def load_pairs(path: str | Path | None = None) -> list[Pair]:
+    """The pairs of ``modelgen/data/crosscheck.yaml`` (or ``path``), validated."""
+    path = Path(path) if path is not None else data_path(PAIRS_FILE)
+    data = read_yaml(path, "cross-check file")
+    where = path.name
+    unknown = sorted(set(data) - {"pairs"})
+    if unknown:
+        raise ModelError(f"{where}: unknown key {unknown[0]!r} (expected 'pairs')")
+    items = data.get("pairs")
+    if not isinstance(items, list) or not items:
+        raise ModelError(f"{where}: 'pairs' must be a non-empty list")
+    pairs = [_pair(item, f"{where}: pairs[{i}]") for i, item in enumerate(items)]
+    twins = [p.twin for p in pairs]
+    duplicates = sorted({t for t in twins if twins.count(t) > 1})
+    if duplicates:
+        raise ModelError(f"{where}: twin {duplicates[0]!r} is listed in more than one pair")
+    return pairs
+
+
+def _mapping(value: Any, where: str, allowed: set[str], required: set[str]) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        raise ModelError(f"{where}: expected a mapping")
+    unknown = sorted(set(value) - allowed)
+    if unknown:
+        raise ModelError(f"{where}: unknown key {unknown[0]!r} (expected one of {sorted(allowed)})")
+    missing = sorted(required - set(value))
+    if missing:
+        raise ModelError(f"{where}: missing key {missing[0]!r}")
+    return value
+
+
+def _names(value: Any, where: str) -> tuple[str, ...]:
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ModelError(f"{where}: expected a list of names")
+    return tuple(value)
+
+
+def _pair(item: Any, where: str) -> Pair:
+    item = _mapping(item, where, _PAIR_KEYS, {"hand", "twin"})
+    symbols = item.get("symbols") or {}
+    if not isinstance(symbols, dict):
+        raise ModelError(f"{where}.symbols: expected a mapping twin symbol -> expression in the hand model's symbols")
+    conventions = []
+    for k, c in enumerate(item.get("conventions") or []):
+        place = f"{where}.conventions[{k}]"
+        c = _mapping(c, place, _CONVENTION_KEYS, {"name", "reason"})
+        conventions.append(Convention(
+            name=str(c["name"]),
+            states=_names(c.get("states") or [], f"{place}.states"),
+            noises=_names(c.get("noises") or [], f"{place}.noises"),
+            reason=str(c["reason"]),
+        ))
+    errors = []
+    for k, e in enumerate(item.get("hand_model_errors") or []):
+        e = _mapping(e, f"{where}.hand_model_errors[{k}]", _ERROR_KEYS, {"matrix", "row", "column", "reason"})
+        if e["matrix"] not in MATRICES:
+            raise ModelError(f"{where}.hand_model_errors[{k}]: matrix must be one of {', '.join(MATRICES)}")
+        errors.append(HandModelError(str(e["matrix"]), str(e["row"]), str(e["column"]), str(e["reason"]), bool(e.get("fixed", False))))
+    return Pair(str(item["hand"]), str(item["twin"]), {str(k): str(v) for k, v in symbols.items()}, tuple(conventions), tuple(errors))
+
+
+# -- the twin in the hand model's terms -------------------------------------------
+def twin_substitution(pair: Pair, hand: ErrorModel, twin: ErrorModel) -> dict[sp.Symbol, sp.Expr]:
+    """Each twin parameter symbol as an expression in the hand model's parameter symbols.
+
+    A twin parameter spelled like a hand parameter maps to it; any other
+    must be given in the pair's ``symbols``.  A twin parameter that maps to
+    nothing is refused, naming it.
+    """
+    namespace = {p.symbol: p.sym for p in hand.parameters}
+    out: dict[sp.Symbol, sp.Expr] = {}
+    missing = []
+    for p in twin.parameters:
+        if p.symbol in pair.symbols:
+            out[p.sym] = parse_expression(pair.symbols[p.symbol], namespace, f"{PAIRS_FILE}: {pair.twin}.symbols.{p.symbol}")
+        elif p.symbol in namespace:
+            out[p.sym] = namespace[p.symbol]
+        else:
+            missing.append(p.symbol)
+    if missing:
+        raise ModelError(
+            f"{PAIRS_FILE}: pair {pair.hand}/{pair.twin}: twin parameter(s) {', '.join(missing)} are not parameters of "
+            f"{pair.hand} and have no entry in 'symbols'"
+        )
+    return out
+
+
+def check_same_layout(hand: ErrorModel, twin: ErrorModel) -> None:
+    """Refuse a twin whose states, noises or measurements do not line up one to one with the hand model's."""
+    for kind, mine, theirs in (
+        ("states", hand.states, twin.states),
+        ("noises", hand.noises, twin.noises),
+        ("measurements", hand.measurements, twin.measurements),
+    ):
+        if len(mine) != len(theirs):
+            raise ModelError(
+                f"twin {twin.name!r} has {len(theirs)} {kind} ({', '.join(q.symbol for q in theirs)}), hand model "
+                f"{hand.name!r} has {len(mine)} ({', '.join(q.symbol for q in mine)}): they are compared in order"
+            )
+
+
+def signs(pair: Pair, hand: ErrorModel) -> tuple[list[int], list[int]]:
+    """The sign s_i of each hand state and noise relative to the twin's (x_hand = s x_twin), from the conventions."""
+    state_sign = {s.symbol: 1 for s in hand.states}
+    noise_sign = {w.symbol: 1 for w in hand.noises}
+    for c in pair.conventions:
+        for table, names, kind in ((state_sign, c.states, "state"), (noise_sign, c.noises, "noise")):
+            for name in names:
+                if name not in table:
+                    raise ModelError(f"{PAIRS_FILE}: convention {c.name!r} names {kind} {name!r}, not a {kind} of {hand.name}")
+                table[name] = -table[name]
+    return [state_sign[s.symbol] for s in hand.states], [noise_sign[w.symbol] for w in hand.noises]
+
+
+def with_conventions(matrix: str, value: sp.Expr, i: int, j: int, state_signs: Sequence[int], noise_signs: Sequence[int]) -> sp.Expr:
+    """A twin entry as the hand model's convention writes it (x_hand = s x_twin, w_hand = n w_twin)."""
+    if matrix == "F":
+        return state_signs[i] * state_signs[j] * value
+    if matrix == "G":
+        return state_signs[i] * noise_signs[j] * value
+    return state_signs[j] * value  # H: measurements keep their sign
+
+
+# -- the comparison ------------------------------------------------------------------
+@dataclass(frozen=True)
+class EntryRecord:
+    """One (matrix, row, column) of the cross-check; row/column are the hand model's symbols."""
+
+    model: str
+    matrix: str
+    row: str
+    column: str
+    hand: str
+    derived: str
+    status: str
+    term: str | None
+    magnitude: float | None
+    reason: str
+
+    def record(self) -> dict[str, Any]:
+        """The entry as a JSON-ready dict with exactly :data:`RECORD_FIELDS`."""
+        return {name: getattr(self, name) for name in RECORD_FIELDS}
+
+
+@dataclass(frozen=True)
+class CrossCheckResult:
+    """The cross-check of one pair: every entry that is nonzero on either side, in matrix order."""
+
+    hand: str
+    twin: str
+    scenario: str
+    entries: tuple[EntryRecord, ...]
+
+    def counts(self) -> dict[str, int]:
+        """Entries per status (all statuses present)."""
+        return {s: sum(e.status == s for e in self.entries) for s in STATUSES}
+
+    @property
+    def unexplained(self) -> list[EntryRecord]:
+        return [e for e in self.entries if e.status == "unexplained"]
+
+    @property
+    def differences(self) -> list[EntryRecord]:
+        return [e for e in self.entries if e.status != "equal"]
+
+
+def _quantities(model: ErrorModel, matrix: str) -> tuple[list[str], list[str]]:
+    states = [s.symbol for s in model.states]
+    if matrix == "F":
+        return states, states
+    if matrix == "G":
+        return states, [w.symbol for w in model.noises]
+    return [m.symbol for m in model.measurements], states
+
+
+def scenario_values(model: ErrorModel) -> tuple[dict[sp.Symbol, float], str]:
+    """Numbers for every parameter of ``model`` (its defaults and check scenario) and a label; empty if incomplete."""
+    values: dict[str, float] = model.parameter_defaults()
+    label = "parameter defaults"
+    if model.check is not None:
+        values.update(model.check.parameter_values())
+        label = f"the check scenario of {model.name}"
+    out = {}
+    for p in model.parameters:
+        value = values.get(p.name, p.value)
+        if value is None:
+            return {}, f"no value for {p.name}: magnitudes not computed"
+        out[p.sym] = float(value)
+    return out, label
+
+
+def magnitude(term: sp.Expr, values: Mapping[sp.Symbol, float]) -> float | None:
+    """|term| at the scenario values (None without values, or if it is not a finite real number there)."""
+    if not values:
+        return None
+    try:
+        number = complex(sp.N(term.xreplace(values)))
+    except (TypeError, ValueError):
+        return None
+    if abs(number.imag) > 1e-12 * max(1.0, abs(number.real)) or not math.isfinite(number.real):
+        return None
+    return float(f"{abs(number.real):.6g}")
+
+
+def _explained_by_approximation(
+    hand: sp.Expr, full: sp.Expr, neglected: Sequence[tuple[sp.Expr, str]], transform
+) -> tuple[sp.Expr, list[str]] | None:
+    """The smallest set of neglected terms whose removal from ``full`` gives ``hand`` (after the conventions)."""
+    for size in range(1, min(MAX_COMBINED_APPROXIMATIONS, len(neglected)) + 1):
+        for subset in combinations(neglected, size):
+            dropped = sp.Add(*(t for t, _ in subset))
+            if same(hand, transform(full - dropped)):
+                return dropped, sorted({name for _, name in subset})
+    return None
+
+
+def cross_check(
+    pair: Pair, hand: DerivedModel, twin: DerivedModel, neglected: Iterable[NeglectedTerm] = ()
+) -> CrossCheckResult:
+    """Compare the hand-written model's F, G, H with its twin's, entry by entry (see module doc)."""
+    check_same_layout(hand.model, twin.model)
+    to_hand = twin_substitution(pair, hand.model, twin.model)
+    state_signs, noise_signs = signs(pair, hand.model)
+    values, label = scenario_values(hand.model)
+    errors = {(e.matrix, e.row, e.column): e for e in pair.hand_model_errors}
+    dropped: dict[tuple[str, int, int], list[tuple[sp.Expr, str]]] = {}
+    for n in neglected:
+        dropped.setdefault((n.matrix, n.row, n.column), []).append((n.term.xreplace(to_hand), n.approximation))
+
+    records = []
+    for matrix in MATRICES:
+        H = getattr(hand, matrix)
+        T = getattr(twin, matrix)
+        rows, columns = _quantities(hand.model, matrix)
+        for i in range(H.shape[0]):
+            for j in range(H.shape[1]):
+                terms = dropped.get((matrix, i, j), [])
+                full = T[i, j].xreplace(to_hand) + sp.Add(*(t for t, _ in terms))
+                written = H[i, j]
+                if written == 0 and full == 0 and not terms:
+                    continue
+
+                def transform(value: sp.Expr, i: int = i, j: int = j, matrix: str = matrix) -> sp.Expr:
+                    return with_conventions(matrix, value, i, j, state_signs, noise_signs)
+
+                records.append(_classify(
+                    pair, matrix, rows[i], columns[j], written, full, terms, transform, errors, values,
+                ))
+    return CrossCheckResult(pair.hand, pair.twin, label, tuple(records))
+
+
+def _classify(pair, matrix, row, column, written, full, terms, transform, errors, values) -> EntryRecord:
+    """The status, term, magnitude and reason of one entry (the rules of the module doc, in order)."""
+    derived_text = sp.sstr(full) if full != 0 else "0"
+    base = dict(model=pair.hand, matrix=matrix, row=row, column=column, hand=sp.sstr(written) if written != 0 else "0", derived=derived_text)
+    if same(written, full):
+        return EntryRecord(**base, status="equal", term=None, magnitude=None, reason="")
+    conventional = transform(full)
+    if same(written, conventional):
+        names = [c.name for c in pair.conventions if _convention_touches(c, row, column)]
+        reasons = [c.reason for c in pair.conventions if _convention_touches(c, row, column)]
+        return EntryRecord(
+            **base, status="convention", term=sp.sstr(full - written), magnitude=magnitude(full - written, values),
+            reason=f"{', '.join(names)}: {' '.join(reasons)}",
+        )
+    approximation = _explained_by_approximation(written, full, terms, transform)
+    if approximation is not None:
+        term, names = approximation
+        extra = " (with the sign convention applied)" if not same(written, full - term) else ""
+        return EntryRecord(
+            **base, status="approximation", term=sp.sstr(term), magnitude=magnitude(term, values),
+            reason=f"declared approximation {', '.join(names)} drops this term{extra}",
+        )
+    difference = full - written
+    error = errors.get((matrix, row, column))
+    if error is not None:
+        state = "fixed in the hand model" if error.fixed else "reported"
+        return EntryRecord(
+            **base, status="hand_model_error", term=sp.sstr(sp.simplify(difference)), magnitude=magnitude(difference, values),
+            reason=f"error in the hand model ({state}): {error.reason}",
+        )
+    hints = difference_hints(written, full)
+    return EntryRecord(
+        **base, status="unexplained", term=sp.sstr(sp.simplify(difference)), magnitude=magnitude(difference, values),
+        reason="; ".join(h.text for h in hints) or "no declared approximation, convention or hand-model error explains it",
+    )
+
+
+def _convention_touches(c: Convention, row: str, column: str) -> bool:
+    return bool({row, column} & (set(c.states) | set(c.noises)))
+
+
+# -- the report ------------------------------------------------------------------------
+def crosscheck_json(results: Sequence[CrossCheckResult]) -> str:
+    """``crosscheck.json``: a summary per pair and one record per entry (fields :data:`RECORD_FIELDS`)."""
+    data = {
+        "record_fields": list(RECORD_FIELDS),
+        "pairs": [
+            {"model": r.hand, "twin": r.twin, "scenario": r.scenario, "counts": r.counts(), "unexplained": len(r.unexplained)}
+            for r in results
+        ],
+        "entries": [e.record() for r in results for e in r.entries],
+    }
+    return json.dumps(data, indent=2, sort_keys=True, ensure_ascii=False) + "\n"
+
+
+def _cell(text: Any) -> str:
+    if text is None or text == "":
+        return "—"
+    return " ".join(str(text).split()).replace("|", "\\|")
+
+
+def crosscheck_markdown(results: Sequence[CrossCheckResult]) -> str:
+    """``crosscheck.md``: per pair, the counts and every entry that is not ``equal``."""
+    lines = [
+        "# Cross-check: hand-written models against their twins derived from the navigation equations",
+        "",
+        "Every nonzero entry of F, G and H of each hand-written model is compared with the full first-order "
+        "linearization of its twin (the twin's entry plus every term its declared approximations drop). "
+        "Statuses: `equal`; `convention` (a declared sign convention of a state or noise); `approximation` "
+        "(the hand entry drops a term a declared approximation names; `term` is that term, `magnitude` its "
+        "size at the hand model's check scenario); `hand_model_error`; `unexplained`.",
+        "",
+        "| model | twin | " + " | ".join(STATUSES) + " |",
+        "|---|---|" + "---|" * len(STATUSES),
+    ]
+    for r in results:
+        counts = r.counts()
+        lines.append(f"| {r.hand} | {r.twin} | " + " | ".join(str(counts[s]) for s in STATUSES) + " |")
+    lines += ["", f"Unexplained differences: **{sum(len(r.unexplained) for r in results)}**."]
+    for r in results:
+        lines += ["", f"## {r.hand} against {r.twin}", "", f"Magnitudes at {r.scenario}.", ""]
+        if not r.differences:
+            lines.append("Every entry equal.")
+            continue
+        lines += ["| entry | status | hand | derived | term | magnitude | reason |", "|---|---|---|---|---|---|---|"]
+        for e in r.differences:
+            size = "—" if e.magnitude is None else f"{e.magnitude:.3g}"
+            lines.append(
+                f"| {e.matrix}({e.row}, {e.column}) | {e.status} | `{_cell(e.hand)}` | `{_cell(e.derived)}` "
+                f"| `{_cell(e.term)}` | {size} | {_cell(e.reason)} |"
+            )
+    lines += ["", "`crosscheck.json` holds one record per compared entry with fields " + ", ".join(f"`{f}`" for f in RECORD_FIELDS) + ".", ""]
+    return "\n".join(lines)
+
+
+def write_crosscheck_report(results: Sequence[CrossCheckResult], folder: str | Path) -> tuple[Path, Path]:
+    """Write ``crosscheck.md`` and ``crosscheck.json`` into ``folder`` atomically; returns both paths."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    markdown, data = folder / "crosscheck.md", folder / "crosscheck.json"
+    write_text_atomically(markdown, crosscheck_markdown(results))
+    write_text_atomically(data, crosscheck_json(results))
+    return markdown, data
