@@ -8,6 +8,8 @@ so neither file reader depends on the other's internals.
 
 from __future__ import annotations
 
+from typing import Any
+
 from modelgen.errors import ModelError
 
 
@@ -27,3 +29,34 @@ def notes_text(data: dict, lines: dict[str, str], filename: str) -> list[str]:
         if isinstance(note, (list, dict)):
             raise ModelError(f"{lines.get(f'notes[{i}]', lines.get('notes', filename))}: notes[{i}] must be text")
     return [str(n) for n in notes]
+
+
+def scalar_text(value: Any, place: str, key: str) -> str:
+    """The text of one scalar expression; a list, mapping or empty value is refused."""
+    if value is None or (isinstance(value, str) and not value.strip()):
+        raise ModelError(f"{place}: {key!r} is empty (expected one expression)")
+    if isinstance(value, (list, dict)):
+        kind = f"a list of {len(value)} items" if isinstance(value, list) else "a mapping"
+        raise ModelError(f"{place}: {key!r} is {kind}; dimension mismatch (expected one scalar expression)")
+    return value if isinstance(value, str) else str(value)
+
+
+def is_number(value: Any) -> bool:
+    """Whether a YAML value is a number (or text that reads as one); true and false are not."""
+    if isinstance(value, bool):
+        return False
+    if isinstance(value, (int, float)):
+        return True
+    try:
+        float(str(value))
+    except ValueError:
+        return False
+    return True
+
+
+def as_float(value: Any) -> float:
+    """A parameter value as a float; an integer beyond a double becomes inf, which is then refused."""
+    try:
+        return float(value)
+    except OverflowError:
+        return float("inf") if int(value) > 0 else float("-inf")

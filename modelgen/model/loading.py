@@ -18,8 +18,12 @@ from modelgen.model.check_scenario import build_check_spec, parse_check_section
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import package_path
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State
+from modelgen.model.file_fields import as_float as _as_float
 from modelgen.model.file_fields import free_text, notes_text
+from modelgen.model.file_fields import is_number as _is_number
+from modelgen.model.file_fields import scalar_text as _scalar_text
 from modelgen.model.transform_file import load_transformed_model
+from modelgen.model.vector_loading import load_vector_model, uses_vector_syntax
 
 _ITEM_FIELDS = {
     "states": (State, {"name", "symbol", "unit", "description"}),
@@ -27,7 +31,7 @@ _ITEM_FIELDS = {
     "parameters": (Parameter, {"name", "symbol", "unit", "description", "value"}),
     "measurements": (Measurement, {"name", "symbol", "unit", "description", "expression", "variance"}),
 }
-_TOP_KEYS = {"model", "title", "source", "frame", "notes", "parameters", "states", "noises", "dynamics", "measurements", "check"}
+_TOP_KEYS = {"model", "title", "source", "frame", "notes", "parameters", "states", "noises", "dynamics", "measurements", "check", "definitions"}
 
 
 #: Largest model file accepted, in bytes (the largest built-in model is ~15 kB).
@@ -116,6 +120,9 @@ def load_model_text(text: str, filename: str = "<model>", _loading: tuple[str, .
     for key in ("model", "states", "dynamics"):
         if key not in data:
             raise ModelError(f"{filename}: missing required key {key!r}")
+    if uses_vector_syntax(data):  # vectors, matrices, definitions or the navigation library
+        model, data = load_vector_model(data, lines, filename)
+        return _with_check_scenario(model, data, lines, filename)
 
     items: dict[str, list] = {}
     for key, (cls, fields) in _ITEM_FIELDS.items():
@@ -176,36 +183,6 @@ def _with_check_scenario(model: ErrorModel, data: dict, lines: dict[str, str], f
         return model
     section = parse_check_section(data["check"], lines, filename)
     return replace(model, check=build_check_spec(section, model, lines.get("check", filename)))
-
-
-def _scalar_text(value: Any, place: str, key: str) -> str:
-    """The text of one scalar expression; a list, mapping or empty value is refused."""
-    if value is None or (isinstance(value, str) and not value.strip()):
-        raise ModelError(f"{place}: {key!r} is empty (expected one expression)")
-    if isinstance(value, (list, dict)):
-        kind = f"a list of {len(value)} items" if isinstance(value, list) else "a mapping"
-        raise ModelError(f"{place}: {key!r} is {kind}; dimension mismatch (expected one scalar expression)")
-    return value if isinstance(value, str) else str(value)
-
-
-def _is_number(value: Any) -> bool:
-    if isinstance(value, bool):
-        return False
-    if isinstance(value, (int, float)):
-        return True
-    try:
-        float(str(value))
-    except ValueError:
-        return False
-    return True
-
-
-def _as_float(value: Any) -> float:
-    """A parameter value as a float; an integer beyond a double becomes inf, which is then refused."""
-    try:
-        return float(value)
-    except OverflowError:
-        return float("inf") if int(value) > 0 else float("-inf")
 
 
 #: Deepest nesting of YAML flow collections (``[`` and ``{``) accepted.  PyYAML
