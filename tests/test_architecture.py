@@ -43,10 +43,16 @@ ALLOWED: dict[str, set[str]] = {
     "derive": _MODEL,
     "codegen": _DERIVED,
     "checks": _DERIVED | {"codegen"},
+    # export: F, G, H, Q, R for other tools (LaTeX, Octave, CasADi, JSON); free text through codegen's escapers
+    "export": _DERIVED | {"codegen"},
+    # cluster: dask client and task runner for many independent runs (Monte Carlo, trade cases)
+    "cluster": _FLOOR,
     "analysis": _DERIVED,
-    "simulation": _DERIVED | {"codegen"},
+    "simulation": _DERIVED | {"codegen", "cluster"},
     "navigator": _DERIVED | {"codegen", "simulation"},
-    "jobs": _DERIVED | {"codegen", "checks", "analysis", "simulation", "navigator"},
+    # study: trade studies run covariance cases (analysis) and Monte Carlo (simulation) on one cluster
+    "study": _DERIVED | {"analysis", "simulation", "cluster"},
+    "jobs": _DERIVED | {"codegen", "checks", "analysis", "simulation", "navigator", "export", "cluster", "study"},
     "cli": _FLOOR | {"fileio", "jobs", "navigator"},
     "__main__": {"cli"},
 }

@@ -1,10 +1,15 @@
 """Monte Carlo: N independent simulated flights, ensemble statistics, NEES test.
 
 Each run draws its own sensor errors and initial errors from a per-run
-generator (``numpy.random.SeedSequence(seed).spawn(N)``), so results do not
-depend on how runs are spread over processes.  Runs go to a
-``ProcessPoolExecutor`` (two workers by default: the machine's two cores); each
-worker builds the trajectory once and takes the derived model from the caller.
+generator (``numpy.random.SeedSequence(seed).spawn(N)``: run i's stream
+depends only on the study seed and i), so results do not depend on where or
+in which order runs are flown.  Runs are dask tasks (:mod:`modelgen.cluster`):
+on the caller's client (a local cluster sized to the machine, or an existing
+scheduler), else one after another in this process.  A task carries only
+plain data (:class:`MonteCarloSetup`: the flight profile, the filter model's
+declaration, the seed); each worker derives the model, builds the trajectory
+and, for the generated filter, generates and compiles the code once, and
+keeps them for all its runs of the study.
 
 Consistency (Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to
 Tracking and Navigation*, 2001, §5.4): with e the estimation error and P the
@@ -18,19 +23,22 @@ falls out.
 
 from __future__ import annotations
 
+import hashlib
 import math
-import multiprocessing
-import os
-from concurrent.futures import ProcessPoolExecutor
+import pickle
+import tempfile
+import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 from scipy.stats import chi2
 
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.cluster import dask_client, describe_client, forget_cached, run_tasks, worker_cached
+from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.errors import ModelError
-from modelgen.simulation.filters import ReferenceFilter
+from modelgen.model.declaration import ErrorModel
+from modelgen.simulation.filters import IMPLEMENTATIONS, filter_factory
 from modelgen.simulation.flight import fly_profile, profile_layout
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.trajectory import generate_trajectory
@@ -74,6 +82,7 @@ class MonteCarloResult:
     rejected: np.ndarray  # (runs,) gate rejections
     updates: np.ndarray  # (runs,)
     seconds: float = 0.0
+    where: str = "this process"  # what ran the runs (modelgen.cluster.describe_client)
 
     @property
     def runs(self) -> int:
@@ -98,78 +107,117 @@ class MonteCarloResult:
                         confidence)
 
 
-# -- workers ------------------------------------------------------------------------
-
-_WORKER: dict = {}
+# -- runs as tasks -------------------------------------------------------------------
 
 
-def _prepare(profile: FlightProfile, derived: DerivedModel, truth_profile: FlightProfile | None = None) -> dict:
-    """What every run of a worker shares: the trajectory and the error layout."""
+@dataclass(frozen=True)
+class MonteCarloSetup:
+    """What every run of a study shares, as plain data a worker can receive.
+
+    ``key`` names the set-up in a worker's cache (computed once by the
+    caller from everything else here).
+    """
+
+    profile: FlightProfile
+    truth_profile: FlightProfile | None
+    model: ErrorModel
+    mode: str
+    store_every: int
+    implementation: str
+    key: str
+
+
+@dataclass(frozen=True)
+class RunOutput:
+    """One run's stored history (every ``store_every`` filter cycles) and counts."""
+
+    times: np.ndarray
+    errors: np.ndarray
+    sigma: np.ndarray
+    nees: np.ndarray
+    rejected: int
+    updates: int
+
+
+def setup_key(profile: FlightProfile, truth_profile: FlightProfile | None, model: ErrorModel, mode: str,
+              store_every: int, implementation: str) -> str:
+    """A digest of the set-up: equal set-ups share a worker's derived model, trajectory and compiled filter."""
+    blob = pickle.dumps((profile, truth_profile, model, mode, store_every, implementation))
+    return "montecarlo-" + hashlib.sha256(blob).hexdigest()[:16]
+
+
+def _prepare(setup: MonteCarloSetup, derived: DerivedModel | None = None) -> dict:
+    """What a worker builds once per set-up: the derived model, trajectory, error layout and filter maker.
+
+    The generated code is written to a folder the context owns (removed with it).
+    """
+    derived = derived if derived is not None else derive(setup.model)
+    profile = setup.profile
     trajectory = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
-    layout = profile_layout(profile, derived, trajectory)
-    return {"profile": profile, "truth_profile": truth_profile, "derived": derived, "trajectory": trajectory,
-            "layout": layout}
+    code_dir = tempfile.TemporaryDirectory(prefix="modelgen-montecarlo-")
+    return {"derived": derived, "trajectory": trajectory, "layout": profile_layout(profile, derived, trajectory),
+            "make_filter": filter_factory(derived, setup.implementation, code_dir.name), "code_dir": code_dir}
 
 
-def _init_worker(profile: FlightProfile, derived: DerivedModel, truth_profile: FlightProfile | None) -> None:
-    _WORKER.clear()
-    _WORKER.update(_prepare(profile, derived, truth_profile))
-
-
-def _one_run(seed: np.random.SeedSequence, mode: str, store_every: int, context: dict | None = None) -> tuple:
-    c = context if context is not None else _WORKER
-    derived = c["derived"]
-    result = fly_profile(c["profile"], derived, c["trajectory"], np.random.default_rng(seed),
-                         lambda x, P: ReferenceFilter(derived, x, P), mode=mode, layout=c["layout"],
-                         truth_profile=c["truth_profile"])
-    rows = slice(None, None, store_every)
-    return (result.times[rows], result.estimation_error[rows], result.sigma[rows], result.nees[rows],
-            len(result.rejected), result.updates)
+def fly_one_run(setup: MonteCarloSetup, seed: np.random.SeedSequence) -> RunOutput:
+    """One Monte Carlo run (a dask task): the flight of ``setup`` with the sensors drawn from ``seed``."""
+    c = worker_cached(setup.key, lambda: _prepare(setup))
+    result = fly_profile(setup.profile, c["derived"], c["trajectory"], np.random.default_rng(seed), c["make_filter"],
+                         mode=setup.mode, layout=c["layout"], truth_profile=setup.truth_profile)
+    rows = slice(None, None, setup.store_every)
+    return RunOutput(result.times[rows], result.estimation_error[rows], result.sigma[rows], result.nees[rows],
+                     len(result.rejected), result.updates)
 
 
 def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, seed: int = 0, mode: str | None = None,
-                    workers: int = 2, store_every: int | None = None, progress: Callable[[int, int], None] | None = None,
-                    truth_profile: FlightProfile | None = None) -> MonteCarloResult:
+                    workers: int = 1, client: Any = None, store_every: int | None = None,
+                    progress: Callable[[int, int], None] | None = None,
+                    truth_profile: FlightProfile | None = None, implementation: str = "reference",
+                    on_run: Callable[[int, RunOutput], None] | None = None) -> MonteCarloResult:
     """``runs`` independent flights of ``profile`` with the filter model ``derived`` (module docstring).
 
-    ``truth_profile`` (same flight) draws the sensors from a different error
-    budget than the filter assumes: a mis-modelled filter.
+    ``client``: a ``distributed.Client`` (:func:`modelgen.cluster.dask_client`)
+    to run on; without one, ``workers`` > 1 starts a local cluster of that
+    many worker processes for this call, 1 runs here.  ``truth_profile`` (same flight)
+    draws the sensors from a different error budget than the filter assumes:
+    a mis-modelled filter.  ``implementation`` is the filter flown (the numpy
+    ``reference``, or the generated ``c`` / ``python``, built once per
+    worker).  ``on_run(i, output)`` receives each run as it completes.
     """
-    import time
-
     if runs < 1:
         raise ModelError(f"Monte Carlo: need at least one run, got {runs}")
+    if implementation not in IMPLEMENTATIONS:
+        raise ModelError(f"Monte Carlo: unknown filter implementation {implementation!r} "
+                         f"(choose from {', '.join(IMPLEMENTATIONS)})")
     mode = mode or profile.filter.mode
     store_every = store_every or max(1, int(round(profile.aiding_period / profile.filter.period)))
+    key = setup_key(profile, truth_profile, derived.model, mode, store_every, implementation)
+    setup = MonteCarloSetup(profile, truth_profile, derived.model, mode, store_every, implementation, key)
+    if client is None and workers > 1:
+        with dask_client(workers=min(workers, runs)) as local:
+            return run_monte_carlo(profile, derived, runs, seed, mode, client=local, store_every=store_every,
+                                   progress=progress, truth_profile=truth_profile, implementation=implementation,
+                                   on_run=on_run)
     seeds = np.random.SeedSequence(seed).spawn(runs)
     start = time.perf_counter()
-    outputs = []
-    if workers <= 1:
-        context = _prepare(profile, derived, truth_profile)
-        for i, s in enumerate(seeds):
-            outputs.append(_one_run(s, mode, store_every, context))
-            if progress:
-                progress(i + 1, runs)
-    else:
-        method = "fork" if "fork" in multiprocessing.get_all_start_methods() else None
-        ctx = multiprocessing.get_context(method)
-        with ProcessPoolExecutor(max_workers=min(workers, runs, os.cpu_count() or 1), mp_context=ctx,
-                                 initializer=_init_worker, initargs=(profile, derived, truth_profile)) as pool:
-            futures = [pool.submit(_one_run, s, mode, store_every) for s in seeds]
-            for i, f in enumerate(futures):
-                outputs.append(f.result())
-                if progress:
-                    progress(i + 1, runs)
-    seconds = time.perf_counter() - start
+    if client is None:
+        worker_cached(key, lambda: _prepare(setup, derived))  # this process: the caller's derived model
+    try:
+        outputs = run_tasks(fly_one_run, [(setup, s) for s in seeds], client, progress=progress, on_result=on_run,
+                            label="montecarlo")
+    finally:
+        if client is None:
+            forget_cached(key)
     return MonteCarloResult(
         scenario=profile.name,
         mode=mode,
         state_names=list(derived.model.state_names),
-        times=outputs[0][0],
-        errors=np.stack([o[1] for o in outputs]),
-        sigma=np.stack([o[2] for o in outputs]),
-        nees=np.stack([o[3] for o in outputs]),
-        rejected=np.array([o[4] for o in outputs]),
-        updates=np.array([o[5] for o in outputs]),
-        seconds=seconds,
+        times=outputs[0].times,
+        errors=np.stack([o.errors for o in outputs]),
+        sigma=np.stack([o.sigma for o in outputs]),
+        nees=np.stack([o.nees for o in outputs]),
+        rejected=np.array([o.rejected for o in outputs]),
+        updates=np.array([o.updates for o in outputs]),
+        seconds=time.perf_counter() - start,
+        where=describe_client(client),
     )

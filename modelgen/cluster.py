@@ -1,0 +1,158 @@
+"""Many independent tasks on a dask cluster: Monte Carlo runs and trade-study cases.
+
+modelgen hands its many-run work to ``dask.distributed`` (a well-kept engine
+that runs on one machine or on many) instead of a process pool of its own:
+
+* :func:`dask_client` opens a client on an existing scheduler (``--scheduler
+  tcp://host:8786``, started by the user with ``dask scheduler`` / ``dask
+  worker``, or any deployment dask supports) or, by default, on a local
+  cluster sized to the machine (one single-threaded worker process per core,
+  no setup).  An unreachable address is a :class:`~modelgen.errors.ModelError`
+  within ``timeout_s``.
+* :func:`run_tasks` submits one task per argument tuple with ``retries`` (a
+  task whose worker fails or is lost is run again elsewhere), and gathers
+  each result as soon as its task completes: a completed result is then in
+  the caller's hands and releasing its future keeps a later worker loss from
+  recomputing it.  Progress is reported as tasks complete; results come back
+  in submission order, so they do not depend on which worker ran what.
+  Without a client the same functions run one after another in this process
+  (one run, tests, or a study too small to be worth a cluster).
+* :func:`worker_cached` keeps what every task of a study shares (a derived
+  model, a trajectory, a compiled filter) once per worker process.
+
+Workers need only ``pip install modelgen``: task functions are modelgen's own,
+and their arguments are plain data (model declarations, profiles, seeds), never
+derived objects holding compiled code.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import uuid
+from collections import OrderedDict
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator, Sequence, TypeVar
+
+from modelgen.errors import ModelError
+
+T = TypeVar("T")
+
+#: Seconds to wait for a scheduler before calling its address unreachable.
+CONNECT_TIMEOUT_S = 10.0
+#: How many times a failed task is tried again (dask ``retries=``).
+TASK_RETRIES = 2
+
+#: What one worker process keeps between tasks: the last few studies' shared set-ups.
+CACHE_SIZE = 3
+_CACHE: OrderedDict[Any, Any] = OrderedDict()
+
+
+def worker_cached(key: Any, build: Callable[[], T]) -> T:
+    """``build()``, computed once per process (a dask worker keeps it for every later task of the study).
+
+    Only the ``CACHE_SIZE`` most recently used set-ups are kept: a trajectory
+    of a long flight is large, and a worker serves study after study.
+    """
+    if key in _CACHE:
+        _CACHE.move_to_end(key)
+        return _CACHE[key]
+    value = _CACHE[key] = build()
+    while len(_CACHE) > CACHE_SIZE:
+        _CACHE.popitem(last=False)
+    return value
+
+
+def forget_cached(key: Any) -> None:
+    """Drop one set-up from this process's cache (the caller's own, once its in-process study is done)."""
+    _CACHE.pop(key, None)
+
+
+def local_worker_count(requested: int | None = None) -> int:
+    """Workers of the local cluster: ``requested``, else one per core of this machine."""
+    if requested is not None and requested < 1:
+        raise ModelError(f"--workers: need at least one worker, got {requested}")
+    return requested or os.cpu_count() or 1
+
+
+@contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None,
+                timeout_s: float = CONNECT_TIMEOUT_S) -> Iterator[Any]:
+    """A ``distributed.Client`` on ``scheduler`` (an address) or on a new local cluster of ``workers`` processes.
+
+    The local cluster has one single-threaded worker process per core (the
+    filter loops hold the GIL), no dashboard and quiet logs; it is closed on
+    the way out.  A scheduler that does not answer within ``timeout_s`` is
+    refused with a message naming the address.
+    """
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout=f"{timeout_s}s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ModelError(f"--scheduler {scheduler}: no dask scheduler answered within {timeout_s:g} s "
+                             f"({type(exc).__name__}: {exc})") from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    cluster = LocalCluster(n_workers=local_worker_count(workers), threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=logging.ERROR)
+    try:
+        with Client(cluster) as client:
+            yield client
+    finally:
+        cluster.close()
+
+
+def describe_client(client: Any) -> str:
+    """``'local cluster, 2 workers'`` / ``'tcp://host:8786, 4 workers'`` / ``'this process'`` for progress lines."""
+    if client is None:
+        return "this process"
+    workers = len(client.scheduler_info().get("workers", {}))
+    where = "local cluster" if type(client.cluster).__name__ == "LocalCluster" else client.scheduler.address
+    return f"{where}, {workers} worker{'s' if workers != 1 else ''}"
+
+
+def run_tasks(function: Callable[..., T], arguments: Sequence[tuple], client: Any = None,
+              progress: Callable[[int, int], None] | None = None, retries: int = TASK_RETRIES,
+              on_result: Callable[[int, T], None] | None = None, label: str = "task") -> list[T]:
+    """``[function(*a) for a in arguments]``, as dask tasks on ``client`` (or here, in order, without one).
+
+    ``progress(done, total)`` is called as each task completes and
+    ``on_result(index, result)`` with each result as it arrives (write it
+    out there to keep it whatever happens later).  A task that still fails
+    after ``retries`` more tries raises its error here.
+    """
+    total = len(arguments)
+    results: list[Any] = [None] * total
+    if client is None:
+        for i, args in enumerate(arguments):
+            results[i] = function(*args)
+            if on_result:
+                on_result(i, results[i])
+            if progress:
+                progress(i + 1, total)
+        return results
+    from distributed import as_completed
+
+    study = uuid.uuid4().hex[:12]
+    futures = [client.submit(function, *args, retries=retries, pure=False, key=f"modelgen-{label}-{study}-{i}")
+               for i, args in enumerate(arguments)]
+    index = {f.key: i for i, f in enumerate(futures)}
+    done = 0
+    try:
+        for future in as_completed(futures):
+            i = index[future.key]
+            results[i] = future.result()
+            future.release()
+            done += 1
+            if on_result:
+                on_result(i, results[i])
+            if progress:
+                progress(done, total)
+    finally:
+        client.cancel([f for f in futures if not f.done()])
+    return results
