@@ -96,9 +96,8 @@ class HandModelError:
 class Pair:
     """One hand-written model and its twin, with what may explain their differences.
 
-    ``symbols`` maps a parameter symbol of the twin to an expression in the
-    hand model's parameter symbols (a twin parameter spelled like a hand
-    parameter needs no entry).
+    ``symbols`` renames a parameter symbol of the hand model to the twin's
+    (a hand parameter spelled like a twin parameter needs no entry).
     """
 
     hand: str
@@ -113,7 +112,8 @@ class NeglectedTerm:
     """A term of the full first-order derivation that a declared approximation drops.
 
     ``row`` and ``column`` are 0-based indices into the twin's F, G or H;
-    ``term`` is in the twin's parameter symbols.
+    ``term`` is in the twin's parameter symbols (the derivation engine's
+    :class:`modelgen.model.perturbation.NeglectedTerm` has the same fields).
     """
 
     matrix: str
@@ -164,7 +164,7 @@ def _pair(item: Any, where: str) -> Pair:
     item = _mapping(item, where, _PAIR_KEYS, {"hand", "twin"})
     symbols = item.get("symbols") or {}
     if not isinstance(symbols, dict):
-        raise ModelError(f"{where}.symbols: expected a mapping twin symbol -> expression in the hand model's symbols")
+        raise ModelError(f"{where}.symbols: expected a mapping hand-model symbol -> twin symbol")
     conventions = []
     for k, c in enumerate(item.get("conventions") or []):
         place = f"{where}.conventions[{k}]"
@@ -184,30 +184,35 @@ def _pair(item: Any, where: str) -> Pair:
     return Pair(str(item["hand"]), str(item["twin"]), {str(k): str(v) for k, v in symbols.items()}, tuple(conventions), tuple(errors))
 
 
-# -- the twin in the hand model's terms -------------------------------------------
-def twin_substitution(pair: Pair, hand: ErrorModel, twin: ErrorModel) -> dict[sp.Symbol, sp.Expr]:
-    """Each twin parameter symbol as an expression in the hand model's parameter symbols.
+# -- the hand model in the twin's terms ---------------------------------------------
+def hand_substitution(pair: Pair, hand: ErrorModel, twin: ErrorModel) -> dict[sp.Symbol, sp.Symbol]:
+    """Each hand parameter symbol renamed to the twin's (the pair's ``symbols``; same spelling by default).
 
-    A twin parameter spelled like a hand parameter maps to it; any other
-    must be given in the pair's ``symbols``.  A twin parameter that maps to
-    nothing is refused, naming it.
+    The comparison is made in the twin's symbols because the twin has the
+    richer set (R_M, R_N, h ... where the hand model may have one R): the
+    terms its approximations drop are written in them.  A hand parameter with
+    no twin counterpart is refused, naming it.
     """
-    namespace = {p.symbol: p.sym for p in hand.parameters}
-    out: dict[sp.Symbol, sp.Expr] = {}
+    theirs = {p.symbol: p.sym for p in twin.parameters}
+    out: dict[sp.Symbol, sp.Symbol] = {}
     missing = []
-    for p in twin.parameters:
-        if p.symbol in pair.symbols:
-            out[p.sym] = parse_expression(pair.symbols[p.symbol], namespace, f"{PAIRS_FILE}: {pair.twin}.symbols.{p.symbol}")
-        elif p.symbol in namespace:
-            out[p.sym] = namespace[p.symbol]
+    for p in hand.parameters:
+        target = pair.symbols.get(p.symbol, p.symbol)
+        if target in theirs:
+            out[p.sym] = theirs[target]
         else:
-            missing.append(p.symbol)
+            missing.append(p.symbol if target == p.symbol else f"{p.symbol} -> {target}")
     if missing:
         raise ModelError(
-            f"{PAIRS_FILE}: pair {pair.hand}/{pair.twin}: twin parameter(s) {', '.join(missing)} are not parameters of "
-            f"{pair.hand} and have no entry in 'symbols'"
+            f"{PAIRS_FILE}: pair {pair.hand}/{pair.twin}: hand parameter(s) {', '.join(missing)} have no parameter of "
+            f"that name in {pair.twin} (map them in 'symbols')"
         )
     return out
+
+
+def twin_to_hand(pair: Pair, hand: ErrorModel, twin: ErrorModel) -> dict[sp.Symbol, sp.Symbol]:
+    """The inverse renaming: twin parameter symbols back to the hand model's (for a comparison in the hand's terms)."""
+    return {t: h for h, t in hand_substitution(pair, hand, twin).items()}
 
 
 def check_same_layout(hand: ErrorModel, twin: ErrorModel) -> None:
@@ -344,13 +349,16 @@ def cross_check(
 ) -> CrossCheckResult:
     """Compare the hand-written model's F, G, H with its twin's, entry by entry (see module doc)."""
     check_same_layout(hand.model, twin.model)
-    to_hand = twin_substitution(pair, hand.model, twin.model)
+    to_twin = hand_substitution(pair, hand.model, twin.model)
     state_signs, noise_signs = signs(pair, hand.model)
-    values, label = scenario_values(hand.model)
+    values, label = scenario_values(twin.model)
+    if not values:
+        values, label = scenario_values(hand.model)
+        values = {to_twin.get(k, k): v for k, v in values.items()}
     errors = {(e.matrix, e.row, e.column): e for e in pair.hand_model_errors}
     dropped: dict[tuple[str, int, int], list[tuple[sp.Expr, str]]] = {}
     for n in neglected:
-        dropped.setdefault((n.matrix, n.row, n.column), []).append((n.term.xreplace(to_hand), n.approximation))
+        dropped.setdefault((n.matrix, n.row, n.column), []).append((n.term, n.approximation))
 
     records = []
     for matrix in MATRICES:
@@ -360,8 +368,8 @@ def cross_check(
         for i in range(H.shape[0]):
             for j in range(H.shape[1]):
                 terms = dropped.get((matrix, i, j), [])
-                full = T[i, j].xreplace(to_hand) + sp.Add(*(t for t, _ in terms))
-                written = H[i, j]
+                full = T[i, j] + sp.Add(*(t for t, _ in terms))
+                written = H[i, j].xreplace(to_twin)
                 if written == 0 and full == 0 and not terms:
                     continue
 

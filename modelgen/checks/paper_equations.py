@@ -54,7 +54,7 @@ from modelgen.checks.crosscheck import (
     load_pairs,
     magnitude,
     scenario_values,
-    twin_substitution,
+    twin_to_hand,
 )
 from modelgen.checks.hints import constant_ratio, same
 from modelgen.derive.symbolic import DerivedModel
@@ -443,8 +443,13 @@ def twin_in_model_terms(twin: DerivedModel, model: ErrorModel) -> dict[str, sp.M
     pair = next((p for p in load_pairs() if p.twin == twin.model.name), None)
     if pair is None:
         raise ModelError(f"twin {twin.model.name!r} has no pair in modelgen/data/crosscheck.yaml (its parameter mapping)")
-    to_model = twin_substitution(pair, model, twin.model)
-    return {m: getattr(twin, m).xreplace(to_model) for m in MATRICES}
+    to_model = twin_to_hand(pair, model, twin.model)
+    out = {m: getattr(twin, m).xreplace(to_model) for m in MATRICES}
+    known = {p.sym for p in model.parameters}
+    stray = sorted({str(s) for m in out.values() for s in m.free_symbols if s not in known})
+    if stray:
+        raise ModelError(f"twin {twin.model.name!r}: its F, G, H use {', '.join(stray)}, which model {model.name} does not have")
+    return out
 
 
 def paper_equations_check(twin: DerivedModel, path: str | Path | None = None) -> PaperEquationsResult:
