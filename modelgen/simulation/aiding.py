@@ -33,7 +33,7 @@ from modelgen.simulation import earth
 from modelgen.simulation.error_layout import ErrorLayout, frame_matrix
 from modelgen.simulation.filter_loop import RunResult
 from modelgen.simulation.filters import KalmanFilter, ModelMatrices
-from modelgen.simulation.imu import ImuErrorBudget, ImuErrorHistory
+from modelgen.simulation.imu import ImuErrorBudget, ImuErrorHistory, ImuErrorStream
 from modelgen.simulation.profile_keys import ProfileSection
 from modelgen.simulation.rotation import quaternion_to_dcm
 from modelgen.simulation.strapdown import ALGORITHMS
@@ -48,18 +48,29 @@ Progress = Callable[[int, int], None]
 class SensorData:
     """Everything one simulated run measures, plus the truth of its errors.
 
+    Streamed (``imu_stream`` set, from a streamed trajectory) the IMU
+    increments are not held: the streaming driver puts each piece into
+    ``delta_theta``/``delta_velocity`` with its first sample in ``sample_offset``.
+
     ``aiding`` is the record the profile's aiding sensor simulated (its own
     type: :class:`~modelgen.simulation.doppler.DopplerRecord`,
     :class:`~modelgen.simulation.gps.GpsRecord`...).
     """
 
     trajectory: Trajectory
-    delta_theta: np.ndarray
-    delta_velocity: np.ndarray
+    delta_theta: np.ndarray | None  # measured increments; streamed: the current piece only
+    delta_velocity: np.ndarray | None
     imu_errors: ImuErrorHistory
     initial_navigation: np.ndarray
     altitude_reference: np.ndarray  # at record times
     aiding: Any
+    imu_stream: ImuErrorStream | None = None  # streamed: replays the measured increments piece by piece
+    sample_offset: int = 0  # streamed: the IMU sample of row 0 of delta_theta / delta_velocity
+
+    @property
+    def streamed(self) -> bool:
+        """True when the measured increments come piece by piece (:mod:`modelgen.simulation.streaming`)."""
+        return self.imu_stream is not None
 
 
 class AidingSensor(Protocol):

@@ -88,7 +88,12 @@ class Navigator(Protocol):
 
 @dataclass
 class RunResult:
-    """Per-cycle records of one filtered run (row 0 = t = 0, before any step)."""
+    """Records of one filtered run: one row per recorded cycle (row 0 = t = 0, before any step).
+
+    Every cycle is recorded unless the run was asked to keep every
+    ``record_every``-th (:func:`recorded_cycles`: those and the last); ``times``
+    says which.  The counters cover every cycle whatever was recorded.
+    """
 
     mode: str
     filter_name: str
@@ -123,62 +128,87 @@ def nees(error: np.ndarray, covariance: np.ndarray) -> float:
     return float(y @ y)
 
 
-def run_filter(navigator: Navigator, kalman: KalmanFilter, measurement_matrices: Callable[[dict], tuple[np.ndarray, np.ndarray]],
-               mode: str, n_cycles: int, period: float, fed_back: np.ndarray, gate_probability: float = 0.0,
-               filter_name: str = "", progress: Callable[[int, int], None] | None = None,
-               propagate_accumulator: bool = True) -> RunResult:
-    """The correction-mode loop (module docstring) over ``n_cycles`` filter cycles.
+def recorded_cycles(n_cycles: int, record_every: int) -> np.ndarray:
+    """The cycles a run records: every ``record_every``-th from 0, and always the last one."""
+    cycles = np.arange(0, n_cycles + 1, record_every)
+    return cycles if cycles[-1] == n_cycles else np.r_[cycles, n_cycles]
 
-    ``propagate_accumulator=False`` holds the accumulator constant between
-    updates instead of carrying it by Phi -- the naive accumulation that seed
-    003 warns against (section 2, after the proof); only for demonstrating
-    that the extrapolation is needed.
+
+class FilterLoop:
+    """The correction-mode loop (module docstring), one filter cycle per :meth:`step`.
+
+    Stepping lets a driver run several loops in lockstep over one stream of
+    sensor data (:mod:`modelgen.simulation.streaming`) and stop between
+    pieces; :func:`run_filter` steps one loop through every cycle.  Histories
+    are kept at the cycles :func:`recorded_cycles` names (``record_every``)
+    and, if given, each recorded row also goes to ``sink(cycle, result, row)``
+    (an incremental writer) as it is made.
     """
-    if mode not in MODES:
-        raise ModelError(f"filter loop: unknown correction mode {mode!r} (choose from {', '.join(MODES)})")
-    x0 = kalman.state
-    n = len(x0)
-    accumulated = np.zeros(n)
 
-    def total_estimate() -> np.ndarray:
-        return accumulated + kalman.state
+    def __init__(self, navigator: Navigator, kalman: KalmanFilter,
+                 measurement_matrices: Callable[[dict], tuple[np.ndarray, np.ndarray]], mode: str, n_cycles: int,
+                 period: float, fed_back: np.ndarray, gate_probability: float = 0.0, filter_name: str = "",
+                 progress: Callable[[int, int], None] | None = None, propagate_accumulator: bool = True,
+                 record_every: int = 1, sink: Callable[[int, "RunResult", int], None] | None = None):
+        if mode not in MODES:
+            raise ModelError(f"filter loop: unknown correction mode {mode!r} (choose from {', '.join(MODES)})")
+        if record_every < 1:
+            raise ModelError(f"filter loop: record_every must be a positive whole number, got {record_every}")
+        self.navigator, self.kalman, self.measurement_matrices = navigator, kalman, measurement_matrices
+        self.mode, self.n_cycles, self.period, self.fed_back = mode, n_cycles, period, fed_back
+        self.gate_probability, self.progress, self.propagate_accumulator = gate_probability, progress, propagate_accumulator
+        self.record_every, self.sink = record_every, sink
+        n = len(kalman.state)
+        self.accumulated = np.zeros(n)
+        rows = len(recorded_cycles(n_cycles, record_every))
+        first = navigator.output()
+        self.result = RunResult(mode, filter_name, np.zeros(rows), np.zeros((rows, len(first))),
+                                np.zeros((rows, len(first))), np.zeros((rows, n)), np.zeros((rows, n)),
+                                np.full(rows, math.nan))
+        self.row = 0
+        self._record(0)
 
-    def record(k: int) -> None:
+    def _total_estimate(self) -> np.ndarray:
+        return self.accumulated + self.kalman.state
+
+    def _record(self, k: int) -> None:
+        navigator, result, row = self.navigator, self.result, self.row
         raw = navigator.output()
-        estimate = total_estimate()
+        estimate = self._total_estimate()
         corrected = navigator.correct_output(raw, estimate)
         error = navigator.estimation_error(k, corrected, estimate)
-        P = kalman.covariance
-        result.times[k] = k * period
-        result.outputs[k] = corrected
-        result.raw_outputs[k] = raw
-        result.estimation_error[k] = error
-        result.sigma[k] = np.sqrt(np.maximum(np.diag(P), 0.0))
-        result.nees[k] = nees(error, P)
+        P = self.kalman.covariance
+        result.times[row] = k * self.period
+        result.outputs[row] = corrected
+        result.raw_outputs[row] = raw
+        result.estimation_error[row] = error
+        result.sigma[row] = np.sqrt(np.maximum(np.diag(P), 0.0))
+        result.nees[row] = nees(error, P)
+        if self.sink is not None:
+            self.sink(k, result, row)
+        self.row += 1
 
-    first = navigator.output()
-    result = RunResult(mode, filter_name, np.zeros(n_cycles + 1), np.zeros((n_cycles + 1, len(first))),
-                       np.zeros((n_cycles + 1, len(first))), np.zeros((n_cycles + 1, n)), np.zeros((n_cycles + 1, n)),
-                       np.full(n_cycles + 1, math.nan))
-    record(0)
-    for k in range(1, n_cycles + 1):
+    def step(self, k: int) -> None:
+        """Filter cycle ``k`` (1, 2, ... n_cycles, in order): advance, predict, update, correct, record."""
+        navigator, kalman, result, mode = self.navigator, self.kalman, self.result, self.mode
         navigator.advance(k)
         raw = navigator.output()
-        parameters = navigator.parameters(navigator.correct_output(raw, total_estimate()))
-        phi, qd = kalman.transition(parameters, period)
+        parameters = navigator.parameters(navigator.correct_output(raw, self._total_estimate()))
+        phi, qd = kalman.transition(parameters, self.period)
         kalman.predict(phi, qd)
-        if mode == "accumulated" and propagate_accumulator:
-            accumulated = phi @ accumulated
+        if mode == "accumulated" and self.propagate_accumulator:
+            self.accumulated = phi @ self.accumulated
+        accumulated = self.accumulated
         corrected_for_filter = navigator.correct_output(raw, accumulated) if mode == "accumulated" else raw
         measurement = navigator.measurement(k, corrected_for_filter, accumulated)
         if measurement is not None:
-            t = k * period
+            t = k * self.period
             if not measurement.valid:
                 result.skipped += 1
             elif not np.all(np.isfinite(measurement.z)):
                 result.refused.append(t)
             else:
-                H_all, R_all = measurement_matrices(parameters)
+                H_all, R_all = self.measurement_matrices(parameters)
                 rows = measurement.rows
                 H, R = H_all[rows], R_all[np.ix_(rows, rows)]
                 x, P = kalman.state, kalman.covariance
@@ -186,7 +216,7 @@ def run_filter(navigator: Navigator, kalman: KalmanFilter, measurement_matrices:
                 S = H @ P @ H.T + R
                 d2 = float(innovation @ np.linalg.solve(S, innovation))
                 result.innovations.append((t, d2))
-                if d2 > gate_threshold(gate_probability, len(rows)):
+                if d2 > gate_threshold(self.gate_probability, len(rows)):
                     result.rejected.append(t)
                 else:
                     try:
@@ -196,13 +226,32 @@ def run_filter(navigator: Navigator, kalman: KalmanFilter, measurement_matrices:
                     else:
                         result.updates += 1
                         if mode != "open_loop":
-                            dx = np.where(fed_back, kalman.state, 0.0)
+                            dx = np.where(self.fed_back, kalman.state, 0.0)
                             if mode == "closed_loop":
                                 navigator.feedback(dx)
                             else:
-                                accumulated = accumulated + dx
+                                self.accumulated = accumulated + dx
                             kalman.set_state(kalman.state - dx)
-        record(k)
-        if progress is not None:
-            progress(k, n_cycles)
-    return result
+        if k % self.record_every == 0 or k == self.n_cycles:
+            self._record(k)
+        if self.progress is not None:
+            self.progress(k, self.n_cycles)
+
+
+def run_filter(navigator: Navigator, kalman: KalmanFilter, measurement_matrices: Callable[[dict], tuple[np.ndarray, np.ndarray]],
+               mode: str, n_cycles: int, period: float, fed_back: np.ndarray, gate_probability: float = 0.0,
+               filter_name: str = "", progress: Callable[[int, int], None] | None = None,
+               propagate_accumulator: bool = True, record_every: int = 1) -> RunResult:
+    """The correction-mode loop (module docstring) over ``n_cycles`` filter cycles.
+
+    ``propagate_accumulator=False`` holds the accumulator constant between
+    updates instead of carrying it by Phi -- the naive accumulation that seed
+    003 warns against (section 2, after the proof); only for demonstrating
+    that the extrapolation is needed.  ``record_every``: keep the histories
+    every that many cycles (and at the last one).
+    """
+    loop = FilterLoop(navigator, kalman, measurement_matrices, mode, n_cycles, period, fed_back, gate_probability,
+                      filter_name, progress, propagate_accumulator, record_every)
+    for k in range(1, n_cycles + 1):
+        loop.step(k)
+    return loop.result

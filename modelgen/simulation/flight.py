@@ -15,13 +15,15 @@ import math
 import numpy as np
 
 from modelgen.derive.symbolic import DerivedModel
+from modelgen.errors import ModelError
 from modelgen.simulation import earth
 from modelgen.simulation.aiding import FilterMaker, Progress, SensorData
 from modelgen.simulation.error_layout import ErrorLayout
 from modelgen.simulation.filter_loop import RunResult
-from modelgen.simulation.imu import corrupt_increments
+from modelgen.simulation.imu import ImuErrorStream, corrupt_increments
 from modelgen.simulation.rotation import quaternion_product, rotation_vectors_to_quaternions
 from modelgen.simulation.scenario import FlightProfile
+from modelgen.simulation.streaming import PIECE_SECONDS, fly_modes
 from modelgen.simulation.trajectory import Trajectory
 
 
@@ -38,9 +40,20 @@ def perturbed_initial_state(truth0: np.ndarray, attitude: np.ndarray, velocity: 
 
 
 def simulate_sensors(profile: FlightProfile, trajectory: Trajectory, rng: np.random.Generator) -> SensorData:
-    """One realization of every sensor error of the profile (the aiding sensor's last, from its plug-in)."""
-    dtheta, dvel, history = corrupt_increments(trajectory.delta_theta, trajectory.delta_velocity, trajectory.dt,
-                                               profile.imu_budget, rng, trajectory.record_every)
+    """One realization of every sensor error of the profile (the aiding sensor's last, from its plug-in).
+
+    For a streamed trajectory the IMU errors are an :class:`ImuErrorStream`
+    (nothing of the length of the flight is held); ``rng`` is drawn from
+    exactly as for a whole one, so the same seed gives the same flight.
+    """
+    stream = None
+    if trajectory.streamed:
+        stream = ImuErrorStream(profile.imu_budget, trajectory.dt, trajectory.n_samples, trajectory.record_every, rng)
+        dtheta = dvel = None
+        history = stream.history
+    else:
+        dtheta, dvel, history = corrupt_increments(trajectory.delta_theta, trajectory.delta_velocity, trajectory.dt,
+                                                   profile.imu_budget, rng, trajectory.record_every)
     ie = profile.initial_errors
     initial = perturbed_initial_state(
         trajectory.initial_state(),
@@ -51,7 +64,7 @@ def simulate_sensors(profile: FlightProfile, trajectory: Trajectory, rng: np.ran
     truth = trajectory.truth
     altitude = truth[:, 3] + profile.altitude_noise * rng.standard_normal(len(truth))
     record = profile.aiding_sensor.simulate(profile, trajectory, initial, rng)
-    return SensorData(trajectory, dtheta, dvel, history, initial, altitude, record)
+    return SensorData(trajectory, dtheta, dvel, history, initial, altitude, record, stream)
 
 
 def profile_layout(profile: FlightProfile, derived: DerivedModel, trajectory: Trajectory) -> ErrorLayout:
@@ -62,13 +75,31 @@ def profile_layout(profile: FlightProfile, derived: DerivedModel, trajectory: Tr
 def fly_profile(profile: FlightProfile, derived: DerivedModel, trajectory: Trajectory, rng: np.random.Generator,
                 make_filter: FilterMaker, mode: str | None = None, sensors: SensorData | None = None,
                 layout: ErrorLayout | None = None, progress: Progress | None = None,
-                truth_profile: FlightProfile | None = None) -> RunResult:
+                truth_profile: FlightProfile | None = None, record_every: int = 1,
+                piece_seconds: float | None = None) -> RunResult:
     """Simulate the sensors (unless given) and run the filter in ``mode`` over the whole trajectory.
 
     The filter is tuned from ``profile``; the sensors are drawn from
     ``truth_profile`` if given (a mis-modelled filter), else from ``profile``.
+    A streamed ``trajectory`` (``generate_trajectory(..., streamed=True)``) is
+    flown piece by piece (:mod:`modelgen.simulation.streaming`, pieces of
+    ``piece_seconds``), with memory independent of the flight's duration and
+    the same result as a held one for the same ``rng``.
+
+    Returns a :class:`RunResult`: rows at t = 0 and then every
+    ``record_every`` filter cycles (and the last), each with the corrected
+    output, the INS's own output, the estimation error (true error state minus
+    estimate, model states), sqrt(diag P) and the NEES; plus counts of updates,
+    outage skips, gate rejections and refusals over every cycle.
     """
     mode = mode or profile.filter.mode
     layout = layout or profile_layout(profile, derived, trajectory)
     sensors = sensors or simulate_sensors(truth_profile or profile, trajectory, rng)
-    return profile.aiding_sensor.fly(profile, derived, trajectory, sensors, layout, make_filter, mode, progress)
+    if not hasattr(profile.aiding_sensor, "filter_loop"):
+        if trajectory.streamed:
+            raise ModelError(f"aiding sensor {profile.aiding_sensor.name!r} cannot fly a streamed trajectory "
+                             "(it has no filter_loop())")
+        return profile.aiding_sensor.fly(profile, derived, trajectory, sensors, layout, make_filter, mode, progress)
+    results = fly_modes(profile, derived, trajectory, sensors, layout, make_filter, [mode],
+                        (lambda _: progress) if progress else None, piece_seconds or PIECE_SECONDS, record_every)
+    return results[mode]

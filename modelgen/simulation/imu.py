@@ -128,3 +128,171 @@ def corrupt_increments(delta_theta: np.ndarray, delta_velocity: np.ndarray, dt: 
             measured += noise
             del noise
     return measured_theta, measured_velocity, history
+
+
+# -- streamed: the same realization, a piece at a time -------------------------------------------
+
+_SKIP_ROWS = 1 << 16  # rows of normals drawn at a time when passing over a stream (1.5 MB)
+
+
+def _fresh_generator(rng: np.random.Generator, state: dict) -> np.random.Generator:
+    """A generator of ``rng``'s bit-generator type set to ``state`` (a saved position in its stream)."""
+    generator = np.random.Generator(type(rng.bit_generator)())
+    generator.bit_generator.state = state
+    return generator
+
+
+def _skip_normals(rng: np.random.Generator, rows: int) -> None:
+    """Advance ``rng`` past ``rows`` rows of three standard normals, in bounded pieces."""
+    while rows > 0:
+        m = min(rows, _SKIP_ROWS)
+        rng.standard_normal((m, 3))
+        rows -= m
+
+
+class _MarkovCursor:
+    """The samples of one :func:`markov_sequence`, produced in order, a piece at a time.
+
+    The drive is re-drawn from the saved generator position and filtered with
+    the same recursion (``lfilter`` carrying its state), so the samples are bit
+    for bit those of the whole sequence; one sample of look-ahead lets the
+    error history be read at the first sample after a piece.
+    """
+
+    def __init__(self, rng: np.random.Generator, state: dict | None, scale: float, a: float, start: np.ndarray, n: int):
+        self.generator = None if state is None else _fresh_generator(rng, state)
+        self.scale, self.a, self.start, self.n = scale, a, start, n
+        self.drawn = 0
+        self.last = np.zeros(3)
+        self.buffer = np.zeros((0, 3))
+
+    def _fill(self, rows: int) -> None:
+        while len(self.buffer) < rows and self.drawn < self.n:
+            m = min(max(rows - len(self.buffer), 4096), self.n - self.drawn)
+            if self.generator is None:
+                values = np.zeros((m, 3))
+            else:
+                drive = self.scale * self.generator.standard_normal((m, 3))
+                if self.drawn == 0:
+                    drive[0] = self.start
+                    values = lfilter([1.0], [1.0, -self.a], drive, axis=0)
+                else:
+                    values, _ = lfilter([1.0], [1.0, -self.a], drive, axis=0, zi=(self.a * self.last)[None, :])
+                self.last = values[-1].copy()
+            self.drawn += m
+            self.buffer = np.concatenate([self.buffer, values]) if len(self.buffer) else values
+
+    def take(self, m: int) -> np.ndarray:
+        """The next ``m`` samples (keeps one more ready, for :meth:`peek`)."""
+        self._fill(m + 1)
+        out, self.buffer = self.buffer[:m], self.buffer[m:]
+        return out
+
+    def peek(self) -> np.ndarray | None:
+        """The next sample without taking it (None at the end of the sequence)."""
+        self._fill(1)
+        return self.buffer[0] if len(self.buffer) else None
+
+
+class ImuErrorStream:
+    """One realization of the IMU errors, as :func:`corrupt_increments` draws it, replayed piece by piece.
+
+    Constructing it draws from ``rng`` exactly what :func:`corrupt_increments`
+    draws (the long Markov drives and white noises are passed over in bounded
+    pieces and their starting positions saved), so ``rng`` continues as after
+    the whole-flight call.  :meth:`cursor` then replays the measured increments
+    of consecutive pieces bit for bit, holding no more than a piece, and fills
+    the error history (rows at record times, small) as it goes.
+    """
+
+    def __init__(self, budget: ImuErrorBudget, dt: float, n: int, record_every: int, rng: np.random.Generator):
+        self.budget, self.dt, self.n, self.record_every, self.rng = budget, dt, n, record_every, rng
+        self.gyro_constant = budget.gyro_constant_drift * rng.standard_normal(3)
+        self.accel_constant = budget.accel_constant_bias * rng.standard_normal(3)
+        self.gyro_scale = budget.gyro_scale_factor * rng.standard_normal(3)
+        self.accel_scale = budget.accel_scale_factor * rng.standard_normal(3)
+        self.markov = [self._pass_markov(budget.gyro_markov_drift, budget.gyro_markov_correlation_time),
+                       self._pass_markov(budget.accel_markov_bias, budget.accel_markov_correlation_time)]
+        self.white = [self._pass_white(budget.gyro_white_noise), self._pass_white(budget.accel_white_noise)]
+        records = len(range(0, n + 1, record_every))
+        self.history = ImuErrorHistory(self.gyro_constant, np.zeros((records, 3)), self.accel_constant,
+                                       np.zeros((records, 3)), self.gyro_scale, self.accel_scale)
+        # row 0 is read before the first piece (the run's record at t = 0): a Markov sequence starts at its start
+        self.history.gyro_markov[0] = self.markov[0][3]
+        self.history.accel_markov[0] = self.markov[1][3]
+
+    def _pass_markov(self, sigma: float, correlation_time: float) -> tuple:
+        """(saved position, drive scale, a, start) of a Markov sequence; ``rng`` passed over it."""
+        if sigma == 0 or self.n == 0:
+            return None, 0.0, 0.0, np.zeros(3)
+        a = math.exp(-self.dt / correlation_time)
+        state = self.rng.bit_generator.state
+        _skip_normals(self.rng, self.n)
+        start = sigma * self.rng.standard_normal(3)
+        return state, sigma * math.sqrt(1.0 - a * a), a, start
+
+    def _pass_white(self, sigma: float) -> tuple:
+        """(saved position, sigma) of a white-noise record; ``rng`` passed over it."""
+        if not sigma > 0:
+            return None, 0.0
+        state = self.rng.bit_generator.state
+        _skip_normals(self.rng, self.n)
+        return state, sigma
+
+    def cursor(self) -> "ImuErrorCursor":
+        """A fresh replay from the first sample."""
+        return ImuErrorCursor(self)
+
+
+class ImuErrorCursor:
+    """Consecutive pieces of one :class:`ImuErrorStream` (see there)."""
+
+    def __init__(self, stream: ImuErrorStream):
+        self.stream = stream
+        self.position = 0
+        self.markov = [_MarkovCursor(stream.rng, state, scale, a, start, stream.n)
+                       for state, scale, a, start in stream.markov]
+        self.white = [None if state is None else (_fresh_generator(stream.rng, state), sigma)
+                      for state, sigma in stream.white]
+
+    def corrupt(self, delta_theta: np.ndarray, delta_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Measured increments of the next ``len(delta_theta)`` samples (ideal ones given); history rows filled."""
+        s = self.stream
+        m = len(delta_theta)
+        start = self.position
+        gyro_markov, accel_markov = self.markov[0].take(m), self.markov[1].take(m)
+        self._record_history(start, m, gyro_markov, accel_markov)
+        measured_theta = delta_theta * (1.0 + s.gyro_scale)
+        gyro = gyro_markov + s.gyro_constant
+        gyro *= s.dt
+        measured_theta += gyro
+        measured_velocity = delta_velocity * (1.0 + s.accel_scale)
+        accel = accel_markov + s.accel_constant
+        accel *= s.dt
+        measured_velocity += accel
+        for measured, white in zip((measured_theta, measured_velocity), self.white):
+            if white is not None:
+                generator, sigma = white
+                noise = generator.standard_normal((m, 3))
+                noise *= sigma * math.sqrt(s.dt)
+                measured += noise
+        self.position += m
+        return measured_theta, measured_velocity
+
+    def _record_history(self, start: int, m: int, gyro_markov: np.ndarray, accel_markov: np.ndarray) -> None:
+        """History rows whose sample (clipped to the last) lies in [start, start + m], the end by look-ahead."""
+        s = self.stream
+        every = s.record_every
+        first = -(-start // every)
+        for row in range(first, len(s.history.gyro_markov)):
+            sample = min(row * every, s.n - 1)
+            if sample < start + m:
+                s.history.gyro_markov[row] = gyro_markov[sample - start]
+                s.history.accel_markov[row] = accel_markov[sample - start]
+            elif sample == start + m:
+                for target, cursor in ((s.history.gyro_markov, self.markov[0]), (s.history.accel_markov, self.markov[1])):
+                    ahead = cursor.peek()
+                    target[row] = ahead if ahead is not None else 0.0
+                break
+            else:
+                break

@@ -37,7 +37,7 @@ from modelgen.simulation.aiding import (
     whole_ratio,
 )
 from modelgen.simulation.error_layout import ErrorLayout, build_layout
-from modelgen.simulation.filter_loop import Measurement, RunResult, run_filter
+from modelgen.simulation.filter_loop import FilterLoop, Measurement, RunResult
 from modelgen.simulation.filters import named_parameters
 from modelgen.simulation.profile_keys import ProfileSection
 from modelgen.simulation.rotation import quaternion_to_dcm
@@ -126,18 +126,27 @@ class NavigationQuantitySensor(ABC):
         radius = values["earth_radius"]
         return build_layout(derived, profile.filter.states, m["F"], m["H"], quaternion_to_dcm(truth0[6:10]), rows, radius)
 
-    def fly(self, profile: Any, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
-            layout: ErrorLayout, make_filter: FilterMaker, mode: str, progress: Progress | None) -> RunResult:
-        """The filter loop with a :class:`StrapdownNavigator` aided by this sensor."""
+    def filter_loop(self, profile: Any, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
+                    layout: ErrorLayout, make_filter: FilterMaker, mode: str, progress: Progress | None,
+                    record_every: int = 1, sink: Any = None) -> FilterLoop:
+        """The filter loop with a :class:`StrapdownNavigator` aided by this sensor, ready to step."""
         mapping = profile.filter.measurements.get(self.name)
         if not mapping:
             raise ModelError(f"scenario {profile.name!r}: filter.measurements.{self.name} is missing")
         navigator = StrapdownNavigator(profile, layout, sensors, mapping, self)
         P0 = initial_covariance(layout, profile, trajectory.initial_state(), self)
         kalman = make_filter(np.zeros(layout.n), P0)
-        return run_filter(navigator, kalman, measurement_function(derived), mode, len(trajectory.truth) - 1,
+        return FilterLoop(navigator, kalman, measurement_function(derived), mode, len(trajectory.truth) - 1,
                           trajectory.record_period, layout.fed_back_mask(), profile.filter.gate_probability,
-                          getattr(kalman, "name", type(kalman).__name__), progress)
+                          getattr(kalman, "name", type(kalman).__name__), progress, record_every=record_every, sink=sink)
+
+    def fly(self, profile: Any, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
+            layout: ErrorLayout, make_filter: FilterMaker, mode: str, progress: Progress | None) -> RunResult:
+        """The filter loop with a :class:`StrapdownNavigator` aided by this sensor over the whole (held) flight."""
+        loop = self.filter_loop(profile, derived, trajectory, sensors, layout, make_filter, mode, progress)
+        for k in range(1, loop.n_cycles + 1):
+            loop.step(k)
+        return loop.result
 
 
 class StrapdownNavigator:
@@ -162,7 +171,7 @@ class StrapdownNavigator:
 
     # navigator protocol
     def advance(self, cycle: int) -> None:
-        start = (cycle - 1) * self.samples_per_cycle
+        start = (cycle - 1) * self.samples_per_cycle - self.sensors.sample_offset
         heights = self.sensors.altitude_reference
         self.strapdown.run(self.sensors.delta_theta, self.sensors.delta_velocity, start, start + self.samples_per_cycle,
                            (heights[cycle - 1], heights[cycle]))

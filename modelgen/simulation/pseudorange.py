@@ -74,7 +74,7 @@ from modelgen.simulation.aiding import (
     whole_ratio,
 )
 from modelgen.simulation.error_layout import ErrorLayout
-from modelgen.simulation.filter_loop import Measurement, RunResult, run_filter
+from modelgen.simulation.filter_loop import FilterLoop, Measurement, RunResult
 from modelgen.simulation.filters import named_parameters
 from modelgen.simulation.gps import Constellation, PseudorangeRecord, PseudorangeSettings, simulate_pseudoranges
 from modelgen.simulation.profile_keys import DEG, ProfileSection
@@ -192,7 +192,7 @@ class PseudorangeNavigator:
 
     # -- navigator protocol ------------------------------------------------------------
     def advance(self, cycle: int) -> None:
-        start = (cycle - 1) * self.samples_per_cycle
+        start = (cycle - 1) * self.samples_per_cycle - self.sensors.sample_offset
         heights = self.sensors.altitude_reference
         self.strapdown.run(self.sensors.delta_theta, self.sensors.delta_velocity, start,
                            start + self.samples_per_cycle, (heights[cycle - 1], heights[cycle]))
@@ -331,14 +331,23 @@ class PseudorangeAiding:
         """No layout from the profile: the states are mapped explicitly by this module."""
         return ErrorLayout(derived, {})
 
-    def fly(self, profile: Any, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
-            layout: ErrorLayout, make_filter: FilterMaker, mode: str, progress: Progress | None) -> RunResult:
-        """The correction-mode loop with a :class:`PseudorangeNavigator`; every state is fed back."""
+    def filter_loop(self, profile: Any, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
+                    layout: ErrorLayout, make_filter: FilterMaker, mode: str, progress: Progress | None,
+                    record_every: int = 1, sink: Any = None) -> FilterLoop:
+        """The correction-mode loop with a :class:`PseudorangeNavigator`, ready to step; every state is fed back."""
         navigator = PseudorangeNavigator(profile, derived, sensors)
         kalman = make_filter(np.zeros(len(STATE_NAMES)), initial_covariance(profile, trajectory.initial_state()))
-        return run_filter(navigator, kalman, measurement_function(derived), mode, len(trajectory.truth) - 1,
+        return FilterLoop(navigator, kalman, measurement_function(derived), mode, len(trajectory.truth) - 1,
                           trajectory.record_period, np.ones(len(STATE_NAMES), bool), profile.filter.gate_probability,
-                          getattr(kalman, "name", type(kalman).__name__), progress)
+                          getattr(kalman, "name", type(kalman).__name__), progress, record_every=record_every, sink=sink)
+
+    def fly(self, profile: Any, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
+            layout: ErrorLayout, make_filter: FilterMaker, mode: str, progress: Progress | None) -> RunResult:
+        """The correction-mode loop with a :class:`PseudorangeNavigator` over the whole (held) flight."""
+        loop = self.filter_loop(profile, derived, trajectory, sensors, layout, make_filter, mode, progress)
+        for k in range(1, loop.n_cycles + 1):
+            loop.step(k)
+        return loop.result
 
 
 #: the registry entry (modelgen.simulation.sensors)

@@ -107,22 +107,32 @@ class Trajectory:
     ``delta_theta[k]`` and ``delta_velocity[k]`` are the increments over
     ``[k dt, (k+1) dt]``; ``truth`` rows are taken every ``record_every``
     samples (row j at time ``j * record_every * dt``), columns :data:`TRUTH_COLUMNS`.
+    A *streamed* trajectory (``generate_trajectory(..., streamed=True)``) holds
+    the truth only (``delta_theta``/``delta_velocity`` are None): its increments
+    are generated on demand, a piece at a time, by :meth:`increments`, bit for
+    bit the rows a whole trajectory holds.
     """
 
     path: FlightPath
     imu_rate: float
     record_every: int
-    delta_theta: np.ndarray
-    delta_velocity: np.ndarray
+    delta_theta: np.ndarray | None
+    delta_velocity: np.ndarray | None
     truth: np.ndarray
+    sample_count: int = -1  # streamed: the number of IMU samples (the arrays give it otherwise)
 
     @property
     def dt(self) -> float:
         return 1.0 / self.imu_rate
 
     @property
+    def streamed(self) -> bool:
+        """True when the increments are generated on demand (:meth:`increments`), not held."""
+        return self.delta_theta is None
+
+    @property
     def n_samples(self) -> int:
-        return self.delta_theta.shape[0]
+        return self.sample_count if self.delta_theta is None else self.delta_theta.shape[0]
 
     @property
     def record_period(self) -> float:
@@ -134,6 +144,25 @@ class Trajectory:
     def initial_state(self) -> np.ndarray:
         """Truth at t = 0: latitude, longitude, height, v_NED (3), q_b^n (4)."""
         return self.truth[0, 1:].copy()
+
+    def increments(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """Ideal (delta_theta, delta_velocity) of samples [start, stop), each (stop - start, 3).
+
+        A held trajectory returns slices of its arrays; a streamed one computes
+        them now, starting from the truth row at ``start`` (which must be a
+        record sample: a multiple of ``record_every``).
+        """
+        stop = min(stop, self.n_samples)
+        if self.delta_theta is not None:
+            return self.delta_theta[start:stop], self.delta_velocity[start:stop]
+        if start % self.record_every:
+            raise ModelError(f"trajectory: a streamed piece must start at a record sample, not {start}")
+        row = start // self.record_every
+        delta_theta = np.empty((max(stop - start, 0), 3))
+        delta_velocity = np.empty_like(delta_theta)
+        _increments(segment_table(self.path), self.truth[row, 1], self.truth[row, 2], self.dt, start, stop,
+                    delta_theta, delta_velocity)
+        return delta_theta, delta_velocity
 
 
 def segment_table(profile: FlightPath) -> np.ndarray:
@@ -230,13 +259,31 @@ def _hermite(s, h, p0, m0, p1, m1):
 
 
 @compiled
-def _generate(table, lat0, lon0, dt, n_samples, record_every, delta_theta, delta_velocity, truth):
-    """The sample loop: RK4 latitude/longitude, Gauss-Legendre increments, truth records."""
+def _rk4_step(table, starts, seg, k, dt, lat, lon):
+    """Latitude and longitude one IMU sample on (RK4 over [k dt, (k+1) dt]), with the rates the Hermite
+    interpolation of latitude needs: (lat1, lon1, rate at the start, rate at the end)."""
+    t0 = k * dt
+    t1 = (k + 1) * dt
+    im = _segment_index(t0 + 0.5 * dt, starts, seg)
+    i1 = _segment_index(t1, starts, seg)
+    k1a, k1o, _ = _position_rate(t0, lat, table, seg)
+    k2a, k2o, _ = _position_rate(t0 + 0.5 * dt, lat + 0.5 * dt * k1a, table, im)
+    k3a, k3o, _ = _position_rate(t0 + 0.5 * dt, lat + 0.5 * dt * k2a, table, im)
+    k4a, k4o, _ = _position_rate(t1, lat + dt * k3a, table, i1)
+    lat1 = lat + dt / 6.0 * (k1a + 2 * k2a + 2 * k3a + k4a)
+    lon1 = lon + dt / 6.0 * (k1o + 2 * k2o + 2 * k3o + k4o)
+    return lat1, lon1, k1a, i1
+
+
+@compiled
+def _truth_records(table, lat0, lon0, dt, n_samples, record_every, truth):
+    """Truth rows every ``record_every`` samples (RK4 latitude/longitude on the IMU grid, closed-form rest).
+
+    The latitude and longitude of row j are exactly those :func:`_increments`
+    starts from at sample j * record_every, so increments can be generated later,
+    a piece at a time, bit for bit as in one pass.
+    """
     starts = table[:, 0]
-    gl_x0 = -math.sqrt(0.6)
-    gl_x2 = math.sqrt(0.6)
-    gl_w0 = 5.0 / 9.0
-    gl_w1 = 8.0 / 9.0
     lat, lon = lat0, lon0
     seg = 0
     rec = 0
@@ -260,17 +307,26 @@ def _generate(table, lat0, lon0, dt, n_samples, record_every, delta_theta, delta
             rec += 1
         if k == n_samples:
             break
+        lat, lon, _, _ = _rk4_step(table, starts, seg, k, dt, lat, lon)
+    return rec
+
+
+@compiled
+def _increments(table, lat0, lon0, dt, k_start, k_stop, delta_theta, delta_velocity):
+    """Ideal increments of samples [k_start, k_stop) into rows 0.. of the arrays, from the latitude and
+    longitude at sample k_start: RK4 latitude, Gauss-Legendre increments split at segment boundaries."""
+    starts = table[:, 0]
+    gl_x0 = -math.sqrt(0.6)
+    gl_x2 = math.sqrt(0.6)
+    gl_w0 = 5.0 / 9.0
+    gl_w1 = 8.0 / 9.0
+    lat, lon = lat0, lon0
+    seg = 0
+    for k in range(k_start, k_stop):
+        t0 = k * dt
+        seg = _segment_index(t0, starts, seg)
         t1 = (k + 1) * dt
-        # RK4 for latitude and longitude over [t0, t1]
-        i0 = seg
-        im = _segment_index(t0 + 0.5 * dt, starts, seg)
-        i1 = _segment_index(t1, starts, seg)
-        k1a, k1o, _ = _position_rate(t0, lat, table, i0)
-        k2a, k2o, _ = _position_rate(t0 + 0.5 * dt, lat + 0.5 * dt * k1a, table, im)
-        k3a, k3o, _ = _position_rate(t0 + 0.5 * dt, lat + 0.5 * dt * k2a, table, im)
-        k4a, k4o, _ = _position_rate(t1, lat + dt * k3a, table, i1)
-        lat1 = lat + dt / 6.0 * (k1a + 2 * k2a + 2 * k3a + k4a)
-        lon1 = lon + dt / 6.0 * (k1o + 2 * k2o + 2 * k3o + k4o)
+        lat1, lon1, k1a, i1 = _rk4_step(table, starts, seg, k, dt, lat, lon)
         m1, _, _ = _position_rate(t1, lat1, table, i1)
         # increments, split at segment boundaries
         sx = sy = sz = vx = vy = vz = 0.0
@@ -301,21 +357,25 @@ def _generate(table, lat0, lon0, dt, n_samples, record_every, delta_theta, delta
                 vy += w * half * fy
                 vz += w * half * fz
             a = b
-        delta_theta[k, 0] = sx
-        delta_theta[k, 1] = sy
-        delta_theta[k, 2] = sz
-        delta_velocity[k, 0] = vx
-        delta_velocity[k, 1] = vy
-        delta_velocity[k, 2] = vz
+        row = k - k_start
+        delta_theta[row, 0] = sx
+        delta_theta[row, 1] = sy
+        delta_theta[row, 2] = sz
+        delta_velocity[row, 0] = vx
+        delta_velocity[row, 1] = vy
+        delta_velocity[row, 2] = vz
         lat, lon = lat1, lon1
-    return rec
+    return k_stop - k_start
 
 
-def generate_trajectory(profile: FlightPath, imu_rate: float, record_rate: float) -> Trajectory:
+def generate_trajectory(profile: FlightPath, imu_rate: float, record_rate: float, streamed: bool = False) -> Trajectory:
     """Truth at ``record_rate`` and ideal increments at ``imu_rate`` for a whole profile.
 
     ``imu_rate / record_rate`` must be a whole number (truth rows fall on IMU
     sample times); the flight lasts ``floor(duration * imu_rate)`` samples.
+    ``streamed=True`` keeps only the truth (memory independent of the IMU rate
+    and, but for the truth rows, of the duration); the increments then come
+    piece by piece from :meth:`Trajectory.increments`.
     """
     if imu_rate <= 0 or record_rate <= 0:
         raise ModelError(f"profile {profile.name!r}: rates must be positive (imu {imu_rate}, record {record_rate})")
@@ -330,9 +390,11 @@ def generate_trajectory(profile: FlightPath, imu_rate: float, record_rate: float
     table = segment_table(profile)
     n_samples = int(math.floor(profile.duration * imu_rate + 1e-6))
     n_records = n_samples // record_every + 1
+    truth = np.empty((n_records, len(TRUTH_COLUMNS)))
+    _truth_records(table, profile.latitude, profile.longitude, 1.0 / imu_rate, n_samples, record_every, truth)
+    if streamed:
+        return Trajectory(profile, float(imu_rate), record_every, None, None, truth, n_samples)
     delta_theta = np.empty((n_samples, 3))
     delta_velocity = np.empty((n_samples, 3))
-    truth = np.empty((n_records, len(TRUTH_COLUMNS)))
-    _generate(table, profile.latitude, profile.longitude, 1.0 / imu_rate, n_samples, record_every,
-              delta_theta, delta_velocity, truth)
+    _increments(table, profile.latitude, profile.longitude, 1.0 / imu_rate, 0, n_samples, delta_theta, delta_velocity)
     return Trajectory(profile, float(imu_rate), record_every, delta_theta, delta_velocity, truth)

@@ -1,0 +1,90 @@
+"""Flying a flight in pieces: memory independent of its duration, several correction modes in one pass.
+
+A streamed trajectory (:func:`~modelgen.simulation.trajectory.generate_trajectory`
+with ``streamed=True``) holds only the truth rows; its sensors
+(:func:`~modelgen.simulation.flight.simulate_sensors`) hold the IMU errors as a
+replayable :class:`~modelgen.simulation.imu.ImuErrorStream`.  :func:`fly_modes`
+then walks the flight a piece at a time (``piece_seconds`` of IMU data, a whole
+number of filter cycles): it generates the piece's ideal increments, corrupts
+them, and steps every requested correction mode's filter loop through the
+piece's cycles before the next piece replaces it.  The modes therefore share
+one pass over the data (what ``modelgen simulate`` flies), and what is held is
+a piece of IMU data, the truth and sensor records at the filter and sensor
+rates, and the histories at the rate asked for (``record_every``).
+
+Results are bit for bit those of flying a held trajectory (same seed, any
+piece length): tests/simulation/test_streaming.py checks both.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, Iterable
+
+from modelgen.derive.symbolic import DerivedModel
+from modelgen.errors import ModelError
+from modelgen.simulation.aiding import FilterMaker, Progress, SensorData
+from modelgen.simulation.error_layout import ErrorLayout
+from modelgen.simulation.filter_loop import FilterLoop, RunResult
+from modelgen.simulation.scenario import FlightProfile
+from modelgen.simulation.trajectory import Trajectory
+
+#: default piece length: 10 s of IMU data (3,000 samples at 300 Hz, 144 kB of increments)
+PIECE_SECONDS = 10.0
+
+Sink = Callable[[int, RunResult, int], None]
+
+
+def cycles_per_piece(trajectory: Trajectory, piece_seconds: float) -> int:
+    """Whole filter cycles in a piece of about ``piece_seconds`` (at least one)."""
+    if not (math.isfinite(piece_seconds) and piece_seconds > 0):
+        raise ModelError(f"streaming: the piece length must be a positive number of seconds, got {piece_seconds!r}")
+    return max(1, int(round(piece_seconds / trajectory.record_period)))
+
+
+def pieces(n_cycles: int, per_piece: int) -> Iterable[tuple[int, int]]:
+    """Consecutive ranges [first, last] of filter cycles 1..n_cycles, ``per_piece`` at a time."""
+    for first in range(1, n_cycles + 1, per_piece):
+        yield first, min(first + per_piece - 1, n_cycles)
+
+
+def load_piece(sensors: SensorData, cursor, first_cycle: int, last_cycle: int) -> None:
+    """Put the measured increments of cycles [first_cycle, last_cycle] into ``sensors`` (streamed sensors)."""
+    trajectory = sensors.trajectory
+    every = trajectory.record_every
+    start, stop = (first_cycle - 1) * every, last_cycle * every
+    if cursor.position != start:
+        raise ModelError(f"streaming: pieces must come in order (expected sample {cursor.position}, got {start})")
+    ideal_theta, ideal_velocity = trajectory.increments(start, stop)
+    sensors.delta_theta, sensors.delta_velocity = cursor.corrupt(ideal_theta, ideal_velocity)
+    sensors.sample_offset = start
+
+
+def fly_modes(profile: FlightProfile, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
+              layout: ErrorLayout, make_filter: FilterMaker, modes: Iterable[str],
+              progress: Callable[[str], Progress] | None = None, piece_seconds: float = PIECE_SECONDS,
+              record_every: int = 1, sinks: dict[str, Sink] | None = None) -> dict[str, RunResult]:
+    """Fly ``modes`` in lockstep over one pass of the sensor data (module docstring); mode -> its result.
+
+    ``progress(mode)`` makes each mode's progress callback; ``sinks[mode]``
+    receives each recorded row as it is made (an incremental writer).  A held
+    trajectory is flown the same way (its increments are sliced, not generated).
+    """
+    sensor = profile.aiding_sensor
+    if not hasattr(sensor, "filter_loop"):
+        raise ModelError(f"aiding sensor {sensor.name!r} has no filter_loop(): it can fly a held trajectory only")
+    sinks = sinks or {}
+    loops: list[FilterLoop] = [
+        sensor.filter_loop(profile, derived, trajectory, sensors, layout, make_filter, mode,
+                           progress(mode) if progress else None, record_every=record_every, sink=sinks.get(mode))
+        for mode in modes
+    ]
+    n_cycles = len(trajectory.truth) - 1
+    cursor = sensors.imu_stream.cursor() if sensors.streamed else None
+    for first, last in pieces(n_cycles, cycles_per_piece(trajectory, piece_seconds)):
+        if cursor is not None:
+            load_piece(sensors, cursor, first, last)
+        for loop in loops:
+            for k in range(first, last + 1):
+                loop.step(k)
+    return {loop.mode: loop.result for loop in loops}

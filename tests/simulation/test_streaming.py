@@ -1,0 +1,96 @@
+"""Streaming: a flight flown in pieces is bit for bit the flight flown whole, whatever the piece length."""
+
+import numpy as np
+import pytest
+
+from modelgen.errors import ModelError
+from modelgen.simulation.filter_loop import recorded_cycles
+from modelgen.simulation.filters import ReferenceFilter
+from modelgen.simulation.flight import fly_profile, profile_layout, simulate_sensors
+from modelgen.simulation.imu import ImuErrorBudget, ImuErrorStream, corrupt_increments
+from modelgen.simulation.scenario import load_profile
+from modelgen.simulation.streaming import fly_modes
+from modelgen.simulation.trajectory import generate_trajectory
+
+FIELDS = ("times", "outputs", "raw_outputs", "estimation_error", "sigma", "nees")
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    """Five minutes of the paper's flight (the climb) at a 30 Hz IMU, Doppler every 60 s."""
+    return load_profile("profile_000").with_changes(hours=1 / 12, imu_rate=30.0)
+
+
+def test_streamed_trajectory_pieces_are_the_whole_trajectorys_increments(scenario):
+    whole = generate_trajectory(scenario.path, scenario.imu_rate, 1.0)
+    streamed = generate_trajectory(scenario.path, scenario.imu_rate, 1.0, streamed=True)
+    assert streamed.delta_theta is None and streamed.n_samples == whole.n_samples
+    assert np.array_equal(streamed.truth, whole.truth)
+    step = 7 * streamed.record_every
+    pieces = [streamed.increments(a, a + step) for a in range(0, streamed.n_samples, step)]
+    assert np.array_equal(np.concatenate([p[0] for p in pieces]), whole.delta_theta)
+    assert np.array_equal(np.concatenate([p[1] for p in pieces]), whole.delta_velocity)
+    with pytest.raises(ModelError, match="must start at a record sample"):
+        streamed.increments(1, 10)
+
+
+@pytest.mark.parametrize("n, record_every, piece", [(5000, 30, 60), (4999, 7, 91), (300, 300, 300)])
+def test_imu_error_stream_replays_the_whole_realization_bit_for_bit(n, record_every, piece):
+    budget = ImuErrorBudget(1e-6, 2e-6, 3600.0, 1e-7, 1e-5, 1e-3, 2e-3, 1800.0, 1e-4, 2e-5)  # every error present
+    ideal = np.random.default_rng(3)
+    theta, velocity = ideal.standard_normal((n, 3)), ideal.standard_normal((n, 3))
+    rng_whole, rng_stream = np.random.default_rng(9), np.random.default_rng(9)
+    measured_theta, measured_velocity, history = corrupt_increments(theta, velocity, 0.01, budget, rng_whole, record_every)
+    stream = ImuErrorStream(budget, 0.01, n, record_every, rng_stream)
+    # the generator goes on exactly as after the whole-flight draw (initial errors, aiding sensor...)
+    assert np.array_equal(rng_whole.standard_normal(5), rng_stream.standard_normal(5))
+    cursor = stream.cursor()
+    parts = [cursor.corrupt(theta[i:i + piece], velocity[i:i + piece]) for i in range(0, n, piece)]
+    assert np.array_equal(np.concatenate([p[0] for p in parts]), measured_theta)
+    assert np.array_equal(np.concatenate([p[1] for p in parts]), measured_velocity)
+    for name in ("gyro_constant", "gyro_markov", "accel_constant", "accel_markov", "gyro_scale_factor", "accel_scale_factor"):
+        assert np.array_equal(getattr(stream.history, name), getattr(history, name)), name
+
+
+def _fly(scenario, derived, streamed, piece_seconds, record_every=1):
+    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0, streamed=streamed)
+    layout = profile_layout(scenario, derived, trajectory)
+    sensors = simulate_sensors(scenario, trajectory, np.random.default_rng(21))
+    return fly_modes(scenario, derived, trajectory, sensors, layout, lambda x, P: ReferenceFilter(derived, x, P),
+                     ("open_loop", "closed_loop", "accumulated"), piece_seconds=piece_seconds, record_every=record_every)
+
+
+def test_a_streamed_flight_is_the_held_flight_bit_for_bit_for_any_piece_length(scenario, paper_derived):
+    held = _fly(scenario, paper_derived, False, 10.0)
+    for piece_seconds in (1.0, 7.0, 1e6):
+        streamed = _fly(scenario, paper_derived, True, piece_seconds)
+        for mode, result in held.items():
+            assert result.updates == streamed[mode].updates == 5
+            for name in FIELDS:
+                assert np.array_equal(getattr(result, name), getattr(streamed[mode], name), equal_nan=True), (mode, name, piece_seconds)
+
+
+def test_fly_profile_on_a_streamed_trajectory_matches_the_held_one(scenario, paper_derived):
+    results = []
+    for streamed in (False, True):
+        trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0, streamed=streamed)
+        results.append(fly_profile(scenario, paper_derived, trajectory, np.random.default_rng(4),
+                                   lambda x, P: ReferenceFilter(paper_derived, x, P), mode="closed_loop"))
+    for name in FIELDS:
+        assert np.array_equal(getattr(results[0], name), getattr(results[1], name), equal_nan=True), name
+
+
+def test_decimated_histories_are_the_full_rate_rows_at_the_recorded_cycles(scenario, paper_derived):
+    full = _fly(scenario, paper_derived, True, 10.0)
+    decimated = _fly(scenario, paper_derived, True, 10.0, record_every=7)
+    cycles = recorded_cycles(len(full["closed_loop"].times) - 1, 7)
+    assert cycles[-1] == 300 and cycles[-2] == 294  # every 7th and the last
+    for mode, result in full.items():
+        assert decimated[mode].updates == result.updates
+        for name in FIELDS:
+            assert np.array_equal(getattr(result, name)[cycles], getattr(decimated[mode], name), equal_nan=True)
+
+
+def test_a_piece_length_that_is_not_a_positive_number_is_refused(scenario, paper_derived):
+    with pytest.raises(ModelError, match="piece length must be a positive number of seconds"):
+        _fly(scenario, paper_derived, True, 0.0)
