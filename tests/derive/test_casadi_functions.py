@@ -17,6 +17,8 @@ from modelgen.model.loading import builtin_models, load_model
 RELATIVE_TOLERANCE = 1e-12
 N_OPERATING_POINTS = 5
 _DIRECTION_COSINE = re.compile(r"^c([1-3])([1-3])$")
+#: An element of a 3x3 matrix parameter of a vector model (``C_bn_12``: stem, row, column).
+_MATRIX_ELEMENT = re.compile(r"^(.+)_([1-3])([1-3])$")
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
@@ -39,11 +41,22 @@ def random_operating_point(model: ErrorModel, rng: np.random.Generator) -> dict[
     """
     rotation = random_rotation(rng)
     values: dict[str, float] = {}
+    matrices: dict[str, np.ndarray] = {}  # 3x3 matrix parameters of vector models: one random rotation each
     for p in model.parameters:
         text = f"{p.name} {p.symbol}".lower()
         cosine = _DIRECTION_COSINE.match(p.symbol) or _DIRECTION_COSINE.match(p.name)
+        element = _MATRIX_ELEMENT.match(p.name)
         if cosine:
             values[p.name] = float(rotation[int(cosine[1]) - 1, int(cosine[2]) - 1])
+        elif element and p.unit == "1" and p.value is None:
+            matrix = matrices.setdefault(element[1], random_rotation(rng))
+            values[p.name] = float(matrix[int(element[2]) - 1, int(element[3]) - 1])
+        elif p.value is None and (p.symbol == "L" or "latitude" in p.description.lower()):
+            values[p.name] = float(rng.uniform(-1.3, 1.3))
+        elif p.value is None and p.unit == "m/s":
+            values[p.name] = float(rng.uniform(-300.0, 300.0))
+        elif p.value is None and p.unit in ("m/s^2", "m/s**2"):
+            values[p.name] = float(rng.uniform(-15.0, 15.0))
         elif "latitude" in text:
             values[p.name] = float(rng.uniform(-1.3, 1.3))
         elif "velocity" in text:
@@ -85,6 +98,63 @@ def test_sympy_and_casadi_jacobians_agree_at_random_operating_points(both_backen
         candidate = casadi_model.numeric(values)
         for key in ("F", "G", "H"):
             assert_close(reference[key], candidate[key], f"{derived.model.name} point {k} {key}")
+
+
+@pytest.mark.parametrize("name", [n for n in builtin_models() if load_model(n).check is not None])
+def test_sympy_and_casadi_jacobians_agree_at_the_models_own_check_scenario(name):
+    """The realistic operating point each model file declares (its ``check:`` section)."""
+    model = load_model(name)
+    values = model.check.parameter_values()
+    reference, candidate = derive(model).numeric(values), build_casadi_model(model).numeric(values)
+    for key in ("F", "G", "H"):
+        assert np.array_equal(reference[key] == 0, candidate[key] == 0), f"{name} {key}"
+        assert_close(reference[key], candidate[key], f"{name} check scenario {key}")
+
+
+VECTOR_MODEL = """\
+model: vector_ins
+frame: NED
+states:
+  - {name: dr, shape: 3, unit: m}
+  - {name: dv, shape: 3, unit: m/s}
+  - {name: phi, shape: 3, unit: rad}
+  - {name: b_g, shape: 3, axes: body, unit: rad/s}
+noises:
+  - {name: w_a, shape: 3, axes: body, psd: "1.0e-6"}
+  - {name: w_g, shape: 3, axes: body, psd: "1.0e-10"}
+parameters:
+  - {name: L, unit: rad, description: latitude}
+  - {name: h, unit: m, value: 1200.0}
+  - {name: v, shape: 3, unit: m/s}
+  - {name: C_bn, shape: [3, 3], unit: "1"}
+  - {name: f_b, shape: 3, axes: body, unit: m/s^2}
+  - {name: l_b, shape: 3, axes: body, unit: m, value: [0.5, -0.2, 1.1]}
+definitions:
+  - {name: w_ie, value: "earth_rate_ned(L)"}
+  - {name: w_en, value: "transport_rate_ned(L, h, v)"}
+  - {name: w_in, value: "w_ie + w_en"}
+  - {name: radii, value: "diag(1/(R_M(L) + h), 1/((R_N(L) + h)*cos(L)), -1)"}
+dynamics:
+  dr: "-cross(w_en, dr) + dv"
+  dv: "cross(C_bn*f_b, phi) - cross(2*w_ie + w_en, dv) + vector(0, 0, 2*normal_gravity(L, h)/(R_N(L) + h))*dr_d + C_bn*w_a"
+  phi: "-cross(w_in, phi) - C_bn*b_g - C_bn*w_g"
+  b_g: "-b_g/3600"
+measurements:
+  - {name: z_r, shape: 3, expression: "radii*(dr + cross(C_bn*l_b, phi))", variance: "1.0e-12"}
+"""
+
+
+def test_sympy_and_casadi_agree_on_a_vector_model_using_the_navigation_library():
+    from modelgen.model.loading import load_model_text
+
+    model = load_model_text(VECTOR_MODEL, "vector_ins.yaml")
+    derived, casadi_model = derive(model), build_casadi_model(model)
+    rng = np.random.default_rng(12)
+    for k in range(N_OPERATING_POINTS):
+        values = random_operating_point(model, rng)
+        reference, candidate = derived.numeric(values), casadi_model.numeric(values)
+        for key in ("F", "G", "H"):
+            assert_close(reference[key], candidate[key], f"vector model point {k} {key}")
 
 
 def test_casadi_structural_zeros_are_the_sympy_structural_zeros(both_backends):
