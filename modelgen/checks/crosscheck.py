@@ -65,7 +65,8 @@ RECORD_FIELDS = ("model", "matrix", "row", "column", "hand", "derived", "status"
 #: Most neglected terms of one entry tried together when matching a hand entry (subsets, smallest first).
 MAX_COMBINED_APPROXIMATIONS = 4
 
-_PAIR_KEYS = {"hand", "twin", "symbols", "conventions", "hand_model_errors"}
+_PAIR_KEYS = {"hand", "twin", "symbols", "states", "unmodelled", "conventions", "hand_model_errors"}
+_UNMODELLED_KEYS = {"states", "noises", "approximation", "reason"}
 _CONVENTION_KEYS = {"name", "states", "noises", "reason"}
 _ERROR_KEYS = {"matrix", "row", "column", "reason", "fixed"}
 
@@ -78,6 +79,21 @@ class Convention:
     name: str
     states: tuple[str, ...]
     noises: tuple[str, ...]
+    reason: str
+
+
+@dataclass(frozen=True)
+class Unmodelled:
+    """Twin states (or noises) the hand model leaves out altogether, under a named approximation.
+
+    The twin's couplings from them into the hand model's states are the terms
+    that approximation drops (e.g. the paper's "no vertical channel": the
+    twin has dV_d and dh, the hand model has neither).
+    """
+
+    states: tuple[str, ...]
+    noises: tuple[str, ...]
+    approximation: str
     reason: str
 
 
@@ -97,12 +113,16 @@ class Pair:
     """One hand-written model and its twin, with what may explain their differences.
 
     ``symbols`` renames a parameter symbol of the hand model to the twin's
-    (a hand parameter spelled like a twin parameter needs no entry).
+    and ``states`` a state or noise symbol (same spelling needs no entry):
+    quantities are matched by symbol, not by position.  ``unmodelled`` lists
+    the twin's states and noises the hand model leaves out.
     """
 
     hand: str
     twin: str
     symbols: Mapping[str, str] = field(default_factory=dict)
+    states: Mapping[str, str] = field(default_factory=dict)
+    unmodelled: tuple[Unmodelled, ...] = ()
     conventions: tuple[Convention, ...] = ()
     hand_model_errors: tuple[HandModelError, ...] = ()
 
@@ -175,13 +195,27 @@ def _pair(item: Any, where: str) -> Pair:
             noises=_names(c.get("noises") or [], f"{place}.noises"),
             reason=str(c["reason"]),
         ))
+    renames = item.get("states") or {}
+    if not isinstance(renames, dict):
+        raise ModelError(f"{where}.states: expected a mapping hand-model state or noise symbol -> twin symbol")
+    unmodelled = []
+    for k, u in enumerate(item.get("unmodelled") or []):
+        place = f"{where}.unmodelled[{k}]"
+        u = _mapping(u, place, _UNMODELLED_KEYS, {"approximation", "reason"})
+        unmodelled.append(Unmodelled(
+            states=_names(u.get("states") or [], f"{place}.states"), noises=_names(u.get("noises") or [], f"{place}.noises"),
+            approximation=str(u["approximation"]), reason=str(u["reason"]),
+        ))
     errors = []
     for k, e in enumerate(item.get("hand_model_errors") or []):
         e = _mapping(e, f"{where}.hand_model_errors[{k}]", _ERROR_KEYS, {"matrix", "row", "column", "reason"})
         if e["matrix"] not in MATRICES:
             raise ModelError(f"{where}.hand_model_errors[{k}]: matrix must be one of {', '.join(MATRICES)}")
         errors.append(HandModelError(str(e["matrix"]), str(e["row"]), str(e["column"]), str(e["reason"]), bool(e.get("fixed", False))))
-    return Pair(str(item["hand"]), str(item["twin"]), {str(k): str(v) for k, v in symbols.items()}, tuple(conventions), tuple(errors))
+    return Pair(
+        str(item["hand"]), str(item["twin"]), {str(k): str(v) for k, v in symbols.items()},
+        {str(k): str(v) for k, v in renames.items()}, tuple(unmodelled), tuple(conventions), tuple(errors),
+    )
 
 
 # -- the hand model in the twin's terms ---------------------------------------------
@@ -215,18 +249,56 @@ def twin_to_hand(pair: Pair, hand: ErrorModel, twin: ErrorModel) -> dict[sp.Symb
     return {t: h for h, t in hand_substitution(pair, hand, twin).items()}
 
 
-def check_same_layout(hand: ErrorModel, twin: ErrorModel) -> None:
-    """Refuse a twin whose states, noises or measurements do not line up one to one with the hand model's."""
-    for kind, mine, theirs in (
-        ("states", hand.states, twin.states),
-        ("noises", hand.noises, twin.noises),
-        ("measurements", hand.measurements, twin.measurements),
-    ):
-        if len(mine) != len(theirs):
+@dataclass(frozen=True)
+class Layout:
+    """Where each hand-model state, noise and measurement sits in the twin (0-based twin indices)."""
+
+    states: tuple[int, ...]
+    noises: tuple[int, ...]
+    measurements: tuple[int, ...]
+    unmodelled_states: Mapping[int, Unmodelled]  # twin index -> why the hand model leaves it out
+    unmodelled_noises: Mapping[int, Unmodelled]
+
+    def index(self, matrix: str) -> tuple[tuple[int, ...], tuple[int, ...]]:
+        """Twin row and column indices of the hand model's rows and columns of ``matrix``."""
+        return {"F": (self.states, self.states), "G": (self.states, self.noises), "H": (self.measurements, self.states)}[matrix]
+
+
+def layout(pair: Pair, hand: ErrorModel, twin: ErrorModel) -> Layout:
+    """Match the hand model's quantities with the twin's by symbol (renamed by the pair's ``states``).
+
+    Measurements match by symbol when every hand symbol is the twin's, else by
+    order.  A hand quantity the twin lacks, or a twin quantity the hand model
+    lacks without an ``unmodelled`` declaration, is refused, naming both lists.
+    """
+    def match(kind: str, mine, theirs, declared: dict[str, Unmodelled]) -> tuple[tuple[int, ...], dict[int, Unmodelled]]:
+        where = {q.symbol: k for k, q in enumerate(theirs)}
+        wanted = [pair.states.get(q.symbol, q.symbol) for q in mine]
+        missing = [w for w in wanted if w not in where]
+        extra = [q.symbol for q in theirs if q.symbol not in wanted and q.symbol not in declared]
+        if missing or extra:
             raise ModelError(
-                f"twin {twin.name!r} has {len(theirs)} {kind} ({', '.join(q.symbol for q in theirs)}), hand model "
-                f"{hand.name!r} has {len(mine)} ({', '.join(q.symbol for q in mine)}): they are compared in order"
+                f"pair {pair.hand}/{pair.twin}: {kind} do not match (hand: {', '.join(q.symbol for q in mine) or '-'}; "
+                f"twin: {', '.join(q.symbol for q in theirs) or '-'}); missing in the twin: {', '.join(missing) or '-'}; "
+                f"in the twin only, not declared unmodelled: {', '.join(extra) or '-'}"
             )
+        return tuple(where[w] for w in wanted), {where[s]: u for s, u in declared.items() if s in where}
+
+    unmodelled_states = {s: u for u in pair.unmodelled for s in u.states}
+    unmodelled_noises = {s: u for u in pair.unmodelled for s in u.noises}
+    states, lost_states = match("states", hand.states, twin.states, unmodelled_states)
+    noises, lost_noises = match("noises", hand.noises, twin.noises, unmodelled_noises)
+    theirs = [m.symbol for m in twin.measurements]
+    if all(m.symbol in theirs for m in hand.measurements) and len(theirs) == len(hand.measurements):
+        measurements = tuple(theirs.index(m.symbol) for m in hand.measurements)
+    elif len(theirs) == len(hand.measurements):
+        measurements = tuple(range(len(theirs)))
+    else:
+        raise ModelError(
+            f"pair {pair.hand}/{pair.twin}: {len(hand.measurements)} hand measurements "
+            f"({', '.join(m.symbol for m in hand.measurements)}) against {len(theirs)} in the twin ({', '.join(theirs)})"
+        )
+    return Layout(states, noises, measurements, lost_states, lost_noises)
 
 
 def signs(pair: Pair, hand: ErrorModel) -> tuple[list[int], list[int]]:
@@ -348,7 +420,7 @@ def cross_check(
     pair: Pair, hand: DerivedModel, twin: DerivedModel, neglected: Iterable[NeglectedTerm] = ()
 ) -> CrossCheckResult:
     """Compare the hand-written model's F, G, H with its twin's, entry by entry (see module doc)."""
-    check_same_layout(hand.model, twin.model)
+    where = layout(pair, hand.model, twin.model)
     to_twin = hand_substitution(pair, hand.model, twin.model)
     state_signs, noise_signs = signs(pair, hand.model)
     values, label = scenario_values(twin.model)
@@ -365,10 +437,11 @@ def cross_check(
         H = getattr(hand, matrix)
         T = getattr(twin, matrix)
         rows, columns = _quantities(hand.model, matrix)
+        twin_rows, twin_columns = where.index(matrix)
         for i in range(H.shape[0]):
             for j in range(H.shape[1]):
-                terms = dropped.get((matrix, i, j), [])
-                full = T[i, j] + sp.Add(*(t for t, _ in terms))
+                terms = dropped.get((matrix, twin_rows[i], twin_columns[j]), [])
+                full = T[twin_rows[i], twin_columns[j]] + sp.Add(*(t for t, _ in terms))
                 written = H[i, j].xreplace(to_twin)
                 if written == 0 and full == 0 and not terms:
                     continue
@@ -379,7 +452,28 @@ def cross_check(
                 records.append(_classify(
                     pair, matrix, rows[i], columns[j], written, full, terms, transform, errors, values,
                 ))
+        records += _unmodelled_couplings(pair, matrix, twin, where, rows, twin_rows, dropped, values)
     return CrossCheckResult(pair.hand, pair.twin, label, tuple(records))
+
+
+def _unmodelled_couplings(pair, matrix, twin, where: Layout, rows, twin_rows, dropped, values) -> list[EntryRecord]:
+    """Records for the twin's couplings into the hand model's rows from quantities the hand model leaves out."""
+    lost = where.unmodelled_noises if matrix == "G" else where.unmodelled_states
+    T = getattr(twin, matrix)
+    names = [w.symbol for w in twin.model.noises] if matrix == "G" else [s.symbol for s in twin.model.states]
+    out = []
+    for i, row in zip(twin_rows, rows):
+        for j in sorted(lost):
+            full = T[i, j] + sp.Add(*(t for t, _ in dropped.get((matrix, i, j), [])))
+            if full == 0:
+                continue
+            u = lost[j]
+            out.append(EntryRecord(
+                model=pair.hand, matrix=matrix, row=row, column=names[j], hand="0", derived=sp.sstr(full),
+                status="approximation", term=sp.sstr(full), magnitude=magnitude(full, values),
+                reason=f"{u.approximation}: {names[j]} is not a state of {pair.hand} ({u.reason})",
+            ))
+    return out
 
 
 def _classify(pair, matrix, row, column, written, full, terms, transform, errors, values) -> EntryRecord:

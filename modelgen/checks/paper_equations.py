@@ -50,7 +50,7 @@ from typing import Any, Mapping, Sequence
 import sympy as sp
 
 from modelgen.checks.crosscheck import (
-    check_same_layout,
+    layout,
     load_pairs,
     magnitude,
     scenario_values,
@@ -438,13 +438,21 @@ def compare_equations(
 
 
 def twin_in_model_terms(twin: DerivedModel, model: ErrorModel) -> dict[str, sp.Matrix]:
-    """The twin's F, G, H in ``model``'s parameter symbols (the cross-check pair's mapping), same order."""
-    check_same_layout(model, twin.model)
+    """The twin's F, G, H in ``model``'s symbols and order (the cross-check pair's mapping).
+
+    States the paper does not model (the pair's ``unmodelled``, e.g. the
+    vertical channel) are left out, as the paper's assumptions say.
+    """
     pair = next((p for p in load_pairs() if p.twin == twin.model.name), None)
     if pair is None:
         raise ModelError(f"twin {twin.model.name!r} has no pair in modelgen/data/crosscheck.yaml (its parameter mapping)")
+    where = layout(pair, model, twin.model)
     to_model = twin_to_hand(pair, model, twin.model)
-    out = {m: getattr(twin, m).xreplace(to_model) for m in MATRICES}
+    out = {}
+    for m in MATRICES:
+        rows, columns = where.index(m)
+        T = getattr(twin, m)
+        out[m] = sp.Matrix(len(rows), len(columns), lambda i, j: T[rows[i], columns[j]].xreplace(to_model))
     known = {p.sym for p in model.parameters}
     stray = sorted({str(s) for m in out.values() for s in m.free_symbols if s not in known})
     if stray:

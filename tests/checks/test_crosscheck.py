@@ -118,8 +118,26 @@ def test_a_hand_parameter_the_twin_spells_otherwise_must_be_renamed(paper_model,
 def test_a_twin_with_other_states_is_refused_naming_both_lists(paper_derived):
     from modelgen.model.loading import load_model
 
-    with pytest.raises(ModelError, match="compared in order"):
+    with pytest.raises(ModelError, match="missing in the twin: dV_dn, dV_de"):
         cc.cross_check(pair(), paper_derived, derive(load_model("ned_inertial16")))
+
+
+def test_twin_states_the_hand_model_leaves_out_are_couplings_its_declared_approximation_drops(paper_model):
+    from modelgen.model.loading import load_model
+
+    hand = derive(load_model("ned_inertial16"))
+    equations = {s.name: paper_model.dynamics[s.name] for s in paper_model.states}
+    equations["velocity_error_north"] = sp.sstr(equations["velocity_error_north"]) + " + a_n*dV_dn"
+    twin = dataclasses.replace(ErrorModel.build(
+        name="t", states=paper_model.states, noises=paper_model.noises, parameters=paper_model.parameters, dynamics=equations,
+    ), check=paper_model.check)
+    with pytest.raises(ModelError, match="not declared unmodelled: dV_dn, dV_de"):
+        cc.cross_check(cc.Pair("ned_inertial16", "t"), hand, derive(twin))
+    doppler = cc.Unmodelled(("dV_dn", "dV_de"), (), "no Doppler states", "a pure-inertial model has no Doppler radar")
+    result = cc.cross_check(cc.Pair("ned_inertial16", "t", unmodelled=(doppler,)), hand, derive(twin))
+    (coupling,) = result.differences
+    assert (coupling.row, coupling.column, coupling.status, coupling.hand) == ("dV_n", "dV_dn", "approximation", "0")
+    assert coupling.magnitude == pytest.approx(0.006705375157442078) and "no Doppler states" in coupling.reason
 
 
 def test_pairs_file_with_an_unknown_key_or_a_convention_on_no_state_is_refused(paper_derived, tmp_path):
