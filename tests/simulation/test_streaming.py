@@ -94,3 +94,27 @@ def test_decimated_histories_are_the_full_rate_rows_at_the_recorded_cycles(scena
 def test_a_piece_length_that_is_not_a_positive_number_is_refused(scenario, paper_derived):
     with pytest.raises(ModelError, match="piece length must be a positive number of seconds"):
         _fly(scenario, paper_derived, True, 0.0)
+
+
+@pytest.mark.parametrize("probability, dimension", [(0.9999, 1), (0.9999, 2), (0.95, 3), (0.5, 8)])
+def test_gate_threshold_is_scipys_chi_square_quantile(probability, dimension):
+    from scipy.stats import chi2
+
+    from modelgen.simulation.filter_loop import gate_threshold
+
+    assert gate_threshold(probability, dimension) == chi2.ppf(probability, dimension)
+
+
+def test_markov_recursion_is_lfilter_bit_for_bit():
+    from scipy.signal import lfilter
+
+    from modelgen.simulation.imu import markov_sequence
+
+    a = np.exp(-1.0 / 300.0 / 3600.0)
+    drive = 1e-3 * np.random.default_rng(2).standard_normal((20000, 3))
+    rng = np.random.default_rng(8)
+    sequence = markov_sequence(20000, 1e-3, 3600.0, 1.0 / 300.0, rng)
+    rng = np.random.default_rng(8)
+    drive = 1e-3 * np.sqrt(1.0 - a * a) * rng.standard_normal((20000, 3))
+    drive[0] = 1e-3 * rng.standard_normal(3)
+    assert np.array_equal(sequence, lfilter([1.0], [1.0, -a], drive, axis=0))
