@@ -22,6 +22,7 @@ from modelgen.model.file_fields import as_float as _as_float
 from modelgen.model.file_fields import free_text, notes_text
 from modelgen.model.file_fields import is_number as _is_number
 from modelgen.model.file_fields import scalar_text as _scalar_text
+from modelgen.model.navigation_model import derive_navigation_model
 from modelgen.model.transform_file import load_transformed_model
 from modelgen.model.vector_loading import load_vector_model, uses_vector_syntax
 
@@ -114,6 +115,8 @@ def load_model_text(text: str, filename: str = "<model>", _loading: tuple[str, .
             return load_model(path, _loading=(*_loading, filename))
 
         return load_transformed_model(data, lines, filename, load_base)
+    if "navigation" in data:  # an error model derived from the navigation equations (modelgen.model.navigation_model)
+        return _with_check_scenario(derive_navigation_model(data, lines, filename).model, data, lines, filename)
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
         raise ModelError(f"{lines[unknown[0]]}: unknown key {unknown[0]!r} (expected one of {sorted(_TOP_KEYS)})")

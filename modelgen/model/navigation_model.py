@@ -1,0 +1,691 @@
+"""Reading the ``navigation:`` section of a model file: an error model derived from the navigation equations.
+
+A model file with a ``navigation:`` section declares no states, noises,
+dynamics or measurements of its own: it names the navigation frame, the
+mechanization, the error definition, the sensor errors, the measurements as
+functions of the navigation state and the approximations, and
+:mod:`modelgen.model.perturbation` derives the linear error model.  The
+result is an ordinary :class:`~modelgen.model.declaration.ErrorModel`
+(dynamics F x + G w, measurements H x), so derivation, code generation and
+every check treat it like a hand-written model.  The format is in README.md,
+"Navigation equations -> error model".
+
+Every name is generated unless the file gives it: state names
+``attitude_error_north``, ``velocity_error_east``, ``position_error_down``,
+``latitude_error``; sensor-error states ``gyro_bias_x``; their driving noises
+``gyro_bias_driving_noise_x``; parameters of the navigation state
+(``latitude``, ``velocity_north``, ``c11`` ...) are declared for the symbols
+the derived matrices use.  Bad input is refused with file:line and the names
+involved, before anything is derived.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Sequence
+
+import sympy as sp
+
+from modelgen.errors import ModelError
+from modelgen.model import perturbation as pt
+from modelgen.model import wgs84
+from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State, check_identifier, parse_expression
+from modelgen.model.file_fields import free_text, notes_text, scalar_text
+from modelgen.model.vectors import component_names, parse_vector_expression
+
+#: Keys of a model file that derives its error model from the navigation equations.
+NAVIGATION_TOP_KEYS = frozenset({"model", "title", "source", "frame", "notes", "parameters", "navigation", "check"})
+#: Keys of the ``navigation:`` section.
+SECTION_KEYS = frozenset(
+    {"mechanization", "attitude", "velocity", "position", "specific_force", "body_rate", "earth", "errors",
+     "sensor_errors", "noises", "equations", "approximations", "measurements"}
+)
+#: The one named mechanization (the equations of :class:`modelgen.model.perturbation.Mechanization`).
+MECHANIZATIONS = ("local_level",)
+#: Navigation quantities that have error states, and the equations a file may write for them.
+ERROR_QUANTITIES = ("attitude", "velocity", "position")
+WRITABLE_EQUATIONS = ("velocity", "position")
+#: Sensor-error quantities: what each one is in the sensor model.
+SENSOR_ERROR_KINDS = ("gyro_bias", "gyro_scale_factor", "accel_bias", "accel_scale_factor", "receiver_clock")
+#: Processes of sensor-error states.
+PROCESSES = ("random_constant", "gauss_markov", "random_walk", "clock")
+#: Measurement kinds: what a measurement observes.
+MEASUREMENT_KINDS = ("position", "velocity", "pseudorange", "expression")
+
+_AXIS_WORDS = {"n": "north", "e": "east", "d": "down", "u": "up", "x": "x", "y": "y", "z": "z"}
+_UNITS = {
+    "gyro_bias": "rad/s", "gyro_scale_factor": "1", "accel_bias": "m/s^2", "accel_scale_factor": "1",
+}
+
+
+@dataclass(frozen=True)
+class NavigationDerivation:
+    """A navigation model as loaded: the ErrorModel and the engine's result (neglected terms included)."""
+
+    model: ErrorModel
+    equations: pt.ErrorEquations
+
+
+class _Reader:
+    """Typed access to the section with file:line in every message."""
+
+    def __init__(self, lines: Mapping[str, str], filename: str):
+        self.lines, self.filename = lines, filename
+
+    def at(self, key: str) -> str:
+        """The file:line of ``key`` (its nearest located parent if it has none)."""
+        while key and key not in self.lines:
+            key = key.rsplit(".", 1)[0] if "." in key else key.rsplit("[", 1)[0] if "[" in key else ""
+        return self.lines.get(key, self.filename)
+
+    def mapping(self, value: Any, key: str, allowed: Sequence[str] | frozenset, required: Sequence[str] = ()) -> dict:
+        if not isinstance(value, dict):
+            raise ModelError(f"{self.at(key)}: {key!r} must be a mapping (keys {', '.join(sorted(allowed))})")
+        unknown = sorted(set(value) - set(allowed))
+        if unknown:
+            raise ModelError(f"{self.at(f'{key}.{unknown[0]}')}: unknown key {key}.{unknown[0]} (expected one of {', '.join(sorted(allowed))})")
+        for name in required:
+            if name not in value:
+                raise ModelError(f"{self.at(key)}: {key!r} has no {name!r}")
+        return value
+
+    def names(self, value: Any, key: str, count: int) -> list[str]:
+        """A list of ``count`` identifiers."""
+        if not isinstance(value, list) or len(value) != count:
+            got = f"{len(value)} names" if isinstance(value, list) else repr(value)
+            raise ModelError(f"{self.at(key)}: {key!r} must list {count} names, got {got}")
+        for item in value:
+            check_identifier(str(item), f"{self.at(key)}: {key}")
+        return [str(v) for v in value]
+
+    def choice(self, value: Any, key: str, options: Sequence[str]) -> str:
+        if value not in options:
+            raise ModelError(f"{self.at(key)}: {key} {value!r} is not one of {', '.join(options)}")
+        return str(value)
+
+
+def _symbols(names: Sequence[str]) -> sp.Matrix:
+    return sp.Matrix([sp.Symbol(n, real=True) for n in names])
+
+
+def _vector_symbols(read: _Reader, entry: Mapping, key: str, default_symbol: str, frame: str, axes: str | None) -> list[str]:
+    """The symbols of a 3-vector: its ``symbols`` list, or ``symbol`` expanded by component (``dv`` -> ``dv_n``...)."""
+    if "symbols" in entry:
+        return read.names(entry["symbols"], f"{key}.symbols", 3)
+    symbol = str(entry.get("symbol", default_symbol))
+    check_identifier(symbol, f"{read.at(key)}: {key}.symbol")
+    return component_names(symbol, 3, frame, axes, f"{read.at(key)}: {key}")
+
+
+def _axis_words(frame: str, axes: str | None) -> list[str]:
+    return [_AXIS_WORDS[n.rsplit("_", 1)[1]] for n in component_names("a", 3, frame, axes)]
+
+
+# -- the navigation state and its parameters --------------------------------------------
+@dataclass
+class _Declarations:
+    """What the section declares, collected while reading it."""
+
+    states: list[State]
+    noises: list[Noise]
+    parameters: dict[str, Parameter]  # by symbol: parameters the engine may put into the matrices
+
+
+def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declarations) -> dict[str, Any]:
+    """Symbols of the computed attitude, velocity, position, sensed inputs and Earth quantities."""
+    axes_words = _axis_words(frame, None)
+    attitude = read.mapping(section.get("attitude", {}), "navigation.attitude", ("symbols",))
+    c = read.names(attitude["symbols"], "navigation.attitude.symbols", 9) if "symbols" in attitude else [f"c{i}{j}" for i in range(1, 4) for j in range(1, 4)]
+    for k, s in enumerate(c):
+        _offer(decl, s, s, "1", f"attitude matrix C_b^n (body to {frame}), row {k // 3 + 1} col {k % 3 + 1}")
+    velocity = read.mapping(section.get("velocity", {}), "navigation.velocity", ("symbols", "symbol"))
+    v = _vector_symbols(read, velocity, "navigation.velocity", "v", frame, None)
+    for s, word in zip(v, axes_words):
+        _offer(decl, s, f"velocity_{word}", "m/s", f"{word} ground speed")
+    position = read.mapping(section.get("position", {}), "navigation.position", ("symbols",))
+    p = read.names(position["symbols"], "navigation.position.symbols", 3) if "symbols" in position else ["L", "lambda_", "h"]
+    for s, name, unit, text in zip(p, ("latitude", "longitude", "height"), ("rad", "rad", "m"), ("geodetic latitude", "longitude", "height above the ellipsoid")):
+        _offer(decl, s, name, unit, text)
+    force = read.mapping(section.get("specific_force", {}), "navigation.specific_force", ("symbols", "symbol", "axes"))
+    force_axes = read.choice(force.get("axes", "body"), "navigation.specific_force.axes", ("body", "navigation"))
+    f = _vector_symbols(read, force, "navigation.specific_force", "f_b" if force_axes == "body" else "f", frame, "body" if force_axes == "body" else None)
+    for s, word in zip(f, ("x", "y", "z") if force_axes == "body" else axes_words):
+        name = f"body_specific_force_{word}" if force_axes == "body" else f"specific_force_{word}"
+        _offer(decl, s, name, "m/s^2", f"sensed specific force along {'body ' if force_axes == 'body' else ''}{word}")
+    rate = read.mapping(section.get("body_rate", {}), "navigation.body_rate", ("symbols", "symbol"))
+    w = _vector_symbols(read, rate, "navigation.body_rate", "omega_b", frame, "body")
+    for s, word in zip(w, "xyz"):
+        _offer(decl, s, f"body_rate_{word}", "rad/s", f"sensed body rate w_ib^b about body {word}")
+    earth = read.mapping(section.get("earth", {}), "navigation.earth", ("earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "earth_radius"))
+    defaults = {"earth_rate": "omega_ie", "meridian_radius": "R_M", "prime_vertical_radius": "R_N", "gravity": "g", "earth_radius": "R"}
+    symbols = {}
+    for key, default in defaults.items():
+        symbols[key] = str(earth.get(key, default))
+        check_identifier(symbols[key], f"{read.at(f'navigation.earth.{key}')}: navigation.earth.{key}")
+    _offer(decl, symbols["earth_rate"], "earth_rate", "rad/s", "earth rotation rate (WGS-84, IS-GPS-200 value)", wgs84.GPS_EARTH_RATE)
+    _offer(decl, symbols["meridian_radius"], "meridian_radius", "m", "meridian radius of curvature at the latitude (WGS-84)")
+    _offer(decl, symbols["prime_vertical_radius"], "prime_vertical_radius", "m", "prime-vertical radius of curvature at the latitude (WGS-84)")
+    _offer(decl, symbols["gravity"], "gravity", "m/s^2", "normal gravity at the position (WGS-84)")
+    _offer(decl, symbols["earth_radius"], "earth_radius", "m", "radius of the spherical Earth", wgs84.SEMI_MAJOR_AXIS)
+    S = lambda name: sp.Symbol(name, real=True)  # noqa: E731
+    return {
+        "attitude": sp.Matrix(3, 3, [S(s) for s in c]),
+        "velocity": _symbols(v),
+        "position": _symbols(p),
+        "specific_force": _symbols(f),
+        "specific_force_axes": force_axes,
+        "body_rate": _symbols(w),
+        "earth": pt.EarthSymbols(*(S(symbols[k]) for k in ("earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "earth_radius"))),
+    }
+
+
+def _offer(decl: _Declarations, symbol: str, name: str, unit: str, description: str, value: float | None = None) -> None:
+    """A parameter the engine may use (declared in the model only if the result uses it); the file's own wins."""
+    decl.parameters.setdefault(symbol, Parameter(name=name, symbol=symbol, unit=unit, description=description, value=value))
+
+
+# -- error definition ------------------------------------------------------------------------
+_ERROR_FORMS = {"attitude": pt.ATTITUDE_FORMS, "velocity": pt.VELOCITY_FORMS, "position": pt.POSITION_FORMS}
+_ERROR_DEFAULTS = {"attitude": ("phi", "phi"), "velocity": ("difference", "dv"), "position": ("geodetic", "d")}
+
+
+def _error_definition(read: _Reader, section: Mapping, frame: str, decl: _Declarations) -> tuple[pt.ErrorDefinition, list[sp.Symbol]]:
+    """The declared navigation error states (in the file's order) and their definition."""
+    errors = read.mapping(section.get("errors"), "navigation.errors", (*ERROR_QUANTITIES,))
+    missing = [q for q in ERROR_QUANTITIES if q not in errors]
+    if missing:
+        raise ModelError(
+            f"{read.at('navigation.errors')}: the error definition has no {', '.join(missing)} error; the local-level "
+            f"mechanization integrates attitude, velocity and position, and each needs its error states"
+        )
+    chosen: dict[str, tuple[str, list[str]]] = {}
+    order: list[sp.Symbol] = []
+    for quantity in errors:
+        key = f"navigation.errors.{quantity}"
+        entry = read.mapping(errors[quantity], key, ("form", "symbols", "symbol", "names"))
+        form = read.choice(entry.get("form", _ERROR_DEFAULTS[quantity][0]), f"{key}.form", _ERROR_FORMS[quantity])
+        if quantity == "position" and form == "geodetic" and "symbols" not in entry:
+            symbols = ["dL", "dlambda", "dh"]
+        else:
+            symbols = _vector_symbols(read, entry, key, "dr" if quantity == "position" else _ERROR_DEFAULTS[quantity][1], frame, None)
+        if quantity == "attitude":
+            names = [f"attitude_error_{w}" for w in _axis_words(frame, None)]
+        elif quantity == "velocity":
+            names = [f"velocity_error_{w}" for w in _axis_words(frame, None)]
+        elif form == "geodetic":
+            names = ["latitude_error", "longitude_error", "height_error"]
+        else:
+            names = [f"position_error_{w}" for w in _axis_words(frame, None)]
+        if "names" in entry:
+            names = read.names(entry["names"], f"{key}.names", 3)
+        units = {"attitude": ["rad"] * 3, "velocity": ["m/s"] * 3, "position": ["rad", "rad", "m"] if form == "geodetic" else ["m"] * 3}[quantity]
+        label = {"phi": "phi-angle", "psi": "psi-angle"}.get(form, form)
+        for name, symbol, unit in zip(names, symbols, units):
+            decl.states.append(State(name=name, symbol=symbol, unit=unit, description=f"{quantity} error ({label}), computed minus true"))
+        chosen[quantity] = (form, symbols)
+        order.extend(sp.Symbol(s, real=True) for s in symbols)
+    S = lambda names: tuple(sp.Symbol(s, real=True) for s in names)  # noqa: E731
+    definition = pt.ErrorDefinition(
+        chosen["attitude"][0], S(chosen["attitude"][1]), chosen["velocity"][0], S(chosen["velocity"][1]),
+        chosen["position"][0], S(chosen["position"][1]),
+    )
+    return definition, order
+
+
+# -- sensor errors and noises ------------------------------------------------------------------
+def _sensor_errors(read: _Reader, section: Mapping, frame: str, decl: _Declarations, namespace: Callable[[], dict]) -> tuple[dict, dict, list[sp.Symbol]]:
+    """(sensor-model parts by kind, dynamics of the sensor-error states, their symbols in order)."""
+    raw = section.get("sensor_errors") or []
+    if not isinstance(raw, list):
+        raise ModelError(f"{read.at('navigation.sensor_errors')}: 'navigation.sensor_errors' must be a list")
+    parts: dict[str, sp.Matrix] = {}
+    dynamics: dict[sp.Symbol, sp.Expr] = {}
+    order: list[sp.Symbol] = []
+    for i, item in enumerate(raw):
+        key = f"navigation.sensor_errors[{i}]"
+        entry = read.mapping(item, key, ("of", "process", "symbols", "symbol", "names", "rate", "sigma", "psd", "noise_symbols", "noise_names"), ("of", "process"))
+        kind = read.choice(entry["of"], f"{key}.of", SENSOR_ERROR_KINDS)
+        if kind in parts:
+            raise ModelError(f"{read.at(key)}: sensor error {kind!r} is declared twice")
+        process = read.choice(entry["process"], f"{key}.process", PROCESSES)
+        if (process == "clock") != (kind == "receiver_clock"):
+            raise ModelError(f"{read.at(f'{key}.process')}: process 'clock' is the receiver clock's (bias and drift), and only its")
+        count = 2 if kind == "receiver_clock" else 3
+        default_symbols = {"gyro_bias": "b_g", "gyro_scale_factor": "s_g", "accel_bias": "b_a", "accel_scale_factor": "s_a"}
+        if kind == "receiver_clock":
+            symbols = read.names(entry.get("symbols", ["clock_bias", "clock_drift"]), f"{key}.symbols", 2)
+            names = read.names(entry.get("names", ["clock_bias_range", "clock_drift_range"]), f"{key}.names", 2)
+            units, suffixes = ["m", "m/s"], ["bias", "drift"]
+        else:
+            symbols = _vector_symbols(read, entry, key, default_symbols[kind], frame, "body")
+            names = read.names(entry["names"], f"{key}.names", 3) if "names" in entry else [f"{kind}_{a}" for a in "xyz"]
+            units, suffixes = [_UNITS[kind]] * 3, list("xyz")
+        state_symbols = [sp.Symbol(s, real=True) for s in symbols]
+        for name, symbol, unit in zip(names, symbols, units):
+            decl.states.append(State(name=name, symbol=symbol, unit=unit, description=f"{kind.replace('_', ' ')} ({process.replace('_', ' ')})"))
+        noise_symbols = read.names(entry["noise_symbols"], f"{key}.noise_symbols", count) if "noise_symbols" in entry else [f"w_{s}" for s in symbols]
+        noise_names = read.names(entry["noise_names"], f"{key}.noise_names", count) if "noise_names" in entry else [f"{kind}_driving_noise_{a}" for a in suffixes]
+        noises = [sp.Symbol(s, real=True) for s in noise_symbols]
+        if process == "random_constant":
+            rates = [sp.S.Zero] * count
+        elif process == "gauss_markov":
+            for field in ("rate", "sigma"):
+                if field not in entry:
+                    raise ModelError(f"{read.at(key)}: a Gauss-Markov sensor error needs {field!r} (inverse correlation time and steady-state sigma)")
+            rate = parse_expression(scalar_text(entry["rate"], read.at(f"{key}.rate"), f"{key}.rate"), namespace(), f"{read.at(f'{key}.rate')}: {key}.rate")
+            psd = f"2*({scalar_text(entry['rate'], read.at(key), 'rate')})*({scalar_text(entry['sigma'], read.at(key), 'sigma')})**2"
+            rates = [-rate * s + w for s, w in zip(state_symbols, noises)]
+            _add_noises(decl, noise_names, noise_symbols, [psd] * 3, units, kind)
+        else:  # random_walk and clock: driven by white noise of the given PSD(s)
+            if "psd" not in entry:
+                raise ModelError(f"{read.at(key)}: a {process.replace('_', ' ')} sensor error needs 'psd'")
+            psds = entry["psd"] if isinstance(entry["psd"], list) else [entry["psd"]] * count
+            if len(psds) != count:
+                raise ModelError(f"{read.at(f'{key}.psd')}: {key}.psd lists {len(psds)} values for {count} states")
+            psds = [scalar_text(p, read.at(f"{key}.psd"), f"{key}.psd") for p in psds]
+            rates = [w for w in noises] if process == "random_walk" else [state_symbols[1] + noises[0], noises[1]]
+            _add_noises(decl, noise_names, noise_symbols, psds, units, kind)
+        dynamics.update(zip(state_symbols, rates))
+        parts[kind] = sp.Matrix(state_symbols)
+        order.extend(state_symbols)
+    return parts, dynamics, order
+
+
+def _add_noises(decl: _Declarations, names: Sequence[str], symbols: Sequence[str], psds: Sequence[str], units: Sequence[str], kind: str) -> None:
+    for name, symbol, psd, unit in zip(names, symbols, psds, units):
+        decl.noises.append(Noise(name=name, symbol=symbol, unit=f"{unit}/sqrt(s)", psd=psd, description=f"drives the {kind.replace('_', ' ')}"))
+
+
+def _sensor_noises(read: _Reader, section: Mapping, decl: _Declarations) -> dict[str, sp.Matrix]:
+    """White measurement noise of the gyros and accelerometers (``noises: {gyro: {...}, accel: {...}}``)."""
+    raw = read.mapping(section.get("noises", {}), "navigation.noises", ("gyro", "accel"))
+    out = {}
+    words = {"gyro": ("gyro_white_noise", "w_g", "rad/sqrt(s)", "angle random walk"), "accel": ("accel_white_noise", "w_a", "m/s/sqrt(s)", "velocity random walk")}
+    for sensor, value in raw.items():
+        key = f"navigation.noises.{sensor}"
+        entry = read.mapping(value, key, ("psd", "symbols", "symbol", "names"), ("psd",))
+        prefix, default, unit, text = words[sensor]
+        symbols = _vector_symbols(read, entry, key, default, "NED", "body")
+        names = read.names(entry["names"], f"{key}.names", 3) if "names" in entry else [f"{prefix}_{a}" for a in "xyz"]
+        psd = scalar_text(entry["psd"], read.at(f"{key}.psd"), f"{key}.psd")
+        for name, symbol, axis in zip(names, symbols, "xyz"):
+            decl.noises.append(Noise(name=name, symbol=symbol, unit=unit, psd=psd, description=f"{axis} {sensor} white noise ({text})"))
+        out[sensor] = _symbols(symbols)
+    return out
+
+
+# -- measurements -------------------------------------------------------------------------------
+def _lever_arm(read: _Reader, entry: Mapping, key: str, decl: _Declarations) -> sp.Matrix | None:
+    """The antenna's lever arm l^b (body axes): ``lever_arm: {symbols: [...]}`` or ``{symbol: l}``."""
+    if "lever_arm" not in entry:
+        return None
+    arm = read.mapping(entry["lever_arm"], f"{key}.lever_arm", ("symbols", "symbol"))
+    symbols = _vector_symbols(read, arm, f"{key}.lever_arm", "l", "NED", "body")
+    for s, axis in zip(symbols, "xyz"):
+        _offer(decl, s, f"lever_arm_{axis}", "m", f"GNSS antenna position from the IMU along body {axis}")
+    return _symbols(symbols)
+
+
+def _component_order(read: _Reader, entry: Mapping, key: str, frame: str) -> tuple[list[int], list[int]]:
+    """Indices and signs that take the frame's axis order to the ``axes`` the measurement lists."""
+    words = _axis_words(frame, None)
+    if "axes" not in entry:
+        return [0, 1, 2], [1, 1, 1]
+    axes = entry["axes"]
+    opposite = {"down": "up", "up": "down"}
+    if not isinstance(axes, list) or len(axes) != 3:
+        raise ModelError(f"{read.at(f'{key}.axes')}: {key}.axes must list three of {', '.join(words)}")
+    index, sign = [], []
+    for a in axes:
+        if a in words:
+            index.append(words.index(a)), sign.append(1)
+        elif a in opposite and opposite[a] in words:
+            index.append(words.index(opposite[a])), sign.append(-1)
+        else:
+            raise ModelError(f"{read.at(f'{key}.axes')}: {key}.axes: {a!r} is not an axis of the {frame} frame ({', '.join(words)})")
+    if sorted(index) != [0, 1, 2]:
+        raise ModelError(f"{read.at(f'{key}.axes')}: {key}.axes names an axis twice: {axes}")
+    return index, sign
+
+
+def _reorder(vector: sp.Matrix, index: Sequence[int], sign: Sequence[int]) -> sp.Matrix:
+    return sp.Matrix([sign[k] * vector[index[k]] for k in range(3)])
+
+
+def _measurements(
+    read: _Reader, section: Mapping, frame: str, decl: _Declarations, clock: sp.Matrix | None, namespace: Callable[[], dict]
+) -> tuple[list[pt.MeasurementFunction], list[Measurement]]:
+    """The measurement functions for the engine and the Measurement declarations (names, variances)."""
+    raw = section.get("measurements") or []
+    if not isinstance(raw, list):
+        raise ModelError(f"{read.at('navigation.measurements')}: 'navigation.measurements' must be a list")
+    functions: list[pt.MeasurementFunction] = []
+    declared: list[Measurement] = []
+    fields = ("of", "form", "lever_arm", "axes", "symbols", "names", "variance", "line_of_sight", "expression", "difference", "units")
+    for i, item in enumerate(raw):
+        key = f"navigation.measurements[{i}]"
+        entry = read.mapping(item, key, fields, ("of", "symbols", "variance"))
+        kind = read.choice(entry["of"], f"{key}.of", MEASUREMENT_KINDS)
+        arm = _lever_arm(read, entry, key, decl)
+        measured_minus_computed = read.choice(entry.get("difference", "computed_minus_measured"), f"{key}.difference", ("computed_minus_measured", "measured_minus_computed")) == "measured_minus_computed"
+        if kind in ("position", "velocity"):
+            index, sign = _component_order(read, entry, key, frame)
+            function, scale, units, count = _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign)
+            extra = None
+        elif kind == "pseudorange":
+            function, scale, units, count, extra = _pseudorange(read, entry, key, frame, clock, decl)
+        else:
+            function, scale, units, count, extra = _expression_measurement(read, entry, key, namespace)
+        symbols = read.names(entry["symbols"], f"{key}.symbols", count)
+        names = read.names(entry["names"], f"{key}.names", count) if "names" in entry else [f"{kind}_difference_{k + 1}" for k in range(count)]
+        variances = entry["variance"] if isinstance(entry["variance"], list) else [entry["variance"]] * count
+        if len(variances) != count:
+            raise ModelError(f"{read.at(f'{key}.variance')}: {key}.variance lists {len(variances)} values for {count} components")
+        for name, symbol, variance, unit in zip(names, symbols, variances, units):
+            text = scalar_text(variance, read.at(f"{key}.variance"), f"{key}.variance")
+            declared.append(Measurement(name=name, symbol=symbol, unit=unit, expression="0", variance=text, description=f"{kind} measurement, {'measured minus computed' if measured_minus_computed else 'computed minus measured'}"))
+        functions.append(pt.MeasurementFunction(tuple(sp.Symbol(s, real=True) for s in symbols), function, scale, extra, measured_minus_computed))
+    return functions, declared
+
+
+def _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign):
+    """GNSS position (geodetic, or metres along the listed axes) or velocity of the antenna at lever arm l^b.
+
+    Antenna position: p + D (C l), D = (1/(R_M + h), 1/((R_N + h) cos L), up) per
+    metre; antenna velocity: v + C (w_ib x l) - w_ie x (C l) (Groves 2013, eqs. 14.x).
+    """
+    form = read.choice(entry.get("form", "metres" if kind == "position" else "navigation"), f"{key}.form", ("metres", "geodetic") if kind == "position" else ("navigation",))
+    if kind == "position":
+        def function(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
+            if arm is None:
+                return state.position
+            return state.position + pt.metres_matrix(frame, state.position).inv() * (state.attitude * arm)
+
+        if form == "geodetic":
+            if "axes" in entry:
+                raise ModelError(f"{read.at(f'{key}.axes')}: {key}: geodetic position differences (dL, dlambda, dh) take no 'axes'")
+            return function, None, ["rad", "rad", "m"], 3
+        scale = lambda computed: sp.Matrix([[sign[k] * v for v in pt.metres_matrix(frame, computed.position).row(index[k])] for k in range(3)])  # noqa: E731
+        return function, scale, ["m"] * 3, 3
+
+    def velocity(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
+        if arm is None:
+            return _reorder(state.velocity, index, sign)
+        if computed.body_rate is None:
+            raise ModelError(f"{read.at(key)}: a lever arm on a velocity measurement needs the body rate")
+        rate = state.body_rate if state.body_rate is not None else computed.body_rate
+        antenna = state.velocity + state.attitude * rate.cross(arm) - mech.earth_rate(state).cross(state.attitude * arm)
+        return _reorder(antenna, index, sign)
+
+    return velocity, None, ["m/s"] * 3, 3
+
+
+def _pseudorange(read, entry, key, frame, clock, decl):
+    """Pseudo-ranges to satellites along unit line-of-sight vectors e_k (navigation axes, receiver to satellite).
+
+    The range from a point displaced by d (metres, navigation axes) from the
+    computed receiver to satellite k at distance rho is
+    |rho e_k - d| = sqrt(rho^2 - 2 rho e_k . d + d . d) (|e_k| = 1), exact and
+    nonlinear in d; the measured pseudo-range adds the receiver clock bias.
+    """
+    if clock is None:
+        raise ModelError(f"{read.at(key)}: a pseudo-range measurement needs a receiver clock (sensor_errors: {{of: receiver_clock, ...}})")
+    raw = entry.get("line_of_sight")
+    if not isinstance(raw, list) or not raw:
+        raise ModelError(f"{read.at(key)}: a pseudo-range measurement needs 'line_of_sight': one list of 3 symbols per satellite")
+    words = _axis_words(frame, None)
+    sights = []
+    for k, item in enumerate(raw):
+        names = read.names(item, f"{key}.line_of_sight[{k}]", 3)
+        for name, word in zip(names, words):
+            _offer(decl, name, f"line_of_sight_{word}_{k + 1}", "1", f"{word} component of the unit vector from the receiver to satellite {k + 1}")
+        sights.append(_symbols(names))
+    distance = sp.Symbol("satellite_distance", positive=True)
+
+    def ranges(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
+        d = pt.metres_matrix(frame, computed.position) * (state.position - computed.position)
+        return sp.Matrix([sp.sqrt(distance**2 - 2 * distance * e.dot(d) + d.dot(d)) for e in sights])
+
+    extra = sp.Matrix([clock[0]] * len(sights))
+    return ranges, None, ["m"] * len(sights), len(sights), extra
+
+
+def state_namespace(state: pt.NavigationState, mech: pt.Mechanization, frame: str, parameters: Mapping[str, sp.Symbol]) -> dict[str, Any]:
+    """The names a written equation or measurement expression may use (README lists them)."""
+    L, lam, h = state.position
+    return {
+        **parameters,
+        "C_b_n": state.attitude,
+        "v_n": state.velocity,
+        "latitude": L,
+        "longitude": lam,
+        "height": h,
+        "f_n": state.specific_force,
+        "omega_ie_n": mech.earth_rate(state),
+        "omega_en_n": mech.transport_rate(state),
+        "g_n": pt.gravity_vector(frame, state.position),
+        "R_M": pt.MeridianRadius(L),
+        "R_N": pt.PrimeVerticalRadius(L),
+    }
+
+
+def _expression_measurement(read, entry, key, namespace):
+    """A measurement written as an expression of the navigation state (:func:`state_namespace`)."""
+    if "expression" not in entry:
+        raise ModelError(f"{read.at(key)}: a measurement 'of: expression' needs 'expression'")
+    text = scalar_text(entry["expression"], read.at(f"{key}.expression"), f"{key}.expression")
+    where = f"{read.at(f'{key}.expression')}: {key}.expression"
+
+    def function(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
+        value = parse_vector_expression(text, state_namespace(state, mech, mech.frame, namespace()), where)
+        return value if isinstance(value, sp.MatrixBase) else sp.Matrix([value])
+
+    count = len(entry["symbols"]) if isinstance(entry.get("symbols"), list) else 1
+    units = entry.get("units", ["1"] * count)
+    if not isinstance(units, list) or len(units) != count:
+        raise ModelError(f"{read.at(f'{key}.units')}: {key}.units must list {count} units")
+    return function, None, [str(u) for u in units], count, None
+
+
+def _written_equations(read: _Reader, section: Mapping, frame: str, namespace: Callable[[], dict]) -> dict[str, Callable]:
+    """``equations:``: the velocity or position rate written out (vector expressions of :func:`state_namespace`)."""
+    raw = section.get("equations")
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise ModelError(f"{read.at('navigation.equations')}: 'navigation.equations' must map a quantity to its rate")
+    out = {}
+    for quantity, text in raw.items():
+        key = f"navigation.equations.{quantity}"
+        if quantity not in WRITABLE_EQUATIONS:
+            has = "has error states, but its kinematics are fixed (C' = C [w_ib x] - [w_in x] C)" if quantity == "attitude" else "has no error state"
+            raise ModelError(
+                f"{read.at(key)}: navigation equation for {quantity!r}, which {has}; equations may be written for "
+                f"{', '.join(WRITABLE_EQUATIONS)} (error states: {', '.join(ERROR_QUANTITIES)})"
+            )
+        body = scalar_text(text, read.at(key), key)
+        where = f"{read.at(key)}: {key}"
+
+        def equation(state: pt.NavigationState, mech: pt.Mechanization, body: str = body, where: str = where) -> sp.Matrix:
+            value = parse_vector_expression(body, state_namespace(state, mech, frame, namespace()), where)
+            if not isinstance(value, sp.MatrixBase) or value.shape != (3, 1):
+                raise ModelError(f"{where}: the rate must be a 3-vector, got {'a scalar' if not isinstance(value, sp.MatrixBase) else f'{value.rows}x{value.cols}'}")
+            return value
+
+        out[quantity] = equation
+    return out
+
+
+# -- the whole file --------------------------------------------------------------------------
+def _user_parameters(read: _Reader, data: Mapping, decl: _Declarations) -> list[str]:
+    """The file's own ``parameters:`` (statistics, noise levels): always declared; returns their symbols."""
+    raw = data.get("parameters") or []
+    if not isinstance(raw, list):
+        raise ModelError(f"{read.at('parameters')}: 'parameters' must be a list of entries with a 'name'")
+    symbols = []
+    for i, entry in enumerate(raw):
+        key = f"parameters[{i}]"
+        entry = read.mapping(entry, key, ("name", "symbol", "unit", "description", "value"), ("name",))
+        if "value" in entry and (isinstance(entry["value"], bool) or not isinstance(entry["value"], (int, float))):
+            raise ModelError(f"{read.at(key)}: parameter {entry['name']!r} value {entry['value']!r} is not a number")
+        fields = {k: (float(v) if k == "value" else str(v)) for k, v in entry.items()}
+        parameter = Parameter(**fields)
+        check_identifier(parameter.symbol, f"{read.at(key)}: parameter symbol")
+        decl.parameters[parameter.symbol] = parameter
+        symbols.append(parameter.symbol)
+    return symbols
+
+
+def _approximations(read: _Reader, section: Mapping) -> tuple[str, ...]:
+    raw = section.get("approximations") or []
+    if not isinstance(raw, list):
+        raise ModelError(f"{read.at('navigation.approximations')}: 'navigation.approximations' must be a list of names")
+    for i, name in enumerate(raw):
+        if name not in pt.APPROXIMATIONS:
+            raise ModelError(
+                f"{read.at(f'navigation.approximations[{i}]')}: unknown approximation {name!r} "
+                f"(known: {', '.join(sorted(pt.APPROXIMATIONS))})"
+            )
+    if len(set(raw)) != len(raw):
+        raise ModelError(f"{read.at('navigation.approximations')}: an approximation is listed twice: {raw}")
+    return tuple(str(a) for a in raw)
+
+
+def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], filename: str) -> NavigationDerivation:
+    """The ErrorModel of a file with a ``navigation:`` section (its ``check:`` is attached by the loader)."""
+    read = _Reader(lines, filename)
+    unknown = sorted(set(data) - NAVIGATION_TOP_KEYS)
+    if unknown:
+        derived = " (a model with a 'navigation:' section derives its states, noises, dynamics and measurements)" if unknown[0] in ("states", "noises", "dynamics", "measurements") else ""
+        raise ModelError(f"{read.at(unknown[0])}: unknown key {unknown[0]!r}{derived} (expected one of {', '.join(sorted(NAVIGATION_TOP_KEYS))})")
+    if "model" not in data:
+        raise ModelError(f"{filename}: missing required key 'model'")
+    frame = read.choice(free_text(data, "frame", dict(lines), filename), "frame", tuple(pt.FRAME_AXES))
+    section = read.mapping(data["navigation"], "navigation", SECTION_KEYS, ("errors",))
+    read.choice(section.get("mechanization", "local_level"), "navigation.mechanization", MECHANIZATIONS)
+    decl = _Declarations(states=[], noises=[], parameters={})
+    own = _user_parameters(read, data, decl)
+    nav = _navigation_state(read, section, frame, decl)
+
+    def namespace() -> dict[str, sp.Symbol]:
+        return {s: sp.Symbol(s, real=True) for s in own}
+
+    definition, navigation_order = _error_definition(read, section, frame, decl)
+    noises = _sensor_noises(read, section, decl)
+    parts, aux, sensor_order = _sensor_errors(read, section, frame, decl, namespace)
+    functions, measurement_decls = _measurements(read, section, frame, decl, parts.get("receiver_clock"), namespace)
+    problem = pt.NavigationProblem(
+        frame=frame, **nav, errors=definition,
+        gyro=pt.InertialSensorErrors(parts.get("gyro_bias"), parts.get("gyro_scale_factor"), noises.get("gyro")),
+        accelerometer=pt.InertialSensorErrors(parts.get("accel_bias"), parts.get("accel_scale_factor"), noises.get("accel")),
+        state_order=tuple(navigation_order + sensor_order),
+        auxiliary_dynamics=aux,
+        noises=tuple(sp.Symbol(n.symbol, real=True) for n in decl.noises),
+        measurements=tuple(functions),
+        approximations=_approximations(read, section),
+        equations=_written_equations(read, section, frame, namespace),
+    )
+    if problem.specific_force_axes == "navigation" and problem.accelerometer.scale_factor is not None:
+        raise ModelError(f"{read.at('navigation.specific_force')}: accelerometer scale factors need the specific force in body axes (specific_force: {{axes: body}})")
+    try:
+        equations = pt.derive_error_equations(problem)
+    except ModelError as exc:
+        raise ModelError(f"{read.at('navigation')}: model {data['model']!r}: {exc}") from None
+    model = _error_model(data, lines, filename, decl, own, equations, measurement_decls)
+    _DERIVED[model.name] = equations
+    return NavigationDerivation(model=model, equations=equations)
+
+
+def _error_model(data, lines, filename, decl: _Declarations, own: list[str], equations: pt.ErrorEquations, measurement_decls) -> ErrorModel:
+    """The derived matrices written as the linear equations of an ordinary ErrorModel."""
+    x = sp.Matrix(equations.states)
+    w = sp.Matrix(equations.noises) if equations.noises else sp.zeros(0, 1)
+    rhs = equations.F * x + (equations.G * w if equations.noises else sp.zeros(x.rows, 1))
+    measured = equations.H * x if equations.H.rows else sp.zeros(0, 1)
+    used = set().union(*(m.free_symbols for m in (equations.F, equations.G, equations.H)))
+    used |= {s for n in decl.noises for s in sp.sympify(n.psd, locals=_locals(decl)).free_symbols}
+    used |= {s for m in measurement_decls for s in sp.sympify(m.variance, locals=_locals(decl)).free_symbols}
+    used_names = {str(s) for s in used}
+    parameters = [p for symbol, p in decl.parameters.items() if symbol in own or symbol in used_names]
+    measurements = [
+        Measurement(name=m.name, symbol=m.symbol, unit=m.unit, description=m.description, variance=m.variance, expression=measured[i])
+        for i, m in enumerate(measurement_decls)
+    ]
+    return ErrorModel.build(
+        name=str(data["model"]),
+        states=decl.states,
+        noises=decl.noises,
+        parameters=parameters,
+        dynamics={s.name: rhs[i] for i, s in enumerate(decl.states)},
+        measurements=measurements,
+        title=free_text(data, "title", dict(lines), filename),
+        source=free_text(data, "source", dict(lines), filename),
+        frame=free_text(data, "frame", dict(lines), filename),
+        notes=[*notes_text(dict(data), dict(lines), filename), *approximation_notes(data, equations, decl)],
+        locations=lines,
+    )
+
+
+def _locals(decl: _Declarations) -> dict[str, sp.Symbol]:
+    """Symbols for reading PSD and variance texts (only to find which parameters they use; parsed properly by build)."""
+    return {s: sp.Symbol(s, real=True) for s in decl.parameters}
+
+
+def approximation_notes(data: Mapping, equations: pt.ErrorEquations, decl: _Declarations) -> list[str]:
+    """One note per declared approximation: what it is and each term it dropped, with its size at the check scenario."""
+    values = _check_values(data, decl)
+    names = {"F": ([s.name for s in decl.states], [s.name for s in decl.states]),
+             "G": ([s.name for s in decl.states], [n.name for n in decl.noises])}
+    approximations = data["navigation"].get("approximations") or []
+    notes = []
+    for name in approximations:
+        terms = [t for t in equations.neglected if t.approximation == name]
+        parts = []
+        for t in terms:
+            rows, columns = names.get(t.matrix, (list(map(str, equations.measurements)), [s.name for s in decl.states]))
+            size = term_magnitude(t.term, values)
+            parts.append(f"{t.matrix}[{rows[t.row]}, {columns[t.column]}]" + (f" = {size:.3g}" if size is not None else ""))
+        dropped = "; ".join(parts) if parts else "no term in this model"
+        notes.append(f"Approximation {name} ({pt.APPROXIMATION_DESCRIPTIONS[name]}): dropped {dropped} (size at the check scenario).")
+    return notes
+
+
+def _check_values(data: Mapping, decl: _Declarations) -> dict[sp.Symbol, float]:
+    """Parameter values of the file's check scenario (SI) and defaults, by symbol; empty without a scenario."""
+    from modelgen.model.check_scenario import parse_check_section
+
+    values = {sp.Symbol(p.symbol, real=True): p.value for p in decl.parameters.values() if p.value is not None}
+    if "check" not in data:
+        return values
+    try:
+        section = parse_check_section(data["check"], {}, "<check>")
+    except ModelError:
+        return values  # the loader reports it with file:line
+    by_name = {p.name: p.symbol for p in decl.parameters.values()}
+    for name, value in section.get("parameters", {}).items():
+        if name in by_name:
+            values[sp.Symbol(by_name[name], real=True)] = value
+    return values
+
+
+def term_magnitude(term: sp.Expr, values: Mapping[sp.Symbol, float]) -> float | None:
+    """|term| at the given values, or None if a value is missing."""
+    number = term.xreplace(dict(values))
+    if number.free_symbols:
+        return None
+    return abs(float(number))
+
+
+#: The engine's result of every navigation model derived in this process, by model name (see :func:`neglected_terms`).
+_DERIVED: dict[str, pt.ErrorEquations] = {}
+
+
+def neglected_terms(model_name: str) -> tuple[pt.NeglectedTerm, ...]:
+    """The terms the declared approximations dropped from a navigation model loaded in this process.
+
+    Loading the model (``load_model``) derives it; its F, G, H entries plus
+    these terms are the full first-order linearization (for the cross-check).
+    """
+    if model_name not in _DERIVED:
+        raise ModelError(f"model {model_name!r} is not a navigation model loaded in this process")
+    return _DERIVED[model_name].neglected

@@ -1,0 +1,694 @@
+"""Error models derived from the navigation equations, by symbolic perturbation.
+
+Instead of typing the linear error equations, a model states the nonlinear
+local-level mechanization (attitude C_b^n, velocity v^n, geodetic position
+L, lambda, h), the sensor models, the definition of each error state and the
+measurements as functions of the navigation state.  This module derives
+
+    d(x)/dt = F x + G w,   z = H x + v
+
+exactly to first order:
+
+1. *Perturb.*  The true navigation state is written as the computed one
+   composed with the error: v_t = v - dv, p_t = p - dp and
+   C_t = (I + [phi x]) C (the phi-angle: the computed attitude is
+   C = (I - [phi x]) C_t).  The true sensor inputs come from inverting the
+   sensor model, e.g. measured rate = (I + diag(s_g)) w + b_g + w_g.
+2. *Differentiate.*  The error rates are computed-minus-true rates of the same
+   equations, d(dv)/dt = f_v(computed) - f_v(true); for the attitude the exact
+   first-order kinematics of the phi-angle, d(phi)/dt = -w_in x phi + dw_in -
+   C dw_ib (the one step that needs C C^T = I, done once here).  F, G and H
+   are Jacobians at zero error (``sympy.Matrix.jacobian``).
+3. *Change variables.*  Declared error states that are linear, position-
+   dependent combinations of those primitive errors (position in metres,
+   psi-angle, velocity error in the computed frame) follow from
+   F = (T F_0 + dT/dt) T^-1, G = T G_0, H = H_0 T^-1, with dT/dt along the
+   computed trajectory.
+4. *Approximate, by name.*  Each declared approximation is a pure function of
+   the derivation (:data:`APPROXIMATIONS`); the terms it removes are kept as
+   :class:`NeglectedTerm` records (matrix, row, column, the symbolic term),
+   so that nothing is dropped silently.
+5. *Simplify* with one fixed pipeline (:func:`simplify_entry`), so that the
+   result is the same text run to run.
+
+The Earth's radii and gravity are carried as functions of position
+(``R_M(L)``, ``R_N(L)``, ``g(L, h)``) while deriving, so that their derivatives
+are visible as terms; at the end they become the model's parameters
+(``meridian_radius`` ...) and their derivatives the WGS-84 formulas of
+:func:`earth_derivative_rules`.
+
+Sources: Shin (2005), "Estimation techniques for low-cost inertial
+navigation", ch. 4 (phi-angle NED error model); Groves (2013), "Principles of
+GNSS, Inertial, and Multisensor Integrated Navigation Systems", ch. 5 and 14;
+Benson (1975), "A comparison of two approaches to pure-inertial and Doppler-
+inertial error analysis" (psi-angle); NIMA TR8350.2 (WGS-84 radii and normal
+gravity).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Mapping, Sequence
+
+import sympy as sp
+
+from modelgen.errors import ModelError
+from modelgen.model import wgs84
+
+#: Navigation frames and their axes, in component order.
+FRAME_AXES: dict[str, tuple[str, str, str]] = {"NED": ("north", "east", "down"), "ENU": ("east", "north", "up")}
+
+# Earth quantities as undefined functions of position while deriving (module doc).
+MeridianRadius = sp.Function("MeridianRadius")
+PrimeVerticalRadius = sp.Function("PrimeVerticalRadius")
+Gravity = sp.Function("Gravity")
+
+ATTITUDE_FORMS = ("phi", "psi")
+VELOCITY_FORMS = ("difference", "computed_frame")
+POSITION_FORMS = ("geodetic", "metres")
+
+
+# -- vector helpers ---------------------------------------------------------------
+def skew(a: sp.Matrix) -> sp.Matrix:
+    """[a x], the matrix of the cross product a x (.)."""
+    return sp.Matrix([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+
+
+def _vector(items: Sequence[sp.Expr]) -> sp.Matrix:
+    return sp.Matrix(list(items))
+
+
+# -- the local-level mechanization ------------------------------------------------
+@dataclass(frozen=True)
+class EarthSymbols:
+    """Parameter symbols that stand for the Earth quantities in the result."""
+
+    earth_rate: sp.Symbol
+    meridian_radius: sp.Symbol
+    prime_vertical_radius: sp.Symbol
+    gravity: sp.Symbol
+    earth_radius: sp.Symbol | None = None  # used only by the single_earth_radius approximation
+
+
+def earth_rate_vector(frame: str, latitude: sp.Expr, earth_rate: sp.Expr) -> sp.Matrix:
+    """w_ie^n: NED (W cos L, 0, -W sin L), ENU (0, W cos L, W sin L)."""
+    c, s = earth_rate * sp.cos(latitude), earth_rate * sp.sin(latitude)
+    return _vector((c, 0, -s)) if frame == "NED" else _vector((0, c, s))
+
+
+def position_angle_rates(frame: str, latitude: sp.Expr, latitude_rate: sp.Expr, longitude_rate: sp.Expr) -> sp.Matrix:
+    """Rotation rate of the local-level frame for given rates of L and lambda.
+
+    NED (lambda' cos L, -L', -lambda' sin L); ENU (-L', lambda' cos L, lambda' sin L).
+    With the position rates this is the transport rate w_en^n; with position
+    errors (dL, dlambda) it is the small angle d(theta) between the true and
+    the computed local-level frames.
+    """
+    c, s = sp.cos(latitude), sp.sin(latitude)
+    if frame == "NED":
+        return _vector((longitude_rate * c, -latitude_rate, -longitude_rate * s))
+    return _vector((-latitude_rate, longitude_rate * c, longitude_rate * s))
+
+
+def north_east_vertical(frame: str, vector: sp.Matrix) -> tuple[sp.Expr, sp.Expr, sp.Expr]:
+    """(north, east, up) components of a navigation-frame vector."""
+    if frame == "NED":
+        return vector[0], vector[1], -vector[2]
+    return vector[1], vector[0], vector[2]
+
+
+def position_rate(frame: str, position: sp.Matrix, velocity: sp.Matrix) -> sp.Matrix:
+    """(L', lambda', h') = (v_N/(R_M + h), v_E/((R_N + h) cos L), v_up)."""
+    latitude, _, height = position
+    north, east, up = north_east_vertical(frame, velocity)
+    return _vector(
+        (
+            north / (MeridianRadius(latitude) + height),
+            east / ((PrimeVerticalRadius(latitude) + height) * sp.cos(latitude)),
+            up,
+        )
+    )
+
+
+def gravity_vector(frame: str, position: sp.Matrix) -> sp.Matrix:
+    """g^n = g(L, h) along the down axis (plumb-line gravity, no deflection of the vertical)."""
+    g = Gravity(position[0], position[2])
+    return _vector((0, 0, g)) if frame == "NED" else _vector((0, 0, -g))
+
+
+def metres_matrix(frame: str, position: sp.Matrix) -> sp.Matrix:
+    """M with (navigation-frame metres) = M (dL, dlambda, dh): north (R_M + h) dL, east (R_N + h) cos L dlambda."""
+    latitude, _, height = position
+    north = MeridianRadius(latitude) + height
+    east = (PrimeVerticalRadius(latitude) + height) * sp.cos(latitude)
+    if frame == "NED":
+        return sp.Matrix([[north, 0, 0], [0, east, 0], [0, 0, -1]])
+    return sp.Matrix([[0, east, 0], [north, 0, 0], [0, 0, 1]])
+
+
+@dataclass(frozen=True)
+class NavigationState:
+    """One navigation solution: attitude C_b^n, velocity, geodetic position and what it senses."""
+
+    attitude: sp.Matrix
+    velocity: sp.Matrix
+    position: sp.Matrix
+    specific_force: sp.Matrix  # resolved in the navigation frame
+    body_rate: sp.Matrix | None  # w_ib^b in body axes, if the model has it
+    earth_rate_position: sp.Matrix  # where w_ie takes its latitude (the state's own unless approximated)
+    transport_rate_position: sp.Matrix  # where w_en takes its position (the state's own unless approximated)
+
+
+@dataclass(frozen=True)
+class Mechanization:
+    """The local-level mechanization in ``frame`` (Groves 2013, eqs. 5.44-5.56):
+
+    C' = C [w_ib x] - [w_in x] C,  v' = f^n - (2 w_ie + w_en) x v + g^n,
+    (L', lambda', h') = :func:`position_rate`.
+
+    A model may write the velocity or position equation itself
+    (``velocity_equation``, ``position_equation``: functions of the state and
+    this mechanization); the attitude kinematics keep their form, with w_in
+    from :meth:`navigation_rate`.
+    """
+
+    frame: str
+    rotation_rate: sp.Symbol  # the Earth's rotation rate (parameter symbol)
+    velocity_equation: Callable[[NavigationState, "Mechanization"], sp.Matrix] | None = None
+    position_equation: Callable[[NavigationState, "Mechanization"], sp.Matrix] | None = None
+
+    def earth_rate(self, state: NavigationState) -> sp.Matrix:
+        """w_ie^n at the state's (or the approximation's) latitude."""
+        return earth_rate_vector(self.frame, state.earth_rate_position[0], self.rotation_rate)
+
+    def transport_rate(self, state: NavigationState) -> sp.Matrix:
+        """w_en^n from the state's velocity at its (or the approximation's) position."""
+        rates = position_rate(self.frame, state.transport_rate_position, state.velocity)
+        return position_angle_rates(self.frame, state.transport_rate_position[0], rates[0], rates[1])
+
+    def navigation_rate(self, state: NavigationState) -> sp.Matrix:
+        """w_in^n = w_ie^n + w_en^n."""
+        return self.earth_rate(state) + self.transport_rate(state)
+
+    def velocity_rate(self, state: NavigationState) -> sp.Matrix:
+        if self.velocity_equation is not None:
+            return self.velocity_equation(state, self)
+        coriolis = (2 * self.earth_rate(state) + self.transport_rate(state)).cross(state.velocity)
+        return state.specific_force - coriolis + gravity_vector(self.frame, state.position)
+
+    def position_rate(self, state: NavigationState) -> sp.Matrix:
+        if self.position_equation is not None:
+            return self.position_equation(state, self)
+        return position_rate(self.frame, state.position, state.velocity)
+
+
+# -- what the model file declares ------------------------------------------------
+@dataclass(frozen=True)
+class InertialSensorErrors:
+    """measured = (I + diag(scale_factor)) true + bias + noise; any part may be absent (None)."""
+
+    bias: sp.Matrix | None = None
+    scale_factor: sp.Matrix | None = None
+    noise: sp.Matrix | None = None
+
+    def error(self, measured: sp.Matrix | None, what: str) -> sp.Matrix:
+        """measured - true, with true = (measured - bias - noise) / (1 + scale_factor) per axis (exact)."""
+        parts = [p for p in (self.bias, self.noise) if p is not None]
+        offset = sum(parts, sp.zeros(3, 1)) if parts else sp.zeros(3, 1)
+        if self.scale_factor is None:
+            return offset
+        if measured is None:
+            raise ModelError(f"the {what} scale factor needs the sensed {what} input in body axes")
+        return _vector([measured[i] - (measured[i] - offset[i]) / (1 + self.scale_factor[i]) for i in range(3)])
+
+
+@dataclass(frozen=True)
+class ErrorDefinition:
+    """How the declared navigation error states are defined (computed minus true).
+
+    attitude ``phi``: C = (I - [phi x]) C_t; ``psi``: phi = psi + d(theta), the
+    attitude error against the computed local-level frame (Benson 1975).
+    velocity ``difference``: dv = v - v_t; ``computed_frame``: v - C_n^c v_t =
+    dv + d(theta) x v.  position ``geodetic``: (dL, dlambda, dh); ``metres``:
+    :func:`metres_matrix` times them, in the frame's axes.
+    """
+
+    attitude: str
+    attitude_states: tuple[sp.Symbol, ...]
+    velocity: str
+    velocity_states: tuple[sp.Symbol, ...]
+    position: str
+    position_states: tuple[sp.Symbol, ...]
+
+
+@dataclass(frozen=True)
+class MeasurementFunction:
+    """A measurement as a function of the navigation state.
+
+    z = scale (h(computed) - h(true)) - extra, or its negative when
+    ``measured_minus_computed``; ``extra`` is what the measured value has on
+    top of h(true), linear in declared error states (a receiver clock bias).  ``h(state, computed)`` sees the true (or computed)
+    state and the computed one.
+    """
+
+    symbols: tuple[sp.Symbol, ...]
+    function: Callable[[NavigationState, NavigationState, Mechanization], sp.Matrix]
+    scale: Callable[[NavigationState], sp.Matrix] | None = None
+    extra: sp.Matrix | None = None
+    measured_minus_computed: bool = False
+
+
+@dataclass(frozen=True)
+class NavigationProblem:
+    """Everything :func:`derive_error_equations` needs, as sympy objects (no YAML)."""
+
+    frame: str
+    attitude: sp.Matrix  # computed C_b^n (symbols)
+    velocity: sp.Matrix
+    position: sp.Matrix  # (L, lambda, h)
+    specific_force: sp.Matrix  # sensed specific force (symbols)
+    specific_force_axes: str  # "body" or "navigation"
+    body_rate: sp.Matrix | None
+    earth: EarthSymbols
+    errors: ErrorDefinition
+    gyro: InertialSensorErrors
+    accelerometer: InertialSensorErrors
+    state_order: tuple[sp.Symbol, ...]  # every declared error state, in model order
+    auxiliary_dynamics: Mapping[sp.Symbol, sp.Expr]  # d/dt of the non-navigation states (biases, clock)
+    noises: tuple[sp.Symbol, ...]
+    measurements: tuple[MeasurementFunction, ...] = ()
+    approximations: tuple[str, ...] = ()
+    equations: Mapping[str, Callable[[NavigationState, Mechanization], sp.Matrix]] = field(default_factory=dict)
+
+    def mechanization(self) -> Mechanization:
+        """The local-level mechanization, with the equations the model writes itself."""
+        return Mechanization(self.frame, self.earth.earth_rate, self.equations.get("velocity"), self.equations.get("position"))
+
+
+@dataclass(frozen=True)
+class NeglectedTerm:
+    """One term an approximation removed: ``matrix[row, column]`` lost ``term``."""
+
+    approximation: str
+    matrix: str
+    row: int
+    column: int
+    term: sp.Expr
+
+
+@dataclass(frozen=True)
+class ErrorEquations:
+    """The derived F, G, H (in parameter symbols) and what the approximations removed."""
+
+    F: sp.Matrix
+    G: sp.Matrix
+    H: sp.Matrix
+    states: tuple[sp.Symbol, ...]
+    noises: tuple[sp.Symbol, ...]
+    measurements: tuple[sp.Symbol, ...]
+    neglected: tuple[NeglectedTerm, ...] = field(default_factory=tuple)
+
+
+# -- step 1 and 2: primitive error equations ----------------------------------------
+@dataclass(frozen=True)
+class _Stage:
+    """Matrices with the Earth functions still unevaluated (between approximations)."""
+
+    F: sp.Matrix
+    G: sp.Matrix
+    H: sp.Matrix
+
+
+def _primitive_symbols() -> tuple[sp.Matrix, sp.Matrix, sp.Matrix]:
+    """phi, dv, dp: the primitive errors (attitude, velocity, geodetic position)."""
+    make = lambda prefix: _vector(sp.symbols(f"{prefix}0:3", real=True, cls=sp.Dummy))  # noqa: E731
+    return make("primitive_phi"), make("primitive_dv"), make("primitive_dp")
+
+
+def _sensed_navigation_force(problem: NavigationProblem) -> sp.Matrix:
+    """C f~ (or f~ when the model gives the sensed specific force in navigation axes)."""
+    if problem.specific_force_axes == "navigation":
+        return problem.specific_force
+    return problem.attitude * problem.specific_force
+
+
+def _states(problem: NavigationProblem, approximations: set[str]) -> tuple[NavigationState, NavigationState, dict]:
+    """The computed state, the true state (in true-state symbols) and those true-state symbols.
+
+    True attitude (I + [phi x]) C; true specific force in navigation axes
+    (I + [phi x]) (C f~ - C df), df = measured - true from the sensor model.
+    The true state's earth and transport rates take the computed position
+    under the approximations named for that.
+    """
+    phi, _, _ = _primitive_symbols_cached()
+    true_v = _vector(sp.symbols("true_v0:3", real=True, cls=sp.Dummy))
+    true_p = _vector(sp.symbols("true_p0:3", real=True, cls=sp.Dummy))
+    C = problem.attitude
+    body_input = problem.specific_force if problem.specific_force_axes == "body" else None
+    force_error = problem.accelerometer.error(body_input, "accelerometer")
+    sensed = _sensed_navigation_force(problem)
+    true_force = (sp.eye(3) + skew(phi)) * (sensed - C * force_error)
+    p = problem.position
+    computed = NavigationState(C, problem.velocity, p, sensed, problem.body_rate, p, p)
+    earth_at = p if "no_earth_rate_position_terms" in approximations else true_p
+    transport_at = p if "no_transport_rate_position_terms" in approximations else true_p
+    true_rate = None if problem.body_rate is None else problem.body_rate - problem.gyro.error(problem.body_rate, "gyro")
+    true = NavigationState((sp.eye(3) + skew(phi)) * C, true_v, true_p, true_force, true_rate, earth_at, transport_at)
+    return computed, true, {"v": true_v, "p": true_p}
+
+
+_PRIMITIVES: tuple[sp.Matrix, sp.Matrix, sp.Matrix] | None = None
+
+
+def _primitive_symbols_cached() -> tuple[sp.Matrix, sp.Matrix, sp.Matrix]:
+    """One set of primitive symbols per process, so that stages of a derivation share them."""
+    global _PRIMITIVES
+    if _PRIMITIVES is None:
+        _PRIMITIVES = _primitive_symbols()
+    return _PRIMITIVES
+
+
+def _primitive_stage(problem: NavigationProblem, equation_approximations: set[str]) -> _Stage:
+    """F_0, G_0, H_0 over (phi, dv, dp, other declared states) at zero error (steps 1-2)."""
+    phi, dv, dp = _primitive_symbols_cached()
+    mech = problem.mechanization()
+    computed, true, true_symbols = _states(problem, equation_approximations)
+    w_in_c = mech.navigation_rate(computed)
+    gyro_error = problem.gyro.error(problem.body_rate, "gyro")
+    rates = sp.Matrix.vstack(
+        -w_in_c.cross(phi) + (w_in_c - mech.navigation_rate(true)) - problem.attitude * gyro_error,
+        mech.velocity_rate(computed) - mech.velocity_rate(true),
+        mech.position_rate(computed) - mech.position_rate(true),
+    )
+    others = [s for s in problem.state_order if s not in _declared_navigation_states(problem)]
+    aux = _vector([problem.auxiliary_dynamics[s] for s in others]) if others else sp.zeros(0, 1)
+    rates = sp.Matrix.vstack(rates, aux)
+    to_true = {**dict(zip(true_symbols["v"], problem.velocity)), **dict(zip(true_symbols["p"], problem.position))}
+    by = [*phi, *true_symbols["v"], *true_symbols["p"], *others]
+    zero = {s: 0 for s in (*phi, *others, *problem.noises)}
+    # d/d(dv) = -d/d(v_t) because v_t = v - dv (and the same for position).
+    sign = sp.diag(*([1] * 3 + [-1] * 6 + [1] * len(others)))
+    F0 = _at(rates.jacobian(by), zero, to_true) * sign
+    G0 = _at(rates.jacobian(list(problem.noises)), zero, to_true) if problem.noises else sp.zeros(rates.rows, 0)
+    H0 = _measurement_jacobian(problem, mech, computed, true, by, zero, to_true) * sign
+    return _Stage(F0, G0, H0)
+
+
+def _at(matrix: sp.Matrix, zero: Mapping, to_true: Mapping) -> sp.Matrix:
+    """A Jacobian at zero error: errors and noises 0, the true state equal to the computed one."""
+    return matrix.xreplace(zero).xreplace(to_true)
+
+
+def _measurement_jacobian(problem, mech, computed, true, by, zero, to_true) -> sp.Matrix:
+    """H_0: rows of z = scale (h(computed) - h(true)) + extra, differentiated by ``by``."""
+    rows = []
+    for m in problem.measurements:
+        difference = m.function(computed, computed, mech) - m.function(true, computed, mech)
+        if m.scale is not None:
+            difference = m.scale(computed) * difference
+        if m.extra is not None:
+            difference = difference - m.extra
+        if m.measured_minus_computed:
+            difference = -difference
+        rows.append(_at(difference.jacobian(by), zero, to_true))
+    return sp.Matrix.vstack(*rows) if rows else sp.zeros(0, len(by))
+
+
+def _declared_navigation_states(problem: NavigationProblem) -> tuple[sp.Symbol, ...]:
+    e = problem.errors
+    return (*e.attitude_states, *e.velocity_states, *e.position_states)
+
+
+# -- step 3: change of variables --------------------------------------------------------
+def _change_of_variables(problem: NavigationProblem) -> tuple[sp.Matrix, sp.Matrix]:
+    """(T, T^-1) with declared = T primitive, as Jacobians of the forward and inverse maps."""
+    phi, dv, dp = _primitive_symbols_cached()
+    e = problem.errors
+    others = [s for s in problem.state_order if s not in _declared_navigation_states(problem)]
+    M = metres_matrix(problem.frame, problem.position)
+    L = problem.position[0]
+    theta = lambda d: position_angle_rates(problem.frame, L, d[0], d[1])  # noqa: E731  d(theta) of a position error
+    # forward: declared errors from primitive ones
+    position = M * dp if e.position == "metres" else dp
+    attitude = phi - theta(dp) if e.attitude == "psi" else phi
+    velocity = dv + theta(dp).cross(problem.velocity) if e.velocity == "computed_frame" else dv
+    forward = {**dict(zip(e.attitude_states, attitude)), **dict(zip(e.velocity_states, velocity)), **dict(zip(e.position_states, position))}
+    # inverse: primitive errors from declared ones
+    d_pos, d_att, d_vel = _vector(e.position_states), _vector(e.attitude_states), _vector(e.velocity_states)
+    dp_of = M.inv() * d_pos if e.position == "metres" else d_pos
+    phi_of = d_att + theta(dp_of) if e.attitude == "psi" else d_att
+    dv_of = d_vel - theta(dp_of).cross(problem.velocity) if e.velocity == "computed_frame" else d_vel
+    primitive = [*phi, *dv, *dp, *others]
+    declared = list(problem.state_order)
+    forward_rows = _vector([forward.get(s, s) for s in declared])
+    inverse_rows = sp.Matrix.vstack(phi_of, dv_of, dp_of, _vector(others) if others else sp.zeros(0, 1))
+    return forward_rows.jacobian(primitive), inverse_rows.jacobian(declared)
+
+
+def _time_derivative(matrix: sp.Matrix, problem: NavigationProblem) -> sp.Matrix:
+    """dT/dt along the computed trajectory (T depends on the computed velocity and position)."""
+    mech = problem.mechanization()
+    p = problem.position
+    computed = NavigationState(problem.attitude, problem.velocity, p, _sensed_navigation_force(problem), problem.body_rate, p, p)
+    variables = [*problem.velocity, *problem.position]
+    rates = [*mech.velocity_rate(computed), *mech.position_rate(computed)]
+    out = sp.zeros(*matrix.shape)
+    for variable, rate in zip(variables, rates):
+        partial = matrix.diff(variable)
+        if partial.is_zero_matrix:
+            continue
+        out += partial * rate
+    return out
+
+
+def _declared_stage(problem: NavigationProblem, primitive: _Stage) -> _Stage:
+    """Step 3: F = (T F_0 + T') T^-1, G = T G_0, H = H_0 T^-1."""
+    T, T_inv = _change_of_variables(problem)
+    if T == sp.eye(T.rows):
+        return primitive
+    T_dot = _time_derivative(T, problem)
+    return _Stage((T * primitive.F + T_dot) * T_inv, T * primitive.G, primitive.H * T_inv)
+
+
+# -- step 4: approximations ---------------------------------------------------------------
+def _derivative_of(function: sp.FunctionClass, stage: _Stage, variable_index: int | None = None) -> set:
+    found = set()
+    for m in (stage.F, stage.G, stage.H):
+        for d in m.atoms(sp.Derivative):
+            if isinstance(d.expr, sp.Function) and d.expr.func == function:
+                if variable_index is None or d.variables[0] == d.expr.args[variable_index]:
+                    found.add(d)
+    return found
+
+
+def _substitute(stage: _Stage, mapping: Mapping) -> _Stage:
+    return _Stage(stage.F.xreplace(mapping), stage.G.xreplace(mapping), stage.H.xreplace(mapping))
+
+
+def constant_radii(stage: _Stage, problem: NavigationProblem) -> _Stage:
+    """R_M and R_N do not vary with latitude: every dR/dL term is dropped."""
+    found = _derivative_of(MeridianRadius, stage) | _derivative_of(PrimeVerticalRadius, stage)
+    return _substitute(stage, {d: 0 for d in found})
+
+
+def single_earth_radius(stage: _Stage, problem: NavigationProblem) -> _Stage:
+    """One spherical Earth of radius R: R_M = R_N = R, constant (its parameter ``earth_radius``)."""
+    stage = constant_radii(stage, problem)
+    if problem.earth.earth_radius is None:
+        raise ModelError("single_earth_radius needs an earth_radius parameter")
+    radius = problem.earth.earth_radius
+    replaced = {f: radius for m in (stage.F, stage.G, stage.H) for f in m.atoms(MeridianRadius, PrimeVerticalRadius)}
+    return _substitute(stage, replaced)
+
+
+def no_height_in_radii(stage: _Stage, problem: NavigationProblem) -> _Stage:
+    """R + h ~ R: the computed height is dropped beside the Earth radii (h << R)."""
+    h = problem.position[2]
+    return _Stage(*(m.applyfunc(lambda e: _drop_height(e, h)) for m in (stage.F, stage.G, stage.H)))
+
+
+def _drop_height(expr: sp.Expr, height: sp.Symbol) -> sp.Expr:
+    """``expr`` with ``height`` removed from every sum that adds it to an Earth radius."""
+    radii = (MeridianRadius, PrimeVerticalRadius)
+
+    def beside_radius(node: sp.Basic) -> bool:
+        return isinstance(node, sp.Add) and height in node.args and any(a.func in radii for a in node.args)
+
+    return expr.replace(beside_radius, lambda node: sp.Add(*(a for a in node.args if a != height)))
+
+
+def constant_gravity(stage: _Stage, problem: NavigationProblem) -> _Stage:
+    """Gravity does not vary with position: dg/dL and dg/dh are dropped."""
+    return _substitute(stage, {d: 0 for d in _derivative_of(Gravity, stage)})
+
+
+def gravity_height_only(stage: _Stage, problem: NavigationProblem) -> _Stage:
+    """Gravity varies with height only: dg/dL is dropped (normal gravity changes 0.5 % pole to equator)."""
+    return _substitute(stage, {d: 0 for d in _derivative_of(Gravity, stage, 0)})
+
+
+def free_air_gradient(stage: _Stage, problem: NavigationProblem) -> _Stage:
+    """dg/dh = -2 g / (R_N + h), the inverse-square free-air gradient, instead of WGS-84's normal-gravity gradient."""
+    mapping = {}
+    for d in _derivative_of(Gravity, stage, 1):
+        L, h = d.expr.args
+        mapping[d] = -2 * d.expr / (PrimeVerticalRadius(L) + h)
+    return _substitute(stage, mapping)
+
+
+def free_vertical_channel(stage: _Stage, problem: NavigationProblem) -> _Stage:
+    """No gravity feedback on the height error: dg/dh is dropped (the vertical channel integrates freely)."""
+    return _substitute(stage, {d: 0 for d in _derivative_of(Gravity, stage, 1)})
+
+
+def level_flight(stage: _Stage, problem: NavigationProblem) -> _Stage:
+    """No vertical velocity: v_down (v_up) = 0."""
+    return _substitute(stage, {problem.velocity[2]: 0})
+
+
+def _equation_approximation(stage: _Stage, problem: NavigationProblem) -> _Stage:  # applied while perturbing
+    return stage
+
+
+#: Approximations a model may declare, by name: each transforms the derivation;
+#: the two whose names say "position terms" act on the equations themselves.
+APPROXIMATIONS: dict[str, Callable[[_Stage, NavigationProblem], _Stage]] = {
+    "constant_radii": constant_radii,
+    "single_earth_radius": single_earth_radius,
+    "no_height_in_radii": no_height_in_radii,
+    "constant_gravity": constant_gravity,
+    "gravity_height_only": gravity_height_only,
+    "free_air_gradient": free_air_gradient,
+    "free_vertical_channel": free_vertical_channel,
+    "level_flight": level_flight,
+    "no_earth_rate_position_terms": _equation_approximation,
+    "no_transport_rate_position_terms": _equation_approximation,
+}
+#: Approximations that change the perturbed equations rather than the result.
+EQUATION_APPROXIMATIONS = frozenset({"no_earth_rate_position_terms", "no_transport_rate_position_terms"})
+
+APPROXIMATION_DESCRIPTIONS: dict[str, str] = {
+    "no_earth_rate_position_terms": "the true state's earth rate w_ie is taken at the computed latitude (no dL terms from it)",
+    "no_transport_rate_position_terms": "the true state's transport rate w_en is taken at the computed position (no dL, dh terms from it)",
+    **{name: (function.__doc__ or "").strip().split("\n")[0] for name, function in APPROXIMATIONS.items() if function is not _equation_approximation},
+}
+
+
+# -- step 5: parameters and simplification -----------------------------------------------
+def earth_derivative_rules(latitude: sp.Symbol, height: sp.Symbol, earth: EarthSymbols) -> dict:
+    """dR_M/dL, dR_N/dL, dg/dL, dg/dh of WGS-84 (TR8350.2), in the parameter symbols.
+
+    R_M = a (1 - e^2) / w^(3/2), R_N = a / w^(1/2), w = 1 - e^2 sin^2 L:
+    dR_M/dL = 3 e^2 sin L cos L R_M / w, dR_N/dL = e^2 sin L cos L R_N / w.
+    Normal gravity g = gamma(L) eta(L, h) with Somigliana's gamma =
+    gamma_e (1 + k sin^2 L) / w^(1/2) and eta = 1 - 2 h (1 + f + m - 2 f sin^2 L) / a
+    + 3 h^2 / a^2 (TR8350.2 eq. 4-3): dg/dL = g sin L cos L (2 k / (1 + k sin^2 L)
+    + e^2 / w + 8 f h / (a eta)), dg/dh = g (-2 (1 + f + m - 2 f sin^2 L) / a + 6 h / a^2) / eta.
+    """
+    L, h = latitude, height
+    e2, a = sp.Float(wgs84.ECCENTRICITY_SQUARED), sp.Float(wgs84.SEMI_MAJOR_AXIS)
+    f, m, k = sp.Float(wgs84.FLATTENING), sp.Float(wgs84.GRAVITY_RATIO_M), sp.Float(wgs84.SOMIGLIANA_K)
+    s, c = sp.sin(L), sp.cos(L)
+    w = 1 - e2 * s**2
+    eta = 1 - 2 * h * (1 + f + m - 2 * f * s**2) / a + 3 * h**2 / a**2
+    g = earth.gravity
+    return {
+        sp.Derivative(MeridianRadius(L), L): 3 * e2 * s * c * earth.meridian_radius / w,
+        sp.Derivative(PrimeVerticalRadius(L), L): e2 * s * c * earth.prime_vertical_radius / w,
+        sp.Derivative(Gravity(L, h), L): g * s * c * (2 * k / (1 + k * s**2) + e2 / w + 8 * f * h / (a * eta)),
+        sp.Derivative(Gravity(L, h), h): g * (-2 * (1 + f + m - 2 * f * s**2) / a + 6 * h / a**2) / eta,
+        MeridianRadius(L): earth.meridian_radius,
+        PrimeVerticalRadius(L): earth.prime_vertical_radius,
+        Gravity(L, h): g,
+    }
+
+
+def simplify_entry(expr: sp.Expr) -> sp.Expr:
+    """The one simplification pipeline: ``expand`` (sums of products; equal bases combine).
+
+    Deterministic and fast (no heuristic ``simplify``): the same expression
+    gives the same text on every run, and what ``modelgen.derive.symbolic``
+    does to every model's entries (``expand``) leaves it unchanged.
+    """
+    return sp.expand(expr) if expr != 0 else sp.S.Zero
+
+
+def _finish(stage: _Stage, problem: NavigationProblem) -> _Stage:
+    """Earth functions to parameters, derivatives to formulas (with (L, h) shown in the Derivative objects), simplified."""
+    rules = earth_derivative_rules(problem.position[0], problem.position[2], problem.earth)
+    derivatives = {k: v for k, v in rules.items() if isinstance(k, sp.Derivative)}
+    values = {k: v for k, v in rules.items() if not isinstance(k, sp.Derivative)}
+    out = []
+    for m in (stage.F, stage.G, stage.H):
+        m = m.xreplace(derivatives).xreplace(values)
+        leftover = m.atoms(sp.Derivative)
+        if leftover:
+            raise ModelError(f"derivation left derivatives it has no rule for: {sorted(map(str, leftover))}")
+        out.append(m.applyfunc(simplify_entry))
+    return _Stage(*out)
+
+
+# -- the whole derivation -------------------------------------------------------------------
+def check_problem(problem: NavigationProblem) -> None:
+    """Refuse an inconsistent problem before deriving: frame, forms, approximation names, states without equations."""
+    if problem.frame not in FRAME_AXES:
+        raise ModelError(f"navigation frame {problem.frame!r} is not one of {', '.join(FRAME_AXES)}")
+    e = problem.errors
+    for what, form, forms in (("attitude", e.attitude, ATTITUDE_FORMS), ("velocity", e.velocity, VELOCITY_FORMS), ("position", e.position, POSITION_FORMS)):
+        if form not in forms:
+            raise ModelError(f"{what} error form {form!r} is not one of {', '.join(forms)}")
+    unknown = [a for a in problem.approximations if a not in APPROXIMATIONS]
+    if unknown:
+        raise ModelError(f"unknown approximation(s) {', '.join(unknown)} (known: {', '.join(sorted(APPROXIMATIONS))})")
+    navigation = set(_declared_navigation_states(problem))
+    missing = [str(s) for s in problem.state_order if s not in navigation and s not in problem.auxiliary_dynamics]
+    if missing:
+        raise ModelError(f"error state(s) {', '.join(missing)} have no equation")
+
+
+def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
+    """F, G, H of the declared error states, exact to first order except the declared approximations.
+
+    Each approximation is applied in the order declared; the entries it
+    changes become :class:`NeglectedTerm` records (the removed term =
+    before - after, in parameter symbols).
+    """
+    check_problem(problem)
+    equation_flags: set[str] = set()
+    stage = _declared_stage(problem, _primitive_stage(problem, equation_flags))
+    finished = _finish(stage, problem)
+    neglected: list[NeglectedTerm] = []
+    for name in problem.approximations:
+        if name in EQUATION_APPROXIMATIONS:
+            equation_flags.add(name)
+            stage = _declared_stage(problem, _primitive_stage(problem, equation_flags))
+            for other in problem.approximations[: problem.approximations.index(name)]:
+                if other not in EQUATION_APPROXIMATIONS:
+                    stage = APPROXIMATIONS[other](stage, problem)
+        else:
+            stage = APPROXIMATIONS[name](stage, problem)
+        after = _finish(stage, problem)
+        neglected.extend(_differences(name, finished, after))
+        finished = after
+    return ErrorEquations(
+        F=finished.F,
+        G=finished.G,
+        H=finished.H,
+        states=tuple(problem.state_order),
+        noises=tuple(problem.noises),
+        measurements=tuple(s for m in problem.measurements for s in m.symbols),
+        neglected=tuple(neglected),
+    )
+
+
+def _differences(name: str, before: _Stage, after: _Stage) -> list[NeglectedTerm]:
+    out = []
+    for label in ("F", "G", "H"):
+        a, b = getattr(before, label), getattr(after, label)
+        for i in range(a.rows):
+            for j in range(a.cols):
+                if a[i, j] != b[i, j]:
+                    term = simplify_entry(a[i, j] - b[i, j])
+                    if term != 0:
+                        out.append(NeglectedTerm(name, label, i, j, term))
+    return out

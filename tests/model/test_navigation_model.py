@@ -1,0 +1,54 @@
+"""Model files with a ``navigation:`` section: the error model derived from the navigation equations.
+
+The twins of the hand-written models must reproduce them entry by entry
+(numerically at the check scenario, same states, noises and measurements in
+the same order) once the hand model's own approximations are declared, and
+every term an approximation drops must be listed with its size.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from modelgen.derive.symbolic import derive
+from modelgen.model.loading import load_model
+from modelgen.model.navigation_model import neglected_terms
+
+
+def _numeric(model):
+    values = dict(model.parameter_defaults())
+    values.update(model.check.parameter_values())
+    return derive(model).numeric(values)
+
+
+@pytest.fixture(scope="module")
+def ins_gps15_pair():
+    return load_model("ins_gps15"), load_model("ins_gps15_twin")
+
+
+def test_ins_gps15_twin_declares_the_hand_models_states_noises_and_measurements_in_order(ins_gps15_pair):
+    hand, twin = ins_gps15_pair
+    assert [(s.name, s.symbol) for s in twin.states] == [(s.name, s.symbol) for s in hand.states]
+    assert [(n.name, n.symbol) for n in twin.noises] == [(n.name, n.symbol) for n in hand.noises]
+    assert [(m.name, m.symbol) for m in twin.measurements] == [(m.name, m.symbol) for m in hand.measurements]
+
+
+def test_ins_gps15_twin_F_G_H_Q_R_equal_the_hand_model_at_its_check_scenario(ins_gps15_pair):
+    hand, twin = ins_gps15_pair
+    derived, written = _numeric(twin), _numeric(hand)
+    for key in "FGHQR":
+        scale = np.maximum(1.0, np.abs(written[key]))
+        assert np.all(np.abs(derived[key] - written[key]) <= 1e-14 * scale), key
+
+
+def test_ins_gps15_twin_lists_every_term_its_approximations_drop_with_its_size(ins_gps15_pair):
+    _, twin = ins_gps15_pair
+    terms = neglected_terms(twin.name)
+    by_approximation = {t.approximation for t in terms}
+    assert by_approximation == {"constant_radii", "gravity_height_only", "free_air_gradient"}
+    # dg/dL: normal gravity grows ~0.05 m/s^2 per radian of latitude at 34 deg: the dv_U/dL entry
+    gravity = [t for t in terms if t.approximation == "gravity_height_only"]
+    assert [(t.matrix, t.row, t.column) for t in gravity] == [("F", 5, 6)]
+    notes = [n for n in twin.notes if n.startswith("Approximation gravity_height_only")]
+    assert notes and "F[velocity_error_up, latitude_error] = 0.048" in notes[0]
