@@ -90,7 +90,9 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
     if scheduler is not None:
         try:
             client = Client(scheduler, timeout=f"{timeout_s}s")
-        except (OSError, TimeoutError, ValueError) as exc:
+        except ValueError as exc:
+            raise ModelError(f"--scheduler {scheduler}: not a dask scheduler address ({exc})") from None
+        except (OSError, TimeoutError) as exc:
             raise ModelError(f"--scheduler {scheduler}: no dask scheduler answered within {timeout_s:g} s "
                              f"({type(exc).__name__}: {exc})") from None
         try:

@@ -14,7 +14,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -67,7 +67,8 @@ def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, in
 
 
 def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs: int = 20, seed: int = 0,
-             workers: int = 2, echo: Callable[[str], None] = print, implementation: str = "c") -> Path:
+             workers: int = 2, echo: Callable[[str], None] = print, implementation: str = "c",
+             client: Any = None) -> Path:
     """Fly ``profile`` with its filter model ``derived`` (module docstring); the summary's path.
 
     ``implementation`` is the filter of the three correction-mode runs: the
@@ -114,9 +115,9 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
     monte_carlo = None
     if runs > 0:
         t = time.perf_counter()
-        monte_carlo = run_monte_carlo(profile, derived, runs, seed=seed + 1, workers=workers,
+        monte_carlo = run_monte_carlo(profile, derived, runs, seed=seed + 1, workers=workers, client=client,
                                       progress=_echo_progress(echo, "Monte Carlo runs"))
-        timings[f"Monte Carlo ({runs} runs, {workers} workers)"] = time.perf_counter() - t
+        timings[f"Monte Carlo ({runs} runs, {monte_carlo.where})"] = time.perf_counter() - t
 
     figures = [
         _plot_trajectory(trajectory, out_dir / "trajectory.png"),

@@ -140,8 +140,8 @@ def plot_metric(result: TradeResult, path: Path) -> Path:
     axes[0][0].set_ylabel(f"{study.metric} at {hours:g} h [{_metric_unit(study.metric)}]")
     axes[0][-1].legend(fontsize=7)
     held_text = ", ".join(f"{names[i]} = {v:.4g} {study.parameters[i].unit}" for i, v in held.items())
-    fig.suptitle(f"{study.title}: {study.metric} against {x_parameter.name}" + (f" ({held_text})" if held_text else ""),
-                 fontsize=10)
+    fig.suptitle(f"Trade study {study.name}: {study.metric} at {hours:g} h against {x_parameter.name}"
+                 + (f" ({held_text})" if held_text else ""), fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -173,8 +173,8 @@ def summary_markdown(result: TradeResult, files: Sequence[Path], parquet_written
         "",
         f"Study `{study.name}` ({study.source_file}): truth model `{study.model.name}`, scenario "
         f"`{study.scenario.name}`, budget `{study.budget.name}`.  {len(study.points)} points x "
-        f"{len(study.filters)} filters = {study.case_count} covariance cases, in {result.seconds:.1f} s on "
-        f"{result.where}.",
+        f"{len(study.filters)} filters = {study.case_count} covariance cases in {result.covariance_seconds:.1f} s "
+        f"(the whole study {result.seconds:.1f} s) on {result.where}.",
         "",
         "Parameters: " + "; ".join(f"`{p.name}` [{p.unit}] sets {', '.join(p.sets)}" for p in study.parameters) + ".",
         "",

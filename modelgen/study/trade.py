@@ -82,7 +82,8 @@ class TradeResult:
     study: Study
     cases: list[CaseResult]
     monte_carlo: list[MonteCarloCase]
-    seconds: float
+    seconds: float  # the whole study
+    covariance_seconds: float  # the covariance cases alone (from submitting the first task)
     where: str
 
 
@@ -188,8 +189,10 @@ def run_trade(study: Study, client: Any = None, progress: Callable[[str], None] 
             while state["next"] <= done / total:
                 state["next"] += 0.1
 
+    covariance_start = time.perf_counter()
     finals = [f for chunk in run_tasks(evaluate_points, [(setup, c) for c in tasks], client, progress=report,
                                        label="trade") for f in chunk]
+    covariance_seconds = time.perf_counter() - covariance_start
     cases = []
     for point, systems in zip(study.points, finals):
         for choice in study.filters:
@@ -207,7 +210,7 @@ def run_trade(study: Study, client: Any = None, progress: Callable[[str], None] 
             result = run_monte_carlo(profile, derived, mc.runs, seed=mc.seed, client=client,
                                      progress=lambda d, t: report_mc(say, d, t))
             ensembles.append(MonteCarloCase(point, result))
-    return TradeResult(study, cases, ensembles, time.perf_counter() - start, where)
+    return TradeResult(study, cases, ensembles, time.perf_counter() - start, covariance_seconds, where)
 
 
 def report_mc(say: Callable[[str], None], done: int, total: int) -> None:
