@@ -54,3 +54,23 @@ def test_readme_test_command_is_what_ci_runs():
     assert len(commands) >= 2, commands
     assert commands[1] in (REPO / ".ci" / "run").read_text(encoding="utf-8")
     assert all("-c constraints.txt" in c for c in commands[:2])
+
+
+def test_readme_vector_model_generates_and_passes_the_compiled_check(tmp_path):
+    """The README's vector model (found by its name) loads, generates and passes --check."""
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    example = next(block for block in re.findall(r"```yaml\n(.*?)```", text, re.S) if block.startswith("model: vector_ins"))
+    path = tmp_path / "vector_ins.yaml"
+    path.write_text(example)
+    result = CliRunner().invoke(main, ["generate", str(path), "--out", str(tmp_path / "gen"), "--check"])
+    assert result.exit_code == 0, result.output
+    assert "check c" in result.output and "FAILED" not in result.output
+
+
+def test_readme_documents_every_navigation_library_function_and_constant():
+    from modelgen.model.navlib import NAVLIB_CONSTANTS, NAVLIB_FUNCTIONS
+
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    section = text.split("\n## Navigation library\n", 1)[1].split("\n## ", 1)[0]
+    missing = [name for name in (*NAVLIB_FUNCTIONS, *NAVLIB_CONSTANTS) if f"`{name}" not in section and f"`{name}(" not in section and f" `{name}" not in section]
+    assert missing == []

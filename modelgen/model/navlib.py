@@ -77,7 +77,7 @@ def _vector3(value: Any, function: str, argument: str) -> sp.Matrix:
 def meridian_radius(L: Scalar) -> sp.Expr:
     """R_M(L) = a (1 - e^2) / (1 - e^2 sin^2 L)^(3/2): meridian (north-south) radius of curvature [m].
 
-    Source: Groves (2013) eq. 2.105; Titterton & Weston (2004) eq. 3.83.
+    Source: Groves (2013) ch. 2 (who names it R_N, for north); Titterton & Weston (2004) ch. 3.
     Published values: 6,335,439.327 m at the equator, 6,399,593.626 m at the poles.
     """
     L = _scalar(L, "meridian_radius", "latitude")
@@ -87,7 +87,7 @@ def meridian_radius(L: Scalar) -> sp.Expr:
 def prime_vertical_radius(L: Scalar) -> sp.Expr:
     """R_N(L) = a / (1 - e^2 sin^2 L)^(1/2): prime-vertical (east-west) radius of curvature [m].
 
-    Source: Groves (2013) eq. 2.106; Titterton & Weston (2004) eq. 3.84.
+    Source: Groves (2013) ch. 2 (who names it R_E, for east); Titterton & Weston (2004) ch. 3.
     Published values: 6,378,137 m (= a) at the equator, 6,399,593.626 m at the poles.
     """
     L = _scalar(L, "prime_vertical_radius", "latitude")
@@ -127,7 +127,7 @@ def earth_rate_ned(L: Scalar, rate: Scalar = _OMEGA) -> Vector:
     """omega_ie^n = Omega [cos L, 0, -sin L]: the Earth's rotation seen in NED axes [rad/s].
 
     ``rate`` defaults to WGS-84's Omega = 7.292115e-5 rad/s; a model may pass
-    its own (a parameter ``omega_ie``).  Source: Groves (2013) eq. 5.41.
+    its own (a parameter ``omega_ie``).  Source: Groves (2013) ch. 5.
     """
     L, rate = _scalar(L, "earth_rate_ned", "latitude"), _scalar(rate, "earth_rate_ned", "rate")
     return sp.Matrix([rate * sp.cos(L), 0, -rate * sp.sin(L)])
@@ -155,8 +155,8 @@ def transport_rate_ned(L: Scalar, h: Scalar, v: Any, *radii: Scalar) -> Vector:
     """omega_en^n = [v_E/(R_N+h), -v_N/(R_M+h), -v_E tan L/(R_N+h)]: rotation of NED over the ellipsoid [rad/s].
 
     ``v`` = [v_N, v_E, v_D]; the radii are WGS-84's at L, or ``R_M, R_N``
-    given as two more arguments.  Source: Groves (2013) eq. 5.44;
-    Titterton & Weston (2004) eq. 3.72.
+    given as two more arguments.  Source: Groves (2013) ch. 5;
+    Titterton & Weston (2004) ch. 3.
     """
     L, h = _scalar(L, "transport_rate_ned", "latitude"), _scalar(h, "transport_rate_ned", "height")
     v = _vector3(v, "transport_rate_ned", "velocity")
@@ -179,7 +179,7 @@ def transport_rate_enu(L: Scalar, h: Scalar, v: Any, *radii: Scalar) -> Vector:
 def position_rate_ned(L: Scalar, h: Scalar, v: Any, *radii: Scalar) -> Vector:
     """[dL/dt, dlambda/dt, dh/dt] = [v_N/(R_M+h), v_E/((R_N+h) cos L), -v_D] from NED velocity.
 
-    Source: Groves (2013) eq. 2.111; radii as in :func:`transport_rate_ned`.
+    Source: Groves (2013) ch. 2; radii as in :func:`transport_rate_ned`.
     """
     L, h = _scalar(L, "position_rate_ned", "latitude"), _scalar(h, "position_rate_ned", "height")
     v = _vector3(v, "position_rate_ned", "velocity")
@@ -191,8 +191,8 @@ def position_rate_ned(L: Scalar, h: Scalar, v: Any, *radii: Scalar) -> Vector:
 def euler_to_dcm(roll: Scalar, pitch: Scalar, yaw: Scalar) -> sp.Matrix:
     """C_b^n = R_z(yaw) R_y(pitch) R_x(roll): body to NED from Euler angles (z-y-x order).
 
-    Source: Groves (2013) eq. 2.22 (C_b^n, the transpose of C_n^b in eq. 2.15);
-    Titterton & Weston (2004) eq. 3.47.
+    Source: Groves (2013) ch. 2 (C_b^n is the transpose of C_n^b);
+    Titterton & Weston (2004) ch. 3.
     """
     r = _scalar(roll, "euler_to_dcm", "roll")
     p = _scalar(pitch, "euler_to_dcm", "pitch")
@@ -211,7 +211,7 @@ def dcm_to_euler(C: Any) -> Vector:
     """[roll, pitch, yaw] of a body-to-NED matrix C_b^n (inverse of :func:`euler_to_dcm`).
 
     roll = atan2(C_32, C_33), pitch = -asin(C_31), yaw = atan2(C_21, C_11);
-    valid away from pitch = +-90 deg.  Source: Groves (2013) eq. 2.23.
+    valid away from pitch = +-90 deg.  Source: Groves (2013) ch. 2.
     """
     if not (isinstance(C, sp.MatrixBase) and C.shape == (3, 3)):
         got = f"{C.shape[0]}x{C.shape[1]}" if isinstance(C, sp.MatrixBase) else "scalar"
@@ -227,7 +227,7 @@ def quaternion_to_dcm(*q: Any) -> sp.Matrix:
     C = [[q0^2+q1^2-q2^2-q3^2, 2(q1q2-q0q3), 2(q1q3+q0q2)],
          [2(q1q2+q0q3), q0^2-q1^2+q2^2-q3^2, 2(q2q3-q0q1)],
          [2(q1q3-q0q2), 2(q2q3+q0q1), q0^2-q1^2-q2^2+q3^2]].
-    Source: Groves (2013) eq. 2.34; Titterton & Weston (2004) eq. 3.63.
+    Source: Groves (2013) ch. 2; Titterton & Weston (2004) ch. 3.
     """
     if len(q) == 1 and isinstance(q[0], sp.MatrixBase) and q[0].shape in ((4, 1), (1, 4)):
         q = tuple(q[0])
