@@ -21,7 +21,7 @@ involved, before anything is derived.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
 
 import sympy as sp
@@ -47,6 +47,9 @@ ERROR_QUANTITIES = ("attitude", "velocity", "position")
 WRITABLE_EQUATIONS = ("velocity", "position")
 #: Sensor-error quantities: what each one is in the sensor model.
 SENSOR_ERROR_KINDS = ("gyro_bias", "gyro_scale_factor", "accel_bias", "accel_scale_factor", "receiver_clock")
+#: Sensor errors that may be declared more than once: the bias is then their sum (seed 000 eq. (2): gyro
+#: drift = random constant + first-order Markov process).
+SUMMED_SENSOR_ERROR_KINDS = ("gyro_bias", "accel_bias")
 #: Processes of sensor-error states.
 PROCESSES = ("random_constant", "gauss_markov", "random_walk", "clock")
 #: Measurement kinds: what a measurement observes.
@@ -129,6 +132,7 @@ class _Declarations:
     states: list[State]
     noises: list[Noise]
     parameters: dict[str, Parameter]  # by symbol: parameters the engine may put into the matrices
+    measurement_biases: list[sp.Symbol] = field(default_factory=list)  # random-constant states of aiding sensors
 
 
 def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declarations) -> dict[str, Any]:
@@ -245,8 +249,8 @@ def _sensor_errors(read: _Reader, section: Mapping, frame: str, decl: _Declarati
         key = f"navigation.sensor_errors[{i}]"
         entry = read.mapping(item, key, ("of", "process", "symbols", "symbol", "names", "rate", "sigma", "psd", "noise_symbols", "noise_names"), ("of", "process"))
         kind = read.choice(entry["of"], f"{key}.of", SENSOR_ERROR_KINDS)
-        if kind in parts:
-            raise ModelError(f"{read.at(key)}: sensor error {kind!r} is declared twice")
+        if kind in parts and kind not in SUMMED_SENSOR_ERROR_KINDS:
+            raise ModelError(f"{read.at(key)}: sensor error {kind!r} is declared twice (only {', '.join(SUMMED_SENSOR_ERROR_KINDS)} may be, as a sum)")
         process = read.choice(entry["process"], f"{key}.process", PROCESSES)
         if (process == "clock") != (kind == "receiver_clock"):
             raise ModelError(f"{read.at(f'{key}.process')}: process 'clock' is the receiver clock's (bias and drift), and only its")
@@ -286,7 +290,7 @@ def _sensor_errors(read: _Reader, section: Mapping, frame: str, decl: _Declarati
             rates = [w for w in noises] if process == "random_walk" else [state_symbols[1] + noises[0], noises[1]]
             _add_noises(decl, noise_names, noise_symbols, psds, units, kind)
         dynamics.update(zip(state_symbols, rates))
-        parts[kind] = sp.Matrix(state_symbols)
+        parts[kind] = parts[kind] + sp.Matrix(state_symbols) if kind in parts else sp.Matrix(state_symbols)
         order.extend(state_symbols)
     return parts, dynamics, order
 
@@ -361,7 +365,7 @@ def _measurements(
         raise ModelError(f"{read.at('navigation.measurements')}: 'navigation.measurements' must be a list")
     functions: list[pt.MeasurementFunction] = []
     declared: list[Measurement] = []
-    fields = ("of", "form", "lever_arm", "axes", "symbols", "names", "variance", "line_of_sight", "expression", "difference", "units")
+    fields = ("of", "form", "lever_arm", "axes", "symbols", "names", "variance", "line_of_sight", "expression", "difference", "units", "bias")
     for i, item in enumerate(raw):
         key = f"navigation.measurements[{i}]"
         entry = read.mapping(item, key, fields, ("of", "symbols", "variance"))
@@ -376,6 +380,9 @@ def _measurements(
             function, scale, units, count, extra = _pseudorange(read, entry, key, frame, clock, decl)
         else:
             function, scale, units, count, extra = _expression_measurement(read, entry, key, namespace)
+        bias = _measurement_bias(read, entry, key, count, units, decl)
+        if bias is not None:  # measured = true + bias: the measured side's extra term
+            extra = bias if extra is None else extra + bias
         symbols = read.names(entry["symbols"], f"{key}.symbols", count)
         names = read.names(entry["names"], f"{key}.names", count) if "names" in entry else [f"{kind}_difference_{k + 1}" for k in range(count)]
         variances = entry["variance"] if isinstance(entry["variance"], list) else [entry["variance"]] * count
@@ -388,18 +395,40 @@ def _measurements(
     return functions, declared
 
 
+def _measurement_bias(read: _Reader, entry: Mapping, key: str, count: int, units: Sequence[str], decl: _Declarations) -> sp.Matrix | None:
+    """An aiding sensor's own error, one random-constant state per component (``bias: {symbols, names}``).
+
+    E.g. the Doppler radar's velocity error of seed 000: measured = true + bias, so the
+    computed-minus-measured difference carries minus the bias; the states follow the
+    sensor-error states.
+    """
+    if "bias" not in entry:
+        return None
+    bias = read.mapping(entry["bias"], f"{key}.bias", ("process", "symbols", "names"), ("symbols",))
+    read.choice(bias.get("process", "random_constant"), f"{key}.bias.process", ("random_constant",))
+    symbols = read.names(bias["symbols"], f"{key}.bias.symbols", count)
+    names = read.names(bias["names"], f"{key}.bias.names", count) if "names" in bias else [f"{s}_bias" for s in symbols]
+    for name, symbol, unit in zip(names, symbols, units):
+        decl.states.append(State(name=name, symbol=symbol, unit=unit, description="aiding-sensor error (random constant): measured = true + bias"))
+    states = [sp.Symbol(s, real=True) for s in symbols]
+    decl.measurement_biases.extend(states)
+    return sp.Matrix(states)
+
+
 def _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign):
     """GNSS position (geodetic, or metres along the listed axes) or velocity of the antenna at lever arm l^b.
 
     Antenna position: p + D (C l), D = (1/(R_M + h), 1/((R_N + h) cos L), up) per
-    metre; antenna velocity: v + C (w_ib x l) - w_ie x (C l) (Groves 2013, eqs. 14.x).
+    metre at the computed position (so that in metres the lever arm is the
+    Cartesian offset C l, as in Groves 2013 eq. 14.x); antenna velocity: v + C (w_ib x l) - w_ie x (C l) (Groves 2013, eqs. 14.x).
     """
     form = read.choice(entry.get("form", "metres" if kind == "position" else "navigation"), f"{key}.form", ("metres", "geodetic") if kind == "position" else ("navigation",))
     if kind == "position":
         def function(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
             if arm is None:
                 return state.position
-            return state.position + pt.metres_matrix(frame, state.position).inv() * (state.attitude * arm)
+            # metres to (dL, dlambda, dh) at the computed position: the lever arm stays a Cartesian offset
+            return state.position + pt.metres_matrix(frame, computed.position).inv() * (state.attitude * arm)
 
         if form == "geodetic":
             if "axes" in entry:
@@ -578,8 +607,8 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         frame=frame, **nav, errors=definition,
         gyro=pt.InertialSensorErrors(parts.get("gyro_bias"), parts.get("gyro_scale_factor"), noises.get("gyro")),
         accelerometer=pt.InertialSensorErrors(parts.get("accel_bias"), parts.get("accel_scale_factor"), noises.get("accel")),
-        state_order=tuple(navigation_order + sensor_order),
-        auxiliary_dynamics=aux,
+        state_order=tuple(navigation_order + sensor_order + decl.measurement_biases),
+        auxiliary_dynamics={**aux, **{s: sp.S.Zero for s in decl.measurement_biases}},
         noises=tuple(sp.Symbol(n.symbol, real=True) for n in decl.noises),
         measurements=tuple(functions),
         approximations=_approximations(read, section),
