@@ -52,3 +52,21 @@ def test_ins_gps15_twin_lists_every_term_its_approximations_drop_with_its_size(i
     assert [(t.matrix, t.row, t.column) for t in gravity] == [("F", 5, 6)]
     notes = [n for n in twin.notes if n.startswith("Approximation gravity_height_only")]
     assert notes and "F[velocity_error_up, latitude_error] = 0.048" in notes[0]
+
+
+def test_readme_navigation_example_is_under_40_lines_and_generates_and_passes_the_compiled_check(tmp_path):
+    import re
+
+    from click.testing import CliRunner
+
+    from conftest import REPO
+    from modelgen.cli import main
+
+    blocks = re.findall(r"```yaml\n(.*?)```", (REPO / "README.md").read_text(encoding="utf-8"), re.S)
+    example = next(b for b in blocks if "model: ins_gnss15_example" in b)
+    assert len(example.splitlines()) < 40
+    path = tmp_path / "ins_gnss15_example.yaml"
+    path.write_text(example)
+    result = CliRunner().invoke(main, ["generate", str(path), "--out", str(tmp_path / "gen"), "--check"])
+    assert result.exit_code == 0, result.output
+    assert "check c" in result.output and "FAILED" not in result.output
