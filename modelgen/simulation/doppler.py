@@ -177,6 +177,10 @@ class DopplerAiding(NavigationQuantitySensor):
             velocity = quaternion_to_dcm(navigation[6:10]) @ velocity
         return velocity, None
 
+    def fix_table(self, record: DopplerRecord) -> tuple[np.ndarray, np.ndarray, bool]:
+        """:meth:`fix` for every epoch, for the compiled loop: velocity (NED or body axes), no position."""
+        return record.velocity, np.full((len(record.times), 3), np.nan), record.frame == "body"
+
     def true_bias(self, record: DopplerRecord) -> np.ndarray:
         return record.bias[0]
 

@@ -241,6 +241,12 @@ class FilterLoop:
             self.progress(k, self.n_cycles)
 
 
+    def run(self, first: int, last: int) -> None:
+        """Filter cycles ``first``..``last`` in order (a piece of the flight)."""
+        for k in range(first, last + 1):
+            self.step(k)
+
+
 def run_filter(navigator: Navigator, kalman: KalmanFilter, measurement_matrices: Callable[[dict], tuple[np.ndarray, np.ndarray]],
                mode: str, n_cycles: int, period: float, fed_back: np.ndarray, gate_probability: float = 0.0,
                filter_name: str = "", progress: Callable[[int, int], None] | None = None,

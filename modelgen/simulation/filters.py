@@ -25,8 +25,10 @@ Three implementations plug in:
 
 from __future__ import annotations
 
+import ctypes
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Mapping, Protocol
+from typing import Any, Callable, Mapping, Protocol
 
 import numpy as np
 
@@ -198,6 +200,77 @@ class GeneratedCFilter:
         self.compiled.set_estimate(np.asarray(x, float))
 
 
+# -- the generated C filter, laid out for the compiled loop --------------------------------------
+
+
+@dataclass
+class NativeFilter:
+    """One generated C filter instance laid out for the compiled loop: structs, views, function pointers."""
+
+    compiled: Any  # modelgen.codegen.build.CompiledFilter
+    functions: tuple  # evaluate, discretize, predict, update_masked, get_covariance (ctypes, void* arguments)
+    addresses: np.ndarray  # params, matrices, transition, filter, workspace (uint64)
+    parameters: np.ndarray  # view of the params struct (model parameter order)
+    state: np.ndarray  # view of filter.x
+    transition_matrix: np.ndarray  # view of transition.Phi (n, n)
+    filter_bytes: np.ndarray  # the filter struct as bytes (snapshot / restore around a gated update)
+
+    @classmethod
+    def of(cls, compiled: Any) -> "NativeFilter":
+        """Views and fresh function pointers (their own argtypes) on a loaded :class:`CompiledFilter`."""
+        lib, model = compiled.lib, compiled.model
+        if compiled.options.ud or compiled.dtype != np.float64:
+            raise ModelError("native filter loop: needs the default (double, non-UD) generated C filter")
+
+        def function(name: str, argtypes: list, restype=ctypes.c_int):
+            fn = lib[f"{model}_{name}"]  # a new function object: CompiledFilter's own keep their argtypes
+            fn.argtypes, fn.restype = argtypes, restype
+            return fn
+
+        void = ctypes.c_void_p
+        functions = (
+            function("matrices_evaluate", [void, void]),
+            function("discretize", [void, ctypes.c_double, void, void]),
+            function("predict", [void, void, void]),
+            function("update_masked", [void] * 7),
+            function("get_covariance", [void, void], None),
+        )
+        addresses = np.array([ctypes.addressof(s) for s in (compiled.params, compiled.matrices, compiled.transition,
+                                                            compiled.filter, compiled.workspace)], dtype=np.uint64)
+        n_parameters = len(compiled.params._fields_)
+        parameters = np.ctypeslib.as_array((ctypes.c_double * n_parameters).from_address(int(addresses[0])))
+        size = ctypes.sizeof(compiled.filter)
+        filter_bytes = np.ctypeslib.as_array((ctypes.c_uint8 * size).from_address(int(addresses[3])))
+        state = np.ctypeslib.as_array(compiled.filter.x)
+        transition_matrix = np.ctypeslib.as_array(compiled.transition.Phi)
+        if transition_matrix.shape != (compiled.n, compiled.n):
+            raise ModelError("native filter loop: the transition struct has no full Phi")
+        return cls(compiled, functions, addresses, parameters, state, transition_matrix, filter_bytes)
+
+
+class NativeFilterMaker:
+    """``filter_factory(derived, "c", ...)``: a maker of generated C filters (x0, P0) -> filter.
+
+    Calling it gives the Python loop's :class:`~modelgen.simulation.filters.GeneratedCFilter`;
+    the streaming driver asks :meth:`native` for the compiled loop's view of one
+    (:mod:`modelgen.simulation.native_loop`).
+    """
+
+    name = "generated-c"
+
+    def __init__(self, library, model_name: str, sizes, parameter_names: list[str]):
+        self.library, self.model_name, self.sizes, self.parameter_names = library, model_name, sizes, parameter_names
+
+    def __call__(self, x0: np.ndarray, P0: np.ndarray) -> "GeneratedCFilter":
+        from modelgen.codegen.build import CompiledFilter  # sibling layer, imported where used
+
+        return GeneratedCFilter(CompiledFilter(self.library, self.model_name, self.sizes, self.parameter_names), x0, P0)
+
+    def native(self, x0: np.ndarray, P0: np.ndarray) -> NativeFilter:
+        """A fresh filter set to (x0, P0), laid out for the compiled loop."""
+        return NativeFilter.of(self(x0, P0).compiled)
+
+
 IMPLEMENTATIONS = ("c", "python", "reference")
 
 
@@ -207,14 +280,17 @@ def filter_factory(derived: DerivedModel, implementation: str, work_dir: str | P
     ``c`` and ``python`` are the code ``modelgen generate`` writes for the
     model (default options), generated into ``work_dir`` now and compiled or
     imported once; every filter made shares that code but has its own state.
-    ``reference`` is the dense numpy filter.
+    ``reference`` is the dense numpy filter.  For ``c`` the maker is a
+    :class:`NativeFilterMaker`: called, it
+    gives a :class:`GeneratedCFilter` for the Python loop; the streaming driver
+    flies it in the compiled loop where the sensor allows.
     """
     if implementation not in IMPLEMENTATIONS:
         raise ModelError(f"simulation: unknown filter implementation {implementation!r} "
                          f"(choose from {', '.join(IMPLEMENTATIONS)})")
     if implementation == "reference":
         return lambda x0, P0: ReferenceFilter(derived, x0, P0)
-    from modelgen.codegen.build import CompiledFilter, compile_shared_library, load_python_module  # siblings
+    from modelgen.codegen.build import compile_shared_library, load_python_module  # siblings
     from modelgen.codegen.generate import generate_code
     from modelgen.fileio.output import write_atomically
     from modelgen.codegen.layout import ModelSizes
@@ -226,8 +302,7 @@ def filter_factory(derived: DerivedModel, implementation: str, work_dir: str | P
         module = load_python_module(folder / f"{model.name}.py")
         return lambda x0, P0: GeneratedPythonFilter(module, x0, P0)
     library = compile_shared_library([folder / f"{model.name}.c"], folder / f"lib{model.name}.so")
-    sizes = ModelSizes.of(derived)
-    return lambda x0, P0: GeneratedCFilter(CompiledFilter(library, model.name, sizes, model.parameter_names), x0, P0)
+    return NativeFilterMaker(library, model.name, ModelSizes.of(derived), model.parameter_names)
 
 
 def named_parameters(derived: DerivedModel, available: Mapping[str, float], validate: bool = True) -> dict[str, float]:

@@ -207,6 +207,10 @@ class GpsAiding(NavigationQuantitySensor):
     def fix(self, record: GpsRecord, epoch: int, navigation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return record.velocity[epoch], record.position[epoch]
 
+    def fix_table(self, record: GpsRecord) -> tuple[np.ndarray, np.ndarray, bool]:
+        """:meth:`fix` for every epoch, for the compiled loop: NED velocity and (lat, lon, h)."""
+        return record.velocity, record.position, False
+
 
 #: the registry entry (modelgen.simulation.sensors)
 GPS = GpsAiding()

@@ -39,6 +39,7 @@ from modelgen.simulation.aiding import (
 from modelgen.simulation.error_layout import ErrorLayout, build_layout
 from modelgen.simulation.filter_loop import FilterLoop, Measurement, RunResult
 from modelgen.simulation.filters import named_parameters
+from modelgen.simulation.native_loop import NativeFilterLoop
 from modelgen.simulation.profile_keys import ProfileSection
 from modelgen.simulation.rotation import quaternion_to_dcm
 from modelgen.simulation.strapdown import Strapdown
@@ -94,6 +95,11 @@ class NavigationQuantitySensor(ABC):
         q_b^n): a sensor that measures in body axes resolves with its attitude.
         """
 
+    # A subclass whose fix() is a table lookup may also give
+    #     fix_table(record) -> (velocity (epochs, 3), position (epochs, 3), velocity in body axes: bool)
+    # (NaN where it measures nothing); the compiled filter loop then flies it
+    # (modelgen.simulation.native_loop), else the Python loop does.
+
     def true_bias(self, record: Any) -> np.ndarray:
         """The true bias (NED, 3) of the sensor's bias states."""
         return np.zeros(3)
@@ -139,6 +145,25 @@ class NavigationQuantitySensor(ABC):
         return FilterLoop(navigator, kalman, measurement_function(derived), mode, len(trajectory.truth) - 1,
                           trajectory.record_period, layout.fed_back_mask(), profile.filter.gate_probability,
                           getattr(kalman, "name", type(kalman).__name__), progress, record_every=record_every, sink=sink)
+
+    def native_loop(self, profile: Any, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
+                    layout: ErrorLayout, make_filter: Any, mode: str, progress: Progress | None,
+                    record_every: int = 1) -> Any:
+        """The same loop in compiled code with the generated C filter (:mod:`modelgen.simulation.native_loop`).
+
+        Needs :meth:`fix_table` (a subclass that gives it) and a filter maker
+        with ``native`` (``filter_factory(..., "c", ...)``).
+        """
+        mapping = profile.filter.measurements.get(self.name)
+        if not mapping:
+            raise ModelError(f"scenario {profile.name!r}: filter.measurements.{self.name} is missing")
+        navigator = StrapdownNavigator(profile, layout, sensors, mapping, self)
+        P0 = initial_covariance(layout, profile, trajectory.initial_state(), self)
+        native = make_filter.native(np.zeros(layout.n), P0)
+        values = operating_point(navigator.output(), navigator.strapdown.specific_force, navigator.frame,
+                                 profile.imu_budget, navigator.noise)
+        return NativeFilterLoop(navigator, native, mode, len(trajectory.truth) - 1, trajectory.record_period,
+                                layout.fed_back_mask(), profile.filter.gate_probability, values, record_every, progress)
 
     def fly(self, profile: Any, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
             layout: ErrorLayout, make_filter: FilterMaker, mode: str, progress: Progress | None) -> RunResult:

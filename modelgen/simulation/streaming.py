@@ -19,13 +19,14 @@ piece length): tests/simulation/test_streaming.py checks both.
 from __future__ import annotations
 
 import math
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable
 
 from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.simulation.aiding import FilterMaker, Progress, SensorData
 from modelgen.simulation.error_layout import ErrorLayout
-from modelgen.simulation.filter_loop import FilterLoop, RunResult
+from modelgen.simulation.filter_loop import RunResult
+from modelgen.simulation.native_loop import native_supported
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.trajectory import Trajectory
 
@@ -33,6 +34,8 @@ from modelgen.simulation.trajectory import Trajectory
 PIECE_SECONDS = 10.0
 
 Sink = Callable[[int, RunResult, int], None]
+#: who runs the cycle between IMU samples and filter: the compiled loop where possible, or the Python loop
+GLUES = ("compiled", "python")
 
 
 def cycles_per_piece(trajectory: Trajectory, piece_seconds: float) -> int:
@@ -63,18 +66,28 @@ def load_piece(sensors: SensorData, cursor, first_cycle: int, last_cycle: int) -
 def fly_modes(profile: FlightProfile, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
               layout: ErrorLayout, make_filter: FilterMaker, modes: Iterable[str],
               progress: Callable[[str], Progress] | None = None, piece_seconds: float = PIECE_SECONDS,
-              record_every: int = 1, sinks: dict[str, Sink] | None = None) -> dict[str, RunResult]:
+              record_every: int = 1, sinks: dict[str, Sink] | None = None,
+              glue: str = "compiled") -> dict[str, RunResult]:
     """Fly ``modes`` in lockstep over one pass of the sensor data (module docstring); mode -> its result.
 
     ``progress(mode)`` makes each mode's progress callback; ``sinks[mode]``
     receives each recorded row as it is made (an incremental writer).  A held
     trajectory is flown the same way (its increments are sliced, not generated).
+    ``glue="compiled"`` (default) flies the generated C filter in the compiled
+    loop (:mod:`modelgen.simulation.native_loop`) where the sensor and filter
+    allow it (and no sink is asked for), else the Python loop; ``"python"``
+    always flies the Python loop.
     """
     sensor = profile.aiding_sensor
     if not hasattr(sensor, "filter_loop"):
         raise ModelError(f"aiding sensor {sensor.name!r} has no filter_loop(): it can fly a held trajectory only")
     sinks = sinks or {}
-    loops: list[FilterLoop] = [
+    if glue not in GLUES:
+        raise ModelError(f"streaming: unknown glue {glue!r} (choose from {', '.join(GLUES)})")
+    native = glue == "compiled" and not sinks and native_supported(sensor, make_filter)
+    loops: list[Any] = [
+        sensor.native_loop(profile, derived, trajectory, sensors, layout, make_filter, mode,
+                           progress(mode) if progress else None, record_every=record_every) if native else
         sensor.filter_loop(profile, derived, trajectory, sensors, layout, make_filter, mode,
                            progress(mode) if progress else None, record_every=record_every, sink=sinks.get(mode))
         for mode in modes
@@ -85,6 +98,5 @@ def fly_modes(profile: FlightProfile, derived: DerivedModel, trajectory: Traject
         if cursor is not None:
             load_piece(sensors, cursor, first, last)
         for loop in loops:
-            for k in range(first, last + 1):
-                loop.step(k)
+            loop.run(first, last)
     return {loop.mode: loop.result for loop in loops}
