@@ -300,21 +300,24 @@ def _add_noises(decl: _Declarations, names: Sequence[str], symbols: Sequence[str
         decl.noises.append(Noise(name=name, symbol=symbol, unit=f"{unit}/sqrt(s)", psd=psd, description=f"drives the {kind.replace('_', ' ')}"))
 
 
-def _sensor_noises(read: _Reader, section: Mapping, decl: _Declarations) -> dict[str, sp.Matrix]:
-    """White measurement noise of the gyros and accelerometers (``noises: {gyro: {...}, accel: {...}}``)."""
+def _sensor_noises(read: _Reader, section: Mapping, frame: str, decl: _Declarations) -> dict[str, tuple[sp.Matrix, str]]:
+    """White noise of the gyros and accelerometers (``noises: {gyro: {...}, accel: {...}}``), in body or navigation axes."""
     raw = read.mapping(section.get("noises", {}), "navigation.noises", ("gyro", "accel"))
     out = {}
     words = {"gyro": ("gyro_white_noise", "w_g", "rad/sqrt(s)", "angle random walk"), "accel": ("accel_white_noise", "w_a", "m/s/sqrt(s)", "velocity random walk")}
     for sensor, value in raw.items():
         key = f"navigation.noises.{sensor}"
-        entry = read.mapping(value, key, ("psd", "symbols", "symbol", "names"), ("psd",))
+        entry = read.mapping(value, key, ("psd", "symbols", "symbol", "names", "axes"), ("psd",))
+        axes = read.choice(entry.get("axes", "body"), f"{key}.axes", ("body", "navigation"))
         prefix, default, unit, text = words[sensor]
-        symbols = _vector_symbols(read, entry, key, default, "NED", "body")
-        names = read.names(entry["names"], f"{key}.names", 3) if "names" in entry else [f"{prefix}_{a}" for a in "xyz"]
+        symbols = _vector_symbols(read, entry, key, default, frame, "body" if axes == "body" else None)
+        words_of = list("xyz") if axes == "body" else _axis_words(frame, None)
+        names = read.names(entry["names"], f"{key}.names", 3) if "names" in entry else [f"{prefix}_{a}" for a in words_of]
         psd = scalar_text(entry["psd"], read.at(f"{key}.psd"), f"{key}.psd")
-        for name, symbol, axis in zip(names, symbols, "xyz"):
-            decl.noises.append(Noise(name=name, symbol=symbol, unit=unit, psd=psd, description=f"{axis} {sensor} white noise ({text})"))
-        out[sensor] = _symbols(symbols)
+        for name, symbol, axis in zip(names, symbols, words_of):
+            where = f"{axis}" if axes == "body" else f"resolved {axis}"
+            decl.noises.append(Noise(name=name, symbol=symbol, unit=unit, psd=psd, description=f"{sensor} white noise {where} ({text})"))
+        out[sensor] = (_symbols(symbols), axes)
     return out
 
 
@@ -428,7 +431,7 @@ def _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign):
             if arm is None:
                 return state.position
             # metres to (dL, dlambda, dh) at the computed position: the lever arm stays a Cartesian offset
-            return state.position + pt.metres_matrix(frame, computed.position).inv() * (state.attitude * arm)
+            return state.position + pt.metres_matrix_inverse(frame, computed.position) * (state.attitude * arm)
 
         if form == "geodetic":
             if "axes" in entry:
@@ -600,13 +603,13 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         return {s: sp.Symbol(s, real=True) for s in own}
 
     definition, navigation_order = _error_definition(read, section, frame, decl)
-    noises = _sensor_noises(read, section, decl)
+    noises = _sensor_noises(read, section, frame, decl)
     parts, aux, sensor_order = _sensor_errors(read, section, frame, decl, namespace)
     functions, measurement_decls = _measurements(read, section, frame, decl, parts.get("receiver_clock"), namespace)
     problem = pt.NavigationProblem(
         frame=frame, **nav, errors=definition,
-        gyro=pt.InertialSensorErrors(parts.get("gyro_bias"), parts.get("gyro_scale_factor"), noises.get("gyro")),
-        accelerometer=pt.InertialSensorErrors(parts.get("accel_bias"), parts.get("accel_scale_factor"), noises.get("accel")),
+        gyro=pt.InertialSensorErrors(parts.get("gyro_bias"), parts.get("gyro_scale_factor"), *noises.get("gyro", (None, "body"))),
+        accelerometer=pt.InertialSensorErrors(parts.get("accel_bias"), parts.get("accel_scale_factor"), *noises.get("accel", (None, "body"))),
         state_order=tuple(navigation_order + sensor_order + decl.measurement_biases),
         auxiliary_dynamics={**aux, **{s: sp.S.Zero for s in decl.measurement_biases}},
         noises=tuple(sp.Symbol(n.symbol, real=True) for n in decl.noises),
@@ -676,25 +679,36 @@ def approximation_notes(data: Mapping, equations: pt.ErrorEquations, decl: _Decl
             parts.append(f"{t.matrix}[{rows[t.row]}, {columns[t.column]}]" + (f" = {size:.3g}" if size is not None else ""))
         dropped = "; ".join(parts) if parts else "no term in this model"
         notes.append(f"Approximation {name} ({pt.APPROXIMATION_DESCRIPTIONS[name]}): dropped {dropped} (size at the check scenario).")
+    if approximations and not values:
+        notes.append("The sizes above need a check: scenario; this model has none.")
     return notes
 
 
 def _check_values(data: Mapping, decl: _Declarations) -> dict[sp.Symbol, float]:
-    """Parameter values of the file's check scenario (SI) and defaults, by symbol; empty without a scenario."""
-    from modelgen.model.check_scenario import parse_check_section
+    """Parameter values of the file's check scenario (SI) and defaults, by symbol; empty without a scenario.
 
-    values = {sp.Symbol(p.symbol, real=True): p.value for p in decl.parameters.values() if p.value is not None}
-    if "check" not in data:
-        return values
-    try:
-        section = parse_check_section(data["check"], {}, "<check>")
-    except ModelError:
-        return values  # the loader reports it with file:line
-    by_name = {p.name: p.symbol for p in decl.parameters.values()}
-    for name, value in section.get("parameters", {}).items():
-        if name in by_name:
-            values[sp.Symbol(by_name[name], real=True)] = value
-    return values
+    Quantities an approximation removed from the model (so the scenario cannot
+    give them) take their value at the scenario: height 0 and vertical velocity
+    0 if absent, WGS-84 radii and normal gravity at the scenario's latitude.
+    """
+    from modelgen.model.check_scenario import parse_check_section
+    from modelgen.model.navlib import normal_gravity
+
+    values = {p.name: p.value for p in decl.parameters.values() if p.value is not None}
+    if "check" in data:
+        try:
+            values.update(parse_check_section(data["check"], {}, "<check>").get("parameters", {}))
+        except ModelError:
+            pass  # the loader reports it with file:line
+    values.setdefault("height", 0.0)
+    for name in ("velocity_down", "velocity_up"):
+        values.setdefault(name, 0.0)
+    if "latitude" in values:
+        radii = wgs84.earth_radii(values["latitude"])
+        values.setdefault("meridian_radius", radii[0])
+        values.setdefault("prime_vertical_radius", radii[1])
+        values.setdefault("gravity", float(normal_gravity(values["latitude"], values["height"])))
+    return {sp.Symbol(p.symbol, real=True): values[p.name] for p in decl.parameters.values() if p.name in values}
 
 
 def term_magnitude(term: sp.Expr, values: Mapping[sp.Symbol, float]) -> float | None:

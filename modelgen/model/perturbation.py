@@ -136,6 +136,12 @@ def gravity_vector(frame: str, position: sp.Matrix) -> sp.Matrix:
     return _vector((0, 0, g)) if frame == "NED" else _vector((0, 0, -g))
 
 
+def metres_matrix_inverse(frame: str, position: sp.Matrix) -> sp.Matrix:
+    """M^-1: (dL, dlambda, dh) from navigation-frame metres (M is a signed permutation of a diagonal)."""
+    M = metres_matrix(frame, position)
+    return M.T.applyfunc(lambda e: 1 / e if e != 0 else sp.S.Zero)
+
+
 def metres_matrix(frame: str, position: sp.Matrix) -> sp.Matrix:
     """M with (navigation-frame metres) = M (dL, dlambda, dh): north (R_M + h) dL, east (R_N + h) cos L dlambda."""
     latitude, _, height = position
@@ -205,21 +211,32 @@ class Mechanization:
 # -- what the model file declares ------------------------------------------------
 @dataclass(frozen=True)
 class InertialSensorErrors:
-    """measured = (I + diag(scale_factor)) true + bias + noise; any part may be absent (None)."""
+    """measured = (I + diag(scale_factor)) true + bias + noise; any part may be absent (None).
+
+    ``noise_axes`` ``navigation``: the white noise is given resolved in the
+    navigation frame (C w_body, a model that assumes equal noise on every axis),
+    so it enters the navigation equations without the attitude matrix.
+    """
 
     bias: sp.Matrix | None = None
     scale_factor: sp.Matrix | None = None
     noise: sp.Matrix | None = None
+    noise_axes: str = "body"
 
     def error(self, measured: sp.Matrix | None, what: str) -> sp.Matrix:
-        """measured - true, with true = (measured - bias - noise) / (1 + scale_factor) per axis (exact)."""
-        parts = [p for p in (self.bias, self.noise) if p is not None]
+        """measured - true in body axes, with true = (measured - bias - noise) / (1 + scale_factor) per axis (exact)."""
+        body_noise = self.noise if self.noise_axes == "body" else None
+        parts = [p for p in (self.bias, body_noise) if p is not None]
         offset = sum(parts, sp.zeros(3, 1)) if parts else sp.zeros(3, 1)
         if self.scale_factor is None:
             return offset
         if measured is None:
             raise ModelError(f"the {what} scale factor needs the sensed {what} input in body axes")
         return _vector([measured[i] - (measured[i] - offset[i]) / (1 + self.scale_factor[i]) for i in range(3)])
+
+    def navigation_noise(self) -> sp.Matrix:
+        """The white noise resolved in the navigation frame (zero when it is given in body axes)."""
+        return self.noise if self.noise is not None and self.noise_axes == "navigation" else sp.zeros(3, 1)
 
 
 @dataclass(frozen=True)
@@ -347,7 +364,7 @@ def _states(problem: NavigationProblem, approximations: set[str]) -> tuple[Navig
     body_input = problem.specific_force if problem.specific_force_axes == "body" else None
     force_error = problem.accelerometer.error(body_input, "accelerometer")
     sensed = _sensed_navigation_force(problem)
-    true_force = (sp.eye(3) + skew(phi)) * (sensed - C * force_error)
+    true_force = (sp.eye(3) + skew(phi)) * (sensed - C * force_error - problem.accelerometer.navigation_noise())
     p = problem.position
     computed = NavigationState(C, problem.velocity, p, sensed, problem.body_rate, p, p)
     earth_at = p if "no_earth_rate_position_terms" in approximations else true_p
@@ -376,7 +393,7 @@ def _primitive_stage(problem: NavigationProblem, equation_approximations: set[st
     w_in_c = mech.navigation_rate(computed)
     gyro_error = problem.gyro.error(problem.body_rate, "gyro")
     rates = sp.Matrix.vstack(
-        -w_in_c.cross(phi) + (w_in_c - mech.navigation_rate(true)) - problem.attitude * gyro_error,
+        -w_in_c.cross(phi) + (w_in_c - mech.navigation_rate(true)) - problem.attitude * gyro_error - problem.gyro.navigation_noise(),
         mech.velocity_rate(computed) - mech.velocity_rate(true),
         mech.position_rate(computed) - mech.position_rate(true),
     )
@@ -435,7 +452,7 @@ def _change_of_variables(problem: NavigationProblem) -> tuple[sp.Matrix, sp.Matr
     forward = {**dict(zip(e.attitude_states, attitude)), **dict(zip(e.velocity_states, velocity)), **dict(zip(e.position_states, position))}
     # inverse: primitive errors from declared ones
     d_pos, d_att, d_vel = _vector(e.position_states), _vector(e.attitude_states), _vector(e.velocity_states)
-    dp_of = M.inv() * d_pos if e.position == "metres" else d_pos
+    dp_of = metres_matrix_inverse(problem.frame, problem.position) * d_pos if e.position == "metres" else d_pos
     phi_of = d_att + theta(dp_of) if e.attitude == "psi" else d_att
     dv_of = d_vel - theta(dp_of).cross(problem.velocity) if e.velocity == "computed_frame" else d_vel
     primitive = [*phi, *dv, *dp, *others]
@@ -502,19 +519,14 @@ def single_earth_radius(stage: _Stage, problem: NavigationProblem) -> _Stage:
 
 
 def no_height_in_radii(stage: _Stage, problem: NavigationProblem) -> _Stage:
-    """R + h ~ R: the computed height is dropped beside the Earth radii (h << R)."""
+    """R + h ~ R: the computed height is dropped beside the Earth radii (h << R); gravity keeps its own height."""
     h = problem.position[2]
-    return _Stage(*(m.applyfunc(lambda e: _drop_height(e, h)) for m in (stage.F, stage.G, stage.H)))
-
-
-def _drop_height(expr: sp.Expr, height: sp.Symbol) -> sp.Expr:
-    """``expr`` with ``height`` removed from every sum that adds it to an Earth radius."""
-    radii = (MeridianRadius, PrimeVerticalRadius)
-
-    def beside_radius(node: sp.Basic) -> bool:
-        return isinstance(node, sp.Add) and height in node.args and any(a.func in radii for a in node.args)
-
-    return expr.replace(beside_radius, lambda node: sp.Add(*(a for a in node.args if a != height)))
+    out = []
+    for m in (stage.F, stage.G, stage.H):
+        kept = {a: sp.Dummy("gravity_term") for a in m.atoms(sp.Derivative) | m.atoms(Gravity)}
+        dropped = m.xreplace(kept).xreplace({h: 0})
+        out.append(dropped.xreplace({v: k for k, v in kept.items()}))
+    return _Stage(*out)
 
 
 def constant_gravity(stage: _Stage, problem: NavigationProblem) -> _Stage:
@@ -688,7 +700,7 @@ def _differences(name: str, before: _Stage, after: _Stage) -> list[NeglectedTerm
         for i in range(a.rows):
             for j in range(a.cols):
                 if a[i, j] != b[i, j]:
-                    term = simplify_entry(a[i, j] - b[i, j])
-                    if term != 0:
-                        out.append(NeglectedTerm(name, label, i, j, term))
+                    difference = a[i, j] - b[i, j]
+                    if sp.cancel(sp.together(difference)) != 0:  # zero once rational functions are cancelled: no term
+                        out.append(NeglectedTerm(name, label, i, j, simplify_entry(difference)))
     return out

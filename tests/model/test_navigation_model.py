@@ -22,24 +22,39 @@ def _numeric(model):
     return derive(model).numeric(values)
 
 
+TWINS = ("ins_gps15", "gps_pseudorange11")
+
+
 @pytest.fixture(scope="module")
 def ins_gps15_pair():
     return load_model("ins_gps15"), load_model("ins_gps15_twin")
 
 
-def test_ins_gps15_twin_declares_the_hand_models_states_noises_and_measurements_in_order(ins_gps15_pair):
-    hand, twin = ins_gps15_pair
+@pytest.mark.parametrize("hand_name", TWINS)
+def test_twin_declares_the_hand_models_states_noises_and_measurements_in_order(hand_name):
+    hand, twin = load_model(hand_name), load_model(f"{hand_name}_twin")
     assert [(s.name, s.symbol) for s in twin.states] == [(s.name, s.symbol) for s in hand.states]
     assert [(n.name, n.symbol) for n in twin.noises] == [(n.name, n.symbol) for n in hand.noises]
     assert [(m.name, m.symbol) for m in twin.measurements] == [(m.name, m.symbol) for m in hand.measurements]
 
 
-def test_ins_gps15_twin_F_G_H_Q_R_equal_the_hand_model_at_its_check_scenario(ins_gps15_pair):
-    hand, twin = ins_gps15_pair
+@pytest.mark.parametrize("hand_name", TWINS)
+def test_twin_F_G_H_Q_R_equal_the_hand_model_at_its_check_scenario(hand_name):
+    """ins_gps15 (phi-angle, geodetic position) and Benson's psi-angle pseudo-range model, derived."""
+    hand, twin = load_model(hand_name), load_model(f"{hand_name}_twin")
     derived, written = _numeric(twin), _numeric(hand)
     for key in "FGHQR":
         scale = np.maximum(1.0, np.abs(written[key]))
         assert np.all(np.abs(derived[key] - written[key]) <= 1e-14 * scale), key
+
+
+def test_pseudorange_twin_drops_only_spherical_earth_and_gravity_terms_and_sizes_them():
+    twin = load_model("gps_pseudorange11_twin")
+    terms = neglected_terms(twin.name)
+    assert {t.approximation for t in terms} == {"gravity_height_only", "free_air_gradient", "no_height_in_radii", "single_earth_radius"}
+    assert all(t.matrix == "F" for t in terms)  # H (line of sight, clock) is exact: the range is linearized, not approximated
+    notes = [n for n in twin.notes if n.startswith("Approximation single_earth_radius")]
+    assert "F[position_error_east, position_error_north] = 6.44e-09" in notes[0]
 
 
 def test_ins_gps15_twin_lists_every_term_its_approximations_drop_with_its_size(ins_gps15_pair):
