@@ -54,6 +54,7 @@ from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml
 from modelgen.fileio.output import write_text_atomically
+from modelgen.model import navlib
 from modelgen.model.declaration import ErrorModel, parse_expression
 
 #: The data file listing every (hand-written model, twin) pair and what explains their differences.
@@ -388,15 +389,47 @@ def scenario_values(model: ErrorModel) -> tuple[dict[sp.Symbol, float], str]:
         if value is None:
             return {}, f"no value for {p.name}: magnitudes not computed"
         out[p.sym] = float(value)
-    return out, label
+    return with_earth_quantities(out, model), label
+
+
+#: Symbols the derivation engine writes the Earth quantities with (modelgen.model.navigation_model's defaults).
+EARTH_SYMBOLS = ("R_M", "R_N", "g", "h")
+
+
+def with_earth_quantities(values: dict[sp.Symbol, float], model: ErrorModel) -> dict[sp.Symbol, float]:
+    """``values`` plus R_M, R_N, normal gravity g and height h where the model does not declare them.
+
+    A twin's declared approximations remove these from its matrices, so the
+    engine does not declare them as parameters; the terms they dropped still
+    use them.  They are WGS-84's at the scenario's latitude (the parameter
+    named ``latitude``) and height (``height``, else 0: sea level), from
+    :mod:`modelgen.model.navlib`.  Without a latitude nothing is added.
+    """
+    by_name = {p.name: values.get(p.sym) for p in model.parameters}
+    latitude = by_name.get("latitude")
+    if latitude is None:
+        return values
+    height = by_name.get("height") or 0.0
+    earth = {
+        "R_M": float(navlib.meridian_radius(latitude)),
+        "R_N": float(navlib.prime_vertical_radius(latitude)),
+        "g": float(navlib.normal_gravity(latitude, height)),
+        "h": float(height),
+    }
+    declared = {p.symbol for p in model.parameters}
+    return {**values, **{sp.Symbol(k, real=True): v for k, v in earth.items() if k not in declared}}
 
 
 def magnitude(term: sp.Expr, values: Mapping[sp.Symbol, float]) -> float | None:
     """|term| at the scenario values (None without values, or if it is not a finite real number there)."""
     if not values:
         return None
+    numbers = {k: sp.Float(v) for k, v in values.items()}
+    term = sp.sympify(term)
+    if term.xreplace(numbers).free_symbols:
+        term = sp.cancel(sp.together(term))  # a symbol may cancel out (f - f): no value needed for it
     try:
-        number = complex(sp.N(term.xreplace(values)))
+        number = complex(sp.N(term.xreplace(numbers)))
     except (TypeError, ValueError):
         return None
     if abs(number.imag) > 1e-12 * max(1.0, abs(number.real)) or not math.isfinite(number.real):
@@ -469,16 +502,22 @@ def _unmodelled_couplings(pair, matrix, twin, where: Layout, rows, twin_rows, dr
                 continue
             u = lost[j]
             out.append(EntryRecord(
-                model=pair.hand, matrix=matrix, row=row, column=names[j], hand="0", derived=sp.sstr(full),
-                status="approximation", term=sp.sstr(full), magnitude=magnitude(full, values),
+                model=pair.hand, matrix=matrix, row=row, column=names[j], hand="0", derived=short(full),
+                status="approximation", term=short(full), magnitude=magnitude(full, values),
                 reason=f"{u.approximation}: {names[j]} is not a state of {pair.hand} ({u.reason})",
             ))
     return out
 
 
+def short(expr: sp.Expr) -> str:
+    """``expr`` as text with its floating-point constants to 6 significant digits (WGS-84 e^2 and the like)."""
+    expr = sp.sympify(expr)
+    return sp.sstr(expr.xreplace({f: sp.Float(f, 6) for f in expr.atoms(sp.Float)}))
+
+
 def _classify(pair, matrix, row, column, written, full, terms, transform, errors, values) -> EntryRecord:
     """The status, term, magnitude and reason of one entry (the rules of the module doc, in order)."""
-    derived_text = sp.sstr(full) if full != 0 else "0"
+    derived_text = short(full) if full != 0 else "0"
     base = dict(model=pair.hand, matrix=matrix, row=row, column=column, hand=sp.sstr(written) if written != 0 else "0", derived=derived_text)
     if same(written, full):
         return EntryRecord(**base, status="equal", term=None, magnitude=None, reason="")
@@ -487,7 +526,7 @@ def _classify(pair, matrix, row, column, written, full, terms, transform, errors
         names = [c.name for c in pair.conventions if _convention_touches(c, row, column)]
         reasons = [c.reason for c in pair.conventions if _convention_touches(c, row, column)]
         return EntryRecord(
-            **base, status="convention", term=sp.sstr(full - written), magnitude=magnitude(full - written, values),
+            **base, status="convention", term=short(full - written), magnitude=magnitude(full - written, values),
             reason=f"{', '.join(names)}: {' '.join(reasons)}",
         )
     approximation = _explained_by_approximation(written, full, terms, transform)
@@ -495,7 +534,7 @@ def _classify(pair, matrix, row, column, written, full, terms, transform, errors
         term, names = approximation
         extra = " (with the sign convention applied)" if not same(written, full - term) else ""
         return EntryRecord(
-            **base, status="approximation", term=sp.sstr(term), magnitude=magnitude(term, values),
+            **base, status="approximation", term=short(term), magnitude=magnitude(term, values),
             reason=f"declared approximation {', '.join(names)} drops this term{extra}",
         )
     difference = full - written
@@ -503,12 +542,12 @@ def _classify(pair, matrix, row, column, written, full, terms, transform, errors
     if error is not None:
         state = "fixed in the hand model" if error.fixed else "reported"
         return EntryRecord(
-            **base, status="hand_model_error", term=sp.sstr(sp.simplify(difference)), magnitude=magnitude(difference, values),
+            **base, status="hand_model_error", term=short(sp.simplify(difference)), magnitude=magnitude(difference, values),
             reason=f"error in the hand model ({state}): {error.reason}",
         )
     hints = difference_hints(written, full)
     return EntryRecord(
-        **base, status="unexplained", term=sp.sstr(sp.simplify(difference)), magnitude=magnitude(difference, values),
+        **base, status="unexplained", term=short(sp.simplify(difference)), magnitude=magnitude(difference, values),
         reason="; ".join(h.text for h in hints) or "no declared approximation, convention or hand-model error explains it",
     )
 

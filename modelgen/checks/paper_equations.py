@@ -54,7 +54,7 @@ from modelgen.checks.crosscheck import (
     load_pairs,
     magnitude,
     scenario_values,
-    twin_to_hand,
+    hand_substitution,
 )
 from modelgen.checks.hints import constant_ratio, same
 from modelgen.derive.symbolic import DerivedModel
@@ -293,7 +293,7 @@ def classify(
 ) -> tuple[str, str]:
     """The classification of a differing entry and the rule that gave it (module doc, rules 1-5)."""
     P, D = paper[matrix][i, j], derived[matrix][i, j]
-    if matrix in ("F", "H") and j in sensor_errors and column_sign_flipped(j, paper, derived):
+    if matrix in ("F", "H") and (matrix, i) != ("F", j) and j in sensor_errors and column_sign_flipped(j, paper, derived):
         return "convention", "rule 1: the whole column of a sensor error is negated (sign of its definition)"
     terms = compare_terms(P, D)
     if terms.missing and not terms.extra and not terms.refactored:
@@ -398,9 +398,15 @@ RULES = [
 
 def compare_equations(
     equations: PaperEquations, model: ErrorModel, derived: Mapping[str, sp.Matrix], scenario: tuple[dict, str] | None = None,
+    rename: Mapping[sp.Symbol, sp.Symbol] | None = None,
 ) -> PaperEquationsResult:
-    """Compare the printed equations' F, G, H with ``derived`` (same symbols and order as ``model``)."""
-    paper = paper_matrices(equations, model)
+    """Compare the printed equations' F, G, H with ``derived`` (``model``'s state order).
+
+    ``rename`` takes the paper's (``model``'s) parameter symbols to those of
+    ``derived`` (a twin's), ``scenario`` gives values and a label for the
+    magnitudes (default: ``model``'s check scenario).
+    """
+    paper = {m: value.xreplace(rename or {}) for m, value in paper_matrices(equations, model).items()}
     values, label = scenario or scenario_values(model)
     sensor_errors = sensor_error_states(derived["F"])
     where = printed_terms(equations)
@@ -437,27 +443,24 @@ def compare_equations(
     )
 
 
-def twin_in_model_terms(twin: DerivedModel, model: ErrorModel) -> dict[str, sp.Matrix]:
-    """The twin's F, G, H in ``model``'s symbols and order (the cross-check pair's mapping).
+def twin_in_model_order(twin: DerivedModel, model: ErrorModel) -> tuple[dict[str, sp.Matrix], dict[sp.Symbol, sp.Symbol]]:
+    """The twin's F, G, H in ``model``'s state order, and the renaming of ``model``'s parameters to the twin's.
 
-    States the paper does not model (the pair's ``unmodelled``, e.g. the
-    vertical channel) are left out, as the paper's assumptions say.
+    The comparison is made in the twin's symbols (several per-axis parameters
+    of the paper may be one of the twin's).  States the paper does not model
+    (the pair's ``unmodelled``, e.g. the vertical channel) are left out, as the
+    paper's assumptions say.
     """
     pair = next((p for p in load_pairs() if p.twin == twin.model.name), None)
     if pair is None:
         raise ModelError(f"twin {twin.model.name!r} has no pair in modelgen/data/crosscheck.yaml (its parameter mapping)")
     where = layout(pair, model, twin.model)
-    to_model = twin_to_hand(pair, model, twin.model)
     out = {}
     for m in MATRICES:
         rows, columns = where.index(m)
         T = getattr(twin, m)
-        out[m] = sp.Matrix(len(rows), len(columns), lambda i, j: T[rows[i], columns[j]].xreplace(to_model))
-    known = {p.sym for p in model.parameters}
-    stray = sorted({str(s) for m in out.values() for s in m.free_symbols if s not in known})
-    if stray:
-        raise ModelError(f"twin {twin.model.name!r}: its F, G, H use {', '.join(stray)}, which model {model.name} does not have")
-    return out
+        out[m] = sp.Matrix(len(rows), len(columns), lambda i, j: T[rows[i], columns[j]])
+    return out, hand_substitution(pair, model, twin.model)
 
 
 def paper_equations_check(twin: DerivedModel, path: str | Path | None = None) -> PaperEquationsResult:
@@ -470,7 +473,8 @@ def paper_equations_check(twin: DerivedModel, path: str | Path | None = None) ->
     header = read_yaml(path, "paper-equations file")
     model = load_model(str(_require(header, "model", Path(path).name)))
     equations = load_paper_equations(path, model)
-    return compare_equations(equations, model, twin_in_model_terms(twin, model))
+    derived, rename = twin_in_model_order(twin, model)
+    return compare_equations(equations, model, derived, scenario_values(twin.model), rename)
 
 
 # -- the report ----------------------------------------------------------------------------
@@ -529,9 +533,23 @@ def write_paper_equations_report(result: PaperEquationsResult, folder: str | Pat
 
 
 def differences_summary(result: PaperEquationsResult) -> Sequence[str]:
-    """One line per difference, for the command line and the run's report."""
-    return [
-        f"{d.label} ({d.row_quantity}, {d.column_quantity}), eq. ({d.equation or '?'}): {d.classification} - "
-        f"paper {d.paper}, derived {d.derived}; {d.rule}"
-        for d in result.differences
-    ]
+    """The differences for the command line and the run's report: one line per difference, or per group of
+    differences with the same classification and rule (a negated column is one finding, not eighteen)."""
+    groups: dict[tuple[str, str], list[EquationDifference]] = {}
+    for d in result.differences:
+        groups.setdefault((d.classification, d.rule), []).append(d)
+    lines = []
+    for (classification, rule), members in groups.items():
+        if len(members) == 1:
+            d = members[0]
+            lines.append(
+                f"{d.label} ({d.row_quantity}, {d.column_quantity}), eq. ({d.equation or '?'}): {classification} - "
+                f"paper {d.paper}, derived {d.derived}; {rule}"
+            )
+        else:
+            columns = sorted({d.column_quantity for d in members}, key=lambda c: min(d.column for d in members if d.column_quantity == c))
+            lines.append(
+                f"{len(members)} entries ({', '.join(d.label for d in members)}; columns {', '.join(columns)}): "
+                f"{classification} - {rule}"
+            )
+    return lines

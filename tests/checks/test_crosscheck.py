@@ -148,3 +148,57 @@ def test_pairs_file_with_an_unknown_key_or_a_convention_on_no_state_is_refused(p
     wrong = cc.Convention("sign", ("no_such_state",), (), "x")
     with pytest.raises(ModelError, match="no_such_state"):
         cc.signs(pair(conventions=(wrong,)), paper_derived.model)
+
+
+# -- the built-in pairs (modelgen/data/crosscheck.yaml) -----------------------------------------------
+PAIRS = cc.load_pairs()
+
+
+@pytest.fixture(scope="module")
+def builtin_results():
+    """Each pair's cross-check, every model loaded and derived once."""
+    from modelgen.model.loading import load_model
+    from modelgen.model.navigation_model import neglected_terms
+
+    out = {}
+    for p in PAIRS:
+        twin = derive(load_model(p.twin))
+        out[p.hand] = cc.cross_check(p, derive(load_model(p.hand)), twin, neglected_terms(p.twin))
+    return out
+
+
+@pytest.mark.parametrize("hand", [p.hand for p in PAIRS])
+def test_every_hand_model_equals_its_twin_but_for_declared_approximations_and_conventions(builtin_results, hand):
+    result = builtin_results[hand]
+    assert [(e.matrix, e.row, e.column, e.reason) for e in result.unexplained] == []
+    assert result.counts()["equal"] > 0
+    assert all(e.magnitude is not None for e in result.entries if e.status == "approximation"), "every dropped term has a size"
+
+
+def test_every_twin_file_is_in_a_pair_and_every_pair_has_its_twin():
+    from modelgen.fileio.datafiles import package_path
+
+    twins = {path.stem for path in package_path("models").glob("*_twin.yaml")}
+    assert twins == {p.twin for p in PAIRS}
+
+
+def test_the_paper_models_differ_from_their_twins_by_the_drift_sign_and_the_vertical_channel_only(builtin_results):
+    for hand in ("ned_doppler18", "ned_inertial16"):
+        result = builtin_results[hand]
+        conventions = [e for e in result.entries if e.status == "convention"]
+        assert {e.row for e in conventions} == {"alpha", "beta", "gamma"} and len(conventions) == 18
+        reasons = {e.reason.split(" drops")[0] for e in result.entries if e.status == "approximation"}
+        assert reasons <= {"declared approximation no_height_in_radii, single_earth_radius", "declared approximation single_earth_radius"} | {
+            r for r in reasons if r.startswith("no_vertical_channel: ")
+        }
+        (coupling,) = [e for e in result.entries if (e.row, e.column) == ("dV_e", "dV_d")]
+        # 2 w_ie cos(30 deg) + V_e / R_N(30 deg): the Coriolis coupling the paper drops with the vertical channel
+        assert coupling.magnitude == pytest.approx(2 * 7.2921151467e-5 * 0.8660254 + 83.333333 / 6383594.8, rel=1e-5)
+
+
+def test_crosscheck_report_of_the_builtin_pairs_has_no_unexplained_entry(builtin_results, tmp_path):
+    markdown, data = cc.write_crosscheck_report(list(builtin_results.values()), tmp_path)
+    record = json.loads(data.read_text())
+    assert {p["model"] for p in record["pairs"]} == {p.hand for p in PAIRS}
+    assert all(p["unexplained"] == 0 for p in record["pairs"])
+    assert all(e["status"] in cc.STATUSES for e in record["entries"])

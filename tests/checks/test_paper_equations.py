@@ -112,3 +112,22 @@ def test_a_state_without_an_equation_is_refused(paper_model, tmp_path):
     bad.write_text("\n".join(kept) + "\n")
     with pytest.raises(ModelError, match="missing: dV_de"):
         pe.load_paper_equations(bad, paper_model)
+
+
+def test_the_paper_against_its_twin_finds_the_transport_rate_factor_and_the_drift_sign_convention():
+    """The first-principles check itself: eqs. (1)-(6) against the error model derived under the paper's assumptions."""
+    from modelgen.derive.symbolic import derive
+    from modelgen.model.loading import load_model
+
+    result = pe.paper_equations_check(derive(load_model("ned_doppler18_twin")))
+    by_class = {}
+    for d in result.differences:
+        by_class.setdefault(d.classification, []).append(d)
+    assert sorted(by_class) == ["convention", "physics"]
+    (physics,) = by_class["physics"]
+    assert (physics.label, physics.row_quantity, physics.column_quantity, physics.equation) == ("F(4,5)", "dV_n", "dV_e", 1)
+    assert physics.rule.startswith("rule 3")
+    conventions = by_class["convention"]
+    assert len(conventions) == 18 and {d.row for d in conventions} == {1, 2, 3}
+    assert {d.column_quantity for d in conventions} == {f"eps_{k}_{a}" for k in "cr" for a in "xyz"}
+    assert result.compared == 64 and result.scenario == "the check scenario of ned_doppler18_twin"
