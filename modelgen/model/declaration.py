@@ -594,25 +594,27 @@ def _check_defined(expr: sp.Expr, text: str, where: str) -> None:
     expression that would multiply out to more than :data:`MAX_EXPANDED_TERMS`
     terms.
     """
-    shown = _excerpt(str(text))
+    def shown() -> str:  # printed only for a message: printing a large expression costs seconds
+        return _excerpt(str(text))
+
     if expr.has(*_NON_FINITE):
-        raise ModelError(f"{where}: {shown} is undefined or infinite (it evaluates to {_excerpt(str(expr))})")
+        raise ModelError(f"{where}: {shown()} is undefined or infinite (it evaluates to {_excerpt(str(expr))})")
     if expr.has(sp.I):
-        raise ModelError(f"{where}: {shown} is complex (it evaluates to {_excerpt(str(expr))})")
+        raise ModelError(f"{where}: {shown()} is complex (it evaluates to {_excerpt(str(expr))})")
     terms = _expanded_terms(expr)
     if terms > MAX_EXPANDED_TERMS:
         raise ModelError(
-            f"{where}: {shown} multiplies out to more than {MAX_EXPANDED_TERMS} terms; write it in a smaller form"
+            f"{where}: {shown()} multiplies out to more than {MAX_EXPANDED_TERMS} terms; write it in a smaller form"
         )
     stack = [expr]
     while stack:
         e = stack.pop()
         if e.is_number:
             if not _finite_real(e):
-                raise ModelError(f"{where}: {shown} has a part, {_excerpt(str(e))}, that is not a finite real number")
+                raise ModelError(f"{where}: {shown()} has a part, {_excerpt(str(e))}, that is not a finite real number")
             continue
         if isinstance(e, sp.Pow) and e.exp.is_negative and _is_zero(e.base):
-            raise ModelError(f"{where}: {shown} divides by {_excerpt(str(e.base))}, which is zero")
+            raise ModelError(f"{where}: {shown()} divides by {_excerpt(str(e.base))}, which is zero")
         stack.extend(e.args)
 
 

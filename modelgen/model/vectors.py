@@ -43,6 +43,12 @@ Value = Any  # sp.Expr | sp.Matrix
 
 #: Shapes a declaration may have: a scalar, a 3-vector (column) or a 3x3 matrix.
 SUPPORTED_SHAPES = ((1, 1), (3, 1), (3, 3))
+#: Most nodes an expression's tree may have once every definition it uses is written
+#: out.  Definitions share subexpressions, so ``d1 = sin(d0) + cos(d0)``, ``d2 = sin(d1)
+#: + cos(d1)``... doubles the tree with each line; sympy's later passes walk the tree,
+#: not the shared graph, and would take hours.  The largest built-in equation has
+#: under 300 nodes.
+MAX_TREE_NODES = 20_000
 #: Axis letters of a 3-vector's components, by the axes it is resolved in.
 AXIS_SUFFIXES: dict[str, tuple[str, str, str]] = {
     "NED": ("n", "e", "d"),
@@ -186,8 +192,12 @@ def parse_vector_expression(text: str | sp.Expr | float | int, namespace: Mappin
     """
     if isinstance(text, (int, float)) and not isinstance(text, bool):
         text = repr(text)
-    if isinstance(text, sp.Basic) or isinstance(text, sp.MatrixBase):
-        return text
+    if isinstance(text, (sp.Basic, sp.MatrixBase)):  # already built: only the checks on the result apply
+        known = set().union(*(v.free_symbols for v in namespace.values() if isinstance(v, (sp.Basic, sp.MatrixBase))))
+        unknown = sorted(str(x) for x in text.free_symbols - known)
+        if unknown:
+            raise ModelError(f"{where}: unknown symbol(s) {', '.join(unknown)} in {_excerpt(str(text))}")
+        return _checked_result(_as_scalar_if_1x1(text), str(text), where)
     if not isinstance(text, str):
         raise ModelError(f"{where}: expected an expression, got {type(text).__name__}")
     if len(text) > MAX_EXPRESSION_LENGTH:
@@ -202,12 +212,42 @@ def parse_vector_expression(text: str | sp.Expr | float | int, namespace: Mappin
     source = text.strip()
     tree = ast.parse(source, mode="eval")
     evaluator = _Evaluator(source, values, functions, where)
-    result = _as_scalar_if_1x1(evaluator.evaluate(tree.body))
+    return _checked_result(_as_scalar_if_1x1(evaluator.evaluate(tree.body)), text, where)
+
+
+def _checked_result(result: Value, text: str, where: str) -> Value:
+    """``result`` once each element is an expression, of bounded size, defined and finite (else ModelError)."""
     for element in (list(result) if is_matrix(result) else [result]):
         if not isinstance(element, sp.Expr):
             raise ModelError(f"{where}: {_excerpt(text)} is not an expression")
+        if tree_size(element, MAX_TREE_NODES) > MAX_TREE_NODES:
+            raise ModelError(
+                f"{where}: {_excerpt(text)} grows to more than {MAX_TREE_NODES} operations once the definitions "
+                "it uses are written out; write it in a smaller form"
+            )
         _check_defined(element, text, where)
     return result
+
+
+def tree_size(expr: sp.Basic, cap: int) -> int:
+    """Nodes of ``expr``'s tree (shared subexpressions counted each time they occur), at most ``cap + 1``.
+
+    Computed on the shared graph, bottom-up and memoized, so it costs time in
+    proportion to the distinct subexpressions even when the tree is
+    exponentially larger (see :data:`MAX_TREE_NODES`).
+    """
+    sizes: dict[int, int] = {}
+    stack: list[tuple[sp.Basic, bool]] = [(expr, False)]
+    while stack:
+        node, children_done = stack.pop()
+        if id(node) in sizes:
+            continue
+        if not children_done:
+            stack.append((node, True))
+            stack.extend((arg, False) for arg in node.args if id(arg) not in sizes)
+            continue
+        sizes[id(node)] = min(cap + 1, 1 + sum(sizes[id(arg)] for arg in node.args))
+    return sizes[id(expr)]
 
 
 class _Evaluator:
@@ -348,18 +388,6 @@ def component_names(name: str, shape: Any, frame: str, axes: str | None = None, 
     if (rows, columns) == (3, 1):
         return [f"{name}_{suffix}" for suffix in axis_suffixes(frame, axes, place)]
     return [f"{name}_{i}{j}" for i in range(1, rows + 1) for j in range(1, columns + 1)]
-
-
-def check_component_names(declared: Mapping[str, str], where_of: Mapping[str, str]) -> None:
-    """Refuse component names that are not identifiers, collide with generated code, or repeat a name.
-
-    ``declared`` maps every name (components included) to what declared it
-    (``"component of vector 'dv'"``); ``where_of`` maps it to its place.  The
-    collision rules are :mod:`modelgen.model.names`'s, through
-    :func:`~modelgen.model.declaration.check_identifier`.
-    """
-    for name, origin in declared.items():
-        check_identifier(name, f"{where_of.get(name, '')}: {origin} {name!r}".lstrip(": "))
 
 
 # -- definitions -----------------------------------------------------------------
