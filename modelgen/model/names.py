@@ -110,7 +110,7 @@ GENERATOR_C = frozenset(
 #: argument ``p``, the result ``out`` and temporaries ``t<k>`` are not listed:
 #: the generator keeps a parameter so named as ``p[k]`` (codegen/generate.py).
 GENERATOR_PYTHON = frozenset(
-    """np math numpy MODEL TITLE SOURCE N_STATES N_NOISES N_MEASUREMENTS TAYLOR_ORDER
+    """np math numpy MODEL TITLE SOURCE N_STATES N_NOISES N_MEASUREMENTS TAYLOR_ORDER TAYLOR_TOLERANCE
     SERIES_RANGE PSD_TOLERANCE STATE_NAMES NOISE_NAMES MEASUREMENT_NAMES PARAMETER_NAMES
     PARAMETER_DEFAULTS SingularOperatingPoint parameter_vector system_matrix
     noise_input_matrix measurement_matrix noise_psd measurement_variance discretize predict
