@@ -622,6 +622,8 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
     try:
         equations = pt.derive_error_equations(problem)
     except ModelError as exc:
+        if str(exc).startswith(filename):  # already names its file and line
+            raise
         raise ModelError(f"{read.at('navigation')}: model {data['model']!r}: {exc}") from None
     model = _error_model(data, lines, filename, decl, own, equations, measurement_decls)
     _DERIVED[model.name] = equations
