@@ -168,3 +168,30 @@ def test_bad_definitions_are_refused_naming_the_definitions_and_lines(entries, m
     with pytest.raises(ModelError) as caught:
         evaluate_definitions(entries, NAMESPACE, _locate)
     assert message in str(caught.value)
+
+
+def test_tree_size_counts_shared_subexpressions_each_time_without_walking_the_tree():
+    from modelgen.model.vectors import tree_size
+
+    x = sp.Symbol("x", real=True)
+    expr = x
+    for _ in range(60):  # a tree of ~2^61 nodes, a graph of ~180
+        expr = sp.sin(expr) + sp.cos(expr)
+    assert tree_size(sp.sin(x) + sp.cos(x), 100) == 5
+    assert tree_size(expr, 1000) == 1001
+
+
+def test_definitions_that_double_their_tree_are_refused_before_sympy_walks_them():
+    entries = [{"name": "d0", "value": "s"}] + [
+        {"name": f"d{k}", "value": f"sin(d{k - 1}) + cos(d{k - 1})"} for k in range(1, 60)
+    ]
+    with pytest.raises(ModelError, match="grows to more than 20000 operations"):
+        evaluate_definitions(entries, NAMESPACE, _locate)
+
+
+def test_built_sympy_values_get_the_same_checks_as_text():
+    assert parse_vector_expression(a.cross(b), NAMESPACE, "here") == a.cross(b)
+    with pytest.raises(ModelError, match="unknown symbol"):
+        parse_vector_expression(sp.Symbol("zz") * a, NAMESPACE, "here")
+    with pytest.raises(ModelError, match="undefined or infinite"):
+        parse_vector_expression(sp.zoo * s, NAMESPACE, "here")
