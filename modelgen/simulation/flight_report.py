@@ -1,10 +1,13 @@
 """`modelgen simulate`: fly a flight profile, write PNG figures and a Markdown summary.
 
-What it does, in order: generate the truth and ideal IMU data; simulate one
-set of sensors; run the filter (the generated C by default) on it in the
-three correction modes (open loop, closed loop, seed 003's accumulated
-correction) plus the free INS; run a Monte Carlo ensemble (both cores) and
-test its NEES; plot and summarize.  Progress goes to ``echo``.
+What it does, in order: generate the truth (the ideal IMU data comes piece by
+piece, :mod:`modelgen.simulation.streaming`); draw one set of sensor errors;
+fly the filter (the generated C by default, in the compiled loop of
+:mod:`modelgen.simulation.native_loop`) on them in the three correction modes
+(open loop, closed loop, seed 003's accumulated correction) in one pass over
+the data, plus the free INS; run a Monte Carlo ensemble and test its NEES; plot
+and summarize.  Memory does not grow with the IMU data; histories hold at most
+:data:`MAX_HISTORY_ROWS` rows per mode.  Progress goes to ``echo``.
 """
 
 from __future__ import annotations
@@ -22,14 +25,17 @@ from modelgen.derive.symbolic import DerivedModel
 from modelgen.simulation import earth
 from modelgen.simulation.filter_loop import MODES, RunResult
 from modelgen.simulation.filters import filter_factory
-from modelgen.simulation.flight import fly_profile, profile_layout, simulate_sensors
+from modelgen.simulation.flight import profile_layout, simulate_sensors
 from modelgen.simulation.jit import HAVE_NUMBA
 from modelgen.simulation.montecarlo import MonteCarloResult, run_monte_carlo
 from modelgen.simulation.rotation import dcm_to_euler, navigation_frame_attitude_error, quaternion_to_dcm
 from modelgen.simulation.scenario import FlightProfile
+from modelgen.simulation.streaming import fly_modes
 from modelgen.simulation.trajectory import Trajectory, generate_trajectory
 
 ARCSEC = math.pi / 180 / 3600
+#: at most this many history rows per correction mode (a longer flight keeps every k-th filter cycle)
+MAX_HISTORY_ROWS = 20000
 NMILE = 1852.0
 
 
@@ -43,8 +49,11 @@ class NavigationErrors:
     attitude: np.ndarray  # (T, 3) about N, E, D
 
 
-def navigation_errors(outputs: np.ndarray, trajectory: Trajectory) -> NavigationErrors:
+def navigation_errors(outputs: np.ndarray, trajectory: Trajectory, times: np.ndarray | None = None) -> NavigationErrors:
+    """Errors of ``outputs`` (one row per truth record, or per record at ``times`` of a decimated run)."""
     truth = trajectory.truth
+    if times is not None:
+        truth = truth[np.rint(times / trajectory.record_period).astype(int)]
     lat = truth[:, 1]
     meridian, prime_vertical = np.vectorize(earth.radii_of_curvature)(lat)
     position = np.stack([(outputs[:, 0] - lat) * (meridian + truth[:, 3]),
@@ -88,9 +97,9 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
     echo(f"modelgen simulate: {profile.name}, {profile.path.duration / 3600:.2f} h, IMU {profile.imu_rate:g} Hz "
          f"({'numba' if HAVE_NUMBA else 'pure Python: slow'}), filter {derived.model.name}, {runs} Monte Carlo runs")
     t = time.perf_counter()
-    trajectory = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
-    timings["trajectory (truth + ideal IMU)"] = time.perf_counter() - t
-    echo(f"  trajectory: {trajectory.n_samples} IMU samples in {timings['trajectory (truth + ideal IMU)']:.1f} s")
+    trajectory = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period, streamed=True)
+    timings["trajectory (truth; IMU increments are generated piece by piece in the flight)"] = time.perf_counter() - t
+    echo(f"  trajectory: truth of {trajectory.n_samples} IMU samples in {time.perf_counter() - t:.1f} s")
     layout = profile_layout(profile, derived, trajectory)
     rng = np.random.default_rng(seed)
     t = time.perf_counter()
@@ -103,14 +112,14 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
         make_filter = filter_factory(derived, implementation, code_dir)
         build = timings[f"filter code ({implementation}: generate, compile or import)"] = time.perf_counter() - t
         echo(f"  filter: {implementation} ({build:.1f} s to build)")
-        for mode in MODES:
-            t = time.perf_counter()
-            results[mode] = fly_profile(profile, derived, trajectory, rng, make_filter,
-                                        mode=mode, sensors=sensors, layout=layout,
-                                        progress=_echo_progress(echo, f"{mode} filter"))
-            timings[f"mechanization + filter, {mode}"] = time.perf_counter() - t
-    errors = {mode: navigation_errors(r.outputs, trajectory) for mode, r in results.items()}
-    errors["free INS"] = navigation_errors(results["open_loop"].raw_outputs, trajectory)
+        t = time.perf_counter()
+        n_cycles = len(trajectory.truth) - 1
+        record_every = max(1, math.ceil(n_cycles / MAX_HISTORY_ROWS))
+        results = fly_modes(profile, derived, trajectory, sensors, layout, make_filter, MODES,
+                            progress=lambda mode: _echo_progress(echo, f"{mode} filter"), record_every=record_every)
+        timings["IMU + mechanization + filter, three modes in one streamed pass"] = time.perf_counter() - t
+    errors = {mode: navigation_errors(r.outputs, trajectory, r.times) for mode, r in results.items()}
+    errors["free INS"] = navigation_errors(results["open_loop"].raw_outputs, trajectory, results["open_loop"].times)
 
     monte_carlo = None
     if runs > 0:
@@ -254,7 +263,8 @@ def _plot_nees(mc: MonteCarloResult, path: Path) -> Path:
 
 
 _IMPLEMENTATION_TEXT = {
-    "c": "the generated C (modelgen generate, default options), compiled for this run and called through ctypes",
+    "c": "the generated C (modelgen generate, default options), compiled for this run and driven, with the "
+         "strapdown and the glue, by one compiled loop (modelgen/simulation/native_loop.py)",
     "python": "the generated Python module (modelgen generate, default options)",
     "reference": "the dense numpy reference filter (modelgen/derive/reference.py)",
 }
@@ -283,7 +293,7 @@ def _summary(profile, model_name, implementation, conventions, trajectory, resul
         "final heading error [arcsec] | updates | gate rejections | outage skips | refused |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    last_hour = trajectory.truth[:, 0] >= trajectory.truth[-1, 0] - 3600
+    last_hour = errors["closed_loop"].times >= trajectory.truth[-1, 0] - 3600
     for label, e in errors.items():
         r = results.get(label)
         counts = f"{r.updates} | {len(r.rejected)} | {r.skipped} | {len(r.refused)}" if r else "- | - | - | -"
