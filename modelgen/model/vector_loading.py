@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from typing import Any, Mapping
 
 import sympy as sp
 
@@ -233,8 +233,12 @@ def _shaped(value: Value, item: _Declared, where: str, text: str) -> list[sp.Exp
 
 def _dynamics(
     states: list[_Declared], raw: Any, namespace: Mapping[str, Value], lines: Mapping[str, str], filename: str, model: str
-) -> dict[str, sp.Expr]:
-    """Each state component's right-hand side, from one equation per declared state (vector or scalar)."""
+) -> tuple[dict[str, sp.Expr], dict[str, str]]:
+    """Each state component's right-hand side, from one equation per declared state (vector or scalar).
+
+    Also returns, for each component, the ``dynamics:`` key its equation was
+    written under (for the line of a later message).
+    """
     if not isinstance(raw, dict):
         raise ModelError(f"{lines.get('dynamics', filename)}: 'dynamics' must map each state to its right-hand side")
     by_key: dict[str, _Declared] = {}
@@ -267,7 +271,8 @@ def _dynamics(
     missing = [item.name for item in states if item.name not in done]
     if missing:
         raise ModelError(f"{lines.get('dynamics', filename)}: model {model!r}: no equation for state(s) {', '.join(missing)}")
-    return out
+    keys = {component: done[item.name] for item in states for component in item.names}
+    return out, keys
 
 
 def _locations(lines: Mapping[str, str], declared: list[_Declared], dynamics_keys: Mapping[str, str]) -> dict[str, str]:
@@ -327,14 +332,8 @@ def _expand_check(data: Mapping[str, Any], declared: list[_Declared], lines: dic
     return {**data, "check": check}
 
 
-def load_vector_model(data: Mapping[str, Any], lines: dict[str, str], filename: str) -> tuple[ErrorModel, dict[str, Any]]:
-    """Build the scalar ErrorModel of a file with vectors, matrices or definitions (see module doc).
-
-    Returns the model and the file's data with its ``check:`` section's
-    vector entries expanded to components (:func:`_expand_check`).
-    """
-    model_name = str(data["model"])
-    frame = free_text(data, "frame", lines, filename)
+def _declare_all(data: Mapping[str, Any], frame: str, lines: Mapping[str, str], filename: str) -> list[_Declared]:
+    """Every entry of ``states``, ``noises``, ``parameters`` and ``measurements``, validated, no name used twice."""
     declared: list[_Declared] = []
     for kind in _FIELDS:
         raw = data.get(kind) or []
@@ -342,72 +341,91 @@ def load_vector_model(data: Mapping[str, Any], lines: dict[str, str], filename: 
             raise ModelError(f"{lines.get(kind, filename)}: {kind!r} must be a list of entries with a 'name'")
         declared.extend(_declare(kind, i, entry, frame, lines, filename) for i, entry in enumerate(raw))
     _check_unique(declared)
-    of_kind: Callable[[str], list[_Declared]] = lambda kind: [d for d in declared if d.kind == kind]  # noqa: E731
+    return declared
 
-    def namespace(*kinds: str) -> dict[str, Value]:
-        out: dict[str, Value] = {}
-        for item in declared:
-            if item.kind in kinds:
-                out[item.symbol] = item.value()
-                if item.shape != (1, 1):
-                    out.update({s: sp.Symbol(s, real=True) for s in item.symbols})
-        return out
 
-    everything = namespace("states", "noises", "parameters")
+def _namespace(declared: list[_Declared], *kinds: str) -> dict[str, Value]:
+    """Names usable in expressions: each entry's symbol (scalar or Matrix) and its component symbols."""
+    out: dict[str, Value] = {}
+    for item in declared:
+        if item.kind in kinds:
+            out[item.symbol] = item.value()
+            if item.shape != (1, 1):
+                out.update({s: sp.Symbol(s, real=True) for s in item.symbols})
+    return out
+
+
+def _definitions(
+    data: Mapping[str, Any], declared: list[_Declared], namespace: Mapping[str, Value], lines: Mapping[str, str], filename: str
+) -> dict[str, Value]:
+    """The ``definitions:`` section evaluated; a definition named like a declared entry is refused naming both lines."""
+    raw = data.get("definitions")
     names = {d.name: d for d in declared if d.kind != "measurements"}
-    for i, entry in enumerate(data.get("definitions") or [] if isinstance(data.get("definitions"), list) else []):
+    for i, entry in enumerate(raw if isinstance(raw, list) else []):
         if isinstance(entry, dict) and entry.get("name") in names:
             other = names[entry["name"]]
             raise ModelError(
                 f"{lines.get(f'definitions[{i}]', filename)}: definition {entry['name']!r} has the name of {other.what} "
                 f"declared at {other.place}"
             )
-    definitions = evaluate_definitions(
-        data.get("definitions") if "definitions" in data else [],
-        everything,
+    return evaluate_definitions(
+        [] if raw is None else raw,
+        namespace,
         lambda key: lines.get(key) or lines.get(key.split(".")[0]) or lines.get("definitions", filename),
     )
-    with_definitions = {**everything, **definitions}
-    statistics_namespace = {**namespace("parameters"), **definitions}
-    measured_namespace = {**namespace("states", "parameters"), **definitions}
 
-    states = [State(name=n, symbol=s, unit=str(d.entry.get("unit", "1")), description=t) for d in of_kind("states") for n, s, t in zip(d.names, d.symbols, d.descriptions)]
-    parameters = [
-        Parameter(name=n, symbol=s, unit=str(d.entry.get("unit", "1")), description=t, value=v)
-        for d in of_kind("parameters")
-        for n, s, t, v in zip(d.names, d.symbols, d.descriptions, _parameter_values(d, lines))
+
+def _quantities(item: _Declared, cls: type, **per_component: list[Any]) -> list[Any]:
+    """One ``cls`` (State, Noise, Parameter, Measurement) per component of ``item``, with per-component fields."""
+    unit = str(item.entry.get("unit", "1"))
+    return [
+        cls(name=n, symbol=s, unit=unit, description=t, **{k: v[j] for k, v in per_component.items()})
+        for j, (n, s, t) in enumerate(zip(item.names, item.symbols, item.descriptions))
     ]
-    noises = [
-        Noise(name=n, symbol=s, unit=str(d.entry.get("unit", "1")), description=t, psd=psd)
-        for d in of_kind("noises")
-        for n, s, t, psd in zip(d.names, d.symbols, d.descriptions, _scalar_statistics(d, "psd", statistics_namespace, lines, model_name))
-    ]
-    measurements = []
-    for d in of_kind("measurements"):
-        key = f"measurements[{d.index}].expression"
-        place = lines.get(key, d.place)
-        text = scalar_text(d.entry["expression"], place, key)
-        where = f"{place}: model {model_name!r}, {d.what}"
-        expressions = _shaped(parse_vector_expression(text, measured_namespace, where), d, where, text)
-        variances = (
-            _scalar_statistics(d, "variance", statistics_namespace, lines, model_name) if "variance" in d.entry else ["1"] * len(d.names)
-        )
-        measurements.extend(
-            Measurement(name=n, symbol=s, unit=str(d.entry.get("unit", "1")), description=t, expression=e, variance=v)
-            for n, s, t, e, v in zip(d.names, d.symbols, d.descriptions, expressions, variances)
-        )
-    dynamics_raw = data.get("dynamics")
-    dynamics = _dynamics(of_kind("states"), dynamics_raw, with_definitions, lines, filename, model_name)
-    state_items = {d.name: d for d in of_kind("states")}
-    key_of = {d.name: d.name for d in state_items.values()}
-    if isinstance(dynamics_raw, dict):
-        for key in dynamics_raw:
-            for d in state_items.values():
-                if key in (d.name, d.symbol):
-                    key_of[d.name] = key
-    dynamics_keys = {n: key_of[d.name] for d in state_items.values() for n in d.names}
-    model = ErrorModel.build(
-        name=model_name,
+
+
+def _measurement_expressions(item: _Declared, namespace: Mapping[str, Value], lines: Mapping[str, str], model: str) -> list[sp.Expr]:
+    """Each component's h(x): the expression evaluated, with the declared shape."""
+    key = f"measurements[{item.index}].expression"
+    place = lines.get(key, item.place)
+    text = scalar_text(item.entry["expression"], place, key)
+    where = f"{place}: model {model!r}, {item.what}"
+    return _shaped(parse_vector_expression(text, namespace, where), item, where, text)
+
+
+def load_vector_model(data: Mapping[str, Any], lines: dict[str, str], filename: str) -> tuple[ErrorModel, dict[str, Any]]:
+    """Build the scalar ErrorModel of a file with vectors, matrices or definitions (see module doc).
+
+    Returns the model and the file's data with its ``check:`` section's
+    vector entries expanded to components (:func:`_expand_check`).
+    """
+    model = str(data["model"])
+    frame = free_text(data, "frame", lines, filename)
+    declared = _declare_all(data, frame, lines, filename)
+    everything = _namespace(declared, "states", "noises", "parameters")
+    definitions = _definitions(data, declared, everything, lines, filename)
+    statistics_namespace = {**_namespace(declared, "parameters"), **definitions}
+    measured_namespace = {**_namespace(declared, "states", "parameters"), **definitions}
+    states, noises, parameters, measurements = [], [], [], []
+    for d in declared:
+        if d.kind == "states":
+            states += _quantities(d, State)
+        elif d.kind == "parameters":
+            parameters += _quantities(d, Parameter, value=_parameter_values(d, lines))
+        elif d.kind == "noises":
+            noises += _quantities(d, Noise, psd=_scalar_statistics(d, "psd", statistics_namespace, lines, model))
+        else:
+            variances = (
+                _scalar_statistics(d, "variance", statistics_namespace, lines, model)
+                if "variance" in d.entry
+                else ["1"] * len(d.names)
+            )
+            expressions = _measurement_expressions(d, measured_namespace, lines, model)
+            measurements += _quantities(d, Measurement, expression=expressions, variance=variances)
+    state_items = [d for d in declared if d.kind == "states"]
+    dynamics, dynamics_keys = _dynamics(state_items, data.get("dynamics"), {**everything, **definitions}, lines, filename, model)
+    built = ErrorModel.build(
+        name=model,
         states=states,
         noises=noises,
         parameters=parameters,
@@ -419,4 +437,4 @@ def load_vector_model(data: Mapping[str, Any], lines: dict[str, str], filename: 
         notes=notes_text(data, lines, filename),
         locations=_locations(lines, declared, dynamics_keys),
     )
-    return model, _expand_check(data, declared, lines)
+    return built, _expand_check(data, declared, lines)
