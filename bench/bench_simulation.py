@@ -1,121 +1,195 @@
-"""Benchmark of the navigation simulation (issue 5, item 7).
+"""Benchmark of the navigation simulation: streaming memory, the compiled filter cycle, whole `simulate`.
 
-Measures, for the core paper's flight (profile_000) at 300 Hz:
-  * truth + ideal IMU generation for the whole flight (4 h = 4.32 million samples),
-  * the strapdown mechanization alone over all samples, compiled, against a
-    baseline of the same loop run as plain Python on a slice in this process
-    (extrapolated per sample) -- the ratio is the speed-up the compilation buys,
-  * one complete closed-loop filtered run (sensors, mechanization, 18-state filter
-    every 1 s, Doppler every 60 s),
-  * a Monte Carlo ensemble on two worker processes;
-  * memory: the peak resident size the flight adds to the process, against
-    the size of the IMU increments themselves (the data any simulation of
-    this flight must hold).
+For the core paper's flight (profile_000, 300 Hz IMU, 18-state Doppler filter
+every 1 s, Doppler every 60 s), in one process unless said otherwise:
 
-Usage: python bench/bench_simulation.py [--hours 4] [--rate 300] [--runs 8]
+  * one correction mode (closed loop) with the generated C filter, two ways:
+      old  -- held trajectory and sensors (every IMU increment in memory), the
+              Python filter loop calling the C through ctypes once per call;
+      new  -- streamed trajectory and sensors (10-s pieces), the compiled loop
+              (modelgen/simulation/native_loop.py) running mechanization, glue and
+              the C filter with no Python per cycle;
+    both on the same seed (their histories are compared), with the time per
+    filter cycle spent outside the mechanization and the generation of IMU data
+    ("glue + filter"), and the ratio old / new;
+  * the whole single-run `modelgen simulate` (three modes, no Monte Carlo,
+    figures and summary) against the old recipe (held data, three Python-loop
+    runs, same figures) -- in process, same seed;
+  * memory: the peak resident size of a fresh process that flies the closed-loop
+    flight (derive, build the C, fly) -- old for 4 h, new for 4 h and 24 h.  Peak
+    RSS only grows, so each figure comes from its own child process (this script
+    with --memory-child).
+
+Wall time and CPU time of this process are both printed: on a shared machine the
+CPU time is the figure to compare with the targets (one core).
+
+Usage: python bench/bench_simulation.py [--hours 4] [--long-hours 24] [--skip-memory]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import resource
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
 from modelgen.derive.symbolic import derive
 from modelgen.model.loading import load_model
-from modelgen.simulation.filters import ReferenceFilter
-from modelgen.simulation.flight import fly_profile, profile_layout, simulate_sensors
-from modelgen.simulation.jit import HAVE_NUMBA
-from modelgen.simulation.montecarlo import run_monte_carlo
+from modelgen.simulation.filters import filter_factory
+from modelgen.simulation.flight import profile_layout, simulate_sensors
 from modelgen.simulation.scenario import load_profile
-from modelgen.simulation.strapdown import ALGORITHMS, Strapdown, _mechanize
+from modelgen.simulation.streaming import fly_modes
+from modelgen.simulation.strapdown import Strapdown
 from modelgen.simulation.trajectory import generate_trajectory
 
+TARGETS = {"peak RSS [MiB]": 250.0, "one mode [s]": 1.0, "simulate [s]": 4.0}
 
-def progress(label):
-    state = {"next": 0.1, "t": time.perf_counter()}
 
-    def report(done, total):
+class Clock:
+    """Wall and CPU seconds of a block."""
+
+    def __enter__(self):
+        self.wall, self.cpu = time.perf_counter(), time.process_time()
+        return self
+
+    def __exit__(self, *exc):
+        self.wall, self.cpu = time.perf_counter() - self.wall, time.process_time() - self.cpu
+
+
+def peak_rss_mib() -> float:
+    """Peak resident set size of this process so far (Linux reports kilobytes)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def progress(label: str):
+    state = {"next": 0.25, "t": time.perf_counter()}
+
+    def report(done: int, total: int) -> None:
         if done / total >= state["next"] or done == total:
             print(f"    {label}: {100 * done / total:5.1f} % ({time.perf_counter() - state['t']:.1f} s)", flush=True)
             while state["next"] <= done / total:
-                state["next"] += 0.1
+                state["next"] += 0.25
 
     return report
 
 
-def peak_rss_bytes() -> int:
-    """Peak resident set size of this process so far (Linux reports kilobytes)."""
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+def fly(scenario, derived, make, streamed: bool, glue: str, modes=("closed_loop",), label: str = ""):
+    """Trajectory, sensors and the flight; (results, timings)."""
+    with Clock() as c_trajectory:
+        trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0 / scenario.filter.period, streamed=streamed)
+    layout = profile_layout(scenario, derived, trajectory)
+    with Clock() as c_sensors:
+        sensors = simulate_sensors(scenario, trajectory, np.random.default_rng(0))
+    with Clock() as c_fly:
+        results = fly_modes(scenario, derived, trajectory, sensors, layout, make, modes, glue=glue,
+                            progress=(lambda mode: progress(f"{label} {mode}")) if label else None)
+    return results, trajectory, {"trajectory": c_trajectory, "sensors": c_sensors, "fly": c_fly}
+
+
+def memory_child(hours: float, way: str) -> None:
+    """Fly the closed loop once in this fresh process and print its peak RSS as JSON (--memory-child)."""
+    scenario = load_profile("profile_000").with_changes(hours=hours)
+    derived = derive(load_model(scenario.filter.model))
+    with tempfile.TemporaryDirectory() as folder:
+        make = filter_factory(derived, "c", folder)
+        before = peak_rss_mib()
+        results, trajectory, clocks = fly(scenario, derived, make, way == "new", "compiled" if way == "new" else "python")
+    print(json.dumps({"hours": hours, "way": way, "peak_rss_mib": peak_rss_mib(), "before_flight_mib": before,
+                      "cycles": len(trajectory.truth) - 1, "updates": results["closed_loop"].updates,
+                      "cpu_s": clocks["fly"].cpu + clocks["trajectory"].cpu + clocks["sensors"].cpu}))
+
+
+def measure_memory(hours: float, way: str) -> dict:
+    print(f"  memory: {way} way, {hours:g} h in a fresh process ...", flush=True)
+    out = subprocess.run([sys.executable, __file__, "--memory-child", way, "--hours", str(hours)], check=True,
+                         capture_output=True, text=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--hours", type=float, default=4.0)
-    parser.add_argument("--rate", type=float, default=300.0)
-    parser.add_argument("--runs", type=int, default=8)
-    parser.add_argument("--baseline-samples", type=int, default=30000)
+    parser.add_argument("--long-hours", type=float, default=24.0)
+    parser.add_argument("--skip-memory", action="store_true")
+    parser.add_argument("--memory-child", choices=("old", "new"), help=argparse.SUPPRESS)
+    parser.add_argument("--out", default=str(Path(__file__).parent / "results" / "simulation.json"))
     args = parser.parse_args()
+    if args.memory_child:
+        memory_child(args.hours, args.memory_child)
+        return
 
-    scenario = load_profile("profile_000").with_changes(hours=args.hours, imu_rate=args.rate)
+    scenario = load_profile("profile_000").with_changes(hours=args.hours)
     derived = derive(load_model(scenario.filter.model))
-    print(f"numba: {HAVE_NUMBA}; {args.hours} h at {args.rate:g} Hz", flush=True)
+    report: dict = {"hours": args.hours, "imu_rate_hz": scenario.imu_rate, "cpu_count": os.cpu_count()}
+    print(f"profile_000, {args.hours:g} h at {scenario.imu_rate:g} Hz, filter {derived.model.name} (generated C)", flush=True)
+    with tempfile.TemporaryDirectory() as folder:
+        make = filter_factory(derived, "c", folder)
+        warm = scenario.with_changes(hours=30 / 3600)  # numba compilation or cache load, not timed
+        for streamed, glue in ((False, "python"), (True, "compiled")):
+            fly(warm, derived, make, streamed, glue)
 
-    # warm-up (compilation or cache load) on a tiny flight, not timed
-    tiny = generate_trajectory(scenario.path.truncated(10.0), args.rate, 1.0)
-    Strapdown(tiny.initial_state(), args.rate, scenario.coning).run(tiny.delta_theta, tiny.delta_velocity, 0, tiny.n_samples)
+        # -- one correction mode ------------------------------------------------------------
+        old, trajectory, t_old = fly(scenario, derived, make, False, "python", label="old")
+        cycles = len(trajectory.truth) - 1
+        with Clock() as c_mech:  # the mechanization alone over the same samples (held data, ideal increments)
+            ins = Strapdown(trajectory.initial_state(), scenario.imu_rate, scenario.coning)
+            ins.run(trajectory.delta_theta, trajectory.delta_velocity, 0, cycles * trajectory.record_every)
+        del trajectory
+        new, streamed_trajectory, t_new = fly(scenario, derived, make, True, "compiled", label="new")
+        with Clock() as c_pieces:  # generating and corrupting the IMU pieces alone (what streaming adds)
+            sensors = simulate_sensors(scenario, streamed_trajectory, np.random.default_rng(0))
+            cursor = sensors.imu_stream.cursor()
+            for start in range(0, cycles * streamed_trajectory.record_every, 3000):
+                cursor.corrupt(*streamed_trajectory.increments(start, min(start + 3000, cycles * streamed_trajectory.record_every)))
+        a, b = old["closed_loop"], new["closed_loop"]
+        same = all(np.array_equal(getattr(a, f), getattr(b, f)) for f in ("outputs", "estimation_error", "sigma"))
+        glue_old = (t_old["fly"].cpu - c_mech.cpu) / cycles * 1e6
+        glue_new = (t_new["fly"].cpu - c_mech.cpu - c_pieces.cpu) / cycles * 1e6
+        print(f"  one mode (closed loop), {cycles} filter cycles, {b.updates} Doppler updates; histories "
+              f"{'bit for bit equal' if same else 'DIFFERENT'}", flush=True)
+        print(f"    old (held data, Python loop): wall {t_old['fly'].wall:.2f} s, CPU {t_old['fly'].cpu:.2f} s", flush=True)
+        print(f"    new (streamed, compiled loop): wall {t_new['fly'].wall:.2f} s, CPU {t_new['fly'].cpu:.2f} s "
+              f"(of which IMU pieces {c_pieces.cpu:.2f} s, mechanization {c_mech.cpu:.2f} s) -> "
+              f"{t_old['fly'].cpu / t_new['fly'].cpu:.1f}x less CPU; target <= {TARGETS['one mode [s]']} s", flush=True)
+        print(f"    per filter cycle outside mechanization and IMU data (glue + C filter): old {glue_old:.1f} us, "
+              f"new {glue_new:.1f} us -> {glue_old / glue_new:.0f}x", flush=True)
+        report["one_mode"] = {"cycles": cycles, "bit_for_bit": same,
+                              "old": {"wall_s": t_old["fly"].wall, "cpu_s": t_old["fly"].cpu, "glue_us_per_cycle": glue_old},
+                              "new": {"wall_s": t_new["fly"].wall, "cpu_s": t_new["fly"].cpu, "glue_us_per_cycle": glue_new,
+                                      "imu_pieces_cpu_s": c_pieces.cpu},
+                              "mechanization_cpu_s": c_mech.cpu}
 
-    rss_before = peak_rss_bytes()
-    t = time.perf_counter()
-    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0 / scenario.filter.period)
-    t_trajectory = time.perf_counter() - t
-    print(f"  trajectory: {trajectory.n_samples:,} IMU samples in {t_trajectory:.2f} s", flush=True)
+        # -- whole simulate, three modes --------------------------------------------------------
+        from modelgen.simulation.flight_report import simulate
 
-    ins = Strapdown(trajectory.initial_state(), args.rate, scenario.coning)
-    t = time.perf_counter()
-    ins.run(trajectory.delta_theta, trajectory.delta_velocity, 0,
-            trajectory.n_samples - trajectory.n_samples % ALGORITHMS[scenario.coning][1])
-    t_mech = time.perf_counter() - t
-    print(f"  mechanization alone: {t_mech:.2f} s ({t_mech / trajectory.n_samples * 1e9:.0f} ns/sample)", flush=True)
+        with tempfile.TemporaryDirectory() as out, Clock() as c_sim:
+            simulate(scenario, derived, Path(out), runs=0, echo=lambda line: None)
+        with Clock() as c_three_old:
+            fly(scenario, derived, make, False, "python", modes=("open_loop", "closed_loop", "accumulated"))
+        print(f"  whole `modelgen simulate` (three modes, figures, no Monte Carlo): wall {c_sim.wall:.2f} s, "
+              f"CPU {c_sim.cpu:.2f} s; the old recipe's data and three runs alone (no figures): CPU {c_three_old.cpu:.2f} s "
+              f"-> {c_three_old.cpu / c_sim.cpu:.1f}x; target <= {TARGETS['simulate [s]']} s", flush=True)
+        report["simulate"] = {"wall_s": c_sim.wall, "cpu_s": c_sim.cpu, "old_three_modes_cpu_s": c_three_old.cpu}
 
-    # baseline: the same loop as plain Python, on a slice
-    python_loop = getattr(_mechanize, "py_func", _mechanize)
-    n = args.baseline_samples - args.baseline_samples % 2
-    state = Strapdown(trajectory.initial_state(), args.rate, scenario.coning).state
-    t = time.perf_counter()
-    code, per = ALGORITHMS[scenario.coning]
-    python_loop(state, trajectory.delta_theta, trajectory.delta_velocity, 0, n, 1.0 / args.rate, code, per,
-                np.zeros(3), np.zeros(3), float("nan"), float("nan"), 0.0, 0.0, np.zeros(3))
-    t_python = (time.perf_counter() - t) / n * trajectory.n_samples
-    print(f"  baseline (plain Python, {n} samples, extrapolated): {t_python:.1f} s -> compiled is "
-          f"{t_python / t_mech:.0f}x faster", flush=True)
-
-    layout = profile_layout(scenario, derived, trajectory)
-    rng = np.random.default_rng(0)
-    t = time.perf_counter()
-    sensors = simulate_sensors(scenario, trajectory, rng)
-    t_sensors = time.perf_counter() - t
-    t = time.perf_counter()
-    result = fly_profile(scenario, derived, trajectory, rng, lambda x, P: ReferenceFilter(derived, x, P),
-                         mode="closed_loop", sensors=sensors, layout=layout, progress=progress("filtered run"))
-    t_run = time.perf_counter() - t
-    print(f"  sensors: {t_sensors:.2f} s; closed-loop filtered run: {t_run:.2f} s "
-          f"({result.updates} Doppler updates, {len(result.times) - 1} filter cycles)", flush=True)
-    print(f"  whole 4-h flight (trajectory + sensors + run): {t_trajectory + t_sensors + t_run:.2f} s", flush=True)
-    increments = trajectory.delta_theta.nbytes + trajectory.delta_velocity.nbytes
-    added = peak_rss_bytes() - rss_before
-    print(f"  memory: the flight added {added / 2**20:.0f} MiB to the peak resident size; the IMU increments are "
-          f"{increments / 2**20:.0f} MiB -> ratio {added / increments:.2f}", flush=True)
-
-    if args.runs:
-        t = time.perf_counter()
-        mc = run_monte_carlo(scenario, derived, args.runs, seed=1, workers=2, progress=progress("Monte Carlo"))
-        t_mc = time.perf_counter() - t
-        test = mc.nees_test(0.95, start_time=60.0)
-        print(f"  Monte Carlo: {args.runs} runs on 2 workers in {t_mc:.1f} s ({t_mc / args.runs:.1f} s per run); "
-              f"NEES inside the 95 % band at {100 * test.fraction_inside:.0f} % of times", flush=True)
+    # -- memory ---------------------------------------------------------------------------------
+    if not args.skip_memory:
+        rows = [measure_memory(args.hours, "old"), measure_memory(args.hours, "new"), measure_memory(args.long_hours, "new")]
+        for row in rows:
+            print(f"    {row['way']}: {row['hours']:g} h, peak RSS {row['peak_rss_mib']:.0f} MiB "
+                  f"({row['before_flight_mib']:.0f} MiB before the flight: interpreter, numpy, sympy, numba, the model); "
+                  f"target <= {TARGETS['peak RSS [MiB]']:.0f} MiB", flush=True)
+        print(f"    ratio old / new at {args.hours:g} h: {rows[0]['peak_rss_mib'] / rows[1]['peak_rss_mib']:.1f}x", flush=True)
+        report["memory"] = rows
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    print(f"  wrote {args.out}")
 
 
 if __name__ == "__main__":
