@@ -81,8 +81,9 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
     """A ``distributed.Client`` on ``scheduler`` (an address) or on a new local cluster of ``workers`` processes.
 
     The local cluster has one single-threaded worker process per core (the
-    filter loops hold the GIL), no dashboard and quiet logs; it is closed on
-    the way out.  A scheduler that does not answer within ``timeout_s`` is
+    filter loops hold the GIL), listens on the loopback address only (its
+    status page on a free port) and logs only errors; it is closed on the
+    way out.  A scheduler that does not answer within ``timeout_s`` is
     refused with a message naming the address.
     """
     from distributed import Client, LocalCluster
@@ -101,7 +102,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
             client.close()
         return
     cluster = LocalCluster(n_workers=local_worker_count(workers), threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=logging.ERROR)
+                           host="127.0.0.1", dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
     try:
         with Client(cluster) as client:
             yield client

@@ -178,9 +178,9 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
 
     ``client``: a ``distributed.Client`` (:func:`modelgen.cluster.dask_client`)
     to run on; without one, ``workers`` > 1 starts a local cluster of that
-    many worker processes for this call, 1 runs here.  ``truth_profile`` (same flight)
-    draws the sensors from a different error budget than the filter assumes:
-    a mis-modelled filter.  ``implementation`` is the filter flown (the numpy
+    many worker processes for this call (for two runs or more), 1 runs here.
+    ``truth_profile`` (same flight) draws the sensors from a different error
+    budget than the filter assumes: a mis-modelled filter.  ``implementation`` is the filter flown (the numpy
     ``reference``, or the generated ``c`` / ``python``, built once per
     worker).  ``on_run(i, output)`` receives each run as it completes.
     """
@@ -193,7 +193,7 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
     store_every = store_every or max(1, int(round(profile.aiding_period / profile.filter.period)))
     key = setup_key(profile, truth_profile, derived.model, mode, store_every, implementation)
     setup = MonteCarloSetup(profile, truth_profile, derived.model, mode, store_every, implementation, key)
-    if client is None and workers > 1:
+    if client is None and workers > 1 and runs > 1:
         with dask_client(workers=min(workers, runs)) as local:
             return run_monte_carlo(profile, derived, runs, seed, mode, client=local, store_every=store_every,
                                    progress=progress, truth_profile=truth_profile, implementation=implementation,
