@@ -405,10 +405,36 @@ def _primitive_stage(problem: NavigationProblem, equation_approximations: set[st
     zero = {s: 0 for s in (*phi, *others, *problem.noises)}
     # d/d(dv) = -d/d(v_t) because v_t = v - dv (and the same for position).
     sign = sp.diag(*([1] * 3 + [-1] * 6 + [1] * len(others)))
-    F0 = _at(rates.jacobian(by), zero, to_true) * sign
+    F0 = _at(_jacobian(rates, by), zero, to_true) * sign
     G0 = _at(rates.jacobian(list(problem.noises)), zero, to_true) if problem.noises else sp.zeros(rates.rows, 0)
     H0 = _measurement_jacobian(problem, mech, computed, true, by, zero, to_true) * sign
     return _Stage(F0, G0, H0)
+
+
+def _jacobian(matrix: sp.Matrix, by: Sequence[sp.Symbol]) -> sp.Matrix:
+    """``matrix.jacobian(by)``, with the Earth functions differentiated by the chain rule.
+
+    Each R_M(L), R_N(L), g(L, h) whose arguments are in ``by`` stands in as a
+    plain symbol while differentiating (sympy builds Derivative objects of
+    applied functions slowly); its partial derivatives are added once, as
+    ``Derivative(R_M(L), L)`` terms, for the rules of :func:`earth_derivative_rules`.
+    """
+    variables = set(by)
+    applied = sorted(
+        (a for a in matrix.atoms(MeridianRadius, PrimeVerticalRadius, Gravity) if variables & set(a.args)), key=sp.default_sort_key
+    )
+    stand_in = {a: sp.Dummy(f"earth_{k}", real=True) for k, a in enumerate(applied)}
+    plain = matrix.xreplace(stand_in)
+    result = plain.jacobian(list(by))
+    for function, symbol in stand_in.items():
+        partial = plain.diff(symbol)
+        if partial.is_zero_matrix:
+            continue
+        for argument in function.args:
+            if argument in variables:
+                column = list(by).index(argument)
+                result[:, column] = result[:, column] + partial * sp.Derivative(function, argument)
+    return result.xreplace({v: k for k, v in stand_in.items()})
 
 
 def _at(matrix: sp.Matrix, zero: Mapping, to_true: Mapping) -> sp.Matrix:
@@ -427,7 +453,7 @@ def _measurement_jacobian(problem, mech, computed, true, by, zero, to_true) -> s
             difference = difference - m.extra
         if m.measured_minus_computed:
             difference = -difference
-        rows.append(_at(difference.jacobian(by), zero, to_true))
+        rows.append(_at(_jacobian(difference, by), zero, to_true))
     return sp.Matrix.vstack(*rows) if rows else sp.zeros(0, len(by))
 
 
@@ -694,13 +720,29 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
 
 
 def _differences(name: str, before: _Stage, after: _Stage) -> list[NeglectedTerm]:
+    """The entries ``name`` changed, as NeglectedTerm records (term = before - after)."""
     out = []
     for label in ("F", "G", "H"):
         a, b = getattr(before, label), getattr(after, label)
         for i in range(a.rows):
             for j in range(a.cols):
                 if a[i, j] != b[i, j]:
-                    difference = a[i, j] - b[i, j]
-                    if sp.cancel(sp.together(difference)) != 0:  # zero once rational functions are cancelled: no term
-                        out.append(NeglectedTerm(name, label, i, j, simplify_entry(difference)))
+                    difference = simplify_entry(a[i, j] - b[i, j])
+                    if difference != 0 and not _is_zero_function(difference):
+                        out.append(NeglectedTerm(name, label, i, j, difference))
     return out
+
+
+def _is_zero_function(expr: sp.Expr) -> bool:
+    """Whether ``expr`` is identically zero, e.g. x/(R cos L + h cos L) - x/((R + h) cos L).
+
+    A value at a fixed generic point (each symbol 0.2 + 0.0137 k, deterministic)
+    that is not small decides quickly; otherwise rational functions are cancelled.
+    """
+    symbols = sorted(expr.free_symbols, key=str)
+    point = {s: sp.Float(0.2 + 0.0137 * k) for k, s in enumerate(symbols)}
+    value = expr.xreplace(point)
+    scale = sum(abs(t.xreplace(point)) for t in sp.Add.make_args(expr))
+    if value.is_number and scale.is_number and abs(float(value)) > 1e-9 * float(scale):
+        return False
+    return sp.cancel(sp.together(expr)) == 0
