@@ -325,6 +325,11 @@ def _expand_check(data: Mapping[str, Any], declared: list[_Declared], lines: dic
                     f"{place}: check.{key}.{name}: {item.what} needs {len(item.names)} values "
                     f"(a list{', or one value for all' if key == 'initial_sigma' else ''}), got {value!r}"
                 )
+            twice = sorted(set(item.names) & set(section))
+            if twice:
+                raise ModelError(
+                    f"{place}: check.{key}.{name} gives {twice[0]!r}, which check.{key}.{twice[0]} gives too; give it once"
+                )
             for component, v in zip(item.names, values):
                 expanded[component] = v
                 lines.setdefault(f"check.{key}.{component}", place)

@@ -190,6 +190,7 @@ def test_models_declaring_library_names_keep_their_own_meaning():
         ('expression: "dv"', 'expression: "dv_n"', "vec_demo.yaml:26: model 'vec_demo', 3x1 measurement 'z_v': 'dv_n' is a scalar, but 3x1 measurement 'z_v' is a 3x1"),
         ("  b_a: 0\n", "  b_a: 0\n  dv_n: 0\n", "'dv_n' is a component of 3x1 state 'dv'; write one 3x1 equation for 'dv'"),
         ("    dv: 0.1\n", "    dv: [0.1, 0.2]\n", "check.initial_sigma.dv: 3x1 state 'dv' needs 3 values"),
+        ("    dv: 0.1\n", "    dv: 0.1\n    dv_e: 0.2\n", "check.initial_sigma.dv gives 'dv_e', which check.initial_sigma.dv_e gives too"),
     ],
 )
 def test_bad_vector_files_are_refused_with_file_line_and_shapes(old, new, message):
