@@ -387,7 +387,7 @@ def _measurements(
         if bias is not None:  # measured = true + bias: the measured side's extra term
             extra = bias if extra is None else extra + bias
         symbols = read.names(entry["symbols"], f"{key}.symbols", count)
-        names = read.names(entry["names"], f"{key}.names", count) if "names" in entry else [f"{kind}_difference_{k + 1}" for k in range(count)]
+        names = read.names(entry["names"], f"{key}.names", count) if "names" in entry else [f"{kind}_difference_{symbol}" for symbol in symbols]
         variances = entry["variance"] if isinstance(entry["variance"], list) else [entry["variance"]] * count
         if len(variances) != count:
             raise ModelError(f"{read.at(f'{key}.variance')}: {key}.variance lists {len(variances)} values for {count} components")

@@ -85,3 +85,47 @@ def test_readme_navigation_example_is_under_40_lines_and_generates_and_passes_th
     result = CliRunner().invoke(main, ["generate", str(path), "--out", str(tmp_path / "gen"), "--check"])
     assert result.exit_code == 0, result.output
     assert "check c" in result.output and "FAILED" not in result.output
+
+
+JANUS = """
+model: janus_doppler
+frame: NED
+parameters:
+  - {name: q, unit: "1", value: 1.0e-6}
+  - {name: beam_sigma, symbol: sigma_b, unit: m/s, value: 0.05}
+  - {name: depression_cos, symbol: cg, unit: "1", value: 0.8660254037844386}
+  - {name: depression_sin, symbol: sg, unit: "1", value: 0.5}
+navigation:
+  errors:
+    position: {form: metres, symbol: dr}
+    velocity: {form: difference, symbol: dv}
+    attitude: {form: phi, symbol: phi}
+  noises: {gyro: {psd: q}, accel: {psd: q}}
+  measurements:   # four Janus beams (forward/aft, left/right at 30 deg depression): body velocity along each beam
+    - {of: expression, expression: "dot(vector(cg, 0, sg), transpose(C_b_n)*v_n)", symbols: [z_1], variance: "sigma_b**2", units: [m/s]}
+    - {of: expression, expression: "dot(vector(-cg, 0, sg), transpose(C_b_n)*v_n)", symbols: [z_2], variance: "sigma_b**2", units: [m/s]}
+    - {of: expression, expression: "dot(vector(0, cg, sg), transpose(C_b_n)*v_n)", symbols: [z_3], variance: "sigma_b**2", units: [m/s]}
+    - {of: expression, expression: "dot(vector(0, -cg, sg), transpose(C_b_n)*v_n)", symbols: [z_4], variance: "sigma_b**2", units: [m/s]}
+"""
+
+
+def test_janus_doppler_beam_rows_are_b_transpose_C_transpose_on_dv_and_on_v_cross_phi():
+    """z_k = b_k . C^T v (seed 002's Janus beams); perturbed: H = [0, b^T C^T, -b^T C^T [v x]] (no C C^T = I needed)."""
+    from modelgen.model.loading import load_model_text
+
+    model = load_model_text(JANUS, "janus.yaml")
+    derived = derive(model)
+    rng = np.random.default_rng(5)
+    C = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    C *= np.sign(np.linalg.det(C))
+    v = np.array([80.0, -20.0, 1.5])
+    values = {f"c{i + 1}{j + 1}": C[i, j] for i in range(3) for j in range(3)}
+    values.update(velocity_north=v[0], velocity_east=v[1], velocity_down=v[2], latitude=0.7, height=100.0,
+                  meridian_radius=6.36e6, prime_vertical_radius=6.39e6, gravity=9.8,
+                  body_specific_force_x=0.0, body_specific_force_y=0.0, body_specific_force_z=-9.8)
+    H = derived.numeric(values)["H"]
+    cg, sg = np.sqrt(3) / 2, 0.5
+    beams = np.array([[cg, 0, sg], [-cg, 0, sg], [0, cg, sg], [0, -cg, sg]])
+    cross_v = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    expected = np.hstack([np.zeros((4, 3)), beams @ C.T, -beams @ C.T @ cross_v])
+    assert np.allclose(H, expected, rtol=0, atol=1e-12)
