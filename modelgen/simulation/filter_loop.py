@@ -241,6 +241,11 @@ class FilterLoop:
             self.progress(k, self.n_cycles)
 
 
+    @property
+    def recorded(self) -> int:
+        """Rows of ``result`` recorded so far."""
+        return self.row
+
     def run(self, first: int, last: int) -> None:
         """Filter cycles ``first``..``last`` in order (a piece of the flight)."""
         for k in range(first, last + 1):

@@ -30,6 +30,7 @@ from modelgen.simulation.jit import HAVE_NUMBA
 from modelgen.simulation.montecarlo import MonteCarloResult, run_monte_carlo
 from modelgen.simulation.rotation import dcm_to_euler, navigation_frame_attitude_error, quaternion_to_dcm
 from modelgen.simulation.scenario import FlightProfile
+from modelgen.simulation.history import CsvHistory
 from modelgen.simulation.streaming import fly_modes
 from modelgen.simulation.trajectory import Trajectory, generate_trajectory
 
@@ -77,7 +78,7 @@ def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, in
 
 def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs: int = 20, seed: int = 0,
              workers: int = 2, echo: Callable[[str], None] = print, implementation: str = "c",
-             client: Any = None) -> Path:
+             client: Any = None, history_csv: bool = False) -> Path:
     """Fly ``profile`` with its filter model ``derived`` (module docstring); the summary's path.
 
     ``implementation`` is the filter of the three correction-mode runs: the
@@ -85,7 +86,9 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
     The Monte Carlo runs use the reference, which the conformance tests hold
     to the generated code within 1e-12 (scaled covariance difference).
     ``derived`` is the profile's ``filter.model``, derived by the caller (the
-    main job hands down the model it derived once).
+    main job hands down the model it derived once).  ``history_csv`` also
+    writes each mode's history, as it is flown, to ``history_<mode>.csv``
+    (:mod:`modelgen.simulation.history`) in ``out_dir``.
     """
     import matplotlib
 
@@ -115,8 +118,15 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
         t = time.perf_counter()
         n_cycles = len(trajectory.truth) - 1
         record_every = max(1, math.ceil(n_cycles / MAX_HISTORY_ROWS))
-        results = fly_modes(profile, derived, trajectory, sensors, layout, make_filter, MODES,
-                            progress=lambda mode: _echo_progress(echo, f"{mode} filter"), record_every=record_every)
+        histories = {mode: CsvHistory(out_dir / f"history_{mode}.csv", derived.model.state_names)
+                     for mode in MODES} if history_csv else {}
+        try:
+            results = fly_modes(profile, derived, trajectory, sensors, layout, make_filter, MODES,
+                                progress=lambda mode: _echo_progress(echo, f"{mode} filter"),
+                                record_every=record_every, histories=histories)
+        finally:
+            for history in histories.values():
+                history.close()
         timings["IMU + mechanization + filter, three modes in one streamed pass"] = time.perf_counter() - t
     errors = {mode: navigation_errors(r.outputs, trajectory, r.times) for mode, r in results.items()}
     errors["free INS"] = navigation_errors(results["open_loop"].raw_outputs, trajectory, results["open_loop"].times)

@@ -529,6 +529,11 @@ class NativeFilterLoop:
         nav.strapdown.accel_bias[:] = self.biases[1]
         nav.sensor_compensation[:] = self.biases[2]
 
+    @property
+    def recorded(self) -> int:
+        """Rows of ``result`` recorded so far."""
+        return int(self.counters[0])
+
     def run(self, first: int, last: int) -> None:
         """Filter cycles ``first``..``last`` (consecutive pieces, in order)."""
         self._run(first, last)

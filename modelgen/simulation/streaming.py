@@ -67,7 +67,7 @@ def fly_modes(profile: FlightProfile, derived: DerivedModel, trajectory: Traject
               layout: ErrorLayout, make_filter: FilterMaker, modes: Iterable[str],
               progress: Callable[[str], Progress] | None = None, piece_seconds: float = PIECE_SECONDS,
               record_every: int = 1, sinks: dict[str, Sink] | None = None,
-              glue: str = "compiled") -> dict[str, RunResult]:
+              glue: str = "compiled", histories: dict[str, Any] | None = None) -> dict[str, RunResult]:
     """Fly ``modes`` in lockstep over one pass of the sensor data (module docstring); mode -> its result.
 
     ``progress(mode)`` makes each mode's progress callback; ``sinks[mode]``
@@ -76,8 +76,11 @@ def fly_modes(profile: FlightProfile, derived: DerivedModel, trajectory: Traject
     ``glue="compiled"`` (default) flies the generated C filter in the compiled
     loop (:mod:`modelgen.simulation.native_loop`) where the sensor and filter
     allow it (and no sink is asked for), else the Python loop; ``"python"``
-    always flies the Python loop.
+    always flies the Python loop.  ``histories[mode]`` (a
+    :class:`~modelgen.simulation.history.CsvHistory`) receives each piece's
+    recorded rows as soon as the piece is flown.
     """
+    histories = histories or {}
     sensor = profile.aiding_sensor
     if not hasattr(sensor, "filter_loop"):
         raise ModelError(f"aiding sensor {sensor.name!r} has no filter_loop(): it can fly a held trajectory only")
@@ -98,5 +101,8 @@ def fly_modes(profile: FlightProfile, derived: DerivedModel, trajectory: Traject
         if cursor is not None:
             load_piece(sensors, cursor, first, last)
         for loop in loops:
+            written = loop.recorded if first > 1 else 0  # the first piece also writes the row at t = 0
             loop.run(first, last)
+            if loop.mode in histories:
+                histories[loop.mode].write(loop.result, written, loop.recorded)
     return {loop.mode: loop.result for loop in loops}

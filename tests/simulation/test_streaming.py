@@ -118,3 +118,38 @@ def test_markov_recursion_is_lfilter_bit_for_bit():
     drive = 1e-3 * np.sqrt(1.0 - a * a) * rng.standard_normal((20000, 3))
     drive[0] = 1e-3 * rng.standard_normal(3)
     assert np.array_equal(sequence, lfilter([1.0], [1.0, -a], drive, axis=0))
+
+
+def test_histories_are_written_piece_by_piece_with_the_rows_held_in_memory(scenario, paper_derived, tmp_path):
+    import csv
+
+    from modelgen.simulation.history import CsvHistory, history_columns
+
+    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0, streamed=True)
+    layout = profile_layout(scenario, paper_derived, trajectory)
+    sensors = simulate_sensors(scenario, trajectory, np.random.default_rng(21))
+    names = paper_derived.model.state_names
+    histories = {mode: CsvHistory(tmp_path / f"{mode}.csv", names) for mode in ("open_loop", "closed_loop")}
+    seen = []
+
+    class Watching(CsvHistory):  # the file grows while the flight goes on, one piece at a time
+        def write(self, result, start, stop):
+            seen.append(stop)
+            super().write(result, start, stop)
+
+    histories["closed_loop"].close()
+    histories["closed_loop"] = Watching(tmp_path / "closed_loop.csv", names)
+    results = fly_modes(scenario, paper_derived, trajectory, sensors, layout,
+                        lambda x, P: ReferenceFilter(paper_derived, x, P), ("open_loop", "closed_loop"),
+                        piece_seconds=60.0, record_every=10, histories=histories)
+    for history in histories.values():
+        history.close()
+    assert seen == [7, 13, 19, 25, 31]  # row 0 and rows every 10 s: 6 more per 60-s piece, the last included
+    for mode, result in results.items():
+        with open(tmp_path / f"{mode}.csv", newline="", encoding="utf-8") as f:
+            rows = list(csv.reader(f))
+        assert rows[0] == history_columns(names) and len(rows) == len(result.times) + 1
+        table = np.array(rows[1:], dtype=float)
+        assert np.array_equal(table[:, 0], result.times)
+        assert np.array_equal(table[:, 11:11 + len(names)], result.estimation_error)  # repr: exact round trip
+        assert np.array_equal(table[:, -1], result.nees, equal_nan=True)
