@@ -208,7 +208,12 @@ def parse_vector_expression(text: str | sp.Expr | float | int, namespace: Mappin
         functions.pop(name, None)  # a declared name shadows a library name
         values[name] = value
     _check_tokens(text, where)
-    _check_syntax(text, {**values, **functions}, where)
+    try:
+        _check_syntax(text, {**values, **functions}, where)
+    except ModelError as exc:
+        if "unknown function" not in str(exc):
+            raise
+        raise ModelError(f"{exc} (the functions are: {', '.join(sorted(functions))})") from None
     source = text.strip()
     tree = ast.parse(source, mode="eval")
     evaluator = _Evaluator(source, values, functions, where)
