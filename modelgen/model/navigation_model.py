@@ -204,14 +204,19 @@ def _error_definition(read: _Reader, section: Mapping, frame: str, decl: _Declar
         )
     chosen: dict[str, tuple[str, list[str]]] = {}
     order: list[sp.Symbol] = []
+    approximations = section.get("approximations")
+    horizontal = isinstance(approximations, list) and "no_vertical_channel" in approximations
     for quantity in errors:
         key = f"navigation.errors.{quantity}"
         entry = read.mapping(errors[quantity], key, ("form", "symbols", "symbol", "names"))
         form = read.choice(entry.get("form", _ERROR_DEFAULTS[quantity][0]), f"{key}.form", _ERROR_FORMS[quantity])
-        if quantity == "position" and form == "geodetic" and "symbols" not in entry:
-            symbols = ["dL", "dlambda", "dh"]
+        count = 2 if horizontal and quantity != "attitude" else 3  # no_vertical_channel: horizontal components only
+        if "symbols" in entry:
+            symbols = read.names(entry["symbols"], f"{key}.symbols", count)
+        elif quantity == "position" and form == "geodetic":
+            symbols = ["dL", "dlambda", "dh"][:count]
         else:
-            symbols = _vector_symbols(read, entry, key, "dr" if quantity == "position" else _ERROR_DEFAULTS[quantity][1], frame, None)
+            symbols = _vector_symbols(read, entry, key, "dr" if quantity == "position" else _ERROR_DEFAULTS[quantity][1], frame, None)[:count]
         if quantity == "attitude":
             names = [f"attitude_error_{w}" for w in _axis_words(frame, None)]
         elif quantity == "velocity":
@@ -220,9 +225,8 @@ def _error_definition(read: _Reader, section: Mapping, frame: str, decl: _Declar
             names = ["latitude_error", "longitude_error", "height_error"]
         else:
             names = [f"position_error_{w}" for w in _axis_words(frame, None)]
-        if "names" in entry:
-            names = read.names(entry["names"], f"{key}.names", 3)
-        units = {"attitude": ["rad"] * 3, "velocity": ["m/s"] * 3, "position": ["rad", "rad", "m"] if form == "geodetic" else ["m"] * 3}[quantity]
+        names = read.names(entry["names"], f"{key}.names", count) if "names" in entry else names[:count]
+        units = {"attitude": ["rad"] * 3, "velocity": ["m/s"] * 3, "position": ["rad", "rad", "m"] if form == "geodetic" else ["m"] * 3}[quantity][:count]
         label = {"phi": "phi-angle", "psi": "psi-angle"}.get(form, form)
         for name, symbol, unit in zip(names, symbols, units):
             decl.states.append(State(name=name, symbol=symbol, unit=unit, description=f"{quantity} error ({label}), computed minus true"))
@@ -340,8 +344,8 @@ def _component_order(read: _Reader, entry: Mapping, key: str, frame: str) -> tup
         return [0, 1, 2], [1, 1, 1]
     axes = entry["axes"]
     opposite = {"down": "up", "up": "down"}
-    if not isinstance(axes, list) or len(axes) != 3:
-        raise ModelError(f"{read.at(f'{key}.axes')}: {key}.axes must list three of {', '.join(words)}")
+    if not isinstance(axes, list) or len(axes) not in (2, 3):
+        raise ModelError(f"{read.at(f'{key}.axes')}: {key}.axes must list two or three of {', '.join(words)}")
     index, sign = [], []
     for a in axes:
         if a in words:
@@ -350,13 +354,14 @@ def _component_order(read: _Reader, entry: Mapping, key: str, frame: str) -> tup
             index.append(words.index(opposite[a])), sign.append(-1)
         else:
             raise ModelError(f"{read.at(f'{key}.axes')}: {key}.axes: {a!r} is not an axis of the {frame} frame ({', '.join(words)})")
-    if sorted(index) != [0, 1, 2]:
+    if len(set(index)) != len(index):
         raise ModelError(f"{read.at(f'{key}.axes')}: {key}.axes names an axis twice: {axes}")
     return index, sign
 
 
 def _reorder(vector: sp.Matrix, index: Sequence[int], sign: Sequence[int]) -> sp.Matrix:
-    return sp.Matrix([sign[k] * vector[index[k]] for k in range(3)])
+    """The listed components of a navigation-frame vector, in the listed order and sign."""
+    return sp.Matrix([sign[k] * vector[index[k]] for k in range(len(index))])
 
 
 def _measurements(
@@ -437,8 +442,8 @@ def _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign):
             if "axes" in entry:
                 raise ModelError(f"{read.at(f'{key}.axes')}: {key}: geodetic position differences (dL, dlambda, dh) take no 'axes'")
             return function, None, ["rad", "rad", "m"], 3
-        scale = lambda computed: sp.Matrix([[sign[k] * v for v in pt.metres_matrix(frame, computed.position).row(index[k])] for k in range(3)])  # noqa: E731
-        return function, scale, ["m"] * 3, 3
+        scale = lambda computed: sp.Matrix([[sign[k] * v for v in pt.metres_matrix(frame, computed.position).row(index[k])] for k in range(len(index))])  # noqa: E731
+        return function, scale, ["m"] * len(index), len(index)
 
     def velocity(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
         if arm is None:
@@ -449,7 +454,7 @@ def _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign):
         antenna = state.velocity + state.attitude * rate.cross(arm) - mech.earth_rate(state).cross(state.attitude * arm)
         return _reorder(antenna, index, sign)
 
-    return velocity, None, ["m/s"] * 3, 3
+    return velocity, None, ["m/s"] * len(index), len(index)
 
 
 def _pseudorange(read, entry, key, frame, clock, decl):
@@ -625,9 +630,22 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         if str(exc).startswith(filename):  # already names its file and line
             raise
         raise ModelError(f"{read.at('navigation')}: model {data['model']!r}: {exc}") from None
+    _refuse_measurements_of_removed_states(read, equations, functions)
     model = _error_model(data, lines, filename, decl, own, equations, measurement_decls)
     _DERIVED[model.name] = equations
     return NavigationDerivation(model=model, equations=equations)
+
+
+def _refuse_measurements_of_removed_states(read: _Reader, equations: pt.ErrorEquations, functions: Sequence[pt.MeasurementFunction]) -> None:
+    """A measurement that depends on a quantity with no error state (the vertical channel under no_vertical_channel) is refused."""
+    rows = [(f"navigation.measurements[{i}]", symbol) for i, f in enumerate(functions) for symbol in f.symbols]
+    for term in equations.neglected:
+        if term.matrix == "H" and term.column == -1:
+            key, symbol = rows[term.row]
+            raise ModelError(
+                f"{read.at(key)}: measurement {str(symbol)!r} depends on the vertical velocity or height, which have no "
+                f"error state under no_vertical_channel (measure the horizontal components only)"
+            )
 
 
 def _error_model(data, lines, filename, decl: _Declarations, own: list[str], equations: pt.ErrorEquations, measurement_decls) -> ErrorModel:
@@ -678,7 +696,9 @@ def approximation_notes(data: Mapping, equations: pt.ErrorEquations, decl: _Decl
         for t in terms:
             rows, columns = names.get(t.matrix, (list(map(str, equations.measurements)), [s.name for s in decl.states]))
             size = term_magnitude(t.term, values)
-            parts.append(f"{t.matrix}[{rows[t.row]}, {columns[t.column]}]" + (f" = {size:.3g}" if size is not None else ""))
+            row = rows[t.row] if t.row >= 0 else "a removed vertical state"
+            column = columns[t.column] if t.column >= 0 else "a removed vertical state"
+            parts.append(f"{t.matrix}[{row}, {column}]" + (f" = {size:.3g}" if size is not None else ""))
         dropped = "; ".join(parts) if parts else "no term in this model"
         notes.append(f"Approximation {name} ({pt.APPROXIMATION_DESCRIPTIONS[name]}): dropped {dropped} (size at the check scenario).")
     if approximations and not values:

@@ -47,7 +47,7 @@ gravity).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Mapping, Sequence
 
 import sympy as sp
@@ -579,6 +579,14 @@ def free_vertical_channel(stage: _Stage, problem: NavigationProblem) -> _Stage:
     return _substitute(stage, {d: 0 for d in _derivative_of(Gravity, stage, 1)})
 
 
+def no_vertical_channel(stage: _Stage, problem: NavigationProblem) -> _Stage:
+    """No vertical channel: the vertical velocity and height errors are not states (their couplings are dropped)."""
+    vertical = {problem.errors.velocity_states[2], problem.errors.position_states[2]}
+    keep = [0 if s in vertical else 1 for s in problem.state_order]
+    mask = sp.diag(*keep)
+    return _Stage(mask * stage.F * mask, mask * stage.G, stage.H * mask)
+
+
 def level_flight(stage: _Stage, problem: NavigationProblem) -> _Stage:
     """No vertical velocity: v_down (v_up) = 0."""
     return _substitute(stage, {problem.velocity[2]: 0})
@@ -599,6 +607,7 @@ APPROXIMATIONS: dict[str, Callable[[_Stage, NavigationProblem], _Stage]] = {
     "free_air_gradient": free_air_gradient,
     "free_vertical_channel": free_vertical_channel,
     "level_flight": level_flight,
+    "no_vertical_channel": no_vertical_channel,
     "no_earth_rate_position_terms": _equation_approximation,
     "no_transport_rate_position_terms": _equation_approximation,
 }
@@ -675,6 +684,11 @@ def check_problem(problem: NavigationProblem) -> None:
     for what, form, forms in (("attitude", e.attitude, ATTITUDE_FORMS), ("velocity", e.velocity, VELOCITY_FORMS), ("position", e.position, POSITION_FORMS)):
         if form not in forms:
             raise ModelError(f"{what} error form {form!r} is not one of {', '.join(forms)}")
+    expected = 2 if "no_vertical_channel" in problem.approximations else 3
+    for what, states, count in (("attitude", e.attitude_states, 3), ("velocity", e.velocity_states, expected), ("position", e.position_states, expected)):
+        if len(states) != count:
+            reason = " (no_vertical_channel: the horizontal components only)" if count == 2 else ""
+            raise ModelError(f"the {what} error has {len(states)} states, {count} expected{reason}")
     unknown = [a for a in problem.approximations if a not in APPROXIMATIONS]
     if unknown:
         raise ModelError(f"unknown approximation(s) {', '.join(unknown)} (known: {', '.join(sorted(APPROXIMATIONS))})")
@@ -692,6 +706,7 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
     before - after, in parameter symbols).
     """
     check_problem(problem)
+    problem, placeholders = _with_vertical_placeholders(problem)
     equation_flags: set[str] = set()
     stage = _declared_stage(problem, _primitive_stage(problem, equation_flags))
     finished = _finish(stage, problem)
@@ -708,14 +723,58 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
         after = _finish(stage, problem)
         neglected.extend(_differences(name, finished, after))
         finished = after
+    return _without_states(
+        ErrorEquations(
+            F=finished.F,
+            G=finished.G,
+            H=finished.H,
+            states=tuple(problem.state_order),
+            noises=tuple(problem.noises),
+            measurements=tuple(s for m in problem.measurements for s in m.symbols),
+            neglected=tuple(neglected),
+        ),
+        placeholders,
+    )
+
+
+def _with_vertical_placeholders(problem: NavigationProblem) -> tuple[NavigationProblem, tuple[sp.Symbol, ...]]:
+    """Under ``no_vertical_channel`` the model declares horizontal velocity and position errors (2 each);
+    the derivation runs with the vertical ones as placeholder states, removed at the end."""
+    e = problem.errors
+    if "no_vertical_channel" not in problem.approximations:
+        return problem, ()
+    velocity, height = sp.Dummy("vertical_velocity_error", real=True), sp.Dummy("vertical_position_error", real=True)
+    errors = ErrorDefinition(e.attitude, e.attitude_states, e.velocity, (*e.velocity_states, velocity), e.position, (*e.position_states, height))
+    order: list[sp.Symbol] = []
+    for s in problem.state_order:
+        order.append(s)
+        if s == e.velocity_states[-1]:
+            order.append(velocity)
+        if s == e.position_states[-1]:
+            order.append(height)
+    return replace(problem, errors=errors, state_order=tuple(order)), (velocity, height)
+
+
+def _without_states(equations: ErrorEquations, removed: Sequence[sp.Symbol]) -> ErrorEquations:
+    """``equations`` without the ``removed`` states; a neglected term in a removed row or column gets index -1."""
+    if not removed:
+        return equations
+    kept = [i for i, s in enumerate(equations.states) if s not in removed]
+    new_index = {old: new for new, old in enumerate(kept)}
+
+    def moved(term: NeglectedTerm) -> NeglectedTerm:
+        row = new_index.get(term.row, -1) if term.matrix in ("F", "G") else term.row
+        column = new_index.get(term.column, -1) if term.matrix in ("F", "H") else term.column
+        return NeglectedTerm(term.approximation, term.matrix, row, column, term.term)
+
     return ErrorEquations(
-        F=finished.F,
-        G=finished.G,
-        H=finished.H,
-        states=tuple(problem.state_order),
-        noises=tuple(problem.noises),
-        measurements=tuple(s for m in problem.measurements for s in m.symbols),
-        neglected=tuple(neglected),
+        F=equations.F.extract(kept, kept),
+        G=equations.G.extract(kept, list(range(equations.G.cols))) if equations.G.cols else sp.zeros(len(kept), 0),
+        H=equations.H.extract(list(range(equations.H.rows)), kept) if equations.H.rows else sp.zeros(0, len(kept)),
+        states=tuple(equations.states[i] for i in kept),
+        noises=equations.noises,
+        measurements=equations.measurements,
+        neglected=tuple(moved(t) for t in equations.neglected),
     )
 
 

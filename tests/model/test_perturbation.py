@@ -178,3 +178,29 @@ def test_inconsistent_problems_are_refused_before_deriving(change, message):
 
     with pytest.raises(ModelError, match=message.replace("(", r"\(").replace(")", r"\)")):
         pt.derive_error_equations(replace(problem(), **change))
+
+
+def test_no_vertical_channel_removes_vertical_velocity_and_height_and_lists_their_couplings(exact):
+    full = problem()
+    horizontal = pt.ErrorDefinition("phi", full.errors.attitude_states, "difference", full.errors.velocity_states[:2],
+                                    "geodetic", full.errors.position_states[:2])
+    order = tuple(s for s in full.state_order if s not in (full.errors.velocity_states[2], full.errors.position_states[2]))
+    from dataclasses import replace
+
+    reduced = pt.derive_error_equations(replace(full, errors=horizontal, state_order=order, approximations=("no_vertical_channel",)))
+    kept = [full.state_order.index(s) for s in order]
+    assert reduced.states == order and reduced.F.shape == (19, 19)
+    assert sp.simplify(reduced.F - exact.F.extract(kept, kept)) == sp.zeros(19, 19)
+    dropped = {(t.row, t.column) for t in reduced.neglected}
+    v_d, h = full.state_order.index(full.errors.velocity_states[2]), full.state_order.index(full.errors.position_states[2])
+    # every nonzero coupling of a kept state to the vertical channel is listed (column -1: the removed state)
+    couplings = {kept.index(i) for i in kept for j in (v_d, h) if exact.F[i, j] != 0}
+    assert couplings == {row for row, column in dropped if column == -1 and row >= 0}
+    assert any(row == -1 for row, _ in dropped)  # and the vertical channel's own rows
+
+
+def test_no_vertical_channel_needs_the_horizontal_components_only():
+    from dataclasses import replace
+
+    with pytest.raises(ModelError, match="velocity error has 3 states, 2 expected"):
+        pt.derive_error_equations(replace(problem(), approximations=("no_vertical_channel",)))
