@@ -93,6 +93,9 @@ def _mapped_echo(update, err: bool = False):
 
 
 _FORCE_REPORT_HELP = "Overwrite report files of the same name that modelgen did not write or that were edited since."
+_SCHEDULER_HELP = ("Address of an existing dask scheduler (tcp://HOST:8786) to run the runs on; default: a local "
+                   "cluster started for this command.")
+_WORKERS_HELP = "Worker processes of the local cluster (default: one per core)."
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -146,25 +149,28 @@ def main(debug: bool) -> None:
 
 @main.command()
 @click.argument("model", default="ned_doppler18")
-def derive(model: str) -> None:
+@click.option("--format", "fmt", type=click.Choice(["text", "json", "latex", "octave", "casadi"]), default="text", show_default=True, help="text: one line per entry; json: entries as sympy strings; latex: a table like a paper's; octave: a function file [F,G,H,Q,R] = NAME(p); casadi: a serialized casadi.Function of the parameter vector (needs --out).")
+@click.option("--out", "out_file", type=click.Path(dir_okay=False), default=None, help="Write to FILE (atomically) instead of printing; for octave the function is named after FILE's stem.")
+def derive(model: str, fmt: str, out_file: str | None) -> None:
     """Derive F, G, H, Q, R from MODEL's equations and print the nonzero entries.
 
-    MODEL is a model file (YAML) or the name of a built-in model.
+    MODEL is a model file (YAML) or the name of a built-in model.  Entries are
+    printed simplified for reading (denominators factored, R_M + h kept
+    together); --format exports them for LaTeX, Octave/MATLAB, CasADi or JSON.
     """
-    from modelgen.jobs import load_and_derive
+    from modelgen.errors import ModelError
+    from modelgen.fileio.output import write_text_atomically
+    from modelgen.jobs import derived_export
 
-    derived = load_and_derive(model)
-    m = derived.model
-    click.echo(f"model {m.name}: {derived.n_states} states, {derived.n_noises} noises, {derived.n_measurements} measurements")
-    for label, matrix, rows, cols in (
-        ("F", derived.F, m.state_names, m.state_names),
-        ("G", derived.G, m.state_names, m.noise_names),
-        ("H", derived.H, m.measurement_names, m.state_names),
-    ):
-        for i in range(matrix.shape[0]):
-            for j in range(matrix.shape[1]):
-                if matrix[i, j] != 0:
-                    click.echo(f"{label}({i + 1},{j + 1}) [{rows[i]}, {cols[j]}] = {matrix[i, j]}")
+    if fmt == "casadi" and out_file is None:
+        raise ModelError("--format casadi writes a file: give --out FILE (e.g. --out model.casadi)")
+    name = Path(out_file).stem if out_file is not None and fmt == "octave" else None
+    text = derived_export(model, fmt, name)
+    if out_file is None:
+        click.echo(text, nl=False)
+        return
+    write_text_atomically(Path(out_file), text)
+    click.echo(f"wrote {out_file}")
 
 
 @main.command()
@@ -364,16 +370,12 @@ def observability(model: str, scenario_file: str | None, assignments: tuple[str,
     scenario's operating point(s) and names the unobservable and weakly
     observable directions as combinations of states.
     """
-    from modelgen.jobs import load_and_derive, observability_defaults, observability_report
+    from modelgen.jobs import load_and_derive, observability_analysis, observability_report
 
-    derived = load_and_derive(model)
-    defaults = observability_defaults(derived) if scenario_file is None else None
-    base = None
-    if defaults:
-        label, base, default_step = defaults
-        step = step if step is not None else default_step
+    label, report = observability_analysis(load_and_derive(model), scenario_file, assignments, step, steps, weak_rtol)
+    if label:
         click.echo(f"scenario: {label}")
-    click.echo(observability_report(derived, scenario_file, assignments, step, steps, weak_rtol, base))
+    click.echo(observability_report(report))
 
 
 
@@ -411,21 +413,53 @@ def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool, force: bool
 @click.option("--filter", "implementation", type=click.Choice(["c", "python", "reference"]), default="c", show_default=True, help="Filter of the correction-mode runs: the generated C (compiled now), the generated Python, or the numpy reference.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="report/simulation", show_default=True, help="Directory for summary.md and the PNG figures.")
 @click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
+@click.option("--scheduler", default=None, metavar="ADDRESS", help=_SCHEDULER_HELP)
+@click.option("--workers", type=click.IntRange(min=1), default=None, help=_WORKERS_HELP)
+@click.option("--history-csv", is_flag=True, help="Also write each correction mode's history (output, estimation error, sigma, NEES per recorded cycle) to history_<mode>.csv as it is flown.")
 def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | None, seed: int, out_dir: str,
-             implementation: str, force: bool) -> None:
+             implementation: str, force: bool, scheduler: str | None, workers: int | None, history_csv: bool) -> None:
     """Fly a scenario: truth, IMU/Doppler/GPS, strapdown, filter in three correction modes, Monte Carlo.
 
-    Writes summary.md (errors per correction mode, NEES test, timings) and PNG figures.
+    Writes summary.md (errors per correction mode, NEES test, timings) and PNG
+    figures.  The Monte Carlo runs are dask tasks: on a local cluster (one
+    worker per core) unless --scheduler names an existing one; each run's
+    seed comes from --seed and its index, so results do not depend on where
+    it ran.
     """
     from modelgen.fileio.output import ReportUpdate
     from modelgen.jobs import flight_scenario, simulate_flight
 
     scenario = flight_scenario(profile, hours, imu_rate)
     with ReportUpdate(Path(out_dir), force=force) as staged:
-        summary = simulate_flight(scenario, staged.staging, runs, seed, implementation, echo=_mapped_echo(staged, err=True))
+        summary = simulate_flight(scenario, staged.staging, runs, seed, implementation, echo=_mapped_echo(staged, err=True),
+                                  scheduler=scheduler, workers=workers, history_csv=history_csv)
         summary = staged.final(summary)
         staged.commit()
     click.echo(f"wrote {summary}")
+
+
+@main.command()
+@click.argument("study_file", metavar="STUDY.yaml")
+@click.option("--scheduler", default=None, metavar="ADDRESS", help=_SCHEDULER_HELP)
+@click.option("--workers", type=click.IntRange(min=1), default=None, help=_WORKERS_HELP)
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="report/trade", show_default=True, help="Directory for trade.csv, trade.parquet, the figure and summary.md.")
+@click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
+def trade(study_file: str, scheduler: str | None, workers: int | None, out_dir: str, force: bool) -> None:
+    """Run a trade study: covariance analysis of every case of a grid (or list), Monte Carlo of selected ones.
+
+    STUDY.yaml is a study file or a built-in study's name
+    (modelgen/data/studies/).  The file is checked completely before any
+    task is submitted.  Writes the case table (CSV and Parquet), a figure of
+    the study's metric against its plot parameter per filter, and summary.md.
+    """
+    from modelgen.fileio.output import ReportUpdate
+    from modelgen.jobs import trade_study
+
+    with ReportUpdate(Path(out_dir), force=force) as staged:
+        files = trade_study(study_file, staged.staging, scheduler, workers, echo=_mapped_echo(staged, err=True))
+        files = [staged.final(p) for p in files]
+        staged.commit()
+    click.echo("wrote " + ", ".join(str(p) for p in files))
 
 
 from modelgen.navigator.cli import replay  # noqa: E402  (issue 13: `modelgen replay`)

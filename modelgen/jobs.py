@@ -369,6 +369,22 @@ def replay_section(folder: Path, echo=print) -> str:
     ])
 
 
+def derived_export(model: str | Path, fmt: str, name: str | None = None) -> str:
+    """``modelgen derive --format``: MODEL's F, G, H, Q, R as text, json, latex, octave or casadi (see :mod:`modelgen.export`).
+
+    ``name`` names the Octave function (the output file's stem); CasADi
+    names its function ``<model>_matrices``.
+    """
+    derived = load_and_derive(model)
+    if fmt == "casadi":
+        from modelgen.export.casadi_file import to_casadi
+
+        return to_casadi(derived)
+    from modelgen.export.formats import to_format
+
+    return to_format(derived, fmt, name)
+
+
 def paper_check_of(
     model: str | Path, table: str | Path | None = None, complete: bool | None = None
 ) -> tuple[str, VerificationResult | None]:
@@ -406,17 +422,34 @@ def recommended_form(runs) -> str:
     return recommend(runs)
 
 
-def observability_report(
-    derived: DerivedModel, scenario_file: str | None, assignments: tuple[str, ...], step: float | None,
-    steps: int | None, weak_rtol: float, base_values: dict[str, float] | None,
-) -> str:
-    """``modelgen observability``: the text report of the model's observability over the command's scenario."""
-    from modelgen.analysis.observability import analyse, command_line_scenario, format_report
+def observability_analysis(
+    derived: DerivedModel, scenario_file: str | None = None, assignments: tuple[str, ...] = (), step: float | None = None,
+    steps: int | None = None, weak_rtol: float = 1e-3,
+):
+    """``modelgen observability``: the default operating point's label (None with a scenario file) and the report.
 
+    Without a scenario file the operating point is :func:`observability_defaults`'
+    (its step too, unless ``step`` is given), overridden by the ``NAME=VALUE``
+    assignments.
+    """
+    from modelgen.analysis.observability import analyse, command_line_scenario
+
+    defaults = observability_defaults(derived) if scenario_file is None else None
+    label = base = None
+    if defaults:
+        label, base, default_step = defaults
+        step = step if step is not None else default_step
     scenario = command_line_scenario(
-        scenario_file, assignments, step, steps, default_steps=derived.n_states, base_values=base_values
+        scenario_file, assignments, step, steps, default_steps=derived.n_states, base_values=base
     )
-    return format_report(analyse(derived, scenario, weak_rtol=weak_rtol))
+    return label, analyse(derived, scenario, weak_rtol=weak_rtol)
+
+
+def observability_report(report) -> str:
+    """The text report of an observability analysis (what ``modelgen observability`` prints)."""
+    from modelgen.analysis.observability import format_report
+
+    return format_report(report)
 
 
 def covariance_analysis(folder: Path, sensitivity: bool, figures: bool, progress=None):
@@ -441,9 +474,43 @@ def flight_scenario(profile: str, hours: float | None = None, imu_rate: float | 
     return load_profile(profile).with_changes(**changes)
 
 
-def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation: str, echo=print) -> Path:
-    """``modelgen simulate``: fly the scenario (truth, sensors, filter, Monte Carlo) into ``folder``; the summary's path."""
+def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation: str, echo=print,
+                    scheduler: str | None = None, workers: int | None = None, history_csv: bool = False) -> Path:
+    """``modelgen simulate``: fly the scenario (truth, sensors, filter, Monte Carlo) into ``folder``; the summary's path.
+
+    The Monte Carlo runs go to ``scheduler`` (an existing dask cluster) or,
+    for two runs or more, to a local cluster of ``workers`` processes (default:
+    one per core), opened first so that an unreachable address fails at once.
+    """
+    from modelgen.cluster import dask_client, describe_client
     from modelgen.simulation.flight_report import simulate
 
     derived = load_and_derive(scenario.filter.model)
-    return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation)
+    if runs < 2 and scheduler is None:
+        return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation,
+                        history_csv=history_csv)
+    with dask_client(scheduler, workers) as client:
+        echo(f"  Monte Carlo on {describe_client(client)}")
+        return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation,
+                        client=client, history_csv=history_csv)
+
+
+def trade_study(study_file: str | Path, folder: Path, scheduler: str | None = None, workers: int | None = None,
+                echo=print) -> list[Path]:
+    """``modelgen trade``: check the study file, run its cases on a dask cluster, write its outputs into ``folder``.
+
+    The whole file is checked (and its Monte Carlo profiles built) before the
+    cluster is opened or any task submitted.
+    """
+    from modelgen.cluster import dask_client
+    from modelgen.study.outputs import write_outputs
+    from modelgen.study.studyfile import load_study
+    from modelgen.study.trade import monte_carlo_profiles, run_trade
+
+    study = load_study(study_file)
+    profiles = monte_carlo_profiles(study)
+    echo(f"modelgen trade: {study.name}, {study.case_count} covariance cases"
+         + (f", {len(profiles)} Monte Carlo cases" if profiles else ""))
+    with dask_client(scheduler, workers) as client:
+        result = run_trade(study, client, progress=echo, profiles=profiles)
+    return write_outputs(result, folder)

@@ -91,10 +91,56 @@ def md_text(text: object) -> str:
     return _MARKDOWN_ORDERED.sub(r"\1\\\2", line)
 
 
+_LATEX_SPECIAL = {
+    "\\": r"\textbackslash{}",
+    "{": r"\{",
+    "}": r"\}",
+    "$": r"\$",
+    "&": r"\&",
+    "#": r"\#",
+    "%": r"\%",
+    "_": r"\_",
+    "^": r"\textasciicircum{}",
+    "~": r"\textasciitilde{}",
+}
+
+
+def latex_text(text: object) -> str:
+    """Text for LaTeX prose or a table cell, on one line: every special character typeset literally.
+
+    Backslash, braces, ``$ & # % _ ^ ~`` are replaced by their text forms, so
+    no command (``\\input``, ``\\write18``), group, math mode, alignment tab or
+    comment can come out of the text; a line break cannot end a ``%``
+    comment line or start a paragraph.
+    """
+    return "".join(_LATEX_SPECIAL.get(ch, ch) for ch in one_line(text))
+
+
+def octave_comment(text: object) -> str:
+    """Text for an Octave/MATLAB ``%`` comment line, on one line.
+
+    Only a line break ends such a comment; a line holding just ``%{`` or
+    ``#{`` would open a block comment, so braces after a comment character
+    are split by a space.
+    """
+    line = one_line(text)
+    for opener in ("%{", "%}", "#{", "#}"):
+        line = line.replace(opener, opener[0] + " " + opener[1])
+    return line
+
+
+def octave_string(text: object) -> str:
+    """An Octave/MATLAB single-quoted string literal whose value is ``text`` on one line (quotes doubled)."""
+    return "'" + one_line(text).replace("'", "''") + "'"
+
+
 FILTERS = {
     "c_comment": c_comment,
     "py_comment": py_comment,
     "py_string": py_string,
     "hash_comment": hash_comment,
     "md_text": md_text,
+    "latex_text": latex_text,
+    "octave_comment": octave_comment,
+    "octave_string": octave_string,
 }

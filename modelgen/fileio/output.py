@@ -45,7 +45,7 @@ from contextlib import contextmanager
 from pathlib import Path, PurePosixPath
 from typing import Iterator, Mapping
 
-from modelgen import __version__
+from modelgen.version import __version__
 from modelgen.errors import ModelError
 
 #: Name of the manifest inside every folder modelgen writes.

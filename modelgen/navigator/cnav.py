@@ -25,7 +25,7 @@ import jinja2
 import numpy as np
 from scipy.stats import chi2
 
-from modelgen import __version__
+from modelgen.version import __version__
 from modelgen.codegen.build import compile_shared_library
 from modelgen.codegen.generate import generate_code, template_folder
 from modelgen.errors import ModelError

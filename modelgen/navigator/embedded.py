@@ -24,7 +24,7 @@ from pathlib import Path
 import jinja2
 import numpy as np
 
-from modelgen import __version__
+from modelgen.version import __version__
 from modelgen.codegen import toolchain
 from modelgen.codegen.build import STRICT_FLAGS
 from modelgen.codegen.generate import generate_code, harness_folder

@@ -1,0 +1,123 @@
+"""The Python API (modelgen.api, offered by ``import modelgen``): cheap to import, documented, the same jobs as the CLI."""
+
+from __future__ import annotations
+
+import ast
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import modelgen
+import modelgen.api as api
+import modelgen.jobs as jobs
+from modelgen.derive.symbolic import DerivedModel
+
+from conftest import REPO
+
+TINY = """model: tilt
+title: Single-axis tilt loop
+parameters:
+  - {name: gravity, symbol: g, unit: m/s^2, value: 9.8}
+  - {name: earth_radius, symbol: R, unit: m, value: 6371000.0}
+  - {name: velocity_sigma, symbol: s_v, unit: m/s, value: 0.1}
+states:
+  - {name: tilt_error, symbol: phi, unit: rad}
+  - {name: velocity_error, symbol: dv, unit: m/s}
+dynamics:
+  phi: -dv/R
+  dv: g*phi
+measurements:
+  - {name: velocity_difference, symbol: z, unit: m/s, expression: dv, variance: "s_v**2"}
+"""
+
+
+def readme_section(title: str) -> str:
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    start = text.index(f"\n## {title}\n")
+    end = text.index("\n## ", start + 1)
+    return text[start:end]
+
+
+def test_the_api_is_exactly_the_documented_eight_functions_with_docstrings():
+    functions = ["load_model", "derive", "verify", "generate", "check", "observability", "covariance_analysis", "simulate"]
+    assert api.__all__ == functions
+    assert set(functions) <= set(modelgen.__all__) and set(functions) <= set(dir(modelgen))
+    for name in functions:
+        assert callable(getattr(modelgen, name)), name
+        assert len((getattr(api, name).__doc__ or "").split()) >= 10, name
+        assert f"`{name}(" in readme_section("Python API"), f"README's table lists {name}"
+
+
+def test_importing_modelgen_loads_no_heavy_library():
+    code = "import sys, modelgen; print(sorted(m for m in ('sympy', 'numpy', 'casadi', 'jinja2', 'matplotlib') if m in sys.modules))"
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert run.stdout.strip() == "[]"
+
+
+def test_derive_is_both_the_subpackage_and_the_function():
+    import modelgen.derive.symbolic as symbolic
+
+    assert modelgen.derive.symbolic is symbolic
+    derived = modelgen.derive("ned_doppler18")
+    assert isinstance(derived, DerivedModel) and derived.n_states == 18
+    assert modelgen.derive(derived) is derived
+
+
+def test_python_dash_m_modelgen_runs_the_command_line():
+    run = subprocess.run([sys.executable, "-m", "modelgen", "--version"], capture_output=True, text=True)
+    assert run.returncode == 0 and run.stdout.startswith("modelgen, version ")
+
+
+def test_the_readme_notebook_runs(tmp_path, monkeypatch):
+    """The README's Python API block, with its verify table saved as my_table.yaml, runs and finds the table's mistakes."""
+    table = re.search(r"```yaml\n(.*?)```", readme_section("Verifying your own paper"), re.S).group(1)
+    code = re.search(r"```python\n(.*?)```", readme_section("Python API"), re.S).group(1)
+    (tmp_path / "my_table.yaml").write_text(table, encoding="utf-8")
+    monkeypatch.chdir(tmp_path)
+    namespace: dict = {}
+    exec(compile(ast.parse(code), "README.md (Python API)", "exec"), namespace)
+    assert [e.label for e in namespace["result"].unexplained] == ["F(2,4)", "F(5,1)", "F(6,5)"]
+    assert (tmp_path / "generated" / "enu_doppler18" / "enu_doppler18.c").is_file()
+    assert namespace["report"].rank <= 18
+
+
+def test_check_compiles_and_runs_a_model_against_the_reference(tmp_path):
+    path = tmp_path / "tilt.yaml"
+    path.write_text(TINY, encoding="utf-8")
+    results = modelgen.check(path)
+    assert {r.implementation for r in results} == {"python", "c"}
+    assert all(r.passed() for r in results)
+
+
+def test_verify_without_a_table_is_the_papers_check():
+    result = modelgen.verify("ned_doppler18")
+    assert result.table == "paper_000_table.yaml" and not result.unexplained
+
+
+@pytest.mark.parametrize(
+    ("call", "job", "expected"),
+    [
+        (lambda out: modelgen.covariance_analysis(out=out, sensitivity=False, figures=False), "covariance_analysis", lambda out: ((Path(out), False, False, None), {})),
+        (
+            lambda out: modelgen.simulate("profile_001", out=out, runs=3, seed=7, implementation="reference"),
+            "simulate_flight",
+            None,
+        ),
+    ],
+    ids=["covariance_analysis", "simulate"],
+)
+def test_the_long_jobs_get_their_arguments_through(call, job, expected, tmp_path, monkeypatch):
+    """covariance_analysis and simulate (minutes of work, tested by their commands) pass their arguments to the jobs."""
+    seen = {}
+    monkeypatch.setattr(jobs, job, lambda *args, **kwargs: seen.update(args=args, kwargs=kwargs) or "done")
+    out = tmp_path / "out"
+    assert call(out) == "done" and out.is_dir()
+    if expected is not None:
+        assert (seen["args"], seen["kwargs"]) == expected(out)
+    else:
+        scenario, folder, runs, seed, implementation = seen["args"]
+        assert (folder, runs, seed, implementation) == (out, 3, 7, "reference")
+        assert scenario == jobs.flight_scenario("profile_001")
