@@ -186,6 +186,79 @@ def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[K
     return blocks, OperationCount(mul, add)
 
 
+def unrolled_predict_flops(structure: FilterStructure) -> int:
+    """Flops of the fully unrolled covariance prediction without its Q_d additions, without building it.
+
+    M = Phi P costs 2 nnz_i N - N per non-unit row i of Phi; the upper
+    triangle of M Phi^T costs 2 nnz_j - 1 for each of the j + 1 pairs (i, j),
+    i <= j, of a non-unit row j.  Cheap, so that the choice between unrolled
+    and compact kernels is made before any kernel is built.
+    """
+    n = structure.n_states
+    unit = set(structure.unit_rows)
+    flops = 0
+    for i, row in enumerate(structure.rows("Phi")):
+        if i not in unit:
+            flops += (2 * len(row) - 1) * n + (2 * len(row) - 1) * (i + 1)
+    return flops
+
+
+#: Above this many unrolled flops in the covariance prediction the generated C gets compact
+#: kernels (loops over the CSR pattern of Phi, ``compact_kernels``) instead of straight-line
+#: code.  Measured by bench/bench_large_models.py (gcc 12 -O2, x86-64): the unrolled
+#: prediction is faster per call while its code fits the instruction cache, and its compile
+#: time and .text grow with the flop count (ned_doppler32_augmented: 29,600 flops; 64 states:
+#: about 105,000 flops, 11 s to compile, 0.55 MB of .text); the compact loops compile in
+#: well under a second at any size and take at most 1.6x the unrolled time per call below
+#: this threshold, and less above it, where the unrolled code no longer fits the
+#: instruction cache.  Every built-in model is below it, so their code is unchanged.
+COMPACT_ABOVE_FLOPS = 40_000
+
+
+def compact_kernels(structure: FilterStructure) -> bool:
+    """Whether the generated C predicts by loops over Phi's sparsity pattern (see :data:`COMPACT_ABOVE_FLOPS`)."""
+    return unrolled_predict_flops(structure) > COMPACT_ABOVE_FLOPS
+
+
+def compact_predict_tables(structure: FilterStructure) -> dict[str, list[int]]:
+    """The CSR pattern of Phi over every row (a unit row holds its diagonal) and the unit-row flags.
+
+    The compact kernels (C templates ``c_predict_covariance.c.j2``,
+    ``c_predict_ud.c.j2``) loop over these tables in the same order as the
+    unrolled code adds its terms, so both give the same bits.
+    """
+    rows = structure.rows("Phi")
+    start = [0]
+    for row in rows:
+        start.append(start[-1] + len(row))
+    unit = set(structure.unit_rows)
+    return {
+        "row_start": start,
+        "col": [int(k) for row in rows for k in row],
+        "unit": [1 if i in unit else 0 for i in range(structure.n_states)],
+    }
+
+
+def compact_covariance_cost(structure: FilterStructure) -> OperationCount:
+    """Flops of the compact covariance prediction: the same products and sums as the unrolled kernel.
+
+    The loops add each structural Q_d entry and a zero for the others (an
+    exact no-op): counted as an addition for every pair, i <= j.
+    """
+    n = structure.n_states
+    unit = set(structure.unit_rows)
+    mul = add = 0
+    rows = structure.rows("Phi")
+    for i, row in enumerate(rows):
+        if i not in unit:
+            mul += len(row) * n
+            add += (len(row) - 1) * n
+            mul += len(row) * (i + 1)
+            add += (len(row) - 1) * (i + 1)
+    add += n * (n + 1) // 2
+    return OperationCount(mul, add)
+
+
 def ud_weights(structure: FilterStructure) -> tuple[list[KernelBlock], OperationCount]:
     """Unrolled W[:, :N] = Phi U for Thornton's time update (U unit upper, packed), by row.
 
@@ -212,6 +285,18 @@ def ud_weights(structure: FilterStructure) -> tuple[list[KernelBlock], Operation
             lines.append(Assign(Ref("scratch", "W", (i, k)), tuple(terms)))
         blocks.append(KernelBlock(f"phi_times_u_row_{i}", tuple(lines)))
     return blocks, OperationCount(mul, add)
+
+
+def ud_weights_cost(structure: FilterStructure) -> OperationCount:
+    """Flops of W[:, :N] = Phi U (``ud_weights``'s count) without building the statements (compact kernels)."""
+    n = structure.n_states
+    mul = add = 0
+    for row in structure.rows("Phi"):
+        for k in range(n):
+            below = sum(1 for l in row if l <= k)
+            mul += sum(1 for l in row if l < k)
+            add += max(below - 1, 0)
+    return OperationCount(mul, add)
 
 
 def thornton_cost(structure: FilterStructure) -> OperationCount:
@@ -251,6 +336,29 @@ def python_predict_cost(structure: FilterStructure) -> OperationCount:
     mul = 2 * g * c * n + 2 * d * n
     add = 2 * g * (c - 1) * n + n * n
     return OperationCount(mul, add)
+
+
+def dense_predict_cost(n_states: int) -> OperationCount:
+    """Flops of the dense x = Phi x, P = Phi P Phi^T + Q_d (the baseline of the Python kernel choice)."""
+    n = n_states
+    return OperationCount(2 * n**3 + n * n, 2 * n * n * (n - 1) + n * (n - 1) + n * n)
+
+
+#: Flops the structured Python prediction (gathers by row class of Phi) must save over the dense
+#: products to be chosen instead of the factored one.  bench/bench_python_module.py times both
+#: on every model it runs: the gathers and scatters (a dozen numpy calls, each a copy of rows or
+#: columns of P) lost at 18, 32 and 100 states although they save 0, 40 % and 75 % of the
+#: flops; the factored form (Cholesky factor of the contract's check reused: trmm and syrk)
+#: does the check and the prediction in about the time of the dense products alone.  So the
+#: structured kernel is taken only where it saves the bulk of an n^3 product: 50 million
+#: flops, about 230 states fully dense; no model measured reaches it.
+PYTHON_STRUCTURED_SAVING_FLOPS = 50_000_000
+
+
+def python_predict_kernel(structure: FilterStructure) -> str:
+    """``factored`` (Cholesky factor, BLAS trmm and syrk) or ``structured`` (by row class) for the Python predict."""
+    saving = dense_predict_cost(structure.n_states).total - python_predict_cost(structure).total
+    return "structured" if saving > PYTHON_STRUCTURED_SAVING_FLOPS else "factored"
 
 
 def discretize_cost(structure: FilterStructure, order: int) -> OperationCount:
@@ -321,14 +429,34 @@ BYTES_PER_PREDICT_FLOP = 18
 FIXED_BYTES = 40_000
 
 
+#: With compact kernels (large models) the generated text grows with the states (names,
+#: indices, struct members), the nonzeros of F, G, H (their expressions, in C and Python) and
+#: those of Phi (index tables): bytes per state, per F/G/H nonzero, per Phi nonzero and the
+#: rest, fitted on the augmented models of 64, 100 and 200 states (144, 187, 313 kB written;
+#: estimated within 3 %).
+COMPACT_BYTES_PER_STATE = 600
+COMPACT_BYTES_PER_MATRIX_NONZERO = 250
+COMPACT_BYTES_PER_PHI_NONZERO = 10
+COMPACT_FIXED_BYTES = 60_000
+
+
 def estimated_code_bytes(structure: FilterStructure) -> int:
     """Expected size of all generated files, from the structural nonzeros of Phi alone.
 
     The unrolled covariance prediction dominates: M = Phi P costs about n
     multiply-adds per nonzero of a non-unit row of Phi, and the upper
-    triangle of M Phi^T about (n + 1) / 2 more.  Cheap (no kernel is built),
+    triangle of M Phi^T about (n + 1) / 2 more.  Compact kernels (large
+    models) grow with the nonzeros themselves.  Cheap (no kernel is built),
     so that a large model is reported before any time is spent on it.
     """
+    if compact_kernels(structure):
+        matrix_nonzeros = int(structure.F.sum() + structure.G.sum() + structure.H.sum())
+        return (
+            COMPACT_FIXED_BYTES
+            + COMPACT_BYTES_PER_STATE * structure.n_states
+            + COMPACT_BYTES_PER_MATRIX_NONZERO * matrix_nonzeros
+            + COMPACT_BYTES_PER_PHI_NONZERO * int(structure.Phi.sum())
+        )
     n = structure.n_states
     unit = set(structure.unit_rows)
     nonzeros = sum(len(row) for i, row in enumerate(structure.rows("Phi")) if i not in unit)
