@@ -198,3 +198,28 @@ def test_bad_vector_files_are_refused_with_file_line_and_shapes(old, new, messag
     with pytest.raises(ModelError) as caught:
         load_model_text(VECTOR_MODEL.replace(old, new, 1), "vec_demo.yaml")
     assert message in str(caught.value)
+
+
+def test_enu_vectors_are_stored_east_north_up_and_equal_the_ned_model_permuted():
+    """The same earth-rate coupling written in ENU and in NED: F_enu = P F_ned P^T with P the NED->ENU map."""
+    from modelgen.model.frames import NED_TO_ENU
+
+    def model(frame: str, rate: str) -> str:
+        return textwrap.dedent(
+            f"""\
+            model: coriolis_{frame.lower()}
+            frame: {frame}
+            states:
+              - {{name: dv, shape: 3, unit: m/s}}
+            parameters:
+              - {{name: L, unit: rad}}
+            dynamics:
+              dv: "-cross(2*{rate}(L), dv)"
+            """
+        )
+
+    enu = load_model_text(model("ENU", "earth_rate_enu"), "enu.yaml")
+    ned = load_model_text(model("NED", "earth_rate_ned"), "ned.yaml")
+    assert enu.state_names == ["dv_e", "dv_n", "dv_u"] and ned.state_names == ["dv_n", "dv_e", "dv_d"]
+    F_enu, F_ned = derive(enu).numeric({"L": 0.8})["F"], derive(ned).numeric({"L": 0.8})["F"]
+    assert F_enu == pytest.approx(NED_TO_ENU @ F_ned @ NED_TO_ENU.T, abs=1e-20)
