@@ -53,7 +53,7 @@ SUMMED_SENSOR_ERROR_KINDS = ("gyro_bias", "accel_bias")
 #: Processes of sensor-error states.
 PROCESSES = ("random_constant", "gauss_markov", "random_walk", "clock")
 #: Measurement kinds: what a measurement observes.
-MEASUREMENT_KINDS = ("position", "velocity", "pseudorange", "expression")
+MEASUREMENT_KINDS = ("position", "velocity", "pseudorange", "pseudorange_rate", "expression")
 
 _AXIS_WORDS = {"n": "north", "e": "east", "d": "down", "u": "up", "x": "x", "y": "y", "z": "z"}
 _UNITS = {
@@ -373,7 +373,8 @@ def _measurements(
         raise ModelError(f"{read.at('navigation.measurements')}: 'navigation.measurements' must be a list")
     functions: list[pt.MeasurementFunction] = []
     declared: list[Measurement] = []
-    fields = ("of", "form", "lever_arm", "axes", "symbols", "names", "variance", "line_of_sight", "expression", "difference", "units", "bias")
+    fields = ("of", "form", "lever_arm", "axes", "symbols", "names", "variance", "line_of_sight", "expression", "difference", "units", "bias",
+              "range", "satellite_velocity")
     for i, item in enumerate(raw):
         key = f"navigation.measurements[{i}]"
         entry = read.mapping(item, key, fields, ("of", "symbols", "variance"))
@@ -386,6 +387,8 @@ def _measurements(
             extra = None
         elif kind == "pseudorange":
             function, scale, units, count, extra = _pseudorange(read, entry, key, frame, clock, decl)
+        elif kind == "pseudorange_rate":
+            function, scale, units, count, extra = _pseudorange_rate(read, entry, key, frame, clock, decl)
         else:
             function, scale, units, count, extra = _expression_measurement(read, entry, key, namespace)
         bias = _measurement_bias(read, entry, key, count, units, decl)
@@ -465,6 +468,19 @@ def _pseudorange(read, entry, key, frame, clock, decl):
     |rho e_k - d| = sqrt(rho^2 - 2 rho e_k . d + d . d) (|e_k| = 1), exact and
     nonlinear in d; the measured pseudo-range adds the receiver clock bias.
     """
+    sights = _lines_of_sight(read, entry, key, frame, clock, decl)
+    distance = sp.Symbol("satellite_distance", positive=True)
+
+    def ranges(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
+        d = pt.metres_matrix(frame, computed.position) * (state.position - computed.position)
+        return sp.Matrix([sp.sqrt(distance**2 - 2 * distance * e.dot(d) + d.dot(d)) for e in sights])
+
+    extra = sp.Matrix([clock[0]] * len(sights))
+    return ranges, None, ["m"] * len(sights), len(sights), extra
+
+
+def _lines_of_sight(read, entry, key, frame, clock, decl) -> list[sp.Matrix]:
+    """The unit line-of-sight vectors of a pseudo-range (rate) measurement; it needs the receiver clock."""
     if clock is None:
         raise ModelError(f"{read.at(key)}: a pseudo-range measurement needs a receiver clock (sensor_errors: {{of: receiver_clock, ...}})")
     raw = entry.get("line_of_sight")
@@ -477,14 +493,46 @@ def _pseudorange(read, entry, key, frame, clock, decl):
         for name, word in zip(names, words):
             _offer(decl, name, f"line_of_sight_{word}_{k + 1}", "1", f"{word} component of the unit vector from the receiver to satellite {k + 1}")
         sights.append(_symbols(names))
-    distance = sp.Symbol("satellite_distance", positive=True)
+    return sights
 
-    def ranges(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
+
+def _pseudorange_rate(read, entry, key, frame, clock, decl):
+    """Pseudo-range rates: the relative velocity of satellite k along the line of sight, plus the clock drift.
+
+    From a point displaced by d (metres, navigation axes) from the computed
+    receiver, the unit vector to satellite k at distance rho is
+    u = (e_k - d/rho) / sqrt(1 - 2 e_k . d/rho + d . d/rho^2) (|e_k| = 1), and the
+    rate is u . (v_k - v) with the satellite's velocity v_k (navigation axes,
+    ``satellite_velocity``, zero if not given).  ``range`` names rho per satellite.
+    """
+    sights = _lines_of_sight(read, entry, key, frame, clock, decl)
+    words = _axis_words(frame, None)
+    ranges = read.names(entry.get("range"), f"{key}.range", len(sights)) if "range" in entry else [f"rho_{k + 1}" for k in range(len(sights))]
+    for k, name in enumerate(ranges):
+        _offer(decl, name, f"satellite_range_{k + 1}", "m", f"distance from the receiver to satellite {k + 1}")
+    velocities = [sp.zeros(3, 1)] * len(sights)
+    if "satellite_velocity" in entry:
+        raw = entry["satellite_velocity"]
+        if not isinstance(raw, list) or len(raw) != len(sights):
+            raise ModelError(f"{read.at(f'{key}.satellite_velocity')}: {key}.satellite_velocity must list one velocity per satellite ({len(sights)})")
+        velocities = []
+        for k, item in enumerate(raw):
+            names = read.names(item, f"{key}.satellite_velocity[{k}]", 3)
+            for name, word in zip(names, words):
+                _offer(decl, name, f"satellite_velocity_{word}_{k + 1}", "m/s", f"{word} velocity of satellite {k + 1}")
+            velocities.append(_symbols(names))
+    rhos = [sp.Symbol(r, real=True) for r in ranges]
+
+    def rates(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
         d = pt.metres_matrix(frame, computed.position) * (state.position - computed.position)
-        return sp.Matrix([sp.sqrt(distance**2 - 2 * distance * e.dot(d) + d.dot(d)) for e in sights])
+        out = []
+        for e, rho, v_sat in zip(sights, rhos, velocities):
+            u = (e - d / rho) / sp.sqrt(1 - 2 * e.dot(d) / rho + d.dot(d) / rho**2)
+            out.append(u.dot(v_sat - state.velocity))
+        return sp.Matrix(out)
 
-    extra = sp.Matrix([clock[0]] * len(sights))
-    return ranges, None, ["m"] * len(sights), len(sights), extra
+    extra = sp.Matrix([clock[1]] * len(sights))
+    return rates, None, ["m/s"] * len(sights), len(sights), extra
 
 
 def state_namespace(state: pt.NavigationState, mech: pt.Mechanization, frame: str, parameters: Mapping[str, sp.Symbol]) -> dict[str, Any]:

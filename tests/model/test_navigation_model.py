@@ -129,3 +129,51 @@ def test_janus_doppler_beam_rows_are_b_transpose_C_transpose_on_dv_and_on_v_cros
     cross_v = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
     expected = np.hstack([np.zeros((4, 3)), beams @ C.T, -beams @ C.T @ cross_v])
     assert np.allclose(H, expected, rtol=0, atol=1e-12)
+
+
+RANGE_RATE = """
+model: range_rate
+frame: ENU
+parameters:
+  - {name: q, unit: "1", value: 1.0e-6}
+  - {name: rate_sigma, symbol: sigma_d, unit: m/s, value: 0.05}
+navigation:
+  errors:
+    position: {form: metres, symbol: dr}
+    velocity: {form: difference, symbol: dv}
+    attitude: {form: phi, symbol: phi}
+  sensor_errors:
+    - {of: receiver_clock, process: clock, symbols: [b_clk, d_clk], psd: [q, q]}
+  noises: {gyro: {psd: q}, accel: {psd: q}}
+  measurements:
+    - {of: pseudorange_rate, difference: measured_minus_computed, symbols: [zd_1, zd_2], variance: "sigma_d**2",
+       line_of_sight: [[e_1_x, e_1_y, e_1_z], [e_2_x, e_2_y, e_2_z]], range: [rho_1, rho_2],
+       satellite_velocity: [[s_1_x, s_1_y, s_1_z], [s_2_x, s_2_y, s_2_z]]}
+"""
+
+
+def test_pseudorange_rate_rows_see_velocity_along_the_line_of_sight_position_through_its_turn_and_the_clock_drift():
+    """z = e . dv + (v_s - v)^T (I - e e^T) dr / rho + drift (measured minus computed), derived from u(d) . (v_s - v)."""
+    from modelgen.model.loading import load_model_text
+
+    model = load_model_text(RANGE_RATE, "range_rate.yaml")
+    names = [s.name for s in model.states]
+    e = np.array([[0.3, 0.5, np.sqrt(1 - 0.34)], [-0.6, 0.0, 0.8]])
+    rho = np.array([2.1e7, 2.4e7])
+    sat = np.array([[1200.0, -300.0, 800.0], [-500.0, 2500.0, 100.0]])
+    v = np.array([30.0, 40.0, -1.0])
+    values = {"velocity_east": v[0], "velocity_north": v[1], "velocity_up": v[2], "latitude": 0.7, "height": 10.0,
+              "meridian_radius": 6.36e6, "prime_vertical_radius": 6.39e6, "gravity": 9.8,
+              "body_specific_force_x": 0.0, "body_specific_force_y": 0.0, "body_specific_force_z": 9.8}
+    values.update({f"c{i}{j}": float(i == j) for i in (1, 2, 3) for j in (1, 2, 3)})
+    for k in range(2):
+        values.update({f"line_of_sight_{w}_{k + 1}": e[k, a] for a, w in enumerate(("east", "north", "up"))})
+        values.update({f"satellite_velocity_{w}_{k + 1}": sat[k, a] for a, w in enumerate(("east", "north", "up"))})
+        values[f"satellite_range_{k + 1}"] = rho[k]
+    H = derive(model).numeric(values)["H"]
+    for k in range(2):
+        expected = np.zeros(len(names))
+        expected[3:6] = e[k]
+        expected[0:3] = (sat[k] - v) @ (np.eye(3) - np.outer(e[k], e[k])) / rho[k]
+        expected[names.index("clock_drift_range")] = 1.0
+        assert np.allclose(H[k], expected, rtol=1e-12, atol=1e-15), (H[k], expected)
