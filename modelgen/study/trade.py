@@ -167,16 +167,26 @@ def _worker_count(client: Any) -> int:
     return 1 if client is None else max(1, len(client.scheduler_info().get("workers", {})))
 
 
-def run_trade(study: Study, client: Any = None, progress: Callable[[str], None] | None = None) -> TradeResult:
-    """Every case of ``study`` (covariance), then its Monte Carlo cases, on ``client`` (or here without one)."""
+def monte_carlo_profiles(study: Study) -> list[FlightProfile]:
+    """The flight profile of each Monte Carlo case (refused here, before any task, if a key does not fit)."""
+    mc = study.monte_carlo
+    if mc is None:
+        return []
+    return [monte_carlo_profile(mc.profile, study.parameters, p, mc.hours, mc.imu_rate) for p in mc.cases]
+
+
+def run_trade(study: Study, client: Any = None, progress: Callable[[str], None] | None = None,
+              profiles: Sequence[FlightProfile] | None = None) -> TradeResult:
+    """Every case of ``study`` (covariance), then its Monte Carlo cases, on ``client`` (or here without one).
+
+    ``profiles``: :func:`monte_carlo_profiles` of the study, if the caller
+    built them already (to refuse a bad one before opening a cluster).
+    """
     say = progress or (lambda _: None)
     start = time.perf_counter()
     where = describe_client(client)
     # everything that can be refused is checked before the first task goes out
-    profiles = []
-    if study.monte_carlo is not None:
-        mc = study.monte_carlo
-        profiles = [monte_carlo_profile(mc.profile, study.parameters, p, mc.hours, mc.imu_rate) for p in mc.cases]
+    profiles = list(profiles) if profiles is not None else monte_carlo_profiles(study)
     setup = covariance_setup(study)
     tasks = chunks(study.points, _worker_count(client))
     say(f"trade study {study.name}: {study.case_count} covariance cases ({len(study.points)} points x "
