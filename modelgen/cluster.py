@@ -89,6 +89,9 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
+        if workers is not None:
+            raise ModelError(f"--workers {workers}: sizes the local cluster only; the cluster at --scheduler "
+                             f"{scheduler} has the workers started there")
         try:
             client = Client(scheduler, timeout=f"{timeout_s}s")
         except ValueError as exc:
