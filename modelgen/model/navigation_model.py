@@ -739,16 +739,17 @@ def approximation_notes(data: Mapping, equations: pt.ErrorEquations, decl: _Decl
     approximations = data["navigation"].get("approximations") or []
     notes = []
     for name in approximations:
-        terms = [t for t in equations.neglected if t.approximation == name]
+        terms = [(t, shown) for t, shown in zip(equations.neglected, equations.readable) if t.approximation == name]
         parts = []
-        for t in terms:
+        for t, text in terms:
             rows, columns = names.get(t.matrix, (list(map(str, equations.measurements)), [s.name for s in decl.states]))
             size = term_magnitude(t.term, values)
             row = rows[t.row] if t.row >= 0 else "a removed vertical state"
             column = columns[t.column] if t.column >= 0 else "a removed vertical state"
-            parts.append(f"{t.matrix}[{row}, {column}]" + (f" = {size:.3g}" if size is not None else ""))
+            shown = f" = {text}" if len(text) <= 120 else ""
+            parts.append(f"{t.matrix}[{row}, {column}]{shown}" + (f" ({size:.3g})" if size is not None else ""))
         dropped = "; ".join(parts) if parts else "no term in this model"
-        notes.append(f"Approximation {name} ({pt.APPROXIMATION_DESCRIPTIONS[name]}): dropped {dropped} (size at the check scenario).")
+        notes.append(f"Approximation {name} ({pt.APPROXIMATION_DESCRIPTIONS[name]}): dropped {dropped} (term, and its size at the check scenario).")
     if approximations and not values:
         notes.append("The sizes above need a check: scenario; this model has none.")
     return notes

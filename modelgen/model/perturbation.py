@@ -324,6 +324,8 @@ class ErrorEquations:
     noises: tuple[sp.Symbol, ...]
     measurements: tuple[sp.Symbol, ...]
     neglected: tuple[NeglectedTerm, ...] = field(default_factory=tuple)
+    #: Each neglected term as a person reads it: R_M, R_N, g and their derivatives (dR_M/dL ...) by name.
+    readable: tuple[str, ...] = ()
 
 
 # -- step 1 and 2: primitive error equations ----------------------------------------
@@ -711,7 +713,9 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
     stage = _declared_stage(problem, _primitive_stage(problem, equation_flags))
     finished = _finish(stage, problem)
     neglected: list[NeglectedTerm] = []
+    readable: list[str] = []
     for name in problem.approximations:
+        before = stage
         if name in EQUATION_APPROXIMATIONS:
             equation_flags.add(name)
             stage = _declared_stage(problem, _primitive_stage(problem, equation_flags))
@@ -721,7 +725,9 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
         else:
             stage = APPROXIMATIONS[name](stage, problem)
         after = _finish(stage, problem)
-        neglected.extend(_differences(name, finished, after))
+        found = _differences(name, finished, after)
+        neglected.extend(found)
+        readable.extend(readable_term(getattr(before, t.matrix)[t.row, t.column] - getattr(stage, t.matrix)[t.row, t.column], problem) for t in found)
         finished = after
     return _without_states(
         ErrorEquations(
@@ -732,9 +738,23 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
             noises=tuple(problem.noises),
             measurements=tuple(s for m in problem.measurements for s in m.symbols),
             neglected=tuple(neglected),
+            readable=tuple(readable),
         ),
         placeholders,
     )
+
+
+def readable_term(term: sp.Expr, problem: NavigationProblem) -> str:
+    """A neglected term with the Earth quantities by name: ``R_M``, ``dR_M/dL``, ``g``, ``dg/dh``."""
+    L, h = problem.position[0], problem.position[2]
+    names = {
+        sp.Derivative(MeridianRadius(L), L): "dR_M/dL", sp.Derivative(PrimeVerticalRadius(L), L): "dR_N/dL",
+        sp.Derivative(Gravity(L, h), L): "dg/dL", sp.Derivative(Gravity(L, h), h): "dg/dh",
+        MeridianRadius(L): str(problem.earth.meridian_radius), PrimeVerticalRadius(L): str(problem.earth.prime_vertical_radius),
+        Gravity(L, h): str(problem.earth.gravity),
+    }
+    shown = term.xreplace({k: sp.Symbol(v) for k, v in names.items()})
+    return sp.sstr(sp.factor_terms(sp.cancel(sp.together(shown))))
 
 
 def _with_vertical_placeholders(problem: NavigationProblem) -> tuple[NavigationProblem, tuple[sp.Symbol, ...]]:
@@ -775,6 +795,7 @@ def _without_states(equations: ErrorEquations, removed: Sequence[sp.Symbol]) -> 
         noises=equations.noises,
         measurements=equations.measurements,
         neglected=tuple(moved(t) for t in equations.neglected),
+        readable=equations.readable,
     )
 
 

@@ -30,6 +30,8 @@ whose dropped terms the model lists with their sizes.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -134,6 +136,6 @@ def test_ins_gnss21_nav_lists_what_its_three_approximations_drop_with_sizes(mode
     notes = [n for n in model.notes if n.startswith("Approximation ")]
     assert len(notes) == 3
     # dg/dh: WGS-84 normal-gravity gradient against 2 g / (R_N + h), the textbook's: 0.5 % of 3.1e-6 s^-2
-    assert "F[velocity_error_down, position_error_down] = 1.58e-08" in notes[2]
+    assert re.search(r"F\[velocity_error_down, position_error_down\] = -\(R_N\*dg/dh \+ dg/dh\*h \+ 2\*g\)/\(R_N \+ h\) \(1\.58e-08\)", notes[2])
     # dR_N/dL in the east position rate: d((R_N + h) cos L)/dt
-    assert "F[position_error_east, position_error_east] = 4.57e-08" in notes[0]
+    assert re.search(r"F\[position_error_east, position_error_east\] = dR_N/dL\*v_n/[^;]*\(4\.57e-08\)", notes[0])
