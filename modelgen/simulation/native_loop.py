@@ -217,7 +217,7 @@ def _nees(error, P):
 
 @compiled
 def _fly_piece(first, last, mode, period, n_cycles, record_every,
-               imu, imu_offset, samples_per_cycle, ins, ins_settings, biases, specific_force, heights,
+               delta_theta, delta_velocity, imu_offset, samples_per_cycle, ins, ins_settings, biases, specific_force, heights,
                tables, fed_back, sensor_part, enu, codes, constants,
                every, epochs_valid, epoch_velocity, epoch_position, velocity_in_body, quantities, rows, gate,
                truth, imu_errors, true_bias,
@@ -228,7 +228,7 @@ def _fly_piece(first, last, mode, period, n_cycles, record_every,
 
     Cycle 0 is only recorded (the row at t = 0).
 
-    ``imu``: (2, samples, 3) measured increments of the piece, sample ``imu_offset`` first.
+    ``delta_theta``, ``delta_velocity``: measured increments of the piece, sample ``imu_offset`` first.
     ``ins``: the strapdown's flat state; ``ins_settings``: dt, coning code, samples per
     update, reference altitude used (1/0), damping k1, k2; ``biases``: rows gyro,
     accelerometer, sensor compensation (the strapdown's and navigator's estimates).
@@ -262,7 +262,7 @@ def _fly_piece(first, last, mode, period, n_cycles, record_every,
                 h0, h1 = heights[k - 1], heights[k]
             else:
                 h0 = h1 = math.nan
-            _mechanize(ins, imu[0], imu[1], start, start + samples_per_cycle, dt, code, per_update, biases[0], biases[1],
+            _mechanize(ins, delta_theta, delta_velocity, start, start + samples_per_cycle, dt, code, per_update, biases[0], biases[1],
                        h0, h1, damping1, damping2, specific_force)
             raw[0], raw[1], raw[2] = ins[7], ins[8], ins[9]
             raw[3], raw[4], raw[5] = ins[4], ins[5], ins[6]
@@ -488,18 +488,19 @@ class NativeFilterLoop:
         self.result = RunResult(mode, "generated-c", np.zeros(rows), np.zeros((rows, 10)), np.zeros((rows, 10)),
                                 np.zeros((rows, n)), np.zeros((rows, n)), np.full(rows, math.nan))
         self.counters = np.zeros(4, dtype=np.int64)
-        self.counters[0] = 0
+        self._entry = None  # the compiled overload of _fly_piece, once known (see _call)
         self._run(0, 0)  # the record at t = 0 (cycle 0 only records)
 
     def _run(self, first: int, last: int) -> None:
         nav, sensors, native, r = self.navigator, self.navigator.sensors, self.native, self.result
-        imu = np.stack([sensors.delta_theta, sensors.delta_velocity]) if sensors.delta_theta is not None else np.zeros((2, 0, 3))
         events = np.zeros((last - first + 2, 3))
         self.counters[3] = 0
         errors = sensors.imu_errors
-        status = _fly_piece(
+        empty = np.zeros((0, 3))  # cycle 0 (the record at t = 0) comes before any piece
+        args = (
             first, last, MODE_CODES[self.mode], self.period, self.n_cycles, self.record_every,
-            imu, sensors.sample_offset, nav.samples_per_cycle, nav.strapdown.state, self.ins_settings, self.biases,
+            empty if sensors.delta_theta is None else sensors.delta_theta,
+            empty if sensors.delta_velocity is None else sensors.delta_velocity, sensors.sample_offset, nav.samples_per_cycle, nav.strapdown.state, self.ins_settings, self.biases,
             nav.strapdown.specific_force, sensors.altitude_reference,
             self.tables, self.fed_back, self.sensor_part, nav.frame.upper() == "ENU", self.codes, self.constants,
             nav.every, self.epochs_valid, self.epoch_velocity, self.epoch_position, self.velocity_in_body,
@@ -510,6 +511,7 @@ class NativeFilterLoop:
             native.filter_bytes, self.P, self.z, self.mask, self.innovation, self.nis,
             self.accumulated, (r.times, r.outputs, r.raw_outputs, r.estimation_error, r.sigma, r.nees),
             self.counters, events)
+        status = self._call(args)
         if status != OK:
             what = {ERR_EVALUATE: "matrices_evaluate", ERR_DISCRETIZE: f"discretize (T = {self.period})",
                     ERR_PREDICT: "predict"}[status]
@@ -533,6 +535,26 @@ class NativeFilterLoop:
     def recorded(self) -> int:
         """Rows of ``result`` recorded so far."""
         return int(self.counters[0])
+
+    def _call(self, args: tuple) -> int:
+        """``_fly_piece(*args)``; after the first call straight into its compiled entry point.
+
+        numba's dispatcher types every argument on every call, and for tuples
+        and ctypes function pointers it does so in Python: about 3 ms for this
+        call's fifty arguments, more than the 10-s piece's cycles cost.  The
+        argument types never change within a flight, so the overload is looked
+        up once (from the types numba itself gives the arguments).
+        """
+        pieces_fit = all(a.dtype == np.float64 and a.ndim == 2 and a.flags.c_contiguous for a in args[6:8])
+        if self._entry is not None and pieces_fit:  # the IMU pieces are the only arguments not made here
+            return self._entry(*args)
+        status = _fly_piece(*args)
+        overloads = getattr(_fly_piece, "overloads", None)
+        if overloads is not None and pieces_fit:
+            signature = tuple(_fly_piece.typeof_pyval(a) for a in args)
+            compiled_overload = overloads.get(signature)
+            self._entry = getattr(compiled_overload, "entry_point", None)
+        return status
 
     def run(self, first: int, last: int) -> None:
         """Filter cycles ``first``..``last`` (consecutive pieces, in order)."""
