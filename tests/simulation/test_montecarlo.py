@@ -1,10 +1,15 @@
-"""Monte Carlo consistency: the optimal filter passes the NEES test, a mis-modelled one fails."""
+"""Monte Carlo consistency: the optimal filter passes the NEES test, a mis-modelled one fails.
+
+The runs go to one local dask cluster of two workers, shared by the module's tests.
+"""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
+from modelgen.cluster import dask_client
+from modelgen.errors import ModelError
 from modelgen.simulation.montecarlo import run_monte_carlo
 from modelgen.simulation.scenario import load_profile
 
@@ -17,20 +22,26 @@ def scenario():
     return load_profile("profile_000").with_changes(hours=1 / 3, imu_rate=50.0)
 
 
+@pytest.fixture(scope="module")
+def client():
+    with dask_client(workers=2) as c:
+        yield c
+
+
 def mean_nees_at(result, times, confidence=0.99):
     test = result.nees_test(confidence=confidence, start_time=60.0)
     rows = [int(np.argmin(np.abs(test.times - t))) for t in times]
     return test.mean_nees[rows], test
 
 
-def test_optimal_filter_passes_the_nees_test_on_both_cores(scenario, paper_derived):
+def test_optimal_filter_passes_the_nees_test_on_both_cores(scenario, paper_derived, client):
     # 16 runs on two worker processes.  At each check time N * mean NEES is
     # chi-square with 16 x 18 degrees of freedom for a consistent filter; the
     # two-sided 99 % band is [14.4, 22.1] for the mean.  (Checked at a few
     # separated times: the random-constant states make the NEES of one
     # ensemble strongly correlated in time, so "fraction of all times inside"
     # is a weak statistic for 16 runs.)
-    result = run_monte_carlo(scenario, paper_derived, runs=16, seed=1, workers=2)
+    result = run_monte_carlo(scenario, paper_derived, runs=16, seed=1, client=client)
     values, test = mean_nees_at(result, CHECK_TIMES)
     assert result.runs == 16 and test.dimension == 18
     assert np.all((values > test.lower) & (values < test.upper)), (values, test.lower, test.upper)
@@ -39,19 +50,41 @@ def test_optimal_filter_passes_the_nees_test_on_both_cores(scenario, paper_deriv
     assert 0.7 < np.median(ratio) < 1.3
 
 
-def test_filter_with_understated_doppler_noise_fails_the_nees_test(scenario, paper_derived):
+def test_filter_with_understated_doppler_noise_fails_the_nees_test(scenario, paper_derived, client):
     # The sensors are drawn with a Doppler 4x noisier than the filter believes:
     # the filter is over-confident and the ensemble NEES leaves its band.
     short = scenario.with_changes(hours=1 / 6)
     doppler = short.sensors["doppler"]
     noisy = dataclasses.replace(doppler, white_noise=4 * doppler.white_noise)
-    result = run_monte_carlo(short, paper_derived, runs=8, seed=1, workers=2, truth_profile=short.with_sensor("doppler", noisy))
+    result = run_monte_carlo(short, paper_derived, runs=8, seed=1, client=client, truth_profile=short.with_sensor("doppler", noisy))
     values, test = mean_nees_at(result, (300.0, 600.0))
     assert np.all(values > test.upper), (values, test.upper)
 
 
-def test_runs_do_not_depend_on_the_number_of_workers(scenario, paper_derived):
+def test_runs_do_not_depend_on_where_they_run(scenario, paper_derived, client):
     short = scenario.with_changes(hours=0.05)
-    one = run_monte_carlo(short, paper_derived, runs=2, seed=9, workers=1)
-    two = run_monte_carlo(short, paper_derived, runs=2, seed=9, workers=2)
-    assert np.array_equal(one.errors, two.errors)
+    here = run_monte_carlo(short, paper_derived, runs=3, seed=9)
+    there = run_monte_carlo(short, paper_derived, runs=3, seed=9, client=client)
+    assert here.where == "this process" and there.where == "local cluster, 2 workers"
+    assert np.array_equal(here.errors, there.errors) and np.array_equal(here.sigma, there.sigma)
+    # run i's generator is spawned from the study seed: the first runs of a larger study are the same runs
+    more = run_monte_carlo(short, paper_derived, runs=4, seed=9)
+    assert np.array_equal(more.errors[:3], here.errors)
+
+
+def test_a_run_reaches_the_caller_as_it_completes(scenario, paper_derived, client):
+    short = scenario.with_changes(hours=0.05)
+    arrived, progress = [], []
+    result = run_monte_carlo(short, paper_derived, runs=3, seed=2, client=client,
+                             on_run=lambda i, run: arrived.append((i, run.errors.copy())),
+                             progress=lambda done, total: progress.append((done, total)))
+    assert sorted(i for i, _ in arrived) == [0, 1, 2] and progress == [(1, 3), (2, 3), (3, 3)]
+    for i, errors in arrived:
+        assert np.array_equal(errors, result.errors[i])
+
+
+def test_a_bad_number_of_runs_or_filter_is_refused(scenario, paper_derived):
+    with pytest.raises(ModelError, match="at least one run"):
+        run_monte_carlo(scenario, paper_derived, runs=0)
+    with pytest.raises(ModelError, match="unknown filter implementation 'fortran'"):
+        run_monte_carlo(scenario, paper_derived, runs=1, implementation="fortran")
