@@ -101,8 +101,38 @@ class CLayout:
     filter_scratch: tuple[Field, ...]
 
 
-def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout:
-    """The struct members for ``options``; ``prefix`` is the upper-case model name."""
+@dataclass(frozen=True)
+class UnrolledDiscretizeSizes:
+    """Compressed scratch of the unrolled discretize (modelgen.codegen.discretize_kernels).
+
+    ``terms``: entries of each of the two term arrays; ``active``: entries of
+    Phi in rows that are not e_i (S is kept there only).
+    """
+
+    terms: int
+    active: int
+
+
+def _unrolled_discretize_scratch(prefix: str, sizes: ModelSizes, unrolled: UnrolledDiscretizeSizes, N: Dim, nnz_f: Dim) -> tuple[Field, ...]:
+    """Members of the unrolled discretize's scratch: compressed terms, S, F h and the balancing's vectors."""
+    return (
+        Field("term", (Dim("2", 2), Dim(f"{prefix}_N_TERMS", unrolled.terms)), "(F h)^k at the nonzeros of F^k, two orders in turn; the doubling's new values; S G"),
+        Field("S", (Dim(f"{prefix}_N_ACTIVE_ENTRIES", unrolled.active),), "sum of the terms / (k + 1) at the active entries of Phi"),
+        Field("fh", (nnz_f,), "F h at the nonzeros of F"),
+        Field("row_sum", (N,), "balancing: off-diagonal row sums of D^-1 |F| D"),
+        Field("col_sum", (N,), "balancing: off-diagonal column sums of D^-1 |F| D"),
+    )
+
+
+def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str, unrolled: UnrolledDiscretizeSizes | None = None) -> CLayout:
+    """The struct members for ``options``; ``prefix`` is the upper-case model name.
+
+    ``unrolled`` (the header's case for models below the compact-kernel
+    threshold) gives discretize its compressed scratch; without it the
+    scratch is the dense N x N arrays of the loop version, never smaller, so
+    a caller that only needs the workspace's size (``build.CompiledFilter``,
+    which passes it to C and never reads it) may leave it out.
+    """
     N = Dim(f"{prefix}_N_STATES", sizes.n)
     NP = Dim(f"{prefix}_N_PACKED", sizes.packed)
     NU = Dim(f"{prefix}_N_UPPER", max(sizes.upper, 1))
@@ -140,6 +170,8 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout
         Field("row_sum", (N,), "balancing: off-diagonal row sums of D^-1 |F| D"),
         Field("col_sum", (N,), "balancing: off-diagonal column sums of D^-1 |F| D"),
         )
+        if unrolled is not None:
+            discretize_scratch = _unrolled_discretize_scratch(prefix, sizes, unrolled, N, nnz_f)
         filter_scratch = (
             Field("W", (N, NWT), "Thornton: [Phi U, Gamma]"),
             Field("Dw", (NWT,), "Thornton: weights [D, qw]"),
@@ -171,6 +203,8 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str) -> CLayout
         Field("col_sum", (N,), "balancing: off-diagonal column sums of D^-1 |F| D"),
         Field("Gamma", (N, dim_w)),
     )
+    if unrolled is not None:
+        discretize_scratch = _unrolled_discretize_scratch(prefix, sizes, unrolled, N, nnz_f)
     filter_scratch = [
         Field("M", (N, N), "Phi P"),
         Field("Pn", symmetric, "new covariance before it is committed"),

@@ -17,6 +17,14 @@ double-precision numpy filter (it is the readable twin of the default C).
 * ``covariance_update`` -- ``joseph`` (I-KH) P (I-KH)^T + K R K^T, first-order
   insensitive to errors in K, or ``standard`` P - K H P (cheaper).
 
+* ``taylor_order`` -- the highest order of the Taylor series of discretize
+  (the paper's 9 by default), and ``taylor_tolerance`` -- the relative
+  accuracy of Phi against e^{F T} that discretize guarantees (default 1e-12):
+  at run time it sums only the orders and doublings that bound needs
+  (modelgen.derive.discretization.taylor_plan); None sums every order up to
+  ``taylor_order`` and doubles until the remainder is below the unit
+  roundoff (the paper's fixed order).
+
 ``storage``, ``update`` and ``covariance_update`` describe the covariance
 form; the UD form always stores U packed and updates by Bierman, so they do
 not apply to it (``describe`` says what the code really does).
@@ -26,7 +34,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from modelgen.derive.discretization import DEFAULT_TAYLOR_ORDER
+from modelgen.derive.discretization import DEFAULT_TAYLOR_ORDER, DEFAULT_TOLERANCE
 from modelgen.errors import ModelError
 
 SCALARS = ("double", "float")
@@ -46,6 +54,7 @@ class CodegenOptions:
     storage: str = "full"
     update: str = "vector"
     covariance_update: str = "joseph"
+    taylor_tolerance: float | None = DEFAULT_TOLERANCE
 
     def __post_init__(self) -> None:
         for field, allowed in (
@@ -61,6 +70,9 @@ class CodegenOptions:
                 raise ModelError(f"{label} must be one of {', '.join(map(repr, allowed))}, not {value!r}")
         if not isinstance(self.taylor_order, int) or not 1 <= self.taylor_order <= 30:
             raise ModelError(f"Taylor order must be between 1 and 30, not {self.taylor_order}")
+        tolerance = self.taylor_tolerance
+        if tolerance is not None and (isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not 0.0 < tolerance < 1.0):
+            raise ModelError(f"Taylor tolerance must be a number between 0 and 1 (exclusive) or None, not {tolerance!r}")
 
     @property
     def ud(self) -> bool:

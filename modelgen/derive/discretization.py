@@ -48,6 +48,41 @@ against scipy's expm on the paper's model, the largest error of Phi is below
 Python compute the same D, norm and s, so the three agree.  s is capped at
 64 (||F||_D T up to about 2e18): beyond, e^{F T} is refused as not
 representable.
+
+The accuracy rule (``tolerance``, default 1e-12; None keeps the order fixed).
+With X = F h, theta = ||X||_D and the remainder R = e^X - T_m(X) of the
+series truncated after order m, ||R||_D <= rho_m(theta) = theta^(m+1) /
+(m+1)! * (m+2) / (m+2-theta) (the tail of e^theta, bounded by a geometric
+series, for theta < m + 2).  R is a power series in X, so
+T_m(X) = e^X (I + E) with E = -e^{-X} R commuting with e^X and
+||E||_D <= delta = e^theta rho_m(theta).  Squaring s times,
+T_m(X)^(2^s) = e^{F T} (I + E)^(2^s), and
+||(I + E)^(2^s) - I|| <= (1 + delta)^(2^s) - 1 <= 2^(s+1) delta
+whenever 2^s delta <= 1/2.  So
+
+    ||Phi - e^{F T}||_D <= tol ||e^{F T}||_D   when   2^(s+1) e^theta rho_m(theta) <= tol,
+
+in exact arithmetic (rounding adds about s + m unit roundoffs).  That norm
+lets the balancing scale a block of F that drives another without being
+driven (a bias into the attitude) by up to 2^-80 against it, so an entry
+whose leading term crosses such a coupling (a gyro bias into velocity
+through the tilt, of order 2 in T) is bounded only relative to its block,
+and its relative error is larger by about 1/theta: at T = 1 s the paper's
+model with order 4 is 3.4e-12 off at that entry against 1.2e-15 in the
+balanced norm.  The rule therefore keeps one order of margin
+(CROSS_BLOCK_MARGIN): it asks 2^(s+1) e^theta rho_(m-1)(theta) <= tol,
+which bounds those entries too (measured against expm on every built-in
+model, tests/derive/test_discretization.py), the stated bound.  The same holds for Psi: its series is the integral of the
+series of Phi, term by term smaller by 1/(k+1), and each doubling
+Psi(2h) = Psi(h) + Phi(h) Psi(h) carries Phi's relative error.  The plan
+(``taylor_plan``) takes the smallest s for which the highest generated order
+N meets the bound, then the smallest order m <= N that still meets it: at
+T = 1 s the paper's model needs order 5 (theta = 0.0026), at T = 60 s order 9
+without doubling (theta = 0.155), where the fixed order 9 takes one doubling
+to reach the unit roundoff.  A tolerance not above the unit roundoff of the
+arithmetic (every tolerance in single precision, where rounding through the
+doublings dominates) means the fixed order.  Measured against scipy's expm (tests), the largest error
+stays below the tolerance relative to the largest entry.
 """
 
 from __future__ import annotations
@@ -61,6 +96,8 @@ from scipy.linalg import expm
 from modelgen.errors import ModelError
 
 DEFAULT_TAYLOR_ORDER = 9  # seed 000, eq. (10): terms up to F^9 T^9 / 9!
+DEFAULT_TOLERANCE = 1e-12  # relative error of Phi against e^{F T} that the accuracy rule guarantees
+CROSS_BLOCK_MARGIN = 1  # orders kept beyond the balanced-norm bound, for entries that couple blocks of F (docstring)
 MAX_DOUBLINGS = 64  # T / 2^64: far below any step a navigation filter takes
 BALANCING_SWEEPS = 8
 MAX_SWEEP_EXPONENT = 8  # a scale moves by at most 2^8 per sweep
@@ -160,6 +197,61 @@ def doublings(norm: float, T: float, order: int, unit_roundoff: float = DOUBLE_R
     )
 
 
+def truncation_bound(theta: float, order: int) -> float:
+    """rho_m(theta) = theta^(m+1) / (m+1)! * (m+2) / (m+2-theta): the Taylor remainder bound (module docstring).
+
+    Computed by one product, term by term, so that the generated C (which
+    does the same operations in the same order) gets the same bits;
+    infinity for theta >= m + 2, where the geometric bound fails.
+    """
+    if not theta < order + 2:
+        return math.inf
+    power = 1.0
+    for k in range(1, order + 2):
+        power = power * theta / k
+    return power * (order + 2) / (order + 2 - theta)
+
+
+def step_error_bound(theta: float, order: int, halvings: int) -> float:
+    """2^(s+1) e^theta rho_(m-1)(theta): the bound on the relative error of Phi (module docstring).
+
+    One order of margin (CROSS_BLOCK_MARGIN) over the balanced-norm bound
+    2^(s+1) e^theta rho_m(theta), for the entries that couple two blocks of F.
+    """
+    return math.ldexp(math.exp(theta) * truncation_bound(theta, order - CROSS_BLOCK_MARGIN), halvings + 1)
+
+
+def taylor_plan(
+    norm: float, T: float, order: int, tolerance: float | None = DEFAULT_TOLERANCE, unit_roundoff: float = DOUBLE_ROUNDOFF
+) -> tuple[int, int]:
+    """(s, m): the doublings and the order actually summed, for ||F||_D = ``norm`` and step ``T``.
+
+    ``tolerance`` None, or not above the unit roundoff (where rounding,
+    not truncation, limits the accuracy; single precision): the order is
+    fixed at ``order`` and s keeps the remainder below the unit roundoff
+    (:func:`doublings`).  Otherwise s is the smallest number of doublings
+    for which order ``order`` meets :func:`step_error_bound` <= tolerance,
+    and m the smallest order that meets it with that s.  ModelError beyond
+    MAX_DOUBLINGS.
+    """
+    if tolerance is None or tolerance <= unit_roundoff:
+        return doublings(norm, T, order, unit_roundoff), order
+    target = tolerance
+    for s in range(MAX_DOUBLINGS + 1):
+        theta = norm * math.ldexp(T, -s)
+        if step_error_bound(theta, order, s) <= target:
+            break
+    else:
+        raise ModelError(
+            f"discretize: e^(F T) is not representable: ||F||*T = {norm * T:.3g} needs more than "
+            f"{MAX_DOUBLINGS} doublings of the Taylor series"
+        )
+    for m in range(1, order + 1):
+        if step_error_bound(theta, m, s) <= target:
+            return s, m
+    return s, order
+
+
 def _taylor_terms(F: np.ndarray, h: float, order: int) -> tuple[np.ndarray, np.ndarray]:
     """(Phi, sum (F h)^k / (k+1)!) over one step h."""
     n = F.shape[0]
@@ -185,10 +277,14 @@ def check_step(T: float) -> float:
 
 
 def taylor_discretization_with_doublings(
-    F: np.ndarray, G: np.ndarray, T: float, order: int = DEFAULT_TAYLOR_ORDER
+    F: np.ndarray, G: np.ndarray, T: float, order: int = DEFAULT_TAYLOR_ORDER, tolerance: float | None = None
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Phi, Gamma and the number s of doublings used (module docstring).
 
+    ``order`` is the highest order; ``tolerance`` None sums exactly that
+    order (the paper's fixed order), a number lets :func:`taylor_plan`
+    choose s and the order for that relative accuracy, as the generated code
+    does by default (``CodegenOptions.taylor_tolerance``).
     ModelError (a ValueError) for an order below 1, a non-finite or non-positive T, a
     non-finite F or G, or an e^(F T) that is not representable.
     """
@@ -197,7 +293,7 @@ def taylor_discretization_with_doublings(
     T = check_step(T)
     if not (np.all(np.isfinite(F)) and np.all(np.isfinite(G))):
         raise ModelError("discretize: F or G has a non-finite entry")
-    s = doublings(balanced_norm(F), T, order)
+    s, order = taylor_plan(balanced_norm(F), T, order, tolerance)
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below, with a message
         phi, series = _taylor_terms(F, math.ldexp(T, -s), order)
         for _ in range(s):
@@ -208,13 +304,15 @@ def taylor_discretization_with_doublings(
     return phi, T * series @ G, s
 
 
-def taylor_discretization(F: np.ndarray, G: np.ndarray, T: float, order: int = DEFAULT_TAYLOR_ORDER) -> tuple[np.ndarray, np.ndarray]:
+def taylor_discretization(
+    F: np.ndarray, G: np.ndarray, T: float, order: int = DEFAULT_TAYLOR_ORDER, tolerance: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Phi and Gamma by the series of eqs. (10) and (11), with scaling and squaring.
 
-    Accurate for any finite T (module docstring); ModelError as
-    :func:`taylor_discretization_with_doublings`.
+    Accurate for any finite T (module docstring); ``tolerance`` and
+    ModelError as :func:`taylor_discretization_with_doublings`.
     """
-    phi, gamma, _ = taylor_discretization_with_doublings(F, G, T, order)
+    phi, gamma, _ = taylor_discretization_with_doublings(F, G, T, order, tolerance)
     return phi, gamma
 
 

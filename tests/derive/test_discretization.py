@@ -35,9 +35,10 @@ STEPS = [1e-3, 1.0, 60.0, 600.0, 3600.0, 1e4, 86400.0]
 MODELS = Path(__file__).resolve().parents[2] / "modelgen" / "models"
 
 
-def bound(T: float) -> float:
-    """The stated relative bound at step T."""
-    return 1e-13 if T <= 600.0 else 1e-10
+def bound(T: float, tolerance: float | None = None) -> float:
+    """The stated relative bound at step T: with the accuracy rule, never below its tolerance."""
+    fixed = 1e-13 if T <= 600.0 else 1e-10
+    return fixed if tolerance is None else max(fixed, tolerance)
 
 
 def exact(F: np.ndarray, G: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
@@ -171,3 +172,58 @@ def test_vectorized_sweep_exponents_equal_the_scalar_rule():
     row = np.where(rng.random(200) < 0.2, 0.0, 10.0 ** rng.uniform(-30, 30, 200))
     column = np.where(rng.random(200) < 0.2, 0.0, 10.0 ** rng.uniform(-30, 30, 200))
     assert list(sweep_exponents(row, column)) == [sweep_exponent(r, c) for r, c in zip(row, column)]
+
+
+# -- the accuracy rule (taylor_plan) --------------------------------------------------------
+
+
+@pytest.mark.parametrize("theta", [1e-6, 1e-3, 0.05, 0.3, 1.0, 3.0])
+@pytest.mark.parametrize("order", [1, 2, 5, 9])
+def test_truncation_bound_bounds_the_remainder_of_the_exponential_series(theta, order):
+    """rho_m(theta) >= e^theta - sum_{k<=m} theta^k / k!: the scalar series is the worst case of the norm bound."""
+    from modelgen.derive.discretization import truncation_bound
+
+    remainder = math.fsum(theta**k / math.factorial(k) for k in range(order + 1, order + 60))
+    assert remainder <= truncation_bound(theta, order)
+    if theta <= (order + 2) / 2:  # and tight where the rule uses it (infinite from theta = m + 2 on)
+        assert truncation_bound(theta, order) <= 2 * remainder
+
+
+def test_accuracy_rule_sums_fewer_orders_for_short_steps_and_none_past_the_highest(level_matrices):
+    """Paper's model: order 5 at T = 1 s, the full order 9 without doubling at T = 60 s, doublings beyond."""
+    from modelgen.derive.discretization import taylor_plan
+
+    norm = balanced_norm(level_matrices["F"])
+    plans = {T: taylor_plan(norm, T, 9) for T in STEPS}
+    assert plans[1.0] == (0, 5) and plans[60.0] == (0, 9)
+    assert plans[1e-3][1] < plans[1.0][1] and plans[600.0][0] > 0
+    assert all(order <= 9 for _, order in plans.values())
+
+
+def test_a_tolerance_of_none_or_within_rounding_is_the_fixed_order(level_matrices):
+    from modelgen.derive.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, doublings, taylor_plan
+
+    norm = balanced_norm(level_matrices["F"])
+    for T in STEPS:
+        fixed = (doublings(norm, T, 9), 9)
+        assert taylor_plan(norm, T, 9, None) == fixed
+        assert taylor_plan(norm, T, 9, DOUBLE_ROUNDOFF) == fixed
+        assert taylor_plan(norm, T, 9, 1e-8, FLOAT_ROUNDOFF) == (doublings(norm, T, 9, FLOAT_ROUNDOFF), 9)
+
+
+BUILTIN = ["ned_doppler18", "ned_inertial16", "enu_doppler18", "ins_gps15", "gps_pseudorange11", "ned_doppler32_augmented"]
+
+
+@pytest.mark.parametrize("name", BUILTIN)
+def test_accuracy_rule_meets_its_tolerance_against_expm_on_every_builtin_model(name):
+    """Phi and Gamma within 1e-12 of the largest exact entry from 10 ms to 10 minutes, with the order the rule picks."""
+    from modelgen.derive.discretization import DEFAULT_TOLERANCE
+    from modelgen.jobs import check_scenario
+
+    derived = derive(load_model(name))
+    m = derived.numeric(check_scenario(derived).parameters)
+    for T in (0.01, 0.1, 1.0, 10.0, 60.0, 600.0):
+        phi, gamma = taylor_discretization(m["F"], m["G"], T, 9, DEFAULT_TOLERANCE)
+        phi_exact, gamma_exact = exact(m["F"], m["G"], T)
+        assert relative_error(phi, phi_exact) < DEFAULT_TOLERANCE, T
+        assert relative_error(gamma, gamma_exact) < DEFAULT_TOLERANCE, T

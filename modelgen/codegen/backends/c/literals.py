@@ -20,6 +20,10 @@ def scalar_spellings(scalar: str) -> dict[str, str]:
         "half": "0.5F" if single else "0.5",
         "sqrt": "sqrtf" if single else "sqrt",
         "fabs": "fabsf" if single else "fabs",
+        "exp": "expf" if single else "exp",
+        "ldexp": "ldexpf" if single else "ldexp",
+        "frexp": "frexpf" if single else "frexp",
+        "huge": "HUGE_VALF" if single else "HUGE_VAL",
         "epsilon": "FLT_EPSILON" if single else "DBL_EPSILON",
     }
 

@@ -19,7 +19,7 @@ from modelgen.codegen.kernels import Assign, CheckedAssign, Ref, Statement, Term
 SCALAR_TYPES = {"double": float64, "float": float32}
 
 #: The pointer through which a generated C function reaches each kernel owner.
-POINTERS = {"filter": "f", "transition": "t", "scratch": "w"}
+POINTERS = {"filter": "f", "transition": "t", "scratch": "w", "matrices": "m"}
 
 
 class CPrinter(RenamedSymbols, C99CodePrinter):
@@ -37,7 +37,9 @@ class CPrinter(RenamedSymbols, C99CodePrinter):
 
 
 def c_ref(ref: Ref) -> str:
-    """``t->Phi[3][4]``: a kernel entry through its owner's pointer."""
+    """``t->Phi[3][4]``: a kernel entry through its owner's pointer (a ``local`` scalar by its name)."""
+    if ref.owner == "local":
+        return ref.array
     return f"{POINTERS[ref.owner]}->{ref.array}" + "".join(f"[{i}]" for i in ref.index)
 
 
