@@ -3,8 +3,10 @@
 Derived entries are stored expanded (``modelgen.derive.symbolic`` expands
 them so that equal entries print identically), which prints denominators
 such as ``R_M**2 + 2*R_M*h + h**2``.  :func:`readable` undoes that for
-display only: each term's denominator is factored (``(R_M + h)**2``), then
-common factors are pulled out of the sum (``-(omega_ie*cos(L) + v_E/(R_N + h))``).
+display only: each term's denominator is factored (``(R_M + h)**2``), the
+numerators of terms with the same denominator are added and factored (so that
+``(R_N*x + h*x)/(R_N + h)`` becomes ``x``), then common factors are pulled out
+of the sum (``-(omega_ie*cos(L) + v_E/(R_N + h))``).
 The result is the same function (factoring is exact), the pipeline is fixed,
 and sympy's printer is deterministic, so the same model always prints the
 same text.
@@ -18,14 +20,20 @@ MATRIX_NAMES = ("F", "G", "H", "Q", "R")
 
 
 def readable(expr: sp.Expr) -> sp.Expr:
-    """``expr`` with factored denominators and common factors pulled out (see module doc)."""
+    """``expr`` with factored denominators, like fractions combined, common factors pulled out (see module doc)."""
     expr = sp.sympify(expr)
     if expr.is_Atom:
         return expr
-    terms = []
+    groups: dict[sp.Expr, list[sp.Expr]] = {}  # factored denominator -> numerators, in the order met
     for term in sp.Add.make_args(expr):
         numerator, denominator = sp.fraction(term)
-        terms.append(numerator / sp.factor(denominator) if denominator != 1 else numerator)
+        groups.setdefault(sp.factor(denominator) if denominator != 1 else sp.S.One, []).append(numerator)
+    terms = []
+    for denominator, numerators in groups.items():
+        if denominator == 1 or len(numerators) == 1:
+            terms += [n / denominator for n in numerators]
+        else:  # R_N*x + h*x over (R_N + h)*y: factored, the common factor cancels
+            terms.append(sp.factor(sp.Add(*numerators)) / denominator)
     return sp.factor_terms(sp.Add(*terms))
 
 

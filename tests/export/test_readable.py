@@ -15,7 +15,7 @@ def test_an_expanded_denominator_is_printed_as_the_power_of_its_sum():
 
 def test_common_factors_are_pulled_out_of_a_sum():
     entry = sp.expand(-v_E * v_N * sp.tan(L) / (R_N + h) ** 2 + v_E * v_U / (R_N + h) ** 2)
-    assert sp.sstr(readable(entry)) == "v_E*(-v_N*tan(L) + v_U)/(R_N + h)**2"
+    assert sp.sstr(readable(entry)) == "-v_E*(v_N*tan(L) - v_U)/(R_N + h)**2"
     assert sp.sstr(readable(-2 * w * sp.cos(L) - 2 * v_E / (R_N + h))) == "-2*(omega_ie*cos(L) + v_E/(R_N + h))"
 
 
@@ -25,6 +25,11 @@ def test_every_readable_entry_of_a_built_in_model_is_the_same_function(enu_deriv
             shown = readable(entry)
             assert sp.expand(sp.together(shown - entry)) == 0, f"{name}({i},{j})"
             assert "R_N**2" not in sp.sstr(shown) and "R_M**2" not in sp.sstr(shown), f"{name}({i},{j})"
+
+
+def test_numerators_over_one_denominator_are_combined_and_cancel():
+    entry = -(R_N * v_N * sp.tan(L) + h * v_N * sp.tan(L)) / ((R_N + h) * (w + h)) - v_U / (R_N + h)
+    assert sp.sstr(readable(sp.expand(entry))) == "-(v_N*tan(L)/(h + omega_ie) + v_U/(R_N + h))"
 
 
 def test_atoms_stay_as_they_are_and_the_output_is_deterministic():
