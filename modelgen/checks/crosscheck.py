@@ -486,7 +486,31 @@ def cross_check(
                     pair, matrix, rows[i], columns[j], written, full, terms, transform, errors, values,
                 ))
         records += _unmodelled_couplings(pair, matrix, twin, where, rows, twin_rows, dropped, values)
+        records += _removed_state_couplings(pair, matrix, rows, twin_rows, dropped, values)
     return CrossCheckResult(pair.hand, pair.twin, label, tuple(records))
+
+
+#: What a record's column says for a term whose state the twin's approximation removed (engine index -1).
+REMOVED_STATE = "(a state the approximation removes)"
+
+
+def _removed_state_couplings(pair, matrix, rows, twin_rows, dropped, values) -> list[EntryRecord]:
+    """Records for the terms coupling a removed state (e.g. under no_vertical_channel: dV_d, dh) into the model's rows.
+
+    The engine gives such a term column -1 (the state no longer exists);
+    rows of removed states are not part of the model and are not listed.
+    """
+    if matrix == "G":
+        return []
+    out = []
+    for i, row in zip(twin_rows, rows):
+        for term, approximation in dropped.get((matrix, i, -1), []):
+            out.append(EntryRecord(
+                model=pair.hand, matrix=matrix, row=row, column=REMOVED_STATE, hand="0", derived=short(term),
+                status="approximation", term=short(term), magnitude=magnitude(term, values),
+                reason=f"declared approximation {approximation} removes the state this term couples in",
+            ))
+    return out
 
 
 def _unmodelled_couplings(pair, matrix, twin, where: Layout, rows, twin_rows, dropped, values) -> list[EntryRecord]:
@@ -542,12 +566,12 @@ def _classify(pair, matrix, row, column, written, full, terms, transform, errors
     if error is not None:
         state = "fixed in the hand model" if error.fixed else "reported"
         return EntryRecord(
-            **base, status="hand_model_error", term=short(sp.simplify(difference)), magnitude=magnitude(difference, values),
+            **base, status="hand_model_error", term=short(sp.expand(difference)), magnitude=magnitude(difference, values),
             reason=f"error in the hand model ({state}): {error.reason}",
         )
     hints = difference_hints(written, full)
     return EntryRecord(
-        **base, status="unexplained", term=short(sp.simplify(difference)), magnitude=magnitude(difference, values),
+        **base, status="unexplained", term=short(sp.expand(difference)), magnitude=magnitude(difference, values),
         reason="; ".join(h.text for h in hints) or "no declared approximation, convention or hand-model error explains it",
     )
 

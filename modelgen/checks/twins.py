@@ -73,13 +73,18 @@ def run_twin_checks(derived_of: DerivedOf, neglected_of: NeglectedOf = engine_ne
         require_twin(pair.twin)
         twin = derived_of(pair.twin)
         results.append(cross_check(pair, derived_of(pair.hand), twin, neglected_of(pair.twin)))
-    paper = None
-    path = paper_equations_path(paper_model) if paper_model else None
-    if path is not None:
-        twin_name = str(read_yaml(path, "paper-equations file").get("twin"))
-        require_twin(twin_name)
-        paper = paper_equations_check(derived_of(twin_name), path)
+    paper = first_principles_check(paper_model, derived_of) if paper_model else None
     return TwinChecks(tuple(results), paper)
+
+
+def first_principles_check(model_name: str, derived_of: DerivedOf) -> PaperEquationsResult | None:
+    """The paper check from first principles for the paper model ``model_name`` (None: no transcription names it)."""
+    path = paper_equations_path(model_name)
+    if path is None:
+        return None
+    twin_name = str(read_yaml(path, "paper-equations file").get("twin"))
+    require_twin(twin_name)
+    return paper_equations_check(derived_of(twin_name), path)
 
 
 def write_twin_reports(checks: TwinChecks, folder: Path) -> list[Path]:

@@ -784,7 +784,7 @@ def _check_values(data: Mapping, decl: _Declarations) -> dict[sp.Symbol, float]:
 
 def term_magnitude(term: sp.Expr, values: Mapping[sp.Symbol, float]) -> float | None:
     """|term| at the given values, or None if a value is missing."""
-    number = term.xreplace(dict(values))
+    number = sp.sympify(term).xreplace({k: sp.Float(v) for k, v in values.items()})  # a bare symbol becomes a Float, not a float
     if number.free_symbols:
         return None
     return abs(float(number))
