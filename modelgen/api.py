@@ -96,7 +96,7 @@ def check(model: ModelLike, folder: str | Path | None = None, **options: Any) ->
     Checks the code in ``folder`` (as written by :func:`generate` with the same
     ``options``), or, without it, code generated into a temporary folder.
     Returns one :class:`~modelgen.checks.code_check.ConformanceResult` per
-    build (``.passed``, ``.max_error``, ``.tolerance``), run at the model's
+    build (``.passed()``, ``.max_scaled_P``, ``.tolerance``), run at the model's
     check scenario.
     """
     derived = derive(model)
