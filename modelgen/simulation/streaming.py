@@ -8,7 +8,9 @@ then walks the flight a piece at a time (``piece_seconds`` of IMU data, a whole
 number of filter cycles): it generates the piece's ideal increments, corrupts
 them, and steps every requested correction mode's filter loop through the
 piece's cycles before the next piece replaces it.  The modes therefore share
-one pass over the data (what ``modelgen simulate`` flies), and what is held is
+one pass over the data (what ``modelgen simulate`` flies); the next piece's
+ideal increments are generated in a second thread (compiled code that
+releases the GIL) while the current one flies.  What is held is
 a piece of IMU data, the truth and sensor records at the filter and sensor
 rates, and the histories at the rate asked for (``record_every``).
 
@@ -19,7 +21,10 @@ piece length): tests/simulation/test_streaming.py checks both.
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable, Iterable
+
+import numpy as np
 
 from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
@@ -51,14 +56,28 @@ def pieces(n_cycles: int, per_piece: int) -> Iterable[tuple[int, int]]:
         yield first, min(first + per_piece - 1, n_cycles)
 
 
-def load_piece(sensors: SensorData, cursor, first_cycle: int, last_cycle: int) -> None:
-    """Put the measured increments of cycles [first_cycle, last_cycle] into ``sensors`` (streamed sensors)."""
-    trajectory = sensors.trajectory
+def piece_samples(trajectory: Trajectory, first_cycle: int, last_cycle: int) -> tuple[int, int]:
+    """IMU samples [start, stop) of filter cycles [first_cycle, last_cycle]."""
     every = trajectory.record_every
-    start, stop = (first_cycle - 1) * every, last_cycle * every
+    return (first_cycle - 1) * every, last_cycle * every
+
+
+def ideal_piece(trajectory: Trajectory, first_cycle: int, last_cycle: int) -> tuple[np.ndarray, np.ndarray]:
+    """Ideal increments of filter cycles [first_cycle, last_cycle] (generated now for a streamed trajectory)."""
+    return trajectory.increments(*piece_samples(trajectory, first_cycle, last_cycle))
+
+
+def load_piece(sensors: SensorData, cursor, first_cycle: int, last_cycle: int,
+               ideal: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+    """Put the measured increments of cycles [first_cycle, last_cycle] into ``sensors`` (streamed sensors).
+
+    ``ideal``: the piece's ideal increments if already made (by a prefetch), else they are made now.
+    """
+    trajectory = sensors.trajectory
+    start, _ = piece_samples(trajectory, first_cycle, last_cycle)
     if cursor.position != start:
         raise ModelError(f"streaming: pieces must come in order (expected sample {cursor.position}, got {start})")
-    ideal_theta, ideal_velocity = trajectory.increments(start, stop)
+    ideal_theta, ideal_velocity = ideal if ideal is not None else ideal_piece(trajectory, first_cycle, last_cycle)
     sensors.delta_theta, sensors.delta_velocity = cursor.corrupt(ideal_theta, ideal_velocity)
     sensors.sample_offset = start
 
@@ -97,12 +116,20 @@ def fly_modes(profile: FlightProfile, derived: DerivedModel, trajectory: Traject
     ]
     n_cycles = len(trajectory.truth) - 1
     cursor = sensors.imu_stream.cursor() if sensors.streamed else None
-    for first, last in pieces(n_cycles, cycles_per_piece(trajectory, piece_seconds)):
-        if cursor is not None:
-            load_piece(sensors, cursor, first, last)
-        for loop in loops:
-            written = loop.recorded if first > 1 else 0  # the first piece also writes the row at t = 0
-            loop.run(first, last)
-            if loop.mode in histories:
-                histories[loop.mode].write(loop.result, written, loop.recorded)
+    ranges = list(pieces(n_cycles, cycles_per_piece(trajectory, piece_seconds)))
+    with ThreadPoolExecutor(max_workers=1) as prefetch:
+        # a streamed trajectory's next piece of ideal increments is generated (compiled, without the GIL)
+        # while this one flies: the same numbers, made on the second core if there is one
+        coming = prefetch.submit(ideal_piece, trajectory, *ranges[0]) if cursor is not None and ranges else None
+        for index, (first, last) in enumerate(ranges):
+            if cursor is not None:
+                ideal = coming.result()
+                if index + 1 < len(ranges):
+                    coming = prefetch.submit(ideal_piece, trajectory, *ranges[index + 1])
+                load_piece(sensors, cursor, first, last, ideal)
+            for loop in loops:
+                written = loop.recorded if first > 1 else 0  # the first piece also writes the row at t = 0
+                loop.run(first, last)
+                if loop.mode in histories:
+                    histories[loop.mode].write(loop.result, written, loop.recorded)
     return {loop.mode: loop.result for loop in loops}
