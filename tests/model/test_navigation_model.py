@@ -179,3 +179,38 @@ def test_pseudorange_rate_rows_see_velocity_along_the_line_of_sight_position_thr
         expected[0:3] = (sat[k] - v) @ (np.eye(3) - np.outer(e[k], e[k])) / rho[k]
         expected[names.index("clock_drift_range")] = 1.0
         assert np.allclose(H[k], expected, rtol=1e-12, atol=1e-15), (H[k], expected)
+
+
+WRITTEN = """
+model: written
+frame: NED
+parameters:
+  - {name: q, unit: "1", value: 1.0e-6}
+navigation:
+  errors:
+    position: {form: metres, symbol: dr}
+    velocity: {form: difference, symbol: dv}
+    attitude: {form: phi, symbol: phi}
+  noises: {gyro: {psd: q}, accel: {psd: q}}
+"""
+EQUATIONS = """  equations:
+    velocity: "f_n - cross(2*omega_ie_n + omega_en_n, v_n) + g_n"
+    position: "vector(dot(vector(1, 0, 0), v_n)/(R_M + height), dot(vector(0, 1, 0), v_n)/((R_N + height)*cos(latitude)), -dot(vector(0, 0, 1), v_n))"
+"""
+
+
+def test_written_navigation_equations_give_the_named_mechanizations_error_model():
+    """The same equations written out as vector expressions derive the same F, G; a changed one changes F."""
+    from modelgen.model.loading import load_model_text
+
+    values = {"latitude": 0.7, "height": 300.0, "velocity_north": 80.0, "velocity_east": -30.0, "velocity_down": 1.0,
+              "meridian_radius": 6.36e6, "prime_vertical_radius": 6.39e6, "gravity": 9.8,
+              "body_specific_force_x": 0.2, "body_specific_force_y": -0.1, "body_specific_force_z": -9.8}
+    values.update({f"c{i}{j}": float(i == j) for i in (1, 2, 3) for j in (1, 2, 3)})
+    named = derive(load_model_text(WRITTEN, "named.yaml")).numeric(values)
+    written = derive(load_model_text(WRITTEN + EQUATIONS, "written.yaml")).numeric(values)
+    for key in "FGH":
+        np.testing.assert_allclose(written[key], named[key], rtol=1e-13, atol=1e-20)
+    changed = WRITTEN + EQUATIONS.replace(" - cross(2*omega_ie_n + omega_en_n, v_n)", "")
+    no_coriolis = derive(load_model_text(changed, "changed.yaml")).numeric(values)
+    assert np.abs(no_coriolis["F"] - named["F"]).max() > 1e-5
