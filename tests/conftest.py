@@ -15,6 +15,16 @@ def paper_model():
 
 
 @pytest.fixture(scope="session")
+def derived_builtin():
+    """A built-in model by name, loaded and derived once per session (a navigation-equation twin takes seconds)."""
+    from functools import lru_cache
+
+    from modelgen.jobs import load_and_derive
+
+    return lru_cache(maxsize=None)(load_and_derive)
+
+
+@pytest.fixture(scope="session")
 def paper_derived(paper_model):
     from modelgen.derive.symbolic import derive
 

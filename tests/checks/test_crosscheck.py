@@ -155,15 +155,14 @@ PAIRS = cc.load_pairs()
 
 
 @pytest.fixture(scope="module")
-def builtin_results():
+def builtin_results(derived_builtin):
     """Each pair's cross-check, every model loaded and derived once."""
-    from modelgen.model.loading import load_model
     from modelgen.model.navigation_model import neglected_terms
 
     out = {}
     for p in PAIRS:
-        twin = derive(load_model(p.twin))
-        out[p.hand] = cc.cross_check(p, derive(load_model(p.hand)), twin, neglected_terms(p.twin))
+        twin = derived_builtin(p.twin)
+        out[p.hand] = cc.cross_check(p, derived_builtin(p.hand), twin, neglected_terms(p.twin))
     return out
 
 

@@ -5,16 +5,15 @@ from __future__ import annotations
 import pytest
 import sympy as sp
 
-from modelgen.derive.symbolic import derive
 from modelgen.errors import ModelError
-from modelgen.model.loading import load_model, load_model_text
+from modelgen.model.loading import load_model_text
 
 C11 = sp.Symbol("c11", real=True)
 
 
 @pytest.fixture(scope="module")
-def twin():
-    return derive(load_model("ned_doppler18_twin"))
+def twin(derived_builtin):
+    return derived_builtin("ned_doppler18_twin")
 
 
 def test_gyro_drift_declared_twice_is_the_sum_of_a_random_constant_and_a_markov_process(twin):
