@@ -326,6 +326,9 @@ def _sensor_noises(read: _Reader, section: Mapping, frame: str, decl: _Declarati
 
 
 # -- measurements -------------------------------------------------------------------------------
+#: What each measurement kind gives: h(state, computed, mechanization), the scale (or None), the units,
+#: the number of components and the measured side's extra term (or None).
+_MeasurementParts = tuple[Callable, Callable | None, list[str], int, sp.Matrix | None]
 def _lever_arm(read: _Reader, entry: Mapping, key: str, decl: _Declarations) -> sp.Matrix | None:
     """The antenna's lever arm l^b (body axes): ``lever_arm: {symbols: [...]}`` or ``{symbol: l}``."""
     if "lever_arm" not in entry:
@@ -383,8 +386,7 @@ def _measurements(
         measured_minus_computed = read.choice(entry.get("difference", "computed_minus_measured"), f"{key}.difference", ("computed_minus_measured", "measured_minus_computed")) == "measured_minus_computed"
         if kind in ("position", "velocity"):
             index, sign = _component_order(read, entry, key, frame)
-            function, scale, units, count = _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign)
-            extra = None
+            function, scale, units, count, extra = _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign)
         elif kind == "pseudorange":
             function, scale, units, count, extra = _pseudorange(read, entry, key, frame, clock, decl)
         elif kind == "pseudorange_rate":
@@ -426,7 +428,9 @@ def _measurement_bias(read: _Reader, entry: Mapping, key: str, count: int, units
     return sp.Matrix(states)
 
 
-def _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign):
+def _kinematic_measurement(
+    read: _Reader, entry: Mapping, key: str, kind: str, frame: str, arm: sp.Matrix | None, index: Sequence[int], sign: Sequence[int]
+) -> _MeasurementParts:
     """GNSS position (geodetic, or metres along the listed axes) or velocity of the antenna at lever arm l^b.
 
     Antenna position: p + D (C l), D = (1/(R_M + h), 1/((R_N + h) cos L), up) per
@@ -444,9 +448,9 @@ def _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign):
         if form == "geodetic":
             if "axes" in entry:
                 raise ModelError(f"{read.at(f'{key}.axes')}: {key}: geodetic position differences (dL, dlambda, dh) take no 'axes'")
-            return function, None, ["rad", "rad", "m"], 3
+            return function, None, ["rad", "rad", "m"], 3, None
         scale = lambda computed: sp.Matrix([[sign[k] * v for v in pt.metres_matrix(frame, computed.position).row(index[k])] for k in range(len(index))])  # noqa: E731
-        return function, scale, ["m"] * len(index), len(index)
+        return function, scale, ["m"] * len(index), len(index), None
 
     def velocity(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
         if arm is None:
@@ -457,10 +461,10 @@ def _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign):
         antenna = state.velocity + state.attitude * rate.cross(arm) - mech.earth_rate(state).cross(state.attitude * arm)
         return _reorder(antenna, index, sign)
 
-    return velocity, None, ["m/s"] * len(index), len(index)
+    return velocity, None, ["m/s"] * len(index), len(index), None
 
 
-def _pseudorange(read, entry, key, frame, clock, decl):
+def _pseudorange(read: _Reader, entry: Mapping, key: str, frame: str, clock: sp.Matrix | None, decl: _Declarations) -> _MeasurementParts:
     """Pseudo-ranges to satellites along unit line-of-sight vectors e_k (navigation axes, receiver to satellite).
 
     The range from a point displaced by d (metres, navigation axes) from the
@@ -479,7 +483,7 @@ def _pseudorange(read, entry, key, frame, clock, decl):
     return ranges, None, ["m"] * len(sights), len(sights), extra
 
 
-def _lines_of_sight(read, entry, key, frame, clock, decl) -> list[sp.Matrix]:
+def _lines_of_sight(read: _Reader, entry: Mapping, key: str, frame: str, clock: sp.Matrix | None, decl: _Declarations) -> list[sp.Matrix]:
     """The unit line-of-sight vectors of a pseudo-range (rate) measurement; it needs the receiver clock."""
     if clock is None:
         raise ModelError(f"{read.at(key)}: a pseudo-range measurement needs a receiver clock (sensor_errors: {{of: receiver_clock, ...}})")
@@ -496,7 +500,7 @@ def _lines_of_sight(read, entry, key, frame, clock, decl) -> list[sp.Matrix]:
     return sights
 
 
-def _pseudorange_rate(read, entry, key, frame, clock, decl):
+def _pseudorange_rate(read: _Reader, entry: Mapping, key: str, frame: str, clock: sp.Matrix | None, decl: _Declarations) -> _MeasurementParts:
     """Pseudo-range rates: the relative velocity of satellite k along the line of sight, plus the clock drift.
 
     From a point displaced by d (metres, navigation axes) from the computed
@@ -554,7 +558,7 @@ def state_namespace(state: pt.NavigationState, mech: pt.Mechanization, frame: st
     }
 
 
-def _expression_measurement(read, entry, key, namespace):
+def _expression_measurement(read: _Reader, entry: Mapping, key: str, namespace: Callable[[], dict]) -> _MeasurementParts:
     """A measurement written as an expression of the navigation state (:func:`state_namespace`)."""
     if "expression" not in entry:
         raise ModelError(f"{read.at(key)}: a measurement 'of: expression' needs 'expression'")

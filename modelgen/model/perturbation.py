@@ -376,14 +376,12 @@ def _states(problem: NavigationProblem, approximations: set[str]) -> tuple[Navig
     return computed, true, {"v": true_v, "p": true_p}
 
 
-_PRIMITIVES: tuple[sp.Matrix, sp.Matrix, sp.Matrix] | None = None
+#: The primitive error symbols, one set for the module, so that every stage of a derivation shares them.
+_PRIMITIVES = _primitive_symbols()
 
 
 def _primitive_symbols_cached() -> tuple[sp.Matrix, sp.Matrix, sp.Matrix]:
-    """One set of primitive symbols per process, so that stages of a derivation share them."""
-    global _PRIMITIVES
-    if _PRIMITIVES is None:
-        _PRIMITIVES = _primitive_symbols()
+    """phi, dv, dp of this module (:data:`_PRIMITIVES`)."""
     return _PRIMITIVES
 
 
@@ -444,7 +442,10 @@ def _at(matrix: sp.Matrix, zero: Mapping, to_true: Mapping) -> sp.Matrix:
     return matrix.xreplace(zero).xreplace(to_true)
 
 
-def _measurement_jacobian(problem, mech, computed, true, by, zero, to_true) -> sp.Matrix:
+def _measurement_jacobian(
+    problem: NavigationProblem, mech: Mechanization, computed: NavigationState, true: NavigationState,
+    by: Sequence[sp.Symbol], zero: Mapping, to_true: Mapping,
+) -> sp.Matrix:
     """H_0: rows of z = scale (h(computed) - h(true)) + extra, differentiated by ``by``."""
     rows = []
     for m in problem.measurements:
@@ -594,7 +595,9 @@ def level_flight(stage: _Stage, problem: NavigationProblem) -> _Stage:
     return _substitute(stage, {problem.velocity[2]: 0})
 
 
-def _equation_approximation(stage: _Stage, problem: NavigationProblem) -> _Stage:  # applied while perturbing
+def _applied_while_perturbing(stage: _Stage, problem: NavigationProblem) -> _Stage:
+    """An approximation of :data:`EQUATION_APPROXIMATIONS`: it changes the perturbed equations
+    (:func:`_states`), so there is nothing left to do to the result."""
     return stage
 
 
@@ -610,8 +613,8 @@ APPROXIMATIONS: dict[str, Callable[[_Stage, NavigationProblem], _Stage]] = {
     "free_vertical_channel": free_vertical_channel,
     "level_flight": level_flight,
     "no_vertical_channel": no_vertical_channel,
-    "no_earth_rate_position_terms": _equation_approximation,
-    "no_transport_rate_position_terms": _equation_approximation,
+    "no_earth_rate_position_terms": _applied_while_perturbing,
+    "no_transport_rate_position_terms": _applied_while_perturbing,
 }
 #: Approximations that change the perturbed equations rather than the result.
 EQUATION_APPROXIMATIONS = frozenset({"no_earth_rate_position_terms", "no_transport_rate_position_terms"})
@@ -619,7 +622,7 @@ EQUATION_APPROXIMATIONS = frozenset({"no_earth_rate_position_terms", "no_transpo
 APPROXIMATION_DESCRIPTIONS: dict[str, str] = {
     "no_earth_rate_position_terms": "the true state's earth rate w_ie is taken at the computed latitude (no dL terms from it)",
     "no_transport_rate_position_terms": "the true state's transport rate w_en is taken at the computed position (no dL, dh terms from it)",
-    **{name: (function.__doc__ or "").strip().split("\n")[0] for name, function in APPROXIMATIONS.items() if function is not _equation_approximation},
+    **{name: (function.__doc__ or "").strip().split("\n")[0] for name, function in APPROXIMATIONS.items() if function is not _applied_while_perturbing},
 }
 
 
