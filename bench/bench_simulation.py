@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import resource
 import subprocess
@@ -47,6 +48,7 @@ from modelgen.derive.symbolic import derive
 from modelgen.model.loading import load_model
 from modelgen.simulation.filters import filter_factory
 from modelgen.simulation.flight import profile_layout, simulate_sensors
+from modelgen.simulation.flight_report import MAX_HISTORY_ROWS
 from modelgen.simulation.scenario import load_profile
 from modelgen.simulation.streaming import fly_modes
 from modelgen.simulation.strapdown import Strapdown
@@ -92,7 +94,8 @@ def progress(label: str):
     return report
 
 
-def fly(scenario, derived, make, streamed: bool, glue: str, modes=("closed_loop",), label: str = ""):
+def fly(scenario, derived, make, streamed: bool, glue: str, modes=("closed_loop",), label: str = "",
+        record_every: int = 1):
     """Trajectory, sensors and the flight; (results, timings)."""
     with Clock() as c_trajectory:
         trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0 / scenario.filter.period, streamed=streamed)
@@ -101,7 +104,8 @@ def fly(scenario, derived, make, streamed: bool, glue: str, modes=("closed_loop"
         sensors = simulate_sensors(scenario, trajectory, np.random.default_rng(0))
     with Clock() as c_fly:
         results = fly_modes(scenario, derived, trajectory, sensors, layout, make, modes, glue=glue,
-                            progress=(lambda mode: progress(f"{label} {mode}")) if label else None)
+                            progress=(lambda mode: progress(f"{label} {mode}")) if label else None,
+                            record_every=record_every)
     return results, trajectory, {"trajectory": c_trajectory, "sensors": c_sensors, "fly": c_fly}
 
 
@@ -127,8 +131,13 @@ def memory_child(hours: float, way: str) -> None:
     with tempfile.TemporaryDirectory() as folder:
         make = filter_factory(derived, "c", folder)
         before = peak_rss_mib()
-        results, trajectory, clocks = fly(scenario, derived, make, way == "new", "compiled" if way == "new" else "python")
+        # the histories at the rate `modelgen simulate` keeps them (at most MAX_HISTORY_ROWS rows: every 5 s at 24 h)
+        cycles = round(scenario.path.duration / scenario.filter.period)
+        record_every = max(1, math.ceil(cycles / MAX_HISTORY_ROWS)) if way == "new" else 1
+        results, trajectory, clocks = fly(scenario, derived, make, way == "new", "compiled" if way == "new" else "python",
+                                          record_every=record_every)
     print(json.dumps({"hours": hours, "way": way, "peak_rss_mib": peak_rss_mib(), "before_flight_mib": before,
+                      "record_every": record_every,
                       "cycles": len(trajectory.truth) - 1, "updates": results["closed_loop"].updates,
                       "cpu_s": clocks["fly"].cpu + clocks["trajectory"].cpu + clocks["sensors"].cpu}))
 
@@ -140,22 +149,8 @@ def measure_memory(hours: float, way: str) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--hours", type=float, default=4.0)
-    parser.add_argument("--long-hours", type=float, default=24.0)
-    parser.add_argument("--skip-memory", action="store_true")
-    parser.add_argument("--memory-child", choices=("old", "new"), help=argparse.SUPPRESS)
-    parser.add_argument("--out", default=str(Path(__file__).parent / "results" / "simulation.json"))
-    args = parser.parse_args()
-    if args.memory_child:
-        memory_child(args.hours, args.memory_child)
-        return
-
-    scenario = load_profile("profile_000").with_changes(hours=args.hours)
-    derived = derive(load_model(scenario.filter.model))
-    report: dict = {"hours": args.hours, "imu_rate_hz": scenario.imu_rate, "cpu_count": os.cpu_count()}
-    print(f"profile_000, {args.hours:g} h at {scenario.imu_rate:g} Hz, filter {derived.model.name} (generated C)", flush=True)
+def measure_time(scenario, derived, report: dict) -> None:
+    """One mode old vs new, and the whole `simulate`, in this process (module docstring)."""
     with tempfile.TemporaryDirectory() as folder:
         make = filter_factory(derived, "c", folder)
         warm = scenario.with_changes(hours=30 / 3600)  # numba compilation or cache load, not timed
@@ -202,14 +197,38 @@ def main() -> None:
         # -- whole simulate, three modes --------------------------------------------------------
         from modelgen.simulation.flight_report import simulate
 
-        with tempfile.TemporaryDirectory() as out, Clock() as c_sim:
-            simulate(scenario, derived, Path(out), runs=0, echo=lambda line: None)
+        with tempfile.TemporaryDirectory() as out:
+            with Clock() as c_sim:
+                summary = simulate(scenario, derived, Path(out), runs=0, echo=lambda line: None)
+            steps = summary.read_text(encoding="utf-8").split("## Timings", 1)[1].split("## Figures", 1)[0]
+        print("    simulate's own timings (wall):\n" + "\n".join(f"      {line}" for line in steps.strip().splitlines()[2:]))
         with Clock() as c_three_old:
             fly(scenario, derived, make, False, "python", modes=("open_loop", "closed_loop", "accumulated"))
         print(f"  whole `modelgen simulate` (three modes, figures, no Monte Carlo): wall {c_sim.wall:.2f} s, "
               f"CPU {c_sim.cpu:.2f} s; the old recipe's data and three runs alone (no figures): CPU {c_three_old.cpu:.2f} s "
               f"-> {c_three_old.cpu / c_sim.cpu:.1f}x; target <= {TARGETS['simulate [s]']} s", flush=True)
         report["simulate"] = {"wall_s": c_sim.wall, "cpu_s": c_sim.cpu, "old_three_modes_cpu_s": c_three_old.cpu}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--hours", type=float, default=4.0)
+    parser.add_argument("--long-hours", type=float, default=24.0)
+    parser.add_argument("--skip-memory", action="store_true")
+    parser.add_argument("--memory-only", action="store_true", help="only the peak-RSS figures")
+    parser.add_argument("--memory-child", choices=("old", "new"), help=argparse.SUPPRESS)
+    parser.add_argument("--out", default=str(Path(__file__).parent / "results" / "simulation.json"))
+    args = parser.parse_args()
+    if args.memory_child:
+        memory_child(args.hours, args.memory_child)
+        return
+
+    scenario = load_profile("profile_000").with_changes(hours=args.hours)
+    derived = derive(load_model(scenario.filter.model))
+    report: dict = {"hours": args.hours, "imu_rate_hz": scenario.imu_rate, "cpu_count": os.cpu_count()}
+    print(f"profile_000, {args.hours:g} h at {scenario.imu_rate:g} Hz, filter {derived.model.name} (generated C)", flush=True)
+    if not args.memory_only:
+        measure_time(scenario, derived, report)
 
     # -- memory ---------------------------------------------------------------------------------
     if not args.skip_memory:
