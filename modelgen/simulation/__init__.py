@@ -8,5 +8,12 @@ Data flows one way through the modules:
     sensor's navigator, ``ins_aiding``) -> filter_loop (correction modes, faults; ``filters``,
     ``error_layout``) -> montecarlo (ensembles, NEES) -> flight_report (`modelgen simulate`).
 
+A flight is flown in pieces (``streaming``): a streamed trajectory holds only
+the truth, the IMU errors replay from saved generator positions, every
+correction mode steps through each piece in one pass, and histories go to
+memory at a chosen rate and, if asked, to CSV files as they are made
+(``history``).  With the generated C filter the cycle runs in one compiled
+loop (``native_loop``); other filters and sensors fly the Python loop.
+
 Hot loops are compiled with numba when it is installed (``jit``).
 """
