@@ -133,6 +133,7 @@ class _Declarations:
     noises: list[Noise]
     parameters: dict[str, Parameter]  # by symbol: parameters the engine may put into the matrices
     measurement_biases: list[sp.Symbol] = field(default_factory=list)  # random-constant states of aiding sensors
+    places: dict[tuple[str, str], str] = field(default_factory=dict)  # (kind, name) -> the key that declared it
 
 
 def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declarations) -> dict[str, Any]:
@@ -230,6 +231,7 @@ def _error_definition(read: _Reader, section: Mapping, frame: str, decl: _Declar
         label = {"phi": "phi-angle", "psi": "psi-angle"}.get(form, form)
         for name, symbol, unit in zip(names, symbols, units):
             decl.states.append(State(name=name, symbol=symbol, unit=unit, description=f"{quantity} error ({label}), computed minus true"))
+            decl.places[("state", name)] = key
         chosen[quantity] = (form, symbols)
         order.extend(sp.Symbol(s, real=True) for s in symbols)
     S = lambda names: tuple(sp.Symbol(s, real=True) for s in names)  # noqa: E731
@@ -271,6 +273,7 @@ def _sensor_errors(read: _Reader, section: Mapping, frame: str, decl: _Declarati
         state_symbols = [sp.Symbol(s, real=True) for s in symbols]
         for name, symbol, unit in zip(names, symbols, units):
             decl.states.append(State(name=name, symbol=symbol, unit=unit, description=f"{kind.replace('_', ' ')} ({process.replace('_', ' ')})"))
+            decl.places[("state", name)] = key
         noise_symbols = read.names(entry["noise_symbols"], f"{key}.noise_symbols", count) if "noise_symbols" in entry else [f"w_{s}" for s in symbols]
         noise_names = read.names(entry["noise_names"], f"{key}.noise_names", count) if "noise_names" in entry else [f"{kind}_driving_noise_{a}" for a in suffixes]
         noises = [sp.Symbol(s, real=True) for s in noise_symbols]
@@ -283,7 +286,7 @@ def _sensor_errors(read: _Reader, section: Mapping, frame: str, decl: _Declarati
             rate = parse_expression(scalar_text(entry["rate"], read.at(f"{key}.rate"), f"{key}.rate"), namespace(), f"{read.at(f'{key}.rate')}: {key}.rate")
             psd = f"2*({scalar_text(entry['rate'], read.at(key), 'rate')})*({scalar_text(entry['sigma'], read.at(key), 'sigma')})**2"
             rates = [-rate * s + w for s, w in zip(state_symbols, noises)]
-            _add_noises(decl, noise_names, noise_symbols, [psd] * 3, units, kind)
+            _add_noises(decl, noise_names, noise_symbols, [psd] * 3, units, kind, key)
         else:  # random_walk and clock: driven by white noise of the given PSD(s)
             if "psd" not in entry:
                 raise ModelError(f"{read.at(key)}: a {process.replace('_', ' ')} sensor error needs 'psd'")
@@ -292,16 +295,20 @@ def _sensor_errors(read: _Reader, section: Mapping, frame: str, decl: _Declarati
                 raise ModelError(f"{read.at(f'{key}.psd')}: {key}.psd lists {len(psds)} values for {count} states")
             psds = [scalar_text(p, read.at(f"{key}.psd"), f"{key}.psd") for p in psds]
             rates = [w for w in noises] if process == "random_walk" else [state_symbols[1] + noises[0], noises[1]]
-            _add_noises(decl, noise_names, noise_symbols, psds, units, kind)
+            _add_noises(decl, noise_names, noise_symbols, psds, units, kind, key)
         dynamics.update(zip(state_symbols, rates))
         parts[kind] = parts[kind] + sp.Matrix(state_symbols) if kind in parts else sp.Matrix(state_symbols)
         order.extend(state_symbols)
     return parts, dynamics, order
 
 
-def _add_noises(decl: _Declarations, names: Sequence[str], symbols: Sequence[str], psds: Sequence[str], units: Sequence[str], kind: str) -> None:
+def _add_noises(
+    decl: _Declarations, names: Sequence[str], symbols: Sequence[str], psds: Sequence[str], units: Sequence[str], kind: str, key: str
+) -> None:
+    """The white noises driving a sensor error's states (declared at ``key``)."""
     for name, symbol, psd, unit in zip(names, symbols, psds, units):
         decl.noises.append(Noise(name=name, symbol=symbol, unit=f"{unit}/sqrt(s)", psd=psd, description=f"drives the {kind.replace('_', ' ')}"))
+        decl.places[("noise", name)] = key
 
 
 def _sensor_noises(read: _Reader, section: Mapping, frame: str, decl: _Declarations) -> dict[str, tuple[sp.Matrix, str]]:
@@ -321,6 +328,7 @@ def _sensor_noises(read: _Reader, section: Mapping, frame: str, decl: _Declarati
         for name, symbol, axis in zip(names, symbols, words_of):
             where = f"{axis}" if axes == "body" else f"resolved {axis}"
             decl.noises.append(Noise(name=name, symbol=symbol, unit=unit, psd=psd, description=f"{sensor} white noise {where} ({text})"))
+            decl.places[("noise", name)] = key
         out[sensor] = (_symbols(symbols), axes)
     return out
 
@@ -404,6 +412,7 @@ def _measurements(
         for name, symbol, variance, unit in zip(names, symbols, variances, units):
             text = scalar_text(variance, read.at(f"{key}.variance"), f"{key}.variance")
             declared.append(Measurement(name=name, symbol=symbol, unit=unit, expression="0", variance=text, description=f"{kind} measurement, {'measured minus computed' if measured_minus_computed else 'computed minus measured'}"))
+            decl.places[("measurement", name)] = key
         functions.append(pt.MeasurementFunction(tuple(sp.Symbol(s, real=True) for s in symbols), function, scale, extra, measured_minus_computed))
     return functions, declared
 
@@ -423,6 +432,7 @@ def _measurement_bias(read: _Reader, entry: Mapping, key: str, count: int, units
     names = read.names(bias["names"], f"{key}.bias.names", count) if "names" in bias else [f"{s}_bias" for s in symbols]
     for name, symbol, unit in zip(names, symbols, units):
         decl.states.append(State(name=name, symbol=symbol, unit=unit, description="aiding-sensor error (random constant): measured = true + bias"))
+        decl.places[("state", name)] = f"{key}.bias"
     states = [sp.Symbol(s, real=True) for s in symbols]
     decl.measurement_biases.extend(states)
     return sp.Matrix(states)
@@ -621,6 +631,7 @@ def _user_parameters(read: _Reader, data: Mapping, decl: _Declarations) -> list[
         parameter = Parameter(**fields)
         check_identifier(parameter.symbol, f"{read.at(key)}: parameter symbol")
         decl.parameters[parameter.symbol] = parameter
+        decl.places[("parameter", parameter.name)] = key
         symbols.append(parameter.symbol)
     return symbols
 
@@ -649,6 +660,8 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         raise ModelError(f"{read.at(unknown[0])}: unknown key {unknown[0]!r}{derived} (expected one of {', '.join(sorted(NAVIGATION_TOP_KEYS))})")
     if "model" not in data:
         raise ModelError(f"{filename}: missing required key 'model'")
+    if "frame" not in data:
+        raise ModelError(f"{filename}: a model with a 'navigation:' section needs 'frame: NED' or 'frame: ENU' (its navigation frame)")
     frame = read.choice(free_text(data, "frame", dict(lines), filename), "frame", tuple(pt.FRAME_AXES))
     section = read.mapping(data["navigation"], "navigation", SECTION_KEYS, ("errors",))
     read.choice(section.get("mechanization", "local_level"), "navigation.mechanization", MECHANIZATIONS)
@@ -726,8 +739,24 @@ def _error_model(data, lines, filename, decl: _Declarations, own: list[str], equ
         source=free_text(data, "source", dict(lines), filename),
         frame=free_text(data, "frame", dict(lines), filename),
         notes=[*notes_text(dict(data), dict(lines), filename), *approximation_notes(data, equations, decl)],
-        locations=lines,
+        locations=_locations(lines, filename, decl, parameters, measurements),
     )
+
+
+def _locations(lines: Mapping[str, str], filename: str, decl: _Declarations, parameters: Sequence[Parameter], measurements: Sequence[Measurement]) -> dict[str, str]:
+    """file:line of every derived declaration (ErrorModel.build's keys), from the entry of the section that made it."""
+    read = _Reader(lines, filename)
+    derived = ("parameters", "states", "noises", "measurements", "dynamics")
+    out = {k: v for k, v in lines.items() if not k.startswith(derived)}
+    for kind, items, fields in (("state", decl.states, ()), ("noise", decl.noises, ("psd",)), ("parameter", parameters, ()),
+                                ("measurement", measurements, ("expression", "variance"))):
+        for i, item in enumerate(items):
+            place = read.at(decl.places.get((kind, item.name), "navigation"))
+            out[f"{kind}s[{i}]"] = place
+            out.update({f"{kind}s[{i}].{f}": place for f in fields})
+            if kind == "state":
+                out[f"dynamics.{item.name}"] = place
+    return out
 
 
 def _locals(decl: _Declarations) -> dict[str, sp.Symbol]:
