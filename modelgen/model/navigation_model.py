@@ -172,6 +172,8 @@ def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declar
     _offer(decl, symbols["prime_vertical_radius"], "prime_vertical_radius", "m", "prime-vertical radius of curvature at the latitude (WGS-84)")
     _offer(decl, symbols["gravity"], "gravity", "m/s^2", "normal gravity at the position (WGS-84)")
     _offer(decl, symbols["earth_radius"], "earth_radius", "m", "radius of the spherical Earth", wgs84.SEMI_MAJOR_AXIS)
+    _offer(decl, "k_v1", "vertical_damping_gain_1", "1/s", "baro-damped vertical channel: height feedback gain k_1")
+    _offer(decl, "k_v2", "vertical_damping_gain_2", "1/s^2", "baro-damped vertical channel: vertical-velocity feedback gain k_2")
     S = lambda name: sp.Symbol(name, real=True)  # noqa: E731
     return {
         "attitude": sp.Matrix(3, 3, [S(s) for s in c]),

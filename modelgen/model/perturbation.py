@@ -296,6 +296,8 @@ class NavigationProblem:
     measurements: tuple[MeasurementFunction, ...] = ()
     approximations: tuple[str, ...] = ()
     equations: Mapping[str, Callable[[NavigationState, Mechanization], sp.Matrix]] = field(default_factory=dict)
+    #: Gains (k_1 [1/s], k_2 [1/s^2]) of the baro-damped vertical channel (approximation damped_vertical_channel).
+    vertical_damping_gains: tuple[sp.Symbol, sp.Symbol] = (sp.Symbol("k_v1", real=True), sp.Symbol("k_v2", real=True))
 
     def mechanization(self) -> Mechanization:
         """The local-level mechanization, with the equations the model writes itself."""
@@ -590,6 +592,26 @@ def no_vertical_channel(stage: _Stage, problem: NavigationProblem) -> _Stage:
     return _Stage(mask * stage.F * mask, mask * stage.G, stage.H * mask)
 
 
+def damped_vertical_channel(stage: _Stage, problem: NavigationProblem) -> _Stage:
+    """A baro-damped vertical channel: h' = v_up - k_1 (h - h_baro), v_up' = ... - k_2 (h - h_baro), h_baro taken as true.
+
+    The second-order loop of Titterton & Weston (2004) ch. 3: the height error
+    obeys dh' = dv_up - k_1 dh, dv_up' = (2 g/R - k_2) dh + ..., stable for
+    k_1 > 0, k_2 > 2 g/R.  The listed terms are the feedback with the opposite
+    sign (full minus damped); the baro's own errors are not modelled.
+    """
+    k1, k2 = problem.vertical_damping_gains
+    e = problem.errors
+    height, vertical_velocity = e.position_states[2], e.velocity_states[2]
+    height_sign = -1 if (e.position == "metres" and problem.frame == "NED") else 1  # d(h) = sign * height state
+    velocity_sign = -1 if problem.frame == "NED" else 1  # vertical velocity state = sign * d(v_up)
+    i, j = problem.state_order.index(height), problem.state_order.index(vertical_velocity)
+    F = stage.F.copy()
+    F[i, i] -= k1
+    F[j, i] -= k2 * velocity_sign * height_sign
+    return _Stage(F, stage.G, stage.H)
+
+
 def level_flight(stage: _Stage, problem: NavigationProblem) -> _Stage:
     """No vertical velocity: v_down (v_up) = 0."""
     return _substitute(stage, {problem.velocity[2]: 0})
@@ -613,6 +635,7 @@ APPROXIMATIONS: dict[str, Callable[[_Stage, NavigationProblem], _Stage]] = {
     "free_vertical_channel": free_vertical_channel,
     "level_flight": level_flight,
     "no_vertical_channel": no_vertical_channel,
+    "damped_vertical_channel": damped_vertical_channel,
     "no_earth_rate_position_terms": _applied_while_perturbing,
     "no_transport_rate_position_terms": _applied_while_perturbing,
 }

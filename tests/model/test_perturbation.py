@@ -204,3 +204,28 @@ def test_no_vertical_channel_needs_the_horizontal_components_only():
 
     with pytest.raises(ModelError, match="velocity error has 3 states, 2 expected"):
         pt.derive_error_equations(replace(problem(), approximations=("no_vertical_channel",)))
+
+
+@pytest.mark.parametrize("position_form", ["geodetic", "metres"])
+def test_damped_vertical_channel_makes_the_height_loop_stable_with_its_gains(position_form):
+    """dh' = dv_up - k_1 dh, dv_up' = (2g/R - k_2) dh: roots of s^2 + k_1 s + (k_2 - 2g/R), in either position form."""
+    from dataclasses import replace
+
+    base = problem()
+    position = VEC(["dL", "dlambda", "dh"]) if position_form == "geodetic" else VEC(["dr_n", "dr_e", "dr_d"])
+    errors = replace(base.errors, position=position_form, position_states=tuple(position))
+    order = (*base.errors.attitude_states, *base.errors.velocity_states, *position, *base.state_order[9:])
+    free = pt.derive_error_equations(replace(base, errors=errors, state_order=order))
+    damped = pt.derive_error_equations(replace(base, errors=errors, state_order=order, approximations=("damped_vertical_channel",)))
+    v_d, h = 5, 8
+    gains = {S("k_v1"): 0.02, S("k_v2"): 3e-4}
+    change = np.array((damped.F - free.F).xreplace(gains).evalf(), dtype=float)
+    expected = np.zeros_like(change)
+    expected[h, h] = -0.02
+    expected[v_d, h] = 3e-4 if position_form == "geodetic" else -3e-4  # NED: v_D = -v_up; metres: dr_D = -dh
+    assert np.array_equal(change, expected)
+    assert [(t.row, t.column) for t in damped.neglected] == [(v_d, h), (h, h)]
+    # the vertical pair alone (level, at rest in height rate): stable only with the damping
+    for derived, stable in ((free, False), (damped, True)):
+        block = evaluate(derived.F.xreplace(gains))[np.ix_([v_d, h], [v_d, h])]
+        assert (np.linalg.eigvals(block).real.max() < 0) == stable
