@@ -1,0 +1,197 @@
+"""Runs on a real dask cluster: a scheduler and a worker started as separate processes, as a user would.
+
+The scheduler and the worker are ``python -m distributed.cli.dask_scheduler``
+and ``python -m distributed.cli.dask_worker`` (what ``dask scheduler`` and
+``dask worker`` run), on the loopback address; each test submits through
+their address and compares with the same work done in this process.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import REPO
+from modelgen.cluster import dask_client, describe_client, run_tasks
+from modelgen.errors import ModelError
+from modelgen.simulation.montecarlo import run_monte_carlo
+from modelgen.simulation.scenario import load_profile
+
+START_TIMEOUT_S = 90
+
+SMALL_STUDY = """\
+study: cluster_grid
+parameters:
+  gyro_drift: {unit: deg/h, values: [0.03, 0.3], sets: [gyro_markov_sigma_x, gyro_markov_sigma_y, gyro_markov_sigma_z]}
+  doppler_noise: {unit: m/s, values: [0.1, 0.3], sets: [doppler_noise_sigma_north, doppler_noise_sigma_east]}
+filters: [optimal, suboptimal_4]
+"""
+
+
+def _wait_for(predicate, what: str, process: subprocess.Popen, log: Path) -> None:
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while not predicate():
+        if process.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f"{what} did not start:\n{log.read_text(errors='replace')[-3000:]}")
+        time.sleep(0.2)
+
+
+@pytest.fixture(scope="module")
+def scheduler_address(tmp_path_factory):
+    """The address of a scheduler with one single-threaded worker, both separate processes."""
+    folder = tmp_path_factory.mktemp("dask")
+    scheduler_file = folder / "scheduler.json"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    processes = []
+    try:
+        log = folder / "scheduler.log"
+        scheduler = subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0",
+             "--no-dashboard", "--scheduler-file", str(scheduler_file)],
+            stdout=log.open("w"), stderr=subprocess.STDOUT, env=env, cwd=folder)
+        processes.append(scheduler)
+        _wait_for(lambda: scheduler_file.is_file() and scheduler_file.stat().st_size > 0, "dask scheduler", scheduler, log)
+        address = json.loads(scheduler_file.read_text())["address"]
+        worker_log = folder / "worker.log"
+        worker = subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--nworkers", "1",
+             "--no-dashboard", "--local-directory", str(folder)],
+            stdout=worker_log.open("w"), stderr=subprocess.STDOUT, env=env, cwd=folder)
+        processes.append(worker)
+        with dask_client(address) as client:
+            client.wait_for_workers(1, timeout=START_TIMEOUT_S)
+        yield address
+    finally:
+        for process in reversed(processes):
+            if process.poll() is None:
+                process.send_signal(signal.SIGTERM)
+                try:
+                    process.wait(timeout=20)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+                    process.wait()
+
+
+@pytest.fixture(scope="module")
+def short_flight():
+    # 3 minutes of the paper's climb at 20 Hz, Doppler every 60 s
+    return load_profile("profile_000").with_changes(hours=0.05, imu_rate=20.0)
+
+
+def test_monte_carlo_on_a_separate_scheduler_and_worker_equals_the_run_in_this_process(
+        scheduler_address, short_flight, paper_derived):
+    here = run_monte_carlo(short_flight, paper_derived, runs=3, seed=11)
+    with dask_client(scheduler_address) as client:
+        assert describe_client(client) == f"{scheduler_address}, 1 worker"
+        done = []
+        there = run_monte_carlo(short_flight, paper_derived, runs=3, seed=11, client=client,
+                                progress=lambda d, t: done.append((d, t)))
+    assert done == [(1, 3), (2, 3), (3, 3)]
+    assert there.where.startswith(scheduler_address) and here.where == "this process"
+    for name in ("times", "errors", "sigma", "nees", "rejected", "updates"):
+        assert np.array_equal(getattr(here, name), getattr(there, name), equal_nan=True), name  # NEES is NaN at t = 0
+    assert not np.array_equal(here.errors[0], here.errors[1])  # each run its own seed
+
+
+def test_the_generated_c_filter_is_built_once_on_the_worker_and_flies_the_same_runs(
+        scheduler_address, short_flight, paper_derived):
+    def cached_filter_libraries() -> list[str]:
+        """On a worker (a nested function travels by value): the compiled filters its cached set-ups hold."""
+        from modelgen.cluster import _CACHE
+
+        return [str(path) for key, context in _CACHE.items() if str(key).startswith("montecarlo-")
+                for path in Path(context["code_dir"].name).rglob("*.so")]
+
+    here = run_monte_carlo(short_flight, paper_derived, runs=2, seed=4, implementation="c")
+    with dask_client(scheduler_address) as client:
+        there = run_monte_carlo(short_flight, paper_derived, runs=2, seed=4, implementation="c", client=client)
+        run_monte_carlo(short_flight, paper_derived, runs=2, seed=4, implementation="c", client=client)
+        cached = client.run(cached_filter_libraries)
+    assert np.array_equal(here.errors, there.errors) and np.array_equal(here.sigma, there.sigma)
+    # one set-up, one compiled library on the worker, for both studies' four runs
+    assert [len(libraries) for libraries in cached.values()] == [1]
+    reference = run_monte_carlo(short_flight, paper_derived, runs=2, seed=4)
+    assert np.allclose(here.sigma, reference.sigma, rtol=1e-8, atol=0)
+
+
+def test_modelgen_trade_through_scheduler_writes_the_table_of_the_run_in_this_process(scheduler_address, tmp_path):
+    from modelgen.study.outputs import csv_text
+    from modelgen.study.studyfile import load_study
+    from modelgen.study.trade import run_trade
+
+    study_file = tmp_path / "grid.yaml"
+    study_file.write_text(SMALL_STUDY, encoding="utf-8")
+    out = tmp_path / "out"
+    completed = subprocess.run([sys.executable, "-m", "modelgen", "trade", str(study_file), "--scheduler",
+                                scheduler_address, "--out", str(out)],
+                               capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert completed.returncode == 0, completed.stderr
+    assert f"on {scheduler_address}, 1 worker" in completed.stderr
+    assert "covariance: 4/4 tasks" in completed.stderr
+    local = run_trade(load_study(study_file))
+    assert (out / "trade.csv").read_text(encoding="utf-8") == csv_text(local)
+    assert (out / "position_cep_vs_gyro_drift.png").is_file()
+
+
+def test_modelgen_simulate_sends_its_monte_carlo_to_the_scheduler(scheduler_address, tmp_path):
+    out = tmp_path / "sim"
+    completed = subprocess.run([sys.executable, "-m", "modelgen", "simulate", "--hours", "0.05", "--imu-rate", "20",
+                                "--runs", "2", "--filter", "reference", "--scheduler", scheduler_address,
+                                "--out", str(out)], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert completed.returncode == 0, completed.stderr
+    assert f"Monte Carlo on {scheduler_address}, 1 worker" in completed.stderr
+    assert f"Monte Carlo (2 runs, {scheduler_address}, 1 worker)" in (out / "summary.md").read_text(encoding="utf-8")
+
+
+def test_a_task_that_fails_once_is_retried_and_the_study_completes(scheduler_address, tmp_path):
+    marker = tmp_path / "failed-once"
+
+    def flaky(i: int) -> int:
+        # the first call of task 2 fails (as a lost worker or a crash would); its retry succeeds
+        if i == 2 and not marker.exists():
+            marker.write_text("failed")
+            raise RuntimeError("worker lost")
+        return i * i
+
+    with dask_client(scheduler_address) as client:
+        assert run_tasks(flaky, [(i,) for i in range(5)], client, retries=1) == [0, 1, 4, 9, 16]
+        assert marker.exists()
+        marker.unlink()
+        kept = []
+        with pytest.raises(RuntimeError, match="worker lost"):
+            run_tasks(flaky, [(i,) for i in range(5)], client, retries=0, on_result=lambda i, r: kept.append(i))
+    assert 2 not in kept
+
+
+def test_a_worker_lost_in_the_middle_of_a_task_does_not_lose_the_study(tmp_path):
+    marker = tmp_path / "died-once"
+
+    def dies_once(i: int) -> int:
+        # the first worker to run task 1 dies with it (its process exits, as on a crash or a lost machine)
+        if i == 1 and not marker.exists():
+            marker.write_text("died")
+            os._exit(1)
+        return 10 * i
+
+    with dask_client(workers=2) as client:
+        assert run_tasks(dies_once, [(i,) for i in range(4)], client) == [0, 10, 20, 30]
+    assert marker.exists()
+
+
+def test_an_unreachable_scheduler_is_a_clear_error_within_the_timeout():
+    start = time.monotonic()
+    with pytest.raises(ModelError, match=r"--scheduler tcp://127.0.0.1:9: no dask scheduler answered within 2 s"):
+        with dask_client("tcp://127.0.0.1:9", timeout_s=2):
+            pass
+    assert time.monotonic() - start < 15
+    with pytest.raises(ModelError, match="not a dask scheduler address"):
+        with dask_client("bogus://127.0.0.1:9", timeout_s=2):
+            pass
