@@ -204,15 +204,18 @@ def unrolled_predict_flops(structure: FilterStructure) -> int:
 
 
 #: Above this many unrolled flops in the covariance prediction the generated C gets compact
-#: kernels (loops over the CSR pattern of Phi, ``compact_kernels``) instead of straight-line
-#: code.  Measured by bench/bench_large_models.py (gcc 12 -O2, x86-64): the unrolled
-#: prediction is faster per call while its code fits the instruction cache, and its compile
-#: time and .text grow with the flop count (ned_doppler32_augmented: 29,600 flops; 64 states:
-#: about 105,000 flops, 11 s to compile, 0.55 MB of .text); the compact loops compile in
-#: well under a second at any size and take at most 1.6x the unrolled time per call below
-#: this threshold, and less above it, where the unrolled code no longer fits the
-#: instruction cache.  Every built-in model is below it, so their code is unchanged.
-COMPACT_ABOVE_FLOPS = 40_000
+#: kernels (loops over the CSR pattern of Phi, ``compact_kernels``; discretize follows the same
+#: switch) instead of straight-line code.  Measured by bench/bench_large_models.py (gcc -O2,
+#: x86-64, on a machine shared by several jobs): unrolled against compact, compile time of the
+#: filter, .text and wall time per prediction --
+#:   18 states (4,700 flops):            25 s, 204 kB,  3.8 us   against 1.5 s, 14 kB, 4.8 us;
+#:   32 states augmented (13,700 flops): 50 s, 397 kB,  5.3 us   against 1.1 s, 18 kB, 7.7 us;
+#:   48 states (32,100 flops):          161 s, 772 kB, 43.3 us   against 8.8 s, 25 kB, 37.9 us.
+#: The unrolled code is faster per call while it fits the instruction cache, and costs compile
+#: time and .text in proportion to its flops; at 48 states the compact loops are already the
+#: faster.  The threshold sits between the 32- and the 48-state models, so every built-in model
+#: (at most 13,700 flops) keeps its unrolled code.
+COMPACT_ABOVE_FLOPS = 20_000
 
 
 def compact_kernels(structure: FilterStructure) -> bool:
@@ -345,14 +348,13 @@ def dense_predict_cost(n_states: int) -> OperationCount:
 
 
 #: Flops the structured Python prediction (gathers by row class of Phi) must save over the dense
-#: products to be chosen instead of the factored one.  bench/bench_python_module.py times both
-#: on every model it runs: the gathers and scatters (a dozen numpy calls, each a copy of rows or
-#: columns of P) lost at 18, 32 and 100 states although they save 0, 40 % and 75 % of the
-#: flops; the factored form (Cholesky factor of the contract's check reused: trmm and syrk)
-#: does the check and the prediction in about the time of the dense products alone.  So the
-#: structured kernel is taken only where it saves the bulk of an n^3 product: 50 million
-#: flops, about 230 states fully dense; no model measured reaches it.
-PYTHON_STRUCTURED_SAVING_FLOPS = 50_000_000
+#: products to be chosen instead of the factored one (the Cholesky factor of the contract's
+#: check reused: P_n = (Phi L)(Phi L)^T + Q_d by BLAS trmm and syrk).  bench/bench_python_module.py
+#: times both (CPU time, one BLAS thread): the gathers, a dozen numpy calls each copying rows or
+#: columns of P, lose at 18 states (saving 15k flops: 30 against 14 us) and at 32 (106k:
+#: 32-36 against 20 us) and win at 100 (3.7M: 111 against 123-126 us).  The threshold sits
+#: between, nearer the win.
+PYTHON_STRUCTURED_SAVING_FLOPS = 2_000_000
 
 
 def python_predict_kernel(structure: FilterStructure) -> str:
