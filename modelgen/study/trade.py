@@ -21,7 +21,6 @@ import math
 import pickle
 import time
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from modelgen.analysis.budget import ErrorBudget
@@ -40,6 +39,8 @@ from modelgen.simulation.montecarlo import MonteCarloResult, run_monte_carlo
 from modelgen.simulation.scenario import FlightProfile, load_profile_data
 from modelgen.study.studyfile import METRICS, PROFILE_SUFFIX_UNITS, Parameter, Study
 
+#: How the table names the pure-inertial system (Table 2's row "I").
+PURE_INERTIAL_LABEL = "I (inertial)"
 #: Points per task: enough to make a task's overhead small, few enough to spread and show progress.
 TASKS_PER_WORKER = 8
 
@@ -207,7 +208,7 @@ def run_trade(study: Study, client: Any = None, progress: Callable[[str], None] 
     for point, systems in zip(study.points, finals):
         for choice in study.filters:
             key = choice.design.key if choice.design is not None else PURE_INERTIAL
-            label = choice.design.label if choice.design is not None else "I (inertial)"
+            label = choice.design.label if choice.design is not None else PURE_INERTIAL_LABEL
             states = 0 if choice.design is None else _filter_states(study, choice.design)
             cases.append(CaseResult(point, choice.name, label, states,
                                     {m: systems[key][m] for m, _ in METRICS if m in systems[key]}))
@@ -218,12 +219,12 @@ def run_trade(study: Study, client: Any = None, progress: Callable[[str], None] 
             say(f"  Monte Carlo {i + 1}/{len(profiles)}: {_point_text(study.parameters, point)}, {mc.runs} runs")
             derived = derive(load_model(profile.filter.model))
             result = run_monte_carlo(profile, derived, mc.runs, seed=mc.seed, client=client,
-                                     progress=lambda d, t: report_mc(say, d, t))
+                                     progress=lambda d, t: _say_run_done(say, d, t))
             ensembles.append(MonteCarloCase(point, result))
     return TradeResult(study, cases, ensembles, time.perf_counter() - start, covariance_seconds, where)
 
 
-def report_mc(say: Callable[[str], None], done: int, total: int) -> None:
+def _say_run_done(say: Callable[[str], None], done: int, total: int) -> None:
     """One line per completed Monte Carlo run (a study's runs are few and long)."""
     say(f"    run {done}/{total} done")
 
