@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import resource
 import subprocess
@@ -48,9 +47,8 @@ from modelgen.derive.symbolic import derive
 from modelgen.model.loading import load_model
 from modelgen.simulation.filters import filter_factory
 from modelgen.simulation.flight import profile_layout, simulate_sensors
-from modelgen.simulation.flight_report import MAX_HISTORY_ROWS
 from modelgen.simulation.scenario import load_profile
-from modelgen.simulation.streaming import fly_modes
+from modelgen.simulation.streaming import fly_modes, history_every
 from modelgen.simulation.strapdown import Strapdown
 from modelgen.simulation.trajectory import generate_trajectory
 
@@ -133,7 +131,7 @@ def memory_child(hours: float, way: str) -> None:
         before = peak_rss_mib()
         # the histories at the rate `modelgen simulate` keeps them (at most MAX_HISTORY_ROWS rows: every 5 s at 24 h)
         cycles = round(scenario.path.duration / scenario.filter.period)
-        record_every = max(1, math.ceil(cycles / MAX_HISTORY_ROWS)) if way == "new" else 1
+        record_every = history_every(cycles) if way == "new" else 1
         results, trajectory, clocks = fly(scenario, derived, make, way == "new", "compiled" if way == "new" else "python",
                                           record_every=record_every)
     print(json.dumps({"hours": hours, "way": way, "peak_rss_mib": peak_rss_mib(), "before_flight_mib": before,

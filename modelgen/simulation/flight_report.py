@@ -7,7 +7,7 @@ fly the filter (the generated C by default, in the compiled loop of
 (open loop, closed loop, seed 003's accumulated correction) in one pass over
 the data, plus the free INS; run a Monte Carlo ensemble and test its NEES; plot
 and summarize.  Memory does not grow with the IMU data; histories hold at most
-:data:`MAX_HISTORY_ROWS` rows per mode.  Progress goes to ``echo``.
+:data:`~modelgen.simulation.streaming.MAX_HISTORY_ROWS` rows per mode.  Progress goes to ``echo``.
 """
 
 from __future__ import annotations
@@ -31,12 +31,10 @@ from modelgen.simulation.montecarlo import MonteCarloResult, run_monte_carlo
 from modelgen.simulation.rotation import dcm_to_euler, navigation_frame_attitude_error, quaternion_to_dcm
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.history import CsvHistory
-from modelgen.simulation.streaming import fly_modes
+from modelgen.simulation.streaming import fly_modes, history_every
 from modelgen.simulation.trajectory import Trajectory, generate_trajectory
 
 ARCSEC = math.pi / 180 / 3600
-#: at most this many history rows per correction mode (a longer flight keeps every k-th filter cycle)
-MAX_HISTORY_ROWS = 20000
 NMILE = 1852.0
 
 
@@ -117,7 +115,7 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
         echo(f"  filter: {implementation} ({build:.1f} s to build)")
         t = time.perf_counter()
         n_cycles = len(trajectory.truth) - 1
-        record_every = max(1, math.ceil(n_cycles / MAX_HISTORY_ROWS))
+        record_every = history_every(n_cycles)
         histories = {mode: CsvHistory(out_dir / f"history_{mode}.csv", derived.model.state_names)
                      for mode in MODES} if history_csv else {}
         try:

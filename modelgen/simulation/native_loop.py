@@ -32,7 +32,6 @@ to 1e-9 relative in every recorded history and equal in every count.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np

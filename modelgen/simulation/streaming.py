@@ -37,6 +37,8 @@ from modelgen.simulation.trajectory import Trajectory
 
 #: default piece length: 10 s of IMU data (3,000 samples at 300 Hz, 144 kB of increments)
 PIECE_SECONDS = 10.0
+#: at most this many history rows per correction mode in a report (a longer flight keeps every k-th cycle)
+MAX_HISTORY_ROWS = 20000
 
 Sink = Callable[[int, RunResult, int], None]
 #: who runs the cycle between IMU samples and filter: the compiled loop where possible, or the Python loop
@@ -48,6 +50,11 @@ def cycles_per_piece(trajectory: Trajectory, piece_seconds: float) -> int:
     if not (math.isfinite(piece_seconds) and piece_seconds > 0):
         raise ModelError(f"streaming: the piece length must be a positive number of seconds, got {piece_seconds!r}")
     return max(1, int(round(piece_seconds / trajectory.record_period)))
+
+
+def history_every(n_cycles: int, max_rows: int = MAX_HISTORY_ROWS) -> int:
+    """``record_every`` keeping at most about ``max_rows`` history rows over ``n_cycles`` filter cycles."""
+    return max(1, math.ceil(n_cycles / max_rows))
 
 
 def pieces(n_cycles: int, per_piece: int) -> Iterable[tuple[int, int]]:
