@@ -32,7 +32,7 @@ from modelgen.codegen.build import build_c_filter, load_python_module
 from modelgen.codegen.layout import ModelSizes
 from modelgen.codegen.options import CodegenOptions
 from modelgen.derive.symbolic import DerivedModel, parameter_vector
-from modelgen.derive.discretization import DEFAULT_TAYLOR_ORDER, taylor_discretization, taylor_process_noise
+from modelgen.derive.discretization import DEFAULT_TAYLOR_ORDER, DEFAULT_TOLERANCE, taylor_discretization, taylor_process_noise
 from modelgen.errors import ModelError
 
 
@@ -124,10 +124,12 @@ def measurement_sequence(derived: DerivedModel, scenario: CheckScenario) -> np.n
 Stepper = Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
-def reference_run(derived: DerivedModel, scenario: CheckScenario, order: int = DEFAULT_TAYLOR_ORDER) -> list[tuple[np.ndarray, np.ndarray]]:
-    """x and P after every step, by the dense numpy reference."""
+def reference_run(
+    derived: DerivedModel, scenario: CheckScenario, order: int = DEFAULT_TAYLOR_ORDER, tolerance: float | None = DEFAULT_TOLERANCE
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """x and P after every step, by the dense numpy reference (discretized as the generated code does by default)."""
     m = derived.numeric(scenario.parameters)
-    phi, gamma = taylor_discretization(m["F"], m["G"], scenario.step, order)
+    phi, gamma = taylor_discretization(m["F"], m["G"], scenario.step, order, tolerance)
     qd = taylor_process_noise(gamma, m["Q"], scenario.step)
     x = scenario.x0()
     P = scenario.initial_covariance.copy()
@@ -223,7 +225,7 @@ def check_generated(
     if options.scalar != "double":
         raise ModelError("the reference check needs double-precision code; float is checked by `modelgen embedded`")
     folder = Path(folder)
-    ref = reference_run(derived, scenario, options.taylor_order)
+    ref = reference_run(derived, scenario, options.taylor_order, options.taylor_tolerance)
     tol = scenario_tolerance(derived, scenario, options.taylor_order)
     name = derived.model.name
     return [

@@ -142,7 +142,7 @@ def qemu_run(derived: DerivedModel, scenario: CheckScenario, options: CodegenOpt
     if len(steps) != scenario.steps:
         raise ModelError(f"qemu run of {name} ({options.slug()}) returned {len(steps)} of {scenario.steps} steps")
     tolerance = (float_tolerance if options.scalar == "float" else double_tolerance)(derived, scenario, options.taylor_order)
-    return compare_run(steps, reference_run(derived, scenario, options.taylor_order), options, seconds, tolerance)
+    return compare_run(steps, reference_run(derived, scenario, options.taylor_order, options.taylor_tolerance), options, seconds, tolerance)
 
 
 def compare_run(

@@ -17,11 +17,13 @@ from functools import cached_property
 
 import sympy as sp
 
-from modelgen import __version__
+from modelgen.version import __version__
 from modelgen.codegen.contract import contract_markdown, contract_text
 from modelgen.codegen.expressions import Block, Pole, eliminate_common_subexpressions, poles
 from modelgen.codegen.kernels import (
     OperationCount,
+    compact_covariance_cost,
+    compact_kernels,
     covariance_predict,
     discretize_cost,
     doubling_cost,
@@ -29,7 +31,17 @@ from modelgen.codegen.kernels import (
     state_predict,
     thornton_cost,
     ud_weights,
+    ud_weights_cost,
     update_cost,
+)
+from modelgen.codegen.discretize_kernels import (
+    DiscretizeBlock,
+    DiscretizePlan,
+    doubling_block,
+    noise_blocks,
+    series_blocks,
+    transition_check_block,
+    unrolled_discretize_cost,
 )
 from modelgen.codegen.layout import ModelSizes
 from modelgen.codegen.options import CodegenOptions
@@ -92,11 +104,40 @@ class FilterDescription:
         return self.options.packed and not self.options.ud
 
     @cached_property
+    def compact(self) -> bool:
+        """Whether the C predicts by loops over Phi's pattern instead of unrolled code (large models)."""
+        return compact_kernels(self.structure)
+
+    @cached_property
     def predict_blocks(self):
-        """The unrolled covariance (or UD weight) prediction, row by row, and its cost."""
+        """The unrolled covariance (or UD weight) prediction, row by row, and its cost (no blocks when compact)."""
+        if self.compact:
+            return [], ud_weights_cost(self.structure) if self.options.ud else compact_covariance_cost(self.structure)
         if self.options.ud:
             return ud_weights(self.structure)
         return covariance_predict(self.structure, self.packed)
+
+    @cached_property
+    def discretize_unrolled(self) -> bool:
+        """Whether the C discretizes by straight-line code over the structure (below the compact threshold)."""
+        return not self.compact
+
+    @cached_property
+    def discretize_plan(self) -> DiscretizePlan:
+        """The compressed patterns of the unrolled discretize (modelgen.codegen.discretize_kernels)."""
+        return DiscretizePlan(self.structure, self.options.taylor_order)
+
+    @cached_property
+    def discretize_blocks(self) -> list[DiscretizeBlock]:
+        """The unrolled discretize's functions: one per order with a nonzero power of F, doubling, check, noise."""
+        plan = self.discretize_plan
+        if not plan.active:
+            return []
+        blocks = [b for b in series_blocks(plan) if b.block.statements]
+        blocks += [doubling_block(plan), transition_check_block(plan)]
+        if plan.gamma_entries and (self.options.ud or plan.qd_pairs):
+            blocks += noise_blocks(plan, self.packed, self.options.ud)
+        return blocks
 
     @cached_property
     def state_predict(self):
@@ -119,6 +160,7 @@ class FilterDescription:
             EVALUATE: OperationCount(self.evaluation[2].operation_count, 0),
             "discretize": discretize_cost(structure, options.taylor_order),
             "discretize, each doubling (long steps)": doubling_cost(structure),
+            **self.unrolled_discretize_costs,
             "predict (C)": predict,
             "predict (Python)": python_predict_cost(structure),
             "predict (dense, for comparison)": OperationCount(2 * n**3 + n, 2 * n * n * (n - 1) + n * n),
@@ -126,6 +168,17 @@ class FilterDescription:
         if self.derived.n_measurements:
             costs["update"] = update_cost(structure, options)
         return costs
+
+    @cached_property
+    def unrolled_discretize_costs(self) -> dict[str, OperationCount]:
+        """The unrolled discretize's counts, replacing the loop version's (empty when it is not unrolled)."""
+        if not self.discretize_unrolled or not self.discretize_plan.active:
+            return {}
+        first, doubling, _ = unrolled_discretize_cost(self.discretize_plan, self.options.ud)
+        return {
+            "discretize": first,
+            "discretize, each doubling (long steps)": doubling,
+        }
 
     def cost_lines(self) -> list[str]:
         """The operation counts as the lines of a file header."""
@@ -135,7 +188,11 @@ class FilterDescription:
         ]
 
     def shared_context(self) -> dict[str, object]:
-        """Template variables every backend uses alike."""
+        """Template variables every backend uses alike (computed once per description: the model hash prints every expression)."""
+        return dict(self._shared_context)
+
+    @cached_property
+    def _shared_context(self) -> dict[str, object]:
         model, derived = self.model, self.derived
         return {
             "model": model,

@@ -124,6 +124,18 @@ def _unrolled_discretize_scratch(prefix: str, sizes: ModelSizes, unrolled: Unrol
     )
 
 
+def _recompute_fields(options: CodegenOptions, nnz_f: Dim, dim_g: Dim, dim_w: Dim) -> tuple[Field, ...]:
+    """The inputs the transition was computed from, when discretize may keep it (``recompute_threshold``)."""
+    if options.recompute_threshold is None:
+        return ()
+    return (
+        Field("F_used", (nnz_f,), "F the transition was computed from"),
+        Field("G_used", (dim_g,), "G the transition was computed from"),
+        Field("q_used", (dim_w,), "q the transition was computed from"),
+        Field("T_used", (Dim("1", 1),), "the step it was computed for; 0 (a zeroed struct) means none yet"),
+    )
+
+
 def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str, unrolled: UnrolledDiscretizeSizes | None = None) -> CLayout:
     """The struct members for ``options``; ``prefix`` is the upper-case model name.
 
@@ -156,7 +168,7 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str, unrolled: 
             Field("Phi", (N, N), "transition matrix"),
             Field("Gamma", (N, dim_w), "noise input matrix of the step"),
             Field("qw", (dim_w,), "discrete noise weights q / T: Q_d = Gamma diag(qw) Gamma^T"),
-        )
+        ) + _recompute_fields(options, nnz_f, dim_g, dim_w)
         filt = (
             Field("x", (N,)),
             Field("U", (NU,), "strictly upper part of the unit upper triangular U, packed by rows"),
@@ -189,7 +201,7 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str, unrolled: 
     transition = (
         Field("Phi", (N, N), "transition matrix"),
         Field("Qd", symmetric, "Gamma (Q/T) Gamma^T" + (", packed upper triangle" if options.packed else "")),
-    )
+    ) + _recompute_fields(options, nnz_f, dim_g, dim_w)
     filt = (
         Field("x", (N,)),
         Field("P", symmetric, "covariance" + (", packed upper triangle" if options.packed else "")),

@@ -25,6 +25,12 @@ double-precision numpy filter (it is the readable twin of the default C).
   ``taylor_order`` and doubles until the remainder is below the unit
   roundoff (the paper's fixed order).
 
+* ``recompute_threshold`` -- None (default) or a relative change: discretize
+  keeps the transition it computed last, and returns at once, while T is the
+  same and no entry of F, G or q has moved by more than this fraction of its
+  value then (the operating point has not changed); the transition struct
+  holds the inputs it was computed from and must be zeroed before first use.
+
 ``storage``, ``update`` and ``covariance_update`` describe the covariance
 form; the UD form always stores U packed and updates by Bierman, so they do
 not apply to it (``describe`` says what the code really does).
@@ -55,6 +61,7 @@ class CodegenOptions:
     update: str = "vector"
     covariance_update: str = "joseph"
     taylor_tolerance: float | None = DEFAULT_TOLERANCE
+    recompute_threshold: float | None = None
 
     def __post_init__(self) -> None:
         for field, allowed in (
@@ -73,6 +80,9 @@ class CodegenOptions:
         tolerance = self.taylor_tolerance
         if tolerance is not None and (isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not 0.0 < tolerance < 1.0):
             raise ModelError(f"Taylor tolerance must be a number between 0 and 1 (exclusive) or None, not {tolerance!r}")
+        threshold = self.recompute_threshold
+        if threshold is not None and (isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not 0.0 <= threshold < 1.0):
+            raise ModelError(f"recompute threshold must be a number in [0, 1) or None, not {threshold!r}")
 
     @property
     def ud(self) -> bool:

@@ -13,7 +13,7 @@ import pytest
 
 from modelgen.codegen.options import CodegenOptions
 from modelgen.derive.symbolic import derive, parameter_vector
-from modelgen.derive.discretization import taylor_discretization, taylor_process_noise
+from modelgen.derive.discretization import DEFAULT_TOLERANCE, taylor_discretization, taylor_process_noise
 from modelgen.model.loading import load_model
 from tests.codegen.generated_support import build
 from tests.derive.test_discretization import MODELS, STEPS, bound, exact, relative_error
@@ -55,9 +55,9 @@ def test_generated_c_discretize_matches_expm(case, T):
             assert c.discretize(T) == 1, options.slug()  # ERR_NONFINITE: e^{F T} is not representable in float
             continue
         assert c.discretize(T) == 0, options.slug()
-        limit = FLOAT_BOUND if options.scalar == "float" else bound(T)
+        limit = FLOAT_BOUND if options.scalar == "float" else bound(T, options.taylor_tolerance)
         assert relative_error(c.Phi, phi_exact) < limit, options.slug()
-        assert relative_error(c.Qd, qd_exact) < (10 * FLOAT_BOUND if options.scalar == "float" else 10 * bound(T)), options.slug()
+        assert relative_error(c.Qd, qd_exact) < 10 * limit, options.slug()
 
 
 @pytest.mark.parametrize("T", STEPS)
@@ -67,12 +67,12 @@ def test_generated_python_discretize_is_the_reference(case, T):
     m = derived.numeric(values)
     p = py.parameter_vector(values)
     phi, qd = py.discretize(py.system_matrix(p), py.noise_input_matrix(p), py.noise_psd(p), T)
-    phi_ref, gamma_ref = taylor_discretization(m["F"], m["G"], T)
+    phi_ref, gamma_ref = taylor_discretization(m["F"], m["G"], T, tolerance=DEFAULT_TOLERANCE)
     assert relative_error(phi, phi_ref) < 1e-14
     assert relative_error(qd, taylor_process_noise(gamma_ref, m["Q"], T)) < 1e-13
     phi_exact, qd_exact = exact_noise(m, T)
-    assert relative_error(phi, phi_exact) < bound(T)
-    assert relative_error(qd, qd_exact) < 10 * bound(T)
+    assert relative_error(phi, phi_exact) < bound(T, DEFAULT_TOLERANCE)
+    assert relative_error(qd, qd_exact) < 10 * bound(T, DEFAULT_TOLERANCE)
 
 
 def chain_model(n: int) -> str:
@@ -107,7 +107,7 @@ def test_paths_longer_than_the_taylor_order_reach_phi_in_c_and_python(tmp_path):
     phi_python, _ = py.discretize(py.system_matrix(p), py.noise_input_matrix(p), py.noise_psd(p), T)
     for phi in (c.Phi, phi_python):
         assert phi[0, 11] > 0  # the far corner is there
-        assert relative_error(phi, phi_exact) < 1e-13
+        assert relative_error(phi, phi_exact) < DEFAULT_TOLERANCE
 
 
 def test_generated_python_balanced_norm_is_the_reference_bit_for_bit(case):
@@ -122,3 +122,21 @@ def test_generated_python_balanced_norm_is_the_reference_bit_for_bit(case):
     for _ in range(5):  # other operating points on the same structure, values over 20 decades
         G = np.where(F != 0, rng.standard_normal(F.shape) * 10.0 ** rng.integers(-10, 10, F.shape), 0.0)
         assert py._balanced_norm(G) == balanced_norm(G)
+
+
+def test_recompute_threshold_keeps_the_transition_until_the_operating_point_moves(paper_derived, level_flight, tmp_path):
+    """CodegenOptions(recompute_threshold=1e-6): a 1e-9 change of latitude keeps Phi bit for bit; 1e-3 or a new T recomputes."""
+    options = CodegenOptions(recompute_threshold=1e-6)
+    built = build(paper_derived, tmp_path / "threshold", options)
+    named = dict(zip(paper_derived.model.parameter_names, parameter_vector(paper_derived.model, level_flight)))
+    c = built.c_filter(options)
+    assert c.set_parameters(named) == 0 and c.discretize(60.0) == 0
+    first = c.Phi.copy()
+    assert c.set_parameters(dict(named, latitude=named["latitude"] * (1 + 1e-9))) == 0 and c.discretize(60.0) == 0
+    assert np.array_equal(c.Phi, first)
+    moved = dict(named, latitude=named["latitude"] * (1 + 1e-3))
+    assert c.set_parameters(moved) == 0 and c.discretize(60.0) == 0
+    fresh = built.c_filter(options)
+    assert fresh.set_parameters(moved) == 0 and fresh.discretize(60.0) == 0
+    assert np.array_equal(c.Phi, fresh.Phi) and not np.array_equal(c.Phi, first)
+    assert c.discretize(30.0) == 0 and not np.array_equal(c.Phi, fresh.Phi)

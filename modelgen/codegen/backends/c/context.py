@@ -5,8 +5,9 @@ from __future__ import annotations
 from modelgen.codegen.backends.c.literals import c_number, scalar_bytes, scalar_spellings
 from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c_declarator, c_ref, c_statement
 from modelgen.codegen.description import FilterDescription, named
-from modelgen.codegen.kernels import KernelBlock
-from modelgen.codegen.layout import CLayout, c_layout
+from modelgen.codegen.discretize_kernels import DiscretizeBlock
+from modelgen.codegen.kernels import KernelBlock, compact_predict_tables
+from modelgen.codegen.layout import CLayout, UnrolledDiscretizeSizes, c_layout
 from modelgen.codegen.structure import FilterStructure
 from modelgen.derive.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, series_range
 from modelgen.errors import ModelError
@@ -71,6 +72,78 @@ def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, ob
             }
         )
     return out
+
+
+def compact_tables(description: FilterDescription) -> dict[str, list[int]]:
+    """Phi's CSR tables for the compact prediction kernels; empty when the prediction is unrolled."""
+    return compact_predict_tables(description.structure) if description.compact else {}
+
+
+def discretize_functions(blocks: list[DiscretizeBlock], prefix: str, scalar: str) -> list[dict[str, object]]:
+    """Static C functions of the unrolled discretize, with the parameters each uses and how it is called.
+
+    An owner is passed const unless the block writes into it; the run-time
+    scalars (``h``, ``T``) are passed by value; the compile-time constants
+    (1/k!, ...) are declared in the function as exact quotients the compiler folds.
+    """
+    types = {"matrices": f"{prefix}_matrices", "transition": f"{prefix}_transition", "scratch": f"{prefix}_discretize_scratch"}
+    arguments = {"h": "T * power_of_two(-halvings)", "T": "T"}
+    out = []
+    for b in blocks:
+        statements = b.block.statements
+        written = {t.owner for s in statements for t in (s.targets if hasattr(s, "targets") else (s.target,))}
+        read = {r.owner for s in statements for term in s.terms for r in term}
+        owners = [o for o in ("matrices", "transition", "scratch") if o in written | read]
+        parameters = [f"{'' if o in written else 'const '}{types[o]} *restrict {POINTERS[o]}" for o in owners]
+        parameters += [f"const {prefix}_scalar {name}" for name in b.scalars]
+        call = f"{b.block.name}({', '.join([POINTERS[o] for o in owners] + [arguments[n] for n in b.scalars])})"
+        out.append(
+            {
+                "name": b.block.name,
+                "signature": ", ".join(parameters),
+                "call": f"{call};",
+                "constants": [
+                    (name, f"{c_number(float(num), scalar)} / {c_number(float(den), scalar)}") for name, num, den in b.constants
+                ],
+                "lines": [c_statement(s) for s in statements],
+                "checked": b.block.checked,
+            }
+        )
+    return out
+
+
+def _norm_rows(structure: FilterStructure) -> list[tuple[int, list[tuple[int, int]]]]:
+    """Rows of F with their (entry, column) pairs, in storage order, for the unrolled ||F||_D."""
+    rows: dict[int, list[tuple[int, int]]] = {}
+    for e, (i, j) in enumerate(structure.entries("F")):
+        rows.setdefault(i, []).append((e, j))
+    return sorted(rows.items())
+
+
+def _balance_states(structure: FilterStructure) -> list[tuple[int, str]]:
+    """States with an off-diagonal entry of F in their row and column ('both'), row only or column only.
+
+    A state with neither never moves in Osborne's balancing (its step is 0), so
+    the unrolled sweep leaves it out.
+    """
+    rows = {i for i, j in structure.entries("F") if i != j}
+    columns = {j for i, j in structure.entries("F") if i != j}
+    out = []
+    for i in range(structure.n_states):
+        if i in rows and i in columns:
+            out.append((i, "both"))
+        elif i in rows:
+            out.append((i, "row"))
+        elif i in columns:
+            out.append((i, "column"))
+    return out
+
+
+def _ieee_layout(scalar: str) -> dict[str, object]:
+    """The IEEE-754 bit layout of the scalar type, for the exponent helpers of discretize."""
+    if scalar == "float":
+        return {"bits_type": "uint32_t", "mantissa_bits": 23, "exponent_mask": "0xFFu", "exponent_bias": 127}
+    return {"bits_type": "uint64_t", "mantissa_bits": 52, "exponent_mask": "0x7FFu", "exponent_bias": 1023}
 
 
 def _struct_list(layout: CLayout) -> list[dict[str, object]]:
@@ -141,13 +214,20 @@ def c_context(description: FilterDescription) -> dict[str, object]:
     n, nw, nm = sizes.n, sizes.nw, sizes.nm
     prefix = model.name.upper()
     tables = index_tables(structure)
+    compact = compact_tables(description)
+    if compact:
+        tables["max_index"] = max(tables["max_index"], len(compact["col"]) + 1)
     if tables["max_index"] >= 65536:
         raise ModelError(f"model {model.name!r} is too large for 16-bit index tables")
     index_type = "unsigned char" if tables["max_index"] < 256 else "unsigned short"
     spell = scalar_spellings(options.scalar)
     packed = description.packed
     at_upper, at_any = accessors(packed, prefix)
-    layout = c_layout(sizes, options, prefix)
+    unrolled = description.discretize_plan if description.discretize_unrolled else None
+    layout = c_layout(
+        sizes, options, prefix, UnrolledDiscretizeSizes(unrolled.term_size, unrolled.active_size) if unrolled else None
+    )
+    discretize = discretize_functions(description.discretize_blocks, model.name, options.scalar) if unrolled else []
     printer = CPrinter(options.scalar, {p.sym: f"params->{p.name}" for p in model.parameters})
     targets, _, block = description.evaluation
     state_lines, state_commit, _ = description.state_predict
@@ -208,6 +288,28 @@ def c_context(description: FilterDescription) -> dict[str, object]:
             for pole in description.poles
         ],
         "series_range": c_number(series_range(options.taylor_order, roundoff), options.scalar),
+        "taylor_tolerance": c_number(options.taylor_tolerance, options.scalar)
+        if options.taylor_tolerance is not None and options.taylor_tolerance > roundoff
+        else None,  # a tolerance within the rounding of the arithmetic (any in float): the fixed order
+        "recompute_threshold": c_number(options.recompute_threshold, options.scalar) if options.recompute_threshold is not None else None,
+        "discretize_unrolled": bool(unrolled),
+        "balance_entries": [(e, i, j) for e, (i, j) in enumerate(structure.entries("F")) if i != j],
+        "balance_rows": sorted({i for i, j in structure.entries("F") if i != j}),
+        "balance_columns": sorted({j for i, j in structure.entries("F") if i != j}),
+        "balance_states": _balance_states(structure),
+        "norm_rows": _norm_rows(structure),
+        **_ieee_layout(options.scalar),
+        "discretize_sizes": {"terms": unrolled.term_size, "active": unrolled.active_size} if unrolled else {},
+        "discretize_blocks": discretize,
+        "discretize_calls": {f["name"]: f["call"] for f in discretize},
+        "discretize_series_calls": [
+            (int(f["name"].rsplit("_", 1)[1]), f["call"]) for f in discretize if f["name"].startswith("taylor_order_") and f["name"] != "taylor_order_1"
+        ],
+        "discretize_noise_calls": [
+            ("check += " if f["checked"] else "") + f["call"]
+            for f in discretize
+            if f["name"] in ("noise_input", "noise_input_times_step", "process_noise")
+        ],
         "predict_state": [c_statement(s) for s in state_lines],
         "predict_state_check": [
             f"check += {ref} - {ref};"
@@ -219,8 +321,10 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         else (0, 0),
         "predict_state_commit": [c_statement(s) for s in state_commit],
         "predict_blocks": block_functions(blocks, model.name),
+        "compact": bool(compact),
+        "compact_tables": {**{k: _table(v) for k, v in compact.items()}, "nnz": max(len(compact.get("col", ())), 1)},
         "struct_bytes": struct_bytes(layout, scalar_bytes(options.scalar)),
-        "predict_reads_transition": bool(state_lines) or any(b.uses("transition") for b in blocks),
+        "predict_reads_transition": bool(state_lines) or bool(compact) or any(b.uses("transition") for b in blocks),
         "first_free_parameter": next((p.name for p in model.parameters if p.value is None), None),
         "example_value": c_number(0.5, options.scalar),
         "example_variance": c_number(1e-4, options.scalar),

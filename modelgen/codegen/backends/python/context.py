@@ -7,10 +7,18 @@ import json
 from modelgen.codegen.backends.python.printer import parameter_locals
 from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.expressions import Block, eliminate_common_subexpressions, poles
-from modelgen.codegen.kernels import python_predict_plan
+from modelgen.codegen.kernels import python_predict_kernel, python_predict_plan
 from modelgen.derive.discretization import DOUBLE_ROUNDOFF, series_range
 
 BANNER = "# GENERATED FILE - DO NOT EDIT (modelgen)"
+
+#: Up to this many nonzeros of F the generated discretize balances F in plain Python floats
+#: (a loop over the entries) rather than numpy (about a dozen calls per sweep, whatever the
+#: size).  Measured (bench/bench_python_module.py's machine, one core): ned_doppler18, 54
+#: entries, 275 us in Python against 380-475 us in numpy; ned_doppler32_augmented, 87
+#: entries, 505-590 us against 480-525 us.  Both add in the same order, so the norm is the
+#: same to the bit either way.
+PYTHON_BALANCING_ENTRIES = 64
 
 
 def _print_block(block: Block, targets: list[str], printer) -> dict[str, list[tuple[str, str]]]:
@@ -63,17 +71,19 @@ def matrix_functions(description: FilterDescription) -> list[dict[str, object]]:
 def python_context(description: FilterDescription) -> dict[str, object]:
     """Everything python_module.py.j2 reads (always the double-precision numpy filter)."""
     structure, model, options = description.structure, description.model, description.options
-    qd_entries = structure.entries("Qd")
     return {
         **description.shared_context(),
         "banner_python": BANNER,
         "functions": matrix_functions(description),
         "plan": python_predict_plan(structure),
+        "predict_kernel": python_predict_kernel(structure),
+        "balance_in_python": int(structure.F.sum()) <= PYTHON_BALANCING_ENTRIES,
         "series_range": repr(series_range(options.taylor_order, DOUBLE_ROUNDOFF)),
+        "taylor_tolerance": repr(options.taylor_tolerance)
+        if options.taylor_tolerance is not None and options.taylor_tolerance > DOUBLE_ROUNDOFF
+        else None,
         "f_rows": repr([i for i, _ in structure.entries("F")]),
         "f_cols": repr([j for _, j in structure.entries("F")]),
-        "qd_rows": [i for i, _ in qd_entries],
-        "qd_cols": [j for _, j in qd_entries],
         "state_names_tuple": py_tuple(model.state_names),
         "noise_names_tuple": py_tuple(model.noise_names),
         "measurement_names_tuple": py_tuple(model.measurement_names),
