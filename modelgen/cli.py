@@ -176,7 +176,9 @@ def derive(model: str, fmt: str, out_file: str | None) -> None:
 @main.command()
 @click.argument("models", nargs=-1)
 @click.option("--out", "out_root", default="generated", show_default=True, type=click.Path(file_okay=False), help="Root folder; code goes to OUT/<model>/.")
-@click.option("--taylor-order", default=9, show_default=True, help="Terms of the Taylor series for Phi and Gamma (eqs. 10-11).")
+@click.option("--taylor-order", default=9, show_default=True, help="Highest order of the Taylor series for Phi and Gamma (eqs. 10-11).")
+@click.option("--taylor-tolerance", default=1e-12, show_default=True, type=float, help="Relative accuracy of Phi that chooses the order and doublings at run time (0: the fixed order).")
+@click.option("--recompute-threshold", default=None, type=float, help="C discretize keeps its last transition while T is the same and no entry of F, G, q moved by more than this fraction.")
 @click.option("--scalar", type=click.Choice(["double", "float"]), default="double", show_default=True, help="C scalar type.")
 @click.option("--form", type=click.Choice(["covariance", "ud"]), default="covariance", show_default=True, help="Store P, or its UD factors (Thornton time update, Bierman measurement update).")
 @click.option("--storage", type=click.Choice(["full", "packed"]), default="full", show_default=True, help="P as N x N or as its packed upper triangle (covariance form).")
@@ -186,8 +188,8 @@ def derive(model: str, fmt: str, out_file: str | None) -> None:
 @click.option("--check/--no-check", default=False, help="Also compile the C and run it beside the numpy reference, in a staging folder: only code that passes replaces OUT/<model>/ (a failure exits 1 and keeps the previous output).")
 @click.option("--force", is_flag=True, help="Overwrite files in OUT/<model>/ that modelgen did not write or that were edited since (files with other names are always kept).")
 def generate(
-    models: tuple[str, ...], out_root: str, taylor_order: int, scalar: str, form: str, storage: str, update: str,
-    covariance_update: str, all_models: bool, check: bool, force: bool,
+    models: tuple[str, ...], out_root: str, taylor_order: int, taylor_tolerance: float, recompute_threshold: float | None,
+    scalar: str, form: str, storage: str, update: str, covariance_update: str, all_models: bool, check: bool, force: bool,
 ) -> None:
     """Generate Python and C99 filter code for MODELS (files or built-in names).
 
@@ -207,7 +209,8 @@ def generate(
 
     names = list(models) or (builtin_models() if all_models else ["ned_doppler18"])
     options = CodegenOptions(
-        taylor_order=taylor_order, scalar=scalar, form=form, storage=storage, update=update, covariance_update=covariance_update
+        taylor_order=taylor_order, scalar=scalar, form=form, storage=storage, update=update, covariance_update=covariance_update,
+        taylor_tolerance=taylor_tolerance or None, recompute_threshold=recompute_threshold,
     )
     for name in names:
         result = generate_model(name, Path(out_root), options, force=force, with_check=check and scalar == "double")
@@ -244,8 +247,11 @@ def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool,
 
     Derives the model, verifies it entry by entry against the paper's table,
     generates Python and C for every built-in model into OUT/<model>/,
-    compiles the C strictly and checks both against the numpy reference, runs
-    the paper's covariance analysis (Table 2, Figs 2-7), flies the paper's
+    compiles the C strictly and checks both against the numpy reference,
+    cross-checks every hand-written model against its twin derived from the
+    navigation equations and the paper's eqs. (1)-(6) from first principles
+    (crosscheck.md, paper_equations.md), runs the paper's covariance
+    analysis (Table 2, Figs 2-7), flies the paper's
     profile and the recorded car drive, and writes REPORT/README.md with
     links to everything.
     """
@@ -260,8 +266,13 @@ def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool,
         staged.commit()
     report = Path(report_dir)
     click.echo(job.text)
-    if job.failed_models or job.verification.unexplained:
-        click.echo(f"modelgen run: FAILED ({', '.join(job.failed_models) or 'unexplained paper differences'})", err=True)
+    twins_unexplained = job.twins.unexplained if job.twins is not None else 0
+    if job.failed_models or job.verification.unexplained or twins_unexplained:
+        reason = ", ".join(job.failed_models) or (
+            "unexplained paper differences" if job.verification.unexplained
+            else f"{twins_unexplained} unexplained differences between hand-written models and their twins (crosscheck.md)"
+        )
+        click.echo(f"modelgen run: FAILED ({reason})", err=True)
         sys.exit(EXIT_CHECK_FAILED)
     click.echo(f"modelgen run: ok; report in {report / 'README.md'}, code in {out_root}/")
 
@@ -330,14 +341,16 @@ def verify(model: str, out_dir: str, table_file: str | None, complete: bool | No
     no annotation (unexplained).
     """
     from modelgen.fileio.output import ReportUpdate
-    from modelgen.jobs import paper_check_of, write_verification_report
+    from modelgen.jobs import differences_summary, first_principles_of, paper_check_of, write_paper_equations_report, write_verification_report
 
     name, result = paper_check_of(model, table_file, complete or None)
     if result is None:
         click.echo(f"model {name}: no paper table to verify against (only the built-in paper model has one; give yours with --table)")
         return
+    first = first_principles_of(name) if table_file is None else None
     with ReportUpdate(Path(out_dir), force=force) as staged:
         markdown, data = (staged.final(p) for p in write_verification_report(result, staged.staging))
+        first_files = [staged.final(p) for p in write_paper_equations_report(first, staged.staging)] if first else []
         staged.commit()
     counts = result.counts()
     click.echo(f"model {result.model} against {result.table}: {len(result.entries)} entries, " + ", ".join(f"{n} {s}" for s, n in counts.items()))
@@ -350,6 +363,14 @@ def verify(model: str, out_dir: str, table_file: str | None, complete: bool | No
             click.echo(f"  {e.label} {e.status} from eq. (1): {e.classification} - {e.reason}")
     for note in result.unused_annotations:
         click.echo(f"  warning: annotation matches no difference: {note}")
+    if first is not None:
+        click.echo(
+            f"the paper from first principles: {first.equations_file} against {first.twin} (derived from the navigation "
+            f"equations): {first.compared} entries, {len(first.differences)} differ"
+        )
+        for line in differences_summary(first):
+            click.echo(f"  {line}")
+        click.echo(f"wrote {' and '.join(map(str, first_files))}")
     click.echo(f"wrote {markdown} and {data}")
     if result.unexplained:
         click.echo(f"{len(result.unexplained)} unexplained difference(s)", err=True)

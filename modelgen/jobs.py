@@ -28,6 +28,8 @@ import numpy as np
 from modelgen.checks.code_check import ConformanceResult, CheckScenario, check_generated
 from modelgen.checks.paper_check import VerificationResult, verify, write_verification_report
 from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model, paper_table_path
+from modelgen.checks.paper_equations import PaperEquationsResult, differences_summary, write_paper_equations_report
+from modelgen.checks.twins import TwinChecks, first_principles_check, report_section, run_twin_checks, write_twin_reports
 from modelgen.codegen.generate import CodegenOptions, GeneratedCode, generate_code
 from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.fileio.datafiles import data_path
@@ -299,6 +301,7 @@ class MainJobResult:
     text: str
     runs: list[ModelRun]
     verification: VerificationResult
+    twins: TwinChecks | None = None  # the cross-check of every hand model and its twin, and the paper from first principles
 
     @property
     def failed_models(self) -> list[str]:
@@ -330,9 +333,13 @@ def main_job(
     result = verify(derived)
     summary = verification_summary(result, *write_verification_report(result, report))
     runs = generate_and_check_all(Path(out_root), progress=progress, force=force, models=models)
+    progress("cross-check the hand-written models against their twins; the paper from first principles ...")
+    twins = run_twin_checks(models.get, paper_model=paper_model)
+    write_twin_reports(twins, report)
     progress("covariance analysis (Table 2, Figs 2-7) ...")
     analysis = run_covariance_analysis(report / "covariance", PaperModels.build(derived), figures=figures, progress=echo)
-    sections = ["## Covariance analysis (Table 2 analogue)\n\n" + analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)"]
+    sections = [report_section(twins)]
+    sections.append("## Covariance analysis (Table 2 analogue)\n\n" + analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)")
     if with_simulation:
         from modelgen.simulation.flight_report import simulate
         from modelgen.simulation.scenario import load_profile
@@ -346,7 +353,7 @@ def main_job(
         sections.append(replay_section(report / "replay", echo))
     text = run_report(summary, runs, Path(out_root), sections)
     write_text_atomically(report / "README.md", text)
-    return MainJobResult(text, runs, result)
+    return MainJobResult(text, runs, result, twins)
 
 
 def replay_section(folder: Path, echo=print) -> str:
@@ -400,6 +407,11 @@ def paper_check_of(
     if complete is None:
         complete = table is None
     return loaded.name, verify(derive(loaded), table, complete=complete)
+
+
+def first_principles_of(model_name: str) -> PaperEquationsResult | None:
+    """``modelgen verify``: the paper's printed equations against the model's twin (None: no transcription names the model)."""
+    return first_principles_check(model_name, load_and_derive)
 
 
 def embedded_inputs(model: str | Path, qemu: bool):

@@ -73,6 +73,9 @@ def test_run_does_the_main_job_end_to_end(runner, tmp_path, monkeypatch):
     assert (tmp_path / "generated" / "ned_doppler18" / "ned_doppler18.c").is_file()
     assert "## Recorded car drive" in report and "end-of-outage horizontal error RMS" in report
     assert (tmp_path / "report" / "replay" / "summary.json").is_file()
+    assert "## Hand-written models against their twins" in report and "Unexplained: **0**" in report
+    assert "## The paper from first principles" in report and "F(4,5) (dV_n, dV_e), eq. (1): physics" in report
+    assert (tmp_path / "report" / "crosscheck.json").is_file() and (tmp_path / "report" / "paper_equations.json").is_file()
 
 
 def test_simulate_flies_a_profile_with_the_generated_c_filter_and_writes_summary_and_figures(runner, tmp_path):

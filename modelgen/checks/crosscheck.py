@@ -55,7 +55,7 @@ from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml
 from modelgen.fileio.output import write_text_atomically
 from modelgen.model import navlib
-from modelgen.model.declaration import ErrorModel, parse_expression
+from modelgen.model.declaration import ErrorModel
 
 #: The data file listing every (hand-written model, twin) pair and what explains their differences.
 PAIRS_FILE = "crosscheck.yaml"

@@ -114,12 +114,9 @@ def test_a_state_without_an_equation_is_refused(paper_model, tmp_path):
         pe.load_paper_equations(bad, paper_model)
 
 
-def test_the_paper_against_its_twin_finds_the_transport_rate_factor_and_the_drift_sign_convention():
+def test_the_paper_against_its_twin_finds_the_transport_rate_factor_and_the_drift_sign_convention(derived_builtin):
     """The first-principles check itself: eqs. (1)-(6) against the error model derived under the paper's assumptions."""
-    from modelgen.derive.symbolic import derive
-    from modelgen.model.loading import load_model
-
-    result = pe.paper_equations_check(derive(load_model("ned_doppler18_twin")))
+    result = pe.paper_equations_check(derived_builtin("ned_doppler18_twin"))
     by_class = {}
     for d in result.differences:
         by_class.setdefault(d.classification, []).append(d)
@@ -131,3 +128,17 @@ def test_the_paper_against_its_twin_finds_the_transport_rate_factor_and_the_drif
     assert len(conventions) == 18 and {d.row for d in conventions} == {1, 2, 3}
     assert {d.column_quantity for d in conventions} == {f"eps_{k}_{a}" for k in "cr" for a in "xyz"}
     assert result.compared == 64 and result.scenario == "the check scenario of ned_doppler18_twin"
+
+
+def test_verify_shows_the_first_principles_check_after_the_table_check_and_writes_its_files(tmp_path):
+    from click.testing import CliRunner
+
+    from modelgen.cli import main
+
+    result = CliRunner().invoke(main, ["verify", "ned_doppler18", "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    table, first = result.output.index("against paper_000_table.yaml"), result.output.index("the paper from first principles")
+    assert table < first
+    assert "F(4,5) (dV_n, dV_e), eq. (1): physics" in result.output and "18 entries" in result.output
+    assert json.loads((tmp_path / "paper_equations.json").read_text())["summary"]["differences"] == 19
+    assert (tmp_path / "verification.json").is_file()
