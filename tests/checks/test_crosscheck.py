@@ -200,3 +200,10 @@ def test_crosscheck_report_of_the_builtin_pairs_has_no_unexplained_entry(builtin
     assert {p["model"] for p in record["pairs"]} == {p.hand for p in PAIRS}
     assert all(p["unexplained"] == 0 for p in record["pairs"])
     assert all(e["status"] in cc.STATUSES for e in record["entries"])
+
+
+def test_a_pair_whose_twin_file_is_missing_fails_loudly():
+    from modelgen.checks.twins import require_twin
+
+    with pytest.raises(ModelError, match="modelgen/models/no_such_model_twin.yaml does not exist"):
+        require_twin("no_such_model_twin")
