@@ -262,7 +262,8 @@ class Layout:
 
     def index(self, matrix: str) -> tuple[tuple[int, ...], tuple[int, ...]]:
         """Twin row and column indices of the hand model's rows and columns of ``matrix``."""
-        return {"F": (self.states, self.states), "G": (self.states, self.noises), "H": (self.measurements, self.states)}[matrix]
+        return {"F": (self.states, self.states), "G": (self.states, self.noises), "H": (self.measurements, self.states),
+                "Q": (self.noises, self.noises)}[matrix]
 
 
 def layout(pair: Pair, hand: ErrorModel, twin: ErrorModel) -> Layout:

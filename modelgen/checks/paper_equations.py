@@ -69,8 +69,9 @@ CORE_PAPER_EQUATIONS = "paper_000_equations.yaml"
 CLASSIFICATIONS = ("typo", "convention", "omitted term", "physics")
 #: A missing term counts as small (rule 2) up to this fraction of the derived entry at the scenario.
 SMALL_FRACTION = 0.01
-MATRICES = ("F", "G", "H")
+MATRICES = ("F", "G", "H", "Q")
 #: Fields of every difference record in paper_equations.json.
+#: Q is the driving noises' power spectral densities (eq. (5)), compared where the paper prints them.
 RECORD_FIELDS = (
     "matrix", "row", "column", "row_quantity", "column_quantity", "equation", "printed", "paper", "derived",
     "difference", "magnitude", "classification", "rule",
@@ -116,6 +117,7 @@ class PaperEquations:
     combinations: Mapping[str, sp.Expr]
     dynamics: tuple[PrintedEquation, ...]
     measurements: tuple[PrintedEquation, ...]
+    noise_densities: tuple[tuple[str, sp.Expr, int, str], ...] = ()  # (noise, psd, equation, printed)
 
 
 def paper_equations_path(model_name: str) -> Path | None:
@@ -191,16 +193,26 @@ def load_paper_equations(path: str | Path, model: ErrorModel) -> PaperEquations:
             raise ModelError(f"{place}: {target!r} is not a measurement of model {model.name}")
         measurements.append(PrintedEquation(6, target, str(_require(item, "printed", place)),
                                             _terms(_require(item, "terms", place), namespace, place), item.get("ocr")))
+    noises = {w.symbol for w in model.noises}
+    densities = []
+    for k, item in enumerate(data.get("noise_densities") or []):
+        place = f"{where}: noise_densities[{k}]"
+        noise = str(_require(item, "noise", place))
+        if noise not in noises:
+            raise ModelError(f"{place}: {noise!r} is not a noise of model {model.name}")
+        psd = parse_expression(str(_require(item, "psd", place)), namespace, f"{place}.psd")
+        densities.append((noise, psd, int(_require(item, "equation", place)), str(_require(item, "printed", place))))
     return PaperEquations(
         name=path.name, source=str(data.get("source", "")), paper=str(data.get("paper", "")),
         seed_file=str(data.get("seed_file", "")), model=model.name, twin=str(_require(data, "twin", where)),
         assumptions=tuple(str(a) for a in data.get("assumptions") or []), combinations=combinations,
-        dynamics=tuple(dynamics), measurements=tuple(measurements),
+        dynamics=tuple(dynamics), measurements=tuple(measurements), noise_densities=tuple(densities),
     )
 
 
 def paper_matrices(equations: PaperEquations, model: ErrorModel) -> dict[str, sp.Matrix]:
-    """F, G, H built from the printed terms (combinations expanded), in the model's state order."""
+    """F, G, H built from the printed terms (combinations expanded), in the model's state order, and Q from the
+    printed noise densities (zero where the paper prints none)."""
     combos = {sp.Symbol(k, real=True): v for k, v in equations.combinations.items()}
     symbol = {q.symbol: q.sym for q in (*model.states, *model.noises)}
 
@@ -213,14 +225,16 @@ def paper_matrices(equations: PaperEquations, model: ErrorModel) -> dict[str, sp
     w = sp.Matrix(model.noise_symbols) if model.noises else sp.zeros(0, 1)
     by_measurement = {e.target: right_hand_side(e) for e in equations.measurements}
     h = sp.Matrix([by_measurement.get(m.symbol, sp.S.Zero) for m in model.measurements])
+    psd = {noise: value for noise, value, _, _ in equations.noise_densities}
     return {
         "F": f.jacobian(x),
         "G": f.jacobian(w) if model.noises else sp.zeros(len(x), 0),
         "H": h.jacobian(x) if model.measurements else sp.zeros(0, len(x)),
+        "Q": sp.diag(*[psd.get(n.symbol, sp.S.Zero) for n in model.noises]) if model.noises else sp.zeros(0, 0),
     }
 
 
-def printed_terms(equations: PaperEquations) -> dict[tuple[str, str, str], tuple[int, str]]:
+def printed_terms(equations: PaperEquations, noises: set[str]) -> dict[tuple[str, str, str], tuple[int, str]]:
     """(matrix, row symbol, column symbol) -> (equation number, the printed text of the term(s) there)."""
     out: dict[tuple[str, str, str], tuple[int, list[str]]] = {}
     for matrix, group in (("F", equations.dynamics), ("H", equations.measurements)):
@@ -228,8 +242,10 @@ def printed_terms(equations: PaperEquations) -> dict[tuple[str, str, str], tuple
             for t in e.terms:
                 columns = [str(s) for s in equations.combinations[t.of].free_symbols] if t.of in equations.combinations else [t.of]
                 for column in columns:
-                    kind = "G" if matrix == "F" and column.startswith("w_") else matrix
+                    kind = "G" if matrix == "F" and column in noises else matrix
                     out.setdefault((kind, e.target, column), (e.equation, []))[1].append(t.printed)
+    for noise, _, equation, printed in equations.noise_densities:
+        out[("Q", noise, noise)] = (equation, [printed])
     return {k: (n, " ".join(texts)) for k, (n, texts) in out.items()}
 
 
@@ -409,11 +425,12 @@ def compare_equations(
     paper = {m: value.xreplace(rename or {}) for m, value in paper_matrices(equations, model).items()}
     values, label = scenario or scenario_values(model)
     sensor_errors = sensor_error_states(derived["F"])
-    where = printed_terms(equations)
+    where = printed_terms(equations, {w.symbol for w in model.noises})
     names = {
         "F": ([s.symbol for s in model.states],) * 2,
         "G": ([s.symbol for s in model.states], [w.symbol for w in model.noises]),
         "H": ([m.symbol for m in model.measurements], [s.symbol for s in model.states]),
+        "Q": ([w.symbol for w in model.noises],) * 2,
     }
     compared, differences = 0, []
     for m in MATRICES:
@@ -444,7 +461,7 @@ def compare_equations(
 
 
 def twin_in_model_order(twin: DerivedModel, model: ErrorModel) -> tuple[dict[str, sp.Matrix], dict[sp.Symbol, sp.Symbol]]:
-    """The twin's F, G, H in ``model``'s state order, and the renaming of ``model``'s parameters to the twin's.
+    """The twin's F, G, H (and Q) in ``model``'s order, and the renaming of ``model``'s parameters to the twin's.
 
     The comparison is made in the twin's symbols (several per-axis parameters
     of the paper may be one of the twin's).  States the paper does not model

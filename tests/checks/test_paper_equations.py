@@ -42,7 +42,7 @@ def test_printed_equations_against_the_hand_model_differ_only_in_the_transport_r
     assert sp.simplify(sp.sympify(d.difference) + sp.sympify("V_e*tan(phi)/R")) == 0
     # 83.3 m/s east at 30 N: V_e tan(phi)/R = 7.5e-6 1/s
     assert d.magnitude == pytest.approx(83.333333 * 0.57735027 / 6378137.0, rel=1e-6)
-    assert result.compared == 64
+    assert result.compared == 70  # 64 entries of F, G, H and the 6 noise densities of eq. (5)
 
 
 def test_a_negated_sensor_column_is_a_convention(equations, paper_model, paper_derived):
@@ -127,7 +127,7 @@ def test_the_paper_against_its_twin_finds_the_transport_rate_factor_and_the_drif
     conventions = by_class["convention"]
     assert len(conventions) == 18 and {d.row for d in conventions} == {1, 2, 3}
     assert {d.column_quantity for d in conventions} == {f"eps_{k}_{a}" for k in "cr" for a in "xyz"}
-    assert result.compared == 64 and result.scenario == "the check scenario of ned_doppler18_twin"
+    assert result.compared == 70 and result.scenario == "the check scenario of ned_doppler18_twin"
 
 
 def test_verify_shows_the_first_principles_check_after_the_table_check_and_writes_its_files(tmp_path):
@@ -142,3 +142,11 @@ def test_verify_shows_the_first_principles_check_after_the_table_check_and_write
     assert "F(4,5) (dV_n, dV_e), eq. (1): physics" in result.output and "18 entries" in result.output
     assert json.loads((tmp_path / "paper_equations.json").read_text())["summary"]["differences"] == 19
     assert (tmp_path / "verification.json").is_file()
+
+
+def test_a_noise_density_printed_without_its_factor_two_is_found(equations, paper_model, paper_derived):
+    derived = matrices(paper_derived)
+    derived["Q"][0, 0] = derived["Q"][0, 0] / 2  # as if the paper's 2 mu sigma^2 were derived as mu sigma^2
+    result = pe.compare_equations(equations, paper_model, derived)
+    (d,) = [d for d in result.differences if d.matrix == "Q"]
+    assert (d.label, d.row_quantity, d.equation, d.classification) == ("Q(1,1)", "w_eps_x", 5, "typo")
