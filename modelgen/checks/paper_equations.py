@@ -2,7 +2,7 @@
 
 ``modelgen/data/paper_000_equations.yaml`` transcribes the core paper's
 eqs. (1)-(6) term by term, as printed (OCR decisions recorded beside the
-terms).  This module builds F, G, H from those terms and compares them entry
+terms).  This module builds F, G, H (and Q from eq. (5)) from those terms and compares them entry
 by entry with the error model that modelgen DERIVES from the navigation
 equations under the paper's own assumptions (the twin model the file names,
 ``ned_doppler18_twin``: one spherical Earth radius, no vertical channel, the
