@@ -230,6 +230,9 @@ def main() -> None:
 
     # -- memory ---------------------------------------------------------------------------------
     if not args.skip_memory:
+        # a first short flight fills numba's on-disk cache (compiling the loops takes ~100 MB in the compiler), so
+        # that each measured process loads compiled code as an installed modelgen does
+        measure_memory(1 / 60, "new")
         rows = [measure_memory(args.hours, "old"), measure_memory(args.hours, "new"), measure_memory(args.long_hours, "new")]
         for row in rows:
             print(f"    {row['way']}: {row['hours']:g} h, peak RSS {row['peak_rss_mib']:.0f} MiB "
