@@ -45,7 +45,7 @@ import math
 from dataclasses import dataclass, field
 from itertools import combinations
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import sympy as sp
 
@@ -326,6 +326,14 @@ def with_conventions(matrix: str, value: sp.Expr, i: int, j: int, state_signs: S
 
 
 # -- the comparison ------------------------------------------------------------------
+#: A twin entry -> the same entry under the hand model's sign conventions.
+Transform = Callable[[sp.Expr], sp.Expr]
+#: (matrix, twin row, twin column) -> the terms declared approximations dropped there, with the approximation's name.
+Dropped = Mapping[tuple[str, int, int], Sequence[tuple[sp.Expr, str]]]
+#: Parameter symbol -> its value at the scenario.
+Values = Mapping[sp.Symbol, float]
+
+
 @dataclass(frozen=True)
 class EntryRecord:
     """One (matrix, row, column) of the cross-check; row/column are the hand model's symbols."""
@@ -439,7 +447,7 @@ def magnitude(term: sp.Expr, values: Mapping[sp.Symbol, float]) -> float | None:
 
 
 def _explained_by_approximation(
-    hand: sp.Expr, full: sp.Expr, neglected: Sequence[tuple[sp.Expr, str]], transform
+    hand: sp.Expr, full: sp.Expr, neglected: Sequence[tuple[sp.Expr, str]], transform: Transform
 ) -> tuple[sp.Expr, list[str]] | None:
     """The smallest set of neglected terms whose removal from ``full`` gives ``hand`` (after the conventions)."""
     for size in range(1, min(MAX_COMBINED_APPROXIMATIONS, len(neglected)) + 1):
@@ -495,7 +503,9 @@ def cross_check(
 REMOVED_STATE = "(a state the approximation removes)"
 
 
-def _removed_state_couplings(pair, matrix, rows, twin_rows, dropped, values) -> list[EntryRecord]:
+def _removed_state_couplings(
+    pair: Pair, matrix: str, rows: Sequence[str], twin_rows: Sequence[int], dropped: Dropped, values: Values
+) -> list[EntryRecord]:
     """Records for the terms coupling a removed state (e.g. under no_vertical_channel: dV_d, dh) into the model's rows.
 
     The engine gives such a term column -1 (the state no longer exists);
@@ -514,7 +524,10 @@ def _removed_state_couplings(pair, matrix, rows, twin_rows, dropped, values) -> 
     return out
 
 
-def _unmodelled_couplings(pair, matrix, twin, where: Layout, rows, twin_rows, dropped, values) -> list[EntryRecord]:
+def _unmodelled_couplings(
+    pair: Pair, matrix: str, twin: DerivedModel, where: Layout, rows: Sequence[str], twin_rows: Sequence[int],
+    dropped: Dropped, values: Values,
+) -> list[EntryRecord]:
     """Records for the twin's couplings into the hand model's rows from quantities the hand model leaves out."""
     lost = where.unmodelled_noises if matrix == "G" else where.unmodelled_states
     T = getattr(twin, matrix)
@@ -540,7 +553,10 @@ def short(expr: sp.Expr) -> str:
     return sp.sstr(expr.xreplace({f: sp.Float(f, 6) for f in expr.atoms(sp.Float)}))
 
 
-def _classify(pair, matrix, row, column, written, full, terms, transform, errors, values) -> EntryRecord:
+def _classify(
+    pair: Pair, matrix: str, row: str, column: str, written: sp.Expr, full: sp.Expr, terms: Sequence[tuple[sp.Expr, str]],
+    transform: Transform, errors: Mapping[tuple[str, str, str], HandModelError], values: Values,
+) -> EntryRecord:
     """The status, term, magnitude and reason of one entry (the rules of the module doc, in order)."""
     derived_text = short(full) if full != 0 else "0"
     base = dict(model=pair.hand, matrix=matrix, row=row, column=column, hand=sp.sstr(written) if written != 0 else "0", derived=derived_text)
@@ -578,6 +594,7 @@ def _classify(pair, matrix, row, column, written, full, terms, transform, errors
 
 
 def _convention_touches(c: Convention, row: str, column: str) -> bool:
+    """Whether the convention changes the sign of the entry's row or column quantity."""
     return bool({row, column} & (set(c.states) | set(c.noises)))
 
 
