@@ -45,7 +45,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import sympy as sp
 
@@ -59,7 +59,7 @@ from modelgen.checks.crosscheck import (
 from modelgen.checks.hints import constant_ratio, same
 from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
-from modelgen.fileio.datafiles import data_path, read_yaml
+from modelgen.fileio.datafiles import data_path, read_yaml, read_yaml_with_lines
 from modelgen.fileio.output import write_text_atomically
 from modelgen.model.declaration import ErrorModel, parse_expression
 from modelgen.model.loading import load_model
@@ -128,83 +128,92 @@ def paper_equations_path(model_name: str) -> Path | None:
     return None
 
 
-def _require(data: Mapping[str, Any], key: str, where: str) -> Any:
+def _require(data: Any, key: str, where: str) -> Any:
+    if not isinstance(data, dict):
+        raise ModelError(f"{where}: expected a mapping")
     if key not in data:
         raise ModelError(f"{where}: missing key {key!r}")
     return data[key]
 
 
-def _terms(items: Any, namespace: Mapping[str, sp.Symbol], where: str) -> tuple[PrintedTerm, ...]:
-    if not isinstance(items, list):
-        raise ModelError(f"{where}.terms: expected a list")
+def _list(value: Any, where: str) -> list:
+    if not isinstance(value, list):
+        raise ModelError(f"{where}: expected a list")
+    return value
+
+
+def _terms(items: Any, namespace: Mapping[str, sp.Symbol], key: str, place: Callable[[str], str]) -> tuple[PrintedTerm, ...]:
+    """The printed terms of one equation (``key`` is its path in the file, ``place`` gives file:line and path)."""
     out = []
-    for k, item in enumerate(items):
-        place = f"{where}.terms[{k}]"
+    for k, item in enumerate(_list(items, place(f"{key}.terms"))):
+        where = place(f"{key}.terms[{k}]")
         if not isinstance(item, dict) or set(item) - _TERM_KEYS:
-            raise ModelError(f"{place}: expected a mapping with keys {sorted(_TERM_KEYS)}")
-        of = str(_require(item, "of", place))
+            raise ModelError(f"{where}: expected a mapping with keys {sorted(_TERM_KEYS)}")
+        of = str(_require(item, "of", where))
         if of not in namespace:
-            raise ModelError(f"{place}: {of!r} is not a state, noise or combination of the paper's model")
-        coefficient = parse_expression(str(_require(item, "coefficient", place)), namespace, f"{place}.coefficient")
-        out.append(PrintedTerm(of, coefficient, str(_require(item, "printed", place)), item.get("ocr")))
+            raise ModelError(f"{where}: {of!r} is not a state, noise or combination of the paper's model")
+        coefficient = parse_expression(str(_require(item, "coefficient", where)), namespace, f"{where}.coefficient")
+        out.append(PrintedTerm(of, coefficient, str(_require(item, "printed", where)), item.get("ocr")))
     return tuple(out)
 
 
 def load_paper_equations(path: str | Path, model: ErrorModel) -> PaperEquations:
-    """Read and validate a transcribed-equations file against the model whose symbols it uses."""
+    """Read and validate a transcribed-equations file against the model whose symbols it uses (errors name file:line)."""
     path = Path(path)
-    where = path.name
-    data = read_yaml(path, "paper-equations file")
+    data, lines = read_yaml_with_lines(path, "paper-equations file")
+
+    def place(key: str) -> str:
+        """``file:line: key`` of a key path such as ``equations[3].terms[1]``."""
+        return f"{lines.get(key, path.name)}: {key}"
+
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
-        raise ModelError(f"{where}: unknown key {unknown[0]!r} (expected one of {sorted(_TOP_KEYS)})")
-    if _require(data, "model", where) != model.name:
-        raise ModelError(f"{where}: written for model {data['model']!r}, not {model.name!r}")
+        raise ModelError(f"{place(unknown[0])}: unknown key (expected one of {sorted(_TOP_KEYS)})")
+    if _require(data, "model", path.name) != model.name:
+        raise ModelError(f"{place('model')}: written for model {data['model']!r}, not {model.name!r}")
     namespace: dict[str, sp.Symbol] = {q.symbol: q.sym for q in (*model.parameters, *model.states, *model.noises)}
     combinations: dict[str, sp.Expr] = {}
-    for k, item in enumerate(data.get("combinations") or []):
-        place = f"{where}: combinations[{k}]"
-        symbol = str(_require(item, "symbol", place))
+    for k, item in enumerate(_list(data.get("combinations") or [], place("combinations"))):
+        where = place(f"combinations[{k}]")
+        symbol = str(_require(item, "symbol", where))
         if symbol in namespace:
-            raise ModelError(f"{place}: {symbol!r} is already a symbol of model {model.name}")
-        combinations[symbol] = parse_expression(str(_require(item, "expression", place)), namespace, f"{place}.expression")
+            raise ModelError(f"{where}: {symbol!r} is already a symbol of model {model.name}")
+        combinations[symbol] = parse_expression(str(_require(item, "expression", where)), namespace, f"{where}.expression")
     namespace.update({name: sp.Symbol(name, real=True) for name in combinations})
 
-    states = {s.symbol for s in model.states}
-    dynamics = []
-    for k, item in enumerate(_require(data, "equations", where)):
-        place = f"{where}: equations[{k}]"
-        target = str(_require(item, "state", place))
-        if target not in states:
-            raise ModelError(f"{place}: {target!r} is not a state of model {model.name}")
-        dynamics.append(PrintedEquation(int(_require(item, "equation", place)), target, str(_require(item, "printed", place)),
-                                        _terms(_require(item, "terms", place), namespace, place), item.get("ocr")))
+    def equations_of(section: str, target_key: str, targets: set[str], kind: str) -> list[PrintedEquation]:
+        out = []
+        for k, item in enumerate(_list(data.get(section) or [], place(section))):
+            where = place(f"{section}[{k}]")
+            target = str(_require(item, target_key, where))
+            if target not in targets:
+                raise ModelError(f"{where}: {target!r} is not a {kind} of model {model.name}")
+            out.append(PrintedEquation(
+                int(_require(item, "equation", where)), target, str(_require(item, "printed", where)),
+                _terms(_require(item, "terms", where), namespace, f"{section}[{k}]", place), item.get("ocr"),
+            ))
+        return out
+
+    _require(data, "equations", path.name)
+    dynamics = equations_of("equations", "state", {s.symbol for s in model.states}, "state")
     written = [e.target for e in dynamics]
     missing = [s for s in (s.symbol for s in model.states) if s not in written]
     twice = sorted({t for t in written if written.count(t) > 1})
     if missing or twice:
-        raise ModelError(f"{where}: every state needs exactly one equation (missing: {', '.join(missing) or '-'}; twice: {', '.join(twice) or '-'})")
-    measured = {m.symbol for m in model.measurements}
-    measurements = []
-    for k, item in enumerate(data.get("measurements") or []):
-        place = f"{where}: measurements[{k}]"
-        target = str(_require(item, "measurement", place))
-        if target not in measured:
-            raise ModelError(f"{place}: {target!r} is not a measurement of model {model.name}")
-        measurements.append(PrintedEquation(6, target, str(_require(item, "printed", place)),
-                                            _terms(_require(item, "terms", place), namespace, place), item.get("ocr")))
+        raise ModelError(f"{place('equations')}: every state needs exactly one equation (missing: {', '.join(missing) or '-'}; twice: {', '.join(twice) or '-'})")
+    measurements = equations_of("measurements", "measurement", {m.symbol for m in model.measurements}, "measurement")
     noises = {w.symbol for w in model.noises}
     densities = []
-    for k, item in enumerate(data.get("noise_densities") or []):
-        place = f"{where}: noise_densities[{k}]"
-        noise = str(_require(item, "noise", place))
+    for k, item in enumerate(_list(data.get("noise_densities") or [], place("noise_densities"))):
+        where = place(f"noise_densities[{k}]")
+        noise = str(_require(item, "noise", where))
         if noise not in noises:
-            raise ModelError(f"{place}: {noise!r} is not a noise of model {model.name}")
-        psd = parse_expression(str(_require(item, "psd", place)), namespace, f"{place}.psd")
-        densities.append((noise, psd, int(_require(item, "equation", place)), str(_require(item, "printed", place))))
+            raise ModelError(f"{where}: {noise!r} is not a noise of model {model.name}")
+        psd = parse_expression(str(_require(item, "psd", where)), namespace, f"{where}.psd")
+        densities.append((noise, psd, int(_require(item, "equation", where)), str(_require(item, "printed", where))))
     return PaperEquations(
         name=path.name, source=str(data.get("source", "")), paper=str(data.get("paper", "")),
-        seed_file=str(data.get("seed_file", "")), model=model.name, twin=str(_require(data, "twin", where)),
+        seed_file=str(data.get("seed_file", "")), model=model.name, twin=str(_require(data, "twin", path.name)),
         assumptions=tuple(str(a) for a in data.get("assumptions") or []), combinations=combinations,
         dynamics=tuple(dynamics), measurements=tuple(measurements), noise_densities=tuple(densities),
     )

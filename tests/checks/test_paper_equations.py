@@ -101,7 +101,7 @@ def test_a_transcribed_term_with_an_unknown_symbol_is_refused(paper_model, tmp_p
     text = data_path(pe.CORE_PAPER_EQUATIONS).read_text().replace('coefficient: "V_n/R"', 'coefficient: "V_x/R"', 1)
     bad = tmp_path / "paper_bad_equations.yaml"
     bad.write_text(text)
-    with pytest.raises(ModelError, match=r"unknown symbol\(s\) V_x"):
+    with pytest.raises(ModelError, match=r"paper_bad_equations\.yaml:\d+: equations\[0\]\.terms\[2\]\.coefficient: unknown symbol\(s\) V_x"):
         pe.load_paper_equations(bad, paper_model)
 
 
@@ -110,7 +110,7 @@ def test_a_state_without_an_equation_is_refused(paper_model, tmp_path):
     kept = [line for line in lines if "state: dV_de" not in line]
     bad = tmp_path / "paper_bad_equations.yaml"
     bad.write_text("\n".join(kept) + "\n")
-    with pytest.raises(ModelError, match="missing: dV_de"):
+    with pytest.raises(ModelError, match=r"paper_bad_equations\.yaml:\d+: equations: every state needs exactly one equation \(missing: dV_de"):
         pe.load_paper_equations(bad, paper_model)
 
 
