@@ -52,7 +52,7 @@ import sympy as sp
 from modelgen.checks.hints import difference_hints, same
 from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
-from modelgen.fileio.datafiles import data_path, read_yaml
+from modelgen.fileio.datafiles import data_path, read_yaml_with_lines
 from modelgen.fileio.output import write_text_atomically
 from modelgen.model import navlib
 from modelgen.model.declaration import ErrorModel
@@ -145,9 +145,9 @@ class NeglectedTerm:
 
 
 def load_pairs(path: str | Path | None = None) -> list[Pair]:
-    """The pairs of ``modelgen/data/crosscheck.yaml`` (or ``path``), validated."""
+    """The pairs of ``modelgen/data/crosscheck.yaml`` (or ``path``), validated (errors name file:line)."""
     path = Path(path) if path is not None else data_path(PAIRS_FILE)
-    data = read_yaml(path, "cross-check file")
+    data, lines = read_yaml_with_lines(path, "cross-check file")
     where = path.name
     unknown = sorted(set(data) - {"pairs"})
     if unknown:
@@ -155,7 +155,7 @@ def load_pairs(path: str | Path | None = None) -> list[Pair]:
     items = data.get("pairs")
     if not isinstance(items, list) or not items:
         raise ModelError(f"{where}: 'pairs' must be a non-empty list")
-    pairs = [_pair(item, f"{where}: pairs[{i}]") for i, item in enumerate(items)]
+    pairs = [_pair(item, f"{lines.get(f'pairs[{i}]', where)}: pairs[{i}]") for i, item in enumerate(items)]
     twins = [p.twin for p in pairs]
     duplicates = sorted({t for t in twins if twins.count(t) > 1})
     if duplicates:

@@ -143,7 +143,7 @@ def test_twin_states_the_hand_model_leaves_out_are_couplings_its_declared_approx
 def test_pairs_file_with_an_unknown_key_or_a_convention_on_no_state_is_refused(paper_derived, tmp_path):
     bad = tmp_path / "crosscheck.yaml"
     bad.write_text("pairs:\n  - {hand: a, twin: b, colour: red}\n")
-    with pytest.raises(ModelError, match="unknown key 'colour'"):
+    with pytest.raises(ModelError, match=r"crosscheck\.yaml:2: pairs\[0\]: unknown key .colour."):
         cc.load_pairs(bad)
     wrong = cc.Convention("sign", ("no_such_state",), (), "x")
     with pytest.raises(ModelError, match="no_such_state"):
