@@ -49,7 +49,7 @@ REPO = HERE.parent
 sys.path.insert(0, str(REPO))  # runs from a fresh clone without installing
 sys.path.insert(0, str(HERE))
 
-from bench_codegen import GLUE_DENSE, build_harness, glue_generated, input_file, wall_ns  # noqa: E402
+from bench_codegen import GLUE_DENSE, build_harness, glue_generated, input_file, run  # noqa: E402
 
 from modelgen.checks.code_check import measurement_sequence  # noqa: E402
 from modelgen.codegen import kernels  # noqa: E402
@@ -117,6 +117,12 @@ def compile_seconds_and_text(source: Path) -> tuple[float, int]:
     return seconds, text
 
 
+def wall_ns(exe: Path, data: Path, n: int) -> float:
+    """Best of three harness runs, ns per prediction; about 2e8 dense flops per run whatever the size."""
+    iterations = max(20, min(20000, int(5e7 / n**3)))
+    return min(float(run([str(exe), str(data), "time", "predict", str(iterations)]).stdout.split()[0]) for _ in range(3))
+
+
 def kernel_row(derived, p: dict, data: Path, folder: Path, compact: bool) -> dict:
     name = derived.model.name
     seconds, files = generate(derived, compact)
@@ -125,7 +131,7 @@ def kernel_row(derived, p: dict, data: Path, folder: Path, compact: bool) -> dic
     compile_s, text = compile_seconds_and_text(gen / f"{name}.c")
     exe = build_harness(Path(tempfile.mkdtemp(dir=folder)), glue_generated(name), [gen / f"{name}.c"], p, includes=(gen,))
     return {"codegen_s": seconds, "compile_s": compile_s, "text_bytes": text, "c_bytes": len(files[f"{name}.c"]),
-            "predict_ns": wall_ns(exe, data, "predict")}
+            "predict_ns": wall_ns(exe, data, derived.n_states)}
 
 
 def measure(n: int, unrolled_up_to: int, folder: Path) -> dict:
@@ -146,7 +152,7 @@ def measure(n: int, unrolled_up_to: int, folder: Path) -> dict:
     p = problem(derived)
     data = input_file(p, folder)
     dense = build_harness(Path(tempfile.mkdtemp(dir=folder)), GLUE_DENSE, [HERE / "dense_filter.c"], p)
-    row["dense_predict_ns"] = wall_ns(dense, data, "predict")
+    row["dense_predict_ns"] = wall_ns(dense, data, n)
     for compact in (False, True):
         if not compact and n > unrolled_up_to:
             continue
