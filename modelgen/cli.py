@@ -465,7 +465,9 @@ def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | Non
 @click.option("--workers", type=click.IntRange(min=1), default=None, help=_WORKERS_HELP)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="report/trade", show_default=True, help="Directory for trade.csv, trade.parquet, the figure and summary.md.")
 @click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
-def trade(study_file: str, scheduler: str | None, workers: int | None, out_dir: str, force: bool) -> None:
+@click.option("--journal", "journal", type=click.Path(dir_okay=False), default=None, metavar="FILE", help="Keep each completed covariance task in FILE (JSON lines, written as tasks complete); run again with the same FILE to take a stopped study up where it stopped.")
+def trade(study_file: str, scheduler: str | None, workers: int | None, out_dir: str, force: bool,
+          journal: str | None) -> None:
     """Run a trade study: covariance analysis of every case of a grid (or list), Monte Carlo of selected ones.
 
     STUDY.yaml is a study file or a built-in study's name
@@ -477,7 +479,8 @@ def trade(study_file: str, scheduler: str | None, workers: int | None, out_dir: 
     from modelgen.jobs import trade_study
 
     with ReportUpdate(Path(out_dir), force=force) as staged:
-        files = trade_study(study_file, staged.staging, scheduler, workers, echo=_mapped_echo(staged, err=True))
+        files = trade_study(study_file, staged.staging, scheduler, workers, echo=_mapped_echo(staged, err=True),
+                            journal=journal)
         files = [staged.final(p) for p in files]
         staged.commit()
     click.echo("wrote " + ", ".join(str(p) for p in files))

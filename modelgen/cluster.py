@@ -14,7 +14,9 @@ that runs on one machine or on many) instead of a process pool of its own:
   each result as soon as its task completes: a completed result is then in
   the caller's hands and releasing its future keeps a later worker loss from
   recomputing it.  Progress is reported as tasks complete; results come back
-  in submission order, so they do not depend on which worker ran what.
+  in submission order, so they do not depend on which worker ran what.  A
+  :class:`Journal` writes each result to disk as it arrives, so a study
+  whose client stops is taken up again where it stopped.
   Without a client the same functions run one after another in this process
   (one run, tests, or a study too small to be worth a cluster).
 * :func:`worker_cached` keeps what every task of a study shares (a derived
@@ -27,11 +29,13 @@ derived objects holding compiled code.
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import uuid
 from collections import OrderedDict
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence, TypeVar
 
 from modelgen.errors import ModelError
@@ -122,43 +126,106 @@ def describe_client(client: Any) -> str:
     return f"{where}, {workers} worker{'s' if workers != 1 else ''}"
 
 
+class Journal:
+    """A study's completed task results, one JSON line each, appended and flushed to disk as they arrive.
+
+    The first line names the study (a digest of its inputs and task split)
+    and its number of tasks.  A study stopped part-way (its client killed, a
+    task failing after its retries) is taken up again from its journal: the
+    tasks recorded there are not run again.  A journal of another study is
+    refused; a last line cut short by the stop is ignored.  Results must be
+    JSON data (numbers, strings, lists, mappings; NaN allowed).
+    """
+
+    def __init__(self, path: str | Path, study: str, tasks: int) -> None:
+        self.path, self.study, self.tasks = Path(path), study, tasks
+
+    def completed(self) -> dict[int, Any]:
+        """Results already recorded, by task index (the journal is started with its header if absent)."""
+        if not self.path.exists() or self.path.stat().st_size == 0:
+            self._append({"study": self.study, "tasks": self.tasks})
+            return {}
+        lines = self.path.read_text(encoding="utf-8").splitlines()
+        try:
+            header = json.loads(lines[0])
+        except (json.JSONDecodeError, IndexError):
+            raise ModelError(f"{self.path}:1: not a modelgen journal (its first line is not a study header)") from None
+        if not isinstance(header, dict) or header.get("study") != self.study or header.get("tasks") != self.tasks:
+            raise ModelError(f"{self.path}:1: journal of another study or task split ({header!r:.120}); "
+                             f"give a new --journal file or remove this one")
+        done: dict[int, Any] = {}
+        for number, line in enumerate(lines[1:], start=2):
+            try:
+                entry = json.loads(line)
+                index = entry["index"]
+            except (json.JSONDecodeError, KeyError, TypeError):
+                if number == len(lines):  # cut short by the stop that ended the study: drop it
+                    good = "".join(f"{kept}\n" for kept in lines[:-1])
+                    os.truncate(self.path, len(good.encode("utf-8")))
+                    break
+                raise ModelError(f"{self.path}:{number}: not a journal entry") from None
+            if not isinstance(index, int) or not 0 <= index < self.tasks:
+                raise ModelError(f"{self.path}:{number}: task index {index!r} out of range [0, {self.tasks})")
+            done[index] = entry.get("result")
+        return done
+
+    def record(self, index: int, result: Any) -> None:
+        """Append one completed task's result."""
+        self._append({"index": index, "result": result})
+
+    def _append(self, entry: dict) -> None:
+        with self.path.open("a", encoding="utf-8") as handle:
+            handle.write(json.dumps(entry, separators=(",", ":")) + "\n")
+            handle.flush()
+            os.fsync(handle.fileno())
+
+
 def run_tasks(function: Callable[..., T], arguments: Sequence[tuple], client: Any = None,
               progress: Callable[[int, int], None] | None = None, retries: int = TASK_RETRIES,
-              on_result: Callable[[int, T], None] | None = None, label: str = "task") -> list[T]:
+              on_result: Callable[[int, T], None] | None = None, label: str = "task",
+              journal: Journal | None = None) -> list[T]:
     """``[function(*a) for a in arguments]``, as dask tasks on ``client`` (or here, in order, without one).
 
     ``progress(done, total)`` is called as each task completes and
-    ``on_result(index, result)`` with each result as it arrives (write it
-    out there to keep it whatever happens later).  A task that still fails
-    after ``retries`` more tries raises its error here.
+    ``on_result(index, result)`` with each result as it arrives.  With a
+    ``journal`` each result is written to it as it arrives, and the tasks it
+    already holds are not run again.  A task that still fails after
+    ``retries`` more tries raises its error here.
     """
     total = len(arguments)
     results: list[Any] = [None] * total
+    recorded = journal.completed() if journal is not None else {}
+    for i, value in recorded.items():
+        results[i] = value
+    pending = [i for i in range(total) if i not in recorded]
+    done = len(recorded)
+
+    def arrived(i: int, value: Any) -> None:
+        nonlocal done
+        results[i] = value
+        done += 1
+        if journal is not None:
+            journal.record(i, value)
+        if on_result:
+            on_result(i, value)
+        if progress:
+            progress(done, total)
+
     if client is None:
-        for i, args in enumerate(arguments):
-            results[i] = function(*args)
-            if on_result:
-                on_result(i, results[i])
-            if progress:
-                progress(i + 1, total)
+        for i in pending:
+            arrived(i, function(*arguments[i]))
         return results
     from distributed import as_completed
 
     study = uuid.uuid4().hex[:12]
-    futures = [client.submit(function, *args, retries=retries, pure=False, key=f"modelgen-{label}-{study}-{i}")
-               for i, args in enumerate(arguments)]
-    index = {f.key: i for i, f in enumerate(futures)}
-    done = 0
+    futures = [client.submit(function, *arguments[i], retries=retries, pure=False, key=f"modelgen-{label}-{study}-{i}")
+               for i in pending]
+    index = {f.key: i for i, f in zip(pending, futures)}
     try:
         for future in as_completed(futures):
-            i = index[future.key]
-            results[i] = future.result()
+            value = future.result()
             future.release()
-            done += 1
-            if on_result:
-                on_result(i, results[i])
-            if progress:
-                progress(done, total)
+            arrived(index[future.key], value)
     finally:
         client.cancel([f for f in futures if not f.done()])
     return results

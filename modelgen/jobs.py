@@ -508,11 +508,12 @@ def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation
 
 
 def trade_study(study_file: str | Path, folder: Path, scheduler: str | None = None, workers: int | None = None,
-                echo=print) -> list[Path]:
+                echo=print, journal: str | Path | None = None) -> list[Path]:
     """``modelgen trade``: check the study file, run its cases on a dask cluster, write its outputs into ``folder``.
 
     The whole file is checked (and its Monte Carlo profiles built) before the
-    cluster is opened or any task submitted.
+    cluster is opened or any task submitted.  ``journal`` keeps completed
+    covariance tasks on disk (see :class:`modelgen.cluster.Journal`).
     """
     from modelgen.cluster import dask_client
     from modelgen.study.outputs import write_outputs
@@ -524,5 +525,5 @@ def trade_study(study_file: str | Path, folder: Path, scheduler: str | None = No
     echo(f"modelgen trade: {study.name}, {study.case_count} covariance cases"
          + (f", {len(profiles)} Monte Carlo cases" if profiles else ""))
     with dask_client(scheduler, workers) as client:
-        result = run_trade(study, client, progress=echo, profiles=profiles)
+        result = run_trade(study, client, progress=echo, profiles=profiles, journal=journal)
     return write_outputs(result, folder)

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from conftest import REPO
-from modelgen.cluster import dask_client, describe_client, run_tasks
+from modelgen.cluster import Journal, dask_client, describe_client, run_tasks
 from modelgen.errors import ModelError
 from modelgen.simulation.montecarlo import run_monte_carlo
 from modelgen.simulation.scenario import load_profile
@@ -195,3 +195,40 @@ def test_an_unreachable_scheduler_is_a_clear_error_within_the_timeout():
     with pytest.raises(ModelError, match="not a dask scheduler address"):
         with dask_client("bogus://127.0.0.1:9", timeout_s=2):
             pass
+
+
+def test_a_journal_keeps_results_as_they_complete_and_a_stopped_study_resumes_from_it(tmp_path):
+    path = tmp_path / "study.jsonl"
+    calls = []
+
+    def square(i: int) -> dict:
+        calls.append(i)
+        return {"i": i, "square": i * i, "nothing": float("nan")}
+
+    first = run_tasks(square, [(i,) for i in range(5)], journal=Journal(path, "study-a", 5))
+    assert calls == [0, 1, 2, 3, 4] and len(path.read_text().splitlines()) == 6
+    # the study stops after two results, the third cut short as it was written
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(lines[:3] + [lines[3][:9]]) + "\n")
+    calls.clear()
+    progress = []
+    again = run_tasks(square, [(i,) for i in range(5)], journal=Journal(path, "study-a", 5),
+                      progress=lambda d, t: progress.append(d))
+    assert calls == [2, 3, 4] and progress == [3, 4, 5]
+    assert [(r["i"], r["square"]) for r in again] == [(r["i"], r["square"]) for r in first]
+    calls.clear()
+    run_tasks(square, [(i,) for i in range(5)], journal=Journal(path, "study-a", 5))
+    assert calls == []  # all five recorded now
+
+
+def test_a_journal_of_another_study_is_refused(tmp_path):
+    path = tmp_path / "study.jsonl"
+    run_tasks(abs, [(-1,), (-2,)], journal=Journal(path, "study-a", 2))
+    with pytest.raises(ModelError, match="study.jsonl:1: journal of another study"):
+        run_tasks(abs, [(-1,), (-2,)], journal=Journal(path, "study-b", 2))
+    path.write_text('{"study": "study-a", "tasks": 2}\nnot json\n{"index": 1, "result": 2}\n')
+    with pytest.raises(ModelError, match="study.jsonl:2: not a journal entry"):
+        run_tasks(abs, [(-1,), (-2,)], journal=Journal(path, "study-a", 2))
+    path.write_text('{"study": "study-a", "tasks": 2}\n{"index": 7, "result": 2}\n')
+    with pytest.raises(ModelError, match="task index 7 out of range"):
+        run_tasks(abs, [(-1,), (-2,)], journal=Journal(path, "study-a", 2))

@@ -21,6 +21,7 @@ import math
 import pickle
 import time
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from modelgen.analysis.budget import ErrorBudget
@@ -28,7 +29,7 @@ from modelgen.analysis.metrics import final_values
 from modelgen.analysis.scenario import AnalysisScenario
 from modelgen.analysis.suboptimal import FilterDesign
 from modelgen.analysis.systems import PURE_INERTIAL, PaperModels, analyse_systems
-from modelgen.cluster import describe_client, run_tasks, worker_cached
+from modelgen.cluster import Journal, describe_client, run_tasks, worker_cached
 from modelgen.derive.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import read_yaml_with_lines
@@ -176,12 +177,21 @@ def monte_carlo_profiles(study: Study) -> list[FlightProfile]:
     return [monte_carlo_profile(mc.profile, study.parameters, p, mc.hours, mc.imu_rate) for p in mc.cases]
 
 
+def covariance_journal(path: str | Path, setup: CovarianceSetup, tasks: Sequence[Sequence[tuple[float, ...]]]) -> Journal:
+    """The journal of a study's covariance tasks: its name is the digest of the set-up and of the split into tasks."""
+    split = hashlib.sha256(repr([list(t) for t in tasks]).encode()).hexdigest()[:16]
+    return Journal(path, f"{setup.key}-{split}", len(tasks))
+
+
 def run_trade(study: Study, client: Any = None, progress: Callable[[str], None] | None = None,
-              profiles: Sequence[FlightProfile] | None = None) -> TradeResult:
+              profiles: Sequence[FlightProfile] | None = None, journal: str | Path | None = None) -> TradeResult:
     """Every case of ``study`` (covariance), then its Monte Carlo cases, on ``client`` (or here without one).
 
     ``profiles``: :func:`monte_carlo_profiles` of the study, if the caller
     built them already (to refuse a bad one before opening a cluster).
+    ``journal``: a file that keeps each completed covariance task (JSON
+    lines); a study stopped part-way is taken up again from it (with the
+    same number of workers, which sets the split into tasks).
     """
     say = progress or (lambda _: None)
     start = time.perf_counter()
@@ -201,8 +211,11 @@ def run_trade(study: Study, client: Any = None, progress: Callable[[str], None] 
                 state["next"] += 0.1
 
     covariance_start = time.perf_counter()
+    kept = covariance_journal(journal, setup, tasks) if journal is not None else None
+    if kept is not None:
+        say(f"  journal {journal}: {len(kept.completed())} of {len(tasks)} tasks already done")
     finals = [f for chunk in run_tasks(evaluate_points, [(setup, c) for c in tasks], client, progress=report,
-                                       label="trade") for f in chunk]
+                                       label="trade", journal=kept) for f in chunk]
     covariance_seconds = time.perf_counter() - covariance_start
     cases = []
     for point, systems in zip(study.points, finals):

@@ -144,3 +144,16 @@ def test_a_study_with_monte_carlo_flies_the_selected_case(small_study):
     assert len(result.cases) == 1 and len(result.monte_carlo) == 1
     ensemble = result.monte_carlo[0].result
     assert ensemble.runs == 2 and ensemble.errors.shape[2] == 18 and np.all(np.isfinite(ensemble.errors))
+
+
+def test_a_trade_study_with_a_journal_takes_up_where_it_stopped(small_study, small_result, tmp_path):
+    journal = tmp_path / "trade.jsonl"
+    whole = run_trade(small_study, journal=journal)
+    lines = journal.read_text().splitlines()
+    assert len(lines) == 1 + 6 and csv_text(whole) == csv_text(small_result)
+    journal.write_text("\n".join(lines[:4]) + "\n")  # stopped after three of six tasks
+    said = []
+    resumed = run_trade(small_study, journal=journal, progress=said.append)
+    assert any("3 of 6 tasks already done" in s for s in said)
+    assert csv_text(resumed) == csv_text(small_result)
+    assert len(journal.read_text().splitlines()) == 7
