@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -62,6 +63,12 @@ def navigation_errors(outputs: np.ndarray, trajectory: Trajectory, times: np.nda
     return NavigationErrors(truth[:, 0], position, velocity, attitude)
 
 
+def _timed(function: Callable, *args: Any) -> tuple[Any, float]:
+    """``function(*args)`` and the seconds it took."""
+    start = time.perf_counter()
+    return function(*args), time.perf_counter() - start
+
+
 def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, int], None]:
     state = {"next": 0.1, "start": time.perf_counter()}
 
@@ -97,22 +104,22 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
 
     echo(f"modelgen simulate: {profile.name}, {profile.path.duration / 3600:.2f} h, IMU {profile.imu_rate:g} Hz "
          f"({'numba' if HAVE_NUMBA else 'pure Python: slow'}), filter {derived.model.name}, {runs} Monte Carlo runs")
-    t = time.perf_counter()
-    trajectory = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period, streamed=True)
-    timings["trajectory (truth; IMU increments are generated piece by piece in the flight)"] = time.perf_counter() - t
-    echo(f"  trajectory: truth of {trajectory.n_samples} IMU samples in {time.perf_counter() - t:.1f} s")
-    layout = profile_layout(profile, derived, trajectory)
-    rng = np.random.default_rng(seed)
-    t = time.perf_counter()
-    sensors = simulate_sensors(profile, trajectory, rng)
-    timings["sensors (IMU errors, aiding)"] = time.perf_counter() - t
-
     results: dict[str, RunResult] = {}
-    with tempfile.TemporaryDirectory(prefix="modelgen-simulate-") as code_dir:
+    with tempfile.TemporaryDirectory(prefix="modelgen-simulate-") as code_dir, ThreadPoolExecutor(1) as builder:
+        # the filter code is generated and compiled (a compiler process) while the truth and the sensors are made
+        building = builder.submit(_timed, filter_factory, derived, implementation, code_dir)
         t = time.perf_counter()
-        make_filter = filter_factory(derived, implementation, code_dir)
-        build = timings[f"filter code ({implementation}: generate, compile or import)"] = time.perf_counter() - t
-        echo(f"  filter: {implementation} ({build:.1f} s to build)")
+        trajectory = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period, streamed=True)
+        timings["trajectory (truth; IMU increments are generated piece by piece in the flight)"] = time.perf_counter() - t
+        echo(f"  trajectory: truth of {trajectory.n_samples} IMU samples in {time.perf_counter() - t:.1f} s")
+        layout = profile_layout(profile, derived, trajectory)
+        rng = np.random.default_rng(seed)
+        t = time.perf_counter()
+        sensors = simulate_sensors(profile, trajectory, rng)
+        timings["sensors (IMU errors, aiding)"] = time.perf_counter() - t
+        make_filter, build = building.result()
+        timings[f"filter code ({implementation}: generate, compile or import; alongside the above)"] = build
+        echo(f"  filter: {implementation} ({build:.1f} s to build, alongside the trajectory and sensors)")
         t = time.perf_counter()
         n_cycles = len(trajectory.truth) - 1
         record_every = history_every(n_cycles)
