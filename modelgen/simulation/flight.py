@@ -39,15 +39,19 @@ def perturbed_initial_state(truth0: np.ndarray, attitude: np.ndarray, velocity: 
     return nav
 
 
-def simulate_sensors(profile: FlightProfile, trajectory: Trajectory, rng: np.random.Generator) -> SensorData:
+def simulate_sensors(profile: FlightProfile, trajectory: Trajectory, rng: np.random.Generator,
+                     stream_errors: bool | None = None) -> SensorData:
     """One realization of every sensor error of the profile (the aiding sensor's last, from its plug-in).
 
-    For a streamed trajectory the IMU errors are an :class:`ImuErrorStream`
-    (nothing of the length of the flight is held); ``rng`` is drawn from
-    exactly as for a whole one, so the same seed gives the same flight.
+    For a streamed trajectory (or ``stream_errors=True``) the IMU errors are
+    an :class:`ImuErrorStream` (nothing of the length of the flight is held);
+    ``rng`` is drawn from exactly as for a whole one, so the same seed gives
+    the same flight.  Streamed errors on a held trajectory suit many runs of
+    one flight (a Monte Carlo worker): the ideal increments are made once and
+    shared, and each run adds only its pieces of measured increments.
     """
     stream = None
-    if trajectory.streamed:
+    if trajectory.streamed or stream_errors:
         stream = ImuErrorStream(profile.imu_budget, trajectory.dt, trajectory.n_samples, trajectory.record_every, rng)
         dtheta = dvel = None
         history = stream.history

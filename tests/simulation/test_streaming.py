@@ -153,3 +153,17 @@ def test_histories_are_written_piece_by_piece_with_the_rows_held_in_memory(scena
         assert np.array_equal(table[:, 0], result.times)
         assert np.array_equal(table[:, 11:11 + len(names)], result.estimation_error)  # repr: exact round trip
         assert np.array_equal(table[:, -1], result.nees, equal_nan=True)
+
+
+def test_streamed_errors_on_a_held_trajectory_fly_the_held_flight_bit_for_bit(scenario, paper_derived):
+    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0)
+    layout = profile_layout(scenario, paper_derived, trajectory)
+    results = []
+    for stream_errors in (False, True):
+        sensors = simulate_sensors(scenario, trajectory, np.random.default_rng(21), stream_errors=stream_errors)
+        assert sensors.streamed == stream_errors
+        results.append(fly_modes(scenario, paper_derived, trajectory, sensors, layout,
+                                 lambda x, P: ReferenceFilter(paper_derived, x, P), ("closed_loop",), piece_seconds=7.0))
+    for name in FIELDS:
+        assert np.array_equal(getattr(results[0]["closed_loop"], name), getattr(results[1]["closed_loop"], name),
+                              equal_nan=True), name
