@@ -14,7 +14,9 @@ errors), per model:
   ``kernels.COMPACT_ABOVE_FLOPS`` -- the C compile time of the filter at -O2,
   its .text size, and the wall time per covariance prediction in the
   benchmark harness (bench/harness.c, best of three runs);
-* the wall time of the same prediction by the dense C filter
+* instructions per prediction (valgrind's callgrind: deterministic, where
+  the wall time on a shared machine is not);
+* the wall time and instructions of the same prediction by the dense C filter
   (bench/dense_filter.c: P = Phi P Phi^T + Q_d with triple loops), the
   baseline of the ratios, measured in the same run.
 
@@ -49,7 +51,7 @@ REPO = HERE.parent
 sys.path.insert(0, str(REPO))  # runs from a fresh clone without installing
 sys.path.insert(0, str(HERE))
 
-from bench_codegen import GLUE_DENSE, build_harness, glue_generated, input_file, run  # noqa: E402
+from bench_codegen import GLUE_DENSE, build_harness, callgrind_instructions, glue_generated, input_file, run  # noqa: E402
 
 from modelgen.checks.code_check import measurement_sequence  # noqa: E402
 from modelgen.codegen import kernels  # noqa: E402
@@ -131,7 +133,8 @@ def kernel_row(derived, p: dict, data: Path, folder: Path, compact: bool) -> dic
     compile_s, text = compile_seconds_and_text(gen / f"{name}.c")
     exe = build_harness(Path(tempfile.mkdtemp(dir=folder)), glue_generated(name), [gen / f"{name}.c"], p, includes=(gen,))
     return {"codegen_s": seconds, "compile_s": compile_s, "text_bytes": text, "c_bytes": len(files[f"{name}.c"]),
-            "predict_ns": wall_ns(exe, data, derived.n_states)}
+            "predict_ns": wall_ns(exe, data, derived.n_states),
+            "predict_instructions": callgrind_instructions(exe, data, "predict")}
 
 
 def measure(n: int, unrolled_up_to: int, folder: Path) -> dict:
@@ -153,22 +156,25 @@ def measure(n: int, unrolled_up_to: int, folder: Path) -> dict:
     data = input_file(p, folder)
     dense = build_harness(Path(tempfile.mkdtemp(dir=folder)), GLUE_DENSE, [HERE / "dense_filter.c"], p)
     row["dense_predict_ns"] = wall_ns(dense, data, n)
+    row["dense_predict_instructions"] = callgrind_instructions(dense, data, "predict")
     for compact in (False, True):
         if not compact and n > unrolled_up_to:
             continue
         kind = "compact" if compact else "unrolled"
         row[kind] = kernel_row(derived, p, data, folder, compact)
         row[kind]["ratio_to_dense"] = row[kind]["predict_ns"] / row["dense_predict_ns"]
+        row[kind]["instruction_ratio_to_dense"] = row[kind]["predict_instructions"] / row["dense_predict_instructions"]
         progress(f"  {kind}: compile {row[kind]['compile_s']:.1f} s, .text {row[kind]['text_bytes'] / 1e3:.0f} kB, "
-                 f"predict {row[kind]['predict_ns'] / 1e3:.1f} us = {row[kind]['ratio_to_dense']:.3f}x dense C")
+                 f"predict {row[kind]['predict_ns'] / 1e3:.1f} us = {row[kind]['ratio_to_dense']:.3f}x dense C, "
+                 f"{row[kind]['predict_instructions']:.0f} instructions = {row[kind]['instruction_ratio_to_dense']:.3f}x")
     return row
 
 
 def markdown(rows: list[dict]) -> str:
     lines = [
         "| states | Phi nonzeros | unrolled flops | default | codegen s | largest file kB | kernel | compile s (-O2) "
-        "| .text kB | predict us | dense C us | ratio to dense |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| .text kB | predict us | dense C us | ratio to dense | predict instructions | ratio to dense |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         for kind in ("unrolled", "compact"):
@@ -178,7 +184,8 @@ def markdown(rows: list[dict]) -> str:
             lines.append(
                 f"| {r['states']} | {r['phi_nonzeros']} | {r['unrolled_flops']} | {r['default']} | {r['codegen_s']:.2f} "
                 f"| {r['largest_file_bytes'] / 1e3:.0f} | {kind} | {k['compile_s']:.2f} | {k['text_bytes'] / 1e3:.0f} "
-                f"| {k['predict_ns'] / 1e3:.2f} | {r['dense_predict_ns'] / 1e3:.1f} | {k['ratio_to_dense']:.3f} |"
+                f"| {k['predict_ns'] / 1e3:.2f} | {r['dense_predict_ns'] / 1e3:.1f} | {k['ratio_to_dense']:.3f} "
+                f"| {k['predict_instructions']:.0f} | {k['instruction_ratio_to_dense']:.4f} |"
             )
     return "\n".join(lines) + "\n"
 

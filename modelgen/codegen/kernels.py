@@ -206,15 +206,16 @@ def unrolled_predict_flops(structure: FilterStructure) -> int:
 #: Above this many unrolled flops in the covariance prediction the generated C gets compact
 #: kernels (loops over the CSR pattern of Phi, ``compact_kernels``; discretize follows the same
 #: switch) instead of straight-line code.  Measured by bench/bench_large_models.py (gcc -O2,
-#: x86-64, on a machine shared by several jobs): unrolled against compact, compile time of the
-#: filter, .text and wall time per prediction --
-#:   18 states (4,700 flops):            25 s, 204 kB,  3.8 us   against 1.5 s, 14 kB, 4.8 us;
-#:   32 states augmented (13,700 flops): 50 s, 397 kB,  5.3 us   against 1.1 s, 18 kB, 7.7 us;
-#:   48 states (32,100 flops):          161 s, 772 kB, 43.3 us   against 8.8 s, 25 kB, 37.9 us.
-#: The unrolled code is faster per call while it fits the instruction cache, and costs compile
-#: time and .text in proportion to its flops; at 48 states the compact loops are already the
-#: faster.  The threshold sits between the 32- and the 48-state models, so every built-in model
-#: (at most 13,700 flops) keeps its unrolled code.
+#: x86-64, bench/results/large_models.md): unrolled against compact, compile time of the
+#: filter, .text, instructions and wall time per prediction --
+#:   18 states (4,700 flops):            24 s, 204 kB,  7,600 instr, 1.25 us  against 0.6 s, 14 kB,  18,600, 1.60 us;
+#:   32 states augmented (13,700 flops): 14 s, 397 kB, 20,500 instr, 2.30 us  against 0.5 s, 18 kB,  47,700, 3.24 us;
+#:   48 states (32,100 flops):           49 s, 772 kB, 62,300 instr, 5.15 us  against 1.5 s, 25 kB, 123,400, 7.16 us.
+#: The unrolled code is 1.3-1.4x faster per call (2-2.5x fewer instructions: no index loads),
+#: and costs compile time and .text in proportion to its flops (both include discretize, which
+#: switches with it): at 48 states a minute of compiling and 0.77 MB of object code, most of a
+#: Cortex-M4's flash, for that factor.  The threshold sits between the 32- and the 48-state
+#: models, so every built-in model (at most 13,700 flops) keeps its unrolled code.
 COMPACT_ABOVE_FLOPS = 20_000
 
 
