@@ -23,6 +23,28 @@ def package_path(*parts: str) -> Path:
     return Path(str(place))
 
 
+def display_path(path: str | Path) -> str:
+    """How a report names ``path``: never an absolute path of this machine.
+
+    A file shipped in the package is ``modelgen/<its place in the package>``;
+    a user's file is named relative to the working folder when it lies below
+    it, else by its file name alone.
+    """
+    path = Path(path)
+    try:
+        resolved = path.resolve()
+    except OSError:
+        return path.name
+    root = Path(str(resources.files("modelgen"))).resolve()
+    for base, prefix in ((root, "modelgen"), (Path.cwd().resolve(), "")):
+        try:
+            relative = resolved.relative_to(base)
+        except ValueError:
+            continue
+        return f"{prefix}/{relative.as_posix()}" if prefix else relative.as_posix()
+    return path.name
+
+
 def data_path(filename: str = "") -> Path:
     """Path of a file shipped in ``modelgen/data`` (the folder itself without a file name)."""
     return package_path("data", filename) if filename else package_path("data")

@@ -23,6 +23,8 @@ from typing import Any, Callable
 import numpy as np
 
 from modelgen.derive.symbolic import DerivedModel
+from modelgen.fileio.datafiles import display_path
+from modelgen.model.sources import cite_sources
 from modelgen.simulation import earth
 from modelgen.simulation.filter_loop import MODES, RunResult
 from modelgen.simulation.filters import filter_factory
@@ -140,20 +142,21 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
     if runs > 0:
         t = time.perf_counter()
         monte_carlo = run_monte_carlo(profile, derived, runs, seed=seed + 1, workers=workers, client=client,
-                                      progress=_echo_progress(echo, "Monte Carlo runs"))
-        timings[f"Monte Carlo ({runs} runs, {monte_carlo.where})"] = time.perf_counter() - t
+                                      progress=_echo_progress(echo, "Monte Carlo runs"), implementation=implementation)
+        timings[f"Monte Carlo ({_runs(runs)}, {monte_carlo.where})"] = time.perf_counter() - t
 
+    units = {state.name: state.unit for state in derived.model.states}
     figures = [
         _plot_trajectory(trajectory, out_dir / "trajectory.png"),
         _plot_modes(errors, out_dir / "correction_modes.png"),
-        _plot_filter(results[profile.filter.mode], derived.model.state_names, out_dir / "filter_errors.png"),
+        _plot_filter(results[profile.filter.mode], derived.model.state_names, units, out_dir / "filter_errors.png"),
     ]
     if monte_carlo is not None:
-        figures.append(_plot_monte_carlo(monte_carlo, out_dir / "monte_carlo.png"))
+        figures.append(_plot_monte_carlo(monte_carlo, units, out_dir / "monte_carlo.png"))
         figures.append(_plot_nees(monte_carlo, out_dir / "nees.png"))
     summary = out_dir / "summary.md"
-    summary.write_text(_summary(profile, derived.model.name, implementation, layout.conventions, trajectory, results, errors,
-                                monte_carlo, timings, figures), encoding="utf-8")
+    summary.write_text(cite_sources(_summary(profile, derived.model.name, implementation, layout.conventions, trajectory, results, errors,
+                                monte_carlo, timings, figures)), encoding="utf-8")
     echo(f"  wrote {summary} and {len(figures)} figures")
     return summary
 
@@ -187,29 +190,58 @@ def _plot_trajectory(trajectory: Trajectory, path: Path) -> Path:
     return path
 
 
+#: line styles of the correction modes: drawn widest first, so a mode whose curve
+#: lies on another's (closed loop and accumulated, by seed 003's theorem) stays visible
+_MODE_STYLES = {
+    "open_loop": {"linewidth": 3.2, "alpha": 0.55},
+    "closed_loop": {"linewidth": 1.8, "linestyle": "--"},
+    "accumulated": {"linewidth": 1.2, "linestyle": (0, (1, 1.5))},
+    "free INS": {"linewidth": 1.0, "linestyle": "-."},
+}
+
+
+def coinciding_modes(curves: dict[str, np.ndarray], tolerance: float = 0.01) -> dict[str, tuple[str, float]]:
+    """For each curve lying on an earlier one (median relative difference below ``tolerance``): (that one, difference)."""
+    notes: dict[str, tuple[str, float]] = {}
+    labels = list(curves)
+    for i, label in enumerate(labels):
+        for earlier in labels[:i]:
+            a, b = curves[earlier], curves[label]
+            scale = np.maximum(np.abs(a), 1e-12)
+            median = float(np.median(np.abs(a - b) / scale)) if a.size else 0.0
+            if median < tolerance:
+                notes[label] = (earlier, median)
+                break
+    return notes
+
+
 def _plot_modes(errors: dict[str, NavigationErrors], path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(3, 1, figsize=(11, 10), sharex=True)
-    for label, e in errors.items():
-        hours = e.times / 3600
-        style = {"linestyle": ":"} if label == "free INS" else {}
-        ax[0].semilogy(hours, np.hypot(*e.position.T) / NMILE + 1e-9, label=label, **style)
-        ax[1].semilogy(hours, np.hypot(*e.velocity.T) + 1e-9, label=label, **style)
-        ax[2].semilogy(hours, np.abs(e.attitude[:, 2]) / ARCSEC + 1e-9, label=label, **style)
-    ax[0].set(ylabel="horizontal position error [nmile]", title="Corrected outputs by correction mode (one run, same sensors)")
-    ax[1].set(ylabel="horizontal velocity error [m/s]")
-    ax[2].set(ylabel="heading error [arcsec]", xlabel="time [h]")
-    for a in ax:
+    panels = (
+        ("horizontal position error [nmile]", lambda e: np.hypot(*e.position.T) / NMILE),
+        ("horizontal velocity error [m/s]", lambda e: np.hypot(*e.velocity.T)),
+        ("heading error [arcsec]", lambda e: np.abs(e.attitude[:, 2]) / ARCSEC),
+    )
+    for a, (unit, quantity) in zip(ax, panels):
+        curves = {label: quantity(e) for label, e in errors.items()}
+        notes = coinciding_modes(curves)
+        for label, e in errors.items():
+            shown = label if label not in notes else f"{label} (on {notes[label][0]}: median diff. {100 * notes[label][1]:.2g} %)"
+            a.semilogy(e.times / 3600, curves[label] + 1e-9, label=shown, **_MODE_STYLES.get(label, {}))
+        a.set(ylabel=unit)
         a.legend(fontsize=8)
         a.grid(True, which="both", alpha=0.3)
+    ax[0].set(title="Corrected outputs by correction mode (one run, same sensors)")
+    ax[2].set(xlabel="time since start [h]")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
 
 
-def _plot_filter(result: RunResult, names: list[str], path: Path) -> Path:
+def _plot_filter(result: RunResult, names: list[str], units: dict[str, str], path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     hours = result.times / 3600
@@ -222,18 +254,19 @@ def _plot_filter(result: RunResult, names: list[str], path: Path) -> Path:
         a.plot(hours, result.estimation_error[:, i], lw=0.8, label="error")
         a.plot(hours, 3 * result.sigma[:, i], "r", lw=0.6, label="+-3 sigma")
         a.plot(hours, -3 * result.sigma[:, i], "r", lw=0.6)
-        a.set_title(names[i], fontsize=8)
+        a.set_title(f"{names[i]} [{units.get(names[i], '?')}]", fontsize=8)
         a.tick_params(labelsize=7)
     for a in list(ax.flat)[len(picks):]:
         a.axis("off")
-    fig.suptitle(f"Estimation error and filter 3-sigma, {result.mode} ({result.filter_name}), SI units")
+    _time_labels(ax, len(picks), cols)
+    fig.suptitle(f"Estimation error and filter 3-sigma, {result.mode} ({result.filter_name}); each panel in its state's unit")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
 
 
-def _plot_monte_carlo(mc: MonteCarloResult, path: Path) -> Path:
+def _plot_monte_carlo(mc: MonteCarloResult, units: dict[str, str], path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     hours = mc.times / 3600
@@ -244,18 +277,31 @@ def _plot_monte_carlo(mc: MonteCarloResult, path: Path) -> Path:
     fig, ax = plt.subplots(rows, cols, figsize=(13, 2.1 * rows), sharex=True)
     for i in range(n):
         a = ax.flat[i]
-        a.plot(hours, rms[:, i], label=f"ensemble rms ({mc.runs} runs)")
+        a.plot(hours, rms[:, i], label=f"ensemble rms ({_runs(mc.runs)})")
         a.plot(hours, sigma[:, i], "--", label="filter covariance sigma")
-        a.set_title(mc.state_names[i], fontsize=8)
+        a.set_title(f"{mc.state_names[i]} [{units.get(mc.state_names[i], '?')}]", fontsize=8)
         a.tick_params(labelsize=7)
     ax.flat[0].legend(fontsize=7)
     for a in list(ax.flat)[n:]:
         a.axis("off")
-    fig.suptitle(f"Monte Carlo: actual error rms vs covariance sigma ({mc.mode}), SI units")
+    _time_labels(ax, n, cols)
+    fig.suptitle(f"Monte Carlo: actual error rms vs covariance sigma ({mc.mode}, {_runs(mc.runs)}); each panel in its state's unit")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+def _time_labels(ax, used: int, cols: int) -> None:
+    """'time [h]' under the lowest used panel of each column."""
+    for column in range(min(cols, used)):
+        lowest = column + cols * ((used - 1 - column) // cols)
+        ax.flat[lowest].set_xlabel("time [h]", fontsize=8)
+
+
+def _runs(count: int) -> str:
+    """'1 run', '16 runs'."""
+    return f"{count} run" + ("" if count == 1 else "s")
 
 
 def _plot_nees(mc: MonteCarloResult, path: Path) -> Path:
@@ -263,7 +309,7 @@ def _plot_nees(mc: MonteCarloResult, path: Path) -> Path:
 
     test = mc.nees_test(0.95, start_time=mc.times[1] if len(mc.times) > 1 else 0.0)
     fig, ax = plt.subplots(figsize=(10, 4))
-    ax.plot(test.times / 3600, test.mean_nees, label=f"ensemble mean NEES ({mc.runs} runs)")
+    ax.plot(test.times / 3600, test.mean_nees, label=f"ensemble mean NEES ({_runs(mc.runs)})")
     ax.axhline(test.dimension, color="k", lw=0.8, label=f"n = {test.dimension}")
     ax.axhspan(test.lower, test.upper, color="g", alpha=0.15, label="95 % chi-square band")
     ax.set(xlabel="time [h]", ylabel="NEES", title=f"NEES consistency: {100 * test.fraction_inside:.0f} % of times inside")
@@ -289,7 +335,7 @@ def _summary(profile, model_name, implementation, conventions, trajectory, resul
     lines = [
         f"# Simulation: {profile.title or profile.name}",
         "",
-        f"Scenario `{profile.name}` ({profile.source_file}), {profile.path.duration / 3600:.2f} h, "
+        f"Scenario `{profile.name}` ({display_path(profile.source_file) if profile.source_file else 'built in code'}), {profile.path.duration / 3600:.2f} h, "
         f"IMU {profile.imu_rate:g} Hz with {profile.coning}-sample coning/sculling, filter model `{model_name}`, "
         f"aiding {profile.filter.aiding} every {profile.aiding_period:g} s, "
         f"filter cycle {profile.filter.period:g} s.",
@@ -340,10 +386,9 @@ def _summary(profile, model_name, implementation, conventions, trajectory, resul
         test = mc.nees_test(0.95, start_time=mc.times[1] if len(mc.times) > 1 else 0.0)
         rms, sigma = mc.ensemble_rms(), mc.mean_sigma()
         lines += [
-            f"## Monte Carlo ({mc.runs} runs, {mc.mode}, {mc.seconds:.1f} s)",
+            f"## Monte Carlo ({_runs(mc.runs)}, {mc.mode}, {mc.seconds:.1f} s)",
             "",
-            "Filter: the numpy reference (the conformance tests hold the generated code to it within 1e-12, "
-            "scaled covariance difference).",
+            f"Filter: {_IMPLEMENTATION_TEXT[implementation]}, built once per worker.",
             "",
             f"Ensemble mean NEES inside the 95 % chi-square band [{test.lower:.2f}, {test.upper:.2f}] "
             f"(n = {test.dimension}) at {100 * test.fraction_inside:.0f} % of the {len(test.times)} stored times: "
