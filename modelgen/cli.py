@@ -437,8 +437,10 @@ def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool, force: bool
 @click.option("--scheduler", default=None, metavar="ADDRESS", help=_SCHEDULER_HELP)
 @click.option("--workers", type=click.IntRange(min=1), default=None, help=_WORKERS_HELP)
 @click.option("--history-csv", is_flag=True, help="Also write each correction mode's history (output, estimation error, sigma, NEES per recorded cycle) to history_<mode>.csv as it is flown.")
+@click.option("--model", "model", default=None, metavar="MODEL", help="Filter model (a built-in name or a model file) instead of the profile's filter.model; its parameters are taken by name from the simulation, its filter.parameters constants or its own defaults (README: 'Flying your own model').")
 def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | None, seed: int, out_dir: str,
-             implementation: str, force: bool, scheduler: str | None, workers: int | None, history_csv: bool) -> None:
+             implementation: str, force: bool, scheduler: str | None, workers: int | None, history_csv: bool,
+             model: str | None) -> None:
     """Fly a scenario: truth, IMU/Doppler/GPS, strapdown, filter in three correction modes, Monte Carlo.
 
     Writes summary.md (errors per correction mode, NEES test, timings) and PNG
@@ -450,7 +452,7 @@ def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | Non
     from modelgen.fileio.output import ReportUpdate
     from modelgen.jobs import flight_scenario, simulate_flight
 
-    scenario = flight_scenario(profile, hours, imu_rate)
+    scenario = flight_scenario(profile, hours, imu_rate, model)
     with ReportUpdate(Path(out_dir), force=force) as staged:
         summary = simulate_flight(scenario, staged.staging, runs, seed, implementation, echo=_mapped_echo(staged, err=True),
                                   scheduler=scheduler, workers=workers, history_csv=history_csv)

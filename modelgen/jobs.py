@@ -476,13 +476,16 @@ def covariance_analysis(folder: Path, sensitivity: bool, figures: bool, progress
     return run_covariance_analysis(folder, models, sensitivity=sensitivity, figures=figures, progress=progress)
 
 
-def flight_scenario(profile: str, hours: float | None = None, imu_rate: float | None = None):
-    """``modelgen simulate``'s scenario: a profile (file or built-in name), optionally shortened or at another IMU rate."""
+def flight_scenario(profile: str, hours: float | None = None, imu_rate: float | None = None, model: str | None = None):
+    """``modelgen simulate``'s scenario: a profile (file or built-in name), optionally shortened, at another
+    IMU rate or with another filter model."""
     from modelgen.simulation.scenario import load_profile
 
-    changes: dict[str, float] = {"imu_rate": imu_rate} if imu_rate is not None else {}
+    changes: dict[str, float | str] = {"imu_rate": imu_rate} if imu_rate is not None else {}
     if hours is not None:
         changes["hours"] = hours
+    if model is not None:
+        changes["model"] = model
     return load_profile(profile).with_changes(**changes)
 
 

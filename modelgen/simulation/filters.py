@@ -309,8 +309,29 @@ def named_parameters(derived: DerivedModel, available: Mapping[str, float], vali
     """The model's parameters from a larger vocabulary; a missing one is refused by name."""
     chosen = {name: available[name] for name in derived.model.parameter_names if name in available}
     if validate:
-        parameter_vector(derived.model, chosen)  # raises ModelError naming any parameter without a value
+        missing = [p for p in derived.model.parameters if p.name not in chosen and p.value is None]
+        if missing:
+            raise ModelError(unsupplied_parameters_message(derived.model.name, [f"{p.name} ({p.symbol})" for p in missing],
+                                                           sorted(available)))
+        parameter_vector(derived.model, chosen)
     return chosen
+
+
+def _collapse_numbered(names: list[str]) -> list[str]:
+    """``pseudorange_sigma_1``, ``pseudorange_sigma_2``... shown once as ``pseudorange_sigma_<k>``."""
+    import re
+
+    return list(dict.fromkeys(re.sub(r"_\d+$", "_<k>", name) for name in names))
+
+
+def unsupplied_parameters_message(model: str, missing: list[str], supplied: list[str]) -> str:
+    """Why a model cannot fly, and the convention that would let it (README: 'Flying your own model')."""
+    return (
+        f"model {model!r} cannot fly this profile: the simulation supplies no value for parameter(s) "
+        f"{', '.join(missing)}.  A model's parameters take, by name, the simulated quantity of the same name "
+        f"({', '.join(_collapse_numbered(supplied))}); any other parameter needs a default value in the model file or a constant "
+        f"in the profile's filter.parameters (for example `{missing[0].split(' ')[0]}: 0.0`)"
+    )
 
 
 class ModelMatrices:

@@ -62,6 +62,8 @@ class FilterSettings:
     gate_probability: float = 0.9999
     states: dict[str, dict[str, str]] = field(default_factory=dict)
     measurements: dict[str, dict[str, str]] = field(default_factory=dict)
+    #: ``filter.parameters``: model parameters the simulation does not compute, held at these values
+    parameters: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -98,12 +100,14 @@ class FlightProfile:
 
     def noise_parameters(self) -> dict[str, float]:
         """Every sensor's noise as model parameter values (a model picks the names it has); where two
-        sensors set the same name, the aiding sensor's value holds."""
+        sensors set the same name, the aiding sensor's value holds.  The filter's constant
+        ``parameters`` come last and hold over both."""
         out: dict[str, float] = {}
         for name, settings in self.sensors.items():
             if name != self.filter.aiding:
                 out.update(SENSORS[name].noise_parameters(settings))
         out.update(self.aiding_sensor.noise_parameters(self.aiding_settings))
+        out.update(self.filter.parameters)
         return out
 
     def with_sensor(self, name: str, settings: Any) -> "FlightProfile":
@@ -111,13 +115,16 @@ class FlightProfile:
         return replace(self, sensors={**self.sensors, name: settings})
 
     def with_changes(self, **changes: Any) -> "FlightProfile":
-        """A copy with some fields replaced (``hours=`` truncates the flight)."""
+        """A copy with some fields replaced (``hours=`` truncates the flight, ``model=`` names another filter model)."""
         hours = changes.pop("hours", None)
         if hours is not None and not (math.isfinite(hours) and hours > 0):
             raise ModelError(f"--hours: must be a positive number of hours, got {hours:g}")
         if "imu_rate" in changes and not (math.isfinite(changes["imu_rate"]) and changes["imu_rate"] > 0):
             raise ModelError(f"--imu-rate: must be a positive rate in Hz, got {changes['imu_rate']:g}")
+        model = changes.pop("model", None)
         out = replace(self, **changes)
+        if model is not None:
+            out = replace(out, filter=replace(out.filter, model=str(model)))
         if hours is not None:
             out = replace(out, path=out.path.truncated(hours * HOUR))
         return out
@@ -151,6 +158,11 @@ def _mapping(s: ProfileSection, key: str, allowed: dict[str, tuple[str, ...]]) -
                 raise ModelError(f"{where}.{name}: {axis!r} is not one of {', '.join(allowed[group])}")
         out[str(group)] = {str(k): str(v) for k, v in entries.items()}
     return out
+
+
+def _constants(section: ProfileSection) -> dict[str, float]:
+    """``filter.parameters``: model parameter name -> a finite number, held for the whole flight."""
+    return {str(name): section.number(str(name)) for name in section.data}
 
 
 def load_profile_data(data: Any, filename: str, lines: dict[str, str] | None = None) -> FlightProfile:
@@ -236,6 +248,7 @@ def load_profile_data(data: Any, filename: str, lines: dict[str, str] | None = N
         gate_probability=fi.number("gate_probability", 0.9999),
         states=_mapping(fi, "states", state_roles()),
         measurements=_mapping(fi, "measurements", {n: s.quantities for n, s in SENSORS.items() if s.quantities}),
+        parameters=_constants(fi.section("parameters")),
     )
     if not 0 <= filt.gate_probability < 1:
         raise ModelError(f"{fi.where}.gate_probability: must be in [0, 1)")
