@@ -35,6 +35,7 @@ from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.fileio.datafiles import data_path
 from modelgen.fileio.output import FolderUpdate, write_text_atomically
 from modelgen.model.loading import builtin_models, load_model
+from modelgen.model.sources import cite_sources
 
 # CodegenOptions and builtin_models are used by the command line through this module (it imports only jobs).
 
@@ -229,7 +230,7 @@ def generate_and_check_all(
 def run_report(verification_summary: str, runs: list[ModelRun], out_root: Path, extra_sections: list[str]) -> str:
     """The short Markdown report of the main job (no timestamps: byte-stable)."""
     lines = ["# modelgen run: the core paper's model, end to end", ""]
-    lines += ["## Paper check (seed 000 table of F, G, H)", "", verification_summary, ""]
+    lines += ["## Paper check (the table of F, G, H of seed 000)", "", verification_summary, ""]
     lines += ["## Generated code, compiled and checked against the numpy reference", ""]
     lines += [
         "Check: the generated Python and the C (compiled with "
@@ -257,7 +258,7 @@ def run_report(verification_summary: str, runs: list[ModelRun], out_root: Path, 
     lines.append("")
     for section in extra_sections:
         lines += [section, ""]
-    return "\n".join(lines).rstrip() + "\n"
+    return cite_sources("\n".join(lines).rstrip() + "\n")
 
 
 def paper_operating_point(derived: DerivedModel) -> dict[str, float] | None:

@@ -36,6 +36,7 @@ import sympy as sp
 from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.fileio.output import write_text_atomically
+from modelgen.model.sources import cite_sources
 from modelgen.checks.hints import difference_hints
 from modelgen.checks.paper_table import (
     MATRICES,
@@ -407,7 +408,7 @@ def _markdown(result: VerificationResult) -> str:
     lines = [
         f"# Paper check: model `{result.model}`",
         "",
-        f"Derived F, G, H compared entry by entry with {result.source} (transcribed in `{result.table}`).",
+        f"Derived F, G, H compared entry by entry with {cite_sources(result.source)} (transcribed in `{result.table}`).",
         f"Derived entries are converted to the paper's units; {result.unit_symbol} = {result.unit_value}"
         " (radians to arc-seconds) is substituted before the symbolic comparison.",
         "",
