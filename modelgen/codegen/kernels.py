@@ -425,11 +425,12 @@ def update_cost(structure: FilterStructure, options: CodegenOptions | None = Non
     return OperationCount(mul, add)
 
 
-#: Bytes of generated text per estimated unrolled flop of the covariance prediction, and the
-#: rest (templates, tables, evaluation): fitted on the built-in models, which it predicts
-#: within 25 % (ned_doppler18: 151 kB estimated, 159 kB written).
-BYTES_PER_PREDICT_FLOP = 18
-FIXED_BYTES = 40_000
+#: Bytes of generated text per unrolled flop of the covariance prediction (which the unrolled
+#: discretize, over the powers of F, grows with too), and the rest (templates, tables,
+#: evaluation): least squares on the built-in models, which it predicts within 17 %
+#: (ned_doppler18: 510 kB estimated, 480 kB written).
+BYTES_PER_PREDICT_FLOP = 58
+FIXED_BYTES = 235_000
 
 
 #: With compact kernels (large models) the generated text grows with the states (names,
@@ -446,10 +447,11 @@ COMPACT_FIXED_BYTES = 60_000
 def estimated_code_bytes(structure: FilterStructure) -> int:
     """Expected size of all generated files, from the structural nonzeros of Phi alone.
 
-    The unrolled covariance prediction dominates: M = Phi P costs about n
-    multiply-adds per nonzero of a non-unit row of Phi, and the upper
-    triangle of M Phi^T about (n + 1) / 2 more.  Compact kernels (large
-    models) grow with the nonzeros themselves.  Cheap (no kernel is built),
+    Unrolled code grows with the flops of the covariance prediction
+    (:func:`unrolled_predict_flops`: about n multiply-adds per nonzero of a
+    non-unit row of Phi, and (n + 1) / 2 more for the upper triangle of
+    M Phi^T).  Compact kernels (large models) grow with the nonzeros
+    themselves.  Cheap (no kernel is built),
     so that a large model is reported before any time is spent on it.
     """
     if compact_kernels(structure):
@@ -460,8 +462,4 @@ def estimated_code_bytes(structure: FilterStructure) -> int:
             + COMPACT_BYTES_PER_MATRIX_NONZERO * matrix_nonzeros
             + COMPACT_BYTES_PER_PHI_NONZERO * int(structure.Phi.sum())
         )
-    n = structure.n_states
-    unit = set(structure.unit_rows)
-    nonzeros = sum(len(row) for i, row in enumerate(structure.rows("Phi")) if i not in unit)
-    flops = 2 * (n * nonzeros + (n + 1) * nonzeros // 2)
-    return FIXED_BYTES + BYTES_PER_PREDICT_FLOP * flops
+    return FIXED_BYTES + BYTES_PER_PREDICT_FLOP * unrolled_predict_flops(structure)
