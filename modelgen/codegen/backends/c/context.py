@@ -103,7 +103,8 @@ def discretize_functions(blocks: list[DiscretizeBlock], prefix: str, scalar: str
                 "signature": ", ".join(parameters),
                 "call": f"{call};",
                 "constants": [
-                    (name, f"{c_number(float(num), scalar)} / {c_number(float(den), scalar)}") for name, num, den in b.constants
+                    (name, c_number(float(num), scalar) + (f" / {c_number(float(den), scalar)}" if den != 1 else ""))
+                    for name, num, den in b.constants
                 ],
                 "lines": [c_statement(s) for s in statements],
                 "checked": b.block.checked,
