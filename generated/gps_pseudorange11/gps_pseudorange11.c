@@ -11,8 +11,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 37 operations after CSE
- *   discretize: 5948 mul + 5213 add = 11161 flops
- *   discretize, each doubling (long steps): 1495 mul + 1430 add = 2925 flops
+ *   discretize: 3412 mul + 2673 add = 6085 flops
+ *   discretize, each doubling (long steps): 879 mul + 751 add = 1630 flops
  *   predict (C): 1061 mul + 934 add = 1995 flops
  *   predict (Python): 2420 mul + 2321 add = 4741 flops
  *   predict (dense, for comparison): 2673 mul + 2541 add = 5214 flops
@@ -26,6 +26,7 @@
 
 #include <float.h>
 #include <math.h>
+#include <stdint.h>
 #include <string.h>
 
 
@@ -71,32 +72,17 @@ const unsigned char gps_pseudorange11_H_col[16] = { 0, 1, 2, 9, 0, 1, 2, 9, 0, 1
         };
 
 /* First entry of each row of F and of H in the compact arrays (CSR row starts). */
-static const unsigned char F_row_start[GPS_PSEUDORANGE11_N_STATES + 1] = { 0, 3, 6, 9, 14, 19, 24,
-        26, 28, 30, 31, 31 };
 /* Entries (row, column) of Phi that the Taylor terms can change: rows that are not e_i. */
 #define GPS_PSEUDORANGE11_N_ACTIVE 65
-static const unsigned char active_row[GPS_PSEUDORANGE11_N_ACTIVE] = { 0, 0, 0, 0, 0, 0, 0, 0, 0, 1,
-        1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4,
-        4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 9, 9 };
-static const unsigned char active_col[GPS_PSEUDORANGE11_N_ACTIVE] = { 0, 1, 2, 3, 4, 5, 6, 7, 8, 0,
-        1, 2, 3, 4, 5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 1, 2, 3, 4,
-        5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8, 9, 10 };
-/* Halvings of T that discretize may take before it gives up (T / 2^64), and the
-   largest ||F h||_D for which the Taylor remainder of order TAYLOR_ORDER is below
-   the unit roundoff (modelgen.derive.discretization.series_range). */
+/* Halvings of T that discretize may take before it gives up (T / 2^64), and
+   the relative accuracy of Phi against e^{F T} that chooses the doublings and the order
+   (modelgen.derive.discretization.taylor_plan; at least the unit roundoff). */
 #define GPS_PSEUDORANGE11_MAX_DOUBLINGS 64
-#define GPS_PSEUDORANGE11_SERIES_RANGE 0.11483164143919657
+#define GPS_PSEUDORANGE11_TAYLOR_TOLERANCE 1e-12
 /* Rows of Phi that are exactly e_i (states with an empty row of F). */
 #define GPS_PSEUDORANGE11_N_UNIT_ROWS 1
-static const unsigned char unit_row[GPS_PSEUDORANGE11_N_UNIT_ROWS] = { 10 };
 /* Upper-triangle entries of Q_d that can be nonzero. */
 #define GPS_PSEUDORANGE11_N_QD 48
-static const unsigned char qd_row[GPS_PSEUDORANGE11_N_QD] = { 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1,
-        1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 5, 5, 5, 5, 6, 6, 6, 7, 7,
-        8, 9, 9, 10 };
-static const unsigned char qd_col[GPS_PSEUDORANGE11_N_QD] = { 0, 1, 2, 3, 4, 5, 6, 7, 8, 1, 2, 3, 4,
-        5, 6, 7, 8, 2, 3, 4, 5, 6, 7, 8, 3, 4, 5, 6, 7, 8, 4, 5, 6, 7, 8, 5, 6, 7, 8, 6, 7, 8, 7, 8,
-        8, 9, 10, 10 };
 
 void gps_pseudorange11_default_params(gps_pseudorange11_params *params)
 {
@@ -251,14 +237,2826 @@ int gps_pseudorange11_matrices_evaluate(const gps_pseudorange11_params *restrict
     return (check != 0.0) ? GPS_PSEUDORANGE11_ERR_NONFINITE : GPS_PSEUDORANGE11_OK;
 }
 
+/* frexp's exponent of a positive finite x (x = f 2^e, f in [0.5, 1)), read from its IEEE-754 bits
+   without a call; a subnormal x goes through frexp. */
+static int binary_exponent(const gps_pseudorange11_scalar x)
+{
+    uint64_t bits;
+    int e;
+    memcpy(&bits, &x, sizeof bits);
+    e = (int)((bits >> 52) & 0x7FFu);
+    if (e == 0) {
+        (void)frexp(x, &e);
+        return e;
+    }
+    return e - 1022;
+}
+
+/* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
+static gps_pseudorange11_scalar power_of_two(const int e)
+{
+    const uint64_t bits = (uint64_t)(e + 1023) << 52;
+    gps_pseudorange11_scalar x;
+    memcpy(&x, &bits, sizeof x);
+    return x;
+}
+
+/* One state's step of Osborne's balancing (modelgen.derive.discretization.sweep_exponent): 2^k ~
+   sqrt(row / column) within [-8, 8], the exponent kept within [-40, 40]; 1 when it changed. */
+static int balance_step(const gps_pseudorange11_scalar row, const gps_pseudorange11_scalar column,
+        signed char *exponent)
+{
+    int step = 0, next;
+    if (row > 0.0 && column > 0.0) {
+        step = binary_exponent(row) - binary_exponent(column); /* log2(row / column) within 1 */
+        step = (step >= 0) ? step / 2 : -((1 - step) / 2); /* floor(step / 2) */
+        step = step > 8 ? 8 : (step < -8 ? -8 : step);
+    } else if (column > 0.0) {
+        step = -8; /* drives others, driven by none */
+    } else if (row > 0.0) {
+        step = 8; /* driven, drives none */
+    }
+    next = *exponent + step;
+    next = next > 40 ? 40 : (next < -40 ? -40 : next);
+    if (next == *exponent) {
+        return 0;
+    }
+    *exponent = (signed char)next;
+    return 1;
+}
+
+/* ||F||_D = max_i sum_j |F_ij| d_j / d_i (modelgen/derive/discretization.py): D = 2^exponent from
+   at most 8 Jacobi sweeps of Osborne's balancing in powers of two, stopped at a fixed point; the
+   sums in the reference's order (row by row), d_j / d_i as one exact power of two. */
+static gps_pseudorange11_scalar balanced_norm(const gps_pseudorange11_matrices *restrict m,
+        gps_pseudorange11_discretize_scratch *restrict w)
+{
+    gps_pseudorange11_scalar v, norm = 0.0;
+    signed char exponent[GPS_PSEUDORANGE11_N_STATES]; /* within [-40, 40] */
+    int i, k, changed;
+    for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
+        exponent[i] = 0;
+    }
+    for (k = 0, changed = 1; k < 8 && changed; ++k) {
+        changed = 0; /* a sweep that changes no scale is a fixed point: stop */
+        w->row_sum[0] = 0.0;
+        w->row_sum[1] = 0.0;
+        w->row_sum[2] = 0.0;
+        w->row_sum[3] = 0.0;
+        w->row_sum[4] = 0.0;
+        w->row_sum[5] = 0.0;
+        w->row_sum[6] = 0.0;
+        w->row_sum[7] = 0.0;
+        w->row_sum[8] = 0.0;
+        w->row_sum[9] = 0.0;
+        w->col_sum[0] = 0.0;
+        w->col_sum[1] = 0.0;
+        w->col_sum[2] = 0.0;
+        w->col_sum[3] = 0.0;
+        w->col_sum[4] = 0.0;
+        w->col_sum[5] = 0.0;
+        w->col_sum[6] = 0.0;
+        w->col_sum[7] = 0.0;
+        w->col_sum[8] = 0.0;
+        w->col_sum[10] = 0.0;
+        v = fabs(m->F[0]) * power_of_two(exponent[1] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[1] += v;
+        v = fabs(m->F[1]) * power_of_two(exponent[2] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[2] += v;
+        v = fabs(m->F[2]) * power_of_two(exponent[3] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[3] += v;
+        v = fabs(m->F[3]) * power_of_two(exponent[0] - exponent[1]);
+        w->row_sum[1] += v;
+        w->col_sum[0] += v;
+        v = fabs(m->F[4]) * power_of_two(exponent[2] - exponent[1]);
+        w->row_sum[1] += v;
+        w->col_sum[2] += v;
+        v = fabs(m->F[5]) * power_of_two(exponent[4] - exponent[1]);
+        w->row_sum[1] += v;
+        w->col_sum[4] += v;
+        v = fabs(m->F[6]) * power_of_two(exponent[0] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[0] += v;
+        v = fabs(m->F[7]) * power_of_two(exponent[1] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[1] += v;
+        v = fabs(m->F[8]) * power_of_two(exponent[5] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[5] += v;
+        v = fabs(m->F[9]) * power_of_two(exponent[0] - exponent[3]);
+        w->row_sum[3] += v;
+        w->col_sum[0] += v;
+        v = fabs(m->F[10]) * power_of_two(exponent[4] - exponent[3]);
+        w->row_sum[3] += v;
+        w->col_sum[4] += v;
+        v = fabs(m->F[11]) * power_of_two(exponent[5] - exponent[3]);
+        w->row_sum[3] += v;
+        w->col_sum[5] += v;
+        v = fabs(m->F[12]) * power_of_two(exponent[7] - exponent[3]);
+        w->row_sum[3] += v;
+        w->col_sum[7] += v;
+        v = fabs(m->F[13]) * power_of_two(exponent[8] - exponent[3]);
+        w->row_sum[3] += v;
+        w->col_sum[8] += v;
+        v = fabs(m->F[14]) * power_of_two(exponent[1] - exponent[4]);
+        w->row_sum[4] += v;
+        w->col_sum[1] += v;
+        v = fabs(m->F[15]) * power_of_two(exponent[3] - exponent[4]);
+        w->row_sum[4] += v;
+        w->col_sum[3] += v;
+        v = fabs(m->F[16]) * power_of_two(exponent[5] - exponent[4]);
+        w->row_sum[4] += v;
+        w->col_sum[5] += v;
+        v = fabs(m->F[17]) * power_of_two(exponent[6] - exponent[4]);
+        w->row_sum[4] += v;
+        w->col_sum[6] += v;
+        v = fabs(m->F[18]) * power_of_two(exponent[8] - exponent[4]);
+        w->row_sum[4] += v;
+        w->col_sum[8] += v;
+        v = fabs(m->F[19]) * power_of_two(exponent[2] - exponent[5]);
+        w->row_sum[5] += v;
+        w->col_sum[2] += v;
+        v = fabs(m->F[20]) * power_of_two(exponent[3] - exponent[5]);
+        w->row_sum[5] += v;
+        w->col_sum[3] += v;
+        v = fabs(m->F[21]) * power_of_two(exponent[4] - exponent[5]);
+        w->row_sum[5] += v;
+        w->col_sum[4] += v;
+        v = fabs(m->F[22]) * power_of_two(exponent[6] - exponent[5]);
+        w->row_sum[5] += v;
+        w->col_sum[6] += v;
+        v = fabs(m->F[23]) * power_of_two(exponent[7] - exponent[5]);
+        w->row_sum[5] += v;
+        w->col_sum[7] += v;
+        v = fabs(m->F[24]) * power_of_two(exponent[7] - exponent[6]);
+        w->row_sum[6] += v;
+        w->col_sum[7] += v;
+        v = fabs(m->F[25]) * power_of_two(exponent[8] - exponent[6]);
+        w->row_sum[6] += v;
+        w->col_sum[8] += v;
+        v = fabs(m->F[26]) * power_of_two(exponent[6] - exponent[7]);
+        w->row_sum[7] += v;
+        w->col_sum[6] += v;
+        v = fabs(m->F[27]) * power_of_two(exponent[8] - exponent[7]);
+        w->row_sum[7] += v;
+        w->col_sum[8] += v;
+        v = fabs(m->F[28]) * power_of_two(exponent[6] - exponent[8]);
+        w->row_sum[8] += v;
+        w->col_sum[6] += v;
+        v = fabs(m->F[29]) * power_of_two(exponent[7] - exponent[8]);
+        w->row_sum[8] += v;
+        w->col_sum[7] += v;
+        v = fabs(m->F[30]) * power_of_two(exponent[10] - exponent[9]);
+        w->row_sum[9] += v;
+        w->col_sum[10] += v;
+        /* a state with no off-diagonal entry in its row (column) of F has a zero row (column)
+                sum */
+        changed |= balance_step(w->row_sum[0], w->col_sum[0], &exponent[0]);
+        changed |= balance_step(w->row_sum[1], w->col_sum[1], &exponent[1]);
+        changed |= balance_step(w->row_sum[2], w->col_sum[2], &exponent[2]);
+        changed |= balance_step(w->row_sum[3], w->col_sum[3], &exponent[3]);
+        changed |= balance_step(w->row_sum[4], w->col_sum[4], &exponent[4]);
+        changed |= balance_step(w->row_sum[5], w->col_sum[5], &exponent[5]);
+        changed |= balance_step(w->row_sum[6], w->col_sum[6], &exponent[6]);
+        changed |= balance_step(w->row_sum[7], w->col_sum[7], &exponent[7]);
+        changed |= balance_step(w->row_sum[8], w->col_sum[8], &exponent[8]);
+        changed |= balance_step(w->row_sum[9], 0.0, &exponent[9]);
+        changed |= balance_step(0.0, w->col_sum[10], &exponent[10]);
+    }
+    v = fabs(m->F[0]) * power_of_two(exponent[1] - exponent[0]) + fabs(m->F[1]) *
+            power_of_two(exponent[2] - exponent[0]) + fabs(m->F[2]) * power_of_two(exponent[3] -
+            exponent[0]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[3]) * power_of_two(exponent[0] - exponent[1]) + fabs(m->F[4]) *
+            power_of_two(exponent[2] - exponent[1]) + fabs(m->F[5]) * power_of_two(exponent[4] -
+            exponent[1]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[6]) * power_of_two(exponent[0] - exponent[2]) + fabs(m->F[7]) *
+            power_of_two(exponent[1] - exponent[2]) + fabs(m->F[8]) * power_of_two(exponent[5] -
+            exponent[2]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[9]) * power_of_two(exponent[0] - exponent[3]) + fabs(m->F[10]) *
+            power_of_two(exponent[4] - exponent[3]) + fabs(m->F[11]) * power_of_two(exponent[5] -
+            exponent[3]) + fabs(m->F[12]) * power_of_two(exponent[7] - exponent[3]) + fabs(m->F[13])
+            * power_of_two(exponent[8] - exponent[3]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[14]) * power_of_two(exponent[1] - exponent[4]) + fabs(m->F[15]) *
+            power_of_two(exponent[3] - exponent[4]) + fabs(m->F[16]) * power_of_two(exponent[5] -
+            exponent[4]) + fabs(m->F[17]) * power_of_two(exponent[6] - exponent[4]) + fabs(m->F[18])
+            * power_of_two(exponent[8] - exponent[4]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[19]) * power_of_two(exponent[2] - exponent[5]) + fabs(m->F[20]) *
+            power_of_two(exponent[3] - exponent[5]) + fabs(m->F[21]) * power_of_two(exponent[4] -
+            exponent[5]) + fabs(m->F[22]) * power_of_two(exponent[6] - exponent[5]) + fabs(m->F[23])
+            * power_of_two(exponent[7] - exponent[5]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[24]) * power_of_two(exponent[7] - exponent[6]) + fabs(m->F[25]) *
+            power_of_two(exponent[8] - exponent[6]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[26]) * power_of_two(exponent[6] - exponent[7]) + fabs(m->F[27]) *
+            power_of_two(exponent[8] - exponent[7]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[28]) * power_of_two(exponent[6] - exponent[8]) + fabs(m->F[29]) *
+            power_of_two(exponent[7] - exponent[8]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[30]) * power_of_two(exponent[10] - exponent[9]);
+    norm = v > norm ? v : norm;
+    return norm;
+}
+
+/* 2^(s+1) e^theta rho_(m-1)(theta), rho_m(theta) = theta^(m+1) / (m+1)! (m+2) / (m+2-theta): the
+   bound on the relative error of Phi of order m after s doublings (growth = e^theta), one order of
+   margin for the entries that couple blocks of F; the same operations in the same order as
+   modelgen.derive.discretization.step_error_bound. */
+static gps_pseudorange11_scalar step_error_bound(const gps_pseudorange11_scalar growth, const
+        gps_pseudorange11_scalar theta, const int taylor_order,
+                const int halvings)
+{
+    const int order = taylor_order - 1;
+    gps_pseudorange11_scalar power = 1.0;
+    int k;
+    if (!(theta < (gps_pseudorange11_scalar)(order + 2))) {
+        return HUGE_VAL;
+    }
+    for (k = 1; k <= order + 1; ++k) {
+        power = power * theta / (gps_pseudorange11_scalar)k;
+    }
+    return growth * (power * (gps_pseudorange11_scalar)(order + 2) /
+            ((gps_pseudorange11_scalar)(order + 2) - theta)) * power_of_two(halvings + 1);
+}
+
+/* The doublings s and the order m summed for ||F||_D = norm and step T
+   (modelgen.derive.discretization.taylor_plan); ERR_NONFINITE beyond MAX_DOUBLINGS. */
+static int taylor_plan(const gps_pseudorange11_scalar norm, const gps_pseudorange11_scalar T, int
+        *halvings, int *order)
+{
+    /* the smallest s for which order TAYLOR_ORDER meets the tolerance, then the smallest order
+       that meets it with that s */
+    int s, k;
+    gps_pseudorange11_scalar theta = norm * T, growth = exp(norm * T);
+    for (s = 0; !(step_error_bound(growth, theta, GPS_PSEUDORANGE11_TAYLOR_ORDER, s) <=
+            GPS_PSEUDORANGE11_TAYLOR_TOLERANCE); ++s) {
+        if (s == GPS_PSEUDORANGE11_MAX_DOUBLINGS) {
+            return GPS_PSEUDORANGE11_ERR_NONFINITE; /* e^{F T} is not representable */
+        }
+        theta = norm * (T * power_of_two(-(s + 1)));
+        growth = exp(theta);
+    }
+    for (k = 1; k < GPS_PSEUDORANGE11_TAYLOR_ORDER && !(step_error_bound(growth, theta, k, s) <=
+            GPS_PSEUDORANGE11_TAYLOR_TOLERANCE); ++k) {
+    }
+    *halvings = s;
+    *order = k;
+    return GPS_PSEUDORANGE11_OK;
+}
+
+/* Each block keeps its own stack frame: inlined into discretize, the frames of all blocks
+   would add up (the worst-case stack is measured for the Cortex-M4F, tests/embedded). */
+#if defined(__GNUC__)
+#define GPS_PSEUDORANGE11_BLOCK static __attribute__((noinline))
+#else
+#define GPS_PSEUDORANGE11_BLOCK static
+#endif
+GPS_PSEUDORANGE11_BLOCK void taylor_order_1(const gps_pseudorange11_matrices *restrict m,
+        gps_pseudorange11_transition *restrict t, gps_pseudorange11_discretize_scratch *restrict w,
+        const gps_pseudorange11_scalar h)
+{
+    const gps_pseudorange11_scalar one = 1.0;
+    const gps_pseudorange11_scalar c2 = 1.0 / 2.0;
+    w->fh[0] = m->F[0]*h;
+    w->fh[1] = m->F[1]*h;
+    w->fh[2] = m->F[2]*h;
+    w->fh[3] = m->F[3]*h;
+    w->fh[4] = m->F[4]*h;
+    w->fh[5] = m->F[5]*h;
+    w->fh[6] = m->F[6]*h;
+    w->fh[7] = m->F[7]*h;
+    w->fh[8] = m->F[8]*h;
+    w->fh[9] = m->F[9]*h;
+    w->fh[10] = m->F[10]*h;
+    w->fh[11] = m->F[11]*h;
+    w->fh[12] = m->F[12]*h;
+    w->fh[13] = m->F[13]*h;
+    w->fh[14] = m->F[14]*h;
+    w->fh[15] = m->F[15]*h;
+    w->fh[16] = m->F[16]*h;
+    w->fh[17] = m->F[17]*h;
+    w->fh[18] = m->F[18]*h;
+    w->fh[19] = m->F[19]*h;
+    w->fh[20] = m->F[20]*h;
+    w->fh[21] = m->F[21]*h;
+    w->fh[22] = m->F[22]*h;
+    w->fh[23] = m->F[23]*h;
+    w->fh[24] = m->F[24]*h;
+    w->fh[25] = m->F[25]*h;
+    w->fh[26] = m->F[26]*h;
+    w->fh[27] = m->F[27]*h;
+    w->fh[28] = m->F[28]*h;
+    w->fh[29] = m->F[29]*h;
+    w->fh[30] = m->F[30]*h;
+    w->S[0] = one;
+    w->S[1] = w->fh[0]*c2;
+    w->S[2] = w->fh[1]*c2;
+    w->S[3] = w->fh[2]*c2;
+    w->S[4] = 0;
+    w->S[5] = 0;
+    w->S[6] = 0;
+    w->S[7] = 0;
+    w->S[8] = 0;
+    w->S[9] = w->fh[3]*c2;
+    w->S[10] = one;
+    w->S[11] = w->fh[4]*c2;
+    w->S[12] = 0;
+    w->S[13] = w->fh[5]*c2;
+    w->S[14] = 0;
+    w->S[15] = 0;
+    w->S[16] = 0;
+    w->S[17] = 0;
+    w->S[18] = w->fh[6]*c2;
+    w->S[19] = w->fh[7]*c2;
+    w->S[20] = one;
+    w->S[21] = 0;
+    w->S[22] = 0;
+    w->S[23] = w->fh[8]*c2;
+    w->S[24] = 0;
+    w->S[25] = 0;
+    w->S[26] = 0;
+    w->S[27] = w->fh[9]*c2;
+    w->S[28] = 0;
+    w->S[29] = 0;
+    w->S[30] = one;
+    w->S[31] = w->fh[10]*c2;
+    w->S[32] = w->fh[11]*c2;
+    w->S[33] = 0;
+    w->S[34] = w->fh[12]*c2;
+    w->S[35] = w->fh[13]*c2;
+    w->S[36] = 0;
+    w->S[37] = w->fh[14]*c2;
+    w->S[38] = 0;
+    w->S[39] = w->fh[15]*c2;
+    w->S[40] = one;
+    w->S[41] = w->fh[16]*c2;
+    w->S[42] = w->fh[17]*c2;
+    w->S[43] = 0;
+    w->S[44] = w->fh[18]*c2;
+    w->S[45] = 0;
+    w->S[46] = 0;
+    w->S[47] = w->fh[19]*c2;
+    w->S[48] = w->fh[20]*c2;
+    w->S[49] = w->fh[21]*c2;
+    w->S[50] = one;
+    w->S[51] = w->fh[22]*c2;
+    w->S[52] = w->fh[23]*c2;
+    w->S[53] = 0;
+    w->S[54] = one;
+    w->S[55] = w->fh[24]*c2;
+    w->S[56] = w->fh[25]*c2;
+    w->S[57] = w->fh[26]*c2;
+    w->S[58] = one;
+    w->S[59] = w->fh[27]*c2;
+    w->S[60] = w->fh[28]*c2;
+    w->S[61] = w->fh[29]*c2;
+    w->S[62] = one;
+    w->S[63] = one;
+    w->S[64] = w->fh[30]*c2;
+    t->Phi[0][1] = t->Phi[0][1] + w->fh[0];
+    t->Phi[0][2] = t->Phi[0][2] + w->fh[1];
+    t->Phi[0][3] = t->Phi[0][3] + w->fh[2];
+    t->Phi[1][0] = t->Phi[1][0] + w->fh[3];
+    t->Phi[1][2] = t->Phi[1][2] + w->fh[4];
+    t->Phi[1][4] = t->Phi[1][4] + w->fh[5];
+    t->Phi[2][0] = t->Phi[2][0] + w->fh[6];
+    t->Phi[2][1] = t->Phi[2][1] + w->fh[7];
+    t->Phi[2][5] = t->Phi[2][5] + w->fh[8];
+    t->Phi[3][0] = t->Phi[3][0] + w->fh[9];
+    t->Phi[3][4] = t->Phi[3][4] + w->fh[10];
+    t->Phi[3][5] = t->Phi[3][5] + w->fh[11];
+    t->Phi[3][7] = t->Phi[3][7] + w->fh[12];
+    t->Phi[3][8] = t->Phi[3][8] + w->fh[13];
+    t->Phi[4][1] = t->Phi[4][1] + w->fh[14];
+    t->Phi[4][3] = t->Phi[4][3] + w->fh[15];
+    t->Phi[4][5] = t->Phi[4][5] + w->fh[16];
+    t->Phi[4][6] = t->Phi[4][6] + w->fh[17];
+    t->Phi[4][8] = t->Phi[4][8] + w->fh[18];
+    t->Phi[5][2] = t->Phi[5][2] + w->fh[19];
+    t->Phi[5][3] = t->Phi[5][3] + w->fh[20];
+    t->Phi[5][4] = t->Phi[5][4] + w->fh[21];
+    t->Phi[5][6] = t->Phi[5][6] + w->fh[22];
+    t->Phi[5][7] = t->Phi[5][7] + w->fh[23];
+    t->Phi[6][7] = t->Phi[6][7] + w->fh[24];
+    t->Phi[6][8] = t->Phi[6][8] + w->fh[25];
+    t->Phi[7][6] = t->Phi[7][6] + w->fh[26];
+    t->Phi[7][8] = t->Phi[7][8] + w->fh[27];
+    t->Phi[8][6] = t->Phi[8][6] + w->fh[28];
+    t->Phi[8][7] = t->Phi[8][7] + w->fh[29];
+    t->Phi[9][10] = t->Phi[9][10] + w->fh[30];
+}
+
+GPS_PSEUDORANGE11_BLOCK void taylor_order_2(gps_pseudorange11_transition *restrict t,
+        gps_pseudorange11_discretize_scratch *restrict w)
+{
+    const gps_pseudorange11_scalar ck = 1.0 / 2.0;
+    const gps_pseudorange11_scalar cs = 1.0 / 6.0;
+    w->term[0][0] = w->fh[0]*w->fh[3] + w->fh[1]*w->fh[6] + w->fh[2]*w->fh[9];
+    w->term[0][1] = w->fh[1]*w->fh[7];
+    w->term[0][2] = w->fh[0]*w->fh[4];
+    w->term[0][3] = w->fh[0]*w->fh[5] + w->fh[2]*w->fh[10];
+    w->term[0][4] = w->fh[1]*w->fh[8] + w->fh[2]*w->fh[11];
+    w->term[0][5] = w->fh[2]*w->fh[12];
+    w->term[0][6] = w->fh[2]*w->fh[13];
+    w->term[0][7] = w->fh[4]*w->fh[6];
+    w->term[0][8] = w->fh[3]*w->fh[0] + w->fh[4]*w->fh[7] + w->fh[5]*w->fh[14];
+    w->term[0][9] = w->fh[3]*w->fh[1];
+    w->term[0][10] = w->fh[3]*w->fh[2] + w->fh[5]*w->fh[15];
+    w->term[0][11] = w->fh[4]*w->fh[8] + w->fh[5]*w->fh[16];
+    w->term[0][12] = w->fh[5]*w->fh[17];
+    w->term[0][13] = w->fh[5]*w->fh[18];
+    w->term[0][14] = w->fh[7]*w->fh[3];
+    w->term[0][15] = w->fh[6]*w->fh[0];
+    w->term[0][16] = w->fh[6]*w->fh[1] + w->fh[7]*w->fh[4] + w->fh[8]*w->fh[19];
+    w->term[0][17] = w->fh[6]*w->fh[2] + w->fh[8]*w->fh[20];
+    w->term[0][18] = w->fh[7]*w->fh[5] + w->fh[8]*w->fh[21];
+    w->term[0][19] = w->fh[8]*w->fh[22];
+    w->term[0][20] = w->fh[8]*w->fh[23];
+    w->term[0][21] = w->fh[9]*w->fh[0] + w->fh[10]*w->fh[14];
+    w->term[0][22] = w->fh[9]*w->fh[1] + w->fh[11]*w->fh[19];
+    w->term[0][23] = w->fh[9]*w->fh[2] + w->fh[10]*w->fh[15] + w->fh[11]*w->fh[20];
+    w->term[0][24] = w->fh[11]*w->fh[21];
+    w->term[0][25] = w->fh[10]*w->fh[16];
+    w->term[0][26] = w->fh[10]*w->fh[17] + w->fh[11]*w->fh[22] + w->fh[12]*w->fh[26] +
+            w->fh[13]*w->fh[28];
+    w->term[0][27] = w->fh[11]*w->fh[23] + w->fh[13]*w->fh[29];
+    w->term[0][28] = w->fh[10]*w->fh[18] + w->fh[12]*w->fh[27];
+    w->term[0][29] = w->fh[14]*w->fh[3] + w->fh[15]*w->fh[9];
+    w->term[0][30] = w->fh[14]*w->fh[4] + w->fh[16]*w->fh[19];
+    w->term[0][31] = w->fh[16]*w->fh[20];
+    w->term[0][32] = w->fh[14]*w->fh[5] + w->fh[15]*w->fh[10] + w->fh[16]*w->fh[21];
+    w->term[0][33] = w->fh[15]*w->fh[11];
+    w->term[0][34] = w->fh[16]*w->fh[22] + w->fh[18]*w->fh[28];
+    w->term[0][35] = w->fh[15]*w->fh[12] + w->fh[16]*w->fh[23] + w->fh[17]*w->fh[24] +
+            w->fh[18]*w->fh[29];
+    w->term[0][36] = w->fh[15]*w->fh[13] + w->fh[17]*w->fh[25];
+    w->term[0][37] = w->fh[19]*w->fh[6] + w->fh[20]*w->fh[9];
+    w->term[0][38] = w->fh[19]*w->fh[7] + w->fh[21]*w->fh[14];
+    w->term[0][39] = w->fh[21]*w->fh[15];
+    w->term[0][40] = w->fh[20]*w->fh[10];
+    w->term[0][41] = w->fh[19]*w->fh[8] + w->fh[20]*w->fh[11] + w->fh[21]*w->fh[16];
+    w->term[0][42] = w->fh[21]*w->fh[17] + w->fh[23]*w->fh[26];
+    w->term[0][43] = w->fh[20]*w->fh[12] + w->fh[22]*w->fh[24];
+    w->term[0][44] = w->fh[20]*w->fh[13] + w->fh[21]*w->fh[18] + w->fh[22]*w->fh[25] +
+            w->fh[23]*w->fh[27];
+    w->term[0][45] = w->fh[24]*w->fh[26] + w->fh[25]*w->fh[28];
+    w->term[0][46] = w->fh[25]*w->fh[29];
+    w->term[0][47] = w->fh[24]*w->fh[27];
+    w->term[0][48] = w->fh[27]*w->fh[28];
+    w->term[0][49] = w->fh[26]*w->fh[24] + w->fh[27]*w->fh[29];
+    w->term[0][50] = w->fh[26]*w->fh[25];
+    w->term[0][51] = w->fh[29]*w->fh[26];
+    w->term[0][52] = w->fh[28]*w->fh[24];
+    w->term[0][53] = w->fh[28]*w->fh[25] + w->fh[29]*w->fh[27];
+    t->Phi[0][0] = t->Phi[0][0] + w->term[0][0]*ck;
+    w->S[0] = w->S[0] + w->term[0][0]*cs;
+    t->Phi[0][1] = t->Phi[0][1] + w->term[0][1]*ck;
+    w->S[1] = w->S[1] + w->term[0][1]*cs;
+    t->Phi[0][2] = t->Phi[0][2] + w->term[0][2]*ck;
+    w->S[2] = w->S[2] + w->term[0][2]*cs;
+    t->Phi[0][4] = t->Phi[0][4] + w->term[0][3]*ck;
+    w->S[4] = w->S[4] + w->term[0][3]*cs;
+    t->Phi[0][5] = t->Phi[0][5] + w->term[0][4]*ck;
+    w->S[5] = w->S[5] + w->term[0][4]*cs;
+    t->Phi[0][7] = t->Phi[0][7] + w->term[0][5]*ck;
+    w->S[7] = w->S[7] + w->term[0][5]*cs;
+    t->Phi[0][8] = t->Phi[0][8] + w->term[0][6]*ck;
+    w->S[8] = w->S[8] + w->term[0][6]*cs;
+    t->Phi[1][0] = t->Phi[1][0] + w->term[0][7]*ck;
+    w->S[9] = w->S[9] + w->term[0][7]*cs;
+    t->Phi[1][1] = t->Phi[1][1] + w->term[0][8]*ck;
+    w->S[10] = w->S[10] + w->term[0][8]*cs;
+    t->Phi[1][2] = t->Phi[1][2] + w->term[0][9]*ck;
+    w->S[11] = w->S[11] + w->term[0][9]*cs;
+    t->Phi[1][3] = t->Phi[1][3] + w->term[0][10]*ck;
+    w->S[12] = w->S[12] + w->term[0][10]*cs;
+    t->Phi[1][5] = t->Phi[1][5] + w->term[0][11]*ck;
+    w->S[14] = w->S[14] + w->term[0][11]*cs;
+    t->Phi[1][6] = t->Phi[1][6] + w->term[0][12]*ck;
+    w->S[15] = w->S[15] + w->term[0][12]*cs;
+    t->Phi[1][8] = t->Phi[1][8] + w->term[0][13]*ck;
+    w->S[17] = w->S[17] + w->term[0][13]*cs;
+    t->Phi[2][0] = t->Phi[2][0] + w->term[0][14]*ck;
+    w->S[18] = w->S[18] + w->term[0][14]*cs;
+    t->Phi[2][1] = t->Phi[2][1] + w->term[0][15]*ck;
+    w->S[19] = w->S[19] + w->term[0][15]*cs;
+    t->Phi[2][2] = t->Phi[2][2] + w->term[0][16]*ck;
+    w->S[20] = w->S[20] + w->term[0][16]*cs;
+    t->Phi[2][3] = t->Phi[2][3] + w->term[0][17]*ck;
+    w->S[21] = w->S[21] + w->term[0][17]*cs;
+    t->Phi[2][4] = t->Phi[2][4] + w->term[0][18]*ck;
+    w->S[22] = w->S[22] + w->term[0][18]*cs;
+    t->Phi[2][6] = t->Phi[2][6] + w->term[0][19]*ck;
+    w->S[24] = w->S[24] + w->term[0][19]*cs;
+    t->Phi[2][7] = t->Phi[2][7] + w->term[0][20]*ck;
+    w->S[25] = w->S[25] + w->term[0][20]*cs;
+    t->Phi[3][1] = t->Phi[3][1] + w->term[0][21]*ck;
+    w->S[28] = w->S[28] + w->term[0][21]*cs;
+    t->Phi[3][2] = t->Phi[3][2] + w->term[0][22]*ck;
+    w->S[29] = w->S[29] + w->term[0][22]*cs;
+    t->Phi[3][3] = t->Phi[3][3] + w->term[0][23]*ck;
+    w->S[30] = w->S[30] + w->term[0][23]*cs;
+    t->Phi[3][4] = t->Phi[3][4] + w->term[0][24]*ck;
+    w->S[31] = w->S[31] + w->term[0][24]*cs;
+    t->Phi[3][5] = t->Phi[3][5] + w->term[0][25]*ck;
+    w->S[32] = w->S[32] + w->term[0][25]*cs;
+    t->Phi[3][6] = t->Phi[3][6] + w->term[0][26]*ck;
+    w->S[33] = w->S[33] + w->term[0][26]*cs;
+    t->Phi[3][7] = t->Phi[3][7] + w->term[0][27]*ck;
+    w->S[34] = w->S[34] + w->term[0][27]*cs;
+    t->Phi[3][8] = t->Phi[3][8] + w->term[0][28]*ck;
+    w->S[35] = w->S[35] + w->term[0][28]*cs;
+    t->Phi[4][0] = t->Phi[4][0] + w->term[0][29]*ck;
+    w->S[36] = w->S[36] + w->term[0][29]*cs;
+    t->Phi[4][2] = t->Phi[4][2] + w->term[0][30]*ck;
+    w->S[38] = w->S[38] + w->term[0][30]*cs;
+    t->Phi[4][3] = t->Phi[4][3] + w->term[0][31]*ck;
+    w->S[39] = w->S[39] + w->term[0][31]*cs;
+    t->Phi[4][4] = t->Phi[4][4] + w->term[0][32]*ck;
+    w->S[40] = w->S[40] + w->term[0][32]*cs;
+    t->Phi[4][5] = t->Phi[4][5] + w->term[0][33]*ck;
+    w->S[41] = w->S[41] + w->term[0][33]*cs;
+    t->Phi[4][6] = t->Phi[4][6] + w->term[0][34]*ck;
+    w->S[42] = w->S[42] + w->term[0][34]*cs;
+    t->Phi[4][7] = t->Phi[4][7] + w->term[0][35]*ck;
+    w->S[43] = w->S[43] + w->term[0][35]*cs;
+    t->Phi[4][8] = t->Phi[4][8] + w->term[0][36]*ck;
+    w->S[44] = w->S[44] + w->term[0][36]*cs;
+    t->Phi[5][0] = t->Phi[5][0] + w->term[0][37]*ck;
+    w->S[45] = w->S[45] + w->term[0][37]*cs;
+    t->Phi[5][1] = t->Phi[5][1] + w->term[0][38]*ck;
+    w->S[46] = w->S[46] + w->term[0][38]*cs;
+    t->Phi[5][3] = t->Phi[5][3] + w->term[0][39]*ck;
+    w->S[48] = w->S[48] + w->term[0][39]*cs;
+    t->Phi[5][4] = t->Phi[5][4] + w->term[0][40]*ck;
+    w->S[49] = w->S[49] + w->term[0][40]*cs;
+    t->Phi[5][5] = t->Phi[5][5] + w->term[0][41]*ck;
+    w->S[50] = w->S[50] + w->term[0][41]*cs;
+    t->Phi[5][6] = t->Phi[5][6] + w->term[0][42]*ck;
+    w->S[51] = w->S[51] + w->term[0][42]*cs;
+    t->Phi[5][7] = t->Phi[5][7] + w->term[0][43]*ck;
+    w->S[52] = w->S[52] + w->term[0][43]*cs;
+    t->Phi[5][8] = t->Phi[5][8] + w->term[0][44]*ck;
+    w->S[53] = w->S[53] + w->term[0][44]*cs;
+    t->Phi[6][6] = t->Phi[6][6] + w->term[0][45]*ck;
+    w->S[54] = w->S[54] + w->term[0][45]*cs;
+    t->Phi[6][7] = t->Phi[6][7] + w->term[0][46]*ck;
+    w->S[55] = w->S[55] + w->term[0][46]*cs;
+    t->Phi[6][8] = t->Phi[6][8] + w->term[0][47]*ck;
+    w->S[56] = w->S[56] + w->term[0][47]*cs;
+    t->Phi[7][6] = t->Phi[7][6] + w->term[0][48]*ck;
+    w->S[57] = w->S[57] + w->term[0][48]*cs;
+    t->Phi[7][7] = t->Phi[7][7] + w->term[0][49]*ck;
+    w->S[58] = w->S[58] + w->term[0][49]*cs;
+    t->Phi[7][8] = t->Phi[7][8] + w->term[0][50]*ck;
+    w->S[59] = w->S[59] + w->term[0][50]*cs;
+    t->Phi[8][6] = t->Phi[8][6] + w->term[0][51]*ck;
+    w->S[60] = w->S[60] + w->term[0][51]*cs;
+    t->Phi[8][7] = t->Phi[8][7] + w->term[0][52]*ck;
+    w->S[61] = w->S[61] + w->term[0][52]*cs;
+    t->Phi[8][8] = t->Phi[8][8] + w->term[0][53]*ck;
+    w->S[62] = w->S[62] + w->term[0][53]*cs;
+}
+
+GPS_PSEUDORANGE11_BLOCK void taylor_order_3(gps_pseudorange11_transition *restrict t,
+        gps_pseudorange11_discretize_scratch *restrict w)
+{
+    const gps_pseudorange11_scalar ck = 1.0 / 6.0;
+    const gps_pseudorange11_scalar cs = 1.0 / 24.0;
+    w->term[1][0] = w->fh[0]*w->term[0][7] + w->fh[1]*w->term[0][14];
+    w->term[1][1] = w->fh[0]*w->term[0][8] + w->fh[1]*w->term[0][15] + w->fh[2]*w->term[0][21];
+    w->term[1][2] = w->fh[0]*w->term[0][9] + w->fh[1]*w->term[0][16] + w->fh[2]*w->term[0][22];
+    w->term[1][3] = w->fh[0]*w->term[0][10] + w->fh[1]*w->term[0][17] + w->fh[2]*w->term[0][23];
+    w->term[1][4] = w->fh[1]*w->term[0][18] + w->fh[2]*w->term[0][24];
+    w->term[1][5] = w->fh[0]*w->term[0][11] + w->fh[2]*w->term[0][25];
+    w->term[1][6] = w->fh[0]*w->term[0][12] + w->fh[1]*w->term[0][19] + w->fh[2]*w->term[0][26];
+    w->term[1][7] = w->fh[1]*w->term[0][20] + w->fh[2]*w->term[0][27];
+    w->term[1][8] = w->fh[0]*w->term[0][13] + w->fh[2]*w->term[0][28];
+    w->term[1][9] = w->fh[3]*w->term[0][0] + w->fh[4]*w->term[0][14] + w->fh[5]*w->term[0][29];
+    w->term[1][10] = w->fh[3]*w->term[0][1] + w->fh[4]*w->term[0][15];
+    w->term[1][11] = w->fh[3]*w->term[0][2] + w->fh[4]*w->term[0][16] + w->fh[5]*w->term[0][30];
+    w->term[1][12] = w->fh[4]*w->term[0][17] + w->fh[5]*w->term[0][31];
+    w->term[1][13] = w->fh[3]*w->term[0][3] + w->fh[4]*w->term[0][18] + w->fh[5]*w->term[0][32];
+    w->term[1][14] = w->fh[3]*w->term[0][4] + w->fh[5]*w->term[0][33];
+    w->term[1][15] = w->fh[4]*w->term[0][19] + w->fh[5]*w->term[0][34];
+    w->term[1][16] = w->fh[3]*w->term[0][5] + w->fh[4]*w->term[0][20] + w->fh[5]*w->term[0][35];
+    w->term[1][17] = w->fh[3]*w->term[0][6] + w->fh[5]*w->term[0][36];
+    w->term[1][18] = w->fh[6]*w->term[0][0] + w->fh[7]*w->term[0][7] + w->fh[8]*w->term[0][37];
+    w->term[1][19] = w->fh[6]*w->term[0][1] + w->fh[7]*w->term[0][8] + w->fh[8]*w->term[0][38];
+    w->term[1][20] = w->fh[6]*w->term[0][2] + w->fh[7]*w->term[0][9];
+    w->term[1][21] = w->fh[7]*w->term[0][10] + w->fh[8]*w->term[0][39];
+    w->term[1][22] = w->fh[6]*w->term[0][3] + w->fh[8]*w->term[0][40];
+    w->term[1][23] = w->fh[6]*w->term[0][4] + w->fh[7]*w->term[0][11] + w->fh[8]*w->term[0][41];
+    w->term[1][24] = w->fh[7]*w->term[0][12] + w->fh[8]*w->term[0][42];
+    w->term[1][25] = w->fh[6]*w->term[0][5] + w->fh[8]*w->term[0][43];
+    w->term[1][26] = w->fh[6]*w->term[0][6] + w->fh[7]*w->term[0][13] + w->fh[8]*w->term[0][44];
+    w->term[1][27] = w->fh[9]*w->term[0][0] + w->fh[10]*w->term[0][29] + w->fh[11]*w->term[0][37];
+    w->term[1][28] = w->fh[9]*w->term[0][1] + w->fh[11]*w->term[0][38];
+    w->term[1][29] = w->fh[9]*w->term[0][2] + w->fh[10]*w->term[0][30];
+    w->term[1][30] = w->fh[10]*w->term[0][31] + w->fh[11]*w->term[0][39];
+    w->term[1][31] = w->fh[9]*w->term[0][3] + w->fh[10]*w->term[0][32] + w->fh[11]*w->term[0][40];
+    w->term[1][32] = w->fh[9]*w->term[0][4] + w->fh[10]*w->term[0][33] + w->fh[11]*w->term[0][41];
+    w->term[1][33] = w->fh[10]*w->term[0][34] + w->fh[11]*w->term[0][42] + w->fh[12]*w->term[0][48]
+            + w->fh[13]*w->term[0][51];
+    w->term[1][34] = w->fh[9]*w->term[0][5] + w->fh[10]*w->term[0][35] + w->fh[11]*w->term[0][43] +
+            w->fh[12]*w->term[0][49] + w->fh[13]*w->term[0][52];
+    w->term[1][35] = w->fh[9]*w->term[0][6] + w->fh[10]*w->term[0][36] + w->fh[11]*w->term[0][44] +
+            w->fh[12]*w->term[0][50] + w->fh[13]*w->term[0][53];
+    w->term[1][36] = w->fh[14]*w->term[0][7] + w->fh[16]*w->term[0][37];
+    w->term[1][37] = w->fh[14]*w->term[0][8] + w->fh[15]*w->term[0][21] + w->fh[16]*w->term[0][38];
+    w->term[1][38] = w->fh[14]*w->term[0][9] + w->fh[15]*w->term[0][22];
+    w->term[1][39] = w->fh[14]*w->term[0][10] + w->fh[15]*w->term[0][23] + w->fh[16]*w->term[0][39];
+    w->term[1][40] = w->fh[15]*w->term[0][24] + w->fh[16]*w->term[0][40];
+    w->term[1][41] = w->fh[14]*w->term[0][11] + w->fh[15]*w->term[0][25] + w->fh[16]*w->term[0][41];
+    w->term[1][42] = w->fh[14]*w->term[0][12] + w->fh[15]*w->term[0][26] + w->fh[16]*w->term[0][42]
+            + w->fh[17]*w->term[0][45] + w->fh[18]*w->term[0][51];
+    w->term[1][43] = w->fh[15]*w->term[0][27] + w->fh[16]*w->term[0][43] + w->fh[17]*w->term[0][46]
+            + w->fh[18]*w->term[0][52];
+    w->term[1][44] = w->fh[14]*w->term[0][13] + w->fh[15]*w->term[0][28] + w->fh[16]*w->term[0][44]
+            + w->fh[17]*w->term[0][47] + w->fh[18]*w->term[0][53];
+    w->term[1][45] = w->fh[19]*w->term[0][14] + w->fh[21]*w->term[0][29];
+    w->term[1][46] = w->fh[19]*w->term[0][15] + w->fh[20]*w->term[0][21];
+    w->term[1][47] = w->fh[19]*w->term[0][16] + w->fh[20]*w->term[0][22] + w->fh[21]*w->term[0][30];
+    w->term[1][48] = w->fh[19]*w->term[0][17] + w->fh[20]*w->term[0][23] + w->fh[21]*w->term[0][31];
+    w->term[1][49] = w->fh[19]*w->term[0][18] + w->fh[20]*w->term[0][24] + w->fh[21]*w->term[0][32];
+    w->term[1][50] = w->fh[20]*w->term[0][25] + w->fh[21]*w->term[0][33];
+    w->term[1][51] = w->fh[19]*w->term[0][19] + w->fh[20]*w->term[0][26] + w->fh[21]*w->term[0][34]
+            + w->fh[22]*w->term[0][45] + w->fh[23]*w->term[0][48];
+    w->term[1][52] = w->fh[19]*w->term[0][20] + w->fh[20]*w->term[0][27] + w->fh[21]*w->term[0][35]
+            + w->fh[22]*w->term[0][46] + w->fh[23]*w->term[0][49];
+    w->term[1][53] = w->fh[20]*w->term[0][28] + w->fh[21]*w->term[0][36] + w->fh[22]*w->term[0][47]
+            + w->fh[23]*w->term[0][50];
+    w->term[1][54] = w->fh[24]*w->term[0][48] + w->fh[25]*w->term[0][51];
+    w->term[1][55] = w->fh[24]*w->term[0][49] + w->fh[25]*w->term[0][52];
+    w->term[1][56] = w->fh[24]*w->term[0][50] + w->fh[25]*w->term[0][53];
+    w->term[1][57] = w->fh[26]*w->term[0][45] + w->fh[27]*w->term[0][51];
+    w->term[1][58] = w->fh[26]*w->term[0][46] + w->fh[27]*w->term[0][52];
+    w->term[1][59] = w->fh[26]*w->term[0][47] + w->fh[27]*w->term[0][53];
+    w->term[1][60] = w->fh[28]*w->term[0][45] + w->fh[29]*w->term[0][48];
+    w->term[1][61] = w->fh[28]*w->term[0][46] + w->fh[29]*w->term[0][49];
+    w->term[1][62] = w->fh[28]*w->term[0][47] + w->fh[29]*w->term[0][50];
+    t->Phi[0][0] = t->Phi[0][0] + w->term[1][0]*ck;
+    w->S[0] = w->S[0] + w->term[1][0]*cs;
+    t->Phi[0][1] = t->Phi[0][1] + w->term[1][1]*ck;
+    w->S[1] = w->S[1] + w->term[1][1]*cs;
+    t->Phi[0][2] = t->Phi[0][2] + w->term[1][2]*ck;
+    w->S[2] = w->S[2] + w->term[1][2]*cs;
+    t->Phi[0][3] = t->Phi[0][3] + w->term[1][3]*ck;
+    w->S[3] = w->S[3] + w->term[1][3]*cs;
+    t->Phi[0][4] = t->Phi[0][4] + w->term[1][4]*ck;
+    w->S[4] = w->S[4] + w->term[1][4]*cs;
+    t->Phi[0][5] = t->Phi[0][5] + w->term[1][5]*ck;
+    w->S[5] = w->S[5] + w->term[1][5]*cs;
+    t->Phi[0][6] = t->Phi[0][6] + w->term[1][6]*ck;
+    w->S[6] = w->S[6] + w->term[1][6]*cs;
+    t->Phi[0][7] = t->Phi[0][7] + w->term[1][7]*ck;
+    w->S[7] = w->S[7] + w->term[1][7]*cs;
+    t->Phi[0][8] = t->Phi[0][8] + w->term[1][8]*ck;
+    w->S[8] = w->S[8] + w->term[1][8]*cs;
+    t->Phi[1][0] = t->Phi[1][0] + w->term[1][9]*ck;
+    w->S[9] = w->S[9] + w->term[1][9]*cs;
+    t->Phi[1][1] = t->Phi[1][1] + w->term[1][10]*ck;
+    w->S[10] = w->S[10] + w->term[1][10]*cs;
+    t->Phi[1][2] = t->Phi[1][2] + w->term[1][11]*ck;
+    w->S[11] = w->S[11] + w->term[1][11]*cs;
+    t->Phi[1][3] = t->Phi[1][3] + w->term[1][12]*ck;
+    w->S[12] = w->S[12] + w->term[1][12]*cs;
+    t->Phi[1][4] = t->Phi[1][4] + w->term[1][13]*ck;
+    w->S[13] = w->S[13] + w->term[1][13]*cs;
+    t->Phi[1][5] = t->Phi[1][5] + w->term[1][14]*ck;
+    w->S[14] = w->S[14] + w->term[1][14]*cs;
+    t->Phi[1][6] = t->Phi[1][6] + w->term[1][15]*ck;
+    w->S[15] = w->S[15] + w->term[1][15]*cs;
+    t->Phi[1][7] = t->Phi[1][7] + w->term[1][16]*ck;
+    w->S[16] = w->S[16] + w->term[1][16]*cs;
+    t->Phi[1][8] = t->Phi[1][8] + w->term[1][17]*ck;
+    w->S[17] = w->S[17] + w->term[1][17]*cs;
+    t->Phi[2][0] = t->Phi[2][0] + w->term[1][18]*ck;
+    w->S[18] = w->S[18] + w->term[1][18]*cs;
+    t->Phi[2][1] = t->Phi[2][1] + w->term[1][19]*ck;
+    w->S[19] = w->S[19] + w->term[1][19]*cs;
+    t->Phi[2][2] = t->Phi[2][2] + w->term[1][20]*ck;
+    w->S[20] = w->S[20] + w->term[1][20]*cs;
+    t->Phi[2][3] = t->Phi[2][3] + w->term[1][21]*ck;
+    w->S[21] = w->S[21] + w->term[1][21]*cs;
+    t->Phi[2][4] = t->Phi[2][4] + w->term[1][22]*ck;
+    w->S[22] = w->S[22] + w->term[1][22]*cs;
+    t->Phi[2][5] = t->Phi[2][5] + w->term[1][23]*ck;
+    w->S[23] = w->S[23] + w->term[1][23]*cs;
+    t->Phi[2][6] = t->Phi[2][6] + w->term[1][24]*ck;
+    w->S[24] = w->S[24] + w->term[1][24]*cs;
+    t->Phi[2][7] = t->Phi[2][7] + w->term[1][25]*ck;
+    w->S[25] = w->S[25] + w->term[1][25]*cs;
+    t->Phi[2][8] = t->Phi[2][8] + w->term[1][26]*ck;
+    w->S[26] = w->S[26] + w->term[1][26]*cs;
+    t->Phi[3][0] = t->Phi[3][0] + w->term[1][27]*ck;
+    w->S[27] = w->S[27] + w->term[1][27]*cs;
+    t->Phi[3][1] = t->Phi[3][1] + w->term[1][28]*ck;
+    w->S[28] = w->S[28] + w->term[1][28]*cs;
+    t->Phi[3][2] = t->Phi[3][2] + w->term[1][29]*ck;
+    w->S[29] = w->S[29] + w->term[1][29]*cs;
+    t->Phi[3][3] = t->Phi[3][3] + w->term[1][30]*ck;
+    w->S[30] = w->S[30] + w->term[1][30]*cs;
+    t->Phi[3][4] = t->Phi[3][4] + w->term[1][31]*ck;
+    w->S[31] = w->S[31] + w->term[1][31]*cs;
+    t->Phi[3][5] = t->Phi[3][5] + w->term[1][32]*ck;
+    w->S[32] = w->S[32] + w->term[1][32]*cs;
+    t->Phi[3][6] = t->Phi[3][6] + w->term[1][33]*ck;
+    w->S[33] = w->S[33] + w->term[1][33]*cs;
+    t->Phi[3][7] = t->Phi[3][7] + w->term[1][34]*ck;
+    w->S[34] = w->S[34] + w->term[1][34]*cs;
+    t->Phi[3][8] = t->Phi[3][8] + w->term[1][35]*ck;
+    w->S[35] = w->S[35] + w->term[1][35]*cs;
+    t->Phi[4][0] = t->Phi[4][0] + w->term[1][36]*ck;
+    w->S[36] = w->S[36] + w->term[1][36]*cs;
+    t->Phi[4][1] = t->Phi[4][1] + w->term[1][37]*ck;
+    w->S[37] = w->S[37] + w->term[1][37]*cs;
+    t->Phi[4][2] = t->Phi[4][2] + w->term[1][38]*ck;
+    w->S[38] = w->S[38] + w->term[1][38]*cs;
+    t->Phi[4][3] = t->Phi[4][3] + w->term[1][39]*ck;
+    w->S[39] = w->S[39] + w->term[1][39]*cs;
+    t->Phi[4][4] = t->Phi[4][4] + w->term[1][40]*ck;
+    w->S[40] = w->S[40] + w->term[1][40]*cs;
+    t->Phi[4][5] = t->Phi[4][5] + w->term[1][41]*ck;
+    w->S[41] = w->S[41] + w->term[1][41]*cs;
+    t->Phi[4][6] = t->Phi[4][6] + w->term[1][42]*ck;
+    w->S[42] = w->S[42] + w->term[1][42]*cs;
+    t->Phi[4][7] = t->Phi[4][7] + w->term[1][43]*ck;
+    w->S[43] = w->S[43] + w->term[1][43]*cs;
+    t->Phi[4][8] = t->Phi[4][8] + w->term[1][44]*ck;
+    w->S[44] = w->S[44] + w->term[1][44]*cs;
+    t->Phi[5][0] = t->Phi[5][0] + w->term[1][45]*ck;
+    w->S[45] = w->S[45] + w->term[1][45]*cs;
+    t->Phi[5][1] = t->Phi[5][1] + w->term[1][46]*ck;
+    w->S[46] = w->S[46] + w->term[1][46]*cs;
+    t->Phi[5][2] = t->Phi[5][2] + w->term[1][47]*ck;
+    w->S[47] = w->S[47] + w->term[1][47]*cs;
+    t->Phi[5][3] = t->Phi[5][3] + w->term[1][48]*ck;
+    w->S[48] = w->S[48] + w->term[1][48]*cs;
+    t->Phi[5][4] = t->Phi[5][4] + w->term[1][49]*ck;
+    w->S[49] = w->S[49] + w->term[1][49]*cs;
+    t->Phi[5][5] = t->Phi[5][5] + w->term[1][50]*ck;
+    w->S[50] = w->S[50] + w->term[1][50]*cs;
+    t->Phi[5][6] = t->Phi[5][6] + w->term[1][51]*ck;
+    w->S[51] = w->S[51] + w->term[1][51]*cs;
+    t->Phi[5][7] = t->Phi[5][7] + w->term[1][52]*ck;
+    w->S[52] = w->S[52] + w->term[1][52]*cs;
+    t->Phi[5][8] = t->Phi[5][8] + w->term[1][53]*ck;
+    w->S[53] = w->S[53] + w->term[1][53]*cs;
+    t->Phi[6][6] = t->Phi[6][6] + w->term[1][54]*ck;
+    w->S[54] = w->S[54] + w->term[1][54]*cs;
+    t->Phi[6][7] = t->Phi[6][7] + w->term[1][55]*ck;
+    w->S[55] = w->S[55] + w->term[1][55]*cs;
+    t->Phi[6][8] = t->Phi[6][8] + w->term[1][56]*ck;
+    w->S[56] = w->S[56] + w->term[1][56]*cs;
+    t->Phi[7][6] = t->Phi[7][6] + w->term[1][57]*ck;
+    w->S[57] = w->S[57] + w->term[1][57]*cs;
+    t->Phi[7][7] = t->Phi[7][7] + w->term[1][58]*ck;
+    w->S[58] = w->S[58] + w->term[1][58]*cs;
+    t->Phi[7][8] = t->Phi[7][8] + w->term[1][59]*ck;
+    w->S[59] = w->S[59] + w->term[1][59]*cs;
+    t->Phi[8][6] = t->Phi[8][6] + w->term[1][60]*ck;
+    w->S[60] = w->S[60] + w->term[1][60]*cs;
+    t->Phi[8][7] = t->Phi[8][7] + w->term[1][61]*ck;
+    w->S[61] = w->S[61] + w->term[1][61]*cs;
+    t->Phi[8][8] = t->Phi[8][8] + w->term[1][62]*ck;
+    w->S[62] = w->S[62] + w->term[1][62]*cs;
+}
+
+GPS_PSEUDORANGE11_BLOCK void taylor_order_4(gps_pseudorange11_transition *restrict t,
+        gps_pseudorange11_discretize_scratch *restrict w)
+{
+    const gps_pseudorange11_scalar ck = 1.0 / 24.0;
+    const gps_pseudorange11_scalar cs = 1.0 / 120.0;
+    w->term[0][0] = w->fh[0]*w->term[1][9] + w->fh[1]*w->term[1][18] + w->fh[2]*w->term[1][27];
+    w->term[0][1] = w->fh[0]*w->term[1][10] + w->fh[1]*w->term[1][19] + w->fh[2]*w->term[1][28];
+    w->term[0][2] = w->fh[0]*w->term[1][11] + w->fh[1]*w->term[1][20] + w->fh[2]*w->term[1][29];
+    w->term[0][3] = w->fh[0]*w->term[1][12] + w->fh[1]*w->term[1][21] + w->fh[2]*w->term[1][30];
+    w->term[0][4] = w->fh[0]*w->term[1][13] + w->fh[1]*w->term[1][22] + w->fh[2]*w->term[1][31];
+    w->term[0][5] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][23] + w->fh[2]*w->term[1][32];
+    w->term[0][6] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][24] + w->fh[2]*w->term[1][33];
+    w->term[0][7] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][25] + w->fh[2]*w->term[1][34];
+    w->term[0][8] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][26] + w->fh[2]*w->term[1][35];
+    w->term[0][9] = w->fh[3]*w->term[1][0] + w->fh[4]*w->term[1][18] + w->fh[5]*w->term[1][36];
+    w->term[0][10] = w->fh[3]*w->term[1][1] + w->fh[4]*w->term[1][19] + w->fh[5]*w->term[1][37];
+    w->term[0][11] = w->fh[3]*w->term[1][2] + w->fh[4]*w->term[1][20] + w->fh[5]*w->term[1][38];
+    w->term[0][12] = w->fh[3]*w->term[1][3] + w->fh[4]*w->term[1][21] + w->fh[5]*w->term[1][39];
+    w->term[0][13] = w->fh[3]*w->term[1][4] + w->fh[4]*w->term[1][22] + w->fh[5]*w->term[1][40];
+    w->term[0][14] = w->fh[3]*w->term[1][5] + w->fh[4]*w->term[1][23] + w->fh[5]*w->term[1][41];
+    w->term[0][15] = w->fh[3]*w->term[1][6] + w->fh[4]*w->term[1][24] + w->fh[5]*w->term[1][42];
+    w->term[0][16] = w->fh[3]*w->term[1][7] + w->fh[4]*w->term[1][25] + w->fh[5]*w->term[1][43];
+    w->term[0][17] = w->fh[3]*w->term[1][8] + w->fh[4]*w->term[1][26] + w->fh[5]*w->term[1][44];
+    w->term[0][18] = w->fh[6]*w->term[1][0] + w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][45];
+    w->term[0][19] = w->fh[6]*w->term[1][1] + w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][46];
+    w->term[0][20] = w->fh[6]*w->term[1][2] + w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][47];
+    w->term[0][21] = w->fh[6]*w->term[1][3] + w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][48];
+    w->term[0][22] = w->fh[6]*w->term[1][4] + w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][49];
+    w->term[0][23] = w->fh[6]*w->term[1][5] + w->fh[7]*w->term[1][14] + w->fh[8]*w->term[1][50];
+    w->term[0][24] = w->fh[6]*w->term[1][6] + w->fh[7]*w->term[1][15] + w->fh[8]*w->term[1][51];
+    w->term[0][25] = w->fh[6]*w->term[1][7] + w->fh[7]*w->term[1][16] + w->fh[8]*w->term[1][52];
+    w->term[0][26] = w->fh[6]*w->term[1][8] + w->fh[7]*w->term[1][17] + w->fh[8]*w->term[1][53];
+    w->term[0][27] = w->fh[9]*w->term[1][0] + w->fh[10]*w->term[1][36] + w->fh[11]*w->term[1][45];
+    w->term[0][28] = w->fh[9]*w->term[1][1] + w->fh[10]*w->term[1][37] + w->fh[11]*w->term[1][46];
+    w->term[0][29] = w->fh[9]*w->term[1][2] + w->fh[10]*w->term[1][38] + w->fh[11]*w->term[1][47];
+    w->term[0][30] = w->fh[9]*w->term[1][3] + w->fh[10]*w->term[1][39] + w->fh[11]*w->term[1][48];
+    w->term[0][31] = w->fh[9]*w->term[1][4] + w->fh[10]*w->term[1][40] + w->fh[11]*w->term[1][49];
+    w->term[0][32] = w->fh[9]*w->term[1][5] + w->fh[10]*w->term[1][41] + w->fh[11]*w->term[1][50];
+    w->term[0][33] = w->fh[9]*w->term[1][6] + w->fh[10]*w->term[1][42] + w->fh[11]*w->term[1][51] +
+            w->fh[12]*w->term[1][57] + w->fh[13]*w->term[1][60];
+    w->term[0][34] = w->fh[9]*w->term[1][7] + w->fh[10]*w->term[1][43] + w->fh[11]*w->term[1][52] +
+            w->fh[12]*w->term[1][58] + w->fh[13]*w->term[1][61];
+    w->term[0][35] = w->fh[9]*w->term[1][8] + w->fh[10]*w->term[1][44] + w->fh[11]*w->term[1][53] +
+            w->fh[12]*w->term[1][59] + w->fh[13]*w->term[1][62];
+    w->term[0][36] = w->fh[14]*w->term[1][9] + w->fh[15]*w->term[1][27] + w->fh[16]*w->term[1][45];
+    w->term[0][37] = w->fh[14]*w->term[1][10] + w->fh[15]*w->term[1][28] + w->fh[16]*w->term[1][46];
+    w->term[0][38] = w->fh[14]*w->term[1][11] + w->fh[15]*w->term[1][29] + w->fh[16]*w->term[1][47];
+    w->term[0][39] = w->fh[14]*w->term[1][12] + w->fh[15]*w->term[1][30] + w->fh[16]*w->term[1][48];
+    w->term[0][40] = w->fh[14]*w->term[1][13] + w->fh[15]*w->term[1][31] + w->fh[16]*w->term[1][49];
+    w->term[0][41] = w->fh[14]*w->term[1][14] + w->fh[15]*w->term[1][32] + w->fh[16]*w->term[1][50];
+    w->term[0][42] = w->fh[14]*w->term[1][15] + w->fh[15]*w->term[1][33] + w->fh[16]*w->term[1][51]
+            + w->fh[17]*w->term[1][54] + w->fh[18]*w->term[1][60];
+    w->term[0][43] = w->fh[14]*w->term[1][16] + w->fh[15]*w->term[1][34] + w->fh[16]*w->term[1][52]
+            + w->fh[17]*w->term[1][55] + w->fh[18]*w->term[1][61];
+    w->term[0][44] = w->fh[14]*w->term[1][17] + w->fh[15]*w->term[1][35] + w->fh[16]*w->term[1][53]
+            + w->fh[17]*w->term[1][56] + w->fh[18]*w->term[1][62];
+    w->term[0][45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][27] + w->fh[21]*w->term[1][36];
+    w->term[0][46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][28] + w->fh[21]*w->term[1][37];
+    w->term[0][47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][29] + w->fh[21]*w->term[1][38];
+    w->term[0][48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][30] + w->fh[21]*w->term[1][39];
+    w->term[0][49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][31] + w->fh[21]*w->term[1][40];
+    w->term[0][50] = w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][32] + w->fh[21]*w->term[1][41];
+    w->term[0][51] = w->fh[19]*w->term[1][24] + w->fh[20]*w->term[1][33] + w->fh[21]*w->term[1][42]
+            + w->fh[22]*w->term[1][54] + w->fh[23]*w->term[1][57];
+    w->term[0][52] = w->fh[19]*w->term[1][25] + w->fh[20]*w->term[1][34] + w->fh[21]*w->term[1][43]
+            + w->fh[22]*w->term[1][55] + w->fh[23]*w->term[1][58];
+    w->term[0][53] = w->fh[19]*w->term[1][26] + w->fh[20]*w->term[1][35] + w->fh[21]*w->term[1][44]
+            + w->fh[22]*w->term[1][56] + w->fh[23]*w->term[1][59];
+    w->term[0][54] = w->fh[24]*w->term[1][57] + w->fh[25]*w->term[1][60];
+    w->term[0][55] = w->fh[24]*w->term[1][58] + w->fh[25]*w->term[1][61];
+    w->term[0][56] = w->fh[24]*w->term[1][59] + w->fh[25]*w->term[1][62];
+    w->term[0][57] = w->fh[26]*w->term[1][54] + w->fh[27]*w->term[1][60];
+    w->term[0][58] = w->fh[26]*w->term[1][55] + w->fh[27]*w->term[1][61];
+    w->term[0][59] = w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][62];
+    w->term[0][60] = w->fh[28]*w->term[1][54] + w->fh[29]*w->term[1][57];
+    w->term[0][61] = w->fh[28]*w->term[1][55] + w->fh[29]*w->term[1][58];
+    w->term[0][62] = w->fh[28]*w->term[1][56] + w->fh[29]*w->term[1][59];
+    t->Phi[0][0] = t->Phi[0][0] + w->term[0][0]*ck;
+    w->S[0] = w->S[0] + w->term[0][0]*cs;
+    t->Phi[0][1] = t->Phi[0][1] + w->term[0][1]*ck;
+    w->S[1] = w->S[1] + w->term[0][1]*cs;
+    t->Phi[0][2] = t->Phi[0][2] + w->term[0][2]*ck;
+    w->S[2] = w->S[2] + w->term[0][2]*cs;
+    t->Phi[0][3] = t->Phi[0][3] + w->term[0][3]*ck;
+    w->S[3] = w->S[3] + w->term[0][3]*cs;
+    t->Phi[0][4] = t->Phi[0][4] + w->term[0][4]*ck;
+    w->S[4] = w->S[4] + w->term[0][4]*cs;
+    t->Phi[0][5] = t->Phi[0][5] + w->term[0][5]*ck;
+    w->S[5] = w->S[5] + w->term[0][5]*cs;
+    t->Phi[0][6] = t->Phi[0][6] + w->term[0][6]*ck;
+    w->S[6] = w->S[6] + w->term[0][6]*cs;
+    t->Phi[0][7] = t->Phi[0][7] + w->term[0][7]*ck;
+    w->S[7] = w->S[7] + w->term[0][7]*cs;
+    t->Phi[0][8] = t->Phi[0][8] + w->term[0][8]*ck;
+    w->S[8] = w->S[8] + w->term[0][8]*cs;
+    t->Phi[1][0] = t->Phi[1][0] + w->term[0][9]*ck;
+    w->S[9] = w->S[9] + w->term[0][9]*cs;
+    t->Phi[1][1] = t->Phi[1][1] + w->term[0][10]*ck;
+    w->S[10] = w->S[10] + w->term[0][10]*cs;
+    t->Phi[1][2] = t->Phi[1][2] + w->term[0][11]*ck;
+    w->S[11] = w->S[11] + w->term[0][11]*cs;
+    t->Phi[1][3] = t->Phi[1][3] + w->term[0][12]*ck;
+    w->S[12] = w->S[12] + w->term[0][12]*cs;
+    t->Phi[1][4] = t->Phi[1][4] + w->term[0][13]*ck;
+    w->S[13] = w->S[13] + w->term[0][13]*cs;
+    t->Phi[1][5] = t->Phi[1][5] + w->term[0][14]*ck;
+    w->S[14] = w->S[14] + w->term[0][14]*cs;
+    t->Phi[1][6] = t->Phi[1][6] + w->term[0][15]*ck;
+    w->S[15] = w->S[15] + w->term[0][15]*cs;
+    t->Phi[1][7] = t->Phi[1][7] + w->term[0][16]*ck;
+    w->S[16] = w->S[16] + w->term[0][16]*cs;
+    t->Phi[1][8] = t->Phi[1][8] + w->term[0][17]*ck;
+    w->S[17] = w->S[17] + w->term[0][17]*cs;
+    t->Phi[2][0] = t->Phi[2][0] + w->term[0][18]*ck;
+    w->S[18] = w->S[18] + w->term[0][18]*cs;
+    t->Phi[2][1] = t->Phi[2][1] + w->term[0][19]*ck;
+    w->S[19] = w->S[19] + w->term[0][19]*cs;
+    t->Phi[2][2] = t->Phi[2][2] + w->term[0][20]*ck;
+    w->S[20] = w->S[20] + w->term[0][20]*cs;
+    t->Phi[2][3] = t->Phi[2][3] + w->term[0][21]*ck;
+    w->S[21] = w->S[21] + w->term[0][21]*cs;
+    t->Phi[2][4] = t->Phi[2][4] + w->term[0][22]*ck;
+    w->S[22] = w->S[22] + w->term[0][22]*cs;
+    t->Phi[2][5] = t->Phi[2][5] + w->term[0][23]*ck;
+    w->S[23] = w->S[23] + w->term[0][23]*cs;
+    t->Phi[2][6] = t->Phi[2][6] + w->term[0][24]*ck;
+    w->S[24] = w->S[24] + w->term[0][24]*cs;
+    t->Phi[2][7] = t->Phi[2][7] + w->term[0][25]*ck;
+    w->S[25] = w->S[25] + w->term[0][25]*cs;
+    t->Phi[2][8] = t->Phi[2][8] + w->term[0][26]*ck;
+    w->S[26] = w->S[26] + w->term[0][26]*cs;
+    t->Phi[3][0] = t->Phi[3][0] + w->term[0][27]*ck;
+    w->S[27] = w->S[27] + w->term[0][27]*cs;
+    t->Phi[3][1] = t->Phi[3][1] + w->term[0][28]*ck;
+    w->S[28] = w->S[28] + w->term[0][28]*cs;
+    t->Phi[3][2] = t->Phi[3][2] + w->term[0][29]*ck;
+    w->S[29] = w->S[29] + w->term[0][29]*cs;
+    t->Phi[3][3] = t->Phi[3][3] + w->term[0][30]*ck;
+    w->S[30] = w->S[30] + w->term[0][30]*cs;
+    t->Phi[3][4] = t->Phi[3][4] + w->term[0][31]*ck;
+    w->S[31] = w->S[31] + w->term[0][31]*cs;
+    t->Phi[3][5] = t->Phi[3][5] + w->term[0][32]*ck;
+    w->S[32] = w->S[32] + w->term[0][32]*cs;
+    t->Phi[3][6] = t->Phi[3][6] + w->term[0][33]*ck;
+    w->S[33] = w->S[33] + w->term[0][33]*cs;
+    t->Phi[3][7] = t->Phi[3][7] + w->term[0][34]*ck;
+    w->S[34] = w->S[34] + w->term[0][34]*cs;
+    t->Phi[3][8] = t->Phi[3][8] + w->term[0][35]*ck;
+    w->S[35] = w->S[35] + w->term[0][35]*cs;
+    t->Phi[4][0] = t->Phi[4][0] + w->term[0][36]*ck;
+    w->S[36] = w->S[36] + w->term[0][36]*cs;
+    t->Phi[4][1] = t->Phi[4][1] + w->term[0][37]*ck;
+    w->S[37] = w->S[37] + w->term[0][37]*cs;
+    t->Phi[4][2] = t->Phi[4][2] + w->term[0][38]*ck;
+    w->S[38] = w->S[38] + w->term[0][38]*cs;
+    t->Phi[4][3] = t->Phi[4][3] + w->term[0][39]*ck;
+    w->S[39] = w->S[39] + w->term[0][39]*cs;
+    t->Phi[4][4] = t->Phi[4][4] + w->term[0][40]*ck;
+    w->S[40] = w->S[40] + w->term[0][40]*cs;
+    t->Phi[4][5] = t->Phi[4][5] + w->term[0][41]*ck;
+    w->S[41] = w->S[41] + w->term[0][41]*cs;
+    t->Phi[4][6] = t->Phi[4][6] + w->term[0][42]*ck;
+    w->S[42] = w->S[42] + w->term[0][42]*cs;
+    t->Phi[4][7] = t->Phi[4][7] + w->term[0][43]*ck;
+    w->S[43] = w->S[43] + w->term[0][43]*cs;
+    t->Phi[4][8] = t->Phi[4][8] + w->term[0][44]*ck;
+    w->S[44] = w->S[44] + w->term[0][44]*cs;
+    t->Phi[5][0] = t->Phi[5][0] + w->term[0][45]*ck;
+    w->S[45] = w->S[45] + w->term[0][45]*cs;
+    t->Phi[5][1] = t->Phi[5][1] + w->term[0][46]*ck;
+    w->S[46] = w->S[46] + w->term[0][46]*cs;
+    t->Phi[5][2] = t->Phi[5][2] + w->term[0][47]*ck;
+    w->S[47] = w->S[47] + w->term[0][47]*cs;
+    t->Phi[5][3] = t->Phi[5][3] + w->term[0][48]*ck;
+    w->S[48] = w->S[48] + w->term[0][48]*cs;
+    t->Phi[5][4] = t->Phi[5][4] + w->term[0][49]*ck;
+    w->S[49] = w->S[49] + w->term[0][49]*cs;
+    t->Phi[5][5] = t->Phi[5][5] + w->term[0][50]*ck;
+    w->S[50] = w->S[50] + w->term[0][50]*cs;
+    t->Phi[5][6] = t->Phi[5][6] + w->term[0][51]*ck;
+    w->S[51] = w->S[51] + w->term[0][51]*cs;
+    t->Phi[5][7] = t->Phi[5][7] + w->term[0][52]*ck;
+    w->S[52] = w->S[52] + w->term[0][52]*cs;
+    t->Phi[5][8] = t->Phi[5][8] + w->term[0][53]*ck;
+    w->S[53] = w->S[53] + w->term[0][53]*cs;
+    t->Phi[6][6] = t->Phi[6][6] + w->term[0][54]*ck;
+    w->S[54] = w->S[54] + w->term[0][54]*cs;
+    t->Phi[6][7] = t->Phi[6][7] + w->term[0][55]*ck;
+    w->S[55] = w->S[55] + w->term[0][55]*cs;
+    t->Phi[6][8] = t->Phi[6][8] + w->term[0][56]*ck;
+    w->S[56] = w->S[56] + w->term[0][56]*cs;
+    t->Phi[7][6] = t->Phi[7][6] + w->term[0][57]*ck;
+    w->S[57] = w->S[57] + w->term[0][57]*cs;
+    t->Phi[7][7] = t->Phi[7][7] + w->term[0][58]*ck;
+    w->S[58] = w->S[58] + w->term[0][58]*cs;
+    t->Phi[7][8] = t->Phi[7][8] + w->term[0][59]*ck;
+    w->S[59] = w->S[59] + w->term[0][59]*cs;
+    t->Phi[8][6] = t->Phi[8][6] + w->term[0][60]*ck;
+    w->S[60] = w->S[60] + w->term[0][60]*cs;
+    t->Phi[8][7] = t->Phi[8][7] + w->term[0][61]*ck;
+    w->S[61] = w->S[61] + w->term[0][61]*cs;
+    t->Phi[8][8] = t->Phi[8][8] + w->term[0][62]*ck;
+    w->S[62] = w->S[62] + w->term[0][62]*cs;
+}
+
+GPS_PSEUDORANGE11_BLOCK void taylor_order_5(gps_pseudorange11_transition *restrict t,
+        gps_pseudorange11_discretize_scratch *restrict w)
+{
+    const gps_pseudorange11_scalar ck = 1.0 / 120.0;
+    const gps_pseudorange11_scalar cs = 1.0 / 720.0;
+    w->term[1][0] = w->fh[0]*w->term[0][9] + w->fh[1]*w->term[0][18] + w->fh[2]*w->term[0][27];
+    w->term[1][1] = w->fh[0]*w->term[0][10] + w->fh[1]*w->term[0][19] + w->fh[2]*w->term[0][28];
+    w->term[1][2] = w->fh[0]*w->term[0][11] + w->fh[1]*w->term[0][20] + w->fh[2]*w->term[0][29];
+    w->term[1][3] = w->fh[0]*w->term[0][12] + w->fh[1]*w->term[0][21] + w->fh[2]*w->term[0][30];
+    w->term[1][4] = w->fh[0]*w->term[0][13] + w->fh[1]*w->term[0][22] + w->fh[2]*w->term[0][31];
+    w->term[1][5] = w->fh[0]*w->term[0][14] + w->fh[1]*w->term[0][23] + w->fh[2]*w->term[0][32];
+    w->term[1][6] = w->fh[0]*w->term[0][15] + w->fh[1]*w->term[0][24] + w->fh[2]*w->term[0][33];
+    w->term[1][7] = w->fh[0]*w->term[0][16] + w->fh[1]*w->term[0][25] + w->fh[2]*w->term[0][34];
+    w->term[1][8] = w->fh[0]*w->term[0][17] + w->fh[1]*w->term[0][26] + w->fh[2]*w->term[0][35];
+    w->term[1][9] = w->fh[3]*w->term[0][0] + w->fh[4]*w->term[0][18] + w->fh[5]*w->term[0][36];
+    w->term[1][10] = w->fh[3]*w->term[0][1] + w->fh[4]*w->term[0][19] + w->fh[5]*w->term[0][37];
+    w->term[1][11] = w->fh[3]*w->term[0][2] + w->fh[4]*w->term[0][20] + w->fh[5]*w->term[0][38];
+    w->term[1][12] = w->fh[3]*w->term[0][3] + w->fh[4]*w->term[0][21] + w->fh[5]*w->term[0][39];
+    w->term[1][13] = w->fh[3]*w->term[0][4] + w->fh[4]*w->term[0][22] + w->fh[5]*w->term[0][40];
+    w->term[1][14] = w->fh[3]*w->term[0][5] + w->fh[4]*w->term[0][23] + w->fh[5]*w->term[0][41];
+    w->term[1][15] = w->fh[3]*w->term[0][6] + w->fh[4]*w->term[0][24] + w->fh[5]*w->term[0][42];
+    w->term[1][16] = w->fh[3]*w->term[0][7] + w->fh[4]*w->term[0][25] + w->fh[5]*w->term[0][43];
+    w->term[1][17] = w->fh[3]*w->term[0][8] + w->fh[4]*w->term[0][26] + w->fh[5]*w->term[0][44];
+    w->term[1][18] = w->fh[6]*w->term[0][0] + w->fh[7]*w->term[0][9] + w->fh[8]*w->term[0][45];
+    w->term[1][19] = w->fh[6]*w->term[0][1] + w->fh[7]*w->term[0][10] + w->fh[8]*w->term[0][46];
+    w->term[1][20] = w->fh[6]*w->term[0][2] + w->fh[7]*w->term[0][11] + w->fh[8]*w->term[0][47];
+    w->term[1][21] = w->fh[6]*w->term[0][3] + w->fh[7]*w->term[0][12] + w->fh[8]*w->term[0][48];
+    w->term[1][22] = w->fh[6]*w->term[0][4] + w->fh[7]*w->term[0][13] + w->fh[8]*w->term[0][49];
+    w->term[1][23] = w->fh[6]*w->term[0][5] + w->fh[7]*w->term[0][14] + w->fh[8]*w->term[0][50];
+    w->term[1][24] = w->fh[6]*w->term[0][6] + w->fh[7]*w->term[0][15] + w->fh[8]*w->term[0][51];
+    w->term[1][25] = w->fh[6]*w->term[0][7] + w->fh[7]*w->term[0][16] + w->fh[8]*w->term[0][52];
+    w->term[1][26] = w->fh[6]*w->term[0][8] + w->fh[7]*w->term[0][17] + w->fh[8]*w->term[0][53];
+    w->term[1][27] = w->fh[9]*w->term[0][0] + w->fh[10]*w->term[0][36] + w->fh[11]*w->term[0][45];
+    w->term[1][28] = w->fh[9]*w->term[0][1] + w->fh[10]*w->term[0][37] + w->fh[11]*w->term[0][46];
+    w->term[1][29] = w->fh[9]*w->term[0][2] + w->fh[10]*w->term[0][38] + w->fh[11]*w->term[0][47];
+    w->term[1][30] = w->fh[9]*w->term[0][3] + w->fh[10]*w->term[0][39] + w->fh[11]*w->term[0][48];
+    w->term[1][31] = w->fh[9]*w->term[0][4] + w->fh[10]*w->term[0][40] + w->fh[11]*w->term[0][49];
+    w->term[1][32] = w->fh[9]*w->term[0][5] + w->fh[10]*w->term[0][41] + w->fh[11]*w->term[0][50];
+    w->term[1][33] = w->fh[9]*w->term[0][6] + w->fh[10]*w->term[0][42] + w->fh[11]*w->term[0][51] +
+            w->fh[12]*w->term[0][57] + w->fh[13]*w->term[0][60];
+    w->term[1][34] = w->fh[9]*w->term[0][7] + w->fh[10]*w->term[0][43] + w->fh[11]*w->term[0][52] +
+            w->fh[12]*w->term[0][58] + w->fh[13]*w->term[0][61];
+    w->term[1][35] = w->fh[9]*w->term[0][8] + w->fh[10]*w->term[0][44] + w->fh[11]*w->term[0][53] +
+            w->fh[12]*w->term[0][59] + w->fh[13]*w->term[0][62];
+    w->term[1][36] = w->fh[14]*w->term[0][9] + w->fh[15]*w->term[0][27] + w->fh[16]*w->term[0][45];
+    w->term[1][37] = w->fh[14]*w->term[0][10] + w->fh[15]*w->term[0][28] + w->fh[16]*w->term[0][46];
+    w->term[1][38] = w->fh[14]*w->term[0][11] + w->fh[15]*w->term[0][29] + w->fh[16]*w->term[0][47];
+    w->term[1][39] = w->fh[14]*w->term[0][12] + w->fh[15]*w->term[0][30] + w->fh[16]*w->term[0][48];
+    w->term[1][40] = w->fh[14]*w->term[0][13] + w->fh[15]*w->term[0][31] + w->fh[16]*w->term[0][49];
+    w->term[1][41] = w->fh[14]*w->term[0][14] + w->fh[15]*w->term[0][32] + w->fh[16]*w->term[0][50];
+    w->term[1][42] = w->fh[14]*w->term[0][15] + w->fh[15]*w->term[0][33] + w->fh[16]*w->term[0][51]
+            + w->fh[17]*w->term[0][54] + w->fh[18]*w->term[0][60];
+    w->term[1][43] = w->fh[14]*w->term[0][16] + w->fh[15]*w->term[0][34] + w->fh[16]*w->term[0][52]
+            + w->fh[17]*w->term[0][55] + w->fh[18]*w->term[0][61];
+    w->term[1][44] = w->fh[14]*w->term[0][17] + w->fh[15]*w->term[0][35] + w->fh[16]*w->term[0][53]
+            + w->fh[17]*w->term[0][56] + w->fh[18]*w->term[0][62];
+    w->term[1][45] = w->fh[19]*w->term[0][18] + w->fh[20]*w->term[0][27] + w->fh[21]*w->term[0][36];
+    w->term[1][46] = w->fh[19]*w->term[0][19] + w->fh[20]*w->term[0][28] + w->fh[21]*w->term[0][37];
+    w->term[1][47] = w->fh[19]*w->term[0][20] + w->fh[20]*w->term[0][29] + w->fh[21]*w->term[0][38];
+    w->term[1][48] = w->fh[19]*w->term[0][21] + w->fh[20]*w->term[0][30] + w->fh[21]*w->term[0][39];
+    w->term[1][49] = w->fh[19]*w->term[0][22] + w->fh[20]*w->term[0][31] + w->fh[21]*w->term[0][40];
+    w->term[1][50] = w->fh[19]*w->term[0][23] + w->fh[20]*w->term[0][32] + w->fh[21]*w->term[0][41];
+    w->term[1][51] = w->fh[19]*w->term[0][24] + w->fh[20]*w->term[0][33] + w->fh[21]*w->term[0][42]
+            + w->fh[22]*w->term[0][54] + w->fh[23]*w->term[0][57];
+    w->term[1][52] = w->fh[19]*w->term[0][25] + w->fh[20]*w->term[0][34] + w->fh[21]*w->term[0][43]
+            + w->fh[22]*w->term[0][55] + w->fh[23]*w->term[0][58];
+    w->term[1][53] = w->fh[19]*w->term[0][26] + w->fh[20]*w->term[0][35] + w->fh[21]*w->term[0][44]
+            + w->fh[22]*w->term[0][56] + w->fh[23]*w->term[0][59];
+    w->term[1][54] = w->fh[24]*w->term[0][57] + w->fh[25]*w->term[0][60];
+    w->term[1][55] = w->fh[24]*w->term[0][58] + w->fh[25]*w->term[0][61];
+    w->term[1][56] = w->fh[24]*w->term[0][59] + w->fh[25]*w->term[0][62];
+    w->term[1][57] = w->fh[26]*w->term[0][54] + w->fh[27]*w->term[0][60];
+    w->term[1][58] = w->fh[26]*w->term[0][55] + w->fh[27]*w->term[0][61];
+    w->term[1][59] = w->fh[26]*w->term[0][56] + w->fh[27]*w->term[0][62];
+    w->term[1][60] = w->fh[28]*w->term[0][54] + w->fh[29]*w->term[0][57];
+    w->term[1][61] = w->fh[28]*w->term[0][55] + w->fh[29]*w->term[0][58];
+    w->term[1][62] = w->fh[28]*w->term[0][56] + w->fh[29]*w->term[0][59];
+    t->Phi[0][0] = t->Phi[0][0] + w->term[1][0]*ck;
+    w->S[0] = w->S[0] + w->term[1][0]*cs;
+    t->Phi[0][1] = t->Phi[0][1] + w->term[1][1]*ck;
+    w->S[1] = w->S[1] + w->term[1][1]*cs;
+    t->Phi[0][2] = t->Phi[0][2] + w->term[1][2]*ck;
+    w->S[2] = w->S[2] + w->term[1][2]*cs;
+    t->Phi[0][3] = t->Phi[0][3] + w->term[1][3]*ck;
+    w->S[3] = w->S[3] + w->term[1][3]*cs;
+    t->Phi[0][4] = t->Phi[0][4] + w->term[1][4]*ck;
+    w->S[4] = w->S[4] + w->term[1][4]*cs;
+    t->Phi[0][5] = t->Phi[0][5] + w->term[1][5]*ck;
+    w->S[5] = w->S[5] + w->term[1][5]*cs;
+    t->Phi[0][6] = t->Phi[0][6] + w->term[1][6]*ck;
+    w->S[6] = w->S[6] + w->term[1][6]*cs;
+    t->Phi[0][7] = t->Phi[0][7] + w->term[1][7]*ck;
+    w->S[7] = w->S[7] + w->term[1][7]*cs;
+    t->Phi[0][8] = t->Phi[0][8] + w->term[1][8]*ck;
+    w->S[8] = w->S[8] + w->term[1][8]*cs;
+    t->Phi[1][0] = t->Phi[1][0] + w->term[1][9]*ck;
+    w->S[9] = w->S[9] + w->term[1][9]*cs;
+    t->Phi[1][1] = t->Phi[1][1] + w->term[1][10]*ck;
+    w->S[10] = w->S[10] + w->term[1][10]*cs;
+    t->Phi[1][2] = t->Phi[1][2] + w->term[1][11]*ck;
+    w->S[11] = w->S[11] + w->term[1][11]*cs;
+    t->Phi[1][3] = t->Phi[1][3] + w->term[1][12]*ck;
+    w->S[12] = w->S[12] + w->term[1][12]*cs;
+    t->Phi[1][4] = t->Phi[1][4] + w->term[1][13]*ck;
+    w->S[13] = w->S[13] + w->term[1][13]*cs;
+    t->Phi[1][5] = t->Phi[1][5] + w->term[1][14]*ck;
+    w->S[14] = w->S[14] + w->term[1][14]*cs;
+    t->Phi[1][6] = t->Phi[1][6] + w->term[1][15]*ck;
+    w->S[15] = w->S[15] + w->term[1][15]*cs;
+    t->Phi[1][7] = t->Phi[1][7] + w->term[1][16]*ck;
+    w->S[16] = w->S[16] + w->term[1][16]*cs;
+    t->Phi[1][8] = t->Phi[1][8] + w->term[1][17]*ck;
+    w->S[17] = w->S[17] + w->term[1][17]*cs;
+    t->Phi[2][0] = t->Phi[2][0] + w->term[1][18]*ck;
+    w->S[18] = w->S[18] + w->term[1][18]*cs;
+    t->Phi[2][1] = t->Phi[2][1] + w->term[1][19]*ck;
+    w->S[19] = w->S[19] + w->term[1][19]*cs;
+    t->Phi[2][2] = t->Phi[2][2] + w->term[1][20]*ck;
+    w->S[20] = w->S[20] + w->term[1][20]*cs;
+    t->Phi[2][3] = t->Phi[2][3] + w->term[1][21]*ck;
+    w->S[21] = w->S[21] + w->term[1][21]*cs;
+    t->Phi[2][4] = t->Phi[2][4] + w->term[1][22]*ck;
+    w->S[22] = w->S[22] + w->term[1][22]*cs;
+    t->Phi[2][5] = t->Phi[2][5] + w->term[1][23]*ck;
+    w->S[23] = w->S[23] + w->term[1][23]*cs;
+    t->Phi[2][6] = t->Phi[2][6] + w->term[1][24]*ck;
+    w->S[24] = w->S[24] + w->term[1][24]*cs;
+    t->Phi[2][7] = t->Phi[2][7] + w->term[1][25]*ck;
+    w->S[25] = w->S[25] + w->term[1][25]*cs;
+    t->Phi[2][8] = t->Phi[2][8] + w->term[1][26]*ck;
+    w->S[26] = w->S[26] + w->term[1][26]*cs;
+    t->Phi[3][0] = t->Phi[3][0] + w->term[1][27]*ck;
+    w->S[27] = w->S[27] + w->term[1][27]*cs;
+    t->Phi[3][1] = t->Phi[3][1] + w->term[1][28]*ck;
+    w->S[28] = w->S[28] + w->term[1][28]*cs;
+    t->Phi[3][2] = t->Phi[3][2] + w->term[1][29]*ck;
+    w->S[29] = w->S[29] + w->term[1][29]*cs;
+    t->Phi[3][3] = t->Phi[3][3] + w->term[1][30]*ck;
+    w->S[30] = w->S[30] + w->term[1][30]*cs;
+    t->Phi[3][4] = t->Phi[3][4] + w->term[1][31]*ck;
+    w->S[31] = w->S[31] + w->term[1][31]*cs;
+    t->Phi[3][5] = t->Phi[3][5] + w->term[1][32]*ck;
+    w->S[32] = w->S[32] + w->term[1][32]*cs;
+    t->Phi[3][6] = t->Phi[3][6] + w->term[1][33]*ck;
+    w->S[33] = w->S[33] + w->term[1][33]*cs;
+    t->Phi[3][7] = t->Phi[3][7] + w->term[1][34]*ck;
+    w->S[34] = w->S[34] + w->term[1][34]*cs;
+    t->Phi[3][8] = t->Phi[3][8] + w->term[1][35]*ck;
+    w->S[35] = w->S[35] + w->term[1][35]*cs;
+    t->Phi[4][0] = t->Phi[4][0] + w->term[1][36]*ck;
+    w->S[36] = w->S[36] + w->term[1][36]*cs;
+    t->Phi[4][1] = t->Phi[4][1] + w->term[1][37]*ck;
+    w->S[37] = w->S[37] + w->term[1][37]*cs;
+    t->Phi[4][2] = t->Phi[4][2] + w->term[1][38]*ck;
+    w->S[38] = w->S[38] + w->term[1][38]*cs;
+    t->Phi[4][3] = t->Phi[4][3] + w->term[1][39]*ck;
+    w->S[39] = w->S[39] + w->term[1][39]*cs;
+    t->Phi[4][4] = t->Phi[4][4] + w->term[1][40]*ck;
+    w->S[40] = w->S[40] + w->term[1][40]*cs;
+    t->Phi[4][5] = t->Phi[4][5] + w->term[1][41]*ck;
+    w->S[41] = w->S[41] + w->term[1][41]*cs;
+    t->Phi[4][6] = t->Phi[4][6] + w->term[1][42]*ck;
+    w->S[42] = w->S[42] + w->term[1][42]*cs;
+    t->Phi[4][7] = t->Phi[4][7] + w->term[1][43]*ck;
+    w->S[43] = w->S[43] + w->term[1][43]*cs;
+    t->Phi[4][8] = t->Phi[4][8] + w->term[1][44]*ck;
+    w->S[44] = w->S[44] + w->term[1][44]*cs;
+    t->Phi[5][0] = t->Phi[5][0] + w->term[1][45]*ck;
+    w->S[45] = w->S[45] + w->term[1][45]*cs;
+    t->Phi[5][1] = t->Phi[5][1] + w->term[1][46]*ck;
+    w->S[46] = w->S[46] + w->term[1][46]*cs;
+    t->Phi[5][2] = t->Phi[5][2] + w->term[1][47]*ck;
+    w->S[47] = w->S[47] + w->term[1][47]*cs;
+    t->Phi[5][3] = t->Phi[5][3] + w->term[1][48]*ck;
+    w->S[48] = w->S[48] + w->term[1][48]*cs;
+    t->Phi[5][4] = t->Phi[5][4] + w->term[1][49]*ck;
+    w->S[49] = w->S[49] + w->term[1][49]*cs;
+    t->Phi[5][5] = t->Phi[5][5] + w->term[1][50]*ck;
+    w->S[50] = w->S[50] + w->term[1][50]*cs;
+    t->Phi[5][6] = t->Phi[5][6] + w->term[1][51]*ck;
+    w->S[51] = w->S[51] + w->term[1][51]*cs;
+    t->Phi[5][7] = t->Phi[5][7] + w->term[1][52]*ck;
+    w->S[52] = w->S[52] + w->term[1][52]*cs;
+    t->Phi[5][8] = t->Phi[5][8] + w->term[1][53]*ck;
+    w->S[53] = w->S[53] + w->term[1][53]*cs;
+    t->Phi[6][6] = t->Phi[6][6] + w->term[1][54]*ck;
+    w->S[54] = w->S[54] + w->term[1][54]*cs;
+    t->Phi[6][7] = t->Phi[6][7] + w->term[1][55]*ck;
+    w->S[55] = w->S[55] + w->term[1][55]*cs;
+    t->Phi[6][8] = t->Phi[6][8] + w->term[1][56]*ck;
+    w->S[56] = w->S[56] + w->term[1][56]*cs;
+    t->Phi[7][6] = t->Phi[7][6] + w->term[1][57]*ck;
+    w->S[57] = w->S[57] + w->term[1][57]*cs;
+    t->Phi[7][7] = t->Phi[7][7] + w->term[1][58]*ck;
+    w->S[58] = w->S[58] + w->term[1][58]*cs;
+    t->Phi[7][8] = t->Phi[7][8] + w->term[1][59]*ck;
+    w->S[59] = w->S[59] + w->term[1][59]*cs;
+    t->Phi[8][6] = t->Phi[8][6] + w->term[1][60]*ck;
+    w->S[60] = w->S[60] + w->term[1][60]*cs;
+    t->Phi[8][7] = t->Phi[8][7] + w->term[1][61]*ck;
+    w->S[61] = w->S[61] + w->term[1][61]*cs;
+    t->Phi[8][8] = t->Phi[8][8] + w->term[1][62]*ck;
+    w->S[62] = w->S[62] + w->term[1][62]*cs;
+}
+
+GPS_PSEUDORANGE11_BLOCK void taylor_order_6(gps_pseudorange11_transition *restrict t,
+        gps_pseudorange11_discretize_scratch *restrict w)
+{
+    const gps_pseudorange11_scalar ck = 1.0 / 720.0;
+    const gps_pseudorange11_scalar cs = 1.0 / 5040.0;
+    w->term[0][0] = w->fh[0]*w->term[1][9] + w->fh[1]*w->term[1][18] + w->fh[2]*w->term[1][27];
+    w->term[0][1] = w->fh[0]*w->term[1][10] + w->fh[1]*w->term[1][19] + w->fh[2]*w->term[1][28];
+    w->term[0][2] = w->fh[0]*w->term[1][11] + w->fh[1]*w->term[1][20] + w->fh[2]*w->term[1][29];
+    w->term[0][3] = w->fh[0]*w->term[1][12] + w->fh[1]*w->term[1][21] + w->fh[2]*w->term[1][30];
+    w->term[0][4] = w->fh[0]*w->term[1][13] + w->fh[1]*w->term[1][22] + w->fh[2]*w->term[1][31];
+    w->term[0][5] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][23] + w->fh[2]*w->term[1][32];
+    w->term[0][6] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][24] + w->fh[2]*w->term[1][33];
+    w->term[0][7] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][25] + w->fh[2]*w->term[1][34];
+    w->term[0][8] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][26] + w->fh[2]*w->term[1][35];
+    w->term[0][9] = w->fh[3]*w->term[1][0] + w->fh[4]*w->term[1][18] + w->fh[5]*w->term[1][36];
+    w->term[0][10] = w->fh[3]*w->term[1][1] + w->fh[4]*w->term[1][19] + w->fh[5]*w->term[1][37];
+    w->term[0][11] = w->fh[3]*w->term[1][2] + w->fh[4]*w->term[1][20] + w->fh[5]*w->term[1][38];
+    w->term[0][12] = w->fh[3]*w->term[1][3] + w->fh[4]*w->term[1][21] + w->fh[5]*w->term[1][39];
+    w->term[0][13] = w->fh[3]*w->term[1][4] + w->fh[4]*w->term[1][22] + w->fh[5]*w->term[1][40];
+    w->term[0][14] = w->fh[3]*w->term[1][5] + w->fh[4]*w->term[1][23] + w->fh[5]*w->term[1][41];
+    w->term[0][15] = w->fh[3]*w->term[1][6] + w->fh[4]*w->term[1][24] + w->fh[5]*w->term[1][42];
+    w->term[0][16] = w->fh[3]*w->term[1][7] + w->fh[4]*w->term[1][25] + w->fh[5]*w->term[1][43];
+    w->term[0][17] = w->fh[3]*w->term[1][8] + w->fh[4]*w->term[1][26] + w->fh[5]*w->term[1][44];
+    w->term[0][18] = w->fh[6]*w->term[1][0] + w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][45];
+    w->term[0][19] = w->fh[6]*w->term[1][1] + w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][46];
+    w->term[0][20] = w->fh[6]*w->term[1][2] + w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][47];
+    w->term[0][21] = w->fh[6]*w->term[1][3] + w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][48];
+    w->term[0][22] = w->fh[6]*w->term[1][4] + w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][49];
+    w->term[0][23] = w->fh[6]*w->term[1][5] + w->fh[7]*w->term[1][14] + w->fh[8]*w->term[1][50];
+    w->term[0][24] = w->fh[6]*w->term[1][6] + w->fh[7]*w->term[1][15] + w->fh[8]*w->term[1][51];
+    w->term[0][25] = w->fh[6]*w->term[1][7] + w->fh[7]*w->term[1][16] + w->fh[8]*w->term[1][52];
+    w->term[0][26] = w->fh[6]*w->term[1][8] + w->fh[7]*w->term[1][17] + w->fh[8]*w->term[1][53];
+    w->term[0][27] = w->fh[9]*w->term[1][0] + w->fh[10]*w->term[1][36] + w->fh[11]*w->term[1][45];
+    w->term[0][28] = w->fh[9]*w->term[1][1] + w->fh[10]*w->term[1][37] + w->fh[11]*w->term[1][46];
+    w->term[0][29] = w->fh[9]*w->term[1][2] + w->fh[10]*w->term[1][38] + w->fh[11]*w->term[1][47];
+    w->term[0][30] = w->fh[9]*w->term[1][3] + w->fh[10]*w->term[1][39] + w->fh[11]*w->term[1][48];
+    w->term[0][31] = w->fh[9]*w->term[1][4] + w->fh[10]*w->term[1][40] + w->fh[11]*w->term[1][49];
+    w->term[0][32] = w->fh[9]*w->term[1][5] + w->fh[10]*w->term[1][41] + w->fh[11]*w->term[1][50];
+    w->term[0][33] = w->fh[9]*w->term[1][6] + w->fh[10]*w->term[1][42] + w->fh[11]*w->term[1][51] +
+            w->fh[12]*w->term[1][57] + w->fh[13]*w->term[1][60];
+    w->term[0][34] = w->fh[9]*w->term[1][7] + w->fh[10]*w->term[1][43] + w->fh[11]*w->term[1][52] +
+            w->fh[12]*w->term[1][58] + w->fh[13]*w->term[1][61];
+    w->term[0][35] = w->fh[9]*w->term[1][8] + w->fh[10]*w->term[1][44] + w->fh[11]*w->term[1][53] +
+            w->fh[12]*w->term[1][59] + w->fh[13]*w->term[1][62];
+    w->term[0][36] = w->fh[14]*w->term[1][9] + w->fh[15]*w->term[1][27] + w->fh[16]*w->term[1][45];
+    w->term[0][37] = w->fh[14]*w->term[1][10] + w->fh[15]*w->term[1][28] + w->fh[16]*w->term[1][46];
+    w->term[0][38] = w->fh[14]*w->term[1][11] + w->fh[15]*w->term[1][29] + w->fh[16]*w->term[1][47];
+    w->term[0][39] = w->fh[14]*w->term[1][12] + w->fh[15]*w->term[1][30] + w->fh[16]*w->term[1][48];
+    w->term[0][40] = w->fh[14]*w->term[1][13] + w->fh[15]*w->term[1][31] + w->fh[16]*w->term[1][49];
+    w->term[0][41] = w->fh[14]*w->term[1][14] + w->fh[15]*w->term[1][32] + w->fh[16]*w->term[1][50];
+    w->term[0][42] = w->fh[14]*w->term[1][15] + w->fh[15]*w->term[1][33] + w->fh[16]*w->term[1][51]
+            + w->fh[17]*w->term[1][54] + w->fh[18]*w->term[1][60];
+    w->term[0][43] = w->fh[14]*w->term[1][16] + w->fh[15]*w->term[1][34] + w->fh[16]*w->term[1][52]
+            + w->fh[17]*w->term[1][55] + w->fh[18]*w->term[1][61];
+    w->term[0][44] = w->fh[14]*w->term[1][17] + w->fh[15]*w->term[1][35] + w->fh[16]*w->term[1][53]
+            + w->fh[17]*w->term[1][56] + w->fh[18]*w->term[1][62];
+    w->term[0][45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][27] + w->fh[21]*w->term[1][36];
+    w->term[0][46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][28] + w->fh[21]*w->term[1][37];
+    w->term[0][47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][29] + w->fh[21]*w->term[1][38];
+    w->term[0][48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][30] + w->fh[21]*w->term[1][39];
+    w->term[0][49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][31] + w->fh[21]*w->term[1][40];
+    w->term[0][50] = w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][32] + w->fh[21]*w->term[1][41];
+    w->term[0][51] = w->fh[19]*w->term[1][24] + w->fh[20]*w->term[1][33] + w->fh[21]*w->term[1][42]
+            + w->fh[22]*w->term[1][54] + w->fh[23]*w->term[1][57];
+    w->term[0][52] = w->fh[19]*w->term[1][25] + w->fh[20]*w->term[1][34] + w->fh[21]*w->term[1][43]
+            + w->fh[22]*w->term[1][55] + w->fh[23]*w->term[1][58];
+    w->term[0][53] = w->fh[19]*w->term[1][26] + w->fh[20]*w->term[1][35] + w->fh[21]*w->term[1][44]
+            + w->fh[22]*w->term[1][56] + w->fh[23]*w->term[1][59];
+    w->term[0][54] = w->fh[24]*w->term[1][57] + w->fh[25]*w->term[1][60];
+    w->term[0][55] = w->fh[24]*w->term[1][58] + w->fh[25]*w->term[1][61];
+    w->term[0][56] = w->fh[24]*w->term[1][59] + w->fh[25]*w->term[1][62];
+    w->term[0][57] = w->fh[26]*w->term[1][54] + w->fh[27]*w->term[1][60];
+    w->term[0][58] = w->fh[26]*w->term[1][55] + w->fh[27]*w->term[1][61];
+    w->term[0][59] = w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][62];
+    w->term[0][60] = w->fh[28]*w->term[1][54] + w->fh[29]*w->term[1][57];
+    w->term[0][61] = w->fh[28]*w->term[1][55] + w->fh[29]*w->term[1][58];
+    w->term[0][62] = w->fh[28]*w->term[1][56] + w->fh[29]*w->term[1][59];
+    t->Phi[0][0] = t->Phi[0][0] + w->term[0][0]*ck;
+    w->S[0] = w->S[0] + w->term[0][0]*cs;
+    t->Phi[0][1] = t->Phi[0][1] + w->term[0][1]*ck;
+    w->S[1] = w->S[1] + w->term[0][1]*cs;
+    t->Phi[0][2] = t->Phi[0][2] + w->term[0][2]*ck;
+    w->S[2] = w->S[2] + w->term[0][2]*cs;
+    t->Phi[0][3] = t->Phi[0][3] + w->term[0][3]*ck;
+    w->S[3] = w->S[3] + w->term[0][3]*cs;
+    t->Phi[0][4] = t->Phi[0][4] + w->term[0][4]*ck;
+    w->S[4] = w->S[4] + w->term[0][4]*cs;
+    t->Phi[0][5] = t->Phi[0][5] + w->term[0][5]*ck;
+    w->S[5] = w->S[5] + w->term[0][5]*cs;
+    t->Phi[0][6] = t->Phi[0][6] + w->term[0][6]*ck;
+    w->S[6] = w->S[6] + w->term[0][6]*cs;
+    t->Phi[0][7] = t->Phi[0][7] + w->term[0][7]*ck;
+    w->S[7] = w->S[7] + w->term[0][7]*cs;
+    t->Phi[0][8] = t->Phi[0][8] + w->term[0][8]*ck;
+    w->S[8] = w->S[8] + w->term[0][8]*cs;
+    t->Phi[1][0] = t->Phi[1][0] + w->term[0][9]*ck;
+    w->S[9] = w->S[9] + w->term[0][9]*cs;
+    t->Phi[1][1] = t->Phi[1][1] + w->term[0][10]*ck;
+    w->S[10] = w->S[10] + w->term[0][10]*cs;
+    t->Phi[1][2] = t->Phi[1][2] + w->term[0][11]*ck;
+    w->S[11] = w->S[11] + w->term[0][11]*cs;
+    t->Phi[1][3] = t->Phi[1][3] + w->term[0][12]*ck;
+    w->S[12] = w->S[12] + w->term[0][12]*cs;
+    t->Phi[1][4] = t->Phi[1][4] + w->term[0][13]*ck;
+    w->S[13] = w->S[13] + w->term[0][13]*cs;
+    t->Phi[1][5] = t->Phi[1][5] + w->term[0][14]*ck;
+    w->S[14] = w->S[14] + w->term[0][14]*cs;
+    t->Phi[1][6] = t->Phi[1][6] + w->term[0][15]*ck;
+    w->S[15] = w->S[15] + w->term[0][15]*cs;
+    t->Phi[1][7] = t->Phi[1][7] + w->term[0][16]*ck;
+    w->S[16] = w->S[16] + w->term[0][16]*cs;
+    t->Phi[1][8] = t->Phi[1][8] + w->term[0][17]*ck;
+    w->S[17] = w->S[17] + w->term[0][17]*cs;
+    t->Phi[2][0] = t->Phi[2][0] + w->term[0][18]*ck;
+    w->S[18] = w->S[18] + w->term[0][18]*cs;
+    t->Phi[2][1] = t->Phi[2][1] + w->term[0][19]*ck;
+    w->S[19] = w->S[19] + w->term[0][19]*cs;
+    t->Phi[2][2] = t->Phi[2][2] + w->term[0][20]*ck;
+    w->S[20] = w->S[20] + w->term[0][20]*cs;
+    t->Phi[2][3] = t->Phi[2][3] + w->term[0][21]*ck;
+    w->S[21] = w->S[21] + w->term[0][21]*cs;
+    t->Phi[2][4] = t->Phi[2][4] + w->term[0][22]*ck;
+    w->S[22] = w->S[22] + w->term[0][22]*cs;
+    t->Phi[2][5] = t->Phi[2][5] + w->term[0][23]*ck;
+    w->S[23] = w->S[23] + w->term[0][23]*cs;
+    t->Phi[2][6] = t->Phi[2][6] + w->term[0][24]*ck;
+    w->S[24] = w->S[24] + w->term[0][24]*cs;
+    t->Phi[2][7] = t->Phi[2][7] + w->term[0][25]*ck;
+    w->S[25] = w->S[25] + w->term[0][25]*cs;
+    t->Phi[2][8] = t->Phi[2][8] + w->term[0][26]*ck;
+    w->S[26] = w->S[26] + w->term[0][26]*cs;
+    t->Phi[3][0] = t->Phi[3][0] + w->term[0][27]*ck;
+    w->S[27] = w->S[27] + w->term[0][27]*cs;
+    t->Phi[3][1] = t->Phi[3][1] + w->term[0][28]*ck;
+    w->S[28] = w->S[28] + w->term[0][28]*cs;
+    t->Phi[3][2] = t->Phi[3][2] + w->term[0][29]*ck;
+    w->S[29] = w->S[29] + w->term[0][29]*cs;
+    t->Phi[3][3] = t->Phi[3][3] + w->term[0][30]*ck;
+    w->S[30] = w->S[30] + w->term[0][30]*cs;
+    t->Phi[3][4] = t->Phi[3][4] + w->term[0][31]*ck;
+    w->S[31] = w->S[31] + w->term[0][31]*cs;
+    t->Phi[3][5] = t->Phi[3][5] + w->term[0][32]*ck;
+    w->S[32] = w->S[32] + w->term[0][32]*cs;
+    t->Phi[3][6] = t->Phi[3][6] + w->term[0][33]*ck;
+    w->S[33] = w->S[33] + w->term[0][33]*cs;
+    t->Phi[3][7] = t->Phi[3][7] + w->term[0][34]*ck;
+    w->S[34] = w->S[34] + w->term[0][34]*cs;
+    t->Phi[3][8] = t->Phi[3][8] + w->term[0][35]*ck;
+    w->S[35] = w->S[35] + w->term[0][35]*cs;
+    t->Phi[4][0] = t->Phi[4][0] + w->term[0][36]*ck;
+    w->S[36] = w->S[36] + w->term[0][36]*cs;
+    t->Phi[4][1] = t->Phi[4][1] + w->term[0][37]*ck;
+    w->S[37] = w->S[37] + w->term[0][37]*cs;
+    t->Phi[4][2] = t->Phi[4][2] + w->term[0][38]*ck;
+    w->S[38] = w->S[38] + w->term[0][38]*cs;
+    t->Phi[4][3] = t->Phi[4][3] + w->term[0][39]*ck;
+    w->S[39] = w->S[39] + w->term[0][39]*cs;
+    t->Phi[4][4] = t->Phi[4][4] + w->term[0][40]*ck;
+    w->S[40] = w->S[40] + w->term[0][40]*cs;
+    t->Phi[4][5] = t->Phi[4][5] + w->term[0][41]*ck;
+    w->S[41] = w->S[41] + w->term[0][41]*cs;
+    t->Phi[4][6] = t->Phi[4][6] + w->term[0][42]*ck;
+    w->S[42] = w->S[42] + w->term[0][42]*cs;
+    t->Phi[4][7] = t->Phi[4][7] + w->term[0][43]*ck;
+    w->S[43] = w->S[43] + w->term[0][43]*cs;
+    t->Phi[4][8] = t->Phi[4][8] + w->term[0][44]*ck;
+    w->S[44] = w->S[44] + w->term[0][44]*cs;
+    t->Phi[5][0] = t->Phi[5][0] + w->term[0][45]*ck;
+    w->S[45] = w->S[45] + w->term[0][45]*cs;
+    t->Phi[5][1] = t->Phi[5][1] + w->term[0][46]*ck;
+    w->S[46] = w->S[46] + w->term[0][46]*cs;
+    t->Phi[5][2] = t->Phi[5][2] + w->term[0][47]*ck;
+    w->S[47] = w->S[47] + w->term[0][47]*cs;
+    t->Phi[5][3] = t->Phi[5][3] + w->term[0][48]*ck;
+    w->S[48] = w->S[48] + w->term[0][48]*cs;
+    t->Phi[5][4] = t->Phi[5][4] + w->term[0][49]*ck;
+    w->S[49] = w->S[49] + w->term[0][49]*cs;
+    t->Phi[5][5] = t->Phi[5][5] + w->term[0][50]*ck;
+    w->S[50] = w->S[50] + w->term[0][50]*cs;
+    t->Phi[5][6] = t->Phi[5][6] + w->term[0][51]*ck;
+    w->S[51] = w->S[51] + w->term[0][51]*cs;
+    t->Phi[5][7] = t->Phi[5][7] + w->term[0][52]*ck;
+    w->S[52] = w->S[52] + w->term[0][52]*cs;
+    t->Phi[5][8] = t->Phi[5][8] + w->term[0][53]*ck;
+    w->S[53] = w->S[53] + w->term[0][53]*cs;
+    t->Phi[6][6] = t->Phi[6][6] + w->term[0][54]*ck;
+    w->S[54] = w->S[54] + w->term[0][54]*cs;
+    t->Phi[6][7] = t->Phi[6][7] + w->term[0][55]*ck;
+    w->S[55] = w->S[55] + w->term[0][55]*cs;
+    t->Phi[6][8] = t->Phi[6][8] + w->term[0][56]*ck;
+    w->S[56] = w->S[56] + w->term[0][56]*cs;
+    t->Phi[7][6] = t->Phi[7][6] + w->term[0][57]*ck;
+    w->S[57] = w->S[57] + w->term[0][57]*cs;
+    t->Phi[7][7] = t->Phi[7][7] + w->term[0][58]*ck;
+    w->S[58] = w->S[58] + w->term[0][58]*cs;
+    t->Phi[7][8] = t->Phi[7][8] + w->term[0][59]*ck;
+    w->S[59] = w->S[59] + w->term[0][59]*cs;
+    t->Phi[8][6] = t->Phi[8][6] + w->term[0][60]*ck;
+    w->S[60] = w->S[60] + w->term[0][60]*cs;
+    t->Phi[8][7] = t->Phi[8][7] + w->term[0][61]*ck;
+    w->S[61] = w->S[61] + w->term[0][61]*cs;
+    t->Phi[8][8] = t->Phi[8][8] + w->term[0][62]*ck;
+    w->S[62] = w->S[62] + w->term[0][62]*cs;
+}
+
+GPS_PSEUDORANGE11_BLOCK void taylor_order_7(gps_pseudorange11_transition *restrict t,
+        gps_pseudorange11_discretize_scratch *restrict w)
+{
+    const gps_pseudorange11_scalar ck = 1.0 / 5040.0;
+    const gps_pseudorange11_scalar cs = 1.0 / 40320.0;
+    w->term[1][0] = w->fh[0]*w->term[0][9] + w->fh[1]*w->term[0][18] + w->fh[2]*w->term[0][27];
+    w->term[1][1] = w->fh[0]*w->term[0][10] + w->fh[1]*w->term[0][19] + w->fh[2]*w->term[0][28];
+    w->term[1][2] = w->fh[0]*w->term[0][11] + w->fh[1]*w->term[0][20] + w->fh[2]*w->term[0][29];
+    w->term[1][3] = w->fh[0]*w->term[0][12] + w->fh[1]*w->term[0][21] + w->fh[2]*w->term[0][30];
+    w->term[1][4] = w->fh[0]*w->term[0][13] + w->fh[1]*w->term[0][22] + w->fh[2]*w->term[0][31];
+    w->term[1][5] = w->fh[0]*w->term[0][14] + w->fh[1]*w->term[0][23] + w->fh[2]*w->term[0][32];
+    w->term[1][6] = w->fh[0]*w->term[0][15] + w->fh[1]*w->term[0][24] + w->fh[2]*w->term[0][33];
+    w->term[1][7] = w->fh[0]*w->term[0][16] + w->fh[1]*w->term[0][25] + w->fh[2]*w->term[0][34];
+    w->term[1][8] = w->fh[0]*w->term[0][17] + w->fh[1]*w->term[0][26] + w->fh[2]*w->term[0][35];
+    w->term[1][9] = w->fh[3]*w->term[0][0] + w->fh[4]*w->term[0][18] + w->fh[5]*w->term[0][36];
+    w->term[1][10] = w->fh[3]*w->term[0][1] + w->fh[4]*w->term[0][19] + w->fh[5]*w->term[0][37];
+    w->term[1][11] = w->fh[3]*w->term[0][2] + w->fh[4]*w->term[0][20] + w->fh[5]*w->term[0][38];
+    w->term[1][12] = w->fh[3]*w->term[0][3] + w->fh[4]*w->term[0][21] + w->fh[5]*w->term[0][39];
+    w->term[1][13] = w->fh[3]*w->term[0][4] + w->fh[4]*w->term[0][22] + w->fh[5]*w->term[0][40];
+    w->term[1][14] = w->fh[3]*w->term[0][5] + w->fh[4]*w->term[0][23] + w->fh[5]*w->term[0][41];
+    w->term[1][15] = w->fh[3]*w->term[0][6] + w->fh[4]*w->term[0][24] + w->fh[5]*w->term[0][42];
+    w->term[1][16] = w->fh[3]*w->term[0][7] + w->fh[4]*w->term[0][25] + w->fh[5]*w->term[0][43];
+    w->term[1][17] = w->fh[3]*w->term[0][8] + w->fh[4]*w->term[0][26] + w->fh[5]*w->term[0][44];
+    w->term[1][18] = w->fh[6]*w->term[0][0] + w->fh[7]*w->term[0][9] + w->fh[8]*w->term[0][45];
+    w->term[1][19] = w->fh[6]*w->term[0][1] + w->fh[7]*w->term[0][10] + w->fh[8]*w->term[0][46];
+    w->term[1][20] = w->fh[6]*w->term[0][2] + w->fh[7]*w->term[0][11] + w->fh[8]*w->term[0][47];
+    w->term[1][21] = w->fh[6]*w->term[0][3] + w->fh[7]*w->term[0][12] + w->fh[8]*w->term[0][48];
+    w->term[1][22] = w->fh[6]*w->term[0][4] + w->fh[7]*w->term[0][13] + w->fh[8]*w->term[0][49];
+    w->term[1][23] = w->fh[6]*w->term[0][5] + w->fh[7]*w->term[0][14] + w->fh[8]*w->term[0][50];
+    w->term[1][24] = w->fh[6]*w->term[0][6] + w->fh[7]*w->term[0][15] + w->fh[8]*w->term[0][51];
+    w->term[1][25] = w->fh[6]*w->term[0][7] + w->fh[7]*w->term[0][16] + w->fh[8]*w->term[0][52];
+    w->term[1][26] = w->fh[6]*w->term[0][8] + w->fh[7]*w->term[0][17] + w->fh[8]*w->term[0][53];
+    w->term[1][27] = w->fh[9]*w->term[0][0] + w->fh[10]*w->term[0][36] + w->fh[11]*w->term[0][45];
+    w->term[1][28] = w->fh[9]*w->term[0][1] + w->fh[10]*w->term[0][37] + w->fh[11]*w->term[0][46];
+    w->term[1][29] = w->fh[9]*w->term[0][2] + w->fh[10]*w->term[0][38] + w->fh[11]*w->term[0][47];
+    w->term[1][30] = w->fh[9]*w->term[0][3] + w->fh[10]*w->term[0][39] + w->fh[11]*w->term[0][48];
+    w->term[1][31] = w->fh[9]*w->term[0][4] + w->fh[10]*w->term[0][40] + w->fh[11]*w->term[0][49];
+    w->term[1][32] = w->fh[9]*w->term[0][5] + w->fh[10]*w->term[0][41] + w->fh[11]*w->term[0][50];
+    w->term[1][33] = w->fh[9]*w->term[0][6] + w->fh[10]*w->term[0][42] + w->fh[11]*w->term[0][51] +
+            w->fh[12]*w->term[0][57] + w->fh[13]*w->term[0][60];
+    w->term[1][34] = w->fh[9]*w->term[0][7] + w->fh[10]*w->term[0][43] + w->fh[11]*w->term[0][52] +
+            w->fh[12]*w->term[0][58] + w->fh[13]*w->term[0][61];
+    w->term[1][35] = w->fh[9]*w->term[0][8] + w->fh[10]*w->term[0][44] + w->fh[11]*w->term[0][53] +
+            w->fh[12]*w->term[0][59] + w->fh[13]*w->term[0][62];
+    w->term[1][36] = w->fh[14]*w->term[0][9] + w->fh[15]*w->term[0][27] + w->fh[16]*w->term[0][45];
+    w->term[1][37] = w->fh[14]*w->term[0][10] + w->fh[15]*w->term[0][28] + w->fh[16]*w->term[0][46];
+    w->term[1][38] = w->fh[14]*w->term[0][11] + w->fh[15]*w->term[0][29] + w->fh[16]*w->term[0][47];
+    w->term[1][39] = w->fh[14]*w->term[0][12] + w->fh[15]*w->term[0][30] + w->fh[16]*w->term[0][48];
+    w->term[1][40] = w->fh[14]*w->term[0][13] + w->fh[15]*w->term[0][31] + w->fh[16]*w->term[0][49];
+    w->term[1][41] = w->fh[14]*w->term[0][14] + w->fh[15]*w->term[0][32] + w->fh[16]*w->term[0][50];
+    w->term[1][42] = w->fh[14]*w->term[0][15] + w->fh[15]*w->term[0][33] + w->fh[16]*w->term[0][51]
+            + w->fh[17]*w->term[0][54] + w->fh[18]*w->term[0][60];
+    w->term[1][43] = w->fh[14]*w->term[0][16] + w->fh[15]*w->term[0][34] + w->fh[16]*w->term[0][52]
+            + w->fh[17]*w->term[0][55] + w->fh[18]*w->term[0][61];
+    w->term[1][44] = w->fh[14]*w->term[0][17] + w->fh[15]*w->term[0][35] + w->fh[16]*w->term[0][53]
+            + w->fh[17]*w->term[0][56] + w->fh[18]*w->term[0][62];
+    w->term[1][45] = w->fh[19]*w->term[0][18] + w->fh[20]*w->term[0][27] + w->fh[21]*w->term[0][36];
+    w->term[1][46] = w->fh[19]*w->term[0][19] + w->fh[20]*w->term[0][28] + w->fh[21]*w->term[0][37];
+    w->term[1][47] = w->fh[19]*w->term[0][20] + w->fh[20]*w->term[0][29] + w->fh[21]*w->term[0][38];
+    w->term[1][48] = w->fh[19]*w->term[0][21] + w->fh[20]*w->term[0][30] + w->fh[21]*w->term[0][39];
+    w->term[1][49] = w->fh[19]*w->term[0][22] + w->fh[20]*w->term[0][31] + w->fh[21]*w->term[0][40];
+    w->term[1][50] = w->fh[19]*w->term[0][23] + w->fh[20]*w->term[0][32] + w->fh[21]*w->term[0][41];
+    w->term[1][51] = w->fh[19]*w->term[0][24] + w->fh[20]*w->term[0][33] + w->fh[21]*w->term[0][42]
+            + w->fh[22]*w->term[0][54] + w->fh[23]*w->term[0][57];
+    w->term[1][52] = w->fh[19]*w->term[0][25] + w->fh[20]*w->term[0][34] + w->fh[21]*w->term[0][43]
+            + w->fh[22]*w->term[0][55] + w->fh[23]*w->term[0][58];
+    w->term[1][53] = w->fh[19]*w->term[0][26] + w->fh[20]*w->term[0][35] + w->fh[21]*w->term[0][44]
+            + w->fh[22]*w->term[0][56] + w->fh[23]*w->term[0][59];
+    w->term[1][54] = w->fh[24]*w->term[0][57] + w->fh[25]*w->term[0][60];
+    w->term[1][55] = w->fh[24]*w->term[0][58] + w->fh[25]*w->term[0][61];
+    w->term[1][56] = w->fh[24]*w->term[0][59] + w->fh[25]*w->term[0][62];
+    w->term[1][57] = w->fh[26]*w->term[0][54] + w->fh[27]*w->term[0][60];
+    w->term[1][58] = w->fh[26]*w->term[0][55] + w->fh[27]*w->term[0][61];
+    w->term[1][59] = w->fh[26]*w->term[0][56] + w->fh[27]*w->term[0][62];
+    w->term[1][60] = w->fh[28]*w->term[0][54] + w->fh[29]*w->term[0][57];
+    w->term[1][61] = w->fh[28]*w->term[0][55] + w->fh[29]*w->term[0][58];
+    w->term[1][62] = w->fh[28]*w->term[0][56] + w->fh[29]*w->term[0][59];
+    t->Phi[0][0] = t->Phi[0][0] + w->term[1][0]*ck;
+    w->S[0] = w->S[0] + w->term[1][0]*cs;
+    t->Phi[0][1] = t->Phi[0][1] + w->term[1][1]*ck;
+    w->S[1] = w->S[1] + w->term[1][1]*cs;
+    t->Phi[0][2] = t->Phi[0][2] + w->term[1][2]*ck;
+    w->S[2] = w->S[2] + w->term[1][2]*cs;
+    t->Phi[0][3] = t->Phi[0][3] + w->term[1][3]*ck;
+    w->S[3] = w->S[3] + w->term[1][3]*cs;
+    t->Phi[0][4] = t->Phi[0][4] + w->term[1][4]*ck;
+    w->S[4] = w->S[4] + w->term[1][4]*cs;
+    t->Phi[0][5] = t->Phi[0][5] + w->term[1][5]*ck;
+    w->S[5] = w->S[5] + w->term[1][5]*cs;
+    t->Phi[0][6] = t->Phi[0][6] + w->term[1][6]*ck;
+    w->S[6] = w->S[6] + w->term[1][6]*cs;
+    t->Phi[0][7] = t->Phi[0][7] + w->term[1][7]*ck;
+    w->S[7] = w->S[7] + w->term[1][7]*cs;
+    t->Phi[0][8] = t->Phi[0][8] + w->term[1][8]*ck;
+    w->S[8] = w->S[8] + w->term[1][8]*cs;
+    t->Phi[1][0] = t->Phi[1][0] + w->term[1][9]*ck;
+    w->S[9] = w->S[9] + w->term[1][9]*cs;
+    t->Phi[1][1] = t->Phi[1][1] + w->term[1][10]*ck;
+    w->S[10] = w->S[10] + w->term[1][10]*cs;
+    t->Phi[1][2] = t->Phi[1][2] + w->term[1][11]*ck;
+    w->S[11] = w->S[11] + w->term[1][11]*cs;
+    t->Phi[1][3] = t->Phi[1][3] + w->term[1][12]*ck;
+    w->S[12] = w->S[12] + w->term[1][12]*cs;
+    t->Phi[1][4] = t->Phi[1][4] + w->term[1][13]*ck;
+    w->S[13] = w->S[13] + w->term[1][13]*cs;
+    t->Phi[1][5] = t->Phi[1][5] + w->term[1][14]*ck;
+    w->S[14] = w->S[14] + w->term[1][14]*cs;
+    t->Phi[1][6] = t->Phi[1][6] + w->term[1][15]*ck;
+    w->S[15] = w->S[15] + w->term[1][15]*cs;
+    t->Phi[1][7] = t->Phi[1][7] + w->term[1][16]*ck;
+    w->S[16] = w->S[16] + w->term[1][16]*cs;
+    t->Phi[1][8] = t->Phi[1][8] + w->term[1][17]*ck;
+    w->S[17] = w->S[17] + w->term[1][17]*cs;
+    t->Phi[2][0] = t->Phi[2][0] + w->term[1][18]*ck;
+    w->S[18] = w->S[18] + w->term[1][18]*cs;
+    t->Phi[2][1] = t->Phi[2][1] + w->term[1][19]*ck;
+    w->S[19] = w->S[19] + w->term[1][19]*cs;
+    t->Phi[2][2] = t->Phi[2][2] + w->term[1][20]*ck;
+    w->S[20] = w->S[20] + w->term[1][20]*cs;
+    t->Phi[2][3] = t->Phi[2][3] + w->term[1][21]*ck;
+    w->S[21] = w->S[21] + w->term[1][21]*cs;
+    t->Phi[2][4] = t->Phi[2][4] + w->term[1][22]*ck;
+    w->S[22] = w->S[22] + w->term[1][22]*cs;
+    t->Phi[2][5] = t->Phi[2][5] + w->term[1][23]*ck;
+    w->S[23] = w->S[23] + w->term[1][23]*cs;
+    t->Phi[2][6] = t->Phi[2][6] + w->term[1][24]*ck;
+    w->S[24] = w->S[24] + w->term[1][24]*cs;
+    t->Phi[2][7] = t->Phi[2][7] + w->term[1][25]*ck;
+    w->S[25] = w->S[25] + w->term[1][25]*cs;
+    t->Phi[2][8] = t->Phi[2][8] + w->term[1][26]*ck;
+    w->S[26] = w->S[26] + w->term[1][26]*cs;
+    t->Phi[3][0] = t->Phi[3][0] + w->term[1][27]*ck;
+    w->S[27] = w->S[27] + w->term[1][27]*cs;
+    t->Phi[3][1] = t->Phi[3][1] + w->term[1][28]*ck;
+    w->S[28] = w->S[28] + w->term[1][28]*cs;
+    t->Phi[3][2] = t->Phi[3][2] + w->term[1][29]*ck;
+    w->S[29] = w->S[29] + w->term[1][29]*cs;
+    t->Phi[3][3] = t->Phi[3][3] + w->term[1][30]*ck;
+    w->S[30] = w->S[30] + w->term[1][30]*cs;
+    t->Phi[3][4] = t->Phi[3][4] + w->term[1][31]*ck;
+    w->S[31] = w->S[31] + w->term[1][31]*cs;
+    t->Phi[3][5] = t->Phi[3][5] + w->term[1][32]*ck;
+    w->S[32] = w->S[32] + w->term[1][32]*cs;
+    t->Phi[3][6] = t->Phi[3][6] + w->term[1][33]*ck;
+    w->S[33] = w->S[33] + w->term[1][33]*cs;
+    t->Phi[3][7] = t->Phi[3][7] + w->term[1][34]*ck;
+    w->S[34] = w->S[34] + w->term[1][34]*cs;
+    t->Phi[3][8] = t->Phi[3][8] + w->term[1][35]*ck;
+    w->S[35] = w->S[35] + w->term[1][35]*cs;
+    t->Phi[4][0] = t->Phi[4][0] + w->term[1][36]*ck;
+    w->S[36] = w->S[36] + w->term[1][36]*cs;
+    t->Phi[4][1] = t->Phi[4][1] + w->term[1][37]*ck;
+    w->S[37] = w->S[37] + w->term[1][37]*cs;
+    t->Phi[4][2] = t->Phi[4][2] + w->term[1][38]*ck;
+    w->S[38] = w->S[38] + w->term[1][38]*cs;
+    t->Phi[4][3] = t->Phi[4][3] + w->term[1][39]*ck;
+    w->S[39] = w->S[39] + w->term[1][39]*cs;
+    t->Phi[4][4] = t->Phi[4][4] + w->term[1][40]*ck;
+    w->S[40] = w->S[40] + w->term[1][40]*cs;
+    t->Phi[4][5] = t->Phi[4][5] + w->term[1][41]*ck;
+    w->S[41] = w->S[41] + w->term[1][41]*cs;
+    t->Phi[4][6] = t->Phi[4][6] + w->term[1][42]*ck;
+    w->S[42] = w->S[42] + w->term[1][42]*cs;
+    t->Phi[4][7] = t->Phi[4][7] + w->term[1][43]*ck;
+    w->S[43] = w->S[43] + w->term[1][43]*cs;
+    t->Phi[4][8] = t->Phi[4][8] + w->term[1][44]*ck;
+    w->S[44] = w->S[44] + w->term[1][44]*cs;
+    t->Phi[5][0] = t->Phi[5][0] + w->term[1][45]*ck;
+    w->S[45] = w->S[45] + w->term[1][45]*cs;
+    t->Phi[5][1] = t->Phi[5][1] + w->term[1][46]*ck;
+    w->S[46] = w->S[46] + w->term[1][46]*cs;
+    t->Phi[5][2] = t->Phi[5][2] + w->term[1][47]*ck;
+    w->S[47] = w->S[47] + w->term[1][47]*cs;
+    t->Phi[5][3] = t->Phi[5][3] + w->term[1][48]*ck;
+    w->S[48] = w->S[48] + w->term[1][48]*cs;
+    t->Phi[5][4] = t->Phi[5][4] + w->term[1][49]*ck;
+    w->S[49] = w->S[49] + w->term[1][49]*cs;
+    t->Phi[5][5] = t->Phi[5][5] + w->term[1][50]*ck;
+    w->S[50] = w->S[50] + w->term[1][50]*cs;
+    t->Phi[5][6] = t->Phi[5][6] + w->term[1][51]*ck;
+    w->S[51] = w->S[51] + w->term[1][51]*cs;
+    t->Phi[5][7] = t->Phi[5][7] + w->term[1][52]*ck;
+    w->S[52] = w->S[52] + w->term[1][52]*cs;
+    t->Phi[5][8] = t->Phi[5][8] + w->term[1][53]*ck;
+    w->S[53] = w->S[53] + w->term[1][53]*cs;
+    t->Phi[6][6] = t->Phi[6][6] + w->term[1][54]*ck;
+    w->S[54] = w->S[54] + w->term[1][54]*cs;
+    t->Phi[6][7] = t->Phi[6][7] + w->term[1][55]*ck;
+    w->S[55] = w->S[55] + w->term[1][55]*cs;
+    t->Phi[6][8] = t->Phi[6][8] + w->term[1][56]*ck;
+    w->S[56] = w->S[56] + w->term[1][56]*cs;
+    t->Phi[7][6] = t->Phi[7][6] + w->term[1][57]*ck;
+    w->S[57] = w->S[57] + w->term[1][57]*cs;
+    t->Phi[7][7] = t->Phi[7][7] + w->term[1][58]*ck;
+    w->S[58] = w->S[58] + w->term[1][58]*cs;
+    t->Phi[7][8] = t->Phi[7][8] + w->term[1][59]*ck;
+    w->S[59] = w->S[59] + w->term[1][59]*cs;
+    t->Phi[8][6] = t->Phi[8][6] + w->term[1][60]*ck;
+    w->S[60] = w->S[60] + w->term[1][60]*cs;
+    t->Phi[8][7] = t->Phi[8][7] + w->term[1][61]*ck;
+    w->S[61] = w->S[61] + w->term[1][61]*cs;
+    t->Phi[8][8] = t->Phi[8][8] + w->term[1][62]*ck;
+    w->S[62] = w->S[62] + w->term[1][62]*cs;
+}
+
+GPS_PSEUDORANGE11_BLOCK void taylor_order_8(gps_pseudorange11_transition *restrict t,
+        gps_pseudorange11_discretize_scratch *restrict w)
+{
+    const gps_pseudorange11_scalar ck = 1.0 / 40320.0;
+    const gps_pseudorange11_scalar cs = 1.0 / 362880.0;
+    w->term[0][0] = w->fh[0]*w->term[1][9] + w->fh[1]*w->term[1][18] + w->fh[2]*w->term[1][27];
+    w->term[0][1] = w->fh[0]*w->term[1][10] + w->fh[1]*w->term[1][19] + w->fh[2]*w->term[1][28];
+    w->term[0][2] = w->fh[0]*w->term[1][11] + w->fh[1]*w->term[1][20] + w->fh[2]*w->term[1][29];
+    w->term[0][3] = w->fh[0]*w->term[1][12] + w->fh[1]*w->term[1][21] + w->fh[2]*w->term[1][30];
+    w->term[0][4] = w->fh[0]*w->term[1][13] + w->fh[1]*w->term[1][22] + w->fh[2]*w->term[1][31];
+    w->term[0][5] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][23] + w->fh[2]*w->term[1][32];
+    w->term[0][6] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][24] + w->fh[2]*w->term[1][33];
+    w->term[0][7] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][25] + w->fh[2]*w->term[1][34];
+    w->term[0][8] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][26] + w->fh[2]*w->term[1][35];
+    w->term[0][9] = w->fh[3]*w->term[1][0] + w->fh[4]*w->term[1][18] + w->fh[5]*w->term[1][36];
+    w->term[0][10] = w->fh[3]*w->term[1][1] + w->fh[4]*w->term[1][19] + w->fh[5]*w->term[1][37];
+    w->term[0][11] = w->fh[3]*w->term[1][2] + w->fh[4]*w->term[1][20] + w->fh[5]*w->term[1][38];
+    w->term[0][12] = w->fh[3]*w->term[1][3] + w->fh[4]*w->term[1][21] + w->fh[5]*w->term[1][39];
+    w->term[0][13] = w->fh[3]*w->term[1][4] + w->fh[4]*w->term[1][22] + w->fh[5]*w->term[1][40];
+    w->term[0][14] = w->fh[3]*w->term[1][5] + w->fh[4]*w->term[1][23] + w->fh[5]*w->term[1][41];
+    w->term[0][15] = w->fh[3]*w->term[1][6] + w->fh[4]*w->term[1][24] + w->fh[5]*w->term[1][42];
+    w->term[0][16] = w->fh[3]*w->term[1][7] + w->fh[4]*w->term[1][25] + w->fh[5]*w->term[1][43];
+    w->term[0][17] = w->fh[3]*w->term[1][8] + w->fh[4]*w->term[1][26] + w->fh[5]*w->term[1][44];
+    w->term[0][18] = w->fh[6]*w->term[1][0] + w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][45];
+    w->term[0][19] = w->fh[6]*w->term[1][1] + w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][46];
+    w->term[0][20] = w->fh[6]*w->term[1][2] + w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][47];
+    w->term[0][21] = w->fh[6]*w->term[1][3] + w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][48];
+    w->term[0][22] = w->fh[6]*w->term[1][4] + w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][49];
+    w->term[0][23] = w->fh[6]*w->term[1][5] + w->fh[7]*w->term[1][14] + w->fh[8]*w->term[1][50];
+    w->term[0][24] = w->fh[6]*w->term[1][6] + w->fh[7]*w->term[1][15] + w->fh[8]*w->term[1][51];
+    w->term[0][25] = w->fh[6]*w->term[1][7] + w->fh[7]*w->term[1][16] + w->fh[8]*w->term[1][52];
+    w->term[0][26] = w->fh[6]*w->term[1][8] + w->fh[7]*w->term[1][17] + w->fh[8]*w->term[1][53];
+    w->term[0][27] = w->fh[9]*w->term[1][0] + w->fh[10]*w->term[1][36] + w->fh[11]*w->term[1][45];
+    w->term[0][28] = w->fh[9]*w->term[1][1] + w->fh[10]*w->term[1][37] + w->fh[11]*w->term[1][46];
+    w->term[0][29] = w->fh[9]*w->term[1][2] + w->fh[10]*w->term[1][38] + w->fh[11]*w->term[1][47];
+    w->term[0][30] = w->fh[9]*w->term[1][3] + w->fh[10]*w->term[1][39] + w->fh[11]*w->term[1][48];
+    w->term[0][31] = w->fh[9]*w->term[1][4] + w->fh[10]*w->term[1][40] + w->fh[11]*w->term[1][49];
+    w->term[0][32] = w->fh[9]*w->term[1][5] + w->fh[10]*w->term[1][41] + w->fh[11]*w->term[1][50];
+    w->term[0][33] = w->fh[9]*w->term[1][6] + w->fh[10]*w->term[1][42] + w->fh[11]*w->term[1][51] +
+            w->fh[12]*w->term[1][57] + w->fh[13]*w->term[1][60];
+    w->term[0][34] = w->fh[9]*w->term[1][7] + w->fh[10]*w->term[1][43] + w->fh[11]*w->term[1][52] +
+            w->fh[12]*w->term[1][58] + w->fh[13]*w->term[1][61];
+    w->term[0][35] = w->fh[9]*w->term[1][8] + w->fh[10]*w->term[1][44] + w->fh[11]*w->term[1][53] +
+            w->fh[12]*w->term[1][59] + w->fh[13]*w->term[1][62];
+    w->term[0][36] = w->fh[14]*w->term[1][9] + w->fh[15]*w->term[1][27] + w->fh[16]*w->term[1][45];
+    w->term[0][37] = w->fh[14]*w->term[1][10] + w->fh[15]*w->term[1][28] + w->fh[16]*w->term[1][46];
+    w->term[0][38] = w->fh[14]*w->term[1][11] + w->fh[15]*w->term[1][29] + w->fh[16]*w->term[1][47];
+    w->term[0][39] = w->fh[14]*w->term[1][12] + w->fh[15]*w->term[1][30] + w->fh[16]*w->term[1][48];
+    w->term[0][40] = w->fh[14]*w->term[1][13] + w->fh[15]*w->term[1][31] + w->fh[16]*w->term[1][49];
+    w->term[0][41] = w->fh[14]*w->term[1][14] + w->fh[15]*w->term[1][32] + w->fh[16]*w->term[1][50];
+    w->term[0][42] = w->fh[14]*w->term[1][15] + w->fh[15]*w->term[1][33] + w->fh[16]*w->term[1][51]
+            + w->fh[17]*w->term[1][54] + w->fh[18]*w->term[1][60];
+    w->term[0][43] = w->fh[14]*w->term[1][16] + w->fh[15]*w->term[1][34] + w->fh[16]*w->term[1][52]
+            + w->fh[17]*w->term[1][55] + w->fh[18]*w->term[1][61];
+    w->term[0][44] = w->fh[14]*w->term[1][17] + w->fh[15]*w->term[1][35] + w->fh[16]*w->term[1][53]
+            + w->fh[17]*w->term[1][56] + w->fh[18]*w->term[1][62];
+    w->term[0][45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][27] + w->fh[21]*w->term[1][36];
+    w->term[0][46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][28] + w->fh[21]*w->term[1][37];
+    w->term[0][47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][29] + w->fh[21]*w->term[1][38];
+    w->term[0][48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][30] + w->fh[21]*w->term[1][39];
+    w->term[0][49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][31] + w->fh[21]*w->term[1][40];
+    w->term[0][50] = w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][32] + w->fh[21]*w->term[1][41];
+    w->term[0][51] = w->fh[19]*w->term[1][24] + w->fh[20]*w->term[1][33] + w->fh[21]*w->term[1][42]
+            + w->fh[22]*w->term[1][54] + w->fh[23]*w->term[1][57];
+    w->term[0][52] = w->fh[19]*w->term[1][25] + w->fh[20]*w->term[1][34] + w->fh[21]*w->term[1][43]
+            + w->fh[22]*w->term[1][55] + w->fh[23]*w->term[1][58];
+    w->term[0][53] = w->fh[19]*w->term[1][26] + w->fh[20]*w->term[1][35] + w->fh[21]*w->term[1][44]
+            + w->fh[22]*w->term[1][56] + w->fh[23]*w->term[1][59];
+    w->term[0][54] = w->fh[24]*w->term[1][57] + w->fh[25]*w->term[1][60];
+    w->term[0][55] = w->fh[24]*w->term[1][58] + w->fh[25]*w->term[1][61];
+    w->term[0][56] = w->fh[24]*w->term[1][59] + w->fh[25]*w->term[1][62];
+    w->term[0][57] = w->fh[26]*w->term[1][54] + w->fh[27]*w->term[1][60];
+    w->term[0][58] = w->fh[26]*w->term[1][55] + w->fh[27]*w->term[1][61];
+    w->term[0][59] = w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][62];
+    w->term[0][60] = w->fh[28]*w->term[1][54] + w->fh[29]*w->term[1][57];
+    w->term[0][61] = w->fh[28]*w->term[1][55] + w->fh[29]*w->term[1][58];
+    w->term[0][62] = w->fh[28]*w->term[1][56] + w->fh[29]*w->term[1][59];
+    t->Phi[0][0] = t->Phi[0][0] + w->term[0][0]*ck;
+    w->S[0] = w->S[0] + w->term[0][0]*cs;
+    t->Phi[0][1] = t->Phi[0][1] + w->term[0][1]*ck;
+    w->S[1] = w->S[1] + w->term[0][1]*cs;
+    t->Phi[0][2] = t->Phi[0][2] + w->term[0][2]*ck;
+    w->S[2] = w->S[2] + w->term[0][2]*cs;
+    t->Phi[0][3] = t->Phi[0][3] + w->term[0][3]*ck;
+    w->S[3] = w->S[3] + w->term[0][3]*cs;
+    t->Phi[0][4] = t->Phi[0][4] + w->term[0][4]*ck;
+    w->S[4] = w->S[4] + w->term[0][4]*cs;
+    t->Phi[0][5] = t->Phi[0][5] + w->term[0][5]*ck;
+    w->S[5] = w->S[5] + w->term[0][5]*cs;
+    t->Phi[0][6] = t->Phi[0][6] + w->term[0][6]*ck;
+    w->S[6] = w->S[6] + w->term[0][6]*cs;
+    t->Phi[0][7] = t->Phi[0][7] + w->term[0][7]*ck;
+    w->S[7] = w->S[7] + w->term[0][7]*cs;
+    t->Phi[0][8] = t->Phi[0][8] + w->term[0][8]*ck;
+    w->S[8] = w->S[8] + w->term[0][8]*cs;
+    t->Phi[1][0] = t->Phi[1][0] + w->term[0][9]*ck;
+    w->S[9] = w->S[9] + w->term[0][9]*cs;
+    t->Phi[1][1] = t->Phi[1][1] + w->term[0][10]*ck;
+    w->S[10] = w->S[10] + w->term[0][10]*cs;
+    t->Phi[1][2] = t->Phi[1][2] + w->term[0][11]*ck;
+    w->S[11] = w->S[11] + w->term[0][11]*cs;
+    t->Phi[1][3] = t->Phi[1][3] + w->term[0][12]*ck;
+    w->S[12] = w->S[12] + w->term[0][12]*cs;
+    t->Phi[1][4] = t->Phi[1][4] + w->term[0][13]*ck;
+    w->S[13] = w->S[13] + w->term[0][13]*cs;
+    t->Phi[1][5] = t->Phi[1][5] + w->term[0][14]*ck;
+    w->S[14] = w->S[14] + w->term[0][14]*cs;
+    t->Phi[1][6] = t->Phi[1][6] + w->term[0][15]*ck;
+    w->S[15] = w->S[15] + w->term[0][15]*cs;
+    t->Phi[1][7] = t->Phi[1][7] + w->term[0][16]*ck;
+    w->S[16] = w->S[16] + w->term[0][16]*cs;
+    t->Phi[1][8] = t->Phi[1][8] + w->term[0][17]*ck;
+    w->S[17] = w->S[17] + w->term[0][17]*cs;
+    t->Phi[2][0] = t->Phi[2][0] + w->term[0][18]*ck;
+    w->S[18] = w->S[18] + w->term[0][18]*cs;
+    t->Phi[2][1] = t->Phi[2][1] + w->term[0][19]*ck;
+    w->S[19] = w->S[19] + w->term[0][19]*cs;
+    t->Phi[2][2] = t->Phi[2][2] + w->term[0][20]*ck;
+    w->S[20] = w->S[20] + w->term[0][20]*cs;
+    t->Phi[2][3] = t->Phi[2][3] + w->term[0][21]*ck;
+    w->S[21] = w->S[21] + w->term[0][21]*cs;
+    t->Phi[2][4] = t->Phi[2][4] + w->term[0][22]*ck;
+    w->S[22] = w->S[22] + w->term[0][22]*cs;
+    t->Phi[2][5] = t->Phi[2][5] + w->term[0][23]*ck;
+    w->S[23] = w->S[23] + w->term[0][23]*cs;
+    t->Phi[2][6] = t->Phi[2][6] + w->term[0][24]*ck;
+    w->S[24] = w->S[24] + w->term[0][24]*cs;
+    t->Phi[2][7] = t->Phi[2][7] + w->term[0][25]*ck;
+    w->S[25] = w->S[25] + w->term[0][25]*cs;
+    t->Phi[2][8] = t->Phi[2][8] + w->term[0][26]*ck;
+    w->S[26] = w->S[26] + w->term[0][26]*cs;
+    t->Phi[3][0] = t->Phi[3][0] + w->term[0][27]*ck;
+    w->S[27] = w->S[27] + w->term[0][27]*cs;
+    t->Phi[3][1] = t->Phi[3][1] + w->term[0][28]*ck;
+    w->S[28] = w->S[28] + w->term[0][28]*cs;
+    t->Phi[3][2] = t->Phi[3][2] + w->term[0][29]*ck;
+    w->S[29] = w->S[29] + w->term[0][29]*cs;
+    t->Phi[3][3] = t->Phi[3][3] + w->term[0][30]*ck;
+    w->S[30] = w->S[30] + w->term[0][30]*cs;
+    t->Phi[3][4] = t->Phi[3][4] + w->term[0][31]*ck;
+    w->S[31] = w->S[31] + w->term[0][31]*cs;
+    t->Phi[3][5] = t->Phi[3][5] + w->term[0][32]*ck;
+    w->S[32] = w->S[32] + w->term[0][32]*cs;
+    t->Phi[3][6] = t->Phi[3][6] + w->term[0][33]*ck;
+    w->S[33] = w->S[33] + w->term[0][33]*cs;
+    t->Phi[3][7] = t->Phi[3][7] + w->term[0][34]*ck;
+    w->S[34] = w->S[34] + w->term[0][34]*cs;
+    t->Phi[3][8] = t->Phi[3][8] + w->term[0][35]*ck;
+    w->S[35] = w->S[35] + w->term[0][35]*cs;
+    t->Phi[4][0] = t->Phi[4][0] + w->term[0][36]*ck;
+    w->S[36] = w->S[36] + w->term[0][36]*cs;
+    t->Phi[4][1] = t->Phi[4][1] + w->term[0][37]*ck;
+    w->S[37] = w->S[37] + w->term[0][37]*cs;
+    t->Phi[4][2] = t->Phi[4][2] + w->term[0][38]*ck;
+    w->S[38] = w->S[38] + w->term[0][38]*cs;
+    t->Phi[4][3] = t->Phi[4][3] + w->term[0][39]*ck;
+    w->S[39] = w->S[39] + w->term[0][39]*cs;
+    t->Phi[4][4] = t->Phi[4][4] + w->term[0][40]*ck;
+    w->S[40] = w->S[40] + w->term[0][40]*cs;
+    t->Phi[4][5] = t->Phi[4][5] + w->term[0][41]*ck;
+    w->S[41] = w->S[41] + w->term[0][41]*cs;
+    t->Phi[4][6] = t->Phi[4][6] + w->term[0][42]*ck;
+    w->S[42] = w->S[42] + w->term[0][42]*cs;
+    t->Phi[4][7] = t->Phi[4][7] + w->term[0][43]*ck;
+    w->S[43] = w->S[43] + w->term[0][43]*cs;
+    t->Phi[4][8] = t->Phi[4][8] + w->term[0][44]*ck;
+    w->S[44] = w->S[44] + w->term[0][44]*cs;
+    t->Phi[5][0] = t->Phi[5][0] + w->term[0][45]*ck;
+    w->S[45] = w->S[45] + w->term[0][45]*cs;
+    t->Phi[5][1] = t->Phi[5][1] + w->term[0][46]*ck;
+    w->S[46] = w->S[46] + w->term[0][46]*cs;
+    t->Phi[5][2] = t->Phi[5][2] + w->term[0][47]*ck;
+    w->S[47] = w->S[47] + w->term[0][47]*cs;
+    t->Phi[5][3] = t->Phi[5][3] + w->term[0][48]*ck;
+    w->S[48] = w->S[48] + w->term[0][48]*cs;
+    t->Phi[5][4] = t->Phi[5][4] + w->term[0][49]*ck;
+    w->S[49] = w->S[49] + w->term[0][49]*cs;
+    t->Phi[5][5] = t->Phi[5][5] + w->term[0][50]*ck;
+    w->S[50] = w->S[50] + w->term[0][50]*cs;
+    t->Phi[5][6] = t->Phi[5][6] + w->term[0][51]*ck;
+    w->S[51] = w->S[51] + w->term[0][51]*cs;
+    t->Phi[5][7] = t->Phi[5][7] + w->term[0][52]*ck;
+    w->S[52] = w->S[52] + w->term[0][52]*cs;
+    t->Phi[5][8] = t->Phi[5][8] + w->term[0][53]*ck;
+    w->S[53] = w->S[53] + w->term[0][53]*cs;
+    t->Phi[6][6] = t->Phi[6][6] + w->term[0][54]*ck;
+    w->S[54] = w->S[54] + w->term[0][54]*cs;
+    t->Phi[6][7] = t->Phi[6][7] + w->term[0][55]*ck;
+    w->S[55] = w->S[55] + w->term[0][55]*cs;
+    t->Phi[6][8] = t->Phi[6][8] + w->term[0][56]*ck;
+    w->S[56] = w->S[56] + w->term[0][56]*cs;
+    t->Phi[7][6] = t->Phi[7][6] + w->term[0][57]*ck;
+    w->S[57] = w->S[57] + w->term[0][57]*cs;
+    t->Phi[7][7] = t->Phi[7][7] + w->term[0][58]*ck;
+    w->S[58] = w->S[58] + w->term[0][58]*cs;
+    t->Phi[7][8] = t->Phi[7][8] + w->term[0][59]*ck;
+    w->S[59] = w->S[59] + w->term[0][59]*cs;
+    t->Phi[8][6] = t->Phi[8][6] + w->term[0][60]*ck;
+    w->S[60] = w->S[60] + w->term[0][60]*cs;
+    t->Phi[8][7] = t->Phi[8][7] + w->term[0][61]*ck;
+    w->S[61] = w->S[61] + w->term[0][61]*cs;
+    t->Phi[8][8] = t->Phi[8][8] + w->term[0][62]*ck;
+    w->S[62] = w->S[62] + w->term[0][62]*cs;
+}
+
+GPS_PSEUDORANGE11_BLOCK void taylor_order_9(gps_pseudorange11_transition *restrict t,
+        gps_pseudorange11_discretize_scratch *restrict w)
+{
+    const gps_pseudorange11_scalar ck = 1.0 / 362880.0;
+    const gps_pseudorange11_scalar cs = 1.0 / 3628800.0;
+    w->term[1][0] = w->fh[0]*w->term[0][9] + w->fh[1]*w->term[0][18] + w->fh[2]*w->term[0][27];
+    w->term[1][1] = w->fh[0]*w->term[0][10] + w->fh[1]*w->term[0][19] + w->fh[2]*w->term[0][28];
+    w->term[1][2] = w->fh[0]*w->term[0][11] + w->fh[1]*w->term[0][20] + w->fh[2]*w->term[0][29];
+    w->term[1][3] = w->fh[0]*w->term[0][12] + w->fh[1]*w->term[0][21] + w->fh[2]*w->term[0][30];
+    w->term[1][4] = w->fh[0]*w->term[0][13] + w->fh[1]*w->term[0][22] + w->fh[2]*w->term[0][31];
+    w->term[1][5] = w->fh[0]*w->term[0][14] + w->fh[1]*w->term[0][23] + w->fh[2]*w->term[0][32];
+    w->term[1][6] = w->fh[0]*w->term[0][15] + w->fh[1]*w->term[0][24] + w->fh[2]*w->term[0][33];
+    w->term[1][7] = w->fh[0]*w->term[0][16] + w->fh[1]*w->term[0][25] + w->fh[2]*w->term[0][34];
+    w->term[1][8] = w->fh[0]*w->term[0][17] + w->fh[1]*w->term[0][26] + w->fh[2]*w->term[0][35];
+    w->term[1][9] = w->fh[3]*w->term[0][0] + w->fh[4]*w->term[0][18] + w->fh[5]*w->term[0][36];
+    w->term[1][10] = w->fh[3]*w->term[0][1] + w->fh[4]*w->term[0][19] + w->fh[5]*w->term[0][37];
+    w->term[1][11] = w->fh[3]*w->term[0][2] + w->fh[4]*w->term[0][20] + w->fh[5]*w->term[0][38];
+    w->term[1][12] = w->fh[3]*w->term[0][3] + w->fh[4]*w->term[0][21] + w->fh[5]*w->term[0][39];
+    w->term[1][13] = w->fh[3]*w->term[0][4] + w->fh[4]*w->term[0][22] + w->fh[5]*w->term[0][40];
+    w->term[1][14] = w->fh[3]*w->term[0][5] + w->fh[4]*w->term[0][23] + w->fh[5]*w->term[0][41];
+    w->term[1][15] = w->fh[3]*w->term[0][6] + w->fh[4]*w->term[0][24] + w->fh[5]*w->term[0][42];
+    w->term[1][16] = w->fh[3]*w->term[0][7] + w->fh[4]*w->term[0][25] + w->fh[5]*w->term[0][43];
+    w->term[1][17] = w->fh[3]*w->term[0][8] + w->fh[4]*w->term[0][26] + w->fh[5]*w->term[0][44];
+    w->term[1][18] = w->fh[6]*w->term[0][0] + w->fh[7]*w->term[0][9] + w->fh[8]*w->term[0][45];
+    w->term[1][19] = w->fh[6]*w->term[0][1] + w->fh[7]*w->term[0][10] + w->fh[8]*w->term[0][46];
+    w->term[1][20] = w->fh[6]*w->term[0][2] + w->fh[7]*w->term[0][11] + w->fh[8]*w->term[0][47];
+    w->term[1][21] = w->fh[6]*w->term[0][3] + w->fh[7]*w->term[0][12] + w->fh[8]*w->term[0][48];
+    w->term[1][22] = w->fh[6]*w->term[0][4] + w->fh[7]*w->term[0][13] + w->fh[8]*w->term[0][49];
+    w->term[1][23] = w->fh[6]*w->term[0][5] + w->fh[7]*w->term[0][14] + w->fh[8]*w->term[0][50];
+    w->term[1][24] = w->fh[6]*w->term[0][6] + w->fh[7]*w->term[0][15] + w->fh[8]*w->term[0][51];
+    w->term[1][25] = w->fh[6]*w->term[0][7] + w->fh[7]*w->term[0][16] + w->fh[8]*w->term[0][52];
+    w->term[1][26] = w->fh[6]*w->term[0][8] + w->fh[7]*w->term[0][17] + w->fh[8]*w->term[0][53];
+    w->term[1][27] = w->fh[9]*w->term[0][0] + w->fh[10]*w->term[0][36] + w->fh[11]*w->term[0][45];
+    w->term[1][28] = w->fh[9]*w->term[0][1] + w->fh[10]*w->term[0][37] + w->fh[11]*w->term[0][46];
+    w->term[1][29] = w->fh[9]*w->term[0][2] + w->fh[10]*w->term[0][38] + w->fh[11]*w->term[0][47];
+    w->term[1][30] = w->fh[9]*w->term[0][3] + w->fh[10]*w->term[0][39] + w->fh[11]*w->term[0][48];
+    w->term[1][31] = w->fh[9]*w->term[0][4] + w->fh[10]*w->term[0][40] + w->fh[11]*w->term[0][49];
+    w->term[1][32] = w->fh[9]*w->term[0][5] + w->fh[10]*w->term[0][41] + w->fh[11]*w->term[0][50];
+    w->term[1][33] = w->fh[9]*w->term[0][6] + w->fh[10]*w->term[0][42] + w->fh[11]*w->term[0][51] +
+            w->fh[12]*w->term[0][57] + w->fh[13]*w->term[0][60];
+    w->term[1][34] = w->fh[9]*w->term[0][7] + w->fh[10]*w->term[0][43] + w->fh[11]*w->term[0][52] +
+            w->fh[12]*w->term[0][58] + w->fh[13]*w->term[0][61];
+    w->term[1][35] = w->fh[9]*w->term[0][8] + w->fh[10]*w->term[0][44] + w->fh[11]*w->term[0][53] +
+            w->fh[12]*w->term[0][59] + w->fh[13]*w->term[0][62];
+    w->term[1][36] = w->fh[14]*w->term[0][9] + w->fh[15]*w->term[0][27] + w->fh[16]*w->term[0][45];
+    w->term[1][37] = w->fh[14]*w->term[0][10] + w->fh[15]*w->term[0][28] + w->fh[16]*w->term[0][46];
+    w->term[1][38] = w->fh[14]*w->term[0][11] + w->fh[15]*w->term[0][29] + w->fh[16]*w->term[0][47];
+    w->term[1][39] = w->fh[14]*w->term[0][12] + w->fh[15]*w->term[0][30] + w->fh[16]*w->term[0][48];
+    w->term[1][40] = w->fh[14]*w->term[0][13] + w->fh[15]*w->term[0][31] + w->fh[16]*w->term[0][49];
+    w->term[1][41] = w->fh[14]*w->term[0][14] + w->fh[15]*w->term[0][32] + w->fh[16]*w->term[0][50];
+    w->term[1][42] = w->fh[14]*w->term[0][15] + w->fh[15]*w->term[0][33] + w->fh[16]*w->term[0][51]
+            + w->fh[17]*w->term[0][54] + w->fh[18]*w->term[0][60];
+    w->term[1][43] = w->fh[14]*w->term[0][16] + w->fh[15]*w->term[0][34] + w->fh[16]*w->term[0][52]
+            + w->fh[17]*w->term[0][55] + w->fh[18]*w->term[0][61];
+    w->term[1][44] = w->fh[14]*w->term[0][17] + w->fh[15]*w->term[0][35] + w->fh[16]*w->term[0][53]
+            + w->fh[17]*w->term[0][56] + w->fh[18]*w->term[0][62];
+    w->term[1][45] = w->fh[19]*w->term[0][18] + w->fh[20]*w->term[0][27] + w->fh[21]*w->term[0][36];
+    w->term[1][46] = w->fh[19]*w->term[0][19] + w->fh[20]*w->term[0][28] + w->fh[21]*w->term[0][37];
+    w->term[1][47] = w->fh[19]*w->term[0][20] + w->fh[20]*w->term[0][29] + w->fh[21]*w->term[0][38];
+    w->term[1][48] = w->fh[19]*w->term[0][21] + w->fh[20]*w->term[0][30] + w->fh[21]*w->term[0][39];
+    w->term[1][49] = w->fh[19]*w->term[0][22] + w->fh[20]*w->term[0][31] + w->fh[21]*w->term[0][40];
+    w->term[1][50] = w->fh[19]*w->term[0][23] + w->fh[20]*w->term[0][32] + w->fh[21]*w->term[0][41];
+    w->term[1][51] = w->fh[19]*w->term[0][24] + w->fh[20]*w->term[0][33] + w->fh[21]*w->term[0][42]
+            + w->fh[22]*w->term[0][54] + w->fh[23]*w->term[0][57];
+    w->term[1][52] = w->fh[19]*w->term[0][25] + w->fh[20]*w->term[0][34] + w->fh[21]*w->term[0][43]
+            + w->fh[22]*w->term[0][55] + w->fh[23]*w->term[0][58];
+    w->term[1][53] = w->fh[19]*w->term[0][26] + w->fh[20]*w->term[0][35] + w->fh[21]*w->term[0][44]
+            + w->fh[22]*w->term[0][56] + w->fh[23]*w->term[0][59];
+    w->term[1][54] = w->fh[24]*w->term[0][57] + w->fh[25]*w->term[0][60];
+    w->term[1][55] = w->fh[24]*w->term[0][58] + w->fh[25]*w->term[0][61];
+    w->term[1][56] = w->fh[24]*w->term[0][59] + w->fh[25]*w->term[0][62];
+    w->term[1][57] = w->fh[26]*w->term[0][54] + w->fh[27]*w->term[0][60];
+    w->term[1][58] = w->fh[26]*w->term[0][55] + w->fh[27]*w->term[0][61];
+    w->term[1][59] = w->fh[26]*w->term[0][56] + w->fh[27]*w->term[0][62];
+    w->term[1][60] = w->fh[28]*w->term[0][54] + w->fh[29]*w->term[0][57];
+    w->term[1][61] = w->fh[28]*w->term[0][55] + w->fh[29]*w->term[0][58];
+    w->term[1][62] = w->fh[28]*w->term[0][56] + w->fh[29]*w->term[0][59];
+    t->Phi[0][0] = t->Phi[0][0] + w->term[1][0]*ck;
+    w->S[0] = w->S[0] + w->term[1][0]*cs;
+    t->Phi[0][1] = t->Phi[0][1] + w->term[1][1]*ck;
+    w->S[1] = w->S[1] + w->term[1][1]*cs;
+    t->Phi[0][2] = t->Phi[0][2] + w->term[1][2]*ck;
+    w->S[2] = w->S[2] + w->term[1][2]*cs;
+    t->Phi[0][3] = t->Phi[0][3] + w->term[1][3]*ck;
+    w->S[3] = w->S[3] + w->term[1][3]*cs;
+    t->Phi[0][4] = t->Phi[0][4] + w->term[1][4]*ck;
+    w->S[4] = w->S[4] + w->term[1][4]*cs;
+    t->Phi[0][5] = t->Phi[0][5] + w->term[1][5]*ck;
+    w->S[5] = w->S[5] + w->term[1][5]*cs;
+    t->Phi[0][6] = t->Phi[0][6] + w->term[1][6]*ck;
+    w->S[6] = w->S[6] + w->term[1][6]*cs;
+    t->Phi[0][7] = t->Phi[0][7] + w->term[1][7]*ck;
+    w->S[7] = w->S[7] + w->term[1][7]*cs;
+    t->Phi[0][8] = t->Phi[0][8] + w->term[1][8]*ck;
+    w->S[8] = w->S[8] + w->term[1][8]*cs;
+    t->Phi[1][0] = t->Phi[1][0] + w->term[1][9]*ck;
+    w->S[9] = w->S[9] + w->term[1][9]*cs;
+    t->Phi[1][1] = t->Phi[1][1] + w->term[1][10]*ck;
+    w->S[10] = w->S[10] + w->term[1][10]*cs;
+    t->Phi[1][2] = t->Phi[1][2] + w->term[1][11]*ck;
+    w->S[11] = w->S[11] + w->term[1][11]*cs;
+    t->Phi[1][3] = t->Phi[1][3] + w->term[1][12]*ck;
+    w->S[12] = w->S[12] + w->term[1][12]*cs;
+    t->Phi[1][4] = t->Phi[1][4] + w->term[1][13]*ck;
+    w->S[13] = w->S[13] + w->term[1][13]*cs;
+    t->Phi[1][5] = t->Phi[1][5] + w->term[1][14]*ck;
+    w->S[14] = w->S[14] + w->term[1][14]*cs;
+    t->Phi[1][6] = t->Phi[1][6] + w->term[1][15]*ck;
+    w->S[15] = w->S[15] + w->term[1][15]*cs;
+    t->Phi[1][7] = t->Phi[1][7] + w->term[1][16]*ck;
+    w->S[16] = w->S[16] + w->term[1][16]*cs;
+    t->Phi[1][8] = t->Phi[1][8] + w->term[1][17]*ck;
+    w->S[17] = w->S[17] + w->term[1][17]*cs;
+    t->Phi[2][0] = t->Phi[2][0] + w->term[1][18]*ck;
+    w->S[18] = w->S[18] + w->term[1][18]*cs;
+    t->Phi[2][1] = t->Phi[2][1] + w->term[1][19]*ck;
+    w->S[19] = w->S[19] + w->term[1][19]*cs;
+    t->Phi[2][2] = t->Phi[2][2] + w->term[1][20]*ck;
+    w->S[20] = w->S[20] + w->term[1][20]*cs;
+    t->Phi[2][3] = t->Phi[2][3] + w->term[1][21]*ck;
+    w->S[21] = w->S[21] + w->term[1][21]*cs;
+    t->Phi[2][4] = t->Phi[2][4] + w->term[1][22]*ck;
+    w->S[22] = w->S[22] + w->term[1][22]*cs;
+    t->Phi[2][5] = t->Phi[2][5] + w->term[1][23]*ck;
+    w->S[23] = w->S[23] + w->term[1][23]*cs;
+    t->Phi[2][6] = t->Phi[2][6] + w->term[1][24]*ck;
+    w->S[24] = w->S[24] + w->term[1][24]*cs;
+    t->Phi[2][7] = t->Phi[2][7] + w->term[1][25]*ck;
+    w->S[25] = w->S[25] + w->term[1][25]*cs;
+    t->Phi[2][8] = t->Phi[2][8] + w->term[1][26]*ck;
+    w->S[26] = w->S[26] + w->term[1][26]*cs;
+    t->Phi[3][0] = t->Phi[3][0] + w->term[1][27]*ck;
+    w->S[27] = w->S[27] + w->term[1][27]*cs;
+    t->Phi[3][1] = t->Phi[3][1] + w->term[1][28]*ck;
+    w->S[28] = w->S[28] + w->term[1][28]*cs;
+    t->Phi[3][2] = t->Phi[3][2] + w->term[1][29]*ck;
+    w->S[29] = w->S[29] + w->term[1][29]*cs;
+    t->Phi[3][3] = t->Phi[3][3] + w->term[1][30]*ck;
+    w->S[30] = w->S[30] + w->term[1][30]*cs;
+    t->Phi[3][4] = t->Phi[3][4] + w->term[1][31]*ck;
+    w->S[31] = w->S[31] + w->term[1][31]*cs;
+    t->Phi[3][5] = t->Phi[3][5] + w->term[1][32]*ck;
+    w->S[32] = w->S[32] + w->term[1][32]*cs;
+    t->Phi[3][6] = t->Phi[3][6] + w->term[1][33]*ck;
+    w->S[33] = w->S[33] + w->term[1][33]*cs;
+    t->Phi[3][7] = t->Phi[3][7] + w->term[1][34]*ck;
+    w->S[34] = w->S[34] + w->term[1][34]*cs;
+    t->Phi[3][8] = t->Phi[3][8] + w->term[1][35]*ck;
+    w->S[35] = w->S[35] + w->term[1][35]*cs;
+    t->Phi[4][0] = t->Phi[4][0] + w->term[1][36]*ck;
+    w->S[36] = w->S[36] + w->term[1][36]*cs;
+    t->Phi[4][1] = t->Phi[4][1] + w->term[1][37]*ck;
+    w->S[37] = w->S[37] + w->term[1][37]*cs;
+    t->Phi[4][2] = t->Phi[4][2] + w->term[1][38]*ck;
+    w->S[38] = w->S[38] + w->term[1][38]*cs;
+    t->Phi[4][3] = t->Phi[4][3] + w->term[1][39]*ck;
+    w->S[39] = w->S[39] + w->term[1][39]*cs;
+    t->Phi[4][4] = t->Phi[4][4] + w->term[1][40]*ck;
+    w->S[40] = w->S[40] + w->term[1][40]*cs;
+    t->Phi[4][5] = t->Phi[4][5] + w->term[1][41]*ck;
+    w->S[41] = w->S[41] + w->term[1][41]*cs;
+    t->Phi[4][6] = t->Phi[4][6] + w->term[1][42]*ck;
+    w->S[42] = w->S[42] + w->term[1][42]*cs;
+    t->Phi[4][7] = t->Phi[4][7] + w->term[1][43]*ck;
+    w->S[43] = w->S[43] + w->term[1][43]*cs;
+    t->Phi[4][8] = t->Phi[4][8] + w->term[1][44]*ck;
+    w->S[44] = w->S[44] + w->term[1][44]*cs;
+    t->Phi[5][0] = t->Phi[5][0] + w->term[1][45]*ck;
+    w->S[45] = w->S[45] + w->term[1][45]*cs;
+    t->Phi[5][1] = t->Phi[5][1] + w->term[1][46]*ck;
+    w->S[46] = w->S[46] + w->term[1][46]*cs;
+    t->Phi[5][2] = t->Phi[5][2] + w->term[1][47]*ck;
+    w->S[47] = w->S[47] + w->term[1][47]*cs;
+    t->Phi[5][3] = t->Phi[5][3] + w->term[1][48]*ck;
+    w->S[48] = w->S[48] + w->term[1][48]*cs;
+    t->Phi[5][4] = t->Phi[5][4] + w->term[1][49]*ck;
+    w->S[49] = w->S[49] + w->term[1][49]*cs;
+    t->Phi[5][5] = t->Phi[5][5] + w->term[1][50]*ck;
+    w->S[50] = w->S[50] + w->term[1][50]*cs;
+    t->Phi[5][6] = t->Phi[5][6] + w->term[1][51]*ck;
+    w->S[51] = w->S[51] + w->term[1][51]*cs;
+    t->Phi[5][7] = t->Phi[5][7] + w->term[1][52]*ck;
+    w->S[52] = w->S[52] + w->term[1][52]*cs;
+    t->Phi[5][8] = t->Phi[5][8] + w->term[1][53]*ck;
+    w->S[53] = w->S[53] + w->term[1][53]*cs;
+    t->Phi[6][6] = t->Phi[6][6] + w->term[1][54]*ck;
+    w->S[54] = w->S[54] + w->term[1][54]*cs;
+    t->Phi[6][7] = t->Phi[6][7] + w->term[1][55]*ck;
+    w->S[55] = w->S[55] + w->term[1][55]*cs;
+    t->Phi[6][8] = t->Phi[6][8] + w->term[1][56]*ck;
+    w->S[56] = w->S[56] + w->term[1][56]*cs;
+    t->Phi[7][6] = t->Phi[7][6] + w->term[1][57]*ck;
+    w->S[57] = w->S[57] + w->term[1][57]*cs;
+    t->Phi[7][7] = t->Phi[7][7] + w->term[1][58]*ck;
+    w->S[58] = w->S[58] + w->term[1][58]*cs;
+    t->Phi[7][8] = t->Phi[7][8] + w->term[1][59]*ck;
+    w->S[59] = w->S[59] + w->term[1][59]*cs;
+    t->Phi[8][6] = t->Phi[8][6] + w->term[1][60]*ck;
+    w->S[60] = w->S[60] + w->term[1][60]*cs;
+    t->Phi[8][7] = t->Phi[8][7] + w->term[1][61]*ck;
+    w->S[61] = w->S[61] + w->term[1][61]*cs;
+    t->Phi[8][8] = t->Phi[8][8] + w->term[1][62]*ck;
+    w->S[62] = w->S[62] + w->term[1][62]*cs;
+}
+
+GPS_PSEUDORANGE11_BLOCK void doubling(gps_pseudorange11_transition *restrict t,
+        gps_pseudorange11_discretize_scratch *restrict w)
+{
+    const gps_pseudorange11_scalar half = 1.0 / 2.0;
+    w->term[0][0] = t->Phi[0][0]*t->Phi[0][0] + t->Phi[0][1]*t->Phi[1][0] +
+            t->Phi[0][2]*t->Phi[2][0] + t->Phi[0][3]*t->Phi[3][0] + t->Phi[0][4]*t->Phi[4][0] +
+            t->Phi[0][5]*t->Phi[5][0];
+    w->term[1][0] = w->S[0] + t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[9] + t->Phi[0][2]*w->S[18] +
+            t->Phi[0][3]*w->S[27] + t->Phi[0][4]*w->S[36] + t->Phi[0][5]*w->S[45];
+    w->term[0][1] = t->Phi[0][0]*t->Phi[0][1] + t->Phi[0][1]*t->Phi[1][1] +
+            t->Phi[0][2]*t->Phi[2][1] + t->Phi[0][3]*t->Phi[3][1] + t->Phi[0][4]*t->Phi[4][1] +
+            t->Phi[0][5]*t->Phi[5][1];
+    w->term[1][1] = w->S[1] + t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[10] + t->Phi[0][2]*w->S[19] +
+            t->Phi[0][3]*w->S[28] + t->Phi[0][4]*w->S[37] + t->Phi[0][5]*w->S[46];
+    w->term[0][2] = t->Phi[0][0]*t->Phi[0][2] + t->Phi[0][1]*t->Phi[1][2] +
+            t->Phi[0][2]*t->Phi[2][2] + t->Phi[0][3]*t->Phi[3][2] + t->Phi[0][4]*t->Phi[4][2] +
+            t->Phi[0][5]*t->Phi[5][2];
+    w->term[1][2] = w->S[2] + t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[11] + t->Phi[0][2]*w->S[20] +
+            t->Phi[0][3]*w->S[29] + t->Phi[0][4]*w->S[38] + t->Phi[0][5]*w->S[47];
+    w->term[0][3] = t->Phi[0][0]*t->Phi[0][3] + t->Phi[0][1]*t->Phi[1][3] +
+            t->Phi[0][2]*t->Phi[2][3] + t->Phi[0][3]*t->Phi[3][3] + t->Phi[0][4]*t->Phi[4][3] +
+            t->Phi[0][5]*t->Phi[5][3];
+    w->term[1][3] = w->S[3] + t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[12] + t->Phi[0][2]*w->S[21] +
+            t->Phi[0][3]*w->S[30] + t->Phi[0][4]*w->S[39] + t->Phi[0][5]*w->S[48];
+    w->term[0][4] = t->Phi[0][0]*t->Phi[0][4] + t->Phi[0][1]*t->Phi[1][4] +
+            t->Phi[0][2]*t->Phi[2][4] + t->Phi[0][3]*t->Phi[3][4] + t->Phi[0][4]*t->Phi[4][4] +
+            t->Phi[0][5]*t->Phi[5][4];
+    w->term[1][4] = w->S[4] + t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[13] + t->Phi[0][2]*w->S[22] +
+            t->Phi[0][3]*w->S[31] + t->Phi[0][4]*w->S[40] + t->Phi[0][5]*w->S[49];
+    w->term[0][5] = t->Phi[0][0]*t->Phi[0][5] + t->Phi[0][1]*t->Phi[1][5] +
+            t->Phi[0][2]*t->Phi[2][5] + t->Phi[0][3]*t->Phi[3][5] + t->Phi[0][4]*t->Phi[4][5] +
+            t->Phi[0][5]*t->Phi[5][5];
+    w->term[1][5] = w->S[5] + t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[23] +
+            t->Phi[0][3]*w->S[32] + t->Phi[0][4]*w->S[41] + t->Phi[0][5]*w->S[50];
+    w->term[0][6] = t->Phi[0][0]*t->Phi[0][6] + t->Phi[0][1]*t->Phi[1][6] +
+            t->Phi[0][2]*t->Phi[2][6] + t->Phi[0][3]*t->Phi[3][6] + t->Phi[0][4]*t->Phi[4][6] +
+            t->Phi[0][5]*t->Phi[5][6] + t->Phi[0][6]*t->Phi[6][6] + t->Phi[0][7]*t->Phi[7][6] +
+            t->Phi[0][8]*t->Phi[8][6];
+    w->term[1][6] = w->S[6] + t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[24] +
+            t->Phi[0][3]*w->S[33] + t->Phi[0][4]*w->S[42] + t->Phi[0][5]*w->S[51] +
+            t->Phi[0][6]*w->S[54] + t->Phi[0][7]*w->S[57] + t->Phi[0][8]*w->S[60];
+    w->term[0][7] = t->Phi[0][0]*t->Phi[0][7] + t->Phi[0][1]*t->Phi[1][7] +
+            t->Phi[0][2]*t->Phi[2][7] + t->Phi[0][3]*t->Phi[3][7] + t->Phi[0][4]*t->Phi[4][7] +
+            t->Phi[0][5]*t->Phi[5][7] + t->Phi[0][6]*t->Phi[6][7] + t->Phi[0][7]*t->Phi[7][7] +
+            t->Phi[0][8]*t->Phi[8][7];
+    w->term[1][7] = w->S[7] + t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[25] +
+            t->Phi[0][3]*w->S[34] + t->Phi[0][4]*w->S[43] + t->Phi[0][5]*w->S[52] +
+            t->Phi[0][6]*w->S[55] + t->Phi[0][7]*w->S[58] + t->Phi[0][8]*w->S[61];
+    w->term[0][8] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
+            t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
+            t->Phi[0][5]*t->Phi[5][8] + t->Phi[0][6]*t->Phi[6][8] + t->Phi[0][7]*t->Phi[7][8] +
+            t->Phi[0][8]*t->Phi[8][8];
+    w->term[1][8] = w->S[8] + t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[26] +
+            t->Phi[0][3]*w->S[35] + t->Phi[0][4]*w->S[44] + t->Phi[0][5]*w->S[53] +
+            t->Phi[0][6]*w->S[56] + t->Phi[0][7]*w->S[59] + t->Phi[0][8]*w->S[62];
+    w->term[0][9] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
+            t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
+            t->Phi[1][5]*t->Phi[5][0];
+    w->term[1][9] = w->S[9] + t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[9] + t->Phi[1][2]*w->S[18] +
+            t->Phi[1][3]*w->S[27] + t->Phi[1][4]*w->S[36] + t->Phi[1][5]*w->S[45];
+    w->term[0][10] = t->Phi[1][0]*t->Phi[0][1] + t->Phi[1][1]*t->Phi[1][1] +
+            t->Phi[1][2]*t->Phi[2][1] + t->Phi[1][3]*t->Phi[3][1] + t->Phi[1][4]*t->Phi[4][1] +
+            t->Phi[1][5]*t->Phi[5][1];
+    w->term[1][10] = w->S[10] + t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[10] + t->Phi[1][2]*w->S[19]
+            + t->Phi[1][3]*w->S[28] + t->Phi[1][4]*w->S[37] + t->Phi[1][5]*w->S[46];
+    w->term[0][11] = t->Phi[1][0]*t->Phi[0][2] + t->Phi[1][1]*t->Phi[1][2] +
+            t->Phi[1][2]*t->Phi[2][2] + t->Phi[1][3]*t->Phi[3][2] + t->Phi[1][4]*t->Phi[4][2] +
+            t->Phi[1][5]*t->Phi[5][2];
+    w->term[1][11] = w->S[11] + t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[11] + t->Phi[1][2]*w->S[20]
+            + t->Phi[1][3]*w->S[29] + t->Phi[1][4]*w->S[38] + t->Phi[1][5]*w->S[47];
+    w->term[0][12] = t->Phi[1][0]*t->Phi[0][3] + t->Phi[1][1]*t->Phi[1][3] +
+            t->Phi[1][2]*t->Phi[2][3] + t->Phi[1][3]*t->Phi[3][3] + t->Phi[1][4]*t->Phi[4][3] +
+            t->Phi[1][5]*t->Phi[5][3];
+    w->term[1][12] = w->S[12] + t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[12] + t->Phi[1][2]*w->S[21]
+            + t->Phi[1][3]*w->S[30] + t->Phi[1][4]*w->S[39] + t->Phi[1][5]*w->S[48];
+    w->term[0][13] = t->Phi[1][0]*t->Phi[0][4] + t->Phi[1][1]*t->Phi[1][4] +
+            t->Phi[1][2]*t->Phi[2][4] + t->Phi[1][3]*t->Phi[3][4] + t->Phi[1][4]*t->Phi[4][4] +
+            t->Phi[1][5]*t->Phi[5][4];
+    w->term[1][13] = w->S[13] + t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[13] + t->Phi[1][2]*w->S[22]
+            + t->Phi[1][3]*w->S[31] + t->Phi[1][4]*w->S[40] + t->Phi[1][5]*w->S[49];
+    w->term[0][14] = t->Phi[1][0]*t->Phi[0][5] + t->Phi[1][1]*t->Phi[1][5] +
+            t->Phi[1][2]*t->Phi[2][5] + t->Phi[1][3]*t->Phi[3][5] + t->Phi[1][4]*t->Phi[4][5] +
+            t->Phi[1][5]*t->Phi[5][5];
+    w->term[1][14] = w->S[14] + t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[23]
+            + t->Phi[1][3]*w->S[32] + t->Phi[1][4]*w->S[41] + t->Phi[1][5]*w->S[50];
+    w->term[0][15] = t->Phi[1][0]*t->Phi[0][6] + t->Phi[1][1]*t->Phi[1][6] +
+            t->Phi[1][2]*t->Phi[2][6] + t->Phi[1][3]*t->Phi[3][6] + t->Phi[1][4]*t->Phi[4][6] +
+            t->Phi[1][5]*t->Phi[5][6] + t->Phi[1][6]*t->Phi[6][6] + t->Phi[1][7]*t->Phi[7][6] +
+            t->Phi[1][8]*t->Phi[8][6];
+    w->term[1][15] = w->S[15] + t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[24]
+            + t->Phi[1][3]*w->S[33] + t->Phi[1][4]*w->S[42] + t->Phi[1][5]*w->S[51] +
+            t->Phi[1][6]*w->S[54] + t->Phi[1][7]*w->S[57] + t->Phi[1][8]*w->S[60];
+    w->term[0][16] = t->Phi[1][0]*t->Phi[0][7] + t->Phi[1][1]*t->Phi[1][7] +
+            t->Phi[1][2]*t->Phi[2][7] + t->Phi[1][3]*t->Phi[3][7] + t->Phi[1][4]*t->Phi[4][7] +
+            t->Phi[1][5]*t->Phi[5][7] + t->Phi[1][6]*t->Phi[6][7] + t->Phi[1][7]*t->Phi[7][7] +
+            t->Phi[1][8]*t->Phi[8][7];
+    w->term[1][16] = w->S[16] + t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[25]
+            + t->Phi[1][3]*w->S[34] + t->Phi[1][4]*w->S[43] + t->Phi[1][5]*w->S[52] +
+            t->Phi[1][6]*w->S[55] + t->Phi[1][7]*w->S[58] + t->Phi[1][8]*w->S[61];
+    w->term[0][17] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
+            t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
+            t->Phi[1][5]*t->Phi[5][8] + t->Phi[1][6]*t->Phi[6][8] + t->Phi[1][7]*t->Phi[7][8] +
+            t->Phi[1][8]*t->Phi[8][8];
+    w->term[1][17] = w->S[17] + t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[26]
+            + t->Phi[1][3]*w->S[35] + t->Phi[1][4]*w->S[44] + t->Phi[1][5]*w->S[53] +
+            t->Phi[1][6]*w->S[56] + t->Phi[1][7]*w->S[59] + t->Phi[1][8]*w->S[62];
+    w->term[0][18] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
+            t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
+            t->Phi[2][5]*t->Phi[5][0];
+    w->term[1][18] = w->S[18] + t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[9] + t->Phi[2][2]*w->S[18]
+            + t->Phi[2][3]*w->S[27] + t->Phi[2][4]*w->S[36] + t->Phi[2][5]*w->S[45];
+    w->term[0][19] = t->Phi[2][0]*t->Phi[0][1] + t->Phi[2][1]*t->Phi[1][1] +
+            t->Phi[2][2]*t->Phi[2][1] + t->Phi[2][3]*t->Phi[3][1] + t->Phi[2][4]*t->Phi[4][1] +
+            t->Phi[2][5]*t->Phi[5][1];
+    w->term[1][19] = w->S[19] + t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[10] + t->Phi[2][2]*w->S[19]
+            + t->Phi[2][3]*w->S[28] + t->Phi[2][4]*w->S[37] + t->Phi[2][5]*w->S[46];
+    w->term[0][20] = t->Phi[2][0]*t->Phi[0][2] + t->Phi[2][1]*t->Phi[1][2] +
+            t->Phi[2][2]*t->Phi[2][2] + t->Phi[2][3]*t->Phi[3][2] + t->Phi[2][4]*t->Phi[4][2] +
+            t->Phi[2][5]*t->Phi[5][2];
+    w->term[1][20] = w->S[20] + t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[11] + t->Phi[2][2]*w->S[20]
+            + t->Phi[2][3]*w->S[29] + t->Phi[2][4]*w->S[38] + t->Phi[2][5]*w->S[47];
+    w->term[0][21] = t->Phi[2][0]*t->Phi[0][3] + t->Phi[2][1]*t->Phi[1][3] +
+            t->Phi[2][2]*t->Phi[2][3] + t->Phi[2][3]*t->Phi[3][3] + t->Phi[2][4]*t->Phi[4][3] +
+            t->Phi[2][5]*t->Phi[5][3];
+    w->term[1][21] = w->S[21] + t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[12] + t->Phi[2][2]*w->S[21]
+            + t->Phi[2][3]*w->S[30] + t->Phi[2][4]*w->S[39] + t->Phi[2][5]*w->S[48];
+    w->term[0][22] = t->Phi[2][0]*t->Phi[0][4] + t->Phi[2][1]*t->Phi[1][4] +
+            t->Phi[2][2]*t->Phi[2][4] + t->Phi[2][3]*t->Phi[3][4] + t->Phi[2][4]*t->Phi[4][4] +
+            t->Phi[2][5]*t->Phi[5][4];
+    w->term[1][22] = w->S[22] + t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[13] + t->Phi[2][2]*w->S[22]
+            + t->Phi[2][3]*w->S[31] + t->Phi[2][4]*w->S[40] + t->Phi[2][5]*w->S[49];
+    w->term[0][23] = t->Phi[2][0]*t->Phi[0][5] + t->Phi[2][1]*t->Phi[1][5] +
+            t->Phi[2][2]*t->Phi[2][5] + t->Phi[2][3]*t->Phi[3][5] + t->Phi[2][4]*t->Phi[4][5] +
+            t->Phi[2][5]*t->Phi[5][5];
+    w->term[1][23] = w->S[23] + t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[23]
+            + t->Phi[2][3]*w->S[32] + t->Phi[2][4]*w->S[41] + t->Phi[2][5]*w->S[50];
+    w->term[0][24] = t->Phi[2][0]*t->Phi[0][6] + t->Phi[2][1]*t->Phi[1][6] +
+            t->Phi[2][2]*t->Phi[2][6] + t->Phi[2][3]*t->Phi[3][6] + t->Phi[2][4]*t->Phi[4][6] +
+            t->Phi[2][5]*t->Phi[5][6] + t->Phi[2][6]*t->Phi[6][6] + t->Phi[2][7]*t->Phi[7][6] +
+            t->Phi[2][8]*t->Phi[8][6];
+    w->term[1][24] = w->S[24] + t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[24]
+            + t->Phi[2][3]*w->S[33] + t->Phi[2][4]*w->S[42] + t->Phi[2][5]*w->S[51] +
+            t->Phi[2][6]*w->S[54] + t->Phi[2][7]*w->S[57] + t->Phi[2][8]*w->S[60];
+    w->term[0][25] = t->Phi[2][0]*t->Phi[0][7] + t->Phi[2][1]*t->Phi[1][7] +
+            t->Phi[2][2]*t->Phi[2][7] + t->Phi[2][3]*t->Phi[3][7] + t->Phi[2][4]*t->Phi[4][7] +
+            t->Phi[2][5]*t->Phi[5][7] + t->Phi[2][6]*t->Phi[6][7] + t->Phi[2][7]*t->Phi[7][7] +
+            t->Phi[2][8]*t->Phi[8][7];
+    w->term[1][25] = w->S[25] + t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[25]
+            + t->Phi[2][3]*w->S[34] + t->Phi[2][4]*w->S[43] + t->Phi[2][5]*w->S[52] +
+            t->Phi[2][6]*w->S[55] + t->Phi[2][7]*w->S[58] + t->Phi[2][8]*w->S[61];
+    w->term[0][26] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
+            t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
+            t->Phi[2][5]*t->Phi[5][8] + t->Phi[2][6]*t->Phi[6][8] + t->Phi[2][7]*t->Phi[7][8] +
+            t->Phi[2][8]*t->Phi[8][8];
+    w->term[1][26] = w->S[26] + t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[26]
+            + t->Phi[2][3]*w->S[35] + t->Phi[2][4]*w->S[44] + t->Phi[2][5]*w->S[53] +
+            t->Phi[2][6]*w->S[56] + t->Phi[2][7]*w->S[59] + t->Phi[2][8]*w->S[62];
+    w->term[0][27] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
+            t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
+            t->Phi[3][5]*t->Phi[5][0];
+    w->term[1][27] = w->S[27] + t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[9] + t->Phi[3][2]*w->S[18]
+            + t->Phi[3][3]*w->S[27] + t->Phi[3][4]*w->S[36] + t->Phi[3][5]*w->S[45];
+    w->term[0][28] = t->Phi[3][0]*t->Phi[0][1] + t->Phi[3][1]*t->Phi[1][1] +
+            t->Phi[3][2]*t->Phi[2][1] + t->Phi[3][3]*t->Phi[3][1] + t->Phi[3][4]*t->Phi[4][1] +
+            t->Phi[3][5]*t->Phi[5][1];
+    w->term[1][28] = w->S[28] + t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[10] + t->Phi[3][2]*w->S[19]
+            + t->Phi[3][3]*w->S[28] + t->Phi[3][4]*w->S[37] + t->Phi[3][5]*w->S[46];
+    w->term[0][29] = t->Phi[3][0]*t->Phi[0][2] + t->Phi[3][1]*t->Phi[1][2] +
+            t->Phi[3][2]*t->Phi[2][2] + t->Phi[3][3]*t->Phi[3][2] + t->Phi[3][4]*t->Phi[4][2] +
+            t->Phi[3][5]*t->Phi[5][2];
+    w->term[1][29] = w->S[29] + t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[11] + t->Phi[3][2]*w->S[20]
+            + t->Phi[3][3]*w->S[29] + t->Phi[3][4]*w->S[38] + t->Phi[3][5]*w->S[47];
+    w->term[0][30] = t->Phi[3][0]*t->Phi[0][3] + t->Phi[3][1]*t->Phi[1][3] +
+            t->Phi[3][2]*t->Phi[2][3] + t->Phi[3][3]*t->Phi[3][3] + t->Phi[3][4]*t->Phi[4][3] +
+            t->Phi[3][5]*t->Phi[5][3];
+    w->term[1][30] = w->S[30] + t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[12] + t->Phi[3][2]*w->S[21]
+            + t->Phi[3][3]*w->S[30] + t->Phi[3][4]*w->S[39] + t->Phi[3][5]*w->S[48];
+    w->term[0][31] = t->Phi[3][0]*t->Phi[0][4] + t->Phi[3][1]*t->Phi[1][4] +
+            t->Phi[3][2]*t->Phi[2][4] + t->Phi[3][3]*t->Phi[3][4] + t->Phi[3][4]*t->Phi[4][4] +
+            t->Phi[3][5]*t->Phi[5][4];
+    w->term[1][31] = w->S[31] + t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[13] + t->Phi[3][2]*w->S[22]
+            + t->Phi[3][3]*w->S[31] + t->Phi[3][4]*w->S[40] + t->Phi[3][5]*w->S[49];
+    w->term[0][32] = t->Phi[3][0]*t->Phi[0][5] + t->Phi[3][1]*t->Phi[1][5] +
+            t->Phi[3][2]*t->Phi[2][5] + t->Phi[3][3]*t->Phi[3][5] + t->Phi[3][4]*t->Phi[4][5] +
+            t->Phi[3][5]*t->Phi[5][5];
+    w->term[1][32] = w->S[32] + t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[23]
+            + t->Phi[3][3]*w->S[32] + t->Phi[3][4]*w->S[41] + t->Phi[3][5]*w->S[50];
+    w->term[0][33] = t->Phi[3][0]*t->Phi[0][6] + t->Phi[3][1]*t->Phi[1][6] +
+            t->Phi[3][2]*t->Phi[2][6] + t->Phi[3][3]*t->Phi[3][6] + t->Phi[3][4]*t->Phi[4][6] +
+            t->Phi[3][5]*t->Phi[5][6] + t->Phi[3][6]*t->Phi[6][6] + t->Phi[3][7]*t->Phi[7][6] +
+            t->Phi[3][8]*t->Phi[8][6];
+    w->term[1][33] = w->S[33] + t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[24]
+            + t->Phi[3][3]*w->S[33] + t->Phi[3][4]*w->S[42] + t->Phi[3][5]*w->S[51] +
+            t->Phi[3][6]*w->S[54] + t->Phi[3][7]*w->S[57] + t->Phi[3][8]*w->S[60];
+    w->term[0][34] = t->Phi[3][0]*t->Phi[0][7] + t->Phi[3][1]*t->Phi[1][7] +
+            t->Phi[3][2]*t->Phi[2][7] + t->Phi[3][3]*t->Phi[3][7] + t->Phi[3][4]*t->Phi[4][7] +
+            t->Phi[3][5]*t->Phi[5][7] + t->Phi[3][6]*t->Phi[6][7] + t->Phi[3][7]*t->Phi[7][7] +
+            t->Phi[3][8]*t->Phi[8][7];
+    w->term[1][34] = w->S[34] + t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[25]
+            + t->Phi[3][3]*w->S[34] + t->Phi[3][4]*w->S[43] + t->Phi[3][5]*w->S[52] +
+            t->Phi[3][6]*w->S[55] + t->Phi[3][7]*w->S[58] + t->Phi[3][8]*w->S[61];
+    w->term[0][35] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
+            t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
+            t->Phi[3][5]*t->Phi[5][8] + t->Phi[3][6]*t->Phi[6][8] + t->Phi[3][7]*t->Phi[7][8] +
+            t->Phi[3][8]*t->Phi[8][8];
+    w->term[1][35] = w->S[35] + t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[26]
+            + t->Phi[3][3]*w->S[35] + t->Phi[3][4]*w->S[44] + t->Phi[3][5]*w->S[53] +
+            t->Phi[3][6]*w->S[56] + t->Phi[3][7]*w->S[59] + t->Phi[3][8]*w->S[62];
+    w->term[0][36] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
+            t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
+            t->Phi[4][5]*t->Phi[5][0];
+    w->term[1][36] = w->S[36] + t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[9] + t->Phi[4][2]*w->S[18]
+            + t->Phi[4][3]*w->S[27] + t->Phi[4][4]*w->S[36] + t->Phi[4][5]*w->S[45];
+    w->term[0][37] = t->Phi[4][0]*t->Phi[0][1] + t->Phi[4][1]*t->Phi[1][1] +
+            t->Phi[4][2]*t->Phi[2][1] + t->Phi[4][3]*t->Phi[3][1] + t->Phi[4][4]*t->Phi[4][1] +
+            t->Phi[4][5]*t->Phi[5][1];
+    w->term[1][37] = w->S[37] + t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[10] + t->Phi[4][2]*w->S[19]
+            + t->Phi[4][3]*w->S[28] + t->Phi[4][4]*w->S[37] + t->Phi[4][5]*w->S[46];
+    w->term[0][38] = t->Phi[4][0]*t->Phi[0][2] + t->Phi[4][1]*t->Phi[1][2] +
+            t->Phi[4][2]*t->Phi[2][2] + t->Phi[4][3]*t->Phi[3][2] + t->Phi[4][4]*t->Phi[4][2] +
+            t->Phi[4][5]*t->Phi[5][2];
+    w->term[1][38] = w->S[38] + t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[11] + t->Phi[4][2]*w->S[20]
+            + t->Phi[4][3]*w->S[29] + t->Phi[4][4]*w->S[38] + t->Phi[4][5]*w->S[47];
+    w->term[0][39] = t->Phi[4][0]*t->Phi[0][3] + t->Phi[4][1]*t->Phi[1][3] +
+            t->Phi[4][2]*t->Phi[2][3] + t->Phi[4][3]*t->Phi[3][3] + t->Phi[4][4]*t->Phi[4][3] +
+            t->Phi[4][5]*t->Phi[5][3];
+    w->term[1][39] = w->S[39] + t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[12] + t->Phi[4][2]*w->S[21]
+            + t->Phi[4][3]*w->S[30] + t->Phi[4][4]*w->S[39] + t->Phi[4][5]*w->S[48];
+    w->term[0][40] = t->Phi[4][0]*t->Phi[0][4] + t->Phi[4][1]*t->Phi[1][4] +
+            t->Phi[4][2]*t->Phi[2][4] + t->Phi[4][3]*t->Phi[3][4] + t->Phi[4][4]*t->Phi[4][4] +
+            t->Phi[4][5]*t->Phi[5][4];
+    w->term[1][40] = w->S[40] + t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[13] + t->Phi[4][2]*w->S[22]
+            + t->Phi[4][3]*w->S[31] + t->Phi[4][4]*w->S[40] + t->Phi[4][5]*w->S[49];
+    w->term[0][41] = t->Phi[4][0]*t->Phi[0][5] + t->Phi[4][1]*t->Phi[1][5] +
+            t->Phi[4][2]*t->Phi[2][5] + t->Phi[4][3]*t->Phi[3][5] + t->Phi[4][4]*t->Phi[4][5] +
+            t->Phi[4][5]*t->Phi[5][5];
+    w->term[1][41] = w->S[41] + t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[23]
+            + t->Phi[4][3]*w->S[32] + t->Phi[4][4]*w->S[41] + t->Phi[4][5]*w->S[50];
+    w->term[0][42] = t->Phi[4][0]*t->Phi[0][6] + t->Phi[4][1]*t->Phi[1][6] +
+            t->Phi[4][2]*t->Phi[2][6] + t->Phi[4][3]*t->Phi[3][6] + t->Phi[4][4]*t->Phi[4][6] +
+            t->Phi[4][5]*t->Phi[5][6] + t->Phi[4][6]*t->Phi[6][6] + t->Phi[4][7]*t->Phi[7][6] +
+            t->Phi[4][8]*t->Phi[8][6];
+    w->term[1][42] = w->S[42] + t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[24]
+            + t->Phi[4][3]*w->S[33] + t->Phi[4][4]*w->S[42] + t->Phi[4][5]*w->S[51] +
+            t->Phi[4][6]*w->S[54] + t->Phi[4][7]*w->S[57] + t->Phi[4][8]*w->S[60];
+    w->term[0][43] = t->Phi[4][0]*t->Phi[0][7] + t->Phi[4][1]*t->Phi[1][7] +
+            t->Phi[4][2]*t->Phi[2][7] + t->Phi[4][3]*t->Phi[3][7] + t->Phi[4][4]*t->Phi[4][7] +
+            t->Phi[4][5]*t->Phi[5][7] + t->Phi[4][6]*t->Phi[6][7] + t->Phi[4][7]*t->Phi[7][7] +
+            t->Phi[4][8]*t->Phi[8][7];
+    w->term[1][43] = w->S[43] + t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[25]
+            + t->Phi[4][3]*w->S[34] + t->Phi[4][4]*w->S[43] + t->Phi[4][5]*w->S[52] +
+            t->Phi[4][6]*w->S[55] + t->Phi[4][7]*w->S[58] + t->Phi[4][8]*w->S[61];
+    w->term[0][44] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
+            t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
+            t->Phi[4][5]*t->Phi[5][8] + t->Phi[4][6]*t->Phi[6][8] + t->Phi[4][7]*t->Phi[7][8] +
+            t->Phi[4][8]*t->Phi[8][8];
+    w->term[1][44] = w->S[44] + t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[26]
+            + t->Phi[4][3]*w->S[35] + t->Phi[4][4]*w->S[44] + t->Phi[4][5]*w->S[53] +
+            t->Phi[4][6]*w->S[56] + t->Phi[4][7]*w->S[59] + t->Phi[4][8]*w->S[62];
+    w->term[0][45] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
+            t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
+            t->Phi[5][5]*t->Phi[5][0];
+    w->term[1][45] = w->S[45] + t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[9] + t->Phi[5][2]*w->S[18]
+            + t->Phi[5][3]*w->S[27] + t->Phi[5][4]*w->S[36] + t->Phi[5][5]*w->S[45];
+    w->term[0][46] = t->Phi[5][0]*t->Phi[0][1] + t->Phi[5][1]*t->Phi[1][1] +
+            t->Phi[5][2]*t->Phi[2][1] + t->Phi[5][3]*t->Phi[3][1] + t->Phi[5][4]*t->Phi[4][1] +
+            t->Phi[5][5]*t->Phi[5][1];
+    w->term[1][46] = w->S[46] + t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[10] + t->Phi[5][2]*w->S[19]
+            + t->Phi[5][3]*w->S[28] + t->Phi[5][4]*w->S[37] + t->Phi[5][5]*w->S[46];
+    w->term[0][47] = t->Phi[5][0]*t->Phi[0][2] + t->Phi[5][1]*t->Phi[1][2] +
+            t->Phi[5][2]*t->Phi[2][2] + t->Phi[5][3]*t->Phi[3][2] + t->Phi[5][4]*t->Phi[4][2] +
+            t->Phi[5][5]*t->Phi[5][2];
+    w->term[1][47] = w->S[47] + t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[11] + t->Phi[5][2]*w->S[20]
+            + t->Phi[5][3]*w->S[29] + t->Phi[5][4]*w->S[38] + t->Phi[5][5]*w->S[47];
+    w->term[0][48] = t->Phi[5][0]*t->Phi[0][3] + t->Phi[5][1]*t->Phi[1][3] +
+            t->Phi[5][2]*t->Phi[2][3] + t->Phi[5][3]*t->Phi[3][3] + t->Phi[5][4]*t->Phi[4][3] +
+            t->Phi[5][5]*t->Phi[5][3];
+    w->term[1][48] = w->S[48] + t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[12] + t->Phi[5][2]*w->S[21]
+            + t->Phi[5][3]*w->S[30] + t->Phi[5][4]*w->S[39] + t->Phi[5][5]*w->S[48];
+    w->term[0][49] = t->Phi[5][0]*t->Phi[0][4] + t->Phi[5][1]*t->Phi[1][4] +
+            t->Phi[5][2]*t->Phi[2][4] + t->Phi[5][3]*t->Phi[3][4] + t->Phi[5][4]*t->Phi[4][4] +
+            t->Phi[5][5]*t->Phi[5][4];
+    w->term[1][49] = w->S[49] + t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[13] + t->Phi[5][2]*w->S[22]
+            + t->Phi[5][3]*w->S[31] + t->Phi[5][4]*w->S[40] + t->Phi[5][5]*w->S[49];
+    w->term[0][50] = t->Phi[5][0]*t->Phi[0][5] + t->Phi[5][1]*t->Phi[1][5] +
+            t->Phi[5][2]*t->Phi[2][5] + t->Phi[5][3]*t->Phi[3][5] + t->Phi[5][4]*t->Phi[4][5] +
+            t->Phi[5][5]*t->Phi[5][5];
+    w->term[1][50] = w->S[50] + t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[23]
+            + t->Phi[5][3]*w->S[32] + t->Phi[5][4]*w->S[41] + t->Phi[5][5]*w->S[50];
+    w->term[0][51] = t->Phi[5][0]*t->Phi[0][6] + t->Phi[5][1]*t->Phi[1][6] +
+            t->Phi[5][2]*t->Phi[2][6] + t->Phi[5][3]*t->Phi[3][6] + t->Phi[5][4]*t->Phi[4][6] +
+            t->Phi[5][5]*t->Phi[5][6] + t->Phi[5][6]*t->Phi[6][6] + t->Phi[5][7]*t->Phi[7][6] +
+            t->Phi[5][8]*t->Phi[8][6];
+    w->term[1][51] = w->S[51] + t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[24]
+            + t->Phi[5][3]*w->S[33] + t->Phi[5][4]*w->S[42] + t->Phi[5][5]*w->S[51] +
+            t->Phi[5][6]*w->S[54] + t->Phi[5][7]*w->S[57] + t->Phi[5][8]*w->S[60];
+    w->term[0][52] = t->Phi[5][0]*t->Phi[0][7] + t->Phi[5][1]*t->Phi[1][7] +
+            t->Phi[5][2]*t->Phi[2][7] + t->Phi[5][3]*t->Phi[3][7] + t->Phi[5][4]*t->Phi[4][7] +
+            t->Phi[5][5]*t->Phi[5][7] + t->Phi[5][6]*t->Phi[6][7] + t->Phi[5][7]*t->Phi[7][7] +
+            t->Phi[5][8]*t->Phi[8][7];
+    w->term[1][52] = w->S[52] + t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[25]
+            + t->Phi[5][3]*w->S[34] + t->Phi[5][4]*w->S[43] + t->Phi[5][5]*w->S[52] +
+            t->Phi[5][6]*w->S[55] + t->Phi[5][7]*w->S[58] + t->Phi[5][8]*w->S[61];
+    w->term[0][53] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
+            t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
+            t->Phi[5][5]*t->Phi[5][8] + t->Phi[5][6]*t->Phi[6][8] + t->Phi[5][7]*t->Phi[7][8] +
+            t->Phi[5][8]*t->Phi[8][8];
+    w->term[1][53] = w->S[53] + t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[26]
+            + t->Phi[5][3]*w->S[35] + t->Phi[5][4]*w->S[44] + t->Phi[5][5]*w->S[53] +
+            t->Phi[5][6]*w->S[56] + t->Phi[5][7]*w->S[59] + t->Phi[5][8]*w->S[62];
+    w->term[0][54] = t->Phi[6][6]*t->Phi[6][6] + t->Phi[6][7]*t->Phi[7][6] +
+            t->Phi[6][8]*t->Phi[8][6];
+    w->term[1][54] = w->S[54] + t->Phi[6][6]*w->S[54] + t->Phi[6][7]*w->S[57] +
+            t->Phi[6][8]*w->S[60];
+    w->term[0][55] = t->Phi[6][6]*t->Phi[6][7] + t->Phi[6][7]*t->Phi[7][7] +
+            t->Phi[6][8]*t->Phi[8][7];
+    w->term[1][55] = w->S[55] + t->Phi[6][6]*w->S[55] + t->Phi[6][7]*w->S[58] +
+            t->Phi[6][8]*w->S[61];
+    w->term[0][56] = t->Phi[6][6]*t->Phi[6][8] + t->Phi[6][7]*t->Phi[7][8] +
+            t->Phi[6][8]*t->Phi[8][8];
+    w->term[1][56] = w->S[56] + t->Phi[6][6]*w->S[56] + t->Phi[6][7]*w->S[59] +
+            t->Phi[6][8]*w->S[62];
+    w->term[0][57] = t->Phi[7][6]*t->Phi[6][6] + t->Phi[7][7]*t->Phi[7][6] +
+            t->Phi[7][8]*t->Phi[8][6];
+    w->term[1][57] = w->S[57] + t->Phi[7][6]*w->S[54] + t->Phi[7][7]*w->S[57] +
+            t->Phi[7][8]*w->S[60];
+    w->term[0][58] = t->Phi[7][6]*t->Phi[6][7] + t->Phi[7][7]*t->Phi[7][7] +
+            t->Phi[7][8]*t->Phi[8][7];
+    w->term[1][58] = w->S[58] + t->Phi[7][6]*w->S[55] + t->Phi[7][7]*w->S[58] +
+            t->Phi[7][8]*w->S[61];
+    w->term[0][59] = t->Phi[7][6]*t->Phi[6][8] + t->Phi[7][7]*t->Phi[7][8] +
+            t->Phi[7][8]*t->Phi[8][8];
+    w->term[1][59] = w->S[59] + t->Phi[7][6]*w->S[56] + t->Phi[7][7]*w->S[59] +
+            t->Phi[7][8]*w->S[62];
+    w->term[0][60] = t->Phi[8][6]*t->Phi[6][6] + t->Phi[8][7]*t->Phi[7][6] +
+            t->Phi[8][8]*t->Phi[8][6];
+    w->term[1][60] = w->S[60] + t->Phi[8][6]*w->S[54] + t->Phi[8][7]*w->S[57] +
+            t->Phi[8][8]*w->S[60];
+    w->term[0][61] = t->Phi[8][6]*t->Phi[6][7] + t->Phi[8][7]*t->Phi[7][7] +
+            t->Phi[8][8]*t->Phi[8][7];
+    w->term[1][61] = w->S[61] + t->Phi[8][6]*w->S[55] + t->Phi[8][7]*w->S[58] +
+            t->Phi[8][8]*w->S[61];
+    w->term[0][62] = t->Phi[8][6]*t->Phi[6][8] + t->Phi[8][7]*t->Phi[7][8] +
+            t->Phi[8][8]*t->Phi[8][8];
+    w->term[1][62] = w->S[62] + t->Phi[8][6]*w->S[56] + t->Phi[8][7]*w->S[59] +
+            t->Phi[8][8]*w->S[62];
+    w->term[0][63] = t->Phi[9][9]*t->Phi[9][9];
+    w->term[1][63] = w->S[63] + t->Phi[9][9]*w->S[63];
+    w->term[0][64] = t->Phi[9][9]*t->Phi[9][10] + t->Phi[9][10];
+    w->term[1][64] = w->S[64] + t->Phi[9][9]*w->S[64] + t->Phi[9][10];
+    t->Phi[0][0] = w->term[0][0];
+    w->S[0] = half*w->term[1][0];
+    t->Phi[0][1] = w->term[0][1];
+    w->S[1] = half*w->term[1][1];
+    t->Phi[0][2] = w->term[0][2];
+    w->S[2] = half*w->term[1][2];
+    t->Phi[0][3] = w->term[0][3];
+    w->S[3] = half*w->term[1][3];
+    t->Phi[0][4] = w->term[0][4];
+    w->S[4] = half*w->term[1][4];
+    t->Phi[0][5] = w->term[0][5];
+    w->S[5] = half*w->term[1][5];
+    t->Phi[0][6] = w->term[0][6];
+    w->S[6] = half*w->term[1][6];
+    t->Phi[0][7] = w->term[0][7];
+    w->S[7] = half*w->term[1][7];
+    t->Phi[0][8] = w->term[0][8];
+    w->S[8] = half*w->term[1][8];
+    t->Phi[1][0] = w->term[0][9];
+    w->S[9] = half*w->term[1][9];
+    t->Phi[1][1] = w->term[0][10];
+    w->S[10] = half*w->term[1][10];
+    t->Phi[1][2] = w->term[0][11];
+    w->S[11] = half*w->term[1][11];
+    t->Phi[1][3] = w->term[0][12];
+    w->S[12] = half*w->term[1][12];
+    t->Phi[1][4] = w->term[0][13];
+    w->S[13] = half*w->term[1][13];
+    t->Phi[1][5] = w->term[0][14];
+    w->S[14] = half*w->term[1][14];
+    t->Phi[1][6] = w->term[0][15];
+    w->S[15] = half*w->term[1][15];
+    t->Phi[1][7] = w->term[0][16];
+    w->S[16] = half*w->term[1][16];
+    t->Phi[1][8] = w->term[0][17];
+    w->S[17] = half*w->term[1][17];
+    t->Phi[2][0] = w->term[0][18];
+    w->S[18] = half*w->term[1][18];
+    t->Phi[2][1] = w->term[0][19];
+    w->S[19] = half*w->term[1][19];
+    t->Phi[2][2] = w->term[0][20];
+    w->S[20] = half*w->term[1][20];
+    t->Phi[2][3] = w->term[0][21];
+    w->S[21] = half*w->term[1][21];
+    t->Phi[2][4] = w->term[0][22];
+    w->S[22] = half*w->term[1][22];
+    t->Phi[2][5] = w->term[0][23];
+    w->S[23] = half*w->term[1][23];
+    t->Phi[2][6] = w->term[0][24];
+    w->S[24] = half*w->term[1][24];
+    t->Phi[2][7] = w->term[0][25];
+    w->S[25] = half*w->term[1][25];
+    t->Phi[2][8] = w->term[0][26];
+    w->S[26] = half*w->term[1][26];
+    t->Phi[3][0] = w->term[0][27];
+    w->S[27] = half*w->term[1][27];
+    t->Phi[3][1] = w->term[0][28];
+    w->S[28] = half*w->term[1][28];
+    t->Phi[3][2] = w->term[0][29];
+    w->S[29] = half*w->term[1][29];
+    t->Phi[3][3] = w->term[0][30];
+    w->S[30] = half*w->term[1][30];
+    t->Phi[3][4] = w->term[0][31];
+    w->S[31] = half*w->term[1][31];
+    t->Phi[3][5] = w->term[0][32];
+    w->S[32] = half*w->term[1][32];
+    t->Phi[3][6] = w->term[0][33];
+    w->S[33] = half*w->term[1][33];
+    t->Phi[3][7] = w->term[0][34];
+    w->S[34] = half*w->term[1][34];
+    t->Phi[3][8] = w->term[0][35];
+    w->S[35] = half*w->term[1][35];
+    t->Phi[4][0] = w->term[0][36];
+    w->S[36] = half*w->term[1][36];
+    t->Phi[4][1] = w->term[0][37];
+    w->S[37] = half*w->term[1][37];
+    t->Phi[4][2] = w->term[0][38];
+    w->S[38] = half*w->term[1][38];
+    t->Phi[4][3] = w->term[0][39];
+    w->S[39] = half*w->term[1][39];
+    t->Phi[4][4] = w->term[0][40];
+    w->S[40] = half*w->term[1][40];
+    t->Phi[4][5] = w->term[0][41];
+    w->S[41] = half*w->term[1][41];
+    t->Phi[4][6] = w->term[0][42];
+    w->S[42] = half*w->term[1][42];
+    t->Phi[4][7] = w->term[0][43];
+    w->S[43] = half*w->term[1][43];
+    t->Phi[4][8] = w->term[0][44];
+    w->S[44] = half*w->term[1][44];
+    t->Phi[5][0] = w->term[0][45];
+    w->S[45] = half*w->term[1][45];
+    t->Phi[5][1] = w->term[0][46];
+    w->S[46] = half*w->term[1][46];
+    t->Phi[5][2] = w->term[0][47];
+    w->S[47] = half*w->term[1][47];
+    t->Phi[5][3] = w->term[0][48];
+    w->S[48] = half*w->term[1][48];
+    t->Phi[5][4] = w->term[0][49];
+    w->S[49] = half*w->term[1][49];
+    t->Phi[5][5] = w->term[0][50];
+    w->S[50] = half*w->term[1][50];
+    t->Phi[5][6] = w->term[0][51];
+    w->S[51] = half*w->term[1][51];
+    t->Phi[5][7] = w->term[0][52];
+    w->S[52] = half*w->term[1][52];
+    t->Phi[5][8] = w->term[0][53];
+    w->S[53] = half*w->term[1][53];
+    t->Phi[6][6] = w->term[0][54];
+    w->S[54] = half*w->term[1][54];
+    t->Phi[6][7] = w->term[0][55];
+    w->S[55] = half*w->term[1][55];
+    t->Phi[6][8] = w->term[0][56];
+    w->S[56] = half*w->term[1][56];
+    t->Phi[7][6] = w->term[0][57];
+    w->S[57] = half*w->term[1][57];
+    t->Phi[7][7] = w->term[0][58];
+    w->S[58] = half*w->term[1][58];
+    t->Phi[7][8] = w->term[0][59];
+    w->S[59] = half*w->term[1][59];
+    t->Phi[8][6] = w->term[0][60];
+    w->S[60] = half*w->term[1][60];
+    t->Phi[8][7] = w->term[0][61];
+    w->S[61] = half*w->term[1][61];
+    t->Phi[8][8] = w->term[0][62];
+    w->S[62] = half*w->term[1][62];
+    t->Phi[9][9] = w->term[0][63];
+    w->S[63] = half*w->term[1][63];
+    t->Phi[9][10] = w->term[0][64];
+    w->S[64] = half*w->term[1][64];
+}
+
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar transition_check(gps_pseudorange11_transition
+        *restrict t)
+{
+    gps_pseudorange11_scalar v, check = 0.0;
+    v = t->Phi[0][0]; t->Phi[0][0] = v; check += v - v;
+    v = t->Phi[0][1]; t->Phi[0][1] = v; check += v - v;
+    v = t->Phi[0][2]; t->Phi[0][2] = v; check += v - v;
+    v = t->Phi[0][3]; t->Phi[0][3] = v; check += v - v;
+    v = t->Phi[0][4]; t->Phi[0][4] = v; check += v - v;
+    v = t->Phi[0][5]; t->Phi[0][5] = v; check += v - v;
+    v = t->Phi[0][6]; t->Phi[0][6] = v; check += v - v;
+    v = t->Phi[0][7]; t->Phi[0][7] = v; check += v - v;
+    v = t->Phi[0][8]; t->Phi[0][8] = v; check += v - v;
+    v = t->Phi[1][0]; t->Phi[1][0] = v; check += v - v;
+    v = t->Phi[1][1]; t->Phi[1][1] = v; check += v - v;
+    v = t->Phi[1][2]; t->Phi[1][2] = v; check += v - v;
+    v = t->Phi[1][3]; t->Phi[1][3] = v; check += v - v;
+    v = t->Phi[1][4]; t->Phi[1][4] = v; check += v - v;
+    v = t->Phi[1][5]; t->Phi[1][5] = v; check += v - v;
+    v = t->Phi[1][6]; t->Phi[1][6] = v; check += v - v;
+    v = t->Phi[1][7]; t->Phi[1][7] = v; check += v - v;
+    v = t->Phi[1][8]; t->Phi[1][8] = v; check += v - v;
+    v = t->Phi[2][0]; t->Phi[2][0] = v; check += v - v;
+    v = t->Phi[2][1]; t->Phi[2][1] = v; check += v - v;
+    v = t->Phi[2][2]; t->Phi[2][2] = v; check += v - v;
+    v = t->Phi[2][3]; t->Phi[2][3] = v; check += v - v;
+    v = t->Phi[2][4]; t->Phi[2][4] = v; check += v - v;
+    v = t->Phi[2][5]; t->Phi[2][5] = v; check += v - v;
+    v = t->Phi[2][6]; t->Phi[2][6] = v; check += v - v;
+    v = t->Phi[2][7]; t->Phi[2][7] = v; check += v - v;
+    v = t->Phi[2][8]; t->Phi[2][8] = v; check += v - v;
+    v = t->Phi[3][0]; t->Phi[3][0] = v; check += v - v;
+    v = t->Phi[3][1]; t->Phi[3][1] = v; check += v - v;
+    v = t->Phi[3][2]; t->Phi[3][2] = v; check += v - v;
+    v = t->Phi[3][3]; t->Phi[3][3] = v; check += v - v;
+    v = t->Phi[3][4]; t->Phi[3][4] = v; check += v - v;
+    v = t->Phi[3][5]; t->Phi[3][5] = v; check += v - v;
+    v = t->Phi[3][6]; t->Phi[3][6] = v; check += v - v;
+    v = t->Phi[3][7]; t->Phi[3][7] = v; check += v - v;
+    v = t->Phi[3][8]; t->Phi[3][8] = v; check += v - v;
+    v = t->Phi[4][0]; t->Phi[4][0] = v; check += v - v;
+    v = t->Phi[4][1]; t->Phi[4][1] = v; check += v - v;
+    v = t->Phi[4][2]; t->Phi[4][2] = v; check += v - v;
+    v = t->Phi[4][3]; t->Phi[4][3] = v; check += v - v;
+    v = t->Phi[4][4]; t->Phi[4][4] = v; check += v - v;
+    v = t->Phi[4][5]; t->Phi[4][5] = v; check += v - v;
+    v = t->Phi[4][6]; t->Phi[4][6] = v; check += v - v;
+    v = t->Phi[4][7]; t->Phi[4][7] = v; check += v - v;
+    v = t->Phi[4][8]; t->Phi[4][8] = v; check += v - v;
+    v = t->Phi[5][0]; t->Phi[5][0] = v; check += v - v;
+    v = t->Phi[5][1]; t->Phi[5][1] = v; check += v - v;
+    v = t->Phi[5][2]; t->Phi[5][2] = v; check += v - v;
+    v = t->Phi[5][3]; t->Phi[5][3] = v; check += v - v;
+    v = t->Phi[5][4]; t->Phi[5][4] = v; check += v - v;
+    v = t->Phi[5][5]; t->Phi[5][5] = v; check += v - v;
+    v = t->Phi[5][6]; t->Phi[5][6] = v; check += v - v;
+    v = t->Phi[5][7]; t->Phi[5][7] = v; check += v - v;
+    v = t->Phi[5][8]; t->Phi[5][8] = v; check += v - v;
+    v = t->Phi[6][6]; t->Phi[6][6] = v; check += v - v;
+    v = t->Phi[6][7]; t->Phi[6][7] = v; check += v - v;
+    v = t->Phi[6][8]; t->Phi[6][8] = v; check += v - v;
+    v = t->Phi[7][6]; t->Phi[7][6] = v; check += v - v;
+    v = t->Phi[7][7]; t->Phi[7][7] = v; check += v - v;
+    v = t->Phi[7][8]; t->Phi[7][8] = v; check += v - v;
+    v = t->Phi[8][6]; t->Phi[8][6] = v; check += v - v;
+    v = t->Phi[8][7]; t->Phi[8][7] = v; check += v - v;
+    v = t->Phi[8][8]; t->Phi[8][8] = v; check += v - v;
+    v = t->Phi[9][9]; t->Phi[9][9] = v; check += v - v;
+    v = t->Phi[9][10]; t->Phi[9][10] = v; check += v - v;
+    return check;
+}
+
+GPS_PSEUDORANGE11_BLOCK void noise_input(const gps_pseudorange11_matrices *restrict m,
+        gps_pseudorange11_discretize_scratch *restrict w)
+{
+    w->term[0][0] = w->S[6]*m->G[3];
+    w->term[0][1] = w->S[7]*m->G[4];
+    w->term[0][2] = w->S[8]*m->G[5];
+    w->term[0][3] = w->S[3]*m->G[0];
+    w->term[0][4] = w->S[4]*m->G[1];
+    w->term[0][5] = w->S[5]*m->G[2];
+    w->term[0][6] = w->S[15]*m->G[3];
+    w->term[0][7] = w->S[16]*m->G[4];
+    w->term[0][8] = w->S[17]*m->G[5];
+    w->term[0][9] = w->S[12]*m->G[0];
+    w->term[0][10] = w->S[13]*m->G[1];
+    w->term[0][11] = w->S[14]*m->G[2];
+    w->term[0][12] = w->S[24]*m->G[3];
+    w->term[0][13] = w->S[25]*m->G[4];
+    w->term[0][14] = w->S[26]*m->G[5];
+    w->term[0][15] = w->S[21]*m->G[0];
+    w->term[0][16] = w->S[22]*m->G[1];
+    w->term[0][17] = w->S[23]*m->G[2];
+    w->term[0][18] = w->S[33]*m->G[3];
+    w->term[0][19] = w->S[34]*m->G[4];
+    w->term[0][20] = w->S[35]*m->G[5];
+    w->term[0][21] = w->S[30]*m->G[0];
+    w->term[0][22] = w->S[31]*m->G[1];
+    w->term[0][23] = w->S[32]*m->G[2];
+    w->term[0][24] = w->S[42]*m->G[3];
+    w->term[0][25] = w->S[43]*m->G[4];
+    w->term[0][26] = w->S[44]*m->G[5];
+    w->term[0][27] = w->S[39]*m->G[0];
+    w->term[0][28] = w->S[40]*m->G[1];
+    w->term[0][29] = w->S[41]*m->G[2];
+    w->term[0][30] = w->S[51]*m->G[3];
+    w->term[0][31] = w->S[52]*m->G[4];
+    w->term[0][32] = w->S[53]*m->G[5];
+    w->term[0][33] = w->S[48]*m->G[0];
+    w->term[0][34] = w->S[49]*m->G[1];
+    w->term[0][35] = w->S[50]*m->G[2];
+    w->term[0][36] = w->S[54]*m->G[3];
+    w->term[0][37] = w->S[55]*m->G[4];
+    w->term[0][38] = w->S[56]*m->G[5];
+    w->term[0][39] = w->S[57]*m->G[3];
+    w->term[0][40] = w->S[58]*m->G[4];
+    w->term[0][41] = w->S[59]*m->G[5];
+    w->term[0][42] = w->S[60]*m->G[3];
+    w->term[0][43] = w->S[61]*m->G[4];
+    w->term[0][44] = w->S[62]*m->G[5];
+    w->term[0][45] = w->S[63]*m->G[6];
+    w->term[0][46] = w->S[64]*m->G[7];
+    w->term[0][47] = m->G[7];
+}
+
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar process_noise(const gps_pseudorange11_matrices
+        *restrict m, gps_pseudorange11_transition *restrict t, gps_pseudorange11_discretize_scratch
+        *restrict w, const gps_pseudorange11_scalar T)
+{
+    gps_pseudorange11_scalar v, check = 0.0;
+    w->term[1][0] = w->term[0][0]*T*m->q[0];
+    w->term[1][1] = w->term[0][1]*T*m->q[1];
+    w->term[1][2] = w->term[0][2]*T*m->q[2];
+    w->term[1][3] = w->term[0][3]*T*m->q[3];
+    w->term[1][4] = w->term[0][4]*T*m->q[4];
+    w->term[1][5] = w->term[0][5]*T*m->q[5];
+    w->term[1][6] = w->term[0][6]*T*m->q[0];
+    w->term[1][7] = w->term[0][7]*T*m->q[1];
+    w->term[1][8] = w->term[0][8]*T*m->q[2];
+    w->term[1][9] = w->term[0][9]*T*m->q[3];
+    w->term[1][10] = w->term[0][10]*T*m->q[4];
+    w->term[1][11] = w->term[0][11]*T*m->q[5];
+    w->term[1][12] = w->term[0][12]*T*m->q[0];
+    w->term[1][13] = w->term[0][13]*T*m->q[1];
+    w->term[1][14] = w->term[0][14]*T*m->q[2];
+    w->term[1][15] = w->term[0][15]*T*m->q[3];
+    w->term[1][16] = w->term[0][16]*T*m->q[4];
+    w->term[1][17] = w->term[0][17]*T*m->q[5];
+    w->term[1][18] = w->term[0][18]*T*m->q[0];
+    w->term[1][19] = w->term[0][19]*T*m->q[1];
+    w->term[1][20] = w->term[0][20]*T*m->q[2];
+    w->term[1][21] = w->term[0][21]*T*m->q[3];
+    w->term[1][22] = w->term[0][22]*T*m->q[4];
+    w->term[1][23] = w->term[0][23]*T*m->q[5];
+    w->term[1][24] = w->term[0][24]*T*m->q[0];
+    w->term[1][25] = w->term[0][25]*T*m->q[1];
+    w->term[1][26] = w->term[0][26]*T*m->q[2];
+    w->term[1][27] = w->term[0][27]*T*m->q[3];
+    w->term[1][28] = w->term[0][28]*T*m->q[4];
+    w->term[1][29] = w->term[0][29]*T*m->q[5];
+    w->term[1][30] = w->term[0][30]*T*m->q[0];
+    w->term[1][31] = w->term[0][31]*T*m->q[1];
+    w->term[1][32] = w->term[0][32]*T*m->q[2];
+    w->term[1][33] = w->term[0][33]*T*m->q[3];
+    w->term[1][34] = w->term[0][34]*T*m->q[4];
+    w->term[1][35] = w->term[0][35]*T*m->q[5];
+    w->term[1][36] = w->term[0][36]*T*m->q[0];
+    w->term[1][37] = w->term[0][37]*T*m->q[1];
+    w->term[1][38] = w->term[0][38]*T*m->q[2];
+    w->term[1][39] = w->term[0][39]*T*m->q[0];
+    w->term[1][40] = w->term[0][40]*T*m->q[1];
+    w->term[1][41] = w->term[0][41]*T*m->q[2];
+    w->term[1][42] = w->term[0][42]*T*m->q[0];
+    w->term[1][43] = w->term[0][43]*T*m->q[1];
+    w->term[1][44] = w->term[0][44]*T*m->q[2];
+    w->term[1][45] = w->term[0][45]*T*m->q[6];
+    w->term[1][46] = w->term[0][46]*T*m->q[7];
+    w->term[1][47] = w->term[0][47]*T*m->q[7];
+    v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
+            w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
+            t->Qd[0][0] = v; check += v - v;
+    v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
+            w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
+            w->term[1][5]*w->term[0][11]; t->Qd[0][1] = v; t->Qd[1][0] = v; check += v - v;
+    v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
+            w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
+            w->term[1][5]*w->term[0][17]; t->Qd[0][2] = v; t->Qd[2][0] = v; check += v - v;
+    v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
+            w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
+            w->term[1][5]*w->term[0][23]; t->Qd[0][3] = v; t->Qd[3][0] = v; check += v - v;
+    v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
+            w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
+            w->term[1][5]*w->term[0][29]; t->Qd[0][4] = v; t->Qd[4][0] = v; check += v - v;
+    v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
+            w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
+            w->term[1][5]*w->term[0][35]; t->Qd[0][5] = v; t->Qd[5][0] = v; check += v - v;
+    v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38];
+            t->Qd[0][6] = v; t->Qd[6][0] = v; check += v - v;
+    v = w->term[1][0]*w->term[0][39] + w->term[1][1]*w->term[0][40] + w->term[1][2]*w->term[0][41];
+            t->Qd[0][7] = v; t->Qd[7][0] = v; check += v - v;
+    v = w->term[1][0]*w->term[0][42] + w->term[1][1]*w->term[0][43] + w->term[1][2]*w->term[0][44];
+            t->Qd[0][8] = v; t->Qd[8][0] = v; check += v - v;
+    v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
+            w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
+            w->term[1][11]*w->term[0][11]; t->Qd[1][1] = v; check += v - v;
+    v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
+            w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
+            w->term[1][11]*w->term[0][17]; t->Qd[1][2] = v; t->Qd[2][1] = v; check += v - v;
+    v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
+            w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
+            w->term[1][11]*w->term[0][23]; t->Qd[1][3] = v; t->Qd[3][1] = v; check += v - v;
+    v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
+            w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
+            w->term[1][11]*w->term[0][29]; t->Qd[1][4] = v; t->Qd[4][1] = v; check += v - v;
+    v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
+            w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
+            w->term[1][11]*w->term[0][35]; t->Qd[1][5] = v; t->Qd[5][1] = v; check += v - v;
+    v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38];
+            t->Qd[1][6] = v; t->Qd[6][1] = v; check += v - v;
+    v = w->term[1][6]*w->term[0][39] + w->term[1][7]*w->term[0][40] + w->term[1][8]*w->term[0][41];
+            t->Qd[1][7] = v; t->Qd[7][1] = v; check += v - v;
+    v = w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] + w->term[1][8]*w->term[0][44];
+            t->Qd[1][8] = v; t->Qd[8][1] = v; check += v - v;
+    v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
+            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[2][2] = v; check +=
+            v - v;
+    v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
+            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[2][3] = v;
+            t->Qd[3][2] = v; check += v - v;
+    v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
+            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[2][4] = v;
+            t->Qd[4][2] = v; check += v - v;
+    v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
+            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[2][5] = v;
+            t->Qd[5][2] = v; check += v - v;
+    v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
+            w->term[1][14]*w->term[0][38]; t->Qd[2][6] = v; t->Qd[6][2] = v; check += v - v;
+    v = w->term[1][12]*w->term[0][39] + w->term[1][13]*w->term[0][40] +
+            w->term[1][14]*w->term[0][41]; t->Qd[2][7] = v; t->Qd[7][2] = v; check += v - v;
+    v = w->term[1][12]*w->term[0][42] + w->term[1][13]*w->term[0][43] +
+            w->term[1][14]*w->term[0][44]; t->Qd[2][8] = v; t->Qd[8][2] = v; check += v - v;
+    v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
+            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[3][3] = v; check +=
+            v - v;
+    v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
+            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[3][4] = v;
+            t->Qd[4][3] = v; check += v - v;
+    v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
+            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[3][5] = v;
+            t->Qd[5][3] = v; check += v - v;
+    v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
+            w->term[1][20]*w->term[0][38]; t->Qd[3][6] = v; t->Qd[6][3] = v; check += v - v;
+    v = w->term[1][18]*w->term[0][39] + w->term[1][19]*w->term[0][40] +
+            w->term[1][20]*w->term[0][41]; t->Qd[3][7] = v; t->Qd[7][3] = v; check += v - v;
+    v = w->term[1][18]*w->term[0][42] + w->term[1][19]*w->term[0][43] +
+            w->term[1][20]*w->term[0][44]; t->Qd[3][8] = v; t->Qd[8][3] = v; check += v - v;
+    v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
+            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[4][4] = v; check +=
+            v - v;
+    v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
+            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[4][5] = v;
+            t->Qd[5][4] = v; check += v - v;
+    v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
+            w->term[1][26]*w->term[0][38]; t->Qd[4][6] = v; t->Qd[6][4] = v; check += v - v;
+    v = w->term[1][24]*w->term[0][39] + w->term[1][25]*w->term[0][40] +
+            w->term[1][26]*w->term[0][41]; t->Qd[4][7] = v; t->Qd[7][4] = v; check += v - v;
+    v = w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
+            w->term[1][26]*w->term[0][44]; t->Qd[4][8] = v; t->Qd[8][4] = v; check += v - v;
+    v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
+            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[5][5] = v; check +=
+            v - v;
+    v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
+            w->term[1][32]*w->term[0][38]; t->Qd[5][6] = v; t->Qd[6][5] = v; check += v - v;
+    v = w->term[1][30]*w->term[0][39] + w->term[1][31]*w->term[0][40] +
+            w->term[1][32]*w->term[0][41]; t->Qd[5][7] = v; t->Qd[7][5] = v; check += v - v;
+    v = w->term[1][30]*w->term[0][42] + w->term[1][31]*w->term[0][43] +
+            w->term[1][32]*w->term[0][44]; t->Qd[5][8] = v; t->Qd[8][5] = v; check += v - v;
+    v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
+            w->term[1][38]*w->term[0][38]; t->Qd[6][6] = v; check += v - v;
+    v = w->term[1][36]*w->term[0][39] + w->term[1][37]*w->term[0][40] +
+            w->term[1][38]*w->term[0][41]; t->Qd[6][7] = v; t->Qd[7][6] = v; check += v - v;
+    v = w->term[1][36]*w->term[0][42] + w->term[1][37]*w->term[0][43] +
+            w->term[1][38]*w->term[0][44]; t->Qd[6][8] = v; t->Qd[8][6] = v; check += v - v;
+    v = w->term[1][39]*w->term[0][39] + w->term[1][40]*w->term[0][40] +
+            w->term[1][41]*w->term[0][41]; t->Qd[7][7] = v; check += v - v;
+    v = w->term[1][39]*w->term[0][42] + w->term[1][40]*w->term[0][43] +
+            w->term[1][41]*w->term[0][44]; t->Qd[7][8] = v; t->Qd[8][7] = v; check += v - v;
+    v = w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
+            w->term[1][44]*w->term[0][44]; t->Qd[8][8] = v; check += v - v;
+    v = w->term[1][45]*w->term[0][45] + w->term[1][46]*w->term[0][46]; t->Qd[9][9] = v; check += v -
+            v;
+    v = w->term[1][46]*w->term[0][47]; t->Qd[9][10] = v; t->Qd[10][9] = v; check += v - v;
+    v = w->term[1][47]*w->term[0][47]; t->Qd[10][10] = v; check += v - v;
+    return check;
+}
+
 int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
         gps_pseudorange11_scalar T, gps_pseudorange11_transition *restrict t,
                 gps_pseudorange11_workspace *restrict work)
 {
     gps_pseudorange11_discretize_scratch *w = &work->discretize;
     int i, j, e, c;
-    int k, halvings, d, changed;
-    gps_pseudorange11_scalar norm;
+    int halvings, order, status;
     gps_pseudorange11_scalar check = 0.0;
     if (!isfinite(T)) {
         return GPS_PSEUDORANGE11_ERR_NONFINITE;
@@ -283,151 +3081,61 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
             return GPS_PSEUDORANGE11_ERR_NOT_POSITIVE;
         }
     }
-    /* Scaling and squaring (modelgen/derive/discretization.py): theta = ||F||_D h
-       with D from 8 Jacobi sweeps of Osborne's balancing in powers of two,
-       h = T / 2^s for the smallest s with theta <= SERIES_RANGE (Taylor
-       remainder below the unit roundoff); the series over h, then s doublings
-       Phi(2h) = Phi(h)^2 and S(2h) = (S(h) + Phi(h) S(h)) / 2, where
-       h S(h) = int_0^h e^{F s} ds. */
+    /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
+       of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
+       S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds. */
+    status = taylor_plan(balanced_norm(m, w), T, &halvings, &order);
+    if (status != GPS_PSEUDORANGE11_OK) {
+        return status;
+    }
     for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
-        w->scale[i] = 1.0;
-    }
-    for (k = 0, changed = 1; k < 8 && changed; ++k) {
-        changed = 0; /* a sweep that changes no scale is a fixed point: stop */
-        for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
-            w->row_sum[i] = 0.0;
-            w->col_sum[i] = 0.0;
-        }
-        for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
-            for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
-                j = gps_pseudorange11_F_col[c];
-                if (j != i) {
-                    const gps_pseudorange11_scalar v = fabs(m->F[c]) * w->scale[j] / w->scale[i];
-                    w->row_sum[i] += v;
-                    w->col_sum[j] += v;
-                }
-            }
-        }
-        for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
-            int step = 0, exponent, column_exponent;
-            if (w->row_sum[i] > 0.0 && w->col_sum[i] > 0.0) {
-                (void)frexp(w->row_sum[i], &step);
-                (void)frexp(w->col_sum[i], &column_exponent);
-                step -= column_exponent; /* log2(row / column) within 1 */
-                step = (step >= 0) ? step / 2 : -((1 - step) / 2); /* floor(step / 2) */
-                step = step > 8 ? 8 : (step < -8 ? -8 : step);
-            } else if (w->col_sum[i] > 0.0) {
-                step = -8; /* drives others, driven by none */
-            } else if (w->row_sum[i] > 0.0) {
-                step = 8; /* driven, drives none */
-            }
-            (void)frexp(w->scale[i], &exponent);
-            exponent += step - 1;
-            exponent = exponent > 40 ? 40 : (exponent < -40 ? -40 : exponent);
-            if (ldexp(1.0, exponent) != w->scale[i]) {
-                changed = 1;
-            }
-            w->scale[i] = ldexp(1.0, exponent);
+        for (j = 0; j < GPS_PSEUDORANGE11_N_STATES; ++j) {
+            t->Phi[i][j] = 0.0;
         }
     }
-    norm = 0.0;
     for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
-        gps_pseudorange11_scalar v = 0.0;
-        for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
-            v += fabs(m->F[c]) * w->scale[gps_pseudorange11_F_col[c]] / w->scale[i];
-        }
-        norm = v > norm ? v : norm;
+        t->Phi[i][i] = 1.0;
     }
-    for (halvings = 0; !(norm * ldexp(T, -halvings) <= GPS_PSEUDORANGE11_SERIES_RANGE); ++halvings)
-            {
-        if (halvings == GPS_PSEUDORANGE11_MAX_DOUBLINGS) {
-            return GPS_PSEUDORANGE11_ERR_NONFINITE; /* e^{F T} is not representable */
-        }
+    /* The series over the structural nonzeros of (F h)^k, one function per order, then the
+       doublings over the entries of Phi that are not e_i (unrolled, see
+               modelgen/codegen/discretize_kernels.py). */
+    taylor_order_1(m, t, w, T * power_of_two(-halvings));
+    if (order >= 2) {
+        taylor_order_2(t, w);
     }
-    {
-        const gps_pseudorange11_scalar h = ldexp(T, -halvings);
-        for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
-            for (j = 0; j < GPS_PSEUDORANGE11_N_STATES; ++j) {
-                const gps_pseudorange11_scalar delta = (i == j) ? 1.0 : 0.0;
-                w->A[i][j] = delta;   /* (F h)^k / k! */
-                t->Phi[i][j] = delta; /* sum of the terms, eq. (10) */
-                w->S[i][j] = delta;   /* sum of the terms / (k + 1), eq. (11) */
-            }
-        }
-        for (k = 1; k <= GPS_PSEUDORANGE11_TAYLOR_ORDER; ++k) {
-            const gps_pseudorange11_scalar hk = h / (gps_pseudorange11_scalar)k;
-            for (e = 0; e < GPS_PSEUDORANGE11_N_ACTIVE; ++e) {
-                gps_pseudorange11_scalar v = 0.0;
-                i = active_row[e];
-                j = active_col[e];
-                for (c = F_row_start[i]; c < F_row_start[i + 1]; ++c) {
-                    v += m->F[c] * w->A[gps_pseudorange11_F_col[c]][j];
-                }
-                w->B[i][j] = v * hk;
-            }
-            for (e = 0; e < GPS_PSEUDORANGE11_N_ACTIVE; ++e) {
-                i = active_row[e];
-                j = active_col[e];
-                w->A[i][j] = w->B[i][j];
-                t->Phi[i][j] += w->B[i][j];
-                w->S[i][j] += w->B[i][j] / (gps_pseudorange11_scalar)(k + 1);
-            }
-            if (k == 1) {
-                for (e = 0; e < GPS_PSEUDORANGE11_N_UNIT_ROWS; ++e) {
-                    w->A[unit_row[e]][unit_row[e]] = 0.0; /* (F h)^k e_i = 0 for k >= 1 */
-                }
-            }
-        }
+    if (order >= 3) {
+        taylor_order_3(t, w);
     }
-    for (d = 0; d < halvings; ++d) {
-        for (e = 0; e < GPS_PSEUDORANGE11_N_ACTIVE; ++e) {
-            gps_pseudorange11_scalar phi = 0.0, psi = 0.0;
-            i = active_row[e];
-            j = active_col[e];
-            for (c = 0; c < GPS_PSEUDORANGE11_N_STATES; ++c) {
-                phi += t->Phi[i][c] * t->Phi[c][j];
-                psi += t->Phi[i][c] * w->S[c][j];
-            }
-            w->B[i][j] = phi;
-            w->A[i][j] = 0.5 * (w->S[i][j] + psi);
-        }
-        for (e = 0; e < GPS_PSEUDORANGE11_N_ACTIVE; ++e) {
-            i = active_row[e];
-            j = active_col[e];
-            t->Phi[i][j] = w->B[i][j];
-            w->S[i][j] = w->A[i][j];
-        }
+    if (order >= 4) {
+        taylor_order_4(t, w);
     }
-    for (e = 0; e < GPS_PSEUDORANGE11_N_ACTIVE; ++e) {
-        check += t->Phi[active_row[e]][active_col[e]] - t->Phi[active_row[e]][active_col[e]];
+    if (order >= 5) {
+        taylor_order_5(t, w);
     }
+    if (order >= 6) {
+        taylor_order_6(t, w);
+    }
+    if (order >= 7) {
+        taylor_order_7(t, w);
+    }
+    if (order >= 8) {
+        taylor_order_8(t, w);
+    }
+    if (order >= 9) {
+        taylor_order_9(t, w);
+    }
+    for (i = 0; i < halvings; ++i) {
+        doubling(t, w);
+    }
+    check += transition_check(t);
     for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
         for (j = 0; j < GPS_PSEUDORANGE11_N_STATES; ++j) {
             t->Qd[i][j] = 0.0;
         }
     }
-    /* Gamma = T S G */
-    for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
-        for (j = 0; j < GPS_PSEUDORANGE11_N_NOISES; ++j) {
-            w->Gamma[i][j] = 0.0;
-        }
-        for (e = 0; e < GPS_PSEUDORANGE11_NNZ_G; ++e) {
-            w->Gamma[i][gps_pseudorange11_G_col[e]] += T * w->S[i][gps_pseudorange11_G_row[e]] *
-                    m->G[e];
-        }
-    }
-    /* Q_d = Gamma (Q / T) Gamma^T, upper triangle then mirrored */
-    for (e = 0; e < GPS_PSEUDORANGE11_N_QD; ++e) {
-        gps_pseudorange11_scalar s = 0.0;
-        i = qd_row[e];
-        j = qd_col[e];
-        for (c = 0; c < GPS_PSEUDORANGE11_N_NOISES; ++c) {
-            s += w->Gamma[i][c] * (m->q[c] / T) * w->Gamma[j][c];
-        }
-        check += s - s;
-        t->Qd[i][j] = s;
-        t->Qd[j][i] = s;
-    }
+    /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero */
+    noise_input(m, w);
+    check += process_noise(m, t, w, T);
     return (check != 0.0) ? GPS_PSEUDORANGE11_ERR_NONFINITE : GPS_PSEUDORANGE11_OK;
 }
 

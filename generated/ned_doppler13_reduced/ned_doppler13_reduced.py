@@ -12,8 +12,8 @@ parameter_vector() to build it from a mapping.
 
 Operation counts (floating-point, per call):
   matrices_evaluate: 73 operations after CSE
-  discretize: 7900 mul + 7095 add = 14995 flops
-  discretize, each doubling (long steps): 1971 mul + 1898 add = 3869 flops
+  discretize: 4020 mul + 3222 add = 7242 flops
+  discretize, each doubling (long steps): 967 mul + 849 add = 1816 flops
   predict (C): 1330 mul + 1199 add = 2529 flops
   predict (Python): 2054 mul + 1989 add = 4043 flops
   predict (dense, for comparison): 4407 mul + 4225 add = 8632 flops
@@ -51,6 +51,7 @@ and leaves its filter unchanged:
 import math
 
 import numpy as np
+from scipy.linalg import blas, lapack
 
 MODEL = "ned_doppler13_reduced"
 TITLE = 'Suboptimal filter I of seed 000, 13 states (NED)'
@@ -90,8 +91,13 @@ NOISE_ACCEL_MARKOV_BIAS_Z_WHITE = 5  # [(m/s^2)*sqrt(s)] white-noise equivalent 
 MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = 0  # [m/s] 
 MEASUREMENT_VELOCITY_DIFFERENCE_EAST = 1  # [m/s] 
 SERIES_RANGE = 0.11483164143919657  # largest ||F h||_D with a Taylor remainder below 2^-53
+TAYLOR_TOLERANCE = 1e-12  # relative accuracy of Phi against e^{F T} (None: fixed order)
 _F_ROWS = np.array([0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 5, 6, 6, 9, 10], dtype=np.int64)  # structural nonzeros of F, row by row
 _F_COLS = np.array([1, 2, 4, 5, 7, 8, 9, 10, 0, 2, 3, 7, 8, 9, 10, 0, 1, 4, 5, 7, 8, 9, 10, 1, 2, 3, 4, 5, 0, 2, 3, 4, 5, 3, 4, 5, 9, 10], dtype=np.int64)
+_F_OFF = _F_ROWS != _F_COLS
+_F_OFF_ROWS, _F_OFF_COLS = _F_ROWS[_F_OFF], _F_COLS[_F_OFF]
+_F_ENTRIES = tuple(zip(_F_ROWS.tolist(), _F_COLS.tolist()))
+TAYLOR_TOLERANCE = 1e-12  # relative accuracy of Phi against e^(F T); None: the fixed order TAYLOR_ORDER
 
 
 def parameter_vector(values):
@@ -320,105 +326,171 @@ def matrices_evaluate(p):
 def _balanced_norm(F):
     """max_i sum_j |F_ij| d_j / d_i, D from 8 Jacobi sweeps of Osborne's balancing in powers of two.
 
-    The same sums, in the same order (bincount adds in entry order), as the
-    C discretize and modelgen.derive.discretization.balanced_norm, so all three
-    choose the same s.
+    The same sums, in the same order (entry by entry, as bincount adds), as
+    the C discretize and modelgen.derive.discretization.balanced_norm, so all
+    three choose the same s.  Python floats: for a pattern this small a loop over the entries costs less than numpy calls.
     """
     if not _F_ROWS.size:
         return 0.0
-    size = np.abs(np.asarray(F, dtype=float)[_F_ROWS, _F_COLS])
-    off = _F_ROWS != _F_COLS
-    rows, cols, off_size = _F_ROWS[off], _F_COLS[off], size[off]
-    exponent = np.zeros(N_STATES, dtype=np.int64)  # d = 2^exponent
+    F = F.tolist()
+    size = [abs(F[i][j]) for i, j in _F_ENTRIES]
+    off = [(i, j, size[e]) for e, (i, j) in enumerate(_F_ENTRIES) if i != j]
+    exponent = [0] * N_STATES  # d = 2^exponent
     for _ in range(8):
-        d = np.ldexp(1.0, exponent)
-        v = off_size * d[cols] / d[rows]
-        row = np.bincount(rows, weights=v, minlength=N_STATES)
-        column = np.bincount(cols, weights=v, minlength=N_STATES)
-        both = (row > 0.0) & (column > 0.0)
-        step = np.where(both, np.minimum(np.maximum((np.frexp(row)[1] - np.frexp(column)[1]) // 2, -8), 8), 0)
-        step = np.where(~both & (column > 0.0), -8, np.where(~both & (row > 0.0), 8, step))
-        new = np.minimum(np.maximum(exponent + step, -40), 40)
-        if np.array_equal(new, exponent):
+        d = [math.ldexp(1.0, e) for e in exponent]
+        row = [0.0] * N_STATES
+        column = [0.0] * N_STATES
+        for i, j, a in off:
+            v = a * d[j] / d[i]
+            row[i] += v
+            column[j] += v
+        new = []
+        for e, r, c in zip(exponent, row, column):
+            if r > 0.0 and c > 0.0:
+                step = min(max((math.frexp(r)[1] - math.frexp(c)[1]) // 2, -8), 8)
+            else:
+                step = -8 if c > 0.0 else (8 if r > 0.0 else 0)
+            new.append(min(max(e + step, -40), 40))
+        if new == exponent:
             break  # a fixed point: further sweeps change nothing
         exponent = new
-    d = np.ldexp(1.0, exponent)
-    return float(np.bincount(_F_ROWS, weights=size * d[_F_COLS] / d[_F_ROWS], minlength=N_STATES).max())
+    d = [math.ldexp(1.0, e) for e in exponent]
+    total = [0.0] * N_STATES
+    for (i, j), a in zip(_F_ENTRIES, size):
+        total[i] += a * d[j] / d[i]
+    if not math.isfinite(sum(total)):
+        return math.nan
+    return max(total)
+
+
+def _step_error_bound(theta, order, halvings):
+    """2^(s+1) e^theta rho_(m-1)(theta), rho_m(theta) = theta^(m+1) / (m+1)! (m+2) / (m+2-theta).
+
+    The bound on the relative error of Phi against e^(F T) after s halvings
+    of the step and order m, with one order of margin for the entries that
+    couple two blocks of F (modelgen.derive.discretization.step_error_bound).
+    """
+    m = order - 1
+    if not theta < m + 2:
+        return math.inf
+    power = 1.0
+    for k in range(1, m + 2):
+        power = power * theta / k
+    return math.ldexp(math.exp(theta) * (power * (m + 2) / (m + 2 - theta)), halvings + 1)
+
+
+def _taylor_plan(norm, T):
+    """(s, m): the doublings and the order summed (modelgen.derive.discretization.taylor_plan).
+
+    TAYLOR_TOLERANCE None: order TAYLOR_ORDER, s the smallest with
+    ||F||_D h <= SERIES_RANGE.  Otherwise the smallest s for which order
+    TAYLOR_ORDER meets the error bound TAYLOR_TOLERANCE, then the smallest
+    order that meets it with that s.
+    """
+    if TAYLOR_TOLERANCE is None:
+        for s in range(65):
+            if norm * math.ldexp(T, -s) <= SERIES_RANGE:
+                return s, TAYLOR_ORDER
+    else:
+        for s in range(65):
+            theta = norm * math.ldexp(T, -s)
+            if _step_error_bound(theta, TAYLOR_ORDER, s) <= TAYLOR_TOLERANCE:
+                for m in range(1, TAYLOR_ORDER + 1):
+                    if _step_error_bound(theta, m, s) <= TAYLOR_TOLERANCE:
+                        return s, m
+                return s, TAYLOR_ORDER
+    raise ValueError("discretize: e^(F T) is not representable (||F|| T = %.3g)" % (norm * T))
 
 
 def discretize(F, G, q, T):
-    """Phi and Q_d by the Taylor series of order TAYLOR_ORDER (seed 000, eqs. (10)-(11)).
+    """Phi and Q_d by the Taylor series (seed 000, eqs. (10)-(11)), to TAYLOR_TOLERANCE.
 
     Q_d = Gamma (Q/T) Gamma^T with Q = diag(q) the continuous noise PSD.
     Scaling and squaring keeps it accurate for any finite T: the series is
-    summed over h = T / 2^s, with s the smallest integer for which
-    ||F||_D h <= SERIES_RANGE (the truncation error is then below the unit
-    roundoff in that norm), then doubled s times: Phi(2h) = Phi(h)^2 and
+    summed over h = T / 2^s up to order m, both chosen by _taylor_plan so
+    that Phi is within TAYLOR_TOLERANCE of e^(F T) relative (or, with the
+    paper's fixed order, the truncation error is below the unit roundoff),
+    then doubled s times: Phi(2h) = Phi(h)^2 and
     S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds.
+    Dense matrix products (BLAS), as modelgen.derive.discretization does.
     Raises ValueError, naming the argument, for a non-finite or non-positive
     T, a non-finite F, G or q, a negative q, or an e^{F T} that is not
     representable (more than 64 doublings) or overflows.
     """
+    F, G, q = _float(F), _float(G), _float(q)
     _check_shapes("discretize", F=(F, (N_STATES, N_STATES)), G=(G, (N_STATES, N_NOISES)), q=(q, (N_NOISES,)))
     T = _check_step(T)
-    _check_finite("discretize", F=F, G=G, q=q)
-    if np.any(np.asarray(q) < 0.0):
+    if N_NOISES and not q.min() >= 0.0:
+        _check_finite("discretize", q=q)
         raise ValueError("discretize: q has a negative noise PSD")
     norm = _balanced_norm(F)
-    s = 0
-    while not norm * math.ldexp(T, -s) <= SERIES_RANGE:
-        s += 1
-        if s > 64:
-            raise ValueError("discretize: e^(F T) is not representable (||F|| T = %.3g)" % (norm * T))
+    if not math.isfinite(norm):
+        _check_finite("discretize", F=F)
+    s, order = _taylor_plan(norm, T)
     h = math.ldexp(T, -s)
     Fh = F * h
-    term = np.eye(N_STATES)
-    phi = np.eye(N_STATES)
-    series = np.eye(N_STATES)
-    for k in range(1, TAYLOR_ORDER + 1):
+    term = phi = series = _IDENTITY
+    for k in range(1, order + 1):
         term = term @ Fh / k
         phi = phi + term
         series = series + term / (k + 1)
-    for _ in range(s):
-        series = 0.5 * (series + phi @ series)
-        phi = phi @ phi
-    gamma = T * series @ G
-    qd = (gamma * (q / T)) @ gamma.T
-    _check_finite("discretize", Phi=phi, Qd=qd)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below, naming the result
+        for _ in range(s):
+            series = 0.5 * (series + phi @ series)
+            phi = phi @ phi
+        gamma = T * series @ G
+        qd = (gamma * (q / T)) @ gamma.T
+    _check_result("discretize", {"Phi": phi, "Qd": qd}, F=F, G=G, q=q)
     return phi, 0.5 * (qd + qd.T)
 
 
-_UNIT_ROWS = [7, 8, 11, 12]
-_DIAGONAL_ROWS = [9, 10]
-_GENERAL_ROWS = [0, 1, 2, 3, 4, 5, 6]
-_GENERAL_COLUMNS = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10]
-_QD_ROWS, _QD_COLS = [0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 9, 9, 9, 9, 9, 9, 9, 9, 10, 10, 10, 10, 10, 10, 10, 10], [0, 1, 2, 3, 4, 5, 6, 9, 10, 0, 1, 2, 3, 4, 5, 6, 9, 10, 0, 1, 2, 3, 4, 5, 6, 9, 10, 0, 1, 2, 3, 4, 5, 6, 9, 10, 0, 1, 2, 3, 4, 5, 6, 9, 10, 0, 1, 2, 3, 4, 5, 6, 9, 10, 0, 1, 2, 3, 4, 5, 6, 9, 10, 0, 1, 2, 3, 4, 5, 6, 9, 0, 1, 2, 3, 4, 5, 6, 10]
+# The prediction's kernel, chosen at generation time by modelgen.codegen.kernels.python_predict_kernel
+# (the rule, measured by bench/bench_python_module.py, is documented there): factored.
+_UNIT_ROWS = np.array([7, 8, 11, 12], dtype=np.intp)
+_DIAGONAL_ROWS = np.array([9, 10], dtype=np.intp)
+_GENERAL_ROWS = np.array([0, 1, 2, 3, 4, 5, 6], dtype=np.intp)
+_GENERAL_COLUMNS = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10], dtype=np.intp)
+_GENERAL_BLOCK = np.ix_(_GENERAL_ROWS, _GENERAL_COLUMNS)
+_LOWER = np.tril(np.ones((N_STATES, N_STATES), dtype=bool), -1)  # mirrored from the upper triangle
+_UPPER = _LOWER.T
+_VECTOR, _SQUARE = (N_STATES,), (N_STATES, N_STATES)
+_IDENTITY = np.eye(N_STATES)
+_IDENTITY.flags.writeable = False
 
 
 def predict(x, P, Phi, Qd):
-    """x = Phi x and P = Phi P Phi^T + Q_d, skipping the structural zeros of Phi.
+    """x = Phi x and P = Phi P Phi^T + Q_d.
 
+    In factored form: the Cholesky factor P = L L^T that proves P positive
+    definite (the contract's check) also gives P_n = (Phi L)(Phi L)^T + Q_d,
+    a triangular product and a symmetric rank-n update (BLAS trmm and syrk:
+    half the flops of two dense products each, so check and prediction
+    together cost less than the dense Phi P Phi^T alone).  A P without a
+    Cholesky factor (a zero variance, or positive semidefinite only within
+    the contract's tolerance) takes the dense products.  The upper triangle
+    is mirrored into the lower one, so P stays exactly symmetric.
     Raises ValueError, naming the argument, for non-finite x, P, Phi or Qd,
-    a P outside the contract (module docstring) or a non-finite result.
+    a P outside the contract (module docstring) or a non-finite result.  A
+    NaN or infinity in an argument makes the result non-finite (IEEE
+    arithmetic: NaN and 0 * inf are NaN), so the arguments are tested entry
+    by entry only then, to name the culprit.
     """
-    _check_shapes("predict", x=(x, (N_STATES,)), P=(P, (N_STATES, N_STATES)), Phi=(Phi, (N_STATES, N_STATES)), Qd=(Qd, (N_STATES, N_STATES)))
-    _check_finite("predict", x=x, Phi=Phi, Qd=Qd)
-    _check_covariance("predict", P)
-    x, P, Phi, Qd = (np.asarray(a, dtype=float) for a in (x, P, Phi, Qd))
-    g, c, d = _GENERAL_ROWS, _GENERAL_COLUMNS, _DIAGONAL_ROWS
-    x_new = x.copy()
-    x_new[g] = Phi[np.ix_(g, c)] @ x[c]
-    x_new[d] = Phi[d, d] * x[d]
-    M = P.copy()  # unit rows of Phi copy P
-    M[g] = Phi[np.ix_(g, c)] @ P[c]
-    M[d] = Phi[d, d][:, None] * P[d]
-    P_new = M.copy()
-    P_new[:, g] = M[:, c] @ Phi[np.ix_(g, c)].T
-    P_new[:, d] = M[:, d] * Phi[d, d]
-    P_new[_QD_ROWS, _QD_COLS] += Qd[_QD_ROWS, _QD_COLS]
-    upper = np.triu(P_new)
-    P_new = upper + np.triu(upper, 1).T
-    _check_finite("predict", result=P_new, x_result=x_new)
+    x, P, Phi, Qd = _float(x), _float(P), _float(Phi), _float(Qd)
+    if x.shape != _VECTOR or P.shape != _SQUARE or Phi.shape != _SQUARE or Qd.shape != _SQUARE:
+        _check_shapes("predict", x=(x, _VECTOR), P=(P, _SQUARE), Phi=(Phi, _SQUARE), Qd=(Qd, _SQUARE))
+    _check_finite("predict", Qd=Qd)  # only its upper triangle reaches the result
+    x_new = Phi @ x
+    factor = _factor(P)
+    if factor is not None:
+        upper = _syrk(1.0, _trmm(1.0, factor, Phi, side=1, lower=1), beta=1.0, c=Qd, lower=0)  # Fortran order
+        P_new = upper.T  # C order; its lower triangle holds the result
+        np.copyto(P_new, upper, where=_UPPER)
+    else:
+        _check_covariance_entries("predict", P)
+        P_new = Phi @ P @ Phi.T
+        P_new += Qd
+        np.copyto(P_new, P_new.T, where=_LOWER)
+    _check_result("predict", {"x_result": x_new, "result": P_new}, x=x, P=P, Phi=Phi, Qd=Qd)
     return x_new, P_new
 
 
@@ -428,29 +500,34 @@ def update(x, P, z, H, r):
     ``r`` is the diagonal of R.  Raises ValueError, naming the argument and
     leaving x and P untouched, for non-finite x, z, H or r, a negative r, a
     P outside the contract (module docstring), an innovation covariance
-    that is not positive definite or a non-finite result.
+    that is not positive definite or a non-finite result.  Non-finite
+    arguments show in the result (or the innovation covariance) and are
+    named then, as in predict.
     """
-    z = np.asarray(z, dtype=float)
+    x, P, z, H, r = _float(x), _float(P), _float(z), _float(H), _float(r)
     m = z.shape[0] if z.ndim == 1 else -1
-    _check_shapes("update", x=(x, (N_STATES,)), P=(P, (N_STATES, N_STATES)), z=(z, (m,)), H=(H, (m, N_STATES)), r=(r, (m,)))
-    _check_finite("update", x=x, z=z, H=H, r=r)
-    if np.any(np.asarray(r) < 0.0):
+    if x.shape != _VECTOR or P.shape != _SQUARE or z.shape != (m,) or H.shape != (m, N_STATES) or r.shape != (m,):
+        _check_shapes("update", x=(x, _VECTOR), P=(P, _SQUARE), z=(z, (m,)), H=(H, (m, N_STATES)), r=(r, (m,)))
+    if m and not r.min() >= 0.0:
+        _check_finite("update", r=r)
         raise ValueError("update: r has a negative measurement variance")
     _check_covariance("update", P)
-    x, P, H, r = (np.asarray(a, dtype=float) for a in (x, P, H, r))
+    if not m:  # nothing measured: x and P as they were
+        _check_result("update", {"x_result": x, "result": P}, x=x, P=P)
+        return x.copy(), P.copy()
     HP = H @ P
-    S = HP @ H.T + np.diag(r)
-    try:
-        L = np.linalg.cholesky(S)
-    except np.linalg.LinAlgError:
-        raise ValueError("update: the innovation covariance H P H^T + R is not positive definite") from None
-    K = np.linalg.solve(L.T, np.linalg.solve(L, HP)).T
+    S = HP @ H.T
+    S.flat[:: m + 1] += r
+    L, info = _cholesky(S, lower=1, clean=0, overwrite_a=1)
+    if info:
+        _check_finite("update", x=x, z=z, H=H, P=P)
+        raise ValueError("update: the innovation covariance H P H^T + R is not positive definite")
+    K = _cholesky_solve(L, HP, lower=1)[0].T
     x_new = x + K @ (z - H @ x)
     B = P - K @ HP  # (I - K H) P
     P_new = B - (B @ H.T) @ K.T + (K * r) @ K.T  # ... (I - K H)^T + K R K^T
-    upper = np.triu(P_new)
-    P_new = upper + np.triu(upper, 1).T
-    _check_finite("update", result=P_new, x_result=x_new)
+    np.copyto(P_new, P_new.T, where=_LOWER)
+    _check_result("update", {"x_result": x_new, "result": P_new}, x=x, P=P, z=z, H=H, r=r)
     return x_new, P_new
 
 
@@ -496,11 +573,34 @@ def _check_shapes(function, **arrays):
             raise ValueError(f"{function}: {name} has shape {shape}, expected {expected}")
 
 
+def _float(a):
+    """``a`` as a float array (no copy when it already is one)."""
+    return np.asarray(a, dtype=float)
+
+
 def _check_finite(function, **arrays):
-    """Refuse a NaN or infinite entry, naming the argument (or ``result``)."""
+    """Refuse a NaN or infinite entry, naming the argument (or ``result``).
+
+    One reduction per argument: a sum is finite unless an entry is NaN or
+    infinite, or finite entries overflow it; only then is each entry
+    tested, so a large finite array is not refused.
+    """
     for name, value in arrays.items():
-        if not np.all(np.isfinite(value)):
+        if not math.isfinite(_sum(value, None)) and not np.isfinite(value).all():
             raise ValueError(f"{function}: {name} has a non-finite entry")
+
+
+def _check_result(function, results, **arguments):
+    """Refuse a non-finite result, naming the argument that made it so when one did.
+
+    One sum per result array; only when one is not finite are the
+    arguments tested entry by entry (a NaN or infinity in an argument
+    reaches the result through IEEE arithmetic: NaN and 0 * inf are NaN).
+    """
+    if all(math.isfinite(_sum(value, None)) for value in results.values()):
+        return
+    _check_finite(function, **arguments)
+    _check_finite(function, **results)
 
 
 def _check_step(T):
@@ -536,6 +636,33 @@ def _check_pole(function, text, value, argument):
         )
 
 
+_cholesky = lapack.dpotrf  # (factor, info); LAPACK directly: numpy's wrapper costs more than a small factorization
+_cholesky_solve = lapack.dpotrs
+
+
+_cholesky = lapack.dpotrf  # (factor, info); LAPACK directly: numpy's wrapper costs more than a small factorization
+_cholesky_solve = lapack.dpotrs
+_trmm = blas.dtrmm
+_syrk = blas.dsyrk
+_sum = np.add.reduce  # with axis None: one reduction over every entry, cheaper than ndarray.sum
+
+
+def _factor(P):
+    """The lower Cholesky factor of P when P is exactly symmetric with positive variances, else None.
+
+    A factor proves the contract's positive semidefiniteness (a stronger
+    test than the one with the tolerance, and, through each 2 x 2 minor,
+    the bound on |P_ij|); a NaN fails one of the tests.  None sends the
+    caller to the entry-by-entry test, which accepts what is within the
+    tolerance and names what is not.
+    """
+    if np.minimum.reduce(P.diagonal()) > 0.0 and P.tobytes() == P.T.tobytes():
+        factor, info = _cholesky(P, lower=1, clean=1)
+        if not info:
+            return factor
+    return None
+
+
 def _check_covariance(function, P):
     """Refuse a P that is not finite, symmetric and positive semidefinite within PSD_TOLERANCE.
 
@@ -543,8 +670,18 @@ def _check_covariance(function, P):
     |P_ij| <= sqrt(P_ii P_jj) (1 + tol) (so a zero variance has no
     correlation); the correlation matrix of the states with a positive
     variance, plus tol I, has a Cholesky factor.
+
+    The usual case is one Cholesky factorization (:func:`_factor`); an
+    infinite variance can pass it, but makes the caller's result
+    non-finite, which is then traced back to P.  Anything else takes the
+    test entry by entry (:func:`_check_covariance_entries`).
     """
-    P = np.asarray(P, dtype=float)
+    if _factor(P) is None:
+        _check_covariance_entries(function, P)
+
+
+def _check_covariance_entries(function, P):
+    """:func:`_check_covariance` entry by entry, raising ValueError that names the first violation (or returning)."""
     _check_finite(function, P=P)
     variance = P.diagonal()
     if variance.min() < 0.0:
