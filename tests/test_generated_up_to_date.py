@@ -48,6 +48,16 @@ def test_committed_generated_code_matches_generator(name):
         )
 
 
+@pytest.mark.parametrize("name", builtin_models())
+def test_committed_generated_code_records_the_pinned_sympy_and_jinja2(name):
+    pins = _pinned_versions()
+    stamp = f"(sympy {pins['sympy']}, jinja2 {pins['jinja2']})"
+    for filename in (f"{name}.h", f"{name}.c", f"{name}.py", "README.md"):
+        assert stamp in (REPO / "generated" / name / filename).read_text(encoding="utf-8"), (
+            f"generated/{name}/{filename} does not say it was made with the pinned {stamp}"
+        )
+
+
 def test_no_generated_folder_without_a_model():
     models = set(builtin_models()) | {"options"}
     stray = [p.name for p in (REPO / "generated").iterdir() if p.is_dir() and p.name not in models]

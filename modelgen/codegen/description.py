@@ -53,6 +53,19 @@ from modelgen.errors import ModelError
 EVALUATE = "matrices_evaluate"
 
 
+def text_shaping_versions() -> str:
+    """The releases of the packages that shape generated text, as generated files record them.
+
+    sympy prints every expression and jinja2 lays out every file, so a generated file
+    says which of their releases made it (the freshness test compares only under the
+    releases pinned in constraints.txt).
+    """
+    import jinja2
+    import sympy
+
+    return f"sympy {sympy.__version__}, jinja2 {jinja2.__version__}"
+
+
 @dataclass(frozen=True)
 class MatrixTarget:
     """Where one evaluated entry goes: the k-th structural nonzero of ``matrix`` (F, G, H, q, r)."""
@@ -197,6 +210,7 @@ class FilterDescription:
         return {
             "model": model,
             "version": __version__,
+            "text_versions": text_shaping_versions(),
             "n_states": derived.n_states,
             "n_noises": derived.n_noises,
             "n_measurements": derived.n_measurements,
