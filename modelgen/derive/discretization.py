@@ -218,7 +218,10 @@ def step_error_bound(theta: float, order: int, halvings: int) -> float:
     One order of margin (CROSS_BLOCK_MARGIN) over the balanced-norm bound
     2^(s+1) e^theta rho_m(theta), for the entries that couple two blocks of F.
     """
-    return math.ldexp(math.exp(theta) * truncation_bound(theta, order - CROSS_BLOCK_MARGIN), halvings + 1)
+    remainder = truncation_bound(theta, order - CROSS_BLOCK_MARGIN)
+    if math.isinf(remainder):  # theta beyond the series' reach: e^theta may not even be a float
+        return math.inf
+    return math.ldexp(math.exp(theta) * remainder, halvings + 1)
 
 
 def taylor_plan(

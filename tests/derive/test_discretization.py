@@ -227,3 +227,12 @@ def test_accuracy_rule_meets_its_tolerance_against_expm_on_every_builtin_model(n
         phi_exact, gamma_exact = exact(m["F"], m["G"], T)
         assert relative_error(phi, phi_exact) < DEFAULT_TOLERANCE, T
         assert relative_error(gamma, gamma_exact) < DEFAULT_TOLERANCE, T
+
+
+def test_error_bound_is_infinite_not_an_overflow_far_beyond_the_series_reach():
+    import math
+
+    from modelgen.derive.discretization import step_error_bound
+
+    assert step_error_bound(1.0e4, 9, 0) == math.inf  # e^10000 is not a float; the bound says "too far", no exception
+    assert math.isfinite(step_error_bound(0.5, 9, 0))
