@@ -122,7 +122,7 @@ class NavigationQuantitySensor(ABC):
         truth0 = trajectory.initial_state()
         frame = derived.model.frame or "NED"
         gravity = np.array([0.0, 0.0, -earth.normal_gravity(truth0[0], truth0[2])])
-        values = operating_point(truth0, gravity, frame, profile.imu_budget, profile.noise_parameters())
+        values = operating_point(truth0, gravity, frame, profile.imu_budget, profile.constant_parameters())
         m = derived.numeric(named_parameters(derived, values))
         rows = {}
         for name, quantity in profile.filter.measurements.get(self.name, {}).items():
@@ -192,7 +192,7 @@ class StrapdownNavigator:
         self.record = sensors.aiding
         record = self.record
         self.every = int(round((record.times[1] - record.times[0]) / trajectory.record_period)) if len(record.times) > 1 else 1
-        self.noise = profile.noise_parameters()
+        self.noise = profile.constant_parameters()
 
     # navigator protocol
     def advance(self, cycle: int) -> None:

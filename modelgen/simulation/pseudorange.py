@@ -188,7 +188,7 @@ class PseudorangeNavigator:
         self.cycle = 0
         self.selected = np.arange(self.satellites)
         self.line_of_sight = np.tile([0.0, 0.0, 1.0], (self.satellites, 1))
-        self.noise = profile.noise_parameters()
+        self.noise = profile.constant_parameters()
 
     # -- navigator protocol ------------------------------------------------------------
     def advance(self, cycle: int) -> None:

@@ -100,15 +100,18 @@ class FlightProfile:
 
     def noise_parameters(self) -> dict[str, float]:
         """Every sensor's noise as model parameter values (a model picks the names it has); where two
-        sensors set the same name, the aiding sensor's value holds.  The filter's constant
-        ``parameters`` come last and hold over both."""
+        sensors set the same name, the aiding sensor's value holds."""
         out: dict[str, float] = {}
         for name, settings in self.sensors.items():
             if name != self.filter.aiding:
                 out.update(SENSORS[name].noise_parameters(settings))
         out.update(self.aiding_sensor.noise_parameters(self.aiding_settings))
-        out.update(self.filter.parameters)
         return out
+
+    def constant_parameters(self) -> dict[str, float]:
+        """The model parameter values held for the whole flight: every sensor's noise, then the
+        filter's own ``parameters`` (which hold over the noise of the same name)."""
+        return {**self.noise_parameters(), **self.filter.parameters}
 
     def with_sensor(self, name: str, settings: Any) -> "FlightProfile":
         """A copy with one sensor's settings replaced."""

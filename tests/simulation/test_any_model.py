@@ -24,7 +24,7 @@ def augmented():
 
 def _vocabulary(profile) -> dict[str, float]:
     nav = np.array([0.5, 2.0, 100.0, 10.0, 20.0, 0.0, 1.0, 0.0, 0.0, 0.0])
-    return operating_point(nav, np.array([0.0, 0.0, -9.8]), "NED", profile.imu_budget, profile.noise_parameters())
+    return operating_point(nav, np.array([0.0, 0.0, -9.8]), "NED", profile.imu_budget, profile.constant_parameters())
 
 
 def test_parameters_the_simulation_cannot_supply_are_refused_all_by_name_with_the_way_to_supply_them(augmented):
@@ -40,7 +40,8 @@ def test_profile_filter_parameters_are_constants_that_complete_the_model(augment
     data = yaml.safe_load(data_path("profile_000.yaml").read_text(encoding="utf-8"))
     data["filter"]["parameters"] = {name: 0.0 for name in BODY} | {"body_specific_force_z": -9.8}
     profile = load_profile_data(data, "p.yaml")
-    assert profile.noise_parameters()["body_specific_force_z"] == -9.8
+    assert profile.constant_parameters()["body_specific_force_z"] == -9.8
+    assert "body_specific_force_z" not in profile.noise_parameters()
     chosen = named_parameters(augmented, _vocabulary(profile))
     assert chosen["body_rate_x"] == 0.0 and chosen["latitude"] == 0.5
 
