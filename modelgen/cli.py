@@ -151,7 +151,8 @@ def main(debug: bool) -> None:
 @click.argument("model", default="ned_doppler18")
 @click.option("--format", "fmt", type=click.Choice(["text", "json", "latex", "octave", "casadi"]), default="text", show_default=True, help="text: one line per entry; json: entries as sympy strings; latex: a table like a paper's; octave: a function file [F,G,H,Q,R] = NAME(p); casadi: a serialized casadi.Function of the parameter vector (needs --out).")
 @click.option("--out", "out_file", type=click.Path(dir_okay=False), default=None, help="Write to FILE (atomically) instead of printing; for octave the function is named after FILE's stem.")
-def derive(model: str, fmt: str, out_file: str | None) -> None:
+@click.option("--force", is_flag=True, help="Replace FILE when it already exists (without it, an existing file is never overwritten).")
+def derive(model: str, fmt: str, out_file: str | None, force: bool) -> None:
     """Derive F, G, H, Q, R from MODEL's equations and print the nonzero entries.
 
     MODEL is a model file (YAML) or the name of a built-in model.  Entries are
@@ -164,6 +165,9 @@ def derive(model: str, fmt: str, out_file: str | None) -> None:
 
     if fmt == "casadi" and out_file is None:
         raise ModelError("--format casadi writes a file: give --out FILE (e.g. --out model.casadi)")
+    if out_file is not None and Path(out_file).exists() and not force:
+        raise ModelError(f"{out_file}: already exists and modelgen does not overwrite a file unasked: "
+                         f"give another --out, or --force to replace it")
     name = Path(out_file).stem if out_file is not None and fmt == "octave" else None
     text = derived_export(model, fmt, name)
     if out_file is None:
