@@ -5,13 +5,31 @@ The C is compiled with the system compiler in strict C99 mode
 loaded with ctypes; the struct layouts are rebuilt from the model's sizes and
 the code-generation options by ``layout.c_layout``, the description the
 header itself was rendered from, so no header parser is needed.
+
+Compiled libraries can be kept in an on-disk cache (``cache=True``): the
+paper's model is about 400 kB of C that gcc -O2 needs seconds for, and every
+Monte Carlo worker, every ``modelgen simulate`` and every check of unchanged
+code would otherwise compile it again.  An entry is keyed by a digest of
+everything the compiler reads or is told: the C files and the headers beside
+them, the flags, and the compiler's resolved path and ``--version`` text.  It
+lives in ``$MODELGEN_CACHE_DIR``, else ``$XDG_CACHE_HOME/modelgen``, else
+``~/.cache/modelgen`` (folder ``libraries``).  An entry is written under a
+temporary name and then linked to its final name, which never replaces an
+existing file: two builders of the same code both succeed and one entry
+stays.  Each entry carries a header with its key and the digest of the
+library; a file at an entry's name that does not verify (cut short, corrupt,
+not modelgen's) is left alone and the library is compiled again under the
+next name.  A hit copies the library to the caller's output path, so what is
+loaded is the caller's own file, as without the cache.
 """
 
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import importlib.util
+import json
 import os
 import shutil
 import subprocess
@@ -25,6 +43,7 @@ import numpy as np
 from modelgen.codegen.layout import ModelSizes, c_layout
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
+from modelgen.fileio.output import current_umask
 
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 
@@ -37,13 +56,165 @@ def compiler() -> str:
     raise ModelError("no C compiler found (set CC or install gcc)")
 
 
-def compile_shared_library(c_files: list[Path], output: Path, extra_flags: tuple[str, ...] = ("-O2",)) -> Path:
-    """Compile ``c_files`` into a shared library; raise with the compiler's output on failure."""
-    command = [compiler(), *STRICT_FLAGS, *extra_flags, "-fPIC", "-shared", "-o", str(output), *map(str, c_files), "-lm"]
+def compile_shared_library(c_files: list[Path], output: Path, extra_flags: tuple[str, ...] = ("-O2",),
+                           cache: bool = False) -> Path:
+    """Compile ``c_files`` into a shared library at ``output``; raise with the compiler's output on failure.
+
+    ``cache=True`` takes the library from the compile cache (module
+    docstring) when the same sources were compiled with the same compiler
+    and flags before, and keeps a newly compiled one there.
+    """
+    cc = compiler()
+    flags = [*STRICT_FLAGS, *extra_flags, "-fPIC", "-shared"]
+    key = library_key(c_files, [*flags, "-lm"], compiler_identity(cc)) if cache else None
+    if key is not None:
+        payload = cached_library(library_cache_folder(), key)
+        if payload is not None:
+            _write_file(Path(output), payload)
+            return output
+    command = [cc, *flags, "-o", str(output), *map(str, c_files), "-lm"]
     result = subprocess.run(command, capture_output=True, text=True)
     if result.returncode != 0:
         raise ModelError(f"compiling {', '.join(map(str, c_files))} failed:\n{result.stderr}")
+    if key is not None:
+        store_library(library_cache_folder(), key, Path(output).read_bytes())
     return output
+
+
+# -- the compile cache (module docstring) ----------------------------------------------
+
+#: Environment variable naming the cache folder (tests point it at a temporary folder).
+CACHE_ENV = "MODELGEN_CACHE_DIR"
+#: First line of every cache entry; a new layout of entries changes the number.
+ENTRY_MAGIC = b"modelgen-library-cache 1\n"
+#: Names tried for one key: a file at a name that does not verify is left alone and the next is used.
+ENTRY_NAMES = 4
+
+
+def library_cache_folder() -> Path:
+    """The folder of cached libraries: $MODELGEN_CACHE_DIR, else $XDG_CACHE_HOME/modelgen, else ~/.cache/modelgen."""
+    explicit = os.environ.get(CACHE_ENV)
+    if explicit:
+        return Path(explicit) / "libraries"
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg) if xdg and os.path.isabs(xdg) else Path.home() / ".cache"  # the XDG rule: relative is ignored
+    return base / "modelgen" / "libraries"
+
+
+def compiler_identity(name: str) -> str:
+    """The compiler's resolved path and ``--version`` text: a compiler upgrade is a different compiler."""
+    path = os.path.realpath(shutil.which(name) or name)
+    try:
+        modified = os.stat(path).st_mtime_ns
+    except OSError:
+        modified = 0
+    return _identity(path, modified)
+
+
+@functools.lru_cache(maxsize=8)
+def _identity(path: str, modified: int) -> str:
+    result = subprocess.run([path, "--version"], capture_output=True, text=True)
+    return f"{path}\n{result.returncode}\n{result.stdout}"
+
+
+def library_key(c_files: list[Path], flags: list[str], identity: str) -> str:
+    """Digest of what a compile reads or is told: sources, the headers beside them, flags, compiler."""
+    folders = sorted({Path(f).resolve().parent for f in c_files})
+    headers = sorted(h for folder in folders for h in folder.glob("*.h"))
+    digest = hashlib.sha256(ENTRY_MAGIC)
+    digest.update(json.dumps({"compiler": identity, "flags": flags,
+                              "sources": [Path(f).name for f in c_files]}).encode("utf-8"))
+    for path in [*map(Path, c_files), *headers]:
+        content = path.read_bytes()
+        digest.update(f"\n{path.name} {len(content)}\n".encode("utf-8"))
+        digest.update(content)
+    return digest.hexdigest()
+
+
+def _entry_paths(folder: Path, key: str) -> list[Path]:
+    return [folder / (f"{key}.lib" if k == 0 else f"{key}.{k}.lib") for k in range(ENTRY_NAMES)]
+
+
+def _entry(key: str, payload: bytes) -> bytes:
+    """An entry: magic, key, the library's digest and length, then the library."""
+    return ENTRY_MAGIC + f"{key}\n{hashlib.sha256(payload).hexdigest()}\n{len(payload)}\n".encode("ascii") + payload
+
+
+def _verified_payload(path: Path, key: str) -> bytes | None:
+    """The library in the entry at ``path`` if it is a whole entry of ``key``, else None (not trusted)."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    if not data.startswith(ENTRY_MAGIC):
+        return None
+    fields = data[len(ENTRY_MAGIC):].split(b"\n", 3)
+    if len(fields) != 4 or fields[0] != key.encode("ascii"):
+        return None
+    payload = fields[3]
+    if fields[2] != str(len(payload)).encode("ascii") or fields[1] != hashlib.sha256(payload).hexdigest().encode("ascii"):
+        return None
+    return payload
+
+
+def cached_library(folder: Path, key: str) -> bytes | None:
+    """The cached library of ``key`` (the first entry that verifies), or None."""
+    for path in _entry_paths(folder, key):
+        if path.exists():
+            payload = _verified_payload(path, key)
+            if payload is not None:
+                return payload
+    return None
+
+
+def store_library(folder: Path, key: str, payload: bytes) -> Path | None:
+    """Keep ``payload`` as the entry of ``key``; its path, or None if it could not be kept.
+
+    The entry is written to a temporary file and hard-linked to the first
+    free name, which fails rather than replace a file: an entry of the same
+    key another builder linked first is kept (and used), a file that does not
+    verify is left alone and the next name tried.  Only the temporary file,
+    ours, is removed.  A cache that cannot be written (read-only, no room, no
+    hard links) just stays without the entry: the caller has its library.
+    """
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, temporary = tempfile.mkstemp(prefix=f".{key[:16]}-", suffix=".tmp", dir=folder)
+    except OSError:
+        return None
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(_entry(key, payload))
+            handle.flush()
+            os.fsync(handle.fileno())
+        for path in _entry_paths(folder, key):
+            try:
+                os.link(temporary, path)
+                return path
+            except FileExistsError:
+                if _verified_payload(path, key) is not None:
+                    return path
+            except OSError:
+                return None
+        return None
+    except OSError:
+        return None
+    finally:
+        Path(temporary).unlink(missing_ok=True)
+
+
+def _write_file(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file beside it and a rename (as the compiler's -o would)."""
+    fd, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+        os.chmod(temporary, 0o755 & ~current_umask())
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
 
 
 def load_python_module(path: Path) -> ModuleType:
@@ -238,11 +409,14 @@ def build_c_filter(
 
     Without ``build_dir`` the library is built in a temporary folder that is
     removed once it is loaded (a loaded library stays mapped), so nothing is
-    left in the system's temporary folder.
+    left in the system's temporary folder.  The compile cache is used: the
+    same code, compiler and flags compiled cleanly before compile cleanly now.
     """
     if build_dir is not None:
-        library = compile_shared_library([Path(folder) / f"{model}.c"], Path(build_dir) / f"lib{model}.so", extra_flags)
+        library = compile_shared_library([Path(folder) / f"{model}.c"], Path(build_dir) / f"lib{model}.so", extra_flags,
+                                         cache=True)
         return CompiledFilter(library, model, sizes, parameter_names, options=options)
     with tempfile.TemporaryDirectory(prefix="modelgen-build-") as temporary:
-        library = compile_shared_library([Path(folder) / f"{model}.c"], Path(temporary) / f"lib{model}.so", extra_flags)
+        library = compile_shared_library([Path(folder) / f"{model}.c"], Path(temporary) / f"lib{model}.so", extra_flags,
+                                         cache=True)
         return CompiledFilter(library, model, sizes, parameter_names, options=options)
