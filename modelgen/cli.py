@@ -183,6 +183,7 @@ def derive(model: str, fmt: str, out_file: str | None, force: bool) -> None:
 @click.option("--taylor-order", default=9, show_default=True, help="Highest order of the Taylor series for Phi and Gamma (eqs. 10-11).")
 @click.option("--taylor-tolerance", default=1e-12, show_default=True, type=float, help="Relative accuracy of Phi that chooses the order and doublings at run time (0: the fixed order).")
 @click.option("--recompute-threshold", default=None, type=float, help="C discretize keeps its last transition while T is the same and no entry of F, G, q moved by more than this fraction.")
+@click.option("--process-noise", type=click.Choice(["taylor", "van-loan"]), default="taylor", show_default=True, help="Q_d as the paper's Gamma (Q/T) Gamma^T (Taylor series), or exact by Van Loan's block exponential (covariance form only).")
 @click.option("--scalar", type=click.Choice(["double", "float"]), default="double", show_default=True, help="C scalar type.")
 @click.option("--form", type=click.Choice(["covariance", "ud"]), default="covariance", show_default=True, help="Store P, or its UD factors (Thornton time update, Bierman measurement update).")
 @click.option("--storage", type=click.Choice(["full", "packed"]), default="full", show_default=True, help="P as N x N or as its packed upper triangle (covariance form).")
@@ -193,7 +194,7 @@ def derive(model: str, fmt: str, out_file: str | None, force: bool) -> None:
 @click.option("--force", is_flag=True, help="Overwrite files in OUT/<model>/ that modelgen did not write or that were edited since (files with other names are always kept).")
 def generate(
     models: tuple[str, ...], out_root: str, taylor_order: int, taylor_tolerance: float, recompute_threshold: float | None,
-    scalar: str, form: str, storage: str, update: str, covariance_update: str, all_models: bool, check: bool, force: bool,
+    process_noise: str, scalar: str, form: str, storage: str, update: str, covariance_update: str, all_models: bool, check: bool, force: bool,
 ) -> None:
     """Generate Python and C99 filter code for MODELS (files or built-in names).
 
@@ -214,7 +215,7 @@ def generate(
     names = list(models) or (builtin_models() if all_models else ["ned_doppler18"])
     options = CodegenOptions(
         taylor_order=taylor_order, scalar=scalar, form=form, storage=storage, update=update, covariance_update=covariance_update,
-        taylor_tolerance=taylor_tolerance or None, recompute_threshold=recompute_threshold,
+        taylor_tolerance=taylor_tolerance or None, recompute_threshold=recompute_threshold, process_noise=process_noise,
     )
     for name in names:
         result = generate_model(name, Path(out_root), options, force=force, with_check=check and scalar == "double")
@@ -442,9 +443,10 @@ def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool, force: bool
 @click.option("--workers", type=click.IntRange(min=1), default=None, help=_WORKERS_HELP)
 @click.option("--history-csv", is_flag=True, help="Also write each correction mode's history (output, estimation error, sigma, NEES per recorded cycle) to history_<mode>.csv as it is flown.")
 @click.option("--model", "model", default=None, metavar="MODEL", help="Filter model (a built-in name or a model file) instead of the profile's filter.model; its parameters are taken by name from the simulation, its filter.parameters constants or its own defaults (README: 'Flying your own model').")
+@click.option("--journal", "journal", type=click.Path(dir_okay=False), default=None, metavar="FILE", help="Keep each completed Monte Carlo run in FILE (JSON lines, written as runs complete); run again with the same FILE to fly only the runs missing from it. A journal of another study (profile, model, filter, seed, runs) is refused.")
 def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | None, seed: int, out_dir: str,
              implementation: str, force: bool, scheduler: str | None, workers: int | None, history_csv: bool,
-             model: str | None) -> None:
+             model: str | None, journal: str | None) -> None:
     """Fly a scenario: truth, IMU/Doppler/GPS, strapdown, filter in three correction modes, Monte Carlo.
 
     Writes summary.md (errors per correction mode, NEES test, timings) and PNG
@@ -459,7 +461,7 @@ def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | Non
     scenario = flight_scenario(profile, hours, imu_rate, model)
     with ReportUpdate(Path(out_dir), force=force) as staged:
         summary = simulate_flight(scenario, staged.staging, runs, seed, implementation, echo=_mapped_echo(staged, err=True),
-                                  scheduler=scheduler, workers=workers, history_csv=history_csv)
+                                  scheduler=scheduler, workers=workers, history_csv=history_csv, journal=journal)
         summary = staged.final(summary)
         staged.commit()
     click.echo(f"wrote {summary}")

@@ -133,12 +133,17 @@ class Journal:
     and its number of tasks.  A study stopped part-way (its client killed, a
     task failing after its retries) is taken up again from its journal: the
     tasks recorded there are not run again.  A journal of another study is
-    refused; a last line cut short by the stop is ignored.  Results must be
-    JSON data (numbers, strings, lists, mappings; NaN allowed).
+    refused; a last line cut short by the stop is ignored.  Results are
+    kept as ``encode(result)``, which must be JSON data (numbers, strings,
+    lists, mappings; NaN allowed), and read back as ``decode(data)``
+    (default: results are JSON data themselves).
     """
 
-    def __init__(self, path: str | Path, study: str, tasks: int) -> None:
+    def __init__(self, path: str | Path, study: str, tasks: int, encode: Callable[[Any], Any] | None = None,
+                 decode: Callable[[Any], Any] | None = None) -> None:
         self.path, self.study, self.tasks = Path(path), study, tasks
+        self.encode = encode or (lambda result: result)
+        self.decode = decode or (lambda data: data)
 
     def completed(self) -> dict[int, Any]:
         """Results already recorded, by task index (the journal is started with its header if absent)."""
@@ -151,8 +156,11 @@ class Journal:
         except (json.JSONDecodeError, IndexError):
             raise ModelError(f"{self.path}:1: not a modelgen journal (its first line is not a study header)") from None
         if not isinstance(header, dict) or header.get("study") != self.study or header.get("tasks") != self.tasks:
-            raise ModelError(f"{self.path}:1: journal of another study or task split ({header!r:.120}); "
-                             f"give a new --journal file or remove this one")
+            held = (f"study {header.get('study')!r} of {header.get('tasks')!r} tasks" if isinstance(header, dict)
+                    else f"{header!r:.120}")
+            raise ModelError(f"{self.path}:1: journal of another study or task split (it holds {held}; this is "
+                             f"study {self.study!r} of {self.tasks} tasks); give a new --journal file or remove "
+                             f"this one")
         done: dict[int, Any] = {}
         for number, line in enumerate(lines[1:], start=2):
             try:
@@ -166,12 +174,15 @@ class Journal:
                 raise ModelError(f"{self.path}:{number}: not a journal entry") from None
             if not isinstance(index, int) or not 0 <= index < self.tasks:
                 raise ModelError(f"{self.path}:{number}: task index {index!r} out of range [0, {self.tasks})")
-            done[index] = entry.get("result")
+            try:
+                done[index] = self.decode(entry.get("result"))
+            except (KeyError, TypeError, ValueError) as exc:
+                raise ModelError(f"{self.path}:{number}: not a result of this study ({type(exc).__name__}: {exc})") from None
         return done
 
     def record(self, index: int, result: Any) -> None:
         """Append one completed task's result."""
-        self._append({"index": index, "result": result})
+        self._append({"index": index, "result": self.encode(result)})
 
     def _append(self, entry: dict) -> None:
         with self.path.open("a", encoding="utf-8") as handle:

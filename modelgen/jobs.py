@@ -491,12 +491,15 @@ def flight_scenario(profile: str, hours: float | None = None, imu_rate: float | 
 
 
 def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation: str, echo=print,
-                    scheduler: str | None = None, workers: int | None = None, history_csv: bool = False) -> Path:
+                    scheduler: str | None = None, workers: int | None = None, history_csv: bool = False,
+                    journal: str | Path | None = None) -> Path:
     """``modelgen simulate``: fly the scenario (truth, sensors, filter, Monte Carlo) into ``folder``; the summary's path.
 
     The Monte Carlo runs go to ``scheduler`` (an existing dask cluster) or,
     for two runs or more, to a local cluster of ``workers`` processes (default:
     one per core), opened first so that an unreachable address fails at once.
+    ``journal`` keeps the completed runs on disk; a rerun of the same study
+    with it flies only the missing ones.
     """
     from modelgen.cluster import dask_client, describe_client
     from modelgen.simulation.flight_report import simulate
@@ -504,11 +507,11 @@ def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation
     derived = load_and_derive(scenario.filter.model)
     if runs < 2 and scheduler is None:
         return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation,
-                        history_csv=history_csv)
+                        history_csv=history_csv, journal=journal)
     with dask_client(scheduler, workers) as client:
         echo(f"  Monte Carlo on {describe_client(client)}")
         return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation,
-                        client=client, history_csv=history_csv)
+                        client=client, history_csv=history_csv, journal=journal)
 
 
 def trade_study(study_file: str | Path, folder: Path, scheduler: str | None = None, workers: int | None = None,

@@ -274,12 +274,28 @@ class NativeFilterMaker:
 IMPLEMENTATIONS = ("c", "python", "reference")
 
 
-def filter_factory(derived: DerivedModel, implementation: str, work_dir: str | Path) -> Callable[[np.ndarray, np.ndarray], KalmanFilter]:
+def generated_filter_files(derived: DerivedModel) -> dict[str, str]:
+    """The files ``modelgen generate`` writes for the model (default options): name -> text.
+
+    Plain text: a Monte Carlo client generates them once and ships them with
+    its tasks, so that a worker only writes and compiles (or takes from the
+    compile cache) the very code the client would fly.
+    """
+    from modelgen.codegen.generate import generate_code  # sibling layer, imported where used
+
+    return dict(generate_code(derived).files)
+
+
+def filter_factory(derived: DerivedModel, implementation: str, work_dir: str | Path,
+                   files: Mapping[str, str] | None = None) -> Callable[[np.ndarray, np.ndarray], KalmanFilter]:
     """A maker of fresh filters (x0, P0) -> filter for ``implementation``.
 
     ``c`` and ``python`` are the code ``modelgen generate`` writes for the
-    model (default options), generated into ``work_dir`` now and compiled or
-    imported once; every filter made shares that code but has its own state.
+    model (default options; ``files`` if given, as :func:`generated_filter_files`
+    made them), written into ``work_dir`` now and compiled or imported once;
+    every filter made shares that code but has its own state.  The C is taken
+    from the compile cache when it was compiled before
+    (:func:`modelgen.codegen.build.compile_shared_library`).
     ``reference`` is the dense numpy filter.  For ``c`` the maker is a
     :class:`NativeFilterMaker`: called, it
     gives a :class:`GeneratedCFilter` for the Python loop; the streaming driver
@@ -291,17 +307,16 @@ def filter_factory(derived: DerivedModel, implementation: str, work_dir: str | P
     if implementation == "reference":
         return lambda x0, P0: ReferenceFilter(derived, x0, P0)
     from modelgen.codegen.build import compile_shared_library, load_python_module  # siblings
-    from modelgen.codegen.generate import generate_code
     from modelgen.fileio.output import write_atomically
     from modelgen.codegen.layout import ModelSizes
 
     model = derived.model
     folder = Path(work_dir) / model.name
-    write_atomically(folder, generate_code(derived).files)
+    write_atomically(folder, dict(files) if files is not None else generated_filter_files(derived))
     if implementation == "python":
         module = load_python_module(folder / f"{model.name}.py")
         return lambda x0, P0: GeneratedPythonFilter(module, x0, P0)
-    library = compile_shared_library([folder / f"{model.name}.c"], folder / f"lib{model.name}.so")
+    library = compile_shared_library([folder / f"{model.name}.c"], folder / f"lib{model.name}.so", cache=True)
     return NativeFilterMaker(library, model.name, ModelSizes.of(derived), model.parameter_names)
 
 

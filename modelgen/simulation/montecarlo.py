@@ -7,9 +7,14 @@ in which order runs are flown.  Runs are dask tasks (:mod:`modelgen.cluster`):
 on the caller's client (a local cluster sized to the machine, or an existing
 scheduler), else one after another in this process.  A task carries only
 plain data (:class:`MonteCarloSetup`: the flight profile, the filter model's
-declaration, the seed); each worker derives the model, builds the trajectory
-and, for the generated filter, generates and compiles the code once, and
-keeps them for all its runs of the study.
+declaration, the seed and, for the generated filter, the generated code as
+text, made once by the caller); each worker derives the model, builds the
+trajectory and writes and compiles the code once (the compile itself is
+skipped when the compile cache of :mod:`modelgen.codegen.build` holds the
+library, e.g. after ``modelgen simulate``'s own flight or an earlier study),
+and keeps them for all its runs of the study.  With a journal
+(:class:`modelgen.cluster.Journal`) each completed run is kept on disk as it
+arrives and a rerun of the same study flies only the runs missing from it.
 
 Consistency (Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to
 Tracking and Navigation*, 2001, §5.4): with e the estimation error and P the
@@ -28,17 +33,18 @@ import math
 import pickle
 import tempfile
 import time
+import uuid
 from dataclasses import dataclass
-from typing import Any, Callable
+from pathlib import Path
+from typing import Any, Callable, Mapping
 
 import numpy as np
-from scipy.stats import chi2
 
-from modelgen.cluster import dask_client, describe_client, forget_cached, run_tasks, worker_cached
+from modelgen.cluster import Journal, dask_client, describe_client, forget_cached, run_tasks, worker_cached
 from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel
-from modelgen.simulation.filters import IMPLEMENTATIONS, filter_factory
+from modelgen.simulation.filters import IMPLEMENTATIONS, filter_factory, generated_filter_files
 from modelgen.simulation.flight import fly_profile, profile_layout
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.trajectory import generate_trajectory
@@ -98,6 +104,8 @@ class MonteCarloResult:
 
     def nees_test(self, confidence: float = 0.95, start_time: float = 0.0) -> NeesTest:
         """The chi-square test of the module docstring, over times >= start_time."""
+        from scipy.stats import chi2  # here, not at import: scipy.stats costs a worker 0.6 s to import
+
         keep = self.times >= start_time
         n, N = self.errors.shape[2], self.runs
         alpha = 1.0 - confidence
@@ -115,7 +123,9 @@ class MonteCarloSetup:
     """What every run of a study shares, as plain data a worker can receive.
 
     ``key`` names the set-up in a worker's cache (computed once by the
-    caller from everything else here).
+    caller from everything else here).  ``code`` is the generated filter's
+    files (name -> text) for the ``c`` and ``python`` implementations,
+    generated once by the caller; None for the reference.
     """
 
     profile: FlightProfile
@@ -125,6 +135,7 @@ class MonteCarloSetup:
     store_every: int
     implementation: str
     key: str
+    code: Mapping[str, str] | None = None
 
 
 @dataclass(frozen=True)
@@ -138,6 +149,20 @@ class RunOutput:
     rejected: int
     updates: int
 
+    def to_json(self) -> dict:
+        """JSON data (a journal line); floats as their shortest exact text, so :meth:`of_json` gives them back bit for bit."""
+        return {"times": self.times.tolist(), "errors": self.errors.tolist(), "sigma": self.sigma.tolist(),
+                "nees": self.nees.tolist(), "rejected": int(self.rejected), "updates": int(self.updates)}
+
+    @classmethod
+    def of_json(cls, data: Any) -> "RunOutput":
+        """The run :meth:`to_json` wrote (KeyError / TypeError / ValueError on anything else)."""
+        arrays = [np.asarray(data[name], dtype=float) for name in ("times", "errors", "sigma", "nees")]
+        times, errors, sigma, nees = arrays
+        if errors.ndim != 2 or sigma.shape != errors.shape or times.shape != nees.shape or len(times) != len(errors):
+            raise ValueError("arrays of inconsistent shapes")
+        return cls(times, errors, sigma, nees, int(data["rejected"]), int(data["updates"]))
+
 
 def setup_key(profile: FlightProfile, truth_profile: FlightProfile | None, model: ErrorModel, mode: str,
               store_every: int, implementation: str) -> str:
@@ -149,14 +174,21 @@ def setup_key(profile: FlightProfile, truth_profile: FlightProfile | None, model
 def _prepare(setup: MonteCarloSetup, derived: DerivedModel | None = None) -> dict:
     """What a worker builds once per set-up: the derived model, trajectory, error layout and filter maker.
 
-    The generated code is written to a folder the context owns (removed with it).
+    The shipped code is written to a folder the context owns (removed with it)
+    and compiled through the compile cache.
     """
     derived = derived if derived is not None else derive(setup.model)
     profile = setup.profile
     trajectory = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
     code_dir = tempfile.TemporaryDirectory(prefix="modelgen-montecarlo-")
     return {"derived": derived, "trajectory": trajectory, "layout": profile_layout(profile, derived, trajectory),
-            "make_filter": filter_factory(derived, setup.implementation, code_dir.name), "code_dir": code_dir}
+            "make_filter": filter_factory(derived, setup.implementation, code_dir.name, setup.code),
+            "code_dir": code_dir}
+
+
+def _the_setup(setup: MonteCarloSetup) -> MonteCarloSetup:
+    """The set-up as a task's result: held by a worker, fetched by the others, recomputed from the graph if lost."""
+    return setup
 
 
 def fly_one_run(setup: MonteCarloSetup, seed: np.random.SeedSequence) -> RunOutput:
@@ -173,7 +205,8 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
                     workers: int = 1, client: Any = None, store_every: int | None = None,
                     progress: Callable[[int, int], None] | None = None,
                     truth_profile: FlightProfile | None = None, implementation: str = "reference",
-                    on_run: Callable[[int, RunOutput], None] | None = None) -> MonteCarloResult:
+                    on_run: Callable[[int, RunOutput], None] | None = None,
+                    journal: str | Path | None = None) -> MonteCarloResult:
     """``runs`` independent flights of ``profile`` with the filter model ``derived`` (module docstring).
 
     ``client``: a ``distributed.Client`` (:func:`modelgen.cluster.dask_client`)
@@ -183,6 +216,9 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
     budget than the filter assumes: a mis-modelled filter.  ``implementation`` is the filter flown (the numpy
     ``reference``, or the generated ``c`` / ``python``, built once per
     worker).  ``on_run(i, output)`` receives each run as it completes.
+    ``journal``: a file that keeps each completed run (:func:`run_journal`);
+    a study stopped part-way is taken up again from it, flying only the
+    missing runs, and a journal of another study is refused.
     """
     if runs < 1:
         raise ModelError(f"Monte Carlo: need at least one run, got {runs}")
@@ -192,22 +228,31 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
     mode = mode or profile.filter.mode
     store_every = store_every or max(1, int(round(profile.aiding_period / profile.filter.period)))
     key = setup_key(profile, truth_profile, derived.model, mode, store_every, implementation)
-    setup = MonteCarloSetup(profile, truth_profile, derived.model, mode, store_every, implementation, key)
     if client is None and workers > 1 and runs > 1:
         with dask_client(workers=min(workers, runs)) as local:
             return run_monte_carlo(profile, derived, runs, seed, mode, client=local, store_every=store_every,
                                    progress=progress, truth_profile=truth_profile, implementation=implementation,
-                                   on_run=on_run)
+                                   on_run=on_run, journal=journal)
+    kept = run_journal(journal, key, seed, runs) if journal is not None else None
     seeds = np.random.SeedSequence(seed).spawn(runs)
     start = time.perf_counter()
-    if client is None:
-        worker_cached(key, lambda: _prepare(setup, derived))  # this process: the caller's derived model
+    finished = kept is not None and len(kept.completed()) == runs  # all in the journal: nothing to build or ship
+    code = generated_filter_files(derived) if implementation != "reference" and not finished else None
+    setup = MonteCarloSetup(profile, truth_profile, derived.model, mode, store_every, implementation, key, code)
+    if client is None or finished:
+        if not finished:
+            worker_cached(key, lambda: _prepare(setup, derived))  # this process: the caller's derived model
+        shared: Any = setup
+    else:  # the set-up (the code: ~400 kB of text) travels once, as a task of its own, not once per run
+        shared = client.submit(_the_setup, setup, pure=False, key=f"modelgen-montecarlo-setup-{key}-{uuid.uuid4().hex[:8]}")
     try:
-        outputs = run_tasks(fly_one_run, [(setup, s) for s in seeds], client, progress=progress, on_result=on_run,
-                            label="montecarlo")
+        outputs = run_tasks(fly_one_run, [(shared, s) for s in seeds], client, progress=progress, on_result=on_run,
+                            label="montecarlo", journal=kept)
     finally:
         if client is None:
             forget_cached(key)
+        elif shared is not setup:
+            shared.release()
     return MonteCarloResult(
         scenario=profile.name,
         mode=mode,
@@ -221,3 +266,8 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
         seconds=time.perf_counter() - start,
         where=describe_client(client),
     )
+
+
+def run_journal(path: str | Path, key: str, seed: int, runs: int) -> Journal:
+    """The journal of a Monte Carlo study: named by its set-up digest (profile, model, mode, filter) and seed, ``runs`` tasks."""
+    return Journal(path, f"{key}-seed-{seed}", runs, encode=RunOutput.to_json, decode=RunOutput.of_json)

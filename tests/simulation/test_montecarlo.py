@@ -88,3 +88,65 @@ def test_a_bad_number_of_runs_or_filter_is_refused(scenario, paper_derived):
         run_monte_carlo(scenario, paper_derived, runs=0)
     with pytest.raises(ModelError, match="unknown filter implementation 'fortran'"):
         run_monte_carlo(scenario, paper_derived, runs=1, implementation="fortran")
+
+
+def _same_runs(a, b) -> bool:
+    return all(np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True)
+               for name in ("times", "errors", "sigma", "nees", "rejected", "updates"))
+
+
+def test_a_journal_keeps_completed_runs_and_a_rerun_flies_only_the_missing_ones(scenario, paper_derived, client,
+                                                                                tmp_path):
+    short = scenario.with_changes(hours=0.05)
+    journal = tmp_path / "runs.jsonl"
+    whole = run_monte_carlo(short, paper_derived, runs=4, seed=5, client=client, journal=journal)
+    lines = journal.read_text().splitlines()
+    assert len(lines) == 5  # the study's header, then one line per run as it completed
+    kept = [lines[0]] + [line for line in lines[1:] if '"index":1,' in line or '"index":3,' in line]
+    journal.write_text("\n".join(kept) + "\n")  # the study stopped after runs 1 and 3
+    flown = []
+    resumed = run_monte_carlo(short, paper_derived, runs=4, seed=5, client=client, journal=journal,
+                              on_run=lambda i, run: flown.append(i))
+    assert sorted(flown) == [0, 2]
+    assert _same_runs(resumed, whole)  # the kept runs come back from the journal bit for bit (NaN NEES included)
+    flown.clear()
+    again = run_monte_carlo(short, paper_derived, runs=4, seed=5, journal=journal, on_run=lambda i, run: flown.append(i))
+    assert flown == [] and _same_runs(again, whole)  # complete: nothing flown, here or on the cluster
+
+
+@pytest.mark.parametrize("change", ["seed", "runs", "profile", "filter"])
+def test_a_journal_of_another_monte_carlo_study_is_refused(scenario, paper_derived, tmp_path, change):
+    short = scenario.with_changes(hours=0.02)
+    journal = tmp_path / "runs.jsonl"
+    run_monte_carlo(short, paper_derived, runs=2, seed=5, journal=journal)
+    other = {"seed": dict(seed=6), "runs": dict(runs=3), "profile": dict(profile=short.with_changes(hours=0.03)),
+             "filter": dict(implementation="python")}[change]
+    arguments = {"profile": short, "runs": 2, "seed": 5, **other}
+    with pytest.raises(ModelError, match=r"runs.jsonl:1: journal of another study or task split \(it holds study "
+                                         r"'montecarlo-[0-9a-f]{16}-seed-5' of 2 tasks; this is study"):
+        run_monte_carlo(derived=paper_derived, journal=journal, **arguments)
+
+
+def test_a_worker_killed_in_the_middle_of_a_monte_carlo_study_does_not_lose_it(scenario, paper_derived):
+    import os
+    import signal
+
+    short = scenario.with_changes(hours=1 / 6)
+    here = run_monte_carlo(short, paper_derived, runs=6, seed=3)
+    killed = []
+
+    with dask_client(workers=2) as own:
+        def kill_a_busy_worker(i, run):
+            # at the first completed run: kill (SIGKILL, as a crash or a lost machine) a worker flying another run
+            if killed:
+                return
+            busy = [address for address, keys in own.processing().items()
+                    if any(str(key).startswith("modelgen-montecarlo-") and "-setup-" not in str(key) for key in keys)]
+            assert busy, "no run in flight to lose"
+            pid = own.run(os.getpid, workers=busy[:1])[busy[0]]
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+
+        there = run_monte_carlo(short, paper_derived, runs=6, seed=3, client=own, on_run=kill_a_busy_worker)
+    assert len(killed) == 1
+    assert _same_runs(there, here)
