@@ -32,7 +32,13 @@ from modelgen.codegen.build import build_c_filter, load_python_module
 from modelgen.codegen.layout import ModelSizes
 from modelgen.codegen.options import CodegenOptions
 from modelgen.derive.symbolic import DerivedModel, parameter_vector
-from modelgen.derive.discretization import DEFAULT_TAYLOR_ORDER, DEFAULT_TOLERANCE, taylor_discretization, taylor_process_noise
+from modelgen.derive.discretization import (
+    DEFAULT_TAYLOR_ORDER,
+    DEFAULT_TOLERANCE,
+    taylor_discretization,
+    taylor_process_noise,
+    van_loan_discretization,
+)
 from modelgen.errors import ModelError
 
 
@@ -125,12 +131,25 @@ Stepper = Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 def reference_run(
-    derived: DerivedModel, scenario: CheckScenario, order: int = DEFAULT_TAYLOR_ORDER, tolerance: float | None = DEFAULT_TOLERANCE
+    derived: DerivedModel,
+    scenario: CheckScenario,
+    order: int = DEFAULT_TAYLOR_ORDER,
+    tolerance: float | None = DEFAULT_TOLERANCE,
+    process_noise: str = "taylor",
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """x and P after every step, by the dense numpy reference (discretized as the generated code does by default)."""
+    """x and P after every step, by the dense numpy reference, discretized as the generated code is.
+
+    ``process_noise`` is the option's (CodegenOptions.process_noise):
+    ``taylor`` the Taylor series and Gamma (Q/T) Gamma^T of the given order
+    and tolerance, ``van-loan`` scipy's exact exponential of Van Loan's block
+    (modelgen.derive.discretization.van_loan_discretization).
+    """
     m = derived.numeric(scenario.parameters)
-    phi, gamma = taylor_discretization(m["F"], m["G"], scenario.step, order, tolerance)
-    qd = taylor_process_noise(gamma, m["Q"], scenario.step)
+    if process_noise == "van-loan":
+        phi, qd = van_loan_discretization(m["F"], m["G"], m["Q"], scenario.step)
+    else:
+        phi, gamma = taylor_discretization(m["F"], m["G"], scenario.step, order, tolerance)
+        qd = taylor_process_noise(gamma, m["Q"], scenario.step)
     x = scenario.x0()
     P = scenario.initial_covariance.copy()
     out = []
@@ -219,13 +238,13 @@ def check_generated(
     """Run reference, generated Python and generated C; compare each to the reference.
 
     ``options`` must be those the code was generated with (Taylor order,
-    storage, update form); the scalar type must be double.
+    process noise, storage, update form); the scalar type must be double.
     """
     options = options or CodegenOptions()
     if options.scalar != "double":
         raise ModelError("the reference check needs double-precision code; float is checked by `modelgen embedded`")
     folder = Path(folder)
-    ref = reference_run(derived, scenario, options.taylor_order, options.taylor_tolerance)
+    ref = reference_run(derived, scenario, options.taylor_order, options.taylor_tolerance, options.process_noise)
     tol = scenario_tolerance(derived, scenario, options.taylor_order)
     name = derived.model.name
     return [

@@ -44,6 +44,7 @@ from modelgen.codegen.discretize_kernels import (
     unrolled_discretize_cost,
 )
 from modelgen.codegen.layout import ModelSizes
+from modelgen.codegen.van_loan import van_loan_costs
 from modelgen.codegen.options import CodegenOptions
 from modelgen.codegen.structure import FilterStructure, filter_structure
 from modelgen.derive.symbolic import DerivedModel
@@ -174,6 +175,7 @@ class FilterDescription:
             "discretize": discretize_cost(structure, options.taylor_order),
             "discretize, each doubling (long steps)": doubling_cost(structure),
             **self.unrolled_discretize_costs,
+            **self.van_loan_costs,
             "predict (C)": predict,
             "predict (Python)": python_predict_cost(structure),
             "predict (dense, for comparison)": OperationCount(2 * n**3 + n, 2 * n * n * (n - 1) + n * n),
@@ -192,6 +194,14 @@ class FilterDescription:
             "discretize": first,
             "discretize, each doubling (long steps)": doubling,
         }
+
+    @cached_property
+    def van_loan_costs(self) -> dict[str, OperationCount]:
+        """Van Loan's discretize's counts (modelgen.codegen.van_loan), replacing the Taylor ones (empty without the option)."""
+        if not self.options.van_loan:
+            return {}
+        series, doubling = van_loan_costs(self.structure, self.options.taylor_order)
+        return {"discretize": series, "discretize, each doubling (long steps)": doubling}
 
     def cost_lines(self) -> list[str]:
         """The operation counts as the lines of a file header."""

@@ -124,6 +124,21 @@ def _unrolled_discretize_scratch(prefix: str, sizes: ModelSizes, unrolled: Unrol
     )
 
 
+def _van_loan_scratch(N: Dim, dim_w: Dim) -> tuple[Field, ...]:
+    """Members of Van Loan's discretize (modelgen.codegen.van_loan): two terms, E12's sum, rows, balancing sums."""
+    N2 = Dim(f"2 * {N.text}", 2 * N.value)
+    return (
+        Field("B", (N, N), "upper-right term B_k of e^{M h}; the doubling's products"),
+        Field("C", (N, N), "lower-right term (F^T h)^k / k!; then Q_d of each doubling"),
+        Field("S", (N, N), "W, then the sum of the B terms (E12), then the doubling's new Q_d"),
+        Field("row", (N,), "one row of a new term"),
+        Field("col", (N,), "column i of C: row i of the upper-left term"),
+        Field("g", (dim_w,), "one row times G diag(q)"),
+        Field("row_sum", (N2,), "balancing: off-diagonal row sums of D^-1 |M| D"),
+        Field("col_sum", (N2,), "balancing: off-diagonal column sums of D^-1 |M| D"),
+    )
+
+
 def _recompute_fields(options: CodegenOptions, nnz_f: Dim, dim_g: Dim, dim_w: Dim) -> tuple[Field, ...]:
     """The inputs the transition was computed from, when discretize may keep it (``recompute_threshold``)."""
     if options.recompute_threshold is None:
@@ -198,9 +213,10 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str, unrolled: 
         )
         return CLayout(matrices, transition, filt, discretize_scratch, filter_scratch)
 
+    qd_kind = "int_0^T e^{F s} G Q G^T e^{F^T s} ds (Van Loan)" if options.van_loan else "Gamma (Q/T) Gamma^T"
     transition = (
         Field("Phi", (N, N), "transition matrix"),
-        Field("Qd", symmetric, "Gamma (Q/T) Gamma^T" + (", packed upper triangle" if options.packed else "")),
+        Field("Qd", symmetric, qd_kind + (", packed upper triangle" if options.packed else "")),
     ) + _recompute_fields(options, nnz_f, dim_g, dim_w)
     filt = (
         Field("x", (N,)),
@@ -217,6 +233,8 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str, unrolled: 
     )
     if unrolled is not None:
         discretize_scratch = _unrolled_discretize_scratch(prefix, sizes, unrolled, N, nnz_f)
+    if options.van_loan:
+        discretize_scratch = _van_loan_scratch(N, dim_w)
     filter_scratch = [
         Field("M", (N, N), "Phi P"),
         Field("Pn", symmetric, "new covariance before it is committed"),

@@ -1,7 +1,8 @@
 """What the generated C may be asked to be: the code-generation options.
 
-The options only change the C; the generated Python module is always the
-double-precision numpy filter (it is the readable twin of the default C).
+The options only change the C, except ``process_noise`` (and the Taylor
+order and tolerance), which the generated Python module follows too; it is
+always the double-precision numpy filter (the readable twin of the default C).
 
 * ``scalar`` -- ``double`` or ``float`` (every array, constant and math call).
 * ``form`` -- ``covariance`` (P is stored) or ``ud`` (P = U D U^T is stored:
@@ -31,6 +32,14 @@ double-precision numpy filter (it is the readable twin of the default C).
   value then (the operating point has not changed); the transition struct
   holds the inputs it was computed from and must be zeroed before first use.
 
+* ``process_noise`` -- ``taylor`` (default): Q_d = Gamma (Q/T) Gamma^T of the
+  paper's eq. (9), Gamma from the Taylor series; ``van-loan``: Phi and the
+  exact Q_d = int_0^T e^{F s} G Q G^T e^{F^T s} ds by Van Loan's block
+  exponential (Van Loan 1978; modelgen.codegen.van_loan), in the C by a
+  block Taylor series with scaling and squaring under the same accuracy
+  rule, in the Python module by scipy.linalg.expm.  Covariance form only:
+  the UD form's Thornton update takes Gamma and q, not Q_d (refused).
+
 ``storage``, ``update`` and ``covariance_update`` describe the covariance
 form; the UD form always stores U packed and updates by Bierman, so they do
 not apply to it (``describe`` says what the code really does).
@@ -48,6 +57,7 @@ FORMS = ("covariance", "ud")
 STORAGES = ("full", "packed")
 UPDATES = ("vector", "sequential")
 COVARIANCE_UPDATES = ("joseph", "standard")
+PROCESS_NOISES = ("taylor", "van-loan")
 
 
 @dataclass(frozen=True)
@@ -62,6 +72,7 @@ class CodegenOptions:
     covariance_update: str = "joseph"
     taylor_tolerance: float | None = DEFAULT_TOLERANCE
     recompute_threshold: float | None = None
+    process_noise: str = "taylor"
 
     def __post_init__(self) -> None:
         for field, allowed in (
@@ -70,6 +81,7 @@ class CodegenOptions:
             ("storage", STORAGES),
             ("update", UPDATES),
             ("covariance_update", COVARIANCE_UPDATES),
+            ("process_noise", PROCESS_NOISES),
         ):
             value = getattr(self, field)
             if value not in allowed:
@@ -83,6 +95,16 @@ class CodegenOptions:
         threshold = self.recompute_threshold
         if threshold is not None and (isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not 0.0 <= threshold < 1.0):
             raise ModelError(f"recompute threshold must be a number in [0, 1) or None, not {threshold!r}")
+        if self.van_loan and self.ud:
+            raise ModelError(
+                "process noise 'van-loan' needs form 'covariance', not form 'ud': the UD time update "
+                "(Thornton) takes Gamma and q, not the Q_d that Van Loan's method gives"
+            )
+
+    @property
+    def van_loan(self) -> bool:
+        """True when discretize computes Phi and the exact Q_d by Van Loan's block exponential."""
+        return self.process_noise == "van-loan"
 
     @property
     def ud(self) -> bool:
@@ -108,13 +130,15 @@ class CodegenOptions:
             "vector measurement update (Cholesky solve)" if self.update == "vector" else "sequential scalar measurement updates"
         )
         form = "Joseph-form" if self.covariance_update == "joseph" else "standard-form"
-        return f"{self.scalar}, covariance form, {self.storage} storage, {update}, {form} covariance update"
+        noise = ", Van Loan's exact Q_d" if self.van_loan else ""
+        return f"{self.scalar}, covariance form, {self.storage} storage, {update}, {form} covariance update{noise}"
 
     def slug(self) -> str:
         """Short identifier of the combination (file and test names)."""
         if self.ud:
             return f"{self.scalar}-ud"
-        return f"{self.scalar}-{self.storage}-{self.update}-{self.covariance_update}"
+        noise = "-van-loan" if self.van_loan else ""
+        return f"{self.scalar}-{self.storage}-{self.update}-{self.covariance_update}{noise}"
 
 
 def all_combinations(scalar: str = "double") -> list[CodegenOptions]:

@@ -11,6 +11,7 @@ from modelgen.codegen.layout import CLayout, UnrolledDiscretizeSizes, c_layout
 from modelgen.codegen.structure import FilterStructure
 from modelgen.derive.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, series_range
 from modelgen.errors import ModelError
+from modelgen.codegen.van_loan import QD_MARGIN
 
 BANNER = "/* GENERATED FILE - DO NOT EDIT (modelgen) */"
 HASH_BANNER = "# GENERATED FILE - DO NOT EDIT (modelgen)"
@@ -279,7 +280,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "pivot_tolerance": f"(16 * {prefix}_N_STATES * {spell['epsilon']})",
         "update_doc": _update_doc(description),
         "part_templates": parts,
-        "source_templates": ["c_source.c.j2", *parts, "c_udu_factor.c.j2"],
+        "source_templates": ["c_source.c.j2", *(["c_discretize_van_loan.c.j2"] if options.van_loan else []), *parts, "c_udu_factor.c.j2"],
         "evaluate": {
             "temporaries": [(str(s), printer.doprint(e)) for s, e in block.temporaries],
             "outputs": [(f"{t.matrix}[{t.k}]", printer.doprint(e)) for t, e in zip(targets, block.outputs)],
@@ -297,6 +298,10 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "balance_entries": [(e, i, j) for e, (i, j) in enumerate(structure.entries("F")) if i != j],
         "balance_rows": sorted({i for i, j in structure.entries("F") if i != j}),
         "balance_columns": sorted({j for i, j in structure.entries("F") if i != j}),
+        "van_loan": options.van_loan,
+        "qd_margin": QD_MARGIN,
+        "discretize_template": "c_discretize_van_loan.c.j2" if options.van_loan else "c_discretize.c.j2",
+        "taylor_loop_tables": not unrolled and not options.van_loan,  # the loop Taylor discretize's index tables
         "balance_states": _balance_states(structure),
         "norm_rows": _norm_rows(structure),
         **_ieee_layout(options.scalar),

@@ -77,6 +77,7 @@ def python_context(description: FilterDescription) -> dict[str, object]:
         "functions": matrix_functions(description),
         "plan": python_predict_plan(structure),
         "predict_kernel": python_predict_kernel(structure),
+        "van_loan": options.van_loan,
         "balance_in_python": int(structure.F.sum()) <= PYTHON_BALANCING_ENTRIES,
         "series_range": repr(series_range(options.taylor_order, DOUBLE_ROUNDOFF)),
         "taylor_tolerance": repr(options.taylor_tolerance)
