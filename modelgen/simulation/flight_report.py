@@ -193,7 +193,7 @@ def _plot_trajectory(trajectory: Trajectory, path: Path) -> Path:
     ax[1, 1].set(xlabel="time [h]", ylabel="deg", title="attitude")
     ax[1, 1].legend()
     fig.suptitle(f"Flight profile {trajectory.path.name}")
-    _fixed_margins(fig, top=0.92, hspace=0.35, wspace=0.22)
+    _fixed_margins(fig, top=0.9, hspace=0.35, wspace=0.22)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
@@ -269,7 +269,7 @@ def _plot_filter(result: RunResult, names: list[str], units: dict[str, str], pat
         a.axis("off")
     _time_labels(ax, len(picks), cols)
     fig.suptitle(f"Estimation error and filter 3-sigma, {result.mode} ({result.filter_name}); each panel in its state's unit")
-    _fixed_margins(fig, left=0.06, top=1 - 0.45 / fig.get_figheight(), hspace=0.5, wspace=0.25)
+    _fixed_margins(fig, left=0.06, top=1 - 0.8 / fig.get_figheight(), hspace=0.6, wspace=0.25)
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
@@ -295,7 +295,7 @@ def _plot_monte_carlo(mc: MonteCarloResult, units: dict[str, str], path: Path) -
         a.axis("off")
     _time_labels(ax, n, cols)
     fig.suptitle(f"Monte Carlo: actual error rms vs covariance sigma ({mc.mode}, {_runs(mc.runs)}); each panel in its state's unit")
-    _fixed_margins(fig, left=0.06, top=1 - 0.45 / fig.get_figheight(), hspace=0.5, wspace=0.25)
+    _fixed_margins(fig, left=0.06, top=1 - 0.8 / fig.get_figheight(), hspace=0.6, wspace=0.25)
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
