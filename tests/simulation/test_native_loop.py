@@ -96,3 +96,32 @@ def test_unknown_glue_is_refused_by_name(paper_derived, tmp_path):
     with pytest.raises(ModelError, match="unknown glue 'fortran'"):
         fly_modes(scenario, paper_derived, trajectory, sensors, layout, filter_factory(paper_derived, "c", tmp_path),
                   MODES, glue="fortran")
+
+
+def test_uncorrected_modes_sharing_one_mechanization_fly_as_each_flown_alone(paper_derived, tmp_path, monkeypatch):
+    import modelgen.simulation.streaming as streaming
+    from modelgen.simulation import native_loop
+
+    scenario = load_profile("profile_000").with_changes(hours=1 / 12, imu_rate=30.0)
+    make = filter_factory(paper_derived, "c", tmp_path)
+    roles = []
+
+    def watched(loops):
+        native_loop.share_mechanization(loops)
+        roles.extend((loop.mode, loop.trace_role) for loop in loops)
+
+    def fly(modes):
+        trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0, streamed=True)
+        sensors = simulate_sensors(scenario, trajectory, np.random.default_rng(5))
+        layout = profile_layout(scenario, paper_derived, trajectory)
+        return fly_modes(scenario, paper_derived, trajectory, sensors, layout, make, modes, piece_seconds=7.0)
+
+    monkeypatch.setattr(streaming, "share_mechanization", watched)
+    together = fly(("accumulated", "closed_loop", "open_loop"))
+    assert roles == [("accumulated", native_loop.TRACE_WRITE), ("closed_loop", native_loop.TRACE_NONE),
+                     ("open_loop", native_loop.TRACE_READ)]
+    for mode in ("accumulated", "open_loop"):
+        alone = fly((mode,))[mode]
+        assert alone.updates == together[mode].updates == 5
+        for name in EXACT + ("nees",):
+            assert np.array_equal(getattr(alone, name), getattr(together[mode], name), equal_nan=True), (mode, name)
