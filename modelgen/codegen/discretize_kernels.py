@@ -1,29 +1,35 @@
 """discretize as straight-line code that follows the structure of F, Phi, Gamma and Q_d.
 
-The Taylor series of modelgen.derive.discretization is summed over
-compressed storage: the k-th power B_k = (F h)^k is kept only at the
-structural nonzeros of F^k (row-major order), which grow with k and saturate
-at the closure (the fill-in of Phi; for the paper's model 32, 53, 70, 72 of
-324 entries), so each order multiplies only where a product can be nonzero:
+The Taylor series of modelgen.derive.discretization is summed by Horner's
+rule over compressed storage, A = F h:
 
-    B_1 = F h,   B_k(i, j) = sum over c of (F h)(i, c) B_{k-1}(c, j),
-    Phi += B_k / k!,   S += B_k / (k + 1)!,
+    R_m = I / (m+1)!,   R_k = I / (k+1)! + A R_(k+1),   S = R_0,   E = Phi - I = A S,
 
-with 1/k! and 1/(k+1)! compile-time constants (no division in the series).
-Rows of F that are empty (random constants) give rows e_i of Phi and S and
-appear in no sum.  Each order is one small function; discretize calls order
-k only when the accuracy rule asked for it (``taylor_plan``), so one
-generated file serves every step T.  The doublings
-Phi(2h) = Phi(h)^2 and S(2h) = (S(h) + Phi(h) S(h)) / 2 run over the active
-entries of Phi (rows that are not e_i) with the same structure.  Then
-S G (the pattern of Gamma), and Q_d = T (S G) diag(q) (S G)^T over the
-upper-triangle pairs that can be nonzero, which is the paper's
-Gamma (Q/T) Gamma^T with Gamma = T S G.
+so each order is one sparse product A R_(k+1) and the constants 1/(k+1)!
+land on the diagonal only (no per-entry scaling, no Phi += / S += sums).
+R_(m-j) has the pattern of I + F + ... + F^j, which grows with j and
+saturates at the closure (the fill-in of Phi; for the paper's model 59, 98,
+112 entries in the rows that are not e_i), so there is one function per level
+until the pattern stops growing and one saturated function for every further
+level, each in two copies (R_k into S for even k, into the second term array
+for odd k, so that S = R_0 lands in S).  The order m is chosen at run time by
+the accuracy rule (``taylor_plan``): the chain starts at level 1 with the
+coefficients 1/(k+1)! read from a static table, so one generated file serves
+every step T.  Rows of F that are empty (random constants) give rows e_i of
+Phi and S and appear in no sum (their R_k(c, c) = 1/(k+1)! is a scalar).
 
-The scratch is compressed too: two term arrays of the largest pattern (they
-also hold the doubling's new values and S G), S over the active entries,
-F h, and the balancing's three vectors, far below the two N x N arrays of
-the filter's own scratch (the workspace union keeps the larger).
+The doublings E(2h) = 2 E + E^2 and S(2h) = S + E S / 2 run over the active
+entries of Phi (rows that are not e_i) with the same structure; working on
+E = Phi - I keeps the small part of Phi(h) that adding I would round away
+(in float, s times over).  The identity is added at the end.  Then S G (the
+pattern of Gamma), and Q_d = T (S G) diag(q) (S G)^T over the upper-triangle
+pairs that can be nonzero, which is the paper's Gamma (Q/T) Gamma^T with
+Gamma = T S G.
+
+The scratch is compressed too: two arrays of the active entries (S and the
+odd levels; the doubling's new values; S G), F h, and the balancing's two
+vectors, far below the two N x N arrays of the filter's own scratch (the
+workspace union keeps the larger).
 """
 
 from __future__ import annotations
@@ -80,15 +86,25 @@ class DiscretizePlan:
         return self.structure.entries("F")
 
     @cached_property
-    def powers(self) -> list[list[tuple[int, int]]]:
-        """Structural nonzeros of F^k, k = 1..order, row-major (index 0 is F itself)."""
+    def horner_patterns(self) -> list[list[tuple[int, int]]]:
+        """Structural nonzeros of R_(m-j), j = 1..J, in the rows that are not e_i (row-major).
+
+        R_(m-j) = sum_(i=0..j) A^i / (m-j+i+1)! has the pattern of I + F + ... + F^j;
+        the last pattern is the first that the next level leaves unchanged (the
+        closure, Phi's fill-in), which every further level keeps.
+        """
+        n = self.structure.n_states
+        unit = set(self.structure.unit_rows)
         step = self.structure.F.astype(np.int64)
-        power = step.copy()
-        out = [_pattern_entries(power > 0)]
-        for _ in range(2, self.order + 1):
-            power = ((step @ (power > 0).astype(np.int64)) > 0).astype(np.int64)
-            out.append(_pattern_entries(power > 0))
-        return out
+        identity = np.eye(n, dtype=bool)
+        pattern = identity
+        out: list[list[tuple[int, int]]] = []
+        while True:
+            pattern = identity | ((step @ pattern.astype(np.int64)) > 0)
+            entries = [(i, j) for i, j in _pattern_entries(pattern) if i not in unit]
+            if out and entries == out[-1]:
+                return out
+            out.append(entries)
 
     @cached_property
     def active(self) -> list[tuple[int, int]]:
@@ -106,19 +122,12 @@ class DiscretizePlan:
 
     @property
     def term_size(self) -> int:
-        """Entries of each of the two term arrays: the largest power, the active entries, S G."""
-        return max([len(p) for p in self.powers[1:]] + [len(self.active), len(self.gamma_entries), 1])
+        """Entries of each of the two term arrays: the odd levels of the chain and the doubling's new values (active entries), S G."""
+        return max(len(self.active), len(self.gamma_entries), 1)
 
     @property
     def active_size(self) -> int:
         return max(len(self.active), 1)
-
-
-def _term(order: int, index: int) -> Ref:
-    """B_order at its compressed index: F h for order 1, then the two term arrays in turn."""
-    if order == 1:
-        return Ref("scratch", "fh", (index,))
-    return Ref("scratch", "term", (order % 2, index))
 
 
 def _phi(i: int, j: int) -> Ref:
@@ -130,43 +139,112 @@ def _s(active: dict[tuple[int, int], int], unit: set[int], i: int, j: int) -> Re
     return Ref("scratch", "S", (active[(i, j)],)) if i not in unit else None
 
 
-def series_blocks(plan: DiscretizePlan) -> list[DiscretizeBlock]:
-    """One block per order: B_k, Phi += B_k / k!, S += B_k / (k + 1)!."""
-    f_index = plan.f_entries
+def _horner_array(parity: int, index: int) -> Ref:
+    """Where R_k lives at a compressed (active) index: S for even k (so that S = R_0 lands there), term[1] for odd k."""
+    return Ref("scratch", "S", (index,)) if parity == 0 else Ref("scratch", "term", (1, index))
+
+
+def _f_rows(plan: DiscretizePlan) -> dict[int, list[tuple[int, int]]]:
+    """Row i of F as (column, index of the entry in F's storage) pairs."""
+    rows: dict[int, list[tuple[int, int]]] = {}
+    for e, (i, c) in enumerate(plan.f_entries):
+        rows.setdefault(i, []).append((c, e))
+    return rows
+
+
+def horner_input_block(plan: DiscretizePlan) -> DiscretizeBlock:
+    """A = F h at the nonzeros of F (the only run-time scaling of the series)."""
+    lines = tuple(Assign(Ref("scratch", "fh", (e,)), ((Ref("matrices", "F", (e,)), _local("h")),)) for e in range(len(plan.f_entries)))
+    return DiscretizeBlock(KernelBlock("horner_input", lines), (), ("h",))
+
+
+def horner_level_name(level: int, parity: int, saturated: bool = False) -> str:
+    """The function computing R_k at distance ``level`` below the top order (or any level past saturation), into S (k even) or term (k odd)."""
+    into = "S" if parity == 0 else "term"
+    return f"horner_saturated_into_{into}" if saturated else f"horner_level_{level}_into_{into}"
+
+
+def horner_level_block(plan: DiscretizePlan, level: int, parity: int, saturated: bool = False) -> DiscretizeBlock:
+    """R_k = c_out I + A R_(k+1) over the pattern of R_k, for k = m - ``level`` of parity ``parity``.
+
+    ``c_out`` = 1/(k+1)! and ``c_in`` = 1/(k+2)! are passed at run time (the
+    order m is chosen at run time); ``c_in`` is the value of R_(k+1) on the
+    rows of random constants (and everywhere on its diagonal at level 1,
+    where R_(k+1) = R_m = c_in I is not stored).  Level ``level`` reads the
+    pattern of level - 1 only; the saturated block reads and writes the
+    closure.  Written into S, the active entries outside the pattern are set
+    to zero, so that S is complete whatever order the chain stopped at.
+    """
+    patterns = plan.horner_patterns
+    unit = set(plan.structure.unit_rows)
     active = _index(plan.active)
-    blocks = []
-    # order 1: F h, S = I + F h / 2 over the active entries, Phi += F h
-    lines: list = [Assign(Ref("scratch", "fh", (e,)), ((Ref("matrices", "F", (e,)), _local("h")),)) for e in range(len(f_index))]
-    in_f = _index(f_index)
-    for a, (i, j) in enumerate(plan.active):
-        terms = [(_local("one"),)] if i == j else []
-        if (i, j) in in_f:
-            terms.append((_term(1, in_f[(i, j)]), _local("c2")))
-        lines.append(Assign(Ref("scratch", "S", (a,)), tuple(terms)))
-    for e, (i, j) in enumerate(f_index):
-        lines.append(Assign(_phi(i, j), ((_phi(i, j),), (_term(1, e),))))
-    blocks.append(DiscretizeBlock(KernelBlock("taylor_order_1", tuple(lines)), (("one", 1, 1), ("c2", 1, 2)), ("h",)))
-    f_rows: dict[int, list[tuple[int, int]]] = {}
-    for e, (i, c) in enumerate(f_index):
-        f_rows.setdefault(i, []).append((c, e))
-    for k in range(2, plan.order + 1):
-        previous = _index(plan.powers[k - 2])
-        lines = []
-        for p, (i, j) in enumerate(plan.powers[k - 1]):
-            terms = tuple(
-                (Ref("scratch", "fh", (e,)), _term(k - 1, previous[(c, j)])) for c, e in f_rows.get(i, []) if (c, j) in previous
-            )
-            lines.append(Assign(_term(k, p), terms))
-        for p, (i, j) in enumerate(plan.powers[k - 1]):
-            lines.append(Assign(_phi(i, j), ((_phi(i, j),), (_term(k, p), _local("ck")))))
-            lines.append(Assign(Ref("scratch", "S", (active[(i, j)],)), ((Ref("scratch", "S", (active[(i, j)],)),), (_term(k, p), _local("cs")))))
-        constants = (("ck", 1, math.factorial(k)), ("cs", 1, math.factorial(k + 1)))
-        blocks.append(DiscretizeBlock(KernelBlock(f"taylor_order_{k}", tuple(lines)), constants))
-    return blocks
+    out_pattern = patterns[-1] if saturated else patterns[level - 1]
+    in_pattern = set(patterns[-1] if saturated else (patterns[level - 2] if level >= 2 else ()))
+    f_rows = _f_rows(plan)
+    lines: list = []
+    for i, j in out_pattern:
+        terms: list[tuple[Ref, ...]] = [(_local("c_out"),)] if i == j else []
+        for c, e in f_rows.get(i, []):
+            a = Ref("scratch", "fh", (e,))
+            if c in unit or (level == 1 and not saturated):  # R_(k+1) is c_in there on the diagonal, zero elsewhere
+                if c == j:
+                    terms.append((a, _local("c_in")))
+            elif (c, j) in in_pattern:
+                terms.append((a, _horner_array(1 - parity, active[(c, j)])))
+        lines.append(Assign(_horner_array(parity, active[(i, j)]), tuple(terms)))
+    if parity == 0:
+        written = set(out_pattern)
+        lines += [Assign(_horner_array(0, a), ()) for a, entry in enumerate(plan.active) if entry not in written]
+    used = {r.array for line in lines for term in line.terms for r in term if r.owner == LOCAL}
+    scalars = tuple(name for name in ("c_out", "c_in") if name in used)  # c_in is unused where no row reaches a random constant
+    return DiscretizeBlock(KernelBlock(horner_level_name(level, parity, saturated), tuple(lines)), (), scalars)
+
+
+def horner_transition_block(plan: DiscretizePlan) -> DiscretizeBlock:
+    """E = Phi - I = A S over the active entries, into Phi (S = 1 on the diagonal of a row of random constants).
+
+    The identity is added after the doublings (:func:`doubling_block`).
+    """
+    unit = set(plan.structure.unit_rows)
+    active = _index(plan.active)
+    f_rows = _f_rows(plan)
+    lines = []
+    for i, j in plan.active:
+        terms: list[tuple[Ref, ...]] = []
+        for c, e in f_rows.get(i, []):
+            a = Ref("scratch", "fh", (e,))
+            if c in unit:
+                if c == j:
+                    terms.append((a,))
+            elif (c, j) in active:
+                terms.append((a, _horner_array(0, active[(c, j)])))
+        lines.append(Assign(_phi(i, j), tuple(terms)))
+    return DiscretizeBlock(KernelBlock("horner_transition", tuple(lines)))
+
+
+def series_blocks(plan: DiscretizePlan) -> list[DiscretizeBlock]:
+    """The Horner chain: A = F h, levels 1..J into either array, the saturated level into either, then Phi = I + A S."""
+    blocks = [horner_input_block(plan)]
+    for level in range(1, len(plan.horner_patterns) + 1):
+        blocks += [horner_level_block(plan, level, parity) for parity in (0, 1)]
+    blocks += [horner_level_block(plan, 0, parity, saturated=True) for parity in (0, 1)]
+    return blocks + [horner_transition_block(plan)]
+
+
+def horner_schedule(plan: DiscretizePlan, order: int) -> list[str]:
+    """The level functions an order-``order`` chain calls, top (k = order - 1) to bottom (k = 0)."""
+    levels = len(plan.horner_patterns)
+    return [horner_level_name(min(order - k, levels + 1), k % 2, order - k > levels) for k in range(order - 1, -1, -1)]
 
 
 def doubling_block(plan: DiscretizePlan) -> DiscretizeBlock:
-    """Phi(2h) = Phi(h)^2 and S(2h) = (S(h) + Phi(h) S(h)) / 2 over the active entries, then committed."""
+    """E(2h) = 2 E(h) + E(h)^2 and S(2h) = S(h) + E(h) S(h) / 2 over the active entries, then committed.
+
+    E = Phi - I: Phi(2h) = Phi(h)^2 and S(2h) = (S(h) + Phi(h) S(h)) / 2
+    without adding the identity, whose rounding would swamp the small part of
+    Phi(h) (in float, 2^s times over).  A row of random constants is zero in
+    E and e_c in S.
+    """
     unit = set(plan.structure.unit_rows)
     active = _index(plan.active)
     rows: dict[int, list[int]] = {}
@@ -174,21 +252,20 @@ def doubling_block(plan: DiscretizePlan) -> DiscretizeBlock:
         rows.setdefault(i, []).append(c)
     lines: list = []
     for a, (i, j) in enumerate(plan.active):
-        phi_terms, psi_terms = [], [(Ref("scratch", "S", (a,)),)]
+        square, product = [], []
         for c in rows[i]:
-            if c in unit:  # row c of Phi and of S is e_c
+            if c in unit:  # row c of E is zero, of S e_c
                 if c == j:
-                    phi_terms.append((_phi(i, c),))
-                    psi_terms.append((_phi(i, c),))
+                    product.append((_phi(i, c),))
                 continue
             if (c, j) in active:
-                phi_terms.append((_phi(i, c), _phi(c, j)))
-                psi_terms.append((_phi(i, c), _s(active, unit, c, j)))
-        lines.append(Assign(Ref("scratch", "term", (0, a)), tuple(phi_terms)))
-        lines.append(Assign(Ref("scratch", "term", (1, a)), tuple(psi_terms)))
+                square.append((_phi(i, c), _phi(c, j)))
+                product.append((_phi(i, c), _s(active, unit, c, j)))
+        lines.append(Assign(Ref("scratch", "term", (0, a)), tuple(square)))
+        lines.append(Assign(Ref("scratch", "term", (1, a)), tuple(product)))
     for a, (i, j) in enumerate(plan.active):
-        lines.append(Assign(_phi(i, j), ((Ref("scratch", "term", (0, a)),),)))
-        lines.append(Assign(Ref("scratch", "S", (a,)), ((_local("half"), Ref("scratch", "term", (1, a))),)))
+        lines.append(Assign(_phi(i, j), ((_phi(i, j),), (_phi(i, j),), (Ref("scratch", "term", (0, a)),))))
+        lines.append(Assign(Ref("scratch", "S", (a,)), ((Ref("scratch", "S", (a,)),), (_local("half"), Ref("scratch", "term", (1, a))))))
     return DiscretizeBlock(KernelBlock("doubling", tuple(lines)), (("half", 1, 2),))
 
 
@@ -247,35 +324,43 @@ def noise_blocks(plan: DiscretizePlan, packed: bool, ud: bool) -> list[Discretiz
 
 
 def transition_check_block(plan: DiscretizePlan) -> DiscretizeBlock:
-    """The sum of v - v over the active entries of Phi (0 when all are finite)."""
+    """The sum of v - v over the active entries of E = Phi - I (0 when all are finite)."""
     lines = [CheckedAssign((_phi(i, j),), ((_phi(i, j),),)) for i, j in plan.active]
     return DiscretizeBlock(KernelBlock("transition_check", tuple(lines), checked=True))
 
 
+def block_cost(blocks: list[DiscretizeBlock]) -> OperationCount:
+    """Multiplications and additions of the emitted statements (a zero fill costs nothing)."""
+    mul = add = 0
+    for b in blocks:
+        for s in b.block.statements:
+            mul += sum(len(t) - 1 for t in s.terms)
+            add += max(len(s.terms) - 1, 0)
+    return OperationCount(mul, add)
+
+
+def series_cost(plan: DiscretizePlan, order: int) -> OperationCount:
+    """Flops of Phi and S by the Horner chain of ``order`` (A = F h, the levels it calls, Phi = I + A S)."""
+    blocks = {b.block.name: b for b in series_blocks(plan)}
+    called = ["horner_input", *horner_schedule(plan, order), "horner_transition"]
+    return block_cost([blocks[name] for name in called])
+
+
 def unrolled_discretize_cost(plan: DiscretizePlan, ud: bool) -> tuple[OperationCount, OperationCount, list[int]]:
-    """(flops at the highest order without doubling, flops of one doubling, flops of each order k >= 2).
+    """(flops at the highest order without doubling, flops of one doubling, flops of the series at each order 1..N).
 
     Counted from the emitted statements, so that the header states what the
     code does (the balancing's sweeps, at most 8 over the off-diagonal
     entries of F, and the plan's bound are included in the first count).
     """
-    def count(blocks: list[DiscretizeBlock]) -> OperationCount:
-        mul = add = 0
-        for b in blocks:
-            for s in b.block.statements:
-                terms = s.terms
-                mul += sum(len(t) - 1 for t in terms)
-                add += max(len(terms) - 1, 0)
-        return OperationCount(mul, add)
-
-    series = series_blocks(plan)
-    per_order = [count([b]).total for b in series[1:]]
-    total = count(series + noise_blocks(plan, packed=False, ud=ud))
+    per_order = [series_cost(plan, m).total for m in range(1, plan.order + 1)]
+    series = series_cost(plan, plan.order)
+    noise = block_cost(noise_blocks(plan, packed=False, ud=ud))
     structure = plan.structure
     nnz_f = int(structure.F.sum())
     off = nnz_f - int(np.trace(structure.F.astype(int)))
     balancing = OperationCount(8 * 2 * off + nnz_f, 8 * 2 * off + nnz_f) if nnz_f else OperationCount(0, 0)
     bound = OperationCount(3 * plan.order + 6, plan.order + 2)
-    first = OperationCount(total.multiplications + balancing.multiplications + bound.multiplications,
-                           total.additions + balancing.additions + bound.additions)
-    return first, count([doubling_block(plan)]), per_order
+    parts = (series, noise, balancing, bound)
+    first = OperationCount(sum(c.multiplications for c in parts), sum(c.additions for c in parts))
+    return first, block_cost([doubling_block(plan)]), per_order

@@ -116,8 +116,8 @@ class UnrolledDiscretizeSizes:
 def _unrolled_discretize_scratch(prefix: str, sizes: ModelSizes, unrolled: UnrolledDiscretizeSizes, N: Dim, nnz_f: Dim) -> tuple[Field, ...]:
     """Members of the unrolled discretize's scratch: compressed terms, S, F h and the balancing's vectors."""
     return (
-        Field("term", (Dim("2", 2), Dim(f"{prefix}_N_TERMS", unrolled.terms)), "(F h)^k at the nonzeros of F^k, two orders in turn; the doubling's new values; S G"),
-        Field("S", (Dim(f"{prefix}_N_ACTIVE_ENTRIES", unrolled.active),), "sum of the terms / (k + 1) at the active entries of Phi"),
+        Field("term", (Dim("2", 2), Dim(f"{prefix}_N_TERMS", unrolled.terms)), "the Horner chain's odd levels R_k (term[1]); the doubling's new values; S G"),
+        Field("S", (Dim(f"{prefix}_N_ACTIVE_ENTRIES", unrolled.active),), "S = sum (F h)^k / (k + 1)! at the active entries of Phi (and the even levels R_k)"),
         Field("fh", (nnz_f,), "F h at the nonzeros of F"),
         Field("row_sum", (N,), "balancing: off-diagonal row sums of D^-1 |F| D"),
         Field("col_sum", (N,), "balancing: off-diagonal column sums of D^-1 |F| D"),

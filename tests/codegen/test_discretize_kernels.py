@@ -1,16 +1,20 @@
 """The unrolled discretize follows the structure: products only where they can be nonzero, compressed scratch.
 
-modelgen.codegen.discretize_kernels builds the series order by order over the
-structural nonzeros of (F h)^k; these tests read its statements (no compiler)
-and check what the issue asks of them: no product with a structural zero, no
-work on rows of random constants, fewer products than a dense-row loop, and a
-scratch of at most two N x N arrays.
+modelgen.codegen.discretize_kernels sums the series by Horner's rule over the
+structural nonzeros of each level; these tests read its statements (no
+compiler), run them in Python against the reference, and check what the issue
+asks of them: no product with a structural zero, no work on rows of random
+constants, fewer products than a dense-row loop, and a scratch of at most two
+N x N arrays.
 """
+
+import math
 
 import numpy as np
 import pytest
 
-from modelgen.codegen.discretize_kernels import DiscretizePlan, doubling_block, noise_blocks, series_blocks
+from modelgen.codegen.discretize_kernels import DiscretizePlan, doubling_block, horner_schedule, noise_blocks, series_blocks, series_cost
+from modelgen.derive.discretization import _taylor_terms
 from modelgen.codegen.structure import filter_structure
 from modelgen.derive.symbolic import derive
 from modelgen.model.loading import load_model
@@ -37,29 +41,103 @@ def power_pattern(F: np.ndarray, k: int) -> np.ndarray:
     return power > 0
 
 
-def test_each_order_computes_exactly_the_structural_nonzeros_of_the_power_of_F(plan):
+def level_pattern(F: np.ndarray, level: int) -> np.ndarray:
+    """Structural nonzeros of R_(m-level) = sum_(i<=level) (F h)^i / (m-level+i+1)!: those of I + F + ... + F^level."""
+    return np.logical_or.reduce([power_pattern(F, i) for i in range(level + 1)])
+
+
+def level_blocks(plan: DiscretizePlan):
+    """(level, block) for the distinct levels, then (None, block) for the saturated ones."""
+    for b in series_blocks(plan):
+        name = b.block.name
+        if name.startswith("horner_level_"):
+            yield int(name.split("_")[2]), b
+        elif name.startswith("horner_saturated_"):
+            yield None, b
+
+
+def written(block, plan: DiscretizePlan) -> list[tuple[int, int]]:
+    """The active entries a level block computes (not the zero fill)."""
+    return [plan.active[s.target.index[-1]] for s in block.block.statements if s.terms]
+
+
+def test_each_horner_level_computes_exactly_the_structural_nonzeros_of_its_term(plan):
     F = plan.structure.F
-    for k, block in enumerate(series_blocks(plan)[1:], start=2):
-        targets = [s.target.index for s in block.block.statements if s.target.array == "term"]
-        assert len(targets) == int(power_pattern(F, k).sum()), k
-        assert len(set(targets)) == len(targets)
+    unit = set(plan.structure.unit_rows)
+    last = len(plan.horner_patterns)
+    for level, block in level_blocks(plan):
+        pattern = level_pattern(F, last if level is None else level)
+        expected = [(int(i), int(j)) for i, j in zip(*np.nonzero(pattern)) if i not in unit]
+        assert written(block, plan) == expected, block.block.name
 
 
-def test_no_product_of_the_series_reads_a_structural_zero(plan):
-    """Every term of B_k(i, j) is (F h)(i, c) times B_(k-1)(c, j) with both structurally nonzero."""
+def test_no_product_of_the_chain_reads_a_structural_zero(plan):
+    """Every term of R_k(i, j) is (F h)(i, c) times R_(k+1)(c, j) with both structurally nonzero (or c_in on a unit row)."""
     F = plan.structure.F
     f_entries = plan.f_entries
-    for k, block in enumerate(series_blocks(plan)[1:], start=2):
-        previous = plan.powers[k - 2]
-        current = plan.powers[k - 1]
+    last = len(plan.horner_patterns)
+    for level, block in level_blocks(plan):
+        previous = level_pattern(F, last if level is None else level - 1)
         for s in block.block.statements:
-            if s.target.array != "term":
+            if not s.terms:
                 continue
-            i, j = current[s.target.index[1]]
-            for fh, term in s.terms:
-                r, c = f_entries[fh.index[0]]
-                assert r == i and F[r, c]
-                assert previous[term.index[-1]] == (c, j)
+            i, j = plan.active[s.target.index[-1]]
+            for term in s.terms:
+                if len(term) == 1:  # the diagonal constant 1/(k+1)!
+                    assert i == j and term[0].array == "c_out"
+                    continue
+                fh, r = term
+                row, c = f_entries[fh.index[0]]
+                assert row == i and F[row, c]
+                assert previous[c, j]
+                if r.owner == "local":
+                    assert r.array == "c_in" and c == j
+                else:
+                    assert plan.active[r.index[-1]] == (c, j)
+
+
+def run_chain(plan: DiscretizePlan, F: np.ndarray, h: float, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Execute the emitted statements of an order-``order`` chain on F (Phi, S as N x N)."""
+    n = F.shape[0]
+    blocks = {b.block.name: b for b in series_blocks(plan)}
+    arrays = {
+        ("matrices", "F"): np.array([F[i, j] for i, j in plan.f_entries]),
+        ("scratch", "fh"): np.full(len(plan.f_entries), np.nan),
+        ("scratch", "S"): np.full(plan.active_size, np.nan),
+        ("scratch", "term"): np.full((2, plan.term_size), np.nan),
+        ("transition", "Phi"): np.zeros((n, n)),  # E = Phi - I, as the C holds it until the doublings are done
+    }
+
+    def run(name: str, local: dict[str, float]) -> None:
+        for s in blocks[name].block.statements:
+            value = 0.0
+            for term in s.terms:
+                product = 1.0
+                for r in term:
+                    product *= local[r.array] if r.owner == "local" else arrays[(r.owner, r.array)][r.index]
+                value += product
+            arrays[(s.target.owner, s.target.array)][s.target.index] = value
+
+    run("horner_input", {"h": h})
+    for k, name in zip(range(order - 1, -1, -1), horner_schedule(plan, order)):
+        run(name, {"c_out": 1.0 / math.factorial(k + 1), "c_in": 1.0 / math.factorial(k + 2)})
+    run("horner_transition", {"one": 1.0})
+    S = np.eye(n)
+    for a, (i, j) in enumerate(plan.active):
+        S[i, j] = arrays[("scratch", "S")][a]
+    return np.eye(n) + arrays[("transition", "Phi")], S
+
+
+@pytest.mark.parametrize("order", [1, 2, 3, 4, 5, 9])
+def test_the_emitted_chain_is_the_reference_series_at_every_order(plan, order):
+    """Phi and S of the statements (run in Python) equal modelgen.derive.discretization's Horner sums to rounding."""
+    F = np.where(plan.structure.F, np.random.default_rng(order).standard_normal(plan.structure.F.shape), 0.0)
+    h = 0.4 / max(np.abs(F).sum(axis=1).max(), 1.0)
+    phi, S = run_chain(plan, F, h, order)
+    phi_ref, s_ref = _taylor_terms(F, h, order)
+    assert np.abs(S - s_ref).max() <= 8 * np.finfo(float).eps
+    assert np.abs(phi - phi_ref).max() <= 8 * np.finfo(float).eps
+    assert not np.isnan(phi).any()
 
 
 def test_rows_of_random_constants_are_never_written(plan):
@@ -72,14 +150,21 @@ def test_rows_of_random_constants_are_never_written(plan):
                 assert s.target.index[0] not in unit
 
 
-def test_the_series_does_fewer_products_than_a_loop_over_dense_rows(plan):
+def test_each_level_does_fewer_products_than_a_loop_over_dense_rows(plan):
     """The loop version multiplied each active entry by its whole row of F; the unrolled one skips zero terms."""
     F = plan.structure.F
     rows = F.sum(axis=1)
     loop = sum(int(rows[i]) for i, _ in plan.active)  # products per order of the loop version
-    for block in series_blocks(plan)[1:]:
-        products = sum(len(s.terms) for s in block.block.statements if s.target.array == "term")
+    for _, block in level_blocks(plan):
+        products = sum(len(t) - 1 for s in block.block.statements for t in s.terms)
         assert products < loop
+
+
+def test_the_chain_of_order_9_on_the_papers_model_costs_what_the_header_states():
+    """Horner's rule: 5826 flops for Phi and S at order 9 on the paper's model (the power series took 8446)."""
+    plan = plan_of("ned_doppler18")
+    assert series_cost(plan, 9).total == 5826
+    assert [series_cost(plan, m).total for m in (1, 5)] == [776, 3102]
 
 
 def compressed_scratch(plan: DiscretizePlan) -> int:

@@ -81,9 +81,9 @@ def test_reference_transition_and_noise_input_match_expm(matrices, T):
 
 
 def test_the_series_alone_was_far_off_at_an_hour(level_matrices):
-    """What scaling and squaring fixes: the plain 9th-order series at T = 3600 s."""
+    """What scaling and squaring fixes: the plain series of order 9 (Phi = I + F T S, to order 10) is 16 % off at T = 3600 s."""
     phi, _ = _taylor_terms(level_matrices["F"], 3600.0, 9)
-    assert relative_error(phi, exact(level_matrices["F"], level_matrices["G"], 3600.0)[0]) > 0.5
+    assert relative_error(phi, exact(level_matrices["F"], level_matrices["G"], 3600.0)[0]) > 0.1
     _, _, s = taylor_discretization_with_doublings(level_matrices["F"], level_matrices["G"], 3600.0, 9)
     assert s > 0
 

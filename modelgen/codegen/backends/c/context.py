@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 from modelgen.codegen.backends.c.literals import c_number, scalar_bytes, scalar_spellings
 from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c_declarator, c_ref, c_statement
 from modelgen.codegen.description import FilterDescription, named
-from modelgen.codegen.discretize_kernels import DiscretizeBlock
+from modelgen.codegen.discretize_kernels import DiscretizeBlock, horner_level_name
 from modelgen.codegen.kernels import KernelBlock, compact_predict_tables
 from modelgen.codegen.layout import CLayout, UnrolledDiscretizeSizes, c_layout
 from modelgen.codegen.structure import FilterStructure
@@ -88,7 +90,7 @@ def discretize_functions(blocks: list[DiscretizeBlock], prefix: str, scalar: str
     (1/k!, ...) are declared in the function as exact quotients the compiler folds.
     """
     types = {"matrices": f"{prefix}_matrices", "transition": f"{prefix}_transition", "scratch": f"{prefix}_discretize_scratch"}
-    arguments = {"h": "T * power_of_two(-halvings)", "T": "T"}
+    arguments = {"h": "T * power_of_two(-halvings)", "T": "T", "c_out": "taylor_coefficient[k]", "c_in": "taylor_coefficient[k + 1]"}
     out = []
     for b in blocks:
         statements = b.block.statements
@@ -230,6 +232,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         sizes, options, prefix, UnrolledDiscretizeSizes(unrolled.term_size, unrolled.active_size) if unrolled else None
     )
     discretize = discretize_functions(description.discretize_blocks, model.name, options.scalar) if unrolled else []
+    calls = {f["name"]: f["call"] for f in discretize}
     printer = CPrinter(options.scalar, {p.sym: f"params->{p.name}" for p in model.parameters})
     targets, _, block = description.evaluation
     state_lines, state_commit, _ = description.state_predict
@@ -308,9 +311,14 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "discretize_sizes": {"terms": unrolled.term_size, "active": unrolled.active_size} if unrolled else {},
         "discretize_blocks": discretize,
         "discretize_calls": {f["name"]: f["call"] for f in discretize},
-        "discretize_series_calls": [
-            (int(f["name"].rsplit("_", 1)[1]), f["call"]) for f in discretize if f["name"].startswith("taylor_order_") and f["name"] != "taylor_order_1"
-        ],
+        "horner_levels": [
+            (calls[horner_level_name(level, 0)], calls[horner_level_name(level, 1)]) for level in range(1, len(unrolled.horner_patterns) + 1)
+        ]
+        if discretize
+        else [],
+        "horner_saturated": (calls[horner_level_name(0, 0, True)], calls[horner_level_name(0, 1, True)]) if discretize else (),
+        "taylor_coefficients": [c_number(1.0, options.scalar) + f" / {c_number(float(math.factorial(k + 1)), options.scalar)}"
+                                for k in range(options.taylor_order + 1)],
         "discretize_noise_calls": [
             ("check += " if f["checked"] else "") + f["call"]
             for f in discretize
