@@ -68,6 +68,13 @@ def matrix_functions(description: FilterDescription) -> list[dict[str, object]]:
     return functions
 
 
+def index_expression(indices: list[int]) -> str:
+    """A Python index for these rows: ``slice(a, b)`` for a contiguous run (a view, no gather), else a list."""
+    if indices and indices == list(range(indices[0], indices[-1] + 1)):
+        return f"slice({indices[0]}, {indices[-1] + 1})"
+    return repr(indices)
+
+
 def python_context(description: FilterDescription) -> dict[str, object]:
     """Everything python_module.py.j2 reads (always the double-precision numpy filter)."""
     structure, model, options = description.structure, description.model, description.options
@@ -77,6 +84,7 @@ def python_context(description: FilterDescription) -> dict[str, object]:
         "functions": matrix_functions(description),
         "plan": python_predict_plan(structure),
         "predict_kernel": python_predict_kernel(structure),
+        "general_rows": index_expression(python_predict_plan(structure)["general"]),
         "van_loan": options.van_loan,
         "balance_in_python": int(structure.F.sum()) <= PYTHON_BALANCING_ENTRIES,
         "series_range": repr(series_range(options.taylor_order, DOUBLE_ROUNDOFF)),
