@@ -134,6 +134,7 @@ def _van_loan_scratch(N: Dim, dim_w: Dim) -> tuple[Field, ...]:
         Field("row", (N,), "one row of a new term"),
         Field("col", (N,), "column i of C: row i of the upper-left term"),
         Field("g", (dim_w,), "one row times G diag(q)"),
+        Field("scale", (N2,), "balancing: d of ||M||_D = ||D^-1 M D||"),
         Field("row_sum", (N2,), "balancing: off-diagonal row sums of D^-1 |M| D"),
         Field("col_sum", (N2,), "balancing: off-diagonal column sums of D^-1 |M| D"),
     )

@@ -33,7 +33,9 @@ from modelgen.derive.discretization import van_loan_discretization
 from modelgen.derive.symbolic import derive, parameter_vector
 from modelgen.errors import ModelError
 from modelgen.jobs import paper_parameters, paper_scenario
+from modelgen.model.loading import load_model_text
 from tests.codegen.large_model_support import large_model
+from tests.codegen.test_degenerate_models import MODELS as DEGENERATE
 
 VAN_LOAN = CodegenOptions(process_noise="van-loan")
 PACKED_FIXED_ORDER = CodegenOptions(process_noise="van-loan", storage="packed", taylor_tolerance=None)
@@ -246,3 +248,28 @@ def test_recompute_threshold_keeps_the_van_loan_transition(paper_derived, tmp_pa
     assert filt.discretize(60.0) == 0 and filt.Qd[0, 0] == 123.0
     assert filt.discretize(1.0) == 0 and filt.Qd[0, 0] != 123.0
     assert filt.discretize(60.0) == 0 and np.array_equal(filt.Qd, first)
+
+
+@pytest.mark.parametrize("name", list(DEGENERATE))
+def test_degenerate_models_compile_strictly_and_discretize_as_the_python(name, tmp_path):
+    """No noises, no measurements, F = 0, one state: the Van Loan C compiles (double and float) and agrees with the Python."""
+    derived = derive(load_model_text(DEGENERATE[name], filename=f"{name}.yaml"))
+    model = derived.model.name
+    for scalar in ("double", "float"):
+        options = CodegenOptions(process_noise="van-loan", scalar=scalar)
+        folder = write_atomically(tmp_path / scalar, generate_code(derived, options).files)
+        result = subprocess.run(
+            [compiler(), *STRICT, "-O0", "-c", str(folder / f"{model}.c"), "-o", str(folder / "filter.o")], capture_output=True, text=True
+        )
+        assert result.returncode == 0, result.stderr
+    compile_shared_library([folder.parent / "double" / f"{model}.c"], tmp_path / f"lib{model}.so", ("-O0",))
+    filt = CompiledFilter(tmp_path / f"lib{model}.so", model, ModelSizes.of(derived), derived.model.parameter_names, options=VAN_LOAN)
+    assert filt.set_parameters({}) == 0
+    assert filt.discretize(2.0) == 0
+    module = load_python_module(folder.parent / "double" / f"{model}.py")
+    p = module.parameter_vector({})
+    phi, qd = module.discretize(module.system_matrix(p), module.noise_input_matrix(p), module.noise_psd(p), 2.0)
+    np.testing.assert_allclose(filt.Phi, phi, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(filt.Qd, qd, rtol=1e-14, atol=1e-300)
+    if not derived.structure("F").any():
+        assert np.array_equal(phi, np.eye(derived.n_states)) and np.array_equal(filt.Phi, phi)
