@@ -82,9 +82,13 @@ def rotate_vector(q0, q1, q2, q3, x, y, z):
 @compiled
 def euler_quaternion(roll: float, pitch: float, yaw: float):
     """q_b^n of Euler angles (C_b^n = Rz(yaw) Ry(pitch) Rx(roll))."""
-    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
-    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
-    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+    return half_angle_quaternion(math.cos(0.5 * roll), math.sin(0.5 * roll), math.cos(0.5 * pitch),
+                                 math.sin(0.5 * pitch), math.cos(0.5 * yaw), math.sin(0.5 * yaw))
+
+
+@compiled
+def half_angle_quaternion(cr: float, sr: float, cp: float, sp: float, cy: float, sy: float):
+    """:func:`euler_quaternion` from the cosines and sines of the half angles (a caller may hold them)."""
     return (
         cy * cp * cr + sy * sp * sr,
         cy * cp * sr - sy * sp * cr,

@@ -32,7 +32,7 @@ import numpy as np
 from modelgen.errors import ModelError
 from modelgen.simulation import earth
 from modelgen.simulation.jit import compiled
-from modelgen.simulation.rotation import euler_quaternion, rotate_vector
+from modelgen.simulation.rotation import euler_quaternion, half_angle_quaternion, rotate_vector
 
 # Column layout of the recorded truth (one row per record time).
 TRUTH_COLUMNS = (
@@ -165,10 +165,17 @@ class Trajectory:
         return delta_theta, delta_velocity
 
 
-def segment_table(profile: FlightPath) -> np.ndarray:
-    """Per segment: start time, controls and the closed-form state at its start.
+#: columns of :func:`segment_table` after the controls and start state: an angle held through a segment
+#: (flag 1/0, then its cosine, sine and the cosine and sine of its half) -- heading, roll, pitch
+HEADING_HELD, ROLL_HELD, PITCH_HELD = 10, 15, 20
+SEGMENT_COLUMNS = 25
 
-    Columns: start, a_h, turn_rate, a_v, roll_rate, V_h0, heading0, V_d0, roll0, h0.
+
+def segment_table(profile: FlightPath) -> np.ndarray:
+    """Per segment: start time, controls and the closed-form state at its start, and the held angles.
+
+    Columns: start, a_h, turn_rate, a_v, roll_rate, V_h0, heading0, V_d0, roll0, h0, then
+    (:data:`HEADING_HELD`...) the trigonometry of each angle a segment holds constant (:func:`_held_angles`).
     """
     rows = []
     t, vh, psi, vd, roll, h = 0.0, profile.ground_speed, profile.heading, profile.velocity_down, profile.roll, profile.height
@@ -185,7 +192,50 @@ def segment_table(profile: FlightPath) -> np.ndarray:
         t += T
         if abs(roll) >= math.radians(89.0):
             raise ModelError(f"profile {profile.name!r}, segment {s.name!r}: roll reaches {math.degrees(roll):.1f} deg")
-    return np.array(rows, dtype=float)
+    table = np.zeros((len(rows), SEGMENT_COLUMNS))
+    table[:, :10] = np.array(rows, dtype=float).reshape(len(rows), 10)
+    _held_angles(table)
+    return table
+
+
+@compiled
+def _held_angles(table):
+    """Fill the held-angle columns: the cosines and sines every sample of a segment would compute again.
+
+    A segment without turn rate holds its heading, without roll rate its roll,
+    without horizontal and vertical acceleration its pitch (the flight-path
+    angle).  The angle is formed as :func:`_kinematics` forms it (start value
+    plus rate times elapsed time, the product a zero of the rate's sign for any
+    time in the segment) and its functions computed here, by the same compiled
+    calls, once: the increments and truth then read them, bit for bit the
+    values they computed per sample (2-3x fewer sines and cosines in cruise).
+    """
+    for i in range(table.shape[0]):
+        if table[i, 2] == 0.0:
+            psi = table[i, 6] + table[i, 2] * 0.0
+            table[i, HEADING_HELD] = 1.0
+            table[i, HEADING_HELD + 1], table[i, HEADING_HELD + 2] = math.cos(psi), math.sin(psi)
+            table[i, HEADING_HELD + 3], table[i, HEADING_HELD + 4] = math.cos(0.5 * psi), math.sin(0.5 * psi)
+        if table[i, 4] == 0.0:
+            roll = table[i, 8] + table[i, 4] * 0.0
+            table[i, ROLL_HELD] = 1.0
+            table[i, ROLL_HELD + 1], table[i, ROLL_HELD + 2] = math.cos(roll), math.sin(roll)
+            table[i, ROLL_HELD + 3], table[i, ROLL_HELD + 4] = math.cos(0.5 * roll), math.sin(0.5 * roll)
+        if table[i, 1] == 0.0 and table[i, 3] == 0.0:
+            vh = table[i, 5] + table[i, 1] * 0.0
+            vd = table[i, 7] + table[i, 3] * 0.0
+            pitch = math.atan2(-vd, vh)
+            table[i, PITCH_HELD] = 1.0
+            table[i, PITCH_HELD + 1], table[i, PITCH_HELD + 2] = math.cos(pitch), math.sin(pitch)
+            table[i, PITCH_HELD + 3], table[i, PITCH_HELD + 4] = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+
+
+@compiled
+def _heading_trig(table, i, psi):
+    """cos, sin of the heading ``psi`` in segment i (held ones read from the table)."""
+    if table[i, HEADING_HELD] != 0.0:
+        return table[i, HEADING_HELD + 1], table[i, HEADING_HELD + 2]
+    return math.cos(psi), math.sin(psi)
 
 
 @compiled
@@ -216,21 +266,37 @@ def _kinematics(t, table, i):
 @compiled
 def _position_rate(t, lat, table, i):
     vh, psi, vd, roll, h, a_h, turn, a_v, rr = _kinematics(t, table, i)
-    return earth.position_rates(lat, h, vh * math.cos(psi), vh * math.sin(psi), vd)
+    cpsi, spsi = _heading_trig(table, i, psi)
+    return earth.position_rates(lat, h, vh * cpsi, vh * spsi, vd)
 
 
 @compiled
 def _integrands(t, lat, table, i):
     """omega_ib^b and f^b at time t (latitude supplied by the caller)."""
     vh, psi, vd, roll, h, a_h, turn, a_v, roll_rate = _kinematics(t, table, i)
-    cpsi, spsi = math.cos(psi), math.sin(psi)
+    if table[i, HEADING_HELD] != 0.0:
+        cpsi, spsi = table[i, HEADING_HELD + 1], table[i, HEADING_HELD + 2]
+        chalf_y, shalf_y = table[i, HEADING_HELD + 3], table[i, HEADING_HELD + 4]
+    else:
+        cpsi, spsi = math.cos(psi), math.sin(psi)
+        chalf_y, shalf_y = math.cos(0.5 * psi), math.sin(0.5 * psi)
     vn, ve = vh * cpsi, vh * spsi
     speed2 = vh * vh + vd * vd
-    pitch = math.atan2(-vd, vh)
     pitch_rate = (-vh * a_v + vd * a_h) / speed2
-    q0, q1, q2, q3 = euler_quaternion(roll, pitch, psi)
-    sr, cr = math.sin(roll), math.cos(roll)
-    sp, cp = math.sin(pitch), math.cos(pitch)
+    if table[i, PITCH_HELD] != 0.0:
+        cp, sp = table[i, PITCH_HELD + 1], table[i, PITCH_HELD + 2]
+        chalf_p, shalf_p = table[i, PITCH_HELD + 3], table[i, PITCH_HELD + 4]
+    else:
+        pitch = math.atan2(-vd, vh)
+        cp, sp = math.cos(pitch), math.sin(pitch)
+        chalf_p, shalf_p = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+    if table[i, ROLL_HELD] != 0.0:
+        cr, sr = table[i, ROLL_HELD + 1], table[i, ROLL_HELD + 2]
+        chalf_r, shalf_r = table[i, ROLL_HELD + 3], table[i, ROLL_HELD + 4]
+    else:
+        cr, sr = math.cos(roll), math.sin(roll)
+        chalf_r, shalf_r = math.cos(0.5 * roll), math.sin(0.5 * roll)
+    q0, q1, q2, q3 = half_angle_quaternion(chalf_r, shalf_r, chalf_p, shalf_p, chalf_y, shalf_y)
     # omega_nb^b from the Euler angle rates (ZYX sequence)
     wx = roll_rate - turn * sp
     wy = pitch_rate * cr + turn * cp * sr
