@@ -39,8 +39,18 @@ def perturbed_initial_state(truth0: np.ndarray, attitude: np.ndarray, velocity: 
     return nav
 
 
+def imu_error_stream(profile: FlightProfile, n_samples: int, record_every: int,
+                     rng: np.random.Generator) -> ImuErrorStream:
+    """The IMU errors of a flight of ``n_samples``, streamed: the first draws :func:`simulate_sensors` makes.
+
+    It needs no truth, so it can be drawn while the truth is computed (``modelgen
+    simulate`` does) and handed to :func:`simulate_sensors` as ``imu_stream``.
+    """
+    return ImuErrorStream(profile.imu_budget, 1.0 / profile.imu_rate, n_samples, record_every, rng)
+
+
 def simulate_sensors(profile: FlightProfile, trajectory: Trajectory, rng: np.random.Generator,
-                     stream_errors: bool | None = None) -> SensorData:
+                     stream_errors: bool | None = None, imu_stream: ImuErrorStream | None = None) -> SensorData:
     """One realization of every sensor error of the profile (the aiding sensor's last, from its plug-in).
 
     For a streamed trajectory (or ``stream_errors=True``) the IMU errors are
@@ -49,9 +59,17 @@ def simulate_sensors(profile: FlightProfile, trajectory: Trajectory, rng: np.ran
     the same flight.  Streamed errors on a held trajectory suit many runs of
     one flight (a Monte Carlo worker): the ideal increments are made once and
     shared, and each run adds only its pieces of measured increments.
+    ``imu_stream``: that stream already drawn from ``rng`` (:func:`imu_error_stream`).
     """
-    stream = None
-    if trajectory.streamed or stream_errors:
+    stream = imu_stream
+    if stream is not None:
+        if (stream.n, stream.record_every, stream.dt) != (trajectory.n_samples, trajectory.record_every, trajectory.dt):
+            raise ModelError(f"simulate_sensors: the IMU error stream ({stream.n} samples, a record every "
+                             f"{stream.record_every}) is not this trajectory's ({trajectory.n_samples}, "
+                             f"{trajectory.record_every})")
+        dtheta = dvel = None
+        history = stream.history
+    elif trajectory.streamed or stream_errors:
         stream = ImuErrorStream(profile.imu_budget, trajectory.dt, trajectory.n_samples, trajectory.record_every, rng)
         dtheta = dvel = None
         history = stream.history

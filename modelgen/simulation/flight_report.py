@@ -1,12 +1,13 @@
 """`modelgen simulate`: fly a flight profile, write PNG figures and a Markdown summary.
 
 What it does, in order: generate the truth (the ideal IMU data comes piece by
-piece, :mod:`modelgen.simulation.streaming`); draw one set of sensor errors;
+piece, :mod:`modelgen.simulation.streaming`) while helper threads build the
+filter code and draw the IMU errors; draw the other sensor errors;
 fly the filter (the generated C by default, in the compiled loop of
 :mod:`modelgen.simulation.native_loop`) on them in the three correction modes
 (open loop, closed loop, seed 003's accumulated correction) in one pass over
-the data, plus the free INS; run a Monte Carlo ensemble and test its NEES; plot
-and summarize.  Memory does not grow with the IMU data; histories hold at most
+the data, plus the free INS (the trajectory figure is drawn meanwhile); run a
+Monte Carlo ensemble and test its NEES; plot and summarize.  Memory does not grow with the IMU data; histories hold at most
 :data:`~modelgen.simulation.streaming.MAX_HISTORY_ROWS` rows per mode.  Progress goes to ``echo``.
 """
 
@@ -28,14 +29,14 @@ from modelgen.model.sources import cite_sources
 from modelgen.simulation import earth
 from modelgen.simulation.filter_loop import MODES, RunResult
 from modelgen.simulation.filters import filter_factory
-from modelgen.simulation.flight import profile_layout, simulate_sensors
+from modelgen.simulation.flight import imu_error_stream, profile_layout, simulate_sensors
 from modelgen.simulation.jit import HAVE_NUMBA
 from modelgen.simulation.montecarlo import MonteCarloResult, run_monte_carlo
 from modelgen.simulation.rotation import dcm_to_euler, navigation_frame_attitude_error, quaternion_to_dcm
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.history import CsvHistory
 from modelgen.simulation.streaming import fly_modes, history_every
-from modelgen.simulation.trajectory import Trajectory, generate_trajectory
+from modelgen.simulation.trajectory import Trajectory, generate_trajectory, sample_counts
 
 ARCSEC = math.pi / 180 / 3600
 NMILE = 1852.0
@@ -108,18 +109,25 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
     echo(f"modelgen simulate: {profile.name}, {profile.path.duration / 3600:.2f} h, IMU {profile.imu_rate:g} Hz "
          f"({'numba' if HAVE_NUMBA else 'pure Python: slow'}), filter {derived.model.name}, {runs} Monte Carlo runs")
     results: dict[str, RunResult] = {}
-    with tempfile.TemporaryDirectory(prefix="modelgen-simulate-") as code_dir, ThreadPoolExecutor(1) as builder:
-        # the filter code is generated and compiled (a compiler process) while the truth and the sensors are made
-        building = builder.submit(_timed, filter_factory, derived, implementation, code_dir)
+    with tempfile.TemporaryDirectory(prefix="modelgen-simulate-") as code_dir, ThreadPoolExecutor(2) as helpers:
+        # the filter code is generated and compiled (a compiler process) while the truth and the sensors are
+        # made, and the IMU errors (the seed's first draws, they need no truth) are drawn while the truth is made
+        building = helpers.submit(_timed, filter_factory, derived, implementation, code_dir)
+        n_samples, record_every_sample = sample_counts(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
+        rng = np.random.default_rng(seed)
+        drawing = helpers.submit(_timed, imu_error_stream, profile, n_samples, record_every_sample, rng)
         t = time.perf_counter()
         trajectory = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period, streamed=True)
         timings["trajectory (truth; IMU increments are generated piece by piece in the flight)"] = time.perf_counter() - t
         echo(f"  trajectory: truth of {trajectory.n_samples} IMU samples in {time.perf_counter() - t:.1f} s")
+        # drawn while the filter flies (a figure of the truth alone)
+        trajectory_figure = helpers.submit(_plot_trajectory, trajectory, out_dir / "trajectory.png")
         layout = profile_layout(profile, derived, trajectory)
-        rng = np.random.default_rng(seed)
+        imu_stream, drawn = drawing.result()
+        timings["IMU errors (drawn alongside the trajectory)"] = drawn
         t = time.perf_counter()
-        sensors = simulate_sensors(profile, trajectory, rng)
-        timings["sensors (IMU errors, aiding)"] = time.perf_counter() - t
+        sensors = simulate_sensors(profile, trajectory, rng, imu_stream=imu_stream)
+        timings["sensors (initial errors, reference altitude, aiding)"] = time.perf_counter() - t
         make_filter, build = building.result()
         timings[f"filter code ({implementation}: generate, compile or import; alongside the above)"] = build
         echo(f"  filter: {implementation} ({build:.1f} s to build, alongside the trajectory and sensors)")
@@ -149,7 +157,7 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
 
     units = {state.name: state.unit for state in derived.model.states}
     figures = [
-        _plot_trajectory(trajectory, out_dir / "trajectory.png"),
+        trajectory_figure.result(),
         _plot_modes(errors, out_dir / "correction_modes.png"),
         _plot_filter(results[profile.filter.mode], derived.model.state_names, units, out_dir / "filter_errors.png"),
     ]
@@ -174,12 +182,15 @@ def _fixed_margins(fig, left: float = 0.07, right: float = 0.98, bottom: float =
 
 
 def _plot_trajectory(trajectory: Trajectory, path: Path) -> Path:
-    import matplotlib.pyplot as plt
+    """The truth's ground track, height, speeds and attitude; drawn by a helper thread while the filter flies
+    (a Figure of its own, not pyplot's shared state)."""
+    from matplotlib.figure import Figure
 
     truth = trajectory.truth
     hours = truth[:, 0] / 3600
     euler = np.degrees(dcm_to_euler(quaternion_to_dcm(truth[:, 7:11])))
-    fig, ax = plt.subplots(2, 2, figsize=(11, 7))
+    fig = Figure(figsize=(11, 7))
+    ax = fig.subplots(2, 2)
     ax[0, 0].plot(np.degrees(truth[:, 2]), np.degrees(truth[:, 1]))
     ax[0, 0].set(xlabel="longitude [deg]", ylabel="latitude [deg]", title="ground track")
     ax[0, 1].plot(hours, truth[:, 3] / 1000)
@@ -195,7 +206,6 @@ def _plot_trajectory(trajectory: Trajectory, path: Path) -> Path:
     fig.suptitle(f"Flight profile {trajectory.path.name}")
     _fixed_margins(fig, top=0.9, hspace=0.35, wspace=0.22)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 

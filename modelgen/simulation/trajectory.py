@@ -452,15 +452,8 @@ def _increments(table, lat0, lon0, dt, k_start, k_stop, delta_theta, delta_veloc
     return k_stop - k_start
 
 
-def generate_trajectory(profile: FlightPath, imu_rate: float, record_rate: float, streamed: bool = False) -> Trajectory:
-    """Truth at ``record_rate`` and ideal increments at ``imu_rate`` for a whole profile.
-
-    ``imu_rate / record_rate`` must be a whole number (truth rows fall on IMU
-    sample times); the flight lasts ``floor(duration * imu_rate)`` samples.
-    ``streamed=True`` keeps only the truth (memory independent of the IMU rate
-    and, but for the truth rows, of the duration); the increments then come
-    piece by piece from :meth:`Trajectory.increments`.
-    """
+def sample_counts(profile: FlightPath, imu_rate: float, record_rate: float) -> tuple[int, int]:
+    """(IMU samples, samples per truth record) of :func:`generate_trajectory`'s flight, known before it is made."""
     if imu_rate <= 0 or record_rate <= 0:
         raise ModelError(f"profile {profile.name!r}: rates must be positive (imu {imu_rate}, record {record_rate})")
     ratio = imu_rate / record_rate
@@ -471,8 +464,20 @@ def generate_trajectory(profile: FlightPath, imu_rate: float, record_rate: float
         )
     if not profile.segments:
         raise ModelError(f"profile {profile.name!r}: has no segments")
+    return int(math.floor(profile.duration * imu_rate + 1e-6)), record_every
+
+
+def generate_trajectory(profile: FlightPath, imu_rate: float, record_rate: float, streamed: bool = False) -> Trajectory:
+    """Truth at ``record_rate`` and ideal increments at ``imu_rate`` for a whole profile.
+
+    ``imu_rate / record_rate`` must be a whole number (truth rows fall on IMU
+    sample times); the flight lasts ``floor(duration * imu_rate)`` samples.
+    ``streamed=True`` keeps only the truth (memory independent of the IMU rate
+    and, but for the truth rows, of the duration); the increments then come
+    piece by piece from :meth:`Trajectory.increments`.
+    """
+    n_samples, record_every = sample_counts(profile, imu_rate, record_rate)
     table = segment_table(profile)
-    n_samples = int(math.floor(profile.duration * imu_rate + 1e-6))
     n_records = n_samples // record_every + 1
     truth = np.empty((n_records, len(TRUTH_COLUMNS)))
     _truth_records(table, profile.latitude, profile.longitude, 1.0 / imu_rate, n_samples, record_every, truth)

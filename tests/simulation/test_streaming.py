@@ -167,3 +167,23 @@ def test_streamed_errors_on_a_held_trajectory_fly_the_held_flight_bit_for_bit(sc
     for name in FIELDS:
         assert np.array_equal(getattr(results[0]["closed_loop"], name), getattr(results[1]["closed_loop"], name),
                               equal_nan=True), name
+
+
+def test_imu_errors_drawn_before_the_truth_give_the_same_sensors_and_a_foreign_stream_is_refused(scenario):
+    from modelgen.simulation.flight import imu_error_stream
+    from modelgen.simulation.trajectory import sample_counts
+
+    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0, streamed=True)
+    assert sample_counts(scenario.path, scenario.imu_rate, 1.0) == (trajectory.n_samples, trajectory.record_every)
+    plain = simulate_sensors(scenario, trajectory, np.random.default_rng(21))
+    rng = np.random.default_rng(21)
+    early = simulate_sensors(scenario, trajectory, rng,
+                             imu_stream=imu_error_stream(scenario, trajectory.n_samples, trajectory.record_every, rng))
+    assert np.array_equal(plain.initial_navigation, early.initial_navigation)
+    assert np.array_equal(plain.altitude_reference, early.altitude_reference)
+    assert np.array_equal(plain.aiding.velocity, early.aiding.velocity)
+    pieces = [s.imu_stream.cursor().corrupt(*trajectory.increments(0, 600)) for s in (plain, early)]
+    assert all(np.array_equal(a, b) for a, b in zip(*pieces))
+    foreign = imu_error_stream(scenario, trajectory.n_samples - 30, trajectory.record_every, np.random.default_rng(1))
+    with pytest.raises(ModelError, match="IMU error stream .* is not this trajectory's"):
+        simulate_sensors(scenario, trajectory, np.random.default_rng(21), imu_stream=foreign)
