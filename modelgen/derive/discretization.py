@@ -36,7 +36,14 @@ s is the smallest integer with theta = ||F||_D h <= theta_N, where
   gives a valid norm; balancing makes it independent of the units chosen
   for each state (unscaled, g = 9.8 m/s^2 from tilt into velocity makes
   ||F T|| about 650 at T = 60 s for the paper's model; balanced it is
-  0.16, the Schuler rate times T);
+  0.16, the Schuler rate times T).  Since any D will do, the generated
+  code balances once, at generation time, at the model's check operating
+  point (``nominal_scaling``), and keeps that D as constants for every
+  operating point: the run-time norm is then one pass over the nonzeros of F
+  (no sweeps).  Elsewhere the fixed D gives a norm within a factor of about
+  4 of F's own balancing (measured over operating points of the built-in
+  models), so at worst one more order or doubling, never a wrong bound.  A
+  model without a ``check:`` section is balanced at run time, as above;
 * theta_N is the largest theta for which the remainder of the series,
   at most theta^(N+1) / (N+1)! * (N+2) / (N+2-theta) in that norm, is below
   the unit roundoff u (2^-53 in double, 2^-24 in float): 0.12 for N = 9 in
@@ -48,7 +55,7 @@ doublings (s = 1 at the paper's 60 s step, 11 at one day).  Measured
 against scipy's expm on the paper's model, the largest error of Phi is below
 1e-15 of its largest entry up to T = 600 s and below 1e-11 up to T = 1 day
 (tests/derive/test_discretization.py states 1e-13 and 1e-10).  The generated C and
-Python compute the same D, norm and s, so the three agree.  s is capped at
+Python compute the same D (given the same ``scaling``), norm and s, so the three agree.  s is capped at
 64 (||F||_D T up to about 2e18): beyond, e^{F T} is refused as not
 representable.
 
@@ -167,24 +174,20 @@ def sweep_exponents(row: np.ndarray, column: np.ndarray) -> np.ndarray:
     return np.where(both, ratio, lone).astype(np.int64)
 
 
-def balanced_norm(F: np.ndarray) -> float:
-    """||F||_D = max_i sum_j |F_ij| d_j / d_i with D from Osborne's balancing (module docstring).
+def balancing_exponents(F: np.ndarray) -> tuple[int, ...]:
+    """e with D = diag(2^e) from Osborne's balancing of F (module docstring).
 
-    Each d_i stays within 2^-MAX_SCALE_EXPONENT..2^MAX_SCALE_EXPONENT, so
-    that no ratio d_j / d_i overflows, even in single precision.  The sums
-    run over the nonzero entries row by row (``np.bincount`` adds in that
-    order), as the loops of the generated C do, so that both round alike.
+    At most BALANCING_SWEEPS Jacobi sweeps over the off-diagonal nonzeros,
+    stopped at a fixed point; each e_i within +-MAX_SCALE_EXPONENT, so that
+    no ratio d_j / d_i overflows, even in single precision.
     """
     F = np.asarray(F, dtype=float)
     rows, cols = np.nonzero(F)
-    if not rows.size:
-        return 0.0
-    size = np.abs(F[rows, cols])
-    off = rows != cols
-    off_rows, off_cols, off_size = rows[off], cols[off], size[off]
     n = F.shape[0]
+    off = rows != cols
+    off_rows, off_cols, off_size = rows[off], cols[off], np.abs(F[rows[off], cols[off]])
     exponent = np.zeros(n, dtype=np.int64)  # d = 2^exponent
-    for _ in range(BALANCING_SWEEPS):
+    for _ in range(BALANCING_SWEEPS if off_rows.size else 0):
         d = np.ldexp(1.0, exponent)
         v = off_size * d[off_cols] / d[off_rows]
         row = np.bincount(off_rows, weights=v, minlength=n)
@@ -193,8 +196,45 @@ def balanced_norm(F: np.ndarray) -> float:
         if np.array_equal(new, exponent):
             break  # a fixed point: further sweeps change nothing
         exponent = new
-    d = np.ldexp(1.0, exponent)
-    return float(np.bincount(rows, weights=size * d[cols] / d[rows], minlength=n).max())
+    return tuple(int(e) for e in exponent)
+
+
+def scaled_norm(F: np.ndarray, exponents: tuple[int, ...]) -> float:
+    """||F||_D = max_i sum_j |F_ij| d_j / d_i for D = diag(2^exponents).
+
+    The sums run over the nonzero entries row by row (``np.bincount`` adds in
+    that order), as the generated C and Python do, so that all round alike;
+    each d_j / d_i is an exact power of two.
+    """
+    F = np.asarray(F, dtype=float)
+    rows, cols = np.nonzero(F)
+    if not rows.size:
+        return 0.0
+    d = np.ldexp(1.0, np.asarray(exponents, dtype=np.int64))
+    return float(np.bincount(rows, weights=np.abs(F[rows, cols]) * d[cols] / d[rows], minlength=F.shape[0]).max())
+
+
+def balanced_norm(F: np.ndarray, scaling: tuple[int, ...] | None = None) -> float:
+    """||F||_D (module docstring): D = 2^``scaling`` fixed in advance, or from Osborne's balancing of F itself (None)."""
+    return scaled_norm(F, balancing_exponents(F) if scaling is None else scaling)
+
+
+def nominal_scaling(derived) -> tuple[int, ...] | None:
+    """The exponents of D balanced once, at the model's check operating point (its ``check:`` section).
+
+    Any fixed D gives a valid norm (module docstring), so the generated code
+    uses this D as constants for every operating point and only sums
+    max_i sum_j |F_ij| d_j / d_i at run time; None (balance F itself at run
+    time) for a model without a ``check:`` section or whose F is not finite
+    there.
+    """
+    check = derived.model.check
+    if check is None:
+        return None
+    F = derived.numeric(check.parameter_values())["F"]
+    if not np.all(np.isfinite(F)):
+        return None
+    return balancing_exponents(F)
 
 
 def doublings(norm: float, T: float, order: int, unit_roundoff: float = DOUBLE_ROUNDOFF) -> int:
@@ -301,14 +341,21 @@ def check_step(T: float) -> float:
 
 
 def taylor_discretization_with_doublings(
-    F: np.ndarray, G: np.ndarray, T: float, order: int = DEFAULT_TAYLOR_ORDER, tolerance: float | None = None
+    F: np.ndarray,
+    G: np.ndarray,
+    T: float,
+    order: int = DEFAULT_TAYLOR_ORDER,
+    tolerance: float | None = None,
+    scaling: tuple[int, ...] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Phi, Gamma and the number s of doublings used (module docstring).
 
     ``order`` is the highest order; ``tolerance`` None sums exactly that
     order (the paper's fixed order), a number lets :func:`taylor_plan`
     choose s and the order for that relative accuracy, as the generated code
-    does by default (``CodegenOptions.taylor_tolerance``).
+    does by default (``CodegenOptions.taylor_tolerance``).  ``scaling``:
+    the exponents of D for ||F||_D (:func:`nominal_scaling`, what the
+    generated code bakes in), None to balance F itself.
     ModelError (a ValueError) for an order below 1, a non-finite or non-positive T, a
     non-finite F or G, or an e^(F T) that is not representable.
     """
@@ -317,7 +364,7 @@ def taylor_discretization_with_doublings(
     T = check_step(T)
     if not (np.all(np.isfinite(F)) and np.all(np.isfinite(G))):
         raise ModelError("discretize: F or G has a non-finite entry")
-    s, order = taylor_plan(balanced_norm(F), T, order, tolerance)
+    s, order = taylor_plan(balanced_norm(F, scaling), T, order, tolerance)
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below, with a message
         increment, series = _taylor_increment(F, math.ldexp(T, -s), order)
         for _ in range(s):  # on E = Phi - I, so that the identity does not round the small part away
@@ -330,14 +377,19 @@ def taylor_discretization_with_doublings(
 
 
 def taylor_discretization(
-    F: np.ndarray, G: np.ndarray, T: float, order: int = DEFAULT_TAYLOR_ORDER, tolerance: float | None = None
+    F: np.ndarray,
+    G: np.ndarray,
+    T: float,
+    order: int = DEFAULT_TAYLOR_ORDER,
+    tolerance: float | None = None,
+    scaling: tuple[int, ...] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Phi and Gamma by the series of eqs. (10) and (11), with scaling and squaring.
 
-    Accurate for any finite T (module docstring); ``tolerance`` and
+    Accurate for any finite T (module docstring); ``tolerance``, ``scaling`` and
     ModelError as :func:`taylor_discretization_with_doublings`.
     """
-    phi, gamma, _ = taylor_discretization_with_doublings(F, G, T, order, tolerance)
+    phi, gamma, _ = taylor_discretization_with_doublings(F, G, T, order, tolerance, scaling)
     return phi, gamma
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from modelgen.codegen.options import CodegenOptions
 from modelgen.derive.symbolic import derive, parameter_vector
-from modelgen.derive.discretization import DEFAULT_TOLERANCE, taylor_discretization, taylor_process_noise
+from modelgen.derive.discretization import DEFAULT_TOLERANCE, nominal_scaling, taylor_discretization, taylor_process_noise
 from modelgen.model.loading import load_model
 from tests.codegen.generated_support import build
 from tests.derive.test_discretization import MODELS, STEPS, bound, exact, relative_error
@@ -67,7 +67,7 @@ def test_generated_python_discretize_is_the_reference(case, T):
     m = derived.numeric(values)
     p = py.parameter_vector(values)
     phi, qd = py.discretize(py.system_matrix(p), py.noise_input_matrix(p), py.noise_psd(p), T)
-    phi_ref, gamma_ref = taylor_discretization(m["F"], m["G"], T, tolerance=DEFAULT_TOLERANCE)
+    phi_ref, gamma_ref = taylor_discretization(m["F"], m["G"], T, tolerance=DEFAULT_TOLERANCE, scaling=nominal_scaling(derived))
     assert relative_error(phi, phi_ref) < 1e-14
     assert relative_error(qd, taylor_process_noise(gamma_ref, m["Q"], T)) < 1e-13
     phi_exact, qd_exact = exact_noise(m, T)
@@ -111,17 +111,42 @@ def test_paths_longer_than_the_taylor_order_reach_phi_in_c_and_python(tmp_path):
 
 
 def test_generated_python_balanced_norm_is_the_reference_bit_for_bit(case):
-    """Same sums in the same order: the generated module and the reference pick the same number of doublings."""
+    """Same D (balanced at generation time), same sums in the same order: the module and the reference pick the same plan."""
     from modelgen.derive.discretization import balanced_norm
 
     derived, values, builds = case
     py = next(iter(builds.values()))[1].python
     F = derived.numeric(values)["F"]
-    assert py._balanced_norm(F) == balanced_norm(F)
+    scaling = nominal_scaling(derived)
+    assert scaling is not None  # both models declare a check operating point
+    assert py._balanced_norm(F) == balanced_norm(F, scaling) == balanced_norm(F)  # at that point D is F's own balancing
     rng = np.random.default_rng(1)
     for _ in range(5):  # other operating points on the same structure, values over 20 decades
         G = np.where(F != 0, rng.standard_normal(F.shape) * 10.0 ** rng.integers(-10, 10, F.shape), 0.0)
-        assert py._balanced_norm(G) == balanced_norm(G)
+        assert py._balanced_norm(G) == balanced_norm(G, scaling)
+
+
+def test_c_and_python_choose_the_reference_plan_away_from_the_nominal_point(case):
+    """At other operating points the fixed D still gives all three the same norm, so the same order and doublings."""
+    derived, values, builds = case
+    py = next(iter(builds.values()))[1].python
+    scaling = nominal_scaling(derived)
+    F = derived.numeric(values)["F"]
+    rng = np.random.default_rng(2)
+    for options, built in builds.values():
+        if options.scalar != "double" or options.ud:
+            continue
+        c = built.c_filter(options)
+        assert c.set_parameters(dict(zip(derived.model.parameter_names, parameter_vector(derived.model, values)))) == 0
+        for _ in range(3):
+            G = np.where(F != 0, F * rng.uniform(0.2, 3.0, F.shape), 0.0)
+            c.matrices.F[:] = [G[i, j] for i, j in zip(*np.nonzero(derived.structure("F")))]
+            assert c.discretize(60.0) == 0
+            phi_ref, _ = taylor_discretization(G, derived.numeric(values)["G"], 60.0, tolerance=DEFAULT_TOLERANCE, scaling=scaling)
+            p = py.parameter_vector(values)
+            phi_py, _ = py.discretize(G, py.noise_input_matrix(p), py.noise_psd(p), 60.0)
+            assert relative_error(c.Phi, phi_ref) < 1e-14
+            assert relative_error(phi_py, phi_ref) < 1e-14
 
 
 def test_recompute_threshold_keeps_the_transition_until_the_operating_point_moves(paper_derived, level_flight, tmp_path):

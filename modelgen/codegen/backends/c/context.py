@@ -11,7 +11,7 @@ from modelgen.codegen.discretize_kernels import DiscretizeBlock, horner_level_na
 from modelgen.codegen.kernels import KernelBlock, compact_predict_tables
 from modelgen.codegen.layout import CLayout, UnrolledDiscretizeSizes, c_layout
 from modelgen.codegen.structure import FilterStructure
-from modelgen.derive.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, series_range
+from modelgen.derive.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range
 from modelgen.errors import ModelError
 from modelgen.codegen.van_loan import QD_MARGIN
 
@@ -124,6 +124,14 @@ def _norm_rows(structure: FilterStructure) -> list[tuple[int, list[tuple[int, in
     return sorted(rows.items())
 
 
+def _scaled_norm_rows(structure: FilterStructure, scaling: tuple[int, ...], scalar: str) -> list[tuple[int, list[tuple[int, str | None]]]]:
+    """Rows of F with (entry, d_j / d_i printed, None for 1) for ||F||_D with D = 2^scaling fixed at generation time."""
+    return [
+        (i, [(e, c_number(2.0 ** (scaling[j] - scaling[i]), scalar) if scaling[j] != scaling[i] else None) for e, j in entries])
+        for i, entries in _norm_rows(structure)
+    ]
+
+
 def _balance_states(structure: FilterStructure) -> list[tuple[int, str]]:
     """States with an off-diagonal entry of F in their row and column ('both'), row only or column only.
 
@@ -233,6 +241,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
     )
     discretize = discretize_functions(description.discretize_blocks, model.name, options.scalar) if unrolled else []
     calls = {f["name"]: f["call"] for f in discretize}
+    scaling = nominal_scaling(description.derived)  # D of ||F||_D fixed at generation time (None: balanced at run time)
     printer = CPrinter(options.scalar, {p.sym: f"params->{p.name}" for p in model.parameters})
     targets, _, block = description.evaluation
     state_lines, state_commit, _ = description.state_predict
@@ -307,6 +316,8 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "taylor_loop_tables": not unrolled and not options.van_loan,  # the loop Taylor discretize's index tables
         "balance_states": _balance_states(structure),
         "norm_rows": _norm_rows(structure),
+        "balance_scaling": list(scaling) if scaling is not None else None,
+        "scaled_norm_rows": _scaled_norm_rows(structure, scaling, options.scalar) if scaling is not None else [],
         **_ieee_layout(options.scalar),
         "discretize_sizes": {"terms": unrolled.term_size, "active": unrolled.active_size} if unrolled else {},
         "discretize_blocks": discretize,

@@ -8,7 +8,7 @@ from modelgen.codegen.backends.python.printer import parameter_locals
 from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.expressions import Block, eliminate_common_subexpressions, poles
 from modelgen.codegen.kernels import python_predict_kernel, python_predict_plan
-from modelgen.derive.discretization import DOUBLE_ROUNDOFF, series_range
+from modelgen.derive.discretization import DOUBLE_ROUNDOFF, nominal_scaling, series_range
 
 BANNER = "# GENERATED FILE - DO NOT EDIT (modelgen)"
 
@@ -75,6 +75,13 @@ def index_expression(indices: list[int]) -> str:
     return repr(indices)
 
 
+def _balance_factors(structure, scaling: tuple[int, ...] | None) -> str | None:
+    """d_j / d_i per nonzero of F (storage order) for ||F||_D with D = 2^scaling fixed at generation time; None: balance at run time."""
+    if scaling is None:
+        return None
+    return repr([2.0 ** (scaling[j] - scaling[i]) for i, j in structure.entries("F")])
+
+
 def python_context(description: FilterDescription) -> dict[str, object]:
     """Everything python_module.py.j2 reads (always the double-precision numpy filter)."""
     structure, model, options = description.structure, description.model, description.options
@@ -87,6 +94,7 @@ def python_context(description: FilterDescription) -> dict[str, object]:
         "general_rows": index_expression(python_predict_plan(structure)["general"]),
         "van_loan": options.van_loan,
         "balance_in_python": int(structure.F.sum()) <= PYTHON_BALANCING_ENTRIES,
+        "balance_factors": _balance_factors(structure, nominal_scaling(description.derived)),
         "series_range": repr(series_range(options.taylor_order, DOUBLE_ROUNDOFF)),
         "taylor_tolerance": repr(options.taylor_tolerance)
         if options.taylor_tolerance is not None and options.taylor_tolerance > DOUBLE_ROUNDOFF
