@@ -8,29 +8,43 @@ a covariance after ten filter cycles):
 
 * ``predict`` -- generated ``predict(x, P, Phi, Qd)``, which checks its
   arguments against the contract (finite; P symmetric and positive
-  semidefinite by a Cholesky factorization) and the result, against plain
-  dense numpy computing the same function with no checks:
-  ``x = Phi @ x``, ``P = Phi @ P @ Phi.T + Qd`` and the same symmetrization
-  (upper triangle mirrored into the lower, ``np.copyto(..., where=lower)``);
+  semidefinite, proven by a Cholesky factorization) and the result, against
+  two dense numpy functions computing the same numbers with the same
+  symmetrization (upper triangle mirrored into the lower,
+  ``np.copyto(..., where=lower)``):
+
+  - *bare*: ``x = Phi @ x``, ``P = Phi @ P @ Phi.T + Qd``, mirrored, no
+    checks at all (the issue's baseline);
+  - *checked*: the same after the same contract written in plain numpy:
+    ``np.isfinite(a).all()`` for every argument, ``np.array_equal(P, P.T)``
+    and ``np.linalg.cholesky(P)``, and ``np.isfinite(...).all()`` for the
+    results;
 * ``update`` -- generated ``update(x, P, z, H, r)`` against dense numpy doing
-  the same Kalman update form: ``S = H P H^T + R``, ``K = solve(S, H P)^T``,
+  the same Kalman update: ``S = H P H^T + R``, ``K = solve(S, H P)^T``,
   the Joseph form ``(P - K H P) - (P - K H P) H^T K^T + K R K^T``, mirrored;
+  bare, and checked as predict (plus ``r >= 0``);
 * ``discretize`` -- generated ``discretize(F, G, q, T)`` against
   ``modelgen.derive.discretization`` (the numpy reference: the same balancing,
-  order rule, Taylor series and doublings) and ``taylor_process_noise``.
+  order rule, Taylor series and doublings) and ``taylor_process_noise``;
+  bare, and checked (finite F, G, q, ``q >= 0``, finite positive T, finite
+  results).
 
 Each side is timed best-of-several with interleaved repeats (CPU time of
-the process, BLAS on one thread); the ratio is
-baseline time / generated time (>= 1: the generated module is at least as
-fast).  The ``checks`` column is what the contract's checks of the
-arguments cost in the generated predict and update (timed alone).  For
-predict the two kernels the generator chooses between (dense BLAS products,
-or gathers by row class of Phi: unit, diagonal, general) are both timed, to
-justify the rule ``kernels.python_predict_kernel``.  Writes
-bench/results/python_module.json, .md and .png.
+the process, BLAS on one thread); each ratio is numpy time / generated time
+(>= 1: the generated module is at least as fast).  The ``P test`` column is
+what the contract's test of P costs inside the generated predict and update
+(``_factor``: the exact-symmetry test and the LAPACK Cholesky, timed
+alone): the part of the generated time that the bare numpy does not do.
+For predict the two kernels the generator chooses between (the factored
+form by BLAS trmm and syrk, or by row class of Phi: D P D elementwise and
+one product of the general rows) are both timed, to justify the rule
+``kernels.python_predict_kernel``.  The machine's load (``os.getloadavg``)
+is recorded before and after.  Writes bench/results/python_module.json,
+.md and .png.
 
 Target (issue 14, item 3): ratio >= 1.0 for predict, update and discretize
-at 18, 32 and 100 states.
+at 18, 32 and 100 states (against the bare numpy; the checked ratio shows
+what the same contract costs in numpy).
 
 usage: nice python bench/bench_python_module.py [--sizes 18 32 100]
 """
@@ -71,6 +85,7 @@ from tests.codegen.large_model_support import large_model  # noqa: E402
 RESULTS = HERE / "results"
 BUILTIN = {18: "ned_doppler18", 32: "ned_doppler32_augmented"}
 START = time.perf_counter()
+ROUNDS = 5  # interleaved rounds of every side; each round is the best of 7 timeit repeats
 
 
 def progress(message: str) -> None:
@@ -149,6 +164,60 @@ def dense_discretize(F, G, q, T):
     return phi, taylor_process_noise(gamma, np.diag(q), T)
 
 
+def require_finite(**arrays) -> None:
+    """The contract's finiteness test as plain numpy writes it: one isfinite pass per array."""
+    for name, value in arrays.items():
+        if not np.isfinite(value).all():
+            raise ValueError(f"{name} has a non-finite entry")
+
+
+def require_covariance(P) -> None:
+    """P exactly symmetric and positive definite, proven by numpy's Cholesky (LinAlgError otherwise)."""
+    if not np.array_equal(P, P.T):
+        raise ValueError("P is not symmetric")
+    np.linalg.cholesky(P)
+
+
+def checked_predict(lower):
+    """dense_predict after and before the contract's checks, in plain numpy."""
+    bare = dense_predict(lower)
+
+    def predict(x, P, Phi, Qd):
+        require_finite(x=x, P=P, Phi=Phi, Qd=Qd)
+        require_covariance(P)
+        x_new, P_new = bare(x, P, Phi, Qd)
+        require_finite(x_result=x_new, result=P_new)
+        return x_new, P_new
+    return predict
+
+
+def checked_update(lower):
+    """dense_update after and before the contract's checks, in plain numpy."""
+    bare = dense_update(lower)
+
+    def update(x, P, z, H, r):
+        require_finite(x=x, P=P, z=z, H=H, r=r)
+        if not (r >= 0.0).all():
+            raise ValueError("r has a negative measurement variance")
+        require_covariance(P)
+        x_new, P_new = bare(x, P, z, H, r)
+        require_finite(x_result=x_new, result=P_new)
+        return x_new, P_new
+    return update
+
+
+def checked_discretize(F, G, q, T):
+    """dense_discretize after and before the contract's checks, in plain numpy."""
+    require_finite(F=F, G=G, q=q)
+    if not (q >= 0.0).all():
+        raise ValueError("q has a negative noise PSD")
+    if not (np.isfinite(T) and T > 0.0):
+        raise ValueError("T must be finite and positive")
+    phi, qd = dense_discretize(F, G, q, T)
+    require_finite(Phi=phi, Qd=qd)
+    return phi, qd
+
+
 def measure(n: int, folder: Path) -> dict:
     derived = derive(load_model(BUILTIN[n]) if n in BUILTIN else large_model(n))
     scenario = paper_scenario(derived) if n == 18 else synthetic_scenario(derived)
@@ -158,49 +227,76 @@ def measure(n: int, folder: Path) -> dict:
     gen = module_for(derived, folder, None)
     variants = {k: module_for(derived, folder, k) for k in ("factored", "structured")}
     x, P, Phi, Qd, H, r, z = (a[k] for k in ("x", "P", "Phi", "Qd", "H", "r", "z"))
-    # the same numbers from both sides, so that both compute the same function
-    for got, want in ((gen.predict(x, P, Phi, Qd), dense_predict(lower)(x, P, Phi, Qd)),
-                      (gen.update(x, P, z, H, r), dense_update(lower)(x, P, z, H, r)),
-                      (gen.discretize(a["F"], a["G"], a["q"], a["T"]), dense_discretize(a["F"], a["G"], a["q"], a["T"]))):
-        for g, w in zip(got, want):
-            assert np.allclose(g, w, rtol=1e-9, atol=1e-12 * np.abs(w).max()), "generated and dense numpy differ"
-    row = {"states": n, "model": derived.model.name, "predict_kernel": chosen}
-    cases = {
-        "predict": (lambda: gen.predict(x, P, Phi, Qd), lambda: dense_predict(lower)(x, P, Phi, Qd)),
-        "update": (lambda: gen.update(x, P, z, H, r), lambda: dense_update(lower)(x, P, z, H, r)),
-        "discretize": (lambda: gen.discretize(a["F"], a["G"], a["q"], a["T"]),
-                       lambda: dense_discretize(a["F"], a["G"], a["q"], a["T"])),
+    F, G, q, T = a["F"], a["G"], a["q"], a["T"]
+    cases = {  # generated, bare numpy, checked numpy: the same function
+        "predict": (lambda: gen.predict(x, P, Phi, Qd), lambda: dense_predict(lower)(x, P, Phi, Qd),
+                    lambda: checked_predict(lower)(x, P, Phi, Qd)),
+        "update": (lambda: gen.update(x, P, z, H, r), lambda: dense_update(lower)(x, P, z, H, r),
+                   lambda: checked_update(lower)(x, P, z, H, r)),
+        "discretize": (lambda: gen.discretize(F, G, q, T), lambda: dense_discretize(F, G, q, T),
+                       lambda: checked_discretize(F, G, q, T)),
     }
-    for name, (generated, baseline) in cases.items():
-        g = b = float("inf")
-        for _ in range(3):  # interleaved, so that a busy spell hits both sides
+    for name, sides in cases.items():  # the same numbers from every side, and P exactly symmetric
+        want = sides[1]()
+        for side in (sides[0], sides[2]):
+            for g, w in zip(side(), want):
+                assert np.allclose(g, w, rtol=1e-9, atol=1e-12 * np.abs(w).max()), f"{name}: generated and numpy differ"
+        if name != "discretize":
+            assert np.array_equal(sides[0]()[1], sides[0]()[1].T), f"{name}: generated P not exactly symmetric"
+    row = {"states": n, "model": derived.model.name, "predict_kernel": chosen}
+    for name, (generated, bare, checked) in cases.items():
+        g = b = c = float("inf")
+        for _ in range(ROUNDS):  # interleaved, so that a busy spell hits every side
             g = min(g, per_call_us(generated))
-            b = min(b, per_call_us(baseline))
-        row[name] = {"generated_us": g, "dense_numpy_us": b, "ratio": b / g}
-        progress(f"{n} states {name}: generated {g:.1f} us, dense numpy {b:.1f} us, ratio {b / g:.2f}")
-    row["predict"]["checks_us"] = per_call_us(lambda: (gen._check_finite("predict", x=x, Phi=Phi, Qd=Qd),
-                                                      gen._check_covariance("predict", P)))
-    row["update"]["checks_us"] = per_call_us(lambda: (gen._check_finite("update", x=x, z=z, H=H, r=r),
-                                                     gen._check_covariance("update", P)))
+            b = min(b, per_call_us(bare))
+            c = min(c, per_call_us(checked))
+        row[name] = {"generated_us": g, "dense_numpy_us": b, "ratio": b / g, "checked_numpy_us": c, "checked_ratio": c / g}
+        progress(f"{n} states {name}: generated {g:.1f} us, bare numpy {b:.1f} us (ratio {b / g:.2f}), "
+                 f"checked numpy {c:.1f} us (ratio {c / g:.2f})")
+    for name in ("predict", "update"):
+        row[name]["p_test_us"] = min(per_call_us(lambda: gen._factor(P)) for _ in range(ROUNDS))
     for kernel, module in variants.items():
-        row["predict"][f"{kernel}_kernel_us"] = min(per_call_us(lambda: module.predict(x, P, Phi, Qd)) for _ in range(3))
+        row["predict"][f"{kernel}_kernel_us"] = min(per_call_us(lambda: module.predict(x, P, Phi, Qd))
+                                                    for _ in range(ROUNDS))
     progress(f"{n} states predict kernels: factored {row['predict']['factored_kernel_us']:.1f} us, "
              f"structured {row['predict']['structured_kernel_us']:.1f} us; the rule chose {chosen}")
     return row
 
 
 def markdown(rows: list[dict]) -> str:
-    lines = ["| states | function | generated us | dense numpy us | ratio (>= 1: generated faster) | checks us "
-             "| predict kernel: factored us | structured us | chosen |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| states | function | generated us | bare numpy us | ratio to bare | checked numpy us "
+             "| ratio to checked | P test us | predict kernel: factored us | structured us | chosen |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         for name in ("predict", "update", "discretize"):
             c = r[name]
             kernel = (f"{c['factored_kernel_us']:.1f} | {c['structured_kernel_us']:.1f} | {r['predict_kernel']}"
                       if name == "predict" else " | | ")
-            checks = f"{c['checks_us']:.1f}" if "checks_us" in c else ""
+            test = f"{c['p_test_us']:.1f}" if "p_test_us" in c else ""
             lines.append(f"| {r['states']} | {name} | {c['generated_us']:.1f} | {c['dense_numpy_us']:.1f} "
-                         f"| {c['ratio']:.2f} | {checks} | {kernel} |")
+                         f"| {c['ratio']:.2f} | {c['checked_numpy_us']:.1f} | {c['checked_ratio']:.2f} | {test} | {kernel} |")
     return "\n".join(lines) + "\n"
+
+
+LEGEND = """All times are CPU time per call (best of {rounds} interleaved rounds, each the best of 7 timeit
+repeats; BLAS on one thread).  Every side computes the same function on the same inputs (Phi and Q_d
+from the reference discretization, P after ten filter cycles) and returns the same numbers, P exactly
+symmetric (upper triangle mirrored):
+
+* generated: the module `modelgen generate` writes, with the contract's checks (finite arguments and
+  results, P exactly symmetric and positive definite by a Cholesky factor, else entry by entry within
+  16 N eps; r, q >= 0);
+* bare numpy: the same products with no checks at all (`Phi @ P @ Phi.T + Qd`; the Joseph update with
+  `np.linalg.solve`; `modelgen.derive.discretization` for discretize) -- the issue's baseline;
+* checked numpy: bare numpy plus the same contract in plain numpy (`np.isfinite(a).all()` per argument
+  and result, `np.array_equal(P, P.T)`, `np.linalg.cholesky(P)`, `r >= 0` / `q >= 0`).
+
+ratio = numpy time / generated time (>= 1: the generated module is at least as fast).  P test: the
+generated module's test of P alone (`_factor`: exact symmetry and LAPACK dpotrf), which the bare numpy
+does not do.  Predict kernels: the factored form (BLAS trmm and syrk on the Cholesky factor) and the
+row-class form (D P D elementwise plus one product of the general rows of Phi), both timed; `chosen` is
+what `kernels.python_predict_kernel` picks.
+"""
 
 
 def figure(rows: list[dict], path: Path) -> None:
@@ -209,16 +305,19 @@ def figure(rows: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = plt.subplots(figsize=(7.5, 4))
     names = ("predict", "update", "discretize")
     width = 0.8 / len(rows)
     for k, r in enumerate(rows):
-        ax.bar(np.arange(3) + k * width, [r[nm]["ratio"] for nm in names], width, label=f"{r['states']} states")
-    ax.axhline(1.0, color="gray", linestyle=":", label="as fast as dense numpy")
+        at = np.arange(3) + k * width
+        bars = ax.bar(at, [r[nm]["ratio"] for nm in names], width, label=f"{r['states']} states: to bare numpy")
+        ax.scatter(at, [r[nm]["checked_ratio"] for nm in names], marker="D", s=25, color=bars[0].get_facecolor(),
+                   edgecolors="black", zorder=3, label=f"{r['states']} states: to checked numpy")
+    ax.axhline(1.0, color="gray", linestyle=":", label="as fast as numpy")
     ax.set_xticks(np.arange(3) + width * (len(rows) - 1) / 2, names)
-    ax.set_ylabel("dense numpy time / generated time [-]")
-    ax.set_title("generated Python module against dense numpy (per call)")
-    ax.legend()
+    ax.set_ylabel("numpy time / generated time [-]")
+    ax.set_title("generated Python module against dense numpy (per call, same function)")
+    ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 
@@ -228,12 +327,20 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[18, 32, 100])
     args = parser.parse_args()
     RESULTS.mkdir(exist_ok=True)
+    load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
         rows = [measure(n, Path(tmp)) for n in args.sizes]
+    load_after = os.getloadavg()
+    load = (f"Load average (1, 5, 15 min) on {os.cpu_count()} cores: {' '.join(f'{v:.2f}' for v in load_before)} "
+            f"before, {' '.join(f'{v:.2f}' for v in load_after)} after the run.")
     table = markdown(rows)
-    (RESULTS / "python_module.json").write_text(json.dumps(rows, indent=2) + "\n")
+    (RESULTS / "python_module.json").write_text(
+        json.dumps({"load_before": load_before, "load_after": load_after, "cores": os.cpu_count(), "rows": rows},
+                   indent=2) + "\n")
     (RESULTS / "python_module.md").write_text(
-        "# Generated Python module against dense numpy (bench/bench_python_module.py)\n\n" + table)
+        "# Generated Python module against dense numpy (bench/bench_python_module.py)\n\n"
+        + LEGEND.format(rounds=ROUNDS) + "\n" + load + "\n\n" + table)
+    progress(load)
     figure(rows, RESULTS / "python_module.png")
     print(table)
     progress(f"wrote {RESULTS / 'python_module.json'}, .md and .png")
