@@ -3,11 +3,13 @@
 The module predicts in factored form (the Cholesky factor of the
 contract's check reused: P_n = (Phi L)(Phi L)^T + Q_d), falls back to the
 dense products for a P without a factor, may predict by row class of Phi
-(``structured``, chosen by ``kernels.python_predict_kernel``), balances F in
-plain Python floats or in numpy (``PYTHON_BALANCING_ENTRIES``), and finds a
-non-finite argument through the result's finiteness.  Each choice must give
-the reference's numbers, and a NaN or infinity anywhere in any argument must
-still be refused, naming that argument.
+(``structured``, chosen by ``kernels.python_predict_kernel``; the general
+rows as a slice when contiguous, else a list), updates by two rank-m BLAS
+products onto P, balances F in plain Python floats or in numpy
+(``PYTHON_BALANCING_ENTRIES``), and finds a non-finite argument through one
+sum over the result.  Each choice must give the reference's numbers, and a
+NaN or infinity anywhere in any argument must still be refused, naming that
+argument, on the factored path as on the fallback.
 """
 
 from __future__ import annotations
@@ -39,6 +41,17 @@ def python_module(derived, folder, monkeypatch=None, **constants):
 @pytest.fixture(scope="module")
 def paper_module(paper_derived, tmp_path_factory):
     return python_module(paper_derived, tmp_path_factory.mktemp("py"))
+
+
+@pytest.fixture(scope="module")
+def structured_module(paper_derived, tmp_path_factory):
+    """The paper model with the prediction by row class of Phi forced."""
+    mp = pytest.MonkeyPatch()
+    try:
+        return python_module(paper_derived, tmp_path_factory.mktemp("structured"), mp,
+                             overrides=[(kernels, "PYTHON_STRUCTURED_SAVING_FLOPS", -1)])
+    finally:
+        mp.undo()
 
 
 @pytest.fixture(scope="module")
@@ -109,25 +122,89 @@ def test_both_balancings_are_the_reference_to_the_bit(paper_derived, inputs, tmp
     assert not math.isfinite(module._balanced_norm(G))
 
 
+def test_scattered_general_rows_are_indexed_by_a_list_and_give_the_same_prediction(paper_derived, inputs, tmp_path,
+                                                                                 monkeypatch):
+    """A model whose general rows of Phi are not one run indexes them by a list: the same numbers as the slice."""
+    assert python_context.index_expression([0, 1, 2]) == "slice(0, 3)"
+    assert python_context.index_expression([0, 2, 5]) == "[0, 2, 5]"
+    assert python_context.index_expression([]) == "[]"
+    module = python_module(paper_derived, tmp_path, monkeypatch,
+                           overrides=[(kernels, "PYTHON_STRUCTURED_SAVING_FLOPS", -1),
+                                      (python_context, "index_expression", repr)])
+    assert isinstance(module._GENERAL, list)
+    x, P, Phi, Qd = (inputs[k] for k in ("x", "P", "Phi", "Qd"))
+    _, P_new = module.predict(x, P, Phi, Qd)
+    want = reference.predict_covariance(P, Phi, Qd)
+    np.testing.assert_allclose(P_new, want, rtol=0, atol=1e-14 * np.abs(want).max())
+    np.testing.assert_array_equal(P_new, P_new.T)
+
+
+@pytest.mark.parametrize("kernel", ["factored", "structured"])
+def test_only_the_upper_triangle_of_qd_is_used_and_its_lower_one_is_checked(paper_module, structured_module, inputs,
+                                                                            kernel):
+    module = paper_module if kernel == "factored" else structured_module
+    x, P, Phi, Qd = (inputs[k] for k in ("x", "P", "Phi", "Qd"))
+    skewed = Qd + np.tril(np.full(Qd.shape, 1e-3), -1)  # a finite lower triangle that differs from the upper
+    _, P_new = module.predict(x, P, Phi, skewed)
+    np.testing.assert_array_equal(P_new, module.predict(x, P, Phi, Qd)[1])
+    skewed[-1, 0] = math.nan
+    with pytest.raises(ValueError, match="predict: Qd has a non-finite entry"):
+        module.predict(x, P, Phi, skewed)
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+def test_a_non_finite_entry_of_a_positive_definite_p_is_named(paper_module, structured_module, inputs, bad):
+    """P with a Cholesky factor: OpenBLAS goes on past a NaN pivot and an infinite variance factors; both are named."""
+    n = inputs["P"].shape[0]
+    for module in (paper_module, structured_module):
+        for i, j in ((0, 0), (n // 2, n // 2), (n - 1, n - 1), (n - 1, 0), (3, 5)):
+            args = {k: inputs[k].copy() for k in ("x", "P", "Phi", "Qd", "z", "H", "r")}
+            args["P"][i, j] = args["P"][j, i] = bad
+            if bad != bad or i != j:  # a NaN, or an infinite covariance: no factor
+                assert module._factor(args["P"]) is None
+            with pytest.raises(ValueError, match="predict: P (has a non-finite entry|is not)"):
+                module.predict(*(args[k] for k in ("x", "P", "Phi", "Qd")))
+            with pytest.raises(ValueError, match="update: P (has a non-finite entry|is not)"):
+                module.update(*(args[k] for k in ("x", "P", "z", "H", "r")))
+
+
+def test_the_update_keeps_x_and_p_of_the_caller(paper_module, inputs):
+    """The BLAS products write into copies: the caller's arrays are unchanged."""
+    args = {k: inputs[k].copy() for k in ("x", "P", "z", "H", "r")}
+    paper_module.update(**args)
+    for k, v in args.items():
+        np.testing.assert_array_equal(v, inputs[k])
+
+
 def positions(n: int) -> list[tuple[int, ...]]:
     """Corners, the diagonal and an entry in a row of zeros of P (state 0)."""
     return [(0, 0), (0, n - 1), (n - 1, 0), (n // 2, n // 2), (1, 0)]
 
 
+@pytest.mark.parametrize("kernel", ["factored", "structured"])
+@pytest.mark.parametrize("zero_variance", [True, False])
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
 @pytest.mark.parametrize("argument", ["x", "P", "Phi", "Qd"])
-def test_a_non_finite_predict_argument_is_named_wherever_it_is(paper_module, inputs, argument, bad):
-    """Also where it meets zeros (a state with zero variance): NaN and 0 * inf are NaN, so the result shows it."""
+def test_a_non_finite_predict_argument_is_named_wherever_it_is(paper_module, structured_module, inputs, argument, bad,
+                                                               zero_variance, kernel):
+    """Also where it meets zeros (a state with zero variance): NaN and 0 * inf are NaN, so the result shows it.
+
+    With a zero variance P has no Cholesky factor (the dense fallback);
+    without, the factored or structured kernel runs and one sum over the
+    result before its mirroring must show the culprit.
+    """
+    module = paper_module if kernel == "factored" else structured_module
     n = inputs["P"].shape[0]
     for where in positions(n):
         args = {k: inputs[k].copy() for k in ("x", "P", "Phi", "Qd")}
-        args["P"][0, :] = args["P"][:, 0] = 0.0  # state 0 has no variance: its row of P is zeros
+        if zero_variance:
+            args["P"][0, :] = args["P"][:, 0] = 0.0  # state 0 has no variance: its row of P is zeros
         index = where[:1] if argument == "x" else where
         args[argument][index] = bad
         if argument == "P":
             args["P"][index[::-1]] = bad
         with pytest.raises(ValueError, match=f"predict: {argument} (has a non-finite entry|is not|has a negative)"):
-            paper_module.predict(**args)
+            module.predict(**args)
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf])
