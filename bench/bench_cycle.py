@@ -15,14 +15,16 @@ point and covariance:
     structural nonzeros of Phi and Q_d, and a symmetric P);
 (b) the full predict cycle from continuous parameters: (parameters, T, P, x)
     -> (P', x') with F, G, Q evaluated from the parameters, Phi and
-    Gamma by the Taylor series of eqs. (10)-(11) of the same order, Q_d =
+    Gamma by the Taylor series of eqs. (10)-(11) of the same order as
+    modelgen sums it (S = sum (F T)^k / (k+1)! by Horner's rule, Phi = I + F T S,
+    Gamma = T S G: modelgen.derive.discretization), Q_d =
     Gamma (Q/T) Gamma^T and the prediction.  CasADi and SymForce are given
     the model's F, G, diag(Q) as symbolic expressions of the parameters
     (CasADi from modelgen.derive.casadi_functions, SymForce from their
     text, read by symengine) and generate that one function symbolically, P packed upper in and
     out.  modelgen's side is its generated matrices_evaluate + discretize +
     predict (default options: full symmetric storage, computed once per
-    pair), which also computes ||F||_D and chooses the order at run time
+    pair), which also computes ||F||_D (D fixed at generation time) and chooses the order at run time
     (modelgen.derive.discretization.taylor_plan): the order the competitors get is
     the one that rule picks at that T (T = 60 s: 9, the paper's; T = 1 s: 5 for the
     paper's model), so both sides sum the same series;
@@ -51,6 +53,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import platform
 import subprocess
 import sys
@@ -72,13 +75,20 @@ from modelgen.codegen.discretize_kernels import (  # noqa: E402
     DiscretizePlan,
     doubling_block,
     noise_blocks,
-    series_blocks,
+    series_cost,
 )
 from modelgen.codegen.generate import describe, generate_code, write_atomically  # noqa: E402
 from modelgen.codegen.kernels import OperationCount, update_cost  # noqa: E402
 from modelgen.codegen.options import CodegenOptions  # noqa: E402
 from modelgen.derive import reference  # noqa: E402
-from modelgen.derive.discretization import DEFAULT_TOLERANCE, balanced_norm, taylor_discretization, taylor_plan, taylor_process_noise  # noqa: E402,E501
+from modelgen.derive.discretization import (  # noqa: E402
+    DEFAULT_TOLERANCE,
+    balanced_norm,
+    nominal_scaling,
+    taylor_discretization,
+    taylor_plan,
+    taylor_process_noise,
+)
 from modelgen.derive.symbolic import DerivedModel, derive  # noqa: E402
 from modelgen.jobs import paper_scenario, synthetic_scenario  # noqa: E402
 from modelgen.model.loading import load_model  # noqa: E402
@@ -103,7 +113,7 @@ def problem(name: str) -> dict:
     derived = derived_model(name)
     scenario = paper_scenario(derived) if name == "ned_doppler18" else synthetic_scenario(derived)
     m = derived.numeric(scenario.parameters)
-    phi, gamma = taylor_discretization(m["F"], m["G"], scenario.step, 9, DEFAULT_TOLERANCE)
+    phi, gamma = taylor_discretization(m["F"], m["G"], scenario.step, 9, DEFAULT_TOLERANCE, nominal_scaling(derived))
     qd = taylor_process_noise(gamma, m["Q"], scenario.step)
     x, P = scenario.x0(), scenario.initial_covariance.copy()
     zs = measurement_sequence(derived, scenario)
@@ -156,12 +166,10 @@ def predict_floor(structure) -> int:
 
 
 def discretize_floor(structure, order: int, halvings: int) -> int:
-    """Flops of Phi and Q_d by the series of ``order`` over the structural nonzeros of (F h)^k (no norm, no plan)."""
-    plan = DiscretizePlan(structure, order)
-    blocks = series_blocks(plan)
-    if plan.gamma_entries and plan.qd_pairs:
-        blocks += noise_blocks(plan, packed=False, ud=False)
-    return _count(blocks).total + halvings * _count([doubling_block(plan)]).total
+    """Flops of Phi and Q_d by Horner's rule of ``order`` over the structural nonzeros of each level (no norm, no plan)."""
+    plan = DiscretizePlan(structure, 9)
+    noise = _count(noise_blocks(plan, packed=False, ud=False)).total if plan.gamma_entries and plan.qd_pairs else 0
+    return series_cost(plan, order).total + noise + halvings * _count([doubling_block(plan)]).total
 
 
 def floors(p: dict, order: int, halvings: int) -> dict[str, int]:
@@ -238,13 +246,10 @@ def casadi_cycle(p: dict, order: int, folder: Path) -> dict:
             P[j, i] = packed[k]
             k += 1
     X = cm.F * T
-    term = ca.SX.eye(n)
-    Phi = ca.SX.eye(n)
-    S = ca.SX.eye(n)
-    for k in range(1, order + 1):
-        term = ca.mtimes(term, X) / k
-        Phi = Phi + term
-        S = S + term / (k + 1)
+    S = ca.SX.eye(n) / math.factorial(order + 1)  # Horner: S = R_0, R_k = I / (k+1)! + X R_(k+1), as modelgen sums it
+    for k in range(order - 1, -1, -1):
+        S = ca.mtimes(X, S) + ca.SX.eye(n) / math.factorial(k + 1)
+    Phi = ca.SX.eye(n) + ca.mtimes(X, S)
     Gamma = T * ca.mtimes(S, cm.G)
     Qd = ca.mtimes([Gamma, ca.diag(ca.vertcat(*q) / T), Gamma.T]) if nw else ca.SX(n, n)
     Pn = ca.mtimes([Phi, P, Phi.T]) + Qd
@@ -371,7 +376,7 @@ def run_model(name: str, root: Path, sf_python: Path | None, symforce_max: int) 
         bc.symforce_codegen(sf_python, sp_, work / "symforce")
         builds["symforce"] = bc.build_harness(_fresh(work, "a-symforce"), bc.glue_symforce(sp_), [], p, cxx=True,
                                               includes=(work / "symforce", bc.EIGEN))
-    norm = balanced_norm(p["F"])
+    norm = balanced_norm(p["F"], nominal_scaling(p["derived"]))  # the D the generated code bakes in
     for part, what in (("a", "predict"), ("c", "update")):
         floor = floors(p, 9, 0)[part]
         for impl, exe in builds.items():

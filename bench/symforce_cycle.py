@@ -8,16 +8,19 @@ modelgen from the derived model), the Taylor order and the sizes.  The one
 generated C++ function takes (parameters, T, packed upper P, x) and returns
 (packed upper P', x') with
 
-    Phi = sum_{k<=N} (F T)^k / k!,  Gamma = T sum_{k<=N} (F T)^k / (k+1)! G,
-    Q_d = Gamma diag(q / T) Gamma^T,  P' = Phi P Phi^T + Q_d,  x' = Phi x,
+    S = sum_{k<=N} (F T)^k / (k+1)! (by Horner's rule),  Phi = I + F T S,
+    Gamma = T S G,  Q_d = Gamma diag(q / T) Gamma^T,  P' = Phi P Phi^T + Q_d,  x' = Phi x,
 
-the paper's eqs. (9)-(11), exactly what CasADi is given in bench_cycle.py.
+the paper's eqs. (9)-(11) as modelgen sums them (Phi = I + F T S is eq. (10)
+to order N + 1, modelgen.derive.discretization), exactly what CasADi is
+given in bench_cycle.py.
 SymForce runs with its default symengine back end; the expression text
 (written by modelgen from its own derived model, not from a user) is read by
 symengine's parser.
 """
 
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -61,13 +64,10 @@ def main() -> None:
             k += 1
     x = sf.Matrix([sf.Symbol(f"x_{i}") for i in range(n)])
     X = F * T
-    term = sf.Matrix.eye(n)
-    Phi = sf.Matrix.eye(n)
-    S = sf.Matrix.eye(n)
-    for k in range(1, order + 1):
-        term = term * X / k
-        Phi = Phi + term
-        S = S + term / (k + 1)
+    S = sf.Matrix.eye(n) / math.factorial(order + 1)  # Horner: S = R_0, R_k = I / (k+1)! + X R_(k+1)
+    for k in range(order - 1, -1, -1):
+        S = X * S + sf.Matrix.eye(n) / math.factorial(k + 1)
+    Phi = sf.Matrix.eye(n) + X * S
     Gamma = T * S * G
     Qd = Gamma * sf.Matrix.diag([qk / T for qk in q] or [0]) * Gamma.T
     Pn = Phi * P * Phi.T + Qd

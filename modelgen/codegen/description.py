@@ -47,6 +47,7 @@ from modelgen.codegen.layout import ModelSizes
 from modelgen.codegen.van_loan import van_loan_costs
 from modelgen.codegen.options import CodegenOptions
 from modelgen.codegen.structure import FilterStructure, filter_structure
+from modelgen.derive.discretization import nominal_scaling
 from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 
@@ -189,7 +190,7 @@ class FilterDescription:
         """The unrolled discretize's counts, replacing the loop version's (empty when it is not unrolled)."""
         if not self.discretize_unrolled or not self.discretize_plan.active:
             return {}
-        first, doubling, _ = unrolled_discretize_cost(self.discretize_plan, self.options.ud)
+        first, doubling, _ = unrolled_discretize_cost(self.discretize_plan, self.options.ud, nominal_scaling(self.derived) is not None)
         return {
             "discretize": first,
             "discretize, each doubling (long steps)": doubling,

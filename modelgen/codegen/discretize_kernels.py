@@ -346,12 +346,14 @@ def series_cost(plan: DiscretizePlan, order: int) -> OperationCount:
     return block_cost([blocks[name] for name in called])
 
 
-def unrolled_discretize_cost(plan: DiscretizePlan, ud: bool) -> tuple[OperationCount, OperationCount, list[int]]:
+def unrolled_discretize_cost(plan: DiscretizePlan, ud: bool, fixed_scaling: bool = False) -> tuple[OperationCount, OperationCount, list[int]]:
     """(flops at the highest order without doubling, flops of one doubling, flops of the series at each order 1..N).
 
     Counted from the emitted statements, so that the header states what the
-    code does (the balancing's sweeps, at most 8 over the off-diagonal
-    entries of F, and the plan's bound are included in the first count).
+    code does (the norm and the plan's bound are included in the first count:
+    with D fixed at generation time, ``fixed_scaling``, one product and sum
+    per nonzero of F; otherwise also the balancing's sweeps, at most 8 over
+    the off-diagonal entries of F).
     """
     per_order = [series_cost(plan, m).total for m in range(1, plan.order + 1)]
     series = series_cost(plan, plan.order)
@@ -359,7 +361,8 @@ def unrolled_discretize_cost(plan: DiscretizePlan, ud: bool) -> tuple[OperationC
     structure = plan.structure
     nnz_f = int(structure.F.sum())
     off = nnz_f - int(np.trace(structure.F.astype(int)))
-    balancing = OperationCount(8 * 2 * off + nnz_f, 8 * 2 * off + nnz_f) if nnz_f else OperationCount(0, 0)
+    sweeps = 0 if fixed_scaling else 8 * 2 * off
+    balancing = OperationCount(sweeps + nnz_f, sweeps + nnz_f) if nnz_f else OperationCount(0, 0)
     bound = OperationCount(3 * plan.order + 6, plan.order + 2)
     parts = (series, noise, balancing, bound)
     first = OperationCount(sum(c.multiplications for c in parts), sum(c.additions for c in parts))
