@@ -26,6 +26,9 @@ Three implementations plug in:
 from __future__ import annotations
 
 import ctypes
+import hashlib
+import pickle
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Protocol
@@ -34,7 +37,6 @@ import numpy as np
 
 from modelgen.derive import reference
 from modelgen.derive.symbolic import DerivedModel, parameter_vector
-from modelgen.derive.discretization import taylor_discretization, taylor_process_noise
 from modelgen.errors import ModelError
 
 
@@ -76,6 +78,9 @@ class ReferenceFilter:
         self._P = np.array(P0, float)
 
     def transition(self, parameters, period):
+        # imported here: it brings scipy.linalg, which a worker flying the generated C never needs
+        from modelgen.derive.discretization import taylor_discretization, taylor_process_noise
+
         m = self.matrices(parameters)
         phi, gamma = taylor_discretization(m["F"], m["G"], period, self.taylor_order)
         return phi, taylor_process_noise(gamma, m["Q"], period)
@@ -274,16 +279,32 @@ class NativeFilterMaker:
 IMPLEMENTATIONS = ("c", "python", "reference")
 
 
+#: The generated files of the last few models, by a digest of the model's declaration (see generated_filter_files).
+_GENERATED: "OrderedDict[str, dict[str, str]]" = OrderedDict()
+GENERATED_KEPT = 4
+
+
 def generated_filter_files(derived: DerivedModel) -> dict[str, str]:
     """The files ``modelgen generate`` writes for the model (default options): name -> text.
 
     Plain text: a Monte Carlo client generates them once and ships them with
     its tasks, so that a worker only writes and compiles (or takes from the
-    compile cache) the very code the client would fly.
+    compile cache) the very code the client would fly.  The last few models'
+    files are kept in this process, by a digest of the model's declaration
+    (what the code is generated from): ``modelgen simulate`` generates the
+    code for its own flight, and its Monte Carlo ships the same files without
+    generating them again (half a second for the paper's model).
     """
     from modelgen.codegen.generate import generate_code  # sibling layer, imported where used
 
-    return dict(generate_code(derived).files)
+    key = hashlib.sha256(pickle.dumps(derived.model)).hexdigest()
+    if key in _GENERATED:
+        _GENERATED.move_to_end(key)
+    else:
+        _GENERATED[key] = dict(generate_code(derived).files)
+        while len(_GENERATED) > GENERATED_KEPT:
+            _GENERATED.popitem(last=False)
+    return dict(_GENERATED[key])
 
 
 def filter_factory(derived: DerivedModel, implementation: str, work_dir: str | Path,

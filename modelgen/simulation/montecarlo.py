@@ -171,18 +171,25 @@ def setup_key(profile: FlightProfile, truth_profile: FlightProfile | None, model
     return "montecarlo-" + hashlib.sha256(blob).hexdigest()[:16]
 
 
-def _prepare(setup: MonteCarloSetup, derived: DerivedModel | None = None) -> dict:
+def _prepare(setup: MonteCarloSetup, derived: DerivedModel | None = None,
+             mark: Callable[[str], None] = lambda step: None) -> dict:
     """What a worker builds once per set-up: the derived model, trajectory, error layout and filter maker.
 
     The shipped code is written to a folder the context owns (removed with it)
-    and compiled through the compile cache.
+    and compiled through the compile cache.  ``mark(step)`` is called after
+    each step (the benchmark times a worker's set-up with it).
     """
     derived = derived if derived is not None else derive(setup.model)
+    mark("derive the model (sympy)")
     profile = setup.profile
     trajectory = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
+    mark("trajectory (truth and ideal IMU increments)")
+    layout = profile_layout(profile, derived, trajectory)
+    mark("error layout")
     code_dir = tempfile.TemporaryDirectory(prefix="modelgen-montecarlo-")
-    return {"derived": derived, "trajectory": trajectory, "layout": profile_layout(profile, derived, trajectory),
-            "make_filter": filter_factory(derived, setup.implementation, code_dir.name, setup.code),
+    make_filter = filter_factory(derived, setup.implementation, code_dir.name, setup.code)
+    mark(f"filter: write the shipped code, compile or take from the cache ({setup.implementation})")
+    return {"derived": derived, "trajectory": trajectory, "layout": layout, "make_filter": make_filter,
             "code_dir": code_dir}
 
 

@@ -9,37 +9,23 @@ from __future__ import annotations
 
 import ctypes
 import os
-import stat
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
 
-from modelgen.codegen.build import CACHE_ENV, compile_shared_library, compiler, library_cache_folder
+from modelgen.codegen.build import CACHE_ENV, compile_shared_library, library_cache_folder
+from tests.codegen.compile_cache_support import counting_compiler
 
 SOURCE = "int answer(void);\nint answer(void) { return %d; }\n"
 
 
 @pytest.fixture
 def counted_compiler(tmp_path, monkeypatch):
-    """CC is a script that appends one line per compile to a log and runs the compiler.
-
-    With a file ``barrier`` holding N beside the log, a compile first waits
-    (10 s at most) until N compiles have started: builders that race for sure.
-    """
-    real = compiler()
-    log, barrier = tmp_path / "compiles.log", tmp_path / "barrier"
-    script = tmp_path / "counting-cc"
-    script.write_text(f'#!/bin/sh\ncase " $* " in *" -shared "*)\n  echo "$*" >> "{log}"\n'
-                      f'  if [ -f "{barrier}" ]; then i=0; while [ "$(wc -l < "{log}")" -lt "$(cat "{barrier}")" ] '
-                      f'&& [ $i -lt 100 ]; do sleep 0.1; i=$((i+1)); done; fi;;\nesac\nexec {real} "$@"\n')
-    script.chmod(script.stat().st_mode | stat.S_IXUSR)
+    """CC counts its compiles (tests.codegen.compile_cache_support); the cache is a folder of this test."""
+    script, compiles = counting_compiler(tmp_path)
     monkeypatch.setenv("CC", str(script))
     monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
-
-    def compiles() -> int:
-        return len(log.read_text().splitlines()) if log.exists() else 0
-
     return compiles
 
 

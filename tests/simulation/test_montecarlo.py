@@ -150,3 +150,43 @@ def test_a_worker_killed_in_the_middle_of_a_monte_carlo_study_does_not_lose_it(s
         there = run_monte_carlo(short, paper_derived, runs=6, seed=3, client=own, on_run=kill_a_busy_worker)
     assert len(killed) == 1
     assert _same_runs(there, here)
+
+
+def test_fresh_workers_take_the_filter_the_caller_compiled_from_the_compile_cache(scenario, paper_derived, tmp_path,
+                                                                                  monkeypatch):
+    from modelgen.codegen.build import CACHE_ENV
+    from tests.codegen.compile_cache_support import counting_compiler
+
+    script, compiles = counting_compiler(tmp_path)
+    monkeypatch.setenv("CC", str(script))  # the workers started below inherit both
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
+    short = scenario.with_changes(hours=0.02)
+    here = run_monte_carlo(short, paper_derived, runs=2, seed=8, implementation="c")  # compiles once, here
+    assert compiles() == 1
+    with dask_client(workers=2) as fresh:
+        there = run_monte_carlo(short, paper_derived, runs=4, seed=8, implementation="c", client=fresh)
+        workers_with_a_filter = sum(fresh.run(_montecarlo_set_ups).values())
+    # every new worker that flew a run (short runs: one or both) built its filter from the cache, not the compiler
+    assert workers_with_a_filter >= 1 and compiles() == 1
+    assert np.array_equal(there.errors[:2], here.errors) and np.array_equal(there.sigma[:2], here.sigma)
+
+
+def _montecarlo_set_ups() -> int:
+    """On a worker: how many Monte Carlo set-ups it holds."""
+    from modelgen.cluster import _CACHE
+
+    return sum(str(key).startswith("montecarlo-") for key in _CACHE)
+
+
+def test_the_filter_code_is_generated_once_per_model_in_the_calling_process(paper_derived, monkeypatch):
+    import modelgen.codegen.generate as generate
+    from modelgen.simulation.filters import generated_filter_files
+
+    calls = []
+    real = generate.generate_code
+    monkeypatch.setattr(generate, "generate_code", lambda derived: calls.append(1) or real(derived))
+    first = generated_filter_files(paper_derived)
+    first["ned_doppler18.c"] = "changed by the caller"  # a copy: the kept files stay as generated
+    again = generated_filter_files(paper_derived)
+    assert len(calls) <= 1 and again["ned_doppler18.c"].startswith("/*")
+    assert again == real(paper_derived).files
