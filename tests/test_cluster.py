@@ -232,3 +232,25 @@ def test_a_journal_of_another_study_is_refused(tmp_path):
     path.write_text('{"study": "study-a", "tasks": 2}\n{"index": 7, "result": 2}\n')
     with pytest.raises(ModelError, match="task index 7 out of range"):
         run_tasks(abs, [(-1,), (-2,)], journal=Journal(path, "study-a", 2))
+
+
+def test_modelgen_simulate_journal_keeps_the_runs_and_refuses_another_study(tmp_path):
+    journal = tmp_path / "runs.jsonl"
+
+    def simulate(*extra: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "modelgen", "simulate", "--hours", "0.02", "--imu-rate", "20",
+                               "--runs", "2", "--workers", "1", "--filter", "reference", "--journal", str(journal),
+                               "--out", str(tmp_path / "sim"), "--force", *extra],
+                              capture_output=True, text=True, cwd=tmp_path, timeout=300)
+
+    first = simulate()
+    assert first.returncode == 0, first.stderr
+    kept = journal.read_text()
+    assert len(kept.splitlines()) == 3  # the study's header and both runs
+    again = simulate()
+    assert again.returncode == 0, again.stderr
+    assert journal.read_text() == kept  # nothing flown again, nothing appended
+    other = simulate("--seed", "1")
+    assert other.returncode == 2
+    assert "runs.jsonl:1: journal of another study or task split" in other.stderr
+    assert journal.read_text() == kept
