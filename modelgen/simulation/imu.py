@@ -150,6 +150,15 @@ def corrupt_increments(delta_theta: np.ndarray, delta_velocity: np.ndarray, dt: 
 
 # -- streamed: the same realization, a piece at a time -------------------------------------------
 
+
+@compiled
+def _measured(ideal, scale, markov, constant, dt, out):
+    """out = ideal (1 + scale) + (markov + constant) dt, row by row: :func:`corrupt_increments`' operations
+    in its order (each product and sum rounded as numpy rounds it), in one pass instead of six over the piece."""
+    for k in range(ideal.shape[0]):
+        for j in range(3):
+            out[k, j] = ideal[k, j] * (1.0 + scale[j]) + (markov[k, j] + constant[j]) * dt
+
 _SKIP_ROWS = 1 << 16  # rows of normals drawn at a time when passing over a stream (1.5 MB)
 
 
@@ -277,14 +286,10 @@ class ImuErrorCursor:
         start = self.position
         gyro_markov, accel_markov = self.markov[0].take(m), self.markov[1].take(m)
         self._record_history(start, m, gyro_markov, accel_markov)
-        measured_theta = delta_theta * (1.0 + s.gyro_scale)
-        gyro = gyro_markov + s.gyro_constant
-        gyro *= s.dt
-        measured_theta += gyro
-        measured_velocity = delta_velocity * (1.0 + s.accel_scale)
-        accel = accel_markov + s.accel_constant
-        accel *= s.dt
-        measured_velocity += accel
+        measured_theta, measured_velocity = np.empty((m, 3)), np.empty((m, 3))
+        _measured(np.asarray(delta_theta, dtype=float), s.gyro_scale, gyro_markov, s.gyro_constant, s.dt, measured_theta)
+        _measured(np.asarray(delta_velocity, dtype=float), s.accel_scale, accel_markov, s.accel_constant, s.dt,
+                  measured_velocity)
         for measured, white in zip((measured_theta, measured_velocity), self.white):
             if white is not None:
                 generator, sigma = white
