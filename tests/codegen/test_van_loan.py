@@ -17,12 +17,14 @@ import pytest
 from click.testing import CliRunner
 
 from modelgen.checks.code_check import (
+    c_run,
     check_generated,
     compare,
     python_run,
     reference_run,
     scenario_tolerance,
 )
+from modelgen.checks.embedded_check import float_tolerance
 from modelgen.cli import main
 from modelgen.codegen.build import CompiledFilter, compile_shared_library, compiler, load_python_module
 from modelgen.codegen.generate import generate_code, write_atomically
@@ -201,10 +203,16 @@ def test_cli_flag_changes_only_the_discretize_and_what_describes_it(tmp_path, pa
     def body(text: str, first: str) -> str:
         return text[text.index(first):]
 
-    py = [_without(body(read[k][f"{name}.py"], "import math"), "def _balanced_norm" if k == "taylor" else "def discretize", "# The prediction's kernel") for k in read]
+    # everything from the end of matrices_evaluate to the prediction is the discretize and its helpers
+    py = [_without(body(read[k][f"{name}.py"], "import math"), "    return system_matrix(p)", "# The prediction's kernel") for k in read]
     assert _changed_lines(*py) == ["from scipy.linalg import blas, lapack", "from scipy.linalg import blas, lapack, expm"]
 
-    c = [_without(body(read[k][f"{name}.c"], "#include"), "/* frexp" if k == "taylor" else "/* Van Loan's exact", f"void {name}_get_state") for k in read]
+    def without_discretize(source: str) -> str:
+        """The C source without what lies between matrices_evaluate and get_state (the discretize)."""
+        start = source.index("\n}\n", source.index(f"int {name}_matrices_evaluate(")) + 3
+        return source[:start] + source[source.index(f"void {name}_get_state"):]
+
+    c = [without_discretize(body(read[k][f"{name}.c"], "#include")) for k in read]
     assert _changed_lines(*c) == []
 
     header = [body(read[k][f"{name}.h"], "#ifndef") for k in read]
@@ -273,3 +281,17 @@ def test_degenerate_models_compile_strictly_and_discretize_as_the_python(name, t
     np.testing.assert_allclose(filt.Qd, qd, rtol=1e-14, atol=1e-300)
     if not derived.structure("F").any():
         assert np.array_equal(phi, np.eye(derived.n_states)) and np.array_equal(filt.Phi, phi)
+
+
+def test_float_van_loan_filter_stays_within_the_float_tolerance_of_the_exact_reference(paper_derived, tmp_path):
+    """Single precision: the paper's 240 steps within embedded_check's float tolerance, and far closer to the exact Q_d than to eq. (9)'s."""
+    options = CodegenOptions(process_noise="van-loan", scalar="float")
+    scenario = paper_scenario(paper_derived)
+    folder = write_atomically(tmp_path / "code", generate_code(paper_derived, options).files)
+    (tmp_path / "build").mkdir()
+    run = c_run(folder, paper_derived, scenario, tmp_path / "build", options)
+    exact = compare("c", run, reference_run(paper_derived, scenario, process_noise="van-loan"))
+    taylor = compare("c", run, reference_run(paper_derived, scenario))
+    tolerance = float_tolerance(paper_derived, scenario, options.taylor_order)
+    assert exact.max_scaled_P < tolerance and exact.max_scaled_x < tolerance, exact
+    assert exact.max_scaled_P < taylor.max_scaled_P / 100
