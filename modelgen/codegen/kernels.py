@@ -426,11 +426,11 @@ def update_cost(structure: FilterStructure, options: CodegenOptions | None = Non
 
 
 #: Bytes of generated text per unrolled flop of the covariance prediction (which the unrolled
-#: discretize, over the powers of F, grows with too), and the rest (templates, tables,
-#: evaluation): least squares on the built-in models, which it predicts within 17 %
-#: (ned_doppler18: 510 kB estimated, 480 kB written).
-BYTES_PER_PREDICT_FLOP = 58
-FIXED_BYTES = 235_000
+#: discretize, Horner's rule over the fill-in of Phi, grows with too), and the rest (templates,
+#: tables, evaluation): least squares of the relative error on the built-in models, which it
+#: predicts within 20 % (ned_doppler18: 376 kB estimated, 363 kB written).
+BYTES_PER_PREDICT_FLOP = 48
+FIXED_BYTES = 150_000
 
 
 #: With compact kernels (large models) the generated text grows with the states (names,
