@@ -42,8 +42,12 @@ grow with the model), exploiting the block-triangular form:
   4 N^3, and Q_d stays symmetric: its upper triangle is computed, then
   mirrored).
 
-Scratch: three N x N arrays (B, C, the sum of the B terms), one row, one
-noise vector and the balancing's 2N row and column sums.  The UD form takes
+Scratch: three N x N arrays (B, C, and S: W for the norm, then the sum of the
+B terms), two rows, one noise vector and the balancing's 2N scales, row and
+column sums (modelgen.codegen.layout); 8976 bytes for the paper's model in
+double against 6304 for the Taylor discretize's workspace
+(bench/bench_van_loan.py).  The balancing runs over F's nonzeros (the blocks
+-F and F^T) and W, not over the dense 2N x 2N block.  The UD form takes
 Gamma and q, not Q_d, so the option is refused with it
 (modelgen.codegen.options).
 """
@@ -150,24 +154,24 @@ def van_loan_series(
 
 
 def van_loan_costs(structure: FilterStructure, order: int) -> tuple[OperationCount, OperationCount]:
-    """(series at ``order`` with W's products, Q_d(h) and the balancing; one doubling): flops of the generated C.
+    """(series at ``order``, Q_d(h), W and the balancing; one doubling): flops of the generated C's loops.
 
-    Per order of the series and row: a G diag(+-q) G^T (2 nnz_G + 2 nw
-    multiplications), B F^T and C F^T (nnz_F each), the scaling by h / k
-    and the sums (N each).  Q_d(h) = Phi(h) E12 over the upper triangle;
-    a doubling is Phi Q_d, the upper triangle of (Phi Q_d) Phi^T + Q_d and
-    Phi^2.  The balancing: up to 8 sweeps over the off-diagonal entries of M
-    that can be nonzero, then the norm.
+    Divisions count as multiplications.  W: a G diag(q) G^T per row.  The
+    balancing: up to 8 sweeps and the final norm, each over the off-diagonal
+    nonzeros of F (twice: -F and F^T, a multiplication and a division each)
+    and every entry of W.  Per order of the series and row: a G diag(+-q) G^T
+    (2 nnz_G + 2 nw multiplications), B F^T and C F^T (nnz_F each), the
+    scaling by h / k and the sums (N each).  Q_d(h) = Phi(h) E12 over the
+    upper triangle; a doubling is Phi Q_d, the upper triangle of
+    (Phi Q_d) Phi^T + Q_d and Phi^2.
     """
     n = structure.n_states
     nnz_f, nnz_g, nw = int(structure.F.sum()), int(structure.G.sum()), structure.G.shape[1]
+    off = nnz_f - int(np.trace(structure.F.astype(int)))
     pairs = n * (n + 1) // 2
-    mul = order * (n * (2 * nnz_g + 2 * nw + 2 * nnz_f + 2 * n) + 1) + pairs * n
-    add = order * n * (2 * nnz_g + 2 * nnz_f + 2 * n) + pairs * (n - 1)
-    diagonal = int(np.trace(structure.F.astype(int)))
-    w_entries = int(np.count_nonzero(structure.G.astype(int) @ structure.G.astype(int).T))
-    off = 2 * (nnz_f - diagonal) + w_entries
-    mul += 8 * off + off + 2 * diagonal
-    add += 8 * 2 * off + off + 2 * diagonal
-    doubling = OperationCount(2 * n**3 + pairs * n, 2 * n * n * (n - 1) + pairs * n)
+    w_mul, w_add = n * (2 * nnz_g + nw), n * 2 * nnz_g
+    sweep_mul, sweep_add = 8 * off + 2 * n * n, 4 * off + 2 * n * n
+    mul = w_mul + 9 * sweep_mul + order * (n * (2 * nnz_g + 2 * nw + 2 * nnz_f + 2 * n) + 1) + pairs * n
+    add = w_add + 9 * sweep_add + order * n * (2 * nnz_g + 2 * nnz_f + 2 * n) + pairs * n
+    doubling = OperationCount(2 * n**3 + pairs * n, 2 * n**3 + pairs * n)
     return OperationCount(mul, add), doubling
