@@ -174,6 +174,10 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
 # -- figures ------------------------------------------------------------------------
 
 
+# The figures are matplotlib Figures of their own (no pyplot: no global figure registry to close, and the
+# trajectory figure can be drawn by a helper thread while the filter flies).
+
+
 def _fixed_margins(fig, left: float = 0.07, right: float = 0.98, bottom: float = 0.06, top: float = 0.93,
                    hspace: float = 0.3, wspace: float = 0.2) -> None:
     """Subplot margins set, not searched: ``tight_layout`` measures every tick label of every panel
@@ -235,9 +239,10 @@ def coinciding_modes(curves: dict[str, np.ndarray], tolerance: float = 0.01) -> 
 
 
 def _plot_modes(errors: dict[str, NavigationErrors], path: Path) -> Path:
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
-    fig, ax = plt.subplots(3, 1, figsize=(11, 10), sharex=True)
+    fig = Figure(figsize=(11, 10))
+    ax = fig.subplots(3, 1, sharex=True)
     panels = (
         ("horizontal position error [nmile]", lambda e: np.hypot(*e.position.T) / NMILE),
         ("horizontal velocity error [m/s]", lambda e: np.hypot(*e.velocity.T)),
@@ -256,18 +261,18 @@ def _plot_modes(errors: dict[str, NavigationErrors], path: Path) -> Path:
     ax[2].set(xlabel="time since start [h]")
     _fixed_margins(fig, left=0.08, top=0.96, hspace=0.12)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 
 def _plot_filter(result: RunResult, names: list[str], units: dict[str, str], path: Path) -> Path:
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     hours = result.times / 3600
     picks = [i for i in range(len(names))][: min(len(names), 18)]
     cols = 3
     rows = math.ceil(len(picks) / cols)
-    fig, ax = plt.subplots(rows, cols, figsize=(13, 2.1 * rows), sharex=True)
+    fig = Figure(figsize=(13, 2.1 * rows))
+    ax = fig.subplots(rows, cols, sharex=True)
     for k, i in enumerate(picks):
         a = ax.flat[k]
         a.plot(hours, result.estimation_error[:, i], lw=0.8, label="error")
@@ -281,19 +286,19 @@ def _plot_filter(result: RunResult, names: list[str], units: dict[str, str], pat
     fig.suptitle(f"Estimation error and filter 3-sigma, {result.mode} ({result.filter_name}); each panel in its state's unit")
     _fixed_margins(fig, left=0.06, top=1 - 0.8 / fig.get_figheight(), hspace=0.6, wspace=0.25)
     fig.savefig(path, dpi=100)
-    plt.close(fig)
     return path
 
 
 def _plot_monte_carlo(mc: MonteCarloResult, units: dict[str, str], path: Path) -> Path:
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     hours = mc.times / 3600
     rms, sigma = mc.ensemble_rms(), mc.mean_sigma()
     n = len(mc.state_names)
     cols = 3
     rows = math.ceil(n / cols)
-    fig, ax = plt.subplots(rows, cols, figsize=(13, 2.1 * rows), sharex=True)
+    fig = Figure(figsize=(13, 2.1 * rows))
+    ax = fig.subplots(rows, cols, sharex=True)
     for i in range(n):
         a = ax.flat[i]
         a.plot(hours, rms[:, i], label=f"ensemble rms ({_runs(mc.runs)})")
@@ -307,7 +312,6 @@ def _plot_monte_carlo(mc: MonteCarloResult, units: dict[str, str], path: Path) -
     fig.suptitle(f"Monte Carlo: actual error rms vs covariance sigma ({mc.mode}, {_runs(mc.runs)}); each panel in its state's unit")
     _fixed_margins(fig, left=0.06, top=1 - 0.8 / fig.get_figheight(), hspace=0.6, wspace=0.25)
     fig.savefig(path, dpi=100)
-    plt.close(fig)
     return path
 
 
@@ -324,10 +328,11 @@ def _runs(count: int) -> str:
 
 
 def _plot_nees(mc: MonteCarloResult, path: Path) -> Path:
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     test = mc.nees_test(0.95, start_time=mc.times[1] if len(mc.times) > 1 else 0.0)
-    fig, ax = plt.subplots(figsize=(10, 4))
+    fig = Figure(figsize=(10, 4))
+    ax = fig.subplots()
     ax.plot(test.times / 3600, test.mean_nees, label=f"ensemble mean NEES ({_runs(mc.runs)})")
     ax.axhline(test.dimension, color="k", lw=0.8, label=f"n = {test.dimension}")
     ax.axhspan(test.lower, test.upper, color="g", alpha=0.15, label="95 % chi-square band")
@@ -335,7 +340,6 @@ def _plot_nees(mc: MonteCarloResult, path: Path) -> Path:
     ax.legend()
     _fixed_margins(fig, left=0.08, bottom=0.12, top=0.9)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 
