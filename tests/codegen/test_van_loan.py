@@ -26,6 +26,7 @@ from modelgen.checks.code_check import (
 )
 from modelgen.checks.embedded_check import float_tolerance
 from modelgen.cli import main
+from modelgen.codegen import toolchain
 from modelgen.codegen.build import CompiledFilter, compile_shared_library, compiler, load_python_module
 from modelgen.codegen.generate import generate_code, write_atomically
 from modelgen.codegen.layout import ModelSizes
@@ -38,6 +39,7 @@ from modelgen.jobs import paper_parameters, paper_scenario
 from modelgen.model.loading import load_model_text
 from tests.codegen.large_model_support import large_model
 from tests.codegen.test_degenerate_models import MODELS as DEGENERATE
+from tests.embedded.embedded_support import require_tools
 
 VAN_LOAN = CodegenOptions(process_noise="van-loan")
 PACKED_FIXED_ORDER = CodegenOptions(process_noise="van-loan", storage="packed", taylor_tolerance=None)
@@ -295,3 +297,14 @@ def test_float_van_loan_filter_stays_within_the_float_tolerance_of_the_exact_ref
     tolerance = float_tolerance(paper_derived, scenario, options.taylor_order)
     assert exact.max_scaled_P < tolerance and exact.max_scaled_x < tolerance, exact
     assert exact.max_scaled_P < taylor.max_scaled_P / 100
+
+
+@require_tools(toolchain.CPPCHECK)
+def test_van_loan_c_passes_cppcheck(paper_derived, tmp_path):
+    """The Van Loan discretize's branches (double full with the accuracy rule; float packed, fixed order, recompute threshold)."""
+    for options in (
+        VAN_LOAN,
+        CodegenOptions(process_noise="van-loan", scalar="float", storage="packed", taylor_tolerance=None, recompute_threshold=1e-6),
+    ):
+        folder = write_atomically(tmp_path / options.slug(), generate_code(paper_derived, options).files)
+        toolchain.run_cppcheck([folder / "ned_doppler18.c", folder / "ned_doppler18.h"], folder)
