@@ -6,7 +6,7 @@ every 1 s, Doppler every 60 s), the generated C filter, one seed:
   * one correction mode (closed loop):
       old  -- held trajectory and sensors (every IMU increment in memory), the
               Python filter loop calling the C through ctypes once per call;
-      new  -- streamed trajectory and sensors (60-s pieces), the compiled loop
+      new  -- streamed trajectory and sensors (30-s pieces), the compiled loop
               (modelgen/simulation/native_loop.py) running mechanization, glue
               and the C filter with no Python per cycle;
     their closed-loop histories are compared bit for bit.  The new mode is

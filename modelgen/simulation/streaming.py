@@ -37,10 +37,10 @@ from modelgen.simulation.native_loop import native_supported, share_mechanizatio
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.trajectory import Trajectory
 
-#: default piece length: 60 s of IMU data (18,000 samples at 300 Hz, 864 kB of increments); Python is
-#: entered once per piece and mode, so shorter pieces cost interpreter time (10-s pieces: 0.3 s more CPU and
-#: 1 s more wall for ``modelgen simulate``'s 4-h flight) for memory nobody misses
-PIECE_SECONDS = 60.0
+#: default piece length: 30 s of IMU data (9,000 samples at 300 Hz, 432 kB of increments); Python is
+#: entered once per piece and mode, so much shorter pieces cost interpreter time (10-s pieces: 0.3 s more CPU
+#: for ``modelgen simulate``'s 4-h flight), longer ones memory (60-s pieces: 3.5 MiB more peak RSS, no CPU saved)
+PIECE_SECONDS = 30.0
 #: pieces of ideal increments generated ahead of the one flying (each by its own thread)
 PREFETCH_AHEAD = 2
 #: at most this many history rows per correction mode in a report (a longer flight keeps every k-th cycle)
