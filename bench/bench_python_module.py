@@ -46,7 +46,7 @@ Target (issue 14, item 3): ratio >= 1.0 for predict, update and discretize
 at 18, 32 and 100 states (against the bare numpy; the checked ratio shows
 what the same contract costs in numpy).
 
-usage: nice python bench/bench_python_module.py [--sizes 18 32 100]
+usage: nice python bench/bench_python_module.py [--sizes 18 32 100] [--kernel-sizes 40 48 64 80]
 """
 
 from __future__ import annotations
@@ -263,6 +263,44 @@ def measure(n: int, folder: Path) -> dict:
     return row
 
 
+def measure_kernels(n: int, folder: Path) -> dict:
+    """The two predict kernels alone at an intermediate size (a large_model of n states), for the kernel rule."""
+    derived = derive(large_model(n))
+    a = inputs(derived, synthetic_scenario(derived))
+    structure = describe(derived).structure
+    saving = kernels.dense_predict_cost(n).total - kernels.python_predict_cost(structure).total
+    x, P, Phi, Qd = (a[k] for k in ("x", "P", "Phi", "Qd"))
+    row = {"states": n, "saving_flops": int(saving), "chosen": kernels.python_predict_kernel(structure)}
+    for kernel in ("factored", "structured"):
+        module = module_for(derived, folder, kernel)
+        row[f"{kernel}_kernel_us"] = min(per_call_us(lambda: module.predict(x, P, Phi, Qd)) for _ in range(ROUNDS))
+    progress(f"{n} states predict kernels: factored {row['factored_kernel_us']:.1f} us, "
+             f"structured {row['structured_kernel_us']:.1f} us; the rule chose {row['chosen']}")
+    return row
+
+
+def kernel_markdown(rows: list[dict]) -> str:
+    lines = ["| states | flops the row classes save | factored us | structured us | chosen by the rule |",
+             "|---|---|---|---|---|"]
+    lines += [f"| {r['states']} | {r['saving_flops']:,} | {r['factored_kernel_us']:.1f} | {r['structured_kernel_us']:.1f} "
+              f"| {r['chosen']} |" for r in rows]
+    return "\n".join(lines) + "\n" + kernel_rule_note(rows)
+
+
+def kernel_rule_note(rows: list[dict]) -> str:
+    """Where the rule picks the slower of the two predict kernels (empty when it never does)."""
+    wrong = []
+    for r in rows:
+        chosen, other = r["chosen"], "structured" if r["chosen"] == "factored" else "factored"
+        chosen_us, other_us = r[f"{chosen}_kernel_us"], r[f"{other}_kernel_us"]
+        if other_us < chosen_us:
+            wrong.append(f"{r['states']} states ({other} {other_us:.1f} us against {chosen} {chosen_us:.1f})")
+    if not wrong:
+        return ""
+    return ("\nThe rule (`kernels.PYTHON_STRUCTURED_SAVING_FLOPS` = "
+            f"{kernels.PYTHON_STRUCTURED_SAVING_FLOPS:,} saved flops) picks the slower kernel at " + ", ".join(wrong) + ".\n")
+
+
 def markdown(rows: list[dict]) -> str:
     lines = ["| states | function | generated us | bare numpy us | ratio to bare | checked numpy us "
              "| ratio to checked | P test us | predict kernel: factored us | structured us | chosen |",
@@ -325,21 +363,27 @@ def figure(rows: list[dict], path: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", type=int, nargs="+", default=[18, 32, 100])
+    parser.add_argument("--kernel-sizes", type=int, nargs="*", default=[40, 48, 64, 80],
+                        help="intermediate sizes (above 32) where only the two predict kernels are timed")
     args = parser.parse_args()
     RESULTS.mkdir(exist_ok=True)
     load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
         rows = [measure(n, Path(tmp)) for n in args.sizes]
+        kernel_rows = [measure_kernels(n, Path(tmp)) for n in args.kernel_sizes]
     load_after = os.getloadavg()
     load = (f"Load average (1, 5, 15 min) on {os.cpu_count()} cores: {' '.join(f'{v:.2f}' for v in load_before)} "
             f"before, {' '.join(f'{v:.2f}' for v in load_after)} after the run.")
     table = markdown(rows)
     (RESULTS / "python_module.json").write_text(
-        json.dumps({"load_before": load_before, "load_after": load_after, "cores": os.cpu_count(), "rows": rows},
+        json.dumps({"load_before": load_before, "load_after": load_after, "cores": os.cpu_count(), "rows": rows,
+                    "predict_kernels": kernel_rows},
                    indent=2) + "\n")
     (RESULTS / "python_module.md").write_text(
         "# Generated Python module against dense numpy (bench/bench_python_module.py)\n\n"
-        + LEGEND.format(rounds=ROUNDS) + "\n" + load + "\n\n" + table)
+        + LEGEND.format(rounds=ROUNDS) + "\n" + load + "\n\n" + table
+        + ("\n## The predict kernels at intermediate sizes (large_model, CPU time per call)\n\n"
+           + kernel_markdown(kernel_rows) if kernel_rows else ""))
     progress(load)
     figure(rows, RESULTS / "python_module.png")
     print(table)
