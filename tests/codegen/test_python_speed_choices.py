@@ -25,7 +25,7 @@ from modelgen.codegen.backends.registry import backend
 from modelgen.codegen.build import load_python_module
 from modelgen.codegen.generate import describe
 from modelgen.derive import reference
-from modelgen.derive.discretization import balanced_norm
+from modelgen.derive.discretization import balanced_norm, nominal_scaling
 from tests.codegen.generated_support import write_files
 
 
@@ -116,7 +116,7 @@ def test_both_balancings_are_the_reference_to_the_bit(paper_derived, inputs, tmp
     rng = np.random.default_rng(4)
     for _ in range(5):  # values over 20 decades on the model's pattern
         G = np.where(F != 0, rng.standard_normal(F.shape) * 10.0 ** rng.integers(-10, 10, F.shape), 0.0)
-        assert module._balanced_norm(G) == balanced_norm(G)
+        assert module._balanced_norm(G) == balanced_norm(G, nominal_scaling(paper_derived))  # the D baked in at generation time
     G[2, 3] = math.nan if F[2, 3] else G[2, 3]
     G[0, 1] = math.inf
     assert not math.isfinite(module._balanced_norm(G))
