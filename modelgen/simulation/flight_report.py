@@ -91,8 +91,8 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
 
     ``implementation`` is the filter of the three correction-mode runs: the
     generated ``c`` (compiled now) or ``python``, or the numpy ``reference``.
-    The Monte Carlo runs use the reference, which the conformance tests hold
-    to the generated code within 1e-12 (scaled covariance difference).
+    The Monte Carlo runs fly the same filter, as dask tasks on ``client``
+    (a local cluster of ``workers`` when None).
     ``derived`` is the profile's ``filter.model``, derived by the caller (the
     main job hands down the model it derived once).  ``history_csv`` also
     writes each mode's history, as it is flown, to ``history_<mode>.csv``
