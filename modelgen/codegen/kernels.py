@@ -348,14 +348,15 @@ def dense_predict_cost(n_states: int) -> OperationCount:
     return OperationCount(2 * n**3 + n * n, 2 * n * n * (n - 1) + n * (n - 1) + n * n)
 
 
-#: Flops the structured Python prediction (gathers by row class of Phi) must save over the dense
-#: products to be chosen instead of the factored one (the Cholesky factor of the contract's
-#: check reused: P_n = (Phi L)(Phi L)^T + Q_d by BLAS trmm and syrk).  bench/bench_python_module.py
-#: times both (CPU time, one BLAS thread): the gathers, a dozen numpy calls each copying rows or
-#: columns of P, lose at 18 states (saving 15k flops: 30 against 14 us) and at 32 (106k:
-#: 32-36 against 20 us) and win at 100 (3.7M: 111 against 123-126 us).  The threshold sits
-#: between, nearer the win.
-PYTHON_STRUCTURED_SAVING_FLOPS = 2_000_000
+#: Flops the structured Python prediction (by row class of Phi: D P D elementwise plus one
+#: product of the general rows) must save over the dense products to be chosen instead of the
+#: factored one (the Cholesky factor of the contract's check reused: P_n = (Phi L)(Phi L)^T + Q_d
+#: by BLAS trmm and syrk).  bench/bench_python_module.py times both (CPU time per call, one BLAS
+#: thread, bench/results/python_module.md): factored wins at 18 states (saving 15k flops: 10.3
+#: against 16.6 us), 32 (106k: 16.3 against 20.4 us) and 40 (215k: 21.5 against 24.3 us), ties at
+#: 48 (383k: 27.4 against 28.1 us); structured wins at 64 (939k: 37.5 against 45.6 us), 80 (1.9M:
+#: 51.8 against 70.5 us) and 100 (3.7M: 74.7 against 113.3 us).  The threshold sits between 48 and 64.
+PYTHON_STRUCTURED_SAVING_FLOPS = 500_000
 
 
 def python_predict_kernel(structure: FilterStructure) -> str:
