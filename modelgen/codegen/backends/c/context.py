@@ -11,9 +11,9 @@ from modelgen.codegen.discretize_kernels import DiscretizeBlock, horner_level_na
 from modelgen.codegen.kernels import KernelBlock, compact_predict_tables
 from modelgen.codegen.layout import CLayout, UnrolledDiscretizeSizes, c_layout
 from modelgen.codegen.structure import FilterStructure
+from modelgen.codegen.van_loan import QD_MARGIN
 from modelgen.derive.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range
 from modelgen.errors import ModelError
-from modelgen.codegen.van_loan import QD_MARGIN
 
 BANNER = "/* GENERATED FILE - DO NOT EDIT (modelgen) */"
 HASH_BANNER = "# GENERATED FILE - DO NOT EDIT (modelgen)"
@@ -307,13 +307,13 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         else None,  # a tolerance within the rounding of the arithmetic (any in float): the fixed order
         "recompute_threshold": c_number(options.recompute_threshold, options.scalar) if options.recompute_threshold is not None else None,
         "discretize_unrolled": bool(unrolled),
-        "balance_entries": [(e, i, j) for e, (i, j) in enumerate(structure.entries("F")) if i != j],
-        "balance_rows": sorted({i for i, j in structure.entries("F") if i != j}),
-        "balance_columns": sorted({j for i, j in structure.entries("F") if i != j}),
         "van_loan": options.van_loan,
         "qd_margin": QD_MARGIN,
         "discretize_template": "c_discretize_van_loan.c.j2" if options.van_loan else "c_discretize.c.j2",
         "taylor_loop_tables": not unrolled and not options.van_loan,  # the loop Taylor discretize's index tables
+        "balance_entries": [(e, i, j) for e, (i, j) in enumerate(structure.entries("F")) if i != j],
+        "balance_rows": sorted({i for i, j in structure.entries("F") if i != j}),
+        "balance_columns": sorted({j for i, j in structure.entries("F") if i != j}),
         "balance_states": _balance_states(structure),
         "norm_rows": _norm_rows(structure),
         "balance_scaling": list(scaling) if scaling is not None else None,
