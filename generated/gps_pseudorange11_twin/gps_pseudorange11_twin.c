@@ -12,8 +12,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 37 operations after CSE
- *   discretize: 3412 mul + 2673 add = 6085 flops
- *   discretize, each doubling (long steps): 879 mul + 751 add = 1630 flops
+ *   discretize: 2180 mul + 1405 add = 3585 flops
+ *   discretize, each doubling (long steps): 879 mul + 880 add = 1759 flops
  *   predict (C): 1061 mul + 934 add = 1995 flops
  *   predict (Python): 2420 mul + 2321 add = 4741 flops
  *   predict (dense, for comparison): 2673 mul + 2541 add = 5214 flops
@@ -79,6 +79,11 @@ const unsigned char gps_pseudorange11_twin_H_col[16] = { 0, 1, 2, 9, 0, 1, 2, 9,
    the relative accuracy of Phi against e^{F T} that chooses the doublings and the order
    (modelgen.derive.discretization.taylor_plan; at least the unit roundoff). */
 #define GPS_PSEUDORANGE11_TWIN_MAX_DOUBLINGS 64
+/* The norm that chooses them is ||F||_D = max_i sum_j |F_ij| d_j / d_i with D = diag(2^e) fixed at
+   generation time: Osborne's balancing of F at the model's check operating point
+   (modelgen.derive.discretization.nominal_scaling), e = { 11, 12, 5, 0, 1, -1, -16, -16, -15, 40,
+           -40 }.
+   Any fixed D gives a valid bound; the Python module and the reference use the same D. */
 #define GPS_PSEUDORANGE11_TWIN_TAYLOR_TOLERANCE 1e-12
 /* Rows of Phi that are exactly e_i (states with an empty row of F). */
 #define GPS_PSEUDORANGE11_TWIN_N_UNIT_ROWS 1
@@ -242,21 +247,6 @@ int gps_pseudorange11_twin_matrices_evaluate(const gps_pseudorange11_twin_params
     return (check != 0.0) ? GPS_PSEUDORANGE11_TWIN_ERR_NONFINITE : GPS_PSEUDORANGE11_TWIN_OK;
 }
 
-/* frexp's exponent of a positive finite x (x = f 2^e, f in [0.5, 1)), read from its IEEE-754 bits
-   without a call; a subnormal x goes through frexp. */
-static int binary_exponent(const gps_pseudorange11_twin_scalar x)
-{
-    uint64_t bits;
-    int e;
-    memcpy(&bits, &x, sizeof bits);
-    e = (int)((bits >> 52) & 0x7FFu);
-    if (e == 0) {
-        (void)frexp(x, &e);
-        return e;
-    }
-    return e - 1022;
-}
-
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static gps_pseudorange11_twin_scalar power_of_two(const int e)
 {
@@ -266,211 +256,55 @@ static gps_pseudorange11_twin_scalar power_of_two(const int e)
     return x;
 }
 
-/* One state's step of Osborne's balancing (modelgen.derive.discretization.sweep_exponent): 2^k ~
-   sqrt(row / column) within [-8, 8], the exponent kept within [-40, 40]; 1 when it changed. */
-static int balance_step(const gps_pseudorange11_twin_scalar row, const gps_pseudorange11_twin_scalar
-        column, signed char *exponent)
-{
-    int step = 0, next;
-    if (row > 0.0 && column > 0.0) {
-        step = binary_exponent(row) - binary_exponent(column); /* log2(row / column) within 1 */
-        step = (step >= 0) ? step / 2 : -((1 - step) / 2); /* floor(step / 2) */
-        step = step > 8 ? 8 : (step < -8 ? -8 : step);
-    } else if (column > 0.0) {
-        step = -8; /* drives others, driven by none */
-    } else if (row > 0.0) {
-        step = 8; /* driven, drives none */
-    }
-    next = *exponent + step;
-    next = next > 40 ? 40 : (next < -40 ? -40 : next);
-    if (next == *exponent) {
-        return 0;
-    }
-    *exponent = (signed char)next;
-    return 1;
-}
 
-/* ||F||_D = max_i sum_j |F_ij| d_j / d_i (modelgen/derive/discretization.py): D = 2^exponent from
-   at most 8 Jacobi sweeps of Osborne's balancing in powers of two, stopped at a fixed point; the
-   sums in the reference's order (row by row), d_j / d_i as one exact power of two. */
+/* ||F||_D = max_i sum_j |F_ij| d_j / d_i (modelgen/derive/discretization.py) with D = 2^e fixed at
+   generation time: Osborne's balancing of F at the model's check operating point (nominal_scaling;
+   any D gives a valid bound, so one D serves every operating point); the sums in the reference's
+   order (row by row), d_j / d_i an exact power of two. */
 static gps_pseudorange11_twin_scalar balanced_norm(const gps_pseudorange11_twin_matrices *restrict
-        m, gps_pseudorange11_twin_discretize_scratch *restrict w)
+        m)
 {
     gps_pseudorange11_twin_scalar v, norm = 0.0;
-    signed char exponent[GPS_PSEUDORANGE11_TWIN_N_STATES]; /* within [-40, 40] */
-    int i, k, changed;
-    for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_STATES; ++i) {
-        exponent[i] = 0;
-    }
-    for (k = 0, changed = 1; k < 8 && changed; ++k) {
-        changed = 0; /* a sweep that changes no scale is a fixed point: stop */
-        w->row_sum[0] = 0.0;
-        w->row_sum[1] = 0.0;
-        w->row_sum[2] = 0.0;
-        w->row_sum[3] = 0.0;
-        w->row_sum[4] = 0.0;
-        w->row_sum[5] = 0.0;
-        w->row_sum[6] = 0.0;
-        w->row_sum[7] = 0.0;
-        w->row_sum[8] = 0.0;
-        w->row_sum[9] = 0.0;
-        w->col_sum[0] = 0.0;
-        w->col_sum[1] = 0.0;
-        w->col_sum[2] = 0.0;
-        w->col_sum[3] = 0.0;
-        w->col_sum[4] = 0.0;
-        w->col_sum[5] = 0.0;
-        w->col_sum[6] = 0.0;
-        w->col_sum[7] = 0.0;
-        w->col_sum[8] = 0.0;
-        w->col_sum[10] = 0.0;
-        v = fabs(m->F[0]) * power_of_two(exponent[1] - exponent[0]);
-        w->row_sum[0] += v;
-        w->col_sum[1] += v;
-        v = fabs(m->F[1]) * power_of_two(exponent[2] - exponent[0]);
-        w->row_sum[0] += v;
-        w->col_sum[2] += v;
-        v = fabs(m->F[2]) * power_of_two(exponent[3] - exponent[0]);
-        w->row_sum[0] += v;
-        w->col_sum[3] += v;
-        v = fabs(m->F[3]) * power_of_two(exponent[0] - exponent[1]);
-        w->row_sum[1] += v;
-        w->col_sum[0] += v;
-        v = fabs(m->F[4]) * power_of_two(exponent[2] - exponent[1]);
-        w->row_sum[1] += v;
-        w->col_sum[2] += v;
-        v = fabs(m->F[5]) * power_of_two(exponent[4] - exponent[1]);
-        w->row_sum[1] += v;
-        w->col_sum[4] += v;
-        v = fabs(m->F[6]) * power_of_two(exponent[0] - exponent[2]);
-        w->row_sum[2] += v;
-        w->col_sum[0] += v;
-        v = fabs(m->F[7]) * power_of_two(exponent[1] - exponent[2]);
-        w->row_sum[2] += v;
-        w->col_sum[1] += v;
-        v = fabs(m->F[8]) * power_of_two(exponent[5] - exponent[2]);
-        w->row_sum[2] += v;
-        w->col_sum[5] += v;
-        v = fabs(m->F[9]) * power_of_two(exponent[0] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[0] += v;
-        v = fabs(m->F[10]) * power_of_two(exponent[4] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[4] += v;
-        v = fabs(m->F[11]) * power_of_two(exponent[5] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[5] += v;
-        v = fabs(m->F[12]) * power_of_two(exponent[7] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[7] += v;
-        v = fabs(m->F[13]) * power_of_two(exponent[8] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[8] += v;
-        v = fabs(m->F[14]) * power_of_two(exponent[1] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[1] += v;
-        v = fabs(m->F[15]) * power_of_two(exponent[3] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[3] += v;
-        v = fabs(m->F[16]) * power_of_two(exponent[5] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[5] += v;
-        v = fabs(m->F[17]) * power_of_two(exponent[6] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[6] += v;
-        v = fabs(m->F[18]) * power_of_two(exponent[8] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[8] += v;
-        v = fabs(m->F[19]) * power_of_two(exponent[2] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[2] += v;
-        v = fabs(m->F[20]) * power_of_two(exponent[3] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[3] += v;
-        v = fabs(m->F[21]) * power_of_two(exponent[4] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[4] += v;
-        v = fabs(m->F[22]) * power_of_two(exponent[6] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[6] += v;
-        v = fabs(m->F[23]) * power_of_two(exponent[7] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[7] += v;
-        v = fabs(m->F[24]) * power_of_two(exponent[7] - exponent[6]);
-        w->row_sum[6] += v;
-        w->col_sum[7] += v;
-        v = fabs(m->F[25]) * power_of_two(exponent[8] - exponent[6]);
-        w->row_sum[6] += v;
-        w->col_sum[8] += v;
-        v = fabs(m->F[26]) * power_of_two(exponent[6] - exponent[7]);
-        w->row_sum[7] += v;
-        w->col_sum[6] += v;
-        v = fabs(m->F[27]) * power_of_two(exponent[8] - exponent[7]);
-        w->row_sum[7] += v;
-        w->col_sum[8] += v;
-        v = fabs(m->F[28]) * power_of_two(exponent[6] - exponent[8]);
-        w->row_sum[8] += v;
-        w->col_sum[6] += v;
-        v = fabs(m->F[29]) * power_of_two(exponent[7] - exponent[8]);
-        w->row_sum[8] += v;
-        w->col_sum[7] += v;
-        v = fabs(m->F[30]) * power_of_two(exponent[10] - exponent[9]);
-        w->row_sum[9] += v;
-        w->col_sum[10] += v;
-        /* a state with no off-diagonal entry in its row (column) of F has a zero row (column)
-                sum */
-        changed |= balance_step(w->row_sum[0], w->col_sum[0], &exponent[0]);
-        changed |= balance_step(w->row_sum[1], w->col_sum[1], &exponent[1]);
-        changed |= balance_step(w->row_sum[2], w->col_sum[2], &exponent[2]);
-        changed |= balance_step(w->row_sum[3], w->col_sum[3], &exponent[3]);
-        changed |= balance_step(w->row_sum[4], w->col_sum[4], &exponent[4]);
-        changed |= balance_step(w->row_sum[5], w->col_sum[5], &exponent[5]);
-        changed |= balance_step(w->row_sum[6], w->col_sum[6], &exponent[6]);
-        changed |= balance_step(w->row_sum[7], w->col_sum[7], &exponent[7]);
-        changed |= balance_step(w->row_sum[8], w->col_sum[8], &exponent[8]);
-        changed |= balance_step(w->row_sum[9], 0.0, &exponent[9]);
-        changed |= balance_step(0.0, w->col_sum[10], &exponent[10]);
-    }
-    v = fabs(m->F[0]) * power_of_two(exponent[1] - exponent[0]) + fabs(m->F[1]) *
-            power_of_two(exponent[2] - exponent[0]) + fabs(m->F[2]) * power_of_two(exponent[3] -
-            exponent[0]);
+    v = fabs(m->F[0]) * 2.0 + fabs(m->F[1]) * 0.015625 + fabs(m->F[2]) * 0.00048828125;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[3]) * power_of_two(exponent[0] - exponent[1]) + fabs(m->F[4]) *
-            power_of_two(exponent[2] - exponent[1]) + fabs(m->F[5]) * power_of_two(exponent[4] -
-            exponent[1]);
+    v = fabs(m->F[3]) * 0.5 + fabs(m->F[4]) * 0.0078125 + fabs(m->F[5]) * 0.00048828125;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[6]) * power_of_two(exponent[0] - exponent[2]) + fabs(m->F[7]) *
-            power_of_two(exponent[1] - exponent[2]) + fabs(m->F[8]) * power_of_two(exponent[5] -
-            exponent[2]);
+    v = fabs(m->F[6]) * 64.0 + fabs(m->F[7]) * 128.0 + fabs(m->F[8]) * 0.015625;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[9]) * power_of_two(exponent[0] - exponent[3]) + fabs(m->F[10]) *
-            power_of_two(exponent[4] - exponent[3]) + fabs(m->F[11]) * power_of_two(exponent[5] -
-            exponent[3]) + fabs(m->F[12]) * power_of_two(exponent[7] - exponent[3]) + fabs(m->F[13])
-            * power_of_two(exponent[8] - exponent[3]);
+    v = fabs(m->F[9]) * 2048.0 + fabs(m->F[10]) * 2.0 + fabs(m->F[11]) * 0.5 + fabs(m->F[12]) *
+            1.52587890625e-05 + fabs(m->F[13]) * 3.0517578125e-05;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[14]) * power_of_two(exponent[1] - exponent[4]) + fabs(m->F[15]) *
-            power_of_two(exponent[3] - exponent[4]) + fabs(m->F[16]) * power_of_two(exponent[5] -
-            exponent[4]) + fabs(m->F[17]) * power_of_two(exponent[6] - exponent[4]) + fabs(m->F[18])
-            * power_of_two(exponent[8] - exponent[4]);
+    v = fabs(m->F[14]) * 2048.0 + fabs(m->F[15]) * 0.5 + fabs(m->F[16]) * 0.25 + fabs(m->F[17]) *
+            7.62939453125e-06 + fabs(m->F[18]) * 1.52587890625e-05;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[19]) * power_of_two(exponent[2] - exponent[5]) + fabs(m->F[20]) *
-            power_of_two(exponent[3] - exponent[5]) + fabs(m->F[21]) * power_of_two(exponent[4] -
-            exponent[5]) + fabs(m->F[22]) * power_of_two(exponent[6] - exponent[5]) + fabs(m->F[23])
-            * power_of_two(exponent[7] - exponent[5]);
+    v = fabs(m->F[19]) * 64.0 + fabs(m->F[20]) * 2.0 + fabs(m->F[21]) * 4.0 + fabs(m->F[22]) *
+            3.0517578125e-05 + fabs(m->F[23]) * 3.0517578125e-05;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[24]) * power_of_two(exponent[7] - exponent[6]) + fabs(m->F[25]) *
-            power_of_two(exponent[8] - exponent[6]);
+    v = fabs(m->F[24]) + fabs(m->F[25]) * 2.0;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[26]) * power_of_two(exponent[6] - exponent[7]) + fabs(m->F[27]) *
-            power_of_two(exponent[8] - exponent[7]);
+    v = fabs(m->F[26]) + fabs(m->F[27]) * 2.0;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[28]) * power_of_two(exponent[6] - exponent[8]) + fabs(m->F[29]) *
-            power_of_two(exponent[7] - exponent[8]);
+    v = fabs(m->F[28]) * 0.5 + fabs(m->F[29]) * 0.5;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[30]) * power_of_two(exponent[10] - exponent[9]);
+    v = fabs(m->F[30]) * 8.271806125530277e-25;
     norm = v > norm ? v : norm;
     return norm;
 }
+
+/* 1/(k+1)!, k = 0..TAYLOR_ORDER: the diagonal of R_k in the Horner chain (the order is chosen at
+        run time). */
+static const gps_pseudorange11_twin_scalar taylor_coefficient[10] = {
+    1.0 / 1.0,
+    1.0 / 2.0,
+    1.0 / 6.0,
+    1.0 / 24.0,
+    1.0 / 120.0,
+    1.0 / 720.0,
+    1.0 / 5040.0,
+    1.0 / 40320.0,
+    1.0 / 362880.0,
+    1.0 / 3628800.0
+};
 
 /* 2^(s+1) e^theta rho_(m-1)(theta), rho_m(theta) = theta^(m+1) / (m+1)! (m+2) / (m+2-theta): the
    bound on the relative error of Phi of order m after s doublings (growth = e^theta), one order of
@@ -525,12 +359,10 @@ static int taylor_plan(const gps_pseudorange11_twin_scalar norm, const gps_pseud
 #else
 #define GPS_PSEUDORANGE11_TWIN_BLOCK static
 #endif
-GPS_PSEUDORANGE11_TWIN_BLOCK void taylor_order_1(const gps_pseudorange11_twin_matrices *restrict m,
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_discretize_scratch
-        *restrict w, const gps_pseudorange11_twin_scalar h)
+GPS_PSEUDORANGE11_TWIN_BLOCK void horner_input(const gps_pseudorange11_twin_matrices *restrict m,
+        gps_pseudorange11_twin_discretize_scratch *restrict w, const gps_pseudorange11_twin_scalar
+        h)
 {
-    const gps_pseudorange11_twin_scalar one = 1.0;
-    const gps_pseudorange11_twin_scalar c2 = 1.0 / 2.0;
     w->fh[0] = m->F[0]*h;
     w->fh[1] = m->F[1]*h;
     w->fh[2] = m->F[2]*h;
@@ -562,1709 +394,674 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void taylor_order_1(const gps_pseudorange11_twin_ma
     w->fh[28] = m->F[28]*h;
     w->fh[29] = m->F[29]*h;
     w->fh[30] = m->F[30]*h;
-    w->S[0] = one;
-    w->S[1] = w->fh[0]*c2;
-    w->S[2] = w->fh[1]*c2;
-    w->S[3] = w->fh[2]*c2;
+}
+
+GPS_PSEUDORANGE11_TWIN_BLOCK void horner_level_1_into_S(gps_pseudorange11_twin_discretize_scratch
+        *restrict w, const gps_pseudorange11_twin_scalar c_out, const gps_pseudorange11_twin_scalar
+        c_in)
+{
+    w->S[0] = c_out;
+    w->S[1] = w->fh[0]*c_in;
+    w->S[2] = w->fh[1]*c_in;
+    w->S[3] = w->fh[2]*c_in;
+    w->S[9] = w->fh[3]*c_in;
+    w->S[10] = c_out;
+    w->S[11] = w->fh[4]*c_in;
+    w->S[13] = w->fh[5]*c_in;
+    w->S[18] = w->fh[6]*c_in;
+    w->S[19] = w->fh[7]*c_in;
+    w->S[20] = c_out;
+    w->S[23] = w->fh[8]*c_in;
+    w->S[27] = w->fh[9]*c_in;
+    w->S[30] = c_out;
+    w->S[31] = w->fh[10]*c_in;
+    w->S[32] = w->fh[11]*c_in;
+    w->S[34] = w->fh[12]*c_in;
+    w->S[35] = w->fh[13]*c_in;
+    w->S[37] = w->fh[14]*c_in;
+    w->S[39] = w->fh[15]*c_in;
+    w->S[40] = c_out;
+    w->S[41] = w->fh[16]*c_in;
+    w->S[42] = w->fh[17]*c_in;
+    w->S[44] = w->fh[18]*c_in;
+    w->S[47] = w->fh[19]*c_in;
+    w->S[48] = w->fh[20]*c_in;
+    w->S[49] = w->fh[21]*c_in;
+    w->S[50] = c_out;
+    w->S[51] = w->fh[22]*c_in;
+    w->S[52] = w->fh[23]*c_in;
+    w->S[54] = c_out;
+    w->S[55] = w->fh[24]*c_in;
+    w->S[56] = w->fh[25]*c_in;
+    w->S[57] = w->fh[26]*c_in;
+    w->S[58] = c_out;
+    w->S[59] = w->fh[27]*c_in;
+    w->S[60] = w->fh[28]*c_in;
+    w->S[61] = w->fh[29]*c_in;
+    w->S[62] = c_out;
+    w->S[63] = c_out;
+    w->S[64] = w->fh[30]*c_in;
     w->S[4] = 0;
     w->S[5] = 0;
     w->S[6] = 0;
     w->S[7] = 0;
     w->S[8] = 0;
-    w->S[9] = w->fh[3]*c2;
-    w->S[10] = one;
-    w->S[11] = w->fh[4]*c2;
     w->S[12] = 0;
-    w->S[13] = w->fh[5]*c2;
     w->S[14] = 0;
     w->S[15] = 0;
     w->S[16] = 0;
     w->S[17] = 0;
-    w->S[18] = w->fh[6]*c2;
-    w->S[19] = w->fh[7]*c2;
-    w->S[20] = one;
     w->S[21] = 0;
     w->S[22] = 0;
-    w->S[23] = w->fh[8]*c2;
     w->S[24] = 0;
     w->S[25] = 0;
     w->S[26] = 0;
-    w->S[27] = w->fh[9]*c2;
     w->S[28] = 0;
     w->S[29] = 0;
-    w->S[30] = one;
-    w->S[31] = w->fh[10]*c2;
-    w->S[32] = w->fh[11]*c2;
     w->S[33] = 0;
-    w->S[34] = w->fh[12]*c2;
-    w->S[35] = w->fh[13]*c2;
     w->S[36] = 0;
-    w->S[37] = w->fh[14]*c2;
     w->S[38] = 0;
-    w->S[39] = w->fh[15]*c2;
-    w->S[40] = one;
-    w->S[41] = w->fh[16]*c2;
-    w->S[42] = w->fh[17]*c2;
     w->S[43] = 0;
-    w->S[44] = w->fh[18]*c2;
     w->S[45] = 0;
     w->S[46] = 0;
-    w->S[47] = w->fh[19]*c2;
-    w->S[48] = w->fh[20]*c2;
-    w->S[49] = w->fh[21]*c2;
-    w->S[50] = one;
-    w->S[51] = w->fh[22]*c2;
-    w->S[52] = w->fh[23]*c2;
     w->S[53] = 0;
-    w->S[54] = one;
-    w->S[55] = w->fh[24]*c2;
-    w->S[56] = w->fh[25]*c2;
-    w->S[57] = w->fh[26]*c2;
-    w->S[58] = one;
-    w->S[59] = w->fh[27]*c2;
-    w->S[60] = w->fh[28]*c2;
-    w->S[61] = w->fh[29]*c2;
-    w->S[62] = one;
-    w->S[63] = one;
-    w->S[64] = w->fh[30]*c2;
-    t->Phi[0][1] = t->Phi[0][1] + w->fh[0];
-    t->Phi[0][2] = t->Phi[0][2] + w->fh[1];
-    t->Phi[0][3] = t->Phi[0][3] + w->fh[2];
-    t->Phi[1][0] = t->Phi[1][0] + w->fh[3];
-    t->Phi[1][2] = t->Phi[1][2] + w->fh[4];
-    t->Phi[1][4] = t->Phi[1][4] + w->fh[5];
-    t->Phi[2][0] = t->Phi[2][0] + w->fh[6];
-    t->Phi[2][1] = t->Phi[2][1] + w->fh[7];
-    t->Phi[2][5] = t->Phi[2][5] + w->fh[8];
-    t->Phi[3][0] = t->Phi[3][0] + w->fh[9];
-    t->Phi[3][4] = t->Phi[3][4] + w->fh[10];
-    t->Phi[3][5] = t->Phi[3][5] + w->fh[11];
-    t->Phi[3][7] = t->Phi[3][7] + w->fh[12];
-    t->Phi[3][8] = t->Phi[3][8] + w->fh[13];
-    t->Phi[4][1] = t->Phi[4][1] + w->fh[14];
-    t->Phi[4][3] = t->Phi[4][3] + w->fh[15];
-    t->Phi[4][5] = t->Phi[4][5] + w->fh[16];
-    t->Phi[4][6] = t->Phi[4][6] + w->fh[17];
-    t->Phi[4][8] = t->Phi[4][8] + w->fh[18];
-    t->Phi[5][2] = t->Phi[5][2] + w->fh[19];
-    t->Phi[5][3] = t->Phi[5][3] + w->fh[20];
-    t->Phi[5][4] = t->Phi[5][4] + w->fh[21];
-    t->Phi[5][6] = t->Phi[5][6] + w->fh[22];
-    t->Phi[5][7] = t->Phi[5][7] + w->fh[23];
-    t->Phi[6][7] = t->Phi[6][7] + w->fh[24];
-    t->Phi[6][8] = t->Phi[6][8] + w->fh[25];
-    t->Phi[7][6] = t->Phi[7][6] + w->fh[26];
-    t->Phi[7][8] = t->Phi[7][8] + w->fh[27];
-    t->Phi[8][6] = t->Phi[8][6] + w->fh[28];
-    t->Phi[8][7] = t->Phi[8][7] + w->fh[29];
-    t->Phi[9][10] = t->Phi[9][10] + w->fh[30];
 }
 
-GPS_PSEUDORANGE11_TWIN_BLOCK void taylor_order_2(gps_pseudorange11_twin_transition *restrict t,
-        gps_pseudorange11_twin_discretize_scratch *restrict w)
+GPS_PSEUDORANGE11_TWIN_BLOCK void horner_level_1_into_term(gps_pseudorange11_twin_discretize_scratch
+        *restrict w, const gps_pseudorange11_twin_scalar c_out, const gps_pseudorange11_twin_scalar
+        c_in)
 {
-    const gps_pseudorange11_twin_scalar ck = 1.0 / 2.0;
-    const gps_pseudorange11_twin_scalar cs = 1.0 / 6.0;
-    w->term[0][0] = w->fh[0]*w->fh[3] + w->fh[1]*w->fh[6] + w->fh[2]*w->fh[9];
-    w->term[0][1] = w->fh[1]*w->fh[7];
-    w->term[0][2] = w->fh[0]*w->fh[4];
-    w->term[0][3] = w->fh[0]*w->fh[5] + w->fh[2]*w->fh[10];
-    w->term[0][4] = w->fh[1]*w->fh[8] + w->fh[2]*w->fh[11];
-    w->term[0][5] = w->fh[2]*w->fh[12];
-    w->term[0][6] = w->fh[2]*w->fh[13];
-    w->term[0][7] = w->fh[4]*w->fh[6];
-    w->term[0][8] = w->fh[3]*w->fh[0] + w->fh[4]*w->fh[7] + w->fh[5]*w->fh[14];
-    w->term[0][9] = w->fh[3]*w->fh[1];
-    w->term[0][10] = w->fh[3]*w->fh[2] + w->fh[5]*w->fh[15];
-    w->term[0][11] = w->fh[4]*w->fh[8] + w->fh[5]*w->fh[16];
-    w->term[0][12] = w->fh[5]*w->fh[17];
-    w->term[0][13] = w->fh[5]*w->fh[18];
-    w->term[0][14] = w->fh[7]*w->fh[3];
-    w->term[0][15] = w->fh[6]*w->fh[0];
-    w->term[0][16] = w->fh[6]*w->fh[1] + w->fh[7]*w->fh[4] + w->fh[8]*w->fh[19];
-    w->term[0][17] = w->fh[6]*w->fh[2] + w->fh[8]*w->fh[20];
-    w->term[0][18] = w->fh[7]*w->fh[5] + w->fh[8]*w->fh[21];
-    w->term[0][19] = w->fh[8]*w->fh[22];
-    w->term[0][20] = w->fh[8]*w->fh[23];
-    w->term[0][21] = w->fh[9]*w->fh[0] + w->fh[10]*w->fh[14];
-    w->term[0][22] = w->fh[9]*w->fh[1] + w->fh[11]*w->fh[19];
-    w->term[0][23] = w->fh[9]*w->fh[2] + w->fh[10]*w->fh[15] + w->fh[11]*w->fh[20];
-    w->term[0][24] = w->fh[11]*w->fh[21];
-    w->term[0][25] = w->fh[10]*w->fh[16];
-    w->term[0][26] = w->fh[10]*w->fh[17] + w->fh[11]*w->fh[22] + w->fh[12]*w->fh[26] +
-            w->fh[13]*w->fh[28];
-    w->term[0][27] = w->fh[11]*w->fh[23] + w->fh[13]*w->fh[29];
-    w->term[0][28] = w->fh[10]*w->fh[18] + w->fh[12]*w->fh[27];
-    w->term[0][29] = w->fh[14]*w->fh[3] + w->fh[15]*w->fh[9];
-    w->term[0][30] = w->fh[14]*w->fh[4] + w->fh[16]*w->fh[19];
-    w->term[0][31] = w->fh[16]*w->fh[20];
-    w->term[0][32] = w->fh[14]*w->fh[5] + w->fh[15]*w->fh[10] + w->fh[16]*w->fh[21];
-    w->term[0][33] = w->fh[15]*w->fh[11];
-    w->term[0][34] = w->fh[16]*w->fh[22] + w->fh[18]*w->fh[28];
-    w->term[0][35] = w->fh[15]*w->fh[12] + w->fh[16]*w->fh[23] + w->fh[17]*w->fh[24] +
-            w->fh[18]*w->fh[29];
-    w->term[0][36] = w->fh[15]*w->fh[13] + w->fh[17]*w->fh[25];
-    w->term[0][37] = w->fh[19]*w->fh[6] + w->fh[20]*w->fh[9];
-    w->term[0][38] = w->fh[19]*w->fh[7] + w->fh[21]*w->fh[14];
-    w->term[0][39] = w->fh[21]*w->fh[15];
-    w->term[0][40] = w->fh[20]*w->fh[10];
-    w->term[0][41] = w->fh[19]*w->fh[8] + w->fh[20]*w->fh[11] + w->fh[21]*w->fh[16];
-    w->term[0][42] = w->fh[21]*w->fh[17] + w->fh[23]*w->fh[26];
-    w->term[0][43] = w->fh[20]*w->fh[12] + w->fh[22]*w->fh[24];
-    w->term[0][44] = w->fh[20]*w->fh[13] + w->fh[21]*w->fh[18] + w->fh[22]*w->fh[25] +
-            w->fh[23]*w->fh[27];
-    w->term[0][45] = w->fh[24]*w->fh[26] + w->fh[25]*w->fh[28];
-    w->term[0][46] = w->fh[25]*w->fh[29];
-    w->term[0][47] = w->fh[24]*w->fh[27];
-    w->term[0][48] = w->fh[27]*w->fh[28];
-    w->term[0][49] = w->fh[26]*w->fh[24] + w->fh[27]*w->fh[29];
-    w->term[0][50] = w->fh[26]*w->fh[25];
-    w->term[0][51] = w->fh[29]*w->fh[26];
-    w->term[0][52] = w->fh[28]*w->fh[24];
-    w->term[0][53] = w->fh[28]*w->fh[25] + w->fh[29]*w->fh[27];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[0][0]*ck;
-    w->S[0] = w->S[0] + w->term[0][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[0][1]*ck;
-    w->S[1] = w->S[1] + w->term[0][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[0][2]*ck;
-    w->S[2] = w->S[2] + w->term[0][2]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[0][3]*ck;
-    w->S[4] = w->S[4] + w->term[0][3]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[0][4]*ck;
-    w->S[5] = w->S[5] + w->term[0][4]*cs;
-    t->Phi[0][7] = t->Phi[0][7] + w->term[0][5]*ck;
-    w->S[7] = w->S[7] + w->term[0][5]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[0][6]*ck;
-    w->S[8] = w->S[8] + w->term[0][6]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[0][7]*ck;
-    w->S[9] = w->S[9] + w->term[0][7]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[0][8]*ck;
-    w->S[10] = w->S[10] + w->term[0][8]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[0][9]*ck;
-    w->S[11] = w->S[11] + w->term[0][9]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[0][10]*ck;
-    w->S[12] = w->S[12] + w->term[0][10]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[0][11]*ck;
-    w->S[14] = w->S[14] + w->term[0][11]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[0][12]*ck;
-    w->S[15] = w->S[15] + w->term[0][12]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[0][13]*ck;
-    w->S[17] = w->S[17] + w->term[0][13]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[0][14]*ck;
-    w->S[18] = w->S[18] + w->term[0][14]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[0][15]*ck;
-    w->S[19] = w->S[19] + w->term[0][15]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[0][16]*ck;
-    w->S[20] = w->S[20] + w->term[0][16]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[0][17]*ck;
-    w->S[21] = w->S[21] + w->term[0][17]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[0][18]*ck;
-    w->S[22] = w->S[22] + w->term[0][18]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[0][19]*ck;
-    w->S[24] = w->S[24] + w->term[0][19]*cs;
-    t->Phi[2][7] = t->Phi[2][7] + w->term[0][20]*ck;
-    w->S[25] = w->S[25] + w->term[0][20]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[0][21]*ck;
-    w->S[28] = w->S[28] + w->term[0][21]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[0][22]*ck;
-    w->S[29] = w->S[29] + w->term[0][22]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[0][23]*ck;
-    w->S[30] = w->S[30] + w->term[0][23]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[0][24]*ck;
-    w->S[31] = w->S[31] + w->term[0][24]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[0][25]*ck;
-    w->S[32] = w->S[32] + w->term[0][25]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[0][26]*ck;
-    w->S[33] = w->S[33] + w->term[0][26]*cs;
-    t->Phi[3][7] = t->Phi[3][7] + w->term[0][27]*ck;
-    w->S[34] = w->S[34] + w->term[0][27]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[0][28]*ck;
-    w->S[35] = w->S[35] + w->term[0][28]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[0][29]*ck;
-    w->S[36] = w->S[36] + w->term[0][29]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[0][30]*ck;
-    w->S[38] = w->S[38] + w->term[0][30]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[0][31]*ck;
-    w->S[39] = w->S[39] + w->term[0][31]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[0][32]*ck;
-    w->S[40] = w->S[40] + w->term[0][32]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[0][33]*ck;
-    w->S[41] = w->S[41] + w->term[0][33]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[0][34]*ck;
-    w->S[42] = w->S[42] + w->term[0][34]*cs;
-    t->Phi[4][7] = t->Phi[4][7] + w->term[0][35]*ck;
-    w->S[43] = w->S[43] + w->term[0][35]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[0][36]*ck;
-    w->S[44] = w->S[44] + w->term[0][36]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[0][37]*ck;
-    w->S[45] = w->S[45] + w->term[0][37]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[0][38]*ck;
-    w->S[46] = w->S[46] + w->term[0][38]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[0][39]*ck;
-    w->S[48] = w->S[48] + w->term[0][39]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[0][40]*ck;
-    w->S[49] = w->S[49] + w->term[0][40]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[0][41]*ck;
-    w->S[50] = w->S[50] + w->term[0][41]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[0][42]*ck;
-    w->S[51] = w->S[51] + w->term[0][42]*cs;
-    t->Phi[5][7] = t->Phi[5][7] + w->term[0][43]*ck;
-    w->S[52] = w->S[52] + w->term[0][43]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[0][44]*ck;
-    w->S[53] = w->S[53] + w->term[0][44]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[0][45]*ck;
-    w->S[54] = w->S[54] + w->term[0][45]*cs;
-    t->Phi[6][7] = t->Phi[6][7] + w->term[0][46]*ck;
-    w->S[55] = w->S[55] + w->term[0][46]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[0][47]*ck;
-    w->S[56] = w->S[56] + w->term[0][47]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[0][48]*ck;
-    w->S[57] = w->S[57] + w->term[0][48]*cs;
-    t->Phi[7][7] = t->Phi[7][7] + w->term[0][49]*ck;
-    w->S[58] = w->S[58] + w->term[0][49]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[0][50]*ck;
-    w->S[59] = w->S[59] + w->term[0][50]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[0][51]*ck;
-    w->S[60] = w->S[60] + w->term[0][51]*cs;
-    t->Phi[8][7] = t->Phi[8][7] + w->term[0][52]*ck;
-    w->S[61] = w->S[61] + w->term[0][52]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[0][53]*ck;
-    w->S[62] = w->S[62] + w->term[0][53]*cs;
+    w->term[1][0] = c_out;
+    w->term[1][1] = w->fh[0]*c_in;
+    w->term[1][2] = w->fh[1]*c_in;
+    w->term[1][3] = w->fh[2]*c_in;
+    w->term[1][9] = w->fh[3]*c_in;
+    w->term[1][10] = c_out;
+    w->term[1][11] = w->fh[4]*c_in;
+    w->term[1][13] = w->fh[5]*c_in;
+    w->term[1][18] = w->fh[6]*c_in;
+    w->term[1][19] = w->fh[7]*c_in;
+    w->term[1][20] = c_out;
+    w->term[1][23] = w->fh[8]*c_in;
+    w->term[1][27] = w->fh[9]*c_in;
+    w->term[1][30] = c_out;
+    w->term[1][31] = w->fh[10]*c_in;
+    w->term[1][32] = w->fh[11]*c_in;
+    w->term[1][34] = w->fh[12]*c_in;
+    w->term[1][35] = w->fh[13]*c_in;
+    w->term[1][37] = w->fh[14]*c_in;
+    w->term[1][39] = w->fh[15]*c_in;
+    w->term[1][40] = c_out;
+    w->term[1][41] = w->fh[16]*c_in;
+    w->term[1][42] = w->fh[17]*c_in;
+    w->term[1][44] = w->fh[18]*c_in;
+    w->term[1][47] = w->fh[19]*c_in;
+    w->term[1][48] = w->fh[20]*c_in;
+    w->term[1][49] = w->fh[21]*c_in;
+    w->term[1][50] = c_out;
+    w->term[1][51] = w->fh[22]*c_in;
+    w->term[1][52] = w->fh[23]*c_in;
+    w->term[1][54] = c_out;
+    w->term[1][55] = w->fh[24]*c_in;
+    w->term[1][56] = w->fh[25]*c_in;
+    w->term[1][57] = w->fh[26]*c_in;
+    w->term[1][58] = c_out;
+    w->term[1][59] = w->fh[27]*c_in;
+    w->term[1][60] = w->fh[28]*c_in;
+    w->term[1][61] = w->fh[29]*c_in;
+    w->term[1][62] = c_out;
+    w->term[1][63] = c_out;
+    w->term[1][64] = w->fh[30]*c_in;
 }
 
-GPS_PSEUDORANGE11_TWIN_BLOCK void taylor_order_3(gps_pseudorange11_twin_transition *restrict t,
-        gps_pseudorange11_twin_discretize_scratch *restrict w)
+GPS_PSEUDORANGE11_TWIN_BLOCK void horner_level_2_into_S(gps_pseudorange11_twin_discretize_scratch
+        *restrict w, const gps_pseudorange11_twin_scalar c_out, const gps_pseudorange11_twin_scalar
+        c_in)
 {
-    const gps_pseudorange11_twin_scalar ck = 1.0 / 6.0;
-    const gps_pseudorange11_twin_scalar cs = 1.0 / 24.0;
-    w->term[1][0] = w->fh[0]*w->term[0][7] + w->fh[1]*w->term[0][14];
-    w->term[1][1] = w->fh[0]*w->term[0][8] + w->fh[1]*w->term[0][15] + w->fh[2]*w->term[0][21];
-    w->term[1][2] = w->fh[0]*w->term[0][9] + w->fh[1]*w->term[0][16] + w->fh[2]*w->term[0][22];
-    w->term[1][3] = w->fh[0]*w->term[0][10] + w->fh[1]*w->term[0][17] + w->fh[2]*w->term[0][23];
-    w->term[1][4] = w->fh[1]*w->term[0][18] + w->fh[2]*w->term[0][24];
-    w->term[1][5] = w->fh[0]*w->term[0][11] + w->fh[2]*w->term[0][25];
-    w->term[1][6] = w->fh[0]*w->term[0][12] + w->fh[1]*w->term[0][19] + w->fh[2]*w->term[0][26];
-    w->term[1][7] = w->fh[1]*w->term[0][20] + w->fh[2]*w->term[0][27];
-    w->term[1][8] = w->fh[0]*w->term[0][13] + w->fh[2]*w->term[0][28];
-    w->term[1][9] = w->fh[3]*w->term[0][0] + w->fh[4]*w->term[0][14] + w->fh[5]*w->term[0][29];
-    w->term[1][10] = w->fh[3]*w->term[0][1] + w->fh[4]*w->term[0][15];
-    w->term[1][11] = w->fh[3]*w->term[0][2] + w->fh[4]*w->term[0][16] + w->fh[5]*w->term[0][30];
-    w->term[1][12] = w->fh[4]*w->term[0][17] + w->fh[5]*w->term[0][31];
-    w->term[1][13] = w->fh[3]*w->term[0][3] + w->fh[4]*w->term[0][18] + w->fh[5]*w->term[0][32];
-    w->term[1][14] = w->fh[3]*w->term[0][4] + w->fh[5]*w->term[0][33];
-    w->term[1][15] = w->fh[4]*w->term[0][19] + w->fh[5]*w->term[0][34];
-    w->term[1][16] = w->fh[3]*w->term[0][5] + w->fh[4]*w->term[0][20] + w->fh[5]*w->term[0][35];
-    w->term[1][17] = w->fh[3]*w->term[0][6] + w->fh[5]*w->term[0][36];
-    w->term[1][18] = w->fh[6]*w->term[0][0] + w->fh[7]*w->term[0][7] + w->fh[8]*w->term[0][37];
-    w->term[1][19] = w->fh[6]*w->term[0][1] + w->fh[7]*w->term[0][8] + w->fh[8]*w->term[0][38];
-    w->term[1][20] = w->fh[6]*w->term[0][2] + w->fh[7]*w->term[0][9];
-    w->term[1][21] = w->fh[7]*w->term[0][10] + w->fh[8]*w->term[0][39];
-    w->term[1][22] = w->fh[6]*w->term[0][3] + w->fh[8]*w->term[0][40];
-    w->term[1][23] = w->fh[6]*w->term[0][4] + w->fh[7]*w->term[0][11] + w->fh[8]*w->term[0][41];
-    w->term[1][24] = w->fh[7]*w->term[0][12] + w->fh[8]*w->term[0][42];
-    w->term[1][25] = w->fh[6]*w->term[0][5] + w->fh[8]*w->term[0][43];
-    w->term[1][26] = w->fh[6]*w->term[0][6] + w->fh[7]*w->term[0][13] + w->fh[8]*w->term[0][44];
-    w->term[1][27] = w->fh[9]*w->term[0][0] + w->fh[10]*w->term[0][29] + w->fh[11]*w->term[0][37];
-    w->term[1][28] = w->fh[9]*w->term[0][1] + w->fh[11]*w->term[0][38];
-    w->term[1][29] = w->fh[9]*w->term[0][2] + w->fh[10]*w->term[0][30];
-    w->term[1][30] = w->fh[10]*w->term[0][31] + w->fh[11]*w->term[0][39];
-    w->term[1][31] = w->fh[9]*w->term[0][3] + w->fh[10]*w->term[0][32] + w->fh[11]*w->term[0][40];
-    w->term[1][32] = w->fh[9]*w->term[0][4] + w->fh[10]*w->term[0][33] + w->fh[11]*w->term[0][41];
-    w->term[1][33] = w->fh[10]*w->term[0][34] + w->fh[11]*w->term[0][42] + w->fh[12]*w->term[0][48]
-            + w->fh[13]*w->term[0][51];
-    w->term[1][34] = w->fh[9]*w->term[0][5] + w->fh[10]*w->term[0][35] + w->fh[11]*w->term[0][43] +
-            w->fh[12]*w->term[0][49] + w->fh[13]*w->term[0][52];
-    w->term[1][35] = w->fh[9]*w->term[0][6] + w->fh[10]*w->term[0][36] + w->fh[11]*w->term[0][44] +
-            w->fh[12]*w->term[0][50] + w->fh[13]*w->term[0][53];
-    w->term[1][36] = w->fh[14]*w->term[0][7] + w->fh[16]*w->term[0][37];
-    w->term[1][37] = w->fh[14]*w->term[0][8] + w->fh[15]*w->term[0][21] + w->fh[16]*w->term[0][38];
-    w->term[1][38] = w->fh[14]*w->term[0][9] + w->fh[15]*w->term[0][22];
-    w->term[1][39] = w->fh[14]*w->term[0][10] + w->fh[15]*w->term[0][23] + w->fh[16]*w->term[0][39];
-    w->term[1][40] = w->fh[15]*w->term[0][24] + w->fh[16]*w->term[0][40];
-    w->term[1][41] = w->fh[14]*w->term[0][11] + w->fh[15]*w->term[0][25] + w->fh[16]*w->term[0][41];
-    w->term[1][42] = w->fh[14]*w->term[0][12] + w->fh[15]*w->term[0][26] + w->fh[16]*w->term[0][42]
-            + w->fh[17]*w->term[0][45] + w->fh[18]*w->term[0][51];
-    w->term[1][43] = w->fh[15]*w->term[0][27] + w->fh[16]*w->term[0][43] + w->fh[17]*w->term[0][46]
-            + w->fh[18]*w->term[0][52];
-    w->term[1][44] = w->fh[14]*w->term[0][13] + w->fh[15]*w->term[0][28] + w->fh[16]*w->term[0][44]
-            + w->fh[17]*w->term[0][47] + w->fh[18]*w->term[0][53];
-    w->term[1][45] = w->fh[19]*w->term[0][14] + w->fh[21]*w->term[0][29];
-    w->term[1][46] = w->fh[19]*w->term[0][15] + w->fh[20]*w->term[0][21];
-    w->term[1][47] = w->fh[19]*w->term[0][16] + w->fh[20]*w->term[0][22] + w->fh[21]*w->term[0][30];
-    w->term[1][48] = w->fh[19]*w->term[0][17] + w->fh[20]*w->term[0][23] + w->fh[21]*w->term[0][31];
-    w->term[1][49] = w->fh[19]*w->term[0][18] + w->fh[20]*w->term[0][24] + w->fh[21]*w->term[0][32];
-    w->term[1][50] = w->fh[20]*w->term[0][25] + w->fh[21]*w->term[0][33];
-    w->term[1][51] = w->fh[19]*w->term[0][19] + w->fh[20]*w->term[0][26] + w->fh[21]*w->term[0][34]
-            + w->fh[22]*w->term[0][45] + w->fh[23]*w->term[0][48];
-    w->term[1][52] = w->fh[19]*w->term[0][20] + w->fh[20]*w->term[0][27] + w->fh[21]*w->term[0][35]
-            + w->fh[22]*w->term[0][46] + w->fh[23]*w->term[0][49];
-    w->term[1][53] = w->fh[20]*w->term[0][28] + w->fh[21]*w->term[0][36] + w->fh[22]*w->term[0][47]
-            + w->fh[23]*w->term[0][50];
-    w->term[1][54] = w->fh[24]*w->term[0][48] + w->fh[25]*w->term[0][51];
-    w->term[1][55] = w->fh[24]*w->term[0][49] + w->fh[25]*w->term[0][52];
-    w->term[1][56] = w->fh[24]*w->term[0][50] + w->fh[25]*w->term[0][53];
-    w->term[1][57] = w->fh[26]*w->term[0][45] + w->fh[27]*w->term[0][51];
-    w->term[1][58] = w->fh[26]*w->term[0][46] + w->fh[27]*w->term[0][52];
-    w->term[1][59] = w->fh[26]*w->term[0][47] + w->fh[27]*w->term[0][53];
-    w->term[1][60] = w->fh[28]*w->term[0][45] + w->fh[29]*w->term[0][48];
-    w->term[1][61] = w->fh[28]*w->term[0][46] + w->fh[29]*w->term[0][49];
-    w->term[1][62] = w->fh[28]*w->term[0][47] + w->fh[29]*w->term[0][50];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[1][0]*ck;
-    w->S[0] = w->S[0] + w->term[1][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[1][1]*ck;
-    w->S[1] = w->S[1] + w->term[1][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[1][2]*ck;
-    w->S[2] = w->S[2] + w->term[1][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[1][3]*ck;
-    w->S[3] = w->S[3] + w->term[1][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[1][4]*ck;
-    w->S[4] = w->S[4] + w->term[1][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[1][5]*ck;
-    w->S[5] = w->S[5] + w->term[1][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[1][6]*ck;
-    w->S[6] = w->S[6] + w->term[1][6]*cs;
-    t->Phi[0][7] = t->Phi[0][7] + w->term[1][7]*ck;
-    w->S[7] = w->S[7] + w->term[1][7]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[1][8]*ck;
-    w->S[8] = w->S[8] + w->term[1][8]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[1][9]*ck;
-    w->S[9] = w->S[9] + w->term[1][9]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[1][10]*ck;
-    w->S[10] = w->S[10] + w->term[1][10]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[1][11]*ck;
-    w->S[11] = w->S[11] + w->term[1][11]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[1][12]*ck;
-    w->S[12] = w->S[12] + w->term[1][12]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[1][13]*ck;
-    w->S[13] = w->S[13] + w->term[1][13]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[1][14]*ck;
-    w->S[14] = w->S[14] + w->term[1][14]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[1][15]*ck;
-    w->S[15] = w->S[15] + w->term[1][15]*cs;
-    t->Phi[1][7] = t->Phi[1][7] + w->term[1][16]*ck;
-    w->S[16] = w->S[16] + w->term[1][16]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[1][17]*ck;
-    w->S[17] = w->S[17] + w->term[1][17]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[1][18]*ck;
-    w->S[18] = w->S[18] + w->term[1][18]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[1][19]*ck;
-    w->S[19] = w->S[19] + w->term[1][19]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[1][20]*ck;
-    w->S[20] = w->S[20] + w->term[1][20]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[1][21]*ck;
-    w->S[21] = w->S[21] + w->term[1][21]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[1][22]*ck;
-    w->S[22] = w->S[22] + w->term[1][22]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[1][23]*ck;
-    w->S[23] = w->S[23] + w->term[1][23]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[1][24]*ck;
-    w->S[24] = w->S[24] + w->term[1][24]*cs;
-    t->Phi[2][7] = t->Phi[2][7] + w->term[1][25]*ck;
-    w->S[25] = w->S[25] + w->term[1][25]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[1][26]*ck;
-    w->S[26] = w->S[26] + w->term[1][26]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[1][27]*ck;
-    w->S[27] = w->S[27] + w->term[1][27]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[1][28]*ck;
-    w->S[28] = w->S[28] + w->term[1][28]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[1][29]*ck;
-    w->S[29] = w->S[29] + w->term[1][29]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[1][30]*ck;
-    w->S[30] = w->S[30] + w->term[1][30]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[1][31]*ck;
-    w->S[31] = w->S[31] + w->term[1][31]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[1][32]*ck;
-    w->S[32] = w->S[32] + w->term[1][32]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[1][33]*ck;
-    w->S[33] = w->S[33] + w->term[1][33]*cs;
-    t->Phi[3][7] = t->Phi[3][7] + w->term[1][34]*ck;
-    w->S[34] = w->S[34] + w->term[1][34]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[1][35]*ck;
-    w->S[35] = w->S[35] + w->term[1][35]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[1][36]*ck;
-    w->S[36] = w->S[36] + w->term[1][36]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[1][37]*ck;
-    w->S[37] = w->S[37] + w->term[1][37]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[1][38]*ck;
-    w->S[38] = w->S[38] + w->term[1][38]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[1][39]*ck;
-    w->S[39] = w->S[39] + w->term[1][39]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[1][40]*ck;
-    w->S[40] = w->S[40] + w->term[1][40]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[1][41]*ck;
-    w->S[41] = w->S[41] + w->term[1][41]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[1][42]*ck;
-    w->S[42] = w->S[42] + w->term[1][42]*cs;
-    t->Phi[4][7] = t->Phi[4][7] + w->term[1][43]*ck;
-    w->S[43] = w->S[43] + w->term[1][43]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[1][44]*ck;
-    w->S[44] = w->S[44] + w->term[1][44]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[1][45]*ck;
-    w->S[45] = w->S[45] + w->term[1][45]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[1][46]*ck;
-    w->S[46] = w->S[46] + w->term[1][46]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[1][47]*ck;
-    w->S[47] = w->S[47] + w->term[1][47]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[1][48]*ck;
-    w->S[48] = w->S[48] + w->term[1][48]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[1][49]*ck;
-    w->S[49] = w->S[49] + w->term[1][49]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[1][50]*ck;
-    w->S[50] = w->S[50] + w->term[1][50]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[1][51]*ck;
-    w->S[51] = w->S[51] + w->term[1][51]*cs;
-    t->Phi[5][7] = t->Phi[5][7] + w->term[1][52]*ck;
-    w->S[52] = w->S[52] + w->term[1][52]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[1][53]*ck;
-    w->S[53] = w->S[53] + w->term[1][53]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[1][54]*ck;
-    w->S[54] = w->S[54] + w->term[1][54]*cs;
-    t->Phi[6][7] = t->Phi[6][7] + w->term[1][55]*ck;
-    w->S[55] = w->S[55] + w->term[1][55]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[1][56]*ck;
-    w->S[56] = w->S[56] + w->term[1][56]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[1][57]*ck;
-    w->S[57] = w->S[57] + w->term[1][57]*cs;
-    t->Phi[7][7] = t->Phi[7][7] + w->term[1][58]*ck;
-    w->S[58] = w->S[58] + w->term[1][58]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[1][59]*ck;
-    w->S[59] = w->S[59] + w->term[1][59]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[1][60]*ck;
-    w->S[60] = w->S[60] + w->term[1][60]*cs;
-    t->Phi[8][7] = t->Phi[8][7] + w->term[1][61]*ck;
-    w->S[61] = w->S[61] + w->term[1][61]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[1][62]*ck;
-    w->S[62] = w->S[62] + w->term[1][62]*cs;
+    w->S[0] = c_out + w->fh[0]*w->term[1][9] + w->fh[1]*w->term[1][18] + w->fh[2]*w->term[1][27];
+    w->S[1] = w->fh[0]*w->term[1][10] + w->fh[1]*w->term[1][19];
+    w->S[2] = w->fh[0]*w->term[1][11] + w->fh[1]*w->term[1][20];
+    w->S[3] = w->fh[2]*w->term[1][30];
+    w->S[4] = w->fh[0]*w->term[1][13] + w->fh[2]*w->term[1][31];
+    w->S[5] = w->fh[1]*w->term[1][23] + w->fh[2]*w->term[1][32];
+    w->S[7] = w->fh[2]*w->term[1][34];
+    w->S[8] = w->fh[2]*w->term[1][35];
+    w->S[9] = w->fh[3]*w->term[1][0] + w->fh[4]*w->term[1][18];
+    w->S[10] = c_out + w->fh[3]*w->term[1][1] + w->fh[4]*w->term[1][19] + w->fh[5]*w->term[1][37];
+    w->S[11] = w->fh[3]*w->term[1][2] + w->fh[4]*w->term[1][20];
+    w->S[12] = w->fh[3]*w->term[1][3] + w->fh[5]*w->term[1][39];
+    w->S[13] = w->fh[5]*w->term[1][40];
+    w->S[14] = w->fh[4]*w->term[1][23] + w->fh[5]*w->term[1][41];
+    w->S[15] = w->fh[5]*w->term[1][42];
+    w->S[17] = w->fh[5]*w->term[1][44];
+    w->S[18] = w->fh[6]*w->term[1][0] + w->fh[7]*w->term[1][9];
+    w->S[19] = w->fh[6]*w->term[1][1] + w->fh[7]*w->term[1][10];
+    w->S[20] = c_out + w->fh[6]*w->term[1][2] + w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][47];
+    w->S[21] = w->fh[6]*w->term[1][3] + w->fh[8]*w->term[1][48];
+    w->S[22] = w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][49];
+    w->S[23] = w->fh[8]*w->term[1][50];
+    w->S[24] = w->fh[8]*w->term[1][51];
+    w->S[25] = w->fh[8]*w->term[1][52];
+    w->S[27] = w->fh[9]*w->term[1][0];
+    w->S[28] = w->fh[9]*w->term[1][1] + w->fh[10]*w->term[1][37];
+    w->S[29] = w->fh[9]*w->term[1][2] + w->fh[11]*w->term[1][47];
+    w->S[30] = c_out + w->fh[9]*w->term[1][3] + w->fh[10]*w->term[1][39] + w->fh[11]*w->term[1][48];
+    w->S[31] = w->fh[10]*w->term[1][40] + w->fh[11]*w->term[1][49];
+    w->S[32] = w->fh[10]*w->term[1][41] + w->fh[11]*w->term[1][50];
+    w->S[33] = w->fh[10]*w->term[1][42] + w->fh[11]*w->term[1][51] + w->fh[12]*w->term[1][57] +
+            w->fh[13]*w->term[1][60];
+    w->S[34] = w->fh[11]*w->term[1][52] + w->fh[12]*w->term[1][58] + w->fh[13]*w->term[1][61];
+    w->S[35] = w->fh[10]*w->term[1][44] + w->fh[12]*w->term[1][59] + w->fh[13]*w->term[1][62];
+    w->S[36] = w->fh[14]*w->term[1][9] + w->fh[15]*w->term[1][27];
+    w->S[37] = w->fh[14]*w->term[1][10];
+    w->S[38] = w->fh[14]*w->term[1][11] + w->fh[16]*w->term[1][47];
+    w->S[39] = w->fh[15]*w->term[1][30] + w->fh[16]*w->term[1][48];
+    w->S[40] = c_out + w->fh[14]*w->term[1][13] + w->fh[15]*w->term[1][31] +
+            w->fh[16]*w->term[1][49];
+    w->S[41] = w->fh[15]*w->term[1][32] + w->fh[16]*w->term[1][50];
+    w->S[42] = w->fh[16]*w->term[1][51] + w->fh[17]*w->term[1][54] + w->fh[18]*w->term[1][60];
+    w->S[43] = w->fh[15]*w->term[1][34] + w->fh[16]*w->term[1][52] + w->fh[17]*w->term[1][55] +
+            w->fh[18]*w->term[1][61];
+    w->S[44] = w->fh[15]*w->term[1][35] + w->fh[17]*w->term[1][56] + w->fh[18]*w->term[1][62];
+    w->S[45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][27];
+    w->S[46] = w->fh[19]*w->term[1][19] + w->fh[21]*w->term[1][37];
+    w->S[47] = w->fh[19]*w->term[1][20];
+    w->S[48] = w->fh[20]*w->term[1][30] + w->fh[21]*w->term[1][39];
+    w->S[49] = w->fh[20]*w->term[1][31] + w->fh[21]*w->term[1][40];
+    w->S[50] = c_out + w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][32] +
+            w->fh[21]*w->term[1][41];
+    w->S[51] = w->fh[21]*w->term[1][42] + w->fh[22]*w->term[1][54] + w->fh[23]*w->term[1][57];
+    w->S[52] = w->fh[20]*w->term[1][34] + w->fh[22]*w->term[1][55] + w->fh[23]*w->term[1][58];
+    w->S[53] = w->fh[20]*w->term[1][35] + w->fh[21]*w->term[1][44] + w->fh[22]*w->term[1][56] +
+            w->fh[23]*w->term[1][59];
+    w->S[54] = c_out + w->fh[24]*w->term[1][57] + w->fh[25]*w->term[1][60];
+    w->S[55] = w->fh[24]*w->term[1][58] + w->fh[25]*w->term[1][61];
+    w->S[56] = w->fh[24]*w->term[1][59] + w->fh[25]*w->term[1][62];
+    w->S[57] = w->fh[26]*w->term[1][54] + w->fh[27]*w->term[1][60];
+    w->S[58] = c_out + w->fh[26]*w->term[1][55] + w->fh[27]*w->term[1][61];
+    w->S[59] = w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][62];
+    w->S[60] = w->fh[28]*w->term[1][54] + w->fh[29]*w->term[1][57];
+    w->S[61] = w->fh[28]*w->term[1][55] + w->fh[29]*w->term[1][58];
+    w->S[62] = c_out + w->fh[28]*w->term[1][56] + w->fh[29]*w->term[1][59];
+    w->S[63] = c_out;
+    w->S[64] = w->fh[30]*c_in;
+    w->S[6] = 0;
+    w->S[16] = 0;
+    w->S[26] = 0;
 }
 
-GPS_PSEUDORANGE11_TWIN_BLOCK void taylor_order_4(gps_pseudorange11_twin_transition *restrict t,
-        gps_pseudorange11_twin_discretize_scratch *restrict w)
+GPS_PSEUDORANGE11_TWIN_BLOCK void horner_level_2_into_term(gps_pseudorange11_twin_discretize_scratch
+        *restrict w, const gps_pseudorange11_twin_scalar c_out, const gps_pseudorange11_twin_scalar
+        c_in)
 {
-    const gps_pseudorange11_twin_scalar ck = 1.0 / 24.0;
-    const gps_pseudorange11_twin_scalar cs = 1.0 / 120.0;
-    w->term[0][0] = w->fh[0]*w->term[1][9] + w->fh[1]*w->term[1][18] + w->fh[2]*w->term[1][27];
-    w->term[0][1] = w->fh[0]*w->term[1][10] + w->fh[1]*w->term[1][19] + w->fh[2]*w->term[1][28];
-    w->term[0][2] = w->fh[0]*w->term[1][11] + w->fh[1]*w->term[1][20] + w->fh[2]*w->term[1][29];
-    w->term[0][3] = w->fh[0]*w->term[1][12] + w->fh[1]*w->term[1][21] + w->fh[2]*w->term[1][30];
-    w->term[0][4] = w->fh[0]*w->term[1][13] + w->fh[1]*w->term[1][22] + w->fh[2]*w->term[1][31];
-    w->term[0][5] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][23] + w->fh[2]*w->term[1][32];
-    w->term[0][6] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][24] + w->fh[2]*w->term[1][33];
-    w->term[0][7] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][25] + w->fh[2]*w->term[1][34];
-    w->term[0][8] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][26] + w->fh[2]*w->term[1][35];
-    w->term[0][9] = w->fh[3]*w->term[1][0] + w->fh[4]*w->term[1][18] + w->fh[5]*w->term[1][36];
-    w->term[0][10] = w->fh[3]*w->term[1][1] + w->fh[4]*w->term[1][19] + w->fh[5]*w->term[1][37];
-    w->term[0][11] = w->fh[3]*w->term[1][2] + w->fh[4]*w->term[1][20] + w->fh[5]*w->term[1][38];
-    w->term[0][12] = w->fh[3]*w->term[1][3] + w->fh[4]*w->term[1][21] + w->fh[5]*w->term[1][39];
-    w->term[0][13] = w->fh[3]*w->term[1][4] + w->fh[4]*w->term[1][22] + w->fh[5]*w->term[1][40];
-    w->term[0][14] = w->fh[3]*w->term[1][5] + w->fh[4]*w->term[1][23] + w->fh[5]*w->term[1][41];
-    w->term[0][15] = w->fh[3]*w->term[1][6] + w->fh[4]*w->term[1][24] + w->fh[5]*w->term[1][42];
-    w->term[0][16] = w->fh[3]*w->term[1][7] + w->fh[4]*w->term[1][25] + w->fh[5]*w->term[1][43];
-    w->term[0][17] = w->fh[3]*w->term[1][8] + w->fh[4]*w->term[1][26] + w->fh[5]*w->term[1][44];
-    w->term[0][18] = w->fh[6]*w->term[1][0] + w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][45];
-    w->term[0][19] = w->fh[6]*w->term[1][1] + w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][46];
-    w->term[0][20] = w->fh[6]*w->term[1][2] + w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][47];
-    w->term[0][21] = w->fh[6]*w->term[1][3] + w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][48];
-    w->term[0][22] = w->fh[6]*w->term[1][4] + w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][49];
-    w->term[0][23] = w->fh[6]*w->term[1][5] + w->fh[7]*w->term[1][14] + w->fh[8]*w->term[1][50];
-    w->term[0][24] = w->fh[6]*w->term[1][6] + w->fh[7]*w->term[1][15] + w->fh[8]*w->term[1][51];
-    w->term[0][25] = w->fh[6]*w->term[1][7] + w->fh[7]*w->term[1][16] + w->fh[8]*w->term[1][52];
-    w->term[0][26] = w->fh[6]*w->term[1][8] + w->fh[7]*w->term[1][17] + w->fh[8]*w->term[1][53];
-    w->term[0][27] = w->fh[9]*w->term[1][0] + w->fh[10]*w->term[1][36] + w->fh[11]*w->term[1][45];
-    w->term[0][28] = w->fh[9]*w->term[1][1] + w->fh[10]*w->term[1][37] + w->fh[11]*w->term[1][46];
-    w->term[0][29] = w->fh[9]*w->term[1][2] + w->fh[10]*w->term[1][38] + w->fh[11]*w->term[1][47];
-    w->term[0][30] = w->fh[9]*w->term[1][3] + w->fh[10]*w->term[1][39] + w->fh[11]*w->term[1][48];
-    w->term[0][31] = w->fh[9]*w->term[1][4] + w->fh[10]*w->term[1][40] + w->fh[11]*w->term[1][49];
-    w->term[0][32] = w->fh[9]*w->term[1][5] + w->fh[10]*w->term[1][41] + w->fh[11]*w->term[1][50];
-    w->term[0][33] = w->fh[9]*w->term[1][6] + w->fh[10]*w->term[1][42] + w->fh[11]*w->term[1][51] +
-            w->fh[12]*w->term[1][57] + w->fh[13]*w->term[1][60];
-    w->term[0][34] = w->fh[9]*w->term[1][7] + w->fh[10]*w->term[1][43] + w->fh[11]*w->term[1][52] +
+    w->term[1][0] = c_out + w->fh[0]*w->S[9] + w->fh[1]*w->S[18] + w->fh[2]*w->S[27];
+    w->term[1][1] = w->fh[0]*w->S[10] + w->fh[1]*w->S[19];
+    w->term[1][2] = w->fh[0]*w->S[11] + w->fh[1]*w->S[20];
+    w->term[1][3] = w->fh[2]*w->S[30];
+    w->term[1][4] = w->fh[0]*w->S[13] + w->fh[2]*w->S[31];
+    w->term[1][5] = w->fh[1]*w->S[23] + w->fh[2]*w->S[32];
+    w->term[1][7] = w->fh[2]*w->S[34];
+    w->term[1][8] = w->fh[2]*w->S[35];
+    w->term[1][9] = w->fh[3]*w->S[0] + w->fh[4]*w->S[18];
+    w->term[1][10] = c_out + w->fh[3]*w->S[1] + w->fh[4]*w->S[19] + w->fh[5]*w->S[37];
+    w->term[1][11] = w->fh[3]*w->S[2] + w->fh[4]*w->S[20];
+    w->term[1][12] = w->fh[3]*w->S[3] + w->fh[5]*w->S[39];
+    w->term[1][13] = w->fh[5]*w->S[40];
+    w->term[1][14] = w->fh[4]*w->S[23] + w->fh[5]*w->S[41];
+    w->term[1][15] = w->fh[5]*w->S[42];
+    w->term[1][17] = w->fh[5]*w->S[44];
+    w->term[1][18] = w->fh[6]*w->S[0] + w->fh[7]*w->S[9];
+    w->term[1][19] = w->fh[6]*w->S[1] + w->fh[7]*w->S[10];
+    w->term[1][20] = c_out + w->fh[6]*w->S[2] + w->fh[7]*w->S[11] + w->fh[8]*w->S[47];
+    w->term[1][21] = w->fh[6]*w->S[3] + w->fh[8]*w->S[48];
+    w->term[1][22] = w->fh[7]*w->S[13] + w->fh[8]*w->S[49];
+    w->term[1][23] = w->fh[8]*w->S[50];
+    w->term[1][24] = w->fh[8]*w->S[51];
+    w->term[1][25] = w->fh[8]*w->S[52];
+    w->term[1][27] = w->fh[9]*w->S[0];
+    w->term[1][28] = w->fh[9]*w->S[1] + w->fh[10]*w->S[37];
+    w->term[1][29] = w->fh[9]*w->S[2] + w->fh[11]*w->S[47];
+    w->term[1][30] = c_out + w->fh[9]*w->S[3] + w->fh[10]*w->S[39] + w->fh[11]*w->S[48];
+    w->term[1][31] = w->fh[10]*w->S[40] + w->fh[11]*w->S[49];
+    w->term[1][32] = w->fh[10]*w->S[41] + w->fh[11]*w->S[50];
+    w->term[1][33] = w->fh[10]*w->S[42] + w->fh[11]*w->S[51] + w->fh[12]*w->S[57] +
+            w->fh[13]*w->S[60];
+    w->term[1][34] = w->fh[11]*w->S[52] + w->fh[12]*w->S[58] + w->fh[13]*w->S[61];
+    w->term[1][35] = w->fh[10]*w->S[44] + w->fh[12]*w->S[59] + w->fh[13]*w->S[62];
+    w->term[1][36] = w->fh[14]*w->S[9] + w->fh[15]*w->S[27];
+    w->term[1][37] = w->fh[14]*w->S[10];
+    w->term[1][38] = w->fh[14]*w->S[11] + w->fh[16]*w->S[47];
+    w->term[1][39] = w->fh[15]*w->S[30] + w->fh[16]*w->S[48];
+    w->term[1][40] = c_out + w->fh[14]*w->S[13] + w->fh[15]*w->S[31] + w->fh[16]*w->S[49];
+    w->term[1][41] = w->fh[15]*w->S[32] + w->fh[16]*w->S[50];
+    w->term[1][42] = w->fh[16]*w->S[51] + w->fh[17]*w->S[54] + w->fh[18]*w->S[60];
+    w->term[1][43] = w->fh[15]*w->S[34] + w->fh[16]*w->S[52] + w->fh[17]*w->S[55] +
+            w->fh[18]*w->S[61];
+    w->term[1][44] = w->fh[15]*w->S[35] + w->fh[17]*w->S[56] + w->fh[18]*w->S[62];
+    w->term[1][45] = w->fh[19]*w->S[18] + w->fh[20]*w->S[27];
+    w->term[1][46] = w->fh[19]*w->S[19] + w->fh[21]*w->S[37];
+    w->term[1][47] = w->fh[19]*w->S[20];
+    w->term[1][48] = w->fh[20]*w->S[30] + w->fh[21]*w->S[39];
+    w->term[1][49] = w->fh[20]*w->S[31] + w->fh[21]*w->S[40];
+    w->term[1][50] = c_out + w->fh[19]*w->S[23] + w->fh[20]*w->S[32] + w->fh[21]*w->S[41];
+    w->term[1][51] = w->fh[21]*w->S[42] + w->fh[22]*w->S[54] + w->fh[23]*w->S[57];
+    w->term[1][52] = w->fh[20]*w->S[34] + w->fh[22]*w->S[55] + w->fh[23]*w->S[58];
+    w->term[1][53] = w->fh[20]*w->S[35] + w->fh[21]*w->S[44] + w->fh[22]*w->S[56] +
+            w->fh[23]*w->S[59];
+    w->term[1][54] = c_out + w->fh[24]*w->S[57] + w->fh[25]*w->S[60];
+    w->term[1][55] = w->fh[24]*w->S[58] + w->fh[25]*w->S[61];
+    w->term[1][56] = w->fh[24]*w->S[59] + w->fh[25]*w->S[62];
+    w->term[1][57] = w->fh[26]*w->S[54] + w->fh[27]*w->S[60];
+    w->term[1][58] = c_out + w->fh[26]*w->S[55] + w->fh[27]*w->S[61];
+    w->term[1][59] = w->fh[26]*w->S[56] + w->fh[27]*w->S[62];
+    w->term[1][60] = w->fh[28]*w->S[54] + w->fh[29]*w->S[57];
+    w->term[1][61] = w->fh[28]*w->S[55] + w->fh[29]*w->S[58];
+    w->term[1][62] = c_out + w->fh[28]*w->S[56] + w->fh[29]*w->S[59];
+    w->term[1][63] = c_out;
+    w->term[1][64] = w->fh[30]*c_in;
+}
+
+GPS_PSEUDORANGE11_TWIN_BLOCK void horner_level_3_into_S(gps_pseudorange11_twin_discretize_scratch
+        *restrict w, const gps_pseudorange11_twin_scalar c_out, const gps_pseudorange11_twin_scalar
+        c_in)
+{
+    w->S[0] = c_out + w->fh[0]*w->term[1][9] + w->fh[1]*w->term[1][18] + w->fh[2]*w->term[1][27];
+    w->S[1] = w->fh[0]*w->term[1][10] + w->fh[1]*w->term[1][19] + w->fh[2]*w->term[1][28];
+    w->S[2] = w->fh[0]*w->term[1][11] + w->fh[1]*w->term[1][20] + w->fh[2]*w->term[1][29];
+    w->S[3] = w->fh[0]*w->term[1][12] + w->fh[1]*w->term[1][21] + w->fh[2]*w->term[1][30];
+    w->S[4] = w->fh[0]*w->term[1][13] + w->fh[1]*w->term[1][22] + w->fh[2]*w->term[1][31];
+    w->S[5] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][23] + w->fh[2]*w->term[1][32];
+    w->S[6] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][24] + w->fh[2]*w->term[1][33];
+    w->S[7] = w->fh[1]*w->term[1][25] + w->fh[2]*w->term[1][34];
+    w->S[8] = w->fh[0]*w->term[1][17] + w->fh[2]*w->term[1][35];
+    w->S[9] = w->fh[3]*w->term[1][0] + w->fh[4]*w->term[1][18] + w->fh[5]*w->term[1][36];
+    w->S[10] = c_out + w->fh[3]*w->term[1][1] + w->fh[4]*w->term[1][19] + w->fh[5]*w->term[1][37];
+    w->S[11] = w->fh[3]*w->term[1][2] + w->fh[4]*w->term[1][20] + w->fh[5]*w->term[1][38];
+    w->S[12] = w->fh[3]*w->term[1][3] + w->fh[4]*w->term[1][21] + w->fh[5]*w->term[1][39];
+    w->S[13] = w->fh[3]*w->term[1][4] + w->fh[4]*w->term[1][22] + w->fh[5]*w->term[1][40];
+    w->S[14] = w->fh[3]*w->term[1][5] + w->fh[4]*w->term[1][23] + w->fh[5]*w->term[1][41];
+    w->S[15] = w->fh[4]*w->term[1][24] + w->fh[5]*w->term[1][42];
+    w->S[16] = w->fh[3]*w->term[1][7] + w->fh[4]*w->term[1][25] + w->fh[5]*w->term[1][43];
+    w->S[17] = w->fh[3]*w->term[1][8] + w->fh[5]*w->term[1][44];
+    w->S[18] = w->fh[6]*w->term[1][0] + w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][45];
+    w->S[19] = w->fh[6]*w->term[1][1] + w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][46];
+    w->S[20] = c_out + w->fh[6]*w->term[1][2] + w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][47];
+    w->S[21] = w->fh[6]*w->term[1][3] + w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][48];
+    w->S[22] = w->fh[6]*w->term[1][4] + w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][49];
+    w->S[23] = w->fh[6]*w->term[1][5] + w->fh[7]*w->term[1][14] + w->fh[8]*w->term[1][50];
+    w->S[24] = w->fh[7]*w->term[1][15] + w->fh[8]*w->term[1][51];
+    w->S[25] = w->fh[6]*w->term[1][7] + w->fh[8]*w->term[1][52];
+    w->S[26] = w->fh[6]*w->term[1][8] + w->fh[7]*w->term[1][17] + w->fh[8]*w->term[1][53];
+    w->S[27] = w->fh[9]*w->term[1][0] + w->fh[10]*w->term[1][36] + w->fh[11]*w->term[1][45];
+    w->S[28] = w->fh[9]*w->term[1][1] + w->fh[10]*w->term[1][37] + w->fh[11]*w->term[1][46];
+    w->S[29] = w->fh[9]*w->term[1][2] + w->fh[10]*w->term[1][38] + w->fh[11]*w->term[1][47];
+    w->S[30] = c_out + w->fh[9]*w->term[1][3] + w->fh[10]*w->term[1][39] + w->fh[11]*w->term[1][48];
+    w->S[31] = w->fh[9]*w->term[1][4] + w->fh[10]*w->term[1][40] + w->fh[11]*w->term[1][49];
+    w->S[32] = w->fh[9]*w->term[1][5] + w->fh[10]*w->term[1][41] + w->fh[11]*w->term[1][50];
+    w->S[33] = w->fh[10]*w->term[1][42] + w->fh[11]*w->term[1][51] + w->fh[12]*w->term[1][57] +
+            w->fh[13]*w->term[1][60];
+    w->S[34] = w->fh[9]*w->term[1][7] + w->fh[10]*w->term[1][43] + w->fh[11]*w->term[1][52] +
             w->fh[12]*w->term[1][58] + w->fh[13]*w->term[1][61];
-    w->term[0][35] = w->fh[9]*w->term[1][8] + w->fh[10]*w->term[1][44] + w->fh[11]*w->term[1][53] +
+    w->S[35] = w->fh[9]*w->term[1][8] + w->fh[10]*w->term[1][44] + w->fh[11]*w->term[1][53] +
             w->fh[12]*w->term[1][59] + w->fh[13]*w->term[1][62];
-    w->term[0][36] = w->fh[14]*w->term[1][9] + w->fh[15]*w->term[1][27] + w->fh[16]*w->term[1][45];
-    w->term[0][37] = w->fh[14]*w->term[1][10] + w->fh[15]*w->term[1][28] + w->fh[16]*w->term[1][46];
-    w->term[0][38] = w->fh[14]*w->term[1][11] + w->fh[15]*w->term[1][29] + w->fh[16]*w->term[1][47];
-    w->term[0][39] = w->fh[14]*w->term[1][12] + w->fh[15]*w->term[1][30] + w->fh[16]*w->term[1][48];
-    w->term[0][40] = w->fh[14]*w->term[1][13] + w->fh[15]*w->term[1][31] + w->fh[16]*w->term[1][49];
-    w->term[0][41] = w->fh[14]*w->term[1][14] + w->fh[15]*w->term[1][32] + w->fh[16]*w->term[1][50];
-    w->term[0][42] = w->fh[14]*w->term[1][15] + w->fh[15]*w->term[1][33] + w->fh[16]*w->term[1][51]
-            + w->fh[17]*w->term[1][54] + w->fh[18]*w->term[1][60];
-    w->term[0][43] = w->fh[14]*w->term[1][16] + w->fh[15]*w->term[1][34] + w->fh[16]*w->term[1][52]
-            + w->fh[17]*w->term[1][55] + w->fh[18]*w->term[1][61];
-    w->term[0][44] = w->fh[14]*w->term[1][17] + w->fh[15]*w->term[1][35] + w->fh[16]*w->term[1][53]
-            + w->fh[17]*w->term[1][56] + w->fh[18]*w->term[1][62];
-    w->term[0][45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][27] + w->fh[21]*w->term[1][36];
-    w->term[0][46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][28] + w->fh[21]*w->term[1][37];
-    w->term[0][47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][29] + w->fh[21]*w->term[1][38];
-    w->term[0][48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][30] + w->fh[21]*w->term[1][39];
-    w->term[0][49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][31] + w->fh[21]*w->term[1][40];
-    w->term[0][50] = w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][32] + w->fh[21]*w->term[1][41];
-    w->term[0][51] = w->fh[19]*w->term[1][24] + w->fh[20]*w->term[1][33] + w->fh[21]*w->term[1][42]
-            + w->fh[22]*w->term[1][54] + w->fh[23]*w->term[1][57];
-    w->term[0][52] = w->fh[19]*w->term[1][25] + w->fh[20]*w->term[1][34] + w->fh[21]*w->term[1][43]
-            + w->fh[22]*w->term[1][55] + w->fh[23]*w->term[1][58];
-    w->term[0][53] = w->fh[19]*w->term[1][26] + w->fh[20]*w->term[1][35] + w->fh[21]*w->term[1][44]
-            + w->fh[22]*w->term[1][56] + w->fh[23]*w->term[1][59];
-    w->term[0][54] = w->fh[24]*w->term[1][57] + w->fh[25]*w->term[1][60];
-    w->term[0][55] = w->fh[24]*w->term[1][58] + w->fh[25]*w->term[1][61];
-    w->term[0][56] = w->fh[24]*w->term[1][59] + w->fh[25]*w->term[1][62];
-    w->term[0][57] = w->fh[26]*w->term[1][54] + w->fh[27]*w->term[1][60];
-    w->term[0][58] = w->fh[26]*w->term[1][55] + w->fh[27]*w->term[1][61];
-    w->term[0][59] = w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][62];
-    w->term[0][60] = w->fh[28]*w->term[1][54] + w->fh[29]*w->term[1][57];
-    w->term[0][61] = w->fh[28]*w->term[1][55] + w->fh[29]*w->term[1][58];
-    w->term[0][62] = w->fh[28]*w->term[1][56] + w->fh[29]*w->term[1][59];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[0][0]*ck;
-    w->S[0] = w->S[0] + w->term[0][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[0][1]*ck;
-    w->S[1] = w->S[1] + w->term[0][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[0][2]*ck;
-    w->S[2] = w->S[2] + w->term[0][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[0][3]*ck;
-    w->S[3] = w->S[3] + w->term[0][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[0][4]*ck;
-    w->S[4] = w->S[4] + w->term[0][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[0][5]*ck;
-    w->S[5] = w->S[5] + w->term[0][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[0][6]*ck;
-    w->S[6] = w->S[6] + w->term[0][6]*cs;
-    t->Phi[0][7] = t->Phi[0][7] + w->term[0][7]*ck;
-    w->S[7] = w->S[7] + w->term[0][7]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[0][8]*ck;
-    w->S[8] = w->S[8] + w->term[0][8]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[0][9]*ck;
-    w->S[9] = w->S[9] + w->term[0][9]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[0][10]*ck;
-    w->S[10] = w->S[10] + w->term[0][10]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[0][11]*ck;
-    w->S[11] = w->S[11] + w->term[0][11]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[0][12]*ck;
-    w->S[12] = w->S[12] + w->term[0][12]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[0][13]*ck;
-    w->S[13] = w->S[13] + w->term[0][13]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[0][14]*ck;
-    w->S[14] = w->S[14] + w->term[0][14]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[0][15]*ck;
-    w->S[15] = w->S[15] + w->term[0][15]*cs;
-    t->Phi[1][7] = t->Phi[1][7] + w->term[0][16]*ck;
-    w->S[16] = w->S[16] + w->term[0][16]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[0][17]*ck;
-    w->S[17] = w->S[17] + w->term[0][17]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[0][18]*ck;
-    w->S[18] = w->S[18] + w->term[0][18]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[0][19]*ck;
-    w->S[19] = w->S[19] + w->term[0][19]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[0][20]*ck;
-    w->S[20] = w->S[20] + w->term[0][20]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[0][21]*ck;
-    w->S[21] = w->S[21] + w->term[0][21]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[0][22]*ck;
-    w->S[22] = w->S[22] + w->term[0][22]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[0][23]*ck;
-    w->S[23] = w->S[23] + w->term[0][23]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[0][24]*ck;
-    w->S[24] = w->S[24] + w->term[0][24]*cs;
-    t->Phi[2][7] = t->Phi[2][7] + w->term[0][25]*ck;
-    w->S[25] = w->S[25] + w->term[0][25]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[0][26]*ck;
-    w->S[26] = w->S[26] + w->term[0][26]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[0][27]*ck;
-    w->S[27] = w->S[27] + w->term[0][27]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[0][28]*ck;
-    w->S[28] = w->S[28] + w->term[0][28]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[0][29]*ck;
-    w->S[29] = w->S[29] + w->term[0][29]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[0][30]*ck;
-    w->S[30] = w->S[30] + w->term[0][30]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[0][31]*ck;
-    w->S[31] = w->S[31] + w->term[0][31]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[0][32]*ck;
-    w->S[32] = w->S[32] + w->term[0][32]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[0][33]*ck;
-    w->S[33] = w->S[33] + w->term[0][33]*cs;
-    t->Phi[3][7] = t->Phi[3][7] + w->term[0][34]*ck;
-    w->S[34] = w->S[34] + w->term[0][34]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[0][35]*ck;
-    w->S[35] = w->S[35] + w->term[0][35]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[0][36]*ck;
-    w->S[36] = w->S[36] + w->term[0][36]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[0][37]*ck;
-    w->S[37] = w->S[37] + w->term[0][37]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[0][38]*ck;
-    w->S[38] = w->S[38] + w->term[0][38]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[0][39]*ck;
-    w->S[39] = w->S[39] + w->term[0][39]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[0][40]*ck;
-    w->S[40] = w->S[40] + w->term[0][40]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[0][41]*ck;
-    w->S[41] = w->S[41] + w->term[0][41]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[0][42]*ck;
-    w->S[42] = w->S[42] + w->term[0][42]*cs;
-    t->Phi[4][7] = t->Phi[4][7] + w->term[0][43]*ck;
-    w->S[43] = w->S[43] + w->term[0][43]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[0][44]*ck;
-    w->S[44] = w->S[44] + w->term[0][44]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[0][45]*ck;
-    w->S[45] = w->S[45] + w->term[0][45]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[0][46]*ck;
-    w->S[46] = w->S[46] + w->term[0][46]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[0][47]*ck;
-    w->S[47] = w->S[47] + w->term[0][47]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[0][48]*ck;
-    w->S[48] = w->S[48] + w->term[0][48]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[0][49]*ck;
-    w->S[49] = w->S[49] + w->term[0][49]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[0][50]*ck;
-    w->S[50] = w->S[50] + w->term[0][50]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[0][51]*ck;
-    w->S[51] = w->S[51] + w->term[0][51]*cs;
-    t->Phi[5][7] = t->Phi[5][7] + w->term[0][52]*ck;
-    w->S[52] = w->S[52] + w->term[0][52]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[0][53]*ck;
-    w->S[53] = w->S[53] + w->term[0][53]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[0][54]*ck;
-    w->S[54] = w->S[54] + w->term[0][54]*cs;
-    t->Phi[6][7] = t->Phi[6][7] + w->term[0][55]*ck;
-    w->S[55] = w->S[55] + w->term[0][55]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[0][56]*ck;
-    w->S[56] = w->S[56] + w->term[0][56]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[0][57]*ck;
-    w->S[57] = w->S[57] + w->term[0][57]*cs;
-    t->Phi[7][7] = t->Phi[7][7] + w->term[0][58]*ck;
-    w->S[58] = w->S[58] + w->term[0][58]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[0][59]*ck;
-    w->S[59] = w->S[59] + w->term[0][59]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[0][60]*ck;
-    w->S[60] = w->S[60] + w->term[0][60]*cs;
-    t->Phi[8][7] = t->Phi[8][7] + w->term[0][61]*ck;
-    w->S[61] = w->S[61] + w->term[0][61]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[0][62]*ck;
-    w->S[62] = w->S[62] + w->term[0][62]*cs;
+    w->S[36] = w->fh[14]*w->term[1][9] + w->fh[15]*w->term[1][27] + w->fh[16]*w->term[1][45];
+    w->S[37] = w->fh[14]*w->term[1][10] + w->fh[15]*w->term[1][28] + w->fh[16]*w->term[1][46];
+    w->S[38] = w->fh[14]*w->term[1][11] + w->fh[15]*w->term[1][29] + w->fh[16]*w->term[1][47];
+    w->S[39] = w->fh[14]*w->term[1][12] + w->fh[15]*w->term[1][30] + w->fh[16]*w->term[1][48];
+    w->S[40] = c_out + w->fh[14]*w->term[1][13] + w->fh[15]*w->term[1][31] +
+            w->fh[16]*w->term[1][49];
+    w->S[41] = w->fh[14]*w->term[1][14] + w->fh[15]*w->term[1][32] + w->fh[16]*w->term[1][50];
+    w->S[42] = w->fh[14]*w->term[1][15] + w->fh[15]*w->term[1][33] + w->fh[16]*w->term[1][51] +
+            w->fh[17]*w->term[1][54] + w->fh[18]*w->term[1][60];
+    w->S[43] = w->fh[15]*w->term[1][34] + w->fh[16]*w->term[1][52] + w->fh[17]*w->term[1][55] +
+            w->fh[18]*w->term[1][61];
+    w->S[44] = w->fh[14]*w->term[1][17] + w->fh[15]*w->term[1][35] + w->fh[16]*w->term[1][53] +
+            w->fh[17]*w->term[1][56] + w->fh[18]*w->term[1][62];
+    w->S[45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][27] + w->fh[21]*w->term[1][36];
+    w->S[46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][28] + w->fh[21]*w->term[1][37];
+    w->S[47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][29] + w->fh[21]*w->term[1][38];
+    w->S[48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][30] + w->fh[21]*w->term[1][39];
+    w->S[49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][31] + w->fh[21]*w->term[1][40];
+    w->S[50] = c_out + w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][32] +
+            w->fh[21]*w->term[1][41];
+    w->S[51] = w->fh[19]*w->term[1][24] + w->fh[20]*w->term[1][33] + w->fh[21]*w->term[1][42] +
+            w->fh[22]*w->term[1][54] + w->fh[23]*w->term[1][57];
+    w->S[52] = w->fh[19]*w->term[1][25] + w->fh[20]*w->term[1][34] + w->fh[21]*w->term[1][43] +
+            w->fh[22]*w->term[1][55] + w->fh[23]*w->term[1][58];
+    w->S[53] = w->fh[20]*w->term[1][35] + w->fh[21]*w->term[1][44] + w->fh[22]*w->term[1][56] +
+            w->fh[23]*w->term[1][59];
+    w->S[54] = c_out + w->fh[24]*w->term[1][57] + w->fh[25]*w->term[1][60];
+    w->S[55] = w->fh[24]*w->term[1][58] + w->fh[25]*w->term[1][61];
+    w->S[56] = w->fh[24]*w->term[1][59] + w->fh[25]*w->term[1][62];
+    w->S[57] = w->fh[26]*w->term[1][54] + w->fh[27]*w->term[1][60];
+    w->S[58] = c_out + w->fh[26]*w->term[1][55] + w->fh[27]*w->term[1][61];
+    w->S[59] = w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][62];
+    w->S[60] = w->fh[28]*w->term[1][54] + w->fh[29]*w->term[1][57];
+    w->S[61] = w->fh[28]*w->term[1][55] + w->fh[29]*w->term[1][58];
+    w->S[62] = c_out + w->fh[28]*w->term[1][56] + w->fh[29]*w->term[1][59];
+    w->S[63] = c_out;
+    w->S[64] = w->fh[30]*c_in;
 }
 
-GPS_PSEUDORANGE11_TWIN_BLOCK void taylor_order_5(gps_pseudorange11_twin_transition *restrict t,
-        gps_pseudorange11_twin_discretize_scratch *restrict w)
+GPS_PSEUDORANGE11_TWIN_BLOCK void horner_level_3_into_term(gps_pseudorange11_twin_discretize_scratch
+        *restrict w, const gps_pseudorange11_twin_scalar c_out, const gps_pseudorange11_twin_scalar
+        c_in)
 {
-    const gps_pseudorange11_twin_scalar ck = 1.0 / 120.0;
-    const gps_pseudorange11_twin_scalar cs = 1.0 / 720.0;
-    w->term[1][0] = w->fh[0]*w->term[0][9] + w->fh[1]*w->term[0][18] + w->fh[2]*w->term[0][27];
-    w->term[1][1] = w->fh[0]*w->term[0][10] + w->fh[1]*w->term[0][19] + w->fh[2]*w->term[0][28];
-    w->term[1][2] = w->fh[0]*w->term[0][11] + w->fh[1]*w->term[0][20] + w->fh[2]*w->term[0][29];
-    w->term[1][3] = w->fh[0]*w->term[0][12] + w->fh[1]*w->term[0][21] + w->fh[2]*w->term[0][30];
-    w->term[1][4] = w->fh[0]*w->term[0][13] + w->fh[1]*w->term[0][22] + w->fh[2]*w->term[0][31];
-    w->term[1][5] = w->fh[0]*w->term[0][14] + w->fh[1]*w->term[0][23] + w->fh[2]*w->term[0][32];
-    w->term[1][6] = w->fh[0]*w->term[0][15] + w->fh[1]*w->term[0][24] + w->fh[2]*w->term[0][33];
-    w->term[1][7] = w->fh[0]*w->term[0][16] + w->fh[1]*w->term[0][25] + w->fh[2]*w->term[0][34];
-    w->term[1][8] = w->fh[0]*w->term[0][17] + w->fh[1]*w->term[0][26] + w->fh[2]*w->term[0][35];
-    w->term[1][9] = w->fh[3]*w->term[0][0] + w->fh[4]*w->term[0][18] + w->fh[5]*w->term[0][36];
-    w->term[1][10] = w->fh[3]*w->term[0][1] + w->fh[4]*w->term[0][19] + w->fh[5]*w->term[0][37];
-    w->term[1][11] = w->fh[3]*w->term[0][2] + w->fh[4]*w->term[0][20] + w->fh[5]*w->term[0][38];
-    w->term[1][12] = w->fh[3]*w->term[0][3] + w->fh[4]*w->term[0][21] + w->fh[5]*w->term[0][39];
-    w->term[1][13] = w->fh[3]*w->term[0][4] + w->fh[4]*w->term[0][22] + w->fh[5]*w->term[0][40];
-    w->term[1][14] = w->fh[3]*w->term[0][5] + w->fh[4]*w->term[0][23] + w->fh[5]*w->term[0][41];
-    w->term[1][15] = w->fh[3]*w->term[0][6] + w->fh[4]*w->term[0][24] + w->fh[5]*w->term[0][42];
-    w->term[1][16] = w->fh[3]*w->term[0][7] + w->fh[4]*w->term[0][25] + w->fh[5]*w->term[0][43];
-    w->term[1][17] = w->fh[3]*w->term[0][8] + w->fh[4]*w->term[0][26] + w->fh[5]*w->term[0][44];
-    w->term[1][18] = w->fh[6]*w->term[0][0] + w->fh[7]*w->term[0][9] + w->fh[8]*w->term[0][45];
-    w->term[1][19] = w->fh[6]*w->term[0][1] + w->fh[7]*w->term[0][10] + w->fh[8]*w->term[0][46];
-    w->term[1][20] = w->fh[6]*w->term[0][2] + w->fh[7]*w->term[0][11] + w->fh[8]*w->term[0][47];
-    w->term[1][21] = w->fh[6]*w->term[0][3] + w->fh[7]*w->term[0][12] + w->fh[8]*w->term[0][48];
-    w->term[1][22] = w->fh[6]*w->term[0][4] + w->fh[7]*w->term[0][13] + w->fh[8]*w->term[0][49];
-    w->term[1][23] = w->fh[6]*w->term[0][5] + w->fh[7]*w->term[0][14] + w->fh[8]*w->term[0][50];
-    w->term[1][24] = w->fh[6]*w->term[0][6] + w->fh[7]*w->term[0][15] + w->fh[8]*w->term[0][51];
-    w->term[1][25] = w->fh[6]*w->term[0][7] + w->fh[7]*w->term[0][16] + w->fh[8]*w->term[0][52];
-    w->term[1][26] = w->fh[6]*w->term[0][8] + w->fh[7]*w->term[0][17] + w->fh[8]*w->term[0][53];
-    w->term[1][27] = w->fh[9]*w->term[0][0] + w->fh[10]*w->term[0][36] + w->fh[11]*w->term[0][45];
-    w->term[1][28] = w->fh[9]*w->term[0][1] + w->fh[10]*w->term[0][37] + w->fh[11]*w->term[0][46];
-    w->term[1][29] = w->fh[9]*w->term[0][2] + w->fh[10]*w->term[0][38] + w->fh[11]*w->term[0][47];
-    w->term[1][30] = w->fh[9]*w->term[0][3] + w->fh[10]*w->term[0][39] + w->fh[11]*w->term[0][48];
-    w->term[1][31] = w->fh[9]*w->term[0][4] + w->fh[10]*w->term[0][40] + w->fh[11]*w->term[0][49];
-    w->term[1][32] = w->fh[9]*w->term[0][5] + w->fh[10]*w->term[0][41] + w->fh[11]*w->term[0][50];
-    w->term[1][33] = w->fh[9]*w->term[0][6] + w->fh[10]*w->term[0][42] + w->fh[11]*w->term[0][51] +
-            w->fh[12]*w->term[0][57] + w->fh[13]*w->term[0][60];
-    w->term[1][34] = w->fh[9]*w->term[0][7] + w->fh[10]*w->term[0][43] + w->fh[11]*w->term[0][52] +
-            w->fh[12]*w->term[0][58] + w->fh[13]*w->term[0][61];
-    w->term[1][35] = w->fh[9]*w->term[0][8] + w->fh[10]*w->term[0][44] + w->fh[11]*w->term[0][53] +
-            w->fh[12]*w->term[0][59] + w->fh[13]*w->term[0][62];
-    w->term[1][36] = w->fh[14]*w->term[0][9] + w->fh[15]*w->term[0][27] + w->fh[16]*w->term[0][45];
-    w->term[1][37] = w->fh[14]*w->term[0][10] + w->fh[15]*w->term[0][28] + w->fh[16]*w->term[0][46];
-    w->term[1][38] = w->fh[14]*w->term[0][11] + w->fh[15]*w->term[0][29] + w->fh[16]*w->term[0][47];
-    w->term[1][39] = w->fh[14]*w->term[0][12] + w->fh[15]*w->term[0][30] + w->fh[16]*w->term[0][48];
-    w->term[1][40] = w->fh[14]*w->term[0][13] + w->fh[15]*w->term[0][31] + w->fh[16]*w->term[0][49];
-    w->term[1][41] = w->fh[14]*w->term[0][14] + w->fh[15]*w->term[0][32] + w->fh[16]*w->term[0][50];
-    w->term[1][42] = w->fh[14]*w->term[0][15] + w->fh[15]*w->term[0][33] + w->fh[16]*w->term[0][51]
-            + w->fh[17]*w->term[0][54] + w->fh[18]*w->term[0][60];
-    w->term[1][43] = w->fh[14]*w->term[0][16] + w->fh[15]*w->term[0][34] + w->fh[16]*w->term[0][52]
-            + w->fh[17]*w->term[0][55] + w->fh[18]*w->term[0][61];
-    w->term[1][44] = w->fh[14]*w->term[0][17] + w->fh[15]*w->term[0][35] + w->fh[16]*w->term[0][53]
-            + w->fh[17]*w->term[0][56] + w->fh[18]*w->term[0][62];
-    w->term[1][45] = w->fh[19]*w->term[0][18] + w->fh[20]*w->term[0][27] + w->fh[21]*w->term[0][36];
-    w->term[1][46] = w->fh[19]*w->term[0][19] + w->fh[20]*w->term[0][28] + w->fh[21]*w->term[0][37];
-    w->term[1][47] = w->fh[19]*w->term[0][20] + w->fh[20]*w->term[0][29] + w->fh[21]*w->term[0][38];
-    w->term[1][48] = w->fh[19]*w->term[0][21] + w->fh[20]*w->term[0][30] + w->fh[21]*w->term[0][39];
-    w->term[1][49] = w->fh[19]*w->term[0][22] + w->fh[20]*w->term[0][31] + w->fh[21]*w->term[0][40];
-    w->term[1][50] = w->fh[19]*w->term[0][23] + w->fh[20]*w->term[0][32] + w->fh[21]*w->term[0][41];
-    w->term[1][51] = w->fh[19]*w->term[0][24] + w->fh[20]*w->term[0][33] + w->fh[21]*w->term[0][42]
-            + w->fh[22]*w->term[0][54] + w->fh[23]*w->term[0][57];
-    w->term[1][52] = w->fh[19]*w->term[0][25] + w->fh[20]*w->term[0][34] + w->fh[21]*w->term[0][43]
-            + w->fh[22]*w->term[0][55] + w->fh[23]*w->term[0][58];
-    w->term[1][53] = w->fh[19]*w->term[0][26] + w->fh[20]*w->term[0][35] + w->fh[21]*w->term[0][44]
-            + w->fh[22]*w->term[0][56] + w->fh[23]*w->term[0][59];
-    w->term[1][54] = w->fh[24]*w->term[0][57] + w->fh[25]*w->term[0][60];
-    w->term[1][55] = w->fh[24]*w->term[0][58] + w->fh[25]*w->term[0][61];
-    w->term[1][56] = w->fh[24]*w->term[0][59] + w->fh[25]*w->term[0][62];
-    w->term[1][57] = w->fh[26]*w->term[0][54] + w->fh[27]*w->term[0][60];
-    w->term[1][58] = w->fh[26]*w->term[0][55] + w->fh[27]*w->term[0][61];
-    w->term[1][59] = w->fh[26]*w->term[0][56] + w->fh[27]*w->term[0][62];
-    w->term[1][60] = w->fh[28]*w->term[0][54] + w->fh[29]*w->term[0][57];
-    w->term[1][61] = w->fh[28]*w->term[0][55] + w->fh[29]*w->term[0][58];
-    w->term[1][62] = w->fh[28]*w->term[0][56] + w->fh[29]*w->term[0][59];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[1][0]*ck;
-    w->S[0] = w->S[0] + w->term[1][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[1][1]*ck;
-    w->S[1] = w->S[1] + w->term[1][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[1][2]*ck;
-    w->S[2] = w->S[2] + w->term[1][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[1][3]*ck;
-    w->S[3] = w->S[3] + w->term[1][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[1][4]*ck;
-    w->S[4] = w->S[4] + w->term[1][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[1][5]*ck;
-    w->S[5] = w->S[5] + w->term[1][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[1][6]*ck;
-    w->S[6] = w->S[6] + w->term[1][6]*cs;
-    t->Phi[0][7] = t->Phi[0][7] + w->term[1][7]*ck;
-    w->S[7] = w->S[7] + w->term[1][7]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[1][8]*ck;
-    w->S[8] = w->S[8] + w->term[1][8]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[1][9]*ck;
-    w->S[9] = w->S[9] + w->term[1][9]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[1][10]*ck;
-    w->S[10] = w->S[10] + w->term[1][10]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[1][11]*ck;
-    w->S[11] = w->S[11] + w->term[1][11]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[1][12]*ck;
-    w->S[12] = w->S[12] + w->term[1][12]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[1][13]*ck;
-    w->S[13] = w->S[13] + w->term[1][13]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[1][14]*ck;
-    w->S[14] = w->S[14] + w->term[1][14]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[1][15]*ck;
-    w->S[15] = w->S[15] + w->term[1][15]*cs;
-    t->Phi[1][7] = t->Phi[1][7] + w->term[1][16]*ck;
-    w->S[16] = w->S[16] + w->term[1][16]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[1][17]*ck;
-    w->S[17] = w->S[17] + w->term[1][17]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[1][18]*ck;
-    w->S[18] = w->S[18] + w->term[1][18]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[1][19]*ck;
-    w->S[19] = w->S[19] + w->term[1][19]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[1][20]*ck;
-    w->S[20] = w->S[20] + w->term[1][20]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[1][21]*ck;
-    w->S[21] = w->S[21] + w->term[1][21]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[1][22]*ck;
-    w->S[22] = w->S[22] + w->term[1][22]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[1][23]*ck;
-    w->S[23] = w->S[23] + w->term[1][23]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[1][24]*ck;
-    w->S[24] = w->S[24] + w->term[1][24]*cs;
-    t->Phi[2][7] = t->Phi[2][7] + w->term[1][25]*ck;
-    w->S[25] = w->S[25] + w->term[1][25]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[1][26]*ck;
-    w->S[26] = w->S[26] + w->term[1][26]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[1][27]*ck;
-    w->S[27] = w->S[27] + w->term[1][27]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[1][28]*ck;
-    w->S[28] = w->S[28] + w->term[1][28]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[1][29]*ck;
-    w->S[29] = w->S[29] + w->term[1][29]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[1][30]*ck;
-    w->S[30] = w->S[30] + w->term[1][30]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[1][31]*ck;
-    w->S[31] = w->S[31] + w->term[1][31]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[1][32]*ck;
-    w->S[32] = w->S[32] + w->term[1][32]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[1][33]*ck;
-    w->S[33] = w->S[33] + w->term[1][33]*cs;
-    t->Phi[3][7] = t->Phi[3][7] + w->term[1][34]*ck;
-    w->S[34] = w->S[34] + w->term[1][34]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[1][35]*ck;
-    w->S[35] = w->S[35] + w->term[1][35]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[1][36]*ck;
-    w->S[36] = w->S[36] + w->term[1][36]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[1][37]*ck;
-    w->S[37] = w->S[37] + w->term[1][37]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[1][38]*ck;
-    w->S[38] = w->S[38] + w->term[1][38]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[1][39]*ck;
-    w->S[39] = w->S[39] + w->term[1][39]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[1][40]*ck;
-    w->S[40] = w->S[40] + w->term[1][40]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[1][41]*ck;
-    w->S[41] = w->S[41] + w->term[1][41]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[1][42]*ck;
-    w->S[42] = w->S[42] + w->term[1][42]*cs;
-    t->Phi[4][7] = t->Phi[4][7] + w->term[1][43]*ck;
-    w->S[43] = w->S[43] + w->term[1][43]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[1][44]*ck;
-    w->S[44] = w->S[44] + w->term[1][44]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[1][45]*ck;
-    w->S[45] = w->S[45] + w->term[1][45]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[1][46]*ck;
-    w->S[46] = w->S[46] + w->term[1][46]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[1][47]*ck;
-    w->S[47] = w->S[47] + w->term[1][47]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[1][48]*ck;
-    w->S[48] = w->S[48] + w->term[1][48]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[1][49]*ck;
-    w->S[49] = w->S[49] + w->term[1][49]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[1][50]*ck;
-    w->S[50] = w->S[50] + w->term[1][50]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[1][51]*ck;
-    w->S[51] = w->S[51] + w->term[1][51]*cs;
-    t->Phi[5][7] = t->Phi[5][7] + w->term[1][52]*ck;
-    w->S[52] = w->S[52] + w->term[1][52]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[1][53]*ck;
-    w->S[53] = w->S[53] + w->term[1][53]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[1][54]*ck;
-    w->S[54] = w->S[54] + w->term[1][54]*cs;
-    t->Phi[6][7] = t->Phi[6][7] + w->term[1][55]*ck;
-    w->S[55] = w->S[55] + w->term[1][55]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[1][56]*ck;
-    w->S[56] = w->S[56] + w->term[1][56]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[1][57]*ck;
-    w->S[57] = w->S[57] + w->term[1][57]*cs;
-    t->Phi[7][7] = t->Phi[7][7] + w->term[1][58]*ck;
-    w->S[58] = w->S[58] + w->term[1][58]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[1][59]*ck;
-    w->S[59] = w->S[59] + w->term[1][59]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[1][60]*ck;
-    w->S[60] = w->S[60] + w->term[1][60]*cs;
-    t->Phi[8][7] = t->Phi[8][7] + w->term[1][61]*ck;
-    w->S[61] = w->S[61] + w->term[1][61]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[1][62]*ck;
-    w->S[62] = w->S[62] + w->term[1][62]*cs;
+    w->term[1][0] = c_out + w->fh[0]*w->S[9] + w->fh[1]*w->S[18] + w->fh[2]*w->S[27];
+    w->term[1][1] = w->fh[0]*w->S[10] + w->fh[1]*w->S[19] + w->fh[2]*w->S[28];
+    w->term[1][2] = w->fh[0]*w->S[11] + w->fh[1]*w->S[20] + w->fh[2]*w->S[29];
+    w->term[1][3] = w->fh[0]*w->S[12] + w->fh[1]*w->S[21] + w->fh[2]*w->S[30];
+    w->term[1][4] = w->fh[0]*w->S[13] + w->fh[1]*w->S[22] + w->fh[2]*w->S[31];
+    w->term[1][5] = w->fh[0]*w->S[14] + w->fh[1]*w->S[23] + w->fh[2]*w->S[32];
+    w->term[1][6] = w->fh[0]*w->S[15] + w->fh[1]*w->S[24] + w->fh[2]*w->S[33];
+    w->term[1][7] = w->fh[1]*w->S[25] + w->fh[2]*w->S[34];
+    w->term[1][8] = w->fh[0]*w->S[17] + w->fh[2]*w->S[35];
+    w->term[1][9] = w->fh[3]*w->S[0] + w->fh[4]*w->S[18] + w->fh[5]*w->S[36];
+    w->term[1][10] = c_out + w->fh[3]*w->S[1] + w->fh[4]*w->S[19] + w->fh[5]*w->S[37];
+    w->term[1][11] = w->fh[3]*w->S[2] + w->fh[4]*w->S[20] + w->fh[5]*w->S[38];
+    w->term[1][12] = w->fh[3]*w->S[3] + w->fh[4]*w->S[21] + w->fh[5]*w->S[39];
+    w->term[1][13] = w->fh[3]*w->S[4] + w->fh[4]*w->S[22] + w->fh[5]*w->S[40];
+    w->term[1][14] = w->fh[3]*w->S[5] + w->fh[4]*w->S[23] + w->fh[5]*w->S[41];
+    w->term[1][15] = w->fh[4]*w->S[24] + w->fh[5]*w->S[42];
+    w->term[1][16] = w->fh[3]*w->S[7] + w->fh[4]*w->S[25] + w->fh[5]*w->S[43];
+    w->term[1][17] = w->fh[3]*w->S[8] + w->fh[5]*w->S[44];
+    w->term[1][18] = w->fh[6]*w->S[0] + w->fh[7]*w->S[9] + w->fh[8]*w->S[45];
+    w->term[1][19] = w->fh[6]*w->S[1] + w->fh[7]*w->S[10] + w->fh[8]*w->S[46];
+    w->term[1][20] = c_out + w->fh[6]*w->S[2] + w->fh[7]*w->S[11] + w->fh[8]*w->S[47];
+    w->term[1][21] = w->fh[6]*w->S[3] + w->fh[7]*w->S[12] + w->fh[8]*w->S[48];
+    w->term[1][22] = w->fh[6]*w->S[4] + w->fh[7]*w->S[13] + w->fh[8]*w->S[49];
+    w->term[1][23] = w->fh[6]*w->S[5] + w->fh[7]*w->S[14] + w->fh[8]*w->S[50];
+    w->term[1][24] = w->fh[7]*w->S[15] + w->fh[8]*w->S[51];
+    w->term[1][25] = w->fh[6]*w->S[7] + w->fh[8]*w->S[52];
+    w->term[1][26] = w->fh[6]*w->S[8] + w->fh[7]*w->S[17] + w->fh[8]*w->S[53];
+    w->term[1][27] = w->fh[9]*w->S[0] + w->fh[10]*w->S[36] + w->fh[11]*w->S[45];
+    w->term[1][28] = w->fh[9]*w->S[1] + w->fh[10]*w->S[37] + w->fh[11]*w->S[46];
+    w->term[1][29] = w->fh[9]*w->S[2] + w->fh[10]*w->S[38] + w->fh[11]*w->S[47];
+    w->term[1][30] = c_out + w->fh[9]*w->S[3] + w->fh[10]*w->S[39] + w->fh[11]*w->S[48];
+    w->term[1][31] = w->fh[9]*w->S[4] + w->fh[10]*w->S[40] + w->fh[11]*w->S[49];
+    w->term[1][32] = w->fh[9]*w->S[5] + w->fh[10]*w->S[41] + w->fh[11]*w->S[50];
+    w->term[1][33] = w->fh[10]*w->S[42] + w->fh[11]*w->S[51] + w->fh[12]*w->S[57] +
+            w->fh[13]*w->S[60];
+    w->term[1][34] = w->fh[9]*w->S[7] + w->fh[10]*w->S[43] + w->fh[11]*w->S[52] + w->fh[12]*w->S[58]
+            + w->fh[13]*w->S[61];
+    w->term[1][35] = w->fh[9]*w->S[8] + w->fh[10]*w->S[44] + w->fh[11]*w->S[53] + w->fh[12]*w->S[59]
+            + w->fh[13]*w->S[62];
+    w->term[1][36] = w->fh[14]*w->S[9] + w->fh[15]*w->S[27] + w->fh[16]*w->S[45];
+    w->term[1][37] = w->fh[14]*w->S[10] + w->fh[15]*w->S[28] + w->fh[16]*w->S[46];
+    w->term[1][38] = w->fh[14]*w->S[11] + w->fh[15]*w->S[29] + w->fh[16]*w->S[47];
+    w->term[1][39] = w->fh[14]*w->S[12] + w->fh[15]*w->S[30] + w->fh[16]*w->S[48];
+    w->term[1][40] = c_out + w->fh[14]*w->S[13] + w->fh[15]*w->S[31] + w->fh[16]*w->S[49];
+    w->term[1][41] = w->fh[14]*w->S[14] + w->fh[15]*w->S[32] + w->fh[16]*w->S[50];
+    w->term[1][42] = w->fh[14]*w->S[15] + w->fh[15]*w->S[33] + w->fh[16]*w->S[51] +
+            w->fh[17]*w->S[54] + w->fh[18]*w->S[60];
+    w->term[1][43] = w->fh[15]*w->S[34] + w->fh[16]*w->S[52] + w->fh[17]*w->S[55] +
+            w->fh[18]*w->S[61];
+    w->term[1][44] = w->fh[14]*w->S[17] + w->fh[15]*w->S[35] + w->fh[16]*w->S[53] +
+            w->fh[17]*w->S[56] + w->fh[18]*w->S[62];
+    w->term[1][45] = w->fh[19]*w->S[18] + w->fh[20]*w->S[27] + w->fh[21]*w->S[36];
+    w->term[1][46] = w->fh[19]*w->S[19] + w->fh[20]*w->S[28] + w->fh[21]*w->S[37];
+    w->term[1][47] = w->fh[19]*w->S[20] + w->fh[20]*w->S[29] + w->fh[21]*w->S[38];
+    w->term[1][48] = w->fh[19]*w->S[21] + w->fh[20]*w->S[30] + w->fh[21]*w->S[39];
+    w->term[1][49] = w->fh[19]*w->S[22] + w->fh[20]*w->S[31] + w->fh[21]*w->S[40];
+    w->term[1][50] = c_out + w->fh[19]*w->S[23] + w->fh[20]*w->S[32] + w->fh[21]*w->S[41];
+    w->term[1][51] = w->fh[19]*w->S[24] + w->fh[20]*w->S[33] + w->fh[21]*w->S[42] +
+            w->fh[22]*w->S[54] + w->fh[23]*w->S[57];
+    w->term[1][52] = w->fh[19]*w->S[25] + w->fh[20]*w->S[34] + w->fh[21]*w->S[43] +
+            w->fh[22]*w->S[55] + w->fh[23]*w->S[58];
+    w->term[1][53] = w->fh[20]*w->S[35] + w->fh[21]*w->S[44] + w->fh[22]*w->S[56] +
+            w->fh[23]*w->S[59];
+    w->term[1][54] = c_out + w->fh[24]*w->S[57] + w->fh[25]*w->S[60];
+    w->term[1][55] = w->fh[24]*w->S[58] + w->fh[25]*w->S[61];
+    w->term[1][56] = w->fh[24]*w->S[59] + w->fh[25]*w->S[62];
+    w->term[1][57] = w->fh[26]*w->S[54] + w->fh[27]*w->S[60];
+    w->term[1][58] = c_out + w->fh[26]*w->S[55] + w->fh[27]*w->S[61];
+    w->term[1][59] = w->fh[26]*w->S[56] + w->fh[27]*w->S[62];
+    w->term[1][60] = w->fh[28]*w->S[54] + w->fh[29]*w->S[57];
+    w->term[1][61] = w->fh[28]*w->S[55] + w->fh[29]*w->S[58];
+    w->term[1][62] = c_out + w->fh[28]*w->S[56] + w->fh[29]*w->S[59];
+    w->term[1][63] = c_out;
+    w->term[1][64] = w->fh[30]*c_in;
 }
 
-GPS_PSEUDORANGE11_TWIN_BLOCK void taylor_order_6(gps_pseudorange11_twin_transition *restrict t,
-        gps_pseudorange11_twin_discretize_scratch *restrict w)
+GPS_PSEUDORANGE11_TWIN_BLOCK void horner_saturated_into_S(gps_pseudorange11_twin_discretize_scratch
+        *restrict w, const gps_pseudorange11_twin_scalar c_out, const gps_pseudorange11_twin_scalar
+        c_in)
 {
-    const gps_pseudorange11_twin_scalar ck = 1.0 / 720.0;
-    const gps_pseudorange11_twin_scalar cs = 1.0 / 5040.0;
-    w->term[0][0] = w->fh[0]*w->term[1][9] + w->fh[1]*w->term[1][18] + w->fh[2]*w->term[1][27];
-    w->term[0][1] = w->fh[0]*w->term[1][10] + w->fh[1]*w->term[1][19] + w->fh[2]*w->term[1][28];
-    w->term[0][2] = w->fh[0]*w->term[1][11] + w->fh[1]*w->term[1][20] + w->fh[2]*w->term[1][29];
-    w->term[0][3] = w->fh[0]*w->term[1][12] + w->fh[1]*w->term[1][21] + w->fh[2]*w->term[1][30];
-    w->term[0][4] = w->fh[0]*w->term[1][13] + w->fh[1]*w->term[1][22] + w->fh[2]*w->term[1][31];
-    w->term[0][5] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][23] + w->fh[2]*w->term[1][32];
-    w->term[0][6] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][24] + w->fh[2]*w->term[1][33];
-    w->term[0][7] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][25] + w->fh[2]*w->term[1][34];
-    w->term[0][8] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][26] + w->fh[2]*w->term[1][35];
-    w->term[0][9] = w->fh[3]*w->term[1][0] + w->fh[4]*w->term[1][18] + w->fh[5]*w->term[1][36];
-    w->term[0][10] = w->fh[3]*w->term[1][1] + w->fh[4]*w->term[1][19] + w->fh[5]*w->term[1][37];
-    w->term[0][11] = w->fh[3]*w->term[1][2] + w->fh[4]*w->term[1][20] + w->fh[5]*w->term[1][38];
-    w->term[0][12] = w->fh[3]*w->term[1][3] + w->fh[4]*w->term[1][21] + w->fh[5]*w->term[1][39];
-    w->term[0][13] = w->fh[3]*w->term[1][4] + w->fh[4]*w->term[1][22] + w->fh[5]*w->term[1][40];
-    w->term[0][14] = w->fh[3]*w->term[1][5] + w->fh[4]*w->term[1][23] + w->fh[5]*w->term[1][41];
-    w->term[0][15] = w->fh[3]*w->term[1][6] + w->fh[4]*w->term[1][24] + w->fh[5]*w->term[1][42];
-    w->term[0][16] = w->fh[3]*w->term[1][7] + w->fh[4]*w->term[1][25] + w->fh[5]*w->term[1][43];
-    w->term[0][17] = w->fh[3]*w->term[1][8] + w->fh[4]*w->term[1][26] + w->fh[5]*w->term[1][44];
-    w->term[0][18] = w->fh[6]*w->term[1][0] + w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][45];
-    w->term[0][19] = w->fh[6]*w->term[1][1] + w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][46];
-    w->term[0][20] = w->fh[6]*w->term[1][2] + w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][47];
-    w->term[0][21] = w->fh[6]*w->term[1][3] + w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][48];
-    w->term[0][22] = w->fh[6]*w->term[1][4] + w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][49];
-    w->term[0][23] = w->fh[6]*w->term[1][5] + w->fh[7]*w->term[1][14] + w->fh[8]*w->term[1][50];
-    w->term[0][24] = w->fh[6]*w->term[1][6] + w->fh[7]*w->term[1][15] + w->fh[8]*w->term[1][51];
-    w->term[0][25] = w->fh[6]*w->term[1][7] + w->fh[7]*w->term[1][16] + w->fh[8]*w->term[1][52];
-    w->term[0][26] = w->fh[6]*w->term[1][8] + w->fh[7]*w->term[1][17] + w->fh[8]*w->term[1][53];
-    w->term[0][27] = w->fh[9]*w->term[1][0] + w->fh[10]*w->term[1][36] + w->fh[11]*w->term[1][45];
-    w->term[0][28] = w->fh[9]*w->term[1][1] + w->fh[10]*w->term[1][37] + w->fh[11]*w->term[1][46];
-    w->term[0][29] = w->fh[9]*w->term[1][2] + w->fh[10]*w->term[1][38] + w->fh[11]*w->term[1][47];
-    w->term[0][30] = w->fh[9]*w->term[1][3] + w->fh[10]*w->term[1][39] + w->fh[11]*w->term[1][48];
-    w->term[0][31] = w->fh[9]*w->term[1][4] + w->fh[10]*w->term[1][40] + w->fh[11]*w->term[1][49];
-    w->term[0][32] = w->fh[9]*w->term[1][5] + w->fh[10]*w->term[1][41] + w->fh[11]*w->term[1][50];
-    w->term[0][33] = w->fh[9]*w->term[1][6] + w->fh[10]*w->term[1][42] + w->fh[11]*w->term[1][51] +
+    w->S[0] = c_out + w->fh[0]*w->term[1][9] + w->fh[1]*w->term[1][18] + w->fh[2]*w->term[1][27];
+    w->S[1] = w->fh[0]*w->term[1][10] + w->fh[1]*w->term[1][19] + w->fh[2]*w->term[1][28];
+    w->S[2] = w->fh[0]*w->term[1][11] + w->fh[1]*w->term[1][20] + w->fh[2]*w->term[1][29];
+    w->S[3] = w->fh[0]*w->term[1][12] + w->fh[1]*w->term[1][21] + w->fh[2]*w->term[1][30];
+    w->S[4] = w->fh[0]*w->term[1][13] + w->fh[1]*w->term[1][22] + w->fh[2]*w->term[1][31];
+    w->S[5] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][23] + w->fh[2]*w->term[1][32];
+    w->S[6] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][24] + w->fh[2]*w->term[1][33];
+    w->S[7] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][25] + w->fh[2]*w->term[1][34];
+    w->S[8] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][26] + w->fh[2]*w->term[1][35];
+    w->S[9] = w->fh[3]*w->term[1][0] + w->fh[4]*w->term[1][18] + w->fh[5]*w->term[1][36];
+    w->S[10] = c_out + w->fh[3]*w->term[1][1] + w->fh[4]*w->term[1][19] + w->fh[5]*w->term[1][37];
+    w->S[11] = w->fh[3]*w->term[1][2] + w->fh[4]*w->term[1][20] + w->fh[5]*w->term[1][38];
+    w->S[12] = w->fh[3]*w->term[1][3] + w->fh[4]*w->term[1][21] + w->fh[5]*w->term[1][39];
+    w->S[13] = w->fh[3]*w->term[1][4] + w->fh[4]*w->term[1][22] + w->fh[5]*w->term[1][40];
+    w->S[14] = w->fh[3]*w->term[1][5] + w->fh[4]*w->term[1][23] + w->fh[5]*w->term[1][41];
+    w->S[15] = w->fh[3]*w->term[1][6] + w->fh[4]*w->term[1][24] + w->fh[5]*w->term[1][42];
+    w->S[16] = w->fh[3]*w->term[1][7] + w->fh[4]*w->term[1][25] + w->fh[5]*w->term[1][43];
+    w->S[17] = w->fh[3]*w->term[1][8] + w->fh[4]*w->term[1][26] + w->fh[5]*w->term[1][44];
+    w->S[18] = w->fh[6]*w->term[1][0] + w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][45];
+    w->S[19] = w->fh[6]*w->term[1][1] + w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][46];
+    w->S[20] = c_out + w->fh[6]*w->term[1][2] + w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][47];
+    w->S[21] = w->fh[6]*w->term[1][3] + w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][48];
+    w->S[22] = w->fh[6]*w->term[1][4] + w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][49];
+    w->S[23] = w->fh[6]*w->term[1][5] + w->fh[7]*w->term[1][14] + w->fh[8]*w->term[1][50];
+    w->S[24] = w->fh[6]*w->term[1][6] + w->fh[7]*w->term[1][15] + w->fh[8]*w->term[1][51];
+    w->S[25] = w->fh[6]*w->term[1][7] + w->fh[7]*w->term[1][16] + w->fh[8]*w->term[1][52];
+    w->S[26] = w->fh[6]*w->term[1][8] + w->fh[7]*w->term[1][17] + w->fh[8]*w->term[1][53];
+    w->S[27] = w->fh[9]*w->term[1][0] + w->fh[10]*w->term[1][36] + w->fh[11]*w->term[1][45];
+    w->S[28] = w->fh[9]*w->term[1][1] + w->fh[10]*w->term[1][37] + w->fh[11]*w->term[1][46];
+    w->S[29] = w->fh[9]*w->term[1][2] + w->fh[10]*w->term[1][38] + w->fh[11]*w->term[1][47];
+    w->S[30] = c_out + w->fh[9]*w->term[1][3] + w->fh[10]*w->term[1][39] + w->fh[11]*w->term[1][48];
+    w->S[31] = w->fh[9]*w->term[1][4] + w->fh[10]*w->term[1][40] + w->fh[11]*w->term[1][49];
+    w->S[32] = w->fh[9]*w->term[1][5] + w->fh[10]*w->term[1][41] + w->fh[11]*w->term[1][50];
+    w->S[33] = w->fh[9]*w->term[1][6] + w->fh[10]*w->term[1][42] + w->fh[11]*w->term[1][51] +
             w->fh[12]*w->term[1][57] + w->fh[13]*w->term[1][60];
-    w->term[0][34] = w->fh[9]*w->term[1][7] + w->fh[10]*w->term[1][43] + w->fh[11]*w->term[1][52] +
+    w->S[34] = w->fh[9]*w->term[1][7] + w->fh[10]*w->term[1][43] + w->fh[11]*w->term[1][52] +
             w->fh[12]*w->term[1][58] + w->fh[13]*w->term[1][61];
-    w->term[0][35] = w->fh[9]*w->term[1][8] + w->fh[10]*w->term[1][44] + w->fh[11]*w->term[1][53] +
+    w->S[35] = w->fh[9]*w->term[1][8] + w->fh[10]*w->term[1][44] + w->fh[11]*w->term[1][53] +
             w->fh[12]*w->term[1][59] + w->fh[13]*w->term[1][62];
-    w->term[0][36] = w->fh[14]*w->term[1][9] + w->fh[15]*w->term[1][27] + w->fh[16]*w->term[1][45];
-    w->term[0][37] = w->fh[14]*w->term[1][10] + w->fh[15]*w->term[1][28] + w->fh[16]*w->term[1][46];
-    w->term[0][38] = w->fh[14]*w->term[1][11] + w->fh[15]*w->term[1][29] + w->fh[16]*w->term[1][47];
-    w->term[0][39] = w->fh[14]*w->term[1][12] + w->fh[15]*w->term[1][30] + w->fh[16]*w->term[1][48];
-    w->term[0][40] = w->fh[14]*w->term[1][13] + w->fh[15]*w->term[1][31] + w->fh[16]*w->term[1][49];
-    w->term[0][41] = w->fh[14]*w->term[1][14] + w->fh[15]*w->term[1][32] + w->fh[16]*w->term[1][50];
-    w->term[0][42] = w->fh[14]*w->term[1][15] + w->fh[15]*w->term[1][33] + w->fh[16]*w->term[1][51]
-            + w->fh[17]*w->term[1][54] + w->fh[18]*w->term[1][60];
-    w->term[0][43] = w->fh[14]*w->term[1][16] + w->fh[15]*w->term[1][34] + w->fh[16]*w->term[1][52]
-            + w->fh[17]*w->term[1][55] + w->fh[18]*w->term[1][61];
-    w->term[0][44] = w->fh[14]*w->term[1][17] + w->fh[15]*w->term[1][35] + w->fh[16]*w->term[1][53]
-            + w->fh[17]*w->term[1][56] + w->fh[18]*w->term[1][62];
-    w->term[0][45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][27] + w->fh[21]*w->term[1][36];
-    w->term[0][46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][28] + w->fh[21]*w->term[1][37];
-    w->term[0][47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][29] + w->fh[21]*w->term[1][38];
-    w->term[0][48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][30] + w->fh[21]*w->term[1][39];
-    w->term[0][49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][31] + w->fh[21]*w->term[1][40];
-    w->term[0][50] = w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][32] + w->fh[21]*w->term[1][41];
-    w->term[0][51] = w->fh[19]*w->term[1][24] + w->fh[20]*w->term[1][33] + w->fh[21]*w->term[1][42]
-            + w->fh[22]*w->term[1][54] + w->fh[23]*w->term[1][57];
-    w->term[0][52] = w->fh[19]*w->term[1][25] + w->fh[20]*w->term[1][34] + w->fh[21]*w->term[1][43]
-            + w->fh[22]*w->term[1][55] + w->fh[23]*w->term[1][58];
-    w->term[0][53] = w->fh[19]*w->term[1][26] + w->fh[20]*w->term[1][35] + w->fh[21]*w->term[1][44]
-            + w->fh[22]*w->term[1][56] + w->fh[23]*w->term[1][59];
-    w->term[0][54] = w->fh[24]*w->term[1][57] + w->fh[25]*w->term[1][60];
-    w->term[0][55] = w->fh[24]*w->term[1][58] + w->fh[25]*w->term[1][61];
-    w->term[0][56] = w->fh[24]*w->term[1][59] + w->fh[25]*w->term[1][62];
-    w->term[0][57] = w->fh[26]*w->term[1][54] + w->fh[27]*w->term[1][60];
-    w->term[0][58] = w->fh[26]*w->term[1][55] + w->fh[27]*w->term[1][61];
-    w->term[0][59] = w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][62];
-    w->term[0][60] = w->fh[28]*w->term[1][54] + w->fh[29]*w->term[1][57];
-    w->term[0][61] = w->fh[28]*w->term[1][55] + w->fh[29]*w->term[1][58];
-    w->term[0][62] = w->fh[28]*w->term[1][56] + w->fh[29]*w->term[1][59];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[0][0]*ck;
-    w->S[0] = w->S[0] + w->term[0][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[0][1]*ck;
-    w->S[1] = w->S[1] + w->term[0][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[0][2]*ck;
-    w->S[2] = w->S[2] + w->term[0][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[0][3]*ck;
-    w->S[3] = w->S[3] + w->term[0][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[0][4]*ck;
-    w->S[4] = w->S[4] + w->term[0][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[0][5]*ck;
-    w->S[5] = w->S[5] + w->term[0][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[0][6]*ck;
-    w->S[6] = w->S[6] + w->term[0][6]*cs;
-    t->Phi[0][7] = t->Phi[0][7] + w->term[0][7]*ck;
-    w->S[7] = w->S[7] + w->term[0][7]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[0][8]*ck;
-    w->S[8] = w->S[8] + w->term[0][8]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[0][9]*ck;
-    w->S[9] = w->S[9] + w->term[0][9]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[0][10]*ck;
-    w->S[10] = w->S[10] + w->term[0][10]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[0][11]*ck;
-    w->S[11] = w->S[11] + w->term[0][11]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[0][12]*ck;
-    w->S[12] = w->S[12] + w->term[0][12]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[0][13]*ck;
-    w->S[13] = w->S[13] + w->term[0][13]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[0][14]*ck;
-    w->S[14] = w->S[14] + w->term[0][14]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[0][15]*ck;
-    w->S[15] = w->S[15] + w->term[0][15]*cs;
-    t->Phi[1][7] = t->Phi[1][7] + w->term[0][16]*ck;
-    w->S[16] = w->S[16] + w->term[0][16]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[0][17]*ck;
-    w->S[17] = w->S[17] + w->term[0][17]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[0][18]*ck;
-    w->S[18] = w->S[18] + w->term[0][18]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[0][19]*ck;
-    w->S[19] = w->S[19] + w->term[0][19]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[0][20]*ck;
-    w->S[20] = w->S[20] + w->term[0][20]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[0][21]*ck;
-    w->S[21] = w->S[21] + w->term[0][21]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[0][22]*ck;
-    w->S[22] = w->S[22] + w->term[0][22]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[0][23]*ck;
-    w->S[23] = w->S[23] + w->term[0][23]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[0][24]*ck;
-    w->S[24] = w->S[24] + w->term[0][24]*cs;
-    t->Phi[2][7] = t->Phi[2][7] + w->term[0][25]*ck;
-    w->S[25] = w->S[25] + w->term[0][25]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[0][26]*ck;
-    w->S[26] = w->S[26] + w->term[0][26]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[0][27]*ck;
-    w->S[27] = w->S[27] + w->term[0][27]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[0][28]*ck;
-    w->S[28] = w->S[28] + w->term[0][28]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[0][29]*ck;
-    w->S[29] = w->S[29] + w->term[0][29]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[0][30]*ck;
-    w->S[30] = w->S[30] + w->term[0][30]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[0][31]*ck;
-    w->S[31] = w->S[31] + w->term[0][31]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[0][32]*ck;
-    w->S[32] = w->S[32] + w->term[0][32]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[0][33]*ck;
-    w->S[33] = w->S[33] + w->term[0][33]*cs;
-    t->Phi[3][7] = t->Phi[3][7] + w->term[0][34]*ck;
-    w->S[34] = w->S[34] + w->term[0][34]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[0][35]*ck;
-    w->S[35] = w->S[35] + w->term[0][35]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[0][36]*ck;
-    w->S[36] = w->S[36] + w->term[0][36]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[0][37]*ck;
-    w->S[37] = w->S[37] + w->term[0][37]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[0][38]*ck;
-    w->S[38] = w->S[38] + w->term[0][38]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[0][39]*ck;
-    w->S[39] = w->S[39] + w->term[0][39]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[0][40]*ck;
-    w->S[40] = w->S[40] + w->term[0][40]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[0][41]*ck;
-    w->S[41] = w->S[41] + w->term[0][41]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[0][42]*ck;
-    w->S[42] = w->S[42] + w->term[0][42]*cs;
-    t->Phi[4][7] = t->Phi[4][7] + w->term[0][43]*ck;
-    w->S[43] = w->S[43] + w->term[0][43]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[0][44]*ck;
-    w->S[44] = w->S[44] + w->term[0][44]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[0][45]*ck;
-    w->S[45] = w->S[45] + w->term[0][45]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[0][46]*ck;
-    w->S[46] = w->S[46] + w->term[0][46]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[0][47]*ck;
-    w->S[47] = w->S[47] + w->term[0][47]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[0][48]*ck;
-    w->S[48] = w->S[48] + w->term[0][48]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[0][49]*ck;
-    w->S[49] = w->S[49] + w->term[0][49]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[0][50]*ck;
-    w->S[50] = w->S[50] + w->term[0][50]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[0][51]*ck;
-    w->S[51] = w->S[51] + w->term[0][51]*cs;
-    t->Phi[5][7] = t->Phi[5][7] + w->term[0][52]*ck;
-    w->S[52] = w->S[52] + w->term[0][52]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[0][53]*ck;
-    w->S[53] = w->S[53] + w->term[0][53]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[0][54]*ck;
-    w->S[54] = w->S[54] + w->term[0][54]*cs;
-    t->Phi[6][7] = t->Phi[6][7] + w->term[0][55]*ck;
-    w->S[55] = w->S[55] + w->term[0][55]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[0][56]*ck;
-    w->S[56] = w->S[56] + w->term[0][56]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[0][57]*ck;
-    w->S[57] = w->S[57] + w->term[0][57]*cs;
-    t->Phi[7][7] = t->Phi[7][7] + w->term[0][58]*ck;
-    w->S[58] = w->S[58] + w->term[0][58]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[0][59]*ck;
-    w->S[59] = w->S[59] + w->term[0][59]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[0][60]*ck;
-    w->S[60] = w->S[60] + w->term[0][60]*cs;
-    t->Phi[8][7] = t->Phi[8][7] + w->term[0][61]*ck;
-    w->S[61] = w->S[61] + w->term[0][61]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[0][62]*ck;
-    w->S[62] = w->S[62] + w->term[0][62]*cs;
+    w->S[36] = w->fh[14]*w->term[1][9] + w->fh[15]*w->term[1][27] + w->fh[16]*w->term[1][45];
+    w->S[37] = w->fh[14]*w->term[1][10] + w->fh[15]*w->term[1][28] + w->fh[16]*w->term[1][46];
+    w->S[38] = w->fh[14]*w->term[1][11] + w->fh[15]*w->term[1][29] + w->fh[16]*w->term[1][47];
+    w->S[39] = w->fh[14]*w->term[1][12] + w->fh[15]*w->term[1][30] + w->fh[16]*w->term[1][48];
+    w->S[40] = c_out + w->fh[14]*w->term[1][13] + w->fh[15]*w->term[1][31] +
+            w->fh[16]*w->term[1][49];
+    w->S[41] = w->fh[14]*w->term[1][14] + w->fh[15]*w->term[1][32] + w->fh[16]*w->term[1][50];
+    w->S[42] = w->fh[14]*w->term[1][15] + w->fh[15]*w->term[1][33] + w->fh[16]*w->term[1][51] +
+            w->fh[17]*w->term[1][54] + w->fh[18]*w->term[1][60];
+    w->S[43] = w->fh[14]*w->term[1][16] + w->fh[15]*w->term[1][34] + w->fh[16]*w->term[1][52] +
+            w->fh[17]*w->term[1][55] + w->fh[18]*w->term[1][61];
+    w->S[44] = w->fh[14]*w->term[1][17] + w->fh[15]*w->term[1][35] + w->fh[16]*w->term[1][53] +
+            w->fh[17]*w->term[1][56] + w->fh[18]*w->term[1][62];
+    w->S[45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][27] + w->fh[21]*w->term[1][36];
+    w->S[46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][28] + w->fh[21]*w->term[1][37];
+    w->S[47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][29] + w->fh[21]*w->term[1][38];
+    w->S[48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][30] + w->fh[21]*w->term[1][39];
+    w->S[49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][31] + w->fh[21]*w->term[1][40];
+    w->S[50] = c_out + w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][32] +
+            w->fh[21]*w->term[1][41];
+    w->S[51] = w->fh[19]*w->term[1][24] + w->fh[20]*w->term[1][33] + w->fh[21]*w->term[1][42] +
+            w->fh[22]*w->term[1][54] + w->fh[23]*w->term[1][57];
+    w->S[52] = w->fh[19]*w->term[1][25] + w->fh[20]*w->term[1][34] + w->fh[21]*w->term[1][43] +
+            w->fh[22]*w->term[1][55] + w->fh[23]*w->term[1][58];
+    w->S[53] = w->fh[19]*w->term[1][26] + w->fh[20]*w->term[1][35] + w->fh[21]*w->term[1][44] +
+            w->fh[22]*w->term[1][56] + w->fh[23]*w->term[1][59];
+    w->S[54] = c_out + w->fh[24]*w->term[1][57] + w->fh[25]*w->term[1][60];
+    w->S[55] = w->fh[24]*w->term[1][58] + w->fh[25]*w->term[1][61];
+    w->S[56] = w->fh[24]*w->term[1][59] + w->fh[25]*w->term[1][62];
+    w->S[57] = w->fh[26]*w->term[1][54] + w->fh[27]*w->term[1][60];
+    w->S[58] = c_out + w->fh[26]*w->term[1][55] + w->fh[27]*w->term[1][61];
+    w->S[59] = w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][62];
+    w->S[60] = w->fh[28]*w->term[1][54] + w->fh[29]*w->term[1][57];
+    w->S[61] = w->fh[28]*w->term[1][55] + w->fh[29]*w->term[1][58];
+    w->S[62] = c_out + w->fh[28]*w->term[1][56] + w->fh[29]*w->term[1][59];
+    w->S[63] = c_out;
+    w->S[64] = w->fh[30]*c_in;
 }
 
-GPS_PSEUDORANGE11_TWIN_BLOCK void taylor_order_7(gps_pseudorange11_twin_transition *restrict t,
-        gps_pseudorange11_twin_discretize_scratch *restrict w)
+GPS_PSEUDORANGE11_TWIN_BLOCK void
+        horner_saturated_into_term(gps_pseudorange11_twin_discretize_scratch *restrict w, const
+        gps_pseudorange11_twin_scalar c_out, const gps_pseudorange11_twin_scalar c_in)
 {
-    const gps_pseudorange11_twin_scalar ck = 1.0 / 5040.0;
-    const gps_pseudorange11_twin_scalar cs = 1.0 / 40320.0;
-    w->term[1][0] = w->fh[0]*w->term[0][9] + w->fh[1]*w->term[0][18] + w->fh[2]*w->term[0][27];
-    w->term[1][1] = w->fh[0]*w->term[0][10] + w->fh[1]*w->term[0][19] + w->fh[2]*w->term[0][28];
-    w->term[1][2] = w->fh[0]*w->term[0][11] + w->fh[1]*w->term[0][20] + w->fh[2]*w->term[0][29];
-    w->term[1][3] = w->fh[0]*w->term[0][12] + w->fh[1]*w->term[0][21] + w->fh[2]*w->term[0][30];
-    w->term[1][4] = w->fh[0]*w->term[0][13] + w->fh[1]*w->term[0][22] + w->fh[2]*w->term[0][31];
-    w->term[1][5] = w->fh[0]*w->term[0][14] + w->fh[1]*w->term[0][23] + w->fh[2]*w->term[0][32];
-    w->term[1][6] = w->fh[0]*w->term[0][15] + w->fh[1]*w->term[0][24] + w->fh[2]*w->term[0][33];
-    w->term[1][7] = w->fh[0]*w->term[0][16] + w->fh[1]*w->term[0][25] + w->fh[2]*w->term[0][34];
-    w->term[1][8] = w->fh[0]*w->term[0][17] + w->fh[1]*w->term[0][26] + w->fh[2]*w->term[0][35];
-    w->term[1][9] = w->fh[3]*w->term[0][0] + w->fh[4]*w->term[0][18] + w->fh[5]*w->term[0][36];
-    w->term[1][10] = w->fh[3]*w->term[0][1] + w->fh[4]*w->term[0][19] + w->fh[5]*w->term[0][37];
-    w->term[1][11] = w->fh[3]*w->term[0][2] + w->fh[4]*w->term[0][20] + w->fh[5]*w->term[0][38];
-    w->term[1][12] = w->fh[3]*w->term[0][3] + w->fh[4]*w->term[0][21] + w->fh[5]*w->term[0][39];
-    w->term[1][13] = w->fh[3]*w->term[0][4] + w->fh[4]*w->term[0][22] + w->fh[5]*w->term[0][40];
-    w->term[1][14] = w->fh[3]*w->term[0][5] + w->fh[4]*w->term[0][23] + w->fh[5]*w->term[0][41];
-    w->term[1][15] = w->fh[3]*w->term[0][6] + w->fh[4]*w->term[0][24] + w->fh[5]*w->term[0][42];
-    w->term[1][16] = w->fh[3]*w->term[0][7] + w->fh[4]*w->term[0][25] + w->fh[5]*w->term[0][43];
-    w->term[1][17] = w->fh[3]*w->term[0][8] + w->fh[4]*w->term[0][26] + w->fh[5]*w->term[0][44];
-    w->term[1][18] = w->fh[6]*w->term[0][0] + w->fh[7]*w->term[0][9] + w->fh[8]*w->term[0][45];
-    w->term[1][19] = w->fh[6]*w->term[0][1] + w->fh[7]*w->term[0][10] + w->fh[8]*w->term[0][46];
-    w->term[1][20] = w->fh[6]*w->term[0][2] + w->fh[7]*w->term[0][11] + w->fh[8]*w->term[0][47];
-    w->term[1][21] = w->fh[6]*w->term[0][3] + w->fh[7]*w->term[0][12] + w->fh[8]*w->term[0][48];
-    w->term[1][22] = w->fh[6]*w->term[0][4] + w->fh[7]*w->term[0][13] + w->fh[8]*w->term[0][49];
-    w->term[1][23] = w->fh[6]*w->term[0][5] + w->fh[7]*w->term[0][14] + w->fh[8]*w->term[0][50];
-    w->term[1][24] = w->fh[6]*w->term[0][6] + w->fh[7]*w->term[0][15] + w->fh[8]*w->term[0][51];
-    w->term[1][25] = w->fh[6]*w->term[0][7] + w->fh[7]*w->term[0][16] + w->fh[8]*w->term[0][52];
-    w->term[1][26] = w->fh[6]*w->term[0][8] + w->fh[7]*w->term[0][17] + w->fh[8]*w->term[0][53];
-    w->term[1][27] = w->fh[9]*w->term[0][0] + w->fh[10]*w->term[0][36] + w->fh[11]*w->term[0][45];
-    w->term[1][28] = w->fh[9]*w->term[0][1] + w->fh[10]*w->term[0][37] + w->fh[11]*w->term[0][46];
-    w->term[1][29] = w->fh[9]*w->term[0][2] + w->fh[10]*w->term[0][38] + w->fh[11]*w->term[0][47];
-    w->term[1][30] = w->fh[9]*w->term[0][3] + w->fh[10]*w->term[0][39] + w->fh[11]*w->term[0][48];
-    w->term[1][31] = w->fh[9]*w->term[0][4] + w->fh[10]*w->term[0][40] + w->fh[11]*w->term[0][49];
-    w->term[1][32] = w->fh[9]*w->term[0][5] + w->fh[10]*w->term[0][41] + w->fh[11]*w->term[0][50];
-    w->term[1][33] = w->fh[9]*w->term[0][6] + w->fh[10]*w->term[0][42] + w->fh[11]*w->term[0][51] +
-            w->fh[12]*w->term[0][57] + w->fh[13]*w->term[0][60];
-    w->term[1][34] = w->fh[9]*w->term[0][7] + w->fh[10]*w->term[0][43] + w->fh[11]*w->term[0][52] +
-            w->fh[12]*w->term[0][58] + w->fh[13]*w->term[0][61];
-    w->term[1][35] = w->fh[9]*w->term[0][8] + w->fh[10]*w->term[0][44] + w->fh[11]*w->term[0][53] +
-            w->fh[12]*w->term[0][59] + w->fh[13]*w->term[0][62];
-    w->term[1][36] = w->fh[14]*w->term[0][9] + w->fh[15]*w->term[0][27] + w->fh[16]*w->term[0][45];
-    w->term[1][37] = w->fh[14]*w->term[0][10] + w->fh[15]*w->term[0][28] + w->fh[16]*w->term[0][46];
-    w->term[1][38] = w->fh[14]*w->term[0][11] + w->fh[15]*w->term[0][29] + w->fh[16]*w->term[0][47];
-    w->term[1][39] = w->fh[14]*w->term[0][12] + w->fh[15]*w->term[0][30] + w->fh[16]*w->term[0][48];
-    w->term[1][40] = w->fh[14]*w->term[0][13] + w->fh[15]*w->term[0][31] + w->fh[16]*w->term[0][49];
-    w->term[1][41] = w->fh[14]*w->term[0][14] + w->fh[15]*w->term[0][32] + w->fh[16]*w->term[0][50];
-    w->term[1][42] = w->fh[14]*w->term[0][15] + w->fh[15]*w->term[0][33] + w->fh[16]*w->term[0][51]
-            + w->fh[17]*w->term[0][54] + w->fh[18]*w->term[0][60];
-    w->term[1][43] = w->fh[14]*w->term[0][16] + w->fh[15]*w->term[0][34] + w->fh[16]*w->term[0][52]
-            + w->fh[17]*w->term[0][55] + w->fh[18]*w->term[0][61];
-    w->term[1][44] = w->fh[14]*w->term[0][17] + w->fh[15]*w->term[0][35] + w->fh[16]*w->term[0][53]
-            + w->fh[17]*w->term[0][56] + w->fh[18]*w->term[0][62];
-    w->term[1][45] = w->fh[19]*w->term[0][18] + w->fh[20]*w->term[0][27] + w->fh[21]*w->term[0][36];
-    w->term[1][46] = w->fh[19]*w->term[0][19] + w->fh[20]*w->term[0][28] + w->fh[21]*w->term[0][37];
-    w->term[1][47] = w->fh[19]*w->term[0][20] + w->fh[20]*w->term[0][29] + w->fh[21]*w->term[0][38];
-    w->term[1][48] = w->fh[19]*w->term[0][21] + w->fh[20]*w->term[0][30] + w->fh[21]*w->term[0][39];
-    w->term[1][49] = w->fh[19]*w->term[0][22] + w->fh[20]*w->term[0][31] + w->fh[21]*w->term[0][40];
-    w->term[1][50] = w->fh[19]*w->term[0][23] + w->fh[20]*w->term[0][32] + w->fh[21]*w->term[0][41];
-    w->term[1][51] = w->fh[19]*w->term[0][24] + w->fh[20]*w->term[0][33] + w->fh[21]*w->term[0][42]
-            + w->fh[22]*w->term[0][54] + w->fh[23]*w->term[0][57];
-    w->term[1][52] = w->fh[19]*w->term[0][25] + w->fh[20]*w->term[0][34] + w->fh[21]*w->term[0][43]
-            + w->fh[22]*w->term[0][55] + w->fh[23]*w->term[0][58];
-    w->term[1][53] = w->fh[19]*w->term[0][26] + w->fh[20]*w->term[0][35] + w->fh[21]*w->term[0][44]
-            + w->fh[22]*w->term[0][56] + w->fh[23]*w->term[0][59];
-    w->term[1][54] = w->fh[24]*w->term[0][57] + w->fh[25]*w->term[0][60];
-    w->term[1][55] = w->fh[24]*w->term[0][58] + w->fh[25]*w->term[0][61];
-    w->term[1][56] = w->fh[24]*w->term[0][59] + w->fh[25]*w->term[0][62];
-    w->term[1][57] = w->fh[26]*w->term[0][54] + w->fh[27]*w->term[0][60];
-    w->term[1][58] = w->fh[26]*w->term[0][55] + w->fh[27]*w->term[0][61];
-    w->term[1][59] = w->fh[26]*w->term[0][56] + w->fh[27]*w->term[0][62];
-    w->term[1][60] = w->fh[28]*w->term[0][54] + w->fh[29]*w->term[0][57];
-    w->term[1][61] = w->fh[28]*w->term[0][55] + w->fh[29]*w->term[0][58];
-    w->term[1][62] = w->fh[28]*w->term[0][56] + w->fh[29]*w->term[0][59];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[1][0]*ck;
-    w->S[0] = w->S[0] + w->term[1][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[1][1]*ck;
-    w->S[1] = w->S[1] + w->term[1][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[1][2]*ck;
-    w->S[2] = w->S[2] + w->term[1][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[1][3]*ck;
-    w->S[3] = w->S[3] + w->term[1][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[1][4]*ck;
-    w->S[4] = w->S[4] + w->term[1][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[1][5]*ck;
-    w->S[5] = w->S[5] + w->term[1][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[1][6]*ck;
-    w->S[6] = w->S[6] + w->term[1][6]*cs;
-    t->Phi[0][7] = t->Phi[0][7] + w->term[1][7]*ck;
-    w->S[7] = w->S[7] + w->term[1][7]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[1][8]*ck;
-    w->S[8] = w->S[8] + w->term[1][8]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[1][9]*ck;
-    w->S[9] = w->S[9] + w->term[1][9]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[1][10]*ck;
-    w->S[10] = w->S[10] + w->term[1][10]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[1][11]*ck;
-    w->S[11] = w->S[11] + w->term[1][11]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[1][12]*ck;
-    w->S[12] = w->S[12] + w->term[1][12]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[1][13]*ck;
-    w->S[13] = w->S[13] + w->term[1][13]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[1][14]*ck;
-    w->S[14] = w->S[14] + w->term[1][14]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[1][15]*ck;
-    w->S[15] = w->S[15] + w->term[1][15]*cs;
-    t->Phi[1][7] = t->Phi[1][7] + w->term[1][16]*ck;
-    w->S[16] = w->S[16] + w->term[1][16]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[1][17]*ck;
-    w->S[17] = w->S[17] + w->term[1][17]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[1][18]*ck;
-    w->S[18] = w->S[18] + w->term[1][18]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[1][19]*ck;
-    w->S[19] = w->S[19] + w->term[1][19]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[1][20]*ck;
-    w->S[20] = w->S[20] + w->term[1][20]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[1][21]*ck;
-    w->S[21] = w->S[21] + w->term[1][21]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[1][22]*ck;
-    w->S[22] = w->S[22] + w->term[1][22]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[1][23]*ck;
-    w->S[23] = w->S[23] + w->term[1][23]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[1][24]*ck;
-    w->S[24] = w->S[24] + w->term[1][24]*cs;
-    t->Phi[2][7] = t->Phi[2][7] + w->term[1][25]*ck;
-    w->S[25] = w->S[25] + w->term[1][25]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[1][26]*ck;
-    w->S[26] = w->S[26] + w->term[1][26]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[1][27]*ck;
-    w->S[27] = w->S[27] + w->term[1][27]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[1][28]*ck;
-    w->S[28] = w->S[28] + w->term[1][28]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[1][29]*ck;
-    w->S[29] = w->S[29] + w->term[1][29]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[1][30]*ck;
-    w->S[30] = w->S[30] + w->term[1][30]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[1][31]*ck;
-    w->S[31] = w->S[31] + w->term[1][31]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[1][32]*ck;
-    w->S[32] = w->S[32] + w->term[1][32]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[1][33]*ck;
-    w->S[33] = w->S[33] + w->term[1][33]*cs;
-    t->Phi[3][7] = t->Phi[3][7] + w->term[1][34]*ck;
-    w->S[34] = w->S[34] + w->term[1][34]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[1][35]*ck;
-    w->S[35] = w->S[35] + w->term[1][35]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[1][36]*ck;
-    w->S[36] = w->S[36] + w->term[1][36]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[1][37]*ck;
-    w->S[37] = w->S[37] + w->term[1][37]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[1][38]*ck;
-    w->S[38] = w->S[38] + w->term[1][38]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[1][39]*ck;
-    w->S[39] = w->S[39] + w->term[1][39]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[1][40]*ck;
-    w->S[40] = w->S[40] + w->term[1][40]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[1][41]*ck;
-    w->S[41] = w->S[41] + w->term[1][41]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[1][42]*ck;
-    w->S[42] = w->S[42] + w->term[1][42]*cs;
-    t->Phi[4][7] = t->Phi[4][7] + w->term[1][43]*ck;
-    w->S[43] = w->S[43] + w->term[1][43]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[1][44]*ck;
-    w->S[44] = w->S[44] + w->term[1][44]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[1][45]*ck;
-    w->S[45] = w->S[45] + w->term[1][45]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[1][46]*ck;
-    w->S[46] = w->S[46] + w->term[1][46]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[1][47]*ck;
-    w->S[47] = w->S[47] + w->term[1][47]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[1][48]*ck;
-    w->S[48] = w->S[48] + w->term[1][48]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[1][49]*ck;
-    w->S[49] = w->S[49] + w->term[1][49]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[1][50]*ck;
-    w->S[50] = w->S[50] + w->term[1][50]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[1][51]*ck;
-    w->S[51] = w->S[51] + w->term[1][51]*cs;
-    t->Phi[5][7] = t->Phi[5][7] + w->term[1][52]*ck;
-    w->S[52] = w->S[52] + w->term[1][52]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[1][53]*ck;
-    w->S[53] = w->S[53] + w->term[1][53]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[1][54]*ck;
-    w->S[54] = w->S[54] + w->term[1][54]*cs;
-    t->Phi[6][7] = t->Phi[6][7] + w->term[1][55]*ck;
-    w->S[55] = w->S[55] + w->term[1][55]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[1][56]*ck;
-    w->S[56] = w->S[56] + w->term[1][56]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[1][57]*ck;
-    w->S[57] = w->S[57] + w->term[1][57]*cs;
-    t->Phi[7][7] = t->Phi[7][7] + w->term[1][58]*ck;
-    w->S[58] = w->S[58] + w->term[1][58]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[1][59]*ck;
-    w->S[59] = w->S[59] + w->term[1][59]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[1][60]*ck;
-    w->S[60] = w->S[60] + w->term[1][60]*cs;
-    t->Phi[8][7] = t->Phi[8][7] + w->term[1][61]*ck;
-    w->S[61] = w->S[61] + w->term[1][61]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[1][62]*ck;
-    w->S[62] = w->S[62] + w->term[1][62]*cs;
+    w->term[1][0] = c_out + w->fh[0]*w->S[9] + w->fh[1]*w->S[18] + w->fh[2]*w->S[27];
+    w->term[1][1] = w->fh[0]*w->S[10] + w->fh[1]*w->S[19] + w->fh[2]*w->S[28];
+    w->term[1][2] = w->fh[0]*w->S[11] + w->fh[1]*w->S[20] + w->fh[2]*w->S[29];
+    w->term[1][3] = w->fh[0]*w->S[12] + w->fh[1]*w->S[21] + w->fh[2]*w->S[30];
+    w->term[1][4] = w->fh[0]*w->S[13] + w->fh[1]*w->S[22] + w->fh[2]*w->S[31];
+    w->term[1][5] = w->fh[0]*w->S[14] + w->fh[1]*w->S[23] + w->fh[2]*w->S[32];
+    w->term[1][6] = w->fh[0]*w->S[15] + w->fh[1]*w->S[24] + w->fh[2]*w->S[33];
+    w->term[1][7] = w->fh[0]*w->S[16] + w->fh[1]*w->S[25] + w->fh[2]*w->S[34];
+    w->term[1][8] = w->fh[0]*w->S[17] + w->fh[1]*w->S[26] + w->fh[2]*w->S[35];
+    w->term[1][9] = w->fh[3]*w->S[0] + w->fh[4]*w->S[18] + w->fh[5]*w->S[36];
+    w->term[1][10] = c_out + w->fh[3]*w->S[1] + w->fh[4]*w->S[19] + w->fh[5]*w->S[37];
+    w->term[1][11] = w->fh[3]*w->S[2] + w->fh[4]*w->S[20] + w->fh[5]*w->S[38];
+    w->term[1][12] = w->fh[3]*w->S[3] + w->fh[4]*w->S[21] + w->fh[5]*w->S[39];
+    w->term[1][13] = w->fh[3]*w->S[4] + w->fh[4]*w->S[22] + w->fh[5]*w->S[40];
+    w->term[1][14] = w->fh[3]*w->S[5] + w->fh[4]*w->S[23] + w->fh[5]*w->S[41];
+    w->term[1][15] = w->fh[3]*w->S[6] + w->fh[4]*w->S[24] + w->fh[5]*w->S[42];
+    w->term[1][16] = w->fh[3]*w->S[7] + w->fh[4]*w->S[25] + w->fh[5]*w->S[43];
+    w->term[1][17] = w->fh[3]*w->S[8] + w->fh[4]*w->S[26] + w->fh[5]*w->S[44];
+    w->term[1][18] = w->fh[6]*w->S[0] + w->fh[7]*w->S[9] + w->fh[8]*w->S[45];
+    w->term[1][19] = w->fh[6]*w->S[1] + w->fh[7]*w->S[10] + w->fh[8]*w->S[46];
+    w->term[1][20] = c_out + w->fh[6]*w->S[2] + w->fh[7]*w->S[11] + w->fh[8]*w->S[47];
+    w->term[1][21] = w->fh[6]*w->S[3] + w->fh[7]*w->S[12] + w->fh[8]*w->S[48];
+    w->term[1][22] = w->fh[6]*w->S[4] + w->fh[7]*w->S[13] + w->fh[8]*w->S[49];
+    w->term[1][23] = w->fh[6]*w->S[5] + w->fh[7]*w->S[14] + w->fh[8]*w->S[50];
+    w->term[1][24] = w->fh[6]*w->S[6] + w->fh[7]*w->S[15] + w->fh[8]*w->S[51];
+    w->term[1][25] = w->fh[6]*w->S[7] + w->fh[7]*w->S[16] + w->fh[8]*w->S[52];
+    w->term[1][26] = w->fh[6]*w->S[8] + w->fh[7]*w->S[17] + w->fh[8]*w->S[53];
+    w->term[1][27] = w->fh[9]*w->S[0] + w->fh[10]*w->S[36] + w->fh[11]*w->S[45];
+    w->term[1][28] = w->fh[9]*w->S[1] + w->fh[10]*w->S[37] + w->fh[11]*w->S[46];
+    w->term[1][29] = w->fh[9]*w->S[2] + w->fh[10]*w->S[38] + w->fh[11]*w->S[47];
+    w->term[1][30] = c_out + w->fh[9]*w->S[3] + w->fh[10]*w->S[39] + w->fh[11]*w->S[48];
+    w->term[1][31] = w->fh[9]*w->S[4] + w->fh[10]*w->S[40] + w->fh[11]*w->S[49];
+    w->term[1][32] = w->fh[9]*w->S[5] + w->fh[10]*w->S[41] + w->fh[11]*w->S[50];
+    w->term[1][33] = w->fh[9]*w->S[6] + w->fh[10]*w->S[42] + w->fh[11]*w->S[51] + w->fh[12]*w->S[57]
+            + w->fh[13]*w->S[60];
+    w->term[1][34] = w->fh[9]*w->S[7] + w->fh[10]*w->S[43] + w->fh[11]*w->S[52] + w->fh[12]*w->S[58]
+            + w->fh[13]*w->S[61];
+    w->term[1][35] = w->fh[9]*w->S[8] + w->fh[10]*w->S[44] + w->fh[11]*w->S[53] + w->fh[12]*w->S[59]
+            + w->fh[13]*w->S[62];
+    w->term[1][36] = w->fh[14]*w->S[9] + w->fh[15]*w->S[27] + w->fh[16]*w->S[45];
+    w->term[1][37] = w->fh[14]*w->S[10] + w->fh[15]*w->S[28] + w->fh[16]*w->S[46];
+    w->term[1][38] = w->fh[14]*w->S[11] + w->fh[15]*w->S[29] + w->fh[16]*w->S[47];
+    w->term[1][39] = w->fh[14]*w->S[12] + w->fh[15]*w->S[30] + w->fh[16]*w->S[48];
+    w->term[1][40] = c_out + w->fh[14]*w->S[13] + w->fh[15]*w->S[31] + w->fh[16]*w->S[49];
+    w->term[1][41] = w->fh[14]*w->S[14] + w->fh[15]*w->S[32] + w->fh[16]*w->S[50];
+    w->term[1][42] = w->fh[14]*w->S[15] + w->fh[15]*w->S[33] + w->fh[16]*w->S[51] +
+            w->fh[17]*w->S[54] + w->fh[18]*w->S[60];
+    w->term[1][43] = w->fh[14]*w->S[16] + w->fh[15]*w->S[34] + w->fh[16]*w->S[52] +
+            w->fh[17]*w->S[55] + w->fh[18]*w->S[61];
+    w->term[1][44] = w->fh[14]*w->S[17] + w->fh[15]*w->S[35] + w->fh[16]*w->S[53] +
+            w->fh[17]*w->S[56] + w->fh[18]*w->S[62];
+    w->term[1][45] = w->fh[19]*w->S[18] + w->fh[20]*w->S[27] + w->fh[21]*w->S[36];
+    w->term[1][46] = w->fh[19]*w->S[19] + w->fh[20]*w->S[28] + w->fh[21]*w->S[37];
+    w->term[1][47] = w->fh[19]*w->S[20] + w->fh[20]*w->S[29] + w->fh[21]*w->S[38];
+    w->term[1][48] = w->fh[19]*w->S[21] + w->fh[20]*w->S[30] + w->fh[21]*w->S[39];
+    w->term[1][49] = w->fh[19]*w->S[22] + w->fh[20]*w->S[31] + w->fh[21]*w->S[40];
+    w->term[1][50] = c_out + w->fh[19]*w->S[23] + w->fh[20]*w->S[32] + w->fh[21]*w->S[41];
+    w->term[1][51] = w->fh[19]*w->S[24] + w->fh[20]*w->S[33] + w->fh[21]*w->S[42] +
+            w->fh[22]*w->S[54] + w->fh[23]*w->S[57];
+    w->term[1][52] = w->fh[19]*w->S[25] + w->fh[20]*w->S[34] + w->fh[21]*w->S[43] +
+            w->fh[22]*w->S[55] + w->fh[23]*w->S[58];
+    w->term[1][53] = w->fh[19]*w->S[26] + w->fh[20]*w->S[35] + w->fh[21]*w->S[44] +
+            w->fh[22]*w->S[56] + w->fh[23]*w->S[59];
+    w->term[1][54] = c_out + w->fh[24]*w->S[57] + w->fh[25]*w->S[60];
+    w->term[1][55] = w->fh[24]*w->S[58] + w->fh[25]*w->S[61];
+    w->term[1][56] = w->fh[24]*w->S[59] + w->fh[25]*w->S[62];
+    w->term[1][57] = w->fh[26]*w->S[54] + w->fh[27]*w->S[60];
+    w->term[1][58] = c_out + w->fh[26]*w->S[55] + w->fh[27]*w->S[61];
+    w->term[1][59] = w->fh[26]*w->S[56] + w->fh[27]*w->S[62];
+    w->term[1][60] = w->fh[28]*w->S[54] + w->fh[29]*w->S[57];
+    w->term[1][61] = w->fh[28]*w->S[55] + w->fh[29]*w->S[58];
+    w->term[1][62] = c_out + w->fh[28]*w->S[56] + w->fh[29]*w->S[59];
+    w->term[1][63] = c_out;
+    w->term[1][64] = w->fh[30]*c_in;
 }
 
-GPS_PSEUDORANGE11_TWIN_BLOCK void taylor_order_8(gps_pseudorange11_twin_transition *restrict t,
-        gps_pseudorange11_twin_discretize_scratch *restrict w)
+GPS_PSEUDORANGE11_TWIN_BLOCK void horner_transition(gps_pseudorange11_twin_transition *restrict t,
+        const gps_pseudorange11_twin_discretize_scratch *restrict w)
 {
-    const gps_pseudorange11_twin_scalar ck = 1.0 / 40320.0;
-    const gps_pseudorange11_twin_scalar cs = 1.0 / 362880.0;
-    w->term[0][0] = w->fh[0]*w->term[1][9] + w->fh[1]*w->term[1][18] + w->fh[2]*w->term[1][27];
-    w->term[0][1] = w->fh[0]*w->term[1][10] + w->fh[1]*w->term[1][19] + w->fh[2]*w->term[1][28];
-    w->term[0][2] = w->fh[0]*w->term[1][11] + w->fh[1]*w->term[1][20] + w->fh[2]*w->term[1][29];
-    w->term[0][3] = w->fh[0]*w->term[1][12] + w->fh[1]*w->term[1][21] + w->fh[2]*w->term[1][30];
-    w->term[0][4] = w->fh[0]*w->term[1][13] + w->fh[1]*w->term[1][22] + w->fh[2]*w->term[1][31];
-    w->term[0][5] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][23] + w->fh[2]*w->term[1][32];
-    w->term[0][6] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][24] + w->fh[2]*w->term[1][33];
-    w->term[0][7] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][25] + w->fh[2]*w->term[1][34];
-    w->term[0][8] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][26] + w->fh[2]*w->term[1][35];
-    w->term[0][9] = w->fh[3]*w->term[1][0] + w->fh[4]*w->term[1][18] + w->fh[5]*w->term[1][36];
-    w->term[0][10] = w->fh[3]*w->term[1][1] + w->fh[4]*w->term[1][19] + w->fh[5]*w->term[1][37];
-    w->term[0][11] = w->fh[3]*w->term[1][2] + w->fh[4]*w->term[1][20] + w->fh[5]*w->term[1][38];
-    w->term[0][12] = w->fh[3]*w->term[1][3] + w->fh[4]*w->term[1][21] + w->fh[5]*w->term[1][39];
-    w->term[0][13] = w->fh[3]*w->term[1][4] + w->fh[4]*w->term[1][22] + w->fh[5]*w->term[1][40];
-    w->term[0][14] = w->fh[3]*w->term[1][5] + w->fh[4]*w->term[1][23] + w->fh[5]*w->term[1][41];
-    w->term[0][15] = w->fh[3]*w->term[1][6] + w->fh[4]*w->term[1][24] + w->fh[5]*w->term[1][42];
-    w->term[0][16] = w->fh[3]*w->term[1][7] + w->fh[4]*w->term[1][25] + w->fh[5]*w->term[1][43];
-    w->term[0][17] = w->fh[3]*w->term[1][8] + w->fh[4]*w->term[1][26] + w->fh[5]*w->term[1][44];
-    w->term[0][18] = w->fh[6]*w->term[1][0] + w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][45];
-    w->term[0][19] = w->fh[6]*w->term[1][1] + w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][46];
-    w->term[0][20] = w->fh[6]*w->term[1][2] + w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][47];
-    w->term[0][21] = w->fh[6]*w->term[1][3] + w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][48];
-    w->term[0][22] = w->fh[6]*w->term[1][4] + w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][49];
-    w->term[0][23] = w->fh[6]*w->term[1][5] + w->fh[7]*w->term[1][14] + w->fh[8]*w->term[1][50];
-    w->term[0][24] = w->fh[6]*w->term[1][6] + w->fh[7]*w->term[1][15] + w->fh[8]*w->term[1][51];
-    w->term[0][25] = w->fh[6]*w->term[1][7] + w->fh[7]*w->term[1][16] + w->fh[8]*w->term[1][52];
-    w->term[0][26] = w->fh[6]*w->term[1][8] + w->fh[7]*w->term[1][17] + w->fh[8]*w->term[1][53];
-    w->term[0][27] = w->fh[9]*w->term[1][0] + w->fh[10]*w->term[1][36] + w->fh[11]*w->term[1][45];
-    w->term[0][28] = w->fh[9]*w->term[1][1] + w->fh[10]*w->term[1][37] + w->fh[11]*w->term[1][46];
-    w->term[0][29] = w->fh[9]*w->term[1][2] + w->fh[10]*w->term[1][38] + w->fh[11]*w->term[1][47];
-    w->term[0][30] = w->fh[9]*w->term[1][3] + w->fh[10]*w->term[1][39] + w->fh[11]*w->term[1][48];
-    w->term[0][31] = w->fh[9]*w->term[1][4] + w->fh[10]*w->term[1][40] + w->fh[11]*w->term[1][49];
-    w->term[0][32] = w->fh[9]*w->term[1][5] + w->fh[10]*w->term[1][41] + w->fh[11]*w->term[1][50];
-    w->term[0][33] = w->fh[9]*w->term[1][6] + w->fh[10]*w->term[1][42] + w->fh[11]*w->term[1][51] +
-            w->fh[12]*w->term[1][57] + w->fh[13]*w->term[1][60];
-    w->term[0][34] = w->fh[9]*w->term[1][7] + w->fh[10]*w->term[1][43] + w->fh[11]*w->term[1][52] +
-            w->fh[12]*w->term[1][58] + w->fh[13]*w->term[1][61];
-    w->term[0][35] = w->fh[9]*w->term[1][8] + w->fh[10]*w->term[1][44] + w->fh[11]*w->term[1][53] +
-            w->fh[12]*w->term[1][59] + w->fh[13]*w->term[1][62];
-    w->term[0][36] = w->fh[14]*w->term[1][9] + w->fh[15]*w->term[1][27] + w->fh[16]*w->term[1][45];
-    w->term[0][37] = w->fh[14]*w->term[1][10] + w->fh[15]*w->term[1][28] + w->fh[16]*w->term[1][46];
-    w->term[0][38] = w->fh[14]*w->term[1][11] + w->fh[15]*w->term[1][29] + w->fh[16]*w->term[1][47];
-    w->term[0][39] = w->fh[14]*w->term[1][12] + w->fh[15]*w->term[1][30] + w->fh[16]*w->term[1][48];
-    w->term[0][40] = w->fh[14]*w->term[1][13] + w->fh[15]*w->term[1][31] + w->fh[16]*w->term[1][49];
-    w->term[0][41] = w->fh[14]*w->term[1][14] + w->fh[15]*w->term[1][32] + w->fh[16]*w->term[1][50];
-    w->term[0][42] = w->fh[14]*w->term[1][15] + w->fh[15]*w->term[1][33] + w->fh[16]*w->term[1][51]
-            + w->fh[17]*w->term[1][54] + w->fh[18]*w->term[1][60];
-    w->term[0][43] = w->fh[14]*w->term[1][16] + w->fh[15]*w->term[1][34] + w->fh[16]*w->term[1][52]
-            + w->fh[17]*w->term[1][55] + w->fh[18]*w->term[1][61];
-    w->term[0][44] = w->fh[14]*w->term[1][17] + w->fh[15]*w->term[1][35] + w->fh[16]*w->term[1][53]
-            + w->fh[17]*w->term[1][56] + w->fh[18]*w->term[1][62];
-    w->term[0][45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][27] + w->fh[21]*w->term[1][36];
-    w->term[0][46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][28] + w->fh[21]*w->term[1][37];
-    w->term[0][47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][29] + w->fh[21]*w->term[1][38];
-    w->term[0][48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][30] + w->fh[21]*w->term[1][39];
-    w->term[0][49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][31] + w->fh[21]*w->term[1][40];
-    w->term[0][50] = w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][32] + w->fh[21]*w->term[1][41];
-    w->term[0][51] = w->fh[19]*w->term[1][24] + w->fh[20]*w->term[1][33] + w->fh[21]*w->term[1][42]
-            + w->fh[22]*w->term[1][54] + w->fh[23]*w->term[1][57];
-    w->term[0][52] = w->fh[19]*w->term[1][25] + w->fh[20]*w->term[1][34] + w->fh[21]*w->term[1][43]
-            + w->fh[22]*w->term[1][55] + w->fh[23]*w->term[1][58];
-    w->term[0][53] = w->fh[19]*w->term[1][26] + w->fh[20]*w->term[1][35] + w->fh[21]*w->term[1][44]
-            + w->fh[22]*w->term[1][56] + w->fh[23]*w->term[1][59];
-    w->term[0][54] = w->fh[24]*w->term[1][57] + w->fh[25]*w->term[1][60];
-    w->term[0][55] = w->fh[24]*w->term[1][58] + w->fh[25]*w->term[1][61];
-    w->term[0][56] = w->fh[24]*w->term[1][59] + w->fh[25]*w->term[1][62];
-    w->term[0][57] = w->fh[26]*w->term[1][54] + w->fh[27]*w->term[1][60];
-    w->term[0][58] = w->fh[26]*w->term[1][55] + w->fh[27]*w->term[1][61];
-    w->term[0][59] = w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][62];
-    w->term[0][60] = w->fh[28]*w->term[1][54] + w->fh[29]*w->term[1][57];
-    w->term[0][61] = w->fh[28]*w->term[1][55] + w->fh[29]*w->term[1][58];
-    w->term[0][62] = w->fh[28]*w->term[1][56] + w->fh[29]*w->term[1][59];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[0][0]*ck;
-    w->S[0] = w->S[0] + w->term[0][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[0][1]*ck;
-    w->S[1] = w->S[1] + w->term[0][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[0][2]*ck;
-    w->S[2] = w->S[2] + w->term[0][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[0][3]*ck;
-    w->S[3] = w->S[3] + w->term[0][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[0][4]*ck;
-    w->S[4] = w->S[4] + w->term[0][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[0][5]*ck;
-    w->S[5] = w->S[5] + w->term[0][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[0][6]*ck;
-    w->S[6] = w->S[6] + w->term[0][6]*cs;
-    t->Phi[0][7] = t->Phi[0][7] + w->term[0][7]*ck;
-    w->S[7] = w->S[7] + w->term[0][7]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[0][8]*ck;
-    w->S[8] = w->S[8] + w->term[0][8]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[0][9]*ck;
-    w->S[9] = w->S[9] + w->term[0][9]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[0][10]*ck;
-    w->S[10] = w->S[10] + w->term[0][10]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[0][11]*ck;
-    w->S[11] = w->S[11] + w->term[0][11]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[0][12]*ck;
-    w->S[12] = w->S[12] + w->term[0][12]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[0][13]*ck;
-    w->S[13] = w->S[13] + w->term[0][13]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[0][14]*ck;
-    w->S[14] = w->S[14] + w->term[0][14]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[0][15]*ck;
-    w->S[15] = w->S[15] + w->term[0][15]*cs;
-    t->Phi[1][7] = t->Phi[1][7] + w->term[0][16]*ck;
-    w->S[16] = w->S[16] + w->term[0][16]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[0][17]*ck;
-    w->S[17] = w->S[17] + w->term[0][17]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[0][18]*ck;
-    w->S[18] = w->S[18] + w->term[0][18]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[0][19]*ck;
-    w->S[19] = w->S[19] + w->term[0][19]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[0][20]*ck;
-    w->S[20] = w->S[20] + w->term[0][20]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[0][21]*ck;
-    w->S[21] = w->S[21] + w->term[0][21]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[0][22]*ck;
-    w->S[22] = w->S[22] + w->term[0][22]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[0][23]*ck;
-    w->S[23] = w->S[23] + w->term[0][23]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[0][24]*ck;
-    w->S[24] = w->S[24] + w->term[0][24]*cs;
-    t->Phi[2][7] = t->Phi[2][7] + w->term[0][25]*ck;
-    w->S[25] = w->S[25] + w->term[0][25]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[0][26]*ck;
-    w->S[26] = w->S[26] + w->term[0][26]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[0][27]*ck;
-    w->S[27] = w->S[27] + w->term[0][27]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[0][28]*ck;
-    w->S[28] = w->S[28] + w->term[0][28]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[0][29]*ck;
-    w->S[29] = w->S[29] + w->term[0][29]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[0][30]*ck;
-    w->S[30] = w->S[30] + w->term[0][30]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[0][31]*ck;
-    w->S[31] = w->S[31] + w->term[0][31]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[0][32]*ck;
-    w->S[32] = w->S[32] + w->term[0][32]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[0][33]*ck;
-    w->S[33] = w->S[33] + w->term[0][33]*cs;
-    t->Phi[3][7] = t->Phi[3][7] + w->term[0][34]*ck;
-    w->S[34] = w->S[34] + w->term[0][34]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[0][35]*ck;
-    w->S[35] = w->S[35] + w->term[0][35]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[0][36]*ck;
-    w->S[36] = w->S[36] + w->term[0][36]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[0][37]*ck;
-    w->S[37] = w->S[37] + w->term[0][37]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[0][38]*ck;
-    w->S[38] = w->S[38] + w->term[0][38]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[0][39]*ck;
-    w->S[39] = w->S[39] + w->term[0][39]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[0][40]*ck;
-    w->S[40] = w->S[40] + w->term[0][40]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[0][41]*ck;
-    w->S[41] = w->S[41] + w->term[0][41]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[0][42]*ck;
-    w->S[42] = w->S[42] + w->term[0][42]*cs;
-    t->Phi[4][7] = t->Phi[4][7] + w->term[0][43]*ck;
-    w->S[43] = w->S[43] + w->term[0][43]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[0][44]*ck;
-    w->S[44] = w->S[44] + w->term[0][44]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[0][45]*ck;
-    w->S[45] = w->S[45] + w->term[0][45]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[0][46]*ck;
-    w->S[46] = w->S[46] + w->term[0][46]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[0][47]*ck;
-    w->S[47] = w->S[47] + w->term[0][47]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[0][48]*ck;
-    w->S[48] = w->S[48] + w->term[0][48]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[0][49]*ck;
-    w->S[49] = w->S[49] + w->term[0][49]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[0][50]*ck;
-    w->S[50] = w->S[50] + w->term[0][50]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[0][51]*ck;
-    w->S[51] = w->S[51] + w->term[0][51]*cs;
-    t->Phi[5][7] = t->Phi[5][7] + w->term[0][52]*ck;
-    w->S[52] = w->S[52] + w->term[0][52]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[0][53]*ck;
-    w->S[53] = w->S[53] + w->term[0][53]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[0][54]*ck;
-    w->S[54] = w->S[54] + w->term[0][54]*cs;
-    t->Phi[6][7] = t->Phi[6][7] + w->term[0][55]*ck;
-    w->S[55] = w->S[55] + w->term[0][55]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[0][56]*ck;
-    w->S[56] = w->S[56] + w->term[0][56]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[0][57]*ck;
-    w->S[57] = w->S[57] + w->term[0][57]*cs;
-    t->Phi[7][7] = t->Phi[7][7] + w->term[0][58]*ck;
-    w->S[58] = w->S[58] + w->term[0][58]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[0][59]*ck;
-    w->S[59] = w->S[59] + w->term[0][59]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[0][60]*ck;
-    w->S[60] = w->S[60] + w->term[0][60]*cs;
-    t->Phi[8][7] = t->Phi[8][7] + w->term[0][61]*ck;
-    w->S[61] = w->S[61] + w->term[0][61]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[0][62]*ck;
-    w->S[62] = w->S[62] + w->term[0][62]*cs;
-}
-
-GPS_PSEUDORANGE11_TWIN_BLOCK void taylor_order_9(gps_pseudorange11_twin_transition *restrict t,
-        gps_pseudorange11_twin_discretize_scratch *restrict w)
-{
-    const gps_pseudorange11_twin_scalar ck = 1.0 / 362880.0;
-    const gps_pseudorange11_twin_scalar cs = 1.0 / 3628800.0;
-    w->term[1][0] = w->fh[0]*w->term[0][9] + w->fh[1]*w->term[0][18] + w->fh[2]*w->term[0][27];
-    w->term[1][1] = w->fh[0]*w->term[0][10] + w->fh[1]*w->term[0][19] + w->fh[2]*w->term[0][28];
-    w->term[1][2] = w->fh[0]*w->term[0][11] + w->fh[1]*w->term[0][20] + w->fh[2]*w->term[0][29];
-    w->term[1][3] = w->fh[0]*w->term[0][12] + w->fh[1]*w->term[0][21] + w->fh[2]*w->term[0][30];
-    w->term[1][4] = w->fh[0]*w->term[0][13] + w->fh[1]*w->term[0][22] + w->fh[2]*w->term[0][31];
-    w->term[1][5] = w->fh[0]*w->term[0][14] + w->fh[1]*w->term[0][23] + w->fh[2]*w->term[0][32];
-    w->term[1][6] = w->fh[0]*w->term[0][15] + w->fh[1]*w->term[0][24] + w->fh[2]*w->term[0][33];
-    w->term[1][7] = w->fh[0]*w->term[0][16] + w->fh[1]*w->term[0][25] + w->fh[2]*w->term[0][34];
-    w->term[1][8] = w->fh[0]*w->term[0][17] + w->fh[1]*w->term[0][26] + w->fh[2]*w->term[0][35];
-    w->term[1][9] = w->fh[3]*w->term[0][0] + w->fh[4]*w->term[0][18] + w->fh[5]*w->term[0][36];
-    w->term[1][10] = w->fh[3]*w->term[0][1] + w->fh[4]*w->term[0][19] + w->fh[5]*w->term[0][37];
-    w->term[1][11] = w->fh[3]*w->term[0][2] + w->fh[4]*w->term[0][20] + w->fh[5]*w->term[0][38];
-    w->term[1][12] = w->fh[3]*w->term[0][3] + w->fh[4]*w->term[0][21] + w->fh[5]*w->term[0][39];
-    w->term[1][13] = w->fh[3]*w->term[0][4] + w->fh[4]*w->term[0][22] + w->fh[5]*w->term[0][40];
-    w->term[1][14] = w->fh[3]*w->term[0][5] + w->fh[4]*w->term[0][23] + w->fh[5]*w->term[0][41];
-    w->term[1][15] = w->fh[3]*w->term[0][6] + w->fh[4]*w->term[0][24] + w->fh[5]*w->term[0][42];
-    w->term[1][16] = w->fh[3]*w->term[0][7] + w->fh[4]*w->term[0][25] + w->fh[5]*w->term[0][43];
-    w->term[1][17] = w->fh[3]*w->term[0][8] + w->fh[4]*w->term[0][26] + w->fh[5]*w->term[0][44];
-    w->term[1][18] = w->fh[6]*w->term[0][0] + w->fh[7]*w->term[0][9] + w->fh[8]*w->term[0][45];
-    w->term[1][19] = w->fh[6]*w->term[0][1] + w->fh[7]*w->term[0][10] + w->fh[8]*w->term[0][46];
-    w->term[1][20] = w->fh[6]*w->term[0][2] + w->fh[7]*w->term[0][11] + w->fh[8]*w->term[0][47];
-    w->term[1][21] = w->fh[6]*w->term[0][3] + w->fh[7]*w->term[0][12] + w->fh[8]*w->term[0][48];
-    w->term[1][22] = w->fh[6]*w->term[0][4] + w->fh[7]*w->term[0][13] + w->fh[8]*w->term[0][49];
-    w->term[1][23] = w->fh[6]*w->term[0][5] + w->fh[7]*w->term[0][14] + w->fh[8]*w->term[0][50];
-    w->term[1][24] = w->fh[6]*w->term[0][6] + w->fh[7]*w->term[0][15] + w->fh[8]*w->term[0][51];
-    w->term[1][25] = w->fh[6]*w->term[0][7] + w->fh[7]*w->term[0][16] + w->fh[8]*w->term[0][52];
-    w->term[1][26] = w->fh[6]*w->term[0][8] + w->fh[7]*w->term[0][17] + w->fh[8]*w->term[0][53];
-    w->term[1][27] = w->fh[9]*w->term[0][0] + w->fh[10]*w->term[0][36] + w->fh[11]*w->term[0][45];
-    w->term[1][28] = w->fh[9]*w->term[0][1] + w->fh[10]*w->term[0][37] + w->fh[11]*w->term[0][46];
-    w->term[1][29] = w->fh[9]*w->term[0][2] + w->fh[10]*w->term[0][38] + w->fh[11]*w->term[0][47];
-    w->term[1][30] = w->fh[9]*w->term[0][3] + w->fh[10]*w->term[0][39] + w->fh[11]*w->term[0][48];
-    w->term[1][31] = w->fh[9]*w->term[0][4] + w->fh[10]*w->term[0][40] + w->fh[11]*w->term[0][49];
-    w->term[1][32] = w->fh[9]*w->term[0][5] + w->fh[10]*w->term[0][41] + w->fh[11]*w->term[0][50];
-    w->term[1][33] = w->fh[9]*w->term[0][6] + w->fh[10]*w->term[0][42] + w->fh[11]*w->term[0][51] +
-            w->fh[12]*w->term[0][57] + w->fh[13]*w->term[0][60];
-    w->term[1][34] = w->fh[9]*w->term[0][7] + w->fh[10]*w->term[0][43] + w->fh[11]*w->term[0][52] +
-            w->fh[12]*w->term[0][58] + w->fh[13]*w->term[0][61];
-    w->term[1][35] = w->fh[9]*w->term[0][8] + w->fh[10]*w->term[0][44] + w->fh[11]*w->term[0][53] +
-            w->fh[12]*w->term[0][59] + w->fh[13]*w->term[0][62];
-    w->term[1][36] = w->fh[14]*w->term[0][9] + w->fh[15]*w->term[0][27] + w->fh[16]*w->term[0][45];
-    w->term[1][37] = w->fh[14]*w->term[0][10] + w->fh[15]*w->term[0][28] + w->fh[16]*w->term[0][46];
-    w->term[1][38] = w->fh[14]*w->term[0][11] + w->fh[15]*w->term[0][29] + w->fh[16]*w->term[0][47];
-    w->term[1][39] = w->fh[14]*w->term[0][12] + w->fh[15]*w->term[0][30] + w->fh[16]*w->term[0][48];
-    w->term[1][40] = w->fh[14]*w->term[0][13] + w->fh[15]*w->term[0][31] + w->fh[16]*w->term[0][49];
-    w->term[1][41] = w->fh[14]*w->term[0][14] + w->fh[15]*w->term[0][32] + w->fh[16]*w->term[0][50];
-    w->term[1][42] = w->fh[14]*w->term[0][15] + w->fh[15]*w->term[0][33] + w->fh[16]*w->term[0][51]
-            + w->fh[17]*w->term[0][54] + w->fh[18]*w->term[0][60];
-    w->term[1][43] = w->fh[14]*w->term[0][16] + w->fh[15]*w->term[0][34] + w->fh[16]*w->term[0][52]
-            + w->fh[17]*w->term[0][55] + w->fh[18]*w->term[0][61];
-    w->term[1][44] = w->fh[14]*w->term[0][17] + w->fh[15]*w->term[0][35] + w->fh[16]*w->term[0][53]
-            + w->fh[17]*w->term[0][56] + w->fh[18]*w->term[0][62];
-    w->term[1][45] = w->fh[19]*w->term[0][18] + w->fh[20]*w->term[0][27] + w->fh[21]*w->term[0][36];
-    w->term[1][46] = w->fh[19]*w->term[0][19] + w->fh[20]*w->term[0][28] + w->fh[21]*w->term[0][37];
-    w->term[1][47] = w->fh[19]*w->term[0][20] + w->fh[20]*w->term[0][29] + w->fh[21]*w->term[0][38];
-    w->term[1][48] = w->fh[19]*w->term[0][21] + w->fh[20]*w->term[0][30] + w->fh[21]*w->term[0][39];
-    w->term[1][49] = w->fh[19]*w->term[0][22] + w->fh[20]*w->term[0][31] + w->fh[21]*w->term[0][40];
-    w->term[1][50] = w->fh[19]*w->term[0][23] + w->fh[20]*w->term[0][32] + w->fh[21]*w->term[0][41];
-    w->term[1][51] = w->fh[19]*w->term[0][24] + w->fh[20]*w->term[0][33] + w->fh[21]*w->term[0][42]
-            + w->fh[22]*w->term[0][54] + w->fh[23]*w->term[0][57];
-    w->term[1][52] = w->fh[19]*w->term[0][25] + w->fh[20]*w->term[0][34] + w->fh[21]*w->term[0][43]
-            + w->fh[22]*w->term[0][55] + w->fh[23]*w->term[0][58];
-    w->term[1][53] = w->fh[19]*w->term[0][26] + w->fh[20]*w->term[0][35] + w->fh[21]*w->term[0][44]
-            + w->fh[22]*w->term[0][56] + w->fh[23]*w->term[0][59];
-    w->term[1][54] = w->fh[24]*w->term[0][57] + w->fh[25]*w->term[0][60];
-    w->term[1][55] = w->fh[24]*w->term[0][58] + w->fh[25]*w->term[0][61];
-    w->term[1][56] = w->fh[24]*w->term[0][59] + w->fh[25]*w->term[0][62];
-    w->term[1][57] = w->fh[26]*w->term[0][54] + w->fh[27]*w->term[0][60];
-    w->term[1][58] = w->fh[26]*w->term[0][55] + w->fh[27]*w->term[0][61];
-    w->term[1][59] = w->fh[26]*w->term[0][56] + w->fh[27]*w->term[0][62];
-    w->term[1][60] = w->fh[28]*w->term[0][54] + w->fh[29]*w->term[0][57];
-    w->term[1][61] = w->fh[28]*w->term[0][55] + w->fh[29]*w->term[0][58];
-    w->term[1][62] = w->fh[28]*w->term[0][56] + w->fh[29]*w->term[0][59];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[1][0]*ck;
-    w->S[0] = w->S[0] + w->term[1][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[1][1]*ck;
-    w->S[1] = w->S[1] + w->term[1][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[1][2]*ck;
-    w->S[2] = w->S[2] + w->term[1][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[1][3]*ck;
-    w->S[3] = w->S[3] + w->term[1][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[1][4]*ck;
-    w->S[4] = w->S[4] + w->term[1][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[1][5]*ck;
-    w->S[5] = w->S[5] + w->term[1][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[1][6]*ck;
-    w->S[6] = w->S[6] + w->term[1][6]*cs;
-    t->Phi[0][7] = t->Phi[0][7] + w->term[1][7]*ck;
-    w->S[7] = w->S[7] + w->term[1][7]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[1][8]*ck;
-    w->S[8] = w->S[8] + w->term[1][8]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[1][9]*ck;
-    w->S[9] = w->S[9] + w->term[1][9]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[1][10]*ck;
-    w->S[10] = w->S[10] + w->term[1][10]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[1][11]*ck;
-    w->S[11] = w->S[11] + w->term[1][11]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[1][12]*ck;
-    w->S[12] = w->S[12] + w->term[1][12]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[1][13]*ck;
-    w->S[13] = w->S[13] + w->term[1][13]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[1][14]*ck;
-    w->S[14] = w->S[14] + w->term[1][14]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[1][15]*ck;
-    w->S[15] = w->S[15] + w->term[1][15]*cs;
-    t->Phi[1][7] = t->Phi[1][7] + w->term[1][16]*ck;
-    w->S[16] = w->S[16] + w->term[1][16]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[1][17]*ck;
-    w->S[17] = w->S[17] + w->term[1][17]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[1][18]*ck;
-    w->S[18] = w->S[18] + w->term[1][18]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[1][19]*ck;
-    w->S[19] = w->S[19] + w->term[1][19]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[1][20]*ck;
-    w->S[20] = w->S[20] + w->term[1][20]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[1][21]*ck;
-    w->S[21] = w->S[21] + w->term[1][21]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[1][22]*ck;
-    w->S[22] = w->S[22] + w->term[1][22]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[1][23]*ck;
-    w->S[23] = w->S[23] + w->term[1][23]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[1][24]*ck;
-    w->S[24] = w->S[24] + w->term[1][24]*cs;
-    t->Phi[2][7] = t->Phi[2][7] + w->term[1][25]*ck;
-    w->S[25] = w->S[25] + w->term[1][25]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[1][26]*ck;
-    w->S[26] = w->S[26] + w->term[1][26]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[1][27]*ck;
-    w->S[27] = w->S[27] + w->term[1][27]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[1][28]*ck;
-    w->S[28] = w->S[28] + w->term[1][28]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[1][29]*ck;
-    w->S[29] = w->S[29] + w->term[1][29]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[1][30]*ck;
-    w->S[30] = w->S[30] + w->term[1][30]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[1][31]*ck;
-    w->S[31] = w->S[31] + w->term[1][31]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[1][32]*ck;
-    w->S[32] = w->S[32] + w->term[1][32]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[1][33]*ck;
-    w->S[33] = w->S[33] + w->term[1][33]*cs;
-    t->Phi[3][7] = t->Phi[3][7] + w->term[1][34]*ck;
-    w->S[34] = w->S[34] + w->term[1][34]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[1][35]*ck;
-    w->S[35] = w->S[35] + w->term[1][35]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[1][36]*ck;
-    w->S[36] = w->S[36] + w->term[1][36]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[1][37]*ck;
-    w->S[37] = w->S[37] + w->term[1][37]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[1][38]*ck;
-    w->S[38] = w->S[38] + w->term[1][38]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[1][39]*ck;
-    w->S[39] = w->S[39] + w->term[1][39]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[1][40]*ck;
-    w->S[40] = w->S[40] + w->term[1][40]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[1][41]*ck;
-    w->S[41] = w->S[41] + w->term[1][41]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[1][42]*ck;
-    w->S[42] = w->S[42] + w->term[1][42]*cs;
-    t->Phi[4][7] = t->Phi[4][7] + w->term[1][43]*ck;
-    w->S[43] = w->S[43] + w->term[1][43]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[1][44]*ck;
-    w->S[44] = w->S[44] + w->term[1][44]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[1][45]*ck;
-    w->S[45] = w->S[45] + w->term[1][45]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[1][46]*ck;
-    w->S[46] = w->S[46] + w->term[1][46]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[1][47]*ck;
-    w->S[47] = w->S[47] + w->term[1][47]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[1][48]*ck;
-    w->S[48] = w->S[48] + w->term[1][48]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[1][49]*ck;
-    w->S[49] = w->S[49] + w->term[1][49]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[1][50]*ck;
-    w->S[50] = w->S[50] + w->term[1][50]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[1][51]*ck;
-    w->S[51] = w->S[51] + w->term[1][51]*cs;
-    t->Phi[5][7] = t->Phi[5][7] + w->term[1][52]*ck;
-    w->S[52] = w->S[52] + w->term[1][52]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[1][53]*ck;
-    w->S[53] = w->S[53] + w->term[1][53]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[1][54]*ck;
-    w->S[54] = w->S[54] + w->term[1][54]*cs;
-    t->Phi[6][7] = t->Phi[6][7] + w->term[1][55]*ck;
-    w->S[55] = w->S[55] + w->term[1][55]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[1][56]*ck;
-    w->S[56] = w->S[56] + w->term[1][56]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[1][57]*ck;
-    w->S[57] = w->S[57] + w->term[1][57]*cs;
-    t->Phi[7][7] = t->Phi[7][7] + w->term[1][58]*ck;
-    w->S[58] = w->S[58] + w->term[1][58]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[1][59]*ck;
-    w->S[59] = w->S[59] + w->term[1][59]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[1][60]*ck;
-    w->S[60] = w->S[60] + w->term[1][60]*cs;
-    t->Phi[8][7] = t->Phi[8][7] + w->term[1][61]*ck;
-    w->S[61] = w->S[61] + w->term[1][61]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[1][62]*ck;
-    w->S[62] = w->S[62] + w->term[1][62]*cs;
+    t->Phi[0][0] = w->fh[0]*w->S[9] + w->fh[1]*w->S[18] + w->fh[2]*w->S[27];
+    t->Phi[0][1] = w->fh[0]*w->S[10] + w->fh[1]*w->S[19] + w->fh[2]*w->S[28];
+    t->Phi[0][2] = w->fh[0]*w->S[11] + w->fh[1]*w->S[20] + w->fh[2]*w->S[29];
+    t->Phi[0][3] = w->fh[0]*w->S[12] + w->fh[1]*w->S[21] + w->fh[2]*w->S[30];
+    t->Phi[0][4] = w->fh[0]*w->S[13] + w->fh[1]*w->S[22] + w->fh[2]*w->S[31];
+    t->Phi[0][5] = w->fh[0]*w->S[14] + w->fh[1]*w->S[23] + w->fh[2]*w->S[32];
+    t->Phi[0][6] = w->fh[0]*w->S[15] + w->fh[1]*w->S[24] + w->fh[2]*w->S[33];
+    t->Phi[0][7] = w->fh[0]*w->S[16] + w->fh[1]*w->S[25] + w->fh[2]*w->S[34];
+    t->Phi[0][8] = w->fh[0]*w->S[17] + w->fh[1]*w->S[26] + w->fh[2]*w->S[35];
+    t->Phi[1][0] = w->fh[3]*w->S[0] + w->fh[4]*w->S[18] + w->fh[5]*w->S[36];
+    t->Phi[1][1] = w->fh[3]*w->S[1] + w->fh[4]*w->S[19] + w->fh[5]*w->S[37];
+    t->Phi[1][2] = w->fh[3]*w->S[2] + w->fh[4]*w->S[20] + w->fh[5]*w->S[38];
+    t->Phi[1][3] = w->fh[3]*w->S[3] + w->fh[4]*w->S[21] + w->fh[5]*w->S[39];
+    t->Phi[1][4] = w->fh[3]*w->S[4] + w->fh[4]*w->S[22] + w->fh[5]*w->S[40];
+    t->Phi[1][5] = w->fh[3]*w->S[5] + w->fh[4]*w->S[23] + w->fh[5]*w->S[41];
+    t->Phi[1][6] = w->fh[3]*w->S[6] + w->fh[4]*w->S[24] + w->fh[5]*w->S[42];
+    t->Phi[1][7] = w->fh[3]*w->S[7] + w->fh[4]*w->S[25] + w->fh[5]*w->S[43];
+    t->Phi[1][8] = w->fh[3]*w->S[8] + w->fh[4]*w->S[26] + w->fh[5]*w->S[44];
+    t->Phi[2][0] = w->fh[6]*w->S[0] + w->fh[7]*w->S[9] + w->fh[8]*w->S[45];
+    t->Phi[2][1] = w->fh[6]*w->S[1] + w->fh[7]*w->S[10] + w->fh[8]*w->S[46];
+    t->Phi[2][2] = w->fh[6]*w->S[2] + w->fh[7]*w->S[11] + w->fh[8]*w->S[47];
+    t->Phi[2][3] = w->fh[6]*w->S[3] + w->fh[7]*w->S[12] + w->fh[8]*w->S[48];
+    t->Phi[2][4] = w->fh[6]*w->S[4] + w->fh[7]*w->S[13] + w->fh[8]*w->S[49];
+    t->Phi[2][5] = w->fh[6]*w->S[5] + w->fh[7]*w->S[14] + w->fh[8]*w->S[50];
+    t->Phi[2][6] = w->fh[6]*w->S[6] + w->fh[7]*w->S[15] + w->fh[8]*w->S[51];
+    t->Phi[2][7] = w->fh[6]*w->S[7] + w->fh[7]*w->S[16] + w->fh[8]*w->S[52];
+    t->Phi[2][8] = w->fh[6]*w->S[8] + w->fh[7]*w->S[17] + w->fh[8]*w->S[53];
+    t->Phi[3][0] = w->fh[9]*w->S[0] + w->fh[10]*w->S[36] + w->fh[11]*w->S[45];
+    t->Phi[3][1] = w->fh[9]*w->S[1] + w->fh[10]*w->S[37] + w->fh[11]*w->S[46];
+    t->Phi[3][2] = w->fh[9]*w->S[2] + w->fh[10]*w->S[38] + w->fh[11]*w->S[47];
+    t->Phi[3][3] = w->fh[9]*w->S[3] + w->fh[10]*w->S[39] + w->fh[11]*w->S[48];
+    t->Phi[3][4] = w->fh[9]*w->S[4] + w->fh[10]*w->S[40] + w->fh[11]*w->S[49];
+    t->Phi[3][5] = w->fh[9]*w->S[5] + w->fh[10]*w->S[41] + w->fh[11]*w->S[50];
+    t->Phi[3][6] = w->fh[9]*w->S[6] + w->fh[10]*w->S[42] + w->fh[11]*w->S[51] + w->fh[12]*w->S[57] +
+            w->fh[13]*w->S[60];
+    t->Phi[3][7] = w->fh[9]*w->S[7] + w->fh[10]*w->S[43] + w->fh[11]*w->S[52] + w->fh[12]*w->S[58] +
+            w->fh[13]*w->S[61];
+    t->Phi[3][8] = w->fh[9]*w->S[8] + w->fh[10]*w->S[44] + w->fh[11]*w->S[53] + w->fh[12]*w->S[59] +
+            w->fh[13]*w->S[62];
+    t->Phi[4][0] = w->fh[14]*w->S[9] + w->fh[15]*w->S[27] + w->fh[16]*w->S[45];
+    t->Phi[4][1] = w->fh[14]*w->S[10] + w->fh[15]*w->S[28] + w->fh[16]*w->S[46];
+    t->Phi[4][2] = w->fh[14]*w->S[11] + w->fh[15]*w->S[29] + w->fh[16]*w->S[47];
+    t->Phi[4][3] = w->fh[14]*w->S[12] + w->fh[15]*w->S[30] + w->fh[16]*w->S[48];
+    t->Phi[4][4] = w->fh[14]*w->S[13] + w->fh[15]*w->S[31] + w->fh[16]*w->S[49];
+    t->Phi[4][5] = w->fh[14]*w->S[14] + w->fh[15]*w->S[32] + w->fh[16]*w->S[50];
+    t->Phi[4][6] = w->fh[14]*w->S[15] + w->fh[15]*w->S[33] + w->fh[16]*w->S[51] + w->fh[17]*w->S[54]
+            + w->fh[18]*w->S[60];
+    t->Phi[4][7] = w->fh[14]*w->S[16] + w->fh[15]*w->S[34] + w->fh[16]*w->S[52] + w->fh[17]*w->S[55]
+            + w->fh[18]*w->S[61];
+    t->Phi[4][8] = w->fh[14]*w->S[17] + w->fh[15]*w->S[35] + w->fh[16]*w->S[53] + w->fh[17]*w->S[56]
+            + w->fh[18]*w->S[62];
+    t->Phi[5][0] = w->fh[19]*w->S[18] + w->fh[20]*w->S[27] + w->fh[21]*w->S[36];
+    t->Phi[5][1] = w->fh[19]*w->S[19] + w->fh[20]*w->S[28] + w->fh[21]*w->S[37];
+    t->Phi[5][2] = w->fh[19]*w->S[20] + w->fh[20]*w->S[29] + w->fh[21]*w->S[38];
+    t->Phi[5][3] = w->fh[19]*w->S[21] + w->fh[20]*w->S[30] + w->fh[21]*w->S[39];
+    t->Phi[5][4] = w->fh[19]*w->S[22] + w->fh[20]*w->S[31] + w->fh[21]*w->S[40];
+    t->Phi[5][5] = w->fh[19]*w->S[23] + w->fh[20]*w->S[32] + w->fh[21]*w->S[41];
+    t->Phi[5][6] = w->fh[19]*w->S[24] + w->fh[20]*w->S[33] + w->fh[21]*w->S[42] + w->fh[22]*w->S[54]
+            + w->fh[23]*w->S[57];
+    t->Phi[5][7] = w->fh[19]*w->S[25] + w->fh[20]*w->S[34] + w->fh[21]*w->S[43] + w->fh[22]*w->S[55]
+            + w->fh[23]*w->S[58];
+    t->Phi[5][8] = w->fh[19]*w->S[26] + w->fh[20]*w->S[35] + w->fh[21]*w->S[44] + w->fh[22]*w->S[56]
+            + w->fh[23]*w->S[59];
+    t->Phi[6][6] = w->fh[24]*w->S[57] + w->fh[25]*w->S[60];
+    t->Phi[6][7] = w->fh[24]*w->S[58] + w->fh[25]*w->S[61];
+    t->Phi[6][8] = w->fh[24]*w->S[59] + w->fh[25]*w->S[62];
+    t->Phi[7][6] = w->fh[26]*w->S[54] + w->fh[27]*w->S[60];
+    t->Phi[7][7] = w->fh[26]*w->S[55] + w->fh[27]*w->S[61];
+    t->Phi[7][8] = w->fh[26]*w->S[56] + w->fh[27]*w->S[62];
+    t->Phi[8][6] = w->fh[28]*w->S[54] + w->fh[29]*w->S[57];
+    t->Phi[8][7] = w->fh[28]*w->S[55] + w->fh[29]*w->S[58];
+    t->Phi[8][8] = w->fh[28]*w->S[56] + w->fh[29]*w->S[59];
+    t->Phi[9][9] = 0;
+    t->Phi[9][10] = w->fh[30];
 }
 
 GPS_PSEUDORANGE11_TWIN_BLOCK void doubling(gps_pseudorange11_twin_transition *restrict t,
@@ -2274,479 +1071,470 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void doubling(gps_pseudorange11_twin_transition *re
     w->term[0][0] = t->Phi[0][0]*t->Phi[0][0] + t->Phi[0][1]*t->Phi[1][0] +
             t->Phi[0][2]*t->Phi[2][0] + t->Phi[0][3]*t->Phi[3][0] + t->Phi[0][4]*t->Phi[4][0] +
             t->Phi[0][5]*t->Phi[5][0];
-    w->term[1][0] = w->S[0] + t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[9] + t->Phi[0][2]*w->S[18] +
+    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[9] + t->Phi[0][2]*w->S[18] +
             t->Phi[0][3]*w->S[27] + t->Phi[0][4]*w->S[36] + t->Phi[0][5]*w->S[45];
     w->term[0][1] = t->Phi[0][0]*t->Phi[0][1] + t->Phi[0][1]*t->Phi[1][1] +
             t->Phi[0][2]*t->Phi[2][1] + t->Phi[0][3]*t->Phi[3][1] + t->Phi[0][4]*t->Phi[4][1] +
             t->Phi[0][5]*t->Phi[5][1];
-    w->term[1][1] = w->S[1] + t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[10] + t->Phi[0][2]*w->S[19] +
+    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[10] + t->Phi[0][2]*w->S[19] +
             t->Phi[0][3]*w->S[28] + t->Phi[0][4]*w->S[37] + t->Phi[0][5]*w->S[46];
     w->term[0][2] = t->Phi[0][0]*t->Phi[0][2] + t->Phi[0][1]*t->Phi[1][2] +
             t->Phi[0][2]*t->Phi[2][2] + t->Phi[0][3]*t->Phi[3][2] + t->Phi[0][4]*t->Phi[4][2] +
             t->Phi[0][5]*t->Phi[5][2];
-    w->term[1][2] = w->S[2] + t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[11] + t->Phi[0][2]*w->S[20] +
+    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[11] + t->Phi[0][2]*w->S[20] +
             t->Phi[0][3]*w->S[29] + t->Phi[0][4]*w->S[38] + t->Phi[0][5]*w->S[47];
     w->term[0][3] = t->Phi[0][0]*t->Phi[0][3] + t->Phi[0][1]*t->Phi[1][3] +
             t->Phi[0][2]*t->Phi[2][3] + t->Phi[0][3]*t->Phi[3][3] + t->Phi[0][4]*t->Phi[4][3] +
             t->Phi[0][5]*t->Phi[5][3];
-    w->term[1][3] = w->S[3] + t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[12] + t->Phi[0][2]*w->S[21] +
+    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[12] + t->Phi[0][2]*w->S[21] +
             t->Phi[0][3]*w->S[30] + t->Phi[0][4]*w->S[39] + t->Phi[0][5]*w->S[48];
     w->term[0][4] = t->Phi[0][0]*t->Phi[0][4] + t->Phi[0][1]*t->Phi[1][4] +
             t->Phi[0][2]*t->Phi[2][4] + t->Phi[0][3]*t->Phi[3][4] + t->Phi[0][4]*t->Phi[4][4] +
             t->Phi[0][5]*t->Phi[5][4];
-    w->term[1][4] = w->S[4] + t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[13] + t->Phi[0][2]*w->S[22] +
+    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[13] + t->Phi[0][2]*w->S[22] +
             t->Phi[0][3]*w->S[31] + t->Phi[0][4]*w->S[40] + t->Phi[0][5]*w->S[49];
     w->term[0][5] = t->Phi[0][0]*t->Phi[0][5] + t->Phi[0][1]*t->Phi[1][5] +
             t->Phi[0][2]*t->Phi[2][5] + t->Phi[0][3]*t->Phi[3][5] + t->Phi[0][4]*t->Phi[4][5] +
             t->Phi[0][5]*t->Phi[5][5];
-    w->term[1][5] = w->S[5] + t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[23] +
+    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[23] +
             t->Phi[0][3]*w->S[32] + t->Phi[0][4]*w->S[41] + t->Phi[0][5]*w->S[50];
     w->term[0][6] = t->Phi[0][0]*t->Phi[0][6] + t->Phi[0][1]*t->Phi[1][6] +
             t->Phi[0][2]*t->Phi[2][6] + t->Phi[0][3]*t->Phi[3][6] + t->Phi[0][4]*t->Phi[4][6] +
             t->Phi[0][5]*t->Phi[5][6] + t->Phi[0][6]*t->Phi[6][6] + t->Phi[0][7]*t->Phi[7][6] +
             t->Phi[0][8]*t->Phi[8][6];
-    w->term[1][6] = w->S[6] + t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[24] +
+    w->term[1][6] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[24] +
             t->Phi[0][3]*w->S[33] + t->Phi[0][4]*w->S[42] + t->Phi[0][5]*w->S[51] +
             t->Phi[0][6]*w->S[54] + t->Phi[0][7]*w->S[57] + t->Phi[0][8]*w->S[60];
     w->term[0][7] = t->Phi[0][0]*t->Phi[0][7] + t->Phi[0][1]*t->Phi[1][7] +
             t->Phi[0][2]*t->Phi[2][7] + t->Phi[0][3]*t->Phi[3][7] + t->Phi[0][4]*t->Phi[4][7] +
             t->Phi[0][5]*t->Phi[5][7] + t->Phi[0][6]*t->Phi[6][7] + t->Phi[0][7]*t->Phi[7][7] +
             t->Phi[0][8]*t->Phi[8][7];
-    w->term[1][7] = w->S[7] + t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[25] +
+    w->term[1][7] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[25] +
             t->Phi[0][3]*w->S[34] + t->Phi[0][4]*w->S[43] + t->Phi[0][5]*w->S[52] +
             t->Phi[0][6]*w->S[55] + t->Phi[0][7]*w->S[58] + t->Phi[0][8]*w->S[61];
     w->term[0][8] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
             t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
             t->Phi[0][5]*t->Phi[5][8] + t->Phi[0][6]*t->Phi[6][8] + t->Phi[0][7]*t->Phi[7][8] +
             t->Phi[0][8]*t->Phi[8][8];
-    w->term[1][8] = w->S[8] + t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[26] +
+    w->term[1][8] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[26] +
             t->Phi[0][3]*w->S[35] + t->Phi[0][4]*w->S[44] + t->Phi[0][5]*w->S[53] +
             t->Phi[0][6]*w->S[56] + t->Phi[0][7]*w->S[59] + t->Phi[0][8]*w->S[62];
     w->term[0][9] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
             t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
             t->Phi[1][5]*t->Phi[5][0];
-    w->term[1][9] = w->S[9] + t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[9] + t->Phi[1][2]*w->S[18] +
+    w->term[1][9] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[9] + t->Phi[1][2]*w->S[18] +
             t->Phi[1][3]*w->S[27] + t->Phi[1][4]*w->S[36] + t->Phi[1][5]*w->S[45];
     w->term[0][10] = t->Phi[1][0]*t->Phi[0][1] + t->Phi[1][1]*t->Phi[1][1] +
             t->Phi[1][2]*t->Phi[2][1] + t->Phi[1][3]*t->Phi[3][1] + t->Phi[1][4]*t->Phi[4][1] +
             t->Phi[1][5]*t->Phi[5][1];
-    w->term[1][10] = w->S[10] + t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[10] + t->Phi[1][2]*w->S[19]
-            + t->Phi[1][3]*w->S[28] + t->Phi[1][4]*w->S[37] + t->Phi[1][5]*w->S[46];
+    w->term[1][10] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[10] + t->Phi[1][2]*w->S[19] +
+            t->Phi[1][3]*w->S[28] + t->Phi[1][4]*w->S[37] + t->Phi[1][5]*w->S[46];
     w->term[0][11] = t->Phi[1][0]*t->Phi[0][2] + t->Phi[1][1]*t->Phi[1][2] +
             t->Phi[1][2]*t->Phi[2][2] + t->Phi[1][3]*t->Phi[3][2] + t->Phi[1][4]*t->Phi[4][2] +
             t->Phi[1][5]*t->Phi[5][2];
-    w->term[1][11] = w->S[11] + t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[11] + t->Phi[1][2]*w->S[20]
-            + t->Phi[1][3]*w->S[29] + t->Phi[1][4]*w->S[38] + t->Phi[1][5]*w->S[47];
+    w->term[1][11] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[11] + t->Phi[1][2]*w->S[20] +
+            t->Phi[1][3]*w->S[29] + t->Phi[1][4]*w->S[38] + t->Phi[1][5]*w->S[47];
     w->term[0][12] = t->Phi[1][0]*t->Phi[0][3] + t->Phi[1][1]*t->Phi[1][3] +
             t->Phi[1][2]*t->Phi[2][3] + t->Phi[1][3]*t->Phi[3][3] + t->Phi[1][4]*t->Phi[4][3] +
             t->Phi[1][5]*t->Phi[5][3];
-    w->term[1][12] = w->S[12] + t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[12] + t->Phi[1][2]*w->S[21]
-            + t->Phi[1][3]*w->S[30] + t->Phi[1][4]*w->S[39] + t->Phi[1][5]*w->S[48];
+    w->term[1][12] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[12] + t->Phi[1][2]*w->S[21] +
+            t->Phi[1][3]*w->S[30] + t->Phi[1][4]*w->S[39] + t->Phi[1][5]*w->S[48];
     w->term[0][13] = t->Phi[1][0]*t->Phi[0][4] + t->Phi[1][1]*t->Phi[1][4] +
             t->Phi[1][2]*t->Phi[2][4] + t->Phi[1][3]*t->Phi[3][4] + t->Phi[1][4]*t->Phi[4][4] +
             t->Phi[1][5]*t->Phi[5][4];
-    w->term[1][13] = w->S[13] + t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[13] + t->Phi[1][2]*w->S[22]
-            + t->Phi[1][3]*w->S[31] + t->Phi[1][4]*w->S[40] + t->Phi[1][5]*w->S[49];
+    w->term[1][13] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[13] + t->Phi[1][2]*w->S[22] +
+            t->Phi[1][3]*w->S[31] + t->Phi[1][4]*w->S[40] + t->Phi[1][5]*w->S[49];
     w->term[0][14] = t->Phi[1][0]*t->Phi[0][5] + t->Phi[1][1]*t->Phi[1][5] +
             t->Phi[1][2]*t->Phi[2][5] + t->Phi[1][3]*t->Phi[3][5] + t->Phi[1][4]*t->Phi[4][5] +
             t->Phi[1][5]*t->Phi[5][5];
-    w->term[1][14] = w->S[14] + t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[23]
-            + t->Phi[1][3]*w->S[32] + t->Phi[1][4]*w->S[41] + t->Phi[1][5]*w->S[50];
+    w->term[1][14] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[23] +
+            t->Phi[1][3]*w->S[32] + t->Phi[1][4]*w->S[41] + t->Phi[1][5]*w->S[50];
     w->term[0][15] = t->Phi[1][0]*t->Phi[0][6] + t->Phi[1][1]*t->Phi[1][6] +
             t->Phi[1][2]*t->Phi[2][6] + t->Phi[1][3]*t->Phi[3][6] + t->Phi[1][4]*t->Phi[4][6] +
             t->Phi[1][5]*t->Phi[5][6] + t->Phi[1][6]*t->Phi[6][6] + t->Phi[1][7]*t->Phi[7][6] +
             t->Phi[1][8]*t->Phi[8][6];
-    w->term[1][15] = w->S[15] + t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[24]
-            + t->Phi[1][3]*w->S[33] + t->Phi[1][4]*w->S[42] + t->Phi[1][5]*w->S[51] +
+    w->term[1][15] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[24] +
+            t->Phi[1][3]*w->S[33] + t->Phi[1][4]*w->S[42] + t->Phi[1][5]*w->S[51] +
             t->Phi[1][6]*w->S[54] + t->Phi[1][7]*w->S[57] + t->Phi[1][8]*w->S[60];
     w->term[0][16] = t->Phi[1][0]*t->Phi[0][7] + t->Phi[1][1]*t->Phi[1][7] +
             t->Phi[1][2]*t->Phi[2][7] + t->Phi[1][3]*t->Phi[3][7] + t->Phi[1][4]*t->Phi[4][7] +
             t->Phi[1][5]*t->Phi[5][7] + t->Phi[1][6]*t->Phi[6][7] + t->Phi[1][7]*t->Phi[7][7] +
             t->Phi[1][8]*t->Phi[8][7];
-    w->term[1][16] = w->S[16] + t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[25]
-            + t->Phi[1][3]*w->S[34] + t->Phi[1][4]*w->S[43] + t->Phi[1][5]*w->S[52] +
+    w->term[1][16] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[25] +
+            t->Phi[1][3]*w->S[34] + t->Phi[1][4]*w->S[43] + t->Phi[1][5]*w->S[52] +
             t->Phi[1][6]*w->S[55] + t->Phi[1][7]*w->S[58] + t->Phi[1][8]*w->S[61];
     w->term[0][17] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
             t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
             t->Phi[1][5]*t->Phi[5][8] + t->Phi[1][6]*t->Phi[6][8] + t->Phi[1][7]*t->Phi[7][8] +
             t->Phi[1][8]*t->Phi[8][8];
-    w->term[1][17] = w->S[17] + t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[26]
-            + t->Phi[1][3]*w->S[35] + t->Phi[1][4]*w->S[44] + t->Phi[1][5]*w->S[53] +
+    w->term[1][17] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[26] +
+            t->Phi[1][3]*w->S[35] + t->Phi[1][4]*w->S[44] + t->Phi[1][5]*w->S[53] +
             t->Phi[1][6]*w->S[56] + t->Phi[1][7]*w->S[59] + t->Phi[1][8]*w->S[62];
     w->term[0][18] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
             t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
             t->Phi[2][5]*t->Phi[5][0];
-    w->term[1][18] = w->S[18] + t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[9] + t->Phi[2][2]*w->S[18]
-            + t->Phi[2][3]*w->S[27] + t->Phi[2][4]*w->S[36] + t->Phi[2][5]*w->S[45];
+    w->term[1][18] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[9] + t->Phi[2][2]*w->S[18] +
+            t->Phi[2][3]*w->S[27] + t->Phi[2][4]*w->S[36] + t->Phi[2][5]*w->S[45];
     w->term[0][19] = t->Phi[2][0]*t->Phi[0][1] + t->Phi[2][1]*t->Phi[1][1] +
             t->Phi[2][2]*t->Phi[2][1] + t->Phi[2][3]*t->Phi[3][1] + t->Phi[2][4]*t->Phi[4][1] +
             t->Phi[2][5]*t->Phi[5][1];
-    w->term[1][19] = w->S[19] + t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[10] + t->Phi[2][2]*w->S[19]
-            + t->Phi[2][3]*w->S[28] + t->Phi[2][4]*w->S[37] + t->Phi[2][5]*w->S[46];
+    w->term[1][19] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[10] + t->Phi[2][2]*w->S[19] +
+            t->Phi[2][3]*w->S[28] + t->Phi[2][4]*w->S[37] + t->Phi[2][5]*w->S[46];
     w->term[0][20] = t->Phi[2][0]*t->Phi[0][2] + t->Phi[2][1]*t->Phi[1][2] +
             t->Phi[2][2]*t->Phi[2][2] + t->Phi[2][3]*t->Phi[3][2] + t->Phi[2][4]*t->Phi[4][2] +
             t->Phi[2][5]*t->Phi[5][2];
-    w->term[1][20] = w->S[20] + t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[11] + t->Phi[2][2]*w->S[20]
-            + t->Phi[2][3]*w->S[29] + t->Phi[2][4]*w->S[38] + t->Phi[2][5]*w->S[47];
+    w->term[1][20] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[11] + t->Phi[2][2]*w->S[20] +
+            t->Phi[2][3]*w->S[29] + t->Phi[2][4]*w->S[38] + t->Phi[2][5]*w->S[47];
     w->term[0][21] = t->Phi[2][0]*t->Phi[0][3] + t->Phi[2][1]*t->Phi[1][3] +
             t->Phi[2][2]*t->Phi[2][3] + t->Phi[2][3]*t->Phi[3][3] + t->Phi[2][4]*t->Phi[4][3] +
             t->Phi[2][5]*t->Phi[5][3];
-    w->term[1][21] = w->S[21] + t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[12] + t->Phi[2][2]*w->S[21]
-            + t->Phi[2][3]*w->S[30] + t->Phi[2][4]*w->S[39] + t->Phi[2][5]*w->S[48];
+    w->term[1][21] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[12] + t->Phi[2][2]*w->S[21] +
+            t->Phi[2][3]*w->S[30] + t->Phi[2][4]*w->S[39] + t->Phi[2][5]*w->S[48];
     w->term[0][22] = t->Phi[2][0]*t->Phi[0][4] + t->Phi[2][1]*t->Phi[1][4] +
             t->Phi[2][2]*t->Phi[2][4] + t->Phi[2][3]*t->Phi[3][4] + t->Phi[2][4]*t->Phi[4][4] +
             t->Phi[2][5]*t->Phi[5][4];
-    w->term[1][22] = w->S[22] + t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[13] + t->Phi[2][2]*w->S[22]
-            + t->Phi[2][3]*w->S[31] + t->Phi[2][4]*w->S[40] + t->Phi[2][5]*w->S[49];
+    w->term[1][22] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[13] + t->Phi[2][2]*w->S[22] +
+            t->Phi[2][3]*w->S[31] + t->Phi[2][4]*w->S[40] + t->Phi[2][5]*w->S[49];
     w->term[0][23] = t->Phi[2][0]*t->Phi[0][5] + t->Phi[2][1]*t->Phi[1][5] +
             t->Phi[2][2]*t->Phi[2][5] + t->Phi[2][3]*t->Phi[3][5] + t->Phi[2][4]*t->Phi[4][5] +
             t->Phi[2][5]*t->Phi[5][5];
-    w->term[1][23] = w->S[23] + t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[23]
-            + t->Phi[2][3]*w->S[32] + t->Phi[2][4]*w->S[41] + t->Phi[2][5]*w->S[50];
+    w->term[1][23] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[23] +
+            t->Phi[2][3]*w->S[32] + t->Phi[2][4]*w->S[41] + t->Phi[2][5]*w->S[50];
     w->term[0][24] = t->Phi[2][0]*t->Phi[0][6] + t->Phi[2][1]*t->Phi[1][6] +
             t->Phi[2][2]*t->Phi[2][6] + t->Phi[2][3]*t->Phi[3][6] + t->Phi[2][4]*t->Phi[4][6] +
             t->Phi[2][5]*t->Phi[5][6] + t->Phi[2][6]*t->Phi[6][6] + t->Phi[2][7]*t->Phi[7][6] +
             t->Phi[2][8]*t->Phi[8][6];
-    w->term[1][24] = w->S[24] + t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[24]
-            + t->Phi[2][3]*w->S[33] + t->Phi[2][4]*w->S[42] + t->Phi[2][5]*w->S[51] +
+    w->term[1][24] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[24] +
+            t->Phi[2][3]*w->S[33] + t->Phi[2][4]*w->S[42] + t->Phi[2][5]*w->S[51] +
             t->Phi[2][6]*w->S[54] + t->Phi[2][7]*w->S[57] + t->Phi[2][8]*w->S[60];
     w->term[0][25] = t->Phi[2][0]*t->Phi[0][7] + t->Phi[2][1]*t->Phi[1][7] +
             t->Phi[2][2]*t->Phi[2][7] + t->Phi[2][3]*t->Phi[3][7] + t->Phi[2][4]*t->Phi[4][7] +
             t->Phi[2][5]*t->Phi[5][7] + t->Phi[2][6]*t->Phi[6][7] + t->Phi[2][7]*t->Phi[7][7] +
             t->Phi[2][8]*t->Phi[8][7];
-    w->term[1][25] = w->S[25] + t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[25]
-            + t->Phi[2][3]*w->S[34] + t->Phi[2][4]*w->S[43] + t->Phi[2][5]*w->S[52] +
+    w->term[1][25] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[25] +
+            t->Phi[2][3]*w->S[34] + t->Phi[2][4]*w->S[43] + t->Phi[2][5]*w->S[52] +
             t->Phi[2][6]*w->S[55] + t->Phi[2][7]*w->S[58] + t->Phi[2][8]*w->S[61];
     w->term[0][26] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
             t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
             t->Phi[2][5]*t->Phi[5][8] + t->Phi[2][6]*t->Phi[6][8] + t->Phi[2][7]*t->Phi[7][8] +
             t->Phi[2][8]*t->Phi[8][8];
-    w->term[1][26] = w->S[26] + t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[26]
-            + t->Phi[2][3]*w->S[35] + t->Phi[2][4]*w->S[44] + t->Phi[2][5]*w->S[53] +
+    w->term[1][26] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[26] +
+            t->Phi[2][3]*w->S[35] + t->Phi[2][4]*w->S[44] + t->Phi[2][5]*w->S[53] +
             t->Phi[2][6]*w->S[56] + t->Phi[2][7]*w->S[59] + t->Phi[2][8]*w->S[62];
     w->term[0][27] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
             t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
             t->Phi[3][5]*t->Phi[5][0];
-    w->term[1][27] = w->S[27] + t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[9] + t->Phi[3][2]*w->S[18]
-            + t->Phi[3][3]*w->S[27] + t->Phi[3][4]*w->S[36] + t->Phi[3][5]*w->S[45];
+    w->term[1][27] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[9] + t->Phi[3][2]*w->S[18] +
+            t->Phi[3][3]*w->S[27] + t->Phi[3][4]*w->S[36] + t->Phi[3][5]*w->S[45];
     w->term[0][28] = t->Phi[3][0]*t->Phi[0][1] + t->Phi[3][1]*t->Phi[1][1] +
             t->Phi[3][2]*t->Phi[2][1] + t->Phi[3][3]*t->Phi[3][1] + t->Phi[3][4]*t->Phi[4][1] +
             t->Phi[3][5]*t->Phi[5][1];
-    w->term[1][28] = w->S[28] + t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[10] + t->Phi[3][2]*w->S[19]
-            + t->Phi[3][3]*w->S[28] + t->Phi[3][4]*w->S[37] + t->Phi[3][5]*w->S[46];
+    w->term[1][28] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[10] + t->Phi[3][2]*w->S[19] +
+            t->Phi[3][3]*w->S[28] + t->Phi[3][4]*w->S[37] + t->Phi[3][5]*w->S[46];
     w->term[0][29] = t->Phi[3][0]*t->Phi[0][2] + t->Phi[3][1]*t->Phi[1][2] +
             t->Phi[3][2]*t->Phi[2][2] + t->Phi[3][3]*t->Phi[3][2] + t->Phi[3][4]*t->Phi[4][2] +
             t->Phi[3][5]*t->Phi[5][2];
-    w->term[1][29] = w->S[29] + t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[11] + t->Phi[3][2]*w->S[20]
-            + t->Phi[3][3]*w->S[29] + t->Phi[3][4]*w->S[38] + t->Phi[3][5]*w->S[47];
+    w->term[1][29] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[11] + t->Phi[3][2]*w->S[20] +
+            t->Phi[3][3]*w->S[29] + t->Phi[3][4]*w->S[38] + t->Phi[3][5]*w->S[47];
     w->term[0][30] = t->Phi[3][0]*t->Phi[0][3] + t->Phi[3][1]*t->Phi[1][3] +
             t->Phi[3][2]*t->Phi[2][3] + t->Phi[3][3]*t->Phi[3][3] + t->Phi[3][4]*t->Phi[4][3] +
             t->Phi[3][5]*t->Phi[5][3];
-    w->term[1][30] = w->S[30] + t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[12] + t->Phi[3][2]*w->S[21]
-            + t->Phi[3][3]*w->S[30] + t->Phi[3][4]*w->S[39] + t->Phi[3][5]*w->S[48];
+    w->term[1][30] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[12] + t->Phi[3][2]*w->S[21] +
+            t->Phi[3][3]*w->S[30] + t->Phi[3][4]*w->S[39] + t->Phi[3][5]*w->S[48];
     w->term[0][31] = t->Phi[3][0]*t->Phi[0][4] + t->Phi[3][1]*t->Phi[1][4] +
             t->Phi[3][2]*t->Phi[2][4] + t->Phi[3][3]*t->Phi[3][4] + t->Phi[3][4]*t->Phi[4][4] +
             t->Phi[3][5]*t->Phi[5][4];
-    w->term[1][31] = w->S[31] + t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[13] + t->Phi[3][2]*w->S[22]
-            + t->Phi[3][3]*w->S[31] + t->Phi[3][4]*w->S[40] + t->Phi[3][5]*w->S[49];
+    w->term[1][31] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[13] + t->Phi[3][2]*w->S[22] +
+            t->Phi[3][3]*w->S[31] + t->Phi[3][4]*w->S[40] + t->Phi[3][5]*w->S[49];
     w->term[0][32] = t->Phi[3][0]*t->Phi[0][5] + t->Phi[3][1]*t->Phi[1][5] +
             t->Phi[3][2]*t->Phi[2][5] + t->Phi[3][3]*t->Phi[3][5] + t->Phi[3][4]*t->Phi[4][5] +
             t->Phi[3][5]*t->Phi[5][5];
-    w->term[1][32] = w->S[32] + t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[23]
-            + t->Phi[3][3]*w->S[32] + t->Phi[3][4]*w->S[41] + t->Phi[3][5]*w->S[50];
+    w->term[1][32] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[23] +
+            t->Phi[3][3]*w->S[32] + t->Phi[3][4]*w->S[41] + t->Phi[3][5]*w->S[50];
     w->term[0][33] = t->Phi[3][0]*t->Phi[0][6] + t->Phi[3][1]*t->Phi[1][6] +
             t->Phi[3][2]*t->Phi[2][6] + t->Phi[3][3]*t->Phi[3][6] + t->Phi[3][4]*t->Phi[4][6] +
             t->Phi[3][5]*t->Phi[5][6] + t->Phi[3][6]*t->Phi[6][6] + t->Phi[3][7]*t->Phi[7][6] +
             t->Phi[3][8]*t->Phi[8][6];
-    w->term[1][33] = w->S[33] + t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[24]
-            + t->Phi[3][3]*w->S[33] + t->Phi[3][4]*w->S[42] + t->Phi[3][5]*w->S[51] +
+    w->term[1][33] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[24] +
+            t->Phi[3][3]*w->S[33] + t->Phi[3][4]*w->S[42] + t->Phi[3][5]*w->S[51] +
             t->Phi[3][6]*w->S[54] + t->Phi[3][7]*w->S[57] + t->Phi[3][8]*w->S[60];
     w->term[0][34] = t->Phi[3][0]*t->Phi[0][7] + t->Phi[3][1]*t->Phi[1][7] +
             t->Phi[3][2]*t->Phi[2][7] + t->Phi[3][3]*t->Phi[3][7] + t->Phi[3][4]*t->Phi[4][7] +
             t->Phi[3][5]*t->Phi[5][7] + t->Phi[3][6]*t->Phi[6][7] + t->Phi[3][7]*t->Phi[7][7] +
             t->Phi[3][8]*t->Phi[8][7];
-    w->term[1][34] = w->S[34] + t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[25]
-            + t->Phi[3][3]*w->S[34] + t->Phi[3][4]*w->S[43] + t->Phi[3][5]*w->S[52] +
+    w->term[1][34] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[25] +
+            t->Phi[3][3]*w->S[34] + t->Phi[3][4]*w->S[43] + t->Phi[3][5]*w->S[52] +
             t->Phi[3][6]*w->S[55] + t->Phi[3][7]*w->S[58] + t->Phi[3][8]*w->S[61];
     w->term[0][35] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
             t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
             t->Phi[3][5]*t->Phi[5][8] + t->Phi[3][6]*t->Phi[6][8] + t->Phi[3][7]*t->Phi[7][8] +
             t->Phi[3][8]*t->Phi[8][8];
-    w->term[1][35] = w->S[35] + t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[26]
-            + t->Phi[3][3]*w->S[35] + t->Phi[3][4]*w->S[44] + t->Phi[3][5]*w->S[53] +
+    w->term[1][35] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[26] +
+            t->Phi[3][3]*w->S[35] + t->Phi[3][4]*w->S[44] + t->Phi[3][5]*w->S[53] +
             t->Phi[3][6]*w->S[56] + t->Phi[3][7]*w->S[59] + t->Phi[3][8]*w->S[62];
     w->term[0][36] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
             t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
             t->Phi[4][5]*t->Phi[5][0];
-    w->term[1][36] = w->S[36] + t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[9] + t->Phi[4][2]*w->S[18]
-            + t->Phi[4][3]*w->S[27] + t->Phi[4][4]*w->S[36] + t->Phi[4][5]*w->S[45];
+    w->term[1][36] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[9] + t->Phi[4][2]*w->S[18] +
+            t->Phi[4][3]*w->S[27] + t->Phi[4][4]*w->S[36] + t->Phi[4][5]*w->S[45];
     w->term[0][37] = t->Phi[4][0]*t->Phi[0][1] + t->Phi[4][1]*t->Phi[1][1] +
             t->Phi[4][2]*t->Phi[2][1] + t->Phi[4][3]*t->Phi[3][1] + t->Phi[4][4]*t->Phi[4][1] +
             t->Phi[4][5]*t->Phi[5][1];
-    w->term[1][37] = w->S[37] + t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[10] + t->Phi[4][2]*w->S[19]
-            + t->Phi[4][3]*w->S[28] + t->Phi[4][4]*w->S[37] + t->Phi[4][5]*w->S[46];
+    w->term[1][37] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[10] + t->Phi[4][2]*w->S[19] +
+            t->Phi[4][3]*w->S[28] + t->Phi[4][4]*w->S[37] + t->Phi[4][5]*w->S[46];
     w->term[0][38] = t->Phi[4][0]*t->Phi[0][2] + t->Phi[4][1]*t->Phi[1][2] +
             t->Phi[4][2]*t->Phi[2][2] + t->Phi[4][3]*t->Phi[3][2] + t->Phi[4][4]*t->Phi[4][2] +
             t->Phi[4][5]*t->Phi[5][2];
-    w->term[1][38] = w->S[38] + t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[11] + t->Phi[4][2]*w->S[20]
-            + t->Phi[4][3]*w->S[29] + t->Phi[4][4]*w->S[38] + t->Phi[4][5]*w->S[47];
+    w->term[1][38] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[11] + t->Phi[4][2]*w->S[20] +
+            t->Phi[4][3]*w->S[29] + t->Phi[4][4]*w->S[38] + t->Phi[4][5]*w->S[47];
     w->term[0][39] = t->Phi[4][0]*t->Phi[0][3] + t->Phi[4][1]*t->Phi[1][3] +
             t->Phi[4][2]*t->Phi[2][3] + t->Phi[4][3]*t->Phi[3][3] + t->Phi[4][4]*t->Phi[4][3] +
             t->Phi[4][5]*t->Phi[5][3];
-    w->term[1][39] = w->S[39] + t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[12] + t->Phi[4][2]*w->S[21]
-            + t->Phi[4][3]*w->S[30] + t->Phi[4][4]*w->S[39] + t->Phi[4][5]*w->S[48];
+    w->term[1][39] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[12] + t->Phi[4][2]*w->S[21] +
+            t->Phi[4][3]*w->S[30] + t->Phi[4][4]*w->S[39] + t->Phi[4][5]*w->S[48];
     w->term[0][40] = t->Phi[4][0]*t->Phi[0][4] + t->Phi[4][1]*t->Phi[1][4] +
             t->Phi[4][2]*t->Phi[2][4] + t->Phi[4][3]*t->Phi[3][4] + t->Phi[4][4]*t->Phi[4][4] +
             t->Phi[4][5]*t->Phi[5][4];
-    w->term[1][40] = w->S[40] + t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[13] + t->Phi[4][2]*w->S[22]
-            + t->Phi[4][3]*w->S[31] + t->Phi[4][4]*w->S[40] + t->Phi[4][5]*w->S[49];
+    w->term[1][40] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[13] + t->Phi[4][2]*w->S[22] +
+            t->Phi[4][3]*w->S[31] + t->Phi[4][4]*w->S[40] + t->Phi[4][5]*w->S[49];
     w->term[0][41] = t->Phi[4][0]*t->Phi[0][5] + t->Phi[4][1]*t->Phi[1][5] +
             t->Phi[4][2]*t->Phi[2][5] + t->Phi[4][3]*t->Phi[3][5] + t->Phi[4][4]*t->Phi[4][5] +
             t->Phi[4][5]*t->Phi[5][5];
-    w->term[1][41] = w->S[41] + t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[23]
-            + t->Phi[4][3]*w->S[32] + t->Phi[4][4]*w->S[41] + t->Phi[4][5]*w->S[50];
+    w->term[1][41] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[23] +
+            t->Phi[4][3]*w->S[32] + t->Phi[4][4]*w->S[41] + t->Phi[4][5]*w->S[50];
     w->term[0][42] = t->Phi[4][0]*t->Phi[0][6] + t->Phi[4][1]*t->Phi[1][6] +
             t->Phi[4][2]*t->Phi[2][6] + t->Phi[4][3]*t->Phi[3][6] + t->Phi[4][4]*t->Phi[4][6] +
             t->Phi[4][5]*t->Phi[5][6] + t->Phi[4][6]*t->Phi[6][6] + t->Phi[4][7]*t->Phi[7][6] +
             t->Phi[4][8]*t->Phi[8][6];
-    w->term[1][42] = w->S[42] + t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[24]
-            + t->Phi[4][3]*w->S[33] + t->Phi[4][4]*w->S[42] + t->Phi[4][5]*w->S[51] +
+    w->term[1][42] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[24] +
+            t->Phi[4][3]*w->S[33] + t->Phi[4][4]*w->S[42] + t->Phi[4][5]*w->S[51] +
             t->Phi[4][6]*w->S[54] + t->Phi[4][7]*w->S[57] + t->Phi[4][8]*w->S[60];
     w->term[0][43] = t->Phi[4][0]*t->Phi[0][7] + t->Phi[4][1]*t->Phi[1][7] +
             t->Phi[4][2]*t->Phi[2][7] + t->Phi[4][3]*t->Phi[3][7] + t->Phi[4][4]*t->Phi[4][7] +
             t->Phi[4][5]*t->Phi[5][7] + t->Phi[4][6]*t->Phi[6][7] + t->Phi[4][7]*t->Phi[7][7] +
             t->Phi[4][8]*t->Phi[8][7];
-    w->term[1][43] = w->S[43] + t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[25]
-            + t->Phi[4][3]*w->S[34] + t->Phi[4][4]*w->S[43] + t->Phi[4][5]*w->S[52] +
+    w->term[1][43] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[25] +
+            t->Phi[4][3]*w->S[34] + t->Phi[4][4]*w->S[43] + t->Phi[4][5]*w->S[52] +
             t->Phi[4][6]*w->S[55] + t->Phi[4][7]*w->S[58] + t->Phi[4][8]*w->S[61];
     w->term[0][44] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
             t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
             t->Phi[4][5]*t->Phi[5][8] + t->Phi[4][6]*t->Phi[6][8] + t->Phi[4][7]*t->Phi[7][8] +
             t->Phi[4][8]*t->Phi[8][8];
-    w->term[1][44] = w->S[44] + t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[26]
-            + t->Phi[4][3]*w->S[35] + t->Phi[4][4]*w->S[44] + t->Phi[4][5]*w->S[53] +
+    w->term[1][44] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[26] +
+            t->Phi[4][3]*w->S[35] + t->Phi[4][4]*w->S[44] + t->Phi[4][5]*w->S[53] +
             t->Phi[4][6]*w->S[56] + t->Phi[4][7]*w->S[59] + t->Phi[4][8]*w->S[62];
     w->term[0][45] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
             t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
             t->Phi[5][5]*t->Phi[5][0];
-    w->term[1][45] = w->S[45] + t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[9] + t->Phi[5][2]*w->S[18]
-            + t->Phi[5][3]*w->S[27] + t->Phi[5][4]*w->S[36] + t->Phi[5][5]*w->S[45];
+    w->term[1][45] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[9] + t->Phi[5][2]*w->S[18] +
+            t->Phi[5][3]*w->S[27] + t->Phi[5][4]*w->S[36] + t->Phi[5][5]*w->S[45];
     w->term[0][46] = t->Phi[5][0]*t->Phi[0][1] + t->Phi[5][1]*t->Phi[1][1] +
             t->Phi[5][2]*t->Phi[2][1] + t->Phi[5][3]*t->Phi[3][1] + t->Phi[5][4]*t->Phi[4][1] +
             t->Phi[5][5]*t->Phi[5][1];
-    w->term[1][46] = w->S[46] + t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[10] + t->Phi[5][2]*w->S[19]
-            + t->Phi[5][3]*w->S[28] + t->Phi[5][4]*w->S[37] + t->Phi[5][5]*w->S[46];
+    w->term[1][46] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[10] + t->Phi[5][2]*w->S[19] +
+            t->Phi[5][3]*w->S[28] + t->Phi[5][4]*w->S[37] + t->Phi[5][5]*w->S[46];
     w->term[0][47] = t->Phi[5][0]*t->Phi[0][2] + t->Phi[5][1]*t->Phi[1][2] +
             t->Phi[5][2]*t->Phi[2][2] + t->Phi[5][3]*t->Phi[3][2] + t->Phi[5][4]*t->Phi[4][2] +
             t->Phi[5][5]*t->Phi[5][2];
-    w->term[1][47] = w->S[47] + t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[11] + t->Phi[5][2]*w->S[20]
-            + t->Phi[5][3]*w->S[29] + t->Phi[5][4]*w->S[38] + t->Phi[5][5]*w->S[47];
+    w->term[1][47] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[11] + t->Phi[5][2]*w->S[20] +
+            t->Phi[5][3]*w->S[29] + t->Phi[5][4]*w->S[38] + t->Phi[5][5]*w->S[47];
     w->term[0][48] = t->Phi[5][0]*t->Phi[0][3] + t->Phi[5][1]*t->Phi[1][3] +
             t->Phi[5][2]*t->Phi[2][3] + t->Phi[5][3]*t->Phi[3][3] + t->Phi[5][4]*t->Phi[4][3] +
             t->Phi[5][5]*t->Phi[5][3];
-    w->term[1][48] = w->S[48] + t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[12] + t->Phi[5][2]*w->S[21]
-            + t->Phi[5][3]*w->S[30] + t->Phi[5][4]*w->S[39] + t->Phi[5][5]*w->S[48];
+    w->term[1][48] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[12] + t->Phi[5][2]*w->S[21] +
+            t->Phi[5][3]*w->S[30] + t->Phi[5][4]*w->S[39] + t->Phi[5][5]*w->S[48];
     w->term[0][49] = t->Phi[5][0]*t->Phi[0][4] + t->Phi[5][1]*t->Phi[1][4] +
             t->Phi[5][2]*t->Phi[2][4] + t->Phi[5][3]*t->Phi[3][4] + t->Phi[5][4]*t->Phi[4][4] +
             t->Phi[5][5]*t->Phi[5][4];
-    w->term[1][49] = w->S[49] + t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[13] + t->Phi[5][2]*w->S[22]
-            + t->Phi[5][3]*w->S[31] + t->Phi[5][4]*w->S[40] + t->Phi[5][5]*w->S[49];
+    w->term[1][49] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[13] + t->Phi[5][2]*w->S[22] +
+            t->Phi[5][3]*w->S[31] + t->Phi[5][4]*w->S[40] + t->Phi[5][5]*w->S[49];
     w->term[0][50] = t->Phi[5][0]*t->Phi[0][5] + t->Phi[5][1]*t->Phi[1][5] +
             t->Phi[5][2]*t->Phi[2][5] + t->Phi[5][3]*t->Phi[3][5] + t->Phi[5][4]*t->Phi[4][5] +
             t->Phi[5][5]*t->Phi[5][5];
-    w->term[1][50] = w->S[50] + t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[23]
-            + t->Phi[5][3]*w->S[32] + t->Phi[5][4]*w->S[41] + t->Phi[5][5]*w->S[50];
+    w->term[1][50] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[23] +
+            t->Phi[5][3]*w->S[32] + t->Phi[5][4]*w->S[41] + t->Phi[5][5]*w->S[50];
     w->term[0][51] = t->Phi[5][0]*t->Phi[0][6] + t->Phi[5][1]*t->Phi[1][6] +
             t->Phi[5][2]*t->Phi[2][6] + t->Phi[5][3]*t->Phi[3][6] + t->Phi[5][4]*t->Phi[4][6] +
             t->Phi[5][5]*t->Phi[5][6] + t->Phi[5][6]*t->Phi[6][6] + t->Phi[5][7]*t->Phi[7][6] +
             t->Phi[5][8]*t->Phi[8][6];
-    w->term[1][51] = w->S[51] + t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[24]
-            + t->Phi[5][3]*w->S[33] + t->Phi[5][4]*w->S[42] + t->Phi[5][5]*w->S[51] +
+    w->term[1][51] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[24] +
+            t->Phi[5][3]*w->S[33] + t->Phi[5][4]*w->S[42] + t->Phi[5][5]*w->S[51] +
             t->Phi[5][6]*w->S[54] + t->Phi[5][7]*w->S[57] + t->Phi[5][8]*w->S[60];
     w->term[0][52] = t->Phi[5][0]*t->Phi[0][7] + t->Phi[5][1]*t->Phi[1][7] +
             t->Phi[5][2]*t->Phi[2][7] + t->Phi[5][3]*t->Phi[3][7] + t->Phi[5][4]*t->Phi[4][7] +
             t->Phi[5][5]*t->Phi[5][7] + t->Phi[5][6]*t->Phi[6][7] + t->Phi[5][7]*t->Phi[7][7] +
             t->Phi[5][8]*t->Phi[8][7];
-    w->term[1][52] = w->S[52] + t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[25]
-            + t->Phi[5][3]*w->S[34] + t->Phi[5][4]*w->S[43] + t->Phi[5][5]*w->S[52] +
+    w->term[1][52] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[25] +
+            t->Phi[5][3]*w->S[34] + t->Phi[5][4]*w->S[43] + t->Phi[5][5]*w->S[52] +
             t->Phi[5][6]*w->S[55] + t->Phi[5][7]*w->S[58] + t->Phi[5][8]*w->S[61];
     w->term[0][53] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
             t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
             t->Phi[5][5]*t->Phi[5][8] + t->Phi[5][6]*t->Phi[6][8] + t->Phi[5][7]*t->Phi[7][8] +
             t->Phi[5][8]*t->Phi[8][8];
-    w->term[1][53] = w->S[53] + t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[26]
-            + t->Phi[5][3]*w->S[35] + t->Phi[5][4]*w->S[44] + t->Phi[5][5]*w->S[53] +
+    w->term[1][53] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[26] +
+            t->Phi[5][3]*w->S[35] + t->Phi[5][4]*w->S[44] + t->Phi[5][5]*w->S[53] +
             t->Phi[5][6]*w->S[56] + t->Phi[5][7]*w->S[59] + t->Phi[5][8]*w->S[62];
     w->term[0][54] = t->Phi[6][6]*t->Phi[6][6] + t->Phi[6][7]*t->Phi[7][6] +
             t->Phi[6][8]*t->Phi[8][6];
-    w->term[1][54] = w->S[54] + t->Phi[6][6]*w->S[54] + t->Phi[6][7]*w->S[57] +
-            t->Phi[6][8]*w->S[60];
+    w->term[1][54] = t->Phi[6][6]*w->S[54] + t->Phi[6][7]*w->S[57] + t->Phi[6][8]*w->S[60];
     w->term[0][55] = t->Phi[6][6]*t->Phi[6][7] + t->Phi[6][7]*t->Phi[7][7] +
             t->Phi[6][8]*t->Phi[8][7];
-    w->term[1][55] = w->S[55] + t->Phi[6][6]*w->S[55] + t->Phi[6][7]*w->S[58] +
-            t->Phi[6][8]*w->S[61];
+    w->term[1][55] = t->Phi[6][6]*w->S[55] + t->Phi[6][7]*w->S[58] + t->Phi[6][8]*w->S[61];
     w->term[0][56] = t->Phi[6][6]*t->Phi[6][8] + t->Phi[6][7]*t->Phi[7][8] +
             t->Phi[6][8]*t->Phi[8][8];
-    w->term[1][56] = w->S[56] + t->Phi[6][6]*w->S[56] + t->Phi[6][7]*w->S[59] +
-            t->Phi[6][8]*w->S[62];
+    w->term[1][56] = t->Phi[6][6]*w->S[56] + t->Phi[6][7]*w->S[59] + t->Phi[6][8]*w->S[62];
     w->term[0][57] = t->Phi[7][6]*t->Phi[6][6] + t->Phi[7][7]*t->Phi[7][6] +
             t->Phi[7][8]*t->Phi[8][6];
-    w->term[1][57] = w->S[57] + t->Phi[7][6]*w->S[54] + t->Phi[7][7]*w->S[57] +
-            t->Phi[7][8]*w->S[60];
+    w->term[1][57] = t->Phi[7][6]*w->S[54] + t->Phi[7][7]*w->S[57] + t->Phi[7][8]*w->S[60];
     w->term[0][58] = t->Phi[7][6]*t->Phi[6][7] + t->Phi[7][7]*t->Phi[7][7] +
             t->Phi[7][8]*t->Phi[8][7];
-    w->term[1][58] = w->S[58] + t->Phi[7][6]*w->S[55] + t->Phi[7][7]*w->S[58] +
-            t->Phi[7][8]*w->S[61];
+    w->term[1][58] = t->Phi[7][6]*w->S[55] + t->Phi[7][7]*w->S[58] + t->Phi[7][8]*w->S[61];
     w->term[0][59] = t->Phi[7][6]*t->Phi[6][8] + t->Phi[7][7]*t->Phi[7][8] +
             t->Phi[7][8]*t->Phi[8][8];
-    w->term[1][59] = w->S[59] + t->Phi[7][6]*w->S[56] + t->Phi[7][7]*w->S[59] +
-            t->Phi[7][8]*w->S[62];
+    w->term[1][59] = t->Phi[7][6]*w->S[56] + t->Phi[7][7]*w->S[59] + t->Phi[7][8]*w->S[62];
     w->term[0][60] = t->Phi[8][6]*t->Phi[6][6] + t->Phi[8][7]*t->Phi[7][6] +
             t->Phi[8][8]*t->Phi[8][6];
-    w->term[1][60] = w->S[60] + t->Phi[8][6]*w->S[54] + t->Phi[8][7]*w->S[57] +
-            t->Phi[8][8]*w->S[60];
+    w->term[1][60] = t->Phi[8][6]*w->S[54] + t->Phi[8][7]*w->S[57] + t->Phi[8][8]*w->S[60];
     w->term[0][61] = t->Phi[8][6]*t->Phi[6][7] + t->Phi[8][7]*t->Phi[7][7] +
             t->Phi[8][8]*t->Phi[8][7];
-    w->term[1][61] = w->S[61] + t->Phi[8][6]*w->S[55] + t->Phi[8][7]*w->S[58] +
-            t->Phi[8][8]*w->S[61];
+    w->term[1][61] = t->Phi[8][6]*w->S[55] + t->Phi[8][7]*w->S[58] + t->Phi[8][8]*w->S[61];
     w->term[0][62] = t->Phi[8][6]*t->Phi[6][8] + t->Phi[8][7]*t->Phi[7][8] +
             t->Phi[8][8]*t->Phi[8][8];
-    w->term[1][62] = w->S[62] + t->Phi[8][6]*w->S[56] + t->Phi[8][7]*w->S[59] +
-            t->Phi[8][8]*w->S[62];
+    w->term[1][62] = t->Phi[8][6]*w->S[56] + t->Phi[8][7]*w->S[59] + t->Phi[8][8]*w->S[62];
     w->term[0][63] = t->Phi[9][9]*t->Phi[9][9];
-    w->term[1][63] = w->S[63] + t->Phi[9][9]*w->S[63];
-    w->term[0][64] = t->Phi[9][9]*t->Phi[9][10] + t->Phi[9][10];
-    w->term[1][64] = w->S[64] + t->Phi[9][9]*w->S[64] + t->Phi[9][10];
-    t->Phi[0][0] = w->term[0][0];
-    w->S[0] = half*w->term[1][0];
-    t->Phi[0][1] = w->term[0][1];
-    w->S[1] = half*w->term[1][1];
-    t->Phi[0][2] = w->term[0][2];
-    w->S[2] = half*w->term[1][2];
-    t->Phi[0][3] = w->term[0][3];
-    w->S[3] = half*w->term[1][3];
-    t->Phi[0][4] = w->term[0][4];
-    w->S[4] = half*w->term[1][4];
-    t->Phi[0][5] = w->term[0][5];
-    w->S[5] = half*w->term[1][5];
-    t->Phi[0][6] = w->term[0][6];
-    w->S[6] = half*w->term[1][6];
-    t->Phi[0][7] = w->term[0][7];
-    w->S[7] = half*w->term[1][7];
-    t->Phi[0][8] = w->term[0][8];
-    w->S[8] = half*w->term[1][8];
-    t->Phi[1][0] = w->term[0][9];
-    w->S[9] = half*w->term[1][9];
-    t->Phi[1][1] = w->term[0][10];
-    w->S[10] = half*w->term[1][10];
-    t->Phi[1][2] = w->term[0][11];
-    w->S[11] = half*w->term[1][11];
-    t->Phi[1][3] = w->term[0][12];
-    w->S[12] = half*w->term[1][12];
-    t->Phi[1][4] = w->term[0][13];
-    w->S[13] = half*w->term[1][13];
-    t->Phi[1][5] = w->term[0][14];
-    w->S[14] = half*w->term[1][14];
-    t->Phi[1][6] = w->term[0][15];
-    w->S[15] = half*w->term[1][15];
-    t->Phi[1][7] = w->term[0][16];
-    w->S[16] = half*w->term[1][16];
-    t->Phi[1][8] = w->term[0][17];
-    w->S[17] = half*w->term[1][17];
-    t->Phi[2][0] = w->term[0][18];
-    w->S[18] = half*w->term[1][18];
-    t->Phi[2][1] = w->term[0][19];
-    w->S[19] = half*w->term[1][19];
-    t->Phi[2][2] = w->term[0][20];
-    w->S[20] = half*w->term[1][20];
-    t->Phi[2][3] = w->term[0][21];
-    w->S[21] = half*w->term[1][21];
-    t->Phi[2][4] = w->term[0][22];
-    w->S[22] = half*w->term[1][22];
-    t->Phi[2][5] = w->term[0][23];
-    w->S[23] = half*w->term[1][23];
-    t->Phi[2][6] = w->term[0][24];
-    w->S[24] = half*w->term[1][24];
-    t->Phi[2][7] = w->term[0][25];
-    w->S[25] = half*w->term[1][25];
-    t->Phi[2][8] = w->term[0][26];
-    w->S[26] = half*w->term[1][26];
-    t->Phi[3][0] = w->term[0][27];
-    w->S[27] = half*w->term[1][27];
-    t->Phi[3][1] = w->term[0][28];
-    w->S[28] = half*w->term[1][28];
-    t->Phi[3][2] = w->term[0][29];
-    w->S[29] = half*w->term[1][29];
-    t->Phi[3][3] = w->term[0][30];
-    w->S[30] = half*w->term[1][30];
-    t->Phi[3][4] = w->term[0][31];
-    w->S[31] = half*w->term[1][31];
-    t->Phi[3][5] = w->term[0][32];
-    w->S[32] = half*w->term[1][32];
-    t->Phi[3][6] = w->term[0][33];
-    w->S[33] = half*w->term[1][33];
-    t->Phi[3][7] = w->term[0][34];
-    w->S[34] = half*w->term[1][34];
-    t->Phi[3][8] = w->term[0][35];
-    w->S[35] = half*w->term[1][35];
-    t->Phi[4][0] = w->term[0][36];
-    w->S[36] = half*w->term[1][36];
-    t->Phi[4][1] = w->term[0][37];
-    w->S[37] = half*w->term[1][37];
-    t->Phi[4][2] = w->term[0][38];
-    w->S[38] = half*w->term[1][38];
-    t->Phi[4][3] = w->term[0][39];
-    w->S[39] = half*w->term[1][39];
-    t->Phi[4][4] = w->term[0][40];
-    w->S[40] = half*w->term[1][40];
-    t->Phi[4][5] = w->term[0][41];
-    w->S[41] = half*w->term[1][41];
-    t->Phi[4][6] = w->term[0][42];
-    w->S[42] = half*w->term[1][42];
-    t->Phi[4][7] = w->term[0][43];
-    w->S[43] = half*w->term[1][43];
-    t->Phi[4][8] = w->term[0][44];
-    w->S[44] = half*w->term[1][44];
-    t->Phi[5][0] = w->term[0][45];
-    w->S[45] = half*w->term[1][45];
-    t->Phi[5][1] = w->term[0][46];
-    w->S[46] = half*w->term[1][46];
-    t->Phi[5][2] = w->term[0][47];
-    w->S[47] = half*w->term[1][47];
-    t->Phi[5][3] = w->term[0][48];
-    w->S[48] = half*w->term[1][48];
-    t->Phi[5][4] = w->term[0][49];
-    w->S[49] = half*w->term[1][49];
-    t->Phi[5][5] = w->term[0][50];
-    w->S[50] = half*w->term[1][50];
-    t->Phi[5][6] = w->term[0][51];
-    w->S[51] = half*w->term[1][51];
-    t->Phi[5][7] = w->term[0][52];
-    w->S[52] = half*w->term[1][52];
-    t->Phi[5][8] = w->term[0][53];
-    w->S[53] = half*w->term[1][53];
-    t->Phi[6][6] = w->term[0][54];
-    w->S[54] = half*w->term[1][54];
-    t->Phi[6][7] = w->term[0][55];
-    w->S[55] = half*w->term[1][55];
-    t->Phi[6][8] = w->term[0][56];
-    w->S[56] = half*w->term[1][56];
-    t->Phi[7][6] = w->term[0][57];
-    w->S[57] = half*w->term[1][57];
-    t->Phi[7][7] = w->term[0][58];
-    w->S[58] = half*w->term[1][58];
-    t->Phi[7][8] = w->term[0][59];
-    w->S[59] = half*w->term[1][59];
-    t->Phi[8][6] = w->term[0][60];
-    w->S[60] = half*w->term[1][60];
-    t->Phi[8][7] = w->term[0][61];
-    w->S[61] = half*w->term[1][61];
-    t->Phi[8][8] = w->term[0][62];
-    w->S[62] = half*w->term[1][62];
-    t->Phi[9][9] = w->term[0][63];
-    w->S[63] = half*w->term[1][63];
-    t->Phi[9][10] = w->term[0][64];
-    w->S[64] = half*w->term[1][64];
+    w->term[1][63] = t->Phi[9][9]*w->S[63];
+    w->term[0][64] = t->Phi[9][9]*t->Phi[9][10];
+    w->term[1][64] = t->Phi[9][9]*w->S[64] + t->Phi[9][10];
+    t->Phi[0][0] = t->Phi[0][0] + t->Phi[0][0] + w->term[0][0];
+    w->S[0] = w->S[0] + half*w->term[1][0];
+    t->Phi[0][1] = t->Phi[0][1] + t->Phi[0][1] + w->term[0][1];
+    w->S[1] = w->S[1] + half*w->term[1][1];
+    t->Phi[0][2] = t->Phi[0][2] + t->Phi[0][2] + w->term[0][2];
+    w->S[2] = w->S[2] + half*w->term[1][2];
+    t->Phi[0][3] = t->Phi[0][3] + t->Phi[0][3] + w->term[0][3];
+    w->S[3] = w->S[3] + half*w->term[1][3];
+    t->Phi[0][4] = t->Phi[0][4] + t->Phi[0][4] + w->term[0][4];
+    w->S[4] = w->S[4] + half*w->term[1][4];
+    t->Phi[0][5] = t->Phi[0][5] + t->Phi[0][5] + w->term[0][5];
+    w->S[5] = w->S[5] + half*w->term[1][5];
+    t->Phi[0][6] = t->Phi[0][6] + t->Phi[0][6] + w->term[0][6];
+    w->S[6] = w->S[6] + half*w->term[1][6];
+    t->Phi[0][7] = t->Phi[0][7] + t->Phi[0][7] + w->term[0][7];
+    w->S[7] = w->S[7] + half*w->term[1][7];
+    t->Phi[0][8] = t->Phi[0][8] + t->Phi[0][8] + w->term[0][8];
+    w->S[8] = w->S[8] + half*w->term[1][8];
+    t->Phi[1][0] = t->Phi[1][0] + t->Phi[1][0] + w->term[0][9];
+    w->S[9] = w->S[9] + half*w->term[1][9];
+    t->Phi[1][1] = t->Phi[1][1] + t->Phi[1][1] + w->term[0][10];
+    w->S[10] = w->S[10] + half*w->term[1][10];
+    t->Phi[1][2] = t->Phi[1][2] + t->Phi[1][2] + w->term[0][11];
+    w->S[11] = w->S[11] + half*w->term[1][11];
+    t->Phi[1][3] = t->Phi[1][3] + t->Phi[1][3] + w->term[0][12];
+    w->S[12] = w->S[12] + half*w->term[1][12];
+    t->Phi[1][4] = t->Phi[1][4] + t->Phi[1][4] + w->term[0][13];
+    w->S[13] = w->S[13] + half*w->term[1][13];
+    t->Phi[1][5] = t->Phi[1][5] + t->Phi[1][5] + w->term[0][14];
+    w->S[14] = w->S[14] + half*w->term[1][14];
+    t->Phi[1][6] = t->Phi[1][6] + t->Phi[1][6] + w->term[0][15];
+    w->S[15] = w->S[15] + half*w->term[1][15];
+    t->Phi[1][7] = t->Phi[1][7] + t->Phi[1][7] + w->term[0][16];
+    w->S[16] = w->S[16] + half*w->term[1][16];
+    t->Phi[1][8] = t->Phi[1][8] + t->Phi[1][8] + w->term[0][17];
+    w->S[17] = w->S[17] + half*w->term[1][17];
+    t->Phi[2][0] = t->Phi[2][0] + t->Phi[2][0] + w->term[0][18];
+    w->S[18] = w->S[18] + half*w->term[1][18];
+    t->Phi[2][1] = t->Phi[2][1] + t->Phi[2][1] + w->term[0][19];
+    w->S[19] = w->S[19] + half*w->term[1][19];
+    t->Phi[2][2] = t->Phi[2][2] + t->Phi[2][2] + w->term[0][20];
+    w->S[20] = w->S[20] + half*w->term[1][20];
+    t->Phi[2][3] = t->Phi[2][3] + t->Phi[2][3] + w->term[0][21];
+    w->S[21] = w->S[21] + half*w->term[1][21];
+    t->Phi[2][4] = t->Phi[2][4] + t->Phi[2][4] + w->term[0][22];
+    w->S[22] = w->S[22] + half*w->term[1][22];
+    t->Phi[2][5] = t->Phi[2][5] + t->Phi[2][5] + w->term[0][23];
+    w->S[23] = w->S[23] + half*w->term[1][23];
+    t->Phi[2][6] = t->Phi[2][6] + t->Phi[2][6] + w->term[0][24];
+    w->S[24] = w->S[24] + half*w->term[1][24];
+    t->Phi[2][7] = t->Phi[2][7] + t->Phi[2][7] + w->term[0][25];
+    w->S[25] = w->S[25] + half*w->term[1][25];
+    t->Phi[2][8] = t->Phi[2][8] + t->Phi[2][8] + w->term[0][26];
+    w->S[26] = w->S[26] + half*w->term[1][26];
+    t->Phi[3][0] = t->Phi[3][0] + t->Phi[3][0] + w->term[0][27];
+    w->S[27] = w->S[27] + half*w->term[1][27];
+    t->Phi[3][1] = t->Phi[3][1] + t->Phi[3][1] + w->term[0][28];
+    w->S[28] = w->S[28] + half*w->term[1][28];
+    t->Phi[3][2] = t->Phi[3][2] + t->Phi[3][2] + w->term[0][29];
+    w->S[29] = w->S[29] + half*w->term[1][29];
+    t->Phi[3][3] = t->Phi[3][3] + t->Phi[3][3] + w->term[0][30];
+    w->S[30] = w->S[30] + half*w->term[1][30];
+    t->Phi[3][4] = t->Phi[3][4] + t->Phi[3][4] + w->term[0][31];
+    w->S[31] = w->S[31] + half*w->term[1][31];
+    t->Phi[3][5] = t->Phi[3][5] + t->Phi[3][5] + w->term[0][32];
+    w->S[32] = w->S[32] + half*w->term[1][32];
+    t->Phi[3][6] = t->Phi[3][6] + t->Phi[3][6] + w->term[0][33];
+    w->S[33] = w->S[33] + half*w->term[1][33];
+    t->Phi[3][7] = t->Phi[3][7] + t->Phi[3][7] + w->term[0][34];
+    w->S[34] = w->S[34] + half*w->term[1][34];
+    t->Phi[3][8] = t->Phi[3][8] + t->Phi[3][8] + w->term[0][35];
+    w->S[35] = w->S[35] + half*w->term[1][35];
+    t->Phi[4][0] = t->Phi[4][0] + t->Phi[4][0] + w->term[0][36];
+    w->S[36] = w->S[36] + half*w->term[1][36];
+    t->Phi[4][1] = t->Phi[4][1] + t->Phi[4][1] + w->term[0][37];
+    w->S[37] = w->S[37] + half*w->term[1][37];
+    t->Phi[4][2] = t->Phi[4][2] + t->Phi[4][2] + w->term[0][38];
+    w->S[38] = w->S[38] + half*w->term[1][38];
+    t->Phi[4][3] = t->Phi[4][3] + t->Phi[4][3] + w->term[0][39];
+    w->S[39] = w->S[39] + half*w->term[1][39];
+    t->Phi[4][4] = t->Phi[4][4] + t->Phi[4][4] + w->term[0][40];
+    w->S[40] = w->S[40] + half*w->term[1][40];
+    t->Phi[4][5] = t->Phi[4][5] + t->Phi[4][5] + w->term[0][41];
+    w->S[41] = w->S[41] + half*w->term[1][41];
+    t->Phi[4][6] = t->Phi[4][6] + t->Phi[4][6] + w->term[0][42];
+    w->S[42] = w->S[42] + half*w->term[1][42];
+    t->Phi[4][7] = t->Phi[4][7] + t->Phi[4][7] + w->term[0][43];
+    w->S[43] = w->S[43] + half*w->term[1][43];
+    t->Phi[4][8] = t->Phi[4][8] + t->Phi[4][8] + w->term[0][44];
+    w->S[44] = w->S[44] + half*w->term[1][44];
+    t->Phi[5][0] = t->Phi[5][0] + t->Phi[5][0] + w->term[0][45];
+    w->S[45] = w->S[45] + half*w->term[1][45];
+    t->Phi[5][1] = t->Phi[5][1] + t->Phi[5][1] + w->term[0][46];
+    w->S[46] = w->S[46] + half*w->term[1][46];
+    t->Phi[5][2] = t->Phi[5][2] + t->Phi[5][2] + w->term[0][47];
+    w->S[47] = w->S[47] + half*w->term[1][47];
+    t->Phi[5][3] = t->Phi[5][3] + t->Phi[5][3] + w->term[0][48];
+    w->S[48] = w->S[48] + half*w->term[1][48];
+    t->Phi[5][4] = t->Phi[5][4] + t->Phi[5][4] + w->term[0][49];
+    w->S[49] = w->S[49] + half*w->term[1][49];
+    t->Phi[5][5] = t->Phi[5][5] + t->Phi[5][5] + w->term[0][50];
+    w->S[50] = w->S[50] + half*w->term[1][50];
+    t->Phi[5][6] = t->Phi[5][6] + t->Phi[5][6] + w->term[0][51];
+    w->S[51] = w->S[51] + half*w->term[1][51];
+    t->Phi[5][7] = t->Phi[5][7] + t->Phi[5][7] + w->term[0][52];
+    w->S[52] = w->S[52] + half*w->term[1][52];
+    t->Phi[5][8] = t->Phi[5][8] + t->Phi[5][8] + w->term[0][53];
+    w->S[53] = w->S[53] + half*w->term[1][53];
+    t->Phi[6][6] = t->Phi[6][6] + t->Phi[6][6] + w->term[0][54];
+    w->S[54] = w->S[54] + half*w->term[1][54];
+    t->Phi[6][7] = t->Phi[6][7] + t->Phi[6][7] + w->term[0][55];
+    w->S[55] = w->S[55] + half*w->term[1][55];
+    t->Phi[6][8] = t->Phi[6][8] + t->Phi[6][8] + w->term[0][56];
+    w->S[56] = w->S[56] + half*w->term[1][56];
+    t->Phi[7][6] = t->Phi[7][6] + t->Phi[7][6] + w->term[0][57];
+    w->S[57] = w->S[57] + half*w->term[1][57];
+    t->Phi[7][7] = t->Phi[7][7] + t->Phi[7][7] + w->term[0][58];
+    w->S[58] = w->S[58] + half*w->term[1][58];
+    t->Phi[7][8] = t->Phi[7][8] + t->Phi[7][8] + w->term[0][59];
+    w->S[59] = w->S[59] + half*w->term[1][59];
+    t->Phi[8][6] = t->Phi[8][6] + t->Phi[8][6] + w->term[0][60];
+    w->S[60] = w->S[60] + half*w->term[1][60];
+    t->Phi[8][7] = t->Phi[8][7] + t->Phi[8][7] + w->term[0][61];
+    w->S[61] = w->S[61] + half*w->term[1][61];
+    t->Phi[8][8] = t->Phi[8][8] + t->Phi[8][8] + w->term[0][62];
+    w->S[62] = w->S[62] + half*w->term[1][62];
+    t->Phi[9][9] = t->Phi[9][9] + t->Phi[9][9] + w->term[0][63];
+    w->S[63] = w->S[63] + half*w->term[1][63];
+    t->Phi[9][10] = t->Phi[9][10] + t->Phi[9][10] + w->term[0][64];
+    w->S[64] = w->S[64] + half*w->term[1][64];
 }
 
 GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar
@@ -3063,6 +1851,7 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
     gps_pseudorange11_twin_discretize_scratch *w = &work->discretize;
     int i, j, e, c;
     int halvings, order, status;
+    int k;
     gps_pseudorange11_twin_scalar check = 0.0;
     if (!isfinite(T)) {
         return GPS_PSEUDORANGE11_TWIN_ERR_NONFINITE;
@@ -3090,50 +1879,57 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
     /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
        S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds. */
-    status = taylor_plan(balanced_norm(m, w), T, &halvings, &order);
+    status = taylor_plan(balanced_norm(m), T, &halvings, &order);
     if (status != GPS_PSEUDORANGE11_TWIN_OK) {
         return status;
     }
+    /* Phi holds E = Phi - I until the identity is added after the doublings (E(2h) = 2 E + E^2:
+       adding I to Phi(h) would round its small part away, s times over). */
     for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_STATES; ++i) {
         for (j = 0; j < GPS_PSEUDORANGE11_TWIN_N_STATES; ++j) {
             t->Phi[i][j] = 0.0;
         }
     }
-    for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_STATES; ++i) {
-        t->Phi[i][i] = 1.0;
+    /* Horner's rule over the structural nonzeros (modelgen/codegen/discretize_kernels.py): A = F h,
+       R_m = I / (m+1)!, R_k = I / (k+1)! + A R_(k+1) down to S = R_0 (R_k in S for even k, in term
+       for odd k), one function per level until the pattern stops growing, then E = A S; the
+       doublings run over the entries of Phi that are not e_i. */
+    horner_input(m, w, T * power_of_two(-halvings));
+    for (k = order - 1; k >= 0; --k) {
+        if (order - k == 1) {
+            if (k & 1) {
+                horner_level_1_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            } else {
+                horner_level_1_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            }
+        } else if (order - k == 2) {
+            if (k & 1) {
+                horner_level_2_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            } else {
+                horner_level_2_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            }
+        } else if (order - k == 3) {
+            if (k & 1) {
+                horner_level_3_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            } else {
+                horner_level_3_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            }
+        } else {
+            if (k & 1) {
+                horner_saturated_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            } else {
+                horner_saturated_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            }
+        }
     }
-    /* The series over the structural nonzeros of (F h)^k, one function per order, then the
-       doublings over the entries of Phi that are not e_i (unrolled, see
-               modelgen/codegen/discretize_kernels.py). */
-    taylor_order_1(m, t, w, T * power_of_two(-halvings));
-    if (order >= 2) {
-        taylor_order_2(t, w);
-    }
-    if (order >= 3) {
-        taylor_order_3(t, w);
-    }
-    if (order >= 4) {
-        taylor_order_4(t, w);
-    }
-    if (order >= 5) {
-        taylor_order_5(t, w);
-    }
-    if (order >= 6) {
-        taylor_order_6(t, w);
-    }
-    if (order >= 7) {
-        taylor_order_7(t, w);
-    }
-    if (order >= 8) {
-        taylor_order_8(t, w);
-    }
-    if (order >= 9) {
-        taylor_order_9(t, w);
-    }
+    horner_transition(t, w);
     for (i = 0; i < halvings; ++i) {
         doubling(t, w);
     }
     check += transition_check(t);
+    for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_STATES; ++i) {
+        t->Phi[i][i] += 1.0;
+    }
     for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_STATES; ++i) {
         for (j = 0; j < GPS_PSEUDORANGE11_TWIN_N_STATES; ++j) {
             t->Qd[i][j] = 0.0;

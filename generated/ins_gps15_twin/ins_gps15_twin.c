@@ -12,8 +12,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 127 operations after CSE
- *   discretize: 7738 mul + 6458 add = 14196 flops
- *   discretize, each doubling (long steps): 2173 mul + 2027 add = 4200 flops
+ *   discretize: 5593 mul + 4210 add = 9803 flops
+ *   discretize, each doubling (long steps): 2173 mul + 2227 add = 4400 flops
  *   predict (C): 2670 mul + 2526 add = 5196 flops
  *   predict (Python): 4050 mul + 4005 add = 8055 flops
  *   predict (dense, for comparison): 6765 mul + 6525 add = 13290 flops
@@ -85,6 +85,11 @@ const unsigned char ins_gps15_twin_H_col[6] = { 3, 4, 5, 6, 7, 8 };
    the relative accuracy of Phi against e^{F T} that chooses the doublings and the order
    (modelgen.derive.discretization.taylor_plan; at least the unit roundoff). */
 #define INS_GPS15_TWIN_MAX_DOUBLINGS 64
+/* The norm that chooses them is ||F||_D = max_i sum_j |F_ij| d_j / d_i with D = diag(2^e) fixed at
+   generation time: Osborne's balancing of F at the model's check operating point
+   (modelgen.derive.discretization.nominal_scaling), e = { -6, -8, -5, 4, 6, 2, -5, 40, 10, -40,
+           -40, -40, -40, -40, -40 }.
+   Any fixed D gives a valid bound; the Python module and the reference use the same D. */
 #define INS_GPS15_TWIN_TAYLOR_TOLERANCE 1e-12
 /* Rows of Phi that are exactly e_i (states with an empty row of F). */
 #define INS_GPS15_TWIN_N_UNIT_ROWS 6
@@ -294,21 +299,6 @@ int ins_gps15_twin_matrices_evaluate(const ins_gps15_twin_params *restrict param
     return (check != 0.0) ? INS_GPS15_TWIN_ERR_NONFINITE : INS_GPS15_TWIN_OK;
 }
 
-/* frexp's exponent of a positive finite x (x = f 2^e, f in [0.5, 1)), read from its IEEE-754 bits
-   without a call; a subnormal x goes through frexp. */
-static int binary_exponent(const ins_gps15_twin_scalar x)
-{
-    uint64_t bits;
-    int e;
-    memcpy(&bits, &x, sizeof bits);
-    e = (int)((bits >> 52) & 0x7FFu);
-    if (e == 0) {
-        (void)frexp(x, &e);
-        return e;
-    }
-    return e - 1022;
-}
-
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static ins_gps15_twin_scalar power_of_two(const int e)
 {
@@ -318,308 +308,65 @@ static ins_gps15_twin_scalar power_of_two(const int e)
     return x;
 }
 
-/* One state's step of Osborne's balancing (modelgen.derive.discretization.sweep_exponent): 2^k ~
-   sqrt(row / column) within [-8, 8], the exponent kept within [-40, 40]; 1 when it changed. */
-static int balance_step(const ins_gps15_twin_scalar row, const ins_gps15_twin_scalar column, signed
-        char *exponent)
-{
-    int step = 0, next;
-    if (row > 0.0 && column > 0.0) {
-        step = binary_exponent(row) - binary_exponent(column); /* log2(row / column) within 1 */
-        step = (step >= 0) ? step / 2 : -((1 - step) / 2); /* floor(step / 2) */
-        step = step > 8 ? 8 : (step < -8 ? -8 : step);
-    } else if (column > 0.0) {
-        step = -8; /* drives others, driven by none */
-    } else if (row > 0.0) {
-        step = 8; /* driven, drives none */
-    }
-    next = *exponent + step;
-    next = next > 40 ? 40 : (next < -40 ? -40 : next);
-    if (next == *exponent) {
-        return 0;
-    }
-    *exponent = (signed char)next;
-    return 1;
-}
 
-/* ||F||_D = max_i sum_j |F_ij| d_j / d_i (modelgen/derive/discretization.py): D = 2^exponent from
-   at most 8 Jacobi sweeps of Osborne's balancing in powers of two, stopped at a fixed point; the
-   sums in the reference's order (row by row), d_j / d_i as one exact power of two. */
-static ins_gps15_twin_scalar balanced_norm(const ins_gps15_twin_matrices *restrict m,
-        ins_gps15_twin_discretize_scratch *restrict w)
+/* ||F||_D = max_i sum_j |F_ij| d_j / d_i (modelgen/derive/discretization.py) with D = 2^e fixed at
+   generation time: Osborne's balancing of F at the model's check operating point (nominal_scaling;
+   any D gives a valid bound, so one D serves every operating point); the sums in the reference's
+   order (row by row), d_j / d_i an exact power of two. */
+static ins_gps15_twin_scalar balanced_norm(const ins_gps15_twin_matrices *restrict m)
 {
     ins_gps15_twin_scalar v, norm = 0.0;
-    signed char exponent[INS_GPS15_TWIN_N_STATES]; /* within [-40, 40] */
-    int i, k, changed;
-    for (i = 0; i < INS_GPS15_TWIN_N_STATES; ++i) {
-        exponent[i] = 0;
-    }
-    for (k = 0, changed = 1; k < 8 && changed; ++k) {
-        changed = 0; /* a sweep that changes no scale is a fixed point: stop */
-        w->row_sum[0] = 0.0;
-        w->row_sum[1] = 0.0;
-        w->row_sum[2] = 0.0;
-        w->row_sum[3] = 0.0;
-        w->row_sum[4] = 0.0;
-        w->row_sum[5] = 0.0;
-        w->row_sum[6] = 0.0;
-        w->row_sum[7] = 0.0;
-        w->row_sum[8] = 0.0;
-        w->col_sum[0] = 0.0;
-        w->col_sum[1] = 0.0;
-        w->col_sum[2] = 0.0;
-        w->col_sum[3] = 0.0;
-        w->col_sum[4] = 0.0;
-        w->col_sum[5] = 0.0;
-        w->col_sum[6] = 0.0;
-        w->col_sum[8] = 0.0;
-        w->col_sum[9] = 0.0;
-        w->col_sum[10] = 0.0;
-        w->col_sum[11] = 0.0;
-        w->col_sum[12] = 0.0;
-        w->col_sum[13] = 0.0;
-        w->col_sum[14] = 0.0;
-        v = fabs(m->F[0]) * power_of_two(exponent[1] - exponent[0]);
-        w->row_sum[0] += v;
-        w->col_sum[1] += v;
-        v = fabs(m->F[1]) * power_of_two(exponent[2] - exponent[0]);
-        w->row_sum[0] += v;
-        w->col_sum[2] += v;
-        v = fabs(m->F[2]) * power_of_two(exponent[4] - exponent[0]);
-        w->row_sum[0] += v;
-        w->col_sum[4] += v;
-        v = fabs(m->F[3]) * power_of_two(exponent[8] - exponent[0]);
-        w->row_sum[0] += v;
-        w->col_sum[8] += v;
-        v = fabs(m->F[4]) * power_of_two(exponent[9] - exponent[0]);
-        w->row_sum[0] += v;
-        w->col_sum[9] += v;
-        v = fabs(m->F[5]) * power_of_two(exponent[10] - exponent[0]);
-        w->row_sum[0] += v;
-        w->col_sum[10] += v;
-        v = fabs(m->F[6]) * power_of_two(exponent[11] - exponent[0]);
-        w->row_sum[0] += v;
-        w->col_sum[11] += v;
-        v = fabs(m->F[7]) * power_of_two(exponent[0] - exponent[1]);
-        w->row_sum[1] += v;
-        w->col_sum[0] += v;
-        v = fabs(m->F[8]) * power_of_two(exponent[2] - exponent[1]);
-        w->row_sum[1] += v;
-        w->col_sum[2] += v;
-        v = fabs(m->F[9]) * power_of_two(exponent[3] - exponent[1]);
-        w->row_sum[1] += v;
-        w->col_sum[3] += v;
-        v = fabs(m->F[10]) * power_of_two(exponent[6] - exponent[1]);
-        w->row_sum[1] += v;
-        w->col_sum[6] += v;
-        v = fabs(m->F[11]) * power_of_two(exponent[8] - exponent[1]);
-        w->row_sum[1] += v;
-        w->col_sum[8] += v;
-        v = fabs(m->F[12]) * power_of_two(exponent[9] - exponent[1]);
-        w->row_sum[1] += v;
-        w->col_sum[9] += v;
-        v = fabs(m->F[13]) * power_of_two(exponent[10] - exponent[1]);
-        w->row_sum[1] += v;
-        w->col_sum[10] += v;
-        v = fabs(m->F[14]) * power_of_two(exponent[11] - exponent[1]);
-        w->row_sum[1] += v;
-        w->col_sum[11] += v;
-        v = fabs(m->F[15]) * power_of_two(exponent[0] - exponent[2]);
-        w->row_sum[2] += v;
-        w->col_sum[0] += v;
-        v = fabs(m->F[16]) * power_of_two(exponent[1] - exponent[2]);
-        w->row_sum[2] += v;
-        w->col_sum[1] += v;
-        v = fabs(m->F[17]) * power_of_two(exponent[3] - exponent[2]);
-        w->row_sum[2] += v;
-        w->col_sum[3] += v;
-        v = fabs(m->F[18]) * power_of_two(exponent[6] - exponent[2]);
-        w->row_sum[2] += v;
-        w->col_sum[6] += v;
-        v = fabs(m->F[19]) * power_of_two(exponent[8] - exponent[2]);
-        w->row_sum[2] += v;
-        w->col_sum[8] += v;
-        v = fabs(m->F[20]) * power_of_two(exponent[9] - exponent[2]);
-        w->row_sum[2] += v;
-        w->col_sum[9] += v;
-        v = fabs(m->F[21]) * power_of_two(exponent[10] - exponent[2]);
-        w->row_sum[2] += v;
-        w->col_sum[10] += v;
-        v = fabs(m->F[22]) * power_of_two(exponent[11] - exponent[2]);
-        w->row_sum[2] += v;
-        w->col_sum[11] += v;
-        v = fabs(m->F[23]) * power_of_two(exponent[1] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[1] += v;
-        v = fabs(m->F[24]) * power_of_two(exponent[2] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[2] += v;
-        v = fabs(m->F[26]) * power_of_two(exponent[4] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[4] += v;
-        v = fabs(m->F[27]) * power_of_two(exponent[5] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[5] += v;
-        v = fabs(m->F[28]) * power_of_two(exponent[6] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[6] += v;
-        v = fabs(m->F[29]) * power_of_two(exponent[8] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[8] += v;
-        v = fabs(m->F[30]) * power_of_two(exponent[12] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[12] += v;
-        v = fabs(m->F[31]) * power_of_two(exponent[13] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[13] += v;
-        v = fabs(m->F[32]) * power_of_two(exponent[14] - exponent[3]);
-        w->row_sum[3] += v;
-        w->col_sum[14] += v;
-        v = fabs(m->F[33]) * power_of_two(exponent[0] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[0] += v;
-        v = fabs(m->F[34]) * power_of_two(exponent[2] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[2] += v;
-        v = fabs(m->F[35]) * power_of_two(exponent[3] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[3] += v;
-        v = fabs(m->F[37]) * power_of_two(exponent[5] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[5] += v;
-        v = fabs(m->F[38]) * power_of_two(exponent[6] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[6] += v;
-        v = fabs(m->F[39]) * power_of_two(exponent[8] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[8] += v;
-        v = fabs(m->F[40]) * power_of_two(exponent[12] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[12] += v;
-        v = fabs(m->F[41]) * power_of_two(exponent[13] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[13] += v;
-        v = fabs(m->F[42]) * power_of_two(exponent[14] - exponent[4]);
-        w->row_sum[4] += v;
-        w->col_sum[14] += v;
-        v = fabs(m->F[43]) * power_of_two(exponent[0] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[0] += v;
-        v = fabs(m->F[44]) * power_of_two(exponent[1] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[1] += v;
-        v = fabs(m->F[45]) * power_of_two(exponent[3] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[3] += v;
-        v = fabs(m->F[46]) * power_of_two(exponent[4] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[4] += v;
-        v = fabs(m->F[47]) * power_of_two(exponent[6] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[6] += v;
-        v = fabs(m->F[48]) * power_of_two(exponent[8] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[8] += v;
-        v = fabs(m->F[49]) * power_of_two(exponent[12] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[12] += v;
-        v = fabs(m->F[50]) * power_of_two(exponent[13] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[13] += v;
-        v = fabs(m->F[51]) * power_of_two(exponent[14] - exponent[5]);
-        w->row_sum[5] += v;
-        w->col_sum[14] += v;
-        v = fabs(m->F[52]) * power_of_two(exponent[4] - exponent[6]);
-        w->row_sum[6] += v;
-        w->col_sum[4] += v;
-        v = fabs(m->F[53]) * power_of_two(exponent[8] - exponent[6]);
-        w->row_sum[6] += v;
-        w->col_sum[8] += v;
-        v = fabs(m->F[54]) * power_of_two(exponent[3] - exponent[7]);
-        w->row_sum[7] += v;
-        w->col_sum[3] += v;
-        v = fabs(m->F[55]) * power_of_two(exponent[6] - exponent[7]);
-        w->row_sum[7] += v;
-        w->col_sum[6] += v;
-        v = fabs(m->F[56]) * power_of_two(exponent[8] - exponent[7]);
-        w->row_sum[7] += v;
-        w->col_sum[8] += v;
-        v = fabs(m->F[57]) * power_of_two(exponent[5] - exponent[8]);
-        w->row_sum[8] += v;
-        w->col_sum[5] += v;
-        /* a state with no off-diagonal entry in its row (column) of F has a zero row (column)
-                sum */
-        changed |= balance_step(w->row_sum[0], w->col_sum[0], &exponent[0]);
-        changed |= balance_step(w->row_sum[1], w->col_sum[1], &exponent[1]);
-        changed |= balance_step(w->row_sum[2], w->col_sum[2], &exponent[2]);
-        changed |= balance_step(w->row_sum[3], w->col_sum[3], &exponent[3]);
-        changed |= balance_step(w->row_sum[4], w->col_sum[4], &exponent[4]);
-        changed |= balance_step(w->row_sum[5], w->col_sum[5], &exponent[5]);
-        changed |= balance_step(w->row_sum[6], w->col_sum[6], &exponent[6]);
-        changed |= balance_step(w->row_sum[7], 0.0, &exponent[7]);
-        changed |= balance_step(w->row_sum[8], w->col_sum[8], &exponent[8]);
-        changed |= balance_step(0.0, w->col_sum[9], &exponent[9]);
-        changed |= balance_step(0.0, w->col_sum[10], &exponent[10]);
-        changed |= balance_step(0.0, w->col_sum[11], &exponent[11]);
-        changed |= balance_step(0.0, w->col_sum[12], &exponent[12]);
-        changed |= balance_step(0.0, w->col_sum[13], &exponent[13]);
-        changed |= balance_step(0.0, w->col_sum[14], &exponent[14]);
-    }
-    v = fabs(m->F[0]) * power_of_two(exponent[1] - exponent[0]) + fabs(m->F[1]) *
-            power_of_two(exponent[2] - exponent[0]) + fabs(m->F[2]) * power_of_two(exponent[4] -
-            exponent[0]) + fabs(m->F[3]) * power_of_two(exponent[8] - exponent[0]) + fabs(m->F[4]) *
-            power_of_two(exponent[9] - exponent[0]) + fabs(m->F[5]) * power_of_two(exponent[10] -
-            exponent[0]) + fabs(m->F[6]) * power_of_two(exponent[11] - exponent[0]);
+    v = fabs(m->F[0]) * 0.25 + fabs(m->F[1]) * 2.0 + fabs(m->F[2]) * 4096.0 + fabs(m->F[3]) *
+            65536.0 + fabs(m->F[4]) * 5.820766091346741e-11 + fabs(m->F[5]) * 5.820766091346741e-11
+            + fabs(m->F[6]) * 5.820766091346741e-11;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[7]) * power_of_two(exponent[0] - exponent[1]) + fabs(m->F[8]) *
-            power_of_two(exponent[2] - exponent[1]) + fabs(m->F[9]) * power_of_two(exponent[3] -
-            exponent[1]) + fabs(m->F[10]) * power_of_two(exponent[6] - exponent[1]) + fabs(m->F[11])
-            * power_of_two(exponent[8] - exponent[1]) + fabs(m->F[12]) * power_of_two(exponent[9] -
-            exponent[1]) + fabs(m->F[13]) * power_of_two(exponent[10] - exponent[1]) +
-            fabs(m->F[14]) * power_of_two(exponent[11] - exponent[1]);
+    v = fabs(m->F[7]) * 4.0 + fabs(m->F[8]) * 8.0 + fabs(m->F[9]) * 4096.0 + fabs(m->F[10]) * 8.0 +
+            fabs(m->F[11]) * 262144.0 + fabs(m->F[12]) * 2.3283064365386963e-10 + fabs(m->F[13]) *
+            2.3283064365386963e-10 + fabs(m->F[14]) * 2.3283064365386963e-10;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[15]) * power_of_two(exponent[0] - exponent[2]) + fabs(m->F[16]) *
-            power_of_two(exponent[1] - exponent[2]) + fabs(m->F[17]) * power_of_two(exponent[3] -
-            exponent[2]) + fabs(m->F[18]) * power_of_two(exponent[6] - exponent[2]) + fabs(m->F[19])
-            * power_of_two(exponent[8] - exponent[2]) + fabs(m->F[20]) * power_of_two(exponent[9] -
-            exponent[2]) + fabs(m->F[21]) * power_of_two(exponent[10] - exponent[2]) +
-            fabs(m->F[22]) * power_of_two(exponent[11] - exponent[2]);
+    v = fabs(m->F[15]) * 0.5 + fabs(m->F[16]) * 0.125 + fabs(m->F[17]) * 512.0 + fabs(m->F[18]) +
+            fabs(m->F[19]) * 32768.0 + fabs(m->F[20]) * 2.9103830456733704e-11 + fabs(m->F[21]) *
+            2.9103830456733704e-11 + fabs(m->F[22]) * 2.9103830456733704e-11;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[23]) * power_of_two(exponent[1] - exponent[3]) + fabs(m->F[24]) *
-            power_of_two(exponent[2] - exponent[3]) + fabs(m->F[25]) + fabs(m->F[26]) *
-            power_of_two(exponent[4] - exponent[3]) + fabs(m->F[27]) * power_of_two(exponent[5] -
-            exponent[3]) + fabs(m->F[28]) * power_of_two(exponent[6] - exponent[3]) + fabs(m->F[29])
-            * power_of_two(exponent[8] - exponent[3]) + fabs(m->F[30]) * power_of_two(exponent[12] -
-            exponent[3]) + fabs(m->F[31]) * power_of_two(exponent[13] - exponent[3]) +
-            fabs(m->F[32]) * power_of_two(exponent[14] - exponent[3]);
+    v = fabs(m->F[23]) * 0.000244140625 + fabs(m->F[24]) * 0.001953125 + fabs(m->F[25]) +
+            fabs(m->F[26]) * 4.0 + fabs(m->F[27]) * 0.25 + fabs(m->F[28]) * 0.001953125 +
+            fabs(m->F[29]) * 64.0 + fabs(m->F[30]) * 5.684341886080802e-14 + fabs(m->F[31]) *
+            5.684341886080802e-14 + fabs(m->F[32]) * 5.684341886080802e-14;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[33]) * power_of_two(exponent[0] - exponent[4]) + fabs(m->F[34]) *
-            power_of_two(exponent[2] - exponent[4]) + fabs(m->F[35]) * power_of_two(exponent[3] -
-            exponent[4]) + fabs(m->F[36]) + fabs(m->F[37]) * power_of_two(exponent[5] - exponent[4])
-            + fabs(m->F[38]) * power_of_two(exponent[6] - exponent[4]) + fabs(m->F[39]) *
-            power_of_two(exponent[8] - exponent[4]) + fabs(m->F[40]) * power_of_two(exponent[12] -
-            exponent[4]) + fabs(m->F[41]) * power_of_two(exponent[13] - exponent[4]) +
-            fabs(m->F[42]) * power_of_two(exponent[14] - exponent[4]);
+    v = fabs(m->F[33]) * 0.000244140625 + fabs(m->F[34]) * 0.00048828125 + fabs(m->F[35]) * 0.25 +
+            fabs(m->F[36]) + fabs(m->F[37]) * 0.0625 + fabs(m->F[38]) * 0.00048828125 +
+            fabs(m->F[39]) * 16.0 + fabs(m->F[40]) * 1.4210854715202004e-14 + fabs(m->F[41]) *
+            1.4210854715202004e-14 + fabs(m->F[42]) * 1.4210854715202004e-14;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[43]) * power_of_two(exponent[0] - exponent[5]) + fabs(m->F[44]) *
-            power_of_two(exponent[1] - exponent[5]) + fabs(m->F[45]) * power_of_two(exponent[3] -
-            exponent[5]) + fabs(m->F[46]) * power_of_two(exponent[4] - exponent[5]) + fabs(m->F[47])
-            * power_of_two(exponent[6] - exponent[5]) + fabs(m->F[48]) * power_of_two(exponent[8] -
-            exponent[5]) + fabs(m->F[49]) * power_of_two(exponent[12] - exponent[5]) +
-            fabs(m->F[50]) * power_of_two(exponent[13] - exponent[5]) + fabs(m->F[51]) *
-            power_of_two(exponent[14] - exponent[5]);
+    v = fabs(m->F[43]) * 0.00390625 + fabs(m->F[44]) * 0.0009765625 + fabs(m->F[45]) * 4.0 +
+            fabs(m->F[46]) * 16.0 + fabs(m->F[47]) * 0.0078125 + fabs(m->F[48]) * 256.0 +
+            fabs(m->F[49]) * 2.2737367544323206e-13 + fabs(m->F[50]) * 2.2737367544323206e-13 +
+            fabs(m->F[51]) * 2.2737367544323206e-13;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[52]) * power_of_two(exponent[4] - exponent[6]) + fabs(m->F[53]) *
-            power_of_two(exponent[8] - exponent[6]);
+    v = fabs(m->F[52]) * 2048.0 + fabs(m->F[53]) * 32768.0;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[54]) * power_of_two(exponent[3] - exponent[7]) + fabs(m->F[55]) *
-            power_of_two(exponent[6] - exponent[7]) + fabs(m->F[56]) * power_of_two(exponent[8] -
-            exponent[7]);
+    v = fabs(m->F[54]) * 1.4551915228366852e-11 + fabs(m->F[55]) * 2.842170943040401e-14 +
+            fabs(m->F[56]) * 9.313225746154785e-10;
     norm = v > norm ? v : norm;
-    v = fabs(m->F[57]) * power_of_two(exponent[5] - exponent[8]);
+    v = fabs(m->F[57]) * 0.00390625;
     norm = v > norm ? v : norm;
     return norm;
 }
+
+/* 1/(k+1)!, k = 0..TAYLOR_ORDER: the diagonal of R_k in the Horner chain (the order is chosen at
+        run time). */
+static const ins_gps15_twin_scalar taylor_coefficient[10] = {
+    1.0 / 1.0,
+    1.0 / 2.0,
+    1.0 / 6.0,
+    1.0 / 24.0,
+    1.0 / 120.0,
+    1.0 / 720.0,
+    1.0 / 5040.0,
+    1.0 / 40320.0,
+    1.0 / 362880.0,
+    1.0 / 3628800.0
+};
 
 /* 2^(s+1) e^theta rho_(m-1)(theta), rho_m(theta) = theta^(m+1) / (m+1)! (m+2) / (m+2-theta): the
    bound on the relative error of Phi of order m after s doublings (growth = e^theta), one order of
@@ -674,12 +421,9 @@ static int taylor_plan(const ins_gps15_twin_scalar norm, const ins_gps15_twin_sc
 #else
 #define INS_GPS15_TWIN_BLOCK static
 #endif
-INS_GPS15_TWIN_BLOCK void taylor_order_1(const ins_gps15_twin_matrices *restrict m,
-        ins_gps15_twin_transition *restrict t, ins_gps15_twin_discretize_scratch *restrict w, const
-        ins_gps15_twin_scalar h)
+INS_GPS15_TWIN_BLOCK void horner_input(const ins_gps15_twin_matrices *restrict m,
+        ins_gps15_twin_discretize_scratch *restrict w, const ins_gps15_twin_scalar h)
 {
-    const ins_gps15_twin_scalar one = 1.0;
-    const ins_gps15_twin_scalar c2 = 1.0 / 2.0;
     w->fh[0] = m->F[0]*h;
     w->fh[1] = m->F[1]*h;
     w->fh[2] = m->F[2]*h;
@@ -738,98 +482,109 @@ INS_GPS15_TWIN_BLOCK void taylor_order_1(const ins_gps15_twin_matrices *restrict
     w->fh[55] = m->F[55]*h;
     w->fh[56] = m->F[56]*h;
     w->fh[57] = m->F[57]*h;
-    w->S[0] = one;
-    w->S[1] = w->fh[0]*c2;
-    w->S[2] = w->fh[1]*c2;
+}
+
+INS_GPS15_TWIN_BLOCK void horner_level_1_into_S(ins_gps15_twin_discretize_scratch *restrict w, const
+        ins_gps15_twin_scalar c_out, const ins_gps15_twin_scalar c_in)
+{
+    w->S[0] = c_out;
+    w->S[1] = w->fh[0]*c_in;
+    w->S[2] = w->fh[1]*c_in;
+    w->S[4] = w->fh[2]*c_in;
+    w->S[7] = w->fh[3]*c_in;
+    w->S[8] = w->fh[4]*c_in;
+    w->S[9] = w->fh[5]*c_in;
+    w->S[10] = w->fh[6]*c_in;
+    w->S[14] = w->fh[7]*c_in;
+    w->S[15] = c_out;
+    w->S[16] = w->fh[8]*c_in;
+    w->S[17] = w->fh[9]*c_in;
+    w->S[20] = w->fh[10]*c_in;
+    w->S[21] = w->fh[11]*c_in;
+    w->S[22] = w->fh[12]*c_in;
+    w->S[23] = w->fh[13]*c_in;
+    w->S[24] = w->fh[14]*c_in;
+    w->S[28] = w->fh[15]*c_in;
+    w->S[29] = w->fh[16]*c_in;
+    w->S[30] = c_out;
+    w->S[31] = w->fh[17]*c_in;
+    w->S[34] = w->fh[18]*c_in;
+    w->S[35] = w->fh[19]*c_in;
+    w->S[36] = w->fh[20]*c_in;
+    w->S[37] = w->fh[21]*c_in;
+    w->S[38] = w->fh[22]*c_in;
+    w->S[43] = w->fh[23]*c_in;
+    w->S[44] = w->fh[24]*c_in;
+    w->S[45] = c_out + w->fh[25]*c_in;
+    w->S[46] = w->fh[26]*c_in;
+    w->S[47] = w->fh[27]*c_in;
+    w->S[48] = w->fh[28]*c_in;
+    w->S[49] = w->fh[29]*c_in;
+    w->S[53] = w->fh[30]*c_in;
+    w->S[54] = w->fh[31]*c_in;
+    w->S[55] = w->fh[32]*c_in;
+    w->S[56] = w->fh[33]*c_in;
+    w->S[58] = w->fh[34]*c_in;
+    w->S[59] = w->fh[35]*c_in;
+    w->S[60] = c_out + w->fh[36]*c_in;
+    w->S[61] = w->fh[37]*c_in;
+    w->S[62] = w->fh[38]*c_in;
+    w->S[63] = w->fh[39]*c_in;
+    w->S[67] = w->fh[40]*c_in;
+    w->S[68] = w->fh[41]*c_in;
+    w->S[69] = w->fh[42]*c_in;
+    w->S[70] = w->fh[43]*c_in;
+    w->S[71] = w->fh[44]*c_in;
+    w->S[73] = w->fh[45]*c_in;
+    w->S[74] = w->fh[46]*c_in;
+    w->S[75] = c_out;
+    w->S[76] = w->fh[47]*c_in;
+    w->S[77] = w->fh[48]*c_in;
+    w->S[81] = w->fh[49]*c_in;
+    w->S[82] = w->fh[50]*c_in;
+    w->S[83] = w->fh[51]*c_in;
+    w->S[88] = w->fh[52]*c_in;
+    w->S[90] = c_out;
+    w->S[91] = w->fh[53]*c_in;
+    w->S[101] = w->fh[54]*c_in;
+    w->S[104] = w->fh[55]*c_in;
+    w->S[105] = c_out;
+    w->S[106] = w->fh[56]*c_in;
+    w->S[118] = w->fh[57]*c_in;
+    w->S[120] = c_out;
     w->S[3] = 0;
-    w->S[4] = w->fh[2]*c2;
     w->S[5] = 0;
     w->S[6] = 0;
-    w->S[7] = w->fh[3]*c2;
-    w->S[8] = w->fh[4]*c2;
-    w->S[9] = w->fh[5]*c2;
-    w->S[10] = w->fh[6]*c2;
     w->S[11] = 0;
     w->S[12] = 0;
     w->S[13] = 0;
-    w->S[14] = w->fh[7]*c2;
-    w->S[15] = one;
-    w->S[16] = w->fh[8]*c2;
-    w->S[17] = w->fh[9]*c2;
     w->S[18] = 0;
     w->S[19] = 0;
-    w->S[20] = w->fh[10]*c2;
-    w->S[21] = w->fh[11]*c2;
-    w->S[22] = w->fh[12]*c2;
-    w->S[23] = w->fh[13]*c2;
-    w->S[24] = w->fh[14]*c2;
     w->S[25] = 0;
     w->S[26] = 0;
     w->S[27] = 0;
-    w->S[28] = w->fh[15]*c2;
-    w->S[29] = w->fh[16]*c2;
-    w->S[30] = one;
-    w->S[31] = w->fh[17]*c2;
     w->S[32] = 0;
     w->S[33] = 0;
-    w->S[34] = w->fh[18]*c2;
-    w->S[35] = w->fh[19]*c2;
-    w->S[36] = w->fh[20]*c2;
-    w->S[37] = w->fh[21]*c2;
-    w->S[38] = w->fh[22]*c2;
     w->S[39] = 0;
     w->S[40] = 0;
     w->S[41] = 0;
     w->S[42] = 0;
-    w->S[43] = w->fh[23]*c2;
-    w->S[44] = w->fh[24]*c2;
-    w->S[45] = one + w->fh[25]*c2;
-    w->S[46] = w->fh[26]*c2;
-    w->S[47] = w->fh[27]*c2;
-    w->S[48] = w->fh[28]*c2;
-    w->S[49] = w->fh[29]*c2;
     w->S[50] = 0;
     w->S[51] = 0;
     w->S[52] = 0;
-    w->S[53] = w->fh[30]*c2;
-    w->S[54] = w->fh[31]*c2;
-    w->S[55] = w->fh[32]*c2;
-    w->S[56] = w->fh[33]*c2;
     w->S[57] = 0;
-    w->S[58] = w->fh[34]*c2;
-    w->S[59] = w->fh[35]*c2;
-    w->S[60] = one + w->fh[36]*c2;
-    w->S[61] = w->fh[37]*c2;
-    w->S[62] = w->fh[38]*c2;
-    w->S[63] = w->fh[39]*c2;
     w->S[64] = 0;
     w->S[65] = 0;
     w->S[66] = 0;
-    w->S[67] = w->fh[40]*c2;
-    w->S[68] = w->fh[41]*c2;
-    w->S[69] = w->fh[42]*c2;
-    w->S[70] = w->fh[43]*c2;
-    w->S[71] = w->fh[44]*c2;
     w->S[72] = 0;
-    w->S[73] = w->fh[45]*c2;
-    w->S[74] = w->fh[46]*c2;
-    w->S[75] = one;
-    w->S[76] = w->fh[47]*c2;
-    w->S[77] = w->fh[48]*c2;
     w->S[78] = 0;
     w->S[79] = 0;
     w->S[80] = 0;
-    w->S[81] = w->fh[49]*c2;
-    w->S[82] = w->fh[50]*c2;
-    w->S[83] = w->fh[51]*c2;
     w->S[84] = 0;
     w->S[85] = 0;
     w->S[86] = 0;
     w->S[87] = 0;
-    w->S[88] = w->fh[52]*c2;
     w->S[89] = 0;
-    w->S[90] = one;
-    w->S[91] = w->fh[53]*c2;
     w->S[92] = 0;
     w->S[93] = 0;
     w->S[94] = 0;
@@ -839,12 +594,8 @@ INS_GPS15_TWIN_BLOCK void taylor_order_1(const ins_gps15_twin_matrices *restrict
     w->S[98] = 0;
     w->S[99] = 0;
     w->S[100] = 0;
-    w->S[101] = w->fh[54]*c2;
     w->S[102] = 0;
     w->S[103] = 0;
-    w->S[104] = w->fh[55]*c2;
-    w->S[105] = one;
-    w->S[106] = w->fh[56]*c2;
     w->S[107] = 0;
     w->S[108] = 0;
     w->S[109] = 0;
@@ -856,3982 +607,1498 @@ INS_GPS15_TWIN_BLOCK void taylor_order_1(const ins_gps15_twin_matrices *restrict
     w->S[115] = 0;
     w->S[116] = 0;
     w->S[117] = 0;
-    w->S[118] = w->fh[57]*c2;
     w->S[119] = 0;
-    w->S[120] = one;
     w->S[121] = 0;
     w->S[122] = 0;
     w->S[123] = 0;
     w->S[124] = 0;
     w->S[125] = 0;
     w->S[126] = 0;
-    t->Phi[0][1] = t->Phi[0][1] + w->fh[0];
-    t->Phi[0][2] = t->Phi[0][2] + w->fh[1];
-    t->Phi[0][4] = t->Phi[0][4] + w->fh[2];
-    t->Phi[0][8] = t->Phi[0][8] + w->fh[3];
-    t->Phi[0][9] = t->Phi[0][9] + w->fh[4];
-    t->Phi[0][10] = t->Phi[0][10] + w->fh[5];
-    t->Phi[0][11] = t->Phi[0][11] + w->fh[6];
-    t->Phi[1][0] = t->Phi[1][0] + w->fh[7];
-    t->Phi[1][2] = t->Phi[1][2] + w->fh[8];
-    t->Phi[1][3] = t->Phi[1][3] + w->fh[9];
-    t->Phi[1][6] = t->Phi[1][6] + w->fh[10];
-    t->Phi[1][8] = t->Phi[1][8] + w->fh[11];
-    t->Phi[1][9] = t->Phi[1][9] + w->fh[12];
-    t->Phi[1][10] = t->Phi[1][10] + w->fh[13];
-    t->Phi[1][11] = t->Phi[1][11] + w->fh[14];
-    t->Phi[2][0] = t->Phi[2][0] + w->fh[15];
-    t->Phi[2][1] = t->Phi[2][1] + w->fh[16];
-    t->Phi[2][3] = t->Phi[2][3] + w->fh[17];
-    t->Phi[2][6] = t->Phi[2][6] + w->fh[18];
-    t->Phi[2][8] = t->Phi[2][8] + w->fh[19];
-    t->Phi[2][9] = t->Phi[2][9] + w->fh[20];
-    t->Phi[2][10] = t->Phi[2][10] + w->fh[21];
-    t->Phi[2][11] = t->Phi[2][11] + w->fh[22];
-    t->Phi[3][1] = t->Phi[3][1] + w->fh[23];
-    t->Phi[3][2] = t->Phi[3][2] + w->fh[24];
-    t->Phi[3][3] = t->Phi[3][3] + w->fh[25];
-    t->Phi[3][4] = t->Phi[3][4] + w->fh[26];
-    t->Phi[3][5] = t->Phi[3][5] + w->fh[27];
-    t->Phi[3][6] = t->Phi[3][6] + w->fh[28];
-    t->Phi[3][8] = t->Phi[3][8] + w->fh[29];
-    t->Phi[3][12] = t->Phi[3][12] + w->fh[30];
-    t->Phi[3][13] = t->Phi[3][13] + w->fh[31];
-    t->Phi[3][14] = t->Phi[3][14] + w->fh[32];
-    t->Phi[4][0] = t->Phi[4][0] + w->fh[33];
-    t->Phi[4][2] = t->Phi[4][2] + w->fh[34];
-    t->Phi[4][3] = t->Phi[4][3] + w->fh[35];
-    t->Phi[4][4] = t->Phi[4][4] + w->fh[36];
-    t->Phi[4][5] = t->Phi[4][5] + w->fh[37];
-    t->Phi[4][6] = t->Phi[4][6] + w->fh[38];
-    t->Phi[4][8] = t->Phi[4][8] + w->fh[39];
-    t->Phi[4][12] = t->Phi[4][12] + w->fh[40];
-    t->Phi[4][13] = t->Phi[4][13] + w->fh[41];
-    t->Phi[4][14] = t->Phi[4][14] + w->fh[42];
-    t->Phi[5][0] = t->Phi[5][0] + w->fh[43];
-    t->Phi[5][1] = t->Phi[5][1] + w->fh[44];
-    t->Phi[5][3] = t->Phi[5][3] + w->fh[45];
-    t->Phi[5][4] = t->Phi[5][4] + w->fh[46];
-    t->Phi[5][6] = t->Phi[5][6] + w->fh[47];
-    t->Phi[5][8] = t->Phi[5][8] + w->fh[48];
-    t->Phi[5][12] = t->Phi[5][12] + w->fh[49];
-    t->Phi[5][13] = t->Phi[5][13] + w->fh[50];
-    t->Phi[5][14] = t->Phi[5][14] + w->fh[51];
-    t->Phi[6][4] = t->Phi[6][4] + w->fh[52];
-    t->Phi[6][8] = t->Phi[6][8] + w->fh[53];
-    t->Phi[7][3] = t->Phi[7][3] + w->fh[54];
-    t->Phi[7][6] = t->Phi[7][6] + w->fh[55];
-    t->Phi[7][8] = t->Phi[7][8] + w->fh[56];
-    t->Phi[8][5] = t->Phi[8][5] + w->fh[57];
 }
 
-INS_GPS15_TWIN_BLOCK void taylor_order_2(ins_gps15_twin_transition *restrict t,
-        ins_gps15_twin_discretize_scratch *restrict w)
+INS_GPS15_TWIN_BLOCK void horner_level_1_into_term(ins_gps15_twin_discretize_scratch *restrict w,
+        const ins_gps15_twin_scalar c_out, const ins_gps15_twin_scalar c_in)
 {
-    const ins_gps15_twin_scalar ck = 1.0 / 2.0;
-    const ins_gps15_twin_scalar cs = 1.0 / 6.0;
-    w->term[0][0] = w->fh[0]*w->fh[7] + w->fh[1]*w->fh[15] + w->fh[2]*w->fh[33];
-    w->term[0][1] = w->fh[1]*w->fh[16];
-    w->term[0][2] = w->fh[0]*w->fh[8] + w->fh[2]*w->fh[34];
-    w->term[0][3] = w->fh[0]*w->fh[9] + w->fh[1]*w->fh[17] + w->fh[2]*w->fh[35];
-    w->term[0][4] = w->fh[2]*w->fh[36];
-    w->term[0][5] = w->fh[2]*w->fh[37] + w->fh[3]*w->fh[57];
-    w->term[0][6] = w->fh[0]*w->fh[10] + w->fh[1]*w->fh[18] + w->fh[2]*w->fh[38];
-    w->term[0][7] = w->fh[0]*w->fh[11] + w->fh[1]*w->fh[19] + w->fh[2]*w->fh[39];
-    w->term[0][8] = w->fh[0]*w->fh[12] + w->fh[1]*w->fh[20];
-    w->term[0][9] = w->fh[0]*w->fh[13] + w->fh[1]*w->fh[21];
-    w->term[0][10] = w->fh[0]*w->fh[14] + w->fh[1]*w->fh[22];
-    w->term[0][11] = w->fh[2]*w->fh[40];
-    w->term[0][12] = w->fh[2]*w->fh[41];
-    w->term[0][13] = w->fh[2]*w->fh[42];
-    w->term[0][14] = w->fh[8]*w->fh[15];
-    w->term[0][15] = w->fh[7]*w->fh[0] + w->fh[8]*w->fh[16] + w->fh[9]*w->fh[23];
-    w->term[0][16] = w->fh[7]*w->fh[1] + w->fh[9]*w->fh[24];
-    w->term[0][17] = w->fh[8]*w->fh[17] + w->fh[9]*w->fh[25];
-    w->term[0][18] = w->fh[7]*w->fh[2] + w->fh[9]*w->fh[26] + w->fh[10]*w->fh[52];
-    w->term[0][19] = w->fh[9]*w->fh[27] + w->fh[11]*w->fh[57];
-    w->term[0][20] = w->fh[8]*w->fh[18] + w->fh[9]*w->fh[28];
-    w->term[0][21] = w->fh[7]*w->fh[3] + w->fh[8]*w->fh[19] + w->fh[9]*w->fh[29] +
-            w->fh[10]*w->fh[53];
-    w->term[0][22] = w->fh[7]*w->fh[4] + w->fh[8]*w->fh[20];
-    w->term[0][23] = w->fh[7]*w->fh[5] + w->fh[8]*w->fh[21];
-    w->term[0][24] = w->fh[7]*w->fh[6] + w->fh[8]*w->fh[22];
-    w->term[0][25] = w->fh[9]*w->fh[30];
-    w->term[0][26] = w->fh[9]*w->fh[31];
-    w->term[0][27] = w->fh[9]*w->fh[32];
-    w->term[0][28] = w->fh[16]*w->fh[7];
-    w->term[0][29] = w->fh[15]*w->fh[0] + w->fh[17]*w->fh[23];
-    w->term[0][30] = w->fh[15]*w->fh[1] + w->fh[16]*w->fh[8] + w->fh[17]*w->fh[24];
-    w->term[0][31] = w->fh[16]*w->fh[9] + w->fh[17]*w->fh[25];
-    w->term[0][32] = w->fh[15]*w->fh[2] + w->fh[17]*w->fh[26] + w->fh[18]*w->fh[52];
-    w->term[0][33] = w->fh[17]*w->fh[27] + w->fh[19]*w->fh[57];
-    w->term[0][34] = w->fh[16]*w->fh[10] + w->fh[17]*w->fh[28];
-    w->term[0][35] = w->fh[15]*w->fh[3] + w->fh[16]*w->fh[11] + w->fh[17]*w->fh[29] +
-            w->fh[18]*w->fh[53];
-    w->term[0][36] = w->fh[15]*w->fh[4] + w->fh[16]*w->fh[12];
-    w->term[0][37] = w->fh[15]*w->fh[5] + w->fh[16]*w->fh[13];
-    w->term[0][38] = w->fh[15]*w->fh[6] + w->fh[16]*w->fh[14];
-    w->term[0][39] = w->fh[17]*w->fh[30];
-    w->term[0][40] = w->fh[17]*w->fh[31];
-    w->term[0][41] = w->fh[17]*w->fh[32];
-    w->term[0][42] = w->fh[23]*w->fh[7] + w->fh[24]*w->fh[15] + w->fh[26]*w->fh[33] +
-            w->fh[27]*w->fh[43];
-    w->term[0][43] = w->fh[24]*w->fh[16] + w->fh[25]*w->fh[23] + w->fh[27]*w->fh[44];
-    w->term[0][44] = w->fh[23]*w->fh[8] + w->fh[25]*w->fh[24] + w->fh[26]*w->fh[34];
-    w->term[0][45] = w->fh[23]*w->fh[9] + w->fh[24]*w->fh[17] + w->fh[25]*w->fh[25] +
-            w->fh[26]*w->fh[35] + w->fh[27]*w->fh[45];
-    w->term[0][46] = w->fh[25]*w->fh[26] + w->fh[26]*w->fh[36] + w->fh[27]*w->fh[46] +
-            w->fh[28]*w->fh[52];
-    w->term[0][47] = w->fh[25]*w->fh[27] + w->fh[26]*w->fh[37] + w->fh[29]*w->fh[57];
-    w->term[0][48] = w->fh[23]*w->fh[10] + w->fh[24]*w->fh[18] + w->fh[25]*w->fh[28] +
-            w->fh[26]*w->fh[38] + w->fh[27]*w->fh[47];
-    w->term[0][49] = w->fh[23]*w->fh[11] + w->fh[24]*w->fh[19] + w->fh[25]*w->fh[29] +
-            w->fh[26]*w->fh[39] + w->fh[27]*w->fh[48] + w->fh[28]*w->fh[53];
-    w->term[0][50] = w->fh[23]*w->fh[12] + w->fh[24]*w->fh[20];
-    w->term[0][51] = w->fh[23]*w->fh[13] + w->fh[24]*w->fh[21];
-    w->term[0][52] = w->fh[23]*w->fh[14] + w->fh[24]*w->fh[22];
-    w->term[0][53] = w->fh[25]*w->fh[30] + w->fh[26]*w->fh[40] + w->fh[27]*w->fh[49];
-    w->term[0][54] = w->fh[25]*w->fh[31] + w->fh[26]*w->fh[41] + w->fh[27]*w->fh[50];
-    w->term[0][55] = w->fh[25]*w->fh[32] + w->fh[26]*w->fh[42] + w->fh[27]*w->fh[51];
-    w->term[0][56] = w->fh[34]*w->fh[15] + w->fh[36]*w->fh[33] + w->fh[37]*w->fh[43];
-    w->term[0][57] = w->fh[33]*w->fh[0] + w->fh[34]*w->fh[16] + w->fh[35]*w->fh[23] +
-            w->fh[37]*w->fh[44];
-    w->term[0][58] = w->fh[33]*w->fh[1] + w->fh[35]*w->fh[24] + w->fh[36]*w->fh[34];
-    w->term[0][59] = w->fh[34]*w->fh[17] + w->fh[35]*w->fh[25] + w->fh[36]*w->fh[35] +
-            w->fh[37]*w->fh[45];
-    w->term[0][60] = w->fh[33]*w->fh[2] + w->fh[35]*w->fh[26] + w->fh[36]*w->fh[36] +
-            w->fh[37]*w->fh[46] + w->fh[38]*w->fh[52];
-    w->term[0][61] = w->fh[35]*w->fh[27] + w->fh[36]*w->fh[37] + w->fh[39]*w->fh[57];
-    w->term[0][62] = w->fh[34]*w->fh[18] + w->fh[35]*w->fh[28] + w->fh[36]*w->fh[38] +
-            w->fh[37]*w->fh[47];
-    w->term[0][63] = w->fh[33]*w->fh[3] + w->fh[34]*w->fh[19] + w->fh[35]*w->fh[29] +
-            w->fh[36]*w->fh[39] + w->fh[37]*w->fh[48] + w->fh[38]*w->fh[53];
-    w->term[0][64] = w->fh[33]*w->fh[4] + w->fh[34]*w->fh[20];
-    w->term[0][65] = w->fh[33]*w->fh[5] + w->fh[34]*w->fh[21];
-    w->term[0][66] = w->fh[33]*w->fh[6] + w->fh[34]*w->fh[22];
-    w->term[0][67] = w->fh[35]*w->fh[30] + w->fh[36]*w->fh[40] + w->fh[37]*w->fh[49];
-    w->term[0][68] = w->fh[35]*w->fh[31] + w->fh[36]*w->fh[41] + w->fh[37]*w->fh[50];
-    w->term[0][69] = w->fh[35]*w->fh[32] + w->fh[36]*w->fh[42] + w->fh[37]*w->fh[51];
-    w->term[0][70] = w->fh[44]*w->fh[7] + w->fh[46]*w->fh[33];
-    w->term[0][71] = w->fh[43]*w->fh[0] + w->fh[45]*w->fh[23];
-    w->term[0][72] = w->fh[43]*w->fh[1] + w->fh[44]*w->fh[8] + w->fh[45]*w->fh[24] +
-            w->fh[46]*w->fh[34];
-    w->term[0][73] = w->fh[44]*w->fh[9] + w->fh[45]*w->fh[25] + w->fh[46]*w->fh[35];
-    w->term[0][74] = w->fh[43]*w->fh[2] + w->fh[45]*w->fh[26] + w->fh[46]*w->fh[36] +
-            w->fh[47]*w->fh[52];
-    w->term[0][75] = w->fh[45]*w->fh[27] + w->fh[46]*w->fh[37] + w->fh[48]*w->fh[57];
-    w->term[0][76] = w->fh[44]*w->fh[10] + w->fh[45]*w->fh[28] + w->fh[46]*w->fh[38];
-    w->term[0][77] = w->fh[43]*w->fh[3] + w->fh[44]*w->fh[11] + w->fh[45]*w->fh[29] +
-            w->fh[46]*w->fh[39] + w->fh[47]*w->fh[53];
-    w->term[0][78] = w->fh[43]*w->fh[4] + w->fh[44]*w->fh[12];
-    w->term[0][79] = w->fh[43]*w->fh[5] + w->fh[44]*w->fh[13];
-    w->term[0][80] = w->fh[43]*w->fh[6] + w->fh[44]*w->fh[14];
-    w->term[0][81] = w->fh[45]*w->fh[30] + w->fh[46]*w->fh[40];
-    w->term[0][82] = w->fh[45]*w->fh[31] + w->fh[46]*w->fh[41];
-    w->term[0][83] = w->fh[45]*w->fh[32] + w->fh[46]*w->fh[42];
-    w->term[0][84] = w->fh[52]*w->fh[33];
-    w->term[0][85] = w->fh[52]*w->fh[34];
-    w->term[0][86] = w->fh[52]*w->fh[35];
-    w->term[0][87] = w->fh[52]*w->fh[36];
-    w->term[0][88] = w->fh[52]*w->fh[37] + w->fh[53]*w->fh[57];
-    w->term[0][89] = w->fh[52]*w->fh[38];
-    w->term[0][90] = w->fh[52]*w->fh[39];
-    w->term[0][91] = w->fh[52]*w->fh[40];
-    w->term[0][92] = w->fh[52]*w->fh[41];
-    w->term[0][93] = w->fh[52]*w->fh[42];
-    w->term[0][94] = w->fh[54]*w->fh[23];
-    w->term[0][95] = w->fh[54]*w->fh[24];
-    w->term[0][96] = w->fh[54]*w->fh[25];
-    w->term[0][97] = w->fh[54]*w->fh[26] + w->fh[55]*w->fh[52];
-    w->term[0][98] = w->fh[54]*w->fh[27] + w->fh[56]*w->fh[57];
-    w->term[0][99] = w->fh[54]*w->fh[28];
-    w->term[0][100] = w->fh[54]*w->fh[29] + w->fh[55]*w->fh[53];
-    w->term[0][101] = w->fh[54]*w->fh[30];
-    w->term[0][102] = w->fh[54]*w->fh[31];
-    w->term[0][103] = w->fh[54]*w->fh[32];
-    w->term[0][104] = w->fh[57]*w->fh[43];
-    w->term[0][105] = w->fh[57]*w->fh[44];
-    w->term[0][106] = w->fh[57]*w->fh[45];
-    w->term[0][107] = w->fh[57]*w->fh[46];
-    w->term[0][108] = w->fh[57]*w->fh[47];
-    w->term[0][109] = w->fh[57]*w->fh[48];
-    w->term[0][110] = w->fh[57]*w->fh[49];
-    w->term[0][111] = w->fh[57]*w->fh[50];
-    w->term[0][112] = w->fh[57]*w->fh[51];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[0][0]*ck;
-    w->S[0] = w->S[0] + w->term[0][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[0][1]*ck;
-    w->S[1] = w->S[1] + w->term[0][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[0][2]*ck;
-    w->S[2] = w->S[2] + w->term[0][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[0][3]*ck;
-    w->S[3] = w->S[3] + w->term[0][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[0][4]*ck;
-    w->S[4] = w->S[4] + w->term[0][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[0][5]*ck;
-    w->S[5] = w->S[5] + w->term[0][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[0][6]*ck;
-    w->S[6] = w->S[6] + w->term[0][6]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[0][7]*ck;
-    w->S[7] = w->S[7] + w->term[0][7]*cs;
-    t->Phi[0][9] = t->Phi[0][9] + w->term[0][8]*ck;
-    w->S[8] = w->S[8] + w->term[0][8]*cs;
-    t->Phi[0][10] = t->Phi[0][10] + w->term[0][9]*ck;
-    w->S[9] = w->S[9] + w->term[0][9]*cs;
-    t->Phi[0][11] = t->Phi[0][11] + w->term[0][10]*ck;
-    w->S[10] = w->S[10] + w->term[0][10]*cs;
-    t->Phi[0][12] = t->Phi[0][12] + w->term[0][11]*ck;
-    w->S[11] = w->S[11] + w->term[0][11]*cs;
-    t->Phi[0][13] = t->Phi[0][13] + w->term[0][12]*ck;
-    w->S[12] = w->S[12] + w->term[0][12]*cs;
-    t->Phi[0][14] = t->Phi[0][14] + w->term[0][13]*ck;
-    w->S[13] = w->S[13] + w->term[0][13]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[0][14]*ck;
-    w->S[14] = w->S[14] + w->term[0][14]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[0][15]*ck;
-    w->S[15] = w->S[15] + w->term[0][15]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[0][16]*ck;
-    w->S[16] = w->S[16] + w->term[0][16]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[0][17]*ck;
-    w->S[17] = w->S[17] + w->term[0][17]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[0][18]*ck;
-    w->S[18] = w->S[18] + w->term[0][18]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[0][19]*ck;
-    w->S[19] = w->S[19] + w->term[0][19]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[0][20]*ck;
-    w->S[20] = w->S[20] + w->term[0][20]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[0][21]*ck;
-    w->S[21] = w->S[21] + w->term[0][21]*cs;
-    t->Phi[1][9] = t->Phi[1][9] + w->term[0][22]*ck;
-    w->S[22] = w->S[22] + w->term[0][22]*cs;
-    t->Phi[1][10] = t->Phi[1][10] + w->term[0][23]*ck;
-    w->S[23] = w->S[23] + w->term[0][23]*cs;
-    t->Phi[1][11] = t->Phi[1][11] + w->term[0][24]*ck;
-    w->S[24] = w->S[24] + w->term[0][24]*cs;
-    t->Phi[1][12] = t->Phi[1][12] + w->term[0][25]*ck;
-    w->S[25] = w->S[25] + w->term[0][25]*cs;
-    t->Phi[1][13] = t->Phi[1][13] + w->term[0][26]*ck;
-    w->S[26] = w->S[26] + w->term[0][26]*cs;
-    t->Phi[1][14] = t->Phi[1][14] + w->term[0][27]*ck;
-    w->S[27] = w->S[27] + w->term[0][27]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[0][28]*ck;
-    w->S[28] = w->S[28] + w->term[0][28]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[0][29]*ck;
-    w->S[29] = w->S[29] + w->term[0][29]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[0][30]*ck;
-    w->S[30] = w->S[30] + w->term[0][30]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[0][31]*ck;
-    w->S[31] = w->S[31] + w->term[0][31]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[0][32]*ck;
-    w->S[32] = w->S[32] + w->term[0][32]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[0][33]*ck;
-    w->S[33] = w->S[33] + w->term[0][33]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[0][34]*ck;
-    w->S[34] = w->S[34] + w->term[0][34]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[0][35]*ck;
-    w->S[35] = w->S[35] + w->term[0][35]*cs;
-    t->Phi[2][9] = t->Phi[2][9] + w->term[0][36]*ck;
-    w->S[36] = w->S[36] + w->term[0][36]*cs;
-    t->Phi[2][10] = t->Phi[2][10] + w->term[0][37]*ck;
-    w->S[37] = w->S[37] + w->term[0][37]*cs;
-    t->Phi[2][11] = t->Phi[2][11] + w->term[0][38]*ck;
-    w->S[38] = w->S[38] + w->term[0][38]*cs;
-    t->Phi[2][12] = t->Phi[2][12] + w->term[0][39]*ck;
-    w->S[39] = w->S[39] + w->term[0][39]*cs;
-    t->Phi[2][13] = t->Phi[2][13] + w->term[0][40]*ck;
-    w->S[40] = w->S[40] + w->term[0][40]*cs;
-    t->Phi[2][14] = t->Phi[2][14] + w->term[0][41]*ck;
-    w->S[41] = w->S[41] + w->term[0][41]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[0][42]*ck;
-    w->S[42] = w->S[42] + w->term[0][42]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[0][43]*ck;
-    w->S[43] = w->S[43] + w->term[0][43]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[0][44]*ck;
-    w->S[44] = w->S[44] + w->term[0][44]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[0][45]*ck;
-    w->S[45] = w->S[45] + w->term[0][45]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[0][46]*ck;
-    w->S[46] = w->S[46] + w->term[0][46]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[0][47]*ck;
-    w->S[47] = w->S[47] + w->term[0][47]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[0][48]*ck;
-    w->S[48] = w->S[48] + w->term[0][48]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[0][49]*ck;
-    w->S[49] = w->S[49] + w->term[0][49]*cs;
-    t->Phi[3][9] = t->Phi[3][9] + w->term[0][50]*ck;
-    w->S[50] = w->S[50] + w->term[0][50]*cs;
-    t->Phi[3][10] = t->Phi[3][10] + w->term[0][51]*ck;
-    w->S[51] = w->S[51] + w->term[0][51]*cs;
-    t->Phi[3][11] = t->Phi[3][11] + w->term[0][52]*ck;
-    w->S[52] = w->S[52] + w->term[0][52]*cs;
-    t->Phi[3][12] = t->Phi[3][12] + w->term[0][53]*ck;
-    w->S[53] = w->S[53] + w->term[0][53]*cs;
-    t->Phi[3][13] = t->Phi[3][13] + w->term[0][54]*ck;
-    w->S[54] = w->S[54] + w->term[0][54]*cs;
-    t->Phi[3][14] = t->Phi[3][14] + w->term[0][55]*ck;
-    w->S[55] = w->S[55] + w->term[0][55]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[0][56]*ck;
-    w->S[56] = w->S[56] + w->term[0][56]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[0][57]*ck;
-    w->S[57] = w->S[57] + w->term[0][57]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[0][58]*ck;
-    w->S[58] = w->S[58] + w->term[0][58]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[0][59]*ck;
-    w->S[59] = w->S[59] + w->term[0][59]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[0][60]*ck;
-    w->S[60] = w->S[60] + w->term[0][60]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[0][61]*ck;
-    w->S[61] = w->S[61] + w->term[0][61]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[0][62]*ck;
-    w->S[62] = w->S[62] + w->term[0][62]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[0][63]*ck;
-    w->S[63] = w->S[63] + w->term[0][63]*cs;
-    t->Phi[4][9] = t->Phi[4][9] + w->term[0][64]*ck;
-    w->S[64] = w->S[64] + w->term[0][64]*cs;
-    t->Phi[4][10] = t->Phi[4][10] + w->term[0][65]*ck;
-    w->S[65] = w->S[65] + w->term[0][65]*cs;
-    t->Phi[4][11] = t->Phi[4][11] + w->term[0][66]*ck;
-    w->S[66] = w->S[66] + w->term[0][66]*cs;
-    t->Phi[4][12] = t->Phi[4][12] + w->term[0][67]*ck;
-    w->S[67] = w->S[67] + w->term[0][67]*cs;
-    t->Phi[4][13] = t->Phi[4][13] + w->term[0][68]*ck;
-    w->S[68] = w->S[68] + w->term[0][68]*cs;
-    t->Phi[4][14] = t->Phi[4][14] + w->term[0][69]*ck;
-    w->S[69] = w->S[69] + w->term[0][69]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[0][70]*ck;
-    w->S[70] = w->S[70] + w->term[0][70]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[0][71]*ck;
-    w->S[71] = w->S[71] + w->term[0][71]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[0][72]*ck;
-    w->S[72] = w->S[72] + w->term[0][72]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[0][73]*ck;
-    w->S[73] = w->S[73] + w->term[0][73]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[0][74]*ck;
-    w->S[74] = w->S[74] + w->term[0][74]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[0][75]*ck;
-    w->S[75] = w->S[75] + w->term[0][75]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[0][76]*ck;
-    w->S[76] = w->S[76] + w->term[0][76]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[0][77]*ck;
-    w->S[77] = w->S[77] + w->term[0][77]*cs;
-    t->Phi[5][9] = t->Phi[5][9] + w->term[0][78]*ck;
-    w->S[78] = w->S[78] + w->term[0][78]*cs;
-    t->Phi[5][10] = t->Phi[5][10] + w->term[0][79]*ck;
-    w->S[79] = w->S[79] + w->term[0][79]*cs;
-    t->Phi[5][11] = t->Phi[5][11] + w->term[0][80]*ck;
-    w->S[80] = w->S[80] + w->term[0][80]*cs;
-    t->Phi[5][12] = t->Phi[5][12] + w->term[0][81]*ck;
-    w->S[81] = w->S[81] + w->term[0][81]*cs;
-    t->Phi[5][13] = t->Phi[5][13] + w->term[0][82]*ck;
-    w->S[82] = w->S[82] + w->term[0][82]*cs;
-    t->Phi[5][14] = t->Phi[5][14] + w->term[0][83]*ck;
-    w->S[83] = w->S[83] + w->term[0][83]*cs;
-    t->Phi[6][0] = t->Phi[6][0] + w->term[0][84]*ck;
-    w->S[84] = w->S[84] + w->term[0][84]*cs;
-    t->Phi[6][2] = t->Phi[6][2] + w->term[0][85]*ck;
-    w->S[86] = w->S[86] + w->term[0][85]*cs;
-    t->Phi[6][3] = t->Phi[6][3] + w->term[0][86]*ck;
-    w->S[87] = w->S[87] + w->term[0][86]*cs;
-    t->Phi[6][4] = t->Phi[6][4] + w->term[0][87]*ck;
-    w->S[88] = w->S[88] + w->term[0][87]*cs;
-    t->Phi[6][5] = t->Phi[6][5] + w->term[0][88]*ck;
-    w->S[89] = w->S[89] + w->term[0][88]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[0][89]*ck;
-    w->S[90] = w->S[90] + w->term[0][89]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[0][90]*ck;
-    w->S[91] = w->S[91] + w->term[0][90]*cs;
-    t->Phi[6][12] = t->Phi[6][12] + w->term[0][91]*ck;
-    w->S[95] = w->S[95] + w->term[0][91]*cs;
-    t->Phi[6][13] = t->Phi[6][13] + w->term[0][92]*ck;
-    w->S[96] = w->S[96] + w->term[0][92]*cs;
-    t->Phi[6][14] = t->Phi[6][14] + w->term[0][93]*ck;
-    w->S[97] = w->S[97] + w->term[0][93]*cs;
-    t->Phi[7][1] = t->Phi[7][1] + w->term[0][94]*ck;
-    w->S[99] = w->S[99] + w->term[0][94]*cs;
-    t->Phi[7][2] = t->Phi[7][2] + w->term[0][95]*ck;
-    w->S[100] = w->S[100] + w->term[0][95]*cs;
-    t->Phi[7][3] = t->Phi[7][3] + w->term[0][96]*ck;
-    w->S[101] = w->S[101] + w->term[0][96]*cs;
-    t->Phi[7][4] = t->Phi[7][4] + w->term[0][97]*ck;
-    w->S[102] = w->S[102] + w->term[0][97]*cs;
-    t->Phi[7][5] = t->Phi[7][5] + w->term[0][98]*ck;
-    w->S[103] = w->S[103] + w->term[0][98]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[0][99]*ck;
-    w->S[104] = w->S[104] + w->term[0][99]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[0][100]*ck;
-    w->S[106] = w->S[106] + w->term[0][100]*cs;
-    t->Phi[7][12] = t->Phi[7][12] + w->term[0][101]*ck;
-    w->S[110] = w->S[110] + w->term[0][101]*cs;
-    t->Phi[7][13] = t->Phi[7][13] + w->term[0][102]*ck;
-    w->S[111] = w->S[111] + w->term[0][102]*cs;
-    t->Phi[7][14] = t->Phi[7][14] + w->term[0][103]*ck;
-    w->S[112] = w->S[112] + w->term[0][103]*cs;
-    t->Phi[8][0] = t->Phi[8][0] + w->term[0][104]*ck;
-    w->S[113] = w->S[113] + w->term[0][104]*cs;
-    t->Phi[8][1] = t->Phi[8][1] + w->term[0][105]*ck;
-    w->S[114] = w->S[114] + w->term[0][105]*cs;
-    t->Phi[8][3] = t->Phi[8][3] + w->term[0][106]*ck;
-    w->S[116] = w->S[116] + w->term[0][106]*cs;
-    t->Phi[8][4] = t->Phi[8][4] + w->term[0][107]*ck;
-    w->S[117] = w->S[117] + w->term[0][107]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[0][108]*ck;
-    w->S[119] = w->S[119] + w->term[0][108]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[0][109]*ck;
-    w->S[120] = w->S[120] + w->term[0][109]*cs;
-    t->Phi[8][12] = t->Phi[8][12] + w->term[0][110]*ck;
-    w->S[124] = w->S[124] + w->term[0][110]*cs;
-    t->Phi[8][13] = t->Phi[8][13] + w->term[0][111]*ck;
-    w->S[125] = w->S[125] + w->term[0][111]*cs;
-    t->Phi[8][14] = t->Phi[8][14] + w->term[0][112]*ck;
-    w->S[126] = w->S[126] + w->term[0][112]*cs;
+    w->term[1][0] = c_out;
+    w->term[1][1] = w->fh[0]*c_in;
+    w->term[1][2] = w->fh[1]*c_in;
+    w->term[1][4] = w->fh[2]*c_in;
+    w->term[1][7] = w->fh[3]*c_in;
+    w->term[1][8] = w->fh[4]*c_in;
+    w->term[1][9] = w->fh[5]*c_in;
+    w->term[1][10] = w->fh[6]*c_in;
+    w->term[1][14] = w->fh[7]*c_in;
+    w->term[1][15] = c_out;
+    w->term[1][16] = w->fh[8]*c_in;
+    w->term[1][17] = w->fh[9]*c_in;
+    w->term[1][20] = w->fh[10]*c_in;
+    w->term[1][21] = w->fh[11]*c_in;
+    w->term[1][22] = w->fh[12]*c_in;
+    w->term[1][23] = w->fh[13]*c_in;
+    w->term[1][24] = w->fh[14]*c_in;
+    w->term[1][28] = w->fh[15]*c_in;
+    w->term[1][29] = w->fh[16]*c_in;
+    w->term[1][30] = c_out;
+    w->term[1][31] = w->fh[17]*c_in;
+    w->term[1][34] = w->fh[18]*c_in;
+    w->term[1][35] = w->fh[19]*c_in;
+    w->term[1][36] = w->fh[20]*c_in;
+    w->term[1][37] = w->fh[21]*c_in;
+    w->term[1][38] = w->fh[22]*c_in;
+    w->term[1][43] = w->fh[23]*c_in;
+    w->term[1][44] = w->fh[24]*c_in;
+    w->term[1][45] = c_out + w->fh[25]*c_in;
+    w->term[1][46] = w->fh[26]*c_in;
+    w->term[1][47] = w->fh[27]*c_in;
+    w->term[1][48] = w->fh[28]*c_in;
+    w->term[1][49] = w->fh[29]*c_in;
+    w->term[1][53] = w->fh[30]*c_in;
+    w->term[1][54] = w->fh[31]*c_in;
+    w->term[1][55] = w->fh[32]*c_in;
+    w->term[1][56] = w->fh[33]*c_in;
+    w->term[1][58] = w->fh[34]*c_in;
+    w->term[1][59] = w->fh[35]*c_in;
+    w->term[1][60] = c_out + w->fh[36]*c_in;
+    w->term[1][61] = w->fh[37]*c_in;
+    w->term[1][62] = w->fh[38]*c_in;
+    w->term[1][63] = w->fh[39]*c_in;
+    w->term[1][67] = w->fh[40]*c_in;
+    w->term[1][68] = w->fh[41]*c_in;
+    w->term[1][69] = w->fh[42]*c_in;
+    w->term[1][70] = w->fh[43]*c_in;
+    w->term[1][71] = w->fh[44]*c_in;
+    w->term[1][73] = w->fh[45]*c_in;
+    w->term[1][74] = w->fh[46]*c_in;
+    w->term[1][75] = c_out;
+    w->term[1][76] = w->fh[47]*c_in;
+    w->term[1][77] = w->fh[48]*c_in;
+    w->term[1][81] = w->fh[49]*c_in;
+    w->term[1][82] = w->fh[50]*c_in;
+    w->term[1][83] = w->fh[51]*c_in;
+    w->term[1][88] = w->fh[52]*c_in;
+    w->term[1][90] = c_out;
+    w->term[1][91] = w->fh[53]*c_in;
+    w->term[1][101] = w->fh[54]*c_in;
+    w->term[1][104] = w->fh[55]*c_in;
+    w->term[1][105] = c_out;
+    w->term[1][106] = w->fh[56]*c_in;
+    w->term[1][118] = w->fh[57]*c_in;
+    w->term[1][120] = c_out;
 }
 
-INS_GPS15_TWIN_BLOCK void taylor_order_3(ins_gps15_twin_transition *restrict t,
-        ins_gps15_twin_discretize_scratch *restrict w)
+INS_GPS15_TWIN_BLOCK void horner_level_2_into_S(ins_gps15_twin_discretize_scratch *restrict w, const
+        ins_gps15_twin_scalar c_out, const ins_gps15_twin_scalar c_in)
 {
-    const ins_gps15_twin_scalar ck = 1.0 / 6.0;
-    const ins_gps15_twin_scalar cs = 1.0 / 24.0;
-    w->term[1][0] = w->fh[0]*w->term[0][14] + w->fh[1]*w->term[0][28] + w->fh[2]*w->term[0][56] +
-            w->fh[3]*w->term[0][104];
-    w->term[1][1] = w->fh[0]*w->term[0][15] + w->fh[1]*w->term[0][29] + w->fh[2]*w->term[0][57] +
-            w->fh[3]*w->term[0][105];
-    w->term[1][2] = w->fh[0]*w->term[0][16] + w->fh[1]*w->term[0][30] + w->fh[2]*w->term[0][58];
-    w->term[1][3] = w->fh[0]*w->term[0][17] + w->fh[1]*w->term[0][31] + w->fh[2]*w->term[0][59] +
-            w->fh[3]*w->term[0][106];
-    w->term[1][4] = w->fh[0]*w->term[0][18] + w->fh[1]*w->term[0][32] + w->fh[2]*w->term[0][60] +
-            w->fh[3]*w->term[0][107];
-    w->term[1][5] = w->fh[0]*w->term[0][19] + w->fh[1]*w->term[0][33] + w->fh[2]*w->term[0][61];
-    w->term[1][6] = w->fh[0]*w->term[0][20] + w->fh[1]*w->term[0][34] + w->fh[2]*w->term[0][62] +
-            w->fh[3]*w->term[0][108];
-    w->term[1][7] = w->fh[0]*w->term[0][21] + w->fh[1]*w->term[0][35] + w->fh[2]*w->term[0][63] +
-            w->fh[3]*w->term[0][109];
-    w->term[1][8] = w->fh[0]*w->term[0][22] + w->fh[1]*w->term[0][36] + w->fh[2]*w->term[0][64];
-    w->term[1][9] = w->fh[0]*w->term[0][23] + w->fh[1]*w->term[0][37] + w->fh[2]*w->term[0][65];
-    w->term[1][10] = w->fh[0]*w->term[0][24] + w->fh[1]*w->term[0][38] + w->fh[2]*w->term[0][66];
-    w->term[1][11] = w->fh[0]*w->term[0][25] + w->fh[1]*w->term[0][39] + w->fh[2]*w->term[0][67] +
-            w->fh[3]*w->term[0][110];
-    w->term[1][12] = w->fh[0]*w->term[0][26] + w->fh[1]*w->term[0][40] + w->fh[2]*w->term[0][68] +
-            w->fh[3]*w->term[0][111];
-    w->term[1][13] = w->fh[0]*w->term[0][27] + w->fh[1]*w->term[0][41] + w->fh[2]*w->term[0][69] +
-            w->fh[3]*w->term[0][112];
-    w->term[1][14] = w->fh[7]*w->term[0][0] + w->fh[8]*w->term[0][28] + w->fh[9]*w->term[0][42] +
-            w->fh[10]*w->term[0][84] + w->fh[11]*w->term[0][104];
-    w->term[1][15] = w->fh[7]*w->term[0][1] + w->fh[8]*w->term[0][29] + w->fh[9]*w->term[0][43] +
-            w->fh[11]*w->term[0][105];
-    w->term[1][16] = w->fh[7]*w->term[0][2] + w->fh[8]*w->term[0][30] + w->fh[9]*w->term[0][44] +
-            w->fh[10]*w->term[0][85];
-    w->term[1][17] = w->fh[7]*w->term[0][3] + w->fh[8]*w->term[0][31] + w->fh[9]*w->term[0][45] +
-            w->fh[10]*w->term[0][86] + w->fh[11]*w->term[0][106];
-    w->term[1][18] = w->fh[7]*w->term[0][4] + w->fh[8]*w->term[0][32] + w->fh[9]*w->term[0][46] +
-            w->fh[10]*w->term[0][87] + w->fh[11]*w->term[0][107];
-    w->term[1][19] = w->fh[7]*w->term[0][5] + w->fh[8]*w->term[0][33] + w->fh[9]*w->term[0][47] +
-            w->fh[10]*w->term[0][88];
-    w->term[1][20] = w->fh[7]*w->term[0][6] + w->fh[8]*w->term[0][34] + w->fh[9]*w->term[0][48] +
-            w->fh[10]*w->term[0][89] + w->fh[11]*w->term[0][108];
-    w->term[1][21] = w->fh[7]*w->term[0][7] + w->fh[8]*w->term[0][35] + w->fh[9]*w->term[0][49] +
-            w->fh[10]*w->term[0][90] + w->fh[11]*w->term[0][109];
-    w->term[1][22] = w->fh[7]*w->term[0][8] + w->fh[8]*w->term[0][36] + w->fh[9]*w->term[0][50];
-    w->term[1][23] = w->fh[7]*w->term[0][9] + w->fh[8]*w->term[0][37] + w->fh[9]*w->term[0][51];
-    w->term[1][24] = w->fh[7]*w->term[0][10] + w->fh[8]*w->term[0][38] + w->fh[9]*w->term[0][52];
-    w->term[1][25] = w->fh[7]*w->term[0][11] + w->fh[8]*w->term[0][39] + w->fh[9]*w->term[0][53] +
-            w->fh[10]*w->term[0][91] + w->fh[11]*w->term[0][110];
-    w->term[1][26] = w->fh[7]*w->term[0][12] + w->fh[8]*w->term[0][40] + w->fh[9]*w->term[0][54] +
-            w->fh[10]*w->term[0][92] + w->fh[11]*w->term[0][111];
-    w->term[1][27] = w->fh[7]*w->term[0][13] + w->fh[8]*w->term[0][41] + w->fh[9]*w->term[0][55] +
-            w->fh[10]*w->term[0][93] + w->fh[11]*w->term[0][112];
-    w->term[1][28] = w->fh[15]*w->term[0][0] + w->fh[16]*w->term[0][14] + w->fh[17]*w->term[0][42] +
-            w->fh[18]*w->term[0][84] + w->fh[19]*w->term[0][104];
-    w->term[1][29] = w->fh[15]*w->term[0][1] + w->fh[16]*w->term[0][15] + w->fh[17]*w->term[0][43] +
-            w->fh[19]*w->term[0][105];
-    w->term[1][30] = w->fh[15]*w->term[0][2] + w->fh[16]*w->term[0][16] + w->fh[17]*w->term[0][44] +
-            w->fh[18]*w->term[0][85];
-    w->term[1][31] = w->fh[15]*w->term[0][3] + w->fh[16]*w->term[0][17] + w->fh[17]*w->term[0][45] +
-            w->fh[18]*w->term[0][86] + w->fh[19]*w->term[0][106];
-    w->term[1][32] = w->fh[15]*w->term[0][4] + w->fh[16]*w->term[0][18] + w->fh[17]*w->term[0][46] +
-            w->fh[18]*w->term[0][87] + w->fh[19]*w->term[0][107];
-    w->term[1][33] = w->fh[15]*w->term[0][5] + w->fh[16]*w->term[0][19] + w->fh[17]*w->term[0][47] +
-            w->fh[18]*w->term[0][88];
-    w->term[1][34] = w->fh[15]*w->term[0][6] + w->fh[16]*w->term[0][20] + w->fh[17]*w->term[0][48] +
-            w->fh[18]*w->term[0][89] + w->fh[19]*w->term[0][108];
-    w->term[1][35] = w->fh[15]*w->term[0][7] + w->fh[16]*w->term[0][21] + w->fh[17]*w->term[0][49] +
-            w->fh[18]*w->term[0][90] + w->fh[19]*w->term[0][109];
-    w->term[1][36] = w->fh[15]*w->term[0][8] + w->fh[16]*w->term[0][22] + w->fh[17]*w->term[0][50];
-    w->term[1][37] = w->fh[15]*w->term[0][9] + w->fh[16]*w->term[0][23] + w->fh[17]*w->term[0][51];
-    w->term[1][38] = w->fh[15]*w->term[0][10] + w->fh[16]*w->term[0][24] + w->fh[17]*w->term[0][52];
-    w->term[1][39] = w->fh[15]*w->term[0][11] + w->fh[16]*w->term[0][25] + w->fh[17]*w->term[0][53]
-            + w->fh[18]*w->term[0][91] + w->fh[19]*w->term[0][110];
-    w->term[1][40] = w->fh[15]*w->term[0][12] + w->fh[16]*w->term[0][26] + w->fh[17]*w->term[0][54]
-            + w->fh[18]*w->term[0][92] + w->fh[19]*w->term[0][111];
-    w->term[1][41] = w->fh[15]*w->term[0][13] + w->fh[16]*w->term[0][27] + w->fh[17]*w->term[0][55]
-            + w->fh[18]*w->term[0][93] + w->fh[19]*w->term[0][112];
-    w->term[1][42] = w->fh[23]*w->term[0][14] + w->fh[24]*w->term[0][28] + w->fh[25]*w->term[0][42]
-            + w->fh[26]*w->term[0][56] + w->fh[27]*w->term[0][70] + w->fh[28]*w->term[0][84] +
-            w->fh[29]*w->term[0][104];
-    w->term[1][43] = w->fh[23]*w->term[0][15] + w->fh[24]*w->term[0][29] + w->fh[25]*w->term[0][43]
-            + w->fh[26]*w->term[0][57] + w->fh[27]*w->term[0][71] + w->fh[29]*w->term[0][105];
-    w->term[1][44] = w->fh[23]*w->term[0][16] + w->fh[24]*w->term[0][30] + w->fh[25]*w->term[0][44]
-            + w->fh[26]*w->term[0][58] + w->fh[27]*w->term[0][72] + w->fh[28]*w->term[0][85];
-    w->term[1][45] = w->fh[23]*w->term[0][17] + w->fh[24]*w->term[0][31] + w->fh[25]*w->term[0][45]
-            + w->fh[26]*w->term[0][59] + w->fh[27]*w->term[0][73] + w->fh[28]*w->term[0][86] +
-            w->fh[29]*w->term[0][106];
-    w->term[1][46] = w->fh[23]*w->term[0][18] + w->fh[24]*w->term[0][32] + w->fh[25]*w->term[0][46]
-            + w->fh[26]*w->term[0][60] + w->fh[27]*w->term[0][74] + w->fh[28]*w->term[0][87] +
-            w->fh[29]*w->term[0][107];
-    w->term[1][47] = w->fh[23]*w->term[0][19] + w->fh[24]*w->term[0][33] + w->fh[25]*w->term[0][47]
-            + w->fh[26]*w->term[0][61] + w->fh[27]*w->term[0][75] + w->fh[28]*w->term[0][88];
-    w->term[1][48] = w->fh[23]*w->term[0][20] + w->fh[24]*w->term[0][34] + w->fh[25]*w->term[0][48]
-            + w->fh[26]*w->term[0][62] + w->fh[27]*w->term[0][76] + w->fh[28]*w->term[0][89] +
-            w->fh[29]*w->term[0][108];
-    w->term[1][49] = w->fh[23]*w->term[0][21] + w->fh[24]*w->term[0][35] + w->fh[25]*w->term[0][49]
-            + w->fh[26]*w->term[0][63] + w->fh[27]*w->term[0][77] + w->fh[28]*w->term[0][90] +
-            w->fh[29]*w->term[0][109];
-    w->term[1][50] = w->fh[23]*w->term[0][22] + w->fh[24]*w->term[0][36] + w->fh[25]*w->term[0][50]
-            + w->fh[26]*w->term[0][64] + w->fh[27]*w->term[0][78];
-    w->term[1][51] = w->fh[23]*w->term[0][23] + w->fh[24]*w->term[0][37] + w->fh[25]*w->term[0][51]
-            + w->fh[26]*w->term[0][65] + w->fh[27]*w->term[0][79];
-    w->term[1][52] = w->fh[23]*w->term[0][24] + w->fh[24]*w->term[0][38] + w->fh[25]*w->term[0][52]
-            + w->fh[26]*w->term[0][66] + w->fh[27]*w->term[0][80];
-    w->term[1][53] = w->fh[23]*w->term[0][25] + w->fh[24]*w->term[0][39] + w->fh[25]*w->term[0][53]
-            + w->fh[26]*w->term[0][67] + w->fh[27]*w->term[0][81] + w->fh[28]*w->term[0][91] +
-            w->fh[29]*w->term[0][110];
-    w->term[1][54] = w->fh[23]*w->term[0][26] + w->fh[24]*w->term[0][40] + w->fh[25]*w->term[0][54]
-            + w->fh[26]*w->term[0][68] + w->fh[27]*w->term[0][82] + w->fh[28]*w->term[0][92] +
-            w->fh[29]*w->term[0][111];
-    w->term[1][55] = w->fh[23]*w->term[0][27] + w->fh[24]*w->term[0][41] + w->fh[25]*w->term[0][55]
-            + w->fh[26]*w->term[0][69] + w->fh[27]*w->term[0][83] + w->fh[28]*w->term[0][93] +
-            w->fh[29]*w->term[0][112];
-    w->term[1][56] = w->fh[33]*w->term[0][0] + w->fh[34]*w->term[0][28] + w->fh[35]*w->term[0][42] +
-            w->fh[36]*w->term[0][56] + w->fh[37]*w->term[0][70] + w->fh[38]*w->term[0][84] +
-            w->fh[39]*w->term[0][104];
-    w->term[1][57] = w->fh[33]*w->term[0][1] + w->fh[34]*w->term[0][29] + w->fh[35]*w->term[0][43] +
-            w->fh[36]*w->term[0][57] + w->fh[37]*w->term[0][71] + w->fh[39]*w->term[0][105];
-    w->term[1][58] = w->fh[33]*w->term[0][2] + w->fh[34]*w->term[0][30] + w->fh[35]*w->term[0][44] +
-            w->fh[36]*w->term[0][58] + w->fh[37]*w->term[0][72] + w->fh[38]*w->term[0][85];
-    w->term[1][59] = w->fh[33]*w->term[0][3] + w->fh[34]*w->term[0][31] + w->fh[35]*w->term[0][45] +
-            w->fh[36]*w->term[0][59] + w->fh[37]*w->term[0][73] + w->fh[38]*w->term[0][86] +
-            w->fh[39]*w->term[0][106];
-    w->term[1][60] = w->fh[33]*w->term[0][4] + w->fh[34]*w->term[0][32] + w->fh[35]*w->term[0][46] +
-            w->fh[36]*w->term[0][60] + w->fh[37]*w->term[0][74] + w->fh[38]*w->term[0][87] +
-            w->fh[39]*w->term[0][107];
-    w->term[1][61] = w->fh[33]*w->term[0][5] + w->fh[34]*w->term[0][33] + w->fh[35]*w->term[0][47] +
-            w->fh[36]*w->term[0][61] + w->fh[37]*w->term[0][75] + w->fh[38]*w->term[0][88];
-    w->term[1][62] = w->fh[33]*w->term[0][6] + w->fh[34]*w->term[0][34] + w->fh[35]*w->term[0][48] +
-            w->fh[36]*w->term[0][62] + w->fh[37]*w->term[0][76] + w->fh[38]*w->term[0][89] +
-            w->fh[39]*w->term[0][108];
-    w->term[1][63] = w->fh[33]*w->term[0][7] + w->fh[34]*w->term[0][35] + w->fh[35]*w->term[0][49] +
-            w->fh[36]*w->term[0][63] + w->fh[37]*w->term[0][77] + w->fh[38]*w->term[0][90] +
-            w->fh[39]*w->term[0][109];
-    w->term[1][64] = w->fh[33]*w->term[0][8] + w->fh[34]*w->term[0][36] + w->fh[35]*w->term[0][50] +
-            w->fh[36]*w->term[0][64] + w->fh[37]*w->term[0][78];
-    w->term[1][65] = w->fh[33]*w->term[0][9] + w->fh[34]*w->term[0][37] + w->fh[35]*w->term[0][51] +
-            w->fh[36]*w->term[0][65] + w->fh[37]*w->term[0][79];
-    w->term[1][66] = w->fh[33]*w->term[0][10] + w->fh[34]*w->term[0][38] + w->fh[35]*w->term[0][52]
-            + w->fh[36]*w->term[0][66] + w->fh[37]*w->term[0][80];
-    w->term[1][67] = w->fh[33]*w->term[0][11] + w->fh[34]*w->term[0][39] + w->fh[35]*w->term[0][53]
-            + w->fh[36]*w->term[0][67] + w->fh[37]*w->term[0][81] + w->fh[38]*w->term[0][91] +
-            w->fh[39]*w->term[0][110];
-    w->term[1][68] = w->fh[33]*w->term[0][12] + w->fh[34]*w->term[0][40] + w->fh[35]*w->term[0][54]
-            + w->fh[36]*w->term[0][68] + w->fh[37]*w->term[0][82] + w->fh[38]*w->term[0][92] +
-            w->fh[39]*w->term[0][111];
-    w->term[1][69] = w->fh[33]*w->term[0][13] + w->fh[34]*w->term[0][41] + w->fh[35]*w->term[0][55]
-            + w->fh[36]*w->term[0][69] + w->fh[37]*w->term[0][83] + w->fh[38]*w->term[0][93] +
-            w->fh[39]*w->term[0][112];
-    w->term[1][70] = w->fh[43]*w->term[0][0] + w->fh[44]*w->term[0][14] + w->fh[45]*w->term[0][42] +
-            w->fh[46]*w->term[0][56] + w->fh[47]*w->term[0][84] + w->fh[48]*w->term[0][104];
-    w->term[1][71] = w->fh[43]*w->term[0][1] + w->fh[44]*w->term[0][15] + w->fh[45]*w->term[0][43] +
-            w->fh[46]*w->term[0][57] + w->fh[48]*w->term[0][105];
-    w->term[1][72] = w->fh[43]*w->term[0][2] + w->fh[44]*w->term[0][16] + w->fh[45]*w->term[0][44] +
-            w->fh[46]*w->term[0][58] + w->fh[47]*w->term[0][85];
-    w->term[1][73] = w->fh[43]*w->term[0][3] + w->fh[44]*w->term[0][17] + w->fh[45]*w->term[0][45] +
-            w->fh[46]*w->term[0][59] + w->fh[47]*w->term[0][86] + w->fh[48]*w->term[0][106];
-    w->term[1][74] = w->fh[43]*w->term[0][4] + w->fh[44]*w->term[0][18] + w->fh[45]*w->term[0][46] +
-            w->fh[46]*w->term[0][60] + w->fh[47]*w->term[0][87] + w->fh[48]*w->term[0][107];
-    w->term[1][75] = w->fh[43]*w->term[0][5] + w->fh[44]*w->term[0][19] + w->fh[45]*w->term[0][47] +
-            w->fh[46]*w->term[0][61] + w->fh[47]*w->term[0][88];
-    w->term[1][76] = w->fh[43]*w->term[0][6] + w->fh[44]*w->term[0][20] + w->fh[45]*w->term[0][48] +
-            w->fh[46]*w->term[0][62] + w->fh[47]*w->term[0][89] + w->fh[48]*w->term[0][108];
-    w->term[1][77] = w->fh[43]*w->term[0][7] + w->fh[44]*w->term[0][21] + w->fh[45]*w->term[0][49] +
-            w->fh[46]*w->term[0][63] + w->fh[47]*w->term[0][90] + w->fh[48]*w->term[0][109];
-    w->term[1][78] = w->fh[43]*w->term[0][8] + w->fh[44]*w->term[0][22] + w->fh[45]*w->term[0][50] +
-            w->fh[46]*w->term[0][64];
-    w->term[1][79] = w->fh[43]*w->term[0][9] + w->fh[44]*w->term[0][23] + w->fh[45]*w->term[0][51] +
-            w->fh[46]*w->term[0][65];
-    w->term[1][80] = w->fh[43]*w->term[0][10] + w->fh[44]*w->term[0][24] + w->fh[45]*w->term[0][52]
-            + w->fh[46]*w->term[0][66];
-    w->term[1][81] = w->fh[43]*w->term[0][11] + w->fh[44]*w->term[0][25] + w->fh[45]*w->term[0][53]
-            + w->fh[46]*w->term[0][67] + w->fh[47]*w->term[0][91] + w->fh[48]*w->term[0][110];
-    w->term[1][82] = w->fh[43]*w->term[0][12] + w->fh[44]*w->term[0][26] + w->fh[45]*w->term[0][54]
-            + w->fh[46]*w->term[0][68] + w->fh[47]*w->term[0][92] + w->fh[48]*w->term[0][111];
-    w->term[1][83] = w->fh[43]*w->term[0][13] + w->fh[44]*w->term[0][27] + w->fh[45]*w->term[0][55]
-            + w->fh[46]*w->term[0][69] + w->fh[47]*w->term[0][93] + w->fh[48]*w->term[0][112];
-    w->term[1][84] = w->fh[52]*w->term[0][56] + w->fh[53]*w->term[0][104];
-    w->term[1][85] = w->fh[52]*w->term[0][57] + w->fh[53]*w->term[0][105];
-    w->term[1][86] = w->fh[52]*w->term[0][58];
-    w->term[1][87] = w->fh[52]*w->term[0][59] + w->fh[53]*w->term[0][106];
-    w->term[1][88] = w->fh[52]*w->term[0][60] + w->fh[53]*w->term[0][107];
-    w->term[1][89] = w->fh[52]*w->term[0][61];
-    w->term[1][90] = w->fh[52]*w->term[0][62] + w->fh[53]*w->term[0][108];
-    w->term[1][91] = w->fh[52]*w->term[0][63] + w->fh[53]*w->term[0][109];
-    w->term[1][92] = w->fh[52]*w->term[0][64];
-    w->term[1][93] = w->fh[52]*w->term[0][65];
-    w->term[1][94] = w->fh[52]*w->term[0][66];
-    w->term[1][95] = w->fh[52]*w->term[0][67] + w->fh[53]*w->term[0][110];
-    w->term[1][96] = w->fh[52]*w->term[0][68] + w->fh[53]*w->term[0][111];
-    w->term[1][97] = w->fh[52]*w->term[0][69] + w->fh[53]*w->term[0][112];
-    w->term[1][98] = w->fh[54]*w->term[0][42] + w->fh[55]*w->term[0][84] +
-            w->fh[56]*w->term[0][104];
-    w->term[1][99] = w->fh[54]*w->term[0][43] + w->fh[56]*w->term[0][105];
-    w->term[1][100] = w->fh[54]*w->term[0][44] + w->fh[55]*w->term[0][85];
-    w->term[1][101] = w->fh[54]*w->term[0][45] + w->fh[55]*w->term[0][86] +
-            w->fh[56]*w->term[0][106];
-    w->term[1][102] = w->fh[54]*w->term[0][46] + w->fh[55]*w->term[0][87] +
-            w->fh[56]*w->term[0][107];
-    w->term[1][103] = w->fh[54]*w->term[0][47] + w->fh[55]*w->term[0][88];
-    w->term[1][104] = w->fh[54]*w->term[0][48] + w->fh[55]*w->term[0][89] +
-            w->fh[56]*w->term[0][108];
-    w->term[1][105] = w->fh[54]*w->term[0][49] + w->fh[55]*w->term[0][90] +
-            w->fh[56]*w->term[0][109];
-    w->term[1][106] = w->fh[54]*w->term[0][50];
-    w->term[1][107] = w->fh[54]*w->term[0][51];
-    w->term[1][108] = w->fh[54]*w->term[0][52];
-    w->term[1][109] = w->fh[54]*w->term[0][53] + w->fh[55]*w->term[0][91] +
-            w->fh[56]*w->term[0][110];
-    w->term[1][110] = w->fh[54]*w->term[0][54] + w->fh[55]*w->term[0][92] +
-            w->fh[56]*w->term[0][111];
-    w->term[1][111] = w->fh[54]*w->term[0][55] + w->fh[55]*w->term[0][93] +
-            w->fh[56]*w->term[0][112];
-    w->term[1][112] = w->fh[57]*w->term[0][70];
-    w->term[1][113] = w->fh[57]*w->term[0][71];
-    w->term[1][114] = w->fh[57]*w->term[0][72];
-    w->term[1][115] = w->fh[57]*w->term[0][73];
-    w->term[1][116] = w->fh[57]*w->term[0][74];
-    w->term[1][117] = w->fh[57]*w->term[0][75];
-    w->term[1][118] = w->fh[57]*w->term[0][76];
-    w->term[1][119] = w->fh[57]*w->term[0][77];
-    w->term[1][120] = w->fh[57]*w->term[0][78];
-    w->term[1][121] = w->fh[57]*w->term[0][79];
-    w->term[1][122] = w->fh[57]*w->term[0][80];
-    w->term[1][123] = w->fh[57]*w->term[0][81];
-    w->term[1][124] = w->fh[57]*w->term[0][82];
-    w->term[1][125] = w->fh[57]*w->term[0][83];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[1][0]*ck;
-    w->S[0] = w->S[0] + w->term[1][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[1][1]*ck;
-    w->S[1] = w->S[1] + w->term[1][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[1][2]*ck;
-    w->S[2] = w->S[2] + w->term[1][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[1][3]*ck;
-    w->S[3] = w->S[3] + w->term[1][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[1][4]*ck;
-    w->S[4] = w->S[4] + w->term[1][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[1][5]*ck;
-    w->S[5] = w->S[5] + w->term[1][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[1][6]*ck;
-    w->S[6] = w->S[6] + w->term[1][6]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[1][7]*ck;
-    w->S[7] = w->S[7] + w->term[1][7]*cs;
-    t->Phi[0][9] = t->Phi[0][9] + w->term[1][8]*ck;
-    w->S[8] = w->S[8] + w->term[1][8]*cs;
-    t->Phi[0][10] = t->Phi[0][10] + w->term[1][9]*ck;
-    w->S[9] = w->S[9] + w->term[1][9]*cs;
-    t->Phi[0][11] = t->Phi[0][11] + w->term[1][10]*ck;
-    w->S[10] = w->S[10] + w->term[1][10]*cs;
-    t->Phi[0][12] = t->Phi[0][12] + w->term[1][11]*ck;
-    w->S[11] = w->S[11] + w->term[1][11]*cs;
-    t->Phi[0][13] = t->Phi[0][13] + w->term[1][12]*ck;
-    w->S[12] = w->S[12] + w->term[1][12]*cs;
-    t->Phi[0][14] = t->Phi[0][14] + w->term[1][13]*ck;
-    w->S[13] = w->S[13] + w->term[1][13]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[1][14]*ck;
-    w->S[14] = w->S[14] + w->term[1][14]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[1][15]*ck;
-    w->S[15] = w->S[15] + w->term[1][15]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[1][16]*ck;
-    w->S[16] = w->S[16] + w->term[1][16]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[1][17]*ck;
-    w->S[17] = w->S[17] + w->term[1][17]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[1][18]*ck;
-    w->S[18] = w->S[18] + w->term[1][18]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[1][19]*ck;
-    w->S[19] = w->S[19] + w->term[1][19]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[1][20]*ck;
-    w->S[20] = w->S[20] + w->term[1][20]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[1][21]*ck;
-    w->S[21] = w->S[21] + w->term[1][21]*cs;
-    t->Phi[1][9] = t->Phi[1][9] + w->term[1][22]*ck;
-    w->S[22] = w->S[22] + w->term[1][22]*cs;
-    t->Phi[1][10] = t->Phi[1][10] + w->term[1][23]*ck;
-    w->S[23] = w->S[23] + w->term[1][23]*cs;
-    t->Phi[1][11] = t->Phi[1][11] + w->term[1][24]*ck;
-    w->S[24] = w->S[24] + w->term[1][24]*cs;
-    t->Phi[1][12] = t->Phi[1][12] + w->term[1][25]*ck;
-    w->S[25] = w->S[25] + w->term[1][25]*cs;
-    t->Phi[1][13] = t->Phi[1][13] + w->term[1][26]*ck;
-    w->S[26] = w->S[26] + w->term[1][26]*cs;
-    t->Phi[1][14] = t->Phi[1][14] + w->term[1][27]*ck;
-    w->S[27] = w->S[27] + w->term[1][27]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[1][28]*ck;
-    w->S[28] = w->S[28] + w->term[1][28]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[1][29]*ck;
-    w->S[29] = w->S[29] + w->term[1][29]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[1][30]*ck;
-    w->S[30] = w->S[30] + w->term[1][30]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[1][31]*ck;
-    w->S[31] = w->S[31] + w->term[1][31]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[1][32]*ck;
-    w->S[32] = w->S[32] + w->term[1][32]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[1][33]*ck;
-    w->S[33] = w->S[33] + w->term[1][33]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[1][34]*ck;
-    w->S[34] = w->S[34] + w->term[1][34]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[1][35]*ck;
-    w->S[35] = w->S[35] + w->term[1][35]*cs;
-    t->Phi[2][9] = t->Phi[2][9] + w->term[1][36]*ck;
-    w->S[36] = w->S[36] + w->term[1][36]*cs;
-    t->Phi[2][10] = t->Phi[2][10] + w->term[1][37]*ck;
-    w->S[37] = w->S[37] + w->term[1][37]*cs;
-    t->Phi[2][11] = t->Phi[2][11] + w->term[1][38]*ck;
-    w->S[38] = w->S[38] + w->term[1][38]*cs;
-    t->Phi[2][12] = t->Phi[2][12] + w->term[1][39]*ck;
-    w->S[39] = w->S[39] + w->term[1][39]*cs;
-    t->Phi[2][13] = t->Phi[2][13] + w->term[1][40]*ck;
-    w->S[40] = w->S[40] + w->term[1][40]*cs;
-    t->Phi[2][14] = t->Phi[2][14] + w->term[1][41]*ck;
-    w->S[41] = w->S[41] + w->term[1][41]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[1][42]*ck;
-    w->S[42] = w->S[42] + w->term[1][42]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[1][43]*ck;
-    w->S[43] = w->S[43] + w->term[1][43]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[1][44]*ck;
-    w->S[44] = w->S[44] + w->term[1][44]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[1][45]*ck;
-    w->S[45] = w->S[45] + w->term[1][45]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[1][46]*ck;
-    w->S[46] = w->S[46] + w->term[1][46]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[1][47]*ck;
-    w->S[47] = w->S[47] + w->term[1][47]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[1][48]*ck;
-    w->S[48] = w->S[48] + w->term[1][48]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[1][49]*ck;
-    w->S[49] = w->S[49] + w->term[1][49]*cs;
-    t->Phi[3][9] = t->Phi[3][9] + w->term[1][50]*ck;
-    w->S[50] = w->S[50] + w->term[1][50]*cs;
-    t->Phi[3][10] = t->Phi[3][10] + w->term[1][51]*ck;
-    w->S[51] = w->S[51] + w->term[1][51]*cs;
-    t->Phi[3][11] = t->Phi[3][11] + w->term[1][52]*ck;
-    w->S[52] = w->S[52] + w->term[1][52]*cs;
-    t->Phi[3][12] = t->Phi[3][12] + w->term[1][53]*ck;
-    w->S[53] = w->S[53] + w->term[1][53]*cs;
-    t->Phi[3][13] = t->Phi[3][13] + w->term[1][54]*ck;
-    w->S[54] = w->S[54] + w->term[1][54]*cs;
-    t->Phi[3][14] = t->Phi[3][14] + w->term[1][55]*ck;
-    w->S[55] = w->S[55] + w->term[1][55]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[1][56]*ck;
-    w->S[56] = w->S[56] + w->term[1][56]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[1][57]*ck;
-    w->S[57] = w->S[57] + w->term[1][57]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[1][58]*ck;
-    w->S[58] = w->S[58] + w->term[1][58]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[1][59]*ck;
-    w->S[59] = w->S[59] + w->term[1][59]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[1][60]*ck;
-    w->S[60] = w->S[60] + w->term[1][60]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[1][61]*ck;
-    w->S[61] = w->S[61] + w->term[1][61]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[1][62]*ck;
-    w->S[62] = w->S[62] + w->term[1][62]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[1][63]*ck;
-    w->S[63] = w->S[63] + w->term[1][63]*cs;
-    t->Phi[4][9] = t->Phi[4][9] + w->term[1][64]*ck;
-    w->S[64] = w->S[64] + w->term[1][64]*cs;
-    t->Phi[4][10] = t->Phi[4][10] + w->term[1][65]*ck;
-    w->S[65] = w->S[65] + w->term[1][65]*cs;
-    t->Phi[4][11] = t->Phi[4][11] + w->term[1][66]*ck;
-    w->S[66] = w->S[66] + w->term[1][66]*cs;
-    t->Phi[4][12] = t->Phi[4][12] + w->term[1][67]*ck;
-    w->S[67] = w->S[67] + w->term[1][67]*cs;
-    t->Phi[4][13] = t->Phi[4][13] + w->term[1][68]*ck;
-    w->S[68] = w->S[68] + w->term[1][68]*cs;
-    t->Phi[4][14] = t->Phi[4][14] + w->term[1][69]*ck;
-    w->S[69] = w->S[69] + w->term[1][69]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[1][70]*ck;
-    w->S[70] = w->S[70] + w->term[1][70]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[1][71]*ck;
-    w->S[71] = w->S[71] + w->term[1][71]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[1][72]*ck;
-    w->S[72] = w->S[72] + w->term[1][72]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[1][73]*ck;
-    w->S[73] = w->S[73] + w->term[1][73]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[1][74]*ck;
-    w->S[74] = w->S[74] + w->term[1][74]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[1][75]*ck;
-    w->S[75] = w->S[75] + w->term[1][75]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[1][76]*ck;
-    w->S[76] = w->S[76] + w->term[1][76]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[1][77]*ck;
-    w->S[77] = w->S[77] + w->term[1][77]*cs;
-    t->Phi[5][9] = t->Phi[5][9] + w->term[1][78]*ck;
-    w->S[78] = w->S[78] + w->term[1][78]*cs;
-    t->Phi[5][10] = t->Phi[5][10] + w->term[1][79]*ck;
-    w->S[79] = w->S[79] + w->term[1][79]*cs;
-    t->Phi[5][11] = t->Phi[5][11] + w->term[1][80]*ck;
-    w->S[80] = w->S[80] + w->term[1][80]*cs;
-    t->Phi[5][12] = t->Phi[5][12] + w->term[1][81]*ck;
-    w->S[81] = w->S[81] + w->term[1][81]*cs;
-    t->Phi[5][13] = t->Phi[5][13] + w->term[1][82]*ck;
-    w->S[82] = w->S[82] + w->term[1][82]*cs;
-    t->Phi[5][14] = t->Phi[5][14] + w->term[1][83]*ck;
-    w->S[83] = w->S[83] + w->term[1][83]*cs;
-    t->Phi[6][0] = t->Phi[6][0] + w->term[1][84]*ck;
-    w->S[84] = w->S[84] + w->term[1][84]*cs;
-    t->Phi[6][1] = t->Phi[6][1] + w->term[1][85]*ck;
-    w->S[85] = w->S[85] + w->term[1][85]*cs;
-    t->Phi[6][2] = t->Phi[6][2] + w->term[1][86]*ck;
-    w->S[86] = w->S[86] + w->term[1][86]*cs;
-    t->Phi[6][3] = t->Phi[6][3] + w->term[1][87]*ck;
-    w->S[87] = w->S[87] + w->term[1][87]*cs;
-    t->Phi[6][4] = t->Phi[6][4] + w->term[1][88]*ck;
-    w->S[88] = w->S[88] + w->term[1][88]*cs;
-    t->Phi[6][5] = t->Phi[6][5] + w->term[1][89]*ck;
-    w->S[89] = w->S[89] + w->term[1][89]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[1][90]*ck;
-    w->S[90] = w->S[90] + w->term[1][90]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[1][91]*ck;
-    w->S[91] = w->S[91] + w->term[1][91]*cs;
-    t->Phi[6][9] = t->Phi[6][9] + w->term[1][92]*ck;
-    w->S[92] = w->S[92] + w->term[1][92]*cs;
-    t->Phi[6][10] = t->Phi[6][10] + w->term[1][93]*ck;
-    w->S[93] = w->S[93] + w->term[1][93]*cs;
-    t->Phi[6][11] = t->Phi[6][11] + w->term[1][94]*ck;
-    w->S[94] = w->S[94] + w->term[1][94]*cs;
-    t->Phi[6][12] = t->Phi[6][12] + w->term[1][95]*ck;
-    w->S[95] = w->S[95] + w->term[1][95]*cs;
-    t->Phi[6][13] = t->Phi[6][13] + w->term[1][96]*ck;
-    w->S[96] = w->S[96] + w->term[1][96]*cs;
-    t->Phi[6][14] = t->Phi[6][14] + w->term[1][97]*ck;
-    w->S[97] = w->S[97] + w->term[1][97]*cs;
-    t->Phi[7][0] = t->Phi[7][0] + w->term[1][98]*ck;
-    w->S[98] = w->S[98] + w->term[1][98]*cs;
-    t->Phi[7][1] = t->Phi[7][1] + w->term[1][99]*ck;
-    w->S[99] = w->S[99] + w->term[1][99]*cs;
-    t->Phi[7][2] = t->Phi[7][2] + w->term[1][100]*ck;
-    w->S[100] = w->S[100] + w->term[1][100]*cs;
-    t->Phi[7][3] = t->Phi[7][3] + w->term[1][101]*ck;
-    w->S[101] = w->S[101] + w->term[1][101]*cs;
-    t->Phi[7][4] = t->Phi[7][4] + w->term[1][102]*ck;
-    w->S[102] = w->S[102] + w->term[1][102]*cs;
-    t->Phi[7][5] = t->Phi[7][5] + w->term[1][103]*ck;
-    w->S[103] = w->S[103] + w->term[1][103]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[1][104]*ck;
-    w->S[104] = w->S[104] + w->term[1][104]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[1][105]*ck;
-    w->S[106] = w->S[106] + w->term[1][105]*cs;
-    t->Phi[7][9] = t->Phi[7][9] + w->term[1][106]*ck;
-    w->S[107] = w->S[107] + w->term[1][106]*cs;
-    t->Phi[7][10] = t->Phi[7][10] + w->term[1][107]*ck;
-    w->S[108] = w->S[108] + w->term[1][107]*cs;
-    t->Phi[7][11] = t->Phi[7][11] + w->term[1][108]*ck;
-    w->S[109] = w->S[109] + w->term[1][108]*cs;
-    t->Phi[7][12] = t->Phi[7][12] + w->term[1][109]*ck;
-    w->S[110] = w->S[110] + w->term[1][109]*cs;
-    t->Phi[7][13] = t->Phi[7][13] + w->term[1][110]*ck;
-    w->S[111] = w->S[111] + w->term[1][110]*cs;
-    t->Phi[7][14] = t->Phi[7][14] + w->term[1][111]*ck;
-    w->S[112] = w->S[112] + w->term[1][111]*cs;
-    t->Phi[8][0] = t->Phi[8][0] + w->term[1][112]*ck;
-    w->S[113] = w->S[113] + w->term[1][112]*cs;
-    t->Phi[8][1] = t->Phi[8][1] + w->term[1][113]*ck;
-    w->S[114] = w->S[114] + w->term[1][113]*cs;
-    t->Phi[8][2] = t->Phi[8][2] + w->term[1][114]*ck;
-    w->S[115] = w->S[115] + w->term[1][114]*cs;
-    t->Phi[8][3] = t->Phi[8][3] + w->term[1][115]*ck;
-    w->S[116] = w->S[116] + w->term[1][115]*cs;
-    t->Phi[8][4] = t->Phi[8][4] + w->term[1][116]*ck;
-    w->S[117] = w->S[117] + w->term[1][116]*cs;
-    t->Phi[8][5] = t->Phi[8][5] + w->term[1][117]*ck;
-    w->S[118] = w->S[118] + w->term[1][117]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[1][118]*ck;
-    w->S[119] = w->S[119] + w->term[1][118]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[1][119]*ck;
-    w->S[120] = w->S[120] + w->term[1][119]*cs;
-    t->Phi[8][9] = t->Phi[8][9] + w->term[1][120]*ck;
-    w->S[121] = w->S[121] + w->term[1][120]*cs;
-    t->Phi[8][10] = t->Phi[8][10] + w->term[1][121]*ck;
-    w->S[122] = w->S[122] + w->term[1][121]*cs;
-    t->Phi[8][11] = t->Phi[8][11] + w->term[1][122]*ck;
-    w->S[123] = w->S[123] + w->term[1][122]*cs;
-    t->Phi[8][12] = t->Phi[8][12] + w->term[1][123]*ck;
-    w->S[124] = w->S[124] + w->term[1][123]*cs;
-    t->Phi[8][13] = t->Phi[8][13] + w->term[1][124]*ck;
-    w->S[125] = w->S[125] + w->term[1][124]*cs;
-    t->Phi[8][14] = t->Phi[8][14] + w->term[1][125]*ck;
-    w->S[126] = w->S[126] + w->term[1][125]*cs;
-}
-
-INS_GPS15_TWIN_BLOCK void taylor_order_4(ins_gps15_twin_transition *restrict t,
-        ins_gps15_twin_discretize_scratch *restrict w)
-{
-    const ins_gps15_twin_scalar ck = 1.0 / 24.0;
-    const ins_gps15_twin_scalar cs = 1.0 / 120.0;
-    w->term[0][0] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][28] + w->fh[2]*w->term[1][56] +
-            w->fh[3]*w->term[1][112];
-    w->term[0][1] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][29] + w->fh[2]*w->term[1][57] +
-            w->fh[3]*w->term[1][113];
-    w->term[0][2] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][30] + w->fh[2]*w->term[1][58] +
-            w->fh[3]*w->term[1][114];
-    w->term[0][3] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][31] + w->fh[2]*w->term[1][59] +
-            w->fh[3]*w->term[1][115];
-    w->term[0][4] = w->fh[0]*w->term[1][18] + w->fh[1]*w->term[1][32] + w->fh[2]*w->term[1][60] +
-            w->fh[3]*w->term[1][116];
-    w->term[0][5] = w->fh[0]*w->term[1][19] + w->fh[1]*w->term[1][33] + w->fh[2]*w->term[1][61] +
-            w->fh[3]*w->term[1][117];
-    w->term[0][6] = w->fh[0]*w->term[1][20] + w->fh[1]*w->term[1][34] + w->fh[2]*w->term[1][62] +
-            w->fh[3]*w->term[1][118];
-    w->term[0][7] = w->fh[0]*w->term[1][21] + w->fh[1]*w->term[1][35] + w->fh[2]*w->term[1][63] +
-            w->fh[3]*w->term[1][119];
-    w->term[0][8] = w->fh[0]*w->term[1][22] + w->fh[1]*w->term[1][36] + w->fh[2]*w->term[1][64] +
+    w->S[0] = c_out + w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][28] + w->fh[2]*w->term[1][56];
+    w->S[1] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][29];
+    w->S[2] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][30] + w->fh[2]*w->term[1][58];
+    w->S[3] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][31] + w->fh[2]*w->term[1][59];
+    w->S[4] = w->fh[2]*w->term[1][60];
+    w->S[5] = w->fh[2]*w->term[1][61] + w->fh[3]*w->term[1][118];
+    w->S[6] = w->fh[0]*w->term[1][20] + w->fh[1]*w->term[1][34] + w->fh[2]*w->term[1][62];
+    w->S[7] = w->fh[0]*w->term[1][21] + w->fh[1]*w->term[1][35] + w->fh[2]*w->term[1][63] +
             w->fh[3]*w->term[1][120];
-    w->term[0][9] = w->fh[0]*w->term[1][23] + w->fh[1]*w->term[1][37] + w->fh[2]*w->term[1][65] +
-            w->fh[3]*w->term[1][121];
-    w->term[0][10] = w->fh[0]*w->term[1][24] + w->fh[1]*w->term[1][38] + w->fh[2]*w->term[1][66] +
-            w->fh[3]*w->term[1][122];
-    w->term[0][11] = w->fh[0]*w->term[1][25] + w->fh[1]*w->term[1][39] + w->fh[2]*w->term[1][67] +
-            w->fh[3]*w->term[1][123];
-    w->term[0][12] = w->fh[0]*w->term[1][26] + w->fh[1]*w->term[1][40] + w->fh[2]*w->term[1][68] +
-            w->fh[3]*w->term[1][124];
-    w->term[0][13] = w->fh[0]*w->term[1][27] + w->fh[1]*w->term[1][41] + w->fh[2]*w->term[1][69] +
-            w->fh[3]*w->term[1][125];
-    w->term[0][14] = w->fh[7]*w->term[1][0] + w->fh[8]*w->term[1][28] + w->fh[9]*w->term[1][42] +
-            w->fh[10]*w->term[1][84] + w->fh[11]*w->term[1][112];
-    w->term[0][15] = w->fh[7]*w->term[1][1] + w->fh[8]*w->term[1][29] + w->fh[9]*w->term[1][43] +
-            w->fh[10]*w->term[1][85] + w->fh[11]*w->term[1][113];
-    w->term[0][16] = w->fh[7]*w->term[1][2] + w->fh[8]*w->term[1][30] + w->fh[9]*w->term[1][44] +
-            w->fh[10]*w->term[1][86] + w->fh[11]*w->term[1][114];
-    w->term[0][17] = w->fh[7]*w->term[1][3] + w->fh[8]*w->term[1][31] + w->fh[9]*w->term[1][45] +
-            w->fh[10]*w->term[1][87] + w->fh[11]*w->term[1][115];
-    w->term[0][18] = w->fh[7]*w->term[1][4] + w->fh[8]*w->term[1][32] + w->fh[9]*w->term[1][46] +
-            w->fh[10]*w->term[1][88] + w->fh[11]*w->term[1][116];
-    w->term[0][19] = w->fh[7]*w->term[1][5] + w->fh[8]*w->term[1][33] + w->fh[9]*w->term[1][47] +
-            w->fh[10]*w->term[1][89] + w->fh[11]*w->term[1][117];
-    w->term[0][20] = w->fh[7]*w->term[1][6] + w->fh[8]*w->term[1][34] + w->fh[9]*w->term[1][48] +
-            w->fh[10]*w->term[1][90] + w->fh[11]*w->term[1][118];
-    w->term[0][21] = w->fh[7]*w->term[1][7] + w->fh[8]*w->term[1][35] + w->fh[9]*w->term[1][49] +
-            w->fh[10]*w->term[1][91] + w->fh[11]*w->term[1][119];
-    w->term[0][22] = w->fh[7]*w->term[1][8] + w->fh[8]*w->term[1][36] + w->fh[9]*w->term[1][50] +
-            w->fh[10]*w->term[1][92] + w->fh[11]*w->term[1][120];
-    w->term[0][23] = w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][37] + w->fh[9]*w->term[1][51] +
-            w->fh[10]*w->term[1][93] + w->fh[11]*w->term[1][121];
-    w->term[0][24] = w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][38] + w->fh[9]*w->term[1][52] +
-            w->fh[10]*w->term[1][94] + w->fh[11]*w->term[1][122];
-    w->term[0][25] = w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][39] + w->fh[9]*w->term[1][53] +
-            w->fh[10]*w->term[1][95] + w->fh[11]*w->term[1][123];
-    w->term[0][26] = w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][40] + w->fh[9]*w->term[1][54] +
-            w->fh[10]*w->term[1][96] + w->fh[11]*w->term[1][124];
-    w->term[0][27] = w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][41] + w->fh[9]*w->term[1][55] +
-            w->fh[10]*w->term[1][97] + w->fh[11]*w->term[1][125];
-    w->term[0][28] = w->fh[15]*w->term[1][0] + w->fh[16]*w->term[1][14] + w->fh[17]*w->term[1][42] +
-            w->fh[18]*w->term[1][84] + w->fh[19]*w->term[1][112];
-    w->term[0][29] = w->fh[15]*w->term[1][1] + w->fh[16]*w->term[1][15] + w->fh[17]*w->term[1][43] +
-            w->fh[18]*w->term[1][85] + w->fh[19]*w->term[1][113];
-    w->term[0][30] = w->fh[15]*w->term[1][2] + w->fh[16]*w->term[1][16] + w->fh[17]*w->term[1][44] +
-            w->fh[18]*w->term[1][86] + w->fh[19]*w->term[1][114];
-    w->term[0][31] = w->fh[15]*w->term[1][3] + w->fh[16]*w->term[1][17] + w->fh[17]*w->term[1][45] +
-            w->fh[18]*w->term[1][87] + w->fh[19]*w->term[1][115];
-    w->term[0][32] = w->fh[15]*w->term[1][4] + w->fh[16]*w->term[1][18] + w->fh[17]*w->term[1][46] +
-            w->fh[18]*w->term[1][88] + w->fh[19]*w->term[1][116];
-    w->term[0][33] = w->fh[15]*w->term[1][5] + w->fh[16]*w->term[1][19] + w->fh[17]*w->term[1][47] +
-            w->fh[18]*w->term[1][89] + w->fh[19]*w->term[1][117];
-    w->term[0][34] = w->fh[15]*w->term[1][6] + w->fh[16]*w->term[1][20] + w->fh[17]*w->term[1][48] +
-            w->fh[18]*w->term[1][90] + w->fh[19]*w->term[1][118];
-    w->term[0][35] = w->fh[15]*w->term[1][7] + w->fh[16]*w->term[1][21] + w->fh[17]*w->term[1][49] +
-            w->fh[18]*w->term[1][91] + w->fh[19]*w->term[1][119];
-    w->term[0][36] = w->fh[15]*w->term[1][8] + w->fh[16]*w->term[1][22] + w->fh[17]*w->term[1][50] +
-            w->fh[18]*w->term[1][92] + w->fh[19]*w->term[1][120];
-    w->term[0][37] = w->fh[15]*w->term[1][9] + w->fh[16]*w->term[1][23] + w->fh[17]*w->term[1][51] +
-            w->fh[18]*w->term[1][93] + w->fh[19]*w->term[1][121];
-    w->term[0][38] = w->fh[15]*w->term[1][10] + w->fh[16]*w->term[1][24] + w->fh[17]*w->term[1][52]
-            + w->fh[18]*w->term[1][94] + w->fh[19]*w->term[1][122];
-    w->term[0][39] = w->fh[15]*w->term[1][11] + w->fh[16]*w->term[1][25] + w->fh[17]*w->term[1][53]
-            + w->fh[18]*w->term[1][95] + w->fh[19]*w->term[1][123];
-    w->term[0][40] = w->fh[15]*w->term[1][12] + w->fh[16]*w->term[1][26] + w->fh[17]*w->term[1][54]
-            + w->fh[18]*w->term[1][96] + w->fh[19]*w->term[1][124];
-    w->term[0][41] = w->fh[15]*w->term[1][13] + w->fh[16]*w->term[1][27] + w->fh[17]*w->term[1][55]
-            + w->fh[18]*w->term[1][97] + w->fh[19]*w->term[1][125];
-    w->term[0][42] = w->fh[23]*w->term[1][14] + w->fh[24]*w->term[1][28] + w->fh[25]*w->term[1][42]
-            + w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][70] + w->fh[28]*w->term[1][84] +
-            w->fh[29]*w->term[1][112];
-    w->term[0][43] = w->fh[23]*w->term[1][15] + w->fh[24]*w->term[1][29] + w->fh[25]*w->term[1][43]
-            + w->fh[26]*w->term[1][57] + w->fh[27]*w->term[1][71] + w->fh[28]*w->term[1][85] +
-            w->fh[29]*w->term[1][113];
-    w->term[0][44] = w->fh[23]*w->term[1][16] + w->fh[24]*w->term[1][30] + w->fh[25]*w->term[1][44]
-            + w->fh[26]*w->term[1][58] + w->fh[27]*w->term[1][72] + w->fh[28]*w->term[1][86] +
-            w->fh[29]*w->term[1][114];
-    w->term[0][45] = w->fh[23]*w->term[1][17] + w->fh[24]*w->term[1][31] + w->fh[25]*w->term[1][45]
-            + w->fh[26]*w->term[1][59] + w->fh[27]*w->term[1][73] + w->fh[28]*w->term[1][87] +
-            w->fh[29]*w->term[1][115];
-    w->term[0][46] = w->fh[23]*w->term[1][18] + w->fh[24]*w->term[1][32] + w->fh[25]*w->term[1][46]
-            + w->fh[26]*w->term[1][60] + w->fh[27]*w->term[1][74] + w->fh[28]*w->term[1][88] +
-            w->fh[29]*w->term[1][116];
-    w->term[0][47] = w->fh[23]*w->term[1][19] + w->fh[24]*w->term[1][33] + w->fh[25]*w->term[1][47]
-            + w->fh[26]*w->term[1][61] + w->fh[27]*w->term[1][75] + w->fh[28]*w->term[1][89] +
-            w->fh[29]*w->term[1][117];
-    w->term[0][48] = w->fh[23]*w->term[1][20] + w->fh[24]*w->term[1][34] + w->fh[25]*w->term[1][48]
-            + w->fh[26]*w->term[1][62] + w->fh[27]*w->term[1][76] + w->fh[28]*w->term[1][90] +
+    w->S[8] = w->fh[0]*w->term[1][22] + w->fh[1]*w->term[1][36] + w->fh[4]*c_in;
+    w->S[9] = w->fh[0]*w->term[1][23] + w->fh[1]*w->term[1][37] + w->fh[5]*c_in;
+    w->S[10] = w->fh[0]*w->term[1][24] + w->fh[1]*w->term[1][38] + w->fh[6]*c_in;
+    w->S[11] = w->fh[2]*w->term[1][67];
+    w->S[12] = w->fh[2]*w->term[1][68];
+    w->S[13] = w->fh[2]*w->term[1][69];
+    w->S[14] = w->fh[7]*w->term[1][0] + w->fh[8]*w->term[1][28];
+    w->S[15] = c_out + w->fh[7]*w->term[1][1] + w->fh[8]*w->term[1][29] + w->fh[9]*w->term[1][43];
+    w->S[16] = w->fh[7]*w->term[1][2] + w->fh[8]*w->term[1][30] + w->fh[9]*w->term[1][44];
+    w->S[17] = w->fh[8]*w->term[1][31] + w->fh[9]*w->term[1][45];
+    w->S[18] = w->fh[7]*w->term[1][4] + w->fh[9]*w->term[1][46] + w->fh[10]*w->term[1][88];
+    w->S[19] = w->fh[9]*w->term[1][47] + w->fh[11]*w->term[1][118];
+    w->S[20] = w->fh[8]*w->term[1][34] + w->fh[9]*w->term[1][48] + w->fh[10]*w->term[1][90];
+    w->S[21] = w->fh[7]*w->term[1][7] + w->fh[8]*w->term[1][35] + w->fh[9]*w->term[1][49] +
+            w->fh[10]*w->term[1][91] + w->fh[11]*w->term[1][120];
+    w->S[22] = w->fh[7]*w->term[1][8] + w->fh[8]*w->term[1][36] + w->fh[12]*c_in;
+    w->S[23] = w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][37] + w->fh[13]*c_in;
+    w->S[24] = w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][38] + w->fh[14]*c_in;
+    w->S[25] = w->fh[9]*w->term[1][53];
+    w->S[26] = w->fh[9]*w->term[1][54];
+    w->S[27] = w->fh[9]*w->term[1][55];
+    w->S[28] = w->fh[15]*w->term[1][0] + w->fh[16]*w->term[1][14];
+    w->S[29] = w->fh[15]*w->term[1][1] + w->fh[16]*w->term[1][15] + w->fh[17]*w->term[1][43];
+    w->S[30] = c_out + w->fh[15]*w->term[1][2] + w->fh[16]*w->term[1][16] +
+            w->fh[17]*w->term[1][44];
+    w->S[31] = w->fh[16]*w->term[1][17] + w->fh[17]*w->term[1][45];
+    w->S[32] = w->fh[15]*w->term[1][4] + w->fh[17]*w->term[1][46] + w->fh[18]*w->term[1][88];
+    w->S[33] = w->fh[17]*w->term[1][47] + w->fh[19]*w->term[1][118];
+    w->S[34] = w->fh[16]*w->term[1][20] + w->fh[17]*w->term[1][48] + w->fh[18]*w->term[1][90];
+    w->S[35] = w->fh[15]*w->term[1][7] + w->fh[16]*w->term[1][21] + w->fh[17]*w->term[1][49] +
+            w->fh[18]*w->term[1][91] + w->fh[19]*w->term[1][120];
+    w->S[36] = w->fh[15]*w->term[1][8] + w->fh[16]*w->term[1][22] + w->fh[20]*c_in;
+    w->S[37] = w->fh[15]*w->term[1][9] + w->fh[16]*w->term[1][23] + w->fh[21]*c_in;
+    w->S[38] = w->fh[15]*w->term[1][10] + w->fh[16]*w->term[1][24] + w->fh[22]*c_in;
+    w->S[39] = w->fh[17]*w->term[1][53];
+    w->S[40] = w->fh[17]*w->term[1][54];
+    w->S[41] = w->fh[17]*w->term[1][55];
+    w->S[42] = w->fh[23]*w->term[1][14] + w->fh[24]*w->term[1][28] + w->fh[26]*w->term[1][56] +
+            w->fh[27]*w->term[1][70];
+    w->S[43] = w->fh[23]*w->term[1][15] + w->fh[24]*w->term[1][29] + w->fh[25]*w->term[1][43] +
+            w->fh[27]*w->term[1][71];
+    w->S[44] = w->fh[23]*w->term[1][16] + w->fh[24]*w->term[1][30] + w->fh[25]*w->term[1][44] +
+            w->fh[26]*w->term[1][58];
+    w->S[45] = c_out + w->fh[23]*w->term[1][17] + w->fh[24]*w->term[1][31] +
+            w->fh[25]*w->term[1][45] + w->fh[26]*w->term[1][59] + w->fh[27]*w->term[1][73];
+    w->S[46] = w->fh[25]*w->term[1][46] + w->fh[26]*w->term[1][60] + w->fh[27]*w->term[1][74] +
+            w->fh[28]*w->term[1][88];
+    w->S[47] = w->fh[25]*w->term[1][47] + w->fh[26]*w->term[1][61] + w->fh[27]*w->term[1][75] +
             w->fh[29]*w->term[1][118];
-    w->term[0][49] = w->fh[23]*w->term[1][21] + w->fh[24]*w->term[1][35] + w->fh[25]*w->term[1][49]
-            + w->fh[26]*w->term[1][63] + w->fh[27]*w->term[1][77] + w->fh[28]*w->term[1][91] +
-            w->fh[29]*w->term[1][119];
-    w->term[0][50] = w->fh[23]*w->term[1][22] + w->fh[24]*w->term[1][36] + w->fh[25]*w->term[1][50]
-            + w->fh[26]*w->term[1][64] + w->fh[27]*w->term[1][78] + w->fh[28]*w->term[1][92] +
+    w->S[48] = w->fh[23]*w->term[1][20] + w->fh[24]*w->term[1][34] + w->fh[25]*w->term[1][48] +
+            w->fh[26]*w->term[1][62] + w->fh[27]*w->term[1][76] + w->fh[28]*w->term[1][90];
+    w->S[49] = w->fh[23]*w->term[1][21] + w->fh[24]*w->term[1][35] + w->fh[25]*w->term[1][49] +
+            w->fh[26]*w->term[1][63] + w->fh[27]*w->term[1][77] + w->fh[28]*w->term[1][91] +
             w->fh[29]*w->term[1][120];
-    w->term[0][51] = w->fh[23]*w->term[1][23] + w->fh[24]*w->term[1][37] + w->fh[25]*w->term[1][51]
-            + w->fh[26]*w->term[1][65] + w->fh[27]*w->term[1][79] + w->fh[28]*w->term[1][93] +
-            w->fh[29]*w->term[1][121];
-    w->term[0][52] = w->fh[23]*w->term[1][24] + w->fh[24]*w->term[1][38] + w->fh[25]*w->term[1][52]
-            + w->fh[26]*w->term[1][66] + w->fh[27]*w->term[1][80] + w->fh[28]*w->term[1][94] +
-            w->fh[29]*w->term[1][122];
-    w->term[0][53] = w->fh[23]*w->term[1][25] + w->fh[24]*w->term[1][39] + w->fh[25]*w->term[1][53]
-            + w->fh[26]*w->term[1][67] + w->fh[27]*w->term[1][81] + w->fh[28]*w->term[1][95] +
-            w->fh[29]*w->term[1][123];
-    w->term[0][54] = w->fh[23]*w->term[1][26] + w->fh[24]*w->term[1][40] + w->fh[25]*w->term[1][54]
-            + w->fh[26]*w->term[1][68] + w->fh[27]*w->term[1][82] + w->fh[28]*w->term[1][96] +
-            w->fh[29]*w->term[1][124];
-    w->term[0][55] = w->fh[23]*w->term[1][27] + w->fh[24]*w->term[1][41] + w->fh[25]*w->term[1][55]
-            + w->fh[26]*w->term[1][69] + w->fh[27]*w->term[1][83] + w->fh[28]*w->term[1][97] +
-            w->fh[29]*w->term[1][125];
-    w->term[0][56] = w->fh[33]*w->term[1][0] + w->fh[34]*w->term[1][28] + w->fh[35]*w->term[1][42] +
-            w->fh[36]*w->term[1][56] + w->fh[37]*w->term[1][70] + w->fh[38]*w->term[1][84] +
-            w->fh[39]*w->term[1][112];
-    w->term[0][57] = w->fh[33]*w->term[1][1] + w->fh[34]*w->term[1][29] + w->fh[35]*w->term[1][43] +
-            w->fh[36]*w->term[1][57] + w->fh[37]*w->term[1][71] + w->fh[38]*w->term[1][85] +
-            w->fh[39]*w->term[1][113];
-    w->term[0][58] = w->fh[33]*w->term[1][2] + w->fh[34]*w->term[1][30] + w->fh[35]*w->term[1][44] +
-            w->fh[36]*w->term[1][58] + w->fh[37]*w->term[1][72] + w->fh[38]*w->term[1][86] +
-            w->fh[39]*w->term[1][114];
-    w->term[0][59] = w->fh[33]*w->term[1][3] + w->fh[34]*w->term[1][31] + w->fh[35]*w->term[1][45] +
-            w->fh[36]*w->term[1][59] + w->fh[37]*w->term[1][73] + w->fh[38]*w->term[1][87] +
-            w->fh[39]*w->term[1][115];
-    w->term[0][60] = w->fh[33]*w->term[1][4] + w->fh[34]*w->term[1][32] + w->fh[35]*w->term[1][46] +
-            w->fh[36]*w->term[1][60] + w->fh[37]*w->term[1][74] + w->fh[38]*w->term[1][88] +
-            w->fh[39]*w->term[1][116];
-    w->term[0][61] = w->fh[33]*w->term[1][5] + w->fh[34]*w->term[1][33] + w->fh[35]*w->term[1][47] +
-            w->fh[36]*w->term[1][61] + w->fh[37]*w->term[1][75] + w->fh[38]*w->term[1][89] +
-            w->fh[39]*w->term[1][117];
-    w->term[0][62] = w->fh[33]*w->term[1][6] + w->fh[34]*w->term[1][34] + w->fh[35]*w->term[1][48] +
-            w->fh[36]*w->term[1][62] + w->fh[37]*w->term[1][76] + w->fh[38]*w->term[1][90] +
+    w->S[50] = w->fh[23]*w->term[1][22] + w->fh[24]*w->term[1][36];
+    w->S[51] = w->fh[23]*w->term[1][23] + w->fh[24]*w->term[1][37];
+    w->S[52] = w->fh[23]*w->term[1][24] + w->fh[24]*w->term[1][38];
+    w->S[53] = w->fh[25]*w->term[1][53] + w->fh[26]*w->term[1][67] + w->fh[27]*w->term[1][81] +
+            w->fh[30]*c_in;
+    w->S[54] = w->fh[25]*w->term[1][54] + w->fh[26]*w->term[1][68] + w->fh[27]*w->term[1][82] +
+            w->fh[31]*c_in;
+    w->S[55] = w->fh[25]*w->term[1][55] + w->fh[26]*w->term[1][69] + w->fh[27]*w->term[1][83] +
+            w->fh[32]*c_in;
+    w->S[56] = w->fh[33]*w->term[1][0] + w->fh[34]*w->term[1][28] + w->fh[36]*w->term[1][56] +
+            w->fh[37]*w->term[1][70];
+    w->S[57] = w->fh[33]*w->term[1][1] + w->fh[34]*w->term[1][29] + w->fh[35]*w->term[1][43] +
+            w->fh[37]*w->term[1][71];
+    w->S[58] = w->fh[33]*w->term[1][2] + w->fh[34]*w->term[1][30] + w->fh[35]*w->term[1][44] +
+            w->fh[36]*w->term[1][58];
+    w->S[59] = w->fh[34]*w->term[1][31] + w->fh[35]*w->term[1][45] + w->fh[36]*w->term[1][59] +
+            w->fh[37]*w->term[1][73];
+    w->S[60] = c_out + w->fh[33]*w->term[1][4] + w->fh[35]*w->term[1][46] + w->fh[36]*w->term[1][60]
+            + w->fh[37]*w->term[1][74] + w->fh[38]*w->term[1][88];
+    w->S[61] = w->fh[35]*w->term[1][47] + w->fh[36]*w->term[1][61] + w->fh[37]*w->term[1][75] +
             w->fh[39]*w->term[1][118];
-    w->term[0][63] = w->fh[33]*w->term[1][7] + w->fh[34]*w->term[1][35] + w->fh[35]*w->term[1][49] +
+    w->S[62] = w->fh[34]*w->term[1][34] + w->fh[35]*w->term[1][48] + w->fh[36]*w->term[1][62] +
+            w->fh[37]*w->term[1][76] + w->fh[38]*w->term[1][90];
+    w->S[63] = w->fh[33]*w->term[1][7] + w->fh[34]*w->term[1][35] + w->fh[35]*w->term[1][49] +
             w->fh[36]*w->term[1][63] + w->fh[37]*w->term[1][77] + w->fh[38]*w->term[1][91] +
-            w->fh[39]*w->term[1][119];
-    w->term[0][64] = w->fh[33]*w->term[1][8] + w->fh[34]*w->term[1][36] + w->fh[35]*w->term[1][50] +
-            w->fh[36]*w->term[1][64] + w->fh[37]*w->term[1][78] + w->fh[38]*w->term[1][92] +
             w->fh[39]*w->term[1][120];
-    w->term[0][65] = w->fh[33]*w->term[1][9] + w->fh[34]*w->term[1][37] + w->fh[35]*w->term[1][51] +
-            w->fh[36]*w->term[1][65] + w->fh[37]*w->term[1][79] + w->fh[38]*w->term[1][93] +
-            w->fh[39]*w->term[1][121];
-    w->term[0][66] = w->fh[33]*w->term[1][10] + w->fh[34]*w->term[1][38] + w->fh[35]*w->term[1][52]
-            + w->fh[36]*w->term[1][66] + w->fh[37]*w->term[1][80] + w->fh[38]*w->term[1][94] +
-            w->fh[39]*w->term[1][122];
-    w->term[0][67] = w->fh[33]*w->term[1][11] + w->fh[34]*w->term[1][39] + w->fh[35]*w->term[1][53]
-            + w->fh[36]*w->term[1][67] + w->fh[37]*w->term[1][81] + w->fh[38]*w->term[1][95] +
-            w->fh[39]*w->term[1][123];
-    w->term[0][68] = w->fh[33]*w->term[1][12] + w->fh[34]*w->term[1][40] + w->fh[35]*w->term[1][54]
-            + w->fh[36]*w->term[1][68] + w->fh[37]*w->term[1][82] + w->fh[38]*w->term[1][96] +
-            w->fh[39]*w->term[1][124];
-    w->term[0][69] = w->fh[33]*w->term[1][13] + w->fh[34]*w->term[1][41] + w->fh[35]*w->term[1][55]
-            + w->fh[36]*w->term[1][69] + w->fh[37]*w->term[1][83] + w->fh[38]*w->term[1][97] +
-            w->fh[39]*w->term[1][125];
-    w->term[0][70] = w->fh[43]*w->term[1][0] + w->fh[44]*w->term[1][14] + w->fh[45]*w->term[1][42] +
-            w->fh[46]*w->term[1][56] + w->fh[47]*w->term[1][84] + w->fh[48]*w->term[1][112];
-    w->term[0][71] = w->fh[43]*w->term[1][1] + w->fh[44]*w->term[1][15] + w->fh[45]*w->term[1][43] +
-            w->fh[46]*w->term[1][57] + w->fh[47]*w->term[1][85] + w->fh[48]*w->term[1][113];
-    w->term[0][72] = w->fh[43]*w->term[1][2] + w->fh[44]*w->term[1][16] + w->fh[45]*w->term[1][44] +
-            w->fh[46]*w->term[1][58] + w->fh[47]*w->term[1][86] + w->fh[48]*w->term[1][114];
-    w->term[0][73] = w->fh[43]*w->term[1][3] + w->fh[44]*w->term[1][17] + w->fh[45]*w->term[1][45] +
-            w->fh[46]*w->term[1][59] + w->fh[47]*w->term[1][87] + w->fh[48]*w->term[1][115];
-    w->term[0][74] = w->fh[43]*w->term[1][4] + w->fh[44]*w->term[1][18] + w->fh[45]*w->term[1][46] +
-            w->fh[46]*w->term[1][60] + w->fh[47]*w->term[1][88] + w->fh[48]*w->term[1][116];
-    w->term[0][75] = w->fh[43]*w->term[1][5] + w->fh[44]*w->term[1][19] + w->fh[45]*w->term[1][47] +
-            w->fh[46]*w->term[1][61] + w->fh[47]*w->term[1][89] + w->fh[48]*w->term[1][117];
-    w->term[0][76] = w->fh[43]*w->term[1][6] + w->fh[44]*w->term[1][20] + w->fh[45]*w->term[1][48] +
-            w->fh[46]*w->term[1][62] + w->fh[47]*w->term[1][90] + w->fh[48]*w->term[1][118];
-    w->term[0][77] = w->fh[43]*w->term[1][7] + w->fh[44]*w->term[1][21] + w->fh[45]*w->term[1][49] +
-            w->fh[46]*w->term[1][63] + w->fh[47]*w->term[1][91] + w->fh[48]*w->term[1][119];
-    w->term[0][78] = w->fh[43]*w->term[1][8] + w->fh[44]*w->term[1][22] + w->fh[45]*w->term[1][50] +
-            w->fh[46]*w->term[1][64] + w->fh[47]*w->term[1][92] + w->fh[48]*w->term[1][120];
-    w->term[0][79] = w->fh[43]*w->term[1][9] + w->fh[44]*w->term[1][23] + w->fh[45]*w->term[1][51] +
-            w->fh[46]*w->term[1][65] + w->fh[47]*w->term[1][93] + w->fh[48]*w->term[1][121];
-    w->term[0][80] = w->fh[43]*w->term[1][10] + w->fh[44]*w->term[1][24] + w->fh[45]*w->term[1][52]
-            + w->fh[46]*w->term[1][66] + w->fh[47]*w->term[1][94] + w->fh[48]*w->term[1][122];
-    w->term[0][81] = w->fh[43]*w->term[1][11] + w->fh[44]*w->term[1][25] + w->fh[45]*w->term[1][53]
-            + w->fh[46]*w->term[1][67] + w->fh[47]*w->term[1][95] + w->fh[48]*w->term[1][123];
-    w->term[0][82] = w->fh[43]*w->term[1][12] + w->fh[44]*w->term[1][26] + w->fh[45]*w->term[1][54]
-            + w->fh[46]*w->term[1][68] + w->fh[47]*w->term[1][96] + w->fh[48]*w->term[1][124];
-    w->term[0][83] = w->fh[43]*w->term[1][13] + w->fh[44]*w->term[1][27] + w->fh[45]*w->term[1][55]
-            + w->fh[46]*w->term[1][69] + w->fh[47]*w->term[1][97] + w->fh[48]*w->term[1][125];
-    w->term[0][84] = w->fh[52]*w->term[1][56] + w->fh[53]*w->term[1][112];
-    w->term[0][85] = w->fh[52]*w->term[1][57] + w->fh[53]*w->term[1][113];
-    w->term[0][86] = w->fh[52]*w->term[1][58] + w->fh[53]*w->term[1][114];
-    w->term[0][87] = w->fh[52]*w->term[1][59] + w->fh[53]*w->term[1][115];
-    w->term[0][88] = w->fh[52]*w->term[1][60] + w->fh[53]*w->term[1][116];
-    w->term[0][89] = w->fh[52]*w->term[1][61] + w->fh[53]*w->term[1][117];
-    w->term[0][90] = w->fh[52]*w->term[1][62] + w->fh[53]*w->term[1][118];
-    w->term[0][91] = w->fh[52]*w->term[1][63] + w->fh[53]*w->term[1][119];
-    w->term[0][92] = w->fh[52]*w->term[1][64] + w->fh[53]*w->term[1][120];
-    w->term[0][93] = w->fh[52]*w->term[1][65] + w->fh[53]*w->term[1][121];
-    w->term[0][94] = w->fh[52]*w->term[1][66] + w->fh[53]*w->term[1][122];
-    w->term[0][95] = w->fh[52]*w->term[1][67] + w->fh[53]*w->term[1][123];
-    w->term[0][96] = w->fh[52]*w->term[1][68] + w->fh[53]*w->term[1][124];
-    w->term[0][97] = w->fh[52]*w->term[1][69] + w->fh[53]*w->term[1][125];
-    w->term[0][98] = w->fh[54]*w->term[1][42] + w->fh[55]*w->term[1][84] +
-            w->fh[56]*w->term[1][112];
-    w->term[0][99] = w->fh[54]*w->term[1][43] + w->fh[55]*w->term[1][85] +
-            w->fh[56]*w->term[1][113];
-    w->term[0][100] = w->fh[54]*w->term[1][44] + w->fh[55]*w->term[1][86] +
-            w->fh[56]*w->term[1][114];
-    w->term[0][101] = w->fh[54]*w->term[1][45] + w->fh[55]*w->term[1][87] +
-            w->fh[56]*w->term[1][115];
-    w->term[0][102] = w->fh[54]*w->term[1][46] + w->fh[55]*w->term[1][88] +
-            w->fh[56]*w->term[1][116];
-    w->term[0][103] = w->fh[54]*w->term[1][47] + w->fh[55]*w->term[1][89] +
-            w->fh[56]*w->term[1][117];
-    w->term[0][104] = w->fh[54]*w->term[1][48] + w->fh[55]*w->term[1][90] +
-            w->fh[56]*w->term[1][118];
-    w->term[0][105] = w->fh[54]*w->term[1][49] + w->fh[55]*w->term[1][91] +
-            w->fh[56]*w->term[1][119];
-    w->term[0][106] = w->fh[54]*w->term[1][50] + w->fh[55]*w->term[1][92] +
-            w->fh[56]*w->term[1][120];
-    w->term[0][107] = w->fh[54]*w->term[1][51] + w->fh[55]*w->term[1][93] +
-            w->fh[56]*w->term[1][121];
-    w->term[0][108] = w->fh[54]*w->term[1][52] + w->fh[55]*w->term[1][94] +
-            w->fh[56]*w->term[1][122];
-    w->term[0][109] = w->fh[54]*w->term[1][53] + w->fh[55]*w->term[1][95] +
-            w->fh[56]*w->term[1][123];
-    w->term[0][110] = w->fh[54]*w->term[1][54] + w->fh[55]*w->term[1][96] +
-            w->fh[56]*w->term[1][124];
-    w->term[0][111] = w->fh[54]*w->term[1][55] + w->fh[55]*w->term[1][97] +
-            w->fh[56]*w->term[1][125];
-    w->term[0][112] = w->fh[57]*w->term[1][70];
-    w->term[0][113] = w->fh[57]*w->term[1][71];
-    w->term[0][114] = w->fh[57]*w->term[1][72];
-    w->term[0][115] = w->fh[57]*w->term[1][73];
-    w->term[0][116] = w->fh[57]*w->term[1][74];
-    w->term[0][117] = w->fh[57]*w->term[1][75];
-    w->term[0][118] = w->fh[57]*w->term[1][76];
-    w->term[0][119] = w->fh[57]*w->term[1][77];
-    w->term[0][120] = w->fh[57]*w->term[1][78];
-    w->term[0][121] = w->fh[57]*w->term[1][79];
-    w->term[0][122] = w->fh[57]*w->term[1][80];
-    w->term[0][123] = w->fh[57]*w->term[1][81];
-    w->term[0][124] = w->fh[57]*w->term[1][82];
-    w->term[0][125] = w->fh[57]*w->term[1][83];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[0][0]*ck;
-    w->S[0] = w->S[0] + w->term[0][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[0][1]*ck;
-    w->S[1] = w->S[1] + w->term[0][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[0][2]*ck;
-    w->S[2] = w->S[2] + w->term[0][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[0][3]*ck;
-    w->S[3] = w->S[3] + w->term[0][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[0][4]*ck;
-    w->S[4] = w->S[4] + w->term[0][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[0][5]*ck;
-    w->S[5] = w->S[5] + w->term[0][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[0][6]*ck;
-    w->S[6] = w->S[6] + w->term[0][6]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[0][7]*ck;
-    w->S[7] = w->S[7] + w->term[0][7]*cs;
-    t->Phi[0][9] = t->Phi[0][9] + w->term[0][8]*ck;
-    w->S[8] = w->S[8] + w->term[0][8]*cs;
-    t->Phi[0][10] = t->Phi[0][10] + w->term[0][9]*ck;
-    w->S[9] = w->S[9] + w->term[0][9]*cs;
-    t->Phi[0][11] = t->Phi[0][11] + w->term[0][10]*ck;
-    w->S[10] = w->S[10] + w->term[0][10]*cs;
-    t->Phi[0][12] = t->Phi[0][12] + w->term[0][11]*ck;
-    w->S[11] = w->S[11] + w->term[0][11]*cs;
-    t->Phi[0][13] = t->Phi[0][13] + w->term[0][12]*ck;
-    w->S[12] = w->S[12] + w->term[0][12]*cs;
-    t->Phi[0][14] = t->Phi[0][14] + w->term[0][13]*ck;
-    w->S[13] = w->S[13] + w->term[0][13]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[0][14]*ck;
-    w->S[14] = w->S[14] + w->term[0][14]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[0][15]*ck;
-    w->S[15] = w->S[15] + w->term[0][15]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[0][16]*ck;
-    w->S[16] = w->S[16] + w->term[0][16]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[0][17]*ck;
-    w->S[17] = w->S[17] + w->term[0][17]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[0][18]*ck;
-    w->S[18] = w->S[18] + w->term[0][18]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[0][19]*ck;
-    w->S[19] = w->S[19] + w->term[0][19]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[0][20]*ck;
-    w->S[20] = w->S[20] + w->term[0][20]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[0][21]*ck;
-    w->S[21] = w->S[21] + w->term[0][21]*cs;
-    t->Phi[1][9] = t->Phi[1][9] + w->term[0][22]*ck;
-    w->S[22] = w->S[22] + w->term[0][22]*cs;
-    t->Phi[1][10] = t->Phi[1][10] + w->term[0][23]*ck;
-    w->S[23] = w->S[23] + w->term[0][23]*cs;
-    t->Phi[1][11] = t->Phi[1][11] + w->term[0][24]*ck;
-    w->S[24] = w->S[24] + w->term[0][24]*cs;
-    t->Phi[1][12] = t->Phi[1][12] + w->term[0][25]*ck;
-    w->S[25] = w->S[25] + w->term[0][25]*cs;
-    t->Phi[1][13] = t->Phi[1][13] + w->term[0][26]*ck;
-    w->S[26] = w->S[26] + w->term[0][26]*cs;
-    t->Phi[1][14] = t->Phi[1][14] + w->term[0][27]*ck;
-    w->S[27] = w->S[27] + w->term[0][27]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[0][28]*ck;
-    w->S[28] = w->S[28] + w->term[0][28]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[0][29]*ck;
-    w->S[29] = w->S[29] + w->term[0][29]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[0][30]*ck;
-    w->S[30] = w->S[30] + w->term[0][30]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[0][31]*ck;
-    w->S[31] = w->S[31] + w->term[0][31]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[0][32]*ck;
-    w->S[32] = w->S[32] + w->term[0][32]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[0][33]*ck;
-    w->S[33] = w->S[33] + w->term[0][33]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[0][34]*ck;
-    w->S[34] = w->S[34] + w->term[0][34]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[0][35]*ck;
-    w->S[35] = w->S[35] + w->term[0][35]*cs;
-    t->Phi[2][9] = t->Phi[2][9] + w->term[0][36]*ck;
-    w->S[36] = w->S[36] + w->term[0][36]*cs;
-    t->Phi[2][10] = t->Phi[2][10] + w->term[0][37]*ck;
-    w->S[37] = w->S[37] + w->term[0][37]*cs;
-    t->Phi[2][11] = t->Phi[2][11] + w->term[0][38]*ck;
-    w->S[38] = w->S[38] + w->term[0][38]*cs;
-    t->Phi[2][12] = t->Phi[2][12] + w->term[0][39]*ck;
-    w->S[39] = w->S[39] + w->term[0][39]*cs;
-    t->Phi[2][13] = t->Phi[2][13] + w->term[0][40]*ck;
-    w->S[40] = w->S[40] + w->term[0][40]*cs;
-    t->Phi[2][14] = t->Phi[2][14] + w->term[0][41]*ck;
-    w->S[41] = w->S[41] + w->term[0][41]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[0][42]*ck;
-    w->S[42] = w->S[42] + w->term[0][42]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[0][43]*ck;
-    w->S[43] = w->S[43] + w->term[0][43]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[0][44]*ck;
-    w->S[44] = w->S[44] + w->term[0][44]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[0][45]*ck;
-    w->S[45] = w->S[45] + w->term[0][45]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[0][46]*ck;
-    w->S[46] = w->S[46] + w->term[0][46]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[0][47]*ck;
-    w->S[47] = w->S[47] + w->term[0][47]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[0][48]*ck;
-    w->S[48] = w->S[48] + w->term[0][48]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[0][49]*ck;
-    w->S[49] = w->S[49] + w->term[0][49]*cs;
-    t->Phi[3][9] = t->Phi[3][9] + w->term[0][50]*ck;
-    w->S[50] = w->S[50] + w->term[0][50]*cs;
-    t->Phi[3][10] = t->Phi[3][10] + w->term[0][51]*ck;
-    w->S[51] = w->S[51] + w->term[0][51]*cs;
-    t->Phi[3][11] = t->Phi[3][11] + w->term[0][52]*ck;
-    w->S[52] = w->S[52] + w->term[0][52]*cs;
-    t->Phi[3][12] = t->Phi[3][12] + w->term[0][53]*ck;
-    w->S[53] = w->S[53] + w->term[0][53]*cs;
-    t->Phi[3][13] = t->Phi[3][13] + w->term[0][54]*ck;
-    w->S[54] = w->S[54] + w->term[0][54]*cs;
-    t->Phi[3][14] = t->Phi[3][14] + w->term[0][55]*ck;
-    w->S[55] = w->S[55] + w->term[0][55]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[0][56]*ck;
-    w->S[56] = w->S[56] + w->term[0][56]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[0][57]*ck;
-    w->S[57] = w->S[57] + w->term[0][57]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[0][58]*ck;
-    w->S[58] = w->S[58] + w->term[0][58]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[0][59]*ck;
-    w->S[59] = w->S[59] + w->term[0][59]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[0][60]*ck;
-    w->S[60] = w->S[60] + w->term[0][60]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[0][61]*ck;
-    w->S[61] = w->S[61] + w->term[0][61]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[0][62]*ck;
-    w->S[62] = w->S[62] + w->term[0][62]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[0][63]*ck;
-    w->S[63] = w->S[63] + w->term[0][63]*cs;
-    t->Phi[4][9] = t->Phi[4][9] + w->term[0][64]*ck;
-    w->S[64] = w->S[64] + w->term[0][64]*cs;
-    t->Phi[4][10] = t->Phi[4][10] + w->term[0][65]*ck;
-    w->S[65] = w->S[65] + w->term[0][65]*cs;
-    t->Phi[4][11] = t->Phi[4][11] + w->term[0][66]*ck;
-    w->S[66] = w->S[66] + w->term[0][66]*cs;
-    t->Phi[4][12] = t->Phi[4][12] + w->term[0][67]*ck;
-    w->S[67] = w->S[67] + w->term[0][67]*cs;
-    t->Phi[4][13] = t->Phi[4][13] + w->term[0][68]*ck;
-    w->S[68] = w->S[68] + w->term[0][68]*cs;
-    t->Phi[4][14] = t->Phi[4][14] + w->term[0][69]*ck;
-    w->S[69] = w->S[69] + w->term[0][69]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[0][70]*ck;
-    w->S[70] = w->S[70] + w->term[0][70]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[0][71]*ck;
-    w->S[71] = w->S[71] + w->term[0][71]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[0][72]*ck;
-    w->S[72] = w->S[72] + w->term[0][72]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[0][73]*ck;
-    w->S[73] = w->S[73] + w->term[0][73]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[0][74]*ck;
-    w->S[74] = w->S[74] + w->term[0][74]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[0][75]*ck;
-    w->S[75] = w->S[75] + w->term[0][75]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[0][76]*ck;
-    w->S[76] = w->S[76] + w->term[0][76]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[0][77]*ck;
-    w->S[77] = w->S[77] + w->term[0][77]*cs;
-    t->Phi[5][9] = t->Phi[5][9] + w->term[0][78]*ck;
-    w->S[78] = w->S[78] + w->term[0][78]*cs;
-    t->Phi[5][10] = t->Phi[5][10] + w->term[0][79]*ck;
-    w->S[79] = w->S[79] + w->term[0][79]*cs;
-    t->Phi[5][11] = t->Phi[5][11] + w->term[0][80]*ck;
-    w->S[80] = w->S[80] + w->term[0][80]*cs;
-    t->Phi[5][12] = t->Phi[5][12] + w->term[0][81]*ck;
-    w->S[81] = w->S[81] + w->term[0][81]*cs;
-    t->Phi[5][13] = t->Phi[5][13] + w->term[0][82]*ck;
-    w->S[82] = w->S[82] + w->term[0][82]*cs;
-    t->Phi[5][14] = t->Phi[5][14] + w->term[0][83]*ck;
-    w->S[83] = w->S[83] + w->term[0][83]*cs;
-    t->Phi[6][0] = t->Phi[6][0] + w->term[0][84]*ck;
-    w->S[84] = w->S[84] + w->term[0][84]*cs;
-    t->Phi[6][1] = t->Phi[6][1] + w->term[0][85]*ck;
-    w->S[85] = w->S[85] + w->term[0][85]*cs;
-    t->Phi[6][2] = t->Phi[6][2] + w->term[0][86]*ck;
-    w->S[86] = w->S[86] + w->term[0][86]*cs;
-    t->Phi[6][3] = t->Phi[6][3] + w->term[0][87]*ck;
-    w->S[87] = w->S[87] + w->term[0][87]*cs;
-    t->Phi[6][4] = t->Phi[6][4] + w->term[0][88]*ck;
-    w->S[88] = w->S[88] + w->term[0][88]*cs;
-    t->Phi[6][5] = t->Phi[6][5] + w->term[0][89]*ck;
-    w->S[89] = w->S[89] + w->term[0][89]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[0][90]*ck;
-    w->S[90] = w->S[90] + w->term[0][90]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[0][91]*ck;
-    w->S[91] = w->S[91] + w->term[0][91]*cs;
-    t->Phi[6][9] = t->Phi[6][9] + w->term[0][92]*ck;
-    w->S[92] = w->S[92] + w->term[0][92]*cs;
-    t->Phi[6][10] = t->Phi[6][10] + w->term[0][93]*ck;
-    w->S[93] = w->S[93] + w->term[0][93]*cs;
-    t->Phi[6][11] = t->Phi[6][11] + w->term[0][94]*ck;
-    w->S[94] = w->S[94] + w->term[0][94]*cs;
-    t->Phi[6][12] = t->Phi[6][12] + w->term[0][95]*ck;
-    w->S[95] = w->S[95] + w->term[0][95]*cs;
-    t->Phi[6][13] = t->Phi[6][13] + w->term[0][96]*ck;
-    w->S[96] = w->S[96] + w->term[0][96]*cs;
-    t->Phi[6][14] = t->Phi[6][14] + w->term[0][97]*ck;
-    w->S[97] = w->S[97] + w->term[0][97]*cs;
-    t->Phi[7][0] = t->Phi[7][0] + w->term[0][98]*ck;
-    w->S[98] = w->S[98] + w->term[0][98]*cs;
-    t->Phi[7][1] = t->Phi[7][1] + w->term[0][99]*ck;
-    w->S[99] = w->S[99] + w->term[0][99]*cs;
-    t->Phi[7][2] = t->Phi[7][2] + w->term[0][100]*ck;
-    w->S[100] = w->S[100] + w->term[0][100]*cs;
-    t->Phi[7][3] = t->Phi[7][3] + w->term[0][101]*ck;
-    w->S[101] = w->S[101] + w->term[0][101]*cs;
-    t->Phi[7][4] = t->Phi[7][4] + w->term[0][102]*ck;
-    w->S[102] = w->S[102] + w->term[0][102]*cs;
-    t->Phi[7][5] = t->Phi[7][5] + w->term[0][103]*ck;
-    w->S[103] = w->S[103] + w->term[0][103]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[0][104]*ck;
-    w->S[104] = w->S[104] + w->term[0][104]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[0][105]*ck;
-    w->S[106] = w->S[106] + w->term[0][105]*cs;
-    t->Phi[7][9] = t->Phi[7][9] + w->term[0][106]*ck;
-    w->S[107] = w->S[107] + w->term[0][106]*cs;
-    t->Phi[7][10] = t->Phi[7][10] + w->term[0][107]*ck;
-    w->S[108] = w->S[108] + w->term[0][107]*cs;
-    t->Phi[7][11] = t->Phi[7][11] + w->term[0][108]*ck;
-    w->S[109] = w->S[109] + w->term[0][108]*cs;
-    t->Phi[7][12] = t->Phi[7][12] + w->term[0][109]*ck;
-    w->S[110] = w->S[110] + w->term[0][109]*cs;
-    t->Phi[7][13] = t->Phi[7][13] + w->term[0][110]*ck;
-    w->S[111] = w->S[111] + w->term[0][110]*cs;
-    t->Phi[7][14] = t->Phi[7][14] + w->term[0][111]*ck;
-    w->S[112] = w->S[112] + w->term[0][111]*cs;
-    t->Phi[8][0] = t->Phi[8][0] + w->term[0][112]*ck;
-    w->S[113] = w->S[113] + w->term[0][112]*cs;
-    t->Phi[8][1] = t->Phi[8][1] + w->term[0][113]*ck;
-    w->S[114] = w->S[114] + w->term[0][113]*cs;
-    t->Phi[8][2] = t->Phi[8][2] + w->term[0][114]*ck;
-    w->S[115] = w->S[115] + w->term[0][114]*cs;
-    t->Phi[8][3] = t->Phi[8][3] + w->term[0][115]*ck;
-    w->S[116] = w->S[116] + w->term[0][115]*cs;
-    t->Phi[8][4] = t->Phi[8][4] + w->term[0][116]*ck;
-    w->S[117] = w->S[117] + w->term[0][116]*cs;
-    t->Phi[8][5] = t->Phi[8][5] + w->term[0][117]*ck;
-    w->S[118] = w->S[118] + w->term[0][117]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[0][118]*ck;
-    w->S[119] = w->S[119] + w->term[0][118]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[0][119]*ck;
-    w->S[120] = w->S[120] + w->term[0][119]*cs;
-    t->Phi[8][9] = t->Phi[8][9] + w->term[0][120]*ck;
-    w->S[121] = w->S[121] + w->term[0][120]*cs;
-    t->Phi[8][10] = t->Phi[8][10] + w->term[0][121]*ck;
-    w->S[122] = w->S[122] + w->term[0][121]*cs;
-    t->Phi[8][11] = t->Phi[8][11] + w->term[0][122]*ck;
-    w->S[123] = w->S[123] + w->term[0][122]*cs;
-    t->Phi[8][12] = t->Phi[8][12] + w->term[0][123]*ck;
-    w->S[124] = w->S[124] + w->term[0][123]*cs;
-    t->Phi[8][13] = t->Phi[8][13] + w->term[0][124]*ck;
-    w->S[125] = w->S[125] + w->term[0][124]*cs;
-    t->Phi[8][14] = t->Phi[8][14] + w->term[0][125]*ck;
-    w->S[126] = w->S[126] + w->term[0][125]*cs;
+    w->S[64] = w->fh[33]*w->term[1][8] + w->fh[34]*w->term[1][36];
+    w->S[65] = w->fh[33]*w->term[1][9] + w->fh[34]*w->term[1][37];
+    w->S[66] = w->fh[33]*w->term[1][10] + w->fh[34]*w->term[1][38];
+    w->S[67] = w->fh[35]*w->term[1][53] + w->fh[36]*w->term[1][67] + w->fh[37]*w->term[1][81] +
+            w->fh[40]*c_in;
+    w->S[68] = w->fh[35]*w->term[1][54] + w->fh[36]*w->term[1][68] + w->fh[37]*w->term[1][82] +
+            w->fh[41]*c_in;
+    w->S[69] = w->fh[35]*w->term[1][55] + w->fh[36]*w->term[1][69] + w->fh[37]*w->term[1][83] +
+            w->fh[42]*c_in;
+    w->S[70] = w->fh[43]*w->term[1][0] + w->fh[44]*w->term[1][14] + w->fh[46]*w->term[1][56];
+    w->S[71] = w->fh[43]*w->term[1][1] + w->fh[44]*w->term[1][15] + w->fh[45]*w->term[1][43];
+    w->S[72] = w->fh[43]*w->term[1][2] + w->fh[44]*w->term[1][16] + w->fh[45]*w->term[1][44] +
+            w->fh[46]*w->term[1][58];
+    w->S[73] = w->fh[44]*w->term[1][17] + w->fh[45]*w->term[1][45] + w->fh[46]*w->term[1][59];
+    w->S[74] = w->fh[43]*w->term[1][4] + w->fh[45]*w->term[1][46] + w->fh[46]*w->term[1][60] +
+            w->fh[47]*w->term[1][88];
+    w->S[75] = c_out + w->fh[45]*w->term[1][47] + w->fh[46]*w->term[1][61] +
+            w->fh[48]*w->term[1][118];
+    w->S[76] = w->fh[44]*w->term[1][20] + w->fh[45]*w->term[1][48] + w->fh[46]*w->term[1][62] +
+            w->fh[47]*w->term[1][90];
+    w->S[77] = w->fh[43]*w->term[1][7] + w->fh[44]*w->term[1][21] + w->fh[45]*w->term[1][49] +
+            w->fh[46]*w->term[1][63] + w->fh[47]*w->term[1][91] + w->fh[48]*w->term[1][120];
+    w->S[78] = w->fh[43]*w->term[1][8] + w->fh[44]*w->term[1][22];
+    w->S[79] = w->fh[43]*w->term[1][9] + w->fh[44]*w->term[1][23];
+    w->S[80] = w->fh[43]*w->term[1][10] + w->fh[44]*w->term[1][24];
+    w->S[81] = w->fh[45]*w->term[1][53] + w->fh[46]*w->term[1][67] + w->fh[49]*c_in;
+    w->S[82] = w->fh[45]*w->term[1][54] + w->fh[46]*w->term[1][68] + w->fh[50]*c_in;
+    w->S[83] = w->fh[45]*w->term[1][55] + w->fh[46]*w->term[1][69] + w->fh[51]*c_in;
+    w->S[84] = w->fh[52]*w->term[1][56];
+    w->S[86] = w->fh[52]*w->term[1][58];
+    w->S[87] = w->fh[52]*w->term[1][59];
+    w->S[88] = w->fh[52]*w->term[1][60];
+    w->S[89] = w->fh[52]*w->term[1][61] + w->fh[53]*w->term[1][118];
+    w->S[90] = c_out + w->fh[52]*w->term[1][62];
+    w->S[91] = w->fh[52]*w->term[1][63] + w->fh[53]*w->term[1][120];
+    w->S[95] = w->fh[52]*w->term[1][67];
+    w->S[96] = w->fh[52]*w->term[1][68];
+    w->S[97] = w->fh[52]*w->term[1][69];
+    w->S[99] = w->fh[54]*w->term[1][43];
+    w->S[100] = w->fh[54]*w->term[1][44];
+    w->S[101] = w->fh[54]*w->term[1][45];
+    w->S[102] = w->fh[54]*w->term[1][46] + w->fh[55]*w->term[1][88];
+    w->S[103] = w->fh[54]*w->term[1][47] + w->fh[56]*w->term[1][118];
+    w->S[104] = w->fh[54]*w->term[1][48] + w->fh[55]*w->term[1][90];
+    w->S[105] = c_out;
+    w->S[106] = w->fh[54]*w->term[1][49] + w->fh[55]*w->term[1][91] + w->fh[56]*w->term[1][120];
+    w->S[110] = w->fh[54]*w->term[1][53];
+    w->S[111] = w->fh[54]*w->term[1][54];
+    w->S[112] = w->fh[54]*w->term[1][55];
+    w->S[113] = w->fh[57]*w->term[1][70];
+    w->S[114] = w->fh[57]*w->term[1][71];
+    w->S[116] = w->fh[57]*w->term[1][73];
+    w->S[117] = w->fh[57]*w->term[1][74];
+    w->S[118] = w->fh[57]*w->term[1][75];
+    w->S[119] = w->fh[57]*w->term[1][76];
+    w->S[120] = c_out + w->fh[57]*w->term[1][77];
+    w->S[124] = w->fh[57]*w->term[1][81];
+    w->S[125] = w->fh[57]*w->term[1][82];
+    w->S[126] = w->fh[57]*w->term[1][83];
+    w->S[85] = 0;
+    w->S[92] = 0;
+    w->S[93] = 0;
+    w->S[94] = 0;
+    w->S[98] = 0;
+    w->S[107] = 0;
+    w->S[108] = 0;
+    w->S[109] = 0;
+    w->S[115] = 0;
+    w->S[121] = 0;
+    w->S[122] = 0;
+    w->S[123] = 0;
 }
 
-INS_GPS15_TWIN_BLOCK void taylor_order_5(ins_gps15_twin_transition *restrict t,
-        ins_gps15_twin_discretize_scratch *restrict w)
+INS_GPS15_TWIN_BLOCK void horner_level_2_into_term(ins_gps15_twin_discretize_scratch *restrict w,
+        const ins_gps15_twin_scalar c_out, const ins_gps15_twin_scalar c_in)
 {
-    const ins_gps15_twin_scalar ck = 1.0 / 120.0;
-    const ins_gps15_twin_scalar cs = 1.0 / 720.0;
-    w->term[1][0] = w->fh[0]*w->term[0][14] + w->fh[1]*w->term[0][28] + w->fh[2]*w->term[0][56] +
-            w->fh[3]*w->term[0][112];
-    w->term[1][1] = w->fh[0]*w->term[0][15] + w->fh[1]*w->term[0][29] + w->fh[2]*w->term[0][57] +
-            w->fh[3]*w->term[0][113];
-    w->term[1][2] = w->fh[0]*w->term[0][16] + w->fh[1]*w->term[0][30] + w->fh[2]*w->term[0][58] +
-            w->fh[3]*w->term[0][114];
-    w->term[1][3] = w->fh[0]*w->term[0][17] + w->fh[1]*w->term[0][31] + w->fh[2]*w->term[0][59] +
-            w->fh[3]*w->term[0][115];
-    w->term[1][4] = w->fh[0]*w->term[0][18] + w->fh[1]*w->term[0][32] + w->fh[2]*w->term[0][60] +
-            w->fh[3]*w->term[0][116];
-    w->term[1][5] = w->fh[0]*w->term[0][19] + w->fh[1]*w->term[0][33] + w->fh[2]*w->term[0][61] +
-            w->fh[3]*w->term[0][117];
-    w->term[1][6] = w->fh[0]*w->term[0][20] + w->fh[1]*w->term[0][34] + w->fh[2]*w->term[0][62] +
-            w->fh[3]*w->term[0][118];
-    w->term[1][7] = w->fh[0]*w->term[0][21] + w->fh[1]*w->term[0][35] + w->fh[2]*w->term[0][63] +
-            w->fh[3]*w->term[0][119];
-    w->term[1][8] = w->fh[0]*w->term[0][22] + w->fh[1]*w->term[0][36] + w->fh[2]*w->term[0][64] +
-            w->fh[3]*w->term[0][120];
-    w->term[1][9] = w->fh[0]*w->term[0][23] + w->fh[1]*w->term[0][37] + w->fh[2]*w->term[0][65] +
-            w->fh[3]*w->term[0][121];
-    w->term[1][10] = w->fh[0]*w->term[0][24] + w->fh[1]*w->term[0][38] + w->fh[2]*w->term[0][66] +
-            w->fh[3]*w->term[0][122];
-    w->term[1][11] = w->fh[0]*w->term[0][25] + w->fh[1]*w->term[0][39] + w->fh[2]*w->term[0][67] +
-            w->fh[3]*w->term[0][123];
-    w->term[1][12] = w->fh[0]*w->term[0][26] + w->fh[1]*w->term[0][40] + w->fh[2]*w->term[0][68] +
-            w->fh[3]*w->term[0][124];
-    w->term[1][13] = w->fh[0]*w->term[0][27] + w->fh[1]*w->term[0][41] + w->fh[2]*w->term[0][69] +
-            w->fh[3]*w->term[0][125];
-    w->term[1][14] = w->fh[7]*w->term[0][0] + w->fh[8]*w->term[0][28] + w->fh[9]*w->term[0][42] +
-            w->fh[10]*w->term[0][84] + w->fh[11]*w->term[0][112];
-    w->term[1][15] = w->fh[7]*w->term[0][1] + w->fh[8]*w->term[0][29] + w->fh[9]*w->term[0][43] +
-            w->fh[10]*w->term[0][85] + w->fh[11]*w->term[0][113];
-    w->term[1][16] = w->fh[7]*w->term[0][2] + w->fh[8]*w->term[0][30] + w->fh[9]*w->term[0][44] +
-            w->fh[10]*w->term[0][86] + w->fh[11]*w->term[0][114];
-    w->term[1][17] = w->fh[7]*w->term[0][3] + w->fh[8]*w->term[0][31] + w->fh[9]*w->term[0][45] +
-            w->fh[10]*w->term[0][87] + w->fh[11]*w->term[0][115];
-    w->term[1][18] = w->fh[7]*w->term[0][4] + w->fh[8]*w->term[0][32] + w->fh[9]*w->term[0][46] +
-            w->fh[10]*w->term[0][88] + w->fh[11]*w->term[0][116];
-    w->term[1][19] = w->fh[7]*w->term[0][5] + w->fh[8]*w->term[0][33] + w->fh[9]*w->term[0][47] +
-            w->fh[10]*w->term[0][89] + w->fh[11]*w->term[0][117];
-    w->term[1][20] = w->fh[7]*w->term[0][6] + w->fh[8]*w->term[0][34] + w->fh[9]*w->term[0][48] +
-            w->fh[10]*w->term[0][90] + w->fh[11]*w->term[0][118];
-    w->term[1][21] = w->fh[7]*w->term[0][7] + w->fh[8]*w->term[0][35] + w->fh[9]*w->term[0][49] +
-            w->fh[10]*w->term[0][91] + w->fh[11]*w->term[0][119];
-    w->term[1][22] = w->fh[7]*w->term[0][8] + w->fh[8]*w->term[0][36] + w->fh[9]*w->term[0][50] +
-            w->fh[10]*w->term[0][92] + w->fh[11]*w->term[0][120];
-    w->term[1][23] = w->fh[7]*w->term[0][9] + w->fh[8]*w->term[0][37] + w->fh[9]*w->term[0][51] +
-            w->fh[10]*w->term[0][93] + w->fh[11]*w->term[0][121];
-    w->term[1][24] = w->fh[7]*w->term[0][10] + w->fh[8]*w->term[0][38] + w->fh[9]*w->term[0][52] +
-            w->fh[10]*w->term[0][94] + w->fh[11]*w->term[0][122];
-    w->term[1][25] = w->fh[7]*w->term[0][11] + w->fh[8]*w->term[0][39] + w->fh[9]*w->term[0][53] +
-            w->fh[10]*w->term[0][95] + w->fh[11]*w->term[0][123];
-    w->term[1][26] = w->fh[7]*w->term[0][12] + w->fh[8]*w->term[0][40] + w->fh[9]*w->term[0][54] +
-            w->fh[10]*w->term[0][96] + w->fh[11]*w->term[0][124];
-    w->term[1][27] = w->fh[7]*w->term[0][13] + w->fh[8]*w->term[0][41] + w->fh[9]*w->term[0][55] +
-            w->fh[10]*w->term[0][97] + w->fh[11]*w->term[0][125];
-    w->term[1][28] = w->fh[15]*w->term[0][0] + w->fh[16]*w->term[0][14] + w->fh[17]*w->term[0][42] +
-            w->fh[18]*w->term[0][84] + w->fh[19]*w->term[0][112];
-    w->term[1][29] = w->fh[15]*w->term[0][1] + w->fh[16]*w->term[0][15] + w->fh[17]*w->term[0][43] +
-            w->fh[18]*w->term[0][85] + w->fh[19]*w->term[0][113];
-    w->term[1][30] = w->fh[15]*w->term[0][2] + w->fh[16]*w->term[0][16] + w->fh[17]*w->term[0][44] +
-            w->fh[18]*w->term[0][86] + w->fh[19]*w->term[0][114];
-    w->term[1][31] = w->fh[15]*w->term[0][3] + w->fh[16]*w->term[0][17] + w->fh[17]*w->term[0][45] +
-            w->fh[18]*w->term[0][87] + w->fh[19]*w->term[0][115];
-    w->term[1][32] = w->fh[15]*w->term[0][4] + w->fh[16]*w->term[0][18] + w->fh[17]*w->term[0][46] +
-            w->fh[18]*w->term[0][88] + w->fh[19]*w->term[0][116];
-    w->term[1][33] = w->fh[15]*w->term[0][5] + w->fh[16]*w->term[0][19] + w->fh[17]*w->term[0][47] +
-            w->fh[18]*w->term[0][89] + w->fh[19]*w->term[0][117];
-    w->term[1][34] = w->fh[15]*w->term[0][6] + w->fh[16]*w->term[0][20] + w->fh[17]*w->term[0][48] +
-            w->fh[18]*w->term[0][90] + w->fh[19]*w->term[0][118];
-    w->term[1][35] = w->fh[15]*w->term[0][7] + w->fh[16]*w->term[0][21] + w->fh[17]*w->term[0][49] +
-            w->fh[18]*w->term[0][91] + w->fh[19]*w->term[0][119];
-    w->term[1][36] = w->fh[15]*w->term[0][8] + w->fh[16]*w->term[0][22] + w->fh[17]*w->term[0][50] +
-            w->fh[18]*w->term[0][92] + w->fh[19]*w->term[0][120];
-    w->term[1][37] = w->fh[15]*w->term[0][9] + w->fh[16]*w->term[0][23] + w->fh[17]*w->term[0][51] +
-            w->fh[18]*w->term[0][93] + w->fh[19]*w->term[0][121];
-    w->term[1][38] = w->fh[15]*w->term[0][10] + w->fh[16]*w->term[0][24] + w->fh[17]*w->term[0][52]
-            + w->fh[18]*w->term[0][94] + w->fh[19]*w->term[0][122];
-    w->term[1][39] = w->fh[15]*w->term[0][11] + w->fh[16]*w->term[0][25] + w->fh[17]*w->term[0][53]
-            + w->fh[18]*w->term[0][95] + w->fh[19]*w->term[0][123];
-    w->term[1][40] = w->fh[15]*w->term[0][12] + w->fh[16]*w->term[0][26] + w->fh[17]*w->term[0][54]
-            + w->fh[18]*w->term[0][96] + w->fh[19]*w->term[0][124];
-    w->term[1][41] = w->fh[15]*w->term[0][13] + w->fh[16]*w->term[0][27] + w->fh[17]*w->term[0][55]
-            + w->fh[18]*w->term[0][97] + w->fh[19]*w->term[0][125];
-    w->term[1][42] = w->fh[23]*w->term[0][14] + w->fh[24]*w->term[0][28] + w->fh[25]*w->term[0][42]
-            + w->fh[26]*w->term[0][56] + w->fh[27]*w->term[0][70] + w->fh[28]*w->term[0][84] +
-            w->fh[29]*w->term[0][112];
-    w->term[1][43] = w->fh[23]*w->term[0][15] + w->fh[24]*w->term[0][29] + w->fh[25]*w->term[0][43]
-            + w->fh[26]*w->term[0][57] + w->fh[27]*w->term[0][71] + w->fh[28]*w->term[0][85] +
-            w->fh[29]*w->term[0][113];
-    w->term[1][44] = w->fh[23]*w->term[0][16] + w->fh[24]*w->term[0][30] + w->fh[25]*w->term[0][44]
-            + w->fh[26]*w->term[0][58] + w->fh[27]*w->term[0][72] + w->fh[28]*w->term[0][86] +
-            w->fh[29]*w->term[0][114];
-    w->term[1][45] = w->fh[23]*w->term[0][17] + w->fh[24]*w->term[0][31] + w->fh[25]*w->term[0][45]
-            + w->fh[26]*w->term[0][59] + w->fh[27]*w->term[0][73] + w->fh[28]*w->term[0][87] +
-            w->fh[29]*w->term[0][115];
-    w->term[1][46] = w->fh[23]*w->term[0][18] + w->fh[24]*w->term[0][32] + w->fh[25]*w->term[0][46]
-            + w->fh[26]*w->term[0][60] + w->fh[27]*w->term[0][74] + w->fh[28]*w->term[0][88] +
-            w->fh[29]*w->term[0][116];
-    w->term[1][47] = w->fh[23]*w->term[0][19] + w->fh[24]*w->term[0][33] + w->fh[25]*w->term[0][47]
-            + w->fh[26]*w->term[0][61] + w->fh[27]*w->term[0][75] + w->fh[28]*w->term[0][89] +
-            w->fh[29]*w->term[0][117];
-    w->term[1][48] = w->fh[23]*w->term[0][20] + w->fh[24]*w->term[0][34] + w->fh[25]*w->term[0][48]
-            + w->fh[26]*w->term[0][62] + w->fh[27]*w->term[0][76] + w->fh[28]*w->term[0][90] +
-            w->fh[29]*w->term[0][118];
-    w->term[1][49] = w->fh[23]*w->term[0][21] + w->fh[24]*w->term[0][35] + w->fh[25]*w->term[0][49]
-            + w->fh[26]*w->term[0][63] + w->fh[27]*w->term[0][77] + w->fh[28]*w->term[0][91] +
-            w->fh[29]*w->term[0][119];
-    w->term[1][50] = w->fh[23]*w->term[0][22] + w->fh[24]*w->term[0][36] + w->fh[25]*w->term[0][50]
-            + w->fh[26]*w->term[0][64] + w->fh[27]*w->term[0][78] + w->fh[28]*w->term[0][92] +
-            w->fh[29]*w->term[0][120];
-    w->term[1][51] = w->fh[23]*w->term[0][23] + w->fh[24]*w->term[0][37] + w->fh[25]*w->term[0][51]
-            + w->fh[26]*w->term[0][65] + w->fh[27]*w->term[0][79] + w->fh[28]*w->term[0][93] +
-            w->fh[29]*w->term[0][121];
-    w->term[1][52] = w->fh[23]*w->term[0][24] + w->fh[24]*w->term[0][38] + w->fh[25]*w->term[0][52]
-            + w->fh[26]*w->term[0][66] + w->fh[27]*w->term[0][80] + w->fh[28]*w->term[0][94] +
-            w->fh[29]*w->term[0][122];
-    w->term[1][53] = w->fh[23]*w->term[0][25] + w->fh[24]*w->term[0][39] + w->fh[25]*w->term[0][53]
-            + w->fh[26]*w->term[0][67] + w->fh[27]*w->term[0][81] + w->fh[28]*w->term[0][95] +
-            w->fh[29]*w->term[0][123];
-    w->term[1][54] = w->fh[23]*w->term[0][26] + w->fh[24]*w->term[0][40] + w->fh[25]*w->term[0][54]
-            + w->fh[26]*w->term[0][68] + w->fh[27]*w->term[0][82] + w->fh[28]*w->term[0][96] +
-            w->fh[29]*w->term[0][124];
-    w->term[1][55] = w->fh[23]*w->term[0][27] + w->fh[24]*w->term[0][41] + w->fh[25]*w->term[0][55]
-            + w->fh[26]*w->term[0][69] + w->fh[27]*w->term[0][83] + w->fh[28]*w->term[0][97] +
-            w->fh[29]*w->term[0][125];
-    w->term[1][56] = w->fh[33]*w->term[0][0] + w->fh[34]*w->term[0][28] + w->fh[35]*w->term[0][42] +
-            w->fh[36]*w->term[0][56] + w->fh[37]*w->term[0][70] + w->fh[38]*w->term[0][84] +
-            w->fh[39]*w->term[0][112];
-    w->term[1][57] = w->fh[33]*w->term[0][1] + w->fh[34]*w->term[0][29] + w->fh[35]*w->term[0][43] +
-            w->fh[36]*w->term[0][57] + w->fh[37]*w->term[0][71] + w->fh[38]*w->term[0][85] +
-            w->fh[39]*w->term[0][113];
-    w->term[1][58] = w->fh[33]*w->term[0][2] + w->fh[34]*w->term[0][30] + w->fh[35]*w->term[0][44] +
-            w->fh[36]*w->term[0][58] + w->fh[37]*w->term[0][72] + w->fh[38]*w->term[0][86] +
-            w->fh[39]*w->term[0][114];
-    w->term[1][59] = w->fh[33]*w->term[0][3] + w->fh[34]*w->term[0][31] + w->fh[35]*w->term[0][45] +
-            w->fh[36]*w->term[0][59] + w->fh[37]*w->term[0][73] + w->fh[38]*w->term[0][87] +
-            w->fh[39]*w->term[0][115];
-    w->term[1][60] = w->fh[33]*w->term[0][4] + w->fh[34]*w->term[0][32] + w->fh[35]*w->term[0][46] +
-            w->fh[36]*w->term[0][60] + w->fh[37]*w->term[0][74] + w->fh[38]*w->term[0][88] +
-            w->fh[39]*w->term[0][116];
-    w->term[1][61] = w->fh[33]*w->term[0][5] + w->fh[34]*w->term[0][33] + w->fh[35]*w->term[0][47] +
-            w->fh[36]*w->term[0][61] + w->fh[37]*w->term[0][75] + w->fh[38]*w->term[0][89] +
-            w->fh[39]*w->term[0][117];
-    w->term[1][62] = w->fh[33]*w->term[0][6] + w->fh[34]*w->term[0][34] + w->fh[35]*w->term[0][48] +
-            w->fh[36]*w->term[0][62] + w->fh[37]*w->term[0][76] + w->fh[38]*w->term[0][90] +
-            w->fh[39]*w->term[0][118];
-    w->term[1][63] = w->fh[33]*w->term[0][7] + w->fh[34]*w->term[0][35] + w->fh[35]*w->term[0][49] +
-            w->fh[36]*w->term[0][63] + w->fh[37]*w->term[0][77] + w->fh[38]*w->term[0][91] +
-            w->fh[39]*w->term[0][119];
-    w->term[1][64] = w->fh[33]*w->term[0][8] + w->fh[34]*w->term[0][36] + w->fh[35]*w->term[0][50] +
-            w->fh[36]*w->term[0][64] + w->fh[37]*w->term[0][78] + w->fh[38]*w->term[0][92] +
-            w->fh[39]*w->term[0][120];
-    w->term[1][65] = w->fh[33]*w->term[0][9] + w->fh[34]*w->term[0][37] + w->fh[35]*w->term[0][51] +
-            w->fh[36]*w->term[0][65] + w->fh[37]*w->term[0][79] + w->fh[38]*w->term[0][93] +
-            w->fh[39]*w->term[0][121];
-    w->term[1][66] = w->fh[33]*w->term[0][10] + w->fh[34]*w->term[0][38] + w->fh[35]*w->term[0][52]
-            + w->fh[36]*w->term[0][66] + w->fh[37]*w->term[0][80] + w->fh[38]*w->term[0][94] +
-            w->fh[39]*w->term[0][122];
-    w->term[1][67] = w->fh[33]*w->term[0][11] + w->fh[34]*w->term[0][39] + w->fh[35]*w->term[0][53]
-            + w->fh[36]*w->term[0][67] + w->fh[37]*w->term[0][81] + w->fh[38]*w->term[0][95] +
-            w->fh[39]*w->term[0][123];
-    w->term[1][68] = w->fh[33]*w->term[0][12] + w->fh[34]*w->term[0][40] + w->fh[35]*w->term[0][54]
-            + w->fh[36]*w->term[0][68] + w->fh[37]*w->term[0][82] + w->fh[38]*w->term[0][96] +
-            w->fh[39]*w->term[0][124];
-    w->term[1][69] = w->fh[33]*w->term[0][13] + w->fh[34]*w->term[0][41] + w->fh[35]*w->term[0][55]
-            + w->fh[36]*w->term[0][69] + w->fh[37]*w->term[0][83] + w->fh[38]*w->term[0][97] +
-            w->fh[39]*w->term[0][125];
-    w->term[1][70] = w->fh[43]*w->term[0][0] + w->fh[44]*w->term[0][14] + w->fh[45]*w->term[0][42] +
-            w->fh[46]*w->term[0][56] + w->fh[47]*w->term[0][84] + w->fh[48]*w->term[0][112];
-    w->term[1][71] = w->fh[43]*w->term[0][1] + w->fh[44]*w->term[0][15] + w->fh[45]*w->term[0][43] +
-            w->fh[46]*w->term[0][57] + w->fh[47]*w->term[0][85] + w->fh[48]*w->term[0][113];
-    w->term[1][72] = w->fh[43]*w->term[0][2] + w->fh[44]*w->term[0][16] + w->fh[45]*w->term[0][44] +
-            w->fh[46]*w->term[0][58] + w->fh[47]*w->term[0][86] + w->fh[48]*w->term[0][114];
-    w->term[1][73] = w->fh[43]*w->term[0][3] + w->fh[44]*w->term[0][17] + w->fh[45]*w->term[0][45] +
-            w->fh[46]*w->term[0][59] + w->fh[47]*w->term[0][87] + w->fh[48]*w->term[0][115];
-    w->term[1][74] = w->fh[43]*w->term[0][4] + w->fh[44]*w->term[0][18] + w->fh[45]*w->term[0][46] +
-            w->fh[46]*w->term[0][60] + w->fh[47]*w->term[0][88] + w->fh[48]*w->term[0][116];
-    w->term[1][75] = w->fh[43]*w->term[0][5] + w->fh[44]*w->term[0][19] + w->fh[45]*w->term[0][47] +
-            w->fh[46]*w->term[0][61] + w->fh[47]*w->term[0][89] + w->fh[48]*w->term[0][117];
-    w->term[1][76] = w->fh[43]*w->term[0][6] + w->fh[44]*w->term[0][20] + w->fh[45]*w->term[0][48] +
-            w->fh[46]*w->term[0][62] + w->fh[47]*w->term[0][90] + w->fh[48]*w->term[0][118];
-    w->term[1][77] = w->fh[43]*w->term[0][7] + w->fh[44]*w->term[0][21] + w->fh[45]*w->term[0][49] +
-            w->fh[46]*w->term[0][63] + w->fh[47]*w->term[0][91] + w->fh[48]*w->term[0][119];
-    w->term[1][78] = w->fh[43]*w->term[0][8] + w->fh[44]*w->term[0][22] + w->fh[45]*w->term[0][50] +
-            w->fh[46]*w->term[0][64] + w->fh[47]*w->term[0][92] + w->fh[48]*w->term[0][120];
-    w->term[1][79] = w->fh[43]*w->term[0][9] + w->fh[44]*w->term[0][23] + w->fh[45]*w->term[0][51] +
-            w->fh[46]*w->term[0][65] + w->fh[47]*w->term[0][93] + w->fh[48]*w->term[0][121];
-    w->term[1][80] = w->fh[43]*w->term[0][10] + w->fh[44]*w->term[0][24] + w->fh[45]*w->term[0][52]
-            + w->fh[46]*w->term[0][66] + w->fh[47]*w->term[0][94] + w->fh[48]*w->term[0][122];
-    w->term[1][81] = w->fh[43]*w->term[0][11] + w->fh[44]*w->term[0][25] + w->fh[45]*w->term[0][53]
-            + w->fh[46]*w->term[0][67] + w->fh[47]*w->term[0][95] + w->fh[48]*w->term[0][123];
-    w->term[1][82] = w->fh[43]*w->term[0][12] + w->fh[44]*w->term[0][26] + w->fh[45]*w->term[0][54]
-            + w->fh[46]*w->term[0][68] + w->fh[47]*w->term[0][96] + w->fh[48]*w->term[0][124];
-    w->term[1][83] = w->fh[43]*w->term[0][13] + w->fh[44]*w->term[0][27] + w->fh[45]*w->term[0][55]
-            + w->fh[46]*w->term[0][69] + w->fh[47]*w->term[0][97] + w->fh[48]*w->term[0][125];
-    w->term[1][84] = w->fh[52]*w->term[0][56] + w->fh[53]*w->term[0][112];
-    w->term[1][85] = w->fh[52]*w->term[0][57] + w->fh[53]*w->term[0][113];
-    w->term[1][86] = w->fh[52]*w->term[0][58] + w->fh[53]*w->term[0][114];
-    w->term[1][87] = w->fh[52]*w->term[0][59] + w->fh[53]*w->term[0][115];
-    w->term[1][88] = w->fh[52]*w->term[0][60] + w->fh[53]*w->term[0][116];
-    w->term[1][89] = w->fh[52]*w->term[0][61] + w->fh[53]*w->term[0][117];
-    w->term[1][90] = w->fh[52]*w->term[0][62] + w->fh[53]*w->term[0][118];
-    w->term[1][91] = w->fh[52]*w->term[0][63] + w->fh[53]*w->term[0][119];
-    w->term[1][92] = w->fh[52]*w->term[0][64] + w->fh[53]*w->term[0][120];
-    w->term[1][93] = w->fh[52]*w->term[0][65] + w->fh[53]*w->term[0][121];
-    w->term[1][94] = w->fh[52]*w->term[0][66] + w->fh[53]*w->term[0][122];
-    w->term[1][95] = w->fh[52]*w->term[0][67] + w->fh[53]*w->term[0][123];
-    w->term[1][96] = w->fh[52]*w->term[0][68] + w->fh[53]*w->term[0][124];
-    w->term[1][97] = w->fh[52]*w->term[0][69] + w->fh[53]*w->term[0][125];
-    w->term[1][98] = w->fh[54]*w->term[0][42] + w->fh[55]*w->term[0][84] +
-            w->fh[56]*w->term[0][112];
-    w->term[1][99] = w->fh[54]*w->term[0][43] + w->fh[55]*w->term[0][85] +
-            w->fh[56]*w->term[0][113];
-    w->term[1][100] = w->fh[54]*w->term[0][44] + w->fh[55]*w->term[0][86] +
-            w->fh[56]*w->term[0][114];
-    w->term[1][101] = w->fh[54]*w->term[0][45] + w->fh[55]*w->term[0][87] +
-            w->fh[56]*w->term[0][115];
-    w->term[1][102] = w->fh[54]*w->term[0][46] + w->fh[55]*w->term[0][88] +
-            w->fh[56]*w->term[0][116];
-    w->term[1][103] = w->fh[54]*w->term[0][47] + w->fh[55]*w->term[0][89] +
-            w->fh[56]*w->term[0][117];
-    w->term[1][104] = w->fh[54]*w->term[0][48] + w->fh[55]*w->term[0][90] +
-            w->fh[56]*w->term[0][118];
-    w->term[1][105] = w->fh[54]*w->term[0][49] + w->fh[55]*w->term[0][91] +
-            w->fh[56]*w->term[0][119];
-    w->term[1][106] = w->fh[54]*w->term[0][50] + w->fh[55]*w->term[0][92] +
-            w->fh[56]*w->term[0][120];
-    w->term[1][107] = w->fh[54]*w->term[0][51] + w->fh[55]*w->term[0][93] +
-            w->fh[56]*w->term[0][121];
-    w->term[1][108] = w->fh[54]*w->term[0][52] + w->fh[55]*w->term[0][94] +
-            w->fh[56]*w->term[0][122];
-    w->term[1][109] = w->fh[54]*w->term[0][53] + w->fh[55]*w->term[0][95] +
-            w->fh[56]*w->term[0][123];
-    w->term[1][110] = w->fh[54]*w->term[0][54] + w->fh[55]*w->term[0][96] +
-            w->fh[56]*w->term[0][124];
-    w->term[1][111] = w->fh[54]*w->term[0][55] + w->fh[55]*w->term[0][97] +
-            w->fh[56]*w->term[0][125];
-    w->term[1][112] = w->fh[57]*w->term[0][70];
-    w->term[1][113] = w->fh[57]*w->term[0][71];
-    w->term[1][114] = w->fh[57]*w->term[0][72];
-    w->term[1][115] = w->fh[57]*w->term[0][73];
-    w->term[1][116] = w->fh[57]*w->term[0][74];
-    w->term[1][117] = w->fh[57]*w->term[0][75];
-    w->term[1][118] = w->fh[57]*w->term[0][76];
-    w->term[1][119] = w->fh[57]*w->term[0][77];
-    w->term[1][120] = w->fh[57]*w->term[0][78];
-    w->term[1][121] = w->fh[57]*w->term[0][79];
-    w->term[1][122] = w->fh[57]*w->term[0][80];
-    w->term[1][123] = w->fh[57]*w->term[0][81];
-    w->term[1][124] = w->fh[57]*w->term[0][82];
-    w->term[1][125] = w->fh[57]*w->term[0][83];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[1][0]*ck;
-    w->S[0] = w->S[0] + w->term[1][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[1][1]*ck;
-    w->S[1] = w->S[1] + w->term[1][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[1][2]*ck;
-    w->S[2] = w->S[2] + w->term[1][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[1][3]*ck;
-    w->S[3] = w->S[3] + w->term[1][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[1][4]*ck;
-    w->S[4] = w->S[4] + w->term[1][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[1][5]*ck;
-    w->S[5] = w->S[5] + w->term[1][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[1][6]*ck;
-    w->S[6] = w->S[6] + w->term[1][6]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[1][7]*ck;
-    w->S[7] = w->S[7] + w->term[1][7]*cs;
-    t->Phi[0][9] = t->Phi[0][9] + w->term[1][8]*ck;
-    w->S[8] = w->S[8] + w->term[1][8]*cs;
-    t->Phi[0][10] = t->Phi[0][10] + w->term[1][9]*ck;
-    w->S[9] = w->S[9] + w->term[1][9]*cs;
-    t->Phi[0][11] = t->Phi[0][11] + w->term[1][10]*ck;
-    w->S[10] = w->S[10] + w->term[1][10]*cs;
-    t->Phi[0][12] = t->Phi[0][12] + w->term[1][11]*ck;
-    w->S[11] = w->S[11] + w->term[1][11]*cs;
-    t->Phi[0][13] = t->Phi[0][13] + w->term[1][12]*ck;
-    w->S[12] = w->S[12] + w->term[1][12]*cs;
-    t->Phi[0][14] = t->Phi[0][14] + w->term[1][13]*ck;
-    w->S[13] = w->S[13] + w->term[1][13]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[1][14]*ck;
-    w->S[14] = w->S[14] + w->term[1][14]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[1][15]*ck;
-    w->S[15] = w->S[15] + w->term[1][15]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[1][16]*ck;
-    w->S[16] = w->S[16] + w->term[1][16]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[1][17]*ck;
-    w->S[17] = w->S[17] + w->term[1][17]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[1][18]*ck;
-    w->S[18] = w->S[18] + w->term[1][18]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[1][19]*ck;
-    w->S[19] = w->S[19] + w->term[1][19]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[1][20]*ck;
-    w->S[20] = w->S[20] + w->term[1][20]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[1][21]*ck;
-    w->S[21] = w->S[21] + w->term[1][21]*cs;
-    t->Phi[1][9] = t->Phi[1][9] + w->term[1][22]*ck;
-    w->S[22] = w->S[22] + w->term[1][22]*cs;
-    t->Phi[1][10] = t->Phi[1][10] + w->term[1][23]*ck;
-    w->S[23] = w->S[23] + w->term[1][23]*cs;
-    t->Phi[1][11] = t->Phi[1][11] + w->term[1][24]*ck;
-    w->S[24] = w->S[24] + w->term[1][24]*cs;
-    t->Phi[1][12] = t->Phi[1][12] + w->term[1][25]*ck;
-    w->S[25] = w->S[25] + w->term[1][25]*cs;
-    t->Phi[1][13] = t->Phi[1][13] + w->term[1][26]*ck;
-    w->S[26] = w->S[26] + w->term[1][26]*cs;
-    t->Phi[1][14] = t->Phi[1][14] + w->term[1][27]*ck;
-    w->S[27] = w->S[27] + w->term[1][27]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[1][28]*ck;
-    w->S[28] = w->S[28] + w->term[1][28]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[1][29]*ck;
-    w->S[29] = w->S[29] + w->term[1][29]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[1][30]*ck;
-    w->S[30] = w->S[30] + w->term[1][30]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[1][31]*ck;
-    w->S[31] = w->S[31] + w->term[1][31]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[1][32]*ck;
-    w->S[32] = w->S[32] + w->term[1][32]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[1][33]*ck;
-    w->S[33] = w->S[33] + w->term[1][33]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[1][34]*ck;
-    w->S[34] = w->S[34] + w->term[1][34]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[1][35]*ck;
-    w->S[35] = w->S[35] + w->term[1][35]*cs;
-    t->Phi[2][9] = t->Phi[2][9] + w->term[1][36]*ck;
-    w->S[36] = w->S[36] + w->term[1][36]*cs;
-    t->Phi[2][10] = t->Phi[2][10] + w->term[1][37]*ck;
-    w->S[37] = w->S[37] + w->term[1][37]*cs;
-    t->Phi[2][11] = t->Phi[2][11] + w->term[1][38]*ck;
-    w->S[38] = w->S[38] + w->term[1][38]*cs;
-    t->Phi[2][12] = t->Phi[2][12] + w->term[1][39]*ck;
-    w->S[39] = w->S[39] + w->term[1][39]*cs;
-    t->Phi[2][13] = t->Phi[2][13] + w->term[1][40]*ck;
-    w->S[40] = w->S[40] + w->term[1][40]*cs;
-    t->Phi[2][14] = t->Phi[2][14] + w->term[1][41]*ck;
-    w->S[41] = w->S[41] + w->term[1][41]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[1][42]*ck;
-    w->S[42] = w->S[42] + w->term[1][42]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[1][43]*ck;
-    w->S[43] = w->S[43] + w->term[1][43]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[1][44]*ck;
-    w->S[44] = w->S[44] + w->term[1][44]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[1][45]*ck;
-    w->S[45] = w->S[45] + w->term[1][45]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[1][46]*ck;
-    w->S[46] = w->S[46] + w->term[1][46]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[1][47]*ck;
-    w->S[47] = w->S[47] + w->term[1][47]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[1][48]*ck;
-    w->S[48] = w->S[48] + w->term[1][48]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[1][49]*ck;
-    w->S[49] = w->S[49] + w->term[1][49]*cs;
-    t->Phi[3][9] = t->Phi[3][9] + w->term[1][50]*ck;
-    w->S[50] = w->S[50] + w->term[1][50]*cs;
-    t->Phi[3][10] = t->Phi[3][10] + w->term[1][51]*ck;
-    w->S[51] = w->S[51] + w->term[1][51]*cs;
-    t->Phi[3][11] = t->Phi[3][11] + w->term[1][52]*ck;
-    w->S[52] = w->S[52] + w->term[1][52]*cs;
-    t->Phi[3][12] = t->Phi[3][12] + w->term[1][53]*ck;
-    w->S[53] = w->S[53] + w->term[1][53]*cs;
-    t->Phi[3][13] = t->Phi[3][13] + w->term[1][54]*ck;
-    w->S[54] = w->S[54] + w->term[1][54]*cs;
-    t->Phi[3][14] = t->Phi[3][14] + w->term[1][55]*ck;
-    w->S[55] = w->S[55] + w->term[1][55]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[1][56]*ck;
-    w->S[56] = w->S[56] + w->term[1][56]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[1][57]*ck;
-    w->S[57] = w->S[57] + w->term[1][57]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[1][58]*ck;
-    w->S[58] = w->S[58] + w->term[1][58]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[1][59]*ck;
-    w->S[59] = w->S[59] + w->term[1][59]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[1][60]*ck;
-    w->S[60] = w->S[60] + w->term[1][60]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[1][61]*ck;
-    w->S[61] = w->S[61] + w->term[1][61]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[1][62]*ck;
-    w->S[62] = w->S[62] + w->term[1][62]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[1][63]*ck;
-    w->S[63] = w->S[63] + w->term[1][63]*cs;
-    t->Phi[4][9] = t->Phi[4][9] + w->term[1][64]*ck;
-    w->S[64] = w->S[64] + w->term[1][64]*cs;
-    t->Phi[4][10] = t->Phi[4][10] + w->term[1][65]*ck;
-    w->S[65] = w->S[65] + w->term[1][65]*cs;
-    t->Phi[4][11] = t->Phi[4][11] + w->term[1][66]*ck;
-    w->S[66] = w->S[66] + w->term[1][66]*cs;
-    t->Phi[4][12] = t->Phi[4][12] + w->term[1][67]*ck;
-    w->S[67] = w->S[67] + w->term[1][67]*cs;
-    t->Phi[4][13] = t->Phi[4][13] + w->term[1][68]*ck;
-    w->S[68] = w->S[68] + w->term[1][68]*cs;
-    t->Phi[4][14] = t->Phi[4][14] + w->term[1][69]*ck;
-    w->S[69] = w->S[69] + w->term[1][69]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[1][70]*ck;
-    w->S[70] = w->S[70] + w->term[1][70]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[1][71]*ck;
-    w->S[71] = w->S[71] + w->term[1][71]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[1][72]*ck;
-    w->S[72] = w->S[72] + w->term[1][72]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[1][73]*ck;
-    w->S[73] = w->S[73] + w->term[1][73]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[1][74]*ck;
-    w->S[74] = w->S[74] + w->term[1][74]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[1][75]*ck;
-    w->S[75] = w->S[75] + w->term[1][75]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[1][76]*ck;
-    w->S[76] = w->S[76] + w->term[1][76]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[1][77]*ck;
-    w->S[77] = w->S[77] + w->term[1][77]*cs;
-    t->Phi[5][9] = t->Phi[5][9] + w->term[1][78]*ck;
-    w->S[78] = w->S[78] + w->term[1][78]*cs;
-    t->Phi[5][10] = t->Phi[5][10] + w->term[1][79]*ck;
-    w->S[79] = w->S[79] + w->term[1][79]*cs;
-    t->Phi[5][11] = t->Phi[5][11] + w->term[1][80]*ck;
-    w->S[80] = w->S[80] + w->term[1][80]*cs;
-    t->Phi[5][12] = t->Phi[5][12] + w->term[1][81]*ck;
-    w->S[81] = w->S[81] + w->term[1][81]*cs;
-    t->Phi[5][13] = t->Phi[5][13] + w->term[1][82]*ck;
-    w->S[82] = w->S[82] + w->term[1][82]*cs;
-    t->Phi[5][14] = t->Phi[5][14] + w->term[1][83]*ck;
-    w->S[83] = w->S[83] + w->term[1][83]*cs;
-    t->Phi[6][0] = t->Phi[6][0] + w->term[1][84]*ck;
-    w->S[84] = w->S[84] + w->term[1][84]*cs;
-    t->Phi[6][1] = t->Phi[6][1] + w->term[1][85]*ck;
-    w->S[85] = w->S[85] + w->term[1][85]*cs;
-    t->Phi[6][2] = t->Phi[6][2] + w->term[1][86]*ck;
-    w->S[86] = w->S[86] + w->term[1][86]*cs;
-    t->Phi[6][3] = t->Phi[6][3] + w->term[1][87]*ck;
-    w->S[87] = w->S[87] + w->term[1][87]*cs;
-    t->Phi[6][4] = t->Phi[6][4] + w->term[1][88]*ck;
-    w->S[88] = w->S[88] + w->term[1][88]*cs;
-    t->Phi[6][5] = t->Phi[6][5] + w->term[1][89]*ck;
-    w->S[89] = w->S[89] + w->term[1][89]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[1][90]*ck;
-    w->S[90] = w->S[90] + w->term[1][90]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[1][91]*ck;
-    w->S[91] = w->S[91] + w->term[1][91]*cs;
-    t->Phi[6][9] = t->Phi[6][9] + w->term[1][92]*ck;
-    w->S[92] = w->S[92] + w->term[1][92]*cs;
-    t->Phi[6][10] = t->Phi[6][10] + w->term[1][93]*ck;
-    w->S[93] = w->S[93] + w->term[1][93]*cs;
-    t->Phi[6][11] = t->Phi[6][11] + w->term[1][94]*ck;
-    w->S[94] = w->S[94] + w->term[1][94]*cs;
-    t->Phi[6][12] = t->Phi[6][12] + w->term[1][95]*ck;
-    w->S[95] = w->S[95] + w->term[1][95]*cs;
-    t->Phi[6][13] = t->Phi[6][13] + w->term[1][96]*ck;
-    w->S[96] = w->S[96] + w->term[1][96]*cs;
-    t->Phi[6][14] = t->Phi[6][14] + w->term[1][97]*ck;
-    w->S[97] = w->S[97] + w->term[1][97]*cs;
-    t->Phi[7][0] = t->Phi[7][0] + w->term[1][98]*ck;
-    w->S[98] = w->S[98] + w->term[1][98]*cs;
-    t->Phi[7][1] = t->Phi[7][1] + w->term[1][99]*ck;
-    w->S[99] = w->S[99] + w->term[1][99]*cs;
-    t->Phi[7][2] = t->Phi[7][2] + w->term[1][100]*ck;
-    w->S[100] = w->S[100] + w->term[1][100]*cs;
-    t->Phi[7][3] = t->Phi[7][3] + w->term[1][101]*ck;
-    w->S[101] = w->S[101] + w->term[1][101]*cs;
-    t->Phi[7][4] = t->Phi[7][4] + w->term[1][102]*ck;
-    w->S[102] = w->S[102] + w->term[1][102]*cs;
-    t->Phi[7][5] = t->Phi[7][5] + w->term[1][103]*ck;
-    w->S[103] = w->S[103] + w->term[1][103]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[1][104]*ck;
-    w->S[104] = w->S[104] + w->term[1][104]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[1][105]*ck;
-    w->S[106] = w->S[106] + w->term[1][105]*cs;
-    t->Phi[7][9] = t->Phi[7][9] + w->term[1][106]*ck;
-    w->S[107] = w->S[107] + w->term[1][106]*cs;
-    t->Phi[7][10] = t->Phi[7][10] + w->term[1][107]*ck;
-    w->S[108] = w->S[108] + w->term[1][107]*cs;
-    t->Phi[7][11] = t->Phi[7][11] + w->term[1][108]*ck;
-    w->S[109] = w->S[109] + w->term[1][108]*cs;
-    t->Phi[7][12] = t->Phi[7][12] + w->term[1][109]*ck;
-    w->S[110] = w->S[110] + w->term[1][109]*cs;
-    t->Phi[7][13] = t->Phi[7][13] + w->term[1][110]*ck;
-    w->S[111] = w->S[111] + w->term[1][110]*cs;
-    t->Phi[7][14] = t->Phi[7][14] + w->term[1][111]*ck;
-    w->S[112] = w->S[112] + w->term[1][111]*cs;
-    t->Phi[8][0] = t->Phi[8][0] + w->term[1][112]*ck;
-    w->S[113] = w->S[113] + w->term[1][112]*cs;
-    t->Phi[8][1] = t->Phi[8][1] + w->term[1][113]*ck;
-    w->S[114] = w->S[114] + w->term[1][113]*cs;
-    t->Phi[8][2] = t->Phi[8][2] + w->term[1][114]*ck;
-    w->S[115] = w->S[115] + w->term[1][114]*cs;
-    t->Phi[8][3] = t->Phi[8][3] + w->term[1][115]*ck;
-    w->S[116] = w->S[116] + w->term[1][115]*cs;
-    t->Phi[8][4] = t->Phi[8][4] + w->term[1][116]*ck;
-    w->S[117] = w->S[117] + w->term[1][116]*cs;
-    t->Phi[8][5] = t->Phi[8][5] + w->term[1][117]*ck;
-    w->S[118] = w->S[118] + w->term[1][117]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[1][118]*ck;
-    w->S[119] = w->S[119] + w->term[1][118]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[1][119]*ck;
-    w->S[120] = w->S[120] + w->term[1][119]*cs;
-    t->Phi[8][9] = t->Phi[8][9] + w->term[1][120]*ck;
-    w->S[121] = w->S[121] + w->term[1][120]*cs;
-    t->Phi[8][10] = t->Phi[8][10] + w->term[1][121]*ck;
-    w->S[122] = w->S[122] + w->term[1][121]*cs;
-    t->Phi[8][11] = t->Phi[8][11] + w->term[1][122]*ck;
-    w->S[123] = w->S[123] + w->term[1][122]*cs;
-    t->Phi[8][12] = t->Phi[8][12] + w->term[1][123]*ck;
-    w->S[124] = w->S[124] + w->term[1][123]*cs;
-    t->Phi[8][13] = t->Phi[8][13] + w->term[1][124]*ck;
-    w->S[125] = w->S[125] + w->term[1][124]*cs;
-    t->Phi[8][14] = t->Phi[8][14] + w->term[1][125]*ck;
-    w->S[126] = w->S[126] + w->term[1][125]*cs;
+    w->term[1][0] = c_out + w->fh[0]*w->S[14] + w->fh[1]*w->S[28] + w->fh[2]*w->S[56];
+    w->term[1][1] = w->fh[0]*w->S[15] + w->fh[1]*w->S[29];
+    w->term[1][2] = w->fh[0]*w->S[16] + w->fh[1]*w->S[30] + w->fh[2]*w->S[58];
+    w->term[1][3] = w->fh[0]*w->S[17] + w->fh[1]*w->S[31] + w->fh[2]*w->S[59];
+    w->term[1][4] = w->fh[2]*w->S[60];
+    w->term[1][5] = w->fh[2]*w->S[61] + w->fh[3]*w->S[118];
+    w->term[1][6] = w->fh[0]*w->S[20] + w->fh[1]*w->S[34] + w->fh[2]*w->S[62];
+    w->term[1][7] = w->fh[0]*w->S[21] + w->fh[1]*w->S[35] + w->fh[2]*w->S[63] + w->fh[3]*w->S[120];
+    w->term[1][8] = w->fh[0]*w->S[22] + w->fh[1]*w->S[36] + w->fh[4]*c_in;
+    w->term[1][9] = w->fh[0]*w->S[23] + w->fh[1]*w->S[37] + w->fh[5]*c_in;
+    w->term[1][10] = w->fh[0]*w->S[24] + w->fh[1]*w->S[38] + w->fh[6]*c_in;
+    w->term[1][11] = w->fh[2]*w->S[67];
+    w->term[1][12] = w->fh[2]*w->S[68];
+    w->term[1][13] = w->fh[2]*w->S[69];
+    w->term[1][14] = w->fh[7]*w->S[0] + w->fh[8]*w->S[28];
+    w->term[1][15] = c_out + w->fh[7]*w->S[1] + w->fh[8]*w->S[29] + w->fh[9]*w->S[43];
+    w->term[1][16] = w->fh[7]*w->S[2] + w->fh[8]*w->S[30] + w->fh[9]*w->S[44];
+    w->term[1][17] = w->fh[8]*w->S[31] + w->fh[9]*w->S[45];
+    w->term[1][18] = w->fh[7]*w->S[4] + w->fh[9]*w->S[46] + w->fh[10]*w->S[88];
+    w->term[1][19] = w->fh[9]*w->S[47] + w->fh[11]*w->S[118];
+    w->term[1][20] = w->fh[8]*w->S[34] + w->fh[9]*w->S[48] + w->fh[10]*w->S[90];
+    w->term[1][21] = w->fh[7]*w->S[7] + w->fh[8]*w->S[35] + w->fh[9]*w->S[49] + w->fh[10]*w->S[91] +
+            w->fh[11]*w->S[120];
+    w->term[1][22] = w->fh[7]*w->S[8] + w->fh[8]*w->S[36] + w->fh[12]*c_in;
+    w->term[1][23] = w->fh[7]*w->S[9] + w->fh[8]*w->S[37] + w->fh[13]*c_in;
+    w->term[1][24] = w->fh[7]*w->S[10] + w->fh[8]*w->S[38] + w->fh[14]*c_in;
+    w->term[1][25] = w->fh[9]*w->S[53];
+    w->term[1][26] = w->fh[9]*w->S[54];
+    w->term[1][27] = w->fh[9]*w->S[55];
+    w->term[1][28] = w->fh[15]*w->S[0] + w->fh[16]*w->S[14];
+    w->term[1][29] = w->fh[15]*w->S[1] + w->fh[16]*w->S[15] + w->fh[17]*w->S[43];
+    w->term[1][30] = c_out + w->fh[15]*w->S[2] + w->fh[16]*w->S[16] + w->fh[17]*w->S[44];
+    w->term[1][31] = w->fh[16]*w->S[17] + w->fh[17]*w->S[45];
+    w->term[1][32] = w->fh[15]*w->S[4] + w->fh[17]*w->S[46] + w->fh[18]*w->S[88];
+    w->term[1][33] = w->fh[17]*w->S[47] + w->fh[19]*w->S[118];
+    w->term[1][34] = w->fh[16]*w->S[20] + w->fh[17]*w->S[48] + w->fh[18]*w->S[90];
+    w->term[1][35] = w->fh[15]*w->S[7] + w->fh[16]*w->S[21] + w->fh[17]*w->S[49] +
+            w->fh[18]*w->S[91] + w->fh[19]*w->S[120];
+    w->term[1][36] = w->fh[15]*w->S[8] + w->fh[16]*w->S[22] + w->fh[20]*c_in;
+    w->term[1][37] = w->fh[15]*w->S[9] + w->fh[16]*w->S[23] + w->fh[21]*c_in;
+    w->term[1][38] = w->fh[15]*w->S[10] + w->fh[16]*w->S[24] + w->fh[22]*c_in;
+    w->term[1][39] = w->fh[17]*w->S[53];
+    w->term[1][40] = w->fh[17]*w->S[54];
+    w->term[1][41] = w->fh[17]*w->S[55];
+    w->term[1][42] = w->fh[23]*w->S[14] + w->fh[24]*w->S[28] + w->fh[26]*w->S[56] +
+            w->fh[27]*w->S[70];
+    w->term[1][43] = w->fh[23]*w->S[15] + w->fh[24]*w->S[29] + w->fh[25]*w->S[43] +
+            w->fh[27]*w->S[71];
+    w->term[1][44] = w->fh[23]*w->S[16] + w->fh[24]*w->S[30] + w->fh[25]*w->S[44] +
+            w->fh[26]*w->S[58];
+    w->term[1][45] = c_out + w->fh[23]*w->S[17] + w->fh[24]*w->S[31] + w->fh[25]*w->S[45] +
+            w->fh[26]*w->S[59] + w->fh[27]*w->S[73];
+    w->term[1][46] = w->fh[25]*w->S[46] + w->fh[26]*w->S[60] + w->fh[27]*w->S[74] +
+            w->fh[28]*w->S[88];
+    w->term[1][47] = w->fh[25]*w->S[47] + w->fh[26]*w->S[61] + w->fh[27]*w->S[75] +
+            w->fh[29]*w->S[118];
+    w->term[1][48] = w->fh[23]*w->S[20] + w->fh[24]*w->S[34] + w->fh[25]*w->S[48] +
+            w->fh[26]*w->S[62] + w->fh[27]*w->S[76] + w->fh[28]*w->S[90];
+    w->term[1][49] = w->fh[23]*w->S[21] + w->fh[24]*w->S[35] + w->fh[25]*w->S[49] +
+            w->fh[26]*w->S[63] + w->fh[27]*w->S[77] + w->fh[28]*w->S[91] + w->fh[29]*w->S[120];
+    w->term[1][50] = w->fh[23]*w->S[22] + w->fh[24]*w->S[36];
+    w->term[1][51] = w->fh[23]*w->S[23] + w->fh[24]*w->S[37];
+    w->term[1][52] = w->fh[23]*w->S[24] + w->fh[24]*w->S[38];
+    w->term[1][53] = w->fh[25]*w->S[53] + w->fh[26]*w->S[67] + w->fh[27]*w->S[81] + w->fh[30]*c_in;
+    w->term[1][54] = w->fh[25]*w->S[54] + w->fh[26]*w->S[68] + w->fh[27]*w->S[82] + w->fh[31]*c_in;
+    w->term[1][55] = w->fh[25]*w->S[55] + w->fh[26]*w->S[69] + w->fh[27]*w->S[83] + w->fh[32]*c_in;
+    w->term[1][56] = w->fh[33]*w->S[0] + w->fh[34]*w->S[28] + w->fh[36]*w->S[56] +
+            w->fh[37]*w->S[70];
+    w->term[1][57] = w->fh[33]*w->S[1] + w->fh[34]*w->S[29] + w->fh[35]*w->S[43] +
+            w->fh[37]*w->S[71];
+    w->term[1][58] = w->fh[33]*w->S[2] + w->fh[34]*w->S[30] + w->fh[35]*w->S[44] +
+            w->fh[36]*w->S[58];
+    w->term[1][59] = w->fh[34]*w->S[31] + w->fh[35]*w->S[45] + w->fh[36]*w->S[59] +
+            w->fh[37]*w->S[73];
+    w->term[1][60] = c_out + w->fh[33]*w->S[4] + w->fh[35]*w->S[46] + w->fh[36]*w->S[60] +
+            w->fh[37]*w->S[74] + w->fh[38]*w->S[88];
+    w->term[1][61] = w->fh[35]*w->S[47] + w->fh[36]*w->S[61] + w->fh[37]*w->S[75] +
+            w->fh[39]*w->S[118];
+    w->term[1][62] = w->fh[34]*w->S[34] + w->fh[35]*w->S[48] + w->fh[36]*w->S[62] +
+            w->fh[37]*w->S[76] + w->fh[38]*w->S[90];
+    w->term[1][63] = w->fh[33]*w->S[7] + w->fh[34]*w->S[35] + w->fh[35]*w->S[49] +
+            w->fh[36]*w->S[63] + w->fh[37]*w->S[77] + w->fh[38]*w->S[91] + w->fh[39]*w->S[120];
+    w->term[1][64] = w->fh[33]*w->S[8] + w->fh[34]*w->S[36];
+    w->term[1][65] = w->fh[33]*w->S[9] + w->fh[34]*w->S[37];
+    w->term[1][66] = w->fh[33]*w->S[10] + w->fh[34]*w->S[38];
+    w->term[1][67] = w->fh[35]*w->S[53] + w->fh[36]*w->S[67] + w->fh[37]*w->S[81] + w->fh[40]*c_in;
+    w->term[1][68] = w->fh[35]*w->S[54] + w->fh[36]*w->S[68] + w->fh[37]*w->S[82] + w->fh[41]*c_in;
+    w->term[1][69] = w->fh[35]*w->S[55] + w->fh[36]*w->S[69] + w->fh[37]*w->S[83] + w->fh[42]*c_in;
+    w->term[1][70] = w->fh[43]*w->S[0] + w->fh[44]*w->S[14] + w->fh[46]*w->S[56];
+    w->term[1][71] = w->fh[43]*w->S[1] + w->fh[44]*w->S[15] + w->fh[45]*w->S[43];
+    w->term[1][72] = w->fh[43]*w->S[2] + w->fh[44]*w->S[16] + w->fh[45]*w->S[44] +
+            w->fh[46]*w->S[58];
+    w->term[1][73] = w->fh[44]*w->S[17] + w->fh[45]*w->S[45] + w->fh[46]*w->S[59];
+    w->term[1][74] = w->fh[43]*w->S[4] + w->fh[45]*w->S[46] + w->fh[46]*w->S[60] +
+            w->fh[47]*w->S[88];
+    w->term[1][75] = c_out + w->fh[45]*w->S[47] + w->fh[46]*w->S[61] + w->fh[48]*w->S[118];
+    w->term[1][76] = w->fh[44]*w->S[20] + w->fh[45]*w->S[48] + w->fh[46]*w->S[62] +
+            w->fh[47]*w->S[90];
+    w->term[1][77] = w->fh[43]*w->S[7] + w->fh[44]*w->S[21] + w->fh[45]*w->S[49] +
+            w->fh[46]*w->S[63] + w->fh[47]*w->S[91] + w->fh[48]*w->S[120];
+    w->term[1][78] = w->fh[43]*w->S[8] + w->fh[44]*w->S[22];
+    w->term[1][79] = w->fh[43]*w->S[9] + w->fh[44]*w->S[23];
+    w->term[1][80] = w->fh[43]*w->S[10] + w->fh[44]*w->S[24];
+    w->term[1][81] = w->fh[45]*w->S[53] + w->fh[46]*w->S[67] + w->fh[49]*c_in;
+    w->term[1][82] = w->fh[45]*w->S[54] + w->fh[46]*w->S[68] + w->fh[50]*c_in;
+    w->term[1][83] = w->fh[45]*w->S[55] + w->fh[46]*w->S[69] + w->fh[51]*c_in;
+    w->term[1][84] = w->fh[52]*w->S[56];
+    w->term[1][86] = w->fh[52]*w->S[58];
+    w->term[1][87] = w->fh[52]*w->S[59];
+    w->term[1][88] = w->fh[52]*w->S[60];
+    w->term[1][89] = w->fh[52]*w->S[61] + w->fh[53]*w->S[118];
+    w->term[1][90] = c_out + w->fh[52]*w->S[62];
+    w->term[1][91] = w->fh[52]*w->S[63] + w->fh[53]*w->S[120];
+    w->term[1][95] = w->fh[52]*w->S[67];
+    w->term[1][96] = w->fh[52]*w->S[68];
+    w->term[1][97] = w->fh[52]*w->S[69];
+    w->term[1][99] = w->fh[54]*w->S[43];
+    w->term[1][100] = w->fh[54]*w->S[44];
+    w->term[1][101] = w->fh[54]*w->S[45];
+    w->term[1][102] = w->fh[54]*w->S[46] + w->fh[55]*w->S[88];
+    w->term[1][103] = w->fh[54]*w->S[47] + w->fh[56]*w->S[118];
+    w->term[1][104] = w->fh[54]*w->S[48] + w->fh[55]*w->S[90];
+    w->term[1][105] = c_out;
+    w->term[1][106] = w->fh[54]*w->S[49] + w->fh[55]*w->S[91] + w->fh[56]*w->S[120];
+    w->term[1][110] = w->fh[54]*w->S[53];
+    w->term[1][111] = w->fh[54]*w->S[54];
+    w->term[1][112] = w->fh[54]*w->S[55];
+    w->term[1][113] = w->fh[57]*w->S[70];
+    w->term[1][114] = w->fh[57]*w->S[71];
+    w->term[1][116] = w->fh[57]*w->S[73];
+    w->term[1][117] = w->fh[57]*w->S[74];
+    w->term[1][118] = w->fh[57]*w->S[75];
+    w->term[1][119] = w->fh[57]*w->S[76];
+    w->term[1][120] = c_out + w->fh[57]*w->S[77];
+    w->term[1][124] = w->fh[57]*w->S[81];
+    w->term[1][125] = w->fh[57]*w->S[82];
+    w->term[1][126] = w->fh[57]*w->S[83];
 }
 
-INS_GPS15_TWIN_BLOCK void taylor_order_6(ins_gps15_twin_transition *restrict t,
-        ins_gps15_twin_discretize_scratch *restrict w)
+INS_GPS15_TWIN_BLOCK void horner_level_3_into_S(ins_gps15_twin_discretize_scratch *restrict w, const
+        ins_gps15_twin_scalar c_out, const ins_gps15_twin_scalar c_in)
 {
-    const ins_gps15_twin_scalar ck = 1.0 / 720.0;
-    const ins_gps15_twin_scalar cs = 1.0 / 5040.0;
-    w->term[0][0] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][28] + w->fh[2]*w->term[1][56] +
-            w->fh[3]*w->term[1][112];
-    w->term[0][1] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][29] + w->fh[2]*w->term[1][57] +
+    w->S[0] = c_out + w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][28] + w->fh[2]*w->term[1][56] +
             w->fh[3]*w->term[1][113];
-    w->term[0][2] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][30] + w->fh[2]*w->term[1][58] +
+    w->S[1] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][29] + w->fh[2]*w->term[1][57] +
             w->fh[3]*w->term[1][114];
-    w->term[0][3] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][31] + w->fh[2]*w->term[1][59] +
-            w->fh[3]*w->term[1][115];
-    w->term[0][4] = w->fh[0]*w->term[1][18] + w->fh[1]*w->term[1][32] + w->fh[2]*w->term[1][60] +
+    w->S[2] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][30] + w->fh[2]*w->term[1][58];
+    w->S[3] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][31] + w->fh[2]*w->term[1][59] +
             w->fh[3]*w->term[1][116];
-    w->term[0][5] = w->fh[0]*w->term[1][19] + w->fh[1]*w->term[1][33] + w->fh[2]*w->term[1][61] +
+    w->S[4] = w->fh[0]*w->term[1][18] + w->fh[1]*w->term[1][32] + w->fh[2]*w->term[1][60] +
             w->fh[3]*w->term[1][117];
-    w->term[0][6] = w->fh[0]*w->term[1][20] + w->fh[1]*w->term[1][34] + w->fh[2]*w->term[1][62] +
+    w->S[5] = w->fh[0]*w->term[1][19] + w->fh[1]*w->term[1][33] + w->fh[2]*w->term[1][61] +
             w->fh[3]*w->term[1][118];
-    w->term[0][7] = w->fh[0]*w->term[1][21] + w->fh[1]*w->term[1][35] + w->fh[2]*w->term[1][63] +
+    w->S[6] = w->fh[0]*w->term[1][20] + w->fh[1]*w->term[1][34] + w->fh[2]*w->term[1][62] +
             w->fh[3]*w->term[1][119];
-    w->term[0][8] = w->fh[0]*w->term[1][22] + w->fh[1]*w->term[1][36] + w->fh[2]*w->term[1][64] +
+    w->S[7] = w->fh[0]*w->term[1][21] + w->fh[1]*w->term[1][35] + w->fh[2]*w->term[1][63] +
             w->fh[3]*w->term[1][120];
-    w->term[0][9] = w->fh[0]*w->term[1][23] + w->fh[1]*w->term[1][37] + w->fh[2]*w->term[1][65] +
-            w->fh[3]*w->term[1][121];
-    w->term[0][10] = w->fh[0]*w->term[1][24] + w->fh[1]*w->term[1][38] + w->fh[2]*w->term[1][66] +
-            w->fh[3]*w->term[1][122];
-    w->term[0][11] = w->fh[0]*w->term[1][25] + w->fh[1]*w->term[1][39] + w->fh[2]*w->term[1][67] +
-            w->fh[3]*w->term[1][123];
-    w->term[0][12] = w->fh[0]*w->term[1][26] + w->fh[1]*w->term[1][40] + w->fh[2]*w->term[1][68] +
+    w->S[8] = w->fh[0]*w->term[1][22] + w->fh[1]*w->term[1][36] + w->fh[2]*w->term[1][64] +
+            w->fh[4]*c_in;
+    w->S[9] = w->fh[0]*w->term[1][23] + w->fh[1]*w->term[1][37] + w->fh[2]*w->term[1][65] +
+            w->fh[5]*c_in;
+    w->S[10] = w->fh[0]*w->term[1][24] + w->fh[1]*w->term[1][38] + w->fh[2]*w->term[1][66] +
+            w->fh[6]*c_in;
+    w->S[11] = w->fh[0]*w->term[1][25] + w->fh[1]*w->term[1][39] + w->fh[2]*w->term[1][67] +
             w->fh[3]*w->term[1][124];
-    w->term[0][13] = w->fh[0]*w->term[1][27] + w->fh[1]*w->term[1][41] + w->fh[2]*w->term[1][69] +
+    w->S[12] = w->fh[0]*w->term[1][26] + w->fh[1]*w->term[1][40] + w->fh[2]*w->term[1][68] +
             w->fh[3]*w->term[1][125];
-    w->term[0][14] = w->fh[7]*w->term[1][0] + w->fh[8]*w->term[1][28] + w->fh[9]*w->term[1][42] +
-            w->fh[10]*w->term[1][84] + w->fh[11]*w->term[1][112];
-    w->term[0][15] = w->fh[7]*w->term[1][1] + w->fh[8]*w->term[1][29] + w->fh[9]*w->term[1][43] +
-            w->fh[10]*w->term[1][85] + w->fh[11]*w->term[1][113];
-    w->term[0][16] = w->fh[7]*w->term[1][2] + w->fh[8]*w->term[1][30] + w->fh[9]*w->term[1][44] +
-            w->fh[10]*w->term[1][86] + w->fh[11]*w->term[1][114];
-    w->term[0][17] = w->fh[7]*w->term[1][3] + w->fh[8]*w->term[1][31] + w->fh[9]*w->term[1][45] +
-            w->fh[10]*w->term[1][87] + w->fh[11]*w->term[1][115];
-    w->term[0][18] = w->fh[7]*w->term[1][4] + w->fh[8]*w->term[1][32] + w->fh[9]*w->term[1][46] +
-            w->fh[10]*w->term[1][88] + w->fh[11]*w->term[1][116];
-    w->term[0][19] = w->fh[7]*w->term[1][5] + w->fh[8]*w->term[1][33] + w->fh[9]*w->term[1][47] +
-            w->fh[10]*w->term[1][89] + w->fh[11]*w->term[1][117];
-    w->term[0][20] = w->fh[7]*w->term[1][6] + w->fh[8]*w->term[1][34] + w->fh[9]*w->term[1][48] +
-            w->fh[10]*w->term[1][90] + w->fh[11]*w->term[1][118];
-    w->term[0][21] = w->fh[7]*w->term[1][7] + w->fh[8]*w->term[1][35] + w->fh[9]*w->term[1][49] +
-            w->fh[10]*w->term[1][91] + w->fh[11]*w->term[1][119];
-    w->term[0][22] = w->fh[7]*w->term[1][8] + w->fh[8]*w->term[1][36] + w->fh[9]*w->term[1][50] +
-            w->fh[10]*w->term[1][92] + w->fh[11]*w->term[1][120];
-    w->term[0][23] = w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][37] + w->fh[9]*w->term[1][51] +
-            w->fh[10]*w->term[1][93] + w->fh[11]*w->term[1][121];
-    w->term[0][24] = w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][38] + w->fh[9]*w->term[1][52] +
-            w->fh[10]*w->term[1][94] + w->fh[11]*w->term[1][122];
-    w->term[0][25] = w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][39] + w->fh[9]*w->term[1][53] +
-            w->fh[10]*w->term[1][95] + w->fh[11]*w->term[1][123];
-    w->term[0][26] = w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][40] + w->fh[9]*w->term[1][54] +
-            w->fh[10]*w->term[1][96] + w->fh[11]*w->term[1][124];
-    w->term[0][27] = w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][41] + w->fh[9]*w->term[1][55] +
-            w->fh[10]*w->term[1][97] + w->fh[11]*w->term[1][125];
-    w->term[0][28] = w->fh[15]*w->term[1][0] + w->fh[16]*w->term[1][14] + w->fh[17]*w->term[1][42] +
-            w->fh[18]*w->term[1][84] + w->fh[19]*w->term[1][112];
-    w->term[0][29] = w->fh[15]*w->term[1][1] + w->fh[16]*w->term[1][15] + w->fh[17]*w->term[1][43] +
-            w->fh[18]*w->term[1][85] + w->fh[19]*w->term[1][113];
-    w->term[0][30] = w->fh[15]*w->term[1][2] + w->fh[16]*w->term[1][16] + w->fh[17]*w->term[1][44] +
-            w->fh[18]*w->term[1][86] + w->fh[19]*w->term[1][114];
-    w->term[0][31] = w->fh[15]*w->term[1][3] + w->fh[16]*w->term[1][17] + w->fh[17]*w->term[1][45] +
-            w->fh[18]*w->term[1][87] + w->fh[19]*w->term[1][115];
-    w->term[0][32] = w->fh[15]*w->term[1][4] + w->fh[16]*w->term[1][18] + w->fh[17]*w->term[1][46] +
-            w->fh[18]*w->term[1][88] + w->fh[19]*w->term[1][116];
-    w->term[0][33] = w->fh[15]*w->term[1][5] + w->fh[16]*w->term[1][19] + w->fh[17]*w->term[1][47] +
-            w->fh[18]*w->term[1][89] + w->fh[19]*w->term[1][117];
-    w->term[0][34] = w->fh[15]*w->term[1][6] + w->fh[16]*w->term[1][20] + w->fh[17]*w->term[1][48] +
-            w->fh[18]*w->term[1][90] + w->fh[19]*w->term[1][118];
-    w->term[0][35] = w->fh[15]*w->term[1][7] + w->fh[16]*w->term[1][21] + w->fh[17]*w->term[1][49] +
-            w->fh[18]*w->term[1][91] + w->fh[19]*w->term[1][119];
-    w->term[0][36] = w->fh[15]*w->term[1][8] + w->fh[16]*w->term[1][22] + w->fh[17]*w->term[1][50] +
-            w->fh[18]*w->term[1][92] + w->fh[19]*w->term[1][120];
-    w->term[0][37] = w->fh[15]*w->term[1][9] + w->fh[16]*w->term[1][23] + w->fh[17]*w->term[1][51] +
-            w->fh[18]*w->term[1][93] + w->fh[19]*w->term[1][121];
-    w->term[0][38] = w->fh[15]*w->term[1][10] + w->fh[16]*w->term[1][24] + w->fh[17]*w->term[1][52]
-            + w->fh[18]*w->term[1][94] + w->fh[19]*w->term[1][122];
-    w->term[0][39] = w->fh[15]*w->term[1][11] + w->fh[16]*w->term[1][25] + w->fh[17]*w->term[1][53]
-            + w->fh[18]*w->term[1][95] + w->fh[19]*w->term[1][123];
-    w->term[0][40] = w->fh[15]*w->term[1][12] + w->fh[16]*w->term[1][26] + w->fh[17]*w->term[1][54]
-            + w->fh[18]*w->term[1][96] + w->fh[19]*w->term[1][124];
-    w->term[0][41] = w->fh[15]*w->term[1][13] + w->fh[16]*w->term[1][27] + w->fh[17]*w->term[1][55]
-            + w->fh[18]*w->term[1][97] + w->fh[19]*w->term[1][125];
-    w->term[0][42] = w->fh[23]*w->term[1][14] + w->fh[24]*w->term[1][28] + w->fh[25]*w->term[1][42]
-            + w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][70] + w->fh[28]*w->term[1][84] +
-            w->fh[29]*w->term[1][112];
-    w->term[0][43] = w->fh[23]*w->term[1][15] + w->fh[24]*w->term[1][29] + w->fh[25]*w->term[1][43]
-            + w->fh[26]*w->term[1][57] + w->fh[27]*w->term[1][71] + w->fh[28]*w->term[1][85] +
+    w->S[13] = w->fh[0]*w->term[1][27] + w->fh[1]*w->term[1][41] + w->fh[2]*w->term[1][69] +
+            w->fh[3]*w->term[1][126];
+    w->S[14] = w->fh[7]*w->term[1][0] + w->fh[8]*w->term[1][28] + w->fh[9]*w->term[1][42] +
+            w->fh[10]*w->term[1][84] + w->fh[11]*w->term[1][113];
+    w->S[15] = c_out + w->fh[7]*w->term[1][1] + w->fh[8]*w->term[1][29] + w->fh[9]*w->term[1][43] +
+            w->fh[11]*w->term[1][114];
+    w->S[16] = w->fh[7]*w->term[1][2] + w->fh[8]*w->term[1][30] + w->fh[9]*w->term[1][44] +
+            w->fh[10]*w->term[1][86];
+    w->S[17] = w->fh[7]*w->term[1][3] + w->fh[8]*w->term[1][31] + w->fh[9]*w->term[1][45] +
+            w->fh[10]*w->term[1][87] + w->fh[11]*w->term[1][116];
+    w->S[18] = w->fh[7]*w->term[1][4] + w->fh[8]*w->term[1][32] + w->fh[9]*w->term[1][46] +
+            w->fh[10]*w->term[1][88] + w->fh[11]*w->term[1][117];
+    w->S[19] = w->fh[7]*w->term[1][5] + w->fh[8]*w->term[1][33] + w->fh[9]*w->term[1][47] +
+            w->fh[10]*w->term[1][89] + w->fh[11]*w->term[1][118];
+    w->S[20] = w->fh[7]*w->term[1][6] + w->fh[8]*w->term[1][34] + w->fh[9]*w->term[1][48] +
+            w->fh[10]*w->term[1][90] + w->fh[11]*w->term[1][119];
+    w->S[21] = w->fh[7]*w->term[1][7] + w->fh[8]*w->term[1][35] + w->fh[9]*w->term[1][49] +
+            w->fh[10]*w->term[1][91] + w->fh[11]*w->term[1][120];
+    w->S[22] = w->fh[7]*w->term[1][8] + w->fh[8]*w->term[1][36] + w->fh[9]*w->term[1][50] +
+            w->fh[12]*c_in;
+    w->S[23] = w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][37] + w->fh[9]*w->term[1][51] +
+            w->fh[13]*c_in;
+    w->S[24] = w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][38] + w->fh[9]*w->term[1][52] +
+            w->fh[14]*c_in;
+    w->S[25] = w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][39] + w->fh[9]*w->term[1][53] +
+            w->fh[10]*w->term[1][95] + w->fh[11]*w->term[1][124];
+    w->S[26] = w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][40] + w->fh[9]*w->term[1][54] +
+            w->fh[10]*w->term[1][96] + w->fh[11]*w->term[1][125];
+    w->S[27] = w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][41] + w->fh[9]*w->term[1][55] +
+            w->fh[10]*w->term[1][97] + w->fh[11]*w->term[1][126];
+    w->S[28] = w->fh[15]*w->term[1][0] + w->fh[16]*w->term[1][14] + w->fh[17]*w->term[1][42] +
+            w->fh[18]*w->term[1][84] + w->fh[19]*w->term[1][113];
+    w->S[29] = w->fh[15]*w->term[1][1] + w->fh[16]*w->term[1][15] + w->fh[17]*w->term[1][43] +
+            w->fh[19]*w->term[1][114];
+    w->S[30] = c_out + w->fh[15]*w->term[1][2] + w->fh[16]*w->term[1][16] + w->fh[17]*w->term[1][44]
+            + w->fh[18]*w->term[1][86];
+    w->S[31] = w->fh[15]*w->term[1][3] + w->fh[16]*w->term[1][17] + w->fh[17]*w->term[1][45] +
+            w->fh[18]*w->term[1][87] + w->fh[19]*w->term[1][116];
+    w->S[32] = w->fh[15]*w->term[1][4] + w->fh[16]*w->term[1][18] + w->fh[17]*w->term[1][46] +
+            w->fh[18]*w->term[1][88] + w->fh[19]*w->term[1][117];
+    w->S[33] = w->fh[15]*w->term[1][5] + w->fh[16]*w->term[1][19] + w->fh[17]*w->term[1][47] +
+            w->fh[18]*w->term[1][89] + w->fh[19]*w->term[1][118];
+    w->S[34] = w->fh[15]*w->term[1][6] + w->fh[16]*w->term[1][20] + w->fh[17]*w->term[1][48] +
+            w->fh[18]*w->term[1][90] + w->fh[19]*w->term[1][119];
+    w->S[35] = w->fh[15]*w->term[1][7] + w->fh[16]*w->term[1][21] + w->fh[17]*w->term[1][49] +
+            w->fh[18]*w->term[1][91] + w->fh[19]*w->term[1][120];
+    w->S[36] = w->fh[15]*w->term[1][8] + w->fh[16]*w->term[1][22] + w->fh[17]*w->term[1][50] +
+            w->fh[20]*c_in;
+    w->S[37] = w->fh[15]*w->term[1][9] + w->fh[16]*w->term[1][23] + w->fh[17]*w->term[1][51] +
+            w->fh[21]*c_in;
+    w->S[38] = w->fh[15]*w->term[1][10] + w->fh[16]*w->term[1][24] + w->fh[17]*w->term[1][52] +
+            w->fh[22]*c_in;
+    w->S[39] = w->fh[15]*w->term[1][11] + w->fh[16]*w->term[1][25] + w->fh[17]*w->term[1][53] +
+            w->fh[18]*w->term[1][95] + w->fh[19]*w->term[1][124];
+    w->S[40] = w->fh[15]*w->term[1][12] + w->fh[16]*w->term[1][26] + w->fh[17]*w->term[1][54] +
+            w->fh[18]*w->term[1][96] + w->fh[19]*w->term[1][125];
+    w->S[41] = w->fh[15]*w->term[1][13] + w->fh[16]*w->term[1][27] + w->fh[17]*w->term[1][55] +
+            w->fh[18]*w->term[1][97] + w->fh[19]*w->term[1][126];
+    w->S[42] = w->fh[23]*w->term[1][14] + w->fh[24]*w->term[1][28] + w->fh[25]*w->term[1][42] +
+            w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][70] + w->fh[28]*w->term[1][84] +
             w->fh[29]*w->term[1][113];
-    w->term[0][44] = w->fh[23]*w->term[1][16] + w->fh[24]*w->term[1][30] + w->fh[25]*w->term[1][44]
-            + w->fh[26]*w->term[1][58] + w->fh[27]*w->term[1][72] + w->fh[28]*w->term[1][86] +
-            w->fh[29]*w->term[1][114];
-    w->term[0][45] = w->fh[23]*w->term[1][17] + w->fh[24]*w->term[1][31] + w->fh[25]*w->term[1][45]
-            + w->fh[26]*w->term[1][59] + w->fh[27]*w->term[1][73] + w->fh[28]*w->term[1][87] +
-            w->fh[29]*w->term[1][115];
-    w->term[0][46] = w->fh[23]*w->term[1][18] + w->fh[24]*w->term[1][32] + w->fh[25]*w->term[1][46]
-            + w->fh[26]*w->term[1][60] + w->fh[27]*w->term[1][74] + w->fh[28]*w->term[1][88] +
-            w->fh[29]*w->term[1][116];
-    w->term[0][47] = w->fh[23]*w->term[1][19] + w->fh[24]*w->term[1][33] + w->fh[25]*w->term[1][47]
-            + w->fh[26]*w->term[1][61] + w->fh[27]*w->term[1][75] + w->fh[28]*w->term[1][89] +
+    w->S[43] = w->fh[23]*w->term[1][15] + w->fh[24]*w->term[1][29] + w->fh[25]*w->term[1][43] +
+            w->fh[26]*w->term[1][57] + w->fh[27]*w->term[1][71] + w->fh[29]*w->term[1][114];
+    w->S[44] = w->fh[23]*w->term[1][16] + w->fh[24]*w->term[1][30] + w->fh[25]*w->term[1][44] +
+            w->fh[26]*w->term[1][58] + w->fh[27]*w->term[1][72] + w->fh[28]*w->term[1][86];
+    w->S[45] = c_out + w->fh[23]*w->term[1][17] + w->fh[24]*w->term[1][31] +
+            w->fh[25]*w->term[1][45] + w->fh[26]*w->term[1][59] + w->fh[27]*w->term[1][73] +
+            w->fh[28]*w->term[1][87] + w->fh[29]*w->term[1][116];
+    w->S[46] = w->fh[23]*w->term[1][18] + w->fh[24]*w->term[1][32] + w->fh[25]*w->term[1][46] +
+            w->fh[26]*w->term[1][60] + w->fh[27]*w->term[1][74] + w->fh[28]*w->term[1][88] +
             w->fh[29]*w->term[1][117];
-    w->term[0][48] = w->fh[23]*w->term[1][20] + w->fh[24]*w->term[1][34] + w->fh[25]*w->term[1][48]
-            + w->fh[26]*w->term[1][62] + w->fh[27]*w->term[1][76] + w->fh[28]*w->term[1][90] +
+    w->S[47] = w->fh[23]*w->term[1][19] + w->fh[24]*w->term[1][33] + w->fh[25]*w->term[1][47] +
+            w->fh[26]*w->term[1][61] + w->fh[27]*w->term[1][75] + w->fh[28]*w->term[1][89] +
             w->fh[29]*w->term[1][118];
-    w->term[0][49] = w->fh[23]*w->term[1][21] + w->fh[24]*w->term[1][35] + w->fh[25]*w->term[1][49]
-            + w->fh[26]*w->term[1][63] + w->fh[27]*w->term[1][77] + w->fh[28]*w->term[1][91] +
+    w->S[48] = w->fh[23]*w->term[1][20] + w->fh[24]*w->term[1][34] + w->fh[25]*w->term[1][48] +
+            w->fh[26]*w->term[1][62] + w->fh[27]*w->term[1][76] + w->fh[28]*w->term[1][90] +
             w->fh[29]*w->term[1][119];
-    w->term[0][50] = w->fh[23]*w->term[1][22] + w->fh[24]*w->term[1][36] + w->fh[25]*w->term[1][50]
-            + w->fh[26]*w->term[1][64] + w->fh[27]*w->term[1][78] + w->fh[28]*w->term[1][92] +
+    w->S[49] = w->fh[23]*w->term[1][21] + w->fh[24]*w->term[1][35] + w->fh[25]*w->term[1][49] +
+            w->fh[26]*w->term[1][63] + w->fh[27]*w->term[1][77] + w->fh[28]*w->term[1][91] +
             w->fh[29]*w->term[1][120];
-    w->term[0][51] = w->fh[23]*w->term[1][23] + w->fh[24]*w->term[1][37] + w->fh[25]*w->term[1][51]
-            + w->fh[26]*w->term[1][65] + w->fh[27]*w->term[1][79] + w->fh[28]*w->term[1][93] +
-            w->fh[29]*w->term[1][121];
-    w->term[0][52] = w->fh[23]*w->term[1][24] + w->fh[24]*w->term[1][38] + w->fh[25]*w->term[1][52]
-            + w->fh[26]*w->term[1][66] + w->fh[27]*w->term[1][80] + w->fh[28]*w->term[1][94] +
-            w->fh[29]*w->term[1][122];
-    w->term[0][53] = w->fh[23]*w->term[1][25] + w->fh[24]*w->term[1][39] + w->fh[25]*w->term[1][53]
-            + w->fh[26]*w->term[1][67] + w->fh[27]*w->term[1][81] + w->fh[28]*w->term[1][95] +
-            w->fh[29]*w->term[1][123];
-    w->term[0][54] = w->fh[23]*w->term[1][26] + w->fh[24]*w->term[1][40] + w->fh[25]*w->term[1][54]
-            + w->fh[26]*w->term[1][68] + w->fh[27]*w->term[1][82] + w->fh[28]*w->term[1][96] +
-            w->fh[29]*w->term[1][124];
-    w->term[0][55] = w->fh[23]*w->term[1][27] + w->fh[24]*w->term[1][41] + w->fh[25]*w->term[1][55]
-            + w->fh[26]*w->term[1][69] + w->fh[27]*w->term[1][83] + w->fh[28]*w->term[1][97] +
-            w->fh[29]*w->term[1][125];
-    w->term[0][56] = w->fh[33]*w->term[1][0] + w->fh[34]*w->term[1][28] + w->fh[35]*w->term[1][42] +
+    w->S[50] = w->fh[23]*w->term[1][22] + w->fh[24]*w->term[1][36] + w->fh[25]*w->term[1][50] +
+            w->fh[26]*w->term[1][64] + w->fh[27]*w->term[1][78];
+    w->S[51] = w->fh[23]*w->term[1][23] + w->fh[24]*w->term[1][37] + w->fh[25]*w->term[1][51] +
+            w->fh[26]*w->term[1][65] + w->fh[27]*w->term[1][79];
+    w->S[52] = w->fh[23]*w->term[1][24] + w->fh[24]*w->term[1][38] + w->fh[25]*w->term[1][52] +
+            w->fh[26]*w->term[1][66] + w->fh[27]*w->term[1][80];
+    w->S[53] = w->fh[23]*w->term[1][25] + w->fh[24]*w->term[1][39] + w->fh[25]*w->term[1][53] +
+            w->fh[26]*w->term[1][67] + w->fh[27]*w->term[1][81] + w->fh[28]*w->term[1][95] +
+            w->fh[29]*w->term[1][124] + w->fh[30]*c_in;
+    w->S[54] = w->fh[23]*w->term[1][26] + w->fh[24]*w->term[1][40] + w->fh[25]*w->term[1][54] +
+            w->fh[26]*w->term[1][68] + w->fh[27]*w->term[1][82] + w->fh[28]*w->term[1][96] +
+            w->fh[29]*w->term[1][125] + w->fh[31]*c_in;
+    w->S[55] = w->fh[23]*w->term[1][27] + w->fh[24]*w->term[1][41] + w->fh[25]*w->term[1][55] +
+            w->fh[26]*w->term[1][69] + w->fh[27]*w->term[1][83] + w->fh[28]*w->term[1][97] +
+            w->fh[29]*w->term[1][126] + w->fh[32]*c_in;
+    w->S[56] = w->fh[33]*w->term[1][0] + w->fh[34]*w->term[1][28] + w->fh[35]*w->term[1][42] +
             w->fh[36]*w->term[1][56] + w->fh[37]*w->term[1][70] + w->fh[38]*w->term[1][84] +
-            w->fh[39]*w->term[1][112];
-    w->term[0][57] = w->fh[33]*w->term[1][1] + w->fh[34]*w->term[1][29] + w->fh[35]*w->term[1][43] +
-            w->fh[36]*w->term[1][57] + w->fh[37]*w->term[1][71] + w->fh[38]*w->term[1][85] +
             w->fh[39]*w->term[1][113];
-    w->term[0][58] = w->fh[33]*w->term[1][2] + w->fh[34]*w->term[1][30] + w->fh[35]*w->term[1][44] +
-            w->fh[36]*w->term[1][58] + w->fh[37]*w->term[1][72] + w->fh[38]*w->term[1][86] +
-            w->fh[39]*w->term[1][114];
-    w->term[0][59] = w->fh[33]*w->term[1][3] + w->fh[34]*w->term[1][31] + w->fh[35]*w->term[1][45] +
+    w->S[57] = w->fh[33]*w->term[1][1] + w->fh[34]*w->term[1][29] + w->fh[35]*w->term[1][43] +
+            w->fh[36]*w->term[1][57] + w->fh[37]*w->term[1][71] + w->fh[39]*w->term[1][114];
+    w->S[58] = w->fh[33]*w->term[1][2] + w->fh[34]*w->term[1][30] + w->fh[35]*w->term[1][44] +
+            w->fh[36]*w->term[1][58] + w->fh[37]*w->term[1][72] + w->fh[38]*w->term[1][86];
+    w->S[59] = w->fh[33]*w->term[1][3] + w->fh[34]*w->term[1][31] + w->fh[35]*w->term[1][45] +
             w->fh[36]*w->term[1][59] + w->fh[37]*w->term[1][73] + w->fh[38]*w->term[1][87] +
-            w->fh[39]*w->term[1][115];
-    w->term[0][60] = w->fh[33]*w->term[1][4] + w->fh[34]*w->term[1][32] + w->fh[35]*w->term[1][46] +
-            w->fh[36]*w->term[1][60] + w->fh[37]*w->term[1][74] + w->fh[38]*w->term[1][88] +
             w->fh[39]*w->term[1][116];
-    w->term[0][61] = w->fh[33]*w->term[1][5] + w->fh[34]*w->term[1][33] + w->fh[35]*w->term[1][47] +
-            w->fh[36]*w->term[1][61] + w->fh[37]*w->term[1][75] + w->fh[38]*w->term[1][89] +
+    w->S[60] = c_out + w->fh[33]*w->term[1][4] + w->fh[34]*w->term[1][32] + w->fh[35]*w->term[1][46]
+            + w->fh[36]*w->term[1][60] + w->fh[37]*w->term[1][74] + w->fh[38]*w->term[1][88] +
             w->fh[39]*w->term[1][117];
-    w->term[0][62] = w->fh[33]*w->term[1][6] + w->fh[34]*w->term[1][34] + w->fh[35]*w->term[1][48] +
-            w->fh[36]*w->term[1][62] + w->fh[37]*w->term[1][76] + w->fh[38]*w->term[1][90] +
+    w->S[61] = w->fh[33]*w->term[1][5] + w->fh[34]*w->term[1][33] + w->fh[35]*w->term[1][47] +
+            w->fh[36]*w->term[1][61] + w->fh[37]*w->term[1][75] + w->fh[38]*w->term[1][89] +
             w->fh[39]*w->term[1][118];
-    w->term[0][63] = w->fh[33]*w->term[1][7] + w->fh[34]*w->term[1][35] + w->fh[35]*w->term[1][49] +
-            w->fh[36]*w->term[1][63] + w->fh[37]*w->term[1][77] + w->fh[38]*w->term[1][91] +
+    w->S[62] = w->fh[33]*w->term[1][6] + w->fh[34]*w->term[1][34] + w->fh[35]*w->term[1][48] +
+            w->fh[36]*w->term[1][62] + w->fh[37]*w->term[1][76] + w->fh[38]*w->term[1][90] +
             w->fh[39]*w->term[1][119];
-    w->term[0][64] = w->fh[33]*w->term[1][8] + w->fh[34]*w->term[1][36] + w->fh[35]*w->term[1][50] +
-            w->fh[36]*w->term[1][64] + w->fh[37]*w->term[1][78] + w->fh[38]*w->term[1][92] +
+    w->S[63] = w->fh[33]*w->term[1][7] + w->fh[34]*w->term[1][35] + w->fh[35]*w->term[1][49] +
+            w->fh[36]*w->term[1][63] + w->fh[37]*w->term[1][77] + w->fh[38]*w->term[1][91] +
             w->fh[39]*w->term[1][120];
-    w->term[0][65] = w->fh[33]*w->term[1][9] + w->fh[34]*w->term[1][37] + w->fh[35]*w->term[1][51] +
-            w->fh[36]*w->term[1][65] + w->fh[37]*w->term[1][79] + w->fh[38]*w->term[1][93] +
-            w->fh[39]*w->term[1][121];
-    w->term[0][66] = w->fh[33]*w->term[1][10] + w->fh[34]*w->term[1][38] + w->fh[35]*w->term[1][52]
-            + w->fh[36]*w->term[1][66] + w->fh[37]*w->term[1][80] + w->fh[38]*w->term[1][94] +
-            w->fh[39]*w->term[1][122];
-    w->term[0][67] = w->fh[33]*w->term[1][11] + w->fh[34]*w->term[1][39] + w->fh[35]*w->term[1][53]
-            + w->fh[36]*w->term[1][67] + w->fh[37]*w->term[1][81] + w->fh[38]*w->term[1][95] +
-            w->fh[39]*w->term[1][123];
-    w->term[0][68] = w->fh[33]*w->term[1][12] + w->fh[34]*w->term[1][40] + w->fh[35]*w->term[1][54]
-            + w->fh[36]*w->term[1][68] + w->fh[37]*w->term[1][82] + w->fh[38]*w->term[1][96] +
-            w->fh[39]*w->term[1][124];
-    w->term[0][69] = w->fh[33]*w->term[1][13] + w->fh[34]*w->term[1][41] + w->fh[35]*w->term[1][55]
-            + w->fh[36]*w->term[1][69] + w->fh[37]*w->term[1][83] + w->fh[38]*w->term[1][97] +
-            w->fh[39]*w->term[1][125];
-    w->term[0][70] = w->fh[43]*w->term[1][0] + w->fh[44]*w->term[1][14] + w->fh[45]*w->term[1][42] +
-            w->fh[46]*w->term[1][56] + w->fh[47]*w->term[1][84] + w->fh[48]*w->term[1][112];
-    w->term[0][71] = w->fh[43]*w->term[1][1] + w->fh[44]*w->term[1][15] + w->fh[45]*w->term[1][43] +
-            w->fh[46]*w->term[1][57] + w->fh[47]*w->term[1][85] + w->fh[48]*w->term[1][113];
-    w->term[0][72] = w->fh[43]*w->term[1][2] + w->fh[44]*w->term[1][16] + w->fh[45]*w->term[1][44] +
-            w->fh[46]*w->term[1][58] + w->fh[47]*w->term[1][86] + w->fh[48]*w->term[1][114];
-    w->term[0][73] = w->fh[43]*w->term[1][3] + w->fh[44]*w->term[1][17] + w->fh[45]*w->term[1][45] +
-            w->fh[46]*w->term[1][59] + w->fh[47]*w->term[1][87] + w->fh[48]*w->term[1][115];
-    w->term[0][74] = w->fh[43]*w->term[1][4] + w->fh[44]*w->term[1][18] + w->fh[45]*w->term[1][46] +
-            w->fh[46]*w->term[1][60] + w->fh[47]*w->term[1][88] + w->fh[48]*w->term[1][116];
-    w->term[0][75] = w->fh[43]*w->term[1][5] + w->fh[44]*w->term[1][19] + w->fh[45]*w->term[1][47] +
-            w->fh[46]*w->term[1][61] + w->fh[47]*w->term[1][89] + w->fh[48]*w->term[1][117];
-    w->term[0][76] = w->fh[43]*w->term[1][6] + w->fh[44]*w->term[1][20] + w->fh[45]*w->term[1][48] +
-            w->fh[46]*w->term[1][62] + w->fh[47]*w->term[1][90] + w->fh[48]*w->term[1][118];
-    w->term[0][77] = w->fh[43]*w->term[1][7] + w->fh[44]*w->term[1][21] + w->fh[45]*w->term[1][49] +
-            w->fh[46]*w->term[1][63] + w->fh[47]*w->term[1][91] + w->fh[48]*w->term[1][119];
-    w->term[0][78] = w->fh[43]*w->term[1][8] + w->fh[44]*w->term[1][22] + w->fh[45]*w->term[1][50] +
-            w->fh[46]*w->term[1][64] + w->fh[47]*w->term[1][92] + w->fh[48]*w->term[1][120];
-    w->term[0][79] = w->fh[43]*w->term[1][9] + w->fh[44]*w->term[1][23] + w->fh[45]*w->term[1][51] +
-            w->fh[46]*w->term[1][65] + w->fh[47]*w->term[1][93] + w->fh[48]*w->term[1][121];
-    w->term[0][80] = w->fh[43]*w->term[1][10] + w->fh[44]*w->term[1][24] + w->fh[45]*w->term[1][52]
-            + w->fh[46]*w->term[1][66] + w->fh[47]*w->term[1][94] + w->fh[48]*w->term[1][122];
-    w->term[0][81] = w->fh[43]*w->term[1][11] + w->fh[44]*w->term[1][25] + w->fh[45]*w->term[1][53]
-            + w->fh[46]*w->term[1][67] + w->fh[47]*w->term[1][95] + w->fh[48]*w->term[1][123];
-    w->term[0][82] = w->fh[43]*w->term[1][12] + w->fh[44]*w->term[1][26] + w->fh[45]*w->term[1][54]
-            + w->fh[46]*w->term[1][68] + w->fh[47]*w->term[1][96] + w->fh[48]*w->term[1][124];
-    w->term[0][83] = w->fh[43]*w->term[1][13] + w->fh[44]*w->term[1][27] + w->fh[45]*w->term[1][55]
-            + w->fh[46]*w->term[1][69] + w->fh[47]*w->term[1][97] + w->fh[48]*w->term[1][125];
-    w->term[0][84] = w->fh[52]*w->term[1][56] + w->fh[53]*w->term[1][112];
-    w->term[0][85] = w->fh[52]*w->term[1][57] + w->fh[53]*w->term[1][113];
-    w->term[0][86] = w->fh[52]*w->term[1][58] + w->fh[53]*w->term[1][114];
-    w->term[0][87] = w->fh[52]*w->term[1][59] + w->fh[53]*w->term[1][115];
-    w->term[0][88] = w->fh[52]*w->term[1][60] + w->fh[53]*w->term[1][116];
-    w->term[0][89] = w->fh[52]*w->term[1][61] + w->fh[53]*w->term[1][117];
-    w->term[0][90] = w->fh[52]*w->term[1][62] + w->fh[53]*w->term[1][118];
-    w->term[0][91] = w->fh[52]*w->term[1][63] + w->fh[53]*w->term[1][119];
-    w->term[0][92] = w->fh[52]*w->term[1][64] + w->fh[53]*w->term[1][120];
-    w->term[0][93] = w->fh[52]*w->term[1][65] + w->fh[53]*w->term[1][121];
-    w->term[0][94] = w->fh[52]*w->term[1][66] + w->fh[53]*w->term[1][122];
-    w->term[0][95] = w->fh[52]*w->term[1][67] + w->fh[53]*w->term[1][123];
-    w->term[0][96] = w->fh[52]*w->term[1][68] + w->fh[53]*w->term[1][124];
-    w->term[0][97] = w->fh[52]*w->term[1][69] + w->fh[53]*w->term[1][125];
-    w->term[0][98] = w->fh[54]*w->term[1][42] + w->fh[55]*w->term[1][84] +
-            w->fh[56]*w->term[1][112];
-    w->term[0][99] = w->fh[54]*w->term[1][43] + w->fh[55]*w->term[1][85] +
-            w->fh[56]*w->term[1][113];
-    w->term[0][100] = w->fh[54]*w->term[1][44] + w->fh[55]*w->term[1][86] +
-            w->fh[56]*w->term[1][114];
-    w->term[0][101] = w->fh[54]*w->term[1][45] + w->fh[55]*w->term[1][87] +
-            w->fh[56]*w->term[1][115];
-    w->term[0][102] = w->fh[54]*w->term[1][46] + w->fh[55]*w->term[1][88] +
-            w->fh[56]*w->term[1][116];
-    w->term[0][103] = w->fh[54]*w->term[1][47] + w->fh[55]*w->term[1][89] +
-            w->fh[56]*w->term[1][117];
-    w->term[0][104] = w->fh[54]*w->term[1][48] + w->fh[55]*w->term[1][90] +
-            w->fh[56]*w->term[1][118];
-    w->term[0][105] = w->fh[54]*w->term[1][49] + w->fh[55]*w->term[1][91] +
-            w->fh[56]*w->term[1][119];
-    w->term[0][106] = w->fh[54]*w->term[1][50] + w->fh[55]*w->term[1][92] +
-            w->fh[56]*w->term[1][120];
-    w->term[0][107] = w->fh[54]*w->term[1][51] + w->fh[55]*w->term[1][93] +
-            w->fh[56]*w->term[1][121];
-    w->term[0][108] = w->fh[54]*w->term[1][52] + w->fh[55]*w->term[1][94] +
-            w->fh[56]*w->term[1][122];
-    w->term[0][109] = w->fh[54]*w->term[1][53] + w->fh[55]*w->term[1][95] +
-            w->fh[56]*w->term[1][123];
-    w->term[0][110] = w->fh[54]*w->term[1][54] + w->fh[55]*w->term[1][96] +
-            w->fh[56]*w->term[1][124];
-    w->term[0][111] = w->fh[54]*w->term[1][55] + w->fh[55]*w->term[1][97] +
-            w->fh[56]*w->term[1][125];
-    w->term[0][112] = w->fh[57]*w->term[1][70];
-    w->term[0][113] = w->fh[57]*w->term[1][71];
-    w->term[0][114] = w->fh[57]*w->term[1][72];
-    w->term[0][115] = w->fh[57]*w->term[1][73];
-    w->term[0][116] = w->fh[57]*w->term[1][74];
-    w->term[0][117] = w->fh[57]*w->term[1][75];
-    w->term[0][118] = w->fh[57]*w->term[1][76];
-    w->term[0][119] = w->fh[57]*w->term[1][77];
-    w->term[0][120] = w->fh[57]*w->term[1][78];
-    w->term[0][121] = w->fh[57]*w->term[1][79];
-    w->term[0][122] = w->fh[57]*w->term[1][80];
-    w->term[0][123] = w->fh[57]*w->term[1][81];
-    w->term[0][124] = w->fh[57]*w->term[1][82];
-    w->term[0][125] = w->fh[57]*w->term[1][83];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[0][0]*ck;
-    w->S[0] = w->S[0] + w->term[0][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[0][1]*ck;
-    w->S[1] = w->S[1] + w->term[0][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[0][2]*ck;
-    w->S[2] = w->S[2] + w->term[0][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[0][3]*ck;
-    w->S[3] = w->S[3] + w->term[0][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[0][4]*ck;
-    w->S[4] = w->S[4] + w->term[0][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[0][5]*ck;
-    w->S[5] = w->S[5] + w->term[0][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[0][6]*ck;
-    w->S[6] = w->S[6] + w->term[0][6]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[0][7]*ck;
-    w->S[7] = w->S[7] + w->term[0][7]*cs;
-    t->Phi[0][9] = t->Phi[0][9] + w->term[0][8]*ck;
-    w->S[8] = w->S[8] + w->term[0][8]*cs;
-    t->Phi[0][10] = t->Phi[0][10] + w->term[0][9]*ck;
-    w->S[9] = w->S[9] + w->term[0][9]*cs;
-    t->Phi[0][11] = t->Phi[0][11] + w->term[0][10]*ck;
-    w->S[10] = w->S[10] + w->term[0][10]*cs;
-    t->Phi[0][12] = t->Phi[0][12] + w->term[0][11]*ck;
-    w->S[11] = w->S[11] + w->term[0][11]*cs;
-    t->Phi[0][13] = t->Phi[0][13] + w->term[0][12]*ck;
-    w->S[12] = w->S[12] + w->term[0][12]*cs;
-    t->Phi[0][14] = t->Phi[0][14] + w->term[0][13]*ck;
-    w->S[13] = w->S[13] + w->term[0][13]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[0][14]*ck;
-    w->S[14] = w->S[14] + w->term[0][14]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[0][15]*ck;
-    w->S[15] = w->S[15] + w->term[0][15]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[0][16]*ck;
-    w->S[16] = w->S[16] + w->term[0][16]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[0][17]*ck;
-    w->S[17] = w->S[17] + w->term[0][17]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[0][18]*ck;
-    w->S[18] = w->S[18] + w->term[0][18]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[0][19]*ck;
-    w->S[19] = w->S[19] + w->term[0][19]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[0][20]*ck;
-    w->S[20] = w->S[20] + w->term[0][20]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[0][21]*ck;
-    w->S[21] = w->S[21] + w->term[0][21]*cs;
-    t->Phi[1][9] = t->Phi[1][9] + w->term[0][22]*ck;
-    w->S[22] = w->S[22] + w->term[0][22]*cs;
-    t->Phi[1][10] = t->Phi[1][10] + w->term[0][23]*ck;
-    w->S[23] = w->S[23] + w->term[0][23]*cs;
-    t->Phi[1][11] = t->Phi[1][11] + w->term[0][24]*ck;
-    w->S[24] = w->S[24] + w->term[0][24]*cs;
-    t->Phi[1][12] = t->Phi[1][12] + w->term[0][25]*ck;
-    w->S[25] = w->S[25] + w->term[0][25]*cs;
-    t->Phi[1][13] = t->Phi[1][13] + w->term[0][26]*ck;
-    w->S[26] = w->S[26] + w->term[0][26]*cs;
-    t->Phi[1][14] = t->Phi[1][14] + w->term[0][27]*ck;
-    w->S[27] = w->S[27] + w->term[0][27]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[0][28]*ck;
-    w->S[28] = w->S[28] + w->term[0][28]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[0][29]*ck;
-    w->S[29] = w->S[29] + w->term[0][29]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[0][30]*ck;
-    w->S[30] = w->S[30] + w->term[0][30]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[0][31]*ck;
-    w->S[31] = w->S[31] + w->term[0][31]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[0][32]*ck;
-    w->S[32] = w->S[32] + w->term[0][32]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[0][33]*ck;
-    w->S[33] = w->S[33] + w->term[0][33]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[0][34]*ck;
-    w->S[34] = w->S[34] + w->term[0][34]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[0][35]*ck;
-    w->S[35] = w->S[35] + w->term[0][35]*cs;
-    t->Phi[2][9] = t->Phi[2][9] + w->term[0][36]*ck;
-    w->S[36] = w->S[36] + w->term[0][36]*cs;
-    t->Phi[2][10] = t->Phi[2][10] + w->term[0][37]*ck;
-    w->S[37] = w->S[37] + w->term[0][37]*cs;
-    t->Phi[2][11] = t->Phi[2][11] + w->term[0][38]*ck;
-    w->S[38] = w->S[38] + w->term[0][38]*cs;
-    t->Phi[2][12] = t->Phi[2][12] + w->term[0][39]*ck;
-    w->S[39] = w->S[39] + w->term[0][39]*cs;
-    t->Phi[2][13] = t->Phi[2][13] + w->term[0][40]*ck;
-    w->S[40] = w->S[40] + w->term[0][40]*cs;
-    t->Phi[2][14] = t->Phi[2][14] + w->term[0][41]*ck;
-    w->S[41] = w->S[41] + w->term[0][41]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[0][42]*ck;
-    w->S[42] = w->S[42] + w->term[0][42]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[0][43]*ck;
-    w->S[43] = w->S[43] + w->term[0][43]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[0][44]*ck;
-    w->S[44] = w->S[44] + w->term[0][44]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[0][45]*ck;
-    w->S[45] = w->S[45] + w->term[0][45]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[0][46]*ck;
-    w->S[46] = w->S[46] + w->term[0][46]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[0][47]*ck;
-    w->S[47] = w->S[47] + w->term[0][47]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[0][48]*ck;
-    w->S[48] = w->S[48] + w->term[0][48]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[0][49]*ck;
-    w->S[49] = w->S[49] + w->term[0][49]*cs;
-    t->Phi[3][9] = t->Phi[3][9] + w->term[0][50]*ck;
-    w->S[50] = w->S[50] + w->term[0][50]*cs;
-    t->Phi[3][10] = t->Phi[3][10] + w->term[0][51]*ck;
-    w->S[51] = w->S[51] + w->term[0][51]*cs;
-    t->Phi[3][11] = t->Phi[3][11] + w->term[0][52]*ck;
-    w->S[52] = w->S[52] + w->term[0][52]*cs;
-    t->Phi[3][12] = t->Phi[3][12] + w->term[0][53]*ck;
-    w->S[53] = w->S[53] + w->term[0][53]*cs;
-    t->Phi[3][13] = t->Phi[3][13] + w->term[0][54]*ck;
-    w->S[54] = w->S[54] + w->term[0][54]*cs;
-    t->Phi[3][14] = t->Phi[3][14] + w->term[0][55]*ck;
-    w->S[55] = w->S[55] + w->term[0][55]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[0][56]*ck;
-    w->S[56] = w->S[56] + w->term[0][56]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[0][57]*ck;
-    w->S[57] = w->S[57] + w->term[0][57]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[0][58]*ck;
-    w->S[58] = w->S[58] + w->term[0][58]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[0][59]*ck;
-    w->S[59] = w->S[59] + w->term[0][59]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[0][60]*ck;
-    w->S[60] = w->S[60] + w->term[0][60]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[0][61]*ck;
-    w->S[61] = w->S[61] + w->term[0][61]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[0][62]*ck;
-    w->S[62] = w->S[62] + w->term[0][62]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[0][63]*ck;
-    w->S[63] = w->S[63] + w->term[0][63]*cs;
-    t->Phi[4][9] = t->Phi[4][9] + w->term[0][64]*ck;
-    w->S[64] = w->S[64] + w->term[0][64]*cs;
-    t->Phi[4][10] = t->Phi[4][10] + w->term[0][65]*ck;
-    w->S[65] = w->S[65] + w->term[0][65]*cs;
-    t->Phi[4][11] = t->Phi[4][11] + w->term[0][66]*ck;
-    w->S[66] = w->S[66] + w->term[0][66]*cs;
-    t->Phi[4][12] = t->Phi[4][12] + w->term[0][67]*ck;
-    w->S[67] = w->S[67] + w->term[0][67]*cs;
-    t->Phi[4][13] = t->Phi[4][13] + w->term[0][68]*ck;
-    w->S[68] = w->S[68] + w->term[0][68]*cs;
-    t->Phi[4][14] = t->Phi[4][14] + w->term[0][69]*ck;
-    w->S[69] = w->S[69] + w->term[0][69]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[0][70]*ck;
-    w->S[70] = w->S[70] + w->term[0][70]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[0][71]*ck;
-    w->S[71] = w->S[71] + w->term[0][71]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[0][72]*ck;
-    w->S[72] = w->S[72] + w->term[0][72]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[0][73]*ck;
-    w->S[73] = w->S[73] + w->term[0][73]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[0][74]*ck;
-    w->S[74] = w->S[74] + w->term[0][74]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[0][75]*ck;
-    w->S[75] = w->S[75] + w->term[0][75]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[0][76]*ck;
-    w->S[76] = w->S[76] + w->term[0][76]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[0][77]*ck;
-    w->S[77] = w->S[77] + w->term[0][77]*cs;
-    t->Phi[5][9] = t->Phi[5][9] + w->term[0][78]*ck;
-    w->S[78] = w->S[78] + w->term[0][78]*cs;
-    t->Phi[5][10] = t->Phi[5][10] + w->term[0][79]*ck;
-    w->S[79] = w->S[79] + w->term[0][79]*cs;
-    t->Phi[5][11] = t->Phi[5][11] + w->term[0][80]*ck;
-    w->S[80] = w->S[80] + w->term[0][80]*cs;
-    t->Phi[5][12] = t->Phi[5][12] + w->term[0][81]*ck;
-    w->S[81] = w->S[81] + w->term[0][81]*cs;
-    t->Phi[5][13] = t->Phi[5][13] + w->term[0][82]*ck;
-    w->S[82] = w->S[82] + w->term[0][82]*cs;
-    t->Phi[5][14] = t->Phi[5][14] + w->term[0][83]*ck;
-    w->S[83] = w->S[83] + w->term[0][83]*cs;
-    t->Phi[6][0] = t->Phi[6][0] + w->term[0][84]*ck;
-    w->S[84] = w->S[84] + w->term[0][84]*cs;
-    t->Phi[6][1] = t->Phi[6][1] + w->term[0][85]*ck;
-    w->S[85] = w->S[85] + w->term[0][85]*cs;
-    t->Phi[6][2] = t->Phi[6][2] + w->term[0][86]*ck;
-    w->S[86] = w->S[86] + w->term[0][86]*cs;
-    t->Phi[6][3] = t->Phi[6][3] + w->term[0][87]*ck;
-    w->S[87] = w->S[87] + w->term[0][87]*cs;
-    t->Phi[6][4] = t->Phi[6][4] + w->term[0][88]*ck;
-    w->S[88] = w->S[88] + w->term[0][88]*cs;
-    t->Phi[6][5] = t->Phi[6][5] + w->term[0][89]*ck;
-    w->S[89] = w->S[89] + w->term[0][89]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[0][90]*ck;
-    w->S[90] = w->S[90] + w->term[0][90]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[0][91]*ck;
-    w->S[91] = w->S[91] + w->term[0][91]*cs;
-    t->Phi[6][9] = t->Phi[6][9] + w->term[0][92]*ck;
-    w->S[92] = w->S[92] + w->term[0][92]*cs;
-    t->Phi[6][10] = t->Phi[6][10] + w->term[0][93]*ck;
-    w->S[93] = w->S[93] + w->term[0][93]*cs;
-    t->Phi[6][11] = t->Phi[6][11] + w->term[0][94]*ck;
-    w->S[94] = w->S[94] + w->term[0][94]*cs;
-    t->Phi[6][12] = t->Phi[6][12] + w->term[0][95]*ck;
-    w->S[95] = w->S[95] + w->term[0][95]*cs;
-    t->Phi[6][13] = t->Phi[6][13] + w->term[0][96]*ck;
-    w->S[96] = w->S[96] + w->term[0][96]*cs;
-    t->Phi[6][14] = t->Phi[6][14] + w->term[0][97]*ck;
-    w->S[97] = w->S[97] + w->term[0][97]*cs;
-    t->Phi[7][0] = t->Phi[7][0] + w->term[0][98]*ck;
-    w->S[98] = w->S[98] + w->term[0][98]*cs;
-    t->Phi[7][1] = t->Phi[7][1] + w->term[0][99]*ck;
-    w->S[99] = w->S[99] + w->term[0][99]*cs;
-    t->Phi[7][2] = t->Phi[7][2] + w->term[0][100]*ck;
-    w->S[100] = w->S[100] + w->term[0][100]*cs;
-    t->Phi[7][3] = t->Phi[7][3] + w->term[0][101]*ck;
-    w->S[101] = w->S[101] + w->term[0][101]*cs;
-    t->Phi[7][4] = t->Phi[7][4] + w->term[0][102]*ck;
-    w->S[102] = w->S[102] + w->term[0][102]*cs;
-    t->Phi[7][5] = t->Phi[7][5] + w->term[0][103]*ck;
-    w->S[103] = w->S[103] + w->term[0][103]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[0][104]*ck;
-    w->S[104] = w->S[104] + w->term[0][104]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[0][105]*ck;
-    w->S[106] = w->S[106] + w->term[0][105]*cs;
-    t->Phi[7][9] = t->Phi[7][9] + w->term[0][106]*ck;
-    w->S[107] = w->S[107] + w->term[0][106]*cs;
-    t->Phi[7][10] = t->Phi[7][10] + w->term[0][107]*ck;
-    w->S[108] = w->S[108] + w->term[0][107]*cs;
-    t->Phi[7][11] = t->Phi[7][11] + w->term[0][108]*ck;
-    w->S[109] = w->S[109] + w->term[0][108]*cs;
-    t->Phi[7][12] = t->Phi[7][12] + w->term[0][109]*ck;
-    w->S[110] = w->S[110] + w->term[0][109]*cs;
-    t->Phi[7][13] = t->Phi[7][13] + w->term[0][110]*ck;
-    w->S[111] = w->S[111] + w->term[0][110]*cs;
-    t->Phi[7][14] = t->Phi[7][14] + w->term[0][111]*ck;
-    w->S[112] = w->S[112] + w->term[0][111]*cs;
-    t->Phi[8][0] = t->Phi[8][0] + w->term[0][112]*ck;
-    w->S[113] = w->S[113] + w->term[0][112]*cs;
-    t->Phi[8][1] = t->Phi[8][1] + w->term[0][113]*ck;
-    w->S[114] = w->S[114] + w->term[0][113]*cs;
-    t->Phi[8][2] = t->Phi[8][2] + w->term[0][114]*ck;
-    w->S[115] = w->S[115] + w->term[0][114]*cs;
-    t->Phi[8][3] = t->Phi[8][3] + w->term[0][115]*ck;
-    w->S[116] = w->S[116] + w->term[0][115]*cs;
-    t->Phi[8][4] = t->Phi[8][4] + w->term[0][116]*ck;
-    w->S[117] = w->S[117] + w->term[0][116]*cs;
-    t->Phi[8][5] = t->Phi[8][5] + w->term[0][117]*ck;
-    w->S[118] = w->S[118] + w->term[0][117]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[0][118]*ck;
-    w->S[119] = w->S[119] + w->term[0][118]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[0][119]*ck;
-    w->S[120] = w->S[120] + w->term[0][119]*cs;
-    t->Phi[8][9] = t->Phi[8][9] + w->term[0][120]*ck;
-    w->S[121] = w->S[121] + w->term[0][120]*cs;
-    t->Phi[8][10] = t->Phi[8][10] + w->term[0][121]*ck;
-    w->S[122] = w->S[122] + w->term[0][121]*cs;
-    t->Phi[8][11] = t->Phi[8][11] + w->term[0][122]*ck;
-    w->S[123] = w->S[123] + w->term[0][122]*cs;
-    t->Phi[8][12] = t->Phi[8][12] + w->term[0][123]*ck;
-    w->S[124] = w->S[124] + w->term[0][123]*cs;
-    t->Phi[8][13] = t->Phi[8][13] + w->term[0][124]*ck;
-    w->S[125] = w->S[125] + w->term[0][124]*cs;
-    t->Phi[8][14] = t->Phi[8][14] + w->term[0][125]*ck;
-    w->S[126] = w->S[126] + w->term[0][125]*cs;
+    w->S[64] = w->fh[33]*w->term[1][8] + w->fh[34]*w->term[1][36] + w->fh[35]*w->term[1][50] +
+            w->fh[36]*w->term[1][64] + w->fh[37]*w->term[1][78];
+    w->S[65] = w->fh[33]*w->term[1][9] + w->fh[34]*w->term[1][37] + w->fh[35]*w->term[1][51] +
+            w->fh[36]*w->term[1][65] + w->fh[37]*w->term[1][79];
+    w->S[66] = w->fh[33]*w->term[1][10] + w->fh[34]*w->term[1][38] + w->fh[35]*w->term[1][52] +
+            w->fh[36]*w->term[1][66] + w->fh[37]*w->term[1][80];
+    w->S[67] = w->fh[33]*w->term[1][11] + w->fh[34]*w->term[1][39] + w->fh[35]*w->term[1][53] +
+            w->fh[36]*w->term[1][67] + w->fh[37]*w->term[1][81] + w->fh[38]*w->term[1][95] +
+            w->fh[39]*w->term[1][124] + w->fh[40]*c_in;
+    w->S[68] = w->fh[33]*w->term[1][12] + w->fh[34]*w->term[1][40] + w->fh[35]*w->term[1][54] +
+            w->fh[36]*w->term[1][68] + w->fh[37]*w->term[1][82] + w->fh[38]*w->term[1][96] +
+            w->fh[39]*w->term[1][125] + w->fh[41]*c_in;
+    w->S[69] = w->fh[33]*w->term[1][13] + w->fh[34]*w->term[1][41] + w->fh[35]*w->term[1][55] +
+            w->fh[36]*w->term[1][69] + w->fh[37]*w->term[1][83] + w->fh[38]*w->term[1][97] +
+            w->fh[39]*w->term[1][126] + w->fh[42]*c_in;
+    w->S[70] = w->fh[43]*w->term[1][0] + w->fh[44]*w->term[1][14] + w->fh[45]*w->term[1][42] +
+            w->fh[46]*w->term[1][56] + w->fh[47]*w->term[1][84] + w->fh[48]*w->term[1][113];
+    w->S[71] = w->fh[43]*w->term[1][1] + w->fh[44]*w->term[1][15] + w->fh[45]*w->term[1][43] +
+            w->fh[46]*w->term[1][57] + w->fh[48]*w->term[1][114];
+    w->S[72] = w->fh[43]*w->term[1][2] + w->fh[44]*w->term[1][16] + w->fh[45]*w->term[1][44] +
+            w->fh[46]*w->term[1][58] + w->fh[47]*w->term[1][86];
+    w->S[73] = w->fh[43]*w->term[1][3] + w->fh[44]*w->term[1][17] + w->fh[45]*w->term[1][45] +
+            w->fh[46]*w->term[1][59] + w->fh[47]*w->term[1][87] + w->fh[48]*w->term[1][116];
+    w->S[74] = w->fh[43]*w->term[1][4] + w->fh[44]*w->term[1][18] + w->fh[45]*w->term[1][46] +
+            w->fh[46]*w->term[1][60] + w->fh[47]*w->term[1][88] + w->fh[48]*w->term[1][117];
+    w->S[75] = c_out + w->fh[43]*w->term[1][5] + w->fh[44]*w->term[1][19] + w->fh[45]*w->term[1][47]
+            + w->fh[46]*w->term[1][61] + w->fh[47]*w->term[1][89] + w->fh[48]*w->term[1][118];
+    w->S[76] = w->fh[43]*w->term[1][6] + w->fh[44]*w->term[1][20] + w->fh[45]*w->term[1][48] +
+            w->fh[46]*w->term[1][62] + w->fh[47]*w->term[1][90] + w->fh[48]*w->term[1][119];
+    w->S[77] = w->fh[43]*w->term[1][7] + w->fh[44]*w->term[1][21] + w->fh[45]*w->term[1][49] +
+            w->fh[46]*w->term[1][63] + w->fh[47]*w->term[1][91] + w->fh[48]*w->term[1][120];
+    w->S[78] = w->fh[43]*w->term[1][8] + w->fh[44]*w->term[1][22] + w->fh[45]*w->term[1][50] +
+            w->fh[46]*w->term[1][64];
+    w->S[79] = w->fh[43]*w->term[1][9] + w->fh[44]*w->term[1][23] + w->fh[45]*w->term[1][51] +
+            w->fh[46]*w->term[1][65];
+    w->S[80] = w->fh[43]*w->term[1][10] + w->fh[44]*w->term[1][24] + w->fh[45]*w->term[1][52] +
+            w->fh[46]*w->term[1][66];
+    w->S[81] = w->fh[43]*w->term[1][11] + w->fh[44]*w->term[1][25] + w->fh[45]*w->term[1][53] +
+            w->fh[46]*w->term[1][67] + w->fh[47]*w->term[1][95] + w->fh[48]*w->term[1][124] +
+            w->fh[49]*c_in;
+    w->S[82] = w->fh[43]*w->term[1][12] + w->fh[44]*w->term[1][26] + w->fh[45]*w->term[1][54] +
+            w->fh[46]*w->term[1][68] + w->fh[47]*w->term[1][96] + w->fh[48]*w->term[1][125] +
+            w->fh[50]*c_in;
+    w->S[83] = w->fh[43]*w->term[1][13] + w->fh[44]*w->term[1][27] + w->fh[45]*w->term[1][55] +
+            w->fh[46]*w->term[1][69] + w->fh[47]*w->term[1][97] + w->fh[48]*w->term[1][126] +
+            w->fh[51]*c_in;
+    w->S[84] = w->fh[52]*w->term[1][56] + w->fh[53]*w->term[1][113];
+    w->S[85] = w->fh[52]*w->term[1][57] + w->fh[53]*w->term[1][114];
+    w->S[86] = w->fh[52]*w->term[1][58];
+    w->S[87] = w->fh[52]*w->term[1][59] + w->fh[53]*w->term[1][116];
+    w->S[88] = w->fh[52]*w->term[1][60] + w->fh[53]*w->term[1][117];
+    w->S[89] = w->fh[52]*w->term[1][61] + w->fh[53]*w->term[1][118];
+    w->S[90] = c_out + w->fh[52]*w->term[1][62] + w->fh[53]*w->term[1][119];
+    w->S[91] = w->fh[52]*w->term[1][63] + w->fh[53]*w->term[1][120];
+    w->S[92] = w->fh[52]*w->term[1][64];
+    w->S[93] = w->fh[52]*w->term[1][65];
+    w->S[94] = w->fh[52]*w->term[1][66];
+    w->S[95] = w->fh[52]*w->term[1][67] + w->fh[53]*w->term[1][124];
+    w->S[96] = w->fh[52]*w->term[1][68] + w->fh[53]*w->term[1][125];
+    w->S[97] = w->fh[52]*w->term[1][69] + w->fh[53]*w->term[1][126];
+    w->S[98] = w->fh[54]*w->term[1][42] + w->fh[55]*w->term[1][84] + w->fh[56]*w->term[1][113];
+    w->S[99] = w->fh[54]*w->term[1][43] + w->fh[56]*w->term[1][114];
+    w->S[100] = w->fh[54]*w->term[1][44] + w->fh[55]*w->term[1][86];
+    w->S[101] = w->fh[54]*w->term[1][45] + w->fh[55]*w->term[1][87] + w->fh[56]*w->term[1][116];
+    w->S[102] = w->fh[54]*w->term[1][46] + w->fh[55]*w->term[1][88] + w->fh[56]*w->term[1][117];
+    w->S[103] = w->fh[54]*w->term[1][47] + w->fh[55]*w->term[1][89] + w->fh[56]*w->term[1][118];
+    w->S[104] = w->fh[54]*w->term[1][48] + w->fh[55]*w->term[1][90] + w->fh[56]*w->term[1][119];
+    w->S[105] = c_out;
+    w->S[106] = w->fh[54]*w->term[1][49] + w->fh[55]*w->term[1][91] + w->fh[56]*w->term[1][120];
+    w->S[107] = w->fh[54]*w->term[1][50];
+    w->S[108] = w->fh[54]*w->term[1][51];
+    w->S[109] = w->fh[54]*w->term[1][52];
+    w->S[110] = w->fh[54]*w->term[1][53] + w->fh[55]*w->term[1][95] + w->fh[56]*w->term[1][124];
+    w->S[111] = w->fh[54]*w->term[1][54] + w->fh[55]*w->term[1][96] + w->fh[56]*w->term[1][125];
+    w->S[112] = w->fh[54]*w->term[1][55] + w->fh[55]*w->term[1][97] + w->fh[56]*w->term[1][126];
+    w->S[113] = w->fh[57]*w->term[1][70];
+    w->S[114] = w->fh[57]*w->term[1][71];
+    w->S[115] = w->fh[57]*w->term[1][72];
+    w->S[116] = w->fh[57]*w->term[1][73];
+    w->S[117] = w->fh[57]*w->term[1][74];
+    w->S[118] = w->fh[57]*w->term[1][75];
+    w->S[119] = w->fh[57]*w->term[1][76];
+    w->S[120] = c_out + w->fh[57]*w->term[1][77];
+    w->S[121] = w->fh[57]*w->term[1][78];
+    w->S[122] = w->fh[57]*w->term[1][79];
+    w->S[123] = w->fh[57]*w->term[1][80];
+    w->S[124] = w->fh[57]*w->term[1][81];
+    w->S[125] = w->fh[57]*w->term[1][82];
+    w->S[126] = w->fh[57]*w->term[1][83];
 }
 
-INS_GPS15_TWIN_BLOCK void taylor_order_7(ins_gps15_twin_transition *restrict t,
-        ins_gps15_twin_discretize_scratch *restrict w)
+INS_GPS15_TWIN_BLOCK void horner_level_3_into_term(ins_gps15_twin_discretize_scratch *restrict w,
+        const ins_gps15_twin_scalar c_out, const ins_gps15_twin_scalar c_in)
 {
-    const ins_gps15_twin_scalar ck = 1.0 / 5040.0;
-    const ins_gps15_twin_scalar cs = 1.0 / 40320.0;
-    w->term[1][0] = w->fh[0]*w->term[0][14] + w->fh[1]*w->term[0][28] + w->fh[2]*w->term[0][56] +
-            w->fh[3]*w->term[0][112];
-    w->term[1][1] = w->fh[0]*w->term[0][15] + w->fh[1]*w->term[0][29] + w->fh[2]*w->term[0][57] +
-            w->fh[3]*w->term[0][113];
-    w->term[1][2] = w->fh[0]*w->term[0][16] + w->fh[1]*w->term[0][30] + w->fh[2]*w->term[0][58] +
-            w->fh[3]*w->term[0][114];
-    w->term[1][3] = w->fh[0]*w->term[0][17] + w->fh[1]*w->term[0][31] + w->fh[2]*w->term[0][59] +
-            w->fh[3]*w->term[0][115];
-    w->term[1][4] = w->fh[0]*w->term[0][18] + w->fh[1]*w->term[0][32] + w->fh[2]*w->term[0][60] +
-            w->fh[3]*w->term[0][116];
-    w->term[1][5] = w->fh[0]*w->term[0][19] + w->fh[1]*w->term[0][33] + w->fh[2]*w->term[0][61] +
-            w->fh[3]*w->term[0][117];
-    w->term[1][6] = w->fh[0]*w->term[0][20] + w->fh[1]*w->term[0][34] + w->fh[2]*w->term[0][62] +
-            w->fh[3]*w->term[0][118];
-    w->term[1][7] = w->fh[0]*w->term[0][21] + w->fh[1]*w->term[0][35] + w->fh[2]*w->term[0][63] +
-            w->fh[3]*w->term[0][119];
-    w->term[1][8] = w->fh[0]*w->term[0][22] + w->fh[1]*w->term[0][36] + w->fh[2]*w->term[0][64] +
-            w->fh[3]*w->term[0][120];
-    w->term[1][9] = w->fh[0]*w->term[0][23] + w->fh[1]*w->term[0][37] + w->fh[2]*w->term[0][65] +
-            w->fh[3]*w->term[0][121];
-    w->term[1][10] = w->fh[0]*w->term[0][24] + w->fh[1]*w->term[0][38] + w->fh[2]*w->term[0][66] +
-            w->fh[3]*w->term[0][122];
-    w->term[1][11] = w->fh[0]*w->term[0][25] + w->fh[1]*w->term[0][39] + w->fh[2]*w->term[0][67] +
-            w->fh[3]*w->term[0][123];
-    w->term[1][12] = w->fh[0]*w->term[0][26] + w->fh[1]*w->term[0][40] + w->fh[2]*w->term[0][68] +
-            w->fh[3]*w->term[0][124];
-    w->term[1][13] = w->fh[0]*w->term[0][27] + w->fh[1]*w->term[0][41] + w->fh[2]*w->term[0][69] +
-            w->fh[3]*w->term[0][125];
-    w->term[1][14] = w->fh[7]*w->term[0][0] + w->fh[8]*w->term[0][28] + w->fh[9]*w->term[0][42] +
-            w->fh[10]*w->term[0][84] + w->fh[11]*w->term[0][112];
-    w->term[1][15] = w->fh[7]*w->term[0][1] + w->fh[8]*w->term[0][29] + w->fh[9]*w->term[0][43] +
-            w->fh[10]*w->term[0][85] + w->fh[11]*w->term[0][113];
-    w->term[1][16] = w->fh[7]*w->term[0][2] + w->fh[8]*w->term[0][30] + w->fh[9]*w->term[0][44] +
-            w->fh[10]*w->term[0][86] + w->fh[11]*w->term[0][114];
-    w->term[1][17] = w->fh[7]*w->term[0][3] + w->fh[8]*w->term[0][31] + w->fh[9]*w->term[0][45] +
-            w->fh[10]*w->term[0][87] + w->fh[11]*w->term[0][115];
-    w->term[1][18] = w->fh[7]*w->term[0][4] + w->fh[8]*w->term[0][32] + w->fh[9]*w->term[0][46] +
-            w->fh[10]*w->term[0][88] + w->fh[11]*w->term[0][116];
-    w->term[1][19] = w->fh[7]*w->term[0][5] + w->fh[8]*w->term[0][33] + w->fh[9]*w->term[0][47] +
-            w->fh[10]*w->term[0][89] + w->fh[11]*w->term[0][117];
-    w->term[1][20] = w->fh[7]*w->term[0][6] + w->fh[8]*w->term[0][34] + w->fh[9]*w->term[0][48] +
-            w->fh[10]*w->term[0][90] + w->fh[11]*w->term[0][118];
-    w->term[1][21] = w->fh[7]*w->term[0][7] + w->fh[8]*w->term[0][35] + w->fh[9]*w->term[0][49] +
-            w->fh[10]*w->term[0][91] + w->fh[11]*w->term[0][119];
-    w->term[1][22] = w->fh[7]*w->term[0][8] + w->fh[8]*w->term[0][36] + w->fh[9]*w->term[0][50] +
-            w->fh[10]*w->term[0][92] + w->fh[11]*w->term[0][120];
-    w->term[1][23] = w->fh[7]*w->term[0][9] + w->fh[8]*w->term[0][37] + w->fh[9]*w->term[0][51] +
-            w->fh[10]*w->term[0][93] + w->fh[11]*w->term[0][121];
-    w->term[1][24] = w->fh[7]*w->term[0][10] + w->fh[8]*w->term[0][38] + w->fh[9]*w->term[0][52] +
-            w->fh[10]*w->term[0][94] + w->fh[11]*w->term[0][122];
-    w->term[1][25] = w->fh[7]*w->term[0][11] + w->fh[8]*w->term[0][39] + w->fh[9]*w->term[0][53] +
-            w->fh[10]*w->term[0][95] + w->fh[11]*w->term[0][123];
-    w->term[1][26] = w->fh[7]*w->term[0][12] + w->fh[8]*w->term[0][40] + w->fh[9]*w->term[0][54] +
-            w->fh[10]*w->term[0][96] + w->fh[11]*w->term[0][124];
-    w->term[1][27] = w->fh[7]*w->term[0][13] + w->fh[8]*w->term[0][41] + w->fh[9]*w->term[0][55] +
-            w->fh[10]*w->term[0][97] + w->fh[11]*w->term[0][125];
-    w->term[1][28] = w->fh[15]*w->term[0][0] + w->fh[16]*w->term[0][14] + w->fh[17]*w->term[0][42] +
-            w->fh[18]*w->term[0][84] + w->fh[19]*w->term[0][112];
-    w->term[1][29] = w->fh[15]*w->term[0][1] + w->fh[16]*w->term[0][15] + w->fh[17]*w->term[0][43] +
-            w->fh[18]*w->term[0][85] + w->fh[19]*w->term[0][113];
-    w->term[1][30] = w->fh[15]*w->term[0][2] + w->fh[16]*w->term[0][16] + w->fh[17]*w->term[0][44] +
-            w->fh[18]*w->term[0][86] + w->fh[19]*w->term[0][114];
-    w->term[1][31] = w->fh[15]*w->term[0][3] + w->fh[16]*w->term[0][17] + w->fh[17]*w->term[0][45] +
-            w->fh[18]*w->term[0][87] + w->fh[19]*w->term[0][115];
-    w->term[1][32] = w->fh[15]*w->term[0][4] + w->fh[16]*w->term[0][18] + w->fh[17]*w->term[0][46] +
-            w->fh[18]*w->term[0][88] + w->fh[19]*w->term[0][116];
-    w->term[1][33] = w->fh[15]*w->term[0][5] + w->fh[16]*w->term[0][19] + w->fh[17]*w->term[0][47] +
-            w->fh[18]*w->term[0][89] + w->fh[19]*w->term[0][117];
-    w->term[1][34] = w->fh[15]*w->term[0][6] + w->fh[16]*w->term[0][20] + w->fh[17]*w->term[0][48] +
-            w->fh[18]*w->term[0][90] + w->fh[19]*w->term[0][118];
-    w->term[1][35] = w->fh[15]*w->term[0][7] + w->fh[16]*w->term[0][21] + w->fh[17]*w->term[0][49] +
-            w->fh[18]*w->term[0][91] + w->fh[19]*w->term[0][119];
-    w->term[1][36] = w->fh[15]*w->term[0][8] + w->fh[16]*w->term[0][22] + w->fh[17]*w->term[0][50] +
-            w->fh[18]*w->term[0][92] + w->fh[19]*w->term[0][120];
-    w->term[1][37] = w->fh[15]*w->term[0][9] + w->fh[16]*w->term[0][23] + w->fh[17]*w->term[0][51] +
-            w->fh[18]*w->term[0][93] + w->fh[19]*w->term[0][121];
-    w->term[1][38] = w->fh[15]*w->term[0][10] + w->fh[16]*w->term[0][24] + w->fh[17]*w->term[0][52]
-            + w->fh[18]*w->term[0][94] + w->fh[19]*w->term[0][122];
-    w->term[1][39] = w->fh[15]*w->term[0][11] + w->fh[16]*w->term[0][25] + w->fh[17]*w->term[0][53]
-            + w->fh[18]*w->term[0][95] + w->fh[19]*w->term[0][123];
-    w->term[1][40] = w->fh[15]*w->term[0][12] + w->fh[16]*w->term[0][26] + w->fh[17]*w->term[0][54]
-            + w->fh[18]*w->term[0][96] + w->fh[19]*w->term[0][124];
-    w->term[1][41] = w->fh[15]*w->term[0][13] + w->fh[16]*w->term[0][27] + w->fh[17]*w->term[0][55]
-            + w->fh[18]*w->term[0][97] + w->fh[19]*w->term[0][125];
-    w->term[1][42] = w->fh[23]*w->term[0][14] + w->fh[24]*w->term[0][28] + w->fh[25]*w->term[0][42]
-            + w->fh[26]*w->term[0][56] + w->fh[27]*w->term[0][70] + w->fh[28]*w->term[0][84] +
-            w->fh[29]*w->term[0][112];
-    w->term[1][43] = w->fh[23]*w->term[0][15] + w->fh[24]*w->term[0][29] + w->fh[25]*w->term[0][43]
-            + w->fh[26]*w->term[0][57] + w->fh[27]*w->term[0][71] + w->fh[28]*w->term[0][85] +
-            w->fh[29]*w->term[0][113];
-    w->term[1][44] = w->fh[23]*w->term[0][16] + w->fh[24]*w->term[0][30] + w->fh[25]*w->term[0][44]
-            + w->fh[26]*w->term[0][58] + w->fh[27]*w->term[0][72] + w->fh[28]*w->term[0][86] +
-            w->fh[29]*w->term[0][114];
-    w->term[1][45] = w->fh[23]*w->term[0][17] + w->fh[24]*w->term[0][31] + w->fh[25]*w->term[0][45]
-            + w->fh[26]*w->term[0][59] + w->fh[27]*w->term[0][73] + w->fh[28]*w->term[0][87] +
-            w->fh[29]*w->term[0][115];
-    w->term[1][46] = w->fh[23]*w->term[0][18] + w->fh[24]*w->term[0][32] + w->fh[25]*w->term[0][46]
-            + w->fh[26]*w->term[0][60] + w->fh[27]*w->term[0][74] + w->fh[28]*w->term[0][88] +
-            w->fh[29]*w->term[0][116];
-    w->term[1][47] = w->fh[23]*w->term[0][19] + w->fh[24]*w->term[0][33] + w->fh[25]*w->term[0][47]
-            + w->fh[26]*w->term[0][61] + w->fh[27]*w->term[0][75] + w->fh[28]*w->term[0][89] +
-            w->fh[29]*w->term[0][117];
-    w->term[1][48] = w->fh[23]*w->term[0][20] + w->fh[24]*w->term[0][34] + w->fh[25]*w->term[0][48]
-            + w->fh[26]*w->term[0][62] + w->fh[27]*w->term[0][76] + w->fh[28]*w->term[0][90] +
-            w->fh[29]*w->term[0][118];
-    w->term[1][49] = w->fh[23]*w->term[0][21] + w->fh[24]*w->term[0][35] + w->fh[25]*w->term[0][49]
-            + w->fh[26]*w->term[0][63] + w->fh[27]*w->term[0][77] + w->fh[28]*w->term[0][91] +
-            w->fh[29]*w->term[0][119];
-    w->term[1][50] = w->fh[23]*w->term[0][22] + w->fh[24]*w->term[0][36] + w->fh[25]*w->term[0][50]
-            + w->fh[26]*w->term[0][64] + w->fh[27]*w->term[0][78] + w->fh[28]*w->term[0][92] +
-            w->fh[29]*w->term[0][120];
-    w->term[1][51] = w->fh[23]*w->term[0][23] + w->fh[24]*w->term[0][37] + w->fh[25]*w->term[0][51]
-            + w->fh[26]*w->term[0][65] + w->fh[27]*w->term[0][79] + w->fh[28]*w->term[0][93] +
-            w->fh[29]*w->term[0][121];
-    w->term[1][52] = w->fh[23]*w->term[0][24] + w->fh[24]*w->term[0][38] + w->fh[25]*w->term[0][52]
-            + w->fh[26]*w->term[0][66] + w->fh[27]*w->term[0][80] + w->fh[28]*w->term[0][94] +
-            w->fh[29]*w->term[0][122];
-    w->term[1][53] = w->fh[23]*w->term[0][25] + w->fh[24]*w->term[0][39] + w->fh[25]*w->term[0][53]
-            + w->fh[26]*w->term[0][67] + w->fh[27]*w->term[0][81] + w->fh[28]*w->term[0][95] +
-            w->fh[29]*w->term[0][123];
-    w->term[1][54] = w->fh[23]*w->term[0][26] + w->fh[24]*w->term[0][40] + w->fh[25]*w->term[0][54]
-            + w->fh[26]*w->term[0][68] + w->fh[27]*w->term[0][82] + w->fh[28]*w->term[0][96] +
-            w->fh[29]*w->term[0][124];
-    w->term[1][55] = w->fh[23]*w->term[0][27] + w->fh[24]*w->term[0][41] + w->fh[25]*w->term[0][55]
-            + w->fh[26]*w->term[0][69] + w->fh[27]*w->term[0][83] + w->fh[28]*w->term[0][97] +
-            w->fh[29]*w->term[0][125];
-    w->term[1][56] = w->fh[33]*w->term[0][0] + w->fh[34]*w->term[0][28] + w->fh[35]*w->term[0][42] +
-            w->fh[36]*w->term[0][56] + w->fh[37]*w->term[0][70] + w->fh[38]*w->term[0][84] +
-            w->fh[39]*w->term[0][112];
-    w->term[1][57] = w->fh[33]*w->term[0][1] + w->fh[34]*w->term[0][29] + w->fh[35]*w->term[0][43] +
-            w->fh[36]*w->term[0][57] + w->fh[37]*w->term[0][71] + w->fh[38]*w->term[0][85] +
-            w->fh[39]*w->term[0][113];
-    w->term[1][58] = w->fh[33]*w->term[0][2] + w->fh[34]*w->term[0][30] + w->fh[35]*w->term[0][44] +
-            w->fh[36]*w->term[0][58] + w->fh[37]*w->term[0][72] + w->fh[38]*w->term[0][86] +
-            w->fh[39]*w->term[0][114];
-    w->term[1][59] = w->fh[33]*w->term[0][3] + w->fh[34]*w->term[0][31] + w->fh[35]*w->term[0][45] +
-            w->fh[36]*w->term[0][59] + w->fh[37]*w->term[0][73] + w->fh[38]*w->term[0][87] +
-            w->fh[39]*w->term[0][115];
-    w->term[1][60] = w->fh[33]*w->term[0][4] + w->fh[34]*w->term[0][32] + w->fh[35]*w->term[0][46] +
-            w->fh[36]*w->term[0][60] + w->fh[37]*w->term[0][74] + w->fh[38]*w->term[0][88] +
-            w->fh[39]*w->term[0][116];
-    w->term[1][61] = w->fh[33]*w->term[0][5] + w->fh[34]*w->term[0][33] + w->fh[35]*w->term[0][47] +
-            w->fh[36]*w->term[0][61] + w->fh[37]*w->term[0][75] + w->fh[38]*w->term[0][89] +
-            w->fh[39]*w->term[0][117];
-    w->term[1][62] = w->fh[33]*w->term[0][6] + w->fh[34]*w->term[0][34] + w->fh[35]*w->term[0][48] +
-            w->fh[36]*w->term[0][62] + w->fh[37]*w->term[0][76] + w->fh[38]*w->term[0][90] +
-            w->fh[39]*w->term[0][118];
-    w->term[1][63] = w->fh[33]*w->term[0][7] + w->fh[34]*w->term[0][35] + w->fh[35]*w->term[0][49] +
-            w->fh[36]*w->term[0][63] + w->fh[37]*w->term[0][77] + w->fh[38]*w->term[0][91] +
-            w->fh[39]*w->term[0][119];
-    w->term[1][64] = w->fh[33]*w->term[0][8] + w->fh[34]*w->term[0][36] + w->fh[35]*w->term[0][50] +
-            w->fh[36]*w->term[0][64] + w->fh[37]*w->term[0][78] + w->fh[38]*w->term[0][92] +
-            w->fh[39]*w->term[0][120];
-    w->term[1][65] = w->fh[33]*w->term[0][9] + w->fh[34]*w->term[0][37] + w->fh[35]*w->term[0][51] +
-            w->fh[36]*w->term[0][65] + w->fh[37]*w->term[0][79] + w->fh[38]*w->term[0][93] +
-            w->fh[39]*w->term[0][121];
-    w->term[1][66] = w->fh[33]*w->term[0][10] + w->fh[34]*w->term[0][38] + w->fh[35]*w->term[0][52]
-            + w->fh[36]*w->term[0][66] + w->fh[37]*w->term[0][80] + w->fh[38]*w->term[0][94] +
-            w->fh[39]*w->term[0][122];
-    w->term[1][67] = w->fh[33]*w->term[0][11] + w->fh[34]*w->term[0][39] + w->fh[35]*w->term[0][53]
-            + w->fh[36]*w->term[0][67] + w->fh[37]*w->term[0][81] + w->fh[38]*w->term[0][95] +
-            w->fh[39]*w->term[0][123];
-    w->term[1][68] = w->fh[33]*w->term[0][12] + w->fh[34]*w->term[0][40] + w->fh[35]*w->term[0][54]
-            + w->fh[36]*w->term[0][68] + w->fh[37]*w->term[0][82] + w->fh[38]*w->term[0][96] +
-            w->fh[39]*w->term[0][124];
-    w->term[1][69] = w->fh[33]*w->term[0][13] + w->fh[34]*w->term[0][41] + w->fh[35]*w->term[0][55]
-            + w->fh[36]*w->term[0][69] + w->fh[37]*w->term[0][83] + w->fh[38]*w->term[0][97] +
-            w->fh[39]*w->term[0][125];
-    w->term[1][70] = w->fh[43]*w->term[0][0] + w->fh[44]*w->term[0][14] + w->fh[45]*w->term[0][42] +
-            w->fh[46]*w->term[0][56] + w->fh[47]*w->term[0][84] + w->fh[48]*w->term[0][112];
-    w->term[1][71] = w->fh[43]*w->term[0][1] + w->fh[44]*w->term[0][15] + w->fh[45]*w->term[0][43] +
-            w->fh[46]*w->term[0][57] + w->fh[47]*w->term[0][85] + w->fh[48]*w->term[0][113];
-    w->term[1][72] = w->fh[43]*w->term[0][2] + w->fh[44]*w->term[0][16] + w->fh[45]*w->term[0][44] +
-            w->fh[46]*w->term[0][58] + w->fh[47]*w->term[0][86] + w->fh[48]*w->term[0][114];
-    w->term[1][73] = w->fh[43]*w->term[0][3] + w->fh[44]*w->term[0][17] + w->fh[45]*w->term[0][45] +
-            w->fh[46]*w->term[0][59] + w->fh[47]*w->term[0][87] + w->fh[48]*w->term[0][115];
-    w->term[1][74] = w->fh[43]*w->term[0][4] + w->fh[44]*w->term[0][18] + w->fh[45]*w->term[0][46] +
-            w->fh[46]*w->term[0][60] + w->fh[47]*w->term[0][88] + w->fh[48]*w->term[0][116];
-    w->term[1][75] = w->fh[43]*w->term[0][5] + w->fh[44]*w->term[0][19] + w->fh[45]*w->term[0][47] +
-            w->fh[46]*w->term[0][61] + w->fh[47]*w->term[0][89] + w->fh[48]*w->term[0][117];
-    w->term[1][76] = w->fh[43]*w->term[0][6] + w->fh[44]*w->term[0][20] + w->fh[45]*w->term[0][48] +
-            w->fh[46]*w->term[0][62] + w->fh[47]*w->term[0][90] + w->fh[48]*w->term[0][118];
-    w->term[1][77] = w->fh[43]*w->term[0][7] + w->fh[44]*w->term[0][21] + w->fh[45]*w->term[0][49] +
-            w->fh[46]*w->term[0][63] + w->fh[47]*w->term[0][91] + w->fh[48]*w->term[0][119];
-    w->term[1][78] = w->fh[43]*w->term[0][8] + w->fh[44]*w->term[0][22] + w->fh[45]*w->term[0][50] +
-            w->fh[46]*w->term[0][64] + w->fh[47]*w->term[0][92] + w->fh[48]*w->term[0][120];
-    w->term[1][79] = w->fh[43]*w->term[0][9] + w->fh[44]*w->term[0][23] + w->fh[45]*w->term[0][51] +
-            w->fh[46]*w->term[0][65] + w->fh[47]*w->term[0][93] + w->fh[48]*w->term[0][121];
-    w->term[1][80] = w->fh[43]*w->term[0][10] + w->fh[44]*w->term[0][24] + w->fh[45]*w->term[0][52]
-            + w->fh[46]*w->term[0][66] + w->fh[47]*w->term[0][94] + w->fh[48]*w->term[0][122];
-    w->term[1][81] = w->fh[43]*w->term[0][11] + w->fh[44]*w->term[0][25] + w->fh[45]*w->term[0][53]
-            + w->fh[46]*w->term[0][67] + w->fh[47]*w->term[0][95] + w->fh[48]*w->term[0][123];
-    w->term[1][82] = w->fh[43]*w->term[0][12] + w->fh[44]*w->term[0][26] + w->fh[45]*w->term[0][54]
-            + w->fh[46]*w->term[0][68] + w->fh[47]*w->term[0][96] + w->fh[48]*w->term[0][124];
-    w->term[1][83] = w->fh[43]*w->term[0][13] + w->fh[44]*w->term[0][27] + w->fh[45]*w->term[0][55]
-            + w->fh[46]*w->term[0][69] + w->fh[47]*w->term[0][97] + w->fh[48]*w->term[0][125];
-    w->term[1][84] = w->fh[52]*w->term[0][56] + w->fh[53]*w->term[0][112];
-    w->term[1][85] = w->fh[52]*w->term[0][57] + w->fh[53]*w->term[0][113];
-    w->term[1][86] = w->fh[52]*w->term[0][58] + w->fh[53]*w->term[0][114];
-    w->term[1][87] = w->fh[52]*w->term[0][59] + w->fh[53]*w->term[0][115];
-    w->term[1][88] = w->fh[52]*w->term[0][60] + w->fh[53]*w->term[0][116];
-    w->term[1][89] = w->fh[52]*w->term[0][61] + w->fh[53]*w->term[0][117];
-    w->term[1][90] = w->fh[52]*w->term[0][62] + w->fh[53]*w->term[0][118];
-    w->term[1][91] = w->fh[52]*w->term[0][63] + w->fh[53]*w->term[0][119];
-    w->term[1][92] = w->fh[52]*w->term[0][64] + w->fh[53]*w->term[0][120];
-    w->term[1][93] = w->fh[52]*w->term[0][65] + w->fh[53]*w->term[0][121];
-    w->term[1][94] = w->fh[52]*w->term[0][66] + w->fh[53]*w->term[0][122];
-    w->term[1][95] = w->fh[52]*w->term[0][67] + w->fh[53]*w->term[0][123];
-    w->term[1][96] = w->fh[52]*w->term[0][68] + w->fh[53]*w->term[0][124];
-    w->term[1][97] = w->fh[52]*w->term[0][69] + w->fh[53]*w->term[0][125];
-    w->term[1][98] = w->fh[54]*w->term[0][42] + w->fh[55]*w->term[0][84] +
-            w->fh[56]*w->term[0][112];
-    w->term[1][99] = w->fh[54]*w->term[0][43] + w->fh[55]*w->term[0][85] +
-            w->fh[56]*w->term[0][113];
-    w->term[1][100] = w->fh[54]*w->term[0][44] + w->fh[55]*w->term[0][86] +
-            w->fh[56]*w->term[0][114];
-    w->term[1][101] = w->fh[54]*w->term[0][45] + w->fh[55]*w->term[0][87] +
-            w->fh[56]*w->term[0][115];
-    w->term[1][102] = w->fh[54]*w->term[0][46] + w->fh[55]*w->term[0][88] +
-            w->fh[56]*w->term[0][116];
-    w->term[1][103] = w->fh[54]*w->term[0][47] + w->fh[55]*w->term[0][89] +
-            w->fh[56]*w->term[0][117];
-    w->term[1][104] = w->fh[54]*w->term[0][48] + w->fh[55]*w->term[0][90] +
-            w->fh[56]*w->term[0][118];
-    w->term[1][105] = w->fh[54]*w->term[0][49] + w->fh[55]*w->term[0][91] +
-            w->fh[56]*w->term[0][119];
-    w->term[1][106] = w->fh[54]*w->term[0][50] + w->fh[55]*w->term[0][92] +
-            w->fh[56]*w->term[0][120];
-    w->term[1][107] = w->fh[54]*w->term[0][51] + w->fh[55]*w->term[0][93] +
-            w->fh[56]*w->term[0][121];
-    w->term[1][108] = w->fh[54]*w->term[0][52] + w->fh[55]*w->term[0][94] +
-            w->fh[56]*w->term[0][122];
-    w->term[1][109] = w->fh[54]*w->term[0][53] + w->fh[55]*w->term[0][95] +
-            w->fh[56]*w->term[0][123];
-    w->term[1][110] = w->fh[54]*w->term[0][54] + w->fh[55]*w->term[0][96] +
-            w->fh[56]*w->term[0][124];
-    w->term[1][111] = w->fh[54]*w->term[0][55] + w->fh[55]*w->term[0][97] +
-            w->fh[56]*w->term[0][125];
-    w->term[1][112] = w->fh[57]*w->term[0][70];
-    w->term[1][113] = w->fh[57]*w->term[0][71];
-    w->term[1][114] = w->fh[57]*w->term[0][72];
-    w->term[1][115] = w->fh[57]*w->term[0][73];
-    w->term[1][116] = w->fh[57]*w->term[0][74];
-    w->term[1][117] = w->fh[57]*w->term[0][75];
-    w->term[1][118] = w->fh[57]*w->term[0][76];
-    w->term[1][119] = w->fh[57]*w->term[0][77];
-    w->term[1][120] = w->fh[57]*w->term[0][78];
-    w->term[1][121] = w->fh[57]*w->term[0][79];
-    w->term[1][122] = w->fh[57]*w->term[0][80];
-    w->term[1][123] = w->fh[57]*w->term[0][81];
-    w->term[1][124] = w->fh[57]*w->term[0][82];
-    w->term[1][125] = w->fh[57]*w->term[0][83];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[1][0]*ck;
-    w->S[0] = w->S[0] + w->term[1][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[1][1]*ck;
-    w->S[1] = w->S[1] + w->term[1][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[1][2]*ck;
-    w->S[2] = w->S[2] + w->term[1][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[1][3]*ck;
-    w->S[3] = w->S[3] + w->term[1][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[1][4]*ck;
-    w->S[4] = w->S[4] + w->term[1][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[1][5]*ck;
-    w->S[5] = w->S[5] + w->term[1][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[1][6]*ck;
-    w->S[6] = w->S[6] + w->term[1][6]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[1][7]*ck;
-    w->S[7] = w->S[7] + w->term[1][7]*cs;
-    t->Phi[0][9] = t->Phi[0][9] + w->term[1][8]*ck;
-    w->S[8] = w->S[8] + w->term[1][8]*cs;
-    t->Phi[0][10] = t->Phi[0][10] + w->term[1][9]*ck;
-    w->S[9] = w->S[9] + w->term[1][9]*cs;
-    t->Phi[0][11] = t->Phi[0][11] + w->term[1][10]*ck;
-    w->S[10] = w->S[10] + w->term[1][10]*cs;
-    t->Phi[0][12] = t->Phi[0][12] + w->term[1][11]*ck;
-    w->S[11] = w->S[11] + w->term[1][11]*cs;
-    t->Phi[0][13] = t->Phi[0][13] + w->term[1][12]*ck;
-    w->S[12] = w->S[12] + w->term[1][12]*cs;
-    t->Phi[0][14] = t->Phi[0][14] + w->term[1][13]*ck;
-    w->S[13] = w->S[13] + w->term[1][13]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[1][14]*ck;
-    w->S[14] = w->S[14] + w->term[1][14]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[1][15]*ck;
-    w->S[15] = w->S[15] + w->term[1][15]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[1][16]*ck;
-    w->S[16] = w->S[16] + w->term[1][16]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[1][17]*ck;
-    w->S[17] = w->S[17] + w->term[1][17]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[1][18]*ck;
-    w->S[18] = w->S[18] + w->term[1][18]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[1][19]*ck;
-    w->S[19] = w->S[19] + w->term[1][19]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[1][20]*ck;
-    w->S[20] = w->S[20] + w->term[1][20]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[1][21]*ck;
-    w->S[21] = w->S[21] + w->term[1][21]*cs;
-    t->Phi[1][9] = t->Phi[1][9] + w->term[1][22]*ck;
-    w->S[22] = w->S[22] + w->term[1][22]*cs;
-    t->Phi[1][10] = t->Phi[1][10] + w->term[1][23]*ck;
-    w->S[23] = w->S[23] + w->term[1][23]*cs;
-    t->Phi[1][11] = t->Phi[1][11] + w->term[1][24]*ck;
-    w->S[24] = w->S[24] + w->term[1][24]*cs;
-    t->Phi[1][12] = t->Phi[1][12] + w->term[1][25]*ck;
-    w->S[25] = w->S[25] + w->term[1][25]*cs;
-    t->Phi[1][13] = t->Phi[1][13] + w->term[1][26]*ck;
-    w->S[26] = w->S[26] + w->term[1][26]*cs;
-    t->Phi[1][14] = t->Phi[1][14] + w->term[1][27]*ck;
-    w->S[27] = w->S[27] + w->term[1][27]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[1][28]*ck;
-    w->S[28] = w->S[28] + w->term[1][28]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[1][29]*ck;
-    w->S[29] = w->S[29] + w->term[1][29]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[1][30]*ck;
-    w->S[30] = w->S[30] + w->term[1][30]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[1][31]*ck;
-    w->S[31] = w->S[31] + w->term[1][31]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[1][32]*ck;
-    w->S[32] = w->S[32] + w->term[1][32]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[1][33]*ck;
-    w->S[33] = w->S[33] + w->term[1][33]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[1][34]*ck;
-    w->S[34] = w->S[34] + w->term[1][34]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[1][35]*ck;
-    w->S[35] = w->S[35] + w->term[1][35]*cs;
-    t->Phi[2][9] = t->Phi[2][9] + w->term[1][36]*ck;
-    w->S[36] = w->S[36] + w->term[1][36]*cs;
-    t->Phi[2][10] = t->Phi[2][10] + w->term[1][37]*ck;
-    w->S[37] = w->S[37] + w->term[1][37]*cs;
-    t->Phi[2][11] = t->Phi[2][11] + w->term[1][38]*ck;
-    w->S[38] = w->S[38] + w->term[1][38]*cs;
-    t->Phi[2][12] = t->Phi[2][12] + w->term[1][39]*ck;
-    w->S[39] = w->S[39] + w->term[1][39]*cs;
-    t->Phi[2][13] = t->Phi[2][13] + w->term[1][40]*ck;
-    w->S[40] = w->S[40] + w->term[1][40]*cs;
-    t->Phi[2][14] = t->Phi[2][14] + w->term[1][41]*ck;
-    w->S[41] = w->S[41] + w->term[1][41]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[1][42]*ck;
-    w->S[42] = w->S[42] + w->term[1][42]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[1][43]*ck;
-    w->S[43] = w->S[43] + w->term[1][43]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[1][44]*ck;
-    w->S[44] = w->S[44] + w->term[1][44]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[1][45]*ck;
-    w->S[45] = w->S[45] + w->term[1][45]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[1][46]*ck;
-    w->S[46] = w->S[46] + w->term[1][46]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[1][47]*ck;
-    w->S[47] = w->S[47] + w->term[1][47]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[1][48]*ck;
-    w->S[48] = w->S[48] + w->term[1][48]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[1][49]*ck;
-    w->S[49] = w->S[49] + w->term[1][49]*cs;
-    t->Phi[3][9] = t->Phi[3][9] + w->term[1][50]*ck;
-    w->S[50] = w->S[50] + w->term[1][50]*cs;
-    t->Phi[3][10] = t->Phi[3][10] + w->term[1][51]*ck;
-    w->S[51] = w->S[51] + w->term[1][51]*cs;
-    t->Phi[3][11] = t->Phi[3][11] + w->term[1][52]*ck;
-    w->S[52] = w->S[52] + w->term[1][52]*cs;
-    t->Phi[3][12] = t->Phi[3][12] + w->term[1][53]*ck;
-    w->S[53] = w->S[53] + w->term[1][53]*cs;
-    t->Phi[3][13] = t->Phi[3][13] + w->term[1][54]*ck;
-    w->S[54] = w->S[54] + w->term[1][54]*cs;
-    t->Phi[3][14] = t->Phi[3][14] + w->term[1][55]*ck;
-    w->S[55] = w->S[55] + w->term[1][55]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[1][56]*ck;
-    w->S[56] = w->S[56] + w->term[1][56]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[1][57]*ck;
-    w->S[57] = w->S[57] + w->term[1][57]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[1][58]*ck;
-    w->S[58] = w->S[58] + w->term[1][58]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[1][59]*ck;
-    w->S[59] = w->S[59] + w->term[1][59]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[1][60]*ck;
-    w->S[60] = w->S[60] + w->term[1][60]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[1][61]*ck;
-    w->S[61] = w->S[61] + w->term[1][61]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[1][62]*ck;
-    w->S[62] = w->S[62] + w->term[1][62]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[1][63]*ck;
-    w->S[63] = w->S[63] + w->term[1][63]*cs;
-    t->Phi[4][9] = t->Phi[4][9] + w->term[1][64]*ck;
-    w->S[64] = w->S[64] + w->term[1][64]*cs;
-    t->Phi[4][10] = t->Phi[4][10] + w->term[1][65]*ck;
-    w->S[65] = w->S[65] + w->term[1][65]*cs;
-    t->Phi[4][11] = t->Phi[4][11] + w->term[1][66]*ck;
-    w->S[66] = w->S[66] + w->term[1][66]*cs;
-    t->Phi[4][12] = t->Phi[4][12] + w->term[1][67]*ck;
-    w->S[67] = w->S[67] + w->term[1][67]*cs;
-    t->Phi[4][13] = t->Phi[4][13] + w->term[1][68]*ck;
-    w->S[68] = w->S[68] + w->term[1][68]*cs;
-    t->Phi[4][14] = t->Phi[4][14] + w->term[1][69]*ck;
-    w->S[69] = w->S[69] + w->term[1][69]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[1][70]*ck;
-    w->S[70] = w->S[70] + w->term[1][70]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[1][71]*ck;
-    w->S[71] = w->S[71] + w->term[1][71]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[1][72]*ck;
-    w->S[72] = w->S[72] + w->term[1][72]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[1][73]*ck;
-    w->S[73] = w->S[73] + w->term[1][73]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[1][74]*ck;
-    w->S[74] = w->S[74] + w->term[1][74]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[1][75]*ck;
-    w->S[75] = w->S[75] + w->term[1][75]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[1][76]*ck;
-    w->S[76] = w->S[76] + w->term[1][76]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[1][77]*ck;
-    w->S[77] = w->S[77] + w->term[1][77]*cs;
-    t->Phi[5][9] = t->Phi[5][9] + w->term[1][78]*ck;
-    w->S[78] = w->S[78] + w->term[1][78]*cs;
-    t->Phi[5][10] = t->Phi[5][10] + w->term[1][79]*ck;
-    w->S[79] = w->S[79] + w->term[1][79]*cs;
-    t->Phi[5][11] = t->Phi[5][11] + w->term[1][80]*ck;
-    w->S[80] = w->S[80] + w->term[1][80]*cs;
-    t->Phi[5][12] = t->Phi[5][12] + w->term[1][81]*ck;
-    w->S[81] = w->S[81] + w->term[1][81]*cs;
-    t->Phi[5][13] = t->Phi[5][13] + w->term[1][82]*ck;
-    w->S[82] = w->S[82] + w->term[1][82]*cs;
-    t->Phi[5][14] = t->Phi[5][14] + w->term[1][83]*ck;
-    w->S[83] = w->S[83] + w->term[1][83]*cs;
-    t->Phi[6][0] = t->Phi[6][0] + w->term[1][84]*ck;
-    w->S[84] = w->S[84] + w->term[1][84]*cs;
-    t->Phi[6][1] = t->Phi[6][1] + w->term[1][85]*ck;
-    w->S[85] = w->S[85] + w->term[1][85]*cs;
-    t->Phi[6][2] = t->Phi[6][2] + w->term[1][86]*ck;
-    w->S[86] = w->S[86] + w->term[1][86]*cs;
-    t->Phi[6][3] = t->Phi[6][3] + w->term[1][87]*ck;
-    w->S[87] = w->S[87] + w->term[1][87]*cs;
-    t->Phi[6][4] = t->Phi[6][4] + w->term[1][88]*ck;
-    w->S[88] = w->S[88] + w->term[1][88]*cs;
-    t->Phi[6][5] = t->Phi[6][5] + w->term[1][89]*ck;
-    w->S[89] = w->S[89] + w->term[1][89]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[1][90]*ck;
-    w->S[90] = w->S[90] + w->term[1][90]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[1][91]*ck;
-    w->S[91] = w->S[91] + w->term[1][91]*cs;
-    t->Phi[6][9] = t->Phi[6][9] + w->term[1][92]*ck;
-    w->S[92] = w->S[92] + w->term[1][92]*cs;
-    t->Phi[6][10] = t->Phi[6][10] + w->term[1][93]*ck;
-    w->S[93] = w->S[93] + w->term[1][93]*cs;
-    t->Phi[6][11] = t->Phi[6][11] + w->term[1][94]*ck;
-    w->S[94] = w->S[94] + w->term[1][94]*cs;
-    t->Phi[6][12] = t->Phi[6][12] + w->term[1][95]*ck;
-    w->S[95] = w->S[95] + w->term[1][95]*cs;
-    t->Phi[6][13] = t->Phi[6][13] + w->term[1][96]*ck;
-    w->S[96] = w->S[96] + w->term[1][96]*cs;
-    t->Phi[6][14] = t->Phi[6][14] + w->term[1][97]*ck;
-    w->S[97] = w->S[97] + w->term[1][97]*cs;
-    t->Phi[7][0] = t->Phi[7][0] + w->term[1][98]*ck;
-    w->S[98] = w->S[98] + w->term[1][98]*cs;
-    t->Phi[7][1] = t->Phi[7][1] + w->term[1][99]*ck;
-    w->S[99] = w->S[99] + w->term[1][99]*cs;
-    t->Phi[7][2] = t->Phi[7][2] + w->term[1][100]*ck;
-    w->S[100] = w->S[100] + w->term[1][100]*cs;
-    t->Phi[7][3] = t->Phi[7][3] + w->term[1][101]*ck;
-    w->S[101] = w->S[101] + w->term[1][101]*cs;
-    t->Phi[7][4] = t->Phi[7][4] + w->term[1][102]*ck;
-    w->S[102] = w->S[102] + w->term[1][102]*cs;
-    t->Phi[7][5] = t->Phi[7][5] + w->term[1][103]*ck;
-    w->S[103] = w->S[103] + w->term[1][103]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[1][104]*ck;
-    w->S[104] = w->S[104] + w->term[1][104]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[1][105]*ck;
-    w->S[106] = w->S[106] + w->term[1][105]*cs;
-    t->Phi[7][9] = t->Phi[7][9] + w->term[1][106]*ck;
-    w->S[107] = w->S[107] + w->term[1][106]*cs;
-    t->Phi[7][10] = t->Phi[7][10] + w->term[1][107]*ck;
-    w->S[108] = w->S[108] + w->term[1][107]*cs;
-    t->Phi[7][11] = t->Phi[7][11] + w->term[1][108]*ck;
-    w->S[109] = w->S[109] + w->term[1][108]*cs;
-    t->Phi[7][12] = t->Phi[7][12] + w->term[1][109]*ck;
-    w->S[110] = w->S[110] + w->term[1][109]*cs;
-    t->Phi[7][13] = t->Phi[7][13] + w->term[1][110]*ck;
-    w->S[111] = w->S[111] + w->term[1][110]*cs;
-    t->Phi[7][14] = t->Phi[7][14] + w->term[1][111]*ck;
-    w->S[112] = w->S[112] + w->term[1][111]*cs;
-    t->Phi[8][0] = t->Phi[8][0] + w->term[1][112]*ck;
-    w->S[113] = w->S[113] + w->term[1][112]*cs;
-    t->Phi[8][1] = t->Phi[8][1] + w->term[1][113]*ck;
-    w->S[114] = w->S[114] + w->term[1][113]*cs;
-    t->Phi[8][2] = t->Phi[8][2] + w->term[1][114]*ck;
-    w->S[115] = w->S[115] + w->term[1][114]*cs;
-    t->Phi[8][3] = t->Phi[8][3] + w->term[1][115]*ck;
-    w->S[116] = w->S[116] + w->term[1][115]*cs;
-    t->Phi[8][4] = t->Phi[8][4] + w->term[1][116]*ck;
-    w->S[117] = w->S[117] + w->term[1][116]*cs;
-    t->Phi[8][5] = t->Phi[8][5] + w->term[1][117]*ck;
-    w->S[118] = w->S[118] + w->term[1][117]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[1][118]*ck;
-    w->S[119] = w->S[119] + w->term[1][118]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[1][119]*ck;
-    w->S[120] = w->S[120] + w->term[1][119]*cs;
-    t->Phi[8][9] = t->Phi[8][9] + w->term[1][120]*ck;
-    w->S[121] = w->S[121] + w->term[1][120]*cs;
-    t->Phi[8][10] = t->Phi[8][10] + w->term[1][121]*ck;
-    w->S[122] = w->S[122] + w->term[1][121]*cs;
-    t->Phi[8][11] = t->Phi[8][11] + w->term[1][122]*ck;
-    w->S[123] = w->S[123] + w->term[1][122]*cs;
-    t->Phi[8][12] = t->Phi[8][12] + w->term[1][123]*ck;
-    w->S[124] = w->S[124] + w->term[1][123]*cs;
-    t->Phi[8][13] = t->Phi[8][13] + w->term[1][124]*ck;
-    w->S[125] = w->S[125] + w->term[1][124]*cs;
-    t->Phi[8][14] = t->Phi[8][14] + w->term[1][125]*ck;
-    w->S[126] = w->S[126] + w->term[1][125]*cs;
+    w->term[1][0] = c_out + w->fh[0]*w->S[14] + w->fh[1]*w->S[28] + w->fh[2]*w->S[56] +
+            w->fh[3]*w->S[113];
+    w->term[1][1] = w->fh[0]*w->S[15] + w->fh[1]*w->S[29] + w->fh[2]*w->S[57] + w->fh[3]*w->S[114];
+    w->term[1][2] = w->fh[0]*w->S[16] + w->fh[1]*w->S[30] + w->fh[2]*w->S[58];
+    w->term[1][3] = w->fh[0]*w->S[17] + w->fh[1]*w->S[31] + w->fh[2]*w->S[59] + w->fh[3]*w->S[116];
+    w->term[1][4] = w->fh[0]*w->S[18] + w->fh[1]*w->S[32] + w->fh[2]*w->S[60] + w->fh[3]*w->S[117];
+    w->term[1][5] = w->fh[0]*w->S[19] + w->fh[1]*w->S[33] + w->fh[2]*w->S[61] + w->fh[3]*w->S[118];
+    w->term[1][6] = w->fh[0]*w->S[20] + w->fh[1]*w->S[34] + w->fh[2]*w->S[62] + w->fh[3]*w->S[119];
+    w->term[1][7] = w->fh[0]*w->S[21] + w->fh[1]*w->S[35] + w->fh[2]*w->S[63] + w->fh[3]*w->S[120];
+    w->term[1][8] = w->fh[0]*w->S[22] + w->fh[1]*w->S[36] + w->fh[2]*w->S[64] + w->fh[4]*c_in;
+    w->term[1][9] = w->fh[0]*w->S[23] + w->fh[1]*w->S[37] + w->fh[2]*w->S[65] + w->fh[5]*c_in;
+    w->term[1][10] = w->fh[0]*w->S[24] + w->fh[1]*w->S[38] + w->fh[2]*w->S[66] + w->fh[6]*c_in;
+    w->term[1][11] = w->fh[0]*w->S[25] + w->fh[1]*w->S[39] + w->fh[2]*w->S[67] + w->fh[3]*w->S[124];
+    w->term[1][12] = w->fh[0]*w->S[26] + w->fh[1]*w->S[40] + w->fh[2]*w->S[68] + w->fh[3]*w->S[125];
+    w->term[1][13] = w->fh[0]*w->S[27] + w->fh[1]*w->S[41] + w->fh[2]*w->S[69] + w->fh[3]*w->S[126];
+    w->term[1][14] = w->fh[7]*w->S[0] + w->fh[8]*w->S[28] + w->fh[9]*w->S[42] + w->fh[10]*w->S[84] +
+            w->fh[11]*w->S[113];
+    w->term[1][15] = c_out + w->fh[7]*w->S[1] + w->fh[8]*w->S[29] + w->fh[9]*w->S[43] +
+            w->fh[11]*w->S[114];
+    w->term[1][16] = w->fh[7]*w->S[2] + w->fh[8]*w->S[30] + w->fh[9]*w->S[44] + w->fh[10]*w->S[86];
+    w->term[1][17] = w->fh[7]*w->S[3] + w->fh[8]*w->S[31] + w->fh[9]*w->S[45] + w->fh[10]*w->S[87] +
+            w->fh[11]*w->S[116];
+    w->term[1][18] = w->fh[7]*w->S[4] + w->fh[8]*w->S[32] + w->fh[9]*w->S[46] + w->fh[10]*w->S[88] +
+            w->fh[11]*w->S[117];
+    w->term[1][19] = w->fh[7]*w->S[5] + w->fh[8]*w->S[33] + w->fh[9]*w->S[47] + w->fh[10]*w->S[89] +
+            w->fh[11]*w->S[118];
+    w->term[1][20] = w->fh[7]*w->S[6] + w->fh[8]*w->S[34] + w->fh[9]*w->S[48] + w->fh[10]*w->S[90] +
+            w->fh[11]*w->S[119];
+    w->term[1][21] = w->fh[7]*w->S[7] + w->fh[8]*w->S[35] + w->fh[9]*w->S[49] + w->fh[10]*w->S[91] +
+            w->fh[11]*w->S[120];
+    w->term[1][22] = w->fh[7]*w->S[8] + w->fh[8]*w->S[36] + w->fh[9]*w->S[50] + w->fh[12]*c_in;
+    w->term[1][23] = w->fh[7]*w->S[9] + w->fh[8]*w->S[37] + w->fh[9]*w->S[51] + w->fh[13]*c_in;
+    w->term[1][24] = w->fh[7]*w->S[10] + w->fh[8]*w->S[38] + w->fh[9]*w->S[52] + w->fh[14]*c_in;
+    w->term[1][25] = w->fh[7]*w->S[11] + w->fh[8]*w->S[39] + w->fh[9]*w->S[53] + w->fh[10]*w->S[95]
+            + w->fh[11]*w->S[124];
+    w->term[1][26] = w->fh[7]*w->S[12] + w->fh[8]*w->S[40] + w->fh[9]*w->S[54] + w->fh[10]*w->S[96]
+            + w->fh[11]*w->S[125];
+    w->term[1][27] = w->fh[7]*w->S[13] + w->fh[8]*w->S[41] + w->fh[9]*w->S[55] + w->fh[10]*w->S[97]
+            + w->fh[11]*w->S[126];
+    w->term[1][28] = w->fh[15]*w->S[0] + w->fh[16]*w->S[14] + w->fh[17]*w->S[42] +
+            w->fh[18]*w->S[84] + w->fh[19]*w->S[113];
+    w->term[1][29] = w->fh[15]*w->S[1] + w->fh[16]*w->S[15] + w->fh[17]*w->S[43] +
+            w->fh[19]*w->S[114];
+    w->term[1][30] = c_out + w->fh[15]*w->S[2] + w->fh[16]*w->S[16] + w->fh[17]*w->S[44] +
+            w->fh[18]*w->S[86];
+    w->term[1][31] = w->fh[15]*w->S[3] + w->fh[16]*w->S[17] + w->fh[17]*w->S[45] +
+            w->fh[18]*w->S[87] + w->fh[19]*w->S[116];
+    w->term[1][32] = w->fh[15]*w->S[4] + w->fh[16]*w->S[18] + w->fh[17]*w->S[46] +
+            w->fh[18]*w->S[88] + w->fh[19]*w->S[117];
+    w->term[1][33] = w->fh[15]*w->S[5] + w->fh[16]*w->S[19] + w->fh[17]*w->S[47] +
+            w->fh[18]*w->S[89] + w->fh[19]*w->S[118];
+    w->term[1][34] = w->fh[15]*w->S[6] + w->fh[16]*w->S[20] + w->fh[17]*w->S[48] +
+            w->fh[18]*w->S[90] + w->fh[19]*w->S[119];
+    w->term[1][35] = w->fh[15]*w->S[7] + w->fh[16]*w->S[21] + w->fh[17]*w->S[49] +
+            w->fh[18]*w->S[91] + w->fh[19]*w->S[120];
+    w->term[1][36] = w->fh[15]*w->S[8] + w->fh[16]*w->S[22] + w->fh[17]*w->S[50] + w->fh[20]*c_in;
+    w->term[1][37] = w->fh[15]*w->S[9] + w->fh[16]*w->S[23] + w->fh[17]*w->S[51] + w->fh[21]*c_in;
+    w->term[1][38] = w->fh[15]*w->S[10] + w->fh[16]*w->S[24] + w->fh[17]*w->S[52] + w->fh[22]*c_in;
+    w->term[1][39] = w->fh[15]*w->S[11] + w->fh[16]*w->S[25] + w->fh[17]*w->S[53] +
+            w->fh[18]*w->S[95] + w->fh[19]*w->S[124];
+    w->term[1][40] = w->fh[15]*w->S[12] + w->fh[16]*w->S[26] + w->fh[17]*w->S[54] +
+            w->fh[18]*w->S[96] + w->fh[19]*w->S[125];
+    w->term[1][41] = w->fh[15]*w->S[13] + w->fh[16]*w->S[27] + w->fh[17]*w->S[55] +
+            w->fh[18]*w->S[97] + w->fh[19]*w->S[126];
+    w->term[1][42] = w->fh[23]*w->S[14] + w->fh[24]*w->S[28] + w->fh[25]*w->S[42] +
+            w->fh[26]*w->S[56] + w->fh[27]*w->S[70] + w->fh[28]*w->S[84] + w->fh[29]*w->S[113];
+    w->term[1][43] = w->fh[23]*w->S[15] + w->fh[24]*w->S[29] + w->fh[25]*w->S[43] +
+            w->fh[26]*w->S[57] + w->fh[27]*w->S[71] + w->fh[29]*w->S[114];
+    w->term[1][44] = w->fh[23]*w->S[16] + w->fh[24]*w->S[30] + w->fh[25]*w->S[44] +
+            w->fh[26]*w->S[58] + w->fh[27]*w->S[72] + w->fh[28]*w->S[86];
+    w->term[1][45] = c_out + w->fh[23]*w->S[17] + w->fh[24]*w->S[31] + w->fh[25]*w->S[45] +
+            w->fh[26]*w->S[59] + w->fh[27]*w->S[73] + w->fh[28]*w->S[87] + w->fh[29]*w->S[116];
+    w->term[1][46] = w->fh[23]*w->S[18] + w->fh[24]*w->S[32] + w->fh[25]*w->S[46] +
+            w->fh[26]*w->S[60] + w->fh[27]*w->S[74] + w->fh[28]*w->S[88] + w->fh[29]*w->S[117];
+    w->term[1][47] = w->fh[23]*w->S[19] + w->fh[24]*w->S[33] + w->fh[25]*w->S[47] +
+            w->fh[26]*w->S[61] + w->fh[27]*w->S[75] + w->fh[28]*w->S[89] + w->fh[29]*w->S[118];
+    w->term[1][48] = w->fh[23]*w->S[20] + w->fh[24]*w->S[34] + w->fh[25]*w->S[48] +
+            w->fh[26]*w->S[62] + w->fh[27]*w->S[76] + w->fh[28]*w->S[90] + w->fh[29]*w->S[119];
+    w->term[1][49] = w->fh[23]*w->S[21] + w->fh[24]*w->S[35] + w->fh[25]*w->S[49] +
+            w->fh[26]*w->S[63] + w->fh[27]*w->S[77] + w->fh[28]*w->S[91] + w->fh[29]*w->S[120];
+    w->term[1][50] = w->fh[23]*w->S[22] + w->fh[24]*w->S[36] + w->fh[25]*w->S[50] +
+            w->fh[26]*w->S[64] + w->fh[27]*w->S[78];
+    w->term[1][51] = w->fh[23]*w->S[23] + w->fh[24]*w->S[37] + w->fh[25]*w->S[51] +
+            w->fh[26]*w->S[65] + w->fh[27]*w->S[79];
+    w->term[1][52] = w->fh[23]*w->S[24] + w->fh[24]*w->S[38] + w->fh[25]*w->S[52] +
+            w->fh[26]*w->S[66] + w->fh[27]*w->S[80];
+    w->term[1][53] = w->fh[23]*w->S[25] + w->fh[24]*w->S[39] + w->fh[25]*w->S[53] +
+            w->fh[26]*w->S[67] + w->fh[27]*w->S[81] + w->fh[28]*w->S[95] + w->fh[29]*w->S[124] +
+            w->fh[30]*c_in;
+    w->term[1][54] = w->fh[23]*w->S[26] + w->fh[24]*w->S[40] + w->fh[25]*w->S[54] +
+            w->fh[26]*w->S[68] + w->fh[27]*w->S[82] + w->fh[28]*w->S[96] + w->fh[29]*w->S[125] +
+            w->fh[31]*c_in;
+    w->term[1][55] = w->fh[23]*w->S[27] + w->fh[24]*w->S[41] + w->fh[25]*w->S[55] +
+            w->fh[26]*w->S[69] + w->fh[27]*w->S[83] + w->fh[28]*w->S[97] + w->fh[29]*w->S[126] +
+            w->fh[32]*c_in;
+    w->term[1][56] = w->fh[33]*w->S[0] + w->fh[34]*w->S[28] + w->fh[35]*w->S[42] +
+            w->fh[36]*w->S[56] + w->fh[37]*w->S[70] + w->fh[38]*w->S[84] + w->fh[39]*w->S[113];
+    w->term[1][57] = w->fh[33]*w->S[1] + w->fh[34]*w->S[29] + w->fh[35]*w->S[43] +
+            w->fh[36]*w->S[57] + w->fh[37]*w->S[71] + w->fh[39]*w->S[114];
+    w->term[1][58] = w->fh[33]*w->S[2] + w->fh[34]*w->S[30] + w->fh[35]*w->S[44] +
+            w->fh[36]*w->S[58] + w->fh[37]*w->S[72] + w->fh[38]*w->S[86];
+    w->term[1][59] = w->fh[33]*w->S[3] + w->fh[34]*w->S[31] + w->fh[35]*w->S[45] +
+            w->fh[36]*w->S[59] + w->fh[37]*w->S[73] + w->fh[38]*w->S[87] + w->fh[39]*w->S[116];
+    w->term[1][60] = c_out + w->fh[33]*w->S[4] + w->fh[34]*w->S[32] + w->fh[35]*w->S[46] +
+            w->fh[36]*w->S[60] + w->fh[37]*w->S[74] + w->fh[38]*w->S[88] + w->fh[39]*w->S[117];
+    w->term[1][61] = w->fh[33]*w->S[5] + w->fh[34]*w->S[33] + w->fh[35]*w->S[47] +
+            w->fh[36]*w->S[61] + w->fh[37]*w->S[75] + w->fh[38]*w->S[89] + w->fh[39]*w->S[118];
+    w->term[1][62] = w->fh[33]*w->S[6] + w->fh[34]*w->S[34] + w->fh[35]*w->S[48] +
+            w->fh[36]*w->S[62] + w->fh[37]*w->S[76] + w->fh[38]*w->S[90] + w->fh[39]*w->S[119];
+    w->term[1][63] = w->fh[33]*w->S[7] + w->fh[34]*w->S[35] + w->fh[35]*w->S[49] +
+            w->fh[36]*w->S[63] + w->fh[37]*w->S[77] + w->fh[38]*w->S[91] + w->fh[39]*w->S[120];
+    w->term[1][64] = w->fh[33]*w->S[8] + w->fh[34]*w->S[36] + w->fh[35]*w->S[50] +
+            w->fh[36]*w->S[64] + w->fh[37]*w->S[78];
+    w->term[1][65] = w->fh[33]*w->S[9] + w->fh[34]*w->S[37] + w->fh[35]*w->S[51] +
+            w->fh[36]*w->S[65] + w->fh[37]*w->S[79];
+    w->term[1][66] = w->fh[33]*w->S[10] + w->fh[34]*w->S[38] + w->fh[35]*w->S[52] +
+            w->fh[36]*w->S[66] + w->fh[37]*w->S[80];
+    w->term[1][67] = w->fh[33]*w->S[11] + w->fh[34]*w->S[39] + w->fh[35]*w->S[53] +
+            w->fh[36]*w->S[67] + w->fh[37]*w->S[81] + w->fh[38]*w->S[95] + w->fh[39]*w->S[124] +
+            w->fh[40]*c_in;
+    w->term[1][68] = w->fh[33]*w->S[12] + w->fh[34]*w->S[40] + w->fh[35]*w->S[54] +
+            w->fh[36]*w->S[68] + w->fh[37]*w->S[82] + w->fh[38]*w->S[96] + w->fh[39]*w->S[125] +
+            w->fh[41]*c_in;
+    w->term[1][69] = w->fh[33]*w->S[13] + w->fh[34]*w->S[41] + w->fh[35]*w->S[55] +
+            w->fh[36]*w->S[69] + w->fh[37]*w->S[83] + w->fh[38]*w->S[97] + w->fh[39]*w->S[126] +
+            w->fh[42]*c_in;
+    w->term[1][70] = w->fh[43]*w->S[0] + w->fh[44]*w->S[14] + w->fh[45]*w->S[42] +
+            w->fh[46]*w->S[56] + w->fh[47]*w->S[84] + w->fh[48]*w->S[113];
+    w->term[1][71] = w->fh[43]*w->S[1] + w->fh[44]*w->S[15] + w->fh[45]*w->S[43] +
+            w->fh[46]*w->S[57] + w->fh[48]*w->S[114];
+    w->term[1][72] = w->fh[43]*w->S[2] + w->fh[44]*w->S[16] + w->fh[45]*w->S[44] +
+            w->fh[46]*w->S[58] + w->fh[47]*w->S[86];
+    w->term[1][73] = w->fh[43]*w->S[3] + w->fh[44]*w->S[17] + w->fh[45]*w->S[45] +
+            w->fh[46]*w->S[59] + w->fh[47]*w->S[87] + w->fh[48]*w->S[116];
+    w->term[1][74] = w->fh[43]*w->S[4] + w->fh[44]*w->S[18] + w->fh[45]*w->S[46] +
+            w->fh[46]*w->S[60] + w->fh[47]*w->S[88] + w->fh[48]*w->S[117];
+    w->term[1][75] = c_out + w->fh[43]*w->S[5] + w->fh[44]*w->S[19] + w->fh[45]*w->S[47] +
+            w->fh[46]*w->S[61] + w->fh[47]*w->S[89] + w->fh[48]*w->S[118];
+    w->term[1][76] = w->fh[43]*w->S[6] + w->fh[44]*w->S[20] + w->fh[45]*w->S[48] +
+            w->fh[46]*w->S[62] + w->fh[47]*w->S[90] + w->fh[48]*w->S[119];
+    w->term[1][77] = w->fh[43]*w->S[7] + w->fh[44]*w->S[21] + w->fh[45]*w->S[49] +
+            w->fh[46]*w->S[63] + w->fh[47]*w->S[91] + w->fh[48]*w->S[120];
+    w->term[1][78] = w->fh[43]*w->S[8] + w->fh[44]*w->S[22] + w->fh[45]*w->S[50] +
+            w->fh[46]*w->S[64];
+    w->term[1][79] = w->fh[43]*w->S[9] + w->fh[44]*w->S[23] + w->fh[45]*w->S[51] +
+            w->fh[46]*w->S[65];
+    w->term[1][80] = w->fh[43]*w->S[10] + w->fh[44]*w->S[24] + w->fh[45]*w->S[52] +
+            w->fh[46]*w->S[66];
+    w->term[1][81] = w->fh[43]*w->S[11] + w->fh[44]*w->S[25] + w->fh[45]*w->S[53] +
+            w->fh[46]*w->S[67] + w->fh[47]*w->S[95] + w->fh[48]*w->S[124] + w->fh[49]*c_in;
+    w->term[1][82] = w->fh[43]*w->S[12] + w->fh[44]*w->S[26] + w->fh[45]*w->S[54] +
+            w->fh[46]*w->S[68] + w->fh[47]*w->S[96] + w->fh[48]*w->S[125] + w->fh[50]*c_in;
+    w->term[1][83] = w->fh[43]*w->S[13] + w->fh[44]*w->S[27] + w->fh[45]*w->S[55] +
+            w->fh[46]*w->S[69] + w->fh[47]*w->S[97] + w->fh[48]*w->S[126] + w->fh[51]*c_in;
+    w->term[1][84] = w->fh[52]*w->S[56] + w->fh[53]*w->S[113];
+    w->term[1][85] = w->fh[52]*w->S[57] + w->fh[53]*w->S[114];
+    w->term[1][86] = w->fh[52]*w->S[58];
+    w->term[1][87] = w->fh[52]*w->S[59] + w->fh[53]*w->S[116];
+    w->term[1][88] = w->fh[52]*w->S[60] + w->fh[53]*w->S[117];
+    w->term[1][89] = w->fh[52]*w->S[61] + w->fh[53]*w->S[118];
+    w->term[1][90] = c_out + w->fh[52]*w->S[62] + w->fh[53]*w->S[119];
+    w->term[1][91] = w->fh[52]*w->S[63] + w->fh[53]*w->S[120];
+    w->term[1][92] = w->fh[52]*w->S[64];
+    w->term[1][93] = w->fh[52]*w->S[65];
+    w->term[1][94] = w->fh[52]*w->S[66];
+    w->term[1][95] = w->fh[52]*w->S[67] + w->fh[53]*w->S[124];
+    w->term[1][96] = w->fh[52]*w->S[68] + w->fh[53]*w->S[125];
+    w->term[1][97] = w->fh[52]*w->S[69] + w->fh[53]*w->S[126];
+    w->term[1][98] = w->fh[54]*w->S[42] + w->fh[55]*w->S[84] + w->fh[56]*w->S[113];
+    w->term[1][99] = w->fh[54]*w->S[43] + w->fh[56]*w->S[114];
+    w->term[1][100] = w->fh[54]*w->S[44] + w->fh[55]*w->S[86];
+    w->term[1][101] = w->fh[54]*w->S[45] + w->fh[55]*w->S[87] + w->fh[56]*w->S[116];
+    w->term[1][102] = w->fh[54]*w->S[46] + w->fh[55]*w->S[88] + w->fh[56]*w->S[117];
+    w->term[1][103] = w->fh[54]*w->S[47] + w->fh[55]*w->S[89] + w->fh[56]*w->S[118];
+    w->term[1][104] = w->fh[54]*w->S[48] + w->fh[55]*w->S[90] + w->fh[56]*w->S[119];
+    w->term[1][105] = c_out;
+    w->term[1][106] = w->fh[54]*w->S[49] + w->fh[55]*w->S[91] + w->fh[56]*w->S[120];
+    w->term[1][107] = w->fh[54]*w->S[50];
+    w->term[1][108] = w->fh[54]*w->S[51];
+    w->term[1][109] = w->fh[54]*w->S[52];
+    w->term[1][110] = w->fh[54]*w->S[53] + w->fh[55]*w->S[95] + w->fh[56]*w->S[124];
+    w->term[1][111] = w->fh[54]*w->S[54] + w->fh[55]*w->S[96] + w->fh[56]*w->S[125];
+    w->term[1][112] = w->fh[54]*w->S[55] + w->fh[55]*w->S[97] + w->fh[56]*w->S[126];
+    w->term[1][113] = w->fh[57]*w->S[70];
+    w->term[1][114] = w->fh[57]*w->S[71];
+    w->term[1][115] = w->fh[57]*w->S[72];
+    w->term[1][116] = w->fh[57]*w->S[73];
+    w->term[1][117] = w->fh[57]*w->S[74];
+    w->term[1][118] = w->fh[57]*w->S[75];
+    w->term[1][119] = w->fh[57]*w->S[76];
+    w->term[1][120] = c_out + w->fh[57]*w->S[77];
+    w->term[1][121] = w->fh[57]*w->S[78];
+    w->term[1][122] = w->fh[57]*w->S[79];
+    w->term[1][123] = w->fh[57]*w->S[80];
+    w->term[1][124] = w->fh[57]*w->S[81];
+    w->term[1][125] = w->fh[57]*w->S[82];
+    w->term[1][126] = w->fh[57]*w->S[83];
 }
 
-INS_GPS15_TWIN_BLOCK void taylor_order_8(ins_gps15_twin_transition *restrict t,
-        ins_gps15_twin_discretize_scratch *restrict w)
+INS_GPS15_TWIN_BLOCK void horner_saturated_into_S(ins_gps15_twin_discretize_scratch *restrict w,
+        const ins_gps15_twin_scalar c_out, const ins_gps15_twin_scalar c_in)
 {
-    const ins_gps15_twin_scalar ck = 1.0 / 40320.0;
-    const ins_gps15_twin_scalar cs = 1.0 / 362880.0;
-    w->term[0][0] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][28] + w->fh[2]*w->term[1][56] +
-            w->fh[3]*w->term[1][112];
-    w->term[0][1] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][29] + w->fh[2]*w->term[1][57] +
+    w->S[0] = c_out + w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][28] + w->fh[2]*w->term[1][56] +
             w->fh[3]*w->term[1][113];
-    w->term[0][2] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][30] + w->fh[2]*w->term[1][58] +
+    w->S[1] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][29] + w->fh[2]*w->term[1][57] +
             w->fh[3]*w->term[1][114];
-    w->term[0][3] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][31] + w->fh[2]*w->term[1][59] +
+    w->S[2] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][30] + w->fh[2]*w->term[1][58] +
             w->fh[3]*w->term[1][115];
-    w->term[0][4] = w->fh[0]*w->term[1][18] + w->fh[1]*w->term[1][32] + w->fh[2]*w->term[1][60] +
+    w->S[3] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][31] + w->fh[2]*w->term[1][59] +
             w->fh[3]*w->term[1][116];
-    w->term[0][5] = w->fh[0]*w->term[1][19] + w->fh[1]*w->term[1][33] + w->fh[2]*w->term[1][61] +
+    w->S[4] = w->fh[0]*w->term[1][18] + w->fh[1]*w->term[1][32] + w->fh[2]*w->term[1][60] +
             w->fh[3]*w->term[1][117];
-    w->term[0][6] = w->fh[0]*w->term[1][20] + w->fh[1]*w->term[1][34] + w->fh[2]*w->term[1][62] +
+    w->S[5] = w->fh[0]*w->term[1][19] + w->fh[1]*w->term[1][33] + w->fh[2]*w->term[1][61] +
             w->fh[3]*w->term[1][118];
-    w->term[0][7] = w->fh[0]*w->term[1][21] + w->fh[1]*w->term[1][35] + w->fh[2]*w->term[1][63] +
+    w->S[6] = w->fh[0]*w->term[1][20] + w->fh[1]*w->term[1][34] + w->fh[2]*w->term[1][62] +
             w->fh[3]*w->term[1][119];
-    w->term[0][8] = w->fh[0]*w->term[1][22] + w->fh[1]*w->term[1][36] + w->fh[2]*w->term[1][64] +
+    w->S[7] = w->fh[0]*w->term[1][21] + w->fh[1]*w->term[1][35] + w->fh[2]*w->term[1][63] +
             w->fh[3]*w->term[1][120];
-    w->term[0][9] = w->fh[0]*w->term[1][23] + w->fh[1]*w->term[1][37] + w->fh[2]*w->term[1][65] +
-            w->fh[3]*w->term[1][121];
-    w->term[0][10] = w->fh[0]*w->term[1][24] + w->fh[1]*w->term[1][38] + w->fh[2]*w->term[1][66] +
-            w->fh[3]*w->term[1][122];
-    w->term[0][11] = w->fh[0]*w->term[1][25] + w->fh[1]*w->term[1][39] + w->fh[2]*w->term[1][67] +
-            w->fh[3]*w->term[1][123];
-    w->term[0][12] = w->fh[0]*w->term[1][26] + w->fh[1]*w->term[1][40] + w->fh[2]*w->term[1][68] +
+    w->S[8] = w->fh[0]*w->term[1][22] + w->fh[1]*w->term[1][36] + w->fh[2]*w->term[1][64] +
+            w->fh[3]*w->term[1][121] + w->fh[4]*c_in;
+    w->S[9] = w->fh[0]*w->term[1][23] + w->fh[1]*w->term[1][37] + w->fh[2]*w->term[1][65] +
+            w->fh[3]*w->term[1][122] + w->fh[5]*c_in;
+    w->S[10] = w->fh[0]*w->term[1][24] + w->fh[1]*w->term[1][38] + w->fh[2]*w->term[1][66] +
+            w->fh[3]*w->term[1][123] + w->fh[6]*c_in;
+    w->S[11] = w->fh[0]*w->term[1][25] + w->fh[1]*w->term[1][39] + w->fh[2]*w->term[1][67] +
             w->fh[3]*w->term[1][124];
-    w->term[0][13] = w->fh[0]*w->term[1][27] + w->fh[1]*w->term[1][41] + w->fh[2]*w->term[1][69] +
+    w->S[12] = w->fh[0]*w->term[1][26] + w->fh[1]*w->term[1][40] + w->fh[2]*w->term[1][68] +
             w->fh[3]*w->term[1][125];
-    w->term[0][14] = w->fh[7]*w->term[1][0] + w->fh[8]*w->term[1][28] + w->fh[9]*w->term[1][42] +
-            w->fh[10]*w->term[1][84] + w->fh[11]*w->term[1][112];
-    w->term[0][15] = w->fh[7]*w->term[1][1] + w->fh[8]*w->term[1][29] + w->fh[9]*w->term[1][43] +
-            w->fh[10]*w->term[1][85] + w->fh[11]*w->term[1][113];
-    w->term[0][16] = w->fh[7]*w->term[1][2] + w->fh[8]*w->term[1][30] + w->fh[9]*w->term[1][44] +
-            w->fh[10]*w->term[1][86] + w->fh[11]*w->term[1][114];
-    w->term[0][17] = w->fh[7]*w->term[1][3] + w->fh[8]*w->term[1][31] + w->fh[9]*w->term[1][45] +
-            w->fh[10]*w->term[1][87] + w->fh[11]*w->term[1][115];
-    w->term[0][18] = w->fh[7]*w->term[1][4] + w->fh[8]*w->term[1][32] + w->fh[9]*w->term[1][46] +
-            w->fh[10]*w->term[1][88] + w->fh[11]*w->term[1][116];
-    w->term[0][19] = w->fh[7]*w->term[1][5] + w->fh[8]*w->term[1][33] + w->fh[9]*w->term[1][47] +
-            w->fh[10]*w->term[1][89] + w->fh[11]*w->term[1][117];
-    w->term[0][20] = w->fh[7]*w->term[1][6] + w->fh[8]*w->term[1][34] + w->fh[9]*w->term[1][48] +
-            w->fh[10]*w->term[1][90] + w->fh[11]*w->term[1][118];
-    w->term[0][21] = w->fh[7]*w->term[1][7] + w->fh[8]*w->term[1][35] + w->fh[9]*w->term[1][49] +
-            w->fh[10]*w->term[1][91] + w->fh[11]*w->term[1][119];
-    w->term[0][22] = w->fh[7]*w->term[1][8] + w->fh[8]*w->term[1][36] + w->fh[9]*w->term[1][50] +
-            w->fh[10]*w->term[1][92] + w->fh[11]*w->term[1][120];
-    w->term[0][23] = w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][37] + w->fh[9]*w->term[1][51] +
-            w->fh[10]*w->term[1][93] + w->fh[11]*w->term[1][121];
-    w->term[0][24] = w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][38] + w->fh[9]*w->term[1][52] +
-            w->fh[10]*w->term[1][94] + w->fh[11]*w->term[1][122];
-    w->term[0][25] = w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][39] + w->fh[9]*w->term[1][53] +
-            w->fh[10]*w->term[1][95] + w->fh[11]*w->term[1][123];
-    w->term[0][26] = w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][40] + w->fh[9]*w->term[1][54] +
-            w->fh[10]*w->term[1][96] + w->fh[11]*w->term[1][124];
-    w->term[0][27] = w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][41] + w->fh[9]*w->term[1][55] +
-            w->fh[10]*w->term[1][97] + w->fh[11]*w->term[1][125];
-    w->term[0][28] = w->fh[15]*w->term[1][0] + w->fh[16]*w->term[1][14] + w->fh[17]*w->term[1][42] +
-            w->fh[18]*w->term[1][84] + w->fh[19]*w->term[1][112];
-    w->term[0][29] = w->fh[15]*w->term[1][1] + w->fh[16]*w->term[1][15] + w->fh[17]*w->term[1][43] +
-            w->fh[18]*w->term[1][85] + w->fh[19]*w->term[1][113];
-    w->term[0][30] = w->fh[15]*w->term[1][2] + w->fh[16]*w->term[1][16] + w->fh[17]*w->term[1][44] +
-            w->fh[18]*w->term[1][86] + w->fh[19]*w->term[1][114];
-    w->term[0][31] = w->fh[15]*w->term[1][3] + w->fh[16]*w->term[1][17] + w->fh[17]*w->term[1][45] +
-            w->fh[18]*w->term[1][87] + w->fh[19]*w->term[1][115];
-    w->term[0][32] = w->fh[15]*w->term[1][4] + w->fh[16]*w->term[1][18] + w->fh[17]*w->term[1][46] +
-            w->fh[18]*w->term[1][88] + w->fh[19]*w->term[1][116];
-    w->term[0][33] = w->fh[15]*w->term[1][5] + w->fh[16]*w->term[1][19] + w->fh[17]*w->term[1][47] +
-            w->fh[18]*w->term[1][89] + w->fh[19]*w->term[1][117];
-    w->term[0][34] = w->fh[15]*w->term[1][6] + w->fh[16]*w->term[1][20] + w->fh[17]*w->term[1][48] +
-            w->fh[18]*w->term[1][90] + w->fh[19]*w->term[1][118];
-    w->term[0][35] = w->fh[15]*w->term[1][7] + w->fh[16]*w->term[1][21] + w->fh[17]*w->term[1][49] +
-            w->fh[18]*w->term[1][91] + w->fh[19]*w->term[1][119];
-    w->term[0][36] = w->fh[15]*w->term[1][8] + w->fh[16]*w->term[1][22] + w->fh[17]*w->term[1][50] +
-            w->fh[18]*w->term[1][92] + w->fh[19]*w->term[1][120];
-    w->term[0][37] = w->fh[15]*w->term[1][9] + w->fh[16]*w->term[1][23] + w->fh[17]*w->term[1][51] +
-            w->fh[18]*w->term[1][93] + w->fh[19]*w->term[1][121];
-    w->term[0][38] = w->fh[15]*w->term[1][10] + w->fh[16]*w->term[1][24] + w->fh[17]*w->term[1][52]
-            + w->fh[18]*w->term[1][94] + w->fh[19]*w->term[1][122];
-    w->term[0][39] = w->fh[15]*w->term[1][11] + w->fh[16]*w->term[1][25] + w->fh[17]*w->term[1][53]
-            + w->fh[18]*w->term[1][95] + w->fh[19]*w->term[1][123];
-    w->term[0][40] = w->fh[15]*w->term[1][12] + w->fh[16]*w->term[1][26] + w->fh[17]*w->term[1][54]
-            + w->fh[18]*w->term[1][96] + w->fh[19]*w->term[1][124];
-    w->term[0][41] = w->fh[15]*w->term[1][13] + w->fh[16]*w->term[1][27] + w->fh[17]*w->term[1][55]
-            + w->fh[18]*w->term[1][97] + w->fh[19]*w->term[1][125];
-    w->term[0][42] = w->fh[23]*w->term[1][14] + w->fh[24]*w->term[1][28] + w->fh[25]*w->term[1][42]
-            + w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][70] + w->fh[28]*w->term[1][84] +
-            w->fh[29]*w->term[1][112];
-    w->term[0][43] = w->fh[23]*w->term[1][15] + w->fh[24]*w->term[1][29] + w->fh[25]*w->term[1][43]
-            + w->fh[26]*w->term[1][57] + w->fh[27]*w->term[1][71] + w->fh[28]*w->term[1][85] +
+    w->S[13] = w->fh[0]*w->term[1][27] + w->fh[1]*w->term[1][41] + w->fh[2]*w->term[1][69] +
+            w->fh[3]*w->term[1][126];
+    w->S[14] = w->fh[7]*w->term[1][0] + w->fh[8]*w->term[1][28] + w->fh[9]*w->term[1][42] +
+            w->fh[10]*w->term[1][84] + w->fh[11]*w->term[1][113];
+    w->S[15] = c_out + w->fh[7]*w->term[1][1] + w->fh[8]*w->term[1][29] + w->fh[9]*w->term[1][43] +
+            w->fh[10]*w->term[1][85] + w->fh[11]*w->term[1][114];
+    w->S[16] = w->fh[7]*w->term[1][2] + w->fh[8]*w->term[1][30] + w->fh[9]*w->term[1][44] +
+            w->fh[10]*w->term[1][86] + w->fh[11]*w->term[1][115];
+    w->S[17] = w->fh[7]*w->term[1][3] + w->fh[8]*w->term[1][31] + w->fh[9]*w->term[1][45] +
+            w->fh[10]*w->term[1][87] + w->fh[11]*w->term[1][116];
+    w->S[18] = w->fh[7]*w->term[1][4] + w->fh[8]*w->term[1][32] + w->fh[9]*w->term[1][46] +
+            w->fh[10]*w->term[1][88] + w->fh[11]*w->term[1][117];
+    w->S[19] = w->fh[7]*w->term[1][5] + w->fh[8]*w->term[1][33] + w->fh[9]*w->term[1][47] +
+            w->fh[10]*w->term[1][89] + w->fh[11]*w->term[1][118];
+    w->S[20] = w->fh[7]*w->term[1][6] + w->fh[8]*w->term[1][34] + w->fh[9]*w->term[1][48] +
+            w->fh[10]*w->term[1][90] + w->fh[11]*w->term[1][119];
+    w->S[21] = w->fh[7]*w->term[1][7] + w->fh[8]*w->term[1][35] + w->fh[9]*w->term[1][49] +
+            w->fh[10]*w->term[1][91] + w->fh[11]*w->term[1][120];
+    w->S[22] = w->fh[7]*w->term[1][8] + w->fh[8]*w->term[1][36] + w->fh[9]*w->term[1][50] +
+            w->fh[10]*w->term[1][92] + w->fh[11]*w->term[1][121] + w->fh[12]*c_in;
+    w->S[23] = w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][37] + w->fh[9]*w->term[1][51] +
+            w->fh[10]*w->term[1][93] + w->fh[11]*w->term[1][122] + w->fh[13]*c_in;
+    w->S[24] = w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][38] + w->fh[9]*w->term[1][52] +
+            w->fh[10]*w->term[1][94] + w->fh[11]*w->term[1][123] + w->fh[14]*c_in;
+    w->S[25] = w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][39] + w->fh[9]*w->term[1][53] +
+            w->fh[10]*w->term[1][95] + w->fh[11]*w->term[1][124];
+    w->S[26] = w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][40] + w->fh[9]*w->term[1][54] +
+            w->fh[10]*w->term[1][96] + w->fh[11]*w->term[1][125];
+    w->S[27] = w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][41] + w->fh[9]*w->term[1][55] +
+            w->fh[10]*w->term[1][97] + w->fh[11]*w->term[1][126];
+    w->S[28] = w->fh[15]*w->term[1][0] + w->fh[16]*w->term[1][14] + w->fh[17]*w->term[1][42] +
+            w->fh[18]*w->term[1][84] + w->fh[19]*w->term[1][113];
+    w->S[29] = w->fh[15]*w->term[1][1] + w->fh[16]*w->term[1][15] + w->fh[17]*w->term[1][43] +
+            w->fh[18]*w->term[1][85] + w->fh[19]*w->term[1][114];
+    w->S[30] = c_out + w->fh[15]*w->term[1][2] + w->fh[16]*w->term[1][16] + w->fh[17]*w->term[1][44]
+            + w->fh[18]*w->term[1][86] + w->fh[19]*w->term[1][115];
+    w->S[31] = w->fh[15]*w->term[1][3] + w->fh[16]*w->term[1][17] + w->fh[17]*w->term[1][45] +
+            w->fh[18]*w->term[1][87] + w->fh[19]*w->term[1][116];
+    w->S[32] = w->fh[15]*w->term[1][4] + w->fh[16]*w->term[1][18] + w->fh[17]*w->term[1][46] +
+            w->fh[18]*w->term[1][88] + w->fh[19]*w->term[1][117];
+    w->S[33] = w->fh[15]*w->term[1][5] + w->fh[16]*w->term[1][19] + w->fh[17]*w->term[1][47] +
+            w->fh[18]*w->term[1][89] + w->fh[19]*w->term[1][118];
+    w->S[34] = w->fh[15]*w->term[1][6] + w->fh[16]*w->term[1][20] + w->fh[17]*w->term[1][48] +
+            w->fh[18]*w->term[1][90] + w->fh[19]*w->term[1][119];
+    w->S[35] = w->fh[15]*w->term[1][7] + w->fh[16]*w->term[1][21] + w->fh[17]*w->term[1][49] +
+            w->fh[18]*w->term[1][91] + w->fh[19]*w->term[1][120];
+    w->S[36] = w->fh[15]*w->term[1][8] + w->fh[16]*w->term[1][22] + w->fh[17]*w->term[1][50] +
+            w->fh[18]*w->term[1][92] + w->fh[19]*w->term[1][121] + w->fh[20]*c_in;
+    w->S[37] = w->fh[15]*w->term[1][9] + w->fh[16]*w->term[1][23] + w->fh[17]*w->term[1][51] +
+            w->fh[18]*w->term[1][93] + w->fh[19]*w->term[1][122] + w->fh[21]*c_in;
+    w->S[38] = w->fh[15]*w->term[1][10] + w->fh[16]*w->term[1][24] + w->fh[17]*w->term[1][52] +
+            w->fh[18]*w->term[1][94] + w->fh[19]*w->term[1][123] + w->fh[22]*c_in;
+    w->S[39] = w->fh[15]*w->term[1][11] + w->fh[16]*w->term[1][25] + w->fh[17]*w->term[1][53] +
+            w->fh[18]*w->term[1][95] + w->fh[19]*w->term[1][124];
+    w->S[40] = w->fh[15]*w->term[1][12] + w->fh[16]*w->term[1][26] + w->fh[17]*w->term[1][54] +
+            w->fh[18]*w->term[1][96] + w->fh[19]*w->term[1][125];
+    w->S[41] = w->fh[15]*w->term[1][13] + w->fh[16]*w->term[1][27] + w->fh[17]*w->term[1][55] +
+            w->fh[18]*w->term[1][97] + w->fh[19]*w->term[1][126];
+    w->S[42] = w->fh[23]*w->term[1][14] + w->fh[24]*w->term[1][28] + w->fh[25]*w->term[1][42] +
+            w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][70] + w->fh[28]*w->term[1][84] +
             w->fh[29]*w->term[1][113];
-    w->term[0][44] = w->fh[23]*w->term[1][16] + w->fh[24]*w->term[1][30] + w->fh[25]*w->term[1][44]
-            + w->fh[26]*w->term[1][58] + w->fh[27]*w->term[1][72] + w->fh[28]*w->term[1][86] +
+    w->S[43] = w->fh[23]*w->term[1][15] + w->fh[24]*w->term[1][29] + w->fh[25]*w->term[1][43] +
+            w->fh[26]*w->term[1][57] + w->fh[27]*w->term[1][71] + w->fh[28]*w->term[1][85] +
             w->fh[29]*w->term[1][114];
-    w->term[0][45] = w->fh[23]*w->term[1][17] + w->fh[24]*w->term[1][31] + w->fh[25]*w->term[1][45]
-            + w->fh[26]*w->term[1][59] + w->fh[27]*w->term[1][73] + w->fh[28]*w->term[1][87] +
+    w->S[44] = w->fh[23]*w->term[1][16] + w->fh[24]*w->term[1][30] + w->fh[25]*w->term[1][44] +
+            w->fh[26]*w->term[1][58] + w->fh[27]*w->term[1][72] + w->fh[28]*w->term[1][86] +
             w->fh[29]*w->term[1][115];
-    w->term[0][46] = w->fh[23]*w->term[1][18] + w->fh[24]*w->term[1][32] + w->fh[25]*w->term[1][46]
-            + w->fh[26]*w->term[1][60] + w->fh[27]*w->term[1][74] + w->fh[28]*w->term[1][88] +
-            w->fh[29]*w->term[1][116];
-    w->term[0][47] = w->fh[23]*w->term[1][19] + w->fh[24]*w->term[1][33] + w->fh[25]*w->term[1][47]
-            + w->fh[26]*w->term[1][61] + w->fh[27]*w->term[1][75] + w->fh[28]*w->term[1][89] +
+    w->S[45] = c_out + w->fh[23]*w->term[1][17] + w->fh[24]*w->term[1][31] +
+            w->fh[25]*w->term[1][45] + w->fh[26]*w->term[1][59] + w->fh[27]*w->term[1][73] +
+            w->fh[28]*w->term[1][87] + w->fh[29]*w->term[1][116];
+    w->S[46] = w->fh[23]*w->term[1][18] + w->fh[24]*w->term[1][32] + w->fh[25]*w->term[1][46] +
+            w->fh[26]*w->term[1][60] + w->fh[27]*w->term[1][74] + w->fh[28]*w->term[1][88] +
             w->fh[29]*w->term[1][117];
-    w->term[0][48] = w->fh[23]*w->term[1][20] + w->fh[24]*w->term[1][34] + w->fh[25]*w->term[1][48]
-            + w->fh[26]*w->term[1][62] + w->fh[27]*w->term[1][76] + w->fh[28]*w->term[1][90] +
+    w->S[47] = w->fh[23]*w->term[1][19] + w->fh[24]*w->term[1][33] + w->fh[25]*w->term[1][47] +
+            w->fh[26]*w->term[1][61] + w->fh[27]*w->term[1][75] + w->fh[28]*w->term[1][89] +
             w->fh[29]*w->term[1][118];
-    w->term[0][49] = w->fh[23]*w->term[1][21] + w->fh[24]*w->term[1][35] + w->fh[25]*w->term[1][49]
-            + w->fh[26]*w->term[1][63] + w->fh[27]*w->term[1][77] + w->fh[28]*w->term[1][91] +
+    w->S[48] = w->fh[23]*w->term[1][20] + w->fh[24]*w->term[1][34] + w->fh[25]*w->term[1][48] +
+            w->fh[26]*w->term[1][62] + w->fh[27]*w->term[1][76] + w->fh[28]*w->term[1][90] +
             w->fh[29]*w->term[1][119];
-    w->term[0][50] = w->fh[23]*w->term[1][22] + w->fh[24]*w->term[1][36] + w->fh[25]*w->term[1][50]
-            + w->fh[26]*w->term[1][64] + w->fh[27]*w->term[1][78] + w->fh[28]*w->term[1][92] +
+    w->S[49] = w->fh[23]*w->term[1][21] + w->fh[24]*w->term[1][35] + w->fh[25]*w->term[1][49] +
+            w->fh[26]*w->term[1][63] + w->fh[27]*w->term[1][77] + w->fh[28]*w->term[1][91] +
             w->fh[29]*w->term[1][120];
-    w->term[0][51] = w->fh[23]*w->term[1][23] + w->fh[24]*w->term[1][37] + w->fh[25]*w->term[1][51]
-            + w->fh[26]*w->term[1][65] + w->fh[27]*w->term[1][79] + w->fh[28]*w->term[1][93] +
+    w->S[50] = w->fh[23]*w->term[1][22] + w->fh[24]*w->term[1][36] + w->fh[25]*w->term[1][50] +
+            w->fh[26]*w->term[1][64] + w->fh[27]*w->term[1][78] + w->fh[28]*w->term[1][92] +
             w->fh[29]*w->term[1][121];
-    w->term[0][52] = w->fh[23]*w->term[1][24] + w->fh[24]*w->term[1][38] + w->fh[25]*w->term[1][52]
-            + w->fh[26]*w->term[1][66] + w->fh[27]*w->term[1][80] + w->fh[28]*w->term[1][94] +
+    w->S[51] = w->fh[23]*w->term[1][23] + w->fh[24]*w->term[1][37] + w->fh[25]*w->term[1][51] +
+            w->fh[26]*w->term[1][65] + w->fh[27]*w->term[1][79] + w->fh[28]*w->term[1][93] +
             w->fh[29]*w->term[1][122];
-    w->term[0][53] = w->fh[23]*w->term[1][25] + w->fh[24]*w->term[1][39] + w->fh[25]*w->term[1][53]
-            + w->fh[26]*w->term[1][67] + w->fh[27]*w->term[1][81] + w->fh[28]*w->term[1][95] +
+    w->S[52] = w->fh[23]*w->term[1][24] + w->fh[24]*w->term[1][38] + w->fh[25]*w->term[1][52] +
+            w->fh[26]*w->term[1][66] + w->fh[27]*w->term[1][80] + w->fh[28]*w->term[1][94] +
             w->fh[29]*w->term[1][123];
-    w->term[0][54] = w->fh[23]*w->term[1][26] + w->fh[24]*w->term[1][40] + w->fh[25]*w->term[1][54]
-            + w->fh[26]*w->term[1][68] + w->fh[27]*w->term[1][82] + w->fh[28]*w->term[1][96] +
-            w->fh[29]*w->term[1][124];
-    w->term[0][55] = w->fh[23]*w->term[1][27] + w->fh[24]*w->term[1][41] + w->fh[25]*w->term[1][55]
-            + w->fh[26]*w->term[1][69] + w->fh[27]*w->term[1][83] + w->fh[28]*w->term[1][97] +
-            w->fh[29]*w->term[1][125];
-    w->term[0][56] = w->fh[33]*w->term[1][0] + w->fh[34]*w->term[1][28] + w->fh[35]*w->term[1][42] +
+    w->S[53] = w->fh[23]*w->term[1][25] + w->fh[24]*w->term[1][39] + w->fh[25]*w->term[1][53] +
+            w->fh[26]*w->term[1][67] + w->fh[27]*w->term[1][81] + w->fh[28]*w->term[1][95] +
+            w->fh[29]*w->term[1][124] + w->fh[30]*c_in;
+    w->S[54] = w->fh[23]*w->term[1][26] + w->fh[24]*w->term[1][40] + w->fh[25]*w->term[1][54] +
+            w->fh[26]*w->term[1][68] + w->fh[27]*w->term[1][82] + w->fh[28]*w->term[1][96] +
+            w->fh[29]*w->term[1][125] + w->fh[31]*c_in;
+    w->S[55] = w->fh[23]*w->term[1][27] + w->fh[24]*w->term[1][41] + w->fh[25]*w->term[1][55] +
+            w->fh[26]*w->term[1][69] + w->fh[27]*w->term[1][83] + w->fh[28]*w->term[1][97] +
+            w->fh[29]*w->term[1][126] + w->fh[32]*c_in;
+    w->S[56] = w->fh[33]*w->term[1][0] + w->fh[34]*w->term[1][28] + w->fh[35]*w->term[1][42] +
             w->fh[36]*w->term[1][56] + w->fh[37]*w->term[1][70] + w->fh[38]*w->term[1][84] +
-            w->fh[39]*w->term[1][112];
-    w->term[0][57] = w->fh[33]*w->term[1][1] + w->fh[34]*w->term[1][29] + w->fh[35]*w->term[1][43] +
-            w->fh[36]*w->term[1][57] + w->fh[37]*w->term[1][71] + w->fh[38]*w->term[1][85] +
             w->fh[39]*w->term[1][113];
-    w->term[0][58] = w->fh[33]*w->term[1][2] + w->fh[34]*w->term[1][30] + w->fh[35]*w->term[1][44] +
-            w->fh[36]*w->term[1][58] + w->fh[37]*w->term[1][72] + w->fh[38]*w->term[1][86] +
+    w->S[57] = w->fh[33]*w->term[1][1] + w->fh[34]*w->term[1][29] + w->fh[35]*w->term[1][43] +
+            w->fh[36]*w->term[1][57] + w->fh[37]*w->term[1][71] + w->fh[38]*w->term[1][85] +
             w->fh[39]*w->term[1][114];
-    w->term[0][59] = w->fh[33]*w->term[1][3] + w->fh[34]*w->term[1][31] + w->fh[35]*w->term[1][45] +
-            w->fh[36]*w->term[1][59] + w->fh[37]*w->term[1][73] + w->fh[38]*w->term[1][87] +
+    w->S[58] = w->fh[33]*w->term[1][2] + w->fh[34]*w->term[1][30] + w->fh[35]*w->term[1][44] +
+            w->fh[36]*w->term[1][58] + w->fh[37]*w->term[1][72] + w->fh[38]*w->term[1][86] +
             w->fh[39]*w->term[1][115];
-    w->term[0][60] = w->fh[33]*w->term[1][4] + w->fh[34]*w->term[1][32] + w->fh[35]*w->term[1][46] +
-            w->fh[36]*w->term[1][60] + w->fh[37]*w->term[1][74] + w->fh[38]*w->term[1][88] +
+    w->S[59] = w->fh[33]*w->term[1][3] + w->fh[34]*w->term[1][31] + w->fh[35]*w->term[1][45] +
+            w->fh[36]*w->term[1][59] + w->fh[37]*w->term[1][73] + w->fh[38]*w->term[1][87] +
             w->fh[39]*w->term[1][116];
-    w->term[0][61] = w->fh[33]*w->term[1][5] + w->fh[34]*w->term[1][33] + w->fh[35]*w->term[1][47] +
-            w->fh[36]*w->term[1][61] + w->fh[37]*w->term[1][75] + w->fh[38]*w->term[1][89] +
+    w->S[60] = c_out + w->fh[33]*w->term[1][4] + w->fh[34]*w->term[1][32] + w->fh[35]*w->term[1][46]
+            + w->fh[36]*w->term[1][60] + w->fh[37]*w->term[1][74] + w->fh[38]*w->term[1][88] +
             w->fh[39]*w->term[1][117];
-    w->term[0][62] = w->fh[33]*w->term[1][6] + w->fh[34]*w->term[1][34] + w->fh[35]*w->term[1][48] +
-            w->fh[36]*w->term[1][62] + w->fh[37]*w->term[1][76] + w->fh[38]*w->term[1][90] +
+    w->S[61] = w->fh[33]*w->term[1][5] + w->fh[34]*w->term[1][33] + w->fh[35]*w->term[1][47] +
+            w->fh[36]*w->term[1][61] + w->fh[37]*w->term[1][75] + w->fh[38]*w->term[1][89] +
             w->fh[39]*w->term[1][118];
-    w->term[0][63] = w->fh[33]*w->term[1][7] + w->fh[34]*w->term[1][35] + w->fh[35]*w->term[1][49] +
-            w->fh[36]*w->term[1][63] + w->fh[37]*w->term[1][77] + w->fh[38]*w->term[1][91] +
+    w->S[62] = w->fh[33]*w->term[1][6] + w->fh[34]*w->term[1][34] + w->fh[35]*w->term[1][48] +
+            w->fh[36]*w->term[1][62] + w->fh[37]*w->term[1][76] + w->fh[38]*w->term[1][90] +
             w->fh[39]*w->term[1][119];
-    w->term[0][64] = w->fh[33]*w->term[1][8] + w->fh[34]*w->term[1][36] + w->fh[35]*w->term[1][50] +
-            w->fh[36]*w->term[1][64] + w->fh[37]*w->term[1][78] + w->fh[38]*w->term[1][92] +
+    w->S[63] = w->fh[33]*w->term[1][7] + w->fh[34]*w->term[1][35] + w->fh[35]*w->term[1][49] +
+            w->fh[36]*w->term[1][63] + w->fh[37]*w->term[1][77] + w->fh[38]*w->term[1][91] +
             w->fh[39]*w->term[1][120];
-    w->term[0][65] = w->fh[33]*w->term[1][9] + w->fh[34]*w->term[1][37] + w->fh[35]*w->term[1][51] +
-            w->fh[36]*w->term[1][65] + w->fh[37]*w->term[1][79] + w->fh[38]*w->term[1][93] +
+    w->S[64] = w->fh[33]*w->term[1][8] + w->fh[34]*w->term[1][36] + w->fh[35]*w->term[1][50] +
+            w->fh[36]*w->term[1][64] + w->fh[37]*w->term[1][78] + w->fh[38]*w->term[1][92] +
             w->fh[39]*w->term[1][121];
-    w->term[0][66] = w->fh[33]*w->term[1][10] + w->fh[34]*w->term[1][38] + w->fh[35]*w->term[1][52]
-            + w->fh[36]*w->term[1][66] + w->fh[37]*w->term[1][80] + w->fh[38]*w->term[1][94] +
+    w->S[65] = w->fh[33]*w->term[1][9] + w->fh[34]*w->term[1][37] + w->fh[35]*w->term[1][51] +
+            w->fh[36]*w->term[1][65] + w->fh[37]*w->term[1][79] + w->fh[38]*w->term[1][93] +
             w->fh[39]*w->term[1][122];
-    w->term[0][67] = w->fh[33]*w->term[1][11] + w->fh[34]*w->term[1][39] + w->fh[35]*w->term[1][53]
-            + w->fh[36]*w->term[1][67] + w->fh[37]*w->term[1][81] + w->fh[38]*w->term[1][95] +
+    w->S[66] = w->fh[33]*w->term[1][10] + w->fh[34]*w->term[1][38] + w->fh[35]*w->term[1][52] +
+            w->fh[36]*w->term[1][66] + w->fh[37]*w->term[1][80] + w->fh[38]*w->term[1][94] +
             w->fh[39]*w->term[1][123];
-    w->term[0][68] = w->fh[33]*w->term[1][12] + w->fh[34]*w->term[1][40] + w->fh[35]*w->term[1][54]
-            + w->fh[36]*w->term[1][68] + w->fh[37]*w->term[1][82] + w->fh[38]*w->term[1][96] +
-            w->fh[39]*w->term[1][124];
-    w->term[0][69] = w->fh[33]*w->term[1][13] + w->fh[34]*w->term[1][41] + w->fh[35]*w->term[1][55]
-            + w->fh[36]*w->term[1][69] + w->fh[37]*w->term[1][83] + w->fh[38]*w->term[1][97] +
-            w->fh[39]*w->term[1][125];
-    w->term[0][70] = w->fh[43]*w->term[1][0] + w->fh[44]*w->term[1][14] + w->fh[45]*w->term[1][42] +
-            w->fh[46]*w->term[1][56] + w->fh[47]*w->term[1][84] + w->fh[48]*w->term[1][112];
-    w->term[0][71] = w->fh[43]*w->term[1][1] + w->fh[44]*w->term[1][15] + w->fh[45]*w->term[1][43] +
-            w->fh[46]*w->term[1][57] + w->fh[47]*w->term[1][85] + w->fh[48]*w->term[1][113];
-    w->term[0][72] = w->fh[43]*w->term[1][2] + w->fh[44]*w->term[1][16] + w->fh[45]*w->term[1][44] +
-            w->fh[46]*w->term[1][58] + w->fh[47]*w->term[1][86] + w->fh[48]*w->term[1][114];
-    w->term[0][73] = w->fh[43]*w->term[1][3] + w->fh[44]*w->term[1][17] + w->fh[45]*w->term[1][45] +
-            w->fh[46]*w->term[1][59] + w->fh[47]*w->term[1][87] + w->fh[48]*w->term[1][115];
-    w->term[0][74] = w->fh[43]*w->term[1][4] + w->fh[44]*w->term[1][18] + w->fh[45]*w->term[1][46] +
-            w->fh[46]*w->term[1][60] + w->fh[47]*w->term[1][88] + w->fh[48]*w->term[1][116];
-    w->term[0][75] = w->fh[43]*w->term[1][5] + w->fh[44]*w->term[1][19] + w->fh[45]*w->term[1][47] +
-            w->fh[46]*w->term[1][61] + w->fh[47]*w->term[1][89] + w->fh[48]*w->term[1][117];
-    w->term[0][76] = w->fh[43]*w->term[1][6] + w->fh[44]*w->term[1][20] + w->fh[45]*w->term[1][48] +
-            w->fh[46]*w->term[1][62] + w->fh[47]*w->term[1][90] + w->fh[48]*w->term[1][118];
-    w->term[0][77] = w->fh[43]*w->term[1][7] + w->fh[44]*w->term[1][21] + w->fh[45]*w->term[1][49] +
-            w->fh[46]*w->term[1][63] + w->fh[47]*w->term[1][91] + w->fh[48]*w->term[1][119];
-    w->term[0][78] = w->fh[43]*w->term[1][8] + w->fh[44]*w->term[1][22] + w->fh[45]*w->term[1][50] +
-            w->fh[46]*w->term[1][64] + w->fh[47]*w->term[1][92] + w->fh[48]*w->term[1][120];
-    w->term[0][79] = w->fh[43]*w->term[1][9] + w->fh[44]*w->term[1][23] + w->fh[45]*w->term[1][51] +
-            w->fh[46]*w->term[1][65] + w->fh[47]*w->term[1][93] + w->fh[48]*w->term[1][121];
-    w->term[0][80] = w->fh[43]*w->term[1][10] + w->fh[44]*w->term[1][24] + w->fh[45]*w->term[1][52]
-            + w->fh[46]*w->term[1][66] + w->fh[47]*w->term[1][94] + w->fh[48]*w->term[1][122];
-    w->term[0][81] = w->fh[43]*w->term[1][11] + w->fh[44]*w->term[1][25] + w->fh[45]*w->term[1][53]
-            + w->fh[46]*w->term[1][67] + w->fh[47]*w->term[1][95] + w->fh[48]*w->term[1][123];
-    w->term[0][82] = w->fh[43]*w->term[1][12] + w->fh[44]*w->term[1][26] + w->fh[45]*w->term[1][54]
-            + w->fh[46]*w->term[1][68] + w->fh[47]*w->term[1][96] + w->fh[48]*w->term[1][124];
-    w->term[0][83] = w->fh[43]*w->term[1][13] + w->fh[44]*w->term[1][27] + w->fh[45]*w->term[1][55]
-            + w->fh[46]*w->term[1][69] + w->fh[47]*w->term[1][97] + w->fh[48]*w->term[1][125];
-    w->term[0][84] = w->fh[52]*w->term[1][56] + w->fh[53]*w->term[1][112];
-    w->term[0][85] = w->fh[52]*w->term[1][57] + w->fh[53]*w->term[1][113];
-    w->term[0][86] = w->fh[52]*w->term[1][58] + w->fh[53]*w->term[1][114];
-    w->term[0][87] = w->fh[52]*w->term[1][59] + w->fh[53]*w->term[1][115];
-    w->term[0][88] = w->fh[52]*w->term[1][60] + w->fh[53]*w->term[1][116];
-    w->term[0][89] = w->fh[52]*w->term[1][61] + w->fh[53]*w->term[1][117];
-    w->term[0][90] = w->fh[52]*w->term[1][62] + w->fh[53]*w->term[1][118];
-    w->term[0][91] = w->fh[52]*w->term[1][63] + w->fh[53]*w->term[1][119];
-    w->term[0][92] = w->fh[52]*w->term[1][64] + w->fh[53]*w->term[1][120];
-    w->term[0][93] = w->fh[52]*w->term[1][65] + w->fh[53]*w->term[1][121];
-    w->term[0][94] = w->fh[52]*w->term[1][66] + w->fh[53]*w->term[1][122];
-    w->term[0][95] = w->fh[52]*w->term[1][67] + w->fh[53]*w->term[1][123];
-    w->term[0][96] = w->fh[52]*w->term[1][68] + w->fh[53]*w->term[1][124];
-    w->term[0][97] = w->fh[52]*w->term[1][69] + w->fh[53]*w->term[1][125];
-    w->term[0][98] = w->fh[54]*w->term[1][42] + w->fh[55]*w->term[1][84] +
-            w->fh[56]*w->term[1][112];
-    w->term[0][99] = w->fh[54]*w->term[1][43] + w->fh[55]*w->term[1][85] +
-            w->fh[56]*w->term[1][113];
-    w->term[0][100] = w->fh[54]*w->term[1][44] + w->fh[55]*w->term[1][86] +
-            w->fh[56]*w->term[1][114];
-    w->term[0][101] = w->fh[54]*w->term[1][45] + w->fh[55]*w->term[1][87] +
-            w->fh[56]*w->term[1][115];
-    w->term[0][102] = w->fh[54]*w->term[1][46] + w->fh[55]*w->term[1][88] +
-            w->fh[56]*w->term[1][116];
-    w->term[0][103] = w->fh[54]*w->term[1][47] + w->fh[55]*w->term[1][89] +
-            w->fh[56]*w->term[1][117];
-    w->term[0][104] = w->fh[54]*w->term[1][48] + w->fh[55]*w->term[1][90] +
-            w->fh[56]*w->term[1][118];
-    w->term[0][105] = w->fh[54]*w->term[1][49] + w->fh[55]*w->term[1][91] +
-            w->fh[56]*w->term[1][119];
-    w->term[0][106] = w->fh[54]*w->term[1][50] + w->fh[55]*w->term[1][92] +
-            w->fh[56]*w->term[1][120];
-    w->term[0][107] = w->fh[54]*w->term[1][51] + w->fh[55]*w->term[1][93] +
-            w->fh[56]*w->term[1][121];
-    w->term[0][108] = w->fh[54]*w->term[1][52] + w->fh[55]*w->term[1][94] +
-            w->fh[56]*w->term[1][122];
-    w->term[0][109] = w->fh[54]*w->term[1][53] + w->fh[55]*w->term[1][95] +
-            w->fh[56]*w->term[1][123];
-    w->term[0][110] = w->fh[54]*w->term[1][54] + w->fh[55]*w->term[1][96] +
-            w->fh[56]*w->term[1][124];
-    w->term[0][111] = w->fh[54]*w->term[1][55] + w->fh[55]*w->term[1][97] +
-            w->fh[56]*w->term[1][125];
-    w->term[0][112] = w->fh[57]*w->term[1][70];
-    w->term[0][113] = w->fh[57]*w->term[1][71];
-    w->term[0][114] = w->fh[57]*w->term[1][72];
-    w->term[0][115] = w->fh[57]*w->term[1][73];
-    w->term[0][116] = w->fh[57]*w->term[1][74];
-    w->term[0][117] = w->fh[57]*w->term[1][75];
-    w->term[0][118] = w->fh[57]*w->term[1][76];
-    w->term[0][119] = w->fh[57]*w->term[1][77];
-    w->term[0][120] = w->fh[57]*w->term[1][78];
-    w->term[0][121] = w->fh[57]*w->term[1][79];
-    w->term[0][122] = w->fh[57]*w->term[1][80];
-    w->term[0][123] = w->fh[57]*w->term[1][81];
-    w->term[0][124] = w->fh[57]*w->term[1][82];
-    w->term[0][125] = w->fh[57]*w->term[1][83];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[0][0]*ck;
-    w->S[0] = w->S[0] + w->term[0][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[0][1]*ck;
-    w->S[1] = w->S[1] + w->term[0][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[0][2]*ck;
-    w->S[2] = w->S[2] + w->term[0][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[0][3]*ck;
-    w->S[3] = w->S[3] + w->term[0][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[0][4]*ck;
-    w->S[4] = w->S[4] + w->term[0][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[0][5]*ck;
-    w->S[5] = w->S[5] + w->term[0][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[0][6]*ck;
-    w->S[6] = w->S[6] + w->term[0][6]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[0][7]*ck;
-    w->S[7] = w->S[7] + w->term[0][7]*cs;
-    t->Phi[0][9] = t->Phi[0][9] + w->term[0][8]*ck;
-    w->S[8] = w->S[8] + w->term[0][8]*cs;
-    t->Phi[0][10] = t->Phi[0][10] + w->term[0][9]*ck;
-    w->S[9] = w->S[9] + w->term[0][9]*cs;
-    t->Phi[0][11] = t->Phi[0][11] + w->term[0][10]*ck;
-    w->S[10] = w->S[10] + w->term[0][10]*cs;
-    t->Phi[0][12] = t->Phi[0][12] + w->term[0][11]*ck;
-    w->S[11] = w->S[11] + w->term[0][11]*cs;
-    t->Phi[0][13] = t->Phi[0][13] + w->term[0][12]*ck;
-    w->S[12] = w->S[12] + w->term[0][12]*cs;
-    t->Phi[0][14] = t->Phi[0][14] + w->term[0][13]*ck;
-    w->S[13] = w->S[13] + w->term[0][13]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[0][14]*ck;
-    w->S[14] = w->S[14] + w->term[0][14]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[0][15]*ck;
-    w->S[15] = w->S[15] + w->term[0][15]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[0][16]*ck;
-    w->S[16] = w->S[16] + w->term[0][16]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[0][17]*ck;
-    w->S[17] = w->S[17] + w->term[0][17]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[0][18]*ck;
-    w->S[18] = w->S[18] + w->term[0][18]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[0][19]*ck;
-    w->S[19] = w->S[19] + w->term[0][19]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[0][20]*ck;
-    w->S[20] = w->S[20] + w->term[0][20]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[0][21]*ck;
-    w->S[21] = w->S[21] + w->term[0][21]*cs;
-    t->Phi[1][9] = t->Phi[1][9] + w->term[0][22]*ck;
-    w->S[22] = w->S[22] + w->term[0][22]*cs;
-    t->Phi[1][10] = t->Phi[1][10] + w->term[0][23]*ck;
-    w->S[23] = w->S[23] + w->term[0][23]*cs;
-    t->Phi[1][11] = t->Phi[1][11] + w->term[0][24]*ck;
-    w->S[24] = w->S[24] + w->term[0][24]*cs;
-    t->Phi[1][12] = t->Phi[1][12] + w->term[0][25]*ck;
-    w->S[25] = w->S[25] + w->term[0][25]*cs;
-    t->Phi[1][13] = t->Phi[1][13] + w->term[0][26]*ck;
-    w->S[26] = w->S[26] + w->term[0][26]*cs;
-    t->Phi[1][14] = t->Phi[1][14] + w->term[0][27]*ck;
-    w->S[27] = w->S[27] + w->term[0][27]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[0][28]*ck;
-    w->S[28] = w->S[28] + w->term[0][28]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[0][29]*ck;
-    w->S[29] = w->S[29] + w->term[0][29]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[0][30]*ck;
-    w->S[30] = w->S[30] + w->term[0][30]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[0][31]*ck;
-    w->S[31] = w->S[31] + w->term[0][31]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[0][32]*ck;
-    w->S[32] = w->S[32] + w->term[0][32]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[0][33]*ck;
-    w->S[33] = w->S[33] + w->term[0][33]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[0][34]*ck;
-    w->S[34] = w->S[34] + w->term[0][34]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[0][35]*ck;
-    w->S[35] = w->S[35] + w->term[0][35]*cs;
-    t->Phi[2][9] = t->Phi[2][9] + w->term[0][36]*ck;
-    w->S[36] = w->S[36] + w->term[0][36]*cs;
-    t->Phi[2][10] = t->Phi[2][10] + w->term[0][37]*ck;
-    w->S[37] = w->S[37] + w->term[0][37]*cs;
-    t->Phi[2][11] = t->Phi[2][11] + w->term[0][38]*ck;
-    w->S[38] = w->S[38] + w->term[0][38]*cs;
-    t->Phi[2][12] = t->Phi[2][12] + w->term[0][39]*ck;
-    w->S[39] = w->S[39] + w->term[0][39]*cs;
-    t->Phi[2][13] = t->Phi[2][13] + w->term[0][40]*ck;
-    w->S[40] = w->S[40] + w->term[0][40]*cs;
-    t->Phi[2][14] = t->Phi[2][14] + w->term[0][41]*ck;
-    w->S[41] = w->S[41] + w->term[0][41]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[0][42]*ck;
-    w->S[42] = w->S[42] + w->term[0][42]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[0][43]*ck;
-    w->S[43] = w->S[43] + w->term[0][43]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[0][44]*ck;
-    w->S[44] = w->S[44] + w->term[0][44]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[0][45]*ck;
-    w->S[45] = w->S[45] + w->term[0][45]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[0][46]*ck;
-    w->S[46] = w->S[46] + w->term[0][46]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[0][47]*ck;
-    w->S[47] = w->S[47] + w->term[0][47]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[0][48]*ck;
-    w->S[48] = w->S[48] + w->term[0][48]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[0][49]*ck;
-    w->S[49] = w->S[49] + w->term[0][49]*cs;
-    t->Phi[3][9] = t->Phi[3][9] + w->term[0][50]*ck;
-    w->S[50] = w->S[50] + w->term[0][50]*cs;
-    t->Phi[3][10] = t->Phi[3][10] + w->term[0][51]*ck;
-    w->S[51] = w->S[51] + w->term[0][51]*cs;
-    t->Phi[3][11] = t->Phi[3][11] + w->term[0][52]*ck;
-    w->S[52] = w->S[52] + w->term[0][52]*cs;
-    t->Phi[3][12] = t->Phi[3][12] + w->term[0][53]*ck;
-    w->S[53] = w->S[53] + w->term[0][53]*cs;
-    t->Phi[3][13] = t->Phi[3][13] + w->term[0][54]*ck;
-    w->S[54] = w->S[54] + w->term[0][54]*cs;
-    t->Phi[3][14] = t->Phi[3][14] + w->term[0][55]*ck;
-    w->S[55] = w->S[55] + w->term[0][55]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[0][56]*ck;
-    w->S[56] = w->S[56] + w->term[0][56]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[0][57]*ck;
-    w->S[57] = w->S[57] + w->term[0][57]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[0][58]*ck;
-    w->S[58] = w->S[58] + w->term[0][58]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[0][59]*ck;
-    w->S[59] = w->S[59] + w->term[0][59]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[0][60]*ck;
-    w->S[60] = w->S[60] + w->term[0][60]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[0][61]*ck;
-    w->S[61] = w->S[61] + w->term[0][61]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[0][62]*ck;
-    w->S[62] = w->S[62] + w->term[0][62]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[0][63]*ck;
-    w->S[63] = w->S[63] + w->term[0][63]*cs;
-    t->Phi[4][9] = t->Phi[4][9] + w->term[0][64]*ck;
-    w->S[64] = w->S[64] + w->term[0][64]*cs;
-    t->Phi[4][10] = t->Phi[4][10] + w->term[0][65]*ck;
-    w->S[65] = w->S[65] + w->term[0][65]*cs;
-    t->Phi[4][11] = t->Phi[4][11] + w->term[0][66]*ck;
-    w->S[66] = w->S[66] + w->term[0][66]*cs;
-    t->Phi[4][12] = t->Phi[4][12] + w->term[0][67]*ck;
-    w->S[67] = w->S[67] + w->term[0][67]*cs;
-    t->Phi[4][13] = t->Phi[4][13] + w->term[0][68]*ck;
-    w->S[68] = w->S[68] + w->term[0][68]*cs;
-    t->Phi[4][14] = t->Phi[4][14] + w->term[0][69]*ck;
-    w->S[69] = w->S[69] + w->term[0][69]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[0][70]*ck;
-    w->S[70] = w->S[70] + w->term[0][70]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[0][71]*ck;
-    w->S[71] = w->S[71] + w->term[0][71]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[0][72]*ck;
-    w->S[72] = w->S[72] + w->term[0][72]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[0][73]*ck;
-    w->S[73] = w->S[73] + w->term[0][73]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[0][74]*ck;
-    w->S[74] = w->S[74] + w->term[0][74]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[0][75]*ck;
-    w->S[75] = w->S[75] + w->term[0][75]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[0][76]*ck;
-    w->S[76] = w->S[76] + w->term[0][76]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[0][77]*ck;
-    w->S[77] = w->S[77] + w->term[0][77]*cs;
-    t->Phi[5][9] = t->Phi[5][9] + w->term[0][78]*ck;
-    w->S[78] = w->S[78] + w->term[0][78]*cs;
-    t->Phi[5][10] = t->Phi[5][10] + w->term[0][79]*ck;
-    w->S[79] = w->S[79] + w->term[0][79]*cs;
-    t->Phi[5][11] = t->Phi[5][11] + w->term[0][80]*ck;
-    w->S[80] = w->S[80] + w->term[0][80]*cs;
-    t->Phi[5][12] = t->Phi[5][12] + w->term[0][81]*ck;
-    w->S[81] = w->S[81] + w->term[0][81]*cs;
-    t->Phi[5][13] = t->Phi[5][13] + w->term[0][82]*ck;
-    w->S[82] = w->S[82] + w->term[0][82]*cs;
-    t->Phi[5][14] = t->Phi[5][14] + w->term[0][83]*ck;
-    w->S[83] = w->S[83] + w->term[0][83]*cs;
-    t->Phi[6][0] = t->Phi[6][0] + w->term[0][84]*ck;
-    w->S[84] = w->S[84] + w->term[0][84]*cs;
-    t->Phi[6][1] = t->Phi[6][1] + w->term[0][85]*ck;
-    w->S[85] = w->S[85] + w->term[0][85]*cs;
-    t->Phi[6][2] = t->Phi[6][2] + w->term[0][86]*ck;
-    w->S[86] = w->S[86] + w->term[0][86]*cs;
-    t->Phi[6][3] = t->Phi[6][3] + w->term[0][87]*ck;
-    w->S[87] = w->S[87] + w->term[0][87]*cs;
-    t->Phi[6][4] = t->Phi[6][4] + w->term[0][88]*ck;
-    w->S[88] = w->S[88] + w->term[0][88]*cs;
-    t->Phi[6][5] = t->Phi[6][5] + w->term[0][89]*ck;
-    w->S[89] = w->S[89] + w->term[0][89]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[0][90]*ck;
-    w->S[90] = w->S[90] + w->term[0][90]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[0][91]*ck;
-    w->S[91] = w->S[91] + w->term[0][91]*cs;
-    t->Phi[6][9] = t->Phi[6][9] + w->term[0][92]*ck;
-    w->S[92] = w->S[92] + w->term[0][92]*cs;
-    t->Phi[6][10] = t->Phi[6][10] + w->term[0][93]*ck;
-    w->S[93] = w->S[93] + w->term[0][93]*cs;
-    t->Phi[6][11] = t->Phi[6][11] + w->term[0][94]*ck;
-    w->S[94] = w->S[94] + w->term[0][94]*cs;
-    t->Phi[6][12] = t->Phi[6][12] + w->term[0][95]*ck;
-    w->S[95] = w->S[95] + w->term[0][95]*cs;
-    t->Phi[6][13] = t->Phi[6][13] + w->term[0][96]*ck;
-    w->S[96] = w->S[96] + w->term[0][96]*cs;
-    t->Phi[6][14] = t->Phi[6][14] + w->term[0][97]*ck;
-    w->S[97] = w->S[97] + w->term[0][97]*cs;
-    t->Phi[7][0] = t->Phi[7][0] + w->term[0][98]*ck;
-    w->S[98] = w->S[98] + w->term[0][98]*cs;
-    t->Phi[7][1] = t->Phi[7][1] + w->term[0][99]*ck;
-    w->S[99] = w->S[99] + w->term[0][99]*cs;
-    t->Phi[7][2] = t->Phi[7][2] + w->term[0][100]*ck;
-    w->S[100] = w->S[100] + w->term[0][100]*cs;
-    t->Phi[7][3] = t->Phi[7][3] + w->term[0][101]*ck;
-    w->S[101] = w->S[101] + w->term[0][101]*cs;
-    t->Phi[7][4] = t->Phi[7][4] + w->term[0][102]*ck;
-    w->S[102] = w->S[102] + w->term[0][102]*cs;
-    t->Phi[7][5] = t->Phi[7][5] + w->term[0][103]*ck;
-    w->S[103] = w->S[103] + w->term[0][103]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[0][104]*ck;
-    w->S[104] = w->S[104] + w->term[0][104]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[0][105]*ck;
-    w->S[106] = w->S[106] + w->term[0][105]*cs;
-    t->Phi[7][9] = t->Phi[7][9] + w->term[0][106]*ck;
-    w->S[107] = w->S[107] + w->term[0][106]*cs;
-    t->Phi[7][10] = t->Phi[7][10] + w->term[0][107]*ck;
-    w->S[108] = w->S[108] + w->term[0][107]*cs;
-    t->Phi[7][11] = t->Phi[7][11] + w->term[0][108]*ck;
-    w->S[109] = w->S[109] + w->term[0][108]*cs;
-    t->Phi[7][12] = t->Phi[7][12] + w->term[0][109]*ck;
-    w->S[110] = w->S[110] + w->term[0][109]*cs;
-    t->Phi[7][13] = t->Phi[7][13] + w->term[0][110]*ck;
-    w->S[111] = w->S[111] + w->term[0][110]*cs;
-    t->Phi[7][14] = t->Phi[7][14] + w->term[0][111]*ck;
-    w->S[112] = w->S[112] + w->term[0][111]*cs;
-    t->Phi[8][0] = t->Phi[8][0] + w->term[0][112]*ck;
-    w->S[113] = w->S[113] + w->term[0][112]*cs;
-    t->Phi[8][1] = t->Phi[8][1] + w->term[0][113]*ck;
-    w->S[114] = w->S[114] + w->term[0][113]*cs;
-    t->Phi[8][2] = t->Phi[8][2] + w->term[0][114]*ck;
-    w->S[115] = w->S[115] + w->term[0][114]*cs;
-    t->Phi[8][3] = t->Phi[8][3] + w->term[0][115]*ck;
-    w->S[116] = w->S[116] + w->term[0][115]*cs;
-    t->Phi[8][4] = t->Phi[8][4] + w->term[0][116]*ck;
-    w->S[117] = w->S[117] + w->term[0][116]*cs;
-    t->Phi[8][5] = t->Phi[8][5] + w->term[0][117]*ck;
-    w->S[118] = w->S[118] + w->term[0][117]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[0][118]*ck;
-    w->S[119] = w->S[119] + w->term[0][118]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[0][119]*ck;
-    w->S[120] = w->S[120] + w->term[0][119]*cs;
-    t->Phi[8][9] = t->Phi[8][9] + w->term[0][120]*ck;
-    w->S[121] = w->S[121] + w->term[0][120]*cs;
-    t->Phi[8][10] = t->Phi[8][10] + w->term[0][121]*ck;
-    w->S[122] = w->S[122] + w->term[0][121]*cs;
-    t->Phi[8][11] = t->Phi[8][11] + w->term[0][122]*ck;
-    w->S[123] = w->S[123] + w->term[0][122]*cs;
-    t->Phi[8][12] = t->Phi[8][12] + w->term[0][123]*ck;
-    w->S[124] = w->S[124] + w->term[0][123]*cs;
-    t->Phi[8][13] = t->Phi[8][13] + w->term[0][124]*ck;
-    w->S[125] = w->S[125] + w->term[0][124]*cs;
-    t->Phi[8][14] = t->Phi[8][14] + w->term[0][125]*ck;
-    w->S[126] = w->S[126] + w->term[0][125]*cs;
+    w->S[67] = w->fh[33]*w->term[1][11] + w->fh[34]*w->term[1][39] + w->fh[35]*w->term[1][53] +
+            w->fh[36]*w->term[1][67] + w->fh[37]*w->term[1][81] + w->fh[38]*w->term[1][95] +
+            w->fh[39]*w->term[1][124] + w->fh[40]*c_in;
+    w->S[68] = w->fh[33]*w->term[1][12] + w->fh[34]*w->term[1][40] + w->fh[35]*w->term[1][54] +
+            w->fh[36]*w->term[1][68] + w->fh[37]*w->term[1][82] + w->fh[38]*w->term[1][96] +
+            w->fh[39]*w->term[1][125] + w->fh[41]*c_in;
+    w->S[69] = w->fh[33]*w->term[1][13] + w->fh[34]*w->term[1][41] + w->fh[35]*w->term[1][55] +
+            w->fh[36]*w->term[1][69] + w->fh[37]*w->term[1][83] + w->fh[38]*w->term[1][97] +
+            w->fh[39]*w->term[1][126] + w->fh[42]*c_in;
+    w->S[70] = w->fh[43]*w->term[1][0] + w->fh[44]*w->term[1][14] + w->fh[45]*w->term[1][42] +
+            w->fh[46]*w->term[1][56] + w->fh[47]*w->term[1][84] + w->fh[48]*w->term[1][113];
+    w->S[71] = w->fh[43]*w->term[1][1] + w->fh[44]*w->term[1][15] + w->fh[45]*w->term[1][43] +
+            w->fh[46]*w->term[1][57] + w->fh[47]*w->term[1][85] + w->fh[48]*w->term[1][114];
+    w->S[72] = w->fh[43]*w->term[1][2] + w->fh[44]*w->term[1][16] + w->fh[45]*w->term[1][44] +
+            w->fh[46]*w->term[1][58] + w->fh[47]*w->term[1][86] + w->fh[48]*w->term[1][115];
+    w->S[73] = w->fh[43]*w->term[1][3] + w->fh[44]*w->term[1][17] + w->fh[45]*w->term[1][45] +
+            w->fh[46]*w->term[1][59] + w->fh[47]*w->term[1][87] + w->fh[48]*w->term[1][116];
+    w->S[74] = w->fh[43]*w->term[1][4] + w->fh[44]*w->term[1][18] + w->fh[45]*w->term[1][46] +
+            w->fh[46]*w->term[1][60] + w->fh[47]*w->term[1][88] + w->fh[48]*w->term[1][117];
+    w->S[75] = c_out + w->fh[43]*w->term[1][5] + w->fh[44]*w->term[1][19] + w->fh[45]*w->term[1][47]
+            + w->fh[46]*w->term[1][61] + w->fh[47]*w->term[1][89] + w->fh[48]*w->term[1][118];
+    w->S[76] = w->fh[43]*w->term[1][6] + w->fh[44]*w->term[1][20] + w->fh[45]*w->term[1][48] +
+            w->fh[46]*w->term[1][62] + w->fh[47]*w->term[1][90] + w->fh[48]*w->term[1][119];
+    w->S[77] = w->fh[43]*w->term[1][7] + w->fh[44]*w->term[1][21] + w->fh[45]*w->term[1][49] +
+            w->fh[46]*w->term[1][63] + w->fh[47]*w->term[1][91] + w->fh[48]*w->term[1][120];
+    w->S[78] = w->fh[43]*w->term[1][8] + w->fh[44]*w->term[1][22] + w->fh[45]*w->term[1][50] +
+            w->fh[46]*w->term[1][64] + w->fh[47]*w->term[1][92] + w->fh[48]*w->term[1][121];
+    w->S[79] = w->fh[43]*w->term[1][9] + w->fh[44]*w->term[1][23] + w->fh[45]*w->term[1][51] +
+            w->fh[46]*w->term[1][65] + w->fh[47]*w->term[1][93] + w->fh[48]*w->term[1][122];
+    w->S[80] = w->fh[43]*w->term[1][10] + w->fh[44]*w->term[1][24] + w->fh[45]*w->term[1][52] +
+            w->fh[46]*w->term[1][66] + w->fh[47]*w->term[1][94] + w->fh[48]*w->term[1][123];
+    w->S[81] = w->fh[43]*w->term[1][11] + w->fh[44]*w->term[1][25] + w->fh[45]*w->term[1][53] +
+            w->fh[46]*w->term[1][67] + w->fh[47]*w->term[1][95] + w->fh[48]*w->term[1][124] +
+            w->fh[49]*c_in;
+    w->S[82] = w->fh[43]*w->term[1][12] + w->fh[44]*w->term[1][26] + w->fh[45]*w->term[1][54] +
+            w->fh[46]*w->term[1][68] + w->fh[47]*w->term[1][96] + w->fh[48]*w->term[1][125] +
+            w->fh[50]*c_in;
+    w->S[83] = w->fh[43]*w->term[1][13] + w->fh[44]*w->term[1][27] + w->fh[45]*w->term[1][55] +
+            w->fh[46]*w->term[1][69] + w->fh[47]*w->term[1][97] + w->fh[48]*w->term[1][126] +
+            w->fh[51]*c_in;
+    w->S[84] = w->fh[52]*w->term[1][56] + w->fh[53]*w->term[1][113];
+    w->S[85] = w->fh[52]*w->term[1][57] + w->fh[53]*w->term[1][114];
+    w->S[86] = w->fh[52]*w->term[1][58] + w->fh[53]*w->term[1][115];
+    w->S[87] = w->fh[52]*w->term[1][59] + w->fh[53]*w->term[1][116];
+    w->S[88] = w->fh[52]*w->term[1][60] + w->fh[53]*w->term[1][117];
+    w->S[89] = w->fh[52]*w->term[1][61] + w->fh[53]*w->term[1][118];
+    w->S[90] = c_out + w->fh[52]*w->term[1][62] + w->fh[53]*w->term[1][119];
+    w->S[91] = w->fh[52]*w->term[1][63] + w->fh[53]*w->term[1][120];
+    w->S[92] = w->fh[52]*w->term[1][64] + w->fh[53]*w->term[1][121];
+    w->S[93] = w->fh[52]*w->term[1][65] + w->fh[53]*w->term[1][122];
+    w->S[94] = w->fh[52]*w->term[1][66] + w->fh[53]*w->term[1][123];
+    w->S[95] = w->fh[52]*w->term[1][67] + w->fh[53]*w->term[1][124];
+    w->S[96] = w->fh[52]*w->term[1][68] + w->fh[53]*w->term[1][125];
+    w->S[97] = w->fh[52]*w->term[1][69] + w->fh[53]*w->term[1][126];
+    w->S[98] = w->fh[54]*w->term[1][42] + w->fh[55]*w->term[1][84] + w->fh[56]*w->term[1][113];
+    w->S[99] = w->fh[54]*w->term[1][43] + w->fh[55]*w->term[1][85] + w->fh[56]*w->term[1][114];
+    w->S[100] = w->fh[54]*w->term[1][44] + w->fh[55]*w->term[1][86] + w->fh[56]*w->term[1][115];
+    w->S[101] = w->fh[54]*w->term[1][45] + w->fh[55]*w->term[1][87] + w->fh[56]*w->term[1][116];
+    w->S[102] = w->fh[54]*w->term[1][46] + w->fh[55]*w->term[1][88] + w->fh[56]*w->term[1][117];
+    w->S[103] = w->fh[54]*w->term[1][47] + w->fh[55]*w->term[1][89] + w->fh[56]*w->term[1][118];
+    w->S[104] = w->fh[54]*w->term[1][48] + w->fh[55]*w->term[1][90] + w->fh[56]*w->term[1][119];
+    w->S[105] = c_out;
+    w->S[106] = w->fh[54]*w->term[1][49] + w->fh[55]*w->term[1][91] + w->fh[56]*w->term[1][120];
+    w->S[107] = w->fh[54]*w->term[1][50] + w->fh[55]*w->term[1][92] + w->fh[56]*w->term[1][121];
+    w->S[108] = w->fh[54]*w->term[1][51] + w->fh[55]*w->term[1][93] + w->fh[56]*w->term[1][122];
+    w->S[109] = w->fh[54]*w->term[1][52] + w->fh[55]*w->term[1][94] + w->fh[56]*w->term[1][123];
+    w->S[110] = w->fh[54]*w->term[1][53] + w->fh[55]*w->term[1][95] + w->fh[56]*w->term[1][124];
+    w->S[111] = w->fh[54]*w->term[1][54] + w->fh[55]*w->term[1][96] + w->fh[56]*w->term[1][125];
+    w->S[112] = w->fh[54]*w->term[1][55] + w->fh[55]*w->term[1][97] + w->fh[56]*w->term[1][126];
+    w->S[113] = w->fh[57]*w->term[1][70];
+    w->S[114] = w->fh[57]*w->term[1][71];
+    w->S[115] = w->fh[57]*w->term[1][72];
+    w->S[116] = w->fh[57]*w->term[1][73];
+    w->S[117] = w->fh[57]*w->term[1][74];
+    w->S[118] = w->fh[57]*w->term[1][75];
+    w->S[119] = w->fh[57]*w->term[1][76];
+    w->S[120] = c_out + w->fh[57]*w->term[1][77];
+    w->S[121] = w->fh[57]*w->term[1][78];
+    w->S[122] = w->fh[57]*w->term[1][79];
+    w->S[123] = w->fh[57]*w->term[1][80];
+    w->S[124] = w->fh[57]*w->term[1][81];
+    w->S[125] = w->fh[57]*w->term[1][82];
+    w->S[126] = w->fh[57]*w->term[1][83];
 }
 
-INS_GPS15_TWIN_BLOCK void taylor_order_9(ins_gps15_twin_transition *restrict t,
+INS_GPS15_TWIN_BLOCK void horner_saturated_into_term(ins_gps15_twin_discretize_scratch *restrict w,
+        const ins_gps15_twin_scalar c_out, const ins_gps15_twin_scalar c_in)
+{
+    w->term[1][0] = c_out + w->fh[0]*w->S[14] + w->fh[1]*w->S[28] + w->fh[2]*w->S[56] +
+            w->fh[3]*w->S[113];
+    w->term[1][1] = w->fh[0]*w->S[15] + w->fh[1]*w->S[29] + w->fh[2]*w->S[57] + w->fh[3]*w->S[114];
+    w->term[1][2] = w->fh[0]*w->S[16] + w->fh[1]*w->S[30] + w->fh[2]*w->S[58] + w->fh[3]*w->S[115];
+    w->term[1][3] = w->fh[0]*w->S[17] + w->fh[1]*w->S[31] + w->fh[2]*w->S[59] + w->fh[3]*w->S[116];
+    w->term[1][4] = w->fh[0]*w->S[18] + w->fh[1]*w->S[32] + w->fh[2]*w->S[60] + w->fh[3]*w->S[117];
+    w->term[1][5] = w->fh[0]*w->S[19] + w->fh[1]*w->S[33] + w->fh[2]*w->S[61] + w->fh[3]*w->S[118];
+    w->term[1][6] = w->fh[0]*w->S[20] + w->fh[1]*w->S[34] + w->fh[2]*w->S[62] + w->fh[3]*w->S[119];
+    w->term[1][7] = w->fh[0]*w->S[21] + w->fh[1]*w->S[35] + w->fh[2]*w->S[63] + w->fh[3]*w->S[120];
+    w->term[1][8] = w->fh[0]*w->S[22] + w->fh[1]*w->S[36] + w->fh[2]*w->S[64] + w->fh[3]*w->S[121] +
+            w->fh[4]*c_in;
+    w->term[1][9] = w->fh[0]*w->S[23] + w->fh[1]*w->S[37] + w->fh[2]*w->S[65] + w->fh[3]*w->S[122] +
+            w->fh[5]*c_in;
+    w->term[1][10] = w->fh[0]*w->S[24] + w->fh[1]*w->S[38] + w->fh[2]*w->S[66] + w->fh[3]*w->S[123]
+            + w->fh[6]*c_in;
+    w->term[1][11] = w->fh[0]*w->S[25] + w->fh[1]*w->S[39] + w->fh[2]*w->S[67] + w->fh[3]*w->S[124];
+    w->term[1][12] = w->fh[0]*w->S[26] + w->fh[1]*w->S[40] + w->fh[2]*w->S[68] + w->fh[3]*w->S[125];
+    w->term[1][13] = w->fh[0]*w->S[27] + w->fh[1]*w->S[41] + w->fh[2]*w->S[69] + w->fh[3]*w->S[126];
+    w->term[1][14] = w->fh[7]*w->S[0] + w->fh[8]*w->S[28] + w->fh[9]*w->S[42] + w->fh[10]*w->S[84] +
+            w->fh[11]*w->S[113];
+    w->term[1][15] = c_out + w->fh[7]*w->S[1] + w->fh[8]*w->S[29] + w->fh[9]*w->S[43] +
+            w->fh[10]*w->S[85] + w->fh[11]*w->S[114];
+    w->term[1][16] = w->fh[7]*w->S[2] + w->fh[8]*w->S[30] + w->fh[9]*w->S[44] + w->fh[10]*w->S[86] +
+            w->fh[11]*w->S[115];
+    w->term[1][17] = w->fh[7]*w->S[3] + w->fh[8]*w->S[31] + w->fh[9]*w->S[45] + w->fh[10]*w->S[87] +
+            w->fh[11]*w->S[116];
+    w->term[1][18] = w->fh[7]*w->S[4] + w->fh[8]*w->S[32] + w->fh[9]*w->S[46] + w->fh[10]*w->S[88] +
+            w->fh[11]*w->S[117];
+    w->term[1][19] = w->fh[7]*w->S[5] + w->fh[8]*w->S[33] + w->fh[9]*w->S[47] + w->fh[10]*w->S[89] +
+            w->fh[11]*w->S[118];
+    w->term[1][20] = w->fh[7]*w->S[6] + w->fh[8]*w->S[34] + w->fh[9]*w->S[48] + w->fh[10]*w->S[90] +
+            w->fh[11]*w->S[119];
+    w->term[1][21] = w->fh[7]*w->S[7] + w->fh[8]*w->S[35] + w->fh[9]*w->S[49] + w->fh[10]*w->S[91] +
+            w->fh[11]*w->S[120];
+    w->term[1][22] = w->fh[7]*w->S[8] + w->fh[8]*w->S[36] + w->fh[9]*w->S[50] + w->fh[10]*w->S[92] +
+            w->fh[11]*w->S[121] + w->fh[12]*c_in;
+    w->term[1][23] = w->fh[7]*w->S[9] + w->fh[8]*w->S[37] + w->fh[9]*w->S[51] + w->fh[10]*w->S[93] +
+            w->fh[11]*w->S[122] + w->fh[13]*c_in;
+    w->term[1][24] = w->fh[7]*w->S[10] + w->fh[8]*w->S[38] + w->fh[9]*w->S[52] + w->fh[10]*w->S[94]
+            + w->fh[11]*w->S[123] + w->fh[14]*c_in;
+    w->term[1][25] = w->fh[7]*w->S[11] + w->fh[8]*w->S[39] + w->fh[9]*w->S[53] + w->fh[10]*w->S[95]
+            + w->fh[11]*w->S[124];
+    w->term[1][26] = w->fh[7]*w->S[12] + w->fh[8]*w->S[40] + w->fh[9]*w->S[54] + w->fh[10]*w->S[96]
+            + w->fh[11]*w->S[125];
+    w->term[1][27] = w->fh[7]*w->S[13] + w->fh[8]*w->S[41] + w->fh[9]*w->S[55] + w->fh[10]*w->S[97]
+            + w->fh[11]*w->S[126];
+    w->term[1][28] = w->fh[15]*w->S[0] + w->fh[16]*w->S[14] + w->fh[17]*w->S[42] +
+            w->fh[18]*w->S[84] + w->fh[19]*w->S[113];
+    w->term[1][29] = w->fh[15]*w->S[1] + w->fh[16]*w->S[15] + w->fh[17]*w->S[43] +
+            w->fh[18]*w->S[85] + w->fh[19]*w->S[114];
+    w->term[1][30] = c_out + w->fh[15]*w->S[2] + w->fh[16]*w->S[16] + w->fh[17]*w->S[44] +
+            w->fh[18]*w->S[86] + w->fh[19]*w->S[115];
+    w->term[1][31] = w->fh[15]*w->S[3] + w->fh[16]*w->S[17] + w->fh[17]*w->S[45] +
+            w->fh[18]*w->S[87] + w->fh[19]*w->S[116];
+    w->term[1][32] = w->fh[15]*w->S[4] + w->fh[16]*w->S[18] + w->fh[17]*w->S[46] +
+            w->fh[18]*w->S[88] + w->fh[19]*w->S[117];
+    w->term[1][33] = w->fh[15]*w->S[5] + w->fh[16]*w->S[19] + w->fh[17]*w->S[47] +
+            w->fh[18]*w->S[89] + w->fh[19]*w->S[118];
+    w->term[1][34] = w->fh[15]*w->S[6] + w->fh[16]*w->S[20] + w->fh[17]*w->S[48] +
+            w->fh[18]*w->S[90] + w->fh[19]*w->S[119];
+    w->term[1][35] = w->fh[15]*w->S[7] + w->fh[16]*w->S[21] + w->fh[17]*w->S[49] +
+            w->fh[18]*w->S[91] + w->fh[19]*w->S[120];
+    w->term[1][36] = w->fh[15]*w->S[8] + w->fh[16]*w->S[22] + w->fh[17]*w->S[50] +
+            w->fh[18]*w->S[92] + w->fh[19]*w->S[121] + w->fh[20]*c_in;
+    w->term[1][37] = w->fh[15]*w->S[9] + w->fh[16]*w->S[23] + w->fh[17]*w->S[51] +
+            w->fh[18]*w->S[93] + w->fh[19]*w->S[122] + w->fh[21]*c_in;
+    w->term[1][38] = w->fh[15]*w->S[10] + w->fh[16]*w->S[24] + w->fh[17]*w->S[52] +
+            w->fh[18]*w->S[94] + w->fh[19]*w->S[123] + w->fh[22]*c_in;
+    w->term[1][39] = w->fh[15]*w->S[11] + w->fh[16]*w->S[25] + w->fh[17]*w->S[53] +
+            w->fh[18]*w->S[95] + w->fh[19]*w->S[124];
+    w->term[1][40] = w->fh[15]*w->S[12] + w->fh[16]*w->S[26] + w->fh[17]*w->S[54] +
+            w->fh[18]*w->S[96] + w->fh[19]*w->S[125];
+    w->term[1][41] = w->fh[15]*w->S[13] + w->fh[16]*w->S[27] + w->fh[17]*w->S[55] +
+            w->fh[18]*w->S[97] + w->fh[19]*w->S[126];
+    w->term[1][42] = w->fh[23]*w->S[14] + w->fh[24]*w->S[28] + w->fh[25]*w->S[42] +
+            w->fh[26]*w->S[56] + w->fh[27]*w->S[70] + w->fh[28]*w->S[84] + w->fh[29]*w->S[113];
+    w->term[1][43] = w->fh[23]*w->S[15] + w->fh[24]*w->S[29] + w->fh[25]*w->S[43] +
+            w->fh[26]*w->S[57] + w->fh[27]*w->S[71] + w->fh[28]*w->S[85] + w->fh[29]*w->S[114];
+    w->term[1][44] = w->fh[23]*w->S[16] + w->fh[24]*w->S[30] + w->fh[25]*w->S[44] +
+            w->fh[26]*w->S[58] + w->fh[27]*w->S[72] + w->fh[28]*w->S[86] + w->fh[29]*w->S[115];
+    w->term[1][45] = c_out + w->fh[23]*w->S[17] + w->fh[24]*w->S[31] + w->fh[25]*w->S[45] +
+            w->fh[26]*w->S[59] + w->fh[27]*w->S[73] + w->fh[28]*w->S[87] + w->fh[29]*w->S[116];
+    w->term[1][46] = w->fh[23]*w->S[18] + w->fh[24]*w->S[32] + w->fh[25]*w->S[46] +
+            w->fh[26]*w->S[60] + w->fh[27]*w->S[74] + w->fh[28]*w->S[88] + w->fh[29]*w->S[117];
+    w->term[1][47] = w->fh[23]*w->S[19] + w->fh[24]*w->S[33] + w->fh[25]*w->S[47] +
+            w->fh[26]*w->S[61] + w->fh[27]*w->S[75] + w->fh[28]*w->S[89] + w->fh[29]*w->S[118];
+    w->term[1][48] = w->fh[23]*w->S[20] + w->fh[24]*w->S[34] + w->fh[25]*w->S[48] +
+            w->fh[26]*w->S[62] + w->fh[27]*w->S[76] + w->fh[28]*w->S[90] + w->fh[29]*w->S[119];
+    w->term[1][49] = w->fh[23]*w->S[21] + w->fh[24]*w->S[35] + w->fh[25]*w->S[49] +
+            w->fh[26]*w->S[63] + w->fh[27]*w->S[77] + w->fh[28]*w->S[91] + w->fh[29]*w->S[120];
+    w->term[1][50] = w->fh[23]*w->S[22] + w->fh[24]*w->S[36] + w->fh[25]*w->S[50] +
+            w->fh[26]*w->S[64] + w->fh[27]*w->S[78] + w->fh[28]*w->S[92] + w->fh[29]*w->S[121];
+    w->term[1][51] = w->fh[23]*w->S[23] + w->fh[24]*w->S[37] + w->fh[25]*w->S[51] +
+            w->fh[26]*w->S[65] + w->fh[27]*w->S[79] + w->fh[28]*w->S[93] + w->fh[29]*w->S[122];
+    w->term[1][52] = w->fh[23]*w->S[24] + w->fh[24]*w->S[38] + w->fh[25]*w->S[52] +
+            w->fh[26]*w->S[66] + w->fh[27]*w->S[80] + w->fh[28]*w->S[94] + w->fh[29]*w->S[123];
+    w->term[1][53] = w->fh[23]*w->S[25] + w->fh[24]*w->S[39] + w->fh[25]*w->S[53] +
+            w->fh[26]*w->S[67] + w->fh[27]*w->S[81] + w->fh[28]*w->S[95] + w->fh[29]*w->S[124] +
+            w->fh[30]*c_in;
+    w->term[1][54] = w->fh[23]*w->S[26] + w->fh[24]*w->S[40] + w->fh[25]*w->S[54] +
+            w->fh[26]*w->S[68] + w->fh[27]*w->S[82] + w->fh[28]*w->S[96] + w->fh[29]*w->S[125] +
+            w->fh[31]*c_in;
+    w->term[1][55] = w->fh[23]*w->S[27] + w->fh[24]*w->S[41] + w->fh[25]*w->S[55] +
+            w->fh[26]*w->S[69] + w->fh[27]*w->S[83] + w->fh[28]*w->S[97] + w->fh[29]*w->S[126] +
+            w->fh[32]*c_in;
+    w->term[1][56] = w->fh[33]*w->S[0] + w->fh[34]*w->S[28] + w->fh[35]*w->S[42] +
+            w->fh[36]*w->S[56] + w->fh[37]*w->S[70] + w->fh[38]*w->S[84] + w->fh[39]*w->S[113];
+    w->term[1][57] = w->fh[33]*w->S[1] + w->fh[34]*w->S[29] + w->fh[35]*w->S[43] +
+            w->fh[36]*w->S[57] + w->fh[37]*w->S[71] + w->fh[38]*w->S[85] + w->fh[39]*w->S[114];
+    w->term[1][58] = w->fh[33]*w->S[2] + w->fh[34]*w->S[30] + w->fh[35]*w->S[44] +
+            w->fh[36]*w->S[58] + w->fh[37]*w->S[72] + w->fh[38]*w->S[86] + w->fh[39]*w->S[115];
+    w->term[1][59] = w->fh[33]*w->S[3] + w->fh[34]*w->S[31] + w->fh[35]*w->S[45] +
+            w->fh[36]*w->S[59] + w->fh[37]*w->S[73] + w->fh[38]*w->S[87] + w->fh[39]*w->S[116];
+    w->term[1][60] = c_out + w->fh[33]*w->S[4] + w->fh[34]*w->S[32] + w->fh[35]*w->S[46] +
+            w->fh[36]*w->S[60] + w->fh[37]*w->S[74] + w->fh[38]*w->S[88] + w->fh[39]*w->S[117];
+    w->term[1][61] = w->fh[33]*w->S[5] + w->fh[34]*w->S[33] + w->fh[35]*w->S[47] +
+            w->fh[36]*w->S[61] + w->fh[37]*w->S[75] + w->fh[38]*w->S[89] + w->fh[39]*w->S[118];
+    w->term[1][62] = w->fh[33]*w->S[6] + w->fh[34]*w->S[34] + w->fh[35]*w->S[48] +
+            w->fh[36]*w->S[62] + w->fh[37]*w->S[76] + w->fh[38]*w->S[90] + w->fh[39]*w->S[119];
+    w->term[1][63] = w->fh[33]*w->S[7] + w->fh[34]*w->S[35] + w->fh[35]*w->S[49] +
+            w->fh[36]*w->S[63] + w->fh[37]*w->S[77] + w->fh[38]*w->S[91] + w->fh[39]*w->S[120];
+    w->term[1][64] = w->fh[33]*w->S[8] + w->fh[34]*w->S[36] + w->fh[35]*w->S[50] +
+            w->fh[36]*w->S[64] + w->fh[37]*w->S[78] + w->fh[38]*w->S[92] + w->fh[39]*w->S[121];
+    w->term[1][65] = w->fh[33]*w->S[9] + w->fh[34]*w->S[37] + w->fh[35]*w->S[51] +
+            w->fh[36]*w->S[65] + w->fh[37]*w->S[79] + w->fh[38]*w->S[93] + w->fh[39]*w->S[122];
+    w->term[1][66] = w->fh[33]*w->S[10] + w->fh[34]*w->S[38] + w->fh[35]*w->S[52] +
+            w->fh[36]*w->S[66] + w->fh[37]*w->S[80] + w->fh[38]*w->S[94] + w->fh[39]*w->S[123];
+    w->term[1][67] = w->fh[33]*w->S[11] + w->fh[34]*w->S[39] + w->fh[35]*w->S[53] +
+            w->fh[36]*w->S[67] + w->fh[37]*w->S[81] + w->fh[38]*w->S[95] + w->fh[39]*w->S[124] +
+            w->fh[40]*c_in;
+    w->term[1][68] = w->fh[33]*w->S[12] + w->fh[34]*w->S[40] + w->fh[35]*w->S[54] +
+            w->fh[36]*w->S[68] + w->fh[37]*w->S[82] + w->fh[38]*w->S[96] + w->fh[39]*w->S[125] +
+            w->fh[41]*c_in;
+    w->term[1][69] = w->fh[33]*w->S[13] + w->fh[34]*w->S[41] + w->fh[35]*w->S[55] +
+            w->fh[36]*w->S[69] + w->fh[37]*w->S[83] + w->fh[38]*w->S[97] + w->fh[39]*w->S[126] +
+            w->fh[42]*c_in;
+    w->term[1][70] = w->fh[43]*w->S[0] + w->fh[44]*w->S[14] + w->fh[45]*w->S[42] +
+            w->fh[46]*w->S[56] + w->fh[47]*w->S[84] + w->fh[48]*w->S[113];
+    w->term[1][71] = w->fh[43]*w->S[1] + w->fh[44]*w->S[15] + w->fh[45]*w->S[43] +
+            w->fh[46]*w->S[57] + w->fh[47]*w->S[85] + w->fh[48]*w->S[114];
+    w->term[1][72] = w->fh[43]*w->S[2] + w->fh[44]*w->S[16] + w->fh[45]*w->S[44] +
+            w->fh[46]*w->S[58] + w->fh[47]*w->S[86] + w->fh[48]*w->S[115];
+    w->term[1][73] = w->fh[43]*w->S[3] + w->fh[44]*w->S[17] + w->fh[45]*w->S[45] +
+            w->fh[46]*w->S[59] + w->fh[47]*w->S[87] + w->fh[48]*w->S[116];
+    w->term[1][74] = w->fh[43]*w->S[4] + w->fh[44]*w->S[18] + w->fh[45]*w->S[46] +
+            w->fh[46]*w->S[60] + w->fh[47]*w->S[88] + w->fh[48]*w->S[117];
+    w->term[1][75] = c_out + w->fh[43]*w->S[5] + w->fh[44]*w->S[19] + w->fh[45]*w->S[47] +
+            w->fh[46]*w->S[61] + w->fh[47]*w->S[89] + w->fh[48]*w->S[118];
+    w->term[1][76] = w->fh[43]*w->S[6] + w->fh[44]*w->S[20] + w->fh[45]*w->S[48] +
+            w->fh[46]*w->S[62] + w->fh[47]*w->S[90] + w->fh[48]*w->S[119];
+    w->term[1][77] = w->fh[43]*w->S[7] + w->fh[44]*w->S[21] + w->fh[45]*w->S[49] +
+            w->fh[46]*w->S[63] + w->fh[47]*w->S[91] + w->fh[48]*w->S[120];
+    w->term[1][78] = w->fh[43]*w->S[8] + w->fh[44]*w->S[22] + w->fh[45]*w->S[50] +
+            w->fh[46]*w->S[64] + w->fh[47]*w->S[92] + w->fh[48]*w->S[121];
+    w->term[1][79] = w->fh[43]*w->S[9] + w->fh[44]*w->S[23] + w->fh[45]*w->S[51] +
+            w->fh[46]*w->S[65] + w->fh[47]*w->S[93] + w->fh[48]*w->S[122];
+    w->term[1][80] = w->fh[43]*w->S[10] + w->fh[44]*w->S[24] + w->fh[45]*w->S[52] +
+            w->fh[46]*w->S[66] + w->fh[47]*w->S[94] + w->fh[48]*w->S[123];
+    w->term[1][81] = w->fh[43]*w->S[11] + w->fh[44]*w->S[25] + w->fh[45]*w->S[53] +
+            w->fh[46]*w->S[67] + w->fh[47]*w->S[95] + w->fh[48]*w->S[124] + w->fh[49]*c_in;
+    w->term[1][82] = w->fh[43]*w->S[12] + w->fh[44]*w->S[26] + w->fh[45]*w->S[54] +
+            w->fh[46]*w->S[68] + w->fh[47]*w->S[96] + w->fh[48]*w->S[125] + w->fh[50]*c_in;
+    w->term[1][83] = w->fh[43]*w->S[13] + w->fh[44]*w->S[27] + w->fh[45]*w->S[55] +
+            w->fh[46]*w->S[69] + w->fh[47]*w->S[97] + w->fh[48]*w->S[126] + w->fh[51]*c_in;
+    w->term[1][84] = w->fh[52]*w->S[56] + w->fh[53]*w->S[113];
+    w->term[1][85] = w->fh[52]*w->S[57] + w->fh[53]*w->S[114];
+    w->term[1][86] = w->fh[52]*w->S[58] + w->fh[53]*w->S[115];
+    w->term[1][87] = w->fh[52]*w->S[59] + w->fh[53]*w->S[116];
+    w->term[1][88] = w->fh[52]*w->S[60] + w->fh[53]*w->S[117];
+    w->term[1][89] = w->fh[52]*w->S[61] + w->fh[53]*w->S[118];
+    w->term[1][90] = c_out + w->fh[52]*w->S[62] + w->fh[53]*w->S[119];
+    w->term[1][91] = w->fh[52]*w->S[63] + w->fh[53]*w->S[120];
+    w->term[1][92] = w->fh[52]*w->S[64] + w->fh[53]*w->S[121];
+    w->term[1][93] = w->fh[52]*w->S[65] + w->fh[53]*w->S[122];
+    w->term[1][94] = w->fh[52]*w->S[66] + w->fh[53]*w->S[123];
+    w->term[1][95] = w->fh[52]*w->S[67] + w->fh[53]*w->S[124];
+    w->term[1][96] = w->fh[52]*w->S[68] + w->fh[53]*w->S[125];
+    w->term[1][97] = w->fh[52]*w->S[69] + w->fh[53]*w->S[126];
+    w->term[1][98] = w->fh[54]*w->S[42] + w->fh[55]*w->S[84] + w->fh[56]*w->S[113];
+    w->term[1][99] = w->fh[54]*w->S[43] + w->fh[55]*w->S[85] + w->fh[56]*w->S[114];
+    w->term[1][100] = w->fh[54]*w->S[44] + w->fh[55]*w->S[86] + w->fh[56]*w->S[115];
+    w->term[1][101] = w->fh[54]*w->S[45] + w->fh[55]*w->S[87] + w->fh[56]*w->S[116];
+    w->term[1][102] = w->fh[54]*w->S[46] + w->fh[55]*w->S[88] + w->fh[56]*w->S[117];
+    w->term[1][103] = w->fh[54]*w->S[47] + w->fh[55]*w->S[89] + w->fh[56]*w->S[118];
+    w->term[1][104] = w->fh[54]*w->S[48] + w->fh[55]*w->S[90] + w->fh[56]*w->S[119];
+    w->term[1][105] = c_out;
+    w->term[1][106] = w->fh[54]*w->S[49] + w->fh[55]*w->S[91] + w->fh[56]*w->S[120];
+    w->term[1][107] = w->fh[54]*w->S[50] + w->fh[55]*w->S[92] + w->fh[56]*w->S[121];
+    w->term[1][108] = w->fh[54]*w->S[51] + w->fh[55]*w->S[93] + w->fh[56]*w->S[122];
+    w->term[1][109] = w->fh[54]*w->S[52] + w->fh[55]*w->S[94] + w->fh[56]*w->S[123];
+    w->term[1][110] = w->fh[54]*w->S[53] + w->fh[55]*w->S[95] + w->fh[56]*w->S[124];
+    w->term[1][111] = w->fh[54]*w->S[54] + w->fh[55]*w->S[96] + w->fh[56]*w->S[125];
+    w->term[1][112] = w->fh[54]*w->S[55] + w->fh[55]*w->S[97] + w->fh[56]*w->S[126];
+    w->term[1][113] = w->fh[57]*w->S[70];
+    w->term[1][114] = w->fh[57]*w->S[71];
+    w->term[1][115] = w->fh[57]*w->S[72];
+    w->term[1][116] = w->fh[57]*w->S[73];
+    w->term[1][117] = w->fh[57]*w->S[74];
+    w->term[1][118] = w->fh[57]*w->S[75];
+    w->term[1][119] = w->fh[57]*w->S[76];
+    w->term[1][120] = c_out + w->fh[57]*w->S[77];
+    w->term[1][121] = w->fh[57]*w->S[78];
+    w->term[1][122] = w->fh[57]*w->S[79];
+    w->term[1][123] = w->fh[57]*w->S[80];
+    w->term[1][124] = w->fh[57]*w->S[81];
+    w->term[1][125] = w->fh[57]*w->S[82];
+    w->term[1][126] = w->fh[57]*w->S[83];
+}
+
+INS_GPS15_TWIN_BLOCK void horner_transition(ins_gps15_twin_transition *restrict t, const
         ins_gps15_twin_discretize_scratch *restrict w)
 {
-    const ins_gps15_twin_scalar ck = 1.0 / 362880.0;
-    const ins_gps15_twin_scalar cs = 1.0 / 3628800.0;
-    w->term[1][0] = w->fh[0]*w->term[0][14] + w->fh[1]*w->term[0][28] + w->fh[2]*w->term[0][56] +
-            w->fh[3]*w->term[0][112];
-    w->term[1][1] = w->fh[0]*w->term[0][15] + w->fh[1]*w->term[0][29] + w->fh[2]*w->term[0][57] +
-            w->fh[3]*w->term[0][113];
-    w->term[1][2] = w->fh[0]*w->term[0][16] + w->fh[1]*w->term[0][30] + w->fh[2]*w->term[0][58] +
-            w->fh[3]*w->term[0][114];
-    w->term[1][3] = w->fh[0]*w->term[0][17] + w->fh[1]*w->term[0][31] + w->fh[2]*w->term[0][59] +
-            w->fh[3]*w->term[0][115];
-    w->term[1][4] = w->fh[0]*w->term[0][18] + w->fh[1]*w->term[0][32] + w->fh[2]*w->term[0][60] +
-            w->fh[3]*w->term[0][116];
-    w->term[1][5] = w->fh[0]*w->term[0][19] + w->fh[1]*w->term[0][33] + w->fh[2]*w->term[0][61] +
-            w->fh[3]*w->term[0][117];
-    w->term[1][6] = w->fh[0]*w->term[0][20] + w->fh[1]*w->term[0][34] + w->fh[2]*w->term[0][62] +
-            w->fh[3]*w->term[0][118];
-    w->term[1][7] = w->fh[0]*w->term[0][21] + w->fh[1]*w->term[0][35] + w->fh[2]*w->term[0][63] +
-            w->fh[3]*w->term[0][119];
-    w->term[1][8] = w->fh[0]*w->term[0][22] + w->fh[1]*w->term[0][36] + w->fh[2]*w->term[0][64] +
-            w->fh[3]*w->term[0][120];
-    w->term[1][9] = w->fh[0]*w->term[0][23] + w->fh[1]*w->term[0][37] + w->fh[2]*w->term[0][65] +
-            w->fh[3]*w->term[0][121];
-    w->term[1][10] = w->fh[0]*w->term[0][24] + w->fh[1]*w->term[0][38] + w->fh[2]*w->term[0][66] +
-            w->fh[3]*w->term[0][122];
-    w->term[1][11] = w->fh[0]*w->term[0][25] + w->fh[1]*w->term[0][39] + w->fh[2]*w->term[0][67] +
-            w->fh[3]*w->term[0][123];
-    w->term[1][12] = w->fh[0]*w->term[0][26] + w->fh[1]*w->term[0][40] + w->fh[2]*w->term[0][68] +
-            w->fh[3]*w->term[0][124];
-    w->term[1][13] = w->fh[0]*w->term[0][27] + w->fh[1]*w->term[0][41] + w->fh[2]*w->term[0][69] +
-            w->fh[3]*w->term[0][125];
-    w->term[1][14] = w->fh[7]*w->term[0][0] + w->fh[8]*w->term[0][28] + w->fh[9]*w->term[0][42] +
-            w->fh[10]*w->term[0][84] + w->fh[11]*w->term[0][112];
-    w->term[1][15] = w->fh[7]*w->term[0][1] + w->fh[8]*w->term[0][29] + w->fh[9]*w->term[0][43] +
-            w->fh[10]*w->term[0][85] + w->fh[11]*w->term[0][113];
-    w->term[1][16] = w->fh[7]*w->term[0][2] + w->fh[8]*w->term[0][30] + w->fh[9]*w->term[0][44] +
-            w->fh[10]*w->term[0][86] + w->fh[11]*w->term[0][114];
-    w->term[1][17] = w->fh[7]*w->term[0][3] + w->fh[8]*w->term[0][31] + w->fh[9]*w->term[0][45] +
-            w->fh[10]*w->term[0][87] + w->fh[11]*w->term[0][115];
-    w->term[1][18] = w->fh[7]*w->term[0][4] + w->fh[8]*w->term[0][32] + w->fh[9]*w->term[0][46] +
-            w->fh[10]*w->term[0][88] + w->fh[11]*w->term[0][116];
-    w->term[1][19] = w->fh[7]*w->term[0][5] + w->fh[8]*w->term[0][33] + w->fh[9]*w->term[0][47] +
-            w->fh[10]*w->term[0][89] + w->fh[11]*w->term[0][117];
-    w->term[1][20] = w->fh[7]*w->term[0][6] + w->fh[8]*w->term[0][34] + w->fh[9]*w->term[0][48] +
-            w->fh[10]*w->term[0][90] + w->fh[11]*w->term[0][118];
-    w->term[1][21] = w->fh[7]*w->term[0][7] + w->fh[8]*w->term[0][35] + w->fh[9]*w->term[0][49] +
-            w->fh[10]*w->term[0][91] + w->fh[11]*w->term[0][119];
-    w->term[1][22] = w->fh[7]*w->term[0][8] + w->fh[8]*w->term[0][36] + w->fh[9]*w->term[0][50] +
-            w->fh[10]*w->term[0][92] + w->fh[11]*w->term[0][120];
-    w->term[1][23] = w->fh[7]*w->term[0][9] + w->fh[8]*w->term[0][37] + w->fh[9]*w->term[0][51] +
-            w->fh[10]*w->term[0][93] + w->fh[11]*w->term[0][121];
-    w->term[1][24] = w->fh[7]*w->term[0][10] + w->fh[8]*w->term[0][38] + w->fh[9]*w->term[0][52] +
-            w->fh[10]*w->term[0][94] + w->fh[11]*w->term[0][122];
-    w->term[1][25] = w->fh[7]*w->term[0][11] + w->fh[8]*w->term[0][39] + w->fh[9]*w->term[0][53] +
-            w->fh[10]*w->term[0][95] + w->fh[11]*w->term[0][123];
-    w->term[1][26] = w->fh[7]*w->term[0][12] + w->fh[8]*w->term[0][40] + w->fh[9]*w->term[0][54] +
-            w->fh[10]*w->term[0][96] + w->fh[11]*w->term[0][124];
-    w->term[1][27] = w->fh[7]*w->term[0][13] + w->fh[8]*w->term[0][41] + w->fh[9]*w->term[0][55] +
-            w->fh[10]*w->term[0][97] + w->fh[11]*w->term[0][125];
-    w->term[1][28] = w->fh[15]*w->term[0][0] + w->fh[16]*w->term[0][14] + w->fh[17]*w->term[0][42] +
-            w->fh[18]*w->term[0][84] + w->fh[19]*w->term[0][112];
-    w->term[1][29] = w->fh[15]*w->term[0][1] + w->fh[16]*w->term[0][15] + w->fh[17]*w->term[0][43] +
-            w->fh[18]*w->term[0][85] + w->fh[19]*w->term[0][113];
-    w->term[1][30] = w->fh[15]*w->term[0][2] + w->fh[16]*w->term[0][16] + w->fh[17]*w->term[0][44] +
-            w->fh[18]*w->term[0][86] + w->fh[19]*w->term[0][114];
-    w->term[1][31] = w->fh[15]*w->term[0][3] + w->fh[16]*w->term[0][17] + w->fh[17]*w->term[0][45] +
-            w->fh[18]*w->term[0][87] + w->fh[19]*w->term[0][115];
-    w->term[1][32] = w->fh[15]*w->term[0][4] + w->fh[16]*w->term[0][18] + w->fh[17]*w->term[0][46] +
-            w->fh[18]*w->term[0][88] + w->fh[19]*w->term[0][116];
-    w->term[1][33] = w->fh[15]*w->term[0][5] + w->fh[16]*w->term[0][19] + w->fh[17]*w->term[0][47] +
-            w->fh[18]*w->term[0][89] + w->fh[19]*w->term[0][117];
-    w->term[1][34] = w->fh[15]*w->term[0][6] + w->fh[16]*w->term[0][20] + w->fh[17]*w->term[0][48] +
-            w->fh[18]*w->term[0][90] + w->fh[19]*w->term[0][118];
-    w->term[1][35] = w->fh[15]*w->term[0][7] + w->fh[16]*w->term[0][21] + w->fh[17]*w->term[0][49] +
-            w->fh[18]*w->term[0][91] + w->fh[19]*w->term[0][119];
-    w->term[1][36] = w->fh[15]*w->term[0][8] + w->fh[16]*w->term[0][22] + w->fh[17]*w->term[0][50] +
-            w->fh[18]*w->term[0][92] + w->fh[19]*w->term[0][120];
-    w->term[1][37] = w->fh[15]*w->term[0][9] + w->fh[16]*w->term[0][23] + w->fh[17]*w->term[0][51] +
-            w->fh[18]*w->term[0][93] + w->fh[19]*w->term[0][121];
-    w->term[1][38] = w->fh[15]*w->term[0][10] + w->fh[16]*w->term[0][24] + w->fh[17]*w->term[0][52]
-            + w->fh[18]*w->term[0][94] + w->fh[19]*w->term[0][122];
-    w->term[1][39] = w->fh[15]*w->term[0][11] + w->fh[16]*w->term[0][25] + w->fh[17]*w->term[0][53]
-            + w->fh[18]*w->term[0][95] + w->fh[19]*w->term[0][123];
-    w->term[1][40] = w->fh[15]*w->term[0][12] + w->fh[16]*w->term[0][26] + w->fh[17]*w->term[0][54]
-            + w->fh[18]*w->term[0][96] + w->fh[19]*w->term[0][124];
-    w->term[1][41] = w->fh[15]*w->term[0][13] + w->fh[16]*w->term[0][27] + w->fh[17]*w->term[0][55]
-            + w->fh[18]*w->term[0][97] + w->fh[19]*w->term[0][125];
-    w->term[1][42] = w->fh[23]*w->term[0][14] + w->fh[24]*w->term[0][28] + w->fh[25]*w->term[0][42]
-            + w->fh[26]*w->term[0][56] + w->fh[27]*w->term[0][70] + w->fh[28]*w->term[0][84] +
-            w->fh[29]*w->term[0][112];
-    w->term[1][43] = w->fh[23]*w->term[0][15] + w->fh[24]*w->term[0][29] + w->fh[25]*w->term[0][43]
-            + w->fh[26]*w->term[0][57] + w->fh[27]*w->term[0][71] + w->fh[28]*w->term[0][85] +
-            w->fh[29]*w->term[0][113];
-    w->term[1][44] = w->fh[23]*w->term[0][16] + w->fh[24]*w->term[0][30] + w->fh[25]*w->term[0][44]
-            + w->fh[26]*w->term[0][58] + w->fh[27]*w->term[0][72] + w->fh[28]*w->term[0][86] +
-            w->fh[29]*w->term[0][114];
-    w->term[1][45] = w->fh[23]*w->term[0][17] + w->fh[24]*w->term[0][31] + w->fh[25]*w->term[0][45]
-            + w->fh[26]*w->term[0][59] + w->fh[27]*w->term[0][73] + w->fh[28]*w->term[0][87] +
-            w->fh[29]*w->term[0][115];
-    w->term[1][46] = w->fh[23]*w->term[0][18] + w->fh[24]*w->term[0][32] + w->fh[25]*w->term[0][46]
-            + w->fh[26]*w->term[0][60] + w->fh[27]*w->term[0][74] + w->fh[28]*w->term[0][88] +
-            w->fh[29]*w->term[0][116];
-    w->term[1][47] = w->fh[23]*w->term[0][19] + w->fh[24]*w->term[0][33] + w->fh[25]*w->term[0][47]
-            + w->fh[26]*w->term[0][61] + w->fh[27]*w->term[0][75] + w->fh[28]*w->term[0][89] +
-            w->fh[29]*w->term[0][117];
-    w->term[1][48] = w->fh[23]*w->term[0][20] + w->fh[24]*w->term[0][34] + w->fh[25]*w->term[0][48]
-            + w->fh[26]*w->term[0][62] + w->fh[27]*w->term[0][76] + w->fh[28]*w->term[0][90] +
-            w->fh[29]*w->term[0][118];
-    w->term[1][49] = w->fh[23]*w->term[0][21] + w->fh[24]*w->term[0][35] + w->fh[25]*w->term[0][49]
-            + w->fh[26]*w->term[0][63] + w->fh[27]*w->term[0][77] + w->fh[28]*w->term[0][91] +
-            w->fh[29]*w->term[0][119];
-    w->term[1][50] = w->fh[23]*w->term[0][22] + w->fh[24]*w->term[0][36] + w->fh[25]*w->term[0][50]
-            + w->fh[26]*w->term[0][64] + w->fh[27]*w->term[0][78] + w->fh[28]*w->term[0][92] +
-            w->fh[29]*w->term[0][120];
-    w->term[1][51] = w->fh[23]*w->term[0][23] + w->fh[24]*w->term[0][37] + w->fh[25]*w->term[0][51]
-            + w->fh[26]*w->term[0][65] + w->fh[27]*w->term[0][79] + w->fh[28]*w->term[0][93] +
-            w->fh[29]*w->term[0][121];
-    w->term[1][52] = w->fh[23]*w->term[0][24] + w->fh[24]*w->term[0][38] + w->fh[25]*w->term[0][52]
-            + w->fh[26]*w->term[0][66] + w->fh[27]*w->term[0][80] + w->fh[28]*w->term[0][94] +
-            w->fh[29]*w->term[0][122];
-    w->term[1][53] = w->fh[23]*w->term[0][25] + w->fh[24]*w->term[0][39] + w->fh[25]*w->term[0][53]
-            + w->fh[26]*w->term[0][67] + w->fh[27]*w->term[0][81] + w->fh[28]*w->term[0][95] +
-            w->fh[29]*w->term[0][123];
-    w->term[1][54] = w->fh[23]*w->term[0][26] + w->fh[24]*w->term[0][40] + w->fh[25]*w->term[0][54]
-            + w->fh[26]*w->term[0][68] + w->fh[27]*w->term[0][82] + w->fh[28]*w->term[0][96] +
-            w->fh[29]*w->term[0][124];
-    w->term[1][55] = w->fh[23]*w->term[0][27] + w->fh[24]*w->term[0][41] + w->fh[25]*w->term[0][55]
-            + w->fh[26]*w->term[0][69] + w->fh[27]*w->term[0][83] + w->fh[28]*w->term[0][97] +
-            w->fh[29]*w->term[0][125];
-    w->term[1][56] = w->fh[33]*w->term[0][0] + w->fh[34]*w->term[0][28] + w->fh[35]*w->term[0][42] +
-            w->fh[36]*w->term[0][56] + w->fh[37]*w->term[0][70] + w->fh[38]*w->term[0][84] +
-            w->fh[39]*w->term[0][112];
-    w->term[1][57] = w->fh[33]*w->term[0][1] + w->fh[34]*w->term[0][29] + w->fh[35]*w->term[0][43] +
-            w->fh[36]*w->term[0][57] + w->fh[37]*w->term[0][71] + w->fh[38]*w->term[0][85] +
-            w->fh[39]*w->term[0][113];
-    w->term[1][58] = w->fh[33]*w->term[0][2] + w->fh[34]*w->term[0][30] + w->fh[35]*w->term[0][44] +
-            w->fh[36]*w->term[0][58] + w->fh[37]*w->term[0][72] + w->fh[38]*w->term[0][86] +
-            w->fh[39]*w->term[0][114];
-    w->term[1][59] = w->fh[33]*w->term[0][3] + w->fh[34]*w->term[0][31] + w->fh[35]*w->term[0][45] +
-            w->fh[36]*w->term[0][59] + w->fh[37]*w->term[0][73] + w->fh[38]*w->term[0][87] +
-            w->fh[39]*w->term[0][115];
-    w->term[1][60] = w->fh[33]*w->term[0][4] + w->fh[34]*w->term[0][32] + w->fh[35]*w->term[0][46] +
-            w->fh[36]*w->term[0][60] + w->fh[37]*w->term[0][74] + w->fh[38]*w->term[0][88] +
-            w->fh[39]*w->term[0][116];
-    w->term[1][61] = w->fh[33]*w->term[0][5] + w->fh[34]*w->term[0][33] + w->fh[35]*w->term[0][47] +
-            w->fh[36]*w->term[0][61] + w->fh[37]*w->term[0][75] + w->fh[38]*w->term[0][89] +
-            w->fh[39]*w->term[0][117];
-    w->term[1][62] = w->fh[33]*w->term[0][6] + w->fh[34]*w->term[0][34] + w->fh[35]*w->term[0][48] +
-            w->fh[36]*w->term[0][62] + w->fh[37]*w->term[0][76] + w->fh[38]*w->term[0][90] +
-            w->fh[39]*w->term[0][118];
-    w->term[1][63] = w->fh[33]*w->term[0][7] + w->fh[34]*w->term[0][35] + w->fh[35]*w->term[0][49] +
-            w->fh[36]*w->term[0][63] + w->fh[37]*w->term[0][77] + w->fh[38]*w->term[0][91] +
-            w->fh[39]*w->term[0][119];
-    w->term[1][64] = w->fh[33]*w->term[0][8] + w->fh[34]*w->term[0][36] + w->fh[35]*w->term[0][50] +
-            w->fh[36]*w->term[0][64] + w->fh[37]*w->term[0][78] + w->fh[38]*w->term[0][92] +
-            w->fh[39]*w->term[0][120];
-    w->term[1][65] = w->fh[33]*w->term[0][9] + w->fh[34]*w->term[0][37] + w->fh[35]*w->term[0][51] +
-            w->fh[36]*w->term[0][65] + w->fh[37]*w->term[0][79] + w->fh[38]*w->term[0][93] +
-            w->fh[39]*w->term[0][121];
-    w->term[1][66] = w->fh[33]*w->term[0][10] + w->fh[34]*w->term[0][38] + w->fh[35]*w->term[0][52]
-            + w->fh[36]*w->term[0][66] + w->fh[37]*w->term[0][80] + w->fh[38]*w->term[0][94] +
-            w->fh[39]*w->term[0][122];
-    w->term[1][67] = w->fh[33]*w->term[0][11] + w->fh[34]*w->term[0][39] + w->fh[35]*w->term[0][53]
-            + w->fh[36]*w->term[0][67] + w->fh[37]*w->term[0][81] + w->fh[38]*w->term[0][95] +
-            w->fh[39]*w->term[0][123];
-    w->term[1][68] = w->fh[33]*w->term[0][12] + w->fh[34]*w->term[0][40] + w->fh[35]*w->term[0][54]
-            + w->fh[36]*w->term[0][68] + w->fh[37]*w->term[0][82] + w->fh[38]*w->term[0][96] +
-            w->fh[39]*w->term[0][124];
-    w->term[1][69] = w->fh[33]*w->term[0][13] + w->fh[34]*w->term[0][41] + w->fh[35]*w->term[0][55]
-            + w->fh[36]*w->term[0][69] + w->fh[37]*w->term[0][83] + w->fh[38]*w->term[0][97] +
-            w->fh[39]*w->term[0][125];
-    w->term[1][70] = w->fh[43]*w->term[0][0] + w->fh[44]*w->term[0][14] + w->fh[45]*w->term[0][42] +
-            w->fh[46]*w->term[0][56] + w->fh[47]*w->term[0][84] + w->fh[48]*w->term[0][112];
-    w->term[1][71] = w->fh[43]*w->term[0][1] + w->fh[44]*w->term[0][15] + w->fh[45]*w->term[0][43] +
-            w->fh[46]*w->term[0][57] + w->fh[47]*w->term[0][85] + w->fh[48]*w->term[0][113];
-    w->term[1][72] = w->fh[43]*w->term[0][2] + w->fh[44]*w->term[0][16] + w->fh[45]*w->term[0][44] +
-            w->fh[46]*w->term[0][58] + w->fh[47]*w->term[0][86] + w->fh[48]*w->term[0][114];
-    w->term[1][73] = w->fh[43]*w->term[0][3] + w->fh[44]*w->term[0][17] + w->fh[45]*w->term[0][45] +
-            w->fh[46]*w->term[0][59] + w->fh[47]*w->term[0][87] + w->fh[48]*w->term[0][115];
-    w->term[1][74] = w->fh[43]*w->term[0][4] + w->fh[44]*w->term[0][18] + w->fh[45]*w->term[0][46] +
-            w->fh[46]*w->term[0][60] + w->fh[47]*w->term[0][88] + w->fh[48]*w->term[0][116];
-    w->term[1][75] = w->fh[43]*w->term[0][5] + w->fh[44]*w->term[0][19] + w->fh[45]*w->term[0][47] +
-            w->fh[46]*w->term[0][61] + w->fh[47]*w->term[0][89] + w->fh[48]*w->term[0][117];
-    w->term[1][76] = w->fh[43]*w->term[0][6] + w->fh[44]*w->term[0][20] + w->fh[45]*w->term[0][48] +
-            w->fh[46]*w->term[0][62] + w->fh[47]*w->term[0][90] + w->fh[48]*w->term[0][118];
-    w->term[1][77] = w->fh[43]*w->term[0][7] + w->fh[44]*w->term[0][21] + w->fh[45]*w->term[0][49] +
-            w->fh[46]*w->term[0][63] + w->fh[47]*w->term[0][91] + w->fh[48]*w->term[0][119];
-    w->term[1][78] = w->fh[43]*w->term[0][8] + w->fh[44]*w->term[0][22] + w->fh[45]*w->term[0][50] +
-            w->fh[46]*w->term[0][64] + w->fh[47]*w->term[0][92] + w->fh[48]*w->term[0][120];
-    w->term[1][79] = w->fh[43]*w->term[0][9] + w->fh[44]*w->term[0][23] + w->fh[45]*w->term[0][51] +
-            w->fh[46]*w->term[0][65] + w->fh[47]*w->term[0][93] + w->fh[48]*w->term[0][121];
-    w->term[1][80] = w->fh[43]*w->term[0][10] + w->fh[44]*w->term[0][24] + w->fh[45]*w->term[0][52]
-            + w->fh[46]*w->term[0][66] + w->fh[47]*w->term[0][94] + w->fh[48]*w->term[0][122];
-    w->term[1][81] = w->fh[43]*w->term[0][11] + w->fh[44]*w->term[0][25] + w->fh[45]*w->term[0][53]
-            + w->fh[46]*w->term[0][67] + w->fh[47]*w->term[0][95] + w->fh[48]*w->term[0][123];
-    w->term[1][82] = w->fh[43]*w->term[0][12] + w->fh[44]*w->term[0][26] + w->fh[45]*w->term[0][54]
-            + w->fh[46]*w->term[0][68] + w->fh[47]*w->term[0][96] + w->fh[48]*w->term[0][124];
-    w->term[1][83] = w->fh[43]*w->term[0][13] + w->fh[44]*w->term[0][27] + w->fh[45]*w->term[0][55]
-            + w->fh[46]*w->term[0][69] + w->fh[47]*w->term[0][97] + w->fh[48]*w->term[0][125];
-    w->term[1][84] = w->fh[52]*w->term[0][56] + w->fh[53]*w->term[0][112];
-    w->term[1][85] = w->fh[52]*w->term[0][57] + w->fh[53]*w->term[0][113];
-    w->term[1][86] = w->fh[52]*w->term[0][58] + w->fh[53]*w->term[0][114];
-    w->term[1][87] = w->fh[52]*w->term[0][59] + w->fh[53]*w->term[0][115];
-    w->term[1][88] = w->fh[52]*w->term[0][60] + w->fh[53]*w->term[0][116];
-    w->term[1][89] = w->fh[52]*w->term[0][61] + w->fh[53]*w->term[0][117];
-    w->term[1][90] = w->fh[52]*w->term[0][62] + w->fh[53]*w->term[0][118];
-    w->term[1][91] = w->fh[52]*w->term[0][63] + w->fh[53]*w->term[0][119];
-    w->term[1][92] = w->fh[52]*w->term[0][64] + w->fh[53]*w->term[0][120];
-    w->term[1][93] = w->fh[52]*w->term[0][65] + w->fh[53]*w->term[0][121];
-    w->term[1][94] = w->fh[52]*w->term[0][66] + w->fh[53]*w->term[0][122];
-    w->term[1][95] = w->fh[52]*w->term[0][67] + w->fh[53]*w->term[0][123];
-    w->term[1][96] = w->fh[52]*w->term[0][68] + w->fh[53]*w->term[0][124];
-    w->term[1][97] = w->fh[52]*w->term[0][69] + w->fh[53]*w->term[0][125];
-    w->term[1][98] = w->fh[54]*w->term[0][42] + w->fh[55]*w->term[0][84] +
-            w->fh[56]*w->term[0][112];
-    w->term[1][99] = w->fh[54]*w->term[0][43] + w->fh[55]*w->term[0][85] +
-            w->fh[56]*w->term[0][113];
-    w->term[1][100] = w->fh[54]*w->term[0][44] + w->fh[55]*w->term[0][86] +
-            w->fh[56]*w->term[0][114];
-    w->term[1][101] = w->fh[54]*w->term[0][45] + w->fh[55]*w->term[0][87] +
-            w->fh[56]*w->term[0][115];
-    w->term[1][102] = w->fh[54]*w->term[0][46] + w->fh[55]*w->term[0][88] +
-            w->fh[56]*w->term[0][116];
-    w->term[1][103] = w->fh[54]*w->term[0][47] + w->fh[55]*w->term[0][89] +
-            w->fh[56]*w->term[0][117];
-    w->term[1][104] = w->fh[54]*w->term[0][48] + w->fh[55]*w->term[0][90] +
-            w->fh[56]*w->term[0][118];
-    w->term[1][105] = w->fh[54]*w->term[0][49] + w->fh[55]*w->term[0][91] +
-            w->fh[56]*w->term[0][119];
-    w->term[1][106] = w->fh[54]*w->term[0][50] + w->fh[55]*w->term[0][92] +
-            w->fh[56]*w->term[0][120];
-    w->term[1][107] = w->fh[54]*w->term[0][51] + w->fh[55]*w->term[0][93] +
-            w->fh[56]*w->term[0][121];
-    w->term[1][108] = w->fh[54]*w->term[0][52] + w->fh[55]*w->term[0][94] +
-            w->fh[56]*w->term[0][122];
-    w->term[1][109] = w->fh[54]*w->term[0][53] + w->fh[55]*w->term[0][95] +
-            w->fh[56]*w->term[0][123];
-    w->term[1][110] = w->fh[54]*w->term[0][54] + w->fh[55]*w->term[0][96] +
-            w->fh[56]*w->term[0][124];
-    w->term[1][111] = w->fh[54]*w->term[0][55] + w->fh[55]*w->term[0][97] +
-            w->fh[56]*w->term[0][125];
-    w->term[1][112] = w->fh[57]*w->term[0][70];
-    w->term[1][113] = w->fh[57]*w->term[0][71];
-    w->term[1][114] = w->fh[57]*w->term[0][72];
-    w->term[1][115] = w->fh[57]*w->term[0][73];
-    w->term[1][116] = w->fh[57]*w->term[0][74];
-    w->term[1][117] = w->fh[57]*w->term[0][75];
-    w->term[1][118] = w->fh[57]*w->term[0][76];
-    w->term[1][119] = w->fh[57]*w->term[0][77];
-    w->term[1][120] = w->fh[57]*w->term[0][78];
-    w->term[1][121] = w->fh[57]*w->term[0][79];
-    w->term[1][122] = w->fh[57]*w->term[0][80];
-    w->term[1][123] = w->fh[57]*w->term[0][81];
-    w->term[1][124] = w->fh[57]*w->term[0][82];
-    w->term[1][125] = w->fh[57]*w->term[0][83];
-    t->Phi[0][0] = t->Phi[0][0] + w->term[1][0]*ck;
-    w->S[0] = w->S[0] + w->term[1][0]*cs;
-    t->Phi[0][1] = t->Phi[0][1] + w->term[1][1]*ck;
-    w->S[1] = w->S[1] + w->term[1][1]*cs;
-    t->Phi[0][2] = t->Phi[0][2] + w->term[1][2]*ck;
-    w->S[2] = w->S[2] + w->term[1][2]*cs;
-    t->Phi[0][3] = t->Phi[0][3] + w->term[1][3]*ck;
-    w->S[3] = w->S[3] + w->term[1][3]*cs;
-    t->Phi[0][4] = t->Phi[0][4] + w->term[1][4]*ck;
-    w->S[4] = w->S[4] + w->term[1][4]*cs;
-    t->Phi[0][5] = t->Phi[0][5] + w->term[1][5]*ck;
-    w->S[5] = w->S[5] + w->term[1][5]*cs;
-    t->Phi[0][6] = t->Phi[0][6] + w->term[1][6]*ck;
-    w->S[6] = w->S[6] + w->term[1][6]*cs;
-    t->Phi[0][8] = t->Phi[0][8] + w->term[1][7]*ck;
-    w->S[7] = w->S[7] + w->term[1][7]*cs;
-    t->Phi[0][9] = t->Phi[0][9] + w->term[1][8]*ck;
-    w->S[8] = w->S[8] + w->term[1][8]*cs;
-    t->Phi[0][10] = t->Phi[0][10] + w->term[1][9]*ck;
-    w->S[9] = w->S[9] + w->term[1][9]*cs;
-    t->Phi[0][11] = t->Phi[0][11] + w->term[1][10]*ck;
-    w->S[10] = w->S[10] + w->term[1][10]*cs;
-    t->Phi[0][12] = t->Phi[0][12] + w->term[1][11]*ck;
-    w->S[11] = w->S[11] + w->term[1][11]*cs;
-    t->Phi[0][13] = t->Phi[0][13] + w->term[1][12]*ck;
-    w->S[12] = w->S[12] + w->term[1][12]*cs;
-    t->Phi[0][14] = t->Phi[0][14] + w->term[1][13]*ck;
-    w->S[13] = w->S[13] + w->term[1][13]*cs;
-    t->Phi[1][0] = t->Phi[1][0] + w->term[1][14]*ck;
-    w->S[14] = w->S[14] + w->term[1][14]*cs;
-    t->Phi[1][1] = t->Phi[1][1] + w->term[1][15]*ck;
-    w->S[15] = w->S[15] + w->term[1][15]*cs;
-    t->Phi[1][2] = t->Phi[1][2] + w->term[1][16]*ck;
-    w->S[16] = w->S[16] + w->term[1][16]*cs;
-    t->Phi[1][3] = t->Phi[1][3] + w->term[1][17]*ck;
-    w->S[17] = w->S[17] + w->term[1][17]*cs;
-    t->Phi[1][4] = t->Phi[1][4] + w->term[1][18]*ck;
-    w->S[18] = w->S[18] + w->term[1][18]*cs;
-    t->Phi[1][5] = t->Phi[1][5] + w->term[1][19]*ck;
-    w->S[19] = w->S[19] + w->term[1][19]*cs;
-    t->Phi[1][6] = t->Phi[1][6] + w->term[1][20]*ck;
-    w->S[20] = w->S[20] + w->term[1][20]*cs;
-    t->Phi[1][8] = t->Phi[1][8] + w->term[1][21]*ck;
-    w->S[21] = w->S[21] + w->term[1][21]*cs;
-    t->Phi[1][9] = t->Phi[1][9] + w->term[1][22]*ck;
-    w->S[22] = w->S[22] + w->term[1][22]*cs;
-    t->Phi[1][10] = t->Phi[1][10] + w->term[1][23]*ck;
-    w->S[23] = w->S[23] + w->term[1][23]*cs;
-    t->Phi[1][11] = t->Phi[1][11] + w->term[1][24]*ck;
-    w->S[24] = w->S[24] + w->term[1][24]*cs;
-    t->Phi[1][12] = t->Phi[1][12] + w->term[1][25]*ck;
-    w->S[25] = w->S[25] + w->term[1][25]*cs;
-    t->Phi[1][13] = t->Phi[1][13] + w->term[1][26]*ck;
-    w->S[26] = w->S[26] + w->term[1][26]*cs;
-    t->Phi[1][14] = t->Phi[1][14] + w->term[1][27]*ck;
-    w->S[27] = w->S[27] + w->term[1][27]*cs;
-    t->Phi[2][0] = t->Phi[2][0] + w->term[1][28]*ck;
-    w->S[28] = w->S[28] + w->term[1][28]*cs;
-    t->Phi[2][1] = t->Phi[2][1] + w->term[1][29]*ck;
-    w->S[29] = w->S[29] + w->term[1][29]*cs;
-    t->Phi[2][2] = t->Phi[2][2] + w->term[1][30]*ck;
-    w->S[30] = w->S[30] + w->term[1][30]*cs;
-    t->Phi[2][3] = t->Phi[2][3] + w->term[1][31]*ck;
-    w->S[31] = w->S[31] + w->term[1][31]*cs;
-    t->Phi[2][4] = t->Phi[2][4] + w->term[1][32]*ck;
-    w->S[32] = w->S[32] + w->term[1][32]*cs;
-    t->Phi[2][5] = t->Phi[2][5] + w->term[1][33]*ck;
-    w->S[33] = w->S[33] + w->term[1][33]*cs;
-    t->Phi[2][6] = t->Phi[2][6] + w->term[1][34]*ck;
-    w->S[34] = w->S[34] + w->term[1][34]*cs;
-    t->Phi[2][8] = t->Phi[2][8] + w->term[1][35]*ck;
-    w->S[35] = w->S[35] + w->term[1][35]*cs;
-    t->Phi[2][9] = t->Phi[2][9] + w->term[1][36]*ck;
-    w->S[36] = w->S[36] + w->term[1][36]*cs;
-    t->Phi[2][10] = t->Phi[2][10] + w->term[1][37]*ck;
-    w->S[37] = w->S[37] + w->term[1][37]*cs;
-    t->Phi[2][11] = t->Phi[2][11] + w->term[1][38]*ck;
-    w->S[38] = w->S[38] + w->term[1][38]*cs;
-    t->Phi[2][12] = t->Phi[2][12] + w->term[1][39]*ck;
-    w->S[39] = w->S[39] + w->term[1][39]*cs;
-    t->Phi[2][13] = t->Phi[2][13] + w->term[1][40]*ck;
-    w->S[40] = w->S[40] + w->term[1][40]*cs;
-    t->Phi[2][14] = t->Phi[2][14] + w->term[1][41]*ck;
-    w->S[41] = w->S[41] + w->term[1][41]*cs;
-    t->Phi[3][0] = t->Phi[3][0] + w->term[1][42]*ck;
-    w->S[42] = w->S[42] + w->term[1][42]*cs;
-    t->Phi[3][1] = t->Phi[3][1] + w->term[1][43]*ck;
-    w->S[43] = w->S[43] + w->term[1][43]*cs;
-    t->Phi[3][2] = t->Phi[3][2] + w->term[1][44]*ck;
-    w->S[44] = w->S[44] + w->term[1][44]*cs;
-    t->Phi[3][3] = t->Phi[3][3] + w->term[1][45]*ck;
-    w->S[45] = w->S[45] + w->term[1][45]*cs;
-    t->Phi[3][4] = t->Phi[3][4] + w->term[1][46]*ck;
-    w->S[46] = w->S[46] + w->term[1][46]*cs;
-    t->Phi[3][5] = t->Phi[3][5] + w->term[1][47]*ck;
-    w->S[47] = w->S[47] + w->term[1][47]*cs;
-    t->Phi[3][6] = t->Phi[3][6] + w->term[1][48]*ck;
-    w->S[48] = w->S[48] + w->term[1][48]*cs;
-    t->Phi[3][8] = t->Phi[3][8] + w->term[1][49]*ck;
-    w->S[49] = w->S[49] + w->term[1][49]*cs;
-    t->Phi[3][9] = t->Phi[3][9] + w->term[1][50]*ck;
-    w->S[50] = w->S[50] + w->term[1][50]*cs;
-    t->Phi[3][10] = t->Phi[3][10] + w->term[1][51]*ck;
-    w->S[51] = w->S[51] + w->term[1][51]*cs;
-    t->Phi[3][11] = t->Phi[3][11] + w->term[1][52]*ck;
-    w->S[52] = w->S[52] + w->term[1][52]*cs;
-    t->Phi[3][12] = t->Phi[3][12] + w->term[1][53]*ck;
-    w->S[53] = w->S[53] + w->term[1][53]*cs;
-    t->Phi[3][13] = t->Phi[3][13] + w->term[1][54]*ck;
-    w->S[54] = w->S[54] + w->term[1][54]*cs;
-    t->Phi[3][14] = t->Phi[3][14] + w->term[1][55]*ck;
-    w->S[55] = w->S[55] + w->term[1][55]*cs;
-    t->Phi[4][0] = t->Phi[4][0] + w->term[1][56]*ck;
-    w->S[56] = w->S[56] + w->term[1][56]*cs;
-    t->Phi[4][1] = t->Phi[4][1] + w->term[1][57]*ck;
-    w->S[57] = w->S[57] + w->term[1][57]*cs;
-    t->Phi[4][2] = t->Phi[4][2] + w->term[1][58]*ck;
-    w->S[58] = w->S[58] + w->term[1][58]*cs;
-    t->Phi[4][3] = t->Phi[4][3] + w->term[1][59]*ck;
-    w->S[59] = w->S[59] + w->term[1][59]*cs;
-    t->Phi[4][4] = t->Phi[4][4] + w->term[1][60]*ck;
-    w->S[60] = w->S[60] + w->term[1][60]*cs;
-    t->Phi[4][5] = t->Phi[4][5] + w->term[1][61]*ck;
-    w->S[61] = w->S[61] + w->term[1][61]*cs;
-    t->Phi[4][6] = t->Phi[4][6] + w->term[1][62]*ck;
-    w->S[62] = w->S[62] + w->term[1][62]*cs;
-    t->Phi[4][8] = t->Phi[4][8] + w->term[1][63]*ck;
-    w->S[63] = w->S[63] + w->term[1][63]*cs;
-    t->Phi[4][9] = t->Phi[4][9] + w->term[1][64]*ck;
-    w->S[64] = w->S[64] + w->term[1][64]*cs;
-    t->Phi[4][10] = t->Phi[4][10] + w->term[1][65]*ck;
-    w->S[65] = w->S[65] + w->term[1][65]*cs;
-    t->Phi[4][11] = t->Phi[4][11] + w->term[1][66]*ck;
-    w->S[66] = w->S[66] + w->term[1][66]*cs;
-    t->Phi[4][12] = t->Phi[4][12] + w->term[1][67]*ck;
-    w->S[67] = w->S[67] + w->term[1][67]*cs;
-    t->Phi[4][13] = t->Phi[4][13] + w->term[1][68]*ck;
-    w->S[68] = w->S[68] + w->term[1][68]*cs;
-    t->Phi[4][14] = t->Phi[4][14] + w->term[1][69]*ck;
-    w->S[69] = w->S[69] + w->term[1][69]*cs;
-    t->Phi[5][0] = t->Phi[5][0] + w->term[1][70]*ck;
-    w->S[70] = w->S[70] + w->term[1][70]*cs;
-    t->Phi[5][1] = t->Phi[5][1] + w->term[1][71]*ck;
-    w->S[71] = w->S[71] + w->term[1][71]*cs;
-    t->Phi[5][2] = t->Phi[5][2] + w->term[1][72]*ck;
-    w->S[72] = w->S[72] + w->term[1][72]*cs;
-    t->Phi[5][3] = t->Phi[5][3] + w->term[1][73]*ck;
-    w->S[73] = w->S[73] + w->term[1][73]*cs;
-    t->Phi[5][4] = t->Phi[5][4] + w->term[1][74]*ck;
-    w->S[74] = w->S[74] + w->term[1][74]*cs;
-    t->Phi[5][5] = t->Phi[5][5] + w->term[1][75]*ck;
-    w->S[75] = w->S[75] + w->term[1][75]*cs;
-    t->Phi[5][6] = t->Phi[5][6] + w->term[1][76]*ck;
-    w->S[76] = w->S[76] + w->term[1][76]*cs;
-    t->Phi[5][8] = t->Phi[5][8] + w->term[1][77]*ck;
-    w->S[77] = w->S[77] + w->term[1][77]*cs;
-    t->Phi[5][9] = t->Phi[5][9] + w->term[1][78]*ck;
-    w->S[78] = w->S[78] + w->term[1][78]*cs;
-    t->Phi[5][10] = t->Phi[5][10] + w->term[1][79]*ck;
-    w->S[79] = w->S[79] + w->term[1][79]*cs;
-    t->Phi[5][11] = t->Phi[5][11] + w->term[1][80]*ck;
-    w->S[80] = w->S[80] + w->term[1][80]*cs;
-    t->Phi[5][12] = t->Phi[5][12] + w->term[1][81]*ck;
-    w->S[81] = w->S[81] + w->term[1][81]*cs;
-    t->Phi[5][13] = t->Phi[5][13] + w->term[1][82]*ck;
-    w->S[82] = w->S[82] + w->term[1][82]*cs;
-    t->Phi[5][14] = t->Phi[5][14] + w->term[1][83]*ck;
-    w->S[83] = w->S[83] + w->term[1][83]*cs;
-    t->Phi[6][0] = t->Phi[6][0] + w->term[1][84]*ck;
-    w->S[84] = w->S[84] + w->term[1][84]*cs;
-    t->Phi[6][1] = t->Phi[6][1] + w->term[1][85]*ck;
-    w->S[85] = w->S[85] + w->term[1][85]*cs;
-    t->Phi[6][2] = t->Phi[6][2] + w->term[1][86]*ck;
-    w->S[86] = w->S[86] + w->term[1][86]*cs;
-    t->Phi[6][3] = t->Phi[6][3] + w->term[1][87]*ck;
-    w->S[87] = w->S[87] + w->term[1][87]*cs;
-    t->Phi[6][4] = t->Phi[6][4] + w->term[1][88]*ck;
-    w->S[88] = w->S[88] + w->term[1][88]*cs;
-    t->Phi[6][5] = t->Phi[6][5] + w->term[1][89]*ck;
-    w->S[89] = w->S[89] + w->term[1][89]*cs;
-    t->Phi[6][6] = t->Phi[6][6] + w->term[1][90]*ck;
-    w->S[90] = w->S[90] + w->term[1][90]*cs;
-    t->Phi[6][8] = t->Phi[6][8] + w->term[1][91]*ck;
-    w->S[91] = w->S[91] + w->term[1][91]*cs;
-    t->Phi[6][9] = t->Phi[6][9] + w->term[1][92]*ck;
-    w->S[92] = w->S[92] + w->term[1][92]*cs;
-    t->Phi[6][10] = t->Phi[6][10] + w->term[1][93]*ck;
-    w->S[93] = w->S[93] + w->term[1][93]*cs;
-    t->Phi[6][11] = t->Phi[6][11] + w->term[1][94]*ck;
-    w->S[94] = w->S[94] + w->term[1][94]*cs;
-    t->Phi[6][12] = t->Phi[6][12] + w->term[1][95]*ck;
-    w->S[95] = w->S[95] + w->term[1][95]*cs;
-    t->Phi[6][13] = t->Phi[6][13] + w->term[1][96]*ck;
-    w->S[96] = w->S[96] + w->term[1][96]*cs;
-    t->Phi[6][14] = t->Phi[6][14] + w->term[1][97]*ck;
-    w->S[97] = w->S[97] + w->term[1][97]*cs;
-    t->Phi[7][0] = t->Phi[7][0] + w->term[1][98]*ck;
-    w->S[98] = w->S[98] + w->term[1][98]*cs;
-    t->Phi[7][1] = t->Phi[7][1] + w->term[1][99]*ck;
-    w->S[99] = w->S[99] + w->term[1][99]*cs;
-    t->Phi[7][2] = t->Phi[7][2] + w->term[1][100]*ck;
-    w->S[100] = w->S[100] + w->term[1][100]*cs;
-    t->Phi[7][3] = t->Phi[7][3] + w->term[1][101]*ck;
-    w->S[101] = w->S[101] + w->term[1][101]*cs;
-    t->Phi[7][4] = t->Phi[7][4] + w->term[1][102]*ck;
-    w->S[102] = w->S[102] + w->term[1][102]*cs;
-    t->Phi[7][5] = t->Phi[7][5] + w->term[1][103]*ck;
-    w->S[103] = w->S[103] + w->term[1][103]*cs;
-    t->Phi[7][6] = t->Phi[7][6] + w->term[1][104]*ck;
-    w->S[104] = w->S[104] + w->term[1][104]*cs;
-    t->Phi[7][8] = t->Phi[7][8] + w->term[1][105]*ck;
-    w->S[106] = w->S[106] + w->term[1][105]*cs;
-    t->Phi[7][9] = t->Phi[7][9] + w->term[1][106]*ck;
-    w->S[107] = w->S[107] + w->term[1][106]*cs;
-    t->Phi[7][10] = t->Phi[7][10] + w->term[1][107]*ck;
-    w->S[108] = w->S[108] + w->term[1][107]*cs;
-    t->Phi[7][11] = t->Phi[7][11] + w->term[1][108]*ck;
-    w->S[109] = w->S[109] + w->term[1][108]*cs;
-    t->Phi[7][12] = t->Phi[7][12] + w->term[1][109]*ck;
-    w->S[110] = w->S[110] + w->term[1][109]*cs;
-    t->Phi[7][13] = t->Phi[7][13] + w->term[1][110]*ck;
-    w->S[111] = w->S[111] + w->term[1][110]*cs;
-    t->Phi[7][14] = t->Phi[7][14] + w->term[1][111]*ck;
-    w->S[112] = w->S[112] + w->term[1][111]*cs;
-    t->Phi[8][0] = t->Phi[8][0] + w->term[1][112]*ck;
-    w->S[113] = w->S[113] + w->term[1][112]*cs;
-    t->Phi[8][1] = t->Phi[8][1] + w->term[1][113]*ck;
-    w->S[114] = w->S[114] + w->term[1][113]*cs;
-    t->Phi[8][2] = t->Phi[8][2] + w->term[1][114]*ck;
-    w->S[115] = w->S[115] + w->term[1][114]*cs;
-    t->Phi[8][3] = t->Phi[8][3] + w->term[1][115]*ck;
-    w->S[116] = w->S[116] + w->term[1][115]*cs;
-    t->Phi[8][4] = t->Phi[8][4] + w->term[1][116]*ck;
-    w->S[117] = w->S[117] + w->term[1][116]*cs;
-    t->Phi[8][5] = t->Phi[8][5] + w->term[1][117]*ck;
-    w->S[118] = w->S[118] + w->term[1][117]*cs;
-    t->Phi[8][6] = t->Phi[8][6] + w->term[1][118]*ck;
-    w->S[119] = w->S[119] + w->term[1][118]*cs;
-    t->Phi[8][8] = t->Phi[8][8] + w->term[1][119]*ck;
-    w->S[120] = w->S[120] + w->term[1][119]*cs;
-    t->Phi[8][9] = t->Phi[8][9] + w->term[1][120]*ck;
-    w->S[121] = w->S[121] + w->term[1][120]*cs;
-    t->Phi[8][10] = t->Phi[8][10] + w->term[1][121]*ck;
-    w->S[122] = w->S[122] + w->term[1][121]*cs;
-    t->Phi[8][11] = t->Phi[8][11] + w->term[1][122]*ck;
-    w->S[123] = w->S[123] + w->term[1][122]*cs;
-    t->Phi[8][12] = t->Phi[8][12] + w->term[1][123]*ck;
-    w->S[124] = w->S[124] + w->term[1][123]*cs;
-    t->Phi[8][13] = t->Phi[8][13] + w->term[1][124]*ck;
-    w->S[125] = w->S[125] + w->term[1][124]*cs;
-    t->Phi[8][14] = t->Phi[8][14] + w->term[1][125]*ck;
-    w->S[126] = w->S[126] + w->term[1][125]*cs;
+    t->Phi[0][0] = w->fh[0]*w->S[14] + w->fh[1]*w->S[28] + w->fh[2]*w->S[56] + w->fh[3]*w->S[113];
+    t->Phi[0][1] = w->fh[0]*w->S[15] + w->fh[1]*w->S[29] + w->fh[2]*w->S[57] + w->fh[3]*w->S[114];
+    t->Phi[0][2] = w->fh[0]*w->S[16] + w->fh[1]*w->S[30] + w->fh[2]*w->S[58] + w->fh[3]*w->S[115];
+    t->Phi[0][3] = w->fh[0]*w->S[17] + w->fh[1]*w->S[31] + w->fh[2]*w->S[59] + w->fh[3]*w->S[116];
+    t->Phi[0][4] = w->fh[0]*w->S[18] + w->fh[1]*w->S[32] + w->fh[2]*w->S[60] + w->fh[3]*w->S[117];
+    t->Phi[0][5] = w->fh[0]*w->S[19] + w->fh[1]*w->S[33] + w->fh[2]*w->S[61] + w->fh[3]*w->S[118];
+    t->Phi[0][6] = w->fh[0]*w->S[20] + w->fh[1]*w->S[34] + w->fh[2]*w->S[62] + w->fh[3]*w->S[119];
+    t->Phi[0][8] = w->fh[0]*w->S[21] + w->fh[1]*w->S[35] + w->fh[2]*w->S[63] + w->fh[3]*w->S[120];
+    t->Phi[0][9] = w->fh[0]*w->S[22] + w->fh[1]*w->S[36] + w->fh[2]*w->S[64] + w->fh[3]*w->S[121] +
+            w->fh[4];
+    t->Phi[0][10] = w->fh[0]*w->S[23] + w->fh[1]*w->S[37] + w->fh[2]*w->S[65] + w->fh[3]*w->S[122] +
+            w->fh[5];
+    t->Phi[0][11] = w->fh[0]*w->S[24] + w->fh[1]*w->S[38] + w->fh[2]*w->S[66] + w->fh[3]*w->S[123] +
+            w->fh[6];
+    t->Phi[0][12] = w->fh[0]*w->S[25] + w->fh[1]*w->S[39] + w->fh[2]*w->S[67] + w->fh[3]*w->S[124];
+    t->Phi[0][13] = w->fh[0]*w->S[26] + w->fh[1]*w->S[40] + w->fh[2]*w->S[68] + w->fh[3]*w->S[125];
+    t->Phi[0][14] = w->fh[0]*w->S[27] + w->fh[1]*w->S[41] + w->fh[2]*w->S[69] + w->fh[3]*w->S[126];
+    t->Phi[1][0] = w->fh[7]*w->S[0] + w->fh[8]*w->S[28] + w->fh[9]*w->S[42] + w->fh[10]*w->S[84] +
+            w->fh[11]*w->S[113];
+    t->Phi[1][1] = w->fh[7]*w->S[1] + w->fh[8]*w->S[29] + w->fh[9]*w->S[43] + w->fh[10]*w->S[85] +
+            w->fh[11]*w->S[114];
+    t->Phi[1][2] = w->fh[7]*w->S[2] + w->fh[8]*w->S[30] + w->fh[9]*w->S[44] + w->fh[10]*w->S[86] +
+            w->fh[11]*w->S[115];
+    t->Phi[1][3] = w->fh[7]*w->S[3] + w->fh[8]*w->S[31] + w->fh[9]*w->S[45] + w->fh[10]*w->S[87] +
+            w->fh[11]*w->S[116];
+    t->Phi[1][4] = w->fh[7]*w->S[4] + w->fh[8]*w->S[32] + w->fh[9]*w->S[46] + w->fh[10]*w->S[88] +
+            w->fh[11]*w->S[117];
+    t->Phi[1][5] = w->fh[7]*w->S[5] + w->fh[8]*w->S[33] + w->fh[9]*w->S[47] + w->fh[10]*w->S[89] +
+            w->fh[11]*w->S[118];
+    t->Phi[1][6] = w->fh[7]*w->S[6] + w->fh[8]*w->S[34] + w->fh[9]*w->S[48] + w->fh[10]*w->S[90] +
+            w->fh[11]*w->S[119];
+    t->Phi[1][8] = w->fh[7]*w->S[7] + w->fh[8]*w->S[35] + w->fh[9]*w->S[49] + w->fh[10]*w->S[91] +
+            w->fh[11]*w->S[120];
+    t->Phi[1][9] = w->fh[7]*w->S[8] + w->fh[8]*w->S[36] + w->fh[9]*w->S[50] + w->fh[10]*w->S[92] +
+            w->fh[11]*w->S[121] + w->fh[12];
+    t->Phi[1][10] = w->fh[7]*w->S[9] + w->fh[8]*w->S[37] + w->fh[9]*w->S[51] + w->fh[10]*w->S[93] +
+            w->fh[11]*w->S[122] + w->fh[13];
+    t->Phi[1][11] = w->fh[7]*w->S[10] + w->fh[8]*w->S[38] + w->fh[9]*w->S[52] + w->fh[10]*w->S[94] +
+            w->fh[11]*w->S[123] + w->fh[14];
+    t->Phi[1][12] = w->fh[7]*w->S[11] + w->fh[8]*w->S[39] + w->fh[9]*w->S[53] + w->fh[10]*w->S[95] +
+            w->fh[11]*w->S[124];
+    t->Phi[1][13] = w->fh[7]*w->S[12] + w->fh[8]*w->S[40] + w->fh[9]*w->S[54] + w->fh[10]*w->S[96] +
+            w->fh[11]*w->S[125];
+    t->Phi[1][14] = w->fh[7]*w->S[13] + w->fh[8]*w->S[41] + w->fh[9]*w->S[55] + w->fh[10]*w->S[97] +
+            w->fh[11]*w->S[126];
+    t->Phi[2][0] = w->fh[15]*w->S[0] + w->fh[16]*w->S[14] + w->fh[17]*w->S[42] + w->fh[18]*w->S[84]
+            + w->fh[19]*w->S[113];
+    t->Phi[2][1] = w->fh[15]*w->S[1] + w->fh[16]*w->S[15] + w->fh[17]*w->S[43] + w->fh[18]*w->S[85]
+            + w->fh[19]*w->S[114];
+    t->Phi[2][2] = w->fh[15]*w->S[2] + w->fh[16]*w->S[16] + w->fh[17]*w->S[44] + w->fh[18]*w->S[86]
+            + w->fh[19]*w->S[115];
+    t->Phi[2][3] = w->fh[15]*w->S[3] + w->fh[16]*w->S[17] + w->fh[17]*w->S[45] + w->fh[18]*w->S[87]
+            + w->fh[19]*w->S[116];
+    t->Phi[2][4] = w->fh[15]*w->S[4] + w->fh[16]*w->S[18] + w->fh[17]*w->S[46] + w->fh[18]*w->S[88]
+            + w->fh[19]*w->S[117];
+    t->Phi[2][5] = w->fh[15]*w->S[5] + w->fh[16]*w->S[19] + w->fh[17]*w->S[47] + w->fh[18]*w->S[89]
+            + w->fh[19]*w->S[118];
+    t->Phi[2][6] = w->fh[15]*w->S[6] + w->fh[16]*w->S[20] + w->fh[17]*w->S[48] + w->fh[18]*w->S[90]
+            + w->fh[19]*w->S[119];
+    t->Phi[2][8] = w->fh[15]*w->S[7] + w->fh[16]*w->S[21] + w->fh[17]*w->S[49] + w->fh[18]*w->S[91]
+            + w->fh[19]*w->S[120];
+    t->Phi[2][9] = w->fh[15]*w->S[8] + w->fh[16]*w->S[22] + w->fh[17]*w->S[50] + w->fh[18]*w->S[92]
+            + w->fh[19]*w->S[121] + w->fh[20];
+    t->Phi[2][10] = w->fh[15]*w->S[9] + w->fh[16]*w->S[23] + w->fh[17]*w->S[51] + w->fh[18]*w->S[93]
+            + w->fh[19]*w->S[122] + w->fh[21];
+    t->Phi[2][11] = w->fh[15]*w->S[10] + w->fh[16]*w->S[24] + w->fh[17]*w->S[52] +
+            w->fh[18]*w->S[94] + w->fh[19]*w->S[123] + w->fh[22];
+    t->Phi[2][12] = w->fh[15]*w->S[11] + w->fh[16]*w->S[25] + w->fh[17]*w->S[53] +
+            w->fh[18]*w->S[95] + w->fh[19]*w->S[124];
+    t->Phi[2][13] = w->fh[15]*w->S[12] + w->fh[16]*w->S[26] + w->fh[17]*w->S[54] +
+            w->fh[18]*w->S[96] + w->fh[19]*w->S[125];
+    t->Phi[2][14] = w->fh[15]*w->S[13] + w->fh[16]*w->S[27] + w->fh[17]*w->S[55] +
+            w->fh[18]*w->S[97] + w->fh[19]*w->S[126];
+    t->Phi[3][0] = w->fh[23]*w->S[14] + w->fh[24]*w->S[28] + w->fh[25]*w->S[42] + w->fh[26]*w->S[56]
+            + w->fh[27]*w->S[70] + w->fh[28]*w->S[84] + w->fh[29]*w->S[113];
+    t->Phi[3][1] = w->fh[23]*w->S[15] + w->fh[24]*w->S[29] + w->fh[25]*w->S[43] + w->fh[26]*w->S[57]
+            + w->fh[27]*w->S[71] + w->fh[28]*w->S[85] + w->fh[29]*w->S[114];
+    t->Phi[3][2] = w->fh[23]*w->S[16] + w->fh[24]*w->S[30] + w->fh[25]*w->S[44] + w->fh[26]*w->S[58]
+            + w->fh[27]*w->S[72] + w->fh[28]*w->S[86] + w->fh[29]*w->S[115];
+    t->Phi[3][3] = w->fh[23]*w->S[17] + w->fh[24]*w->S[31] + w->fh[25]*w->S[45] + w->fh[26]*w->S[59]
+            + w->fh[27]*w->S[73] + w->fh[28]*w->S[87] + w->fh[29]*w->S[116];
+    t->Phi[3][4] = w->fh[23]*w->S[18] + w->fh[24]*w->S[32] + w->fh[25]*w->S[46] + w->fh[26]*w->S[60]
+            + w->fh[27]*w->S[74] + w->fh[28]*w->S[88] + w->fh[29]*w->S[117];
+    t->Phi[3][5] = w->fh[23]*w->S[19] + w->fh[24]*w->S[33] + w->fh[25]*w->S[47] + w->fh[26]*w->S[61]
+            + w->fh[27]*w->S[75] + w->fh[28]*w->S[89] + w->fh[29]*w->S[118];
+    t->Phi[3][6] = w->fh[23]*w->S[20] + w->fh[24]*w->S[34] + w->fh[25]*w->S[48] + w->fh[26]*w->S[62]
+            + w->fh[27]*w->S[76] + w->fh[28]*w->S[90] + w->fh[29]*w->S[119];
+    t->Phi[3][8] = w->fh[23]*w->S[21] + w->fh[24]*w->S[35] + w->fh[25]*w->S[49] + w->fh[26]*w->S[63]
+            + w->fh[27]*w->S[77] + w->fh[28]*w->S[91] + w->fh[29]*w->S[120];
+    t->Phi[3][9] = w->fh[23]*w->S[22] + w->fh[24]*w->S[36] + w->fh[25]*w->S[50] + w->fh[26]*w->S[64]
+            + w->fh[27]*w->S[78] + w->fh[28]*w->S[92] + w->fh[29]*w->S[121];
+    t->Phi[3][10] = w->fh[23]*w->S[23] + w->fh[24]*w->S[37] + w->fh[25]*w->S[51] +
+            w->fh[26]*w->S[65] + w->fh[27]*w->S[79] + w->fh[28]*w->S[93] + w->fh[29]*w->S[122];
+    t->Phi[3][11] = w->fh[23]*w->S[24] + w->fh[24]*w->S[38] + w->fh[25]*w->S[52] +
+            w->fh[26]*w->S[66] + w->fh[27]*w->S[80] + w->fh[28]*w->S[94] + w->fh[29]*w->S[123];
+    t->Phi[3][12] = w->fh[23]*w->S[25] + w->fh[24]*w->S[39] + w->fh[25]*w->S[53] +
+            w->fh[26]*w->S[67] + w->fh[27]*w->S[81] + w->fh[28]*w->S[95] + w->fh[29]*w->S[124] +
+            w->fh[30];
+    t->Phi[3][13] = w->fh[23]*w->S[26] + w->fh[24]*w->S[40] + w->fh[25]*w->S[54] +
+            w->fh[26]*w->S[68] + w->fh[27]*w->S[82] + w->fh[28]*w->S[96] + w->fh[29]*w->S[125] +
+            w->fh[31];
+    t->Phi[3][14] = w->fh[23]*w->S[27] + w->fh[24]*w->S[41] + w->fh[25]*w->S[55] +
+            w->fh[26]*w->S[69] + w->fh[27]*w->S[83] + w->fh[28]*w->S[97] + w->fh[29]*w->S[126] +
+            w->fh[32];
+    t->Phi[4][0] = w->fh[33]*w->S[0] + w->fh[34]*w->S[28] + w->fh[35]*w->S[42] + w->fh[36]*w->S[56]
+            + w->fh[37]*w->S[70] + w->fh[38]*w->S[84] + w->fh[39]*w->S[113];
+    t->Phi[4][1] = w->fh[33]*w->S[1] + w->fh[34]*w->S[29] + w->fh[35]*w->S[43] + w->fh[36]*w->S[57]
+            + w->fh[37]*w->S[71] + w->fh[38]*w->S[85] + w->fh[39]*w->S[114];
+    t->Phi[4][2] = w->fh[33]*w->S[2] + w->fh[34]*w->S[30] + w->fh[35]*w->S[44] + w->fh[36]*w->S[58]
+            + w->fh[37]*w->S[72] + w->fh[38]*w->S[86] + w->fh[39]*w->S[115];
+    t->Phi[4][3] = w->fh[33]*w->S[3] + w->fh[34]*w->S[31] + w->fh[35]*w->S[45] + w->fh[36]*w->S[59]
+            + w->fh[37]*w->S[73] + w->fh[38]*w->S[87] + w->fh[39]*w->S[116];
+    t->Phi[4][4] = w->fh[33]*w->S[4] + w->fh[34]*w->S[32] + w->fh[35]*w->S[46] + w->fh[36]*w->S[60]
+            + w->fh[37]*w->S[74] + w->fh[38]*w->S[88] + w->fh[39]*w->S[117];
+    t->Phi[4][5] = w->fh[33]*w->S[5] + w->fh[34]*w->S[33] + w->fh[35]*w->S[47] + w->fh[36]*w->S[61]
+            + w->fh[37]*w->S[75] + w->fh[38]*w->S[89] + w->fh[39]*w->S[118];
+    t->Phi[4][6] = w->fh[33]*w->S[6] + w->fh[34]*w->S[34] + w->fh[35]*w->S[48] + w->fh[36]*w->S[62]
+            + w->fh[37]*w->S[76] + w->fh[38]*w->S[90] + w->fh[39]*w->S[119];
+    t->Phi[4][8] = w->fh[33]*w->S[7] + w->fh[34]*w->S[35] + w->fh[35]*w->S[49] + w->fh[36]*w->S[63]
+            + w->fh[37]*w->S[77] + w->fh[38]*w->S[91] + w->fh[39]*w->S[120];
+    t->Phi[4][9] = w->fh[33]*w->S[8] + w->fh[34]*w->S[36] + w->fh[35]*w->S[50] + w->fh[36]*w->S[64]
+            + w->fh[37]*w->S[78] + w->fh[38]*w->S[92] + w->fh[39]*w->S[121];
+    t->Phi[4][10] = w->fh[33]*w->S[9] + w->fh[34]*w->S[37] + w->fh[35]*w->S[51] + w->fh[36]*w->S[65]
+            + w->fh[37]*w->S[79] + w->fh[38]*w->S[93] + w->fh[39]*w->S[122];
+    t->Phi[4][11] = w->fh[33]*w->S[10] + w->fh[34]*w->S[38] + w->fh[35]*w->S[52] +
+            w->fh[36]*w->S[66] + w->fh[37]*w->S[80] + w->fh[38]*w->S[94] + w->fh[39]*w->S[123];
+    t->Phi[4][12] = w->fh[33]*w->S[11] + w->fh[34]*w->S[39] + w->fh[35]*w->S[53] +
+            w->fh[36]*w->S[67] + w->fh[37]*w->S[81] + w->fh[38]*w->S[95] + w->fh[39]*w->S[124] +
+            w->fh[40];
+    t->Phi[4][13] = w->fh[33]*w->S[12] + w->fh[34]*w->S[40] + w->fh[35]*w->S[54] +
+            w->fh[36]*w->S[68] + w->fh[37]*w->S[82] + w->fh[38]*w->S[96] + w->fh[39]*w->S[125] +
+            w->fh[41];
+    t->Phi[4][14] = w->fh[33]*w->S[13] + w->fh[34]*w->S[41] + w->fh[35]*w->S[55] +
+            w->fh[36]*w->S[69] + w->fh[37]*w->S[83] + w->fh[38]*w->S[97] + w->fh[39]*w->S[126] +
+            w->fh[42];
+    t->Phi[5][0] = w->fh[43]*w->S[0] + w->fh[44]*w->S[14] + w->fh[45]*w->S[42] + w->fh[46]*w->S[56]
+            + w->fh[47]*w->S[84] + w->fh[48]*w->S[113];
+    t->Phi[5][1] = w->fh[43]*w->S[1] + w->fh[44]*w->S[15] + w->fh[45]*w->S[43] + w->fh[46]*w->S[57]
+            + w->fh[47]*w->S[85] + w->fh[48]*w->S[114];
+    t->Phi[5][2] = w->fh[43]*w->S[2] + w->fh[44]*w->S[16] + w->fh[45]*w->S[44] + w->fh[46]*w->S[58]
+            + w->fh[47]*w->S[86] + w->fh[48]*w->S[115];
+    t->Phi[5][3] = w->fh[43]*w->S[3] + w->fh[44]*w->S[17] + w->fh[45]*w->S[45] + w->fh[46]*w->S[59]
+            + w->fh[47]*w->S[87] + w->fh[48]*w->S[116];
+    t->Phi[5][4] = w->fh[43]*w->S[4] + w->fh[44]*w->S[18] + w->fh[45]*w->S[46] + w->fh[46]*w->S[60]
+            + w->fh[47]*w->S[88] + w->fh[48]*w->S[117];
+    t->Phi[5][5] = w->fh[43]*w->S[5] + w->fh[44]*w->S[19] + w->fh[45]*w->S[47] + w->fh[46]*w->S[61]
+            + w->fh[47]*w->S[89] + w->fh[48]*w->S[118];
+    t->Phi[5][6] = w->fh[43]*w->S[6] + w->fh[44]*w->S[20] + w->fh[45]*w->S[48] + w->fh[46]*w->S[62]
+            + w->fh[47]*w->S[90] + w->fh[48]*w->S[119];
+    t->Phi[5][8] = w->fh[43]*w->S[7] + w->fh[44]*w->S[21] + w->fh[45]*w->S[49] + w->fh[46]*w->S[63]
+            + w->fh[47]*w->S[91] + w->fh[48]*w->S[120];
+    t->Phi[5][9] = w->fh[43]*w->S[8] + w->fh[44]*w->S[22] + w->fh[45]*w->S[50] + w->fh[46]*w->S[64]
+            + w->fh[47]*w->S[92] + w->fh[48]*w->S[121];
+    t->Phi[5][10] = w->fh[43]*w->S[9] + w->fh[44]*w->S[23] + w->fh[45]*w->S[51] + w->fh[46]*w->S[65]
+            + w->fh[47]*w->S[93] + w->fh[48]*w->S[122];
+    t->Phi[5][11] = w->fh[43]*w->S[10] + w->fh[44]*w->S[24] + w->fh[45]*w->S[52] +
+            w->fh[46]*w->S[66] + w->fh[47]*w->S[94] + w->fh[48]*w->S[123];
+    t->Phi[5][12] = w->fh[43]*w->S[11] + w->fh[44]*w->S[25] + w->fh[45]*w->S[53] +
+            w->fh[46]*w->S[67] + w->fh[47]*w->S[95] + w->fh[48]*w->S[124] + w->fh[49];
+    t->Phi[5][13] = w->fh[43]*w->S[12] + w->fh[44]*w->S[26] + w->fh[45]*w->S[54] +
+            w->fh[46]*w->S[68] + w->fh[47]*w->S[96] + w->fh[48]*w->S[125] + w->fh[50];
+    t->Phi[5][14] = w->fh[43]*w->S[13] + w->fh[44]*w->S[27] + w->fh[45]*w->S[55] +
+            w->fh[46]*w->S[69] + w->fh[47]*w->S[97] + w->fh[48]*w->S[126] + w->fh[51];
+    t->Phi[6][0] = w->fh[52]*w->S[56] + w->fh[53]*w->S[113];
+    t->Phi[6][1] = w->fh[52]*w->S[57] + w->fh[53]*w->S[114];
+    t->Phi[6][2] = w->fh[52]*w->S[58] + w->fh[53]*w->S[115];
+    t->Phi[6][3] = w->fh[52]*w->S[59] + w->fh[53]*w->S[116];
+    t->Phi[6][4] = w->fh[52]*w->S[60] + w->fh[53]*w->S[117];
+    t->Phi[6][5] = w->fh[52]*w->S[61] + w->fh[53]*w->S[118];
+    t->Phi[6][6] = w->fh[52]*w->S[62] + w->fh[53]*w->S[119];
+    t->Phi[6][8] = w->fh[52]*w->S[63] + w->fh[53]*w->S[120];
+    t->Phi[6][9] = w->fh[52]*w->S[64] + w->fh[53]*w->S[121];
+    t->Phi[6][10] = w->fh[52]*w->S[65] + w->fh[53]*w->S[122];
+    t->Phi[6][11] = w->fh[52]*w->S[66] + w->fh[53]*w->S[123];
+    t->Phi[6][12] = w->fh[52]*w->S[67] + w->fh[53]*w->S[124];
+    t->Phi[6][13] = w->fh[52]*w->S[68] + w->fh[53]*w->S[125];
+    t->Phi[6][14] = w->fh[52]*w->S[69] + w->fh[53]*w->S[126];
+    t->Phi[7][0] = w->fh[54]*w->S[42] + w->fh[55]*w->S[84] + w->fh[56]*w->S[113];
+    t->Phi[7][1] = w->fh[54]*w->S[43] + w->fh[55]*w->S[85] + w->fh[56]*w->S[114];
+    t->Phi[7][2] = w->fh[54]*w->S[44] + w->fh[55]*w->S[86] + w->fh[56]*w->S[115];
+    t->Phi[7][3] = w->fh[54]*w->S[45] + w->fh[55]*w->S[87] + w->fh[56]*w->S[116];
+    t->Phi[7][4] = w->fh[54]*w->S[46] + w->fh[55]*w->S[88] + w->fh[56]*w->S[117];
+    t->Phi[7][5] = w->fh[54]*w->S[47] + w->fh[55]*w->S[89] + w->fh[56]*w->S[118];
+    t->Phi[7][6] = w->fh[54]*w->S[48] + w->fh[55]*w->S[90] + w->fh[56]*w->S[119];
+    t->Phi[7][7] = 0;
+    t->Phi[7][8] = w->fh[54]*w->S[49] + w->fh[55]*w->S[91] + w->fh[56]*w->S[120];
+    t->Phi[7][9] = w->fh[54]*w->S[50] + w->fh[55]*w->S[92] + w->fh[56]*w->S[121];
+    t->Phi[7][10] = w->fh[54]*w->S[51] + w->fh[55]*w->S[93] + w->fh[56]*w->S[122];
+    t->Phi[7][11] = w->fh[54]*w->S[52] + w->fh[55]*w->S[94] + w->fh[56]*w->S[123];
+    t->Phi[7][12] = w->fh[54]*w->S[53] + w->fh[55]*w->S[95] + w->fh[56]*w->S[124];
+    t->Phi[7][13] = w->fh[54]*w->S[54] + w->fh[55]*w->S[96] + w->fh[56]*w->S[125];
+    t->Phi[7][14] = w->fh[54]*w->S[55] + w->fh[55]*w->S[97] + w->fh[56]*w->S[126];
+    t->Phi[8][0] = w->fh[57]*w->S[70];
+    t->Phi[8][1] = w->fh[57]*w->S[71];
+    t->Phi[8][2] = w->fh[57]*w->S[72];
+    t->Phi[8][3] = w->fh[57]*w->S[73];
+    t->Phi[8][4] = w->fh[57]*w->S[74];
+    t->Phi[8][5] = w->fh[57]*w->S[75];
+    t->Phi[8][6] = w->fh[57]*w->S[76];
+    t->Phi[8][8] = w->fh[57]*w->S[77];
+    t->Phi[8][9] = w->fh[57]*w->S[78];
+    t->Phi[8][10] = w->fh[57]*w->S[79];
+    t->Phi[8][11] = w->fh[57]*w->S[80];
+    t->Phi[8][12] = w->fh[57]*w->S[81];
+    t->Phi[8][13] = w->fh[57]*w->S[82];
+    t->Phi[8][14] = w->fh[57]*w->S[83];
 }
 
 INS_GPS15_TWIN_BLOCK void doubling(ins_gps15_twin_transition *restrict t,
@@ -4841,1089 +2108,1029 @@ INS_GPS15_TWIN_BLOCK void doubling(ins_gps15_twin_transition *restrict t,
     w->term[0][0] = t->Phi[0][0]*t->Phi[0][0] + t->Phi[0][1]*t->Phi[1][0] +
             t->Phi[0][2]*t->Phi[2][0] + t->Phi[0][3]*t->Phi[3][0] + t->Phi[0][4]*t->Phi[4][0] +
             t->Phi[0][5]*t->Phi[5][0] + t->Phi[0][6]*t->Phi[6][0] + t->Phi[0][8]*t->Phi[8][0];
-    w->term[1][0] = w->S[0] + t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[28] +
+    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[28] +
             t->Phi[0][3]*w->S[42] + t->Phi[0][4]*w->S[56] + t->Phi[0][5]*w->S[70] +
             t->Phi[0][6]*w->S[84] + t->Phi[0][8]*w->S[113];
     w->term[0][1] = t->Phi[0][0]*t->Phi[0][1] + t->Phi[0][1]*t->Phi[1][1] +
             t->Phi[0][2]*t->Phi[2][1] + t->Phi[0][3]*t->Phi[3][1] + t->Phi[0][4]*t->Phi[4][1] +
             t->Phi[0][5]*t->Phi[5][1] + t->Phi[0][6]*t->Phi[6][1] + t->Phi[0][8]*t->Phi[8][1];
-    w->term[1][1] = w->S[1] + t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[29] +
+    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[29] +
             t->Phi[0][3]*w->S[43] + t->Phi[0][4]*w->S[57] + t->Phi[0][5]*w->S[71] +
             t->Phi[0][6]*w->S[85] + t->Phi[0][8]*w->S[114];
     w->term[0][2] = t->Phi[0][0]*t->Phi[0][2] + t->Phi[0][1]*t->Phi[1][2] +
             t->Phi[0][2]*t->Phi[2][2] + t->Phi[0][3]*t->Phi[3][2] + t->Phi[0][4]*t->Phi[4][2] +
             t->Phi[0][5]*t->Phi[5][2] + t->Phi[0][6]*t->Phi[6][2] + t->Phi[0][8]*t->Phi[8][2];
-    w->term[1][2] = w->S[2] + t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[30] +
+    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[30] +
             t->Phi[0][3]*w->S[44] + t->Phi[0][4]*w->S[58] + t->Phi[0][5]*w->S[72] +
             t->Phi[0][6]*w->S[86] + t->Phi[0][8]*w->S[115];
     w->term[0][3] = t->Phi[0][0]*t->Phi[0][3] + t->Phi[0][1]*t->Phi[1][3] +
             t->Phi[0][2]*t->Phi[2][3] + t->Phi[0][3]*t->Phi[3][3] + t->Phi[0][4]*t->Phi[4][3] +
             t->Phi[0][5]*t->Phi[5][3] + t->Phi[0][6]*t->Phi[6][3] + t->Phi[0][8]*t->Phi[8][3];
-    w->term[1][3] = w->S[3] + t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[31] +
+    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[31] +
             t->Phi[0][3]*w->S[45] + t->Phi[0][4]*w->S[59] + t->Phi[0][5]*w->S[73] +
             t->Phi[0][6]*w->S[87] + t->Phi[0][8]*w->S[116];
     w->term[0][4] = t->Phi[0][0]*t->Phi[0][4] + t->Phi[0][1]*t->Phi[1][4] +
             t->Phi[0][2]*t->Phi[2][4] + t->Phi[0][3]*t->Phi[3][4] + t->Phi[0][4]*t->Phi[4][4] +
             t->Phi[0][5]*t->Phi[5][4] + t->Phi[0][6]*t->Phi[6][4] + t->Phi[0][8]*t->Phi[8][4];
-    w->term[1][4] = w->S[4] + t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[18] + t->Phi[0][2]*w->S[32] +
+    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[18] + t->Phi[0][2]*w->S[32] +
             t->Phi[0][3]*w->S[46] + t->Phi[0][4]*w->S[60] + t->Phi[0][5]*w->S[74] +
             t->Phi[0][6]*w->S[88] + t->Phi[0][8]*w->S[117];
     w->term[0][5] = t->Phi[0][0]*t->Phi[0][5] + t->Phi[0][1]*t->Phi[1][5] +
             t->Phi[0][2]*t->Phi[2][5] + t->Phi[0][3]*t->Phi[3][5] + t->Phi[0][4]*t->Phi[4][5] +
             t->Phi[0][5]*t->Phi[5][5] + t->Phi[0][6]*t->Phi[6][5] + t->Phi[0][8]*t->Phi[8][5];
-    w->term[1][5] = w->S[5] + t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[19] + t->Phi[0][2]*w->S[33] +
+    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[19] + t->Phi[0][2]*w->S[33] +
             t->Phi[0][3]*w->S[47] + t->Phi[0][4]*w->S[61] + t->Phi[0][5]*w->S[75] +
             t->Phi[0][6]*w->S[89] + t->Phi[0][8]*w->S[118];
     w->term[0][6] = t->Phi[0][0]*t->Phi[0][6] + t->Phi[0][1]*t->Phi[1][6] +
             t->Phi[0][2]*t->Phi[2][6] + t->Phi[0][3]*t->Phi[3][6] + t->Phi[0][4]*t->Phi[4][6] +
             t->Phi[0][5]*t->Phi[5][6] + t->Phi[0][6]*t->Phi[6][6] + t->Phi[0][8]*t->Phi[8][6];
-    w->term[1][6] = w->S[6] + t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[20] + t->Phi[0][2]*w->S[34] +
+    w->term[1][6] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[20] + t->Phi[0][2]*w->S[34] +
             t->Phi[0][3]*w->S[48] + t->Phi[0][4]*w->S[62] + t->Phi[0][5]*w->S[76] +
             t->Phi[0][6]*w->S[90] + t->Phi[0][8]*w->S[119];
     w->term[0][7] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
             t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
             t->Phi[0][5]*t->Phi[5][8] + t->Phi[0][6]*t->Phi[6][8] + t->Phi[0][8]*t->Phi[8][8];
-    w->term[1][7] = w->S[7] + t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[21] + t->Phi[0][2]*w->S[35] +
+    w->term[1][7] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[21] + t->Phi[0][2]*w->S[35] +
             t->Phi[0][3]*w->S[49] + t->Phi[0][4]*w->S[63] + t->Phi[0][5]*w->S[77] +
             t->Phi[0][6]*w->S[91] + t->Phi[0][8]*w->S[120];
     w->term[0][8] = t->Phi[0][0]*t->Phi[0][9] + t->Phi[0][1]*t->Phi[1][9] +
             t->Phi[0][2]*t->Phi[2][9] + t->Phi[0][3]*t->Phi[3][9] + t->Phi[0][4]*t->Phi[4][9] +
-            t->Phi[0][5]*t->Phi[5][9] + t->Phi[0][6]*t->Phi[6][9] + t->Phi[0][8]*t->Phi[8][9] +
-            t->Phi[0][9];
-    w->term[1][8] = w->S[8] + t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[22] + t->Phi[0][2]*w->S[36] +
+            t->Phi[0][5]*t->Phi[5][9] + t->Phi[0][6]*t->Phi[6][9] + t->Phi[0][8]*t->Phi[8][9];
+    w->term[1][8] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[22] + t->Phi[0][2]*w->S[36] +
             t->Phi[0][3]*w->S[50] + t->Phi[0][4]*w->S[64] + t->Phi[0][5]*w->S[78] +
             t->Phi[0][6]*w->S[92] + t->Phi[0][8]*w->S[121] + t->Phi[0][9];
     w->term[0][9] = t->Phi[0][0]*t->Phi[0][10] + t->Phi[0][1]*t->Phi[1][10] +
             t->Phi[0][2]*t->Phi[2][10] + t->Phi[0][3]*t->Phi[3][10] + t->Phi[0][4]*t->Phi[4][10] +
-            t->Phi[0][5]*t->Phi[5][10] + t->Phi[0][6]*t->Phi[6][10] + t->Phi[0][8]*t->Phi[8][10] +
-            t->Phi[0][10];
-    w->term[1][9] = w->S[9] + t->Phi[0][0]*w->S[9] + t->Phi[0][1]*w->S[23] + t->Phi[0][2]*w->S[37] +
+            t->Phi[0][5]*t->Phi[5][10] + t->Phi[0][6]*t->Phi[6][10] + t->Phi[0][8]*t->Phi[8][10];
+    w->term[1][9] = t->Phi[0][0]*w->S[9] + t->Phi[0][1]*w->S[23] + t->Phi[0][2]*w->S[37] +
             t->Phi[0][3]*w->S[51] + t->Phi[0][4]*w->S[65] + t->Phi[0][5]*w->S[79] +
             t->Phi[0][6]*w->S[93] + t->Phi[0][8]*w->S[122] + t->Phi[0][10];
     w->term[0][10] = t->Phi[0][0]*t->Phi[0][11] + t->Phi[0][1]*t->Phi[1][11] +
             t->Phi[0][2]*t->Phi[2][11] + t->Phi[0][3]*t->Phi[3][11] + t->Phi[0][4]*t->Phi[4][11] +
-            t->Phi[0][5]*t->Phi[5][11] + t->Phi[0][6]*t->Phi[6][11] + t->Phi[0][8]*t->Phi[8][11] +
-            t->Phi[0][11];
-    w->term[1][10] = w->S[10] + t->Phi[0][0]*w->S[10] + t->Phi[0][1]*w->S[24] +
-            t->Phi[0][2]*w->S[38] + t->Phi[0][3]*w->S[52] + t->Phi[0][4]*w->S[66] +
-            t->Phi[0][5]*w->S[80] + t->Phi[0][6]*w->S[94] + t->Phi[0][8]*w->S[123] + t->Phi[0][11];
+            t->Phi[0][5]*t->Phi[5][11] + t->Phi[0][6]*t->Phi[6][11] + t->Phi[0][8]*t->Phi[8][11];
+    w->term[1][10] = t->Phi[0][0]*w->S[10] + t->Phi[0][1]*w->S[24] + t->Phi[0][2]*w->S[38] +
+            t->Phi[0][3]*w->S[52] + t->Phi[0][4]*w->S[66] + t->Phi[0][5]*w->S[80] +
+            t->Phi[0][6]*w->S[94] + t->Phi[0][8]*w->S[123] + t->Phi[0][11];
     w->term[0][11] = t->Phi[0][0]*t->Phi[0][12] + t->Phi[0][1]*t->Phi[1][12] +
             t->Phi[0][2]*t->Phi[2][12] + t->Phi[0][3]*t->Phi[3][12] + t->Phi[0][4]*t->Phi[4][12] +
-            t->Phi[0][5]*t->Phi[5][12] + t->Phi[0][6]*t->Phi[6][12] + t->Phi[0][8]*t->Phi[8][12] +
-            t->Phi[0][12];
-    w->term[1][11] = w->S[11] + t->Phi[0][0]*w->S[11] + t->Phi[0][1]*w->S[25] +
-            t->Phi[0][2]*w->S[39] + t->Phi[0][3]*w->S[53] + t->Phi[0][4]*w->S[67] +
-            t->Phi[0][5]*w->S[81] + t->Phi[0][6]*w->S[95] + t->Phi[0][8]*w->S[124] + t->Phi[0][12];
+            t->Phi[0][5]*t->Phi[5][12] + t->Phi[0][6]*t->Phi[6][12] + t->Phi[0][8]*t->Phi[8][12];
+    w->term[1][11] = t->Phi[0][0]*w->S[11] + t->Phi[0][1]*w->S[25] + t->Phi[0][2]*w->S[39] +
+            t->Phi[0][3]*w->S[53] + t->Phi[0][4]*w->S[67] + t->Phi[0][5]*w->S[81] +
+            t->Phi[0][6]*w->S[95] + t->Phi[0][8]*w->S[124] + t->Phi[0][12];
     w->term[0][12] = t->Phi[0][0]*t->Phi[0][13] + t->Phi[0][1]*t->Phi[1][13] +
             t->Phi[0][2]*t->Phi[2][13] + t->Phi[0][3]*t->Phi[3][13] + t->Phi[0][4]*t->Phi[4][13] +
-            t->Phi[0][5]*t->Phi[5][13] + t->Phi[0][6]*t->Phi[6][13] + t->Phi[0][8]*t->Phi[8][13] +
-            t->Phi[0][13];
-    w->term[1][12] = w->S[12] + t->Phi[0][0]*w->S[12] + t->Phi[0][1]*w->S[26] +
-            t->Phi[0][2]*w->S[40] + t->Phi[0][3]*w->S[54] + t->Phi[0][4]*w->S[68] +
-            t->Phi[0][5]*w->S[82] + t->Phi[0][6]*w->S[96] + t->Phi[0][8]*w->S[125] + t->Phi[0][13];
+            t->Phi[0][5]*t->Phi[5][13] + t->Phi[0][6]*t->Phi[6][13] + t->Phi[0][8]*t->Phi[8][13];
+    w->term[1][12] = t->Phi[0][0]*w->S[12] + t->Phi[0][1]*w->S[26] + t->Phi[0][2]*w->S[40] +
+            t->Phi[0][3]*w->S[54] + t->Phi[0][4]*w->S[68] + t->Phi[0][5]*w->S[82] +
+            t->Phi[0][6]*w->S[96] + t->Phi[0][8]*w->S[125] + t->Phi[0][13];
     w->term[0][13] = t->Phi[0][0]*t->Phi[0][14] + t->Phi[0][1]*t->Phi[1][14] +
             t->Phi[0][2]*t->Phi[2][14] + t->Phi[0][3]*t->Phi[3][14] + t->Phi[0][4]*t->Phi[4][14] +
-            t->Phi[0][5]*t->Phi[5][14] + t->Phi[0][6]*t->Phi[6][14] + t->Phi[0][8]*t->Phi[8][14] +
-            t->Phi[0][14];
-    w->term[1][13] = w->S[13] + t->Phi[0][0]*w->S[13] + t->Phi[0][1]*w->S[27] +
-            t->Phi[0][2]*w->S[41] + t->Phi[0][3]*w->S[55] + t->Phi[0][4]*w->S[69] +
-            t->Phi[0][5]*w->S[83] + t->Phi[0][6]*w->S[97] + t->Phi[0][8]*w->S[126] + t->Phi[0][14];
+            t->Phi[0][5]*t->Phi[5][14] + t->Phi[0][6]*t->Phi[6][14] + t->Phi[0][8]*t->Phi[8][14];
+    w->term[1][13] = t->Phi[0][0]*w->S[13] + t->Phi[0][1]*w->S[27] + t->Phi[0][2]*w->S[41] +
+            t->Phi[0][3]*w->S[55] + t->Phi[0][4]*w->S[69] + t->Phi[0][5]*w->S[83] +
+            t->Phi[0][6]*w->S[97] + t->Phi[0][8]*w->S[126] + t->Phi[0][14];
     w->term[0][14] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
             t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
             t->Phi[1][5]*t->Phi[5][0] + t->Phi[1][6]*t->Phi[6][0] + t->Phi[1][8]*t->Phi[8][0];
-    w->term[1][14] = w->S[14] + t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[28]
-            + t->Phi[1][3]*w->S[42] + t->Phi[1][4]*w->S[56] + t->Phi[1][5]*w->S[70] +
+    w->term[1][14] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[28] +
+            t->Phi[1][3]*w->S[42] + t->Phi[1][4]*w->S[56] + t->Phi[1][5]*w->S[70] +
             t->Phi[1][6]*w->S[84] + t->Phi[1][8]*w->S[113];
     w->term[0][15] = t->Phi[1][0]*t->Phi[0][1] + t->Phi[1][1]*t->Phi[1][1] +
             t->Phi[1][2]*t->Phi[2][1] + t->Phi[1][3]*t->Phi[3][1] + t->Phi[1][4]*t->Phi[4][1] +
             t->Phi[1][5]*t->Phi[5][1] + t->Phi[1][6]*t->Phi[6][1] + t->Phi[1][8]*t->Phi[8][1];
-    w->term[1][15] = w->S[15] + t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[29]
-            + t->Phi[1][3]*w->S[43] + t->Phi[1][4]*w->S[57] + t->Phi[1][5]*w->S[71] +
+    w->term[1][15] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[29] +
+            t->Phi[1][3]*w->S[43] + t->Phi[1][4]*w->S[57] + t->Phi[1][5]*w->S[71] +
             t->Phi[1][6]*w->S[85] + t->Phi[1][8]*w->S[114];
     w->term[0][16] = t->Phi[1][0]*t->Phi[0][2] + t->Phi[1][1]*t->Phi[1][2] +
             t->Phi[1][2]*t->Phi[2][2] + t->Phi[1][3]*t->Phi[3][2] + t->Phi[1][4]*t->Phi[4][2] +
             t->Phi[1][5]*t->Phi[5][2] + t->Phi[1][6]*t->Phi[6][2] + t->Phi[1][8]*t->Phi[8][2];
-    w->term[1][16] = w->S[16] + t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[30]
-            + t->Phi[1][3]*w->S[44] + t->Phi[1][4]*w->S[58] + t->Phi[1][5]*w->S[72] +
+    w->term[1][16] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[30] +
+            t->Phi[1][3]*w->S[44] + t->Phi[1][4]*w->S[58] + t->Phi[1][5]*w->S[72] +
             t->Phi[1][6]*w->S[86] + t->Phi[1][8]*w->S[115];
     w->term[0][17] = t->Phi[1][0]*t->Phi[0][3] + t->Phi[1][1]*t->Phi[1][3] +
             t->Phi[1][2]*t->Phi[2][3] + t->Phi[1][3]*t->Phi[3][3] + t->Phi[1][4]*t->Phi[4][3] +
             t->Phi[1][5]*t->Phi[5][3] + t->Phi[1][6]*t->Phi[6][3] + t->Phi[1][8]*t->Phi[8][3];
-    w->term[1][17] = w->S[17] + t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[31]
-            + t->Phi[1][3]*w->S[45] + t->Phi[1][4]*w->S[59] + t->Phi[1][5]*w->S[73] +
+    w->term[1][17] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[31] +
+            t->Phi[1][3]*w->S[45] + t->Phi[1][4]*w->S[59] + t->Phi[1][5]*w->S[73] +
             t->Phi[1][6]*w->S[87] + t->Phi[1][8]*w->S[116];
     w->term[0][18] = t->Phi[1][0]*t->Phi[0][4] + t->Phi[1][1]*t->Phi[1][4] +
             t->Phi[1][2]*t->Phi[2][4] + t->Phi[1][3]*t->Phi[3][4] + t->Phi[1][4]*t->Phi[4][4] +
             t->Phi[1][5]*t->Phi[5][4] + t->Phi[1][6]*t->Phi[6][4] + t->Phi[1][8]*t->Phi[8][4];
-    w->term[1][18] = w->S[18] + t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[18] + t->Phi[1][2]*w->S[32]
-            + t->Phi[1][3]*w->S[46] + t->Phi[1][4]*w->S[60] + t->Phi[1][5]*w->S[74] +
+    w->term[1][18] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[18] + t->Phi[1][2]*w->S[32] +
+            t->Phi[1][3]*w->S[46] + t->Phi[1][4]*w->S[60] + t->Phi[1][5]*w->S[74] +
             t->Phi[1][6]*w->S[88] + t->Phi[1][8]*w->S[117];
     w->term[0][19] = t->Phi[1][0]*t->Phi[0][5] + t->Phi[1][1]*t->Phi[1][5] +
             t->Phi[1][2]*t->Phi[2][5] + t->Phi[1][3]*t->Phi[3][5] + t->Phi[1][4]*t->Phi[4][5] +
             t->Phi[1][5]*t->Phi[5][5] + t->Phi[1][6]*t->Phi[6][5] + t->Phi[1][8]*t->Phi[8][5];
-    w->term[1][19] = w->S[19] + t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[19] + t->Phi[1][2]*w->S[33]
-            + t->Phi[1][3]*w->S[47] + t->Phi[1][4]*w->S[61] + t->Phi[1][5]*w->S[75] +
+    w->term[1][19] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[19] + t->Phi[1][2]*w->S[33] +
+            t->Phi[1][3]*w->S[47] + t->Phi[1][4]*w->S[61] + t->Phi[1][5]*w->S[75] +
             t->Phi[1][6]*w->S[89] + t->Phi[1][8]*w->S[118];
     w->term[0][20] = t->Phi[1][0]*t->Phi[0][6] + t->Phi[1][1]*t->Phi[1][6] +
             t->Phi[1][2]*t->Phi[2][6] + t->Phi[1][3]*t->Phi[3][6] + t->Phi[1][4]*t->Phi[4][6] +
             t->Phi[1][5]*t->Phi[5][6] + t->Phi[1][6]*t->Phi[6][6] + t->Phi[1][8]*t->Phi[8][6];
-    w->term[1][20] = w->S[20] + t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[20] + t->Phi[1][2]*w->S[34]
-            + t->Phi[1][3]*w->S[48] + t->Phi[1][4]*w->S[62] + t->Phi[1][5]*w->S[76] +
+    w->term[1][20] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[20] + t->Phi[1][2]*w->S[34] +
+            t->Phi[1][3]*w->S[48] + t->Phi[1][4]*w->S[62] + t->Phi[1][5]*w->S[76] +
             t->Phi[1][6]*w->S[90] + t->Phi[1][8]*w->S[119];
     w->term[0][21] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
             t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
             t->Phi[1][5]*t->Phi[5][8] + t->Phi[1][6]*t->Phi[6][8] + t->Phi[1][8]*t->Phi[8][8];
-    w->term[1][21] = w->S[21] + t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[21] + t->Phi[1][2]*w->S[35]
-            + t->Phi[1][3]*w->S[49] + t->Phi[1][4]*w->S[63] + t->Phi[1][5]*w->S[77] +
+    w->term[1][21] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[21] + t->Phi[1][2]*w->S[35] +
+            t->Phi[1][3]*w->S[49] + t->Phi[1][4]*w->S[63] + t->Phi[1][5]*w->S[77] +
             t->Phi[1][6]*w->S[91] + t->Phi[1][8]*w->S[120];
     w->term[0][22] = t->Phi[1][0]*t->Phi[0][9] + t->Phi[1][1]*t->Phi[1][9] +
             t->Phi[1][2]*t->Phi[2][9] + t->Phi[1][3]*t->Phi[3][9] + t->Phi[1][4]*t->Phi[4][9] +
-            t->Phi[1][5]*t->Phi[5][9] + t->Phi[1][6]*t->Phi[6][9] + t->Phi[1][8]*t->Phi[8][9] +
-            t->Phi[1][9];
-    w->term[1][22] = w->S[22] + t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[22] + t->Phi[1][2]*w->S[36]
-            + t->Phi[1][3]*w->S[50] + t->Phi[1][4]*w->S[64] + t->Phi[1][5]*w->S[78] +
+            t->Phi[1][5]*t->Phi[5][9] + t->Phi[1][6]*t->Phi[6][9] + t->Phi[1][8]*t->Phi[8][9];
+    w->term[1][22] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[22] + t->Phi[1][2]*w->S[36] +
+            t->Phi[1][3]*w->S[50] + t->Phi[1][4]*w->S[64] + t->Phi[1][5]*w->S[78] +
             t->Phi[1][6]*w->S[92] + t->Phi[1][8]*w->S[121] + t->Phi[1][9];
     w->term[0][23] = t->Phi[1][0]*t->Phi[0][10] + t->Phi[1][1]*t->Phi[1][10] +
             t->Phi[1][2]*t->Phi[2][10] + t->Phi[1][3]*t->Phi[3][10] + t->Phi[1][4]*t->Phi[4][10] +
-            t->Phi[1][5]*t->Phi[5][10] + t->Phi[1][6]*t->Phi[6][10] + t->Phi[1][8]*t->Phi[8][10] +
-            t->Phi[1][10];
-    w->term[1][23] = w->S[23] + t->Phi[1][0]*w->S[9] + t->Phi[1][1]*w->S[23] + t->Phi[1][2]*w->S[37]
-            + t->Phi[1][3]*w->S[51] + t->Phi[1][4]*w->S[65] + t->Phi[1][5]*w->S[79] +
+            t->Phi[1][5]*t->Phi[5][10] + t->Phi[1][6]*t->Phi[6][10] + t->Phi[1][8]*t->Phi[8][10];
+    w->term[1][23] = t->Phi[1][0]*w->S[9] + t->Phi[1][1]*w->S[23] + t->Phi[1][2]*w->S[37] +
+            t->Phi[1][3]*w->S[51] + t->Phi[1][4]*w->S[65] + t->Phi[1][5]*w->S[79] +
             t->Phi[1][6]*w->S[93] + t->Phi[1][8]*w->S[122] + t->Phi[1][10];
     w->term[0][24] = t->Phi[1][0]*t->Phi[0][11] + t->Phi[1][1]*t->Phi[1][11] +
             t->Phi[1][2]*t->Phi[2][11] + t->Phi[1][3]*t->Phi[3][11] + t->Phi[1][4]*t->Phi[4][11] +
-            t->Phi[1][5]*t->Phi[5][11] + t->Phi[1][6]*t->Phi[6][11] + t->Phi[1][8]*t->Phi[8][11] +
-            t->Phi[1][11];
-    w->term[1][24] = w->S[24] + t->Phi[1][0]*w->S[10] + t->Phi[1][1]*w->S[24] +
-            t->Phi[1][2]*w->S[38] + t->Phi[1][3]*w->S[52] + t->Phi[1][4]*w->S[66] +
-            t->Phi[1][5]*w->S[80] + t->Phi[1][6]*w->S[94] + t->Phi[1][8]*w->S[123] + t->Phi[1][11];
+            t->Phi[1][5]*t->Phi[5][11] + t->Phi[1][6]*t->Phi[6][11] + t->Phi[1][8]*t->Phi[8][11];
+    w->term[1][24] = t->Phi[1][0]*w->S[10] + t->Phi[1][1]*w->S[24] + t->Phi[1][2]*w->S[38] +
+            t->Phi[1][3]*w->S[52] + t->Phi[1][4]*w->S[66] + t->Phi[1][5]*w->S[80] +
+            t->Phi[1][6]*w->S[94] + t->Phi[1][8]*w->S[123] + t->Phi[1][11];
     w->term[0][25] = t->Phi[1][0]*t->Phi[0][12] + t->Phi[1][1]*t->Phi[1][12] +
             t->Phi[1][2]*t->Phi[2][12] + t->Phi[1][3]*t->Phi[3][12] + t->Phi[1][4]*t->Phi[4][12] +
-            t->Phi[1][5]*t->Phi[5][12] + t->Phi[1][6]*t->Phi[6][12] + t->Phi[1][8]*t->Phi[8][12] +
-            t->Phi[1][12];
-    w->term[1][25] = w->S[25] + t->Phi[1][0]*w->S[11] + t->Phi[1][1]*w->S[25] +
-            t->Phi[1][2]*w->S[39] + t->Phi[1][3]*w->S[53] + t->Phi[1][4]*w->S[67] +
-            t->Phi[1][5]*w->S[81] + t->Phi[1][6]*w->S[95] + t->Phi[1][8]*w->S[124] + t->Phi[1][12];
+            t->Phi[1][5]*t->Phi[5][12] + t->Phi[1][6]*t->Phi[6][12] + t->Phi[1][8]*t->Phi[8][12];
+    w->term[1][25] = t->Phi[1][0]*w->S[11] + t->Phi[1][1]*w->S[25] + t->Phi[1][2]*w->S[39] +
+            t->Phi[1][3]*w->S[53] + t->Phi[1][4]*w->S[67] + t->Phi[1][5]*w->S[81] +
+            t->Phi[1][6]*w->S[95] + t->Phi[1][8]*w->S[124] + t->Phi[1][12];
     w->term[0][26] = t->Phi[1][0]*t->Phi[0][13] + t->Phi[1][1]*t->Phi[1][13] +
             t->Phi[1][2]*t->Phi[2][13] + t->Phi[1][3]*t->Phi[3][13] + t->Phi[1][4]*t->Phi[4][13] +
-            t->Phi[1][5]*t->Phi[5][13] + t->Phi[1][6]*t->Phi[6][13] + t->Phi[1][8]*t->Phi[8][13] +
-            t->Phi[1][13];
-    w->term[1][26] = w->S[26] + t->Phi[1][0]*w->S[12] + t->Phi[1][1]*w->S[26] +
-            t->Phi[1][2]*w->S[40] + t->Phi[1][3]*w->S[54] + t->Phi[1][4]*w->S[68] +
-            t->Phi[1][5]*w->S[82] + t->Phi[1][6]*w->S[96] + t->Phi[1][8]*w->S[125] + t->Phi[1][13];
+            t->Phi[1][5]*t->Phi[5][13] + t->Phi[1][6]*t->Phi[6][13] + t->Phi[1][8]*t->Phi[8][13];
+    w->term[1][26] = t->Phi[1][0]*w->S[12] + t->Phi[1][1]*w->S[26] + t->Phi[1][2]*w->S[40] +
+            t->Phi[1][3]*w->S[54] + t->Phi[1][4]*w->S[68] + t->Phi[1][5]*w->S[82] +
+            t->Phi[1][6]*w->S[96] + t->Phi[1][8]*w->S[125] + t->Phi[1][13];
     w->term[0][27] = t->Phi[1][0]*t->Phi[0][14] + t->Phi[1][1]*t->Phi[1][14] +
             t->Phi[1][2]*t->Phi[2][14] + t->Phi[1][3]*t->Phi[3][14] + t->Phi[1][4]*t->Phi[4][14] +
-            t->Phi[1][5]*t->Phi[5][14] + t->Phi[1][6]*t->Phi[6][14] + t->Phi[1][8]*t->Phi[8][14] +
-            t->Phi[1][14];
-    w->term[1][27] = w->S[27] + t->Phi[1][0]*w->S[13] + t->Phi[1][1]*w->S[27] +
-            t->Phi[1][2]*w->S[41] + t->Phi[1][3]*w->S[55] + t->Phi[1][4]*w->S[69] +
-            t->Phi[1][5]*w->S[83] + t->Phi[1][6]*w->S[97] + t->Phi[1][8]*w->S[126] + t->Phi[1][14];
+            t->Phi[1][5]*t->Phi[5][14] + t->Phi[1][6]*t->Phi[6][14] + t->Phi[1][8]*t->Phi[8][14];
+    w->term[1][27] = t->Phi[1][0]*w->S[13] + t->Phi[1][1]*w->S[27] + t->Phi[1][2]*w->S[41] +
+            t->Phi[1][3]*w->S[55] + t->Phi[1][4]*w->S[69] + t->Phi[1][5]*w->S[83] +
+            t->Phi[1][6]*w->S[97] + t->Phi[1][8]*w->S[126] + t->Phi[1][14];
     w->term[0][28] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
             t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
             t->Phi[2][5]*t->Phi[5][0] + t->Phi[2][6]*t->Phi[6][0] + t->Phi[2][8]*t->Phi[8][0];
-    w->term[1][28] = w->S[28] + t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[28]
-            + t->Phi[2][3]*w->S[42] + t->Phi[2][4]*w->S[56] + t->Phi[2][5]*w->S[70] +
+    w->term[1][28] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[28] +
+            t->Phi[2][3]*w->S[42] + t->Phi[2][4]*w->S[56] + t->Phi[2][5]*w->S[70] +
             t->Phi[2][6]*w->S[84] + t->Phi[2][8]*w->S[113];
     w->term[0][29] = t->Phi[2][0]*t->Phi[0][1] + t->Phi[2][1]*t->Phi[1][1] +
             t->Phi[2][2]*t->Phi[2][1] + t->Phi[2][3]*t->Phi[3][1] + t->Phi[2][4]*t->Phi[4][1] +
             t->Phi[2][5]*t->Phi[5][1] + t->Phi[2][6]*t->Phi[6][1] + t->Phi[2][8]*t->Phi[8][1];
-    w->term[1][29] = w->S[29] + t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[29]
-            + t->Phi[2][3]*w->S[43] + t->Phi[2][4]*w->S[57] + t->Phi[2][5]*w->S[71] +
+    w->term[1][29] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[29] +
+            t->Phi[2][3]*w->S[43] + t->Phi[2][4]*w->S[57] + t->Phi[2][5]*w->S[71] +
             t->Phi[2][6]*w->S[85] + t->Phi[2][8]*w->S[114];
     w->term[0][30] = t->Phi[2][0]*t->Phi[0][2] + t->Phi[2][1]*t->Phi[1][2] +
             t->Phi[2][2]*t->Phi[2][2] + t->Phi[2][3]*t->Phi[3][2] + t->Phi[2][4]*t->Phi[4][2] +
             t->Phi[2][5]*t->Phi[5][2] + t->Phi[2][6]*t->Phi[6][2] + t->Phi[2][8]*t->Phi[8][2];
-    w->term[1][30] = w->S[30] + t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[30]
-            + t->Phi[2][3]*w->S[44] + t->Phi[2][4]*w->S[58] + t->Phi[2][5]*w->S[72] +
+    w->term[1][30] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[30] +
+            t->Phi[2][3]*w->S[44] + t->Phi[2][4]*w->S[58] + t->Phi[2][5]*w->S[72] +
             t->Phi[2][6]*w->S[86] + t->Phi[2][8]*w->S[115];
     w->term[0][31] = t->Phi[2][0]*t->Phi[0][3] + t->Phi[2][1]*t->Phi[1][3] +
             t->Phi[2][2]*t->Phi[2][3] + t->Phi[2][3]*t->Phi[3][3] + t->Phi[2][4]*t->Phi[4][3] +
             t->Phi[2][5]*t->Phi[5][3] + t->Phi[2][6]*t->Phi[6][3] + t->Phi[2][8]*t->Phi[8][3];
-    w->term[1][31] = w->S[31] + t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[31]
-            + t->Phi[2][3]*w->S[45] + t->Phi[2][4]*w->S[59] + t->Phi[2][5]*w->S[73] +
+    w->term[1][31] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[31] +
+            t->Phi[2][3]*w->S[45] + t->Phi[2][4]*w->S[59] + t->Phi[2][5]*w->S[73] +
             t->Phi[2][6]*w->S[87] + t->Phi[2][8]*w->S[116];
     w->term[0][32] = t->Phi[2][0]*t->Phi[0][4] + t->Phi[2][1]*t->Phi[1][4] +
             t->Phi[2][2]*t->Phi[2][4] + t->Phi[2][3]*t->Phi[3][4] + t->Phi[2][4]*t->Phi[4][4] +
             t->Phi[2][5]*t->Phi[5][4] + t->Phi[2][6]*t->Phi[6][4] + t->Phi[2][8]*t->Phi[8][4];
-    w->term[1][32] = w->S[32] + t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[18] + t->Phi[2][2]*w->S[32]
-            + t->Phi[2][3]*w->S[46] + t->Phi[2][4]*w->S[60] + t->Phi[2][5]*w->S[74] +
+    w->term[1][32] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[18] + t->Phi[2][2]*w->S[32] +
+            t->Phi[2][3]*w->S[46] + t->Phi[2][4]*w->S[60] + t->Phi[2][5]*w->S[74] +
             t->Phi[2][6]*w->S[88] + t->Phi[2][8]*w->S[117];
     w->term[0][33] = t->Phi[2][0]*t->Phi[0][5] + t->Phi[2][1]*t->Phi[1][5] +
             t->Phi[2][2]*t->Phi[2][5] + t->Phi[2][3]*t->Phi[3][5] + t->Phi[2][4]*t->Phi[4][5] +
             t->Phi[2][5]*t->Phi[5][5] + t->Phi[2][6]*t->Phi[6][5] + t->Phi[2][8]*t->Phi[8][5];
-    w->term[1][33] = w->S[33] + t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[19] + t->Phi[2][2]*w->S[33]
-            + t->Phi[2][3]*w->S[47] + t->Phi[2][4]*w->S[61] + t->Phi[2][5]*w->S[75] +
+    w->term[1][33] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[19] + t->Phi[2][2]*w->S[33] +
+            t->Phi[2][3]*w->S[47] + t->Phi[2][4]*w->S[61] + t->Phi[2][5]*w->S[75] +
             t->Phi[2][6]*w->S[89] + t->Phi[2][8]*w->S[118];
     w->term[0][34] = t->Phi[2][0]*t->Phi[0][6] + t->Phi[2][1]*t->Phi[1][6] +
             t->Phi[2][2]*t->Phi[2][6] + t->Phi[2][3]*t->Phi[3][6] + t->Phi[2][4]*t->Phi[4][6] +
             t->Phi[2][5]*t->Phi[5][6] + t->Phi[2][6]*t->Phi[6][6] + t->Phi[2][8]*t->Phi[8][6];
-    w->term[1][34] = w->S[34] + t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[20] + t->Phi[2][2]*w->S[34]
-            + t->Phi[2][3]*w->S[48] + t->Phi[2][4]*w->S[62] + t->Phi[2][5]*w->S[76] +
+    w->term[1][34] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[20] + t->Phi[2][2]*w->S[34] +
+            t->Phi[2][3]*w->S[48] + t->Phi[2][4]*w->S[62] + t->Phi[2][5]*w->S[76] +
             t->Phi[2][6]*w->S[90] + t->Phi[2][8]*w->S[119];
     w->term[0][35] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
             t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
             t->Phi[2][5]*t->Phi[5][8] + t->Phi[2][6]*t->Phi[6][8] + t->Phi[2][8]*t->Phi[8][8];
-    w->term[1][35] = w->S[35] + t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[21] + t->Phi[2][2]*w->S[35]
-            + t->Phi[2][3]*w->S[49] + t->Phi[2][4]*w->S[63] + t->Phi[2][5]*w->S[77] +
+    w->term[1][35] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[21] + t->Phi[2][2]*w->S[35] +
+            t->Phi[2][3]*w->S[49] + t->Phi[2][4]*w->S[63] + t->Phi[2][5]*w->S[77] +
             t->Phi[2][6]*w->S[91] + t->Phi[2][8]*w->S[120];
     w->term[0][36] = t->Phi[2][0]*t->Phi[0][9] + t->Phi[2][1]*t->Phi[1][9] +
             t->Phi[2][2]*t->Phi[2][9] + t->Phi[2][3]*t->Phi[3][9] + t->Phi[2][4]*t->Phi[4][9] +
-            t->Phi[2][5]*t->Phi[5][9] + t->Phi[2][6]*t->Phi[6][9] + t->Phi[2][8]*t->Phi[8][9] +
-            t->Phi[2][9];
-    w->term[1][36] = w->S[36] + t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[22] + t->Phi[2][2]*w->S[36]
-            + t->Phi[2][3]*w->S[50] + t->Phi[2][4]*w->S[64] + t->Phi[2][5]*w->S[78] +
+            t->Phi[2][5]*t->Phi[5][9] + t->Phi[2][6]*t->Phi[6][9] + t->Phi[2][8]*t->Phi[8][9];
+    w->term[1][36] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[22] + t->Phi[2][2]*w->S[36] +
+            t->Phi[2][3]*w->S[50] + t->Phi[2][4]*w->S[64] + t->Phi[2][5]*w->S[78] +
             t->Phi[2][6]*w->S[92] + t->Phi[2][8]*w->S[121] + t->Phi[2][9];
     w->term[0][37] = t->Phi[2][0]*t->Phi[0][10] + t->Phi[2][1]*t->Phi[1][10] +
             t->Phi[2][2]*t->Phi[2][10] + t->Phi[2][3]*t->Phi[3][10] + t->Phi[2][4]*t->Phi[4][10] +
-            t->Phi[2][5]*t->Phi[5][10] + t->Phi[2][6]*t->Phi[6][10] + t->Phi[2][8]*t->Phi[8][10] +
-            t->Phi[2][10];
-    w->term[1][37] = w->S[37] + t->Phi[2][0]*w->S[9] + t->Phi[2][1]*w->S[23] + t->Phi[2][2]*w->S[37]
-            + t->Phi[2][3]*w->S[51] + t->Phi[2][4]*w->S[65] + t->Phi[2][5]*w->S[79] +
+            t->Phi[2][5]*t->Phi[5][10] + t->Phi[2][6]*t->Phi[6][10] + t->Phi[2][8]*t->Phi[8][10];
+    w->term[1][37] = t->Phi[2][0]*w->S[9] + t->Phi[2][1]*w->S[23] + t->Phi[2][2]*w->S[37] +
+            t->Phi[2][3]*w->S[51] + t->Phi[2][4]*w->S[65] + t->Phi[2][5]*w->S[79] +
             t->Phi[2][6]*w->S[93] + t->Phi[2][8]*w->S[122] + t->Phi[2][10];
     w->term[0][38] = t->Phi[2][0]*t->Phi[0][11] + t->Phi[2][1]*t->Phi[1][11] +
             t->Phi[2][2]*t->Phi[2][11] + t->Phi[2][3]*t->Phi[3][11] + t->Phi[2][4]*t->Phi[4][11] +
-            t->Phi[2][5]*t->Phi[5][11] + t->Phi[2][6]*t->Phi[6][11] + t->Phi[2][8]*t->Phi[8][11] +
-            t->Phi[2][11];
-    w->term[1][38] = w->S[38] + t->Phi[2][0]*w->S[10] + t->Phi[2][1]*w->S[24] +
-            t->Phi[2][2]*w->S[38] + t->Phi[2][3]*w->S[52] + t->Phi[2][4]*w->S[66] +
-            t->Phi[2][5]*w->S[80] + t->Phi[2][6]*w->S[94] + t->Phi[2][8]*w->S[123] + t->Phi[2][11];
+            t->Phi[2][5]*t->Phi[5][11] + t->Phi[2][6]*t->Phi[6][11] + t->Phi[2][8]*t->Phi[8][11];
+    w->term[1][38] = t->Phi[2][0]*w->S[10] + t->Phi[2][1]*w->S[24] + t->Phi[2][2]*w->S[38] +
+            t->Phi[2][3]*w->S[52] + t->Phi[2][4]*w->S[66] + t->Phi[2][5]*w->S[80] +
+            t->Phi[2][6]*w->S[94] + t->Phi[2][8]*w->S[123] + t->Phi[2][11];
     w->term[0][39] = t->Phi[2][0]*t->Phi[0][12] + t->Phi[2][1]*t->Phi[1][12] +
             t->Phi[2][2]*t->Phi[2][12] + t->Phi[2][3]*t->Phi[3][12] + t->Phi[2][4]*t->Phi[4][12] +
-            t->Phi[2][5]*t->Phi[5][12] + t->Phi[2][6]*t->Phi[6][12] + t->Phi[2][8]*t->Phi[8][12] +
-            t->Phi[2][12];
-    w->term[1][39] = w->S[39] + t->Phi[2][0]*w->S[11] + t->Phi[2][1]*w->S[25] +
-            t->Phi[2][2]*w->S[39] + t->Phi[2][3]*w->S[53] + t->Phi[2][4]*w->S[67] +
-            t->Phi[2][5]*w->S[81] + t->Phi[2][6]*w->S[95] + t->Phi[2][8]*w->S[124] + t->Phi[2][12];
+            t->Phi[2][5]*t->Phi[5][12] + t->Phi[2][6]*t->Phi[6][12] + t->Phi[2][8]*t->Phi[8][12];
+    w->term[1][39] = t->Phi[2][0]*w->S[11] + t->Phi[2][1]*w->S[25] + t->Phi[2][2]*w->S[39] +
+            t->Phi[2][3]*w->S[53] + t->Phi[2][4]*w->S[67] + t->Phi[2][5]*w->S[81] +
+            t->Phi[2][6]*w->S[95] + t->Phi[2][8]*w->S[124] + t->Phi[2][12];
     w->term[0][40] = t->Phi[2][0]*t->Phi[0][13] + t->Phi[2][1]*t->Phi[1][13] +
             t->Phi[2][2]*t->Phi[2][13] + t->Phi[2][3]*t->Phi[3][13] + t->Phi[2][4]*t->Phi[4][13] +
-            t->Phi[2][5]*t->Phi[5][13] + t->Phi[2][6]*t->Phi[6][13] + t->Phi[2][8]*t->Phi[8][13] +
-            t->Phi[2][13];
-    w->term[1][40] = w->S[40] + t->Phi[2][0]*w->S[12] + t->Phi[2][1]*w->S[26] +
-            t->Phi[2][2]*w->S[40] + t->Phi[2][3]*w->S[54] + t->Phi[2][4]*w->S[68] +
-            t->Phi[2][5]*w->S[82] + t->Phi[2][6]*w->S[96] + t->Phi[2][8]*w->S[125] + t->Phi[2][13];
+            t->Phi[2][5]*t->Phi[5][13] + t->Phi[2][6]*t->Phi[6][13] + t->Phi[2][8]*t->Phi[8][13];
+    w->term[1][40] = t->Phi[2][0]*w->S[12] + t->Phi[2][1]*w->S[26] + t->Phi[2][2]*w->S[40] +
+            t->Phi[2][3]*w->S[54] + t->Phi[2][4]*w->S[68] + t->Phi[2][5]*w->S[82] +
+            t->Phi[2][6]*w->S[96] + t->Phi[2][8]*w->S[125] + t->Phi[2][13];
     w->term[0][41] = t->Phi[2][0]*t->Phi[0][14] + t->Phi[2][1]*t->Phi[1][14] +
             t->Phi[2][2]*t->Phi[2][14] + t->Phi[2][3]*t->Phi[3][14] + t->Phi[2][4]*t->Phi[4][14] +
-            t->Phi[2][5]*t->Phi[5][14] + t->Phi[2][6]*t->Phi[6][14] + t->Phi[2][8]*t->Phi[8][14] +
-            t->Phi[2][14];
-    w->term[1][41] = w->S[41] + t->Phi[2][0]*w->S[13] + t->Phi[2][1]*w->S[27] +
-            t->Phi[2][2]*w->S[41] + t->Phi[2][3]*w->S[55] + t->Phi[2][4]*w->S[69] +
-            t->Phi[2][5]*w->S[83] + t->Phi[2][6]*w->S[97] + t->Phi[2][8]*w->S[126] + t->Phi[2][14];
+            t->Phi[2][5]*t->Phi[5][14] + t->Phi[2][6]*t->Phi[6][14] + t->Phi[2][8]*t->Phi[8][14];
+    w->term[1][41] = t->Phi[2][0]*w->S[13] + t->Phi[2][1]*w->S[27] + t->Phi[2][2]*w->S[41] +
+            t->Phi[2][3]*w->S[55] + t->Phi[2][4]*w->S[69] + t->Phi[2][5]*w->S[83] +
+            t->Phi[2][6]*w->S[97] + t->Phi[2][8]*w->S[126] + t->Phi[2][14];
     w->term[0][42] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
             t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
             t->Phi[3][5]*t->Phi[5][0] + t->Phi[3][6]*t->Phi[6][0] + t->Phi[3][8]*t->Phi[8][0];
-    w->term[1][42] = w->S[42] + t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[28]
-            + t->Phi[3][3]*w->S[42] + t->Phi[3][4]*w->S[56] + t->Phi[3][5]*w->S[70] +
+    w->term[1][42] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[28] +
+            t->Phi[3][3]*w->S[42] + t->Phi[3][4]*w->S[56] + t->Phi[3][5]*w->S[70] +
             t->Phi[3][6]*w->S[84] + t->Phi[3][8]*w->S[113];
     w->term[0][43] = t->Phi[3][0]*t->Phi[0][1] + t->Phi[3][1]*t->Phi[1][1] +
             t->Phi[3][2]*t->Phi[2][1] + t->Phi[3][3]*t->Phi[3][1] + t->Phi[3][4]*t->Phi[4][1] +
             t->Phi[3][5]*t->Phi[5][1] + t->Phi[3][6]*t->Phi[6][1] + t->Phi[3][8]*t->Phi[8][1];
-    w->term[1][43] = w->S[43] + t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[29]
-            + t->Phi[3][3]*w->S[43] + t->Phi[3][4]*w->S[57] + t->Phi[3][5]*w->S[71] +
+    w->term[1][43] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[29] +
+            t->Phi[3][3]*w->S[43] + t->Phi[3][4]*w->S[57] + t->Phi[3][5]*w->S[71] +
             t->Phi[3][6]*w->S[85] + t->Phi[3][8]*w->S[114];
     w->term[0][44] = t->Phi[3][0]*t->Phi[0][2] + t->Phi[3][1]*t->Phi[1][2] +
             t->Phi[3][2]*t->Phi[2][2] + t->Phi[3][3]*t->Phi[3][2] + t->Phi[3][4]*t->Phi[4][2] +
             t->Phi[3][5]*t->Phi[5][2] + t->Phi[3][6]*t->Phi[6][2] + t->Phi[3][8]*t->Phi[8][2];
-    w->term[1][44] = w->S[44] + t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[30]
-            + t->Phi[3][3]*w->S[44] + t->Phi[3][4]*w->S[58] + t->Phi[3][5]*w->S[72] +
+    w->term[1][44] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[30] +
+            t->Phi[3][3]*w->S[44] + t->Phi[3][4]*w->S[58] + t->Phi[3][5]*w->S[72] +
             t->Phi[3][6]*w->S[86] + t->Phi[3][8]*w->S[115];
     w->term[0][45] = t->Phi[3][0]*t->Phi[0][3] + t->Phi[3][1]*t->Phi[1][3] +
             t->Phi[3][2]*t->Phi[2][3] + t->Phi[3][3]*t->Phi[3][3] + t->Phi[3][4]*t->Phi[4][3] +
             t->Phi[3][5]*t->Phi[5][3] + t->Phi[3][6]*t->Phi[6][3] + t->Phi[3][8]*t->Phi[8][3];
-    w->term[1][45] = w->S[45] + t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[31]
-            + t->Phi[3][3]*w->S[45] + t->Phi[3][4]*w->S[59] + t->Phi[3][5]*w->S[73] +
+    w->term[1][45] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[31] +
+            t->Phi[3][3]*w->S[45] + t->Phi[3][4]*w->S[59] + t->Phi[3][5]*w->S[73] +
             t->Phi[3][6]*w->S[87] + t->Phi[3][8]*w->S[116];
     w->term[0][46] = t->Phi[3][0]*t->Phi[0][4] + t->Phi[3][1]*t->Phi[1][4] +
             t->Phi[3][2]*t->Phi[2][4] + t->Phi[3][3]*t->Phi[3][4] + t->Phi[3][4]*t->Phi[4][4] +
             t->Phi[3][5]*t->Phi[5][4] + t->Phi[3][6]*t->Phi[6][4] + t->Phi[3][8]*t->Phi[8][4];
-    w->term[1][46] = w->S[46] + t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[18] + t->Phi[3][2]*w->S[32]
-            + t->Phi[3][3]*w->S[46] + t->Phi[3][4]*w->S[60] + t->Phi[3][5]*w->S[74] +
+    w->term[1][46] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[18] + t->Phi[3][2]*w->S[32] +
+            t->Phi[3][3]*w->S[46] + t->Phi[3][4]*w->S[60] + t->Phi[3][5]*w->S[74] +
             t->Phi[3][6]*w->S[88] + t->Phi[3][8]*w->S[117];
     w->term[0][47] = t->Phi[3][0]*t->Phi[0][5] + t->Phi[3][1]*t->Phi[1][5] +
             t->Phi[3][2]*t->Phi[2][5] + t->Phi[3][3]*t->Phi[3][5] + t->Phi[3][4]*t->Phi[4][5] +
             t->Phi[3][5]*t->Phi[5][5] + t->Phi[3][6]*t->Phi[6][5] + t->Phi[3][8]*t->Phi[8][5];
-    w->term[1][47] = w->S[47] + t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[19] + t->Phi[3][2]*w->S[33]
-            + t->Phi[3][3]*w->S[47] + t->Phi[3][4]*w->S[61] + t->Phi[3][5]*w->S[75] +
+    w->term[1][47] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[19] + t->Phi[3][2]*w->S[33] +
+            t->Phi[3][3]*w->S[47] + t->Phi[3][4]*w->S[61] + t->Phi[3][5]*w->S[75] +
             t->Phi[3][6]*w->S[89] + t->Phi[3][8]*w->S[118];
     w->term[0][48] = t->Phi[3][0]*t->Phi[0][6] + t->Phi[3][1]*t->Phi[1][6] +
             t->Phi[3][2]*t->Phi[2][6] + t->Phi[3][3]*t->Phi[3][6] + t->Phi[3][4]*t->Phi[4][6] +
             t->Phi[3][5]*t->Phi[5][6] + t->Phi[3][6]*t->Phi[6][6] + t->Phi[3][8]*t->Phi[8][6];
-    w->term[1][48] = w->S[48] + t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[20] + t->Phi[3][2]*w->S[34]
-            + t->Phi[3][3]*w->S[48] + t->Phi[3][4]*w->S[62] + t->Phi[3][5]*w->S[76] +
+    w->term[1][48] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[20] + t->Phi[3][2]*w->S[34] +
+            t->Phi[3][3]*w->S[48] + t->Phi[3][4]*w->S[62] + t->Phi[3][5]*w->S[76] +
             t->Phi[3][6]*w->S[90] + t->Phi[3][8]*w->S[119];
     w->term[0][49] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
             t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
             t->Phi[3][5]*t->Phi[5][8] + t->Phi[3][6]*t->Phi[6][8] + t->Phi[3][8]*t->Phi[8][8];
-    w->term[1][49] = w->S[49] + t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[21] + t->Phi[3][2]*w->S[35]
-            + t->Phi[3][3]*w->S[49] + t->Phi[3][4]*w->S[63] + t->Phi[3][5]*w->S[77] +
+    w->term[1][49] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[21] + t->Phi[3][2]*w->S[35] +
+            t->Phi[3][3]*w->S[49] + t->Phi[3][4]*w->S[63] + t->Phi[3][5]*w->S[77] +
             t->Phi[3][6]*w->S[91] + t->Phi[3][8]*w->S[120];
     w->term[0][50] = t->Phi[3][0]*t->Phi[0][9] + t->Phi[3][1]*t->Phi[1][9] +
             t->Phi[3][2]*t->Phi[2][9] + t->Phi[3][3]*t->Phi[3][9] + t->Phi[3][4]*t->Phi[4][9] +
-            t->Phi[3][5]*t->Phi[5][9] + t->Phi[3][6]*t->Phi[6][9] + t->Phi[3][8]*t->Phi[8][9] +
-            t->Phi[3][9];
-    w->term[1][50] = w->S[50] + t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[22] + t->Phi[3][2]*w->S[36]
-            + t->Phi[3][3]*w->S[50] + t->Phi[3][4]*w->S[64] + t->Phi[3][5]*w->S[78] +
+            t->Phi[3][5]*t->Phi[5][9] + t->Phi[3][6]*t->Phi[6][9] + t->Phi[3][8]*t->Phi[8][9];
+    w->term[1][50] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[22] + t->Phi[3][2]*w->S[36] +
+            t->Phi[3][3]*w->S[50] + t->Phi[3][4]*w->S[64] + t->Phi[3][5]*w->S[78] +
             t->Phi[3][6]*w->S[92] + t->Phi[3][8]*w->S[121] + t->Phi[3][9];
     w->term[0][51] = t->Phi[3][0]*t->Phi[0][10] + t->Phi[3][1]*t->Phi[1][10] +
             t->Phi[3][2]*t->Phi[2][10] + t->Phi[3][3]*t->Phi[3][10] + t->Phi[3][4]*t->Phi[4][10] +
-            t->Phi[3][5]*t->Phi[5][10] + t->Phi[3][6]*t->Phi[6][10] + t->Phi[3][8]*t->Phi[8][10] +
-            t->Phi[3][10];
-    w->term[1][51] = w->S[51] + t->Phi[3][0]*w->S[9] + t->Phi[3][1]*w->S[23] + t->Phi[3][2]*w->S[37]
-            + t->Phi[3][3]*w->S[51] + t->Phi[3][4]*w->S[65] + t->Phi[3][5]*w->S[79] +
+            t->Phi[3][5]*t->Phi[5][10] + t->Phi[3][6]*t->Phi[6][10] + t->Phi[3][8]*t->Phi[8][10];
+    w->term[1][51] = t->Phi[3][0]*w->S[9] + t->Phi[3][1]*w->S[23] + t->Phi[3][2]*w->S[37] +
+            t->Phi[3][3]*w->S[51] + t->Phi[3][4]*w->S[65] + t->Phi[3][5]*w->S[79] +
             t->Phi[3][6]*w->S[93] + t->Phi[3][8]*w->S[122] + t->Phi[3][10];
     w->term[0][52] = t->Phi[3][0]*t->Phi[0][11] + t->Phi[3][1]*t->Phi[1][11] +
             t->Phi[3][2]*t->Phi[2][11] + t->Phi[3][3]*t->Phi[3][11] + t->Phi[3][4]*t->Phi[4][11] +
-            t->Phi[3][5]*t->Phi[5][11] + t->Phi[3][6]*t->Phi[6][11] + t->Phi[3][8]*t->Phi[8][11] +
-            t->Phi[3][11];
-    w->term[1][52] = w->S[52] + t->Phi[3][0]*w->S[10] + t->Phi[3][1]*w->S[24] +
-            t->Phi[3][2]*w->S[38] + t->Phi[3][3]*w->S[52] + t->Phi[3][4]*w->S[66] +
-            t->Phi[3][5]*w->S[80] + t->Phi[3][6]*w->S[94] + t->Phi[3][8]*w->S[123] + t->Phi[3][11];
+            t->Phi[3][5]*t->Phi[5][11] + t->Phi[3][6]*t->Phi[6][11] + t->Phi[3][8]*t->Phi[8][11];
+    w->term[1][52] = t->Phi[3][0]*w->S[10] + t->Phi[3][1]*w->S[24] + t->Phi[3][2]*w->S[38] +
+            t->Phi[3][3]*w->S[52] + t->Phi[3][4]*w->S[66] + t->Phi[3][5]*w->S[80] +
+            t->Phi[3][6]*w->S[94] + t->Phi[3][8]*w->S[123] + t->Phi[3][11];
     w->term[0][53] = t->Phi[3][0]*t->Phi[0][12] + t->Phi[3][1]*t->Phi[1][12] +
             t->Phi[3][2]*t->Phi[2][12] + t->Phi[3][3]*t->Phi[3][12] + t->Phi[3][4]*t->Phi[4][12] +
-            t->Phi[3][5]*t->Phi[5][12] + t->Phi[3][6]*t->Phi[6][12] + t->Phi[3][8]*t->Phi[8][12] +
-            t->Phi[3][12];
-    w->term[1][53] = w->S[53] + t->Phi[3][0]*w->S[11] + t->Phi[3][1]*w->S[25] +
-            t->Phi[3][2]*w->S[39] + t->Phi[3][3]*w->S[53] + t->Phi[3][4]*w->S[67] +
-            t->Phi[3][5]*w->S[81] + t->Phi[3][6]*w->S[95] + t->Phi[3][8]*w->S[124] + t->Phi[3][12];
+            t->Phi[3][5]*t->Phi[5][12] + t->Phi[3][6]*t->Phi[6][12] + t->Phi[3][8]*t->Phi[8][12];
+    w->term[1][53] = t->Phi[3][0]*w->S[11] + t->Phi[3][1]*w->S[25] + t->Phi[3][2]*w->S[39] +
+            t->Phi[3][3]*w->S[53] + t->Phi[3][4]*w->S[67] + t->Phi[3][5]*w->S[81] +
+            t->Phi[3][6]*w->S[95] + t->Phi[3][8]*w->S[124] + t->Phi[3][12];
     w->term[0][54] = t->Phi[3][0]*t->Phi[0][13] + t->Phi[3][1]*t->Phi[1][13] +
             t->Phi[3][2]*t->Phi[2][13] + t->Phi[3][3]*t->Phi[3][13] + t->Phi[3][4]*t->Phi[4][13] +
-            t->Phi[3][5]*t->Phi[5][13] + t->Phi[3][6]*t->Phi[6][13] + t->Phi[3][8]*t->Phi[8][13] +
-            t->Phi[3][13];
-    w->term[1][54] = w->S[54] + t->Phi[3][0]*w->S[12] + t->Phi[3][1]*w->S[26] +
-            t->Phi[3][2]*w->S[40] + t->Phi[3][3]*w->S[54] + t->Phi[3][4]*w->S[68] +
-            t->Phi[3][5]*w->S[82] + t->Phi[3][6]*w->S[96] + t->Phi[3][8]*w->S[125] + t->Phi[3][13];
+            t->Phi[3][5]*t->Phi[5][13] + t->Phi[3][6]*t->Phi[6][13] + t->Phi[3][8]*t->Phi[8][13];
+    w->term[1][54] = t->Phi[3][0]*w->S[12] + t->Phi[3][1]*w->S[26] + t->Phi[3][2]*w->S[40] +
+            t->Phi[3][3]*w->S[54] + t->Phi[3][4]*w->S[68] + t->Phi[3][5]*w->S[82] +
+            t->Phi[3][6]*w->S[96] + t->Phi[3][8]*w->S[125] + t->Phi[3][13];
     w->term[0][55] = t->Phi[3][0]*t->Phi[0][14] + t->Phi[3][1]*t->Phi[1][14] +
             t->Phi[3][2]*t->Phi[2][14] + t->Phi[3][3]*t->Phi[3][14] + t->Phi[3][4]*t->Phi[4][14] +
-            t->Phi[3][5]*t->Phi[5][14] + t->Phi[3][6]*t->Phi[6][14] + t->Phi[3][8]*t->Phi[8][14] +
-            t->Phi[3][14];
-    w->term[1][55] = w->S[55] + t->Phi[3][0]*w->S[13] + t->Phi[3][1]*w->S[27] +
-            t->Phi[3][2]*w->S[41] + t->Phi[3][3]*w->S[55] + t->Phi[3][4]*w->S[69] +
-            t->Phi[3][5]*w->S[83] + t->Phi[3][6]*w->S[97] + t->Phi[3][8]*w->S[126] + t->Phi[3][14];
+            t->Phi[3][5]*t->Phi[5][14] + t->Phi[3][6]*t->Phi[6][14] + t->Phi[3][8]*t->Phi[8][14];
+    w->term[1][55] = t->Phi[3][0]*w->S[13] + t->Phi[3][1]*w->S[27] + t->Phi[3][2]*w->S[41] +
+            t->Phi[3][3]*w->S[55] + t->Phi[3][4]*w->S[69] + t->Phi[3][5]*w->S[83] +
+            t->Phi[3][6]*w->S[97] + t->Phi[3][8]*w->S[126] + t->Phi[3][14];
     w->term[0][56] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
             t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
             t->Phi[4][5]*t->Phi[5][0] + t->Phi[4][6]*t->Phi[6][0] + t->Phi[4][8]*t->Phi[8][0];
-    w->term[1][56] = w->S[56] + t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[28]
-            + t->Phi[4][3]*w->S[42] + t->Phi[4][4]*w->S[56] + t->Phi[4][5]*w->S[70] +
+    w->term[1][56] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[28] +
+            t->Phi[4][3]*w->S[42] + t->Phi[4][4]*w->S[56] + t->Phi[4][5]*w->S[70] +
             t->Phi[4][6]*w->S[84] + t->Phi[4][8]*w->S[113];
     w->term[0][57] = t->Phi[4][0]*t->Phi[0][1] + t->Phi[4][1]*t->Phi[1][1] +
             t->Phi[4][2]*t->Phi[2][1] + t->Phi[4][3]*t->Phi[3][1] + t->Phi[4][4]*t->Phi[4][1] +
             t->Phi[4][5]*t->Phi[5][1] + t->Phi[4][6]*t->Phi[6][1] + t->Phi[4][8]*t->Phi[8][1];
-    w->term[1][57] = w->S[57] + t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[29]
-            + t->Phi[4][3]*w->S[43] + t->Phi[4][4]*w->S[57] + t->Phi[4][5]*w->S[71] +
+    w->term[1][57] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[29] +
+            t->Phi[4][3]*w->S[43] + t->Phi[4][4]*w->S[57] + t->Phi[4][5]*w->S[71] +
             t->Phi[4][6]*w->S[85] + t->Phi[4][8]*w->S[114];
     w->term[0][58] = t->Phi[4][0]*t->Phi[0][2] + t->Phi[4][1]*t->Phi[1][2] +
             t->Phi[4][2]*t->Phi[2][2] + t->Phi[4][3]*t->Phi[3][2] + t->Phi[4][4]*t->Phi[4][2] +
             t->Phi[4][5]*t->Phi[5][2] + t->Phi[4][6]*t->Phi[6][2] + t->Phi[4][8]*t->Phi[8][2];
-    w->term[1][58] = w->S[58] + t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[30]
-            + t->Phi[4][3]*w->S[44] + t->Phi[4][4]*w->S[58] + t->Phi[4][5]*w->S[72] +
+    w->term[1][58] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[30] +
+            t->Phi[4][3]*w->S[44] + t->Phi[4][4]*w->S[58] + t->Phi[4][5]*w->S[72] +
             t->Phi[4][6]*w->S[86] + t->Phi[4][8]*w->S[115];
     w->term[0][59] = t->Phi[4][0]*t->Phi[0][3] + t->Phi[4][1]*t->Phi[1][3] +
             t->Phi[4][2]*t->Phi[2][3] + t->Phi[4][3]*t->Phi[3][3] + t->Phi[4][4]*t->Phi[4][3] +
             t->Phi[4][5]*t->Phi[5][3] + t->Phi[4][6]*t->Phi[6][3] + t->Phi[4][8]*t->Phi[8][3];
-    w->term[1][59] = w->S[59] + t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[31]
-            + t->Phi[4][3]*w->S[45] + t->Phi[4][4]*w->S[59] + t->Phi[4][5]*w->S[73] +
+    w->term[1][59] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[31] +
+            t->Phi[4][3]*w->S[45] + t->Phi[4][4]*w->S[59] + t->Phi[4][5]*w->S[73] +
             t->Phi[4][6]*w->S[87] + t->Phi[4][8]*w->S[116];
     w->term[0][60] = t->Phi[4][0]*t->Phi[0][4] + t->Phi[4][1]*t->Phi[1][4] +
             t->Phi[4][2]*t->Phi[2][4] + t->Phi[4][3]*t->Phi[3][4] + t->Phi[4][4]*t->Phi[4][4] +
             t->Phi[4][5]*t->Phi[5][4] + t->Phi[4][6]*t->Phi[6][4] + t->Phi[4][8]*t->Phi[8][4];
-    w->term[1][60] = w->S[60] + t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[18] + t->Phi[4][2]*w->S[32]
-            + t->Phi[4][3]*w->S[46] + t->Phi[4][4]*w->S[60] + t->Phi[4][5]*w->S[74] +
+    w->term[1][60] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[18] + t->Phi[4][2]*w->S[32] +
+            t->Phi[4][3]*w->S[46] + t->Phi[4][4]*w->S[60] + t->Phi[4][5]*w->S[74] +
             t->Phi[4][6]*w->S[88] + t->Phi[4][8]*w->S[117];
     w->term[0][61] = t->Phi[4][0]*t->Phi[0][5] + t->Phi[4][1]*t->Phi[1][5] +
             t->Phi[4][2]*t->Phi[2][5] + t->Phi[4][3]*t->Phi[3][5] + t->Phi[4][4]*t->Phi[4][5] +
             t->Phi[4][5]*t->Phi[5][5] + t->Phi[4][6]*t->Phi[6][5] + t->Phi[4][8]*t->Phi[8][5];
-    w->term[1][61] = w->S[61] + t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[19] + t->Phi[4][2]*w->S[33]
-            + t->Phi[4][3]*w->S[47] + t->Phi[4][4]*w->S[61] + t->Phi[4][5]*w->S[75] +
+    w->term[1][61] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[19] + t->Phi[4][2]*w->S[33] +
+            t->Phi[4][3]*w->S[47] + t->Phi[4][4]*w->S[61] + t->Phi[4][5]*w->S[75] +
             t->Phi[4][6]*w->S[89] + t->Phi[4][8]*w->S[118];
     w->term[0][62] = t->Phi[4][0]*t->Phi[0][6] + t->Phi[4][1]*t->Phi[1][6] +
             t->Phi[4][2]*t->Phi[2][6] + t->Phi[4][3]*t->Phi[3][6] + t->Phi[4][4]*t->Phi[4][6] +
             t->Phi[4][5]*t->Phi[5][6] + t->Phi[4][6]*t->Phi[6][6] + t->Phi[4][8]*t->Phi[8][6];
-    w->term[1][62] = w->S[62] + t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[20] + t->Phi[4][2]*w->S[34]
-            + t->Phi[4][3]*w->S[48] + t->Phi[4][4]*w->S[62] + t->Phi[4][5]*w->S[76] +
+    w->term[1][62] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[20] + t->Phi[4][2]*w->S[34] +
+            t->Phi[4][3]*w->S[48] + t->Phi[4][4]*w->S[62] + t->Phi[4][5]*w->S[76] +
             t->Phi[4][6]*w->S[90] + t->Phi[4][8]*w->S[119];
     w->term[0][63] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
             t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
             t->Phi[4][5]*t->Phi[5][8] + t->Phi[4][6]*t->Phi[6][8] + t->Phi[4][8]*t->Phi[8][8];
-    w->term[1][63] = w->S[63] + t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[21] + t->Phi[4][2]*w->S[35]
-            + t->Phi[4][3]*w->S[49] + t->Phi[4][4]*w->S[63] + t->Phi[4][5]*w->S[77] +
+    w->term[1][63] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[21] + t->Phi[4][2]*w->S[35] +
+            t->Phi[4][3]*w->S[49] + t->Phi[4][4]*w->S[63] + t->Phi[4][5]*w->S[77] +
             t->Phi[4][6]*w->S[91] + t->Phi[4][8]*w->S[120];
     w->term[0][64] = t->Phi[4][0]*t->Phi[0][9] + t->Phi[4][1]*t->Phi[1][9] +
             t->Phi[4][2]*t->Phi[2][9] + t->Phi[4][3]*t->Phi[3][9] + t->Phi[4][4]*t->Phi[4][9] +
-            t->Phi[4][5]*t->Phi[5][9] + t->Phi[4][6]*t->Phi[6][9] + t->Phi[4][8]*t->Phi[8][9] +
-            t->Phi[4][9];
-    w->term[1][64] = w->S[64] + t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[22] + t->Phi[4][2]*w->S[36]
-            + t->Phi[4][3]*w->S[50] + t->Phi[4][4]*w->S[64] + t->Phi[4][5]*w->S[78] +
+            t->Phi[4][5]*t->Phi[5][9] + t->Phi[4][6]*t->Phi[6][9] + t->Phi[4][8]*t->Phi[8][9];
+    w->term[1][64] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[22] + t->Phi[4][2]*w->S[36] +
+            t->Phi[4][3]*w->S[50] + t->Phi[4][4]*w->S[64] + t->Phi[4][5]*w->S[78] +
             t->Phi[4][6]*w->S[92] + t->Phi[4][8]*w->S[121] + t->Phi[4][9];
     w->term[0][65] = t->Phi[4][0]*t->Phi[0][10] + t->Phi[4][1]*t->Phi[1][10] +
             t->Phi[4][2]*t->Phi[2][10] + t->Phi[4][3]*t->Phi[3][10] + t->Phi[4][4]*t->Phi[4][10] +
-            t->Phi[4][5]*t->Phi[5][10] + t->Phi[4][6]*t->Phi[6][10] + t->Phi[4][8]*t->Phi[8][10] +
-            t->Phi[4][10];
-    w->term[1][65] = w->S[65] + t->Phi[4][0]*w->S[9] + t->Phi[4][1]*w->S[23] + t->Phi[4][2]*w->S[37]
-            + t->Phi[4][3]*w->S[51] + t->Phi[4][4]*w->S[65] + t->Phi[4][5]*w->S[79] +
+            t->Phi[4][5]*t->Phi[5][10] + t->Phi[4][6]*t->Phi[6][10] + t->Phi[4][8]*t->Phi[8][10];
+    w->term[1][65] = t->Phi[4][0]*w->S[9] + t->Phi[4][1]*w->S[23] + t->Phi[4][2]*w->S[37] +
+            t->Phi[4][3]*w->S[51] + t->Phi[4][4]*w->S[65] + t->Phi[4][5]*w->S[79] +
             t->Phi[4][6]*w->S[93] + t->Phi[4][8]*w->S[122] + t->Phi[4][10];
     w->term[0][66] = t->Phi[4][0]*t->Phi[0][11] + t->Phi[4][1]*t->Phi[1][11] +
             t->Phi[4][2]*t->Phi[2][11] + t->Phi[4][3]*t->Phi[3][11] + t->Phi[4][4]*t->Phi[4][11] +
-            t->Phi[4][5]*t->Phi[5][11] + t->Phi[4][6]*t->Phi[6][11] + t->Phi[4][8]*t->Phi[8][11] +
-            t->Phi[4][11];
-    w->term[1][66] = w->S[66] + t->Phi[4][0]*w->S[10] + t->Phi[4][1]*w->S[24] +
-            t->Phi[4][2]*w->S[38] + t->Phi[4][3]*w->S[52] + t->Phi[4][4]*w->S[66] +
-            t->Phi[4][5]*w->S[80] + t->Phi[4][6]*w->S[94] + t->Phi[4][8]*w->S[123] + t->Phi[4][11];
+            t->Phi[4][5]*t->Phi[5][11] + t->Phi[4][6]*t->Phi[6][11] + t->Phi[4][8]*t->Phi[8][11];
+    w->term[1][66] = t->Phi[4][0]*w->S[10] + t->Phi[4][1]*w->S[24] + t->Phi[4][2]*w->S[38] +
+            t->Phi[4][3]*w->S[52] + t->Phi[4][4]*w->S[66] + t->Phi[4][5]*w->S[80] +
+            t->Phi[4][6]*w->S[94] + t->Phi[4][8]*w->S[123] + t->Phi[4][11];
     w->term[0][67] = t->Phi[4][0]*t->Phi[0][12] + t->Phi[4][1]*t->Phi[1][12] +
             t->Phi[4][2]*t->Phi[2][12] + t->Phi[4][3]*t->Phi[3][12] + t->Phi[4][4]*t->Phi[4][12] +
-            t->Phi[4][5]*t->Phi[5][12] + t->Phi[4][6]*t->Phi[6][12] + t->Phi[4][8]*t->Phi[8][12] +
-            t->Phi[4][12];
-    w->term[1][67] = w->S[67] + t->Phi[4][0]*w->S[11] + t->Phi[4][1]*w->S[25] +
-            t->Phi[4][2]*w->S[39] + t->Phi[4][3]*w->S[53] + t->Phi[4][4]*w->S[67] +
-            t->Phi[4][5]*w->S[81] + t->Phi[4][6]*w->S[95] + t->Phi[4][8]*w->S[124] + t->Phi[4][12];
+            t->Phi[4][5]*t->Phi[5][12] + t->Phi[4][6]*t->Phi[6][12] + t->Phi[4][8]*t->Phi[8][12];
+    w->term[1][67] = t->Phi[4][0]*w->S[11] + t->Phi[4][1]*w->S[25] + t->Phi[4][2]*w->S[39] +
+            t->Phi[4][3]*w->S[53] + t->Phi[4][4]*w->S[67] + t->Phi[4][5]*w->S[81] +
+            t->Phi[4][6]*w->S[95] + t->Phi[4][8]*w->S[124] + t->Phi[4][12];
     w->term[0][68] = t->Phi[4][0]*t->Phi[0][13] + t->Phi[4][1]*t->Phi[1][13] +
             t->Phi[4][2]*t->Phi[2][13] + t->Phi[4][3]*t->Phi[3][13] + t->Phi[4][4]*t->Phi[4][13] +
-            t->Phi[4][5]*t->Phi[5][13] + t->Phi[4][6]*t->Phi[6][13] + t->Phi[4][8]*t->Phi[8][13] +
-            t->Phi[4][13];
-    w->term[1][68] = w->S[68] + t->Phi[4][0]*w->S[12] + t->Phi[4][1]*w->S[26] +
-            t->Phi[4][2]*w->S[40] + t->Phi[4][3]*w->S[54] + t->Phi[4][4]*w->S[68] +
-            t->Phi[4][5]*w->S[82] + t->Phi[4][6]*w->S[96] + t->Phi[4][8]*w->S[125] + t->Phi[4][13];
+            t->Phi[4][5]*t->Phi[5][13] + t->Phi[4][6]*t->Phi[6][13] + t->Phi[4][8]*t->Phi[8][13];
+    w->term[1][68] = t->Phi[4][0]*w->S[12] + t->Phi[4][1]*w->S[26] + t->Phi[4][2]*w->S[40] +
+            t->Phi[4][3]*w->S[54] + t->Phi[4][4]*w->S[68] + t->Phi[4][5]*w->S[82] +
+            t->Phi[4][6]*w->S[96] + t->Phi[4][8]*w->S[125] + t->Phi[4][13];
     w->term[0][69] = t->Phi[4][0]*t->Phi[0][14] + t->Phi[4][1]*t->Phi[1][14] +
             t->Phi[4][2]*t->Phi[2][14] + t->Phi[4][3]*t->Phi[3][14] + t->Phi[4][4]*t->Phi[4][14] +
-            t->Phi[4][5]*t->Phi[5][14] + t->Phi[4][6]*t->Phi[6][14] + t->Phi[4][8]*t->Phi[8][14] +
-            t->Phi[4][14];
-    w->term[1][69] = w->S[69] + t->Phi[4][0]*w->S[13] + t->Phi[4][1]*w->S[27] +
-            t->Phi[4][2]*w->S[41] + t->Phi[4][3]*w->S[55] + t->Phi[4][4]*w->S[69] +
-            t->Phi[4][5]*w->S[83] + t->Phi[4][6]*w->S[97] + t->Phi[4][8]*w->S[126] + t->Phi[4][14];
+            t->Phi[4][5]*t->Phi[5][14] + t->Phi[4][6]*t->Phi[6][14] + t->Phi[4][8]*t->Phi[8][14];
+    w->term[1][69] = t->Phi[4][0]*w->S[13] + t->Phi[4][1]*w->S[27] + t->Phi[4][2]*w->S[41] +
+            t->Phi[4][3]*w->S[55] + t->Phi[4][4]*w->S[69] + t->Phi[4][5]*w->S[83] +
+            t->Phi[4][6]*w->S[97] + t->Phi[4][8]*w->S[126] + t->Phi[4][14];
     w->term[0][70] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
             t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
             t->Phi[5][5]*t->Phi[5][0] + t->Phi[5][6]*t->Phi[6][0] + t->Phi[5][8]*t->Phi[8][0];
-    w->term[1][70] = w->S[70] + t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[28]
-            + t->Phi[5][3]*w->S[42] + t->Phi[5][4]*w->S[56] + t->Phi[5][5]*w->S[70] +
+    w->term[1][70] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[28] +
+            t->Phi[5][3]*w->S[42] + t->Phi[5][4]*w->S[56] + t->Phi[5][5]*w->S[70] +
             t->Phi[5][6]*w->S[84] + t->Phi[5][8]*w->S[113];
     w->term[0][71] = t->Phi[5][0]*t->Phi[0][1] + t->Phi[5][1]*t->Phi[1][1] +
             t->Phi[5][2]*t->Phi[2][1] + t->Phi[5][3]*t->Phi[3][1] + t->Phi[5][4]*t->Phi[4][1] +
             t->Phi[5][5]*t->Phi[5][1] + t->Phi[5][6]*t->Phi[6][1] + t->Phi[5][8]*t->Phi[8][1];
-    w->term[1][71] = w->S[71] + t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[29]
-            + t->Phi[5][3]*w->S[43] + t->Phi[5][4]*w->S[57] + t->Phi[5][5]*w->S[71] +
+    w->term[1][71] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[29] +
+            t->Phi[5][3]*w->S[43] + t->Phi[5][4]*w->S[57] + t->Phi[5][5]*w->S[71] +
             t->Phi[5][6]*w->S[85] + t->Phi[5][8]*w->S[114];
     w->term[0][72] = t->Phi[5][0]*t->Phi[0][2] + t->Phi[5][1]*t->Phi[1][2] +
             t->Phi[5][2]*t->Phi[2][2] + t->Phi[5][3]*t->Phi[3][2] + t->Phi[5][4]*t->Phi[4][2] +
             t->Phi[5][5]*t->Phi[5][2] + t->Phi[5][6]*t->Phi[6][2] + t->Phi[5][8]*t->Phi[8][2];
-    w->term[1][72] = w->S[72] + t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[30]
-            + t->Phi[5][3]*w->S[44] + t->Phi[5][4]*w->S[58] + t->Phi[5][5]*w->S[72] +
+    w->term[1][72] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[30] +
+            t->Phi[5][3]*w->S[44] + t->Phi[5][4]*w->S[58] + t->Phi[5][5]*w->S[72] +
             t->Phi[5][6]*w->S[86] + t->Phi[5][8]*w->S[115];
     w->term[0][73] = t->Phi[5][0]*t->Phi[0][3] + t->Phi[5][1]*t->Phi[1][3] +
             t->Phi[5][2]*t->Phi[2][3] + t->Phi[5][3]*t->Phi[3][3] + t->Phi[5][4]*t->Phi[4][3] +
             t->Phi[5][5]*t->Phi[5][3] + t->Phi[5][6]*t->Phi[6][3] + t->Phi[5][8]*t->Phi[8][3];
-    w->term[1][73] = w->S[73] + t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[31]
-            + t->Phi[5][3]*w->S[45] + t->Phi[5][4]*w->S[59] + t->Phi[5][5]*w->S[73] +
+    w->term[1][73] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[31] +
+            t->Phi[5][3]*w->S[45] + t->Phi[5][4]*w->S[59] + t->Phi[5][5]*w->S[73] +
             t->Phi[5][6]*w->S[87] + t->Phi[5][8]*w->S[116];
     w->term[0][74] = t->Phi[5][0]*t->Phi[0][4] + t->Phi[5][1]*t->Phi[1][4] +
             t->Phi[5][2]*t->Phi[2][4] + t->Phi[5][3]*t->Phi[3][4] + t->Phi[5][4]*t->Phi[4][4] +
             t->Phi[5][5]*t->Phi[5][4] + t->Phi[5][6]*t->Phi[6][4] + t->Phi[5][8]*t->Phi[8][4];
-    w->term[1][74] = w->S[74] + t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[18] + t->Phi[5][2]*w->S[32]
-            + t->Phi[5][3]*w->S[46] + t->Phi[5][4]*w->S[60] + t->Phi[5][5]*w->S[74] +
+    w->term[1][74] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[18] + t->Phi[5][2]*w->S[32] +
+            t->Phi[5][3]*w->S[46] + t->Phi[5][4]*w->S[60] + t->Phi[5][5]*w->S[74] +
             t->Phi[5][6]*w->S[88] + t->Phi[5][8]*w->S[117];
     w->term[0][75] = t->Phi[5][0]*t->Phi[0][5] + t->Phi[5][1]*t->Phi[1][5] +
             t->Phi[5][2]*t->Phi[2][5] + t->Phi[5][3]*t->Phi[3][5] + t->Phi[5][4]*t->Phi[4][5] +
             t->Phi[5][5]*t->Phi[5][5] + t->Phi[5][6]*t->Phi[6][5] + t->Phi[5][8]*t->Phi[8][5];
-    w->term[1][75] = w->S[75] + t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[19] + t->Phi[5][2]*w->S[33]
-            + t->Phi[5][3]*w->S[47] + t->Phi[5][4]*w->S[61] + t->Phi[5][5]*w->S[75] +
+    w->term[1][75] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[19] + t->Phi[5][2]*w->S[33] +
+            t->Phi[5][3]*w->S[47] + t->Phi[5][4]*w->S[61] + t->Phi[5][5]*w->S[75] +
             t->Phi[5][6]*w->S[89] + t->Phi[5][8]*w->S[118];
     w->term[0][76] = t->Phi[5][0]*t->Phi[0][6] + t->Phi[5][1]*t->Phi[1][6] +
             t->Phi[5][2]*t->Phi[2][6] + t->Phi[5][3]*t->Phi[3][6] + t->Phi[5][4]*t->Phi[4][6] +
             t->Phi[5][5]*t->Phi[5][6] + t->Phi[5][6]*t->Phi[6][6] + t->Phi[5][8]*t->Phi[8][6];
-    w->term[1][76] = w->S[76] + t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[20] + t->Phi[5][2]*w->S[34]
-            + t->Phi[5][3]*w->S[48] + t->Phi[5][4]*w->S[62] + t->Phi[5][5]*w->S[76] +
+    w->term[1][76] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[20] + t->Phi[5][2]*w->S[34] +
+            t->Phi[5][3]*w->S[48] + t->Phi[5][4]*w->S[62] + t->Phi[5][5]*w->S[76] +
             t->Phi[5][6]*w->S[90] + t->Phi[5][8]*w->S[119];
     w->term[0][77] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
             t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
             t->Phi[5][5]*t->Phi[5][8] + t->Phi[5][6]*t->Phi[6][8] + t->Phi[5][8]*t->Phi[8][8];
-    w->term[1][77] = w->S[77] + t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[21] + t->Phi[5][2]*w->S[35]
-            + t->Phi[5][3]*w->S[49] + t->Phi[5][4]*w->S[63] + t->Phi[5][5]*w->S[77] +
+    w->term[1][77] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[21] + t->Phi[5][2]*w->S[35] +
+            t->Phi[5][3]*w->S[49] + t->Phi[5][4]*w->S[63] + t->Phi[5][5]*w->S[77] +
             t->Phi[5][6]*w->S[91] + t->Phi[5][8]*w->S[120];
     w->term[0][78] = t->Phi[5][0]*t->Phi[0][9] + t->Phi[5][1]*t->Phi[1][9] +
             t->Phi[5][2]*t->Phi[2][9] + t->Phi[5][3]*t->Phi[3][9] + t->Phi[5][4]*t->Phi[4][9] +
-            t->Phi[5][5]*t->Phi[5][9] + t->Phi[5][6]*t->Phi[6][9] + t->Phi[5][8]*t->Phi[8][9] +
-            t->Phi[5][9];
-    w->term[1][78] = w->S[78] + t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[22] + t->Phi[5][2]*w->S[36]
-            + t->Phi[5][3]*w->S[50] + t->Phi[5][4]*w->S[64] + t->Phi[5][5]*w->S[78] +
+            t->Phi[5][5]*t->Phi[5][9] + t->Phi[5][6]*t->Phi[6][9] + t->Phi[5][8]*t->Phi[8][9];
+    w->term[1][78] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[22] + t->Phi[5][2]*w->S[36] +
+            t->Phi[5][3]*w->S[50] + t->Phi[5][4]*w->S[64] + t->Phi[5][5]*w->S[78] +
             t->Phi[5][6]*w->S[92] + t->Phi[5][8]*w->S[121] + t->Phi[5][9];
     w->term[0][79] = t->Phi[5][0]*t->Phi[0][10] + t->Phi[5][1]*t->Phi[1][10] +
             t->Phi[5][2]*t->Phi[2][10] + t->Phi[5][3]*t->Phi[3][10] + t->Phi[5][4]*t->Phi[4][10] +
-            t->Phi[5][5]*t->Phi[5][10] + t->Phi[5][6]*t->Phi[6][10] + t->Phi[5][8]*t->Phi[8][10] +
-            t->Phi[5][10];
-    w->term[1][79] = w->S[79] + t->Phi[5][0]*w->S[9] + t->Phi[5][1]*w->S[23] + t->Phi[5][2]*w->S[37]
-            + t->Phi[5][3]*w->S[51] + t->Phi[5][4]*w->S[65] + t->Phi[5][5]*w->S[79] +
+            t->Phi[5][5]*t->Phi[5][10] + t->Phi[5][6]*t->Phi[6][10] + t->Phi[5][8]*t->Phi[8][10];
+    w->term[1][79] = t->Phi[5][0]*w->S[9] + t->Phi[5][1]*w->S[23] + t->Phi[5][2]*w->S[37] +
+            t->Phi[5][3]*w->S[51] + t->Phi[5][4]*w->S[65] + t->Phi[5][5]*w->S[79] +
             t->Phi[5][6]*w->S[93] + t->Phi[5][8]*w->S[122] + t->Phi[5][10];
     w->term[0][80] = t->Phi[5][0]*t->Phi[0][11] + t->Phi[5][1]*t->Phi[1][11] +
             t->Phi[5][2]*t->Phi[2][11] + t->Phi[5][3]*t->Phi[3][11] + t->Phi[5][4]*t->Phi[4][11] +
-            t->Phi[5][5]*t->Phi[5][11] + t->Phi[5][6]*t->Phi[6][11] + t->Phi[5][8]*t->Phi[8][11] +
-            t->Phi[5][11];
-    w->term[1][80] = w->S[80] + t->Phi[5][0]*w->S[10] + t->Phi[5][1]*w->S[24] +
-            t->Phi[5][2]*w->S[38] + t->Phi[5][3]*w->S[52] + t->Phi[5][4]*w->S[66] +
-            t->Phi[5][5]*w->S[80] + t->Phi[5][6]*w->S[94] + t->Phi[5][8]*w->S[123] + t->Phi[5][11];
+            t->Phi[5][5]*t->Phi[5][11] + t->Phi[5][6]*t->Phi[6][11] + t->Phi[5][8]*t->Phi[8][11];
+    w->term[1][80] = t->Phi[5][0]*w->S[10] + t->Phi[5][1]*w->S[24] + t->Phi[5][2]*w->S[38] +
+            t->Phi[5][3]*w->S[52] + t->Phi[5][4]*w->S[66] + t->Phi[5][5]*w->S[80] +
+            t->Phi[5][6]*w->S[94] + t->Phi[5][8]*w->S[123] + t->Phi[5][11];
     w->term[0][81] = t->Phi[5][0]*t->Phi[0][12] + t->Phi[5][1]*t->Phi[1][12] +
             t->Phi[5][2]*t->Phi[2][12] + t->Phi[5][3]*t->Phi[3][12] + t->Phi[5][4]*t->Phi[4][12] +
-            t->Phi[5][5]*t->Phi[5][12] + t->Phi[5][6]*t->Phi[6][12] + t->Phi[5][8]*t->Phi[8][12] +
-            t->Phi[5][12];
-    w->term[1][81] = w->S[81] + t->Phi[5][0]*w->S[11] + t->Phi[5][1]*w->S[25] +
-            t->Phi[5][2]*w->S[39] + t->Phi[5][3]*w->S[53] + t->Phi[5][4]*w->S[67] +
-            t->Phi[5][5]*w->S[81] + t->Phi[5][6]*w->S[95] + t->Phi[5][8]*w->S[124] + t->Phi[5][12];
+            t->Phi[5][5]*t->Phi[5][12] + t->Phi[5][6]*t->Phi[6][12] + t->Phi[5][8]*t->Phi[8][12];
+    w->term[1][81] = t->Phi[5][0]*w->S[11] + t->Phi[5][1]*w->S[25] + t->Phi[5][2]*w->S[39] +
+            t->Phi[5][3]*w->S[53] + t->Phi[5][4]*w->S[67] + t->Phi[5][5]*w->S[81] +
+            t->Phi[5][6]*w->S[95] + t->Phi[5][8]*w->S[124] + t->Phi[5][12];
     w->term[0][82] = t->Phi[5][0]*t->Phi[0][13] + t->Phi[5][1]*t->Phi[1][13] +
             t->Phi[5][2]*t->Phi[2][13] + t->Phi[5][3]*t->Phi[3][13] + t->Phi[5][4]*t->Phi[4][13] +
-            t->Phi[5][5]*t->Phi[5][13] + t->Phi[5][6]*t->Phi[6][13] + t->Phi[5][8]*t->Phi[8][13] +
-            t->Phi[5][13];
-    w->term[1][82] = w->S[82] + t->Phi[5][0]*w->S[12] + t->Phi[5][1]*w->S[26] +
-            t->Phi[5][2]*w->S[40] + t->Phi[5][3]*w->S[54] + t->Phi[5][4]*w->S[68] +
-            t->Phi[5][5]*w->S[82] + t->Phi[5][6]*w->S[96] + t->Phi[5][8]*w->S[125] + t->Phi[5][13];
+            t->Phi[5][5]*t->Phi[5][13] + t->Phi[5][6]*t->Phi[6][13] + t->Phi[5][8]*t->Phi[8][13];
+    w->term[1][82] = t->Phi[5][0]*w->S[12] + t->Phi[5][1]*w->S[26] + t->Phi[5][2]*w->S[40] +
+            t->Phi[5][3]*w->S[54] + t->Phi[5][4]*w->S[68] + t->Phi[5][5]*w->S[82] +
+            t->Phi[5][6]*w->S[96] + t->Phi[5][8]*w->S[125] + t->Phi[5][13];
     w->term[0][83] = t->Phi[5][0]*t->Phi[0][14] + t->Phi[5][1]*t->Phi[1][14] +
             t->Phi[5][2]*t->Phi[2][14] + t->Phi[5][3]*t->Phi[3][14] + t->Phi[5][4]*t->Phi[4][14] +
-            t->Phi[5][5]*t->Phi[5][14] + t->Phi[5][6]*t->Phi[6][14] + t->Phi[5][8]*t->Phi[8][14] +
-            t->Phi[5][14];
-    w->term[1][83] = w->S[83] + t->Phi[5][0]*w->S[13] + t->Phi[5][1]*w->S[27] +
-            t->Phi[5][2]*w->S[41] + t->Phi[5][3]*w->S[55] + t->Phi[5][4]*w->S[69] +
-            t->Phi[5][5]*w->S[83] + t->Phi[5][6]*w->S[97] + t->Phi[5][8]*w->S[126] + t->Phi[5][14];
+            t->Phi[5][5]*t->Phi[5][14] + t->Phi[5][6]*t->Phi[6][14] + t->Phi[5][8]*t->Phi[8][14];
+    w->term[1][83] = t->Phi[5][0]*w->S[13] + t->Phi[5][1]*w->S[27] + t->Phi[5][2]*w->S[41] +
+            t->Phi[5][3]*w->S[55] + t->Phi[5][4]*w->S[69] + t->Phi[5][5]*w->S[83] +
+            t->Phi[5][6]*w->S[97] + t->Phi[5][8]*w->S[126] + t->Phi[5][14];
     w->term[0][84] = t->Phi[6][0]*t->Phi[0][0] + t->Phi[6][1]*t->Phi[1][0] +
             t->Phi[6][2]*t->Phi[2][0] + t->Phi[6][3]*t->Phi[3][0] + t->Phi[6][4]*t->Phi[4][0] +
             t->Phi[6][5]*t->Phi[5][0] + t->Phi[6][6]*t->Phi[6][0] + t->Phi[6][8]*t->Phi[8][0];
-    w->term[1][84] = w->S[84] + t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[14] + t->Phi[6][2]*w->S[28]
-            + t->Phi[6][3]*w->S[42] + t->Phi[6][4]*w->S[56] + t->Phi[6][5]*w->S[70] +
+    w->term[1][84] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[14] + t->Phi[6][2]*w->S[28] +
+            t->Phi[6][3]*w->S[42] + t->Phi[6][4]*w->S[56] + t->Phi[6][5]*w->S[70] +
             t->Phi[6][6]*w->S[84] + t->Phi[6][8]*w->S[113];
     w->term[0][85] = t->Phi[6][0]*t->Phi[0][1] + t->Phi[6][1]*t->Phi[1][1] +
             t->Phi[6][2]*t->Phi[2][1] + t->Phi[6][3]*t->Phi[3][1] + t->Phi[6][4]*t->Phi[4][1] +
             t->Phi[6][5]*t->Phi[5][1] + t->Phi[6][6]*t->Phi[6][1] + t->Phi[6][8]*t->Phi[8][1];
-    w->term[1][85] = w->S[85] + t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[15] + t->Phi[6][2]*w->S[29]
-            + t->Phi[6][3]*w->S[43] + t->Phi[6][4]*w->S[57] + t->Phi[6][5]*w->S[71] +
+    w->term[1][85] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[15] + t->Phi[6][2]*w->S[29] +
+            t->Phi[6][3]*w->S[43] + t->Phi[6][4]*w->S[57] + t->Phi[6][5]*w->S[71] +
             t->Phi[6][6]*w->S[85] + t->Phi[6][8]*w->S[114];
     w->term[0][86] = t->Phi[6][0]*t->Phi[0][2] + t->Phi[6][1]*t->Phi[1][2] +
             t->Phi[6][2]*t->Phi[2][2] + t->Phi[6][3]*t->Phi[3][2] + t->Phi[6][4]*t->Phi[4][2] +
             t->Phi[6][5]*t->Phi[5][2] + t->Phi[6][6]*t->Phi[6][2] + t->Phi[6][8]*t->Phi[8][2];
-    w->term[1][86] = w->S[86] + t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[16] + t->Phi[6][2]*w->S[30]
-            + t->Phi[6][3]*w->S[44] + t->Phi[6][4]*w->S[58] + t->Phi[6][5]*w->S[72] +
+    w->term[1][86] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[16] + t->Phi[6][2]*w->S[30] +
+            t->Phi[6][3]*w->S[44] + t->Phi[6][4]*w->S[58] + t->Phi[6][5]*w->S[72] +
             t->Phi[6][6]*w->S[86] + t->Phi[6][8]*w->S[115];
     w->term[0][87] = t->Phi[6][0]*t->Phi[0][3] + t->Phi[6][1]*t->Phi[1][3] +
             t->Phi[6][2]*t->Phi[2][3] + t->Phi[6][3]*t->Phi[3][3] + t->Phi[6][4]*t->Phi[4][3] +
             t->Phi[6][5]*t->Phi[5][3] + t->Phi[6][6]*t->Phi[6][3] + t->Phi[6][8]*t->Phi[8][3];
-    w->term[1][87] = w->S[87] + t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[17] + t->Phi[6][2]*w->S[31]
-            + t->Phi[6][3]*w->S[45] + t->Phi[6][4]*w->S[59] + t->Phi[6][5]*w->S[73] +
+    w->term[1][87] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[17] + t->Phi[6][2]*w->S[31] +
+            t->Phi[6][3]*w->S[45] + t->Phi[6][4]*w->S[59] + t->Phi[6][5]*w->S[73] +
             t->Phi[6][6]*w->S[87] + t->Phi[6][8]*w->S[116];
     w->term[0][88] = t->Phi[6][0]*t->Phi[0][4] + t->Phi[6][1]*t->Phi[1][4] +
             t->Phi[6][2]*t->Phi[2][4] + t->Phi[6][3]*t->Phi[3][4] + t->Phi[6][4]*t->Phi[4][4] +
             t->Phi[6][5]*t->Phi[5][4] + t->Phi[6][6]*t->Phi[6][4] + t->Phi[6][8]*t->Phi[8][4];
-    w->term[1][88] = w->S[88] + t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[18] + t->Phi[6][2]*w->S[32]
-            + t->Phi[6][3]*w->S[46] + t->Phi[6][4]*w->S[60] + t->Phi[6][5]*w->S[74] +
+    w->term[1][88] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[18] + t->Phi[6][2]*w->S[32] +
+            t->Phi[6][3]*w->S[46] + t->Phi[6][4]*w->S[60] + t->Phi[6][5]*w->S[74] +
             t->Phi[6][6]*w->S[88] + t->Phi[6][8]*w->S[117];
     w->term[0][89] = t->Phi[6][0]*t->Phi[0][5] + t->Phi[6][1]*t->Phi[1][5] +
             t->Phi[6][2]*t->Phi[2][5] + t->Phi[6][3]*t->Phi[3][5] + t->Phi[6][4]*t->Phi[4][5] +
             t->Phi[6][5]*t->Phi[5][5] + t->Phi[6][6]*t->Phi[6][5] + t->Phi[6][8]*t->Phi[8][5];
-    w->term[1][89] = w->S[89] + t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[19] + t->Phi[6][2]*w->S[33]
-            + t->Phi[6][3]*w->S[47] + t->Phi[6][4]*w->S[61] + t->Phi[6][5]*w->S[75] +
+    w->term[1][89] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[19] + t->Phi[6][2]*w->S[33] +
+            t->Phi[6][3]*w->S[47] + t->Phi[6][4]*w->S[61] + t->Phi[6][5]*w->S[75] +
             t->Phi[6][6]*w->S[89] + t->Phi[6][8]*w->S[118];
     w->term[0][90] = t->Phi[6][0]*t->Phi[0][6] + t->Phi[6][1]*t->Phi[1][6] +
             t->Phi[6][2]*t->Phi[2][6] + t->Phi[6][3]*t->Phi[3][6] + t->Phi[6][4]*t->Phi[4][6] +
             t->Phi[6][5]*t->Phi[5][6] + t->Phi[6][6]*t->Phi[6][6] + t->Phi[6][8]*t->Phi[8][6];
-    w->term[1][90] = w->S[90] + t->Phi[6][0]*w->S[6] + t->Phi[6][1]*w->S[20] + t->Phi[6][2]*w->S[34]
-            + t->Phi[6][3]*w->S[48] + t->Phi[6][4]*w->S[62] + t->Phi[6][5]*w->S[76] +
+    w->term[1][90] = t->Phi[6][0]*w->S[6] + t->Phi[6][1]*w->S[20] + t->Phi[6][2]*w->S[34] +
+            t->Phi[6][3]*w->S[48] + t->Phi[6][4]*w->S[62] + t->Phi[6][5]*w->S[76] +
             t->Phi[6][6]*w->S[90] + t->Phi[6][8]*w->S[119];
     w->term[0][91] = t->Phi[6][0]*t->Phi[0][8] + t->Phi[6][1]*t->Phi[1][8] +
             t->Phi[6][2]*t->Phi[2][8] + t->Phi[6][3]*t->Phi[3][8] + t->Phi[6][4]*t->Phi[4][8] +
             t->Phi[6][5]*t->Phi[5][8] + t->Phi[6][6]*t->Phi[6][8] + t->Phi[6][8]*t->Phi[8][8];
-    w->term[1][91] = w->S[91] + t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[21] + t->Phi[6][2]*w->S[35]
-            + t->Phi[6][3]*w->S[49] + t->Phi[6][4]*w->S[63] + t->Phi[6][5]*w->S[77] +
+    w->term[1][91] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[21] + t->Phi[6][2]*w->S[35] +
+            t->Phi[6][3]*w->S[49] + t->Phi[6][4]*w->S[63] + t->Phi[6][5]*w->S[77] +
             t->Phi[6][6]*w->S[91] + t->Phi[6][8]*w->S[120];
     w->term[0][92] = t->Phi[6][0]*t->Phi[0][9] + t->Phi[6][1]*t->Phi[1][9] +
             t->Phi[6][2]*t->Phi[2][9] + t->Phi[6][3]*t->Phi[3][9] + t->Phi[6][4]*t->Phi[4][9] +
-            t->Phi[6][5]*t->Phi[5][9] + t->Phi[6][6]*t->Phi[6][9] + t->Phi[6][8]*t->Phi[8][9] +
-            t->Phi[6][9];
-    w->term[1][92] = w->S[92] + t->Phi[6][0]*w->S[8] + t->Phi[6][1]*w->S[22] + t->Phi[6][2]*w->S[36]
-            + t->Phi[6][3]*w->S[50] + t->Phi[6][4]*w->S[64] + t->Phi[6][5]*w->S[78] +
+            t->Phi[6][5]*t->Phi[5][9] + t->Phi[6][6]*t->Phi[6][9] + t->Phi[6][8]*t->Phi[8][9];
+    w->term[1][92] = t->Phi[6][0]*w->S[8] + t->Phi[6][1]*w->S[22] + t->Phi[6][2]*w->S[36] +
+            t->Phi[6][3]*w->S[50] + t->Phi[6][4]*w->S[64] + t->Phi[6][5]*w->S[78] +
             t->Phi[6][6]*w->S[92] + t->Phi[6][8]*w->S[121] + t->Phi[6][9];
     w->term[0][93] = t->Phi[6][0]*t->Phi[0][10] + t->Phi[6][1]*t->Phi[1][10] +
             t->Phi[6][2]*t->Phi[2][10] + t->Phi[6][3]*t->Phi[3][10] + t->Phi[6][4]*t->Phi[4][10] +
-            t->Phi[6][5]*t->Phi[5][10] + t->Phi[6][6]*t->Phi[6][10] + t->Phi[6][8]*t->Phi[8][10] +
-            t->Phi[6][10];
-    w->term[1][93] = w->S[93] + t->Phi[6][0]*w->S[9] + t->Phi[6][1]*w->S[23] + t->Phi[6][2]*w->S[37]
-            + t->Phi[6][3]*w->S[51] + t->Phi[6][4]*w->S[65] + t->Phi[6][5]*w->S[79] +
+            t->Phi[6][5]*t->Phi[5][10] + t->Phi[6][6]*t->Phi[6][10] + t->Phi[6][8]*t->Phi[8][10];
+    w->term[1][93] = t->Phi[6][0]*w->S[9] + t->Phi[6][1]*w->S[23] + t->Phi[6][2]*w->S[37] +
+            t->Phi[6][3]*w->S[51] + t->Phi[6][4]*w->S[65] + t->Phi[6][5]*w->S[79] +
             t->Phi[6][6]*w->S[93] + t->Phi[6][8]*w->S[122] + t->Phi[6][10];
     w->term[0][94] = t->Phi[6][0]*t->Phi[0][11] + t->Phi[6][1]*t->Phi[1][11] +
             t->Phi[6][2]*t->Phi[2][11] + t->Phi[6][3]*t->Phi[3][11] + t->Phi[6][4]*t->Phi[4][11] +
-            t->Phi[6][5]*t->Phi[5][11] + t->Phi[6][6]*t->Phi[6][11] + t->Phi[6][8]*t->Phi[8][11] +
-            t->Phi[6][11];
-    w->term[1][94] = w->S[94] + t->Phi[6][0]*w->S[10] + t->Phi[6][1]*w->S[24] +
-            t->Phi[6][2]*w->S[38] + t->Phi[6][3]*w->S[52] + t->Phi[6][4]*w->S[66] +
-            t->Phi[6][5]*w->S[80] + t->Phi[6][6]*w->S[94] + t->Phi[6][8]*w->S[123] + t->Phi[6][11];
+            t->Phi[6][5]*t->Phi[5][11] + t->Phi[6][6]*t->Phi[6][11] + t->Phi[6][8]*t->Phi[8][11];
+    w->term[1][94] = t->Phi[6][0]*w->S[10] + t->Phi[6][1]*w->S[24] + t->Phi[6][2]*w->S[38] +
+            t->Phi[6][3]*w->S[52] + t->Phi[6][4]*w->S[66] + t->Phi[6][5]*w->S[80] +
+            t->Phi[6][6]*w->S[94] + t->Phi[6][8]*w->S[123] + t->Phi[6][11];
     w->term[0][95] = t->Phi[6][0]*t->Phi[0][12] + t->Phi[6][1]*t->Phi[1][12] +
             t->Phi[6][2]*t->Phi[2][12] + t->Phi[6][3]*t->Phi[3][12] + t->Phi[6][4]*t->Phi[4][12] +
-            t->Phi[6][5]*t->Phi[5][12] + t->Phi[6][6]*t->Phi[6][12] + t->Phi[6][8]*t->Phi[8][12] +
-            t->Phi[6][12];
-    w->term[1][95] = w->S[95] + t->Phi[6][0]*w->S[11] + t->Phi[6][1]*w->S[25] +
-            t->Phi[6][2]*w->S[39] + t->Phi[6][3]*w->S[53] + t->Phi[6][4]*w->S[67] +
-            t->Phi[6][5]*w->S[81] + t->Phi[6][6]*w->S[95] + t->Phi[6][8]*w->S[124] + t->Phi[6][12];
+            t->Phi[6][5]*t->Phi[5][12] + t->Phi[6][6]*t->Phi[6][12] + t->Phi[6][8]*t->Phi[8][12];
+    w->term[1][95] = t->Phi[6][0]*w->S[11] + t->Phi[6][1]*w->S[25] + t->Phi[6][2]*w->S[39] +
+            t->Phi[6][3]*w->S[53] + t->Phi[6][4]*w->S[67] + t->Phi[6][5]*w->S[81] +
+            t->Phi[6][6]*w->S[95] + t->Phi[6][8]*w->S[124] + t->Phi[6][12];
     w->term[0][96] = t->Phi[6][0]*t->Phi[0][13] + t->Phi[6][1]*t->Phi[1][13] +
             t->Phi[6][2]*t->Phi[2][13] + t->Phi[6][3]*t->Phi[3][13] + t->Phi[6][4]*t->Phi[4][13] +
-            t->Phi[6][5]*t->Phi[5][13] + t->Phi[6][6]*t->Phi[6][13] + t->Phi[6][8]*t->Phi[8][13] +
-            t->Phi[6][13];
-    w->term[1][96] = w->S[96] + t->Phi[6][0]*w->S[12] + t->Phi[6][1]*w->S[26] +
-            t->Phi[6][2]*w->S[40] + t->Phi[6][3]*w->S[54] + t->Phi[6][4]*w->S[68] +
-            t->Phi[6][5]*w->S[82] + t->Phi[6][6]*w->S[96] + t->Phi[6][8]*w->S[125] + t->Phi[6][13];
+            t->Phi[6][5]*t->Phi[5][13] + t->Phi[6][6]*t->Phi[6][13] + t->Phi[6][8]*t->Phi[8][13];
+    w->term[1][96] = t->Phi[6][0]*w->S[12] + t->Phi[6][1]*w->S[26] + t->Phi[6][2]*w->S[40] +
+            t->Phi[6][3]*w->S[54] + t->Phi[6][4]*w->S[68] + t->Phi[6][5]*w->S[82] +
+            t->Phi[6][6]*w->S[96] + t->Phi[6][8]*w->S[125] + t->Phi[6][13];
     w->term[0][97] = t->Phi[6][0]*t->Phi[0][14] + t->Phi[6][1]*t->Phi[1][14] +
             t->Phi[6][2]*t->Phi[2][14] + t->Phi[6][3]*t->Phi[3][14] + t->Phi[6][4]*t->Phi[4][14] +
-            t->Phi[6][5]*t->Phi[5][14] + t->Phi[6][6]*t->Phi[6][14] + t->Phi[6][8]*t->Phi[8][14] +
-            t->Phi[6][14];
-    w->term[1][97] = w->S[97] + t->Phi[6][0]*w->S[13] + t->Phi[6][1]*w->S[27] +
-            t->Phi[6][2]*w->S[41] + t->Phi[6][3]*w->S[55] + t->Phi[6][4]*w->S[69] +
-            t->Phi[6][5]*w->S[83] + t->Phi[6][6]*w->S[97] + t->Phi[6][8]*w->S[126] + t->Phi[6][14];
+            t->Phi[6][5]*t->Phi[5][14] + t->Phi[6][6]*t->Phi[6][14] + t->Phi[6][8]*t->Phi[8][14];
+    w->term[1][97] = t->Phi[6][0]*w->S[13] + t->Phi[6][1]*w->S[27] + t->Phi[6][2]*w->S[41] +
+            t->Phi[6][3]*w->S[55] + t->Phi[6][4]*w->S[69] + t->Phi[6][5]*w->S[83] +
+            t->Phi[6][6]*w->S[97] + t->Phi[6][8]*w->S[126] + t->Phi[6][14];
     w->term[0][98] = t->Phi[7][0]*t->Phi[0][0] + t->Phi[7][1]*t->Phi[1][0] +
             t->Phi[7][2]*t->Phi[2][0] + t->Phi[7][3]*t->Phi[3][0] + t->Phi[7][4]*t->Phi[4][0] +
             t->Phi[7][5]*t->Phi[5][0] + t->Phi[7][6]*t->Phi[6][0] + t->Phi[7][7]*t->Phi[7][0] +
             t->Phi[7][8]*t->Phi[8][0];
-    w->term[1][98] = w->S[98] + t->Phi[7][0]*w->S[0] + t->Phi[7][1]*w->S[14] + t->Phi[7][2]*w->S[28]
-            + t->Phi[7][3]*w->S[42] + t->Phi[7][4]*w->S[56] + t->Phi[7][5]*w->S[70] +
+    w->term[1][98] = t->Phi[7][0]*w->S[0] + t->Phi[7][1]*w->S[14] + t->Phi[7][2]*w->S[28] +
+            t->Phi[7][3]*w->S[42] + t->Phi[7][4]*w->S[56] + t->Phi[7][5]*w->S[70] +
             t->Phi[7][6]*w->S[84] + t->Phi[7][7]*w->S[98] + t->Phi[7][8]*w->S[113];
     w->term[0][99] = t->Phi[7][0]*t->Phi[0][1] + t->Phi[7][1]*t->Phi[1][1] +
             t->Phi[7][2]*t->Phi[2][1] + t->Phi[7][3]*t->Phi[3][1] + t->Phi[7][4]*t->Phi[4][1] +
             t->Phi[7][5]*t->Phi[5][1] + t->Phi[7][6]*t->Phi[6][1] + t->Phi[7][7]*t->Phi[7][1] +
             t->Phi[7][8]*t->Phi[8][1];
-    w->term[1][99] = w->S[99] + t->Phi[7][0]*w->S[1] + t->Phi[7][1]*w->S[15] + t->Phi[7][2]*w->S[29]
-            + t->Phi[7][3]*w->S[43] + t->Phi[7][4]*w->S[57] + t->Phi[7][5]*w->S[71] +
+    w->term[1][99] = t->Phi[7][0]*w->S[1] + t->Phi[7][1]*w->S[15] + t->Phi[7][2]*w->S[29] +
+            t->Phi[7][3]*w->S[43] + t->Phi[7][4]*w->S[57] + t->Phi[7][5]*w->S[71] +
             t->Phi[7][6]*w->S[85] + t->Phi[7][7]*w->S[99] + t->Phi[7][8]*w->S[114];
     w->term[0][100] = t->Phi[7][0]*t->Phi[0][2] + t->Phi[7][1]*t->Phi[1][2] +
             t->Phi[7][2]*t->Phi[2][2] + t->Phi[7][3]*t->Phi[3][2] + t->Phi[7][4]*t->Phi[4][2] +
             t->Phi[7][5]*t->Phi[5][2] + t->Phi[7][6]*t->Phi[6][2] + t->Phi[7][7]*t->Phi[7][2] +
             t->Phi[7][8]*t->Phi[8][2];
-    w->term[1][100] = w->S[100] + t->Phi[7][0]*w->S[2] + t->Phi[7][1]*w->S[16] +
-            t->Phi[7][2]*w->S[30] + t->Phi[7][3]*w->S[44] + t->Phi[7][4]*w->S[58] +
-            t->Phi[7][5]*w->S[72] + t->Phi[7][6]*w->S[86] + t->Phi[7][7]*w->S[100] +
-            t->Phi[7][8]*w->S[115];
+    w->term[1][100] = t->Phi[7][0]*w->S[2] + t->Phi[7][1]*w->S[16] + t->Phi[7][2]*w->S[30] +
+            t->Phi[7][3]*w->S[44] + t->Phi[7][4]*w->S[58] + t->Phi[7][5]*w->S[72] +
+            t->Phi[7][6]*w->S[86] + t->Phi[7][7]*w->S[100] + t->Phi[7][8]*w->S[115];
     w->term[0][101] = t->Phi[7][0]*t->Phi[0][3] + t->Phi[7][1]*t->Phi[1][3] +
             t->Phi[7][2]*t->Phi[2][3] + t->Phi[7][3]*t->Phi[3][3] + t->Phi[7][4]*t->Phi[4][3] +
             t->Phi[7][5]*t->Phi[5][3] + t->Phi[7][6]*t->Phi[6][3] + t->Phi[7][7]*t->Phi[7][3] +
             t->Phi[7][8]*t->Phi[8][3];
-    w->term[1][101] = w->S[101] + t->Phi[7][0]*w->S[3] + t->Phi[7][1]*w->S[17] +
-            t->Phi[7][2]*w->S[31] + t->Phi[7][3]*w->S[45] + t->Phi[7][4]*w->S[59] +
-            t->Phi[7][5]*w->S[73] + t->Phi[7][6]*w->S[87] + t->Phi[7][7]*w->S[101] +
-            t->Phi[7][8]*w->S[116];
+    w->term[1][101] = t->Phi[7][0]*w->S[3] + t->Phi[7][1]*w->S[17] + t->Phi[7][2]*w->S[31] +
+            t->Phi[7][3]*w->S[45] + t->Phi[7][4]*w->S[59] + t->Phi[7][5]*w->S[73] +
+            t->Phi[7][6]*w->S[87] + t->Phi[7][7]*w->S[101] + t->Phi[7][8]*w->S[116];
     w->term[0][102] = t->Phi[7][0]*t->Phi[0][4] + t->Phi[7][1]*t->Phi[1][4] +
             t->Phi[7][2]*t->Phi[2][4] + t->Phi[7][3]*t->Phi[3][4] + t->Phi[7][4]*t->Phi[4][4] +
             t->Phi[7][5]*t->Phi[5][4] + t->Phi[7][6]*t->Phi[6][4] + t->Phi[7][7]*t->Phi[7][4] +
             t->Phi[7][8]*t->Phi[8][4];
-    w->term[1][102] = w->S[102] + t->Phi[7][0]*w->S[4] + t->Phi[7][1]*w->S[18] +
-            t->Phi[7][2]*w->S[32] + t->Phi[7][3]*w->S[46] + t->Phi[7][4]*w->S[60] +
-            t->Phi[7][5]*w->S[74] + t->Phi[7][6]*w->S[88] + t->Phi[7][7]*w->S[102] +
-            t->Phi[7][8]*w->S[117];
+    w->term[1][102] = t->Phi[7][0]*w->S[4] + t->Phi[7][1]*w->S[18] + t->Phi[7][2]*w->S[32] +
+            t->Phi[7][3]*w->S[46] + t->Phi[7][4]*w->S[60] + t->Phi[7][5]*w->S[74] +
+            t->Phi[7][6]*w->S[88] + t->Phi[7][7]*w->S[102] + t->Phi[7][8]*w->S[117];
     w->term[0][103] = t->Phi[7][0]*t->Phi[0][5] + t->Phi[7][1]*t->Phi[1][5] +
             t->Phi[7][2]*t->Phi[2][5] + t->Phi[7][3]*t->Phi[3][5] + t->Phi[7][4]*t->Phi[4][5] +
             t->Phi[7][5]*t->Phi[5][5] + t->Phi[7][6]*t->Phi[6][5] + t->Phi[7][7]*t->Phi[7][5] +
             t->Phi[7][8]*t->Phi[8][5];
-    w->term[1][103] = w->S[103] + t->Phi[7][0]*w->S[5] + t->Phi[7][1]*w->S[19] +
-            t->Phi[7][2]*w->S[33] + t->Phi[7][3]*w->S[47] + t->Phi[7][4]*w->S[61] +
-            t->Phi[7][5]*w->S[75] + t->Phi[7][6]*w->S[89] + t->Phi[7][7]*w->S[103] +
-            t->Phi[7][8]*w->S[118];
+    w->term[1][103] = t->Phi[7][0]*w->S[5] + t->Phi[7][1]*w->S[19] + t->Phi[7][2]*w->S[33] +
+            t->Phi[7][3]*w->S[47] + t->Phi[7][4]*w->S[61] + t->Phi[7][5]*w->S[75] +
+            t->Phi[7][6]*w->S[89] + t->Phi[7][7]*w->S[103] + t->Phi[7][8]*w->S[118];
     w->term[0][104] = t->Phi[7][0]*t->Phi[0][6] + t->Phi[7][1]*t->Phi[1][6] +
             t->Phi[7][2]*t->Phi[2][6] + t->Phi[7][3]*t->Phi[3][6] + t->Phi[7][4]*t->Phi[4][6] +
             t->Phi[7][5]*t->Phi[5][6] + t->Phi[7][6]*t->Phi[6][6] + t->Phi[7][7]*t->Phi[7][6] +
             t->Phi[7][8]*t->Phi[8][6];
-    w->term[1][104] = w->S[104] + t->Phi[7][0]*w->S[6] + t->Phi[7][1]*w->S[20] +
-            t->Phi[7][2]*w->S[34] + t->Phi[7][3]*w->S[48] + t->Phi[7][4]*w->S[62] +
-            t->Phi[7][5]*w->S[76] + t->Phi[7][6]*w->S[90] + t->Phi[7][7]*w->S[104] +
-            t->Phi[7][8]*w->S[119];
+    w->term[1][104] = t->Phi[7][0]*w->S[6] + t->Phi[7][1]*w->S[20] + t->Phi[7][2]*w->S[34] +
+            t->Phi[7][3]*w->S[48] + t->Phi[7][4]*w->S[62] + t->Phi[7][5]*w->S[76] +
+            t->Phi[7][6]*w->S[90] + t->Phi[7][7]*w->S[104] + t->Phi[7][8]*w->S[119];
     w->term[0][105] = t->Phi[7][7]*t->Phi[7][7];
-    w->term[1][105] = w->S[105] + t->Phi[7][7]*w->S[105];
+    w->term[1][105] = t->Phi[7][7]*w->S[105];
     w->term[0][106] = t->Phi[7][0]*t->Phi[0][8] + t->Phi[7][1]*t->Phi[1][8] +
             t->Phi[7][2]*t->Phi[2][8] + t->Phi[7][3]*t->Phi[3][8] + t->Phi[7][4]*t->Phi[4][8] +
             t->Phi[7][5]*t->Phi[5][8] + t->Phi[7][6]*t->Phi[6][8] + t->Phi[7][7]*t->Phi[7][8] +
             t->Phi[7][8]*t->Phi[8][8];
-    w->term[1][106] = w->S[106] + t->Phi[7][0]*w->S[7] + t->Phi[7][1]*w->S[21] +
-            t->Phi[7][2]*w->S[35] + t->Phi[7][3]*w->S[49] + t->Phi[7][4]*w->S[63] +
-            t->Phi[7][5]*w->S[77] + t->Phi[7][6]*w->S[91] + t->Phi[7][7]*w->S[106] +
-            t->Phi[7][8]*w->S[120];
+    w->term[1][106] = t->Phi[7][0]*w->S[7] + t->Phi[7][1]*w->S[21] + t->Phi[7][2]*w->S[35] +
+            t->Phi[7][3]*w->S[49] + t->Phi[7][4]*w->S[63] + t->Phi[7][5]*w->S[77] +
+            t->Phi[7][6]*w->S[91] + t->Phi[7][7]*w->S[106] + t->Phi[7][8]*w->S[120];
     w->term[0][107] = t->Phi[7][0]*t->Phi[0][9] + t->Phi[7][1]*t->Phi[1][9] +
             t->Phi[7][2]*t->Phi[2][9] + t->Phi[7][3]*t->Phi[3][9] + t->Phi[7][4]*t->Phi[4][9] +
             t->Phi[7][5]*t->Phi[5][9] + t->Phi[7][6]*t->Phi[6][9] + t->Phi[7][7]*t->Phi[7][9] +
-            t->Phi[7][8]*t->Phi[8][9] + t->Phi[7][9];
-    w->term[1][107] = w->S[107] + t->Phi[7][0]*w->S[8] + t->Phi[7][1]*w->S[22] +
-            t->Phi[7][2]*w->S[36] + t->Phi[7][3]*w->S[50] + t->Phi[7][4]*w->S[64] +
-            t->Phi[7][5]*w->S[78] + t->Phi[7][6]*w->S[92] + t->Phi[7][7]*w->S[107] +
-            t->Phi[7][8]*w->S[121] + t->Phi[7][9];
+            t->Phi[7][8]*t->Phi[8][9];
+    w->term[1][107] = t->Phi[7][0]*w->S[8] + t->Phi[7][1]*w->S[22] + t->Phi[7][2]*w->S[36] +
+            t->Phi[7][3]*w->S[50] + t->Phi[7][4]*w->S[64] + t->Phi[7][5]*w->S[78] +
+            t->Phi[7][6]*w->S[92] + t->Phi[7][7]*w->S[107] + t->Phi[7][8]*w->S[121] + t->Phi[7][9];
     w->term[0][108] = t->Phi[7][0]*t->Phi[0][10] + t->Phi[7][1]*t->Phi[1][10] +
             t->Phi[7][2]*t->Phi[2][10] + t->Phi[7][3]*t->Phi[3][10] + t->Phi[7][4]*t->Phi[4][10] +
             t->Phi[7][5]*t->Phi[5][10] + t->Phi[7][6]*t->Phi[6][10] + t->Phi[7][7]*t->Phi[7][10] +
-            t->Phi[7][8]*t->Phi[8][10] + t->Phi[7][10];
-    w->term[1][108] = w->S[108] + t->Phi[7][0]*w->S[9] + t->Phi[7][1]*w->S[23] +
-            t->Phi[7][2]*w->S[37] + t->Phi[7][3]*w->S[51] + t->Phi[7][4]*w->S[65] +
-            t->Phi[7][5]*w->S[79] + t->Phi[7][6]*w->S[93] + t->Phi[7][7]*w->S[108] +
-            t->Phi[7][8]*w->S[122] + t->Phi[7][10];
+            t->Phi[7][8]*t->Phi[8][10];
+    w->term[1][108] = t->Phi[7][0]*w->S[9] + t->Phi[7][1]*w->S[23] + t->Phi[7][2]*w->S[37] +
+            t->Phi[7][3]*w->S[51] + t->Phi[7][4]*w->S[65] + t->Phi[7][5]*w->S[79] +
+            t->Phi[7][6]*w->S[93] + t->Phi[7][7]*w->S[108] + t->Phi[7][8]*w->S[122] + t->Phi[7][10];
     w->term[0][109] = t->Phi[7][0]*t->Phi[0][11] + t->Phi[7][1]*t->Phi[1][11] +
             t->Phi[7][2]*t->Phi[2][11] + t->Phi[7][3]*t->Phi[3][11] + t->Phi[7][4]*t->Phi[4][11] +
             t->Phi[7][5]*t->Phi[5][11] + t->Phi[7][6]*t->Phi[6][11] + t->Phi[7][7]*t->Phi[7][11] +
-            t->Phi[7][8]*t->Phi[8][11] + t->Phi[7][11];
-    w->term[1][109] = w->S[109] + t->Phi[7][0]*w->S[10] + t->Phi[7][1]*w->S[24] +
-            t->Phi[7][2]*w->S[38] + t->Phi[7][3]*w->S[52] + t->Phi[7][4]*w->S[66] +
-            t->Phi[7][5]*w->S[80] + t->Phi[7][6]*w->S[94] + t->Phi[7][7]*w->S[109] +
-            t->Phi[7][8]*w->S[123] + t->Phi[7][11];
+            t->Phi[7][8]*t->Phi[8][11];
+    w->term[1][109] = t->Phi[7][0]*w->S[10] + t->Phi[7][1]*w->S[24] + t->Phi[7][2]*w->S[38] +
+            t->Phi[7][3]*w->S[52] + t->Phi[7][4]*w->S[66] + t->Phi[7][5]*w->S[80] +
+            t->Phi[7][6]*w->S[94] + t->Phi[7][7]*w->S[109] + t->Phi[7][8]*w->S[123] + t->Phi[7][11];
     w->term[0][110] = t->Phi[7][0]*t->Phi[0][12] + t->Phi[7][1]*t->Phi[1][12] +
             t->Phi[7][2]*t->Phi[2][12] + t->Phi[7][3]*t->Phi[3][12] + t->Phi[7][4]*t->Phi[4][12] +
             t->Phi[7][5]*t->Phi[5][12] + t->Phi[7][6]*t->Phi[6][12] + t->Phi[7][7]*t->Phi[7][12] +
-            t->Phi[7][8]*t->Phi[8][12] + t->Phi[7][12];
-    w->term[1][110] = w->S[110] + t->Phi[7][0]*w->S[11] + t->Phi[7][1]*w->S[25] +
-            t->Phi[7][2]*w->S[39] + t->Phi[7][3]*w->S[53] + t->Phi[7][4]*w->S[67] +
-            t->Phi[7][5]*w->S[81] + t->Phi[7][6]*w->S[95] + t->Phi[7][7]*w->S[110] +
-            t->Phi[7][8]*w->S[124] + t->Phi[7][12];
+            t->Phi[7][8]*t->Phi[8][12];
+    w->term[1][110] = t->Phi[7][0]*w->S[11] + t->Phi[7][1]*w->S[25] + t->Phi[7][2]*w->S[39] +
+            t->Phi[7][3]*w->S[53] + t->Phi[7][4]*w->S[67] + t->Phi[7][5]*w->S[81] +
+            t->Phi[7][6]*w->S[95] + t->Phi[7][7]*w->S[110] + t->Phi[7][8]*w->S[124] + t->Phi[7][12];
     w->term[0][111] = t->Phi[7][0]*t->Phi[0][13] + t->Phi[7][1]*t->Phi[1][13] +
             t->Phi[7][2]*t->Phi[2][13] + t->Phi[7][3]*t->Phi[3][13] + t->Phi[7][4]*t->Phi[4][13] +
             t->Phi[7][5]*t->Phi[5][13] + t->Phi[7][6]*t->Phi[6][13] + t->Phi[7][7]*t->Phi[7][13] +
-            t->Phi[7][8]*t->Phi[8][13] + t->Phi[7][13];
-    w->term[1][111] = w->S[111] + t->Phi[7][0]*w->S[12] + t->Phi[7][1]*w->S[26] +
-            t->Phi[7][2]*w->S[40] + t->Phi[7][3]*w->S[54] + t->Phi[7][4]*w->S[68] +
-            t->Phi[7][5]*w->S[82] + t->Phi[7][6]*w->S[96] + t->Phi[7][7]*w->S[111] +
-            t->Phi[7][8]*w->S[125] + t->Phi[7][13];
+            t->Phi[7][8]*t->Phi[8][13];
+    w->term[1][111] = t->Phi[7][0]*w->S[12] + t->Phi[7][1]*w->S[26] + t->Phi[7][2]*w->S[40] +
+            t->Phi[7][3]*w->S[54] + t->Phi[7][4]*w->S[68] + t->Phi[7][5]*w->S[82] +
+            t->Phi[7][6]*w->S[96] + t->Phi[7][7]*w->S[111] + t->Phi[7][8]*w->S[125] + t->Phi[7][13];
     w->term[0][112] = t->Phi[7][0]*t->Phi[0][14] + t->Phi[7][1]*t->Phi[1][14] +
             t->Phi[7][2]*t->Phi[2][14] + t->Phi[7][3]*t->Phi[3][14] + t->Phi[7][4]*t->Phi[4][14] +
             t->Phi[7][5]*t->Phi[5][14] + t->Phi[7][6]*t->Phi[6][14] + t->Phi[7][7]*t->Phi[7][14] +
-            t->Phi[7][8]*t->Phi[8][14] + t->Phi[7][14];
-    w->term[1][112] = w->S[112] + t->Phi[7][0]*w->S[13] + t->Phi[7][1]*w->S[27] +
-            t->Phi[7][2]*w->S[41] + t->Phi[7][3]*w->S[55] + t->Phi[7][4]*w->S[69] +
-            t->Phi[7][5]*w->S[83] + t->Phi[7][6]*w->S[97] + t->Phi[7][7]*w->S[112] +
-            t->Phi[7][8]*w->S[126] + t->Phi[7][14];
+            t->Phi[7][8]*t->Phi[8][14];
+    w->term[1][112] = t->Phi[7][0]*w->S[13] + t->Phi[7][1]*w->S[27] + t->Phi[7][2]*w->S[41] +
+            t->Phi[7][3]*w->S[55] + t->Phi[7][4]*w->S[69] + t->Phi[7][5]*w->S[83] +
+            t->Phi[7][6]*w->S[97] + t->Phi[7][7]*w->S[112] + t->Phi[7][8]*w->S[126] + t->Phi[7][14];
     w->term[0][113] = t->Phi[8][0]*t->Phi[0][0] + t->Phi[8][1]*t->Phi[1][0] +
             t->Phi[8][2]*t->Phi[2][0] + t->Phi[8][3]*t->Phi[3][0] + t->Phi[8][4]*t->Phi[4][0] +
             t->Phi[8][5]*t->Phi[5][0] + t->Phi[8][6]*t->Phi[6][0] + t->Phi[8][8]*t->Phi[8][0];
-    w->term[1][113] = w->S[113] + t->Phi[8][0]*w->S[0] + t->Phi[8][1]*w->S[14] +
-            t->Phi[8][2]*w->S[28] + t->Phi[8][3]*w->S[42] + t->Phi[8][4]*w->S[56] +
-            t->Phi[8][5]*w->S[70] + t->Phi[8][6]*w->S[84] + t->Phi[8][8]*w->S[113];
+    w->term[1][113] = t->Phi[8][0]*w->S[0] + t->Phi[8][1]*w->S[14] + t->Phi[8][2]*w->S[28] +
+            t->Phi[8][3]*w->S[42] + t->Phi[8][4]*w->S[56] + t->Phi[8][5]*w->S[70] +
+            t->Phi[8][6]*w->S[84] + t->Phi[8][8]*w->S[113];
     w->term[0][114] = t->Phi[8][0]*t->Phi[0][1] + t->Phi[8][1]*t->Phi[1][1] +
             t->Phi[8][2]*t->Phi[2][1] + t->Phi[8][3]*t->Phi[3][1] + t->Phi[8][4]*t->Phi[4][1] +
             t->Phi[8][5]*t->Phi[5][1] + t->Phi[8][6]*t->Phi[6][1] + t->Phi[8][8]*t->Phi[8][1];
-    w->term[1][114] = w->S[114] + t->Phi[8][0]*w->S[1] + t->Phi[8][1]*w->S[15] +
-            t->Phi[8][2]*w->S[29] + t->Phi[8][3]*w->S[43] + t->Phi[8][4]*w->S[57] +
-            t->Phi[8][5]*w->S[71] + t->Phi[8][6]*w->S[85] + t->Phi[8][8]*w->S[114];
+    w->term[1][114] = t->Phi[8][0]*w->S[1] + t->Phi[8][1]*w->S[15] + t->Phi[8][2]*w->S[29] +
+            t->Phi[8][3]*w->S[43] + t->Phi[8][4]*w->S[57] + t->Phi[8][5]*w->S[71] +
+            t->Phi[8][6]*w->S[85] + t->Phi[8][8]*w->S[114];
     w->term[0][115] = t->Phi[8][0]*t->Phi[0][2] + t->Phi[8][1]*t->Phi[1][2] +
             t->Phi[8][2]*t->Phi[2][2] + t->Phi[8][3]*t->Phi[3][2] + t->Phi[8][4]*t->Phi[4][2] +
             t->Phi[8][5]*t->Phi[5][2] + t->Phi[8][6]*t->Phi[6][2] + t->Phi[8][8]*t->Phi[8][2];
-    w->term[1][115] = w->S[115] + t->Phi[8][0]*w->S[2] + t->Phi[8][1]*w->S[16] +
-            t->Phi[8][2]*w->S[30] + t->Phi[8][3]*w->S[44] + t->Phi[8][4]*w->S[58] +
-            t->Phi[8][5]*w->S[72] + t->Phi[8][6]*w->S[86] + t->Phi[8][8]*w->S[115];
+    w->term[1][115] = t->Phi[8][0]*w->S[2] + t->Phi[8][1]*w->S[16] + t->Phi[8][2]*w->S[30] +
+            t->Phi[8][3]*w->S[44] + t->Phi[8][4]*w->S[58] + t->Phi[8][5]*w->S[72] +
+            t->Phi[8][6]*w->S[86] + t->Phi[8][8]*w->S[115];
     w->term[0][116] = t->Phi[8][0]*t->Phi[0][3] + t->Phi[8][1]*t->Phi[1][3] +
             t->Phi[8][2]*t->Phi[2][3] + t->Phi[8][3]*t->Phi[3][3] + t->Phi[8][4]*t->Phi[4][3] +
             t->Phi[8][5]*t->Phi[5][3] + t->Phi[8][6]*t->Phi[6][3] + t->Phi[8][8]*t->Phi[8][3];
-    w->term[1][116] = w->S[116] + t->Phi[8][0]*w->S[3] + t->Phi[8][1]*w->S[17] +
-            t->Phi[8][2]*w->S[31] + t->Phi[8][3]*w->S[45] + t->Phi[8][4]*w->S[59] +
-            t->Phi[8][5]*w->S[73] + t->Phi[8][6]*w->S[87] + t->Phi[8][8]*w->S[116];
+    w->term[1][116] = t->Phi[8][0]*w->S[3] + t->Phi[8][1]*w->S[17] + t->Phi[8][2]*w->S[31] +
+            t->Phi[8][3]*w->S[45] + t->Phi[8][4]*w->S[59] + t->Phi[8][5]*w->S[73] +
+            t->Phi[8][6]*w->S[87] + t->Phi[8][8]*w->S[116];
     w->term[0][117] = t->Phi[8][0]*t->Phi[0][4] + t->Phi[8][1]*t->Phi[1][4] +
             t->Phi[8][2]*t->Phi[2][4] + t->Phi[8][3]*t->Phi[3][4] + t->Phi[8][4]*t->Phi[4][4] +
             t->Phi[8][5]*t->Phi[5][4] + t->Phi[8][6]*t->Phi[6][4] + t->Phi[8][8]*t->Phi[8][4];
-    w->term[1][117] = w->S[117] + t->Phi[8][0]*w->S[4] + t->Phi[8][1]*w->S[18] +
-            t->Phi[8][2]*w->S[32] + t->Phi[8][3]*w->S[46] + t->Phi[8][4]*w->S[60] +
-            t->Phi[8][5]*w->S[74] + t->Phi[8][6]*w->S[88] + t->Phi[8][8]*w->S[117];
+    w->term[1][117] = t->Phi[8][0]*w->S[4] + t->Phi[8][1]*w->S[18] + t->Phi[8][2]*w->S[32] +
+            t->Phi[8][3]*w->S[46] + t->Phi[8][4]*w->S[60] + t->Phi[8][5]*w->S[74] +
+            t->Phi[8][6]*w->S[88] + t->Phi[8][8]*w->S[117];
     w->term[0][118] = t->Phi[8][0]*t->Phi[0][5] + t->Phi[8][1]*t->Phi[1][5] +
             t->Phi[8][2]*t->Phi[2][5] + t->Phi[8][3]*t->Phi[3][5] + t->Phi[8][4]*t->Phi[4][5] +
             t->Phi[8][5]*t->Phi[5][5] + t->Phi[8][6]*t->Phi[6][5] + t->Phi[8][8]*t->Phi[8][5];
-    w->term[1][118] = w->S[118] + t->Phi[8][0]*w->S[5] + t->Phi[8][1]*w->S[19] +
-            t->Phi[8][2]*w->S[33] + t->Phi[8][3]*w->S[47] + t->Phi[8][4]*w->S[61] +
-            t->Phi[8][5]*w->S[75] + t->Phi[8][6]*w->S[89] + t->Phi[8][8]*w->S[118];
+    w->term[1][118] = t->Phi[8][0]*w->S[5] + t->Phi[8][1]*w->S[19] + t->Phi[8][2]*w->S[33] +
+            t->Phi[8][3]*w->S[47] + t->Phi[8][4]*w->S[61] + t->Phi[8][5]*w->S[75] +
+            t->Phi[8][6]*w->S[89] + t->Phi[8][8]*w->S[118];
     w->term[0][119] = t->Phi[8][0]*t->Phi[0][6] + t->Phi[8][1]*t->Phi[1][6] +
             t->Phi[8][2]*t->Phi[2][6] + t->Phi[8][3]*t->Phi[3][6] + t->Phi[8][4]*t->Phi[4][6] +
             t->Phi[8][5]*t->Phi[5][6] + t->Phi[8][6]*t->Phi[6][6] + t->Phi[8][8]*t->Phi[8][6];
-    w->term[1][119] = w->S[119] + t->Phi[8][0]*w->S[6] + t->Phi[8][1]*w->S[20] +
-            t->Phi[8][2]*w->S[34] + t->Phi[8][3]*w->S[48] + t->Phi[8][4]*w->S[62] +
-            t->Phi[8][5]*w->S[76] + t->Phi[8][6]*w->S[90] + t->Phi[8][8]*w->S[119];
+    w->term[1][119] = t->Phi[8][0]*w->S[6] + t->Phi[8][1]*w->S[20] + t->Phi[8][2]*w->S[34] +
+            t->Phi[8][3]*w->S[48] + t->Phi[8][4]*w->S[62] + t->Phi[8][5]*w->S[76] +
+            t->Phi[8][6]*w->S[90] + t->Phi[8][8]*w->S[119];
     w->term[0][120] = t->Phi[8][0]*t->Phi[0][8] + t->Phi[8][1]*t->Phi[1][8] +
             t->Phi[8][2]*t->Phi[2][8] + t->Phi[8][3]*t->Phi[3][8] + t->Phi[8][4]*t->Phi[4][8] +
             t->Phi[8][5]*t->Phi[5][8] + t->Phi[8][6]*t->Phi[6][8] + t->Phi[8][8]*t->Phi[8][8];
-    w->term[1][120] = w->S[120] + t->Phi[8][0]*w->S[7] + t->Phi[8][1]*w->S[21] +
-            t->Phi[8][2]*w->S[35] + t->Phi[8][3]*w->S[49] + t->Phi[8][4]*w->S[63] +
-            t->Phi[8][5]*w->S[77] + t->Phi[8][6]*w->S[91] + t->Phi[8][8]*w->S[120];
+    w->term[1][120] = t->Phi[8][0]*w->S[7] + t->Phi[8][1]*w->S[21] + t->Phi[8][2]*w->S[35] +
+            t->Phi[8][3]*w->S[49] + t->Phi[8][4]*w->S[63] + t->Phi[8][5]*w->S[77] +
+            t->Phi[8][6]*w->S[91] + t->Phi[8][8]*w->S[120];
     w->term[0][121] = t->Phi[8][0]*t->Phi[0][9] + t->Phi[8][1]*t->Phi[1][9] +
             t->Phi[8][2]*t->Phi[2][9] + t->Phi[8][3]*t->Phi[3][9] + t->Phi[8][4]*t->Phi[4][9] +
-            t->Phi[8][5]*t->Phi[5][9] + t->Phi[8][6]*t->Phi[6][9] + t->Phi[8][8]*t->Phi[8][9] +
-            t->Phi[8][9];
-    w->term[1][121] = w->S[121] + t->Phi[8][0]*w->S[8] + t->Phi[8][1]*w->S[22] +
-            t->Phi[8][2]*w->S[36] + t->Phi[8][3]*w->S[50] + t->Phi[8][4]*w->S[64] +
-            t->Phi[8][5]*w->S[78] + t->Phi[8][6]*w->S[92] + t->Phi[8][8]*w->S[121] + t->Phi[8][9];
+            t->Phi[8][5]*t->Phi[5][9] + t->Phi[8][6]*t->Phi[6][9] + t->Phi[8][8]*t->Phi[8][9];
+    w->term[1][121] = t->Phi[8][0]*w->S[8] + t->Phi[8][1]*w->S[22] + t->Phi[8][2]*w->S[36] +
+            t->Phi[8][3]*w->S[50] + t->Phi[8][4]*w->S[64] + t->Phi[8][5]*w->S[78] +
+            t->Phi[8][6]*w->S[92] + t->Phi[8][8]*w->S[121] + t->Phi[8][9];
     w->term[0][122] = t->Phi[8][0]*t->Phi[0][10] + t->Phi[8][1]*t->Phi[1][10] +
             t->Phi[8][2]*t->Phi[2][10] + t->Phi[8][3]*t->Phi[3][10] + t->Phi[8][4]*t->Phi[4][10] +
-            t->Phi[8][5]*t->Phi[5][10] + t->Phi[8][6]*t->Phi[6][10] + t->Phi[8][8]*t->Phi[8][10] +
-            t->Phi[8][10];
-    w->term[1][122] = w->S[122] + t->Phi[8][0]*w->S[9] + t->Phi[8][1]*w->S[23] +
-            t->Phi[8][2]*w->S[37] + t->Phi[8][3]*w->S[51] + t->Phi[8][4]*w->S[65] +
-            t->Phi[8][5]*w->S[79] + t->Phi[8][6]*w->S[93] + t->Phi[8][8]*w->S[122] + t->Phi[8][10];
+            t->Phi[8][5]*t->Phi[5][10] + t->Phi[8][6]*t->Phi[6][10] + t->Phi[8][8]*t->Phi[8][10];
+    w->term[1][122] = t->Phi[8][0]*w->S[9] + t->Phi[8][1]*w->S[23] + t->Phi[8][2]*w->S[37] +
+            t->Phi[8][3]*w->S[51] + t->Phi[8][4]*w->S[65] + t->Phi[8][5]*w->S[79] +
+            t->Phi[8][6]*w->S[93] + t->Phi[8][8]*w->S[122] + t->Phi[8][10];
     w->term[0][123] = t->Phi[8][0]*t->Phi[0][11] + t->Phi[8][1]*t->Phi[1][11] +
             t->Phi[8][2]*t->Phi[2][11] + t->Phi[8][3]*t->Phi[3][11] + t->Phi[8][4]*t->Phi[4][11] +
-            t->Phi[8][5]*t->Phi[5][11] + t->Phi[8][6]*t->Phi[6][11] + t->Phi[8][8]*t->Phi[8][11] +
-            t->Phi[8][11];
-    w->term[1][123] = w->S[123] + t->Phi[8][0]*w->S[10] + t->Phi[8][1]*w->S[24] +
-            t->Phi[8][2]*w->S[38] + t->Phi[8][3]*w->S[52] + t->Phi[8][4]*w->S[66] +
-            t->Phi[8][5]*w->S[80] + t->Phi[8][6]*w->S[94] + t->Phi[8][8]*w->S[123] + t->Phi[8][11];
+            t->Phi[8][5]*t->Phi[5][11] + t->Phi[8][6]*t->Phi[6][11] + t->Phi[8][8]*t->Phi[8][11];
+    w->term[1][123] = t->Phi[8][0]*w->S[10] + t->Phi[8][1]*w->S[24] + t->Phi[8][2]*w->S[38] +
+            t->Phi[8][3]*w->S[52] + t->Phi[8][4]*w->S[66] + t->Phi[8][5]*w->S[80] +
+            t->Phi[8][6]*w->S[94] + t->Phi[8][8]*w->S[123] + t->Phi[8][11];
     w->term[0][124] = t->Phi[8][0]*t->Phi[0][12] + t->Phi[8][1]*t->Phi[1][12] +
             t->Phi[8][2]*t->Phi[2][12] + t->Phi[8][3]*t->Phi[3][12] + t->Phi[8][4]*t->Phi[4][12] +
-            t->Phi[8][5]*t->Phi[5][12] + t->Phi[8][6]*t->Phi[6][12] + t->Phi[8][8]*t->Phi[8][12] +
-            t->Phi[8][12];
-    w->term[1][124] = w->S[124] + t->Phi[8][0]*w->S[11] + t->Phi[8][1]*w->S[25] +
-            t->Phi[8][2]*w->S[39] + t->Phi[8][3]*w->S[53] + t->Phi[8][4]*w->S[67] +
-            t->Phi[8][5]*w->S[81] + t->Phi[8][6]*w->S[95] + t->Phi[8][8]*w->S[124] + t->Phi[8][12];
+            t->Phi[8][5]*t->Phi[5][12] + t->Phi[8][6]*t->Phi[6][12] + t->Phi[8][8]*t->Phi[8][12];
+    w->term[1][124] = t->Phi[8][0]*w->S[11] + t->Phi[8][1]*w->S[25] + t->Phi[8][2]*w->S[39] +
+            t->Phi[8][3]*w->S[53] + t->Phi[8][4]*w->S[67] + t->Phi[8][5]*w->S[81] +
+            t->Phi[8][6]*w->S[95] + t->Phi[8][8]*w->S[124] + t->Phi[8][12];
     w->term[0][125] = t->Phi[8][0]*t->Phi[0][13] + t->Phi[8][1]*t->Phi[1][13] +
             t->Phi[8][2]*t->Phi[2][13] + t->Phi[8][3]*t->Phi[3][13] + t->Phi[8][4]*t->Phi[4][13] +
-            t->Phi[8][5]*t->Phi[5][13] + t->Phi[8][6]*t->Phi[6][13] + t->Phi[8][8]*t->Phi[8][13] +
-            t->Phi[8][13];
-    w->term[1][125] = w->S[125] + t->Phi[8][0]*w->S[12] + t->Phi[8][1]*w->S[26] +
-            t->Phi[8][2]*w->S[40] + t->Phi[8][3]*w->S[54] + t->Phi[8][4]*w->S[68] +
-            t->Phi[8][5]*w->S[82] + t->Phi[8][6]*w->S[96] + t->Phi[8][8]*w->S[125] + t->Phi[8][13];
+            t->Phi[8][5]*t->Phi[5][13] + t->Phi[8][6]*t->Phi[6][13] + t->Phi[8][8]*t->Phi[8][13];
+    w->term[1][125] = t->Phi[8][0]*w->S[12] + t->Phi[8][1]*w->S[26] + t->Phi[8][2]*w->S[40] +
+            t->Phi[8][3]*w->S[54] + t->Phi[8][4]*w->S[68] + t->Phi[8][5]*w->S[82] +
+            t->Phi[8][6]*w->S[96] + t->Phi[8][8]*w->S[125] + t->Phi[8][13];
     w->term[0][126] = t->Phi[8][0]*t->Phi[0][14] + t->Phi[8][1]*t->Phi[1][14] +
             t->Phi[8][2]*t->Phi[2][14] + t->Phi[8][3]*t->Phi[3][14] + t->Phi[8][4]*t->Phi[4][14] +
-            t->Phi[8][5]*t->Phi[5][14] + t->Phi[8][6]*t->Phi[6][14] + t->Phi[8][8]*t->Phi[8][14] +
-            t->Phi[8][14];
-    w->term[1][126] = w->S[126] + t->Phi[8][0]*w->S[13] + t->Phi[8][1]*w->S[27] +
-            t->Phi[8][2]*w->S[41] + t->Phi[8][3]*w->S[55] + t->Phi[8][4]*w->S[69] +
-            t->Phi[8][5]*w->S[83] + t->Phi[8][6]*w->S[97] + t->Phi[8][8]*w->S[126] + t->Phi[8][14];
-    t->Phi[0][0] = w->term[0][0];
-    w->S[0] = half*w->term[1][0];
-    t->Phi[0][1] = w->term[0][1];
-    w->S[1] = half*w->term[1][1];
-    t->Phi[0][2] = w->term[0][2];
-    w->S[2] = half*w->term[1][2];
-    t->Phi[0][3] = w->term[0][3];
-    w->S[3] = half*w->term[1][3];
-    t->Phi[0][4] = w->term[0][4];
-    w->S[4] = half*w->term[1][4];
-    t->Phi[0][5] = w->term[0][5];
-    w->S[5] = half*w->term[1][5];
-    t->Phi[0][6] = w->term[0][6];
-    w->S[6] = half*w->term[1][6];
-    t->Phi[0][8] = w->term[0][7];
-    w->S[7] = half*w->term[1][7];
-    t->Phi[0][9] = w->term[0][8];
-    w->S[8] = half*w->term[1][8];
-    t->Phi[0][10] = w->term[0][9];
-    w->S[9] = half*w->term[1][9];
-    t->Phi[0][11] = w->term[0][10];
-    w->S[10] = half*w->term[1][10];
-    t->Phi[0][12] = w->term[0][11];
-    w->S[11] = half*w->term[1][11];
-    t->Phi[0][13] = w->term[0][12];
-    w->S[12] = half*w->term[1][12];
-    t->Phi[0][14] = w->term[0][13];
-    w->S[13] = half*w->term[1][13];
-    t->Phi[1][0] = w->term[0][14];
-    w->S[14] = half*w->term[1][14];
-    t->Phi[1][1] = w->term[0][15];
-    w->S[15] = half*w->term[1][15];
-    t->Phi[1][2] = w->term[0][16];
-    w->S[16] = half*w->term[1][16];
-    t->Phi[1][3] = w->term[0][17];
-    w->S[17] = half*w->term[1][17];
-    t->Phi[1][4] = w->term[0][18];
-    w->S[18] = half*w->term[1][18];
-    t->Phi[1][5] = w->term[0][19];
-    w->S[19] = half*w->term[1][19];
-    t->Phi[1][6] = w->term[0][20];
-    w->S[20] = half*w->term[1][20];
-    t->Phi[1][8] = w->term[0][21];
-    w->S[21] = half*w->term[1][21];
-    t->Phi[1][9] = w->term[0][22];
-    w->S[22] = half*w->term[1][22];
-    t->Phi[1][10] = w->term[0][23];
-    w->S[23] = half*w->term[1][23];
-    t->Phi[1][11] = w->term[0][24];
-    w->S[24] = half*w->term[1][24];
-    t->Phi[1][12] = w->term[0][25];
-    w->S[25] = half*w->term[1][25];
-    t->Phi[1][13] = w->term[0][26];
-    w->S[26] = half*w->term[1][26];
-    t->Phi[1][14] = w->term[0][27];
-    w->S[27] = half*w->term[1][27];
-    t->Phi[2][0] = w->term[0][28];
-    w->S[28] = half*w->term[1][28];
-    t->Phi[2][1] = w->term[0][29];
-    w->S[29] = half*w->term[1][29];
-    t->Phi[2][2] = w->term[0][30];
-    w->S[30] = half*w->term[1][30];
-    t->Phi[2][3] = w->term[0][31];
-    w->S[31] = half*w->term[1][31];
-    t->Phi[2][4] = w->term[0][32];
-    w->S[32] = half*w->term[1][32];
-    t->Phi[2][5] = w->term[0][33];
-    w->S[33] = half*w->term[1][33];
-    t->Phi[2][6] = w->term[0][34];
-    w->S[34] = half*w->term[1][34];
-    t->Phi[2][8] = w->term[0][35];
-    w->S[35] = half*w->term[1][35];
-    t->Phi[2][9] = w->term[0][36];
-    w->S[36] = half*w->term[1][36];
-    t->Phi[2][10] = w->term[0][37];
-    w->S[37] = half*w->term[1][37];
-    t->Phi[2][11] = w->term[0][38];
-    w->S[38] = half*w->term[1][38];
-    t->Phi[2][12] = w->term[0][39];
-    w->S[39] = half*w->term[1][39];
-    t->Phi[2][13] = w->term[0][40];
-    w->S[40] = half*w->term[1][40];
-    t->Phi[2][14] = w->term[0][41];
-    w->S[41] = half*w->term[1][41];
-    t->Phi[3][0] = w->term[0][42];
-    w->S[42] = half*w->term[1][42];
-    t->Phi[3][1] = w->term[0][43];
-    w->S[43] = half*w->term[1][43];
-    t->Phi[3][2] = w->term[0][44];
-    w->S[44] = half*w->term[1][44];
-    t->Phi[3][3] = w->term[0][45];
-    w->S[45] = half*w->term[1][45];
-    t->Phi[3][4] = w->term[0][46];
-    w->S[46] = half*w->term[1][46];
-    t->Phi[3][5] = w->term[0][47];
-    w->S[47] = half*w->term[1][47];
-    t->Phi[3][6] = w->term[0][48];
-    w->S[48] = half*w->term[1][48];
-    t->Phi[3][8] = w->term[0][49];
-    w->S[49] = half*w->term[1][49];
-    t->Phi[3][9] = w->term[0][50];
-    w->S[50] = half*w->term[1][50];
-    t->Phi[3][10] = w->term[0][51];
-    w->S[51] = half*w->term[1][51];
-    t->Phi[3][11] = w->term[0][52];
-    w->S[52] = half*w->term[1][52];
-    t->Phi[3][12] = w->term[0][53];
-    w->S[53] = half*w->term[1][53];
-    t->Phi[3][13] = w->term[0][54];
-    w->S[54] = half*w->term[1][54];
-    t->Phi[3][14] = w->term[0][55];
-    w->S[55] = half*w->term[1][55];
-    t->Phi[4][0] = w->term[0][56];
-    w->S[56] = half*w->term[1][56];
-    t->Phi[4][1] = w->term[0][57];
-    w->S[57] = half*w->term[1][57];
-    t->Phi[4][2] = w->term[0][58];
-    w->S[58] = half*w->term[1][58];
-    t->Phi[4][3] = w->term[0][59];
-    w->S[59] = half*w->term[1][59];
-    t->Phi[4][4] = w->term[0][60];
-    w->S[60] = half*w->term[1][60];
-    t->Phi[4][5] = w->term[0][61];
-    w->S[61] = half*w->term[1][61];
-    t->Phi[4][6] = w->term[0][62];
-    w->S[62] = half*w->term[1][62];
-    t->Phi[4][8] = w->term[0][63];
-    w->S[63] = half*w->term[1][63];
-    t->Phi[4][9] = w->term[0][64];
-    w->S[64] = half*w->term[1][64];
-    t->Phi[4][10] = w->term[0][65];
-    w->S[65] = half*w->term[1][65];
-    t->Phi[4][11] = w->term[0][66];
-    w->S[66] = half*w->term[1][66];
-    t->Phi[4][12] = w->term[0][67];
-    w->S[67] = half*w->term[1][67];
-    t->Phi[4][13] = w->term[0][68];
-    w->S[68] = half*w->term[1][68];
-    t->Phi[4][14] = w->term[0][69];
-    w->S[69] = half*w->term[1][69];
-    t->Phi[5][0] = w->term[0][70];
-    w->S[70] = half*w->term[1][70];
-    t->Phi[5][1] = w->term[0][71];
-    w->S[71] = half*w->term[1][71];
-    t->Phi[5][2] = w->term[0][72];
-    w->S[72] = half*w->term[1][72];
-    t->Phi[5][3] = w->term[0][73];
-    w->S[73] = half*w->term[1][73];
-    t->Phi[5][4] = w->term[0][74];
-    w->S[74] = half*w->term[1][74];
-    t->Phi[5][5] = w->term[0][75];
-    w->S[75] = half*w->term[1][75];
-    t->Phi[5][6] = w->term[0][76];
-    w->S[76] = half*w->term[1][76];
-    t->Phi[5][8] = w->term[0][77];
-    w->S[77] = half*w->term[1][77];
-    t->Phi[5][9] = w->term[0][78];
-    w->S[78] = half*w->term[1][78];
-    t->Phi[5][10] = w->term[0][79];
-    w->S[79] = half*w->term[1][79];
-    t->Phi[5][11] = w->term[0][80];
-    w->S[80] = half*w->term[1][80];
-    t->Phi[5][12] = w->term[0][81];
-    w->S[81] = half*w->term[1][81];
-    t->Phi[5][13] = w->term[0][82];
-    w->S[82] = half*w->term[1][82];
-    t->Phi[5][14] = w->term[0][83];
-    w->S[83] = half*w->term[1][83];
-    t->Phi[6][0] = w->term[0][84];
-    w->S[84] = half*w->term[1][84];
-    t->Phi[6][1] = w->term[0][85];
-    w->S[85] = half*w->term[1][85];
-    t->Phi[6][2] = w->term[0][86];
-    w->S[86] = half*w->term[1][86];
-    t->Phi[6][3] = w->term[0][87];
-    w->S[87] = half*w->term[1][87];
-    t->Phi[6][4] = w->term[0][88];
-    w->S[88] = half*w->term[1][88];
-    t->Phi[6][5] = w->term[0][89];
-    w->S[89] = half*w->term[1][89];
-    t->Phi[6][6] = w->term[0][90];
-    w->S[90] = half*w->term[1][90];
-    t->Phi[6][8] = w->term[0][91];
-    w->S[91] = half*w->term[1][91];
-    t->Phi[6][9] = w->term[0][92];
-    w->S[92] = half*w->term[1][92];
-    t->Phi[6][10] = w->term[0][93];
-    w->S[93] = half*w->term[1][93];
-    t->Phi[6][11] = w->term[0][94];
-    w->S[94] = half*w->term[1][94];
-    t->Phi[6][12] = w->term[0][95];
-    w->S[95] = half*w->term[1][95];
-    t->Phi[6][13] = w->term[0][96];
-    w->S[96] = half*w->term[1][96];
-    t->Phi[6][14] = w->term[0][97];
-    w->S[97] = half*w->term[1][97];
-    t->Phi[7][0] = w->term[0][98];
-    w->S[98] = half*w->term[1][98];
-    t->Phi[7][1] = w->term[0][99];
-    w->S[99] = half*w->term[1][99];
-    t->Phi[7][2] = w->term[0][100];
-    w->S[100] = half*w->term[1][100];
-    t->Phi[7][3] = w->term[0][101];
-    w->S[101] = half*w->term[1][101];
-    t->Phi[7][4] = w->term[0][102];
-    w->S[102] = half*w->term[1][102];
-    t->Phi[7][5] = w->term[0][103];
-    w->S[103] = half*w->term[1][103];
-    t->Phi[7][6] = w->term[0][104];
-    w->S[104] = half*w->term[1][104];
-    t->Phi[7][7] = w->term[0][105];
-    w->S[105] = half*w->term[1][105];
-    t->Phi[7][8] = w->term[0][106];
-    w->S[106] = half*w->term[1][106];
-    t->Phi[7][9] = w->term[0][107];
-    w->S[107] = half*w->term[1][107];
-    t->Phi[7][10] = w->term[0][108];
-    w->S[108] = half*w->term[1][108];
-    t->Phi[7][11] = w->term[0][109];
-    w->S[109] = half*w->term[1][109];
-    t->Phi[7][12] = w->term[0][110];
-    w->S[110] = half*w->term[1][110];
-    t->Phi[7][13] = w->term[0][111];
-    w->S[111] = half*w->term[1][111];
-    t->Phi[7][14] = w->term[0][112];
-    w->S[112] = half*w->term[1][112];
-    t->Phi[8][0] = w->term[0][113];
-    w->S[113] = half*w->term[1][113];
-    t->Phi[8][1] = w->term[0][114];
-    w->S[114] = half*w->term[1][114];
-    t->Phi[8][2] = w->term[0][115];
-    w->S[115] = half*w->term[1][115];
-    t->Phi[8][3] = w->term[0][116];
-    w->S[116] = half*w->term[1][116];
-    t->Phi[8][4] = w->term[0][117];
-    w->S[117] = half*w->term[1][117];
-    t->Phi[8][5] = w->term[0][118];
-    w->S[118] = half*w->term[1][118];
-    t->Phi[8][6] = w->term[0][119];
-    w->S[119] = half*w->term[1][119];
-    t->Phi[8][8] = w->term[0][120];
-    w->S[120] = half*w->term[1][120];
-    t->Phi[8][9] = w->term[0][121];
-    w->S[121] = half*w->term[1][121];
-    t->Phi[8][10] = w->term[0][122];
-    w->S[122] = half*w->term[1][122];
-    t->Phi[8][11] = w->term[0][123];
-    w->S[123] = half*w->term[1][123];
-    t->Phi[8][12] = w->term[0][124];
-    w->S[124] = half*w->term[1][124];
-    t->Phi[8][13] = w->term[0][125];
-    w->S[125] = half*w->term[1][125];
-    t->Phi[8][14] = w->term[0][126];
-    w->S[126] = half*w->term[1][126];
+            t->Phi[8][5]*t->Phi[5][14] + t->Phi[8][6]*t->Phi[6][14] + t->Phi[8][8]*t->Phi[8][14];
+    w->term[1][126] = t->Phi[8][0]*w->S[13] + t->Phi[8][1]*w->S[27] + t->Phi[8][2]*w->S[41] +
+            t->Phi[8][3]*w->S[55] + t->Phi[8][4]*w->S[69] + t->Phi[8][5]*w->S[83] +
+            t->Phi[8][6]*w->S[97] + t->Phi[8][8]*w->S[126] + t->Phi[8][14];
+    t->Phi[0][0] = t->Phi[0][0] + t->Phi[0][0] + w->term[0][0];
+    w->S[0] = w->S[0] + half*w->term[1][0];
+    t->Phi[0][1] = t->Phi[0][1] + t->Phi[0][1] + w->term[0][1];
+    w->S[1] = w->S[1] + half*w->term[1][1];
+    t->Phi[0][2] = t->Phi[0][2] + t->Phi[0][2] + w->term[0][2];
+    w->S[2] = w->S[2] + half*w->term[1][2];
+    t->Phi[0][3] = t->Phi[0][3] + t->Phi[0][3] + w->term[0][3];
+    w->S[3] = w->S[3] + half*w->term[1][3];
+    t->Phi[0][4] = t->Phi[0][4] + t->Phi[0][4] + w->term[0][4];
+    w->S[4] = w->S[4] + half*w->term[1][4];
+    t->Phi[0][5] = t->Phi[0][5] + t->Phi[0][5] + w->term[0][5];
+    w->S[5] = w->S[5] + half*w->term[1][5];
+    t->Phi[0][6] = t->Phi[0][6] + t->Phi[0][6] + w->term[0][6];
+    w->S[6] = w->S[6] + half*w->term[1][6];
+    t->Phi[0][8] = t->Phi[0][8] + t->Phi[0][8] + w->term[0][7];
+    w->S[7] = w->S[7] + half*w->term[1][7];
+    t->Phi[0][9] = t->Phi[0][9] + t->Phi[0][9] + w->term[0][8];
+    w->S[8] = w->S[8] + half*w->term[1][8];
+    t->Phi[0][10] = t->Phi[0][10] + t->Phi[0][10] + w->term[0][9];
+    w->S[9] = w->S[9] + half*w->term[1][9];
+    t->Phi[0][11] = t->Phi[0][11] + t->Phi[0][11] + w->term[0][10];
+    w->S[10] = w->S[10] + half*w->term[1][10];
+    t->Phi[0][12] = t->Phi[0][12] + t->Phi[0][12] + w->term[0][11];
+    w->S[11] = w->S[11] + half*w->term[1][11];
+    t->Phi[0][13] = t->Phi[0][13] + t->Phi[0][13] + w->term[0][12];
+    w->S[12] = w->S[12] + half*w->term[1][12];
+    t->Phi[0][14] = t->Phi[0][14] + t->Phi[0][14] + w->term[0][13];
+    w->S[13] = w->S[13] + half*w->term[1][13];
+    t->Phi[1][0] = t->Phi[1][0] + t->Phi[1][0] + w->term[0][14];
+    w->S[14] = w->S[14] + half*w->term[1][14];
+    t->Phi[1][1] = t->Phi[1][1] + t->Phi[1][1] + w->term[0][15];
+    w->S[15] = w->S[15] + half*w->term[1][15];
+    t->Phi[1][2] = t->Phi[1][2] + t->Phi[1][2] + w->term[0][16];
+    w->S[16] = w->S[16] + half*w->term[1][16];
+    t->Phi[1][3] = t->Phi[1][3] + t->Phi[1][3] + w->term[0][17];
+    w->S[17] = w->S[17] + half*w->term[1][17];
+    t->Phi[1][4] = t->Phi[1][4] + t->Phi[1][4] + w->term[0][18];
+    w->S[18] = w->S[18] + half*w->term[1][18];
+    t->Phi[1][5] = t->Phi[1][5] + t->Phi[1][5] + w->term[0][19];
+    w->S[19] = w->S[19] + half*w->term[1][19];
+    t->Phi[1][6] = t->Phi[1][6] + t->Phi[1][6] + w->term[0][20];
+    w->S[20] = w->S[20] + half*w->term[1][20];
+    t->Phi[1][8] = t->Phi[1][8] + t->Phi[1][8] + w->term[0][21];
+    w->S[21] = w->S[21] + half*w->term[1][21];
+    t->Phi[1][9] = t->Phi[1][9] + t->Phi[1][9] + w->term[0][22];
+    w->S[22] = w->S[22] + half*w->term[1][22];
+    t->Phi[1][10] = t->Phi[1][10] + t->Phi[1][10] + w->term[0][23];
+    w->S[23] = w->S[23] + half*w->term[1][23];
+    t->Phi[1][11] = t->Phi[1][11] + t->Phi[1][11] + w->term[0][24];
+    w->S[24] = w->S[24] + half*w->term[1][24];
+    t->Phi[1][12] = t->Phi[1][12] + t->Phi[1][12] + w->term[0][25];
+    w->S[25] = w->S[25] + half*w->term[1][25];
+    t->Phi[1][13] = t->Phi[1][13] + t->Phi[1][13] + w->term[0][26];
+    w->S[26] = w->S[26] + half*w->term[1][26];
+    t->Phi[1][14] = t->Phi[1][14] + t->Phi[1][14] + w->term[0][27];
+    w->S[27] = w->S[27] + half*w->term[1][27];
+    t->Phi[2][0] = t->Phi[2][0] + t->Phi[2][0] + w->term[0][28];
+    w->S[28] = w->S[28] + half*w->term[1][28];
+    t->Phi[2][1] = t->Phi[2][1] + t->Phi[2][1] + w->term[0][29];
+    w->S[29] = w->S[29] + half*w->term[1][29];
+    t->Phi[2][2] = t->Phi[2][2] + t->Phi[2][2] + w->term[0][30];
+    w->S[30] = w->S[30] + half*w->term[1][30];
+    t->Phi[2][3] = t->Phi[2][3] + t->Phi[2][3] + w->term[0][31];
+    w->S[31] = w->S[31] + half*w->term[1][31];
+    t->Phi[2][4] = t->Phi[2][4] + t->Phi[2][4] + w->term[0][32];
+    w->S[32] = w->S[32] + half*w->term[1][32];
+    t->Phi[2][5] = t->Phi[2][5] + t->Phi[2][5] + w->term[0][33];
+    w->S[33] = w->S[33] + half*w->term[1][33];
+    t->Phi[2][6] = t->Phi[2][6] + t->Phi[2][6] + w->term[0][34];
+    w->S[34] = w->S[34] + half*w->term[1][34];
+    t->Phi[2][8] = t->Phi[2][8] + t->Phi[2][8] + w->term[0][35];
+    w->S[35] = w->S[35] + half*w->term[1][35];
+    t->Phi[2][9] = t->Phi[2][9] + t->Phi[2][9] + w->term[0][36];
+    w->S[36] = w->S[36] + half*w->term[1][36];
+    t->Phi[2][10] = t->Phi[2][10] + t->Phi[2][10] + w->term[0][37];
+    w->S[37] = w->S[37] + half*w->term[1][37];
+    t->Phi[2][11] = t->Phi[2][11] + t->Phi[2][11] + w->term[0][38];
+    w->S[38] = w->S[38] + half*w->term[1][38];
+    t->Phi[2][12] = t->Phi[2][12] + t->Phi[2][12] + w->term[0][39];
+    w->S[39] = w->S[39] + half*w->term[1][39];
+    t->Phi[2][13] = t->Phi[2][13] + t->Phi[2][13] + w->term[0][40];
+    w->S[40] = w->S[40] + half*w->term[1][40];
+    t->Phi[2][14] = t->Phi[2][14] + t->Phi[2][14] + w->term[0][41];
+    w->S[41] = w->S[41] + half*w->term[1][41];
+    t->Phi[3][0] = t->Phi[3][0] + t->Phi[3][0] + w->term[0][42];
+    w->S[42] = w->S[42] + half*w->term[1][42];
+    t->Phi[3][1] = t->Phi[3][1] + t->Phi[3][1] + w->term[0][43];
+    w->S[43] = w->S[43] + half*w->term[1][43];
+    t->Phi[3][2] = t->Phi[3][2] + t->Phi[3][2] + w->term[0][44];
+    w->S[44] = w->S[44] + half*w->term[1][44];
+    t->Phi[3][3] = t->Phi[3][3] + t->Phi[3][3] + w->term[0][45];
+    w->S[45] = w->S[45] + half*w->term[1][45];
+    t->Phi[3][4] = t->Phi[3][4] + t->Phi[3][4] + w->term[0][46];
+    w->S[46] = w->S[46] + half*w->term[1][46];
+    t->Phi[3][5] = t->Phi[3][5] + t->Phi[3][5] + w->term[0][47];
+    w->S[47] = w->S[47] + half*w->term[1][47];
+    t->Phi[3][6] = t->Phi[3][6] + t->Phi[3][6] + w->term[0][48];
+    w->S[48] = w->S[48] + half*w->term[1][48];
+    t->Phi[3][8] = t->Phi[3][8] + t->Phi[3][8] + w->term[0][49];
+    w->S[49] = w->S[49] + half*w->term[1][49];
+    t->Phi[3][9] = t->Phi[3][9] + t->Phi[3][9] + w->term[0][50];
+    w->S[50] = w->S[50] + half*w->term[1][50];
+    t->Phi[3][10] = t->Phi[3][10] + t->Phi[3][10] + w->term[0][51];
+    w->S[51] = w->S[51] + half*w->term[1][51];
+    t->Phi[3][11] = t->Phi[3][11] + t->Phi[3][11] + w->term[0][52];
+    w->S[52] = w->S[52] + half*w->term[1][52];
+    t->Phi[3][12] = t->Phi[3][12] + t->Phi[3][12] + w->term[0][53];
+    w->S[53] = w->S[53] + half*w->term[1][53];
+    t->Phi[3][13] = t->Phi[3][13] + t->Phi[3][13] + w->term[0][54];
+    w->S[54] = w->S[54] + half*w->term[1][54];
+    t->Phi[3][14] = t->Phi[3][14] + t->Phi[3][14] + w->term[0][55];
+    w->S[55] = w->S[55] + half*w->term[1][55];
+    t->Phi[4][0] = t->Phi[4][0] + t->Phi[4][0] + w->term[0][56];
+    w->S[56] = w->S[56] + half*w->term[1][56];
+    t->Phi[4][1] = t->Phi[4][1] + t->Phi[4][1] + w->term[0][57];
+    w->S[57] = w->S[57] + half*w->term[1][57];
+    t->Phi[4][2] = t->Phi[4][2] + t->Phi[4][2] + w->term[0][58];
+    w->S[58] = w->S[58] + half*w->term[1][58];
+    t->Phi[4][3] = t->Phi[4][3] + t->Phi[4][3] + w->term[0][59];
+    w->S[59] = w->S[59] + half*w->term[1][59];
+    t->Phi[4][4] = t->Phi[4][4] + t->Phi[4][4] + w->term[0][60];
+    w->S[60] = w->S[60] + half*w->term[1][60];
+    t->Phi[4][5] = t->Phi[4][5] + t->Phi[4][5] + w->term[0][61];
+    w->S[61] = w->S[61] + half*w->term[1][61];
+    t->Phi[4][6] = t->Phi[4][6] + t->Phi[4][6] + w->term[0][62];
+    w->S[62] = w->S[62] + half*w->term[1][62];
+    t->Phi[4][8] = t->Phi[4][8] + t->Phi[4][8] + w->term[0][63];
+    w->S[63] = w->S[63] + half*w->term[1][63];
+    t->Phi[4][9] = t->Phi[4][9] + t->Phi[4][9] + w->term[0][64];
+    w->S[64] = w->S[64] + half*w->term[1][64];
+    t->Phi[4][10] = t->Phi[4][10] + t->Phi[4][10] + w->term[0][65];
+    w->S[65] = w->S[65] + half*w->term[1][65];
+    t->Phi[4][11] = t->Phi[4][11] + t->Phi[4][11] + w->term[0][66];
+    w->S[66] = w->S[66] + half*w->term[1][66];
+    t->Phi[4][12] = t->Phi[4][12] + t->Phi[4][12] + w->term[0][67];
+    w->S[67] = w->S[67] + half*w->term[1][67];
+    t->Phi[4][13] = t->Phi[4][13] + t->Phi[4][13] + w->term[0][68];
+    w->S[68] = w->S[68] + half*w->term[1][68];
+    t->Phi[4][14] = t->Phi[4][14] + t->Phi[4][14] + w->term[0][69];
+    w->S[69] = w->S[69] + half*w->term[1][69];
+    t->Phi[5][0] = t->Phi[5][0] + t->Phi[5][0] + w->term[0][70];
+    w->S[70] = w->S[70] + half*w->term[1][70];
+    t->Phi[5][1] = t->Phi[5][1] + t->Phi[5][1] + w->term[0][71];
+    w->S[71] = w->S[71] + half*w->term[1][71];
+    t->Phi[5][2] = t->Phi[5][2] + t->Phi[5][2] + w->term[0][72];
+    w->S[72] = w->S[72] + half*w->term[1][72];
+    t->Phi[5][3] = t->Phi[5][3] + t->Phi[5][3] + w->term[0][73];
+    w->S[73] = w->S[73] + half*w->term[1][73];
+    t->Phi[5][4] = t->Phi[5][4] + t->Phi[5][4] + w->term[0][74];
+    w->S[74] = w->S[74] + half*w->term[1][74];
+    t->Phi[5][5] = t->Phi[5][5] + t->Phi[5][5] + w->term[0][75];
+    w->S[75] = w->S[75] + half*w->term[1][75];
+    t->Phi[5][6] = t->Phi[5][6] + t->Phi[5][6] + w->term[0][76];
+    w->S[76] = w->S[76] + half*w->term[1][76];
+    t->Phi[5][8] = t->Phi[5][8] + t->Phi[5][8] + w->term[0][77];
+    w->S[77] = w->S[77] + half*w->term[1][77];
+    t->Phi[5][9] = t->Phi[5][9] + t->Phi[5][9] + w->term[0][78];
+    w->S[78] = w->S[78] + half*w->term[1][78];
+    t->Phi[5][10] = t->Phi[5][10] + t->Phi[5][10] + w->term[0][79];
+    w->S[79] = w->S[79] + half*w->term[1][79];
+    t->Phi[5][11] = t->Phi[5][11] + t->Phi[5][11] + w->term[0][80];
+    w->S[80] = w->S[80] + half*w->term[1][80];
+    t->Phi[5][12] = t->Phi[5][12] + t->Phi[5][12] + w->term[0][81];
+    w->S[81] = w->S[81] + half*w->term[1][81];
+    t->Phi[5][13] = t->Phi[5][13] + t->Phi[5][13] + w->term[0][82];
+    w->S[82] = w->S[82] + half*w->term[1][82];
+    t->Phi[5][14] = t->Phi[5][14] + t->Phi[5][14] + w->term[0][83];
+    w->S[83] = w->S[83] + half*w->term[1][83];
+    t->Phi[6][0] = t->Phi[6][0] + t->Phi[6][0] + w->term[0][84];
+    w->S[84] = w->S[84] + half*w->term[1][84];
+    t->Phi[6][1] = t->Phi[6][1] + t->Phi[6][1] + w->term[0][85];
+    w->S[85] = w->S[85] + half*w->term[1][85];
+    t->Phi[6][2] = t->Phi[6][2] + t->Phi[6][2] + w->term[0][86];
+    w->S[86] = w->S[86] + half*w->term[1][86];
+    t->Phi[6][3] = t->Phi[6][3] + t->Phi[6][3] + w->term[0][87];
+    w->S[87] = w->S[87] + half*w->term[1][87];
+    t->Phi[6][4] = t->Phi[6][4] + t->Phi[6][4] + w->term[0][88];
+    w->S[88] = w->S[88] + half*w->term[1][88];
+    t->Phi[6][5] = t->Phi[6][5] + t->Phi[6][5] + w->term[0][89];
+    w->S[89] = w->S[89] + half*w->term[1][89];
+    t->Phi[6][6] = t->Phi[6][6] + t->Phi[6][6] + w->term[0][90];
+    w->S[90] = w->S[90] + half*w->term[1][90];
+    t->Phi[6][8] = t->Phi[6][8] + t->Phi[6][8] + w->term[0][91];
+    w->S[91] = w->S[91] + half*w->term[1][91];
+    t->Phi[6][9] = t->Phi[6][9] + t->Phi[6][9] + w->term[0][92];
+    w->S[92] = w->S[92] + half*w->term[1][92];
+    t->Phi[6][10] = t->Phi[6][10] + t->Phi[6][10] + w->term[0][93];
+    w->S[93] = w->S[93] + half*w->term[1][93];
+    t->Phi[6][11] = t->Phi[6][11] + t->Phi[6][11] + w->term[0][94];
+    w->S[94] = w->S[94] + half*w->term[1][94];
+    t->Phi[6][12] = t->Phi[6][12] + t->Phi[6][12] + w->term[0][95];
+    w->S[95] = w->S[95] + half*w->term[1][95];
+    t->Phi[6][13] = t->Phi[6][13] + t->Phi[6][13] + w->term[0][96];
+    w->S[96] = w->S[96] + half*w->term[1][96];
+    t->Phi[6][14] = t->Phi[6][14] + t->Phi[6][14] + w->term[0][97];
+    w->S[97] = w->S[97] + half*w->term[1][97];
+    t->Phi[7][0] = t->Phi[7][0] + t->Phi[7][0] + w->term[0][98];
+    w->S[98] = w->S[98] + half*w->term[1][98];
+    t->Phi[7][1] = t->Phi[7][1] + t->Phi[7][1] + w->term[0][99];
+    w->S[99] = w->S[99] + half*w->term[1][99];
+    t->Phi[7][2] = t->Phi[7][2] + t->Phi[7][2] + w->term[0][100];
+    w->S[100] = w->S[100] + half*w->term[1][100];
+    t->Phi[7][3] = t->Phi[7][3] + t->Phi[7][3] + w->term[0][101];
+    w->S[101] = w->S[101] + half*w->term[1][101];
+    t->Phi[7][4] = t->Phi[7][4] + t->Phi[7][4] + w->term[0][102];
+    w->S[102] = w->S[102] + half*w->term[1][102];
+    t->Phi[7][5] = t->Phi[7][5] + t->Phi[7][5] + w->term[0][103];
+    w->S[103] = w->S[103] + half*w->term[1][103];
+    t->Phi[7][6] = t->Phi[7][6] + t->Phi[7][6] + w->term[0][104];
+    w->S[104] = w->S[104] + half*w->term[1][104];
+    t->Phi[7][7] = t->Phi[7][7] + t->Phi[7][7] + w->term[0][105];
+    w->S[105] = w->S[105] + half*w->term[1][105];
+    t->Phi[7][8] = t->Phi[7][8] + t->Phi[7][8] + w->term[0][106];
+    w->S[106] = w->S[106] + half*w->term[1][106];
+    t->Phi[7][9] = t->Phi[7][9] + t->Phi[7][9] + w->term[0][107];
+    w->S[107] = w->S[107] + half*w->term[1][107];
+    t->Phi[7][10] = t->Phi[7][10] + t->Phi[7][10] + w->term[0][108];
+    w->S[108] = w->S[108] + half*w->term[1][108];
+    t->Phi[7][11] = t->Phi[7][11] + t->Phi[7][11] + w->term[0][109];
+    w->S[109] = w->S[109] + half*w->term[1][109];
+    t->Phi[7][12] = t->Phi[7][12] + t->Phi[7][12] + w->term[0][110];
+    w->S[110] = w->S[110] + half*w->term[1][110];
+    t->Phi[7][13] = t->Phi[7][13] + t->Phi[7][13] + w->term[0][111];
+    w->S[111] = w->S[111] + half*w->term[1][111];
+    t->Phi[7][14] = t->Phi[7][14] + t->Phi[7][14] + w->term[0][112];
+    w->S[112] = w->S[112] + half*w->term[1][112];
+    t->Phi[8][0] = t->Phi[8][0] + t->Phi[8][0] + w->term[0][113];
+    w->S[113] = w->S[113] + half*w->term[1][113];
+    t->Phi[8][1] = t->Phi[8][1] + t->Phi[8][1] + w->term[0][114];
+    w->S[114] = w->S[114] + half*w->term[1][114];
+    t->Phi[8][2] = t->Phi[8][2] + t->Phi[8][2] + w->term[0][115];
+    w->S[115] = w->S[115] + half*w->term[1][115];
+    t->Phi[8][3] = t->Phi[8][3] + t->Phi[8][3] + w->term[0][116];
+    w->S[116] = w->S[116] + half*w->term[1][116];
+    t->Phi[8][4] = t->Phi[8][4] + t->Phi[8][4] + w->term[0][117];
+    w->S[117] = w->S[117] + half*w->term[1][117];
+    t->Phi[8][5] = t->Phi[8][5] + t->Phi[8][5] + w->term[0][118];
+    w->S[118] = w->S[118] + half*w->term[1][118];
+    t->Phi[8][6] = t->Phi[8][6] + t->Phi[8][6] + w->term[0][119];
+    w->S[119] = w->S[119] + half*w->term[1][119];
+    t->Phi[8][8] = t->Phi[8][8] + t->Phi[8][8] + w->term[0][120];
+    w->S[120] = w->S[120] + half*w->term[1][120];
+    t->Phi[8][9] = t->Phi[8][9] + t->Phi[8][9] + w->term[0][121];
+    w->S[121] = w->S[121] + half*w->term[1][121];
+    t->Phi[8][10] = t->Phi[8][10] + t->Phi[8][10] + w->term[0][122];
+    w->S[122] = w->S[122] + half*w->term[1][122];
+    t->Phi[8][11] = t->Phi[8][11] + t->Phi[8][11] + w->term[0][123];
+    w->S[123] = w->S[123] + half*w->term[1][123];
+    t->Phi[8][12] = t->Phi[8][12] + t->Phi[8][12] + w->term[0][124];
+    w->S[124] = w->S[124] + half*w->term[1][124];
+    t->Phi[8][13] = t->Phi[8][13] + t->Phi[8][13] + w->term[0][125];
+    w->S[125] = w->S[125] + half*w->term[1][125];
+    t->Phi[8][14] = t->Phi[8][14] + t->Phi[8][14] + w->term[0][126];
+    w->S[126] = w->S[126] + half*w->term[1][126];
 }
 
 INS_GPS15_TWIN_BLOCK ins_gps15_twin_scalar transition_check(ins_gps15_twin_transition *restrict t)
@@ -6350,6 +3557,7 @@ int ins_gps15_twin_discretize(const ins_gps15_twin_matrices *restrict m, ins_gps
     ins_gps15_twin_discretize_scratch *w = &work->discretize;
     int i, j, e, c;
     int halvings, order, status;
+    int k;
     ins_gps15_twin_scalar check = 0.0;
     if (!isfinite(T)) {
         return INS_GPS15_TWIN_ERR_NONFINITE;
@@ -6377,50 +3585,57 @@ int ins_gps15_twin_discretize(const ins_gps15_twin_matrices *restrict m, ins_gps
     /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
        S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds. */
-    status = taylor_plan(balanced_norm(m, w), T, &halvings, &order);
+    status = taylor_plan(balanced_norm(m), T, &halvings, &order);
     if (status != INS_GPS15_TWIN_OK) {
         return status;
     }
+    /* Phi holds E = Phi - I until the identity is added after the doublings (E(2h) = 2 E + E^2:
+       adding I to Phi(h) would round its small part away, s times over). */
     for (i = 0; i < INS_GPS15_TWIN_N_STATES; ++i) {
         for (j = 0; j < INS_GPS15_TWIN_N_STATES; ++j) {
             t->Phi[i][j] = 0.0;
         }
     }
-    for (i = 0; i < INS_GPS15_TWIN_N_STATES; ++i) {
-        t->Phi[i][i] = 1.0;
+    /* Horner's rule over the structural nonzeros (modelgen/codegen/discretize_kernels.py): A = F h,
+       R_m = I / (m+1)!, R_k = I / (k+1)! + A R_(k+1) down to S = R_0 (R_k in S for even k, in term
+       for odd k), one function per level until the pattern stops growing, then E = A S; the
+       doublings run over the entries of Phi that are not e_i. */
+    horner_input(m, w, T * power_of_two(-halvings));
+    for (k = order - 1; k >= 0; --k) {
+        if (order - k == 1) {
+            if (k & 1) {
+                horner_level_1_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            } else {
+                horner_level_1_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            }
+        } else if (order - k == 2) {
+            if (k & 1) {
+                horner_level_2_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            } else {
+                horner_level_2_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            }
+        } else if (order - k == 3) {
+            if (k & 1) {
+                horner_level_3_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            } else {
+                horner_level_3_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            }
+        } else {
+            if (k & 1) {
+                horner_saturated_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            } else {
+                horner_saturated_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+            }
+        }
     }
-    /* The series over the structural nonzeros of (F h)^k, one function per order, then the
-       doublings over the entries of Phi that are not e_i (unrolled, see
-               modelgen/codegen/discretize_kernels.py). */
-    taylor_order_1(m, t, w, T * power_of_two(-halvings));
-    if (order >= 2) {
-        taylor_order_2(t, w);
-    }
-    if (order >= 3) {
-        taylor_order_3(t, w);
-    }
-    if (order >= 4) {
-        taylor_order_4(t, w);
-    }
-    if (order >= 5) {
-        taylor_order_5(t, w);
-    }
-    if (order >= 6) {
-        taylor_order_6(t, w);
-    }
-    if (order >= 7) {
-        taylor_order_7(t, w);
-    }
-    if (order >= 8) {
-        taylor_order_8(t, w);
-    }
-    if (order >= 9) {
-        taylor_order_9(t, w);
-    }
+    horner_transition(t, w);
     for (i = 0; i < halvings; ++i) {
         doubling(t, w);
     }
     check += transition_check(t);
+    for (i = 0; i < INS_GPS15_TWIN_N_STATES; ++i) {
+        t->Phi[i][i] += 1.0;
+    }
     for (i = 0; i < INS_GPS15_TWIN_N_STATES; ++i) {
         for (j = 0; j < INS_GPS15_TWIN_N_STATES; ++j) {
             t->Qd[i][j] = 0.0;

@@ -14,8 +14,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 73 operations after CSE
- *   discretize: 4020 mul + 3222 add = 7242 flops
- *   discretize, each doubling (long steps): 967 mul + 849 add = 1816 flops
+ *   discretize: 2655 mul + 1817 add = 4472 flops
+ *   discretize, each doubling (long steps): 967 mul + 981 add = 1948 flops
  *   predict (C): 1330 mul + 1199 add = 2529 flops
  *   predict (Python): 2054 mul + 1989 add = 4043 flops
  *   predict (dense, for comparison): 4407 mul + 4225 add = 8632 flops
@@ -169,10 +169,10 @@ typedef struct {
 
 /* Scratch memory of discretize. */
 typedef struct {
-    ned_doppler13_reduced_scalar term[2][NED_DOPPLER13_REDUCED_N_TERMS]; /* (F h)^k at the nonzeros
-            of F^k, two orders in turn; the doubling's new values; S G */
-    ned_doppler13_reduced_scalar S[NED_DOPPLER13_REDUCED_N_ACTIVE_ENTRIES]; /* sum of the terms / (k
-            + 1) at the active entries of Phi */
+    ned_doppler13_reduced_scalar term[2][NED_DOPPLER13_REDUCED_N_TERMS]; /* the Horner chain's odd
+            levels R_k (term[1]); the doubling's new values; S G */
+    ned_doppler13_reduced_scalar S[NED_DOPPLER13_REDUCED_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k
+            + 1)! at the active entries of Phi (and the even levels R_k) */
     ned_doppler13_reduced_scalar fh[NED_DOPPLER13_REDUCED_NNZ_F]; /* F h at the nonzeros of F */
     ned_doppler13_reduced_scalar row_sum[NED_DOPPLER13_REDUCED_N_STATES]; /* balancing: off-diagonal
             row sums of D^-1 |F| D */
@@ -226,7 +226,8 @@ int ned_doppler13_reduced_matrices_evaluate(const ned_doppler13_reduced_params *
         ned_doppler13_reduced_matrices *restrict m);
 
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
-   with scaling and squaring so that it is accurate for any finite T.
+   with scaling and squaring so that it is accurate for any finite T, and
+   Q_d = Gamma (Q/T) Gamma^T (eq. (9)).
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not
    representable (ERR_NONFINITE), a non-positive T and a negative noise PSD
    (ERR_NOT_POSITIVE); on error *t must not be used. */

@@ -14,8 +14,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 77 operations after CSE
- *   discretize: 5866 mul + 4704 add = 10570 flops
- *   discretize, each doubling (long steps): 1500 mul + 1318 add = 2818 flops
+ *   discretize: 3850 mul + 2628 add = 6478 flops
+ *   discretize, each doubling (long steps): 1500 mul + 1521 add = 3021 flops
  *   predict (C): 2636 mul + 2356 add = 4992 flops
  *   predict (Python): 4248 mul + 4104 add = 8352 flops
  *   predict (dense, for comparison): 11682 mul + 11340 add = 23022 flops
@@ -174,10 +174,10 @@ typedef struct {
 
 /* Scratch memory of discretize. */
 typedef struct {
-    ned_doppler18_scalar term[2][NED_DOPPLER18_N_TERMS]; /* (F h)^k at the nonzeros of F^k, two
-            orders in turn; the doubling's new values; S G */
-    ned_doppler18_scalar S[NED_DOPPLER18_N_ACTIVE_ENTRIES]; /* sum of the terms / (k + 1) at the
-            active entries of Phi */
+    ned_doppler18_scalar term[2][NED_DOPPLER18_N_TERMS]; /* the Horner chain's odd levels R_k
+            (term[1]); the doubling's new values; S G */
+    ned_doppler18_scalar S[NED_DOPPLER18_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! at the
+            active entries of Phi (and the even levels R_k) */
     ned_doppler18_scalar fh[NED_DOPPLER18_NNZ_F]; /* F h at the nonzeros of F */
     ned_doppler18_scalar row_sum[NED_DOPPLER18_N_STATES]; /* balancing: off-diagonal row sums of
             D^-1 |F| D */
@@ -230,7 +230,8 @@ int ned_doppler18_matrices_evaluate(const ned_doppler18_params *restrict params,
         ned_doppler18_matrices *restrict m);
 
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
-   with scaling and squaring so that it is accurate for any finite T.
+   with scaling and squaring so that it is accurate for any finite T, and
+   Q_d = Gamma (Q/T) Gamma^T (eq. (9)).
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not
    representable (ERR_NONFINITE), a non-positive T and a negative noise PSD
    (ERR_NOT_POSITIVE); on error *t must not be used. */

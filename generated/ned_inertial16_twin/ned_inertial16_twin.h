@@ -14,8 +14,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 71 operations after CSE
- *   discretize: 5866 mul + 4704 add = 10570 flops
- *   discretize, each doubling (long steps): 1500 mul + 1318 add = 2818 flops
+ *   discretize: 3850 mul + 2628 add = 6478 flops
+ *   discretize, each doubling (long steps): 1500 mul + 1521 add = 3021 flops
  *   predict (C): 2412 mul + 2158 add = 4570 flops
  *   predict (Python): 3776 mul + 3616 add = 7392 flops
  *   predict (dense, for comparison): 8208 mul + 7936 add = 16144 flops
@@ -143,10 +143,10 @@ typedef struct {
 
 /* Scratch memory of discretize. */
 typedef struct {
-    ned_inertial16_twin_scalar term[2][NED_INERTIAL16_TWIN_N_TERMS]; /* (F h)^k at the nonzeros of
-            F^k, two orders in turn; the doubling's new values; S G */
-    ned_inertial16_twin_scalar S[NED_INERTIAL16_TWIN_N_ACTIVE_ENTRIES]; /* sum of the terms / (k +
-            1) at the active entries of Phi */
+    ned_inertial16_twin_scalar term[2][NED_INERTIAL16_TWIN_N_TERMS]; /* the Horner chain's odd
+            levels R_k (term[1]); the doubling's new values; S G */
+    ned_inertial16_twin_scalar S[NED_INERTIAL16_TWIN_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k +
+            1)! at the active entries of Phi (and the even levels R_k) */
     ned_inertial16_twin_scalar fh[NED_INERTIAL16_TWIN_NNZ_F]; /* F h at the nonzeros of F */
     ned_inertial16_twin_scalar row_sum[NED_INERTIAL16_TWIN_N_STATES]; /* balancing: off-diagonal row
             sums of D^-1 |F| D */
@@ -200,7 +200,8 @@ int ned_inertial16_twin_matrices_evaluate(const ned_inertial16_twin_params *rest
         ned_inertial16_twin_matrices *restrict m);
 
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
-   with scaling and squaring so that it is accurate for any finite T.
+   with scaling and squaring so that it is accurate for any finite T, and
+   Q_d = Gamma (Q/T) Gamma^T (eq. (9)).
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not
    representable (ERR_NONFINITE), a non-positive T and a negative noise PSD
    (ERR_NOT_POSITIVE); on error *t must not be used. */

@@ -12,8 +12,8 @@ parameter_vector() to build it from a mapping.
 
 Operation counts (floating-point, per call):
   matrices_evaluate: 71 operations after CSE
-  discretize: 5866 mul + 4704 add = 10570 flops
-  discretize, each doubling (long steps): 1500 mul + 1318 add = 2818 flops
+  discretize: 3850 mul + 2628 add = 6478 flops
+  discretize, each doubling (long steps): 1500 mul + 1521 add = 3021 flops
   predict (C): 2412 mul + 2158 add = 4570 flops
   predict (Python): 3776 mul + 3616 add = 7392 flops
   predict (dense, for comparison): 8208 mul + 7936 add = 16144 flops
@@ -322,41 +322,24 @@ def matrices_evaluate(p):
     return system_matrix(p), noise_input_matrix(p), measurement_matrix(p), noise_psd(p), measurement_variance(p)
 
 
-def _balanced_norm(F):
-    """max_i sum_j |F_ij| d_j / d_i, D from 8 Jacobi sweeps of Osborne's balancing in powers of two.
+_BALANCE_FACTORS = [1.0, 2.0, 8192.0, 4.0, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 1.0, 2.0, 4096.0, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 0.5, 0.5, 4096.0, 2.0, 1.8189894035458565e-12, 1.8189894035458565e-12, 1.8189894035458565e-12, 1.8189894035458565e-12, 1.8189894035458565e-12, 1.8189894035458565e-12, 0.000244140625, 0.00048828125, 1.0, 2.0, 0.0009765625, 8.881784197001252e-16, 8.881784197001252e-16, 0.0009765625, 0.0001220703125, 0.000244140625, 0.5, 1.0, 0.00048828125, 4.440892098500626e-16, 4.440892098500626e-16, 0.00048828125, 1024.0, 1.862645149230957e-09, 9.094947017729282e-13, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0]  # d_j / d_i per nonzero of F
 
-    The same sums, in the same order (entry by entry, as bincount adds), as
-    the C discretize and modelgen.derive.discretization.balanced_norm, so all
-    three choose the same s.  Python floats: for a pattern this small a loop over the entries costs less than numpy calls.
+
+def _balanced_norm(F):
+    """max_i sum_j |F_ij| d_j / d_i with D = 2^e fixed at generation time.
+
+    D is Osborne's balancing of F at the model's check operating point
+    (modelgen.derive.discretization.nominal_scaling); any D gives a valid
+    bound, so one D serves every operating point.  The same sums, in the same
+    order, as the C discretize and modelgen.derive.discretization.balanced_norm
+    with that scaling, so all three choose the same s and order.
     """
     if not _F_ROWS.size:
         return 0.0
     F = F.tolist()
-    size = [abs(F[i][j]) for i, j in _F_ENTRIES]
-    off = [(i, j, size[e]) for e, (i, j) in enumerate(_F_ENTRIES) if i != j]
-    exponent = [0] * N_STATES  # d = 2^exponent
-    for _ in range(8):
-        d = [math.ldexp(1.0, e) for e in exponent]
-        row = [0.0] * N_STATES
-        column = [0.0] * N_STATES
-        for i, j, a in off:
-            v = a * d[j] / d[i]
-            row[i] += v
-            column[j] += v
-        new = []
-        for e, r, c in zip(exponent, row, column):
-            if r > 0.0 and c > 0.0:
-                step = min(max((math.frexp(r)[1] - math.frexp(c)[1]) // 2, -8), 8)
-            else:
-                step = -8 if c > 0.0 else (8 if r > 0.0 else 0)
-            new.append(min(max(e + step, -40), 40))
-        if new == exponent:
-            break  # a fixed point: further sweeps change nothing
-        exponent = new
-    d = [math.ldexp(1.0, e) for e in exponent]
     total = [0.0] * N_STATES
-    for (i, j), a in zip(_F_ENTRIES, size):
-        total[i] += a * d[j] / d[i]
+    for (i, j), factor in zip(_F_ENTRIES, _BALANCE_FACTORS):
+        total[i] += abs(F[i][j]) * factor
     if not math.isfinite(sum(total)):
         return math.nan
     return max(total)
@@ -409,8 +392,10 @@ def discretize(F, G, q, T):
     summed over h = T / 2^s up to order m, both chosen by _taylor_plan so
     that Phi is within TAYLOR_TOLERANCE of e^(F T) relative (or, with the
     paper's fixed order, the truncation error is below the unit roundoff),
+    S = sum (F h)^k / (k+1)! by Horner's rule and Phi = I + F h S,
     then doubled s times: Phi(2h) = Phi(h)^2 and
-    S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds.
+    S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds
+    (on E = Phi - I, as the reference does).
     Dense matrix products (BLAS), as modelgen.derive.discretization does.
     Raises ValueError, naming the argument, for a non-finite or non-positive
     T, a non-finite F, G or q, a negative q, or an e^{F T} that is not
@@ -428,15 +413,16 @@ def discretize(F, G, q, T):
     s, order = _taylor_plan(norm, T)
     h = math.ldexp(T, -s)
     Fh = F * h
-    term = phi = series = _IDENTITY
-    for k in range(1, order + 1):
-        term = term @ Fh / k
-        phi = phi + term
-        series = series + term / (k + 1)
+    series = _IDENTITY / math.factorial(order + 1)  # Horner: R_k = I / (k+1)! + F h R_(k+1), S = R_0
+    for k in range(order - 1, -1, -1):
+        series = Fh @ series
+        series[_DIAGONAL] += 1.0 / math.factorial(k + 1)
+    increment = Fh @ series  # E = Phi - I: the series of eq. (10) to order m + 1
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below, naming the result
         for _ in range(s):
-            series = 0.5 * (series + phi @ series)
-            phi = phi @ phi
+            series = series + 0.5 * (increment @ series)
+            increment = 2.0 * increment + increment @ increment
+        phi = _IDENTITY + increment
         gamma = T * series @ G
         qd = (gamma * (q / T)) @ gamma.T
     _check_result("discretize", {"Phi": phi, "Qd": qd}, F=F, G=G, q=q)
@@ -445,16 +431,12 @@ def discretize(F, G, q, T):
 
 # The prediction's kernel, chosen at generation time by modelgen.codegen.kernels.python_predict_kernel
 # (the rule, measured by bench/bench_python_module.py, is documented there): factored.
-_UNIT_ROWS = np.array([7, 8, 9], dtype=np.intp)
-_DIAGONAL_ROWS = np.array([10, 11, 12, 13, 14, 15], dtype=np.intp)
-_GENERAL_ROWS = np.array([0, 1, 2, 3, 4, 5, 6], dtype=np.intp)
-_GENERAL_COLUMNS = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15], dtype=np.intp)
-_GENERAL_BLOCK = np.ix_(_GENERAL_ROWS, _GENERAL_COLUMNS)
 _LOWER = np.tril(np.ones((N_STATES, N_STATES), dtype=bool), -1)  # mirrored from the upper triangle
 _UPPER = _LOWER.T
 _VECTOR, _SQUARE = (N_STATES,), (N_STATES, N_STATES)
 _IDENTITY = np.eye(N_STATES)
 _IDENTITY.flags.writeable = False
+_DIAGONAL = np.diag_indices(N_STATES)
 
 
 def predict(x, P, Phi, Qd):
@@ -463,51 +445,66 @@ def predict(x, P, Phi, Qd):
     In factored form: the Cholesky factor P = L L^T that proves P positive
     definite (the contract's check) also gives P_n = (Phi L)(Phi L)^T + Q_d,
     a triangular product and a symmetric rank-n update (BLAS trmm and syrk:
-    half the flops of two dense products each, so check and prediction
-    together cost less than the dense Phi P Phi^T alone).  A P without a
-    Cholesky factor (a zero variance, or positive semidefinite only within
-    the contract's tolerance) takes the dense products.  The upper triangle
-    is mirrored into the lower one, so P stays exactly symmetric.
+    half the flops of two dense products each).  A P without a Cholesky
+    factor (a zero variance, or positive semidefinite only within the
+    contract's tolerance) takes the dense products.
+
+    The upper triangle is mirrored into the lower one, so P stays exactly
+    symmetric (Q_d's lower triangle is checked, not used).
+
     Raises ValueError, naming the argument, for non-finite x, P, Phi or Qd,
     a P outside the contract (module docstring) or a non-finite result.  A
     NaN or infinity in an argument makes the result non-finite (IEEE
-    arithmetic: NaN and 0 * inf are NaN), so the arguments are tested entry
-    by entry only then, to name the culprit.
+    arithmetic: NaN and 0 * inf are NaN; x_new = Phi x reads every entry of
+    Phi, the result before its mirroring every entry of P and Qd), so one
+    sum tests them all and the arguments are tested entry by entry only
+    then, to name the culprit.
     """
     x, P, Phi, Qd = _float(x), _float(P), _float(Phi), _float(Qd)
     if x.shape != _VECTOR or P.shape != _SQUARE or Phi.shape != _SQUARE or Qd.shape != _SQUARE:
         _check_shapes("predict", x=(x, _VECTOR), P=(P, _SQUARE), Phi=(Phi, _SQUARE), Qd=(Qd, _SQUARE))
-    _check_finite("predict", Qd=Qd)  # only its upper triangle reaches the result
-    x_new = Phi @ x
     factor = _factor(P)
+    if factor is None:  # the contract's test entry by entry, naming what it refuses
+        _check_finite("predict", Qd=Qd)
+        _check_covariance_entries("predict", P)
+    x_new = Phi @ x
     if factor is not None:
         upper = _syrk(1.0, _trmm(1.0, factor, Phi, side=1, lower=1), beta=1.0, c=Qd, lower=0)  # Fortran order
+        total = _sum(upper, None)  # its strict lower triangle is Qd's
         P_new = upper.T  # C order; its lower triangle holds the result
         np.copyto(P_new, upper, where=_UPPER)
     else:
-        _check_covariance_entries("predict", P)
         P_new = Phi @ P @ Phi.T
         P_new += Qd
+        total = _sum(P_new, None)
         np.copyto(P_new, P_new.T, where=_LOWER)
-    _check_result("predict", {"x_result": x_new, "result": P_new}, x=x, P=P, Phi=Phi, Qd=Qd)
+    if not math.isfinite(total + sum(x_new.tolist())):
+        _refuse_non_finite("predict", {"x_result": x_new, "result": P_new}, Qd=Qd, x=x, P=P, Phi=Phi)
     return x_new, P_new
 
 
 def update(x, P, z, H, r):
     """Kalman update: gain, state, Joseph-form covariance (seed 000, eq. (12)).
 
-    ``r`` is the diagonal of R.  Raises ValueError, naming the argument and
-    leaving x and P untouched, for non-finite x, z, H or r, a negative r, a
-    P outside the contract (module docstring), an innovation covariance
-    that is not positive definite or a non-finite result.  Non-finite
-    arguments show in the result (or the innovation covariance) and are
-    named then, as in predict.
+    ``r`` is the diagonal of R.  With S = H P H^T + R and K = P H^T S^-1,
+    the Joseph form (I - K H) P (I - K H)^T + K R K^T expands to
+    P - K (H P) - C K^T with C = (H P)^T - K S, which is zero but for
+    rounding (the part of the Joseph form that keeps P positive for any
+    gain): two BLAS products of rank m onto P, O(m n^2) flops where the
+    product form takes O(n^3).  The upper triangle is mirrored into the
+    lower one.
+
+    Raises ValueError, naming the argument and leaving x and P untouched,
+    for non-finite x, z, H or r, a negative r, a P outside the contract
+    (module docstring), an innovation covariance that is not positive
+    definite or a non-finite result.  Non-finite arguments show in the
+    result (or the innovation covariance) and are named then, as in predict.
     """
     x, P, z, H, r = _float(x), _float(P), _float(z), _float(H), _float(r)
     m = z.shape[0] if z.ndim == 1 else -1
     if x.shape != _VECTOR or P.shape != _SQUARE or z.shape != (m,) or H.shape != (m, N_STATES) or r.shape != (m,):
         _check_shapes("update", x=(x, _VECTOR), P=(P, _SQUARE), z=(z, (m,)), H=(H, (m, N_STATES)), r=(r, (m,)))
-    if m and not r.min() >= 0.0:
+    if not all(v >= 0.0 for v in r.tolist()):  # Python floats: cheaper than numpy calls for a few measurements
         _check_finite("update", r=r)
         raise ValueError("update: r has a negative measurement variance")
     _check_covariance("update", P)
@@ -516,17 +513,21 @@ def update(x, P, z, H, r):
         return x.copy(), P.copy()
     HP = H @ P
     S = HP @ H.T
-    S.flat[:: m + 1] += r
-    L, info = _cholesky(S, lower=1, clean=0, overwrite_a=1)
+    S.ravel()[:: m + 1] += r  # R on the diagonal (ravel: a view of the new S)
+    _, gain_t, info = _cholesky_system(S, HP, lower=1)  # K^T = S^-1 H P, S kept
     if info:
         _check_finite("update", x=x, z=z, H=H, P=P)
         raise ValueError("update: the innovation covariance H P H^T + R is not positive definite")
-    K = _cholesky_solve(L, HP, lower=1)[0].T
-    x_new = x + K @ (z - H @ x)
-    B = P - K @ HP  # (I - K H) P
-    P_new = B - (B @ H.T) @ K.T + (K * r) @ K.T  # ... (I - K H)^T + K R K^T
+    x_new = _gemv(1.0, gain_t, z - H @ x, beta=1.0, y=x, trans=1)  # x + K (z - H x)
+    residual_t = HP - S.T @ gain_t  # C^T
+    # P - K (H P) - C K^T, transposed: BLAS works in Fortran order, where P.T is P's memory (no copy)
+    joseph_t = _gemm(-1.0, HP, gain_t, beta=1.0, c=P.T, trans_a=1)
+    joseph_t = _gemm(-1.0, gain_t, residual_t, beta=1.0, c=joseph_t, trans_a=1, overwrite_c=1)
+    P_new = joseph_t.T
+    total = _sum(P_new, None)
     np.copyto(P_new, P_new.T, where=_LOWER)
-    _check_result("update", {"x_result": x_new, "result": P_new}, x=x, P=P, z=z, H=H, r=r)
+    if not math.isfinite(total + sum(x_new.tolist())):
+        _refuse_non_finite("update", {"x_result": x_new, "result": P_new}, x=x, P=P, z=z, H=H, r=r)
     return x_new, P_new
 
 
@@ -602,6 +603,17 @@ def _check_result(function, results, **arguments):
     _check_finite(function, **results)
 
 
+def _refuse_non_finite(function, results, **arguments):
+    """Name the first argument (in the order given), else the result, with a non-finite entry.
+
+    Called when a sum over the results is not finite; returns when no entry
+    is (a finite sum that overflowed, or a non-finite entry the mirroring
+    discarded: then an argument has one and is named).
+    """
+    _check_finite(function, **arguments)
+    _check_finite(function, **results)
+
+
 def _check_step(T):
     """T as a float; ValueError unless it is finite and positive."""
     try:
@@ -636,28 +648,27 @@ def _check_pole(function, text, value, argument):
 
 
 _cholesky = lapack.dpotrf  # (factor, info); LAPACK directly: numpy's wrapper costs more than a small factorization
-_cholesky_solve = lapack.dpotrs
-
-
-_cholesky = lapack.dpotrf  # (factor, info); LAPACK directly: numpy's wrapper costs more than a small factorization
-_cholesky_solve = lapack.dpotrs
+_cholesky_system = lapack.dposv  # (factor, solution, info): factorization and solve in one call
 _trmm = blas.dtrmm
 _syrk = blas.dsyrk
+_gemm = blas.dgemm
+_gemv = blas.dgemv
 _sum = np.add.reduce  # with axis None: one reduction over every entry, cheaper than ndarray.sum
 
 
 def _factor(P):
-    """The lower Cholesky factor of P when P is exactly symmetric with positive variances, else None.
+    """The lower Cholesky factor of P (upper triangle not cleared) when P is exactly symmetric and positive definite, else None.
 
     A factor proves the contract's positive semidefiniteness (a stronger
     test than the one with the tolerance, and, through each 2 x 2 minor,
-    the bound on |P_ij|); a NaN fails one of the tests.  None sends the
-    caller to the entry-by-entry test, which accepts what is within the
-    tolerance and names what is not.
+    the bound on |P_ij|).  A NaN fails it: OpenBLAS's factorization goes on
+    past a NaN pivot, but the NaN then reaches every later pivot, so the
+    last one shows it.  None sends the caller to the entry-by-entry test,
+    which accepts what is within the tolerance and names what is not.
     """
-    if np.minimum.reduce(P.diagonal()) > 0.0 and P.tobytes() == P.T.tobytes():
-        factor, info = _cholesky(P, lower=1, clean=1)
-        if not info:
+    if P.tobytes() == P.T.tobytes():  # exactly symmetric (bytes: no NaN != NaN)
+        factor, info = _cholesky(P.T, lower=1, clean=0)  # P.T: Fortran order, the same matrix, no transposing copy
+        if not info and factor[-1, -1] == factor[-1, -1]:
             return factor
     return None
 
