@@ -400,13 +400,31 @@ def taylor_process_noise(gamma: np.ndarray, Q: np.ndarray, T: float) -> np.ndarr
 
 
 def van_loan_discretization(F: np.ndarray, G: np.ndarray, Q: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
-    """Exact Phi = e^{F T} and Q_d by Van Loan's block exponential (1978)."""
+    """Exact Phi = e^{F T} and Q_d by Van Loan's block exponential (1978), over a step short enough to be exact.
+
+    Van Loan's Q_d = Phi (e^{M})_12 multiplies e^{F T} by a block of about
+    e^{-F T}: for a decaying state (a Markov process of correlation time
+    tau) the two are e^{-T/tau} and e^{T/tau}, so at T >> tau the product
+    cancels catastrophically (at one day and tau = 1 h, 3e8 where the
+    variance is 259).  So the block exponential is taken over
+    h = T / 2^s with ||F||_1 h <= 1, where the cancellation costs at most a
+    few roundoffs, and the step is doubled s times by the exact identities
+    Phi(2h) = Phi(h)^2 and Q_d(2h) = Q_d(h) + Phi(h) Q_d(h) Phi(h)^T.
+    """
     n = F.shape[0]
+    norm = float(np.abs(F).sum(axis=0).max()) if n else 0.0
+    halvings = max(0, math.ceil(math.log2(norm * T))) if norm * T > 1.0 else 0
+    h = math.ldexp(T, -halvings)
     block = np.zeros((2 * n, 2 * n))
     block[:n, :n] = -F
     block[:n, n:] = G @ Q @ G.T
     block[n:, n:] = F.T
-    e = expm(block * T)
+    e = expm(block * h)
     phi = e[n:, n:].T
     qd = phi @ e[:n, n:]
-    return phi, 0.5 * (qd + qd.T)
+    qd = 0.5 * (qd + qd.T)
+    for _ in range(halvings):
+        qd = qd + phi @ qd @ phi.T
+        qd = 0.5 * (qd + qd.T)
+        phi = phi @ phi
+    return phi, qd

@@ -236,3 +236,30 @@ def test_error_bound_is_infinite_not_an_overflow_far_beyond_the_series_reach():
 
     assert step_error_bound(1.0e4, 9, 0) == math.inf  # e^10000 is not a float; the bound says "too far", no exception
     assert math.isfinite(step_error_bound(0.5, 9, 0))
+
+
+def test_van_loan_reference_matches_the_closed_form_markov_variance_far_beyond_its_correlation_time():
+    """Q_d of a first-order Markov state is q tau / 2 (1 - e^(-2T/tau)), through the halved-and-doubled step up to 720 tau."""
+    tau, q = 3600.0, 2.5e-3
+    F, G, Q = np.array([[-1.0 / tau]]), np.array([[1.0]]), np.array([[q]])
+    for T in (1.0, 60.0, 86400.0, 30 * 86400.0):
+        phi, qd = van_loan_discretization(F, G, Q, T)
+        assert phi[0, 0] == pytest.approx(math.exp(-T / tau), rel=1e-13, abs=1e-300)
+        assert qd[0, 0] == pytest.approx(q * tau / 2.0 * -math.expm1(-2.0 * T / tau), rel=1e-12)
+
+
+def test_van_loan_reference_over_a_day_equals_a_day_of_one_second_steps(level_matrices):
+    """The doubled Van Loan step agrees with the exact recursion Q_d(t + 1) = Phi Q_d(t) Phi^T + Q_d(1) over 86,400 s.
+
+    One block exponential over the day cancels e^(F T) against about e^(-F T): it was 6.8e5 times Q_d's
+    largest entry off; the doubled step is 2.4e-11 off.
+    """
+    m = level_matrices
+    phi_1, qd_1 = van_loan_discretization(m["F"], m["G"], m["Q"], 1.0)
+    phi_day, qd_day = van_loan_discretization(m["F"], m["G"], m["Q"], 86400.0)
+    phi, qd = np.eye(len(phi_1)), np.zeros_like(qd_1)
+    for _ in range(86400):
+        qd = phi_1 @ qd @ phi_1.T + qd_1
+        phi = phi_1 @ phi
+    assert np.abs(phi_day - phi).max() <= 1e-8 * np.abs(phi).max()
+    assert np.abs(qd_day - qd).max() <= 1e-8 * np.abs(qd).max()
