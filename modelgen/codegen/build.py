@@ -43,7 +43,7 @@ import numpy as np
 from modelgen.codegen.layout import ModelSizes, c_layout
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
-from modelgen.fileio.output import current_umask
+from modelgen.fileio.output import write_bytes_atomically
 
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 
@@ -70,7 +70,7 @@ def compile_shared_library(c_files: list[Path], output: Path, extra_flags: tuple
     if key is not None:
         payload = cached_library(library_cache_folder(), key)
         if payload is not None:
-            _write_file(Path(output), payload)
+            write_bytes_atomically(Path(output), payload, mode=0o755)  # as the compiler's -o would
             return output
     command = [cc, *flags, "-o", str(output), *map(str, c_files), "-lm"]
     result = subprocess.run(command, capture_output=True, text=True)
@@ -201,19 +201,6 @@ def store_library(folder: Path, key: str, payload: bytes) -> Path | None:
         return None
     finally:
         Path(temporary).unlink(missing_ok=True)
-
-
-def _write_file(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file beside it and a rename (as the compiler's -o would)."""
-    fd, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-        os.chmod(temporary, 0o755 & ~current_umask())
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
 
 
 

@@ -404,15 +404,20 @@ def write_atomically(folder: Path, files: Mapping[str, str], force: bool = False
 
 def write_text_atomically(path: Path, text: str) -> Path:
     """Write one file through a temporary file and a rename: readers see the old or the new text, never a part."""
+    return write_bytes_atomically(path, text.encode("utf-8"))
+
+
+def write_bytes_atomically(path: Path, data: bytes, mode: int = 0o666) -> Path:
+    """:func:`write_text_atomically` for bytes; ``mode`` (less the umask) is the file's permissions (0o755 for a library)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.is_dir() and not path.is_symlink():
         raise OSError(errno.EISDIR, "is a folder, not a file", str(path))
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
-        os.chmod(tmp, 0o666 & ~current_umask())
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+        os.chmod(tmp, mode & ~current_umask())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
