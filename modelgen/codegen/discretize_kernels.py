@@ -339,11 +339,19 @@ def block_cost(blocks: list[DiscretizeBlock]) -> OperationCount:
     return OperationCount(mul, add)
 
 
-def series_cost(plan: DiscretizePlan, order: int) -> OperationCount:
-    """Flops of Phi and S by the Horner chain of ``order`` (A = F h, the levels it calls, Phi = I + A S)."""
-    blocks = {b.block.name: b for b in series_blocks(plan)}
-    called = ["horner_input", *horner_schedule(plan, order), "horner_transition"]
-    return block_cost([blocks[name] for name in called])
+def series_block_costs(plan: DiscretizePlan) -> dict[str, OperationCount]:
+    """Flops of each function of the Horner chain, by name (built once, then summed per order)."""
+    return {b.block.name: block_cost([b]) for b in series_blocks(plan)}
+
+
+def series_cost(plan: DiscretizePlan, order: int, costs: dict[str, OperationCount] | None = None) -> OperationCount:
+    """Flops of Phi and S by the Horner chain of ``order`` (A = F h, the levels it calls, Phi = I + A S).
+
+    ``costs``: :func:`series_block_costs` of ``plan``, when the caller counts several orders.
+    """
+    costs = series_block_costs(plan) if costs is None else costs
+    called = [costs[name] for name in ("horner_input", *horner_schedule(plan, order), "horner_transition")]
+    return OperationCount(sum(c.multiplications for c in called), sum(c.additions for c in called))
 
 
 def unrolled_discretize_cost(plan: DiscretizePlan, ud: bool, fixed_scaling: bool = False) -> tuple[OperationCount, OperationCount, list[int]]:
@@ -355,8 +363,9 @@ def unrolled_discretize_cost(plan: DiscretizePlan, ud: bool, fixed_scaling: bool
     per nonzero of F; otherwise also the balancing's sweeps, at most 8 over
     the off-diagonal entries of F).
     """
-    per_order = [series_cost(plan, m).total for m in range(1, plan.order + 1)]
-    series = series_cost(plan, plan.order)
+    costs = series_block_costs(plan)
+    per_order = [series_cost(plan, m, costs).total for m in range(1, plan.order + 1)]
+    series = series_cost(plan, plan.order, costs)
     noise = block_cost(noise_blocks(plan, packed=False, ud=ud))
     structure = plan.structure
     nnz_f = int(structure.F.sum())
