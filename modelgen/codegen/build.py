@@ -203,7 +203,6 @@ def store_library(folder: Path, key: str, payload: bytes) -> Path | None:
         Path(temporary).unlink(missing_ok=True)
 
 
-
 def load_python_module(path: Path) -> ModuleType:
     """Import a generated Python module from its file, under a unique name."""
     path = Path(path)

@@ -34,7 +34,6 @@ workspace union keeps the larger).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cached_property
 
