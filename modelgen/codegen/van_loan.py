@@ -66,6 +66,7 @@ from modelgen.derive.discretization import (
     balanced_norm,
     check_step,
     taylor_plan,
+    van_loan_block,
 )
 from modelgen.errors import ModelError
 
@@ -77,17 +78,6 @@ from modelgen.errors import ModelError
 #: tolerance) and the latitude-longitude correlation 4.9e-6 off; order 7, two more, 3.9e-16
 #: and 1.9e-12.  Phi is unaffected (it only gets more accurate).
 QD_MARGIN = 2
-
-
-def van_loan_block(F: np.ndarray, G: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """M = [[-F, G diag(q) G^T], [0, F^T]] (2N x 2N), the step T not applied."""
-    F, G, q = (np.asarray(a, dtype=float) for a in (F, G, q))
-    n = F.shape[0]
-    block = np.zeros((2 * n, 2 * n))
-    block[:n, :n] = -F
-    block[:n, n:] = (G * q) @ G.T
-    block[n:, n:] = F.T
-    return block
 
 
 def van_loan_plan(
@@ -105,7 +95,8 @@ def van_loan_plan(
     raised by QD_MARGIN (at most ``order``); the fixed order (tolerance None,
     or within the rounding) is taylor_plan's, unchanged.
     """
-    norm = balanced_norm(van_loan_block(F, G, q))
+    F, G, q = (np.asarray(a, dtype=float) for a in (F, G, q))
+    norm = balanced_norm(van_loan_block(F, (G * q) @ G.T))
     if tolerance is None or tolerance <= unit_roundoff:
         return taylor_plan(norm, T, order, tolerance, unit_roundoff)
     planned = max(order - QD_MARGIN, 1)

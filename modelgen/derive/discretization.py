@@ -399,6 +399,16 @@ def taylor_process_noise(gamma: np.ndarray, Q: np.ndarray, T: float) -> np.ndarr
     return 0.5 * (qd + qd.T)
 
 
+def van_loan_block(F: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """Van Loan's (1978) M = [[-F, W], [0, F^T]] (2N x 2N) for W = G Q G^T, the step not applied."""
+    n = F.shape[0]
+    block = np.zeros((2 * n, 2 * n))
+    block[:n, :n] = -F
+    block[:n, n:] = W
+    block[n:, n:] = F.T
+    return block
+
+
 def van_loan_discretization(F: np.ndarray, G: np.ndarray, Q: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact Phi = e^{F T} and Q_d by Van Loan's block exponential (1978), over a step short enough to be exact.
 
@@ -415,11 +425,7 @@ def van_loan_discretization(F: np.ndarray, G: np.ndarray, Q: np.ndarray, T: floa
     norm = float(np.abs(F).sum(axis=0).max()) if n else 0.0
     halvings = max(0, math.ceil(math.log2(norm * T))) if norm * T > 1.0 else 0
     h = math.ldexp(T, -halvings)
-    block = np.zeros((2 * n, 2 * n))
-    block[:n, :n] = -F
-    block[:n, n:] = G @ Q @ G.T
-    block[n:, n:] = F.T
-    e = expm(block * h)
+    e = expm(van_loan_block(F, G @ Q @ G.T) * h)
     phi = e[n:, n:].T
     qd = phi @ e[:n, n:]
     qd = 0.5 * (qd + qd.T)
