@@ -75,7 +75,7 @@ from modelgen.codegen.discretize_kernels import (  # noqa: E402
     DiscretizePlan,
     doubling_block,
     noise_blocks,
-    series_cost,
+    structural_series_cost,
 )
 from modelgen.codegen.generate import describe, generate_code, write_atomically  # noqa: E402
 from modelgen.codegen.kernels import OperationCount, update_cost  # noqa: E402
@@ -169,7 +169,7 @@ def discretize_floor(structure, order: int, halvings: int) -> int:
     """Flops of Phi and Q_d by Horner's rule of ``order`` over the structural nonzeros of each level (no norm, no plan)."""
     plan = DiscretizePlan(structure, 9)
     noise = _count(noise_blocks(plan, packed=False, ud=False)).total if plan.gamma_entries and plan.qd_pairs else 0
-    return series_cost(plan, order).total + noise + halvings * _count([doubling_block(plan)]).total
+    return structural_series_cost(plan, order).total + noise + halvings * _count([doubling_block(plan)]).total
 
 
 def floors(p: dict, order: int, halvings: int) -> dict[str, int]:

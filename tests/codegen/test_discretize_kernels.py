@@ -13,7 +13,17 @@ import math
 import numpy as np
 import pytest
 
-from modelgen.codegen.discretize_kernels import DiscretizePlan, doubling_block, horner_schedule, noise_blocks, series_blocks, series_cost
+from modelgen.codegen.discretize_kernels import (
+    DiscretizePlan,
+    SegmentAssign,
+    doubling_block,
+    horner_schedule,
+    noise_blocks,
+    scalar_statements,
+    series_blocks,
+    series_cost,
+    structural_series_cost,
+)
 from modelgen.derive.discretization import _taylor_terms
 from modelgen.codegen.structure import filter_structure
 from modelgen.derive.symbolic import derive
@@ -47,7 +57,7 @@ def level_pattern(F: np.ndarray, level: int) -> np.ndarray:
 
 
 def level_blocks(plan: DiscretizePlan):
-    """(level, block) for the distinct levels, then (None, block) for the saturated ones."""
+    """(1, block) for the top level, then (None, block) for the dense level every lower one calls."""
     for b in series_blocks(plan):
         name = b.block.name
         if name.startswith("horner_level_"):
@@ -56,44 +66,64 @@ def level_blocks(plan: DiscretizePlan):
             yield None, b
 
 
+def stored_entry(plan: DiscretizePlan) -> dict[int, tuple[int, int]]:
+    """(i, j) of each stored position of S and of the levels."""
+    return {index: entry for entry, index in plan.s_position.items()}
+
+
 def written(block, plan: DiscretizePlan) -> list[tuple[int, int]]:
-    """The active entries a level block computes (not the zero fill)."""
-    return [plan.active[s.target.index[-1]] for s in block.block.statements if s.terms]
+    """The entries a level block computes with a product or constant (not the zero fill), in storage order."""
+    entry = stored_entry(plan)
+    return sorted({entry[s.target.index[-1]] for s in scalar_statements(block.block.statements) if s.terms}, key=plan.s_position.get)
 
 
-def test_each_horner_level_computes_exactly_the_structural_nonzeros_of_its_term(plan):
+def test_the_top_level_computes_exactly_the_structural_nonzeros_of_its_term(plan):
+    """R_(m-1) = c_out I + F h c_in: its pattern is that of I + F, every other stored entry is set to zero."""
     F = plan.structure.F
     unit = set(plan.structure.unit_rows)
-    last = len(plan.horner_patterns)
+    expected = sorted(((int(i), int(j)) for i, j in zip(*np.nonzero(level_pattern(F, 1))) if i not in unit), key=plan.s_position.get)
     for level, block in level_blocks(plan):
-        pattern = level_pattern(F, last if level is None else level)
-        expected = [(int(i), int(j)) for i, j in zip(*np.nonzero(pattern)) if i not in unit]
-        assert written(block, plan) == expected, block.block.name
+        if level == 1:
+            assert written(block, plan) == expected, block.block.name
+            assert {s.target.index[-1] for s in block.block.statements} == set(range(plan.segment_size))
 
 
-def test_no_product_of_the_chain_reads_a_structural_zero(plan):
-    """Every term of R_k(i, j) is (F h)(i, c) times R_(k+1)(c, j) with both structurally nonzero (or c_in on a unit row)."""
+def test_the_dense_level_computes_every_active_entry(plan):
+    """The level below the top covers the closure (the pattern every lower level stays within)."""
+    for level, block in level_blocks(plan):
+        if level is None:
+            assert set(plan.active) <= set(written(block, plan)), block.block.name
+
+
+def test_products_outside_the_closure_are_only_the_padding_of_the_dense_segments(plan):
+    """A scalar term multiplies structural nonzeros only; a segment may read zeros of its span, at most as many as it reads nonzeros."""
     F = plan.structure.F
+    closure = set(plan.active) | {(c, c) for c in plan.structure.unit_rows}
+    entry = stored_entry(plan)
     f_entries = plan.f_entries
-    last = len(plan.horner_patterns)
     for level, block in level_blocks(plan):
-        previous = level_pattern(F, last if level is None else level - 1)
+        padding = inside = 0
         for s in block.block.statements:
-            if not s.terms:
-                continue
-            i, j = plan.active[s.target.index[-1]]
-            for term in s.terms:
-                if len(term) == 1:  # the diagonal constant 1/(k+1)!
-                    assert i == j and term[0].array == "c_out"
-                    continue
-                fh, r = term
-                row, c = f_entries[fh.index[0]]
-                assert row == i and F[row, c]
-                assert previous[c, j]
-                if r.owner == "local":
-                    assert r.array == "c_in" and c == j
-                else:
-                    assert plan.active[r.index[-1]] == (c, j)
+            segment = isinstance(s, SegmentAssign)
+            for t in scalar_statements((s,)):
+                for term in t.terms:
+                    if term == (t.target,):  # a sparse term added after a segment's sum
+                        continue
+                    if len(term) == 1:  # the diagonal constant 1/(k+1)!
+                        assert term[0].array == "c_out" and entry[t.target.index[-1]] in {(i, i) for i, _ in plan.active}
+                        continue
+                    fh, r = term
+                    i, c = f_entries[fh.index[0]]
+                    assert F[i, c]
+                    j = c if r.owner == "local" else entry[r.index[-1]][1]
+                    if r.owner != "local":
+                        assert entry[r.index[-1]][0] == c
+                    if (c, j) in closure:
+                        inside += 1
+                    else:
+                        assert segment, (block.block.name, t)
+                        padding += 1
+        assert padding <= inside, block.block.name
 
 
 def run_chain(plan: DiscretizePlan, F: np.ndarray, h: float, order: int) -> tuple[np.ndarray, np.ndarray]:
@@ -109,7 +139,7 @@ def run_chain(plan: DiscretizePlan, F: np.ndarray, h: float, order: int) -> tupl
     }
 
     def run(name: str, local: dict[str, float]) -> None:
-        for s in blocks[name].block.statements:
+        for s in scalar_statements(blocks[name].block.statements):
             value = 0.0
             for term in s.terms:
                 product = 1.0
@@ -123,8 +153,8 @@ def run_chain(plan: DiscretizePlan, F: np.ndarray, h: float, order: int) -> tupl
         run(name, {"c_out": 1.0 / math.factorial(k + 1), "c_in": 1.0 / math.factorial(k + 2)})
     run("horner_transition", {"one": 1.0})
     S = np.eye(n)
-    for a, (i, j) in enumerate(plan.active):
-        S[i, j] = arrays[("scratch", "S")][a]
+    for i, j in plan.active:
+        S[i, j] = arrays[("scratch", "S")][plan.s_position[(i, j)]]
     return np.eye(n) + arrays[("transition", "Phi")], S
 
 
@@ -145,7 +175,7 @@ def test_rows_of_random_constants_are_never_written(plan):
     unit = set(plan.structure.unit_rows)
     blocks = series_blocks(plan) + [doubling_block(plan)]
     for b in blocks:
-        for s in b.block.statements:
+        for s in scalar_statements(b.block.statements):
             if s.target.array == "Phi":
                 assert s.target.index[0] not in unit
 
@@ -156,15 +186,21 @@ def test_each_level_does_fewer_products_than_a_loop_over_dense_rows(plan):
     rows = F.sum(axis=1)
     loop = sum(int(rows[i]) for i, _ in plan.active)  # products per order of the loop version
     for _, block in level_blocks(plan):
-        products = sum(len(t) - 1 for s in block.block.statements for t in s.terms)
+        products = sum(len(t) - 1 for s in scalar_statements(block.block.statements) for t in s.terms)
         assert products < loop
 
 
 def test_the_chain_of_order_9_on_the_papers_model_costs_what_the_header_states():
-    """Horner's rule: 5826 flops for Phi and S at order 9 on the paper's model (the power series took 8446)."""
+    """Horner's rule over the structure: 5826 flops for Phi and S at order 9 on the paper's model (the power series took 8446).
+
+    The emitted chain does 6601 (its dense segments also multiply the zeros
+    of column 6 and of the levels that have not yet saturated): within 15 %
+    of the structural count, at about half the instructions per flop.
+    """
     plan = plan_of("ned_doppler18")
-    assert series_cost(plan, 9).total == 5826
-    assert [series_cost(plan, m).total for m in (1, 5)] == [776, 3102]
+    assert structural_series_cost(plan, 9).total == 5826
+    assert [structural_series_cost(plan, m).total for m in (1, 5)] == [776, 3102]
+    assert [series_cost(plan, m).total for m in (1, 5, 9)] == [817, 3709, 6601]
 
 
 def compressed_scratch(plan: DiscretizePlan) -> int:
