@@ -502,16 +502,17 @@ def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation
     with it flies only the missing ones.
     """
     from modelgen.cluster import dask_client, describe_client
-    from modelgen.simulation.flight_report import simulate
+    from modelgen.simulation.flight_report import simulate, start_flight
 
+    started = start_flight(scenario, seed)  # the truth and IMU errors are made while the model is derived
     derived = load_and_derive(scenario.filter.model)
     if runs < 2 and scheduler is None:
         return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation,
-                        history_csv=history_csv, journal=journal)
+                        history_csv=history_csv, journal=journal, started=started)
     with dask_client(scheduler, workers) as client:
         echo(f"  Monte Carlo on {describe_client(client)}")
         return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation,
-                        client=client, history_csv=history_csv, journal=journal)
+                        client=client, history_csv=history_csv, journal=journal, started=started)
 
 
 def trade_study(study_file: str | Path, folder: Path, scheduler: str | None = None, workers: int | None = None,

@@ -1,22 +1,29 @@
 """`modelgen simulate`: fly a flight profile, write PNG figures and a Markdown summary.
 
 What it does, in order: generate the truth (the ideal IMU data comes piece by
-piece, :mod:`modelgen.simulation.streaming`) while helper threads build the
-filter code and draw the IMU errors; draw the other sensor errors;
+piece, :mod:`modelgen.simulation.streaming`) and draw the IMU errors, in two
+threads started before the filter model is derived (:func:`start_flight`),
+while a helper thread builds the filter code; draw the other sensor errors;
 fly the filter (the generated C by default, in the compiled loop of
 :mod:`modelgen.simulation.native_loop`) on them in the three correction modes
 (open loop, closed loop, seed 003's accumulated correction) in one pass over
-the data, plus the free INS (the trajectory figure is drawn meanwhile); run a
-Monte Carlo ensemble and test its NEES; plot and summarize.  Memory does not grow with the IMU data; histories hold at most
+the data, plus the free INS; run a Monte Carlo ensemble and test its NEES;
+plot (the filter's figure in a forked copy of the process while this one draws
+the others, :func:`draw_figures`; each line cut to what its pixel columns show,
+:func:`pixel_envelope`) and summarize.  Memory does not grow with the IMU data; histories hold at most
 :data:`~modelgen.simulation.streaming.MAX_HISTORY_ROWS` rows per mode.  Progress goes to ``echo``.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import sys
 import tempfile
+import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
+import traceback
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -24,6 +31,7 @@ from typing import Any, Callable
 import numpy as np
 
 from modelgen.derive.symbolic import DerivedModel
+from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import display_path
 from modelgen.model.sources import cite_sources
 from modelgen.simulation import earth
@@ -72,6 +80,66 @@ def _timed(function: Callable, *args: Any) -> tuple[Any, float]:
     return function(*args), time.perf_counter() - start
 
 
+def _in_background(function: Callable, *args: Any) -> tuple[Future, threading.Thread]:
+    """``_timed(function, *args)`` started in a daemon thread: its future and the thread.
+
+    A daemon thread, not a pool's: if the caller fails before asking for the
+    result (a model that does not derive), the process exits at once instead
+    of waiting for the work to finish.
+    """
+    future: Future = Future()
+
+    def run() -> None:
+        if future.set_running_or_notify_cancel():
+            try:
+                future.set_result(_timed(function, *args))
+            except BaseException as error:  # handed to whoever asks for the result
+                future.set_exception(error)
+
+    thread = threading.Thread(target=run, name=f"modelgen-{function.__name__}", daemon=True)
+    thread.start()
+    return future, thread
+
+
+class FlightStart:
+    """A flight's truth and IMU errors, being made in two background threads (compiled code, no GIL held).
+
+    Neither needs the filter model, so ``modelgen simulate`` starts them
+    (:func:`start_flight`) before it derives the model, and the derivation,
+    the imports after it and the filter's code generation overlap them.  The
+    IMU errors are the seed's first draws (:func:`~modelgen.simulation.flight.imu_error_stream`);
+    :attr:`rng` continues from there once :meth:`imu_errors` has returned.
+    """
+
+    def __init__(self, profile: FlightProfile, seed: int):
+        self.profile, self.seed = profile, seed
+        n_samples, record_every = sample_counts(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
+        self.rng = np.random.default_rng(seed)
+        self._truth = _in_background(generate_trajectory, profile.path, profile.imu_rate, 1.0 / profile.filter.period,
+                                     True)
+        self._imu = _in_background(imu_error_stream, profile, n_samples, record_every, self.rng)
+
+    @staticmethod
+    def _finished(started: tuple[Future, threading.Thread]) -> tuple[Any, float]:
+        future, thread = started
+        result = future.result()
+        thread.join()
+        return result
+
+    def trajectory(self) -> tuple[Trajectory, float]:
+        """The streamed trajectory (truth rows; increments come piece by piece) and the seconds it took."""
+        return self._finished(self._truth)
+
+    def imu_errors(self) -> tuple[Any, float]:
+        """The :class:`~modelgen.simulation.imu.ImuErrorStream` and the seconds its draws took."""
+        return self._finished(self._imu)
+
+
+def start_flight(profile: FlightProfile, seed: int) -> FlightStart:
+    """Start making ``profile``'s truth and drawing its IMU errors (seed ``seed``) now; see :class:`FlightStart`."""
+    return FlightStart(profile, seed)
+
+
 def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, int], None]:
     state = {"next": 0.1, "start": time.perf_counter()}
 
@@ -86,7 +154,8 @@ def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, in
 
 def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs: int = 20, seed: int = 0,
              workers: int = 2, echo: Callable[[str], None] = print, implementation: str = "c",
-             client: Any = None, history_csv: bool = False, journal: str | Path | None = None) -> Path:
+             client: Any = None, history_csv: bool = False, journal: str | Path | None = None,
+             started: FlightStart | None = None) -> Path:
     """Fly ``profile`` with its filter model ``derived`` (module docstring); the summary's path.
 
     ``implementation`` is the filter of the three correction-mode runs: the
@@ -98,6 +167,8 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
     writes each mode's history, as it is flown, to ``history_<mode>.csv``
     (:mod:`modelgen.simulation.history`) in ``out_dir``.  ``journal`` keeps
     the completed Monte Carlo runs (:func:`modelgen.simulation.montecarlo.run_monte_carlo`).
+    ``started``: this flight's truth and IMU errors, already being made (:func:`start_flight` with the same
+    profile and seed); they are started here otherwise.
     """
     import matplotlib
 
@@ -109,21 +180,21 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
     echo(f"modelgen simulate: {profile.name}, {profile.path.duration / 3600:.2f} h, IMU {profile.imu_rate:g} Hz "
          f"({'numba' if HAVE_NUMBA else 'pure Python: slow'}), filter {derived.model.name}, {runs} Monte Carlo runs")
     results: dict[str, RunResult] = {}
-    with tempfile.TemporaryDirectory(prefix="modelgen-simulate-") as code_dir, ThreadPoolExecutor(2) as helpers:
-        # the filter code is generated and compiled (a compiler process) while the truth and the sensors are
-        # made, and the IMU errors (the seed's first draws, they need no truth) are drawn while the truth is made
+    if started is None:
+        started = start_flight(profile, seed)
+    elif started.profile != profile or started.seed != seed:
+        raise ModelError(f"simulate: the flight started for profile {started.profile.name!r}, seed {started.seed} "
+                         f"is not this one ({profile.name!r}, seed {seed})")
+    with tempfile.TemporaryDirectory(prefix="modelgen-simulate-") as code_dir, ThreadPoolExecutor(1) as helpers:
+        # the filter code is generated and compiled (a compiler process) while the truth is made and the IMU
+        # errors (the seed's first draws, they need no truth) are drawn, both in threads of ``started``
         building = helpers.submit(_timed, filter_factory, derived, implementation, code_dir)
-        n_samples, record_every_sample = sample_counts(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
-        rng = np.random.default_rng(seed)
-        drawing = helpers.submit(_timed, imu_error_stream, profile, n_samples, record_every_sample, rng)
-        t = time.perf_counter()
-        trajectory = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period, streamed=True)
-        timings["trajectory (truth; IMU increments are generated piece by piece in the flight)"] = time.perf_counter() - t
-        echo(f"  trajectory: truth of {trajectory.n_samples} IMU samples in {time.perf_counter() - t:.1f} s")
-        # drawn while the filter flies (a figure of the truth alone)
-        trajectory_figure = helpers.submit(_plot_trajectory, trajectory, out_dir / "trajectory.png")
+        trajectory, seconds = started.trajectory()
+        timings["trajectory (truth; IMU increments are generated piece by piece in the flight)"] = seconds
+        echo(f"  trajectory: truth of {trajectory.n_samples} IMU samples in {seconds:.1f} s")
         layout = profile_layout(profile, derived, trajectory)
-        imu_stream, drawn = drawing.result()
+        imu_stream, drawn = started.imu_errors()
+        rng = started.rng
         timings["IMU errors (drawn alongside the trajectory)"] = drawn
         t = time.perf_counter()
         sensors = simulate_sensors(profile, trajectory, rng, imu_stream=imu_stream)
@@ -156,14 +227,15 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
         timings[f"Monte Carlo ({_runs(runs)}, {monte_carlo.where})"] = time.perf_counter() - t
 
     units = {state.name: state.unit for state in derived.model.states}
-    figures = [
-        trajectory_figure.result(),
-        _plot_modes(errors, out_dir / "correction_modes.png"),
-        _plot_filter(results[profile.filter.mode], derived.model.state_names, units, out_dir / "filter_errors.png"),
+    drawings: list[tuple[Callable[..., Path], tuple]] = [
+        (_plot_trajectory, (trajectory, out_dir / "trajectory.png")),
+        (_plot_modes, (errors, out_dir / "correction_modes.png")),
+        (_plot_filter, (results[profile.filter.mode], derived.model.state_names, units, out_dir / "filter_errors.png")),
     ]
     if monte_carlo is not None:
-        figures.append(_plot_monte_carlo(monte_carlo, units, out_dir / "monte_carlo.png"))
-        figures.append(_plot_nees(monte_carlo, out_dir / "nees.png"))
+        drawings.append((_plot_monte_carlo, (monte_carlo, units, out_dir / "monte_carlo.png")))
+        drawings.append((_plot_nees, (monte_carlo, out_dir / "nees.png")))
+    figures = draw_figures(drawings, apart=2)  # the filter's 18 panels: the longest drawing
     summary = out_dir / "summary.md"
     summary.write_text(cite_sources(_summary(profile, derived.model.name, implementation, layout.conventions, trajectory, results, errors,
                                 monte_carlo, timings, figures)), encoding="utf-8")
@@ -178,11 +250,85 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
 # trajectory figure can be drawn by a helper thread while the filter flies).
 
 
+def draw_figures(drawings: list[tuple[Callable[..., Path], tuple]], apart: int) -> list[Path]:
+    """Call each ``(function, args)`` of ``drawings`` (each draws one figure and saves it to ``args[-1]``, the
+    path it returns); their paths, in order.
+
+    matplotlib holds the GIL while it draws, so two figures drawn by two
+    threads take as long as one after the other; instead ``drawings[apart]``
+    is drawn by a forked copy of this process while this one draws the rest
+    (the two cores share the figures' second of work).  Only a process with
+    no other thread running forks (a thread's locks would be copied held);
+    otherwise, and where there is no fork, all are drawn here.  Should the
+    copy fail, the figure is drawn again here, so that its error is raised.
+    """
+    if not hasattr(os, "fork") or threading.active_count() > 1 or len(drawings) < 2:
+        return [function(*args) for function, args in drawings]
+    sys.stdout.flush()
+    sys.stderr.flush()
+    pid = os.fork()
+    if pid == 0:  # the copy: draw one figure, leave without running this process's exit handlers
+        status = 1
+        try:
+            function, args = drawings[apart]
+            function(*args)
+            status = 0
+        except BaseException:
+            traceback.print_exc()
+        finally:
+            os._exit(status)
+    try:
+        paths = [function(*args) for index, (function, args) in enumerate(drawings) if index != apart]
+    finally:
+        _, status = os.waitpid(pid, 0)
+    function, args = drawings[apart]
+    path = args[-1] if os.waitstatus_to_exitcode(status) == 0 else function(*args)
+    paths.insert(apart, Path(path))
+    return paths
+
+
 def _fixed_margins(fig, left: float = 0.07, right: float = 0.98, bottom: float = 0.06, top: float = 0.93,
                    hspace: float = 0.3, wspace: float = 0.2) -> None:
     """Subplot margins set, not searched: ``tight_layout`` measures every tick label of every panel
     (half of the figures' time, 1.2 s of the 4-h ``modelgen simulate``); these figures' layout is known."""
     fig.subplots_adjust(left=left, right=right, bottom=bottom, top=top, hspace=hspace, wspace=wspace)
+
+
+def pixel_envelope(values: np.ndarray, columns: int) -> np.ndarray:
+    """Indices of the samples of a time series that draw the same line in ``columns`` pixel columns.
+
+    The series is cut into ``columns`` consecutive runs of samples (one per
+    pixel column of the axes); of each run the first, last, smallest and
+    largest sample are kept (the M4 aggregation: a polyline through them covers
+    the same pixels as through every sample), and every non-finite sample (a
+    gap in the line).  A 4-h history has 14,400 rows per curve, an axes some
+    400 pixel columns: drawing the kept 1,600 instead halves the figures' time.
+    Returns sorted indices; all of them when there are few samples already.
+    """
+    n = len(values)
+    if columns < 1:
+        raise ValueError(f"pixel_envelope: columns must be positive, got {columns}")
+    if n <= 4 * columns:
+        return np.arange(n)
+    edges = np.linspace(0, n, columns + 1).round().astype(np.intp)
+    column = np.repeat(np.arange(columns), np.diff(edges))
+    by_value = np.lexsort((values, column))  # per column, ascending value, NaN last
+    numbers = np.add.reduceat(~np.isnan(values), edges[:-1])  # each column has 4 samples or more
+    largest = by_value[edges[:-1] + np.maximum(numbers, 1) - 1]
+    kept = np.concatenate([edges[:-1], edges[1:] - 1, by_value[edges[:-1]], largest,
+                           np.flatnonzero(~np.isfinite(values))])
+    return np.unique(kept)
+
+
+def _pixel_columns(ax, dpi: float) -> int:
+    """Pixel columns of an axes' plotting area in a figure saved at ``dpi`` (its position set already)."""
+    return max(1, math.ceil(ax.get_position().width * ax.get_figure().get_figwidth() * dpi))
+
+
+def _plot_series(ax, x: np.ndarray, y: np.ndarray, dpi: float, *args, semilog: bool = False, **kwargs) -> None:
+    """``ax.plot`` (or ``semilogy``) of a time series, the samples reduced to its :func:`pixel_envelope`."""
+    keep = pixel_envelope(y, _pixel_columns(ax, dpi))
+    (ax.semilogy if semilog else ax.plot)(x[keep], y[keep], *args, **kwargs)
 
 
 def _plot_trajectory(trajectory: Trajectory, path: Path) -> Path:
@@ -195,21 +341,22 @@ def _plot_trajectory(trajectory: Trajectory, path: Path) -> Path:
     euler = np.degrees(dcm_to_euler(quaternion_to_dcm(truth[:, 7:11])))
     fig = Figure(figsize=(11, 7))
     ax = fig.subplots(2, 2)
-    ax[0, 0].plot(np.degrees(truth[:, 2]), np.degrees(truth[:, 1]))
+    _fixed_margins(fig, top=0.9, hspace=0.35, wspace=0.22)
+    dpi = 110
+    ax[0, 0].plot(np.degrees(truth[:, 2]), np.degrees(truth[:, 1]))  # a path, not a time series: every point
     ax[0, 0].set(xlabel="longitude [deg]", ylabel="latitude [deg]", title="ground track")
-    ax[0, 1].plot(hours, truth[:, 3] / 1000)
+    _plot_series(ax[0, 1], hours, truth[:, 3] / 1000, dpi)
     ax[0, 1].set(xlabel="time [h]", ylabel="height [km]", title="height")
-    ax[1, 0].plot(hours, np.hypot(truth[:, 4], truth[:, 5]) * 3.6, label="ground speed")
-    ax[1, 0].plot(hours, -truth[:, 6] * 3.6, label="climb rate")
+    _plot_series(ax[1, 0], hours, np.hypot(truth[:, 4], truth[:, 5]) * 3.6, dpi, label="ground speed")
+    _plot_series(ax[1, 0], hours, -truth[:, 6] * 3.6, dpi, label="climb rate")
     ax[1, 0].set(xlabel="time [h]", ylabel="km/h", title="speeds")
     ax[1, 0].legend()
     for i, name in enumerate(("roll", "pitch", "yaw")):
-        ax[1, 1].plot(hours, euler[:, i], label=name)
+        _plot_series(ax[1, 1], hours, euler[:, i], dpi, label=name)
     ax[1, 1].set(xlabel="time [h]", ylabel="deg", title="attitude")
     ax[1, 1].legend()
     fig.suptitle(f"Flight profile {trajectory.path.name}")
-    _fixed_margins(fig, top=0.9, hspace=0.35, wspace=0.22)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=dpi)
     return path
 
 
@@ -243,6 +390,8 @@ def _plot_modes(errors: dict[str, NavigationErrors], path: Path) -> Path:
 
     fig = Figure(figsize=(11, 10))
     ax = fig.subplots(3, 1, sharex=True)
+    _fixed_margins(fig, left=0.08, top=0.96, hspace=0.12)
+    dpi = 110
     panels = (
         ("horizontal position error [nmile]", lambda e: np.hypot(*e.position.T) / NMILE),
         ("horizontal velocity error [m/s]", lambda e: np.hypot(*e.velocity.T)),
@@ -253,14 +402,14 @@ def _plot_modes(errors: dict[str, NavigationErrors], path: Path) -> Path:
         notes = coinciding_modes(curves)
         for label, e in errors.items():
             shown = label if label not in notes else f"{label} (on {notes[label][0]}: median diff. {100 * notes[label][1]:.2g} %)"
-            a.semilogy(e.times / 3600, curves[label] + 1e-9, label=shown, **_MODE_STYLES.get(label, {}))
+            _plot_series(a, e.times / 3600, curves[label] + 1e-9, dpi, semilog=True, label=shown,
+                         **_MODE_STYLES.get(label, {}))
         a.set(ylabel=unit)
         a.legend(fontsize=8)
         a.grid(True, which="both", alpha=0.3)
     ax[0].set(title="Corrected outputs by correction mode (one run, same sensors)")
     ax[2].set(xlabel="time since start [h]")
-    _fixed_margins(fig, left=0.08, top=0.96, hspace=0.12)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=dpi)
     return path
 
 
@@ -273,19 +422,20 @@ def _plot_filter(result: RunResult, names: list[str], units: dict[str, str], pat
     rows = math.ceil(len(picks) / cols)
     fig = Figure(figsize=(13, 2.1 * rows))
     ax = fig.subplots(rows, cols, sharex=True)
+    _fixed_margins(fig, left=0.06, top=1 - 0.8 / fig.get_figheight(), hspace=0.6, wspace=0.25)
+    dpi = 100
     for k, i in enumerate(picks):
         a = ax.flat[k]
-        a.plot(hours, result.estimation_error[:, i], lw=0.8, label="error")
-        a.plot(hours, 3 * result.sigma[:, i], "r", lw=0.6, label="+-3 sigma")
-        a.plot(hours, -3 * result.sigma[:, i], "r", lw=0.6)
+        _plot_series(a, hours, result.estimation_error[:, i], dpi, lw=0.8, label="error")
+        _plot_series(a, hours, 3 * result.sigma[:, i], dpi, "r", lw=0.6, label="+-3 sigma")
+        _plot_series(a, hours, -3 * result.sigma[:, i], dpi, "r", lw=0.6)
         a.set_title(f"{names[i]} [{units.get(names[i], '?')}]", fontsize=8)
         a.tick_params(labelsize=7)
     for a in list(ax.flat)[len(picks):]:
         a.axis("off")
     _time_labels(ax, len(picks), cols)
     fig.suptitle(f"Estimation error and filter 3-sigma, {result.mode} ({result.filter_name}); each panel in its state's unit")
-    _fixed_margins(fig, left=0.06, top=1 - 0.8 / fig.get_figheight(), hspace=0.6, wspace=0.25)
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=dpi)
     return path
 
 
@@ -299,10 +449,12 @@ def _plot_monte_carlo(mc: MonteCarloResult, units: dict[str, str], path: Path) -
     rows = math.ceil(n / cols)
     fig = Figure(figsize=(13, 2.1 * rows))
     ax = fig.subplots(rows, cols, sharex=True)
+    _fixed_margins(fig, left=0.06, top=1 - 0.8 / fig.get_figheight(), hspace=0.6, wspace=0.25)
+    dpi = 100
     for i in range(n):
         a = ax.flat[i]
-        a.plot(hours, rms[:, i], label=f"ensemble rms ({_runs(mc.runs)})")
-        a.plot(hours, sigma[:, i], "--", label="filter covariance sigma")
+        _plot_series(a, hours, rms[:, i], dpi, label=f"ensemble rms ({_runs(mc.runs)})")
+        _plot_series(a, hours, sigma[:, i], dpi, "--", label="filter covariance sigma")
         a.set_title(f"{mc.state_names[i]} [{units.get(mc.state_names[i], '?')}]", fontsize=8)
         a.tick_params(labelsize=7)
     ax.flat[0].legend(fontsize=7)
@@ -310,8 +462,7 @@ def _plot_monte_carlo(mc: MonteCarloResult, units: dict[str, str], path: Path) -
         a.axis("off")
     _time_labels(ax, n, cols)
     fig.suptitle(f"Monte Carlo: actual error rms vs covariance sigma ({mc.mode}, {_runs(mc.runs)}); each panel in its state's unit")
-    _fixed_margins(fig, left=0.06, top=1 - 0.8 / fig.get_figheight(), hspace=0.6, wspace=0.25)
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=dpi)
     return path
 
 
