@@ -29,6 +29,7 @@ derived objects holding compiled code.
 
 from __future__ import annotations
 
+import importlib
 import json
 import logging
 import os
@@ -115,6 +116,25 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
             yield client
     finally:
         cluster.close()
+
+
+def import_on_workers(client: Any, module: str) -> None:
+    """Have every worker of ``client`` import ``module`` now, all at once, without waiting for them.
+
+    A fresh worker otherwise imports a study's task code only when its first
+    task arrives, and a task that needs a result held by another worker (the
+    study's shared set-up) arrives only after that worker has imported the
+    code and computed it: the fresh workers' imports (0.4 s for the Monte
+    Carlo code) would follow one another instead of overlapping.  A worker
+    that already has the module does nothing; one that fails to import it
+    fails again, with its message, on its first task.
+    """
+    client.run(_import_module, module, wait=False)
+
+
+async def _import_module(module: str) -> None:
+    """On a worker: import ``module`` (a coroutine: what ``Client.run`` can start without waiting for it)."""
+    importlib.import_module(module)
 
 
 def describe_client(client: Any) -> str:

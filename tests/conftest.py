@@ -9,7 +9,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="session", autouse=True)
 def private_compile_cache(tmp_path_factory):
-    """The suite's compiled libraries go to a cache of its own, never the user's (child processes inherit it)."""
+    """The suite's compiled libraries and trajectories go to a cache of its own, never the user's (child processes inherit it)."""
     import os
 
     from modelgen.codegen.build import CACHE_ENV

@@ -8,11 +8,15 @@ on the caller's client (a local cluster sized to the machine, or an existing
 scheduler), else one after another in this process.  A task carries only
 plain data (:class:`MonteCarloSetup`: the flight profile, the filter model's
 declaration, the seed and, for the generated filter, the generated code as
-text, made once by the caller); each worker derives the model, builds the
-trajectory and writes and compiles the code once (the compile itself is
-skipped when the compile cache of :mod:`modelgen.codegen.build` holds the
-library, e.g. after ``modelgen simulate``'s own flight or an earlier study),
-and keeps them for all its runs of the study.  With a journal
+text, made once by the caller); each worker derives the model, takes the
+trajectory (truth and ideal IMU increments) from its machine's trajectory
+cache (:mod:`modelgen.simulation.trajectory_cache`: mapped read-only, made
+and kept there by the first worker that needs it) and writes and compiles
+the code once (the compile itself is skipped when the compile cache of
+:mod:`modelgen.codegen.build` holds the library, e.g. after ``modelgen
+simulate``'s own flight or an earlier study), and keeps them for all its
+runs of the study.  Fresh workers import this module side by side as the
+study starts (:func:`modelgen.cluster.import_on_workers`).  With a journal
 (:class:`modelgen.cluster.Journal`) each completed run is kept on disk as it
 arrives and a rerun of the same study flies only the runs missing from it.
 
@@ -40,14 +44,15 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from modelgen.cluster import Journal, dask_client, describe_client, forget_cached, run_tasks, worker_cached
+from modelgen.cluster import (Journal, dask_client, describe_client, forget_cached, import_on_workers, run_tasks,
+                              worker_cached)
 from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel
 from modelgen.simulation.filters import IMPLEMENTATIONS, filter_factory, generated_filter_files
 from modelgen.simulation.flight import fly_profile, profile_layout
 from modelgen.simulation.scenario import FlightProfile
-from modelgen.simulation.trajectory import generate_trajectory
+from modelgen.simulation.trajectory_cache import cached_trajectory
 
 
 @dataclass
@@ -175,15 +180,16 @@ def _prepare(setup: MonteCarloSetup, derived: DerivedModel | None = None,
              mark: Callable[[str], None] = lambda step: None) -> dict:
     """What a worker builds once per set-up: the derived model, trajectory, error layout and filter maker.
 
-    The shipped code is written to a folder the context owns (removed with it)
-    and compiled through the compile cache.  ``mark(step)`` is called after
+    The trajectory comes from the trajectory cache (made and kept there on a
+    miss); the shipped code is written to a folder the context owns (removed
+    with it) and compiled through the compile cache.  ``mark(step)`` is called after
     each step (the benchmark times a worker's set-up with it).
     """
     derived = derived if derived is not None else derive(setup.model)
     mark("derive the model (sympy)")
     profile = setup.profile
-    trajectory = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
-    mark("trajectory (truth and ideal IMU increments)")
+    trajectory = cached_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
+    mark("trajectory (truth and ideal IMU increments: from the trajectory cache, or made and kept there)")
     layout = profile_layout(profile, derived, trajectory)
     mark("error layout")
     code_dir = tempfile.TemporaryDirectory(prefix="modelgen-montecarlo-")
@@ -251,6 +257,7 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
             worker_cached(key, lambda: _prepare(setup, derived))  # this process: the caller's derived model
         shared: Any = setup
     else:  # the set-up (the code: ~400 kB of text) travels once, as a task of its own, not once per run
+        import_on_workers(client, __name__)  # fresh workers import this module side by side, not one after another
         shared = client.submit(_the_setup, setup, pure=False, key=f"modelgen-montecarlo-setup-{key}-{uuid.uuid4().hex[:8]}")
     try:
         outputs = run_tasks(fly_one_run, [(shared, s) for s in seeds], client, progress=progress, on_result=on_run,

@@ -1,0 +1,62 @@
+"""What a fresh Monte Carlo worker does before its first run: imports side by side, the trajectory mapped from the cache."""
+
+import sys
+import time
+
+import numpy as np
+
+from modelgen.cluster import dask_client, import_on_workers
+
+# Only modelgen.cluster at the top: the workers import this file to run its functions, and must not get the
+# Monte Carlo module from it.
+
+
+def _has_module(name: str) -> bool:
+    return name in sys.modules
+
+
+def _set_up_trajectories() -> list[bool]:
+    """On a worker: for each Monte Carlo set-up it holds, whether its increments are a read-only map of a file."""
+    from modelgen.cluster import _CACHE
+
+    mapped = []
+    for key, context in _CACHE.items():
+        if str(key).startswith("montecarlo-"):
+            array, bases = context["trajectory"].delta_theta, []
+            while array is not None:
+                bases.append(array)
+                array = getattr(array, "base", None)
+            mapped.append(not context["trajectory"].delta_theta.flags.writeable
+                          and any(isinstance(b, np.memmap) for b in bases))
+    return mapped
+
+
+def test_fresh_workers_import_the_study_code_when_asked_without_a_task():
+    module = "modelgen.simulation.montecarlo"
+    with dask_client(workers=2) as client:
+        client.wait_for_workers(2)
+        assert not any(client.run(_has_module, module).values())  # spawned workers start without it
+        import_on_workers(client, module)  # returns at once; the workers import side by side
+        deadline = time.monotonic() + 60
+        while not all(client.run(_has_module, module).values()):
+            assert time.monotonic() < deadline, "the workers did not import the module"
+            time.sleep(0.1)
+
+
+def test_fresh_workers_map_the_trajectory_the_caller_kept_in_the_cache(paper_derived):
+    from modelgen.simulation.montecarlo import run_monte_carlo
+    from modelgen.simulation.scenario import load_profile
+    from modelgen.simulation.trajectory_cache import trajectory_cache_folder
+
+    short = load_profile("profile_000").with_changes(hours=0.02, imu_rate=50.0)
+    folder = trajectory_cache_folder()
+    before = set(folder.iterdir()) if folder.exists() else set()
+    here = run_monte_carlo(short, paper_derived, runs=3, seed=4)  # makes the flight and keeps it
+    kept = set(folder.iterdir()) - before
+    assert len(kept) == 1 and next(iter(kept)).name.endswith(".trajectory")
+    with dask_client(workers=2) as fresh:
+        there = run_monte_carlo(short, paper_derived, runs=3, seed=4, client=fresh)
+        mapped = [m for flags in fresh.run(_set_up_trajectories).values() for m in flags]
+    assert mapped and all(mapped)  # every worker that flew a run mapped the entry
+    assert set(folder.iterdir()) - before == kept  # and none made another
+    assert np.array_equal(there.errors, here.errors) and np.array_equal(there.sigma, here.sigma)
