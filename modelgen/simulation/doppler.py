@@ -168,6 +168,8 @@ class DopplerAiding(NavigationQuantitySensor):
     def noise_parameters(self, settings: DopplerSettings) -> dict[str, float]:
         return {"doppler_noise_sigma_north": settings.white_noise, "doppler_noise_sigma_east": settings.white_noise}
 
+    reads_truth_position = False  # velocity and attitude only
+
     def simulate_at(self, settings: DopplerSettings, truth: np.ndarray, rng: np.random.Generator) -> DopplerRecord:
         return simulate_doppler(truth[:, 0], truth[:, 4:7], truth[:, 7:11], settings, rng)
 

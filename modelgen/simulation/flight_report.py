@@ -106,7 +106,10 @@ class FlightStart:
 
     Neither needs the filter model, so ``modelgen simulate`` starts them
     (:func:`start_flight`) before it derives the model, and the derivation,
-    the imports after it and the filter's code generation overlap them.  The
+    the imports after it and the filter's code generation overlap them.  When
+    the aiding sensor does not read the truth position (the Doppler radar) the
+    truth leaves it to the flight's pieces (``positions_in_pieces``), which
+    integrate it anyway for the increments.  The
     IMU errors are the seed's first draws (:func:`~modelgen.simulation.flight.imu_error_stream`);
     :attr:`rng` continues from there once :meth:`imu_errors` has returned.
     """
@@ -115,8 +118,11 @@ class FlightStart:
         self.profile, self.seed = profile, seed
         n_samples, record_every = sample_counts(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
         self.rng = np.random.default_rng(seed)
+        # the truth positions are integrated by the flight's pieces (once, not twice) unless the aiding sensor
+        # reads them when its record is drawn, before the flight
+        later = not getattr(profile.aiding_sensor, "reads_truth_position", True)
         self._truth = _in_background(generate_trajectory, profile.path, profile.imu_rate, 1.0 / profile.filter.period,
-                                     True)
+                                     True, later)
         self._imu = _in_background(imu_error_stream, profile, n_samples, record_every, self.rng)
 
     @staticmethod
@@ -190,7 +196,8 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
         # errors (the seed's first draws, they need no truth) are drawn, both in threads of ``started``
         building = helpers.submit(_timed, filter_factory, derived, implementation, code_dir)
         trajectory, seconds = started.trajectory()
-        timings["trajectory (truth; IMU increments are generated piece by piece in the flight)"] = seconds
+        later = "its positions and " if trajectory.positions_in_pieces else ""
+        timings[f"trajectory (truth; {later}IMU increments are generated piece by piece in the flight)"] = seconds
         echo(f"  trajectory: truth of {trajectory.n_samples} IMU samples in {seconds:.1f} s")
         layout = profile_layout(profile, derived, trajectory)
         imu_stream, drawn = started.imu_errors()

@@ -66,6 +66,9 @@ class NavigationQuantitySensor(ABC):
     name = ""
     quantities: tuple[str, ...] = tuple(QUANTITIES)
     bias_group: str | None = None  # error-layout group of the sensor's own bias states, if any
+    #: whether :meth:`simulate_at` reads the truth's latitude and longitude; a sensor that does not lets
+    #: ``modelgen simulate`` integrate them while the flight goes (``generate_trajectory(positions_in_pieces=True)``)
+    reads_truth_position = True
 
     # -- what a subclass gives ---------------------------------------------------------
     @abstractmethod

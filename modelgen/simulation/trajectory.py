@@ -110,7 +110,11 @@ class Trajectory:
     A *streamed* trajectory (``generate_trajectory(..., streamed=True)``) holds
     the truth only (``delta_theta``/``delta_velocity`` are None): its increments
     are generated on demand, a piece at a time, by :meth:`increments`, bit for
-    bit the rows a whole trajectory holds.
+    bit the rows a whole trajectory holds.  A streamed trajectory made with
+    ``positions_in_pieces=True`` has the latitude and longitude of its truth
+    rows filled by those pieces as they are made, in order (NaN until then,
+    but for row 0): the position is integrated once, not once for the truth
+    and again for the increments.
     """
 
     path: FlightPath
@@ -120,6 +124,7 @@ class Trajectory:
     delta_velocity: np.ndarray | None
     truth: np.ndarray
     sample_count: int = -1  # streamed: the number of IMU samples (the arrays give it otherwise)
+    positions_in_pieces: bool = False  # streamed: truth latitude and longitude filled by the pieces, in order
 
     @property
     def dt(self) -> float:
@@ -150,7 +155,10 @@ class Trajectory:
 
         A held trajectory returns slices of its arrays; a streamed one computes
         them now, starting from the truth row at ``start`` (which must be a
-        record sample: a multiple of ``record_every``).
+        record sample: a multiple of ``record_every``).  With
+        :attr:`positions_in_pieces` that row's position must be known (the
+        pieces before it made), and the piece fills the positions of the truth
+        rows it reaches.
         """
         stop = min(stop, self.n_samples)
         if self.delta_theta is not None:
@@ -158,10 +166,13 @@ class Trajectory:
         if start % self.record_every:
             raise ModelError(f"trajectory: a streamed piece must start at a record sample, not {start}")
         row = start // self.record_every
+        if self.positions_in_pieces and math.isnan(self.truth[row, 1]):
+            raise ModelError(f"trajectory: the position at sample {start} is not known yet (the truth positions are "
+                             "integrated by the pieces: make them in order)")
         delta_theta = np.empty((max(stop - start, 0), 3))
         delta_velocity = np.empty_like(delta_theta)
         _increments(segment_table(self.path), self.truth[row, 1], self.truth[row, 2], self.dt, start, stop,
-                    delta_theta, delta_velocity)
+                    delta_theta, delta_velocity, self.truth, self.record_every, self.positions_in_pieces)
         return delta_theta, delta_velocity
 
 
@@ -352,6 +363,24 @@ def _rk4_from(table, starts, seg, k, dt, lat, lon, k1a, k1o):
 
 
 @compiled
+def _truth_row(table, seg, t0, lat, lon, truth, rec):
+    """Truth row ``rec`` at time t0 in segment ``seg``: the position given, the closed-form rest."""
+    vh, psi, vd, roll, h, a_h, turn, a_v, rr = _kinematics(t0, table, seg)
+    q0, q1, q2, q3 = euler_quaternion(roll, math.atan2(-vd, vh), psi)
+    truth[rec, 0] = t0
+    truth[rec, 1] = lat
+    truth[rec, 2] = lon
+    truth[rec, 3] = h
+    truth[rec, 4] = vh * math.cos(psi)
+    truth[rec, 5] = vh * math.sin(psi)
+    truth[rec, 6] = vd
+    truth[rec, 7] = q0
+    truth[rec, 8] = q1
+    truth[rec, 9] = q2
+    truth[rec, 10] = q3
+
+
+@compiled
 def _truth_records(table, lat0, lon0, dt, n_samples, record_every, truth):
     """Truth rows every ``record_every`` samples (RK4 latitude/longitude on the IMU grid, closed-form rest).
 
@@ -367,19 +396,7 @@ def _truth_records(table, lat0, lon0, dt, n_samples, record_every, truth):
         t0 = k * dt
         seg = _segment_index(t0, starts, seg)
         if k % record_every == 0:
-            vh, psi, vd, roll, h, a_h, turn, a_v, rr = _kinematics(t0, table, seg)
-            q0, q1, q2, q3 = euler_quaternion(roll, math.atan2(-vd, vh), psi)
-            truth[rec, 0] = t0
-            truth[rec, 1] = lat
-            truth[rec, 2] = lon
-            truth[rec, 3] = h
-            truth[rec, 4] = vh * math.cos(psi)
-            truth[rec, 5] = vh * math.sin(psi)
-            truth[rec, 6] = vd
-            truth[rec, 7] = q0
-            truth[rec, 8] = q1
-            truth[rec, 9] = q2
-            truth[rec, 10] = q3
+            _truth_row(table, seg, t0, lat, lon, truth, rec)
             rec += 1
         if k == n_samples:
             break
@@ -388,9 +405,27 @@ def _truth_records(table, lat0, lon0, dt, n_samples, record_every, truth):
 
 
 @compiled
-def _increments(table, lat0, lon0, dt, k_start, k_stop, delta_theta, delta_velocity):
+def _truth_motion(table, lat0, lon0, dt, n_samples, record_every, truth):
+    """:func:`_truth_records` without the position integration: the closed-form columns of every row, the
+    position of row 0, NaN for the other rows' latitude and longitude (the pieces' :func:`_increments` fill them)."""
+    starts = table[:, 0]
+    seg = 0
+    rec = 0
+    for k in range(0, n_samples + 1, record_every):
+        t0 = k * dt
+        seg = _segment_index(t0, starts, seg)
+        _truth_row(table, seg, t0, lat0 if rec == 0 else math.nan, lon0 if rec == 0 else math.nan, truth, rec)
+        rec += 1
+    return rec
+
+
+@compiled
+def _increments(table, lat0, lon0, dt, k_start, k_stop, delta_theta, delta_velocity, truth, record_every,
+                fill_positions):
     """Ideal increments of samples [k_start, k_stop) into rows 0.. of the arrays, from the latitude and
-    longitude at sample k_start: RK4 latitude, Gauss-Legendre increments split at segment boundaries."""
+    longitude at sample k_start: RK4 latitude, Gauss-Legendre increments split at segment boundaries.
+    ``fill_positions``: the latitude and longitude reached at each record sample (a multiple of
+    ``record_every``) are written into that row of ``truth`` (what :func:`_truth_records` computes there)."""
     starts = table[:, 0]
     gl_x0 = -math.sqrt(0.6)
     gl_x2 = math.sqrt(0.6)
@@ -441,6 +476,9 @@ def _increments(table, lat0, lon0, dt, k_start, k_stop, delta_theta, delta_veloc
                 vy += w * half * fy
                 vz += w * half * fz
             a = b
+        if fill_positions and (k + 1) % record_every == 0:
+            truth[(k + 1) // record_every, 1] = lat1
+            truth[(k + 1) // record_every, 2] = lon1
         row = k - k_start
         delta_theta[row, 0] = sx
         delta_theta[row, 1] = sy
@@ -467,23 +505,31 @@ def sample_counts(profile: FlightPath, imu_rate: float, record_rate: float) -> t
     return int(math.floor(profile.duration * imu_rate + 1e-6)), record_every
 
 
-def generate_trajectory(profile: FlightPath, imu_rate: float, record_rate: float, streamed: bool = False) -> Trajectory:
+def generate_trajectory(profile: FlightPath, imu_rate: float, record_rate: float, streamed: bool = False,
+                        positions_in_pieces: bool = False) -> Trajectory:
     """Truth at ``record_rate`` and ideal increments at ``imu_rate`` for a whole profile.
 
     ``imu_rate / record_rate`` must be a whole number (truth rows fall on IMU
     sample times); the flight lasts ``floor(duration * imu_rate)`` samples.
     ``streamed=True`` keeps only the truth (memory independent of the IMU rate
     and, but for the truth rows, of the duration); the increments then come
-    piece by piece from :meth:`Trajectory.increments`.
+    piece by piece from :meth:`Trajectory.increments`.  ``positions_in_pieces``
+    (streamed only) leaves the truth rows' latitude and longitude to those
+    pieces (:class:`Trajectory`): the truth then costs next to nothing, and
+    until the last piece is made only the rows reached have a position.
     """
+    if positions_in_pieces and not streamed:
+        raise ModelError(f"profile {profile.name!r}: positions_in_pieces needs a streamed trajectory")
     n_samples, record_every = sample_counts(profile, imu_rate, record_rate)
     table = segment_table(profile)
     n_records = n_samples // record_every + 1
     truth = np.empty((n_records, len(TRUTH_COLUMNS)))
-    _truth_records(table, profile.latitude, profile.longitude, 1.0 / imu_rate, n_samples, record_every, truth)
+    records = _truth_motion if positions_in_pieces else _truth_records
+    records(table, profile.latitude, profile.longitude, 1.0 / imu_rate, n_samples, record_every, truth)
     if streamed:
-        return Trajectory(profile, float(imu_rate), record_every, None, None, truth, n_samples)
+        return Trajectory(profile, float(imu_rate), record_every, None, None, truth, n_samples, positions_in_pieces)
     delta_theta = np.empty((n_samples, 3))
     delta_velocity = np.empty((n_samples, 3))
-    _increments(table, profile.latitude, profile.longitude, 1.0 / imu_rate, 0, n_samples, delta_theta, delta_velocity)
+    _increments(table, profile.latitude, profile.longitude, 1.0 / imu_rate, 0, n_samples, delta_theta, delta_velocity,
+                truth, record_every, False)
     return Trajectory(profile, float(imu_rate), record_every, delta_theta, delta_velocity, truth)

@@ -125,3 +125,18 @@ def test_uncorrected_modes_sharing_one_mechanization_fly_as_each_flown_alone(pap
         assert alone.updates == together[mode].updates == 5
         for name in EXACT + ("nees",):
             assert np.array_equal(getattr(alone, name), getattr(together[mode], name), equal_nan=True), (mode, name)
+
+
+def test_compiled_loop_flies_the_same_flight_when_its_pieces_integrate_the_truth_positions(paper_derived, tmp_path):
+    scenario = load_profile("profile_000").with_changes(hours=1 / 12, imu_rate=30.0)
+    make = filter_factory(paper_derived, "c", tmp_path)
+    results = []
+    for positions_in_pieces in (False, True):
+        trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0 / scenario.filter.period, streamed=True,
+                                         positions_in_pieces=positions_in_pieces)
+        sensors = simulate_sensors(scenario, trajectory, np.random.default_rng(5))
+        layout = profile_layout(scenario, paper_derived, trajectory)
+        results.append(fly_modes(scenario, paper_derived, trajectory, sensors, layout, make, MODES, piece_seconds=20.0))
+    for mode in MODES:
+        for name in EXACT + ("nees",):
+            assert np.array_equal(getattr(results[0][mode], name), getattr(results[1][mode], name), equal_nan=True)

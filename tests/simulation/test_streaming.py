@@ -52,8 +52,36 @@ def test_imu_error_stream_replays_the_whole_realization_bit_for_bit(n, record_ev
         assert np.array_equal(getattr(stream.history, name), getattr(history, name)), name
 
 
-def _fly(scenario, derived, streamed, piece_seconds, record_every=1):
-    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0, streamed=streamed)
+def test_truth_positions_integrated_by_the_pieces_are_the_truths_and_the_pieces_must_come_in_order(scenario):
+    plain = generate_trajectory(scenario.path, scenario.imu_rate, 1.0, streamed=True)
+    later = generate_trajectory(scenario.path, scenario.imu_rate, 1.0, streamed=True, positions_in_pieces=True)
+    motion = [0, *range(3, 11)]  # time, height, velocity, attitude: closed form, there from the start
+    assert np.array_equal(later.truth[:, motion], plain.truth[:, motion]) and np.array_equal(later.truth[0], plain.truth[0])
+    assert np.isnan(later.truth[1:, 1:3]).all()
+    step = 7 * later.record_every
+    with pytest.raises(ModelError, match="not known yet"):
+        later.increments(step, 2 * step)
+    for start in range(0, later.n_samples, step):
+        made, wanted = later.increments(start, start + step), plain.increments(start, start + step)
+        assert np.array_equal(made[0], wanted[0]) and np.array_equal(made[1], wanted[1])
+    assert np.array_equal(later.truth, plain.truth)
+    with pytest.raises(ModelError, match="needs a streamed trajectory"):
+        generate_trajectory(scenario.path, scenario.imu_rate, 1.0, positions_in_pieces=True)
+
+
+def test_a_flight_whose_pieces_integrate_the_truth_positions_is_the_streamed_flight_bit_for_bit(scenario, paper_derived):
+    streamed = _fly(scenario, paper_derived, True, 7.0)
+    for piece_seconds in (7.0, 60.0):
+        later = _fly(scenario, paper_derived, True, piece_seconds, positions_in_pieces=True)
+        for mode, result in streamed.items():
+            assert result.updates == later[mode].updates
+            for name in FIELDS:
+                assert np.array_equal(getattr(result, name), getattr(later[mode], name), equal_nan=True), (mode, name)
+
+
+def _fly(scenario, derived, streamed, piece_seconds, record_every=1, positions_in_pieces=False):
+    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0, streamed=streamed,
+                                     positions_in_pieces=positions_in_pieces)
     layout = profile_layout(scenario, derived, trajectory)
     sensors = simulate_sensors(scenario, trajectory, np.random.default_rng(21))
     return fly_modes(scenario, derived, trajectory, sensors, layout, lambda x, P: ReferenceFilter(derived, x, P),

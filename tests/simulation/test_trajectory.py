@@ -23,7 +23,7 @@ def _generate(table: np.ndarray, path: FlightPath, dt: float) -> tuple[np.ndarra
     truth = np.empty((n // 10 + 1, 11))
     _truth_records(table, path.latitude, path.longitude, dt, n, 10, truth)
     theta, velocity = np.empty((n, 3)), np.empty((n, 3))
-    _increments(table, path.latitude, path.longitude, dt, 0, n, theta, velocity)
+    _increments(table, path.latitude, path.longitude, dt, 0, n, theta, velocity, truth, 10, False)
     return truth, theta, velocity
 
 
