@@ -359,17 +359,22 @@ def horner_level_block(plan: DiscretizePlan, parity: int) -> DiscretizeBlock:
 def horner_transition_block(plan: DiscretizePlan) -> DiscretizeBlock:
     """E = Phi - I = A S over the stored rows, into Phi (S = e_c on a row c of random constants).
 
-    The block rows' segments are written into Phi's rows whole where the
-    span lies inside the row (their structural zeros are zeros of Phi,
-    which discretize cleared); the identity is added after the doublings
+    The block rows' segments are written into Phi's rows whole (their
+    structural zeros are stored zeros), every other entry of Phi is set to
+    zero here: straight-line zero stores, which gcc -O2 pairs into vector
+    stores, instead of a loop over N x N that it turns into ``rep stos``
+    (one instruction per entry).  The identity is added after the doublings
     (:func:`doubling_block`).
     """
+    n = plan.structure.n_states
     unit = set(plan.structure.unit_rows)
 
     def source(c: int, j: int) -> Ref | None:
         return None if c in unit else Ref("scratch", "S", (plan.s_position[(c, j)],))
 
-    lines = _product_rows(plan, _phi, source, None, plan.structure.n_states)  # a padding column past the row is not written
+    lines = _product_rows(plan, _phi, source, None, n)  # a padding column past the row is not written
+    written = {s.target.index for s in scalar_statements(lines)}
+    lines += [Assign(_phi(i, j), ()) for i in range(n) for j in range(n) if (i, j) not in written]
     return DiscretizeBlock(KernelBlock("horner_transition", tuple(lines)))
 
 
@@ -423,6 +428,8 @@ def noise_blocks(plan: DiscretizePlan, packed: bool, ud: bool) -> list[Discretiz
     """S G over Gamma's pattern, then Q_d = T (S G) diag(q) (S G)^T (or Gamma = T S G for the UD form).
 
     The Q_d block is checked: it returns the sum of v - v over its values.
+    It also sets every other entry of Q_d to zero (straight-line stores that
+    gcc pairs into vector stores, where a loop becomes ``rep stos``).
     """
     structure = plan.structure
     n = structure.n_states
@@ -469,6 +476,9 @@ def noise_blocks(plan: DiscretizePlan, packed: bool, ud: bool) -> list[Discretiz
         else:
             targets = (Ref("transition", "Qd", (i, j)),) + ((Ref("transition", "Qd", (j, i)),) if i != j else ())
         lines.append(CheckedAssign(targets, terms))
+    written = {t.index for s in lines if isinstance(s, CheckedAssign) for t in s.targets}
+    every = [(k,) for k in range(n * (n + 1) // 2)] if packed else [(i, j) for i in range(n) for j in range(n)]
+    lines += [Assign(Ref("transition", "Qd", index), ()) for index in every if index not in written]  # the rest of Q_d: zero stores
     blocks.append(DiscretizeBlock(KernelBlock("process_noise", tuple(lines), checked=True), (), ("T",)))
     return blocks
 

@@ -170,14 +170,33 @@ def test_the_emitted_chain_is_the_reference_series_at_every_order(plan, order):
     assert not np.isnan(phi).any()
 
 
-def test_rows_of_random_constants_are_never_written(plan):
-    """A row of F that is empty gives a row e_i of Phi: no series, doubling or noise statement writes it."""
+def test_rows_of_random_constants_are_only_cleared(plan):
+    """A row of F that is empty gives a row e_i of Phi: the series, doubling and noise write no value into it, only E's zeros."""
     unit = set(plan.structure.unit_rows)
     blocks = series_blocks(plan) + [doubling_block(plan)]
     for b in blocks:
         for s in scalar_statements(b.block.statements):
-            if s.target.array == "Phi":
-                assert s.target.index[0] not in unit
+            if s.target.array == "Phi" and s.target.index[0] in unit:
+                assert b.block.name == "horner_transition" and not s.terms
+
+
+def test_the_transition_and_process_noise_set_every_entry_once(plan):
+    """discretize does not clear Phi and Q_d first: the blocks write each entry exactly once (E = A S or zero; Q_d or zero)."""
+    n = plan.structure.n_states
+    (transition,) = [b for b in series_blocks(plan) if b.block.name == "horner_transition"]
+    stores, added = [], set()
+    for s in scalar_statements(transition.block.statements):
+        if (s.target,) in s.terms:  # a sparse term added to a segment's entry
+            added.add(s.target.index)
+        else:
+            stores.append(s.target.index)
+    assert sorted(stores) == [(i, j) for i in range(n) for j in range(n)]
+    assert added <= set(stores)
+    for packed in (False, True):
+        noise = noise_blocks(plan, packed=packed, ud=False)[-1].block.statements
+        written = [t.index for s in noise for t in (s.targets if hasattr(s, "targets") else (s.target,)) if t.array == "Qd"]
+        every = [(k,) for k in range(n * (n + 1) // 2)] if packed else [(i, j) for i in range(n) for j in range(n)]
+        assert sorted(written) == every
 
 
 def test_each_level_does_fewer_products_than_a_loop_over_dense_rows(plan):

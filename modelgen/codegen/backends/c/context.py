@@ -359,6 +359,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "horner_saturated": (calls[horner_level_name(0, 0, True)], calls[horner_level_name(0, 1, True)]) if discretize else (),
         "taylor_coefficients": [c_number(1.0, options.scalar) + f" / {c_number(float(math.factorial(k + 1)), options.scalar)}"
                                 for k in range(options.taylor_order + 1)],
+        "discretize_sets_qd": "process_noise" in calls,  # the unrolled Q_d block sets every entry (no zero loop first)
         "discretize_noise_calls": [
             ("check += " if f["checked"] else "") + f["call"]
             for f in discretize
