@@ -124,6 +124,50 @@ def _unrolled_discretize_scratch(prefix: str, sizes: ModelSizes, unrolled: Unrol
     )
 
 
+@dataclass(frozen=True)
+class CompactDiscretizeSizes:
+    """Sizes of the compact discretize's scratch (modelgen.codegen.compact_discretize).
+
+    ``closure``: structural nonzeros of Phi; ``gamma``: of Gamma; ``row``:
+    entries of a stored row of R (N rounded up to even).
+    """
+
+    closure: int
+    gamma: int
+    row: int
+
+
+def _compact_discretize_scratch(sizes: ModelSizes, compact: CompactDiscretizeSizes | None, N: Dim, nnz_f: Dim, ud: bool) -> tuple[Field, ...]:
+    """Members of the compact discretize's scratch: two level arrays of N rows (only the spans used), compressed rest.
+
+    Without ``compact`` the compressed sizes are their bounds (N^2, N noises
+    per state), so that a caller that only needs the workspace's size gets
+    one never smaller than the C's.
+    """
+    closure = compact.closure if compact else sizes.n * sizes.n
+    gamma = compact.gamma if compact else sizes.n * sizes.nw
+    width = compact.row if compact else sizes.n + sizes.n % 2
+    n_closure = Dim(str(max(closure, 1)), max(closure, 1))
+    n_gamma = Dim(str(max(gamma, 1)), max(gamma, 1))
+    row = Dim(str(width), width)
+    fields = (
+        Field("R", (Dim("2", 2), N, row), "Horner levels R_k over each row's span (k even in R[0], odd in R[1]): S = R_0 in R[0], E = A S in R[1]"),
+        Field("fh", (nnz_f,), "F h at the nonzeros of F"),
+        Field("E_row", (row,), "one row of E^2 (the doubling), over its span"),
+        Field("S_row", (row,), "one row of E S (the doubling), over its span"),
+        Field("E_next", (n_closure,), "the doubling's new E at the nonzeros of Phi, row by row"),
+        Field("S_next", (n_closure,), "the doubling's new S at the nonzeros of Phi, row by row"),
+        Field("acc", (N,), "one row of S G or of Q_d, by column"),
+        Field("gamma", (n_gamma,), "S G at the nonzeros of Gamma, row by row"),
+    )
+    if not ud:
+        fields += (Field("gamma_q", (n_gamma,), "T S G diag(q) at the nonzeros of Gamma"),)
+    return fields + (
+        Field("row_sum", (N,), "balancing: off-diagonal row sums of D^-1 |F| D"),
+        Field("col_sum", (N,), "balancing: off-diagonal column sums of D^-1 |F| D"),
+    )
+
+
 def _van_loan_scratch(N: Dim, dim_w: Dim) -> tuple[Field, ...]:
     """Members of Van Loan's discretize (modelgen.codegen.van_loan): two terms, E12's sum, rows, balancing sums."""
     N2 = Dim(f"2 * {N.text}", 2 * N.value)
@@ -152,14 +196,21 @@ def _recompute_fields(options: CodegenOptions, nnz_f: Dim, dim_g: Dim, dim_w: Di
     )
 
 
-def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str, unrolled: UnrolledDiscretizeSizes | None = None) -> CLayout:
+def c_layout(
+    sizes: ModelSizes,
+    options: CodegenOptions,
+    prefix: str,
+    unrolled: UnrolledDiscretizeSizes | None = None,
+    compact: CompactDiscretizeSizes | None = None,
+) -> CLayout:
     """The struct members for ``options``; ``prefix`` is the upper-case model name.
 
     ``unrolled`` (the header's case for models below the compact-kernel
-    threshold) gives discretize its compressed scratch; without it the
-    scratch is the dense N x N arrays of the loop version, never smaller, so
-    a caller that only needs the workspace's size (``build.CompiledFilter``,
-    which passes it to C and never reads it) may leave it out.
+    threshold) gives discretize its compressed scratch; ``compact`` (above it)
+    the sizes of the compact discretize's compressed arrays.  Without either
+    the scratch is the compact one at its bounds, never smaller, so a caller
+    that only needs the workspace's size (``build.CompiledFilter``, which
+    passes it to C and never reads it) may leave them out.
     """
     N = Dim(f"{prefix}_N_STATES", sizes.n)
     NP = Dim(f"{prefix}_N_PACKED", sizes.packed)
@@ -190,14 +241,7 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str, unrolled: 
             Field("U", (NU,), "strictly upper part of the unit upper triangular U, packed by rows"),
             Field("D", (N,), "diagonal of D: P = U D U^T"),
         )
-        discretize_scratch = (
-            Field("A", (N, N), "(F T)^k / k!"),
-            Field("B", (N, N), "the next term"),
-            Field("S", (N, N), "sum of the terms / (k + 1), for Gamma"),
-        Field("scale", (N,), "balancing: d of ||F||_D = ||D^-1 F D||"),
-        Field("row_sum", (N,), "balancing: off-diagonal row sums of D^-1 |F| D"),
-        Field("col_sum", (N,), "balancing: off-diagonal column sums of D^-1 |F| D"),
-        )
+        discretize_scratch = _compact_discretize_scratch(sizes, compact, N, nnz_f, ud=True)
         if unrolled is not None:
             discretize_scratch = _unrolled_discretize_scratch(prefix, sizes, unrolled, N, nnz_f)
         filter_scratch = (
@@ -223,15 +267,7 @@ def c_layout(sizes: ModelSizes, options: CodegenOptions, prefix: str, unrolled: 
         Field("x", (N,)),
         Field("P", symmetric, "covariance" + (", packed upper triangle" if options.packed else "")),
     )
-    discretize_scratch = (
-        Field("A", (N, N), "(F T)^k / k!"),
-        Field("B", (N, N), "the next term"),
-        Field("S", (N, N), "sum of the terms / (k + 1), for Gamma"),
-        Field("scale", (N,), "balancing: d of ||F||_D = ||D^-1 F D||"),
-        Field("row_sum", (N,), "balancing: off-diagonal row sums of D^-1 |F| D"),
-        Field("col_sum", (N,), "balancing: off-diagonal column sums of D^-1 |F| D"),
-        Field("Gamma", (N, dim_w)),
-    )
+    discretize_scratch = _compact_discretize_scratch(sizes, compact, N, nnz_f, ud=False)
     if unrolled is not None:
         discretize_scratch = _unrolled_discretize_scratch(prefix, sizes, unrolled, N, nnz_f)
     if options.van_loan:

@@ -20,6 +20,7 @@ from modelgen.checks.code_check import check_generated
 from modelgen.codegen import kernels
 from modelgen.codegen.generate import describe, generate_code
 from modelgen.codegen.options import CodegenOptions
+from modelgen.derive.discretization import DEFAULT_TOLERANCE, nominal_scaling, taylor_discretization, taylor_process_noise
 from modelgen.derive.symbolic import derive
 from modelgen.fileio.datafiles import package_path
 from modelgen.jobs import synthetic_scenario
@@ -89,6 +90,50 @@ def test_compact_kernels_give_the_unrolled_bits(form, paper_derived, tmp_path, m
     got = run_filter(compact, options, transition=expected[0])
     for a, b in zip(expected[1:], got[1:], strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def discretized(built, options: CodegenOptions, T: float) -> tuple[np.ndarray, np.ndarray]:
+    """Phi and Q_d of the C discretize at step T (Q_d as Gamma diag(qw) Gamma^T in the UD form)."""
+    derived = built.derived
+    scenario = synthetic_scenario(derived)
+    filt = built.c_filter(options)
+    filt.set_parameters(dict(zip(derived.model.parameter_names, built.python.parameter_vector(scenario.parameters))))
+    assert filt.discretize(T) == 0
+    if options.ud:
+        gamma = np.ctypeslib.as_array(filt.transition.Gamma)[:, : derived.n_noises]
+        qw = np.ctypeslib.as_array(filt.transition.qw)[: derived.n_noises]
+        return filt.Phi.copy(), gamma @ np.diag(qw) @ gamma.T
+    return filt.Phi.copy(), filt.Qd.copy()
+
+
+def reference_discretized(derived, T: float) -> tuple[np.ndarray, np.ndarray]:
+    """Phi and Q_d of the checks' reference (numpy, modelgen.derive.discretization) at the same operating point."""
+    m = derived.numeric(synthetic_scenario(derived).parameters)
+    phi, gamma = taylor_discretization(m["F"], m["G"], T, 9, DEFAULT_TOLERANCE, nominal_scaling(derived))
+    return phi, taylor_process_noise(gamma, m["Q"], T)
+
+
+@pytest.mark.parametrize("form", [*FORMS, "float"])
+def test_compact_discretize_matches_the_reference_at_every_order_and_doubling(form, paper_derived, tmp_path, monkeypatch):
+    """The compact discretize (loops over Phi's pattern) gives the reference's Phi and Q_d to the rounding of the arithmetic.
+
+    The steps cover an order below the pattern's saturation (order 2: the
+    chain's prefixes), order 9 without doublings, and 10 and 16 doublings.
+    The bound, 50 units of roundoff of the largest entry of Phi - I (plus the
+    rounding of 1 + E on the diagonal) and of Q_d, is far below any error of
+    the scheme (a missed or doubled term is of the size of the entries).
+    """
+    options = CodegenOptions(scalar="float", storage="packed", update="sequential") if form == "float" else FORMS[form]
+    monkeypatch.setattr(kernels, "COMPACT_ABOVE_FLOPS", 0)
+    compact = build(paper_derived, tmp_path / "compact", options)
+    assert "horner_series(w, order);" in (compact.folder / "ned_doppler18.c").read_text()
+    eps = np.finfo(np.float32 if form == "float" else np.float64).eps
+    for T in (1e-7, 0.1778, 60.0, 3600.0):
+        phi, qd = discretized(compact, options, T)
+        phi_ref, qd_ref = reference_discretized(paper_derived, T)
+        step = phi_ref - np.eye(18)
+        assert (np.abs(phi - phi_ref) <= 50 * eps * np.abs(step).max() + eps * np.eye(18)).all(), T  # + the rounding of 1 + E
+        assert np.abs(qd - qd_ref).max() <= 50 * eps * np.abs(qd_ref).max(), T
 
 
 @pytest.fixture(scope="module")

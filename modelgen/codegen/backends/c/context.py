@@ -9,7 +9,8 @@ from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c
 from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.discretize_kernels import DiscretizeBlock, SegmentAssign, horner_level_name, scalar_statements
 from modelgen.codegen.kernels import KernelBlock, compact_predict_tables
-from modelgen.codegen.layout import CLayout, UnrolledDiscretizeSizes, c_layout
+from modelgen.codegen.compact_discretize import CompactDiscretizeTables
+from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout
 from modelgen.codegen.structure import FilterStructure
 from modelgen.codegen.van_loan import QD_MARGIN
 from modelgen.derive.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range
@@ -56,6 +57,16 @@ def index_tables(structure: FilterStructure) -> dict[str, object]:
         "qd_row": _table([i for i, _ in qd]),
         "qd_col": _table([j for _, j in qd]),
         "max_index": max([n, len(f_entries), len(active), len(qd)]),
+    }
+
+
+def compact_discretize_context(structure: FilterStructure) -> dict[str, object]:
+    """The compact discretize's index tables printed as C initializers, their index type and the scratch's sizes."""
+    tables = CompactDiscretizeTables(structure)
+    return {
+        "tables": {name: _table(values) for name, values in tables.tables().items()},
+        "index_type": tables.index_type(),
+        "sizes": CompactDiscretizeSizes(len(tables.tables()["closure_col"]), len(tables.gamma_entries), tables.row_width),
     }
 
 
@@ -269,8 +280,10 @@ def c_context(description: FilterDescription) -> dict[str, object]:
     packed = description.packed
     at_upper, at_any = accessors(packed, prefix)
     unrolled = description.discretize_plan if description.discretize_unrolled else None
+    compact_discretize = compact_discretize_context(structure) if not unrolled and not options.van_loan else None
     layout = c_layout(
-        sizes, options, prefix, UnrolledDiscretizeSizes(unrolled.term_size, unrolled.active_size) if unrolled else None
+        sizes, options, prefix, UnrolledDiscretizeSizes(unrolled.term_size, unrolled.active_size) if unrolled else None,
+        compact_discretize["sizes"] if compact_discretize else None,
     )
     discretize = discretize_functions(description.discretize_blocks, model.name, options.scalar) if unrolled else []
     calls = {f["name"]: f["call"] for f in discretize}
@@ -343,7 +356,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "van_loan": options.van_loan,
         "qd_margin": QD_MARGIN,
         "discretize_template": "c_discretize_van_loan.c.j2" if options.van_loan else "c_discretize.c.j2",
-        "taylor_loop_tables": not unrolled and not options.van_loan,  # the loop Taylor discretize's index tables
+        "compact_discretize": compact_discretize,  # the compact Taylor discretize's index tables (None otherwise)
         "balance_entries": [(e, i, j) for e, (i, j) in enumerate(structure.entries("F")) if i != j],
         "balance_rows": sorted({i for i, j in structure.entries("F") if i != j}),
         "balance_columns": sorted({j for i, j in structure.entries("F") if i != j}),

@@ -1,0 +1,151 @@
+"""Index tables of the compact discretize (large models): Horner's rule as row-by-row products over row spans.
+
+Above the compact threshold (``kernels.compact_kernels``) the C discretize
+sums the same Horner scheme as the unrolled code
+(modelgen.codegen.discretize_kernels), A = F h:
+
+    R_m = I / (m+1)!,   R_k = I / (k+1)! + A R_(k+1),   S = R_0,   E = A S,
+
+then the doublings E(2h) = 2 E + E^2, S(2h) = S + E S / 2, Gamma = T S G and
+Q_d = T (S G) diag(q) (S G)^T, by loops over these tables instead of
+straight-line code, so that the tables (and the code) grow with the
+structural nonzeros only.  Each product is Gustavson's: row i of A R is the
+sum over the nonzeros F(i, c) of F(i, c) h times row c of R.  Every row of
+R is kept in an N x N array over its span, the columns from the first to
+the last of its row of Phi's pattern (the closure: R_k's pattern is within
+it at every level), padded to an even length: so row c of R is added into
+row i (whose span covers that of c, the closure of c lying within that of i
+where F(i, c) is nonzero) by one loop over contiguous entries, two per step,
+which gcc -O2 vectorizes; the structural zeros inside a span are stored
+zeros (a span is cleared before a row is summed into it).  An augmented
+model's rows are the core's, nearly dense over the states they reach, and
+the diagonal rows of its sensor errors, so the spans hold few structural
+zeros (5 % more products than the exact patterns for the 100-state bench
+model).  The doubling runs over each row's entries in column order
+(``closure_col``), S G over them too, Q_d over the columns of Gamma (CSC)
+from the row's own entry down, so each pair i <= j is summed once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+from modelgen.codegen.structure import FilterStructure
+
+
+def _row_starts(rows: list[list[int]]) -> list[int]:
+    """CSR row starts of the given rows."""
+    start = [0]
+    for row in rows:
+        start.append(start[-1] + len(row))
+    return start
+
+
+@dataclass(frozen=True)
+class CompactDiscretizeTables:
+    """The compact discretize's index tables for one structure."""
+
+    structure: FilterStructure
+
+    @cached_property
+    def closure_rows(self) -> list[list[int]]:
+        """Columns of each row of Phi's pattern, ascending."""
+        return [[int(j) for j in row] for row in self.structure.rows("Phi")]
+
+    @cached_property
+    def spans(self) -> list[tuple[int, int]]:
+        """[start, end) of each row's span: its first to last column of Phi's pattern, padded to an even length.
+
+        The padding goes to the right while the span stays within the
+        storage's rows (N rounded up to even), else to the left.
+        """
+        width = self.row_width
+        out = []
+        for row in self.closure_rows:
+            start, end = row[0], row[-1] + 1
+            if (end - start) % 2:
+                if end < width:
+                    end += 1
+                else:
+                    start -= 1
+            out.append((start, end))
+        return out
+
+    @property
+    def row_width(self) -> int:
+        """Entries of each stored row of R: N rounded up to even (every span fits)."""
+        n = self.structure.n_states
+        return n + n % 2
+
+    @property
+    def closure_start(self) -> list[int]:
+        return _row_starts(self.closure_rows)
+
+    @property
+    def f_row_start(self) -> list[int]:
+        return _row_starts(self.structure.rows("F"))
+
+    @property
+    def g_row_start(self) -> list[int]:
+        return _row_starts(self.structure.rows("G"))
+
+    @cached_property
+    def gamma_entries(self) -> list[tuple[int, int]]:
+        return self.structure.entries("Gamma")
+
+    @property
+    def gamma_row_start(self) -> list[int]:
+        return _row_starts(self.structure.rows("Gamma"))
+
+    @cached_property
+    def gamma_by_column(self) -> list[int]:
+        """Entries of Gamma (their index in row-major storage) column by column, rows ascending (CSC)."""
+        return sorted(range(len(self.gamma_entries)), key=lambda g: (self.gamma_entries[g][1], self.gamma_entries[g][0]))
+
+    @property
+    def gamma_column_start(self) -> list[int]:
+        nw = self.structure.G.shape[1]
+        counts = [0] * nw
+        for _, w in self.gamma_entries:
+            counts[w] += 1
+        return _row_starts([[0] * c for c in counts])
+
+    @property
+    def gamma_column_position(self) -> list[int]:
+        """For each entry of Gamma (row-major), its position in the column-by-column order."""
+        position = [0] * len(self.gamma_entries)
+        for p, g in enumerate(self.gamma_by_column):
+            position[g] = p
+        return position
+
+    @cached_property
+    def qd_rows(self) -> list[list[int]]:
+        """Columns j >= i of each row of Q_d's pattern."""
+        return [[int(j) for j in row if j >= i] for i, row in enumerate(self.structure.rows("Qd"))]
+
+    def tables(self) -> dict[str, list[int]]:
+        """Every table by its C name (see the module docstring and the compact branch of c_discretize.c.j2)."""
+        return {
+            "F_row_start": self.f_row_start,
+            "closure_start": self.closure_start,
+            "closure_col": [j for row in self.closure_rows for j in row],
+            "span_start": [start for start, _ in self.spans],
+            "span_end": [end for _, end in self.spans],
+            "G_row_start": self.g_row_start,
+            "gamma_row_start": self.gamma_row_start,
+            "gamma_col": [w for _, w in self.gamma_entries],
+            "gamma_column_start": self.gamma_column_start,
+            "gamma_column_row": [self.gamma_entries[g][0] for g in self.gamma_by_column],
+            "gamma_column_entry": self.gamma_by_column,
+            "gamma_column_position": self.gamma_column_position,
+            "qd_row_start": _row_starts(self.qd_rows),
+            "qd_col": [j for row in self.qd_rows for j in row],
+        }
+
+    def index_type(self) -> str:
+        """The narrowest unsigned C type that holds every table entry."""
+        largest = max([self.row_width, *(v for t in self.tables().values() for v in t)])
+        if largest < 256:
+            return "unsigned char"
+        return "unsigned short" if largest < 65536 else "uint32_t"
