@@ -9,19 +9,24 @@ cluster already started.  Both sides give identical results (checked).
 
 1. Worker set-up.  What a fresh worker process does before its first run,
    in a fresh process of its own, step by step (wall and CPU, the compiler's
-   CPU included): import, receive the set-up, derive the model, build the
-   trajectory, write the shipped code and compile it (compile cache empty) or
-   take it from the cache (cache filled), then two runs.
+   CPU included): import, receive the set-up, derive the model, take the
+   trajectory (made and kept in the trajectory cache when it is empty, mapped
+   from it when filled), write the shipped code and compile it (compile
+   cache empty) or take it from the cache (filled), then two runs.
 2. Scaling, in three states of the workers:
-   * ``cold, compile cache empty``: new worker processes, nothing compiled
-     (the first study of a new model on a new machine);
-   * ``cold, compile cache filled``: new worker processes, the library in the
-     compile cache (any later study, and ``modelgen simulate``'s Monte Carlo,
-     whose own flight compiled the same code a moment before) -- the target's
-     "cold efficiency";
+   * ``cold, caches empty``: new worker processes, nothing compiled and no
+     trajectory kept (the first study of a new model and flight on a new
+     machine);
+   * ``cold, caches filled``: new worker processes, the library in the
+     compile cache and the flight in the trajectory cache (any later study
+     of the flight, on a new cluster) -- the target's "cold efficiency";
    * ``warm``: the same workers again (set-up kept in each worker).
    Speed-up = t(1 worker) / t(2 workers); efficiency = speed-up / 2 (target
-   >= 0.8).  Beside wall time, a CPU-time estimate of each study, immune to
+   >= 0.8).  Each state is measured ``--repeat`` times on each side, the
+   sides taking turns (1 worker, 2 workers, 1 worker, ...) so that other
+   processes of a shared machine disturb both alike; the efficiency is that
+   of the best (least disturbed) time of each side, and of the medians
+   beside it.  Beside wall time, a CPU-time estimate of each study, immune to
    other processes on a shared machine: the caller's CPU plus the CPU of the
    busiest worker (its set-up and runs), i.e. the study's length on otherwise
    idle cores; its speed-up and efficiency are shown too.
@@ -33,12 +38,12 @@ cluster already started.  Both sides give identical results (checked).
    workers (target <= 60 s), against the same cases one after another in
    this process (same table, checked).
 
-The compile cache used is a temporary folder of this run ($MODELGEN_CACHE_DIR
-is set for the clusters), never the user's.  The load average before and
+The compile and trajectory caches used are temporary folders of this run
+($MODELGEN_CACHE_DIR is set for the clusters), never the user's.  The load average before and
 after (``uptime``) is recorded with the results: on a shared machine the other
 processes take cores from the workers and the wall times with them.
 
-Usage: nice -n 10 python bench/bench_montecarlo.py [--runs 16] [--hours 1] [--filter c] [--skip-trade]
+Usage: nice -n 10 python bench/bench_montecarlo.py [--runs 16] [--hours 1] [--filter c] [--repeat 3] [--skip-trade]
 """
 
 from __future__ import annotations
@@ -63,7 +68,11 @@ RESULTS = Path(__file__).resolve().parent / "results"
 #: cores; CPU seconds.  Kept beside this run's figures for comparison.
 BEFORE = {"commit": "0293297", "import_cpu_s": 1.22, "prepare_cpu_s": 7.12, "first_run_cpu_s": 0.39,
           "note": "prepare = derive + trajectory + layout + generate the code (~0.5 s) + gcc -O2 (~5 s)"}
-STATES = ("cold, compile cache empty", "cold, compile cache filled", "warm")
+#: Not measured by this script: the scaling at commit 9e1974c (before the trajectory cache and the side-by-side
+#: imports), one measurement per state, load < 1.3 on 2 cores.  Kept beside this run's figures for comparison.
+PREVIOUS = {"commit": "9e1974c", "efficiency": {"cold, caches empty": 0.58, "cold, caches filled": 0.62, "warm": 1.00},
+            "cpu_efficiency": {"cold, caches empty": 0.62, "cold, caches filled": 0.67, "warm": 1.10}}
+STATES = ("cold, caches empty", "cold, caches filled", "warm")
 
 
 def process_cpu() -> float:
@@ -134,7 +143,7 @@ def timed_study(client, profile, derived, runs: int, implementation: str) -> tup
 
 
 def scaling(workers: int, profile, derived, runs: int, implementation: str) -> tuple[dict, object]:
-    """The three states of module docstring item 2 on clusters of ``workers`` processes, each with an empty cache at first."""
+    """The three states of module docstring item 2 on clusters of ``workers`` processes, with empty caches at first."""
     from modelgen.cluster import dask_client
 
     measured = {}
@@ -143,15 +152,31 @@ def scaling(workers: int, profile, derived, runs: int, implementation: str) -> t
         with dask_client(workers=workers) as client:
             client.wait_for_workers(workers)
             measured[STATES[0]], result = timed_study(client, profile, derived, runs, implementation)
-            print(f"  {workers} worker(s), {STATES[0]}: {measured[STATES[0]]['wall_s']:.1f} s", flush=True)
             measured[STATES[2]], _ = timed_study(client, profile, derived, runs, implementation)
         with dask_client(workers=workers) as client:
             client.wait_for_workers(workers)
             measured[STATES[1]], again = timed_study(client, profile, derived, runs, implementation)
-        print(f"  {workers} worker(s), {STATES[1]}: {measured[STATES[1]]['wall_s']:.1f} s; "
-              f"{STATES[2]}: {measured[STATES[2]]['wall_s']:.1f} s", flush=True)
+    print(f"  {workers} worker(s): " + "; ".join(f"{state} {measured[state]['wall_s']:.2f} s" for state in STATES),
+          flush=True)
     assert np.array_equal(result.errors, again.errors) and np.array_equal(result.sigma, again.sigma)
     return measured, result
+
+
+def summary(samples: list[dict]) -> dict:
+    """The repetitions of one side and state: every sample, the best and the median wall time and CPU estimate."""
+    walls = [m["wall_s"] for m in samples]
+    cpus = [m["cpu_estimate_s"] for m in samples]
+    return {"samples": samples, "best_wall_s": min(walls), "median_wall_s": float(np.median(walls)),
+            "best_cpu_estimate_s": min(cpus), "median_cpu_estimate_s": float(np.median(cpus))}
+
+
+def efficiency_of(one: dict, two: dict) -> dict:
+    """Speed-up and efficiency (speed-up / 2) from the best and the median times of 1 and of 2 workers."""
+    figures = {}
+    for name, field in (("", "best_wall_s"), ("median_", "median_wall_s"), ("cpu_", "best_cpu_estimate_s")):
+        speed_up = one[field] / two[field]
+        figures[f"{name}speed_up"], figures[f"{name}efficiency"] = speed_up, speed_up / 2
+    return figures
 
 
 def monte_carlo_part(args) -> dict:
@@ -175,23 +200,31 @@ def monte_carlo_part(args) -> dict:
     setup = MonteCarloSetup(profile, None, derived.model, mode, store_every, args.implementation, key, code)
     set_up = {}
     with tempfile.TemporaryDirectory(prefix="modelgen-bench-cache-") as cache:
-        for state in ("compile cache empty", "compile cache filled"):
+        for state in ("caches empty", "caches filled"):
             print(f"  one worker's set-up, {state} ...", flush=True)
             set_up[state] = measure_setup(setup, Path(cache))
 
-    one, one_result = scaling(1, profile, derived, args.runs, args.implementation)
-    two, two_result = scaling(2, profile, derived, args.runs, args.implementation)
-    identical = bool(np.array_equal(one_result.errors, two_result.errors)
-                     and np.array_equal(one_result.sigma, two_result.sigma))
-    efficiency = {}
+    samples: dict[int, dict[str, list]] = {1: {state: [] for state in STATES}, 2: {state: [] for state in STATES}}
+    results = []
+    for repetition in range(args.repeat):
+        print(f"  repetition {repetition + 1} of {args.repeat}", flush=True)
+        for workers in (1, 2) if repetition % 2 == 0 else (2, 1):  # the sides take turns going first
+            measured, result = scaling(workers, profile, derived, args.runs, args.implementation)
+            results.append(result)
+            for state in STATES:
+                samples[workers][state].append(measured[state])
+    identical = all(np.array_equal(r.errors, results[0].errors) and np.array_equal(r.sigma, results[0].sigma)
+                    for r in results[1:])
+    one = {state: summary(samples[1][state]) for state in STATES}
+    two = {state: summary(samples[2][state]) for state in STATES}
+    efficiency = {state: efficiency_of(one[state], two[state]) for state in STATES}
     for state in STATES:
-        wall = one[state]["wall_s"] / two[state]["wall_s"]
-        cpu = one[state]["cpu_estimate_s"] / two[state]["cpu_estimate_s"]
-        efficiency[state] = {"speed_up": wall, "efficiency": wall / 2, "cpu_speed_up": cpu, "cpu_efficiency": cpu / 2}
-        print(f"  {state}: speed-up {wall:.2f}, efficiency {wall / 2:.2f}; CPU estimate: speed-up {cpu:.2f}, "
-              f"efficiency {cpu / 2:.2f}", flush=True)
+        e = efficiency[state]
+        print(f"  {state}: best of {args.repeat}: speed-up {e['speed_up']:.2f}, efficiency {e['efficiency']:.2f}; "
+              f"medians: efficiency {e['median_efficiency']:.2f}; CPU estimate: efficiency {e['cpu_efficiency']:.2f}",
+              flush=True)
     return {"runs": args.runs, "hours": args.hours, "imu_rate_hz": args.rate, "filter": args.implementation,
-            "worker_set_up": set_up, "one_worker": one, "two_workers": two, "efficiency": efficiency,
+            "repeat": args.repeat, "worker_set_up": set_up, "one_worker": one, "two_workers": two, "efficiency": efficiency,
             "identical_results": identical}
 
 
@@ -236,11 +269,13 @@ def markdown(report: dict) -> str:
                   f"{mc['imu_rate_hz']:g} Hz, the generated {mc['filter']} filter, seed 1, on a local dask cluster; "
                   f"identical results on 1 and 2 workers: {mc['identical_results']}.", "",
                   "## One worker's set-up (fresh process)", "",
-                  "| step | cache empty: wall s | CPU s | cache filled: wall s | CPU s |", "|---|---:|---:|---:|---:|"]
-        empty, filled = mc["worker_set_up"]["compile cache empty"], mc["worker_set_up"]["compile cache filled"]
+                  "| step | caches empty: wall s | CPU s | caches filled: wall s | CPU s |", "|---|---:|---:|---:|---:|"]
+        empty, filled = mc["worker_set_up"]["caches empty"], mc["worker_set_up"]["caches filled"]
         for a, b in zip(empty, filled):
             lines.append(f"| {a['step']} | {a['wall_s']:.2f} | {a['cpu_s']:.2f} | {b['wall_s']:.2f} | {b['cpu_s']:.2f} |")
-        for label, rows in (("set-up before the first run", lambda r: r[:-2]),):
+        for label, rows in (("set-up before the first run", lambda r: r[:-2]),
+                            ("set-up and the first run's extra over the second", lambda r: r[:-2] + [
+                                {"wall_s": r[-2]["wall_s"] - r[-1]["wall_s"], "cpu_s": r[-2]["cpu_s"] - r[-1]["cpu_s"]}])):
             lines.append(f"| **{label}** | {sum(s['wall_s'] for s in rows(empty)):.2f} | "
                          f"{sum(s['cpu_s'] for s in rows(empty)):.2f} | {sum(s['wall_s'] for s in rows(filled)):.2f} | "
                          f"{sum(s['cpu_s'] for s in rows(filled)):.2f} |")
@@ -248,14 +283,22 @@ def markdown(report: dict) -> str:
                   f"{BEFORE['import_cpu_s']:.2f} s CPU, set-up {BEFORE['prepare_cpu_s']:.2f} s CPU ({BEFORE['note']}), "
                   f"{BEFORE['import_cpu_s'] + 0.03 + BEFORE['prepare_cpu_s']:.2f} s CPU before the first run."]
         lines += ["", "## Scaling: 1 worker against 2 workers", "",
-                  "CPU estimate = the caller's CPU + the busiest worker's CPU (the study on otherwise idle cores).", "",
-                  "| workers' state | 1 worker: wall s | CPU est. s | 2 workers: wall s | CPU est. s | "
-                  "efficiency (wall) | efficiency (CPU est.) |", "|---|---:|---:|---:|---:|---:|---:|"]
+                  f"Each state measured {mc['repeat']} times on each side, the sides taking turns; efficiency from the "
+                  "best time of each side (the least disturbed by other processes), and from the medians.  CPU "
+                  "estimate = the caller's CPU + the busiest worker's CPU (the study on otherwise idle cores), best "
+                  "of the repetitions.", "",
+                  "| workers' state | 1 worker: wall s (each) | best | 2 workers: wall s (each) | best | "
+                  "efficiency (best) | (medians) | (CPU est.) |", "|---|---|---:|---|---:|---:|---:|---:|"]
         for state in STATES:
             one, two, eff = mc["one_worker"][state], mc["two_workers"][state], mc["efficiency"][state]
-            lines.append(f"| {state} | {one['wall_s']:.1f} | {one['cpu_estimate_s']:.1f} | {two['wall_s']:.1f} | "
-                         f"{two['cpu_estimate_s']:.1f} | {eff['efficiency']:.2f} | {eff['cpu_efficiency']:.2f} |")
-        lines += ["", "Target: efficiency (speed-up / workers) >= 0.8, cold."]
+            each = lambda side: ", ".join(f"{m['wall_s']:.2f}" for m in side["samples"])
+            lines.append(f"| {state} | {each(one)} | {one['best_wall_s']:.2f} | {each(two)} | {two['best_wall_s']:.2f} | "
+                         f"**{eff['efficiency']:.2f}** | {eff['median_efficiency']:.2f} | {eff['cpu_efficiency']:.2f} |")
+        lines += ["", f"Before (commit {PREVIOUS['commit']}, measured once, not by this run; then only the compile "
+                  "cache existed): efficiency " + ", ".join(f"{state} {value:.2f} (CPU est. "
+                                                            f"{PREVIOUS['cpu_efficiency'][state]:.2f})"
+                                                            for state, value in PREVIOUS["efficiency"].items()) + ".",
+                  "", "Target: efficiency (speed-up / workers) >= 0.8, cold."]
     trade = report.get("trade")
     if trade:
         lines += ["", "## 1,000 covariance cases (paper_gyro_doppler_1000)", "",
@@ -272,6 +315,7 @@ def main() -> None:
     parser.add_argument("--hours", type=float, default=1.0)
     parser.add_argument("--rate", type=float, default=300.0)
     parser.add_argument("--filter", dest="implementation", default="c", choices=("c", "python", "reference"))
+    parser.add_argument("--repeat", type=int, default=3, help="measurements of each state on each side (default 3)")
     parser.add_argument("--skip-trade", action="store_true")
     parser.add_argument("--skip-monte-carlo", action="store_true")
     parser.add_argument("--out", type=Path, default=RESULTS / "montecarlo", help="results: OUT.json and OUT.md")
@@ -280,7 +324,7 @@ def main() -> None:
     if args.setup_child:
         setup_child(args.setup_child)
         return
-    report: dict = {"cores": os.cpu_count(), "uptime_before": uptime(), "before": BEFORE}
+    report: dict = {"cores": os.cpu_count(), "uptime_before": uptime(), "before": BEFORE, "previous": PREVIOUS}
     print(f"cores: {os.cpu_count()}; {report['uptime_before']}", flush=True)
     if not args.skip_monte_carlo:
         report["monte_carlo"] = monte_carlo_part(args)

@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from modelgen.codegen.build import library_cache_folder
 from modelgen.simulation import earth, jit, rotation, trajectory as trajectory_module
 from modelgen.simulation.trajectory import TRUTH_COLUMNS, FlightPath, Trajectory, generate_trajectory, sample_counts
 
@@ -61,8 +62,6 @@ SOURCES = (trajectory_module, earth, rotation, jit)
 
 def trajectory_cache_folder() -> Path:
     """The folder of cached trajectories: ``trajectories`` beside the compile cache's ``libraries``."""
-    from modelgen.codegen.build import library_cache_folder  # here: the build module's imports cost a worker 0.1 s
-
     return library_cache_folder().parent / "trajectories"
 
 
