@@ -124,6 +124,11 @@ class CompactDiscretizeTables:
         """Columns j >= i of each row of Q_d's pattern."""
         return [[int(j) for j in row if j >= i] for i, row in enumerate(self.structure.rows("Qd"))]
 
+    @cached_property
+    def qd_lower_rows(self) -> list[list[int]]:
+        """Columns j < i of each row of Q_d's pattern (mirrored from the upper triangle)."""
+        return [[int(j) for j in row if j < i] for i, row in enumerate(self.structure.rows("Qd"))]
+
     def tables(self) -> dict[str, list[int]]:
         """Every table by its C name (see the module docstring and the compact branch of c_discretize.c.j2)."""
         return {
@@ -141,6 +146,8 @@ class CompactDiscretizeTables:
             "gamma_column_position": self.gamma_column_position,
             "qd_row_start": _row_starts(self.qd_rows),
             "qd_col": [j for row in self.qd_rows for j in row],
+            "qd_lower_start": _row_starts(self.qd_lower_rows),
+            "qd_lower_col": [j for row in self.qd_lower_rows for j in row] or [0],
         }
 
     def index_type(self) -> str:

@@ -93,11 +93,15 @@ def test_compact_kernels_give_the_unrolled_bits(form, paper_derived, tmp_path, m
 
 
 def discretized(built, options: CodegenOptions, T: float) -> tuple[np.ndarray, np.ndarray]:
-    """Phi and Q_d of the C discretize at step T (Q_d as Gamma diag(qw) Gamma^T in the UD form)."""
+    """Phi and Q_d of the C discretize at step T (Q_d as Gamma diag(qw) Gamma^T in the UD form).
+
+    The transition struct is filled with NaN bits first: every entry must be written.
+    """
     derived = built.derived
     scenario = synthetic_scenario(derived)
     filt = built.c_filter(options)
     filt.set_parameters(dict(zip(derived.model.parameter_names, built.python.parameter_vector(scenario.parameters))))
+    ctypes.memset(ctypes.addressof(filt.transition), 0xFF, ctypes.sizeof(filt.transition))
     assert filt.discretize(T) == 0
     if options.ud:
         gamma = np.ctypeslib.as_array(filt.transition.Gamma)[:, : derived.n_noises]
