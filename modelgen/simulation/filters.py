@@ -26,7 +26,9 @@ Three implementations plug in:
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
+import json
 import pickle
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -284,6 +286,66 @@ _GENERATED: "OrderedDict[str, dict[str, str]]" = OrderedDict()
 GENERATED_KEPT = 4
 
 
+#: what the generated files are made from besides the model: modelgen's own sources and data, and the
+#: libraries that shape the generated text (pinned, but a new install is a new generator)
+_GENERATOR_SUFFIXES = (".py", ".j2", ".yaml", ".json")
+_GENERATOR_LIBRARIES = ("sympy", "jinja2", "numpy")
+
+
+@functools.lru_cache(maxsize=1)
+def generator_digest() -> str:
+    """Digest of everything besides the model that :func:`generated_filter_files`' text depends on.
+
+    Every source, template and data file of the modelgen package (their paths
+    and contents: 10 ms) and the versions of Python and of the libraries that
+    shape the text.  Conservative: any change to modelgen is a new generator.
+    """
+    import importlib.metadata
+    import platform
+
+    package = Path(__file__).resolve().parents[1]  # the modelgen package
+    digest = hashlib.sha256(b"modelgen generated-files 1\n")
+    versions = [platform.python_version()] + [importlib.metadata.version(name) for name in _GENERATOR_LIBRARIES]
+    digest.update(repr(versions).encode("utf-8"))
+    for path in sorted(package.rglob("*")):
+        if path.suffix in _GENERATOR_SUFFIXES and "__pycache__" not in path.parts and path.is_file():
+            content = path.read_bytes()
+            digest.update(f"\n{path.relative_to(package).as_posix()} {len(content)}\n".encode("utf-8"))
+            digest.update(content)
+    return digest.hexdigest()
+
+
+def _generated_files_folder() -> Path:
+    """The on-disk cache of generated files: ``generated`` beside the compile cache's ``libraries``."""
+    from modelgen.codegen.build import library_cache_folder  # sibling layer, imported where used
+
+    return library_cache_folder().parent / "generated"
+
+
+def _cached_files(key: str) -> dict[str, str] | None:
+    """The generated files of ``key`` from the on-disk cache, or None (absent, or an entry that does not verify)."""
+    from modelgen.codegen.build import cached_library  # an entry store of any payload: magic, key, digest
+
+    payload = cached_library(_generated_files_folder(), key)
+    if payload is None:
+        return None
+    try:
+        files = json.loads(payload.decode("utf-8"))
+    except ValueError:
+        return None
+    if not (isinstance(files, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in files.items())):
+        return None
+    return files
+
+
+def _store_files(key: str, files: dict[str, str]) -> None:
+    """Keep ``files`` as the on-disk entry of ``key`` (never replacing a file; a cache that cannot be written is
+    left without it)."""
+    from modelgen.codegen.build import store_library
+
+    store_library(_generated_files_folder(), key, json.dumps(files, sort_keys=True).encode("utf-8"))
+
+
 def generated_filter_files(derived: DerivedModel) -> dict[str, str]:
     """The files ``modelgen generate`` writes for the model (default options): name -> text.
 
@@ -293,7 +355,13 @@ def generated_filter_files(derived: DerivedModel) -> dict[str, str]:
     files are kept in this process, by a digest of the model's declaration
     (what the code is generated from): ``modelgen simulate`` generates the
     code for its own flight, and its Monte Carlo ships the same files without
-    generating them again (half a second for the paper's model).
+    generating them again (half a second for the paper's model).  They are
+    also kept on disk, beside the compile cache
+    (:func:`modelgen.codegen.build.library_cache_folder`), keyed by that
+    digest and :func:`generator_digest`, in entries verified as the compile
+    cache's are (:func:`~modelgen.codegen.build.store_library`: written once,
+    never replaced; one that does not verify is ignored): a fresh ``modelgen simulate`` of a model it flew before takes
+    them from there instead of generating them (0.3 s of its start).
     """
     from modelgen.codegen.generate import generate_code  # sibling layer, imported where used
 
@@ -301,7 +369,12 @@ def generated_filter_files(derived: DerivedModel) -> dict[str, str]:
     if key in _GENERATED:
         _GENERATED.move_to_end(key)
     else:
-        _GENERATED[key] = dict(generate_code(derived).files)
+        on_disk = hashlib.sha256(f"{key}\n{generator_digest()}".encode("ascii")).hexdigest()
+        files = _cached_files(on_disk)
+        if files is None:
+            files = dict(generate_code(derived).files)
+            _store_files(on_disk, files)
+        _GENERATED[key] = files
         while len(_GENERATED) > GENERATED_KEPT:
             _GENERATED.popitem(last=False)
     return dict(_GENERATED[key])
