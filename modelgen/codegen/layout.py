@@ -129,7 +129,7 @@ class CompactDiscretizeSizes:
     """Sizes of the compact discretize's scratch (modelgen.codegen.compact_discretize).
 
     ``closure``: structural nonzeros of Phi; ``gamma``: of Gamma; ``row``:
-    entries of a stored row of R (N rounded up to even).
+    entries of a stored row of R (N rounded up to a multiple of 4).
     """
 
     closure: int
@@ -146,7 +146,7 @@ def _compact_discretize_scratch(sizes: ModelSizes, compact: CompactDiscretizeSiz
     """
     closure = compact.closure if compact else sizes.n * sizes.n
     gamma = compact.gamma if compact else sizes.n * sizes.nw
-    width = compact.row if compact else sizes.n + sizes.n % 2
+    width = compact.row if compact else -(-sizes.n // 4) * 4
     n_closure = Dim(str(max(closure, 1)), max(closure, 1))
     n_gamma = Dim(str(max(gamma, 1)), max(gamma, 1))
     row = Dim(str(width), width)
