@@ -101,12 +101,15 @@ def setup_child(setup_file: str) -> None:
         steps.append((step, now[0] - last[0], now[1] - last[1]))
         last = now
 
-    from modelgen.simulation import montecarlo  # what a worker imports for its first task
+    from modelgen import cluster
+
+    cluster.import_long_lived("modelgen.simulation.montecarlo")  # what run_monte_carlo has each worker do first
+    from modelgen.simulation import montecarlo
 
     mark("import modelgen's Monte Carlo (numpy, numba, sympy, modelgen)")
     setup = pickle.loads(Path(setup_file).read_bytes())
     mark("receive the set-up (unpickle the profile, model and code)")
-    context = montecarlo._prepare(setup, mark=mark)
+    context = cluster.worker_cached(setup.key, lambda: montecarlo._prepare(setup, mark=mark))  # as fly_one_run
     for run in (0, 1):
         seed = np.random.SeedSequence(1).spawn(2)[run]
         montecarlo.fly_profile(setup.profile, context["derived"], context["trajectory"], np.random.default_rng(seed),

@@ -29,6 +29,7 @@ derived objects holding compiled code.
 
 from __future__ import annotations
 
+import gc
 import importlib
 import json
 import logging
@@ -57,15 +58,37 @@ def worker_cached(key: Any, build: Callable[[], T]) -> T:
     """``build()``, computed once per process (a dask worker keeps it for every later task of the study).
 
     Only the ``CACHE_SIZE`` most recently used set-ups are kept: a trajectory
-    of a long flight is large, and a worker serves study after study.
+    of a long flight is large, and a worker serves study after study.  The
+    build runs with the cyclic garbage collector paused (:func:`collector_paused`).
     """
     if key in _CACHE:
         _CACHE.move_to_end(key)
         return _CACHE[key]
-    value = _CACHE[key] = build()
+    with collector_paused():
+        value = _CACHE[key] = build()
     while len(_CACHE) > CACHE_SIZE:
         _CACHE.popitem(last=False)
     return value
+
+
+@contextmanager
+def collector_paused() -> Iterator[None]:
+    """Python's cyclic garbage collector off for the block, then on again (if it was on).
+
+    A set-up or an import makes hundreds of thousands of objects that live on
+    (sympy expressions, numba's type registries, modules), and the collector,
+    run every few hundred allocations, would walk them again and again as
+    they age: 0.15-0.2 s of CPU of a fresh Monte Carlo worker's set-up before
+    its first run (bench/results/montecarlo.md).  Objects without cycles are
+    still freed as usual; the cycles made meanwhile wait for the next collection.
+    """
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
 
 
 def forget_cached(key: Any) -> None:
@@ -127,14 +150,23 @@ def import_on_workers(client: Any, module: str) -> None:
     code and computed it: the fresh workers' imports (0.4 s for the Monte
     Carlo code) would follow one another instead of overlapping.  A worker
     that already has the module does nothing; one that fails to import it
-    fails again, with its message, on its first task.
+    fails again, with its message, on its first task.  The imported objects
+    live as long as the worker: they are moved out of the collector's sight
+    (``gc.freeze``), so its later collections do not walk them.
     """
     client.run(_import_module, module, wait=False)
 
 
+def import_long_lived(module: str) -> None:
+    """Import ``module`` with the collector paused, then keep everything made so far out of its sight (``gc.freeze``)."""
+    with collector_paused():
+        importlib.import_module(module)
+    gc.freeze()
+
+
 async def _import_module(module: str) -> None:
-    """On a worker: import ``module`` (a coroutine: what ``Client.run`` can start without waiting for it)."""
-    importlib.import_module(module)
+    """On a worker: :func:`import_long_lived` (a coroutine: what ``Client.run`` can start without waiting for it)."""
+    import_long_lived(module)
 
 
 def describe_client(client: Any) -> str:

@@ -60,3 +60,28 @@ def test_fresh_workers_map_the_trajectory_the_caller_kept_in_the_cache(paper_der
     assert mapped and all(mapped)  # every worker that flew a run mapped the entry
     assert set(folder.iterdir()) - before == kept  # and none made another
     assert np.array_equal(there.errors, here.errors) and np.array_equal(there.sigma, here.sigma)
+
+
+def test_the_collector_is_paused_for_a_set_up_and_restored_after_it():
+    import gc
+
+    from modelgen.cluster import collector_paused, forget_cached, worker_cached
+
+    seen = []
+    assert gc.isenabled()
+    worker_cached("test-collector", lambda: seen.append(gc.isenabled()))
+    forget_cached("test-collector")
+    assert seen == [False] and gc.isenabled()
+    try:
+        with collector_paused():
+            raise RuntimeError("a failed set-up")
+    except RuntimeError:
+        pass
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        with collector_paused():
+            pass
+        assert not gc.isenabled()  # a collector the caller had turned off stays off
+    finally:
+        gc.enable()
