@@ -24,7 +24,7 @@ from modelgen.derive.discretization import DEFAULT_TOLERANCE, nominal_scaling, t
 from modelgen.derive.symbolic import derive
 from modelgen.fileio.datafiles import package_path
 from modelgen.jobs import synthetic_scenario
-from modelgen.model.loading import load_model
+from modelgen.model.loading import load_model, load_model_text
 from tests.codegen.generated_support import build, write_files
 from tests.codegen.large_model_support import large_model
 
@@ -138,6 +138,30 @@ def test_compact_discretize_matches_the_reference_at_every_order_and_doubling(fo
         step = phi_ref - np.eye(18)
         assert (np.abs(phi - phi_ref) <= 50 * eps * np.abs(step).max() + eps * np.eye(18)).all(), T  # + the rounding of 1 + E
         assert np.abs(qd - qd_ref).max() <= 50 * eps * np.abs(qd_ref).max(), T
+
+
+DEGENERATE = {
+    "constants": "model: constants\nstates:\n  - {name: bias_a, symbol: a, unit: m}\n  - {name: bias_b, symbol: b, unit: m}\n"
+    "dynamics: {a: \"0\", b: \"0\"}\nmeasurements:\n  - {name: z, symbol: z, expression: a + b, variance: \"1e-2\"}\n",
+    "walk": "model: walk\nstates:\n  - {name: bias, symbol: b, unit: m}\n  - {name: drift, symbol: d, unit: m}\n"
+    "noises:\n  - {name: bias_noise, symbol: w, psd: \"1e-4\"}\ndynamics: {b: w, d: \"0\"}\n"
+    "measurements:\n  - {name: z, symbol: z, expression: b + d, variance: \"1e-2\"}\n",
+    "chain": "model: chain\nstates:\n  - {name: p, symbol: p, unit: m}\n  - {name: v, symbol: v, unit: m}\n  - {name: a, symbol: a, unit: m}\n"
+    "noises:\n  - {name: jerk, symbol: w, psd: \"1e-4\"}\ndynamics: {p: v, v: a, a: \"-a/100 + w\"}\n"
+    "measurements:\n  - {name: z, symbol: z, expression: p, variance: \"1e-2\"}\n",
+}
+
+
+@pytest.mark.parametrize("name", DEGENERATE)
+@pytest.mark.parametrize("form", ["full", "ud"])
+def test_degenerate_models_forced_compact_conform(name, form, tmp_path, monkeypatch):
+    """The compact discretize's edge cases conform: F without a nonzero, a noise on an empty row of F, a chain of 3."""
+    monkeypatch.setattr(kernels, "COMPACT_ABOVE_FLOPS", -1)
+    derived = derive(load_model_text(DEGENERATE[name], filename="m.yaml"))
+    folder = write_files(tmp_path / "gen", generate_code(derived, FORMS[form]).files)
+    assert "phi_row_start" in (folder / f"{name}.c").read_text()
+    for result in check_generated(folder, derived, synthetic_scenario(derived, steps=10), options=FORMS[form]):
+        assert result.passed(), result
 
 
 @pytest.fixture(scope="module")
