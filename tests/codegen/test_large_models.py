@@ -121,8 +121,8 @@ def reference_discretized(derived, T: float) -> tuple[np.ndarray, np.ndarray]:
 def test_compact_discretize_matches_the_reference_at_every_order_and_doubling(form, paper_derived, tmp_path, monkeypatch):
     """The compact discretize (loops over Phi's pattern) gives the reference's Phi and Q_d to the rounding of the arithmetic.
 
-    The steps cover an order below the pattern's saturation (order 2: the
-    chain's prefixes), order 9 without doublings, and 10 and 16 doublings.
+    The steps cover order 2 (the two top levels over their own patterns
+    alone), order 9 without doublings, and 10 and 16 doublings.
     The bound, 50 units of roundoff of the largest entry of Phi - I (plus the
     rounding of 1 + E on the diagonal) and of Q_d, is far below any error of
     the scheme (a missed or doubled term is of the size of the entries).
