@@ -101,6 +101,14 @@ def _in_background(function: Callable, *args: Any) -> tuple[Future, threading.Th
     return future, thread
 
 
+def _finished(started: tuple[Future, threading.Thread]) -> Any:
+    """The result of work started by :func:`_in_background` (its error raised), once its thread has ended."""
+    future, thread = started
+    result = future.result()
+    thread.join()
+    return result
+
+
 class FlightStart:
     """A flight's truth and IMU errors, being made in two background threads (compiled code, no GIL held).
 
@@ -125,20 +133,19 @@ class FlightStart:
                                      True, later)
         self._imu = _in_background(imu_error_stream, profile, n_samples, record_every, self.rng)
 
-    @staticmethod
-    def _finished(started: tuple[Future, threading.Thread]) -> tuple[Any, float]:
-        future, thread = started
-        result = future.result()
-        thread.join()
-        return result
-
     def trajectory(self) -> tuple[Trajectory, float]:
         """The streamed trajectory (truth rows; increments come piece by piece) and the seconds it took."""
-        return self._finished(self._truth)
+        return _finished(self._truth)
 
     def imu_errors(self) -> tuple[Any, float]:
         """The :class:`~modelgen.simulation.imu.ImuErrorStream` and the seconds its draws took."""
-        return self._finished(self._imu)
+        return _finished(self._imu)
+
+
+def _import_plotting() -> None:
+    """Import what the figures need (matplotlib's Figure and Agg canvas: 0.25 s) ahead of drawing them."""
+    import matplotlib.backends.backend_agg  # noqa: F401
+    import matplotlib.figure  # noqa: F401
 
 
 def start_flight(profile: FlightProfile, seed: int) -> FlightStart:
@@ -214,6 +221,9 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
         record_every = history_every(n_cycles)
         histories = {mode: CsvHistory(out_dir / f"history_{mode}.csv", derived.model.state_names)
                      for mode in MODES} if history_csv else {}
+        # the figures' imports (a quarter second) are done while the flight goes: its thread making the IMU
+        # increments sets the pace, the flying thread's core has time to spare
+        plotting = _in_background(_import_plotting)
         try:
             results = fly_modes(profile, derived, trajectory, sensors, layout, make_filter, MODES,
                                 progress=lambda mode: _echo_progress(echo, f"{mode} filter"),
@@ -242,6 +252,7 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
     if monte_carlo is not None:
         drawings.append((_plot_monte_carlo, (monte_carlo, units, out_dir / "monte_carlo.png")))
         drawings.append((_plot_nees, (monte_carlo, out_dir / "nees.png")))
+    _finished(plotting)
     figures = draw_figures(drawings, apart=2)  # the filter's 18 panels: the longest drawing
     summary = out_dir / "summary.md"
     summary.write_text(cite_sources(_summary(profile, derived.model.name, implementation, layout.conventions, trajectory, results, errors,
