@@ -139,6 +139,12 @@ class DiscretizePlan:
         return sorted({i for i, _ in self.active} - blocks)
 
     @cached_property
+    def leaf_rows(self) -> list[int]:
+        """Active rows that no row of F reads (F(r, i) = 0 for every r): R_k there is needed at k = 0 only (S)."""
+        read = {c for _, c in self.f_entries}
+        return [i for i in self.block_rows + self.diagonal_rows if i not in read]
+
+    @cached_property
     def spans(self) -> dict[int, tuple[int, int]]:
         """(first column, even length) of each block row's dense segment.
 
@@ -257,6 +263,10 @@ def horner_input_block(plan: DiscretizePlan) -> DiscretizeBlock:
     return DiscretizeBlock(KernelBlock("horner_input", lines), (), ("h",))
 
 
+#: The function of the chain's last level (k = 0, into S) where some rows are needed there only.
+HORNER_LAST = "horner_last_into_S"
+
+
 def horner_level_name(level: int, parity: int, saturated: bool = False) -> str:
     """The function computing R_k at the top level (``level`` 1) or at any level below it (``saturated``), into S (k even) or term (k odd)."""
     into = "S" if parity == 0 else "term"
@@ -288,7 +298,7 @@ def horner_top_block(plan: DiscretizePlan, parity: int) -> DiscretizeBlock:
     return DiscretizeBlock(KernelBlock(horner_level_name(1, parity), tuple(lines)), (), _scalars_used(lines))
 
 
-def _product_rows(plan: DiscretizePlan, target, source, diagonal: Ref | None, columns: int) -> list:
+def _product_rows(plan: DiscretizePlan, target, source, diagonal: Ref | None, columns: int, skip: frozenset = frozenset()) -> list:
     """target = A source (+ ``diagonal`` I) over the stored rows: the block rows' dense segments, then their sparse terms.
 
     ``target(i, j)`` and ``source(i, j)`` give the Ref of a stored entry; a
@@ -299,14 +309,15 @@ def _product_rows(plan: DiscretizePlan, target, source, diagonal: Ref | None, co
     row c contributes A(i, c) source(c, c) (None: A(i, c) alone), a diagonal
     row A(i, c) source(c, c), each added after the segments (which C sums in
     loops over all rows: each source segment is loaded once per step).
-    ``columns``: the target's rows end there (a segment is cut short at it).
+    ``columns``: the target's rows end there (a segment is cut short at it);
+    the rows in ``skip`` are not computed.
     """
     blocks = set(plan.block_rows)
     f_rows = _f_rows(plan)
     spans = plan.spans
     whole: list = []
     parts: list = []
-    for i in plan.block_rows:
+    for i in [r for r in plan.block_rows if r not in skip]:
         first, length = spans[i]
         end = min(first + length, columns)
         same, narrower = [], {}
@@ -321,7 +332,7 @@ def _product_rows(plan: DiscretizePlan, target, source, diagonal: Ref | None, co
         whole.append(SegmentAssign(target(i, first), tuple(same), end - first))
         parts += [SegmentAssign(target(i, lo), tuple(terms), hi - lo, accumulate=True) for (lo, hi), terms in narrower.items()]
     lines = whole + parts
-    for i in plan.block_rows:
+    for i in [r for r in plan.block_rows if r not in skip]:
         if diagonal is not None:
             lines.append(Assign(target(i, i), ((target(i, i),), (diagonal,))))
         for c, e in f_rows.get(i, []):
@@ -330,19 +341,21 @@ def _product_rows(plan: DiscretizePlan, target, source, diagonal: Ref | None, co
             a = Ref("scratch", "fh", (e,))
             x = source(c, c)
             lines.append(Assign(target(i, c), ((target(i, c),), (a,) if x is None else (a, x))))
-    for i in plan.diagonal_rows:
+    for i in [r for r in plan.diagonal_rows if r not in skip]:
         (_, e), = f_rows[i]
         product = (Ref("scratch", "fh", (e,)), source(i, i))
         lines.append(Assign(target(i, i), ((diagonal,), product) if diagonal is not None else (product,)))
     return lines
 
 
-def horner_level_block(plan: DiscretizePlan, parity: int) -> DiscretizeBlock:
+def horner_level_block(plan: DiscretizePlan, parity: int, final: bool = False) -> DiscretizeBlock:
     """R_k = c_out I + A R_(k+1) for every k below the top, into S (k even) or term (k odd).
 
     Dense over the stored rows: the block rows' structural zeros are stored
     zeros, so one function serves every level (the pattern grows from I + F
     to the closure and then stays); a unit row c of R_(k+1) is c_in e_c.
+    The rows no row of F reads (:attr:`DiscretizePlan.leaf_rows`) are left
+    out except at k = 0 (``final``: S = R_0, into S).
     """
     unit = set(plan.structure.unit_rows)
 
@@ -352,8 +365,10 @@ def horner_level_block(plan: DiscretizePlan, parity: int) -> DiscretizeBlock:
     def target(i: int, j: int) -> Ref:
         return _horner_array(parity, plan.s_position[(i, j)])
 
-    lines = _product_rows(plan, target, source, _local("c_out"), plan.structure.n_states + 1)
-    return DiscretizeBlock(KernelBlock(horner_level_name(0, parity, True), tuple(lines)), (), _scalars_used(lines))
+    skip = frozenset() if final else frozenset(plan.leaf_rows)
+    lines = _product_rows(plan, target, source, _local("c_out"), plan.structure.n_states + 1, skip)
+    name = HORNER_LAST if final else horner_level_name(0, parity, True)
+    return DiscretizeBlock(KernelBlock(name, tuple(lines)), (), _scalars_used(lines))
 
 
 def horner_transition_block(plan: DiscretizePlan) -> DiscretizeBlock:
@@ -379,16 +394,20 @@ def horner_transition_block(plan: DiscretizePlan) -> DiscretizeBlock:
 
 
 def series_blocks(plan: DiscretizePlan) -> list[DiscretizeBlock]:
-    """The Horner chain: A = F h, the top level into either array, the dense level into either, then E = A S."""
+    """The Horner chain: A = F h, the top level into either array, the dense level into either (and the last, where rows are left out), then E = A S."""
     blocks = [horner_input_block(plan)]
     blocks += [horner_top_block(plan, parity) for parity in (0, 1)]
     blocks += [horner_level_block(plan, parity) for parity in (0, 1)]
+    blocks += [horner_level_block(plan, 0, final=True)] if plan.leaf_rows else []
     return blocks + [horner_transition_block(plan)]
 
 
 def horner_schedule(plan: DiscretizePlan, order: int) -> list[str]:
     """The level functions an order-``order`` chain calls, top (k = order - 1) to bottom (k = 0)."""
-    return [horner_level_name(1, k % 2, k < order - 1) for k in range(order - 1, -1, -1)]
+    return [
+        HORNER_LAST if k == 0 < order - 1 and plan.leaf_rows else horner_level_name(1, k % 2, k < order - 1)
+        for k in range(order - 1, -1, -1)
+    ]
 
 
 def doubling_block(plan: DiscretizePlan) -> DiscretizeBlock:

@@ -7,7 +7,7 @@ import math
 from modelgen.codegen.backends.c.literals import c_number, scalar_bytes, scalar_spellings
 from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c_declarator, c_ref, c_statement
 from modelgen.codegen.description import FilterDescription, named
-from modelgen.codegen.discretize_kernels import DiscretizeBlock, SegmentAssign, horner_level_name, scalar_statements
+from modelgen.codegen.discretize_kernels import HORNER_LAST, DiscretizeBlock, SegmentAssign, horner_level_name, scalar_statements
 from modelgen.codegen.kernels import KernelBlock, compact_predict_tables
 from modelgen.codegen.compact_discretize import CompactDiscretizeTables
 from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout
@@ -370,6 +370,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "discretize_calls": {f["name"]: f["call"] for f in discretize},
         "horner_levels": [(calls[horner_level_name(1, 0)], calls[horner_level_name(1, 1)])] if discretize else [],
         "horner_saturated": (calls[horner_level_name(0, 0, True)], calls[horner_level_name(0, 1, True)]) if discretize else (),
+        "horner_last": calls.get(HORNER_LAST, ""),  # k = 0 where rows that no row of F reads are left out above it
         "taylor_coefficients": [c_number(1.0, options.scalar) + f" / {c_number(float(math.factorial(k + 1)), options.scalar)}"
                                 for k in range(options.taylor_order + 1)],
         "discretize_sets_qd": "process_noise" in calls,  # the unrolled Q_d block sets every entry (no zero loop first)
