@@ -20,9 +20,10 @@ the paper's model against 1.9 for scalar statements over the exact
 patterns, bench/bench_cycle.py), then
 the sparse terms: c_out on the diagonal, A(i, c) c_in for a row c of
 random constants (R_(k+1) = c_in e_c there), A(i, c) R_(k+1)(c, c) for a
-diagonal row c.  The padding and the not yet saturated levels cost about
-13 % more flops than the exact patterns (:func:`structural_series_cost`,
-the benchmark's floor).  The top level R_(m-1) = c_out I + A c_in is scalar
+diagonal row c.  A row that no row of F reads (``leaf_rows``) is summed at
+k = 0 only.  The padding and the not yet saturated levels cost 7 % more
+flops than the exact patterns on the paper's model
+(:func:`structural_series_cost`, the benchmark's floor).  The top level R_(m-1) = c_out I + A c_in is scalar
 (its pattern, I + F, is sparse) and sets the rest of the segments to zero.
 Each function comes in two copies (R_k into S for even k, into the second
 term array for odd k, so that S = R_0 lands in S).  The order m is chosen
