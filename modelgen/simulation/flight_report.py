@@ -180,8 +180,8 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
     writes each mode's history, as it is flown, to ``history_<mode>.csv``
     (:mod:`modelgen.simulation.history`) in ``out_dir``.  ``journal`` keeps
     the completed Monte Carlo runs (:func:`modelgen.simulation.montecarlo.run_monte_carlo`).
-    ``started``: this flight's truth and IMU errors, already being made (:func:`start_flight` with the same
-    profile and seed); they are started here otherwise.
+    ``started``: this flight's truth and IMU errors, already being made (:func:`start_flight` with this
+    profile object and seed); they are started here otherwise.
     """
     import matplotlib
 
@@ -195,7 +195,7 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
     results: dict[str, RunResult] = {}
     if started is None:
         started = start_flight(profile, seed)
-    elif started.profile != profile or started.seed != seed:
+    elif started.profile is not profile or started.seed != seed:
         raise ModelError(f"simulate: the flight started for profile {started.profile.name!r}, seed {started.seed} "
                          f"is not this one ({profile.name!r}, seed {seed})")
     with tempfile.TemporaryDirectory(prefix="modelgen-simulate-") as code_dir, ThreadPoolExecutor(1) as helpers:
@@ -320,7 +320,8 @@ def pixel_envelope(values: np.ndarray, columns: int) -> np.ndarray:
     largest sample are kept (the M4 aggregation: a polyline through them covers
     the same pixels as through every sample), and every non-finite sample (a
     gap in the line).  A 4-h history has 14,400 rows per curve, an axes some
-    400 pixel columns: drawing the kept 1,600 instead halves the figures' time.
+    400 pixel columns: the 54 curves of the filter's figure drawn from the kept
+    1,600 points each take 0.52 s instead of 0.61 s of CPU.
     Returns sorted indices; all of them when there are few samples already.
     """
     n = len(values)
