@@ -20,8 +20,9 @@ every 1 s, Doppler every 60 s), the generated C filter, one seed:
   * the three modes with their data in one pass (what ``modelgen simulate`` flies);
   * the whole single-run ``modelgen simulate --runs 0`` (three modes, figures,
     summary) as a fresh process: Python start, imports, derivation, code
-    generation and compile included -- once with an empty compile cache (cold:
-    gcc runs) and once more with the library in it (warm);
+    generation and compile included -- once with an empty cache folder (cold:
+    the filter's code generated, gcc runs) and once more with the code and the
+    library in it (warm);
   * memory: the peak resident size of a fresh process that flies the closed-loop
     flight (derive, build the C, fly) -- old for 4 h, new for 4 h and 24 h.  Peak
     RSS only grows, so each figure comes from its own child process (this script
@@ -286,7 +287,8 @@ def markdown(report: dict) -> str:
         r = report["simulate_in_process"]
         lines.append(f"| `simulate()` in a warm process | the same run without Python start, imports, numba loading, "
                      f"derivation (the C from the cache) | {r['cpu_s']:.2f} | {r['wall_s']:.2f} | - |")
-    for key, label in (("cold_compile", "cold: gcc compiles the filter"), ("warm_compile", "warm: the filter from the compile cache")):
+    for key, label in (("cold_compile", "cold: the filter's code generated, gcc compiles it"),
+                       ("warm_compile", "warm: the filter's code and library from the caches")):
         if key in report.get("simulate", {}):
             r = report["simulate"][key]
             lines.append(f"| `modelgen simulate --runs 0`, {label} | a fresh process: imports, derivation, code, truth, "
@@ -325,7 +327,8 @@ def main() -> None:
     os.environ["MODELGEN_CACHE_DIR"] = cache_home.name
     if not args.memory_only:
         measure_time(scenario, derived, report)
-        # the compile cache (modelgen/codegen/build.py) of a fresh folder: compiled once (cold), then found (warm)
+        # the caches of a fresh folder (modelgen/codegen/build.py's libraries, modelgen/simulation/filters.py's
+        # generated files): generated and compiled once (cold), then found (warm)
         with tempfile.TemporaryDirectory() as cache:
             report["simulate"] = {"cold_compile": measure_simulate(args.hours, Path(cache), "cold: the C compiled"),
                                   "warm_compile": measure_simulate(args.hours, Path(cache), "warm: the C from the cache")}
