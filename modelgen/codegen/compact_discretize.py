@@ -125,10 +125,35 @@ class CompactDiscretizeTables:
         """Columns j < i of each row of Q_d's pattern (mirrored from the upper triangle)."""
         return [[int(j) for j in row if j < i] for i, row in enumerate(self.structure.rows("Qd"))]
 
+    @cached_property
+    def a_entries(self) -> list[int]:
+        """F's entries row by row, in each row those whose column c has more than its diagonal in Phi first.
+
+        A = F h is stored in this order: a row of R that is its diagonal alone
+        (F's row c empty or F_cc alone) adds one product, the others a span,
+        and the two kinds run in two loops without a test per entry.
+        """
+        f_entries = self.structure.entries("F")
+        wide = [len(row) > 1 for row in self.closure_rows]
+        order = sorted(range(len(f_entries)), key=lambda e: (f_entries[e][0], not wide[f_entries[e][1]], e))
+        return order
+
+    @property
+    def a_diagonal_from(self) -> list[int]:
+        """Where row i's entries whose column is a diagonal row of R start in ``a_entries``."""
+        f_entries = self.structure.entries("F")
+        wide = [len(row) > 1 for row in self.closure_rows]
+        start = self.f_row_start
+        return [start[i] + sum(1 for e in range(len(f_entries)) if f_entries[e][0] == i and wide[f_entries[e][1]])
+                for i in range(self.structure.n_states)]
+
     def tables(self) -> dict[str, list[int]]:
         """Every table by its C name (see the module docstring and the compact branch of c_discretize.c.j2)."""
         return {
             "F_row_start": self.f_row_start,
+            "A_entry": self.a_entries or [0],
+            "A_col": [self.structure.entries("F")[e][1] for e in self.a_entries] or [0],
+            "A_diagonal_from": self.a_diagonal_from,
             "closure_start": self.closure_start,
             "closure_col": [j for row in self.closure_rows for j in row],
             "span_start": [start for start, _ in self.spans],

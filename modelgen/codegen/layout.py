@@ -152,7 +152,7 @@ def _compact_discretize_scratch(sizes: ModelSizes, compact: CompactDiscretizeSiz
     row = Dim(str(width), width)
     fields = (
         Field("R", (Dim("2", 2), N, row), "Horner levels R_k over each row's span (k even in R[0], odd in R[1]): S = R_0 in R[0], E = A S in R[1]"),
-        Field("fh", (nnz_f,), "F h at the nonzeros of F"),
+        Field("fh", (nnz_f,), "A = F h, F's nonzeros in the order of the A_entry table"),
         Field("E_row", (row,), "one row of E^2 (the doubling), over its span"),
         Field("S_row", (row,), "one row of E S (the doubling), over its span"),
         Field("E_next", (n_closure,), "the doubling's new E at the nonzeros of Phi, row by row"),
