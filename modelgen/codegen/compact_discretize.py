@@ -14,10 +14,16 @@ sum over the nonzeros F(i, c) of F(i, c) h times row c of R.  Every row of
 R is kept in an N x N array over its span, the columns from the first to
 the last of its row of Phi's pattern (the closure: R_k's pattern is within
 it at every level), padded to a multiple of 4: so row c of R is added into
-row i (whose span covers that of c, the closure of c lying within that of i
-where F(i, c) is nonzero) by one loop over contiguous entries, four per step,
-which gcc -O2 vectorizes (two pairs); the structural zeros inside a span are stored
-zeros (a span is cleared before a row is summed into it).  An augmented
+row i (whose span covers that of c before padding, the closure of c lying
+within that of i where F(i, c) is nonzero; what the padding adds past row
+i's span is never read) by one loop over contiguous entries, four per step,
+which gcc -O2 vectorizes (two pairs); the structural zeros inside a span are
+stored zeros (a span is cleared before a row is summed into it).  A row c
+of R that is its diagonal alone (F's row c empty or F_cc alone) adds one
+product; A = F h is stored with those columns last in each row (``A_entry``),
+so the two kinds run in two loops.  The two top levels, R_(m-1) = I/m! +
+A/(m+1)! and R_(m-2), are summed over their own patterns (I + F, I + F +
+F^2), the rest over the spans.  An augmented
 model's rows are the core's, nearly dense over the states they reach, and
 the diagonal rows of its sensor errors, so the spans hold few structural
 zeros (5 % more products than the exact patterns for the 100-state bench
