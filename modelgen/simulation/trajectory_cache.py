@@ -119,6 +119,8 @@ def entry_paths(folder: Path, key: str) -> list[Path]:
 def _mapped(path: Path, key: str, shapes: dict[str, tuple[int, int]]) -> list[np.ndarray] | None:
     """The arrays of the entry at ``path``, mapped read-only, if it is a whole entry of ``key``; else None."""
     try:
+        if not path.is_file():  # a folder or a pipe at an entry's name is not an entry (and is never opened)
+            return None
         with path.open("rb") as handle:
             header = handle.read(HEADER_BYTES)
         size = path.stat().st_size
