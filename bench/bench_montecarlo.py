@@ -132,17 +132,19 @@ def measure_setup(setup, cache: Path) -> list[dict]:
 
 
 def timed_study(client, profile, derived, runs: int, implementation: str) -> tuple[dict, object]:
-    """One study on ``client``: wall, the caller's CPU, each worker's CPU (set-up and runs), and the result."""
+    """One study on ``client``: wall, the caller's CPU, each worker's CPU (set-up and runs), the machine's
+    1-minute load average as it starts (other processes included), and the result."""
     from modelgen.simulation.montecarlo import run_monte_carlo
 
     before = client.run(process_cpu)
+    load = os.getloadavg()[0]
     cpu, start = process_cpu(), time.perf_counter()
     result = run_monte_carlo(profile, derived, runs, seed=1, client=client, implementation=implementation)
     wall, caller = time.perf_counter() - start, process_cpu() - cpu
     after = client.run(process_cpu)
     workers = sorted(after[w] - before.get(w, 0.0) for w in after)
     return {"wall_s": wall, "caller_cpu_s": caller, "worker_cpu_s": workers,
-            "cpu_estimate_s": caller + max(workers)}, result
+            "cpu_estimate_s": caller + max(workers), "load_average": load}, result
 
 
 def scaling(workers: int, profile, derived, runs: int, implementation: str) -> tuple[dict, object]:
@@ -285,11 +287,14 @@ def markdown(report: dict) -> str:
         lines += ["", f"Before (commit {BEFORE['commit']}, measured once, not by this run): import "
                   f"{BEFORE['import_cpu_s']:.2f} s CPU, set-up {BEFORE['prepare_cpu_s']:.2f} s CPU ({BEFORE['note']}), "
                   f"{BEFORE['import_cpu_s'] + 0.03 + BEFORE['prepare_cpu_s']:.2f} s CPU before the first run."]
+        loads = [m["load_average"] for side in ("one_worker", "two_workers") for state in STATES
+                 for m in mc[side][state]["samples"]]
         lines += ["", "## Scaling: 1 worker against 2 workers", "",
                   f"Each state measured {mc['repeat']} times on each side, the sides taking turns; efficiency from the "
                   "best time of each side (the least disturbed by other processes), and from the medians.  CPU "
                   "estimate = the caller's CPU + the busiest worker's CPU (the study on otherwise idle cores), best "
-                  "of the repetitions.", "",
+                  "of the repetitions.  1-minute load average as each study started: "
+                  f"{min(loads):.1f} to {max(loads):.1f} (this benchmark's own processes count about 1-2 while a study runs).", "",
                   "| workers' state | 1 worker: wall s (each) | best | 2 workers: wall s (each) | best | "
                   "efficiency (best) | (medians) | (CPU est.) |", "|---|---|---:|---|---:|---:|---:|---:|"]
         for state in STATES:
