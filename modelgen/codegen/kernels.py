@@ -427,11 +427,11 @@ def update_cost(structure: FilterStructure, options: CodegenOptions | None = Non
 
 
 #: Bytes of generated text per unrolled flop of the covariance prediction (which the unrolled
-#: discretize, Horner's rule over the fill-in of Phi, grows with too), and the rest (templates,
-#: tables, evaluation): least squares of the relative error on the built-in models, which it
-#: predicts within 20 % (ned_doppler18: 376 kB estimated, 363 kB written).
-BYTES_PER_PREDICT_FLOP = 48
-FIXED_BYTES = 150_000
+#: discretize, Horner's rule over dense row segments of the fill-in of Phi, grows with too), and
+#: the rest (templates, tables, evaluation): least squares of the relative error on the built-in
+#: models, which it predicts within 12 % (ned_doppler18: 318 kB estimated, 312 kB written).
+BYTES_PER_PREDICT_FLOP = 40
+FIXED_BYTES = 130_000
 
 
 #: With compact kernels (large models) the generated text grows with the states (names,

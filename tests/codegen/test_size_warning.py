@@ -40,5 +40,5 @@ def test_a_dense_hundred_state_model_is_announced_with_its_size():
 
 def test_generate_warns_before_building_when_above_the_threshold(paper_derived, monkeypatch):
     monkeypatch.setattr(generate_module, "LARGE_CODE_BYTES", 100_000)
-    with pytest.warns(GeneratedSizeWarning, match=r"about 0\.4 MB"):
+    with pytest.warns(GeneratedSizeWarning, match=r"about 0\.3 MB"):
         generate_code(paper_derived)
