@@ -27,8 +27,8 @@ F^2), the rest over the spans.  An augmented
 model's rows are the core's, nearly dense over the states they reach, and
 the diagonal rows of its sensor errors, so the spans hold few structural
 zeros (5 % more products than the exact patterns for the 100-state bench
-model).  The doubling runs over each row's entries in column order
-(``closure_col``), S G over them too, Q_d over the columns of Gamma (CSC)
+model).  The doubling runs over each row's entries (``closure_col``: the
+columns whose row is a span first, the diagonal rows after), S G over them too, Q_d over the columns of Gamma (CSC)
 from the row's own entry down, so each pair i <= j is summed once.
 """
 
@@ -153,6 +153,18 @@ class CompactDiscretizeTables:
         return [start[i] + sum(1 for e in range(len(f_entries)) if f_entries[e][0] == i and wide[f_entries[e][1]])
                 for i in range(self.structure.n_states)]
 
+    @cached_property
+    def closure_by_kind(self) -> list[list[int]]:
+        """Each row of Phi's pattern with the columns whose row is more than its diagonal first (each kind ascending)."""
+        wide = [len(row) > 1 for row in self.closure_rows]
+        return [sorted(row, key=lambda j: (not wide[j], j)) for row in self.closure_rows]
+
+    @property
+    def closure_diagonal_from(self) -> list[int]:
+        """Where row i's columns that are diagonal rows start in ``closure_col``."""
+        start = self.closure_start
+        return [start[i] + sum(1 for j in row if len(self.closure_rows[j]) > 1) for i, row in enumerate(self.closure_rows)]
+
     def tables(self) -> dict[str, list[int]]:
         """Every table by its C name (see the module docstring and the compact branch of c_discretize.c.j2)."""
         return {
@@ -161,7 +173,8 @@ class CompactDiscretizeTables:
             "A_col": [self.structure.entries("F")[e][1] for e in self.a_entries] or [0],
             "A_diagonal_from": self.a_diagonal_from,
             "closure_start": self.closure_start,
-            "closure_col": [j for row in self.closure_rows for j in row],
+            "closure_col": [j for row in self.closure_by_kind for j in row],
+            "closure_diagonal_from": self.closure_diagonal_from,
             "span_start": [start for start, _ in self.spans],
             "span_end": [end for _, end in self.spans],
             "G_row_start": self.g_row_start,
