@@ -9,7 +9,8 @@ cluster already started.  Both sides give identical results (checked).
 
 1. Worker set-up.  What a fresh worker process does before its first run,
    in a fresh process of its own, step by step (wall and CPU, the compiler's
-   CPU included): import, receive the set-up, derive the model, take the
+   CPU included): import, receive the set-up (the caller's derived model
+   with it), take the
    trajectory (made and kept in the trajectory cache when it is empty, mapped
    from it when filled), write the shipped code and compile it (compile
    cache empty) or take it from the cache (filled), then two runs.
@@ -187,7 +188,7 @@ def efficiency_of(one: dict, two: dict) -> dict:
 def monte_carlo_part(args) -> dict:
     from modelgen.derive.symbolic import derive
     from modelgen.model.loading import load_model
-    from modelgen.simulation.montecarlo import MonteCarloSetup, run_monte_carlo, setup_key
+    from modelgen.simulation.montecarlo import MonteCarloSetup, run_monte_carlo, setup_key, symbolic_only
     from modelgen.simulation.filters import generated_filter_files
     from modelgen.simulation.scenario import load_profile
 
@@ -202,7 +203,8 @@ def monte_carlo_part(args) -> dict:
     mode, store_every = profile.filter.mode, max(1, int(round(profile.aiding_period / profile.filter.period)))
     key = setup_key(profile, None, derived.model, mode, store_every, args.implementation)
     code = generated_filter_files(derived) if args.implementation != "reference" else None
-    setup = MonteCarloSetup(profile, None, derived.model, mode, store_every, args.implementation, key, code)
+    setup = MonteCarloSetup(profile, None, derived.model, mode, store_every, args.implementation, key, code,
+                            symbolic_only(derived))  # what run_monte_carlo sends a worker
     set_up = {}
     with tempfile.TemporaryDirectory(prefix="modelgen-bench-cache-") as cache:
         for state in ("caches empty", "caches filled"):

@@ -4,6 +4,7 @@ import sys
 import time
 
 import numpy as np
+import pytest
 
 from modelgen.cluster import dask_client, import_on_workers
 
@@ -85,3 +86,32 @@ def test_the_collector_is_paused_for_a_set_up_and_restored_after_it():
         assert not gc.isenabled()  # a collector the caller had turned off stays off
     finally:
         gc.enable()
+
+
+def test_a_worker_takes_the_callers_derived_model_instead_of_deriving_it(paper_derived, monkeypatch):
+    import pickle
+
+    from modelgen.simulation import montecarlo
+
+    paper_derived._numeric  # the caller's model has made its lambdified matrices: code, which cannot travel
+    with pytest.raises(Exception):
+        pickle.dumps(paper_derived)
+    sent = pickle.loads(pickle.dumps(montecarlo.symbolic_only(paper_derived)))
+    assert all(getattr(sent, name) == getattr(paper_derived, name) for name in ("model", "F", "G", "H", "Q", "R"))
+
+    def refuse(model):
+        raise AssertionError("the worker derived the model again")
+
+    monkeypatch.setattr(montecarlo, "derive", refuse)
+    short = load_short_profile()
+    setup = montecarlo.MonteCarloSetup(short, None, paper_derived.model, short.filter.mode, 60, "reference", "test-key",
+                                       None, sent)
+    context = montecarlo._prepare(setup)
+    assert context["derived"] is sent
+    context["code_dir"].cleanup()
+
+
+def load_short_profile():
+    from modelgen.simulation.scenario import load_profile
+
+    return load_profile("profile_000").with_changes(hours=0.01, imu_rate=50.0)
