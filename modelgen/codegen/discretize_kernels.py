@@ -395,7 +395,11 @@ def horner_transition_block(plan: DiscretizePlan) -> DiscretizeBlock:
 
 
 def series_blocks(plan: DiscretizePlan) -> list[DiscretizeBlock]:
-    """The Horner chain: A = F h, the top level into either array, the dense level into either (and the last, where rows are left out), then E = A S."""
+    """The Horner chain: A = F h, the top level into either array, the dense level into either, then E = A S.
+
+    Where some rows are read by no row of F, the dense level leaves them out
+    and a last copy (k = 0, into S) computes every row.
+    """
     blocks = [horner_input_block(plan)]
     blocks += [horner_top_block(plan, parity) for parity in (0, 1)]
     blocks += [horner_level_block(plan, parity) for parity in (0, 1)]
