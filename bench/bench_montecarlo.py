@@ -120,12 +120,20 @@ def setup_child(setup_file: str) -> None:
 
 
 def measure_setup(setup, cache: Path) -> list[dict]:
-    """The set-up of a fresh worker process with the compile cache ``cache`` (its state as it is)."""
+    """The set-up of a fresh worker process with the caches in ``cache`` (their state as it is).
+
+    The child gets the environment a dask nanny gives the worker processes it
+    spawns (``distributed.nanny.pre-spawn-environ``: one BLAS / OpenMP thread).
+    """
+    import dask
+    import distributed  # noqa: F401  (registers the distributed configuration read below)
+
+    spawned = {name: str(value) for name, value in dask.config.get("distributed.nanny.pre-spawn-environ").items()}
     with tempfile.NamedTemporaryFile(suffix=".pickle") as handle:
         handle.write(pickle.dumps(setup))
         handle.flush()
         out = subprocess.run([sys.executable, __file__, "--setup-child", handle.name], check=True, capture_output=True,
-                             text=True, env={**os.environ, "MODELGEN_CACHE_DIR": str(cache)})
+                             text=True, env={**os.environ, **spawned, "MODELGEN_CACHE_DIR": str(cache)})
     return [{"step": step, "wall_s": wall, "cpu_s": cpu} for step, wall, cpu in json.loads(out.stdout.splitlines()[-1])]
 
 
