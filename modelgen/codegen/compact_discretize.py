@@ -37,6 +37,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cached_property
 
+from modelgen.codegen.kernels import OperationCount
 from modelgen.codegen.structure import FilterStructure
 
 
@@ -196,3 +197,98 @@ class CompactDiscretizeTables:
         if largest < 256:
             return "unsigned char"
         return "unsigned short" if largest < 65536 else "uint32_t"
+
+
+@dataclass(frozen=True)
+class CompactDiscretizeCost:
+    """Flops of the compact discretize, counted from its tables (:func:`compact_discretize_cost`).
+
+    ``series``: at each order 1..N (A = F h, the Horner levels, E = A S and
+    the identity added to Phi); ``doubling``: one doubling; ``noise``: S G
+    and Q_d (or Gamma and q / T in the UD form); ``norm``: the balancing's
+    sweeps (at most 8), ||F||_D and the plan's bound.
+    """
+
+    series: tuple[OperationCount, ...]
+    doubling: OperationCount
+    noise: OperationCount
+    norm: OperationCount
+
+    def first(self, order: int) -> OperationCount:
+        """One call at ``order`` without doubling: norm, series and noise."""
+        parts = (self.norm, self.series[order - 1], self.noise)
+        return OperationCount(sum(c.multiplications for c in parts), sum(c.additions for c in parts))
+
+
+def _same(count: int) -> OperationCount:
+    """``count`` products each summed once (a ``+= a * b``)."""
+    return OperationCount(count, count)
+
+
+def horner_level_flops(tables: CompactDiscretizeTables) -> int:
+    """Products (each with its sum) of one ``horner_level`` call: a span of row c per wide entry F(i, c), one per other."""
+    t = tables.tables()
+    count = 0
+    for i in range(tables.structure.n_states):
+        for x in range(t["F_row_start"][i], t["F_row_start"][i + 1]):
+            c = t["A_col"][x]
+            count += t["span_end"][c] - t["span_start"][c] if x < t["A_diagonal_from"][i] else 1
+    return count
+
+
+def compact_discretize_cost(tables: CompactDiscretizeTables, order: int, ud: bool, fixed_scaling: bool) -> CompactDiscretizeCost:
+    """The flops the compact C (c_discretize.c.j2's compact branch) runs, counted over the tables it runs over.
+
+    Every ``*`` and ``+`` of a loop body counts once per trip, whatever the
+    values (the stored zeros of a span are multiplied too); the finiteness
+    probes (``check += v - v``) are not counted, q / T counts as a
+    multiplication.  The series at order m: A = F h, the top level (one
+    product per nonzero of F), the second (m >= 2: per nonzero F(i, c), its
+    diagonal and row c's off-diagonal entries of F), m - 2 span levels and
+    E = A S (each :func:`horner_level_flops`), then Phi = I + E.  The norm:
+    with D fixed at generation time (``fixed_scaling``) one product and sum
+    per nonzero of F; otherwise also up to 8 sweeps, each a product and two
+    sums per off-diagonal nonzero; the plan's bound as the unrolled count's
+    (3 m + 6 products, m + 2 sums).
+    """
+    t, structure = tables.tables(), tables.structure
+    n = structure.n_states
+    f_row_start, a_col = t["F_row_start"], t["A_col"]
+    nnz_f = f_row_start[n]
+    closure_start, closure_col = t["closure_start"], t["closure_col"]
+    g_row_start = t["G_row_start"]
+    noise = OperationCount(0, 0)
+    if structure.G.shape[1]:
+        products = sum(g_row_start[j + 1] - g_row_start[j] for i in range(n)
+                       for j in closure_col[closure_start[i]:closure_start[i + 1]])
+        noise = _same(products)  # S G
+        n_gamma = t["gamma_row_start"][n]
+        if ud:
+            noise = OperationCount(noise.multiplications + n_gamma + structure.G.shape[1], noise.additions)  # T S G, q / T
+        elif tables.qd_rows and any(tables.qd_rows):
+            column = t["gamma_column_start"]
+            pairs = sum(k * (k + 1) // 2 for k in (column[w + 1] - column[w] for w in range(len(column) - 1)))
+            noise = OperationCount(noise.multiplications + 2 * n_gamma + pairs, noise.additions + pairs)  # T q S G, Q_d
+    if not nnz_f:
+        return CompactDiscretizeCost(tuple(OperationCount(0, 0) for _ in range(order)), OperationCount(0, 0), noise, OperationCount(0, 0))
+    level = horner_level_flops(tables)
+    off_diagonal = [sum(1 for x in range(f_row_start[c], f_row_start[c + 1]) if a_col[x] != c) for c in range(n)]
+    second = sum(1 + off_diagonal[a_col[x]] for x in range(nnz_f))
+    series = []
+    for m in range(1, order + 1):
+        products = nnz_f + (second if m >= 2 else 0) + (max(m - 2, 0) + 1) * level
+        series.append(OperationCount(nnz_f + products, products + n))  # A = F h; + I on Phi's diagonal
+    doubling_products = 0
+    entries = 0
+    for i in range(n):
+        if f_row_start[i] == f_row_start[i + 1]:
+            continue  # a row of random constants: E = 0, S = e_i
+        for c in range(closure_start[i], closure_start[i + 1]):
+            j = closure_col[c]
+            wide = c < t["closure_diagonal_from"][i]
+            doubling_products += 2 * (t["span_end"][j] - t["span_start"][j] if wide else 1)  # E^2 and E S
+            entries += 1
+    doubling = OperationCount(doubling_products + entries, doubling_products + 3 * entries)  # 2 E + E^2, S + E S / 2
+    sweeps = 0 if fixed_scaling else 8 * sum(off_diagonal)
+    norm = OperationCount(sweeps + nnz_f + 3 * order + 6, 2 * sweeps + nnz_f + order + 2)
+    return CompactDiscretizeCost(tuple(series), doubling, noise, norm)

@@ -34,6 +34,7 @@ from modelgen.codegen.kernels import (
     ud_weights_cost,
     update_cost,
 )
+from modelgen.codegen.compact_discretize import CompactDiscretizeCost, CompactDiscretizeTables, compact_discretize_cost
 from modelgen.codegen.discretize_kernels import (
     DiscretizeBlock,
     DiscretizePlan,
@@ -176,6 +177,7 @@ class FilterDescription:
             "discretize": discretize_cost(structure, options.taylor_order),
             "discretize, each doubling (long steps)": doubling_cost(structure),
             **self.unrolled_discretize_costs,
+            **self.compact_discretize_costs,
             **self.van_loan_costs,
             "predict (C)": predict,
             "predict (Python)": python_predict_cost(structure),
@@ -194,6 +196,25 @@ class FilterDescription:
         return {
             "discretize": first,
             "discretize, each doubling (long steps)": doubling,
+        }
+
+    @cached_property
+    def compact_discretize_cost(self) -> CompactDiscretizeCost | None:
+        """The compact discretize's flops, counted from the tables its loops run over (None when unrolled or Van Loan's)."""
+        if self.discretize_unrolled or self.options.van_loan:
+            return None
+        fixed = nominal_scaling(self.derived) is not None
+        return compact_discretize_cost(CompactDiscretizeTables(self.structure), self.options.taylor_order, self.options.ud, fixed)
+
+    @cached_property
+    def compact_discretize_costs(self) -> dict[str, OperationCount]:
+        """The compact discretize's counts, replacing the loop formula's (empty when it is unrolled)."""
+        cost = self.compact_discretize_cost
+        if cost is None:
+            return {}
+        return {
+            "discretize": cost.first(self.options.taylor_order),
+            "discretize, each doubling (long steps)": cost.doubling,
         }
 
     @cached_property
