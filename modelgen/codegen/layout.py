@@ -106,7 +106,9 @@ class UnrolledDiscretizeSizes:
     """Compressed scratch of the unrolled discretize (modelgen.codegen.discretize_kernels).
 
     ``terms``: entries of each of the two term arrays; ``active``: entries of
-    Phi in rows that are not e_i (S is kept there only).
+    S (``DiscretizePlan.segment_size``: each block row's dense segment over
+    its span of Phi's pattern, padded to an even length, and one entry per
+    diagonal row; the rows e_i are not stored).
     """
 
     terms: int
@@ -117,7 +119,7 @@ def _unrolled_discretize_scratch(prefix: str, sizes: ModelSizes, unrolled: Unrol
     """Members of the unrolled discretize's scratch: compressed terms, S, F h and the balancing's vectors."""
     return (
         Field("term", (Dim("2", 2), Dim(f"{prefix}_N_TERMS", unrolled.terms)), "the Horner chain's odd levels R_k (term[1]); the doubling's new values; S G"),
-        Field("S", (Dim(f"{prefix}_N_ACTIVE_ENTRIES", unrolled.active),), "S = sum (F h)^k / (k + 1)! at the active entries of Phi (and the even levels R_k)"),
+        Field("S", (Dim(f"{prefix}_N_ACTIVE_ENTRIES", unrolled.active),), "S = sum (F h)^k / (k + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal rows"),
         Field("fh", (nnz_f,), "F h at the nonzeros of F"),
         Field("row_sum", (N,), "balancing: off-diagonal row sums of D^-1 |F| D"),
         Field("col_sum", (N,), "balancing: off-diagonal column sums of D^-1 |F| D"),
