@@ -34,6 +34,7 @@ import importlib
 import json
 import logging
 import os
+import sys
 import uuid
 from collections import OrderedDict
 from contextlib import contextmanager
@@ -158,7 +159,13 @@ def import_on_workers(client: Any, module: str) -> None:
 
 
 def import_long_lived(module: str) -> None:
-    """Import ``module`` with the collector paused, then keep everything made so far out of its sight (``gc.freeze``)."""
+    """Import ``module`` with the collector paused, then keep everything made so far out of its sight (``gc.freeze``).
+
+    Only a first import freezes: a worker asked again, study after study,
+    must not freeze the garbage cycles of its earlier studies for good.
+    """
+    if module in sys.modules:
+        return
     with collector_paused():
         importlib.import_module(module)
     gc.freeze()

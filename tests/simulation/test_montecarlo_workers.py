@@ -115,3 +115,23 @@ def load_short_profile():
     from modelgen.simulation.scenario import load_profile
 
     return load_profile("profile_000").with_changes(hours=0.01, imu_rate=50.0)
+
+
+def test_only_a_first_import_freezes_what_the_collector_sees(tmp_path, monkeypatch):
+    import gc
+
+    from modelgen.cluster import import_long_lived
+
+    (tmp_path / "modelgen_test_task_code.py").write_text("VALUE = 1\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "modelgen_test_task_code", raising=False)
+    frozen = gc.get_freeze_count()
+    try:
+        import_long_lived("modelgen_test_task_code")
+        assert sys.modules["modelgen_test_task_code"].VALUE == 1 and gc.get_freeze_count() > frozen
+        now = gc.get_freeze_count()
+        import_long_lived("modelgen_test_task_code")  # imported already (a later study): nothing frozen
+        assert gc.get_freeze_count() == now
+    finally:
+        gc.unfreeze()
+        sys.modules.pop("modelgen_test_task_code", None)
