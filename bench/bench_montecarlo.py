@@ -50,6 +50,7 @@ Usage: nice -n 10 python bench/bench_montecarlo.py [--runs 16] [--hours 1] [--fi
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
@@ -140,6 +141,20 @@ def measure_setup(setup, cache: Path) -> list[dict]:
 # -- 2. scaling -------------------------------------------------------------------------------------
 
 
+@contextlib.contextmanager
+def cache_folder(path: str):
+    """$MODELGEN_CACHE_DIR set to ``path`` for the block (processes started in it inherit it), then as it was."""
+    before = os.environ.get("MODELGEN_CACHE_DIR")
+    os.environ["MODELGEN_CACHE_DIR"] = path
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop("MODELGEN_CACHE_DIR", None)
+        else:
+            os.environ["MODELGEN_CACHE_DIR"] = before
+
+
 def timed_study(client, profile, derived, runs: int, implementation: str) -> tuple[dict, object]:
     """One study on ``client``: wall, the caller's CPU, each worker's CPU (set-up and runs), the machine's
     1-minute load average as it starts (other processes included), and the result."""
@@ -161,8 +176,7 @@ def scaling(workers: int, profile, derived, runs: int, implementation: str) -> t
     from modelgen.cluster import dask_client
 
     measured = {}
-    with tempfile.TemporaryDirectory(prefix="modelgen-bench-cache-") as cache:
-        os.environ["MODELGEN_CACHE_DIR"] = cache  # the workers started below inherit it
+    with tempfile.TemporaryDirectory(prefix="modelgen-bench-cache-") as cache, cache_folder(cache):
         with dask_client(workers=workers) as client:
             client.wait_for_workers(workers)
             measured[STATES[0]], result = timed_study(client, profile, derived, runs, implementation)
@@ -203,8 +217,7 @@ def monte_carlo_part(args) -> dict:
     profile = load_profile("profile_000").with_changes(hours=args.hours, imu_rate=args.rate)
     derived = derive(load_model(profile.filter.model))
     print(f"Monte Carlo: {args.runs} runs of {args.hours:g} h at {args.rate:g} Hz, filter {args.implementation}")
-    with tempfile.TemporaryDirectory(prefix="modelgen-bench-warmup-") as cache:
-        os.environ["MODELGEN_CACHE_DIR"] = cache
+    with tempfile.TemporaryDirectory(prefix="modelgen-bench-warmup-") as cache, cache_folder(cache):
         print("  filling numba's cache (a 30-s flight here, with a compile cache of its own) ...", flush=True)
         run_monte_carlo(profile.with_changes(hours=30 / 3600), derived, 1, implementation=args.implementation)
 
