@@ -12,6 +12,8 @@ counts, not the old dense-loop formula.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -116,3 +118,180 @@ def test_a_large_model_header_prints_the_compact_count():
         assert description.costs["discretize, each doubling (long steps)"] == cost.doubling
         assert f"discretize: {cost.first(options.taylor_order)}" in description.cost_lines()
         assert cost.first(options.taylor_order).total < discretize_cost(description.structure, options.taylor_order).total / 2
+
+
+# --- an instrumented run: gcov's line counts of the generated C, times each line's flops ---------------
+
+#: The compact discretize's functions whose arithmetic the count covers (the plan's bound, taylor_plan,
+#: and the balancing's integer steps are not floating-point work of the series).
+COUNTED = ("add_scaled_span", "horner_level", "horner_top_level", "horner_second_level", "doubling",
+           "noise_input", "process_noise", "balanced_norm", "_discretize")
+
+MAIN = """#include <stdio.h>
+#include <stdlib.h>
+#include "{name}.h"
+static {name}_matrices m;
+static {name}_transition t;
+static {name}_workspace w;
+int main(int argc, char **argv)
+{{
+    int e;
+    (void)argc;
+    for (e = 0; e < {P}_NNZ_F; ++e) m.F[e] = 0.01 * ((e % 5) + 1) * ((e % 2) ? 1.0 : -1.0);
+    for (e = 0; e < {P}_NNZ_G; ++e) m.G[e] = 1.0 + 0.1 * e;
+    for (e = 0; e < {P}_N_NOISES; ++e) m.q[e] = 1.0;
+    printf("%d\\n", {name}_discretize(&m, atof(argv[1]), &t, &w));
+    return 0;
+}}
+"""
+
+
+def _strip(text: str) -> str:
+    """``text`` without index brackets and call arguments (integer arithmetic, or counted in the callee)."""
+    out, stack = [], []
+    for k, ch in enumerate(text):
+        if ch in "[(":
+            call = ch == "(" and k > 0 and (text[k - 1].isalnum() or text[k - 1] == "_")
+            stack.append(ch == "[" or call or (stack and stack[-1]))
+            if not stack[-1]:
+                out.append(ch)
+            continue
+        if ch in "])":
+            hidden = stack.pop()
+            if not hidden:
+                out.append(ch)
+            continue
+        if not (stack and stack[-1]):
+            out.append(ch)
+    return "".join(out)
+
+
+def line_flops(source: str) -> tuple[int, int]:
+    """(mul, add) of one C statement: ``*`` and ``/`` are products, binary ``+`` and ``-`` and ``+=`` sums.
+
+    Loop and branch headers, declarations without a value and the finiteness
+    probes (``check += v - v``) count nothing.
+    """
+    text = re.sub(r"/\*.*?(\*/|$)", "", source).strip()
+    if not text.endswith(";") or text.startswith(("for ", "if ", "} else", "return", "check +=")) or "check += " in text:
+        return 0, 0
+    text = _strip(text[:-1])
+    if " += " in text:
+        rhs, add = text.split(" += ", 1)[1], 1
+    elif " = " in text:
+        rhs, add = text.split(" = ", 1)[1], 0
+    else:
+        return 0, 0
+    if "?" in rhs:
+        return 0, 0
+    return rhs.count(" * ") + rhs.count(" / "), add + rhs.count(" + ") + rhs.count(" - ")
+
+
+def measured_run(folder, name: str, T: float) -> dict[str, object]:
+    """Run ``<name>_discretize`` at step T under gcov: its flops, order, doublings and balancing sweeps."""
+    import subprocess
+
+    (folder / "main.c").write_text(MAIN.format(name=name, P=name.upper()))
+    for stale in folder.glob("*.gcda"):
+        stale.unlink()
+    cc = ["gcc", "-std=c99", "-O0", "--coverage", "-c"]
+    subprocess.run([*cc, f"{name}.c"], cwd=folder, check=True)
+    subprocess.run([*cc, "main.c"], cwd=folder, check=True)
+    subprocess.run(["gcc", "--coverage", "-o", "run", f"{name}.o", "main.o", "-lm"], cwd=folder, check=True)
+    assert subprocess.run(["./run", repr(T)], cwd=folder, check=True, capture_output=True, text=True).stdout.strip() == "0"
+    subprocess.run(["gcov", f"{name}.c"], cwd=folder, check=True, capture_output=True)
+    mul = add = 0
+    function = ""
+    calls: dict[str, int] = {}
+    by_function: dict[str, int] = {}
+    pending, pending_count = "", ""
+    for line in (folder / f"{name}.c.gcov").read_text().splitlines():
+        count_text, _, rest = line.partition(":")
+        source = rest.partition(":")[2]
+        if source and not source[0].isspace() and "(" in source and not source.rstrip().endswith(";"):
+            function = source.split("(")[0].split()[-1]
+        if pending:  # a statement continued on this line: counted once, with its first line's count
+            source, count_text, pending = pending + " " + source.strip(), pending_count, ""
+        elif source.startswith(" ") and source.rstrip().endswith(("*", "+", "-", ",", "(")):
+            pending, pending_count = source.rstrip(), count_text
+            continue
+        count_text = count_text.strip().rstrip("*")
+        if not count_text.isdigit():
+            continue
+        count = int(count_text)
+        for marker in ("horner_second_level(w", "horner_level(w->R[k", "doubling(w);", "changed |= balance_step("):
+            if marker in source:
+                calls[marker] = calls.get(marker, 0) + count
+        if function.endswith(COUNTED) and not (function.endswith("_discretize") and function != f"{name}_discretize"):
+            m, a = line_flops(source)
+            mul, add = mul + m * count, add + a * count
+            by_function[function] = by_function.get(function, 0) + (m + a) * count
+    second, levels = calls.get("horner_second_level(w", 0), calls.get("horner_level(w->R[k", 0)
+    return {
+        "flops": OperationCount(mul, add),
+        "order": 1 if not second else (2 if not levels else levels + 2),
+        "halvings": calls.get("doubling(w);", 0),
+        "sweeps": calls.get("changed |= balance_step(", 0),
+        "by_function": by_function,
+    }
+
+
+def test_the_line_rule_counts_the_template_statements():
+    """The rule of the instrumented count on the statements it meets: index arithmetic and calls' arguments are not flops."""
+    assert line_flops("        target[j + 1] += a * source[j + 1];") == (1, 1)
+    assert line_flops("            w->E_next[c] = E[i][j] + E[i][j] + w->E_row[j];") == (0, 2)
+    assert line_flops("            v = fabs(m->F[c]) * power_of_two(exponent[x_F_col[c]] - exponent[i]);") == (1, 0)
+    assert line_flops("        check += store_transition_row(t->Phi[i], w->R[1][i], span_start[i], span_end[i]);") == (0, 0)
+    assert line_flops("    for (j = start; j < end; j += 4) {") == (0, 0)
+    assert line_flops("        norm = v > norm ? v : norm;") == (0, 0)
+    assert line_flops("        t->qw[c] = m->q[c] / T;") == (1, 0)
+    assert line_flops("            out[i][c] += fh[x] * in[c][c]; /* row c of R is its diagonal */") == (1, 1)
+    assert line_flops("            out[i][c] += fh[x] * in[c][c]; /* a comment that goes on") == (1, 1)
+
+
+@pytest.mark.parametrize("model", ["paper", "chain"])
+@pytest.mark.parametrize("form", ["full", "ud"])
+def test_an_instrumented_run_of_the_c_does_the_counted_flops(model, form, paper_derived, tmp_path, monkeypatch):
+    """gcov's count of every executed flop of the compact C equals the tables' count at the order and doublings it ran.
+
+    The paper's model (D fixed at generation time) and a chain of 3 (D
+    balanced at run time) forced onto the compact loops, at a short step
+    (no doubling) and a long one (several).  The balancing runs as many
+    sweeps as it needs (at most 8, the count's bound): the expectation uses
+    the sweeps that ran; the plan's bound (taylor_plan) is left out of both.
+    """
+    import shutil
+
+    from modelgen.codegen import kernels
+    from modelgen.codegen.generate import generate_code
+    from modelgen.derive.discretization import nominal_scaling
+    from tests.codegen.generated_support import write_files
+
+    if shutil.which("gcov") is None:
+        pytest.skip("gcov is not installed")
+    derived = paper_derived if model == "paper" else derive(load_model_text(DEGENERATE[model], filename="m.yaml"))
+    name = derived.model.name
+    options = CodegenOptions(form="ud") if form == "ud" else CodegenOptions()
+    monkeypatch.setattr(kernels, "COMPACT_ABOVE_FLOPS", 0)
+    description = describe(derived, options)
+    assert not description.discretize_unrolled
+    fixed = nominal_scaling(derived) is not None
+    folder = write_files(tmp_path / "gen", generate_code(derived, options).files)
+    cost = description.compact_discretize_cost
+    structure = description.structure
+    nnz = int(structure.F.sum())
+    off = nnz - int(np.trace(structure.F.astype(int)))
+    n = structure.n_states
+    seen_doublings = set()
+    for T in (1e-7, 600.0):
+        run = measured_run(folder, name, T)
+        sweeps = run["sweeps"] // n
+        assert run["sweeps"] == sweeps * n and (sweeps == 0 if fixed else 1 <= sweeps <= 8)
+        series, h = cost.series[run["order"] - 1], run["halvings"]
+        expected = OperationCount(
+            series.multiplications + h * cost.doubling.multiplications + cost.noise.multiplications + nnz + sweeps * off,
+            series.additions + h * cost.doubling.additions + cost.noise.additions + nnz + 2 * sweeps * off,
+        )
+        assert run["flops"] == expected, (T, run)
+        seen_doublings.add(h > 0)
+    assert seen_doublings == {False, True}
