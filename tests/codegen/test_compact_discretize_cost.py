@@ -6,24 +6,31 @@ closure_col, closure_diagonal_from, gamma_column_start).  Here the same
 operations are counted from the structure alone (F, G, Phi's, Gamma's and
 Q_d's patterns, each row's span recomputed from Phi's pattern), loop by
 loop of c_discretize.c.j2's compact branch, so a table or a cost that
-drifts from the other fails.  The header of a large model must print these
-counts, not the old dense-loop formula.
+drifts from the other fails.  An instrumented run checks the C itself: gcov's
+line counts of the generated compact C times each statement's flops equal
+the count at the order and doublings the run chose.  The header of a large
+model must print these counts, not the old dense-loop formula.
 """
 
 from __future__ import annotations
 
 import re
+import shutil
+import subprocess
 
 import numpy as np
 import pytest
 
+from modelgen.codegen import kernels
 from modelgen.codegen.compact_discretize import CompactDiscretizeTables, compact_discretize_cost
-from modelgen.codegen.generate import describe
+from modelgen.codegen.generate import describe, generate_code
 from modelgen.codegen.kernels import OperationCount, discretize_cost
 from modelgen.codegen.options import CodegenOptions
 from modelgen.codegen.structure import FilterStructure, filter_structure
+from modelgen.derive.discretization import nominal_scaling
 from modelgen.derive.symbolic import derive
 from modelgen.model.loading import load_model_text
+from tests.codegen.generated_support import write_files
 from tests.codegen.large_model_support import large_model
 from tests.codegen.test_large_models import DEGENERATE
 
@@ -67,6 +74,7 @@ def pattern_count(structure: FilterStructure, order: int, ud: bool, fixed_scalin
 
 
 def structures() -> dict[str, FilterStructure]:
+    """The degenerate models' structures (no F, an empty row of F, a chain) and a 40-state augmented model's."""
     out = {}
     for name, text in DEGENERATE.items():
         derived = derive(load_model_text(text, filename="m.yaml"))
@@ -189,8 +197,6 @@ def line_flops(source: str) -> tuple[int, int]:
 
 def measured_run(folder, name: str, T: float) -> dict[str, object]:
     """Run ``<name>_discretize`` at step T under gcov: its flops, order, doublings and balancing sweeps."""
-    import subprocess
-
     (folder / "main.c").write_text(MAIN.format(name=name, P=name.upper()))
     for stale in folder.glob("*.gcda"):
         stale.unlink()
@@ -260,13 +266,6 @@ def test_an_instrumented_run_of_the_c_does_the_counted_flops(model, form, paper_
     sweeps as it needs (at most 8, the count's bound): the expectation uses
     the sweeps that ran; the plan's bound (taylor_plan) is left out of both.
     """
-    import shutil
-
-    from modelgen.codegen import kernels
-    from modelgen.codegen.generate import generate_code
-    from modelgen.derive.discretization import nominal_scaling
-    from tests.codegen.generated_support import write_files
-
     if shutil.which("gcov") is None:
         pytest.skip("gcov is not installed")
     derived = paper_derived if model == "paper" else derive(load_model_text(DEGENERATE[model], filename="m.yaml"))
