@@ -14,7 +14,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 130 operations after CSE
- *   discretize: 6976 mul + 5161 add = 12137 flops
+ *   discretize: 7422 mul + 5632 add = 13054 flops
  *   discretize, each doubling (long steps): 2764 mul + 2791 add = 5555 flops
  *   predict (C): 3906 mul + 3588 add = 7494 flops
  *   predict (Python): 6048 mul + 5832 add = 11880 flops
@@ -34,8 +34,8 @@
 #define ENU_DOPPLER18_NNZ_G 15
 #define ENU_DOPPLER18_NNZ_H 3
 #define ENU_DOPPLER18_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
-#define ENU_DOPPLER18_N_TERMS 160   /* entries of discretize's compressed term arrays */
-#define ENU_DOPPLER18_N_ACTIVE_ENTRIES 160   /* entries of Phi in rows that are not e_i */
+#define ENU_DOPPLER18_N_TERMS 168   /* entries of discretize's compressed term arrays */
+#define ENU_DOPPLER18_N_ACTIVE_ENTRIES 168   /* entries of Phi in rows that are not e_i */
 #define ENU_DOPPLER18_FORM_COVARIANCE 1
 
 #define ENU_DOPPLER18_OK 0
@@ -192,8 +192,8 @@ typedef struct {
 typedef struct {
     enu_doppler18_scalar term[2][ENU_DOPPLER18_N_TERMS]; /* the Horner chain's odd levels R_k
             (term[1]); the doubling's new values; S G */
-    enu_doppler18_scalar S[ENU_DOPPLER18_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! at the
-            active entries of Phi (and the even levels R_k) */
+    enu_doppler18_scalar S[ENU_DOPPLER18_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the
+            even levels R_k): each block row's dense segment, then the diagonal rows */
     enu_doppler18_scalar fh[ENU_DOPPLER18_NNZ_F]; /* F h at the nonzeros of F */
     enu_doppler18_scalar row_sum[ENU_DOPPLER18_N_STATES]; /* balancing: off-diagonal row sums of
             D^-1 |F| D */

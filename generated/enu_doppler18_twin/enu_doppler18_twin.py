@@ -12,7 +12,7 @@ parameter_vector() to build it from a mapping.
 
 Operation counts (floating-point, per call):
   matrices_evaluate: 131 operations after CSE
-  discretize: 6976 mul + 5161 add = 12137 flops
+  discretize: 7422 mul + 5632 add = 13054 flops
   discretize, each doubling (long steps): 2764 mul + 2791 add = 5555 flops
   predict (C): 3906 mul + 3588 add = 7494 flops
   predict (Python): 6048 mul + 5832 add = 11880 flops

@@ -11,7 +11,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 37 operations after CSE
- *   discretize: 2180 mul + 1405 add = 3585 flops
+ *   discretize: 2524 mul + 1675 add = 4199 flops
  *   discretize, each doubling (long steps): 879 mul + 880 add = 1759 flops
  *   predict (C): 1061 mul + 934 add = 1995 flops
  *   predict (Python): 2420 mul + 2321 add = 4741 flops
@@ -71,7 +71,7 @@ const unsigned char gps_pseudorange11_H_row[16] = { 0, 0, 0, 0, 1, 1, 1, 1, 2, 2
 const unsigned char gps_pseudorange11_H_col[16] = { 0, 1, 2, 9, 0, 1, 2, 9, 0, 1, 2, 9, 0, 1, 2, 9
         };
 
-/* First entry of each row of F and of H in the compact arrays (CSR row starts). */
+/* First entry of each row of H in the compact arrays (CSR row starts). */
 /* Entries (row, column) of Phi that the Taylor terms can change: rows that are not e_i. */
 #define GPS_PSEUDORANGE11_N_ACTIVE 65
 /* Halvings of T that discretize may take before it gives up (T / 2^64), and
@@ -304,21 +304,28 @@ static const gps_pseudorange11_scalar taylor_coefficient[10] = {
    bound on the relative error of Phi of order m after s doublings (growth = e^theta), one order of
    margin for the entries that couple blocks of F; the same operations in the same order as
    modelgen.derive.discretization.step_error_bound. */
+static gps_pseudorange11_scalar series_bound(const gps_pseudorange11_scalar growth, const
+        gps_pseudorange11_scalar theta, const gps_pseudorange11_scalar power,
+                const int taylor_order, const int halvings)
+{
+    const int order = taylor_order - 1; /* power = theta^(order+1) / (order+1)!, built as below */
+    if (!(theta < (gps_pseudorange11_scalar)(order + 2))) {
+        return HUGE_VAL;
+    }
+    return growth * (power * (gps_pseudorange11_scalar)(order + 2) /
+            ((gps_pseudorange11_scalar)(order + 2) - theta)) * power_of_two(halvings + 1);
+}
+
 static gps_pseudorange11_scalar step_error_bound(const gps_pseudorange11_scalar growth, const
         gps_pseudorange11_scalar theta, const int taylor_order,
                 const int halvings)
 {
-    const int order = taylor_order - 1;
     gps_pseudorange11_scalar power = 1.0;
     int k;
-    if (!(theta < (gps_pseudorange11_scalar)(order + 2))) {
-        return HUGE_VAL;
-    }
-    for (k = 1; k <= order + 1; ++k) {
+    for (k = 1; k <= taylor_order; ++k) {
         power = power * theta / (gps_pseudorange11_scalar)k;
     }
-    return growth * (power * (gps_pseudorange11_scalar)(order + 2) /
-            ((gps_pseudorange11_scalar)(order + 2) - theta)) * power_of_two(halvings + 1);
+    return series_bound(growth, theta, power, taylor_order, halvings);
 }
 
 /* The doublings s and the order m summed for ||F||_D = norm and step T
@@ -329,7 +336,7 @@ static int taylor_plan(const gps_pseudorange11_scalar norm, const gps_pseudorang
     /* the smallest s for which order TAYLOR_ORDER meets the tolerance, then the smallest order
        that meets it with that s */
     int s, k;
-    gps_pseudorange11_scalar theta = norm * T, growth = exp(norm * T);
+    gps_pseudorange11_scalar theta = norm * T, growth = exp(norm * T), power = 1.0;
     for (s = 0; !(step_error_bound(growth, theta, GPS_PSEUDORANGE11_TAYLOR_ORDER, s) <=
             GPS_PSEUDORANGE11_TAYLOR_TOLERANCE); ++s) {
         if (s == GPS_PSEUDORANGE11_MAX_DOUBLINGS) {
@@ -338,8 +345,15 @@ static int taylor_plan(const gps_pseudorange11_scalar norm, const gps_pseudorang
         theta = norm * (T * power_of_two(-(s + 1)));
         growth = exp(theta);
     }
-    for (k = 1; k < GPS_PSEUDORANGE11_TAYLOR_ORDER && !(step_error_bound(growth, theta, k, s) <=
-            GPS_PSEUDORANGE11_TAYLOR_TOLERANCE); ++k) {
+    /* the bound of order k from theta^k / k! carried from order k - 1: the same products and
+            quotients
+       as step_error_bound's loop, without repeating them for every order */
+    for (k = 1;; ++k) {
+        power = power * theta / (gps_pseudorange11_scalar)k;
+        if (k == GPS_PSEUDORANGE11_TAYLOR_ORDER || series_bound(growth, theta, power, k, s) <=
+                GPS_PSEUDORANGE11_TAYLOR_TOLERANCE) {
+            break;
+        }
     }
     *halvings = s;
     *order = k;
@@ -396,67 +410,76 @@ GPS_PSEUDORANGE11_BLOCK void horner_level_1_into_S(gps_pseudorange11_discretize_
     w->S[1] = w->fh[0]*c_in;
     w->S[2] = w->fh[1]*c_in;
     w->S[3] = w->fh[2]*c_in;
-    w->S[9] = w->fh[3]*c_in;
-    w->S[10] = c_out;
-    w->S[11] = w->fh[4]*c_in;
-    w->S[13] = w->fh[5]*c_in;
-    w->S[18] = w->fh[6]*c_in;
-    w->S[19] = w->fh[7]*c_in;
-    w->S[20] = c_out;
-    w->S[23] = w->fh[8]*c_in;
-    w->S[27] = w->fh[9]*c_in;
-    w->S[30] = c_out;
-    w->S[31] = w->fh[10]*c_in;
-    w->S[32] = w->fh[11]*c_in;
-    w->S[34] = w->fh[12]*c_in;
-    w->S[35] = w->fh[13]*c_in;
-    w->S[37] = w->fh[14]*c_in;
-    w->S[39] = w->fh[15]*c_in;
-    w->S[40] = c_out;
-    w->S[41] = w->fh[16]*c_in;
-    w->S[42] = w->fh[17]*c_in;
-    w->S[44] = w->fh[18]*c_in;
-    w->S[47] = w->fh[19]*c_in;
-    w->S[48] = w->fh[20]*c_in;
-    w->S[49] = w->fh[21]*c_in;
-    w->S[50] = c_out;
-    w->S[51] = w->fh[22]*c_in;
-    w->S[52] = w->fh[23]*c_in;
-    w->S[54] = c_out;
-    w->S[55] = w->fh[24]*c_in;
-    w->S[56] = w->fh[25]*c_in;
-    w->S[57] = w->fh[26]*c_in;
-    w->S[58] = c_out;
-    w->S[59] = w->fh[27]*c_in;
-    w->S[60] = w->fh[28]*c_in;
-    w->S[61] = w->fh[29]*c_in;
-    w->S[62] = c_out;
-    w->S[63] = c_out;
-    w->S[64] = w->fh[30]*c_in;
     w->S[4] = 0;
     w->S[5] = 0;
     w->S[6] = 0;
     w->S[7] = 0;
     w->S[8] = 0;
-    w->S[12] = 0;
-    w->S[14] = 0;
+    w->S[9] = 0;
+    w->S[10] = w->fh[3]*c_in;
+    w->S[11] = c_out;
+    w->S[12] = w->fh[4]*c_in;
+    w->S[13] = 0;
+    w->S[14] = w->fh[5]*c_in;
     w->S[15] = 0;
     w->S[16] = 0;
     w->S[17] = 0;
-    w->S[21] = 0;
-    w->S[22] = 0;
+    w->S[18] = 0;
+    w->S[19] = 0;
+    w->S[20] = w->fh[6]*c_in;
+    w->S[21] = w->fh[7]*c_in;
+    w->S[22] = c_out;
+    w->S[23] = 0;
     w->S[24] = 0;
-    w->S[25] = 0;
+    w->S[25] = w->fh[8]*c_in;
     w->S[26] = 0;
+    w->S[27] = 0;
     w->S[28] = 0;
     w->S[29] = 0;
-    w->S[33] = 0;
+    w->S[30] = w->fh[9]*c_in;
+    w->S[31] = 0;
+    w->S[32] = 0;
+    w->S[33] = c_out;
+    w->S[34] = w->fh[10]*c_in;
+    w->S[35] = w->fh[11]*c_in;
     w->S[36] = 0;
-    w->S[38] = 0;
-    w->S[43] = 0;
-    w->S[45] = 0;
-    w->S[46] = 0;
-    w->S[53] = 0;
+    w->S[37] = w->fh[12]*c_in;
+    w->S[38] = w->fh[13]*c_in;
+    w->S[39] = 0;
+    w->S[40] = 0;
+    w->S[41] = w->fh[14]*c_in;
+    w->S[42] = 0;
+    w->S[43] = w->fh[15]*c_in;
+    w->S[44] = c_out;
+    w->S[45] = w->fh[16]*c_in;
+    w->S[46] = w->fh[17]*c_in;
+    w->S[47] = 0;
+    w->S[48] = w->fh[18]*c_in;
+    w->S[49] = 0;
+    w->S[50] = 0;
+    w->S[51] = 0;
+    w->S[52] = w->fh[19]*c_in;
+    w->S[53] = w->fh[20]*c_in;
+    w->S[54] = w->fh[21]*c_in;
+    w->S[55] = c_out;
+    w->S[56] = w->fh[22]*c_in;
+    w->S[57] = w->fh[23]*c_in;
+    w->S[58] = 0;
+    w->S[59] = 0;
+    w->S[60] = c_out;
+    w->S[61] = w->fh[24]*c_in;
+    w->S[62] = w->fh[25]*c_in;
+    w->S[63] = 0;
+    w->S[64] = w->fh[26]*c_in;
+    w->S[65] = c_out;
+    w->S[66] = w->fh[27]*c_in;
+    w->S[67] = 0;
+    w->S[68] = w->fh[28]*c_in;
+    w->S[69] = w->fh[29]*c_in;
+    w->S[70] = c_out;
+    w->S[71] = 0;
+    w->S[72] = c_out;
+    w->S[73] = w->fh[30]*c_in;
 }
 
 GPS_PSEUDORANGE11_BLOCK void horner_level_1_into_term(gps_pseudorange11_discretize_scratch *restrict
@@ -466,587 +489,257 @@ GPS_PSEUDORANGE11_BLOCK void horner_level_1_into_term(gps_pseudorange11_discreti
     w->term[1][1] = w->fh[0]*c_in;
     w->term[1][2] = w->fh[1]*c_in;
     w->term[1][3] = w->fh[2]*c_in;
-    w->term[1][9] = w->fh[3]*c_in;
-    w->term[1][10] = c_out;
-    w->term[1][11] = w->fh[4]*c_in;
-    w->term[1][13] = w->fh[5]*c_in;
-    w->term[1][18] = w->fh[6]*c_in;
-    w->term[1][19] = w->fh[7]*c_in;
-    w->term[1][20] = c_out;
-    w->term[1][23] = w->fh[8]*c_in;
-    w->term[1][27] = w->fh[9]*c_in;
-    w->term[1][30] = c_out;
-    w->term[1][31] = w->fh[10]*c_in;
-    w->term[1][32] = w->fh[11]*c_in;
-    w->term[1][34] = w->fh[12]*c_in;
-    w->term[1][35] = w->fh[13]*c_in;
-    w->term[1][37] = w->fh[14]*c_in;
-    w->term[1][39] = w->fh[15]*c_in;
-    w->term[1][40] = c_out;
-    w->term[1][41] = w->fh[16]*c_in;
-    w->term[1][42] = w->fh[17]*c_in;
-    w->term[1][44] = w->fh[18]*c_in;
-    w->term[1][47] = w->fh[19]*c_in;
-    w->term[1][48] = w->fh[20]*c_in;
-    w->term[1][49] = w->fh[21]*c_in;
-    w->term[1][50] = c_out;
-    w->term[1][51] = w->fh[22]*c_in;
-    w->term[1][52] = w->fh[23]*c_in;
-    w->term[1][54] = c_out;
-    w->term[1][55] = w->fh[24]*c_in;
-    w->term[1][56] = w->fh[25]*c_in;
-    w->term[1][57] = w->fh[26]*c_in;
-    w->term[1][58] = c_out;
-    w->term[1][59] = w->fh[27]*c_in;
-    w->term[1][60] = w->fh[28]*c_in;
-    w->term[1][61] = w->fh[29]*c_in;
-    w->term[1][62] = c_out;
-    w->term[1][63] = c_out;
-    w->term[1][64] = w->fh[30]*c_in;
-}
-
-GPS_PSEUDORANGE11_BLOCK void horner_level_2_into_S(gps_pseudorange11_discretize_scratch *restrict w,
-        const gps_pseudorange11_scalar c_out, const gps_pseudorange11_scalar c_in)
-{
-    w->S[0] = c_out + w->fh[0]*w->term[1][9] + w->fh[1]*w->term[1][18] + w->fh[2]*w->term[1][27];
-    w->S[1] = w->fh[0]*w->term[1][10] + w->fh[1]*w->term[1][19];
-    w->S[2] = w->fh[0]*w->term[1][11] + w->fh[1]*w->term[1][20];
-    w->S[3] = w->fh[2]*w->term[1][30];
-    w->S[4] = w->fh[0]*w->term[1][13] + w->fh[2]*w->term[1][31];
-    w->S[5] = w->fh[1]*w->term[1][23] + w->fh[2]*w->term[1][32];
-    w->S[7] = w->fh[2]*w->term[1][34];
-    w->S[8] = w->fh[2]*w->term[1][35];
-    w->S[9] = w->fh[3]*w->term[1][0] + w->fh[4]*w->term[1][18];
-    w->S[10] = c_out + w->fh[3]*w->term[1][1] + w->fh[4]*w->term[1][19] + w->fh[5]*w->term[1][37];
-    w->S[11] = w->fh[3]*w->term[1][2] + w->fh[4]*w->term[1][20];
-    w->S[12] = w->fh[3]*w->term[1][3] + w->fh[5]*w->term[1][39];
-    w->S[13] = w->fh[5]*w->term[1][40];
-    w->S[14] = w->fh[4]*w->term[1][23] + w->fh[5]*w->term[1][41];
-    w->S[15] = w->fh[5]*w->term[1][42];
-    w->S[17] = w->fh[5]*w->term[1][44];
-    w->S[18] = w->fh[6]*w->term[1][0] + w->fh[7]*w->term[1][9];
-    w->S[19] = w->fh[6]*w->term[1][1] + w->fh[7]*w->term[1][10];
-    w->S[20] = c_out + w->fh[6]*w->term[1][2] + w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][47];
-    w->S[21] = w->fh[6]*w->term[1][3] + w->fh[8]*w->term[1][48];
-    w->S[22] = w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][49];
-    w->S[23] = w->fh[8]*w->term[1][50];
-    w->S[24] = w->fh[8]*w->term[1][51];
-    w->S[25] = w->fh[8]*w->term[1][52];
-    w->S[27] = w->fh[9]*w->term[1][0];
-    w->S[28] = w->fh[9]*w->term[1][1] + w->fh[10]*w->term[1][37];
-    w->S[29] = w->fh[9]*w->term[1][2] + w->fh[11]*w->term[1][47];
-    w->S[30] = c_out + w->fh[9]*w->term[1][3] + w->fh[10]*w->term[1][39] + w->fh[11]*w->term[1][48];
-    w->S[31] = w->fh[10]*w->term[1][40] + w->fh[11]*w->term[1][49];
-    w->S[32] = w->fh[10]*w->term[1][41] + w->fh[11]*w->term[1][50];
-    w->S[33] = w->fh[10]*w->term[1][42] + w->fh[11]*w->term[1][51] + w->fh[12]*w->term[1][57] +
-            w->fh[13]*w->term[1][60];
-    w->S[34] = w->fh[11]*w->term[1][52] + w->fh[12]*w->term[1][58] + w->fh[13]*w->term[1][61];
-    w->S[35] = w->fh[10]*w->term[1][44] + w->fh[12]*w->term[1][59] + w->fh[13]*w->term[1][62];
-    w->S[36] = w->fh[14]*w->term[1][9] + w->fh[15]*w->term[1][27];
-    w->S[37] = w->fh[14]*w->term[1][10];
-    w->S[38] = w->fh[14]*w->term[1][11] + w->fh[16]*w->term[1][47];
-    w->S[39] = w->fh[15]*w->term[1][30] + w->fh[16]*w->term[1][48];
-    w->S[40] = c_out + w->fh[14]*w->term[1][13] + w->fh[15]*w->term[1][31] +
-            w->fh[16]*w->term[1][49];
-    w->S[41] = w->fh[15]*w->term[1][32] + w->fh[16]*w->term[1][50];
-    w->S[42] = w->fh[16]*w->term[1][51] + w->fh[17]*w->term[1][54] + w->fh[18]*w->term[1][60];
-    w->S[43] = w->fh[15]*w->term[1][34] + w->fh[16]*w->term[1][52] + w->fh[17]*w->term[1][55] +
-            w->fh[18]*w->term[1][61];
-    w->S[44] = w->fh[15]*w->term[1][35] + w->fh[17]*w->term[1][56] + w->fh[18]*w->term[1][62];
-    w->S[45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][27];
-    w->S[46] = w->fh[19]*w->term[1][19] + w->fh[21]*w->term[1][37];
-    w->S[47] = w->fh[19]*w->term[1][20];
-    w->S[48] = w->fh[20]*w->term[1][30] + w->fh[21]*w->term[1][39];
-    w->S[49] = w->fh[20]*w->term[1][31] + w->fh[21]*w->term[1][40];
-    w->S[50] = c_out + w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][32] +
-            w->fh[21]*w->term[1][41];
-    w->S[51] = w->fh[21]*w->term[1][42] + w->fh[22]*w->term[1][54] + w->fh[23]*w->term[1][57];
-    w->S[52] = w->fh[20]*w->term[1][34] + w->fh[22]*w->term[1][55] + w->fh[23]*w->term[1][58];
-    w->S[53] = w->fh[20]*w->term[1][35] + w->fh[21]*w->term[1][44] + w->fh[22]*w->term[1][56] +
-            w->fh[23]*w->term[1][59];
-    w->S[54] = c_out + w->fh[24]*w->term[1][57] + w->fh[25]*w->term[1][60];
-    w->S[55] = w->fh[24]*w->term[1][58] + w->fh[25]*w->term[1][61];
-    w->S[56] = w->fh[24]*w->term[1][59] + w->fh[25]*w->term[1][62];
-    w->S[57] = w->fh[26]*w->term[1][54] + w->fh[27]*w->term[1][60];
-    w->S[58] = c_out + w->fh[26]*w->term[1][55] + w->fh[27]*w->term[1][61];
-    w->S[59] = w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][62];
-    w->S[60] = w->fh[28]*w->term[1][54] + w->fh[29]*w->term[1][57];
-    w->S[61] = w->fh[28]*w->term[1][55] + w->fh[29]*w->term[1][58];
-    w->S[62] = c_out + w->fh[28]*w->term[1][56] + w->fh[29]*w->term[1][59];
-    w->S[63] = c_out;
-    w->S[64] = w->fh[30]*c_in;
-    w->S[6] = 0;
-    w->S[16] = 0;
-    w->S[26] = 0;
-}
-
-GPS_PSEUDORANGE11_BLOCK void horner_level_2_into_term(gps_pseudorange11_discretize_scratch *restrict
-        w, const gps_pseudorange11_scalar c_out, const gps_pseudorange11_scalar c_in)
-{
-    w->term[1][0] = c_out + w->fh[0]*w->S[9] + w->fh[1]*w->S[18] + w->fh[2]*w->S[27];
-    w->term[1][1] = w->fh[0]*w->S[10] + w->fh[1]*w->S[19];
-    w->term[1][2] = w->fh[0]*w->S[11] + w->fh[1]*w->S[20];
-    w->term[1][3] = w->fh[2]*w->S[30];
-    w->term[1][4] = w->fh[0]*w->S[13] + w->fh[2]*w->S[31];
-    w->term[1][5] = w->fh[1]*w->S[23] + w->fh[2]*w->S[32];
-    w->term[1][7] = w->fh[2]*w->S[34];
-    w->term[1][8] = w->fh[2]*w->S[35];
-    w->term[1][9] = w->fh[3]*w->S[0] + w->fh[4]*w->S[18];
-    w->term[1][10] = c_out + w->fh[3]*w->S[1] + w->fh[4]*w->S[19] + w->fh[5]*w->S[37];
-    w->term[1][11] = w->fh[3]*w->S[2] + w->fh[4]*w->S[20];
-    w->term[1][12] = w->fh[3]*w->S[3] + w->fh[5]*w->S[39];
-    w->term[1][13] = w->fh[5]*w->S[40];
-    w->term[1][14] = w->fh[4]*w->S[23] + w->fh[5]*w->S[41];
-    w->term[1][15] = w->fh[5]*w->S[42];
-    w->term[1][17] = w->fh[5]*w->S[44];
-    w->term[1][18] = w->fh[6]*w->S[0] + w->fh[7]*w->S[9];
-    w->term[1][19] = w->fh[6]*w->S[1] + w->fh[7]*w->S[10];
-    w->term[1][20] = c_out + w->fh[6]*w->S[2] + w->fh[7]*w->S[11] + w->fh[8]*w->S[47];
-    w->term[1][21] = w->fh[6]*w->S[3] + w->fh[8]*w->S[48];
-    w->term[1][22] = w->fh[7]*w->S[13] + w->fh[8]*w->S[49];
-    w->term[1][23] = w->fh[8]*w->S[50];
-    w->term[1][24] = w->fh[8]*w->S[51];
-    w->term[1][25] = w->fh[8]*w->S[52];
-    w->term[1][27] = w->fh[9]*w->S[0];
-    w->term[1][28] = w->fh[9]*w->S[1] + w->fh[10]*w->S[37];
-    w->term[1][29] = w->fh[9]*w->S[2] + w->fh[11]*w->S[47];
-    w->term[1][30] = c_out + w->fh[9]*w->S[3] + w->fh[10]*w->S[39] + w->fh[11]*w->S[48];
-    w->term[1][31] = w->fh[10]*w->S[40] + w->fh[11]*w->S[49];
-    w->term[1][32] = w->fh[10]*w->S[41] + w->fh[11]*w->S[50];
-    w->term[1][33] = w->fh[10]*w->S[42] + w->fh[11]*w->S[51] + w->fh[12]*w->S[57] +
-            w->fh[13]*w->S[60];
-    w->term[1][34] = w->fh[11]*w->S[52] + w->fh[12]*w->S[58] + w->fh[13]*w->S[61];
-    w->term[1][35] = w->fh[10]*w->S[44] + w->fh[12]*w->S[59] + w->fh[13]*w->S[62];
-    w->term[1][36] = w->fh[14]*w->S[9] + w->fh[15]*w->S[27];
-    w->term[1][37] = w->fh[14]*w->S[10];
-    w->term[1][38] = w->fh[14]*w->S[11] + w->fh[16]*w->S[47];
-    w->term[1][39] = w->fh[15]*w->S[30] + w->fh[16]*w->S[48];
-    w->term[1][40] = c_out + w->fh[14]*w->S[13] + w->fh[15]*w->S[31] + w->fh[16]*w->S[49];
-    w->term[1][41] = w->fh[15]*w->S[32] + w->fh[16]*w->S[50];
-    w->term[1][42] = w->fh[16]*w->S[51] + w->fh[17]*w->S[54] + w->fh[18]*w->S[60];
-    w->term[1][43] = w->fh[15]*w->S[34] + w->fh[16]*w->S[52] + w->fh[17]*w->S[55] +
-            w->fh[18]*w->S[61];
-    w->term[1][44] = w->fh[15]*w->S[35] + w->fh[17]*w->S[56] + w->fh[18]*w->S[62];
-    w->term[1][45] = w->fh[19]*w->S[18] + w->fh[20]*w->S[27];
-    w->term[1][46] = w->fh[19]*w->S[19] + w->fh[21]*w->S[37];
-    w->term[1][47] = w->fh[19]*w->S[20];
-    w->term[1][48] = w->fh[20]*w->S[30] + w->fh[21]*w->S[39];
-    w->term[1][49] = w->fh[20]*w->S[31] + w->fh[21]*w->S[40];
-    w->term[1][50] = c_out + w->fh[19]*w->S[23] + w->fh[20]*w->S[32] + w->fh[21]*w->S[41];
-    w->term[1][51] = w->fh[21]*w->S[42] + w->fh[22]*w->S[54] + w->fh[23]*w->S[57];
-    w->term[1][52] = w->fh[20]*w->S[34] + w->fh[22]*w->S[55] + w->fh[23]*w->S[58];
-    w->term[1][53] = w->fh[20]*w->S[35] + w->fh[21]*w->S[44] + w->fh[22]*w->S[56] +
-            w->fh[23]*w->S[59];
-    w->term[1][54] = c_out + w->fh[24]*w->S[57] + w->fh[25]*w->S[60];
-    w->term[1][55] = w->fh[24]*w->S[58] + w->fh[25]*w->S[61];
-    w->term[1][56] = w->fh[24]*w->S[59] + w->fh[25]*w->S[62];
-    w->term[1][57] = w->fh[26]*w->S[54] + w->fh[27]*w->S[60];
-    w->term[1][58] = c_out + w->fh[26]*w->S[55] + w->fh[27]*w->S[61];
-    w->term[1][59] = w->fh[26]*w->S[56] + w->fh[27]*w->S[62];
-    w->term[1][60] = w->fh[28]*w->S[54] + w->fh[29]*w->S[57];
-    w->term[1][61] = w->fh[28]*w->S[55] + w->fh[29]*w->S[58];
-    w->term[1][62] = c_out + w->fh[28]*w->S[56] + w->fh[29]*w->S[59];
-    w->term[1][63] = c_out;
-    w->term[1][64] = w->fh[30]*c_in;
-}
-
-GPS_PSEUDORANGE11_BLOCK void horner_level_3_into_S(gps_pseudorange11_discretize_scratch *restrict w,
-        const gps_pseudorange11_scalar c_out, const gps_pseudorange11_scalar c_in)
-{
-    w->S[0] = c_out + w->fh[0]*w->term[1][9] + w->fh[1]*w->term[1][18] + w->fh[2]*w->term[1][27];
-    w->S[1] = w->fh[0]*w->term[1][10] + w->fh[1]*w->term[1][19] + w->fh[2]*w->term[1][28];
-    w->S[2] = w->fh[0]*w->term[1][11] + w->fh[1]*w->term[1][20] + w->fh[2]*w->term[1][29];
-    w->S[3] = w->fh[0]*w->term[1][12] + w->fh[1]*w->term[1][21] + w->fh[2]*w->term[1][30];
-    w->S[4] = w->fh[0]*w->term[1][13] + w->fh[1]*w->term[1][22] + w->fh[2]*w->term[1][31];
-    w->S[5] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][23] + w->fh[2]*w->term[1][32];
-    w->S[6] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][24] + w->fh[2]*w->term[1][33];
-    w->S[7] = w->fh[1]*w->term[1][25] + w->fh[2]*w->term[1][34];
-    w->S[8] = w->fh[0]*w->term[1][17] + w->fh[2]*w->term[1][35];
-    w->S[9] = w->fh[3]*w->term[1][0] + w->fh[4]*w->term[1][18] + w->fh[5]*w->term[1][36];
-    w->S[10] = c_out + w->fh[3]*w->term[1][1] + w->fh[4]*w->term[1][19] + w->fh[5]*w->term[1][37];
-    w->S[11] = w->fh[3]*w->term[1][2] + w->fh[4]*w->term[1][20] + w->fh[5]*w->term[1][38];
-    w->S[12] = w->fh[3]*w->term[1][3] + w->fh[4]*w->term[1][21] + w->fh[5]*w->term[1][39];
-    w->S[13] = w->fh[3]*w->term[1][4] + w->fh[4]*w->term[1][22] + w->fh[5]*w->term[1][40];
-    w->S[14] = w->fh[3]*w->term[1][5] + w->fh[4]*w->term[1][23] + w->fh[5]*w->term[1][41];
-    w->S[15] = w->fh[4]*w->term[1][24] + w->fh[5]*w->term[1][42];
-    w->S[16] = w->fh[3]*w->term[1][7] + w->fh[4]*w->term[1][25] + w->fh[5]*w->term[1][43];
-    w->S[17] = w->fh[3]*w->term[1][8] + w->fh[5]*w->term[1][44];
-    w->S[18] = w->fh[6]*w->term[1][0] + w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][45];
-    w->S[19] = w->fh[6]*w->term[1][1] + w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][46];
-    w->S[20] = c_out + w->fh[6]*w->term[1][2] + w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][47];
-    w->S[21] = w->fh[6]*w->term[1][3] + w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][48];
-    w->S[22] = w->fh[6]*w->term[1][4] + w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][49];
-    w->S[23] = w->fh[6]*w->term[1][5] + w->fh[7]*w->term[1][14] + w->fh[8]*w->term[1][50];
-    w->S[24] = w->fh[7]*w->term[1][15] + w->fh[8]*w->term[1][51];
-    w->S[25] = w->fh[6]*w->term[1][7] + w->fh[8]*w->term[1][52];
-    w->S[26] = w->fh[6]*w->term[1][8] + w->fh[7]*w->term[1][17] + w->fh[8]*w->term[1][53];
-    w->S[27] = w->fh[9]*w->term[1][0] + w->fh[10]*w->term[1][36] + w->fh[11]*w->term[1][45];
-    w->S[28] = w->fh[9]*w->term[1][1] + w->fh[10]*w->term[1][37] + w->fh[11]*w->term[1][46];
-    w->S[29] = w->fh[9]*w->term[1][2] + w->fh[10]*w->term[1][38] + w->fh[11]*w->term[1][47];
-    w->S[30] = c_out + w->fh[9]*w->term[1][3] + w->fh[10]*w->term[1][39] + w->fh[11]*w->term[1][48];
-    w->S[31] = w->fh[9]*w->term[1][4] + w->fh[10]*w->term[1][40] + w->fh[11]*w->term[1][49];
-    w->S[32] = w->fh[9]*w->term[1][5] + w->fh[10]*w->term[1][41] + w->fh[11]*w->term[1][50];
-    w->S[33] = w->fh[10]*w->term[1][42] + w->fh[11]*w->term[1][51] + w->fh[12]*w->term[1][57] +
-            w->fh[13]*w->term[1][60];
-    w->S[34] = w->fh[9]*w->term[1][7] + w->fh[10]*w->term[1][43] + w->fh[11]*w->term[1][52] +
-            w->fh[12]*w->term[1][58] + w->fh[13]*w->term[1][61];
-    w->S[35] = w->fh[9]*w->term[1][8] + w->fh[10]*w->term[1][44] + w->fh[11]*w->term[1][53] +
-            w->fh[12]*w->term[1][59] + w->fh[13]*w->term[1][62];
-    w->S[36] = w->fh[14]*w->term[1][9] + w->fh[15]*w->term[1][27] + w->fh[16]*w->term[1][45];
-    w->S[37] = w->fh[14]*w->term[1][10] + w->fh[15]*w->term[1][28] + w->fh[16]*w->term[1][46];
-    w->S[38] = w->fh[14]*w->term[1][11] + w->fh[15]*w->term[1][29] + w->fh[16]*w->term[1][47];
-    w->S[39] = w->fh[14]*w->term[1][12] + w->fh[15]*w->term[1][30] + w->fh[16]*w->term[1][48];
-    w->S[40] = c_out + w->fh[14]*w->term[1][13] + w->fh[15]*w->term[1][31] +
-            w->fh[16]*w->term[1][49];
-    w->S[41] = w->fh[14]*w->term[1][14] + w->fh[15]*w->term[1][32] + w->fh[16]*w->term[1][50];
-    w->S[42] = w->fh[14]*w->term[1][15] + w->fh[15]*w->term[1][33] + w->fh[16]*w->term[1][51] +
-            w->fh[17]*w->term[1][54] + w->fh[18]*w->term[1][60];
-    w->S[43] = w->fh[15]*w->term[1][34] + w->fh[16]*w->term[1][52] + w->fh[17]*w->term[1][55] +
-            w->fh[18]*w->term[1][61];
-    w->S[44] = w->fh[14]*w->term[1][17] + w->fh[15]*w->term[1][35] + w->fh[16]*w->term[1][53] +
-            w->fh[17]*w->term[1][56] + w->fh[18]*w->term[1][62];
-    w->S[45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][27] + w->fh[21]*w->term[1][36];
-    w->S[46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][28] + w->fh[21]*w->term[1][37];
-    w->S[47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][29] + w->fh[21]*w->term[1][38];
-    w->S[48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][30] + w->fh[21]*w->term[1][39];
-    w->S[49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][31] + w->fh[21]*w->term[1][40];
-    w->S[50] = c_out + w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][32] +
-            w->fh[21]*w->term[1][41];
-    w->S[51] = w->fh[19]*w->term[1][24] + w->fh[20]*w->term[1][33] + w->fh[21]*w->term[1][42] +
-            w->fh[22]*w->term[1][54] + w->fh[23]*w->term[1][57];
-    w->S[52] = w->fh[19]*w->term[1][25] + w->fh[20]*w->term[1][34] + w->fh[21]*w->term[1][43] +
-            w->fh[22]*w->term[1][55] + w->fh[23]*w->term[1][58];
-    w->S[53] = w->fh[20]*w->term[1][35] + w->fh[21]*w->term[1][44] + w->fh[22]*w->term[1][56] +
-            w->fh[23]*w->term[1][59];
-    w->S[54] = c_out + w->fh[24]*w->term[1][57] + w->fh[25]*w->term[1][60];
-    w->S[55] = w->fh[24]*w->term[1][58] + w->fh[25]*w->term[1][61];
-    w->S[56] = w->fh[24]*w->term[1][59] + w->fh[25]*w->term[1][62];
-    w->S[57] = w->fh[26]*w->term[1][54] + w->fh[27]*w->term[1][60];
-    w->S[58] = c_out + w->fh[26]*w->term[1][55] + w->fh[27]*w->term[1][61];
-    w->S[59] = w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][62];
-    w->S[60] = w->fh[28]*w->term[1][54] + w->fh[29]*w->term[1][57];
-    w->S[61] = w->fh[28]*w->term[1][55] + w->fh[29]*w->term[1][58];
-    w->S[62] = c_out + w->fh[28]*w->term[1][56] + w->fh[29]*w->term[1][59];
-    w->S[63] = c_out;
-    w->S[64] = w->fh[30]*c_in;
-}
-
-GPS_PSEUDORANGE11_BLOCK void horner_level_3_into_term(gps_pseudorange11_discretize_scratch *restrict
-        w, const gps_pseudorange11_scalar c_out, const gps_pseudorange11_scalar c_in)
-{
-    w->term[1][0] = c_out + w->fh[0]*w->S[9] + w->fh[1]*w->S[18] + w->fh[2]*w->S[27];
-    w->term[1][1] = w->fh[0]*w->S[10] + w->fh[1]*w->S[19] + w->fh[2]*w->S[28];
-    w->term[1][2] = w->fh[0]*w->S[11] + w->fh[1]*w->S[20] + w->fh[2]*w->S[29];
-    w->term[1][3] = w->fh[0]*w->S[12] + w->fh[1]*w->S[21] + w->fh[2]*w->S[30];
-    w->term[1][4] = w->fh[0]*w->S[13] + w->fh[1]*w->S[22] + w->fh[2]*w->S[31];
-    w->term[1][5] = w->fh[0]*w->S[14] + w->fh[1]*w->S[23] + w->fh[2]*w->S[32];
-    w->term[1][6] = w->fh[0]*w->S[15] + w->fh[1]*w->S[24] + w->fh[2]*w->S[33];
-    w->term[1][7] = w->fh[1]*w->S[25] + w->fh[2]*w->S[34];
-    w->term[1][8] = w->fh[0]*w->S[17] + w->fh[2]*w->S[35];
-    w->term[1][9] = w->fh[3]*w->S[0] + w->fh[4]*w->S[18] + w->fh[5]*w->S[36];
-    w->term[1][10] = c_out + w->fh[3]*w->S[1] + w->fh[4]*w->S[19] + w->fh[5]*w->S[37];
-    w->term[1][11] = w->fh[3]*w->S[2] + w->fh[4]*w->S[20] + w->fh[5]*w->S[38];
-    w->term[1][12] = w->fh[3]*w->S[3] + w->fh[4]*w->S[21] + w->fh[5]*w->S[39];
-    w->term[1][13] = w->fh[3]*w->S[4] + w->fh[4]*w->S[22] + w->fh[5]*w->S[40];
-    w->term[1][14] = w->fh[3]*w->S[5] + w->fh[4]*w->S[23] + w->fh[5]*w->S[41];
-    w->term[1][15] = w->fh[4]*w->S[24] + w->fh[5]*w->S[42];
-    w->term[1][16] = w->fh[3]*w->S[7] + w->fh[4]*w->S[25] + w->fh[5]*w->S[43];
-    w->term[1][17] = w->fh[3]*w->S[8] + w->fh[5]*w->S[44];
-    w->term[1][18] = w->fh[6]*w->S[0] + w->fh[7]*w->S[9] + w->fh[8]*w->S[45];
-    w->term[1][19] = w->fh[6]*w->S[1] + w->fh[7]*w->S[10] + w->fh[8]*w->S[46];
-    w->term[1][20] = c_out + w->fh[6]*w->S[2] + w->fh[7]*w->S[11] + w->fh[8]*w->S[47];
-    w->term[1][21] = w->fh[6]*w->S[3] + w->fh[7]*w->S[12] + w->fh[8]*w->S[48];
-    w->term[1][22] = w->fh[6]*w->S[4] + w->fh[7]*w->S[13] + w->fh[8]*w->S[49];
-    w->term[1][23] = w->fh[6]*w->S[5] + w->fh[7]*w->S[14] + w->fh[8]*w->S[50];
-    w->term[1][24] = w->fh[7]*w->S[15] + w->fh[8]*w->S[51];
-    w->term[1][25] = w->fh[6]*w->S[7] + w->fh[8]*w->S[52];
-    w->term[1][26] = w->fh[6]*w->S[8] + w->fh[7]*w->S[17] + w->fh[8]*w->S[53];
-    w->term[1][27] = w->fh[9]*w->S[0] + w->fh[10]*w->S[36] + w->fh[11]*w->S[45];
-    w->term[1][28] = w->fh[9]*w->S[1] + w->fh[10]*w->S[37] + w->fh[11]*w->S[46];
-    w->term[1][29] = w->fh[9]*w->S[2] + w->fh[10]*w->S[38] + w->fh[11]*w->S[47];
-    w->term[1][30] = c_out + w->fh[9]*w->S[3] + w->fh[10]*w->S[39] + w->fh[11]*w->S[48];
-    w->term[1][31] = w->fh[9]*w->S[4] + w->fh[10]*w->S[40] + w->fh[11]*w->S[49];
-    w->term[1][32] = w->fh[9]*w->S[5] + w->fh[10]*w->S[41] + w->fh[11]*w->S[50];
-    w->term[1][33] = w->fh[10]*w->S[42] + w->fh[11]*w->S[51] + w->fh[12]*w->S[57] +
-            w->fh[13]*w->S[60];
-    w->term[1][34] = w->fh[9]*w->S[7] + w->fh[10]*w->S[43] + w->fh[11]*w->S[52] + w->fh[12]*w->S[58]
-            + w->fh[13]*w->S[61];
-    w->term[1][35] = w->fh[9]*w->S[8] + w->fh[10]*w->S[44] + w->fh[11]*w->S[53] + w->fh[12]*w->S[59]
-            + w->fh[13]*w->S[62];
-    w->term[1][36] = w->fh[14]*w->S[9] + w->fh[15]*w->S[27] + w->fh[16]*w->S[45];
-    w->term[1][37] = w->fh[14]*w->S[10] + w->fh[15]*w->S[28] + w->fh[16]*w->S[46];
-    w->term[1][38] = w->fh[14]*w->S[11] + w->fh[15]*w->S[29] + w->fh[16]*w->S[47];
-    w->term[1][39] = w->fh[14]*w->S[12] + w->fh[15]*w->S[30] + w->fh[16]*w->S[48];
-    w->term[1][40] = c_out + w->fh[14]*w->S[13] + w->fh[15]*w->S[31] + w->fh[16]*w->S[49];
-    w->term[1][41] = w->fh[14]*w->S[14] + w->fh[15]*w->S[32] + w->fh[16]*w->S[50];
-    w->term[1][42] = w->fh[14]*w->S[15] + w->fh[15]*w->S[33] + w->fh[16]*w->S[51] +
-            w->fh[17]*w->S[54] + w->fh[18]*w->S[60];
-    w->term[1][43] = w->fh[15]*w->S[34] + w->fh[16]*w->S[52] + w->fh[17]*w->S[55] +
-            w->fh[18]*w->S[61];
-    w->term[1][44] = w->fh[14]*w->S[17] + w->fh[15]*w->S[35] + w->fh[16]*w->S[53] +
-            w->fh[17]*w->S[56] + w->fh[18]*w->S[62];
-    w->term[1][45] = w->fh[19]*w->S[18] + w->fh[20]*w->S[27] + w->fh[21]*w->S[36];
-    w->term[1][46] = w->fh[19]*w->S[19] + w->fh[20]*w->S[28] + w->fh[21]*w->S[37];
-    w->term[1][47] = w->fh[19]*w->S[20] + w->fh[20]*w->S[29] + w->fh[21]*w->S[38];
-    w->term[1][48] = w->fh[19]*w->S[21] + w->fh[20]*w->S[30] + w->fh[21]*w->S[39];
-    w->term[1][49] = w->fh[19]*w->S[22] + w->fh[20]*w->S[31] + w->fh[21]*w->S[40];
-    w->term[1][50] = c_out + w->fh[19]*w->S[23] + w->fh[20]*w->S[32] + w->fh[21]*w->S[41];
-    w->term[1][51] = w->fh[19]*w->S[24] + w->fh[20]*w->S[33] + w->fh[21]*w->S[42] +
-            w->fh[22]*w->S[54] + w->fh[23]*w->S[57];
-    w->term[1][52] = w->fh[19]*w->S[25] + w->fh[20]*w->S[34] + w->fh[21]*w->S[43] +
-            w->fh[22]*w->S[55] + w->fh[23]*w->S[58];
-    w->term[1][53] = w->fh[20]*w->S[35] + w->fh[21]*w->S[44] + w->fh[22]*w->S[56] +
-            w->fh[23]*w->S[59];
-    w->term[1][54] = c_out + w->fh[24]*w->S[57] + w->fh[25]*w->S[60];
-    w->term[1][55] = w->fh[24]*w->S[58] + w->fh[25]*w->S[61];
-    w->term[1][56] = w->fh[24]*w->S[59] + w->fh[25]*w->S[62];
-    w->term[1][57] = w->fh[26]*w->S[54] + w->fh[27]*w->S[60];
-    w->term[1][58] = c_out + w->fh[26]*w->S[55] + w->fh[27]*w->S[61];
-    w->term[1][59] = w->fh[26]*w->S[56] + w->fh[27]*w->S[62];
-    w->term[1][60] = w->fh[28]*w->S[54] + w->fh[29]*w->S[57];
-    w->term[1][61] = w->fh[28]*w->S[55] + w->fh[29]*w->S[58];
-    w->term[1][62] = c_out + w->fh[28]*w->S[56] + w->fh[29]*w->S[59];
-    w->term[1][63] = c_out;
-    w->term[1][64] = w->fh[30]*c_in;
+    w->term[1][4] = 0;
+    w->term[1][5] = 0;
+    w->term[1][6] = 0;
+    w->term[1][7] = 0;
+    w->term[1][8] = 0;
+    w->term[1][9] = 0;
+    w->term[1][10] = w->fh[3]*c_in;
+    w->term[1][11] = c_out;
+    w->term[1][12] = w->fh[4]*c_in;
+    w->term[1][13] = 0;
+    w->term[1][14] = w->fh[5]*c_in;
+    w->term[1][15] = 0;
+    w->term[1][16] = 0;
+    w->term[1][17] = 0;
+    w->term[1][18] = 0;
+    w->term[1][19] = 0;
+    w->term[1][20] = w->fh[6]*c_in;
+    w->term[1][21] = w->fh[7]*c_in;
+    w->term[1][22] = c_out;
+    w->term[1][23] = 0;
+    w->term[1][24] = 0;
+    w->term[1][25] = w->fh[8]*c_in;
+    w->term[1][26] = 0;
+    w->term[1][27] = 0;
+    w->term[1][28] = 0;
+    w->term[1][29] = 0;
+    w->term[1][30] = w->fh[9]*c_in;
+    w->term[1][31] = 0;
+    w->term[1][32] = 0;
+    w->term[1][33] = c_out;
+    w->term[1][34] = w->fh[10]*c_in;
+    w->term[1][35] = w->fh[11]*c_in;
+    w->term[1][36] = 0;
+    w->term[1][37] = w->fh[12]*c_in;
+    w->term[1][38] = w->fh[13]*c_in;
+    w->term[1][39] = 0;
+    w->term[1][40] = 0;
+    w->term[1][41] = w->fh[14]*c_in;
+    w->term[1][42] = 0;
+    w->term[1][43] = w->fh[15]*c_in;
+    w->term[1][44] = c_out;
+    w->term[1][45] = w->fh[16]*c_in;
+    w->term[1][46] = w->fh[17]*c_in;
+    w->term[1][47] = 0;
+    w->term[1][48] = w->fh[18]*c_in;
+    w->term[1][49] = 0;
+    w->term[1][50] = 0;
+    w->term[1][51] = 0;
+    w->term[1][52] = w->fh[19]*c_in;
+    w->term[1][53] = w->fh[20]*c_in;
+    w->term[1][54] = w->fh[21]*c_in;
+    w->term[1][55] = c_out;
+    w->term[1][56] = w->fh[22]*c_in;
+    w->term[1][57] = w->fh[23]*c_in;
+    w->term[1][58] = 0;
+    w->term[1][59] = 0;
+    w->term[1][60] = c_out;
+    w->term[1][61] = w->fh[24]*c_in;
+    w->term[1][62] = w->fh[25]*c_in;
+    w->term[1][63] = 0;
+    w->term[1][64] = w->fh[26]*c_in;
+    w->term[1][65] = c_out;
+    w->term[1][66] = w->fh[27]*c_in;
+    w->term[1][67] = 0;
+    w->term[1][68] = w->fh[28]*c_in;
+    w->term[1][69] = w->fh[29]*c_in;
+    w->term[1][70] = c_out;
+    w->term[1][71] = 0;
+    w->term[1][72] = c_out;
+    w->term[1][73] = w->fh[30]*c_in;
 }
 
 GPS_PSEUDORANGE11_BLOCK void horner_saturated_into_S(gps_pseudorange11_discretize_scratch *restrict
-        w, const gps_pseudorange11_scalar c_out, const gps_pseudorange11_scalar c_in)
+        w, const gps_pseudorange11_scalar c_out)
 {
-    w->S[0] = c_out + w->fh[0]*w->term[1][9] + w->fh[1]*w->term[1][18] + w->fh[2]*w->term[1][27];
-    w->S[1] = w->fh[0]*w->term[1][10] + w->fh[1]*w->term[1][19] + w->fh[2]*w->term[1][28];
-    w->S[2] = w->fh[0]*w->term[1][11] + w->fh[1]*w->term[1][20] + w->fh[2]*w->term[1][29];
-    w->S[3] = w->fh[0]*w->term[1][12] + w->fh[1]*w->term[1][21] + w->fh[2]*w->term[1][30];
-    w->S[4] = w->fh[0]*w->term[1][13] + w->fh[1]*w->term[1][22] + w->fh[2]*w->term[1][31];
-    w->S[5] = w->fh[0]*w->term[1][14] + w->fh[1]*w->term[1][23] + w->fh[2]*w->term[1][32];
-    w->S[6] = w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][24] + w->fh[2]*w->term[1][33];
-    w->S[7] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][25] + w->fh[2]*w->term[1][34];
-    w->S[8] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][26] + w->fh[2]*w->term[1][35];
-    w->S[9] = w->fh[3]*w->term[1][0] + w->fh[4]*w->term[1][18] + w->fh[5]*w->term[1][36];
-    w->S[10] = c_out + w->fh[3]*w->term[1][1] + w->fh[4]*w->term[1][19] + w->fh[5]*w->term[1][37];
-    w->S[11] = w->fh[3]*w->term[1][2] + w->fh[4]*w->term[1][20] + w->fh[5]*w->term[1][38];
-    w->S[12] = w->fh[3]*w->term[1][3] + w->fh[4]*w->term[1][21] + w->fh[5]*w->term[1][39];
-    w->S[13] = w->fh[3]*w->term[1][4] + w->fh[4]*w->term[1][22] + w->fh[5]*w->term[1][40];
-    w->S[14] = w->fh[3]*w->term[1][5] + w->fh[4]*w->term[1][23] + w->fh[5]*w->term[1][41];
-    w->S[15] = w->fh[3]*w->term[1][6] + w->fh[4]*w->term[1][24] + w->fh[5]*w->term[1][42];
-    w->S[16] = w->fh[3]*w->term[1][7] + w->fh[4]*w->term[1][25] + w->fh[5]*w->term[1][43];
-    w->S[17] = w->fh[3]*w->term[1][8] + w->fh[4]*w->term[1][26] + w->fh[5]*w->term[1][44];
-    w->S[18] = w->fh[6]*w->term[1][0] + w->fh[7]*w->term[1][9] + w->fh[8]*w->term[1][45];
-    w->S[19] = w->fh[6]*w->term[1][1] + w->fh[7]*w->term[1][10] + w->fh[8]*w->term[1][46];
-    w->S[20] = c_out + w->fh[6]*w->term[1][2] + w->fh[7]*w->term[1][11] + w->fh[8]*w->term[1][47];
-    w->S[21] = w->fh[6]*w->term[1][3] + w->fh[7]*w->term[1][12] + w->fh[8]*w->term[1][48];
-    w->S[22] = w->fh[6]*w->term[1][4] + w->fh[7]*w->term[1][13] + w->fh[8]*w->term[1][49];
-    w->S[23] = w->fh[6]*w->term[1][5] + w->fh[7]*w->term[1][14] + w->fh[8]*w->term[1][50];
-    w->S[24] = w->fh[6]*w->term[1][6] + w->fh[7]*w->term[1][15] + w->fh[8]*w->term[1][51];
-    w->S[25] = w->fh[6]*w->term[1][7] + w->fh[7]*w->term[1][16] + w->fh[8]*w->term[1][52];
-    w->S[26] = w->fh[6]*w->term[1][8] + w->fh[7]*w->term[1][17] + w->fh[8]*w->term[1][53];
-    w->S[27] = w->fh[9]*w->term[1][0] + w->fh[10]*w->term[1][36] + w->fh[11]*w->term[1][45];
-    w->S[28] = w->fh[9]*w->term[1][1] + w->fh[10]*w->term[1][37] + w->fh[11]*w->term[1][46];
-    w->S[29] = w->fh[9]*w->term[1][2] + w->fh[10]*w->term[1][38] + w->fh[11]*w->term[1][47];
-    w->S[30] = c_out + w->fh[9]*w->term[1][3] + w->fh[10]*w->term[1][39] + w->fh[11]*w->term[1][48];
-    w->S[31] = w->fh[9]*w->term[1][4] + w->fh[10]*w->term[1][40] + w->fh[11]*w->term[1][49];
-    w->S[32] = w->fh[9]*w->term[1][5] + w->fh[10]*w->term[1][41] + w->fh[11]*w->term[1][50];
-    w->S[33] = w->fh[9]*w->term[1][6] + w->fh[10]*w->term[1][42] + w->fh[11]*w->term[1][51] +
-            w->fh[12]*w->term[1][57] + w->fh[13]*w->term[1][60];
-    w->S[34] = w->fh[9]*w->term[1][7] + w->fh[10]*w->term[1][43] + w->fh[11]*w->term[1][52] +
-            w->fh[12]*w->term[1][58] + w->fh[13]*w->term[1][61];
-    w->S[35] = w->fh[9]*w->term[1][8] + w->fh[10]*w->term[1][44] + w->fh[11]*w->term[1][53] +
-            w->fh[12]*w->term[1][59] + w->fh[13]*w->term[1][62];
-    w->S[36] = w->fh[14]*w->term[1][9] + w->fh[15]*w->term[1][27] + w->fh[16]*w->term[1][45];
-    w->S[37] = w->fh[14]*w->term[1][10] + w->fh[15]*w->term[1][28] + w->fh[16]*w->term[1][46];
-    w->S[38] = w->fh[14]*w->term[1][11] + w->fh[15]*w->term[1][29] + w->fh[16]*w->term[1][47];
-    w->S[39] = w->fh[14]*w->term[1][12] + w->fh[15]*w->term[1][30] + w->fh[16]*w->term[1][48];
-    w->S[40] = c_out + w->fh[14]*w->term[1][13] + w->fh[15]*w->term[1][31] +
-            w->fh[16]*w->term[1][49];
-    w->S[41] = w->fh[14]*w->term[1][14] + w->fh[15]*w->term[1][32] + w->fh[16]*w->term[1][50];
-    w->S[42] = w->fh[14]*w->term[1][15] + w->fh[15]*w->term[1][33] + w->fh[16]*w->term[1][51] +
-            w->fh[17]*w->term[1][54] + w->fh[18]*w->term[1][60];
-    w->S[43] = w->fh[14]*w->term[1][16] + w->fh[15]*w->term[1][34] + w->fh[16]*w->term[1][52] +
-            w->fh[17]*w->term[1][55] + w->fh[18]*w->term[1][61];
-    w->S[44] = w->fh[14]*w->term[1][17] + w->fh[15]*w->term[1][35] + w->fh[16]*w->term[1][53] +
-            w->fh[17]*w->term[1][56] + w->fh[18]*w->term[1][62];
-    w->S[45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][27] + w->fh[21]*w->term[1][36];
-    w->S[46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][28] + w->fh[21]*w->term[1][37];
-    w->S[47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][29] + w->fh[21]*w->term[1][38];
-    w->S[48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][30] + w->fh[21]*w->term[1][39];
-    w->S[49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][31] + w->fh[21]*w->term[1][40];
-    w->S[50] = c_out + w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][32] +
-            w->fh[21]*w->term[1][41];
-    w->S[51] = w->fh[19]*w->term[1][24] + w->fh[20]*w->term[1][33] + w->fh[21]*w->term[1][42] +
-            w->fh[22]*w->term[1][54] + w->fh[23]*w->term[1][57];
-    w->S[52] = w->fh[19]*w->term[1][25] + w->fh[20]*w->term[1][34] + w->fh[21]*w->term[1][43] +
-            w->fh[22]*w->term[1][55] + w->fh[23]*w->term[1][58];
-    w->S[53] = w->fh[19]*w->term[1][26] + w->fh[20]*w->term[1][35] + w->fh[21]*w->term[1][44] +
-            w->fh[22]*w->term[1][56] + w->fh[23]*w->term[1][59];
-    w->S[54] = c_out + w->fh[24]*w->term[1][57] + w->fh[25]*w->term[1][60];
-    w->S[55] = w->fh[24]*w->term[1][58] + w->fh[25]*w->term[1][61];
-    w->S[56] = w->fh[24]*w->term[1][59] + w->fh[25]*w->term[1][62];
-    w->S[57] = w->fh[26]*w->term[1][54] + w->fh[27]*w->term[1][60];
-    w->S[58] = c_out + w->fh[26]*w->term[1][55] + w->fh[27]*w->term[1][61];
-    w->S[59] = w->fh[26]*w->term[1][56] + w->fh[27]*w->term[1][62];
-    w->S[60] = w->fh[28]*w->term[1][54] + w->fh[29]*w->term[1][57];
-    w->S[61] = w->fh[28]*w->term[1][55] + w->fh[29]*w->term[1][58];
-    w->S[62] = c_out + w->fh[28]*w->term[1][56] + w->fh[29]*w->term[1][59];
-    w->S[63] = c_out;
-    w->S[64] = w->fh[30]*c_in;
+    int k;
+    for (k = 0; k < 10; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][10+k] + w->fh[1]*w->term[1][20+k] + w->fh[2]*w->term[1][30+k];
+        w->S[10+k] = w->fh[3]*w->term[1][k] + w->fh[4]*w->term[1][20+k] + w->fh[5]*w->term[1][40+k];
+        w->S[20+k] = w->fh[6]*w->term[1][k] + w->fh[7]*w->term[1][10+k] + w->fh[8]*w->term[1][50+k];
+        w->S[30+k] = w->fh[9]*w->term[1][k] + w->fh[10]*w->term[1][40+k] +
+                w->fh[11]*w->term[1][50+k];
+        w->S[40+k] = w->fh[14]*w->term[1][10+k] + w->fh[15]*w->term[1][30+k] +
+                w->fh[16]*w->term[1][50+k];
+        w->S[50+k] = w->fh[19]*w->term[1][20+k] + w->fh[20]*w->term[1][30+k] +
+                w->fh[21]*w->term[1][40+k];
+    }
+    for (k = 0; k < 4; ++k) {
+        w->S[60+k] = w->fh[24]*w->term[1][64+k] + w->fh[25]*w->term[1][68+k];
+        w->S[64+k] = w->fh[26]*w->term[1][60+k] + w->fh[27]*w->term[1][68+k];
+        w->S[68+k] = w->fh[28]*w->term[1][60+k] + w->fh[29]*w->term[1][64+k];
+        w->S[36+k] = w->S[36+k] + w->fh[12]*w->term[1][64+k] + w->fh[13]*w->term[1][68+k];
+        w->S[46+k] = w->S[46+k] + w->fh[17]*w->term[1][60+k] + w->fh[18]*w->term[1][68+k];
+        w->S[56+k] = w->S[56+k] + w->fh[22]*w->term[1][60+k] + w->fh[23]*w->term[1][64+k];
+    }
+    w->S[0] = w->S[0] + c_out;
+    w->S[11] = w->S[11] + c_out;
+    w->S[22] = w->S[22] + c_out;
+    w->S[33] = w->S[33] + c_out;
+    w->S[44] = w->S[44] + c_out;
+    w->S[55] = w->S[55] + c_out;
+    w->S[60] = w->S[60] + c_out;
+    w->S[65] = w->S[65] + c_out;
+    w->S[70] = w->S[70] + c_out;
 }
 
 GPS_PSEUDORANGE11_BLOCK void horner_saturated_into_term(gps_pseudorange11_discretize_scratch
-        *restrict w, const gps_pseudorange11_scalar c_out, const gps_pseudorange11_scalar c_in)
+        *restrict w, const gps_pseudorange11_scalar c_out)
 {
-    w->term[1][0] = c_out + w->fh[0]*w->S[9] + w->fh[1]*w->S[18] + w->fh[2]*w->S[27];
-    w->term[1][1] = w->fh[0]*w->S[10] + w->fh[1]*w->S[19] + w->fh[2]*w->S[28];
-    w->term[1][2] = w->fh[0]*w->S[11] + w->fh[1]*w->S[20] + w->fh[2]*w->S[29];
-    w->term[1][3] = w->fh[0]*w->S[12] + w->fh[1]*w->S[21] + w->fh[2]*w->S[30];
-    w->term[1][4] = w->fh[0]*w->S[13] + w->fh[1]*w->S[22] + w->fh[2]*w->S[31];
-    w->term[1][5] = w->fh[0]*w->S[14] + w->fh[1]*w->S[23] + w->fh[2]*w->S[32];
-    w->term[1][6] = w->fh[0]*w->S[15] + w->fh[1]*w->S[24] + w->fh[2]*w->S[33];
-    w->term[1][7] = w->fh[0]*w->S[16] + w->fh[1]*w->S[25] + w->fh[2]*w->S[34];
-    w->term[1][8] = w->fh[0]*w->S[17] + w->fh[1]*w->S[26] + w->fh[2]*w->S[35];
-    w->term[1][9] = w->fh[3]*w->S[0] + w->fh[4]*w->S[18] + w->fh[5]*w->S[36];
-    w->term[1][10] = c_out + w->fh[3]*w->S[1] + w->fh[4]*w->S[19] + w->fh[5]*w->S[37];
-    w->term[1][11] = w->fh[3]*w->S[2] + w->fh[4]*w->S[20] + w->fh[5]*w->S[38];
-    w->term[1][12] = w->fh[3]*w->S[3] + w->fh[4]*w->S[21] + w->fh[5]*w->S[39];
-    w->term[1][13] = w->fh[3]*w->S[4] + w->fh[4]*w->S[22] + w->fh[5]*w->S[40];
-    w->term[1][14] = w->fh[3]*w->S[5] + w->fh[4]*w->S[23] + w->fh[5]*w->S[41];
-    w->term[1][15] = w->fh[3]*w->S[6] + w->fh[4]*w->S[24] + w->fh[5]*w->S[42];
-    w->term[1][16] = w->fh[3]*w->S[7] + w->fh[4]*w->S[25] + w->fh[5]*w->S[43];
-    w->term[1][17] = w->fh[3]*w->S[8] + w->fh[4]*w->S[26] + w->fh[5]*w->S[44];
-    w->term[1][18] = w->fh[6]*w->S[0] + w->fh[7]*w->S[9] + w->fh[8]*w->S[45];
-    w->term[1][19] = w->fh[6]*w->S[1] + w->fh[7]*w->S[10] + w->fh[8]*w->S[46];
-    w->term[1][20] = c_out + w->fh[6]*w->S[2] + w->fh[7]*w->S[11] + w->fh[8]*w->S[47];
-    w->term[1][21] = w->fh[6]*w->S[3] + w->fh[7]*w->S[12] + w->fh[8]*w->S[48];
-    w->term[1][22] = w->fh[6]*w->S[4] + w->fh[7]*w->S[13] + w->fh[8]*w->S[49];
-    w->term[1][23] = w->fh[6]*w->S[5] + w->fh[7]*w->S[14] + w->fh[8]*w->S[50];
-    w->term[1][24] = w->fh[6]*w->S[6] + w->fh[7]*w->S[15] + w->fh[8]*w->S[51];
-    w->term[1][25] = w->fh[6]*w->S[7] + w->fh[7]*w->S[16] + w->fh[8]*w->S[52];
-    w->term[1][26] = w->fh[6]*w->S[8] + w->fh[7]*w->S[17] + w->fh[8]*w->S[53];
-    w->term[1][27] = w->fh[9]*w->S[0] + w->fh[10]*w->S[36] + w->fh[11]*w->S[45];
-    w->term[1][28] = w->fh[9]*w->S[1] + w->fh[10]*w->S[37] + w->fh[11]*w->S[46];
-    w->term[1][29] = w->fh[9]*w->S[2] + w->fh[10]*w->S[38] + w->fh[11]*w->S[47];
-    w->term[1][30] = c_out + w->fh[9]*w->S[3] + w->fh[10]*w->S[39] + w->fh[11]*w->S[48];
-    w->term[1][31] = w->fh[9]*w->S[4] + w->fh[10]*w->S[40] + w->fh[11]*w->S[49];
-    w->term[1][32] = w->fh[9]*w->S[5] + w->fh[10]*w->S[41] + w->fh[11]*w->S[50];
-    w->term[1][33] = w->fh[9]*w->S[6] + w->fh[10]*w->S[42] + w->fh[11]*w->S[51] + w->fh[12]*w->S[57]
-            + w->fh[13]*w->S[60];
-    w->term[1][34] = w->fh[9]*w->S[7] + w->fh[10]*w->S[43] + w->fh[11]*w->S[52] + w->fh[12]*w->S[58]
-            + w->fh[13]*w->S[61];
-    w->term[1][35] = w->fh[9]*w->S[8] + w->fh[10]*w->S[44] + w->fh[11]*w->S[53] + w->fh[12]*w->S[59]
-            + w->fh[13]*w->S[62];
-    w->term[1][36] = w->fh[14]*w->S[9] + w->fh[15]*w->S[27] + w->fh[16]*w->S[45];
-    w->term[1][37] = w->fh[14]*w->S[10] + w->fh[15]*w->S[28] + w->fh[16]*w->S[46];
-    w->term[1][38] = w->fh[14]*w->S[11] + w->fh[15]*w->S[29] + w->fh[16]*w->S[47];
-    w->term[1][39] = w->fh[14]*w->S[12] + w->fh[15]*w->S[30] + w->fh[16]*w->S[48];
-    w->term[1][40] = c_out + w->fh[14]*w->S[13] + w->fh[15]*w->S[31] + w->fh[16]*w->S[49];
-    w->term[1][41] = w->fh[14]*w->S[14] + w->fh[15]*w->S[32] + w->fh[16]*w->S[50];
-    w->term[1][42] = w->fh[14]*w->S[15] + w->fh[15]*w->S[33] + w->fh[16]*w->S[51] +
-            w->fh[17]*w->S[54] + w->fh[18]*w->S[60];
-    w->term[1][43] = w->fh[14]*w->S[16] + w->fh[15]*w->S[34] + w->fh[16]*w->S[52] +
-            w->fh[17]*w->S[55] + w->fh[18]*w->S[61];
-    w->term[1][44] = w->fh[14]*w->S[17] + w->fh[15]*w->S[35] + w->fh[16]*w->S[53] +
-            w->fh[17]*w->S[56] + w->fh[18]*w->S[62];
-    w->term[1][45] = w->fh[19]*w->S[18] + w->fh[20]*w->S[27] + w->fh[21]*w->S[36];
-    w->term[1][46] = w->fh[19]*w->S[19] + w->fh[20]*w->S[28] + w->fh[21]*w->S[37];
-    w->term[1][47] = w->fh[19]*w->S[20] + w->fh[20]*w->S[29] + w->fh[21]*w->S[38];
-    w->term[1][48] = w->fh[19]*w->S[21] + w->fh[20]*w->S[30] + w->fh[21]*w->S[39];
-    w->term[1][49] = w->fh[19]*w->S[22] + w->fh[20]*w->S[31] + w->fh[21]*w->S[40];
-    w->term[1][50] = c_out + w->fh[19]*w->S[23] + w->fh[20]*w->S[32] + w->fh[21]*w->S[41];
-    w->term[1][51] = w->fh[19]*w->S[24] + w->fh[20]*w->S[33] + w->fh[21]*w->S[42] +
-            w->fh[22]*w->S[54] + w->fh[23]*w->S[57];
-    w->term[1][52] = w->fh[19]*w->S[25] + w->fh[20]*w->S[34] + w->fh[21]*w->S[43] +
-            w->fh[22]*w->S[55] + w->fh[23]*w->S[58];
-    w->term[1][53] = w->fh[19]*w->S[26] + w->fh[20]*w->S[35] + w->fh[21]*w->S[44] +
-            w->fh[22]*w->S[56] + w->fh[23]*w->S[59];
-    w->term[1][54] = c_out + w->fh[24]*w->S[57] + w->fh[25]*w->S[60];
-    w->term[1][55] = w->fh[24]*w->S[58] + w->fh[25]*w->S[61];
-    w->term[1][56] = w->fh[24]*w->S[59] + w->fh[25]*w->S[62];
-    w->term[1][57] = w->fh[26]*w->S[54] + w->fh[27]*w->S[60];
-    w->term[1][58] = c_out + w->fh[26]*w->S[55] + w->fh[27]*w->S[61];
-    w->term[1][59] = w->fh[26]*w->S[56] + w->fh[27]*w->S[62];
-    w->term[1][60] = w->fh[28]*w->S[54] + w->fh[29]*w->S[57];
-    w->term[1][61] = w->fh[28]*w->S[55] + w->fh[29]*w->S[58];
-    w->term[1][62] = c_out + w->fh[28]*w->S[56] + w->fh[29]*w->S[59];
-    w->term[1][63] = c_out;
-    w->term[1][64] = w->fh[30]*c_in;
+    int k;
+    for (k = 0; k < 10; ++k) {
+        w->term[1][k] = w->fh[0]*w->S[10+k] + w->fh[1]*w->S[20+k] + w->fh[2]*w->S[30+k];
+        w->term[1][10+k] = w->fh[3]*w->S[k] + w->fh[4]*w->S[20+k] + w->fh[5]*w->S[40+k];
+        w->term[1][20+k] = w->fh[6]*w->S[k] + w->fh[7]*w->S[10+k] + w->fh[8]*w->S[50+k];
+        w->term[1][30+k] = w->fh[9]*w->S[k] + w->fh[10]*w->S[40+k] + w->fh[11]*w->S[50+k];
+        w->term[1][40+k] = w->fh[14]*w->S[10+k] + w->fh[15]*w->S[30+k] + w->fh[16]*w->S[50+k];
+        w->term[1][50+k] = w->fh[19]*w->S[20+k] + w->fh[20]*w->S[30+k] + w->fh[21]*w->S[40+k];
+    }
+    for (k = 0; k < 4; ++k) {
+        w->term[1][60+k] = w->fh[24]*w->S[64+k] + w->fh[25]*w->S[68+k];
+        w->term[1][64+k] = w->fh[26]*w->S[60+k] + w->fh[27]*w->S[68+k];
+        w->term[1][68+k] = w->fh[28]*w->S[60+k] + w->fh[29]*w->S[64+k];
+        w->term[1][36+k] = w->term[1][36+k] + w->fh[12]*w->S[64+k] + w->fh[13]*w->S[68+k];
+        w->term[1][46+k] = w->term[1][46+k] + w->fh[17]*w->S[60+k] + w->fh[18]*w->S[68+k];
+        w->term[1][56+k] = w->term[1][56+k] + w->fh[22]*w->S[60+k] + w->fh[23]*w->S[64+k];
+    }
+    w->term[1][0] = w->term[1][0] + c_out;
+    w->term[1][11] = w->term[1][11] + c_out;
+    w->term[1][22] = w->term[1][22] + c_out;
+    w->term[1][33] = w->term[1][33] + c_out;
+    w->term[1][44] = w->term[1][44] + c_out;
+    w->term[1][55] = w->term[1][55] + c_out;
+    w->term[1][60] = w->term[1][60] + c_out;
+    w->term[1][65] = w->term[1][65] + c_out;
+    w->term[1][70] = w->term[1][70] + c_out;
+}
+
+GPS_PSEUDORANGE11_BLOCK void horner_last_into_S(gps_pseudorange11_discretize_scratch *restrict w,
+        const gps_pseudorange11_scalar c_out, const gps_pseudorange11_scalar c_in)
+{
+    int k;
+    for (k = 0; k < 10; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][10+k] + w->fh[1]*w->term[1][20+k] + w->fh[2]*w->term[1][30+k];
+        w->S[10+k] = w->fh[3]*w->term[1][k] + w->fh[4]*w->term[1][20+k] + w->fh[5]*w->term[1][40+k];
+        w->S[20+k] = w->fh[6]*w->term[1][k] + w->fh[7]*w->term[1][10+k] + w->fh[8]*w->term[1][50+k];
+        w->S[30+k] = w->fh[9]*w->term[1][k] + w->fh[10]*w->term[1][40+k] +
+                w->fh[11]*w->term[1][50+k];
+        w->S[40+k] = w->fh[14]*w->term[1][10+k] + w->fh[15]*w->term[1][30+k] +
+                w->fh[16]*w->term[1][50+k];
+        w->S[50+k] = w->fh[19]*w->term[1][20+k] + w->fh[20]*w->term[1][30+k] +
+                w->fh[21]*w->term[1][40+k];
+    }
+    for (k = 0; k < 4; ++k) {
+        w->S[60+k] = w->fh[24]*w->term[1][64+k] + w->fh[25]*w->term[1][68+k];
+        w->S[64+k] = w->fh[26]*w->term[1][60+k] + w->fh[27]*w->term[1][68+k];
+        w->S[68+k] = w->fh[28]*w->term[1][60+k] + w->fh[29]*w->term[1][64+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->S[72+k] = 0;
+    }
+    for (k = 0; k < 4; ++k) {
+        w->S[36+k] = w->S[36+k] + w->fh[12]*w->term[1][64+k] + w->fh[13]*w->term[1][68+k];
+        w->S[46+k] = w->S[46+k] + w->fh[17]*w->term[1][60+k] + w->fh[18]*w->term[1][68+k];
+        w->S[56+k] = w->S[56+k] + w->fh[22]*w->term[1][60+k] + w->fh[23]*w->term[1][64+k];
+    }
+    w->S[0] = w->S[0] + c_out;
+    w->S[11] = w->S[11] + c_out;
+    w->S[22] = w->S[22] + c_out;
+    w->S[33] = w->S[33] + c_out;
+    w->S[44] = w->S[44] + c_out;
+    w->S[55] = w->S[55] + c_out;
+    w->S[60] = w->S[60] + c_out;
+    w->S[65] = w->S[65] + c_out;
+    w->S[70] = w->S[70] + c_out;
+    w->S[72] = w->S[72] + c_out;
+    w->S[73] = w->S[73] + w->fh[30]*c_in;
 }
 
 GPS_PSEUDORANGE11_BLOCK void horner_transition(gps_pseudorange11_transition *restrict t, const
         gps_pseudorange11_discretize_scratch *restrict w)
 {
-    t->Phi[0][0] = w->fh[0]*w->S[9] + w->fh[1]*w->S[18] + w->fh[2]*w->S[27];
-    t->Phi[0][1] = w->fh[0]*w->S[10] + w->fh[1]*w->S[19] + w->fh[2]*w->S[28];
-    t->Phi[0][2] = w->fh[0]*w->S[11] + w->fh[1]*w->S[20] + w->fh[2]*w->S[29];
-    t->Phi[0][3] = w->fh[0]*w->S[12] + w->fh[1]*w->S[21] + w->fh[2]*w->S[30];
-    t->Phi[0][4] = w->fh[0]*w->S[13] + w->fh[1]*w->S[22] + w->fh[2]*w->S[31];
-    t->Phi[0][5] = w->fh[0]*w->S[14] + w->fh[1]*w->S[23] + w->fh[2]*w->S[32];
-    t->Phi[0][6] = w->fh[0]*w->S[15] + w->fh[1]*w->S[24] + w->fh[2]*w->S[33];
-    t->Phi[0][7] = w->fh[0]*w->S[16] + w->fh[1]*w->S[25] + w->fh[2]*w->S[34];
-    t->Phi[0][8] = w->fh[0]*w->S[17] + w->fh[1]*w->S[26] + w->fh[2]*w->S[35];
-    t->Phi[1][0] = w->fh[3]*w->S[0] + w->fh[4]*w->S[18] + w->fh[5]*w->S[36];
-    t->Phi[1][1] = w->fh[3]*w->S[1] + w->fh[4]*w->S[19] + w->fh[5]*w->S[37];
-    t->Phi[1][2] = w->fh[3]*w->S[2] + w->fh[4]*w->S[20] + w->fh[5]*w->S[38];
-    t->Phi[1][3] = w->fh[3]*w->S[3] + w->fh[4]*w->S[21] + w->fh[5]*w->S[39];
-    t->Phi[1][4] = w->fh[3]*w->S[4] + w->fh[4]*w->S[22] + w->fh[5]*w->S[40];
-    t->Phi[1][5] = w->fh[3]*w->S[5] + w->fh[4]*w->S[23] + w->fh[5]*w->S[41];
-    t->Phi[1][6] = w->fh[3]*w->S[6] + w->fh[4]*w->S[24] + w->fh[5]*w->S[42];
-    t->Phi[1][7] = w->fh[3]*w->S[7] + w->fh[4]*w->S[25] + w->fh[5]*w->S[43];
-    t->Phi[1][8] = w->fh[3]*w->S[8] + w->fh[4]*w->S[26] + w->fh[5]*w->S[44];
-    t->Phi[2][0] = w->fh[6]*w->S[0] + w->fh[7]*w->S[9] + w->fh[8]*w->S[45];
-    t->Phi[2][1] = w->fh[6]*w->S[1] + w->fh[7]*w->S[10] + w->fh[8]*w->S[46];
-    t->Phi[2][2] = w->fh[6]*w->S[2] + w->fh[7]*w->S[11] + w->fh[8]*w->S[47];
-    t->Phi[2][3] = w->fh[6]*w->S[3] + w->fh[7]*w->S[12] + w->fh[8]*w->S[48];
-    t->Phi[2][4] = w->fh[6]*w->S[4] + w->fh[7]*w->S[13] + w->fh[8]*w->S[49];
-    t->Phi[2][5] = w->fh[6]*w->S[5] + w->fh[7]*w->S[14] + w->fh[8]*w->S[50];
-    t->Phi[2][6] = w->fh[6]*w->S[6] + w->fh[7]*w->S[15] + w->fh[8]*w->S[51];
-    t->Phi[2][7] = w->fh[6]*w->S[7] + w->fh[7]*w->S[16] + w->fh[8]*w->S[52];
-    t->Phi[2][8] = w->fh[6]*w->S[8] + w->fh[7]*w->S[17] + w->fh[8]*w->S[53];
-    t->Phi[3][0] = w->fh[9]*w->S[0] + w->fh[10]*w->S[36] + w->fh[11]*w->S[45];
-    t->Phi[3][1] = w->fh[9]*w->S[1] + w->fh[10]*w->S[37] + w->fh[11]*w->S[46];
-    t->Phi[3][2] = w->fh[9]*w->S[2] + w->fh[10]*w->S[38] + w->fh[11]*w->S[47];
-    t->Phi[3][3] = w->fh[9]*w->S[3] + w->fh[10]*w->S[39] + w->fh[11]*w->S[48];
-    t->Phi[3][4] = w->fh[9]*w->S[4] + w->fh[10]*w->S[40] + w->fh[11]*w->S[49];
-    t->Phi[3][5] = w->fh[9]*w->S[5] + w->fh[10]*w->S[41] + w->fh[11]*w->S[50];
-    t->Phi[3][6] = w->fh[9]*w->S[6] + w->fh[10]*w->S[42] + w->fh[11]*w->S[51] + w->fh[12]*w->S[57] +
-            w->fh[13]*w->S[60];
-    t->Phi[3][7] = w->fh[9]*w->S[7] + w->fh[10]*w->S[43] + w->fh[11]*w->S[52] + w->fh[12]*w->S[58] +
-            w->fh[13]*w->S[61];
-    t->Phi[3][8] = w->fh[9]*w->S[8] + w->fh[10]*w->S[44] + w->fh[11]*w->S[53] + w->fh[12]*w->S[59] +
-            w->fh[13]*w->S[62];
-    t->Phi[4][0] = w->fh[14]*w->S[9] + w->fh[15]*w->S[27] + w->fh[16]*w->S[45];
-    t->Phi[4][1] = w->fh[14]*w->S[10] + w->fh[15]*w->S[28] + w->fh[16]*w->S[46];
-    t->Phi[4][2] = w->fh[14]*w->S[11] + w->fh[15]*w->S[29] + w->fh[16]*w->S[47];
-    t->Phi[4][3] = w->fh[14]*w->S[12] + w->fh[15]*w->S[30] + w->fh[16]*w->S[48];
-    t->Phi[4][4] = w->fh[14]*w->S[13] + w->fh[15]*w->S[31] + w->fh[16]*w->S[49];
-    t->Phi[4][5] = w->fh[14]*w->S[14] + w->fh[15]*w->S[32] + w->fh[16]*w->S[50];
-    t->Phi[4][6] = w->fh[14]*w->S[15] + w->fh[15]*w->S[33] + w->fh[16]*w->S[51] + w->fh[17]*w->S[54]
-            + w->fh[18]*w->S[60];
-    t->Phi[4][7] = w->fh[14]*w->S[16] + w->fh[15]*w->S[34] + w->fh[16]*w->S[52] + w->fh[17]*w->S[55]
-            + w->fh[18]*w->S[61];
-    t->Phi[4][8] = w->fh[14]*w->S[17] + w->fh[15]*w->S[35] + w->fh[16]*w->S[53] + w->fh[17]*w->S[56]
-            + w->fh[18]*w->S[62];
-    t->Phi[5][0] = w->fh[19]*w->S[18] + w->fh[20]*w->S[27] + w->fh[21]*w->S[36];
-    t->Phi[5][1] = w->fh[19]*w->S[19] + w->fh[20]*w->S[28] + w->fh[21]*w->S[37];
-    t->Phi[5][2] = w->fh[19]*w->S[20] + w->fh[20]*w->S[29] + w->fh[21]*w->S[38];
-    t->Phi[5][3] = w->fh[19]*w->S[21] + w->fh[20]*w->S[30] + w->fh[21]*w->S[39];
-    t->Phi[5][4] = w->fh[19]*w->S[22] + w->fh[20]*w->S[31] + w->fh[21]*w->S[40];
-    t->Phi[5][5] = w->fh[19]*w->S[23] + w->fh[20]*w->S[32] + w->fh[21]*w->S[41];
-    t->Phi[5][6] = w->fh[19]*w->S[24] + w->fh[20]*w->S[33] + w->fh[21]*w->S[42] + w->fh[22]*w->S[54]
-            + w->fh[23]*w->S[57];
-    t->Phi[5][7] = w->fh[19]*w->S[25] + w->fh[20]*w->S[34] + w->fh[21]*w->S[43] + w->fh[22]*w->S[55]
-            + w->fh[23]*w->S[58];
-    t->Phi[5][8] = w->fh[19]*w->S[26] + w->fh[20]*w->S[35] + w->fh[21]*w->S[44] + w->fh[22]*w->S[56]
-            + w->fh[23]*w->S[59];
-    t->Phi[6][6] = w->fh[24]*w->S[57] + w->fh[25]*w->S[60];
-    t->Phi[6][7] = w->fh[24]*w->S[58] + w->fh[25]*w->S[61];
-    t->Phi[6][8] = w->fh[24]*w->S[59] + w->fh[25]*w->S[62];
-    t->Phi[7][6] = w->fh[26]*w->S[54] + w->fh[27]*w->S[60];
-    t->Phi[7][7] = w->fh[26]*w->S[55] + w->fh[27]*w->S[61];
-    t->Phi[7][8] = w->fh[26]*w->S[56] + w->fh[27]*w->S[62];
-    t->Phi[8][6] = w->fh[28]*w->S[54] + w->fh[29]*w->S[57];
-    t->Phi[8][7] = w->fh[28]*w->S[55] + w->fh[29]*w->S[58];
-    t->Phi[8][8] = w->fh[28]*w->S[56] + w->fh[29]*w->S[59];
-    t->Phi[9][9] = 0;
-    t->Phi[9][10] = w->fh[30];
+    int k;
+    for (k = 0; k < 10; ++k) {
+        t->Phi[0][k] = w->fh[0]*w->S[10+k] + w->fh[1]*w->S[20+k] + w->fh[2]*w->S[30+k];
+        t->Phi[1][k] = w->fh[3]*w->S[k] + w->fh[4]*w->S[20+k] + w->fh[5]*w->S[40+k];
+        t->Phi[2][k] = w->fh[6]*w->S[k] + w->fh[7]*w->S[10+k] + w->fh[8]*w->S[50+k];
+        t->Phi[3][k] = w->fh[9]*w->S[k] + w->fh[10]*w->S[40+k] + w->fh[11]*w->S[50+k];
+        t->Phi[4][k] = w->fh[14]*w->S[10+k] + w->fh[15]*w->S[30+k] + w->fh[16]*w->S[50+k];
+        t->Phi[5][k] = w->fh[19]*w->S[20+k] + w->fh[20]*w->S[30+k] + w->fh[21]*w->S[40+k];
+    }
+    for (k = 0; k < 4; ++k) {
+        t->Phi[6][6+k] = w->fh[24]*w->S[64+k] + w->fh[25]*w->S[68+k];
+        t->Phi[7][6+k] = w->fh[26]*w->S[60+k] + w->fh[27]*w->S[68+k];
+        t->Phi[8][6+k] = w->fh[28]*w->S[60+k] + w->fh[29]*w->S[64+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        t->Phi[9][9+k] = 0;
+    }
+    for (k = 0; k < 4; ++k) {
+        t->Phi[3][6+k] = t->Phi[3][6+k] + w->fh[12]*w->S[64+k] + w->fh[13]*w->S[68+k];
+        t->Phi[4][6+k] = t->Phi[4][6+k] + w->fh[17]*w->S[60+k] + w->fh[18]*w->S[68+k];
+        t->Phi[5][6+k] = t->Phi[5][6+k] + w->fh[22]*w->S[60+k] + w->fh[23]*w->S[64+k];
+    }
+    t->Phi[9][10] = t->Phi[9][10] + w->fh[30];
+    t->Phi[0][10] = 0;
+    t->Phi[1][10] = 0;
+    t->Phi[2][10] = 0;
+    t->Phi[3][10] = 0;
+    t->Phi[4][10] = 0;
+    t->Phi[5][10] = 0;
+    t->Phi[6][0] = 0;
+    t->Phi[6][1] = 0;
+    t->Phi[6][2] = 0;
+    t->Phi[6][3] = 0;
+    t->Phi[6][4] = 0;
+    t->Phi[6][5] = 0;
+    t->Phi[6][10] = 0;
+    t->Phi[7][0] = 0;
+    t->Phi[7][1] = 0;
+    t->Phi[7][2] = 0;
+    t->Phi[7][3] = 0;
+    t->Phi[7][4] = 0;
+    t->Phi[7][5] = 0;
+    t->Phi[7][10] = 0;
+    t->Phi[8][0] = 0;
+    t->Phi[8][1] = 0;
+    t->Phi[8][2] = 0;
+    t->Phi[8][3] = 0;
+    t->Phi[8][4] = 0;
+    t->Phi[8][5] = 0;
+    t->Phi[8][10] = 0;
+    t->Phi[9][0] = 0;
+    t->Phi[9][1] = 0;
+    t->Phi[9][2] = 0;
+    t->Phi[9][3] = 0;
+    t->Phi[9][4] = 0;
+    t->Phi[9][5] = 0;
+    t->Phi[9][6] = 0;
+    t->Phi[9][7] = 0;
+    t->Phi[9][8] = 0;
+    t->Phi[10][0] = 0;
+    t->Phi[10][1] = 0;
+    t->Phi[10][2] = 0;
+    t->Phi[10][3] = 0;
+    t->Phi[10][4] = 0;
+    t->Phi[10][5] = 0;
+    t->Phi[10][6] = 0;
+    t->Phi[10][7] = 0;
+    t->Phi[10][8] = 0;
+    t->Phi[10][9] = 0;
+    t->Phi[10][10] = 0;
 }
 
 GPS_PSEUDORANGE11_BLOCK void doubling(gps_pseudorange11_transition *restrict t,
@@ -1056,340 +749,340 @@ GPS_PSEUDORANGE11_BLOCK void doubling(gps_pseudorange11_transition *restrict t,
     w->term[0][0] = t->Phi[0][0]*t->Phi[0][0] + t->Phi[0][1]*t->Phi[1][0] +
             t->Phi[0][2]*t->Phi[2][0] + t->Phi[0][3]*t->Phi[3][0] + t->Phi[0][4]*t->Phi[4][0] +
             t->Phi[0][5]*t->Phi[5][0];
-    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[9] + t->Phi[0][2]*w->S[18] +
-            t->Phi[0][3]*w->S[27] + t->Phi[0][4]*w->S[36] + t->Phi[0][5]*w->S[45];
+    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[10] + t->Phi[0][2]*w->S[20] +
+            t->Phi[0][3]*w->S[30] + t->Phi[0][4]*w->S[40] + t->Phi[0][5]*w->S[50];
     w->term[0][1] = t->Phi[0][0]*t->Phi[0][1] + t->Phi[0][1]*t->Phi[1][1] +
             t->Phi[0][2]*t->Phi[2][1] + t->Phi[0][3]*t->Phi[3][1] + t->Phi[0][4]*t->Phi[4][1] +
             t->Phi[0][5]*t->Phi[5][1];
-    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[10] + t->Phi[0][2]*w->S[19] +
-            t->Phi[0][3]*w->S[28] + t->Phi[0][4]*w->S[37] + t->Phi[0][5]*w->S[46];
+    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[11] + t->Phi[0][2]*w->S[21] +
+            t->Phi[0][3]*w->S[31] + t->Phi[0][4]*w->S[41] + t->Phi[0][5]*w->S[51];
     w->term[0][2] = t->Phi[0][0]*t->Phi[0][2] + t->Phi[0][1]*t->Phi[1][2] +
             t->Phi[0][2]*t->Phi[2][2] + t->Phi[0][3]*t->Phi[3][2] + t->Phi[0][4]*t->Phi[4][2] +
             t->Phi[0][5]*t->Phi[5][2];
-    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[11] + t->Phi[0][2]*w->S[20] +
-            t->Phi[0][3]*w->S[29] + t->Phi[0][4]*w->S[38] + t->Phi[0][5]*w->S[47];
+    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[12] + t->Phi[0][2]*w->S[22] +
+            t->Phi[0][3]*w->S[32] + t->Phi[0][4]*w->S[42] + t->Phi[0][5]*w->S[52];
     w->term[0][3] = t->Phi[0][0]*t->Phi[0][3] + t->Phi[0][1]*t->Phi[1][3] +
             t->Phi[0][2]*t->Phi[2][3] + t->Phi[0][3]*t->Phi[3][3] + t->Phi[0][4]*t->Phi[4][3] +
             t->Phi[0][5]*t->Phi[5][3];
-    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[12] + t->Phi[0][2]*w->S[21] +
-            t->Phi[0][3]*w->S[30] + t->Phi[0][4]*w->S[39] + t->Phi[0][5]*w->S[48];
+    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[13] + t->Phi[0][2]*w->S[23] +
+            t->Phi[0][3]*w->S[33] + t->Phi[0][4]*w->S[43] + t->Phi[0][5]*w->S[53];
     w->term[0][4] = t->Phi[0][0]*t->Phi[0][4] + t->Phi[0][1]*t->Phi[1][4] +
             t->Phi[0][2]*t->Phi[2][4] + t->Phi[0][3]*t->Phi[3][4] + t->Phi[0][4]*t->Phi[4][4] +
             t->Phi[0][5]*t->Phi[5][4];
-    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[13] + t->Phi[0][2]*w->S[22] +
-            t->Phi[0][3]*w->S[31] + t->Phi[0][4]*w->S[40] + t->Phi[0][5]*w->S[49];
+    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[24] +
+            t->Phi[0][3]*w->S[34] + t->Phi[0][4]*w->S[44] + t->Phi[0][5]*w->S[54];
     w->term[0][5] = t->Phi[0][0]*t->Phi[0][5] + t->Phi[0][1]*t->Phi[1][5] +
             t->Phi[0][2]*t->Phi[2][5] + t->Phi[0][3]*t->Phi[3][5] + t->Phi[0][4]*t->Phi[4][5] +
             t->Phi[0][5]*t->Phi[5][5];
-    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[23] +
-            t->Phi[0][3]*w->S[32] + t->Phi[0][4]*w->S[41] + t->Phi[0][5]*w->S[50];
+    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[25] +
+            t->Phi[0][3]*w->S[35] + t->Phi[0][4]*w->S[45] + t->Phi[0][5]*w->S[55];
     w->term[0][6] = t->Phi[0][0]*t->Phi[0][6] + t->Phi[0][1]*t->Phi[1][6] +
             t->Phi[0][2]*t->Phi[2][6] + t->Phi[0][3]*t->Phi[3][6] + t->Phi[0][4]*t->Phi[4][6] +
             t->Phi[0][5]*t->Phi[5][6] + t->Phi[0][6]*t->Phi[6][6] + t->Phi[0][7]*t->Phi[7][6] +
             t->Phi[0][8]*t->Phi[8][6];
-    w->term[1][6] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[24] +
-            t->Phi[0][3]*w->S[33] + t->Phi[0][4]*w->S[42] + t->Phi[0][5]*w->S[51] +
-            t->Phi[0][6]*w->S[54] + t->Phi[0][7]*w->S[57] + t->Phi[0][8]*w->S[60];
+    w->term[1][6] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[26] +
+            t->Phi[0][3]*w->S[36] + t->Phi[0][4]*w->S[46] + t->Phi[0][5]*w->S[56] +
+            t->Phi[0][6]*w->S[60] + t->Phi[0][7]*w->S[64] + t->Phi[0][8]*w->S[68];
     w->term[0][7] = t->Phi[0][0]*t->Phi[0][7] + t->Phi[0][1]*t->Phi[1][7] +
             t->Phi[0][2]*t->Phi[2][7] + t->Phi[0][3]*t->Phi[3][7] + t->Phi[0][4]*t->Phi[4][7] +
             t->Phi[0][5]*t->Phi[5][7] + t->Phi[0][6]*t->Phi[6][7] + t->Phi[0][7]*t->Phi[7][7] +
             t->Phi[0][8]*t->Phi[8][7];
-    w->term[1][7] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[25] +
-            t->Phi[0][3]*w->S[34] + t->Phi[0][4]*w->S[43] + t->Phi[0][5]*w->S[52] +
-            t->Phi[0][6]*w->S[55] + t->Phi[0][7]*w->S[58] + t->Phi[0][8]*w->S[61];
+    w->term[1][7] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[27] +
+            t->Phi[0][3]*w->S[37] + t->Phi[0][4]*w->S[47] + t->Phi[0][5]*w->S[57] +
+            t->Phi[0][6]*w->S[61] + t->Phi[0][7]*w->S[65] + t->Phi[0][8]*w->S[69];
     w->term[0][8] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
             t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
             t->Phi[0][5]*t->Phi[5][8] + t->Phi[0][6]*t->Phi[6][8] + t->Phi[0][7]*t->Phi[7][8] +
             t->Phi[0][8]*t->Phi[8][8];
-    w->term[1][8] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[26] +
-            t->Phi[0][3]*w->S[35] + t->Phi[0][4]*w->S[44] + t->Phi[0][5]*w->S[53] +
-            t->Phi[0][6]*w->S[56] + t->Phi[0][7]*w->S[59] + t->Phi[0][8]*w->S[62];
+    w->term[1][8] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[18] + t->Phi[0][2]*w->S[28] +
+            t->Phi[0][3]*w->S[38] + t->Phi[0][4]*w->S[48] + t->Phi[0][5]*w->S[58] +
+            t->Phi[0][6]*w->S[62] + t->Phi[0][7]*w->S[66] + t->Phi[0][8]*w->S[70];
     w->term[0][9] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
             t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
             t->Phi[1][5]*t->Phi[5][0];
-    w->term[1][9] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[9] + t->Phi[1][2]*w->S[18] +
-            t->Phi[1][3]*w->S[27] + t->Phi[1][4]*w->S[36] + t->Phi[1][5]*w->S[45];
+    w->term[1][9] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[10] + t->Phi[1][2]*w->S[20] +
+            t->Phi[1][3]*w->S[30] + t->Phi[1][4]*w->S[40] + t->Phi[1][5]*w->S[50];
     w->term[0][10] = t->Phi[1][0]*t->Phi[0][1] + t->Phi[1][1]*t->Phi[1][1] +
             t->Phi[1][2]*t->Phi[2][1] + t->Phi[1][3]*t->Phi[3][1] + t->Phi[1][4]*t->Phi[4][1] +
             t->Phi[1][5]*t->Phi[5][1];
-    w->term[1][10] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[10] + t->Phi[1][2]*w->S[19] +
-            t->Phi[1][3]*w->S[28] + t->Phi[1][4]*w->S[37] + t->Phi[1][5]*w->S[46];
+    w->term[1][10] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[11] + t->Phi[1][2]*w->S[21] +
+            t->Phi[1][3]*w->S[31] + t->Phi[1][4]*w->S[41] + t->Phi[1][5]*w->S[51];
     w->term[0][11] = t->Phi[1][0]*t->Phi[0][2] + t->Phi[1][1]*t->Phi[1][2] +
             t->Phi[1][2]*t->Phi[2][2] + t->Phi[1][3]*t->Phi[3][2] + t->Phi[1][4]*t->Phi[4][2] +
             t->Phi[1][5]*t->Phi[5][2];
-    w->term[1][11] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[11] + t->Phi[1][2]*w->S[20] +
-            t->Phi[1][3]*w->S[29] + t->Phi[1][4]*w->S[38] + t->Phi[1][5]*w->S[47];
+    w->term[1][11] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[12] + t->Phi[1][2]*w->S[22] +
+            t->Phi[1][3]*w->S[32] + t->Phi[1][4]*w->S[42] + t->Phi[1][5]*w->S[52];
     w->term[0][12] = t->Phi[1][0]*t->Phi[0][3] + t->Phi[1][1]*t->Phi[1][3] +
             t->Phi[1][2]*t->Phi[2][3] + t->Phi[1][3]*t->Phi[3][3] + t->Phi[1][4]*t->Phi[4][3] +
             t->Phi[1][5]*t->Phi[5][3];
-    w->term[1][12] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[12] + t->Phi[1][2]*w->S[21] +
-            t->Phi[1][3]*w->S[30] + t->Phi[1][4]*w->S[39] + t->Phi[1][5]*w->S[48];
+    w->term[1][12] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[13] + t->Phi[1][2]*w->S[23] +
+            t->Phi[1][3]*w->S[33] + t->Phi[1][4]*w->S[43] + t->Phi[1][5]*w->S[53];
     w->term[0][13] = t->Phi[1][0]*t->Phi[0][4] + t->Phi[1][1]*t->Phi[1][4] +
             t->Phi[1][2]*t->Phi[2][4] + t->Phi[1][3]*t->Phi[3][4] + t->Phi[1][4]*t->Phi[4][4] +
             t->Phi[1][5]*t->Phi[5][4];
-    w->term[1][13] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[13] + t->Phi[1][2]*w->S[22] +
-            t->Phi[1][3]*w->S[31] + t->Phi[1][4]*w->S[40] + t->Phi[1][5]*w->S[49];
+    w->term[1][13] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[24] +
+            t->Phi[1][3]*w->S[34] + t->Phi[1][4]*w->S[44] + t->Phi[1][5]*w->S[54];
     w->term[0][14] = t->Phi[1][0]*t->Phi[0][5] + t->Phi[1][1]*t->Phi[1][5] +
             t->Phi[1][2]*t->Phi[2][5] + t->Phi[1][3]*t->Phi[3][5] + t->Phi[1][4]*t->Phi[4][5] +
             t->Phi[1][5]*t->Phi[5][5];
-    w->term[1][14] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[23] +
-            t->Phi[1][3]*w->S[32] + t->Phi[1][4]*w->S[41] + t->Phi[1][5]*w->S[50];
+    w->term[1][14] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[25] +
+            t->Phi[1][3]*w->S[35] + t->Phi[1][4]*w->S[45] + t->Phi[1][5]*w->S[55];
     w->term[0][15] = t->Phi[1][0]*t->Phi[0][6] + t->Phi[1][1]*t->Phi[1][6] +
             t->Phi[1][2]*t->Phi[2][6] + t->Phi[1][3]*t->Phi[3][6] + t->Phi[1][4]*t->Phi[4][6] +
             t->Phi[1][5]*t->Phi[5][6] + t->Phi[1][6]*t->Phi[6][6] + t->Phi[1][7]*t->Phi[7][6] +
             t->Phi[1][8]*t->Phi[8][6];
-    w->term[1][15] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[24] +
-            t->Phi[1][3]*w->S[33] + t->Phi[1][4]*w->S[42] + t->Phi[1][5]*w->S[51] +
-            t->Phi[1][6]*w->S[54] + t->Phi[1][7]*w->S[57] + t->Phi[1][8]*w->S[60];
+    w->term[1][15] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[26] +
+            t->Phi[1][3]*w->S[36] + t->Phi[1][4]*w->S[46] + t->Phi[1][5]*w->S[56] +
+            t->Phi[1][6]*w->S[60] + t->Phi[1][7]*w->S[64] + t->Phi[1][8]*w->S[68];
     w->term[0][16] = t->Phi[1][0]*t->Phi[0][7] + t->Phi[1][1]*t->Phi[1][7] +
             t->Phi[1][2]*t->Phi[2][7] + t->Phi[1][3]*t->Phi[3][7] + t->Phi[1][4]*t->Phi[4][7] +
             t->Phi[1][5]*t->Phi[5][7] + t->Phi[1][6]*t->Phi[6][7] + t->Phi[1][7]*t->Phi[7][7] +
             t->Phi[1][8]*t->Phi[8][7];
-    w->term[1][16] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[25] +
-            t->Phi[1][3]*w->S[34] + t->Phi[1][4]*w->S[43] + t->Phi[1][5]*w->S[52] +
-            t->Phi[1][6]*w->S[55] + t->Phi[1][7]*w->S[58] + t->Phi[1][8]*w->S[61];
+    w->term[1][16] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[27] +
+            t->Phi[1][3]*w->S[37] + t->Phi[1][4]*w->S[47] + t->Phi[1][5]*w->S[57] +
+            t->Phi[1][6]*w->S[61] + t->Phi[1][7]*w->S[65] + t->Phi[1][8]*w->S[69];
     w->term[0][17] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
             t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
             t->Phi[1][5]*t->Phi[5][8] + t->Phi[1][6]*t->Phi[6][8] + t->Phi[1][7]*t->Phi[7][8] +
             t->Phi[1][8]*t->Phi[8][8];
-    w->term[1][17] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[26] +
-            t->Phi[1][3]*w->S[35] + t->Phi[1][4]*w->S[44] + t->Phi[1][5]*w->S[53] +
-            t->Phi[1][6]*w->S[56] + t->Phi[1][7]*w->S[59] + t->Phi[1][8]*w->S[62];
+    w->term[1][17] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[18] + t->Phi[1][2]*w->S[28] +
+            t->Phi[1][3]*w->S[38] + t->Phi[1][4]*w->S[48] + t->Phi[1][5]*w->S[58] +
+            t->Phi[1][6]*w->S[62] + t->Phi[1][7]*w->S[66] + t->Phi[1][8]*w->S[70];
     w->term[0][18] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
             t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
             t->Phi[2][5]*t->Phi[5][0];
-    w->term[1][18] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[9] + t->Phi[2][2]*w->S[18] +
-            t->Phi[2][3]*w->S[27] + t->Phi[2][4]*w->S[36] + t->Phi[2][5]*w->S[45];
+    w->term[1][18] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[10] + t->Phi[2][2]*w->S[20] +
+            t->Phi[2][3]*w->S[30] + t->Phi[2][4]*w->S[40] + t->Phi[2][5]*w->S[50];
     w->term[0][19] = t->Phi[2][0]*t->Phi[0][1] + t->Phi[2][1]*t->Phi[1][1] +
             t->Phi[2][2]*t->Phi[2][1] + t->Phi[2][3]*t->Phi[3][1] + t->Phi[2][4]*t->Phi[4][1] +
             t->Phi[2][5]*t->Phi[5][1];
-    w->term[1][19] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[10] + t->Phi[2][2]*w->S[19] +
-            t->Phi[2][3]*w->S[28] + t->Phi[2][4]*w->S[37] + t->Phi[2][5]*w->S[46];
+    w->term[1][19] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[11] + t->Phi[2][2]*w->S[21] +
+            t->Phi[2][3]*w->S[31] + t->Phi[2][4]*w->S[41] + t->Phi[2][5]*w->S[51];
     w->term[0][20] = t->Phi[2][0]*t->Phi[0][2] + t->Phi[2][1]*t->Phi[1][2] +
             t->Phi[2][2]*t->Phi[2][2] + t->Phi[2][3]*t->Phi[3][2] + t->Phi[2][4]*t->Phi[4][2] +
             t->Phi[2][5]*t->Phi[5][2];
-    w->term[1][20] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[11] + t->Phi[2][2]*w->S[20] +
-            t->Phi[2][3]*w->S[29] + t->Phi[2][4]*w->S[38] + t->Phi[2][5]*w->S[47];
+    w->term[1][20] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[12] + t->Phi[2][2]*w->S[22] +
+            t->Phi[2][3]*w->S[32] + t->Phi[2][4]*w->S[42] + t->Phi[2][5]*w->S[52];
     w->term[0][21] = t->Phi[2][0]*t->Phi[0][3] + t->Phi[2][1]*t->Phi[1][3] +
             t->Phi[2][2]*t->Phi[2][3] + t->Phi[2][3]*t->Phi[3][3] + t->Phi[2][4]*t->Phi[4][3] +
             t->Phi[2][5]*t->Phi[5][3];
-    w->term[1][21] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[12] + t->Phi[2][2]*w->S[21] +
-            t->Phi[2][3]*w->S[30] + t->Phi[2][4]*w->S[39] + t->Phi[2][5]*w->S[48];
+    w->term[1][21] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[13] + t->Phi[2][2]*w->S[23] +
+            t->Phi[2][3]*w->S[33] + t->Phi[2][4]*w->S[43] + t->Phi[2][5]*w->S[53];
     w->term[0][22] = t->Phi[2][0]*t->Phi[0][4] + t->Phi[2][1]*t->Phi[1][4] +
             t->Phi[2][2]*t->Phi[2][4] + t->Phi[2][3]*t->Phi[3][4] + t->Phi[2][4]*t->Phi[4][4] +
             t->Phi[2][5]*t->Phi[5][4];
-    w->term[1][22] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[13] + t->Phi[2][2]*w->S[22] +
-            t->Phi[2][3]*w->S[31] + t->Phi[2][4]*w->S[40] + t->Phi[2][5]*w->S[49];
+    w->term[1][22] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[24] +
+            t->Phi[2][3]*w->S[34] + t->Phi[2][4]*w->S[44] + t->Phi[2][5]*w->S[54];
     w->term[0][23] = t->Phi[2][0]*t->Phi[0][5] + t->Phi[2][1]*t->Phi[1][5] +
             t->Phi[2][2]*t->Phi[2][5] + t->Phi[2][3]*t->Phi[3][5] + t->Phi[2][4]*t->Phi[4][5] +
             t->Phi[2][5]*t->Phi[5][5];
-    w->term[1][23] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[23] +
-            t->Phi[2][3]*w->S[32] + t->Phi[2][4]*w->S[41] + t->Phi[2][5]*w->S[50];
+    w->term[1][23] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[25] +
+            t->Phi[2][3]*w->S[35] + t->Phi[2][4]*w->S[45] + t->Phi[2][5]*w->S[55];
     w->term[0][24] = t->Phi[2][0]*t->Phi[0][6] + t->Phi[2][1]*t->Phi[1][6] +
             t->Phi[2][2]*t->Phi[2][6] + t->Phi[2][3]*t->Phi[3][6] + t->Phi[2][4]*t->Phi[4][6] +
             t->Phi[2][5]*t->Phi[5][6] + t->Phi[2][6]*t->Phi[6][6] + t->Phi[2][7]*t->Phi[7][6] +
             t->Phi[2][8]*t->Phi[8][6];
-    w->term[1][24] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[24] +
-            t->Phi[2][3]*w->S[33] + t->Phi[2][4]*w->S[42] + t->Phi[2][5]*w->S[51] +
-            t->Phi[2][6]*w->S[54] + t->Phi[2][7]*w->S[57] + t->Phi[2][8]*w->S[60];
+    w->term[1][24] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[26] +
+            t->Phi[2][3]*w->S[36] + t->Phi[2][4]*w->S[46] + t->Phi[2][5]*w->S[56] +
+            t->Phi[2][6]*w->S[60] + t->Phi[2][7]*w->S[64] + t->Phi[2][8]*w->S[68];
     w->term[0][25] = t->Phi[2][0]*t->Phi[0][7] + t->Phi[2][1]*t->Phi[1][7] +
             t->Phi[2][2]*t->Phi[2][7] + t->Phi[2][3]*t->Phi[3][7] + t->Phi[2][4]*t->Phi[4][7] +
             t->Phi[2][5]*t->Phi[5][7] + t->Phi[2][6]*t->Phi[6][7] + t->Phi[2][7]*t->Phi[7][7] +
             t->Phi[2][8]*t->Phi[8][7];
-    w->term[1][25] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[25] +
-            t->Phi[2][3]*w->S[34] + t->Phi[2][4]*w->S[43] + t->Phi[2][5]*w->S[52] +
-            t->Phi[2][6]*w->S[55] + t->Phi[2][7]*w->S[58] + t->Phi[2][8]*w->S[61];
+    w->term[1][25] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[27] +
+            t->Phi[2][3]*w->S[37] + t->Phi[2][4]*w->S[47] + t->Phi[2][5]*w->S[57] +
+            t->Phi[2][6]*w->S[61] + t->Phi[2][7]*w->S[65] + t->Phi[2][8]*w->S[69];
     w->term[0][26] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
             t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
             t->Phi[2][5]*t->Phi[5][8] + t->Phi[2][6]*t->Phi[6][8] + t->Phi[2][7]*t->Phi[7][8] +
             t->Phi[2][8]*t->Phi[8][8];
-    w->term[1][26] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[26] +
-            t->Phi[2][3]*w->S[35] + t->Phi[2][4]*w->S[44] + t->Phi[2][5]*w->S[53] +
-            t->Phi[2][6]*w->S[56] + t->Phi[2][7]*w->S[59] + t->Phi[2][8]*w->S[62];
+    w->term[1][26] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[18] + t->Phi[2][2]*w->S[28] +
+            t->Phi[2][3]*w->S[38] + t->Phi[2][4]*w->S[48] + t->Phi[2][5]*w->S[58] +
+            t->Phi[2][6]*w->S[62] + t->Phi[2][7]*w->S[66] + t->Phi[2][8]*w->S[70];
     w->term[0][27] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
             t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
             t->Phi[3][5]*t->Phi[5][0];
-    w->term[1][27] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[9] + t->Phi[3][2]*w->S[18] +
-            t->Phi[3][3]*w->S[27] + t->Phi[3][4]*w->S[36] + t->Phi[3][5]*w->S[45];
+    w->term[1][27] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[10] + t->Phi[3][2]*w->S[20] +
+            t->Phi[3][3]*w->S[30] + t->Phi[3][4]*w->S[40] + t->Phi[3][5]*w->S[50];
     w->term[0][28] = t->Phi[3][0]*t->Phi[0][1] + t->Phi[3][1]*t->Phi[1][1] +
             t->Phi[3][2]*t->Phi[2][1] + t->Phi[3][3]*t->Phi[3][1] + t->Phi[3][4]*t->Phi[4][1] +
             t->Phi[3][5]*t->Phi[5][1];
-    w->term[1][28] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[10] + t->Phi[3][2]*w->S[19] +
-            t->Phi[3][3]*w->S[28] + t->Phi[3][4]*w->S[37] + t->Phi[3][5]*w->S[46];
+    w->term[1][28] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[11] + t->Phi[3][2]*w->S[21] +
+            t->Phi[3][3]*w->S[31] + t->Phi[3][4]*w->S[41] + t->Phi[3][5]*w->S[51];
     w->term[0][29] = t->Phi[3][0]*t->Phi[0][2] + t->Phi[3][1]*t->Phi[1][2] +
             t->Phi[3][2]*t->Phi[2][2] + t->Phi[3][3]*t->Phi[3][2] + t->Phi[3][4]*t->Phi[4][2] +
             t->Phi[3][5]*t->Phi[5][2];
-    w->term[1][29] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[11] + t->Phi[3][2]*w->S[20] +
-            t->Phi[3][3]*w->S[29] + t->Phi[3][4]*w->S[38] + t->Phi[3][5]*w->S[47];
+    w->term[1][29] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[12] + t->Phi[3][2]*w->S[22] +
+            t->Phi[3][3]*w->S[32] + t->Phi[3][4]*w->S[42] + t->Phi[3][5]*w->S[52];
     w->term[0][30] = t->Phi[3][0]*t->Phi[0][3] + t->Phi[3][1]*t->Phi[1][3] +
             t->Phi[3][2]*t->Phi[2][3] + t->Phi[3][3]*t->Phi[3][3] + t->Phi[3][4]*t->Phi[4][3] +
             t->Phi[3][5]*t->Phi[5][3];
-    w->term[1][30] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[12] + t->Phi[3][2]*w->S[21] +
-            t->Phi[3][3]*w->S[30] + t->Phi[3][4]*w->S[39] + t->Phi[3][5]*w->S[48];
+    w->term[1][30] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[13] + t->Phi[3][2]*w->S[23] +
+            t->Phi[3][3]*w->S[33] + t->Phi[3][4]*w->S[43] + t->Phi[3][5]*w->S[53];
     w->term[0][31] = t->Phi[3][0]*t->Phi[0][4] + t->Phi[3][1]*t->Phi[1][4] +
             t->Phi[3][2]*t->Phi[2][4] + t->Phi[3][3]*t->Phi[3][4] + t->Phi[3][4]*t->Phi[4][4] +
             t->Phi[3][5]*t->Phi[5][4];
-    w->term[1][31] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[13] + t->Phi[3][2]*w->S[22] +
-            t->Phi[3][3]*w->S[31] + t->Phi[3][4]*w->S[40] + t->Phi[3][5]*w->S[49];
+    w->term[1][31] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[24] +
+            t->Phi[3][3]*w->S[34] + t->Phi[3][4]*w->S[44] + t->Phi[3][5]*w->S[54];
     w->term[0][32] = t->Phi[3][0]*t->Phi[0][5] + t->Phi[3][1]*t->Phi[1][5] +
             t->Phi[3][2]*t->Phi[2][5] + t->Phi[3][3]*t->Phi[3][5] + t->Phi[3][4]*t->Phi[4][5] +
             t->Phi[3][5]*t->Phi[5][5];
-    w->term[1][32] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[23] +
-            t->Phi[3][3]*w->S[32] + t->Phi[3][4]*w->S[41] + t->Phi[3][5]*w->S[50];
+    w->term[1][32] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[25] +
+            t->Phi[3][3]*w->S[35] + t->Phi[3][4]*w->S[45] + t->Phi[3][5]*w->S[55];
     w->term[0][33] = t->Phi[3][0]*t->Phi[0][6] + t->Phi[3][1]*t->Phi[1][6] +
             t->Phi[3][2]*t->Phi[2][6] + t->Phi[3][3]*t->Phi[3][6] + t->Phi[3][4]*t->Phi[4][6] +
             t->Phi[3][5]*t->Phi[5][6] + t->Phi[3][6]*t->Phi[6][6] + t->Phi[3][7]*t->Phi[7][6] +
             t->Phi[3][8]*t->Phi[8][6];
-    w->term[1][33] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[24] +
-            t->Phi[3][3]*w->S[33] + t->Phi[3][4]*w->S[42] + t->Phi[3][5]*w->S[51] +
-            t->Phi[3][6]*w->S[54] + t->Phi[3][7]*w->S[57] + t->Phi[3][8]*w->S[60];
+    w->term[1][33] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[26] +
+            t->Phi[3][3]*w->S[36] + t->Phi[3][4]*w->S[46] + t->Phi[3][5]*w->S[56] +
+            t->Phi[3][6]*w->S[60] + t->Phi[3][7]*w->S[64] + t->Phi[3][8]*w->S[68];
     w->term[0][34] = t->Phi[3][0]*t->Phi[0][7] + t->Phi[3][1]*t->Phi[1][7] +
             t->Phi[3][2]*t->Phi[2][7] + t->Phi[3][3]*t->Phi[3][7] + t->Phi[3][4]*t->Phi[4][7] +
             t->Phi[3][5]*t->Phi[5][7] + t->Phi[3][6]*t->Phi[6][7] + t->Phi[3][7]*t->Phi[7][7] +
             t->Phi[3][8]*t->Phi[8][7];
-    w->term[1][34] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[25] +
-            t->Phi[3][3]*w->S[34] + t->Phi[3][4]*w->S[43] + t->Phi[3][5]*w->S[52] +
-            t->Phi[3][6]*w->S[55] + t->Phi[3][7]*w->S[58] + t->Phi[3][8]*w->S[61];
+    w->term[1][34] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[27] +
+            t->Phi[3][3]*w->S[37] + t->Phi[3][4]*w->S[47] + t->Phi[3][5]*w->S[57] +
+            t->Phi[3][6]*w->S[61] + t->Phi[3][7]*w->S[65] + t->Phi[3][8]*w->S[69];
     w->term[0][35] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
             t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
             t->Phi[3][5]*t->Phi[5][8] + t->Phi[3][6]*t->Phi[6][8] + t->Phi[3][7]*t->Phi[7][8] +
             t->Phi[3][8]*t->Phi[8][8];
-    w->term[1][35] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[26] +
-            t->Phi[3][3]*w->S[35] + t->Phi[3][4]*w->S[44] + t->Phi[3][5]*w->S[53] +
-            t->Phi[3][6]*w->S[56] + t->Phi[3][7]*w->S[59] + t->Phi[3][8]*w->S[62];
+    w->term[1][35] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[18] + t->Phi[3][2]*w->S[28] +
+            t->Phi[3][3]*w->S[38] + t->Phi[3][4]*w->S[48] + t->Phi[3][5]*w->S[58] +
+            t->Phi[3][6]*w->S[62] + t->Phi[3][7]*w->S[66] + t->Phi[3][8]*w->S[70];
     w->term[0][36] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
             t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
             t->Phi[4][5]*t->Phi[5][0];
-    w->term[1][36] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[9] + t->Phi[4][2]*w->S[18] +
-            t->Phi[4][3]*w->S[27] + t->Phi[4][4]*w->S[36] + t->Phi[4][5]*w->S[45];
+    w->term[1][36] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[10] + t->Phi[4][2]*w->S[20] +
+            t->Phi[4][3]*w->S[30] + t->Phi[4][4]*w->S[40] + t->Phi[4][5]*w->S[50];
     w->term[0][37] = t->Phi[4][0]*t->Phi[0][1] + t->Phi[4][1]*t->Phi[1][1] +
             t->Phi[4][2]*t->Phi[2][1] + t->Phi[4][3]*t->Phi[3][1] + t->Phi[4][4]*t->Phi[4][1] +
             t->Phi[4][5]*t->Phi[5][1];
-    w->term[1][37] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[10] + t->Phi[4][2]*w->S[19] +
-            t->Phi[4][3]*w->S[28] + t->Phi[4][4]*w->S[37] + t->Phi[4][5]*w->S[46];
+    w->term[1][37] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[11] + t->Phi[4][2]*w->S[21] +
+            t->Phi[4][3]*w->S[31] + t->Phi[4][4]*w->S[41] + t->Phi[4][5]*w->S[51];
     w->term[0][38] = t->Phi[4][0]*t->Phi[0][2] + t->Phi[4][1]*t->Phi[1][2] +
             t->Phi[4][2]*t->Phi[2][2] + t->Phi[4][3]*t->Phi[3][2] + t->Phi[4][4]*t->Phi[4][2] +
             t->Phi[4][5]*t->Phi[5][2];
-    w->term[1][38] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[11] + t->Phi[4][2]*w->S[20] +
-            t->Phi[4][3]*w->S[29] + t->Phi[4][4]*w->S[38] + t->Phi[4][5]*w->S[47];
+    w->term[1][38] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[12] + t->Phi[4][2]*w->S[22] +
+            t->Phi[4][3]*w->S[32] + t->Phi[4][4]*w->S[42] + t->Phi[4][5]*w->S[52];
     w->term[0][39] = t->Phi[4][0]*t->Phi[0][3] + t->Phi[4][1]*t->Phi[1][3] +
             t->Phi[4][2]*t->Phi[2][3] + t->Phi[4][3]*t->Phi[3][3] + t->Phi[4][4]*t->Phi[4][3] +
             t->Phi[4][5]*t->Phi[5][3];
-    w->term[1][39] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[12] + t->Phi[4][2]*w->S[21] +
-            t->Phi[4][3]*w->S[30] + t->Phi[4][4]*w->S[39] + t->Phi[4][5]*w->S[48];
+    w->term[1][39] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[13] + t->Phi[4][2]*w->S[23] +
+            t->Phi[4][3]*w->S[33] + t->Phi[4][4]*w->S[43] + t->Phi[4][5]*w->S[53];
     w->term[0][40] = t->Phi[4][0]*t->Phi[0][4] + t->Phi[4][1]*t->Phi[1][4] +
             t->Phi[4][2]*t->Phi[2][4] + t->Phi[4][3]*t->Phi[3][4] + t->Phi[4][4]*t->Phi[4][4] +
             t->Phi[4][5]*t->Phi[5][4];
-    w->term[1][40] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[13] + t->Phi[4][2]*w->S[22] +
-            t->Phi[4][3]*w->S[31] + t->Phi[4][4]*w->S[40] + t->Phi[4][5]*w->S[49];
+    w->term[1][40] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[24] +
+            t->Phi[4][3]*w->S[34] + t->Phi[4][4]*w->S[44] + t->Phi[4][5]*w->S[54];
     w->term[0][41] = t->Phi[4][0]*t->Phi[0][5] + t->Phi[4][1]*t->Phi[1][5] +
             t->Phi[4][2]*t->Phi[2][5] + t->Phi[4][3]*t->Phi[3][5] + t->Phi[4][4]*t->Phi[4][5] +
             t->Phi[4][5]*t->Phi[5][5];
-    w->term[1][41] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[23] +
-            t->Phi[4][3]*w->S[32] + t->Phi[4][4]*w->S[41] + t->Phi[4][5]*w->S[50];
+    w->term[1][41] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[25] +
+            t->Phi[4][3]*w->S[35] + t->Phi[4][4]*w->S[45] + t->Phi[4][5]*w->S[55];
     w->term[0][42] = t->Phi[4][0]*t->Phi[0][6] + t->Phi[4][1]*t->Phi[1][6] +
             t->Phi[4][2]*t->Phi[2][6] + t->Phi[4][3]*t->Phi[3][6] + t->Phi[4][4]*t->Phi[4][6] +
             t->Phi[4][5]*t->Phi[5][6] + t->Phi[4][6]*t->Phi[6][6] + t->Phi[4][7]*t->Phi[7][6] +
             t->Phi[4][8]*t->Phi[8][6];
-    w->term[1][42] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[24] +
-            t->Phi[4][3]*w->S[33] + t->Phi[4][4]*w->S[42] + t->Phi[4][5]*w->S[51] +
-            t->Phi[4][6]*w->S[54] + t->Phi[4][7]*w->S[57] + t->Phi[4][8]*w->S[60];
+    w->term[1][42] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[26] +
+            t->Phi[4][3]*w->S[36] + t->Phi[4][4]*w->S[46] + t->Phi[4][5]*w->S[56] +
+            t->Phi[4][6]*w->S[60] + t->Phi[4][7]*w->S[64] + t->Phi[4][8]*w->S[68];
     w->term[0][43] = t->Phi[4][0]*t->Phi[0][7] + t->Phi[4][1]*t->Phi[1][7] +
             t->Phi[4][2]*t->Phi[2][7] + t->Phi[4][3]*t->Phi[3][7] + t->Phi[4][4]*t->Phi[4][7] +
             t->Phi[4][5]*t->Phi[5][7] + t->Phi[4][6]*t->Phi[6][7] + t->Phi[4][7]*t->Phi[7][7] +
             t->Phi[4][8]*t->Phi[8][7];
-    w->term[1][43] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[25] +
-            t->Phi[4][3]*w->S[34] + t->Phi[4][4]*w->S[43] + t->Phi[4][5]*w->S[52] +
-            t->Phi[4][6]*w->S[55] + t->Phi[4][7]*w->S[58] + t->Phi[4][8]*w->S[61];
+    w->term[1][43] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[27] +
+            t->Phi[4][3]*w->S[37] + t->Phi[4][4]*w->S[47] + t->Phi[4][5]*w->S[57] +
+            t->Phi[4][6]*w->S[61] + t->Phi[4][7]*w->S[65] + t->Phi[4][8]*w->S[69];
     w->term[0][44] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
             t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
             t->Phi[4][5]*t->Phi[5][8] + t->Phi[4][6]*t->Phi[6][8] + t->Phi[4][7]*t->Phi[7][8] +
             t->Phi[4][8]*t->Phi[8][8];
-    w->term[1][44] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[26] +
-            t->Phi[4][3]*w->S[35] + t->Phi[4][4]*w->S[44] + t->Phi[4][5]*w->S[53] +
-            t->Phi[4][6]*w->S[56] + t->Phi[4][7]*w->S[59] + t->Phi[4][8]*w->S[62];
+    w->term[1][44] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[18] + t->Phi[4][2]*w->S[28] +
+            t->Phi[4][3]*w->S[38] + t->Phi[4][4]*w->S[48] + t->Phi[4][5]*w->S[58] +
+            t->Phi[4][6]*w->S[62] + t->Phi[4][7]*w->S[66] + t->Phi[4][8]*w->S[70];
     w->term[0][45] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
             t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
             t->Phi[5][5]*t->Phi[5][0];
-    w->term[1][45] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[9] + t->Phi[5][2]*w->S[18] +
-            t->Phi[5][3]*w->S[27] + t->Phi[5][4]*w->S[36] + t->Phi[5][5]*w->S[45];
+    w->term[1][45] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[10] + t->Phi[5][2]*w->S[20] +
+            t->Phi[5][3]*w->S[30] + t->Phi[5][4]*w->S[40] + t->Phi[5][5]*w->S[50];
     w->term[0][46] = t->Phi[5][0]*t->Phi[0][1] + t->Phi[5][1]*t->Phi[1][1] +
             t->Phi[5][2]*t->Phi[2][1] + t->Phi[5][3]*t->Phi[3][1] + t->Phi[5][4]*t->Phi[4][1] +
             t->Phi[5][5]*t->Phi[5][1];
-    w->term[1][46] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[10] + t->Phi[5][2]*w->S[19] +
-            t->Phi[5][3]*w->S[28] + t->Phi[5][4]*w->S[37] + t->Phi[5][5]*w->S[46];
+    w->term[1][46] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[11] + t->Phi[5][2]*w->S[21] +
+            t->Phi[5][3]*w->S[31] + t->Phi[5][4]*w->S[41] + t->Phi[5][5]*w->S[51];
     w->term[0][47] = t->Phi[5][0]*t->Phi[0][2] + t->Phi[5][1]*t->Phi[1][2] +
             t->Phi[5][2]*t->Phi[2][2] + t->Phi[5][3]*t->Phi[3][2] + t->Phi[5][4]*t->Phi[4][2] +
             t->Phi[5][5]*t->Phi[5][2];
-    w->term[1][47] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[11] + t->Phi[5][2]*w->S[20] +
-            t->Phi[5][3]*w->S[29] + t->Phi[5][4]*w->S[38] + t->Phi[5][5]*w->S[47];
+    w->term[1][47] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[12] + t->Phi[5][2]*w->S[22] +
+            t->Phi[5][3]*w->S[32] + t->Phi[5][4]*w->S[42] + t->Phi[5][5]*w->S[52];
     w->term[0][48] = t->Phi[5][0]*t->Phi[0][3] + t->Phi[5][1]*t->Phi[1][3] +
             t->Phi[5][2]*t->Phi[2][3] + t->Phi[5][3]*t->Phi[3][3] + t->Phi[5][4]*t->Phi[4][3] +
             t->Phi[5][5]*t->Phi[5][3];
-    w->term[1][48] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[12] + t->Phi[5][2]*w->S[21] +
-            t->Phi[5][3]*w->S[30] + t->Phi[5][4]*w->S[39] + t->Phi[5][5]*w->S[48];
+    w->term[1][48] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[13] + t->Phi[5][2]*w->S[23] +
+            t->Phi[5][3]*w->S[33] + t->Phi[5][4]*w->S[43] + t->Phi[5][5]*w->S[53];
     w->term[0][49] = t->Phi[5][0]*t->Phi[0][4] + t->Phi[5][1]*t->Phi[1][4] +
             t->Phi[5][2]*t->Phi[2][4] + t->Phi[5][3]*t->Phi[3][4] + t->Phi[5][4]*t->Phi[4][4] +
             t->Phi[5][5]*t->Phi[5][4];
-    w->term[1][49] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[13] + t->Phi[5][2]*w->S[22] +
-            t->Phi[5][3]*w->S[31] + t->Phi[5][4]*w->S[40] + t->Phi[5][5]*w->S[49];
+    w->term[1][49] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[24] +
+            t->Phi[5][3]*w->S[34] + t->Phi[5][4]*w->S[44] + t->Phi[5][5]*w->S[54];
     w->term[0][50] = t->Phi[5][0]*t->Phi[0][5] + t->Phi[5][1]*t->Phi[1][5] +
             t->Phi[5][2]*t->Phi[2][5] + t->Phi[5][3]*t->Phi[3][5] + t->Phi[5][4]*t->Phi[4][5] +
             t->Phi[5][5]*t->Phi[5][5];
-    w->term[1][50] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[23] +
-            t->Phi[5][3]*w->S[32] + t->Phi[5][4]*w->S[41] + t->Phi[5][5]*w->S[50];
+    w->term[1][50] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[25] +
+            t->Phi[5][3]*w->S[35] + t->Phi[5][4]*w->S[45] + t->Phi[5][5]*w->S[55];
     w->term[0][51] = t->Phi[5][0]*t->Phi[0][6] + t->Phi[5][1]*t->Phi[1][6] +
             t->Phi[5][2]*t->Phi[2][6] + t->Phi[5][3]*t->Phi[3][6] + t->Phi[5][4]*t->Phi[4][6] +
             t->Phi[5][5]*t->Phi[5][6] + t->Phi[5][6]*t->Phi[6][6] + t->Phi[5][7]*t->Phi[7][6] +
             t->Phi[5][8]*t->Phi[8][6];
-    w->term[1][51] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[24] +
-            t->Phi[5][3]*w->S[33] + t->Phi[5][4]*w->S[42] + t->Phi[5][5]*w->S[51] +
-            t->Phi[5][6]*w->S[54] + t->Phi[5][7]*w->S[57] + t->Phi[5][8]*w->S[60];
+    w->term[1][51] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[26] +
+            t->Phi[5][3]*w->S[36] + t->Phi[5][4]*w->S[46] + t->Phi[5][5]*w->S[56] +
+            t->Phi[5][6]*w->S[60] + t->Phi[5][7]*w->S[64] + t->Phi[5][8]*w->S[68];
     w->term[0][52] = t->Phi[5][0]*t->Phi[0][7] + t->Phi[5][1]*t->Phi[1][7] +
             t->Phi[5][2]*t->Phi[2][7] + t->Phi[5][3]*t->Phi[3][7] + t->Phi[5][4]*t->Phi[4][7] +
             t->Phi[5][5]*t->Phi[5][7] + t->Phi[5][6]*t->Phi[6][7] + t->Phi[5][7]*t->Phi[7][7] +
             t->Phi[5][8]*t->Phi[8][7];
-    w->term[1][52] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[25] +
-            t->Phi[5][3]*w->S[34] + t->Phi[5][4]*w->S[43] + t->Phi[5][5]*w->S[52] +
-            t->Phi[5][6]*w->S[55] + t->Phi[5][7]*w->S[58] + t->Phi[5][8]*w->S[61];
+    w->term[1][52] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[27] +
+            t->Phi[5][3]*w->S[37] + t->Phi[5][4]*w->S[47] + t->Phi[5][5]*w->S[57] +
+            t->Phi[5][6]*w->S[61] + t->Phi[5][7]*w->S[65] + t->Phi[5][8]*w->S[69];
     w->term[0][53] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
             t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
             t->Phi[5][5]*t->Phi[5][8] + t->Phi[5][6]*t->Phi[6][8] + t->Phi[5][7]*t->Phi[7][8] +
             t->Phi[5][8]*t->Phi[8][8];
-    w->term[1][53] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[26] +
-            t->Phi[5][3]*w->S[35] + t->Phi[5][4]*w->S[44] + t->Phi[5][5]*w->S[53] +
-            t->Phi[5][6]*w->S[56] + t->Phi[5][7]*w->S[59] + t->Phi[5][8]*w->S[62];
+    w->term[1][53] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[18] + t->Phi[5][2]*w->S[28] +
+            t->Phi[5][3]*w->S[38] + t->Phi[5][4]*w->S[48] + t->Phi[5][5]*w->S[58] +
+            t->Phi[5][6]*w->S[62] + t->Phi[5][7]*w->S[66] + t->Phi[5][8]*w->S[70];
     w->term[0][54] = t->Phi[6][6]*t->Phi[6][6] + t->Phi[6][7]*t->Phi[7][6] +
             t->Phi[6][8]*t->Phi[8][6];
-    w->term[1][54] = t->Phi[6][6]*w->S[54] + t->Phi[6][7]*w->S[57] + t->Phi[6][8]*w->S[60];
+    w->term[1][54] = t->Phi[6][6]*w->S[60] + t->Phi[6][7]*w->S[64] + t->Phi[6][8]*w->S[68];
     w->term[0][55] = t->Phi[6][6]*t->Phi[6][7] + t->Phi[6][7]*t->Phi[7][7] +
             t->Phi[6][8]*t->Phi[8][7];
-    w->term[1][55] = t->Phi[6][6]*w->S[55] + t->Phi[6][7]*w->S[58] + t->Phi[6][8]*w->S[61];
+    w->term[1][55] = t->Phi[6][6]*w->S[61] + t->Phi[6][7]*w->S[65] + t->Phi[6][8]*w->S[69];
     w->term[0][56] = t->Phi[6][6]*t->Phi[6][8] + t->Phi[6][7]*t->Phi[7][8] +
             t->Phi[6][8]*t->Phi[8][8];
-    w->term[1][56] = t->Phi[6][6]*w->S[56] + t->Phi[6][7]*w->S[59] + t->Phi[6][8]*w->S[62];
+    w->term[1][56] = t->Phi[6][6]*w->S[62] + t->Phi[6][7]*w->S[66] + t->Phi[6][8]*w->S[70];
     w->term[0][57] = t->Phi[7][6]*t->Phi[6][6] + t->Phi[7][7]*t->Phi[7][6] +
             t->Phi[7][8]*t->Phi[8][6];
-    w->term[1][57] = t->Phi[7][6]*w->S[54] + t->Phi[7][7]*w->S[57] + t->Phi[7][8]*w->S[60];
+    w->term[1][57] = t->Phi[7][6]*w->S[60] + t->Phi[7][7]*w->S[64] + t->Phi[7][8]*w->S[68];
     w->term[0][58] = t->Phi[7][6]*t->Phi[6][7] + t->Phi[7][7]*t->Phi[7][7] +
             t->Phi[7][8]*t->Phi[8][7];
-    w->term[1][58] = t->Phi[7][6]*w->S[55] + t->Phi[7][7]*w->S[58] + t->Phi[7][8]*w->S[61];
+    w->term[1][58] = t->Phi[7][6]*w->S[61] + t->Phi[7][7]*w->S[65] + t->Phi[7][8]*w->S[69];
     w->term[0][59] = t->Phi[7][6]*t->Phi[6][8] + t->Phi[7][7]*t->Phi[7][8] +
             t->Phi[7][8]*t->Phi[8][8];
-    w->term[1][59] = t->Phi[7][6]*w->S[56] + t->Phi[7][7]*w->S[59] + t->Phi[7][8]*w->S[62];
+    w->term[1][59] = t->Phi[7][6]*w->S[62] + t->Phi[7][7]*w->S[66] + t->Phi[7][8]*w->S[70];
     w->term[0][60] = t->Phi[8][6]*t->Phi[6][6] + t->Phi[8][7]*t->Phi[7][6] +
             t->Phi[8][8]*t->Phi[8][6];
-    w->term[1][60] = t->Phi[8][6]*w->S[54] + t->Phi[8][7]*w->S[57] + t->Phi[8][8]*w->S[60];
+    w->term[1][60] = t->Phi[8][6]*w->S[60] + t->Phi[8][7]*w->S[64] + t->Phi[8][8]*w->S[68];
     w->term[0][61] = t->Phi[8][6]*t->Phi[6][7] + t->Phi[8][7]*t->Phi[7][7] +
             t->Phi[8][8]*t->Phi[8][7];
-    w->term[1][61] = t->Phi[8][6]*w->S[55] + t->Phi[8][7]*w->S[58] + t->Phi[8][8]*w->S[61];
+    w->term[1][61] = t->Phi[8][6]*w->S[61] + t->Phi[8][7]*w->S[65] + t->Phi[8][8]*w->S[69];
     w->term[0][62] = t->Phi[8][6]*t->Phi[6][8] + t->Phi[8][7]*t->Phi[7][8] +
             t->Phi[8][8]*t->Phi[8][8];
-    w->term[1][62] = t->Phi[8][6]*w->S[56] + t->Phi[8][7]*w->S[59] + t->Phi[8][8]*w->S[62];
+    w->term[1][62] = t->Phi[8][6]*w->S[62] + t->Phi[8][7]*w->S[66] + t->Phi[8][8]*w->S[70];
     w->term[0][63] = t->Phi[9][9]*t->Phi[9][9];
-    w->term[1][63] = t->Phi[9][9]*w->S[63];
+    w->term[1][63] = t->Phi[9][9]*w->S[72];
     w->term[0][64] = t->Phi[9][9]*t->Phi[9][10];
-    w->term[1][64] = t->Phi[9][9]*w->S[64] + t->Phi[9][10];
+    w->term[1][64] = t->Phi[9][9]*w->S[73] + t->Phi[9][10];
     t->Phi[0][0] = t->Phi[0][0] + t->Phi[0][0] + w->term[0][0];
     w->S[0] = w->S[0] + half*w->term[1][0];
     t->Phi[0][1] = t->Phi[0][1] + t->Phi[0][1] + w->term[0][1];
@@ -1409,117 +1102,117 @@ GPS_PSEUDORANGE11_BLOCK void doubling(gps_pseudorange11_transition *restrict t,
     t->Phi[0][8] = t->Phi[0][8] + t->Phi[0][8] + w->term[0][8];
     w->S[8] = w->S[8] + half*w->term[1][8];
     t->Phi[1][0] = t->Phi[1][0] + t->Phi[1][0] + w->term[0][9];
-    w->S[9] = w->S[9] + half*w->term[1][9];
+    w->S[10] = w->S[10] + half*w->term[1][9];
     t->Phi[1][1] = t->Phi[1][1] + t->Phi[1][1] + w->term[0][10];
-    w->S[10] = w->S[10] + half*w->term[1][10];
+    w->S[11] = w->S[11] + half*w->term[1][10];
     t->Phi[1][2] = t->Phi[1][2] + t->Phi[1][2] + w->term[0][11];
-    w->S[11] = w->S[11] + half*w->term[1][11];
+    w->S[12] = w->S[12] + half*w->term[1][11];
     t->Phi[1][3] = t->Phi[1][3] + t->Phi[1][3] + w->term[0][12];
-    w->S[12] = w->S[12] + half*w->term[1][12];
+    w->S[13] = w->S[13] + half*w->term[1][12];
     t->Phi[1][4] = t->Phi[1][4] + t->Phi[1][4] + w->term[0][13];
-    w->S[13] = w->S[13] + half*w->term[1][13];
+    w->S[14] = w->S[14] + half*w->term[1][13];
     t->Phi[1][5] = t->Phi[1][5] + t->Phi[1][5] + w->term[0][14];
-    w->S[14] = w->S[14] + half*w->term[1][14];
+    w->S[15] = w->S[15] + half*w->term[1][14];
     t->Phi[1][6] = t->Phi[1][6] + t->Phi[1][6] + w->term[0][15];
-    w->S[15] = w->S[15] + half*w->term[1][15];
+    w->S[16] = w->S[16] + half*w->term[1][15];
     t->Phi[1][7] = t->Phi[1][7] + t->Phi[1][7] + w->term[0][16];
-    w->S[16] = w->S[16] + half*w->term[1][16];
+    w->S[17] = w->S[17] + half*w->term[1][16];
     t->Phi[1][8] = t->Phi[1][8] + t->Phi[1][8] + w->term[0][17];
-    w->S[17] = w->S[17] + half*w->term[1][17];
+    w->S[18] = w->S[18] + half*w->term[1][17];
     t->Phi[2][0] = t->Phi[2][0] + t->Phi[2][0] + w->term[0][18];
-    w->S[18] = w->S[18] + half*w->term[1][18];
+    w->S[20] = w->S[20] + half*w->term[1][18];
     t->Phi[2][1] = t->Phi[2][1] + t->Phi[2][1] + w->term[0][19];
-    w->S[19] = w->S[19] + half*w->term[1][19];
+    w->S[21] = w->S[21] + half*w->term[1][19];
     t->Phi[2][2] = t->Phi[2][2] + t->Phi[2][2] + w->term[0][20];
-    w->S[20] = w->S[20] + half*w->term[1][20];
+    w->S[22] = w->S[22] + half*w->term[1][20];
     t->Phi[2][3] = t->Phi[2][3] + t->Phi[2][3] + w->term[0][21];
-    w->S[21] = w->S[21] + half*w->term[1][21];
+    w->S[23] = w->S[23] + half*w->term[1][21];
     t->Phi[2][4] = t->Phi[2][4] + t->Phi[2][4] + w->term[0][22];
-    w->S[22] = w->S[22] + half*w->term[1][22];
+    w->S[24] = w->S[24] + half*w->term[1][22];
     t->Phi[2][5] = t->Phi[2][5] + t->Phi[2][5] + w->term[0][23];
-    w->S[23] = w->S[23] + half*w->term[1][23];
+    w->S[25] = w->S[25] + half*w->term[1][23];
     t->Phi[2][6] = t->Phi[2][6] + t->Phi[2][6] + w->term[0][24];
-    w->S[24] = w->S[24] + half*w->term[1][24];
+    w->S[26] = w->S[26] + half*w->term[1][24];
     t->Phi[2][7] = t->Phi[2][7] + t->Phi[2][7] + w->term[0][25];
-    w->S[25] = w->S[25] + half*w->term[1][25];
+    w->S[27] = w->S[27] + half*w->term[1][25];
     t->Phi[2][8] = t->Phi[2][8] + t->Phi[2][8] + w->term[0][26];
-    w->S[26] = w->S[26] + half*w->term[1][26];
+    w->S[28] = w->S[28] + half*w->term[1][26];
     t->Phi[3][0] = t->Phi[3][0] + t->Phi[3][0] + w->term[0][27];
-    w->S[27] = w->S[27] + half*w->term[1][27];
+    w->S[30] = w->S[30] + half*w->term[1][27];
     t->Phi[3][1] = t->Phi[3][1] + t->Phi[3][1] + w->term[0][28];
-    w->S[28] = w->S[28] + half*w->term[1][28];
+    w->S[31] = w->S[31] + half*w->term[1][28];
     t->Phi[3][2] = t->Phi[3][2] + t->Phi[3][2] + w->term[0][29];
-    w->S[29] = w->S[29] + half*w->term[1][29];
+    w->S[32] = w->S[32] + half*w->term[1][29];
     t->Phi[3][3] = t->Phi[3][3] + t->Phi[3][3] + w->term[0][30];
-    w->S[30] = w->S[30] + half*w->term[1][30];
+    w->S[33] = w->S[33] + half*w->term[1][30];
     t->Phi[3][4] = t->Phi[3][4] + t->Phi[3][4] + w->term[0][31];
-    w->S[31] = w->S[31] + half*w->term[1][31];
+    w->S[34] = w->S[34] + half*w->term[1][31];
     t->Phi[3][5] = t->Phi[3][5] + t->Phi[3][5] + w->term[0][32];
-    w->S[32] = w->S[32] + half*w->term[1][32];
+    w->S[35] = w->S[35] + half*w->term[1][32];
     t->Phi[3][6] = t->Phi[3][6] + t->Phi[3][6] + w->term[0][33];
-    w->S[33] = w->S[33] + half*w->term[1][33];
+    w->S[36] = w->S[36] + half*w->term[1][33];
     t->Phi[3][7] = t->Phi[3][7] + t->Phi[3][7] + w->term[0][34];
-    w->S[34] = w->S[34] + half*w->term[1][34];
+    w->S[37] = w->S[37] + half*w->term[1][34];
     t->Phi[3][8] = t->Phi[3][8] + t->Phi[3][8] + w->term[0][35];
-    w->S[35] = w->S[35] + half*w->term[1][35];
+    w->S[38] = w->S[38] + half*w->term[1][35];
     t->Phi[4][0] = t->Phi[4][0] + t->Phi[4][0] + w->term[0][36];
-    w->S[36] = w->S[36] + half*w->term[1][36];
+    w->S[40] = w->S[40] + half*w->term[1][36];
     t->Phi[4][1] = t->Phi[4][1] + t->Phi[4][1] + w->term[0][37];
-    w->S[37] = w->S[37] + half*w->term[1][37];
+    w->S[41] = w->S[41] + half*w->term[1][37];
     t->Phi[4][2] = t->Phi[4][2] + t->Phi[4][2] + w->term[0][38];
-    w->S[38] = w->S[38] + half*w->term[1][38];
+    w->S[42] = w->S[42] + half*w->term[1][38];
     t->Phi[4][3] = t->Phi[4][3] + t->Phi[4][3] + w->term[0][39];
-    w->S[39] = w->S[39] + half*w->term[1][39];
+    w->S[43] = w->S[43] + half*w->term[1][39];
     t->Phi[4][4] = t->Phi[4][4] + t->Phi[4][4] + w->term[0][40];
-    w->S[40] = w->S[40] + half*w->term[1][40];
+    w->S[44] = w->S[44] + half*w->term[1][40];
     t->Phi[4][5] = t->Phi[4][5] + t->Phi[4][5] + w->term[0][41];
-    w->S[41] = w->S[41] + half*w->term[1][41];
+    w->S[45] = w->S[45] + half*w->term[1][41];
     t->Phi[4][6] = t->Phi[4][6] + t->Phi[4][6] + w->term[0][42];
-    w->S[42] = w->S[42] + half*w->term[1][42];
+    w->S[46] = w->S[46] + half*w->term[1][42];
     t->Phi[4][7] = t->Phi[4][7] + t->Phi[4][7] + w->term[0][43];
-    w->S[43] = w->S[43] + half*w->term[1][43];
+    w->S[47] = w->S[47] + half*w->term[1][43];
     t->Phi[4][8] = t->Phi[4][8] + t->Phi[4][8] + w->term[0][44];
-    w->S[44] = w->S[44] + half*w->term[1][44];
+    w->S[48] = w->S[48] + half*w->term[1][44];
     t->Phi[5][0] = t->Phi[5][0] + t->Phi[5][0] + w->term[0][45];
-    w->S[45] = w->S[45] + half*w->term[1][45];
+    w->S[50] = w->S[50] + half*w->term[1][45];
     t->Phi[5][1] = t->Phi[5][1] + t->Phi[5][1] + w->term[0][46];
-    w->S[46] = w->S[46] + half*w->term[1][46];
+    w->S[51] = w->S[51] + half*w->term[1][46];
     t->Phi[5][2] = t->Phi[5][2] + t->Phi[5][2] + w->term[0][47];
-    w->S[47] = w->S[47] + half*w->term[1][47];
+    w->S[52] = w->S[52] + half*w->term[1][47];
     t->Phi[5][3] = t->Phi[5][3] + t->Phi[5][3] + w->term[0][48];
-    w->S[48] = w->S[48] + half*w->term[1][48];
+    w->S[53] = w->S[53] + half*w->term[1][48];
     t->Phi[5][4] = t->Phi[5][4] + t->Phi[5][4] + w->term[0][49];
-    w->S[49] = w->S[49] + half*w->term[1][49];
+    w->S[54] = w->S[54] + half*w->term[1][49];
     t->Phi[5][5] = t->Phi[5][5] + t->Phi[5][5] + w->term[0][50];
-    w->S[50] = w->S[50] + half*w->term[1][50];
+    w->S[55] = w->S[55] + half*w->term[1][50];
     t->Phi[5][6] = t->Phi[5][6] + t->Phi[5][6] + w->term[0][51];
-    w->S[51] = w->S[51] + half*w->term[1][51];
+    w->S[56] = w->S[56] + half*w->term[1][51];
     t->Phi[5][7] = t->Phi[5][7] + t->Phi[5][7] + w->term[0][52];
-    w->S[52] = w->S[52] + half*w->term[1][52];
+    w->S[57] = w->S[57] + half*w->term[1][52];
     t->Phi[5][8] = t->Phi[5][8] + t->Phi[5][8] + w->term[0][53];
-    w->S[53] = w->S[53] + half*w->term[1][53];
+    w->S[58] = w->S[58] + half*w->term[1][53];
     t->Phi[6][6] = t->Phi[6][6] + t->Phi[6][6] + w->term[0][54];
-    w->S[54] = w->S[54] + half*w->term[1][54];
+    w->S[60] = w->S[60] + half*w->term[1][54];
     t->Phi[6][7] = t->Phi[6][7] + t->Phi[6][7] + w->term[0][55];
-    w->S[55] = w->S[55] + half*w->term[1][55];
+    w->S[61] = w->S[61] + half*w->term[1][55];
     t->Phi[6][8] = t->Phi[6][8] + t->Phi[6][8] + w->term[0][56];
-    w->S[56] = w->S[56] + half*w->term[1][56];
+    w->S[62] = w->S[62] + half*w->term[1][56];
     t->Phi[7][6] = t->Phi[7][6] + t->Phi[7][6] + w->term[0][57];
-    w->S[57] = w->S[57] + half*w->term[1][57];
+    w->S[64] = w->S[64] + half*w->term[1][57];
     t->Phi[7][7] = t->Phi[7][7] + t->Phi[7][7] + w->term[0][58];
-    w->S[58] = w->S[58] + half*w->term[1][58];
+    w->S[65] = w->S[65] + half*w->term[1][58];
     t->Phi[7][8] = t->Phi[7][8] + t->Phi[7][8] + w->term[0][59];
-    w->S[59] = w->S[59] + half*w->term[1][59];
+    w->S[66] = w->S[66] + half*w->term[1][59];
     t->Phi[8][6] = t->Phi[8][6] + t->Phi[8][6] + w->term[0][60];
-    w->S[60] = w->S[60] + half*w->term[1][60];
+    w->S[68] = w->S[68] + half*w->term[1][60];
     t->Phi[8][7] = t->Phi[8][7] + t->Phi[8][7] + w->term[0][61];
-    w->S[61] = w->S[61] + half*w->term[1][61];
+    w->S[69] = w->S[69] + half*w->term[1][61];
     t->Phi[8][8] = t->Phi[8][8] + t->Phi[8][8] + w->term[0][62];
-    w->S[62] = w->S[62] + half*w->term[1][62];
+    w->S[70] = w->S[70] + half*w->term[1][62];
     t->Phi[9][9] = t->Phi[9][9] + t->Phi[9][9] + w->term[0][63];
-    w->S[63] = w->S[63] + half*w->term[1][63];
+    w->S[72] = w->S[72] + half*w->term[1][63];
     t->Phi[9][10] = t->Phi[9][10] + t->Phi[9][10] + w->term[0][64];
-    w->S[64] = w->S[64] + half*w->term[1][64];
+    w->S[73] = w->S[73] + half*w->term[1][64];
 }
 
 GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar transition_check(gps_pseudorange11_transition
@@ -1603,47 +1296,47 @@ GPS_PSEUDORANGE11_BLOCK void noise_input(const gps_pseudorange11_matrices *restr
     w->term[0][3] = w->S[3]*m->G[0];
     w->term[0][4] = w->S[4]*m->G[1];
     w->term[0][5] = w->S[5]*m->G[2];
-    w->term[0][6] = w->S[15]*m->G[3];
-    w->term[0][7] = w->S[16]*m->G[4];
-    w->term[0][8] = w->S[17]*m->G[5];
-    w->term[0][9] = w->S[12]*m->G[0];
-    w->term[0][10] = w->S[13]*m->G[1];
-    w->term[0][11] = w->S[14]*m->G[2];
-    w->term[0][12] = w->S[24]*m->G[3];
-    w->term[0][13] = w->S[25]*m->G[4];
-    w->term[0][14] = w->S[26]*m->G[5];
-    w->term[0][15] = w->S[21]*m->G[0];
-    w->term[0][16] = w->S[22]*m->G[1];
-    w->term[0][17] = w->S[23]*m->G[2];
-    w->term[0][18] = w->S[33]*m->G[3];
-    w->term[0][19] = w->S[34]*m->G[4];
-    w->term[0][20] = w->S[35]*m->G[5];
-    w->term[0][21] = w->S[30]*m->G[0];
-    w->term[0][22] = w->S[31]*m->G[1];
-    w->term[0][23] = w->S[32]*m->G[2];
-    w->term[0][24] = w->S[42]*m->G[3];
-    w->term[0][25] = w->S[43]*m->G[4];
-    w->term[0][26] = w->S[44]*m->G[5];
-    w->term[0][27] = w->S[39]*m->G[0];
-    w->term[0][28] = w->S[40]*m->G[1];
-    w->term[0][29] = w->S[41]*m->G[2];
-    w->term[0][30] = w->S[51]*m->G[3];
-    w->term[0][31] = w->S[52]*m->G[4];
-    w->term[0][32] = w->S[53]*m->G[5];
-    w->term[0][33] = w->S[48]*m->G[0];
-    w->term[0][34] = w->S[49]*m->G[1];
-    w->term[0][35] = w->S[50]*m->G[2];
-    w->term[0][36] = w->S[54]*m->G[3];
-    w->term[0][37] = w->S[55]*m->G[4];
-    w->term[0][38] = w->S[56]*m->G[5];
-    w->term[0][39] = w->S[57]*m->G[3];
-    w->term[0][40] = w->S[58]*m->G[4];
-    w->term[0][41] = w->S[59]*m->G[5];
-    w->term[0][42] = w->S[60]*m->G[3];
-    w->term[0][43] = w->S[61]*m->G[4];
-    w->term[0][44] = w->S[62]*m->G[5];
-    w->term[0][45] = w->S[63]*m->G[6];
-    w->term[0][46] = w->S[64]*m->G[7];
+    w->term[0][6] = w->S[16]*m->G[3];
+    w->term[0][7] = w->S[17]*m->G[4];
+    w->term[0][8] = w->S[18]*m->G[5];
+    w->term[0][9] = w->S[13]*m->G[0];
+    w->term[0][10] = w->S[14]*m->G[1];
+    w->term[0][11] = w->S[15]*m->G[2];
+    w->term[0][12] = w->S[26]*m->G[3];
+    w->term[0][13] = w->S[27]*m->G[4];
+    w->term[0][14] = w->S[28]*m->G[5];
+    w->term[0][15] = w->S[23]*m->G[0];
+    w->term[0][16] = w->S[24]*m->G[1];
+    w->term[0][17] = w->S[25]*m->G[2];
+    w->term[0][18] = w->S[36]*m->G[3];
+    w->term[0][19] = w->S[37]*m->G[4];
+    w->term[0][20] = w->S[38]*m->G[5];
+    w->term[0][21] = w->S[33]*m->G[0];
+    w->term[0][22] = w->S[34]*m->G[1];
+    w->term[0][23] = w->S[35]*m->G[2];
+    w->term[0][24] = w->S[46]*m->G[3];
+    w->term[0][25] = w->S[47]*m->G[4];
+    w->term[0][26] = w->S[48]*m->G[5];
+    w->term[0][27] = w->S[43]*m->G[0];
+    w->term[0][28] = w->S[44]*m->G[1];
+    w->term[0][29] = w->S[45]*m->G[2];
+    w->term[0][30] = w->S[56]*m->G[3];
+    w->term[0][31] = w->S[57]*m->G[4];
+    w->term[0][32] = w->S[58]*m->G[5];
+    w->term[0][33] = w->S[53]*m->G[0];
+    w->term[0][34] = w->S[54]*m->G[1];
+    w->term[0][35] = w->S[55]*m->G[2];
+    w->term[0][36] = w->S[60]*m->G[3];
+    w->term[0][37] = w->S[61]*m->G[4];
+    w->term[0][38] = w->S[62]*m->G[5];
+    w->term[0][39] = w->S[64]*m->G[3];
+    w->term[0][40] = w->S[65]*m->G[4];
+    w->term[0][41] = w->S[66]*m->G[5];
+    w->term[0][42] = w->S[68]*m->G[3];
+    w->term[0][43] = w->S[69]*m->G[4];
+    w->term[0][44] = w->S[70]*m->G[5];
+    w->term[0][45] = w->S[72]*m->G[6];
+    w->term[0][46] = w->S[73]*m->G[7];
     w->term[0][47] = m->G[7];
 }
 
@@ -1825,6 +1518,42 @@ GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar process_noise(const gps_pseudor
             v;
     v = w->term[1][46]*w->term[0][47]; t->Qd[9][10] = v; t->Qd[10][9] = v; check += v - v;
     v = w->term[1][47]*w->term[0][47]; t->Qd[10][10] = v; check += v - v;
+    t->Qd[0][9] = 0;
+    t->Qd[0][10] = 0;
+    t->Qd[1][9] = 0;
+    t->Qd[1][10] = 0;
+    t->Qd[2][9] = 0;
+    t->Qd[2][10] = 0;
+    t->Qd[3][9] = 0;
+    t->Qd[3][10] = 0;
+    t->Qd[4][9] = 0;
+    t->Qd[4][10] = 0;
+    t->Qd[5][9] = 0;
+    t->Qd[5][10] = 0;
+    t->Qd[6][9] = 0;
+    t->Qd[6][10] = 0;
+    t->Qd[7][9] = 0;
+    t->Qd[7][10] = 0;
+    t->Qd[8][9] = 0;
+    t->Qd[8][10] = 0;
+    t->Qd[9][0] = 0;
+    t->Qd[9][1] = 0;
+    t->Qd[9][2] = 0;
+    t->Qd[9][3] = 0;
+    t->Qd[9][4] = 0;
+    t->Qd[9][5] = 0;
+    t->Qd[9][6] = 0;
+    t->Qd[9][7] = 0;
+    t->Qd[9][8] = 0;
+    t->Qd[10][0] = 0;
+    t->Qd[10][1] = 0;
+    t->Qd[10][2] = 0;
+    t->Qd[10][3] = 0;
+    t->Qd[10][4] = 0;
+    t->Qd[10][5] = 0;
+    t->Qd[10][6] = 0;
+    t->Qd[10][7] = 0;
+    t->Qd[10][8] = 0;
     return check;
 }
 
@@ -1833,7 +1562,7 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
                 gps_pseudorange11_workspace *restrict work)
 {
     gps_pseudorange11_discretize_scratch *w = &work->discretize;
-    int i, j, e, c;
+    int i, e, c;
     int halvings, order, status;
     int k;
     gps_pseudorange11_scalar check = 0.0;
@@ -1869,15 +1598,11 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
     }
     /* Phi holds E = Phi - I until the identity is added after the doublings (E(2h) = 2 E + E^2:
        adding I to Phi(h) would round its small part away, s times over). */
-    for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
-        for (j = 0; j < GPS_PSEUDORANGE11_N_STATES; ++j) {
-            t->Phi[i][j] = 0.0;
-        }
-    }
     /* Horner's rule over the structural nonzeros (modelgen/codegen/discretize_kernels.py): A = F h,
        R_m = I / (m+1)!, R_k = I / (k+1)! + A R_(k+1) down to S = R_0 (R_k in S for even k, in term
-       for odd k), one function per level until the pattern stops growing, then E = A S; the
-       doublings run over the entries of Phi that are not e_i. */
+       for odd k), the top level over its pattern and every lower one as dense row segments, then
+       E = A S and zero elsewhere in Phi; the doublings run over the entries of Phi that are not
+               e_i. */
     horner_input(m, w, T * power_of_two(-halvings));
     for (k = order - 1; k >= 0; --k) {
         if (order - k == 1) {
@@ -1886,23 +1611,14 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
             } else {
                 horner_level_1_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
             }
-        } else if (order - k == 2) {
-            if (k & 1) {
-                horner_level_2_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
-            } else {
-                horner_level_2_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
-            }
-        } else if (order - k == 3) {
-            if (k & 1) {
-                horner_level_3_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
-            } else {
-                horner_level_3_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
-            }
+        } else if (k == 0) {
+            horner_last_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]); /* S = R_0:
+                    also the rows no row of F reads */
         } else {
             if (k & 1) {
-                horner_saturated_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+                horner_saturated_into_term(w, taylor_coefficient[k]);
             } else {
-                horner_saturated_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+                horner_saturated_into_S(w, taylor_coefficient[k]);
             }
         }
     }
@@ -1914,12 +1630,8 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
     for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
         t->Phi[i][i] += 1.0;
     }
-    for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
-        for (j = 0; j < GPS_PSEUDORANGE11_N_STATES; ++j) {
-            t->Qd[i][j] = 0.0;
-        }
-    }
-    /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero */
+    /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
+       zero elsewhere) */
     noise_input(m, w);
     check += process_noise(m, t, w, T);
     return (check != 0.0) ? GPS_PSEUDORANGE11_ERR_NONFINITE : GPS_PSEUDORANGE11_OK;

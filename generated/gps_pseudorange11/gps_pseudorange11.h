@@ -14,7 +14,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 37 operations after CSE
- *   discretize: 2180 mul + 1405 add = 3585 flops
+ *   discretize: 2524 mul + 1675 add = 4199 flops
  *   discretize, each doubling (long steps): 879 mul + 880 add = 1759 flops
  *   predict (C): 1061 mul + 934 add = 1995 flops
  *   predict (Python): 2420 mul + 2321 add = 4741 flops
@@ -35,8 +35,8 @@
 #define GPS_PSEUDORANGE11_NNZ_G 8
 #define GPS_PSEUDORANGE11_NNZ_H 16
 #define GPS_PSEUDORANGE11_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
-#define GPS_PSEUDORANGE11_N_TERMS 65   /* entries of discretize's compressed term arrays */
-#define GPS_PSEUDORANGE11_N_ACTIVE_ENTRIES 65   /* entries of Phi in rows that are not e_i */
+#define GPS_PSEUDORANGE11_N_TERMS 74   /* entries of discretize's compressed term arrays */
+#define GPS_PSEUDORANGE11_N_ACTIVE_ENTRIES 74   /* entries of Phi in rows that are not e_i */
 #define GPS_PSEUDORANGE11_FORM_COVARIANCE 1
 
 #define GPS_PSEUDORANGE11_OK 0
@@ -181,8 +181,8 @@ typedef struct {
 typedef struct {
     gps_pseudorange11_scalar term[2][GPS_PSEUDORANGE11_N_TERMS]; /* the Horner chain's odd levels
             R_k (term[1]); the doubling's new values; S G */
-    gps_pseudorange11_scalar S[GPS_PSEUDORANGE11_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! at
-            the active entries of Phi (and the even levels R_k) */
+    gps_pseudorange11_scalar S[GPS_PSEUDORANGE11_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)!
+            (and the even levels R_k): each block row's dense segment, then the diagonal rows */
     gps_pseudorange11_scalar fh[GPS_PSEUDORANGE11_NNZ_F]; /* F h at the nonzeros of F */
     gps_pseudorange11_scalar row_sum[GPS_PSEUDORANGE11_N_STATES]; /* balancing: off-diagonal row
             sums of D^-1 |F| D */

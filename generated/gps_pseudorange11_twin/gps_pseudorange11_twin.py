@@ -12,7 +12,7 @@ parameter_vector() to build it from a mapping.
 
 Operation counts (floating-point, per call):
   matrices_evaluate: 37 operations after CSE
-  discretize: 2180 mul + 1405 add = 3585 flops
+  discretize: 2524 mul + 1675 add = 4199 flops
   discretize, each doubling (long steps): 879 mul + 880 add = 1759 flops
   predict (C): 1061 mul + 934 add = 1995 flops
   predict (Python): 2420 mul + 2321 add = 4741 flops

@@ -14,7 +14,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 197 operations after CSE
- *   discretize: 7626 mul + 5170 add = 12796 flops
+ *   discretize: 8369 mul + 5801 add = 14170 flops
  *   discretize, each doubling (long steps): 3843 mul + 3843 add = 7686 flops
  *   predict (C): 5553 mul + 5025 add = 10578 flops
  *   predict (Python): 8442 mul + 8001 add = 16443 flops
@@ -34,8 +34,8 @@
 #define INS_GNSS21_NNZ_G 30
 #define INS_GNSS21_NNZ_H 36
 #define INS_GNSS21_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
-#define INS_GNSS21_N_TERMS 201   /* entries of discretize's compressed term arrays */
-#define INS_GNSS21_N_ACTIVE_ENTRIES 201   /* entries of Phi in rows that are not e_i */
+#define INS_GNSS21_N_TERMS 210   /* entries of discretize's compressed term arrays */
+#define INS_GNSS21_N_ACTIVE_ENTRIES 210   /* entries of Phi in rows that are not e_i */
 #define INS_GNSS21_FORM_COVARIANCE 1
 
 #define INS_GNSS21_OK 0
@@ -196,8 +196,8 @@ typedef struct {
 typedef struct {
     ins_gnss21_scalar term[2][INS_GNSS21_N_TERMS]; /* the Horner chain's odd levels R_k (term[1]);
             the doubling's new values; S G */
-    ins_gnss21_scalar S[INS_GNSS21_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! at the active
-            entries of Phi (and the even levels R_k) */
+    ins_gnss21_scalar S[INS_GNSS21_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the even
+            levels R_k): each block row's dense segment, then the diagonal rows */
     ins_gnss21_scalar fh[INS_GNSS21_NNZ_F]; /* F h at the nonzeros of F */
     ins_gnss21_scalar row_sum[INS_GNSS21_N_STATES]; /* balancing: off-diagonal row sums of D^-1 |F|
             D */

@@ -12,7 +12,7 @@ parameter_vector() to build it from a mapping.
 
 Operation counts (floating-point, per call):
   matrices_evaluate: 197 operations after CSE
-  discretize: 7626 mul + 5170 add = 12796 flops
+  discretize: 8369 mul + 5801 add = 14170 flops
   discretize, each doubling (long steps): 3843 mul + 3843 add = 7686 flops
   predict (C): 5553 mul + 5025 add = 10578 flops
   predict (Python): 8442 mul + 8001 add = 16443 flops

@@ -14,7 +14,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 354 operations after CSE
- *   discretize: 9274 mul + 6853 add = 16127 flops
+ *   discretize: 10569 mul + 7983 add = 18552 flops
  *   discretize, each doubling (long steps): 3355 mul + 3355 add = 6710 flops
  *   predict (C): 5334 mul + 4806 add = 10140 flops
  *   predict (Python): 8442 mul + 8001 add = 16443 flops
@@ -34,8 +34,8 @@
 #define INS_GNSS21_NAV_NNZ_G 30
 #define INS_GNSS21_NAV_NNZ_H 42
 #define INS_GNSS21_NAV_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
-#define INS_GNSS21_NAV_N_TERMS 193   /* entries of discretize's compressed term arrays */
-#define INS_GNSS21_NAV_N_ACTIVE_ENTRIES 193   /* entries of Phi in rows that are not e_i */
+#define INS_GNSS21_NAV_N_TERMS 210   /* entries of discretize's compressed term arrays */
+#define INS_GNSS21_NAV_N_ACTIVE_ENTRIES 210   /* entries of Phi in rows that are not e_i */
 #define INS_GNSS21_NAV_FORM_COVARIANCE 1
 
 #define INS_GNSS21_NAV_OK 0
@@ -204,8 +204,8 @@ typedef struct {
 typedef struct {
     ins_gnss21_nav_scalar term[2][INS_GNSS21_NAV_N_TERMS]; /* the Horner chain's odd levels R_k
             (term[1]); the doubling's new values; S G */
-    ins_gnss21_nav_scalar S[INS_GNSS21_NAV_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! at the
-            active entries of Phi (and the even levels R_k) */
+    ins_gnss21_nav_scalar S[INS_GNSS21_NAV_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the
+            even levels R_k): each block row's dense segment, then the diagonal rows */
     ins_gnss21_nav_scalar fh[INS_GNSS21_NAV_NNZ_F]; /* F h at the nonzeros of F */
     ins_gnss21_nav_scalar row_sum[INS_GNSS21_NAV_N_STATES]; /* balancing: off-diagonal row sums of
             D^-1 |F| D */

@@ -12,7 +12,7 @@ parameter_vector() to build it from a mapping.
 
 Operation counts (floating-point, per call):
   matrices_evaluate: 354 operations after CSE
-  discretize: 9274 mul + 6853 add = 16127 flops
+  discretize: 10569 mul + 7983 add = 18552 flops
   discretize, each doubling (long steps): 3355 mul + 3355 add = 6710 flops
   predict (C): 5334 mul + 4806 add = 10140 flops
   predict (Python): 8442 mul + 8001 add = 16443 flops

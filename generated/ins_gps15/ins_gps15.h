@@ -14,7 +14,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 113 operations after CSE
- *   discretize: 5593 mul + 4210 add = 9803 flops
+ *   discretize: 6275 mul + 4840 add = 11115 flops
  *   discretize, each doubling (long steps): 2173 mul + 2227 add = 4400 flops
  *   predict (C): 2670 mul + 2526 add = 5196 flops
  *   predict (Python): 4050 mul + 4005 add = 8055 flops
@@ -34,8 +34,8 @@
 #define INS_GPS15_NNZ_G 18
 #define INS_GPS15_NNZ_H 6
 #define INS_GPS15_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
-#define INS_GPS15_N_TERMS 127   /* entries of discretize's compressed term arrays */
-#define INS_GPS15_N_ACTIVE_ENTRIES 127   /* entries of Phi in rows that are not e_i */
+#define INS_GPS15_N_TERMS 144   /* entries of discretize's compressed term arrays */
+#define INS_GPS15_N_ACTIVE_ENTRIES 144   /* entries of Phi in rows that are not e_i */
 #define INS_GPS15_FORM_COVARIANCE 1
 
 #define INS_GPS15_OK 0
@@ -151,8 +151,8 @@ typedef struct {
 typedef struct {
     ins_gps15_scalar term[2][INS_GPS15_N_TERMS]; /* the Horner chain's odd levels R_k (term[1]); the
             doubling's new values; S G */
-    ins_gps15_scalar S[INS_GPS15_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! at the active
-            entries of Phi (and the even levels R_k) */
+    ins_gps15_scalar S[INS_GPS15_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the even
+            levels R_k): each block row's dense segment, then the diagonal rows */
     ins_gps15_scalar fh[INS_GPS15_NNZ_F]; /* F h at the nonzeros of F */
     ins_gps15_scalar row_sum[INS_GPS15_N_STATES]; /* balancing: off-diagonal row sums of D^-1 |F|
             D */

@@ -12,7 +12,7 @@ parameter_vector() to build it from a mapping.
 
 Operation counts (floating-point, per call):
   matrices_evaluate: 127 operations after CSE
-  discretize: 5593 mul + 4210 add = 9803 flops
+  discretize: 6275 mul + 4840 add = 11115 flops
   discretize, each doubling (long steps): 2173 mul + 2227 add = 4400 flops
   predict (C): 2670 mul + 2526 add = 5196 flops
   predict (Python): 4050 mul + 4005 add = 8055 flops

@@ -14,7 +14,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 73 operations after CSE
- *   discretize: 2655 mul + 1817 add = 4472 flops
+ *   discretize: 3042 mul + 2153 add = 5195 flops
  *   discretize, each doubling (long steps): 967 mul + 981 add = 1948 flops
  *   predict (C): 1330 mul + 1199 add = 2529 flops
  *   predict (Python): 2054 mul + 1989 add = 4043 flops
@@ -36,8 +36,8 @@
 #define NED_DOPPLER13_REDUCED_NNZ_H 4
 /* highest order of the Taylor series of discretize */
 #define NED_DOPPLER13_REDUCED_TAYLOR_ORDER 9
-#define NED_DOPPLER13_REDUCED_N_TERMS 73   /* entries of discretize's compressed term arrays */
-#define NED_DOPPLER13_REDUCED_N_ACTIVE_ENTRIES 73   /* entries of Phi in rows that are not e_i */
+#define NED_DOPPLER13_REDUCED_N_TERMS 86   /* entries of discretize's compressed term arrays */
+#define NED_DOPPLER13_REDUCED_N_ACTIVE_ENTRIES 86   /* entries of Phi in rows that are not e_i */
 #define NED_DOPPLER13_REDUCED_FORM_COVARIANCE 1
 
 #define NED_DOPPLER13_REDUCED_OK 0
@@ -172,7 +172,8 @@ typedef struct {
     ned_doppler13_reduced_scalar term[2][NED_DOPPLER13_REDUCED_N_TERMS]; /* the Horner chain's odd
             levels R_k (term[1]); the doubling's new values; S G */
     ned_doppler13_reduced_scalar S[NED_DOPPLER13_REDUCED_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k
-            + 1)! at the active entries of Phi (and the even levels R_k) */
+            + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal
+            rows */
     ned_doppler13_reduced_scalar fh[NED_DOPPLER13_REDUCED_NNZ_F]; /* F h at the nonzeros of F */
     ned_doppler13_reduced_scalar row_sum[NED_DOPPLER13_REDUCED_N_STATES]; /* balancing: off-diagonal
             row sums of D^-1 |F| D */

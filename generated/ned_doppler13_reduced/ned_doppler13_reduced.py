@@ -12,7 +12,7 @@ parameter_vector() to build it from a mapping.
 
 Operation counts (floating-point, per call):
   matrices_evaluate: 73 operations after CSE
-  discretize: 2655 mul + 1817 add = 4472 flops
+  discretize: 3042 mul + 2153 add = 5195 flops
   discretize, each doubling (long steps): 967 mul + 981 add = 1948 flops
   predict (C): 1330 mul + 1199 add = 2529 flops
   predict (Python): 2054 mul + 1989 add = 4043 flops

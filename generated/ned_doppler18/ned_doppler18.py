@@ -12,7 +12,7 @@ parameter_vector() to build it from a mapping.
 
 Operation counts (floating-point, per call):
   matrices_evaluate: 77 operations after CSE
-  discretize: 3850 mul + 2628 add = 6478 flops
+  discretize: 4048 mul + 2862 add = 6910 flops
   discretize, each doubling (long steps): 1500 mul + 1521 add = 3021 flops
   predict (C): 2636 mul + 2356 add = 4992 flops
   predict (Python): 4248 mul + 4104 add = 8352 flops

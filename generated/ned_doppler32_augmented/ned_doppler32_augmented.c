@@ -11,7 +11,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 112 operations after CSE
- *   discretize: 6589 mul + 4596 add = 11185 flops
+ *   discretize: 7239 mul + 5236 add = 12475 flops
  *   discretize, each doubling (long steps): 2616 mul + 2721 add = 5337 flops
  *   predict (C): 7312 mul + 6850 add = 14162 flops
  *   predict (Python): 12928 mul + 13120 add = 26048 flops
@@ -91,7 +91,7 @@ const unsigned char ned_doppler32_augmented_G_col[6] = { 0, 1, 2, 3, 4, 5 };
 const unsigned char ned_doppler32_augmented_H_row[8] = { 0, 0, 0, 0, 1, 1, 1, 1 };
 const unsigned char ned_doppler32_augmented_H_col[8] = { 3, 16, 30, 31, 4, 17, 30, 31 };
 
-/* First entry of each row of F and of H in the compact arrays (CSR row starts). */
+/* First entry of each row of H in the compact arrays (CSR row starts). */
 /* Entries (row, column) of Phi that the Taylor terms can change: rows that are not e_i. */
 #define NED_DOPPLER32_AUGMENTED_N_ACTIVE 196
 /* Halvings of T that discretize may take before it gives up (T / 2^64), and
@@ -417,21 +417,28 @@ static const ned_doppler32_augmented_scalar taylor_coefficient[10] = {
    bound on the relative error of Phi of order m after s doublings (growth = e^theta), one order of
    margin for the entries that couple blocks of F; the same operations in the same order as
    modelgen.derive.discretization.step_error_bound. */
+static ned_doppler32_augmented_scalar series_bound(const ned_doppler32_augmented_scalar growth,
+        const ned_doppler32_augmented_scalar theta, const ned_doppler32_augmented_scalar power,
+                const int taylor_order, const int halvings)
+{
+    const int order = taylor_order - 1; /* power = theta^(order+1) / (order+1)!, built as below */
+    if (!(theta < (ned_doppler32_augmented_scalar)(order + 2))) {
+        return HUGE_VAL;
+    }
+    return growth * (power * (ned_doppler32_augmented_scalar)(order + 2) /
+            ((ned_doppler32_augmented_scalar)(order + 2) - theta)) * power_of_two(halvings + 1);
+}
+
 static ned_doppler32_augmented_scalar step_error_bound(const ned_doppler32_augmented_scalar growth,
         const ned_doppler32_augmented_scalar theta, const int taylor_order,
                 const int halvings)
 {
-    const int order = taylor_order - 1;
     ned_doppler32_augmented_scalar power = 1.0;
     int k;
-    if (!(theta < (ned_doppler32_augmented_scalar)(order + 2))) {
-        return HUGE_VAL;
-    }
-    for (k = 1; k <= order + 1; ++k) {
+    for (k = 1; k <= taylor_order; ++k) {
         power = power * theta / (ned_doppler32_augmented_scalar)k;
     }
-    return growth * (power * (ned_doppler32_augmented_scalar)(order + 2) /
-            ((ned_doppler32_augmented_scalar)(order + 2) - theta)) * power_of_two(halvings + 1);
+    return series_bound(growth, theta, power, taylor_order, halvings);
 }
 
 /* The doublings s and the order m summed for ||F||_D = norm and step T
@@ -442,7 +449,7 @@ static int taylor_plan(const ned_doppler32_augmented_scalar norm, const
     /* the smallest s for which order TAYLOR_ORDER meets the tolerance, then the smallest order
        that meets it with that s */
     int s, k;
-    ned_doppler32_augmented_scalar theta = norm * T, growth = exp(norm * T);
+    ned_doppler32_augmented_scalar theta = norm * T, growth = exp(norm * T), power = 1.0;
     for (s = 0; !(step_error_bound(growth, theta, NED_DOPPLER32_AUGMENTED_TAYLOR_ORDER, s) <=
             NED_DOPPLER32_AUGMENTED_TAYLOR_TOLERANCE); ++s) {
         if (s == NED_DOPPLER32_AUGMENTED_MAX_DOUBLINGS) {
@@ -451,8 +458,15 @@ static int taylor_plan(const ned_doppler32_augmented_scalar norm, const
         theta = norm * (T * power_of_two(-(s + 1)));
         growth = exp(theta);
     }
-    for (k = 1; k < NED_DOPPLER32_AUGMENTED_TAYLOR_ORDER && !(step_error_bound(growth, theta, k, s)
-            <= NED_DOPPLER32_AUGMENTED_TAYLOR_TOLERANCE); ++k) {
+    /* the bound of order k from theta^k / k! carried from order k - 1: the same products and
+            quotients
+       as step_error_bound's loop, without repeating them for every order */
+    for (k = 1;; ++k) {
+        power = power * theta / (ned_doppler32_augmented_scalar)k;
+        if (k == NED_DOPPLER32_AUGMENTED_TAYLOR_ORDER || series_bound(growth, theta, power, k, s) <=
+                NED_DOPPLER32_AUGMENTED_TAYLOR_TOLERANCE) {
+            break;
+        }
     }
     *halvings = s;
     *order = k;
@@ -566,124 +580,99 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_level_1_into_S(ned_doppler32_augmented
     w->S[0] = c_out;
     w->S[1] = w->fh[0]*c_in;
     w->S[2] = w->fh[1]*c_in;
+    w->S[3] = 0;
     w->S[4] = w->fh[2]*c_in;
     w->S[5] = w->fh[3]*c_in;
-    w->S[6] = w->fh[4]*c_in;
-    w->S[7] = w->fh[5]*c_in;
-    w->S[8] = w->fh[6]*c_in;
-    w->S[9] = w->fh[7]*c_in;
-    w->S[10] = w->fh[8]*c_in;
-    w->S[11] = w->fh[9]*c_in;
-    w->S[15] = w->fh[10]*c_in;
-    w->S[16] = w->fh[11]*c_in;
-    w->S[17] = w->fh[12]*c_in;
-    w->S[18] = w->fh[13]*c_in;
-    w->S[19] = w->fh[14]*c_in;
-    w->S[20] = w->fh[15]*c_in;
-    w->S[21] = w->fh[16]*c_in;
-    w->S[22] = w->fh[17]*c_in;
-    w->S[23] = w->fh[18]*c_in;
-    w->S[27] = w->fh[19]*c_in;
-    w->S[28] = c_out;
-    w->S[29] = w->fh[20]*c_in;
-    w->S[30] = w->fh[21]*c_in;
-    w->S[33] = w->fh[22]*c_in;
-    w->S[34] = w->fh[23]*c_in;
-    w->S[35] = w->fh[24]*c_in;
-    w->S[36] = w->fh[25]*c_in;
-    w->S[37] = w->fh[26]*c_in;
-    w->S[38] = w->fh[27]*c_in;
-    w->S[42] = w->fh[28]*c_in;
-    w->S[43] = w->fh[29]*c_in;
-    w->S[44] = w->fh[30]*c_in;
-    w->S[45] = w->fh[31]*c_in;
-    w->S[46] = w->fh[32]*c_in;
-    w->S[47] = w->fh[33]*c_in;
-    w->S[48] = w->fh[34]*c_in;
-    w->S[49] = w->fh[35]*c_in;
-    w->S[50] = w->fh[36]*c_in;
-    w->S[54] = w->fh[37]*c_in;
-    w->S[55] = w->fh[38]*c_in;
-    w->S[56] = c_out;
-    w->S[58] = w->fh[39]*c_in;
-    w->S[59] = w->fh[40]*c_in;
-    w->S[60] = w->fh[41]*c_in;
-    w->S[61] = w->fh[42]*c_in;
-    w->S[62] = w->fh[43]*c_in;
-    w->S[63] = w->fh[44]*c_in;
-    w->S[64] = w->fh[45]*c_in;
-    w->S[65] = w->fh[46]*c_in;
-    w->S[69] = w->fh[47]*c_in;
-    w->S[70] = w->fh[48]*c_in;
-    w->S[71] = w->fh[49]*c_in;
-    w->S[72] = w->fh[50]*c_in;
-    w->S[73] = w->fh[51]*c_in;
-    w->S[74] = w->fh[52]*c_in;
-    w->S[75] = w->fh[53]*c_in;
-    w->S[76] = w->fh[54]*c_in;
-    w->S[77] = w->fh[55]*c_in;
-    w->S[82] = w->fh[56]*c_in;
-    w->S[83] = w->fh[57]*c_in;
-    w->S[84] = c_out + w->fh[58]*c_in;
-    w->S[85] = w->fh[59]*c_in;
-    w->S[86] = w->fh[60]*c_in;
-    w->S[93] = w->fh[61]*c_in;
-    w->S[94] = w->fh[62]*c_in;
-    w->S[95] = w->fh[63]*c_in;
-    w->S[105] = w->fh[64]*c_in;
-    w->S[106] = w->fh[65]*c_in;
-    w->S[107] = w->fh[66]*c_in;
-    w->S[108] = w->fh[67]*c_in;
-    w->S[110] = w->fh[68]*c_in;
-    w->S[111] = w->fh[69]*c_in;
-    w->S[112] = c_out + w->fh[70]*c_in;
-    w->S[113] = w->fh[71]*c_in;
-    w->S[120] = w->fh[72]*c_in;
-    w->S[121] = w->fh[73]*c_in;
-    w->S[122] = w->fh[74]*c_in;
-    w->S[132] = w->fh[75]*c_in;
-    w->S[133] = w->fh[76]*c_in;
-    w->S[134] = w->fh[77]*c_in;
-    w->S[138] = w->fh[78]*c_in;
-    w->S[140] = c_out;
-    w->S[166] = w->fh[79]*c_in;
-    w->S[167] = w->fh[80]*c_in;
-    w->S[168] = c_out;
-    w->S[190] = c_out + w->fh[81]*c_in;
-    w->S[191] = c_out + w->fh[82]*c_in;
-    w->S[192] = c_out + w->fh[83]*c_in;
-    w->S[193] = c_out + w->fh[84]*c_in;
-    w->S[194] = c_out + w->fh[85]*c_in;
-    w->S[195] = c_out + w->fh[86]*c_in;
-    w->S[3] = 0;
-    w->S[12] = 0;
+    w->S[6] = 0;
+    w->S[7] = w->fh[4]*c_in;
+    w->S[8] = w->fh[5]*c_in;
+    w->S[9] = w->fh[6]*c_in;
+    w->S[10] = w->fh[7]*c_in;
+    w->S[11] = w->fh[8]*c_in;
+    w->S[12] = w->fh[9]*c_in;
     w->S[13] = 0;
     w->S[14] = 0;
-    w->S[24] = 0;
-    w->S[25] = 0;
-    w->S[26] = 0;
-    w->S[31] = 0;
-    w->S[32] = 0;
-    w->S[39] = 0;
-    w->S[40] = 0;
-    w->S[41] = 0;
-    w->S[51] = 0;
-    w->S[52] = 0;
-    w->S[53] = 0;
+    w->S[15] = 0;
+    w->S[16] = 0;
+    w->S[17] = 0;
+    w->S[18] = w->fh[10]*c_in;
+    w->S[19] = w->fh[11]*c_in;
+    w->S[20] = w->fh[12]*c_in;
+    w->S[21] = w->fh[13]*c_in;
+    w->S[22] = w->fh[14]*c_in;
+    w->S[23] = w->fh[15]*c_in;
+    w->S[24] = w->fh[16]*c_in;
+    w->S[25] = w->fh[17]*c_in;
+    w->S[26] = w->fh[18]*c_in;
+    w->S[27] = 0;
+    w->S[28] = 0;
+    w->S[29] = 0;
+    w->S[30] = w->fh[19]*c_in;
+    w->S[31] = c_out;
+    w->S[32] = w->fh[20]*c_in;
+    w->S[33] = w->fh[21]*c_in;
+    w->S[34] = 0;
+    w->S[35] = 0;
+    w->S[36] = 0;
+    w->S[37] = w->fh[22]*c_in;
+    w->S[38] = w->fh[23]*c_in;
+    w->S[39] = w->fh[24]*c_in;
+    w->S[40] = w->fh[25]*c_in;
+    w->S[41] = w->fh[26]*c_in;
+    w->S[42] = w->fh[27]*c_in;
+    w->S[43] = 0;
+    w->S[44] = 0;
+    w->S[45] = 0;
+    w->S[46] = 0;
+    w->S[47] = 0;
+    w->S[48] = w->fh[28]*c_in;
+    w->S[49] = w->fh[29]*c_in;
+    w->S[50] = w->fh[30]*c_in;
+    w->S[51] = w->fh[31]*c_in;
+    w->S[52] = w->fh[32]*c_in;
+    w->S[53] = w->fh[33]*c_in;
+    w->S[54] = w->fh[34]*c_in;
+    w->S[55] = w->fh[35]*c_in;
+    w->S[56] = w->fh[36]*c_in;
     w->S[57] = 0;
+    w->S[58] = 0;
+    w->S[59] = 0;
+    w->S[60] = w->fh[37]*c_in;
+    w->S[61] = w->fh[38]*c_in;
+    w->S[62] = c_out;
+    w->S[63] = 0;
+    w->S[64] = w->fh[39]*c_in;
+    w->S[65] = w->fh[40]*c_in;
     w->S[66] = 0;
-    w->S[67] = 0;
-    w->S[68] = 0;
-    w->S[78] = 0;
-    w->S[79] = 0;
-    w->S[80] = 0;
-    w->S[81] = 0;
+    w->S[67] = w->fh[41]*c_in;
+    w->S[68] = w->fh[42]*c_in;
+    w->S[69] = w->fh[43]*c_in;
+    w->S[70] = w->fh[44]*c_in;
+    w->S[71] = w->fh[45]*c_in;
+    w->S[72] = w->fh[46]*c_in;
+    w->S[73] = 0;
+    w->S[74] = 0;
+    w->S[75] = 0;
+    w->S[76] = 0;
+    w->S[77] = 0;
+    w->S[78] = w->fh[47]*c_in;
+    w->S[79] = w->fh[48]*c_in;
+    w->S[80] = w->fh[49]*c_in;
+    w->S[81] = w->fh[50]*c_in;
+    w->S[82] = w->fh[51]*c_in;
+    w->S[83] = w->fh[52]*c_in;
+    w->S[84] = w->fh[53]*c_in;
+    w->S[85] = w->fh[54]*c_in;
+    w->S[86] = w->fh[55]*c_in;
     w->S[87] = 0;
     w->S[88] = 0;
     w->S[89] = 0;
     w->S[90] = 0;
-    w->S[91] = 0;
-    w->S[92] = 0;
+    w->S[91] = w->fh[56]*c_in;
+    w->S[92] = w->fh[57]*c_in;
+    w->S[93] = c_out + w->fh[58]*c_in;
+    w->S[94] = w->fh[59]*c_in;
+    w->S[95] = w->fh[60]*c_in;
     w->S[96] = 0;
     w->S[97] = 0;
     w->S[98] = 0;
@@ -691,43 +680,59 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_level_1_into_S(ned_doppler32_augmented
     w->S[100] = 0;
     w->S[101] = 0;
     w->S[102] = 0;
-    w->S[103] = 0;
-    w->S[104] = 0;
+    w->S[103] = w->fh[61]*c_in;
+    w->S[104] = w->fh[62]*c_in;
+    w->S[105] = w->fh[63]*c_in;
+    w->S[106] = 0;
+    w->S[107] = 0;
+    w->S[108] = 0;
     w->S[109] = 0;
+    w->S[110] = 0;
+    w->S[111] = 0;
+    w->S[112] = 0;
+    w->S[113] = 0;
     w->S[114] = 0;
     w->S[115] = 0;
     w->S[116] = 0;
-    w->S[117] = 0;
-    w->S[118] = 0;
-    w->S[119] = 0;
-    w->S[123] = 0;
-    w->S[124] = 0;
-    w->S[125] = 0;
+    w->S[117] = w->fh[64]*c_in;
+    w->S[118] = w->fh[65]*c_in;
+    w->S[119] = w->fh[66]*c_in;
+    w->S[120] = w->fh[67]*c_in;
+    w->S[121] = 0;
+    w->S[122] = w->fh[68]*c_in;
+    w->S[123] = w->fh[69]*c_in;
+    w->S[124] = c_out + w->fh[70]*c_in;
+    w->S[125] = w->fh[71]*c_in;
     w->S[126] = 0;
     w->S[127] = 0;
     w->S[128] = 0;
     w->S[129] = 0;
     w->S[130] = 0;
     w->S[131] = 0;
-    w->S[135] = 0;
+    w->S[132] = 0;
+    w->S[133] = w->fh[72]*c_in;
+    w->S[134] = w->fh[73]*c_in;
+    w->S[135] = w->fh[74]*c_in;
     w->S[136] = 0;
     w->S[137] = 0;
+    w->S[138] = 0;
     w->S[139] = 0;
+    w->S[140] = 0;
     w->S[141] = 0;
     w->S[142] = 0;
     w->S[143] = 0;
     w->S[144] = 0;
     w->S[145] = 0;
     w->S[146] = 0;
-    w->S[147] = 0;
-    w->S[148] = 0;
-    w->S[149] = 0;
+    w->S[147] = w->fh[75]*c_in;
+    w->S[148] = w->fh[76]*c_in;
+    w->S[149] = w->fh[77]*c_in;
     w->S[150] = 0;
     w->S[151] = 0;
     w->S[152] = 0;
-    w->S[153] = 0;
+    w->S[153] = w->fh[78]*c_in;
     w->S[154] = 0;
-    w->S[155] = 0;
+    w->S[155] = c_out;
     w->S[156] = 0;
     w->S[157] = 0;
     w->S[158] = 0;
@@ -738,6 +743,9 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_level_1_into_S(ned_doppler32_augmented
     w->S[163] = 0;
     w->S[164] = 0;
     w->S[165] = 0;
+    w->S[166] = 0;
+    w->S[167] = 0;
+    w->S[168] = 0;
     w->S[169] = 0;
     w->S[170] = 0;
     w->S[171] = 0;
@@ -753,12 +761,38 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_level_1_into_S(ned_doppler32_augmented
     w->S[181] = 0;
     w->S[182] = 0;
     w->S[183] = 0;
-    w->S[184] = 0;
-    w->S[185] = 0;
-    w->S[186] = 0;
+    w->S[184] = w->fh[79]*c_in;
+    w->S[185] = w->fh[80]*c_in;
+    w->S[186] = c_out;
     w->S[187] = 0;
     w->S[188] = 0;
     w->S[189] = 0;
+    w->S[190] = 0;
+    w->S[191] = 0;
+    w->S[192] = 0;
+    w->S[193] = 0;
+    w->S[194] = 0;
+    w->S[195] = 0;
+    w->S[196] = 0;
+    w->S[197] = 0;
+    w->S[198] = 0;
+    w->S[199] = 0;
+    w->S[200] = 0;
+    w->S[201] = 0;
+    w->S[202] = 0;
+    w->S[203] = 0;
+    w->S[204] = 0;
+    w->S[205] = 0;
+    w->S[206] = 0;
+    w->S[207] = 0;
+    w->S[208] = 0;
+    w->S[209] = 0;
+    w->S[210] = c_out + w->fh[81]*c_in;
+    w->S[211] = c_out + w->fh[82]*c_in;
+    w->S[212] = c_out + w->fh[83]*c_in;
+    w->S[213] = c_out + w->fh[84]*c_in;
+    w->S[214] = c_out + w->fh[85]*c_in;
+    w->S[215] = c_out + w->fh[86]*c_in;
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void
@@ -768,2020 +802,1381 @@ NED_DOPPLER32_AUGMENTED_BLOCK void
     w->term[1][0] = c_out;
     w->term[1][1] = w->fh[0]*c_in;
     w->term[1][2] = w->fh[1]*c_in;
+    w->term[1][3] = 0;
     w->term[1][4] = w->fh[2]*c_in;
     w->term[1][5] = w->fh[3]*c_in;
-    w->term[1][6] = w->fh[4]*c_in;
-    w->term[1][7] = w->fh[5]*c_in;
-    w->term[1][8] = w->fh[6]*c_in;
-    w->term[1][9] = w->fh[7]*c_in;
-    w->term[1][10] = w->fh[8]*c_in;
-    w->term[1][11] = w->fh[9]*c_in;
-    w->term[1][15] = w->fh[10]*c_in;
-    w->term[1][16] = w->fh[11]*c_in;
-    w->term[1][17] = w->fh[12]*c_in;
-    w->term[1][18] = w->fh[13]*c_in;
-    w->term[1][19] = w->fh[14]*c_in;
-    w->term[1][20] = w->fh[15]*c_in;
-    w->term[1][21] = w->fh[16]*c_in;
-    w->term[1][22] = w->fh[17]*c_in;
-    w->term[1][23] = w->fh[18]*c_in;
-    w->term[1][27] = w->fh[19]*c_in;
-    w->term[1][28] = c_out;
-    w->term[1][29] = w->fh[20]*c_in;
-    w->term[1][30] = w->fh[21]*c_in;
-    w->term[1][33] = w->fh[22]*c_in;
-    w->term[1][34] = w->fh[23]*c_in;
-    w->term[1][35] = w->fh[24]*c_in;
-    w->term[1][36] = w->fh[25]*c_in;
-    w->term[1][37] = w->fh[26]*c_in;
-    w->term[1][38] = w->fh[27]*c_in;
-    w->term[1][42] = w->fh[28]*c_in;
-    w->term[1][43] = w->fh[29]*c_in;
-    w->term[1][44] = w->fh[30]*c_in;
-    w->term[1][45] = w->fh[31]*c_in;
-    w->term[1][46] = w->fh[32]*c_in;
-    w->term[1][47] = w->fh[33]*c_in;
-    w->term[1][48] = w->fh[34]*c_in;
-    w->term[1][49] = w->fh[35]*c_in;
-    w->term[1][50] = w->fh[36]*c_in;
-    w->term[1][54] = w->fh[37]*c_in;
-    w->term[1][55] = w->fh[38]*c_in;
-    w->term[1][56] = c_out;
-    w->term[1][58] = w->fh[39]*c_in;
-    w->term[1][59] = w->fh[40]*c_in;
-    w->term[1][60] = w->fh[41]*c_in;
-    w->term[1][61] = w->fh[42]*c_in;
-    w->term[1][62] = w->fh[43]*c_in;
-    w->term[1][63] = w->fh[44]*c_in;
-    w->term[1][64] = w->fh[45]*c_in;
-    w->term[1][65] = w->fh[46]*c_in;
-    w->term[1][69] = w->fh[47]*c_in;
-    w->term[1][70] = w->fh[48]*c_in;
-    w->term[1][71] = w->fh[49]*c_in;
-    w->term[1][72] = w->fh[50]*c_in;
-    w->term[1][73] = w->fh[51]*c_in;
-    w->term[1][74] = w->fh[52]*c_in;
-    w->term[1][75] = w->fh[53]*c_in;
-    w->term[1][76] = w->fh[54]*c_in;
-    w->term[1][77] = w->fh[55]*c_in;
-    w->term[1][82] = w->fh[56]*c_in;
-    w->term[1][83] = w->fh[57]*c_in;
-    w->term[1][84] = c_out + w->fh[58]*c_in;
-    w->term[1][85] = w->fh[59]*c_in;
-    w->term[1][86] = w->fh[60]*c_in;
-    w->term[1][93] = w->fh[61]*c_in;
-    w->term[1][94] = w->fh[62]*c_in;
-    w->term[1][95] = w->fh[63]*c_in;
-    w->term[1][105] = w->fh[64]*c_in;
-    w->term[1][106] = w->fh[65]*c_in;
-    w->term[1][107] = w->fh[66]*c_in;
-    w->term[1][108] = w->fh[67]*c_in;
-    w->term[1][110] = w->fh[68]*c_in;
-    w->term[1][111] = w->fh[69]*c_in;
-    w->term[1][112] = c_out + w->fh[70]*c_in;
-    w->term[1][113] = w->fh[71]*c_in;
-    w->term[1][120] = w->fh[72]*c_in;
-    w->term[1][121] = w->fh[73]*c_in;
-    w->term[1][122] = w->fh[74]*c_in;
-    w->term[1][132] = w->fh[75]*c_in;
-    w->term[1][133] = w->fh[76]*c_in;
-    w->term[1][134] = w->fh[77]*c_in;
-    w->term[1][138] = w->fh[78]*c_in;
-    w->term[1][140] = c_out;
-    w->term[1][166] = w->fh[79]*c_in;
-    w->term[1][167] = w->fh[80]*c_in;
-    w->term[1][168] = c_out;
-    w->term[1][190] = c_out + w->fh[81]*c_in;
-    w->term[1][191] = c_out + w->fh[82]*c_in;
-    w->term[1][192] = c_out + w->fh[83]*c_in;
-    w->term[1][193] = c_out + w->fh[84]*c_in;
-    w->term[1][194] = c_out + w->fh[85]*c_in;
-    w->term[1][195] = c_out + w->fh[86]*c_in;
-}
-
-NED_DOPPLER32_AUGMENTED_BLOCK void horner_level_2_into_S(ned_doppler32_augmented_discretize_scratch
-        *restrict w, const ned_doppler32_augmented_scalar c_out, const
-        ned_doppler32_augmented_scalar c_in)
-{
-    w->S[0] = c_out + w->fh[0]*w->term[1][27] + w->fh[1]*w->term[1][54] + w->fh[2]*w->term[1][108];
-    w->S[1] = w->fh[0]*w->term[1][28] + w->fh[1]*w->term[1][55];
-    w->S[2] = w->fh[0]*w->term[1][29] + w->fh[1]*w->term[1][56] + w->fh[2]*w->term[1][110];
-    w->S[3] = w->fh[0]*w->term[1][30] + w->fh[2]*w->term[1][111] + w->fh[3]*w->term[1][138];
-    w->S[4] = w->fh[1]*w->term[1][58] + w->fh[2]*w->term[1][112];
-    w->S[5] = w->fh[1]*w->term[1][59] + w->fh[2]*w->term[1][113] + w->fh[3]*w->term[1][140];
-    w->S[6] = w->fh[0]*w->term[1][33] + w->fh[1]*w->term[1][60] + w->fh[4]*c_in;
-    w->S[7] = w->fh[0]*w->term[1][34] + w->fh[1]*w->term[1][61] + w->fh[5]*c_in;
-    w->S[8] = w->fh[0]*w->term[1][35] + w->fh[1]*w->term[1][62] + w->fh[6]*c_in;
-    w->S[9] = w->fh[0]*w->term[1][36] + w->fh[1]*w->term[1][63] + w->fh[7]*w->term[1][190];
-    w->S[10] = w->fh[0]*w->term[1][37] + w->fh[1]*w->term[1][64] + w->fh[8]*w->term[1][191];
-    w->S[11] = w->fh[0]*w->term[1][38] + w->fh[1]*w->term[1][65] + w->fh[9]*w->term[1][192];
-    w->S[12] = w->fh[2]*w->term[1][120];
-    w->S[13] = w->fh[2]*w->term[1][121];
-    w->S[14] = w->fh[2]*w->term[1][122];
-    w->S[15] = w->fh[0]*w->term[1][42] + w->fh[1]*w->term[1][69] + w->fh[10]*c_in;
-    w->S[16] = w->fh[0]*w->term[1][43] + w->fh[1]*w->term[1][70] + w->fh[11]*c_in;
-    w->S[17] = w->fh[0]*w->term[1][44] + w->fh[1]*w->term[1][71] + w->fh[12]*c_in;
-    w->S[18] = w->fh[0]*w->term[1][45] + w->fh[1]*w->term[1][72] + w->fh[13]*c_in;
-    w->S[19] = w->fh[0]*w->term[1][46] + w->fh[1]*w->term[1][73] + w->fh[14]*c_in;
-    w->S[20] = w->fh[0]*w->term[1][47] + w->fh[1]*w->term[1][74] + w->fh[15]*c_in;
-    w->S[21] = w->fh[0]*w->term[1][48] + w->fh[1]*w->term[1][75] + w->fh[16]*c_in;
-    w->S[22] = w->fh[0]*w->term[1][49] + w->fh[1]*w->term[1][76] + w->fh[17]*c_in;
-    w->S[23] = w->fh[0]*w->term[1][50] + w->fh[1]*w->term[1][77] + w->fh[18]*c_in;
-    w->S[24] = w->fh[2]*w->term[1][132];
-    w->S[25] = w->fh[2]*w->term[1][133];
-    w->S[26] = w->fh[2]*w->term[1][134];
-    w->S[27] = w->fh[19]*w->term[1][0] + w->fh[20]*w->term[1][54];
-    w->S[28] = c_out + w->fh[19]*w->term[1][1] + w->fh[20]*w->term[1][55] +
-            w->fh[21]*w->term[1][82];
-    w->S[29] = w->fh[19]*w->term[1][2] + w->fh[20]*w->term[1][56] + w->fh[21]*w->term[1][83];
-    w->S[30] = w->fh[21]*w->term[1][84];
-    w->S[31] = w->fh[19]*w->term[1][4] + w->fh[20]*w->term[1][58] + w->fh[21]*w->term[1][85];
-    w->S[32] = w->fh[19]*w->term[1][5] + w->fh[20]*w->term[1][59] + w->fh[21]*w->term[1][86];
-    w->S[33] = w->fh[19]*w->term[1][6] + w->fh[20]*w->term[1][60] + w->fh[22]*c_in;
-    w->S[34] = w->fh[19]*w->term[1][7] + w->fh[20]*w->term[1][61] + w->fh[23]*c_in;
-    w->S[35] = w->fh[19]*w->term[1][8] + w->fh[20]*w->term[1][62] + w->fh[24]*c_in;
-    w->S[36] = w->fh[19]*w->term[1][9] + w->fh[20]*w->term[1][63] + w->fh[25]*w->term[1][190];
-    w->S[37] = w->fh[19]*w->term[1][10] + w->fh[20]*w->term[1][64] + w->fh[26]*w->term[1][191];
-    w->S[38] = w->fh[19]*w->term[1][11] + w->fh[20]*w->term[1][65] + w->fh[27]*w->term[1][192];
-    w->S[39] = w->fh[21]*w->term[1][93];
-    w->S[40] = w->fh[21]*w->term[1][94];
-    w->S[41] = w->fh[21]*w->term[1][95];
-    w->S[42] = w->fh[19]*w->term[1][15] + w->fh[20]*w->term[1][69] + w->fh[28]*c_in;
-    w->S[43] = w->fh[19]*w->term[1][16] + w->fh[20]*w->term[1][70] + w->fh[29]*c_in;
-    w->S[44] = w->fh[19]*w->term[1][17] + w->fh[20]*w->term[1][71] + w->fh[30]*c_in;
-    w->S[45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][72] + w->fh[31]*c_in;
-    w->S[46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][73] + w->fh[32]*c_in;
-    w->S[47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][74] + w->fh[33]*c_in;
-    w->S[48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][75] + w->fh[34]*c_in;
-    w->S[49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][76] + w->fh[35]*c_in;
-    w->S[50] = w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][77] + w->fh[36]*c_in;
-    w->S[51] = w->fh[21]*w->term[1][105];
-    w->S[52] = w->fh[21]*w->term[1][106];
-    w->S[53] = w->fh[21]*w->term[1][107];
-    w->S[54] = w->fh[37]*w->term[1][0] + w->fh[38]*w->term[1][27] + w->fh[39]*w->term[1][108];
-    w->S[55] = w->fh[37]*w->term[1][1] + w->fh[38]*w->term[1][28];
-    w->S[56] = c_out + w->fh[37]*w->term[1][2] + w->fh[38]*w->term[1][29] +
-            w->fh[39]*w->term[1][110];
-    w->S[57] = w->fh[38]*w->term[1][30] + w->fh[39]*w->term[1][111] + w->fh[40]*w->term[1][138];
-    w->S[58] = w->fh[37]*w->term[1][4] + w->fh[39]*w->term[1][112];
-    w->S[59] = w->fh[37]*w->term[1][5] + w->fh[39]*w->term[1][113] + w->fh[40]*w->term[1][140];
-    w->S[60] = w->fh[37]*w->term[1][6] + w->fh[38]*w->term[1][33] + w->fh[41]*c_in;
-    w->S[61] = w->fh[37]*w->term[1][7] + w->fh[38]*w->term[1][34] + w->fh[42]*c_in;
-    w->S[62] = w->fh[37]*w->term[1][8] + w->fh[38]*w->term[1][35] + w->fh[43]*c_in;
-    w->S[63] = w->fh[37]*w->term[1][9] + w->fh[38]*w->term[1][36] + w->fh[44]*w->term[1][190];
-    w->S[64] = w->fh[37]*w->term[1][10] + w->fh[38]*w->term[1][37] + w->fh[45]*w->term[1][191];
-    w->S[65] = w->fh[37]*w->term[1][11] + w->fh[38]*w->term[1][38] + w->fh[46]*w->term[1][192];
-    w->S[66] = w->fh[39]*w->term[1][120];
-    w->S[67] = w->fh[39]*w->term[1][121];
-    w->S[68] = w->fh[39]*w->term[1][122];
-    w->S[69] = w->fh[37]*w->term[1][15] + w->fh[38]*w->term[1][42] + w->fh[47]*c_in;
-    w->S[70] = w->fh[37]*w->term[1][16] + w->fh[38]*w->term[1][43] + w->fh[48]*c_in;
-    w->S[71] = w->fh[37]*w->term[1][17] + w->fh[38]*w->term[1][44] + w->fh[49]*c_in;
-    w->S[72] = w->fh[37]*w->term[1][18] + w->fh[38]*w->term[1][45] + w->fh[50]*c_in;
-    w->S[73] = w->fh[37]*w->term[1][19] + w->fh[38]*w->term[1][46] + w->fh[51]*c_in;
-    w->S[74] = w->fh[37]*w->term[1][20] + w->fh[38]*w->term[1][47] + w->fh[52]*c_in;
-    w->S[75] = w->fh[37]*w->term[1][21] + w->fh[38]*w->term[1][48] + w->fh[53]*c_in;
-    w->S[76] = w->fh[37]*w->term[1][22] + w->fh[38]*w->term[1][49] + w->fh[54]*c_in;
-    w->S[77] = w->fh[37]*w->term[1][23] + w->fh[38]*w->term[1][50] + w->fh[55]*c_in;
-    w->S[78] = w->fh[39]*w->term[1][132];
-    w->S[79] = w->fh[39]*w->term[1][133];
-    w->S[80] = w->fh[39]*w->term[1][134];
-    w->S[81] = w->fh[56]*w->term[1][27] + w->fh[57]*w->term[1][54] + w->fh[59]*w->term[1][108];
-    w->S[82] = w->fh[56]*w->term[1][28] + w->fh[57]*w->term[1][55] + w->fh[58]*w->term[1][82];
-    w->S[83] = w->fh[56]*w->term[1][29] + w->fh[57]*w->term[1][56] + w->fh[58]*w->term[1][83] +
-            w->fh[59]*w->term[1][110];
-    w->S[84] = c_out + w->fh[56]*w->term[1][30] + w->fh[58]*w->term[1][84] +
-            w->fh[59]*w->term[1][111] + w->fh[60]*w->term[1][138];
-    w->S[85] = w->fh[57]*w->term[1][58] + w->fh[58]*w->term[1][85] + w->fh[59]*w->term[1][112];
-    w->S[86] = w->fh[57]*w->term[1][59] + w->fh[58]*w->term[1][86] + w->fh[59]*w->term[1][113] +
-            w->fh[60]*w->term[1][140];
-    w->S[87] = w->fh[56]*w->term[1][33] + w->fh[57]*w->term[1][60];
-    w->S[88] = w->fh[56]*w->term[1][34] + w->fh[57]*w->term[1][61];
-    w->S[89] = w->fh[56]*w->term[1][35] + w->fh[57]*w->term[1][62];
-    w->S[90] = w->fh[56]*w->term[1][36] + w->fh[57]*w->term[1][63];
-    w->S[91] = w->fh[56]*w->term[1][37] + w->fh[57]*w->term[1][64];
-    w->S[92] = w->fh[56]*w->term[1][38] + w->fh[57]*w->term[1][65];
-    w->S[93] = w->fh[58]*w->term[1][93] + w->fh[59]*w->term[1][120] + w->fh[61]*w->term[1][193];
-    w->S[94] = w->fh[58]*w->term[1][94] + w->fh[59]*w->term[1][121] + w->fh[62]*w->term[1][194];
-    w->S[95] = w->fh[58]*w->term[1][95] + w->fh[59]*w->term[1][122] + w->fh[63]*w->term[1][195];
-    w->S[96] = w->fh[56]*w->term[1][42] + w->fh[57]*w->term[1][69];
-    w->S[97] = w->fh[56]*w->term[1][43] + w->fh[57]*w->term[1][70];
-    w->S[98] = w->fh[56]*w->term[1][44] + w->fh[57]*w->term[1][71];
-    w->S[99] = w->fh[56]*w->term[1][45] + w->fh[57]*w->term[1][72];
-    w->S[100] = w->fh[56]*w->term[1][46] + w->fh[57]*w->term[1][73];
-    w->S[101] = w->fh[56]*w->term[1][47] + w->fh[57]*w->term[1][74];
-    w->S[102] = w->fh[56]*w->term[1][48] + w->fh[57]*w->term[1][75];
-    w->S[103] = w->fh[56]*w->term[1][49] + w->fh[57]*w->term[1][76];
-    w->S[104] = w->fh[56]*w->term[1][50] + w->fh[57]*w->term[1][77];
-    w->S[105] = w->fh[58]*w->term[1][105] + w->fh[59]*w->term[1][132] + w->fh[64]*c_in;
-    w->S[106] = w->fh[58]*w->term[1][106] + w->fh[59]*w->term[1][133] + w->fh[65]*c_in;
-    w->S[107] = w->fh[58]*w->term[1][107] + w->fh[59]*w->term[1][134] + w->fh[66]*c_in;
-    w->S[108] = w->fh[67]*w->term[1][0] + w->fh[68]*w->term[1][54] + w->fh[70]*w->term[1][108];
-    w->S[109] = w->fh[67]*w->term[1][1] + w->fh[68]*w->term[1][55] + w->fh[69]*w->term[1][82];
-    w->S[110] = w->fh[67]*w->term[1][2] + w->fh[68]*w->term[1][56] + w->fh[69]*w->term[1][83] +
-            w->fh[70]*w->term[1][110];
-    w->S[111] = w->fh[69]*w->term[1][84] + w->fh[70]*w->term[1][111] + w->fh[71]*w->term[1][138];
-    w->S[112] = c_out + w->fh[67]*w->term[1][4] + w->fh[68]*w->term[1][58] +
-            w->fh[69]*w->term[1][85] + w->fh[70]*w->term[1][112];
-    w->S[113] = w->fh[67]*w->term[1][5] + w->fh[68]*w->term[1][59] + w->fh[69]*w->term[1][86] +
-            w->fh[70]*w->term[1][113] + w->fh[71]*w->term[1][140];
-    w->S[114] = w->fh[67]*w->term[1][6] + w->fh[68]*w->term[1][60];
-    w->S[115] = w->fh[67]*w->term[1][7] + w->fh[68]*w->term[1][61];
-    w->S[116] = w->fh[67]*w->term[1][8] + w->fh[68]*w->term[1][62];
-    w->S[117] = w->fh[67]*w->term[1][9] + w->fh[68]*w->term[1][63];
-    w->S[118] = w->fh[67]*w->term[1][10] + w->fh[68]*w->term[1][64];
-    w->S[119] = w->fh[67]*w->term[1][11] + w->fh[68]*w->term[1][65];
-    w->S[120] = w->fh[69]*w->term[1][93] + w->fh[70]*w->term[1][120] + w->fh[72]*w->term[1][193];
-    w->S[121] = w->fh[69]*w->term[1][94] + w->fh[70]*w->term[1][121] + w->fh[73]*w->term[1][194];
-    w->S[122] = w->fh[69]*w->term[1][95] + w->fh[70]*w->term[1][122] + w->fh[74]*w->term[1][195];
-    w->S[123] = w->fh[67]*w->term[1][15] + w->fh[68]*w->term[1][69];
-    w->S[124] = w->fh[67]*w->term[1][16] + w->fh[68]*w->term[1][70];
-    w->S[125] = w->fh[67]*w->term[1][17] + w->fh[68]*w->term[1][71];
-    w->S[126] = w->fh[67]*w->term[1][18] + w->fh[68]*w->term[1][72];
-    w->S[127] = w->fh[67]*w->term[1][19] + w->fh[68]*w->term[1][73];
-    w->S[128] = w->fh[67]*w->term[1][20] + w->fh[68]*w->term[1][74];
-    w->S[129] = w->fh[67]*w->term[1][21] + w->fh[68]*w->term[1][75];
-    w->S[130] = w->fh[67]*w->term[1][22] + w->fh[68]*w->term[1][76];
-    w->S[131] = w->fh[67]*w->term[1][23] + w->fh[68]*w->term[1][77];
-    w->S[132] = w->fh[69]*w->term[1][105] + w->fh[70]*w->term[1][132] + w->fh[75]*c_in;
-    w->S[133] = w->fh[69]*w->term[1][106] + w->fh[70]*w->term[1][133] + w->fh[76]*c_in;
-    w->S[134] = w->fh[69]*w->term[1][107] + w->fh[70]*w->term[1][134] + w->fh[77]*c_in;
-    w->S[136] = w->fh[78]*w->term[1][82];
-    w->S[137] = w->fh[78]*w->term[1][83];
-    w->S[138] = w->fh[78]*w->term[1][84];
-    w->S[139] = w->fh[78]*w->term[1][85];
-    w->S[140] = c_out + w->fh[78]*w->term[1][86];
-    w->S[147] = w->fh[78]*w->term[1][93];
-    w->S[148] = w->fh[78]*w->term[1][94];
-    w->S[149] = w->fh[78]*w->term[1][95];
-    w->S[159] = w->fh[78]*w->term[1][105];
-    w->S[160] = w->fh[78]*w->term[1][106];
-    w->S[161] = w->fh[78]*w->term[1][107];
-    w->S[162] = w->fh[79]*w->term[1][108];
-    w->S[164] = w->fh[79]*w->term[1][110];
-    w->S[165] = w->fh[79]*w->term[1][111] + w->fh[80]*w->term[1][138];
-    w->S[166] = w->fh[79]*w->term[1][112];
-    w->S[167] = w->fh[79]*w->term[1][113] + w->fh[80]*w->term[1][140];
-    w->S[168] = c_out;
-    w->S[175] = w->fh[79]*w->term[1][120];
-    w->S[176] = w->fh[79]*w->term[1][121];
-    w->S[177] = w->fh[79]*w->term[1][122];
-    w->S[187] = w->fh[79]*w->term[1][132];
-    w->S[188] = w->fh[79]*w->term[1][133];
-    w->S[189] = w->fh[79]*w->term[1][134];
-    w->S[190] = c_out + w->fh[81]*w->term[1][190];
-    w->S[191] = c_out + w->fh[82]*w->term[1][191];
-    w->S[192] = c_out + w->fh[83]*w->term[1][192];
-    w->S[193] = c_out + w->fh[84]*w->term[1][193];
-    w->S[194] = c_out + w->fh[85]*w->term[1][194];
-    w->S[195] = c_out + w->fh[86]*w->term[1][195];
-    w->S[135] = 0;
-    w->S[141] = 0;
-    w->S[142] = 0;
-    w->S[143] = 0;
-    w->S[144] = 0;
-    w->S[145] = 0;
-    w->S[146] = 0;
-    w->S[150] = 0;
-    w->S[151] = 0;
-    w->S[152] = 0;
-    w->S[153] = 0;
-    w->S[154] = 0;
-    w->S[155] = 0;
-    w->S[156] = 0;
-    w->S[157] = 0;
-    w->S[158] = 0;
-    w->S[163] = 0;
-    w->S[169] = 0;
-    w->S[170] = 0;
-    w->S[171] = 0;
-    w->S[172] = 0;
-    w->S[173] = 0;
-    w->S[174] = 0;
-    w->S[178] = 0;
-    w->S[179] = 0;
-    w->S[180] = 0;
-    w->S[181] = 0;
-    w->S[182] = 0;
-    w->S[183] = 0;
-    w->S[184] = 0;
-    w->S[185] = 0;
-    w->S[186] = 0;
-}
-
-NED_DOPPLER32_AUGMENTED_BLOCK void
-        horner_level_2_into_term(ned_doppler32_augmented_discretize_scratch *restrict w, const
-        ned_doppler32_augmented_scalar c_out, const ned_doppler32_augmented_scalar c_in)
-{
-    w->term[1][0] = c_out + w->fh[0]*w->S[27] + w->fh[1]*w->S[54] + w->fh[2]*w->S[108];
-    w->term[1][1] = w->fh[0]*w->S[28] + w->fh[1]*w->S[55];
-    w->term[1][2] = w->fh[0]*w->S[29] + w->fh[1]*w->S[56] + w->fh[2]*w->S[110];
-    w->term[1][3] = w->fh[0]*w->S[30] + w->fh[2]*w->S[111] + w->fh[3]*w->S[138];
-    w->term[1][4] = w->fh[1]*w->S[58] + w->fh[2]*w->S[112];
-    w->term[1][5] = w->fh[1]*w->S[59] + w->fh[2]*w->S[113] + w->fh[3]*w->S[140];
-    w->term[1][6] = w->fh[0]*w->S[33] + w->fh[1]*w->S[60] + w->fh[4]*c_in;
-    w->term[1][7] = w->fh[0]*w->S[34] + w->fh[1]*w->S[61] + w->fh[5]*c_in;
-    w->term[1][8] = w->fh[0]*w->S[35] + w->fh[1]*w->S[62] + w->fh[6]*c_in;
-    w->term[1][9] = w->fh[0]*w->S[36] + w->fh[1]*w->S[63] + w->fh[7]*w->S[190];
-    w->term[1][10] = w->fh[0]*w->S[37] + w->fh[1]*w->S[64] + w->fh[8]*w->S[191];
-    w->term[1][11] = w->fh[0]*w->S[38] + w->fh[1]*w->S[65] + w->fh[9]*w->S[192];
-    w->term[1][12] = w->fh[2]*w->S[120];
-    w->term[1][13] = w->fh[2]*w->S[121];
-    w->term[1][14] = w->fh[2]*w->S[122];
-    w->term[1][15] = w->fh[0]*w->S[42] + w->fh[1]*w->S[69] + w->fh[10]*c_in;
-    w->term[1][16] = w->fh[0]*w->S[43] + w->fh[1]*w->S[70] + w->fh[11]*c_in;
-    w->term[1][17] = w->fh[0]*w->S[44] + w->fh[1]*w->S[71] + w->fh[12]*c_in;
-    w->term[1][18] = w->fh[0]*w->S[45] + w->fh[1]*w->S[72] + w->fh[13]*c_in;
-    w->term[1][19] = w->fh[0]*w->S[46] + w->fh[1]*w->S[73] + w->fh[14]*c_in;
-    w->term[1][20] = w->fh[0]*w->S[47] + w->fh[1]*w->S[74] + w->fh[15]*c_in;
-    w->term[1][21] = w->fh[0]*w->S[48] + w->fh[1]*w->S[75] + w->fh[16]*c_in;
-    w->term[1][22] = w->fh[0]*w->S[49] + w->fh[1]*w->S[76] + w->fh[17]*c_in;
-    w->term[1][23] = w->fh[0]*w->S[50] + w->fh[1]*w->S[77] + w->fh[18]*c_in;
-    w->term[1][24] = w->fh[2]*w->S[132];
-    w->term[1][25] = w->fh[2]*w->S[133];
-    w->term[1][26] = w->fh[2]*w->S[134];
-    w->term[1][27] = w->fh[19]*w->S[0] + w->fh[20]*w->S[54];
-    w->term[1][28] = c_out + w->fh[19]*w->S[1] + w->fh[20]*w->S[55] + w->fh[21]*w->S[82];
-    w->term[1][29] = w->fh[19]*w->S[2] + w->fh[20]*w->S[56] + w->fh[21]*w->S[83];
-    w->term[1][30] = w->fh[21]*w->S[84];
-    w->term[1][31] = w->fh[19]*w->S[4] + w->fh[20]*w->S[58] + w->fh[21]*w->S[85];
-    w->term[1][32] = w->fh[19]*w->S[5] + w->fh[20]*w->S[59] + w->fh[21]*w->S[86];
-    w->term[1][33] = w->fh[19]*w->S[6] + w->fh[20]*w->S[60] + w->fh[22]*c_in;
-    w->term[1][34] = w->fh[19]*w->S[7] + w->fh[20]*w->S[61] + w->fh[23]*c_in;
-    w->term[1][35] = w->fh[19]*w->S[8] + w->fh[20]*w->S[62] + w->fh[24]*c_in;
-    w->term[1][36] = w->fh[19]*w->S[9] + w->fh[20]*w->S[63] + w->fh[25]*w->S[190];
-    w->term[1][37] = w->fh[19]*w->S[10] + w->fh[20]*w->S[64] + w->fh[26]*w->S[191];
-    w->term[1][38] = w->fh[19]*w->S[11] + w->fh[20]*w->S[65] + w->fh[27]*w->S[192];
-    w->term[1][39] = w->fh[21]*w->S[93];
-    w->term[1][40] = w->fh[21]*w->S[94];
-    w->term[1][41] = w->fh[21]*w->S[95];
-    w->term[1][42] = w->fh[19]*w->S[15] + w->fh[20]*w->S[69] + w->fh[28]*c_in;
-    w->term[1][43] = w->fh[19]*w->S[16] + w->fh[20]*w->S[70] + w->fh[29]*c_in;
-    w->term[1][44] = w->fh[19]*w->S[17] + w->fh[20]*w->S[71] + w->fh[30]*c_in;
-    w->term[1][45] = w->fh[19]*w->S[18] + w->fh[20]*w->S[72] + w->fh[31]*c_in;
-    w->term[1][46] = w->fh[19]*w->S[19] + w->fh[20]*w->S[73] + w->fh[32]*c_in;
-    w->term[1][47] = w->fh[19]*w->S[20] + w->fh[20]*w->S[74] + w->fh[33]*c_in;
-    w->term[1][48] = w->fh[19]*w->S[21] + w->fh[20]*w->S[75] + w->fh[34]*c_in;
-    w->term[1][49] = w->fh[19]*w->S[22] + w->fh[20]*w->S[76] + w->fh[35]*c_in;
-    w->term[1][50] = w->fh[19]*w->S[23] + w->fh[20]*w->S[77] + w->fh[36]*c_in;
-    w->term[1][51] = w->fh[21]*w->S[105];
-    w->term[1][52] = w->fh[21]*w->S[106];
-    w->term[1][53] = w->fh[21]*w->S[107];
-    w->term[1][54] = w->fh[37]*w->S[0] + w->fh[38]*w->S[27] + w->fh[39]*w->S[108];
-    w->term[1][55] = w->fh[37]*w->S[1] + w->fh[38]*w->S[28];
-    w->term[1][56] = c_out + w->fh[37]*w->S[2] + w->fh[38]*w->S[29] + w->fh[39]*w->S[110];
-    w->term[1][57] = w->fh[38]*w->S[30] + w->fh[39]*w->S[111] + w->fh[40]*w->S[138];
-    w->term[1][58] = w->fh[37]*w->S[4] + w->fh[39]*w->S[112];
-    w->term[1][59] = w->fh[37]*w->S[5] + w->fh[39]*w->S[113] + w->fh[40]*w->S[140];
-    w->term[1][60] = w->fh[37]*w->S[6] + w->fh[38]*w->S[33] + w->fh[41]*c_in;
-    w->term[1][61] = w->fh[37]*w->S[7] + w->fh[38]*w->S[34] + w->fh[42]*c_in;
-    w->term[1][62] = w->fh[37]*w->S[8] + w->fh[38]*w->S[35] + w->fh[43]*c_in;
-    w->term[1][63] = w->fh[37]*w->S[9] + w->fh[38]*w->S[36] + w->fh[44]*w->S[190];
-    w->term[1][64] = w->fh[37]*w->S[10] + w->fh[38]*w->S[37] + w->fh[45]*w->S[191];
-    w->term[1][65] = w->fh[37]*w->S[11] + w->fh[38]*w->S[38] + w->fh[46]*w->S[192];
-    w->term[1][66] = w->fh[39]*w->S[120];
-    w->term[1][67] = w->fh[39]*w->S[121];
-    w->term[1][68] = w->fh[39]*w->S[122];
-    w->term[1][69] = w->fh[37]*w->S[15] + w->fh[38]*w->S[42] + w->fh[47]*c_in;
-    w->term[1][70] = w->fh[37]*w->S[16] + w->fh[38]*w->S[43] + w->fh[48]*c_in;
-    w->term[1][71] = w->fh[37]*w->S[17] + w->fh[38]*w->S[44] + w->fh[49]*c_in;
-    w->term[1][72] = w->fh[37]*w->S[18] + w->fh[38]*w->S[45] + w->fh[50]*c_in;
-    w->term[1][73] = w->fh[37]*w->S[19] + w->fh[38]*w->S[46] + w->fh[51]*c_in;
-    w->term[1][74] = w->fh[37]*w->S[20] + w->fh[38]*w->S[47] + w->fh[52]*c_in;
-    w->term[1][75] = w->fh[37]*w->S[21] + w->fh[38]*w->S[48] + w->fh[53]*c_in;
-    w->term[1][76] = w->fh[37]*w->S[22] + w->fh[38]*w->S[49] + w->fh[54]*c_in;
-    w->term[1][77] = w->fh[37]*w->S[23] + w->fh[38]*w->S[50] + w->fh[55]*c_in;
-    w->term[1][78] = w->fh[39]*w->S[132];
-    w->term[1][79] = w->fh[39]*w->S[133];
-    w->term[1][80] = w->fh[39]*w->S[134];
-    w->term[1][81] = w->fh[56]*w->S[27] + w->fh[57]*w->S[54] + w->fh[59]*w->S[108];
-    w->term[1][82] = w->fh[56]*w->S[28] + w->fh[57]*w->S[55] + w->fh[58]*w->S[82];
-    w->term[1][83] = w->fh[56]*w->S[29] + w->fh[57]*w->S[56] + w->fh[58]*w->S[83] +
-            w->fh[59]*w->S[110];
-    w->term[1][84] = c_out + w->fh[56]*w->S[30] + w->fh[58]*w->S[84] + w->fh[59]*w->S[111] +
-            w->fh[60]*w->S[138];
-    w->term[1][85] = w->fh[57]*w->S[58] + w->fh[58]*w->S[85] + w->fh[59]*w->S[112];
-    w->term[1][86] = w->fh[57]*w->S[59] + w->fh[58]*w->S[86] + w->fh[59]*w->S[113] +
-            w->fh[60]*w->S[140];
-    w->term[1][87] = w->fh[56]*w->S[33] + w->fh[57]*w->S[60];
-    w->term[1][88] = w->fh[56]*w->S[34] + w->fh[57]*w->S[61];
-    w->term[1][89] = w->fh[56]*w->S[35] + w->fh[57]*w->S[62];
-    w->term[1][90] = w->fh[56]*w->S[36] + w->fh[57]*w->S[63];
-    w->term[1][91] = w->fh[56]*w->S[37] + w->fh[57]*w->S[64];
-    w->term[1][92] = w->fh[56]*w->S[38] + w->fh[57]*w->S[65];
-    w->term[1][93] = w->fh[58]*w->S[93] + w->fh[59]*w->S[120] + w->fh[61]*w->S[193];
-    w->term[1][94] = w->fh[58]*w->S[94] + w->fh[59]*w->S[121] + w->fh[62]*w->S[194];
-    w->term[1][95] = w->fh[58]*w->S[95] + w->fh[59]*w->S[122] + w->fh[63]*w->S[195];
-    w->term[1][96] = w->fh[56]*w->S[42] + w->fh[57]*w->S[69];
-    w->term[1][97] = w->fh[56]*w->S[43] + w->fh[57]*w->S[70];
-    w->term[1][98] = w->fh[56]*w->S[44] + w->fh[57]*w->S[71];
-    w->term[1][99] = w->fh[56]*w->S[45] + w->fh[57]*w->S[72];
-    w->term[1][100] = w->fh[56]*w->S[46] + w->fh[57]*w->S[73];
-    w->term[1][101] = w->fh[56]*w->S[47] + w->fh[57]*w->S[74];
-    w->term[1][102] = w->fh[56]*w->S[48] + w->fh[57]*w->S[75];
-    w->term[1][103] = w->fh[56]*w->S[49] + w->fh[57]*w->S[76];
-    w->term[1][104] = w->fh[56]*w->S[50] + w->fh[57]*w->S[77];
-    w->term[1][105] = w->fh[58]*w->S[105] + w->fh[59]*w->S[132] + w->fh[64]*c_in;
-    w->term[1][106] = w->fh[58]*w->S[106] + w->fh[59]*w->S[133] + w->fh[65]*c_in;
-    w->term[1][107] = w->fh[58]*w->S[107] + w->fh[59]*w->S[134] + w->fh[66]*c_in;
-    w->term[1][108] = w->fh[67]*w->S[0] + w->fh[68]*w->S[54] + w->fh[70]*w->S[108];
-    w->term[1][109] = w->fh[67]*w->S[1] + w->fh[68]*w->S[55] + w->fh[69]*w->S[82];
-    w->term[1][110] = w->fh[67]*w->S[2] + w->fh[68]*w->S[56] + w->fh[69]*w->S[83] +
-            w->fh[70]*w->S[110];
-    w->term[1][111] = w->fh[69]*w->S[84] + w->fh[70]*w->S[111] + w->fh[71]*w->S[138];
-    w->term[1][112] = c_out + w->fh[67]*w->S[4] + w->fh[68]*w->S[58] + w->fh[69]*w->S[85] +
-            w->fh[70]*w->S[112];
-    w->term[1][113] = w->fh[67]*w->S[5] + w->fh[68]*w->S[59] + w->fh[69]*w->S[86] +
-            w->fh[70]*w->S[113] + w->fh[71]*w->S[140];
-    w->term[1][114] = w->fh[67]*w->S[6] + w->fh[68]*w->S[60];
-    w->term[1][115] = w->fh[67]*w->S[7] + w->fh[68]*w->S[61];
-    w->term[1][116] = w->fh[67]*w->S[8] + w->fh[68]*w->S[62];
-    w->term[1][117] = w->fh[67]*w->S[9] + w->fh[68]*w->S[63];
-    w->term[1][118] = w->fh[67]*w->S[10] + w->fh[68]*w->S[64];
-    w->term[1][119] = w->fh[67]*w->S[11] + w->fh[68]*w->S[65];
-    w->term[1][120] = w->fh[69]*w->S[93] + w->fh[70]*w->S[120] + w->fh[72]*w->S[193];
-    w->term[1][121] = w->fh[69]*w->S[94] + w->fh[70]*w->S[121] + w->fh[73]*w->S[194];
-    w->term[1][122] = w->fh[69]*w->S[95] + w->fh[70]*w->S[122] + w->fh[74]*w->S[195];
-    w->term[1][123] = w->fh[67]*w->S[15] + w->fh[68]*w->S[69];
-    w->term[1][124] = w->fh[67]*w->S[16] + w->fh[68]*w->S[70];
-    w->term[1][125] = w->fh[67]*w->S[17] + w->fh[68]*w->S[71];
-    w->term[1][126] = w->fh[67]*w->S[18] + w->fh[68]*w->S[72];
-    w->term[1][127] = w->fh[67]*w->S[19] + w->fh[68]*w->S[73];
-    w->term[1][128] = w->fh[67]*w->S[20] + w->fh[68]*w->S[74];
-    w->term[1][129] = w->fh[67]*w->S[21] + w->fh[68]*w->S[75];
-    w->term[1][130] = w->fh[67]*w->S[22] + w->fh[68]*w->S[76];
-    w->term[1][131] = w->fh[67]*w->S[23] + w->fh[68]*w->S[77];
-    w->term[1][132] = w->fh[69]*w->S[105] + w->fh[70]*w->S[132] + w->fh[75]*c_in;
-    w->term[1][133] = w->fh[69]*w->S[106] + w->fh[70]*w->S[133] + w->fh[76]*c_in;
-    w->term[1][134] = w->fh[69]*w->S[107] + w->fh[70]*w->S[134] + w->fh[77]*c_in;
-    w->term[1][136] = w->fh[78]*w->S[82];
-    w->term[1][137] = w->fh[78]*w->S[83];
-    w->term[1][138] = w->fh[78]*w->S[84];
-    w->term[1][139] = w->fh[78]*w->S[85];
-    w->term[1][140] = c_out + w->fh[78]*w->S[86];
-    w->term[1][147] = w->fh[78]*w->S[93];
-    w->term[1][148] = w->fh[78]*w->S[94];
-    w->term[1][149] = w->fh[78]*w->S[95];
-    w->term[1][159] = w->fh[78]*w->S[105];
-    w->term[1][160] = w->fh[78]*w->S[106];
-    w->term[1][161] = w->fh[78]*w->S[107];
-    w->term[1][162] = w->fh[79]*w->S[108];
-    w->term[1][164] = w->fh[79]*w->S[110];
-    w->term[1][165] = w->fh[79]*w->S[111] + w->fh[80]*w->S[138];
-    w->term[1][166] = w->fh[79]*w->S[112];
-    w->term[1][167] = w->fh[79]*w->S[113] + w->fh[80]*w->S[140];
-    w->term[1][168] = c_out;
-    w->term[1][175] = w->fh[79]*w->S[120];
-    w->term[1][176] = w->fh[79]*w->S[121];
-    w->term[1][177] = w->fh[79]*w->S[122];
-    w->term[1][187] = w->fh[79]*w->S[132];
-    w->term[1][188] = w->fh[79]*w->S[133];
-    w->term[1][189] = w->fh[79]*w->S[134];
-    w->term[1][190] = c_out + w->fh[81]*w->S[190];
-    w->term[1][191] = c_out + w->fh[82]*w->S[191];
-    w->term[1][192] = c_out + w->fh[83]*w->S[192];
-    w->term[1][193] = c_out + w->fh[84]*w->S[193];
-    w->term[1][194] = c_out + w->fh[85]*w->S[194];
-    w->term[1][195] = c_out + w->fh[86]*w->S[195];
-}
-
-NED_DOPPLER32_AUGMENTED_BLOCK void horner_level_3_into_S(ned_doppler32_augmented_discretize_scratch
-        *restrict w, const ned_doppler32_augmented_scalar c_out, const
-        ned_doppler32_augmented_scalar c_in)
-{
-    w->S[0] = c_out + w->fh[0]*w->term[1][27] + w->fh[1]*w->term[1][54] + w->fh[2]*w->term[1][108];
-    w->S[1] = w->fh[0]*w->term[1][28] + w->fh[1]*w->term[1][55] + w->fh[2]*w->term[1][109] +
-            w->fh[3]*w->term[1][136];
-    w->S[2] = w->fh[0]*w->term[1][29] + w->fh[1]*w->term[1][56] + w->fh[2]*w->term[1][110] +
-            w->fh[3]*w->term[1][137];
-    w->S[3] = w->fh[0]*w->term[1][30] + w->fh[1]*w->term[1][57] + w->fh[2]*w->term[1][111] +
-            w->fh[3]*w->term[1][138];
-    w->S[4] = w->fh[0]*w->term[1][31] + w->fh[1]*w->term[1][58] + w->fh[2]*w->term[1][112] +
-            w->fh[3]*w->term[1][139];
-    w->S[5] = w->fh[0]*w->term[1][32] + w->fh[1]*w->term[1][59] + w->fh[2]*w->term[1][113] +
-            w->fh[3]*w->term[1][140];
-    w->S[6] = w->fh[0]*w->term[1][33] + w->fh[1]*w->term[1][60] + w->fh[2]*w->term[1][114] +
-            w->fh[4]*c_in;
-    w->S[7] = w->fh[0]*w->term[1][34] + w->fh[1]*w->term[1][61] + w->fh[2]*w->term[1][115] +
-            w->fh[5]*c_in;
-    w->S[8] = w->fh[0]*w->term[1][35] + w->fh[1]*w->term[1][62] + w->fh[2]*w->term[1][116] +
-            w->fh[6]*c_in;
-    w->S[9] = w->fh[0]*w->term[1][36] + w->fh[1]*w->term[1][63] + w->fh[2]*w->term[1][117] +
-            w->fh[7]*w->term[1][190];
-    w->S[10] = w->fh[0]*w->term[1][37] + w->fh[1]*w->term[1][64] + w->fh[2]*w->term[1][118] +
-            w->fh[8]*w->term[1][191];
-    w->S[11] = w->fh[0]*w->term[1][38] + w->fh[1]*w->term[1][65] + w->fh[2]*w->term[1][119] +
-            w->fh[9]*w->term[1][192];
-    w->S[12] = w->fh[0]*w->term[1][39] + w->fh[1]*w->term[1][66] + w->fh[2]*w->term[1][120] +
-            w->fh[3]*w->term[1][147];
-    w->S[13] = w->fh[0]*w->term[1][40] + w->fh[1]*w->term[1][67] + w->fh[2]*w->term[1][121] +
-            w->fh[3]*w->term[1][148];
-    w->S[14] = w->fh[0]*w->term[1][41] + w->fh[1]*w->term[1][68] + w->fh[2]*w->term[1][122] +
-            w->fh[3]*w->term[1][149];
-    w->S[15] = w->fh[0]*w->term[1][42] + w->fh[1]*w->term[1][69] + w->fh[2]*w->term[1][123] +
-            w->fh[10]*c_in;
-    w->S[16] = w->fh[0]*w->term[1][43] + w->fh[1]*w->term[1][70] + w->fh[2]*w->term[1][124] +
-            w->fh[11]*c_in;
-    w->S[17] = w->fh[0]*w->term[1][44] + w->fh[1]*w->term[1][71] + w->fh[2]*w->term[1][125] +
-            w->fh[12]*c_in;
-    w->S[18] = w->fh[0]*w->term[1][45] + w->fh[1]*w->term[1][72] + w->fh[2]*w->term[1][126] +
-            w->fh[13]*c_in;
-    w->S[19] = w->fh[0]*w->term[1][46] + w->fh[1]*w->term[1][73] + w->fh[2]*w->term[1][127] +
-            w->fh[14]*c_in;
-    w->S[20] = w->fh[0]*w->term[1][47] + w->fh[1]*w->term[1][74] + w->fh[2]*w->term[1][128] +
-            w->fh[15]*c_in;
-    w->S[21] = w->fh[0]*w->term[1][48] + w->fh[1]*w->term[1][75] + w->fh[2]*w->term[1][129] +
-            w->fh[16]*c_in;
-    w->S[22] = w->fh[0]*w->term[1][49] + w->fh[1]*w->term[1][76] + w->fh[2]*w->term[1][130] +
-            w->fh[17]*c_in;
-    w->S[23] = w->fh[0]*w->term[1][50] + w->fh[1]*w->term[1][77] + w->fh[2]*w->term[1][131] +
-            w->fh[18]*c_in;
-    w->S[24] = w->fh[0]*w->term[1][51] + w->fh[1]*w->term[1][78] + w->fh[2]*w->term[1][132] +
-            w->fh[3]*w->term[1][159];
-    w->S[25] = w->fh[0]*w->term[1][52] + w->fh[1]*w->term[1][79] + w->fh[2]*w->term[1][133] +
-            w->fh[3]*w->term[1][160];
-    w->S[26] = w->fh[0]*w->term[1][53] + w->fh[1]*w->term[1][80] + w->fh[2]*w->term[1][134] +
-            w->fh[3]*w->term[1][161];
-    w->S[27] = w->fh[19]*w->term[1][0] + w->fh[20]*w->term[1][54] + w->fh[21]*w->term[1][81];
-    w->S[28] = c_out + w->fh[19]*w->term[1][1] + w->fh[20]*w->term[1][55] +
-            w->fh[21]*w->term[1][82];
-    w->S[29] = w->fh[19]*w->term[1][2] + w->fh[20]*w->term[1][56] + w->fh[21]*w->term[1][83];
-    w->S[30] = w->fh[19]*w->term[1][3] + w->fh[20]*w->term[1][57] + w->fh[21]*w->term[1][84];
-    w->S[31] = w->fh[19]*w->term[1][4] + w->fh[20]*w->term[1][58] + w->fh[21]*w->term[1][85];
-    w->S[32] = w->fh[19]*w->term[1][5] + w->fh[20]*w->term[1][59] + w->fh[21]*w->term[1][86];
-    w->S[33] = w->fh[19]*w->term[1][6] + w->fh[20]*w->term[1][60] + w->fh[21]*w->term[1][87] +
-            w->fh[22]*c_in;
-    w->S[34] = w->fh[19]*w->term[1][7] + w->fh[20]*w->term[1][61] + w->fh[21]*w->term[1][88] +
-            w->fh[23]*c_in;
-    w->S[35] = w->fh[19]*w->term[1][8] + w->fh[20]*w->term[1][62] + w->fh[21]*w->term[1][89] +
-            w->fh[24]*c_in;
-    w->S[36] = w->fh[19]*w->term[1][9] + w->fh[20]*w->term[1][63] + w->fh[21]*w->term[1][90] +
-            w->fh[25]*w->term[1][190];
-    w->S[37] = w->fh[19]*w->term[1][10] + w->fh[20]*w->term[1][64] + w->fh[21]*w->term[1][91] +
-            w->fh[26]*w->term[1][191];
-    w->S[38] = w->fh[19]*w->term[1][11] + w->fh[20]*w->term[1][65] + w->fh[21]*w->term[1][92] +
-            w->fh[27]*w->term[1][192];
-    w->S[39] = w->fh[19]*w->term[1][12] + w->fh[20]*w->term[1][66] + w->fh[21]*w->term[1][93];
-    w->S[40] = w->fh[19]*w->term[1][13] + w->fh[20]*w->term[1][67] + w->fh[21]*w->term[1][94];
-    w->S[41] = w->fh[19]*w->term[1][14] + w->fh[20]*w->term[1][68] + w->fh[21]*w->term[1][95];
-    w->S[42] = w->fh[19]*w->term[1][15] + w->fh[20]*w->term[1][69] + w->fh[21]*w->term[1][96] +
-            w->fh[28]*c_in;
-    w->S[43] = w->fh[19]*w->term[1][16] + w->fh[20]*w->term[1][70] + w->fh[21]*w->term[1][97] +
-            w->fh[29]*c_in;
-    w->S[44] = w->fh[19]*w->term[1][17] + w->fh[20]*w->term[1][71] + w->fh[21]*w->term[1][98] +
-            w->fh[30]*c_in;
-    w->S[45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][72] + w->fh[21]*w->term[1][99] +
-            w->fh[31]*c_in;
-    w->S[46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][73] + w->fh[21]*w->term[1][100] +
-            w->fh[32]*c_in;
-    w->S[47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][74] + w->fh[21]*w->term[1][101] +
-            w->fh[33]*c_in;
-    w->S[48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][75] + w->fh[21]*w->term[1][102] +
-            w->fh[34]*c_in;
-    w->S[49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][76] + w->fh[21]*w->term[1][103] +
-            w->fh[35]*c_in;
-    w->S[50] = w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][77] + w->fh[21]*w->term[1][104] +
-            w->fh[36]*c_in;
-    w->S[51] = w->fh[19]*w->term[1][24] + w->fh[20]*w->term[1][78] + w->fh[21]*w->term[1][105];
-    w->S[52] = w->fh[19]*w->term[1][25] + w->fh[20]*w->term[1][79] + w->fh[21]*w->term[1][106];
-    w->S[53] = w->fh[19]*w->term[1][26] + w->fh[20]*w->term[1][80] + w->fh[21]*w->term[1][107];
-    w->S[54] = w->fh[37]*w->term[1][0] + w->fh[38]*w->term[1][27] + w->fh[39]*w->term[1][108];
-    w->S[55] = w->fh[37]*w->term[1][1] + w->fh[38]*w->term[1][28] + w->fh[39]*w->term[1][109] +
-            w->fh[40]*w->term[1][136];
-    w->S[56] = c_out + w->fh[37]*w->term[1][2] + w->fh[38]*w->term[1][29] +
-            w->fh[39]*w->term[1][110] + w->fh[40]*w->term[1][137];
-    w->S[57] = w->fh[37]*w->term[1][3] + w->fh[38]*w->term[1][30] + w->fh[39]*w->term[1][111] +
-            w->fh[40]*w->term[1][138];
-    w->S[58] = w->fh[37]*w->term[1][4] + w->fh[38]*w->term[1][31] + w->fh[39]*w->term[1][112] +
-            w->fh[40]*w->term[1][139];
-    w->S[59] = w->fh[37]*w->term[1][5] + w->fh[38]*w->term[1][32] + w->fh[39]*w->term[1][113] +
-            w->fh[40]*w->term[1][140];
-    w->S[60] = w->fh[37]*w->term[1][6] + w->fh[38]*w->term[1][33] + w->fh[39]*w->term[1][114] +
-            w->fh[41]*c_in;
-    w->S[61] = w->fh[37]*w->term[1][7] + w->fh[38]*w->term[1][34] + w->fh[39]*w->term[1][115] +
-            w->fh[42]*c_in;
-    w->S[62] = w->fh[37]*w->term[1][8] + w->fh[38]*w->term[1][35] + w->fh[39]*w->term[1][116] +
-            w->fh[43]*c_in;
-    w->S[63] = w->fh[37]*w->term[1][9] + w->fh[38]*w->term[1][36] + w->fh[39]*w->term[1][117] +
-            w->fh[44]*w->term[1][190];
-    w->S[64] = w->fh[37]*w->term[1][10] + w->fh[38]*w->term[1][37] + w->fh[39]*w->term[1][118] +
-            w->fh[45]*w->term[1][191];
-    w->S[65] = w->fh[37]*w->term[1][11] + w->fh[38]*w->term[1][38] + w->fh[39]*w->term[1][119] +
-            w->fh[46]*w->term[1][192];
-    w->S[66] = w->fh[37]*w->term[1][12] + w->fh[38]*w->term[1][39] + w->fh[39]*w->term[1][120] +
-            w->fh[40]*w->term[1][147];
-    w->S[67] = w->fh[37]*w->term[1][13] + w->fh[38]*w->term[1][40] + w->fh[39]*w->term[1][121] +
-            w->fh[40]*w->term[1][148];
-    w->S[68] = w->fh[37]*w->term[1][14] + w->fh[38]*w->term[1][41] + w->fh[39]*w->term[1][122] +
-            w->fh[40]*w->term[1][149];
-    w->S[69] = w->fh[37]*w->term[1][15] + w->fh[38]*w->term[1][42] + w->fh[39]*w->term[1][123] +
-            w->fh[47]*c_in;
-    w->S[70] = w->fh[37]*w->term[1][16] + w->fh[38]*w->term[1][43] + w->fh[39]*w->term[1][124] +
-            w->fh[48]*c_in;
-    w->S[71] = w->fh[37]*w->term[1][17] + w->fh[38]*w->term[1][44] + w->fh[39]*w->term[1][125] +
-            w->fh[49]*c_in;
-    w->S[72] = w->fh[37]*w->term[1][18] + w->fh[38]*w->term[1][45] + w->fh[39]*w->term[1][126] +
-            w->fh[50]*c_in;
-    w->S[73] = w->fh[37]*w->term[1][19] + w->fh[38]*w->term[1][46] + w->fh[39]*w->term[1][127] +
-            w->fh[51]*c_in;
-    w->S[74] = w->fh[37]*w->term[1][20] + w->fh[38]*w->term[1][47] + w->fh[39]*w->term[1][128] +
-            w->fh[52]*c_in;
-    w->S[75] = w->fh[37]*w->term[1][21] + w->fh[38]*w->term[1][48] + w->fh[39]*w->term[1][129] +
-            w->fh[53]*c_in;
-    w->S[76] = w->fh[37]*w->term[1][22] + w->fh[38]*w->term[1][49] + w->fh[39]*w->term[1][130] +
-            w->fh[54]*c_in;
-    w->S[77] = w->fh[37]*w->term[1][23] + w->fh[38]*w->term[1][50] + w->fh[39]*w->term[1][131] +
-            w->fh[55]*c_in;
-    w->S[78] = w->fh[37]*w->term[1][24] + w->fh[38]*w->term[1][51] + w->fh[39]*w->term[1][132] +
-            w->fh[40]*w->term[1][159];
-    w->S[79] = w->fh[37]*w->term[1][25] + w->fh[38]*w->term[1][52] + w->fh[39]*w->term[1][133] +
-            w->fh[40]*w->term[1][160];
-    w->S[80] = w->fh[37]*w->term[1][26] + w->fh[38]*w->term[1][53] + w->fh[39]*w->term[1][134] +
-            w->fh[40]*w->term[1][161];
-    w->S[81] = w->fh[56]*w->term[1][27] + w->fh[57]*w->term[1][54] + w->fh[58]*w->term[1][81] +
-            w->fh[59]*w->term[1][108];
-    w->S[82] = w->fh[56]*w->term[1][28] + w->fh[57]*w->term[1][55] + w->fh[58]*w->term[1][82] +
-            w->fh[59]*w->term[1][109] + w->fh[60]*w->term[1][136];
-    w->S[83] = w->fh[56]*w->term[1][29] + w->fh[57]*w->term[1][56] + w->fh[58]*w->term[1][83] +
-            w->fh[59]*w->term[1][110] + w->fh[60]*w->term[1][137];
-    w->S[84] = c_out + w->fh[56]*w->term[1][30] + w->fh[57]*w->term[1][57] +
-            w->fh[58]*w->term[1][84] + w->fh[59]*w->term[1][111] + w->fh[60]*w->term[1][138];
-    w->S[85] = w->fh[56]*w->term[1][31] + w->fh[57]*w->term[1][58] + w->fh[58]*w->term[1][85] +
-            w->fh[59]*w->term[1][112] + w->fh[60]*w->term[1][139];
-    w->S[86] = w->fh[56]*w->term[1][32] + w->fh[57]*w->term[1][59] + w->fh[58]*w->term[1][86] +
-            w->fh[59]*w->term[1][113] + w->fh[60]*w->term[1][140];
-    w->S[87] = w->fh[56]*w->term[1][33] + w->fh[57]*w->term[1][60] + w->fh[58]*w->term[1][87] +
-            w->fh[59]*w->term[1][114];
-    w->S[88] = w->fh[56]*w->term[1][34] + w->fh[57]*w->term[1][61] + w->fh[58]*w->term[1][88] +
-            w->fh[59]*w->term[1][115];
-    w->S[89] = w->fh[56]*w->term[1][35] + w->fh[57]*w->term[1][62] + w->fh[58]*w->term[1][89] +
-            w->fh[59]*w->term[1][116];
-    w->S[90] = w->fh[56]*w->term[1][36] + w->fh[57]*w->term[1][63] + w->fh[58]*w->term[1][90] +
-            w->fh[59]*w->term[1][117];
-    w->S[91] = w->fh[56]*w->term[1][37] + w->fh[57]*w->term[1][64] + w->fh[58]*w->term[1][91] +
-            w->fh[59]*w->term[1][118];
-    w->S[92] = w->fh[56]*w->term[1][38] + w->fh[57]*w->term[1][65] + w->fh[58]*w->term[1][92] +
-            w->fh[59]*w->term[1][119];
-    w->S[93] = w->fh[56]*w->term[1][39] + w->fh[57]*w->term[1][66] + w->fh[58]*w->term[1][93] +
-            w->fh[59]*w->term[1][120] + w->fh[60]*w->term[1][147] + w->fh[61]*w->term[1][193];
-    w->S[94] = w->fh[56]*w->term[1][40] + w->fh[57]*w->term[1][67] + w->fh[58]*w->term[1][94] +
-            w->fh[59]*w->term[1][121] + w->fh[60]*w->term[1][148] + w->fh[62]*w->term[1][194];
-    w->S[95] = w->fh[56]*w->term[1][41] + w->fh[57]*w->term[1][68] + w->fh[58]*w->term[1][95] +
-            w->fh[59]*w->term[1][122] + w->fh[60]*w->term[1][149] + w->fh[63]*w->term[1][195];
-    w->S[96] = w->fh[56]*w->term[1][42] + w->fh[57]*w->term[1][69] + w->fh[58]*w->term[1][96] +
-            w->fh[59]*w->term[1][123];
-    w->S[97] = w->fh[56]*w->term[1][43] + w->fh[57]*w->term[1][70] + w->fh[58]*w->term[1][97] +
-            w->fh[59]*w->term[1][124];
-    w->S[98] = w->fh[56]*w->term[1][44] + w->fh[57]*w->term[1][71] + w->fh[58]*w->term[1][98] +
-            w->fh[59]*w->term[1][125];
-    w->S[99] = w->fh[56]*w->term[1][45] + w->fh[57]*w->term[1][72] + w->fh[58]*w->term[1][99] +
-            w->fh[59]*w->term[1][126];
-    w->S[100] = w->fh[56]*w->term[1][46] + w->fh[57]*w->term[1][73] + w->fh[58]*w->term[1][100] +
-            w->fh[59]*w->term[1][127];
-    w->S[101] = w->fh[56]*w->term[1][47] + w->fh[57]*w->term[1][74] + w->fh[58]*w->term[1][101] +
-            w->fh[59]*w->term[1][128];
-    w->S[102] = w->fh[56]*w->term[1][48] + w->fh[57]*w->term[1][75] + w->fh[58]*w->term[1][102] +
-            w->fh[59]*w->term[1][129];
-    w->S[103] = w->fh[56]*w->term[1][49] + w->fh[57]*w->term[1][76] + w->fh[58]*w->term[1][103] +
-            w->fh[59]*w->term[1][130];
-    w->S[104] = w->fh[56]*w->term[1][50] + w->fh[57]*w->term[1][77] + w->fh[58]*w->term[1][104] +
-            w->fh[59]*w->term[1][131];
-    w->S[105] = w->fh[56]*w->term[1][51] + w->fh[57]*w->term[1][78] + w->fh[58]*w->term[1][105] +
-            w->fh[59]*w->term[1][132] + w->fh[60]*w->term[1][159] + w->fh[64]*c_in;
-    w->S[106] = w->fh[56]*w->term[1][52] + w->fh[57]*w->term[1][79] + w->fh[58]*w->term[1][106] +
-            w->fh[59]*w->term[1][133] + w->fh[60]*w->term[1][160] + w->fh[65]*c_in;
-    w->S[107] = w->fh[56]*w->term[1][53] + w->fh[57]*w->term[1][80] + w->fh[58]*w->term[1][107] +
-            w->fh[59]*w->term[1][134] + w->fh[60]*w->term[1][161] + w->fh[66]*c_in;
-    w->S[108] = w->fh[67]*w->term[1][0] + w->fh[68]*w->term[1][54] + w->fh[69]*w->term[1][81] +
-            w->fh[70]*w->term[1][108];
-    w->S[109] = w->fh[67]*w->term[1][1] + w->fh[68]*w->term[1][55] + w->fh[69]*w->term[1][82] +
-            w->fh[70]*w->term[1][109] + w->fh[71]*w->term[1][136];
-    w->S[110] = w->fh[67]*w->term[1][2] + w->fh[68]*w->term[1][56] + w->fh[69]*w->term[1][83] +
-            w->fh[70]*w->term[1][110] + w->fh[71]*w->term[1][137];
-    w->S[111] = w->fh[67]*w->term[1][3] + w->fh[68]*w->term[1][57] + w->fh[69]*w->term[1][84] +
-            w->fh[70]*w->term[1][111] + w->fh[71]*w->term[1][138];
-    w->S[112] = c_out + w->fh[67]*w->term[1][4] + w->fh[68]*w->term[1][58] +
-            w->fh[69]*w->term[1][85] + w->fh[70]*w->term[1][112] + w->fh[71]*w->term[1][139];
-    w->S[113] = w->fh[67]*w->term[1][5] + w->fh[68]*w->term[1][59] + w->fh[69]*w->term[1][86] +
-            w->fh[70]*w->term[1][113] + w->fh[71]*w->term[1][140];
-    w->S[114] = w->fh[67]*w->term[1][6] + w->fh[68]*w->term[1][60] + w->fh[69]*w->term[1][87] +
-            w->fh[70]*w->term[1][114];
-    w->S[115] = w->fh[67]*w->term[1][7] + w->fh[68]*w->term[1][61] + w->fh[69]*w->term[1][88] +
-            w->fh[70]*w->term[1][115];
-    w->S[116] = w->fh[67]*w->term[1][8] + w->fh[68]*w->term[1][62] + w->fh[69]*w->term[1][89] +
-            w->fh[70]*w->term[1][116];
-    w->S[117] = w->fh[67]*w->term[1][9] + w->fh[68]*w->term[1][63] + w->fh[69]*w->term[1][90] +
-            w->fh[70]*w->term[1][117];
-    w->S[118] = w->fh[67]*w->term[1][10] + w->fh[68]*w->term[1][64] + w->fh[69]*w->term[1][91] +
-            w->fh[70]*w->term[1][118];
-    w->S[119] = w->fh[67]*w->term[1][11] + w->fh[68]*w->term[1][65] + w->fh[69]*w->term[1][92] +
-            w->fh[70]*w->term[1][119];
-    w->S[120] = w->fh[67]*w->term[1][12] + w->fh[68]*w->term[1][66] + w->fh[69]*w->term[1][93] +
-            w->fh[70]*w->term[1][120] + w->fh[71]*w->term[1][147] + w->fh[72]*w->term[1][193];
-    w->S[121] = w->fh[67]*w->term[1][13] + w->fh[68]*w->term[1][67] + w->fh[69]*w->term[1][94] +
-            w->fh[70]*w->term[1][121] + w->fh[71]*w->term[1][148] + w->fh[73]*w->term[1][194];
-    w->S[122] = w->fh[67]*w->term[1][14] + w->fh[68]*w->term[1][68] + w->fh[69]*w->term[1][95] +
-            w->fh[70]*w->term[1][122] + w->fh[71]*w->term[1][149] + w->fh[74]*w->term[1][195];
-    w->S[123] = w->fh[67]*w->term[1][15] + w->fh[68]*w->term[1][69] + w->fh[69]*w->term[1][96] +
-            w->fh[70]*w->term[1][123];
-    w->S[124] = w->fh[67]*w->term[1][16] + w->fh[68]*w->term[1][70] + w->fh[69]*w->term[1][97] +
-            w->fh[70]*w->term[1][124];
-    w->S[125] = w->fh[67]*w->term[1][17] + w->fh[68]*w->term[1][71] + w->fh[69]*w->term[1][98] +
-            w->fh[70]*w->term[1][125];
-    w->S[126] = w->fh[67]*w->term[1][18] + w->fh[68]*w->term[1][72] + w->fh[69]*w->term[1][99] +
-            w->fh[70]*w->term[1][126];
-    w->S[127] = w->fh[67]*w->term[1][19] + w->fh[68]*w->term[1][73] + w->fh[69]*w->term[1][100] +
-            w->fh[70]*w->term[1][127];
-    w->S[128] = w->fh[67]*w->term[1][20] + w->fh[68]*w->term[1][74] + w->fh[69]*w->term[1][101] +
-            w->fh[70]*w->term[1][128];
-    w->S[129] = w->fh[67]*w->term[1][21] + w->fh[68]*w->term[1][75] + w->fh[69]*w->term[1][102] +
-            w->fh[70]*w->term[1][129];
-    w->S[130] = w->fh[67]*w->term[1][22] + w->fh[68]*w->term[1][76] + w->fh[69]*w->term[1][103] +
-            w->fh[70]*w->term[1][130];
-    w->S[131] = w->fh[67]*w->term[1][23] + w->fh[68]*w->term[1][77] + w->fh[69]*w->term[1][104] +
-            w->fh[70]*w->term[1][131];
-    w->S[132] = w->fh[67]*w->term[1][24] + w->fh[68]*w->term[1][78] + w->fh[69]*w->term[1][105] +
-            w->fh[70]*w->term[1][132] + w->fh[71]*w->term[1][159] + w->fh[75]*c_in;
-    w->S[133] = w->fh[67]*w->term[1][25] + w->fh[68]*w->term[1][79] + w->fh[69]*w->term[1][106] +
-            w->fh[70]*w->term[1][133] + w->fh[71]*w->term[1][160] + w->fh[76]*c_in;
-    w->S[134] = w->fh[67]*w->term[1][26] + w->fh[68]*w->term[1][80] + w->fh[69]*w->term[1][107] +
-            w->fh[70]*w->term[1][134] + w->fh[71]*w->term[1][161] + w->fh[77]*c_in;
-    w->S[135] = w->fh[78]*w->term[1][81];
-    w->S[136] = w->fh[78]*w->term[1][82];
-    w->S[137] = w->fh[78]*w->term[1][83];
-    w->S[138] = w->fh[78]*w->term[1][84];
-    w->S[139] = w->fh[78]*w->term[1][85];
-    w->S[140] = c_out + w->fh[78]*w->term[1][86];
-    w->S[141] = w->fh[78]*w->term[1][87];
-    w->S[142] = w->fh[78]*w->term[1][88];
-    w->S[143] = w->fh[78]*w->term[1][89];
-    w->S[144] = w->fh[78]*w->term[1][90];
-    w->S[145] = w->fh[78]*w->term[1][91];
-    w->S[146] = w->fh[78]*w->term[1][92];
-    w->S[147] = w->fh[78]*w->term[1][93];
-    w->S[148] = w->fh[78]*w->term[1][94];
-    w->S[149] = w->fh[78]*w->term[1][95];
-    w->S[150] = w->fh[78]*w->term[1][96];
-    w->S[151] = w->fh[78]*w->term[1][97];
-    w->S[152] = w->fh[78]*w->term[1][98];
-    w->S[153] = w->fh[78]*w->term[1][99];
-    w->S[154] = w->fh[78]*w->term[1][100];
-    w->S[155] = w->fh[78]*w->term[1][101];
-    w->S[156] = w->fh[78]*w->term[1][102];
-    w->S[157] = w->fh[78]*w->term[1][103];
-    w->S[158] = w->fh[78]*w->term[1][104];
-    w->S[159] = w->fh[78]*w->term[1][105];
-    w->S[160] = w->fh[78]*w->term[1][106];
-    w->S[161] = w->fh[78]*w->term[1][107];
-    w->S[162] = w->fh[79]*w->term[1][108];
-    w->S[163] = w->fh[79]*w->term[1][109] + w->fh[80]*w->term[1][136];
-    w->S[164] = w->fh[79]*w->term[1][110] + w->fh[80]*w->term[1][137];
-    w->S[165] = w->fh[79]*w->term[1][111] + w->fh[80]*w->term[1][138];
-    w->S[166] = w->fh[79]*w->term[1][112] + w->fh[80]*w->term[1][139];
-    w->S[167] = w->fh[79]*w->term[1][113] + w->fh[80]*w->term[1][140];
-    w->S[168] = c_out;
-    w->S[169] = w->fh[79]*w->term[1][114];
-    w->S[170] = w->fh[79]*w->term[1][115];
-    w->S[171] = w->fh[79]*w->term[1][116];
-    w->S[172] = w->fh[79]*w->term[1][117];
-    w->S[173] = w->fh[79]*w->term[1][118];
-    w->S[174] = w->fh[79]*w->term[1][119];
-    w->S[175] = w->fh[79]*w->term[1][120] + w->fh[80]*w->term[1][147];
-    w->S[176] = w->fh[79]*w->term[1][121] + w->fh[80]*w->term[1][148];
-    w->S[177] = w->fh[79]*w->term[1][122] + w->fh[80]*w->term[1][149];
-    w->S[178] = w->fh[79]*w->term[1][123];
-    w->S[179] = w->fh[79]*w->term[1][124];
-    w->S[180] = w->fh[79]*w->term[1][125];
-    w->S[181] = w->fh[79]*w->term[1][126];
-    w->S[182] = w->fh[79]*w->term[1][127];
-    w->S[183] = w->fh[79]*w->term[1][128];
-    w->S[184] = w->fh[79]*w->term[1][129];
-    w->S[185] = w->fh[79]*w->term[1][130];
-    w->S[186] = w->fh[79]*w->term[1][131];
-    w->S[187] = w->fh[79]*w->term[1][132] + w->fh[80]*w->term[1][159];
-    w->S[188] = w->fh[79]*w->term[1][133] + w->fh[80]*w->term[1][160];
-    w->S[189] = w->fh[79]*w->term[1][134] + w->fh[80]*w->term[1][161];
-    w->S[190] = c_out + w->fh[81]*w->term[1][190];
-    w->S[191] = c_out + w->fh[82]*w->term[1][191];
-    w->S[192] = c_out + w->fh[83]*w->term[1][192];
-    w->S[193] = c_out + w->fh[84]*w->term[1][193];
-    w->S[194] = c_out + w->fh[85]*w->term[1][194];
-    w->S[195] = c_out + w->fh[86]*w->term[1][195];
-}
-
-NED_DOPPLER32_AUGMENTED_BLOCK void
-        horner_level_3_into_term(ned_doppler32_augmented_discretize_scratch *restrict w, const
-        ned_doppler32_augmented_scalar c_out, const ned_doppler32_augmented_scalar c_in)
-{
-    w->term[1][0] = c_out + w->fh[0]*w->S[27] + w->fh[1]*w->S[54] + w->fh[2]*w->S[108];
-    w->term[1][1] = w->fh[0]*w->S[28] + w->fh[1]*w->S[55] + w->fh[2]*w->S[109] + w->fh[3]*w->S[136];
-    w->term[1][2] = w->fh[0]*w->S[29] + w->fh[1]*w->S[56] + w->fh[2]*w->S[110] + w->fh[3]*w->S[137];
-    w->term[1][3] = w->fh[0]*w->S[30] + w->fh[1]*w->S[57] + w->fh[2]*w->S[111] + w->fh[3]*w->S[138];
-    w->term[1][4] = w->fh[0]*w->S[31] + w->fh[1]*w->S[58] + w->fh[2]*w->S[112] + w->fh[3]*w->S[139];
-    w->term[1][5] = w->fh[0]*w->S[32] + w->fh[1]*w->S[59] + w->fh[2]*w->S[113] + w->fh[3]*w->S[140];
-    w->term[1][6] = w->fh[0]*w->S[33] + w->fh[1]*w->S[60] + w->fh[2]*w->S[114] + w->fh[4]*c_in;
-    w->term[1][7] = w->fh[0]*w->S[34] + w->fh[1]*w->S[61] + w->fh[2]*w->S[115] + w->fh[5]*c_in;
-    w->term[1][8] = w->fh[0]*w->S[35] + w->fh[1]*w->S[62] + w->fh[2]*w->S[116] + w->fh[6]*c_in;
-    w->term[1][9] = w->fh[0]*w->S[36] + w->fh[1]*w->S[63] + w->fh[2]*w->S[117] + w->fh[7]*w->S[190];
-    w->term[1][10] = w->fh[0]*w->S[37] + w->fh[1]*w->S[64] + w->fh[2]*w->S[118] +
-            w->fh[8]*w->S[191];
-    w->term[1][11] = w->fh[0]*w->S[38] + w->fh[1]*w->S[65] + w->fh[2]*w->S[119] +
-            w->fh[9]*w->S[192];
-    w->term[1][12] = w->fh[0]*w->S[39] + w->fh[1]*w->S[66] + w->fh[2]*w->S[120] +
-            w->fh[3]*w->S[147];
-    w->term[1][13] = w->fh[0]*w->S[40] + w->fh[1]*w->S[67] + w->fh[2]*w->S[121] +
-            w->fh[3]*w->S[148];
-    w->term[1][14] = w->fh[0]*w->S[41] + w->fh[1]*w->S[68] + w->fh[2]*w->S[122] +
-            w->fh[3]*w->S[149];
-    w->term[1][15] = w->fh[0]*w->S[42] + w->fh[1]*w->S[69] + w->fh[2]*w->S[123] + w->fh[10]*c_in;
-    w->term[1][16] = w->fh[0]*w->S[43] + w->fh[1]*w->S[70] + w->fh[2]*w->S[124] + w->fh[11]*c_in;
-    w->term[1][17] = w->fh[0]*w->S[44] + w->fh[1]*w->S[71] + w->fh[2]*w->S[125] + w->fh[12]*c_in;
-    w->term[1][18] = w->fh[0]*w->S[45] + w->fh[1]*w->S[72] + w->fh[2]*w->S[126] + w->fh[13]*c_in;
-    w->term[1][19] = w->fh[0]*w->S[46] + w->fh[1]*w->S[73] + w->fh[2]*w->S[127] + w->fh[14]*c_in;
-    w->term[1][20] = w->fh[0]*w->S[47] + w->fh[1]*w->S[74] + w->fh[2]*w->S[128] + w->fh[15]*c_in;
-    w->term[1][21] = w->fh[0]*w->S[48] + w->fh[1]*w->S[75] + w->fh[2]*w->S[129] + w->fh[16]*c_in;
-    w->term[1][22] = w->fh[0]*w->S[49] + w->fh[1]*w->S[76] + w->fh[2]*w->S[130] + w->fh[17]*c_in;
-    w->term[1][23] = w->fh[0]*w->S[50] + w->fh[1]*w->S[77] + w->fh[2]*w->S[131] + w->fh[18]*c_in;
-    w->term[1][24] = w->fh[0]*w->S[51] + w->fh[1]*w->S[78] + w->fh[2]*w->S[132] +
-            w->fh[3]*w->S[159];
-    w->term[1][25] = w->fh[0]*w->S[52] + w->fh[1]*w->S[79] + w->fh[2]*w->S[133] +
-            w->fh[3]*w->S[160];
-    w->term[1][26] = w->fh[0]*w->S[53] + w->fh[1]*w->S[80] + w->fh[2]*w->S[134] +
-            w->fh[3]*w->S[161];
-    w->term[1][27] = w->fh[19]*w->S[0] + w->fh[20]*w->S[54] + w->fh[21]*w->S[81];
-    w->term[1][28] = c_out + w->fh[19]*w->S[1] + w->fh[20]*w->S[55] + w->fh[21]*w->S[82];
-    w->term[1][29] = w->fh[19]*w->S[2] + w->fh[20]*w->S[56] + w->fh[21]*w->S[83];
-    w->term[1][30] = w->fh[19]*w->S[3] + w->fh[20]*w->S[57] + w->fh[21]*w->S[84];
-    w->term[1][31] = w->fh[19]*w->S[4] + w->fh[20]*w->S[58] + w->fh[21]*w->S[85];
-    w->term[1][32] = w->fh[19]*w->S[5] + w->fh[20]*w->S[59] + w->fh[21]*w->S[86];
-    w->term[1][33] = w->fh[19]*w->S[6] + w->fh[20]*w->S[60] + w->fh[21]*w->S[87] + w->fh[22]*c_in;
-    w->term[1][34] = w->fh[19]*w->S[7] + w->fh[20]*w->S[61] + w->fh[21]*w->S[88] + w->fh[23]*c_in;
-    w->term[1][35] = w->fh[19]*w->S[8] + w->fh[20]*w->S[62] + w->fh[21]*w->S[89] + w->fh[24]*c_in;
-    w->term[1][36] = w->fh[19]*w->S[9] + w->fh[20]*w->S[63] + w->fh[21]*w->S[90] +
-            w->fh[25]*w->S[190];
-    w->term[1][37] = w->fh[19]*w->S[10] + w->fh[20]*w->S[64] + w->fh[21]*w->S[91] +
-            w->fh[26]*w->S[191];
-    w->term[1][38] = w->fh[19]*w->S[11] + w->fh[20]*w->S[65] + w->fh[21]*w->S[92] +
-            w->fh[27]*w->S[192];
-    w->term[1][39] = w->fh[19]*w->S[12] + w->fh[20]*w->S[66] + w->fh[21]*w->S[93];
-    w->term[1][40] = w->fh[19]*w->S[13] + w->fh[20]*w->S[67] + w->fh[21]*w->S[94];
-    w->term[1][41] = w->fh[19]*w->S[14] + w->fh[20]*w->S[68] + w->fh[21]*w->S[95];
-    w->term[1][42] = w->fh[19]*w->S[15] + w->fh[20]*w->S[69] + w->fh[21]*w->S[96] + w->fh[28]*c_in;
-    w->term[1][43] = w->fh[19]*w->S[16] + w->fh[20]*w->S[70] + w->fh[21]*w->S[97] + w->fh[29]*c_in;
-    w->term[1][44] = w->fh[19]*w->S[17] + w->fh[20]*w->S[71] + w->fh[21]*w->S[98] + w->fh[30]*c_in;
-    w->term[1][45] = w->fh[19]*w->S[18] + w->fh[20]*w->S[72] + w->fh[21]*w->S[99] + w->fh[31]*c_in;
-    w->term[1][46] = w->fh[19]*w->S[19] + w->fh[20]*w->S[73] + w->fh[21]*w->S[100] + w->fh[32]*c_in;
-    w->term[1][47] = w->fh[19]*w->S[20] + w->fh[20]*w->S[74] + w->fh[21]*w->S[101] + w->fh[33]*c_in;
-    w->term[1][48] = w->fh[19]*w->S[21] + w->fh[20]*w->S[75] + w->fh[21]*w->S[102] + w->fh[34]*c_in;
-    w->term[1][49] = w->fh[19]*w->S[22] + w->fh[20]*w->S[76] + w->fh[21]*w->S[103] + w->fh[35]*c_in;
-    w->term[1][50] = w->fh[19]*w->S[23] + w->fh[20]*w->S[77] + w->fh[21]*w->S[104] + w->fh[36]*c_in;
-    w->term[1][51] = w->fh[19]*w->S[24] + w->fh[20]*w->S[78] + w->fh[21]*w->S[105];
-    w->term[1][52] = w->fh[19]*w->S[25] + w->fh[20]*w->S[79] + w->fh[21]*w->S[106];
-    w->term[1][53] = w->fh[19]*w->S[26] + w->fh[20]*w->S[80] + w->fh[21]*w->S[107];
-    w->term[1][54] = w->fh[37]*w->S[0] + w->fh[38]*w->S[27] + w->fh[39]*w->S[108];
-    w->term[1][55] = w->fh[37]*w->S[1] + w->fh[38]*w->S[28] + w->fh[39]*w->S[109] +
-            w->fh[40]*w->S[136];
-    w->term[1][56] = c_out + w->fh[37]*w->S[2] + w->fh[38]*w->S[29] + w->fh[39]*w->S[110] +
-            w->fh[40]*w->S[137];
-    w->term[1][57] = w->fh[37]*w->S[3] + w->fh[38]*w->S[30] + w->fh[39]*w->S[111] +
-            w->fh[40]*w->S[138];
-    w->term[1][58] = w->fh[37]*w->S[4] + w->fh[38]*w->S[31] + w->fh[39]*w->S[112] +
-            w->fh[40]*w->S[139];
-    w->term[1][59] = w->fh[37]*w->S[5] + w->fh[38]*w->S[32] + w->fh[39]*w->S[113] +
-            w->fh[40]*w->S[140];
-    w->term[1][60] = w->fh[37]*w->S[6] + w->fh[38]*w->S[33] + w->fh[39]*w->S[114] + w->fh[41]*c_in;
-    w->term[1][61] = w->fh[37]*w->S[7] + w->fh[38]*w->S[34] + w->fh[39]*w->S[115] + w->fh[42]*c_in;
-    w->term[1][62] = w->fh[37]*w->S[8] + w->fh[38]*w->S[35] + w->fh[39]*w->S[116] + w->fh[43]*c_in;
-    w->term[1][63] = w->fh[37]*w->S[9] + w->fh[38]*w->S[36] + w->fh[39]*w->S[117] +
-            w->fh[44]*w->S[190];
-    w->term[1][64] = w->fh[37]*w->S[10] + w->fh[38]*w->S[37] + w->fh[39]*w->S[118] +
-            w->fh[45]*w->S[191];
-    w->term[1][65] = w->fh[37]*w->S[11] + w->fh[38]*w->S[38] + w->fh[39]*w->S[119] +
-            w->fh[46]*w->S[192];
-    w->term[1][66] = w->fh[37]*w->S[12] + w->fh[38]*w->S[39] + w->fh[39]*w->S[120] +
-            w->fh[40]*w->S[147];
-    w->term[1][67] = w->fh[37]*w->S[13] + w->fh[38]*w->S[40] + w->fh[39]*w->S[121] +
-            w->fh[40]*w->S[148];
-    w->term[1][68] = w->fh[37]*w->S[14] + w->fh[38]*w->S[41] + w->fh[39]*w->S[122] +
-            w->fh[40]*w->S[149];
-    w->term[1][69] = w->fh[37]*w->S[15] + w->fh[38]*w->S[42] + w->fh[39]*w->S[123] + w->fh[47]*c_in;
-    w->term[1][70] = w->fh[37]*w->S[16] + w->fh[38]*w->S[43] + w->fh[39]*w->S[124] + w->fh[48]*c_in;
-    w->term[1][71] = w->fh[37]*w->S[17] + w->fh[38]*w->S[44] + w->fh[39]*w->S[125] + w->fh[49]*c_in;
-    w->term[1][72] = w->fh[37]*w->S[18] + w->fh[38]*w->S[45] + w->fh[39]*w->S[126] + w->fh[50]*c_in;
-    w->term[1][73] = w->fh[37]*w->S[19] + w->fh[38]*w->S[46] + w->fh[39]*w->S[127] + w->fh[51]*c_in;
-    w->term[1][74] = w->fh[37]*w->S[20] + w->fh[38]*w->S[47] + w->fh[39]*w->S[128] + w->fh[52]*c_in;
-    w->term[1][75] = w->fh[37]*w->S[21] + w->fh[38]*w->S[48] + w->fh[39]*w->S[129] + w->fh[53]*c_in;
-    w->term[1][76] = w->fh[37]*w->S[22] + w->fh[38]*w->S[49] + w->fh[39]*w->S[130] + w->fh[54]*c_in;
-    w->term[1][77] = w->fh[37]*w->S[23] + w->fh[38]*w->S[50] + w->fh[39]*w->S[131] + w->fh[55]*c_in;
-    w->term[1][78] = w->fh[37]*w->S[24] + w->fh[38]*w->S[51] + w->fh[39]*w->S[132] +
-            w->fh[40]*w->S[159];
-    w->term[1][79] = w->fh[37]*w->S[25] + w->fh[38]*w->S[52] + w->fh[39]*w->S[133] +
-            w->fh[40]*w->S[160];
-    w->term[1][80] = w->fh[37]*w->S[26] + w->fh[38]*w->S[53] + w->fh[39]*w->S[134] +
-            w->fh[40]*w->S[161];
-    w->term[1][81] = w->fh[56]*w->S[27] + w->fh[57]*w->S[54] + w->fh[58]*w->S[81] +
-            w->fh[59]*w->S[108];
-    w->term[1][82] = w->fh[56]*w->S[28] + w->fh[57]*w->S[55] + w->fh[58]*w->S[82] +
-            w->fh[59]*w->S[109] + w->fh[60]*w->S[136];
-    w->term[1][83] = w->fh[56]*w->S[29] + w->fh[57]*w->S[56] + w->fh[58]*w->S[83] +
-            w->fh[59]*w->S[110] + w->fh[60]*w->S[137];
-    w->term[1][84] = c_out + w->fh[56]*w->S[30] + w->fh[57]*w->S[57] + w->fh[58]*w->S[84] +
-            w->fh[59]*w->S[111] + w->fh[60]*w->S[138];
-    w->term[1][85] = w->fh[56]*w->S[31] + w->fh[57]*w->S[58] + w->fh[58]*w->S[85] +
-            w->fh[59]*w->S[112] + w->fh[60]*w->S[139];
-    w->term[1][86] = w->fh[56]*w->S[32] + w->fh[57]*w->S[59] + w->fh[58]*w->S[86] +
-            w->fh[59]*w->S[113] + w->fh[60]*w->S[140];
-    w->term[1][87] = w->fh[56]*w->S[33] + w->fh[57]*w->S[60] + w->fh[58]*w->S[87] +
-            w->fh[59]*w->S[114];
-    w->term[1][88] = w->fh[56]*w->S[34] + w->fh[57]*w->S[61] + w->fh[58]*w->S[88] +
-            w->fh[59]*w->S[115];
-    w->term[1][89] = w->fh[56]*w->S[35] + w->fh[57]*w->S[62] + w->fh[58]*w->S[89] +
-            w->fh[59]*w->S[116];
-    w->term[1][90] = w->fh[56]*w->S[36] + w->fh[57]*w->S[63] + w->fh[58]*w->S[90] +
-            w->fh[59]*w->S[117];
-    w->term[1][91] = w->fh[56]*w->S[37] + w->fh[57]*w->S[64] + w->fh[58]*w->S[91] +
-            w->fh[59]*w->S[118];
-    w->term[1][92] = w->fh[56]*w->S[38] + w->fh[57]*w->S[65] + w->fh[58]*w->S[92] +
-            w->fh[59]*w->S[119];
-    w->term[1][93] = w->fh[56]*w->S[39] + w->fh[57]*w->S[66] + w->fh[58]*w->S[93] +
-            w->fh[59]*w->S[120] + w->fh[60]*w->S[147] + w->fh[61]*w->S[193];
-    w->term[1][94] = w->fh[56]*w->S[40] + w->fh[57]*w->S[67] + w->fh[58]*w->S[94] +
-            w->fh[59]*w->S[121] + w->fh[60]*w->S[148] + w->fh[62]*w->S[194];
-    w->term[1][95] = w->fh[56]*w->S[41] + w->fh[57]*w->S[68] + w->fh[58]*w->S[95] +
-            w->fh[59]*w->S[122] + w->fh[60]*w->S[149] + w->fh[63]*w->S[195];
-    w->term[1][96] = w->fh[56]*w->S[42] + w->fh[57]*w->S[69] + w->fh[58]*w->S[96] +
-            w->fh[59]*w->S[123];
-    w->term[1][97] = w->fh[56]*w->S[43] + w->fh[57]*w->S[70] + w->fh[58]*w->S[97] +
-            w->fh[59]*w->S[124];
-    w->term[1][98] = w->fh[56]*w->S[44] + w->fh[57]*w->S[71] + w->fh[58]*w->S[98] +
-            w->fh[59]*w->S[125];
-    w->term[1][99] = w->fh[56]*w->S[45] + w->fh[57]*w->S[72] + w->fh[58]*w->S[99] +
-            w->fh[59]*w->S[126];
-    w->term[1][100] = w->fh[56]*w->S[46] + w->fh[57]*w->S[73] + w->fh[58]*w->S[100] +
-            w->fh[59]*w->S[127];
-    w->term[1][101] = w->fh[56]*w->S[47] + w->fh[57]*w->S[74] + w->fh[58]*w->S[101] +
-            w->fh[59]*w->S[128];
-    w->term[1][102] = w->fh[56]*w->S[48] + w->fh[57]*w->S[75] + w->fh[58]*w->S[102] +
-            w->fh[59]*w->S[129];
-    w->term[1][103] = w->fh[56]*w->S[49] + w->fh[57]*w->S[76] + w->fh[58]*w->S[103] +
-            w->fh[59]*w->S[130];
-    w->term[1][104] = w->fh[56]*w->S[50] + w->fh[57]*w->S[77] + w->fh[58]*w->S[104] +
-            w->fh[59]*w->S[131];
-    w->term[1][105] = w->fh[56]*w->S[51] + w->fh[57]*w->S[78] + w->fh[58]*w->S[105] +
-            w->fh[59]*w->S[132] + w->fh[60]*w->S[159] + w->fh[64]*c_in;
-    w->term[1][106] = w->fh[56]*w->S[52] + w->fh[57]*w->S[79] + w->fh[58]*w->S[106] +
-            w->fh[59]*w->S[133] + w->fh[60]*w->S[160] + w->fh[65]*c_in;
-    w->term[1][107] = w->fh[56]*w->S[53] + w->fh[57]*w->S[80] + w->fh[58]*w->S[107] +
-            w->fh[59]*w->S[134] + w->fh[60]*w->S[161] + w->fh[66]*c_in;
-    w->term[1][108] = w->fh[67]*w->S[0] + w->fh[68]*w->S[54] + w->fh[69]*w->S[81] +
-            w->fh[70]*w->S[108];
-    w->term[1][109] = w->fh[67]*w->S[1] + w->fh[68]*w->S[55] + w->fh[69]*w->S[82] +
-            w->fh[70]*w->S[109] + w->fh[71]*w->S[136];
-    w->term[1][110] = w->fh[67]*w->S[2] + w->fh[68]*w->S[56] + w->fh[69]*w->S[83] +
-            w->fh[70]*w->S[110] + w->fh[71]*w->S[137];
-    w->term[1][111] = w->fh[67]*w->S[3] + w->fh[68]*w->S[57] + w->fh[69]*w->S[84] +
-            w->fh[70]*w->S[111] + w->fh[71]*w->S[138];
-    w->term[1][112] = c_out + w->fh[67]*w->S[4] + w->fh[68]*w->S[58] + w->fh[69]*w->S[85] +
-            w->fh[70]*w->S[112] + w->fh[71]*w->S[139];
-    w->term[1][113] = w->fh[67]*w->S[5] + w->fh[68]*w->S[59] + w->fh[69]*w->S[86] +
-            w->fh[70]*w->S[113] + w->fh[71]*w->S[140];
-    w->term[1][114] = w->fh[67]*w->S[6] + w->fh[68]*w->S[60] + w->fh[69]*w->S[87] +
-            w->fh[70]*w->S[114];
-    w->term[1][115] = w->fh[67]*w->S[7] + w->fh[68]*w->S[61] + w->fh[69]*w->S[88] +
-            w->fh[70]*w->S[115];
-    w->term[1][116] = w->fh[67]*w->S[8] + w->fh[68]*w->S[62] + w->fh[69]*w->S[89] +
-            w->fh[70]*w->S[116];
-    w->term[1][117] = w->fh[67]*w->S[9] + w->fh[68]*w->S[63] + w->fh[69]*w->S[90] +
-            w->fh[70]*w->S[117];
-    w->term[1][118] = w->fh[67]*w->S[10] + w->fh[68]*w->S[64] + w->fh[69]*w->S[91] +
-            w->fh[70]*w->S[118];
-    w->term[1][119] = w->fh[67]*w->S[11] + w->fh[68]*w->S[65] + w->fh[69]*w->S[92] +
-            w->fh[70]*w->S[119];
-    w->term[1][120] = w->fh[67]*w->S[12] + w->fh[68]*w->S[66] + w->fh[69]*w->S[93] +
-            w->fh[70]*w->S[120] + w->fh[71]*w->S[147] + w->fh[72]*w->S[193];
-    w->term[1][121] = w->fh[67]*w->S[13] + w->fh[68]*w->S[67] + w->fh[69]*w->S[94] +
-            w->fh[70]*w->S[121] + w->fh[71]*w->S[148] + w->fh[73]*w->S[194];
-    w->term[1][122] = w->fh[67]*w->S[14] + w->fh[68]*w->S[68] + w->fh[69]*w->S[95] +
-            w->fh[70]*w->S[122] + w->fh[71]*w->S[149] + w->fh[74]*w->S[195];
-    w->term[1][123] = w->fh[67]*w->S[15] + w->fh[68]*w->S[69] + w->fh[69]*w->S[96] +
-            w->fh[70]*w->S[123];
-    w->term[1][124] = w->fh[67]*w->S[16] + w->fh[68]*w->S[70] + w->fh[69]*w->S[97] +
-            w->fh[70]*w->S[124];
-    w->term[1][125] = w->fh[67]*w->S[17] + w->fh[68]*w->S[71] + w->fh[69]*w->S[98] +
-            w->fh[70]*w->S[125];
-    w->term[1][126] = w->fh[67]*w->S[18] + w->fh[68]*w->S[72] + w->fh[69]*w->S[99] +
-            w->fh[70]*w->S[126];
-    w->term[1][127] = w->fh[67]*w->S[19] + w->fh[68]*w->S[73] + w->fh[69]*w->S[100] +
-            w->fh[70]*w->S[127];
-    w->term[1][128] = w->fh[67]*w->S[20] + w->fh[68]*w->S[74] + w->fh[69]*w->S[101] +
-            w->fh[70]*w->S[128];
-    w->term[1][129] = w->fh[67]*w->S[21] + w->fh[68]*w->S[75] + w->fh[69]*w->S[102] +
-            w->fh[70]*w->S[129];
-    w->term[1][130] = w->fh[67]*w->S[22] + w->fh[68]*w->S[76] + w->fh[69]*w->S[103] +
-            w->fh[70]*w->S[130];
-    w->term[1][131] = w->fh[67]*w->S[23] + w->fh[68]*w->S[77] + w->fh[69]*w->S[104] +
-            w->fh[70]*w->S[131];
-    w->term[1][132] = w->fh[67]*w->S[24] + w->fh[68]*w->S[78] + w->fh[69]*w->S[105] +
-            w->fh[70]*w->S[132] + w->fh[71]*w->S[159] + w->fh[75]*c_in;
-    w->term[1][133] = w->fh[67]*w->S[25] + w->fh[68]*w->S[79] + w->fh[69]*w->S[106] +
-            w->fh[70]*w->S[133] + w->fh[71]*w->S[160] + w->fh[76]*c_in;
-    w->term[1][134] = w->fh[67]*w->S[26] + w->fh[68]*w->S[80] + w->fh[69]*w->S[107] +
-            w->fh[70]*w->S[134] + w->fh[71]*w->S[161] + w->fh[77]*c_in;
-    w->term[1][135] = w->fh[78]*w->S[81];
-    w->term[1][136] = w->fh[78]*w->S[82];
-    w->term[1][137] = w->fh[78]*w->S[83];
-    w->term[1][138] = w->fh[78]*w->S[84];
-    w->term[1][139] = w->fh[78]*w->S[85];
-    w->term[1][140] = c_out + w->fh[78]*w->S[86];
-    w->term[1][141] = w->fh[78]*w->S[87];
-    w->term[1][142] = w->fh[78]*w->S[88];
-    w->term[1][143] = w->fh[78]*w->S[89];
-    w->term[1][144] = w->fh[78]*w->S[90];
-    w->term[1][145] = w->fh[78]*w->S[91];
-    w->term[1][146] = w->fh[78]*w->S[92];
-    w->term[1][147] = w->fh[78]*w->S[93];
-    w->term[1][148] = w->fh[78]*w->S[94];
-    w->term[1][149] = w->fh[78]*w->S[95];
-    w->term[1][150] = w->fh[78]*w->S[96];
-    w->term[1][151] = w->fh[78]*w->S[97];
-    w->term[1][152] = w->fh[78]*w->S[98];
-    w->term[1][153] = w->fh[78]*w->S[99];
-    w->term[1][154] = w->fh[78]*w->S[100];
-    w->term[1][155] = w->fh[78]*w->S[101];
-    w->term[1][156] = w->fh[78]*w->S[102];
-    w->term[1][157] = w->fh[78]*w->S[103];
-    w->term[1][158] = w->fh[78]*w->S[104];
-    w->term[1][159] = w->fh[78]*w->S[105];
-    w->term[1][160] = w->fh[78]*w->S[106];
-    w->term[1][161] = w->fh[78]*w->S[107];
-    w->term[1][162] = w->fh[79]*w->S[108];
-    w->term[1][163] = w->fh[79]*w->S[109] + w->fh[80]*w->S[136];
-    w->term[1][164] = w->fh[79]*w->S[110] + w->fh[80]*w->S[137];
-    w->term[1][165] = w->fh[79]*w->S[111] + w->fh[80]*w->S[138];
-    w->term[1][166] = w->fh[79]*w->S[112] + w->fh[80]*w->S[139];
-    w->term[1][167] = w->fh[79]*w->S[113] + w->fh[80]*w->S[140];
-    w->term[1][168] = c_out;
-    w->term[1][169] = w->fh[79]*w->S[114];
-    w->term[1][170] = w->fh[79]*w->S[115];
-    w->term[1][171] = w->fh[79]*w->S[116];
-    w->term[1][172] = w->fh[79]*w->S[117];
-    w->term[1][173] = w->fh[79]*w->S[118];
-    w->term[1][174] = w->fh[79]*w->S[119];
-    w->term[1][175] = w->fh[79]*w->S[120] + w->fh[80]*w->S[147];
-    w->term[1][176] = w->fh[79]*w->S[121] + w->fh[80]*w->S[148];
-    w->term[1][177] = w->fh[79]*w->S[122] + w->fh[80]*w->S[149];
-    w->term[1][178] = w->fh[79]*w->S[123];
-    w->term[1][179] = w->fh[79]*w->S[124];
-    w->term[1][180] = w->fh[79]*w->S[125];
-    w->term[1][181] = w->fh[79]*w->S[126];
-    w->term[1][182] = w->fh[79]*w->S[127];
-    w->term[1][183] = w->fh[79]*w->S[128];
-    w->term[1][184] = w->fh[79]*w->S[129];
-    w->term[1][185] = w->fh[79]*w->S[130];
-    w->term[1][186] = w->fh[79]*w->S[131];
-    w->term[1][187] = w->fh[79]*w->S[132] + w->fh[80]*w->S[159];
-    w->term[1][188] = w->fh[79]*w->S[133] + w->fh[80]*w->S[160];
-    w->term[1][189] = w->fh[79]*w->S[134] + w->fh[80]*w->S[161];
-    w->term[1][190] = c_out + w->fh[81]*w->S[190];
-    w->term[1][191] = c_out + w->fh[82]*w->S[191];
-    w->term[1][192] = c_out + w->fh[83]*w->S[192];
-    w->term[1][193] = c_out + w->fh[84]*w->S[193];
-    w->term[1][194] = c_out + w->fh[85]*w->S[194];
-    w->term[1][195] = c_out + w->fh[86]*w->S[195];
+    w->term[1][6] = 0;
+    w->term[1][7] = w->fh[4]*c_in;
+    w->term[1][8] = w->fh[5]*c_in;
+    w->term[1][9] = w->fh[6]*c_in;
+    w->term[1][10] = w->fh[7]*c_in;
+    w->term[1][11] = w->fh[8]*c_in;
+    w->term[1][12] = w->fh[9]*c_in;
+    w->term[1][13] = 0;
+    w->term[1][14] = 0;
+    w->term[1][15] = 0;
+    w->term[1][16] = 0;
+    w->term[1][17] = 0;
+    w->term[1][18] = w->fh[10]*c_in;
+    w->term[1][19] = w->fh[11]*c_in;
+    w->term[1][20] = w->fh[12]*c_in;
+    w->term[1][21] = w->fh[13]*c_in;
+    w->term[1][22] = w->fh[14]*c_in;
+    w->term[1][23] = w->fh[15]*c_in;
+    w->term[1][24] = w->fh[16]*c_in;
+    w->term[1][25] = w->fh[17]*c_in;
+    w->term[1][26] = w->fh[18]*c_in;
+    w->term[1][27] = 0;
+    w->term[1][28] = 0;
+    w->term[1][29] = 0;
+    w->term[1][30] = w->fh[19]*c_in;
+    w->term[1][31] = c_out;
+    w->term[1][32] = w->fh[20]*c_in;
+    w->term[1][33] = w->fh[21]*c_in;
+    w->term[1][34] = 0;
+    w->term[1][35] = 0;
+    w->term[1][36] = 0;
+    w->term[1][37] = w->fh[22]*c_in;
+    w->term[1][38] = w->fh[23]*c_in;
+    w->term[1][39] = w->fh[24]*c_in;
+    w->term[1][40] = w->fh[25]*c_in;
+    w->term[1][41] = w->fh[26]*c_in;
+    w->term[1][42] = w->fh[27]*c_in;
+    w->term[1][43] = 0;
+    w->term[1][44] = 0;
+    w->term[1][45] = 0;
+    w->term[1][46] = 0;
+    w->term[1][47] = 0;
+    w->term[1][48] = w->fh[28]*c_in;
+    w->term[1][49] = w->fh[29]*c_in;
+    w->term[1][50] = w->fh[30]*c_in;
+    w->term[1][51] = w->fh[31]*c_in;
+    w->term[1][52] = w->fh[32]*c_in;
+    w->term[1][53] = w->fh[33]*c_in;
+    w->term[1][54] = w->fh[34]*c_in;
+    w->term[1][55] = w->fh[35]*c_in;
+    w->term[1][56] = w->fh[36]*c_in;
+    w->term[1][57] = 0;
+    w->term[1][58] = 0;
+    w->term[1][59] = 0;
+    w->term[1][60] = w->fh[37]*c_in;
+    w->term[1][61] = w->fh[38]*c_in;
+    w->term[1][62] = c_out;
+    w->term[1][63] = 0;
+    w->term[1][64] = w->fh[39]*c_in;
+    w->term[1][65] = w->fh[40]*c_in;
+    w->term[1][66] = 0;
+    w->term[1][67] = w->fh[41]*c_in;
+    w->term[1][68] = w->fh[42]*c_in;
+    w->term[1][69] = w->fh[43]*c_in;
+    w->term[1][70] = w->fh[44]*c_in;
+    w->term[1][71] = w->fh[45]*c_in;
+    w->term[1][72] = w->fh[46]*c_in;
+    w->term[1][73] = 0;
+    w->term[1][74] = 0;
+    w->term[1][75] = 0;
+    w->term[1][76] = 0;
+    w->term[1][77] = 0;
+    w->term[1][78] = w->fh[47]*c_in;
+    w->term[1][79] = w->fh[48]*c_in;
+    w->term[1][80] = w->fh[49]*c_in;
+    w->term[1][81] = w->fh[50]*c_in;
+    w->term[1][82] = w->fh[51]*c_in;
+    w->term[1][83] = w->fh[52]*c_in;
+    w->term[1][84] = w->fh[53]*c_in;
+    w->term[1][85] = w->fh[54]*c_in;
+    w->term[1][86] = w->fh[55]*c_in;
+    w->term[1][87] = 0;
+    w->term[1][88] = 0;
+    w->term[1][89] = 0;
+    w->term[1][90] = 0;
+    w->term[1][91] = w->fh[56]*c_in;
+    w->term[1][92] = w->fh[57]*c_in;
+    w->term[1][93] = c_out + w->fh[58]*c_in;
+    w->term[1][94] = w->fh[59]*c_in;
+    w->term[1][95] = w->fh[60]*c_in;
+    w->term[1][96] = 0;
+    w->term[1][97] = 0;
+    w->term[1][98] = 0;
+    w->term[1][99] = 0;
+    w->term[1][100] = 0;
+    w->term[1][101] = 0;
+    w->term[1][102] = 0;
+    w->term[1][103] = w->fh[61]*c_in;
+    w->term[1][104] = w->fh[62]*c_in;
+    w->term[1][105] = w->fh[63]*c_in;
+    w->term[1][106] = 0;
+    w->term[1][107] = 0;
+    w->term[1][108] = 0;
+    w->term[1][109] = 0;
+    w->term[1][110] = 0;
+    w->term[1][111] = 0;
+    w->term[1][112] = 0;
+    w->term[1][113] = 0;
+    w->term[1][114] = 0;
+    w->term[1][115] = 0;
+    w->term[1][116] = 0;
+    w->term[1][117] = w->fh[64]*c_in;
+    w->term[1][118] = w->fh[65]*c_in;
+    w->term[1][119] = w->fh[66]*c_in;
+    w->term[1][120] = w->fh[67]*c_in;
+    w->term[1][121] = 0;
+    w->term[1][122] = w->fh[68]*c_in;
+    w->term[1][123] = w->fh[69]*c_in;
+    w->term[1][124] = c_out + w->fh[70]*c_in;
+    w->term[1][125] = w->fh[71]*c_in;
+    w->term[1][126] = 0;
+    w->term[1][127] = 0;
+    w->term[1][128] = 0;
+    w->term[1][129] = 0;
+    w->term[1][130] = 0;
+    w->term[1][131] = 0;
+    w->term[1][132] = 0;
+    w->term[1][133] = w->fh[72]*c_in;
+    w->term[1][134] = w->fh[73]*c_in;
+    w->term[1][135] = w->fh[74]*c_in;
+    w->term[1][136] = 0;
+    w->term[1][137] = 0;
+    w->term[1][138] = 0;
+    w->term[1][139] = 0;
+    w->term[1][140] = 0;
+    w->term[1][141] = 0;
+    w->term[1][142] = 0;
+    w->term[1][143] = 0;
+    w->term[1][144] = 0;
+    w->term[1][145] = 0;
+    w->term[1][146] = 0;
+    w->term[1][147] = w->fh[75]*c_in;
+    w->term[1][148] = w->fh[76]*c_in;
+    w->term[1][149] = w->fh[77]*c_in;
+    w->term[1][150] = 0;
+    w->term[1][151] = 0;
+    w->term[1][152] = 0;
+    w->term[1][153] = w->fh[78]*c_in;
+    w->term[1][154] = 0;
+    w->term[1][155] = c_out;
+    w->term[1][156] = 0;
+    w->term[1][157] = 0;
+    w->term[1][158] = 0;
+    w->term[1][159] = 0;
+    w->term[1][160] = 0;
+    w->term[1][161] = 0;
+    w->term[1][162] = 0;
+    w->term[1][163] = 0;
+    w->term[1][164] = 0;
+    w->term[1][165] = 0;
+    w->term[1][166] = 0;
+    w->term[1][167] = 0;
+    w->term[1][168] = 0;
+    w->term[1][169] = 0;
+    w->term[1][170] = 0;
+    w->term[1][171] = 0;
+    w->term[1][172] = 0;
+    w->term[1][173] = 0;
+    w->term[1][174] = 0;
+    w->term[1][175] = 0;
+    w->term[1][176] = 0;
+    w->term[1][177] = 0;
+    w->term[1][178] = 0;
+    w->term[1][179] = 0;
+    w->term[1][180] = 0;
+    w->term[1][181] = 0;
+    w->term[1][182] = 0;
+    w->term[1][183] = 0;
+    w->term[1][184] = w->fh[79]*c_in;
+    w->term[1][185] = w->fh[80]*c_in;
+    w->term[1][186] = c_out;
+    w->term[1][187] = 0;
+    w->term[1][188] = 0;
+    w->term[1][189] = 0;
+    w->term[1][190] = 0;
+    w->term[1][191] = 0;
+    w->term[1][192] = 0;
+    w->term[1][193] = 0;
+    w->term[1][194] = 0;
+    w->term[1][195] = 0;
+    w->term[1][196] = 0;
+    w->term[1][197] = 0;
+    w->term[1][198] = 0;
+    w->term[1][199] = 0;
+    w->term[1][200] = 0;
+    w->term[1][201] = 0;
+    w->term[1][202] = 0;
+    w->term[1][203] = 0;
+    w->term[1][204] = 0;
+    w->term[1][205] = 0;
+    w->term[1][206] = 0;
+    w->term[1][207] = 0;
+    w->term[1][208] = 0;
+    w->term[1][209] = 0;
+    w->term[1][210] = c_out + w->fh[81]*c_in;
+    w->term[1][211] = c_out + w->fh[82]*c_in;
+    w->term[1][212] = c_out + w->fh[83]*c_in;
+    w->term[1][213] = c_out + w->fh[84]*c_in;
+    w->term[1][214] = c_out + w->fh[85]*c_in;
+    w->term[1][215] = c_out + w->fh[86]*c_in;
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void
         horner_saturated_into_S(ned_doppler32_augmented_discretize_scratch *restrict w, const
         ned_doppler32_augmented_scalar c_out, const ned_doppler32_augmented_scalar c_in)
 {
-    w->S[0] = c_out + w->fh[0]*w->term[1][27] + w->fh[1]*w->term[1][54] + w->fh[2]*w->term[1][108] +
-            w->fh[3]*w->term[1][135];
-    w->S[1] = w->fh[0]*w->term[1][28] + w->fh[1]*w->term[1][55] + w->fh[2]*w->term[1][109] +
-            w->fh[3]*w->term[1][136];
-    w->S[2] = w->fh[0]*w->term[1][29] + w->fh[1]*w->term[1][56] + w->fh[2]*w->term[1][110] +
-            w->fh[3]*w->term[1][137];
-    w->S[3] = w->fh[0]*w->term[1][30] + w->fh[1]*w->term[1][57] + w->fh[2]*w->term[1][111] +
-            w->fh[3]*w->term[1][138];
-    w->S[4] = w->fh[0]*w->term[1][31] + w->fh[1]*w->term[1][58] + w->fh[2]*w->term[1][112] +
-            w->fh[3]*w->term[1][139];
-    w->S[5] = w->fh[0]*w->term[1][32] + w->fh[1]*w->term[1][59] + w->fh[2]*w->term[1][113] +
-            w->fh[3]*w->term[1][140];
-    w->S[6] = w->fh[0]*w->term[1][33] + w->fh[1]*w->term[1][60] + w->fh[2]*w->term[1][114] +
-            w->fh[3]*w->term[1][141] + w->fh[4]*c_in;
-    w->S[7] = w->fh[0]*w->term[1][34] + w->fh[1]*w->term[1][61] + w->fh[2]*w->term[1][115] +
-            w->fh[3]*w->term[1][142] + w->fh[5]*c_in;
-    w->S[8] = w->fh[0]*w->term[1][35] + w->fh[1]*w->term[1][62] + w->fh[2]*w->term[1][116] +
-            w->fh[3]*w->term[1][143] + w->fh[6]*c_in;
-    w->S[9] = w->fh[0]*w->term[1][36] + w->fh[1]*w->term[1][63] + w->fh[2]*w->term[1][117] +
-            w->fh[3]*w->term[1][144] + w->fh[7]*w->term[1][190];
-    w->S[10] = w->fh[0]*w->term[1][37] + w->fh[1]*w->term[1][64] + w->fh[2]*w->term[1][118] +
-            w->fh[3]*w->term[1][145] + w->fh[8]*w->term[1][191];
-    w->S[11] = w->fh[0]*w->term[1][38] + w->fh[1]*w->term[1][65] + w->fh[2]*w->term[1][119] +
-            w->fh[3]*w->term[1][146] + w->fh[9]*w->term[1][192];
-    w->S[12] = w->fh[0]*w->term[1][39] + w->fh[1]*w->term[1][66] + w->fh[2]*w->term[1][120] +
-            w->fh[3]*w->term[1][147];
-    w->S[13] = w->fh[0]*w->term[1][40] + w->fh[1]*w->term[1][67] + w->fh[2]*w->term[1][121] +
-            w->fh[3]*w->term[1][148];
-    w->S[14] = w->fh[0]*w->term[1][41] + w->fh[1]*w->term[1][68] + w->fh[2]*w->term[1][122] +
-            w->fh[3]*w->term[1][149];
-    w->S[15] = w->fh[0]*w->term[1][42] + w->fh[1]*w->term[1][69] + w->fh[2]*w->term[1][123] +
-            w->fh[3]*w->term[1][150] + w->fh[10]*c_in;
-    w->S[16] = w->fh[0]*w->term[1][43] + w->fh[1]*w->term[1][70] + w->fh[2]*w->term[1][124] +
-            w->fh[3]*w->term[1][151] + w->fh[11]*c_in;
-    w->S[17] = w->fh[0]*w->term[1][44] + w->fh[1]*w->term[1][71] + w->fh[2]*w->term[1][125] +
-            w->fh[3]*w->term[1][152] + w->fh[12]*c_in;
-    w->S[18] = w->fh[0]*w->term[1][45] + w->fh[1]*w->term[1][72] + w->fh[2]*w->term[1][126] +
-            w->fh[3]*w->term[1][153] + w->fh[13]*c_in;
-    w->S[19] = w->fh[0]*w->term[1][46] + w->fh[1]*w->term[1][73] + w->fh[2]*w->term[1][127] +
-            w->fh[3]*w->term[1][154] + w->fh[14]*c_in;
-    w->S[20] = w->fh[0]*w->term[1][47] + w->fh[1]*w->term[1][74] + w->fh[2]*w->term[1][128] +
-            w->fh[3]*w->term[1][155] + w->fh[15]*c_in;
-    w->S[21] = w->fh[0]*w->term[1][48] + w->fh[1]*w->term[1][75] + w->fh[2]*w->term[1][129] +
-            w->fh[3]*w->term[1][156] + w->fh[16]*c_in;
-    w->S[22] = w->fh[0]*w->term[1][49] + w->fh[1]*w->term[1][76] + w->fh[2]*w->term[1][130] +
-            w->fh[3]*w->term[1][157] + w->fh[17]*c_in;
-    w->S[23] = w->fh[0]*w->term[1][50] + w->fh[1]*w->term[1][77] + w->fh[2]*w->term[1][131] +
-            w->fh[3]*w->term[1][158] + w->fh[18]*c_in;
-    w->S[24] = w->fh[0]*w->term[1][51] + w->fh[1]*w->term[1][78] + w->fh[2]*w->term[1][132] +
-            w->fh[3]*w->term[1][159];
-    w->S[25] = w->fh[0]*w->term[1][52] + w->fh[1]*w->term[1][79] + w->fh[2]*w->term[1][133] +
-            w->fh[3]*w->term[1][160];
-    w->S[26] = w->fh[0]*w->term[1][53] + w->fh[1]*w->term[1][80] + w->fh[2]*w->term[1][134] +
-            w->fh[3]*w->term[1][161];
-    w->S[27] = w->fh[19]*w->term[1][0] + w->fh[20]*w->term[1][54] + w->fh[21]*w->term[1][81];
-    w->S[28] = c_out + w->fh[19]*w->term[1][1] + w->fh[20]*w->term[1][55] +
-            w->fh[21]*w->term[1][82];
-    w->S[29] = w->fh[19]*w->term[1][2] + w->fh[20]*w->term[1][56] + w->fh[21]*w->term[1][83];
-    w->S[30] = w->fh[19]*w->term[1][3] + w->fh[20]*w->term[1][57] + w->fh[21]*w->term[1][84];
-    w->S[31] = w->fh[19]*w->term[1][4] + w->fh[20]*w->term[1][58] + w->fh[21]*w->term[1][85];
-    w->S[32] = w->fh[19]*w->term[1][5] + w->fh[20]*w->term[1][59] + w->fh[21]*w->term[1][86];
-    w->S[33] = w->fh[19]*w->term[1][6] + w->fh[20]*w->term[1][60] + w->fh[21]*w->term[1][87] +
-            w->fh[22]*c_in;
-    w->S[34] = w->fh[19]*w->term[1][7] + w->fh[20]*w->term[1][61] + w->fh[21]*w->term[1][88] +
-            w->fh[23]*c_in;
-    w->S[35] = w->fh[19]*w->term[1][8] + w->fh[20]*w->term[1][62] + w->fh[21]*w->term[1][89] +
-            w->fh[24]*c_in;
-    w->S[36] = w->fh[19]*w->term[1][9] + w->fh[20]*w->term[1][63] + w->fh[21]*w->term[1][90] +
-            w->fh[25]*w->term[1][190];
-    w->S[37] = w->fh[19]*w->term[1][10] + w->fh[20]*w->term[1][64] + w->fh[21]*w->term[1][91] +
-            w->fh[26]*w->term[1][191];
-    w->S[38] = w->fh[19]*w->term[1][11] + w->fh[20]*w->term[1][65] + w->fh[21]*w->term[1][92] +
-            w->fh[27]*w->term[1][192];
-    w->S[39] = w->fh[19]*w->term[1][12] + w->fh[20]*w->term[1][66] + w->fh[21]*w->term[1][93];
-    w->S[40] = w->fh[19]*w->term[1][13] + w->fh[20]*w->term[1][67] + w->fh[21]*w->term[1][94];
-    w->S[41] = w->fh[19]*w->term[1][14] + w->fh[20]*w->term[1][68] + w->fh[21]*w->term[1][95];
-    w->S[42] = w->fh[19]*w->term[1][15] + w->fh[20]*w->term[1][69] + w->fh[21]*w->term[1][96] +
-            w->fh[28]*c_in;
-    w->S[43] = w->fh[19]*w->term[1][16] + w->fh[20]*w->term[1][70] + w->fh[21]*w->term[1][97] +
-            w->fh[29]*c_in;
-    w->S[44] = w->fh[19]*w->term[1][17] + w->fh[20]*w->term[1][71] + w->fh[21]*w->term[1][98] +
-            w->fh[30]*c_in;
-    w->S[45] = w->fh[19]*w->term[1][18] + w->fh[20]*w->term[1][72] + w->fh[21]*w->term[1][99] +
-            w->fh[31]*c_in;
-    w->S[46] = w->fh[19]*w->term[1][19] + w->fh[20]*w->term[1][73] + w->fh[21]*w->term[1][100] +
-            w->fh[32]*c_in;
-    w->S[47] = w->fh[19]*w->term[1][20] + w->fh[20]*w->term[1][74] + w->fh[21]*w->term[1][101] +
-            w->fh[33]*c_in;
-    w->S[48] = w->fh[19]*w->term[1][21] + w->fh[20]*w->term[1][75] + w->fh[21]*w->term[1][102] +
-            w->fh[34]*c_in;
-    w->S[49] = w->fh[19]*w->term[1][22] + w->fh[20]*w->term[1][76] + w->fh[21]*w->term[1][103] +
-            w->fh[35]*c_in;
-    w->S[50] = w->fh[19]*w->term[1][23] + w->fh[20]*w->term[1][77] + w->fh[21]*w->term[1][104] +
-            w->fh[36]*c_in;
-    w->S[51] = w->fh[19]*w->term[1][24] + w->fh[20]*w->term[1][78] + w->fh[21]*w->term[1][105];
-    w->S[52] = w->fh[19]*w->term[1][25] + w->fh[20]*w->term[1][79] + w->fh[21]*w->term[1][106];
-    w->S[53] = w->fh[19]*w->term[1][26] + w->fh[20]*w->term[1][80] + w->fh[21]*w->term[1][107];
-    w->S[54] = w->fh[37]*w->term[1][0] + w->fh[38]*w->term[1][27] + w->fh[39]*w->term[1][108] +
-            w->fh[40]*w->term[1][135];
-    w->S[55] = w->fh[37]*w->term[1][1] + w->fh[38]*w->term[1][28] + w->fh[39]*w->term[1][109] +
-            w->fh[40]*w->term[1][136];
-    w->S[56] = c_out + w->fh[37]*w->term[1][2] + w->fh[38]*w->term[1][29] +
-            w->fh[39]*w->term[1][110] + w->fh[40]*w->term[1][137];
-    w->S[57] = w->fh[37]*w->term[1][3] + w->fh[38]*w->term[1][30] + w->fh[39]*w->term[1][111] +
-            w->fh[40]*w->term[1][138];
-    w->S[58] = w->fh[37]*w->term[1][4] + w->fh[38]*w->term[1][31] + w->fh[39]*w->term[1][112] +
-            w->fh[40]*w->term[1][139];
-    w->S[59] = w->fh[37]*w->term[1][5] + w->fh[38]*w->term[1][32] + w->fh[39]*w->term[1][113] +
-            w->fh[40]*w->term[1][140];
-    w->S[60] = w->fh[37]*w->term[1][6] + w->fh[38]*w->term[1][33] + w->fh[39]*w->term[1][114] +
-            w->fh[40]*w->term[1][141] + w->fh[41]*c_in;
-    w->S[61] = w->fh[37]*w->term[1][7] + w->fh[38]*w->term[1][34] + w->fh[39]*w->term[1][115] +
-            w->fh[40]*w->term[1][142] + w->fh[42]*c_in;
-    w->S[62] = w->fh[37]*w->term[1][8] + w->fh[38]*w->term[1][35] + w->fh[39]*w->term[1][116] +
-            w->fh[40]*w->term[1][143] + w->fh[43]*c_in;
-    w->S[63] = w->fh[37]*w->term[1][9] + w->fh[38]*w->term[1][36] + w->fh[39]*w->term[1][117] +
-            w->fh[40]*w->term[1][144] + w->fh[44]*w->term[1][190];
-    w->S[64] = w->fh[37]*w->term[1][10] + w->fh[38]*w->term[1][37] + w->fh[39]*w->term[1][118] +
-            w->fh[40]*w->term[1][145] + w->fh[45]*w->term[1][191];
-    w->S[65] = w->fh[37]*w->term[1][11] + w->fh[38]*w->term[1][38] + w->fh[39]*w->term[1][119] +
-            w->fh[40]*w->term[1][146] + w->fh[46]*w->term[1][192];
-    w->S[66] = w->fh[37]*w->term[1][12] + w->fh[38]*w->term[1][39] + w->fh[39]*w->term[1][120] +
-            w->fh[40]*w->term[1][147];
-    w->S[67] = w->fh[37]*w->term[1][13] + w->fh[38]*w->term[1][40] + w->fh[39]*w->term[1][121] +
-            w->fh[40]*w->term[1][148];
-    w->S[68] = w->fh[37]*w->term[1][14] + w->fh[38]*w->term[1][41] + w->fh[39]*w->term[1][122] +
-            w->fh[40]*w->term[1][149];
-    w->S[69] = w->fh[37]*w->term[1][15] + w->fh[38]*w->term[1][42] + w->fh[39]*w->term[1][123] +
-            w->fh[40]*w->term[1][150] + w->fh[47]*c_in;
-    w->S[70] = w->fh[37]*w->term[1][16] + w->fh[38]*w->term[1][43] + w->fh[39]*w->term[1][124] +
-            w->fh[40]*w->term[1][151] + w->fh[48]*c_in;
-    w->S[71] = w->fh[37]*w->term[1][17] + w->fh[38]*w->term[1][44] + w->fh[39]*w->term[1][125] +
-            w->fh[40]*w->term[1][152] + w->fh[49]*c_in;
-    w->S[72] = w->fh[37]*w->term[1][18] + w->fh[38]*w->term[1][45] + w->fh[39]*w->term[1][126] +
-            w->fh[40]*w->term[1][153] + w->fh[50]*c_in;
-    w->S[73] = w->fh[37]*w->term[1][19] + w->fh[38]*w->term[1][46] + w->fh[39]*w->term[1][127] +
-            w->fh[40]*w->term[1][154] + w->fh[51]*c_in;
-    w->S[74] = w->fh[37]*w->term[1][20] + w->fh[38]*w->term[1][47] + w->fh[39]*w->term[1][128] +
-            w->fh[40]*w->term[1][155] + w->fh[52]*c_in;
-    w->S[75] = w->fh[37]*w->term[1][21] + w->fh[38]*w->term[1][48] + w->fh[39]*w->term[1][129] +
-            w->fh[40]*w->term[1][156] + w->fh[53]*c_in;
-    w->S[76] = w->fh[37]*w->term[1][22] + w->fh[38]*w->term[1][49] + w->fh[39]*w->term[1][130] +
-            w->fh[40]*w->term[1][157] + w->fh[54]*c_in;
-    w->S[77] = w->fh[37]*w->term[1][23] + w->fh[38]*w->term[1][50] + w->fh[39]*w->term[1][131] +
-            w->fh[40]*w->term[1][158] + w->fh[55]*c_in;
-    w->S[78] = w->fh[37]*w->term[1][24] + w->fh[38]*w->term[1][51] + w->fh[39]*w->term[1][132] +
-            w->fh[40]*w->term[1][159];
-    w->S[79] = w->fh[37]*w->term[1][25] + w->fh[38]*w->term[1][52] + w->fh[39]*w->term[1][133] +
-            w->fh[40]*w->term[1][160];
-    w->S[80] = w->fh[37]*w->term[1][26] + w->fh[38]*w->term[1][53] + w->fh[39]*w->term[1][134] +
-            w->fh[40]*w->term[1][161];
-    w->S[81] = w->fh[56]*w->term[1][27] + w->fh[57]*w->term[1][54] + w->fh[58]*w->term[1][81] +
-            w->fh[59]*w->term[1][108] + w->fh[60]*w->term[1][135];
-    w->S[82] = w->fh[56]*w->term[1][28] + w->fh[57]*w->term[1][55] + w->fh[58]*w->term[1][82] +
-            w->fh[59]*w->term[1][109] + w->fh[60]*w->term[1][136];
-    w->S[83] = w->fh[56]*w->term[1][29] + w->fh[57]*w->term[1][56] + w->fh[58]*w->term[1][83] +
-            w->fh[59]*w->term[1][110] + w->fh[60]*w->term[1][137];
-    w->S[84] = c_out + w->fh[56]*w->term[1][30] + w->fh[57]*w->term[1][57] +
-            w->fh[58]*w->term[1][84] + w->fh[59]*w->term[1][111] + w->fh[60]*w->term[1][138];
-    w->S[85] = w->fh[56]*w->term[1][31] + w->fh[57]*w->term[1][58] + w->fh[58]*w->term[1][85] +
-            w->fh[59]*w->term[1][112] + w->fh[60]*w->term[1][139];
-    w->S[86] = w->fh[56]*w->term[1][32] + w->fh[57]*w->term[1][59] + w->fh[58]*w->term[1][86] +
-            w->fh[59]*w->term[1][113] + w->fh[60]*w->term[1][140];
-    w->S[87] = w->fh[56]*w->term[1][33] + w->fh[57]*w->term[1][60] + w->fh[58]*w->term[1][87] +
-            w->fh[59]*w->term[1][114] + w->fh[60]*w->term[1][141];
-    w->S[88] = w->fh[56]*w->term[1][34] + w->fh[57]*w->term[1][61] + w->fh[58]*w->term[1][88] +
-            w->fh[59]*w->term[1][115] + w->fh[60]*w->term[1][142];
-    w->S[89] = w->fh[56]*w->term[1][35] + w->fh[57]*w->term[1][62] + w->fh[58]*w->term[1][89] +
-            w->fh[59]*w->term[1][116] + w->fh[60]*w->term[1][143];
-    w->S[90] = w->fh[56]*w->term[1][36] + w->fh[57]*w->term[1][63] + w->fh[58]*w->term[1][90] +
-            w->fh[59]*w->term[1][117] + w->fh[60]*w->term[1][144];
-    w->S[91] = w->fh[56]*w->term[1][37] + w->fh[57]*w->term[1][64] + w->fh[58]*w->term[1][91] +
-            w->fh[59]*w->term[1][118] + w->fh[60]*w->term[1][145];
-    w->S[92] = w->fh[56]*w->term[1][38] + w->fh[57]*w->term[1][65] + w->fh[58]*w->term[1][92] +
-            w->fh[59]*w->term[1][119] + w->fh[60]*w->term[1][146];
-    w->S[93] = w->fh[56]*w->term[1][39] + w->fh[57]*w->term[1][66] + w->fh[58]*w->term[1][93] +
-            w->fh[59]*w->term[1][120] + w->fh[60]*w->term[1][147] + w->fh[61]*w->term[1][193];
-    w->S[94] = w->fh[56]*w->term[1][40] + w->fh[57]*w->term[1][67] + w->fh[58]*w->term[1][94] +
-            w->fh[59]*w->term[1][121] + w->fh[60]*w->term[1][148] + w->fh[62]*w->term[1][194];
-    w->S[95] = w->fh[56]*w->term[1][41] + w->fh[57]*w->term[1][68] + w->fh[58]*w->term[1][95] +
-            w->fh[59]*w->term[1][122] + w->fh[60]*w->term[1][149] + w->fh[63]*w->term[1][195];
-    w->S[96] = w->fh[56]*w->term[1][42] + w->fh[57]*w->term[1][69] + w->fh[58]*w->term[1][96] +
-            w->fh[59]*w->term[1][123] + w->fh[60]*w->term[1][150];
-    w->S[97] = w->fh[56]*w->term[1][43] + w->fh[57]*w->term[1][70] + w->fh[58]*w->term[1][97] +
-            w->fh[59]*w->term[1][124] + w->fh[60]*w->term[1][151];
-    w->S[98] = w->fh[56]*w->term[1][44] + w->fh[57]*w->term[1][71] + w->fh[58]*w->term[1][98] +
-            w->fh[59]*w->term[1][125] + w->fh[60]*w->term[1][152];
-    w->S[99] = w->fh[56]*w->term[1][45] + w->fh[57]*w->term[1][72] + w->fh[58]*w->term[1][99] +
-            w->fh[59]*w->term[1][126] + w->fh[60]*w->term[1][153];
-    w->S[100] = w->fh[56]*w->term[1][46] + w->fh[57]*w->term[1][73] + w->fh[58]*w->term[1][100] +
-            w->fh[59]*w->term[1][127] + w->fh[60]*w->term[1][154];
-    w->S[101] = w->fh[56]*w->term[1][47] + w->fh[57]*w->term[1][74] + w->fh[58]*w->term[1][101] +
-            w->fh[59]*w->term[1][128] + w->fh[60]*w->term[1][155];
-    w->S[102] = w->fh[56]*w->term[1][48] + w->fh[57]*w->term[1][75] + w->fh[58]*w->term[1][102] +
-            w->fh[59]*w->term[1][129] + w->fh[60]*w->term[1][156];
-    w->S[103] = w->fh[56]*w->term[1][49] + w->fh[57]*w->term[1][76] + w->fh[58]*w->term[1][103] +
-            w->fh[59]*w->term[1][130] + w->fh[60]*w->term[1][157];
-    w->S[104] = w->fh[56]*w->term[1][50] + w->fh[57]*w->term[1][77] + w->fh[58]*w->term[1][104] +
-            w->fh[59]*w->term[1][131] + w->fh[60]*w->term[1][158];
-    w->S[105] = w->fh[56]*w->term[1][51] + w->fh[57]*w->term[1][78] + w->fh[58]*w->term[1][105] +
-            w->fh[59]*w->term[1][132] + w->fh[60]*w->term[1][159] + w->fh[64]*c_in;
-    w->S[106] = w->fh[56]*w->term[1][52] + w->fh[57]*w->term[1][79] + w->fh[58]*w->term[1][106] +
-            w->fh[59]*w->term[1][133] + w->fh[60]*w->term[1][160] + w->fh[65]*c_in;
-    w->S[107] = w->fh[56]*w->term[1][53] + w->fh[57]*w->term[1][80] + w->fh[58]*w->term[1][107] +
-            w->fh[59]*w->term[1][134] + w->fh[60]*w->term[1][161] + w->fh[66]*c_in;
-    w->S[108] = w->fh[67]*w->term[1][0] + w->fh[68]*w->term[1][54] + w->fh[69]*w->term[1][81] +
-            w->fh[70]*w->term[1][108] + w->fh[71]*w->term[1][135];
-    w->S[109] = w->fh[67]*w->term[1][1] + w->fh[68]*w->term[1][55] + w->fh[69]*w->term[1][82] +
-            w->fh[70]*w->term[1][109] + w->fh[71]*w->term[1][136];
-    w->S[110] = w->fh[67]*w->term[1][2] + w->fh[68]*w->term[1][56] + w->fh[69]*w->term[1][83] +
-            w->fh[70]*w->term[1][110] + w->fh[71]*w->term[1][137];
-    w->S[111] = w->fh[67]*w->term[1][3] + w->fh[68]*w->term[1][57] + w->fh[69]*w->term[1][84] +
-            w->fh[70]*w->term[1][111] + w->fh[71]*w->term[1][138];
-    w->S[112] = c_out + w->fh[67]*w->term[1][4] + w->fh[68]*w->term[1][58] +
-            w->fh[69]*w->term[1][85] + w->fh[70]*w->term[1][112] + w->fh[71]*w->term[1][139];
-    w->S[113] = w->fh[67]*w->term[1][5] + w->fh[68]*w->term[1][59] + w->fh[69]*w->term[1][86] +
-            w->fh[70]*w->term[1][113] + w->fh[71]*w->term[1][140];
-    w->S[114] = w->fh[67]*w->term[1][6] + w->fh[68]*w->term[1][60] + w->fh[69]*w->term[1][87] +
-            w->fh[70]*w->term[1][114] + w->fh[71]*w->term[1][141];
-    w->S[115] = w->fh[67]*w->term[1][7] + w->fh[68]*w->term[1][61] + w->fh[69]*w->term[1][88] +
-            w->fh[70]*w->term[1][115] + w->fh[71]*w->term[1][142];
-    w->S[116] = w->fh[67]*w->term[1][8] + w->fh[68]*w->term[1][62] + w->fh[69]*w->term[1][89] +
-            w->fh[70]*w->term[1][116] + w->fh[71]*w->term[1][143];
-    w->S[117] = w->fh[67]*w->term[1][9] + w->fh[68]*w->term[1][63] + w->fh[69]*w->term[1][90] +
-            w->fh[70]*w->term[1][117] + w->fh[71]*w->term[1][144];
-    w->S[118] = w->fh[67]*w->term[1][10] + w->fh[68]*w->term[1][64] + w->fh[69]*w->term[1][91] +
-            w->fh[70]*w->term[1][118] + w->fh[71]*w->term[1][145];
-    w->S[119] = w->fh[67]*w->term[1][11] + w->fh[68]*w->term[1][65] + w->fh[69]*w->term[1][92] +
-            w->fh[70]*w->term[1][119] + w->fh[71]*w->term[1][146];
-    w->S[120] = w->fh[67]*w->term[1][12] + w->fh[68]*w->term[1][66] + w->fh[69]*w->term[1][93] +
-            w->fh[70]*w->term[1][120] + w->fh[71]*w->term[1][147] + w->fh[72]*w->term[1][193];
-    w->S[121] = w->fh[67]*w->term[1][13] + w->fh[68]*w->term[1][67] + w->fh[69]*w->term[1][94] +
-            w->fh[70]*w->term[1][121] + w->fh[71]*w->term[1][148] + w->fh[73]*w->term[1][194];
-    w->S[122] = w->fh[67]*w->term[1][14] + w->fh[68]*w->term[1][68] + w->fh[69]*w->term[1][95] +
-            w->fh[70]*w->term[1][122] + w->fh[71]*w->term[1][149] + w->fh[74]*w->term[1][195];
-    w->S[123] = w->fh[67]*w->term[1][15] + w->fh[68]*w->term[1][69] + w->fh[69]*w->term[1][96] +
-            w->fh[70]*w->term[1][123] + w->fh[71]*w->term[1][150];
-    w->S[124] = w->fh[67]*w->term[1][16] + w->fh[68]*w->term[1][70] + w->fh[69]*w->term[1][97] +
-            w->fh[70]*w->term[1][124] + w->fh[71]*w->term[1][151];
-    w->S[125] = w->fh[67]*w->term[1][17] + w->fh[68]*w->term[1][71] + w->fh[69]*w->term[1][98] +
-            w->fh[70]*w->term[1][125] + w->fh[71]*w->term[1][152];
-    w->S[126] = w->fh[67]*w->term[1][18] + w->fh[68]*w->term[1][72] + w->fh[69]*w->term[1][99] +
-            w->fh[70]*w->term[1][126] + w->fh[71]*w->term[1][153];
-    w->S[127] = w->fh[67]*w->term[1][19] + w->fh[68]*w->term[1][73] + w->fh[69]*w->term[1][100] +
-            w->fh[70]*w->term[1][127] + w->fh[71]*w->term[1][154];
-    w->S[128] = w->fh[67]*w->term[1][20] + w->fh[68]*w->term[1][74] + w->fh[69]*w->term[1][101] +
-            w->fh[70]*w->term[1][128] + w->fh[71]*w->term[1][155];
-    w->S[129] = w->fh[67]*w->term[1][21] + w->fh[68]*w->term[1][75] + w->fh[69]*w->term[1][102] +
-            w->fh[70]*w->term[1][129] + w->fh[71]*w->term[1][156];
-    w->S[130] = w->fh[67]*w->term[1][22] + w->fh[68]*w->term[1][76] + w->fh[69]*w->term[1][103] +
-            w->fh[70]*w->term[1][130] + w->fh[71]*w->term[1][157];
-    w->S[131] = w->fh[67]*w->term[1][23] + w->fh[68]*w->term[1][77] + w->fh[69]*w->term[1][104] +
-            w->fh[70]*w->term[1][131] + w->fh[71]*w->term[1][158];
-    w->S[132] = w->fh[67]*w->term[1][24] + w->fh[68]*w->term[1][78] + w->fh[69]*w->term[1][105] +
-            w->fh[70]*w->term[1][132] + w->fh[71]*w->term[1][159] + w->fh[75]*c_in;
-    w->S[133] = w->fh[67]*w->term[1][25] + w->fh[68]*w->term[1][79] + w->fh[69]*w->term[1][106] +
-            w->fh[70]*w->term[1][133] + w->fh[71]*w->term[1][160] + w->fh[76]*c_in;
-    w->S[134] = w->fh[67]*w->term[1][26] + w->fh[68]*w->term[1][80] + w->fh[69]*w->term[1][107] +
-            w->fh[70]*w->term[1][134] + w->fh[71]*w->term[1][161] + w->fh[77]*c_in;
-    w->S[135] = w->fh[78]*w->term[1][81];
-    w->S[136] = w->fh[78]*w->term[1][82];
-    w->S[137] = w->fh[78]*w->term[1][83];
-    w->S[138] = w->fh[78]*w->term[1][84];
-    w->S[139] = w->fh[78]*w->term[1][85];
-    w->S[140] = c_out + w->fh[78]*w->term[1][86];
-    w->S[141] = w->fh[78]*w->term[1][87];
-    w->S[142] = w->fh[78]*w->term[1][88];
-    w->S[143] = w->fh[78]*w->term[1][89];
-    w->S[144] = w->fh[78]*w->term[1][90];
-    w->S[145] = w->fh[78]*w->term[1][91];
-    w->S[146] = w->fh[78]*w->term[1][92];
-    w->S[147] = w->fh[78]*w->term[1][93];
-    w->S[148] = w->fh[78]*w->term[1][94];
-    w->S[149] = w->fh[78]*w->term[1][95];
-    w->S[150] = w->fh[78]*w->term[1][96];
-    w->S[151] = w->fh[78]*w->term[1][97];
-    w->S[152] = w->fh[78]*w->term[1][98];
-    w->S[153] = w->fh[78]*w->term[1][99];
-    w->S[154] = w->fh[78]*w->term[1][100];
-    w->S[155] = w->fh[78]*w->term[1][101];
-    w->S[156] = w->fh[78]*w->term[1][102];
-    w->S[157] = w->fh[78]*w->term[1][103];
-    w->S[158] = w->fh[78]*w->term[1][104];
-    w->S[159] = w->fh[78]*w->term[1][105];
-    w->S[160] = w->fh[78]*w->term[1][106];
-    w->S[161] = w->fh[78]*w->term[1][107];
-    w->S[162] = w->fh[79]*w->term[1][108] + w->fh[80]*w->term[1][135];
-    w->S[163] = w->fh[79]*w->term[1][109] + w->fh[80]*w->term[1][136];
-    w->S[164] = w->fh[79]*w->term[1][110] + w->fh[80]*w->term[1][137];
-    w->S[165] = w->fh[79]*w->term[1][111] + w->fh[80]*w->term[1][138];
-    w->S[166] = w->fh[79]*w->term[1][112] + w->fh[80]*w->term[1][139];
-    w->S[167] = w->fh[79]*w->term[1][113] + w->fh[80]*w->term[1][140];
-    w->S[168] = c_out;
-    w->S[169] = w->fh[79]*w->term[1][114] + w->fh[80]*w->term[1][141];
-    w->S[170] = w->fh[79]*w->term[1][115] + w->fh[80]*w->term[1][142];
-    w->S[171] = w->fh[79]*w->term[1][116] + w->fh[80]*w->term[1][143];
-    w->S[172] = w->fh[79]*w->term[1][117] + w->fh[80]*w->term[1][144];
-    w->S[173] = w->fh[79]*w->term[1][118] + w->fh[80]*w->term[1][145];
-    w->S[174] = w->fh[79]*w->term[1][119] + w->fh[80]*w->term[1][146];
-    w->S[175] = w->fh[79]*w->term[1][120] + w->fh[80]*w->term[1][147];
-    w->S[176] = w->fh[79]*w->term[1][121] + w->fh[80]*w->term[1][148];
-    w->S[177] = w->fh[79]*w->term[1][122] + w->fh[80]*w->term[1][149];
-    w->S[178] = w->fh[79]*w->term[1][123] + w->fh[80]*w->term[1][150];
-    w->S[179] = w->fh[79]*w->term[1][124] + w->fh[80]*w->term[1][151];
-    w->S[180] = w->fh[79]*w->term[1][125] + w->fh[80]*w->term[1][152];
-    w->S[181] = w->fh[79]*w->term[1][126] + w->fh[80]*w->term[1][153];
-    w->S[182] = w->fh[79]*w->term[1][127] + w->fh[80]*w->term[1][154];
-    w->S[183] = w->fh[79]*w->term[1][128] + w->fh[80]*w->term[1][155];
-    w->S[184] = w->fh[79]*w->term[1][129] + w->fh[80]*w->term[1][156];
-    w->S[185] = w->fh[79]*w->term[1][130] + w->fh[80]*w->term[1][157];
-    w->S[186] = w->fh[79]*w->term[1][131] + w->fh[80]*w->term[1][158];
-    w->S[187] = w->fh[79]*w->term[1][132] + w->fh[80]*w->term[1][159];
-    w->S[188] = w->fh[79]*w->term[1][133] + w->fh[80]*w->term[1][160];
-    w->S[189] = w->fh[79]*w->term[1][134] + w->fh[80]*w->term[1][161];
-    w->S[190] = c_out + w->fh[81]*w->term[1][190];
-    w->S[191] = c_out + w->fh[82]*w->term[1][191];
-    w->S[192] = c_out + w->fh[83]*w->term[1][192];
-    w->S[193] = c_out + w->fh[84]*w->term[1][193];
-    w->S[194] = c_out + w->fh[85]*w->term[1][194];
-    w->S[195] = c_out + w->fh[86]*w->term[1][195];
+    int k;
+    for (k = 0; k < 30; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][30+k] + w->fh[1]*w->term[1][60+k] + w->fh[2]*w->term[1][120+k]
+                + w->fh[3]*w->term[1][150+k];
+        w->S[30+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][60+k] +
+                w->fh[21]*w->term[1][90+k];
+        w->S[60+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][30+k] +
+                w->fh[39]*w->term[1][120+k] + w->fh[40]*w->term[1][150+k];
+        w->S[90+k] = w->fh[56]*w->term[1][30+k] + w->fh[57]*w->term[1][60+k] +
+                w->fh[58]*w->term[1][90+k] + w->fh[59]*w->term[1][120+k] +
+                w->fh[60]*w->term[1][150+k];
+        w->S[120+k] = w->fh[67]*w->term[1][k] + w->fh[68]*w->term[1][60+k] +
+                w->fh[69]*w->term[1][90+k] + w->fh[70]*w->term[1][120+k] +
+                w->fh[71]*w->term[1][150+k];
+        w->S[150+k] = w->fh[78]*w->term[1][90+k];
+    }
+    w->S[0] = w->S[0] + c_out;
+    w->S[7] = w->S[7] + w->fh[4]*c_in;
+    w->S[8] = w->S[8] + w->fh[5]*c_in;
+    w->S[9] = w->S[9] + w->fh[6]*c_in;
+    w->S[10] = w->S[10] + w->fh[7]*w->term[1][210];
+    w->S[11] = w->S[11] + w->fh[8]*w->term[1][211];
+    w->S[12] = w->S[12] + w->fh[9]*w->term[1][212];
+    w->S[18] = w->S[18] + w->fh[10]*c_in;
+    w->S[19] = w->S[19] + w->fh[11]*c_in;
+    w->S[20] = w->S[20] + w->fh[12]*c_in;
+    w->S[21] = w->S[21] + w->fh[13]*c_in;
+    w->S[22] = w->S[22] + w->fh[14]*c_in;
+    w->S[23] = w->S[23] + w->fh[15]*c_in;
+    w->S[24] = w->S[24] + w->fh[16]*c_in;
+    w->S[25] = w->S[25] + w->fh[17]*c_in;
+    w->S[26] = w->S[26] + w->fh[18]*c_in;
+    w->S[31] = w->S[31] + c_out;
+    w->S[37] = w->S[37] + w->fh[22]*c_in;
+    w->S[38] = w->S[38] + w->fh[23]*c_in;
+    w->S[39] = w->S[39] + w->fh[24]*c_in;
+    w->S[40] = w->S[40] + w->fh[25]*w->term[1][210];
+    w->S[41] = w->S[41] + w->fh[26]*w->term[1][211];
+    w->S[42] = w->S[42] + w->fh[27]*w->term[1][212];
+    w->S[48] = w->S[48] + w->fh[28]*c_in;
+    w->S[49] = w->S[49] + w->fh[29]*c_in;
+    w->S[50] = w->S[50] + w->fh[30]*c_in;
+    w->S[51] = w->S[51] + w->fh[31]*c_in;
+    w->S[52] = w->S[52] + w->fh[32]*c_in;
+    w->S[53] = w->S[53] + w->fh[33]*c_in;
+    w->S[54] = w->S[54] + w->fh[34]*c_in;
+    w->S[55] = w->S[55] + w->fh[35]*c_in;
+    w->S[56] = w->S[56] + w->fh[36]*c_in;
+    w->S[62] = w->S[62] + c_out;
+    w->S[67] = w->S[67] + w->fh[41]*c_in;
+    w->S[68] = w->S[68] + w->fh[42]*c_in;
+    w->S[69] = w->S[69] + w->fh[43]*c_in;
+    w->S[70] = w->S[70] + w->fh[44]*w->term[1][210];
+    w->S[71] = w->S[71] + w->fh[45]*w->term[1][211];
+    w->S[72] = w->S[72] + w->fh[46]*w->term[1][212];
+    w->S[78] = w->S[78] + w->fh[47]*c_in;
+    w->S[79] = w->S[79] + w->fh[48]*c_in;
+    w->S[80] = w->S[80] + w->fh[49]*c_in;
+    w->S[81] = w->S[81] + w->fh[50]*c_in;
+    w->S[82] = w->S[82] + w->fh[51]*c_in;
+    w->S[83] = w->S[83] + w->fh[52]*c_in;
+    w->S[84] = w->S[84] + w->fh[53]*c_in;
+    w->S[85] = w->S[85] + w->fh[54]*c_in;
+    w->S[86] = w->S[86] + w->fh[55]*c_in;
+    w->S[93] = w->S[93] + c_out;
+    w->S[103] = w->S[103] + w->fh[61]*w->term[1][213];
+    w->S[104] = w->S[104] + w->fh[62]*w->term[1][214];
+    w->S[105] = w->S[105] + w->fh[63]*w->term[1][215];
+    w->S[117] = w->S[117] + w->fh[64]*c_in;
+    w->S[118] = w->S[118] + w->fh[65]*c_in;
+    w->S[119] = w->S[119] + w->fh[66]*c_in;
+    w->S[124] = w->S[124] + c_out;
+    w->S[133] = w->S[133] + w->fh[72]*w->term[1][213];
+    w->S[134] = w->S[134] + w->fh[73]*w->term[1][214];
+    w->S[135] = w->S[135] + w->fh[74]*w->term[1][215];
+    w->S[147] = w->S[147] + w->fh[75]*c_in;
+    w->S[148] = w->S[148] + w->fh[76]*c_in;
+    w->S[149] = w->S[149] + w->fh[77]*c_in;
+    w->S[155] = w->S[155] + c_out;
+    w->S[210] = c_out + w->fh[81]*w->term[1][210];
+    w->S[211] = c_out + w->fh[82]*w->term[1][211];
+    w->S[212] = c_out + w->fh[83]*w->term[1][212];
+    w->S[213] = c_out + w->fh[84]*w->term[1][213];
+    w->S[214] = c_out + w->fh[85]*w->term[1][214];
+    w->S[215] = c_out + w->fh[86]*w->term[1][215];
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void
         horner_saturated_into_term(ned_doppler32_augmented_discretize_scratch *restrict w, const
         ned_doppler32_augmented_scalar c_out, const ned_doppler32_augmented_scalar c_in)
 {
-    w->term[1][0] = c_out + w->fh[0]*w->S[27] + w->fh[1]*w->S[54] + w->fh[2]*w->S[108] +
-            w->fh[3]*w->S[135];
-    w->term[1][1] = w->fh[0]*w->S[28] + w->fh[1]*w->S[55] + w->fh[2]*w->S[109] + w->fh[3]*w->S[136];
-    w->term[1][2] = w->fh[0]*w->S[29] + w->fh[1]*w->S[56] + w->fh[2]*w->S[110] + w->fh[3]*w->S[137];
-    w->term[1][3] = w->fh[0]*w->S[30] + w->fh[1]*w->S[57] + w->fh[2]*w->S[111] + w->fh[3]*w->S[138];
-    w->term[1][4] = w->fh[0]*w->S[31] + w->fh[1]*w->S[58] + w->fh[2]*w->S[112] + w->fh[3]*w->S[139];
-    w->term[1][5] = w->fh[0]*w->S[32] + w->fh[1]*w->S[59] + w->fh[2]*w->S[113] + w->fh[3]*w->S[140];
-    w->term[1][6] = w->fh[0]*w->S[33] + w->fh[1]*w->S[60] + w->fh[2]*w->S[114] + w->fh[3]*w->S[141]
-            + w->fh[4]*c_in;
-    w->term[1][7] = w->fh[0]*w->S[34] + w->fh[1]*w->S[61] + w->fh[2]*w->S[115] + w->fh[3]*w->S[142]
-            + w->fh[5]*c_in;
-    w->term[1][8] = w->fh[0]*w->S[35] + w->fh[1]*w->S[62] + w->fh[2]*w->S[116] + w->fh[3]*w->S[143]
-            + w->fh[6]*c_in;
-    w->term[1][9] = w->fh[0]*w->S[36] + w->fh[1]*w->S[63] + w->fh[2]*w->S[117] + w->fh[3]*w->S[144]
-            + w->fh[7]*w->S[190];
-    w->term[1][10] = w->fh[0]*w->S[37] + w->fh[1]*w->S[64] + w->fh[2]*w->S[118] + w->fh[3]*w->S[145]
-            + w->fh[8]*w->S[191];
-    w->term[1][11] = w->fh[0]*w->S[38] + w->fh[1]*w->S[65] + w->fh[2]*w->S[119] + w->fh[3]*w->S[146]
-            + w->fh[9]*w->S[192];
-    w->term[1][12] = w->fh[0]*w->S[39] + w->fh[1]*w->S[66] + w->fh[2]*w->S[120] +
-            w->fh[3]*w->S[147];
-    w->term[1][13] = w->fh[0]*w->S[40] + w->fh[1]*w->S[67] + w->fh[2]*w->S[121] +
-            w->fh[3]*w->S[148];
-    w->term[1][14] = w->fh[0]*w->S[41] + w->fh[1]*w->S[68] + w->fh[2]*w->S[122] +
-            w->fh[3]*w->S[149];
-    w->term[1][15] = w->fh[0]*w->S[42] + w->fh[1]*w->S[69] + w->fh[2]*w->S[123] + w->fh[3]*w->S[150]
-            + w->fh[10]*c_in;
-    w->term[1][16] = w->fh[0]*w->S[43] + w->fh[1]*w->S[70] + w->fh[2]*w->S[124] + w->fh[3]*w->S[151]
-            + w->fh[11]*c_in;
-    w->term[1][17] = w->fh[0]*w->S[44] + w->fh[1]*w->S[71] + w->fh[2]*w->S[125] + w->fh[3]*w->S[152]
-            + w->fh[12]*c_in;
-    w->term[1][18] = w->fh[0]*w->S[45] + w->fh[1]*w->S[72] + w->fh[2]*w->S[126] + w->fh[3]*w->S[153]
-            + w->fh[13]*c_in;
-    w->term[1][19] = w->fh[0]*w->S[46] + w->fh[1]*w->S[73] + w->fh[2]*w->S[127] + w->fh[3]*w->S[154]
-            + w->fh[14]*c_in;
-    w->term[1][20] = w->fh[0]*w->S[47] + w->fh[1]*w->S[74] + w->fh[2]*w->S[128] + w->fh[3]*w->S[155]
-            + w->fh[15]*c_in;
-    w->term[1][21] = w->fh[0]*w->S[48] + w->fh[1]*w->S[75] + w->fh[2]*w->S[129] + w->fh[3]*w->S[156]
-            + w->fh[16]*c_in;
-    w->term[1][22] = w->fh[0]*w->S[49] + w->fh[1]*w->S[76] + w->fh[2]*w->S[130] + w->fh[3]*w->S[157]
-            + w->fh[17]*c_in;
-    w->term[1][23] = w->fh[0]*w->S[50] + w->fh[1]*w->S[77] + w->fh[2]*w->S[131] + w->fh[3]*w->S[158]
-            + w->fh[18]*c_in;
-    w->term[1][24] = w->fh[0]*w->S[51] + w->fh[1]*w->S[78] + w->fh[2]*w->S[132] +
-            w->fh[3]*w->S[159];
-    w->term[1][25] = w->fh[0]*w->S[52] + w->fh[1]*w->S[79] + w->fh[2]*w->S[133] +
-            w->fh[3]*w->S[160];
-    w->term[1][26] = w->fh[0]*w->S[53] + w->fh[1]*w->S[80] + w->fh[2]*w->S[134] +
-            w->fh[3]*w->S[161];
-    w->term[1][27] = w->fh[19]*w->S[0] + w->fh[20]*w->S[54] + w->fh[21]*w->S[81];
-    w->term[1][28] = c_out + w->fh[19]*w->S[1] + w->fh[20]*w->S[55] + w->fh[21]*w->S[82];
-    w->term[1][29] = w->fh[19]*w->S[2] + w->fh[20]*w->S[56] + w->fh[21]*w->S[83];
-    w->term[1][30] = w->fh[19]*w->S[3] + w->fh[20]*w->S[57] + w->fh[21]*w->S[84];
-    w->term[1][31] = w->fh[19]*w->S[4] + w->fh[20]*w->S[58] + w->fh[21]*w->S[85];
-    w->term[1][32] = w->fh[19]*w->S[5] + w->fh[20]*w->S[59] + w->fh[21]*w->S[86];
-    w->term[1][33] = w->fh[19]*w->S[6] + w->fh[20]*w->S[60] + w->fh[21]*w->S[87] + w->fh[22]*c_in;
-    w->term[1][34] = w->fh[19]*w->S[7] + w->fh[20]*w->S[61] + w->fh[21]*w->S[88] + w->fh[23]*c_in;
-    w->term[1][35] = w->fh[19]*w->S[8] + w->fh[20]*w->S[62] + w->fh[21]*w->S[89] + w->fh[24]*c_in;
-    w->term[1][36] = w->fh[19]*w->S[9] + w->fh[20]*w->S[63] + w->fh[21]*w->S[90] +
-            w->fh[25]*w->S[190];
-    w->term[1][37] = w->fh[19]*w->S[10] + w->fh[20]*w->S[64] + w->fh[21]*w->S[91] +
-            w->fh[26]*w->S[191];
-    w->term[1][38] = w->fh[19]*w->S[11] + w->fh[20]*w->S[65] + w->fh[21]*w->S[92] +
-            w->fh[27]*w->S[192];
-    w->term[1][39] = w->fh[19]*w->S[12] + w->fh[20]*w->S[66] + w->fh[21]*w->S[93];
-    w->term[1][40] = w->fh[19]*w->S[13] + w->fh[20]*w->S[67] + w->fh[21]*w->S[94];
-    w->term[1][41] = w->fh[19]*w->S[14] + w->fh[20]*w->S[68] + w->fh[21]*w->S[95];
-    w->term[1][42] = w->fh[19]*w->S[15] + w->fh[20]*w->S[69] + w->fh[21]*w->S[96] + w->fh[28]*c_in;
-    w->term[1][43] = w->fh[19]*w->S[16] + w->fh[20]*w->S[70] + w->fh[21]*w->S[97] + w->fh[29]*c_in;
-    w->term[1][44] = w->fh[19]*w->S[17] + w->fh[20]*w->S[71] + w->fh[21]*w->S[98] + w->fh[30]*c_in;
-    w->term[1][45] = w->fh[19]*w->S[18] + w->fh[20]*w->S[72] + w->fh[21]*w->S[99] + w->fh[31]*c_in;
-    w->term[1][46] = w->fh[19]*w->S[19] + w->fh[20]*w->S[73] + w->fh[21]*w->S[100] + w->fh[32]*c_in;
-    w->term[1][47] = w->fh[19]*w->S[20] + w->fh[20]*w->S[74] + w->fh[21]*w->S[101] + w->fh[33]*c_in;
-    w->term[1][48] = w->fh[19]*w->S[21] + w->fh[20]*w->S[75] + w->fh[21]*w->S[102] + w->fh[34]*c_in;
-    w->term[1][49] = w->fh[19]*w->S[22] + w->fh[20]*w->S[76] + w->fh[21]*w->S[103] + w->fh[35]*c_in;
-    w->term[1][50] = w->fh[19]*w->S[23] + w->fh[20]*w->S[77] + w->fh[21]*w->S[104] + w->fh[36]*c_in;
-    w->term[1][51] = w->fh[19]*w->S[24] + w->fh[20]*w->S[78] + w->fh[21]*w->S[105];
-    w->term[1][52] = w->fh[19]*w->S[25] + w->fh[20]*w->S[79] + w->fh[21]*w->S[106];
-    w->term[1][53] = w->fh[19]*w->S[26] + w->fh[20]*w->S[80] + w->fh[21]*w->S[107];
-    w->term[1][54] = w->fh[37]*w->S[0] + w->fh[38]*w->S[27] + w->fh[39]*w->S[108] +
-            w->fh[40]*w->S[135];
-    w->term[1][55] = w->fh[37]*w->S[1] + w->fh[38]*w->S[28] + w->fh[39]*w->S[109] +
-            w->fh[40]*w->S[136];
-    w->term[1][56] = c_out + w->fh[37]*w->S[2] + w->fh[38]*w->S[29] + w->fh[39]*w->S[110] +
-            w->fh[40]*w->S[137];
-    w->term[1][57] = w->fh[37]*w->S[3] + w->fh[38]*w->S[30] + w->fh[39]*w->S[111] +
-            w->fh[40]*w->S[138];
-    w->term[1][58] = w->fh[37]*w->S[4] + w->fh[38]*w->S[31] + w->fh[39]*w->S[112] +
-            w->fh[40]*w->S[139];
-    w->term[1][59] = w->fh[37]*w->S[5] + w->fh[38]*w->S[32] + w->fh[39]*w->S[113] +
-            w->fh[40]*w->S[140];
-    w->term[1][60] = w->fh[37]*w->S[6] + w->fh[38]*w->S[33] + w->fh[39]*w->S[114] +
-            w->fh[40]*w->S[141] + w->fh[41]*c_in;
-    w->term[1][61] = w->fh[37]*w->S[7] + w->fh[38]*w->S[34] + w->fh[39]*w->S[115] +
-            w->fh[40]*w->S[142] + w->fh[42]*c_in;
-    w->term[1][62] = w->fh[37]*w->S[8] + w->fh[38]*w->S[35] + w->fh[39]*w->S[116] +
-            w->fh[40]*w->S[143] + w->fh[43]*c_in;
-    w->term[1][63] = w->fh[37]*w->S[9] + w->fh[38]*w->S[36] + w->fh[39]*w->S[117] +
-            w->fh[40]*w->S[144] + w->fh[44]*w->S[190];
-    w->term[1][64] = w->fh[37]*w->S[10] + w->fh[38]*w->S[37] + w->fh[39]*w->S[118] +
-            w->fh[40]*w->S[145] + w->fh[45]*w->S[191];
-    w->term[1][65] = w->fh[37]*w->S[11] + w->fh[38]*w->S[38] + w->fh[39]*w->S[119] +
-            w->fh[40]*w->S[146] + w->fh[46]*w->S[192];
-    w->term[1][66] = w->fh[37]*w->S[12] + w->fh[38]*w->S[39] + w->fh[39]*w->S[120] +
-            w->fh[40]*w->S[147];
-    w->term[1][67] = w->fh[37]*w->S[13] + w->fh[38]*w->S[40] + w->fh[39]*w->S[121] +
-            w->fh[40]*w->S[148];
-    w->term[1][68] = w->fh[37]*w->S[14] + w->fh[38]*w->S[41] + w->fh[39]*w->S[122] +
-            w->fh[40]*w->S[149];
-    w->term[1][69] = w->fh[37]*w->S[15] + w->fh[38]*w->S[42] + w->fh[39]*w->S[123] +
-            w->fh[40]*w->S[150] + w->fh[47]*c_in;
-    w->term[1][70] = w->fh[37]*w->S[16] + w->fh[38]*w->S[43] + w->fh[39]*w->S[124] +
-            w->fh[40]*w->S[151] + w->fh[48]*c_in;
-    w->term[1][71] = w->fh[37]*w->S[17] + w->fh[38]*w->S[44] + w->fh[39]*w->S[125] +
-            w->fh[40]*w->S[152] + w->fh[49]*c_in;
-    w->term[1][72] = w->fh[37]*w->S[18] + w->fh[38]*w->S[45] + w->fh[39]*w->S[126] +
-            w->fh[40]*w->S[153] + w->fh[50]*c_in;
-    w->term[1][73] = w->fh[37]*w->S[19] + w->fh[38]*w->S[46] + w->fh[39]*w->S[127] +
-            w->fh[40]*w->S[154] + w->fh[51]*c_in;
-    w->term[1][74] = w->fh[37]*w->S[20] + w->fh[38]*w->S[47] + w->fh[39]*w->S[128] +
-            w->fh[40]*w->S[155] + w->fh[52]*c_in;
-    w->term[1][75] = w->fh[37]*w->S[21] + w->fh[38]*w->S[48] + w->fh[39]*w->S[129] +
-            w->fh[40]*w->S[156] + w->fh[53]*c_in;
-    w->term[1][76] = w->fh[37]*w->S[22] + w->fh[38]*w->S[49] + w->fh[39]*w->S[130] +
-            w->fh[40]*w->S[157] + w->fh[54]*c_in;
-    w->term[1][77] = w->fh[37]*w->S[23] + w->fh[38]*w->S[50] + w->fh[39]*w->S[131] +
-            w->fh[40]*w->S[158] + w->fh[55]*c_in;
-    w->term[1][78] = w->fh[37]*w->S[24] + w->fh[38]*w->S[51] + w->fh[39]*w->S[132] +
-            w->fh[40]*w->S[159];
-    w->term[1][79] = w->fh[37]*w->S[25] + w->fh[38]*w->S[52] + w->fh[39]*w->S[133] +
-            w->fh[40]*w->S[160];
-    w->term[1][80] = w->fh[37]*w->S[26] + w->fh[38]*w->S[53] + w->fh[39]*w->S[134] +
-            w->fh[40]*w->S[161];
-    w->term[1][81] = w->fh[56]*w->S[27] + w->fh[57]*w->S[54] + w->fh[58]*w->S[81] +
-            w->fh[59]*w->S[108] + w->fh[60]*w->S[135];
-    w->term[1][82] = w->fh[56]*w->S[28] + w->fh[57]*w->S[55] + w->fh[58]*w->S[82] +
-            w->fh[59]*w->S[109] + w->fh[60]*w->S[136];
-    w->term[1][83] = w->fh[56]*w->S[29] + w->fh[57]*w->S[56] + w->fh[58]*w->S[83] +
-            w->fh[59]*w->S[110] + w->fh[60]*w->S[137];
-    w->term[1][84] = c_out + w->fh[56]*w->S[30] + w->fh[57]*w->S[57] + w->fh[58]*w->S[84] +
-            w->fh[59]*w->S[111] + w->fh[60]*w->S[138];
-    w->term[1][85] = w->fh[56]*w->S[31] + w->fh[57]*w->S[58] + w->fh[58]*w->S[85] +
-            w->fh[59]*w->S[112] + w->fh[60]*w->S[139];
-    w->term[1][86] = w->fh[56]*w->S[32] + w->fh[57]*w->S[59] + w->fh[58]*w->S[86] +
-            w->fh[59]*w->S[113] + w->fh[60]*w->S[140];
-    w->term[1][87] = w->fh[56]*w->S[33] + w->fh[57]*w->S[60] + w->fh[58]*w->S[87] +
-            w->fh[59]*w->S[114] + w->fh[60]*w->S[141];
-    w->term[1][88] = w->fh[56]*w->S[34] + w->fh[57]*w->S[61] + w->fh[58]*w->S[88] +
-            w->fh[59]*w->S[115] + w->fh[60]*w->S[142];
-    w->term[1][89] = w->fh[56]*w->S[35] + w->fh[57]*w->S[62] + w->fh[58]*w->S[89] +
-            w->fh[59]*w->S[116] + w->fh[60]*w->S[143];
-    w->term[1][90] = w->fh[56]*w->S[36] + w->fh[57]*w->S[63] + w->fh[58]*w->S[90] +
-            w->fh[59]*w->S[117] + w->fh[60]*w->S[144];
-    w->term[1][91] = w->fh[56]*w->S[37] + w->fh[57]*w->S[64] + w->fh[58]*w->S[91] +
-            w->fh[59]*w->S[118] + w->fh[60]*w->S[145];
-    w->term[1][92] = w->fh[56]*w->S[38] + w->fh[57]*w->S[65] + w->fh[58]*w->S[92] +
-            w->fh[59]*w->S[119] + w->fh[60]*w->S[146];
-    w->term[1][93] = w->fh[56]*w->S[39] + w->fh[57]*w->S[66] + w->fh[58]*w->S[93] +
-            w->fh[59]*w->S[120] + w->fh[60]*w->S[147] + w->fh[61]*w->S[193];
-    w->term[1][94] = w->fh[56]*w->S[40] + w->fh[57]*w->S[67] + w->fh[58]*w->S[94] +
-            w->fh[59]*w->S[121] + w->fh[60]*w->S[148] + w->fh[62]*w->S[194];
-    w->term[1][95] = w->fh[56]*w->S[41] + w->fh[57]*w->S[68] + w->fh[58]*w->S[95] +
-            w->fh[59]*w->S[122] + w->fh[60]*w->S[149] + w->fh[63]*w->S[195];
-    w->term[1][96] = w->fh[56]*w->S[42] + w->fh[57]*w->S[69] + w->fh[58]*w->S[96] +
-            w->fh[59]*w->S[123] + w->fh[60]*w->S[150];
-    w->term[1][97] = w->fh[56]*w->S[43] + w->fh[57]*w->S[70] + w->fh[58]*w->S[97] +
-            w->fh[59]*w->S[124] + w->fh[60]*w->S[151];
-    w->term[1][98] = w->fh[56]*w->S[44] + w->fh[57]*w->S[71] + w->fh[58]*w->S[98] +
-            w->fh[59]*w->S[125] + w->fh[60]*w->S[152];
-    w->term[1][99] = w->fh[56]*w->S[45] + w->fh[57]*w->S[72] + w->fh[58]*w->S[99] +
-            w->fh[59]*w->S[126] + w->fh[60]*w->S[153];
-    w->term[1][100] = w->fh[56]*w->S[46] + w->fh[57]*w->S[73] + w->fh[58]*w->S[100] +
-            w->fh[59]*w->S[127] + w->fh[60]*w->S[154];
-    w->term[1][101] = w->fh[56]*w->S[47] + w->fh[57]*w->S[74] + w->fh[58]*w->S[101] +
-            w->fh[59]*w->S[128] + w->fh[60]*w->S[155];
-    w->term[1][102] = w->fh[56]*w->S[48] + w->fh[57]*w->S[75] + w->fh[58]*w->S[102] +
-            w->fh[59]*w->S[129] + w->fh[60]*w->S[156];
-    w->term[1][103] = w->fh[56]*w->S[49] + w->fh[57]*w->S[76] + w->fh[58]*w->S[103] +
-            w->fh[59]*w->S[130] + w->fh[60]*w->S[157];
-    w->term[1][104] = w->fh[56]*w->S[50] + w->fh[57]*w->S[77] + w->fh[58]*w->S[104] +
-            w->fh[59]*w->S[131] + w->fh[60]*w->S[158];
-    w->term[1][105] = w->fh[56]*w->S[51] + w->fh[57]*w->S[78] + w->fh[58]*w->S[105] +
-            w->fh[59]*w->S[132] + w->fh[60]*w->S[159] + w->fh[64]*c_in;
-    w->term[1][106] = w->fh[56]*w->S[52] + w->fh[57]*w->S[79] + w->fh[58]*w->S[106] +
-            w->fh[59]*w->S[133] + w->fh[60]*w->S[160] + w->fh[65]*c_in;
-    w->term[1][107] = w->fh[56]*w->S[53] + w->fh[57]*w->S[80] + w->fh[58]*w->S[107] +
-            w->fh[59]*w->S[134] + w->fh[60]*w->S[161] + w->fh[66]*c_in;
-    w->term[1][108] = w->fh[67]*w->S[0] + w->fh[68]*w->S[54] + w->fh[69]*w->S[81] +
-            w->fh[70]*w->S[108] + w->fh[71]*w->S[135];
-    w->term[1][109] = w->fh[67]*w->S[1] + w->fh[68]*w->S[55] + w->fh[69]*w->S[82] +
-            w->fh[70]*w->S[109] + w->fh[71]*w->S[136];
-    w->term[1][110] = w->fh[67]*w->S[2] + w->fh[68]*w->S[56] + w->fh[69]*w->S[83] +
-            w->fh[70]*w->S[110] + w->fh[71]*w->S[137];
-    w->term[1][111] = w->fh[67]*w->S[3] + w->fh[68]*w->S[57] + w->fh[69]*w->S[84] +
-            w->fh[70]*w->S[111] + w->fh[71]*w->S[138];
-    w->term[1][112] = c_out + w->fh[67]*w->S[4] + w->fh[68]*w->S[58] + w->fh[69]*w->S[85] +
-            w->fh[70]*w->S[112] + w->fh[71]*w->S[139];
-    w->term[1][113] = w->fh[67]*w->S[5] + w->fh[68]*w->S[59] + w->fh[69]*w->S[86] +
-            w->fh[70]*w->S[113] + w->fh[71]*w->S[140];
-    w->term[1][114] = w->fh[67]*w->S[6] + w->fh[68]*w->S[60] + w->fh[69]*w->S[87] +
-            w->fh[70]*w->S[114] + w->fh[71]*w->S[141];
-    w->term[1][115] = w->fh[67]*w->S[7] + w->fh[68]*w->S[61] + w->fh[69]*w->S[88] +
-            w->fh[70]*w->S[115] + w->fh[71]*w->S[142];
-    w->term[1][116] = w->fh[67]*w->S[8] + w->fh[68]*w->S[62] + w->fh[69]*w->S[89] +
-            w->fh[70]*w->S[116] + w->fh[71]*w->S[143];
-    w->term[1][117] = w->fh[67]*w->S[9] + w->fh[68]*w->S[63] + w->fh[69]*w->S[90] +
-            w->fh[70]*w->S[117] + w->fh[71]*w->S[144];
-    w->term[1][118] = w->fh[67]*w->S[10] + w->fh[68]*w->S[64] + w->fh[69]*w->S[91] +
-            w->fh[70]*w->S[118] + w->fh[71]*w->S[145];
-    w->term[1][119] = w->fh[67]*w->S[11] + w->fh[68]*w->S[65] + w->fh[69]*w->S[92] +
-            w->fh[70]*w->S[119] + w->fh[71]*w->S[146];
-    w->term[1][120] = w->fh[67]*w->S[12] + w->fh[68]*w->S[66] + w->fh[69]*w->S[93] +
-            w->fh[70]*w->S[120] + w->fh[71]*w->S[147] + w->fh[72]*w->S[193];
-    w->term[1][121] = w->fh[67]*w->S[13] + w->fh[68]*w->S[67] + w->fh[69]*w->S[94] +
-            w->fh[70]*w->S[121] + w->fh[71]*w->S[148] + w->fh[73]*w->S[194];
-    w->term[1][122] = w->fh[67]*w->S[14] + w->fh[68]*w->S[68] + w->fh[69]*w->S[95] +
-            w->fh[70]*w->S[122] + w->fh[71]*w->S[149] + w->fh[74]*w->S[195];
-    w->term[1][123] = w->fh[67]*w->S[15] + w->fh[68]*w->S[69] + w->fh[69]*w->S[96] +
-            w->fh[70]*w->S[123] + w->fh[71]*w->S[150];
-    w->term[1][124] = w->fh[67]*w->S[16] + w->fh[68]*w->S[70] + w->fh[69]*w->S[97] +
-            w->fh[70]*w->S[124] + w->fh[71]*w->S[151];
-    w->term[1][125] = w->fh[67]*w->S[17] + w->fh[68]*w->S[71] + w->fh[69]*w->S[98] +
-            w->fh[70]*w->S[125] + w->fh[71]*w->S[152];
-    w->term[1][126] = w->fh[67]*w->S[18] + w->fh[68]*w->S[72] + w->fh[69]*w->S[99] +
-            w->fh[70]*w->S[126] + w->fh[71]*w->S[153];
-    w->term[1][127] = w->fh[67]*w->S[19] + w->fh[68]*w->S[73] + w->fh[69]*w->S[100] +
-            w->fh[70]*w->S[127] + w->fh[71]*w->S[154];
-    w->term[1][128] = w->fh[67]*w->S[20] + w->fh[68]*w->S[74] + w->fh[69]*w->S[101] +
-            w->fh[70]*w->S[128] + w->fh[71]*w->S[155];
-    w->term[1][129] = w->fh[67]*w->S[21] + w->fh[68]*w->S[75] + w->fh[69]*w->S[102] +
-            w->fh[70]*w->S[129] + w->fh[71]*w->S[156];
-    w->term[1][130] = w->fh[67]*w->S[22] + w->fh[68]*w->S[76] + w->fh[69]*w->S[103] +
-            w->fh[70]*w->S[130] + w->fh[71]*w->S[157];
-    w->term[1][131] = w->fh[67]*w->S[23] + w->fh[68]*w->S[77] + w->fh[69]*w->S[104] +
-            w->fh[70]*w->S[131] + w->fh[71]*w->S[158];
-    w->term[1][132] = w->fh[67]*w->S[24] + w->fh[68]*w->S[78] + w->fh[69]*w->S[105] +
-            w->fh[70]*w->S[132] + w->fh[71]*w->S[159] + w->fh[75]*c_in;
-    w->term[1][133] = w->fh[67]*w->S[25] + w->fh[68]*w->S[79] + w->fh[69]*w->S[106] +
-            w->fh[70]*w->S[133] + w->fh[71]*w->S[160] + w->fh[76]*c_in;
-    w->term[1][134] = w->fh[67]*w->S[26] + w->fh[68]*w->S[80] + w->fh[69]*w->S[107] +
-            w->fh[70]*w->S[134] + w->fh[71]*w->S[161] + w->fh[77]*c_in;
-    w->term[1][135] = w->fh[78]*w->S[81];
-    w->term[1][136] = w->fh[78]*w->S[82];
-    w->term[1][137] = w->fh[78]*w->S[83];
-    w->term[1][138] = w->fh[78]*w->S[84];
-    w->term[1][139] = w->fh[78]*w->S[85];
-    w->term[1][140] = c_out + w->fh[78]*w->S[86];
-    w->term[1][141] = w->fh[78]*w->S[87];
-    w->term[1][142] = w->fh[78]*w->S[88];
-    w->term[1][143] = w->fh[78]*w->S[89];
-    w->term[1][144] = w->fh[78]*w->S[90];
-    w->term[1][145] = w->fh[78]*w->S[91];
-    w->term[1][146] = w->fh[78]*w->S[92];
-    w->term[1][147] = w->fh[78]*w->S[93];
-    w->term[1][148] = w->fh[78]*w->S[94];
-    w->term[1][149] = w->fh[78]*w->S[95];
-    w->term[1][150] = w->fh[78]*w->S[96];
-    w->term[1][151] = w->fh[78]*w->S[97];
-    w->term[1][152] = w->fh[78]*w->S[98];
-    w->term[1][153] = w->fh[78]*w->S[99];
-    w->term[1][154] = w->fh[78]*w->S[100];
-    w->term[1][155] = w->fh[78]*w->S[101];
-    w->term[1][156] = w->fh[78]*w->S[102];
-    w->term[1][157] = w->fh[78]*w->S[103];
-    w->term[1][158] = w->fh[78]*w->S[104];
-    w->term[1][159] = w->fh[78]*w->S[105];
-    w->term[1][160] = w->fh[78]*w->S[106];
-    w->term[1][161] = w->fh[78]*w->S[107];
-    w->term[1][162] = w->fh[79]*w->S[108] + w->fh[80]*w->S[135];
-    w->term[1][163] = w->fh[79]*w->S[109] + w->fh[80]*w->S[136];
-    w->term[1][164] = w->fh[79]*w->S[110] + w->fh[80]*w->S[137];
-    w->term[1][165] = w->fh[79]*w->S[111] + w->fh[80]*w->S[138];
-    w->term[1][166] = w->fh[79]*w->S[112] + w->fh[80]*w->S[139];
-    w->term[1][167] = w->fh[79]*w->S[113] + w->fh[80]*w->S[140];
-    w->term[1][168] = c_out;
-    w->term[1][169] = w->fh[79]*w->S[114] + w->fh[80]*w->S[141];
-    w->term[1][170] = w->fh[79]*w->S[115] + w->fh[80]*w->S[142];
-    w->term[1][171] = w->fh[79]*w->S[116] + w->fh[80]*w->S[143];
-    w->term[1][172] = w->fh[79]*w->S[117] + w->fh[80]*w->S[144];
-    w->term[1][173] = w->fh[79]*w->S[118] + w->fh[80]*w->S[145];
-    w->term[1][174] = w->fh[79]*w->S[119] + w->fh[80]*w->S[146];
-    w->term[1][175] = w->fh[79]*w->S[120] + w->fh[80]*w->S[147];
-    w->term[1][176] = w->fh[79]*w->S[121] + w->fh[80]*w->S[148];
-    w->term[1][177] = w->fh[79]*w->S[122] + w->fh[80]*w->S[149];
-    w->term[1][178] = w->fh[79]*w->S[123] + w->fh[80]*w->S[150];
-    w->term[1][179] = w->fh[79]*w->S[124] + w->fh[80]*w->S[151];
-    w->term[1][180] = w->fh[79]*w->S[125] + w->fh[80]*w->S[152];
-    w->term[1][181] = w->fh[79]*w->S[126] + w->fh[80]*w->S[153];
-    w->term[1][182] = w->fh[79]*w->S[127] + w->fh[80]*w->S[154];
-    w->term[1][183] = w->fh[79]*w->S[128] + w->fh[80]*w->S[155];
-    w->term[1][184] = w->fh[79]*w->S[129] + w->fh[80]*w->S[156];
-    w->term[1][185] = w->fh[79]*w->S[130] + w->fh[80]*w->S[157];
-    w->term[1][186] = w->fh[79]*w->S[131] + w->fh[80]*w->S[158];
-    w->term[1][187] = w->fh[79]*w->S[132] + w->fh[80]*w->S[159];
-    w->term[1][188] = w->fh[79]*w->S[133] + w->fh[80]*w->S[160];
-    w->term[1][189] = w->fh[79]*w->S[134] + w->fh[80]*w->S[161];
-    w->term[1][190] = c_out + w->fh[81]*w->S[190];
-    w->term[1][191] = c_out + w->fh[82]*w->S[191];
-    w->term[1][192] = c_out + w->fh[83]*w->S[192];
-    w->term[1][193] = c_out + w->fh[84]*w->S[193];
-    w->term[1][194] = c_out + w->fh[85]*w->S[194];
-    w->term[1][195] = c_out + w->fh[86]*w->S[195];
+    int k;
+    for (k = 0; k < 30; ++k) {
+        w->term[1][k] = w->fh[0]*w->S[30+k] + w->fh[1]*w->S[60+k] + w->fh[2]*w->S[120+k] +
+                w->fh[3]*w->S[150+k];
+        w->term[1][30+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[60+k] + w->fh[21]*w->S[90+k];
+        w->term[1][60+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[30+k] + w->fh[39]*w->S[120+k] +
+                w->fh[40]*w->S[150+k];
+        w->term[1][90+k] = w->fh[56]*w->S[30+k] + w->fh[57]*w->S[60+k] + w->fh[58]*w->S[90+k] +
+                w->fh[59]*w->S[120+k] + w->fh[60]*w->S[150+k];
+        w->term[1][120+k] = w->fh[67]*w->S[k] + w->fh[68]*w->S[60+k] + w->fh[69]*w->S[90+k] +
+                w->fh[70]*w->S[120+k] + w->fh[71]*w->S[150+k];
+        w->term[1][150+k] = w->fh[78]*w->S[90+k];
+    }
+    w->term[1][0] = w->term[1][0] + c_out;
+    w->term[1][7] = w->term[1][7] + w->fh[4]*c_in;
+    w->term[1][8] = w->term[1][8] + w->fh[5]*c_in;
+    w->term[1][9] = w->term[1][9] + w->fh[6]*c_in;
+    w->term[1][10] = w->term[1][10] + w->fh[7]*w->S[210];
+    w->term[1][11] = w->term[1][11] + w->fh[8]*w->S[211];
+    w->term[1][12] = w->term[1][12] + w->fh[9]*w->S[212];
+    w->term[1][18] = w->term[1][18] + w->fh[10]*c_in;
+    w->term[1][19] = w->term[1][19] + w->fh[11]*c_in;
+    w->term[1][20] = w->term[1][20] + w->fh[12]*c_in;
+    w->term[1][21] = w->term[1][21] + w->fh[13]*c_in;
+    w->term[1][22] = w->term[1][22] + w->fh[14]*c_in;
+    w->term[1][23] = w->term[1][23] + w->fh[15]*c_in;
+    w->term[1][24] = w->term[1][24] + w->fh[16]*c_in;
+    w->term[1][25] = w->term[1][25] + w->fh[17]*c_in;
+    w->term[1][26] = w->term[1][26] + w->fh[18]*c_in;
+    w->term[1][31] = w->term[1][31] + c_out;
+    w->term[1][37] = w->term[1][37] + w->fh[22]*c_in;
+    w->term[1][38] = w->term[1][38] + w->fh[23]*c_in;
+    w->term[1][39] = w->term[1][39] + w->fh[24]*c_in;
+    w->term[1][40] = w->term[1][40] + w->fh[25]*w->S[210];
+    w->term[1][41] = w->term[1][41] + w->fh[26]*w->S[211];
+    w->term[1][42] = w->term[1][42] + w->fh[27]*w->S[212];
+    w->term[1][48] = w->term[1][48] + w->fh[28]*c_in;
+    w->term[1][49] = w->term[1][49] + w->fh[29]*c_in;
+    w->term[1][50] = w->term[1][50] + w->fh[30]*c_in;
+    w->term[1][51] = w->term[1][51] + w->fh[31]*c_in;
+    w->term[1][52] = w->term[1][52] + w->fh[32]*c_in;
+    w->term[1][53] = w->term[1][53] + w->fh[33]*c_in;
+    w->term[1][54] = w->term[1][54] + w->fh[34]*c_in;
+    w->term[1][55] = w->term[1][55] + w->fh[35]*c_in;
+    w->term[1][56] = w->term[1][56] + w->fh[36]*c_in;
+    w->term[1][62] = w->term[1][62] + c_out;
+    w->term[1][67] = w->term[1][67] + w->fh[41]*c_in;
+    w->term[1][68] = w->term[1][68] + w->fh[42]*c_in;
+    w->term[1][69] = w->term[1][69] + w->fh[43]*c_in;
+    w->term[1][70] = w->term[1][70] + w->fh[44]*w->S[210];
+    w->term[1][71] = w->term[1][71] + w->fh[45]*w->S[211];
+    w->term[1][72] = w->term[1][72] + w->fh[46]*w->S[212];
+    w->term[1][78] = w->term[1][78] + w->fh[47]*c_in;
+    w->term[1][79] = w->term[1][79] + w->fh[48]*c_in;
+    w->term[1][80] = w->term[1][80] + w->fh[49]*c_in;
+    w->term[1][81] = w->term[1][81] + w->fh[50]*c_in;
+    w->term[1][82] = w->term[1][82] + w->fh[51]*c_in;
+    w->term[1][83] = w->term[1][83] + w->fh[52]*c_in;
+    w->term[1][84] = w->term[1][84] + w->fh[53]*c_in;
+    w->term[1][85] = w->term[1][85] + w->fh[54]*c_in;
+    w->term[1][86] = w->term[1][86] + w->fh[55]*c_in;
+    w->term[1][93] = w->term[1][93] + c_out;
+    w->term[1][103] = w->term[1][103] + w->fh[61]*w->S[213];
+    w->term[1][104] = w->term[1][104] + w->fh[62]*w->S[214];
+    w->term[1][105] = w->term[1][105] + w->fh[63]*w->S[215];
+    w->term[1][117] = w->term[1][117] + w->fh[64]*c_in;
+    w->term[1][118] = w->term[1][118] + w->fh[65]*c_in;
+    w->term[1][119] = w->term[1][119] + w->fh[66]*c_in;
+    w->term[1][124] = w->term[1][124] + c_out;
+    w->term[1][133] = w->term[1][133] + w->fh[72]*w->S[213];
+    w->term[1][134] = w->term[1][134] + w->fh[73]*w->S[214];
+    w->term[1][135] = w->term[1][135] + w->fh[74]*w->S[215];
+    w->term[1][147] = w->term[1][147] + w->fh[75]*c_in;
+    w->term[1][148] = w->term[1][148] + w->fh[76]*c_in;
+    w->term[1][149] = w->term[1][149] + w->fh[77]*c_in;
+    w->term[1][155] = w->term[1][155] + c_out;
+    w->term[1][210] = c_out + w->fh[81]*w->S[210];
+    w->term[1][211] = c_out + w->fh[82]*w->S[211];
+    w->term[1][212] = c_out + w->fh[83]*w->S[212];
+    w->term[1][213] = c_out + w->fh[84]*w->S[213];
+    w->term[1][214] = c_out + w->fh[85]*w->S[214];
+    w->term[1][215] = c_out + w->fh[86]*w->S[215];
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK void horner_last_into_S(ned_doppler32_augmented_discretize_scratch
+        *restrict w, const ned_doppler32_augmented_scalar c_out, const
+        ned_doppler32_augmented_scalar c_in)
+{
+    int k;
+    for (k = 0; k < 30; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][30+k] + w->fh[1]*w->term[1][60+k] + w->fh[2]*w->term[1][120+k]
+                + w->fh[3]*w->term[1][150+k];
+        w->S[30+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][60+k] +
+                w->fh[21]*w->term[1][90+k];
+        w->S[60+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][30+k] +
+                w->fh[39]*w->term[1][120+k] + w->fh[40]*w->term[1][150+k];
+        w->S[90+k] = w->fh[56]*w->term[1][30+k] + w->fh[57]*w->term[1][60+k] +
+                w->fh[58]*w->term[1][90+k] + w->fh[59]*w->term[1][120+k] +
+                w->fh[60]*w->term[1][150+k];
+        w->S[120+k] = w->fh[67]*w->term[1][k] + w->fh[68]*w->term[1][60+k] +
+                w->fh[69]*w->term[1][90+k] + w->fh[70]*w->term[1][120+k] +
+                w->fh[71]*w->term[1][150+k];
+        w->S[150+k] = w->fh[78]*w->term[1][90+k];
+        w->S[180+k] = w->fh[79]*w->term[1][120+k] + w->fh[80]*w->term[1][150+k];
+    }
+    w->S[0] = w->S[0] + c_out;
+    w->S[7] = w->S[7] + w->fh[4]*c_in;
+    w->S[8] = w->S[8] + w->fh[5]*c_in;
+    w->S[9] = w->S[9] + w->fh[6]*c_in;
+    w->S[10] = w->S[10] + w->fh[7]*w->term[1][210];
+    w->S[11] = w->S[11] + w->fh[8]*w->term[1][211];
+    w->S[12] = w->S[12] + w->fh[9]*w->term[1][212];
+    w->S[18] = w->S[18] + w->fh[10]*c_in;
+    w->S[19] = w->S[19] + w->fh[11]*c_in;
+    w->S[20] = w->S[20] + w->fh[12]*c_in;
+    w->S[21] = w->S[21] + w->fh[13]*c_in;
+    w->S[22] = w->S[22] + w->fh[14]*c_in;
+    w->S[23] = w->S[23] + w->fh[15]*c_in;
+    w->S[24] = w->S[24] + w->fh[16]*c_in;
+    w->S[25] = w->S[25] + w->fh[17]*c_in;
+    w->S[26] = w->S[26] + w->fh[18]*c_in;
+    w->S[31] = w->S[31] + c_out;
+    w->S[37] = w->S[37] + w->fh[22]*c_in;
+    w->S[38] = w->S[38] + w->fh[23]*c_in;
+    w->S[39] = w->S[39] + w->fh[24]*c_in;
+    w->S[40] = w->S[40] + w->fh[25]*w->term[1][210];
+    w->S[41] = w->S[41] + w->fh[26]*w->term[1][211];
+    w->S[42] = w->S[42] + w->fh[27]*w->term[1][212];
+    w->S[48] = w->S[48] + w->fh[28]*c_in;
+    w->S[49] = w->S[49] + w->fh[29]*c_in;
+    w->S[50] = w->S[50] + w->fh[30]*c_in;
+    w->S[51] = w->S[51] + w->fh[31]*c_in;
+    w->S[52] = w->S[52] + w->fh[32]*c_in;
+    w->S[53] = w->S[53] + w->fh[33]*c_in;
+    w->S[54] = w->S[54] + w->fh[34]*c_in;
+    w->S[55] = w->S[55] + w->fh[35]*c_in;
+    w->S[56] = w->S[56] + w->fh[36]*c_in;
+    w->S[62] = w->S[62] + c_out;
+    w->S[67] = w->S[67] + w->fh[41]*c_in;
+    w->S[68] = w->S[68] + w->fh[42]*c_in;
+    w->S[69] = w->S[69] + w->fh[43]*c_in;
+    w->S[70] = w->S[70] + w->fh[44]*w->term[1][210];
+    w->S[71] = w->S[71] + w->fh[45]*w->term[1][211];
+    w->S[72] = w->S[72] + w->fh[46]*w->term[1][212];
+    w->S[78] = w->S[78] + w->fh[47]*c_in;
+    w->S[79] = w->S[79] + w->fh[48]*c_in;
+    w->S[80] = w->S[80] + w->fh[49]*c_in;
+    w->S[81] = w->S[81] + w->fh[50]*c_in;
+    w->S[82] = w->S[82] + w->fh[51]*c_in;
+    w->S[83] = w->S[83] + w->fh[52]*c_in;
+    w->S[84] = w->S[84] + w->fh[53]*c_in;
+    w->S[85] = w->S[85] + w->fh[54]*c_in;
+    w->S[86] = w->S[86] + w->fh[55]*c_in;
+    w->S[93] = w->S[93] + c_out;
+    w->S[103] = w->S[103] + w->fh[61]*w->term[1][213];
+    w->S[104] = w->S[104] + w->fh[62]*w->term[1][214];
+    w->S[105] = w->S[105] + w->fh[63]*w->term[1][215];
+    w->S[117] = w->S[117] + w->fh[64]*c_in;
+    w->S[118] = w->S[118] + w->fh[65]*c_in;
+    w->S[119] = w->S[119] + w->fh[66]*c_in;
+    w->S[124] = w->S[124] + c_out;
+    w->S[133] = w->S[133] + w->fh[72]*w->term[1][213];
+    w->S[134] = w->S[134] + w->fh[73]*w->term[1][214];
+    w->S[135] = w->S[135] + w->fh[74]*w->term[1][215];
+    w->S[147] = w->S[147] + w->fh[75]*c_in;
+    w->S[148] = w->S[148] + w->fh[76]*c_in;
+    w->S[149] = w->S[149] + w->fh[77]*c_in;
+    w->S[155] = w->S[155] + c_out;
+    w->S[186] = w->S[186] + c_out;
+    w->S[210] = c_out + w->fh[81]*w->term[1][210];
+    w->S[211] = c_out + w->fh[82]*w->term[1][211];
+    w->S[212] = c_out + w->fh[83]*w->term[1][212];
+    w->S[213] = c_out + w->fh[84]*w->term[1][213];
+    w->S[214] = c_out + w->fh[85]*w->term[1][214];
+    w->S[215] = c_out + w->fh[86]*w->term[1][215];
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_transition *restrict t,
         const ned_doppler32_augmented_discretize_scratch *restrict w)
 {
-    t->Phi[0][0] = w->fh[0]*w->S[27] + w->fh[1]*w->S[54] + w->fh[2]*w->S[108] + w->fh[3]*w->S[135];
-    t->Phi[0][1] = w->fh[0]*w->S[28] + w->fh[1]*w->S[55] + w->fh[2]*w->S[109] + w->fh[3]*w->S[136];
-    t->Phi[0][2] = w->fh[0]*w->S[29] + w->fh[1]*w->S[56] + w->fh[2]*w->S[110] + w->fh[3]*w->S[137];
-    t->Phi[0][3] = w->fh[0]*w->S[30] + w->fh[1]*w->S[57] + w->fh[2]*w->S[111] + w->fh[3]*w->S[138];
-    t->Phi[0][4] = w->fh[0]*w->S[31] + w->fh[1]*w->S[58] + w->fh[2]*w->S[112] + w->fh[3]*w->S[139];
-    t->Phi[0][5] = w->fh[0]*w->S[32] + w->fh[1]*w->S[59] + w->fh[2]*w->S[113] + w->fh[3]*w->S[140];
-    t->Phi[0][7] = w->fh[0]*w->S[33] + w->fh[1]*w->S[60] + w->fh[2]*w->S[114] + w->fh[3]*w->S[141] +
-            w->fh[4];
-    t->Phi[0][8] = w->fh[0]*w->S[34] + w->fh[1]*w->S[61] + w->fh[2]*w->S[115] + w->fh[3]*w->S[142] +
-            w->fh[5];
-    t->Phi[0][9] = w->fh[0]*w->S[35] + w->fh[1]*w->S[62] + w->fh[2]*w->S[116] + w->fh[3]*w->S[143] +
-            w->fh[6];
-    t->Phi[0][10] = w->fh[0]*w->S[36] + w->fh[1]*w->S[63] + w->fh[2]*w->S[117] + w->fh[3]*w->S[144]
-            + w->fh[7]*w->S[190];
-    t->Phi[0][11] = w->fh[0]*w->S[37] + w->fh[1]*w->S[64] + w->fh[2]*w->S[118] + w->fh[3]*w->S[145]
-            + w->fh[8]*w->S[191];
-    t->Phi[0][12] = w->fh[0]*w->S[38] + w->fh[1]*w->S[65] + w->fh[2]*w->S[119] + w->fh[3]*w->S[146]
-            + w->fh[9]*w->S[192];
-    t->Phi[0][13] = w->fh[0]*w->S[39] + w->fh[1]*w->S[66] + w->fh[2]*w->S[120] + w->fh[3]*w->S[147];
-    t->Phi[0][14] = w->fh[0]*w->S[40] + w->fh[1]*w->S[67] + w->fh[2]*w->S[121] + w->fh[3]*w->S[148];
-    t->Phi[0][15] = w->fh[0]*w->S[41] + w->fh[1]*w->S[68] + w->fh[2]*w->S[122] + w->fh[3]*w->S[149];
-    t->Phi[0][18] = w->fh[0]*w->S[42] + w->fh[1]*w->S[69] + w->fh[2]*w->S[123] + w->fh[3]*w->S[150]
-            + w->fh[10];
-    t->Phi[0][19] = w->fh[0]*w->S[43] + w->fh[1]*w->S[70] + w->fh[2]*w->S[124] + w->fh[3]*w->S[151]
-            + w->fh[11];
-    t->Phi[0][20] = w->fh[0]*w->S[44] + w->fh[1]*w->S[71] + w->fh[2]*w->S[125] + w->fh[3]*w->S[152]
-            + w->fh[12];
-    t->Phi[0][21] = w->fh[0]*w->S[45] + w->fh[1]*w->S[72] + w->fh[2]*w->S[126] + w->fh[3]*w->S[153]
-            + w->fh[13];
-    t->Phi[0][22] = w->fh[0]*w->S[46] + w->fh[1]*w->S[73] + w->fh[2]*w->S[127] + w->fh[3]*w->S[154]
-            + w->fh[14];
-    t->Phi[0][23] = w->fh[0]*w->S[47] + w->fh[1]*w->S[74] + w->fh[2]*w->S[128] + w->fh[3]*w->S[155]
-            + w->fh[15];
-    t->Phi[0][24] = w->fh[0]*w->S[48] + w->fh[1]*w->S[75] + w->fh[2]*w->S[129] + w->fh[3]*w->S[156]
-            + w->fh[16];
-    t->Phi[0][25] = w->fh[0]*w->S[49] + w->fh[1]*w->S[76] + w->fh[2]*w->S[130] + w->fh[3]*w->S[157]
-            + w->fh[17];
-    t->Phi[0][26] = w->fh[0]*w->S[50] + w->fh[1]*w->S[77] + w->fh[2]*w->S[131] + w->fh[3]*w->S[158]
-            + w->fh[18];
-    t->Phi[0][27] = w->fh[0]*w->S[51] + w->fh[1]*w->S[78] + w->fh[2]*w->S[132] + w->fh[3]*w->S[159];
-    t->Phi[0][28] = w->fh[0]*w->S[52] + w->fh[1]*w->S[79] + w->fh[2]*w->S[133] + w->fh[3]*w->S[160];
-    t->Phi[0][29] = w->fh[0]*w->S[53] + w->fh[1]*w->S[80] + w->fh[2]*w->S[134] + w->fh[3]*w->S[161];
-    t->Phi[1][0] = w->fh[19]*w->S[0] + w->fh[20]*w->S[54] + w->fh[21]*w->S[81];
-    t->Phi[1][1] = w->fh[19]*w->S[1] + w->fh[20]*w->S[55] + w->fh[21]*w->S[82];
-    t->Phi[1][2] = w->fh[19]*w->S[2] + w->fh[20]*w->S[56] + w->fh[21]*w->S[83];
-    t->Phi[1][3] = w->fh[19]*w->S[3] + w->fh[20]*w->S[57] + w->fh[21]*w->S[84];
-    t->Phi[1][4] = w->fh[19]*w->S[4] + w->fh[20]*w->S[58] + w->fh[21]*w->S[85];
-    t->Phi[1][5] = w->fh[19]*w->S[5] + w->fh[20]*w->S[59] + w->fh[21]*w->S[86];
-    t->Phi[1][7] = w->fh[19]*w->S[6] + w->fh[20]*w->S[60] + w->fh[21]*w->S[87] + w->fh[22];
-    t->Phi[1][8] = w->fh[19]*w->S[7] + w->fh[20]*w->S[61] + w->fh[21]*w->S[88] + w->fh[23];
-    t->Phi[1][9] = w->fh[19]*w->S[8] + w->fh[20]*w->S[62] + w->fh[21]*w->S[89] + w->fh[24];
-    t->Phi[1][10] = w->fh[19]*w->S[9] + w->fh[20]*w->S[63] + w->fh[21]*w->S[90] +
-            w->fh[25]*w->S[190];
-    t->Phi[1][11] = w->fh[19]*w->S[10] + w->fh[20]*w->S[64] + w->fh[21]*w->S[91] +
-            w->fh[26]*w->S[191];
-    t->Phi[1][12] = w->fh[19]*w->S[11] + w->fh[20]*w->S[65] + w->fh[21]*w->S[92] +
-            w->fh[27]*w->S[192];
-    t->Phi[1][13] = w->fh[19]*w->S[12] + w->fh[20]*w->S[66] + w->fh[21]*w->S[93];
-    t->Phi[1][14] = w->fh[19]*w->S[13] + w->fh[20]*w->S[67] + w->fh[21]*w->S[94];
-    t->Phi[1][15] = w->fh[19]*w->S[14] + w->fh[20]*w->S[68] + w->fh[21]*w->S[95];
-    t->Phi[1][18] = w->fh[19]*w->S[15] + w->fh[20]*w->S[69] + w->fh[21]*w->S[96] + w->fh[28];
-    t->Phi[1][19] = w->fh[19]*w->S[16] + w->fh[20]*w->S[70] + w->fh[21]*w->S[97] + w->fh[29];
-    t->Phi[1][20] = w->fh[19]*w->S[17] + w->fh[20]*w->S[71] + w->fh[21]*w->S[98] + w->fh[30];
-    t->Phi[1][21] = w->fh[19]*w->S[18] + w->fh[20]*w->S[72] + w->fh[21]*w->S[99] + w->fh[31];
-    t->Phi[1][22] = w->fh[19]*w->S[19] + w->fh[20]*w->S[73] + w->fh[21]*w->S[100] + w->fh[32];
-    t->Phi[1][23] = w->fh[19]*w->S[20] + w->fh[20]*w->S[74] + w->fh[21]*w->S[101] + w->fh[33];
-    t->Phi[1][24] = w->fh[19]*w->S[21] + w->fh[20]*w->S[75] + w->fh[21]*w->S[102] + w->fh[34];
-    t->Phi[1][25] = w->fh[19]*w->S[22] + w->fh[20]*w->S[76] + w->fh[21]*w->S[103] + w->fh[35];
-    t->Phi[1][26] = w->fh[19]*w->S[23] + w->fh[20]*w->S[77] + w->fh[21]*w->S[104] + w->fh[36];
-    t->Phi[1][27] = w->fh[19]*w->S[24] + w->fh[20]*w->S[78] + w->fh[21]*w->S[105];
-    t->Phi[1][28] = w->fh[19]*w->S[25] + w->fh[20]*w->S[79] + w->fh[21]*w->S[106];
-    t->Phi[1][29] = w->fh[19]*w->S[26] + w->fh[20]*w->S[80] + w->fh[21]*w->S[107];
-    t->Phi[2][0] = w->fh[37]*w->S[0] + w->fh[38]*w->S[27] + w->fh[39]*w->S[108] +
-            w->fh[40]*w->S[135];
-    t->Phi[2][1] = w->fh[37]*w->S[1] + w->fh[38]*w->S[28] + w->fh[39]*w->S[109] +
-            w->fh[40]*w->S[136];
-    t->Phi[2][2] = w->fh[37]*w->S[2] + w->fh[38]*w->S[29] + w->fh[39]*w->S[110] +
-            w->fh[40]*w->S[137];
-    t->Phi[2][3] = w->fh[37]*w->S[3] + w->fh[38]*w->S[30] + w->fh[39]*w->S[111] +
-            w->fh[40]*w->S[138];
-    t->Phi[2][4] = w->fh[37]*w->S[4] + w->fh[38]*w->S[31] + w->fh[39]*w->S[112] +
-            w->fh[40]*w->S[139];
-    t->Phi[2][5] = w->fh[37]*w->S[5] + w->fh[38]*w->S[32] + w->fh[39]*w->S[113] +
-            w->fh[40]*w->S[140];
-    t->Phi[2][7] = w->fh[37]*w->S[6] + w->fh[38]*w->S[33] + w->fh[39]*w->S[114] +
-            w->fh[40]*w->S[141] + w->fh[41];
-    t->Phi[2][8] = w->fh[37]*w->S[7] + w->fh[38]*w->S[34] + w->fh[39]*w->S[115] +
-            w->fh[40]*w->S[142] + w->fh[42];
-    t->Phi[2][9] = w->fh[37]*w->S[8] + w->fh[38]*w->S[35] + w->fh[39]*w->S[116] +
-            w->fh[40]*w->S[143] + w->fh[43];
-    t->Phi[2][10] = w->fh[37]*w->S[9] + w->fh[38]*w->S[36] + w->fh[39]*w->S[117] +
-            w->fh[40]*w->S[144] + w->fh[44]*w->S[190];
-    t->Phi[2][11] = w->fh[37]*w->S[10] + w->fh[38]*w->S[37] + w->fh[39]*w->S[118] +
-            w->fh[40]*w->S[145] + w->fh[45]*w->S[191];
-    t->Phi[2][12] = w->fh[37]*w->S[11] + w->fh[38]*w->S[38] + w->fh[39]*w->S[119] +
-            w->fh[40]*w->S[146] + w->fh[46]*w->S[192];
-    t->Phi[2][13] = w->fh[37]*w->S[12] + w->fh[38]*w->S[39] + w->fh[39]*w->S[120] +
-            w->fh[40]*w->S[147];
-    t->Phi[2][14] = w->fh[37]*w->S[13] + w->fh[38]*w->S[40] + w->fh[39]*w->S[121] +
-            w->fh[40]*w->S[148];
-    t->Phi[2][15] = w->fh[37]*w->S[14] + w->fh[38]*w->S[41] + w->fh[39]*w->S[122] +
-            w->fh[40]*w->S[149];
-    t->Phi[2][18] = w->fh[37]*w->S[15] + w->fh[38]*w->S[42] + w->fh[39]*w->S[123] +
-            w->fh[40]*w->S[150] + w->fh[47];
-    t->Phi[2][19] = w->fh[37]*w->S[16] + w->fh[38]*w->S[43] + w->fh[39]*w->S[124] +
-            w->fh[40]*w->S[151] + w->fh[48];
-    t->Phi[2][20] = w->fh[37]*w->S[17] + w->fh[38]*w->S[44] + w->fh[39]*w->S[125] +
-            w->fh[40]*w->S[152] + w->fh[49];
-    t->Phi[2][21] = w->fh[37]*w->S[18] + w->fh[38]*w->S[45] + w->fh[39]*w->S[126] +
-            w->fh[40]*w->S[153] + w->fh[50];
-    t->Phi[2][22] = w->fh[37]*w->S[19] + w->fh[38]*w->S[46] + w->fh[39]*w->S[127] +
-            w->fh[40]*w->S[154] + w->fh[51];
-    t->Phi[2][23] = w->fh[37]*w->S[20] + w->fh[38]*w->S[47] + w->fh[39]*w->S[128] +
-            w->fh[40]*w->S[155] + w->fh[52];
-    t->Phi[2][24] = w->fh[37]*w->S[21] + w->fh[38]*w->S[48] + w->fh[39]*w->S[129] +
-            w->fh[40]*w->S[156] + w->fh[53];
-    t->Phi[2][25] = w->fh[37]*w->S[22] + w->fh[38]*w->S[49] + w->fh[39]*w->S[130] +
-            w->fh[40]*w->S[157] + w->fh[54];
-    t->Phi[2][26] = w->fh[37]*w->S[23] + w->fh[38]*w->S[50] + w->fh[39]*w->S[131] +
-            w->fh[40]*w->S[158] + w->fh[55];
-    t->Phi[2][27] = w->fh[37]*w->S[24] + w->fh[38]*w->S[51] + w->fh[39]*w->S[132] +
-            w->fh[40]*w->S[159];
-    t->Phi[2][28] = w->fh[37]*w->S[25] + w->fh[38]*w->S[52] + w->fh[39]*w->S[133] +
-            w->fh[40]*w->S[160];
-    t->Phi[2][29] = w->fh[37]*w->S[26] + w->fh[38]*w->S[53] + w->fh[39]*w->S[134] +
-            w->fh[40]*w->S[161];
-    t->Phi[3][0] = w->fh[56]*w->S[27] + w->fh[57]*w->S[54] + w->fh[58]*w->S[81] +
-            w->fh[59]*w->S[108] + w->fh[60]*w->S[135];
-    t->Phi[3][1] = w->fh[56]*w->S[28] + w->fh[57]*w->S[55] + w->fh[58]*w->S[82] +
-            w->fh[59]*w->S[109] + w->fh[60]*w->S[136];
-    t->Phi[3][2] = w->fh[56]*w->S[29] + w->fh[57]*w->S[56] + w->fh[58]*w->S[83] +
-            w->fh[59]*w->S[110] + w->fh[60]*w->S[137];
-    t->Phi[3][3] = w->fh[56]*w->S[30] + w->fh[57]*w->S[57] + w->fh[58]*w->S[84] +
-            w->fh[59]*w->S[111] + w->fh[60]*w->S[138];
-    t->Phi[3][4] = w->fh[56]*w->S[31] + w->fh[57]*w->S[58] + w->fh[58]*w->S[85] +
-            w->fh[59]*w->S[112] + w->fh[60]*w->S[139];
-    t->Phi[3][5] = w->fh[56]*w->S[32] + w->fh[57]*w->S[59] + w->fh[58]*w->S[86] +
-            w->fh[59]*w->S[113] + w->fh[60]*w->S[140];
-    t->Phi[3][7] = w->fh[56]*w->S[33] + w->fh[57]*w->S[60] + w->fh[58]*w->S[87] +
-            w->fh[59]*w->S[114] + w->fh[60]*w->S[141];
-    t->Phi[3][8] = w->fh[56]*w->S[34] + w->fh[57]*w->S[61] + w->fh[58]*w->S[88] +
-            w->fh[59]*w->S[115] + w->fh[60]*w->S[142];
-    t->Phi[3][9] = w->fh[56]*w->S[35] + w->fh[57]*w->S[62] + w->fh[58]*w->S[89] +
-            w->fh[59]*w->S[116] + w->fh[60]*w->S[143];
-    t->Phi[3][10] = w->fh[56]*w->S[36] + w->fh[57]*w->S[63] + w->fh[58]*w->S[90] +
-            w->fh[59]*w->S[117] + w->fh[60]*w->S[144];
-    t->Phi[3][11] = w->fh[56]*w->S[37] + w->fh[57]*w->S[64] + w->fh[58]*w->S[91] +
-            w->fh[59]*w->S[118] + w->fh[60]*w->S[145];
-    t->Phi[3][12] = w->fh[56]*w->S[38] + w->fh[57]*w->S[65] + w->fh[58]*w->S[92] +
-            w->fh[59]*w->S[119] + w->fh[60]*w->S[146];
-    t->Phi[3][13] = w->fh[56]*w->S[39] + w->fh[57]*w->S[66] + w->fh[58]*w->S[93] +
-            w->fh[59]*w->S[120] + w->fh[60]*w->S[147] + w->fh[61]*w->S[193];
-    t->Phi[3][14] = w->fh[56]*w->S[40] + w->fh[57]*w->S[67] + w->fh[58]*w->S[94] +
-            w->fh[59]*w->S[121] + w->fh[60]*w->S[148] + w->fh[62]*w->S[194];
-    t->Phi[3][15] = w->fh[56]*w->S[41] + w->fh[57]*w->S[68] + w->fh[58]*w->S[95] +
-            w->fh[59]*w->S[122] + w->fh[60]*w->S[149] + w->fh[63]*w->S[195];
-    t->Phi[3][18] = w->fh[56]*w->S[42] + w->fh[57]*w->S[69] + w->fh[58]*w->S[96] +
-            w->fh[59]*w->S[123] + w->fh[60]*w->S[150];
-    t->Phi[3][19] = w->fh[56]*w->S[43] + w->fh[57]*w->S[70] + w->fh[58]*w->S[97] +
-            w->fh[59]*w->S[124] + w->fh[60]*w->S[151];
-    t->Phi[3][20] = w->fh[56]*w->S[44] + w->fh[57]*w->S[71] + w->fh[58]*w->S[98] +
-            w->fh[59]*w->S[125] + w->fh[60]*w->S[152];
-    t->Phi[3][21] = w->fh[56]*w->S[45] + w->fh[57]*w->S[72] + w->fh[58]*w->S[99] +
-            w->fh[59]*w->S[126] + w->fh[60]*w->S[153];
-    t->Phi[3][22] = w->fh[56]*w->S[46] + w->fh[57]*w->S[73] + w->fh[58]*w->S[100] +
-            w->fh[59]*w->S[127] + w->fh[60]*w->S[154];
-    t->Phi[3][23] = w->fh[56]*w->S[47] + w->fh[57]*w->S[74] + w->fh[58]*w->S[101] +
-            w->fh[59]*w->S[128] + w->fh[60]*w->S[155];
-    t->Phi[3][24] = w->fh[56]*w->S[48] + w->fh[57]*w->S[75] + w->fh[58]*w->S[102] +
-            w->fh[59]*w->S[129] + w->fh[60]*w->S[156];
-    t->Phi[3][25] = w->fh[56]*w->S[49] + w->fh[57]*w->S[76] + w->fh[58]*w->S[103] +
-            w->fh[59]*w->S[130] + w->fh[60]*w->S[157];
-    t->Phi[3][26] = w->fh[56]*w->S[50] + w->fh[57]*w->S[77] + w->fh[58]*w->S[104] +
-            w->fh[59]*w->S[131] + w->fh[60]*w->S[158];
-    t->Phi[3][27] = w->fh[56]*w->S[51] + w->fh[57]*w->S[78] + w->fh[58]*w->S[105] +
-            w->fh[59]*w->S[132] + w->fh[60]*w->S[159] + w->fh[64];
-    t->Phi[3][28] = w->fh[56]*w->S[52] + w->fh[57]*w->S[79] + w->fh[58]*w->S[106] +
-            w->fh[59]*w->S[133] + w->fh[60]*w->S[160] + w->fh[65];
-    t->Phi[3][29] = w->fh[56]*w->S[53] + w->fh[57]*w->S[80] + w->fh[58]*w->S[107] +
-            w->fh[59]*w->S[134] + w->fh[60]*w->S[161] + w->fh[66];
-    t->Phi[4][0] = w->fh[67]*w->S[0] + w->fh[68]*w->S[54] + w->fh[69]*w->S[81] + w->fh[70]*w->S[108]
-            + w->fh[71]*w->S[135];
-    t->Phi[4][1] = w->fh[67]*w->S[1] + w->fh[68]*w->S[55] + w->fh[69]*w->S[82] + w->fh[70]*w->S[109]
-            + w->fh[71]*w->S[136];
-    t->Phi[4][2] = w->fh[67]*w->S[2] + w->fh[68]*w->S[56] + w->fh[69]*w->S[83] + w->fh[70]*w->S[110]
-            + w->fh[71]*w->S[137];
-    t->Phi[4][3] = w->fh[67]*w->S[3] + w->fh[68]*w->S[57] + w->fh[69]*w->S[84] + w->fh[70]*w->S[111]
-            + w->fh[71]*w->S[138];
-    t->Phi[4][4] = w->fh[67]*w->S[4] + w->fh[68]*w->S[58] + w->fh[69]*w->S[85] + w->fh[70]*w->S[112]
-            + w->fh[71]*w->S[139];
-    t->Phi[4][5] = w->fh[67]*w->S[5] + w->fh[68]*w->S[59] + w->fh[69]*w->S[86] + w->fh[70]*w->S[113]
-            + w->fh[71]*w->S[140];
-    t->Phi[4][7] = w->fh[67]*w->S[6] + w->fh[68]*w->S[60] + w->fh[69]*w->S[87] + w->fh[70]*w->S[114]
-            + w->fh[71]*w->S[141];
-    t->Phi[4][8] = w->fh[67]*w->S[7] + w->fh[68]*w->S[61] + w->fh[69]*w->S[88] + w->fh[70]*w->S[115]
-            + w->fh[71]*w->S[142];
-    t->Phi[4][9] = w->fh[67]*w->S[8] + w->fh[68]*w->S[62] + w->fh[69]*w->S[89] + w->fh[70]*w->S[116]
-            + w->fh[71]*w->S[143];
-    t->Phi[4][10] = w->fh[67]*w->S[9] + w->fh[68]*w->S[63] + w->fh[69]*w->S[90] +
-            w->fh[70]*w->S[117] + w->fh[71]*w->S[144];
-    t->Phi[4][11] = w->fh[67]*w->S[10] + w->fh[68]*w->S[64] + w->fh[69]*w->S[91] +
-            w->fh[70]*w->S[118] + w->fh[71]*w->S[145];
-    t->Phi[4][12] = w->fh[67]*w->S[11] + w->fh[68]*w->S[65] + w->fh[69]*w->S[92] +
-            w->fh[70]*w->S[119] + w->fh[71]*w->S[146];
-    t->Phi[4][13] = w->fh[67]*w->S[12] + w->fh[68]*w->S[66] + w->fh[69]*w->S[93] +
-            w->fh[70]*w->S[120] + w->fh[71]*w->S[147] + w->fh[72]*w->S[193];
-    t->Phi[4][14] = w->fh[67]*w->S[13] + w->fh[68]*w->S[67] + w->fh[69]*w->S[94] +
-            w->fh[70]*w->S[121] + w->fh[71]*w->S[148] + w->fh[73]*w->S[194];
-    t->Phi[4][15] = w->fh[67]*w->S[14] + w->fh[68]*w->S[68] + w->fh[69]*w->S[95] +
-            w->fh[70]*w->S[122] + w->fh[71]*w->S[149] + w->fh[74]*w->S[195];
-    t->Phi[4][18] = w->fh[67]*w->S[15] + w->fh[68]*w->S[69] + w->fh[69]*w->S[96] +
-            w->fh[70]*w->S[123] + w->fh[71]*w->S[150];
-    t->Phi[4][19] = w->fh[67]*w->S[16] + w->fh[68]*w->S[70] + w->fh[69]*w->S[97] +
-            w->fh[70]*w->S[124] + w->fh[71]*w->S[151];
-    t->Phi[4][20] = w->fh[67]*w->S[17] + w->fh[68]*w->S[71] + w->fh[69]*w->S[98] +
-            w->fh[70]*w->S[125] + w->fh[71]*w->S[152];
-    t->Phi[4][21] = w->fh[67]*w->S[18] + w->fh[68]*w->S[72] + w->fh[69]*w->S[99] +
-            w->fh[70]*w->S[126] + w->fh[71]*w->S[153];
-    t->Phi[4][22] = w->fh[67]*w->S[19] + w->fh[68]*w->S[73] + w->fh[69]*w->S[100] +
-            w->fh[70]*w->S[127] + w->fh[71]*w->S[154];
-    t->Phi[4][23] = w->fh[67]*w->S[20] + w->fh[68]*w->S[74] + w->fh[69]*w->S[101] +
-            w->fh[70]*w->S[128] + w->fh[71]*w->S[155];
-    t->Phi[4][24] = w->fh[67]*w->S[21] + w->fh[68]*w->S[75] + w->fh[69]*w->S[102] +
-            w->fh[70]*w->S[129] + w->fh[71]*w->S[156];
-    t->Phi[4][25] = w->fh[67]*w->S[22] + w->fh[68]*w->S[76] + w->fh[69]*w->S[103] +
-            w->fh[70]*w->S[130] + w->fh[71]*w->S[157];
-    t->Phi[4][26] = w->fh[67]*w->S[23] + w->fh[68]*w->S[77] + w->fh[69]*w->S[104] +
-            w->fh[70]*w->S[131] + w->fh[71]*w->S[158];
-    t->Phi[4][27] = w->fh[67]*w->S[24] + w->fh[68]*w->S[78] + w->fh[69]*w->S[105] +
-            w->fh[70]*w->S[132] + w->fh[71]*w->S[159] + w->fh[75];
-    t->Phi[4][28] = w->fh[67]*w->S[25] + w->fh[68]*w->S[79] + w->fh[69]*w->S[106] +
-            w->fh[70]*w->S[133] + w->fh[71]*w->S[160] + w->fh[76];
-    t->Phi[4][29] = w->fh[67]*w->S[26] + w->fh[68]*w->S[80] + w->fh[69]*w->S[107] +
-            w->fh[70]*w->S[134] + w->fh[71]*w->S[161] + w->fh[77];
-    t->Phi[5][0] = w->fh[78]*w->S[81];
-    t->Phi[5][1] = w->fh[78]*w->S[82];
-    t->Phi[5][2] = w->fh[78]*w->S[83];
-    t->Phi[5][3] = w->fh[78]*w->S[84];
-    t->Phi[5][4] = w->fh[78]*w->S[85];
-    t->Phi[5][5] = w->fh[78]*w->S[86];
-    t->Phi[5][7] = w->fh[78]*w->S[87];
-    t->Phi[5][8] = w->fh[78]*w->S[88];
-    t->Phi[5][9] = w->fh[78]*w->S[89];
-    t->Phi[5][10] = w->fh[78]*w->S[90];
-    t->Phi[5][11] = w->fh[78]*w->S[91];
-    t->Phi[5][12] = w->fh[78]*w->S[92];
-    t->Phi[5][13] = w->fh[78]*w->S[93];
-    t->Phi[5][14] = w->fh[78]*w->S[94];
-    t->Phi[5][15] = w->fh[78]*w->S[95];
-    t->Phi[5][18] = w->fh[78]*w->S[96];
-    t->Phi[5][19] = w->fh[78]*w->S[97];
-    t->Phi[5][20] = w->fh[78]*w->S[98];
-    t->Phi[5][21] = w->fh[78]*w->S[99];
-    t->Phi[5][22] = w->fh[78]*w->S[100];
-    t->Phi[5][23] = w->fh[78]*w->S[101];
-    t->Phi[5][24] = w->fh[78]*w->S[102];
-    t->Phi[5][25] = w->fh[78]*w->S[103];
-    t->Phi[5][26] = w->fh[78]*w->S[104];
-    t->Phi[5][27] = w->fh[78]*w->S[105];
-    t->Phi[5][28] = w->fh[78]*w->S[106];
-    t->Phi[5][29] = w->fh[78]*w->S[107];
-    t->Phi[6][0] = w->fh[79]*w->S[108] + w->fh[80]*w->S[135];
-    t->Phi[6][1] = w->fh[79]*w->S[109] + w->fh[80]*w->S[136];
-    t->Phi[6][2] = w->fh[79]*w->S[110] + w->fh[80]*w->S[137];
-    t->Phi[6][3] = w->fh[79]*w->S[111] + w->fh[80]*w->S[138];
-    t->Phi[6][4] = w->fh[79]*w->S[112] + w->fh[80]*w->S[139];
-    t->Phi[6][5] = w->fh[79]*w->S[113] + w->fh[80]*w->S[140];
-    t->Phi[6][6] = 0;
-    t->Phi[6][7] = w->fh[79]*w->S[114] + w->fh[80]*w->S[141];
-    t->Phi[6][8] = w->fh[79]*w->S[115] + w->fh[80]*w->S[142];
-    t->Phi[6][9] = w->fh[79]*w->S[116] + w->fh[80]*w->S[143];
-    t->Phi[6][10] = w->fh[79]*w->S[117] + w->fh[80]*w->S[144];
-    t->Phi[6][11] = w->fh[79]*w->S[118] + w->fh[80]*w->S[145];
-    t->Phi[6][12] = w->fh[79]*w->S[119] + w->fh[80]*w->S[146];
-    t->Phi[6][13] = w->fh[79]*w->S[120] + w->fh[80]*w->S[147];
-    t->Phi[6][14] = w->fh[79]*w->S[121] + w->fh[80]*w->S[148];
-    t->Phi[6][15] = w->fh[79]*w->S[122] + w->fh[80]*w->S[149];
-    t->Phi[6][18] = w->fh[79]*w->S[123] + w->fh[80]*w->S[150];
-    t->Phi[6][19] = w->fh[79]*w->S[124] + w->fh[80]*w->S[151];
-    t->Phi[6][20] = w->fh[79]*w->S[125] + w->fh[80]*w->S[152];
-    t->Phi[6][21] = w->fh[79]*w->S[126] + w->fh[80]*w->S[153];
-    t->Phi[6][22] = w->fh[79]*w->S[127] + w->fh[80]*w->S[154];
-    t->Phi[6][23] = w->fh[79]*w->S[128] + w->fh[80]*w->S[155];
-    t->Phi[6][24] = w->fh[79]*w->S[129] + w->fh[80]*w->S[156];
-    t->Phi[6][25] = w->fh[79]*w->S[130] + w->fh[80]*w->S[157];
-    t->Phi[6][26] = w->fh[79]*w->S[131] + w->fh[80]*w->S[158];
-    t->Phi[6][27] = w->fh[79]*w->S[132] + w->fh[80]*w->S[159];
-    t->Phi[6][28] = w->fh[79]*w->S[133] + w->fh[80]*w->S[160];
-    t->Phi[6][29] = w->fh[79]*w->S[134] + w->fh[80]*w->S[161];
-    t->Phi[10][10] = w->fh[81]*w->S[190];
-    t->Phi[11][11] = w->fh[82]*w->S[191];
-    t->Phi[12][12] = w->fh[83]*w->S[192];
-    t->Phi[13][13] = w->fh[84]*w->S[193];
-    t->Phi[14][14] = w->fh[85]*w->S[194];
-    t->Phi[15][15] = w->fh[86]*w->S[195];
+    int k;
+    for (k = 0; k < 30; ++k) {
+        t->Phi[0][k] = w->fh[0]*w->S[30+k] + w->fh[1]*w->S[60+k] + w->fh[2]*w->S[120+k] +
+                w->fh[3]*w->S[150+k];
+        t->Phi[1][k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[60+k] + w->fh[21]*w->S[90+k];
+        t->Phi[2][k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[30+k] + w->fh[39]*w->S[120+k] +
+                w->fh[40]*w->S[150+k];
+        t->Phi[3][k] = w->fh[56]*w->S[30+k] + w->fh[57]*w->S[60+k] + w->fh[58]*w->S[90+k] +
+                w->fh[59]*w->S[120+k] + w->fh[60]*w->S[150+k];
+        t->Phi[4][k] = w->fh[67]*w->S[k] + w->fh[68]*w->S[60+k] + w->fh[69]*w->S[90+k] +
+                w->fh[70]*w->S[120+k] + w->fh[71]*w->S[150+k];
+        t->Phi[5][k] = w->fh[78]*w->S[90+k];
+        t->Phi[6][k] = w->fh[79]*w->S[120+k] + w->fh[80]*w->S[150+k];
+    }
+    t->Phi[0][7] = t->Phi[0][7] + w->fh[4];
+    t->Phi[0][8] = t->Phi[0][8] + w->fh[5];
+    t->Phi[0][9] = t->Phi[0][9] + w->fh[6];
+    t->Phi[0][10] = t->Phi[0][10] + w->fh[7]*w->S[210];
+    t->Phi[0][11] = t->Phi[0][11] + w->fh[8]*w->S[211];
+    t->Phi[0][12] = t->Phi[0][12] + w->fh[9]*w->S[212];
+    t->Phi[0][18] = t->Phi[0][18] + w->fh[10];
+    t->Phi[0][19] = t->Phi[0][19] + w->fh[11];
+    t->Phi[0][20] = t->Phi[0][20] + w->fh[12];
+    t->Phi[0][21] = t->Phi[0][21] + w->fh[13];
+    t->Phi[0][22] = t->Phi[0][22] + w->fh[14];
+    t->Phi[0][23] = t->Phi[0][23] + w->fh[15];
+    t->Phi[0][24] = t->Phi[0][24] + w->fh[16];
+    t->Phi[0][25] = t->Phi[0][25] + w->fh[17];
+    t->Phi[0][26] = t->Phi[0][26] + w->fh[18];
+    t->Phi[1][7] = t->Phi[1][7] + w->fh[22];
+    t->Phi[1][8] = t->Phi[1][8] + w->fh[23];
+    t->Phi[1][9] = t->Phi[1][9] + w->fh[24];
+    t->Phi[1][10] = t->Phi[1][10] + w->fh[25]*w->S[210];
+    t->Phi[1][11] = t->Phi[1][11] + w->fh[26]*w->S[211];
+    t->Phi[1][12] = t->Phi[1][12] + w->fh[27]*w->S[212];
+    t->Phi[1][18] = t->Phi[1][18] + w->fh[28];
+    t->Phi[1][19] = t->Phi[1][19] + w->fh[29];
+    t->Phi[1][20] = t->Phi[1][20] + w->fh[30];
+    t->Phi[1][21] = t->Phi[1][21] + w->fh[31];
+    t->Phi[1][22] = t->Phi[1][22] + w->fh[32];
+    t->Phi[1][23] = t->Phi[1][23] + w->fh[33];
+    t->Phi[1][24] = t->Phi[1][24] + w->fh[34];
+    t->Phi[1][25] = t->Phi[1][25] + w->fh[35];
+    t->Phi[1][26] = t->Phi[1][26] + w->fh[36];
+    t->Phi[2][7] = t->Phi[2][7] + w->fh[41];
+    t->Phi[2][8] = t->Phi[2][8] + w->fh[42];
+    t->Phi[2][9] = t->Phi[2][9] + w->fh[43];
+    t->Phi[2][10] = t->Phi[2][10] + w->fh[44]*w->S[210];
+    t->Phi[2][11] = t->Phi[2][11] + w->fh[45]*w->S[211];
+    t->Phi[2][12] = t->Phi[2][12] + w->fh[46]*w->S[212];
+    t->Phi[2][18] = t->Phi[2][18] + w->fh[47];
+    t->Phi[2][19] = t->Phi[2][19] + w->fh[48];
+    t->Phi[2][20] = t->Phi[2][20] + w->fh[49];
+    t->Phi[2][21] = t->Phi[2][21] + w->fh[50];
+    t->Phi[2][22] = t->Phi[2][22] + w->fh[51];
+    t->Phi[2][23] = t->Phi[2][23] + w->fh[52];
+    t->Phi[2][24] = t->Phi[2][24] + w->fh[53];
+    t->Phi[2][25] = t->Phi[2][25] + w->fh[54];
+    t->Phi[2][26] = t->Phi[2][26] + w->fh[55];
+    t->Phi[3][13] = t->Phi[3][13] + w->fh[61]*w->S[213];
+    t->Phi[3][14] = t->Phi[3][14] + w->fh[62]*w->S[214];
+    t->Phi[3][15] = t->Phi[3][15] + w->fh[63]*w->S[215];
+    t->Phi[3][27] = t->Phi[3][27] + w->fh[64];
+    t->Phi[3][28] = t->Phi[3][28] + w->fh[65];
+    t->Phi[3][29] = t->Phi[3][29] + w->fh[66];
+    t->Phi[4][13] = t->Phi[4][13] + w->fh[72]*w->S[213];
+    t->Phi[4][14] = t->Phi[4][14] + w->fh[73]*w->S[214];
+    t->Phi[4][15] = t->Phi[4][15] + w->fh[74]*w->S[215];
+    t->Phi[4][27] = t->Phi[4][27] + w->fh[75];
+    t->Phi[4][28] = t->Phi[4][28] + w->fh[76];
+    t->Phi[4][29] = t->Phi[4][29] + w->fh[77];
+    t->Phi[10][10] = w->fh[81]*w->S[210];
+    t->Phi[11][11] = w->fh[82]*w->S[211];
+    t->Phi[12][12] = w->fh[83]*w->S[212];
+    t->Phi[13][13] = w->fh[84]*w->S[213];
+    t->Phi[14][14] = w->fh[85]*w->S[214];
+    t->Phi[15][15] = w->fh[86]*w->S[215];
+    t->Phi[0][30] = 0;
+    t->Phi[0][31] = 0;
+    t->Phi[1][30] = 0;
+    t->Phi[1][31] = 0;
+    t->Phi[2][30] = 0;
+    t->Phi[2][31] = 0;
+    t->Phi[3][30] = 0;
+    t->Phi[3][31] = 0;
+    t->Phi[4][30] = 0;
+    t->Phi[4][31] = 0;
+    t->Phi[5][30] = 0;
+    t->Phi[5][31] = 0;
+    t->Phi[6][30] = 0;
+    t->Phi[6][31] = 0;
+    t->Phi[7][0] = 0;
+    t->Phi[7][1] = 0;
+    t->Phi[7][2] = 0;
+    t->Phi[7][3] = 0;
+    t->Phi[7][4] = 0;
+    t->Phi[7][5] = 0;
+    t->Phi[7][6] = 0;
+    t->Phi[7][7] = 0;
+    t->Phi[7][8] = 0;
+    t->Phi[7][9] = 0;
+    t->Phi[7][10] = 0;
+    t->Phi[7][11] = 0;
+    t->Phi[7][12] = 0;
+    t->Phi[7][13] = 0;
+    t->Phi[7][14] = 0;
+    t->Phi[7][15] = 0;
+    t->Phi[7][16] = 0;
+    t->Phi[7][17] = 0;
+    t->Phi[7][18] = 0;
+    t->Phi[7][19] = 0;
+    t->Phi[7][20] = 0;
+    t->Phi[7][21] = 0;
+    t->Phi[7][22] = 0;
+    t->Phi[7][23] = 0;
+    t->Phi[7][24] = 0;
+    t->Phi[7][25] = 0;
+    t->Phi[7][26] = 0;
+    t->Phi[7][27] = 0;
+    t->Phi[7][28] = 0;
+    t->Phi[7][29] = 0;
+    t->Phi[7][30] = 0;
+    t->Phi[7][31] = 0;
+    t->Phi[8][0] = 0;
+    t->Phi[8][1] = 0;
+    t->Phi[8][2] = 0;
+    t->Phi[8][3] = 0;
+    t->Phi[8][4] = 0;
+    t->Phi[8][5] = 0;
+    t->Phi[8][6] = 0;
+    t->Phi[8][7] = 0;
+    t->Phi[8][8] = 0;
+    t->Phi[8][9] = 0;
+    t->Phi[8][10] = 0;
+    t->Phi[8][11] = 0;
+    t->Phi[8][12] = 0;
+    t->Phi[8][13] = 0;
+    t->Phi[8][14] = 0;
+    t->Phi[8][15] = 0;
+    t->Phi[8][16] = 0;
+    t->Phi[8][17] = 0;
+    t->Phi[8][18] = 0;
+    t->Phi[8][19] = 0;
+    t->Phi[8][20] = 0;
+    t->Phi[8][21] = 0;
+    t->Phi[8][22] = 0;
+    t->Phi[8][23] = 0;
+    t->Phi[8][24] = 0;
+    t->Phi[8][25] = 0;
+    t->Phi[8][26] = 0;
+    t->Phi[8][27] = 0;
+    t->Phi[8][28] = 0;
+    t->Phi[8][29] = 0;
+    t->Phi[8][30] = 0;
+    t->Phi[8][31] = 0;
+    t->Phi[9][0] = 0;
+    t->Phi[9][1] = 0;
+    t->Phi[9][2] = 0;
+    t->Phi[9][3] = 0;
+    t->Phi[9][4] = 0;
+    t->Phi[9][5] = 0;
+    t->Phi[9][6] = 0;
+    t->Phi[9][7] = 0;
+    t->Phi[9][8] = 0;
+    t->Phi[9][9] = 0;
+    t->Phi[9][10] = 0;
+    t->Phi[9][11] = 0;
+    t->Phi[9][12] = 0;
+    t->Phi[9][13] = 0;
+    t->Phi[9][14] = 0;
+    t->Phi[9][15] = 0;
+    t->Phi[9][16] = 0;
+    t->Phi[9][17] = 0;
+    t->Phi[9][18] = 0;
+    t->Phi[9][19] = 0;
+    t->Phi[9][20] = 0;
+    t->Phi[9][21] = 0;
+    t->Phi[9][22] = 0;
+    t->Phi[9][23] = 0;
+    t->Phi[9][24] = 0;
+    t->Phi[9][25] = 0;
+    t->Phi[9][26] = 0;
+    t->Phi[9][27] = 0;
+    t->Phi[9][28] = 0;
+    t->Phi[9][29] = 0;
+    t->Phi[9][30] = 0;
+    t->Phi[9][31] = 0;
+    t->Phi[10][0] = 0;
+    t->Phi[10][1] = 0;
+    t->Phi[10][2] = 0;
+    t->Phi[10][3] = 0;
+    t->Phi[10][4] = 0;
+    t->Phi[10][5] = 0;
+    t->Phi[10][6] = 0;
+    t->Phi[10][7] = 0;
+    t->Phi[10][8] = 0;
+    t->Phi[10][9] = 0;
+    t->Phi[10][11] = 0;
+    t->Phi[10][12] = 0;
+    t->Phi[10][13] = 0;
+    t->Phi[10][14] = 0;
+    t->Phi[10][15] = 0;
+    t->Phi[10][16] = 0;
+    t->Phi[10][17] = 0;
+    t->Phi[10][18] = 0;
+    t->Phi[10][19] = 0;
+    t->Phi[10][20] = 0;
+    t->Phi[10][21] = 0;
+    t->Phi[10][22] = 0;
+    t->Phi[10][23] = 0;
+    t->Phi[10][24] = 0;
+    t->Phi[10][25] = 0;
+    t->Phi[10][26] = 0;
+    t->Phi[10][27] = 0;
+    t->Phi[10][28] = 0;
+    t->Phi[10][29] = 0;
+    t->Phi[10][30] = 0;
+    t->Phi[10][31] = 0;
+    t->Phi[11][0] = 0;
+    t->Phi[11][1] = 0;
+    t->Phi[11][2] = 0;
+    t->Phi[11][3] = 0;
+    t->Phi[11][4] = 0;
+    t->Phi[11][5] = 0;
+    t->Phi[11][6] = 0;
+    t->Phi[11][7] = 0;
+    t->Phi[11][8] = 0;
+    t->Phi[11][9] = 0;
+    t->Phi[11][10] = 0;
+    t->Phi[11][12] = 0;
+    t->Phi[11][13] = 0;
+    t->Phi[11][14] = 0;
+    t->Phi[11][15] = 0;
+    t->Phi[11][16] = 0;
+    t->Phi[11][17] = 0;
+    t->Phi[11][18] = 0;
+    t->Phi[11][19] = 0;
+    t->Phi[11][20] = 0;
+    t->Phi[11][21] = 0;
+    t->Phi[11][22] = 0;
+    t->Phi[11][23] = 0;
+    t->Phi[11][24] = 0;
+    t->Phi[11][25] = 0;
+    t->Phi[11][26] = 0;
+    t->Phi[11][27] = 0;
+    t->Phi[11][28] = 0;
+    t->Phi[11][29] = 0;
+    t->Phi[11][30] = 0;
+    t->Phi[11][31] = 0;
+    t->Phi[12][0] = 0;
+    t->Phi[12][1] = 0;
+    t->Phi[12][2] = 0;
+    t->Phi[12][3] = 0;
+    t->Phi[12][4] = 0;
+    t->Phi[12][5] = 0;
+    t->Phi[12][6] = 0;
+    t->Phi[12][7] = 0;
+    t->Phi[12][8] = 0;
+    t->Phi[12][9] = 0;
+    t->Phi[12][10] = 0;
+    t->Phi[12][11] = 0;
+    t->Phi[12][13] = 0;
+    t->Phi[12][14] = 0;
+    t->Phi[12][15] = 0;
+    t->Phi[12][16] = 0;
+    t->Phi[12][17] = 0;
+    t->Phi[12][18] = 0;
+    t->Phi[12][19] = 0;
+    t->Phi[12][20] = 0;
+    t->Phi[12][21] = 0;
+    t->Phi[12][22] = 0;
+    t->Phi[12][23] = 0;
+    t->Phi[12][24] = 0;
+    t->Phi[12][25] = 0;
+    t->Phi[12][26] = 0;
+    t->Phi[12][27] = 0;
+    t->Phi[12][28] = 0;
+    t->Phi[12][29] = 0;
+    t->Phi[12][30] = 0;
+    t->Phi[12][31] = 0;
+    t->Phi[13][0] = 0;
+    t->Phi[13][1] = 0;
+    t->Phi[13][2] = 0;
+    t->Phi[13][3] = 0;
+    t->Phi[13][4] = 0;
+    t->Phi[13][5] = 0;
+    t->Phi[13][6] = 0;
+    t->Phi[13][7] = 0;
+    t->Phi[13][8] = 0;
+    t->Phi[13][9] = 0;
+    t->Phi[13][10] = 0;
+    t->Phi[13][11] = 0;
+    t->Phi[13][12] = 0;
+    t->Phi[13][14] = 0;
+    t->Phi[13][15] = 0;
+    t->Phi[13][16] = 0;
+    t->Phi[13][17] = 0;
+    t->Phi[13][18] = 0;
+    t->Phi[13][19] = 0;
+    t->Phi[13][20] = 0;
+    t->Phi[13][21] = 0;
+    t->Phi[13][22] = 0;
+    t->Phi[13][23] = 0;
+    t->Phi[13][24] = 0;
+    t->Phi[13][25] = 0;
+    t->Phi[13][26] = 0;
+    t->Phi[13][27] = 0;
+    t->Phi[13][28] = 0;
+    t->Phi[13][29] = 0;
+    t->Phi[13][30] = 0;
+    t->Phi[13][31] = 0;
+    t->Phi[14][0] = 0;
+    t->Phi[14][1] = 0;
+    t->Phi[14][2] = 0;
+    t->Phi[14][3] = 0;
+    t->Phi[14][4] = 0;
+    t->Phi[14][5] = 0;
+    t->Phi[14][6] = 0;
+    t->Phi[14][7] = 0;
+    t->Phi[14][8] = 0;
+    t->Phi[14][9] = 0;
+    t->Phi[14][10] = 0;
+    t->Phi[14][11] = 0;
+    t->Phi[14][12] = 0;
+    t->Phi[14][13] = 0;
+    t->Phi[14][15] = 0;
+    t->Phi[14][16] = 0;
+    t->Phi[14][17] = 0;
+    t->Phi[14][18] = 0;
+    t->Phi[14][19] = 0;
+    t->Phi[14][20] = 0;
+    t->Phi[14][21] = 0;
+    t->Phi[14][22] = 0;
+    t->Phi[14][23] = 0;
+    t->Phi[14][24] = 0;
+    t->Phi[14][25] = 0;
+    t->Phi[14][26] = 0;
+    t->Phi[14][27] = 0;
+    t->Phi[14][28] = 0;
+    t->Phi[14][29] = 0;
+    t->Phi[14][30] = 0;
+    t->Phi[14][31] = 0;
+    t->Phi[15][0] = 0;
+    t->Phi[15][1] = 0;
+    t->Phi[15][2] = 0;
+    t->Phi[15][3] = 0;
+    t->Phi[15][4] = 0;
+    t->Phi[15][5] = 0;
+    t->Phi[15][6] = 0;
+    t->Phi[15][7] = 0;
+    t->Phi[15][8] = 0;
+    t->Phi[15][9] = 0;
+    t->Phi[15][10] = 0;
+    t->Phi[15][11] = 0;
+    t->Phi[15][12] = 0;
+    t->Phi[15][13] = 0;
+    t->Phi[15][14] = 0;
+    t->Phi[15][16] = 0;
+    t->Phi[15][17] = 0;
+    t->Phi[15][18] = 0;
+    t->Phi[15][19] = 0;
+    t->Phi[15][20] = 0;
+    t->Phi[15][21] = 0;
+    t->Phi[15][22] = 0;
+    t->Phi[15][23] = 0;
+    t->Phi[15][24] = 0;
+    t->Phi[15][25] = 0;
+    t->Phi[15][26] = 0;
+    t->Phi[15][27] = 0;
+    t->Phi[15][28] = 0;
+    t->Phi[15][29] = 0;
+    t->Phi[15][30] = 0;
+    t->Phi[15][31] = 0;
+    t->Phi[16][0] = 0;
+    t->Phi[16][1] = 0;
+    t->Phi[16][2] = 0;
+    t->Phi[16][3] = 0;
+    t->Phi[16][4] = 0;
+    t->Phi[16][5] = 0;
+    t->Phi[16][6] = 0;
+    t->Phi[16][7] = 0;
+    t->Phi[16][8] = 0;
+    t->Phi[16][9] = 0;
+    t->Phi[16][10] = 0;
+    t->Phi[16][11] = 0;
+    t->Phi[16][12] = 0;
+    t->Phi[16][13] = 0;
+    t->Phi[16][14] = 0;
+    t->Phi[16][15] = 0;
+    t->Phi[16][16] = 0;
+    t->Phi[16][17] = 0;
+    t->Phi[16][18] = 0;
+    t->Phi[16][19] = 0;
+    t->Phi[16][20] = 0;
+    t->Phi[16][21] = 0;
+    t->Phi[16][22] = 0;
+    t->Phi[16][23] = 0;
+    t->Phi[16][24] = 0;
+    t->Phi[16][25] = 0;
+    t->Phi[16][26] = 0;
+    t->Phi[16][27] = 0;
+    t->Phi[16][28] = 0;
+    t->Phi[16][29] = 0;
+    t->Phi[16][30] = 0;
+    t->Phi[16][31] = 0;
+    t->Phi[17][0] = 0;
+    t->Phi[17][1] = 0;
+    t->Phi[17][2] = 0;
+    t->Phi[17][3] = 0;
+    t->Phi[17][4] = 0;
+    t->Phi[17][5] = 0;
+    t->Phi[17][6] = 0;
+    t->Phi[17][7] = 0;
+    t->Phi[17][8] = 0;
+    t->Phi[17][9] = 0;
+    t->Phi[17][10] = 0;
+    t->Phi[17][11] = 0;
+    t->Phi[17][12] = 0;
+    t->Phi[17][13] = 0;
+    t->Phi[17][14] = 0;
+    t->Phi[17][15] = 0;
+    t->Phi[17][16] = 0;
+    t->Phi[17][17] = 0;
+    t->Phi[17][18] = 0;
+    t->Phi[17][19] = 0;
+    t->Phi[17][20] = 0;
+    t->Phi[17][21] = 0;
+    t->Phi[17][22] = 0;
+    t->Phi[17][23] = 0;
+    t->Phi[17][24] = 0;
+    t->Phi[17][25] = 0;
+    t->Phi[17][26] = 0;
+    t->Phi[17][27] = 0;
+    t->Phi[17][28] = 0;
+    t->Phi[17][29] = 0;
+    t->Phi[17][30] = 0;
+    t->Phi[17][31] = 0;
+    t->Phi[18][0] = 0;
+    t->Phi[18][1] = 0;
+    t->Phi[18][2] = 0;
+    t->Phi[18][3] = 0;
+    t->Phi[18][4] = 0;
+    t->Phi[18][5] = 0;
+    t->Phi[18][6] = 0;
+    t->Phi[18][7] = 0;
+    t->Phi[18][8] = 0;
+    t->Phi[18][9] = 0;
+    t->Phi[18][10] = 0;
+    t->Phi[18][11] = 0;
+    t->Phi[18][12] = 0;
+    t->Phi[18][13] = 0;
+    t->Phi[18][14] = 0;
+    t->Phi[18][15] = 0;
+    t->Phi[18][16] = 0;
+    t->Phi[18][17] = 0;
+    t->Phi[18][18] = 0;
+    t->Phi[18][19] = 0;
+    t->Phi[18][20] = 0;
+    t->Phi[18][21] = 0;
+    t->Phi[18][22] = 0;
+    t->Phi[18][23] = 0;
+    t->Phi[18][24] = 0;
+    t->Phi[18][25] = 0;
+    t->Phi[18][26] = 0;
+    t->Phi[18][27] = 0;
+    t->Phi[18][28] = 0;
+    t->Phi[18][29] = 0;
+    t->Phi[18][30] = 0;
+    t->Phi[18][31] = 0;
+    t->Phi[19][0] = 0;
+    t->Phi[19][1] = 0;
+    t->Phi[19][2] = 0;
+    t->Phi[19][3] = 0;
+    t->Phi[19][4] = 0;
+    t->Phi[19][5] = 0;
+    t->Phi[19][6] = 0;
+    t->Phi[19][7] = 0;
+    t->Phi[19][8] = 0;
+    t->Phi[19][9] = 0;
+    t->Phi[19][10] = 0;
+    t->Phi[19][11] = 0;
+    t->Phi[19][12] = 0;
+    t->Phi[19][13] = 0;
+    t->Phi[19][14] = 0;
+    t->Phi[19][15] = 0;
+    t->Phi[19][16] = 0;
+    t->Phi[19][17] = 0;
+    t->Phi[19][18] = 0;
+    t->Phi[19][19] = 0;
+    t->Phi[19][20] = 0;
+    t->Phi[19][21] = 0;
+    t->Phi[19][22] = 0;
+    t->Phi[19][23] = 0;
+    t->Phi[19][24] = 0;
+    t->Phi[19][25] = 0;
+    t->Phi[19][26] = 0;
+    t->Phi[19][27] = 0;
+    t->Phi[19][28] = 0;
+    t->Phi[19][29] = 0;
+    t->Phi[19][30] = 0;
+    t->Phi[19][31] = 0;
+    t->Phi[20][0] = 0;
+    t->Phi[20][1] = 0;
+    t->Phi[20][2] = 0;
+    t->Phi[20][3] = 0;
+    t->Phi[20][4] = 0;
+    t->Phi[20][5] = 0;
+    t->Phi[20][6] = 0;
+    t->Phi[20][7] = 0;
+    t->Phi[20][8] = 0;
+    t->Phi[20][9] = 0;
+    t->Phi[20][10] = 0;
+    t->Phi[20][11] = 0;
+    t->Phi[20][12] = 0;
+    t->Phi[20][13] = 0;
+    t->Phi[20][14] = 0;
+    t->Phi[20][15] = 0;
+    t->Phi[20][16] = 0;
+    t->Phi[20][17] = 0;
+    t->Phi[20][18] = 0;
+    t->Phi[20][19] = 0;
+    t->Phi[20][20] = 0;
+    t->Phi[20][21] = 0;
+    t->Phi[20][22] = 0;
+    t->Phi[20][23] = 0;
+    t->Phi[20][24] = 0;
+    t->Phi[20][25] = 0;
+    t->Phi[20][26] = 0;
+    t->Phi[20][27] = 0;
+    t->Phi[20][28] = 0;
+    t->Phi[20][29] = 0;
+    t->Phi[20][30] = 0;
+    t->Phi[20][31] = 0;
+    t->Phi[21][0] = 0;
+    t->Phi[21][1] = 0;
+    t->Phi[21][2] = 0;
+    t->Phi[21][3] = 0;
+    t->Phi[21][4] = 0;
+    t->Phi[21][5] = 0;
+    t->Phi[21][6] = 0;
+    t->Phi[21][7] = 0;
+    t->Phi[21][8] = 0;
+    t->Phi[21][9] = 0;
+    t->Phi[21][10] = 0;
+    t->Phi[21][11] = 0;
+    t->Phi[21][12] = 0;
+    t->Phi[21][13] = 0;
+    t->Phi[21][14] = 0;
+    t->Phi[21][15] = 0;
+    t->Phi[21][16] = 0;
+    t->Phi[21][17] = 0;
+    t->Phi[21][18] = 0;
+    t->Phi[21][19] = 0;
+    t->Phi[21][20] = 0;
+    t->Phi[21][21] = 0;
+    t->Phi[21][22] = 0;
+    t->Phi[21][23] = 0;
+    t->Phi[21][24] = 0;
+    t->Phi[21][25] = 0;
+    t->Phi[21][26] = 0;
+    t->Phi[21][27] = 0;
+    t->Phi[21][28] = 0;
+    t->Phi[21][29] = 0;
+    t->Phi[21][30] = 0;
+    t->Phi[21][31] = 0;
+    t->Phi[22][0] = 0;
+    t->Phi[22][1] = 0;
+    t->Phi[22][2] = 0;
+    t->Phi[22][3] = 0;
+    t->Phi[22][4] = 0;
+    t->Phi[22][5] = 0;
+    t->Phi[22][6] = 0;
+    t->Phi[22][7] = 0;
+    t->Phi[22][8] = 0;
+    t->Phi[22][9] = 0;
+    t->Phi[22][10] = 0;
+    t->Phi[22][11] = 0;
+    t->Phi[22][12] = 0;
+    t->Phi[22][13] = 0;
+    t->Phi[22][14] = 0;
+    t->Phi[22][15] = 0;
+    t->Phi[22][16] = 0;
+    t->Phi[22][17] = 0;
+    t->Phi[22][18] = 0;
+    t->Phi[22][19] = 0;
+    t->Phi[22][20] = 0;
+    t->Phi[22][21] = 0;
+    t->Phi[22][22] = 0;
+    t->Phi[22][23] = 0;
+    t->Phi[22][24] = 0;
+    t->Phi[22][25] = 0;
+    t->Phi[22][26] = 0;
+    t->Phi[22][27] = 0;
+    t->Phi[22][28] = 0;
+    t->Phi[22][29] = 0;
+    t->Phi[22][30] = 0;
+    t->Phi[22][31] = 0;
+    t->Phi[23][0] = 0;
+    t->Phi[23][1] = 0;
+    t->Phi[23][2] = 0;
+    t->Phi[23][3] = 0;
+    t->Phi[23][4] = 0;
+    t->Phi[23][5] = 0;
+    t->Phi[23][6] = 0;
+    t->Phi[23][7] = 0;
+    t->Phi[23][8] = 0;
+    t->Phi[23][9] = 0;
+    t->Phi[23][10] = 0;
+    t->Phi[23][11] = 0;
+    t->Phi[23][12] = 0;
+    t->Phi[23][13] = 0;
+    t->Phi[23][14] = 0;
+    t->Phi[23][15] = 0;
+    t->Phi[23][16] = 0;
+    t->Phi[23][17] = 0;
+    t->Phi[23][18] = 0;
+    t->Phi[23][19] = 0;
+    t->Phi[23][20] = 0;
+    t->Phi[23][21] = 0;
+    t->Phi[23][22] = 0;
+    t->Phi[23][23] = 0;
+    t->Phi[23][24] = 0;
+    t->Phi[23][25] = 0;
+    t->Phi[23][26] = 0;
+    t->Phi[23][27] = 0;
+    t->Phi[23][28] = 0;
+    t->Phi[23][29] = 0;
+    t->Phi[23][30] = 0;
+    t->Phi[23][31] = 0;
+    t->Phi[24][0] = 0;
+    t->Phi[24][1] = 0;
+    t->Phi[24][2] = 0;
+    t->Phi[24][3] = 0;
+    t->Phi[24][4] = 0;
+    t->Phi[24][5] = 0;
+    t->Phi[24][6] = 0;
+    t->Phi[24][7] = 0;
+    t->Phi[24][8] = 0;
+    t->Phi[24][9] = 0;
+    t->Phi[24][10] = 0;
+    t->Phi[24][11] = 0;
+    t->Phi[24][12] = 0;
+    t->Phi[24][13] = 0;
+    t->Phi[24][14] = 0;
+    t->Phi[24][15] = 0;
+    t->Phi[24][16] = 0;
+    t->Phi[24][17] = 0;
+    t->Phi[24][18] = 0;
+    t->Phi[24][19] = 0;
+    t->Phi[24][20] = 0;
+    t->Phi[24][21] = 0;
+    t->Phi[24][22] = 0;
+    t->Phi[24][23] = 0;
+    t->Phi[24][24] = 0;
+    t->Phi[24][25] = 0;
+    t->Phi[24][26] = 0;
+    t->Phi[24][27] = 0;
+    t->Phi[24][28] = 0;
+    t->Phi[24][29] = 0;
+    t->Phi[24][30] = 0;
+    t->Phi[24][31] = 0;
+    t->Phi[25][0] = 0;
+    t->Phi[25][1] = 0;
+    t->Phi[25][2] = 0;
+    t->Phi[25][3] = 0;
+    t->Phi[25][4] = 0;
+    t->Phi[25][5] = 0;
+    t->Phi[25][6] = 0;
+    t->Phi[25][7] = 0;
+    t->Phi[25][8] = 0;
+    t->Phi[25][9] = 0;
+    t->Phi[25][10] = 0;
+    t->Phi[25][11] = 0;
+    t->Phi[25][12] = 0;
+    t->Phi[25][13] = 0;
+    t->Phi[25][14] = 0;
+    t->Phi[25][15] = 0;
+    t->Phi[25][16] = 0;
+    t->Phi[25][17] = 0;
+    t->Phi[25][18] = 0;
+    t->Phi[25][19] = 0;
+    t->Phi[25][20] = 0;
+    t->Phi[25][21] = 0;
+    t->Phi[25][22] = 0;
+    t->Phi[25][23] = 0;
+    t->Phi[25][24] = 0;
+    t->Phi[25][25] = 0;
+    t->Phi[25][26] = 0;
+    t->Phi[25][27] = 0;
+    t->Phi[25][28] = 0;
+    t->Phi[25][29] = 0;
+    t->Phi[25][30] = 0;
+    t->Phi[25][31] = 0;
+    t->Phi[26][0] = 0;
+    t->Phi[26][1] = 0;
+    t->Phi[26][2] = 0;
+    t->Phi[26][3] = 0;
+    t->Phi[26][4] = 0;
+    t->Phi[26][5] = 0;
+    t->Phi[26][6] = 0;
+    t->Phi[26][7] = 0;
+    t->Phi[26][8] = 0;
+    t->Phi[26][9] = 0;
+    t->Phi[26][10] = 0;
+    t->Phi[26][11] = 0;
+    t->Phi[26][12] = 0;
+    t->Phi[26][13] = 0;
+    t->Phi[26][14] = 0;
+    t->Phi[26][15] = 0;
+    t->Phi[26][16] = 0;
+    t->Phi[26][17] = 0;
+    t->Phi[26][18] = 0;
+    t->Phi[26][19] = 0;
+    t->Phi[26][20] = 0;
+    t->Phi[26][21] = 0;
+    t->Phi[26][22] = 0;
+    t->Phi[26][23] = 0;
+    t->Phi[26][24] = 0;
+    t->Phi[26][25] = 0;
+    t->Phi[26][26] = 0;
+    t->Phi[26][27] = 0;
+    t->Phi[26][28] = 0;
+    t->Phi[26][29] = 0;
+    t->Phi[26][30] = 0;
+    t->Phi[26][31] = 0;
+    t->Phi[27][0] = 0;
+    t->Phi[27][1] = 0;
+    t->Phi[27][2] = 0;
+    t->Phi[27][3] = 0;
+    t->Phi[27][4] = 0;
+    t->Phi[27][5] = 0;
+    t->Phi[27][6] = 0;
+    t->Phi[27][7] = 0;
+    t->Phi[27][8] = 0;
+    t->Phi[27][9] = 0;
+    t->Phi[27][10] = 0;
+    t->Phi[27][11] = 0;
+    t->Phi[27][12] = 0;
+    t->Phi[27][13] = 0;
+    t->Phi[27][14] = 0;
+    t->Phi[27][15] = 0;
+    t->Phi[27][16] = 0;
+    t->Phi[27][17] = 0;
+    t->Phi[27][18] = 0;
+    t->Phi[27][19] = 0;
+    t->Phi[27][20] = 0;
+    t->Phi[27][21] = 0;
+    t->Phi[27][22] = 0;
+    t->Phi[27][23] = 0;
+    t->Phi[27][24] = 0;
+    t->Phi[27][25] = 0;
+    t->Phi[27][26] = 0;
+    t->Phi[27][27] = 0;
+    t->Phi[27][28] = 0;
+    t->Phi[27][29] = 0;
+    t->Phi[27][30] = 0;
+    t->Phi[27][31] = 0;
+    t->Phi[28][0] = 0;
+    t->Phi[28][1] = 0;
+    t->Phi[28][2] = 0;
+    t->Phi[28][3] = 0;
+    t->Phi[28][4] = 0;
+    t->Phi[28][5] = 0;
+    t->Phi[28][6] = 0;
+    t->Phi[28][7] = 0;
+    t->Phi[28][8] = 0;
+    t->Phi[28][9] = 0;
+    t->Phi[28][10] = 0;
+    t->Phi[28][11] = 0;
+    t->Phi[28][12] = 0;
+    t->Phi[28][13] = 0;
+    t->Phi[28][14] = 0;
+    t->Phi[28][15] = 0;
+    t->Phi[28][16] = 0;
+    t->Phi[28][17] = 0;
+    t->Phi[28][18] = 0;
+    t->Phi[28][19] = 0;
+    t->Phi[28][20] = 0;
+    t->Phi[28][21] = 0;
+    t->Phi[28][22] = 0;
+    t->Phi[28][23] = 0;
+    t->Phi[28][24] = 0;
+    t->Phi[28][25] = 0;
+    t->Phi[28][26] = 0;
+    t->Phi[28][27] = 0;
+    t->Phi[28][28] = 0;
+    t->Phi[28][29] = 0;
+    t->Phi[28][30] = 0;
+    t->Phi[28][31] = 0;
+    t->Phi[29][0] = 0;
+    t->Phi[29][1] = 0;
+    t->Phi[29][2] = 0;
+    t->Phi[29][3] = 0;
+    t->Phi[29][4] = 0;
+    t->Phi[29][5] = 0;
+    t->Phi[29][6] = 0;
+    t->Phi[29][7] = 0;
+    t->Phi[29][8] = 0;
+    t->Phi[29][9] = 0;
+    t->Phi[29][10] = 0;
+    t->Phi[29][11] = 0;
+    t->Phi[29][12] = 0;
+    t->Phi[29][13] = 0;
+    t->Phi[29][14] = 0;
+    t->Phi[29][15] = 0;
+    t->Phi[29][16] = 0;
+    t->Phi[29][17] = 0;
+    t->Phi[29][18] = 0;
+    t->Phi[29][19] = 0;
+    t->Phi[29][20] = 0;
+    t->Phi[29][21] = 0;
+    t->Phi[29][22] = 0;
+    t->Phi[29][23] = 0;
+    t->Phi[29][24] = 0;
+    t->Phi[29][25] = 0;
+    t->Phi[29][26] = 0;
+    t->Phi[29][27] = 0;
+    t->Phi[29][28] = 0;
+    t->Phi[29][29] = 0;
+    t->Phi[29][30] = 0;
+    t->Phi[29][31] = 0;
+    t->Phi[30][0] = 0;
+    t->Phi[30][1] = 0;
+    t->Phi[30][2] = 0;
+    t->Phi[30][3] = 0;
+    t->Phi[30][4] = 0;
+    t->Phi[30][5] = 0;
+    t->Phi[30][6] = 0;
+    t->Phi[30][7] = 0;
+    t->Phi[30][8] = 0;
+    t->Phi[30][9] = 0;
+    t->Phi[30][10] = 0;
+    t->Phi[30][11] = 0;
+    t->Phi[30][12] = 0;
+    t->Phi[30][13] = 0;
+    t->Phi[30][14] = 0;
+    t->Phi[30][15] = 0;
+    t->Phi[30][16] = 0;
+    t->Phi[30][17] = 0;
+    t->Phi[30][18] = 0;
+    t->Phi[30][19] = 0;
+    t->Phi[30][20] = 0;
+    t->Phi[30][21] = 0;
+    t->Phi[30][22] = 0;
+    t->Phi[30][23] = 0;
+    t->Phi[30][24] = 0;
+    t->Phi[30][25] = 0;
+    t->Phi[30][26] = 0;
+    t->Phi[30][27] = 0;
+    t->Phi[30][28] = 0;
+    t->Phi[30][29] = 0;
+    t->Phi[30][30] = 0;
+    t->Phi[30][31] = 0;
+    t->Phi[31][0] = 0;
+    t->Phi[31][1] = 0;
+    t->Phi[31][2] = 0;
+    t->Phi[31][3] = 0;
+    t->Phi[31][4] = 0;
+    t->Phi[31][5] = 0;
+    t->Phi[31][6] = 0;
+    t->Phi[31][7] = 0;
+    t->Phi[31][8] = 0;
+    t->Phi[31][9] = 0;
+    t->Phi[31][10] = 0;
+    t->Phi[31][11] = 0;
+    t->Phi[31][12] = 0;
+    t->Phi[31][13] = 0;
+    t->Phi[31][14] = 0;
+    t->Phi[31][15] = 0;
+    t->Phi[31][16] = 0;
+    t->Phi[31][17] = 0;
+    t->Phi[31][18] = 0;
+    t->Phi[31][19] = 0;
+    t->Phi[31][20] = 0;
+    t->Phi[31][21] = 0;
+    t->Phi[31][22] = 0;
+    t->Phi[31][23] = 0;
+    t->Phi[31][24] = 0;
+    t->Phi[31][25] = 0;
+    t->Phi[31][26] = 0;
+    t->Phi[31][27] = 0;
+    t->Phi[31][28] = 0;
+    t->Phi[31][29] = 0;
+    t->Phi[31][30] = 0;
+    t->Phi[31][31] = 0;
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void doubling(ned_doppler32_augmented_transition *restrict t,
@@ -2791,1073 +2186,1097 @@ NED_DOPPLER32_AUGMENTED_BLOCK void doubling(ned_doppler32_augmented_transition *
     w->term[0][0] = t->Phi[0][0]*t->Phi[0][0] + t->Phi[0][1]*t->Phi[1][0] +
             t->Phi[0][2]*t->Phi[2][0] + t->Phi[0][3]*t->Phi[3][0] + t->Phi[0][4]*t->Phi[4][0] +
             t->Phi[0][5]*t->Phi[5][0];
-    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[27] + t->Phi[0][2]*w->S[54] +
-            t->Phi[0][3]*w->S[81] + t->Phi[0][4]*w->S[108] + t->Phi[0][5]*w->S[135];
+    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[30] + t->Phi[0][2]*w->S[60] +
+            t->Phi[0][3]*w->S[90] + t->Phi[0][4]*w->S[120] + t->Phi[0][5]*w->S[150];
     w->term[0][1] = t->Phi[0][0]*t->Phi[0][1] + t->Phi[0][1]*t->Phi[1][1] +
             t->Phi[0][2]*t->Phi[2][1] + t->Phi[0][3]*t->Phi[3][1] + t->Phi[0][4]*t->Phi[4][1] +
             t->Phi[0][5]*t->Phi[5][1];
-    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[28] + t->Phi[0][2]*w->S[55] +
-            t->Phi[0][3]*w->S[82] + t->Phi[0][4]*w->S[109] + t->Phi[0][5]*w->S[136];
+    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[31] + t->Phi[0][2]*w->S[61] +
+            t->Phi[0][3]*w->S[91] + t->Phi[0][4]*w->S[121] + t->Phi[0][5]*w->S[151];
     w->term[0][2] = t->Phi[0][0]*t->Phi[0][2] + t->Phi[0][1]*t->Phi[1][2] +
             t->Phi[0][2]*t->Phi[2][2] + t->Phi[0][3]*t->Phi[3][2] + t->Phi[0][4]*t->Phi[4][2] +
             t->Phi[0][5]*t->Phi[5][2];
-    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[29] + t->Phi[0][2]*w->S[56] +
-            t->Phi[0][3]*w->S[83] + t->Phi[0][4]*w->S[110] + t->Phi[0][5]*w->S[137];
+    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[32] + t->Phi[0][2]*w->S[62] +
+            t->Phi[0][3]*w->S[92] + t->Phi[0][4]*w->S[122] + t->Phi[0][5]*w->S[152];
     w->term[0][3] = t->Phi[0][0]*t->Phi[0][3] + t->Phi[0][1]*t->Phi[1][3] +
             t->Phi[0][2]*t->Phi[2][3] + t->Phi[0][3]*t->Phi[3][3] + t->Phi[0][4]*t->Phi[4][3] +
             t->Phi[0][5]*t->Phi[5][3];
-    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[30] + t->Phi[0][2]*w->S[57] +
-            t->Phi[0][3]*w->S[84] + t->Phi[0][4]*w->S[111] + t->Phi[0][5]*w->S[138];
+    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[33] + t->Phi[0][2]*w->S[63] +
+            t->Phi[0][3]*w->S[93] + t->Phi[0][4]*w->S[123] + t->Phi[0][5]*w->S[153];
     w->term[0][4] = t->Phi[0][0]*t->Phi[0][4] + t->Phi[0][1]*t->Phi[1][4] +
             t->Phi[0][2]*t->Phi[2][4] + t->Phi[0][3]*t->Phi[3][4] + t->Phi[0][4]*t->Phi[4][4] +
             t->Phi[0][5]*t->Phi[5][4];
-    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[31] + t->Phi[0][2]*w->S[58] +
-            t->Phi[0][3]*w->S[85] + t->Phi[0][4]*w->S[112] + t->Phi[0][5]*w->S[139];
+    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[34] + t->Phi[0][2]*w->S[64] +
+            t->Phi[0][3]*w->S[94] + t->Phi[0][4]*w->S[124] + t->Phi[0][5]*w->S[154];
     w->term[0][5] = t->Phi[0][0]*t->Phi[0][5] + t->Phi[0][1]*t->Phi[1][5] +
             t->Phi[0][2]*t->Phi[2][5] + t->Phi[0][3]*t->Phi[3][5] + t->Phi[0][4]*t->Phi[4][5] +
             t->Phi[0][5]*t->Phi[5][5];
-    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[32] + t->Phi[0][2]*w->S[59] +
-            t->Phi[0][3]*w->S[86] + t->Phi[0][4]*w->S[113] + t->Phi[0][5]*w->S[140];
+    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[35] + t->Phi[0][2]*w->S[65] +
+            t->Phi[0][3]*w->S[95] + t->Phi[0][4]*w->S[125] + t->Phi[0][5]*w->S[155];
     w->term[0][6] = t->Phi[0][0]*t->Phi[0][7] + t->Phi[0][1]*t->Phi[1][7] +
             t->Phi[0][2]*t->Phi[2][7] + t->Phi[0][3]*t->Phi[3][7] + t->Phi[0][4]*t->Phi[4][7] +
             t->Phi[0][5]*t->Phi[5][7];
-    w->term[1][6] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[33] + t->Phi[0][2]*w->S[60] +
-            t->Phi[0][3]*w->S[87] + t->Phi[0][4]*w->S[114] + t->Phi[0][5]*w->S[141] + t->Phi[0][7];
+    w->term[1][6] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[37] + t->Phi[0][2]*w->S[67] +
+            t->Phi[0][3]*w->S[97] + t->Phi[0][4]*w->S[127] + t->Phi[0][5]*w->S[157] + t->Phi[0][7];
     w->term[0][7] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
             t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
             t->Phi[0][5]*t->Phi[5][8];
-    w->term[1][7] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[34] + t->Phi[0][2]*w->S[61] +
-            t->Phi[0][3]*w->S[88] + t->Phi[0][4]*w->S[115] + t->Phi[0][5]*w->S[142] + t->Phi[0][8];
+    w->term[1][7] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[38] + t->Phi[0][2]*w->S[68] +
+            t->Phi[0][3]*w->S[98] + t->Phi[0][4]*w->S[128] + t->Phi[0][5]*w->S[158] + t->Phi[0][8];
     w->term[0][8] = t->Phi[0][0]*t->Phi[0][9] + t->Phi[0][1]*t->Phi[1][9] +
             t->Phi[0][2]*t->Phi[2][9] + t->Phi[0][3]*t->Phi[3][9] + t->Phi[0][4]*t->Phi[4][9] +
             t->Phi[0][5]*t->Phi[5][9];
-    w->term[1][8] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[35] + t->Phi[0][2]*w->S[62] +
-            t->Phi[0][3]*w->S[89] + t->Phi[0][4]*w->S[116] + t->Phi[0][5]*w->S[143] + t->Phi[0][9];
+    w->term[1][8] = t->Phi[0][0]*w->S[9] + t->Phi[0][1]*w->S[39] + t->Phi[0][2]*w->S[69] +
+            t->Phi[0][3]*w->S[99] + t->Phi[0][4]*w->S[129] + t->Phi[0][5]*w->S[159] + t->Phi[0][9];
     w->term[0][9] = t->Phi[0][0]*t->Phi[0][10] + t->Phi[0][1]*t->Phi[1][10] +
             t->Phi[0][2]*t->Phi[2][10] + t->Phi[0][3]*t->Phi[3][10] + t->Phi[0][4]*t->Phi[4][10] +
             t->Phi[0][5]*t->Phi[5][10] + t->Phi[0][10]*t->Phi[10][10];
-    w->term[1][9] = t->Phi[0][0]*w->S[9] + t->Phi[0][1]*w->S[36] + t->Phi[0][2]*w->S[63] +
-            t->Phi[0][3]*w->S[90] + t->Phi[0][4]*w->S[117] + t->Phi[0][5]*w->S[144] +
-            t->Phi[0][10]*w->S[190];
+    w->term[1][9] = t->Phi[0][0]*w->S[10] + t->Phi[0][1]*w->S[40] + t->Phi[0][2]*w->S[70] +
+            t->Phi[0][3]*w->S[100] + t->Phi[0][4]*w->S[130] + t->Phi[0][5]*w->S[160] +
+            t->Phi[0][10]*w->S[210];
     w->term[0][10] = t->Phi[0][0]*t->Phi[0][11] + t->Phi[0][1]*t->Phi[1][11] +
             t->Phi[0][2]*t->Phi[2][11] + t->Phi[0][3]*t->Phi[3][11] + t->Phi[0][4]*t->Phi[4][11] +
             t->Phi[0][5]*t->Phi[5][11] + t->Phi[0][11]*t->Phi[11][11];
-    w->term[1][10] = t->Phi[0][0]*w->S[10] + t->Phi[0][1]*w->S[37] + t->Phi[0][2]*w->S[64] +
-            t->Phi[0][3]*w->S[91] + t->Phi[0][4]*w->S[118] + t->Phi[0][5]*w->S[145] +
-            t->Phi[0][11]*w->S[191];
+    w->term[1][10] = t->Phi[0][0]*w->S[11] + t->Phi[0][1]*w->S[41] + t->Phi[0][2]*w->S[71] +
+            t->Phi[0][3]*w->S[101] + t->Phi[0][4]*w->S[131] + t->Phi[0][5]*w->S[161] +
+            t->Phi[0][11]*w->S[211];
     w->term[0][11] = t->Phi[0][0]*t->Phi[0][12] + t->Phi[0][1]*t->Phi[1][12] +
             t->Phi[0][2]*t->Phi[2][12] + t->Phi[0][3]*t->Phi[3][12] + t->Phi[0][4]*t->Phi[4][12] +
             t->Phi[0][5]*t->Phi[5][12] + t->Phi[0][12]*t->Phi[12][12];
-    w->term[1][11] = t->Phi[0][0]*w->S[11] + t->Phi[0][1]*w->S[38] + t->Phi[0][2]*w->S[65] +
-            t->Phi[0][3]*w->S[92] + t->Phi[0][4]*w->S[119] + t->Phi[0][5]*w->S[146] +
-            t->Phi[0][12]*w->S[192];
+    w->term[1][11] = t->Phi[0][0]*w->S[12] + t->Phi[0][1]*w->S[42] + t->Phi[0][2]*w->S[72] +
+            t->Phi[0][3]*w->S[102] + t->Phi[0][4]*w->S[132] + t->Phi[0][5]*w->S[162] +
+            t->Phi[0][12]*w->S[212];
     w->term[0][12] = t->Phi[0][0]*t->Phi[0][13] + t->Phi[0][1]*t->Phi[1][13] +
             t->Phi[0][2]*t->Phi[2][13] + t->Phi[0][3]*t->Phi[3][13] + t->Phi[0][4]*t->Phi[4][13] +
             t->Phi[0][5]*t->Phi[5][13] + t->Phi[0][13]*t->Phi[13][13];
-    w->term[1][12] = t->Phi[0][0]*w->S[12] + t->Phi[0][1]*w->S[39] + t->Phi[0][2]*w->S[66] +
-            t->Phi[0][3]*w->S[93] + t->Phi[0][4]*w->S[120] + t->Phi[0][5]*w->S[147] +
-            t->Phi[0][13]*w->S[193];
+    w->term[1][12] = t->Phi[0][0]*w->S[13] + t->Phi[0][1]*w->S[43] + t->Phi[0][2]*w->S[73] +
+            t->Phi[0][3]*w->S[103] + t->Phi[0][4]*w->S[133] + t->Phi[0][5]*w->S[163] +
+            t->Phi[0][13]*w->S[213];
     w->term[0][13] = t->Phi[0][0]*t->Phi[0][14] + t->Phi[0][1]*t->Phi[1][14] +
             t->Phi[0][2]*t->Phi[2][14] + t->Phi[0][3]*t->Phi[3][14] + t->Phi[0][4]*t->Phi[4][14] +
             t->Phi[0][5]*t->Phi[5][14] + t->Phi[0][14]*t->Phi[14][14];
-    w->term[1][13] = t->Phi[0][0]*w->S[13] + t->Phi[0][1]*w->S[40] + t->Phi[0][2]*w->S[67] +
-            t->Phi[0][3]*w->S[94] + t->Phi[0][4]*w->S[121] + t->Phi[0][5]*w->S[148] +
-            t->Phi[0][14]*w->S[194];
+    w->term[1][13] = t->Phi[0][0]*w->S[14] + t->Phi[0][1]*w->S[44] + t->Phi[0][2]*w->S[74] +
+            t->Phi[0][3]*w->S[104] + t->Phi[0][4]*w->S[134] + t->Phi[0][5]*w->S[164] +
+            t->Phi[0][14]*w->S[214];
     w->term[0][14] = t->Phi[0][0]*t->Phi[0][15] + t->Phi[0][1]*t->Phi[1][15] +
             t->Phi[0][2]*t->Phi[2][15] + t->Phi[0][3]*t->Phi[3][15] + t->Phi[0][4]*t->Phi[4][15] +
             t->Phi[0][5]*t->Phi[5][15] + t->Phi[0][15]*t->Phi[15][15];
-    w->term[1][14] = t->Phi[0][0]*w->S[14] + t->Phi[0][1]*w->S[41] + t->Phi[0][2]*w->S[68] +
-            t->Phi[0][3]*w->S[95] + t->Phi[0][4]*w->S[122] + t->Phi[0][5]*w->S[149] +
-            t->Phi[0][15]*w->S[195];
+    w->term[1][14] = t->Phi[0][0]*w->S[15] + t->Phi[0][1]*w->S[45] + t->Phi[0][2]*w->S[75] +
+            t->Phi[0][3]*w->S[105] + t->Phi[0][4]*w->S[135] + t->Phi[0][5]*w->S[165] +
+            t->Phi[0][15]*w->S[215];
     w->term[0][15] = t->Phi[0][0]*t->Phi[0][18] + t->Phi[0][1]*t->Phi[1][18] +
             t->Phi[0][2]*t->Phi[2][18] + t->Phi[0][3]*t->Phi[3][18] + t->Phi[0][4]*t->Phi[4][18] +
             t->Phi[0][5]*t->Phi[5][18];
-    w->term[1][15] = t->Phi[0][0]*w->S[15] + t->Phi[0][1]*w->S[42] + t->Phi[0][2]*w->S[69] +
-            t->Phi[0][3]*w->S[96] + t->Phi[0][4]*w->S[123] + t->Phi[0][5]*w->S[150] + t->Phi[0][18];
+    w->term[1][15] = t->Phi[0][0]*w->S[18] + t->Phi[0][1]*w->S[48] + t->Phi[0][2]*w->S[78] +
+            t->Phi[0][3]*w->S[108] + t->Phi[0][4]*w->S[138] + t->Phi[0][5]*w->S[168] +
+            t->Phi[0][18];
     w->term[0][16] = t->Phi[0][0]*t->Phi[0][19] + t->Phi[0][1]*t->Phi[1][19] +
             t->Phi[0][2]*t->Phi[2][19] + t->Phi[0][3]*t->Phi[3][19] + t->Phi[0][4]*t->Phi[4][19] +
             t->Phi[0][5]*t->Phi[5][19];
-    w->term[1][16] = t->Phi[0][0]*w->S[16] + t->Phi[0][1]*w->S[43] + t->Phi[0][2]*w->S[70] +
-            t->Phi[0][3]*w->S[97] + t->Phi[0][4]*w->S[124] + t->Phi[0][5]*w->S[151] + t->Phi[0][19];
+    w->term[1][16] = t->Phi[0][0]*w->S[19] + t->Phi[0][1]*w->S[49] + t->Phi[0][2]*w->S[79] +
+            t->Phi[0][3]*w->S[109] + t->Phi[0][4]*w->S[139] + t->Phi[0][5]*w->S[169] +
+            t->Phi[0][19];
     w->term[0][17] = t->Phi[0][0]*t->Phi[0][20] + t->Phi[0][1]*t->Phi[1][20] +
             t->Phi[0][2]*t->Phi[2][20] + t->Phi[0][3]*t->Phi[3][20] + t->Phi[0][4]*t->Phi[4][20] +
             t->Phi[0][5]*t->Phi[5][20];
-    w->term[1][17] = t->Phi[0][0]*w->S[17] + t->Phi[0][1]*w->S[44] + t->Phi[0][2]*w->S[71] +
-            t->Phi[0][3]*w->S[98] + t->Phi[0][4]*w->S[125] + t->Phi[0][5]*w->S[152] + t->Phi[0][20];
+    w->term[1][17] = t->Phi[0][0]*w->S[20] + t->Phi[0][1]*w->S[50] + t->Phi[0][2]*w->S[80] +
+            t->Phi[0][3]*w->S[110] + t->Phi[0][4]*w->S[140] + t->Phi[0][5]*w->S[170] +
+            t->Phi[0][20];
     w->term[0][18] = t->Phi[0][0]*t->Phi[0][21] + t->Phi[0][1]*t->Phi[1][21] +
             t->Phi[0][2]*t->Phi[2][21] + t->Phi[0][3]*t->Phi[3][21] + t->Phi[0][4]*t->Phi[4][21] +
             t->Phi[0][5]*t->Phi[5][21];
-    w->term[1][18] = t->Phi[0][0]*w->S[18] + t->Phi[0][1]*w->S[45] + t->Phi[0][2]*w->S[72] +
-            t->Phi[0][3]*w->S[99] + t->Phi[0][4]*w->S[126] + t->Phi[0][5]*w->S[153] + t->Phi[0][21];
+    w->term[1][18] = t->Phi[0][0]*w->S[21] + t->Phi[0][1]*w->S[51] + t->Phi[0][2]*w->S[81] +
+            t->Phi[0][3]*w->S[111] + t->Phi[0][4]*w->S[141] + t->Phi[0][5]*w->S[171] +
+            t->Phi[0][21];
     w->term[0][19] = t->Phi[0][0]*t->Phi[0][22] + t->Phi[0][1]*t->Phi[1][22] +
             t->Phi[0][2]*t->Phi[2][22] + t->Phi[0][3]*t->Phi[3][22] + t->Phi[0][4]*t->Phi[4][22] +
             t->Phi[0][5]*t->Phi[5][22];
-    w->term[1][19] = t->Phi[0][0]*w->S[19] + t->Phi[0][1]*w->S[46] + t->Phi[0][2]*w->S[73] +
-            t->Phi[0][3]*w->S[100] + t->Phi[0][4]*w->S[127] + t->Phi[0][5]*w->S[154] +
+    w->term[1][19] = t->Phi[0][0]*w->S[22] + t->Phi[0][1]*w->S[52] + t->Phi[0][2]*w->S[82] +
+            t->Phi[0][3]*w->S[112] + t->Phi[0][4]*w->S[142] + t->Phi[0][5]*w->S[172] +
             t->Phi[0][22];
     w->term[0][20] = t->Phi[0][0]*t->Phi[0][23] + t->Phi[0][1]*t->Phi[1][23] +
             t->Phi[0][2]*t->Phi[2][23] + t->Phi[0][3]*t->Phi[3][23] + t->Phi[0][4]*t->Phi[4][23] +
             t->Phi[0][5]*t->Phi[5][23];
-    w->term[1][20] = t->Phi[0][0]*w->S[20] + t->Phi[0][1]*w->S[47] + t->Phi[0][2]*w->S[74] +
-            t->Phi[0][3]*w->S[101] + t->Phi[0][4]*w->S[128] + t->Phi[0][5]*w->S[155] +
+    w->term[1][20] = t->Phi[0][0]*w->S[23] + t->Phi[0][1]*w->S[53] + t->Phi[0][2]*w->S[83] +
+            t->Phi[0][3]*w->S[113] + t->Phi[0][4]*w->S[143] + t->Phi[0][5]*w->S[173] +
             t->Phi[0][23];
     w->term[0][21] = t->Phi[0][0]*t->Phi[0][24] + t->Phi[0][1]*t->Phi[1][24] +
             t->Phi[0][2]*t->Phi[2][24] + t->Phi[0][3]*t->Phi[3][24] + t->Phi[0][4]*t->Phi[4][24] +
             t->Phi[0][5]*t->Phi[5][24];
-    w->term[1][21] = t->Phi[0][0]*w->S[21] + t->Phi[0][1]*w->S[48] + t->Phi[0][2]*w->S[75] +
-            t->Phi[0][3]*w->S[102] + t->Phi[0][4]*w->S[129] + t->Phi[0][5]*w->S[156] +
+    w->term[1][21] = t->Phi[0][0]*w->S[24] + t->Phi[0][1]*w->S[54] + t->Phi[0][2]*w->S[84] +
+            t->Phi[0][3]*w->S[114] + t->Phi[0][4]*w->S[144] + t->Phi[0][5]*w->S[174] +
             t->Phi[0][24];
     w->term[0][22] = t->Phi[0][0]*t->Phi[0][25] + t->Phi[0][1]*t->Phi[1][25] +
             t->Phi[0][2]*t->Phi[2][25] + t->Phi[0][3]*t->Phi[3][25] + t->Phi[0][4]*t->Phi[4][25] +
             t->Phi[0][5]*t->Phi[5][25];
-    w->term[1][22] = t->Phi[0][0]*w->S[22] + t->Phi[0][1]*w->S[49] + t->Phi[0][2]*w->S[76] +
-            t->Phi[0][3]*w->S[103] + t->Phi[0][4]*w->S[130] + t->Phi[0][5]*w->S[157] +
+    w->term[1][22] = t->Phi[0][0]*w->S[25] + t->Phi[0][1]*w->S[55] + t->Phi[0][2]*w->S[85] +
+            t->Phi[0][3]*w->S[115] + t->Phi[0][4]*w->S[145] + t->Phi[0][5]*w->S[175] +
             t->Phi[0][25];
     w->term[0][23] = t->Phi[0][0]*t->Phi[0][26] + t->Phi[0][1]*t->Phi[1][26] +
             t->Phi[0][2]*t->Phi[2][26] + t->Phi[0][3]*t->Phi[3][26] + t->Phi[0][4]*t->Phi[4][26] +
             t->Phi[0][5]*t->Phi[5][26];
-    w->term[1][23] = t->Phi[0][0]*w->S[23] + t->Phi[0][1]*w->S[50] + t->Phi[0][2]*w->S[77] +
-            t->Phi[0][3]*w->S[104] + t->Phi[0][4]*w->S[131] + t->Phi[0][5]*w->S[158] +
+    w->term[1][23] = t->Phi[0][0]*w->S[26] + t->Phi[0][1]*w->S[56] + t->Phi[0][2]*w->S[86] +
+            t->Phi[0][3]*w->S[116] + t->Phi[0][4]*w->S[146] + t->Phi[0][5]*w->S[176] +
             t->Phi[0][26];
     w->term[0][24] = t->Phi[0][0]*t->Phi[0][27] + t->Phi[0][1]*t->Phi[1][27] +
             t->Phi[0][2]*t->Phi[2][27] + t->Phi[0][3]*t->Phi[3][27] + t->Phi[0][4]*t->Phi[4][27] +
             t->Phi[0][5]*t->Phi[5][27];
-    w->term[1][24] = t->Phi[0][0]*w->S[24] + t->Phi[0][1]*w->S[51] + t->Phi[0][2]*w->S[78] +
-            t->Phi[0][3]*w->S[105] + t->Phi[0][4]*w->S[132] + t->Phi[0][5]*w->S[159] +
+    w->term[1][24] = t->Phi[0][0]*w->S[27] + t->Phi[0][1]*w->S[57] + t->Phi[0][2]*w->S[87] +
+            t->Phi[0][3]*w->S[117] + t->Phi[0][4]*w->S[147] + t->Phi[0][5]*w->S[177] +
             t->Phi[0][27];
     w->term[0][25] = t->Phi[0][0]*t->Phi[0][28] + t->Phi[0][1]*t->Phi[1][28] +
             t->Phi[0][2]*t->Phi[2][28] + t->Phi[0][3]*t->Phi[3][28] + t->Phi[0][4]*t->Phi[4][28] +
             t->Phi[0][5]*t->Phi[5][28];
-    w->term[1][25] = t->Phi[0][0]*w->S[25] + t->Phi[0][1]*w->S[52] + t->Phi[0][2]*w->S[79] +
-            t->Phi[0][3]*w->S[106] + t->Phi[0][4]*w->S[133] + t->Phi[0][5]*w->S[160] +
+    w->term[1][25] = t->Phi[0][0]*w->S[28] + t->Phi[0][1]*w->S[58] + t->Phi[0][2]*w->S[88] +
+            t->Phi[0][3]*w->S[118] + t->Phi[0][4]*w->S[148] + t->Phi[0][5]*w->S[178] +
             t->Phi[0][28];
     w->term[0][26] = t->Phi[0][0]*t->Phi[0][29] + t->Phi[0][1]*t->Phi[1][29] +
             t->Phi[0][2]*t->Phi[2][29] + t->Phi[0][3]*t->Phi[3][29] + t->Phi[0][4]*t->Phi[4][29] +
             t->Phi[0][5]*t->Phi[5][29];
-    w->term[1][26] = t->Phi[0][0]*w->S[26] + t->Phi[0][1]*w->S[53] + t->Phi[0][2]*w->S[80] +
-            t->Phi[0][3]*w->S[107] + t->Phi[0][4]*w->S[134] + t->Phi[0][5]*w->S[161] +
+    w->term[1][26] = t->Phi[0][0]*w->S[29] + t->Phi[0][1]*w->S[59] + t->Phi[0][2]*w->S[89] +
+            t->Phi[0][3]*w->S[119] + t->Phi[0][4]*w->S[149] + t->Phi[0][5]*w->S[179] +
             t->Phi[0][29];
     w->term[0][27] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
             t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
             t->Phi[1][5]*t->Phi[5][0];
-    w->term[1][27] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[27] + t->Phi[1][2]*w->S[54] +
-            t->Phi[1][3]*w->S[81] + t->Phi[1][4]*w->S[108] + t->Phi[1][5]*w->S[135];
+    w->term[1][27] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[30] + t->Phi[1][2]*w->S[60] +
+            t->Phi[1][3]*w->S[90] + t->Phi[1][4]*w->S[120] + t->Phi[1][5]*w->S[150];
     w->term[0][28] = t->Phi[1][0]*t->Phi[0][1] + t->Phi[1][1]*t->Phi[1][1] +
             t->Phi[1][2]*t->Phi[2][1] + t->Phi[1][3]*t->Phi[3][1] + t->Phi[1][4]*t->Phi[4][1] +
             t->Phi[1][5]*t->Phi[5][1];
-    w->term[1][28] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[28] + t->Phi[1][2]*w->S[55] +
-            t->Phi[1][3]*w->S[82] + t->Phi[1][4]*w->S[109] + t->Phi[1][5]*w->S[136];
+    w->term[1][28] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[31] + t->Phi[1][2]*w->S[61] +
+            t->Phi[1][3]*w->S[91] + t->Phi[1][4]*w->S[121] + t->Phi[1][5]*w->S[151];
     w->term[0][29] = t->Phi[1][0]*t->Phi[0][2] + t->Phi[1][1]*t->Phi[1][2] +
             t->Phi[1][2]*t->Phi[2][2] + t->Phi[1][3]*t->Phi[3][2] + t->Phi[1][4]*t->Phi[4][2] +
             t->Phi[1][5]*t->Phi[5][2];
-    w->term[1][29] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[29] + t->Phi[1][2]*w->S[56] +
-            t->Phi[1][3]*w->S[83] + t->Phi[1][4]*w->S[110] + t->Phi[1][5]*w->S[137];
+    w->term[1][29] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[32] + t->Phi[1][2]*w->S[62] +
+            t->Phi[1][3]*w->S[92] + t->Phi[1][4]*w->S[122] + t->Phi[1][5]*w->S[152];
     w->term[0][30] = t->Phi[1][0]*t->Phi[0][3] + t->Phi[1][1]*t->Phi[1][3] +
             t->Phi[1][2]*t->Phi[2][3] + t->Phi[1][3]*t->Phi[3][3] + t->Phi[1][4]*t->Phi[4][3] +
             t->Phi[1][5]*t->Phi[5][3];
-    w->term[1][30] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[30] + t->Phi[1][2]*w->S[57] +
-            t->Phi[1][3]*w->S[84] + t->Phi[1][4]*w->S[111] + t->Phi[1][5]*w->S[138];
+    w->term[1][30] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[33] + t->Phi[1][2]*w->S[63] +
+            t->Phi[1][3]*w->S[93] + t->Phi[1][4]*w->S[123] + t->Phi[1][5]*w->S[153];
     w->term[0][31] = t->Phi[1][0]*t->Phi[0][4] + t->Phi[1][1]*t->Phi[1][4] +
             t->Phi[1][2]*t->Phi[2][4] + t->Phi[1][3]*t->Phi[3][4] + t->Phi[1][4]*t->Phi[4][4] +
             t->Phi[1][5]*t->Phi[5][4];
-    w->term[1][31] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[31] + t->Phi[1][2]*w->S[58] +
-            t->Phi[1][3]*w->S[85] + t->Phi[1][4]*w->S[112] + t->Phi[1][5]*w->S[139];
+    w->term[1][31] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[34] + t->Phi[1][2]*w->S[64] +
+            t->Phi[1][3]*w->S[94] + t->Phi[1][4]*w->S[124] + t->Phi[1][5]*w->S[154];
     w->term[0][32] = t->Phi[1][0]*t->Phi[0][5] + t->Phi[1][1]*t->Phi[1][5] +
             t->Phi[1][2]*t->Phi[2][5] + t->Phi[1][3]*t->Phi[3][5] + t->Phi[1][4]*t->Phi[4][5] +
             t->Phi[1][5]*t->Phi[5][5];
-    w->term[1][32] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[32] + t->Phi[1][2]*w->S[59] +
-            t->Phi[1][3]*w->S[86] + t->Phi[1][4]*w->S[113] + t->Phi[1][5]*w->S[140];
+    w->term[1][32] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[35] + t->Phi[1][2]*w->S[65] +
+            t->Phi[1][3]*w->S[95] + t->Phi[1][4]*w->S[125] + t->Phi[1][5]*w->S[155];
     w->term[0][33] = t->Phi[1][0]*t->Phi[0][7] + t->Phi[1][1]*t->Phi[1][7] +
             t->Phi[1][2]*t->Phi[2][7] + t->Phi[1][3]*t->Phi[3][7] + t->Phi[1][4]*t->Phi[4][7] +
             t->Phi[1][5]*t->Phi[5][7];
-    w->term[1][33] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[33] + t->Phi[1][2]*w->S[60] +
-            t->Phi[1][3]*w->S[87] + t->Phi[1][4]*w->S[114] + t->Phi[1][5]*w->S[141] + t->Phi[1][7];
+    w->term[1][33] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[37] + t->Phi[1][2]*w->S[67] +
+            t->Phi[1][3]*w->S[97] + t->Phi[1][4]*w->S[127] + t->Phi[1][5]*w->S[157] + t->Phi[1][7];
     w->term[0][34] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
             t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
             t->Phi[1][5]*t->Phi[5][8];
-    w->term[1][34] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[34] + t->Phi[1][2]*w->S[61] +
-            t->Phi[1][3]*w->S[88] + t->Phi[1][4]*w->S[115] + t->Phi[1][5]*w->S[142] + t->Phi[1][8];
+    w->term[1][34] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[38] + t->Phi[1][2]*w->S[68] +
+            t->Phi[1][3]*w->S[98] + t->Phi[1][4]*w->S[128] + t->Phi[1][5]*w->S[158] + t->Phi[1][8];
     w->term[0][35] = t->Phi[1][0]*t->Phi[0][9] + t->Phi[1][1]*t->Phi[1][9] +
             t->Phi[1][2]*t->Phi[2][9] + t->Phi[1][3]*t->Phi[3][9] + t->Phi[1][4]*t->Phi[4][9] +
             t->Phi[1][5]*t->Phi[5][9];
-    w->term[1][35] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[35] + t->Phi[1][2]*w->S[62] +
-            t->Phi[1][3]*w->S[89] + t->Phi[1][4]*w->S[116] + t->Phi[1][5]*w->S[143] + t->Phi[1][9];
+    w->term[1][35] = t->Phi[1][0]*w->S[9] + t->Phi[1][1]*w->S[39] + t->Phi[1][2]*w->S[69] +
+            t->Phi[1][3]*w->S[99] + t->Phi[1][4]*w->S[129] + t->Phi[1][5]*w->S[159] + t->Phi[1][9];
     w->term[0][36] = t->Phi[1][0]*t->Phi[0][10] + t->Phi[1][1]*t->Phi[1][10] +
             t->Phi[1][2]*t->Phi[2][10] + t->Phi[1][3]*t->Phi[3][10] + t->Phi[1][4]*t->Phi[4][10] +
             t->Phi[1][5]*t->Phi[5][10] + t->Phi[1][10]*t->Phi[10][10];
-    w->term[1][36] = t->Phi[1][0]*w->S[9] + t->Phi[1][1]*w->S[36] + t->Phi[1][2]*w->S[63] +
-            t->Phi[1][3]*w->S[90] + t->Phi[1][4]*w->S[117] + t->Phi[1][5]*w->S[144] +
-            t->Phi[1][10]*w->S[190];
+    w->term[1][36] = t->Phi[1][0]*w->S[10] + t->Phi[1][1]*w->S[40] + t->Phi[1][2]*w->S[70] +
+            t->Phi[1][3]*w->S[100] + t->Phi[1][4]*w->S[130] + t->Phi[1][5]*w->S[160] +
+            t->Phi[1][10]*w->S[210];
     w->term[0][37] = t->Phi[1][0]*t->Phi[0][11] + t->Phi[1][1]*t->Phi[1][11] +
             t->Phi[1][2]*t->Phi[2][11] + t->Phi[1][3]*t->Phi[3][11] + t->Phi[1][4]*t->Phi[4][11] +
             t->Phi[1][5]*t->Phi[5][11] + t->Phi[1][11]*t->Phi[11][11];
-    w->term[1][37] = t->Phi[1][0]*w->S[10] + t->Phi[1][1]*w->S[37] + t->Phi[1][2]*w->S[64] +
-            t->Phi[1][3]*w->S[91] + t->Phi[1][4]*w->S[118] + t->Phi[1][5]*w->S[145] +
-            t->Phi[1][11]*w->S[191];
+    w->term[1][37] = t->Phi[1][0]*w->S[11] + t->Phi[1][1]*w->S[41] + t->Phi[1][2]*w->S[71] +
+            t->Phi[1][3]*w->S[101] + t->Phi[1][4]*w->S[131] + t->Phi[1][5]*w->S[161] +
+            t->Phi[1][11]*w->S[211];
     w->term[0][38] = t->Phi[1][0]*t->Phi[0][12] + t->Phi[1][1]*t->Phi[1][12] +
             t->Phi[1][2]*t->Phi[2][12] + t->Phi[1][3]*t->Phi[3][12] + t->Phi[1][4]*t->Phi[4][12] +
             t->Phi[1][5]*t->Phi[5][12] + t->Phi[1][12]*t->Phi[12][12];
-    w->term[1][38] = t->Phi[1][0]*w->S[11] + t->Phi[1][1]*w->S[38] + t->Phi[1][2]*w->S[65] +
-            t->Phi[1][3]*w->S[92] + t->Phi[1][4]*w->S[119] + t->Phi[1][5]*w->S[146] +
-            t->Phi[1][12]*w->S[192];
+    w->term[1][38] = t->Phi[1][0]*w->S[12] + t->Phi[1][1]*w->S[42] + t->Phi[1][2]*w->S[72] +
+            t->Phi[1][3]*w->S[102] + t->Phi[1][4]*w->S[132] + t->Phi[1][5]*w->S[162] +
+            t->Phi[1][12]*w->S[212];
     w->term[0][39] = t->Phi[1][0]*t->Phi[0][13] + t->Phi[1][1]*t->Phi[1][13] +
             t->Phi[1][2]*t->Phi[2][13] + t->Phi[1][3]*t->Phi[3][13] + t->Phi[1][4]*t->Phi[4][13] +
             t->Phi[1][5]*t->Phi[5][13] + t->Phi[1][13]*t->Phi[13][13];
-    w->term[1][39] = t->Phi[1][0]*w->S[12] + t->Phi[1][1]*w->S[39] + t->Phi[1][2]*w->S[66] +
-            t->Phi[1][3]*w->S[93] + t->Phi[1][4]*w->S[120] + t->Phi[1][5]*w->S[147] +
-            t->Phi[1][13]*w->S[193];
+    w->term[1][39] = t->Phi[1][0]*w->S[13] + t->Phi[1][1]*w->S[43] + t->Phi[1][2]*w->S[73] +
+            t->Phi[1][3]*w->S[103] + t->Phi[1][4]*w->S[133] + t->Phi[1][5]*w->S[163] +
+            t->Phi[1][13]*w->S[213];
     w->term[0][40] = t->Phi[1][0]*t->Phi[0][14] + t->Phi[1][1]*t->Phi[1][14] +
             t->Phi[1][2]*t->Phi[2][14] + t->Phi[1][3]*t->Phi[3][14] + t->Phi[1][4]*t->Phi[4][14] +
             t->Phi[1][5]*t->Phi[5][14] + t->Phi[1][14]*t->Phi[14][14];
-    w->term[1][40] = t->Phi[1][0]*w->S[13] + t->Phi[1][1]*w->S[40] + t->Phi[1][2]*w->S[67] +
-            t->Phi[1][3]*w->S[94] + t->Phi[1][4]*w->S[121] + t->Phi[1][5]*w->S[148] +
-            t->Phi[1][14]*w->S[194];
+    w->term[1][40] = t->Phi[1][0]*w->S[14] + t->Phi[1][1]*w->S[44] + t->Phi[1][2]*w->S[74] +
+            t->Phi[1][3]*w->S[104] + t->Phi[1][4]*w->S[134] + t->Phi[1][5]*w->S[164] +
+            t->Phi[1][14]*w->S[214];
     w->term[0][41] = t->Phi[1][0]*t->Phi[0][15] + t->Phi[1][1]*t->Phi[1][15] +
             t->Phi[1][2]*t->Phi[2][15] + t->Phi[1][3]*t->Phi[3][15] + t->Phi[1][4]*t->Phi[4][15] +
             t->Phi[1][5]*t->Phi[5][15] + t->Phi[1][15]*t->Phi[15][15];
-    w->term[1][41] = t->Phi[1][0]*w->S[14] + t->Phi[1][1]*w->S[41] + t->Phi[1][2]*w->S[68] +
-            t->Phi[1][3]*w->S[95] + t->Phi[1][4]*w->S[122] + t->Phi[1][5]*w->S[149] +
-            t->Phi[1][15]*w->S[195];
+    w->term[1][41] = t->Phi[1][0]*w->S[15] + t->Phi[1][1]*w->S[45] + t->Phi[1][2]*w->S[75] +
+            t->Phi[1][3]*w->S[105] + t->Phi[1][4]*w->S[135] + t->Phi[1][5]*w->S[165] +
+            t->Phi[1][15]*w->S[215];
     w->term[0][42] = t->Phi[1][0]*t->Phi[0][18] + t->Phi[1][1]*t->Phi[1][18] +
             t->Phi[1][2]*t->Phi[2][18] + t->Phi[1][3]*t->Phi[3][18] + t->Phi[1][4]*t->Phi[4][18] +
             t->Phi[1][5]*t->Phi[5][18];
-    w->term[1][42] = t->Phi[1][0]*w->S[15] + t->Phi[1][1]*w->S[42] + t->Phi[1][2]*w->S[69] +
-            t->Phi[1][3]*w->S[96] + t->Phi[1][4]*w->S[123] + t->Phi[1][5]*w->S[150] + t->Phi[1][18];
+    w->term[1][42] = t->Phi[1][0]*w->S[18] + t->Phi[1][1]*w->S[48] + t->Phi[1][2]*w->S[78] +
+            t->Phi[1][3]*w->S[108] + t->Phi[1][4]*w->S[138] + t->Phi[1][5]*w->S[168] +
+            t->Phi[1][18];
     w->term[0][43] = t->Phi[1][0]*t->Phi[0][19] + t->Phi[1][1]*t->Phi[1][19] +
             t->Phi[1][2]*t->Phi[2][19] + t->Phi[1][3]*t->Phi[3][19] + t->Phi[1][4]*t->Phi[4][19] +
             t->Phi[1][5]*t->Phi[5][19];
-    w->term[1][43] = t->Phi[1][0]*w->S[16] + t->Phi[1][1]*w->S[43] + t->Phi[1][2]*w->S[70] +
-            t->Phi[1][3]*w->S[97] + t->Phi[1][4]*w->S[124] + t->Phi[1][5]*w->S[151] + t->Phi[1][19];
+    w->term[1][43] = t->Phi[1][0]*w->S[19] + t->Phi[1][1]*w->S[49] + t->Phi[1][2]*w->S[79] +
+            t->Phi[1][3]*w->S[109] + t->Phi[1][4]*w->S[139] + t->Phi[1][5]*w->S[169] +
+            t->Phi[1][19];
     w->term[0][44] = t->Phi[1][0]*t->Phi[0][20] + t->Phi[1][1]*t->Phi[1][20] +
             t->Phi[1][2]*t->Phi[2][20] + t->Phi[1][3]*t->Phi[3][20] + t->Phi[1][4]*t->Phi[4][20] +
             t->Phi[1][5]*t->Phi[5][20];
-    w->term[1][44] = t->Phi[1][0]*w->S[17] + t->Phi[1][1]*w->S[44] + t->Phi[1][2]*w->S[71] +
-            t->Phi[1][3]*w->S[98] + t->Phi[1][4]*w->S[125] + t->Phi[1][5]*w->S[152] + t->Phi[1][20];
+    w->term[1][44] = t->Phi[1][0]*w->S[20] + t->Phi[1][1]*w->S[50] + t->Phi[1][2]*w->S[80] +
+            t->Phi[1][3]*w->S[110] + t->Phi[1][4]*w->S[140] + t->Phi[1][5]*w->S[170] +
+            t->Phi[1][20];
     w->term[0][45] = t->Phi[1][0]*t->Phi[0][21] + t->Phi[1][1]*t->Phi[1][21] +
             t->Phi[1][2]*t->Phi[2][21] + t->Phi[1][3]*t->Phi[3][21] + t->Phi[1][4]*t->Phi[4][21] +
             t->Phi[1][5]*t->Phi[5][21];
-    w->term[1][45] = t->Phi[1][0]*w->S[18] + t->Phi[1][1]*w->S[45] + t->Phi[1][2]*w->S[72] +
-            t->Phi[1][3]*w->S[99] + t->Phi[1][4]*w->S[126] + t->Phi[1][5]*w->S[153] + t->Phi[1][21];
+    w->term[1][45] = t->Phi[1][0]*w->S[21] + t->Phi[1][1]*w->S[51] + t->Phi[1][2]*w->S[81] +
+            t->Phi[1][3]*w->S[111] + t->Phi[1][4]*w->S[141] + t->Phi[1][5]*w->S[171] +
+            t->Phi[1][21];
     w->term[0][46] = t->Phi[1][0]*t->Phi[0][22] + t->Phi[1][1]*t->Phi[1][22] +
             t->Phi[1][2]*t->Phi[2][22] + t->Phi[1][3]*t->Phi[3][22] + t->Phi[1][4]*t->Phi[4][22] +
             t->Phi[1][5]*t->Phi[5][22];
-    w->term[1][46] = t->Phi[1][0]*w->S[19] + t->Phi[1][1]*w->S[46] + t->Phi[1][2]*w->S[73] +
-            t->Phi[1][3]*w->S[100] + t->Phi[1][4]*w->S[127] + t->Phi[1][5]*w->S[154] +
+    w->term[1][46] = t->Phi[1][0]*w->S[22] + t->Phi[1][1]*w->S[52] + t->Phi[1][2]*w->S[82] +
+            t->Phi[1][3]*w->S[112] + t->Phi[1][4]*w->S[142] + t->Phi[1][5]*w->S[172] +
             t->Phi[1][22];
     w->term[0][47] = t->Phi[1][0]*t->Phi[0][23] + t->Phi[1][1]*t->Phi[1][23] +
             t->Phi[1][2]*t->Phi[2][23] + t->Phi[1][3]*t->Phi[3][23] + t->Phi[1][4]*t->Phi[4][23] +
             t->Phi[1][5]*t->Phi[5][23];
-    w->term[1][47] = t->Phi[1][0]*w->S[20] + t->Phi[1][1]*w->S[47] + t->Phi[1][2]*w->S[74] +
-            t->Phi[1][3]*w->S[101] + t->Phi[1][4]*w->S[128] + t->Phi[1][5]*w->S[155] +
+    w->term[1][47] = t->Phi[1][0]*w->S[23] + t->Phi[1][1]*w->S[53] + t->Phi[1][2]*w->S[83] +
+            t->Phi[1][3]*w->S[113] + t->Phi[1][4]*w->S[143] + t->Phi[1][5]*w->S[173] +
             t->Phi[1][23];
     w->term[0][48] = t->Phi[1][0]*t->Phi[0][24] + t->Phi[1][1]*t->Phi[1][24] +
             t->Phi[1][2]*t->Phi[2][24] + t->Phi[1][3]*t->Phi[3][24] + t->Phi[1][4]*t->Phi[4][24] +
             t->Phi[1][5]*t->Phi[5][24];
-    w->term[1][48] = t->Phi[1][0]*w->S[21] + t->Phi[1][1]*w->S[48] + t->Phi[1][2]*w->S[75] +
-            t->Phi[1][3]*w->S[102] + t->Phi[1][4]*w->S[129] + t->Phi[1][5]*w->S[156] +
+    w->term[1][48] = t->Phi[1][0]*w->S[24] + t->Phi[1][1]*w->S[54] + t->Phi[1][2]*w->S[84] +
+            t->Phi[1][3]*w->S[114] + t->Phi[1][4]*w->S[144] + t->Phi[1][5]*w->S[174] +
             t->Phi[1][24];
     w->term[0][49] = t->Phi[1][0]*t->Phi[0][25] + t->Phi[1][1]*t->Phi[1][25] +
             t->Phi[1][2]*t->Phi[2][25] + t->Phi[1][3]*t->Phi[3][25] + t->Phi[1][4]*t->Phi[4][25] +
             t->Phi[1][5]*t->Phi[5][25];
-    w->term[1][49] = t->Phi[1][0]*w->S[22] + t->Phi[1][1]*w->S[49] + t->Phi[1][2]*w->S[76] +
-            t->Phi[1][3]*w->S[103] + t->Phi[1][4]*w->S[130] + t->Phi[1][5]*w->S[157] +
+    w->term[1][49] = t->Phi[1][0]*w->S[25] + t->Phi[1][1]*w->S[55] + t->Phi[1][2]*w->S[85] +
+            t->Phi[1][3]*w->S[115] + t->Phi[1][4]*w->S[145] + t->Phi[1][5]*w->S[175] +
             t->Phi[1][25];
     w->term[0][50] = t->Phi[1][0]*t->Phi[0][26] + t->Phi[1][1]*t->Phi[1][26] +
             t->Phi[1][2]*t->Phi[2][26] + t->Phi[1][3]*t->Phi[3][26] + t->Phi[1][4]*t->Phi[4][26] +
             t->Phi[1][5]*t->Phi[5][26];
-    w->term[1][50] = t->Phi[1][0]*w->S[23] + t->Phi[1][1]*w->S[50] + t->Phi[1][2]*w->S[77] +
-            t->Phi[1][3]*w->S[104] + t->Phi[1][4]*w->S[131] + t->Phi[1][5]*w->S[158] +
+    w->term[1][50] = t->Phi[1][0]*w->S[26] + t->Phi[1][1]*w->S[56] + t->Phi[1][2]*w->S[86] +
+            t->Phi[1][3]*w->S[116] + t->Phi[1][4]*w->S[146] + t->Phi[1][5]*w->S[176] +
             t->Phi[1][26];
     w->term[0][51] = t->Phi[1][0]*t->Phi[0][27] + t->Phi[1][1]*t->Phi[1][27] +
             t->Phi[1][2]*t->Phi[2][27] + t->Phi[1][3]*t->Phi[3][27] + t->Phi[1][4]*t->Phi[4][27] +
             t->Phi[1][5]*t->Phi[5][27];
-    w->term[1][51] = t->Phi[1][0]*w->S[24] + t->Phi[1][1]*w->S[51] + t->Phi[1][2]*w->S[78] +
-            t->Phi[1][3]*w->S[105] + t->Phi[1][4]*w->S[132] + t->Phi[1][5]*w->S[159] +
+    w->term[1][51] = t->Phi[1][0]*w->S[27] + t->Phi[1][1]*w->S[57] + t->Phi[1][2]*w->S[87] +
+            t->Phi[1][3]*w->S[117] + t->Phi[1][4]*w->S[147] + t->Phi[1][5]*w->S[177] +
             t->Phi[1][27];
     w->term[0][52] = t->Phi[1][0]*t->Phi[0][28] + t->Phi[1][1]*t->Phi[1][28] +
             t->Phi[1][2]*t->Phi[2][28] + t->Phi[1][3]*t->Phi[3][28] + t->Phi[1][4]*t->Phi[4][28] +
             t->Phi[1][5]*t->Phi[5][28];
-    w->term[1][52] = t->Phi[1][0]*w->S[25] + t->Phi[1][1]*w->S[52] + t->Phi[1][2]*w->S[79] +
-            t->Phi[1][3]*w->S[106] + t->Phi[1][4]*w->S[133] + t->Phi[1][5]*w->S[160] +
+    w->term[1][52] = t->Phi[1][0]*w->S[28] + t->Phi[1][1]*w->S[58] + t->Phi[1][2]*w->S[88] +
+            t->Phi[1][3]*w->S[118] + t->Phi[1][4]*w->S[148] + t->Phi[1][5]*w->S[178] +
             t->Phi[1][28];
     w->term[0][53] = t->Phi[1][0]*t->Phi[0][29] + t->Phi[1][1]*t->Phi[1][29] +
             t->Phi[1][2]*t->Phi[2][29] + t->Phi[1][3]*t->Phi[3][29] + t->Phi[1][4]*t->Phi[4][29] +
             t->Phi[1][5]*t->Phi[5][29];
-    w->term[1][53] = t->Phi[1][0]*w->S[26] + t->Phi[1][1]*w->S[53] + t->Phi[1][2]*w->S[80] +
-            t->Phi[1][3]*w->S[107] + t->Phi[1][4]*w->S[134] + t->Phi[1][5]*w->S[161] +
+    w->term[1][53] = t->Phi[1][0]*w->S[29] + t->Phi[1][1]*w->S[59] + t->Phi[1][2]*w->S[89] +
+            t->Phi[1][3]*w->S[119] + t->Phi[1][4]*w->S[149] + t->Phi[1][5]*w->S[179] +
             t->Phi[1][29];
     w->term[0][54] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
             t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
             t->Phi[2][5]*t->Phi[5][0];
-    w->term[1][54] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[27] + t->Phi[2][2]*w->S[54] +
-            t->Phi[2][3]*w->S[81] + t->Phi[2][4]*w->S[108] + t->Phi[2][5]*w->S[135];
+    w->term[1][54] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[30] + t->Phi[2][2]*w->S[60] +
+            t->Phi[2][3]*w->S[90] + t->Phi[2][4]*w->S[120] + t->Phi[2][5]*w->S[150];
     w->term[0][55] = t->Phi[2][0]*t->Phi[0][1] + t->Phi[2][1]*t->Phi[1][1] +
             t->Phi[2][2]*t->Phi[2][1] + t->Phi[2][3]*t->Phi[3][1] + t->Phi[2][4]*t->Phi[4][1] +
             t->Phi[2][5]*t->Phi[5][1];
-    w->term[1][55] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[28] + t->Phi[2][2]*w->S[55] +
-            t->Phi[2][3]*w->S[82] + t->Phi[2][4]*w->S[109] + t->Phi[2][5]*w->S[136];
+    w->term[1][55] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[31] + t->Phi[2][2]*w->S[61] +
+            t->Phi[2][3]*w->S[91] + t->Phi[2][4]*w->S[121] + t->Phi[2][5]*w->S[151];
     w->term[0][56] = t->Phi[2][0]*t->Phi[0][2] + t->Phi[2][1]*t->Phi[1][2] +
             t->Phi[2][2]*t->Phi[2][2] + t->Phi[2][3]*t->Phi[3][2] + t->Phi[2][4]*t->Phi[4][2] +
             t->Phi[2][5]*t->Phi[5][2];
-    w->term[1][56] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[29] + t->Phi[2][2]*w->S[56] +
-            t->Phi[2][3]*w->S[83] + t->Phi[2][4]*w->S[110] + t->Phi[2][5]*w->S[137];
+    w->term[1][56] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[32] + t->Phi[2][2]*w->S[62] +
+            t->Phi[2][3]*w->S[92] + t->Phi[2][4]*w->S[122] + t->Phi[2][5]*w->S[152];
     w->term[0][57] = t->Phi[2][0]*t->Phi[0][3] + t->Phi[2][1]*t->Phi[1][3] +
             t->Phi[2][2]*t->Phi[2][3] + t->Phi[2][3]*t->Phi[3][3] + t->Phi[2][4]*t->Phi[4][3] +
             t->Phi[2][5]*t->Phi[5][3];
-    w->term[1][57] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[30] + t->Phi[2][2]*w->S[57] +
-            t->Phi[2][3]*w->S[84] + t->Phi[2][4]*w->S[111] + t->Phi[2][5]*w->S[138];
+    w->term[1][57] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[33] + t->Phi[2][2]*w->S[63] +
+            t->Phi[2][3]*w->S[93] + t->Phi[2][4]*w->S[123] + t->Phi[2][5]*w->S[153];
     w->term[0][58] = t->Phi[2][0]*t->Phi[0][4] + t->Phi[2][1]*t->Phi[1][4] +
             t->Phi[2][2]*t->Phi[2][4] + t->Phi[2][3]*t->Phi[3][4] + t->Phi[2][4]*t->Phi[4][4] +
             t->Phi[2][5]*t->Phi[5][4];
-    w->term[1][58] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[31] + t->Phi[2][2]*w->S[58] +
-            t->Phi[2][3]*w->S[85] + t->Phi[2][4]*w->S[112] + t->Phi[2][5]*w->S[139];
+    w->term[1][58] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[34] + t->Phi[2][2]*w->S[64] +
+            t->Phi[2][3]*w->S[94] + t->Phi[2][4]*w->S[124] + t->Phi[2][5]*w->S[154];
     w->term[0][59] = t->Phi[2][0]*t->Phi[0][5] + t->Phi[2][1]*t->Phi[1][5] +
             t->Phi[2][2]*t->Phi[2][5] + t->Phi[2][3]*t->Phi[3][5] + t->Phi[2][4]*t->Phi[4][5] +
             t->Phi[2][5]*t->Phi[5][5];
-    w->term[1][59] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[32] + t->Phi[2][2]*w->S[59] +
-            t->Phi[2][3]*w->S[86] + t->Phi[2][4]*w->S[113] + t->Phi[2][5]*w->S[140];
+    w->term[1][59] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[35] + t->Phi[2][2]*w->S[65] +
+            t->Phi[2][3]*w->S[95] + t->Phi[2][4]*w->S[125] + t->Phi[2][5]*w->S[155];
     w->term[0][60] = t->Phi[2][0]*t->Phi[0][7] + t->Phi[2][1]*t->Phi[1][7] +
             t->Phi[2][2]*t->Phi[2][7] + t->Phi[2][3]*t->Phi[3][7] + t->Phi[2][4]*t->Phi[4][7] +
             t->Phi[2][5]*t->Phi[5][7];
-    w->term[1][60] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[33] + t->Phi[2][2]*w->S[60] +
-            t->Phi[2][3]*w->S[87] + t->Phi[2][4]*w->S[114] + t->Phi[2][5]*w->S[141] + t->Phi[2][7];
+    w->term[1][60] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[37] + t->Phi[2][2]*w->S[67] +
+            t->Phi[2][3]*w->S[97] + t->Phi[2][4]*w->S[127] + t->Phi[2][5]*w->S[157] + t->Phi[2][7];
     w->term[0][61] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
             t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
             t->Phi[2][5]*t->Phi[5][8];
-    w->term[1][61] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[34] + t->Phi[2][2]*w->S[61] +
-            t->Phi[2][3]*w->S[88] + t->Phi[2][4]*w->S[115] + t->Phi[2][5]*w->S[142] + t->Phi[2][8];
+    w->term[1][61] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[38] + t->Phi[2][2]*w->S[68] +
+            t->Phi[2][3]*w->S[98] + t->Phi[2][4]*w->S[128] + t->Phi[2][5]*w->S[158] + t->Phi[2][8];
     w->term[0][62] = t->Phi[2][0]*t->Phi[0][9] + t->Phi[2][1]*t->Phi[1][9] +
             t->Phi[2][2]*t->Phi[2][9] + t->Phi[2][3]*t->Phi[3][9] + t->Phi[2][4]*t->Phi[4][9] +
             t->Phi[2][5]*t->Phi[5][9];
-    w->term[1][62] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[35] + t->Phi[2][2]*w->S[62] +
-            t->Phi[2][3]*w->S[89] + t->Phi[2][4]*w->S[116] + t->Phi[2][5]*w->S[143] + t->Phi[2][9];
+    w->term[1][62] = t->Phi[2][0]*w->S[9] + t->Phi[2][1]*w->S[39] + t->Phi[2][2]*w->S[69] +
+            t->Phi[2][3]*w->S[99] + t->Phi[2][4]*w->S[129] + t->Phi[2][5]*w->S[159] + t->Phi[2][9];
     w->term[0][63] = t->Phi[2][0]*t->Phi[0][10] + t->Phi[2][1]*t->Phi[1][10] +
             t->Phi[2][2]*t->Phi[2][10] + t->Phi[2][3]*t->Phi[3][10] + t->Phi[2][4]*t->Phi[4][10] +
             t->Phi[2][5]*t->Phi[5][10] + t->Phi[2][10]*t->Phi[10][10];
-    w->term[1][63] = t->Phi[2][0]*w->S[9] + t->Phi[2][1]*w->S[36] + t->Phi[2][2]*w->S[63] +
-            t->Phi[2][3]*w->S[90] + t->Phi[2][4]*w->S[117] + t->Phi[2][5]*w->S[144] +
-            t->Phi[2][10]*w->S[190];
+    w->term[1][63] = t->Phi[2][0]*w->S[10] + t->Phi[2][1]*w->S[40] + t->Phi[2][2]*w->S[70] +
+            t->Phi[2][3]*w->S[100] + t->Phi[2][4]*w->S[130] + t->Phi[2][5]*w->S[160] +
+            t->Phi[2][10]*w->S[210];
     w->term[0][64] = t->Phi[2][0]*t->Phi[0][11] + t->Phi[2][1]*t->Phi[1][11] +
             t->Phi[2][2]*t->Phi[2][11] + t->Phi[2][3]*t->Phi[3][11] + t->Phi[2][4]*t->Phi[4][11] +
             t->Phi[2][5]*t->Phi[5][11] + t->Phi[2][11]*t->Phi[11][11];
-    w->term[1][64] = t->Phi[2][0]*w->S[10] + t->Phi[2][1]*w->S[37] + t->Phi[2][2]*w->S[64] +
-            t->Phi[2][3]*w->S[91] + t->Phi[2][4]*w->S[118] + t->Phi[2][5]*w->S[145] +
-            t->Phi[2][11]*w->S[191];
+    w->term[1][64] = t->Phi[2][0]*w->S[11] + t->Phi[2][1]*w->S[41] + t->Phi[2][2]*w->S[71] +
+            t->Phi[2][3]*w->S[101] + t->Phi[2][4]*w->S[131] + t->Phi[2][5]*w->S[161] +
+            t->Phi[2][11]*w->S[211];
     w->term[0][65] = t->Phi[2][0]*t->Phi[0][12] + t->Phi[2][1]*t->Phi[1][12] +
             t->Phi[2][2]*t->Phi[2][12] + t->Phi[2][3]*t->Phi[3][12] + t->Phi[2][4]*t->Phi[4][12] +
             t->Phi[2][5]*t->Phi[5][12] + t->Phi[2][12]*t->Phi[12][12];
-    w->term[1][65] = t->Phi[2][0]*w->S[11] + t->Phi[2][1]*w->S[38] + t->Phi[2][2]*w->S[65] +
-            t->Phi[2][3]*w->S[92] + t->Phi[2][4]*w->S[119] + t->Phi[2][5]*w->S[146] +
-            t->Phi[2][12]*w->S[192];
+    w->term[1][65] = t->Phi[2][0]*w->S[12] + t->Phi[2][1]*w->S[42] + t->Phi[2][2]*w->S[72] +
+            t->Phi[2][3]*w->S[102] + t->Phi[2][4]*w->S[132] + t->Phi[2][5]*w->S[162] +
+            t->Phi[2][12]*w->S[212];
     w->term[0][66] = t->Phi[2][0]*t->Phi[0][13] + t->Phi[2][1]*t->Phi[1][13] +
             t->Phi[2][2]*t->Phi[2][13] + t->Phi[2][3]*t->Phi[3][13] + t->Phi[2][4]*t->Phi[4][13] +
             t->Phi[2][5]*t->Phi[5][13] + t->Phi[2][13]*t->Phi[13][13];
-    w->term[1][66] = t->Phi[2][0]*w->S[12] + t->Phi[2][1]*w->S[39] + t->Phi[2][2]*w->S[66] +
-            t->Phi[2][3]*w->S[93] + t->Phi[2][4]*w->S[120] + t->Phi[2][5]*w->S[147] +
-            t->Phi[2][13]*w->S[193];
+    w->term[1][66] = t->Phi[2][0]*w->S[13] + t->Phi[2][1]*w->S[43] + t->Phi[2][2]*w->S[73] +
+            t->Phi[2][3]*w->S[103] + t->Phi[2][4]*w->S[133] + t->Phi[2][5]*w->S[163] +
+            t->Phi[2][13]*w->S[213];
     w->term[0][67] = t->Phi[2][0]*t->Phi[0][14] + t->Phi[2][1]*t->Phi[1][14] +
             t->Phi[2][2]*t->Phi[2][14] + t->Phi[2][3]*t->Phi[3][14] + t->Phi[2][4]*t->Phi[4][14] +
             t->Phi[2][5]*t->Phi[5][14] + t->Phi[2][14]*t->Phi[14][14];
-    w->term[1][67] = t->Phi[2][0]*w->S[13] + t->Phi[2][1]*w->S[40] + t->Phi[2][2]*w->S[67] +
-            t->Phi[2][3]*w->S[94] + t->Phi[2][4]*w->S[121] + t->Phi[2][5]*w->S[148] +
-            t->Phi[2][14]*w->S[194];
+    w->term[1][67] = t->Phi[2][0]*w->S[14] + t->Phi[2][1]*w->S[44] + t->Phi[2][2]*w->S[74] +
+            t->Phi[2][3]*w->S[104] + t->Phi[2][4]*w->S[134] + t->Phi[2][5]*w->S[164] +
+            t->Phi[2][14]*w->S[214];
     w->term[0][68] = t->Phi[2][0]*t->Phi[0][15] + t->Phi[2][1]*t->Phi[1][15] +
             t->Phi[2][2]*t->Phi[2][15] + t->Phi[2][3]*t->Phi[3][15] + t->Phi[2][4]*t->Phi[4][15] +
             t->Phi[2][5]*t->Phi[5][15] + t->Phi[2][15]*t->Phi[15][15];
-    w->term[1][68] = t->Phi[2][0]*w->S[14] + t->Phi[2][1]*w->S[41] + t->Phi[2][2]*w->S[68] +
-            t->Phi[2][3]*w->S[95] + t->Phi[2][4]*w->S[122] + t->Phi[2][5]*w->S[149] +
-            t->Phi[2][15]*w->S[195];
+    w->term[1][68] = t->Phi[2][0]*w->S[15] + t->Phi[2][1]*w->S[45] + t->Phi[2][2]*w->S[75] +
+            t->Phi[2][3]*w->S[105] + t->Phi[2][4]*w->S[135] + t->Phi[2][5]*w->S[165] +
+            t->Phi[2][15]*w->S[215];
     w->term[0][69] = t->Phi[2][0]*t->Phi[0][18] + t->Phi[2][1]*t->Phi[1][18] +
             t->Phi[2][2]*t->Phi[2][18] + t->Phi[2][3]*t->Phi[3][18] + t->Phi[2][4]*t->Phi[4][18] +
             t->Phi[2][5]*t->Phi[5][18];
-    w->term[1][69] = t->Phi[2][0]*w->S[15] + t->Phi[2][1]*w->S[42] + t->Phi[2][2]*w->S[69] +
-            t->Phi[2][3]*w->S[96] + t->Phi[2][4]*w->S[123] + t->Phi[2][5]*w->S[150] + t->Phi[2][18];
+    w->term[1][69] = t->Phi[2][0]*w->S[18] + t->Phi[2][1]*w->S[48] + t->Phi[2][2]*w->S[78] +
+            t->Phi[2][3]*w->S[108] + t->Phi[2][4]*w->S[138] + t->Phi[2][5]*w->S[168] +
+            t->Phi[2][18];
     w->term[0][70] = t->Phi[2][0]*t->Phi[0][19] + t->Phi[2][1]*t->Phi[1][19] +
             t->Phi[2][2]*t->Phi[2][19] + t->Phi[2][3]*t->Phi[3][19] + t->Phi[2][4]*t->Phi[4][19] +
             t->Phi[2][5]*t->Phi[5][19];
-    w->term[1][70] = t->Phi[2][0]*w->S[16] + t->Phi[2][1]*w->S[43] + t->Phi[2][2]*w->S[70] +
-            t->Phi[2][3]*w->S[97] + t->Phi[2][4]*w->S[124] + t->Phi[2][5]*w->S[151] + t->Phi[2][19];
+    w->term[1][70] = t->Phi[2][0]*w->S[19] + t->Phi[2][1]*w->S[49] + t->Phi[2][2]*w->S[79] +
+            t->Phi[2][3]*w->S[109] + t->Phi[2][4]*w->S[139] + t->Phi[2][5]*w->S[169] +
+            t->Phi[2][19];
     w->term[0][71] = t->Phi[2][0]*t->Phi[0][20] + t->Phi[2][1]*t->Phi[1][20] +
             t->Phi[2][2]*t->Phi[2][20] + t->Phi[2][3]*t->Phi[3][20] + t->Phi[2][4]*t->Phi[4][20] +
             t->Phi[2][5]*t->Phi[5][20];
-    w->term[1][71] = t->Phi[2][0]*w->S[17] + t->Phi[2][1]*w->S[44] + t->Phi[2][2]*w->S[71] +
-            t->Phi[2][3]*w->S[98] + t->Phi[2][4]*w->S[125] + t->Phi[2][5]*w->S[152] + t->Phi[2][20];
+    w->term[1][71] = t->Phi[2][0]*w->S[20] + t->Phi[2][1]*w->S[50] + t->Phi[2][2]*w->S[80] +
+            t->Phi[2][3]*w->S[110] + t->Phi[2][4]*w->S[140] + t->Phi[2][5]*w->S[170] +
+            t->Phi[2][20];
     w->term[0][72] = t->Phi[2][0]*t->Phi[0][21] + t->Phi[2][1]*t->Phi[1][21] +
             t->Phi[2][2]*t->Phi[2][21] + t->Phi[2][3]*t->Phi[3][21] + t->Phi[2][4]*t->Phi[4][21] +
             t->Phi[2][5]*t->Phi[5][21];
-    w->term[1][72] = t->Phi[2][0]*w->S[18] + t->Phi[2][1]*w->S[45] + t->Phi[2][2]*w->S[72] +
-            t->Phi[2][3]*w->S[99] + t->Phi[2][4]*w->S[126] + t->Phi[2][5]*w->S[153] + t->Phi[2][21];
+    w->term[1][72] = t->Phi[2][0]*w->S[21] + t->Phi[2][1]*w->S[51] + t->Phi[2][2]*w->S[81] +
+            t->Phi[2][3]*w->S[111] + t->Phi[2][4]*w->S[141] + t->Phi[2][5]*w->S[171] +
+            t->Phi[2][21];
     w->term[0][73] = t->Phi[2][0]*t->Phi[0][22] + t->Phi[2][1]*t->Phi[1][22] +
             t->Phi[2][2]*t->Phi[2][22] + t->Phi[2][3]*t->Phi[3][22] + t->Phi[2][4]*t->Phi[4][22] +
             t->Phi[2][5]*t->Phi[5][22];
-    w->term[1][73] = t->Phi[2][0]*w->S[19] + t->Phi[2][1]*w->S[46] + t->Phi[2][2]*w->S[73] +
-            t->Phi[2][3]*w->S[100] + t->Phi[2][4]*w->S[127] + t->Phi[2][5]*w->S[154] +
+    w->term[1][73] = t->Phi[2][0]*w->S[22] + t->Phi[2][1]*w->S[52] + t->Phi[2][2]*w->S[82] +
+            t->Phi[2][3]*w->S[112] + t->Phi[2][4]*w->S[142] + t->Phi[2][5]*w->S[172] +
             t->Phi[2][22];
     w->term[0][74] = t->Phi[2][0]*t->Phi[0][23] + t->Phi[2][1]*t->Phi[1][23] +
             t->Phi[2][2]*t->Phi[2][23] + t->Phi[2][3]*t->Phi[3][23] + t->Phi[2][4]*t->Phi[4][23] +
             t->Phi[2][5]*t->Phi[5][23];
-    w->term[1][74] = t->Phi[2][0]*w->S[20] + t->Phi[2][1]*w->S[47] + t->Phi[2][2]*w->S[74] +
-            t->Phi[2][3]*w->S[101] + t->Phi[2][4]*w->S[128] + t->Phi[2][5]*w->S[155] +
+    w->term[1][74] = t->Phi[2][0]*w->S[23] + t->Phi[2][1]*w->S[53] + t->Phi[2][2]*w->S[83] +
+            t->Phi[2][3]*w->S[113] + t->Phi[2][4]*w->S[143] + t->Phi[2][5]*w->S[173] +
             t->Phi[2][23];
     w->term[0][75] = t->Phi[2][0]*t->Phi[0][24] + t->Phi[2][1]*t->Phi[1][24] +
             t->Phi[2][2]*t->Phi[2][24] + t->Phi[2][3]*t->Phi[3][24] + t->Phi[2][4]*t->Phi[4][24] +
             t->Phi[2][5]*t->Phi[5][24];
-    w->term[1][75] = t->Phi[2][0]*w->S[21] + t->Phi[2][1]*w->S[48] + t->Phi[2][2]*w->S[75] +
-            t->Phi[2][3]*w->S[102] + t->Phi[2][4]*w->S[129] + t->Phi[2][5]*w->S[156] +
+    w->term[1][75] = t->Phi[2][0]*w->S[24] + t->Phi[2][1]*w->S[54] + t->Phi[2][2]*w->S[84] +
+            t->Phi[2][3]*w->S[114] + t->Phi[2][4]*w->S[144] + t->Phi[2][5]*w->S[174] +
             t->Phi[2][24];
     w->term[0][76] = t->Phi[2][0]*t->Phi[0][25] + t->Phi[2][1]*t->Phi[1][25] +
             t->Phi[2][2]*t->Phi[2][25] + t->Phi[2][3]*t->Phi[3][25] + t->Phi[2][4]*t->Phi[4][25] +
             t->Phi[2][5]*t->Phi[5][25];
-    w->term[1][76] = t->Phi[2][0]*w->S[22] + t->Phi[2][1]*w->S[49] + t->Phi[2][2]*w->S[76] +
-            t->Phi[2][3]*w->S[103] + t->Phi[2][4]*w->S[130] + t->Phi[2][5]*w->S[157] +
+    w->term[1][76] = t->Phi[2][0]*w->S[25] + t->Phi[2][1]*w->S[55] + t->Phi[2][2]*w->S[85] +
+            t->Phi[2][3]*w->S[115] + t->Phi[2][4]*w->S[145] + t->Phi[2][5]*w->S[175] +
             t->Phi[2][25];
     w->term[0][77] = t->Phi[2][0]*t->Phi[0][26] + t->Phi[2][1]*t->Phi[1][26] +
             t->Phi[2][2]*t->Phi[2][26] + t->Phi[2][3]*t->Phi[3][26] + t->Phi[2][4]*t->Phi[4][26] +
             t->Phi[2][5]*t->Phi[5][26];
-    w->term[1][77] = t->Phi[2][0]*w->S[23] + t->Phi[2][1]*w->S[50] + t->Phi[2][2]*w->S[77] +
-            t->Phi[2][3]*w->S[104] + t->Phi[2][4]*w->S[131] + t->Phi[2][5]*w->S[158] +
+    w->term[1][77] = t->Phi[2][0]*w->S[26] + t->Phi[2][1]*w->S[56] + t->Phi[2][2]*w->S[86] +
+            t->Phi[2][3]*w->S[116] + t->Phi[2][4]*w->S[146] + t->Phi[2][5]*w->S[176] +
             t->Phi[2][26];
     w->term[0][78] = t->Phi[2][0]*t->Phi[0][27] + t->Phi[2][1]*t->Phi[1][27] +
             t->Phi[2][2]*t->Phi[2][27] + t->Phi[2][3]*t->Phi[3][27] + t->Phi[2][4]*t->Phi[4][27] +
             t->Phi[2][5]*t->Phi[5][27];
-    w->term[1][78] = t->Phi[2][0]*w->S[24] + t->Phi[2][1]*w->S[51] + t->Phi[2][2]*w->S[78] +
-            t->Phi[2][3]*w->S[105] + t->Phi[2][4]*w->S[132] + t->Phi[2][5]*w->S[159] +
+    w->term[1][78] = t->Phi[2][0]*w->S[27] + t->Phi[2][1]*w->S[57] + t->Phi[2][2]*w->S[87] +
+            t->Phi[2][3]*w->S[117] + t->Phi[2][4]*w->S[147] + t->Phi[2][5]*w->S[177] +
             t->Phi[2][27];
     w->term[0][79] = t->Phi[2][0]*t->Phi[0][28] + t->Phi[2][1]*t->Phi[1][28] +
             t->Phi[2][2]*t->Phi[2][28] + t->Phi[2][3]*t->Phi[3][28] + t->Phi[2][4]*t->Phi[4][28] +
             t->Phi[2][5]*t->Phi[5][28];
-    w->term[1][79] = t->Phi[2][0]*w->S[25] + t->Phi[2][1]*w->S[52] + t->Phi[2][2]*w->S[79] +
-            t->Phi[2][3]*w->S[106] + t->Phi[2][4]*w->S[133] + t->Phi[2][5]*w->S[160] +
+    w->term[1][79] = t->Phi[2][0]*w->S[28] + t->Phi[2][1]*w->S[58] + t->Phi[2][2]*w->S[88] +
+            t->Phi[2][3]*w->S[118] + t->Phi[2][4]*w->S[148] + t->Phi[2][5]*w->S[178] +
             t->Phi[2][28];
     w->term[0][80] = t->Phi[2][0]*t->Phi[0][29] + t->Phi[2][1]*t->Phi[1][29] +
             t->Phi[2][2]*t->Phi[2][29] + t->Phi[2][3]*t->Phi[3][29] + t->Phi[2][4]*t->Phi[4][29] +
             t->Phi[2][5]*t->Phi[5][29];
-    w->term[1][80] = t->Phi[2][0]*w->S[26] + t->Phi[2][1]*w->S[53] + t->Phi[2][2]*w->S[80] +
-            t->Phi[2][3]*w->S[107] + t->Phi[2][4]*w->S[134] + t->Phi[2][5]*w->S[161] +
+    w->term[1][80] = t->Phi[2][0]*w->S[29] + t->Phi[2][1]*w->S[59] + t->Phi[2][2]*w->S[89] +
+            t->Phi[2][3]*w->S[119] + t->Phi[2][4]*w->S[149] + t->Phi[2][5]*w->S[179] +
             t->Phi[2][29];
     w->term[0][81] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
             t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
             t->Phi[3][5]*t->Phi[5][0];
-    w->term[1][81] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[27] + t->Phi[3][2]*w->S[54] +
-            t->Phi[3][3]*w->S[81] + t->Phi[3][4]*w->S[108] + t->Phi[3][5]*w->S[135];
+    w->term[1][81] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[30] + t->Phi[3][2]*w->S[60] +
+            t->Phi[3][3]*w->S[90] + t->Phi[3][4]*w->S[120] + t->Phi[3][5]*w->S[150];
     w->term[0][82] = t->Phi[3][0]*t->Phi[0][1] + t->Phi[3][1]*t->Phi[1][1] +
             t->Phi[3][2]*t->Phi[2][1] + t->Phi[3][3]*t->Phi[3][1] + t->Phi[3][4]*t->Phi[4][1] +
             t->Phi[3][5]*t->Phi[5][1];
-    w->term[1][82] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[28] + t->Phi[3][2]*w->S[55] +
-            t->Phi[3][3]*w->S[82] + t->Phi[3][4]*w->S[109] + t->Phi[3][5]*w->S[136];
+    w->term[1][82] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[31] + t->Phi[3][2]*w->S[61] +
+            t->Phi[3][3]*w->S[91] + t->Phi[3][4]*w->S[121] + t->Phi[3][5]*w->S[151];
     w->term[0][83] = t->Phi[3][0]*t->Phi[0][2] + t->Phi[3][1]*t->Phi[1][2] +
             t->Phi[3][2]*t->Phi[2][2] + t->Phi[3][3]*t->Phi[3][2] + t->Phi[3][4]*t->Phi[4][2] +
             t->Phi[3][5]*t->Phi[5][2];
-    w->term[1][83] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[29] + t->Phi[3][2]*w->S[56] +
-            t->Phi[3][3]*w->S[83] + t->Phi[3][4]*w->S[110] + t->Phi[3][5]*w->S[137];
+    w->term[1][83] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[32] + t->Phi[3][2]*w->S[62] +
+            t->Phi[3][3]*w->S[92] + t->Phi[3][4]*w->S[122] + t->Phi[3][5]*w->S[152];
     w->term[0][84] = t->Phi[3][0]*t->Phi[0][3] + t->Phi[3][1]*t->Phi[1][3] +
             t->Phi[3][2]*t->Phi[2][3] + t->Phi[3][3]*t->Phi[3][3] + t->Phi[3][4]*t->Phi[4][3] +
             t->Phi[3][5]*t->Phi[5][3];
-    w->term[1][84] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[30] + t->Phi[3][2]*w->S[57] +
-            t->Phi[3][3]*w->S[84] + t->Phi[3][4]*w->S[111] + t->Phi[3][5]*w->S[138];
+    w->term[1][84] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[33] + t->Phi[3][2]*w->S[63] +
+            t->Phi[3][3]*w->S[93] + t->Phi[3][4]*w->S[123] + t->Phi[3][5]*w->S[153];
     w->term[0][85] = t->Phi[3][0]*t->Phi[0][4] + t->Phi[3][1]*t->Phi[1][4] +
             t->Phi[3][2]*t->Phi[2][4] + t->Phi[3][3]*t->Phi[3][4] + t->Phi[3][4]*t->Phi[4][4] +
             t->Phi[3][5]*t->Phi[5][4];
-    w->term[1][85] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[31] + t->Phi[3][2]*w->S[58] +
-            t->Phi[3][3]*w->S[85] + t->Phi[3][4]*w->S[112] + t->Phi[3][5]*w->S[139];
+    w->term[1][85] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[34] + t->Phi[3][2]*w->S[64] +
+            t->Phi[3][3]*w->S[94] + t->Phi[3][4]*w->S[124] + t->Phi[3][5]*w->S[154];
     w->term[0][86] = t->Phi[3][0]*t->Phi[0][5] + t->Phi[3][1]*t->Phi[1][5] +
             t->Phi[3][2]*t->Phi[2][5] + t->Phi[3][3]*t->Phi[3][5] + t->Phi[3][4]*t->Phi[4][5] +
             t->Phi[3][5]*t->Phi[5][5];
-    w->term[1][86] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[32] + t->Phi[3][2]*w->S[59] +
-            t->Phi[3][3]*w->S[86] + t->Phi[3][4]*w->S[113] + t->Phi[3][5]*w->S[140];
+    w->term[1][86] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[35] + t->Phi[3][2]*w->S[65] +
+            t->Phi[3][3]*w->S[95] + t->Phi[3][4]*w->S[125] + t->Phi[3][5]*w->S[155];
     w->term[0][87] = t->Phi[3][0]*t->Phi[0][7] + t->Phi[3][1]*t->Phi[1][7] +
             t->Phi[3][2]*t->Phi[2][7] + t->Phi[3][3]*t->Phi[3][7] + t->Phi[3][4]*t->Phi[4][7] +
             t->Phi[3][5]*t->Phi[5][7];
-    w->term[1][87] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[33] + t->Phi[3][2]*w->S[60] +
-            t->Phi[3][3]*w->S[87] + t->Phi[3][4]*w->S[114] + t->Phi[3][5]*w->S[141] + t->Phi[3][7];
+    w->term[1][87] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[37] + t->Phi[3][2]*w->S[67] +
+            t->Phi[3][3]*w->S[97] + t->Phi[3][4]*w->S[127] + t->Phi[3][5]*w->S[157] + t->Phi[3][7];
     w->term[0][88] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
             t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
             t->Phi[3][5]*t->Phi[5][8];
-    w->term[1][88] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[34] + t->Phi[3][2]*w->S[61] +
-            t->Phi[3][3]*w->S[88] + t->Phi[3][4]*w->S[115] + t->Phi[3][5]*w->S[142] + t->Phi[3][8];
+    w->term[1][88] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[38] + t->Phi[3][2]*w->S[68] +
+            t->Phi[3][3]*w->S[98] + t->Phi[3][4]*w->S[128] + t->Phi[3][5]*w->S[158] + t->Phi[3][8];
     w->term[0][89] = t->Phi[3][0]*t->Phi[0][9] + t->Phi[3][1]*t->Phi[1][9] +
             t->Phi[3][2]*t->Phi[2][9] + t->Phi[3][3]*t->Phi[3][9] + t->Phi[3][4]*t->Phi[4][9] +
             t->Phi[3][5]*t->Phi[5][9];
-    w->term[1][89] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[35] + t->Phi[3][2]*w->S[62] +
-            t->Phi[3][3]*w->S[89] + t->Phi[3][4]*w->S[116] + t->Phi[3][5]*w->S[143] + t->Phi[3][9];
+    w->term[1][89] = t->Phi[3][0]*w->S[9] + t->Phi[3][1]*w->S[39] + t->Phi[3][2]*w->S[69] +
+            t->Phi[3][3]*w->S[99] + t->Phi[3][4]*w->S[129] + t->Phi[3][5]*w->S[159] + t->Phi[3][9];
     w->term[0][90] = t->Phi[3][0]*t->Phi[0][10] + t->Phi[3][1]*t->Phi[1][10] +
             t->Phi[3][2]*t->Phi[2][10] + t->Phi[3][3]*t->Phi[3][10] + t->Phi[3][4]*t->Phi[4][10] +
             t->Phi[3][5]*t->Phi[5][10] + t->Phi[3][10]*t->Phi[10][10];
-    w->term[1][90] = t->Phi[3][0]*w->S[9] + t->Phi[3][1]*w->S[36] + t->Phi[3][2]*w->S[63] +
-            t->Phi[3][3]*w->S[90] + t->Phi[3][4]*w->S[117] + t->Phi[3][5]*w->S[144] +
-            t->Phi[3][10]*w->S[190];
+    w->term[1][90] = t->Phi[3][0]*w->S[10] + t->Phi[3][1]*w->S[40] + t->Phi[3][2]*w->S[70] +
+            t->Phi[3][3]*w->S[100] + t->Phi[3][4]*w->S[130] + t->Phi[3][5]*w->S[160] +
+            t->Phi[3][10]*w->S[210];
     w->term[0][91] = t->Phi[3][0]*t->Phi[0][11] + t->Phi[3][1]*t->Phi[1][11] +
             t->Phi[3][2]*t->Phi[2][11] + t->Phi[3][3]*t->Phi[3][11] + t->Phi[3][4]*t->Phi[4][11] +
             t->Phi[3][5]*t->Phi[5][11] + t->Phi[3][11]*t->Phi[11][11];
-    w->term[1][91] = t->Phi[3][0]*w->S[10] + t->Phi[3][1]*w->S[37] + t->Phi[3][2]*w->S[64] +
-            t->Phi[3][3]*w->S[91] + t->Phi[3][4]*w->S[118] + t->Phi[3][5]*w->S[145] +
-            t->Phi[3][11]*w->S[191];
+    w->term[1][91] = t->Phi[3][0]*w->S[11] + t->Phi[3][1]*w->S[41] + t->Phi[3][2]*w->S[71] +
+            t->Phi[3][3]*w->S[101] + t->Phi[3][4]*w->S[131] + t->Phi[3][5]*w->S[161] +
+            t->Phi[3][11]*w->S[211];
     w->term[0][92] = t->Phi[3][0]*t->Phi[0][12] + t->Phi[3][1]*t->Phi[1][12] +
             t->Phi[3][2]*t->Phi[2][12] + t->Phi[3][3]*t->Phi[3][12] + t->Phi[3][4]*t->Phi[4][12] +
             t->Phi[3][5]*t->Phi[5][12] + t->Phi[3][12]*t->Phi[12][12];
-    w->term[1][92] = t->Phi[3][0]*w->S[11] + t->Phi[3][1]*w->S[38] + t->Phi[3][2]*w->S[65] +
-            t->Phi[3][3]*w->S[92] + t->Phi[3][4]*w->S[119] + t->Phi[3][5]*w->S[146] +
-            t->Phi[3][12]*w->S[192];
+    w->term[1][92] = t->Phi[3][0]*w->S[12] + t->Phi[3][1]*w->S[42] + t->Phi[3][2]*w->S[72] +
+            t->Phi[3][3]*w->S[102] + t->Phi[3][4]*w->S[132] + t->Phi[3][5]*w->S[162] +
+            t->Phi[3][12]*w->S[212];
     w->term[0][93] = t->Phi[3][0]*t->Phi[0][13] + t->Phi[3][1]*t->Phi[1][13] +
             t->Phi[3][2]*t->Phi[2][13] + t->Phi[3][3]*t->Phi[3][13] + t->Phi[3][4]*t->Phi[4][13] +
             t->Phi[3][5]*t->Phi[5][13] + t->Phi[3][13]*t->Phi[13][13];
-    w->term[1][93] = t->Phi[3][0]*w->S[12] + t->Phi[3][1]*w->S[39] + t->Phi[3][2]*w->S[66] +
-            t->Phi[3][3]*w->S[93] + t->Phi[3][4]*w->S[120] + t->Phi[3][5]*w->S[147] +
-            t->Phi[3][13]*w->S[193];
+    w->term[1][93] = t->Phi[3][0]*w->S[13] + t->Phi[3][1]*w->S[43] + t->Phi[3][2]*w->S[73] +
+            t->Phi[3][3]*w->S[103] + t->Phi[3][4]*w->S[133] + t->Phi[3][5]*w->S[163] +
+            t->Phi[3][13]*w->S[213];
     w->term[0][94] = t->Phi[3][0]*t->Phi[0][14] + t->Phi[3][1]*t->Phi[1][14] +
             t->Phi[3][2]*t->Phi[2][14] + t->Phi[3][3]*t->Phi[3][14] + t->Phi[3][4]*t->Phi[4][14] +
             t->Phi[3][5]*t->Phi[5][14] + t->Phi[3][14]*t->Phi[14][14];
-    w->term[1][94] = t->Phi[3][0]*w->S[13] + t->Phi[3][1]*w->S[40] + t->Phi[3][2]*w->S[67] +
-            t->Phi[3][3]*w->S[94] + t->Phi[3][4]*w->S[121] + t->Phi[3][5]*w->S[148] +
-            t->Phi[3][14]*w->S[194];
+    w->term[1][94] = t->Phi[3][0]*w->S[14] + t->Phi[3][1]*w->S[44] + t->Phi[3][2]*w->S[74] +
+            t->Phi[3][3]*w->S[104] + t->Phi[3][4]*w->S[134] + t->Phi[3][5]*w->S[164] +
+            t->Phi[3][14]*w->S[214];
     w->term[0][95] = t->Phi[3][0]*t->Phi[0][15] + t->Phi[3][1]*t->Phi[1][15] +
             t->Phi[3][2]*t->Phi[2][15] + t->Phi[3][3]*t->Phi[3][15] + t->Phi[3][4]*t->Phi[4][15] +
             t->Phi[3][5]*t->Phi[5][15] + t->Phi[3][15]*t->Phi[15][15];
-    w->term[1][95] = t->Phi[3][0]*w->S[14] + t->Phi[3][1]*w->S[41] + t->Phi[3][2]*w->S[68] +
-            t->Phi[3][3]*w->S[95] + t->Phi[3][4]*w->S[122] + t->Phi[3][5]*w->S[149] +
-            t->Phi[3][15]*w->S[195];
+    w->term[1][95] = t->Phi[3][0]*w->S[15] + t->Phi[3][1]*w->S[45] + t->Phi[3][2]*w->S[75] +
+            t->Phi[3][3]*w->S[105] + t->Phi[3][4]*w->S[135] + t->Phi[3][5]*w->S[165] +
+            t->Phi[3][15]*w->S[215];
     w->term[0][96] = t->Phi[3][0]*t->Phi[0][18] + t->Phi[3][1]*t->Phi[1][18] +
             t->Phi[3][2]*t->Phi[2][18] + t->Phi[3][3]*t->Phi[3][18] + t->Phi[3][4]*t->Phi[4][18] +
             t->Phi[3][5]*t->Phi[5][18];
-    w->term[1][96] = t->Phi[3][0]*w->S[15] + t->Phi[3][1]*w->S[42] + t->Phi[3][2]*w->S[69] +
-            t->Phi[3][3]*w->S[96] + t->Phi[3][4]*w->S[123] + t->Phi[3][5]*w->S[150] + t->Phi[3][18];
+    w->term[1][96] = t->Phi[3][0]*w->S[18] + t->Phi[3][1]*w->S[48] + t->Phi[3][2]*w->S[78] +
+            t->Phi[3][3]*w->S[108] + t->Phi[3][4]*w->S[138] + t->Phi[3][5]*w->S[168] +
+            t->Phi[3][18];
     w->term[0][97] = t->Phi[3][0]*t->Phi[0][19] + t->Phi[3][1]*t->Phi[1][19] +
             t->Phi[3][2]*t->Phi[2][19] + t->Phi[3][3]*t->Phi[3][19] + t->Phi[3][4]*t->Phi[4][19] +
             t->Phi[3][5]*t->Phi[5][19];
-    w->term[1][97] = t->Phi[3][0]*w->S[16] + t->Phi[3][1]*w->S[43] + t->Phi[3][2]*w->S[70] +
-            t->Phi[3][3]*w->S[97] + t->Phi[3][4]*w->S[124] + t->Phi[3][5]*w->S[151] + t->Phi[3][19];
+    w->term[1][97] = t->Phi[3][0]*w->S[19] + t->Phi[3][1]*w->S[49] + t->Phi[3][2]*w->S[79] +
+            t->Phi[3][3]*w->S[109] + t->Phi[3][4]*w->S[139] + t->Phi[3][5]*w->S[169] +
+            t->Phi[3][19];
     w->term[0][98] = t->Phi[3][0]*t->Phi[0][20] + t->Phi[3][1]*t->Phi[1][20] +
             t->Phi[3][2]*t->Phi[2][20] + t->Phi[3][3]*t->Phi[3][20] + t->Phi[3][4]*t->Phi[4][20] +
             t->Phi[3][5]*t->Phi[5][20];
-    w->term[1][98] = t->Phi[3][0]*w->S[17] + t->Phi[3][1]*w->S[44] + t->Phi[3][2]*w->S[71] +
-            t->Phi[3][3]*w->S[98] + t->Phi[3][4]*w->S[125] + t->Phi[3][5]*w->S[152] + t->Phi[3][20];
+    w->term[1][98] = t->Phi[3][0]*w->S[20] + t->Phi[3][1]*w->S[50] + t->Phi[3][2]*w->S[80] +
+            t->Phi[3][3]*w->S[110] + t->Phi[3][4]*w->S[140] + t->Phi[3][5]*w->S[170] +
+            t->Phi[3][20];
     w->term[0][99] = t->Phi[3][0]*t->Phi[0][21] + t->Phi[3][1]*t->Phi[1][21] +
             t->Phi[3][2]*t->Phi[2][21] + t->Phi[3][3]*t->Phi[3][21] + t->Phi[3][4]*t->Phi[4][21] +
             t->Phi[3][5]*t->Phi[5][21];
-    w->term[1][99] = t->Phi[3][0]*w->S[18] + t->Phi[3][1]*w->S[45] + t->Phi[3][2]*w->S[72] +
-            t->Phi[3][3]*w->S[99] + t->Phi[3][4]*w->S[126] + t->Phi[3][5]*w->S[153] + t->Phi[3][21];
+    w->term[1][99] = t->Phi[3][0]*w->S[21] + t->Phi[3][1]*w->S[51] + t->Phi[3][2]*w->S[81] +
+            t->Phi[3][3]*w->S[111] + t->Phi[3][4]*w->S[141] + t->Phi[3][5]*w->S[171] +
+            t->Phi[3][21];
     w->term[0][100] = t->Phi[3][0]*t->Phi[0][22] + t->Phi[3][1]*t->Phi[1][22] +
             t->Phi[3][2]*t->Phi[2][22] + t->Phi[3][3]*t->Phi[3][22] + t->Phi[3][4]*t->Phi[4][22] +
             t->Phi[3][5]*t->Phi[5][22];
-    w->term[1][100] = t->Phi[3][0]*w->S[19] + t->Phi[3][1]*w->S[46] + t->Phi[3][2]*w->S[73] +
-            t->Phi[3][3]*w->S[100] + t->Phi[3][4]*w->S[127] + t->Phi[3][5]*w->S[154] +
+    w->term[1][100] = t->Phi[3][0]*w->S[22] + t->Phi[3][1]*w->S[52] + t->Phi[3][2]*w->S[82] +
+            t->Phi[3][3]*w->S[112] + t->Phi[3][4]*w->S[142] + t->Phi[3][5]*w->S[172] +
             t->Phi[3][22];
     w->term[0][101] = t->Phi[3][0]*t->Phi[0][23] + t->Phi[3][1]*t->Phi[1][23] +
             t->Phi[3][2]*t->Phi[2][23] + t->Phi[3][3]*t->Phi[3][23] + t->Phi[3][4]*t->Phi[4][23] +
             t->Phi[3][5]*t->Phi[5][23];
-    w->term[1][101] = t->Phi[3][0]*w->S[20] + t->Phi[3][1]*w->S[47] + t->Phi[3][2]*w->S[74] +
-            t->Phi[3][3]*w->S[101] + t->Phi[3][4]*w->S[128] + t->Phi[3][5]*w->S[155] +
+    w->term[1][101] = t->Phi[3][0]*w->S[23] + t->Phi[3][1]*w->S[53] + t->Phi[3][2]*w->S[83] +
+            t->Phi[3][3]*w->S[113] + t->Phi[3][4]*w->S[143] + t->Phi[3][5]*w->S[173] +
             t->Phi[3][23];
     w->term[0][102] = t->Phi[3][0]*t->Phi[0][24] + t->Phi[3][1]*t->Phi[1][24] +
             t->Phi[3][2]*t->Phi[2][24] + t->Phi[3][3]*t->Phi[3][24] + t->Phi[3][4]*t->Phi[4][24] +
             t->Phi[3][5]*t->Phi[5][24];
-    w->term[1][102] = t->Phi[3][0]*w->S[21] + t->Phi[3][1]*w->S[48] + t->Phi[3][2]*w->S[75] +
-            t->Phi[3][3]*w->S[102] + t->Phi[3][4]*w->S[129] + t->Phi[3][5]*w->S[156] +
+    w->term[1][102] = t->Phi[3][0]*w->S[24] + t->Phi[3][1]*w->S[54] + t->Phi[3][2]*w->S[84] +
+            t->Phi[3][3]*w->S[114] + t->Phi[3][4]*w->S[144] + t->Phi[3][5]*w->S[174] +
             t->Phi[3][24];
     w->term[0][103] = t->Phi[3][0]*t->Phi[0][25] + t->Phi[3][1]*t->Phi[1][25] +
             t->Phi[3][2]*t->Phi[2][25] + t->Phi[3][3]*t->Phi[3][25] + t->Phi[3][4]*t->Phi[4][25] +
             t->Phi[3][5]*t->Phi[5][25];
-    w->term[1][103] = t->Phi[3][0]*w->S[22] + t->Phi[3][1]*w->S[49] + t->Phi[3][2]*w->S[76] +
-            t->Phi[3][3]*w->S[103] + t->Phi[3][4]*w->S[130] + t->Phi[3][5]*w->S[157] +
+    w->term[1][103] = t->Phi[3][0]*w->S[25] + t->Phi[3][1]*w->S[55] + t->Phi[3][2]*w->S[85] +
+            t->Phi[3][3]*w->S[115] + t->Phi[3][4]*w->S[145] + t->Phi[3][5]*w->S[175] +
             t->Phi[3][25];
     w->term[0][104] = t->Phi[3][0]*t->Phi[0][26] + t->Phi[3][1]*t->Phi[1][26] +
             t->Phi[3][2]*t->Phi[2][26] + t->Phi[3][3]*t->Phi[3][26] + t->Phi[3][4]*t->Phi[4][26] +
             t->Phi[3][5]*t->Phi[5][26];
-    w->term[1][104] = t->Phi[3][0]*w->S[23] + t->Phi[3][1]*w->S[50] + t->Phi[3][2]*w->S[77] +
-            t->Phi[3][3]*w->S[104] + t->Phi[3][4]*w->S[131] + t->Phi[3][5]*w->S[158] +
+    w->term[1][104] = t->Phi[3][0]*w->S[26] + t->Phi[3][1]*w->S[56] + t->Phi[3][2]*w->S[86] +
+            t->Phi[3][3]*w->S[116] + t->Phi[3][4]*w->S[146] + t->Phi[3][5]*w->S[176] +
             t->Phi[3][26];
     w->term[0][105] = t->Phi[3][0]*t->Phi[0][27] + t->Phi[3][1]*t->Phi[1][27] +
             t->Phi[3][2]*t->Phi[2][27] + t->Phi[3][3]*t->Phi[3][27] + t->Phi[3][4]*t->Phi[4][27] +
             t->Phi[3][5]*t->Phi[5][27];
-    w->term[1][105] = t->Phi[3][0]*w->S[24] + t->Phi[3][1]*w->S[51] + t->Phi[3][2]*w->S[78] +
-            t->Phi[3][3]*w->S[105] + t->Phi[3][4]*w->S[132] + t->Phi[3][5]*w->S[159] +
+    w->term[1][105] = t->Phi[3][0]*w->S[27] + t->Phi[3][1]*w->S[57] + t->Phi[3][2]*w->S[87] +
+            t->Phi[3][3]*w->S[117] + t->Phi[3][4]*w->S[147] + t->Phi[3][5]*w->S[177] +
             t->Phi[3][27];
     w->term[0][106] = t->Phi[3][0]*t->Phi[0][28] + t->Phi[3][1]*t->Phi[1][28] +
             t->Phi[3][2]*t->Phi[2][28] + t->Phi[3][3]*t->Phi[3][28] + t->Phi[3][4]*t->Phi[4][28] +
             t->Phi[3][5]*t->Phi[5][28];
-    w->term[1][106] = t->Phi[3][0]*w->S[25] + t->Phi[3][1]*w->S[52] + t->Phi[3][2]*w->S[79] +
-            t->Phi[3][3]*w->S[106] + t->Phi[3][4]*w->S[133] + t->Phi[3][5]*w->S[160] +
+    w->term[1][106] = t->Phi[3][0]*w->S[28] + t->Phi[3][1]*w->S[58] + t->Phi[3][2]*w->S[88] +
+            t->Phi[3][3]*w->S[118] + t->Phi[3][4]*w->S[148] + t->Phi[3][5]*w->S[178] +
             t->Phi[3][28];
     w->term[0][107] = t->Phi[3][0]*t->Phi[0][29] + t->Phi[3][1]*t->Phi[1][29] +
             t->Phi[3][2]*t->Phi[2][29] + t->Phi[3][3]*t->Phi[3][29] + t->Phi[3][4]*t->Phi[4][29] +
             t->Phi[3][5]*t->Phi[5][29];
-    w->term[1][107] = t->Phi[3][0]*w->S[26] + t->Phi[3][1]*w->S[53] + t->Phi[3][2]*w->S[80] +
-            t->Phi[3][3]*w->S[107] + t->Phi[3][4]*w->S[134] + t->Phi[3][5]*w->S[161] +
+    w->term[1][107] = t->Phi[3][0]*w->S[29] + t->Phi[3][1]*w->S[59] + t->Phi[3][2]*w->S[89] +
+            t->Phi[3][3]*w->S[119] + t->Phi[3][4]*w->S[149] + t->Phi[3][5]*w->S[179] +
             t->Phi[3][29];
     w->term[0][108] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
             t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
             t->Phi[4][5]*t->Phi[5][0];
-    w->term[1][108] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[27] + t->Phi[4][2]*w->S[54] +
-            t->Phi[4][3]*w->S[81] + t->Phi[4][4]*w->S[108] + t->Phi[4][5]*w->S[135];
+    w->term[1][108] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[30] + t->Phi[4][2]*w->S[60] +
+            t->Phi[4][3]*w->S[90] + t->Phi[4][4]*w->S[120] + t->Phi[4][5]*w->S[150];
     w->term[0][109] = t->Phi[4][0]*t->Phi[0][1] + t->Phi[4][1]*t->Phi[1][1] +
             t->Phi[4][2]*t->Phi[2][1] + t->Phi[4][3]*t->Phi[3][1] + t->Phi[4][4]*t->Phi[4][1] +
             t->Phi[4][5]*t->Phi[5][1];
-    w->term[1][109] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[28] + t->Phi[4][2]*w->S[55] +
-            t->Phi[4][3]*w->S[82] + t->Phi[4][4]*w->S[109] + t->Phi[4][5]*w->S[136];
+    w->term[1][109] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[31] + t->Phi[4][2]*w->S[61] +
+            t->Phi[4][3]*w->S[91] + t->Phi[4][4]*w->S[121] + t->Phi[4][5]*w->S[151];
     w->term[0][110] = t->Phi[4][0]*t->Phi[0][2] + t->Phi[4][1]*t->Phi[1][2] +
             t->Phi[4][2]*t->Phi[2][2] + t->Phi[4][3]*t->Phi[3][2] + t->Phi[4][4]*t->Phi[4][2] +
             t->Phi[4][5]*t->Phi[5][2];
-    w->term[1][110] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[29] + t->Phi[4][2]*w->S[56] +
-            t->Phi[4][3]*w->S[83] + t->Phi[4][4]*w->S[110] + t->Phi[4][5]*w->S[137];
+    w->term[1][110] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[32] + t->Phi[4][2]*w->S[62] +
+            t->Phi[4][3]*w->S[92] + t->Phi[4][4]*w->S[122] + t->Phi[4][5]*w->S[152];
     w->term[0][111] = t->Phi[4][0]*t->Phi[0][3] + t->Phi[4][1]*t->Phi[1][3] +
             t->Phi[4][2]*t->Phi[2][3] + t->Phi[4][3]*t->Phi[3][3] + t->Phi[4][4]*t->Phi[4][3] +
             t->Phi[4][5]*t->Phi[5][3];
-    w->term[1][111] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[30] + t->Phi[4][2]*w->S[57] +
-            t->Phi[4][3]*w->S[84] + t->Phi[4][4]*w->S[111] + t->Phi[4][5]*w->S[138];
+    w->term[1][111] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[33] + t->Phi[4][2]*w->S[63] +
+            t->Phi[4][3]*w->S[93] + t->Phi[4][4]*w->S[123] + t->Phi[4][5]*w->S[153];
     w->term[0][112] = t->Phi[4][0]*t->Phi[0][4] + t->Phi[4][1]*t->Phi[1][4] +
             t->Phi[4][2]*t->Phi[2][4] + t->Phi[4][3]*t->Phi[3][4] + t->Phi[4][4]*t->Phi[4][4] +
             t->Phi[4][5]*t->Phi[5][4];
-    w->term[1][112] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[31] + t->Phi[4][2]*w->S[58] +
-            t->Phi[4][3]*w->S[85] + t->Phi[4][4]*w->S[112] + t->Phi[4][5]*w->S[139];
+    w->term[1][112] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[34] + t->Phi[4][2]*w->S[64] +
+            t->Phi[4][3]*w->S[94] + t->Phi[4][4]*w->S[124] + t->Phi[4][5]*w->S[154];
     w->term[0][113] = t->Phi[4][0]*t->Phi[0][5] + t->Phi[4][1]*t->Phi[1][5] +
             t->Phi[4][2]*t->Phi[2][5] + t->Phi[4][3]*t->Phi[3][5] + t->Phi[4][4]*t->Phi[4][5] +
             t->Phi[4][5]*t->Phi[5][5];
-    w->term[1][113] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[32] + t->Phi[4][2]*w->S[59] +
-            t->Phi[4][3]*w->S[86] + t->Phi[4][4]*w->S[113] + t->Phi[4][5]*w->S[140];
+    w->term[1][113] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[35] + t->Phi[4][2]*w->S[65] +
+            t->Phi[4][3]*w->S[95] + t->Phi[4][4]*w->S[125] + t->Phi[4][5]*w->S[155];
     w->term[0][114] = t->Phi[4][0]*t->Phi[0][7] + t->Phi[4][1]*t->Phi[1][7] +
             t->Phi[4][2]*t->Phi[2][7] + t->Phi[4][3]*t->Phi[3][7] + t->Phi[4][4]*t->Phi[4][7] +
             t->Phi[4][5]*t->Phi[5][7];
-    w->term[1][114] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[33] + t->Phi[4][2]*w->S[60] +
-            t->Phi[4][3]*w->S[87] + t->Phi[4][4]*w->S[114] + t->Phi[4][5]*w->S[141] + t->Phi[4][7];
+    w->term[1][114] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[37] + t->Phi[4][2]*w->S[67] +
+            t->Phi[4][3]*w->S[97] + t->Phi[4][4]*w->S[127] + t->Phi[4][5]*w->S[157] + t->Phi[4][7];
     w->term[0][115] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
             t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
             t->Phi[4][5]*t->Phi[5][8];
-    w->term[1][115] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[34] + t->Phi[4][2]*w->S[61] +
-            t->Phi[4][3]*w->S[88] + t->Phi[4][4]*w->S[115] + t->Phi[4][5]*w->S[142] + t->Phi[4][8];
+    w->term[1][115] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[38] + t->Phi[4][2]*w->S[68] +
+            t->Phi[4][3]*w->S[98] + t->Phi[4][4]*w->S[128] + t->Phi[4][5]*w->S[158] + t->Phi[4][8];
     w->term[0][116] = t->Phi[4][0]*t->Phi[0][9] + t->Phi[4][1]*t->Phi[1][9] +
             t->Phi[4][2]*t->Phi[2][9] + t->Phi[4][3]*t->Phi[3][9] + t->Phi[4][4]*t->Phi[4][9] +
             t->Phi[4][5]*t->Phi[5][9];
-    w->term[1][116] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[35] + t->Phi[4][2]*w->S[62] +
-            t->Phi[4][3]*w->S[89] + t->Phi[4][4]*w->S[116] + t->Phi[4][5]*w->S[143] + t->Phi[4][9];
+    w->term[1][116] = t->Phi[4][0]*w->S[9] + t->Phi[4][1]*w->S[39] + t->Phi[4][2]*w->S[69] +
+            t->Phi[4][3]*w->S[99] + t->Phi[4][4]*w->S[129] + t->Phi[4][5]*w->S[159] + t->Phi[4][9];
     w->term[0][117] = t->Phi[4][0]*t->Phi[0][10] + t->Phi[4][1]*t->Phi[1][10] +
             t->Phi[4][2]*t->Phi[2][10] + t->Phi[4][3]*t->Phi[3][10] + t->Phi[4][4]*t->Phi[4][10] +
             t->Phi[4][5]*t->Phi[5][10] + t->Phi[4][10]*t->Phi[10][10];
-    w->term[1][117] = t->Phi[4][0]*w->S[9] + t->Phi[4][1]*w->S[36] + t->Phi[4][2]*w->S[63] +
-            t->Phi[4][3]*w->S[90] + t->Phi[4][4]*w->S[117] + t->Phi[4][5]*w->S[144] +
-            t->Phi[4][10]*w->S[190];
+    w->term[1][117] = t->Phi[4][0]*w->S[10] + t->Phi[4][1]*w->S[40] + t->Phi[4][2]*w->S[70] +
+            t->Phi[4][3]*w->S[100] + t->Phi[4][4]*w->S[130] + t->Phi[4][5]*w->S[160] +
+            t->Phi[4][10]*w->S[210];
     w->term[0][118] = t->Phi[4][0]*t->Phi[0][11] + t->Phi[4][1]*t->Phi[1][11] +
             t->Phi[4][2]*t->Phi[2][11] + t->Phi[4][3]*t->Phi[3][11] + t->Phi[4][4]*t->Phi[4][11] +
             t->Phi[4][5]*t->Phi[5][11] + t->Phi[4][11]*t->Phi[11][11];
-    w->term[1][118] = t->Phi[4][0]*w->S[10] + t->Phi[4][1]*w->S[37] + t->Phi[4][2]*w->S[64] +
-            t->Phi[4][3]*w->S[91] + t->Phi[4][4]*w->S[118] + t->Phi[4][5]*w->S[145] +
-            t->Phi[4][11]*w->S[191];
+    w->term[1][118] = t->Phi[4][0]*w->S[11] + t->Phi[4][1]*w->S[41] + t->Phi[4][2]*w->S[71] +
+            t->Phi[4][3]*w->S[101] + t->Phi[4][4]*w->S[131] + t->Phi[4][5]*w->S[161] +
+            t->Phi[4][11]*w->S[211];
     w->term[0][119] = t->Phi[4][0]*t->Phi[0][12] + t->Phi[4][1]*t->Phi[1][12] +
             t->Phi[4][2]*t->Phi[2][12] + t->Phi[4][3]*t->Phi[3][12] + t->Phi[4][4]*t->Phi[4][12] +
             t->Phi[4][5]*t->Phi[5][12] + t->Phi[4][12]*t->Phi[12][12];
-    w->term[1][119] = t->Phi[4][0]*w->S[11] + t->Phi[4][1]*w->S[38] + t->Phi[4][2]*w->S[65] +
-            t->Phi[4][3]*w->S[92] + t->Phi[4][4]*w->S[119] + t->Phi[4][5]*w->S[146] +
-            t->Phi[4][12]*w->S[192];
+    w->term[1][119] = t->Phi[4][0]*w->S[12] + t->Phi[4][1]*w->S[42] + t->Phi[4][2]*w->S[72] +
+            t->Phi[4][3]*w->S[102] + t->Phi[4][4]*w->S[132] + t->Phi[4][5]*w->S[162] +
+            t->Phi[4][12]*w->S[212];
     w->term[0][120] = t->Phi[4][0]*t->Phi[0][13] + t->Phi[4][1]*t->Phi[1][13] +
             t->Phi[4][2]*t->Phi[2][13] + t->Phi[4][3]*t->Phi[3][13] + t->Phi[4][4]*t->Phi[4][13] +
             t->Phi[4][5]*t->Phi[5][13] + t->Phi[4][13]*t->Phi[13][13];
-    w->term[1][120] = t->Phi[4][0]*w->S[12] + t->Phi[4][1]*w->S[39] + t->Phi[4][2]*w->S[66] +
-            t->Phi[4][3]*w->S[93] + t->Phi[4][4]*w->S[120] + t->Phi[4][5]*w->S[147] +
-            t->Phi[4][13]*w->S[193];
+    w->term[1][120] = t->Phi[4][0]*w->S[13] + t->Phi[4][1]*w->S[43] + t->Phi[4][2]*w->S[73] +
+            t->Phi[4][3]*w->S[103] + t->Phi[4][4]*w->S[133] + t->Phi[4][5]*w->S[163] +
+            t->Phi[4][13]*w->S[213];
     w->term[0][121] = t->Phi[4][0]*t->Phi[0][14] + t->Phi[4][1]*t->Phi[1][14] +
             t->Phi[4][2]*t->Phi[2][14] + t->Phi[4][3]*t->Phi[3][14] + t->Phi[4][4]*t->Phi[4][14] +
             t->Phi[4][5]*t->Phi[5][14] + t->Phi[4][14]*t->Phi[14][14];
-    w->term[1][121] = t->Phi[4][0]*w->S[13] + t->Phi[4][1]*w->S[40] + t->Phi[4][2]*w->S[67] +
-            t->Phi[4][3]*w->S[94] + t->Phi[4][4]*w->S[121] + t->Phi[4][5]*w->S[148] +
-            t->Phi[4][14]*w->S[194];
+    w->term[1][121] = t->Phi[4][0]*w->S[14] + t->Phi[4][1]*w->S[44] + t->Phi[4][2]*w->S[74] +
+            t->Phi[4][3]*w->S[104] + t->Phi[4][4]*w->S[134] + t->Phi[4][5]*w->S[164] +
+            t->Phi[4][14]*w->S[214];
     w->term[0][122] = t->Phi[4][0]*t->Phi[0][15] + t->Phi[4][1]*t->Phi[1][15] +
             t->Phi[4][2]*t->Phi[2][15] + t->Phi[4][3]*t->Phi[3][15] + t->Phi[4][4]*t->Phi[4][15] +
             t->Phi[4][5]*t->Phi[5][15] + t->Phi[4][15]*t->Phi[15][15];
-    w->term[1][122] = t->Phi[4][0]*w->S[14] + t->Phi[4][1]*w->S[41] + t->Phi[4][2]*w->S[68] +
-            t->Phi[4][3]*w->S[95] + t->Phi[4][4]*w->S[122] + t->Phi[4][5]*w->S[149] +
-            t->Phi[4][15]*w->S[195];
+    w->term[1][122] = t->Phi[4][0]*w->S[15] + t->Phi[4][1]*w->S[45] + t->Phi[4][2]*w->S[75] +
+            t->Phi[4][3]*w->S[105] + t->Phi[4][4]*w->S[135] + t->Phi[4][5]*w->S[165] +
+            t->Phi[4][15]*w->S[215];
     w->term[0][123] = t->Phi[4][0]*t->Phi[0][18] + t->Phi[4][1]*t->Phi[1][18] +
             t->Phi[4][2]*t->Phi[2][18] + t->Phi[4][3]*t->Phi[3][18] + t->Phi[4][4]*t->Phi[4][18] +
             t->Phi[4][5]*t->Phi[5][18];
-    w->term[1][123] = t->Phi[4][0]*w->S[15] + t->Phi[4][1]*w->S[42] + t->Phi[4][2]*w->S[69] +
-            t->Phi[4][3]*w->S[96] + t->Phi[4][4]*w->S[123] + t->Phi[4][5]*w->S[150] + t->Phi[4][18];
+    w->term[1][123] = t->Phi[4][0]*w->S[18] + t->Phi[4][1]*w->S[48] + t->Phi[4][2]*w->S[78] +
+            t->Phi[4][3]*w->S[108] + t->Phi[4][4]*w->S[138] + t->Phi[4][5]*w->S[168] +
+            t->Phi[4][18];
     w->term[0][124] = t->Phi[4][0]*t->Phi[0][19] + t->Phi[4][1]*t->Phi[1][19] +
             t->Phi[4][2]*t->Phi[2][19] + t->Phi[4][3]*t->Phi[3][19] + t->Phi[4][4]*t->Phi[4][19] +
             t->Phi[4][5]*t->Phi[5][19];
-    w->term[1][124] = t->Phi[4][0]*w->S[16] + t->Phi[4][1]*w->S[43] + t->Phi[4][2]*w->S[70] +
-            t->Phi[4][3]*w->S[97] + t->Phi[4][4]*w->S[124] + t->Phi[4][5]*w->S[151] + t->Phi[4][19];
+    w->term[1][124] = t->Phi[4][0]*w->S[19] + t->Phi[4][1]*w->S[49] + t->Phi[4][2]*w->S[79] +
+            t->Phi[4][3]*w->S[109] + t->Phi[4][4]*w->S[139] + t->Phi[4][5]*w->S[169] +
+            t->Phi[4][19];
     w->term[0][125] = t->Phi[4][0]*t->Phi[0][20] + t->Phi[4][1]*t->Phi[1][20] +
             t->Phi[4][2]*t->Phi[2][20] + t->Phi[4][3]*t->Phi[3][20] + t->Phi[4][4]*t->Phi[4][20] +
             t->Phi[4][5]*t->Phi[5][20];
-    w->term[1][125] = t->Phi[4][0]*w->S[17] + t->Phi[4][1]*w->S[44] + t->Phi[4][2]*w->S[71] +
-            t->Phi[4][3]*w->S[98] + t->Phi[4][4]*w->S[125] + t->Phi[4][5]*w->S[152] + t->Phi[4][20];
+    w->term[1][125] = t->Phi[4][0]*w->S[20] + t->Phi[4][1]*w->S[50] + t->Phi[4][2]*w->S[80] +
+            t->Phi[4][3]*w->S[110] + t->Phi[4][4]*w->S[140] + t->Phi[4][5]*w->S[170] +
+            t->Phi[4][20];
     w->term[0][126] = t->Phi[4][0]*t->Phi[0][21] + t->Phi[4][1]*t->Phi[1][21] +
             t->Phi[4][2]*t->Phi[2][21] + t->Phi[4][3]*t->Phi[3][21] + t->Phi[4][4]*t->Phi[4][21] +
             t->Phi[4][5]*t->Phi[5][21];
-    w->term[1][126] = t->Phi[4][0]*w->S[18] + t->Phi[4][1]*w->S[45] + t->Phi[4][2]*w->S[72] +
-            t->Phi[4][3]*w->S[99] + t->Phi[4][4]*w->S[126] + t->Phi[4][5]*w->S[153] + t->Phi[4][21];
+    w->term[1][126] = t->Phi[4][0]*w->S[21] + t->Phi[4][1]*w->S[51] + t->Phi[4][2]*w->S[81] +
+            t->Phi[4][3]*w->S[111] + t->Phi[4][4]*w->S[141] + t->Phi[4][5]*w->S[171] +
+            t->Phi[4][21];
     w->term[0][127] = t->Phi[4][0]*t->Phi[0][22] + t->Phi[4][1]*t->Phi[1][22] +
             t->Phi[4][2]*t->Phi[2][22] + t->Phi[4][3]*t->Phi[3][22] + t->Phi[4][4]*t->Phi[4][22] +
             t->Phi[4][5]*t->Phi[5][22];
-    w->term[1][127] = t->Phi[4][0]*w->S[19] + t->Phi[4][1]*w->S[46] + t->Phi[4][2]*w->S[73] +
-            t->Phi[4][3]*w->S[100] + t->Phi[4][4]*w->S[127] + t->Phi[4][5]*w->S[154] +
+    w->term[1][127] = t->Phi[4][0]*w->S[22] + t->Phi[4][1]*w->S[52] + t->Phi[4][2]*w->S[82] +
+            t->Phi[4][3]*w->S[112] + t->Phi[4][4]*w->S[142] + t->Phi[4][5]*w->S[172] +
             t->Phi[4][22];
     w->term[0][128] = t->Phi[4][0]*t->Phi[0][23] + t->Phi[4][1]*t->Phi[1][23] +
             t->Phi[4][2]*t->Phi[2][23] + t->Phi[4][3]*t->Phi[3][23] + t->Phi[4][4]*t->Phi[4][23] +
             t->Phi[4][5]*t->Phi[5][23];
-    w->term[1][128] = t->Phi[4][0]*w->S[20] + t->Phi[4][1]*w->S[47] + t->Phi[4][2]*w->S[74] +
-            t->Phi[4][3]*w->S[101] + t->Phi[4][4]*w->S[128] + t->Phi[4][5]*w->S[155] +
+    w->term[1][128] = t->Phi[4][0]*w->S[23] + t->Phi[4][1]*w->S[53] + t->Phi[4][2]*w->S[83] +
+            t->Phi[4][3]*w->S[113] + t->Phi[4][4]*w->S[143] + t->Phi[4][5]*w->S[173] +
             t->Phi[4][23];
     w->term[0][129] = t->Phi[4][0]*t->Phi[0][24] + t->Phi[4][1]*t->Phi[1][24] +
             t->Phi[4][2]*t->Phi[2][24] + t->Phi[4][3]*t->Phi[3][24] + t->Phi[4][4]*t->Phi[4][24] +
             t->Phi[4][5]*t->Phi[5][24];
-    w->term[1][129] = t->Phi[4][0]*w->S[21] + t->Phi[4][1]*w->S[48] + t->Phi[4][2]*w->S[75] +
-            t->Phi[4][3]*w->S[102] + t->Phi[4][4]*w->S[129] + t->Phi[4][5]*w->S[156] +
+    w->term[1][129] = t->Phi[4][0]*w->S[24] + t->Phi[4][1]*w->S[54] + t->Phi[4][2]*w->S[84] +
+            t->Phi[4][3]*w->S[114] + t->Phi[4][4]*w->S[144] + t->Phi[4][5]*w->S[174] +
             t->Phi[4][24];
     w->term[0][130] = t->Phi[4][0]*t->Phi[0][25] + t->Phi[4][1]*t->Phi[1][25] +
             t->Phi[4][2]*t->Phi[2][25] + t->Phi[4][3]*t->Phi[3][25] + t->Phi[4][4]*t->Phi[4][25] +
             t->Phi[4][5]*t->Phi[5][25];
-    w->term[1][130] = t->Phi[4][0]*w->S[22] + t->Phi[4][1]*w->S[49] + t->Phi[4][2]*w->S[76] +
-            t->Phi[4][3]*w->S[103] + t->Phi[4][4]*w->S[130] + t->Phi[4][5]*w->S[157] +
+    w->term[1][130] = t->Phi[4][0]*w->S[25] + t->Phi[4][1]*w->S[55] + t->Phi[4][2]*w->S[85] +
+            t->Phi[4][3]*w->S[115] + t->Phi[4][4]*w->S[145] + t->Phi[4][5]*w->S[175] +
             t->Phi[4][25];
     w->term[0][131] = t->Phi[4][0]*t->Phi[0][26] + t->Phi[4][1]*t->Phi[1][26] +
             t->Phi[4][2]*t->Phi[2][26] + t->Phi[4][3]*t->Phi[3][26] + t->Phi[4][4]*t->Phi[4][26] +
             t->Phi[4][5]*t->Phi[5][26];
-    w->term[1][131] = t->Phi[4][0]*w->S[23] + t->Phi[4][1]*w->S[50] + t->Phi[4][2]*w->S[77] +
-            t->Phi[4][3]*w->S[104] + t->Phi[4][4]*w->S[131] + t->Phi[4][5]*w->S[158] +
+    w->term[1][131] = t->Phi[4][0]*w->S[26] + t->Phi[4][1]*w->S[56] + t->Phi[4][2]*w->S[86] +
+            t->Phi[4][3]*w->S[116] + t->Phi[4][4]*w->S[146] + t->Phi[4][5]*w->S[176] +
             t->Phi[4][26];
     w->term[0][132] = t->Phi[4][0]*t->Phi[0][27] + t->Phi[4][1]*t->Phi[1][27] +
             t->Phi[4][2]*t->Phi[2][27] + t->Phi[4][3]*t->Phi[3][27] + t->Phi[4][4]*t->Phi[4][27] +
             t->Phi[4][5]*t->Phi[5][27];
-    w->term[1][132] = t->Phi[4][0]*w->S[24] + t->Phi[4][1]*w->S[51] + t->Phi[4][2]*w->S[78] +
-            t->Phi[4][3]*w->S[105] + t->Phi[4][4]*w->S[132] + t->Phi[4][5]*w->S[159] +
+    w->term[1][132] = t->Phi[4][0]*w->S[27] + t->Phi[4][1]*w->S[57] + t->Phi[4][2]*w->S[87] +
+            t->Phi[4][3]*w->S[117] + t->Phi[4][4]*w->S[147] + t->Phi[4][5]*w->S[177] +
             t->Phi[4][27];
     w->term[0][133] = t->Phi[4][0]*t->Phi[0][28] + t->Phi[4][1]*t->Phi[1][28] +
             t->Phi[4][2]*t->Phi[2][28] + t->Phi[4][3]*t->Phi[3][28] + t->Phi[4][4]*t->Phi[4][28] +
             t->Phi[4][5]*t->Phi[5][28];
-    w->term[1][133] = t->Phi[4][0]*w->S[25] + t->Phi[4][1]*w->S[52] + t->Phi[4][2]*w->S[79] +
-            t->Phi[4][3]*w->S[106] + t->Phi[4][4]*w->S[133] + t->Phi[4][5]*w->S[160] +
+    w->term[1][133] = t->Phi[4][0]*w->S[28] + t->Phi[4][1]*w->S[58] + t->Phi[4][2]*w->S[88] +
+            t->Phi[4][3]*w->S[118] + t->Phi[4][4]*w->S[148] + t->Phi[4][5]*w->S[178] +
             t->Phi[4][28];
     w->term[0][134] = t->Phi[4][0]*t->Phi[0][29] + t->Phi[4][1]*t->Phi[1][29] +
             t->Phi[4][2]*t->Phi[2][29] + t->Phi[4][3]*t->Phi[3][29] + t->Phi[4][4]*t->Phi[4][29] +
             t->Phi[4][5]*t->Phi[5][29];
-    w->term[1][134] = t->Phi[4][0]*w->S[26] + t->Phi[4][1]*w->S[53] + t->Phi[4][2]*w->S[80] +
-            t->Phi[4][3]*w->S[107] + t->Phi[4][4]*w->S[134] + t->Phi[4][5]*w->S[161] +
+    w->term[1][134] = t->Phi[4][0]*w->S[29] + t->Phi[4][1]*w->S[59] + t->Phi[4][2]*w->S[89] +
+            t->Phi[4][3]*w->S[119] + t->Phi[4][4]*w->S[149] + t->Phi[4][5]*w->S[179] +
             t->Phi[4][29];
     w->term[0][135] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
             t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
             t->Phi[5][5]*t->Phi[5][0];
-    w->term[1][135] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[27] + t->Phi[5][2]*w->S[54] +
-            t->Phi[5][3]*w->S[81] + t->Phi[5][4]*w->S[108] + t->Phi[5][5]*w->S[135];
+    w->term[1][135] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[30] + t->Phi[5][2]*w->S[60] +
+            t->Phi[5][3]*w->S[90] + t->Phi[5][4]*w->S[120] + t->Phi[5][5]*w->S[150];
     w->term[0][136] = t->Phi[5][0]*t->Phi[0][1] + t->Phi[5][1]*t->Phi[1][1] +
             t->Phi[5][2]*t->Phi[2][1] + t->Phi[5][3]*t->Phi[3][1] + t->Phi[5][4]*t->Phi[4][1] +
             t->Phi[5][5]*t->Phi[5][1];
-    w->term[1][136] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[28] + t->Phi[5][2]*w->S[55] +
-            t->Phi[5][3]*w->S[82] + t->Phi[5][4]*w->S[109] + t->Phi[5][5]*w->S[136];
+    w->term[1][136] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[31] + t->Phi[5][2]*w->S[61] +
+            t->Phi[5][3]*w->S[91] + t->Phi[5][4]*w->S[121] + t->Phi[5][5]*w->S[151];
     w->term[0][137] = t->Phi[5][0]*t->Phi[0][2] + t->Phi[5][1]*t->Phi[1][2] +
             t->Phi[5][2]*t->Phi[2][2] + t->Phi[5][3]*t->Phi[3][2] + t->Phi[5][4]*t->Phi[4][2] +
             t->Phi[5][5]*t->Phi[5][2];
-    w->term[1][137] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[29] + t->Phi[5][2]*w->S[56] +
-            t->Phi[5][3]*w->S[83] + t->Phi[5][4]*w->S[110] + t->Phi[5][5]*w->S[137];
+    w->term[1][137] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[32] + t->Phi[5][2]*w->S[62] +
+            t->Phi[5][3]*w->S[92] + t->Phi[5][4]*w->S[122] + t->Phi[5][5]*w->S[152];
     w->term[0][138] = t->Phi[5][0]*t->Phi[0][3] + t->Phi[5][1]*t->Phi[1][3] +
             t->Phi[5][2]*t->Phi[2][3] + t->Phi[5][3]*t->Phi[3][3] + t->Phi[5][4]*t->Phi[4][3] +
             t->Phi[5][5]*t->Phi[5][3];
-    w->term[1][138] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[30] + t->Phi[5][2]*w->S[57] +
-            t->Phi[5][3]*w->S[84] + t->Phi[5][4]*w->S[111] + t->Phi[5][5]*w->S[138];
+    w->term[1][138] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[33] + t->Phi[5][2]*w->S[63] +
+            t->Phi[5][3]*w->S[93] + t->Phi[5][4]*w->S[123] + t->Phi[5][5]*w->S[153];
     w->term[0][139] = t->Phi[5][0]*t->Phi[0][4] + t->Phi[5][1]*t->Phi[1][4] +
             t->Phi[5][2]*t->Phi[2][4] + t->Phi[5][3]*t->Phi[3][4] + t->Phi[5][4]*t->Phi[4][4] +
             t->Phi[5][5]*t->Phi[5][4];
-    w->term[1][139] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[31] + t->Phi[5][2]*w->S[58] +
-            t->Phi[5][3]*w->S[85] + t->Phi[5][4]*w->S[112] + t->Phi[5][5]*w->S[139];
+    w->term[1][139] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[34] + t->Phi[5][2]*w->S[64] +
+            t->Phi[5][3]*w->S[94] + t->Phi[5][4]*w->S[124] + t->Phi[5][5]*w->S[154];
     w->term[0][140] = t->Phi[5][0]*t->Phi[0][5] + t->Phi[5][1]*t->Phi[1][5] +
             t->Phi[5][2]*t->Phi[2][5] + t->Phi[5][3]*t->Phi[3][5] + t->Phi[5][4]*t->Phi[4][5] +
             t->Phi[5][5]*t->Phi[5][5];
-    w->term[1][140] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[32] + t->Phi[5][2]*w->S[59] +
-            t->Phi[5][3]*w->S[86] + t->Phi[5][4]*w->S[113] + t->Phi[5][5]*w->S[140];
+    w->term[1][140] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[35] + t->Phi[5][2]*w->S[65] +
+            t->Phi[5][3]*w->S[95] + t->Phi[5][4]*w->S[125] + t->Phi[5][5]*w->S[155];
     w->term[0][141] = t->Phi[5][0]*t->Phi[0][7] + t->Phi[5][1]*t->Phi[1][7] +
             t->Phi[5][2]*t->Phi[2][7] + t->Phi[5][3]*t->Phi[3][7] + t->Phi[5][4]*t->Phi[4][7] +
             t->Phi[5][5]*t->Phi[5][7];
-    w->term[1][141] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[33] + t->Phi[5][2]*w->S[60] +
-            t->Phi[5][3]*w->S[87] + t->Phi[5][4]*w->S[114] + t->Phi[5][5]*w->S[141] + t->Phi[5][7];
+    w->term[1][141] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[37] + t->Phi[5][2]*w->S[67] +
+            t->Phi[5][3]*w->S[97] + t->Phi[5][4]*w->S[127] + t->Phi[5][5]*w->S[157] + t->Phi[5][7];
     w->term[0][142] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
             t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
             t->Phi[5][5]*t->Phi[5][8];
-    w->term[1][142] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[34] + t->Phi[5][2]*w->S[61] +
-            t->Phi[5][3]*w->S[88] + t->Phi[5][4]*w->S[115] + t->Phi[5][5]*w->S[142] + t->Phi[5][8];
+    w->term[1][142] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[38] + t->Phi[5][2]*w->S[68] +
+            t->Phi[5][3]*w->S[98] + t->Phi[5][4]*w->S[128] + t->Phi[5][5]*w->S[158] + t->Phi[5][8];
     w->term[0][143] = t->Phi[5][0]*t->Phi[0][9] + t->Phi[5][1]*t->Phi[1][9] +
             t->Phi[5][2]*t->Phi[2][9] + t->Phi[5][3]*t->Phi[3][9] + t->Phi[5][4]*t->Phi[4][9] +
             t->Phi[5][5]*t->Phi[5][9];
-    w->term[1][143] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[35] + t->Phi[5][2]*w->S[62] +
-            t->Phi[5][3]*w->S[89] + t->Phi[5][4]*w->S[116] + t->Phi[5][5]*w->S[143] + t->Phi[5][9];
+    w->term[1][143] = t->Phi[5][0]*w->S[9] + t->Phi[5][1]*w->S[39] + t->Phi[5][2]*w->S[69] +
+            t->Phi[5][3]*w->S[99] + t->Phi[5][4]*w->S[129] + t->Phi[5][5]*w->S[159] + t->Phi[5][9];
     w->term[0][144] = t->Phi[5][0]*t->Phi[0][10] + t->Phi[5][1]*t->Phi[1][10] +
             t->Phi[5][2]*t->Phi[2][10] + t->Phi[5][3]*t->Phi[3][10] + t->Phi[5][4]*t->Phi[4][10] +
             t->Phi[5][5]*t->Phi[5][10] + t->Phi[5][10]*t->Phi[10][10];
-    w->term[1][144] = t->Phi[5][0]*w->S[9] + t->Phi[5][1]*w->S[36] + t->Phi[5][2]*w->S[63] +
-            t->Phi[5][3]*w->S[90] + t->Phi[5][4]*w->S[117] + t->Phi[5][5]*w->S[144] +
-            t->Phi[5][10]*w->S[190];
+    w->term[1][144] = t->Phi[5][0]*w->S[10] + t->Phi[5][1]*w->S[40] + t->Phi[5][2]*w->S[70] +
+            t->Phi[5][3]*w->S[100] + t->Phi[5][4]*w->S[130] + t->Phi[5][5]*w->S[160] +
+            t->Phi[5][10]*w->S[210];
     w->term[0][145] = t->Phi[5][0]*t->Phi[0][11] + t->Phi[5][1]*t->Phi[1][11] +
             t->Phi[5][2]*t->Phi[2][11] + t->Phi[5][3]*t->Phi[3][11] + t->Phi[5][4]*t->Phi[4][11] +
             t->Phi[5][5]*t->Phi[5][11] + t->Phi[5][11]*t->Phi[11][11];
-    w->term[1][145] = t->Phi[5][0]*w->S[10] + t->Phi[5][1]*w->S[37] + t->Phi[5][2]*w->S[64] +
-            t->Phi[5][3]*w->S[91] + t->Phi[5][4]*w->S[118] + t->Phi[5][5]*w->S[145] +
-            t->Phi[5][11]*w->S[191];
+    w->term[1][145] = t->Phi[5][0]*w->S[11] + t->Phi[5][1]*w->S[41] + t->Phi[5][2]*w->S[71] +
+            t->Phi[5][3]*w->S[101] + t->Phi[5][4]*w->S[131] + t->Phi[5][5]*w->S[161] +
+            t->Phi[5][11]*w->S[211];
     w->term[0][146] = t->Phi[5][0]*t->Phi[0][12] + t->Phi[5][1]*t->Phi[1][12] +
             t->Phi[5][2]*t->Phi[2][12] + t->Phi[5][3]*t->Phi[3][12] + t->Phi[5][4]*t->Phi[4][12] +
             t->Phi[5][5]*t->Phi[5][12] + t->Phi[5][12]*t->Phi[12][12];
-    w->term[1][146] = t->Phi[5][0]*w->S[11] + t->Phi[5][1]*w->S[38] + t->Phi[5][2]*w->S[65] +
-            t->Phi[5][3]*w->S[92] + t->Phi[5][4]*w->S[119] + t->Phi[5][5]*w->S[146] +
-            t->Phi[5][12]*w->S[192];
+    w->term[1][146] = t->Phi[5][0]*w->S[12] + t->Phi[5][1]*w->S[42] + t->Phi[5][2]*w->S[72] +
+            t->Phi[5][3]*w->S[102] + t->Phi[5][4]*w->S[132] + t->Phi[5][5]*w->S[162] +
+            t->Phi[5][12]*w->S[212];
     w->term[0][147] = t->Phi[5][0]*t->Phi[0][13] + t->Phi[5][1]*t->Phi[1][13] +
             t->Phi[5][2]*t->Phi[2][13] + t->Phi[5][3]*t->Phi[3][13] + t->Phi[5][4]*t->Phi[4][13] +
             t->Phi[5][5]*t->Phi[5][13] + t->Phi[5][13]*t->Phi[13][13];
-    w->term[1][147] = t->Phi[5][0]*w->S[12] + t->Phi[5][1]*w->S[39] + t->Phi[5][2]*w->S[66] +
-            t->Phi[5][3]*w->S[93] + t->Phi[5][4]*w->S[120] + t->Phi[5][5]*w->S[147] +
-            t->Phi[5][13]*w->S[193];
+    w->term[1][147] = t->Phi[5][0]*w->S[13] + t->Phi[5][1]*w->S[43] + t->Phi[5][2]*w->S[73] +
+            t->Phi[5][3]*w->S[103] + t->Phi[5][4]*w->S[133] + t->Phi[5][5]*w->S[163] +
+            t->Phi[5][13]*w->S[213];
     w->term[0][148] = t->Phi[5][0]*t->Phi[0][14] + t->Phi[5][1]*t->Phi[1][14] +
             t->Phi[5][2]*t->Phi[2][14] + t->Phi[5][3]*t->Phi[3][14] + t->Phi[5][4]*t->Phi[4][14] +
             t->Phi[5][5]*t->Phi[5][14] + t->Phi[5][14]*t->Phi[14][14];
-    w->term[1][148] = t->Phi[5][0]*w->S[13] + t->Phi[5][1]*w->S[40] + t->Phi[5][2]*w->S[67] +
-            t->Phi[5][3]*w->S[94] + t->Phi[5][4]*w->S[121] + t->Phi[5][5]*w->S[148] +
-            t->Phi[5][14]*w->S[194];
+    w->term[1][148] = t->Phi[5][0]*w->S[14] + t->Phi[5][1]*w->S[44] + t->Phi[5][2]*w->S[74] +
+            t->Phi[5][3]*w->S[104] + t->Phi[5][4]*w->S[134] + t->Phi[5][5]*w->S[164] +
+            t->Phi[5][14]*w->S[214];
     w->term[0][149] = t->Phi[5][0]*t->Phi[0][15] + t->Phi[5][1]*t->Phi[1][15] +
             t->Phi[5][2]*t->Phi[2][15] + t->Phi[5][3]*t->Phi[3][15] + t->Phi[5][4]*t->Phi[4][15] +
             t->Phi[5][5]*t->Phi[5][15] + t->Phi[5][15]*t->Phi[15][15];
-    w->term[1][149] = t->Phi[5][0]*w->S[14] + t->Phi[5][1]*w->S[41] + t->Phi[5][2]*w->S[68] +
-            t->Phi[5][3]*w->S[95] + t->Phi[5][4]*w->S[122] + t->Phi[5][5]*w->S[149] +
-            t->Phi[5][15]*w->S[195];
+    w->term[1][149] = t->Phi[5][0]*w->S[15] + t->Phi[5][1]*w->S[45] + t->Phi[5][2]*w->S[75] +
+            t->Phi[5][3]*w->S[105] + t->Phi[5][4]*w->S[135] + t->Phi[5][5]*w->S[165] +
+            t->Phi[5][15]*w->S[215];
     w->term[0][150] = t->Phi[5][0]*t->Phi[0][18] + t->Phi[5][1]*t->Phi[1][18] +
             t->Phi[5][2]*t->Phi[2][18] + t->Phi[5][3]*t->Phi[3][18] + t->Phi[5][4]*t->Phi[4][18] +
             t->Phi[5][5]*t->Phi[5][18];
-    w->term[1][150] = t->Phi[5][0]*w->S[15] + t->Phi[5][1]*w->S[42] + t->Phi[5][2]*w->S[69] +
-            t->Phi[5][3]*w->S[96] + t->Phi[5][4]*w->S[123] + t->Phi[5][5]*w->S[150] + t->Phi[5][18];
+    w->term[1][150] = t->Phi[5][0]*w->S[18] + t->Phi[5][1]*w->S[48] + t->Phi[5][2]*w->S[78] +
+            t->Phi[5][3]*w->S[108] + t->Phi[5][4]*w->S[138] + t->Phi[5][5]*w->S[168] +
+            t->Phi[5][18];
     w->term[0][151] = t->Phi[5][0]*t->Phi[0][19] + t->Phi[5][1]*t->Phi[1][19] +
             t->Phi[5][2]*t->Phi[2][19] + t->Phi[5][3]*t->Phi[3][19] + t->Phi[5][4]*t->Phi[4][19] +
             t->Phi[5][5]*t->Phi[5][19];
-    w->term[1][151] = t->Phi[5][0]*w->S[16] + t->Phi[5][1]*w->S[43] + t->Phi[5][2]*w->S[70] +
-            t->Phi[5][3]*w->S[97] + t->Phi[5][4]*w->S[124] + t->Phi[5][5]*w->S[151] + t->Phi[5][19];
+    w->term[1][151] = t->Phi[5][0]*w->S[19] + t->Phi[5][1]*w->S[49] + t->Phi[5][2]*w->S[79] +
+            t->Phi[5][3]*w->S[109] + t->Phi[5][4]*w->S[139] + t->Phi[5][5]*w->S[169] +
+            t->Phi[5][19];
     w->term[0][152] = t->Phi[5][0]*t->Phi[0][20] + t->Phi[5][1]*t->Phi[1][20] +
             t->Phi[5][2]*t->Phi[2][20] + t->Phi[5][3]*t->Phi[3][20] + t->Phi[5][4]*t->Phi[4][20] +
             t->Phi[5][5]*t->Phi[5][20];
-    w->term[1][152] = t->Phi[5][0]*w->S[17] + t->Phi[5][1]*w->S[44] + t->Phi[5][2]*w->S[71] +
-            t->Phi[5][3]*w->S[98] + t->Phi[5][4]*w->S[125] + t->Phi[5][5]*w->S[152] + t->Phi[5][20];
+    w->term[1][152] = t->Phi[5][0]*w->S[20] + t->Phi[5][1]*w->S[50] + t->Phi[5][2]*w->S[80] +
+            t->Phi[5][3]*w->S[110] + t->Phi[5][4]*w->S[140] + t->Phi[5][5]*w->S[170] +
+            t->Phi[5][20];
     w->term[0][153] = t->Phi[5][0]*t->Phi[0][21] + t->Phi[5][1]*t->Phi[1][21] +
             t->Phi[5][2]*t->Phi[2][21] + t->Phi[5][3]*t->Phi[3][21] + t->Phi[5][4]*t->Phi[4][21] +
             t->Phi[5][5]*t->Phi[5][21];
-    w->term[1][153] = t->Phi[5][0]*w->S[18] + t->Phi[5][1]*w->S[45] + t->Phi[5][2]*w->S[72] +
-            t->Phi[5][3]*w->S[99] + t->Phi[5][4]*w->S[126] + t->Phi[5][5]*w->S[153] + t->Phi[5][21];
+    w->term[1][153] = t->Phi[5][0]*w->S[21] + t->Phi[5][1]*w->S[51] + t->Phi[5][2]*w->S[81] +
+            t->Phi[5][3]*w->S[111] + t->Phi[5][4]*w->S[141] + t->Phi[5][5]*w->S[171] +
+            t->Phi[5][21];
     w->term[0][154] = t->Phi[5][0]*t->Phi[0][22] + t->Phi[5][1]*t->Phi[1][22] +
             t->Phi[5][2]*t->Phi[2][22] + t->Phi[5][3]*t->Phi[3][22] + t->Phi[5][4]*t->Phi[4][22] +
             t->Phi[5][5]*t->Phi[5][22];
-    w->term[1][154] = t->Phi[5][0]*w->S[19] + t->Phi[5][1]*w->S[46] + t->Phi[5][2]*w->S[73] +
-            t->Phi[5][3]*w->S[100] + t->Phi[5][4]*w->S[127] + t->Phi[5][5]*w->S[154] +
+    w->term[1][154] = t->Phi[5][0]*w->S[22] + t->Phi[5][1]*w->S[52] + t->Phi[5][2]*w->S[82] +
+            t->Phi[5][3]*w->S[112] + t->Phi[5][4]*w->S[142] + t->Phi[5][5]*w->S[172] +
             t->Phi[5][22];
     w->term[0][155] = t->Phi[5][0]*t->Phi[0][23] + t->Phi[5][1]*t->Phi[1][23] +
             t->Phi[5][2]*t->Phi[2][23] + t->Phi[5][3]*t->Phi[3][23] + t->Phi[5][4]*t->Phi[4][23] +
             t->Phi[5][5]*t->Phi[5][23];
-    w->term[1][155] = t->Phi[5][0]*w->S[20] + t->Phi[5][1]*w->S[47] + t->Phi[5][2]*w->S[74] +
-            t->Phi[5][3]*w->S[101] + t->Phi[5][4]*w->S[128] + t->Phi[5][5]*w->S[155] +
+    w->term[1][155] = t->Phi[5][0]*w->S[23] + t->Phi[5][1]*w->S[53] + t->Phi[5][2]*w->S[83] +
+            t->Phi[5][3]*w->S[113] + t->Phi[5][4]*w->S[143] + t->Phi[5][5]*w->S[173] +
             t->Phi[5][23];
     w->term[0][156] = t->Phi[5][0]*t->Phi[0][24] + t->Phi[5][1]*t->Phi[1][24] +
             t->Phi[5][2]*t->Phi[2][24] + t->Phi[5][3]*t->Phi[3][24] + t->Phi[5][4]*t->Phi[4][24] +
             t->Phi[5][5]*t->Phi[5][24];
-    w->term[1][156] = t->Phi[5][0]*w->S[21] + t->Phi[5][1]*w->S[48] + t->Phi[5][2]*w->S[75] +
-            t->Phi[5][3]*w->S[102] + t->Phi[5][4]*w->S[129] + t->Phi[5][5]*w->S[156] +
+    w->term[1][156] = t->Phi[5][0]*w->S[24] + t->Phi[5][1]*w->S[54] + t->Phi[5][2]*w->S[84] +
+            t->Phi[5][3]*w->S[114] + t->Phi[5][4]*w->S[144] + t->Phi[5][5]*w->S[174] +
             t->Phi[5][24];
     w->term[0][157] = t->Phi[5][0]*t->Phi[0][25] + t->Phi[5][1]*t->Phi[1][25] +
             t->Phi[5][2]*t->Phi[2][25] + t->Phi[5][3]*t->Phi[3][25] + t->Phi[5][4]*t->Phi[4][25] +
             t->Phi[5][5]*t->Phi[5][25];
-    w->term[1][157] = t->Phi[5][0]*w->S[22] + t->Phi[5][1]*w->S[49] + t->Phi[5][2]*w->S[76] +
-            t->Phi[5][3]*w->S[103] + t->Phi[5][4]*w->S[130] + t->Phi[5][5]*w->S[157] +
+    w->term[1][157] = t->Phi[5][0]*w->S[25] + t->Phi[5][1]*w->S[55] + t->Phi[5][2]*w->S[85] +
+            t->Phi[5][3]*w->S[115] + t->Phi[5][4]*w->S[145] + t->Phi[5][5]*w->S[175] +
             t->Phi[5][25];
     w->term[0][158] = t->Phi[5][0]*t->Phi[0][26] + t->Phi[5][1]*t->Phi[1][26] +
             t->Phi[5][2]*t->Phi[2][26] + t->Phi[5][3]*t->Phi[3][26] + t->Phi[5][4]*t->Phi[4][26] +
             t->Phi[5][5]*t->Phi[5][26];
-    w->term[1][158] = t->Phi[5][0]*w->S[23] + t->Phi[5][1]*w->S[50] + t->Phi[5][2]*w->S[77] +
-            t->Phi[5][3]*w->S[104] + t->Phi[5][4]*w->S[131] + t->Phi[5][5]*w->S[158] +
+    w->term[1][158] = t->Phi[5][0]*w->S[26] + t->Phi[5][1]*w->S[56] + t->Phi[5][2]*w->S[86] +
+            t->Phi[5][3]*w->S[116] + t->Phi[5][4]*w->S[146] + t->Phi[5][5]*w->S[176] +
             t->Phi[5][26];
     w->term[0][159] = t->Phi[5][0]*t->Phi[0][27] + t->Phi[5][1]*t->Phi[1][27] +
             t->Phi[5][2]*t->Phi[2][27] + t->Phi[5][3]*t->Phi[3][27] + t->Phi[5][4]*t->Phi[4][27] +
             t->Phi[5][5]*t->Phi[5][27];
-    w->term[1][159] = t->Phi[5][0]*w->S[24] + t->Phi[5][1]*w->S[51] + t->Phi[5][2]*w->S[78] +
-            t->Phi[5][3]*w->S[105] + t->Phi[5][4]*w->S[132] + t->Phi[5][5]*w->S[159] +
+    w->term[1][159] = t->Phi[5][0]*w->S[27] + t->Phi[5][1]*w->S[57] + t->Phi[5][2]*w->S[87] +
+            t->Phi[5][3]*w->S[117] + t->Phi[5][4]*w->S[147] + t->Phi[5][5]*w->S[177] +
             t->Phi[5][27];
     w->term[0][160] = t->Phi[5][0]*t->Phi[0][28] + t->Phi[5][1]*t->Phi[1][28] +
             t->Phi[5][2]*t->Phi[2][28] + t->Phi[5][3]*t->Phi[3][28] + t->Phi[5][4]*t->Phi[4][28] +
             t->Phi[5][5]*t->Phi[5][28];
-    w->term[1][160] = t->Phi[5][0]*w->S[25] + t->Phi[5][1]*w->S[52] + t->Phi[5][2]*w->S[79] +
-            t->Phi[5][3]*w->S[106] + t->Phi[5][4]*w->S[133] + t->Phi[5][5]*w->S[160] +
+    w->term[1][160] = t->Phi[5][0]*w->S[28] + t->Phi[5][1]*w->S[58] + t->Phi[5][2]*w->S[88] +
+            t->Phi[5][3]*w->S[118] + t->Phi[5][4]*w->S[148] + t->Phi[5][5]*w->S[178] +
             t->Phi[5][28];
     w->term[0][161] = t->Phi[5][0]*t->Phi[0][29] + t->Phi[5][1]*t->Phi[1][29] +
             t->Phi[5][2]*t->Phi[2][29] + t->Phi[5][3]*t->Phi[3][29] + t->Phi[5][4]*t->Phi[4][29] +
             t->Phi[5][5]*t->Phi[5][29];
-    w->term[1][161] = t->Phi[5][0]*w->S[26] + t->Phi[5][1]*w->S[53] + t->Phi[5][2]*w->S[80] +
-            t->Phi[5][3]*w->S[107] + t->Phi[5][4]*w->S[134] + t->Phi[5][5]*w->S[161] +
+    w->term[1][161] = t->Phi[5][0]*w->S[29] + t->Phi[5][1]*w->S[59] + t->Phi[5][2]*w->S[89] +
+            t->Phi[5][3]*w->S[119] + t->Phi[5][4]*w->S[149] + t->Phi[5][5]*w->S[179] +
             t->Phi[5][29];
     w->term[0][162] = t->Phi[6][0]*t->Phi[0][0] + t->Phi[6][1]*t->Phi[1][0] +
             t->Phi[6][2]*t->Phi[2][0] + t->Phi[6][3]*t->Phi[3][0] + t->Phi[6][4]*t->Phi[4][0] +
             t->Phi[6][5]*t->Phi[5][0] + t->Phi[6][6]*t->Phi[6][0];
-    w->term[1][162] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[27] + t->Phi[6][2]*w->S[54] +
-            t->Phi[6][3]*w->S[81] + t->Phi[6][4]*w->S[108] + t->Phi[6][5]*w->S[135] +
-            t->Phi[6][6]*w->S[162];
+    w->term[1][162] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[30] + t->Phi[6][2]*w->S[60] +
+            t->Phi[6][3]*w->S[90] + t->Phi[6][4]*w->S[120] + t->Phi[6][5]*w->S[150] +
+            t->Phi[6][6]*w->S[180];
     w->term[0][163] = t->Phi[6][0]*t->Phi[0][1] + t->Phi[6][1]*t->Phi[1][1] +
             t->Phi[6][2]*t->Phi[2][1] + t->Phi[6][3]*t->Phi[3][1] + t->Phi[6][4]*t->Phi[4][1] +
             t->Phi[6][5]*t->Phi[5][1] + t->Phi[6][6]*t->Phi[6][1];
-    w->term[1][163] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[28] + t->Phi[6][2]*w->S[55] +
-            t->Phi[6][3]*w->S[82] + t->Phi[6][4]*w->S[109] + t->Phi[6][5]*w->S[136] +
-            t->Phi[6][6]*w->S[163];
+    w->term[1][163] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[31] + t->Phi[6][2]*w->S[61] +
+            t->Phi[6][3]*w->S[91] + t->Phi[6][4]*w->S[121] + t->Phi[6][5]*w->S[151] +
+            t->Phi[6][6]*w->S[181];
     w->term[0][164] = t->Phi[6][0]*t->Phi[0][2] + t->Phi[6][1]*t->Phi[1][2] +
             t->Phi[6][2]*t->Phi[2][2] + t->Phi[6][3]*t->Phi[3][2] + t->Phi[6][4]*t->Phi[4][2] +
             t->Phi[6][5]*t->Phi[5][2] + t->Phi[6][6]*t->Phi[6][2];
-    w->term[1][164] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[29] + t->Phi[6][2]*w->S[56] +
-            t->Phi[6][3]*w->S[83] + t->Phi[6][4]*w->S[110] + t->Phi[6][5]*w->S[137] +
-            t->Phi[6][6]*w->S[164];
+    w->term[1][164] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[32] + t->Phi[6][2]*w->S[62] +
+            t->Phi[6][3]*w->S[92] + t->Phi[6][4]*w->S[122] + t->Phi[6][5]*w->S[152] +
+            t->Phi[6][6]*w->S[182];
     w->term[0][165] = t->Phi[6][0]*t->Phi[0][3] + t->Phi[6][1]*t->Phi[1][3] +
             t->Phi[6][2]*t->Phi[2][3] + t->Phi[6][3]*t->Phi[3][3] + t->Phi[6][4]*t->Phi[4][3] +
             t->Phi[6][5]*t->Phi[5][3] + t->Phi[6][6]*t->Phi[6][3];
-    w->term[1][165] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[30] + t->Phi[6][2]*w->S[57] +
-            t->Phi[6][3]*w->S[84] + t->Phi[6][4]*w->S[111] + t->Phi[6][5]*w->S[138] +
-            t->Phi[6][6]*w->S[165];
+    w->term[1][165] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[33] + t->Phi[6][2]*w->S[63] +
+            t->Phi[6][3]*w->S[93] + t->Phi[6][4]*w->S[123] + t->Phi[6][5]*w->S[153] +
+            t->Phi[6][6]*w->S[183];
     w->term[0][166] = t->Phi[6][0]*t->Phi[0][4] + t->Phi[6][1]*t->Phi[1][4] +
             t->Phi[6][2]*t->Phi[2][4] + t->Phi[6][3]*t->Phi[3][4] + t->Phi[6][4]*t->Phi[4][4] +
             t->Phi[6][5]*t->Phi[5][4] + t->Phi[6][6]*t->Phi[6][4];
-    w->term[1][166] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[31] + t->Phi[6][2]*w->S[58] +
-            t->Phi[6][3]*w->S[85] + t->Phi[6][4]*w->S[112] + t->Phi[6][5]*w->S[139] +
-            t->Phi[6][6]*w->S[166];
+    w->term[1][166] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[34] + t->Phi[6][2]*w->S[64] +
+            t->Phi[6][3]*w->S[94] + t->Phi[6][4]*w->S[124] + t->Phi[6][5]*w->S[154] +
+            t->Phi[6][6]*w->S[184];
     w->term[0][167] = t->Phi[6][0]*t->Phi[0][5] + t->Phi[6][1]*t->Phi[1][5] +
             t->Phi[6][2]*t->Phi[2][5] + t->Phi[6][3]*t->Phi[3][5] + t->Phi[6][4]*t->Phi[4][5] +
             t->Phi[6][5]*t->Phi[5][5] + t->Phi[6][6]*t->Phi[6][5];
-    w->term[1][167] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[32] + t->Phi[6][2]*w->S[59] +
-            t->Phi[6][3]*w->S[86] + t->Phi[6][4]*w->S[113] + t->Phi[6][5]*w->S[140] +
-            t->Phi[6][6]*w->S[167];
+    w->term[1][167] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[35] + t->Phi[6][2]*w->S[65] +
+            t->Phi[6][3]*w->S[95] + t->Phi[6][4]*w->S[125] + t->Phi[6][5]*w->S[155] +
+            t->Phi[6][6]*w->S[185];
     w->term[0][168] = t->Phi[6][6]*t->Phi[6][6];
-    w->term[1][168] = t->Phi[6][6]*w->S[168];
+    w->term[1][168] = t->Phi[6][6]*w->S[186];
     w->term[0][169] = t->Phi[6][0]*t->Phi[0][7] + t->Phi[6][1]*t->Phi[1][7] +
             t->Phi[6][2]*t->Phi[2][7] + t->Phi[6][3]*t->Phi[3][7] + t->Phi[6][4]*t->Phi[4][7] +
             t->Phi[6][5]*t->Phi[5][7] + t->Phi[6][6]*t->Phi[6][7];
-    w->term[1][169] = t->Phi[6][0]*w->S[6] + t->Phi[6][1]*w->S[33] + t->Phi[6][2]*w->S[60] +
-            t->Phi[6][3]*w->S[87] + t->Phi[6][4]*w->S[114] + t->Phi[6][5]*w->S[141] +
-            t->Phi[6][6]*w->S[169] + t->Phi[6][7];
+    w->term[1][169] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[37] + t->Phi[6][2]*w->S[67] +
+            t->Phi[6][3]*w->S[97] + t->Phi[6][4]*w->S[127] + t->Phi[6][5]*w->S[157] +
+            t->Phi[6][6]*w->S[187] + t->Phi[6][7];
     w->term[0][170] = t->Phi[6][0]*t->Phi[0][8] + t->Phi[6][1]*t->Phi[1][8] +
             t->Phi[6][2]*t->Phi[2][8] + t->Phi[6][3]*t->Phi[3][8] + t->Phi[6][4]*t->Phi[4][8] +
             t->Phi[6][5]*t->Phi[5][8] + t->Phi[6][6]*t->Phi[6][8];
-    w->term[1][170] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[34] + t->Phi[6][2]*w->S[61] +
-            t->Phi[6][3]*w->S[88] + t->Phi[6][4]*w->S[115] + t->Phi[6][5]*w->S[142] +
-            t->Phi[6][6]*w->S[170] + t->Phi[6][8];
+    w->term[1][170] = t->Phi[6][0]*w->S[8] + t->Phi[6][1]*w->S[38] + t->Phi[6][2]*w->S[68] +
+            t->Phi[6][3]*w->S[98] + t->Phi[6][4]*w->S[128] + t->Phi[6][5]*w->S[158] +
+            t->Phi[6][6]*w->S[188] + t->Phi[6][8];
     w->term[0][171] = t->Phi[6][0]*t->Phi[0][9] + t->Phi[6][1]*t->Phi[1][9] +
             t->Phi[6][2]*t->Phi[2][9] + t->Phi[6][3]*t->Phi[3][9] + t->Phi[6][4]*t->Phi[4][9] +
             t->Phi[6][5]*t->Phi[5][9] + t->Phi[6][6]*t->Phi[6][9];
-    w->term[1][171] = t->Phi[6][0]*w->S[8] + t->Phi[6][1]*w->S[35] + t->Phi[6][2]*w->S[62] +
-            t->Phi[6][3]*w->S[89] + t->Phi[6][4]*w->S[116] + t->Phi[6][5]*w->S[143] +
-            t->Phi[6][6]*w->S[171] + t->Phi[6][9];
+    w->term[1][171] = t->Phi[6][0]*w->S[9] + t->Phi[6][1]*w->S[39] + t->Phi[6][2]*w->S[69] +
+            t->Phi[6][3]*w->S[99] + t->Phi[6][4]*w->S[129] + t->Phi[6][5]*w->S[159] +
+            t->Phi[6][6]*w->S[189] + t->Phi[6][9];
     w->term[0][172] = t->Phi[6][0]*t->Phi[0][10] + t->Phi[6][1]*t->Phi[1][10] +
             t->Phi[6][2]*t->Phi[2][10] + t->Phi[6][3]*t->Phi[3][10] + t->Phi[6][4]*t->Phi[4][10] +
             t->Phi[6][5]*t->Phi[5][10] + t->Phi[6][6]*t->Phi[6][10] + t->Phi[6][10]*t->Phi[10][10];
-    w->term[1][172] = t->Phi[6][0]*w->S[9] + t->Phi[6][1]*w->S[36] + t->Phi[6][2]*w->S[63] +
-            t->Phi[6][3]*w->S[90] + t->Phi[6][4]*w->S[117] + t->Phi[6][5]*w->S[144] +
-            t->Phi[6][6]*w->S[172] + t->Phi[6][10]*w->S[190];
+    w->term[1][172] = t->Phi[6][0]*w->S[10] + t->Phi[6][1]*w->S[40] + t->Phi[6][2]*w->S[70] +
+            t->Phi[6][3]*w->S[100] + t->Phi[6][4]*w->S[130] + t->Phi[6][5]*w->S[160] +
+            t->Phi[6][6]*w->S[190] + t->Phi[6][10]*w->S[210];
     w->term[0][173] = t->Phi[6][0]*t->Phi[0][11] + t->Phi[6][1]*t->Phi[1][11] +
             t->Phi[6][2]*t->Phi[2][11] + t->Phi[6][3]*t->Phi[3][11] + t->Phi[6][4]*t->Phi[4][11] +
             t->Phi[6][5]*t->Phi[5][11] + t->Phi[6][6]*t->Phi[6][11] + t->Phi[6][11]*t->Phi[11][11];
-    w->term[1][173] = t->Phi[6][0]*w->S[10] + t->Phi[6][1]*w->S[37] + t->Phi[6][2]*w->S[64] +
-            t->Phi[6][3]*w->S[91] + t->Phi[6][4]*w->S[118] + t->Phi[6][5]*w->S[145] +
-            t->Phi[6][6]*w->S[173] + t->Phi[6][11]*w->S[191];
+    w->term[1][173] = t->Phi[6][0]*w->S[11] + t->Phi[6][1]*w->S[41] + t->Phi[6][2]*w->S[71] +
+            t->Phi[6][3]*w->S[101] + t->Phi[6][4]*w->S[131] + t->Phi[6][5]*w->S[161] +
+            t->Phi[6][6]*w->S[191] + t->Phi[6][11]*w->S[211];
     w->term[0][174] = t->Phi[6][0]*t->Phi[0][12] + t->Phi[6][1]*t->Phi[1][12] +
             t->Phi[6][2]*t->Phi[2][12] + t->Phi[6][3]*t->Phi[3][12] + t->Phi[6][4]*t->Phi[4][12] +
             t->Phi[6][5]*t->Phi[5][12] + t->Phi[6][6]*t->Phi[6][12] + t->Phi[6][12]*t->Phi[12][12];
-    w->term[1][174] = t->Phi[6][0]*w->S[11] + t->Phi[6][1]*w->S[38] + t->Phi[6][2]*w->S[65] +
-            t->Phi[6][3]*w->S[92] + t->Phi[6][4]*w->S[119] + t->Phi[6][5]*w->S[146] +
-            t->Phi[6][6]*w->S[174] + t->Phi[6][12]*w->S[192];
+    w->term[1][174] = t->Phi[6][0]*w->S[12] + t->Phi[6][1]*w->S[42] + t->Phi[6][2]*w->S[72] +
+            t->Phi[6][3]*w->S[102] + t->Phi[6][4]*w->S[132] + t->Phi[6][5]*w->S[162] +
+            t->Phi[6][6]*w->S[192] + t->Phi[6][12]*w->S[212];
     w->term[0][175] = t->Phi[6][0]*t->Phi[0][13] + t->Phi[6][1]*t->Phi[1][13] +
             t->Phi[6][2]*t->Phi[2][13] + t->Phi[6][3]*t->Phi[3][13] + t->Phi[6][4]*t->Phi[4][13] +
             t->Phi[6][5]*t->Phi[5][13] + t->Phi[6][6]*t->Phi[6][13] + t->Phi[6][13]*t->Phi[13][13];
-    w->term[1][175] = t->Phi[6][0]*w->S[12] + t->Phi[6][1]*w->S[39] + t->Phi[6][2]*w->S[66] +
-            t->Phi[6][3]*w->S[93] + t->Phi[6][4]*w->S[120] + t->Phi[6][5]*w->S[147] +
-            t->Phi[6][6]*w->S[175] + t->Phi[6][13]*w->S[193];
+    w->term[1][175] = t->Phi[6][0]*w->S[13] + t->Phi[6][1]*w->S[43] + t->Phi[6][2]*w->S[73] +
+            t->Phi[6][3]*w->S[103] + t->Phi[6][4]*w->S[133] + t->Phi[6][5]*w->S[163] +
+            t->Phi[6][6]*w->S[193] + t->Phi[6][13]*w->S[213];
     w->term[0][176] = t->Phi[6][0]*t->Phi[0][14] + t->Phi[6][1]*t->Phi[1][14] +
             t->Phi[6][2]*t->Phi[2][14] + t->Phi[6][3]*t->Phi[3][14] + t->Phi[6][4]*t->Phi[4][14] +
             t->Phi[6][5]*t->Phi[5][14] + t->Phi[6][6]*t->Phi[6][14] + t->Phi[6][14]*t->Phi[14][14];
-    w->term[1][176] = t->Phi[6][0]*w->S[13] + t->Phi[6][1]*w->S[40] + t->Phi[6][2]*w->S[67] +
-            t->Phi[6][3]*w->S[94] + t->Phi[6][4]*w->S[121] + t->Phi[6][5]*w->S[148] +
-            t->Phi[6][6]*w->S[176] + t->Phi[6][14]*w->S[194];
+    w->term[1][176] = t->Phi[6][0]*w->S[14] + t->Phi[6][1]*w->S[44] + t->Phi[6][2]*w->S[74] +
+            t->Phi[6][3]*w->S[104] + t->Phi[6][4]*w->S[134] + t->Phi[6][5]*w->S[164] +
+            t->Phi[6][6]*w->S[194] + t->Phi[6][14]*w->S[214];
     w->term[0][177] = t->Phi[6][0]*t->Phi[0][15] + t->Phi[6][1]*t->Phi[1][15] +
             t->Phi[6][2]*t->Phi[2][15] + t->Phi[6][3]*t->Phi[3][15] + t->Phi[6][4]*t->Phi[4][15] +
             t->Phi[6][5]*t->Phi[5][15] + t->Phi[6][6]*t->Phi[6][15] + t->Phi[6][15]*t->Phi[15][15];
-    w->term[1][177] = t->Phi[6][0]*w->S[14] + t->Phi[6][1]*w->S[41] + t->Phi[6][2]*w->S[68] +
-            t->Phi[6][3]*w->S[95] + t->Phi[6][4]*w->S[122] + t->Phi[6][5]*w->S[149] +
-            t->Phi[6][6]*w->S[177] + t->Phi[6][15]*w->S[195];
+    w->term[1][177] = t->Phi[6][0]*w->S[15] + t->Phi[6][1]*w->S[45] + t->Phi[6][2]*w->S[75] +
+            t->Phi[6][3]*w->S[105] + t->Phi[6][4]*w->S[135] + t->Phi[6][5]*w->S[165] +
+            t->Phi[6][6]*w->S[195] + t->Phi[6][15]*w->S[215];
     w->term[0][178] = t->Phi[6][0]*t->Phi[0][18] + t->Phi[6][1]*t->Phi[1][18] +
             t->Phi[6][2]*t->Phi[2][18] + t->Phi[6][3]*t->Phi[3][18] + t->Phi[6][4]*t->Phi[4][18] +
             t->Phi[6][5]*t->Phi[5][18] + t->Phi[6][6]*t->Phi[6][18];
-    w->term[1][178] = t->Phi[6][0]*w->S[15] + t->Phi[6][1]*w->S[42] + t->Phi[6][2]*w->S[69] +
-            t->Phi[6][3]*w->S[96] + t->Phi[6][4]*w->S[123] + t->Phi[6][5]*w->S[150] +
-            t->Phi[6][6]*w->S[178] + t->Phi[6][18];
+    w->term[1][178] = t->Phi[6][0]*w->S[18] + t->Phi[6][1]*w->S[48] + t->Phi[6][2]*w->S[78] +
+            t->Phi[6][3]*w->S[108] + t->Phi[6][4]*w->S[138] + t->Phi[6][5]*w->S[168] +
+            t->Phi[6][6]*w->S[198] + t->Phi[6][18];
     w->term[0][179] = t->Phi[6][0]*t->Phi[0][19] + t->Phi[6][1]*t->Phi[1][19] +
             t->Phi[6][2]*t->Phi[2][19] + t->Phi[6][3]*t->Phi[3][19] + t->Phi[6][4]*t->Phi[4][19] +
             t->Phi[6][5]*t->Phi[5][19] + t->Phi[6][6]*t->Phi[6][19];
-    w->term[1][179] = t->Phi[6][0]*w->S[16] + t->Phi[6][1]*w->S[43] + t->Phi[6][2]*w->S[70] +
-            t->Phi[6][3]*w->S[97] + t->Phi[6][4]*w->S[124] + t->Phi[6][5]*w->S[151] +
-            t->Phi[6][6]*w->S[179] + t->Phi[6][19];
+    w->term[1][179] = t->Phi[6][0]*w->S[19] + t->Phi[6][1]*w->S[49] + t->Phi[6][2]*w->S[79] +
+            t->Phi[6][3]*w->S[109] + t->Phi[6][4]*w->S[139] + t->Phi[6][5]*w->S[169] +
+            t->Phi[6][6]*w->S[199] + t->Phi[6][19];
     w->term[0][180] = t->Phi[6][0]*t->Phi[0][20] + t->Phi[6][1]*t->Phi[1][20] +
             t->Phi[6][2]*t->Phi[2][20] + t->Phi[6][3]*t->Phi[3][20] + t->Phi[6][4]*t->Phi[4][20] +
             t->Phi[6][5]*t->Phi[5][20] + t->Phi[6][6]*t->Phi[6][20];
-    w->term[1][180] = t->Phi[6][0]*w->S[17] + t->Phi[6][1]*w->S[44] + t->Phi[6][2]*w->S[71] +
-            t->Phi[6][3]*w->S[98] + t->Phi[6][4]*w->S[125] + t->Phi[6][5]*w->S[152] +
-            t->Phi[6][6]*w->S[180] + t->Phi[6][20];
+    w->term[1][180] = t->Phi[6][0]*w->S[20] + t->Phi[6][1]*w->S[50] + t->Phi[6][2]*w->S[80] +
+            t->Phi[6][3]*w->S[110] + t->Phi[6][4]*w->S[140] + t->Phi[6][5]*w->S[170] +
+            t->Phi[6][6]*w->S[200] + t->Phi[6][20];
     w->term[0][181] = t->Phi[6][0]*t->Phi[0][21] + t->Phi[6][1]*t->Phi[1][21] +
             t->Phi[6][2]*t->Phi[2][21] + t->Phi[6][3]*t->Phi[3][21] + t->Phi[6][4]*t->Phi[4][21] +
             t->Phi[6][5]*t->Phi[5][21] + t->Phi[6][6]*t->Phi[6][21];
-    w->term[1][181] = t->Phi[6][0]*w->S[18] + t->Phi[6][1]*w->S[45] + t->Phi[6][2]*w->S[72] +
-            t->Phi[6][3]*w->S[99] + t->Phi[6][4]*w->S[126] + t->Phi[6][5]*w->S[153] +
-            t->Phi[6][6]*w->S[181] + t->Phi[6][21];
+    w->term[1][181] = t->Phi[6][0]*w->S[21] + t->Phi[6][1]*w->S[51] + t->Phi[6][2]*w->S[81] +
+            t->Phi[6][3]*w->S[111] + t->Phi[6][4]*w->S[141] + t->Phi[6][5]*w->S[171] +
+            t->Phi[6][6]*w->S[201] + t->Phi[6][21];
     w->term[0][182] = t->Phi[6][0]*t->Phi[0][22] + t->Phi[6][1]*t->Phi[1][22] +
             t->Phi[6][2]*t->Phi[2][22] + t->Phi[6][3]*t->Phi[3][22] + t->Phi[6][4]*t->Phi[4][22] +
             t->Phi[6][5]*t->Phi[5][22] + t->Phi[6][6]*t->Phi[6][22];
-    w->term[1][182] = t->Phi[6][0]*w->S[19] + t->Phi[6][1]*w->S[46] + t->Phi[6][2]*w->S[73] +
-            t->Phi[6][3]*w->S[100] + t->Phi[6][4]*w->S[127] + t->Phi[6][5]*w->S[154] +
-            t->Phi[6][6]*w->S[182] + t->Phi[6][22];
+    w->term[1][182] = t->Phi[6][0]*w->S[22] + t->Phi[6][1]*w->S[52] + t->Phi[6][2]*w->S[82] +
+            t->Phi[6][3]*w->S[112] + t->Phi[6][4]*w->S[142] + t->Phi[6][5]*w->S[172] +
+            t->Phi[6][6]*w->S[202] + t->Phi[6][22];
     w->term[0][183] = t->Phi[6][0]*t->Phi[0][23] + t->Phi[6][1]*t->Phi[1][23] +
             t->Phi[6][2]*t->Phi[2][23] + t->Phi[6][3]*t->Phi[3][23] + t->Phi[6][4]*t->Phi[4][23] +
             t->Phi[6][5]*t->Phi[5][23] + t->Phi[6][6]*t->Phi[6][23];
-    w->term[1][183] = t->Phi[6][0]*w->S[20] + t->Phi[6][1]*w->S[47] + t->Phi[6][2]*w->S[74] +
-            t->Phi[6][3]*w->S[101] + t->Phi[6][4]*w->S[128] + t->Phi[6][5]*w->S[155] +
-            t->Phi[6][6]*w->S[183] + t->Phi[6][23];
+    w->term[1][183] = t->Phi[6][0]*w->S[23] + t->Phi[6][1]*w->S[53] + t->Phi[6][2]*w->S[83] +
+            t->Phi[6][3]*w->S[113] + t->Phi[6][4]*w->S[143] + t->Phi[6][5]*w->S[173] +
+            t->Phi[6][6]*w->S[203] + t->Phi[6][23];
     w->term[0][184] = t->Phi[6][0]*t->Phi[0][24] + t->Phi[6][1]*t->Phi[1][24] +
             t->Phi[6][2]*t->Phi[2][24] + t->Phi[6][3]*t->Phi[3][24] + t->Phi[6][4]*t->Phi[4][24] +
             t->Phi[6][5]*t->Phi[5][24] + t->Phi[6][6]*t->Phi[6][24];
-    w->term[1][184] = t->Phi[6][0]*w->S[21] + t->Phi[6][1]*w->S[48] + t->Phi[6][2]*w->S[75] +
-            t->Phi[6][3]*w->S[102] + t->Phi[6][4]*w->S[129] + t->Phi[6][5]*w->S[156] +
-            t->Phi[6][6]*w->S[184] + t->Phi[6][24];
+    w->term[1][184] = t->Phi[6][0]*w->S[24] + t->Phi[6][1]*w->S[54] + t->Phi[6][2]*w->S[84] +
+            t->Phi[6][3]*w->S[114] + t->Phi[6][4]*w->S[144] + t->Phi[6][5]*w->S[174] +
+            t->Phi[6][6]*w->S[204] + t->Phi[6][24];
     w->term[0][185] = t->Phi[6][0]*t->Phi[0][25] + t->Phi[6][1]*t->Phi[1][25] +
             t->Phi[6][2]*t->Phi[2][25] + t->Phi[6][3]*t->Phi[3][25] + t->Phi[6][4]*t->Phi[4][25] +
             t->Phi[6][5]*t->Phi[5][25] + t->Phi[6][6]*t->Phi[6][25];
-    w->term[1][185] = t->Phi[6][0]*w->S[22] + t->Phi[6][1]*w->S[49] + t->Phi[6][2]*w->S[76] +
-            t->Phi[6][3]*w->S[103] + t->Phi[6][4]*w->S[130] + t->Phi[6][5]*w->S[157] +
-            t->Phi[6][6]*w->S[185] + t->Phi[6][25];
+    w->term[1][185] = t->Phi[6][0]*w->S[25] + t->Phi[6][1]*w->S[55] + t->Phi[6][2]*w->S[85] +
+            t->Phi[6][3]*w->S[115] + t->Phi[6][4]*w->S[145] + t->Phi[6][5]*w->S[175] +
+            t->Phi[6][6]*w->S[205] + t->Phi[6][25];
     w->term[0][186] = t->Phi[6][0]*t->Phi[0][26] + t->Phi[6][1]*t->Phi[1][26] +
             t->Phi[6][2]*t->Phi[2][26] + t->Phi[6][3]*t->Phi[3][26] + t->Phi[6][4]*t->Phi[4][26] +
             t->Phi[6][5]*t->Phi[5][26] + t->Phi[6][6]*t->Phi[6][26];
-    w->term[1][186] = t->Phi[6][0]*w->S[23] + t->Phi[6][1]*w->S[50] + t->Phi[6][2]*w->S[77] +
-            t->Phi[6][3]*w->S[104] + t->Phi[6][4]*w->S[131] + t->Phi[6][5]*w->S[158] +
-            t->Phi[6][6]*w->S[186] + t->Phi[6][26];
+    w->term[1][186] = t->Phi[6][0]*w->S[26] + t->Phi[6][1]*w->S[56] + t->Phi[6][2]*w->S[86] +
+            t->Phi[6][3]*w->S[116] + t->Phi[6][4]*w->S[146] + t->Phi[6][5]*w->S[176] +
+            t->Phi[6][6]*w->S[206] + t->Phi[6][26];
     w->term[0][187] = t->Phi[6][0]*t->Phi[0][27] + t->Phi[6][1]*t->Phi[1][27] +
             t->Phi[6][2]*t->Phi[2][27] + t->Phi[6][3]*t->Phi[3][27] + t->Phi[6][4]*t->Phi[4][27] +
             t->Phi[6][5]*t->Phi[5][27] + t->Phi[6][6]*t->Phi[6][27];
-    w->term[1][187] = t->Phi[6][0]*w->S[24] + t->Phi[6][1]*w->S[51] + t->Phi[6][2]*w->S[78] +
-            t->Phi[6][3]*w->S[105] + t->Phi[6][4]*w->S[132] + t->Phi[6][5]*w->S[159] +
-            t->Phi[6][6]*w->S[187] + t->Phi[6][27];
+    w->term[1][187] = t->Phi[6][0]*w->S[27] + t->Phi[6][1]*w->S[57] + t->Phi[6][2]*w->S[87] +
+            t->Phi[6][3]*w->S[117] + t->Phi[6][4]*w->S[147] + t->Phi[6][5]*w->S[177] +
+            t->Phi[6][6]*w->S[207] + t->Phi[6][27];
     w->term[0][188] = t->Phi[6][0]*t->Phi[0][28] + t->Phi[6][1]*t->Phi[1][28] +
             t->Phi[6][2]*t->Phi[2][28] + t->Phi[6][3]*t->Phi[3][28] + t->Phi[6][4]*t->Phi[4][28] +
             t->Phi[6][5]*t->Phi[5][28] + t->Phi[6][6]*t->Phi[6][28];
-    w->term[1][188] = t->Phi[6][0]*w->S[25] + t->Phi[6][1]*w->S[52] + t->Phi[6][2]*w->S[79] +
-            t->Phi[6][3]*w->S[106] + t->Phi[6][4]*w->S[133] + t->Phi[6][5]*w->S[160] +
-            t->Phi[6][6]*w->S[188] + t->Phi[6][28];
+    w->term[1][188] = t->Phi[6][0]*w->S[28] + t->Phi[6][1]*w->S[58] + t->Phi[6][2]*w->S[88] +
+            t->Phi[6][3]*w->S[118] + t->Phi[6][4]*w->S[148] + t->Phi[6][5]*w->S[178] +
+            t->Phi[6][6]*w->S[208] + t->Phi[6][28];
     w->term[0][189] = t->Phi[6][0]*t->Phi[0][29] + t->Phi[6][1]*t->Phi[1][29] +
             t->Phi[6][2]*t->Phi[2][29] + t->Phi[6][3]*t->Phi[3][29] + t->Phi[6][4]*t->Phi[4][29] +
             t->Phi[6][5]*t->Phi[5][29] + t->Phi[6][6]*t->Phi[6][29];
-    w->term[1][189] = t->Phi[6][0]*w->S[26] + t->Phi[6][1]*w->S[53] + t->Phi[6][2]*w->S[80] +
-            t->Phi[6][3]*w->S[107] + t->Phi[6][4]*w->S[134] + t->Phi[6][5]*w->S[161] +
-            t->Phi[6][6]*w->S[189] + t->Phi[6][29];
+    w->term[1][189] = t->Phi[6][0]*w->S[29] + t->Phi[6][1]*w->S[59] + t->Phi[6][2]*w->S[89] +
+            t->Phi[6][3]*w->S[119] + t->Phi[6][4]*w->S[149] + t->Phi[6][5]*w->S[179] +
+            t->Phi[6][6]*w->S[209] + t->Phi[6][29];
     w->term[0][190] = t->Phi[10][10]*t->Phi[10][10];
-    w->term[1][190] = t->Phi[10][10]*w->S[190];
+    w->term[1][190] = t->Phi[10][10]*w->S[210];
     w->term[0][191] = t->Phi[11][11]*t->Phi[11][11];
-    w->term[1][191] = t->Phi[11][11]*w->S[191];
+    w->term[1][191] = t->Phi[11][11]*w->S[211];
     w->term[0][192] = t->Phi[12][12]*t->Phi[12][12];
-    w->term[1][192] = t->Phi[12][12]*w->S[192];
+    w->term[1][192] = t->Phi[12][12]*w->S[212];
     w->term[0][193] = t->Phi[13][13]*t->Phi[13][13];
-    w->term[1][193] = t->Phi[13][13]*w->S[193];
+    w->term[1][193] = t->Phi[13][13]*w->S[213];
     w->term[0][194] = t->Phi[14][14]*t->Phi[14][14];
-    w->term[1][194] = t->Phi[14][14]*w->S[194];
+    w->term[1][194] = t->Phi[14][14]*w->S[214];
     w->term[0][195] = t->Phi[15][15]*t->Phi[15][15];
-    w->term[1][195] = t->Phi[15][15]*w->S[195];
+    w->term[1][195] = t->Phi[15][15]*w->S[215];
     t->Phi[0][0] = t->Phi[0][0] + t->Phi[0][0] + w->term[0][0];
     w->S[0] = w->S[0] + half*w->term[1][0];
     t->Phi[0][1] = t->Phi[0][1] + t->Phi[0][1] + w->term[0][1];
@@ -3871,385 +3290,385 @@ NED_DOPPLER32_AUGMENTED_BLOCK void doubling(ned_doppler32_augmented_transition *
     t->Phi[0][5] = t->Phi[0][5] + t->Phi[0][5] + w->term[0][5];
     w->S[5] = w->S[5] + half*w->term[1][5];
     t->Phi[0][7] = t->Phi[0][7] + t->Phi[0][7] + w->term[0][6];
-    w->S[6] = w->S[6] + half*w->term[1][6];
+    w->S[7] = w->S[7] + half*w->term[1][6];
     t->Phi[0][8] = t->Phi[0][8] + t->Phi[0][8] + w->term[0][7];
-    w->S[7] = w->S[7] + half*w->term[1][7];
+    w->S[8] = w->S[8] + half*w->term[1][7];
     t->Phi[0][9] = t->Phi[0][9] + t->Phi[0][9] + w->term[0][8];
-    w->S[8] = w->S[8] + half*w->term[1][8];
+    w->S[9] = w->S[9] + half*w->term[1][8];
     t->Phi[0][10] = t->Phi[0][10] + t->Phi[0][10] + w->term[0][9];
-    w->S[9] = w->S[9] + half*w->term[1][9];
+    w->S[10] = w->S[10] + half*w->term[1][9];
     t->Phi[0][11] = t->Phi[0][11] + t->Phi[0][11] + w->term[0][10];
-    w->S[10] = w->S[10] + half*w->term[1][10];
+    w->S[11] = w->S[11] + half*w->term[1][10];
     t->Phi[0][12] = t->Phi[0][12] + t->Phi[0][12] + w->term[0][11];
-    w->S[11] = w->S[11] + half*w->term[1][11];
+    w->S[12] = w->S[12] + half*w->term[1][11];
     t->Phi[0][13] = t->Phi[0][13] + t->Phi[0][13] + w->term[0][12];
-    w->S[12] = w->S[12] + half*w->term[1][12];
+    w->S[13] = w->S[13] + half*w->term[1][12];
     t->Phi[0][14] = t->Phi[0][14] + t->Phi[0][14] + w->term[0][13];
-    w->S[13] = w->S[13] + half*w->term[1][13];
+    w->S[14] = w->S[14] + half*w->term[1][13];
     t->Phi[0][15] = t->Phi[0][15] + t->Phi[0][15] + w->term[0][14];
-    w->S[14] = w->S[14] + half*w->term[1][14];
+    w->S[15] = w->S[15] + half*w->term[1][14];
     t->Phi[0][18] = t->Phi[0][18] + t->Phi[0][18] + w->term[0][15];
-    w->S[15] = w->S[15] + half*w->term[1][15];
+    w->S[18] = w->S[18] + half*w->term[1][15];
     t->Phi[0][19] = t->Phi[0][19] + t->Phi[0][19] + w->term[0][16];
-    w->S[16] = w->S[16] + half*w->term[1][16];
+    w->S[19] = w->S[19] + half*w->term[1][16];
     t->Phi[0][20] = t->Phi[0][20] + t->Phi[0][20] + w->term[0][17];
-    w->S[17] = w->S[17] + half*w->term[1][17];
+    w->S[20] = w->S[20] + half*w->term[1][17];
     t->Phi[0][21] = t->Phi[0][21] + t->Phi[0][21] + w->term[0][18];
-    w->S[18] = w->S[18] + half*w->term[1][18];
+    w->S[21] = w->S[21] + half*w->term[1][18];
     t->Phi[0][22] = t->Phi[0][22] + t->Phi[0][22] + w->term[0][19];
-    w->S[19] = w->S[19] + half*w->term[1][19];
+    w->S[22] = w->S[22] + half*w->term[1][19];
     t->Phi[0][23] = t->Phi[0][23] + t->Phi[0][23] + w->term[0][20];
-    w->S[20] = w->S[20] + half*w->term[1][20];
+    w->S[23] = w->S[23] + half*w->term[1][20];
     t->Phi[0][24] = t->Phi[0][24] + t->Phi[0][24] + w->term[0][21];
-    w->S[21] = w->S[21] + half*w->term[1][21];
+    w->S[24] = w->S[24] + half*w->term[1][21];
     t->Phi[0][25] = t->Phi[0][25] + t->Phi[0][25] + w->term[0][22];
-    w->S[22] = w->S[22] + half*w->term[1][22];
+    w->S[25] = w->S[25] + half*w->term[1][22];
     t->Phi[0][26] = t->Phi[0][26] + t->Phi[0][26] + w->term[0][23];
-    w->S[23] = w->S[23] + half*w->term[1][23];
+    w->S[26] = w->S[26] + half*w->term[1][23];
     t->Phi[0][27] = t->Phi[0][27] + t->Phi[0][27] + w->term[0][24];
-    w->S[24] = w->S[24] + half*w->term[1][24];
+    w->S[27] = w->S[27] + half*w->term[1][24];
     t->Phi[0][28] = t->Phi[0][28] + t->Phi[0][28] + w->term[0][25];
-    w->S[25] = w->S[25] + half*w->term[1][25];
+    w->S[28] = w->S[28] + half*w->term[1][25];
     t->Phi[0][29] = t->Phi[0][29] + t->Phi[0][29] + w->term[0][26];
-    w->S[26] = w->S[26] + half*w->term[1][26];
+    w->S[29] = w->S[29] + half*w->term[1][26];
     t->Phi[1][0] = t->Phi[1][0] + t->Phi[1][0] + w->term[0][27];
-    w->S[27] = w->S[27] + half*w->term[1][27];
+    w->S[30] = w->S[30] + half*w->term[1][27];
     t->Phi[1][1] = t->Phi[1][1] + t->Phi[1][1] + w->term[0][28];
-    w->S[28] = w->S[28] + half*w->term[1][28];
+    w->S[31] = w->S[31] + half*w->term[1][28];
     t->Phi[1][2] = t->Phi[1][2] + t->Phi[1][2] + w->term[0][29];
-    w->S[29] = w->S[29] + half*w->term[1][29];
+    w->S[32] = w->S[32] + half*w->term[1][29];
     t->Phi[1][3] = t->Phi[1][3] + t->Phi[1][3] + w->term[0][30];
-    w->S[30] = w->S[30] + half*w->term[1][30];
+    w->S[33] = w->S[33] + half*w->term[1][30];
     t->Phi[1][4] = t->Phi[1][4] + t->Phi[1][4] + w->term[0][31];
-    w->S[31] = w->S[31] + half*w->term[1][31];
+    w->S[34] = w->S[34] + half*w->term[1][31];
     t->Phi[1][5] = t->Phi[1][5] + t->Phi[1][5] + w->term[0][32];
-    w->S[32] = w->S[32] + half*w->term[1][32];
+    w->S[35] = w->S[35] + half*w->term[1][32];
     t->Phi[1][7] = t->Phi[1][7] + t->Phi[1][7] + w->term[0][33];
-    w->S[33] = w->S[33] + half*w->term[1][33];
+    w->S[37] = w->S[37] + half*w->term[1][33];
     t->Phi[1][8] = t->Phi[1][8] + t->Phi[1][8] + w->term[0][34];
-    w->S[34] = w->S[34] + half*w->term[1][34];
+    w->S[38] = w->S[38] + half*w->term[1][34];
     t->Phi[1][9] = t->Phi[1][9] + t->Phi[1][9] + w->term[0][35];
-    w->S[35] = w->S[35] + half*w->term[1][35];
+    w->S[39] = w->S[39] + half*w->term[1][35];
     t->Phi[1][10] = t->Phi[1][10] + t->Phi[1][10] + w->term[0][36];
-    w->S[36] = w->S[36] + half*w->term[1][36];
+    w->S[40] = w->S[40] + half*w->term[1][36];
     t->Phi[1][11] = t->Phi[1][11] + t->Phi[1][11] + w->term[0][37];
-    w->S[37] = w->S[37] + half*w->term[1][37];
+    w->S[41] = w->S[41] + half*w->term[1][37];
     t->Phi[1][12] = t->Phi[1][12] + t->Phi[1][12] + w->term[0][38];
-    w->S[38] = w->S[38] + half*w->term[1][38];
+    w->S[42] = w->S[42] + half*w->term[1][38];
     t->Phi[1][13] = t->Phi[1][13] + t->Phi[1][13] + w->term[0][39];
-    w->S[39] = w->S[39] + half*w->term[1][39];
+    w->S[43] = w->S[43] + half*w->term[1][39];
     t->Phi[1][14] = t->Phi[1][14] + t->Phi[1][14] + w->term[0][40];
-    w->S[40] = w->S[40] + half*w->term[1][40];
+    w->S[44] = w->S[44] + half*w->term[1][40];
     t->Phi[1][15] = t->Phi[1][15] + t->Phi[1][15] + w->term[0][41];
-    w->S[41] = w->S[41] + half*w->term[1][41];
+    w->S[45] = w->S[45] + half*w->term[1][41];
     t->Phi[1][18] = t->Phi[1][18] + t->Phi[1][18] + w->term[0][42];
-    w->S[42] = w->S[42] + half*w->term[1][42];
+    w->S[48] = w->S[48] + half*w->term[1][42];
     t->Phi[1][19] = t->Phi[1][19] + t->Phi[1][19] + w->term[0][43];
-    w->S[43] = w->S[43] + half*w->term[1][43];
+    w->S[49] = w->S[49] + half*w->term[1][43];
     t->Phi[1][20] = t->Phi[1][20] + t->Phi[1][20] + w->term[0][44];
-    w->S[44] = w->S[44] + half*w->term[1][44];
+    w->S[50] = w->S[50] + half*w->term[1][44];
     t->Phi[1][21] = t->Phi[1][21] + t->Phi[1][21] + w->term[0][45];
-    w->S[45] = w->S[45] + half*w->term[1][45];
+    w->S[51] = w->S[51] + half*w->term[1][45];
     t->Phi[1][22] = t->Phi[1][22] + t->Phi[1][22] + w->term[0][46];
-    w->S[46] = w->S[46] + half*w->term[1][46];
+    w->S[52] = w->S[52] + half*w->term[1][46];
     t->Phi[1][23] = t->Phi[1][23] + t->Phi[1][23] + w->term[0][47];
-    w->S[47] = w->S[47] + half*w->term[1][47];
+    w->S[53] = w->S[53] + half*w->term[1][47];
     t->Phi[1][24] = t->Phi[1][24] + t->Phi[1][24] + w->term[0][48];
-    w->S[48] = w->S[48] + half*w->term[1][48];
+    w->S[54] = w->S[54] + half*w->term[1][48];
     t->Phi[1][25] = t->Phi[1][25] + t->Phi[1][25] + w->term[0][49];
-    w->S[49] = w->S[49] + half*w->term[1][49];
+    w->S[55] = w->S[55] + half*w->term[1][49];
     t->Phi[1][26] = t->Phi[1][26] + t->Phi[1][26] + w->term[0][50];
-    w->S[50] = w->S[50] + half*w->term[1][50];
+    w->S[56] = w->S[56] + half*w->term[1][50];
     t->Phi[1][27] = t->Phi[1][27] + t->Phi[1][27] + w->term[0][51];
-    w->S[51] = w->S[51] + half*w->term[1][51];
+    w->S[57] = w->S[57] + half*w->term[1][51];
     t->Phi[1][28] = t->Phi[1][28] + t->Phi[1][28] + w->term[0][52];
-    w->S[52] = w->S[52] + half*w->term[1][52];
+    w->S[58] = w->S[58] + half*w->term[1][52];
     t->Phi[1][29] = t->Phi[1][29] + t->Phi[1][29] + w->term[0][53];
-    w->S[53] = w->S[53] + half*w->term[1][53];
+    w->S[59] = w->S[59] + half*w->term[1][53];
     t->Phi[2][0] = t->Phi[2][0] + t->Phi[2][0] + w->term[0][54];
-    w->S[54] = w->S[54] + half*w->term[1][54];
+    w->S[60] = w->S[60] + half*w->term[1][54];
     t->Phi[2][1] = t->Phi[2][1] + t->Phi[2][1] + w->term[0][55];
-    w->S[55] = w->S[55] + half*w->term[1][55];
+    w->S[61] = w->S[61] + half*w->term[1][55];
     t->Phi[2][2] = t->Phi[2][2] + t->Phi[2][2] + w->term[0][56];
-    w->S[56] = w->S[56] + half*w->term[1][56];
+    w->S[62] = w->S[62] + half*w->term[1][56];
     t->Phi[2][3] = t->Phi[2][3] + t->Phi[2][3] + w->term[0][57];
-    w->S[57] = w->S[57] + half*w->term[1][57];
+    w->S[63] = w->S[63] + half*w->term[1][57];
     t->Phi[2][4] = t->Phi[2][4] + t->Phi[2][4] + w->term[0][58];
-    w->S[58] = w->S[58] + half*w->term[1][58];
+    w->S[64] = w->S[64] + half*w->term[1][58];
     t->Phi[2][5] = t->Phi[2][5] + t->Phi[2][5] + w->term[0][59];
-    w->S[59] = w->S[59] + half*w->term[1][59];
+    w->S[65] = w->S[65] + half*w->term[1][59];
     t->Phi[2][7] = t->Phi[2][7] + t->Phi[2][7] + w->term[0][60];
-    w->S[60] = w->S[60] + half*w->term[1][60];
+    w->S[67] = w->S[67] + half*w->term[1][60];
     t->Phi[2][8] = t->Phi[2][8] + t->Phi[2][8] + w->term[0][61];
-    w->S[61] = w->S[61] + half*w->term[1][61];
+    w->S[68] = w->S[68] + half*w->term[1][61];
     t->Phi[2][9] = t->Phi[2][9] + t->Phi[2][9] + w->term[0][62];
-    w->S[62] = w->S[62] + half*w->term[1][62];
+    w->S[69] = w->S[69] + half*w->term[1][62];
     t->Phi[2][10] = t->Phi[2][10] + t->Phi[2][10] + w->term[0][63];
-    w->S[63] = w->S[63] + half*w->term[1][63];
+    w->S[70] = w->S[70] + half*w->term[1][63];
     t->Phi[2][11] = t->Phi[2][11] + t->Phi[2][11] + w->term[0][64];
-    w->S[64] = w->S[64] + half*w->term[1][64];
+    w->S[71] = w->S[71] + half*w->term[1][64];
     t->Phi[2][12] = t->Phi[2][12] + t->Phi[2][12] + w->term[0][65];
-    w->S[65] = w->S[65] + half*w->term[1][65];
+    w->S[72] = w->S[72] + half*w->term[1][65];
     t->Phi[2][13] = t->Phi[2][13] + t->Phi[2][13] + w->term[0][66];
-    w->S[66] = w->S[66] + half*w->term[1][66];
+    w->S[73] = w->S[73] + half*w->term[1][66];
     t->Phi[2][14] = t->Phi[2][14] + t->Phi[2][14] + w->term[0][67];
-    w->S[67] = w->S[67] + half*w->term[1][67];
+    w->S[74] = w->S[74] + half*w->term[1][67];
     t->Phi[2][15] = t->Phi[2][15] + t->Phi[2][15] + w->term[0][68];
-    w->S[68] = w->S[68] + half*w->term[1][68];
+    w->S[75] = w->S[75] + half*w->term[1][68];
     t->Phi[2][18] = t->Phi[2][18] + t->Phi[2][18] + w->term[0][69];
-    w->S[69] = w->S[69] + half*w->term[1][69];
+    w->S[78] = w->S[78] + half*w->term[1][69];
     t->Phi[2][19] = t->Phi[2][19] + t->Phi[2][19] + w->term[0][70];
-    w->S[70] = w->S[70] + half*w->term[1][70];
+    w->S[79] = w->S[79] + half*w->term[1][70];
     t->Phi[2][20] = t->Phi[2][20] + t->Phi[2][20] + w->term[0][71];
-    w->S[71] = w->S[71] + half*w->term[1][71];
+    w->S[80] = w->S[80] + half*w->term[1][71];
     t->Phi[2][21] = t->Phi[2][21] + t->Phi[2][21] + w->term[0][72];
-    w->S[72] = w->S[72] + half*w->term[1][72];
+    w->S[81] = w->S[81] + half*w->term[1][72];
     t->Phi[2][22] = t->Phi[2][22] + t->Phi[2][22] + w->term[0][73];
-    w->S[73] = w->S[73] + half*w->term[1][73];
+    w->S[82] = w->S[82] + half*w->term[1][73];
     t->Phi[2][23] = t->Phi[2][23] + t->Phi[2][23] + w->term[0][74];
-    w->S[74] = w->S[74] + half*w->term[1][74];
+    w->S[83] = w->S[83] + half*w->term[1][74];
     t->Phi[2][24] = t->Phi[2][24] + t->Phi[2][24] + w->term[0][75];
-    w->S[75] = w->S[75] + half*w->term[1][75];
+    w->S[84] = w->S[84] + half*w->term[1][75];
     t->Phi[2][25] = t->Phi[2][25] + t->Phi[2][25] + w->term[0][76];
-    w->S[76] = w->S[76] + half*w->term[1][76];
+    w->S[85] = w->S[85] + half*w->term[1][76];
     t->Phi[2][26] = t->Phi[2][26] + t->Phi[2][26] + w->term[0][77];
-    w->S[77] = w->S[77] + half*w->term[1][77];
+    w->S[86] = w->S[86] + half*w->term[1][77];
     t->Phi[2][27] = t->Phi[2][27] + t->Phi[2][27] + w->term[0][78];
-    w->S[78] = w->S[78] + half*w->term[1][78];
+    w->S[87] = w->S[87] + half*w->term[1][78];
     t->Phi[2][28] = t->Phi[2][28] + t->Phi[2][28] + w->term[0][79];
-    w->S[79] = w->S[79] + half*w->term[1][79];
+    w->S[88] = w->S[88] + half*w->term[1][79];
     t->Phi[2][29] = t->Phi[2][29] + t->Phi[2][29] + w->term[0][80];
-    w->S[80] = w->S[80] + half*w->term[1][80];
+    w->S[89] = w->S[89] + half*w->term[1][80];
     t->Phi[3][0] = t->Phi[3][0] + t->Phi[3][0] + w->term[0][81];
-    w->S[81] = w->S[81] + half*w->term[1][81];
+    w->S[90] = w->S[90] + half*w->term[1][81];
     t->Phi[3][1] = t->Phi[3][1] + t->Phi[3][1] + w->term[0][82];
-    w->S[82] = w->S[82] + half*w->term[1][82];
+    w->S[91] = w->S[91] + half*w->term[1][82];
     t->Phi[3][2] = t->Phi[3][2] + t->Phi[3][2] + w->term[0][83];
-    w->S[83] = w->S[83] + half*w->term[1][83];
+    w->S[92] = w->S[92] + half*w->term[1][83];
     t->Phi[3][3] = t->Phi[3][3] + t->Phi[3][3] + w->term[0][84];
-    w->S[84] = w->S[84] + half*w->term[1][84];
+    w->S[93] = w->S[93] + half*w->term[1][84];
     t->Phi[3][4] = t->Phi[3][4] + t->Phi[3][4] + w->term[0][85];
-    w->S[85] = w->S[85] + half*w->term[1][85];
+    w->S[94] = w->S[94] + half*w->term[1][85];
     t->Phi[3][5] = t->Phi[3][5] + t->Phi[3][5] + w->term[0][86];
-    w->S[86] = w->S[86] + half*w->term[1][86];
+    w->S[95] = w->S[95] + half*w->term[1][86];
     t->Phi[3][7] = t->Phi[3][7] + t->Phi[3][7] + w->term[0][87];
-    w->S[87] = w->S[87] + half*w->term[1][87];
+    w->S[97] = w->S[97] + half*w->term[1][87];
     t->Phi[3][8] = t->Phi[3][8] + t->Phi[3][8] + w->term[0][88];
-    w->S[88] = w->S[88] + half*w->term[1][88];
+    w->S[98] = w->S[98] + half*w->term[1][88];
     t->Phi[3][9] = t->Phi[3][9] + t->Phi[3][9] + w->term[0][89];
-    w->S[89] = w->S[89] + half*w->term[1][89];
+    w->S[99] = w->S[99] + half*w->term[1][89];
     t->Phi[3][10] = t->Phi[3][10] + t->Phi[3][10] + w->term[0][90];
-    w->S[90] = w->S[90] + half*w->term[1][90];
+    w->S[100] = w->S[100] + half*w->term[1][90];
     t->Phi[3][11] = t->Phi[3][11] + t->Phi[3][11] + w->term[0][91];
-    w->S[91] = w->S[91] + half*w->term[1][91];
+    w->S[101] = w->S[101] + half*w->term[1][91];
     t->Phi[3][12] = t->Phi[3][12] + t->Phi[3][12] + w->term[0][92];
-    w->S[92] = w->S[92] + half*w->term[1][92];
+    w->S[102] = w->S[102] + half*w->term[1][92];
     t->Phi[3][13] = t->Phi[3][13] + t->Phi[3][13] + w->term[0][93];
-    w->S[93] = w->S[93] + half*w->term[1][93];
+    w->S[103] = w->S[103] + half*w->term[1][93];
     t->Phi[3][14] = t->Phi[3][14] + t->Phi[3][14] + w->term[0][94];
-    w->S[94] = w->S[94] + half*w->term[1][94];
+    w->S[104] = w->S[104] + half*w->term[1][94];
     t->Phi[3][15] = t->Phi[3][15] + t->Phi[3][15] + w->term[0][95];
-    w->S[95] = w->S[95] + half*w->term[1][95];
+    w->S[105] = w->S[105] + half*w->term[1][95];
     t->Phi[3][18] = t->Phi[3][18] + t->Phi[3][18] + w->term[0][96];
-    w->S[96] = w->S[96] + half*w->term[1][96];
+    w->S[108] = w->S[108] + half*w->term[1][96];
     t->Phi[3][19] = t->Phi[3][19] + t->Phi[3][19] + w->term[0][97];
-    w->S[97] = w->S[97] + half*w->term[1][97];
+    w->S[109] = w->S[109] + half*w->term[1][97];
     t->Phi[3][20] = t->Phi[3][20] + t->Phi[3][20] + w->term[0][98];
-    w->S[98] = w->S[98] + half*w->term[1][98];
+    w->S[110] = w->S[110] + half*w->term[1][98];
     t->Phi[3][21] = t->Phi[3][21] + t->Phi[3][21] + w->term[0][99];
-    w->S[99] = w->S[99] + half*w->term[1][99];
+    w->S[111] = w->S[111] + half*w->term[1][99];
     t->Phi[3][22] = t->Phi[3][22] + t->Phi[3][22] + w->term[0][100];
-    w->S[100] = w->S[100] + half*w->term[1][100];
+    w->S[112] = w->S[112] + half*w->term[1][100];
     t->Phi[3][23] = t->Phi[3][23] + t->Phi[3][23] + w->term[0][101];
-    w->S[101] = w->S[101] + half*w->term[1][101];
+    w->S[113] = w->S[113] + half*w->term[1][101];
     t->Phi[3][24] = t->Phi[3][24] + t->Phi[3][24] + w->term[0][102];
-    w->S[102] = w->S[102] + half*w->term[1][102];
+    w->S[114] = w->S[114] + half*w->term[1][102];
     t->Phi[3][25] = t->Phi[3][25] + t->Phi[3][25] + w->term[0][103];
-    w->S[103] = w->S[103] + half*w->term[1][103];
+    w->S[115] = w->S[115] + half*w->term[1][103];
     t->Phi[3][26] = t->Phi[3][26] + t->Phi[3][26] + w->term[0][104];
-    w->S[104] = w->S[104] + half*w->term[1][104];
+    w->S[116] = w->S[116] + half*w->term[1][104];
     t->Phi[3][27] = t->Phi[3][27] + t->Phi[3][27] + w->term[0][105];
-    w->S[105] = w->S[105] + half*w->term[1][105];
+    w->S[117] = w->S[117] + half*w->term[1][105];
     t->Phi[3][28] = t->Phi[3][28] + t->Phi[3][28] + w->term[0][106];
-    w->S[106] = w->S[106] + half*w->term[1][106];
+    w->S[118] = w->S[118] + half*w->term[1][106];
     t->Phi[3][29] = t->Phi[3][29] + t->Phi[3][29] + w->term[0][107];
-    w->S[107] = w->S[107] + half*w->term[1][107];
+    w->S[119] = w->S[119] + half*w->term[1][107];
     t->Phi[4][0] = t->Phi[4][0] + t->Phi[4][0] + w->term[0][108];
-    w->S[108] = w->S[108] + half*w->term[1][108];
+    w->S[120] = w->S[120] + half*w->term[1][108];
     t->Phi[4][1] = t->Phi[4][1] + t->Phi[4][1] + w->term[0][109];
-    w->S[109] = w->S[109] + half*w->term[1][109];
+    w->S[121] = w->S[121] + half*w->term[1][109];
     t->Phi[4][2] = t->Phi[4][2] + t->Phi[4][2] + w->term[0][110];
-    w->S[110] = w->S[110] + half*w->term[1][110];
+    w->S[122] = w->S[122] + half*w->term[1][110];
     t->Phi[4][3] = t->Phi[4][3] + t->Phi[4][3] + w->term[0][111];
-    w->S[111] = w->S[111] + half*w->term[1][111];
+    w->S[123] = w->S[123] + half*w->term[1][111];
     t->Phi[4][4] = t->Phi[4][4] + t->Phi[4][4] + w->term[0][112];
-    w->S[112] = w->S[112] + half*w->term[1][112];
+    w->S[124] = w->S[124] + half*w->term[1][112];
     t->Phi[4][5] = t->Phi[4][5] + t->Phi[4][5] + w->term[0][113];
-    w->S[113] = w->S[113] + half*w->term[1][113];
+    w->S[125] = w->S[125] + half*w->term[1][113];
     t->Phi[4][7] = t->Phi[4][7] + t->Phi[4][7] + w->term[0][114];
-    w->S[114] = w->S[114] + half*w->term[1][114];
+    w->S[127] = w->S[127] + half*w->term[1][114];
     t->Phi[4][8] = t->Phi[4][8] + t->Phi[4][8] + w->term[0][115];
-    w->S[115] = w->S[115] + half*w->term[1][115];
+    w->S[128] = w->S[128] + half*w->term[1][115];
     t->Phi[4][9] = t->Phi[4][9] + t->Phi[4][9] + w->term[0][116];
-    w->S[116] = w->S[116] + half*w->term[1][116];
+    w->S[129] = w->S[129] + half*w->term[1][116];
     t->Phi[4][10] = t->Phi[4][10] + t->Phi[4][10] + w->term[0][117];
-    w->S[117] = w->S[117] + half*w->term[1][117];
+    w->S[130] = w->S[130] + half*w->term[1][117];
     t->Phi[4][11] = t->Phi[4][11] + t->Phi[4][11] + w->term[0][118];
-    w->S[118] = w->S[118] + half*w->term[1][118];
+    w->S[131] = w->S[131] + half*w->term[1][118];
     t->Phi[4][12] = t->Phi[4][12] + t->Phi[4][12] + w->term[0][119];
-    w->S[119] = w->S[119] + half*w->term[1][119];
+    w->S[132] = w->S[132] + half*w->term[1][119];
     t->Phi[4][13] = t->Phi[4][13] + t->Phi[4][13] + w->term[0][120];
-    w->S[120] = w->S[120] + half*w->term[1][120];
+    w->S[133] = w->S[133] + half*w->term[1][120];
     t->Phi[4][14] = t->Phi[4][14] + t->Phi[4][14] + w->term[0][121];
-    w->S[121] = w->S[121] + half*w->term[1][121];
+    w->S[134] = w->S[134] + half*w->term[1][121];
     t->Phi[4][15] = t->Phi[4][15] + t->Phi[4][15] + w->term[0][122];
-    w->S[122] = w->S[122] + half*w->term[1][122];
+    w->S[135] = w->S[135] + half*w->term[1][122];
     t->Phi[4][18] = t->Phi[4][18] + t->Phi[4][18] + w->term[0][123];
-    w->S[123] = w->S[123] + half*w->term[1][123];
+    w->S[138] = w->S[138] + half*w->term[1][123];
     t->Phi[4][19] = t->Phi[4][19] + t->Phi[4][19] + w->term[0][124];
-    w->S[124] = w->S[124] + half*w->term[1][124];
+    w->S[139] = w->S[139] + half*w->term[1][124];
     t->Phi[4][20] = t->Phi[4][20] + t->Phi[4][20] + w->term[0][125];
-    w->S[125] = w->S[125] + half*w->term[1][125];
+    w->S[140] = w->S[140] + half*w->term[1][125];
     t->Phi[4][21] = t->Phi[4][21] + t->Phi[4][21] + w->term[0][126];
-    w->S[126] = w->S[126] + half*w->term[1][126];
+    w->S[141] = w->S[141] + half*w->term[1][126];
     t->Phi[4][22] = t->Phi[4][22] + t->Phi[4][22] + w->term[0][127];
-    w->S[127] = w->S[127] + half*w->term[1][127];
+    w->S[142] = w->S[142] + half*w->term[1][127];
     t->Phi[4][23] = t->Phi[4][23] + t->Phi[4][23] + w->term[0][128];
-    w->S[128] = w->S[128] + half*w->term[1][128];
+    w->S[143] = w->S[143] + half*w->term[1][128];
     t->Phi[4][24] = t->Phi[4][24] + t->Phi[4][24] + w->term[0][129];
-    w->S[129] = w->S[129] + half*w->term[1][129];
+    w->S[144] = w->S[144] + half*w->term[1][129];
     t->Phi[4][25] = t->Phi[4][25] + t->Phi[4][25] + w->term[0][130];
-    w->S[130] = w->S[130] + half*w->term[1][130];
+    w->S[145] = w->S[145] + half*w->term[1][130];
     t->Phi[4][26] = t->Phi[4][26] + t->Phi[4][26] + w->term[0][131];
-    w->S[131] = w->S[131] + half*w->term[1][131];
+    w->S[146] = w->S[146] + half*w->term[1][131];
     t->Phi[4][27] = t->Phi[4][27] + t->Phi[4][27] + w->term[0][132];
-    w->S[132] = w->S[132] + half*w->term[1][132];
+    w->S[147] = w->S[147] + half*w->term[1][132];
     t->Phi[4][28] = t->Phi[4][28] + t->Phi[4][28] + w->term[0][133];
-    w->S[133] = w->S[133] + half*w->term[1][133];
+    w->S[148] = w->S[148] + half*w->term[1][133];
     t->Phi[4][29] = t->Phi[4][29] + t->Phi[4][29] + w->term[0][134];
-    w->S[134] = w->S[134] + half*w->term[1][134];
+    w->S[149] = w->S[149] + half*w->term[1][134];
     t->Phi[5][0] = t->Phi[5][0] + t->Phi[5][0] + w->term[0][135];
-    w->S[135] = w->S[135] + half*w->term[1][135];
+    w->S[150] = w->S[150] + half*w->term[1][135];
     t->Phi[5][1] = t->Phi[5][1] + t->Phi[5][1] + w->term[0][136];
-    w->S[136] = w->S[136] + half*w->term[1][136];
+    w->S[151] = w->S[151] + half*w->term[1][136];
     t->Phi[5][2] = t->Phi[5][2] + t->Phi[5][2] + w->term[0][137];
-    w->S[137] = w->S[137] + half*w->term[1][137];
+    w->S[152] = w->S[152] + half*w->term[1][137];
     t->Phi[5][3] = t->Phi[5][3] + t->Phi[5][3] + w->term[0][138];
-    w->S[138] = w->S[138] + half*w->term[1][138];
+    w->S[153] = w->S[153] + half*w->term[1][138];
     t->Phi[5][4] = t->Phi[5][4] + t->Phi[5][4] + w->term[0][139];
-    w->S[139] = w->S[139] + half*w->term[1][139];
+    w->S[154] = w->S[154] + half*w->term[1][139];
     t->Phi[5][5] = t->Phi[5][5] + t->Phi[5][5] + w->term[0][140];
-    w->S[140] = w->S[140] + half*w->term[1][140];
+    w->S[155] = w->S[155] + half*w->term[1][140];
     t->Phi[5][7] = t->Phi[5][7] + t->Phi[5][7] + w->term[0][141];
-    w->S[141] = w->S[141] + half*w->term[1][141];
+    w->S[157] = w->S[157] + half*w->term[1][141];
     t->Phi[5][8] = t->Phi[5][8] + t->Phi[5][8] + w->term[0][142];
-    w->S[142] = w->S[142] + half*w->term[1][142];
+    w->S[158] = w->S[158] + half*w->term[1][142];
     t->Phi[5][9] = t->Phi[5][9] + t->Phi[5][9] + w->term[0][143];
-    w->S[143] = w->S[143] + half*w->term[1][143];
+    w->S[159] = w->S[159] + half*w->term[1][143];
     t->Phi[5][10] = t->Phi[5][10] + t->Phi[5][10] + w->term[0][144];
-    w->S[144] = w->S[144] + half*w->term[1][144];
+    w->S[160] = w->S[160] + half*w->term[1][144];
     t->Phi[5][11] = t->Phi[5][11] + t->Phi[5][11] + w->term[0][145];
-    w->S[145] = w->S[145] + half*w->term[1][145];
+    w->S[161] = w->S[161] + half*w->term[1][145];
     t->Phi[5][12] = t->Phi[5][12] + t->Phi[5][12] + w->term[0][146];
-    w->S[146] = w->S[146] + half*w->term[1][146];
+    w->S[162] = w->S[162] + half*w->term[1][146];
     t->Phi[5][13] = t->Phi[5][13] + t->Phi[5][13] + w->term[0][147];
-    w->S[147] = w->S[147] + half*w->term[1][147];
+    w->S[163] = w->S[163] + half*w->term[1][147];
     t->Phi[5][14] = t->Phi[5][14] + t->Phi[5][14] + w->term[0][148];
-    w->S[148] = w->S[148] + half*w->term[1][148];
+    w->S[164] = w->S[164] + half*w->term[1][148];
     t->Phi[5][15] = t->Phi[5][15] + t->Phi[5][15] + w->term[0][149];
-    w->S[149] = w->S[149] + half*w->term[1][149];
+    w->S[165] = w->S[165] + half*w->term[1][149];
     t->Phi[5][18] = t->Phi[5][18] + t->Phi[5][18] + w->term[0][150];
-    w->S[150] = w->S[150] + half*w->term[1][150];
+    w->S[168] = w->S[168] + half*w->term[1][150];
     t->Phi[5][19] = t->Phi[5][19] + t->Phi[5][19] + w->term[0][151];
-    w->S[151] = w->S[151] + half*w->term[1][151];
+    w->S[169] = w->S[169] + half*w->term[1][151];
     t->Phi[5][20] = t->Phi[5][20] + t->Phi[5][20] + w->term[0][152];
-    w->S[152] = w->S[152] + half*w->term[1][152];
+    w->S[170] = w->S[170] + half*w->term[1][152];
     t->Phi[5][21] = t->Phi[5][21] + t->Phi[5][21] + w->term[0][153];
-    w->S[153] = w->S[153] + half*w->term[1][153];
+    w->S[171] = w->S[171] + half*w->term[1][153];
     t->Phi[5][22] = t->Phi[5][22] + t->Phi[5][22] + w->term[0][154];
-    w->S[154] = w->S[154] + half*w->term[1][154];
+    w->S[172] = w->S[172] + half*w->term[1][154];
     t->Phi[5][23] = t->Phi[5][23] + t->Phi[5][23] + w->term[0][155];
-    w->S[155] = w->S[155] + half*w->term[1][155];
+    w->S[173] = w->S[173] + half*w->term[1][155];
     t->Phi[5][24] = t->Phi[5][24] + t->Phi[5][24] + w->term[0][156];
-    w->S[156] = w->S[156] + half*w->term[1][156];
+    w->S[174] = w->S[174] + half*w->term[1][156];
     t->Phi[5][25] = t->Phi[5][25] + t->Phi[5][25] + w->term[0][157];
-    w->S[157] = w->S[157] + half*w->term[1][157];
+    w->S[175] = w->S[175] + half*w->term[1][157];
     t->Phi[5][26] = t->Phi[5][26] + t->Phi[5][26] + w->term[0][158];
-    w->S[158] = w->S[158] + half*w->term[1][158];
+    w->S[176] = w->S[176] + half*w->term[1][158];
     t->Phi[5][27] = t->Phi[5][27] + t->Phi[5][27] + w->term[0][159];
-    w->S[159] = w->S[159] + half*w->term[1][159];
+    w->S[177] = w->S[177] + half*w->term[1][159];
     t->Phi[5][28] = t->Phi[5][28] + t->Phi[5][28] + w->term[0][160];
-    w->S[160] = w->S[160] + half*w->term[1][160];
+    w->S[178] = w->S[178] + half*w->term[1][160];
     t->Phi[5][29] = t->Phi[5][29] + t->Phi[5][29] + w->term[0][161];
-    w->S[161] = w->S[161] + half*w->term[1][161];
+    w->S[179] = w->S[179] + half*w->term[1][161];
     t->Phi[6][0] = t->Phi[6][0] + t->Phi[6][0] + w->term[0][162];
-    w->S[162] = w->S[162] + half*w->term[1][162];
+    w->S[180] = w->S[180] + half*w->term[1][162];
     t->Phi[6][1] = t->Phi[6][1] + t->Phi[6][1] + w->term[0][163];
-    w->S[163] = w->S[163] + half*w->term[1][163];
+    w->S[181] = w->S[181] + half*w->term[1][163];
     t->Phi[6][2] = t->Phi[6][2] + t->Phi[6][2] + w->term[0][164];
-    w->S[164] = w->S[164] + half*w->term[1][164];
+    w->S[182] = w->S[182] + half*w->term[1][164];
     t->Phi[6][3] = t->Phi[6][3] + t->Phi[6][3] + w->term[0][165];
-    w->S[165] = w->S[165] + half*w->term[1][165];
+    w->S[183] = w->S[183] + half*w->term[1][165];
     t->Phi[6][4] = t->Phi[6][4] + t->Phi[6][4] + w->term[0][166];
-    w->S[166] = w->S[166] + half*w->term[1][166];
+    w->S[184] = w->S[184] + half*w->term[1][166];
     t->Phi[6][5] = t->Phi[6][5] + t->Phi[6][5] + w->term[0][167];
-    w->S[167] = w->S[167] + half*w->term[1][167];
+    w->S[185] = w->S[185] + half*w->term[1][167];
     t->Phi[6][6] = t->Phi[6][6] + t->Phi[6][6] + w->term[0][168];
-    w->S[168] = w->S[168] + half*w->term[1][168];
+    w->S[186] = w->S[186] + half*w->term[1][168];
     t->Phi[6][7] = t->Phi[6][7] + t->Phi[6][7] + w->term[0][169];
-    w->S[169] = w->S[169] + half*w->term[1][169];
+    w->S[187] = w->S[187] + half*w->term[1][169];
     t->Phi[6][8] = t->Phi[6][8] + t->Phi[6][8] + w->term[0][170];
-    w->S[170] = w->S[170] + half*w->term[1][170];
+    w->S[188] = w->S[188] + half*w->term[1][170];
     t->Phi[6][9] = t->Phi[6][9] + t->Phi[6][9] + w->term[0][171];
-    w->S[171] = w->S[171] + half*w->term[1][171];
+    w->S[189] = w->S[189] + half*w->term[1][171];
     t->Phi[6][10] = t->Phi[6][10] + t->Phi[6][10] + w->term[0][172];
-    w->S[172] = w->S[172] + half*w->term[1][172];
+    w->S[190] = w->S[190] + half*w->term[1][172];
     t->Phi[6][11] = t->Phi[6][11] + t->Phi[6][11] + w->term[0][173];
-    w->S[173] = w->S[173] + half*w->term[1][173];
+    w->S[191] = w->S[191] + half*w->term[1][173];
     t->Phi[6][12] = t->Phi[6][12] + t->Phi[6][12] + w->term[0][174];
-    w->S[174] = w->S[174] + half*w->term[1][174];
+    w->S[192] = w->S[192] + half*w->term[1][174];
     t->Phi[6][13] = t->Phi[6][13] + t->Phi[6][13] + w->term[0][175];
-    w->S[175] = w->S[175] + half*w->term[1][175];
+    w->S[193] = w->S[193] + half*w->term[1][175];
     t->Phi[6][14] = t->Phi[6][14] + t->Phi[6][14] + w->term[0][176];
-    w->S[176] = w->S[176] + half*w->term[1][176];
+    w->S[194] = w->S[194] + half*w->term[1][176];
     t->Phi[6][15] = t->Phi[6][15] + t->Phi[6][15] + w->term[0][177];
-    w->S[177] = w->S[177] + half*w->term[1][177];
+    w->S[195] = w->S[195] + half*w->term[1][177];
     t->Phi[6][18] = t->Phi[6][18] + t->Phi[6][18] + w->term[0][178];
-    w->S[178] = w->S[178] + half*w->term[1][178];
+    w->S[198] = w->S[198] + half*w->term[1][178];
     t->Phi[6][19] = t->Phi[6][19] + t->Phi[6][19] + w->term[0][179];
-    w->S[179] = w->S[179] + half*w->term[1][179];
+    w->S[199] = w->S[199] + half*w->term[1][179];
     t->Phi[6][20] = t->Phi[6][20] + t->Phi[6][20] + w->term[0][180];
-    w->S[180] = w->S[180] + half*w->term[1][180];
+    w->S[200] = w->S[200] + half*w->term[1][180];
     t->Phi[6][21] = t->Phi[6][21] + t->Phi[6][21] + w->term[0][181];
-    w->S[181] = w->S[181] + half*w->term[1][181];
+    w->S[201] = w->S[201] + half*w->term[1][181];
     t->Phi[6][22] = t->Phi[6][22] + t->Phi[6][22] + w->term[0][182];
-    w->S[182] = w->S[182] + half*w->term[1][182];
+    w->S[202] = w->S[202] + half*w->term[1][182];
     t->Phi[6][23] = t->Phi[6][23] + t->Phi[6][23] + w->term[0][183];
-    w->S[183] = w->S[183] + half*w->term[1][183];
+    w->S[203] = w->S[203] + half*w->term[1][183];
     t->Phi[6][24] = t->Phi[6][24] + t->Phi[6][24] + w->term[0][184];
-    w->S[184] = w->S[184] + half*w->term[1][184];
+    w->S[204] = w->S[204] + half*w->term[1][184];
     t->Phi[6][25] = t->Phi[6][25] + t->Phi[6][25] + w->term[0][185];
-    w->S[185] = w->S[185] + half*w->term[1][185];
+    w->S[205] = w->S[205] + half*w->term[1][185];
     t->Phi[6][26] = t->Phi[6][26] + t->Phi[6][26] + w->term[0][186];
-    w->S[186] = w->S[186] + half*w->term[1][186];
+    w->S[206] = w->S[206] + half*w->term[1][186];
     t->Phi[6][27] = t->Phi[6][27] + t->Phi[6][27] + w->term[0][187];
-    w->S[187] = w->S[187] + half*w->term[1][187];
+    w->S[207] = w->S[207] + half*w->term[1][187];
     t->Phi[6][28] = t->Phi[6][28] + t->Phi[6][28] + w->term[0][188];
-    w->S[188] = w->S[188] + half*w->term[1][188];
+    w->S[208] = w->S[208] + half*w->term[1][188];
     t->Phi[6][29] = t->Phi[6][29] + t->Phi[6][29] + w->term[0][189];
-    w->S[189] = w->S[189] + half*w->term[1][189];
+    w->S[209] = w->S[209] + half*w->term[1][189];
     t->Phi[10][10] = t->Phi[10][10] + t->Phi[10][10] + w->term[0][190];
-    w->S[190] = w->S[190] + half*w->term[1][190];
+    w->S[210] = w->S[210] + half*w->term[1][190];
     t->Phi[11][11] = t->Phi[11][11] + t->Phi[11][11] + w->term[0][191];
-    w->S[191] = w->S[191] + half*w->term[1][191];
+    w->S[211] = w->S[211] + half*w->term[1][191];
     t->Phi[12][12] = t->Phi[12][12] + t->Phi[12][12] + w->term[0][192];
-    w->S[192] = w->S[192] + half*w->term[1][192];
+    w->S[212] = w->S[212] + half*w->term[1][192];
     t->Phi[13][13] = t->Phi[13][13] + t->Phi[13][13] + w->term[0][193];
-    w->S[193] = w->S[193] + half*w->term[1][193];
+    w->S[213] = w->S[213] + half*w->term[1][193];
     t->Phi[14][14] = t->Phi[14][14] + t->Phi[14][14] + w->term[0][194];
-    w->S[194] = w->S[194] + half*w->term[1][194];
+    w->S[214] = w->S[214] + half*w->term[1][194];
     t->Phi[15][15] = t->Phi[15][15] + t->Phi[15][15] + w->term[0][195];
-    w->S[195] = w->S[195] + half*w->term[1][195];
+    w->S[215] = w->S[215] + half*w->term[1][195];
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
@@ -4458,54 +3877,54 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
 NED_DOPPLER32_AUGMENTED_BLOCK void noise_input(const ned_doppler32_augmented_matrices *restrict m,
         ned_doppler32_augmented_discretize_scratch *restrict w)
 {
-    w->term[0][0] = w->S[9]*m->G[0];
-    w->term[0][1] = w->S[10]*m->G[1];
-    w->term[0][2] = w->S[11]*m->G[2];
-    w->term[0][3] = w->S[12]*m->G[3];
-    w->term[0][4] = w->S[13]*m->G[4];
-    w->term[0][5] = w->S[14]*m->G[5];
-    w->term[0][6] = w->S[36]*m->G[0];
-    w->term[0][7] = w->S[37]*m->G[1];
-    w->term[0][8] = w->S[38]*m->G[2];
-    w->term[0][9] = w->S[39]*m->G[3];
-    w->term[0][10] = w->S[40]*m->G[4];
-    w->term[0][11] = w->S[41]*m->G[5];
-    w->term[0][12] = w->S[63]*m->G[0];
-    w->term[0][13] = w->S[64]*m->G[1];
-    w->term[0][14] = w->S[65]*m->G[2];
-    w->term[0][15] = w->S[66]*m->G[3];
-    w->term[0][16] = w->S[67]*m->G[4];
-    w->term[0][17] = w->S[68]*m->G[5];
-    w->term[0][18] = w->S[90]*m->G[0];
-    w->term[0][19] = w->S[91]*m->G[1];
-    w->term[0][20] = w->S[92]*m->G[2];
-    w->term[0][21] = w->S[93]*m->G[3];
-    w->term[0][22] = w->S[94]*m->G[4];
-    w->term[0][23] = w->S[95]*m->G[5];
-    w->term[0][24] = w->S[117]*m->G[0];
-    w->term[0][25] = w->S[118]*m->G[1];
-    w->term[0][26] = w->S[119]*m->G[2];
-    w->term[0][27] = w->S[120]*m->G[3];
-    w->term[0][28] = w->S[121]*m->G[4];
-    w->term[0][29] = w->S[122]*m->G[5];
-    w->term[0][30] = w->S[144]*m->G[0];
-    w->term[0][31] = w->S[145]*m->G[1];
-    w->term[0][32] = w->S[146]*m->G[2];
-    w->term[0][33] = w->S[147]*m->G[3];
-    w->term[0][34] = w->S[148]*m->G[4];
-    w->term[0][35] = w->S[149]*m->G[5];
-    w->term[0][36] = w->S[172]*m->G[0];
-    w->term[0][37] = w->S[173]*m->G[1];
-    w->term[0][38] = w->S[174]*m->G[2];
-    w->term[0][39] = w->S[175]*m->G[3];
-    w->term[0][40] = w->S[176]*m->G[4];
-    w->term[0][41] = w->S[177]*m->G[5];
-    w->term[0][42] = w->S[190]*m->G[0];
-    w->term[0][43] = w->S[191]*m->G[1];
-    w->term[0][44] = w->S[192]*m->G[2];
-    w->term[0][45] = w->S[193]*m->G[3];
-    w->term[0][46] = w->S[194]*m->G[4];
-    w->term[0][47] = w->S[195]*m->G[5];
+    w->term[0][0] = w->S[10]*m->G[0];
+    w->term[0][1] = w->S[11]*m->G[1];
+    w->term[0][2] = w->S[12]*m->G[2];
+    w->term[0][3] = w->S[13]*m->G[3];
+    w->term[0][4] = w->S[14]*m->G[4];
+    w->term[0][5] = w->S[15]*m->G[5];
+    w->term[0][6] = w->S[40]*m->G[0];
+    w->term[0][7] = w->S[41]*m->G[1];
+    w->term[0][8] = w->S[42]*m->G[2];
+    w->term[0][9] = w->S[43]*m->G[3];
+    w->term[0][10] = w->S[44]*m->G[4];
+    w->term[0][11] = w->S[45]*m->G[5];
+    w->term[0][12] = w->S[70]*m->G[0];
+    w->term[0][13] = w->S[71]*m->G[1];
+    w->term[0][14] = w->S[72]*m->G[2];
+    w->term[0][15] = w->S[73]*m->G[3];
+    w->term[0][16] = w->S[74]*m->G[4];
+    w->term[0][17] = w->S[75]*m->G[5];
+    w->term[0][18] = w->S[100]*m->G[0];
+    w->term[0][19] = w->S[101]*m->G[1];
+    w->term[0][20] = w->S[102]*m->G[2];
+    w->term[0][21] = w->S[103]*m->G[3];
+    w->term[0][22] = w->S[104]*m->G[4];
+    w->term[0][23] = w->S[105]*m->G[5];
+    w->term[0][24] = w->S[130]*m->G[0];
+    w->term[0][25] = w->S[131]*m->G[1];
+    w->term[0][26] = w->S[132]*m->G[2];
+    w->term[0][27] = w->S[133]*m->G[3];
+    w->term[0][28] = w->S[134]*m->G[4];
+    w->term[0][29] = w->S[135]*m->G[5];
+    w->term[0][30] = w->S[160]*m->G[0];
+    w->term[0][31] = w->S[161]*m->G[1];
+    w->term[0][32] = w->S[162]*m->G[2];
+    w->term[0][33] = w->S[163]*m->G[3];
+    w->term[0][34] = w->S[164]*m->G[4];
+    w->term[0][35] = w->S[165]*m->G[5];
+    w->term[0][36] = w->S[190]*m->G[0];
+    w->term[0][37] = w->S[191]*m->G[1];
+    w->term[0][38] = w->S[192]*m->G[2];
+    w->term[0][39] = w->S[193]*m->G[3];
+    w->term[0][40] = w->S[194]*m->G[4];
+    w->term[0][41] = w->S[195]*m->G[5];
+    w->term[0][42] = w->S[210]*m->G[0];
+    w->term[0][43] = w->S[211]*m->G[1];
+    w->term[0][44] = w->S[212]*m->G[2];
+    w->term[0][45] = w->S[213]*m->G[3];
+    w->term[0][46] = w->S[214]*m->G[4];
+    w->term[0][47] = w->S[215]*m->G[5];
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar process_noise(const
@@ -4709,6 +4128,891 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar process_noise(const
     v = w->term[1][45]*w->term[0][45]; t->Qd[13][13] = v; check += v - v;
     v = w->term[1][46]*w->term[0][46]; t->Qd[14][14] = v; check += v - v;
     v = w->term[1][47]*w->term[0][47]; t->Qd[15][15] = v; check += v - v;
+    t->Qd[0][7] = 0;
+    t->Qd[0][8] = 0;
+    t->Qd[0][9] = 0;
+    t->Qd[0][16] = 0;
+    t->Qd[0][17] = 0;
+    t->Qd[0][18] = 0;
+    t->Qd[0][19] = 0;
+    t->Qd[0][20] = 0;
+    t->Qd[0][21] = 0;
+    t->Qd[0][22] = 0;
+    t->Qd[0][23] = 0;
+    t->Qd[0][24] = 0;
+    t->Qd[0][25] = 0;
+    t->Qd[0][26] = 0;
+    t->Qd[0][27] = 0;
+    t->Qd[0][28] = 0;
+    t->Qd[0][29] = 0;
+    t->Qd[0][30] = 0;
+    t->Qd[0][31] = 0;
+    t->Qd[1][7] = 0;
+    t->Qd[1][8] = 0;
+    t->Qd[1][9] = 0;
+    t->Qd[1][16] = 0;
+    t->Qd[1][17] = 0;
+    t->Qd[1][18] = 0;
+    t->Qd[1][19] = 0;
+    t->Qd[1][20] = 0;
+    t->Qd[1][21] = 0;
+    t->Qd[1][22] = 0;
+    t->Qd[1][23] = 0;
+    t->Qd[1][24] = 0;
+    t->Qd[1][25] = 0;
+    t->Qd[1][26] = 0;
+    t->Qd[1][27] = 0;
+    t->Qd[1][28] = 0;
+    t->Qd[1][29] = 0;
+    t->Qd[1][30] = 0;
+    t->Qd[1][31] = 0;
+    t->Qd[2][7] = 0;
+    t->Qd[2][8] = 0;
+    t->Qd[2][9] = 0;
+    t->Qd[2][16] = 0;
+    t->Qd[2][17] = 0;
+    t->Qd[2][18] = 0;
+    t->Qd[2][19] = 0;
+    t->Qd[2][20] = 0;
+    t->Qd[2][21] = 0;
+    t->Qd[2][22] = 0;
+    t->Qd[2][23] = 0;
+    t->Qd[2][24] = 0;
+    t->Qd[2][25] = 0;
+    t->Qd[2][26] = 0;
+    t->Qd[2][27] = 0;
+    t->Qd[2][28] = 0;
+    t->Qd[2][29] = 0;
+    t->Qd[2][30] = 0;
+    t->Qd[2][31] = 0;
+    t->Qd[3][7] = 0;
+    t->Qd[3][8] = 0;
+    t->Qd[3][9] = 0;
+    t->Qd[3][16] = 0;
+    t->Qd[3][17] = 0;
+    t->Qd[3][18] = 0;
+    t->Qd[3][19] = 0;
+    t->Qd[3][20] = 0;
+    t->Qd[3][21] = 0;
+    t->Qd[3][22] = 0;
+    t->Qd[3][23] = 0;
+    t->Qd[3][24] = 0;
+    t->Qd[3][25] = 0;
+    t->Qd[3][26] = 0;
+    t->Qd[3][27] = 0;
+    t->Qd[3][28] = 0;
+    t->Qd[3][29] = 0;
+    t->Qd[3][30] = 0;
+    t->Qd[3][31] = 0;
+    t->Qd[4][7] = 0;
+    t->Qd[4][8] = 0;
+    t->Qd[4][9] = 0;
+    t->Qd[4][16] = 0;
+    t->Qd[4][17] = 0;
+    t->Qd[4][18] = 0;
+    t->Qd[4][19] = 0;
+    t->Qd[4][20] = 0;
+    t->Qd[4][21] = 0;
+    t->Qd[4][22] = 0;
+    t->Qd[4][23] = 0;
+    t->Qd[4][24] = 0;
+    t->Qd[4][25] = 0;
+    t->Qd[4][26] = 0;
+    t->Qd[4][27] = 0;
+    t->Qd[4][28] = 0;
+    t->Qd[4][29] = 0;
+    t->Qd[4][30] = 0;
+    t->Qd[4][31] = 0;
+    t->Qd[5][7] = 0;
+    t->Qd[5][8] = 0;
+    t->Qd[5][9] = 0;
+    t->Qd[5][16] = 0;
+    t->Qd[5][17] = 0;
+    t->Qd[5][18] = 0;
+    t->Qd[5][19] = 0;
+    t->Qd[5][20] = 0;
+    t->Qd[5][21] = 0;
+    t->Qd[5][22] = 0;
+    t->Qd[5][23] = 0;
+    t->Qd[5][24] = 0;
+    t->Qd[5][25] = 0;
+    t->Qd[5][26] = 0;
+    t->Qd[5][27] = 0;
+    t->Qd[5][28] = 0;
+    t->Qd[5][29] = 0;
+    t->Qd[5][30] = 0;
+    t->Qd[5][31] = 0;
+    t->Qd[6][7] = 0;
+    t->Qd[6][8] = 0;
+    t->Qd[6][9] = 0;
+    t->Qd[6][16] = 0;
+    t->Qd[6][17] = 0;
+    t->Qd[6][18] = 0;
+    t->Qd[6][19] = 0;
+    t->Qd[6][20] = 0;
+    t->Qd[6][21] = 0;
+    t->Qd[6][22] = 0;
+    t->Qd[6][23] = 0;
+    t->Qd[6][24] = 0;
+    t->Qd[6][25] = 0;
+    t->Qd[6][26] = 0;
+    t->Qd[6][27] = 0;
+    t->Qd[6][28] = 0;
+    t->Qd[6][29] = 0;
+    t->Qd[6][30] = 0;
+    t->Qd[6][31] = 0;
+    t->Qd[7][0] = 0;
+    t->Qd[7][1] = 0;
+    t->Qd[7][2] = 0;
+    t->Qd[7][3] = 0;
+    t->Qd[7][4] = 0;
+    t->Qd[7][5] = 0;
+    t->Qd[7][6] = 0;
+    t->Qd[7][7] = 0;
+    t->Qd[7][8] = 0;
+    t->Qd[7][9] = 0;
+    t->Qd[7][10] = 0;
+    t->Qd[7][11] = 0;
+    t->Qd[7][12] = 0;
+    t->Qd[7][13] = 0;
+    t->Qd[7][14] = 0;
+    t->Qd[7][15] = 0;
+    t->Qd[7][16] = 0;
+    t->Qd[7][17] = 0;
+    t->Qd[7][18] = 0;
+    t->Qd[7][19] = 0;
+    t->Qd[7][20] = 0;
+    t->Qd[7][21] = 0;
+    t->Qd[7][22] = 0;
+    t->Qd[7][23] = 0;
+    t->Qd[7][24] = 0;
+    t->Qd[7][25] = 0;
+    t->Qd[7][26] = 0;
+    t->Qd[7][27] = 0;
+    t->Qd[7][28] = 0;
+    t->Qd[7][29] = 0;
+    t->Qd[7][30] = 0;
+    t->Qd[7][31] = 0;
+    t->Qd[8][0] = 0;
+    t->Qd[8][1] = 0;
+    t->Qd[8][2] = 0;
+    t->Qd[8][3] = 0;
+    t->Qd[8][4] = 0;
+    t->Qd[8][5] = 0;
+    t->Qd[8][6] = 0;
+    t->Qd[8][7] = 0;
+    t->Qd[8][8] = 0;
+    t->Qd[8][9] = 0;
+    t->Qd[8][10] = 0;
+    t->Qd[8][11] = 0;
+    t->Qd[8][12] = 0;
+    t->Qd[8][13] = 0;
+    t->Qd[8][14] = 0;
+    t->Qd[8][15] = 0;
+    t->Qd[8][16] = 0;
+    t->Qd[8][17] = 0;
+    t->Qd[8][18] = 0;
+    t->Qd[8][19] = 0;
+    t->Qd[8][20] = 0;
+    t->Qd[8][21] = 0;
+    t->Qd[8][22] = 0;
+    t->Qd[8][23] = 0;
+    t->Qd[8][24] = 0;
+    t->Qd[8][25] = 0;
+    t->Qd[8][26] = 0;
+    t->Qd[8][27] = 0;
+    t->Qd[8][28] = 0;
+    t->Qd[8][29] = 0;
+    t->Qd[8][30] = 0;
+    t->Qd[8][31] = 0;
+    t->Qd[9][0] = 0;
+    t->Qd[9][1] = 0;
+    t->Qd[9][2] = 0;
+    t->Qd[9][3] = 0;
+    t->Qd[9][4] = 0;
+    t->Qd[9][5] = 0;
+    t->Qd[9][6] = 0;
+    t->Qd[9][7] = 0;
+    t->Qd[9][8] = 0;
+    t->Qd[9][9] = 0;
+    t->Qd[9][10] = 0;
+    t->Qd[9][11] = 0;
+    t->Qd[9][12] = 0;
+    t->Qd[9][13] = 0;
+    t->Qd[9][14] = 0;
+    t->Qd[9][15] = 0;
+    t->Qd[9][16] = 0;
+    t->Qd[9][17] = 0;
+    t->Qd[9][18] = 0;
+    t->Qd[9][19] = 0;
+    t->Qd[9][20] = 0;
+    t->Qd[9][21] = 0;
+    t->Qd[9][22] = 0;
+    t->Qd[9][23] = 0;
+    t->Qd[9][24] = 0;
+    t->Qd[9][25] = 0;
+    t->Qd[9][26] = 0;
+    t->Qd[9][27] = 0;
+    t->Qd[9][28] = 0;
+    t->Qd[9][29] = 0;
+    t->Qd[9][30] = 0;
+    t->Qd[9][31] = 0;
+    t->Qd[10][7] = 0;
+    t->Qd[10][8] = 0;
+    t->Qd[10][9] = 0;
+    t->Qd[10][11] = 0;
+    t->Qd[10][12] = 0;
+    t->Qd[10][13] = 0;
+    t->Qd[10][14] = 0;
+    t->Qd[10][15] = 0;
+    t->Qd[10][16] = 0;
+    t->Qd[10][17] = 0;
+    t->Qd[10][18] = 0;
+    t->Qd[10][19] = 0;
+    t->Qd[10][20] = 0;
+    t->Qd[10][21] = 0;
+    t->Qd[10][22] = 0;
+    t->Qd[10][23] = 0;
+    t->Qd[10][24] = 0;
+    t->Qd[10][25] = 0;
+    t->Qd[10][26] = 0;
+    t->Qd[10][27] = 0;
+    t->Qd[10][28] = 0;
+    t->Qd[10][29] = 0;
+    t->Qd[10][30] = 0;
+    t->Qd[10][31] = 0;
+    t->Qd[11][7] = 0;
+    t->Qd[11][8] = 0;
+    t->Qd[11][9] = 0;
+    t->Qd[11][10] = 0;
+    t->Qd[11][12] = 0;
+    t->Qd[11][13] = 0;
+    t->Qd[11][14] = 0;
+    t->Qd[11][15] = 0;
+    t->Qd[11][16] = 0;
+    t->Qd[11][17] = 0;
+    t->Qd[11][18] = 0;
+    t->Qd[11][19] = 0;
+    t->Qd[11][20] = 0;
+    t->Qd[11][21] = 0;
+    t->Qd[11][22] = 0;
+    t->Qd[11][23] = 0;
+    t->Qd[11][24] = 0;
+    t->Qd[11][25] = 0;
+    t->Qd[11][26] = 0;
+    t->Qd[11][27] = 0;
+    t->Qd[11][28] = 0;
+    t->Qd[11][29] = 0;
+    t->Qd[11][30] = 0;
+    t->Qd[11][31] = 0;
+    t->Qd[12][7] = 0;
+    t->Qd[12][8] = 0;
+    t->Qd[12][9] = 0;
+    t->Qd[12][10] = 0;
+    t->Qd[12][11] = 0;
+    t->Qd[12][13] = 0;
+    t->Qd[12][14] = 0;
+    t->Qd[12][15] = 0;
+    t->Qd[12][16] = 0;
+    t->Qd[12][17] = 0;
+    t->Qd[12][18] = 0;
+    t->Qd[12][19] = 0;
+    t->Qd[12][20] = 0;
+    t->Qd[12][21] = 0;
+    t->Qd[12][22] = 0;
+    t->Qd[12][23] = 0;
+    t->Qd[12][24] = 0;
+    t->Qd[12][25] = 0;
+    t->Qd[12][26] = 0;
+    t->Qd[12][27] = 0;
+    t->Qd[12][28] = 0;
+    t->Qd[12][29] = 0;
+    t->Qd[12][30] = 0;
+    t->Qd[12][31] = 0;
+    t->Qd[13][7] = 0;
+    t->Qd[13][8] = 0;
+    t->Qd[13][9] = 0;
+    t->Qd[13][10] = 0;
+    t->Qd[13][11] = 0;
+    t->Qd[13][12] = 0;
+    t->Qd[13][14] = 0;
+    t->Qd[13][15] = 0;
+    t->Qd[13][16] = 0;
+    t->Qd[13][17] = 0;
+    t->Qd[13][18] = 0;
+    t->Qd[13][19] = 0;
+    t->Qd[13][20] = 0;
+    t->Qd[13][21] = 0;
+    t->Qd[13][22] = 0;
+    t->Qd[13][23] = 0;
+    t->Qd[13][24] = 0;
+    t->Qd[13][25] = 0;
+    t->Qd[13][26] = 0;
+    t->Qd[13][27] = 0;
+    t->Qd[13][28] = 0;
+    t->Qd[13][29] = 0;
+    t->Qd[13][30] = 0;
+    t->Qd[13][31] = 0;
+    t->Qd[14][7] = 0;
+    t->Qd[14][8] = 0;
+    t->Qd[14][9] = 0;
+    t->Qd[14][10] = 0;
+    t->Qd[14][11] = 0;
+    t->Qd[14][12] = 0;
+    t->Qd[14][13] = 0;
+    t->Qd[14][15] = 0;
+    t->Qd[14][16] = 0;
+    t->Qd[14][17] = 0;
+    t->Qd[14][18] = 0;
+    t->Qd[14][19] = 0;
+    t->Qd[14][20] = 0;
+    t->Qd[14][21] = 0;
+    t->Qd[14][22] = 0;
+    t->Qd[14][23] = 0;
+    t->Qd[14][24] = 0;
+    t->Qd[14][25] = 0;
+    t->Qd[14][26] = 0;
+    t->Qd[14][27] = 0;
+    t->Qd[14][28] = 0;
+    t->Qd[14][29] = 0;
+    t->Qd[14][30] = 0;
+    t->Qd[14][31] = 0;
+    t->Qd[15][7] = 0;
+    t->Qd[15][8] = 0;
+    t->Qd[15][9] = 0;
+    t->Qd[15][10] = 0;
+    t->Qd[15][11] = 0;
+    t->Qd[15][12] = 0;
+    t->Qd[15][13] = 0;
+    t->Qd[15][14] = 0;
+    t->Qd[15][16] = 0;
+    t->Qd[15][17] = 0;
+    t->Qd[15][18] = 0;
+    t->Qd[15][19] = 0;
+    t->Qd[15][20] = 0;
+    t->Qd[15][21] = 0;
+    t->Qd[15][22] = 0;
+    t->Qd[15][23] = 0;
+    t->Qd[15][24] = 0;
+    t->Qd[15][25] = 0;
+    t->Qd[15][26] = 0;
+    t->Qd[15][27] = 0;
+    t->Qd[15][28] = 0;
+    t->Qd[15][29] = 0;
+    t->Qd[15][30] = 0;
+    t->Qd[15][31] = 0;
+    t->Qd[16][0] = 0;
+    t->Qd[16][1] = 0;
+    t->Qd[16][2] = 0;
+    t->Qd[16][3] = 0;
+    t->Qd[16][4] = 0;
+    t->Qd[16][5] = 0;
+    t->Qd[16][6] = 0;
+    t->Qd[16][7] = 0;
+    t->Qd[16][8] = 0;
+    t->Qd[16][9] = 0;
+    t->Qd[16][10] = 0;
+    t->Qd[16][11] = 0;
+    t->Qd[16][12] = 0;
+    t->Qd[16][13] = 0;
+    t->Qd[16][14] = 0;
+    t->Qd[16][15] = 0;
+    t->Qd[16][16] = 0;
+    t->Qd[16][17] = 0;
+    t->Qd[16][18] = 0;
+    t->Qd[16][19] = 0;
+    t->Qd[16][20] = 0;
+    t->Qd[16][21] = 0;
+    t->Qd[16][22] = 0;
+    t->Qd[16][23] = 0;
+    t->Qd[16][24] = 0;
+    t->Qd[16][25] = 0;
+    t->Qd[16][26] = 0;
+    t->Qd[16][27] = 0;
+    t->Qd[16][28] = 0;
+    t->Qd[16][29] = 0;
+    t->Qd[16][30] = 0;
+    t->Qd[16][31] = 0;
+    t->Qd[17][0] = 0;
+    t->Qd[17][1] = 0;
+    t->Qd[17][2] = 0;
+    t->Qd[17][3] = 0;
+    t->Qd[17][4] = 0;
+    t->Qd[17][5] = 0;
+    t->Qd[17][6] = 0;
+    t->Qd[17][7] = 0;
+    t->Qd[17][8] = 0;
+    t->Qd[17][9] = 0;
+    t->Qd[17][10] = 0;
+    t->Qd[17][11] = 0;
+    t->Qd[17][12] = 0;
+    t->Qd[17][13] = 0;
+    t->Qd[17][14] = 0;
+    t->Qd[17][15] = 0;
+    t->Qd[17][16] = 0;
+    t->Qd[17][17] = 0;
+    t->Qd[17][18] = 0;
+    t->Qd[17][19] = 0;
+    t->Qd[17][20] = 0;
+    t->Qd[17][21] = 0;
+    t->Qd[17][22] = 0;
+    t->Qd[17][23] = 0;
+    t->Qd[17][24] = 0;
+    t->Qd[17][25] = 0;
+    t->Qd[17][26] = 0;
+    t->Qd[17][27] = 0;
+    t->Qd[17][28] = 0;
+    t->Qd[17][29] = 0;
+    t->Qd[17][30] = 0;
+    t->Qd[17][31] = 0;
+    t->Qd[18][0] = 0;
+    t->Qd[18][1] = 0;
+    t->Qd[18][2] = 0;
+    t->Qd[18][3] = 0;
+    t->Qd[18][4] = 0;
+    t->Qd[18][5] = 0;
+    t->Qd[18][6] = 0;
+    t->Qd[18][7] = 0;
+    t->Qd[18][8] = 0;
+    t->Qd[18][9] = 0;
+    t->Qd[18][10] = 0;
+    t->Qd[18][11] = 0;
+    t->Qd[18][12] = 0;
+    t->Qd[18][13] = 0;
+    t->Qd[18][14] = 0;
+    t->Qd[18][15] = 0;
+    t->Qd[18][16] = 0;
+    t->Qd[18][17] = 0;
+    t->Qd[18][18] = 0;
+    t->Qd[18][19] = 0;
+    t->Qd[18][20] = 0;
+    t->Qd[18][21] = 0;
+    t->Qd[18][22] = 0;
+    t->Qd[18][23] = 0;
+    t->Qd[18][24] = 0;
+    t->Qd[18][25] = 0;
+    t->Qd[18][26] = 0;
+    t->Qd[18][27] = 0;
+    t->Qd[18][28] = 0;
+    t->Qd[18][29] = 0;
+    t->Qd[18][30] = 0;
+    t->Qd[18][31] = 0;
+    t->Qd[19][0] = 0;
+    t->Qd[19][1] = 0;
+    t->Qd[19][2] = 0;
+    t->Qd[19][3] = 0;
+    t->Qd[19][4] = 0;
+    t->Qd[19][5] = 0;
+    t->Qd[19][6] = 0;
+    t->Qd[19][7] = 0;
+    t->Qd[19][8] = 0;
+    t->Qd[19][9] = 0;
+    t->Qd[19][10] = 0;
+    t->Qd[19][11] = 0;
+    t->Qd[19][12] = 0;
+    t->Qd[19][13] = 0;
+    t->Qd[19][14] = 0;
+    t->Qd[19][15] = 0;
+    t->Qd[19][16] = 0;
+    t->Qd[19][17] = 0;
+    t->Qd[19][18] = 0;
+    t->Qd[19][19] = 0;
+    t->Qd[19][20] = 0;
+    t->Qd[19][21] = 0;
+    t->Qd[19][22] = 0;
+    t->Qd[19][23] = 0;
+    t->Qd[19][24] = 0;
+    t->Qd[19][25] = 0;
+    t->Qd[19][26] = 0;
+    t->Qd[19][27] = 0;
+    t->Qd[19][28] = 0;
+    t->Qd[19][29] = 0;
+    t->Qd[19][30] = 0;
+    t->Qd[19][31] = 0;
+    t->Qd[20][0] = 0;
+    t->Qd[20][1] = 0;
+    t->Qd[20][2] = 0;
+    t->Qd[20][3] = 0;
+    t->Qd[20][4] = 0;
+    t->Qd[20][5] = 0;
+    t->Qd[20][6] = 0;
+    t->Qd[20][7] = 0;
+    t->Qd[20][8] = 0;
+    t->Qd[20][9] = 0;
+    t->Qd[20][10] = 0;
+    t->Qd[20][11] = 0;
+    t->Qd[20][12] = 0;
+    t->Qd[20][13] = 0;
+    t->Qd[20][14] = 0;
+    t->Qd[20][15] = 0;
+    t->Qd[20][16] = 0;
+    t->Qd[20][17] = 0;
+    t->Qd[20][18] = 0;
+    t->Qd[20][19] = 0;
+    t->Qd[20][20] = 0;
+    t->Qd[20][21] = 0;
+    t->Qd[20][22] = 0;
+    t->Qd[20][23] = 0;
+    t->Qd[20][24] = 0;
+    t->Qd[20][25] = 0;
+    t->Qd[20][26] = 0;
+    t->Qd[20][27] = 0;
+    t->Qd[20][28] = 0;
+    t->Qd[20][29] = 0;
+    t->Qd[20][30] = 0;
+    t->Qd[20][31] = 0;
+    t->Qd[21][0] = 0;
+    t->Qd[21][1] = 0;
+    t->Qd[21][2] = 0;
+    t->Qd[21][3] = 0;
+    t->Qd[21][4] = 0;
+    t->Qd[21][5] = 0;
+    t->Qd[21][6] = 0;
+    t->Qd[21][7] = 0;
+    t->Qd[21][8] = 0;
+    t->Qd[21][9] = 0;
+    t->Qd[21][10] = 0;
+    t->Qd[21][11] = 0;
+    t->Qd[21][12] = 0;
+    t->Qd[21][13] = 0;
+    t->Qd[21][14] = 0;
+    t->Qd[21][15] = 0;
+    t->Qd[21][16] = 0;
+    t->Qd[21][17] = 0;
+    t->Qd[21][18] = 0;
+    t->Qd[21][19] = 0;
+    t->Qd[21][20] = 0;
+    t->Qd[21][21] = 0;
+    t->Qd[21][22] = 0;
+    t->Qd[21][23] = 0;
+    t->Qd[21][24] = 0;
+    t->Qd[21][25] = 0;
+    t->Qd[21][26] = 0;
+    t->Qd[21][27] = 0;
+    t->Qd[21][28] = 0;
+    t->Qd[21][29] = 0;
+    t->Qd[21][30] = 0;
+    t->Qd[21][31] = 0;
+    t->Qd[22][0] = 0;
+    t->Qd[22][1] = 0;
+    t->Qd[22][2] = 0;
+    t->Qd[22][3] = 0;
+    t->Qd[22][4] = 0;
+    t->Qd[22][5] = 0;
+    t->Qd[22][6] = 0;
+    t->Qd[22][7] = 0;
+    t->Qd[22][8] = 0;
+    t->Qd[22][9] = 0;
+    t->Qd[22][10] = 0;
+    t->Qd[22][11] = 0;
+    t->Qd[22][12] = 0;
+    t->Qd[22][13] = 0;
+    t->Qd[22][14] = 0;
+    t->Qd[22][15] = 0;
+    t->Qd[22][16] = 0;
+    t->Qd[22][17] = 0;
+    t->Qd[22][18] = 0;
+    t->Qd[22][19] = 0;
+    t->Qd[22][20] = 0;
+    t->Qd[22][21] = 0;
+    t->Qd[22][22] = 0;
+    t->Qd[22][23] = 0;
+    t->Qd[22][24] = 0;
+    t->Qd[22][25] = 0;
+    t->Qd[22][26] = 0;
+    t->Qd[22][27] = 0;
+    t->Qd[22][28] = 0;
+    t->Qd[22][29] = 0;
+    t->Qd[22][30] = 0;
+    t->Qd[22][31] = 0;
+    t->Qd[23][0] = 0;
+    t->Qd[23][1] = 0;
+    t->Qd[23][2] = 0;
+    t->Qd[23][3] = 0;
+    t->Qd[23][4] = 0;
+    t->Qd[23][5] = 0;
+    t->Qd[23][6] = 0;
+    t->Qd[23][7] = 0;
+    t->Qd[23][8] = 0;
+    t->Qd[23][9] = 0;
+    t->Qd[23][10] = 0;
+    t->Qd[23][11] = 0;
+    t->Qd[23][12] = 0;
+    t->Qd[23][13] = 0;
+    t->Qd[23][14] = 0;
+    t->Qd[23][15] = 0;
+    t->Qd[23][16] = 0;
+    t->Qd[23][17] = 0;
+    t->Qd[23][18] = 0;
+    t->Qd[23][19] = 0;
+    t->Qd[23][20] = 0;
+    t->Qd[23][21] = 0;
+    t->Qd[23][22] = 0;
+    t->Qd[23][23] = 0;
+    t->Qd[23][24] = 0;
+    t->Qd[23][25] = 0;
+    t->Qd[23][26] = 0;
+    t->Qd[23][27] = 0;
+    t->Qd[23][28] = 0;
+    t->Qd[23][29] = 0;
+    t->Qd[23][30] = 0;
+    t->Qd[23][31] = 0;
+    t->Qd[24][0] = 0;
+    t->Qd[24][1] = 0;
+    t->Qd[24][2] = 0;
+    t->Qd[24][3] = 0;
+    t->Qd[24][4] = 0;
+    t->Qd[24][5] = 0;
+    t->Qd[24][6] = 0;
+    t->Qd[24][7] = 0;
+    t->Qd[24][8] = 0;
+    t->Qd[24][9] = 0;
+    t->Qd[24][10] = 0;
+    t->Qd[24][11] = 0;
+    t->Qd[24][12] = 0;
+    t->Qd[24][13] = 0;
+    t->Qd[24][14] = 0;
+    t->Qd[24][15] = 0;
+    t->Qd[24][16] = 0;
+    t->Qd[24][17] = 0;
+    t->Qd[24][18] = 0;
+    t->Qd[24][19] = 0;
+    t->Qd[24][20] = 0;
+    t->Qd[24][21] = 0;
+    t->Qd[24][22] = 0;
+    t->Qd[24][23] = 0;
+    t->Qd[24][24] = 0;
+    t->Qd[24][25] = 0;
+    t->Qd[24][26] = 0;
+    t->Qd[24][27] = 0;
+    t->Qd[24][28] = 0;
+    t->Qd[24][29] = 0;
+    t->Qd[24][30] = 0;
+    t->Qd[24][31] = 0;
+    t->Qd[25][0] = 0;
+    t->Qd[25][1] = 0;
+    t->Qd[25][2] = 0;
+    t->Qd[25][3] = 0;
+    t->Qd[25][4] = 0;
+    t->Qd[25][5] = 0;
+    t->Qd[25][6] = 0;
+    t->Qd[25][7] = 0;
+    t->Qd[25][8] = 0;
+    t->Qd[25][9] = 0;
+    t->Qd[25][10] = 0;
+    t->Qd[25][11] = 0;
+    t->Qd[25][12] = 0;
+    t->Qd[25][13] = 0;
+    t->Qd[25][14] = 0;
+    t->Qd[25][15] = 0;
+    t->Qd[25][16] = 0;
+    t->Qd[25][17] = 0;
+    t->Qd[25][18] = 0;
+    t->Qd[25][19] = 0;
+    t->Qd[25][20] = 0;
+    t->Qd[25][21] = 0;
+    t->Qd[25][22] = 0;
+    t->Qd[25][23] = 0;
+    t->Qd[25][24] = 0;
+    t->Qd[25][25] = 0;
+    t->Qd[25][26] = 0;
+    t->Qd[25][27] = 0;
+    t->Qd[25][28] = 0;
+    t->Qd[25][29] = 0;
+    t->Qd[25][30] = 0;
+    t->Qd[25][31] = 0;
+    t->Qd[26][0] = 0;
+    t->Qd[26][1] = 0;
+    t->Qd[26][2] = 0;
+    t->Qd[26][3] = 0;
+    t->Qd[26][4] = 0;
+    t->Qd[26][5] = 0;
+    t->Qd[26][6] = 0;
+    t->Qd[26][7] = 0;
+    t->Qd[26][8] = 0;
+    t->Qd[26][9] = 0;
+    t->Qd[26][10] = 0;
+    t->Qd[26][11] = 0;
+    t->Qd[26][12] = 0;
+    t->Qd[26][13] = 0;
+    t->Qd[26][14] = 0;
+    t->Qd[26][15] = 0;
+    t->Qd[26][16] = 0;
+    t->Qd[26][17] = 0;
+    t->Qd[26][18] = 0;
+    t->Qd[26][19] = 0;
+    t->Qd[26][20] = 0;
+    t->Qd[26][21] = 0;
+    t->Qd[26][22] = 0;
+    t->Qd[26][23] = 0;
+    t->Qd[26][24] = 0;
+    t->Qd[26][25] = 0;
+    t->Qd[26][26] = 0;
+    t->Qd[26][27] = 0;
+    t->Qd[26][28] = 0;
+    t->Qd[26][29] = 0;
+    t->Qd[26][30] = 0;
+    t->Qd[26][31] = 0;
+    t->Qd[27][0] = 0;
+    t->Qd[27][1] = 0;
+    t->Qd[27][2] = 0;
+    t->Qd[27][3] = 0;
+    t->Qd[27][4] = 0;
+    t->Qd[27][5] = 0;
+    t->Qd[27][6] = 0;
+    t->Qd[27][7] = 0;
+    t->Qd[27][8] = 0;
+    t->Qd[27][9] = 0;
+    t->Qd[27][10] = 0;
+    t->Qd[27][11] = 0;
+    t->Qd[27][12] = 0;
+    t->Qd[27][13] = 0;
+    t->Qd[27][14] = 0;
+    t->Qd[27][15] = 0;
+    t->Qd[27][16] = 0;
+    t->Qd[27][17] = 0;
+    t->Qd[27][18] = 0;
+    t->Qd[27][19] = 0;
+    t->Qd[27][20] = 0;
+    t->Qd[27][21] = 0;
+    t->Qd[27][22] = 0;
+    t->Qd[27][23] = 0;
+    t->Qd[27][24] = 0;
+    t->Qd[27][25] = 0;
+    t->Qd[27][26] = 0;
+    t->Qd[27][27] = 0;
+    t->Qd[27][28] = 0;
+    t->Qd[27][29] = 0;
+    t->Qd[27][30] = 0;
+    t->Qd[27][31] = 0;
+    t->Qd[28][0] = 0;
+    t->Qd[28][1] = 0;
+    t->Qd[28][2] = 0;
+    t->Qd[28][3] = 0;
+    t->Qd[28][4] = 0;
+    t->Qd[28][5] = 0;
+    t->Qd[28][6] = 0;
+    t->Qd[28][7] = 0;
+    t->Qd[28][8] = 0;
+    t->Qd[28][9] = 0;
+    t->Qd[28][10] = 0;
+    t->Qd[28][11] = 0;
+    t->Qd[28][12] = 0;
+    t->Qd[28][13] = 0;
+    t->Qd[28][14] = 0;
+    t->Qd[28][15] = 0;
+    t->Qd[28][16] = 0;
+    t->Qd[28][17] = 0;
+    t->Qd[28][18] = 0;
+    t->Qd[28][19] = 0;
+    t->Qd[28][20] = 0;
+    t->Qd[28][21] = 0;
+    t->Qd[28][22] = 0;
+    t->Qd[28][23] = 0;
+    t->Qd[28][24] = 0;
+    t->Qd[28][25] = 0;
+    t->Qd[28][26] = 0;
+    t->Qd[28][27] = 0;
+    t->Qd[28][28] = 0;
+    t->Qd[28][29] = 0;
+    t->Qd[28][30] = 0;
+    t->Qd[28][31] = 0;
+    t->Qd[29][0] = 0;
+    t->Qd[29][1] = 0;
+    t->Qd[29][2] = 0;
+    t->Qd[29][3] = 0;
+    t->Qd[29][4] = 0;
+    t->Qd[29][5] = 0;
+    t->Qd[29][6] = 0;
+    t->Qd[29][7] = 0;
+    t->Qd[29][8] = 0;
+    t->Qd[29][9] = 0;
+    t->Qd[29][10] = 0;
+    t->Qd[29][11] = 0;
+    t->Qd[29][12] = 0;
+    t->Qd[29][13] = 0;
+    t->Qd[29][14] = 0;
+    t->Qd[29][15] = 0;
+    t->Qd[29][16] = 0;
+    t->Qd[29][17] = 0;
+    t->Qd[29][18] = 0;
+    t->Qd[29][19] = 0;
+    t->Qd[29][20] = 0;
+    t->Qd[29][21] = 0;
+    t->Qd[29][22] = 0;
+    t->Qd[29][23] = 0;
+    t->Qd[29][24] = 0;
+    t->Qd[29][25] = 0;
+    t->Qd[29][26] = 0;
+    t->Qd[29][27] = 0;
+    t->Qd[29][28] = 0;
+    t->Qd[29][29] = 0;
+    t->Qd[29][30] = 0;
+    t->Qd[29][31] = 0;
+    t->Qd[30][0] = 0;
+    t->Qd[30][1] = 0;
+    t->Qd[30][2] = 0;
+    t->Qd[30][3] = 0;
+    t->Qd[30][4] = 0;
+    t->Qd[30][5] = 0;
+    t->Qd[30][6] = 0;
+    t->Qd[30][7] = 0;
+    t->Qd[30][8] = 0;
+    t->Qd[30][9] = 0;
+    t->Qd[30][10] = 0;
+    t->Qd[30][11] = 0;
+    t->Qd[30][12] = 0;
+    t->Qd[30][13] = 0;
+    t->Qd[30][14] = 0;
+    t->Qd[30][15] = 0;
+    t->Qd[30][16] = 0;
+    t->Qd[30][17] = 0;
+    t->Qd[30][18] = 0;
+    t->Qd[30][19] = 0;
+    t->Qd[30][20] = 0;
+    t->Qd[30][21] = 0;
+    t->Qd[30][22] = 0;
+    t->Qd[30][23] = 0;
+    t->Qd[30][24] = 0;
+    t->Qd[30][25] = 0;
+    t->Qd[30][26] = 0;
+    t->Qd[30][27] = 0;
+    t->Qd[30][28] = 0;
+    t->Qd[30][29] = 0;
+    t->Qd[30][30] = 0;
+    t->Qd[30][31] = 0;
+    t->Qd[31][0] = 0;
+    t->Qd[31][1] = 0;
+    t->Qd[31][2] = 0;
+    t->Qd[31][3] = 0;
+    t->Qd[31][4] = 0;
+    t->Qd[31][5] = 0;
+    t->Qd[31][6] = 0;
+    t->Qd[31][7] = 0;
+    t->Qd[31][8] = 0;
+    t->Qd[31][9] = 0;
+    t->Qd[31][10] = 0;
+    t->Qd[31][11] = 0;
+    t->Qd[31][12] = 0;
+    t->Qd[31][13] = 0;
+    t->Qd[31][14] = 0;
+    t->Qd[31][15] = 0;
+    t->Qd[31][16] = 0;
+    t->Qd[31][17] = 0;
+    t->Qd[31][18] = 0;
+    t->Qd[31][19] = 0;
+    t->Qd[31][20] = 0;
+    t->Qd[31][21] = 0;
+    t->Qd[31][22] = 0;
+    t->Qd[31][23] = 0;
+    t->Qd[31][24] = 0;
+    t->Qd[31][25] = 0;
+    t->Qd[31][26] = 0;
+    t->Qd[31][27] = 0;
+    t->Qd[31][28] = 0;
+    t->Qd[31][29] = 0;
+    t->Qd[31][30] = 0;
+    t->Qd[31][31] = 0;
     return check;
 }
 
@@ -4717,7 +5021,7 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
                 ned_doppler32_augmented_workspace *restrict work)
 {
     ned_doppler32_augmented_discretize_scratch *w = &work->discretize;
-    int i, j, e, c;
+    int i, e, c;
     int halvings, order, status;
     int k;
     ned_doppler32_augmented_scalar check = 0.0;
@@ -4753,15 +5057,11 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
     }
     /* Phi holds E = Phi - I until the identity is added after the doublings (E(2h) = 2 E + E^2:
        adding I to Phi(h) would round its small part away, s times over). */
-    for (i = 0; i < NED_DOPPLER32_AUGMENTED_N_STATES; ++i) {
-        for (j = 0; j < NED_DOPPLER32_AUGMENTED_N_STATES; ++j) {
-            t->Phi[i][j] = 0.0;
-        }
-    }
     /* Horner's rule over the structural nonzeros (modelgen/codegen/discretize_kernels.py): A = F h,
        R_m = I / (m+1)!, R_k = I / (k+1)! + A R_(k+1) down to S = R_0 (R_k in S for even k, in term
-       for odd k), one function per level until the pattern stops growing, then E = A S; the
-       doublings run over the entries of Phi that are not e_i. */
+       for odd k), the top level over its pattern and every lower one as dense row segments, then
+       E = A S and zero elsewhere in Phi; the doublings run over the entries of Phi that are not
+               e_i. */
     horner_input(m, w, T * power_of_two(-halvings));
     for (k = order - 1; k >= 0; --k) {
         if (order - k == 1) {
@@ -4770,18 +5070,9 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
             } else {
                 horner_level_1_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
             }
-        } else if (order - k == 2) {
-            if (k & 1) {
-                horner_level_2_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
-            } else {
-                horner_level_2_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
-            }
-        } else if (order - k == 3) {
-            if (k & 1) {
-                horner_level_3_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
-            } else {
-                horner_level_3_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
-            }
+        } else if (k == 0) {
+            horner_last_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]); /* S = R_0:
+                    also the rows no row of F reads */
         } else {
             if (k & 1) {
                 horner_saturated_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
@@ -4798,12 +5089,8 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
     for (i = 0; i < NED_DOPPLER32_AUGMENTED_N_STATES; ++i) {
         t->Phi[i][i] += 1.0;
     }
-    for (i = 0; i < NED_DOPPLER32_AUGMENTED_N_STATES; ++i) {
-        for (j = 0; j < NED_DOPPLER32_AUGMENTED_N_STATES; ++j) {
-            t->Qd[i][j] = 0.0;
-        }
-    }
-    /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero */
+    /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
+       zero elsewhere) */
     noise_input(m, w);
     check += process_noise(m, t, w, T);
     return (check != 0.0) ? NED_DOPPLER32_AUGMENTED_ERR_NONFINITE : NED_DOPPLER32_AUGMENTED_OK;

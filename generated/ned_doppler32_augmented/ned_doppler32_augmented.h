@@ -14,7 +14,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 112 operations after CSE
- *   discretize: 6589 mul + 4596 add = 11185 flops
+ *   discretize: 7239 mul + 5236 add = 12475 flops
  *   discretize, each doubling (long steps): 2616 mul + 2721 add = 5337 flops
  *   predict (C): 7312 mul + 6850 add = 14162 flops
  *   predict (Python): 12928 mul + 13120 add = 26048 flops
@@ -36,8 +36,8 @@
 #define NED_DOPPLER32_AUGMENTED_NNZ_H 8
 /* highest order of the Taylor series of discretize */
 #define NED_DOPPLER32_AUGMENTED_TAYLOR_ORDER 9
-#define NED_DOPPLER32_AUGMENTED_N_TERMS 196   /* entries of discretize's compressed term arrays */
-#define NED_DOPPLER32_AUGMENTED_N_ACTIVE_ENTRIES 196   /* entries of Phi in rows that are not e_i */
+#define NED_DOPPLER32_AUGMENTED_N_TERMS 216   /* entries of discretize's compressed term arrays */
+#define NED_DOPPLER32_AUGMENTED_N_ACTIVE_ENTRIES 216   /* entries of Phi in rows that are not e_i */
 #define NED_DOPPLER32_AUGMENTED_FORM_COVARIANCE 1
 
 #define NED_DOPPLER32_AUGMENTED_OK 0
@@ -205,7 +205,8 @@ typedef struct {
     ned_doppler32_augmented_scalar term[2][NED_DOPPLER32_AUGMENTED_N_TERMS]; /* the Horner chain's
             odd levels R_k (term[1]); the doubling's new values; S G */
     ned_doppler32_augmented_scalar S[NED_DOPPLER32_AUGMENTED_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k /
-            (k + 1)! at the active entries of Phi (and the even levels R_k) */
+            (k + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal
+            rows */
     ned_doppler32_augmented_scalar fh[NED_DOPPLER32_AUGMENTED_NNZ_F]; /* F h at the nonzeros of F */
     ned_doppler32_augmented_scalar row_sum[NED_DOPPLER32_AUGMENTED_N_STATES]; /* balancing:
             off-diagonal row sums of D^-1 |F| D */

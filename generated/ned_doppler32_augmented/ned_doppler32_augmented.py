@@ -12,7 +12,7 @@ parameter_vector() to build it from a mapping.
 
 Operation counts (floating-point, per call):
   matrices_evaluate: 112 operations after CSE
-  discretize: 6589 mul + 4596 add = 11185 flops
+  discretize: 7239 mul + 5236 add = 12475 flops
   discretize, each doubling (long steps): 2616 mul + 2721 add = 5337 flops
   predict (C): 7312 mul + 6850 add = 14162 flops
   predict (Python): 12928 mul + 13120 add = 26048 flops

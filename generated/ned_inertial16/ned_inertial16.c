@@ -11,7 +11,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 73 operations after CSE
- *   discretize: 3850 mul + 2628 add = 6478 flops
+ *   discretize: 4048 mul + 2862 add = 6910 flops
  *   discretize, each doubling (long steps): 1500 mul + 1521 add = 3021 flops
  *   predict (C): 2412 mul + 2158 add = 4570 flops
  *   predict (Python): 3776 mul + 3616 add = 7392 flops
@@ -70,7 +70,7 @@ const unsigned char ned_inertial16_G_col[6] = { 0, 1, 2, 3, 4, 5 };
 const unsigned char ned_inertial16_H_row[1] = { 0 };
 const unsigned char ned_inertial16_H_col[1] = { 0 };
 
-/* First entry of each row of F and of H in the compact arrays (CSR row starts). */
+/* First entry of each row of H in the compact arrays (CSR row starts). */
 /* Entries (row, column) of Phi that the Taylor terms can change: rows that are not e_i. */
 #define NED_INERTIAL16_N_ACTIVE 112
 /* Halvings of T that discretize may take before it gives up (T / 2^64), and
@@ -325,21 +325,28 @@ static const ned_inertial16_scalar taylor_coefficient[10] = {
    bound on the relative error of Phi of order m after s doublings (growth = e^theta), one order of
    margin for the entries that couple blocks of F; the same operations in the same order as
    modelgen.derive.discretization.step_error_bound. */
+static ned_inertial16_scalar series_bound(const ned_inertial16_scalar growth, const
+        ned_inertial16_scalar theta, const ned_inertial16_scalar power,
+                const int taylor_order, const int halvings)
+{
+    const int order = taylor_order - 1; /* power = theta^(order+1) / (order+1)!, built as below */
+    if (!(theta < (ned_inertial16_scalar)(order + 2))) {
+        return HUGE_VAL;
+    }
+    return growth * (power * (ned_inertial16_scalar)(order + 2) / ((ned_inertial16_scalar)(order +
+            2) - theta)) * power_of_two(halvings + 1);
+}
+
 static ned_inertial16_scalar step_error_bound(const ned_inertial16_scalar growth, const
         ned_inertial16_scalar theta, const int taylor_order,
                 const int halvings)
 {
-    const int order = taylor_order - 1;
     ned_inertial16_scalar power = 1.0;
     int k;
-    if (!(theta < (ned_inertial16_scalar)(order + 2))) {
-        return HUGE_VAL;
-    }
-    for (k = 1; k <= order + 1; ++k) {
+    for (k = 1; k <= taylor_order; ++k) {
         power = power * theta / (ned_inertial16_scalar)k;
     }
-    return growth * (power * (ned_inertial16_scalar)(order + 2) / ((ned_inertial16_scalar)(order +
-            2) - theta)) * power_of_two(halvings + 1);
+    return series_bound(growth, theta, power, taylor_order, halvings);
 }
 
 /* The doublings s and the order m summed for ||F||_D = norm and step T
@@ -350,7 +357,7 @@ static int taylor_plan(const ned_inertial16_scalar norm, const ned_inertial16_sc
     /* the smallest s for which order TAYLOR_ORDER meets the tolerance, then the smallest order
        that meets it with that s */
     int s, k;
-    ned_inertial16_scalar theta = norm * T, growth = exp(norm * T);
+    ned_inertial16_scalar theta = norm * T, growth = exp(norm * T), power = 1.0;
     for (s = 0; !(step_error_bound(growth, theta, NED_INERTIAL16_TAYLOR_ORDER, s) <=
             NED_INERTIAL16_TAYLOR_TOLERANCE); ++s) {
         if (s == NED_INERTIAL16_MAX_DOUBLINGS) {
@@ -359,8 +366,15 @@ static int taylor_plan(const ned_inertial16_scalar norm, const ned_inertial16_sc
         theta = norm * (T * power_of_two(-(s + 1)));
         growth = exp(theta);
     }
-    for (k = 1; k < NED_INERTIAL16_TAYLOR_ORDER && !(step_error_bound(growth, theta, k, s) <=
-            NED_INERTIAL16_TAYLOR_TOLERANCE); ++k) {
+    /* the bound of order k from theta^k / k! carried from order k - 1: the same products and
+            quotients
+       as step_error_bound's loop, without repeating them for every order */
+    for (k = 1;; ++k) {
+        power = power * theta / (ned_inertial16_scalar)k;
+        if (k == NED_INERTIAL16_TAYLOR_ORDER || series_bound(growth, theta, power, k, s) <=
+                NED_INERTIAL16_TAYLOR_TOLERANCE) {
+            break;
+        }
     }
     *halvings = s;
     *order = k;
@@ -439,98 +453,89 @@ NED_INERTIAL16_BLOCK void horner_level_1_into_S(ned_inertial16_discretize_scratc
     w->S[0] = c_out;
     w->S[1] = w->fh[0]*c_in;
     w->S[2] = w->fh[1]*c_in;
+    w->S[3] = 0;
     w->S[4] = w->fh[2]*c_in;
     w->S[5] = w->fh[3]*c_in;
-    w->S[6] = w->fh[4]*c_in;
-    w->S[7] = w->fh[5]*c_in;
-    w->S[8] = w->fh[6]*c_in;
-    w->S[9] = w->fh[7]*c_in;
-    w->S[10] = w->fh[8]*c_in;
-    w->S[11] = w->fh[9]*c_in;
-    w->S[15] = w->fh[10]*c_in;
-    w->S[16] = c_out;
-    w->S[17] = w->fh[11]*c_in;
-    w->S[18] = w->fh[12]*c_in;
-    w->S[21] = w->fh[13]*c_in;
-    w->S[22] = w->fh[14]*c_in;
-    w->S[23] = w->fh[15]*c_in;
-    w->S[24] = w->fh[16]*c_in;
-    w->S[25] = w->fh[17]*c_in;
-    w->S[26] = w->fh[18]*c_in;
-    w->S[30] = w->fh[19]*c_in;
-    w->S[31] = w->fh[20]*c_in;
-    w->S[32] = c_out;
-    w->S[34] = w->fh[21]*c_in;
-    w->S[35] = w->fh[22]*c_in;
-    w->S[36] = w->fh[23]*c_in;
-    w->S[37] = w->fh[24]*c_in;
-    w->S[38] = w->fh[25]*c_in;
-    w->S[39] = w->fh[26]*c_in;
-    w->S[40] = w->fh[27]*c_in;
-    w->S[41] = w->fh[28]*c_in;
-    w->S[46] = w->fh[29]*c_in;
-    w->S[47] = w->fh[30]*c_in;
-    w->S[48] = c_out + w->fh[31]*c_in;
-    w->S[49] = w->fh[32]*c_in;
-    w->S[50] = w->fh[33]*c_in;
-    w->S[57] = w->fh[34]*c_in;
-    w->S[58] = w->fh[35]*c_in;
-    w->S[59] = w->fh[36]*c_in;
-    w->S[60] = w->fh[37]*c_in;
-    w->S[62] = w->fh[38]*c_in;
-    w->S[63] = w->fh[39]*c_in;
-    w->S[64] = c_out + w->fh[40]*c_in;
-    w->S[65] = w->fh[41]*c_in;
-    w->S[72] = w->fh[42]*c_in;
-    w->S[73] = w->fh[43]*c_in;
-    w->S[74] = w->fh[44]*c_in;
-    w->S[78] = w->fh[45]*c_in;
-    w->S[80] = c_out;
-    w->S[94] = w->fh[46]*c_in;
-    w->S[95] = w->fh[47]*c_in;
-    w->S[96] = c_out;
-    w->S[106] = c_out + w->fh[48]*c_in;
-    w->S[107] = c_out + w->fh[49]*c_in;
-    w->S[108] = c_out + w->fh[50]*c_in;
-    w->S[109] = c_out + w->fh[51]*c_in;
-    w->S[110] = c_out + w->fh[52]*c_in;
-    w->S[111] = c_out + w->fh[53]*c_in;
-    w->S[3] = 0;
-    w->S[12] = 0;
+    w->S[6] = 0;
+    w->S[7] = w->fh[4]*c_in;
+    w->S[8] = w->fh[5]*c_in;
+    w->S[9] = w->fh[6]*c_in;
+    w->S[10] = w->fh[7]*c_in;
+    w->S[11] = w->fh[8]*c_in;
+    w->S[12] = w->fh[9]*c_in;
     w->S[13] = 0;
     w->S[14] = 0;
-    w->S[19] = 0;
+    w->S[15] = 0;
+    w->S[16] = w->fh[10]*c_in;
+    w->S[17] = c_out;
+    w->S[18] = w->fh[11]*c_in;
+    w->S[19] = w->fh[12]*c_in;
     w->S[20] = 0;
-    w->S[27] = 0;
-    w->S[28] = 0;
+    w->S[21] = 0;
+    w->S[22] = 0;
+    w->S[23] = w->fh[13]*c_in;
+    w->S[24] = w->fh[14]*c_in;
+    w->S[25] = w->fh[15]*c_in;
+    w->S[26] = w->fh[16]*c_in;
+    w->S[27] = w->fh[17]*c_in;
+    w->S[28] = w->fh[18]*c_in;
     w->S[29] = 0;
-    w->S[33] = 0;
-    w->S[42] = 0;
-    w->S[43] = 0;
-    w->S[44] = 0;
+    w->S[30] = 0;
+    w->S[31] = 0;
+    w->S[32] = w->fh[19]*c_in;
+    w->S[33] = w->fh[20]*c_in;
+    w->S[34] = c_out;
+    w->S[35] = 0;
+    w->S[36] = w->fh[21]*c_in;
+    w->S[37] = w->fh[22]*c_in;
+    w->S[38] = 0;
+    w->S[39] = w->fh[23]*c_in;
+    w->S[40] = w->fh[24]*c_in;
+    w->S[41] = w->fh[25]*c_in;
+    w->S[42] = w->fh[26]*c_in;
+    w->S[43] = w->fh[27]*c_in;
+    w->S[44] = w->fh[28]*c_in;
     w->S[45] = 0;
-    w->S[51] = 0;
-    w->S[52] = 0;
-    w->S[53] = 0;
+    w->S[46] = 0;
+    w->S[47] = 0;
+    w->S[48] = 0;
+    w->S[49] = w->fh[29]*c_in;
+    w->S[50] = w->fh[30]*c_in;
+    w->S[51] = c_out + w->fh[31]*c_in;
+    w->S[52] = w->fh[32]*c_in;
+    w->S[53] = w->fh[33]*c_in;
     w->S[54] = 0;
     w->S[55] = 0;
     w->S[56] = 0;
-    w->S[61] = 0;
-    w->S[66] = 0;
-    w->S[67] = 0;
-    w->S[68] = 0;
-    w->S[69] = 0;
+    w->S[57] = 0;
+    w->S[58] = 0;
+    w->S[59] = 0;
+    w->S[60] = 0;
+    w->S[61] = w->fh[34]*c_in;
+    w->S[62] = w->fh[35]*c_in;
+    w->S[63] = w->fh[36]*c_in;
+    w->S[64] = w->fh[37]*c_in;
+    w->S[65] = 0;
+    w->S[66] = w->fh[38]*c_in;
+    w->S[67] = w->fh[39]*c_in;
+    w->S[68] = c_out + w->fh[40]*c_in;
+    w->S[69] = w->fh[41]*c_in;
     w->S[70] = 0;
     w->S[71] = 0;
+    w->S[72] = 0;
+    w->S[73] = 0;
+    w->S[74] = 0;
     w->S[75] = 0;
     w->S[76] = 0;
-    w->S[77] = 0;
-    w->S[79] = 0;
+    w->S[77] = w->fh[42]*c_in;
+    w->S[78] = w->fh[43]*c_in;
+    w->S[79] = w->fh[44]*c_in;
+    w->S[80] = 0;
     w->S[81] = 0;
     w->S[82] = 0;
-    w->S[83] = 0;
+    w->S[83] = w->fh[45]*c_in;
     w->S[84] = 0;
-    w->S[85] = 0;
+    w->S[85] = c_out;
     w->S[86] = 0;
     w->S[87] = 0;
     w->S[88] = 0;
@@ -539,15 +544,30 @@ NED_INERTIAL16_BLOCK void horner_level_1_into_S(ned_inertial16_discretize_scratc
     w->S[91] = 0;
     w->S[92] = 0;
     w->S[93] = 0;
+    w->S[94] = 0;
+    w->S[95] = 0;
+    w->S[96] = 0;
     w->S[97] = 0;
     w->S[98] = 0;
     w->S[99] = 0;
-    w->S[100] = 0;
-    w->S[101] = 0;
-    w->S[102] = 0;
+    w->S[100] = w->fh[46]*c_in;
+    w->S[101] = w->fh[47]*c_in;
+    w->S[102] = c_out;
     w->S[103] = 0;
     w->S[104] = 0;
     w->S[105] = 0;
+    w->S[106] = 0;
+    w->S[107] = 0;
+    w->S[108] = 0;
+    w->S[109] = 0;
+    w->S[110] = 0;
+    w->S[111] = 0;
+    w->S[112] = c_out + w->fh[48]*c_in;
+    w->S[113] = c_out + w->fh[49]*c_in;
+    w->S[114] = c_out + w->fh[50]*c_in;
+    w->S[115] = c_out + w->fh[51]*c_in;
+    w->S[116] = c_out + w->fh[52]*c_in;
+    w->S[117] = c_out + w->fh[53]*c_in;
 }
 
 NED_INERTIAL16_BLOCK void horner_level_1_into_term(ned_inertial16_discretize_scratch *restrict w,
@@ -556,1160 +576,478 @@ NED_INERTIAL16_BLOCK void horner_level_1_into_term(ned_inertial16_discretize_scr
     w->term[1][0] = c_out;
     w->term[1][1] = w->fh[0]*c_in;
     w->term[1][2] = w->fh[1]*c_in;
+    w->term[1][3] = 0;
     w->term[1][4] = w->fh[2]*c_in;
     w->term[1][5] = w->fh[3]*c_in;
-    w->term[1][6] = w->fh[4]*c_in;
-    w->term[1][7] = w->fh[5]*c_in;
-    w->term[1][8] = w->fh[6]*c_in;
-    w->term[1][9] = w->fh[7]*c_in;
-    w->term[1][10] = w->fh[8]*c_in;
-    w->term[1][11] = w->fh[9]*c_in;
-    w->term[1][15] = w->fh[10]*c_in;
-    w->term[1][16] = c_out;
-    w->term[1][17] = w->fh[11]*c_in;
-    w->term[1][18] = w->fh[12]*c_in;
-    w->term[1][21] = w->fh[13]*c_in;
-    w->term[1][22] = w->fh[14]*c_in;
-    w->term[1][23] = w->fh[15]*c_in;
-    w->term[1][24] = w->fh[16]*c_in;
-    w->term[1][25] = w->fh[17]*c_in;
-    w->term[1][26] = w->fh[18]*c_in;
-    w->term[1][30] = w->fh[19]*c_in;
-    w->term[1][31] = w->fh[20]*c_in;
-    w->term[1][32] = c_out;
-    w->term[1][34] = w->fh[21]*c_in;
-    w->term[1][35] = w->fh[22]*c_in;
-    w->term[1][36] = w->fh[23]*c_in;
-    w->term[1][37] = w->fh[24]*c_in;
-    w->term[1][38] = w->fh[25]*c_in;
-    w->term[1][39] = w->fh[26]*c_in;
-    w->term[1][40] = w->fh[27]*c_in;
-    w->term[1][41] = w->fh[28]*c_in;
-    w->term[1][46] = w->fh[29]*c_in;
-    w->term[1][47] = w->fh[30]*c_in;
-    w->term[1][48] = c_out + w->fh[31]*c_in;
-    w->term[1][49] = w->fh[32]*c_in;
-    w->term[1][50] = w->fh[33]*c_in;
-    w->term[1][57] = w->fh[34]*c_in;
-    w->term[1][58] = w->fh[35]*c_in;
-    w->term[1][59] = w->fh[36]*c_in;
-    w->term[1][60] = w->fh[37]*c_in;
-    w->term[1][62] = w->fh[38]*c_in;
-    w->term[1][63] = w->fh[39]*c_in;
-    w->term[1][64] = c_out + w->fh[40]*c_in;
-    w->term[1][65] = w->fh[41]*c_in;
-    w->term[1][72] = w->fh[42]*c_in;
-    w->term[1][73] = w->fh[43]*c_in;
-    w->term[1][74] = w->fh[44]*c_in;
-    w->term[1][78] = w->fh[45]*c_in;
-    w->term[1][80] = c_out;
-    w->term[1][94] = w->fh[46]*c_in;
-    w->term[1][95] = w->fh[47]*c_in;
-    w->term[1][96] = c_out;
-    w->term[1][106] = c_out + w->fh[48]*c_in;
-    w->term[1][107] = c_out + w->fh[49]*c_in;
-    w->term[1][108] = c_out + w->fh[50]*c_in;
-    w->term[1][109] = c_out + w->fh[51]*c_in;
-    w->term[1][110] = c_out + w->fh[52]*c_in;
-    w->term[1][111] = c_out + w->fh[53]*c_in;
-}
-
-NED_INERTIAL16_BLOCK void horner_level_2_into_S(ned_inertial16_discretize_scratch *restrict w, const
-        ned_inertial16_scalar c_out, const ned_inertial16_scalar c_in)
-{
-    w->S[0] = c_out + w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][30] + w->fh[2]*w->term[1][60];
-    w->S[1] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][31];
-    w->S[2] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][32] + w->fh[2]*w->term[1][62];
-    w->S[3] = w->fh[0]*w->term[1][18] + w->fh[2]*w->term[1][63] + w->fh[3]*w->term[1][78];
-    w->S[4] = w->fh[1]*w->term[1][34] + w->fh[2]*w->term[1][64];
-    w->S[5] = w->fh[1]*w->term[1][35] + w->fh[2]*w->term[1][65] + w->fh[3]*w->term[1][80];
-    w->S[6] = w->fh[0]*w->term[1][21] + w->fh[1]*w->term[1][36] + w->fh[4]*c_in;
-    w->S[7] = w->fh[0]*w->term[1][22] + w->fh[1]*w->term[1][37] + w->fh[5]*c_in;
-    w->S[8] = w->fh[0]*w->term[1][23] + w->fh[1]*w->term[1][38] + w->fh[6]*c_in;
-    w->S[9] = w->fh[0]*w->term[1][24] + w->fh[1]*w->term[1][39] + w->fh[7]*w->term[1][106];
-    w->S[10] = w->fh[0]*w->term[1][25] + w->fh[1]*w->term[1][40] + w->fh[8]*w->term[1][107];
-    w->S[11] = w->fh[0]*w->term[1][26] + w->fh[1]*w->term[1][41] + w->fh[9]*w->term[1][108];
-    w->S[12] = w->fh[2]*w->term[1][72];
-    w->S[13] = w->fh[2]*w->term[1][73];
-    w->S[14] = w->fh[2]*w->term[1][74];
-    w->S[15] = w->fh[10]*w->term[1][0] + w->fh[11]*w->term[1][30];
-    w->S[16] = c_out + w->fh[10]*w->term[1][1] + w->fh[11]*w->term[1][31] +
-            w->fh[12]*w->term[1][46];
-    w->S[17] = w->fh[10]*w->term[1][2] + w->fh[11]*w->term[1][32] + w->fh[12]*w->term[1][47];
-    w->S[18] = w->fh[12]*w->term[1][48];
-    w->S[19] = w->fh[10]*w->term[1][4] + w->fh[11]*w->term[1][34] + w->fh[12]*w->term[1][49];
-    w->S[20] = w->fh[10]*w->term[1][5] + w->fh[11]*w->term[1][35] + w->fh[12]*w->term[1][50];
-    w->S[21] = w->fh[10]*w->term[1][6] + w->fh[11]*w->term[1][36] + w->fh[13]*c_in;
-    w->S[22] = w->fh[10]*w->term[1][7] + w->fh[11]*w->term[1][37] + w->fh[14]*c_in;
-    w->S[23] = w->fh[10]*w->term[1][8] + w->fh[11]*w->term[1][38] + w->fh[15]*c_in;
-    w->S[24] = w->fh[10]*w->term[1][9] + w->fh[11]*w->term[1][39] + w->fh[16]*w->term[1][106];
-    w->S[25] = w->fh[10]*w->term[1][10] + w->fh[11]*w->term[1][40] + w->fh[17]*w->term[1][107];
-    w->S[26] = w->fh[10]*w->term[1][11] + w->fh[11]*w->term[1][41] + w->fh[18]*w->term[1][108];
-    w->S[27] = w->fh[12]*w->term[1][57];
-    w->S[28] = w->fh[12]*w->term[1][58];
-    w->S[29] = w->fh[12]*w->term[1][59];
-    w->S[30] = w->fh[19]*w->term[1][0] + w->fh[20]*w->term[1][15] + w->fh[21]*w->term[1][60];
-    w->S[31] = w->fh[19]*w->term[1][1] + w->fh[20]*w->term[1][16];
-    w->S[32] = c_out + w->fh[19]*w->term[1][2] + w->fh[20]*w->term[1][17] +
-            w->fh[21]*w->term[1][62];
-    w->S[33] = w->fh[20]*w->term[1][18] + w->fh[21]*w->term[1][63] + w->fh[22]*w->term[1][78];
-    w->S[34] = w->fh[19]*w->term[1][4] + w->fh[21]*w->term[1][64];
-    w->S[35] = w->fh[19]*w->term[1][5] + w->fh[21]*w->term[1][65] + w->fh[22]*w->term[1][80];
-    w->S[36] = w->fh[19]*w->term[1][6] + w->fh[20]*w->term[1][21] + w->fh[23]*c_in;
-    w->S[37] = w->fh[19]*w->term[1][7] + w->fh[20]*w->term[1][22] + w->fh[24]*c_in;
-    w->S[38] = w->fh[19]*w->term[1][8] + w->fh[20]*w->term[1][23] + w->fh[25]*c_in;
-    w->S[39] = w->fh[19]*w->term[1][9] + w->fh[20]*w->term[1][24] + w->fh[26]*w->term[1][106];
-    w->S[40] = w->fh[19]*w->term[1][10] + w->fh[20]*w->term[1][25] + w->fh[27]*w->term[1][107];
-    w->S[41] = w->fh[19]*w->term[1][11] + w->fh[20]*w->term[1][26] + w->fh[28]*w->term[1][108];
-    w->S[42] = w->fh[21]*w->term[1][72];
-    w->S[43] = w->fh[21]*w->term[1][73];
-    w->S[44] = w->fh[21]*w->term[1][74];
-    w->S[45] = w->fh[29]*w->term[1][15] + w->fh[30]*w->term[1][30] + w->fh[32]*w->term[1][60];
-    w->S[46] = w->fh[29]*w->term[1][16] + w->fh[30]*w->term[1][31] + w->fh[31]*w->term[1][46];
-    w->S[47] = w->fh[29]*w->term[1][17] + w->fh[30]*w->term[1][32] + w->fh[31]*w->term[1][47] +
-            w->fh[32]*w->term[1][62];
-    w->S[48] = c_out + w->fh[29]*w->term[1][18] + w->fh[31]*w->term[1][48] +
-            w->fh[32]*w->term[1][63] + w->fh[33]*w->term[1][78];
-    w->S[49] = w->fh[30]*w->term[1][34] + w->fh[31]*w->term[1][49] + w->fh[32]*w->term[1][64];
-    w->S[50] = w->fh[30]*w->term[1][35] + w->fh[31]*w->term[1][50] + w->fh[32]*w->term[1][65] +
-            w->fh[33]*w->term[1][80];
-    w->S[51] = w->fh[29]*w->term[1][21] + w->fh[30]*w->term[1][36];
-    w->S[52] = w->fh[29]*w->term[1][22] + w->fh[30]*w->term[1][37];
-    w->S[53] = w->fh[29]*w->term[1][23] + w->fh[30]*w->term[1][38];
-    w->S[54] = w->fh[29]*w->term[1][24] + w->fh[30]*w->term[1][39];
-    w->S[55] = w->fh[29]*w->term[1][25] + w->fh[30]*w->term[1][40];
-    w->S[56] = w->fh[29]*w->term[1][26] + w->fh[30]*w->term[1][41];
-    w->S[57] = w->fh[31]*w->term[1][57] + w->fh[32]*w->term[1][72] + w->fh[34]*w->term[1][109];
-    w->S[58] = w->fh[31]*w->term[1][58] + w->fh[32]*w->term[1][73] + w->fh[35]*w->term[1][110];
-    w->S[59] = w->fh[31]*w->term[1][59] + w->fh[32]*w->term[1][74] + w->fh[36]*w->term[1][111];
-    w->S[60] = w->fh[37]*w->term[1][0] + w->fh[38]*w->term[1][30] + w->fh[40]*w->term[1][60];
-    w->S[61] = w->fh[37]*w->term[1][1] + w->fh[38]*w->term[1][31] + w->fh[39]*w->term[1][46];
-    w->S[62] = w->fh[37]*w->term[1][2] + w->fh[38]*w->term[1][32] + w->fh[39]*w->term[1][47] +
-            w->fh[40]*w->term[1][62];
-    w->S[63] = w->fh[39]*w->term[1][48] + w->fh[40]*w->term[1][63] + w->fh[41]*w->term[1][78];
-    w->S[64] = c_out + w->fh[37]*w->term[1][4] + w->fh[38]*w->term[1][34] + w->fh[39]*w->term[1][49]
-            + w->fh[40]*w->term[1][64];
-    w->S[65] = w->fh[37]*w->term[1][5] + w->fh[38]*w->term[1][35] + w->fh[39]*w->term[1][50] +
-            w->fh[40]*w->term[1][65] + w->fh[41]*w->term[1][80];
-    w->S[66] = w->fh[37]*w->term[1][6] + w->fh[38]*w->term[1][36];
-    w->S[67] = w->fh[37]*w->term[1][7] + w->fh[38]*w->term[1][37];
-    w->S[68] = w->fh[37]*w->term[1][8] + w->fh[38]*w->term[1][38];
-    w->S[69] = w->fh[37]*w->term[1][9] + w->fh[38]*w->term[1][39];
-    w->S[70] = w->fh[37]*w->term[1][10] + w->fh[38]*w->term[1][40];
-    w->S[71] = w->fh[37]*w->term[1][11] + w->fh[38]*w->term[1][41];
-    w->S[72] = w->fh[39]*w->term[1][57] + w->fh[40]*w->term[1][72] + w->fh[42]*w->term[1][109];
-    w->S[73] = w->fh[39]*w->term[1][58] + w->fh[40]*w->term[1][73] + w->fh[43]*w->term[1][110];
-    w->S[74] = w->fh[39]*w->term[1][59] + w->fh[40]*w->term[1][74] + w->fh[44]*w->term[1][111];
-    w->S[76] = w->fh[45]*w->term[1][46];
-    w->S[77] = w->fh[45]*w->term[1][47];
-    w->S[78] = w->fh[45]*w->term[1][48];
-    w->S[79] = w->fh[45]*w->term[1][49];
-    w->S[80] = c_out + w->fh[45]*w->term[1][50];
-    w->S[87] = w->fh[45]*w->term[1][57];
-    w->S[88] = w->fh[45]*w->term[1][58];
-    w->S[89] = w->fh[45]*w->term[1][59];
-    w->S[90] = w->fh[46]*w->term[1][60];
-    w->S[92] = w->fh[46]*w->term[1][62];
-    w->S[93] = w->fh[46]*w->term[1][63] + w->fh[47]*w->term[1][78];
-    w->S[94] = w->fh[46]*w->term[1][64];
-    w->S[95] = w->fh[46]*w->term[1][65] + w->fh[47]*w->term[1][80];
-    w->S[96] = c_out;
-    w->S[103] = w->fh[46]*w->term[1][72];
-    w->S[104] = w->fh[46]*w->term[1][73];
-    w->S[105] = w->fh[46]*w->term[1][74];
-    w->S[106] = c_out + w->fh[48]*w->term[1][106];
-    w->S[107] = c_out + w->fh[49]*w->term[1][107];
-    w->S[108] = c_out + w->fh[50]*w->term[1][108];
-    w->S[109] = c_out + w->fh[51]*w->term[1][109];
-    w->S[110] = c_out + w->fh[52]*w->term[1][110];
-    w->S[111] = c_out + w->fh[53]*w->term[1][111];
-    w->S[75] = 0;
-    w->S[81] = 0;
-    w->S[82] = 0;
-    w->S[83] = 0;
-    w->S[84] = 0;
-    w->S[85] = 0;
-    w->S[86] = 0;
-    w->S[91] = 0;
-    w->S[97] = 0;
-    w->S[98] = 0;
-    w->S[99] = 0;
-    w->S[100] = 0;
-    w->S[101] = 0;
-    w->S[102] = 0;
-}
-
-NED_INERTIAL16_BLOCK void horner_level_2_into_term(ned_inertial16_discretize_scratch *restrict w,
-        const ned_inertial16_scalar c_out, const ned_inertial16_scalar c_in)
-{
-    w->term[1][0] = c_out + w->fh[0]*w->S[15] + w->fh[1]*w->S[30] + w->fh[2]*w->S[60];
-    w->term[1][1] = w->fh[0]*w->S[16] + w->fh[1]*w->S[31];
-    w->term[1][2] = w->fh[0]*w->S[17] + w->fh[1]*w->S[32] + w->fh[2]*w->S[62];
-    w->term[1][3] = w->fh[0]*w->S[18] + w->fh[2]*w->S[63] + w->fh[3]*w->S[78];
-    w->term[1][4] = w->fh[1]*w->S[34] + w->fh[2]*w->S[64];
-    w->term[1][5] = w->fh[1]*w->S[35] + w->fh[2]*w->S[65] + w->fh[3]*w->S[80];
-    w->term[1][6] = w->fh[0]*w->S[21] + w->fh[1]*w->S[36] + w->fh[4]*c_in;
-    w->term[1][7] = w->fh[0]*w->S[22] + w->fh[1]*w->S[37] + w->fh[5]*c_in;
-    w->term[1][8] = w->fh[0]*w->S[23] + w->fh[1]*w->S[38] + w->fh[6]*c_in;
-    w->term[1][9] = w->fh[0]*w->S[24] + w->fh[1]*w->S[39] + w->fh[7]*w->S[106];
-    w->term[1][10] = w->fh[0]*w->S[25] + w->fh[1]*w->S[40] + w->fh[8]*w->S[107];
-    w->term[1][11] = w->fh[0]*w->S[26] + w->fh[1]*w->S[41] + w->fh[9]*w->S[108];
-    w->term[1][12] = w->fh[2]*w->S[72];
-    w->term[1][13] = w->fh[2]*w->S[73];
-    w->term[1][14] = w->fh[2]*w->S[74];
-    w->term[1][15] = w->fh[10]*w->S[0] + w->fh[11]*w->S[30];
-    w->term[1][16] = c_out + w->fh[10]*w->S[1] + w->fh[11]*w->S[31] + w->fh[12]*w->S[46];
-    w->term[1][17] = w->fh[10]*w->S[2] + w->fh[11]*w->S[32] + w->fh[12]*w->S[47];
-    w->term[1][18] = w->fh[12]*w->S[48];
-    w->term[1][19] = w->fh[10]*w->S[4] + w->fh[11]*w->S[34] + w->fh[12]*w->S[49];
-    w->term[1][20] = w->fh[10]*w->S[5] + w->fh[11]*w->S[35] + w->fh[12]*w->S[50];
-    w->term[1][21] = w->fh[10]*w->S[6] + w->fh[11]*w->S[36] + w->fh[13]*c_in;
-    w->term[1][22] = w->fh[10]*w->S[7] + w->fh[11]*w->S[37] + w->fh[14]*c_in;
-    w->term[1][23] = w->fh[10]*w->S[8] + w->fh[11]*w->S[38] + w->fh[15]*c_in;
-    w->term[1][24] = w->fh[10]*w->S[9] + w->fh[11]*w->S[39] + w->fh[16]*w->S[106];
-    w->term[1][25] = w->fh[10]*w->S[10] + w->fh[11]*w->S[40] + w->fh[17]*w->S[107];
-    w->term[1][26] = w->fh[10]*w->S[11] + w->fh[11]*w->S[41] + w->fh[18]*w->S[108];
-    w->term[1][27] = w->fh[12]*w->S[57];
-    w->term[1][28] = w->fh[12]*w->S[58];
-    w->term[1][29] = w->fh[12]*w->S[59];
-    w->term[1][30] = w->fh[19]*w->S[0] + w->fh[20]*w->S[15] + w->fh[21]*w->S[60];
-    w->term[1][31] = w->fh[19]*w->S[1] + w->fh[20]*w->S[16];
-    w->term[1][32] = c_out + w->fh[19]*w->S[2] + w->fh[20]*w->S[17] + w->fh[21]*w->S[62];
-    w->term[1][33] = w->fh[20]*w->S[18] + w->fh[21]*w->S[63] + w->fh[22]*w->S[78];
-    w->term[1][34] = w->fh[19]*w->S[4] + w->fh[21]*w->S[64];
-    w->term[1][35] = w->fh[19]*w->S[5] + w->fh[21]*w->S[65] + w->fh[22]*w->S[80];
-    w->term[1][36] = w->fh[19]*w->S[6] + w->fh[20]*w->S[21] + w->fh[23]*c_in;
-    w->term[1][37] = w->fh[19]*w->S[7] + w->fh[20]*w->S[22] + w->fh[24]*c_in;
-    w->term[1][38] = w->fh[19]*w->S[8] + w->fh[20]*w->S[23] + w->fh[25]*c_in;
-    w->term[1][39] = w->fh[19]*w->S[9] + w->fh[20]*w->S[24] + w->fh[26]*w->S[106];
-    w->term[1][40] = w->fh[19]*w->S[10] + w->fh[20]*w->S[25] + w->fh[27]*w->S[107];
-    w->term[1][41] = w->fh[19]*w->S[11] + w->fh[20]*w->S[26] + w->fh[28]*w->S[108];
-    w->term[1][42] = w->fh[21]*w->S[72];
-    w->term[1][43] = w->fh[21]*w->S[73];
-    w->term[1][44] = w->fh[21]*w->S[74];
-    w->term[1][45] = w->fh[29]*w->S[15] + w->fh[30]*w->S[30] + w->fh[32]*w->S[60];
-    w->term[1][46] = w->fh[29]*w->S[16] + w->fh[30]*w->S[31] + w->fh[31]*w->S[46];
-    w->term[1][47] = w->fh[29]*w->S[17] + w->fh[30]*w->S[32] + w->fh[31]*w->S[47] +
-            w->fh[32]*w->S[62];
-    w->term[1][48] = c_out + w->fh[29]*w->S[18] + w->fh[31]*w->S[48] + w->fh[32]*w->S[63] +
-            w->fh[33]*w->S[78];
-    w->term[1][49] = w->fh[30]*w->S[34] + w->fh[31]*w->S[49] + w->fh[32]*w->S[64];
-    w->term[1][50] = w->fh[30]*w->S[35] + w->fh[31]*w->S[50] + w->fh[32]*w->S[65] +
-            w->fh[33]*w->S[80];
-    w->term[1][51] = w->fh[29]*w->S[21] + w->fh[30]*w->S[36];
-    w->term[1][52] = w->fh[29]*w->S[22] + w->fh[30]*w->S[37];
-    w->term[1][53] = w->fh[29]*w->S[23] + w->fh[30]*w->S[38];
-    w->term[1][54] = w->fh[29]*w->S[24] + w->fh[30]*w->S[39];
-    w->term[1][55] = w->fh[29]*w->S[25] + w->fh[30]*w->S[40];
-    w->term[1][56] = w->fh[29]*w->S[26] + w->fh[30]*w->S[41];
-    w->term[1][57] = w->fh[31]*w->S[57] + w->fh[32]*w->S[72] + w->fh[34]*w->S[109];
-    w->term[1][58] = w->fh[31]*w->S[58] + w->fh[32]*w->S[73] + w->fh[35]*w->S[110];
-    w->term[1][59] = w->fh[31]*w->S[59] + w->fh[32]*w->S[74] + w->fh[36]*w->S[111];
-    w->term[1][60] = w->fh[37]*w->S[0] + w->fh[38]*w->S[30] + w->fh[40]*w->S[60];
-    w->term[1][61] = w->fh[37]*w->S[1] + w->fh[38]*w->S[31] + w->fh[39]*w->S[46];
-    w->term[1][62] = w->fh[37]*w->S[2] + w->fh[38]*w->S[32] + w->fh[39]*w->S[47] +
-            w->fh[40]*w->S[62];
-    w->term[1][63] = w->fh[39]*w->S[48] + w->fh[40]*w->S[63] + w->fh[41]*w->S[78];
-    w->term[1][64] = c_out + w->fh[37]*w->S[4] + w->fh[38]*w->S[34] + w->fh[39]*w->S[49] +
-            w->fh[40]*w->S[64];
-    w->term[1][65] = w->fh[37]*w->S[5] + w->fh[38]*w->S[35] + w->fh[39]*w->S[50] +
-            w->fh[40]*w->S[65] + w->fh[41]*w->S[80];
-    w->term[1][66] = w->fh[37]*w->S[6] + w->fh[38]*w->S[36];
-    w->term[1][67] = w->fh[37]*w->S[7] + w->fh[38]*w->S[37];
-    w->term[1][68] = w->fh[37]*w->S[8] + w->fh[38]*w->S[38];
-    w->term[1][69] = w->fh[37]*w->S[9] + w->fh[38]*w->S[39];
-    w->term[1][70] = w->fh[37]*w->S[10] + w->fh[38]*w->S[40];
-    w->term[1][71] = w->fh[37]*w->S[11] + w->fh[38]*w->S[41];
-    w->term[1][72] = w->fh[39]*w->S[57] + w->fh[40]*w->S[72] + w->fh[42]*w->S[109];
-    w->term[1][73] = w->fh[39]*w->S[58] + w->fh[40]*w->S[73] + w->fh[43]*w->S[110];
-    w->term[1][74] = w->fh[39]*w->S[59] + w->fh[40]*w->S[74] + w->fh[44]*w->S[111];
-    w->term[1][76] = w->fh[45]*w->S[46];
-    w->term[1][77] = w->fh[45]*w->S[47];
-    w->term[1][78] = w->fh[45]*w->S[48];
-    w->term[1][79] = w->fh[45]*w->S[49];
-    w->term[1][80] = c_out + w->fh[45]*w->S[50];
-    w->term[1][87] = w->fh[45]*w->S[57];
-    w->term[1][88] = w->fh[45]*w->S[58];
-    w->term[1][89] = w->fh[45]*w->S[59];
-    w->term[1][90] = w->fh[46]*w->S[60];
-    w->term[1][92] = w->fh[46]*w->S[62];
-    w->term[1][93] = w->fh[46]*w->S[63] + w->fh[47]*w->S[78];
-    w->term[1][94] = w->fh[46]*w->S[64];
-    w->term[1][95] = w->fh[46]*w->S[65] + w->fh[47]*w->S[80];
-    w->term[1][96] = c_out;
-    w->term[1][103] = w->fh[46]*w->S[72];
-    w->term[1][104] = w->fh[46]*w->S[73];
-    w->term[1][105] = w->fh[46]*w->S[74];
-    w->term[1][106] = c_out + w->fh[48]*w->S[106];
-    w->term[1][107] = c_out + w->fh[49]*w->S[107];
-    w->term[1][108] = c_out + w->fh[50]*w->S[108];
-    w->term[1][109] = c_out + w->fh[51]*w->S[109];
-    w->term[1][110] = c_out + w->fh[52]*w->S[110];
-    w->term[1][111] = c_out + w->fh[53]*w->S[111];
-}
-
-NED_INERTIAL16_BLOCK void horner_level_3_into_S(ned_inertial16_discretize_scratch *restrict w, const
-        ned_inertial16_scalar c_out, const ned_inertial16_scalar c_in)
-{
-    w->S[0] = c_out + w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][30] + w->fh[2]*w->term[1][60];
-    w->S[1] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][31] + w->fh[2]*w->term[1][61] +
-            w->fh[3]*w->term[1][76];
-    w->S[2] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][32] + w->fh[2]*w->term[1][62] +
-            w->fh[3]*w->term[1][77];
-    w->S[3] = w->fh[0]*w->term[1][18] + w->fh[1]*w->term[1][33] + w->fh[2]*w->term[1][63] +
-            w->fh[3]*w->term[1][78];
-    w->S[4] = w->fh[0]*w->term[1][19] + w->fh[1]*w->term[1][34] + w->fh[2]*w->term[1][64] +
-            w->fh[3]*w->term[1][79];
-    w->S[5] = w->fh[0]*w->term[1][20] + w->fh[1]*w->term[1][35] + w->fh[2]*w->term[1][65] +
-            w->fh[3]*w->term[1][80];
-    w->S[6] = w->fh[0]*w->term[1][21] + w->fh[1]*w->term[1][36] + w->fh[2]*w->term[1][66] +
-            w->fh[4]*c_in;
-    w->S[7] = w->fh[0]*w->term[1][22] + w->fh[1]*w->term[1][37] + w->fh[2]*w->term[1][67] +
-            w->fh[5]*c_in;
-    w->S[8] = w->fh[0]*w->term[1][23] + w->fh[1]*w->term[1][38] + w->fh[2]*w->term[1][68] +
-            w->fh[6]*c_in;
-    w->S[9] = w->fh[0]*w->term[1][24] + w->fh[1]*w->term[1][39] + w->fh[2]*w->term[1][69] +
-            w->fh[7]*w->term[1][106];
-    w->S[10] = w->fh[0]*w->term[1][25] + w->fh[1]*w->term[1][40] + w->fh[2]*w->term[1][70] +
-            w->fh[8]*w->term[1][107];
-    w->S[11] = w->fh[0]*w->term[1][26] + w->fh[1]*w->term[1][41] + w->fh[2]*w->term[1][71] +
-            w->fh[9]*w->term[1][108];
-    w->S[12] = w->fh[0]*w->term[1][27] + w->fh[1]*w->term[1][42] + w->fh[2]*w->term[1][72] +
-            w->fh[3]*w->term[1][87];
-    w->S[13] = w->fh[0]*w->term[1][28] + w->fh[1]*w->term[1][43] + w->fh[2]*w->term[1][73] +
-            w->fh[3]*w->term[1][88];
-    w->S[14] = w->fh[0]*w->term[1][29] + w->fh[1]*w->term[1][44] + w->fh[2]*w->term[1][74] +
-            w->fh[3]*w->term[1][89];
-    w->S[15] = w->fh[10]*w->term[1][0] + w->fh[11]*w->term[1][30] + w->fh[12]*w->term[1][45];
-    w->S[16] = c_out + w->fh[10]*w->term[1][1] + w->fh[11]*w->term[1][31] +
-            w->fh[12]*w->term[1][46];
-    w->S[17] = w->fh[10]*w->term[1][2] + w->fh[11]*w->term[1][32] + w->fh[12]*w->term[1][47];
-    w->S[18] = w->fh[10]*w->term[1][3] + w->fh[11]*w->term[1][33] + w->fh[12]*w->term[1][48];
-    w->S[19] = w->fh[10]*w->term[1][4] + w->fh[11]*w->term[1][34] + w->fh[12]*w->term[1][49];
-    w->S[20] = w->fh[10]*w->term[1][5] + w->fh[11]*w->term[1][35] + w->fh[12]*w->term[1][50];
-    w->S[21] = w->fh[10]*w->term[1][6] + w->fh[11]*w->term[1][36] + w->fh[12]*w->term[1][51] +
-            w->fh[13]*c_in;
-    w->S[22] = w->fh[10]*w->term[1][7] + w->fh[11]*w->term[1][37] + w->fh[12]*w->term[1][52] +
-            w->fh[14]*c_in;
-    w->S[23] = w->fh[10]*w->term[1][8] + w->fh[11]*w->term[1][38] + w->fh[12]*w->term[1][53] +
-            w->fh[15]*c_in;
-    w->S[24] = w->fh[10]*w->term[1][9] + w->fh[11]*w->term[1][39] + w->fh[12]*w->term[1][54] +
-            w->fh[16]*w->term[1][106];
-    w->S[25] = w->fh[10]*w->term[1][10] + w->fh[11]*w->term[1][40] + w->fh[12]*w->term[1][55] +
-            w->fh[17]*w->term[1][107];
-    w->S[26] = w->fh[10]*w->term[1][11] + w->fh[11]*w->term[1][41] + w->fh[12]*w->term[1][56] +
-            w->fh[18]*w->term[1][108];
-    w->S[27] = w->fh[10]*w->term[1][12] + w->fh[11]*w->term[1][42] + w->fh[12]*w->term[1][57];
-    w->S[28] = w->fh[10]*w->term[1][13] + w->fh[11]*w->term[1][43] + w->fh[12]*w->term[1][58];
-    w->S[29] = w->fh[10]*w->term[1][14] + w->fh[11]*w->term[1][44] + w->fh[12]*w->term[1][59];
-    w->S[30] = w->fh[19]*w->term[1][0] + w->fh[20]*w->term[1][15] + w->fh[21]*w->term[1][60];
-    w->S[31] = w->fh[19]*w->term[1][1] + w->fh[20]*w->term[1][16] + w->fh[21]*w->term[1][61] +
-            w->fh[22]*w->term[1][76];
-    w->S[32] = c_out + w->fh[19]*w->term[1][2] + w->fh[20]*w->term[1][17] + w->fh[21]*w->term[1][62]
-            + w->fh[22]*w->term[1][77];
-    w->S[33] = w->fh[19]*w->term[1][3] + w->fh[20]*w->term[1][18] + w->fh[21]*w->term[1][63] +
-            w->fh[22]*w->term[1][78];
-    w->S[34] = w->fh[19]*w->term[1][4] + w->fh[20]*w->term[1][19] + w->fh[21]*w->term[1][64] +
-            w->fh[22]*w->term[1][79];
-    w->S[35] = w->fh[19]*w->term[1][5] + w->fh[20]*w->term[1][20] + w->fh[21]*w->term[1][65] +
-            w->fh[22]*w->term[1][80];
-    w->S[36] = w->fh[19]*w->term[1][6] + w->fh[20]*w->term[1][21] + w->fh[21]*w->term[1][66] +
-            w->fh[23]*c_in;
-    w->S[37] = w->fh[19]*w->term[1][7] + w->fh[20]*w->term[1][22] + w->fh[21]*w->term[1][67] +
-            w->fh[24]*c_in;
-    w->S[38] = w->fh[19]*w->term[1][8] + w->fh[20]*w->term[1][23] + w->fh[21]*w->term[1][68] +
-            w->fh[25]*c_in;
-    w->S[39] = w->fh[19]*w->term[1][9] + w->fh[20]*w->term[1][24] + w->fh[21]*w->term[1][69] +
-            w->fh[26]*w->term[1][106];
-    w->S[40] = w->fh[19]*w->term[1][10] + w->fh[20]*w->term[1][25] + w->fh[21]*w->term[1][70] +
-            w->fh[27]*w->term[1][107];
-    w->S[41] = w->fh[19]*w->term[1][11] + w->fh[20]*w->term[1][26] + w->fh[21]*w->term[1][71] +
-            w->fh[28]*w->term[1][108];
-    w->S[42] = w->fh[19]*w->term[1][12] + w->fh[20]*w->term[1][27] + w->fh[21]*w->term[1][72] +
-            w->fh[22]*w->term[1][87];
-    w->S[43] = w->fh[19]*w->term[1][13] + w->fh[20]*w->term[1][28] + w->fh[21]*w->term[1][73] +
-            w->fh[22]*w->term[1][88];
-    w->S[44] = w->fh[19]*w->term[1][14] + w->fh[20]*w->term[1][29] + w->fh[21]*w->term[1][74] +
-            w->fh[22]*w->term[1][89];
-    w->S[45] = w->fh[29]*w->term[1][15] + w->fh[30]*w->term[1][30] + w->fh[31]*w->term[1][45] +
-            w->fh[32]*w->term[1][60];
-    w->S[46] = w->fh[29]*w->term[1][16] + w->fh[30]*w->term[1][31] + w->fh[31]*w->term[1][46] +
-            w->fh[32]*w->term[1][61] + w->fh[33]*w->term[1][76];
-    w->S[47] = w->fh[29]*w->term[1][17] + w->fh[30]*w->term[1][32] + w->fh[31]*w->term[1][47] +
-            w->fh[32]*w->term[1][62] + w->fh[33]*w->term[1][77];
-    w->S[48] = c_out + w->fh[29]*w->term[1][18] + w->fh[30]*w->term[1][33] +
-            w->fh[31]*w->term[1][48] + w->fh[32]*w->term[1][63] + w->fh[33]*w->term[1][78];
-    w->S[49] = w->fh[29]*w->term[1][19] + w->fh[30]*w->term[1][34] + w->fh[31]*w->term[1][49] +
-            w->fh[32]*w->term[1][64] + w->fh[33]*w->term[1][79];
-    w->S[50] = w->fh[29]*w->term[1][20] + w->fh[30]*w->term[1][35] + w->fh[31]*w->term[1][50] +
-            w->fh[32]*w->term[1][65] + w->fh[33]*w->term[1][80];
-    w->S[51] = w->fh[29]*w->term[1][21] + w->fh[30]*w->term[1][36] + w->fh[31]*w->term[1][51] +
-            w->fh[32]*w->term[1][66];
-    w->S[52] = w->fh[29]*w->term[1][22] + w->fh[30]*w->term[1][37] + w->fh[31]*w->term[1][52] +
-            w->fh[32]*w->term[1][67];
-    w->S[53] = w->fh[29]*w->term[1][23] + w->fh[30]*w->term[1][38] + w->fh[31]*w->term[1][53] +
-            w->fh[32]*w->term[1][68];
-    w->S[54] = w->fh[29]*w->term[1][24] + w->fh[30]*w->term[1][39] + w->fh[31]*w->term[1][54] +
-            w->fh[32]*w->term[1][69];
-    w->S[55] = w->fh[29]*w->term[1][25] + w->fh[30]*w->term[1][40] + w->fh[31]*w->term[1][55] +
-            w->fh[32]*w->term[1][70];
-    w->S[56] = w->fh[29]*w->term[1][26] + w->fh[30]*w->term[1][41] + w->fh[31]*w->term[1][56] +
-            w->fh[32]*w->term[1][71];
-    w->S[57] = w->fh[29]*w->term[1][27] + w->fh[30]*w->term[1][42] + w->fh[31]*w->term[1][57] +
-            w->fh[32]*w->term[1][72] + w->fh[33]*w->term[1][87] + w->fh[34]*w->term[1][109];
-    w->S[58] = w->fh[29]*w->term[1][28] + w->fh[30]*w->term[1][43] + w->fh[31]*w->term[1][58] +
-            w->fh[32]*w->term[1][73] + w->fh[33]*w->term[1][88] + w->fh[35]*w->term[1][110];
-    w->S[59] = w->fh[29]*w->term[1][29] + w->fh[30]*w->term[1][44] + w->fh[31]*w->term[1][59] +
-            w->fh[32]*w->term[1][74] + w->fh[33]*w->term[1][89] + w->fh[36]*w->term[1][111];
-    w->S[60] = w->fh[37]*w->term[1][0] + w->fh[38]*w->term[1][30] + w->fh[39]*w->term[1][45] +
-            w->fh[40]*w->term[1][60];
-    w->S[61] = w->fh[37]*w->term[1][1] + w->fh[38]*w->term[1][31] + w->fh[39]*w->term[1][46] +
-            w->fh[40]*w->term[1][61] + w->fh[41]*w->term[1][76];
-    w->S[62] = w->fh[37]*w->term[1][2] + w->fh[38]*w->term[1][32] + w->fh[39]*w->term[1][47] +
-            w->fh[40]*w->term[1][62] + w->fh[41]*w->term[1][77];
-    w->S[63] = w->fh[37]*w->term[1][3] + w->fh[38]*w->term[1][33] + w->fh[39]*w->term[1][48] +
-            w->fh[40]*w->term[1][63] + w->fh[41]*w->term[1][78];
-    w->S[64] = c_out + w->fh[37]*w->term[1][4] + w->fh[38]*w->term[1][34] + w->fh[39]*w->term[1][49]
-            + w->fh[40]*w->term[1][64] + w->fh[41]*w->term[1][79];
-    w->S[65] = w->fh[37]*w->term[1][5] + w->fh[38]*w->term[1][35] + w->fh[39]*w->term[1][50] +
-            w->fh[40]*w->term[1][65] + w->fh[41]*w->term[1][80];
-    w->S[66] = w->fh[37]*w->term[1][6] + w->fh[38]*w->term[1][36] + w->fh[39]*w->term[1][51] +
-            w->fh[40]*w->term[1][66];
-    w->S[67] = w->fh[37]*w->term[1][7] + w->fh[38]*w->term[1][37] + w->fh[39]*w->term[1][52] +
-            w->fh[40]*w->term[1][67];
-    w->S[68] = w->fh[37]*w->term[1][8] + w->fh[38]*w->term[1][38] + w->fh[39]*w->term[1][53] +
-            w->fh[40]*w->term[1][68];
-    w->S[69] = w->fh[37]*w->term[1][9] + w->fh[38]*w->term[1][39] + w->fh[39]*w->term[1][54] +
-            w->fh[40]*w->term[1][69];
-    w->S[70] = w->fh[37]*w->term[1][10] + w->fh[38]*w->term[1][40] + w->fh[39]*w->term[1][55] +
-            w->fh[40]*w->term[1][70];
-    w->S[71] = w->fh[37]*w->term[1][11] + w->fh[38]*w->term[1][41] + w->fh[39]*w->term[1][56] +
-            w->fh[40]*w->term[1][71];
-    w->S[72] = w->fh[37]*w->term[1][12] + w->fh[38]*w->term[1][42] + w->fh[39]*w->term[1][57] +
-            w->fh[40]*w->term[1][72] + w->fh[41]*w->term[1][87] + w->fh[42]*w->term[1][109];
-    w->S[73] = w->fh[37]*w->term[1][13] + w->fh[38]*w->term[1][43] + w->fh[39]*w->term[1][58] +
-            w->fh[40]*w->term[1][73] + w->fh[41]*w->term[1][88] + w->fh[43]*w->term[1][110];
-    w->S[74] = w->fh[37]*w->term[1][14] + w->fh[38]*w->term[1][44] + w->fh[39]*w->term[1][59] +
-            w->fh[40]*w->term[1][74] + w->fh[41]*w->term[1][89] + w->fh[44]*w->term[1][111];
-    w->S[75] = w->fh[45]*w->term[1][45];
-    w->S[76] = w->fh[45]*w->term[1][46];
-    w->S[77] = w->fh[45]*w->term[1][47];
-    w->S[78] = w->fh[45]*w->term[1][48];
-    w->S[79] = w->fh[45]*w->term[1][49];
-    w->S[80] = c_out + w->fh[45]*w->term[1][50];
-    w->S[81] = w->fh[45]*w->term[1][51];
-    w->S[82] = w->fh[45]*w->term[1][52];
-    w->S[83] = w->fh[45]*w->term[1][53];
-    w->S[84] = w->fh[45]*w->term[1][54];
-    w->S[85] = w->fh[45]*w->term[1][55];
-    w->S[86] = w->fh[45]*w->term[1][56];
-    w->S[87] = w->fh[45]*w->term[1][57];
-    w->S[88] = w->fh[45]*w->term[1][58];
-    w->S[89] = w->fh[45]*w->term[1][59];
-    w->S[90] = w->fh[46]*w->term[1][60];
-    w->S[91] = w->fh[46]*w->term[1][61] + w->fh[47]*w->term[1][76];
-    w->S[92] = w->fh[46]*w->term[1][62] + w->fh[47]*w->term[1][77];
-    w->S[93] = w->fh[46]*w->term[1][63] + w->fh[47]*w->term[1][78];
-    w->S[94] = w->fh[46]*w->term[1][64] + w->fh[47]*w->term[1][79];
-    w->S[95] = w->fh[46]*w->term[1][65] + w->fh[47]*w->term[1][80];
-    w->S[96] = c_out;
-    w->S[97] = w->fh[46]*w->term[1][66];
-    w->S[98] = w->fh[46]*w->term[1][67];
-    w->S[99] = w->fh[46]*w->term[1][68];
-    w->S[100] = w->fh[46]*w->term[1][69];
-    w->S[101] = w->fh[46]*w->term[1][70];
-    w->S[102] = w->fh[46]*w->term[1][71];
-    w->S[103] = w->fh[46]*w->term[1][72] + w->fh[47]*w->term[1][87];
-    w->S[104] = w->fh[46]*w->term[1][73] + w->fh[47]*w->term[1][88];
-    w->S[105] = w->fh[46]*w->term[1][74] + w->fh[47]*w->term[1][89];
-    w->S[106] = c_out + w->fh[48]*w->term[1][106];
-    w->S[107] = c_out + w->fh[49]*w->term[1][107];
-    w->S[108] = c_out + w->fh[50]*w->term[1][108];
-    w->S[109] = c_out + w->fh[51]*w->term[1][109];
-    w->S[110] = c_out + w->fh[52]*w->term[1][110];
-    w->S[111] = c_out + w->fh[53]*w->term[1][111];
-}
-
-NED_INERTIAL16_BLOCK void horner_level_3_into_term(ned_inertial16_discretize_scratch *restrict w,
-        const ned_inertial16_scalar c_out, const ned_inertial16_scalar c_in)
-{
-    w->term[1][0] = c_out + w->fh[0]*w->S[15] + w->fh[1]*w->S[30] + w->fh[2]*w->S[60];
-    w->term[1][1] = w->fh[0]*w->S[16] + w->fh[1]*w->S[31] + w->fh[2]*w->S[61] + w->fh[3]*w->S[76];
-    w->term[1][2] = w->fh[0]*w->S[17] + w->fh[1]*w->S[32] + w->fh[2]*w->S[62] + w->fh[3]*w->S[77];
-    w->term[1][3] = w->fh[0]*w->S[18] + w->fh[1]*w->S[33] + w->fh[2]*w->S[63] + w->fh[3]*w->S[78];
-    w->term[1][4] = w->fh[0]*w->S[19] + w->fh[1]*w->S[34] + w->fh[2]*w->S[64] + w->fh[3]*w->S[79];
-    w->term[1][5] = w->fh[0]*w->S[20] + w->fh[1]*w->S[35] + w->fh[2]*w->S[65] + w->fh[3]*w->S[80];
-    w->term[1][6] = w->fh[0]*w->S[21] + w->fh[1]*w->S[36] + w->fh[2]*w->S[66] + w->fh[4]*c_in;
-    w->term[1][7] = w->fh[0]*w->S[22] + w->fh[1]*w->S[37] + w->fh[2]*w->S[67] + w->fh[5]*c_in;
-    w->term[1][8] = w->fh[0]*w->S[23] + w->fh[1]*w->S[38] + w->fh[2]*w->S[68] + w->fh[6]*c_in;
-    w->term[1][9] = w->fh[0]*w->S[24] + w->fh[1]*w->S[39] + w->fh[2]*w->S[69] + w->fh[7]*w->S[106];
-    w->term[1][10] = w->fh[0]*w->S[25] + w->fh[1]*w->S[40] + w->fh[2]*w->S[70] + w->fh[8]*w->S[107];
-    w->term[1][11] = w->fh[0]*w->S[26] + w->fh[1]*w->S[41] + w->fh[2]*w->S[71] + w->fh[9]*w->S[108];
-    w->term[1][12] = w->fh[0]*w->S[27] + w->fh[1]*w->S[42] + w->fh[2]*w->S[72] + w->fh[3]*w->S[87];
-    w->term[1][13] = w->fh[0]*w->S[28] + w->fh[1]*w->S[43] + w->fh[2]*w->S[73] + w->fh[3]*w->S[88];
-    w->term[1][14] = w->fh[0]*w->S[29] + w->fh[1]*w->S[44] + w->fh[2]*w->S[74] + w->fh[3]*w->S[89];
-    w->term[1][15] = w->fh[10]*w->S[0] + w->fh[11]*w->S[30] + w->fh[12]*w->S[45];
-    w->term[1][16] = c_out + w->fh[10]*w->S[1] + w->fh[11]*w->S[31] + w->fh[12]*w->S[46];
-    w->term[1][17] = w->fh[10]*w->S[2] + w->fh[11]*w->S[32] + w->fh[12]*w->S[47];
-    w->term[1][18] = w->fh[10]*w->S[3] + w->fh[11]*w->S[33] + w->fh[12]*w->S[48];
-    w->term[1][19] = w->fh[10]*w->S[4] + w->fh[11]*w->S[34] + w->fh[12]*w->S[49];
-    w->term[1][20] = w->fh[10]*w->S[5] + w->fh[11]*w->S[35] + w->fh[12]*w->S[50];
-    w->term[1][21] = w->fh[10]*w->S[6] + w->fh[11]*w->S[36] + w->fh[12]*w->S[51] + w->fh[13]*c_in;
-    w->term[1][22] = w->fh[10]*w->S[7] + w->fh[11]*w->S[37] + w->fh[12]*w->S[52] + w->fh[14]*c_in;
-    w->term[1][23] = w->fh[10]*w->S[8] + w->fh[11]*w->S[38] + w->fh[12]*w->S[53] + w->fh[15]*c_in;
-    w->term[1][24] = w->fh[10]*w->S[9] + w->fh[11]*w->S[39] + w->fh[12]*w->S[54] +
-            w->fh[16]*w->S[106];
-    w->term[1][25] = w->fh[10]*w->S[10] + w->fh[11]*w->S[40] + w->fh[12]*w->S[55] +
-            w->fh[17]*w->S[107];
-    w->term[1][26] = w->fh[10]*w->S[11] + w->fh[11]*w->S[41] + w->fh[12]*w->S[56] +
-            w->fh[18]*w->S[108];
-    w->term[1][27] = w->fh[10]*w->S[12] + w->fh[11]*w->S[42] + w->fh[12]*w->S[57];
-    w->term[1][28] = w->fh[10]*w->S[13] + w->fh[11]*w->S[43] + w->fh[12]*w->S[58];
-    w->term[1][29] = w->fh[10]*w->S[14] + w->fh[11]*w->S[44] + w->fh[12]*w->S[59];
-    w->term[1][30] = w->fh[19]*w->S[0] + w->fh[20]*w->S[15] + w->fh[21]*w->S[60];
-    w->term[1][31] = w->fh[19]*w->S[1] + w->fh[20]*w->S[16] + w->fh[21]*w->S[61] +
-            w->fh[22]*w->S[76];
-    w->term[1][32] = c_out + w->fh[19]*w->S[2] + w->fh[20]*w->S[17] + w->fh[21]*w->S[62] +
-            w->fh[22]*w->S[77];
-    w->term[1][33] = w->fh[19]*w->S[3] + w->fh[20]*w->S[18] + w->fh[21]*w->S[63] +
-            w->fh[22]*w->S[78];
-    w->term[1][34] = w->fh[19]*w->S[4] + w->fh[20]*w->S[19] + w->fh[21]*w->S[64] +
-            w->fh[22]*w->S[79];
-    w->term[1][35] = w->fh[19]*w->S[5] + w->fh[20]*w->S[20] + w->fh[21]*w->S[65] +
-            w->fh[22]*w->S[80];
-    w->term[1][36] = w->fh[19]*w->S[6] + w->fh[20]*w->S[21] + w->fh[21]*w->S[66] + w->fh[23]*c_in;
-    w->term[1][37] = w->fh[19]*w->S[7] + w->fh[20]*w->S[22] + w->fh[21]*w->S[67] + w->fh[24]*c_in;
-    w->term[1][38] = w->fh[19]*w->S[8] + w->fh[20]*w->S[23] + w->fh[21]*w->S[68] + w->fh[25]*c_in;
-    w->term[1][39] = w->fh[19]*w->S[9] + w->fh[20]*w->S[24] + w->fh[21]*w->S[69] +
-            w->fh[26]*w->S[106];
-    w->term[1][40] = w->fh[19]*w->S[10] + w->fh[20]*w->S[25] + w->fh[21]*w->S[70] +
-            w->fh[27]*w->S[107];
-    w->term[1][41] = w->fh[19]*w->S[11] + w->fh[20]*w->S[26] + w->fh[21]*w->S[71] +
-            w->fh[28]*w->S[108];
-    w->term[1][42] = w->fh[19]*w->S[12] + w->fh[20]*w->S[27] + w->fh[21]*w->S[72] +
-            w->fh[22]*w->S[87];
-    w->term[1][43] = w->fh[19]*w->S[13] + w->fh[20]*w->S[28] + w->fh[21]*w->S[73] +
-            w->fh[22]*w->S[88];
-    w->term[1][44] = w->fh[19]*w->S[14] + w->fh[20]*w->S[29] + w->fh[21]*w->S[74] +
-            w->fh[22]*w->S[89];
-    w->term[1][45] = w->fh[29]*w->S[15] + w->fh[30]*w->S[30] + w->fh[31]*w->S[45] +
-            w->fh[32]*w->S[60];
-    w->term[1][46] = w->fh[29]*w->S[16] + w->fh[30]*w->S[31] + w->fh[31]*w->S[46] +
-            w->fh[32]*w->S[61] + w->fh[33]*w->S[76];
-    w->term[1][47] = w->fh[29]*w->S[17] + w->fh[30]*w->S[32] + w->fh[31]*w->S[47] +
-            w->fh[32]*w->S[62] + w->fh[33]*w->S[77];
-    w->term[1][48] = c_out + w->fh[29]*w->S[18] + w->fh[30]*w->S[33] + w->fh[31]*w->S[48] +
-            w->fh[32]*w->S[63] + w->fh[33]*w->S[78];
-    w->term[1][49] = w->fh[29]*w->S[19] + w->fh[30]*w->S[34] + w->fh[31]*w->S[49] +
-            w->fh[32]*w->S[64] + w->fh[33]*w->S[79];
-    w->term[1][50] = w->fh[29]*w->S[20] + w->fh[30]*w->S[35] + w->fh[31]*w->S[50] +
-            w->fh[32]*w->S[65] + w->fh[33]*w->S[80];
-    w->term[1][51] = w->fh[29]*w->S[21] + w->fh[30]*w->S[36] + w->fh[31]*w->S[51] +
-            w->fh[32]*w->S[66];
-    w->term[1][52] = w->fh[29]*w->S[22] + w->fh[30]*w->S[37] + w->fh[31]*w->S[52] +
-            w->fh[32]*w->S[67];
-    w->term[1][53] = w->fh[29]*w->S[23] + w->fh[30]*w->S[38] + w->fh[31]*w->S[53] +
-            w->fh[32]*w->S[68];
-    w->term[1][54] = w->fh[29]*w->S[24] + w->fh[30]*w->S[39] + w->fh[31]*w->S[54] +
-            w->fh[32]*w->S[69];
-    w->term[1][55] = w->fh[29]*w->S[25] + w->fh[30]*w->S[40] + w->fh[31]*w->S[55] +
-            w->fh[32]*w->S[70];
-    w->term[1][56] = w->fh[29]*w->S[26] + w->fh[30]*w->S[41] + w->fh[31]*w->S[56] +
-            w->fh[32]*w->S[71];
-    w->term[1][57] = w->fh[29]*w->S[27] + w->fh[30]*w->S[42] + w->fh[31]*w->S[57] +
-            w->fh[32]*w->S[72] + w->fh[33]*w->S[87] + w->fh[34]*w->S[109];
-    w->term[1][58] = w->fh[29]*w->S[28] + w->fh[30]*w->S[43] + w->fh[31]*w->S[58] +
-            w->fh[32]*w->S[73] + w->fh[33]*w->S[88] + w->fh[35]*w->S[110];
-    w->term[1][59] = w->fh[29]*w->S[29] + w->fh[30]*w->S[44] + w->fh[31]*w->S[59] +
-            w->fh[32]*w->S[74] + w->fh[33]*w->S[89] + w->fh[36]*w->S[111];
-    w->term[1][60] = w->fh[37]*w->S[0] + w->fh[38]*w->S[30] + w->fh[39]*w->S[45] +
-            w->fh[40]*w->S[60];
-    w->term[1][61] = w->fh[37]*w->S[1] + w->fh[38]*w->S[31] + w->fh[39]*w->S[46] +
-            w->fh[40]*w->S[61] + w->fh[41]*w->S[76];
-    w->term[1][62] = w->fh[37]*w->S[2] + w->fh[38]*w->S[32] + w->fh[39]*w->S[47] +
-            w->fh[40]*w->S[62] + w->fh[41]*w->S[77];
-    w->term[1][63] = w->fh[37]*w->S[3] + w->fh[38]*w->S[33] + w->fh[39]*w->S[48] +
-            w->fh[40]*w->S[63] + w->fh[41]*w->S[78];
-    w->term[1][64] = c_out + w->fh[37]*w->S[4] + w->fh[38]*w->S[34] + w->fh[39]*w->S[49] +
-            w->fh[40]*w->S[64] + w->fh[41]*w->S[79];
-    w->term[1][65] = w->fh[37]*w->S[5] + w->fh[38]*w->S[35] + w->fh[39]*w->S[50] +
-            w->fh[40]*w->S[65] + w->fh[41]*w->S[80];
-    w->term[1][66] = w->fh[37]*w->S[6] + w->fh[38]*w->S[36] + w->fh[39]*w->S[51] +
-            w->fh[40]*w->S[66];
-    w->term[1][67] = w->fh[37]*w->S[7] + w->fh[38]*w->S[37] + w->fh[39]*w->S[52] +
-            w->fh[40]*w->S[67];
-    w->term[1][68] = w->fh[37]*w->S[8] + w->fh[38]*w->S[38] + w->fh[39]*w->S[53] +
-            w->fh[40]*w->S[68];
-    w->term[1][69] = w->fh[37]*w->S[9] + w->fh[38]*w->S[39] + w->fh[39]*w->S[54] +
-            w->fh[40]*w->S[69];
-    w->term[1][70] = w->fh[37]*w->S[10] + w->fh[38]*w->S[40] + w->fh[39]*w->S[55] +
-            w->fh[40]*w->S[70];
-    w->term[1][71] = w->fh[37]*w->S[11] + w->fh[38]*w->S[41] + w->fh[39]*w->S[56] +
-            w->fh[40]*w->S[71];
-    w->term[1][72] = w->fh[37]*w->S[12] + w->fh[38]*w->S[42] + w->fh[39]*w->S[57] +
-            w->fh[40]*w->S[72] + w->fh[41]*w->S[87] + w->fh[42]*w->S[109];
-    w->term[1][73] = w->fh[37]*w->S[13] + w->fh[38]*w->S[43] + w->fh[39]*w->S[58] +
-            w->fh[40]*w->S[73] + w->fh[41]*w->S[88] + w->fh[43]*w->S[110];
-    w->term[1][74] = w->fh[37]*w->S[14] + w->fh[38]*w->S[44] + w->fh[39]*w->S[59] +
-            w->fh[40]*w->S[74] + w->fh[41]*w->S[89] + w->fh[44]*w->S[111];
-    w->term[1][75] = w->fh[45]*w->S[45];
-    w->term[1][76] = w->fh[45]*w->S[46];
-    w->term[1][77] = w->fh[45]*w->S[47];
-    w->term[1][78] = w->fh[45]*w->S[48];
-    w->term[1][79] = w->fh[45]*w->S[49];
-    w->term[1][80] = c_out + w->fh[45]*w->S[50];
-    w->term[1][81] = w->fh[45]*w->S[51];
-    w->term[1][82] = w->fh[45]*w->S[52];
-    w->term[1][83] = w->fh[45]*w->S[53];
-    w->term[1][84] = w->fh[45]*w->S[54];
-    w->term[1][85] = w->fh[45]*w->S[55];
-    w->term[1][86] = w->fh[45]*w->S[56];
-    w->term[1][87] = w->fh[45]*w->S[57];
-    w->term[1][88] = w->fh[45]*w->S[58];
-    w->term[1][89] = w->fh[45]*w->S[59];
-    w->term[1][90] = w->fh[46]*w->S[60];
-    w->term[1][91] = w->fh[46]*w->S[61] + w->fh[47]*w->S[76];
-    w->term[1][92] = w->fh[46]*w->S[62] + w->fh[47]*w->S[77];
-    w->term[1][93] = w->fh[46]*w->S[63] + w->fh[47]*w->S[78];
-    w->term[1][94] = w->fh[46]*w->S[64] + w->fh[47]*w->S[79];
-    w->term[1][95] = w->fh[46]*w->S[65] + w->fh[47]*w->S[80];
-    w->term[1][96] = c_out;
-    w->term[1][97] = w->fh[46]*w->S[66];
-    w->term[1][98] = w->fh[46]*w->S[67];
-    w->term[1][99] = w->fh[46]*w->S[68];
-    w->term[1][100] = w->fh[46]*w->S[69];
-    w->term[1][101] = w->fh[46]*w->S[70];
-    w->term[1][102] = w->fh[46]*w->S[71];
-    w->term[1][103] = w->fh[46]*w->S[72] + w->fh[47]*w->S[87];
-    w->term[1][104] = w->fh[46]*w->S[73] + w->fh[47]*w->S[88];
-    w->term[1][105] = w->fh[46]*w->S[74] + w->fh[47]*w->S[89];
-    w->term[1][106] = c_out + w->fh[48]*w->S[106];
-    w->term[1][107] = c_out + w->fh[49]*w->S[107];
-    w->term[1][108] = c_out + w->fh[50]*w->S[108];
-    w->term[1][109] = c_out + w->fh[51]*w->S[109];
-    w->term[1][110] = c_out + w->fh[52]*w->S[110];
-    w->term[1][111] = c_out + w->fh[53]*w->S[111];
+    w->term[1][6] = 0;
+    w->term[1][7] = w->fh[4]*c_in;
+    w->term[1][8] = w->fh[5]*c_in;
+    w->term[1][9] = w->fh[6]*c_in;
+    w->term[1][10] = w->fh[7]*c_in;
+    w->term[1][11] = w->fh[8]*c_in;
+    w->term[1][12] = w->fh[9]*c_in;
+    w->term[1][13] = 0;
+    w->term[1][14] = 0;
+    w->term[1][15] = 0;
+    w->term[1][16] = w->fh[10]*c_in;
+    w->term[1][17] = c_out;
+    w->term[1][18] = w->fh[11]*c_in;
+    w->term[1][19] = w->fh[12]*c_in;
+    w->term[1][20] = 0;
+    w->term[1][21] = 0;
+    w->term[1][22] = 0;
+    w->term[1][23] = w->fh[13]*c_in;
+    w->term[1][24] = w->fh[14]*c_in;
+    w->term[1][25] = w->fh[15]*c_in;
+    w->term[1][26] = w->fh[16]*c_in;
+    w->term[1][27] = w->fh[17]*c_in;
+    w->term[1][28] = w->fh[18]*c_in;
+    w->term[1][29] = 0;
+    w->term[1][30] = 0;
+    w->term[1][31] = 0;
+    w->term[1][32] = w->fh[19]*c_in;
+    w->term[1][33] = w->fh[20]*c_in;
+    w->term[1][34] = c_out;
+    w->term[1][35] = 0;
+    w->term[1][36] = w->fh[21]*c_in;
+    w->term[1][37] = w->fh[22]*c_in;
+    w->term[1][38] = 0;
+    w->term[1][39] = w->fh[23]*c_in;
+    w->term[1][40] = w->fh[24]*c_in;
+    w->term[1][41] = w->fh[25]*c_in;
+    w->term[1][42] = w->fh[26]*c_in;
+    w->term[1][43] = w->fh[27]*c_in;
+    w->term[1][44] = w->fh[28]*c_in;
+    w->term[1][45] = 0;
+    w->term[1][46] = 0;
+    w->term[1][47] = 0;
+    w->term[1][48] = 0;
+    w->term[1][49] = w->fh[29]*c_in;
+    w->term[1][50] = w->fh[30]*c_in;
+    w->term[1][51] = c_out + w->fh[31]*c_in;
+    w->term[1][52] = w->fh[32]*c_in;
+    w->term[1][53] = w->fh[33]*c_in;
+    w->term[1][54] = 0;
+    w->term[1][55] = 0;
+    w->term[1][56] = 0;
+    w->term[1][57] = 0;
+    w->term[1][58] = 0;
+    w->term[1][59] = 0;
+    w->term[1][60] = 0;
+    w->term[1][61] = w->fh[34]*c_in;
+    w->term[1][62] = w->fh[35]*c_in;
+    w->term[1][63] = w->fh[36]*c_in;
+    w->term[1][64] = w->fh[37]*c_in;
+    w->term[1][65] = 0;
+    w->term[1][66] = w->fh[38]*c_in;
+    w->term[1][67] = w->fh[39]*c_in;
+    w->term[1][68] = c_out + w->fh[40]*c_in;
+    w->term[1][69] = w->fh[41]*c_in;
+    w->term[1][70] = 0;
+    w->term[1][71] = 0;
+    w->term[1][72] = 0;
+    w->term[1][73] = 0;
+    w->term[1][74] = 0;
+    w->term[1][75] = 0;
+    w->term[1][76] = 0;
+    w->term[1][77] = w->fh[42]*c_in;
+    w->term[1][78] = w->fh[43]*c_in;
+    w->term[1][79] = w->fh[44]*c_in;
+    w->term[1][80] = 0;
+    w->term[1][81] = 0;
+    w->term[1][82] = 0;
+    w->term[1][83] = w->fh[45]*c_in;
+    w->term[1][84] = 0;
+    w->term[1][85] = c_out;
+    w->term[1][86] = 0;
+    w->term[1][87] = 0;
+    w->term[1][88] = 0;
+    w->term[1][89] = 0;
+    w->term[1][90] = 0;
+    w->term[1][91] = 0;
+    w->term[1][92] = 0;
+    w->term[1][93] = 0;
+    w->term[1][94] = 0;
+    w->term[1][95] = 0;
+    w->term[1][96] = 0;
+    w->term[1][97] = 0;
+    w->term[1][98] = 0;
+    w->term[1][99] = 0;
+    w->term[1][100] = w->fh[46]*c_in;
+    w->term[1][101] = w->fh[47]*c_in;
+    w->term[1][102] = c_out;
+    w->term[1][103] = 0;
+    w->term[1][104] = 0;
+    w->term[1][105] = 0;
+    w->term[1][106] = 0;
+    w->term[1][107] = 0;
+    w->term[1][108] = 0;
+    w->term[1][109] = 0;
+    w->term[1][110] = 0;
+    w->term[1][111] = 0;
+    w->term[1][112] = c_out + w->fh[48]*c_in;
+    w->term[1][113] = c_out + w->fh[49]*c_in;
+    w->term[1][114] = c_out + w->fh[50]*c_in;
+    w->term[1][115] = c_out + w->fh[51]*c_in;
+    w->term[1][116] = c_out + w->fh[52]*c_in;
+    w->term[1][117] = c_out + w->fh[53]*c_in;
 }
 
 NED_INERTIAL16_BLOCK void horner_saturated_into_S(ned_inertial16_discretize_scratch *restrict w,
         const ned_inertial16_scalar c_out, const ned_inertial16_scalar c_in)
 {
-    w->S[0] = c_out + w->fh[0]*w->term[1][15] + w->fh[1]*w->term[1][30] + w->fh[2]*w->term[1][60] +
-            w->fh[3]*w->term[1][75];
-    w->S[1] = w->fh[0]*w->term[1][16] + w->fh[1]*w->term[1][31] + w->fh[2]*w->term[1][61] +
-            w->fh[3]*w->term[1][76];
-    w->S[2] = w->fh[0]*w->term[1][17] + w->fh[1]*w->term[1][32] + w->fh[2]*w->term[1][62] +
-            w->fh[3]*w->term[1][77];
-    w->S[3] = w->fh[0]*w->term[1][18] + w->fh[1]*w->term[1][33] + w->fh[2]*w->term[1][63] +
-            w->fh[3]*w->term[1][78];
-    w->S[4] = w->fh[0]*w->term[1][19] + w->fh[1]*w->term[1][34] + w->fh[2]*w->term[1][64] +
-            w->fh[3]*w->term[1][79];
-    w->S[5] = w->fh[0]*w->term[1][20] + w->fh[1]*w->term[1][35] + w->fh[2]*w->term[1][65] +
-            w->fh[3]*w->term[1][80];
-    w->S[6] = w->fh[0]*w->term[1][21] + w->fh[1]*w->term[1][36] + w->fh[2]*w->term[1][66] +
-            w->fh[3]*w->term[1][81] + w->fh[4]*c_in;
-    w->S[7] = w->fh[0]*w->term[1][22] + w->fh[1]*w->term[1][37] + w->fh[2]*w->term[1][67] +
-            w->fh[3]*w->term[1][82] + w->fh[5]*c_in;
-    w->S[8] = w->fh[0]*w->term[1][23] + w->fh[1]*w->term[1][38] + w->fh[2]*w->term[1][68] +
-            w->fh[3]*w->term[1][83] + w->fh[6]*c_in;
-    w->S[9] = w->fh[0]*w->term[1][24] + w->fh[1]*w->term[1][39] + w->fh[2]*w->term[1][69] +
-            w->fh[3]*w->term[1][84] + w->fh[7]*w->term[1][106];
-    w->S[10] = w->fh[0]*w->term[1][25] + w->fh[1]*w->term[1][40] + w->fh[2]*w->term[1][70] +
-            w->fh[3]*w->term[1][85] + w->fh[8]*w->term[1][107];
-    w->S[11] = w->fh[0]*w->term[1][26] + w->fh[1]*w->term[1][41] + w->fh[2]*w->term[1][71] +
-            w->fh[3]*w->term[1][86] + w->fh[9]*w->term[1][108];
-    w->S[12] = w->fh[0]*w->term[1][27] + w->fh[1]*w->term[1][42] + w->fh[2]*w->term[1][72] +
-            w->fh[3]*w->term[1][87];
-    w->S[13] = w->fh[0]*w->term[1][28] + w->fh[1]*w->term[1][43] + w->fh[2]*w->term[1][73] +
-            w->fh[3]*w->term[1][88];
-    w->S[14] = w->fh[0]*w->term[1][29] + w->fh[1]*w->term[1][44] + w->fh[2]*w->term[1][74] +
-            w->fh[3]*w->term[1][89];
-    w->S[15] = w->fh[10]*w->term[1][0] + w->fh[11]*w->term[1][30] + w->fh[12]*w->term[1][45];
-    w->S[16] = c_out + w->fh[10]*w->term[1][1] + w->fh[11]*w->term[1][31] +
-            w->fh[12]*w->term[1][46];
-    w->S[17] = w->fh[10]*w->term[1][2] + w->fh[11]*w->term[1][32] + w->fh[12]*w->term[1][47];
-    w->S[18] = w->fh[10]*w->term[1][3] + w->fh[11]*w->term[1][33] + w->fh[12]*w->term[1][48];
-    w->S[19] = w->fh[10]*w->term[1][4] + w->fh[11]*w->term[1][34] + w->fh[12]*w->term[1][49];
-    w->S[20] = w->fh[10]*w->term[1][5] + w->fh[11]*w->term[1][35] + w->fh[12]*w->term[1][50];
-    w->S[21] = w->fh[10]*w->term[1][6] + w->fh[11]*w->term[1][36] + w->fh[12]*w->term[1][51] +
-            w->fh[13]*c_in;
-    w->S[22] = w->fh[10]*w->term[1][7] + w->fh[11]*w->term[1][37] + w->fh[12]*w->term[1][52] +
-            w->fh[14]*c_in;
-    w->S[23] = w->fh[10]*w->term[1][8] + w->fh[11]*w->term[1][38] + w->fh[12]*w->term[1][53] +
-            w->fh[15]*c_in;
-    w->S[24] = w->fh[10]*w->term[1][9] + w->fh[11]*w->term[1][39] + w->fh[12]*w->term[1][54] +
-            w->fh[16]*w->term[1][106];
-    w->S[25] = w->fh[10]*w->term[1][10] + w->fh[11]*w->term[1][40] + w->fh[12]*w->term[1][55] +
-            w->fh[17]*w->term[1][107];
-    w->S[26] = w->fh[10]*w->term[1][11] + w->fh[11]*w->term[1][41] + w->fh[12]*w->term[1][56] +
-            w->fh[18]*w->term[1][108];
-    w->S[27] = w->fh[10]*w->term[1][12] + w->fh[11]*w->term[1][42] + w->fh[12]*w->term[1][57];
-    w->S[28] = w->fh[10]*w->term[1][13] + w->fh[11]*w->term[1][43] + w->fh[12]*w->term[1][58];
-    w->S[29] = w->fh[10]*w->term[1][14] + w->fh[11]*w->term[1][44] + w->fh[12]*w->term[1][59];
-    w->S[30] = w->fh[19]*w->term[1][0] + w->fh[20]*w->term[1][15] + w->fh[21]*w->term[1][60] +
-            w->fh[22]*w->term[1][75];
-    w->S[31] = w->fh[19]*w->term[1][1] + w->fh[20]*w->term[1][16] + w->fh[21]*w->term[1][61] +
-            w->fh[22]*w->term[1][76];
-    w->S[32] = c_out + w->fh[19]*w->term[1][2] + w->fh[20]*w->term[1][17] + w->fh[21]*w->term[1][62]
-            + w->fh[22]*w->term[1][77];
-    w->S[33] = w->fh[19]*w->term[1][3] + w->fh[20]*w->term[1][18] + w->fh[21]*w->term[1][63] +
-            w->fh[22]*w->term[1][78];
-    w->S[34] = w->fh[19]*w->term[1][4] + w->fh[20]*w->term[1][19] + w->fh[21]*w->term[1][64] +
-            w->fh[22]*w->term[1][79];
-    w->S[35] = w->fh[19]*w->term[1][5] + w->fh[20]*w->term[1][20] + w->fh[21]*w->term[1][65] +
-            w->fh[22]*w->term[1][80];
-    w->S[36] = w->fh[19]*w->term[1][6] + w->fh[20]*w->term[1][21] + w->fh[21]*w->term[1][66] +
-            w->fh[22]*w->term[1][81] + w->fh[23]*c_in;
-    w->S[37] = w->fh[19]*w->term[1][7] + w->fh[20]*w->term[1][22] + w->fh[21]*w->term[1][67] +
-            w->fh[22]*w->term[1][82] + w->fh[24]*c_in;
-    w->S[38] = w->fh[19]*w->term[1][8] + w->fh[20]*w->term[1][23] + w->fh[21]*w->term[1][68] +
-            w->fh[22]*w->term[1][83] + w->fh[25]*c_in;
-    w->S[39] = w->fh[19]*w->term[1][9] + w->fh[20]*w->term[1][24] + w->fh[21]*w->term[1][69] +
-            w->fh[22]*w->term[1][84] + w->fh[26]*w->term[1][106];
-    w->S[40] = w->fh[19]*w->term[1][10] + w->fh[20]*w->term[1][25] + w->fh[21]*w->term[1][70] +
-            w->fh[22]*w->term[1][85] + w->fh[27]*w->term[1][107];
-    w->S[41] = w->fh[19]*w->term[1][11] + w->fh[20]*w->term[1][26] + w->fh[21]*w->term[1][71] +
-            w->fh[22]*w->term[1][86] + w->fh[28]*w->term[1][108];
-    w->S[42] = w->fh[19]*w->term[1][12] + w->fh[20]*w->term[1][27] + w->fh[21]*w->term[1][72] +
-            w->fh[22]*w->term[1][87];
-    w->S[43] = w->fh[19]*w->term[1][13] + w->fh[20]*w->term[1][28] + w->fh[21]*w->term[1][73] +
-            w->fh[22]*w->term[1][88];
-    w->S[44] = w->fh[19]*w->term[1][14] + w->fh[20]*w->term[1][29] + w->fh[21]*w->term[1][74] +
-            w->fh[22]*w->term[1][89];
-    w->S[45] = w->fh[29]*w->term[1][15] + w->fh[30]*w->term[1][30] + w->fh[31]*w->term[1][45] +
-            w->fh[32]*w->term[1][60] + w->fh[33]*w->term[1][75];
-    w->S[46] = w->fh[29]*w->term[1][16] + w->fh[30]*w->term[1][31] + w->fh[31]*w->term[1][46] +
-            w->fh[32]*w->term[1][61] + w->fh[33]*w->term[1][76];
-    w->S[47] = w->fh[29]*w->term[1][17] + w->fh[30]*w->term[1][32] + w->fh[31]*w->term[1][47] +
-            w->fh[32]*w->term[1][62] + w->fh[33]*w->term[1][77];
-    w->S[48] = c_out + w->fh[29]*w->term[1][18] + w->fh[30]*w->term[1][33] +
-            w->fh[31]*w->term[1][48] + w->fh[32]*w->term[1][63] + w->fh[33]*w->term[1][78];
-    w->S[49] = w->fh[29]*w->term[1][19] + w->fh[30]*w->term[1][34] + w->fh[31]*w->term[1][49] +
-            w->fh[32]*w->term[1][64] + w->fh[33]*w->term[1][79];
-    w->S[50] = w->fh[29]*w->term[1][20] + w->fh[30]*w->term[1][35] + w->fh[31]*w->term[1][50] +
-            w->fh[32]*w->term[1][65] + w->fh[33]*w->term[1][80];
-    w->S[51] = w->fh[29]*w->term[1][21] + w->fh[30]*w->term[1][36] + w->fh[31]*w->term[1][51] +
-            w->fh[32]*w->term[1][66] + w->fh[33]*w->term[1][81];
-    w->S[52] = w->fh[29]*w->term[1][22] + w->fh[30]*w->term[1][37] + w->fh[31]*w->term[1][52] +
-            w->fh[32]*w->term[1][67] + w->fh[33]*w->term[1][82];
-    w->S[53] = w->fh[29]*w->term[1][23] + w->fh[30]*w->term[1][38] + w->fh[31]*w->term[1][53] +
-            w->fh[32]*w->term[1][68] + w->fh[33]*w->term[1][83];
-    w->S[54] = w->fh[29]*w->term[1][24] + w->fh[30]*w->term[1][39] + w->fh[31]*w->term[1][54] +
-            w->fh[32]*w->term[1][69] + w->fh[33]*w->term[1][84];
-    w->S[55] = w->fh[29]*w->term[1][25] + w->fh[30]*w->term[1][40] + w->fh[31]*w->term[1][55] +
-            w->fh[32]*w->term[1][70] + w->fh[33]*w->term[1][85];
-    w->S[56] = w->fh[29]*w->term[1][26] + w->fh[30]*w->term[1][41] + w->fh[31]*w->term[1][56] +
-            w->fh[32]*w->term[1][71] + w->fh[33]*w->term[1][86];
-    w->S[57] = w->fh[29]*w->term[1][27] + w->fh[30]*w->term[1][42] + w->fh[31]*w->term[1][57] +
-            w->fh[32]*w->term[1][72] + w->fh[33]*w->term[1][87] + w->fh[34]*w->term[1][109];
-    w->S[58] = w->fh[29]*w->term[1][28] + w->fh[30]*w->term[1][43] + w->fh[31]*w->term[1][58] +
-            w->fh[32]*w->term[1][73] + w->fh[33]*w->term[1][88] + w->fh[35]*w->term[1][110];
-    w->S[59] = w->fh[29]*w->term[1][29] + w->fh[30]*w->term[1][44] + w->fh[31]*w->term[1][59] +
-            w->fh[32]*w->term[1][74] + w->fh[33]*w->term[1][89] + w->fh[36]*w->term[1][111];
-    w->S[60] = w->fh[37]*w->term[1][0] + w->fh[38]*w->term[1][30] + w->fh[39]*w->term[1][45] +
-            w->fh[40]*w->term[1][60] + w->fh[41]*w->term[1][75];
-    w->S[61] = w->fh[37]*w->term[1][1] + w->fh[38]*w->term[1][31] + w->fh[39]*w->term[1][46] +
-            w->fh[40]*w->term[1][61] + w->fh[41]*w->term[1][76];
-    w->S[62] = w->fh[37]*w->term[1][2] + w->fh[38]*w->term[1][32] + w->fh[39]*w->term[1][47] +
-            w->fh[40]*w->term[1][62] + w->fh[41]*w->term[1][77];
-    w->S[63] = w->fh[37]*w->term[1][3] + w->fh[38]*w->term[1][33] + w->fh[39]*w->term[1][48] +
-            w->fh[40]*w->term[1][63] + w->fh[41]*w->term[1][78];
-    w->S[64] = c_out + w->fh[37]*w->term[1][4] + w->fh[38]*w->term[1][34] + w->fh[39]*w->term[1][49]
-            + w->fh[40]*w->term[1][64] + w->fh[41]*w->term[1][79];
-    w->S[65] = w->fh[37]*w->term[1][5] + w->fh[38]*w->term[1][35] + w->fh[39]*w->term[1][50] +
-            w->fh[40]*w->term[1][65] + w->fh[41]*w->term[1][80];
-    w->S[66] = w->fh[37]*w->term[1][6] + w->fh[38]*w->term[1][36] + w->fh[39]*w->term[1][51] +
-            w->fh[40]*w->term[1][66] + w->fh[41]*w->term[1][81];
-    w->S[67] = w->fh[37]*w->term[1][7] + w->fh[38]*w->term[1][37] + w->fh[39]*w->term[1][52] +
-            w->fh[40]*w->term[1][67] + w->fh[41]*w->term[1][82];
-    w->S[68] = w->fh[37]*w->term[1][8] + w->fh[38]*w->term[1][38] + w->fh[39]*w->term[1][53] +
-            w->fh[40]*w->term[1][68] + w->fh[41]*w->term[1][83];
-    w->S[69] = w->fh[37]*w->term[1][9] + w->fh[38]*w->term[1][39] + w->fh[39]*w->term[1][54] +
-            w->fh[40]*w->term[1][69] + w->fh[41]*w->term[1][84];
-    w->S[70] = w->fh[37]*w->term[1][10] + w->fh[38]*w->term[1][40] + w->fh[39]*w->term[1][55] +
-            w->fh[40]*w->term[1][70] + w->fh[41]*w->term[1][85];
-    w->S[71] = w->fh[37]*w->term[1][11] + w->fh[38]*w->term[1][41] + w->fh[39]*w->term[1][56] +
-            w->fh[40]*w->term[1][71] + w->fh[41]*w->term[1][86];
-    w->S[72] = w->fh[37]*w->term[1][12] + w->fh[38]*w->term[1][42] + w->fh[39]*w->term[1][57] +
-            w->fh[40]*w->term[1][72] + w->fh[41]*w->term[1][87] + w->fh[42]*w->term[1][109];
-    w->S[73] = w->fh[37]*w->term[1][13] + w->fh[38]*w->term[1][43] + w->fh[39]*w->term[1][58] +
-            w->fh[40]*w->term[1][73] + w->fh[41]*w->term[1][88] + w->fh[43]*w->term[1][110];
-    w->S[74] = w->fh[37]*w->term[1][14] + w->fh[38]*w->term[1][44] + w->fh[39]*w->term[1][59] +
-            w->fh[40]*w->term[1][74] + w->fh[41]*w->term[1][89] + w->fh[44]*w->term[1][111];
-    w->S[75] = w->fh[45]*w->term[1][45];
-    w->S[76] = w->fh[45]*w->term[1][46];
-    w->S[77] = w->fh[45]*w->term[1][47];
-    w->S[78] = w->fh[45]*w->term[1][48];
-    w->S[79] = w->fh[45]*w->term[1][49];
-    w->S[80] = c_out + w->fh[45]*w->term[1][50];
-    w->S[81] = w->fh[45]*w->term[1][51];
-    w->S[82] = w->fh[45]*w->term[1][52];
-    w->S[83] = w->fh[45]*w->term[1][53];
-    w->S[84] = w->fh[45]*w->term[1][54];
-    w->S[85] = w->fh[45]*w->term[1][55];
-    w->S[86] = w->fh[45]*w->term[1][56];
-    w->S[87] = w->fh[45]*w->term[1][57];
-    w->S[88] = w->fh[45]*w->term[1][58];
-    w->S[89] = w->fh[45]*w->term[1][59];
-    w->S[90] = w->fh[46]*w->term[1][60] + w->fh[47]*w->term[1][75];
-    w->S[91] = w->fh[46]*w->term[1][61] + w->fh[47]*w->term[1][76];
-    w->S[92] = w->fh[46]*w->term[1][62] + w->fh[47]*w->term[1][77];
-    w->S[93] = w->fh[46]*w->term[1][63] + w->fh[47]*w->term[1][78];
-    w->S[94] = w->fh[46]*w->term[1][64] + w->fh[47]*w->term[1][79];
-    w->S[95] = w->fh[46]*w->term[1][65] + w->fh[47]*w->term[1][80];
-    w->S[96] = c_out;
-    w->S[97] = w->fh[46]*w->term[1][66] + w->fh[47]*w->term[1][81];
-    w->S[98] = w->fh[46]*w->term[1][67] + w->fh[47]*w->term[1][82];
-    w->S[99] = w->fh[46]*w->term[1][68] + w->fh[47]*w->term[1][83];
-    w->S[100] = w->fh[46]*w->term[1][69] + w->fh[47]*w->term[1][84];
-    w->S[101] = w->fh[46]*w->term[1][70] + w->fh[47]*w->term[1][85];
-    w->S[102] = w->fh[46]*w->term[1][71] + w->fh[47]*w->term[1][86];
-    w->S[103] = w->fh[46]*w->term[1][72] + w->fh[47]*w->term[1][87];
-    w->S[104] = w->fh[46]*w->term[1][73] + w->fh[47]*w->term[1][88];
-    w->S[105] = w->fh[46]*w->term[1][74] + w->fh[47]*w->term[1][89];
-    w->S[106] = c_out + w->fh[48]*w->term[1][106];
-    w->S[107] = c_out + w->fh[49]*w->term[1][107];
-    w->S[108] = c_out + w->fh[50]*w->term[1][108];
-    w->S[109] = c_out + w->fh[51]*w->term[1][109];
-    w->S[110] = c_out + w->fh[52]*w->term[1][110];
-    w->S[111] = c_out + w->fh[53]*w->term[1][111];
+    int k;
+    for (k = 0; k < 16; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][16+k] + w->fh[1]*w->term[1][32+k] + w->fh[2]*w->term[1][64+k]
+                + w->fh[3]*w->term[1][80+k];
+        w->S[16+k] = w->fh[10]*w->term[1][k] + w->fh[11]*w->term[1][32+k] +
+                w->fh[12]*w->term[1][48+k];
+        w->S[32+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][16+k] +
+                w->fh[21]*w->term[1][64+k] + w->fh[22]*w->term[1][80+k];
+        w->S[48+k] = w->fh[29]*w->term[1][16+k] + w->fh[30]*w->term[1][32+k] +
+                w->fh[31]*w->term[1][48+k] + w->fh[32]*w->term[1][64+k] +
+                w->fh[33]*w->term[1][80+k];
+        w->S[64+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][32+k] +
+                w->fh[39]*w->term[1][48+k] + w->fh[40]*w->term[1][64+k] +
+                w->fh[41]*w->term[1][80+k];
+        w->S[80+k] = w->fh[45]*w->term[1][48+k];
+    }
+    w->S[0] = w->S[0] + c_out;
+    w->S[7] = w->S[7] + w->fh[4]*c_in;
+    w->S[8] = w->S[8] + w->fh[5]*c_in;
+    w->S[9] = w->S[9] + w->fh[6]*c_in;
+    w->S[10] = w->S[10] + w->fh[7]*w->term[1][112];
+    w->S[11] = w->S[11] + w->fh[8]*w->term[1][113];
+    w->S[12] = w->S[12] + w->fh[9]*w->term[1][114];
+    w->S[17] = w->S[17] + c_out;
+    w->S[23] = w->S[23] + w->fh[13]*c_in;
+    w->S[24] = w->S[24] + w->fh[14]*c_in;
+    w->S[25] = w->S[25] + w->fh[15]*c_in;
+    w->S[26] = w->S[26] + w->fh[16]*w->term[1][112];
+    w->S[27] = w->S[27] + w->fh[17]*w->term[1][113];
+    w->S[28] = w->S[28] + w->fh[18]*w->term[1][114];
+    w->S[34] = w->S[34] + c_out;
+    w->S[39] = w->S[39] + w->fh[23]*c_in;
+    w->S[40] = w->S[40] + w->fh[24]*c_in;
+    w->S[41] = w->S[41] + w->fh[25]*c_in;
+    w->S[42] = w->S[42] + w->fh[26]*w->term[1][112];
+    w->S[43] = w->S[43] + w->fh[27]*w->term[1][113];
+    w->S[44] = w->S[44] + w->fh[28]*w->term[1][114];
+    w->S[51] = w->S[51] + c_out;
+    w->S[61] = w->S[61] + w->fh[34]*w->term[1][115];
+    w->S[62] = w->S[62] + w->fh[35]*w->term[1][116];
+    w->S[63] = w->S[63] + w->fh[36]*w->term[1][117];
+    w->S[68] = w->S[68] + c_out;
+    w->S[77] = w->S[77] + w->fh[42]*w->term[1][115];
+    w->S[78] = w->S[78] + w->fh[43]*w->term[1][116];
+    w->S[79] = w->S[79] + w->fh[44]*w->term[1][117];
+    w->S[85] = w->S[85] + c_out;
+    w->S[112] = c_out + w->fh[48]*w->term[1][112];
+    w->S[113] = c_out + w->fh[49]*w->term[1][113];
+    w->S[114] = c_out + w->fh[50]*w->term[1][114];
+    w->S[115] = c_out + w->fh[51]*w->term[1][115];
+    w->S[116] = c_out + w->fh[52]*w->term[1][116];
+    w->S[117] = c_out + w->fh[53]*w->term[1][117];
 }
 
 NED_INERTIAL16_BLOCK void horner_saturated_into_term(ned_inertial16_discretize_scratch *restrict w,
         const ned_inertial16_scalar c_out, const ned_inertial16_scalar c_in)
 {
-    w->term[1][0] = c_out + w->fh[0]*w->S[15] + w->fh[1]*w->S[30] + w->fh[2]*w->S[60] +
-            w->fh[3]*w->S[75];
-    w->term[1][1] = w->fh[0]*w->S[16] + w->fh[1]*w->S[31] + w->fh[2]*w->S[61] + w->fh[3]*w->S[76];
-    w->term[1][2] = w->fh[0]*w->S[17] + w->fh[1]*w->S[32] + w->fh[2]*w->S[62] + w->fh[3]*w->S[77];
-    w->term[1][3] = w->fh[0]*w->S[18] + w->fh[1]*w->S[33] + w->fh[2]*w->S[63] + w->fh[3]*w->S[78];
-    w->term[1][4] = w->fh[0]*w->S[19] + w->fh[1]*w->S[34] + w->fh[2]*w->S[64] + w->fh[3]*w->S[79];
-    w->term[1][5] = w->fh[0]*w->S[20] + w->fh[1]*w->S[35] + w->fh[2]*w->S[65] + w->fh[3]*w->S[80];
-    w->term[1][6] = w->fh[0]*w->S[21] + w->fh[1]*w->S[36] + w->fh[2]*w->S[66] + w->fh[3]*w->S[81] +
-            w->fh[4]*c_in;
-    w->term[1][7] = w->fh[0]*w->S[22] + w->fh[1]*w->S[37] + w->fh[2]*w->S[67] + w->fh[3]*w->S[82] +
-            w->fh[5]*c_in;
-    w->term[1][8] = w->fh[0]*w->S[23] + w->fh[1]*w->S[38] + w->fh[2]*w->S[68] + w->fh[3]*w->S[83] +
-            w->fh[6]*c_in;
-    w->term[1][9] = w->fh[0]*w->S[24] + w->fh[1]*w->S[39] + w->fh[2]*w->S[69] + w->fh[3]*w->S[84] +
-            w->fh[7]*w->S[106];
-    w->term[1][10] = w->fh[0]*w->S[25] + w->fh[1]*w->S[40] + w->fh[2]*w->S[70] + w->fh[3]*w->S[85] +
-            w->fh[8]*w->S[107];
-    w->term[1][11] = w->fh[0]*w->S[26] + w->fh[1]*w->S[41] + w->fh[2]*w->S[71] + w->fh[3]*w->S[86] +
-            w->fh[9]*w->S[108];
-    w->term[1][12] = w->fh[0]*w->S[27] + w->fh[1]*w->S[42] + w->fh[2]*w->S[72] + w->fh[3]*w->S[87];
-    w->term[1][13] = w->fh[0]*w->S[28] + w->fh[1]*w->S[43] + w->fh[2]*w->S[73] + w->fh[3]*w->S[88];
-    w->term[1][14] = w->fh[0]*w->S[29] + w->fh[1]*w->S[44] + w->fh[2]*w->S[74] + w->fh[3]*w->S[89];
-    w->term[1][15] = w->fh[10]*w->S[0] + w->fh[11]*w->S[30] + w->fh[12]*w->S[45];
-    w->term[1][16] = c_out + w->fh[10]*w->S[1] + w->fh[11]*w->S[31] + w->fh[12]*w->S[46];
-    w->term[1][17] = w->fh[10]*w->S[2] + w->fh[11]*w->S[32] + w->fh[12]*w->S[47];
-    w->term[1][18] = w->fh[10]*w->S[3] + w->fh[11]*w->S[33] + w->fh[12]*w->S[48];
-    w->term[1][19] = w->fh[10]*w->S[4] + w->fh[11]*w->S[34] + w->fh[12]*w->S[49];
-    w->term[1][20] = w->fh[10]*w->S[5] + w->fh[11]*w->S[35] + w->fh[12]*w->S[50];
-    w->term[1][21] = w->fh[10]*w->S[6] + w->fh[11]*w->S[36] + w->fh[12]*w->S[51] + w->fh[13]*c_in;
-    w->term[1][22] = w->fh[10]*w->S[7] + w->fh[11]*w->S[37] + w->fh[12]*w->S[52] + w->fh[14]*c_in;
-    w->term[1][23] = w->fh[10]*w->S[8] + w->fh[11]*w->S[38] + w->fh[12]*w->S[53] + w->fh[15]*c_in;
-    w->term[1][24] = w->fh[10]*w->S[9] + w->fh[11]*w->S[39] + w->fh[12]*w->S[54] +
-            w->fh[16]*w->S[106];
-    w->term[1][25] = w->fh[10]*w->S[10] + w->fh[11]*w->S[40] + w->fh[12]*w->S[55] +
-            w->fh[17]*w->S[107];
-    w->term[1][26] = w->fh[10]*w->S[11] + w->fh[11]*w->S[41] + w->fh[12]*w->S[56] +
-            w->fh[18]*w->S[108];
-    w->term[1][27] = w->fh[10]*w->S[12] + w->fh[11]*w->S[42] + w->fh[12]*w->S[57];
-    w->term[1][28] = w->fh[10]*w->S[13] + w->fh[11]*w->S[43] + w->fh[12]*w->S[58];
-    w->term[1][29] = w->fh[10]*w->S[14] + w->fh[11]*w->S[44] + w->fh[12]*w->S[59];
-    w->term[1][30] = w->fh[19]*w->S[0] + w->fh[20]*w->S[15] + w->fh[21]*w->S[60] +
-            w->fh[22]*w->S[75];
-    w->term[1][31] = w->fh[19]*w->S[1] + w->fh[20]*w->S[16] + w->fh[21]*w->S[61] +
-            w->fh[22]*w->S[76];
-    w->term[1][32] = c_out + w->fh[19]*w->S[2] + w->fh[20]*w->S[17] + w->fh[21]*w->S[62] +
-            w->fh[22]*w->S[77];
-    w->term[1][33] = w->fh[19]*w->S[3] + w->fh[20]*w->S[18] + w->fh[21]*w->S[63] +
-            w->fh[22]*w->S[78];
-    w->term[1][34] = w->fh[19]*w->S[4] + w->fh[20]*w->S[19] + w->fh[21]*w->S[64] +
-            w->fh[22]*w->S[79];
-    w->term[1][35] = w->fh[19]*w->S[5] + w->fh[20]*w->S[20] + w->fh[21]*w->S[65] +
-            w->fh[22]*w->S[80];
-    w->term[1][36] = w->fh[19]*w->S[6] + w->fh[20]*w->S[21] + w->fh[21]*w->S[66] +
-            w->fh[22]*w->S[81] + w->fh[23]*c_in;
-    w->term[1][37] = w->fh[19]*w->S[7] + w->fh[20]*w->S[22] + w->fh[21]*w->S[67] +
-            w->fh[22]*w->S[82] + w->fh[24]*c_in;
-    w->term[1][38] = w->fh[19]*w->S[8] + w->fh[20]*w->S[23] + w->fh[21]*w->S[68] +
-            w->fh[22]*w->S[83] + w->fh[25]*c_in;
-    w->term[1][39] = w->fh[19]*w->S[9] + w->fh[20]*w->S[24] + w->fh[21]*w->S[69] +
-            w->fh[22]*w->S[84] + w->fh[26]*w->S[106];
-    w->term[1][40] = w->fh[19]*w->S[10] + w->fh[20]*w->S[25] + w->fh[21]*w->S[70] +
-            w->fh[22]*w->S[85] + w->fh[27]*w->S[107];
-    w->term[1][41] = w->fh[19]*w->S[11] + w->fh[20]*w->S[26] + w->fh[21]*w->S[71] +
-            w->fh[22]*w->S[86] + w->fh[28]*w->S[108];
-    w->term[1][42] = w->fh[19]*w->S[12] + w->fh[20]*w->S[27] + w->fh[21]*w->S[72] +
-            w->fh[22]*w->S[87];
-    w->term[1][43] = w->fh[19]*w->S[13] + w->fh[20]*w->S[28] + w->fh[21]*w->S[73] +
-            w->fh[22]*w->S[88];
-    w->term[1][44] = w->fh[19]*w->S[14] + w->fh[20]*w->S[29] + w->fh[21]*w->S[74] +
-            w->fh[22]*w->S[89];
-    w->term[1][45] = w->fh[29]*w->S[15] + w->fh[30]*w->S[30] + w->fh[31]*w->S[45] +
-            w->fh[32]*w->S[60] + w->fh[33]*w->S[75];
-    w->term[1][46] = w->fh[29]*w->S[16] + w->fh[30]*w->S[31] + w->fh[31]*w->S[46] +
-            w->fh[32]*w->S[61] + w->fh[33]*w->S[76];
-    w->term[1][47] = w->fh[29]*w->S[17] + w->fh[30]*w->S[32] + w->fh[31]*w->S[47] +
-            w->fh[32]*w->S[62] + w->fh[33]*w->S[77];
-    w->term[1][48] = c_out + w->fh[29]*w->S[18] + w->fh[30]*w->S[33] + w->fh[31]*w->S[48] +
-            w->fh[32]*w->S[63] + w->fh[33]*w->S[78];
-    w->term[1][49] = w->fh[29]*w->S[19] + w->fh[30]*w->S[34] + w->fh[31]*w->S[49] +
-            w->fh[32]*w->S[64] + w->fh[33]*w->S[79];
-    w->term[1][50] = w->fh[29]*w->S[20] + w->fh[30]*w->S[35] + w->fh[31]*w->S[50] +
-            w->fh[32]*w->S[65] + w->fh[33]*w->S[80];
-    w->term[1][51] = w->fh[29]*w->S[21] + w->fh[30]*w->S[36] + w->fh[31]*w->S[51] +
-            w->fh[32]*w->S[66] + w->fh[33]*w->S[81];
-    w->term[1][52] = w->fh[29]*w->S[22] + w->fh[30]*w->S[37] + w->fh[31]*w->S[52] +
-            w->fh[32]*w->S[67] + w->fh[33]*w->S[82];
-    w->term[1][53] = w->fh[29]*w->S[23] + w->fh[30]*w->S[38] + w->fh[31]*w->S[53] +
-            w->fh[32]*w->S[68] + w->fh[33]*w->S[83];
-    w->term[1][54] = w->fh[29]*w->S[24] + w->fh[30]*w->S[39] + w->fh[31]*w->S[54] +
-            w->fh[32]*w->S[69] + w->fh[33]*w->S[84];
-    w->term[1][55] = w->fh[29]*w->S[25] + w->fh[30]*w->S[40] + w->fh[31]*w->S[55] +
-            w->fh[32]*w->S[70] + w->fh[33]*w->S[85];
-    w->term[1][56] = w->fh[29]*w->S[26] + w->fh[30]*w->S[41] + w->fh[31]*w->S[56] +
-            w->fh[32]*w->S[71] + w->fh[33]*w->S[86];
-    w->term[1][57] = w->fh[29]*w->S[27] + w->fh[30]*w->S[42] + w->fh[31]*w->S[57] +
-            w->fh[32]*w->S[72] + w->fh[33]*w->S[87] + w->fh[34]*w->S[109];
-    w->term[1][58] = w->fh[29]*w->S[28] + w->fh[30]*w->S[43] + w->fh[31]*w->S[58] +
-            w->fh[32]*w->S[73] + w->fh[33]*w->S[88] + w->fh[35]*w->S[110];
-    w->term[1][59] = w->fh[29]*w->S[29] + w->fh[30]*w->S[44] + w->fh[31]*w->S[59] +
-            w->fh[32]*w->S[74] + w->fh[33]*w->S[89] + w->fh[36]*w->S[111];
-    w->term[1][60] = w->fh[37]*w->S[0] + w->fh[38]*w->S[30] + w->fh[39]*w->S[45] +
-            w->fh[40]*w->S[60] + w->fh[41]*w->S[75];
-    w->term[1][61] = w->fh[37]*w->S[1] + w->fh[38]*w->S[31] + w->fh[39]*w->S[46] +
-            w->fh[40]*w->S[61] + w->fh[41]*w->S[76];
-    w->term[1][62] = w->fh[37]*w->S[2] + w->fh[38]*w->S[32] + w->fh[39]*w->S[47] +
-            w->fh[40]*w->S[62] + w->fh[41]*w->S[77];
-    w->term[1][63] = w->fh[37]*w->S[3] + w->fh[38]*w->S[33] + w->fh[39]*w->S[48] +
-            w->fh[40]*w->S[63] + w->fh[41]*w->S[78];
-    w->term[1][64] = c_out + w->fh[37]*w->S[4] + w->fh[38]*w->S[34] + w->fh[39]*w->S[49] +
-            w->fh[40]*w->S[64] + w->fh[41]*w->S[79];
-    w->term[1][65] = w->fh[37]*w->S[5] + w->fh[38]*w->S[35] + w->fh[39]*w->S[50] +
-            w->fh[40]*w->S[65] + w->fh[41]*w->S[80];
-    w->term[1][66] = w->fh[37]*w->S[6] + w->fh[38]*w->S[36] + w->fh[39]*w->S[51] +
-            w->fh[40]*w->S[66] + w->fh[41]*w->S[81];
-    w->term[1][67] = w->fh[37]*w->S[7] + w->fh[38]*w->S[37] + w->fh[39]*w->S[52] +
-            w->fh[40]*w->S[67] + w->fh[41]*w->S[82];
-    w->term[1][68] = w->fh[37]*w->S[8] + w->fh[38]*w->S[38] + w->fh[39]*w->S[53] +
-            w->fh[40]*w->S[68] + w->fh[41]*w->S[83];
-    w->term[1][69] = w->fh[37]*w->S[9] + w->fh[38]*w->S[39] + w->fh[39]*w->S[54] +
-            w->fh[40]*w->S[69] + w->fh[41]*w->S[84];
-    w->term[1][70] = w->fh[37]*w->S[10] + w->fh[38]*w->S[40] + w->fh[39]*w->S[55] +
-            w->fh[40]*w->S[70] + w->fh[41]*w->S[85];
-    w->term[1][71] = w->fh[37]*w->S[11] + w->fh[38]*w->S[41] + w->fh[39]*w->S[56] +
-            w->fh[40]*w->S[71] + w->fh[41]*w->S[86];
-    w->term[1][72] = w->fh[37]*w->S[12] + w->fh[38]*w->S[42] + w->fh[39]*w->S[57] +
-            w->fh[40]*w->S[72] + w->fh[41]*w->S[87] + w->fh[42]*w->S[109];
-    w->term[1][73] = w->fh[37]*w->S[13] + w->fh[38]*w->S[43] + w->fh[39]*w->S[58] +
-            w->fh[40]*w->S[73] + w->fh[41]*w->S[88] + w->fh[43]*w->S[110];
-    w->term[1][74] = w->fh[37]*w->S[14] + w->fh[38]*w->S[44] + w->fh[39]*w->S[59] +
-            w->fh[40]*w->S[74] + w->fh[41]*w->S[89] + w->fh[44]*w->S[111];
-    w->term[1][75] = w->fh[45]*w->S[45];
-    w->term[1][76] = w->fh[45]*w->S[46];
-    w->term[1][77] = w->fh[45]*w->S[47];
-    w->term[1][78] = w->fh[45]*w->S[48];
-    w->term[1][79] = w->fh[45]*w->S[49];
-    w->term[1][80] = c_out + w->fh[45]*w->S[50];
-    w->term[1][81] = w->fh[45]*w->S[51];
-    w->term[1][82] = w->fh[45]*w->S[52];
-    w->term[1][83] = w->fh[45]*w->S[53];
-    w->term[1][84] = w->fh[45]*w->S[54];
-    w->term[1][85] = w->fh[45]*w->S[55];
-    w->term[1][86] = w->fh[45]*w->S[56];
-    w->term[1][87] = w->fh[45]*w->S[57];
-    w->term[1][88] = w->fh[45]*w->S[58];
-    w->term[1][89] = w->fh[45]*w->S[59];
-    w->term[1][90] = w->fh[46]*w->S[60] + w->fh[47]*w->S[75];
-    w->term[1][91] = w->fh[46]*w->S[61] + w->fh[47]*w->S[76];
-    w->term[1][92] = w->fh[46]*w->S[62] + w->fh[47]*w->S[77];
-    w->term[1][93] = w->fh[46]*w->S[63] + w->fh[47]*w->S[78];
-    w->term[1][94] = w->fh[46]*w->S[64] + w->fh[47]*w->S[79];
-    w->term[1][95] = w->fh[46]*w->S[65] + w->fh[47]*w->S[80];
-    w->term[1][96] = c_out;
-    w->term[1][97] = w->fh[46]*w->S[66] + w->fh[47]*w->S[81];
-    w->term[1][98] = w->fh[46]*w->S[67] + w->fh[47]*w->S[82];
-    w->term[1][99] = w->fh[46]*w->S[68] + w->fh[47]*w->S[83];
-    w->term[1][100] = w->fh[46]*w->S[69] + w->fh[47]*w->S[84];
-    w->term[1][101] = w->fh[46]*w->S[70] + w->fh[47]*w->S[85];
-    w->term[1][102] = w->fh[46]*w->S[71] + w->fh[47]*w->S[86];
-    w->term[1][103] = w->fh[46]*w->S[72] + w->fh[47]*w->S[87];
-    w->term[1][104] = w->fh[46]*w->S[73] + w->fh[47]*w->S[88];
-    w->term[1][105] = w->fh[46]*w->S[74] + w->fh[47]*w->S[89];
-    w->term[1][106] = c_out + w->fh[48]*w->S[106];
-    w->term[1][107] = c_out + w->fh[49]*w->S[107];
-    w->term[1][108] = c_out + w->fh[50]*w->S[108];
-    w->term[1][109] = c_out + w->fh[51]*w->S[109];
-    w->term[1][110] = c_out + w->fh[52]*w->S[110];
-    w->term[1][111] = c_out + w->fh[53]*w->S[111];
+    int k;
+    for (k = 0; k < 16; ++k) {
+        w->term[1][k] = w->fh[0]*w->S[16+k] + w->fh[1]*w->S[32+k] + w->fh[2]*w->S[64+k] +
+                w->fh[3]*w->S[80+k];
+        w->term[1][16+k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[32+k] + w->fh[12]*w->S[48+k];
+        w->term[1][32+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[16+k] + w->fh[21]*w->S[64+k] +
+                w->fh[22]*w->S[80+k];
+        w->term[1][48+k] = w->fh[29]*w->S[16+k] + w->fh[30]*w->S[32+k] + w->fh[31]*w->S[48+k] +
+                w->fh[32]*w->S[64+k] + w->fh[33]*w->S[80+k];
+        w->term[1][64+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[32+k] + w->fh[39]*w->S[48+k] +
+                w->fh[40]*w->S[64+k] + w->fh[41]*w->S[80+k];
+        w->term[1][80+k] = w->fh[45]*w->S[48+k];
+    }
+    w->term[1][0] = w->term[1][0] + c_out;
+    w->term[1][7] = w->term[1][7] + w->fh[4]*c_in;
+    w->term[1][8] = w->term[1][8] + w->fh[5]*c_in;
+    w->term[1][9] = w->term[1][9] + w->fh[6]*c_in;
+    w->term[1][10] = w->term[1][10] + w->fh[7]*w->S[112];
+    w->term[1][11] = w->term[1][11] + w->fh[8]*w->S[113];
+    w->term[1][12] = w->term[1][12] + w->fh[9]*w->S[114];
+    w->term[1][17] = w->term[1][17] + c_out;
+    w->term[1][23] = w->term[1][23] + w->fh[13]*c_in;
+    w->term[1][24] = w->term[1][24] + w->fh[14]*c_in;
+    w->term[1][25] = w->term[1][25] + w->fh[15]*c_in;
+    w->term[1][26] = w->term[1][26] + w->fh[16]*w->S[112];
+    w->term[1][27] = w->term[1][27] + w->fh[17]*w->S[113];
+    w->term[1][28] = w->term[1][28] + w->fh[18]*w->S[114];
+    w->term[1][34] = w->term[1][34] + c_out;
+    w->term[1][39] = w->term[1][39] + w->fh[23]*c_in;
+    w->term[1][40] = w->term[1][40] + w->fh[24]*c_in;
+    w->term[1][41] = w->term[1][41] + w->fh[25]*c_in;
+    w->term[1][42] = w->term[1][42] + w->fh[26]*w->S[112];
+    w->term[1][43] = w->term[1][43] + w->fh[27]*w->S[113];
+    w->term[1][44] = w->term[1][44] + w->fh[28]*w->S[114];
+    w->term[1][51] = w->term[1][51] + c_out;
+    w->term[1][61] = w->term[1][61] + w->fh[34]*w->S[115];
+    w->term[1][62] = w->term[1][62] + w->fh[35]*w->S[116];
+    w->term[1][63] = w->term[1][63] + w->fh[36]*w->S[117];
+    w->term[1][68] = w->term[1][68] + c_out;
+    w->term[1][77] = w->term[1][77] + w->fh[42]*w->S[115];
+    w->term[1][78] = w->term[1][78] + w->fh[43]*w->S[116];
+    w->term[1][79] = w->term[1][79] + w->fh[44]*w->S[117];
+    w->term[1][85] = w->term[1][85] + c_out;
+    w->term[1][112] = c_out + w->fh[48]*w->S[112];
+    w->term[1][113] = c_out + w->fh[49]*w->S[113];
+    w->term[1][114] = c_out + w->fh[50]*w->S[114];
+    w->term[1][115] = c_out + w->fh[51]*w->S[115];
+    w->term[1][116] = c_out + w->fh[52]*w->S[116];
+    w->term[1][117] = c_out + w->fh[53]*w->S[117];
+}
+
+NED_INERTIAL16_BLOCK void horner_last_into_S(ned_inertial16_discretize_scratch *restrict w, const
+        ned_inertial16_scalar c_out, const ned_inertial16_scalar c_in)
+{
+    int k;
+    for (k = 0; k < 16; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][16+k] + w->fh[1]*w->term[1][32+k] + w->fh[2]*w->term[1][64+k]
+                + w->fh[3]*w->term[1][80+k];
+        w->S[16+k] = w->fh[10]*w->term[1][k] + w->fh[11]*w->term[1][32+k] +
+                w->fh[12]*w->term[1][48+k];
+        w->S[32+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][16+k] +
+                w->fh[21]*w->term[1][64+k] + w->fh[22]*w->term[1][80+k];
+        w->S[48+k] = w->fh[29]*w->term[1][16+k] + w->fh[30]*w->term[1][32+k] +
+                w->fh[31]*w->term[1][48+k] + w->fh[32]*w->term[1][64+k] +
+                w->fh[33]*w->term[1][80+k];
+        w->S[64+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][32+k] +
+                w->fh[39]*w->term[1][48+k] + w->fh[40]*w->term[1][64+k] +
+                w->fh[41]*w->term[1][80+k];
+        w->S[80+k] = w->fh[45]*w->term[1][48+k];
+        w->S[96+k] = w->fh[46]*w->term[1][64+k] + w->fh[47]*w->term[1][80+k];
+    }
+    w->S[0] = w->S[0] + c_out;
+    w->S[7] = w->S[7] + w->fh[4]*c_in;
+    w->S[8] = w->S[8] + w->fh[5]*c_in;
+    w->S[9] = w->S[9] + w->fh[6]*c_in;
+    w->S[10] = w->S[10] + w->fh[7]*w->term[1][112];
+    w->S[11] = w->S[11] + w->fh[8]*w->term[1][113];
+    w->S[12] = w->S[12] + w->fh[9]*w->term[1][114];
+    w->S[17] = w->S[17] + c_out;
+    w->S[23] = w->S[23] + w->fh[13]*c_in;
+    w->S[24] = w->S[24] + w->fh[14]*c_in;
+    w->S[25] = w->S[25] + w->fh[15]*c_in;
+    w->S[26] = w->S[26] + w->fh[16]*w->term[1][112];
+    w->S[27] = w->S[27] + w->fh[17]*w->term[1][113];
+    w->S[28] = w->S[28] + w->fh[18]*w->term[1][114];
+    w->S[34] = w->S[34] + c_out;
+    w->S[39] = w->S[39] + w->fh[23]*c_in;
+    w->S[40] = w->S[40] + w->fh[24]*c_in;
+    w->S[41] = w->S[41] + w->fh[25]*c_in;
+    w->S[42] = w->S[42] + w->fh[26]*w->term[1][112];
+    w->S[43] = w->S[43] + w->fh[27]*w->term[1][113];
+    w->S[44] = w->S[44] + w->fh[28]*w->term[1][114];
+    w->S[51] = w->S[51] + c_out;
+    w->S[61] = w->S[61] + w->fh[34]*w->term[1][115];
+    w->S[62] = w->S[62] + w->fh[35]*w->term[1][116];
+    w->S[63] = w->S[63] + w->fh[36]*w->term[1][117];
+    w->S[68] = w->S[68] + c_out;
+    w->S[77] = w->S[77] + w->fh[42]*w->term[1][115];
+    w->S[78] = w->S[78] + w->fh[43]*w->term[1][116];
+    w->S[79] = w->S[79] + w->fh[44]*w->term[1][117];
+    w->S[85] = w->S[85] + c_out;
+    w->S[102] = w->S[102] + c_out;
+    w->S[112] = c_out + w->fh[48]*w->term[1][112];
+    w->S[113] = c_out + w->fh[49]*w->term[1][113];
+    w->S[114] = c_out + w->fh[50]*w->term[1][114];
+    w->S[115] = c_out + w->fh[51]*w->term[1][115];
+    w->S[116] = c_out + w->fh[52]*w->term[1][116];
+    w->S[117] = c_out + w->fh[53]*w->term[1][117];
 }
 
 NED_INERTIAL16_BLOCK void horner_transition(ned_inertial16_transition *restrict t, const
         ned_inertial16_discretize_scratch *restrict w)
 {
-    t->Phi[0][0] = w->fh[0]*w->S[15] + w->fh[1]*w->S[30] + w->fh[2]*w->S[60] + w->fh[3]*w->S[75];
-    t->Phi[0][1] = w->fh[0]*w->S[16] + w->fh[1]*w->S[31] + w->fh[2]*w->S[61] + w->fh[3]*w->S[76];
-    t->Phi[0][2] = w->fh[0]*w->S[17] + w->fh[1]*w->S[32] + w->fh[2]*w->S[62] + w->fh[3]*w->S[77];
-    t->Phi[0][3] = w->fh[0]*w->S[18] + w->fh[1]*w->S[33] + w->fh[2]*w->S[63] + w->fh[3]*w->S[78];
-    t->Phi[0][4] = w->fh[0]*w->S[19] + w->fh[1]*w->S[34] + w->fh[2]*w->S[64] + w->fh[3]*w->S[79];
-    t->Phi[0][5] = w->fh[0]*w->S[20] + w->fh[1]*w->S[35] + w->fh[2]*w->S[65] + w->fh[3]*w->S[80];
-    t->Phi[0][7] = w->fh[0]*w->S[21] + w->fh[1]*w->S[36] + w->fh[2]*w->S[66] + w->fh[3]*w->S[81] +
-            w->fh[4];
-    t->Phi[0][8] = w->fh[0]*w->S[22] + w->fh[1]*w->S[37] + w->fh[2]*w->S[67] + w->fh[3]*w->S[82] +
-            w->fh[5];
-    t->Phi[0][9] = w->fh[0]*w->S[23] + w->fh[1]*w->S[38] + w->fh[2]*w->S[68] + w->fh[3]*w->S[83] +
-            w->fh[6];
-    t->Phi[0][10] = w->fh[0]*w->S[24] + w->fh[1]*w->S[39] + w->fh[2]*w->S[69] + w->fh[3]*w->S[84] +
-            w->fh[7]*w->S[106];
-    t->Phi[0][11] = w->fh[0]*w->S[25] + w->fh[1]*w->S[40] + w->fh[2]*w->S[70] + w->fh[3]*w->S[85] +
-            w->fh[8]*w->S[107];
-    t->Phi[0][12] = w->fh[0]*w->S[26] + w->fh[1]*w->S[41] + w->fh[2]*w->S[71] + w->fh[3]*w->S[86] +
-            w->fh[9]*w->S[108];
-    t->Phi[0][13] = w->fh[0]*w->S[27] + w->fh[1]*w->S[42] + w->fh[2]*w->S[72] + w->fh[3]*w->S[87];
-    t->Phi[0][14] = w->fh[0]*w->S[28] + w->fh[1]*w->S[43] + w->fh[2]*w->S[73] + w->fh[3]*w->S[88];
-    t->Phi[0][15] = w->fh[0]*w->S[29] + w->fh[1]*w->S[44] + w->fh[2]*w->S[74] + w->fh[3]*w->S[89];
-    t->Phi[1][0] = w->fh[10]*w->S[0] + w->fh[11]*w->S[30] + w->fh[12]*w->S[45];
-    t->Phi[1][1] = w->fh[10]*w->S[1] + w->fh[11]*w->S[31] + w->fh[12]*w->S[46];
-    t->Phi[1][2] = w->fh[10]*w->S[2] + w->fh[11]*w->S[32] + w->fh[12]*w->S[47];
-    t->Phi[1][3] = w->fh[10]*w->S[3] + w->fh[11]*w->S[33] + w->fh[12]*w->S[48];
-    t->Phi[1][4] = w->fh[10]*w->S[4] + w->fh[11]*w->S[34] + w->fh[12]*w->S[49];
-    t->Phi[1][5] = w->fh[10]*w->S[5] + w->fh[11]*w->S[35] + w->fh[12]*w->S[50];
-    t->Phi[1][7] = w->fh[10]*w->S[6] + w->fh[11]*w->S[36] + w->fh[12]*w->S[51] + w->fh[13];
-    t->Phi[1][8] = w->fh[10]*w->S[7] + w->fh[11]*w->S[37] + w->fh[12]*w->S[52] + w->fh[14];
-    t->Phi[1][9] = w->fh[10]*w->S[8] + w->fh[11]*w->S[38] + w->fh[12]*w->S[53] + w->fh[15];
-    t->Phi[1][10] = w->fh[10]*w->S[9] + w->fh[11]*w->S[39] + w->fh[12]*w->S[54] +
-            w->fh[16]*w->S[106];
-    t->Phi[1][11] = w->fh[10]*w->S[10] + w->fh[11]*w->S[40] + w->fh[12]*w->S[55] +
-            w->fh[17]*w->S[107];
-    t->Phi[1][12] = w->fh[10]*w->S[11] + w->fh[11]*w->S[41] + w->fh[12]*w->S[56] +
-            w->fh[18]*w->S[108];
-    t->Phi[1][13] = w->fh[10]*w->S[12] + w->fh[11]*w->S[42] + w->fh[12]*w->S[57];
-    t->Phi[1][14] = w->fh[10]*w->S[13] + w->fh[11]*w->S[43] + w->fh[12]*w->S[58];
-    t->Phi[1][15] = w->fh[10]*w->S[14] + w->fh[11]*w->S[44] + w->fh[12]*w->S[59];
-    t->Phi[2][0] = w->fh[19]*w->S[0] + w->fh[20]*w->S[15] + w->fh[21]*w->S[60] + w->fh[22]*w->S[75];
-    t->Phi[2][1] = w->fh[19]*w->S[1] + w->fh[20]*w->S[16] + w->fh[21]*w->S[61] + w->fh[22]*w->S[76];
-    t->Phi[2][2] = w->fh[19]*w->S[2] + w->fh[20]*w->S[17] + w->fh[21]*w->S[62] + w->fh[22]*w->S[77];
-    t->Phi[2][3] = w->fh[19]*w->S[3] + w->fh[20]*w->S[18] + w->fh[21]*w->S[63] + w->fh[22]*w->S[78];
-    t->Phi[2][4] = w->fh[19]*w->S[4] + w->fh[20]*w->S[19] + w->fh[21]*w->S[64] + w->fh[22]*w->S[79];
-    t->Phi[2][5] = w->fh[19]*w->S[5] + w->fh[20]*w->S[20] + w->fh[21]*w->S[65] + w->fh[22]*w->S[80];
-    t->Phi[2][7] = w->fh[19]*w->S[6] + w->fh[20]*w->S[21] + w->fh[21]*w->S[66] + w->fh[22]*w->S[81]
-            + w->fh[23];
-    t->Phi[2][8] = w->fh[19]*w->S[7] + w->fh[20]*w->S[22] + w->fh[21]*w->S[67] + w->fh[22]*w->S[82]
-            + w->fh[24];
-    t->Phi[2][9] = w->fh[19]*w->S[8] + w->fh[20]*w->S[23] + w->fh[21]*w->S[68] + w->fh[22]*w->S[83]
-            + w->fh[25];
-    t->Phi[2][10] = w->fh[19]*w->S[9] + w->fh[20]*w->S[24] + w->fh[21]*w->S[69] + w->fh[22]*w->S[84]
-            + w->fh[26]*w->S[106];
-    t->Phi[2][11] = w->fh[19]*w->S[10] + w->fh[20]*w->S[25] + w->fh[21]*w->S[70] +
-            w->fh[22]*w->S[85] + w->fh[27]*w->S[107];
-    t->Phi[2][12] = w->fh[19]*w->S[11] + w->fh[20]*w->S[26] + w->fh[21]*w->S[71] +
-            w->fh[22]*w->S[86] + w->fh[28]*w->S[108];
-    t->Phi[2][13] = w->fh[19]*w->S[12] + w->fh[20]*w->S[27] + w->fh[21]*w->S[72] +
-            w->fh[22]*w->S[87];
-    t->Phi[2][14] = w->fh[19]*w->S[13] + w->fh[20]*w->S[28] + w->fh[21]*w->S[73] +
-            w->fh[22]*w->S[88];
-    t->Phi[2][15] = w->fh[19]*w->S[14] + w->fh[20]*w->S[29] + w->fh[21]*w->S[74] +
-            w->fh[22]*w->S[89];
-    t->Phi[3][0] = w->fh[29]*w->S[15] + w->fh[30]*w->S[30] + w->fh[31]*w->S[45] + w->fh[32]*w->S[60]
-            + w->fh[33]*w->S[75];
-    t->Phi[3][1] = w->fh[29]*w->S[16] + w->fh[30]*w->S[31] + w->fh[31]*w->S[46] + w->fh[32]*w->S[61]
-            + w->fh[33]*w->S[76];
-    t->Phi[3][2] = w->fh[29]*w->S[17] + w->fh[30]*w->S[32] + w->fh[31]*w->S[47] + w->fh[32]*w->S[62]
-            + w->fh[33]*w->S[77];
-    t->Phi[3][3] = w->fh[29]*w->S[18] + w->fh[30]*w->S[33] + w->fh[31]*w->S[48] + w->fh[32]*w->S[63]
-            + w->fh[33]*w->S[78];
-    t->Phi[3][4] = w->fh[29]*w->S[19] + w->fh[30]*w->S[34] + w->fh[31]*w->S[49] + w->fh[32]*w->S[64]
-            + w->fh[33]*w->S[79];
-    t->Phi[3][5] = w->fh[29]*w->S[20] + w->fh[30]*w->S[35] + w->fh[31]*w->S[50] + w->fh[32]*w->S[65]
-            + w->fh[33]*w->S[80];
-    t->Phi[3][7] = w->fh[29]*w->S[21] + w->fh[30]*w->S[36] + w->fh[31]*w->S[51] + w->fh[32]*w->S[66]
-            + w->fh[33]*w->S[81];
-    t->Phi[3][8] = w->fh[29]*w->S[22] + w->fh[30]*w->S[37] + w->fh[31]*w->S[52] + w->fh[32]*w->S[67]
-            + w->fh[33]*w->S[82];
-    t->Phi[3][9] = w->fh[29]*w->S[23] + w->fh[30]*w->S[38] + w->fh[31]*w->S[53] + w->fh[32]*w->S[68]
-            + w->fh[33]*w->S[83];
-    t->Phi[3][10] = w->fh[29]*w->S[24] + w->fh[30]*w->S[39] + w->fh[31]*w->S[54] +
-            w->fh[32]*w->S[69] + w->fh[33]*w->S[84];
-    t->Phi[3][11] = w->fh[29]*w->S[25] + w->fh[30]*w->S[40] + w->fh[31]*w->S[55] +
-            w->fh[32]*w->S[70] + w->fh[33]*w->S[85];
-    t->Phi[3][12] = w->fh[29]*w->S[26] + w->fh[30]*w->S[41] + w->fh[31]*w->S[56] +
-            w->fh[32]*w->S[71] + w->fh[33]*w->S[86];
-    t->Phi[3][13] = w->fh[29]*w->S[27] + w->fh[30]*w->S[42] + w->fh[31]*w->S[57] +
-            w->fh[32]*w->S[72] + w->fh[33]*w->S[87] + w->fh[34]*w->S[109];
-    t->Phi[3][14] = w->fh[29]*w->S[28] + w->fh[30]*w->S[43] + w->fh[31]*w->S[58] +
-            w->fh[32]*w->S[73] + w->fh[33]*w->S[88] + w->fh[35]*w->S[110];
-    t->Phi[3][15] = w->fh[29]*w->S[29] + w->fh[30]*w->S[44] + w->fh[31]*w->S[59] +
-            w->fh[32]*w->S[74] + w->fh[33]*w->S[89] + w->fh[36]*w->S[111];
-    t->Phi[4][0] = w->fh[37]*w->S[0] + w->fh[38]*w->S[30] + w->fh[39]*w->S[45] + w->fh[40]*w->S[60]
-            + w->fh[41]*w->S[75];
-    t->Phi[4][1] = w->fh[37]*w->S[1] + w->fh[38]*w->S[31] + w->fh[39]*w->S[46] + w->fh[40]*w->S[61]
-            + w->fh[41]*w->S[76];
-    t->Phi[4][2] = w->fh[37]*w->S[2] + w->fh[38]*w->S[32] + w->fh[39]*w->S[47] + w->fh[40]*w->S[62]
-            + w->fh[41]*w->S[77];
-    t->Phi[4][3] = w->fh[37]*w->S[3] + w->fh[38]*w->S[33] + w->fh[39]*w->S[48] + w->fh[40]*w->S[63]
-            + w->fh[41]*w->S[78];
-    t->Phi[4][4] = w->fh[37]*w->S[4] + w->fh[38]*w->S[34] + w->fh[39]*w->S[49] + w->fh[40]*w->S[64]
-            + w->fh[41]*w->S[79];
-    t->Phi[4][5] = w->fh[37]*w->S[5] + w->fh[38]*w->S[35] + w->fh[39]*w->S[50] + w->fh[40]*w->S[65]
-            + w->fh[41]*w->S[80];
-    t->Phi[4][7] = w->fh[37]*w->S[6] + w->fh[38]*w->S[36] + w->fh[39]*w->S[51] + w->fh[40]*w->S[66]
-            + w->fh[41]*w->S[81];
-    t->Phi[4][8] = w->fh[37]*w->S[7] + w->fh[38]*w->S[37] + w->fh[39]*w->S[52] + w->fh[40]*w->S[67]
-            + w->fh[41]*w->S[82];
-    t->Phi[4][9] = w->fh[37]*w->S[8] + w->fh[38]*w->S[38] + w->fh[39]*w->S[53] + w->fh[40]*w->S[68]
-            + w->fh[41]*w->S[83];
-    t->Phi[4][10] = w->fh[37]*w->S[9] + w->fh[38]*w->S[39] + w->fh[39]*w->S[54] + w->fh[40]*w->S[69]
-            + w->fh[41]*w->S[84];
-    t->Phi[4][11] = w->fh[37]*w->S[10] + w->fh[38]*w->S[40] + w->fh[39]*w->S[55] +
-            w->fh[40]*w->S[70] + w->fh[41]*w->S[85];
-    t->Phi[4][12] = w->fh[37]*w->S[11] + w->fh[38]*w->S[41] + w->fh[39]*w->S[56] +
-            w->fh[40]*w->S[71] + w->fh[41]*w->S[86];
-    t->Phi[4][13] = w->fh[37]*w->S[12] + w->fh[38]*w->S[42] + w->fh[39]*w->S[57] +
-            w->fh[40]*w->S[72] + w->fh[41]*w->S[87] + w->fh[42]*w->S[109];
-    t->Phi[4][14] = w->fh[37]*w->S[13] + w->fh[38]*w->S[43] + w->fh[39]*w->S[58] +
-            w->fh[40]*w->S[73] + w->fh[41]*w->S[88] + w->fh[43]*w->S[110];
-    t->Phi[4][15] = w->fh[37]*w->S[14] + w->fh[38]*w->S[44] + w->fh[39]*w->S[59] +
-            w->fh[40]*w->S[74] + w->fh[41]*w->S[89] + w->fh[44]*w->S[111];
-    t->Phi[5][0] = w->fh[45]*w->S[45];
-    t->Phi[5][1] = w->fh[45]*w->S[46];
-    t->Phi[5][2] = w->fh[45]*w->S[47];
-    t->Phi[5][3] = w->fh[45]*w->S[48];
-    t->Phi[5][4] = w->fh[45]*w->S[49];
-    t->Phi[5][5] = w->fh[45]*w->S[50];
-    t->Phi[5][7] = w->fh[45]*w->S[51];
-    t->Phi[5][8] = w->fh[45]*w->S[52];
-    t->Phi[5][9] = w->fh[45]*w->S[53];
-    t->Phi[5][10] = w->fh[45]*w->S[54];
-    t->Phi[5][11] = w->fh[45]*w->S[55];
-    t->Phi[5][12] = w->fh[45]*w->S[56];
-    t->Phi[5][13] = w->fh[45]*w->S[57];
-    t->Phi[5][14] = w->fh[45]*w->S[58];
-    t->Phi[5][15] = w->fh[45]*w->S[59];
-    t->Phi[6][0] = w->fh[46]*w->S[60] + w->fh[47]*w->S[75];
-    t->Phi[6][1] = w->fh[46]*w->S[61] + w->fh[47]*w->S[76];
-    t->Phi[6][2] = w->fh[46]*w->S[62] + w->fh[47]*w->S[77];
-    t->Phi[6][3] = w->fh[46]*w->S[63] + w->fh[47]*w->S[78];
-    t->Phi[6][4] = w->fh[46]*w->S[64] + w->fh[47]*w->S[79];
-    t->Phi[6][5] = w->fh[46]*w->S[65] + w->fh[47]*w->S[80];
-    t->Phi[6][6] = 0;
-    t->Phi[6][7] = w->fh[46]*w->S[66] + w->fh[47]*w->S[81];
-    t->Phi[6][8] = w->fh[46]*w->S[67] + w->fh[47]*w->S[82];
-    t->Phi[6][9] = w->fh[46]*w->S[68] + w->fh[47]*w->S[83];
-    t->Phi[6][10] = w->fh[46]*w->S[69] + w->fh[47]*w->S[84];
-    t->Phi[6][11] = w->fh[46]*w->S[70] + w->fh[47]*w->S[85];
-    t->Phi[6][12] = w->fh[46]*w->S[71] + w->fh[47]*w->S[86];
-    t->Phi[6][13] = w->fh[46]*w->S[72] + w->fh[47]*w->S[87];
-    t->Phi[6][14] = w->fh[46]*w->S[73] + w->fh[47]*w->S[88];
-    t->Phi[6][15] = w->fh[46]*w->S[74] + w->fh[47]*w->S[89];
-    t->Phi[10][10] = w->fh[48]*w->S[106];
-    t->Phi[11][11] = w->fh[49]*w->S[107];
-    t->Phi[12][12] = w->fh[50]*w->S[108];
-    t->Phi[13][13] = w->fh[51]*w->S[109];
-    t->Phi[14][14] = w->fh[52]*w->S[110];
-    t->Phi[15][15] = w->fh[53]*w->S[111];
+    int k;
+    for (k = 0; k < 16; ++k) {
+        t->Phi[0][k] = w->fh[0]*w->S[16+k] + w->fh[1]*w->S[32+k] + w->fh[2]*w->S[64+k] +
+                w->fh[3]*w->S[80+k];
+        t->Phi[1][k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[32+k] + w->fh[12]*w->S[48+k];
+        t->Phi[2][k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[16+k] + w->fh[21]*w->S[64+k] +
+                w->fh[22]*w->S[80+k];
+        t->Phi[3][k] = w->fh[29]*w->S[16+k] + w->fh[30]*w->S[32+k] + w->fh[31]*w->S[48+k] +
+                w->fh[32]*w->S[64+k] + w->fh[33]*w->S[80+k];
+        t->Phi[4][k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[32+k] + w->fh[39]*w->S[48+k] +
+                w->fh[40]*w->S[64+k] + w->fh[41]*w->S[80+k];
+        t->Phi[5][k] = w->fh[45]*w->S[48+k];
+        t->Phi[6][k] = w->fh[46]*w->S[64+k] + w->fh[47]*w->S[80+k];
+    }
+    t->Phi[0][7] = t->Phi[0][7] + w->fh[4];
+    t->Phi[0][8] = t->Phi[0][8] + w->fh[5];
+    t->Phi[0][9] = t->Phi[0][9] + w->fh[6];
+    t->Phi[0][10] = t->Phi[0][10] + w->fh[7]*w->S[112];
+    t->Phi[0][11] = t->Phi[0][11] + w->fh[8]*w->S[113];
+    t->Phi[0][12] = t->Phi[0][12] + w->fh[9]*w->S[114];
+    t->Phi[1][7] = t->Phi[1][7] + w->fh[13];
+    t->Phi[1][8] = t->Phi[1][8] + w->fh[14];
+    t->Phi[1][9] = t->Phi[1][9] + w->fh[15];
+    t->Phi[1][10] = t->Phi[1][10] + w->fh[16]*w->S[112];
+    t->Phi[1][11] = t->Phi[1][11] + w->fh[17]*w->S[113];
+    t->Phi[1][12] = t->Phi[1][12] + w->fh[18]*w->S[114];
+    t->Phi[2][7] = t->Phi[2][7] + w->fh[23];
+    t->Phi[2][8] = t->Phi[2][8] + w->fh[24];
+    t->Phi[2][9] = t->Phi[2][9] + w->fh[25];
+    t->Phi[2][10] = t->Phi[2][10] + w->fh[26]*w->S[112];
+    t->Phi[2][11] = t->Phi[2][11] + w->fh[27]*w->S[113];
+    t->Phi[2][12] = t->Phi[2][12] + w->fh[28]*w->S[114];
+    t->Phi[3][13] = t->Phi[3][13] + w->fh[34]*w->S[115];
+    t->Phi[3][14] = t->Phi[3][14] + w->fh[35]*w->S[116];
+    t->Phi[3][15] = t->Phi[3][15] + w->fh[36]*w->S[117];
+    t->Phi[4][13] = t->Phi[4][13] + w->fh[42]*w->S[115];
+    t->Phi[4][14] = t->Phi[4][14] + w->fh[43]*w->S[116];
+    t->Phi[4][15] = t->Phi[4][15] + w->fh[44]*w->S[117];
+    t->Phi[10][10] = w->fh[48]*w->S[112];
+    t->Phi[11][11] = w->fh[49]*w->S[113];
+    t->Phi[12][12] = w->fh[50]*w->S[114];
+    t->Phi[13][13] = w->fh[51]*w->S[115];
+    t->Phi[14][14] = w->fh[52]*w->S[116];
+    t->Phi[15][15] = w->fh[53]*w->S[117];
+    t->Phi[7][0] = 0;
+    t->Phi[7][1] = 0;
+    t->Phi[7][2] = 0;
+    t->Phi[7][3] = 0;
+    t->Phi[7][4] = 0;
+    t->Phi[7][5] = 0;
+    t->Phi[7][6] = 0;
+    t->Phi[7][7] = 0;
+    t->Phi[7][8] = 0;
+    t->Phi[7][9] = 0;
+    t->Phi[7][10] = 0;
+    t->Phi[7][11] = 0;
+    t->Phi[7][12] = 0;
+    t->Phi[7][13] = 0;
+    t->Phi[7][14] = 0;
+    t->Phi[7][15] = 0;
+    t->Phi[8][0] = 0;
+    t->Phi[8][1] = 0;
+    t->Phi[8][2] = 0;
+    t->Phi[8][3] = 0;
+    t->Phi[8][4] = 0;
+    t->Phi[8][5] = 0;
+    t->Phi[8][6] = 0;
+    t->Phi[8][7] = 0;
+    t->Phi[8][8] = 0;
+    t->Phi[8][9] = 0;
+    t->Phi[8][10] = 0;
+    t->Phi[8][11] = 0;
+    t->Phi[8][12] = 0;
+    t->Phi[8][13] = 0;
+    t->Phi[8][14] = 0;
+    t->Phi[8][15] = 0;
+    t->Phi[9][0] = 0;
+    t->Phi[9][1] = 0;
+    t->Phi[9][2] = 0;
+    t->Phi[9][3] = 0;
+    t->Phi[9][4] = 0;
+    t->Phi[9][5] = 0;
+    t->Phi[9][6] = 0;
+    t->Phi[9][7] = 0;
+    t->Phi[9][8] = 0;
+    t->Phi[9][9] = 0;
+    t->Phi[9][10] = 0;
+    t->Phi[9][11] = 0;
+    t->Phi[9][12] = 0;
+    t->Phi[9][13] = 0;
+    t->Phi[9][14] = 0;
+    t->Phi[9][15] = 0;
+    t->Phi[10][0] = 0;
+    t->Phi[10][1] = 0;
+    t->Phi[10][2] = 0;
+    t->Phi[10][3] = 0;
+    t->Phi[10][4] = 0;
+    t->Phi[10][5] = 0;
+    t->Phi[10][6] = 0;
+    t->Phi[10][7] = 0;
+    t->Phi[10][8] = 0;
+    t->Phi[10][9] = 0;
+    t->Phi[10][11] = 0;
+    t->Phi[10][12] = 0;
+    t->Phi[10][13] = 0;
+    t->Phi[10][14] = 0;
+    t->Phi[10][15] = 0;
+    t->Phi[11][0] = 0;
+    t->Phi[11][1] = 0;
+    t->Phi[11][2] = 0;
+    t->Phi[11][3] = 0;
+    t->Phi[11][4] = 0;
+    t->Phi[11][5] = 0;
+    t->Phi[11][6] = 0;
+    t->Phi[11][7] = 0;
+    t->Phi[11][8] = 0;
+    t->Phi[11][9] = 0;
+    t->Phi[11][10] = 0;
+    t->Phi[11][12] = 0;
+    t->Phi[11][13] = 0;
+    t->Phi[11][14] = 0;
+    t->Phi[11][15] = 0;
+    t->Phi[12][0] = 0;
+    t->Phi[12][1] = 0;
+    t->Phi[12][2] = 0;
+    t->Phi[12][3] = 0;
+    t->Phi[12][4] = 0;
+    t->Phi[12][5] = 0;
+    t->Phi[12][6] = 0;
+    t->Phi[12][7] = 0;
+    t->Phi[12][8] = 0;
+    t->Phi[12][9] = 0;
+    t->Phi[12][10] = 0;
+    t->Phi[12][11] = 0;
+    t->Phi[12][13] = 0;
+    t->Phi[12][14] = 0;
+    t->Phi[12][15] = 0;
+    t->Phi[13][0] = 0;
+    t->Phi[13][1] = 0;
+    t->Phi[13][2] = 0;
+    t->Phi[13][3] = 0;
+    t->Phi[13][4] = 0;
+    t->Phi[13][5] = 0;
+    t->Phi[13][6] = 0;
+    t->Phi[13][7] = 0;
+    t->Phi[13][8] = 0;
+    t->Phi[13][9] = 0;
+    t->Phi[13][10] = 0;
+    t->Phi[13][11] = 0;
+    t->Phi[13][12] = 0;
+    t->Phi[13][14] = 0;
+    t->Phi[13][15] = 0;
+    t->Phi[14][0] = 0;
+    t->Phi[14][1] = 0;
+    t->Phi[14][2] = 0;
+    t->Phi[14][3] = 0;
+    t->Phi[14][4] = 0;
+    t->Phi[14][5] = 0;
+    t->Phi[14][6] = 0;
+    t->Phi[14][7] = 0;
+    t->Phi[14][8] = 0;
+    t->Phi[14][9] = 0;
+    t->Phi[14][10] = 0;
+    t->Phi[14][11] = 0;
+    t->Phi[14][12] = 0;
+    t->Phi[14][13] = 0;
+    t->Phi[14][15] = 0;
+    t->Phi[15][0] = 0;
+    t->Phi[15][1] = 0;
+    t->Phi[15][2] = 0;
+    t->Phi[15][3] = 0;
+    t->Phi[15][4] = 0;
+    t->Phi[15][5] = 0;
+    t->Phi[15][6] = 0;
+    t->Phi[15][7] = 0;
+    t->Phi[15][8] = 0;
+    t->Phi[15][9] = 0;
+    t->Phi[15][10] = 0;
+    t->Phi[15][11] = 0;
+    t->Phi[15][12] = 0;
+    t->Phi[15][13] = 0;
+    t->Phi[15][14] = 0;
 }
 
 NED_INERTIAL16_BLOCK void doubling(ned_inertial16_transition *restrict t,
@@ -1719,593 +1057,593 @@ NED_INERTIAL16_BLOCK void doubling(ned_inertial16_transition *restrict t,
     w->term[0][0] = t->Phi[0][0]*t->Phi[0][0] + t->Phi[0][1]*t->Phi[1][0] +
             t->Phi[0][2]*t->Phi[2][0] + t->Phi[0][3]*t->Phi[3][0] + t->Phi[0][4]*t->Phi[4][0] +
             t->Phi[0][5]*t->Phi[5][0];
-    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[30] +
-            t->Phi[0][3]*w->S[45] + t->Phi[0][4]*w->S[60] + t->Phi[0][5]*w->S[75];
+    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[32] +
+            t->Phi[0][3]*w->S[48] + t->Phi[0][4]*w->S[64] + t->Phi[0][5]*w->S[80];
     w->term[0][1] = t->Phi[0][0]*t->Phi[0][1] + t->Phi[0][1]*t->Phi[1][1] +
             t->Phi[0][2]*t->Phi[2][1] + t->Phi[0][3]*t->Phi[3][1] + t->Phi[0][4]*t->Phi[4][1] +
             t->Phi[0][5]*t->Phi[5][1];
-    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[31] +
-            t->Phi[0][3]*w->S[46] + t->Phi[0][4]*w->S[61] + t->Phi[0][5]*w->S[76];
+    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[33] +
+            t->Phi[0][3]*w->S[49] + t->Phi[0][4]*w->S[65] + t->Phi[0][5]*w->S[81];
     w->term[0][2] = t->Phi[0][0]*t->Phi[0][2] + t->Phi[0][1]*t->Phi[1][2] +
             t->Phi[0][2]*t->Phi[2][2] + t->Phi[0][3]*t->Phi[3][2] + t->Phi[0][4]*t->Phi[4][2] +
             t->Phi[0][5]*t->Phi[5][2];
-    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[32] +
-            t->Phi[0][3]*w->S[47] + t->Phi[0][4]*w->S[62] + t->Phi[0][5]*w->S[77];
+    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[18] + t->Phi[0][2]*w->S[34] +
+            t->Phi[0][3]*w->S[50] + t->Phi[0][4]*w->S[66] + t->Phi[0][5]*w->S[82];
     w->term[0][3] = t->Phi[0][0]*t->Phi[0][3] + t->Phi[0][1]*t->Phi[1][3] +
             t->Phi[0][2]*t->Phi[2][3] + t->Phi[0][3]*t->Phi[3][3] + t->Phi[0][4]*t->Phi[4][3] +
             t->Phi[0][5]*t->Phi[5][3];
-    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[18] + t->Phi[0][2]*w->S[33] +
-            t->Phi[0][3]*w->S[48] + t->Phi[0][4]*w->S[63] + t->Phi[0][5]*w->S[78];
+    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[19] + t->Phi[0][2]*w->S[35] +
+            t->Phi[0][3]*w->S[51] + t->Phi[0][4]*w->S[67] + t->Phi[0][5]*w->S[83];
     w->term[0][4] = t->Phi[0][0]*t->Phi[0][4] + t->Phi[0][1]*t->Phi[1][4] +
             t->Phi[0][2]*t->Phi[2][4] + t->Phi[0][3]*t->Phi[3][4] + t->Phi[0][4]*t->Phi[4][4] +
             t->Phi[0][5]*t->Phi[5][4];
-    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[19] + t->Phi[0][2]*w->S[34] +
-            t->Phi[0][3]*w->S[49] + t->Phi[0][4]*w->S[64] + t->Phi[0][5]*w->S[79];
+    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[20] + t->Phi[0][2]*w->S[36] +
+            t->Phi[0][3]*w->S[52] + t->Phi[0][4]*w->S[68] + t->Phi[0][5]*w->S[84];
     w->term[0][5] = t->Phi[0][0]*t->Phi[0][5] + t->Phi[0][1]*t->Phi[1][5] +
             t->Phi[0][2]*t->Phi[2][5] + t->Phi[0][3]*t->Phi[3][5] + t->Phi[0][4]*t->Phi[4][5] +
             t->Phi[0][5]*t->Phi[5][5];
-    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[20] + t->Phi[0][2]*w->S[35] +
-            t->Phi[0][3]*w->S[50] + t->Phi[0][4]*w->S[65] + t->Phi[0][5]*w->S[80];
+    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[21] + t->Phi[0][2]*w->S[37] +
+            t->Phi[0][3]*w->S[53] + t->Phi[0][4]*w->S[69] + t->Phi[0][5]*w->S[85];
     w->term[0][6] = t->Phi[0][0]*t->Phi[0][7] + t->Phi[0][1]*t->Phi[1][7] +
             t->Phi[0][2]*t->Phi[2][7] + t->Phi[0][3]*t->Phi[3][7] + t->Phi[0][4]*t->Phi[4][7] +
             t->Phi[0][5]*t->Phi[5][7];
-    w->term[1][6] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[21] + t->Phi[0][2]*w->S[36] +
-            t->Phi[0][3]*w->S[51] + t->Phi[0][4]*w->S[66] + t->Phi[0][5]*w->S[81] + t->Phi[0][7];
+    w->term[1][6] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[23] + t->Phi[0][2]*w->S[39] +
+            t->Phi[0][3]*w->S[55] + t->Phi[0][4]*w->S[71] + t->Phi[0][5]*w->S[87] + t->Phi[0][7];
     w->term[0][7] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
             t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
             t->Phi[0][5]*t->Phi[5][8];
-    w->term[1][7] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[22] + t->Phi[0][2]*w->S[37] +
-            t->Phi[0][3]*w->S[52] + t->Phi[0][4]*w->S[67] + t->Phi[0][5]*w->S[82] + t->Phi[0][8];
+    w->term[1][7] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[24] + t->Phi[0][2]*w->S[40] +
+            t->Phi[0][3]*w->S[56] + t->Phi[0][4]*w->S[72] + t->Phi[0][5]*w->S[88] + t->Phi[0][8];
     w->term[0][8] = t->Phi[0][0]*t->Phi[0][9] + t->Phi[0][1]*t->Phi[1][9] +
             t->Phi[0][2]*t->Phi[2][9] + t->Phi[0][3]*t->Phi[3][9] + t->Phi[0][4]*t->Phi[4][9] +
             t->Phi[0][5]*t->Phi[5][9];
-    w->term[1][8] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[23] + t->Phi[0][2]*w->S[38] +
-            t->Phi[0][3]*w->S[53] + t->Phi[0][4]*w->S[68] + t->Phi[0][5]*w->S[83] + t->Phi[0][9];
+    w->term[1][8] = t->Phi[0][0]*w->S[9] + t->Phi[0][1]*w->S[25] + t->Phi[0][2]*w->S[41] +
+            t->Phi[0][3]*w->S[57] + t->Phi[0][4]*w->S[73] + t->Phi[0][5]*w->S[89] + t->Phi[0][9];
     w->term[0][9] = t->Phi[0][0]*t->Phi[0][10] + t->Phi[0][1]*t->Phi[1][10] +
             t->Phi[0][2]*t->Phi[2][10] + t->Phi[0][3]*t->Phi[3][10] + t->Phi[0][4]*t->Phi[4][10] +
             t->Phi[0][5]*t->Phi[5][10] + t->Phi[0][10]*t->Phi[10][10];
-    w->term[1][9] = t->Phi[0][0]*w->S[9] + t->Phi[0][1]*w->S[24] + t->Phi[0][2]*w->S[39] +
-            t->Phi[0][3]*w->S[54] + t->Phi[0][4]*w->S[69] + t->Phi[0][5]*w->S[84] +
-            t->Phi[0][10]*w->S[106];
+    w->term[1][9] = t->Phi[0][0]*w->S[10] + t->Phi[0][1]*w->S[26] + t->Phi[0][2]*w->S[42] +
+            t->Phi[0][3]*w->S[58] + t->Phi[0][4]*w->S[74] + t->Phi[0][5]*w->S[90] +
+            t->Phi[0][10]*w->S[112];
     w->term[0][10] = t->Phi[0][0]*t->Phi[0][11] + t->Phi[0][1]*t->Phi[1][11] +
             t->Phi[0][2]*t->Phi[2][11] + t->Phi[0][3]*t->Phi[3][11] + t->Phi[0][4]*t->Phi[4][11] +
             t->Phi[0][5]*t->Phi[5][11] + t->Phi[0][11]*t->Phi[11][11];
-    w->term[1][10] = t->Phi[0][0]*w->S[10] + t->Phi[0][1]*w->S[25] + t->Phi[0][2]*w->S[40] +
-            t->Phi[0][3]*w->S[55] + t->Phi[0][4]*w->S[70] + t->Phi[0][5]*w->S[85] +
-            t->Phi[0][11]*w->S[107];
+    w->term[1][10] = t->Phi[0][0]*w->S[11] + t->Phi[0][1]*w->S[27] + t->Phi[0][2]*w->S[43] +
+            t->Phi[0][3]*w->S[59] + t->Phi[0][4]*w->S[75] + t->Phi[0][5]*w->S[91] +
+            t->Phi[0][11]*w->S[113];
     w->term[0][11] = t->Phi[0][0]*t->Phi[0][12] + t->Phi[0][1]*t->Phi[1][12] +
             t->Phi[0][2]*t->Phi[2][12] + t->Phi[0][3]*t->Phi[3][12] + t->Phi[0][4]*t->Phi[4][12] +
             t->Phi[0][5]*t->Phi[5][12] + t->Phi[0][12]*t->Phi[12][12];
-    w->term[1][11] = t->Phi[0][0]*w->S[11] + t->Phi[0][1]*w->S[26] + t->Phi[0][2]*w->S[41] +
-            t->Phi[0][3]*w->S[56] + t->Phi[0][4]*w->S[71] + t->Phi[0][5]*w->S[86] +
-            t->Phi[0][12]*w->S[108];
+    w->term[1][11] = t->Phi[0][0]*w->S[12] + t->Phi[0][1]*w->S[28] + t->Phi[0][2]*w->S[44] +
+            t->Phi[0][3]*w->S[60] + t->Phi[0][4]*w->S[76] + t->Phi[0][5]*w->S[92] +
+            t->Phi[0][12]*w->S[114];
     w->term[0][12] = t->Phi[0][0]*t->Phi[0][13] + t->Phi[0][1]*t->Phi[1][13] +
             t->Phi[0][2]*t->Phi[2][13] + t->Phi[0][3]*t->Phi[3][13] + t->Phi[0][4]*t->Phi[4][13] +
             t->Phi[0][5]*t->Phi[5][13] + t->Phi[0][13]*t->Phi[13][13];
-    w->term[1][12] = t->Phi[0][0]*w->S[12] + t->Phi[0][1]*w->S[27] + t->Phi[0][2]*w->S[42] +
-            t->Phi[0][3]*w->S[57] + t->Phi[0][4]*w->S[72] + t->Phi[0][5]*w->S[87] +
-            t->Phi[0][13]*w->S[109];
+    w->term[1][12] = t->Phi[0][0]*w->S[13] + t->Phi[0][1]*w->S[29] + t->Phi[0][2]*w->S[45] +
+            t->Phi[0][3]*w->S[61] + t->Phi[0][4]*w->S[77] + t->Phi[0][5]*w->S[93] +
+            t->Phi[0][13]*w->S[115];
     w->term[0][13] = t->Phi[0][0]*t->Phi[0][14] + t->Phi[0][1]*t->Phi[1][14] +
             t->Phi[0][2]*t->Phi[2][14] + t->Phi[0][3]*t->Phi[3][14] + t->Phi[0][4]*t->Phi[4][14] +
             t->Phi[0][5]*t->Phi[5][14] + t->Phi[0][14]*t->Phi[14][14];
-    w->term[1][13] = t->Phi[0][0]*w->S[13] + t->Phi[0][1]*w->S[28] + t->Phi[0][2]*w->S[43] +
-            t->Phi[0][3]*w->S[58] + t->Phi[0][4]*w->S[73] + t->Phi[0][5]*w->S[88] +
-            t->Phi[0][14]*w->S[110];
+    w->term[1][13] = t->Phi[0][0]*w->S[14] + t->Phi[0][1]*w->S[30] + t->Phi[0][2]*w->S[46] +
+            t->Phi[0][3]*w->S[62] + t->Phi[0][4]*w->S[78] + t->Phi[0][5]*w->S[94] +
+            t->Phi[0][14]*w->S[116];
     w->term[0][14] = t->Phi[0][0]*t->Phi[0][15] + t->Phi[0][1]*t->Phi[1][15] +
             t->Phi[0][2]*t->Phi[2][15] + t->Phi[0][3]*t->Phi[3][15] + t->Phi[0][4]*t->Phi[4][15] +
             t->Phi[0][5]*t->Phi[5][15] + t->Phi[0][15]*t->Phi[15][15];
-    w->term[1][14] = t->Phi[0][0]*w->S[14] + t->Phi[0][1]*w->S[29] + t->Phi[0][2]*w->S[44] +
-            t->Phi[0][3]*w->S[59] + t->Phi[0][4]*w->S[74] + t->Phi[0][5]*w->S[89] +
-            t->Phi[0][15]*w->S[111];
+    w->term[1][14] = t->Phi[0][0]*w->S[15] + t->Phi[0][1]*w->S[31] + t->Phi[0][2]*w->S[47] +
+            t->Phi[0][3]*w->S[63] + t->Phi[0][4]*w->S[79] + t->Phi[0][5]*w->S[95] +
+            t->Phi[0][15]*w->S[117];
     w->term[0][15] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
             t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
             t->Phi[1][5]*t->Phi[5][0];
-    w->term[1][15] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[30] +
-            t->Phi[1][3]*w->S[45] + t->Phi[1][4]*w->S[60] + t->Phi[1][5]*w->S[75];
+    w->term[1][15] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[32] +
+            t->Phi[1][3]*w->S[48] + t->Phi[1][4]*w->S[64] + t->Phi[1][5]*w->S[80];
     w->term[0][16] = t->Phi[1][0]*t->Phi[0][1] + t->Phi[1][1]*t->Phi[1][1] +
             t->Phi[1][2]*t->Phi[2][1] + t->Phi[1][3]*t->Phi[3][1] + t->Phi[1][4]*t->Phi[4][1] +
             t->Phi[1][5]*t->Phi[5][1];
-    w->term[1][16] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[31] +
-            t->Phi[1][3]*w->S[46] + t->Phi[1][4]*w->S[61] + t->Phi[1][5]*w->S[76];
+    w->term[1][16] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[33] +
+            t->Phi[1][3]*w->S[49] + t->Phi[1][4]*w->S[65] + t->Phi[1][5]*w->S[81];
     w->term[0][17] = t->Phi[1][0]*t->Phi[0][2] + t->Phi[1][1]*t->Phi[1][2] +
             t->Phi[1][2]*t->Phi[2][2] + t->Phi[1][3]*t->Phi[3][2] + t->Phi[1][4]*t->Phi[4][2] +
             t->Phi[1][5]*t->Phi[5][2];
-    w->term[1][17] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[32] +
-            t->Phi[1][3]*w->S[47] + t->Phi[1][4]*w->S[62] + t->Phi[1][5]*w->S[77];
+    w->term[1][17] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[18] + t->Phi[1][2]*w->S[34] +
+            t->Phi[1][3]*w->S[50] + t->Phi[1][4]*w->S[66] + t->Phi[1][5]*w->S[82];
     w->term[0][18] = t->Phi[1][0]*t->Phi[0][3] + t->Phi[1][1]*t->Phi[1][3] +
             t->Phi[1][2]*t->Phi[2][3] + t->Phi[1][3]*t->Phi[3][3] + t->Phi[1][4]*t->Phi[4][3] +
             t->Phi[1][5]*t->Phi[5][3];
-    w->term[1][18] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[18] + t->Phi[1][2]*w->S[33] +
-            t->Phi[1][3]*w->S[48] + t->Phi[1][4]*w->S[63] + t->Phi[1][5]*w->S[78];
+    w->term[1][18] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[19] + t->Phi[1][2]*w->S[35] +
+            t->Phi[1][3]*w->S[51] + t->Phi[1][4]*w->S[67] + t->Phi[1][5]*w->S[83];
     w->term[0][19] = t->Phi[1][0]*t->Phi[0][4] + t->Phi[1][1]*t->Phi[1][4] +
             t->Phi[1][2]*t->Phi[2][4] + t->Phi[1][3]*t->Phi[3][4] + t->Phi[1][4]*t->Phi[4][4] +
             t->Phi[1][5]*t->Phi[5][4];
-    w->term[1][19] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[19] + t->Phi[1][2]*w->S[34] +
-            t->Phi[1][3]*w->S[49] + t->Phi[1][4]*w->S[64] + t->Phi[1][5]*w->S[79];
+    w->term[1][19] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[20] + t->Phi[1][2]*w->S[36] +
+            t->Phi[1][3]*w->S[52] + t->Phi[1][4]*w->S[68] + t->Phi[1][5]*w->S[84];
     w->term[0][20] = t->Phi[1][0]*t->Phi[0][5] + t->Phi[1][1]*t->Phi[1][5] +
             t->Phi[1][2]*t->Phi[2][5] + t->Phi[1][3]*t->Phi[3][5] + t->Phi[1][4]*t->Phi[4][5] +
             t->Phi[1][5]*t->Phi[5][5];
-    w->term[1][20] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[20] + t->Phi[1][2]*w->S[35] +
-            t->Phi[1][3]*w->S[50] + t->Phi[1][4]*w->S[65] + t->Phi[1][5]*w->S[80];
+    w->term[1][20] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[21] + t->Phi[1][2]*w->S[37] +
+            t->Phi[1][3]*w->S[53] + t->Phi[1][4]*w->S[69] + t->Phi[1][5]*w->S[85];
     w->term[0][21] = t->Phi[1][0]*t->Phi[0][7] + t->Phi[1][1]*t->Phi[1][7] +
             t->Phi[1][2]*t->Phi[2][7] + t->Phi[1][3]*t->Phi[3][7] + t->Phi[1][4]*t->Phi[4][7] +
             t->Phi[1][5]*t->Phi[5][7];
-    w->term[1][21] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[21] + t->Phi[1][2]*w->S[36] +
-            t->Phi[1][3]*w->S[51] + t->Phi[1][4]*w->S[66] + t->Phi[1][5]*w->S[81] + t->Phi[1][7];
+    w->term[1][21] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[23] + t->Phi[1][2]*w->S[39] +
+            t->Phi[1][3]*w->S[55] + t->Phi[1][4]*w->S[71] + t->Phi[1][5]*w->S[87] + t->Phi[1][7];
     w->term[0][22] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
             t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
             t->Phi[1][5]*t->Phi[5][8];
-    w->term[1][22] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[22] + t->Phi[1][2]*w->S[37] +
-            t->Phi[1][3]*w->S[52] + t->Phi[1][4]*w->S[67] + t->Phi[1][5]*w->S[82] + t->Phi[1][8];
+    w->term[1][22] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[24] + t->Phi[1][2]*w->S[40] +
+            t->Phi[1][3]*w->S[56] + t->Phi[1][4]*w->S[72] + t->Phi[1][5]*w->S[88] + t->Phi[1][8];
     w->term[0][23] = t->Phi[1][0]*t->Phi[0][9] + t->Phi[1][1]*t->Phi[1][9] +
             t->Phi[1][2]*t->Phi[2][9] + t->Phi[1][3]*t->Phi[3][9] + t->Phi[1][4]*t->Phi[4][9] +
             t->Phi[1][5]*t->Phi[5][9];
-    w->term[1][23] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[23] + t->Phi[1][2]*w->S[38] +
-            t->Phi[1][3]*w->S[53] + t->Phi[1][4]*w->S[68] + t->Phi[1][5]*w->S[83] + t->Phi[1][9];
+    w->term[1][23] = t->Phi[1][0]*w->S[9] + t->Phi[1][1]*w->S[25] + t->Phi[1][2]*w->S[41] +
+            t->Phi[1][3]*w->S[57] + t->Phi[1][4]*w->S[73] + t->Phi[1][5]*w->S[89] + t->Phi[1][9];
     w->term[0][24] = t->Phi[1][0]*t->Phi[0][10] + t->Phi[1][1]*t->Phi[1][10] +
             t->Phi[1][2]*t->Phi[2][10] + t->Phi[1][3]*t->Phi[3][10] + t->Phi[1][4]*t->Phi[4][10] +
             t->Phi[1][5]*t->Phi[5][10] + t->Phi[1][10]*t->Phi[10][10];
-    w->term[1][24] = t->Phi[1][0]*w->S[9] + t->Phi[1][1]*w->S[24] + t->Phi[1][2]*w->S[39] +
-            t->Phi[1][3]*w->S[54] + t->Phi[1][4]*w->S[69] + t->Phi[1][5]*w->S[84] +
-            t->Phi[1][10]*w->S[106];
+    w->term[1][24] = t->Phi[1][0]*w->S[10] + t->Phi[1][1]*w->S[26] + t->Phi[1][2]*w->S[42] +
+            t->Phi[1][3]*w->S[58] + t->Phi[1][4]*w->S[74] + t->Phi[1][5]*w->S[90] +
+            t->Phi[1][10]*w->S[112];
     w->term[0][25] = t->Phi[1][0]*t->Phi[0][11] + t->Phi[1][1]*t->Phi[1][11] +
             t->Phi[1][2]*t->Phi[2][11] + t->Phi[1][3]*t->Phi[3][11] + t->Phi[1][4]*t->Phi[4][11] +
             t->Phi[1][5]*t->Phi[5][11] + t->Phi[1][11]*t->Phi[11][11];
-    w->term[1][25] = t->Phi[1][0]*w->S[10] + t->Phi[1][1]*w->S[25] + t->Phi[1][2]*w->S[40] +
-            t->Phi[1][3]*w->S[55] + t->Phi[1][4]*w->S[70] + t->Phi[1][5]*w->S[85] +
-            t->Phi[1][11]*w->S[107];
+    w->term[1][25] = t->Phi[1][0]*w->S[11] + t->Phi[1][1]*w->S[27] + t->Phi[1][2]*w->S[43] +
+            t->Phi[1][3]*w->S[59] + t->Phi[1][4]*w->S[75] + t->Phi[1][5]*w->S[91] +
+            t->Phi[1][11]*w->S[113];
     w->term[0][26] = t->Phi[1][0]*t->Phi[0][12] + t->Phi[1][1]*t->Phi[1][12] +
             t->Phi[1][2]*t->Phi[2][12] + t->Phi[1][3]*t->Phi[3][12] + t->Phi[1][4]*t->Phi[4][12] +
             t->Phi[1][5]*t->Phi[5][12] + t->Phi[1][12]*t->Phi[12][12];
-    w->term[1][26] = t->Phi[1][0]*w->S[11] + t->Phi[1][1]*w->S[26] + t->Phi[1][2]*w->S[41] +
-            t->Phi[1][3]*w->S[56] + t->Phi[1][4]*w->S[71] + t->Phi[1][5]*w->S[86] +
-            t->Phi[1][12]*w->S[108];
+    w->term[1][26] = t->Phi[1][0]*w->S[12] + t->Phi[1][1]*w->S[28] + t->Phi[1][2]*w->S[44] +
+            t->Phi[1][3]*w->S[60] + t->Phi[1][4]*w->S[76] + t->Phi[1][5]*w->S[92] +
+            t->Phi[1][12]*w->S[114];
     w->term[0][27] = t->Phi[1][0]*t->Phi[0][13] + t->Phi[1][1]*t->Phi[1][13] +
             t->Phi[1][2]*t->Phi[2][13] + t->Phi[1][3]*t->Phi[3][13] + t->Phi[1][4]*t->Phi[4][13] +
             t->Phi[1][5]*t->Phi[5][13] + t->Phi[1][13]*t->Phi[13][13];
-    w->term[1][27] = t->Phi[1][0]*w->S[12] + t->Phi[1][1]*w->S[27] + t->Phi[1][2]*w->S[42] +
-            t->Phi[1][3]*w->S[57] + t->Phi[1][4]*w->S[72] + t->Phi[1][5]*w->S[87] +
-            t->Phi[1][13]*w->S[109];
+    w->term[1][27] = t->Phi[1][0]*w->S[13] + t->Phi[1][1]*w->S[29] + t->Phi[1][2]*w->S[45] +
+            t->Phi[1][3]*w->S[61] + t->Phi[1][4]*w->S[77] + t->Phi[1][5]*w->S[93] +
+            t->Phi[1][13]*w->S[115];
     w->term[0][28] = t->Phi[1][0]*t->Phi[0][14] + t->Phi[1][1]*t->Phi[1][14] +
             t->Phi[1][2]*t->Phi[2][14] + t->Phi[1][3]*t->Phi[3][14] + t->Phi[1][4]*t->Phi[4][14] +
             t->Phi[1][5]*t->Phi[5][14] + t->Phi[1][14]*t->Phi[14][14];
-    w->term[1][28] = t->Phi[1][0]*w->S[13] + t->Phi[1][1]*w->S[28] + t->Phi[1][2]*w->S[43] +
-            t->Phi[1][3]*w->S[58] + t->Phi[1][4]*w->S[73] + t->Phi[1][5]*w->S[88] +
-            t->Phi[1][14]*w->S[110];
+    w->term[1][28] = t->Phi[1][0]*w->S[14] + t->Phi[1][1]*w->S[30] + t->Phi[1][2]*w->S[46] +
+            t->Phi[1][3]*w->S[62] + t->Phi[1][4]*w->S[78] + t->Phi[1][5]*w->S[94] +
+            t->Phi[1][14]*w->S[116];
     w->term[0][29] = t->Phi[1][0]*t->Phi[0][15] + t->Phi[1][1]*t->Phi[1][15] +
             t->Phi[1][2]*t->Phi[2][15] + t->Phi[1][3]*t->Phi[3][15] + t->Phi[1][4]*t->Phi[4][15] +
             t->Phi[1][5]*t->Phi[5][15] + t->Phi[1][15]*t->Phi[15][15];
-    w->term[1][29] = t->Phi[1][0]*w->S[14] + t->Phi[1][1]*w->S[29] + t->Phi[1][2]*w->S[44] +
-            t->Phi[1][3]*w->S[59] + t->Phi[1][4]*w->S[74] + t->Phi[1][5]*w->S[89] +
-            t->Phi[1][15]*w->S[111];
+    w->term[1][29] = t->Phi[1][0]*w->S[15] + t->Phi[1][1]*w->S[31] + t->Phi[1][2]*w->S[47] +
+            t->Phi[1][3]*w->S[63] + t->Phi[1][4]*w->S[79] + t->Phi[1][5]*w->S[95] +
+            t->Phi[1][15]*w->S[117];
     w->term[0][30] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
             t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
             t->Phi[2][5]*t->Phi[5][0];
-    w->term[1][30] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[30] +
-            t->Phi[2][3]*w->S[45] + t->Phi[2][4]*w->S[60] + t->Phi[2][5]*w->S[75];
+    w->term[1][30] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[32] +
+            t->Phi[2][3]*w->S[48] + t->Phi[2][4]*w->S[64] + t->Phi[2][5]*w->S[80];
     w->term[0][31] = t->Phi[2][0]*t->Phi[0][1] + t->Phi[2][1]*t->Phi[1][1] +
             t->Phi[2][2]*t->Phi[2][1] + t->Phi[2][3]*t->Phi[3][1] + t->Phi[2][4]*t->Phi[4][1] +
             t->Phi[2][5]*t->Phi[5][1];
-    w->term[1][31] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[31] +
-            t->Phi[2][3]*w->S[46] + t->Phi[2][4]*w->S[61] + t->Phi[2][5]*w->S[76];
+    w->term[1][31] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[33] +
+            t->Phi[2][3]*w->S[49] + t->Phi[2][4]*w->S[65] + t->Phi[2][5]*w->S[81];
     w->term[0][32] = t->Phi[2][0]*t->Phi[0][2] + t->Phi[2][1]*t->Phi[1][2] +
             t->Phi[2][2]*t->Phi[2][2] + t->Phi[2][3]*t->Phi[3][2] + t->Phi[2][4]*t->Phi[4][2] +
             t->Phi[2][5]*t->Phi[5][2];
-    w->term[1][32] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[32] +
-            t->Phi[2][3]*w->S[47] + t->Phi[2][4]*w->S[62] + t->Phi[2][5]*w->S[77];
+    w->term[1][32] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[18] + t->Phi[2][2]*w->S[34] +
+            t->Phi[2][3]*w->S[50] + t->Phi[2][4]*w->S[66] + t->Phi[2][5]*w->S[82];
     w->term[0][33] = t->Phi[2][0]*t->Phi[0][3] + t->Phi[2][1]*t->Phi[1][3] +
             t->Phi[2][2]*t->Phi[2][3] + t->Phi[2][3]*t->Phi[3][3] + t->Phi[2][4]*t->Phi[4][3] +
             t->Phi[2][5]*t->Phi[5][3];
-    w->term[1][33] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[18] + t->Phi[2][2]*w->S[33] +
-            t->Phi[2][3]*w->S[48] + t->Phi[2][4]*w->S[63] + t->Phi[2][5]*w->S[78];
+    w->term[1][33] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[19] + t->Phi[2][2]*w->S[35] +
+            t->Phi[2][3]*w->S[51] + t->Phi[2][4]*w->S[67] + t->Phi[2][5]*w->S[83];
     w->term[0][34] = t->Phi[2][0]*t->Phi[0][4] + t->Phi[2][1]*t->Phi[1][4] +
             t->Phi[2][2]*t->Phi[2][4] + t->Phi[2][3]*t->Phi[3][4] + t->Phi[2][4]*t->Phi[4][4] +
             t->Phi[2][5]*t->Phi[5][4];
-    w->term[1][34] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[19] + t->Phi[2][2]*w->S[34] +
-            t->Phi[2][3]*w->S[49] + t->Phi[2][4]*w->S[64] + t->Phi[2][5]*w->S[79];
+    w->term[1][34] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[20] + t->Phi[2][2]*w->S[36] +
+            t->Phi[2][3]*w->S[52] + t->Phi[2][4]*w->S[68] + t->Phi[2][5]*w->S[84];
     w->term[0][35] = t->Phi[2][0]*t->Phi[0][5] + t->Phi[2][1]*t->Phi[1][5] +
             t->Phi[2][2]*t->Phi[2][5] + t->Phi[2][3]*t->Phi[3][5] + t->Phi[2][4]*t->Phi[4][5] +
             t->Phi[2][5]*t->Phi[5][5];
-    w->term[1][35] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[20] + t->Phi[2][2]*w->S[35] +
-            t->Phi[2][3]*w->S[50] + t->Phi[2][4]*w->S[65] + t->Phi[2][5]*w->S[80];
+    w->term[1][35] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[21] + t->Phi[2][2]*w->S[37] +
+            t->Phi[2][3]*w->S[53] + t->Phi[2][4]*w->S[69] + t->Phi[2][5]*w->S[85];
     w->term[0][36] = t->Phi[2][0]*t->Phi[0][7] + t->Phi[2][1]*t->Phi[1][7] +
             t->Phi[2][2]*t->Phi[2][7] + t->Phi[2][3]*t->Phi[3][7] + t->Phi[2][4]*t->Phi[4][7] +
             t->Phi[2][5]*t->Phi[5][7];
-    w->term[1][36] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[21] + t->Phi[2][2]*w->S[36] +
-            t->Phi[2][3]*w->S[51] + t->Phi[2][4]*w->S[66] + t->Phi[2][5]*w->S[81] + t->Phi[2][7];
+    w->term[1][36] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[23] + t->Phi[2][2]*w->S[39] +
+            t->Phi[2][3]*w->S[55] + t->Phi[2][4]*w->S[71] + t->Phi[2][5]*w->S[87] + t->Phi[2][7];
     w->term[0][37] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
             t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
             t->Phi[2][5]*t->Phi[5][8];
-    w->term[1][37] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[22] + t->Phi[2][2]*w->S[37] +
-            t->Phi[2][3]*w->S[52] + t->Phi[2][4]*w->S[67] + t->Phi[2][5]*w->S[82] + t->Phi[2][8];
+    w->term[1][37] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[24] + t->Phi[2][2]*w->S[40] +
+            t->Phi[2][3]*w->S[56] + t->Phi[2][4]*w->S[72] + t->Phi[2][5]*w->S[88] + t->Phi[2][8];
     w->term[0][38] = t->Phi[2][0]*t->Phi[0][9] + t->Phi[2][1]*t->Phi[1][9] +
             t->Phi[2][2]*t->Phi[2][9] + t->Phi[2][3]*t->Phi[3][9] + t->Phi[2][4]*t->Phi[4][9] +
             t->Phi[2][5]*t->Phi[5][9];
-    w->term[1][38] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[23] + t->Phi[2][2]*w->S[38] +
-            t->Phi[2][3]*w->S[53] + t->Phi[2][4]*w->S[68] + t->Phi[2][5]*w->S[83] + t->Phi[2][9];
+    w->term[1][38] = t->Phi[2][0]*w->S[9] + t->Phi[2][1]*w->S[25] + t->Phi[2][2]*w->S[41] +
+            t->Phi[2][3]*w->S[57] + t->Phi[2][4]*w->S[73] + t->Phi[2][5]*w->S[89] + t->Phi[2][9];
     w->term[0][39] = t->Phi[2][0]*t->Phi[0][10] + t->Phi[2][1]*t->Phi[1][10] +
             t->Phi[2][2]*t->Phi[2][10] + t->Phi[2][3]*t->Phi[3][10] + t->Phi[2][4]*t->Phi[4][10] +
             t->Phi[2][5]*t->Phi[5][10] + t->Phi[2][10]*t->Phi[10][10];
-    w->term[1][39] = t->Phi[2][0]*w->S[9] + t->Phi[2][1]*w->S[24] + t->Phi[2][2]*w->S[39] +
-            t->Phi[2][3]*w->S[54] + t->Phi[2][4]*w->S[69] + t->Phi[2][5]*w->S[84] +
-            t->Phi[2][10]*w->S[106];
+    w->term[1][39] = t->Phi[2][0]*w->S[10] + t->Phi[2][1]*w->S[26] + t->Phi[2][2]*w->S[42] +
+            t->Phi[2][3]*w->S[58] + t->Phi[2][4]*w->S[74] + t->Phi[2][5]*w->S[90] +
+            t->Phi[2][10]*w->S[112];
     w->term[0][40] = t->Phi[2][0]*t->Phi[0][11] + t->Phi[2][1]*t->Phi[1][11] +
             t->Phi[2][2]*t->Phi[2][11] + t->Phi[2][3]*t->Phi[3][11] + t->Phi[2][4]*t->Phi[4][11] +
             t->Phi[2][5]*t->Phi[5][11] + t->Phi[2][11]*t->Phi[11][11];
-    w->term[1][40] = t->Phi[2][0]*w->S[10] + t->Phi[2][1]*w->S[25] + t->Phi[2][2]*w->S[40] +
-            t->Phi[2][3]*w->S[55] + t->Phi[2][4]*w->S[70] + t->Phi[2][5]*w->S[85] +
-            t->Phi[2][11]*w->S[107];
+    w->term[1][40] = t->Phi[2][0]*w->S[11] + t->Phi[2][1]*w->S[27] + t->Phi[2][2]*w->S[43] +
+            t->Phi[2][3]*w->S[59] + t->Phi[2][4]*w->S[75] + t->Phi[2][5]*w->S[91] +
+            t->Phi[2][11]*w->S[113];
     w->term[0][41] = t->Phi[2][0]*t->Phi[0][12] + t->Phi[2][1]*t->Phi[1][12] +
             t->Phi[2][2]*t->Phi[2][12] + t->Phi[2][3]*t->Phi[3][12] + t->Phi[2][4]*t->Phi[4][12] +
             t->Phi[2][5]*t->Phi[5][12] + t->Phi[2][12]*t->Phi[12][12];
-    w->term[1][41] = t->Phi[2][0]*w->S[11] + t->Phi[2][1]*w->S[26] + t->Phi[2][2]*w->S[41] +
-            t->Phi[2][3]*w->S[56] + t->Phi[2][4]*w->S[71] + t->Phi[2][5]*w->S[86] +
-            t->Phi[2][12]*w->S[108];
+    w->term[1][41] = t->Phi[2][0]*w->S[12] + t->Phi[2][1]*w->S[28] + t->Phi[2][2]*w->S[44] +
+            t->Phi[2][3]*w->S[60] + t->Phi[2][4]*w->S[76] + t->Phi[2][5]*w->S[92] +
+            t->Phi[2][12]*w->S[114];
     w->term[0][42] = t->Phi[2][0]*t->Phi[0][13] + t->Phi[2][1]*t->Phi[1][13] +
             t->Phi[2][2]*t->Phi[2][13] + t->Phi[2][3]*t->Phi[3][13] + t->Phi[2][4]*t->Phi[4][13] +
             t->Phi[2][5]*t->Phi[5][13] + t->Phi[2][13]*t->Phi[13][13];
-    w->term[1][42] = t->Phi[2][0]*w->S[12] + t->Phi[2][1]*w->S[27] + t->Phi[2][2]*w->S[42] +
-            t->Phi[2][3]*w->S[57] + t->Phi[2][4]*w->S[72] + t->Phi[2][5]*w->S[87] +
-            t->Phi[2][13]*w->S[109];
+    w->term[1][42] = t->Phi[2][0]*w->S[13] + t->Phi[2][1]*w->S[29] + t->Phi[2][2]*w->S[45] +
+            t->Phi[2][3]*w->S[61] + t->Phi[2][4]*w->S[77] + t->Phi[2][5]*w->S[93] +
+            t->Phi[2][13]*w->S[115];
     w->term[0][43] = t->Phi[2][0]*t->Phi[0][14] + t->Phi[2][1]*t->Phi[1][14] +
             t->Phi[2][2]*t->Phi[2][14] + t->Phi[2][3]*t->Phi[3][14] + t->Phi[2][4]*t->Phi[4][14] +
             t->Phi[2][5]*t->Phi[5][14] + t->Phi[2][14]*t->Phi[14][14];
-    w->term[1][43] = t->Phi[2][0]*w->S[13] + t->Phi[2][1]*w->S[28] + t->Phi[2][2]*w->S[43] +
-            t->Phi[2][3]*w->S[58] + t->Phi[2][4]*w->S[73] + t->Phi[2][5]*w->S[88] +
-            t->Phi[2][14]*w->S[110];
+    w->term[1][43] = t->Phi[2][0]*w->S[14] + t->Phi[2][1]*w->S[30] + t->Phi[2][2]*w->S[46] +
+            t->Phi[2][3]*w->S[62] + t->Phi[2][4]*w->S[78] + t->Phi[2][5]*w->S[94] +
+            t->Phi[2][14]*w->S[116];
     w->term[0][44] = t->Phi[2][0]*t->Phi[0][15] + t->Phi[2][1]*t->Phi[1][15] +
             t->Phi[2][2]*t->Phi[2][15] + t->Phi[2][3]*t->Phi[3][15] + t->Phi[2][4]*t->Phi[4][15] +
             t->Phi[2][5]*t->Phi[5][15] + t->Phi[2][15]*t->Phi[15][15];
-    w->term[1][44] = t->Phi[2][0]*w->S[14] + t->Phi[2][1]*w->S[29] + t->Phi[2][2]*w->S[44] +
-            t->Phi[2][3]*w->S[59] + t->Phi[2][4]*w->S[74] + t->Phi[2][5]*w->S[89] +
-            t->Phi[2][15]*w->S[111];
+    w->term[1][44] = t->Phi[2][0]*w->S[15] + t->Phi[2][1]*w->S[31] + t->Phi[2][2]*w->S[47] +
+            t->Phi[2][3]*w->S[63] + t->Phi[2][4]*w->S[79] + t->Phi[2][5]*w->S[95] +
+            t->Phi[2][15]*w->S[117];
     w->term[0][45] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
             t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
             t->Phi[3][5]*t->Phi[5][0];
-    w->term[1][45] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[30] +
-            t->Phi[3][3]*w->S[45] + t->Phi[3][4]*w->S[60] + t->Phi[3][5]*w->S[75];
+    w->term[1][45] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[32] +
+            t->Phi[3][3]*w->S[48] + t->Phi[3][4]*w->S[64] + t->Phi[3][5]*w->S[80];
     w->term[0][46] = t->Phi[3][0]*t->Phi[0][1] + t->Phi[3][1]*t->Phi[1][1] +
             t->Phi[3][2]*t->Phi[2][1] + t->Phi[3][3]*t->Phi[3][1] + t->Phi[3][4]*t->Phi[4][1] +
             t->Phi[3][5]*t->Phi[5][1];
-    w->term[1][46] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[31] +
-            t->Phi[3][3]*w->S[46] + t->Phi[3][4]*w->S[61] + t->Phi[3][5]*w->S[76];
+    w->term[1][46] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[33] +
+            t->Phi[3][3]*w->S[49] + t->Phi[3][4]*w->S[65] + t->Phi[3][5]*w->S[81];
     w->term[0][47] = t->Phi[3][0]*t->Phi[0][2] + t->Phi[3][1]*t->Phi[1][2] +
             t->Phi[3][2]*t->Phi[2][2] + t->Phi[3][3]*t->Phi[3][2] + t->Phi[3][4]*t->Phi[4][2] +
             t->Phi[3][5]*t->Phi[5][2];
-    w->term[1][47] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[32] +
-            t->Phi[3][3]*w->S[47] + t->Phi[3][4]*w->S[62] + t->Phi[3][5]*w->S[77];
+    w->term[1][47] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[18] + t->Phi[3][2]*w->S[34] +
+            t->Phi[3][3]*w->S[50] + t->Phi[3][4]*w->S[66] + t->Phi[3][5]*w->S[82];
     w->term[0][48] = t->Phi[3][0]*t->Phi[0][3] + t->Phi[3][1]*t->Phi[1][3] +
             t->Phi[3][2]*t->Phi[2][3] + t->Phi[3][3]*t->Phi[3][3] + t->Phi[3][4]*t->Phi[4][3] +
             t->Phi[3][5]*t->Phi[5][3];
-    w->term[1][48] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[18] + t->Phi[3][2]*w->S[33] +
-            t->Phi[3][3]*w->S[48] + t->Phi[3][4]*w->S[63] + t->Phi[3][5]*w->S[78];
+    w->term[1][48] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[19] + t->Phi[3][2]*w->S[35] +
+            t->Phi[3][3]*w->S[51] + t->Phi[3][4]*w->S[67] + t->Phi[3][5]*w->S[83];
     w->term[0][49] = t->Phi[3][0]*t->Phi[0][4] + t->Phi[3][1]*t->Phi[1][4] +
             t->Phi[3][2]*t->Phi[2][4] + t->Phi[3][3]*t->Phi[3][4] + t->Phi[3][4]*t->Phi[4][4] +
             t->Phi[3][5]*t->Phi[5][4];
-    w->term[1][49] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[19] + t->Phi[3][2]*w->S[34] +
-            t->Phi[3][3]*w->S[49] + t->Phi[3][4]*w->S[64] + t->Phi[3][5]*w->S[79];
+    w->term[1][49] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[20] + t->Phi[3][2]*w->S[36] +
+            t->Phi[3][3]*w->S[52] + t->Phi[3][4]*w->S[68] + t->Phi[3][5]*w->S[84];
     w->term[0][50] = t->Phi[3][0]*t->Phi[0][5] + t->Phi[3][1]*t->Phi[1][5] +
             t->Phi[3][2]*t->Phi[2][5] + t->Phi[3][3]*t->Phi[3][5] + t->Phi[3][4]*t->Phi[4][5] +
             t->Phi[3][5]*t->Phi[5][5];
-    w->term[1][50] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[20] + t->Phi[3][2]*w->S[35] +
-            t->Phi[3][3]*w->S[50] + t->Phi[3][4]*w->S[65] + t->Phi[3][5]*w->S[80];
+    w->term[1][50] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[21] + t->Phi[3][2]*w->S[37] +
+            t->Phi[3][3]*w->S[53] + t->Phi[3][4]*w->S[69] + t->Phi[3][5]*w->S[85];
     w->term[0][51] = t->Phi[3][0]*t->Phi[0][7] + t->Phi[3][1]*t->Phi[1][7] +
             t->Phi[3][2]*t->Phi[2][7] + t->Phi[3][3]*t->Phi[3][7] + t->Phi[3][4]*t->Phi[4][7] +
             t->Phi[3][5]*t->Phi[5][7];
-    w->term[1][51] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[21] + t->Phi[3][2]*w->S[36] +
-            t->Phi[3][3]*w->S[51] + t->Phi[3][4]*w->S[66] + t->Phi[3][5]*w->S[81] + t->Phi[3][7];
+    w->term[1][51] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[23] + t->Phi[3][2]*w->S[39] +
+            t->Phi[3][3]*w->S[55] + t->Phi[3][4]*w->S[71] + t->Phi[3][5]*w->S[87] + t->Phi[3][7];
     w->term[0][52] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
             t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
             t->Phi[3][5]*t->Phi[5][8];
-    w->term[1][52] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[22] + t->Phi[3][2]*w->S[37] +
-            t->Phi[3][3]*w->S[52] + t->Phi[3][4]*w->S[67] + t->Phi[3][5]*w->S[82] + t->Phi[3][8];
+    w->term[1][52] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[24] + t->Phi[3][2]*w->S[40] +
+            t->Phi[3][3]*w->S[56] + t->Phi[3][4]*w->S[72] + t->Phi[3][5]*w->S[88] + t->Phi[3][8];
     w->term[0][53] = t->Phi[3][0]*t->Phi[0][9] + t->Phi[3][1]*t->Phi[1][9] +
             t->Phi[3][2]*t->Phi[2][9] + t->Phi[3][3]*t->Phi[3][9] + t->Phi[3][4]*t->Phi[4][9] +
             t->Phi[3][5]*t->Phi[5][9];
-    w->term[1][53] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[23] + t->Phi[3][2]*w->S[38] +
-            t->Phi[3][3]*w->S[53] + t->Phi[3][4]*w->S[68] + t->Phi[3][5]*w->S[83] + t->Phi[3][9];
+    w->term[1][53] = t->Phi[3][0]*w->S[9] + t->Phi[3][1]*w->S[25] + t->Phi[3][2]*w->S[41] +
+            t->Phi[3][3]*w->S[57] + t->Phi[3][4]*w->S[73] + t->Phi[3][5]*w->S[89] + t->Phi[3][9];
     w->term[0][54] = t->Phi[3][0]*t->Phi[0][10] + t->Phi[3][1]*t->Phi[1][10] +
             t->Phi[3][2]*t->Phi[2][10] + t->Phi[3][3]*t->Phi[3][10] + t->Phi[3][4]*t->Phi[4][10] +
             t->Phi[3][5]*t->Phi[5][10] + t->Phi[3][10]*t->Phi[10][10];
-    w->term[1][54] = t->Phi[3][0]*w->S[9] + t->Phi[3][1]*w->S[24] + t->Phi[3][2]*w->S[39] +
-            t->Phi[3][3]*w->S[54] + t->Phi[3][4]*w->S[69] + t->Phi[3][5]*w->S[84] +
-            t->Phi[3][10]*w->S[106];
+    w->term[1][54] = t->Phi[3][0]*w->S[10] + t->Phi[3][1]*w->S[26] + t->Phi[3][2]*w->S[42] +
+            t->Phi[3][3]*w->S[58] + t->Phi[3][4]*w->S[74] + t->Phi[3][5]*w->S[90] +
+            t->Phi[3][10]*w->S[112];
     w->term[0][55] = t->Phi[3][0]*t->Phi[0][11] + t->Phi[3][1]*t->Phi[1][11] +
             t->Phi[3][2]*t->Phi[2][11] + t->Phi[3][3]*t->Phi[3][11] + t->Phi[3][4]*t->Phi[4][11] +
             t->Phi[3][5]*t->Phi[5][11] + t->Phi[3][11]*t->Phi[11][11];
-    w->term[1][55] = t->Phi[3][0]*w->S[10] + t->Phi[3][1]*w->S[25] + t->Phi[3][2]*w->S[40] +
-            t->Phi[3][3]*w->S[55] + t->Phi[3][4]*w->S[70] + t->Phi[3][5]*w->S[85] +
-            t->Phi[3][11]*w->S[107];
+    w->term[1][55] = t->Phi[3][0]*w->S[11] + t->Phi[3][1]*w->S[27] + t->Phi[3][2]*w->S[43] +
+            t->Phi[3][3]*w->S[59] + t->Phi[3][4]*w->S[75] + t->Phi[3][5]*w->S[91] +
+            t->Phi[3][11]*w->S[113];
     w->term[0][56] = t->Phi[3][0]*t->Phi[0][12] + t->Phi[3][1]*t->Phi[1][12] +
             t->Phi[3][2]*t->Phi[2][12] + t->Phi[3][3]*t->Phi[3][12] + t->Phi[3][4]*t->Phi[4][12] +
             t->Phi[3][5]*t->Phi[5][12] + t->Phi[3][12]*t->Phi[12][12];
-    w->term[1][56] = t->Phi[3][0]*w->S[11] + t->Phi[3][1]*w->S[26] + t->Phi[3][2]*w->S[41] +
-            t->Phi[3][3]*w->S[56] + t->Phi[3][4]*w->S[71] + t->Phi[3][5]*w->S[86] +
-            t->Phi[3][12]*w->S[108];
+    w->term[1][56] = t->Phi[3][0]*w->S[12] + t->Phi[3][1]*w->S[28] + t->Phi[3][2]*w->S[44] +
+            t->Phi[3][3]*w->S[60] + t->Phi[3][4]*w->S[76] + t->Phi[3][5]*w->S[92] +
+            t->Phi[3][12]*w->S[114];
     w->term[0][57] = t->Phi[3][0]*t->Phi[0][13] + t->Phi[3][1]*t->Phi[1][13] +
             t->Phi[3][2]*t->Phi[2][13] + t->Phi[3][3]*t->Phi[3][13] + t->Phi[3][4]*t->Phi[4][13] +
             t->Phi[3][5]*t->Phi[5][13] + t->Phi[3][13]*t->Phi[13][13];
-    w->term[1][57] = t->Phi[3][0]*w->S[12] + t->Phi[3][1]*w->S[27] + t->Phi[3][2]*w->S[42] +
-            t->Phi[3][3]*w->S[57] + t->Phi[3][4]*w->S[72] + t->Phi[3][5]*w->S[87] +
-            t->Phi[3][13]*w->S[109];
+    w->term[1][57] = t->Phi[3][0]*w->S[13] + t->Phi[3][1]*w->S[29] + t->Phi[3][2]*w->S[45] +
+            t->Phi[3][3]*w->S[61] + t->Phi[3][4]*w->S[77] + t->Phi[3][5]*w->S[93] +
+            t->Phi[3][13]*w->S[115];
     w->term[0][58] = t->Phi[3][0]*t->Phi[0][14] + t->Phi[3][1]*t->Phi[1][14] +
             t->Phi[3][2]*t->Phi[2][14] + t->Phi[3][3]*t->Phi[3][14] + t->Phi[3][4]*t->Phi[4][14] +
             t->Phi[3][5]*t->Phi[5][14] + t->Phi[3][14]*t->Phi[14][14];
-    w->term[1][58] = t->Phi[3][0]*w->S[13] + t->Phi[3][1]*w->S[28] + t->Phi[3][2]*w->S[43] +
-            t->Phi[3][3]*w->S[58] + t->Phi[3][4]*w->S[73] + t->Phi[3][5]*w->S[88] +
-            t->Phi[3][14]*w->S[110];
+    w->term[1][58] = t->Phi[3][0]*w->S[14] + t->Phi[3][1]*w->S[30] + t->Phi[3][2]*w->S[46] +
+            t->Phi[3][3]*w->S[62] + t->Phi[3][4]*w->S[78] + t->Phi[3][5]*w->S[94] +
+            t->Phi[3][14]*w->S[116];
     w->term[0][59] = t->Phi[3][0]*t->Phi[0][15] + t->Phi[3][1]*t->Phi[1][15] +
             t->Phi[3][2]*t->Phi[2][15] + t->Phi[3][3]*t->Phi[3][15] + t->Phi[3][4]*t->Phi[4][15] +
             t->Phi[3][5]*t->Phi[5][15] + t->Phi[3][15]*t->Phi[15][15];
-    w->term[1][59] = t->Phi[3][0]*w->S[14] + t->Phi[3][1]*w->S[29] + t->Phi[3][2]*w->S[44] +
-            t->Phi[3][3]*w->S[59] + t->Phi[3][4]*w->S[74] + t->Phi[3][5]*w->S[89] +
-            t->Phi[3][15]*w->S[111];
+    w->term[1][59] = t->Phi[3][0]*w->S[15] + t->Phi[3][1]*w->S[31] + t->Phi[3][2]*w->S[47] +
+            t->Phi[3][3]*w->S[63] + t->Phi[3][4]*w->S[79] + t->Phi[3][5]*w->S[95] +
+            t->Phi[3][15]*w->S[117];
     w->term[0][60] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
             t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
             t->Phi[4][5]*t->Phi[5][0];
-    w->term[1][60] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[30] +
-            t->Phi[4][3]*w->S[45] + t->Phi[4][4]*w->S[60] + t->Phi[4][5]*w->S[75];
+    w->term[1][60] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[32] +
+            t->Phi[4][3]*w->S[48] + t->Phi[4][4]*w->S[64] + t->Phi[4][5]*w->S[80];
     w->term[0][61] = t->Phi[4][0]*t->Phi[0][1] + t->Phi[4][1]*t->Phi[1][1] +
             t->Phi[4][2]*t->Phi[2][1] + t->Phi[4][3]*t->Phi[3][1] + t->Phi[4][4]*t->Phi[4][1] +
             t->Phi[4][5]*t->Phi[5][1];
-    w->term[1][61] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[31] +
-            t->Phi[4][3]*w->S[46] + t->Phi[4][4]*w->S[61] + t->Phi[4][5]*w->S[76];
+    w->term[1][61] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[33] +
+            t->Phi[4][3]*w->S[49] + t->Phi[4][4]*w->S[65] + t->Phi[4][5]*w->S[81];
     w->term[0][62] = t->Phi[4][0]*t->Phi[0][2] + t->Phi[4][1]*t->Phi[1][2] +
             t->Phi[4][2]*t->Phi[2][2] + t->Phi[4][3]*t->Phi[3][2] + t->Phi[4][4]*t->Phi[4][2] +
             t->Phi[4][5]*t->Phi[5][2];
-    w->term[1][62] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[32] +
-            t->Phi[4][3]*w->S[47] + t->Phi[4][4]*w->S[62] + t->Phi[4][5]*w->S[77];
+    w->term[1][62] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[18] + t->Phi[4][2]*w->S[34] +
+            t->Phi[4][3]*w->S[50] + t->Phi[4][4]*w->S[66] + t->Phi[4][5]*w->S[82];
     w->term[0][63] = t->Phi[4][0]*t->Phi[0][3] + t->Phi[4][1]*t->Phi[1][3] +
             t->Phi[4][2]*t->Phi[2][3] + t->Phi[4][3]*t->Phi[3][3] + t->Phi[4][4]*t->Phi[4][3] +
             t->Phi[4][5]*t->Phi[5][3];
-    w->term[1][63] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[18] + t->Phi[4][2]*w->S[33] +
-            t->Phi[4][3]*w->S[48] + t->Phi[4][4]*w->S[63] + t->Phi[4][5]*w->S[78];
+    w->term[1][63] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[19] + t->Phi[4][2]*w->S[35] +
+            t->Phi[4][3]*w->S[51] + t->Phi[4][4]*w->S[67] + t->Phi[4][5]*w->S[83];
     w->term[0][64] = t->Phi[4][0]*t->Phi[0][4] + t->Phi[4][1]*t->Phi[1][4] +
             t->Phi[4][2]*t->Phi[2][4] + t->Phi[4][3]*t->Phi[3][4] + t->Phi[4][4]*t->Phi[4][4] +
             t->Phi[4][5]*t->Phi[5][4];
-    w->term[1][64] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[19] + t->Phi[4][2]*w->S[34] +
-            t->Phi[4][3]*w->S[49] + t->Phi[4][4]*w->S[64] + t->Phi[4][5]*w->S[79];
+    w->term[1][64] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[20] + t->Phi[4][2]*w->S[36] +
+            t->Phi[4][3]*w->S[52] + t->Phi[4][4]*w->S[68] + t->Phi[4][5]*w->S[84];
     w->term[0][65] = t->Phi[4][0]*t->Phi[0][5] + t->Phi[4][1]*t->Phi[1][5] +
             t->Phi[4][2]*t->Phi[2][5] + t->Phi[4][3]*t->Phi[3][5] + t->Phi[4][4]*t->Phi[4][5] +
             t->Phi[4][5]*t->Phi[5][5];
-    w->term[1][65] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[20] + t->Phi[4][2]*w->S[35] +
-            t->Phi[4][3]*w->S[50] + t->Phi[4][4]*w->S[65] + t->Phi[4][5]*w->S[80];
+    w->term[1][65] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[21] + t->Phi[4][2]*w->S[37] +
+            t->Phi[4][3]*w->S[53] + t->Phi[4][4]*w->S[69] + t->Phi[4][5]*w->S[85];
     w->term[0][66] = t->Phi[4][0]*t->Phi[0][7] + t->Phi[4][1]*t->Phi[1][7] +
             t->Phi[4][2]*t->Phi[2][7] + t->Phi[4][3]*t->Phi[3][7] + t->Phi[4][4]*t->Phi[4][7] +
             t->Phi[4][5]*t->Phi[5][7];
-    w->term[1][66] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[21] + t->Phi[4][2]*w->S[36] +
-            t->Phi[4][3]*w->S[51] + t->Phi[4][4]*w->S[66] + t->Phi[4][5]*w->S[81] + t->Phi[4][7];
+    w->term[1][66] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[23] + t->Phi[4][2]*w->S[39] +
+            t->Phi[4][3]*w->S[55] + t->Phi[4][4]*w->S[71] + t->Phi[4][5]*w->S[87] + t->Phi[4][7];
     w->term[0][67] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
             t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
             t->Phi[4][5]*t->Phi[5][8];
-    w->term[1][67] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[22] + t->Phi[4][2]*w->S[37] +
-            t->Phi[4][3]*w->S[52] + t->Phi[4][4]*w->S[67] + t->Phi[4][5]*w->S[82] + t->Phi[4][8];
+    w->term[1][67] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[24] + t->Phi[4][2]*w->S[40] +
+            t->Phi[4][3]*w->S[56] + t->Phi[4][4]*w->S[72] + t->Phi[4][5]*w->S[88] + t->Phi[4][8];
     w->term[0][68] = t->Phi[4][0]*t->Phi[0][9] + t->Phi[4][1]*t->Phi[1][9] +
             t->Phi[4][2]*t->Phi[2][9] + t->Phi[4][3]*t->Phi[3][9] + t->Phi[4][4]*t->Phi[4][9] +
             t->Phi[4][5]*t->Phi[5][9];
-    w->term[1][68] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[23] + t->Phi[4][2]*w->S[38] +
-            t->Phi[4][3]*w->S[53] + t->Phi[4][4]*w->S[68] + t->Phi[4][5]*w->S[83] + t->Phi[4][9];
+    w->term[1][68] = t->Phi[4][0]*w->S[9] + t->Phi[4][1]*w->S[25] + t->Phi[4][2]*w->S[41] +
+            t->Phi[4][3]*w->S[57] + t->Phi[4][4]*w->S[73] + t->Phi[4][5]*w->S[89] + t->Phi[4][9];
     w->term[0][69] = t->Phi[4][0]*t->Phi[0][10] + t->Phi[4][1]*t->Phi[1][10] +
             t->Phi[4][2]*t->Phi[2][10] + t->Phi[4][3]*t->Phi[3][10] + t->Phi[4][4]*t->Phi[4][10] +
             t->Phi[4][5]*t->Phi[5][10] + t->Phi[4][10]*t->Phi[10][10];
-    w->term[1][69] = t->Phi[4][0]*w->S[9] + t->Phi[4][1]*w->S[24] + t->Phi[4][2]*w->S[39] +
-            t->Phi[4][3]*w->S[54] + t->Phi[4][4]*w->S[69] + t->Phi[4][5]*w->S[84] +
-            t->Phi[4][10]*w->S[106];
+    w->term[1][69] = t->Phi[4][0]*w->S[10] + t->Phi[4][1]*w->S[26] + t->Phi[4][2]*w->S[42] +
+            t->Phi[4][3]*w->S[58] + t->Phi[4][4]*w->S[74] + t->Phi[4][5]*w->S[90] +
+            t->Phi[4][10]*w->S[112];
     w->term[0][70] = t->Phi[4][0]*t->Phi[0][11] + t->Phi[4][1]*t->Phi[1][11] +
             t->Phi[4][2]*t->Phi[2][11] + t->Phi[4][3]*t->Phi[3][11] + t->Phi[4][4]*t->Phi[4][11] +
             t->Phi[4][5]*t->Phi[5][11] + t->Phi[4][11]*t->Phi[11][11];
-    w->term[1][70] = t->Phi[4][0]*w->S[10] + t->Phi[4][1]*w->S[25] + t->Phi[4][2]*w->S[40] +
-            t->Phi[4][3]*w->S[55] + t->Phi[4][4]*w->S[70] + t->Phi[4][5]*w->S[85] +
-            t->Phi[4][11]*w->S[107];
+    w->term[1][70] = t->Phi[4][0]*w->S[11] + t->Phi[4][1]*w->S[27] + t->Phi[4][2]*w->S[43] +
+            t->Phi[4][3]*w->S[59] + t->Phi[4][4]*w->S[75] + t->Phi[4][5]*w->S[91] +
+            t->Phi[4][11]*w->S[113];
     w->term[0][71] = t->Phi[4][0]*t->Phi[0][12] + t->Phi[4][1]*t->Phi[1][12] +
             t->Phi[4][2]*t->Phi[2][12] + t->Phi[4][3]*t->Phi[3][12] + t->Phi[4][4]*t->Phi[4][12] +
             t->Phi[4][5]*t->Phi[5][12] + t->Phi[4][12]*t->Phi[12][12];
-    w->term[1][71] = t->Phi[4][0]*w->S[11] + t->Phi[4][1]*w->S[26] + t->Phi[4][2]*w->S[41] +
-            t->Phi[4][3]*w->S[56] + t->Phi[4][4]*w->S[71] + t->Phi[4][5]*w->S[86] +
-            t->Phi[4][12]*w->S[108];
+    w->term[1][71] = t->Phi[4][0]*w->S[12] + t->Phi[4][1]*w->S[28] + t->Phi[4][2]*w->S[44] +
+            t->Phi[4][3]*w->S[60] + t->Phi[4][4]*w->S[76] + t->Phi[4][5]*w->S[92] +
+            t->Phi[4][12]*w->S[114];
     w->term[0][72] = t->Phi[4][0]*t->Phi[0][13] + t->Phi[4][1]*t->Phi[1][13] +
             t->Phi[4][2]*t->Phi[2][13] + t->Phi[4][3]*t->Phi[3][13] + t->Phi[4][4]*t->Phi[4][13] +
             t->Phi[4][5]*t->Phi[5][13] + t->Phi[4][13]*t->Phi[13][13];
-    w->term[1][72] = t->Phi[4][0]*w->S[12] + t->Phi[4][1]*w->S[27] + t->Phi[4][2]*w->S[42] +
-            t->Phi[4][3]*w->S[57] + t->Phi[4][4]*w->S[72] + t->Phi[4][5]*w->S[87] +
-            t->Phi[4][13]*w->S[109];
+    w->term[1][72] = t->Phi[4][0]*w->S[13] + t->Phi[4][1]*w->S[29] + t->Phi[4][2]*w->S[45] +
+            t->Phi[4][3]*w->S[61] + t->Phi[4][4]*w->S[77] + t->Phi[4][5]*w->S[93] +
+            t->Phi[4][13]*w->S[115];
     w->term[0][73] = t->Phi[4][0]*t->Phi[0][14] + t->Phi[4][1]*t->Phi[1][14] +
             t->Phi[4][2]*t->Phi[2][14] + t->Phi[4][3]*t->Phi[3][14] + t->Phi[4][4]*t->Phi[4][14] +
             t->Phi[4][5]*t->Phi[5][14] + t->Phi[4][14]*t->Phi[14][14];
-    w->term[1][73] = t->Phi[4][0]*w->S[13] + t->Phi[4][1]*w->S[28] + t->Phi[4][2]*w->S[43] +
-            t->Phi[4][3]*w->S[58] + t->Phi[4][4]*w->S[73] + t->Phi[4][5]*w->S[88] +
-            t->Phi[4][14]*w->S[110];
+    w->term[1][73] = t->Phi[4][0]*w->S[14] + t->Phi[4][1]*w->S[30] + t->Phi[4][2]*w->S[46] +
+            t->Phi[4][3]*w->S[62] + t->Phi[4][4]*w->S[78] + t->Phi[4][5]*w->S[94] +
+            t->Phi[4][14]*w->S[116];
     w->term[0][74] = t->Phi[4][0]*t->Phi[0][15] + t->Phi[4][1]*t->Phi[1][15] +
             t->Phi[4][2]*t->Phi[2][15] + t->Phi[4][3]*t->Phi[3][15] + t->Phi[4][4]*t->Phi[4][15] +
             t->Phi[4][5]*t->Phi[5][15] + t->Phi[4][15]*t->Phi[15][15];
-    w->term[1][74] = t->Phi[4][0]*w->S[14] + t->Phi[4][1]*w->S[29] + t->Phi[4][2]*w->S[44] +
-            t->Phi[4][3]*w->S[59] + t->Phi[4][4]*w->S[74] + t->Phi[4][5]*w->S[89] +
-            t->Phi[4][15]*w->S[111];
+    w->term[1][74] = t->Phi[4][0]*w->S[15] + t->Phi[4][1]*w->S[31] + t->Phi[4][2]*w->S[47] +
+            t->Phi[4][3]*w->S[63] + t->Phi[4][4]*w->S[79] + t->Phi[4][5]*w->S[95] +
+            t->Phi[4][15]*w->S[117];
     w->term[0][75] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
             t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
             t->Phi[5][5]*t->Phi[5][0];
-    w->term[1][75] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[30] +
-            t->Phi[5][3]*w->S[45] + t->Phi[5][4]*w->S[60] + t->Phi[5][5]*w->S[75];
+    w->term[1][75] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[32] +
+            t->Phi[5][3]*w->S[48] + t->Phi[5][4]*w->S[64] + t->Phi[5][5]*w->S[80];
     w->term[0][76] = t->Phi[5][0]*t->Phi[0][1] + t->Phi[5][1]*t->Phi[1][1] +
             t->Phi[5][2]*t->Phi[2][1] + t->Phi[5][3]*t->Phi[3][1] + t->Phi[5][4]*t->Phi[4][1] +
             t->Phi[5][5]*t->Phi[5][1];
-    w->term[1][76] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[31] +
-            t->Phi[5][3]*w->S[46] + t->Phi[5][4]*w->S[61] + t->Phi[5][5]*w->S[76];
+    w->term[1][76] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[33] +
+            t->Phi[5][3]*w->S[49] + t->Phi[5][4]*w->S[65] + t->Phi[5][5]*w->S[81];
     w->term[0][77] = t->Phi[5][0]*t->Phi[0][2] + t->Phi[5][1]*t->Phi[1][2] +
             t->Phi[5][2]*t->Phi[2][2] + t->Phi[5][3]*t->Phi[3][2] + t->Phi[5][4]*t->Phi[4][2] +
             t->Phi[5][5]*t->Phi[5][2];
-    w->term[1][77] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[32] +
-            t->Phi[5][3]*w->S[47] + t->Phi[5][4]*w->S[62] + t->Phi[5][5]*w->S[77];
+    w->term[1][77] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[18] + t->Phi[5][2]*w->S[34] +
+            t->Phi[5][3]*w->S[50] + t->Phi[5][4]*w->S[66] + t->Phi[5][5]*w->S[82];
     w->term[0][78] = t->Phi[5][0]*t->Phi[0][3] + t->Phi[5][1]*t->Phi[1][3] +
             t->Phi[5][2]*t->Phi[2][3] + t->Phi[5][3]*t->Phi[3][3] + t->Phi[5][4]*t->Phi[4][3] +
             t->Phi[5][5]*t->Phi[5][3];
-    w->term[1][78] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[18] + t->Phi[5][2]*w->S[33] +
-            t->Phi[5][3]*w->S[48] + t->Phi[5][4]*w->S[63] + t->Phi[5][5]*w->S[78];
+    w->term[1][78] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[19] + t->Phi[5][2]*w->S[35] +
+            t->Phi[5][3]*w->S[51] + t->Phi[5][4]*w->S[67] + t->Phi[5][5]*w->S[83];
     w->term[0][79] = t->Phi[5][0]*t->Phi[0][4] + t->Phi[5][1]*t->Phi[1][4] +
             t->Phi[5][2]*t->Phi[2][4] + t->Phi[5][3]*t->Phi[3][4] + t->Phi[5][4]*t->Phi[4][4] +
             t->Phi[5][5]*t->Phi[5][4];
-    w->term[1][79] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[19] + t->Phi[5][2]*w->S[34] +
-            t->Phi[5][3]*w->S[49] + t->Phi[5][4]*w->S[64] + t->Phi[5][5]*w->S[79];
+    w->term[1][79] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[20] + t->Phi[5][2]*w->S[36] +
+            t->Phi[5][3]*w->S[52] + t->Phi[5][4]*w->S[68] + t->Phi[5][5]*w->S[84];
     w->term[0][80] = t->Phi[5][0]*t->Phi[0][5] + t->Phi[5][1]*t->Phi[1][5] +
             t->Phi[5][2]*t->Phi[2][5] + t->Phi[5][3]*t->Phi[3][5] + t->Phi[5][4]*t->Phi[4][5] +
             t->Phi[5][5]*t->Phi[5][5];
-    w->term[1][80] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[20] + t->Phi[5][2]*w->S[35] +
-            t->Phi[5][3]*w->S[50] + t->Phi[5][4]*w->S[65] + t->Phi[5][5]*w->S[80];
+    w->term[1][80] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[21] + t->Phi[5][2]*w->S[37] +
+            t->Phi[5][3]*w->S[53] + t->Phi[5][4]*w->S[69] + t->Phi[5][5]*w->S[85];
     w->term[0][81] = t->Phi[5][0]*t->Phi[0][7] + t->Phi[5][1]*t->Phi[1][7] +
             t->Phi[5][2]*t->Phi[2][7] + t->Phi[5][3]*t->Phi[3][7] + t->Phi[5][4]*t->Phi[4][7] +
             t->Phi[5][5]*t->Phi[5][7];
-    w->term[1][81] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[21] + t->Phi[5][2]*w->S[36] +
-            t->Phi[5][3]*w->S[51] + t->Phi[5][4]*w->S[66] + t->Phi[5][5]*w->S[81] + t->Phi[5][7];
+    w->term[1][81] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[23] + t->Phi[5][2]*w->S[39] +
+            t->Phi[5][3]*w->S[55] + t->Phi[5][4]*w->S[71] + t->Phi[5][5]*w->S[87] + t->Phi[5][7];
     w->term[0][82] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
             t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
             t->Phi[5][5]*t->Phi[5][8];
-    w->term[1][82] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[22] + t->Phi[5][2]*w->S[37] +
-            t->Phi[5][3]*w->S[52] + t->Phi[5][4]*w->S[67] + t->Phi[5][5]*w->S[82] + t->Phi[5][8];
+    w->term[1][82] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[24] + t->Phi[5][2]*w->S[40] +
+            t->Phi[5][3]*w->S[56] + t->Phi[5][4]*w->S[72] + t->Phi[5][5]*w->S[88] + t->Phi[5][8];
     w->term[0][83] = t->Phi[5][0]*t->Phi[0][9] + t->Phi[5][1]*t->Phi[1][9] +
             t->Phi[5][2]*t->Phi[2][9] + t->Phi[5][3]*t->Phi[3][9] + t->Phi[5][4]*t->Phi[4][9] +
             t->Phi[5][5]*t->Phi[5][9];
-    w->term[1][83] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[23] + t->Phi[5][2]*w->S[38] +
-            t->Phi[5][3]*w->S[53] + t->Phi[5][4]*w->S[68] + t->Phi[5][5]*w->S[83] + t->Phi[5][9];
+    w->term[1][83] = t->Phi[5][0]*w->S[9] + t->Phi[5][1]*w->S[25] + t->Phi[5][2]*w->S[41] +
+            t->Phi[5][3]*w->S[57] + t->Phi[5][4]*w->S[73] + t->Phi[5][5]*w->S[89] + t->Phi[5][9];
     w->term[0][84] = t->Phi[5][0]*t->Phi[0][10] + t->Phi[5][1]*t->Phi[1][10] +
             t->Phi[5][2]*t->Phi[2][10] + t->Phi[5][3]*t->Phi[3][10] + t->Phi[5][4]*t->Phi[4][10] +
             t->Phi[5][5]*t->Phi[5][10] + t->Phi[5][10]*t->Phi[10][10];
-    w->term[1][84] = t->Phi[5][0]*w->S[9] + t->Phi[5][1]*w->S[24] + t->Phi[5][2]*w->S[39] +
-            t->Phi[5][3]*w->S[54] + t->Phi[5][4]*w->S[69] + t->Phi[5][5]*w->S[84] +
-            t->Phi[5][10]*w->S[106];
+    w->term[1][84] = t->Phi[5][0]*w->S[10] + t->Phi[5][1]*w->S[26] + t->Phi[5][2]*w->S[42] +
+            t->Phi[5][3]*w->S[58] + t->Phi[5][4]*w->S[74] + t->Phi[5][5]*w->S[90] +
+            t->Phi[5][10]*w->S[112];
     w->term[0][85] = t->Phi[5][0]*t->Phi[0][11] + t->Phi[5][1]*t->Phi[1][11] +
             t->Phi[5][2]*t->Phi[2][11] + t->Phi[5][3]*t->Phi[3][11] + t->Phi[5][4]*t->Phi[4][11] +
             t->Phi[5][5]*t->Phi[5][11] + t->Phi[5][11]*t->Phi[11][11];
-    w->term[1][85] = t->Phi[5][0]*w->S[10] + t->Phi[5][1]*w->S[25] + t->Phi[5][2]*w->S[40] +
-            t->Phi[5][3]*w->S[55] + t->Phi[5][4]*w->S[70] + t->Phi[5][5]*w->S[85] +
-            t->Phi[5][11]*w->S[107];
+    w->term[1][85] = t->Phi[5][0]*w->S[11] + t->Phi[5][1]*w->S[27] + t->Phi[5][2]*w->S[43] +
+            t->Phi[5][3]*w->S[59] + t->Phi[5][4]*w->S[75] + t->Phi[5][5]*w->S[91] +
+            t->Phi[5][11]*w->S[113];
     w->term[0][86] = t->Phi[5][0]*t->Phi[0][12] + t->Phi[5][1]*t->Phi[1][12] +
             t->Phi[5][2]*t->Phi[2][12] + t->Phi[5][3]*t->Phi[3][12] + t->Phi[5][4]*t->Phi[4][12] +
             t->Phi[5][5]*t->Phi[5][12] + t->Phi[5][12]*t->Phi[12][12];
-    w->term[1][86] = t->Phi[5][0]*w->S[11] + t->Phi[5][1]*w->S[26] + t->Phi[5][2]*w->S[41] +
-            t->Phi[5][3]*w->S[56] + t->Phi[5][4]*w->S[71] + t->Phi[5][5]*w->S[86] +
-            t->Phi[5][12]*w->S[108];
+    w->term[1][86] = t->Phi[5][0]*w->S[12] + t->Phi[5][1]*w->S[28] + t->Phi[5][2]*w->S[44] +
+            t->Phi[5][3]*w->S[60] + t->Phi[5][4]*w->S[76] + t->Phi[5][5]*w->S[92] +
+            t->Phi[5][12]*w->S[114];
     w->term[0][87] = t->Phi[5][0]*t->Phi[0][13] + t->Phi[5][1]*t->Phi[1][13] +
             t->Phi[5][2]*t->Phi[2][13] + t->Phi[5][3]*t->Phi[3][13] + t->Phi[5][4]*t->Phi[4][13] +
             t->Phi[5][5]*t->Phi[5][13] + t->Phi[5][13]*t->Phi[13][13];
-    w->term[1][87] = t->Phi[5][0]*w->S[12] + t->Phi[5][1]*w->S[27] + t->Phi[5][2]*w->S[42] +
-            t->Phi[5][3]*w->S[57] + t->Phi[5][4]*w->S[72] + t->Phi[5][5]*w->S[87] +
-            t->Phi[5][13]*w->S[109];
+    w->term[1][87] = t->Phi[5][0]*w->S[13] + t->Phi[5][1]*w->S[29] + t->Phi[5][2]*w->S[45] +
+            t->Phi[5][3]*w->S[61] + t->Phi[5][4]*w->S[77] + t->Phi[5][5]*w->S[93] +
+            t->Phi[5][13]*w->S[115];
     w->term[0][88] = t->Phi[5][0]*t->Phi[0][14] + t->Phi[5][1]*t->Phi[1][14] +
             t->Phi[5][2]*t->Phi[2][14] + t->Phi[5][3]*t->Phi[3][14] + t->Phi[5][4]*t->Phi[4][14] +
             t->Phi[5][5]*t->Phi[5][14] + t->Phi[5][14]*t->Phi[14][14];
-    w->term[1][88] = t->Phi[5][0]*w->S[13] + t->Phi[5][1]*w->S[28] + t->Phi[5][2]*w->S[43] +
-            t->Phi[5][3]*w->S[58] + t->Phi[5][4]*w->S[73] + t->Phi[5][5]*w->S[88] +
-            t->Phi[5][14]*w->S[110];
+    w->term[1][88] = t->Phi[5][0]*w->S[14] + t->Phi[5][1]*w->S[30] + t->Phi[5][2]*w->S[46] +
+            t->Phi[5][3]*w->S[62] + t->Phi[5][4]*w->S[78] + t->Phi[5][5]*w->S[94] +
+            t->Phi[5][14]*w->S[116];
     w->term[0][89] = t->Phi[5][0]*t->Phi[0][15] + t->Phi[5][1]*t->Phi[1][15] +
             t->Phi[5][2]*t->Phi[2][15] + t->Phi[5][3]*t->Phi[3][15] + t->Phi[5][4]*t->Phi[4][15] +
             t->Phi[5][5]*t->Phi[5][15] + t->Phi[5][15]*t->Phi[15][15];
-    w->term[1][89] = t->Phi[5][0]*w->S[14] + t->Phi[5][1]*w->S[29] + t->Phi[5][2]*w->S[44] +
-            t->Phi[5][3]*w->S[59] + t->Phi[5][4]*w->S[74] + t->Phi[5][5]*w->S[89] +
-            t->Phi[5][15]*w->S[111];
+    w->term[1][89] = t->Phi[5][0]*w->S[15] + t->Phi[5][1]*w->S[31] + t->Phi[5][2]*w->S[47] +
+            t->Phi[5][3]*w->S[63] + t->Phi[5][4]*w->S[79] + t->Phi[5][5]*w->S[95] +
+            t->Phi[5][15]*w->S[117];
     w->term[0][90] = t->Phi[6][0]*t->Phi[0][0] + t->Phi[6][1]*t->Phi[1][0] +
             t->Phi[6][2]*t->Phi[2][0] + t->Phi[6][3]*t->Phi[3][0] + t->Phi[6][4]*t->Phi[4][0] +
             t->Phi[6][5]*t->Phi[5][0] + t->Phi[6][6]*t->Phi[6][0];
-    w->term[1][90] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[15] + t->Phi[6][2]*w->S[30] +
-            t->Phi[6][3]*w->S[45] + t->Phi[6][4]*w->S[60] + t->Phi[6][5]*w->S[75] +
-            t->Phi[6][6]*w->S[90];
+    w->term[1][90] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[16] + t->Phi[6][2]*w->S[32] +
+            t->Phi[6][3]*w->S[48] + t->Phi[6][4]*w->S[64] + t->Phi[6][5]*w->S[80] +
+            t->Phi[6][6]*w->S[96];
     w->term[0][91] = t->Phi[6][0]*t->Phi[0][1] + t->Phi[6][1]*t->Phi[1][1] +
             t->Phi[6][2]*t->Phi[2][1] + t->Phi[6][3]*t->Phi[3][1] + t->Phi[6][4]*t->Phi[4][1] +
             t->Phi[6][5]*t->Phi[5][1] + t->Phi[6][6]*t->Phi[6][1];
-    w->term[1][91] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[16] + t->Phi[6][2]*w->S[31] +
-            t->Phi[6][3]*w->S[46] + t->Phi[6][4]*w->S[61] + t->Phi[6][5]*w->S[76] +
-            t->Phi[6][6]*w->S[91];
+    w->term[1][91] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[17] + t->Phi[6][2]*w->S[33] +
+            t->Phi[6][3]*w->S[49] + t->Phi[6][4]*w->S[65] + t->Phi[6][5]*w->S[81] +
+            t->Phi[6][6]*w->S[97];
     w->term[0][92] = t->Phi[6][0]*t->Phi[0][2] + t->Phi[6][1]*t->Phi[1][2] +
             t->Phi[6][2]*t->Phi[2][2] + t->Phi[6][3]*t->Phi[3][2] + t->Phi[6][4]*t->Phi[4][2] +
             t->Phi[6][5]*t->Phi[5][2] + t->Phi[6][6]*t->Phi[6][2];
-    w->term[1][92] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[17] + t->Phi[6][2]*w->S[32] +
-            t->Phi[6][3]*w->S[47] + t->Phi[6][4]*w->S[62] + t->Phi[6][5]*w->S[77] +
-            t->Phi[6][6]*w->S[92];
+    w->term[1][92] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[18] + t->Phi[6][2]*w->S[34] +
+            t->Phi[6][3]*w->S[50] + t->Phi[6][4]*w->S[66] + t->Phi[6][5]*w->S[82] +
+            t->Phi[6][6]*w->S[98];
     w->term[0][93] = t->Phi[6][0]*t->Phi[0][3] + t->Phi[6][1]*t->Phi[1][3] +
             t->Phi[6][2]*t->Phi[2][3] + t->Phi[6][3]*t->Phi[3][3] + t->Phi[6][4]*t->Phi[4][3] +
             t->Phi[6][5]*t->Phi[5][3] + t->Phi[6][6]*t->Phi[6][3];
-    w->term[1][93] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[18] + t->Phi[6][2]*w->S[33] +
-            t->Phi[6][3]*w->S[48] + t->Phi[6][4]*w->S[63] + t->Phi[6][5]*w->S[78] +
-            t->Phi[6][6]*w->S[93];
+    w->term[1][93] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[19] + t->Phi[6][2]*w->S[35] +
+            t->Phi[6][3]*w->S[51] + t->Phi[6][4]*w->S[67] + t->Phi[6][5]*w->S[83] +
+            t->Phi[6][6]*w->S[99];
     w->term[0][94] = t->Phi[6][0]*t->Phi[0][4] + t->Phi[6][1]*t->Phi[1][4] +
             t->Phi[6][2]*t->Phi[2][4] + t->Phi[6][3]*t->Phi[3][4] + t->Phi[6][4]*t->Phi[4][4] +
             t->Phi[6][5]*t->Phi[5][4] + t->Phi[6][6]*t->Phi[6][4];
-    w->term[1][94] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[19] + t->Phi[6][2]*w->S[34] +
-            t->Phi[6][3]*w->S[49] + t->Phi[6][4]*w->S[64] + t->Phi[6][5]*w->S[79] +
-            t->Phi[6][6]*w->S[94];
+    w->term[1][94] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[20] + t->Phi[6][2]*w->S[36] +
+            t->Phi[6][3]*w->S[52] + t->Phi[6][4]*w->S[68] + t->Phi[6][5]*w->S[84] +
+            t->Phi[6][6]*w->S[100];
     w->term[0][95] = t->Phi[6][0]*t->Phi[0][5] + t->Phi[6][1]*t->Phi[1][5] +
             t->Phi[6][2]*t->Phi[2][5] + t->Phi[6][3]*t->Phi[3][5] + t->Phi[6][4]*t->Phi[4][5] +
             t->Phi[6][5]*t->Phi[5][5] + t->Phi[6][6]*t->Phi[6][5];
-    w->term[1][95] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[20] + t->Phi[6][2]*w->S[35] +
-            t->Phi[6][3]*w->S[50] + t->Phi[6][4]*w->S[65] + t->Phi[6][5]*w->S[80] +
-            t->Phi[6][6]*w->S[95];
+    w->term[1][95] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[21] + t->Phi[6][2]*w->S[37] +
+            t->Phi[6][3]*w->S[53] + t->Phi[6][4]*w->S[69] + t->Phi[6][5]*w->S[85] +
+            t->Phi[6][6]*w->S[101];
     w->term[0][96] = t->Phi[6][6]*t->Phi[6][6];
-    w->term[1][96] = t->Phi[6][6]*w->S[96];
+    w->term[1][96] = t->Phi[6][6]*w->S[102];
     w->term[0][97] = t->Phi[6][0]*t->Phi[0][7] + t->Phi[6][1]*t->Phi[1][7] +
             t->Phi[6][2]*t->Phi[2][7] + t->Phi[6][3]*t->Phi[3][7] + t->Phi[6][4]*t->Phi[4][7] +
             t->Phi[6][5]*t->Phi[5][7] + t->Phi[6][6]*t->Phi[6][7];
-    w->term[1][97] = t->Phi[6][0]*w->S[6] + t->Phi[6][1]*w->S[21] + t->Phi[6][2]*w->S[36] +
-            t->Phi[6][3]*w->S[51] + t->Phi[6][4]*w->S[66] + t->Phi[6][5]*w->S[81] +
-            t->Phi[6][6]*w->S[97] + t->Phi[6][7];
+    w->term[1][97] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[23] + t->Phi[6][2]*w->S[39] +
+            t->Phi[6][3]*w->S[55] + t->Phi[6][4]*w->S[71] + t->Phi[6][5]*w->S[87] +
+            t->Phi[6][6]*w->S[103] + t->Phi[6][7];
     w->term[0][98] = t->Phi[6][0]*t->Phi[0][8] + t->Phi[6][1]*t->Phi[1][8] +
             t->Phi[6][2]*t->Phi[2][8] + t->Phi[6][3]*t->Phi[3][8] + t->Phi[6][4]*t->Phi[4][8] +
             t->Phi[6][5]*t->Phi[5][8] + t->Phi[6][6]*t->Phi[6][8];
-    w->term[1][98] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[22] + t->Phi[6][2]*w->S[37] +
-            t->Phi[6][3]*w->S[52] + t->Phi[6][4]*w->S[67] + t->Phi[6][5]*w->S[82] +
-            t->Phi[6][6]*w->S[98] + t->Phi[6][8];
+    w->term[1][98] = t->Phi[6][0]*w->S[8] + t->Phi[6][1]*w->S[24] + t->Phi[6][2]*w->S[40] +
+            t->Phi[6][3]*w->S[56] + t->Phi[6][4]*w->S[72] + t->Phi[6][5]*w->S[88] +
+            t->Phi[6][6]*w->S[104] + t->Phi[6][8];
     w->term[0][99] = t->Phi[6][0]*t->Phi[0][9] + t->Phi[6][1]*t->Phi[1][9] +
             t->Phi[6][2]*t->Phi[2][9] + t->Phi[6][3]*t->Phi[3][9] + t->Phi[6][4]*t->Phi[4][9] +
             t->Phi[6][5]*t->Phi[5][9] + t->Phi[6][6]*t->Phi[6][9];
-    w->term[1][99] = t->Phi[6][0]*w->S[8] + t->Phi[6][1]*w->S[23] + t->Phi[6][2]*w->S[38] +
-            t->Phi[6][3]*w->S[53] + t->Phi[6][4]*w->S[68] + t->Phi[6][5]*w->S[83] +
-            t->Phi[6][6]*w->S[99] + t->Phi[6][9];
+    w->term[1][99] = t->Phi[6][0]*w->S[9] + t->Phi[6][1]*w->S[25] + t->Phi[6][2]*w->S[41] +
+            t->Phi[6][3]*w->S[57] + t->Phi[6][4]*w->S[73] + t->Phi[6][5]*w->S[89] +
+            t->Phi[6][6]*w->S[105] + t->Phi[6][9];
     w->term[0][100] = t->Phi[6][0]*t->Phi[0][10] + t->Phi[6][1]*t->Phi[1][10] +
             t->Phi[6][2]*t->Phi[2][10] + t->Phi[6][3]*t->Phi[3][10] + t->Phi[6][4]*t->Phi[4][10] +
             t->Phi[6][5]*t->Phi[5][10] + t->Phi[6][6]*t->Phi[6][10] + t->Phi[6][10]*t->Phi[10][10];
-    w->term[1][100] = t->Phi[6][0]*w->S[9] + t->Phi[6][1]*w->S[24] + t->Phi[6][2]*w->S[39] +
-            t->Phi[6][3]*w->S[54] + t->Phi[6][4]*w->S[69] + t->Phi[6][5]*w->S[84] +
-            t->Phi[6][6]*w->S[100] + t->Phi[6][10]*w->S[106];
+    w->term[1][100] = t->Phi[6][0]*w->S[10] + t->Phi[6][1]*w->S[26] + t->Phi[6][2]*w->S[42] +
+            t->Phi[6][3]*w->S[58] + t->Phi[6][4]*w->S[74] + t->Phi[6][5]*w->S[90] +
+            t->Phi[6][6]*w->S[106] + t->Phi[6][10]*w->S[112];
     w->term[0][101] = t->Phi[6][0]*t->Phi[0][11] + t->Phi[6][1]*t->Phi[1][11] +
             t->Phi[6][2]*t->Phi[2][11] + t->Phi[6][3]*t->Phi[3][11] + t->Phi[6][4]*t->Phi[4][11] +
             t->Phi[6][5]*t->Phi[5][11] + t->Phi[6][6]*t->Phi[6][11] + t->Phi[6][11]*t->Phi[11][11];
-    w->term[1][101] = t->Phi[6][0]*w->S[10] + t->Phi[6][1]*w->S[25] + t->Phi[6][2]*w->S[40] +
-            t->Phi[6][3]*w->S[55] + t->Phi[6][4]*w->S[70] + t->Phi[6][5]*w->S[85] +
-            t->Phi[6][6]*w->S[101] + t->Phi[6][11]*w->S[107];
+    w->term[1][101] = t->Phi[6][0]*w->S[11] + t->Phi[6][1]*w->S[27] + t->Phi[6][2]*w->S[43] +
+            t->Phi[6][3]*w->S[59] + t->Phi[6][4]*w->S[75] + t->Phi[6][5]*w->S[91] +
+            t->Phi[6][6]*w->S[107] + t->Phi[6][11]*w->S[113];
     w->term[0][102] = t->Phi[6][0]*t->Phi[0][12] + t->Phi[6][1]*t->Phi[1][12] +
             t->Phi[6][2]*t->Phi[2][12] + t->Phi[6][3]*t->Phi[3][12] + t->Phi[6][4]*t->Phi[4][12] +
             t->Phi[6][5]*t->Phi[5][12] + t->Phi[6][6]*t->Phi[6][12] + t->Phi[6][12]*t->Phi[12][12];
-    w->term[1][102] = t->Phi[6][0]*w->S[11] + t->Phi[6][1]*w->S[26] + t->Phi[6][2]*w->S[41] +
-            t->Phi[6][3]*w->S[56] + t->Phi[6][4]*w->S[71] + t->Phi[6][5]*w->S[86] +
-            t->Phi[6][6]*w->S[102] + t->Phi[6][12]*w->S[108];
+    w->term[1][102] = t->Phi[6][0]*w->S[12] + t->Phi[6][1]*w->S[28] + t->Phi[6][2]*w->S[44] +
+            t->Phi[6][3]*w->S[60] + t->Phi[6][4]*w->S[76] + t->Phi[6][5]*w->S[92] +
+            t->Phi[6][6]*w->S[108] + t->Phi[6][12]*w->S[114];
     w->term[0][103] = t->Phi[6][0]*t->Phi[0][13] + t->Phi[6][1]*t->Phi[1][13] +
             t->Phi[6][2]*t->Phi[2][13] + t->Phi[6][3]*t->Phi[3][13] + t->Phi[6][4]*t->Phi[4][13] +
             t->Phi[6][5]*t->Phi[5][13] + t->Phi[6][6]*t->Phi[6][13] + t->Phi[6][13]*t->Phi[13][13];
-    w->term[1][103] = t->Phi[6][0]*w->S[12] + t->Phi[6][1]*w->S[27] + t->Phi[6][2]*w->S[42] +
-            t->Phi[6][3]*w->S[57] + t->Phi[6][4]*w->S[72] + t->Phi[6][5]*w->S[87] +
-            t->Phi[6][6]*w->S[103] + t->Phi[6][13]*w->S[109];
+    w->term[1][103] = t->Phi[6][0]*w->S[13] + t->Phi[6][1]*w->S[29] + t->Phi[6][2]*w->S[45] +
+            t->Phi[6][3]*w->S[61] + t->Phi[6][4]*w->S[77] + t->Phi[6][5]*w->S[93] +
+            t->Phi[6][6]*w->S[109] + t->Phi[6][13]*w->S[115];
     w->term[0][104] = t->Phi[6][0]*t->Phi[0][14] + t->Phi[6][1]*t->Phi[1][14] +
             t->Phi[6][2]*t->Phi[2][14] + t->Phi[6][3]*t->Phi[3][14] + t->Phi[6][4]*t->Phi[4][14] +
             t->Phi[6][5]*t->Phi[5][14] + t->Phi[6][6]*t->Phi[6][14] + t->Phi[6][14]*t->Phi[14][14];
-    w->term[1][104] = t->Phi[6][0]*w->S[13] + t->Phi[6][1]*w->S[28] + t->Phi[6][2]*w->S[43] +
-            t->Phi[6][3]*w->S[58] + t->Phi[6][4]*w->S[73] + t->Phi[6][5]*w->S[88] +
-            t->Phi[6][6]*w->S[104] + t->Phi[6][14]*w->S[110];
+    w->term[1][104] = t->Phi[6][0]*w->S[14] + t->Phi[6][1]*w->S[30] + t->Phi[6][2]*w->S[46] +
+            t->Phi[6][3]*w->S[62] + t->Phi[6][4]*w->S[78] + t->Phi[6][5]*w->S[94] +
+            t->Phi[6][6]*w->S[110] + t->Phi[6][14]*w->S[116];
     w->term[0][105] = t->Phi[6][0]*t->Phi[0][15] + t->Phi[6][1]*t->Phi[1][15] +
             t->Phi[6][2]*t->Phi[2][15] + t->Phi[6][3]*t->Phi[3][15] + t->Phi[6][4]*t->Phi[4][15] +
             t->Phi[6][5]*t->Phi[5][15] + t->Phi[6][6]*t->Phi[6][15] + t->Phi[6][15]*t->Phi[15][15];
-    w->term[1][105] = t->Phi[6][0]*w->S[14] + t->Phi[6][1]*w->S[29] + t->Phi[6][2]*w->S[44] +
-            t->Phi[6][3]*w->S[59] + t->Phi[6][4]*w->S[74] + t->Phi[6][5]*w->S[89] +
-            t->Phi[6][6]*w->S[105] + t->Phi[6][15]*w->S[111];
+    w->term[1][105] = t->Phi[6][0]*w->S[15] + t->Phi[6][1]*w->S[31] + t->Phi[6][2]*w->S[47] +
+            t->Phi[6][3]*w->S[63] + t->Phi[6][4]*w->S[79] + t->Phi[6][5]*w->S[95] +
+            t->Phi[6][6]*w->S[111] + t->Phi[6][15]*w->S[117];
     w->term[0][106] = t->Phi[10][10]*t->Phi[10][10];
-    w->term[1][106] = t->Phi[10][10]*w->S[106];
+    w->term[1][106] = t->Phi[10][10]*w->S[112];
     w->term[0][107] = t->Phi[11][11]*t->Phi[11][11];
-    w->term[1][107] = t->Phi[11][11]*w->S[107];
+    w->term[1][107] = t->Phi[11][11]*w->S[113];
     w->term[0][108] = t->Phi[12][12]*t->Phi[12][12];
-    w->term[1][108] = t->Phi[12][12]*w->S[108];
+    w->term[1][108] = t->Phi[12][12]*w->S[114];
     w->term[0][109] = t->Phi[13][13]*t->Phi[13][13];
-    w->term[1][109] = t->Phi[13][13]*w->S[109];
+    w->term[1][109] = t->Phi[13][13]*w->S[115];
     w->term[0][110] = t->Phi[14][14]*t->Phi[14][14];
-    w->term[1][110] = t->Phi[14][14]*w->S[110];
+    w->term[1][110] = t->Phi[14][14]*w->S[116];
     w->term[0][111] = t->Phi[15][15]*t->Phi[15][15];
-    w->term[1][111] = t->Phi[15][15]*w->S[111];
+    w->term[1][111] = t->Phi[15][15]*w->S[117];
     t->Phi[0][0] = t->Phi[0][0] + t->Phi[0][0] + w->term[0][0];
     w->S[0] = w->S[0] + half*w->term[1][0];
     t->Phi[0][1] = t->Phi[0][1] + t->Phi[0][1] + w->term[0][1];
@@ -2319,217 +1657,217 @@ NED_INERTIAL16_BLOCK void doubling(ned_inertial16_transition *restrict t,
     t->Phi[0][5] = t->Phi[0][5] + t->Phi[0][5] + w->term[0][5];
     w->S[5] = w->S[5] + half*w->term[1][5];
     t->Phi[0][7] = t->Phi[0][7] + t->Phi[0][7] + w->term[0][6];
-    w->S[6] = w->S[6] + half*w->term[1][6];
+    w->S[7] = w->S[7] + half*w->term[1][6];
     t->Phi[0][8] = t->Phi[0][8] + t->Phi[0][8] + w->term[0][7];
-    w->S[7] = w->S[7] + half*w->term[1][7];
+    w->S[8] = w->S[8] + half*w->term[1][7];
     t->Phi[0][9] = t->Phi[0][9] + t->Phi[0][9] + w->term[0][8];
-    w->S[8] = w->S[8] + half*w->term[1][8];
+    w->S[9] = w->S[9] + half*w->term[1][8];
     t->Phi[0][10] = t->Phi[0][10] + t->Phi[0][10] + w->term[0][9];
-    w->S[9] = w->S[9] + half*w->term[1][9];
+    w->S[10] = w->S[10] + half*w->term[1][9];
     t->Phi[0][11] = t->Phi[0][11] + t->Phi[0][11] + w->term[0][10];
-    w->S[10] = w->S[10] + half*w->term[1][10];
+    w->S[11] = w->S[11] + half*w->term[1][10];
     t->Phi[0][12] = t->Phi[0][12] + t->Phi[0][12] + w->term[0][11];
-    w->S[11] = w->S[11] + half*w->term[1][11];
+    w->S[12] = w->S[12] + half*w->term[1][11];
     t->Phi[0][13] = t->Phi[0][13] + t->Phi[0][13] + w->term[0][12];
-    w->S[12] = w->S[12] + half*w->term[1][12];
+    w->S[13] = w->S[13] + half*w->term[1][12];
     t->Phi[0][14] = t->Phi[0][14] + t->Phi[0][14] + w->term[0][13];
-    w->S[13] = w->S[13] + half*w->term[1][13];
+    w->S[14] = w->S[14] + half*w->term[1][13];
     t->Phi[0][15] = t->Phi[0][15] + t->Phi[0][15] + w->term[0][14];
-    w->S[14] = w->S[14] + half*w->term[1][14];
+    w->S[15] = w->S[15] + half*w->term[1][14];
     t->Phi[1][0] = t->Phi[1][0] + t->Phi[1][0] + w->term[0][15];
-    w->S[15] = w->S[15] + half*w->term[1][15];
+    w->S[16] = w->S[16] + half*w->term[1][15];
     t->Phi[1][1] = t->Phi[1][1] + t->Phi[1][1] + w->term[0][16];
-    w->S[16] = w->S[16] + half*w->term[1][16];
+    w->S[17] = w->S[17] + half*w->term[1][16];
     t->Phi[1][2] = t->Phi[1][2] + t->Phi[1][2] + w->term[0][17];
-    w->S[17] = w->S[17] + half*w->term[1][17];
+    w->S[18] = w->S[18] + half*w->term[1][17];
     t->Phi[1][3] = t->Phi[1][3] + t->Phi[1][3] + w->term[0][18];
-    w->S[18] = w->S[18] + half*w->term[1][18];
+    w->S[19] = w->S[19] + half*w->term[1][18];
     t->Phi[1][4] = t->Phi[1][4] + t->Phi[1][4] + w->term[0][19];
-    w->S[19] = w->S[19] + half*w->term[1][19];
+    w->S[20] = w->S[20] + half*w->term[1][19];
     t->Phi[1][5] = t->Phi[1][5] + t->Phi[1][5] + w->term[0][20];
-    w->S[20] = w->S[20] + half*w->term[1][20];
+    w->S[21] = w->S[21] + half*w->term[1][20];
     t->Phi[1][7] = t->Phi[1][7] + t->Phi[1][7] + w->term[0][21];
-    w->S[21] = w->S[21] + half*w->term[1][21];
+    w->S[23] = w->S[23] + half*w->term[1][21];
     t->Phi[1][8] = t->Phi[1][8] + t->Phi[1][8] + w->term[0][22];
-    w->S[22] = w->S[22] + half*w->term[1][22];
+    w->S[24] = w->S[24] + half*w->term[1][22];
     t->Phi[1][9] = t->Phi[1][9] + t->Phi[1][9] + w->term[0][23];
-    w->S[23] = w->S[23] + half*w->term[1][23];
+    w->S[25] = w->S[25] + half*w->term[1][23];
     t->Phi[1][10] = t->Phi[1][10] + t->Phi[1][10] + w->term[0][24];
-    w->S[24] = w->S[24] + half*w->term[1][24];
+    w->S[26] = w->S[26] + half*w->term[1][24];
     t->Phi[1][11] = t->Phi[1][11] + t->Phi[1][11] + w->term[0][25];
-    w->S[25] = w->S[25] + half*w->term[1][25];
+    w->S[27] = w->S[27] + half*w->term[1][25];
     t->Phi[1][12] = t->Phi[1][12] + t->Phi[1][12] + w->term[0][26];
-    w->S[26] = w->S[26] + half*w->term[1][26];
+    w->S[28] = w->S[28] + half*w->term[1][26];
     t->Phi[1][13] = t->Phi[1][13] + t->Phi[1][13] + w->term[0][27];
-    w->S[27] = w->S[27] + half*w->term[1][27];
+    w->S[29] = w->S[29] + half*w->term[1][27];
     t->Phi[1][14] = t->Phi[1][14] + t->Phi[1][14] + w->term[0][28];
-    w->S[28] = w->S[28] + half*w->term[1][28];
+    w->S[30] = w->S[30] + half*w->term[1][28];
     t->Phi[1][15] = t->Phi[1][15] + t->Phi[1][15] + w->term[0][29];
-    w->S[29] = w->S[29] + half*w->term[1][29];
+    w->S[31] = w->S[31] + half*w->term[1][29];
     t->Phi[2][0] = t->Phi[2][0] + t->Phi[2][0] + w->term[0][30];
-    w->S[30] = w->S[30] + half*w->term[1][30];
+    w->S[32] = w->S[32] + half*w->term[1][30];
     t->Phi[2][1] = t->Phi[2][1] + t->Phi[2][1] + w->term[0][31];
-    w->S[31] = w->S[31] + half*w->term[1][31];
+    w->S[33] = w->S[33] + half*w->term[1][31];
     t->Phi[2][2] = t->Phi[2][2] + t->Phi[2][2] + w->term[0][32];
-    w->S[32] = w->S[32] + half*w->term[1][32];
+    w->S[34] = w->S[34] + half*w->term[1][32];
     t->Phi[2][3] = t->Phi[2][3] + t->Phi[2][3] + w->term[0][33];
-    w->S[33] = w->S[33] + half*w->term[1][33];
+    w->S[35] = w->S[35] + half*w->term[1][33];
     t->Phi[2][4] = t->Phi[2][4] + t->Phi[2][4] + w->term[0][34];
-    w->S[34] = w->S[34] + half*w->term[1][34];
+    w->S[36] = w->S[36] + half*w->term[1][34];
     t->Phi[2][5] = t->Phi[2][5] + t->Phi[2][5] + w->term[0][35];
-    w->S[35] = w->S[35] + half*w->term[1][35];
+    w->S[37] = w->S[37] + half*w->term[1][35];
     t->Phi[2][7] = t->Phi[2][7] + t->Phi[2][7] + w->term[0][36];
-    w->S[36] = w->S[36] + half*w->term[1][36];
+    w->S[39] = w->S[39] + half*w->term[1][36];
     t->Phi[2][8] = t->Phi[2][8] + t->Phi[2][8] + w->term[0][37];
-    w->S[37] = w->S[37] + half*w->term[1][37];
+    w->S[40] = w->S[40] + half*w->term[1][37];
     t->Phi[2][9] = t->Phi[2][9] + t->Phi[2][9] + w->term[0][38];
-    w->S[38] = w->S[38] + half*w->term[1][38];
+    w->S[41] = w->S[41] + half*w->term[1][38];
     t->Phi[2][10] = t->Phi[2][10] + t->Phi[2][10] + w->term[0][39];
-    w->S[39] = w->S[39] + half*w->term[1][39];
+    w->S[42] = w->S[42] + half*w->term[1][39];
     t->Phi[2][11] = t->Phi[2][11] + t->Phi[2][11] + w->term[0][40];
-    w->S[40] = w->S[40] + half*w->term[1][40];
+    w->S[43] = w->S[43] + half*w->term[1][40];
     t->Phi[2][12] = t->Phi[2][12] + t->Phi[2][12] + w->term[0][41];
-    w->S[41] = w->S[41] + half*w->term[1][41];
+    w->S[44] = w->S[44] + half*w->term[1][41];
     t->Phi[2][13] = t->Phi[2][13] + t->Phi[2][13] + w->term[0][42];
-    w->S[42] = w->S[42] + half*w->term[1][42];
+    w->S[45] = w->S[45] + half*w->term[1][42];
     t->Phi[2][14] = t->Phi[2][14] + t->Phi[2][14] + w->term[0][43];
-    w->S[43] = w->S[43] + half*w->term[1][43];
+    w->S[46] = w->S[46] + half*w->term[1][43];
     t->Phi[2][15] = t->Phi[2][15] + t->Phi[2][15] + w->term[0][44];
-    w->S[44] = w->S[44] + half*w->term[1][44];
+    w->S[47] = w->S[47] + half*w->term[1][44];
     t->Phi[3][0] = t->Phi[3][0] + t->Phi[3][0] + w->term[0][45];
-    w->S[45] = w->S[45] + half*w->term[1][45];
+    w->S[48] = w->S[48] + half*w->term[1][45];
     t->Phi[3][1] = t->Phi[3][1] + t->Phi[3][1] + w->term[0][46];
-    w->S[46] = w->S[46] + half*w->term[1][46];
+    w->S[49] = w->S[49] + half*w->term[1][46];
     t->Phi[3][2] = t->Phi[3][2] + t->Phi[3][2] + w->term[0][47];
-    w->S[47] = w->S[47] + half*w->term[1][47];
+    w->S[50] = w->S[50] + half*w->term[1][47];
     t->Phi[3][3] = t->Phi[3][3] + t->Phi[3][3] + w->term[0][48];
-    w->S[48] = w->S[48] + half*w->term[1][48];
+    w->S[51] = w->S[51] + half*w->term[1][48];
     t->Phi[3][4] = t->Phi[3][4] + t->Phi[3][4] + w->term[0][49];
-    w->S[49] = w->S[49] + half*w->term[1][49];
+    w->S[52] = w->S[52] + half*w->term[1][49];
     t->Phi[3][5] = t->Phi[3][5] + t->Phi[3][5] + w->term[0][50];
-    w->S[50] = w->S[50] + half*w->term[1][50];
+    w->S[53] = w->S[53] + half*w->term[1][50];
     t->Phi[3][7] = t->Phi[3][7] + t->Phi[3][7] + w->term[0][51];
-    w->S[51] = w->S[51] + half*w->term[1][51];
+    w->S[55] = w->S[55] + half*w->term[1][51];
     t->Phi[3][8] = t->Phi[3][8] + t->Phi[3][8] + w->term[0][52];
-    w->S[52] = w->S[52] + half*w->term[1][52];
+    w->S[56] = w->S[56] + half*w->term[1][52];
     t->Phi[3][9] = t->Phi[3][9] + t->Phi[3][9] + w->term[0][53];
-    w->S[53] = w->S[53] + half*w->term[1][53];
+    w->S[57] = w->S[57] + half*w->term[1][53];
     t->Phi[3][10] = t->Phi[3][10] + t->Phi[3][10] + w->term[0][54];
-    w->S[54] = w->S[54] + half*w->term[1][54];
+    w->S[58] = w->S[58] + half*w->term[1][54];
     t->Phi[3][11] = t->Phi[3][11] + t->Phi[3][11] + w->term[0][55];
-    w->S[55] = w->S[55] + half*w->term[1][55];
+    w->S[59] = w->S[59] + half*w->term[1][55];
     t->Phi[3][12] = t->Phi[3][12] + t->Phi[3][12] + w->term[0][56];
-    w->S[56] = w->S[56] + half*w->term[1][56];
+    w->S[60] = w->S[60] + half*w->term[1][56];
     t->Phi[3][13] = t->Phi[3][13] + t->Phi[3][13] + w->term[0][57];
-    w->S[57] = w->S[57] + half*w->term[1][57];
+    w->S[61] = w->S[61] + half*w->term[1][57];
     t->Phi[3][14] = t->Phi[3][14] + t->Phi[3][14] + w->term[0][58];
-    w->S[58] = w->S[58] + half*w->term[1][58];
+    w->S[62] = w->S[62] + half*w->term[1][58];
     t->Phi[3][15] = t->Phi[3][15] + t->Phi[3][15] + w->term[0][59];
-    w->S[59] = w->S[59] + half*w->term[1][59];
+    w->S[63] = w->S[63] + half*w->term[1][59];
     t->Phi[4][0] = t->Phi[4][0] + t->Phi[4][0] + w->term[0][60];
-    w->S[60] = w->S[60] + half*w->term[1][60];
+    w->S[64] = w->S[64] + half*w->term[1][60];
     t->Phi[4][1] = t->Phi[4][1] + t->Phi[4][1] + w->term[0][61];
-    w->S[61] = w->S[61] + half*w->term[1][61];
+    w->S[65] = w->S[65] + half*w->term[1][61];
     t->Phi[4][2] = t->Phi[4][2] + t->Phi[4][2] + w->term[0][62];
-    w->S[62] = w->S[62] + half*w->term[1][62];
+    w->S[66] = w->S[66] + half*w->term[1][62];
     t->Phi[4][3] = t->Phi[4][3] + t->Phi[4][3] + w->term[0][63];
-    w->S[63] = w->S[63] + half*w->term[1][63];
+    w->S[67] = w->S[67] + half*w->term[1][63];
     t->Phi[4][4] = t->Phi[4][4] + t->Phi[4][4] + w->term[0][64];
-    w->S[64] = w->S[64] + half*w->term[1][64];
+    w->S[68] = w->S[68] + half*w->term[1][64];
     t->Phi[4][5] = t->Phi[4][5] + t->Phi[4][5] + w->term[0][65];
-    w->S[65] = w->S[65] + half*w->term[1][65];
+    w->S[69] = w->S[69] + half*w->term[1][65];
     t->Phi[4][7] = t->Phi[4][7] + t->Phi[4][7] + w->term[0][66];
-    w->S[66] = w->S[66] + half*w->term[1][66];
+    w->S[71] = w->S[71] + half*w->term[1][66];
     t->Phi[4][8] = t->Phi[4][8] + t->Phi[4][8] + w->term[0][67];
-    w->S[67] = w->S[67] + half*w->term[1][67];
+    w->S[72] = w->S[72] + half*w->term[1][67];
     t->Phi[4][9] = t->Phi[4][9] + t->Phi[4][9] + w->term[0][68];
-    w->S[68] = w->S[68] + half*w->term[1][68];
+    w->S[73] = w->S[73] + half*w->term[1][68];
     t->Phi[4][10] = t->Phi[4][10] + t->Phi[4][10] + w->term[0][69];
-    w->S[69] = w->S[69] + half*w->term[1][69];
+    w->S[74] = w->S[74] + half*w->term[1][69];
     t->Phi[4][11] = t->Phi[4][11] + t->Phi[4][11] + w->term[0][70];
-    w->S[70] = w->S[70] + half*w->term[1][70];
+    w->S[75] = w->S[75] + half*w->term[1][70];
     t->Phi[4][12] = t->Phi[4][12] + t->Phi[4][12] + w->term[0][71];
-    w->S[71] = w->S[71] + half*w->term[1][71];
+    w->S[76] = w->S[76] + half*w->term[1][71];
     t->Phi[4][13] = t->Phi[4][13] + t->Phi[4][13] + w->term[0][72];
-    w->S[72] = w->S[72] + half*w->term[1][72];
+    w->S[77] = w->S[77] + half*w->term[1][72];
     t->Phi[4][14] = t->Phi[4][14] + t->Phi[4][14] + w->term[0][73];
-    w->S[73] = w->S[73] + half*w->term[1][73];
+    w->S[78] = w->S[78] + half*w->term[1][73];
     t->Phi[4][15] = t->Phi[4][15] + t->Phi[4][15] + w->term[0][74];
-    w->S[74] = w->S[74] + half*w->term[1][74];
+    w->S[79] = w->S[79] + half*w->term[1][74];
     t->Phi[5][0] = t->Phi[5][0] + t->Phi[5][0] + w->term[0][75];
-    w->S[75] = w->S[75] + half*w->term[1][75];
+    w->S[80] = w->S[80] + half*w->term[1][75];
     t->Phi[5][1] = t->Phi[5][1] + t->Phi[5][1] + w->term[0][76];
-    w->S[76] = w->S[76] + half*w->term[1][76];
+    w->S[81] = w->S[81] + half*w->term[1][76];
     t->Phi[5][2] = t->Phi[5][2] + t->Phi[5][2] + w->term[0][77];
-    w->S[77] = w->S[77] + half*w->term[1][77];
+    w->S[82] = w->S[82] + half*w->term[1][77];
     t->Phi[5][3] = t->Phi[5][3] + t->Phi[5][3] + w->term[0][78];
-    w->S[78] = w->S[78] + half*w->term[1][78];
+    w->S[83] = w->S[83] + half*w->term[1][78];
     t->Phi[5][4] = t->Phi[5][4] + t->Phi[5][4] + w->term[0][79];
-    w->S[79] = w->S[79] + half*w->term[1][79];
+    w->S[84] = w->S[84] + half*w->term[1][79];
     t->Phi[5][5] = t->Phi[5][5] + t->Phi[5][5] + w->term[0][80];
-    w->S[80] = w->S[80] + half*w->term[1][80];
+    w->S[85] = w->S[85] + half*w->term[1][80];
     t->Phi[5][7] = t->Phi[5][7] + t->Phi[5][7] + w->term[0][81];
-    w->S[81] = w->S[81] + half*w->term[1][81];
+    w->S[87] = w->S[87] + half*w->term[1][81];
     t->Phi[5][8] = t->Phi[5][8] + t->Phi[5][8] + w->term[0][82];
-    w->S[82] = w->S[82] + half*w->term[1][82];
+    w->S[88] = w->S[88] + half*w->term[1][82];
     t->Phi[5][9] = t->Phi[5][9] + t->Phi[5][9] + w->term[0][83];
-    w->S[83] = w->S[83] + half*w->term[1][83];
+    w->S[89] = w->S[89] + half*w->term[1][83];
     t->Phi[5][10] = t->Phi[5][10] + t->Phi[5][10] + w->term[0][84];
-    w->S[84] = w->S[84] + half*w->term[1][84];
+    w->S[90] = w->S[90] + half*w->term[1][84];
     t->Phi[5][11] = t->Phi[5][11] + t->Phi[5][11] + w->term[0][85];
-    w->S[85] = w->S[85] + half*w->term[1][85];
+    w->S[91] = w->S[91] + half*w->term[1][85];
     t->Phi[5][12] = t->Phi[5][12] + t->Phi[5][12] + w->term[0][86];
-    w->S[86] = w->S[86] + half*w->term[1][86];
+    w->S[92] = w->S[92] + half*w->term[1][86];
     t->Phi[5][13] = t->Phi[5][13] + t->Phi[5][13] + w->term[0][87];
-    w->S[87] = w->S[87] + half*w->term[1][87];
+    w->S[93] = w->S[93] + half*w->term[1][87];
     t->Phi[5][14] = t->Phi[5][14] + t->Phi[5][14] + w->term[0][88];
-    w->S[88] = w->S[88] + half*w->term[1][88];
+    w->S[94] = w->S[94] + half*w->term[1][88];
     t->Phi[5][15] = t->Phi[5][15] + t->Phi[5][15] + w->term[0][89];
-    w->S[89] = w->S[89] + half*w->term[1][89];
+    w->S[95] = w->S[95] + half*w->term[1][89];
     t->Phi[6][0] = t->Phi[6][0] + t->Phi[6][0] + w->term[0][90];
-    w->S[90] = w->S[90] + half*w->term[1][90];
+    w->S[96] = w->S[96] + half*w->term[1][90];
     t->Phi[6][1] = t->Phi[6][1] + t->Phi[6][1] + w->term[0][91];
-    w->S[91] = w->S[91] + half*w->term[1][91];
+    w->S[97] = w->S[97] + half*w->term[1][91];
     t->Phi[6][2] = t->Phi[6][2] + t->Phi[6][2] + w->term[0][92];
-    w->S[92] = w->S[92] + half*w->term[1][92];
+    w->S[98] = w->S[98] + half*w->term[1][92];
     t->Phi[6][3] = t->Phi[6][3] + t->Phi[6][3] + w->term[0][93];
-    w->S[93] = w->S[93] + half*w->term[1][93];
+    w->S[99] = w->S[99] + half*w->term[1][93];
     t->Phi[6][4] = t->Phi[6][4] + t->Phi[6][4] + w->term[0][94];
-    w->S[94] = w->S[94] + half*w->term[1][94];
+    w->S[100] = w->S[100] + half*w->term[1][94];
     t->Phi[6][5] = t->Phi[6][5] + t->Phi[6][5] + w->term[0][95];
-    w->S[95] = w->S[95] + half*w->term[1][95];
+    w->S[101] = w->S[101] + half*w->term[1][95];
     t->Phi[6][6] = t->Phi[6][6] + t->Phi[6][6] + w->term[0][96];
-    w->S[96] = w->S[96] + half*w->term[1][96];
+    w->S[102] = w->S[102] + half*w->term[1][96];
     t->Phi[6][7] = t->Phi[6][7] + t->Phi[6][7] + w->term[0][97];
-    w->S[97] = w->S[97] + half*w->term[1][97];
+    w->S[103] = w->S[103] + half*w->term[1][97];
     t->Phi[6][8] = t->Phi[6][8] + t->Phi[6][8] + w->term[0][98];
-    w->S[98] = w->S[98] + half*w->term[1][98];
+    w->S[104] = w->S[104] + half*w->term[1][98];
     t->Phi[6][9] = t->Phi[6][9] + t->Phi[6][9] + w->term[0][99];
-    w->S[99] = w->S[99] + half*w->term[1][99];
+    w->S[105] = w->S[105] + half*w->term[1][99];
     t->Phi[6][10] = t->Phi[6][10] + t->Phi[6][10] + w->term[0][100];
-    w->S[100] = w->S[100] + half*w->term[1][100];
+    w->S[106] = w->S[106] + half*w->term[1][100];
     t->Phi[6][11] = t->Phi[6][11] + t->Phi[6][11] + w->term[0][101];
-    w->S[101] = w->S[101] + half*w->term[1][101];
+    w->S[107] = w->S[107] + half*w->term[1][101];
     t->Phi[6][12] = t->Phi[6][12] + t->Phi[6][12] + w->term[0][102];
-    w->S[102] = w->S[102] + half*w->term[1][102];
+    w->S[108] = w->S[108] + half*w->term[1][102];
     t->Phi[6][13] = t->Phi[6][13] + t->Phi[6][13] + w->term[0][103];
-    w->S[103] = w->S[103] + half*w->term[1][103];
+    w->S[109] = w->S[109] + half*w->term[1][103];
     t->Phi[6][14] = t->Phi[6][14] + t->Phi[6][14] + w->term[0][104];
-    w->S[104] = w->S[104] + half*w->term[1][104];
+    w->S[110] = w->S[110] + half*w->term[1][104];
     t->Phi[6][15] = t->Phi[6][15] + t->Phi[6][15] + w->term[0][105];
-    w->S[105] = w->S[105] + half*w->term[1][105];
+    w->S[111] = w->S[111] + half*w->term[1][105];
     t->Phi[10][10] = t->Phi[10][10] + t->Phi[10][10] + w->term[0][106];
-    w->S[106] = w->S[106] + half*w->term[1][106];
+    w->S[112] = w->S[112] + half*w->term[1][106];
     t->Phi[11][11] = t->Phi[11][11] + t->Phi[11][11] + w->term[0][107];
-    w->S[107] = w->S[107] + half*w->term[1][107];
+    w->S[113] = w->S[113] + half*w->term[1][107];
     t->Phi[12][12] = t->Phi[12][12] + t->Phi[12][12] + w->term[0][108];
-    w->S[108] = w->S[108] + half*w->term[1][108];
+    w->S[114] = w->S[114] + half*w->term[1][108];
     t->Phi[13][13] = t->Phi[13][13] + t->Phi[13][13] + w->term[0][109];
-    w->S[109] = w->S[109] + half*w->term[1][109];
+    w->S[115] = w->S[115] + half*w->term[1][109];
     t->Phi[14][14] = t->Phi[14][14] + t->Phi[14][14] + w->term[0][110];
-    w->S[110] = w->S[110] + half*w->term[1][110];
+    w->S[116] = w->S[116] + half*w->term[1][110];
     t->Phi[15][15] = t->Phi[15][15] + t->Phi[15][15] + w->term[0][111];
-    w->S[111] = w->S[111] + half*w->term[1][111];
+    w->S[117] = w->S[117] + half*w->term[1][111];
 }
 
 NED_INERTIAL16_BLOCK ned_inertial16_scalar transition_check(ned_inertial16_transition *restrict t)
@@ -2653,54 +1991,54 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar transition_check(ned_inertial16_trans
 NED_INERTIAL16_BLOCK void noise_input(const ned_inertial16_matrices *restrict m,
         ned_inertial16_discretize_scratch *restrict w)
 {
-    w->term[0][0] = w->S[9]*m->G[0];
-    w->term[0][1] = w->S[10]*m->G[1];
-    w->term[0][2] = w->S[11]*m->G[2];
-    w->term[0][3] = w->S[12]*m->G[3];
-    w->term[0][4] = w->S[13]*m->G[4];
-    w->term[0][5] = w->S[14]*m->G[5];
-    w->term[0][6] = w->S[24]*m->G[0];
-    w->term[0][7] = w->S[25]*m->G[1];
-    w->term[0][8] = w->S[26]*m->G[2];
-    w->term[0][9] = w->S[27]*m->G[3];
-    w->term[0][10] = w->S[28]*m->G[4];
-    w->term[0][11] = w->S[29]*m->G[5];
-    w->term[0][12] = w->S[39]*m->G[0];
-    w->term[0][13] = w->S[40]*m->G[1];
-    w->term[0][14] = w->S[41]*m->G[2];
-    w->term[0][15] = w->S[42]*m->G[3];
-    w->term[0][16] = w->S[43]*m->G[4];
-    w->term[0][17] = w->S[44]*m->G[5];
-    w->term[0][18] = w->S[54]*m->G[0];
-    w->term[0][19] = w->S[55]*m->G[1];
-    w->term[0][20] = w->S[56]*m->G[2];
-    w->term[0][21] = w->S[57]*m->G[3];
-    w->term[0][22] = w->S[58]*m->G[4];
-    w->term[0][23] = w->S[59]*m->G[5];
-    w->term[0][24] = w->S[69]*m->G[0];
-    w->term[0][25] = w->S[70]*m->G[1];
-    w->term[0][26] = w->S[71]*m->G[2];
-    w->term[0][27] = w->S[72]*m->G[3];
-    w->term[0][28] = w->S[73]*m->G[4];
-    w->term[0][29] = w->S[74]*m->G[5];
-    w->term[0][30] = w->S[84]*m->G[0];
-    w->term[0][31] = w->S[85]*m->G[1];
-    w->term[0][32] = w->S[86]*m->G[2];
-    w->term[0][33] = w->S[87]*m->G[3];
-    w->term[0][34] = w->S[88]*m->G[4];
-    w->term[0][35] = w->S[89]*m->G[5];
-    w->term[0][36] = w->S[100]*m->G[0];
-    w->term[0][37] = w->S[101]*m->G[1];
-    w->term[0][38] = w->S[102]*m->G[2];
-    w->term[0][39] = w->S[103]*m->G[3];
-    w->term[0][40] = w->S[104]*m->G[4];
-    w->term[0][41] = w->S[105]*m->G[5];
-    w->term[0][42] = w->S[106]*m->G[0];
-    w->term[0][43] = w->S[107]*m->G[1];
-    w->term[0][44] = w->S[108]*m->G[2];
-    w->term[0][45] = w->S[109]*m->G[3];
-    w->term[0][46] = w->S[110]*m->G[4];
-    w->term[0][47] = w->S[111]*m->G[5];
+    w->term[0][0] = w->S[10]*m->G[0];
+    w->term[0][1] = w->S[11]*m->G[1];
+    w->term[0][2] = w->S[12]*m->G[2];
+    w->term[0][3] = w->S[13]*m->G[3];
+    w->term[0][4] = w->S[14]*m->G[4];
+    w->term[0][5] = w->S[15]*m->G[5];
+    w->term[0][6] = w->S[26]*m->G[0];
+    w->term[0][7] = w->S[27]*m->G[1];
+    w->term[0][8] = w->S[28]*m->G[2];
+    w->term[0][9] = w->S[29]*m->G[3];
+    w->term[0][10] = w->S[30]*m->G[4];
+    w->term[0][11] = w->S[31]*m->G[5];
+    w->term[0][12] = w->S[42]*m->G[0];
+    w->term[0][13] = w->S[43]*m->G[1];
+    w->term[0][14] = w->S[44]*m->G[2];
+    w->term[0][15] = w->S[45]*m->G[3];
+    w->term[0][16] = w->S[46]*m->G[4];
+    w->term[0][17] = w->S[47]*m->G[5];
+    w->term[0][18] = w->S[58]*m->G[0];
+    w->term[0][19] = w->S[59]*m->G[1];
+    w->term[0][20] = w->S[60]*m->G[2];
+    w->term[0][21] = w->S[61]*m->G[3];
+    w->term[0][22] = w->S[62]*m->G[4];
+    w->term[0][23] = w->S[63]*m->G[5];
+    w->term[0][24] = w->S[74]*m->G[0];
+    w->term[0][25] = w->S[75]*m->G[1];
+    w->term[0][26] = w->S[76]*m->G[2];
+    w->term[0][27] = w->S[77]*m->G[3];
+    w->term[0][28] = w->S[78]*m->G[4];
+    w->term[0][29] = w->S[79]*m->G[5];
+    w->term[0][30] = w->S[90]*m->G[0];
+    w->term[0][31] = w->S[91]*m->G[1];
+    w->term[0][32] = w->S[92]*m->G[2];
+    w->term[0][33] = w->S[93]*m->G[3];
+    w->term[0][34] = w->S[94]*m->G[4];
+    w->term[0][35] = w->S[95]*m->G[5];
+    w->term[0][36] = w->S[106]*m->G[0];
+    w->term[0][37] = w->S[107]*m->G[1];
+    w->term[0][38] = w->S[108]*m->G[2];
+    w->term[0][39] = w->S[109]*m->G[3];
+    w->term[0][40] = w->S[110]*m->G[4];
+    w->term[0][41] = w->S[111]*m->G[5];
+    w->term[0][42] = w->S[112]*m->G[0];
+    w->term[0][43] = w->S[113]*m->G[1];
+    w->term[0][44] = w->S[114]*m->G[2];
+    w->term[0][45] = w->S[115]*m->G[3];
+    w->term[0][46] = w->S[116]*m->G[4];
+    w->term[0][47] = w->S[117]*m->G[5];
 }
 
 NED_INERTIAL16_BLOCK ned_inertial16_scalar process_noise(const ned_inertial16_matrices *restrict m,
@@ -2903,6 +2241,123 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar process_noise(const ned_inertial16_ma
     v = w->term[1][45]*w->term[0][45]; t->Qd[13][13] = v; check += v - v;
     v = w->term[1][46]*w->term[0][46]; t->Qd[14][14] = v; check += v - v;
     v = w->term[1][47]*w->term[0][47]; t->Qd[15][15] = v; check += v - v;
+    t->Qd[0][7] = 0;
+    t->Qd[0][8] = 0;
+    t->Qd[0][9] = 0;
+    t->Qd[1][7] = 0;
+    t->Qd[1][8] = 0;
+    t->Qd[1][9] = 0;
+    t->Qd[2][7] = 0;
+    t->Qd[2][8] = 0;
+    t->Qd[2][9] = 0;
+    t->Qd[3][7] = 0;
+    t->Qd[3][8] = 0;
+    t->Qd[3][9] = 0;
+    t->Qd[4][7] = 0;
+    t->Qd[4][8] = 0;
+    t->Qd[4][9] = 0;
+    t->Qd[5][7] = 0;
+    t->Qd[5][8] = 0;
+    t->Qd[5][9] = 0;
+    t->Qd[6][7] = 0;
+    t->Qd[6][8] = 0;
+    t->Qd[6][9] = 0;
+    t->Qd[7][0] = 0;
+    t->Qd[7][1] = 0;
+    t->Qd[7][2] = 0;
+    t->Qd[7][3] = 0;
+    t->Qd[7][4] = 0;
+    t->Qd[7][5] = 0;
+    t->Qd[7][6] = 0;
+    t->Qd[7][7] = 0;
+    t->Qd[7][8] = 0;
+    t->Qd[7][9] = 0;
+    t->Qd[7][10] = 0;
+    t->Qd[7][11] = 0;
+    t->Qd[7][12] = 0;
+    t->Qd[7][13] = 0;
+    t->Qd[7][14] = 0;
+    t->Qd[7][15] = 0;
+    t->Qd[8][0] = 0;
+    t->Qd[8][1] = 0;
+    t->Qd[8][2] = 0;
+    t->Qd[8][3] = 0;
+    t->Qd[8][4] = 0;
+    t->Qd[8][5] = 0;
+    t->Qd[8][6] = 0;
+    t->Qd[8][7] = 0;
+    t->Qd[8][8] = 0;
+    t->Qd[8][9] = 0;
+    t->Qd[8][10] = 0;
+    t->Qd[8][11] = 0;
+    t->Qd[8][12] = 0;
+    t->Qd[8][13] = 0;
+    t->Qd[8][14] = 0;
+    t->Qd[8][15] = 0;
+    t->Qd[9][0] = 0;
+    t->Qd[9][1] = 0;
+    t->Qd[9][2] = 0;
+    t->Qd[9][3] = 0;
+    t->Qd[9][4] = 0;
+    t->Qd[9][5] = 0;
+    t->Qd[9][6] = 0;
+    t->Qd[9][7] = 0;
+    t->Qd[9][8] = 0;
+    t->Qd[9][9] = 0;
+    t->Qd[9][10] = 0;
+    t->Qd[9][11] = 0;
+    t->Qd[9][12] = 0;
+    t->Qd[9][13] = 0;
+    t->Qd[9][14] = 0;
+    t->Qd[9][15] = 0;
+    t->Qd[10][7] = 0;
+    t->Qd[10][8] = 0;
+    t->Qd[10][9] = 0;
+    t->Qd[10][11] = 0;
+    t->Qd[10][12] = 0;
+    t->Qd[10][13] = 0;
+    t->Qd[10][14] = 0;
+    t->Qd[10][15] = 0;
+    t->Qd[11][7] = 0;
+    t->Qd[11][8] = 0;
+    t->Qd[11][9] = 0;
+    t->Qd[11][10] = 0;
+    t->Qd[11][12] = 0;
+    t->Qd[11][13] = 0;
+    t->Qd[11][14] = 0;
+    t->Qd[11][15] = 0;
+    t->Qd[12][7] = 0;
+    t->Qd[12][8] = 0;
+    t->Qd[12][9] = 0;
+    t->Qd[12][10] = 0;
+    t->Qd[12][11] = 0;
+    t->Qd[12][13] = 0;
+    t->Qd[12][14] = 0;
+    t->Qd[12][15] = 0;
+    t->Qd[13][7] = 0;
+    t->Qd[13][8] = 0;
+    t->Qd[13][9] = 0;
+    t->Qd[13][10] = 0;
+    t->Qd[13][11] = 0;
+    t->Qd[13][12] = 0;
+    t->Qd[13][14] = 0;
+    t->Qd[13][15] = 0;
+    t->Qd[14][7] = 0;
+    t->Qd[14][8] = 0;
+    t->Qd[14][9] = 0;
+    t->Qd[14][10] = 0;
+    t->Qd[14][11] = 0;
+    t->Qd[14][12] = 0;
+    t->Qd[14][13] = 0;
+    t->Qd[14][15] = 0;
+    t->Qd[15][7] = 0;
+    t->Qd[15][8] = 0;
+    t->Qd[15][9] = 0;
+    t->Qd[15][10] = 0;
+    t->Qd[15][11] = 0;
+    t->Qd[15][12] = 0;
+    t->Qd[15][13] = 0;
+    t->Qd[15][14] = 0;
     return check;
 }
 
@@ -2911,7 +2366,7 @@ int ned_inertial16_discretize(const ned_inertial16_matrices *restrict m, ned_ine
                 ned_inertial16_workspace *restrict work)
 {
     ned_inertial16_discretize_scratch *w = &work->discretize;
-    int i, j, e, c;
+    int i, e, c;
     int halvings, order, status;
     int k;
     ned_inertial16_scalar check = 0.0;
@@ -2947,15 +2402,11 @@ int ned_inertial16_discretize(const ned_inertial16_matrices *restrict m, ned_ine
     }
     /* Phi holds E = Phi - I until the identity is added after the doublings (E(2h) = 2 E + E^2:
        adding I to Phi(h) would round its small part away, s times over). */
-    for (i = 0; i < NED_INERTIAL16_N_STATES; ++i) {
-        for (j = 0; j < NED_INERTIAL16_N_STATES; ++j) {
-            t->Phi[i][j] = 0.0;
-        }
-    }
     /* Horner's rule over the structural nonzeros (modelgen/codegen/discretize_kernels.py): A = F h,
        R_m = I / (m+1)!, R_k = I / (k+1)! + A R_(k+1) down to S = R_0 (R_k in S for even k, in term
-       for odd k), one function per level until the pattern stops growing, then E = A S; the
-       doublings run over the entries of Phi that are not e_i. */
+       for odd k), the top level over its pattern and every lower one as dense row segments, then
+       E = A S and zero elsewhere in Phi; the doublings run over the entries of Phi that are not
+               e_i. */
     horner_input(m, w, T * power_of_two(-halvings));
     for (k = order - 1; k >= 0; --k) {
         if (order - k == 1) {
@@ -2964,18 +2415,9 @@ int ned_inertial16_discretize(const ned_inertial16_matrices *restrict m, ned_ine
             } else {
                 horner_level_1_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
             }
-        } else if (order - k == 2) {
-            if (k & 1) {
-                horner_level_2_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
-            } else {
-                horner_level_2_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
-            }
-        } else if (order - k == 3) {
-            if (k & 1) {
-                horner_level_3_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
-            } else {
-                horner_level_3_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
-            }
+        } else if (k == 0) {
+            horner_last_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]); /* S = R_0:
+                    also the rows no row of F reads */
         } else {
             if (k & 1) {
                 horner_saturated_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
@@ -2992,12 +2434,8 @@ int ned_inertial16_discretize(const ned_inertial16_matrices *restrict m, ned_ine
     for (i = 0; i < NED_INERTIAL16_N_STATES; ++i) {
         t->Phi[i][i] += 1.0;
     }
-    for (i = 0; i < NED_INERTIAL16_N_STATES; ++i) {
-        for (j = 0; j < NED_INERTIAL16_N_STATES; ++j) {
-            t->Qd[i][j] = 0.0;
-        }
-    }
-    /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero */
+    /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
+       zero elsewhere) */
     noise_input(m, w);
     check += process_noise(m, t, w, T);
     return (check != 0.0) ? NED_INERTIAL16_ERR_NONFINITE : NED_INERTIAL16_OK;

@@ -12,7 +12,7 @@ parameter_vector() to build it from a mapping.
 
 Operation counts (floating-point, per call):
   matrices_evaluate: 71 operations after CSE
-  discretize: 3850 mul + 2628 add = 6478 flops
+  discretize: 4048 mul + 2862 add = 6910 flops
   discretize, each doubling (long steps): 1500 mul + 1521 add = 3021 flops
   predict (C): 2412 mul + 2158 add = 4570 flops
   predict (Python): 3776 mul + 3616 add = 7392 flops

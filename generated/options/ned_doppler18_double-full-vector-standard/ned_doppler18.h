@@ -14,7 +14,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 77 operations after CSE
- *   discretize: 3850 mul + 2628 add = 6478 flops
+ *   discretize: 4048 mul + 2862 add = 6910 flops
  *   discretize, each doubling (long steps): 1500 mul + 1521 add = 3021 flops
  *   predict (C): 2636 mul + 2356 add = 4992 flops
  *   predict (Python): 4248 mul + 4104 add = 8352 flops
@@ -34,8 +34,8 @@
 #define NED_DOPPLER18_NNZ_G 6
 #define NED_DOPPLER18_NNZ_H 4
 #define NED_DOPPLER18_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
-#define NED_DOPPLER18_N_TERMS 112   /* entries of discretize's compressed term arrays */
-#define NED_DOPPLER18_N_ACTIVE_ENTRIES 112   /* entries of Phi in rows that are not e_i */
+#define NED_DOPPLER18_N_TERMS 118   /* entries of discretize's compressed term arrays */
+#define NED_DOPPLER18_N_ACTIVE_ENTRIES 118   /* entries of Phi in rows that are not e_i */
 #define NED_DOPPLER18_FORM_COVARIANCE 1
 
 #define NED_DOPPLER18_OK 0
@@ -176,8 +176,8 @@ typedef struct {
 typedef struct {
     ned_doppler18_scalar term[2][NED_DOPPLER18_N_TERMS]; /* the Horner chain's odd levels R_k
             (term[1]); the doubling's new values; S G */
-    ned_doppler18_scalar S[NED_DOPPLER18_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! at the
-            active entries of Phi (and the even levels R_k) */
+    ned_doppler18_scalar S[NED_DOPPLER18_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the
+            even levels R_k): each block row's dense segment, then the diagonal rows */
     ned_doppler18_scalar fh[NED_DOPPLER18_NNZ_F]; /* F h at the nonzeros of F */
     ned_doppler18_scalar row_sum[NED_DOPPLER18_N_STATES]; /* balancing: off-diagonal row sums of
             D^-1 |F| D */
