@@ -43,6 +43,7 @@ import numpy as np
 from modelgen.codegen.layout import ModelSizes, c_layout
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
+from modelgen.fileio.cache_entry import link_new_entry
 from modelgen.fileio.output import write_bytes_atomically
 
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
@@ -177,30 +178,8 @@ def store_library(folder: Path, key: str, payload: bytes) -> Path | None:
     ours, is removed.  A cache that cannot be written (read-only, no room, no
     hard links) just stays without the entry: the caller has its library.
     """
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, temporary = tempfile.mkstemp(prefix=f".{key[:16]}-", suffix=".tmp", dir=folder)
-    except OSError:
-        return None
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(_entry(key, payload))
-            handle.flush()
-            os.fsync(handle.fileno())
-        for path in _entry_paths(folder, key):
-            try:
-                os.link(temporary, path)
-                return path
-            except FileExistsError:
-                if _verified_payload(path, key) is not None:
-                    return path
-            except OSError:
-                return None
-        return None
-    except OSError:
-        return None
-    finally:
-        Path(temporary).unlink(missing_ok=True)
+    return link_new_entry(folder, key, lambda handle: handle.write(_entry(key, payload)), _entry_paths(folder, key),
+                          lambda path: path if _verified_payload(path, key) is not None else None)
 
 
 def load_python_module(path: Path) -> ModuleType:

@@ -35,16 +35,15 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import platform
 import sys
-import tempfile
 import zlib
 from pathlib import Path
 
 import numpy as np
 
 from modelgen.codegen.build import library_cache_folder
+from modelgen.fileio.cache_entry import link_new_entry
 from modelgen.simulation import earth, jit, rotation, trajectory as trajectory_module
 from modelgen.simulation.trajectory import TRUTH_COLUMNS, FlightPath, Trajectory, generate_trajectory, sample_counts
 
@@ -158,33 +157,12 @@ def _store(folder: Path, key: str, arrays: list[np.ndarray], shapes: dict[str, t
     replacing a file); an entry of the same key linked first by another
     worker is used.  Only the temporary file, ours, is removed.
     """
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, temporary = tempfile.mkstemp(prefix=f".{key[:16]}-", suffix=".tmp", dir=folder)
-    except OSError:
-        return None
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(_header(key, shapes, _crc(arrays)))
-            for array in arrays:
-                handle.write(memoryview(np.ascontiguousarray(array)).cast("B"))
-            handle.flush()
-            os.fsync(handle.fileno())
-        for path in entry_paths(folder, key):
-            try:
-                os.link(temporary, path)
-            except FileExistsError:
-                pass  # another worker's entry, or a file not ours: use it if it verifies, else the next name
-            except OSError:
-                return None
-            mapped = _mapped(path, key, shapes)
-            if mapped is not None:
-                return mapped
-        return None
-    except OSError:
-        return None
-    finally:
-        Path(temporary).unlink(missing_ok=True)
+    def write(handle) -> None:
+        handle.write(_header(key, shapes, _crc(arrays)))
+        for array in arrays:
+            handle.write(memoryview(np.ascontiguousarray(array)).cast("B"))
+
+    return link_new_entry(folder, key, write, entry_paths(folder, key), lambda path: _mapped(path, key, shapes))
 
 
 def _read_only(arrays: list[np.ndarray]) -> list[np.ndarray]:
