@@ -44,11 +44,13 @@ def test_fresh_workers_import_the_study_code_when_asked_without_a_task():
             time.sleep(0.1)
 
 
-def test_fresh_workers_map_the_trajectory_the_caller_kept_in_the_cache(paper_derived):
+def test_fresh_workers_map_the_trajectory_the_caller_kept_in_the_cache(paper_derived, tmp_path, monkeypatch):
+    from modelgen.codegen.build import CACHE_ENV
     from modelgen.simulation.montecarlo import run_monte_carlo
     from modelgen.simulation.scenario import load_profile
     from modelgen.simulation.trajectory_cache import trajectory_cache_folder
 
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path))  # a cache of its own: another test may have kept this flight already
     short = load_profile("profile_000").with_changes(hours=0.02, imu_rate=50.0)
     folder = trajectory_cache_folder()
     before = set(folder.iterdir()) if folder.exists() else set()
