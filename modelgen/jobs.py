@@ -32,6 +32,7 @@ from modelgen.checks.paper_equations import PaperEquationsResult, differences_su
 from modelgen.checks.twins import TwinChecks, first_principles_check, report_section, run_twin_checks, write_twin_reports
 from modelgen.codegen.generate import CodegenOptions, GeneratedCode, generate_code
 from modelgen.derive.symbolic import DerivedModel, derive
+from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path
 from modelgen.fileio.output import FolderUpdate, write_text_atomically
 from modelgen.model.loading import builtin_models, load_model
@@ -487,7 +488,32 @@ def flight_scenario(profile: str, hours: float | None = None, imu_rate: float | 
         changes["hours"] = hours
     if model is not None:
         changes["model"] = model
-    return load_profile(profile).with_changes(**changes)
+    scenario = load_profile(profile).with_changes(**changes)
+    if model is None:
+        check_filter_constants(scenario)
+    return scenario
+
+
+def check_filter_constants(scenario) -> None:
+    """A profile's ``filter.parameters`` name parameters of its own ``filter.model``: a misspelt name is refused.
+
+    A constant the model does not have would otherwise be ignored, and the
+    parameter it was meant for would fly at its default.  (With ``--model``
+    the profile's constants were written for another model and are taken
+    only where the names match.)
+    """
+    import difflib
+
+    if not scenario.filter.parameters:
+        return
+    names = load_model(scenario.filter.model).parameter_names
+    unknown = sorted(set(scenario.filter.parameters) - set(names))
+    if unknown:
+        close = difflib.get_close_matches(unknown[0], names, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ModelError(f"profile {scenario.name!r}: filter.parameters: {', '.join(map(repr, unknown))} "
+                         f"{'is' if len(unknown) == 1 else 'are'} not a parameter of model {scenario.filter.model!r}{hint}; "
+                         f"its parameters: {', '.join(names)}")
 
 
 def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation: str, echo=print,

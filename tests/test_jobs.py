@@ -69,3 +69,29 @@ def test_no_code_compares_anything_with_a_built_in_models_name():
                 if literals & names:
                     found.append(f"{path.relative_to(REPO)}:{node.lineno}")
     assert not found, found
+
+
+def _profile_with_filter_constants(tmp_path, constants: dict) -> str:
+    import yaml
+
+    from modelgen.fileio.datafiles import data_path
+
+    data = yaml.safe_load(data_path("profile_000.yaml").read_text(encoding="utf-8"))
+    data["filter"]["parameters"] = constants
+    path = tmp_path / "profile.yaml"
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    return str(path)
+
+
+def test_a_misspelt_filter_constant_is_refused_by_name_with_the_close_match(tmp_path):
+    path = _profile_with_filter_constants(tmp_path, {"doppler_noise_sigma_nort": 0.1})
+    with pytest.raises(ModelError, match=r"'doppler_noise_sigma_nort' is not a parameter of model 'ned_doppler18' "
+                                         r"\(did you mean 'doppler_noise_sigma_north'\?\)"):
+        jobs.flight_scenario(path)
+
+
+def test_filter_constants_the_model_has_are_kept_and_another_model_takes_only_matching_names(tmp_path):
+    path = _profile_with_filter_constants(tmp_path, {"doppler_noise_sigma_north": 0.1})
+    assert jobs.flight_scenario(path).filter.parameters == {"doppler_noise_sigma_north": 0.1}
+    other = _profile_with_filter_constants(tmp_path, {"doppler_noise_sigma_nort": 0.1})
+    assert jobs.flight_scenario(other, model="ned_inertial16").filter.model == "ned_inertial16"
