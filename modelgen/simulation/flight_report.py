@@ -264,8 +264,8 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
 # -- figures ------------------------------------------------------------------------
 
 
-# The figures are matplotlib Figures of their own (no pyplot: no global figure registry to close, and the
-# trajectory figure can be drawn by a helper thread while the filter flies).
+# The figures are matplotlib Figures of their own (no pyplot: no global figure registry to close, and a
+# figure can be drawn in a forked copy of the process, :func:`draw_figures`).
 
 
 def draw_figures(drawings: list[tuple[Callable[..., Path], tuple]], apart: int) -> list[Path]:
@@ -351,8 +351,7 @@ def _plot_series(ax, x: np.ndarray, y: np.ndarray, dpi: float, *args, semilog: b
 
 
 def _plot_trajectory(trajectory: Trajectory, path: Path) -> Path:
-    """The truth's ground track, height, speeds and attitude; drawn by a helper thread while the filter flies
-    (a Figure of its own, not pyplot's shared state)."""
+    """The truth's ground track, height, speeds and attitude (a Figure of its own, not pyplot's shared state)."""
     from matplotlib.figure import Figure
 
     truth = trajectory.truth

@@ -134,3 +134,19 @@ def test_the_cache_is_beside_the_compile_cache(tmp_path, monkeypatch):
     monkeypatch.setenv(CACHE_ENV, str(tmp_path))
     assert trajectory_cache.trajectory_cache_folder() == tmp_path / "trajectories"
     assert library_cache_folder() == tmp_path / "libraries"
+
+
+def test_every_field_of_the_flight_path_is_in_the_key(path):
+    import dataclasses
+
+    keys = {trajectory_key(path, IMU_RATE, RECORD_RATE)}
+    for field in dataclasses.fields(path):
+        if field.name not in ("name", "segments"):
+            keys.add(trajectory_key(dataclasses.replace(path, **{field.name: getattr(path, field.name) + 1e-3}),
+                                    IMU_RATE, RECORD_RATE))
+    segment = path.segments[0]
+    for field in dataclasses.fields(segment):
+        if field.name != "name":
+            changed = dataclasses.replace(segment, **{field.name: getattr(segment, field.name) + 1e-3})
+            keys.add(trajectory_key(dataclasses.replace(path, segments=(changed, *path.segments[1:])), IMU_RATE, RECORD_RATE))
+    assert len(keys) == 1 + (len(dataclasses.fields(path)) - 2) + (len(dataclasses.fields(segment)) - 1)
