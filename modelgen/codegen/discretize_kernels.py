@@ -126,12 +126,17 @@ class DiscretizePlan:
         return [(i, j) for i, j in self.structure.entries("Phi") if i not in unit]
 
     @cached_property
-    def block_rows(self) -> list[int]:
-        """Active rows whose closure has more than the diagonal: kept as dense rows over the column span."""
+    def active_columns(self) -> dict[int, list[int]]:
+        """The columns of each active row's closure, in the order of :attr:`active`."""
         rows: dict[int, list[int]] = {}
         for i, j in self.active:
             rows.setdefault(i, []).append(j)
-        return [i for i, cols in rows.items() if cols != [i]]
+        return rows
+
+    @cached_property
+    def block_rows(self) -> list[int]:
+        """Active rows whose closure has more than the diagonal: kept as dense rows over the column span."""
+        return [i for i, cols in self.active_columns.items() if cols != [i]]
 
     @cached_property
     def diagonal_rows(self) -> list[int]:
@@ -155,9 +160,7 @@ class DiscretizePlan:
         E = A S can be written straight into Phi's row.
         """
         n = self.structure.n_states
-        columns: dict[int, list[int]] = {}
-        for i, j in self.active:
-            columns.setdefault(i, []).append(j)
+        columns = self.active_columns
         out = {}
         for i in self.block_rows:
             first, last = min(columns[i]), max(columns[i])
