@@ -8,7 +8,8 @@ on the caller's client (a local cluster sized to the machine, or an existing
 scheduler), else one after another in this process.  A task carries only
 plain data (:class:`MonteCarloSetup`: the flight profile, the filter model's
 declaration, the seed and, for the generated filter, the generated code as
-text, made once by the caller, and the caller's derived model); each worker takes the
+text, made once by the caller, the caller's derived model and the error layout, made by the
+caller from the flight's first filter cycle); each worker takes the
 trajectory (truth and ideal IMU increments) from its machine's trajectory
 cache (:mod:`modelgen.simulation.trajectory_cache`: mapped read-only, made
 and kept there by the first worker that needs it) and writes and compiles
@@ -16,7 +17,8 @@ the code once (the compile itself is skipped when the compile cache of
 :mod:`modelgen.codegen.build` holds the library, e.g. after ``modelgen
 simulate``'s own flight or an earlier study), and keeps them for all its
 runs of the study.  Fresh workers import this module side by side as the
-study starts (:func:`modelgen.cluster.import_on_workers`).  With a journal
+study starts (:func:`modelgen.cluster.import_on_workers`), asked first thing, so that they import while the
+caller makes the set-up.  With a journal
 (:class:`modelgen.cluster.Journal`) each completed run is kept on disk as it
 arrives and a rerun of the same study flies only the runs missing from it.
 
@@ -50,9 +52,11 @@ from modelgen.cluster import (Journal, dask_client, describe_client, forget_cach
 from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel
+from modelgen.simulation.error_layout import ErrorLayout
 from modelgen.simulation.filters import IMPLEMENTATIONS, filter_factory, generated_filter_files
 from modelgen.simulation.flight import fly_profile, profile_layout
 from modelgen.simulation.scenario import FlightProfile
+from modelgen.simulation.trajectory import Trajectory, generate_trajectory
 from modelgen.simulation.trajectory_cache import cached_trajectory
 
 
@@ -135,6 +139,10 @@ class MonteCarloSetup:
     caller's derived model of ``model`` (:func:`symbolic_only`: its symbolic
     matrices, 12 kB), so that a worker need not derive it again (0.13 s of
     sympy against 2 ms to unpickle); without it the worker derives ``model``.
+    ``layout``: the error layout of the flight for ``derived`` (its ``derived``
+    is that one), made by the caller (:func:`caller_layout`), so that a worker
+    need not make it (0.15-0.2 s: the model's matrices lambdified to evaluate
+    them once); without it the worker makes it.
     """
 
     profile: FlightProfile
@@ -146,11 +154,32 @@ class MonteCarloSetup:
     key: str
     code: Mapping[str, str] | None = None
     derived: DerivedModel | None = None
+    layout: ErrorLayout | None = None
 
 
 def symbolic_only(derived: DerivedModel) -> DerivedModel:
     """The same derived model without what it caches of its own (its lambdified functions: code, not data)."""
     return dataclasses.replace(derived)
+
+
+def flight_start(profile: FlightProfile) -> Trajectory:
+    """The trajectory of the flight's first filter cycle only: its initial state is the whole flight's.
+
+    What the error layout needs of a flight (the sign conventions are read at
+    its initial state), for a few milliseconds instead of the whole flight.
+    """
+    period = profile.filter.period
+    return generate_trajectory(profile.path.truncated(period), profile.imu_rate, 1.0 / period)
+
+
+def caller_layout(profile: FlightProfile, derived: DerivedModel, shipped: DerivedModel) -> ErrorLayout:
+    """The error layout of ``profile`` for ``derived``, made here, holding ``shipped`` (the model the workers receive).
+
+    The layout's groups and conventions (indices and signs) are plain data;
+    ``derived`` evaluates the model's matrices (with the functions it keeps
+    from earlier flights of this process), ``shipped`` travels instead.
+    """
+    return dataclasses.replace(profile_layout(profile, derived, flight_start(profile)), derived=shipped)
 
 
 @dataclass(frozen=True)
@@ -200,8 +229,9 @@ def _prepare(setup: MonteCarloSetup, derived: DerivedModel | None = None,
     profile = setup.profile
     trajectory = cached_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
     mark("trajectory (truth and ideal IMU increments: from the trajectory cache, or made and kept there)")
-    layout = profile_layout(profile, derived, trajectory)
-    mark("error layout")
+    shipped = setup.layout is not None and setup.layout.derived is derived
+    layout = setup.layout if shipped else profile_layout(profile, derived, trajectory)
+    mark("error layout (the caller's, received with the set-up)" if shipped else "error layout")
     code_dir = tempfile.TemporaryDirectory(prefix="modelgen-montecarlo-")
     make_filter = filter_factory(derived, setup.implementation, code_dir.name, setup.code)
     mark(f"filter: write the shipped code, compile or take from the cache ({setup.implementation})")
@@ -260,15 +290,18 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
     seeds = np.random.SeedSequence(seed).spawn(runs)
     start = time.perf_counter()
     finished = kept is not None and len(kept.completed()) == runs  # all in the journal: nothing to build or ship
+    on_workers = client is not None and not finished
+    if on_workers:  # first: fresh workers import this module side by side, and while the set-up is made here
+        import_on_workers(client, __name__)
     code = generated_filter_files(derived) if implementation != "reference" and not finished else None
+    shipped = symbolic_only(derived) if on_workers else None
     setup = MonteCarloSetup(profile, truth_profile, derived.model, mode, store_every, implementation, key, code,
-                            symbolic_only(derived) if client is not None and not finished else None)
-    if client is None or finished:
+                            shipped, caller_layout(profile, derived, shipped) if shipped is not None else None)
+    if not on_workers:
         if not finished:
             worker_cached(key, lambda: _prepare(setup, derived))  # this process: the caller's derived model
         shared: Any = setup
     else:  # the set-up (the code: ~400 kB of text) travels once, as a task of its own, not once per run
-        import_on_workers(client, __name__)  # fresh workers import this module side by side, not one after another
         shared = client.submit(_the_setup, setup, pure=False, key=f"modelgen-montecarlo-setup-{key}-{uuid.uuid4().hex[:8]}")
     try:
         outputs = run_tasks(fly_one_run, [(shared, s) for s in seeds], client, progress=progress, on_result=on_run,

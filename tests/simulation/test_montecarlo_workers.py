@@ -113,6 +113,47 @@ def test_a_worker_takes_the_callers_derived_model_instead_of_deriving_it(paper_d
     context["code_dir"].cleanup()
 
 
+def test_a_worker_takes_the_callers_error_layout_instead_of_making_it(paper_derived, monkeypatch):
+    import pickle
+
+    from modelgen.simulation import montecarlo
+
+    short = load_short_profile()
+    shipped = montecarlo.symbolic_only(paper_derived)
+    setup = montecarlo.MonteCarloSetup(short, None, paper_derived.model, short.filter.mode, 60, "reference", "test-key",
+                                       None, shipped, montecarlo.caller_layout(short, paper_derived, shipped))
+    received = pickle.loads(pickle.dumps(setup))  # as a worker receives it: the layout holds the received model
+    assert received.layout.derived is received.derived
+
+    def refuse(*args):
+        raise AssertionError("the worker made the error layout again")
+
+    monkeypatch.setattr(montecarlo, "profile_layout", refuse)
+    context = montecarlo._prepare(received)
+    assert context["layout"] is received.layout and context["derived"] is received.derived
+    context["code_dir"].cleanup()
+
+
+@pytest.mark.parametrize("name", ["profile_000", "profile_001", "profile_003"])
+def test_the_callers_layout_from_the_first_filter_cycle_is_the_layout_of_the_whole_flight(name):
+    from modelgen.derive.symbolic import derive
+    from modelgen.model.loading import load_model
+    from modelgen.simulation import montecarlo
+    from modelgen.simulation.flight import profile_layout
+    from modelgen.simulation.scenario import load_profile
+    from modelgen.simulation.trajectory import generate_trajectory
+
+    profile = load_profile(name).with_changes(hours=0.02)
+    derived = derive(load_model(profile.filter.model))
+    whole = generate_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
+    start = montecarlo.flight_start(profile)
+    assert start.n_samples < whole.n_samples and np.array_equal(start.initial_state(), whole.initial_state())
+    made = profile_layout(profile, derived, whole)
+    shipped = montecarlo.symbolic_only(derived)
+    sent = montecarlo.caller_layout(profile, derived, shipped)
+    assert sent.derived is shipped and (sent.groups, sent.conventions) == (made.groups, made.conventions)
+
+
 def load_short_profile():
     from modelgen.simulation.scenario import load_profile
 
