@@ -10,8 +10,14 @@ land on the diagonal only (no per-entry scaling, no Phi += / S += sums).
 The rows that are not e_i are of two kinds: block rows, whose closure (the
 fill-in of Phi; R_k's pattern grows from I + F to it and then stays) has
 more than the diagonal, and diagonal rows (a Markov state: F's row is F_ii).
-A block row is stored as one dense segment over its closure's column span,
-padded to an even length; its structural zeros are stored zeros.  Then
+A block row is stored as one dense segment over its closure's columns,
+padded to an even length; its structural zeros are stored zeros.  The
+segments leave out the lone columns (``DiscretizePlan.lone_columns``): a
+unit column j (F's row j empty) has R_k(:, j) = e_j / (k+1)! + R_(k+1) A(:, j)
+and no level reads it, so it is summed at k = 0 only, S(:, j) = R_1 A(:, j),
+and E(:, j) = S A(:, j); a leaf column (read by no row of F) holds its
+diagonal constant alone.  On the paper's model that takes the segments from
+16 columns to 12 (columns 6-9 out).  Then
 every level below the top is the same function: for each block row i,
 R_k(i, span) = sum over the block rows c of A(i, c) R_(k+1)(c, span), one
 fixed-trip loop over k for all rows that gcc -O2 vectorizes (even length,
@@ -21,9 +27,9 @@ patterns, bench/bench_cycle.py), then
 the sparse terms: c_out on the diagonal, A(i, c) c_in for a row c of
 random constants (R_(k+1) = c_in e_c there), A(i, c) R_(k+1)(c, c) for a
 diagonal row c.  A row that no row of F reads (``leaf_rows``) is summed at
-k = 0 only.  The padding and the not yet saturated levels cost 7 % more
-flops than the exact patterns on the paper's model
-(:func:`structural_series_cost`, the benchmark's floor).  The top level R_(m-1) = c_out I + A c_in is scalar
+k = 0 only.  The padding and the not yet saturated levels cost 8 % more
+flops than the exact patterns on the paper's model at order 5, 2 % at
+order 9 (:func:`structural_series_cost`, the benchmark's floor).  The top level R_(m-1) = c_out I + A c_in is scalar
 (its pattern, I + F, is sparse) and sets the rest of the segments to zero.
 Each function comes in two copies (R_k into S for even k, into the second
 term array for odd k, so that S = R_0 lands in S).  The order m is chosen
@@ -151,38 +157,99 @@ class DiscretizePlan:
         return [i for i in self.block_rows + self.diagonal_rows if i not in read]
 
     @cached_property
-    def spans(self) -> dict[int, tuple[int, int]]:
-        """(first column, even length) of each block row's dense segment.
+    def lone_columns(self) -> set[int]:
+        """Columns of R_k that the segments leave out: their column of every level is known without a product.
 
-        The columns of the row's closure, widened to an even length (so that
-        the segment loops have no odd remainder: gcc -O2 vectorizes them two
-        doubles at a time) and kept inside the row where it fits, so that
-        E = A S can be written straight into Phi's row.
+        A unit column j (a row of random constants: F's row j is empty) has
+        R_k(:, j) = e_j / (k+1)! + R_(k+1) F(:, j) h, and no level reads it
+        (A R_(k+1) reads column j of R_(k+1) for column j only), so it is
+        summed at k = 0 alone, S(:, j) = R_1 A(:, j) (:func:`unit_column_terms`),
+        and E(:, j) = S A(:, j).  A leaf column j (a row that no row of F reads:
+        F(:, j) = 0) has R_k(:, j) = e_j / (k+1)!: only R_k(j, j), a scalar.
         """
-        n = self.structure.n_states
-        columns = self.active_columns
+        return set(self.structure.unit_rows) | set(self.leaf_rows)
+
+    @cached_property
+    def segment_columns(self) -> list[int]:
+        """The columns the block rows' dense segments cover, ascending: the closure's columns but the lone ones.
+
+        Position p of a segment holds column ``segment_columns[p]``, so that
+        the segments skip the lone columns (E's segment is cut into runs of
+        consecutive columns of Phi).
+        """
+        blocks = set(self.block_rows)
+        lone = self.lone_columns
+        return sorted({j for i, j in self.active if i in blocks and j not in lone})
+
+    def position_column(self, position: int) -> int:
+        """The column a segment position holds (past the last: a padding position, numbered from N on)."""
+        columns = self.segment_columns
+        return columns[position] if position < len(columns) else self.structure.n_states + position - len(columns)
+
+    @cached_property
+    def spans(self) -> dict[int, tuple[int, int]]:
+        """(first position, even length) of each block row's dense segment over :attr:`segment_columns`.
+
+        The positions of the row's closure columns (but the lone ones), widened
+        to an even length (so that the segment loops have no odd remainder:
+        gcc -O2 vectorizes them two doubles at a time) and kept inside the
+        segment columns where they fit.
+        """
+        width = len(self.segment_columns)
+        position = {j: p for p, j in enumerate(self.segment_columns)}
+        lone = self.lone_columns
         out = {}
         for i in self.block_rows:
-            first, last = min(columns[i]), max(columns[i])
+            positions = [position[j] for j in self.active_columns[i] if j not in lone]
+            if not positions:  # only lone columns (its diagonal, unit columns): an empty segment
+                out[i] = (0, 0)
+                continue
+            first, last = min(positions), max(positions)
             length = last - first + 1 + (last - first + 1) % 2
-            out[i] = (max(0, min(first, n - length)), length)
+            out[i] = (max(0, min(first, width - length)), length)
         return out
 
     @cached_property
+    def lone_entries(self) -> list[tuple[int, int]]:
+        """Entries of the block rows in lone columns (stored as scalars after the diagonal rows), row-major."""
+        blocks = set(self.block_rows)
+        lone = self.lone_columns
+        return [(i, j) for i, j in self.active if i in blocks and j in lone]
+
+    @cached_property
+    def unit_entries(self) -> list[tuple[int, int]]:
+        """The lone entries in unit columns: S there is R_1 A(:, j) at k = 0, E there S A(:, j)."""
+        unit = set(self.structure.unit_rows)
+        return [(i, j) for i, j in self.lone_entries if j in unit]
+
+    @cached_property
     def s_position(self) -> dict[tuple[int, int], int]:
-        """Where entry (i, j) of S (and of each level R_k) is stored: the block rows' segments, then the diagonal rows."""
+        """Where entry (i, j) of S (and of each level R_k) is stored: the block rows' segments, the diagonal rows, the lone entries."""
         out, base = {}, 0
         for i in self.block_rows:
             first, length = self.spans[i]
-            out.update({(i, first + k): base + k for k in range(length)})
+            out.update({(i, self.position_column(first + k)): base + k for k in range(length)})
             base += length
         out.update({(i, i): base + d for d, i in enumerate(self.diagonal_rows)})
+        base += len(self.diagonal_rows)
+        out.update({entry: base + d for d, entry in enumerate(self.lone_entries)})
         return out
 
     @property
+    def needs_last_level(self) -> bool:
+        """Whether k = 0 has its own function: some rows are read by no row of F, or some entries are in unit columns."""
+        return bool(self.leaf_rows or self.unit_entries)
+
+    @property
+    def needs_first_level(self) -> bool:
+        """Whether k = 1 has its own function (every row): a leaf row has entries in unit columns, which read R_1 there."""
+        leaves = set(self.leaf_rows)
+        return any(i in leaves for i, _ in self.unit_entries)
+
+    @property
     def segment_size(self) -> int:
-        """Entries of S and of each level: the block rows' segments and the diagonal rows."""
-        return sum(length for _, length in self.spans.values()) + len(self.diagonal_rows)
+        """Entries of S and of each level: the block rows' segments, the diagonal rows and the lone entries."""
+        return sum(length for _, length in self.spans.values()) + len(self.diagonal_rows) + len(self.lone_entries)
 
     @cached_property
     def gamma_entries(self) -> list[tuple[int, int]]:
@@ -302,49 +369,78 @@ def horner_top_block(plan: DiscretizePlan, parity: int) -> DiscretizeBlock:
     return DiscretizeBlock(KernelBlock(horner_level_name(1, parity), tuple(lines)), (), _scalars_used(lines))
 
 
-def _product_rows(plan: DiscretizePlan, target, source, diagonal: Ref | None, columns: int, skip: frozenset = frozenset()) -> list:
-    """target = A source (+ ``diagonal`` I) over the stored rows: the block rows' dense segments, then their sparse terms.
+def _column_runs(plan: DiscretizePlan, lo: int, hi: int) -> list[tuple[int, int]]:
+    """Segment positions [lo, hi) cut into runs over consecutive columns of the matrix (padding positions left out)."""
+    n = plan.structure.n_states
+    runs: list[tuple[int, int]] = []
+    for p in range(lo, hi):
+        j = plan.position_column(p)
+        if j >= n:
+            continue
+        if runs and runs[-1][1] == p and plan.position_column(p - 1) == j - 1:
+            runs[-1] = (runs[-1][0], p + 1)
+        else:
+            runs.append((p, p + 1))
+    return runs
 
-    ``target(i, j)`` and ``source(i, j)`` give the Ref of a stored entry; a
+
+def _product_rows(plan: DiscretizePlan, target, source, diagonal: Ref | None, into_matrix: bool, skip: frozenset = frozenset()) -> list:
+    """target = A source (+ ``diagonal`` I) over the stored rows but the lone columns: the block rows' dense segments, then their sparse terms.
+
+    ``target(i, j)`` and ``source(i, j)`` give the Ref of entry (i, j); a
     block row c of ``source`` is read as a whole segment over the part of its
     span inside the target's (its structural zeros are stored zeros, and the
     closure of c lies within that of i where F(i, c) is nonzero): the sources
-    with the target's span in one sum, narrower ones added after it.  A unit
-    row c contributes A(i, c) source(c, c) (None: A(i, c) alone), a diagonal
-    row A(i, c) source(c, c), each added after the segments (which C sums in
-    loops over all rows: each source segment is loaded once per step).
-    ``columns``: the target's rows end there (a segment is cut short at it);
-    the rows in ``skip`` are not computed.
+    with the target's span in one sum, narrower ones added after it.  A
+    diagonal row c contributes A(i, c) source(c, c), added after the segments
+    (which C sums in loops over all rows: each source segment is loaded once
+    per step).  The unit columns are left to :func:`unit_column_terms`; a leaf
+    column's only entry is the diagonal constant.  ``into_matrix``: the target
+    is an N x N matrix, so each segment is cut into runs of consecutive
+    columns (no padding); the rows in ``skip`` are not computed.
     """
     blocks = set(plan.block_rows)
+    unit = set(plan.structure.unit_rows)
+    lone = plan.lone_columns
     f_rows = _f_rows(plan)
     spans = plan.spans
+    column = plan.position_column
+
+    def pieces(lo: int, hi: int) -> list[tuple[int, int]]:
+        return _column_runs(plan, lo, hi) if into_matrix else [(lo, hi)]
+
+    rows = [r for r in plan.block_rows if r not in skip]
     whole: list = []
     parts: list = []
-    for i in [r for r in plan.block_rows if r not in skip]:
+    for i in rows:
         first, length = spans[i]
-        end = min(first + length, columns)
+        end = first + length
+        if not length:
+            continue
         same, narrower = [], {}
         for c, e in f_rows.get(i, []):
             if c not in blocks:
                 continue
             lo, hi = max(first, spans[c][0]), min(end, spans[c][0] + spans[c][1])
             if (lo, hi) == (first, end):
-                same.append((Ref("scratch", "fh", (e,)), source(c, first)))
+                same.append((c, e))
             elif hi > lo:
-                narrower.setdefault((lo, hi), []).append((Ref("scratch", "fh", (e,)), source(c, lo)))
-        whole.append(SegmentAssign(target(i, first), tuple(same), end - first))
-        parts += [SegmentAssign(target(i, lo), tuple(terms), hi - lo, accumulate=True) for (lo, hi), terms in narrower.items()]
+                narrower.setdefault((lo, hi), []).append((c, e))
+        for a, b in pieces(first, end):
+            terms = tuple((Ref("scratch", "fh", (e,)), source(c, column(a))) for c, e in same)
+            whole.append(SegmentAssign(target(i, column(a)), terms, b - a))
+        for (lo, hi), sources in narrower.items():
+            for a, b in pieces(lo, hi):
+                terms = tuple((Ref("scratch", "fh", (e,)), source(c, column(a))) for c, e in sources)
+                parts.append(SegmentAssign(target(i, column(a)), terms, b - a, accumulate=True))
     lines = whole + parts
-    for i in [r for r in plan.block_rows if r not in skip]:
+    for i in rows:
         if diagonal is not None:
-            lines.append(Assign(target(i, i), ((target(i, i),), (diagonal,))))
+            lines.append(Assign(target(i, i), ((diagonal,),) if i in lone else ((target(i, i),), (diagonal,))))
         for c, e in f_rows.get(i, []):
-            if c in blocks:
+            if c in blocks or c in unit:
                 continue
-            a = Ref("scratch", "fh", (e,))
-            x = source(c, c)
-            lines.append(Assign(target(i, c), ((target(i, c),), (a,) if x is None else (a, x))))
+            lines.append(Assign(target(i, c), ((target(i, c),), (Ref("scratch", "fh", (e,)), source(c, c)))))
     for i in [r for r in plan.diagonal_rows if r not in skip]:
         (_, e), = f_rows[i]
         product = (Ref("scratch", "fh", (e,)), source(i, i))
@@ -352,14 +448,36 @@ def _product_rows(plan: DiscretizePlan, target, source, diagonal: Ref | None, co
     return lines
 
 
-def horner_level_block(plan: DiscretizePlan, parity: int, final: bool = False) -> DiscretizeBlock:
-    """R_k = c_out I + A R_(k+1) for every k below the top, into S (k even) or term (k odd).
+def unit_column_terms(plan: DiscretizePlan, target, left) -> list[Assign]:
+    """X(i, j) = sum_c left(i, c) A(c, j) at the entries of the block rows in unit columns (:attr:`DiscretizePlan.unit_entries`).
+
+    S(:, j) = R_1 A(:, j) (``left`` R_1, at k = 0) and E(:, j) = S A(:, j)
+    (``left`` S): for a row j of random constants R_k(:, j) = e_j / (k+1)!
+    + R_(k+1) A(:, j), so the levels above k = 0 need not carry column j.
+    """
+    columns: dict[int, list[tuple[int, int]]] = {}
+    for e, (c, j) in enumerate(plan.f_entries):
+        columns.setdefault(j, []).append((c, e))
+    active = set(plan.active)
+    return [
+        Assign(target(i, j), tuple((left(i, c), Ref("scratch", "fh", (e,))) for c, e in columns.get(j, []) if (i, c) in active))
+        for i, j in plan.unit_entries
+    ]
+
+
+#: The function of the chain's level k = 1 (into term) where some rows that no row of F reads have entries in unit columns.
+HORNER_FIRST = "horner_first_into_term"
+
+
+def horner_level_block(plan: DiscretizePlan, parity: int, final: bool = False, first: bool = False) -> DiscretizeBlock:
+    """R_k = c_out I + A R_(k+1) for every k below the top, into S (k even) or term (k odd), but the lone columns.
 
     Dense over the stored rows: the block rows' structural zeros are stored
     zeros, so one function serves every level (the pattern grows from I + F
-    to the closure and then stays); a unit row c of R_(k+1) is c_in e_c.
-    The rows no row of F reads (:attr:`DiscretizePlan.leaf_rows`) are left
-    out except at k = 0 (``final``: S = R_0, into S).
+    to the closure and then stays).  The rows no row of F reads
+    (:attr:`DiscretizePlan.leaf_rows`) are left out except at k = 0
+    (``final``: S = R_0, into S, with its unit columns R_1 A(:, j)) and, where
+    a leaf row has entries in unit columns, at k = 1 (``first``: R_1 there).
     """
     unit = set(plan.structure.unit_rows)
 
@@ -369,29 +487,32 @@ def horner_level_block(plan: DiscretizePlan, parity: int, final: bool = False) -
     def target(i: int, j: int) -> Ref:
         return _horner_array(parity, plan.s_position[(i, j)])
 
-    skip = frozenset() if final else frozenset(plan.leaf_rows)
-    lines = _product_rows(plan, target, source, _local("c_out"), plan.structure.n_states + 1, skip)
-    name = HORNER_LAST if final else horner_level_name(0, parity, True)
+    skip = frozenset() if final or first else frozenset(plan.leaf_rows)
+    lines = _product_rows(plan, target, source, _local("c_out"), False, skip)
+    if final:
+        lines += unit_column_terms(plan, target, lambda i, c: _horner_array(1, plan.s_position[(i, c)]))
+    name = HORNER_LAST if final else HORNER_FIRST if first else horner_level_name(0, parity, True)
     return DiscretizeBlock(KernelBlock(name, tuple(lines)), (), _scalars_used(lines))
 
 
 def horner_transition_block(plan: DiscretizePlan) -> DiscretizeBlock:
     """E = Phi - I = A S over the stored rows, into Phi (S = e_c on a row c of random constants).
 
-    The block rows' segments are written into Phi's rows whole (their
-    structural zeros are stored zeros), every other entry of Phi is set to
-    zero here: straight-line zero stores, which gcc -O2 pairs into vector
-    stores, instead of a loop over N x N that it turns into ``rep stos``
-    (one instruction per entry).  The identity is added after the doublings
+    The block rows' segments are written into Phi's rows as runs of
+    consecutive columns (their structural zeros are stored zeros), the unit
+    columns as S A(:, j), every other entry of Phi is set to zero here:
+    straight-line zero stores, which gcc -O2 pairs into vector stores,
+    instead of a loop over N x N that it turns into ``rep stos`` (one
+    instruction per entry).  The identity is added after the doublings
     (:func:`doubling_block`).
     """
     n = plan.structure.n_states
-    unit = set(plan.structure.unit_rows)
 
-    def source(c: int, j: int) -> Ref | None:
-        return None if c in unit else Ref("scratch", "S", (plan.s_position[(c, j)],))
+    def source(c: int, j: int) -> Ref:
+        return Ref("scratch", "S", (plan.s_position[(c, j)],))
 
-    lines = _product_rows(plan, _phi, source, None, n)  # a padding column past the row is not written
+    lines = _product_rows(plan, _phi, source, None, True)
+    lines += unit_column_terms(plan, _phi, source)
     written = {s.target.index for s in scalar_statements(lines)}
     lines += [Assign(_phi(i, j), ()) for i in range(n) for j in range(n) if (i, j) not in written]
     return DiscretizeBlock(KernelBlock("horner_transition", tuple(lines)))
@@ -400,22 +521,32 @@ def horner_transition_block(plan: DiscretizePlan) -> DiscretizeBlock:
 def series_blocks(plan: DiscretizePlan) -> list[DiscretizeBlock]:
     """The Horner chain: A = F h, the top level into either array, the dense level into either, then E = A S.
 
-    Where some rows are read by no row of F, the dense level leaves them out
-    and a last copy (k = 0, into S) computes every row.
+    Where some rows are read by no row of F, or some columns are unit
+    columns, the dense level leaves them out and a last copy (k = 0, into S)
+    computes every row and the unit columns; where a leaf row has entries in
+    unit columns, a copy at k = 1 computes every row too (R_1 for them).
     """
     blocks = [horner_input_block(plan)]
     blocks += [horner_top_block(plan, parity) for parity in (0, 1)]
     blocks += [horner_level_block(plan, parity) for parity in (0, 1)]
-    blocks += [horner_level_block(plan, 0, final=True)] if plan.leaf_rows else []
+    blocks += [horner_level_block(plan, 1, first=True)] if plan.needs_first_level else []
+    blocks += [horner_level_block(plan, 0, final=True)] if plan.needs_last_level else []
     return blocks + [horner_transition_block(plan)]
 
 
 def horner_schedule(plan: DiscretizePlan, order: int) -> list[str]:
     """The level functions an order-``order`` chain calls, top (k = order - 1) to bottom (k = 0)."""
-    return [
-        HORNER_LAST if k == 0 < order - 1 and plan.leaf_rows else horner_level_name(1, k % 2, k < order - 1)
-        for k in range(order - 1, -1, -1)
-    ]
+
+    def level(k: int) -> str:
+        if k == order - 1:
+            return horner_level_name(1, k % 2)
+        if k == 0 and plan.needs_last_level:
+            return HORNER_LAST
+        if k == 1 and plan.needs_first_level:
+            return HORNER_FIRST
+        return horner_level_name(1, k % 2, True)
+
+    return [level(k) for k in range(order - 1, -1, -1)]
 
 
 def doubling_block(plan: DiscretizePlan) -> DiscretizeBlock:
@@ -571,10 +702,16 @@ def structural_series_cost(plan: DiscretizePlan, order: int) -> OperationCount:
     The floor the dense segments approach (the benchmark's flop floor): R_k
     over the pattern of I + F + ... + F^(m-k) (the closure once it stops
     growing), each entry a product only where F(i, c) and R_(k+1)(c, j) can
-    both be nonzero, plus A = F h and E = A S over the active entries.
+    both be nonzero, plus A = F h and E = A S over the active entries.  A
+    unit column j (a row of random constants) is summed where it is needed
+    only, as the emitted chain does: S(:, j) = R_1 A(:, j) at k = 0 (below the
+    top level) and E(:, j) = S A(:, j).
     """
     unit = set(plan.structure.unit_rows)
     f_rows = _f_rows(plan)
+    f_columns: dict[int, list[int]] = {}
+    for c, j in plan.f_entries:
+        f_columns.setdefault(j, []).append(c)
     patterns = plan.horner_patterns
     mul, add = len(plan.f_entries), 0
 
@@ -593,8 +730,24 @@ def structural_series_cost(plan: DiscretizePlan, order: int) -> OperationCount:
                 terms += products
             add += max(terms - 1, 0)
 
+    def count_unit_columns(entries, left: set) -> None:
+        """X(i, j) = sum_c left(i, c) A(c, j) over the entries in unit columns."""
+        nonlocal mul, add
+        for i, j in entries:
+            products = sum(1 for c in f_columns.get(j, []) if (i, c) in left)
+            mul += products
+            add += max(products - 1, 0)
+
     for level in range(1, order + 1):
         inputs = None if level == 1 else set(patterns[min(level - 1, len(patterns)) - 1])
-        count(patterns[min(level, len(patterns)) - 1], inputs, True)
-    count(plan.active, set(plan.active), False)
+        entries = patterns[min(level, len(patterns)) - 1]
+        if inputs is None:
+            count(entries, inputs, True)
+        else:
+            count([(i, j) for i, j in entries if j not in unit], inputs, True)
+            if level == order:  # k = 0: S(:, j) = R_1 A(:, j)
+                count_unit_columns([(i, j) for i, j in entries if j in unit], inputs)
+    active = set(plan.active)
+    count([(i, j) for i, j in plan.active if j not in unit], active, False)
+    count_unit_columns([(i, j) for i, j in plan.active if j in unit], active)
     return OperationCount(mul, add)
