@@ -186,6 +186,24 @@ def test_a_worker_lost_in_the_middle_of_a_task_does_not_lose_the_study(tmp_path)
     assert marker.exists()
 
 
+def test_the_local_cluster_keeps_its_diagnostics_out_of_the_runs_way_and_the_callers_settings_as_they_were():
+    import dask
+    import distributed  # noqa: F401  (registers the distributed settings)
+
+    from modelgen.cluster import LOCAL_CLUSTER_CONFIG
+
+    names = list(LOCAL_CLUSTER_CONFIG)
+    before = [dask.config.get(name) for name in names]
+    assert before != list(LOCAL_CLUSTER_CONFIG.values())  # dask's defaults differ: the test can see the setting
+    with dask_client(workers=1) as client:
+        client.wait_for_workers(1)
+        on_worker = [next(iter(client.run(dask.config.get, name).values())) for name in names]
+        assert on_worker == list(LOCAL_CLUSTER_CONFIG.values())
+        client.submit(time.sleep, 0.5, pure=False).result()  # a task: a sampling profiler would have counted it
+        assert list(client.run(lambda dask_worker: dask_worker.profile_recent["count"]).values()) == [0]
+    assert [dask.config.get(name) for name in names] == before
+
+
 def test_an_unreachable_scheduler_is_a_clear_error_within_the_timeout():
     start = time.monotonic()
     with pytest.raises(ModelError, match=r"--scheduler tcp://127.0.0.1:9: no dask scheduler answered within 2 s"):
