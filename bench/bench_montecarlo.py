@@ -210,8 +210,7 @@ def efficiency_of(one: dict, two: dict) -> dict:
 def monte_carlo_part(args) -> dict:
     from modelgen.derive.symbolic import derive
     from modelgen.model.loading import load_model
-    from modelgen.simulation.montecarlo import MonteCarloSetup, run_monte_carlo, setup_key, symbolic_only
-    from modelgen.simulation.filters import generated_filter_files
+    from modelgen.simulation.montecarlo import run_monte_carlo, setup_key, worker_setup
     from modelgen.simulation.scenario import load_profile
 
     profile = load_profile("profile_000").with_changes(hours=args.hours, imu_rate=args.rate)
@@ -223,9 +222,7 @@ def monte_carlo_part(args) -> dict:
 
     mode, store_every = profile.filter.mode, max(1, int(round(profile.aiding_period / profile.filter.period)))
     key = setup_key(profile, None, derived.model, mode, store_every, args.implementation)
-    code = generated_filter_files(derived) if args.implementation != "reference" else None
-    setup = MonteCarloSetup(profile, None, derived.model, mode, store_every, args.implementation, key, code,
-                            symbolic_only(derived))  # what run_monte_carlo sends a worker
+    setup = worker_setup(profile, None, derived, mode, store_every, args.implementation, key)  # what run_monte_carlo sends
     set_up = {}
     with tempfile.TemporaryDirectory(prefix="modelgen-bench-cache-") as cache:
         for state in ("caches empty", "caches filled"):

@@ -215,6 +215,15 @@ def setup_key(profile: FlightProfile, truth_profile: FlightProfile | None, model
     return "montecarlo-" + hashlib.sha256(blob).hexdigest()[:16]
 
 
+def worker_setup(profile: FlightProfile, truth_profile: FlightProfile | None, derived: DerivedModel, mode: str,
+                 store_every: int, implementation: str, key: str) -> MonteCarloSetup:
+    """The set-up the workers receive: the code generated here, the derived model and the layout made here."""
+    code = generated_filter_files(derived) if implementation != "reference" else None
+    shipped = symbolic_only(derived)
+    return MonteCarloSetup(profile, truth_profile, derived.model, mode, store_every, implementation, key, code, shipped,
+                           caller_layout(profile, derived, shipped))
+
+
 def _prepare(setup: MonteCarloSetup, derived: DerivedModel | None = None,
              mark: Callable[[str], None] = lambda step: None) -> dict:
     """What a worker builds once per set-up: the derived model, trajectory, error layout and filter maker.
@@ -290,19 +299,18 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
     seeds = np.random.SeedSequence(seed).spawn(runs)
     start = time.perf_counter()
     finished = kept is not None and len(kept.completed()) == runs  # all in the journal: nothing to build or ship
-    on_workers = client is not None and not finished
-    if on_workers:  # first: fresh workers import this module side by side, and while the set-up is made here
-        import_on_workers(client, __name__)
-    code = generated_filter_files(derived) if implementation != "reference" and not finished else None
-    shipped = symbolic_only(derived) if on_workers else None
-    setup = MonteCarloSetup(profile, truth_profile, derived.model, mode, store_every, implementation, key, code,
-                            shipped, caller_layout(profile, derived, shipped) if shipped is not None else None)
-    if not on_workers:
-        if not finished:
-            worker_cached(key, lambda: _prepare(setup, derived))  # this process: the caller's derived model
-        shared: Any = setup
-    else:  # the set-up (the code: ~400 kB of text) travels once, as a task of its own, not once per run
+    shared: Any
+    if client is not None and not finished:
+        import_on_workers(client, __name__)  # first: fresh workers import side by side while the set-up is made here
+        setup = worker_setup(profile, truth_profile, derived, mode, store_every, implementation, key)
+        # the set-up (the code: ~400 kB of text) travels once, as a task of its own, not once per run
         shared = client.submit(_the_setup, setup, pure=False, key=f"modelgen-montecarlo-setup-{key}-{uuid.uuid4().hex[:8]}")
+    else:  # this process flies with the caller's derived model (and makes the layout with the whole trajectory)
+        code = generated_filter_files(derived) if implementation != "reference" and not finished else None
+        setup = shared = MonteCarloSetup(profile, truth_profile, derived.model, mode, store_every, implementation, key,
+                                         code)
+        if not finished:
+            worker_cached(key, lambda: _prepare(setup, derived))
     try:
         outputs = run_tasks(fly_one_run, [(shared, s) for s in seeds], client, progress=progress, on_result=on_run,
                             label="montecarlo", journal=kept)
