@@ -136,10 +136,14 @@ class KernelBlock:
 
 
 def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[KernelBlock], OperationCount]:
-    """Unrolled P_n = Phi P Phi^T + Q_d (upper triangle), by row.
+    """Unrolled P_n = Phi P Phi^T + Q_d (upper triangle), row by row.
 
-    ``M`` (= Phi P) is formed only for the rows of Phi that are not e_i (the
-    others are rows of P itself); ``Pn`` gets each (i, j), i <= j, once.
+    Row i of the result needs only row i of ``M`` = Phi P (P_n(i, j) =
+    M(i, :) Phi(j, :)^T + Q_d(i, j)), so ``M`` is one row of scratch (N
+    entries, not N x N): each row of Phi that is not e_i gets its
+    ``phi_times_p_row_i`` block right before the ``propagate_row_i`` that
+    reads it (for a unit row, M's row is P's row, read in place).  ``Pn``
+    gets each (i, j), i <= j, once.
     """
     n = structure.n_states
     rows = structure.rows("Phi")
@@ -150,23 +154,20 @@ def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[K
     def P(i: int, j: int) -> Ref:
         return _symmetric("filter", "P", n, packed, i, j)
 
-    for i in range(n):  # M = Phi P, only the rows that are not copies of P
-        if i in unit:
-            continue
-        lines = []
-        for col in range(n):
-            terms = tuple((_phi(i, k), P(k, col)) for k in rows[i])
-            mul += len(terms)
-            add += len(terms) - 1
-            lines.append(Assign(Ref("scratch", "M", (i, col)), terms))
-        blocks.append(KernelBlock(f"phi_times_p_row_{i}", tuple(lines)))
-
     def m_ref(i: int, col: int) -> Ref:
-        return P(i, col) if i in unit else Ref("scratch", "M", (i, col))
+        return P(i, col) if i in unit else Ref("scratch", "M", (col,))
 
-    for i in range(n):  # Pn = M Phi^T + Q_d, upper triangle only
+    for i in range(n):
+        if i not in unit:  # row i of M = Phi P
+            lines = []
+            for col in range(n):
+                terms = tuple((_phi(i, k), P(k, col)) for k in rows[i])
+                mul += len(terms)
+                add += len(terms) - 1
+                lines.append(Assign(Ref("scratch", "M", (col,)), terms))
+            blocks.append(KernelBlock(f"phi_times_p_row_{i}", tuple(lines)))
         lines = []
-        for j in range(i, n):
+        for j in range(i, n):  # row i of Pn = M Phi^T + Q_d, upper triangle only
             if j in unit:
                 terms = [(m_ref(i, j),)]
             else:

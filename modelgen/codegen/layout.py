@@ -275,7 +275,7 @@ def c_layout(
     if options.van_loan:
         discretize_scratch = _van_loan_scratch(N, dim_w)
     filter_scratch = [
-        Field("M", (N, N), "Phi P"),
+        Field("M", (N,), "one row of Phi P (predict works row by row)"),
         Field("Pn", symmetric, "new covariance before it is committed"),
         Field("xn", (N,)),
     ]

@@ -173,7 +173,7 @@ def test_a_64_state_model_gets_compact_code_that_conforms(derived_64, tmp_path):
     """64 states (above the threshold): compact C, far smaller than its unrolled code (1.3 MB) that passes the check."""
     code = generate_code(derived_64)
     source = code.files["ned_doppler64_large.c"]
-    assert "_row_0(" not in source and "phi_times_p(f, t, w);" in source
+    assert "_row_0(" not in source and "check += propagate(f, t, w);" in source
     assert len(source) < 200_000
     folder = write_files(tmp_path / "gen", code.files)
     for result in check_generated(folder, derived_64, synthetic_scenario(derived_64, steps=20)):
