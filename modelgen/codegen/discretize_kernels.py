@@ -514,8 +514,14 @@ def horner_transition_block(plan: DiscretizePlan) -> DiscretizeBlock:
     lines = _product_rows(plan, _phi, source, None, True)
     lines += unit_column_terms(plan, _phi, source)
     written = {s.target.index for s in scalar_statements(lines)}
-    lines += [Assign(_phi(i, j), ()) for i in range(n) for j in range(n) if (i, j) not in written]
-    return DiscretizeBlock(KernelBlock("horner_transition", tuple(lines)))
+    unit = set(plan.structure.unit_rows)
+    lines += [
+        Assign(_phi(i, j), ((_local("one"),),) if i == j and i in unit else ())  # a unit row is e_i of Phi now
+        for i in range(n)
+        for j in range(n)
+        if (i, j) not in written
+    ]
+    return DiscretizeBlock(KernelBlock("horner_transition", tuple(lines)), (("one", 1, 1),) if unit else ())
 
 
 def series_blocks(plan: DiscretizePlan) -> list[DiscretizeBlock]:
@@ -642,9 +648,14 @@ def noise_blocks(plan: DiscretizePlan, packed: bool, ud: bool) -> list[Discretiz
 
 
 def transition_check_block(plan: DiscretizePlan) -> DiscretizeBlock:
-    """The sum of v - v over the active entries of E = Phi - I (0 when all are finite)."""
-    lines = [CheckedAssign((_phi(i, j),), ((_phi(i, j),),)) for i, j in plan.active]
-    return DiscretizeBlock(KernelBlock("transition_check", tuple(lines), checked=True))
+    """Phi = I + E on the active rows' diagonal, and the sum of v - v over the active entries (0 when all are finite).
+
+    The identity is added here, after the doublings, in the same pass as the
+    check (E(i, i) + 1 is finite exactly where E(i, i) is); the unit rows'
+    diagonal was stored as 1 by :func:`horner_transition_block`.
+    """
+    lines = [CheckedAssign((_phi(i, j),), ((_phi(i, j),),) + (((_local("one"),),) if i == j else ())) for i, j in plan.active]
+    return DiscretizeBlock(KernelBlock("transition_check", tuple(lines), checked=True), (("one", 1, 1),))
 
 
 def block_cost(blocks: list[DiscretizeBlock]) -> OperationCount:

@@ -13,6 +13,8 @@ import math
 import numpy as np
 import pytest
 
+from modelgen.codegen.kernels import Ref
+
 from modelgen.codegen.discretize_kernels import (
     HORNER_FIRST,
     HORNER_LAST,
@@ -25,6 +27,7 @@ from modelgen.codegen.discretize_kernels import (
     series_blocks,
     series_cost,
     structural_series_cost,
+    transition_check_block,
 )
 from modelgen.derive.discretization import _taylor_terms
 from modelgen.codegen.structure import filter_structure
@@ -174,7 +177,7 @@ def test_products_outside_the_closure_are_only_the_padding_of_the_dense_segments
 def run_chain(plan: DiscretizePlan, F: np.ndarray, h: float, order: int) -> tuple[np.ndarray, np.ndarray]:
     """Execute the emitted statements of an order-``order`` chain on F (Phi, S as N x N)."""
     n = F.shape[0]
-    blocks = {b.block.name: b for b in series_blocks(plan)}
+    blocks = {b.block.name: b for b in series_blocks(plan) + [transition_check_block(plan)]}
     arrays = {
         ("matrices", "F"): np.array([F[i, j] for i, j in plan.f_entries]),
         ("scratch", "fh"): np.full(len(plan.f_entries), np.nan),
@@ -191,16 +194,18 @@ def run_chain(plan: DiscretizePlan, F: np.ndarray, h: float, order: int) -> tupl
                 for r in term:
                     product *= local[r.array] if r.owner == "local" else arrays[(r.owner, r.array)][r.index]
                 value += product
-            arrays[(s.target.owner, s.target.array)][s.target.index] = value
+            for target in s.targets if hasattr(s, "targets") else (s.target,):
+                arrays[(target.owner, target.array)][target.index] = value
 
     run("horner_input", {"h": h})
     for k, name in zip(range(order - 1, -1, -1), horner_schedule(plan, order)):
         run(name, {"c_out": 1.0 / math.factorial(k + 1), "c_in": 1.0 / math.factorial(k + 2)})
     run("horner_transition", {"one": 1.0})
+    run("transition_check", {"one": 1.0})  # Phi = I + E
     S = np.eye(n)
     for i, j in plan.active:
         S[i, j] = arrays[("scratch", "S")][plan.s_position[(i, j)]]
-    return np.eye(n) + arrays[("transition", "Phi")], S
+    return arrays[("transition", "Phi")].copy(), S
 
 
 @pytest.mark.parametrize("order", [1, 2, 3, 4, 5, 9])
@@ -215,14 +220,17 @@ def test_the_emitted_chain_is_the_reference_series_at_every_order(plan, order):
     assert not np.isnan(phi).any()
 
 
-def test_rows_of_random_constants_are_only_cleared(plan):
-    """A row of F that is empty gives a row e_i of Phi: the series, doubling and noise write no value into it, only E's zeros."""
+def test_rows_of_random_constants_are_only_set_to_e_i(plan):
+    """A row of F that is empty gives a row e_i of Phi: the series, doubling and check write no value into it, only e_i's constants."""
     unit = set(plan.structure.unit_rows)
-    blocks = series_blocks(plan) + [doubling_block(plan)]
+    blocks = series_blocks(plan) + [doubling_block(plan), transition_check_block(plan)]
     for b in blocks:
         for s in scalar_statements(b.block.statements):
-            if s.target.array == "Phi" and s.target.index[0] in unit:
-                assert b.block.name == "horner_transition" and not s.terms
+            for target in s.targets if hasattr(s, "targets") else (s.target,):
+                if target.array == "Phi" and target.index[0] in unit:
+                    i, j = target.index
+                    assert b.block.name == "horner_transition"
+                    assert s.terms == ((Ref("local", "one", ()),),) if i == j else not s.terms
 
 
 def test_the_transition_and_process_noise_set_every_entry_once(plan):
