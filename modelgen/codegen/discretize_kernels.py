@@ -261,8 +261,8 @@ class DiscretizePlan:
 
     @property
     def term_size(self) -> int:
-        """Entries of each of the two term arrays: the odd levels of the chain, the doubling's new values (active entries), S G."""
-        return max(self.segment_size, len(self.active), len(self.gamma_entries), 1)
+        """Entries of each of the two term arrays: the odd levels of the chain, the doubling's new values (active entries), S G and T q."""
+        return max(self.segment_size, len(self.active), len(self.gamma_entries) + self.structure.G.shape[1], 1)
 
     @property
     def active_size(self) -> int:
@@ -622,8 +622,11 @@ def noise_blocks(plan: DiscretizePlan, packed: bool, ud: bool) -> list[Discretiz
         ]
         blocks.append(DiscretizeBlock(KernelBlock("noise_input_times_step", tuple(lines)), (), ("T",)))
         return blocks
-    lines = [
-        Assign(Ref("scratch", "term", (1, g)), ((Ref("scratch", "term", (0, g)), _local("T"), Ref("matrices", "q", (w,))),))
+    base = len(plan.gamma_entries)  # T q_w once per noise, after the values (S G) T q_w
+    noises = sorted({w for _, w in plan.gamma_entries})
+    lines = [Assign(Ref("scratch", "term", (1, base + w)), ((_local("T"), Ref("matrices", "q", (w,))),)) for w in noises]
+    lines += [
+        Assign(Ref("scratch", "term", (1, g)), ((Ref("scratch", "term", (0, g)), Ref("scratch", "term", (1, base + w))),))
         for g, (i, w) in enumerate(plan.gamma_entries)
     ]
     by_row: dict[int, list[int]] = {}
@@ -648,13 +651,17 @@ def noise_blocks(plan: DiscretizePlan, packed: bool, ud: bool) -> list[Discretiz
 
 
 def transition_check_block(plan: DiscretizePlan) -> DiscretizeBlock:
-    """Phi = I + E on the active rows' diagonal, and the sum of v - v over the active entries (0 when all are finite).
+    """Phi = I + E on the active rows' diagonal, then the sum of the active entries, v - v of it returned (0 when it is finite).
 
-    The identity is added here, after the doublings, in the same pass as the
-    check (E(i, i) + 1 is finite exactly where E(i, i) is); the unit rows'
-    diagonal was stored as 1 by :func:`horner_transition_block`.
+    The identity is added here, after the doublings (E(i, i) + 1 is finite
+    exactly where E(i, i) is); the unit rows' diagonal was stored as 1 by
+    :func:`horner_transition_block`.  A finite sum means every entry is
+    finite (a NaN or an infinity makes it NaN or infinite); a sum that is not
+    finite may be an overflow of finite entries, which the C then decides
+    entry by entry: one addition per entry instead of two.
     """
-    lines = [CheckedAssign((_phi(i, j),), ((_phi(i, j),),) + (((_local("one"),),) if i == j else ())) for i, j in plan.active]
+    lines: list = [Assign(_phi(i, i), ((_phi(i, i),), (_local("one"),))) for i, j in plan.active if i == j]
+    lines.append(CheckedAssign((Ref("scratch", "term", (0, 0)),), tuple((_phi(i, j),) for i, j in plan.active)))
     return DiscretizeBlock(KernelBlock("transition_check", tuple(lines), checked=True), (("one", 1, 1),))
 
 
