@@ -35,6 +35,7 @@ import json
 import logging
 import os
 import sys
+import threading
 import uuid
 from collections import OrderedDict
 from contextlib import contextmanager
@@ -83,6 +84,11 @@ def worker_cached(key: Any, build: Callable[[], T]) -> T:
     return value
 
 
+_PAUSES = 0  # blocks of collector_paused running now, in any thread
+_RESUME = False  # whether the collector was on when the first of them began
+_PAUSE_LOCK = threading.Lock()
+
+
 @contextmanager
 def collector_paused() -> Iterator[None]:
     """Python's cyclic garbage collector off for the block, then on again (if it was on).
@@ -93,14 +99,22 @@ def collector_paused() -> Iterator[None]:
     they age: 0.15-0.2 s of CPU of a fresh Monte Carlo worker's set-up before
     its first run (bench/results/montecarlo.md).  Objects without cycles are
     still freed as usual; the cycles made meanwhile wait for the next collection.
+    Blocks may overlap in threads (a worker's import and a task's set-up):
+    the collector is on again when the last one ends, if it was when the first began.
     """
-    enabled = gc.isenabled()
-    gc.disable()
+    global _PAUSES, _RESUME
+    with _PAUSE_LOCK:
+        if _PAUSES == 0:
+            _RESUME = gc.isenabled()
+            gc.disable()
+        _PAUSES += 1
     try:
         yield
     finally:
-        if enabled:
-            gc.enable()
+        with _PAUSE_LOCK:
+            _PAUSES -= 1
+            if _PAUSES == 0 and _RESUME:
+                gc.enable()
 
 
 def forget_cached(key: Any) -> None:
@@ -162,7 +176,10 @@ def import_on_workers(client: Any, module: str) -> None:
     task arrives, and a task that needs a result held by another worker (the
     study's shared set-up) arrives only after that worker has imported the
     code and computed it: the fresh workers' imports (0.4 s for the Monte
-    Carlo code) would follow one another instead of overlapping.  A worker
+    Carlo code) would follow one another instead of overlapping.  Each
+    worker imports in a thread of its own, so that its event loop goes on
+    meanwhile: it takes tasks and serves the data it holds (a study's
+    set-up, to the other workers) while it imports.  A worker
     that already has the module does nothing; one that fails to import it
     fails again, with its message, on its first task.  The imported objects
     live as long as the worker: they are moved out of the collector's sight
@@ -185,8 +202,33 @@ def import_long_lived(module: str) -> None:
 
 
 async def _import_module(module: str) -> None:
-    """On a worker: :func:`import_long_lived` (a coroutine: what ``Client.run`` can start without waiting for it)."""
-    import_long_lived(module)
+    """On a worker: :func:`import_long_lived` in a thread (a coroutine: what ``Client.run`` can start without waiting for it)."""
+    threading.Thread(target=import_long_lived, args=(module,), name=f"modelgen-import {module}", daemon=True).start()
+
+
+def held(value: T) -> T:
+    """``value`` as a task's result: held by a worker, fetched by the others, recomputed from the graph if lost."""
+    return value
+
+
+def call_by_name(module: str, name: str, *args: Any) -> Any:
+    """``module.name(*args)``: a task whose function is named, not pickled, so a worker imports its module only to run it.
+
+    A worker unpickles a task as its message arrives, on its event loop; a
+    function pickled by reference would have the loop import its module
+    there (0.45 s for the Monte Carlo code), or wait for the import under
+    way in another thread (:func:`import_on_workers`), answering nothing
+    meanwhile: not even another worker asking for the data the task needs.
+    """
+    return getattr(importlib.import_module(module), name)(*args)
+
+
+def _named(function: Callable[..., T]) -> tuple[Callable[..., Any], tuple]:
+    """(:func:`call_by_name`, (module, name)) for a module-level function of modelgen; else (``function``, ())."""
+    module, name = getattr(function, "__module__", None) or "", getattr(function, "__qualname__", "")
+    if module.startswith("modelgen.") and getattr(sys.modules.get(module), name, None) is function:
+        return call_by_name, (module, name)
+    return function, ()
 
 
 def describe_client(client: Any) -> str:
@@ -301,7 +343,8 @@ def run_tasks(function: Callable[..., T], arguments: Sequence[tuple], client: An
     from distributed import as_completed
 
     study = uuid.uuid4().hex[:12]
-    futures = [client.submit(function, *arguments[i], retries=retries, pure=False, key=f"modelgen-{label}-{study}-{i}")
+    task, named = _named(function)  # a modelgen function travels by name (call_by_name)
+    futures = [client.submit(task, *named, *arguments[i], retries=retries, pure=False, key=f"modelgen-{label}-{study}-{i}")
                for i in pending]
     index = {f.key: i for i, f in zip(pending, futures)}
     try:

@@ -47,7 +47,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from modelgen.cluster import (Journal, dask_client, describe_client, forget_cached, import_on_workers, run_tasks,
+from modelgen.cluster import (Journal, dask_client, describe_client, forget_cached, held, import_on_workers, run_tasks,
                               worker_cached)
 from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.errors import ModelError
@@ -244,18 +244,19 @@ def _prepare(setup: MonteCarloSetup, derived: DerivedModel | None = None,
     code_dir = tempfile.TemporaryDirectory(prefix="modelgen-montecarlo-")
     make_filter = filter_factory(derived, setup.implementation, code_dir.name, setup.code)
     mark(f"filter: write the shipped code, compile or take from the cache ({setup.implementation})")
-    return {"derived": derived, "trajectory": trajectory, "layout": layout, "make_filter": make_filter,
+    return {"setup": setup, "derived": derived, "trajectory": trajectory, "layout": layout, "make_filter": make_filter,
             "code_dir": code_dir}
 
 
-def _the_setup(setup: MonteCarloSetup) -> MonteCarloSetup:
-    """The set-up as a task's result: held by a worker, fetched by the others, recomputed from the graph if lost."""
-    return setup
+def fly_one_run(key: str, sent: MonteCarloSetup | bytes, seed: np.random.SeedSequence) -> RunOutput:
+    """One Monte Carlo run (a dask task): the flight of the set-up ``key`` with the sensors drawn from ``seed``.
 
-
-def fly_one_run(setup: MonteCarloSetup, seed: np.random.SeedSequence) -> RunOutput:
-    """One Monte Carlo run (a dask task): the flight of ``setup`` with the sensors drawn from ``seed``."""
-    c = worker_cached(setup.key, lambda: _prepare(setup))
+    ``sent`` is the set-up or, as it travels to workers, its pickle: a worker
+    unpickles it once, for its first run of the study, and another worker
+    serves it as the bytes they are (nothing to pickle again).
+    """
+    c = worker_cached(key, lambda: _prepare(pickle.loads(sent) if isinstance(sent, bytes) else sent))
+    setup = c["setup"]
     result = fly_profile(setup.profile, c["derived"], c["trajectory"], np.random.default_rng(seed), c["make_filter"],
                          mode=setup.mode, layout=c["layout"], truth_profile=setup.truth_profile)
     rows = slice(None, None, setup.store_every)
@@ -303,8 +304,9 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
     if client is not None and not finished:
         import_on_workers(client, __name__)  # first: fresh workers import side by side while the set-up is made here
         setup = worker_setup(profile, truth_profile, derived, mode, store_every, implementation, key)
-        # the set-up (the code: ~400 kB of text) travels once, as a task of its own, not once per run
-        shared = client.submit(_the_setup, setup, pure=False, key=f"modelgen-montecarlo-setup-{key}-{uuid.uuid4().hex[:8]}")
+        # the set-up (the code: ~400 kB of text) travels once, pickled, as a task of its own, not once per run
+        shared = client.submit(held, pickle.dumps(setup, protocol=pickle.HIGHEST_PROTOCOL), pure=False,
+                               key=f"modelgen-montecarlo-setup-{key}-{uuid.uuid4().hex[:8]}")
     else:  # this process flies with the caller's derived model (and makes the layout with the whole trajectory)
         code = generated_filter_files(derived) if implementation != "reference" and not finished else None
         setup = shared = MonteCarloSetup(profile, truth_profile, derived.model, mode, store_every, implementation, key,
@@ -312,7 +314,7 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
         if not finished:
             worker_cached(key, lambda: _prepare(setup, derived))
     try:
-        outputs = run_tasks(fly_one_run, [(shared, s) for s in seeds], client, progress=progress, on_result=on_run,
+        outputs = run_tasks(fly_one_run, [(key, shared, s) for s in seeds], client, progress=progress, on_result=on_run,
                             label="montecarlo", journal=kept)
     finally:
         if client is None:

@@ -90,6 +90,41 @@ def test_the_collector_is_paused_for_a_set_up_and_restored_after_it():
         gc.enable()
 
 
+def test_pauses_of_the_collector_overlapping_in_two_threads_end_with_the_last_one():
+    import gc
+    import threading
+
+    from modelgen.cluster import collector_paused
+
+    assert gc.isenabled()
+    entered, leave = threading.Event(), threading.Event()
+
+    def import_thread():  # as a worker's import (import_on_workers) beside a task's set-up
+        with collector_paused():
+            entered.set()
+            leave.wait(10)
+
+    thread = threading.Thread(target=import_thread)
+    thread.start()
+    assert entered.wait(10)
+    with collector_paused():
+        leave.set()
+        thread.join(10)
+        assert not gc.isenabled()  # the other thread's pause is over, this one is not
+    assert gc.isenabled()
+
+
+def test_a_task_of_modelgen_travels_by_name_and_a_worker_imports_its_module_only_to_run_it():
+    from modelgen.cluster import _named, call_by_name
+    from modelgen.simulation import montecarlo
+
+    assert _named(montecarlo.fly_one_run) == (call_by_name, ("modelgen.simulation.montecarlo", "fly_one_run"))
+    assert call_by_name("modelgen.cluster", "held", 42) == 42
+    local = lambda x: x  # noqa: E731  (not a module-level function of modelgen: pickled as it is)
+    assert _named(local) == (local, ())
+    assert _named(np.sum) == (np.sum, ())
+
+
 def test_a_worker_takes_the_callers_derived_model_instead_of_deriving_it(paper_derived, monkeypatch):
     import pickle
 
