@@ -10,10 +10,11 @@ cluster already started.  Both sides give identical results (checked).
 1. Worker set-up.  What a fresh worker process does before its first run,
    in a fresh process of its own, step by step (wall and CPU, the compiler's
    CPU included): import, receive the set-up (the caller's derived model
-   with it), take the
+   with it, and the error layout the caller made), take the
    trajectory (made and kept in the trajectory cache when it is empty, mapped
    from it when filled), write the shipped code and compile it (compile
-   cache empty) or take it from the cache (filled), then two runs.
+   cache empty) or take it from the cache (filled), numba's registries (what
+   the first compiled call loads), then two runs.
 2. Scaling, in three states of the workers:
    * ``cold, caches empty``: new worker processes, nothing compiled and no
      trajectory kept (the first study of a new model and flight on a new
@@ -70,10 +71,11 @@ RESULTS = Path(__file__).resolve().parent / "results"
 #: cores; CPU seconds.  Kept beside this run's figures for comparison.
 BEFORE = {"commit": "0293297", "import_cpu_s": 1.22, "prepare_cpu_s": 7.12, "first_run_cpu_s": 0.39,
           "note": "prepare = derive + trajectory + layout + generate the code (~0.5 s) + gcc -O2 (~5 s)"}
-#: Not measured by this script: the scaling at commit 9e1974c (before the trajectory cache and the side-by-side
-#: imports), one measurement per state, load < 1.3 on 2 cores.  Kept beside this run's figures for comparison.
-PREVIOUS = {"commit": "9e1974c", "efficiency": {"cold, caches empty": 0.58, "cold, caches filled": 0.62, "warm": 1.00},
-            "cpu_efficiency": {"cold, caches empty": 0.62, "cold, caches filled": 0.67, "warm": 1.10}}
+#: Not measured by this script: the scaling at commit c029031 (before the caller's error layout, the quiet local
+#: cluster and the set-up served as bytes while the workers import in a thread), best of 3 per side, load 1.0-1.4
+#: on 2 cores.  Kept beside this run's figures for comparison.
+PREVIOUS = {"commit": "c029031", "efficiency": {"cold, caches empty": 0.59, "cold, caches filled": 0.72, "warm": 0.91},
+            "cpu_efficiency": {"cold, caches empty": 0.61, "cold, caches filled": 0.76, "warm": 0.95}}
 STATES = ("cold, caches empty", "cold, caches filled", "warm")
 
 
@@ -112,6 +114,13 @@ def setup_child(setup_file: str) -> None:
     setup = pickle.loads(Path(setup_file).read_bytes())
     mark("receive the set-up (unpickle the profile, model and code)")
     context = cluster.worker_cached(setup.key, lambda: montecarlo._prepare(setup, mark=mark))  # as fly_one_run
+    from modelgen.simulation import jit
+
+    if jit.HAVE_NUMBA:  # what a worker's first compiled call does first (shown apart from run 1's own work)
+        from numba.core.registry import cpu_target
+
+        cpu_target.target_context.refresh()
+        mark("numba's registries of compiled code (at the first compiled call; numba imports scipy.linalg for BLAS)")
     for run in (0, 1):
         seed = np.random.SeedSequence(1).spawn(2)[run]
         montecarlo.fly_profile(setup.profile, context["derived"], context["trajectory"], np.random.default_rng(seed),
@@ -322,10 +331,10 @@ def markdown(report: dict) -> str:
             each = lambda side: ", ".join(f"{m['wall_s']:.2f}" for m in side["samples"])
             lines.append(f"| {state} | {each(one)} | {one['best_wall_s']:.2f} | {each(two)} | {two['best_wall_s']:.2f} | "
                          f"**{eff['efficiency']:.2f}** | {eff['median_efficiency']:.2f} | {eff['cpu_efficiency']:.2f} |")
-        lines += ["", f"Before (commit {PREVIOUS['commit']}, measured once, not by this run; then only the compile "
-                  "cache existed): efficiency " + ", ".join(f"{state} {value:.2f} (CPU est. "
-                                                            f"{PREVIOUS['cpu_efficiency'][state]:.2f})"
-                                                            for state, value in PREVIOUS["efficiency"].items()) + ".",
+        before = ", ".join(f"{state} {value:.2f} (CPU est. {PREVIOUS['cpu_efficiency'][state]:.2f})"
+                           for state, value in PREVIOUS["efficiency"].items())
+        lines += ["", f"Before (commit {PREVIOUS['commit']}, measured by this script then, not by this run): "
+                  f"efficiency {before}.",
                   "", "Target: efficiency (speed-up / workers) >= 0.8, cold."]
     trade = report.get("trade")
     if trade:
