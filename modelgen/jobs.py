@@ -19,18 +19,14 @@ is computed per run from its conditioning (modelgen.checks.code_check).
 
 from __future__ import annotations
 
+import importlib
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from modelgen.checks.code_check import ConformanceResult, CheckScenario, check_generated
-from modelgen.checks.paper_check import VerificationResult, verify, write_verification_report
-from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model, paper_table_path
-from modelgen.checks.paper_equations import PaperEquationsResult, differences_summary, write_paper_equations_report
-from modelgen.checks.twins import TwinChecks, first_principles_check, report_section, run_twin_checks, write_twin_reports
-from modelgen.codegen.generate import CodegenOptions, GeneratedCode, generate_code
 from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path
@@ -38,7 +34,32 @@ from modelgen.fileio.output import FolderUpdate, write_text_atomically
 from modelgen.model.loading import builtin_models, load_model
 from modelgen.model.sources import cite_sources
 
-# CodegenOptions and builtin_models are used by the command line through this module (it imports only jobs).
+if TYPE_CHECKING:
+    from modelgen.checks.code_check import CheckScenario, ConformanceResult
+    from modelgen.checks.paper_check import VerificationResult
+    from modelgen.checks.paper_equations import PaperEquationsResult
+    from modelgen.checks.twins import TwinChecks
+    from modelgen.codegen.generate import CodegenOptions, GeneratedCode
+
+#: names the command line and the Python API take from this module (they import only jobs; builtin_models too),
+#: by the module that defines them: imported on first use, as each job imports the layers it uses (the checks and
+#: the code generator are 0.2 s of imports that ``modelgen simulate`` does not need before its flight starts)
+_REEXPORTED = {
+    "CodegenOptions": "modelgen.codegen.options",
+    "verify": "modelgen.checks.paper_check",
+    "write_verification_report": "modelgen.checks.paper_check",
+    "differences_summary": "modelgen.checks.paper_equations",
+    "write_paper_equations_report": "modelgen.checks.paper_equations",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """A name of :data:`_REEXPORTED`, imported from its module on first use."""
+    if name in _REEXPORTED:
+        value = getattr(importlib.import_module(_REEXPORTED[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def load_and_derive(model: str | Path) -> DerivedModel:
@@ -114,6 +135,8 @@ def generate(
     new files overwrite files in the folder that modelgen did not write or
     that were edited since.
     """
+    from modelgen.codegen.generate import CodegenOptions, generate_code
+
     derived = model if isinstance(model, DerivedModel) else load_and_derive(model)
     options = options or CodegenOptions()
     code = generate_code(derived, options)
@@ -136,6 +159,8 @@ def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -
     not the navigation (an attitude matrix drawn so is no rotation), and says
     so in its label.
     """
+    from modelgen.checks.code_check import CheckScenario
+
     rng = np.random.default_rng(seed)
     values = {p.name: float(rng.uniform(0.2, 1.0)) for p in derived.model.parameters if p.value is None}
     F = derived.numeric(values)["F"]
@@ -158,6 +183,7 @@ def paper_scenario(derived: DerivedModel) -> CheckScenario:
     """Seed 000's 4-hour scenario: level flight, Table 1 errors, T = 60 s."""
     from modelgen.analysis.budget import load_error_budget
     from modelgen.analysis.scenario import load_analysis_scenario
+    from modelgen.checks.code_check import CheckScenario
 
     flight, budget = load_analysis_scenario(), load_error_budget()
     values = paper_parameters()
@@ -171,6 +197,8 @@ def declared_scenario(derived: DerivedModel) -> CheckScenario | None:
     The initial state is drawn from N(0, P(0)) with the section's seed, so the
     state propagation is exercised too, not only the covariance.
     """
+    from modelgen.checks.code_check import CheckScenario
+
     spec = derived.model.check
     if spec is None:
         return None
@@ -194,6 +222,9 @@ def check(
     Each result carries its own tolerance, computed from the run's
     conditioning (modelgen.checks.code_check.conformance_tolerance).
     """
+    from modelgen.checks.code_check import check_generated
+    from modelgen.codegen.options import CodegenOptions
+
     options = options or CodegenOptions()
     scenario = scenario or check_scenario(derived)
     with tempfile.TemporaryDirectory(prefix="modelgen-check-") as build_dir:
@@ -326,6 +357,9 @@ def main_job(
     """
     from modelgen.analysis.covariance_report import run_covariance_analysis
     from modelgen.analysis.systems import PaperModels
+    from modelgen.checks.paper_check import verify, write_verification_report
+    from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model
+    from modelgen.checks.twins import report_section, run_twin_checks, write_twin_reports
 
     paper_model = paper_table_model(data_path(CORE_PAPER_TABLE))
     models = DerivedModels()
@@ -403,6 +437,9 @@ def paper_check_of(
     ``complete`` (default: only for the shipped table) also compares the
     derived nonzeros the table does not list.
     """
+    from modelgen.checks.paper_check import verify
+    from modelgen.checks.paper_table import paper_table_path
+
     loaded = load_model(model)
     if table is None and paper_table_path(loaded.name) is None:
         return loaded.name, None
@@ -413,6 +450,8 @@ def paper_check_of(
 
 def first_principles_of(model_name: str) -> PaperEquationsResult | None:
     """``modelgen verify``: the paper's printed equations against the model's twin (None: no transcription names the model)."""
+    from modelgen.checks.twins import first_principles_check
+
     return first_principles_check(model_name, load_and_derive)
 
 
@@ -470,6 +509,7 @@ def covariance_analysis(folder: Path, sensitivity: bool, figures: bool, progress
     """``modelgen covariance``: Table 2 and Figs 2-7 into ``folder`` (a :class:`CovarianceReport`)."""
     from modelgen.analysis.covariance_report import run_covariance_analysis
     from modelgen.analysis.systems import PaperModels
+    from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model
 
     say = progress or (lambda message: None)
     paper_model = paper_table_model(data_path(CORE_PAPER_TABLE))

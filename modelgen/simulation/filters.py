@@ -363,8 +363,6 @@ def generated_filter_files(derived: DerivedModel) -> dict[str, str]:
     never replaced; one that does not verify is ignored): a fresh ``modelgen simulate`` of a model it flew before takes
     them from there instead of generating them (0.3 s of its start).
     """
-    from modelgen.codegen.generate import generate_code  # sibling layer, imported where used
-
     key = hashlib.sha256(pickle.dumps(derived.model)).hexdigest()
     if key in _GENERATED:
         _GENERATED.move_to_end(key)
@@ -372,6 +370,10 @@ def generated_filter_files(derived: DerivedModel) -> dict[str, str]:
         on_disk = hashlib.sha256(f"{key}\n{generator_digest()}".encode("ascii")).hexdigest()
         files = _cached_files(on_disk)
         if files is None:
+            # sibling layer, imported only when the files are generated (its imports, jinja2 and the backends, are
+            # 0.3 s a fresh ``modelgen simulate`` with the files on disk does without)
+            from modelgen.codegen.generate import generate_code
+
             files = dict(generate_code(derived).files)
             _store_files(on_disk, files)
         _GENERATED[key] = files
