@@ -27,8 +27,8 @@ patterns, bench/bench_cycle.py), then
 the sparse terms: c_out on the diagonal, A(i, c) c_in for a row c of
 random constants (R_(k+1) = c_in e_c there), A(i, c) R_(k+1)(c, c) for a
 diagonal row c.  A row that no row of F reads (``leaf_rows``) is summed at
-k = 0 only.  The padding and the not yet saturated levels cost 8 % more
-flops than the exact patterns on the paper's model at order 5, 2 % at
+k = 0 only.  The padding and the not yet saturated levels cost 10 % more
+flops than the exact patterns on the paper's model at order 5, 6 % at
 order 9 (:func:`structural_series_cost`, the benchmark's floor).  The top level R_(m-1) = c_out I + A c_in is scalar
 (its pattern, I + F, is sparse) and sets the rest of the segments to zero.
 Each function comes in two copies (R_k into S for even k, into the second
@@ -236,9 +236,24 @@ class DiscretizePlan:
         return out
 
     @property
+    def noise_reads_unit_columns(self) -> bool:
+        """Whether S G reads S in a unit column (a row of random constants driven by noise)."""
+        unit = set(self.structure.unit_rows)
+        return any(c in unit for c, _ in self.structure.entries("G"))
+
+    @property
+    def unit_columns_deferred(self) -> bool:
+        """Whether S's unit columns are summed only where the doublings read them (:data:`HORNER_UNIT_COLUMNS`).
+
+        E's unit columns are S A(:, j), from S's other columns; S's own unit
+        columns are read by the doublings and by S G where G has a row there.
+        """
+        return bool(self.unit_entries) and not self.noise_reads_unit_columns
+
+    @property
     def needs_last_level(self) -> bool:
-        """Whether k = 0 has its own function: some rows are read by no row of F, or some entries are in unit columns."""
-        return bool(self.leaf_rows or self.unit_entries)
+        """Whether k = 0 has its own function: some rows are read by no row of F, or S's unit columns are summed there."""
+        return bool(self.leaf_rows or (self.unit_entries and not self.unit_columns_deferred))
 
     @property
     def needs_first_level(self) -> bool:
@@ -489,7 +504,7 @@ def horner_level_block(plan: DiscretizePlan, parity: int, final: bool = False, f
 
     skip = frozenset() if final or first else frozenset(plan.leaf_rows)
     lines = _product_rows(plan, target, source, _local("c_out"), False, skip)
-    if final:
+    if final and not plan.unit_columns_deferred:
         lines += unit_column_terms(plan, target, lambda i, c: _horner_array(1, plan.s_position[(i, c)]))
     name = HORNER_LAST if final else HORNER_FIRST if first else horner_level_name(0, parity, True)
     return DiscretizeBlock(KernelBlock(name, tuple(lines)), (), _scalars_used(lines))
@@ -537,18 +552,35 @@ def series_blocks(plan: DiscretizePlan) -> list[DiscretizeBlock]:
     blocks += [horner_level_block(plan, parity) for parity in (0, 1)]
     blocks += [horner_level_block(plan, 1, first=True)] if plan.needs_first_level else []
     blocks += [horner_level_block(plan, 0, final=True)] if plan.needs_last_level else []
+    blocks += [unit_columns_block(plan)] if plan.unit_columns_deferred else []
     return blocks + [horner_transition_block(plan)]
 
 
-def horner_schedule(plan: DiscretizePlan, order: int) -> list[str]:
-    """The level functions an order-``order`` chain calls, top (k = order - 1) to bottom (k = 0)."""
+#: The function that sums S's unit columns after the chain, where only the doublings read them.
+HORNER_UNIT_COLUMNS = "horner_unit_columns"
+
+
+def unit_columns_block(plan: DiscretizePlan) -> DiscretizeBlock:
+    """S(:, j) = R_1 A(:, j) for the unit columns j, after the chain (R_1 still in term): the C calls it only before doublings, at order 2 or more."""
+    lines = unit_column_terms(
+        plan, lambda i, j: _horner_array(0, plan.s_position[(i, j)]), lambda i, c: _horner_array(1, plan.s_position[(i, c)])
+    )
+    return DiscretizeBlock(KernelBlock(HORNER_UNIT_COLUMNS, tuple(lines)))
+
+
+def horner_schedule(plan: DiscretizePlan, order: int, doubling: bool = False) -> list[str]:
+    """The level functions an order-``order`` chain calls, top (k = order - 1) to bottom (k = 0).
+
+    ``doubling``: the step is halved, so S's unit columns are needed (where
+    they are deferred, k = 1 then computes every row).
+    """
 
     def level(k: int) -> str:
         if k == order - 1:
             return horner_level_name(1, k % 2)
         if k == 0 and plan.needs_last_level:
             return HORNER_LAST
-        if k == 1 and plan.needs_first_level:
+        if k == 1 and plan.needs_first_level and (doubling or not plan.unit_columns_deferred):
             return HORNER_FIRST
         return horner_level_name(1, k % 2, True)
 
@@ -680,13 +712,14 @@ def series_block_costs(plan: DiscretizePlan) -> dict[str, OperationCount]:
     return {b.block.name: block_cost([b]) for b in series_blocks(plan)}
 
 
-def series_cost(plan: DiscretizePlan, order: int, costs: dict[str, OperationCount] | None = None) -> OperationCount:
+def series_cost(plan: DiscretizePlan, order: int, costs: dict[str, OperationCount] | None = None, doubling: bool = False) -> OperationCount:
     """Flops of Phi and S by the Horner chain of ``order`` (A = F h, the levels it calls, Phi = I + A S).
 
-    ``costs``: :func:`series_block_costs` of ``plan``, when the caller counts several orders.
+    ``costs``: :func:`series_block_costs` of ``plan``, when the caller counts several orders;
+    ``doubling``: the levels of a step that is then doubled (:func:`horner_schedule`).
     """
     costs = series_block_costs(plan) if costs is None else costs
-    called = [costs[name] for name in ("horner_input", *horner_schedule(plan, order), "horner_transition")]
+    called = [costs[name] for name in ("horner_input", *horner_schedule(plan, order, doubling), "horner_transition")]
     return OperationCount(sum(c.multiplications for c in called), sum(c.additions for c in called))
 
 
@@ -711,7 +744,13 @@ def unrolled_discretize_cost(plan: DiscretizePlan, ud: bool, fixed_scaling: bool
     bound = OperationCount(3 * plan.order + 6, plan.order + 2)
     parts = (series, noise, balancing, bound)
     first = OperationCount(sum(c.multiplications for c in parts), sum(c.additions for c in parts))
-    return first, block_cost([doubling_block(plan)]), per_order
+    doubling = block_cost([doubling_block(plan)])
+    if plan.unit_columns_deferred:  # a halved step also sums S's unit columns (once): counted in each doubling, a bound
+        extra = series_cost(plan, plan.order, costs, doubling=True)
+        extra = OperationCount(extra.multiplications - series.multiplications + costs[HORNER_UNIT_COLUMNS].multiplications,
+                               extra.additions - series.additions + costs[HORNER_UNIT_COLUMNS].additions)
+        doubling = OperationCount(doubling.multiplications + extra.multiplications, doubling.additions + extra.additions)
+    return first, doubling, per_order
 
 
 def structural_series_cost(plan: DiscretizePlan, order: int) -> OperationCount:
@@ -722,8 +761,10 @@ def structural_series_cost(plan: DiscretizePlan, order: int) -> OperationCount:
     growing), each entry a product only where F(i, c) and R_(k+1)(c, j) can
     both be nonzero, plus A = F h and E = A S over the active entries.  A
     unit column j (a row of random constants) is summed where it is needed
-    only, as the emitted chain does: S(:, j) = R_1 A(:, j) at k = 0 (below the
-    top level) and E(:, j) = S A(:, j).
+    only, as the emitted chain does: E(:, j) = S A(:, j), and S(:, j) = R_1
+    A(:, j) at k = 0 (below the top level) where S G reads it (a step that is
+    not halved needs it nowhere else); a row that no row of F reads at k = 0
+    only.
     """
     unit = set(plan.structure.unit_rows)
     f_rows = _f_rows(plan)
@@ -756,14 +797,18 @@ def structural_series_cost(plan: DiscretizePlan, order: int) -> OperationCount:
             mul += products
             add += max(products - 1, 0)
 
+    leaves = set(plan.leaf_rows)
+    first_needed = plan.needs_first_level and not plan.unit_columns_deferred  # R_1 of the leaf rows: S's unit columns read it
     for level in range(1, order + 1):
         inputs = None if level == 1 else set(patterns[min(level - 1, len(patterns)) - 1])
         entries = patterns[min(level, len(patterns)) - 1]
+        if level < order and not (level == order - 1 and first_needed):  # a row no row reads: needed at k = 0 only
+            entries = [(i, j) for i, j in entries if i not in leaves]
         if inputs is None:
             count(entries, inputs, True)
         else:
             count([(i, j) for i, j in entries if j not in unit], inputs, True)
-            if level == order:  # k = 0: S(:, j) = R_1 A(:, j)
+            if level == order and not plan.unit_columns_deferred:  # k = 0: S(:, j) = R_1 A(:, j), where S G reads it
                 count_unit_columns([(i, j) for i, j in entries if j in unit], inputs)
     active = set(plan.active)
     count([(i, j) for i, j in plan.active if j not in unit], active, False)
