@@ -152,9 +152,11 @@ static {model}_workspace ws;
 static {model}_matrices mat;
 static void setup(void)
 {{
-    int e, a;
+    int e, a, i, j;
     memcpy(tr.Phi, in_Phi, sizeof in_Phi);
-    memcpy(tr.Qd, in_Qd, sizeof in_Qd);
+    for (i = 0, e = 0; i < BENCH_N; ++i) {{
+        for (j = i; j < BENCH_N; ++j) tr.Qd[e++] = in_Qd[i][j]; /* the transition keeps Q_d packed (upper) */
+    }}
     memcpy(filt.x, in_x, sizeof in_x);
     memcpy(filt.P, in_P, sizeof in_P);
     for (e = 0; e < {model.upper()}_NNZ_H; ++e) mat.H[e] = in_H[{model}_H_row[e]][{model}_H_col[e]];

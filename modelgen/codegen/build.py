@@ -353,9 +353,7 @@ class CompiledFilter:
         if self.options.ud:
             gamma = self._view(self.transition.Gamma).astype(float)[:, : self.nw]
             return (gamma * self._view(self.transition.qw).astype(float)[: self.nw]) @ gamma.T
-        qd = self._view(self.transition.Qd).astype(float)
-        if not self.options.packed:
-            return qd
+        qd = self._view(self.transition.Qd).astype(float)  # the packed upper triangle (codegen.layout)
         full = np.zeros((self.n, self.n))
         full[np.triu_indices(self.n)] = qd
         return full + np.triu(full, 1).T

@@ -21,9 +21,11 @@ from modelgen.version import __version__
 from modelgen.codegen.contract import contract_markdown, contract_text
 from modelgen.codegen.expressions import Block, Pole, eliminate_common_subexpressions, poles
 from modelgen.codegen.kernels import (
+    CommitRow,
     OperationCount,
     compact_covariance_cost,
     compact_kernels,
+    covariance_commit,
     covariance_predict,
     discretize_cost,
     doubling_cost,
@@ -152,8 +154,15 @@ class FilterDescription:
         blocks = [b for b in series_blocks(plan) if b.block.statements]
         blocks += [doubling_block(plan), transition_check_block(plan)]
         if plan.gamma_entries and (self.options.ud or plan.qd_pairs):
-            blocks += noise_blocks(plan, self.packed, self.options.ud)
+            blocks += noise_blocks(plan, True, self.options.ud)  # the transition's Q_d is always packed (layout)
         return blocks
+
+    @cached_property
+    def covariance_commit(self) -> list[CommitRow]:
+        """The unrolled commit of P from the packed Pn by predict and the updates (full storage, below the compact threshold)."""
+        if self.options.ud or self.packed or self.compact:
+            return []
+        return covariance_commit(self.structure.n_states)
 
     @cached_property
     def state_predict(self):

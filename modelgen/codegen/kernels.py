@@ -143,7 +143,8 @@ def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[K
     entries, not N x N): each row of Phi that is not e_i gets its
     ``phi_times_p_row_i`` block right before the ``propagate_row_i`` that
     reads it (for a unit row, M's row is P's row, read in place).  ``Pn``
-    gets each (i, j), i <= j, once.
+    gets each (i, j), i <= j, once, packed whatever P's storage (``packed``
+    is P's, which M reads).
     """
     n = structure.n_states
     rows = structure.rows("Phi")
@@ -175,16 +176,42 @@ def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[K
                 mul += len(terms)
             add += len(terms) - 1
             if structure.Qd[i, j]:
-                terms.append((_symmetric("transition", "Qd", n, packed, i, j),))
+                terms.append((_symmetric("transition", "Qd", n, True, i, j),))  # always packed (layout)
                 add += 1
-            # the new value is stored (mirrored in full storage, so that the
-            # commit is one copy) and checked for finiteness while in a register
-            targets = [_symmetric("scratch", "Pn", n, packed, i, j)]
-            if not packed and i != j:
-                targets.append(Ref("scratch", "Pn", (j, i)))
-            lines.append(CheckedAssign(tuple(targets), tuple(terms)))
+            # the new value is stored into Pn, the packed upper triangle whatever
+            # P's storage (the commit mirrors it), and checked for finiteness
+            # while in a register
+            lines.append(CheckedAssign((_symmetric("scratch", "Pn", n, True, i, j),), tuple(terms)))
         blocks.append(KernelBlock(f"propagate_row_{i}", tuple(lines), checked=True))
     return blocks, OperationCount(mul, add)
+
+
+@dataclass(frozen=True)
+class CommitRow:
+    """Row ``row`` of the commit (predict, updates) in full storage: P(row, row:) from Pn's packed row, then mirrored.
+
+    ``start`` is the packed index of (row, row) and ``length`` N - row: the
+    copy is one contiguous block on both sides; ``mirrored`` are the columns
+    j > row whose P(j, row) is then set from P(row, j).
+    """
+
+    row: int
+    start: int
+    length: int
+    mirrored: tuple[int, ...]
+
+
+def covariance_commit(n: int) -> list[CommitRow]:
+    """The unrolled commit of predict and the updates in full storage: both triangles of P from Pn's packed upper one.
+
+    Row by row, each row's upper part is one block copy (gcc -O2 inlines it
+    as vector moves) and its column is mirrored from the row just written, so
+    nothing is kept in registers across rows: 7,243 instructions per
+    prediction at 18 states (callgrind, bench/bench_cycle.py (a)) against
+    7,595 for one assignment per entry, whose loads gcc schedules first and
+    spills (1.5 kB of stack), and 8,696 for a loop over the packed index.
+    """
+    return [CommitRow(i, packed_index(n, i, i), n - i, tuple(range(i + 1, n))) for i in range(n)]
 
 
 def unrolled_predict_flops(structure: FilterStructure) -> int:
@@ -353,10 +380,11 @@ def dense_predict_cost(n_states: int) -> OperationCount:
 #: product of the general rows) must save over the dense products to be chosen instead of the
 #: factored one (the Cholesky factor of the contract's check reused: P_n = (Phi L)(Phi L)^T + Q_d
 #: by BLAS trmm and syrk).  bench/bench_python_module.py times both (CPU time per call, one BLAS
-#: thread, bench/results/python_module.md): factored wins at 18 states (saving 15k flops: 10.3
-#: against 16.6 us), 32 (106k: 16.3 against 20.4 us) and 40 (215k: 21.5 against 24.3 us), ties at
-#: 48 (383k: 27.4 against 28.1 us); structured wins at 64 (939k: 37.5 against 45.6 us), 80 (1.9M:
-#: 51.8 against 70.5 us) and 100 (3.7M: 74.7 against 113.3 us).  The threshold sits between 48 and 64.
+#: thread, bench/results/python_module.md, after the dasum finiteness test): factored wins at 18
+#: states (saving 15k flops: 7.5 against 14.7 us), 32 (106k: 13.0 against 18.1 us), 40 (215k: 18.1
+#: against 22.2 us) and 48 (383k: 24.2 against 26.3 us); structured wins at 64 (939k: 35.1 against
+#: 40.4 us), 80 (1.9M: 47.2 against 65.4 us) and 100 (3.7M: 69.2 against 109.1 us).  The threshold
+#: sits between 48 and 64.
 PYTHON_STRUCTURED_SAVING_FLOPS = 500_000
 
 

@@ -7,7 +7,10 @@ dimension that would be zero (a model without noises or measurements) is
 rounded up to one so that the C stays valid.
 
 Packed storage keeps the upper triangle row by row:
-``(i, j), i <= j -> i (2N - i - 1) / 2 + j`` (``packed_index``).  The UD form
+``(i, j), i <= j -> i (2N - i - 1) / 2 + j`` (``packed_index``).  The
+transition's Q_d is always stored so, whatever P's storage: discretize
+writes and predict reads each pair i <= j once, and the transition is
+N (N - 1) / 2 entries smaller than a full one.  The UD form
 keeps the strictly upper part of U the same way:
 ``(i, j), i < j -> i (2N - i - 3) / 2 + j - 1`` (``upper_index``).
 """
@@ -108,19 +111,26 @@ class UnrolledDiscretizeSizes:
     ``terms``: entries of each of the two term arrays; ``active``: entries of
     S (``DiscretizePlan.segment_size``: each block row's dense segment over
     its span of Phi's pattern, padded to an even length, and one entry per
-    diagonal row; the rows e_i are not stored).
+    diagonal row; the rows e_i are not stored); ``balancing``: whether
+    discretize balances F at run time (no scaling fixed at generation time)
+    and so needs the row and column sums.
     """
 
     terms: int
     active: int
+    balancing: bool = True
 
 
 def _unrolled_discretize_scratch(prefix: str, sizes: ModelSizes, unrolled: UnrolledDiscretizeSizes, N: Dim, nnz_f: Dim) -> tuple[Field, ...]:
-    """Members of the unrolled discretize's scratch: compressed terms, S, F h and the balancing's vectors."""
-    return (
+    """Members of the unrolled discretize's scratch: compressed terms, S, F h and (run-time balancing only) its sums."""
+    fields = (
         Field("term", (Dim("2", 2), Dim(f"{prefix}_N_TERMS", unrolled.terms)), "the Horner chain's odd levels R_k (term[1]); the doubling's new values; S G"),
         Field("S", (Dim(f"{prefix}_N_ACTIVE_ENTRIES", unrolled.active),), "S = sum (F h)^k / (k + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal rows"),
         Field("fh", (nnz_f,), "F h at the nonzeros of F"),
+    )
+    if not unrolled.balancing:
+        return fields
+    return fields + (
         Field("row_sum", (N,), "balancing: off-diagonal row sums of D^-1 |F| D"),
         Field("col_sum", (N,), "balancing: off-diagonal column sums of D^-1 |F| D"),
     )
@@ -261,9 +271,9 @@ def c_layout(
         return CLayout(matrices, transition, filt, discretize_scratch, filter_scratch)
 
     qd_kind = "int_0^T e^{F s} G Q G^T e^{F^T s} ds (Van Loan)" if options.van_loan else "Gamma (Q/T) Gamma^T"
-    transition = (
+    transition = (  # Q_d packed whatever P's storage (module doc)
         Field("Phi", (N, N), "transition matrix"),
-        Field("Qd", symmetric, qd_kind + (", packed upper triangle" if options.packed else "")),
+        Field("Qd", (NP,), qd_kind + ", packed upper triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j"),
     ) + _recompute_fields(options, nnz_f, dim_g, dim_w)
     filt = (
         Field("x", (N,)),
@@ -276,7 +286,7 @@ def c_layout(
         discretize_scratch = _van_loan_scratch(N, dim_w)
     filter_scratch = [
         Field("M", (N,), "one row of Phi P (predict works row by row)"),
-        Field("Pn", symmetric, "new covariance before it is committed"),
+        Field("Pn", (NP,), "new covariance before it is committed, packed upper triangle"),
         Field("xn", (N,)),
     ]
     if options.update == "vector":

@@ -1,20 +1,25 @@
-"""The covariance prediction keeps one row of M = Phi P, not N x N (issue 14, item 6: memory).
+"""The memory of the filter cycle (issue 14, item 6): one row of M = Phi P, packed Pn and Q_d.
 
 Row i of P_n = M Phi^T + Q_d needs only row i of M, so the unrolled kernel
-computes row i of M right before row i of P_n and the scratch holds one row.
-These tests prove the kernel never reads a row of M other than the one just
-computed (the conformance checks prove the numbers), and that the filter
-steps' scratch has no N x N array but the new covariance Pn.
+computes row i of M right before row i of P_n and the scratch holds one row;
+the new covariance Pn and the transition's Q_d are packed upper triangles
+whatever P's storage, and discretize stores the balancing's sums only when
+it balances at run time.  These tests prove the kernel never reads a row of
+M other than the one just computed and the layouts (the conformance checks
+prove the numbers).
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
+from modelgen.codegen.generate import describe, generate_code
 from modelgen.codegen.kernels import CheckedAssign, covariance_predict
 from modelgen.codegen.layout import ModelSizes, c_layout
 from modelgen.codegen.options import CodegenOptions
-from modelgen.codegen.generate import describe
+from modelgen.derive.symbolic import derive
 
 
 def _m_refs(statement) -> tuple[list, list]:
@@ -47,11 +52,26 @@ def test_each_row_of_pn_reads_only_the_row_of_m_computed_just_before_it(paper_de
     assert rows_read == set(range(n)) - unit  # a unit row of Phi reads P in place
 
 
-def test_the_filter_steps_scratch_has_no_square_array_but_the_new_covariance(paper_derived):
+def test_no_square_array_in_the_filter_steps_scratch_and_q_d_packed_in_the_transition(paper_derived):
+    """M is one row, Pn and the transition's Q_d the packed upper triangle whatever P's storage."""
     sizes = ModelSizes.of(paper_derived)
-    for options in (CodegenOptions(), CodegenOptions(update="sequential"), CodegenOptions(storage="packed")):
+    for options in (CodegenOptions(), CodegenOptions(update="sequential"), CodegenOptions(storage="packed"),
+                    CodegenOptions(process_noise="van-loan")):
         layout = c_layout(sizes, options, "NED_DOPPLER18")
-        square = [f.name for f in layout.filter_scratch if len(f.dims) == 2 and all(d.value == sizes.n for d in f.dims)]
-        assert square == ([] if options.packed else ["Pn"])
-        (m,) = [f for f in layout.filter_scratch if f.name == "M"]
-        assert [d.value for d in m.dims] == [sizes.n]
+        fields = {f.name: [d.value for d in f.dims] for f in layout.filter_scratch}
+        assert not [name for name, dims in fields.items() if dims == [sizes.n, sizes.n]], options.slug()
+        assert fields["M"] == [sizes.n] and fields["Pn"] == [sizes.packed], options.slug()
+        transition = {f.name: [d.value for d in f.dims] for f in layout.transition}
+        assert transition["Qd"] == [sizes.packed], options.slug()
+
+
+def _discretize_scratch(header: str) -> str:
+    return header[header.index("/* Scratch memory of discretize. */"):header.index("_discretize_scratch;")]
+
+
+def test_discretize_keeps_the_balancing_sums_only_where_it_balances_at_run_time(paper_model):
+    """The paper's model has a check operating point, so D is fixed at generation time and no sums are stored."""
+    fixed = generate_code(derive(paper_model)).files["ned_doppler18.h"]
+    assert "row_sum" not in _discretize_scratch(fixed) and "col_sum" not in _discretize_scratch(fixed)
+    balanced = generate_code(derive(replace(paper_model, check=None))).files["ned_doppler18.h"]
+    assert "row_sum" in _discretize_scratch(balanced) and "col_sum" in _discretize_scratch(balanced)

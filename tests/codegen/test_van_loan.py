@@ -219,7 +219,7 @@ def test_cli_flag_changes_only_the_discretize_and_what_describes_it(tmp_path, pa
 
     header = [body(read[k][f"{name}.h"], "#ifndef") for k in read]
     words = " ".join(header[1].split())  # comments are wrapped at 100 columns
-    assert "Qd[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* int_0^T e^{F s} G Q G^T e^{F^T s} ds (Van Loan)" in words
+    assert "Qd[NED_DOPPLER18_N_PACKED]; /* int_0^T e^{F s} G Q G^T e^{F^T s} ds (Van Loan), packed upper triangle" in words
     assert "the exact process noise Q_d = int_0^T e^{F s} G Q G^T e^{F^T s} ds by Van Loan's block exponential" in words
     for start, end in (
         ("/* The transition over one step T", "/* The filter state"),
@@ -254,7 +254,7 @@ def test_recompute_threshold_keeps_the_van_loan_transition(paper_derived, tmp_pa
     filt = compiled({options.slug(): folder}, paper_derived, options)
     assert filt.discretize(60.0) == 0
     first = filt.Qd.copy()
-    filt.transition.Qd[0][0] = 123.0  # a kept transition is returned untouched
+    filt.transition.Qd[0] = 123.0  # a kept transition is returned untouched (Q_d(0, 0): packed index 0)
     assert filt.discretize(60.0) == 0 and filt.Qd[0, 0] == 123.0
     assert filt.discretize(1.0) == 0 and filt.Qd[0, 0] != 123.0
     assert filt.discretize(60.0) == 0 and np.array_equal(filt.Qd, first)

@@ -281,13 +281,15 @@ def c_context(description: FilterDescription) -> dict[str, object]:
     at_upper, at_any = accessors(packed, prefix)
     unrolled = description.discretize_plan if description.discretize_unrolled else None
     compact_discretize = compact_discretize_context(structure) if not unrolled and not options.van_loan else None
+    scaling = nominal_scaling(description.derived)  # D of ||F||_D fixed at generation time (None: balanced at run time)
+    balancing = scaling is None and any(i != j for i, j in structure.entries("F"))  # the template's run-time sweeps
     layout = c_layout(
-        sizes, options, prefix, UnrolledDiscretizeSizes(unrolled.term_size, unrolled.active_size) if unrolled else None,
+        sizes, options, prefix,
+        UnrolledDiscretizeSizes(unrolled.term_size, unrolled.active_size, balancing) if unrolled else None,
         compact_discretize["sizes"] if compact_discretize else None,
     )
     discretize = discretize_functions(description.discretize_blocks, model.name, options.scalar) if unrolled else []
     calls = {f["name"]: f["call"] for f in discretize}
-    scaling = nominal_scaling(description.derived)  # D of ||F||_D fixed at generation time (None: balanced at run time)
     printer = CPrinter(options.scalar, {p.sym: f"params->{p.name}" for p in model.parameters})
     targets, _, block = description.evaluation
     state_lines, state_commit, _ = description.state_predict
@@ -389,6 +391,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         if len(structure.unit_rows) < n
         else (0, 0),
         "predict_state_commit": [c_statement(s) for s in state_commit],
+        "covariance_commit_rows": description.covariance_commit,
         "predict_blocks": block_functions(blocks, model.name),
         "compact": bool(compact),
         "compact_tables": {**{k: _table(v) for k, v in compact.items()}, "nnz": max(len(compact.get("col", ())), 1)},
