@@ -8,9 +8,10 @@ fly the filter (the generated C by default, in the compiled loop of
 :mod:`modelgen.simulation.native_loop`) on them in the three correction modes
 (open loop, closed loop, seed 003's accumulated correction) in one pass over
 the data, plus the free INS; run a Monte Carlo ensemble and test its NEES;
-plot (the filter's figure in a forked copy of the process while this one draws
-the others, :func:`draw_figures`; each line cut to what its pixel columns show,
-:func:`pixel_envelope`) and summarize.  Memory does not grow with the IMU data; histories hold at most
+plot (in a copy of the process forked at the start, which imports matplotlib
+while this one flies, :class:`FigureProcess`; the filter's figure in a copy
+of that copy while it draws the others, :func:`draw_figures`; each line cut
+to what its pixel columns show, :func:`pixel_envelope`) and summarize.  Memory does not grow with the IMU data; histories hold at most
 :data:`~modelgen.simulation.streaming.MAX_HISTORY_ROWS` rows per mode.  Progress goes to ``echo``.
 """
 
@@ -18,11 +19,13 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import sys
 import tempfile
 import threading
 import time
 import traceback
+import weakref
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -120,10 +123,15 @@ class FlightStart:
     integrate it anyway for the increments.  The
     IMU errors are the seed's first draws (:func:`~modelgen.simulation.flight.imu_error_stream`);
     :attr:`rng` continues from there once :meth:`imu_errors` has returned.
+    Before the threads start (a process with threads running does not fork),
+    the flight's :class:`FigureProcess` is forked (:attr:`figures`; None where
+    it cannot be, or with ``figure_process=False``): it imports matplotlib
+    while this process derives the model.
     """
 
-    def __init__(self, profile: FlightProfile, seed: int):
+    def __init__(self, profile: FlightProfile, seed: int, figure_process: bool = True):
         self.profile, self.seed = profile, seed
+        self.figures = FigureProcess.start() if figure_process else None
         n_samples, record_every = sample_counts(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
         self.rng = np.random.default_rng(seed)
         # the truth positions are integrated by the flight's pieces (once, not twice) unless the aiding sensor
@@ -142,6 +150,117 @@ class FlightStart:
         return _finished(self._imu)
 
 
+class FigureProcess:
+    """A forked copy of this process that imports matplotlib and draws the figures it is sent.
+
+    matplotlib's import (0.4 s) holds the GIL: in a thread it slows the
+    flight's own threads, after the flight it comes before the figures.  A
+    copy forked at the start of the flight, when no thread runs yet, imports
+    it on the other core while this process derives the model and flies;
+    after the flight it is sent the drawings (functions and their data,
+    pickled through a pipe) and draws them, ``apart`` one by a forked copy of
+    its own (:func:`draw_figures`), while this process never imports
+    matplotlib.  Should it fail (or die), :meth:`paths` draws the batch here,
+    so that its error is raised.  :meth:`close` ends it (so does this
+    object's collection, or this process's exit: a flight that fails leaves
+    no process behind); it ignores Ctrl-C, which this process handles.
+    """
+
+    def __init__(self, pid: int, connection: Any):
+        self.pid, self.connection = pid, connection
+        # each batch asked for, and whether it went to the process (else it is drawn here)
+        self._batches: list[tuple[list[tuple[Callable[..., Path], tuple]], int, bool]] = []
+        self._end = weakref.finalize(self, _end_figure_process, pid, connection)
+
+    @classmethod
+    def start(cls) -> "FigureProcess | None":
+        """Fork the figure process now; None where there is no fork or another thread runs (its locks would be
+        copied held)."""
+        if not hasattr(os, "fork") or threading.active_count() > 1:
+            return None
+        from multiprocessing import Pipe
+
+        here, there = Pipe()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        pid = os.fork()
+        if pid == 0:  # the copy: serve drawings, leave without running this process's exit handlers
+            status = 1
+            try:
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
+                here.close()
+                _serve_figures(there)
+                status = 0
+            except BaseException:
+                traceback.print_exc()
+            finally:
+                os._exit(status)
+        there.close()
+        return cls(pid, here)
+
+    def draw(self, drawings: list[tuple[Callable[..., Path], tuple]], apart: int) -> None:
+        """Send ``drawings`` to be drawn as :func:`draw_figures` draws them (``apart`` by a copy of the copy).
+
+        Drawings that cannot be sent (the process gone, or data that does not
+        pickle: nothing is written then) are drawn here by :meth:`paths`.
+        """
+        try:
+            self.connection.send((drawings, apart))
+            sent = True
+        except Exception:
+            sent = False
+        self._batches.append((drawings, apart, sent))
+
+    def paths(self) -> list[Path]:
+        """The paths of every drawing asked for, in order, once drawn (here, for a batch the process did not draw)."""
+        paths: list[Path] = []
+        for drawings, apart, sent in self._batches:
+            status, drawn = "not sent", None
+            if sent:
+                try:
+                    status, drawn = self.connection.recv()
+                except (EOFError, OSError):
+                    status = "gone"
+            paths += [Path(p) for p in drawn] if status == "drawn" else draw_figures(drawings, apart)
+        self._batches = []
+        return paths
+
+    def close(self) -> None:
+        """Tell the process to leave once its batch is drawn, and wait for it (once; later calls do nothing)."""
+        self._end()
+
+
+def _end_figure_process(pid: int, connection: Any) -> None:
+    """Send the figure process its last message (None), close the pipe and wait for the process to leave."""
+    try:
+        connection.send(None)
+    except (OSError, ValueError):  # gone already
+        pass
+    connection.close()
+    os.waitpid(pid, 0)
+
+
+def _serve_figures(connection: Any) -> None:
+    """The figure process: import matplotlib, then draw each batch received until None (or the pipe closes);
+    answer each with ("drawn", paths) or ("failed", its traceback).  A reader gone is no error of its own."""
+    _import_plotting()
+    while True:
+        try:
+            batch = connection.recv()
+        except EOFError:
+            return
+        if batch is None:
+            return
+        try:
+            answer = ("drawn", [str(p) for p in draw_figures(*batch)])
+        except Exception:
+            answer = ("failed", traceback.format_exc())
+        try:
+            connection.send(answer)
+        except OSError:  # this process stopped waiting (it failed or was interrupted)
+            return
+
+
 def _import_plotting() -> None:
     """Import what the figures need (matplotlib, its Figure and Agg canvas: 0.4 s) ahead of drawing them."""
     import matplotlib
@@ -151,9 +270,10 @@ def _import_plotting() -> None:
     import matplotlib.figure  # noqa: F401
 
 
-def start_flight(profile: FlightProfile, seed: int) -> FlightStart:
-    """Start making ``profile``'s truth and drawing its IMU errors (seed ``seed``) now; see :class:`FlightStart`."""
-    return FlightStart(profile, seed)
+def start_flight(profile: FlightProfile, seed: int, figure_process: bool = True) -> FlightStart:
+    """Start making ``profile``'s truth and drawing its IMU errors (seed ``seed``) now, and (``figure_process``)
+    fork the process that will draw its figures; see :class:`FlightStart`."""
+    return FlightStart(profile, seed, figure_process)
 
 
 def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, int], None]:
@@ -221,9 +341,9 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
         record_every = history_every(n_cycles)
         histories = {mode: CsvHistory(out_dir / f"history_{mode}.csv", derived.model.state_names)
                      for mode in MODES} if history_csv else {}
-        # the figures' imports (0.4 s) are done while the flight goes: its thread making the IMU
-        # increments sets the pace, the flying thread's core has time to spare
-        plotting = _in_background(_import_plotting)
+        # without a figure process, the figures' imports (0.4 s) are done while the flight goes: its thread
+        # making the IMU increments sets the pace, the flying thread's core has time to spare
+        plotting = _in_background(_import_plotting) if started.figures is None else None
         try:
             results = fly_modes(profile, derived, trajectory, sensors, layout, make_filter, MODES,
                                 progress=lambda mode: _echo_progress(echo, f"{mode} filter"),
@@ -252,8 +372,15 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
     if monte_carlo is not None:
         drawings.append((_plot_monte_carlo, (monte_carlo, units, out_dir / "monte_carlo.png")))
         drawings.append((_plot_nees, (monte_carlo, out_dir / "nees.png")))
-    _finished(plotting)
-    figures = draw_figures(drawings, apart=2)  # the filter's 18 panels: the longest drawing
+    if started.figures is None:
+        _finished(plotting)
+        figures = draw_figures(drawings, apart=2)  # the filter's 18 panels: the longest drawing
+    else:
+        try:
+            started.figures.draw(drawings, apart=2)
+            figures = started.figures.paths()
+        finally:
+            started.figures.close()
     summary = out_dir / "summary.md"
     summary.write_text(cite_sources(_summary(profile, derived.model.name, implementation, layout.conventions, trajectory, results, errors,
                                 monte_carlo, timings, figures)), encoding="utf-8")

@@ -1,5 +1,8 @@
 """`modelgen simulate`'s flight report: a streamed flight, its figures, summary and history files."""
 
+import os
+import threading
+
 import numpy as np
 import pytest
 
@@ -108,3 +111,69 @@ def test_a_flight_started_before_the_model_is_derived_flies_the_same_histories(p
     with pytest.raises(ModelError, match="seed 1 is not this one"):
         simulate(scenario, paper_derived, tmp_path / "other", runs=0, echo=lambda line: None,
                  implementation="reference", started=start_flight(scenario, 1))
+
+
+def _write_pid(path):
+    path.write_text(str(os.getpid()), encoding="utf-8")
+    return path
+
+
+def _figure_process():
+    from modelgen.simulation.flight_report import FigureProcess
+
+    process = FigureProcess.start()
+    assert process is not None or threading.active_count() > 1  # only a process running another thread does not fork
+    if process is None:
+        pytest.skip("a thread runs in this test process: it forks no figure process")
+    return process
+
+
+def test_the_figure_process_draws_in_another_process_and_returns_the_paths_in_order(tmp_path):
+    process = _figure_process()
+    try:
+        process.draw([(_write_pid, (tmp_path / f"{name}.txt",)) for name in "abc"], apart=1)
+        assert process.paths() == [tmp_path / "a.txt", tmp_path / "b.txt", tmp_path / "c.txt"]
+    finally:
+        process.close()
+    writers = {(tmp_path / f"{name}.txt").read_text(encoding="utf-8") for name in "abc"}
+    assert str(os.getpid()) not in writers and len(writers) == 2  # the figure process and its copy for "b"
+    with pytest.raises(ChildProcessError):
+        os.waitpid(process.pid, os.WNOHANG)  # waited for: gone
+
+
+def test_a_figure_the_figure_process_fails_to_draw_is_drawn_here_and_raises_its_error(tmp_path):
+    process = _figure_process()
+    try:
+        process.draw([(_write_text, ("a", tmp_path / "a.txt")), (_fail, (tmp_path / "b.txt",))], apart=0)
+        with pytest.raises(RuntimeError, match="cannot draw b.txt"):
+            process.paths()
+    finally:
+        process.close()
+
+
+def test_drawings_that_do_not_pickle_are_drawn_here(tmp_path):
+    process = _figure_process()
+    try:
+        process.draw([(lambda path: _write_pid(path), (tmp_path / "a.txt",))], apart=0)
+        assert process.paths() == [tmp_path / "a.txt"]
+    finally:
+        process.close()
+    assert (tmp_path / "a.txt").read_text(encoding="utf-8") == str(os.getpid())
+
+
+def test_figures_drawn_by_the_figure_process_are_the_bytes_drawn_here(paper_derived, tmp_path):
+    from modelgen.simulation.flight_report import start_flight
+
+    scenario = load_profile("profile_000").with_changes(hours=1 / 60, imu_rate=30.0)
+    started = start_flight(scenario, 0)
+    if started.figures is None:
+        assert threading.active_count() > 1
+        pytest.skip("a thread runs in this test process: it forks no figure process")
+    simulate(scenario, paper_derived, tmp_path / "apart", runs=0, echo=lambda line: None, implementation="reference",
+             started=started)
+    simulate(scenario, paper_derived, tmp_path / "here", runs=0, echo=lambda line: None, implementation="reference",
+             started=start_flight(scenario, 0, figure_process=False))
+    for name in ("trajectory.png", "correction_modes.png", "filter_errors.png"):
+        assert (tmp_path / "apart" / name).read_bytes() == (tmp_path / "here" / name).read_bytes()
+    with pytest.raises(ChildProcessError):
+        os.waitpid(started.figures.pid, os.WNOHANG)
