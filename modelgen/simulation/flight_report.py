@@ -17,6 +17,7 @@ to what its pixel columns show, :func:`pixel_envelope`) and summarize.  Memory d
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import signal
@@ -51,6 +52,9 @@ from modelgen.simulation.trajectory import Trajectory, generate_trajectory, samp
 
 ARCSEC = math.pi / 180 / 3600
 NMILE = 1852.0
+#: major ticks made per axis of a figure prepared before its data (:func:`_ready_ticks`): more than a
+#: panel of these figures shows
+FIGURE_TICKS = 10
 
 
 @dataclass
@@ -160,7 +164,9 @@ class FigureProcess:
     after the flight it is sent the drawings (functions and their data,
     pickled through a pipe) and draws them, ``apart`` one by a forked copy of
     its own (:func:`draw_figures`), while this process never imports
-    matplotlib.  Should it fail (or die), :meth:`paths` draws the batch here,
+    matplotlib.  While the flight goes it can also make a drawing's figure
+    and axes, which need no data (:meth:`prepare`): the drawing then only
+    adds its data.  Should it fail (or die), :meth:`paths` draws the batch here,
     so that its error is raised.  :meth:`close` ends it (so does this
     object's collection, or this process's exit: a flight that fails leaves
     no process behind); it ignores Ctrl-C, which this process handles.
@@ -205,11 +211,19 @@ class FigureProcess:
         pickle: nothing is written then) are drawn here by :meth:`paths`.
         """
         try:
-            self.connection.send((drawings, apart))
+            self.connection.send(("draw", drawings, apart))
             sent = True
         except Exception:
             sent = False
         self._batches.append((drawings, apart, sent))
+
+    def prepare(self, drawing: Callable[..., Path], make: Callable[..., Any], args: tuple) -> None:
+        """Have the process make ``make(*args)`` now, to be handed to ``drawing`` as its ``prepared`` figure
+        and axes when it is drawn (a figure it fails to make is made by the drawing)."""
+        try:
+            self.connection.send(("prepare", drawing.__name__, make, args))
+        except Exception:  # gone, or does not pickle: the drawing makes its own
+            pass
 
     def paths(self) -> list[Path]:
         """The paths of every drawing asked for, in order, once drawn (here, for a batch the process did not draw)."""
@@ -241,18 +255,34 @@ def _end_figure_process(pid: int, connection: Any) -> None:
 
 
 def _serve_figures(connection: Any) -> None:
-    """The figure process: import matplotlib, then draw each batch received until None (or the pipe closes);
-    answer each with ("drawn", paths) or ("failed", its traceback).  A reader gone is no error of its own."""
+    """The figure process: import matplotlib, then serve each message received until None (or the pipe closes).
+
+    ("prepare", drawing's name, make, args): keep ``make(*args)`` for that
+    drawing.  ("draw", drawings, apart): draw them (:func:`draw_figures`),
+    each with its prepared figure if there is one, and answer ("drawn",
+    paths) or ("failed", the traceback).  A reader gone is no error of its own.
+    """
     _import_plotting()
+    prepared: dict[str, Any] = {}
     while True:
         try:
-            batch = connection.recv()
+            message = connection.recv()
         except EOFError:
             return
-        if batch is None:
+        if message is None:
             return
+        if message[0] == "prepare":
+            _, name, make, args = message
+            try:
+                prepared[name] = make(*args)
+            except Exception:  # the drawing makes its figure itself, and raises the error if there is one
+                pass
+            continue
+        _, drawings, apart = message
+        drawings = [(functools.partial(function, prepared=prepared.pop(getattr(function, "__name__", None)))
+                     if getattr(function, "__name__", None) in prepared else function, args) for function, args in drawings]
         try:
-            answer = ("drawn", [str(p) for p in draw_figures(*batch)])
+            answer = ("drawn", [str(p) for p in draw_figures(drawings, apart)])
         except Exception:
             answer = ("failed", traceback.format_exc())
         try:
@@ -344,6 +374,11 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
         # without a figure process, the figures' imports (0.4 s) are done while the flight goes: its thread
         # making the IMU increments sets the pace, the flying thread's core has time to spare
         plotting = _in_background(_import_plotting) if started.figures is None else None
+        units = {state.name: state.unit for state in derived.model.states}
+        if started.figures is not None:  # their figures and axes made while the flight goes
+            started.figures.prepare(_plot_trajectory, _trajectory_axes, (FIGURE_TICKS,))
+            started.figures.prepare(_plot_modes, _modes_axes, (FIGURE_TICKS,))
+            started.figures.prepare(_plot_filter, _filter_axes, (derived.model.state_names, units, FIGURE_TICKS))
         try:
             results = fly_modes(profile, derived, trajectory, sensors, layout, make_filter, MODES,
                                 progress=lambda mode: _echo_progress(echo, f"{mode} filter"),
@@ -363,7 +398,6 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
                                       journal=journal)
         timings[f"Monte Carlo ({_runs(runs)}, {monte_carlo.where})"] = time.perf_counter() - t
 
-    units = {state.name: state.unit for state in derived.model.states}
     drawings: list[tuple[Callable[..., Path], tuple]] = [
         (_plot_trajectory, (trajectory, out_dir / "trajectory.png")),
         (_plot_modes, (errors, out_dir / "correction_modes.png")),
@@ -439,6 +473,16 @@ def _fixed_margins(fig, left: float = 0.07, right: float = 0.98, bottom: float =
     fig.subplots_adjust(left=left, right=right, bottom=bottom, top=top, hspace=hspace, wspace=wspace)
 
 
+def _ready_ticks(axes: Any, count: int) -> None:
+    """Make ``count`` major ticks of each axis of ``axes`` now (matplotlib makes them while it draws, copying the
+    first: half the time of a figure of many panels), for a figure prepared before its data is there."""
+    if count <= 0:
+        return
+    for a in axes:
+        a.xaxis.get_major_ticks(count)
+        a.yaxis.get_major_ticks(count)
+
+
 def pixel_envelope(values: np.ndarray, columns: int) -> np.ndarray:
     """Indices of the samples of a time series that draw the same line in ``columns`` pixel columns.
 
@@ -477,16 +521,26 @@ def _plot_series(ax, x: np.ndarray, y: np.ndarray, dpi: float, *args, semilog: b
     (ax.semilogy if semilog else ax.plot)(x[keep], y[keep], *args, **kwargs)
 
 
-def _plot_trajectory(trajectory: Trajectory, path: Path) -> Path:
-    """The truth's ground track, height, speeds and attitude (a Figure of its own, not pyplot's shared state)."""
+def _trajectory_axes(ticks: int = 0) -> tuple[Any, Any]:
+    """The trajectory figure and its axes before any data (``ticks``: see :func:`_ready_ticks`)."""
     from matplotlib.figure import Figure
 
-    truth = trajectory.truth
-    hours = truth[:, 0] / 3600
-    euler = np.degrees(dcm_to_euler(quaternion_to_dcm(truth[:, 7:11])))
     fig = Figure(figsize=(11, 7))
     ax = fig.subplots(2, 2)
     _fixed_margins(fig, top=0.9, hspace=0.35, wspace=0.22)
+    _ready_ticks(ax.flat, ticks)
+    return fig, ax
+
+
+def _plot_trajectory(trajectory: Trajectory, path: Path, prepared: tuple[Any, Any] | None = None) -> Path:
+    """The truth's ground track, height, speeds and attitude (a Figure of its own, not pyplot's shared state).
+
+    ``prepared``: the figure and axes from :func:`_trajectory_axes`, made before the data was (else made now).
+    """
+    truth = trajectory.truth
+    hours = truth[:, 0] / 3600
+    euler = np.degrees(dcm_to_euler(quaternion_to_dcm(truth[:, 7:11])))
+    fig, ax = prepared or _trajectory_axes()
     dpi = 110
     ax[0, 0].plot(np.degrees(truth[:, 2]), np.degrees(truth[:, 1]))  # a path, not a time series: every point
     ax[0, 0].set(xlabel="longitude [deg]", ylabel="latitude [deg]", title="ground track")
@@ -530,12 +584,21 @@ def coinciding_modes(curves: dict[str, np.ndarray], tolerance: float = 0.01) -> 
     return notes
 
 
-def _plot_modes(errors: dict[str, NavigationErrors], path: Path) -> Path:
+def _modes_axes(ticks: int = 0) -> tuple[Any, Any]:
+    """The correction modes' figure and its axes before any data (``ticks``: see :func:`_ready_ticks`)."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(11, 10))
     ax = fig.subplots(3, 1, sharex=True)
     _fixed_margins(fig, left=0.08, top=0.96, hspace=0.12)
+    _ready_ticks(ax, ticks)
+    return fig, ax
+
+
+def _plot_modes(errors: dict[str, NavigationErrors], path: Path, prepared: tuple[Any, Any] | None = None) -> Path:
+    """Each correction mode's (and the free INS's) position, velocity and heading errors; ``prepared``: the figure
+    and axes from :func:`_modes_axes` (else made now)."""
+    fig, ax = prepared or _modes_axes()
     dpi = 110
     panels = (
         ("horizontal position error [nmile]", lambda e: np.hypot(*e.position.T) / NMILE),
@@ -558,27 +621,49 @@ def _plot_modes(errors: dict[str, NavigationErrors], path: Path) -> Path:
     return path
 
 
-def _plot_filter(result: RunResult, names: list[str], units: dict[str, str], path: Path) -> Path:
+def _filter_axes(names: list[str], units: dict[str, str], ticks: int = 0) -> tuple[Any, Any]:
+    """The filter's figure before any data: a titled panel per state (the first 18), each in its unit.
+
+    The titles sit where matplotlib would place them (``y=1.0``: no tick
+    label above the panels), given rather than measured (a tenth of the
+    figure's time).  ``ticks``: see :func:`_ready_ticks`.
+    """
     from matplotlib.figure import Figure
 
-    hours = result.times / 3600
-    picks = [i for i in range(len(names))][: min(len(names), 18)]
+    picks = _filter_panels(names)
     cols = 3
     rows = math.ceil(len(picks) / cols)
     fig = Figure(figsize=(13, 2.1 * rows))
     ax = fig.subplots(rows, cols, sharex=True)
     _fixed_margins(fig, left=0.06, top=1 - 0.8 / fig.get_figheight(), hspace=0.6, wspace=0.25)
-    dpi = 100
     for k, i in enumerate(picks):
         a = ax.flat[k]
-        _plot_series(a, hours, result.estimation_error[:, i], dpi, lw=0.8, label="error")
-        _plot_series(a, hours, 3 * result.sigma[:, i], dpi, "r", lw=0.6, label="+-3 sigma")
-        _plot_series(a, hours, -3 * result.sigma[:, i], dpi, "r", lw=0.6)
-        a.set_title(f"{names[i]} [{units.get(names[i], '?')}]", fontsize=8)
+        a.set_title(f"{names[i]} [{units.get(names[i], '?')}]", fontsize=8, y=1.0)
         a.tick_params(labelsize=7)
     for a in list(ax.flat)[len(picks):]:
         a.axis("off")
     _time_labels(ax, len(picks), cols)
+    _ready_ticks(ax.flat[:len(picks)], ticks)
+    return fig, ax
+
+
+def _filter_panels(names: list[str]) -> list[int]:
+    """The states the filter's figure shows: the first 18."""
+    return list(range(min(len(names), 18)))
+
+
+def _plot_filter(result: RunResult, names: list[str], units: dict[str, str], path: Path,
+                 prepared: tuple[Any, Any] | None = None) -> Path:
+    """Each state's estimation error and the filter's 3-sigma bounds; ``prepared``: the figure and axes from
+    :func:`_filter_axes` for these ``names`` and ``units`` (else made now)."""
+    hours = result.times / 3600
+    fig, ax = prepared or _filter_axes(names, units)
+    dpi = 100
+    for k, i in enumerate(_filter_panels(names)):
+        a = ax.flat[k]
+        _plot_series(a, hours, result.estimation_error[:, i], dpi, lw=0.8, label="error")
+        _plot_series(a, hours, 3 * result.sigma[:, i], dpi, "r", lw=0.6, label="+-3 sigma")
+        _plot_series(a, hours, -3 * result.sigma[:, i], dpi, "r", lw=0.6)
     fig.suptitle(f"Estimation error and filter 3-sigma, {result.mode} ({result.filter_name}); each panel in its state's unit")
     fig.savefig(path, dpi=dpi)
     return path
