@@ -227,11 +227,11 @@ def measure_time(scenario, derived, report: dict) -> None:
             children = resource.getrusage(resource.RUSAGE_CHILDREN)
             with Clock() as c_sim:
                 simulate(scenario, derived, Path(out), runs=0, echo=lambda line: None)
-            after = resource.getrusage(resource.RUSAGE_CHILDREN)  # the forked copy that draws the filter's figure
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)  # the forked figure process and its copy
             forked = (after.ru_utime - children.ru_utime) + (after.ru_stime - children.ru_stime)
         print(f"  simulate() in this process (three modes, figures, summary; the filter code generated and its "
               f"library taken from the compile cache): CPU {c_sim.cpu + forked:.2f} s (of which the forked figure "
-              f"process {forked:.2f} s), wall {c_sim.wall:.2f} s", flush=True)
+              f"processes {forked:.2f} s), wall {c_sim.wall:.2f} s", flush=True)
         report["simulate_in_process"] = {"cpu_s": c_sim.cpu + forked, "forked_figure_cpu_s": forked, "wall_s": c_sim.wall}
 
 
