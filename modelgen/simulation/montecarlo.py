@@ -141,8 +141,10 @@ class MonteCarloSetup:
     sympy against 2 ms to unpickle); without it the worker derives ``model``.
     ``layout``: the error layout of the flight for ``derived`` (its ``derived``
     is that one), made by the caller (:func:`caller_layout`), so that a worker
-    need not make it (0.15-0.2 s: the model's matrices lambdified to evaluate
-    them once); without it the worker makes it.
+    need not make it (30 ms: the model's matrices lambdified to evaluate them
+    once; the 0.15 s the step used to take was mostly numba's registries,
+    which its first compiled call loaded and the first run loads now); without
+    it the worker makes it.
     """
 
     profile: FlightProfile
