@@ -362,7 +362,7 @@ def figure(rows: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 4))
+    fig, ax = plt.subplots(figsize=(7.5, 5))
     names = ("predict", "update", "discretize")
     width = 0.8 / len(rows)
     for k, r in enumerate(rows):
@@ -374,7 +374,7 @@ def figure(rows: list[dict], path: Path) -> None:
     ax.set_xticks(np.arange(3) + width * (len(rows) - 1) / 2, names)
     ax.set_ylabel("numpy time / generated time [-]")
     ax.set_title("generated Python module against dense numpy (per call, same function)")
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.1))  # below the axes: no bar hidden
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 
