@@ -36,8 +36,7 @@ def case(request, derived_builtin, tmp_path_factory):
     rng = np.random.default_rng(11)
     A = rng.standard_normal((n, n))
     P = A @ A.T / n + 0.1 * np.eye(n)
-    H = np.zeros((m, n))
-    H[:, :] = rng.standard_normal((m, n)) * (rng.random((m, n)) < 0.2)
+    H = rng.standard_normal((m, n)) * (rng.random((m, n)) < 0.2)  # sparse, as a model's H
     H[np.arange(m), np.arange(m)] = 1.0
     return module, {"x": rng.standard_normal(n), "P": P, "z": rng.standard_normal(m), "H": H,
                     "r": rng.uniform(0.5, 2.0, m)}
