@@ -251,7 +251,10 @@ def _end_figure_process(pid: int, connection: Any) -> None:
     except (OSError, ValueError):  # gone already
         pass
     connection.close()
-    os.waitpid(pid, 0)
+    try:
+        os.waitpid(pid, 0)
+    except ChildProcessError:  # waited for already (by whoever reaps this process's children)
+        pass
 
 
 def _serve_figures(connection: Any) -> None:
