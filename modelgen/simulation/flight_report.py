@@ -55,6 +55,8 @@ NMILE = 1852.0
 #: major ticks made per axis of a figure prepared before its data (:func:`_ready_ticks`): more than a
 #: panel of these figures shows
 FIGURE_TICKS = 10
+#: the figure process's niceness: a lower priority than the flight's, whose cores it shares while the flight goes
+FIGURE_NICE = 10
 
 
 @dataclass
@@ -169,7 +171,8 @@ class FigureProcess:
     adds its data.  Should it fail (or die), :meth:`paths` draws the batch here,
     so that its error is raised.  :meth:`close` ends it (so does this
     object's collection, or this process's exit: a flight that fails leaves
-    no process behind); it ignores Ctrl-C, which this process handles.
+    no process behind); it ignores Ctrl-C, which this process handles, and
+    runs at a lower priority (:data:`FIGURE_NICE`).
     """
 
     def __init__(self, pid: int, connection: Any):
@@ -194,6 +197,9 @@ class FigureProcess:
             status = 1
             try:
                 signal.signal(signal.SIGINT, signal.SIG_IGN)
+                # its work while the flight goes takes what the flight leaves of the cores: the flight's threads
+                # come first (after the flight this process only waits for it)
+                os.nice(FIGURE_NICE)
                 here.close()
                 _serve_figures(there)
                 status = 0
@@ -588,12 +594,15 @@ def coinciding_modes(curves: dict[str, np.ndarray], tolerance: float = 0.01) -> 
 
 
 def _modes_axes(ticks: int = 0) -> tuple[Any, Any]:
-    """The correction modes' figure and its axes before any data (``ticks``: see :func:`_ready_ticks`)."""
+    """The correction modes' figure and its axes before any data, each on the log scale its curves are drawn on
+    (set before ``ticks`` are made, see :func:`_ready_ticks`: a new scale makes new ticks)."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(11, 10))
     ax = fig.subplots(3, 1, sharex=True)
     _fixed_margins(fig, left=0.08, top=0.96, hspace=0.12)
+    for a in ax:
+        a.set_yscale("log")
     _ready_ticks(ax, ticks)
     return fig, ax
 
