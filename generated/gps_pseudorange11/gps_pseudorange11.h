@@ -14,7 +14,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 37 operations after CSE
- *   discretize: 2524 mul + 1675 add = 4199 flops
+ *   discretize: 2467 mul + 1660 add = 4127 flops
  *   discretize, each doubling (long steps): 879 mul + 880 add = 1759 flops
  *   predict (C): 1061 mul + 934 add = 1995 flops
  *   predict (Python): 2420 mul + 2321 add = 4741 flops
@@ -166,8 +166,8 @@ typedef struct {
 typedef struct {
     gps_pseudorange11_scalar Phi[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES]; /*
             transition matrix */
-    gps_pseudorange11_scalar Qd[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES]; /* Gamma
-            (Q/T) Gamma^T */
+    gps_pseudorange11_scalar Qd[GPS_PSEUDORANGE11_N_PACKED]; /* Gamma (Q/T) Gamma^T, packed upper
+            triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } gps_pseudorange11_transition;
 
 /* The filter state: estimate and covariance (or its factors). */
@@ -184,17 +184,14 @@ typedef struct {
     gps_pseudorange11_scalar S[GPS_PSEUDORANGE11_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)!
             (and the even levels R_k): each block row's dense segment, then the diagonal rows */
     gps_pseudorange11_scalar fh[GPS_PSEUDORANGE11_NNZ_F]; /* F h at the nonzeros of F */
-    gps_pseudorange11_scalar row_sum[GPS_PSEUDORANGE11_N_STATES]; /* balancing: off-diagonal row
-            sums of D^-1 |F| D */
-    gps_pseudorange11_scalar col_sum[GPS_PSEUDORANGE11_N_STATES]; /* balancing: off-diagonal column
-            sums of D^-1 |F| D */
 } gps_pseudorange11_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */
 typedef struct {
-    gps_pseudorange11_scalar M[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES]; /* Phi P */
-    gps_pseudorange11_scalar Pn[GPS_PSEUDORANGE11_N_STATES][GPS_PSEUDORANGE11_N_STATES]; /* new
-            covariance before it is committed */
+    gps_pseudorange11_scalar M[GPS_PSEUDORANGE11_N_STATES]; /* one row of Phi P (predict works row
+            by row) */
+    gps_pseudorange11_scalar Pn[GPS_PSEUDORANGE11_N_PACKED]; /* new covariance before it is
+            committed, packed upper triangle */
     gps_pseudorange11_scalar xn[GPS_PSEUDORANGE11_N_STATES];
     gps_pseudorange11_scalar HP[4][GPS_PSEUDORANGE11_N_STATES];
     gps_pseudorange11_scalar L[4][4]; /* Cholesky factor of the innovation covariance */

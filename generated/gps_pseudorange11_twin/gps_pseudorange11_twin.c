@@ -12,7 +12,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 37 operations after CSE
- *   discretize: 2524 mul + 1675 add = 4199 flops
+ *   discretize: 2467 mul + 1660 add = 4127 flops
  *   discretize, each doubling (long steps): 879 mul + 880 add = 1759 flops
  *   predict (C): 1061 mul + 934 add = 1995 flops
  *   predict (Python): 2420 mul + 2321 add = 4741 flops
@@ -30,6 +30,10 @@
 #include <stdint.h>
 #include <string.h>
 
+/* Index of (i, j), i <= j (and with packed storage of P, of any (i, j)) of a symmetric
+   matrix stored as a packed upper triangle, row by row: Q_d and Pn always, P if packed. */
+#define GPS_PSEUDORANGE11_TWIN_PACKED_UPPER(i, j) \
+        ((i) * (2 * GPS_PSEUDORANGE11_TWIN_N_STATES - (i) - 1) / 2 + (j))
 
 const char *const gps_pseudorange11_twin_state_names[GPS_PSEUDORANGE11_TWIN_N_STATES] = {
     "position_error_east",
@@ -474,18 +478,18 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void horner_level_1_into_S(gps_pseudorange11_twin_d
     w->S[57] = w->fh[23]*c_in;
     w->S[58] = 0;
     w->S[59] = 0;
-    w->S[60] = c_out;
-    w->S[61] = w->fh[24]*c_in;
-    w->S[62] = w->fh[25]*c_in;
-    w->S[63] = 0;
-    w->S[64] = w->fh[26]*c_in;
-    w->S[65] = c_out;
-    w->S[66] = w->fh[27]*c_in;
-    w->S[67] = 0;
-    w->S[68] = w->fh[28]*c_in;
-    w->S[69] = w->fh[29]*c_in;
-    w->S[70] = c_out;
-    w->S[71] = 0;
+    w->S[60] = 0;
+    w->S[61] = c_out;
+    w->S[62] = w->fh[24]*c_in;
+    w->S[63] = w->fh[25]*c_in;
+    w->S[64] = 0;
+    w->S[65] = w->fh[26]*c_in;
+    w->S[66] = c_out;
+    w->S[67] = w->fh[27]*c_in;
+    w->S[68] = 0;
+    w->S[69] = w->fh[28]*c_in;
+    w->S[70] = w->fh[29]*c_in;
+    w->S[71] = c_out;
     w->S[72] = c_out;
     w->S[73] = w->fh[30]*c_in;
 }
@@ -554,18 +558,18 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void horner_level_1_into_term(gps_pseudorange11_twi
     w->term[1][57] = w->fh[23]*c_in;
     w->term[1][58] = 0;
     w->term[1][59] = 0;
-    w->term[1][60] = c_out;
-    w->term[1][61] = w->fh[24]*c_in;
-    w->term[1][62] = w->fh[25]*c_in;
-    w->term[1][63] = 0;
-    w->term[1][64] = w->fh[26]*c_in;
-    w->term[1][65] = c_out;
-    w->term[1][66] = w->fh[27]*c_in;
-    w->term[1][67] = 0;
-    w->term[1][68] = w->fh[28]*c_in;
-    w->term[1][69] = w->fh[29]*c_in;
-    w->term[1][70] = c_out;
-    w->term[1][71] = 0;
+    w->term[1][60] = 0;
+    w->term[1][61] = c_out;
+    w->term[1][62] = w->fh[24]*c_in;
+    w->term[1][63] = w->fh[25]*c_in;
+    w->term[1][64] = 0;
+    w->term[1][65] = w->fh[26]*c_in;
+    w->term[1][66] = c_out;
+    w->term[1][67] = w->fh[27]*c_in;
+    w->term[1][68] = 0;
+    w->term[1][69] = w->fh[28]*c_in;
+    w->term[1][70] = w->fh[29]*c_in;
+    w->term[1][71] = c_out;
     w->term[1][72] = c_out;
     w->term[1][73] = w->fh[30]*c_in;
 }
@@ -589,9 +593,9 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void horner_saturated_into_S(gps_pseudorange11_twin
         w->S[60+k] = w->fh[24]*w->term[1][64+k] + w->fh[25]*w->term[1][68+k];
         w->S[64+k] = w->fh[26]*w->term[1][60+k] + w->fh[27]*w->term[1][68+k];
         w->S[68+k] = w->fh[28]*w->term[1][60+k] + w->fh[29]*w->term[1][64+k];
-        w->S[36+k] = w->S[36+k] + w->fh[12]*w->term[1][64+k] + w->fh[13]*w->term[1][68+k];
-        w->S[46+k] = w->S[46+k] + w->fh[17]*w->term[1][60+k] + w->fh[18]*w->term[1][68+k];
-        w->S[56+k] = w->S[56+k] + w->fh[22]*w->term[1][60+k] + w->fh[23]*w->term[1][64+k];
+        w->S[35+k] = w->S[35+k] + w->fh[12]*w->term[1][64+k] + w->fh[13]*w->term[1][68+k];
+        w->S[45+k] = w->S[45+k] + w->fh[17]*w->term[1][60+k] + w->fh[18]*w->term[1][68+k];
+        w->S[55+k] = w->S[55+k] + w->fh[22]*w->term[1][60+k] + w->fh[23]*w->term[1][64+k];
     }
     w->S[0] = w->S[0] + c_out;
     w->S[11] = w->S[11] + c_out;
@@ -599,9 +603,9 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void horner_saturated_into_S(gps_pseudorange11_twin
     w->S[33] = w->S[33] + c_out;
     w->S[44] = w->S[44] + c_out;
     w->S[55] = w->S[55] + c_out;
-    w->S[60] = w->S[60] + c_out;
-    w->S[65] = w->S[65] + c_out;
-    w->S[70] = w->S[70] + c_out;
+    w->S[61] = w->S[61] + c_out;
+    w->S[66] = w->S[66] + c_out;
+    w->S[71] = w->S[71] + c_out;
 }
 
 GPS_PSEUDORANGE11_TWIN_BLOCK void
@@ -621,9 +625,9 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void
         w->term[1][60+k] = w->fh[24]*w->S[64+k] + w->fh[25]*w->S[68+k];
         w->term[1][64+k] = w->fh[26]*w->S[60+k] + w->fh[27]*w->S[68+k];
         w->term[1][68+k] = w->fh[28]*w->S[60+k] + w->fh[29]*w->S[64+k];
-        w->term[1][36+k] = w->term[1][36+k] + w->fh[12]*w->S[64+k] + w->fh[13]*w->S[68+k];
-        w->term[1][46+k] = w->term[1][46+k] + w->fh[17]*w->S[60+k] + w->fh[18]*w->S[68+k];
-        w->term[1][56+k] = w->term[1][56+k] + w->fh[22]*w->S[60+k] + w->fh[23]*w->S[64+k];
+        w->term[1][35+k] = w->term[1][35+k] + w->fh[12]*w->S[64+k] + w->fh[13]*w->S[68+k];
+        w->term[1][45+k] = w->term[1][45+k] + w->fh[17]*w->S[60+k] + w->fh[18]*w->S[68+k];
+        w->term[1][55+k] = w->term[1][55+k] + w->fh[22]*w->S[60+k] + w->fh[23]*w->S[64+k];
     }
     w->term[1][0] = w->term[1][0] + c_out;
     w->term[1][11] = w->term[1][11] + c_out;
@@ -631,14 +635,45 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void
     w->term[1][33] = w->term[1][33] + c_out;
     w->term[1][44] = w->term[1][44] + c_out;
     w->term[1][55] = w->term[1][55] + c_out;
-    w->term[1][60] = w->term[1][60] + c_out;
-    w->term[1][65] = w->term[1][65] + c_out;
-    w->term[1][70] = w->term[1][70] + c_out;
+    w->term[1][61] = w->term[1][61] + c_out;
+    w->term[1][66] = w->term[1][66] + c_out;
+    w->term[1][71] = w->term[1][71] + c_out;
+}
+
+GPS_PSEUDORANGE11_TWIN_BLOCK void horner_first_into_term(gps_pseudorange11_twin_discretize_scratch
+        *restrict w, const gps_pseudorange11_twin_scalar c_out)
+{
+    int k;
+    for (k = 0; k < 10; ++k) {
+        w->term[1][k] = w->fh[0]*w->S[10+k] + w->fh[1]*w->S[20+k] + w->fh[2]*w->S[30+k];
+        w->term[1][10+k] = w->fh[3]*w->S[k] + w->fh[4]*w->S[20+k] + w->fh[5]*w->S[40+k];
+        w->term[1][20+k] = w->fh[6]*w->S[k] + w->fh[7]*w->S[10+k] + w->fh[8]*w->S[50+k];
+        w->term[1][30+k] = w->fh[9]*w->S[k] + w->fh[10]*w->S[40+k] + w->fh[11]*w->S[50+k];
+        w->term[1][40+k] = w->fh[14]*w->S[10+k] + w->fh[15]*w->S[30+k] + w->fh[16]*w->S[50+k];
+        w->term[1][50+k] = w->fh[19]*w->S[20+k] + w->fh[20]*w->S[30+k] + w->fh[21]*w->S[40+k];
+    }
+    for (k = 0; k < 4; ++k) {
+        w->term[1][60+k] = w->fh[24]*w->S[64+k] + w->fh[25]*w->S[68+k];
+        w->term[1][64+k] = w->fh[26]*w->S[60+k] + w->fh[27]*w->S[68+k];
+        w->term[1][68+k] = w->fh[28]*w->S[60+k] + w->fh[29]*w->S[64+k];
+        w->term[1][35+k] = w->term[1][35+k] + w->fh[12]*w->S[64+k] + w->fh[13]*w->S[68+k];
+        w->term[1][45+k] = w->term[1][45+k] + w->fh[17]*w->S[60+k] + w->fh[18]*w->S[68+k];
+        w->term[1][55+k] = w->term[1][55+k] + w->fh[22]*w->S[60+k] + w->fh[23]*w->S[64+k];
+    }
+    w->term[1][0] = w->term[1][0] + c_out;
+    w->term[1][11] = w->term[1][11] + c_out;
+    w->term[1][22] = w->term[1][22] + c_out;
+    w->term[1][33] = w->term[1][33] + c_out;
+    w->term[1][44] = w->term[1][44] + c_out;
+    w->term[1][55] = w->term[1][55] + c_out;
+    w->term[1][61] = w->term[1][61] + c_out;
+    w->term[1][66] = w->term[1][66] + c_out;
+    w->term[1][71] = w->term[1][71] + c_out;
+    w->term[1][72] = c_out;
 }
 
 GPS_PSEUDORANGE11_TWIN_BLOCK void horner_last_into_S(gps_pseudorange11_twin_discretize_scratch
-        *restrict w, const gps_pseudorange11_twin_scalar c_out, const gps_pseudorange11_twin_scalar
-        c_in)
+        *restrict w, const gps_pseudorange11_twin_scalar c_out)
 {
     int k;
     for (k = 0; k < 10; ++k) {
@@ -656,14 +691,9 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void horner_last_into_S(gps_pseudorange11_twin_disc
         w->S[60+k] = w->fh[24]*w->term[1][64+k] + w->fh[25]*w->term[1][68+k];
         w->S[64+k] = w->fh[26]*w->term[1][60+k] + w->fh[27]*w->term[1][68+k];
         w->S[68+k] = w->fh[28]*w->term[1][60+k] + w->fh[29]*w->term[1][64+k];
-    }
-    for (k = 0; k < 2; ++k) {
-        w->S[72+k] = 0;
-    }
-    for (k = 0; k < 4; ++k) {
-        w->S[36+k] = w->S[36+k] + w->fh[12]*w->term[1][64+k] + w->fh[13]*w->term[1][68+k];
-        w->S[46+k] = w->S[46+k] + w->fh[17]*w->term[1][60+k] + w->fh[18]*w->term[1][68+k];
-        w->S[56+k] = w->S[56+k] + w->fh[22]*w->term[1][60+k] + w->fh[23]*w->term[1][64+k];
+        w->S[35+k] = w->S[35+k] + w->fh[12]*w->term[1][64+k] + w->fh[13]*w->term[1][68+k];
+        w->S[45+k] = w->S[45+k] + w->fh[17]*w->term[1][60+k] + w->fh[18]*w->term[1][68+k];
+        w->S[55+k] = w->S[55+k] + w->fh[22]*w->term[1][60+k] + w->fh[23]*w->term[1][64+k];
     }
     w->S[0] = w->S[0] + c_out;
     w->S[11] = w->S[11] + c_out;
@@ -671,18 +701,19 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void horner_last_into_S(gps_pseudorange11_twin_disc
     w->S[33] = w->S[33] + c_out;
     w->S[44] = w->S[44] + c_out;
     w->S[55] = w->S[55] + c_out;
-    w->S[60] = w->S[60] + c_out;
-    w->S[65] = w->S[65] + c_out;
-    w->S[70] = w->S[70] + c_out;
-    w->S[72] = w->S[72] + c_out;
-    w->S[73] = w->S[73] + w->fh[30]*c_in;
+    w->S[61] = w->S[61] + c_out;
+    w->S[66] = w->S[66] + c_out;
+    w->S[71] = w->S[71] + c_out;
+    w->S[72] = c_out;
+    w->S[73] = w->term[1][72]*w->fh[30];
 }
 
 GPS_PSEUDORANGE11_TWIN_BLOCK void horner_transition(gps_pseudorange11_twin_transition *restrict t,
         const gps_pseudorange11_twin_discretize_scratch *restrict w)
 {
+    const gps_pseudorange11_twin_scalar one = 1.0;
     int k;
-    for (k = 0; k < 10; ++k) {
+    for (k = 0; k < 9; ++k) {
         t->Phi[0][k] = w->fh[0]*w->S[10+k] + w->fh[1]*w->S[20+k] + w->fh[2]*w->S[30+k];
         t->Phi[1][k] = w->fh[3]*w->S[k] + w->fh[4]*w->S[20+k] + w->fh[5]*w->S[40+k];
         t->Phi[2][k] = w->fh[6]*w->S[k] + w->fh[7]*w->S[10+k] + w->fh[8]*w->S[50+k];
@@ -691,45 +722,46 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void horner_transition(gps_pseudorange11_twin_trans
         t->Phi[5][k] = w->fh[19]*w->S[20+k] + w->fh[20]*w->S[30+k] + w->fh[21]*w->S[40+k];
     }
     for (k = 0; k < 4; ++k) {
-        t->Phi[6][6+k] = w->fh[24]*w->S[64+k] + w->fh[25]*w->S[68+k];
-        t->Phi[7][6+k] = w->fh[26]*w->S[60+k] + w->fh[27]*w->S[68+k];
-        t->Phi[8][6+k] = w->fh[28]*w->S[60+k] + w->fh[29]*w->S[64+k];
+        t->Phi[6][5+k] = w->fh[24]*w->S[64+k] + w->fh[25]*w->S[68+k];
+        t->Phi[7][5+k] = w->fh[26]*w->S[60+k] + w->fh[27]*w->S[68+k];
+        t->Phi[8][5+k] = w->fh[28]*w->S[60+k] + w->fh[29]*w->S[64+k];
+        t->Phi[3][5+k] = t->Phi[3][5+k] + w->fh[12]*w->S[64+k] + w->fh[13]*w->S[68+k];
+        t->Phi[4][5+k] = t->Phi[4][5+k] + w->fh[17]*w->S[60+k] + w->fh[18]*w->S[68+k];
+        t->Phi[5][5+k] = t->Phi[5][5+k] + w->fh[22]*w->S[60+k] + w->fh[23]*w->S[64+k];
     }
-    for (k = 0; k < 2; ++k) {
-        t->Phi[9][9+k] = 0;
-    }
-    for (k = 0; k < 4; ++k) {
-        t->Phi[3][6+k] = t->Phi[3][6+k] + w->fh[12]*w->S[64+k] + w->fh[13]*w->S[68+k];
-        t->Phi[4][6+k] = t->Phi[4][6+k] + w->fh[17]*w->S[60+k] + w->fh[18]*w->S[68+k];
-        t->Phi[5][6+k] = t->Phi[5][6+k] + w->fh[22]*w->S[60+k] + w->fh[23]*w->S[64+k];
-    }
-    t->Phi[9][10] = t->Phi[9][10] + w->fh[30];
+    t->Phi[9][10] = w->S[72]*w->fh[30];
+    t->Phi[0][9] = 0;
     t->Phi[0][10] = 0;
+    t->Phi[1][9] = 0;
     t->Phi[1][10] = 0;
+    t->Phi[2][9] = 0;
     t->Phi[2][10] = 0;
+    t->Phi[3][9] = 0;
     t->Phi[3][10] = 0;
+    t->Phi[4][9] = 0;
     t->Phi[4][10] = 0;
+    t->Phi[5][9] = 0;
     t->Phi[5][10] = 0;
     t->Phi[6][0] = 0;
     t->Phi[6][1] = 0;
     t->Phi[6][2] = 0;
     t->Phi[6][3] = 0;
     t->Phi[6][4] = 0;
-    t->Phi[6][5] = 0;
+    t->Phi[6][9] = 0;
     t->Phi[6][10] = 0;
     t->Phi[7][0] = 0;
     t->Phi[7][1] = 0;
     t->Phi[7][2] = 0;
     t->Phi[7][3] = 0;
     t->Phi[7][4] = 0;
-    t->Phi[7][5] = 0;
+    t->Phi[7][9] = 0;
     t->Phi[7][10] = 0;
     t->Phi[8][0] = 0;
     t->Phi[8][1] = 0;
     t->Phi[8][2] = 0;
     t->Phi[8][3] = 0;
     t->Phi[8][4] = 0;
-    t->Phi[8][5] = 0;
+    t->Phi[8][9] = 0;
     t->Phi[8][10] = 0;
     t->Phi[9][0] = 0;
     t->Phi[9][1] = 0;
@@ -740,6 +772,7 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void horner_transition(gps_pseudorange11_twin_trans
     t->Phi[9][6] = 0;
     t->Phi[9][7] = 0;
     t->Phi[9][8] = 0;
+    t->Phi[9][9] = 0;
     t->Phi[10][0] = 0;
     t->Phi[10][1] = 0;
     t->Phi[10][2] = 0;
@@ -750,7 +783,7 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void horner_transition(gps_pseudorange11_twin_trans
     t->Phi[10][7] = 0;
     t->Phi[10][8] = 0;
     t->Phi[10][9] = 0;
-    t->Phi[10][10] = 0;
+    t->Phi[10][10] = one;
 }
 
 GPS_PSEUDORANGE11_TWIN_BLOCK void doubling(gps_pseudorange11_twin_transition *restrict t,
@@ -793,21 +826,21 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void doubling(gps_pseudorange11_twin_transition *re
             t->Phi[0][8]*t->Phi[8][6];
     w->term[1][6] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[26] +
             t->Phi[0][3]*w->S[36] + t->Phi[0][4]*w->S[46] + t->Phi[0][5]*w->S[56] +
-            t->Phi[0][6]*w->S[60] + t->Phi[0][7]*w->S[64] + t->Phi[0][8]*w->S[68];
+            t->Phi[0][6]*w->S[61] + t->Phi[0][7]*w->S[65] + t->Phi[0][8]*w->S[69];
     w->term[0][7] = t->Phi[0][0]*t->Phi[0][7] + t->Phi[0][1]*t->Phi[1][7] +
             t->Phi[0][2]*t->Phi[2][7] + t->Phi[0][3]*t->Phi[3][7] + t->Phi[0][4]*t->Phi[4][7] +
             t->Phi[0][5]*t->Phi[5][7] + t->Phi[0][6]*t->Phi[6][7] + t->Phi[0][7]*t->Phi[7][7] +
             t->Phi[0][8]*t->Phi[8][7];
     w->term[1][7] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[27] +
             t->Phi[0][3]*w->S[37] + t->Phi[0][4]*w->S[47] + t->Phi[0][5]*w->S[57] +
-            t->Phi[0][6]*w->S[61] + t->Phi[0][7]*w->S[65] + t->Phi[0][8]*w->S[69];
+            t->Phi[0][6]*w->S[62] + t->Phi[0][7]*w->S[66] + t->Phi[0][8]*w->S[70];
     w->term[0][8] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
             t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
             t->Phi[0][5]*t->Phi[5][8] + t->Phi[0][6]*t->Phi[6][8] + t->Phi[0][7]*t->Phi[7][8] +
             t->Phi[0][8]*t->Phi[8][8];
     w->term[1][8] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[18] + t->Phi[0][2]*w->S[28] +
             t->Phi[0][3]*w->S[38] + t->Phi[0][4]*w->S[48] + t->Phi[0][5]*w->S[58] +
-            t->Phi[0][6]*w->S[62] + t->Phi[0][7]*w->S[66] + t->Phi[0][8]*w->S[70];
+            t->Phi[0][6]*w->S[63] + t->Phi[0][7]*w->S[67] + t->Phi[0][8]*w->S[71];
     w->term[0][9] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
             t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
             t->Phi[1][5]*t->Phi[5][0];
@@ -844,21 +877,21 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void doubling(gps_pseudorange11_twin_transition *re
             t->Phi[1][8]*t->Phi[8][6];
     w->term[1][15] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[26] +
             t->Phi[1][3]*w->S[36] + t->Phi[1][4]*w->S[46] + t->Phi[1][5]*w->S[56] +
-            t->Phi[1][6]*w->S[60] + t->Phi[1][7]*w->S[64] + t->Phi[1][8]*w->S[68];
+            t->Phi[1][6]*w->S[61] + t->Phi[1][7]*w->S[65] + t->Phi[1][8]*w->S[69];
     w->term[0][16] = t->Phi[1][0]*t->Phi[0][7] + t->Phi[1][1]*t->Phi[1][7] +
             t->Phi[1][2]*t->Phi[2][7] + t->Phi[1][3]*t->Phi[3][7] + t->Phi[1][4]*t->Phi[4][7] +
             t->Phi[1][5]*t->Phi[5][7] + t->Phi[1][6]*t->Phi[6][7] + t->Phi[1][7]*t->Phi[7][7] +
             t->Phi[1][8]*t->Phi[8][7];
     w->term[1][16] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[27] +
             t->Phi[1][3]*w->S[37] + t->Phi[1][4]*w->S[47] + t->Phi[1][5]*w->S[57] +
-            t->Phi[1][6]*w->S[61] + t->Phi[1][7]*w->S[65] + t->Phi[1][8]*w->S[69];
+            t->Phi[1][6]*w->S[62] + t->Phi[1][7]*w->S[66] + t->Phi[1][8]*w->S[70];
     w->term[0][17] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
             t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
             t->Phi[1][5]*t->Phi[5][8] + t->Phi[1][6]*t->Phi[6][8] + t->Phi[1][7]*t->Phi[7][8] +
             t->Phi[1][8]*t->Phi[8][8];
     w->term[1][17] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[18] + t->Phi[1][2]*w->S[28] +
             t->Phi[1][3]*w->S[38] + t->Phi[1][4]*w->S[48] + t->Phi[1][5]*w->S[58] +
-            t->Phi[1][6]*w->S[62] + t->Phi[1][7]*w->S[66] + t->Phi[1][8]*w->S[70];
+            t->Phi[1][6]*w->S[63] + t->Phi[1][7]*w->S[67] + t->Phi[1][8]*w->S[71];
     w->term[0][18] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
             t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
             t->Phi[2][5]*t->Phi[5][0];
@@ -895,21 +928,21 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void doubling(gps_pseudorange11_twin_transition *re
             t->Phi[2][8]*t->Phi[8][6];
     w->term[1][24] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[26] +
             t->Phi[2][3]*w->S[36] + t->Phi[2][4]*w->S[46] + t->Phi[2][5]*w->S[56] +
-            t->Phi[2][6]*w->S[60] + t->Phi[2][7]*w->S[64] + t->Phi[2][8]*w->S[68];
+            t->Phi[2][6]*w->S[61] + t->Phi[2][7]*w->S[65] + t->Phi[2][8]*w->S[69];
     w->term[0][25] = t->Phi[2][0]*t->Phi[0][7] + t->Phi[2][1]*t->Phi[1][7] +
             t->Phi[2][2]*t->Phi[2][7] + t->Phi[2][3]*t->Phi[3][7] + t->Phi[2][4]*t->Phi[4][7] +
             t->Phi[2][5]*t->Phi[5][7] + t->Phi[2][6]*t->Phi[6][7] + t->Phi[2][7]*t->Phi[7][7] +
             t->Phi[2][8]*t->Phi[8][7];
     w->term[1][25] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[27] +
             t->Phi[2][3]*w->S[37] + t->Phi[2][4]*w->S[47] + t->Phi[2][5]*w->S[57] +
-            t->Phi[2][6]*w->S[61] + t->Phi[2][7]*w->S[65] + t->Phi[2][8]*w->S[69];
+            t->Phi[2][6]*w->S[62] + t->Phi[2][7]*w->S[66] + t->Phi[2][8]*w->S[70];
     w->term[0][26] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
             t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
             t->Phi[2][5]*t->Phi[5][8] + t->Phi[2][6]*t->Phi[6][8] + t->Phi[2][7]*t->Phi[7][8] +
             t->Phi[2][8]*t->Phi[8][8];
     w->term[1][26] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[18] + t->Phi[2][2]*w->S[28] +
             t->Phi[2][3]*w->S[38] + t->Phi[2][4]*w->S[48] + t->Phi[2][5]*w->S[58] +
-            t->Phi[2][6]*w->S[62] + t->Phi[2][7]*w->S[66] + t->Phi[2][8]*w->S[70];
+            t->Phi[2][6]*w->S[63] + t->Phi[2][7]*w->S[67] + t->Phi[2][8]*w->S[71];
     w->term[0][27] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
             t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
             t->Phi[3][5]*t->Phi[5][0];
@@ -946,21 +979,21 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void doubling(gps_pseudorange11_twin_transition *re
             t->Phi[3][8]*t->Phi[8][6];
     w->term[1][33] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[26] +
             t->Phi[3][3]*w->S[36] + t->Phi[3][4]*w->S[46] + t->Phi[3][5]*w->S[56] +
-            t->Phi[3][6]*w->S[60] + t->Phi[3][7]*w->S[64] + t->Phi[3][8]*w->S[68];
+            t->Phi[3][6]*w->S[61] + t->Phi[3][7]*w->S[65] + t->Phi[3][8]*w->S[69];
     w->term[0][34] = t->Phi[3][0]*t->Phi[0][7] + t->Phi[3][1]*t->Phi[1][7] +
             t->Phi[3][2]*t->Phi[2][7] + t->Phi[3][3]*t->Phi[3][7] + t->Phi[3][4]*t->Phi[4][7] +
             t->Phi[3][5]*t->Phi[5][7] + t->Phi[3][6]*t->Phi[6][7] + t->Phi[3][7]*t->Phi[7][7] +
             t->Phi[3][8]*t->Phi[8][7];
     w->term[1][34] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[27] +
             t->Phi[3][3]*w->S[37] + t->Phi[3][4]*w->S[47] + t->Phi[3][5]*w->S[57] +
-            t->Phi[3][6]*w->S[61] + t->Phi[3][7]*w->S[65] + t->Phi[3][8]*w->S[69];
+            t->Phi[3][6]*w->S[62] + t->Phi[3][7]*w->S[66] + t->Phi[3][8]*w->S[70];
     w->term[0][35] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
             t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
             t->Phi[3][5]*t->Phi[5][8] + t->Phi[3][6]*t->Phi[6][8] + t->Phi[3][7]*t->Phi[7][8] +
             t->Phi[3][8]*t->Phi[8][8];
     w->term[1][35] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[18] + t->Phi[3][2]*w->S[28] +
             t->Phi[3][3]*w->S[38] + t->Phi[3][4]*w->S[48] + t->Phi[3][5]*w->S[58] +
-            t->Phi[3][6]*w->S[62] + t->Phi[3][7]*w->S[66] + t->Phi[3][8]*w->S[70];
+            t->Phi[3][6]*w->S[63] + t->Phi[3][7]*w->S[67] + t->Phi[3][8]*w->S[71];
     w->term[0][36] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
             t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
             t->Phi[4][5]*t->Phi[5][0];
@@ -997,21 +1030,21 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void doubling(gps_pseudorange11_twin_transition *re
             t->Phi[4][8]*t->Phi[8][6];
     w->term[1][42] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[26] +
             t->Phi[4][3]*w->S[36] + t->Phi[4][4]*w->S[46] + t->Phi[4][5]*w->S[56] +
-            t->Phi[4][6]*w->S[60] + t->Phi[4][7]*w->S[64] + t->Phi[4][8]*w->S[68];
+            t->Phi[4][6]*w->S[61] + t->Phi[4][7]*w->S[65] + t->Phi[4][8]*w->S[69];
     w->term[0][43] = t->Phi[4][0]*t->Phi[0][7] + t->Phi[4][1]*t->Phi[1][7] +
             t->Phi[4][2]*t->Phi[2][7] + t->Phi[4][3]*t->Phi[3][7] + t->Phi[4][4]*t->Phi[4][7] +
             t->Phi[4][5]*t->Phi[5][7] + t->Phi[4][6]*t->Phi[6][7] + t->Phi[4][7]*t->Phi[7][7] +
             t->Phi[4][8]*t->Phi[8][7];
     w->term[1][43] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[27] +
             t->Phi[4][3]*w->S[37] + t->Phi[4][4]*w->S[47] + t->Phi[4][5]*w->S[57] +
-            t->Phi[4][6]*w->S[61] + t->Phi[4][7]*w->S[65] + t->Phi[4][8]*w->S[69];
+            t->Phi[4][6]*w->S[62] + t->Phi[4][7]*w->S[66] + t->Phi[4][8]*w->S[70];
     w->term[0][44] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
             t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
             t->Phi[4][5]*t->Phi[5][8] + t->Phi[4][6]*t->Phi[6][8] + t->Phi[4][7]*t->Phi[7][8] +
             t->Phi[4][8]*t->Phi[8][8];
     w->term[1][44] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[18] + t->Phi[4][2]*w->S[28] +
             t->Phi[4][3]*w->S[38] + t->Phi[4][4]*w->S[48] + t->Phi[4][5]*w->S[58] +
-            t->Phi[4][6]*w->S[62] + t->Phi[4][7]*w->S[66] + t->Phi[4][8]*w->S[70];
+            t->Phi[4][6]*w->S[63] + t->Phi[4][7]*w->S[67] + t->Phi[4][8]*w->S[71];
     w->term[0][45] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
             t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
             t->Phi[5][5]*t->Phi[5][0];
@@ -1048,48 +1081,48 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void doubling(gps_pseudorange11_twin_transition *re
             t->Phi[5][8]*t->Phi[8][6];
     w->term[1][51] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[26] +
             t->Phi[5][3]*w->S[36] + t->Phi[5][4]*w->S[46] + t->Phi[5][5]*w->S[56] +
-            t->Phi[5][6]*w->S[60] + t->Phi[5][7]*w->S[64] + t->Phi[5][8]*w->S[68];
+            t->Phi[5][6]*w->S[61] + t->Phi[5][7]*w->S[65] + t->Phi[5][8]*w->S[69];
     w->term[0][52] = t->Phi[5][0]*t->Phi[0][7] + t->Phi[5][1]*t->Phi[1][7] +
             t->Phi[5][2]*t->Phi[2][7] + t->Phi[5][3]*t->Phi[3][7] + t->Phi[5][4]*t->Phi[4][7] +
             t->Phi[5][5]*t->Phi[5][7] + t->Phi[5][6]*t->Phi[6][7] + t->Phi[5][7]*t->Phi[7][7] +
             t->Phi[5][8]*t->Phi[8][7];
     w->term[1][52] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[27] +
             t->Phi[5][3]*w->S[37] + t->Phi[5][4]*w->S[47] + t->Phi[5][5]*w->S[57] +
-            t->Phi[5][6]*w->S[61] + t->Phi[5][7]*w->S[65] + t->Phi[5][8]*w->S[69];
+            t->Phi[5][6]*w->S[62] + t->Phi[5][7]*w->S[66] + t->Phi[5][8]*w->S[70];
     w->term[0][53] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
             t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
             t->Phi[5][5]*t->Phi[5][8] + t->Phi[5][6]*t->Phi[6][8] + t->Phi[5][7]*t->Phi[7][8] +
             t->Phi[5][8]*t->Phi[8][8];
     w->term[1][53] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[18] + t->Phi[5][2]*w->S[28] +
             t->Phi[5][3]*w->S[38] + t->Phi[5][4]*w->S[48] + t->Phi[5][5]*w->S[58] +
-            t->Phi[5][6]*w->S[62] + t->Phi[5][7]*w->S[66] + t->Phi[5][8]*w->S[70];
+            t->Phi[5][6]*w->S[63] + t->Phi[5][7]*w->S[67] + t->Phi[5][8]*w->S[71];
     w->term[0][54] = t->Phi[6][6]*t->Phi[6][6] + t->Phi[6][7]*t->Phi[7][6] +
             t->Phi[6][8]*t->Phi[8][6];
-    w->term[1][54] = t->Phi[6][6]*w->S[60] + t->Phi[6][7]*w->S[64] + t->Phi[6][8]*w->S[68];
+    w->term[1][54] = t->Phi[6][6]*w->S[61] + t->Phi[6][7]*w->S[65] + t->Phi[6][8]*w->S[69];
     w->term[0][55] = t->Phi[6][6]*t->Phi[6][7] + t->Phi[6][7]*t->Phi[7][7] +
             t->Phi[6][8]*t->Phi[8][7];
-    w->term[1][55] = t->Phi[6][6]*w->S[61] + t->Phi[6][7]*w->S[65] + t->Phi[6][8]*w->S[69];
+    w->term[1][55] = t->Phi[6][6]*w->S[62] + t->Phi[6][7]*w->S[66] + t->Phi[6][8]*w->S[70];
     w->term[0][56] = t->Phi[6][6]*t->Phi[6][8] + t->Phi[6][7]*t->Phi[7][8] +
             t->Phi[6][8]*t->Phi[8][8];
-    w->term[1][56] = t->Phi[6][6]*w->S[62] + t->Phi[6][7]*w->S[66] + t->Phi[6][8]*w->S[70];
+    w->term[1][56] = t->Phi[6][6]*w->S[63] + t->Phi[6][7]*w->S[67] + t->Phi[6][8]*w->S[71];
     w->term[0][57] = t->Phi[7][6]*t->Phi[6][6] + t->Phi[7][7]*t->Phi[7][6] +
             t->Phi[7][8]*t->Phi[8][6];
-    w->term[1][57] = t->Phi[7][6]*w->S[60] + t->Phi[7][7]*w->S[64] + t->Phi[7][8]*w->S[68];
+    w->term[1][57] = t->Phi[7][6]*w->S[61] + t->Phi[7][7]*w->S[65] + t->Phi[7][8]*w->S[69];
     w->term[0][58] = t->Phi[7][6]*t->Phi[6][7] + t->Phi[7][7]*t->Phi[7][7] +
             t->Phi[7][8]*t->Phi[8][7];
-    w->term[1][58] = t->Phi[7][6]*w->S[61] + t->Phi[7][7]*w->S[65] + t->Phi[7][8]*w->S[69];
+    w->term[1][58] = t->Phi[7][6]*w->S[62] + t->Phi[7][7]*w->S[66] + t->Phi[7][8]*w->S[70];
     w->term[0][59] = t->Phi[7][6]*t->Phi[6][8] + t->Phi[7][7]*t->Phi[7][8] +
             t->Phi[7][8]*t->Phi[8][8];
-    w->term[1][59] = t->Phi[7][6]*w->S[62] + t->Phi[7][7]*w->S[66] + t->Phi[7][8]*w->S[70];
+    w->term[1][59] = t->Phi[7][6]*w->S[63] + t->Phi[7][7]*w->S[67] + t->Phi[7][8]*w->S[71];
     w->term[0][60] = t->Phi[8][6]*t->Phi[6][6] + t->Phi[8][7]*t->Phi[7][6] +
             t->Phi[8][8]*t->Phi[8][6];
-    w->term[1][60] = t->Phi[8][6]*w->S[60] + t->Phi[8][7]*w->S[64] + t->Phi[8][8]*w->S[68];
+    w->term[1][60] = t->Phi[8][6]*w->S[61] + t->Phi[8][7]*w->S[65] + t->Phi[8][8]*w->S[69];
     w->term[0][61] = t->Phi[8][6]*t->Phi[6][7] + t->Phi[8][7]*t->Phi[7][7] +
             t->Phi[8][8]*t->Phi[8][7];
-    w->term[1][61] = t->Phi[8][6]*w->S[61] + t->Phi[8][7]*w->S[65] + t->Phi[8][8]*w->S[69];
+    w->term[1][61] = t->Phi[8][6]*w->S[62] + t->Phi[8][7]*w->S[66] + t->Phi[8][8]*w->S[70];
     w->term[0][62] = t->Phi[8][6]*t->Phi[6][8] + t->Phi[8][7]*t->Phi[7][8] +
             t->Phi[8][8]*t->Phi[8][8];
-    w->term[1][62] = t->Phi[8][6]*w->S[62] + t->Phi[8][7]*w->S[66] + t->Phi[8][8]*w->S[70];
+    w->term[1][62] = t->Phi[8][6]*w->S[63] + t->Phi[8][7]*w->S[67] + t->Phi[8][8]*w->S[71];
     w->term[0][63] = t->Phi[9][9]*t->Phi[9][9];
     w->term[1][63] = t->Phi[9][9]*w->S[72];
     w->term[0][64] = t->Phi[9][9]*t->Phi[9][10];
@@ -1203,23 +1236,23 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void doubling(gps_pseudorange11_twin_transition *re
     t->Phi[5][8] = t->Phi[5][8] + t->Phi[5][8] + w->term[0][53];
     w->S[58] = w->S[58] + half*w->term[1][53];
     t->Phi[6][6] = t->Phi[6][6] + t->Phi[6][6] + w->term[0][54];
-    w->S[60] = w->S[60] + half*w->term[1][54];
+    w->S[61] = w->S[61] + half*w->term[1][54];
     t->Phi[6][7] = t->Phi[6][7] + t->Phi[6][7] + w->term[0][55];
-    w->S[61] = w->S[61] + half*w->term[1][55];
+    w->S[62] = w->S[62] + half*w->term[1][55];
     t->Phi[6][8] = t->Phi[6][8] + t->Phi[6][8] + w->term[0][56];
-    w->S[62] = w->S[62] + half*w->term[1][56];
+    w->S[63] = w->S[63] + half*w->term[1][56];
     t->Phi[7][6] = t->Phi[7][6] + t->Phi[7][6] + w->term[0][57];
-    w->S[64] = w->S[64] + half*w->term[1][57];
+    w->S[65] = w->S[65] + half*w->term[1][57];
     t->Phi[7][7] = t->Phi[7][7] + t->Phi[7][7] + w->term[0][58];
-    w->S[65] = w->S[65] + half*w->term[1][58];
+    w->S[66] = w->S[66] + half*w->term[1][58];
     t->Phi[7][8] = t->Phi[7][8] + t->Phi[7][8] + w->term[0][59];
-    w->S[66] = w->S[66] + half*w->term[1][59];
+    w->S[67] = w->S[67] + half*w->term[1][59];
     t->Phi[8][6] = t->Phi[8][6] + t->Phi[8][6] + w->term[0][60];
-    w->S[68] = w->S[68] + half*w->term[1][60];
+    w->S[69] = w->S[69] + half*w->term[1][60];
     t->Phi[8][7] = t->Phi[8][7] + t->Phi[8][7] + w->term[0][61];
-    w->S[69] = w->S[69] + half*w->term[1][61];
+    w->S[70] = w->S[70] + half*w->term[1][61];
     t->Phi[8][8] = t->Phi[8][8] + t->Phi[8][8] + w->term[0][62];
-    w->S[70] = w->S[70] + half*w->term[1][62];
+    w->S[71] = w->S[71] + half*w->term[1][62];
     t->Phi[9][9] = t->Phi[9][9] + t->Phi[9][9] + w->term[0][63];
     w->S[72] = w->S[72] + half*w->term[1][63];
     t->Phi[9][10] = t->Phi[9][10] + t->Phi[9][10] + w->term[0][64];
@@ -1227,74 +1260,34 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void doubling(gps_pseudorange11_twin_transition *re
 }
 
 GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar
-        transition_check(gps_pseudorange11_twin_transition *restrict t)
+        transition_check(gps_pseudorange11_twin_transition *restrict t,
+        gps_pseudorange11_twin_discretize_scratch *restrict w)
 {
+    const gps_pseudorange11_twin_scalar one = 1.0;
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = t->Phi[0][0]; t->Phi[0][0] = v; check += v - v;
-    v = t->Phi[0][1]; t->Phi[0][1] = v; check += v - v;
-    v = t->Phi[0][2]; t->Phi[0][2] = v; check += v - v;
-    v = t->Phi[0][3]; t->Phi[0][3] = v; check += v - v;
-    v = t->Phi[0][4]; t->Phi[0][4] = v; check += v - v;
-    v = t->Phi[0][5]; t->Phi[0][5] = v; check += v - v;
-    v = t->Phi[0][6]; t->Phi[0][6] = v; check += v - v;
-    v = t->Phi[0][7]; t->Phi[0][7] = v; check += v - v;
-    v = t->Phi[0][8]; t->Phi[0][8] = v; check += v - v;
-    v = t->Phi[1][0]; t->Phi[1][0] = v; check += v - v;
-    v = t->Phi[1][1]; t->Phi[1][1] = v; check += v - v;
-    v = t->Phi[1][2]; t->Phi[1][2] = v; check += v - v;
-    v = t->Phi[1][3]; t->Phi[1][3] = v; check += v - v;
-    v = t->Phi[1][4]; t->Phi[1][4] = v; check += v - v;
-    v = t->Phi[1][5]; t->Phi[1][5] = v; check += v - v;
-    v = t->Phi[1][6]; t->Phi[1][6] = v; check += v - v;
-    v = t->Phi[1][7]; t->Phi[1][7] = v; check += v - v;
-    v = t->Phi[1][8]; t->Phi[1][8] = v; check += v - v;
-    v = t->Phi[2][0]; t->Phi[2][0] = v; check += v - v;
-    v = t->Phi[2][1]; t->Phi[2][1] = v; check += v - v;
-    v = t->Phi[2][2]; t->Phi[2][2] = v; check += v - v;
-    v = t->Phi[2][3]; t->Phi[2][3] = v; check += v - v;
-    v = t->Phi[2][4]; t->Phi[2][4] = v; check += v - v;
-    v = t->Phi[2][5]; t->Phi[2][5] = v; check += v - v;
-    v = t->Phi[2][6]; t->Phi[2][6] = v; check += v - v;
-    v = t->Phi[2][7]; t->Phi[2][7] = v; check += v - v;
-    v = t->Phi[2][8]; t->Phi[2][8] = v; check += v - v;
-    v = t->Phi[3][0]; t->Phi[3][0] = v; check += v - v;
-    v = t->Phi[3][1]; t->Phi[3][1] = v; check += v - v;
-    v = t->Phi[3][2]; t->Phi[3][2] = v; check += v - v;
-    v = t->Phi[3][3]; t->Phi[3][3] = v; check += v - v;
-    v = t->Phi[3][4]; t->Phi[3][4] = v; check += v - v;
-    v = t->Phi[3][5]; t->Phi[3][5] = v; check += v - v;
-    v = t->Phi[3][6]; t->Phi[3][6] = v; check += v - v;
-    v = t->Phi[3][7]; t->Phi[3][7] = v; check += v - v;
-    v = t->Phi[3][8]; t->Phi[3][8] = v; check += v - v;
-    v = t->Phi[4][0]; t->Phi[4][0] = v; check += v - v;
-    v = t->Phi[4][1]; t->Phi[4][1] = v; check += v - v;
-    v = t->Phi[4][2]; t->Phi[4][2] = v; check += v - v;
-    v = t->Phi[4][3]; t->Phi[4][3] = v; check += v - v;
-    v = t->Phi[4][4]; t->Phi[4][4] = v; check += v - v;
-    v = t->Phi[4][5]; t->Phi[4][5] = v; check += v - v;
-    v = t->Phi[4][6]; t->Phi[4][6] = v; check += v - v;
-    v = t->Phi[4][7]; t->Phi[4][7] = v; check += v - v;
-    v = t->Phi[4][8]; t->Phi[4][8] = v; check += v - v;
-    v = t->Phi[5][0]; t->Phi[5][0] = v; check += v - v;
-    v = t->Phi[5][1]; t->Phi[5][1] = v; check += v - v;
-    v = t->Phi[5][2]; t->Phi[5][2] = v; check += v - v;
-    v = t->Phi[5][3]; t->Phi[5][3] = v; check += v - v;
-    v = t->Phi[5][4]; t->Phi[5][4] = v; check += v - v;
-    v = t->Phi[5][5]; t->Phi[5][5] = v; check += v - v;
-    v = t->Phi[5][6]; t->Phi[5][6] = v; check += v - v;
-    v = t->Phi[5][7]; t->Phi[5][7] = v; check += v - v;
-    v = t->Phi[5][8]; t->Phi[5][8] = v; check += v - v;
-    v = t->Phi[6][6]; t->Phi[6][6] = v; check += v - v;
-    v = t->Phi[6][7]; t->Phi[6][7] = v; check += v - v;
-    v = t->Phi[6][8]; t->Phi[6][8] = v; check += v - v;
-    v = t->Phi[7][6]; t->Phi[7][6] = v; check += v - v;
-    v = t->Phi[7][7]; t->Phi[7][7] = v; check += v - v;
-    v = t->Phi[7][8]; t->Phi[7][8] = v; check += v - v;
-    v = t->Phi[8][6]; t->Phi[8][6] = v; check += v - v;
-    v = t->Phi[8][7]; t->Phi[8][7] = v; check += v - v;
-    v = t->Phi[8][8]; t->Phi[8][8] = v; check += v - v;
-    v = t->Phi[9][9]; t->Phi[9][9] = v; check += v - v;
-    v = t->Phi[9][10]; t->Phi[9][10] = v; check += v - v;
+    t->Phi[0][0] = t->Phi[0][0] + one;
+    t->Phi[1][1] = t->Phi[1][1] + one;
+    t->Phi[2][2] = t->Phi[2][2] + one;
+    t->Phi[3][3] = t->Phi[3][3] + one;
+    t->Phi[4][4] = t->Phi[4][4] + one;
+    t->Phi[5][5] = t->Phi[5][5] + one;
+    t->Phi[6][6] = t->Phi[6][6] + one;
+    t->Phi[7][7] = t->Phi[7][7] + one;
+    t->Phi[8][8] = t->Phi[8][8] + one;
+    t->Phi[9][9] = t->Phi[9][9] + one;
+    v = t->Phi[0][0] + t->Phi[0][1] + t->Phi[0][2] + t->Phi[0][3] + t->Phi[0][4] + t->Phi[0][5] +
+            t->Phi[0][6] + t->Phi[0][7] + t->Phi[0][8] + t->Phi[1][0] + t->Phi[1][1] + t->Phi[1][2]
+            + t->Phi[1][3] + t->Phi[1][4] + t->Phi[1][5] + t->Phi[1][6] + t->Phi[1][7] +
+            t->Phi[1][8] + t->Phi[2][0] + t->Phi[2][1] + t->Phi[2][2] + t->Phi[2][3] + t->Phi[2][4]
+            + t->Phi[2][5] + t->Phi[2][6] + t->Phi[2][7] + t->Phi[2][8] + t->Phi[3][0] +
+            t->Phi[3][1] + t->Phi[3][2] + t->Phi[3][3] + t->Phi[3][4] + t->Phi[3][5] + t->Phi[3][6]
+            + t->Phi[3][7] + t->Phi[3][8] + t->Phi[4][0] + t->Phi[4][1] + t->Phi[4][2] +
+            t->Phi[4][3] + t->Phi[4][4] + t->Phi[4][5] + t->Phi[4][6] + t->Phi[4][7] + t->Phi[4][8]
+            + t->Phi[5][0] + t->Phi[5][1] + t->Phi[5][2] + t->Phi[5][3] + t->Phi[5][4] +
+            t->Phi[5][5] + t->Phi[5][6] + t->Phi[5][7] + t->Phi[5][8] + t->Phi[6][6] + t->Phi[6][7]
+            + t->Phi[6][8] + t->Phi[7][6] + t->Phi[7][7] + t->Phi[7][8] + t->Phi[8][6] +
+            t->Phi[8][7] + t->Phi[8][8] + t->Phi[9][9] + t->Phi[9][10]; w->term[0][0] = v; check +=
+            v - v;
     return check;
 }
 
@@ -1337,15 +1330,15 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void noise_input(const gps_pseudorange11_twin_matri
     w->term[0][33] = w->S[53]*m->G[0];
     w->term[0][34] = w->S[54]*m->G[1];
     w->term[0][35] = w->S[55]*m->G[2];
-    w->term[0][36] = w->S[60]*m->G[3];
-    w->term[0][37] = w->S[61]*m->G[4];
-    w->term[0][38] = w->S[62]*m->G[5];
-    w->term[0][39] = w->S[64]*m->G[3];
-    w->term[0][40] = w->S[65]*m->G[4];
-    w->term[0][41] = w->S[66]*m->G[5];
-    w->term[0][42] = w->S[68]*m->G[3];
-    w->term[0][43] = w->S[69]*m->G[4];
-    w->term[0][44] = w->S[70]*m->G[5];
+    w->term[0][36] = w->S[61]*m->G[3];
+    w->term[0][37] = w->S[62]*m->G[4];
+    w->term[0][38] = w->S[63]*m->G[5];
+    w->term[0][39] = w->S[65]*m->G[3];
+    w->term[0][40] = w->S[66]*m->G[4];
+    w->term[0][41] = w->S[67]*m->G[5];
+    w->term[0][42] = w->S[69]*m->G[3];
+    w->term[0][43] = w->S[70]*m->G[4];
+    w->term[0][44] = w->S[71]*m->G[5];
     w->term[0][45] = w->S[72]*m->G[6];
     w->term[0][46] = w->S[73]*m->G[7];
     w->term[0][47] = m->G[7];
@@ -1357,215 +1350,205 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar process_noise(const
         T)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    w->term[1][0] = w->term[0][0]*T*m->q[0];
-    w->term[1][1] = w->term[0][1]*T*m->q[1];
-    w->term[1][2] = w->term[0][2]*T*m->q[2];
-    w->term[1][3] = w->term[0][3]*T*m->q[3];
-    w->term[1][4] = w->term[0][4]*T*m->q[4];
-    w->term[1][5] = w->term[0][5]*T*m->q[5];
-    w->term[1][6] = w->term[0][6]*T*m->q[0];
-    w->term[1][7] = w->term[0][7]*T*m->q[1];
-    w->term[1][8] = w->term[0][8]*T*m->q[2];
-    w->term[1][9] = w->term[0][9]*T*m->q[3];
-    w->term[1][10] = w->term[0][10]*T*m->q[4];
-    w->term[1][11] = w->term[0][11]*T*m->q[5];
-    w->term[1][12] = w->term[0][12]*T*m->q[0];
-    w->term[1][13] = w->term[0][13]*T*m->q[1];
-    w->term[1][14] = w->term[0][14]*T*m->q[2];
-    w->term[1][15] = w->term[0][15]*T*m->q[3];
-    w->term[1][16] = w->term[0][16]*T*m->q[4];
-    w->term[1][17] = w->term[0][17]*T*m->q[5];
-    w->term[1][18] = w->term[0][18]*T*m->q[0];
-    w->term[1][19] = w->term[0][19]*T*m->q[1];
-    w->term[1][20] = w->term[0][20]*T*m->q[2];
-    w->term[1][21] = w->term[0][21]*T*m->q[3];
-    w->term[1][22] = w->term[0][22]*T*m->q[4];
-    w->term[1][23] = w->term[0][23]*T*m->q[5];
-    w->term[1][24] = w->term[0][24]*T*m->q[0];
-    w->term[1][25] = w->term[0][25]*T*m->q[1];
-    w->term[1][26] = w->term[0][26]*T*m->q[2];
-    w->term[1][27] = w->term[0][27]*T*m->q[3];
-    w->term[1][28] = w->term[0][28]*T*m->q[4];
-    w->term[1][29] = w->term[0][29]*T*m->q[5];
-    w->term[1][30] = w->term[0][30]*T*m->q[0];
-    w->term[1][31] = w->term[0][31]*T*m->q[1];
-    w->term[1][32] = w->term[0][32]*T*m->q[2];
-    w->term[1][33] = w->term[0][33]*T*m->q[3];
-    w->term[1][34] = w->term[0][34]*T*m->q[4];
-    w->term[1][35] = w->term[0][35]*T*m->q[5];
-    w->term[1][36] = w->term[0][36]*T*m->q[0];
-    w->term[1][37] = w->term[0][37]*T*m->q[1];
-    w->term[1][38] = w->term[0][38]*T*m->q[2];
-    w->term[1][39] = w->term[0][39]*T*m->q[0];
-    w->term[1][40] = w->term[0][40]*T*m->q[1];
-    w->term[1][41] = w->term[0][41]*T*m->q[2];
-    w->term[1][42] = w->term[0][42]*T*m->q[0];
-    w->term[1][43] = w->term[0][43]*T*m->q[1];
-    w->term[1][44] = w->term[0][44]*T*m->q[2];
-    w->term[1][45] = w->term[0][45]*T*m->q[6];
-    w->term[1][46] = w->term[0][46]*T*m->q[7];
-    w->term[1][47] = w->term[0][47]*T*m->q[7];
+    w->term[1][48] = T*m->q[0];
+    w->term[1][49] = T*m->q[1];
+    w->term[1][50] = T*m->q[2];
+    w->term[1][51] = T*m->q[3];
+    w->term[1][52] = T*m->q[4];
+    w->term[1][53] = T*m->q[5];
+    w->term[1][54] = T*m->q[6];
+    w->term[1][55] = T*m->q[7];
+    w->term[1][0] = w->term[0][0]*w->term[1][48];
+    w->term[1][1] = w->term[0][1]*w->term[1][49];
+    w->term[1][2] = w->term[0][2]*w->term[1][50];
+    w->term[1][3] = w->term[0][3]*w->term[1][51];
+    w->term[1][4] = w->term[0][4]*w->term[1][52];
+    w->term[1][5] = w->term[0][5]*w->term[1][53];
+    w->term[1][6] = w->term[0][6]*w->term[1][48];
+    w->term[1][7] = w->term[0][7]*w->term[1][49];
+    w->term[1][8] = w->term[0][8]*w->term[1][50];
+    w->term[1][9] = w->term[0][9]*w->term[1][51];
+    w->term[1][10] = w->term[0][10]*w->term[1][52];
+    w->term[1][11] = w->term[0][11]*w->term[1][53];
+    w->term[1][12] = w->term[0][12]*w->term[1][48];
+    w->term[1][13] = w->term[0][13]*w->term[1][49];
+    w->term[1][14] = w->term[0][14]*w->term[1][50];
+    w->term[1][15] = w->term[0][15]*w->term[1][51];
+    w->term[1][16] = w->term[0][16]*w->term[1][52];
+    w->term[1][17] = w->term[0][17]*w->term[1][53];
+    w->term[1][18] = w->term[0][18]*w->term[1][48];
+    w->term[1][19] = w->term[0][19]*w->term[1][49];
+    w->term[1][20] = w->term[0][20]*w->term[1][50];
+    w->term[1][21] = w->term[0][21]*w->term[1][51];
+    w->term[1][22] = w->term[0][22]*w->term[1][52];
+    w->term[1][23] = w->term[0][23]*w->term[1][53];
+    w->term[1][24] = w->term[0][24]*w->term[1][48];
+    w->term[1][25] = w->term[0][25]*w->term[1][49];
+    w->term[1][26] = w->term[0][26]*w->term[1][50];
+    w->term[1][27] = w->term[0][27]*w->term[1][51];
+    w->term[1][28] = w->term[0][28]*w->term[1][52];
+    w->term[1][29] = w->term[0][29]*w->term[1][53];
+    w->term[1][30] = w->term[0][30]*w->term[1][48];
+    w->term[1][31] = w->term[0][31]*w->term[1][49];
+    w->term[1][32] = w->term[0][32]*w->term[1][50];
+    w->term[1][33] = w->term[0][33]*w->term[1][51];
+    w->term[1][34] = w->term[0][34]*w->term[1][52];
+    w->term[1][35] = w->term[0][35]*w->term[1][53];
+    w->term[1][36] = w->term[0][36]*w->term[1][48];
+    w->term[1][37] = w->term[0][37]*w->term[1][49];
+    w->term[1][38] = w->term[0][38]*w->term[1][50];
+    w->term[1][39] = w->term[0][39]*w->term[1][48];
+    w->term[1][40] = w->term[0][40]*w->term[1][49];
+    w->term[1][41] = w->term[0][41]*w->term[1][50];
+    w->term[1][42] = w->term[0][42]*w->term[1][48];
+    w->term[1][43] = w->term[0][43]*w->term[1][49];
+    w->term[1][44] = w->term[0][44]*w->term[1][50];
+    w->term[1][45] = w->term[0][45]*w->term[1][54];
+    w->term[1][46] = w->term[0][46]*w->term[1][55];
+    w->term[1][47] = w->term[0][47]*w->term[1][55];
     v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
             w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0][0] = v; check += v - v;
+            t->Qd[0] = v; check += v - v;
     v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
             w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[0][1] = v; t->Qd[1][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v - v;
     v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
             w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[0][2] = v; t->Qd[2][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v - v;
     v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
             w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[0][3] = v; t->Qd[3][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v - v;
     v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
             w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[0][4] = v; t->Qd[4][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v - v;
     v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
             w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[0][5] = v; t->Qd[5][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v - v;
     v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38];
-            t->Qd[0][6] = v; t->Qd[6][0] = v; check += v - v;
+            t->Qd[6] = v; check += v - v;
     v = w->term[1][0]*w->term[0][39] + w->term[1][1]*w->term[0][40] + w->term[1][2]*w->term[0][41];
-            t->Qd[0][7] = v; t->Qd[7][0] = v; check += v - v;
+            t->Qd[7] = v; check += v - v;
     v = w->term[1][0]*w->term[0][42] + w->term[1][1]*w->term[0][43] + w->term[1][2]*w->term[0][44];
-            t->Qd[0][8] = v; t->Qd[8][0] = v; check += v - v;
+            t->Qd[8] = v; check += v - v;
     v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
             w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[1][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][11]; t->Qd[11] = v; check += v - v;
     v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
             w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[1][2] = v; t->Qd[2][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][17]; t->Qd[12] = v; check += v - v;
     v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
             w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[1][3] = v; t->Qd[3][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][23]; t->Qd[13] = v; check += v - v;
     v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
             w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[1][4] = v; t->Qd[4][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][29]; t->Qd[14] = v; check += v - v;
     v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
             w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[1][5] = v; t->Qd[5][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][35]; t->Qd[15] = v; check += v - v;
     v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38];
-            t->Qd[1][6] = v; t->Qd[6][1] = v; check += v - v;
+            t->Qd[16] = v; check += v - v;
     v = w->term[1][6]*w->term[0][39] + w->term[1][7]*w->term[0][40] + w->term[1][8]*w->term[0][41];
-            t->Qd[1][7] = v; t->Qd[7][1] = v; check += v - v;
+            t->Qd[17] = v; check += v - v;
     v = w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] + w->term[1][8]*w->term[0][44];
-            t->Qd[1][8] = v; t->Qd[8][1] = v; check += v - v;
+            t->Qd[18] = v; check += v - v;
     v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
             w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[2][2] = v; check +=
-            v - v;
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[21] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
             w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[2][3] = v;
-            t->Qd[3][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[22] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
             w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[2][4] = v;
-            t->Qd[4][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[23] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
             w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[2][5] = v;
-            t->Qd[5][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[24] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
-            w->term[1][14]*w->term[0][38]; t->Qd[2][6] = v; t->Qd[6][2] = v; check += v - v;
+            w->term[1][14]*w->term[0][38]; t->Qd[25] = v; check += v - v;
     v = w->term[1][12]*w->term[0][39] + w->term[1][13]*w->term[0][40] +
-            w->term[1][14]*w->term[0][41]; t->Qd[2][7] = v; t->Qd[7][2] = v; check += v - v;
+            w->term[1][14]*w->term[0][41]; t->Qd[26] = v; check += v - v;
     v = w->term[1][12]*w->term[0][42] + w->term[1][13]*w->term[0][43] +
-            w->term[1][14]*w->term[0][44]; t->Qd[2][8] = v; t->Qd[8][2] = v; check += v - v;
+            w->term[1][14]*w->term[0][44]; t->Qd[27] = v; check += v - v;
     v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
             w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[3][3] = v; check +=
-            v - v;
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[30] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
             w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[3][4] = v;
-            t->Qd[4][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[31] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
             w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[3][5] = v;
-            t->Qd[5][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[32] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38]; t->Qd[3][6] = v; t->Qd[6][3] = v; check += v - v;
+            w->term[1][20]*w->term[0][38]; t->Qd[33] = v; check += v - v;
     v = w->term[1][18]*w->term[0][39] + w->term[1][19]*w->term[0][40] +
-            w->term[1][20]*w->term[0][41]; t->Qd[3][7] = v; t->Qd[7][3] = v; check += v - v;
+            w->term[1][20]*w->term[0][41]; t->Qd[34] = v; check += v - v;
     v = w->term[1][18]*w->term[0][42] + w->term[1][19]*w->term[0][43] +
-            w->term[1][20]*w->term[0][44]; t->Qd[3][8] = v; t->Qd[8][3] = v; check += v - v;
+            w->term[1][20]*w->term[0][44]; t->Qd[35] = v; check += v - v;
     v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
             w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[4][4] = v; check +=
-            v - v;
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[38] = v; check += v
+            - v;
     v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
             w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[4][5] = v;
-            t->Qd[5][4] = v; check += v - v;
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[39] = v; check += v
+            - v;
     v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
-            w->term[1][26]*w->term[0][38]; t->Qd[4][6] = v; t->Qd[6][4] = v; check += v - v;
+            w->term[1][26]*w->term[0][38]; t->Qd[40] = v; check += v - v;
     v = w->term[1][24]*w->term[0][39] + w->term[1][25]*w->term[0][40] +
-            w->term[1][26]*w->term[0][41]; t->Qd[4][7] = v; t->Qd[7][4] = v; check += v - v;
+            w->term[1][26]*w->term[0][41]; t->Qd[41] = v; check += v - v;
     v = w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
-            w->term[1][26]*w->term[0][44]; t->Qd[4][8] = v; t->Qd[8][4] = v; check += v - v;
+            w->term[1][26]*w->term[0][44]; t->Qd[42] = v; check += v - v;
     v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
             w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[5][5] = v; check +=
-            v - v;
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[45] = v; check += v
+            - v;
     v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
-            w->term[1][32]*w->term[0][38]; t->Qd[5][6] = v; t->Qd[6][5] = v; check += v - v;
+            w->term[1][32]*w->term[0][38]; t->Qd[46] = v; check += v - v;
     v = w->term[1][30]*w->term[0][39] + w->term[1][31]*w->term[0][40] +
-            w->term[1][32]*w->term[0][41]; t->Qd[5][7] = v; t->Qd[7][5] = v; check += v - v;
+            w->term[1][32]*w->term[0][41]; t->Qd[47] = v; check += v - v;
     v = w->term[1][30]*w->term[0][42] + w->term[1][31]*w->term[0][43] +
-            w->term[1][32]*w->term[0][44]; t->Qd[5][8] = v; t->Qd[8][5] = v; check += v - v;
+            w->term[1][32]*w->term[0][44]; t->Qd[48] = v; check += v - v;
     v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38]; t->Qd[6][6] = v; check += v - v;
+            w->term[1][38]*w->term[0][38]; t->Qd[51] = v; check += v - v;
     v = w->term[1][36]*w->term[0][39] + w->term[1][37]*w->term[0][40] +
-            w->term[1][38]*w->term[0][41]; t->Qd[6][7] = v; t->Qd[7][6] = v; check += v - v;
+            w->term[1][38]*w->term[0][41]; t->Qd[52] = v; check += v - v;
     v = w->term[1][36]*w->term[0][42] + w->term[1][37]*w->term[0][43] +
-            w->term[1][38]*w->term[0][44]; t->Qd[6][8] = v; t->Qd[8][6] = v; check += v - v;
+            w->term[1][38]*w->term[0][44]; t->Qd[53] = v; check += v - v;
     v = w->term[1][39]*w->term[0][39] + w->term[1][40]*w->term[0][40] +
-            w->term[1][41]*w->term[0][41]; t->Qd[7][7] = v; check += v - v;
+            w->term[1][41]*w->term[0][41]; t->Qd[56] = v; check += v - v;
     v = w->term[1][39]*w->term[0][42] + w->term[1][40]*w->term[0][43] +
-            w->term[1][41]*w->term[0][44]; t->Qd[7][8] = v; t->Qd[8][7] = v; check += v - v;
+            w->term[1][41]*w->term[0][44]; t->Qd[57] = v; check += v - v;
     v = w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
-            w->term[1][44]*w->term[0][44]; t->Qd[8][8] = v; check += v - v;
-    v = w->term[1][45]*w->term[0][45] + w->term[1][46]*w->term[0][46]; t->Qd[9][9] = v; check += v -
+            w->term[1][44]*w->term[0][44]; t->Qd[60] = v; check += v - v;
+    v = w->term[1][45]*w->term[0][45] + w->term[1][46]*w->term[0][46]; t->Qd[63] = v; check += v -
             v;
-    v = w->term[1][46]*w->term[0][47]; t->Qd[9][10] = v; t->Qd[10][9] = v; check += v - v;
-    v = w->term[1][47]*w->term[0][47]; t->Qd[10][10] = v; check += v - v;
-    t->Qd[0][9] = 0;
-    t->Qd[0][10] = 0;
-    t->Qd[1][9] = 0;
-    t->Qd[1][10] = 0;
-    t->Qd[2][9] = 0;
-    t->Qd[2][10] = 0;
-    t->Qd[3][9] = 0;
-    t->Qd[3][10] = 0;
-    t->Qd[4][9] = 0;
-    t->Qd[4][10] = 0;
-    t->Qd[5][9] = 0;
-    t->Qd[5][10] = 0;
-    t->Qd[6][9] = 0;
-    t->Qd[6][10] = 0;
-    t->Qd[7][9] = 0;
-    t->Qd[7][10] = 0;
-    t->Qd[8][9] = 0;
-    t->Qd[8][10] = 0;
-    t->Qd[9][0] = 0;
-    t->Qd[9][1] = 0;
-    t->Qd[9][2] = 0;
-    t->Qd[9][3] = 0;
-    t->Qd[9][4] = 0;
-    t->Qd[9][5] = 0;
-    t->Qd[9][6] = 0;
-    t->Qd[9][7] = 0;
-    t->Qd[9][8] = 0;
-    t->Qd[10][0] = 0;
-    t->Qd[10][1] = 0;
-    t->Qd[10][2] = 0;
-    t->Qd[10][3] = 0;
-    t->Qd[10][4] = 0;
-    t->Qd[10][5] = 0;
-    t->Qd[10][6] = 0;
-    t->Qd[10][7] = 0;
-    t->Qd[10][8] = 0;
+    v = w->term[1][46]*w->term[0][47]; t->Qd[64] = v; check += v - v;
+    v = w->term[1][47]*w->term[0][47]; t->Qd[65] = v; check += v - v;
+    t->Qd[9] = 0;
+    t->Qd[10] = 0;
+    t->Qd[19] = 0;
+    t->Qd[20] = 0;
+    t->Qd[28] = 0;
+    t->Qd[29] = 0;
+    t->Qd[36] = 0;
+    t->Qd[37] = 0;
+    t->Qd[43] = 0;
+    t->Qd[44] = 0;
+    t->Qd[49] = 0;
+    t->Qd[50] = 0;
+    t->Qd[54] = 0;
+    t->Qd[55] = 0;
+    t->Qd[58] = 0;
+    t->Qd[59] = 0;
+    t->Qd[61] = 0;
+    t->Qd[62] = 0;
     return check;
 }
 
@@ -1577,23 +1560,40 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
     int i, e, c;
     int halvings, order, status;
     int k;
-    gps_pseudorange11_twin_scalar check = 0.0;
+    gps_pseudorange11_twin_scalar sum_check;
+    gps_pseudorange11_twin_scalar check = 0.0, sums[2] = { 0.0, 0.0 };
     if (!isfinite(T)) {
         return GPS_PSEUDORANGE11_TWIN_ERR_NONFINITE;
     }
     if (!(T > 0.0)) {
         return GPS_PSEUDORANGE11_TWIN_ERR_NOT_POSITIVE;
     }
-    for (e = 0; e < GPS_PSEUDORANGE11_TWIN_NNZ_F; ++e) {
-        check += m->F[e] - m->F[e];
+    /* the sum of v - v over F, G and q (0 when all are finite) in two partial sums, two entries a
+            step,
+       which gcc -O2 vectorizes (the order of a sum of zeros and NaNs does not change whether it is
+               0) */
+    for (e = 0; e + 1 < GPS_PSEUDORANGE11_TWIN_NNZ_F; e += 2) {
+        sums[0] += m->F[e] - m->F[e];
+        sums[1] += m->F[e + 1] - m->F[e + 1];
     }
-    for (e = 0; e < GPS_PSEUDORANGE11_TWIN_NNZ_G; ++e) {
-        check += m->G[e] - m->G[e];
+    for (; e < GPS_PSEUDORANGE11_TWIN_NNZ_F; ++e) {
+        sums[0] += m->F[e] - m->F[e];
     }
-    for (c = 0; c < GPS_PSEUDORANGE11_TWIN_N_NOISES; ++c) {
-        check += m->q[c] - m->q[c];
+    for (e = 0; e + 1 < GPS_PSEUDORANGE11_TWIN_NNZ_G; e += 2) {
+        sums[0] += m->G[e] - m->G[e];
+        sums[1] += m->G[e + 1] - m->G[e + 1];
     }
-    if (check != 0.0) {
+    for (; e < GPS_PSEUDORANGE11_TWIN_NNZ_G; ++e) {
+        sums[0] += m->G[e] - m->G[e];
+    }
+    for (e = 0; e + 1 < GPS_PSEUDORANGE11_TWIN_N_NOISES; e += 2) {
+        sums[0] += m->q[e] - m->q[e];
+        sums[1] += m->q[e + 1] - m->q[e + 1];
+    }
+    for (; e < GPS_PSEUDORANGE11_TWIN_N_NOISES; ++e) {
+        sums[0] += m->q[e] - m->q[e];
+    }
+    if (sums[0] + sums[1] != 0.0) {
         return GPS_PSEUDORANGE11_TWIN_ERR_NONFINITE;
     }
     for (c = 0; c < GPS_PSEUDORANGE11_TWIN_N_NOISES; ++c) {
@@ -1624,8 +1624,11 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
                 horner_level_1_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
             }
         } else if (k == 0) {
-            horner_last_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]); /* S = R_0:
-                    also the rows no row of F reads */
+            horner_last_into_S(w, taylor_coefficient[k]); /* S = R_0: also the rows no row of F
+                    reads, and the unit columns R_1 A(:, j) */
+        } else if (k == 1) {
+            horner_first_into_term(w, taylor_coefficient[k]); /* R_1 in every row: the unit columns
+                    of S read it */
         } else {
             if (k & 1) {
                 horner_saturated_into_term(w, taylor_coefficient[k]);
@@ -1638,10 +1641,18 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
     for (i = 0; i < halvings; ++i) {
         doubling(t, w);
     }
-    check += transition_check(t);
-    for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_STATES; ++i) {
-        t->Phi[i][i] += 1.0;
+    /* Phi = I + E, and the sum of its active entries: finite only if every entry is; otherwise (an
+       entry that is not finite, or an overflow of the sum) entry by entry */
+    sum_check = transition_check(t, w);
+    if (sum_check != 0.0) {
+        sum_check = 0.0;
+        for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_STATES; ++i) {
+            for (k = 0; k < GPS_PSEUDORANGE11_TWIN_N_STATES; ++k) {
+                sum_check += t->Phi[i][k] - t->Phi[i][k];
+            }
+        }
     }
+    check += sum_check;
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
@@ -1687,302 +1698,39 @@ static void phi_times_p_row_0(const gps_pseudorange11_twin_filter *restrict f, c
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0][0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] +
+    w->M[0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] +
             t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] +
             t->Phi[0][6]*f->P[6][0] + t->Phi[0][7]*f->P[7][0] + t->Phi[0][8]*f->P[8][0];
-    w->M[0][1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] +
+    w->M[1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] +
             t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] +
             t->Phi[0][6]*f->P[6][1] + t->Phi[0][7]*f->P[7][1] + t->Phi[0][8]*f->P[8][1];
-    w->M[0][2] = t->Phi[0][0]*f->P[0][2] + t->Phi[0][1]*f->P[1][2] + t->Phi[0][2]*f->P[2][2] +
+    w->M[2] = t->Phi[0][0]*f->P[0][2] + t->Phi[0][1]*f->P[1][2] + t->Phi[0][2]*f->P[2][2] +
             t->Phi[0][3]*f->P[3][2] + t->Phi[0][4]*f->P[4][2] + t->Phi[0][5]*f->P[5][2] +
             t->Phi[0][6]*f->P[6][2] + t->Phi[0][7]*f->P[7][2] + t->Phi[0][8]*f->P[8][2];
-    w->M[0][3] = t->Phi[0][0]*f->P[0][3] + t->Phi[0][1]*f->P[1][3] + t->Phi[0][2]*f->P[2][3] +
+    w->M[3] = t->Phi[0][0]*f->P[0][3] + t->Phi[0][1]*f->P[1][3] + t->Phi[0][2]*f->P[2][3] +
             t->Phi[0][3]*f->P[3][3] + t->Phi[0][4]*f->P[4][3] + t->Phi[0][5]*f->P[5][3] +
             t->Phi[0][6]*f->P[6][3] + t->Phi[0][7]*f->P[7][3] + t->Phi[0][8]*f->P[8][3];
-    w->M[0][4] = t->Phi[0][0]*f->P[0][4] + t->Phi[0][1]*f->P[1][4] + t->Phi[0][2]*f->P[2][4] +
+    w->M[4] = t->Phi[0][0]*f->P[0][4] + t->Phi[0][1]*f->P[1][4] + t->Phi[0][2]*f->P[2][4] +
             t->Phi[0][3]*f->P[3][4] + t->Phi[0][4]*f->P[4][4] + t->Phi[0][5]*f->P[5][4] +
             t->Phi[0][6]*f->P[6][4] + t->Phi[0][7]*f->P[7][4] + t->Phi[0][8]*f->P[8][4];
-    w->M[0][5] = t->Phi[0][0]*f->P[0][5] + t->Phi[0][1]*f->P[1][5] + t->Phi[0][2]*f->P[2][5] +
+    w->M[5] = t->Phi[0][0]*f->P[0][5] + t->Phi[0][1]*f->P[1][5] + t->Phi[0][2]*f->P[2][5] +
             t->Phi[0][3]*f->P[3][5] + t->Phi[0][4]*f->P[4][5] + t->Phi[0][5]*f->P[5][5] +
             t->Phi[0][6]*f->P[6][5] + t->Phi[0][7]*f->P[7][5] + t->Phi[0][8]*f->P[8][5];
-    w->M[0][6] = t->Phi[0][0]*f->P[0][6] + t->Phi[0][1]*f->P[1][6] + t->Phi[0][2]*f->P[2][6] +
+    w->M[6] = t->Phi[0][0]*f->P[0][6] + t->Phi[0][1]*f->P[1][6] + t->Phi[0][2]*f->P[2][6] +
             t->Phi[0][3]*f->P[3][6] + t->Phi[0][4]*f->P[4][6] + t->Phi[0][5]*f->P[5][6] +
             t->Phi[0][6]*f->P[6][6] + t->Phi[0][7]*f->P[7][6] + t->Phi[0][8]*f->P[8][6];
-    w->M[0][7] = t->Phi[0][0]*f->P[0][7] + t->Phi[0][1]*f->P[1][7] + t->Phi[0][2]*f->P[2][7] +
+    w->M[7] = t->Phi[0][0]*f->P[0][7] + t->Phi[0][1]*f->P[1][7] + t->Phi[0][2]*f->P[2][7] +
             t->Phi[0][3]*f->P[3][7] + t->Phi[0][4]*f->P[4][7] + t->Phi[0][5]*f->P[5][7] +
             t->Phi[0][6]*f->P[6][7] + t->Phi[0][7]*f->P[7][7] + t->Phi[0][8]*f->P[8][7];
-    w->M[0][8] = t->Phi[0][0]*f->P[0][8] + t->Phi[0][1]*f->P[1][8] + t->Phi[0][2]*f->P[2][8] +
+    w->M[8] = t->Phi[0][0]*f->P[0][8] + t->Phi[0][1]*f->P[1][8] + t->Phi[0][2]*f->P[2][8] +
             t->Phi[0][3]*f->P[3][8] + t->Phi[0][4]*f->P[4][8] + t->Phi[0][5]*f->P[5][8] +
             t->Phi[0][6]*f->P[6][8] + t->Phi[0][7]*f->P[7][8] + t->Phi[0][8]*f->P[8][8];
-    w->M[0][9] = t->Phi[0][0]*f->P[0][9] + t->Phi[0][1]*f->P[1][9] + t->Phi[0][2]*f->P[2][9] +
+    w->M[9] = t->Phi[0][0]*f->P[0][9] + t->Phi[0][1]*f->P[1][9] + t->Phi[0][2]*f->P[2][9] +
             t->Phi[0][3]*f->P[3][9] + t->Phi[0][4]*f->P[4][9] + t->Phi[0][5]*f->P[5][9] +
             t->Phi[0][6]*f->P[6][9] + t->Phi[0][7]*f->P[7][9] + t->Phi[0][8]*f->P[8][9];
-    w->M[0][10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] +
+    w->M[10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] +
             t->Phi[0][3]*f->P[3][10] + t->Phi[0][4]*f->P[4][10] + t->Phi[0][5]*f->P[5][10] +
             t->Phi[0][6]*f->P[6][10] + t->Phi[0][7]*f->P[7][10] + t->Phi[0][8]*f->P[8][10];
-}
-
-static void phi_times_p_row_1(const gps_pseudorange11_twin_filter *restrict f, const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
-{
-    w->M[1][0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] +
-            t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] +
-            t->Phi[1][6]*f->P[6][0] + t->Phi[1][7]*f->P[7][0] + t->Phi[1][8]*f->P[8][0];
-    w->M[1][1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] +
-            t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] +
-            t->Phi[1][6]*f->P[6][1] + t->Phi[1][7]*f->P[7][1] + t->Phi[1][8]*f->P[8][1];
-    w->M[1][2] = t->Phi[1][0]*f->P[0][2] + t->Phi[1][1]*f->P[1][2] + t->Phi[1][2]*f->P[2][2] +
-            t->Phi[1][3]*f->P[3][2] + t->Phi[1][4]*f->P[4][2] + t->Phi[1][5]*f->P[5][2] +
-            t->Phi[1][6]*f->P[6][2] + t->Phi[1][7]*f->P[7][2] + t->Phi[1][8]*f->P[8][2];
-    w->M[1][3] = t->Phi[1][0]*f->P[0][3] + t->Phi[1][1]*f->P[1][3] + t->Phi[1][2]*f->P[2][3] +
-            t->Phi[1][3]*f->P[3][3] + t->Phi[1][4]*f->P[4][3] + t->Phi[1][5]*f->P[5][3] +
-            t->Phi[1][6]*f->P[6][3] + t->Phi[1][7]*f->P[7][3] + t->Phi[1][8]*f->P[8][3];
-    w->M[1][4] = t->Phi[1][0]*f->P[0][4] + t->Phi[1][1]*f->P[1][4] + t->Phi[1][2]*f->P[2][4] +
-            t->Phi[1][3]*f->P[3][4] + t->Phi[1][4]*f->P[4][4] + t->Phi[1][5]*f->P[5][4] +
-            t->Phi[1][6]*f->P[6][4] + t->Phi[1][7]*f->P[7][4] + t->Phi[1][8]*f->P[8][4];
-    w->M[1][5] = t->Phi[1][0]*f->P[0][5] + t->Phi[1][1]*f->P[1][5] + t->Phi[1][2]*f->P[2][5] +
-            t->Phi[1][3]*f->P[3][5] + t->Phi[1][4]*f->P[4][5] + t->Phi[1][5]*f->P[5][5] +
-            t->Phi[1][6]*f->P[6][5] + t->Phi[1][7]*f->P[7][5] + t->Phi[1][8]*f->P[8][5];
-    w->M[1][6] = t->Phi[1][0]*f->P[0][6] + t->Phi[1][1]*f->P[1][6] + t->Phi[1][2]*f->P[2][6] +
-            t->Phi[1][3]*f->P[3][6] + t->Phi[1][4]*f->P[4][6] + t->Phi[1][5]*f->P[5][6] +
-            t->Phi[1][6]*f->P[6][6] + t->Phi[1][7]*f->P[7][6] + t->Phi[1][8]*f->P[8][6];
-    w->M[1][7] = t->Phi[1][0]*f->P[0][7] + t->Phi[1][1]*f->P[1][7] + t->Phi[1][2]*f->P[2][7] +
-            t->Phi[1][3]*f->P[3][7] + t->Phi[1][4]*f->P[4][7] + t->Phi[1][5]*f->P[5][7] +
-            t->Phi[1][6]*f->P[6][7] + t->Phi[1][7]*f->P[7][7] + t->Phi[1][8]*f->P[8][7];
-    w->M[1][8] = t->Phi[1][0]*f->P[0][8] + t->Phi[1][1]*f->P[1][8] + t->Phi[1][2]*f->P[2][8] +
-            t->Phi[1][3]*f->P[3][8] + t->Phi[1][4]*f->P[4][8] + t->Phi[1][5]*f->P[5][8] +
-            t->Phi[1][6]*f->P[6][8] + t->Phi[1][7]*f->P[7][8] + t->Phi[1][8]*f->P[8][8];
-    w->M[1][9] = t->Phi[1][0]*f->P[0][9] + t->Phi[1][1]*f->P[1][9] + t->Phi[1][2]*f->P[2][9] +
-            t->Phi[1][3]*f->P[3][9] + t->Phi[1][4]*f->P[4][9] + t->Phi[1][5]*f->P[5][9] +
-            t->Phi[1][6]*f->P[6][9] + t->Phi[1][7]*f->P[7][9] + t->Phi[1][8]*f->P[8][9];
-    w->M[1][10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] +
-            t->Phi[1][3]*f->P[3][10] + t->Phi[1][4]*f->P[4][10] + t->Phi[1][5]*f->P[5][10] +
-            t->Phi[1][6]*f->P[6][10] + t->Phi[1][7]*f->P[7][10] + t->Phi[1][8]*f->P[8][10];
-}
-
-static void phi_times_p_row_2(const gps_pseudorange11_twin_filter *restrict f, const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
-{
-    w->M[2][0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] +
-            t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] +
-            t->Phi[2][6]*f->P[6][0] + t->Phi[2][7]*f->P[7][0] + t->Phi[2][8]*f->P[8][0];
-    w->M[2][1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] +
-            t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] +
-            t->Phi[2][6]*f->P[6][1] + t->Phi[2][7]*f->P[7][1] + t->Phi[2][8]*f->P[8][1];
-    w->M[2][2] = t->Phi[2][0]*f->P[0][2] + t->Phi[2][1]*f->P[1][2] + t->Phi[2][2]*f->P[2][2] +
-            t->Phi[2][3]*f->P[3][2] + t->Phi[2][4]*f->P[4][2] + t->Phi[2][5]*f->P[5][2] +
-            t->Phi[2][6]*f->P[6][2] + t->Phi[2][7]*f->P[7][2] + t->Phi[2][8]*f->P[8][2];
-    w->M[2][3] = t->Phi[2][0]*f->P[0][3] + t->Phi[2][1]*f->P[1][3] + t->Phi[2][2]*f->P[2][3] +
-            t->Phi[2][3]*f->P[3][3] + t->Phi[2][4]*f->P[4][3] + t->Phi[2][5]*f->P[5][3] +
-            t->Phi[2][6]*f->P[6][3] + t->Phi[2][7]*f->P[7][3] + t->Phi[2][8]*f->P[8][3];
-    w->M[2][4] = t->Phi[2][0]*f->P[0][4] + t->Phi[2][1]*f->P[1][4] + t->Phi[2][2]*f->P[2][4] +
-            t->Phi[2][3]*f->P[3][4] + t->Phi[2][4]*f->P[4][4] + t->Phi[2][5]*f->P[5][4] +
-            t->Phi[2][6]*f->P[6][4] + t->Phi[2][7]*f->P[7][4] + t->Phi[2][8]*f->P[8][4];
-    w->M[2][5] = t->Phi[2][0]*f->P[0][5] + t->Phi[2][1]*f->P[1][5] + t->Phi[2][2]*f->P[2][5] +
-            t->Phi[2][3]*f->P[3][5] + t->Phi[2][4]*f->P[4][5] + t->Phi[2][5]*f->P[5][5] +
-            t->Phi[2][6]*f->P[6][5] + t->Phi[2][7]*f->P[7][5] + t->Phi[2][8]*f->P[8][5];
-    w->M[2][6] = t->Phi[2][0]*f->P[0][6] + t->Phi[2][1]*f->P[1][6] + t->Phi[2][2]*f->P[2][6] +
-            t->Phi[2][3]*f->P[3][6] + t->Phi[2][4]*f->P[4][6] + t->Phi[2][5]*f->P[5][6] +
-            t->Phi[2][6]*f->P[6][6] + t->Phi[2][7]*f->P[7][6] + t->Phi[2][8]*f->P[8][6];
-    w->M[2][7] = t->Phi[2][0]*f->P[0][7] + t->Phi[2][1]*f->P[1][7] + t->Phi[2][2]*f->P[2][7] +
-            t->Phi[2][3]*f->P[3][7] + t->Phi[2][4]*f->P[4][7] + t->Phi[2][5]*f->P[5][7] +
-            t->Phi[2][6]*f->P[6][7] + t->Phi[2][7]*f->P[7][7] + t->Phi[2][8]*f->P[8][7];
-    w->M[2][8] = t->Phi[2][0]*f->P[0][8] + t->Phi[2][1]*f->P[1][8] + t->Phi[2][2]*f->P[2][8] +
-            t->Phi[2][3]*f->P[3][8] + t->Phi[2][4]*f->P[4][8] + t->Phi[2][5]*f->P[5][8] +
-            t->Phi[2][6]*f->P[6][8] + t->Phi[2][7]*f->P[7][8] + t->Phi[2][8]*f->P[8][8];
-    w->M[2][9] = t->Phi[2][0]*f->P[0][9] + t->Phi[2][1]*f->P[1][9] + t->Phi[2][2]*f->P[2][9] +
-            t->Phi[2][3]*f->P[3][9] + t->Phi[2][4]*f->P[4][9] + t->Phi[2][5]*f->P[5][9] +
-            t->Phi[2][6]*f->P[6][9] + t->Phi[2][7]*f->P[7][9] + t->Phi[2][8]*f->P[8][9];
-    w->M[2][10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] +
-            t->Phi[2][3]*f->P[3][10] + t->Phi[2][4]*f->P[4][10] + t->Phi[2][5]*f->P[5][10] +
-            t->Phi[2][6]*f->P[6][10] + t->Phi[2][7]*f->P[7][10] + t->Phi[2][8]*f->P[8][10];
-}
-
-static void phi_times_p_row_3(const gps_pseudorange11_twin_filter *restrict f, const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
-{
-    w->M[3][0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] +
-            t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] +
-            t->Phi[3][6]*f->P[6][0] + t->Phi[3][7]*f->P[7][0] + t->Phi[3][8]*f->P[8][0];
-    w->M[3][1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] +
-            t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] +
-            t->Phi[3][6]*f->P[6][1] + t->Phi[3][7]*f->P[7][1] + t->Phi[3][8]*f->P[8][1];
-    w->M[3][2] = t->Phi[3][0]*f->P[0][2] + t->Phi[3][1]*f->P[1][2] + t->Phi[3][2]*f->P[2][2] +
-            t->Phi[3][3]*f->P[3][2] + t->Phi[3][4]*f->P[4][2] + t->Phi[3][5]*f->P[5][2] +
-            t->Phi[3][6]*f->P[6][2] + t->Phi[3][7]*f->P[7][2] + t->Phi[3][8]*f->P[8][2];
-    w->M[3][3] = t->Phi[3][0]*f->P[0][3] + t->Phi[3][1]*f->P[1][3] + t->Phi[3][2]*f->P[2][3] +
-            t->Phi[3][3]*f->P[3][3] + t->Phi[3][4]*f->P[4][3] + t->Phi[3][5]*f->P[5][3] +
-            t->Phi[3][6]*f->P[6][3] + t->Phi[3][7]*f->P[7][3] + t->Phi[3][8]*f->P[8][3];
-    w->M[3][4] = t->Phi[3][0]*f->P[0][4] + t->Phi[3][1]*f->P[1][4] + t->Phi[3][2]*f->P[2][4] +
-            t->Phi[3][3]*f->P[3][4] + t->Phi[3][4]*f->P[4][4] + t->Phi[3][5]*f->P[5][4] +
-            t->Phi[3][6]*f->P[6][4] + t->Phi[3][7]*f->P[7][4] + t->Phi[3][8]*f->P[8][4];
-    w->M[3][5] = t->Phi[3][0]*f->P[0][5] + t->Phi[3][1]*f->P[1][5] + t->Phi[3][2]*f->P[2][5] +
-            t->Phi[3][3]*f->P[3][5] + t->Phi[3][4]*f->P[4][5] + t->Phi[3][5]*f->P[5][5] +
-            t->Phi[3][6]*f->P[6][5] + t->Phi[3][7]*f->P[7][5] + t->Phi[3][8]*f->P[8][5];
-    w->M[3][6] = t->Phi[3][0]*f->P[0][6] + t->Phi[3][1]*f->P[1][6] + t->Phi[3][2]*f->P[2][6] +
-            t->Phi[3][3]*f->P[3][6] + t->Phi[3][4]*f->P[4][6] + t->Phi[3][5]*f->P[5][6] +
-            t->Phi[3][6]*f->P[6][6] + t->Phi[3][7]*f->P[7][6] + t->Phi[3][8]*f->P[8][6];
-    w->M[3][7] = t->Phi[3][0]*f->P[0][7] + t->Phi[3][1]*f->P[1][7] + t->Phi[3][2]*f->P[2][7] +
-            t->Phi[3][3]*f->P[3][7] + t->Phi[3][4]*f->P[4][7] + t->Phi[3][5]*f->P[5][7] +
-            t->Phi[3][6]*f->P[6][7] + t->Phi[3][7]*f->P[7][7] + t->Phi[3][8]*f->P[8][7];
-    w->M[3][8] = t->Phi[3][0]*f->P[0][8] + t->Phi[3][1]*f->P[1][8] + t->Phi[3][2]*f->P[2][8] +
-            t->Phi[3][3]*f->P[3][8] + t->Phi[3][4]*f->P[4][8] + t->Phi[3][5]*f->P[5][8] +
-            t->Phi[3][6]*f->P[6][8] + t->Phi[3][7]*f->P[7][8] + t->Phi[3][8]*f->P[8][8];
-    w->M[3][9] = t->Phi[3][0]*f->P[0][9] + t->Phi[3][1]*f->P[1][9] + t->Phi[3][2]*f->P[2][9] +
-            t->Phi[3][3]*f->P[3][9] + t->Phi[3][4]*f->P[4][9] + t->Phi[3][5]*f->P[5][9] +
-            t->Phi[3][6]*f->P[6][9] + t->Phi[3][7]*f->P[7][9] + t->Phi[3][8]*f->P[8][9];
-    w->M[3][10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] +
-            t->Phi[3][3]*f->P[3][10] + t->Phi[3][4]*f->P[4][10] + t->Phi[3][5]*f->P[5][10] +
-            t->Phi[3][6]*f->P[6][10] + t->Phi[3][7]*f->P[7][10] + t->Phi[3][8]*f->P[8][10];
-}
-
-static void phi_times_p_row_4(const gps_pseudorange11_twin_filter *restrict f, const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
-{
-    w->M[4][0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] +
-            t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] +
-            t->Phi[4][6]*f->P[6][0] + t->Phi[4][7]*f->P[7][0] + t->Phi[4][8]*f->P[8][0];
-    w->M[4][1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] +
-            t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] +
-            t->Phi[4][6]*f->P[6][1] + t->Phi[4][7]*f->P[7][1] + t->Phi[4][8]*f->P[8][1];
-    w->M[4][2] = t->Phi[4][0]*f->P[0][2] + t->Phi[4][1]*f->P[1][2] + t->Phi[4][2]*f->P[2][2] +
-            t->Phi[4][3]*f->P[3][2] + t->Phi[4][4]*f->P[4][2] + t->Phi[4][5]*f->P[5][2] +
-            t->Phi[4][6]*f->P[6][2] + t->Phi[4][7]*f->P[7][2] + t->Phi[4][8]*f->P[8][2];
-    w->M[4][3] = t->Phi[4][0]*f->P[0][3] + t->Phi[4][1]*f->P[1][3] + t->Phi[4][2]*f->P[2][3] +
-            t->Phi[4][3]*f->P[3][3] + t->Phi[4][4]*f->P[4][3] + t->Phi[4][5]*f->P[5][3] +
-            t->Phi[4][6]*f->P[6][3] + t->Phi[4][7]*f->P[7][3] + t->Phi[4][8]*f->P[8][3];
-    w->M[4][4] = t->Phi[4][0]*f->P[0][4] + t->Phi[4][1]*f->P[1][4] + t->Phi[4][2]*f->P[2][4] +
-            t->Phi[4][3]*f->P[3][4] + t->Phi[4][4]*f->P[4][4] + t->Phi[4][5]*f->P[5][4] +
-            t->Phi[4][6]*f->P[6][4] + t->Phi[4][7]*f->P[7][4] + t->Phi[4][8]*f->P[8][4];
-    w->M[4][5] = t->Phi[4][0]*f->P[0][5] + t->Phi[4][1]*f->P[1][5] + t->Phi[4][2]*f->P[2][5] +
-            t->Phi[4][3]*f->P[3][5] + t->Phi[4][4]*f->P[4][5] + t->Phi[4][5]*f->P[5][5] +
-            t->Phi[4][6]*f->P[6][5] + t->Phi[4][7]*f->P[7][5] + t->Phi[4][8]*f->P[8][5];
-    w->M[4][6] = t->Phi[4][0]*f->P[0][6] + t->Phi[4][1]*f->P[1][6] + t->Phi[4][2]*f->P[2][6] +
-            t->Phi[4][3]*f->P[3][6] + t->Phi[4][4]*f->P[4][6] + t->Phi[4][5]*f->P[5][6] +
-            t->Phi[4][6]*f->P[6][6] + t->Phi[4][7]*f->P[7][6] + t->Phi[4][8]*f->P[8][6];
-    w->M[4][7] = t->Phi[4][0]*f->P[0][7] + t->Phi[4][1]*f->P[1][7] + t->Phi[4][2]*f->P[2][7] +
-            t->Phi[4][3]*f->P[3][7] + t->Phi[4][4]*f->P[4][7] + t->Phi[4][5]*f->P[5][7] +
-            t->Phi[4][6]*f->P[6][7] + t->Phi[4][7]*f->P[7][7] + t->Phi[4][8]*f->P[8][7];
-    w->M[4][8] = t->Phi[4][0]*f->P[0][8] + t->Phi[4][1]*f->P[1][8] + t->Phi[4][2]*f->P[2][8] +
-            t->Phi[4][3]*f->P[3][8] + t->Phi[4][4]*f->P[4][8] + t->Phi[4][5]*f->P[5][8] +
-            t->Phi[4][6]*f->P[6][8] + t->Phi[4][7]*f->P[7][8] + t->Phi[4][8]*f->P[8][8];
-    w->M[4][9] = t->Phi[4][0]*f->P[0][9] + t->Phi[4][1]*f->P[1][9] + t->Phi[4][2]*f->P[2][9] +
-            t->Phi[4][3]*f->P[3][9] + t->Phi[4][4]*f->P[4][9] + t->Phi[4][5]*f->P[5][9] +
-            t->Phi[4][6]*f->P[6][9] + t->Phi[4][7]*f->P[7][9] + t->Phi[4][8]*f->P[8][9];
-    w->M[4][10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] +
-            t->Phi[4][3]*f->P[3][10] + t->Phi[4][4]*f->P[4][10] + t->Phi[4][5]*f->P[5][10] +
-            t->Phi[4][6]*f->P[6][10] + t->Phi[4][7]*f->P[7][10] + t->Phi[4][8]*f->P[8][10];
-}
-
-static void phi_times_p_row_5(const gps_pseudorange11_twin_filter *restrict f, const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
-{
-    w->M[5][0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] +
-            t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] +
-            t->Phi[5][6]*f->P[6][0] + t->Phi[5][7]*f->P[7][0] + t->Phi[5][8]*f->P[8][0];
-    w->M[5][1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] +
-            t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] +
-            t->Phi[5][6]*f->P[6][1] + t->Phi[5][7]*f->P[7][1] + t->Phi[5][8]*f->P[8][1];
-    w->M[5][2] = t->Phi[5][0]*f->P[0][2] + t->Phi[5][1]*f->P[1][2] + t->Phi[5][2]*f->P[2][2] +
-            t->Phi[5][3]*f->P[3][2] + t->Phi[5][4]*f->P[4][2] + t->Phi[5][5]*f->P[5][2] +
-            t->Phi[5][6]*f->P[6][2] + t->Phi[5][7]*f->P[7][2] + t->Phi[5][8]*f->P[8][2];
-    w->M[5][3] = t->Phi[5][0]*f->P[0][3] + t->Phi[5][1]*f->P[1][3] + t->Phi[5][2]*f->P[2][3] +
-            t->Phi[5][3]*f->P[3][3] + t->Phi[5][4]*f->P[4][3] + t->Phi[5][5]*f->P[5][3] +
-            t->Phi[5][6]*f->P[6][3] + t->Phi[5][7]*f->P[7][3] + t->Phi[5][8]*f->P[8][3];
-    w->M[5][4] = t->Phi[5][0]*f->P[0][4] + t->Phi[5][1]*f->P[1][4] + t->Phi[5][2]*f->P[2][4] +
-            t->Phi[5][3]*f->P[3][4] + t->Phi[5][4]*f->P[4][4] + t->Phi[5][5]*f->P[5][4] +
-            t->Phi[5][6]*f->P[6][4] + t->Phi[5][7]*f->P[7][4] + t->Phi[5][8]*f->P[8][4];
-    w->M[5][5] = t->Phi[5][0]*f->P[0][5] + t->Phi[5][1]*f->P[1][5] + t->Phi[5][2]*f->P[2][5] +
-            t->Phi[5][3]*f->P[3][5] + t->Phi[5][4]*f->P[4][5] + t->Phi[5][5]*f->P[5][5] +
-            t->Phi[5][6]*f->P[6][5] + t->Phi[5][7]*f->P[7][5] + t->Phi[5][8]*f->P[8][5];
-    w->M[5][6] = t->Phi[5][0]*f->P[0][6] + t->Phi[5][1]*f->P[1][6] + t->Phi[5][2]*f->P[2][6] +
-            t->Phi[5][3]*f->P[3][6] + t->Phi[5][4]*f->P[4][6] + t->Phi[5][5]*f->P[5][6] +
-            t->Phi[5][6]*f->P[6][6] + t->Phi[5][7]*f->P[7][6] + t->Phi[5][8]*f->P[8][6];
-    w->M[5][7] = t->Phi[5][0]*f->P[0][7] + t->Phi[5][1]*f->P[1][7] + t->Phi[5][2]*f->P[2][7] +
-            t->Phi[5][3]*f->P[3][7] + t->Phi[5][4]*f->P[4][7] + t->Phi[5][5]*f->P[5][7] +
-            t->Phi[5][6]*f->P[6][7] + t->Phi[5][7]*f->P[7][7] + t->Phi[5][8]*f->P[8][7];
-    w->M[5][8] = t->Phi[5][0]*f->P[0][8] + t->Phi[5][1]*f->P[1][8] + t->Phi[5][2]*f->P[2][8] +
-            t->Phi[5][3]*f->P[3][8] + t->Phi[5][4]*f->P[4][8] + t->Phi[5][5]*f->P[5][8] +
-            t->Phi[5][6]*f->P[6][8] + t->Phi[5][7]*f->P[7][8] + t->Phi[5][8]*f->P[8][8];
-    w->M[5][9] = t->Phi[5][0]*f->P[0][9] + t->Phi[5][1]*f->P[1][9] + t->Phi[5][2]*f->P[2][9] +
-            t->Phi[5][3]*f->P[3][9] + t->Phi[5][4]*f->P[4][9] + t->Phi[5][5]*f->P[5][9] +
-            t->Phi[5][6]*f->P[6][9] + t->Phi[5][7]*f->P[7][9] + t->Phi[5][8]*f->P[8][9];
-    w->M[5][10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] +
-            t->Phi[5][3]*f->P[3][10] + t->Phi[5][4]*f->P[4][10] + t->Phi[5][5]*f->P[5][10] +
-            t->Phi[5][6]*f->P[6][10] + t->Phi[5][7]*f->P[7][10] + t->Phi[5][8]*f->P[8][10];
-}
-
-static void phi_times_p_row_6(const gps_pseudorange11_twin_filter *restrict f, const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
-{
-    w->M[6][0] = t->Phi[6][6]*f->P[6][0] + t->Phi[6][7]*f->P[7][0] + t->Phi[6][8]*f->P[8][0];
-    w->M[6][1] = t->Phi[6][6]*f->P[6][1] + t->Phi[6][7]*f->P[7][1] + t->Phi[6][8]*f->P[8][1];
-    w->M[6][2] = t->Phi[6][6]*f->P[6][2] + t->Phi[6][7]*f->P[7][2] + t->Phi[6][8]*f->P[8][2];
-    w->M[6][3] = t->Phi[6][6]*f->P[6][3] + t->Phi[6][7]*f->P[7][3] + t->Phi[6][8]*f->P[8][3];
-    w->M[6][4] = t->Phi[6][6]*f->P[6][4] + t->Phi[6][7]*f->P[7][4] + t->Phi[6][8]*f->P[8][4];
-    w->M[6][5] = t->Phi[6][6]*f->P[6][5] + t->Phi[6][7]*f->P[7][5] + t->Phi[6][8]*f->P[8][5];
-    w->M[6][6] = t->Phi[6][6]*f->P[6][6] + t->Phi[6][7]*f->P[7][6] + t->Phi[6][8]*f->P[8][6];
-    w->M[6][7] = t->Phi[6][6]*f->P[6][7] + t->Phi[6][7]*f->P[7][7] + t->Phi[6][8]*f->P[8][7];
-    w->M[6][8] = t->Phi[6][6]*f->P[6][8] + t->Phi[6][7]*f->P[7][8] + t->Phi[6][8]*f->P[8][8];
-    w->M[6][9] = t->Phi[6][6]*f->P[6][9] + t->Phi[6][7]*f->P[7][9] + t->Phi[6][8]*f->P[8][9];
-    w->M[6][10] = t->Phi[6][6]*f->P[6][10] + t->Phi[6][7]*f->P[7][10] + t->Phi[6][8]*f->P[8][10];
-}
-
-static void phi_times_p_row_7(const gps_pseudorange11_twin_filter *restrict f, const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
-{
-    w->M[7][0] = t->Phi[7][6]*f->P[6][0] + t->Phi[7][7]*f->P[7][0] + t->Phi[7][8]*f->P[8][0];
-    w->M[7][1] = t->Phi[7][6]*f->P[6][1] + t->Phi[7][7]*f->P[7][1] + t->Phi[7][8]*f->P[8][1];
-    w->M[7][2] = t->Phi[7][6]*f->P[6][2] + t->Phi[7][7]*f->P[7][2] + t->Phi[7][8]*f->P[8][2];
-    w->M[7][3] = t->Phi[7][6]*f->P[6][3] + t->Phi[7][7]*f->P[7][3] + t->Phi[7][8]*f->P[8][3];
-    w->M[7][4] = t->Phi[7][6]*f->P[6][4] + t->Phi[7][7]*f->P[7][4] + t->Phi[7][8]*f->P[8][4];
-    w->M[7][5] = t->Phi[7][6]*f->P[6][5] + t->Phi[7][7]*f->P[7][5] + t->Phi[7][8]*f->P[8][5];
-    w->M[7][6] = t->Phi[7][6]*f->P[6][6] + t->Phi[7][7]*f->P[7][6] + t->Phi[7][8]*f->P[8][6];
-    w->M[7][7] = t->Phi[7][6]*f->P[6][7] + t->Phi[7][7]*f->P[7][7] + t->Phi[7][8]*f->P[8][7];
-    w->M[7][8] = t->Phi[7][6]*f->P[6][8] + t->Phi[7][7]*f->P[7][8] + t->Phi[7][8]*f->P[8][8];
-    w->M[7][9] = t->Phi[7][6]*f->P[6][9] + t->Phi[7][7]*f->P[7][9] + t->Phi[7][8]*f->P[8][9];
-    w->M[7][10] = t->Phi[7][6]*f->P[6][10] + t->Phi[7][7]*f->P[7][10] + t->Phi[7][8]*f->P[8][10];
-}
-
-static void phi_times_p_row_8(const gps_pseudorange11_twin_filter *restrict f, const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
-{
-    w->M[8][0] = t->Phi[8][6]*f->P[6][0] + t->Phi[8][7]*f->P[7][0] + t->Phi[8][8]*f->P[8][0];
-    w->M[8][1] = t->Phi[8][6]*f->P[6][1] + t->Phi[8][7]*f->P[7][1] + t->Phi[8][8]*f->P[8][1];
-    w->M[8][2] = t->Phi[8][6]*f->P[6][2] + t->Phi[8][7]*f->P[7][2] + t->Phi[8][8]*f->P[8][2];
-    w->M[8][3] = t->Phi[8][6]*f->P[6][3] + t->Phi[8][7]*f->P[7][3] + t->Phi[8][8]*f->P[8][3];
-    w->M[8][4] = t->Phi[8][6]*f->P[6][4] + t->Phi[8][7]*f->P[7][4] + t->Phi[8][8]*f->P[8][4];
-    w->M[8][5] = t->Phi[8][6]*f->P[6][5] + t->Phi[8][7]*f->P[7][5] + t->Phi[8][8]*f->P[8][5];
-    w->M[8][6] = t->Phi[8][6]*f->P[6][6] + t->Phi[8][7]*f->P[7][6] + t->Phi[8][8]*f->P[8][6];
-    w->M[8][7] = t->Phi[8][6]*f->P[6][7] + t->Phi[8][7]*f->P[7][7] + t->Phi[8][8]*f->P[8][7];
-    w->M[8][8] = t->Phi[8][6]*f->P[6][8] + t->Phi[8][7]*f->P[7][8] + t->Phi[8][8]*f->P[8][8];
-    w->M[8][9] = t->Phi[8][6]*f->P[6][9] + t->Phi[8][7]*f->P[7][9] + t->Phi[8][8]*f->P[8][9];
-    w->M[8][10] = t->Phi[8][6]*f->P[6][10] + t->Phi[8][7]*f->P[7][10] + t->Phi[8][8]*f->P[8][10];
-}
-
-static void phi_times_p_row_9(const gps_pseudorange11_twin_filter *restrict f, const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
-{
-    w->M[9][0] = t->Phi[9][9]*f->P[9][0] + t->Phi[9][10]*f->P[10][0];
-    w->M[9][1] = t->Phi[9][9]*f->P[9][1] + t->Phi[9][10]*f->P[10][1];
-    w->M[9][2] = t->Phi[9][9]*f->P[9][2] + t->Phi[9][10]*f->P[10][2];
-    w->M[9][3] = t->Phi[9][9]*f->P[9][3] + t->Phi[9][10]*f->P[10][3];
-    w->M[9][4] = t->Phi[9][9]*f->P[9][4] + t->Phi[9][10]*f->P[10][4];
-    w->M[9][5] = t->Phi[9][9]*f->P[9][5] + t->Phi[9][10]*f->P[10][5];
-    w->M[9][6] = t->Phi[9][9]*f->P[9][6] + t->Phi[9][10]*f->P[10][6];
-    w->M[9][7] = t->Phi[9][9]*f->P[9][7] + t->Phi[9][10]*f->P[10][7];
-    w->M[9][8] = t->Phi[9][9]*f->P[9][8] + t->Phi[9][10]*f->P[10][8];
-    w->M[9][9] = t->Phi[9][9]*f->P[9][9] + t->Phi[9][10]*f->P[10][9];
-    w->M[9][10] = t->Phi[9][9]*f->P[9][10] + t->Phi[9][10]*f->P[10][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -1990,40 +1738,72 @@ static gps_pseudorange11_twin_scalar propagate_row_0(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0][0]*t->Phi[0][0] + w->M[0][1]*t->Phi[0][1] + w->M[0][2]*t->Phi[0][2] +
-            w->M[0][3]*t->Phi[0][3] + w->M[0][4]*t->Phi[0][4] + w->M[0][5]*t->Phi[0][5] +
-            w->M[0][6]*t->Phi[0][6] + w->M[0][7]*t->Phi[0][7] + w->M[0][8]*t->Phi[0][8] +
-            t->Qd[0][0]; w->Pn[0][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[1][0] + w->M[0][1]*t->Phi[1][1] + w->M[0][2]*t->Phi[1][2] +
-            w->M[0][3]*t->Phi[1][3] + w->M[0][4]*t->Phi[1][4] + w->M[0][5]*t->Phi[1][5] +
-            w->M[0][6]*t->Phi[1][6] + w->M[0][7]*t->Phi[1][7] + w->M[0][8]*t->Phi[1][8] +
-            t->Qd[0][1]; w->Pn[0][1] = v; w->Pn[1][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[2][0] + w->M[0][1]*t->Phi[2][1] + w->M[0][2]*t->Phi[2][2] +
-            w->M[0][3]*t->Phi[2][3] + w->M[0][4]*t->Phi[2][4] + w->M[0][5]*t->Phi[2][5] +
-            w->M[0][6]*t->Phi[2][6] + w->M[0][7]*t->Phi[2][7] + w->M[0][8]*t->Phi[2][8] +
-            t->Qd[0][2]; w->Pn[0][2] = v; w->Pn[2][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[3][0] + w->M[0][1]*t->Phi[3][1] + w->M[0][2]*t->Phi[3][2] +
-            w->M[0][3]*t->Phi[3][3] + w->M[0][4]*t->Phi[3][4] + w->M[0][5]*t->Phi[3][5] +
-            w->M[0][6]*t->Phi[3][6] + w->M[0][7]*t->Phi[3][7] + w->M[0][8]*t->Phi[3][8] +
-            t->Qd[0][3]; w->Pn[0][3] = v; w->Pn[3][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[4][0] + w->M[0][1]*t->Phi[4][1] + w->M[0][2]*t->Phi[4][2] +
-            w->M[0][3]*t->Phi[4][3] + w->M[0][4]*t->Phi[4][4] + w->M[0][5]*t->Phi[4][5] +
-            w->M[0][6]*t->Phi[4][6] + w->M[0][7]*t->Phi[4][7] + w->M[0][8]*t->Phi[4][8] +
-            t->Qd[0][4]; w->Pn[0][4] = v; w->Pn[4][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[5][0] + w->M[0][1]*t->Phi[5][1] + w->M[0][2]*t->Phi[5][2] +
-            w->M[0][3]*t->Phi[5][3] + w->M[0][4]*t->Phi[5][4] + w->M[0][5]*t->Phi[5][5] +
-            w->M[0][6]*t->Phi[5][6] + w->M[0][7]*t->Phi[5][7] + w->M[0][8]*t->Phi[5][8] +
-            t->Qd[0][5]; w->Pn[0][5] = v; w->Pn[5][0] = v; check += v - v;
-    v = w->M[0][6]*t->Phi[6][6] + w->M[0][7]*t->Phi[6][7] + w->M[0][8]*t->Phi[6][8] + t->Qd[0][6];
-            w->Pn[0][6] = v; w->Pn[6][0] = v; check += v - v;
-    v = w->M[0][6]*t->Phi[7][6] + w->M[0][7]*t->Phi[7][7] + w->M[0][8]*t->Phi[7][8] + t->Qd[0][7];
-            w->Pn[0][7] = v; w->Pn[7][0] = v; check += v - v;
-    v = w->M[0][6]*t->Phi[8][6] + w->M[0][7]*t->Phi[8][7] + w->M[0][8]*t->Phi[8][8] + t->Qd[0][8];
-            w->Pn[0][8] = v; w->Pn[8][0] = v; check += v - v;
-    v = w->M[0][9]*t->Phi[9][9] + w->M[0][10]*t->Phi[9][10]; w->Pn[0][9] = v; w->Pn[9][0] = v; check
-            += v - v;
-    v = w->M[0][10]; w->Pn[0][10] = v; w->Pn[10][0] = v; check += v - v;
+    v = w->M[0]*t->Phi[0][0] + w->M[1]*t->Phi[0][1] + w->M[2]*t->Phi[0][2] + w->M[3]*t->Phi[0][3] +
+            w->M[4]*t->Phi[0][4] + w->M[5]*t->Phi[0][5] + w->M[6]*t->Phi[0][6] +
+            w->M[7]*t->Phi[0][7] + w->M[8]*t->Phi[0][8] + t->Qd[0]; w->Pn[0] = v; check += v - v;
+    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
+            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[6]*t->Phi[1][6] +
+            w->M[7]*t->Phi[1][7] + w->M[8]*t->Phi[1][8] + t->Qd[1]; w->Pn[1] = v; check += v - v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[6]*t->Phi[2][6] +
+            w->M[7]*t->Phi[2][7] + w->M[8]*t->Phi[2][8] + t->Qd[2]; w->Pn[2] = v; check += v - v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
+            w->M[7]*t->Phi[3][7] + w->M[8]*t->Phi[3][8] + t->Qd[3]; w->Pn[3] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + t->Qd[4]; w->Pn[4] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + t->Qd[5]; w->Pn[5] = v; check += v - v;
+    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[6]; w->Pn[6] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[7]; w->Pn[7] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[8]; w->Pn[8] = v;
+            check += v - v;
+    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[9] = v; check += v - v;
+    v = w->M[10]; w->Pn[10] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_1(const gps_pseudorange11_twin_filter *restrict f, const
+        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] +
+            t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] +
+            t->Phi[1][6]*f->P[6][0] + t->Phi[1][7]*f->P[7][0] + t->Phi[1][8]*f->P[8][0];
+    w->M[1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] +
+            t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] +
+            t->Phi[1][6]*f->P[6][1] + t->Phi[1][7]*f->P[7][1] + t->Phi[1][8]*f->P[8][1];
+    w->M[2] = t->Phi[1][0]*f->P[0][2] + t->Phi[1][1]*f->P[1][2] + t->Phi[1][2]*f->P[2][2] +
+            t->Phi[1][3]*f->P[3][2] + t->Phi[1][4]*f->P[4][2] + t->Phi[1][5]*f->P[5][2] +
+            t->Phi[1][6]*f->P[6][2] + t->Phi[1][7]*f->P[7][2] + t->Phi[1][8]*f->P[8][2];
+    w->M[3] = t->Phi[1][0]*f->P[0][3] + t->Phi[1][1]*f->P[1][3] + t->Phi[1][2]*f->P[2][3] +
+            t->Phi[1][3]*f->P[3][3] + t->Phi[1][4]*f->P[4][3] + t->Phi[1][5]*f->P[5][3] +
+            t->Phi[1][6]*f->P[6][3] + t->Phi[1][7]*f->P[7][3] + t->Phi[1][8]*f->P[8][3];
+    w->M[4] = t->Phi[1][0]*f->P[0][4] + t->Phi[1][1]*f->P[1][4] + t->Phi[1][2]*f->P[2][4] +
+            t->Phi[1][3]*f->P[3][4] + t->Phi[1][4]*f->P[4][4] + t->Phi[1][5]*f->P[5][4] +
+            t->Phi[1][6]*f->P[6][4] + t->Phi[1][7]*f->P[7][4] + t->Phi[1][8]*f->P[8][4];
+    w->M[5] = t->Phi[1][0]*f->P[0][5] + t->Phi[1][1]*f->P[1][5] + t->Phi[1][2]*f->P[2][5] +
+            t->Phi[1][3]*f->P[3][5] + t->Phi[1][4]*f->P[4][5] + t->Phi[1][5]*f->P[5][5] +
+            t->Phi[1][6]*f->P[6][5] + t->Phi[1][7]*f->P[7][5] + t->Phi[1][8]*f->P[8][5];
+    w->M[6] = t->Phi[1][0]*f->P[0][6] + t->Phi[1][1]*f->P[1][6] + t->Phi[1][2]*f->P[2][6] +
+            t->Phi[1][3]*f->P[3][6] + t->Phi[1][4]*f->P[4][6] + t->Phi[1][5]*f->P[5][6] +
+            t->Phi[1][6]*f->P[6][6] + t->Phi[1][7]*f->P[7][6] + t->Phi[1][8]*f->P[8][6];
+    w->M[7] = t->Phi[1][0]*f->P[0][7] + t->Phi[1][1]*f->P[1][7] + t->Phi[1][2]*f->P[2][7] +
+            t->Phi[1][3]*f->P[3][7] + t->Phi[1][4]*f->P[4][7] + t->Phi[1][5]*f->P[5][7] +
+            t->Phi[1][6]*f->P[6][7] + t->Phi[1][7]*f->P[7][7] + t->Phi[1][8]*f->P[8][7];
+    w->M[8] = t->Phi[1][0]*f->P[0][8] + t->Phi[1][1]*f->P[1][8] + t->Phi[1][2]*f->P[2][8] +
+            t->Phi[1][3]*f->P[3][8] + t->Phi[1][4]*f->P[4][8] + t->Phi[1][5]*f->P[5][8] +
+            t->Phi[1][6]*f->P[6][8] + t->Phi[1][7]*f->P[7][8] + t->Phi[1][8]*f->P[8][8];
+    w->M[9] = t->Phi[1][0]*f->P[0][9] + t->Phi[1][1]*f->P[1][9] + t->Phi[1][2]*f->P[2][9] +
+            t->Phi[1][3]*f->P[3][9] + t->Phi[1][4]*f->P[4][9] + t->Phi[1][5]*f->P[5][9] +
+            t->Phi[1][6]*f->P[6][9] + t->Phi[1][7]*f->P[7][9] + t->Phi[1][8]*f->P[8][9];
+    w->M[10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] +
+            t->Phi[1][3]*f->P[3][10] + t->Phi[1][4]*f->P[4][10] + t->Phi[1][5]*f->P[5][10] +
+            t->Phi[1][6]*f->P[6][10] + t->Phi[1][7]*f->P[7][10] + t->Phi[1][8]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2031,36 +1811,69 @@ static gps_pseudorange11_twin_scalar propagate_row_1(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[1][0]*t->Phi[1][0] + w->M[1][1]*t->Phi[1][1] + w->M[1][2]*t->Phi[1][2] +
-            w->M[1][3]*t->Phi[1][3] + w->M[1][4]*t->Phi[1][4] + w->M[1][5]*t->Phi[1][5] +
-            w->M[1][6]*t->Phi[1][6] + w->M[1][7]*t->Phi[1][7] + w->M[1][8]*t->Phi[1][8] +
-            t->Qd[1][1]; w->Pn[1][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[2][0] + w->M[1][1]*t->Phi[2][1] + w->M[1][2]*t->Phi[2][2] +
-            w->M[1][3]*t->Phi[2][3] + w->M[1][4]*t->Phi[2][4] + w->M[1][5]*t->Phi[2][5] +
-            w->M[1][6]*t->Phi[2][6] + w->M[1][7]*t->Phi[2][7] + w->M[1][8]*t->Phi[2][8] +
-            t->Qd[1][2]; w->Pn[1][2] = v; w->Pn[2][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[3][0] + w->M[1][1]*t->Phi[3][1] + w->M[1][2]*t->Phi[3][2] +
-            w->M[1][3]*t->Phi[3][3] + w->M[1][4]*t->Phi[3][4] + w->M[1][5]*t->Phi[3][5] +
-            w->M[1][6]*t->Phi[3][6] + w->M[1][7]*t->Phi[3][7] + w->M[1][8]*t->Phi[3][8] +
-            t->Qd[1][3]; w->Pn[1][3] = v; w->Pn[3][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[4][0] + w->M[1][1]*t->Phi[4][1] + w->M[1][2]*t->Phi[4][2] +
-            w->M[1][3]*t->Phi[4][3] + w->M[1][4]*t->Phi[4][4] + w->M[1][5]*t->Phi[4][5] +
-            w->M[1][6]*t->Phi[4][6] + w->M[1][7]*t->Phi[4][7] + w->M[1][8]*t->Phi[4][8] +
-            t->Qd[1][4]; w->Pn[1][4] = v; w->Pn[4][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[5][0] + w->M[1][1]*t->Phi[5][1] + w->M[1][2]*t->Phi[5][2] +
-            w->M[1][3]*t->Phi[5][3] + w->M[1][4]*t->Phi[5][4] + w->M[1][5]*t->Phi[5][5] +
-            w->M[1][6]*t->Phi[5][6] + w->M[1][7]*t->Phi[5][7] + w->M[1][8]*t->Phi[5][8] +
-            t->Qd[1][5]; w->Pn[1][5] = v; w->Pn[5][1] = v; check += v - v;
-    v = w->M[1][6]*t->Phi[6][6] + w->M[1][7]*t->Phi[6][7] + w->M[1][8]*t->Phi[6][8] + t->Qd[1][6];
-            w->Pn[1][6] = v; w->Pn[6][1] = v; check += v - v;
-    v = w->M[1][6]*t->Phi[7][6] + w->M[1][7]*t->Phi[7][7] + w->M[1][8]*t->Phi[7][8] + t->Qd[1][7];
-            w->Pn[1][7] = v; w->Pn[7][1] = v; check += v - v;
-    v = w->M[1][6]*t->Phi[8][6] + w->M[1][7]*t->Phi[8][7] + w->M[1][8]*t->Phi[8][8] + t->Qd[1][8];
-            w->Pn[1][8] = v; w->Pn[8][1] = v; check += v - v;
-    v = w->M[1][9]*t->Phi[9][9] + w->M[1][10]*t->Phi[9][10]; w->Pn[1][9] = v; w->Pn[9][1] = v; check
-            += v - v;
-    v = w->M[1][10]; w->Pn[1][10] = v; w->Pn[10][1] = v; check += v - v;
+    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
+            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[6]*t->Phi[1][6] +
+            w->M[7]*t->Phi[1][7] + w->M[8]*t->Phi[1][8] + t->Qd[11]; w->Pn[11] = v; check += v - v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[6]*t->Phi[2][6] +
+            w->M[7]*t->Phi[2][7] + w->M[8]*t->Phi[2][8] + t->Qd[12]; w->Pn[12] = v; check += v - v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
+            w->M[7]*t->Phi[3][7] + w->M[8]*t->Phi[3][8] + t->Qd[13]; w->Pn[13] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + t->Qd[14]; w->Pn[14] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + t->Qd[15]; w->Pn[15] = v; check += v - v;
+    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[16]; w->Pn[16] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[17]; w->Pn[17] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[18]; w->Pn[18] =
+            v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[19] = v; check += v - v;
+    v = w->M[10]; w->Pn[20] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_2(const gps_pseudorange11_twin_filter *restrict f, const
+        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] +
+            t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] +
+            t->Phi[2][6]*f->P[6][0] + t->Phi[2][7]*f->P[7][0] + t->Phi[2][8]*f->P[8][0];
+    w->M[1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] +
+            t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] +
+            t->Phi[2][6]*f->P[6][1] + t->Phi[2][7]*f->P[7][1] + t->Phi[2][8]*f->P[8][1];
+    w->M[2] = t->Phi[2][0]*f->P[0][2] + t->Phi[2][1]*f->P[1][2] + t->Phi[2][2]*f->P[2][2] +
+            t->Phi[2][3]*f->P[3][2] + t->Phi[2][4]*f->P[4][2] + t->Phi[2][5]*f->P[5][2] +
+            t->Phi[2][6]*f->P[6][2] + t->Phi[2][7]*f->P[7][2] + t->Phi[2][8]*f->P[8][2];
+    w->M[3] = t->Phi[2][0]*f->P[0][3] + t->Phi[2][1]*f->P[1][3] + t->Phi[2][2]*f->P[2][3] +
+            t->Phi[2][3]*f->P[3][3] + t->Phi[2][4]*f->P[4][3] + t->Phi[2][5]*f->P[5][3] +
+            t->Phi[2][6]*f->P[6][3] + t->Phi[2][7]*f->P[7][3] + t->Phi[2][8]*f->P[8][3];
+    w->M[4] = t->Phi[2][0]*f->P[0][4] + t->Phi[2][1]*f->P[1][4] + t->Phi[2][2]*f->P[2][4] +
+            t->Phi[2][3]*f->P[3][4] + t->Phi[2][4]*f->P[4][4] + t->Phi[2][5]*f->P[5][4] +
+            t->Phi[2][6]*f->P[6][4] + t->Phi[2][7]*f->P[7][4] + t->Phi[2][8]*f->P[8][4];
+    w->M[5] = t->Phi[2][0]*f->P[0][5] + t->Phi[2][1]*f->P[1][5] + t->Phi[2][2]*f->P[2][5] +
+            t->Phi[2][3]*f->P[3][5] + t->Phi[2][4]*f->P[4][5] + t->Phi[2][5]*f->P[5][5] +
+            t->Phi[2][6]*f->P[6][5] + t->Phi[2][7]*f->P[7][5] + t->Phi[2][8]*f->P[8][5];
+    w->M[6] = t->Phi[2][0]*f->P[0][6] + t->Phi[2][1]*f->P[1][6] + t->Phi[2][2]*f->P[2][6] +
+            t->Phi[2][3]*f->P[3][6] + t->Phi[2][4]*f->P[4][6] + t->Phi[2][5]*f->P[5][6] +
+            t->Phi[2][6]*f->P[6][6] + t->Phi[2][7]*f->P[7][6] + t->Phi[2][8]*f->P[8][6];
+    w->M[7] = t->Phi[2][0]*f->P[0][7] + t->Phi[2][1]*f->P[1][7] + t->Phi[2][2]*f->P[2][7] +
+            t->Phi[2][3]*f->P[3][7] + t->Phi[2][4]*f->P[4][7] + t->Phi[2][5]*f->P[5][7] +
+            t->Phi[2][6]*f->P[6][7] + t->Phi[2][7]*f->P[7][7] + t->Phi[2][8]*f->P[8][7];
+    w->M[8] = t->Phi[2][0]*f->P[0][8] + t->Phi[2][1]*f->P[1][8] + t->Phi[2][2]*f->P[2][8] +
+            t->Phi[2][3]*f->P[3][8] + t->Phi[2][4]*f->P[4][8] + t->Phi[2][5]*f->P[5][8] +
+            t->Phi[2][6]*f->P[6][8] + t->Phi[2][7]*f->P[7][8] + t->Phi[2][8]*f->P[8][8];
+    w->M[9] = t->Phi[2][0]*f->P[0][9] + t->Phi[2][1]*f->P[1][9] + t->Phi[2][2]*f->P[2][9] +
+            t->Phi[2][3]*f->P[3][9] + t->Phi[2][4]*f->P[4][9] + t->Phi[2][5]*f->P[5][9] +
+            t->Phi[2][6]*f->P[6][9] + t->Phi[2][7]*f->P[7][9] + t->Phi[2][8]*f->P[8][9];
+    w->M[10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] +
+            t->Phi[2][3]*f->P[3][10] + t->Phi[2][4]*f->P[4][10] + t->Phi[2][5]*f->P[5][10] +
+            t->Phi[2][6]*f->P[6][10] + t->Phi[2][7]*f->P[7][10] + t->Phi[2][8]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2068,32 +1881,66 @@ static gps_pseudorange11_twin_scalar propagate_row_2(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[2][0]*t->Phi[2][0] + w->M[2][1]*t->Phi[2][1] + w->M[2][2]*t->Phi[2][2] +
-            w->M[2][3]*t->Phi[2][3] + w->M[2][4]*t->Phi[2][4] + w->M[2][5]*t->Phi[2][5] +
-            w->M[2][6]*t->Phi[2][6] + w->M[2][7]*t->Phi[2][7] + w->M[2][8]*t->Phi[2][8] +
-            t->Qd[2][2]; w->Pn[2][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[3][0] + w->M[2][1]*t->Phi[3][1] + w->M[2][2]*t->Phi[3][2] +
-            w->M[2][3]*t->Phi[3][3] + w->M[2][4]*t->Phi[3][4] + w->M[2][5]*t->Phi[3][5] +
-            w->M[2][6]*t->Phi[3][6] + w->M[2][7]*t->Phi[3][7] + w->M[2][8]*t->Phi[3][8] +
-            t->Qd[2][3]; w->Pn[2][3] = v; w->Pn[3][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[4][0] + w->M[2][1]*t->Phi[4][1] + w->M[2][2]*t->Phi[4][2] +
-            w->M[2][3]*t->Phi[4][3] + w->M[2][4]*t->Phi[4][4] + w->M[2][5]*t->Phi[4][5] +
-            w->M[2][6]*t->Phi[4][6] + w->M[2][7]*t->Phi[4][7] + w->M[2][8]*t->Phi[4][8] +
-            t->Qd[2][4]; w->Pn[2][4] = v; w->Pn[4][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[5][0] + w->M[2][1]*t->Phi[5][1] + w->M[2][2]*t->Phi[5][2] +
-            w->M[2][3]*t->Phi[5][3] + w->M[2][4]*t->Phi[5][4] + w->M[2][5]*t->Phi[5][5] +
-            w->M[2][6]*t->Phi[5][6] + w->M[2][7]*t->Phi[5][7] + w->M[2][8]*t->Phi[5][8] +
-            t->Qd[2][5]; w->Pn[2][5] = v; w->Pn[5][2] = v; check += v - v;
-    v = w->M[2][6]*t->Phi[6][6] + w->M[2][7]*t->Phi[6][7] + w->M[2][8]*t->Phi[6][8] + t->Qd[2][6];
-            w->Pn[2][6] = v; w->Pn[6][2] = v; check += v - v;
-    v = w->M[2][6]*t->Phi[7][6] + w->M[2][7]*t->Phi[7][7] + w->M[2][8]*t->Phi[7][8] + t->Qd[2][7];
-            w->Pn[2][7] = v; w->Pn[7][2] = v; check += v - v;
-    v = w->M[2][6]*t->Phi[8][6] + w->M[2][7]*t->Phi[8][7] + w->M[2][8]*t->Phi[8][8] + t->Qd[2][8];
-            w->Pn[2][8] = v; w->Pn[8][2] = v; check += v - v;
-    v = w->M[2][9]*t->Phi[9][9] + w->M[2][10]*t->Phi[9][10]; w->Pn[2][9] = v; w->Pn[9][2] = v; check
-            += v - v;
-    v = w->M[2][10]; w->Pn[2][10] = v; w->Pn[10][2] = v; check += v - v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[6]*t->Phi[2][6] +
+            w->M[7]*t->Phi[2][7] + w->M[8]*t->Phi[2][8] + t->Qd[21]; w->Pn[21] = v; check += v - v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
+            w->M[7]*t->Phi[3][7] + w->M[8]*t->Phi[3][8] + t->Qd[22]; w->Pn[22] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + t->Qd[23]; w->Pn[23] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + t->Qd[24]; w->Pn[24] = v; check += v - v;
+    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[25]; w->Pn[25] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[26]; w->Pn[26] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[27]; w->Pn[27] =
+            v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[28] = v; check += v - v;
+    v = w->M[10]; w->Pn[29] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_3(const gps_pseudorange11_twin_filter *restrict f, const
+        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] +
+            t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] +
+            t->Phi[3][6]*f->P[6][0] + t->Phi[3][7]*f->P[7][0] + t->Phi[3][8]*f->P[8][0];
+    w->M[1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] +
+            t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] +
+            t->Phi[3][6]*f->P[6][1] + t->Phi[3][7]*f->P[7][1] + t->Phi[3][8]*f->P[8][1];
+    w->M[2] = t->Phi[3][0]*f->P[0][2] + t->Phi[3][1]*f->P[1][2] + t->Phi[3][2]*f->P[2][2] +
+            t->Phi[3][3]*f->P[3][2] + t->Phi[3][4]*f->P[4][2] + t->Phi[3][5]*f->P[5][2] +
+            t->Phi[3][6]*f->P[6][2] + t->Phi[3][7]*f->P[7][2] + t->Phi[3][8]*f->P[8][2];
+    w->M[3] = t->Phi[3][0]*f->P[0][3] + t->Phi[3][1]*f->P[1][3] + t->Phi[3][2]*f->P[2][3] +
+            t->Phi[3][3]*f->P[3][3] + t->Phi[3][4]*f->P[4][3] + t->Phi[3][5]*f->P[5][3] +
+            t->Phi[3][6]*f->P[6][3] + t->Phi[3][7]*f->P[7][3] + t->Phi[3][8]*f->P[8][3];
+    w->M[4] = t->Phi[3][0]*f->P[0][4] + t->Phi[3][1]*f->P[1][4] + t->Phi[3][2]*f->P[2][4] +
+            t->Phi[3][3]*f->P[3][4] + t->Phi[3][4]*f->P[4][4] + t->Phi[3][5]*f->P[5][4] +
+            t->Phi[3][6]*f->P[6][4] + t->Phi[3][7]*f->P[7][4] + t->Phi[3][8]*f->P[8][4];
+    w->M[5] = t->Phi[3][0]*f->P[0][5] + t->Phi[3][1]*f->P[1][5] + t->Phi[3][2]*f->P[2][5] +
+            t->Phi[3][3]*f->P[3][5] + t->Phi[3][4]*f->P[4][5] + t->Phi[3][5]*f->P[5][5] +
+            t->Phi[3][6]*f->P[6][5] + t->Phi[3][7]*f->P[7][5] + t->Phi[3][8]*f->P[8][5];
+    w->M[6] = t->Phi[3][0]*f->P[0][6] + t->Phi[3][1]*f->P[1][6] + t->Phi[3][2]*f->P[2][6] +
+            t->Phi[3][3]*f->P[3][6] + t->Phi[3][4]*f->P[4][6] + t->Phi[3][5]*f->P[5][6] +
+            t->Phi[3][6]*f->P[6][6] + t->Phi[3][7]*f->P[7][6] + t->Phi[3][8]*f->P[8][6];
+    w->M[7] = t->Phi[3][0]*f->P[0][7] + t->Phi[3][1]*f->P[1][7] + t->Phi[3][2]*f->P[2][7] +
+            t->Phi[3][3]*f->P[3][7] + t->Phi[3][4]*f->P[4][7] + t->Phi[3][5]*f->P[5][7] +
+            t->Phi[3][6]*f->P[6][7] + t->Phi[3][7]*f->P[7][7] + t->Phi[3][8]*f->P[8][7];
+    w->M[8] = t->Phi[3][0]*f->P[0][8] + t->Phi[3][1]*f->P[1][8] + t->Phi[3][2]*f->P[2][8] +
+            t->Phi[3][3]*f->P[3][8] + t->Phi[3][4]*f->P[4][8] + t->Phi[3][5]*f->P[5][8] +
+            t->Phi[3][6]*f->P[6][8] + t->Phi[3][7]*f->P[7][8] + t->Phi[3][8]*f->P[8][8];
+    w->M[9] = t->Phi[3][0]*f->P[0][9] + t->Phi[3][1]*f->P[1][9] + t->Phi[3][2]*f->P[2][9] +
+            t->Phi[3][3]*f->P[3][9] + t->Phi[3][4]*f->P[4][9] + t->Phi[3][5]*f->P[5][9] +
+            t->Phi[3][6]*f->P[6][9] + t->Phi[3][7]*f->P[7][9] + t->Phi[3][8]*f->P[8][9];
+    w->M[10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] +
+            t->Phi[3][3]*f->P[3][10] + t->Phi[3][4]*f->P[4][10] + t->Phi[3][5]*f->P[5][10] +
+            t->Phi[3][6]*f->P[6][10] + t->Phi[3][7]*f->P[7][10] + t->Phi[3][8]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2101,28 +1948,63 @@ static gps_pseudorange11_twin_scalar propagate_row_3(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[3][0]*t->Phi[3][0] + w->M[3][1]*t->Phi[3][1] + w->M[3][2]*t->Phi[3][2] +
-            w->M[3][3]*t->Phi[3][3] + w->M[3][4]*t->Phi[3][4] + w->M[3][5]*t->Phi[3][5] +
-            w->M[3][6]*t->Phi[3][6] + w->M[3][7]*t->Phi[3][7] + w->M[3][8]*t->Phi[3][8] +
-            t->Qd[3][3]; w->Pn[3][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[4][0] + w->M[3][1]*t->Phi[4][1] + w->M[3][2]*t->Phi[4][2] +
-            w->M[3][3]*t->Phi[4][3] + w->M[3][4]*t->Phi[4][4] + w->M[3][5]*t->Phi[4][5] +
-            w->M[3][6]*t->Phi[4][6] + w->M[3][7]*t->Phi[4][7] + w->M[3][8]*t->Phi[4][8] +
-            t->Qd[3][4]; w->Pn[3][4] = v; w->Pn[4][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[5][0] + w->M[3][1]*t->Phi[5][1] + w->M[3][2]*t->Phi[5][2] +
-            w->M[3][3]*t->Phi[5][3] + w->M[3][4]*t->Phi[5][4] + w->M[3][5]*t->Phi[5][5] +
-            w->M[3][6]*t->Phi[5][6] + w->M[3][7]*t->Phi[5][7] + w->M[3][8]*t->Phi[5][8] +
-            t->Qd[3][5]; w->Pn[3][5] = v; w->Pn[5][3] = v; check += v - v;
-    v = w->M[3][6]*t->Phi[6][6] + w->M[3][7]*t->Phi[6][7] + w->M[3][8]*t->Phi[6][8] + t->Qd[3][6];
-            w->Pn[3][6] = v; w->Pn[6][3] = v; check += v - v;
-    v = w->M[3][6]*t->Phi[7][6] + w->M[3][7]*t->Phi[7][7] + w->M[3][8]*t->Phi[7][8] + t->Qd[3][7];
-            w->Pn[3][7] = v; w->Pn[7][3] = v; check += v - v;
-    v = w->M[3][6]*t->Phi[8][6] + w->M[3][7]*t->Phi[8][7] + w->M[3][8]*t->Phi[8][8] + t->Qd[3][8];
-            w->Pn[3][8] = v; w->Pn[8][3] = v; check += v - v;
-    v = w->M[3][9]*t->Phi[9][9] + w->M[3][10]*t->Phi[9][10]; w->Pn[3][9] = v; w->Pn[9][3] = v; check
-            += v - v;
-    v = w->M[3][10]; w->Pn[3][10] = v; w->Pn[10][3] = v; check += v - v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
+            w->M[7]*t->Phi[3][7] + w->M[8]*t->Phi[3][8] + t->Qd[30]; w->Pn[30] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + t->Qd[31]; w->Pn[31] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + t->Qd[32]; w->Pn[32] = v; check += v - v;
+    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[33]; w->Pn[33] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[34]; w->Pn[34] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[35]; w->Pn[35] =
+            v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[36] = v; check += v - v;
+    v = w->M[10]; w->Pn[37] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_4(const gps_pseudorange11_twin_filter *restrict f, const
+        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] +
+            t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] +
+            t->Phi[4][6]*f->P[6][0] + t->Phi[4][7]*f->P[7][0] + t->Phi[4][8]*f->P[8][0];
+    w->M[1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] +
+            t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] +
+            t->Phi[4][6]*f->P[6][1] + t->Phi[4][7]*f->P[7][1] + t->Phi[4][8]*f->P[8][1];
+    w->M[2] = t->Phi[4][0]*f->P[0][2] + t->Phi[4][1]*f->P[1][2] + t->Phi[4][2]*f->P[2][2] +
+            t->Phi[4][3]*f->P[3][2] + t->Phi[4][4]*f->P[4][2] + t->Phi[4][5]*f->P[5][2] +
+            t->Phi[4][6]*f->P[6][2] + t->Phi[4][7]*f->P[7][2] + t->Phi[4][8]*f->P[8][2];
+    w->M[3] = t->Phi[4][0]*f->P[0][3] + t->Phi[4][1]*f->P[1][3] + t->Phi[4][2]*f->P[2][3] +
+            t->Phi[4][3]*f->P[3][3] + t->Phi[4][4]*f->P[4][3] + t->Phi[4][5]*f->P[5][3] +
+            t->Phi[4][6]*f->P[6][3] + t->Phi[4][7]*f->P[7][3] + t->Phi[4][8]*f->P[8][3];
+    w->M[4] = t->Phi[4][0]*f->P[0][4] + t->Phi[4][1]*f->P[1][4] + t->Phi[4][2]*f->P[2][4] +
+            t->Phi[4][3]*f->P[3][4] + t->Phi[4][4]*f->P[4][4] + t->Phi[4][5]*f->P[5][4] +
+            t->Phi[4][6]*f->P[6][4] + t->Phi[4][7]*f->P[7][4] + t->Phi[4][8]*f->P[8][4];
+    w->M[5] = t->Phi[4][0]*f->P[0][5] + t->Phi[4][1]*f->P[1][5] + t->Phi[4][2]*f->P[2][5] +
+            t->Phi[4][3]*f->P[3][5] + t->Phi[4][4]*f->P[4][5] + t->Phi[4][5]*f->P[5][5] +
+            t->Phi[4][6]*f->P[6][5] + t->Phi[4][7]*f->P[7][5] + t->Phi[4][8]*f->P[8][5];
+    w->M[6] = t->Phi[4][0]*f->P[0][6] + t->Phi[4][1]*f->P[1][6] + t->Phi[4][2]*f->P[2][6] +
+            t->Phi[4][3]*f->P[3][6] + t->Phi[4][4]*f->P[4][6] + t->Phi[4][5]*f->P[5][6] +
+            t->Phi[4][6]*f->P[6][6] + t->Phi[4][7]*f->P[7][6] + t->Phi[4][8]*f->P[8][6];
+    w->M[7] = t->Phi[4][0]*f->P[0][7] + t->Phi[4][1]*f->P[1][7] + t->Phi[4][2]*f->P[2][7] +
+            t->Phi[4][3]*f->P[3][7] + t->Phi[4][4]*f->P[4][7] + t->Phi[4][5]*f->P[5][7] +
+            t->Phi[4][6]*f->P[6][7] + t->Phi[4][7]*f->P[7][7] + t->Phi[4][8]*f->P[8][7];
+    w->M[8] = t->Phi[4][0]*f->P[0][8] + t->Phi[4][1]*f->P[1][8] + t->Phi[4][2]*f->P[2][8] +
+            t->Phi[4][3]*f->P[3][8] + t->Phi[4][4]*f->P[4][8] + t->Phi[4][5]*f->P[5][8] +
+            t->Phi[4][6]*f->P[6][8] + t->Phi[4][7]*f->P[7][8] + t->Phi[4][8]*f->P[8][8];
+    w->M[9] = t->Phi[4][0]*f->P[0][9] + t->Phi[4][1]*f->P[1][9] + t->Phi[4][2]*f->P[2][9] +
+            t->Phi[4][3]*f->P[3][9] + t->Phi[4][4]*f->P[4][9] + t->Phi[4][5]*f->P[5][9] +
+            t->Phi[4][6]*f->P[6][9] + t->Phi[4][7]*f->P[7][9] + t->Phi[4][8]*f->P[8][9];
+    w->M[10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] +
+            t->Phi[4][3]*f->P[3][10] + t->Phi[4][4]*f->P[4][10] + t->Phi[4][5]*f->P[5][10] +
+            t->Phi[4][6]*f->P[6][10] + t->Phi[4][7]*f->P[7][10] + t->Phi[4][8]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2130,24 +2012,60 @@ static gps_pseudorange11_twin_scalar propagate_row_4(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[4][0]*t->Phi[4][0] + w->M[4][1]*t->Phi[4][1] + w->M[4][2]*t->Phi[4][2] +
-            w->M[4][3]*t->Phi[4][3] + w->M[4][4]*t->Phi[4][4] + w->M[4][5]*t->Phi[4][5] +
-            w->M[4][6]*t->Phi[4][6] + w->M[4][7]*t->Phi[4][7] + w->M[4][8]*t->Phi[4][8] +
-            t->Qd[4][4]; w->Pn[4][4] = v; check += v - v;
-    v = w->M[4][0]*t->Phi[5][0] + w->M[4][1]*t->Phi[5][1] + w->M[4][2]*t->Phi[5][2] +
-            w->M[4][3]*t->Phi[5][3] + w->M[4][4]*t->Phi[5][4] + w->M[4][5]*t->Phi[5][5] +
-            w->M[4][6]*t->Phi[5][6] + w->M[4][7]*t->Phi[5][7] + w->M[4][8]*t->Phi[5][8] +
-            t->Qd[4][5]; w->Pn[4][5] = v; w->Pn[5][4] = v; check += v - v;
-    v = w->M[4][6]*t->Phi[6][6] + w->M[4][7]*t->Phi[6][7] + w->M[4][8]*t->Phi[6][8] + t->Qd[4][6];
-            w->Pn[4][6] = v; w->Pn[6][4] = v; check += v - v;
-    v = w->M[4][6]*t->Phi[7][6] + w->M[4][7]*t->Phi[7][7] + w->M[4][8]*t->Phi[7][8] + t->Qd[4][7];
-            w->Pn[4][7] = v; w->Pn[7][4] = v; check += v - v;
-    v = w->M[4][6]*t->Phi[8][6] + w->M[4][7]*t->Phi[8][7] + w->M[4][8]*t->Phi[8][8] + t->Qd[4][8];
-            w->Pn[4][8] = v; w->Pn[8][4] = v; check += v - v;
-    v = w->M[4][9]*t->Phi[9][9] + w->M[4][10]*t->Phi[9][10]; w->Pn[4][9] = v; w->Pn[9][4] = v; check
-            += v - v;
-    v = w->M[4][10]; w->Pn[4][10] = v; w->Pn[10][4] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + t->Qd[38]; w->Pn[38] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + t->Qd[39]; w->Pn[39] = v; check += v - v;
+    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[40]; w->Pn[40] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[41]; w->Pn[41] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[42]; w->Pn[42] =
+            v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[43] = v; check += v - v;
+    v = w->M[10]; w->Pn[44] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_5(const gps_pseudorange11_twin_filter *restrict f, const
+        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] +
+            t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] +
+            t->Phi[5][6]*f->P[6][0] + t->Phi[5][7]*f->P[7][0] + t->Phi[5][8]*f->P[8][0];
+    w->M[1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] +
+            t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] +
+            t->Phi[5][6]*f->P[6][1] + t->Phi[5][7]*f->P[7][1] + t->Phi[5][8]*f->P[8][1];
+    w->M[2] = t->Phi[5][0]*f->P[0][2] + t->Phi[5][1]*f->P[1][2] + t->Phi[5][2]*f->P[2][2] +
+            t->Phi[5][3]*f->P[3][2] + t->Phi[5][4]*f->P[4][2] + t->Phi[5][5]*f->P[5][2] +
+            t->Phi[5][6]*f->P[6][2] + t->Phi[5][7]*f->P[7][2] + t->Phi[5][8]*f->P[8][2];
+    w->M[3] = t->Phi[5][0]*f->P[0][3] + t->Phi[5][1]*f->P[1][3] + t->Phi[5][2]*f->P[2][3] +
+            t->Phi[5][3]*f->P[3][3] + t->Phi[5][4]*f->P[4][3] + t->Phi[5][5]*f->P[5][3] +
+            t->Phi[5][6]*f->P[6][3] + t->Phi[5][7]*f->P[7][3] + t->Phi[5][8]*f->P[8][3];
+    w->M[4] = t->Phi[5][0]*f->P[0][4] + t->Phi[5][1]*f->P[1][4] + t->Phi[5][2]*f->P[2][4] +
+            t->Phi[5][3]*f->P[3][4] + t->Phi[5][4]*f->P[4][4] + t->Phi[5][5]*f->P[5][4] +
+            t->Phi[5][6]*f->P[6][4] + t->Phi[5][7]*f->P[7][4] + t->Phi[5][8]*f->P[8][4];
+    w->M[5] = t->Phi[5][0]*f->P[0][5] + t->Phi[5][1]*f->P[1][5] + t->Phi[5][2]*f->P[2][5] +
+            t->Phi[5][3]*f->P[3][5] + t->Phi[5][4]*f->P[4][5] + t->Phi[5][5]*f->P[5][5] +
+            t->Phi[5][6]*f->P[6][5] + t->Phi[5][7]*f->P[7][5] + t->Phi[5][8]*f->P[8][5];
+    w->M[6] = t->Phi[5][0]*f->P[0][6] + t->Phi[5][1]*f->P[1][6] + t->Phi[5][2]*f->P[2][6] +
+            t->Phi[5][3]*f->P[3][6] + t->Phi[5][4]*f->P[4][6] + t->Phi[5][5]*f->P[5][6] +
+            t->Phi[5][6]*f->P[6][6] + t->Phi[5][7]*f->P[7][6] + t->Phi[5][8]*f->P[8][6];
+    w->M[7] = t->Phi[5][0]*f->P[0][7] + t->Phi[5][1]*f->P[1][7] + t->Phi[5][2]*f->P[2][7] +
+            t->Phi[5][3]*f->P[3][7] + t->Phi[5][4]*f->P[4][7] + t->Phi[5][5]*f->P[5][7] +
+            t->Phi[5][6]*f->P[6][7] + t->Phi[5][7]*f->P[7][7] + t->Phi[5][8]*f->P[8][7];
+    w->M[8] = t->Phi[5][0]*f->P[0][8] + t->Phi[5][1]*f->P[1][8] + t->Phi[5][2]*f->P[2][8] +
+            t->Phi[5][3]*f->P[3][8] + t->Phi[5][4]*f->P[4][8] + t->Phi[5][5]*f->P[5][8] +
+            t->Phi[5][6]*f->P[6][8] + t->Phi[5][7]*f->P[7][8] + t->Phi[5][8]*f->P[8][8];
+    w->M[9] = t->Phi[5][0]*f->P[0][9] + t->Phi[5][1]*f->P[1][9] + t->Phi[5][2]*f->P[2][9] +
+            t->Phi[5][3]*f->P[3][9] + t->Phi[5][4]*f->P[4][9] + t->Phi[5][5]*f->P[5][9] +
+            t->Phi[5][6]*f->P[6][9] + t->Phi[5][7]*f->P[7][9] + t->Phi[5][8]*f->P[8][9];
+    w->M[10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] +
+            t->Phi[5][3]*f->P[3][10] + t->Phi[5][4]*f->P[4][10] + t->Phi[5][5]*f->P[5][10] +
+            t->Phi[5][6]*f->P[6][10] + t->Phi[5][7]*f->P[7][10] + t->Phi[5][8]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2155,20 +2073,35 @@ static gps_pseudorange11_twin_scalar propagate_row_5(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[5][0]*t->Phi[5][0] + w->M[5][1]*t->Phi[5][1] + w->M[5][2]*t->Phi[5][2] +
-            w->M[5][3]*t->Phi[5][3] + w->M[5][4]*t->Phi[5][4] + w->M[5][5]*t->Phi[5][5] +
-            w->M[5][6]*t->Phi[5][6] + w->M[5][7]*t->Phi[5][7] + w->M[5][8]*t->Phi[5][8] +
-            t->Qd[5][5]; w->Pn[5][5] = v; check += v - v;
-    v = w->M[5][6]*t->Phi[6][6] + w->M[5][7]*t->Phi[6][7] + w->M[5][8]*t->Phi[6][8] + t->Qd[5][6];
-            w->Pn[5][6] = v; w->Pn[6][5] = v; check += v - v;
-    v = w->M[5][6]*t->Phi[7][6] + w->M[5][7]*t->Phi[7][7] + w->M[5][8]*t->Phi[7][8] + t->Qd[5][7];
-            w->Pn[5][7] = v; w->Pn[7][5] = v; check += v - v;
-    v = w->M[5][6]*t->Phi[8][6] + w->M[5][7]*t->Phi[8][7] + w->M[5][8]*t->Phi[8][8] + t->Qd[5][8];
-            w->Pn[5][8] = v; w->Pn[8][5] = v; check += v - v;
-    v = w->M[5][9]*t->Phi[9][9] + w->M[5][10]*t->Phi[9][10]; w->Pn[5][9] = v; w->Pn[9][5] = v; check
-            += v - v;
-    v = w->M[5][10]; w->Pn[5][10] = v; w->Pn[10][5] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + t->Qd[45]; w->Pn[45] = v; check += v - v;
+    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[46]; w->Pn[46] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[47]; w->Pn[47] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[48]; w->Pn[48] =
+            v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[49] = v; check += v - v;
+    v = w->M[10]; w->Pn[50] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_6(const gps_pseudorange11_twin_filter *restrict f, const
+        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[6][6]*f->P[6][0] + t->Phi[6][7]*f->P[7][0] + t->Phi[6][8]*f->P[8][0];
+    w->M[1] = t->Phi[6][6]*f->P[6][1] + t->Phi[6][7]*f->P[7][1] + t->Phi[6][8]*f->P[8][1];
+    w->M[2] = t->Phi[6][6]*f->P[6][2] + t->Phi[6][7]*f->P[7][2] + t->Phi[6][8]*f->P[8][2];
+    w->M[3] = t->Phi[6][6]*f->P[6][3] + t->Phi[6][7]*f->P[7][3] + t->Phi[6][8]*f->P[8][3];
+    w->M[4] = t->Phi[6][6]*f->P[6][4] + t->Phi[6][7]*f->P[7][4] + t->Phi[6][8]*f->P[8][4];
+    w->M[5] = t->Phi[6][6]*f->P[6][5] + t->Phi[6][7]*f->P[7][5] + t->Phi[6][8]*f->P[8][5];
+    w->M[6] = t->Phi[6][6]*f->P[6][6] + t->Phi[6][7]*f->P[7][6] + t->Phi[6][8]*f->P[8][6];
+    w->M[7] = t->Phi[6][6]*f->P[6][7] + t->Phi[6][7]*f->P[7][7] + t->Phi[6][8]*f->P[8][7];
+    w->M[8] = t->Phi[6][6]*f->P[6][8] + t->Phi[6][7]*f->P[7][8] + t->Phi[6][8]*f->P[8][8];
+    w->M[9] = t->Phi[6][6]*f->P[6][9] + t->Phi[6][7]*f->P[7][9] + t->Phi[6][8]*f->P[8][9];
+    w->M[10] = t->Phi[6][6]*f->P[6][10] + t->Phi[6][7]*f->P[7][10] + t->Phi[6][8]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2176,16 +2109,32 @@ static gps_pseudorange11_twin_scalar propagate_row_6(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[6][6]*t->Phi[6][6] + w->M[6][7]*t->Phi[6][7] + w->M[6][8]*t->Phi[6][8] + t->Qd[6][6];
-            w->Pn[6][6] = v; check += v - v;
-    v = w->M[6][6]*t->Phi[7][6] + w->M[6][7]*t->Phi[7][7] + w->M[6][8]*t->Phi[7][8] + t->Qd[6][7];
-            w->Pn[6][7] = v; w->Pn[7][6] = v; check += v - v;
-    v = w->M[6][6]*t->Phi[8][6] + w->M[6][7]*t->Phi[8][7] + w->M[6][8]*t->Phi[8][8] + t->Qd[6][8];
-            w->Pn[6][8] = v; w->Pn[8][6] = v; check += v - v;
-    v = w->M[6][9]*t->Phi[9][9] + w->M[6][10]*t->Phi[9][10]; w->Pn[6][9] = v; w->Pn[9][6] = v; check
-            += v - v;
-    v = w->M[6][10]; w->Pn[6][10] = v; w->Pn[10][6] = v; check += v - v;
+    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[51]; w->Pn[51] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[52]; w->Pn[52] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[53]; w->Pn[53] =
+            v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[54] = v; check += v - v;
+    v = w->M[10]; w->Pn[55] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_7(const gps_pseudorange11_twin_filter *restrict f, const
+        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[7][6]*f->P[6][0] + t->Phi[7][7]*f->P[7][0] + t->Phi[7][8]*f->P[8][0];
+    w->M[1] = t->Phi[7][6]*f->P[6][1] + t->Phi[7][7]*f->P[7][1] + t->Phi[7][8]*f->P[8][1];
+    w->M[2] = t->Phi[7][6]*f->P[6][2] + t->Phi[7][7]*f->P[7][2] + t->Phi[7][8]*f->P[8][2];
+    w->M[3] = t->Phi[7][6]*f->P[6][3] + t->Phi[7][7]*f->P[7][3] + t->Phi[7][8]*f->P[8][3];
+    w->M[4] = t->Phi[7][6]*f->P[6][4] + t->Phi[7][7]*f->P[7][4] + t->Phi[7][8]*f->P[8][4];
+    w->M[5] = t->Phi[7][6]*f->P[6][5] + t->Phi[7][7]*f->P[7][5] + t->Phi[7][8]*f->P[8][5];
+    w->M[6] = t->Phi[7][6]*f->P[6][6] + t->Phi[7][7]*f->P[7][6] + t->Phi[7][8]*f->P[8][6];
+    w->M[7] = t->Phi[7][6]*f->P[6][7] + t->Phi[7][7]*f->P[7][7] + t->Phi[7][8]*f->P[8][7];
+    w->M[8] = t->Phi[7][6]*f->P[6][8] + t->Phi[7][7]*f->P[7][8] + t->Phi[7][8]*f->P[8][8];
+    w->M[9] = t->Phi[7][6]*f->P[6][9] + t->Phi[7][7]*f->P[7][9] + t->Phi[7][8]*f->P[8][9];
+    w->M[10] = t->Phi[7][6]*f->P[6][10] + t->Phi[7][7]*f->P[7][10] + t->Phi[7][8]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2193,14 +2142,30 @@ static gps_pseudorange11_twin_scalar propagate_row_7(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[7][6]*t->Phi[7][6] + w->M[7][7]*t->Phi[7][7] + w->M[7][8]*t->Phi[7][8] + t->Qd[7][7];
-            w->Pn[7][7] = v; check += v - v;
-    v = w->M[7][6]*t->Phi[8][6] + w->M[7][7]*t->Phi[8][7] + w->M[7][8]*t->Phi[8][8] + t->Qd[7][8];
-            w->Pn[7][8] = v; w->Pn[8][7] = v; check += v - v;
-    v = w->M[7][9]*t->Phi[9][9] + w->M[7][10]*t->Phi[9][10]; w->Pn[7][9] = v; w->Pn[9][7] = v; check
-            += v - v;
-    v = w->M[7][10]; w->Pn[7][10] = v; w->Pn[10][7] = v; check += v - v;
+    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[56]; w->Pn[56] =
+            v; check += v - v;
+    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[57]; w->Pn[57] =
+            v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[58] = v; check += v - v;
+    v = w->M[10]; w->Pn[59] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_8(const gps_pseudorange11_twin_filter *restrict f, const
+        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[8][6]*f->P[6][0] + t->Phi[8][7]*f->P[7][0] + t->Phi[8][8]*f->P[8][0];
+    w->M[1] = t->Phi[8][6]*f->P[6][1] + t->Phi[8][7]*f->P[7][1] + t->Phi[8][8]*f->P[8][1];
+    w->M[2] = t->Phi[8][6]*f->P[6][2] + t->Phi[8][7]*f->P[7][2] + t->Phi[8][8]*f->P[8][2];
+    w->M[3] = t->Phi[8][6]*f->P[6][3] + t->Phi[8][7]*f->P[7][3] + t->Phi[8][8]*f->P[8][3];
+    w->M[4] = t->Phi[8][6]*f->P[6][4] + t->Phi[8][7]*f->P[7][4] + t->Phi[8][8]*f->P[8][4];
+    w->M[5] = t->Phi[8][6]*f->P[6][5] + t->Phi[8][7]*f->P[7][5] + t->Phi[8][8]*f->P[8][5];
+    w->M[6] = t->Phi[8][6]*f->P[6][6] + t->Phi[8][7]*f->P[7][6] + t->Phi[8][8]*f->P[8][6];
+    w->M[7] = t->Phi[8][6]*f->P[6][7] + t->Phi[8][7]*f->P[7][7] + t->Phi[8][8]*f->P[8][7];
+    w->M[8] = t->Phi[8][6]*f->P[6][8] + t->Phi[8][7]*f->P[7][8] + t->Phi[8][8]*f->P[8][8];
+    w->M[9] = t->Phi[8][6]*f->P[6][9] + t->Phi[8][7]*f->P[7][9] + t->Phi[8][8]*f->P[8][9];
+    w->M[10] = t->Phi[8][6]*f->P[6][10] + t->Phi[8][7]*f->P[7][10] + t->Phi[8][8]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2208,12 +2173,28 @@ static gps_pseudorange11_twin_scalar propagate_row_8(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[8][6]*t->Phi[8][6] + w->M[8][7]*t->Phi[8][7] + w->M[8][8]*t->Phi[8][8] + t->Qd[8][8];
-            w->Pn[8][8] = v; check += v - v;
-    v = w->M[8][9]*t->Phi[9][9] + w->M[8][10]*t->Phi[9][10]; w->Pn[8][9] = v; w->Pn[9][8] = v; check
-            += v - v;
-    v = w->M[8][10]; w->Pn[8][10] = v; w->Pn[10][8] = v; check += v - v;
+    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[60]; w->Pn[60] =
+            v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[61] = v; check += v - v;
+    v = w->M[10]; w->Pn[62] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_9(const gps_pseudorange11_twin_filter *restrict f, const
+        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[9][9]*f->P[9][0] + t->Phi[9][10]*f->P[10][0];
+    w->M[1] = t->Phi[9][9]*f->P[9][1] + t->Phi[9][10]*f->P[10][1];
+    w->M[2] = t->Phi[9][9]*f->P[9][2] + t->Phi[9][10]*f->P[10][2];
+    w->M[3] = t->Phi[9][9]*f->P[9][3] + t->Phi[9][10]*f->P[10][3];
+    w->M[4] = t->Phi[9][9]*f->P[9][4] + t->Phi[9][10]*f->P[10][4];
+    w->M[5] = t->Phi[9][9]*f->P[9][5] + t->Phi[9][10]*f->P[10][5];
+    w->M[6] = t->Phi[9][9]*f->P[9][6] + t->Phi[9][10]*f->P[10][6];
+    w->M[7] = t->Phi[9][9]*f->P[9][7] + t->Phi[9][10]*f->P[10][7];
+    w->M[8] = t->Phi[9][9]*f->P[9][8] + t->Phi[9][10]*f->P[10][8];
+    w->M[9] = t->Phi[9][9]*f->P[9][9] + t->Phi[9][10]*f->P[10][9];
+    w->M[10] = t->Phi[9][9]*f->P[9][10] + t->Phi[9][10]*f->P[10][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2221,9 +2202,8 @@ static gps_pseudorange11_twin_scalar propagate_row_9(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[9][9]*t->Phi[9][9] + w->M[9][10]*t->Phi[9][10] + t->Qd[9][9]; w->Pn[9][9] = v; check +=
-            v - v;
-    v = w->M[9][10] + t->Qd[9][10]; w->Pn[9][10] = v; w->Pn[10][9] = v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10] + t->Qd[63]; w->Pn[63] = v; check += v - v;
+    v = w->M[10] + t->Qd[64]; w->Pn[64] = v; check += v - v;
     return check;
 }
 
@@ -2233,7 +2213,7 @@ static gps_pseudorange11_twin_scalar propagate_row_10(const gps_pseudorange11_tw
         gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = f->P[10][10] + t->Qd[10][10]; w->Pn[10][10] = v; check += v - v;
+    v = f->P[10][10] + t->Qd[65]; w->Pn[65] = v; check += v - v;
     return check;
 }
 
@@ -2277,27 +2257,27 @@ int gps_pseudorange11_twin_predict(gps_pseudorange11_twin_filter *restrict f, co
     check += w->xn[8] - w->xn[8];
     check += w->xn[9] - w->xn[9];
     check += f->x[10] - f->x[10];
-    /* M = Phi P (rows of Phi that are e_i are read from P directly), then
-       Pn = M Phi^T + Q_d (each pair computed once, stored in both triangles) */
+    /* row by row: M = row i of Phi P (a row of Phi that is e_i reads P directly), then
+       row i of Pn = M Phi^T + Q_d (each pair computed once, into the packed upper triangle) */
     phi_times_p_row_0(f, t, w);
-    phi_times_p_row_1(f, t, w);
-    phi_times_p_row_2(f, t, w);
-    phi_times_p_row_3(f, t, w);
-    phi_times_p_row_4(f, t, w);
-    phi_times_p_row_5(f, t, w);
-    phi_times_p_row_6(f, t, w);
-    phi_times_p_row_7(f, t, w);
-    phi_times_p_row_8(f, t, w);
-    phi_times_p_row_9(f, t, w);
     check += propagate_row_0(t, w);
+    phi_times_p_row_1(f, t, w);
     check += propagate_row_1(t, w);
+    phi_times_p_row_2(f, t, w);
     check += propagate_row_2(t, w);
+    phi_times_p_row_3(f, t, w);
     check += propagate_row_3(t, w);
+    phi_times_p_row_4(f, t, w);
     check += propagate_row_4(t, w);
+    phi_times_p_row_5(f, t, w);
     check += propagate_row_5(t, w);
+    phi_times_p_row_6(f, t, w);
     check += propagate_row_6(t, w);
+    phi_times_p_row_7(f, t, w);
     check += propagate_row_7(t, w);
+    phi_times_p_row_8(f, t, w);
     check += propagate_row_8(t, w);
+    phi_times_p_row_9(f, t, w);
     check += propagate_row_9(t, w);
     check += propagate_row_10(f, t, w);
     if (check != 0.0) {
@@ -2313,7 +2293,73 @@ int gps_pseudorange11_twin_predict(gps_pseudorange11_twin_filter *restrict f, co
     f->x[7] = w->xn[7];
     f->x[8] = w->xn[8];
     f->x[9] = w->xn[9];
-    memcpy(f->P, w->Pn, sizeof f->P);
+    /* row i of P from Pn's packed row, then its column */
+    memcpy(&f->P[0][0], &w->Pn[0], 11 * sizeof w->Pn[0]);
+    f->P[1][0] = f->P[0][1];
+    f->P[2][0] = f->P[0][2];
+    f->P[3][0] = f->P[0][3];
+    f->P[4][0] = f->P[0][4];
+    f->P[5][0] = f->P[0][5];
+    f->P[6][0] = f->P[0][6];
+    f->P[7][0] = f->P[0][7];
+    f->P[8][0] = f->P[0][8];
+    f->P[9][0] = f->P[0][9];
+    f->P[10][0] = f->P[0][10];
+    memcpy(&f->P[1][1], &w->Pn[11], 10 * sizeof w->Pn[0]);
+    f->P[2][1] = f->P[1][2];
+    f->P[3][1] = f->P[1][3];
+    f->P[4][1] = f->P[1][4];
+    f->P[5][1] = f->P[1][5];
+    f->P[6][1] = f->P[1][6];
+    f->P[7][1] = f->P[1][7];
+    f->P[8][1] = f->P[1][8];
+    f->P[9][1] = f->P[1][9];
+    f->P[10][1] = f->P[1][10];
+    memcpy(&f->P[2][2], &w->Pn[21], 9 * sizeof w->Pn[0]);
+    f->P[3][2] = f->P[2][3];
+    f->P[4][2] = f->P[2][4];
+    f->P[5][2] = f->P[2][5];
+    f->P[6][2] = f->P[2][6];
+    f->P[7][2] = f->P[2][7];
+    f->P[8][2] = f->P[2][8];
+    f->P[9][2] = f->P[2][9];
+    f->P[10][2] = f->P[2][10];
+    memcpy(&f->P[3][3], &w->Pn[30], 8 * sizeof w->Pn[0]);
+    f->P[4][3] = f->P[3][4];
+    f->P[5][3] = f->P[3][5];
+    f->P[6][3] = f->P[3][6];
+    f->P[7][3] = f->P[3][7];
+    f->P[8][3] = f->P[3][8];
+    f->P[9][3] = f->P[3][9];
+    f->P[10][3] = f->P[3][10];
+    memcpy(&f->P[4][4], &w->Pn[38], 7 * sizeof w->Pn[0]);
+    f->P[5][4] = f->P[4][5];
+    f->P[6][4] = f->P[4][6];
+    f->P[7][4] = f->P[4][7];
+    f->P[8][4] = f->P[4][8];
+    f->P[9][4] = f->P[4][9];
+    f->P[10][4] = f->P[4][10];
+    memcpy(&f->P[5][5], &w->Pn[45], 6 * sizeof w->Pn[0]);
+    f->P[6][5] = f->P[5][6];
+    f->P[7][5] = f->P[5][7];
+    f->P[8][5] = f->P[5][8];
+    f->P[9][5] = f->P[5][9];
+    f->P[10][5] = f->P[5][10];
+    memcpy(&f->P[6][6], &w->Pn[51], 5 * sizeof w->Pn[0]);
+    f->P[7][6] = f->P[6][7];
+    f->P[8][6] = f->P[6][8];
+    f->P[9][6] = f->P[6][9];
+    f->P[10][6] = f->P[6][10];
+    memcpy(&f->P[7][7], &w->Pn[56], 4 * sizeof w->Pn[0]);
+    f->P[8][7] = f->P[7][8];
+    f->P[9][7] = f->P[7][9];
+    f->P[10][7] = f->P[7][10];
+    memcpy(&f->P[8][8], &w->Pn[60], 3 * sizeof w->Pn[0]);
+    f->P[9][8] = f->P[8][9];
+    f->P[10][8] = f->P[8][10];
+    memcpy(&f->P[9][9], &w->Pn[63], 2 * sizeof w->Pn[0]);
+    f->P[10][9] = f->P[9][10];
+    memcpy(&f->P[10][10], &w->Pn[65], 1 * sizeof w->Pn[0]);
     return GPS_PSEUDORANGE11_TWIN_OK;
 }
 
@@ -2334,7 +2380,7 @@ int gps_pseudorange11_twin_set_covariance(gps_pseudorange11_twin_filter *restric
     if (check != 0.0) {
         return GPS_PSEUDORANGE11_TWIN_ERR_NONFINITE;
     }
-    /* factored only to test that P is positive semidefinite (U in M, D in xn) */
+    /* factored only to test that P is positive semidefinite (U in Pn's upper triangle, D in xn) */
     /* The contract (README, "Generated code"), tol = 16 N eps: P_ii >= 0,
        |P_ij - P_ji| <= tol sqrt(P_ii P_jj) and |P_ij| <= sqrt(P_ii P_jj) (1 + tol),
        so that a zero variance carries no correlation. */
@@ -2363,7 +2409,8 @@ int gps_pseudorange11_twin_set_covariance(gps_pseudorange11_twin_filter *restric
     for (j = GPS_PSEUDORANGE11_TWIN_N_STATES - 1; j >= 0; --j) {
         gps_pseudorange11_twin_scalar pivot = P[j * GPS_PSEUDORANGE11_TWIN_N_STATES + j];
         for (k = j + 1; k < GPS_PSEUDORANGE11_TWIN_N_STATES; ++k) {
-            pivot -= w->xn[k] * w->M[j][k] * w->M[j][k];
+            pivot -= w->xn[k] * w->Pn[GPS_PSEUDORANGE11_TWIN_PACKED_UPPER(j, k)] *
+                    w->Pn[GPS_PSEUDORANGE11_TWIN_PACKED_UPPER(j, k)];
         }
         if (pivot < 0.0) {
             if (pivot < -(16 * GPS_PSEUDORANGE11_TWIN_N_STATES * DBL_EPSILON) * P[j *
@@ -2377,15 +2424,17 @@ int gps_pseudorange11_twin_set_covariance(gps_pseudorange11_twin_filter *restric
         for (i = 0; i < j; ++i) {
             gps_pseudorange11_twin_scalar s = P[i * GPS_PSEUDORANGE11_TWIN_N_STATES + j];
             for (k = j + 1; k < GPS_PSEUDORANGE11_TWIN_N_STATES; ++k) {
-                s -= w->xn[k] * w->M[i][k] * w->M[j][k];
+                s -= w->xn[k] * w->Pn[GPS_PSEUDORANGE11_TWIN_PACKED_UPPER(i, k)] *
+                        w->Pn[GPS_PSEUDORANGE11_TWIN_PACKED_UPPER(j, k)];
             }
             if (!(pivot > 0.0) && fabs(s) > (16 * GPS_PSEUDORANGE11_TWIN_N_STATES * DBL_EPSILON) *
                     sqrt(P[i * GPS_PSEUDORANGE11_TWIN_N_STATES + i] * P[j *
                     GPS_PSEUDORANGE11_TWIN_N_STATES + j])) {
                 return GPS_PSEUDORANGE11_TWIN_ERR_NOT_POSITIVE;
             }
-            w->M[i][j] = (pivot > 0.0) ? s / pivot : 0.0;
-            check += w->M[i][j] - w->M[i][j];
+            w->Pn[GPS_PSEUDORANGE11_TWIN_PACKED_UPPER(i, j)] = (pivot > 0.0) ? s / pivot : 0.0;
+            check += w->Pn[GPS_PSEUDORANGE11_TWIN_PACKED_UPPER(i, j)] -
+                    w->Pn[GPS_PSEUDORANGE11_TWIN_PACKED_UPPER(i, j)];
         }
         check += pivot - pivot;
     }
@@ -2559,7 +2608,7 @@ int gps_pseudorange11_twin_update_masked(gps_pseudorange11_twin_filter *restrict
                 s += w->C[i][a] * w->K[j][a] - w->K[i][a] * w->HP[a][j] - w->HP[a][i] * w->K[j][a];
             }
             check += s - s;
-            w->Pn[i][j] = s;
+            w->Pn[GPS_PSEUDORANGE11_TWIN_PACKED_UPPER(i, j)] = s;
         }
         w->xn[i] = f->x[i];
         for (a = 0; a < GPS_PSEUDORANGE11_TWIN_N_MEASUREMENTS; ++a) {
@@ -2573,11 +2622,74 @@ int gps_pseudorange11_twin_update_masked(gps_pseudorange11_twin_filter *restrict
     /* commit only once everything is known to be finite */
     for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_STATES; ++i) {
         f->x[i] = w->xn[i];
-        for (j = i; j < GPS_PSEUDORANGE11_TWIN_N_STATES; ++j) {
-            f->P[i][j] = w->Pn[i][j];
-            f->P[j][i] = w->Pn[i][j];
-        }
     }
+    /* row i of P from Pn's packed row, then its column */
+    memcpy(&f->P[0][0], &w->Pn[0], 11 * sizeof w->Pn[0]);
+    f->P[1][0] = f->P[0][1];
+    f->P[2][0] = f->P[0][2];
+    f->P[3][0] = f->P[0][3];
+    f->P[4][0] = f->P[0][4];
+    f->P[5][0] = f->P[0][5];
+    f->P[6][0] = f->P[0][6];
+    f->P[7][0] = f->P[0][7];
+    f->P[8][0] = f->P[0][8];
+    f->P[9][0] = f->P[0][9];
+    f->P[10][0] = f->P[0][10];
+    memcpy(&f->P[1][1], &w->Pn[11], 10 * sizeof w->Pn[0]);
+    f->P[2][1] = f->P[1][2];
+    f->P[3][1] = f->P[1][3];
+    f->P[4][1] = f->P[1][4];
+    f->P[5][1] = f->P[1][5];
+    f->P[6][1] = f->P[1][6];
+    f->P[7][1] = f->P[1][7];
+    f->P[8][1] = f->P[1][8];
+    f->P[9][1] = f->P[1][9];
+    f->P[10][1] = f->P[1][10];
+    memcpy(&f->P[2][2], &w->Pn[21], 9 * sizeof w->Pn[0]);
+    f->P[3][2] = f->P[2][3];
+    f->P[4][2] = f->P[2][4];
+    f->P[5][2] = f->P[2][5];
+    f->P[6][2] = f->P[2][6];
+    f->P[7][2] = f->P[2][7];
+    f->P[8][2] = f->P[2][8];
+    f->P[9][2] = f->P[2][9];
+    f->P[10][2] = f->P[2][10];
+    memcpy(&f->P[3][3], &w->Pn[30], 8 * sizeof w->Pn[0]);
+    f->P[4][3] = f->P[3][4];
+    f->P[5][3] = f->P[3][5];
+    f->P[6][3] = f->P[3][6];
+    f->P[7][3] = f->P[3][7];
+    f->P[8][3] = f->P[3][8];
+    f->P[9][3] = f->P[3][9];
+    f->P[10][3] = f->P[3][10];
+    memcpy(&f->P[4][4], &w->Pn[38], 7 * sizeof w->Pn[0]);
+    f->P[5][4] = f->P[4][5];
+    f->P[6][4] = f->P[4][6];
+    f->P[7][4] = f->P[4][7];
+    f->P[8][4] = f->P[4][8];
+    f->P[9][4] = f->P[4][9];
+    f->P[10][4] = f->P[4][10];
+    memcpy(&f->P[5][5], &w->Pn[45], 6 * sizeof w->Pn[0]);
+    f->P[6][5] = f->P[5][6];
+    f->P[7][5] = f->P[5][7];
+    f->P[8][5] = f->P[5][8];
+    f->P[9][5] = f->P[5][9];
+    f->P[10][5] = f->P[5][10];
+    memcpy(&f->P[6][6], &w->Pn[51], 5 * sizeof w->Pn[0]);
+    f->P[7][6] = f->P[6][7];
+    f->P[8][6] = f->P[6][8];
+    f->P[9][6] = f->P[6][9];
+    f->P[10][6] = f->P[6][10];
+    memcpy(&f->P[7][7], &w->Pn[56], 4 * sizeof w->Pn[0]);
+    f->P[8][7] = f->P[7][8];
+    f->P[9][7] = f->P[7][9];
+    f->P[10][7] = f->P[7][10];
+    memcpy(&f->P[8][8], &w->Pn[60], 3 * sizeof w->Pn[0]);
+    f->P[9][8] = f->P[8][9];
+    f->P[10][8] = f->P[8][10];
+    memcpy(&f->P[9][9], &w->Pn[63], 2 * sizeof w->Pn[0]);
+    f->P[10][9] = f->P[9][10];
+    memcpy(&f->P[10][10], &w->Pn[65], 1 * sizeof w->Pn[0]);
     if (innovation != NULL) {
         for (a = 0; a < GPS_PSEUDORANGE11_TWIN_N_MEASUREMENTS; ++a) {
             innovation[a] = w->nu0[a];

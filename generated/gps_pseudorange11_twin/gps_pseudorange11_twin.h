@@ -15,7 +15,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 37 operations after CSE
- *   discretize: 2524 mul + 1675 add = 4199 flops
+ *   discretize: 2467 mul + 1660 add = 4127 flops
  *   discretize, each doubling (long steps): 879 mul + 880 add = 1759 flops
  *   predict (C): 1061 mul + 934 add = 1995 flops
  *   predict (Python): 2420 mul + 2321 add = 4741 flops
@@ -173,9 +173,8 @@ typedef struct {
     gps_pseudorange11_twin_scalar
             Phi[GPS_PSEUDORANGE11_TWIN_N_STATES][GPS_PSEUDORANGE11_TWIN_N_STATES]; /* transition
             matrix */
-    gps_pseudorange11_twin_scalar
-            Qd[GPS_PSEUDORANGE11_TWIN_N_STATES][GPS_PSEUDORANGE11_TWIN_N_STATES]; /* Gamma (Q/T)
-            Gamma^T */
+    gps_pseudorange11_twin_scalar Qd[GPS_PSEUDORANGE11_TWIN_N_PACKED]; /* Gamma (Q/T) Gamma^T,
+            packed upper triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } gps_pseudorange11_twin_transition;
 
 /* The filter state: estimate and covariance (or its factors). */
@@ -193,19 +192,14 @@ typedef struct {
             (k + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal
             rows */
     gps_pseudorange11_twin_scalar fh[GPS_PSEUDORANGE11_TWIN_NNZ_F]; /* F h at the nonzeros of F */
-    gps_pseudorange11_twin_scalar row_sum[GPS_PSEUDORANGE11_TWIN_N_STATES]; /* balancing:
-            off-diagonal row sums of D^-1 |F| D */
-    gps_pseudorange11_twin_scalar col_sum[GPS_PSEUDORANGE11_TWIN_N_STATES]; /* balancing:
-            off-diagonal column sums of D^-1 |F| D */
 } gps_pseudorange11_twin_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */
 typedef struct {
-    gps_pseudorange11_twin_scalar
-            M[GPS_PSEUDORANGE11_TWIN_N_STATES][GPS_PSEUDORANGE11_TWIN_N_STATES]; /* Phi P */
-    gps_pseudorange11_twin_scalar
-            Pn[GPS_PSEUDORANGE11_TWIN_N_STATES][GPS_PSEUDORANGE11_TWIN_N_STATES]; /* new covariance
-            before it is committed */
+    gps_pseudorange11_twin_scalar M[GPS_PSEUDORANGE11_TWIN_N_STATES]; /* one row of Phi P (predict
+            works row by row) */
+    gps_pseudorange11_twin_scalar Pn[GPS_PSEUDORANGE11_TWIN_N_PACKED]; /* new covariance before it
+            is committed, packed upper triangle */
     gps_pseudorange11_twin_scalar xn[GPS_PSEUDORANGE11_TWIN_N_STATES];
     gps_pseudorange11_twin_scalar HP[4][GPS_PSEUDORANGE11_TWIN_N_STATES];
     gps_pseudorange11_twin_scalar L[4][4]; /* Cholesky factor of the innovation covariance */

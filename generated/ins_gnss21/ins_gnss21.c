@@ -11,7 +11,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 197 operations after CSE
- *   discretize: 8369 mul + 5801 add = 14170 flops
+ *   discretize: 8213 mul + 5801 add = 14014 flops
  *   discretize, each doubling (long steps): 3843 mul + 3843 add = 7686 flops
  *   predict (C): 5553 mul + 5025 add = 10578 flops
  *   predict (Python): 8442 mul + 8001 add = 16443 flops
@@ -29,6 +29,10 @@
 #include <stdint.h>
 #include <string.h>
 
+/* Index of (i, j), i <= j (and with packed storage of P, of any (i, j)) of a symmetric
+   matrix stored as a packed upper triangle, row by row: Q_d and Pn always, P if packed. */
+#define INS_GNSS21_PACKED_UPPER(i, j) \
+        ((i) * (2 * INS_GNSS21_N_STATES - (i) - 1) / 2 + (j))
 
 const char *const ins_gnss21_state_names[INS_GNSS21_N_STATES] = {
     "position_error_north",
@@ -3468,210 +3472,71 @@ INS_GNSS21_BLOCK void doubling(ins_gnss21_transition *restrict t, ins_gnss21_dis
     w->S[209] = w->S[209] + half*w->term[1][200];
 }
 
-INS_GNSS21_BLOCK ins_gnss21_scalar transition_check(ins_gnss21_transition *restrict t)
+INS_GNSS21_BLOCK ins_gnss21_scalar transition_check(ins_gnss21_transition *restrict t,
+        ins_gnss21_discretize_scratch *restrict w)
 {
+    const ins_gnss21_scalar one = 1.0;
     ins_gnss21_scalar v, check = 0.0;
-    v = t->Phi[0][0]; t->Phi[0][0] = v; check += v - v;
-    v = t->Phi[0][1]; t->Phi[0][1] = v; check += v - v;
-    v = t->Phi[0][2]; t->Phi[0][2] = v; check += v - v;
-    v = t->Phi[0][3]; t->Phi[0][3] = v; check += v - v;
-    v = t->Phi[0][4]; t->Phi[0][4] = v; check += v - v;
-    v = t->Phi[0][5]; t->Phi[0][5] = v; check += v - v;
-    v = t->Phi[0][6]; t->Phi[0][6] = v; check += v - v;
-    v = t->Phi[0][7]; t->Phi[0][7] = v; check += v - v;
-    v = t->Phi[0][8]; t->Phi[0][8] = v; check += v - v;
-    v = t->Phi[0][9]; t->Phi[0][9] = v; check += v - v;
-    v = t->Phi[0][10]; t->Phi[0][10] = v; check += v - v;
-    v = t->Phi[0][11]; t->Phi[0][11] = v; check += v - v;
-    v = t->Phi[0][12]; t->Phi[0][12] = v; check += v - v;
-    v = t->Phi[0][13]; t->Phi[0][13] = v; check += v - v;
-    v = t->Phi[0][14]; t->Phi[0][14] = v; check += v - v;
-    v = t->Phi[0][15]; t->Phi[0][15] = v; check += v - v;
-    v = t->Phi[0][16]; t->Phi[0][16] = v; check += v - v;
-    v = t->Phi[0][17]; t->Phi[0][17] = v; check += v - v;
-    v = t->Phi[0][18]; t->Phi[0][18] = v; check += v - v;
-    v = t->Phi[0][19]; t->Phi[0][19] = v; check += v - v;
-    v = t->Phi[0][20]; t->Phi[0][20] = v; check += v - v;
-    v = t->Phi[1][0]; t->Phi[1][0] = v; check += v - v;
-    v = t->Phi[1][1]; t->Phi[1][1] = v; check += v - v;
-    v = t->Phi[1][2]; t->Phi[1][2] = v; check += v - v;
-    v = t->Phi[1][3]; t->Phi[1][3] = v; check += v - v;
-    v = t->Phi[1][4]; t->Phi[1][4] = v; check += v - v;
-    v = t->Phi[1][5]; t->Phi[1][5] = v; check += v - v;
-    v = t->Phi[1][6]; t->Phi[1][6] = v; check += v - v;
-    v = t->Phi[1][7]; t->Phi[1][7] = v; check += v - v;
-    v = t->Phi[1][8]; t->Phi[1][8] = v; check += v - v;
-    v = t->Phi[1][9]; t->Phi[1][9] = v; check += v - v;
-    v = t->Phi[1][10]; t->Phi[1][10] = v; check += v - v;
-    v = t->Phi[1][11]; t->Phi[1][11] = v; check += v - v;
-    v = t->Phi[1][12]; t->Phi[1][12] = v; check += v - v;
-    v = t->Phi[1][13]; t->Phi[1][13] = v; check += v - v;
-    v = t->Phi[1][14]; t->Phi[1][14] = v; check += v - v;
-    v = t->Phi[1][15]; t->Phi[1][15] = v; check += v - v;
-    v = t->Phi[1][16]; t->Phi[1][16] = v; check += v - v;
-    v = t->Phi[1][17]; t->Phi[1][17] = v; check += v - v;
-    v = t->Phi[1][18]; t->Phi[1][18] = v; check += v - v;
-    v = t->Phi[1][19]; t->Phi[1][19] = v; check += v - v;
-    v = t->Phi[1][20]; t->Phi[1][20] = v; check += v - v;
-    v = t->Phi[2][0]; t->Phi[2][0] = v; check += v - v;
-    v = t->Phi[2][1]; t->Phi[2][1] = v; check += v - v;
-    v = t->Phi[2][2]; t->Phi[2][2] = v; check += v - v;
-    v = t->Phi[2][3]; t->Phi[2][3] = v; check += v - v;
-    v = t->Phi[2][4]; t->Phi[2][4] = v; check += v - v;
-    v = t->Phi[2][5]; t->Phi[2][5] = v; check += v - v;
-    v = t->Phi[2][6]; t->Phi[2][6] = v; check += v - v;
-    v = t->Phi[2][7]; t->Phi[2][7] = v; check += v - v;
-    v = t->Phi[2][8]; t->Phi[2][8] = v; check += v - v;
-    v = t->Phi[2][9]; t->Phi[2][9] = v; check += v - v;
-    v = t->Phi[2][10]; t->Phi[2][10] = v; check += v - v;
-    v = t->Phi[2][11]; t->Phi[2][11] = v; check += v - v;
-    v = t->Phi[2][12]; t->Phi[2][12] = v; check += v - v;
-    v = t->Phi[2][13]; t->Phi[2][13] = v; check += v - v;
-    v = t->Phi[2][14]; t->Phi[2][14] = v; check += v - v;
-    v = t->Phi[2][15]; t->Phi[2][15] = v; check += v - v;
-    v = t->Phi[2][16]; t->Phi[2][16] = v; check += v - v;
-    v = t->Phi[2][17]; t->Phi[2][17] = v; check += v - v;
-    v = t->Phi[2][18]; t->Phi[2][18] = v; check += v - v;
-    v = t->Phi[2][19]; t->Phi[2][19] = v; check += v - v;
-    v = t->Phi[2][20]; t->Phi[2][20] = v; check += v - v;
-    v = t->Phi[3][0]; t->Phi[3][0] = v; check += v - v;
-    v = t->Phi[3][1]; t->Phi[3][1] = v; check += v - v;
-    v = t->Phi[3][2]; t->Phi[3][2] = v; check += v - v;
-    v = t->Phi[3][3]; t->Phi[3][3] = v; check += v - v;
-    v = t->Phi[3][4]; t->Phi[3][4] = v; check += v - v;
-    v = t->Phi[3][5]; t->Phi[3][5] = v; check += v - v;
-    v = t->Phi[3][6]; t->Phi[3][6] = v; check += v - v;
-    v = t->Phi[3][7]; t->Phi[3][7] = v; check += v - v;
-    v = t->Phi[3][8]; t->Phi[3][8] = v; check += v - v;
-    v = t->Phi[3][9]; t->Phi[3][9] = v; check += v - v;
-    v = t->Phi[3][10]; t->Phi[3][10] = v; check += v - v;
-    v = t->Phi[3][11]; t->Phi[3][11] = v; check += v - v;
-    v = t->Phi[3][12]; t->Phi[3][12] = v; check += v - v;
-    v = t->Phi[3][13]; t->Phi[3][13] = v; check += v - v;
-    v = t->Phi[3][14]; t->Phi[3][14] = v; check += v - v;
-    v = t->Phi[3][15]; t->Phi[3][15] = v; check += v - v;
-    v = t->Phi[3][16]; t->Phi[3][16] = v; check += v - v;
-    v = t->Phi[3][17]; t->Phi[3][17] = v; check += v - v;
-    v = t->Phi[3][18]; t->Phi[3][18] = v; check += v - v;
-    v = t->Phi[3][19]; t->Phi[3][19] = v; check += v - v;
-    v = t->Phi[3][20]; t->Phi[3][20] = v; check += v - v;
-    v = t->Phi[4][0]; t->Phi[4][0] = v; check += v - v;
-    v = t->Phi[4][1]; t->Phi[4][1] = v; check += v - v;
-    v = t->Phi[4][2]; t->Phi[4][2] = v; check += v - v;
-    v = t->Phi[4][3]; t->Phi[4][3] = v; check += v - v;
-    v = t->Phi[4][4]; t->Phi[4][4] = v; check += v - v;
-    v = t->Phi[4][5]; t->Phi[4][5] = v; check += v - v;
-    v = t->Phi[4][6]; t->Phi[4][6] = v; check += v - v;
-    v = t->Phi[4][7]; t->Phi[4][7] = v; check += v - v;
-    v = t->Phi[4][8]; t->Phi[4][8] = v; check += v - v;
-    v = t->Phi[4][9]; t->Phi[4][9] = v; check += v - v;
-    v = t->Phi[4][10]; t->Phi[4][10] = v; check += v - v;
-    v = t->Phi[4][11]; t->Phi[4][11] = v; check += v - v;
-    v = t->Phi[4][12]; t->Phi[4][12] = v; check += v - v;
-    v = t->Phi[4][13]; t->Phi[4][13] = v; check += v - v;
-    v = t->Phi[4][14]; t->Phi[4][14] = v; check += v - v;
-    v = t->Phi[4][15]; t->Phi[4][15] = v; check += v - v;
-    v = t->Phi[4][16]; t->Phi[4][16] = v; check += v - v;
-    v = t->Phi[4][17]; t->Phi[4][17] = v; check += v - v;
-    v = t->Phi[4][18]; t->Phi[4][18] = v; check += v - v;
-    v = t->Phi[4][19]; t->Phi[4][19] = v; check += v - v;
-    v = t->Phi[4][20]; t->Phi[4][20] = v; check += v - v;
-    v = t->Phi[5][0]; t->Phi[5][0] = v; check += v - v;
-    v = t->Phi[5][1]; t->Phi[5][1] = v; check += v - v;
-    v = t->Phi[5][2]; t->Phi[5][2] = v; check += v - v;
-    v = t->Phi[5][3]; t->Phi[5][3] = v; check += v - v;
-    v = t->Phi[5][4]; t->Phi[5][4] = v; check += v - v;
-    v = t->Phi[5][5]; t->Phi[5][5] = v; check += v - v;
-    v = t->Phi[5][6]; t->Phi[5][6] = v; check += v - v;
-    v = t->Phi[5][7]; t->Phi[5][7] = v; check += v - v;
-    v = t->Phi[5][8]; t->Phi[5][8] = v; check += v - v;
-    v = t->Phi[5][9]; t->Phi[5][9] = v; check += v - v;
-    v = t->Phi[5][10]; t->Phi[5][10] = v; check += v - v;
-    v = t->Phi[5][11]; t->Phi[5][11] = v; check += v - v;
-    v = t->Phi[5][12]; t->Phi[5][12] = v; check += v - v;
-    v = t->Phi[5][13]; t->Phi[5][13] = v; check += v - v;
-    v = t->Phi[5][14]; t->Phi[5][14] = v; check += v - v;
-    v = t->Phi[5][15]; t->Phi[5][15] = v; check += v - v;
-    v = t->Phi[5][16]; t->Phi[5][16] = v; check += v - v;
-    v = t->Phi[5][17]; t->Phi[5][17] = v; check += v - v;
-    v = t->Phi[5][18]; t->Phi[5][18] = v; check += v - v;
-    v = t->Phi[5][19]; t->Phi[5][19] = v; check += v - v;
-    v = t->Phi[5][20]; t->Phi[5][20] = v; check += v - v;
-    v = t->Phi[6][0]; t->Phi[6][0] = v; check += v - v;
-    v = t->Phi[6][1]; t->Phi[6][1] = v; check += v - v;
-    v = t->Phi[6][2]; t->Phi[6][2] = v; check += v - v;
-    v = t->Phi[6][3]; t->Phi[6][3] = v; check += v - v;
-    v = t->Phi[6][4]; t->Phi[6][4] = v; check += v - v;
-    v = t->Phi[6][5]; t->Phi[6][5] = v; check += v - v;
-    v = t->Phi[6][6]; t->Phi[6][6] = v; check += v - v;
-    v = t->Phi[6][7]; t->Phi[6][7] = v; check += v - v;
-    v = t->Phi[6][8]; t->Phi[6][8] = v; check += v - v;
-    v = t->Phi[6][9]; t->Phi[6][9] = v; check += v - v;
-    v = t->Phi[6][10]; t->Phi[6][10] = v; check += v - v;
-    v = t->Phi[6][11]; t->Phi[6][11] = v; check += v - v;
-    v = t->Phi[6][12]; t->Phi[6][12] = v; check += v - v;
-    v = t->Phi[6][13]; t->Phi[6][13] = v; check += v - v;
-    v = t->Phi[6][14]; t->Phi[6][14] = v; check += v - v;
-    v = t->Phi[6][15]; t->Phi[6][15] = v; check += v - v;
-    v = t->Phi[6][16]; t->Phi[6][16] = v; check += v - v;
-    v = t->Phi[6][17]; t->Phi[6][17] = v; check += v - v;
-    v = t->Phi[6][18]; t->Phi[6][18] = v; check += v - v;
-    v = t->Phi[6][19]; t->Phi[6][19] = v; check += v - v;
-    v = t->Phi[6][20]; t->Phi[6][20] = v; check += v - v;
-    v = t->Phi[7][0]; t->Phi[7][0] = v; check += v - v;
-    v = t->Phi[7][1]; t->Phi[7][1] = v; check += v - v;
-    v = t->Phi[7][2]; t->Phi[7][2] = v; check += v - v;
-    v = t->Phi[7][3]; t->Phi[7][3] = v; check += v - v;
-    v = t->Phi[7][4]; t->Phi[7][4] = v; check += v - v;
-    v = t->Phi[7][5]; t->Phi[7][5] = v; check += v - v;
-    v = t->Phi[7][6]; t->Phi[7][6] = v; check += v - v;
-    v = t->Phi[7][7]; t->Phi[7][7] = v; check += v - v;
-    v = t->Phi[7][8]; t->Phi[7][8] = v; check += v - v;
-    v = t->Phi[7][9]; t->Phi[7][9] = v; check += v - v;
-    v = t->Phi[7][10]; t->Phi[7][10] = v; check += v - v;
-    v = t->Phi[7][11]; t->Phi[7][11] = v; check += v - v;
-    v = t->Phi[7][12]; t->Phi[7][12] = v; check += v - v;
-    v = t->Phi[7][13]; t->Phi[7][13] = v; check += v - v;
-    v = t->Phi[7][14]; t->Phi[7][14] = v; check += v - v;
-    v = t->Phi[7][15]; t->Phi[7][15] = v; check += v - v;
-    v = t->Phi[7][16]; t->Phi[7][16] = v; check += v - v;
-    v = t->Phi[7][17]; t->Phi[7][17] = v; check += v - v;
-    v = t->Phi[7][18]; t->Phi[7][18] = v; check += v - v;
-    v = t->Phi[7][19]; t->Phi[7][19] = v; check += v - v;
-    v = t->Phi[7][20]; t->Phi[7][20] = v; check += v - v;
-    v = t->Phi[8][0]; t->Phi[8][0] = v; check += v - v;
-    v = t->Phi[8][1]; t->Phi[8][1] = v; check += v - v;
-    v = t->Phi[8][2]; t->Phi[8][2] = v; check += v - v;
-    v = t->Phi[8][3]; t->Phi[8][3] = v; check += v - v;
-    v = t->Phi[8][4]; t->Phi[8][4] = v; check += v - v;
-    v = t->Phi[8][5]; t->Phi[8][5] = v; check += v - v;
-    v = t->Phi[8][6]; t->Phi[8][6] = v; check += v - v;
-    v = t->Phi[8][7]; t->Phi[8][7] = v; check += v - v;
-    v = t->Phi[8][8]; t->Phi[8][8] = v; check += v - v;
-    v = t->Phi[8][9]; t->Phi[8][9] = v; check += v - v;
-    v = t->Phi[8][10]; t->Phi[8][10] = v; check += v - v;
-    v = t->Phi[8][11]; t->Phi[8][11] = v; check += v - v;
-    v = t->Phi[8][12]; t->Phi[8][12] = v; check += v - v;
-    v = t->Phi[8][13]; t->Phi[8][13] = v; check += v - v;
-    v = t->Phi[8][14]; t->Phi[8][14] = v; check += v - v;
-    v = t->Phi[8][15]; t->Phi[8][15] = v; check += v - v;
-    v = t->Phi[8][16]; t->Phi[8][16] = v; check += v - v;
-    v = t->Phi[8][17]; t->Phi[8][17] = v; check += v - v;
-    v = t->Phi[8][18]; t->Phi[8][18] = v; check += v - v;
-    v = t->Phi[8][19]; t->Phi[8][19] = v; check += v - v;
-    v = t->Phi[8][20]; t->Phi[8][20] = v; check += v - v;
-    v = t->Phi[9][9]; t->Phi[9][9] = v; check += v - v;
-    v = t->Phi[10][10]; t->Phi[10][10] = v; check += v - v;
-    v = t->Phi[11][11]; t->Phi[11][11] = v; check += v - v;
-    v = t->Phi[12][12]; t->Phi[12][12] = v; check += v - v;
-    v = t->Phi[13][13]; t->Phi[13][13] = v; check += v - v;
-    v = t->Phi[14][14]; t->Phi[14][14] = v; check += v - v;
-    v = t->Phi[15][15]; t->Phi[15][15] = v; check += v - v;
-    v = t->Phi[16][16]; t->Phi[16][16] = v; check += v - v;
-    v = t->Phi[17][17]; t->Phi[17][17] = v; check += v - v;
-    v = t->Phi[18][18]; t->Phi[18][18] = v; check += v - v;
-    v = t->Phi[19][19]; t->Phi[19][19] = v; check += v - v;
-    v = t->Phi[20][20]; t->Phi[20][20] = v; check += v - v;
+    t->Phi[0][0] = t->Phi[0][0] + one;
+    t->Phi[1][1] = t->Phi[1][1] + one;
+    t->Phi[2][2] = t->Phi[2][2] + one;
+    t->Phi[3][3] = t->Phi[3][3] + one;
+    t->Phi[4][4] = t->Phi[4][4] + one;
+    t->Phi[5][5] = t->Phi[5][5] + one;
+    t->Phi[6][6] = t->Phi[6][6] + one;
+    t->Phi[7][7] = t->Phi[7][7] + one;
+    t->Phi[8][8] = t->Phi[8][8] + one;
+    t->Phi[9][9] = t->Phi[9][9] + one;
+    t->Phi[10][10] = t->Phi[10][10] + one;
+    t->Phi[11][11] = t->Phi[11][11] + one;
+    t->Phi[12][12] = t->Phi[12][12] + one;
+    t->Phi[13][13] = t->Phi[13][13] + one;
+    t->Phi[14][14] = t->Phi[14][14] + one;
+    t->Phi[15][15] = t->Phi[15][15] + one;
+    t->Phi[16][16] = t->Phi[16][16] + one;
+    t->Phi[17][17] = t->Phi[17][17] + one;
+    t->Phi[18][18] = t->Phi[18][18] + one;
+    t->Phi[19][19] = t->Phi[19][19] + one;
+    t->Phi[20][20] = t->Phi[20][20] + one;
+    v = t->Phi[0][0] + t->Phi[0][1] + t->Phi[0][2] + t->Phi[0][3] + t->Phi[0][4] + t->Phi[0][5] +
+            t->Phi[0][6] + t->Phi[0][7] + t->Phi[0][8] + t->Phi[0][9] + t->Phi[0][10] +
+            t->Phi[0][11] + t->Phi[0][12] + t->Phi[0][13] + t->Phi[0][14] + t->Phi[0][15] +
+            t->Phi[0][16] + t->Phi[0][17] + t->Phi[0][18] + t->Phi[0][19] + t->Phi[0][20] +
+            t->Phi[1][0] + t->Phi[1][1] + t->Phi[1][2] + t->Phi[1][3] + t->Phi[1][4] + t->Phi[1][5]
+            + t->Phi[1][6] + t->Phi[1][7] + t->Phi[1][8] + t->Phi[1][9] + t->Phi[1][10] +
+            t->Phi[1][11] + t->Phi[1][12] + t->Phi[1][13] + t->Phi[1][14] + t->Phi[1][15] +
+            t->Phi[1][16] + t->Phi[1][17] + t->Phi[1][18] + t->Phi[1][19] + t->Phi[1][20] +
+            t->Phi[2][0] + t->Phi[2][1] + t->Phi[2][2] + t->Phi[2][3] + t->Phi[2][4] + t->Phi[2][5]
+            + t->Phi[2][6] + t->Phi[2][7] + t->Phi[2][8] + t->Phi[2][9] + t->Phi[2][10] +
+            t->Phi[2][11] + t->Phi[2][12] + t->Phi[2][13] + t->Phi[2][14] + t->Phi[2][15] +
+            t->Phi[2][16] + t->Phi[2][17] + t->Phi[2][18] + t->Phi[2][19] + t->Phi[2][20] +
+            t->Phi[3][0] + t->Phi[3][1] + t->Phi[3][2] + t->Phi[3][3] + t->Phi[3][4] + t->Phi[3][5]
+            + t->Phi[3][6] + t->Phi[3][7] + t->Phi[3][8] + t->Phi[3][9] + t->Phi[3][10] +
+            t->Phi[3][11] + t->Phi[3][12] + t->Phi[3][13] + t->Phi[3][14] + t->Phi[3][15] +
+            t->Phi[3][16] + t->Phi[3][17] + t->Phi[3][18] + t->Phi[3][19] + t->Phi[3][20] +
+            t->Phi[4][0] + t->Phi[4][1] + t->Phi[4][2] + t->Phi[4][3] + t->Phi[4][4] + t->Phi[4][5]
+            + t->Phi[4][6] + t->Phi[4][7] + t->Phi[4][8] + t->Phi[4][9] + t->Phi[4][10] +
+            t->Phi[4][11] + t->Phi[4][12] + t->Phi[4][13] + t->Phi[4][14] + t->Phi[4][15] +
+            t->Phi[4][16] + t->Phi[4][17] + t->Phi[4][18] + t->Phi[4][19] + t->Phi[4][20] +
+            t->Phi[5][0] + t->Phi[5][1] + t->Phi[5][2] + t->Phi[5][3] + t->Phi[5][4] + t->Phi[5][5]
+            + t->Phi[5][6] + t->Phi[5][7] + t->Phi[5][8] + t->Phi[5][9] + t->Phi[5][10] +
+            t->Phi[5][11] + t->Phi[5][12] + t->Phi[5][13] + t->Phi[5][14] + t->Phi[5][15] +
+            t->Phi[5][16] + t->Phi[5][17] + t->Phi[5][18] + t->Phi[5][19] + t->Phi[5][20] +
+            t->Phi[6][0] + t->Phi[6][1] + t->Phi[6][2] + t->Phi[6][3] + t->Phi[6][4] + t->Phi[6][5]
+            + t->Phi[6][6] + t->Phi[6][7] + t->Phi[6][8] + t->Phi[6][9] + t->Phi[6][10] +
+            t->Phi[6][11] + t->Phi[6][12] + t->Phi[6][13] + t->Phi[6][14] + t->Phi[6][15] +
+            t->Phi[6][16] + t->Phi[6][17] + t->Phi[6][18] + t->Phi[6][19] + t->Phi[6][20] +
+            t->Phi[7][0] + t->Phi[7][1] + t->Phi[7][2] + t->Phi[7][3] + t->Phi[7][4] + t->Phi[7][5]
+            + t->Phi[7][6] + t->Phi[7][7] + t->Phi[7][8] + t->Phi[7][9] + t->Phi[7][10] +
+            t->Phi[7][11] + t->Phi[7][12] + t->Phi[7][13] + t->Phi[7][14] + t->Phi[7][15] +
+            t->Phi[7][16] + t->Phi[7][17] + t->Phi[7][18] + t->Phi[7][19] + t->Phi[7][20] +
+            t->Phi[8][0] + t->Phi[8][1] + t->Phi[8][2] + t->Phi[8][3] + t->Phi[8][4] + t->Phi[8][5]
+            + t->Phi[8][6] + t->Phi[8][7] + t->Phi[8][8] + t->Phi[8][9] + t->Phi[8][10] +
+            t->Phi[8][11] + t->Phi[8][12] + t->Phi[8][13] + t->Phi[8][14] + t->Phi[8][15] +
+            t->Phi[8][16] + t->Phi[8][17] + t->Phi[8][18] + t->Phi[8][19] + t->Phi[8][20] +
+            t->Phi[9][9] + t->Phi[10][10] + t->Phi[11][11] + t->Phi[12][12] + t->Phi[13][13] +
+            t->Phi[14][14] + t->Phi[15][15] + t->Phi[16][16] + t->Phi[17][17] + t->Phi[18][18] +
+            t->Phi[19][19] + t->Phi[20][20]; w->term[0][0] = v; check += v - v;
     return check;
 }
 
@@ -3859,180 +3724,198 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
         ins_gnss21_scalar T)
 {
     ins_gnss21_scalar v, check = 0.0;
-    w->term[1][0] = w->term[0][0]*T*m->q[0];
-    w->term[1][1] = w->term[0][1]*T*m->q[1];
-    w->term[1][2] = w->term[0][2]*T*m->q[2];
-    w->term[1][3] = w->term[0][3]*T*m->q[3];
-    w->term[1][4] = w->term[0][4]*T*m->q[4];
-    w->term[1][5] = w->term[0][5]*T*m->q[5];
-    w->term[1][6] = w->term[0][6]*T*m->q[6];
-    w->term[1][7] = w->term[0][7]*T*m->q[7];
-    w->term[1][8] = w->term[0][8]*T*m->q[8];
-    w->term[1][9] = w->term[0][9]*T*m->q[9];
-    w->term[1][10] = w->term[0][10]*T*m->q[10];
-    w->term[1][11] = w->term[0][11]*T*m->q[11];
-    w->term[1][12] = w->term[0][12]*T*m->q[12];
-    w->term[1][13] = w->term[0][13]*T*m->q[13];
-    w->term[1][14] = w->term[0][14]*T*m->q[14];
-    w->term[1][15] = w->term[0][15]*T*m->q[15];
-    w->term[1][16] = w->term[0][16]*T*m->q[16];
-    w->term[1][17] = w->term[0][17]*T*m->q[17];
-    w->term[1][18] = w->term[0][18]*T*m->q[0];
-    w->term[1][19] = w->term[0][19]*T*m->q[1];
-    w->term[1][20] = w->term[0][20]*T*m->q[2];
-    w->term[1][21] = w->term[0][21]*T*m->q[3];
-    w->term[1][22] = w->term[0][22]*T*m->q[4];
-    w->term[1][23] = w->term[0][23]*T*m->q[5];
-    w->term[1][24] = w->term[0][24]*T*m->q[6];
-    w->term[1][25] = w->term[0][25]*T*m->q[7];
-    w->term[1][26] = w->term[0][26]*T*m->q[8];
-    w->term[1][27] = w->term[0][27]*T*m->q[9];
-    w->term[1][28] = w->term[0][28]*T*m->q[10];
-    w->term[1][29] = w->term[0][29]*T*m->q[11];
-    w->term[1][30] = w->term[0][30]*T*m->q[12];
-    w->term[1][31] = w->term[0][31]*T*m->q[13];
-    w->term[1][32] = w->term[0][32]*T*m->q[14];
-    w->term[1][33] = w->term[0][33]*T*m->q[15];
-    w->term[1][34] = w->term[0][34]*T*m->q[16];
-    w->term[1][35] = w->term[0][35]*T*m->q[17];
-    w->term[1][36] = w->term[0][36]*T*m->q[0];
-    w->term[1][37] = w->term[0][37]*T*m->q[1];
-    w->term[1][38] = w->term[0][38]*T*m->q[2];
-    w->term[1][39] = w->term[0][39]*T*m->q[3];
-    w->term[1][40] = w->term[0][40]*T*m->q[4];
-    w->term[1][41] = w->term[0][41]*T*m->q[5];
-    w->term[1][42] = w->term[0][42]*T*m->q[6];
-    w->term[1][43] = w->term[0][43]*T*m->q[7];
-    w->term[1][44] = w->term[0][44]*T*m->q[8];
-    w->term[1][45] = w->term[0][45]*T*m->q[9];
-    w->term[1][46] = w->term[0][46]*T*m->q[10];
-    w->term[1][47] = w->term[0][47]*T*m->q[11];
-    w->term[1][48] = w->term[0][48]*T*m->q[12];
-    w->term[1][49] = w->term[0][49]*T*m->q[13];
-    w->term[1][50] = w->term[0][50]*T*m->q[14];
-    w->term[1][51] = w->term[0][51]*T*m->q[15];
-    w->term[1][52] = w->term[0][52]*T*m->q[16];
-    w->term[1][53] = w->term[0][53]*T*m->q[17];
-    w->term[1][54] = w->term[0][54]*T*m->q[0];
-    w->term[1][55] = w->term[0][55]*T*m->q[1];
-    w->term[1][56] = w->term[0][56]*T*m->q[2];
-    w->term[1][57] = w->term[0][57]*T*m->q[3];
-    w->term[1][58] = w->term[0][58]*T*m->q[4];
-    w->term[1][59] = w->term[0][59]*T*m->q[5];
-    w->term[1][60] = w->term[0][60]*T*m->q[6];
-    w->term[1][61] = w->term[0][61]*T*m->q[7];
-    w->term[1][62] = w->term[0][62]*T*m->q[8];
-    w->term[1][63] = w->term[0][63]*T*m->q[9];
-    w->term[1][64] = w->term[0][64]*T*m->q[10];
-    w->term[1][65] = w->term[0][65]*T*m->q[11];
-    w->term[1][66] = w->term[0][66]*T*m->q[12];
-    w->term[1][67] = w->term[0][67]*T*m->q[13];
-    w->term[1][68] = w->term[0][68]*T*m->q[14];
-    w->term[1][69] = w->term[0][69]*T*m->q[15];
-    w->term[1][70] = w->term[0][70]*T*m->q[16];
-    w->term[1][71] = w->term[0][71]*T*m->q[17];
-    w->term[1][72] = w->term[0][72]*T*m->q[0];
-    w->term[1][73] = w->term[0][73]*T*m->q[1];
-    w->term[1][74] = w->term[0][74]*T*m->q[2];
-    w->term[1][75] = w->term[0][75]*T*m->q[3];
-    w->term[1][76] = w->term[0][76]*T*m->q[4];
-    w->term[1][77] = w->term[0][77]*T*m->q[5];
-    w->term[1][78] = w->term[0][78]*T*m->q[6];
-    w->term[1][79] = w->term[0][79]*T*m->q[7];
-    w->term[1][80] = w->term[0][80]*T*m->q[8];
-    w->term[1][81] = w->term[0][81]*T*m->q[9];
-    w->term[1][82] = w->term[0][82]*T*m->q[10];
-    w->term[1][83] = w->term[0][83]*T*m->q[11];
-    w->term[1][84] = w->term[0][84]*T*m->q[12];
-    w->term[1][85] = w->term[0][85]*T*m->q[13];
-    w->term[1][86] = w->term[0][86]*T*m->q[14];
-    w->term[1][87] = w->term[0][87]*T*m->q[15];
-    w->term[1][88] = w->term[0][88]*T*m->q[16];
-    w->term[1][89] = w->term[0][89]*T*m->q[17];
-    w->term[1][90] = w->term[0][90]*T*m->q[0];
-    w->term[1][91] = w->term[0][91]*T*m->q[1];
-    w->term[1][92] = w->term[0][92]*T*m->q[2];
-    w->term[1][93] = w->term[0][93]*T*m->q[3];
-    w->term[1][94] = w->term[0][94]*T*m->q[4];
-    w->term[1][95] = w->term[0][95]*T*m->q[5];
-    w->term[1][96] = w->term[0][96]*T*m->q[6];
-    w->term[1][97] = w->term[0][97]*T*m->q[7];
-    w->term[1][98] = w->term[0][98]*T*m->q[8];
-    w->term[1][99] = w->term[0][99]*T*m->q[9];
-    w->term[1][100] = w->term[0][100]*T*m->q[10];
-    w->term[1][101] = w->term[0][101]*T*m->q[11];
-    w->term[1][102] = w->term[0][102]*T*m->q[12];
-    w->term[1][103] = w->term[0][103]*T*m->q[13];
-    w->term[1][104] = w->term[0][104]*T*m->q[14];
-    w->term[1][105] = w->term[0][105]*T*m->q[15];
-    w->term[1][106] = w->term[0][106]*T*m->q[16];
-    w->term[1][107] = w->term[0][107]*T*m->q[17];
-    w->term[1][108] = w->term[0][108]*T*m->q[0];
-    w->term[1][109] = w->term[0][109]*T*m->q[1];
-    w->term[1][110] = w->term[0][110]*T*m->q[2];
-    w->term[1][111] = w->term[0][111]*T*m->q[3];
-    w->term[1][112] = w->term[0][112]*T*m->q[4];
-    w->term[1][113] = w->term[0][113]*T*m->q[5];
-    w->term[1][114] = w->term[0][114]*T*m->q[6];
-    w->term[1][115] = w->term[0][115]*T*m->q[7];
-    w->term[1][116] = w->term[0][116]*T*m->q[8];
-    w->term[1][117] = w->term[0][117]*T*m->q[9];
-    w->term[1][118] = w->term[0][118]*T*m->q[10];
-    w->term[1][119] = w->term[0][119]*T*m->q[11];
-    w->term[1][120] = w->term[0][120]*T*m->q[12];
-    w->term[1][121] = w->term[0][121]*T*m->q[13];
-    w->term[1][122] = w->term[0][122]*T*m->q[14];
-    w->term[1][123] = w->term[0][123]*T*m->q[15];
-    w->term[1][124] = w->term[0][124]*T*m->q[16];
-    w->term[1][125] = w->term[0][125]*T*m->q[17];
-    w->term[1][126] = w->term[0][126]*T*m->q[0];
-    w->term[1][127] = w->term[0][127]*T*m->q[1];
-    w->term[1][128] = w->term[0][128]*T*m->q[2];
-    w->term[1][129] = w->term[0][129]*T*m->q[3];
-    w->term[1][130] = w->term[0][130]*T*m->q[4];
-    w->term[1][131] = w->term[0][131]*T*m->q[5];
-    w->term[1][132] = w->term[0][132]*T*m->q[6];
-    w->term[1][133] = w->term[0][133]*T*m->q[7];
-    w->term[1][134] = w->term[0][134]*T*m->q[8];
-    w->term[1][135] = w->term[0][135]*T*m->q[9];
-    w->term[1][136] = w->term[0][136]*T*m->q[10];
-    w->term[1][137] = w->term[0][137]*T*m->q[11];
-    w->term[1][138] = w->term[0][138]*T*m->q[12];
-    w->term[1][139] = w->term[0][139]*T*m->q[13];
-    w->term[1][140] = w->term[0][140]*T*m->q[14];
-    w->term[1][141] = w->term[0][141]*T*m->q[15];
-    w->term[1][142] = w->term[0][142]*T*m->q[16];
-    w->term[1][143] = w->term[0][143]*T*m->q[17];
-    w->term[1][144] = w->term[0][144]*T*m->q[0];
-    w->term[1][145] = w->term[0][145]*T*m->q[1];
-    w->term[1][146] = w->term[0][146]*T*m->q[2];
-    w->term[1][147] = w->term[0][147]*T*m->q[3];
-    w->term[1][148] = w->term[0][148]*T*m->q[4];
-    w->term[1][149] = w->term[0][149]*T*m->q[5];
-    w->term[1][150] = w->term[0][150]*T*m->q[6];
-    w->term[1][151] = w->term[0][151]*T*m->q[7];
-    w->term[1][152] = w->term[0][152]*T*m->q[8];
-    w->term[1][153] = w->term[0][153]*T*m->q[9];
-    w->term[1][154] = w->term[0][154]*T*m->q[10];
-    w->term[1][155] = w->term[0][155]*T*m->q[11];
-    w->term[1][156] = w->term[0][156]*T*m->q[12];
-    w->term[1][157] = w->term[0][157]*T*m->q[13];
-    w->term[1][158] = w->term[0][158]*T*m->q[14];
-    w->term[1][159] = w->term[0][159]*T*m->q[15];
-    w->term[1][160] = w->term[0][160]*T*m->q[16];
-    w->term[1][161] = w->term[0][161]*T*m->q[17];
-    w->term[1][162] = w->term[0][162]*T*m->q[6];
-    w->term[1][163] = w->term[0][163]*T*m->q[7];
-    w->term[1][164] = w->term[0][164]*T*m->q[8];
-    w->term[1][165] = w->term[0][165]*T*m->q[9];
-    w->term[1][166] = w->term[0][166]*T*m->q[10];
-    w->term[1][167] = w->term[0][167]*T*m->q[11];
-    w->term[1][168] = w->term[0][168]*T*m->q[12];
-    w->term[1][169] = w->term[0][169]*T*m->q[13];
-    w->term[1][170] = w->term[0][170]*T*m->q[14];
-    w->term[1][171] = w->term[0][171]*T*m->q[15];
-    w->term[1][172] = w->term[0][172]*T*m->q[16];
-    w->term[1][173] = w->term[0][173]*T*m->q[17];
+    w->term[1][174] = T*m->q[0];
+    w->term[1][175] = T*m->q[1];
+    w->term[1][176] = T*m->q[2];
+    w->term[1][177] = T*m->q[3];
+    w->term[1][178] = T*m->q[4];
+    w->term[1][179] = T*m->q[5];
+    w->term[1][180] = T*m->q[6];
+    w->term[1][181] = T*m->q[7];
+    w->term[1][182] = T*m->q[8];
+    w->term[1][183] = T*m->q[9];
+    w->term[1][184] = T*m->q[10];
+    w->term[1][185] = T*m->q[11];
+    w->term[1][186] = T*m->q[12];
+    w->term[1][187] = T*m->q[13];
+    w->term[1][188] = T*m->q[14];
+    w->term[1][189] = T*m->q[15];
+    w->term[1][190] = T*m->q[16];
+    w->term[1][191] = T*m->q[17];
+    w->term[1][0] = w->term[0][0]*w->term[1][174];
+    w->term[1][1] = w->term[0][1]*w->term[1][175];
+    w->term[1][2] = w->term[0][2]*w->term[1][176];
+    w->term[1][3] = w->term[0][3]*w->term[1][177];
+    w->term[1][4] = w->term[0][4]*w->term[1][178];
+    w->term[1][5] = w->term[0][5]*w->term[1][179];
+    w->term[1][6] = w->term[0][6]*w->term[1][180];
+    w->term[1][7] = w->term[0][7]*w->term[1][181];
+    w->term[1][8] = w->term[0][8]*w->term[1][182];
+    w->term[1][9] = w->term[0][9]*w->term[1][183];
+    w->term[1][10] = w->term[0][10]*w->term[1][184];
+    w->term[1][11] = w->term[0][11]*w->term[1][185];
+    w->term[1][12] = w->term[0][12]*w->term[1][186];
+    w->term[1][13] = w->term[0][13]*w->term[1][187];
+    w->term[1][14] = w->term[0][14]*w->term[1][188];
+    w->term[1][15] = w->term[0][15]*w->term[1][189];
+    w->term[1][16] = w->term[0][16]*w->term[1][190];
+    w->term[1][17] = w->term[0][17]*w->term[1][191];
+    w->term[1][18] = w->term[0][18]*w->term[1][174];
+    w->term[1][19] = w->term[0][19]*w->term[1][175];
+    w->term[1][20] = w->term[0][20]*w->term[1][176];
+    w->term[1][21] = w->term[0][21]*w->term[1][177];
+    w->term[1][22] = w->term[0][22]*w->term[1][178];
+    w->term[1][23] = w->term[0][23]*w->term[1][179];
+    w->term[1][24] = w->term[0][24]*w->term[1][180];
+    w->term[1][25] = w->term[0][25]*w->term[1][181];
+    w->term[1][26] = w->term[0][26]*w->term[1][182];
+    w->term[1][27] = w->term[0][27]*w->term[1][183];
+    w->term[1][28] = w->term[0][28]*w->term[1][184];
+    w->term[1][29] = w->term[0][29]*w->term[1][185];
+    w->term[1][30] = w->term[0][30]*w->term[1][186];
+    w->term[1][31] = w->term[0][31]*w->term[1][187];
+    w->term[1][32] = w->term[0][32]*w->term[1][188];
+    w->term[1][33] = w->term[0][33]*w->term[1][189];
+    w->term[1][34] = w->term[0][34]*w->term[1][190];
+    w->term[1][35] = w->term[0][35]*w->term[1][191];
+    w->term[1][36] = w->term[0][36]*w->term[1][174];
+    w->term[1][37] = w->term[0][37]*w->term[1][175];
+    w->term[1][38] = w->term[0][38]*w->term[1][176];
+    w->term[1][39] = w->term[0][39]*w->term[1][177];
+    w->term[1][40] = w->term[0][40]*w->term[1][178];
+    w->term[1][41] = w->term[0][41]*w->term[1][179];
+    w->term[1][42] = w->term[0][42]*w->term[1][180];
+    w->term[1][43] = w->term[0][43]*w->term[1][181];
+    w->term[1][44] = w->term[0][44]*w->term[1][182];
+    w->term[1][45] = w->term[0][45]*w->term[1][183];
+    w->term[1][46] = w->term[0][46]*w->term[1][184];
+    w->term[1][47] = w->term[0][47]*w->term[1][185];
+    w->term[1][48] = w->term[0][48]*w->term[1][186];
+    w->term[1][49] = w->term[0][49]*w->term[1][187];
+    w->term[1][50] = w->term[0][50]*w->term[1][188];
+    w->term[1][51] = w->term[0][51]*w->term[1][189];
+    w->term[1][52] = w->term[0][52]*w->term[1][190];
+    w->term[1][53] = w->term[0][53]*w->term[1][191];
+    w->term[1][54] = w->term[0][54]*w->term[1][174];
+    w->term[1][55] = w->term[0][55]*w->term[1][175];
+    w->term[1][56] = w->term[0][56]*w->term[1][176];
+    w->term[1][57] = w->term[0][57]*w->term[1][177];
+    w->term[1][58] = w->term[0][58]*w->term[1][178];
+    w->term[1][59] = w->term[0][59]*w->term[1][179];
+    w->term[1][60] = w->term[0][60]*w->term[1][180];
+    w->term[1][61] = w->term[0][61]*w->term[1][181];
+    w->term[1][62] = w->term[0][62]*w->term[1][182];
+    w->term[1][63] = w->term[0][63]*w->term[1][183];
+    w->term[1][64] = w->term[0][64]*w->term[1][184];
+    w->term[1][65] = w->term[0][65]*w->term[1][185];
+    w->term[1][66] = w->term[0][66]*w->term[1][186];
+    w->term[1][67] = w->term[0][67]*w->term[1][187];
+    w->term[1][68] = w->term[0][68]*w->term[1][188];
+    w->term[1][69] = w->term[0][69]*w->term[1][189];
+    w->term[1][70] = w->term[0][70]*w->term[1][190];
+    w->term[1][71] = w->term[0][71]*w->term[1][191];
+    w->term[1][72] = w->term[0][72]*w->term[1][174];
+    w->term[1][73] = w->term[0][73]*w->term[1][175];
+    w->term[1][74] = w->term[0][74]*w->term[1][176];
+    w->term[1][75] = w->term[0][75]*w->term[1][177];
+    w->term[1][76] = w->term[0][76]*w->term[1][178];
+    w->term[1][77] = w->term[0][77]*w->term[1][179];
+    w->term[1][78] = w->term[0][78]*w->term[1][180];
+    w->term[1][79] = w->term[0][79]*w->term[1][181];
+    w->term[1][80] = w->term[0][80]*w->term[1][182];
+    w->term[1][81] = w->term[0][81]*w->term[1][183];
+    w->term[1][82] = w->term[0][82]*w->term[1][184];
+    w->term[1][83] = w->term[0][83]*w->term[1][185];
+    w->term[1][84] = w->term[0][84]*w->term[1][186];
+    w->term[1][85] = w->term[0][85]*w->term[1][187];
+    w->term[1][86] = w->term[0][86]*w->term[1][188];
+    w->term[1][87] = w->term[0][87]*w->term[1][189];
+    w->term[1][88] = w->term[0][88]*w->term[1][190];
+    w->term[1][89] = w->term[0][89]*w->term[1][191];
+    w->term[1][90] = w->term[0][90]*w->term[1][174];
+    w->term[1][91] = w->term[0][91]*w->term[1][175];
+    w->term[1][92] = w->term[0][92]*w->term[1][176];
+    w->term[1][93] = w->term[0][93]*w->term[1][177];
+    w->term[1][94] = w->term[0][94]*w->term[1][178];
+    w->term[1][95] = w->term[0][95]*w->term[1][179];
+    w->term[1][96] = w->term[0][96]*w->term[1][180];
+    w->term[1][97] = w->term[0][97]*w->term[1][181];
+    w->term[1][98] = w->term[0][98]*w->term[1][182];
+    w->term[1][99] = w->term[0][99]*w->term[1][183];
+    w->term[1][100] = w->term[0][100]*w->term[1][184];
+    w->term[1][101] = w->term[0][101]*w->term[1][185];
+    w->term[1][102] = w->term[0][102]*w->term[1][186];
+    w->term[1][103] = w->term[0][103]*w->term[1][187];
+    w->term[1][104] = w->term[0][104]*w->term[1][188];
+    w->term[1][105] = w->term[0][105]*w->term[1][189];
+    w->term[1][106] = w->term[0][106]*w->term[1][190];
+    w->term[1][107] = w->term[0][107]*w->term[1][191];
+    w->term[1][108] = w->term[0][108]*w->term[1][174];
+    w->term[1][109] = w->term[0][109]*w->term[1][175];
+    w->term[1][110] = w->term[0][110]*w->term[1][176];
+    w->term[1][111] = w->term[0][111]*w->term[1][177];
+    w->term[1][112] = w->term[0][112]*w->term[1][178];
+    w->term[1][113] = w->term[0][113]*w->term[1][179];
+    w->term[1][114] = w->term[0][114]*w->term[1][180];
+    w->term[1][115] = w->term[0][115]*w->term[1][181];
+    w->term[1][116] = w->term[0][116]*w->term[1][182];
+    w->term[1][117] = w->term[0][117]*w->term[1][183];
+    w->term[1][118] = w->term[0][118]*w->term[1][184];
+    w->term[1][119] = w->term[0][119]*w->term[1][185];
+    w->term[1][120] = w->term[0][120]*w->term[1][186];
+    w->term[1][121] = w->term[0][121]*w->term[1][187];
+    w->term[1][122] = w->term[0][122]*w->term[1][188];
+    w->term[1][123] = w->term[0][123]*w->term[1][189];
+    w->term[1][124] = w->term[0][124]*w->term[1][190];
+    w->term[1][125] = w->term[0][125]*w->term[1][191];
+    w->term[1][126] = w->term[0][126]*w->term[1][174];
+    w->term[1][127] = w->term[0][127]*w->term[1][175];
+    w->term[1][128] = w->term[0][128]*w->term[1][176];
+    w->term[1][129] = w->term[0][129]*w->term[1][177];
+    w->term[1][130] = w->term[0][130]*w->term[1][178];
+    w->term[1][131] = w->term[0][131]*w->term[1][179];
+    w->term[1][132] = w->term[0][132]*w->term[1][180];
+    w->term[1][133] = w->term[0][133]*w->term[1][181];
+    w->term[1][134] = w->term[0][134]*w->term[1][182];
+    w->term[1][135] = w->term[0][135]*w->term[1][183];
+    w->term[1][136] = w->term[0][136]*w->term[1][184];
+    w->term[1][137] = w->term[0][137]*w->term[1][185];
+    w->term[1][138] = w->term[0][138]*w->term[1][186];
+    w->term[1][139] = w->term[0][139]*w->term[1][187];
+    w->term[1][140] = w->term[0][140]*w->term[1][188];
+    w->term[1][141] = w->term[0][141]*w->term[1][189];
+    w->term[1][142] = w->term[0][142]*w->term[1][190];
+    w->term[1][143] = w->term[0][143]*w->term[1][191];
+    w->term[1][144] = w->term[0][144]*w->term[1][174];
+    w->term[1][145] = w->term[0][145]*w->term[1][175];
+    w->term[1][146] = w->term[0][146]*w->term[1][176];
+    w->term[1][147] = w->term[0][147]*w->term[1][177];
+    w->term[1][148] = w->term[0][148]*w->term[1][178];
+    w->term[1][149] = w->term[0][149]*w->term[1][179];
+    w->term[1][150] = w->term[0][150]*w->term[1][180];
+    w->term[1][151] = w->term[0][151]*w->term[1][181];
+    w->term[1][152] = w->term[0][152]*w->term[1][182];
+    w->term[1][153] = w->term[0][153]*w->term[1][183];
+    w->term[1][154] = w->term[0][154]*w->term[1][184];
+    w->term[1][155] = w->term[0][155]*w->term[1][185];
+    w->term[1][156] = w->term[0][156]*w->term[1][186];
+    w->term[1][157] = w->term[0][157]*w->term[1][187];
+    w->term[1][158] = w->term[0][158]*w->term[1][188];
+    w->term[1][159] = w->term[0][159]*w->term[1][189];
+    w->term[1][160] = w->term[0][160]*w->term[1][190];
+    w->term[1][161] = w->term[0][161]*w->term[1][191];
+    w->term[1][162] = w->term[0][162]*w->term[1][180];
+    w->term[1][163] = w->term[0][163]*w->term[1][181];
+    w->term[1][164] = w->term[0][164]*w->term[1][182];
+    w->term[1][165] = w->term[0][165]*w->term[1][183];
+    w->term[1][166] = w->term[0][166]*w->term[1][184];
+    w->term[1][167] = w->term[0][167]*w->term[1][185];
+    w->term[1][168] = w->term[0][168]*w->term[1][186];
+    w->term[1][169] = w->term[0][169]*w->term[1][187];
+    w->term[1][170] = w->term[0][170]*w->term[1][188];
+    w->term[1][171] = w->term[0][171]*w->term[1][189];
+    w->term[1][172] = w->term[0][172]*w->term[1][190];
+    w->term[1][173] = w->term[0][173]*w->term[1][191];
     v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
             w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5]
             + w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
@@ -4040,8 +3923,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11] +
             w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
             w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[0][0] = v; check +=
-            v - v;
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[0] = v; check += v
+            - v;
     v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
             w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
             w->term[1][5]*w->term[0][23] + w->term[1][6]*w->term[0][24] +
@@ -4050,7 +3933,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][11]*w->term[0][29] + w->term[1][12]*w->term[0][30] +
             w->term[1][13]*w->term[0][31] + w->term[1][14]*w->term[0][32] +
             w->term[1][15]*w->term[0][33] + w->term[1][16]*w->term[0][34] +
-            w->term[1][17]*w->term[0][35]; t->Qd[0][1] = v; t->Qd[1][0] = v; check += v - v;
+            w->term[1][17]*w->term[0][35]; t->Qd[1] = v; check += v - v;
     v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
             w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
             w->term[1][5]*w->term[0][41] + w->term[1][6]*w->term[0][42] +
@@ -4059,7 +3942,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][11]*w->term[0][47] + w->term[1][12]*w->term[0][48] +
             w->term[1][13]*w->term[0][49] + w->term[1][14]*w->term[0][50] +
             w->term[1][15]*w->term[0][51] + w->term[1][16]*w->term[0][52] +
-            w->term[1][17]*w->term[0][53]; t->Qd[0][2] = v; t->Qd[2][0] = v; check += v - v;
+            w->term[1][17]*w->term[0][53]; t->Qd[2] = v; check += v - v;
     v = w->term[1][0]*w->term[0][54] + w->term[1][1]*w->term[0][55] + w->term[1][2]*w->term[0][56] +
             w->term[1][3]*w->term[0][57] + w->term[1][4]*w->term[0][58] +
             w->term[1][5]*w->term[0][59] + w->term[1][6]*w->term[0][60] +
@@ -4068,7 +3951,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][11]*w->term[0][65] + w->term[1][12]*w->term[0][66] +
             w->term[1][13]*w->term[0][67] + w->term[1][14]*w->term[0][68] +
             w->term[1][15]*w->term[0][69] + w->term[1][16]*w->term[0][70] +
-            w->term[1][17]*w->term[0][71]; t->Qd[0][3] = v; t->Qd[3][0] = v; check += v - v;
+            w->term[1][17]*w->term[0][71]; t->Qd[3] = v; check += v - v;
     v = w->term[1][0]*w->term[0][72] + w->term[1][1]*w->term[0][73] + w->term[1][2]*w->term[0][74] +
             w->term[1][3]*w->term[0][75] + w->term[1][4]*w->term[0][76] +
             w->term[1][5]*w->term[0][77] + w->term[1][6]*w->term[0][78] +
@@ -4077,7 +3960,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][11]*w->term[0][83] + w->term[1][12]*w->term[0][84] +
             w->term[1][13]*w->term[0][85] + w->term[1][14]*w->term[0][86] +
             w->term[1][15]*w->term[0][87] + w->term[1][16]*w->term[0][88] +
-            w->term[1][17]*w->term[0][89]; t->Qd[0][4] = v; t->Qd[4][0] = v; check += v - v;
+            w->term[1][17]*w->term[0][89]; t->Qd[4] = v; check += v - v;
     v = w->term[1][0]*w->term[0][90] + w->term[1][1]*w->term[0][91] + w->term[1][2]*w->term[0][92] +
             w->term[1][3]*w->term[0][93] + w->term[1][4]*w->term[0][94] +
             w->term[1][5]*w->term[0][95] + w->term[1][6]*w->term[0][96] +
@@ -4086,7 +3969,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][11]*w->term[0][101] + w->term[1][12]*w->term[0][102] +
             w->term[1][13]*w->term[0][103] + w->term[1][14]*w->term[0][104] +
             w->term[1][15]*w->term[0][105] + w->term[1][16]*w->term[0][106] +
-            w->term[1][17]*w->term[0][107]; t->Qd[0][5] = v; t->Qd[5][0] = v; check += v - v;
+            w->term[1][17]*w->term[0][107]; t->Qd[5] = v; check += v - v;
     v = w->term[1][0]*w->term[0][108] + w->term[1][1]*w->term[0][109] +
             w->term[1][2]*w->term[0][110] + w->term[1][3]*w->term[0][111] +
             w->term[1][4]*w->term[0][112] + w->term[1][5]*w->term[0][113] +
@@ -4095,8 +3978,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][10]*w->term[0][118] + w->term[1][11]*w->term[0][119] +
             w->term[1][12]*w->term[0][120] + w->term[1][13]*w->term[0][121] +
             w->term[1][14]*w->term[0][122] + w->term[1][15]*w->term[0][123] +
-            w->term[1][16]*w->term[0][124] + w->term[1][17]*w->term[0][125]; t->Qd[0][6] = v;
-            t->Qd[6][0] = v; check += v - v;
+            w->term[1][16]*w->term[0][124] + w->term[1][17]*w->term[0][125]; t->Qd[6] = v; check +=
+            v - v;
     v = w->term[1][0]*w->term[0][126] + w->term[1][1]*w->term[0][127] +
             w->term[1][2]*w->term[0][128] + w->term[1][3]*w->term[0][129] +
             w->term[1][4]*w->term[0][130] + w->term[1][5]*w->term[0][131] +
@@ -4105,8 +3988,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][10]*w->term[0][136] + w->term[1][11]*w->term[0][137] +
             w->term[1][12]*w->term[0][138] + w->term[1][13]*w->term[0][139] +
             w->term[1][14]*w->term[0][140] + w->term[1][15]*w->term[0][141] +
-            w->term[1][16]*w->term[0][142] + w->term[1][17]*w->term[0][143]; t->Qd[0][7] = v;
-            t->Qd[7][0] = v; check += v - v;
+            w->term[1][16]*w->term[0][142] + w->term[1][17]*w->term[0][143]; t->Qd[7] = v; check +=
+            v - v;
     v = w->term[1][0]*w->term[0][144] + w->term[1][1]*w->term[0][145] +
             w->term[1][2]*w->term[0][146] + w->term[1][3]*w->term[0][147] +
             w->term[1][4]*w->term[0][148] + w->term[1][5]*w->term[0][149] +
@@ -4115,20 +3998,20 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][10]*w->term[0][154] + w->term[1][11]*w->term[0][155] +
             w->term[1][12]*w->term[0][156] + w->term[1][13]*w->term[0][157] +
             w->term[1][14]*w->term[0][158] + w->term[1][15]*w->term[0][159] +
-            w->term[1][16]*w->term[0][160] + w->term[1][17]*w->term[0][161]; t->Qd[0][8] = v;
-            t->Qd[8][0] = v; check += v - v;
-    v = w->term[1][6]*w->term[0][162]; t->Qd[0][9] = v; t->Qd[9][0] = v; check += v - v;
-    v = w->term[1][7]*w->term[0][163]; t->Qd[0][10] = v; t->Qd[10][0] = v; check += v - v;
-    v = w->term[1][8]*w->term[0][164]; t->Qd[0][11] = v; t->Qd[11][0] = v; check += v - v;
-    v = w->term[1][9]*w->term[0][165]; t->Qd[0][12] = v; t->Qd[12][0] = v; check += v - v;
-    v = w->term[1][10]*w->term[0][166]; t->Qd[0][13] = v; t->Qd[13][0] = v; check += v - v;
-    v = w->term[1][11]*w->term[0][167]; t->Qd[0][14] = v; t->Qd[14][0] = v; check += v - v;
-    v = w->term[1][12]*w->term[0][168]; t->Qd[0][15] = v; t->Qd[15][0] = v; check += v - v;
-    v = w->term[1][13]*w->term[0][169]; t->Qd[0][16] = v; t->Qd[16][0] = v; check += v - v;
-    v = w->term[1][14]*w->term[0][170]; t->Qd[0][17] = v; t->Qd[17][0] = v; check += v - v;
-    v = w->term[1][15]*w->term[0][171]; t->Qd[0][18] = v; t->Qd[18][0] = v; check += v - v;
-    v = w->term[1][16]*w->term[0][172]; t->Qd[0][19] = v; t->Qd[19][0] = v; check += v - v;
-    v = w->term[1][17]*w->term[0][173]; t->Qd[0][20] = v; t->Qd[20][0] = v; check += v - v;
+            w->term[1][16]*w->term[0][160] + w->term[1][17]*w->term[0][161]; t->Qd[8] = v; check +=
+            v - v;
+    v = w->term[1][6]*w->term[0][162]; t->Qd[9] = v; check += v - v;
+    v = w->term[1][7]*w->term[0][163]; t->Qd[10] = v; check += v - v;
+    v = w->term[1][8]*w->term[0][164]; t->Qd[11] = v; check += v - v;
+    v = w->term[1][9]*w->term[0][165]; t->Qd[12] = v; check += v - v;
+    v = w->term[1][10]*w->term[0][166]; t->Qd[13] = v; check += v - v;
+    v = w->term[1][11]*w->term[0][167]; t->Qd[14] = v; check += v - v;
+    v = w->term[1][12]*w->term[0][168]; t->Qd[15] = v; check += v - v;
+    v = w->term[1][13]*w->term[0][169]; t->Qd[16] = v; check += v - v;
+    v = w->term[1][14]*w->term[0][170]; t->Qd[17] = v; check += v - v;
+    v = w->term[1][15]*w->term[0][171]; t->Qd[18] = v; check += v - v;
+    v = w->term[1][16]*w->term[0][172]; t->Qd[19] = v; check += v - v;
+    v = w->term[1][17]*w->term[0][173]; t->Qd[20] = v; check += v - v;
     v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
             w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
             w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23] +
@@ -4137,8 +4020,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29] +
             w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
             w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[1][1] = v; check +=
-            v - v;
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[21] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
             w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
             w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41] +
@@ -4147,8 +4030,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][28]*w->term[0][46] + w->term[1][29]*w->term[0][47] +
             w->term[1][30]*w->term[0][48] + w->term[1][31]*w->term[0][49] +
             w->term[1][32]*w->term[0][50] + w->term[1][33]*w->term[0][51] +
-            w->term[1][34]*w->term[0][52] + w->term[1][35]*w->term[0][53]; t->Qd[1][2] = v;
-            t->Qd[2][1] = v; check += v - v;
+            w->term[1][34]*w->term[0][52] + w->term[1][35]*w->term[0][53]; t->Qd[22] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][54] + w->term[1][19]*w->term[0][55] +
             w->term[1][20]*w->term[0][56] + w->term[1][21]*w->term[0][57] +
             w->term[1][22]*w->term[0][58] + w->term[1][23]*w->term[0][59] +
@@ -4157,8 +4040,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][28]*w->term[0][64] + w->term[1][29]*w->term[0][65] +
             w->term[1][30]*w->term[0][66] + w->term[1][31]*w->term[0][67] +
             w->term[1][32]*w->term[0][68] + w->term[1][33]*w->term[0][69] +
-            w->term[1][34]*w->term[0][70] + w->term[1][35]*w->term[0][71]; t->Qd[1][3] = v;
-            t->Qd[3][1] = v; check += v - v;
+            w->term[1][34]*w->term[0][70] + w->term[1][35]*w->term[0][71]; t->Qd[23] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][72] + w->term[1][19]*w->term[0][73] +
             w->term[1][20]*w->term[0][74] + w->term[1][21]*w->term[0][75] +
             w->term[1][22]*w->term[0][76] + w->term[1][23]*w->term[0][77] +
@@ -4167,8 +4050,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][28]*w->term[0][82] + w->term[1][29]*w->term[0][83] +
             w->term[1][30]*w->term[0][84] + w->term[1][31]*w->term[0][85] +
             w->term[1][32]*w->term[0][86] + w->term[1][33]*w->term[0][87] +
-            w->term[1][34]*w->term[0][88] + w->term[1][35]*w->term[0][89]; t->Qd[1][4] = v;
-            t->Qd[4][1] = v; check += v - v;
+            w->term[1][34]*w->term[0][88] + w->term[1][35]*w->term[0][89]; t->Qd[24] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][90] + w->term[1][19]*w->term[0][91] +
             w->term[1][20]*w->term[0][92] + w->term[1][21]*w->term[0][93] +
             w->term[1][22]*w->term[0][94] + w->term[1][23]*w->term[0][95] +
@@ -4177,8 +4060,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][28]*w->term[0][100] + w->term[1][29]*w->term[0][101] +
             w->term[1][30]*w->term[0][102] + w->term[1][31]*w->term[0][103] +
             w->term[1][32]*w->term[0][104] + w->term[1][33]*w->term[0][105] +
-            w->term[1][34]*w->term[0][106] + w->term[1][35]*w->term[0][107]; t->Qd[1][5] = v;
-            t->Qd[5][1] = v; check += v - v;
+            w->term[1][34]*w->term[0][106] + w->term[1][35]*w->term[0][107]; t->Qd[25] = v; check +=
+            v - v;
     v = w->term[1][18]*w->term[0][108] + w->term[1][19]*w->term[0][109] +
             w->term[1][20]*w->term[0][110] + w->term[1][21]*w->term[0][111] +
             w->term[1][22]*w->term[0][112] + w->term[1][23]*w->term[0][113] +
@@ -4187,8 +4070,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][28]*w->term[0][118] + w->term[1][29]*w->term[0][119] +
             w->term[1][30]*w->term[0][120] + w->term[1][31]*w->term[0][121] +
             w->term[1][32]*w->term[0][122] + w->term[1][33]*w->term[0][123] +
-            w->term[1][34]*w->term[0][124] + w->term[1][35]*w->term[0][125]; t->Qd[1][6] = v;
-            t->Qd[6][1] = v; check += v - v;
+            w->term[1][34]*w->term[0][124] + w->term[1][35]*w->term[0][125]; t->Qd[26] = v; check +=
+            v - v;
     v = w->term[1][18]*w->term[0][126] + w->term[1][19]*w->term[0][127] +
             w->term[1][20]*w->term[0][128] + w->term[1][21]*w->term[0][129] +
             w->term[1][22]*w->term[0][130] + w->term[1][23]*w->term[0][131] +
@@ -4197,8 +4080,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][28]*w->term[0][136] + w->term[1][29]*w->term[0][137] +
             w->term[1][30]*w->term[0][138] + w->term[1][31]*w->term[0][139] +
             w->term[1][32]*w->term[0][140] + w->term[1][33]*w->term[0][141] +
-            w->term[1][34]*w->term[0][142] + w->term[1][35]*w->term[0][143]; t->Qd[1][7] = v;
-            t->Qd[7][1] = v; check += v - v;
+            w->term[1][34]*w->term[0][142] + w->term[1][35]*w->term[0][143]; t->Qd[27] = v; check +=
+            v - v;
     v = w->term[1][18]*w->term[0][144] + w->term[1][19]*w->term[0][145] +
             w->term[1][20]*w->term[0][146] + w->term[1][21]*w->term[0][147] +
             w->term[1][22]*w->term[0][148] + w->term[1][23]*w->term[0][149] +
@@ -4207,20 +4090,20 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][28]*w->term[0][154] + w->term[1][29]*w->term[0][155] +
             w->term[1][30]*w->term[0][156] + w->term[1][31]*w->term[0][157] +
             w->term[1][32]*w->term[0][158] + w->term[1][33]*w->term[0][159] +
-            w->term[1][34]*w->term[0][160] + w->term[1][35]*w->term[0][161]; t->Qd[1][8] = v;
-            t->Qd[8][1] = v; check += v - v;
-    v = w->term[1][24]*w->term[0][162]; t->Qd[1][9] = v; t->Qd[9][1] = v; check += v - v;
-    v = w->term[1][25]*w->term[0][163]; t->Qd[1][10] = v; t->Qd[10][1] = v; check += v - v;
-    v = w->term[1][26]*w->term[0][164]; t->Qd[1][11] = v; t->Qd[11][1] = v; check += v - v;
-    v = w->term[1][27]*w->term[0][165]; t->Qd[1][12] = v; t->Qd[12][1] = v; check += v - v;
-    v = w->term[1][28]*w->term[0][166]; t->Qd[1][13] = v; t->Qd[13][1] = v; check += v - v;
-    v = w->term[1][29]*w->term[0][167]; t->Qd[1][14] = v; t->Qd[14][1] = v; check += v - v;
-    v = w->term[1][30]*w->term[0][168]; t->Qd[1][15] = v; t->Qd[15][1] = v; check += v - v;
-    v = w->term[1][31]*w->term[0][169]; t->Qd[1][16] = v; t->Qd[16][1] = v; check += v - v;
-    v = w->term[1][32]*w->term[0][170]; t->Qd[1][17] = v; t->Qd[17][1] = v; check += v - v;
-    v = w->term[1][33]*w->term[0][171]; t->Qd[1][18] = v; t->Qd[18][1] = v; check += v - v;
-    v = w->term[1][34]*w->term[0][172]; t->Qd[1][19] = v; t->Qd[19][1] = v; check += v - v;
-    v = w->term[1][35]*w->term[0][173]; t->Qd[1][20] = v; t->Qd[20][1] = v; check += v - v;
+            w->term[1][34]*w->term[0][160] + w->term[1][35]*w->term[0][161]; t->Qd[28] = v; check +=
+            v - v;
+    v = w->term[1][24]*w->term[0][162]; t->Qd[29] = v; check += v - v;
+    v = w->term[1][25]*w->term[0][163]; t->Qd[30] = v; check += v - v;
+    v = w->term[1][26]*w->term[0][164]; t->Qd[31] = v; check += v - v;
+    v = w->term[1][27]*w->term[0][165]; t->Qd[32] = v; check += v - v;
+    v = w->term[1][28]*w->term[0][166]; t->Qd[33] = v; check += v - v;
+    v = w->term[1][29]*w->term[0][167]; t->Qd[34] = v; check += v - v;
+    v = w->term[1][30]*w->term[0][168]; t->Qd[35] = v; check += v - v;
+    v = w->term[1][31]*w->term[0][169]; t->Qd[36] = v; check += v - v;
+    v = w->term[1][32]*w->term[0][170]; t->Qd[37] = v; check += v - v;
+    v = w->term[1][33]*w->term[0][171]; t->Qd[38] = v; check += v - v;
+    v = w->term[1][34]*w->term[0][172]; t->Qd[39] = v; check += v - v;
+    v = w->term[1][35]*w->term[0][173]; t->Qd[40] = v; check += v - v;
     v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
             w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
             w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41] +
@@ -4229,8 +4112,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][46]*w->term[0][46] + w->term[1][47]*w->term[0][47] +
             w->term[1][48]*w->term[0][48] + w->term[1][49]*w->term[0][49] +
             w->term[1][50]*w->term[0][50] + w->term[1][51]*w->term[0][51] +
-            w->term[1][52]*w->term[0][52] + w->term[1][53]*w->term[0][53]; t->Qd[2][2] = v; check +=
-            v - v;
+            w->term[1][52]*w->term[0][52] + w->term[1][53]*w->term[0][53]; t->Qd[41] = v; check += v
+            - v;
     v = w->term[1][36]*w->term[0][54] + w->term[1][37]*w->term[0][55] +
             w->term[1][38]*w->term[0][56] + w->term[1][39]*w->term[0][57] +
             w->term[1][40]*w->term[0][58] + w->term[1][41]*w->term[0][59] +
@@ -4239,8 +4122,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][46]*w->term[0][64] + w->term[1][47]*w->term[0][65] +
             w->term[1][48]*w->term[0][66] + w->term[1][49]*w->term[0][67] +
             w->term[1][50]*w->term[0][68] + w->term[1][51]*w->term[0][69] +
-            w->term[1][52]*w->term[0][70] + w->term[1][53]*w->term[0][71]; t->Qd[2][3] = v;
-            t->Qd[3][2] = v; check += v - v;
+            w->term[1][52]*w->term[0][70] + w->term[1][53]*w->term[0][71]; t->Qd[42] = v; check += v
+            - v;
     v = w->term[1][36]*w->term[0][72] + w->term[1][37]*w->term[0][73] +
             w->term[1][38]*w->term[0][74] + w->term[1][39]*w->term[0][75] +
             w->term[1][40]*w->term[0][76] + w->term[1][41]*w->term[0][77] +
@@ -4249,8 +4132,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][46]*w->term[0][82] + w->term[1][47]*w->term[0][83] +
             w->term[1][48]*w->term[0][84] + w->term[1][49]*w->term[0][85] +
             w->term[1][50]*w->term[0][86] + w->term[1][51]*w->term[0][87] +
-            w->term[1][52]*w->term[0][88] + w->term[1][53]*w->term[0][89]; t->Qd[2][4] = v;
-            t->Qd[4][2] = v; check += v - v;
+            w->term[1][52]*w->term[0][88] + w->term[1][53]*w->term[0][89]; t->Qd[43] = v; check += v
+            - v;
     v = w->term[1][36]*w->term[0][90] + w->term[1][37]*w->term[0][91] +
             w->term[1][38]*w->term[0][92] + w->term[1][39]*w->term[0][93] +
             w->term[1][40]*w->term[0][94] + w->term[1][41]*w->term[0][95] +
@@ -4259,8 +4142,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][46]*w->term[0][100] + w->term[1][47]*w->term[0][101] +
             w->term[1][48]*w->term[0][102] + w->term[1][49]*w->term[0][103] +
             w->term[1][50]*w->term[0][104] + w->term[1][51]*w->term[0][105] +
-            w->term[1][52]*w->term[0][106] + w->term[1][53]*w->term[0][107]; t->Qd[2][5] = v;
-            t->Qd[5][2] = v; check += v - v;
+            w->term[1][52]*w->term[0][106] + w->term[1][53]*w->term[0][107]; t->Qd[44] = v; check +=
+            v - v;
     v = w->term[1][36]*w->term[0][108] + w->term[1][37]*w->term[0][109] +
             w->term[1][38]*w->term[0][110] + w->term[1][39]*w->term[0][111] +
             w->term[1][40]*w->term[0][112] + w->term[1][41]*w->term[0][113] +
@@ -4269,8 +4152,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][46]*w->term[0][118] + w->term[1][47]*w->term[0][119] +
             w->term[1][48]*w->term[0][120] + w->term[1][49]*w->term[0][121] +
             w->term[1][50]*w->term[0][122] + w->term[1][51]*w->term[0][123] +
-            w->term[1][52]*w->term[0][124] + w->term[1][53]*w->term[0][125]; t->Qd[2][6] = v;
-            t->Qd[6][2] = v; check += v - v;
+            w->term[1][52]*w->term[0][124] + w->term[1][53]*w->term[0][125]; t->Qd[45] = v; check +=
+            v - v;
     v = w->term[1][36]*w->term[0][126] + w->term[1][37]*w->term[0][127] +
             w->term[1][38]*w->term[0][128] + w->term[1][39]*w->term[0][129] +
             w->term[1][40]*w->term[0][130] + w->term[1][41]*w->term[0][131] +
@@ -4279,8 +4162,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][46]*w->term[0][136] + w->term[1][47]*w->term[0][137] +
             w->term[1][48]*w->term[0][138] + w->term[1][49]*w->term[0][139] +
             w->term[1][50]*w->term[0][140] + w->term[1][51]*w->term[0][141] +
-            w->term[1][52]*w->term[0][142] + w->term[1][53]*w->term[0][143]; t->Qd[2][7] = v;
-            t->Qd[7][2] = v; check += v - v;
+            w->term[1][52]*w->term[0][142] + w->term[1][53]*w->term[0][143]; t->Qd[46] = v; check +=
+            v - v;
     v = w->term[1][36]*w->term[0][144] + w->term[1][37]*w->term[0][145] +
             w->term[1][38]*w->term[0][146] + w->term[1][39]*w->term[0][147] +
             w->term[1][40]*w->term[0][148] + w->term[1][41]*w->term[0][149] +
@@ -4289,20 +4172,20 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][46]*w->term[0][154] + w->term[1][47]*w->term[0][155] +
             w->term[1][48]*w->term[0][156] + w->term[1][49]*w->term[0][157] +
             w->term[1][50]*w->term[0][158] + w->term[1][51]*w->term[0][159] +
-            w->term[1][52]*w->term[0][160] + w->term[1][53]*w->term[0][161]; t->Qd[2][8] = v;
-            t->Qd[8][2] = v; check += v - v;
-    v = w->term[1][42]*w->term[0][162]; t->Qd[2][9] = v; t->Qd[9][2] = v; check += v - v;
-    v = w->term[1][43]*w->term[0][163]; t->Qd[2][10] = v; t->Qd[10][2] = v; check += v - v;
-    v = w->term[1][44]*w->term[0][164]; t->Qd[2][11] = v; t->Qd[11][2] = v; check += v - v;
-    v = w->term[1][45]*w->term[0][165]; t->Qd[2][12] = v; t->Qd[12][2] = v; check += v - v;
-    v = w->term[1][46]*w->term[0][166]; t->Qd[2][13] = v; t->Qd[13][2] = v; check += v - v;
-    v = w->term[1][47]*w->term[0][167]; t->Qd[2][14] = v; t->Qd[14][2] = v; check += v - v;
-    v = w->term[1][48]*w->term[0][168]; t->Qd[2][15] = v; t->Qd[15][2] = v; check += v - v;
-    v = w->term[1][49]*w->term[0][169]; t->Qd[2][16] = v; t->Qd[16][2] = v; check += v - v;
-    v = w->term[1][50]*w->term[0][170]; t->Qd[2][17] = v; t->Qd[17][2] = v; check += v - v;
-    v = w->term[1][51]*w->term[0][171]; t->Qd[2][18] = v; t->Qd[18][2] = v; check += v - v;
-    v = w->term[1][52]*w->term[0][172]; t->Qd[2][19] = v; t->Qd[19][2] = v; check += v - v;
-    v = w->term[1][53]*w->term[0][173]; t->Qd[2][20] = v; t->Qd[20][2] = v; check += v - v;
+            w->term[1][52]*w->term[0][160] + w->term[1][53]*w->term[0][161]; t->Qd[47] = v; check +=
+            v - v;
+    v = w->term[1][42]*w->term[0][162]; t->Qd[48] = v; check += v - v;
+    v = w->term[1][43]*w->term[0][163]; t->Qd[49] = v; check += v - v;
+    v = w->term[1][44]*w->term[0][164]; t->Qd[50] = v; check += v - v;
+    v = w->term[1][45]*w->term[0][165]; t->Qd[51] = v; check += v - v;
+    v = w->term[1][46]*w->term[0][166]; t->Qd[52] = v; check += v - v;
+    v = w->term[1][47]*w->term[0][167]; t->Qd[53] = v; check += v - v;
+    v = w->term[1][48]*w->term[0][168]; t->Qd[54] = v; check += v - v;
+    v = w->term[1][49]*w->term[0][169]; t->Qd[55] = v; check += v - v;
+    v = w->term[1][50]*w->term[0][170]; t->Qd[56] = v; check += v - v;
+    v = w->term[1][51]*w->term[0][171]; t->Qd[57] = v; check += v - v;
+    v = w->term[1][52]*w->term[0][172]; t->Qd[58] = v; check += v - v;
+    v = w->term[1][53]*w->term[0][173]; t->Qd[59] = v; check += v - v;
     v = w->term[1][54]*w->term[0][54] + w->term[1][55]*w->term[0][55] +
             w->term[1][56]*w->term[0][56] + w->term[1][57]*w->term[0][57] +
             w->term[1][58]*w->term[0][58] + w->term[1][59]*w->term[0][59] +
@@ -4311,8 +4194,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][64]*w->term[0][64] + w->term[1][65]*w->term[0][65] +
             w->term[1][66]*w->term[0][66] + w->term[1][67]*w->term[0][67] +
             w->term[1][68]*w->term[0][68] + w->term[1][69]*w->term[0][69] +
-            w->term[1][70]*w->term[0][70] + w->term[1][71]*w->term[0][71]; t->Qd[3][3] = v; check +=
-            v - v;
+            w->term[1][70]*w->term[0][70] + w->term[1][71]*w->term[0][71]; t->Qd[60] = v; check += v
+            - v;
     v = w->term[1][54]*w->term[0][72] + w->term[1][55]*w->term[0][73] +
             w->term[1][56]*w->term[0][74] + w->term[1][57]*w->term[0][75] +
             w->term[1][58]*w->term[0][76] + w->term[1][59]*w->term[0][77] +
@@ -4321,8 +4204,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][64]*w->term[0][82] + w->term[1][65]*w->term[0][83] +
             w->term[1][66]*w->term[0][84] + w->term[1][67]*w->term[0][85] +
             w->term[1][68]*w->term[0][86] + w->term[1][69]*w->term[0][87] +
-            w->term[1][70]*w->term[0][88] + w->term[1][71]*w->term[0][89]; t->Qd[3][4] = v;
-            t->Qd[4][3] = v; check += v - v;
+            w->term[1][70]*w->term[0][88] + w->term[1][71]*w->term[0][89]; t->Qd[61] = v; check += v
+            - v;
     v = w->term[1][54]*w->term[0][90] + w->term[1][55]*w->term[0][91] +
             w->term[1][56]*w->term[0][92] + w->term[1][57]*w->term[0][93] +
             w->term[1][58]*w->term[0][94] + w->term[1][59]*w->term[0][95] +
@@ -4331,8 +4214,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][64]*w->term[0][100] + w->term[1][65]*w->term[0][101] +
             w->term[1][66]*w->term[0][102] + w->term[1][67]*w->term[0][103] +
             w->term[1][68]*w->term[0][104] + w->term[1][69]*w->term[0][105] +
-            w->term[1][70]*w->term[0][106] + w->term[1][71]*w->term[0][107]; t->Qd[3][5] = v;
-            t->Qd[5][3] = v; check += v - v;
+            w->term[1][70]*w->term[0][106] + w->term[1][71]*w->term[0][107]; t->Qd[62] = v; check +=
+            v - v;
     v = w->term[1][54]*w->term[0][108] + w->term[1][55]*w->term[0][109] +
             w->term[1][56]*w->term[0][110] + w->term[1][57]*w->term[0][111] +
             w->term[1][58]*w->term[0][112] + w->term[1][59]*w->term[0][113] +
@@ -4341,8 +4224,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][64]*w->term[0][118] + w->term[1][65]*w->term[0][119] +
             w->term[1][66]*w->term[0][120] + w->term[1][67]*w->term[0][121] +
             w->term[1][68]*w->term[0][122] + w->term[1][69]*w->term[0][123] +
-            w->term[1][70]*w->term[0][124] + w->term[1][71]*w->term[0][125]; t->Qd[3][6] = v;
-            t->Qd[6][3] = v; check += v - v;
+            w->term[1][70]*w->term[0][124] + w->term[1][71]*w->term[0][125]; t->Qd[63] = v; check +=
+            v - v;
     v = w->term[1][54]*w->term[0][126] + w->term[1][55]*w->term[0][127] +
             w->term[1][56]*w->term[0][128] + w->term[1][57]*w->term[0][129] +
             w->term[1][58]*w->term[0][130] + w->term[1][59]*w->term[0][131] +
@@ -4351,8 +4234,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][64]*w->term[0][136] + w->term[1][65]*w->term[0][137] +
             w->term[1][66]*w->term[0][138] + w->term[1][67]*w->term[0][139] +
             w->term[1][68]*w->term[0][140] + w->term[1][69]*w->term[0][141] +
-            w->term[1][70]*w->term[0][142] + w->term[1][71]*w->term[0][143]; t->Qd[3][7] = v;
-            t->Qd[7][3] = v; check += v - v;
+            w->term[1][70]*w->term[0][142] + w->term[1][71]*w->term[0][143]; t->Qd[64] = v; check +=
+            v - v;
     v = w->term[1][54]*w->term[0][144] + w->term[1][55]*w->term[0][145] +
             w->term[1][56]*w->term[0][146] + w->term[1][57]*w->term[0][147] +
             w->term[1][58]*w->term[0][148] + w->term[1][59]*w->term[0][149] +
@@ -4361,20 +4244,20 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][64]*w->term[0][154] + w->term[1][65]*w->term[0][155] +
             w->term[1][66]*w->term[0][156] + w->term[1][67]*w->term[0][157] +
             w->term[1][68]*w->term[0][158] + w->term[1][69]*w->term[0][159] +
-            w->term[1][70]*w->term[0][160] + w->term[1][71]*w->term[0][161]; t->Qd[3][8] = v;
-            t->Qd[8][3] = v; check += v - v;
-    v = w->term[1][60]*w->term[0][162]; t->Qd[3][9] = v; t->Qd[9][3] = v; check += v - v;
-    v = w->term[1][61]*w->term[0][163]; t->Qd[3][10] = v; t->Qd[10][3] = v; check += v - v;
-    v = w->term[1][62]*w->term[0][164]; t->Qd[3][11] = v; t->Qd[11][3] = v; check += v - v;
-    v = w->term[1][63]*w->term[0][165]; t->Qd[3][12] = v; t->Qd[12][3] = v; check += v - v;
-    v = w->term[1][64]*w->term[0][166]; t->Qd[3][13] = v; t->Qd[13][3] = v; check += v - v;
-    v = w->term[1][65]*w->term[0][167]; t->Qd[3][14] = v; t->Qd[14][3] = v; check += v - v;
-    v = w->term[1][66]*w->term[0][168]; t->Qd[3][15] = v; t->Qd[15][3] = v; check += v - v;
-    v = w->term[1][67]*w->term[0][169]; t->Qd[3][16] = v; t->Qd[16][3] = v; check += v - v;
-    v = w->term[1][68]*w->term[0][170]; t->Qd[3][17] = v; t->Qd[17][3] = v; check += v - v;
-    v = w->term[1][69]*w->term[0][171]; t->Qd[3][18] = v; t->Qd[18][3] = v; check += v - v;
-    v = w->term[1][70]*w->term[0][172]; t->Qd[3][19] = v; t->Qd[19][3] = v; check += v - v;
-    v = w->term[1][71]*w->term[0][173]; t->Qd[3][20] = v; t->Qd[20][3] = v; check += v - v;
+            w->term[1][70]*w->term[0][160] + w->term[1][71]*w->term[0][161]; t->Qd[65] = v; check +=
+            v - v;
+    v = w->term[1][60]*w->term[0][162]; t->Qd[66] = v; check += v - v;
+    v = w->term[1][61]*w->term[0][163]; t->Qd[67] = v; check += v - v;
+    v = w->term[1][62]*w->term[0][164]; t->Qd[68] = v; check += v - v;
+    v = w->term[1][63]*w->term[0][165]; t->Qd[69] = v; check += v - v;
+    v = w->term[1][64]*w->term[0][166]; t->Qd[70] = v; check += v - v;
+    v = w->term[1][65]*w->term[0][167]; t->Qd[71] = v; check += v - v;
+    v = w->term[1][66]*w->term[0][168]; t->Qd[72] = v; check += v - v;
+    v = w->term[1][67]*w->term[0][169]; t->Qd[73] = v; check += v - v;
+    v = w->term[1][68]*w->term[0][170]; t->Qd[74] = v; check += v - v;
+    v = w->term[1][69]*w->term[0][171]; t->Qd[75] = v; check += v - v;
+    v = w->term[1][70]*w->term[0][172]; t->Qd[76] = v; check += v - v;
+    v = w->term[1][71]*w->term[0][173]; t->Qd[77] = v; check += v - v;
     v = w->term[1][72]*w->term[0][72] + w->term[1][73]*w->term[0][73] +
             w->term[1][74]*w->term[0][74] + w->term[1][75]*w->term[0][75] +
             w->term[1][76]*w->term[0][76] + w->term[1][77]*w->term[0][77] +
@@ -4383,8 +4266,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][82]*w->term[0][82] + w->term[1][83]*w->term[0][83] +
             w->term[1][84]*w->term[0][84] + w->term[1][85]*w->term[0][85] +
             w->term[1][86]*w->term[0][86] + w->term[1][87]*w->term[0][87] +
-            w->term[1][88]*w->term[0][88] + w->term[1][89]*w->term[0][89]; t->Qd[4][4] = v; check +=
-            v - v;
+            w->term[1][88]*w->term[0][88] + w->term[1][89]*w->term[0][89]; t->Qd[78] = v; check += v
+            - v;
     v = w->term[1][72]*w->term[0][90] + w->term[1][73]*w->term[0][91] +
             w->term[1][74]*w->term[0][92] + w->term[1][75]*w->term[0][93] +
             w->term[1][76]*w->term[0][94] + w->term[1][77]*w->term[0][95] +
@@ -4393,8 +4276,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][82]*w->term[0][100] + w->term[1][83]*w->term[0][101] +
             w->term[1][84]*w->term[0][102] + w->term[1][85]*w->term[0][103] +
             w->term[1][86]*w->term[0][104] + w->term[1][87]*w->term[0][105] +
-            w->term[1][88]*w->term[0][106] + w->term[1][89]*w->term[0][107]; t->Qd[4][5] = v;
-            t->Qd[5][4] = v; check += v - v;
+            w->term[1][88]*w->term[0][106] + w->term[1][89]*w->term[0][107]; t->Qd[79] = v; check +=
+            v - v;
     v = w->term[1][72]*w->term[0][108] + w->term[1][73]*w->term[0][109] +
             w->term[1][74]*w->term[0][110] + w->term[1][75]*w->term[0][111] +
             w->term[1][76]*w->term[0][112] + w->term[1][77]*w->term[0][113] +
@@ -4403,8 +4286,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][82]*w->term[0][118] + w->term[1][83]*w->term[0][119] +
             w->term[1][84]*w->term[0][120] + w->term[1][85]*w->term[0][121] +
             w->term[1][86]*w->term[0][122] + w->term[1][87]*w->term[0][123] +
-            w->term[1][88]*w->term[0][124] + w->term[1][89]*w->term[0][125]; t->Qd[4][6] = v;
-            t->Qd[6][4] = v; check += v - v;
+            w->term[1][88]*w->term[0][124] + w->term[1][89]*w->term[0][125]; t->Qd[80] = v; check +=
+            v - v;
     v = w->term[1][72]*w->term[0][126] + w->term[1][73]*w->term[0][127] +
             w->term[1][74]*w->term[0][128] + w->term[1][75]*w->term[0][129] +
             w->term[1][76]*w->term[0][130] + w->term[1][77]*w->term[0][131] +
@@ -4413,8 +4296,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][82]*w->term[0][136] + w->term[1][83]*w->term[0][137] +
             w->term[1][84]*w->term[0][138] + w->term[1][85]*w->term[0][139] +
             w->term[1][86]*w->term[0][140] + w->term[1][87]*w->term[0][141] +
-            w->term[1][88]*w->term[0][142] + w->term[1][89]*w->term[0][143]; t->Qd[4][7] = v;
-            t->Qd[7][4] = v; check += v - v;
+            w->term[1][88]*w->term[0][142] + w->term[1][89]*w->term[0][143]; t->Qd[81] = v; check +=
+            v - v;
     v = w->term[1][72]*w->term[0][144] + w->term[1][73]*w->term[0][145] +
             w->term[1][74]*w->term[0][146] + w->term[1][75]*w->term[0][147] +
             w->term[1][76]*w->term[0][148] + w->term[1][77]*w->term[0][149] +
@@ -4423,20 +4306,20 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][82]*w->term[0][154] + w->term[1][83]*w->term[0][155] +
             w->term[1][84]*w->term[0][156] + w->term[1][85]*w->term[0][157] +
             w->term[1][86]*w->term[0][158] + w->term[1][87]*w->term[0][159] +
-            w->term[1][88]*w->term[0][160] + w->term[1][89]*w->term[0][161]; t->Qd[4][8] = v;
-            t->Qd[8][4] = v; check += v - v;
-    v = w->term[1][78]*w->term[0][162]; t->Qd[4][9] = v; t->Qd[9][4] = v; check += v - v;
-    v = w->term[1][79]*w->term[0][163]; t->Qd[4][10] = v; t->Qd[10][4] = v; check += v - v;
-    v = w->term[1][80]*w->term[0][164]; t->Qd[4][11] = v; t->Qd[11][4] = v; check += v - v;
-    v = w->term[1][81]*w->term[0][165]; t->Qd[4][12] = v; t->Qd[12][4] = v; check += v - v;
-    v = w->term[1][82]*w->term[0][166]; t->Qd[4][13] = v; t->Qd[13][4] = v; check += v - v;
-    v = w->term[1][83]*w->term[0][167]; t->Qd[4][14] = v; t->Qd[14][4] = v; check += v - v;
-    v = w->term[1][84]*w->term[0][168]; t->Qd[4][15] = v; t->Qd[15][4] = v; check += v - v;
-    v = w->term[1][85]*w->term[0][169]; t->Qd[4][16] = v; t->Qd[16][4] = v; check += v - v;
-    v = w->term[1][86]*w->term[0][170]; t->Qd[4][17] = v; t->Qd[17][4] = v; check += v - v;
-    v = w->term[1][87]*w->term[0][171]; t->Qd[4][18] = v; t->Qd[18][4] = v; check += v - v;
-    v = w->term[1][88]*w->term[0][172]; t->Qd[4][19] = v; t->Qd[19][4] = v; check += v - v;
-    v = w->term[1][89]*w->term[0][173]; t->Qd[4][20] = v; t->Qd[20][4] = v; check += v - v;
+            w->term[1][88]*w->term[0][160] + w->term[1][89]*w->term[0][161]; t->Qd[82] = v; check +=
+            v - v;
+    v = w->term[1][78]*w->term[0][162]; t->Qd[83] = v; check += v - v;
+    v = w->term[1][79]*w->term[0][163]; t->Qd[84] = v; check += v - v;
+    v = w->term[1][80]*w->term[0][164]; t->Qd[85] = v; check += v - v;
+    v = w->term[1][81]*w->term[0][165]; t->Qd[86] = v; check += v - v;
+    v = w->term[1][82]*w->term[0][166]; t->Qd[87] = v; check += v - v;
+    v = w->term[1][83]*w->term[0][167]; t->Qd[88] = v; check += v - v;
+    v = w->term[1][84]*w->term[0][168]; t->Qd[89] = v; check += v - v;
+    v = w->term[1][85]*w->term[0][169]; t->Qd[90] = v; check += v - v;
+    v = w->term[1][86]*w->term[0][170]; t->Qd[91] = v; check += v - v;
+    v = w->term[1][87]*w->term[0][171]; t->Qd[92] = v; check += v - v;
+    v = w->term[1][88]*w->term[0][172]; t->Qd[93] = v; check += v - v;
+    v = w->term[1][89]*w->term[0][173]; t->Qd[94] = v; check += v - v;
     v = w->term[1][90]*w->term[0][90] + w->term[1][91]*w->term[0][91] +
             w->term[1][92]*w->term[0][92] + w->term[1][93]*w->term[0][93] +
             w->term[1][94]*w->term[0][94] + w->term[1][95]*w->term[0][95] +
@@ -4445,8 +4328,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][100]*w->term[0][100] + w->term[1][101]*w->term[0][101] +
             w->term[1][102]*w->term[0][102] + w->term[1][103]*w->term[0][103] +
             w->term[1][104]*w->term[0][104] + w->term[1][105]*w->term[0][105] +
-            w->term[1][106]*w->term[0][106] + w->term[1][107]*w->term[0][107]; t->Qd[5][5] = v;
-            check += v - v;
+            w->term[1][106]*w->term[0][106] + w->term[1][107]*w->term[0][107]; t->Qd[95] = v; check
+            += v - v;
     v = w->term[1][90]*w->term[0][108] + w->term[1][91]*w->term[0][109] +
             w->term[1][92]*w->term[0][110] + w->term[1][93]*w->term[0][111] +
             w->term[1][94]*w->term[0][112] + w->term[1][95]*w->term[0][113] +
@@ -4455,8 +4338,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][100]*w->term[0][118] + w->term[1][101]*w->term[0][119] +
             w->term[1][102]*w->term[0][120] + w->term[1][103]*w->term[0][121] +
             w->term[1][104]*w->term[0][122] + w->term[1][105]*w->term[0][123] +
-            w->term[1][106]*w->term[0][124] + w->term[1][107]*w->term[0][125]; t->Qd[5][6] = v;
-            t->Qd[6][5] = v; check += v - v;
+            w->term[1][106]*w->term[0][124] + w->term[1][107]*w->term[0][125]; t->Qd[96] = v; check
+            += v - v;
     v = w->term[1][90]*w->term[0][126] + w->term[1][91]*w->term[0][127] +
             w->term[1][92]*w->term[0][128] + w->term[1][93]*w->term[0][129] +
             w->term[1][94]*w->term[0][130] + w->term[1][95]*w->term[0][131] +
@@ -4465,8 +4348,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][100]*w->term[0][136] + w->term[1][101]*w->term[0][137] +
             w->term[1][102]*w->term[0][138] + w->term[1][103]*w->term[0][139] +
             w->term[1][104]*w->term[0][140] + w->term[1][105]*w->term[0][141] +
-            w->term[1][106]*w->term[0][142] + w->term[1][107]*w->term[0][143]; t->Qd[5][7] = v;
-            t->Qd[7][5] = v; check += v - v;
+            w->term[1][106]*w->term[0][142] + w->term[1][107]*w->term[0][143]; t->Qd[97] = v; check
+            += v - v;
     v = w->term[1][90]*w->term[0][144] + w->term[1][91]*w->term[0][145] +
             w->term[1][92]*w->term[0][146] + w->term[1][93]*w->term[0][147] +
             w->term[1][94]*w->term[0][148] + w->term[1][95]*w->term[0][149] +
@@ -4475,20 +4358,20 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][100]*w->term[0][154] + w->term[1][101]*w->term[0][155] +
             w->term[1][102]*w->term[0][156] + w->term[1][103]*w->term[0][157] +
             w->term[1][104]*w->term[0][158] + w->term[1][105]*w->term[0][159] +
-            w->term[1][106]*w->term[0][160] + w->term[1][107]*w->term[0][161]; t->Qd[5][8] = v;
-            t->Qd[8][5] = v; check += v - v;
-    v = w->term[1][96]*w->term[0][162]; t->Qd[5][9] = v; t->Qd[9][5] = v; check += v - v;
-    v = w->term[1][97]*w->term[0][163]; t->Qd[5][10] = v; t->Qd[10][5] = v; check += v - v;
-    v = w->term[1][98]*w->term[0][164]; t->Qd[5][11] = v; t->Qd[11][5] = v; check += v - v;
-    v = w->term[1][99]*w->term[0][165]; t->Qd[5][12] = v; t->Qd[12][5] = v; check += v - v;
-    v = w->term[1][100]*w->term[0][166]; t->Qd[5][13] = v; t->Qd[13][5] = v; check += v - v;
-    v = w->term[1][101]*w->term[0][167]; t->Qd[5][14] = v; t->Qd[14][5] = v; check += v - v;
-    v = w->term[1][102]*w->term[0][168]; t->Qd[5][15] = v; t->Qd[15][5] = v; check += v - v;
-    v = w->term[1][103]*w->term[0][169]; t->Qd[5][16] = v; t->Qd[16][5] = v; check += v - v;
-    v = w->term[1][104]*w->term[0][170]; t->Qd[5][17] = v; t->Qd[17][5] = v; check += v - v;
-    v = w->term[1][105]*w->term[0][171]; t->Qd[5][18] = v; t->Qd[18][5] = v; check += v - v;
-    v = w->term[1][106]*w->term[0][172]; t->Qd[5][19] = v; t->Qd[19][5] = v; check += v - v;
-    v = w->term[1][107]*w->term[0][173]; t->Qd[5][20] = v; t->Qd[20][5] = v; check += v - v;
+            w->term[1][106]*w->term[0][160] + w->term[1][107]*w->term[0][161]; t->Qd[98] = v; check
+            += v - v;
+    v = w->term[1][96]*w->term[0][162]; t->Qd[99] = v; check += v - v;
+    v = w->term[1][97]*w->term[0][163]; t->Qd[100] = v; check += v - v;
+    v = w->term[1][98]*w->term[0][164]; t->Qd[101] = v; check += v - v;
+    v = w->term[1][99]*w->term[0][165]; t->Qd[102] = v; check += v - v;
+    v = w->term[1][100]*w->term[0][166]; t->Qd[103] = v; check += v - v;
+    v = w->term[1][101]*w->term[0][167]; t->Qd[104] = v; check += v - v;
+    v = w->term[1][102]*w->term[0][168]; t->Qd[105] = v; check += v - v;
+    v = w->term[1][103]*w->term[0][169]; t->Qd[106] = v; check += v - v;
+    v = w->term[1][104]*w->term[0][170]; t->Qd[107] = v; check += v - v;
+    v = w->term[1][105]*w->term[0][171]; t->Qd[108] = v; check += v - v;
+    v = w->term[1][106]*w->term[0][172]; t->Qd[109] = v; check += v - v;
+    v = w->term[1][107]*w->term[0][173]; t->Qd[110] = v; check += v - v;
     v = w->term[1][108]*w->term[0][108] + w->term[1][109]*w->term[0][109] +
             w->term[1][110]*w->term[0][110] + w->term[1][111]*w->term[0][111] +
             w->term[1][112]*w->term[0][112] + w->term[1][113]*w->term[0][113] +
@@ -4497,8 +4380,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][118]*w->term[0][118] + w->term[1][119]*w->term[0][119] +
             w->term[1][120]*w->term[0][120] + w->term[1][121]*w->term[0][121] +
             w->term[1][122]*w->term[0][122] + w->term[1][123]*w->term[0][123] +
-            w->term[1][124]*w->term[0][124] + w->term[1][125]*w->term[0][125]; t->Qd[6][6] = v;
-            check += v - v;
+            w->term[1][124]*w->term[0][124] + w->term[1][125]*w->term[0][125]; t->Qd[111] = v; check
+            += v - v;
     v = w->term[1][108]*w->term[0][126] + w->term[1][109]*w->term[0][127] +
             w->term[1][110]*w->term[0][128] + w->term[1][111]*w->term[0][129] +
             w->term[1][112]*w->term[0][130] + w->term[1][113]*w->term[0][131] +
@@ -4507,8 +4390,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][118]*w->term[0][136] + w->term[1][119]*w->term[0][137] +
             w->term[1][120]*w->term[0][138] + w->term[1][121]*w->term[0][139] +
             w->term[1][122]*w->term[0][140] + w->term[1][123]*w->term[0][141] +
-            w->term[1][124]*w->term[0][142] + w->term[1][125]*w->term[0][143]; t->Qd[6][7] = v;
-            t->Qd[7][6] = v; check += v - v;
+            w->term[1][124]*w->term[0][142] + w->term[1][125]*w->term[0][143]; t->Qd[112] = v; check
+            += v - v;
     v = w->term[1][108]*w->term[0][144] + w->term[1][109]*w->term[0][145] +
             w->term[1][110]*w->term[0][146] + w->term[1][111]*w->term[0][147] +
             w->term[1][112]*w->term[0][148] + w->term[1][113]*w->term[0][149] +
@@ -4517,20 +4400,20 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][118]*w->term[0][154] + w->term[1][119]*w->term[0][155] +
             w->term[1][120]*w->term[0][156] + w->term[1][121]*w->term[0][157] +
             w->term[1][122]*w->term[0][158] + w->term[1][123]*w->term[0][159] +
-            w->term[1][124]*w->term[0][160] + w->term[1][125]*w->term[0][161]; t->Qd[6][8] = v;
-            t->Qd[8][6] = v; check += v - v;
-    v = w->term[1][114]*w->term[0][162]; t->Qd[6][9] = v; t->Qd[9][6] = v; check += v - v;
-    v = w->term[1][115]*w->term[0][163]; t->Qd[6][10] = v; t->Qd[10][6] = v; check += v - v;
-    v = w->term[1][116]*w->term[0][164]; t->Qd[6][11] = v; t->Qd[11][6] = v; check += v - v;
-    v = w->term[1][117]*w->term[0][165]; t->Qd[6][12] = v; t->Qd[12][6] = v; check += v - v;
-    v = w->term[1][118]*w->term[0][166]; t->Qd[6][13] = v; t->Qd[13][6] = v; check += v - v;
-    v = w->term[1][119]*w->term[0][167]; t->Qd[6][14] = v; t->Qd[14][6] = v; check += v - v;
-    v = w->term[1][120]*w->term[0][168]; t->Qd[6][15] = v; t->Qd[15][6] = v; check += v - v;
-    v = w->term[1][121]*w->term[0][169]; t->Qd[6][16] = v; t->Qd[16][6] = v; check += v - v;
-    v = w->term[1][122]*w->term[0][170]; t->Qd[6][17] = v; t->Qd[17][6] = v; check += v - v;
-    v = w->term[1][123]*w->term[0][171]; t->Qd[6][18] = v; t->Qd[18][6] = v; check += v - v;
-    v = w->term[1][124]*w->term[0][172]; t->Qd[6][19] = v; t->Qd[19][6] = v; check += v - v;
-    v = w->term[1][125]*w->term[0][173]; t->Qd[6][20] = v; t->Qd[20][6] = v; check += v - v;
+            w->term[1][124]*w->term[0][160] + w->term[1][125]*w->term[0][161]; t->Qd[113] = v; check
+            += v - v;
+    v = w->term[1][114]*w->term[0][162]; t->Qd[114] = v; check += v - v;
+    v = w->term[1][115]*w->term[0][163]; t->Qd[115] = v; check += v - v;
+    v = w->term[1][116]*w->term[0][164]; t->Qd[116] = v; check += v - v;
+    v = w->term[1][117]*w->term[0][165]; t->Qd[117] = v; check += v - v;
+    v = w->term[1][118]*w->term[0][166]; t->Qd[118] = v; check += v - v;
+    v = w->term[1][119]*w->term[0][167]; t->Qd[119] = v; check += v - v;
+    v = w->term[1][120]*w->term[0][168]; t->Qd[120] = v; check += v - v;
+    v = w->term[1][121]*w->term[0][169]; t->Qd[121] = v; check += v - v;
+    v = w->term[1][122]*w->term[0][170]; t->Qd[122] = v; check += v - v;
+    v = w->term[1][123]*w->term[0][171]; t->Qd[123] = v; check += v - v;
+    v = w->term[1][124]*w->term[0][172]; t->Qd[124] = v; check += v - v;
+    v = w->term[1][125]*w->term[0][173]; t->Qd[125] = v; check += v - v;
     v = w->term[1][126]*w->term[0][126] + w->term[1][127]*w->term[0][127] +
             w->term[1][128]*w->term[0][128] + w->term[1][129]*w->term[0][129] +
             w->term[1][130]*w->term[0][130] + w->term[1][131]*w->term[0][131] +
@@ -4539,8 +4422,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][136]*w->term[0][136] + w->term[1][137]*w->term[0][137] +
             w->term[1][138]*w->term[0][138] + w->term[1][139]*w->term[0][139] +
             w->term[1][140]*w->term[0][140] + w->term[1][141]*w->term[0][141] +
-            w->term[1][142]*w->term[0][142] + w->term[1][143]*w->term[0][143]; t->Qd[7][7] = v;
-            check += v - v;
+            w->term[1][142]*w->term[0][142] + w->term[1][143]*w->term[0][143]; t->Qd[126] = v; check
+            += v - v;
     v = w->term[1][126]*w->term[0][144] + w->term[1][127]*w->term[0][145] +
             w->term[1][128]*w->term[0][146] + w->term[1][129]*w->term[0][147] +
             w->term[1][130]*w->term[0][148] + w->term[1][131]*w->term[0][149] +
@@ -4549,20 +4432,20 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][136]*w->term[0][154] + w->term[1][137]*w->term[0][155] +
             w->term[1][138]*w->term[0][156] + w->term[1][139]*w->term[0][157] +
             w->term[1][140]*w->term[0][158] + w->term[1][141]*w->term[0][159] +
-            w->term[1][142]*w->term[0][160] + w->term[1][143]*w->term[0][161]; t->Qd[7][8] = v;
-            t->Qd[8][7] = v; check += v - v;
-    v = w->term[1][132]*w->term[0][162]; t->Qd[7][9] = v; t->Qd[9][7] = v; check += v - v;
-    v = w->term[1][133]*w->term[0][163]; t->Qd[7][10] = v; t->Qd[10][7] = v; check += v - v;
-    v = w->term[1][134]*w->term[0][164]; t->Qd[7][11] = v; t->Qd[11][7] = v; check += v - v;
-    v = w->term[1][135]*w->term[0][165]; t->Qd[7][12] = v; t->Qd[12][7] = v; check += v - v;
-    v = w->term[1][136]*w->term[0][166]; t->Qd[7][13] = v; t->Qd[13][7] = v; check += v - v;
-    v = w->term[1][137]*w->term[0][167]; t->Qd[7][14] = v; t->Qd[14][7] = v; check += v - v;
-    v = w->term[1][138]*w->term[0][168]; t->Qd[7][15] = v; t->Qd[15][7] = v; check += v - v;
-    v = w->term[1][139]*w->term[0][169]; t->Qd[7][16] = v; t->Qd[16][7] = v; check += v - v;
-    v = w->term[1][140]*w->term[0][170]; t->Qd[7][17] = v; t->Qd[17][7] = v; check += v - v;
-    v = w->term[1][141]*w->term[0][171]; t->Qd[7][18] = v; t->Qd[18][7] = v; check += v - v;
-    v = w->term[1][142]*w->term[0][172]; t->Qd[7][19] = v; t->Qd[19][7] = v; check += v - v;
-    v = w->term[1][143]*w->term[0][173]; t->Qd[7][20] = v; t->Qd[20][7] = v; check += v - v;
+            w->term[1][142]*w->term[0][160] + w->term[1][143]*w->term[0][161]; t->Qd[127] = v; check
+            += v - v;
+    v = w->term[1][132]*w->term[0][162]; t->Qd[128] = v; check += v - v;
+    v = w->term[1][133]*w->term[0][163]; t->Qd[129] = v; check += v - v;
+    v = w->term[1][134]*w->term[0][164]; t->Qd[130] = v; check += v - v;
+    v = w->term[1][135]*w->term[0][165]; t->Qd[131] = v; check += v - v;
+    v = w->term[1][136]*w->term[0][166]; t->Qd[132] = v; check += v - v;
+    v = w->term[1][137]*w->term[0][167]; t->Qd[133] = v; check += v - v;
+    v = w->term[1][138]*w->term[0][168]; t->Qd[134] = v; check += v - v;
+    v = w->term[1][139]*w->term[0][169]; t->Qd[135] = v; check += v - v;
+    v = w->term[1][140]*w->term[0][170]; t->Qd[136] = v; check += v - v;
+    v = w->term[1][141]*w->term[0][171]; t->Qd[137] = v; check += v - v;
+    v = w->term[1][142]*w->term[0][172]; t->Qd[138] = v; check += v - v;
+    v = w->term[1][143]*w->term[0][173]; t->Qd[139] = v; check += v - v;
     v = w->term[1][144]*w->term[0][144] + w->term[1][145]*w->term[0][145] +
             w->term[1][146]*w->term[0][146] + w->term[1][147]*w->term[0][147] +
             w->term[1][148]*w->term[0][148] + w->term[1][149]*w->term[0][149] +
@@ -4571,164 +4454,98 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][154]*w->term[0][154] + w->term[1][155]*w->term[0][155] +
             w->term[1][156]*w->term[0][156] + w->term[1][157]*w->term[0][157] +
             w->term[1][158]*w->term[0][158] + w->term[1][159]*w->term[0][159] +
-            w->term[1][160]*w->term[0][160] + w->term[1][161]*w->term[0][161]; t->Qd[8][8] = v;
-            check += v - v;
-    v = w->term[1][150]*w->term[0][162]; t->Qd[8][9] = v; t->Qd[9][8] = v; check += v - v;
-    v = w->term[1][151]*w->term[0][163]; t->Qd[8][10] = v; t->Qd[10][8] = v; check += v - v;
-    v = w->term[1][152]*w->term[0][164]; t->Qd[8][11] = v; t->Qd[11][8] = v; check += v - v;
-    v = w->term[1][153]*w->term[0][165]; t->Qd[8][12] = v; t->Qd[12][8] = v; check += v - v;
-    v = w->term[1][154]*w->term[0][166]; t->Qd[8][13] = v; t->Qd[13][8] = v; check += v - v;
-    v = w->term[1][155]*w->term[0][167]; t->Qd[8][14] = v; t->Qd[14][8] = v; check += v - v;
-    v = w->term[1][156]*w->term[0][168]; t->Qd[8][15] = v; t->Qd[15][8] = v; check += v - v;
-    v = w->term[1][157]*w->term[0][169]; t->Qd[8][16] = v; t->Qd[16][8] = v; check += v - v;
-    v = w->term[1][158]*w->term[0][170]; t->Qd[8][17] = v; t->Qd[17][8] = v; check += v - v;
-    v = w->term[1][159]*w->term[0][171]; t->Qd[8][18] = v; t->Qd[18][8] = v; check += v - v;
-    v = w->term[1][160]*w->term[0][172]; t->Qd[8][19] = v; t->Qd[19][8] = v; check += v - v;
-    v = w->term[1][161]*w->term[0][173]; t->Qd[8][20] = v; t->Qd[20][8] = v; check += v - v;
-    v = w->term[1][162]*w->term[0][162]; t->Qd[9][9] = v; check += v - v;
-    v = w->term[1][163]*w->term[0][163]; t->Qd[10][10] = v; check += v - v;
-    v = w->term[1][164]*w->term[0][164]; t->Qd[11][11] = v; check += v - v;
-    v = w->term[1][165]*w->term[0][165]; t->Qd[12][12] = v; check += v - v;
-    v = w->term[1][166]*w->term[0][166]; t->Qd[13][13] = v; check += v - v;
-    v = w->term[1][167]*w->term[0][167]; t->Qd[14][14] = v; check += v - v;
-    v = w->term[1][168]*w->term[0][168]; t->Qd[15][15] = v; check += v - v;
-    v = w->term[1][169]*w->term[0][169]; t->Qd[16][16] = v; check += v - v;
-    v = w->term[1][170]*w->term[0][170]; t->Qd[17][17] = v; check += v - v;
-    v = w->term[1][171]*w->term[0][171]; t->Qd[18][18] = v; check += v - v;
-    v = w->term[1][172]*w->term[0][172]; t->Qd[19][19] = v; check += v - v;
-    v = w->term[1][173]*w->term[0][173]; t->Qd[20][20] = v; check += v - v;
-    t->Qd[9][10] = 0;
-    t->Qd[9][11] = 0;
-    t->Qd[9][12] = 0;
-    t->Qd[9][13] = 0;
-    t->Qd[9][14] = 0;
-    t->Qd[9][15] = 0;
-    t->Qd[9][16] = 0;
-    t->Qd[9][17] = 0;
-    t->Qd[9][18] = 0;
-    t->Qd[9][19] = 0;
-    t->Qd[9][20] = 0;
-    t->Qd[10][9] = 0;
-    t->Qd[10][11] = 0;
-    t->Qd[10][12] = 0;
-    t->Qd[10][13] = 0;
-    t->Qd[10][14] = 0;
-    t->Qd[10][15] = 0;
-    t->Qd[10][16] = 0;
-    t->Qd[10][17] = 0;
-    t->Qd[10][18] = 0;
-    t->Qd[10][19] = 0;
-    t->Qd[10][20] = 0;
-    t->Qd[11][9] = 0;
-    t->Qd[11][10] = 0;
-    t->Qd[11][12] = 0;
-    t->Qd[11][13] = 0;
-    t->Qd[11][14] = 0;
-    t->Qd[11][15] = 0;
-    t->Qd[11][16] = 0;
-    t->Qd[11][17] = 0;
-    t->Qd[11][18] = 0;
-    t->Qd[11][19] = 0;
-    t->Qd[11][20] = 0;
-    t->Qd[12][9] = 0;
-    t->Qd[12][10] = 0;
-    t->Qd[12][11] = 0;
-    t->Qd[12][13] = 0;
-    t->Qd[12][14] = 0;
-    t->Qd[12][15] = 0;
-    t->Qd[12][16] = 0;
-    t->Qd[12][17] = 0;
-    t->Qd[12][18] = 0;
-    t->Qd[12][19] = 0;
-    t->Qd[12][20] = 0;
-    t->Qd[13][9] = 0;
-    t->Qd[13][10] = 0;
-    t->Qd[13][11] = 0;
-    t->Qd[13][12] = 0;
-    t->Qd[13][14] = 0;
-    t->Qd[13][15] = 0;
-    t->Qd[13][16] = 0;
-    t->Qd[13][17] = 0;
-    t->Qd[13][18] = 0;
-    t->Qd[13][19] = 0;
-    t->Qd[13][20] = 0;
-    t->Qd[14][9] = 0;
-    t->Qd[14][10] = 0;
-    t->Qd[14][11] = 0;
-    t->Qd[14][12] = 0;
-    t->Qd[14][13] = 0;
-    t->Qd[14][15] = 0;
-    t->Qd[14][16] = 0;
-    t->Qd[14][17] = 0;
-    t->Qd[14][18] = 0;
-    t->Qd[14][19] = 0;
-    t->Qd[14][20] = 0;
-    t->Qd[15][9] = 0;
-    t->Qd[15][10] = 0;
-    t->Qd[15][11] = 0;
-    t->Qd[15][12] = 0;
-    t->Qd[15][13] = 0;
-    t->Qd[15][14] = 0;
-    t->Qd[15][16] = 0;
-    t->Qd[15][17] = 0;
-    t->Qd[15][18] = 0;
-    t->Qd[15][19] = 0;
-    t->Qd[15][20] = 0;
-    t->Qd[16][9] = 0;
-    t->Qd[16][10] = 0;
-    t->Qd[16][11] = 0;
-    t->Qd[16][12] = 0;
-    t->Qd[16][13] = 0;
-    t->Qd[16][14] = 0;
-    t->Qd[16][15] = 0;
-    t->Qd[16][17] = 0;
-    t->Qd[16][18] = 0;
-    t->Qd[16][19] = 0;
-    t->Qd[16][20] = 0;
-    t->Qd[17][9] = 0;
-    t->Qd[17][10] = 0;
-    t->Qd[17][11] = 0;
-    t->Qd[17][12] = 0;
-    t->Qd[17][13] = 0;
-    t->Qd[17][14] = 0;
-    t->Qd[17][15] = 0;
-    t->Qd[17][16] = 0;
-    t->Qd[17][18] = 0;
-    t->Qd[17][19] = 0;
-    t->Qd[17][20] = 0;
-    t->Qd[18][9] = 0;
-    t->Qd[18][10] = 0;
-    t->Qd[18][11] = 0;
-    t->Qd[18][12] = 0;
-    t->Qd[18][13] = 0;
-    t->Qd[18][14] = 0;
-    t->Qd[18][15] = 0;
-    t->Qd[18][16] = 0;
-    t->Qd[18][17] = 0;
-    t->Qd[18][19] = 0;
-    t->Qd[18][20] = 0;
-    t->Qd[19][9] = 0;
-    t->Qd[19][10] = 0;
-    t->Qd[19][11] = 0;
-    t->Qd[19][12] = 0;
-    t->Qd[19][13] = 0;
-    t->Qd[19][14] = 0;
-    t->Qd[19][15] = 0;
-    t->Qd[19][16] = 0;
-    t->Qd[19][17] = 0;
-    t->Qd[19][18] = 0;
-    t->Qd[19][20] = 0;
-    t->Qd[20][9] = 0;
-    t->Qd[20][10] = 0;
-    t->Qd[20][11] = 0;
-    t->Qd[20][12] = 0;
-    t->Qd[20][13] = 0;
-    t->Qd[20][14] = 0;
-    t->Qd[20][15] = 0;
-    t->Qd[20][16] = 0;
-    t->Qd[20][17] = 0;
-    t->Qd[20][18] = 0;
-    t->Qd[20][19] = 0;
+            w->term[1][160]*w->term[0][160] + w->term[1][161]*w->term[0][161]; t->Qd[140] = v; check
+            += v - v;
+    v = w->term[1][150]*w->term[0][162]; t->Qd[141] = v; check += v - v;
+    v = w->term[1][151]*w->term[0][163]; t->Qd[142] = v; check += v - v;
+    v = w->term[1][152]*w->term[0][164]; t->Qd[143] = v; check += v - v;
+    v = w->term[1][153]*w->term[0][165]; t->Qd[144] = v; check += v - v;
+    v = w->term[1][154]*w->term[0][166]; t->Qd[145] = v; check += v - v;
+    v = w->term[1][155]*w->term[0][167]; t->Qd[146] = v; check += v - v;
+    v = w->term[1][156]*w->term[0][168]; t->Qd[147] = v; check += v - v;
+    v = w->term[1][157]*w->term[0][169]; t->Qd[148] = v; check += v - v;
+    v = w->term[1][158]*w->term[0][170]; t->Qd[149] = v; check += v - v;
+    v = w->term[1][159]*w->term[0][171]; t->Qd[150] = v; check += v - v;
+    v = w->term[1][160]*w->term[0][172]; t->Qd[151] = v; check += v - v;
+    v = w->term[1][161]*w->term[0][173]; t->Qd[152] = v; check += v - v;
+    v = w->term[1][162]*w->term[0][162]; t->Qd[153] = v; check += v - v;
+    v = w->term[1][163]*w->term[0][163]; t->Qd[165] = v; check += v - v;
+    v = w->term[1][164]*w->term[0][164]; t->Qd[176] = v; check += v - v;
+    v = w->term[1][165]*w->term[0][165]; t->Qd[186] = v; check += v - v;
+    v = w->term[1][166]*w->term[0][166]; t->Qd[195] = v; check += v - v;
+    v = w->term[1][167]*w->term[0][167]; t->Qd[203] = v; check += v - v;
+    v = w->term[1][168]*w->term[0][168]; t->Qd[210] = v; check += v - v;
+    v = w->term[1][169]*w->term[0][169]; t->Qd[216] = v; check += v - v;
+    v = w->term[1][170]*w->term[0][170]; t->Qd[221] = v; check += v - v;
+    v = w->term[1][171]*w->term[0][171]; t->Qd[225] = v; check += v - v;
+    v = w->term[1][172]*w->term[0][172]; t->Qd[228] = v; check += v - v;
+    v = w->term[1][173]*w->term[0][173]; t->Qd[230] = v; check += v - v;
+    t->Qd[154] = 0;
+    t->Qd[155] = 0;
+    t->Qd[156] = 0;
+    t->Qd[157] = 0;
+    t->Qd[158] = 0;
+    t->Qd[159] = 0;
+    t->Qd[160] = 0;
+    t->Qd[161] = 0;
+    t->Qd[162] = 0;
+    t->Qd[163] = 0;
+    t->Qd[164] = 0;
+    t->Qd[166] = 0;
+    t->Qd[167] = 0;
+    t->Qd[168] = 0;
+    t->Qd[169] = 0;
+    t->Qd[170] = 0;
+    t->Qd[171] = 0;
+    t->Qd[172] = 0;
+    t->Qd[173] = 0;
+    t->Qd[174] = 0;
+    t->Qd[175] = 0;
+    t->Qd[177] = 0;
+    t->Qd[178] = 0;
+    t->Qd[179] = 0;
+    t->Qd[180] = 0;
+    t->Qd[181] = 0;
+    t->Qd[182] = 0;
+    t->Qd[183] = 0;
+    t->Qd[184] = 0;
+    t->Qd[185] = 0;
+    t->Qd[187] = 0;
+    t->Qd[188] = 0;
+    t->Qd[189] = 0;
+    t->Qd[190] = 0;
+    t->Qd[191] = 0;
+    t->Qd[192] = 0;
+    t->Qd[193] = 0;
+    t->Qd[194] = 0;
+    t->Qd[196] = 0;
+    t->Qd[197] = 0;
+    t->Qd[198] = 0;
+    t->Qd[199] = 0;
+    t->Qd[200] = 0;
+    t->Qd[201] = 0;
+    t->Qd[202] = 0;
+    t->Qd[204] = 0;
+    t->Qd[205] = 0;
+    t->Qd[206] = 0;
+    t->Qd[207] = 0;
+    t->Qd[208] = 0;
+    t->Qd[209] = 0;
+    t->Qd[211] = 0;
+    t->Qd[212] = 0;
+    t->Qd[213] = 0;
+    t->Qd[214] = 0;
+    t->Qd[215] = 0;
+    t->Qd[217] = 0;
+    t->Qd[218] = 0;
+    t->Qd[219] = 0;
+    t->Qd[220] = 0;
+    t->Qd[222] = 0;
+    t->Qd[223] = 0;
+    t->Qd[224] = 0;
+    t->Qd[226] = 0;
+    t->Qd[227] = 0;
+    t->Qd[229] = 0;
     return check;
 }
 
@@ -4740,23 +4557,40 @@ int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scal
     int i, e, c;
     int halvings, order, status;
     int k;
-    ins_gnss21_scalar check = 0.0;
+    ins_gnss21_scalar sum_check;
+    ins_gnss21_scalar check = 0.0, sums[2] = { 0.0, 0.0 };
     if (!isfinite(T)) {
         return INS_GNSS21_ERR_NONFINITE;
     }
     if (!(T > 0.0)) {
         return INS_GNSS21_ERR_NOT_POSITIVE;
     }
-    for (e = 0; e < INS_GNSS21_NNZ_F; ++e) {
-        check += m->F[e] - m->F[e];
+    /* the sum of v - v over F, G and q (0 when all are finite) in two partial sums, two entries a
+            step,
+       which gcc -O2 vectorizes (the order of a sum of zeros and NaNs does not change whether it is
+               0) */
+    for (e = 0; e + 1 < INS_GNSS21_NNZ_F; e += 2) {
+        sums[0] += m->F[e] - m->F[e];
+        sums[1] += m->F[e + 1] - m->F[e + 1];
     }
-    for (e = 0; e < INS_GNSS21_NNZ_G; ++e) {
-        check += m->G[e] - m->G[e];
+    for (; e < INS_GNSS21_NNZ_F; ++e) {
+        sums[0] += m->F[e] - m->F[e];
     }
-    for (c = 0; c < INS_GNSS21_N_NOISES; ++c) {
-        check += m->q[c] - m->q[c];
+    for (e = 0; e + 1 < INS_GNSS21_NNZ_G; e += 2) {
+        sums[0] += m->G[e] - m->G[e];
+        sums[1] += m->G[e + 1] - m->G[e + 1];
     }
-    if (check != 0.0) {
+    for (; e < INS_GNSS21_NNZ_G; ++e) {
+        sums[0] += m->G[e] - m->G[e];
+    }
+    for (e = 0; e + 1 < INS_GNSS21_N_NOISES; e += 2) {
+        sums[0] += m->q[e] - m->q[e];
+        sums[1] += m->q[e + 1] - m->q[e + 1];
+    }
+    for (; e < INS_GNSS21_N_NOISES; ++e) {
+        sums[0] += m->q[e] - m->q[e];
+    }
+    if (sums[0] + sums[1] != 0.0) {
         return INS_GNSS21_ERR_NONFINITE;
     }
     for (c = 0; c < INS_GNSS21_N_NOISES; ++c) {
@@ -4798,10 +4632,18 @@ int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scal
     for (i = 0; i < halvings; ++i) {
         doubling(t, w);
     }
-    check += transition_check(t);
-    for (i = 0; i < INS_GNSS21_N_STATES; ++i) {
-        t->Phi[i][i] += 1.0;
+    /* Phi = I + E, and the sum of its active entries: finite only if every entry is; otherwise (an
+       entry that is not finite, or an overflow of the sum) entry by entry */
+    sum_check = transition_check(t, w);
+    if (sum_check != 0.0) {
+        sum_check = 0.0;
+        for (i = 0; i < INS_GNSS21_N_STATES; ++i) {
+            for (k = 0; k < INS_GNSS21_N_STATES; ++k) {
+                sum_check += t->Phi[i][k] - t->Phi[i][k];
+            }
+        }
     }
+    check += sum_check;
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
@@ -4846,147 +4688,147 @@ void ins_gnss21_reset_error_state(ins_gnss21_filter *f)
 static void phi_times_p_row_0(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
         *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[0][0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] +
+    w->M[0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] +
             t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] +
             t->Phi[0][6]*f->P[6][0] + t->Phi[0][7]*f->P[7][0] + t->Phi[0][8]*f->P[8][0] +
             t->Phi[0][9]*f->P[9][0] + t->Phi[0][10]*f->P[10][0] + t->Phi[0][11]*f->P[11][0] +
             t->Phi[0][12]*f->P[12][0] + t->Phi[0][13]*f->P[13][0] + t->Phi[0][14]*f->P[14][0] +
             t->Phi[0][15]*f->P[15][0] + t->Phi[0][16]*f->P[16][0] + t->Phi[0][17]*f->P[17][0] +
             t->Phi[0][18]*f->P[18][0] + t->Phi[0][19]*f->P[19][0] + t->Phi[0][20]*f->P[20][0];
-    w->M[0][1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] +
+    w->M[1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] +
             t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] +
             t->Phi[0][6]*f->P[6][1] + t->Phi[0][7]*f->P[7][1] + t->Phi[0][8]*f->P[8][1] +
             t->Phi[0][9]*f->P[9][1] + t->Phi[0][10]*f->P[10][1] + t->Phi[0][11]*f->P[11][1] +
             t->Phi[0][12]*f->P[12][1] + t->Phi[0][13]*f->P[13][1] + t->Phi[0][14]*f->P[14][1] +
             t->Phi[0][15]*f->P[15][1] + t->Phi[0][16]*f->P[16][1] + t->Phi[0][17]*f->P[17][1] +
             t->Phi[0][18]*f->P[18][1] + t->Phi[0][19]*f->P[19][1] + t->Phi[0][20]*f->P[20][1];
-    w->M[0][2] = t->Phi[0][0]*f->P[0][2] + t->Phi[0][1]*f->P[1][2] + t->Phi[0][2]*f->P[2][2] +
+    w->M[2] = t->Phi[0][0]*f->P[0][2] + t->Phi[0][1]*f->P[1][2] + t->Phi[0][2]*f->P[2][2] +
             t->Phi[0][3]*f->P[3][2] + t->Phi[0][4]*f->P[4][2] + t->Phi[0][5]*f->P[5][2] +
             t->Phi[0][6]*f->P[6][2] + t->Phi[0][7]*f->P[7][2] + t->Phi[0][8]*f->P[8][2] +
             t->Phi[0][9]*f->P[9][2] + t->Phi[0][10]*f->P[10][2] + t->Phi[0][11]*f->P[11][2] +
             t->Phi[0][12]*f->P[12][2] + t->Phi[0][13]*f->P[13][2] + t->Phi[0][14]*f->P[14][2] +
             t->Phi[0][15]*f->P[15][2] + t->Phi[0][16]*f->P[16][2] + t->Phi[0][17]*f->P[17][2] +
             t->Phi[0][18]*f->P[18][2] + t->Phi[0][19]*f->P[19][2] + t->Phi[0][20]*f->P[20][2];
-    w->M[0][3] = t->Phi[0][0]*f->P[0][3] + t->Phi[0][1]*f->P[1][3] + t->Phi[0][2]*f->P[2][3] +
+    w->M[3] = t->Phi[0][0]*f->P[0][3] + t->Phi[0][1]*f->P[1][3] + t->Phi[0][2]*f->P[2][3] +
             t->Phi[0][3]*f->P[3][3] + t->Phi[0][4]*f->P[4][3] + t->Phi[0][5]*f->P[5][3] +
             t->Phi[0][6]*f->P[6][3] + t->Phi[0][7]*f->P[7][3] + t->Phi[0][8]*f->P[8][3] +
             t->Phi[0][9]*f->P[9][3] + t->Phi[0][10]*f->P[10][3] + t->Phi[0][11]*f->P[11][3] +
             t->Phi[0][12]*f->P[12][3] + t->Phi[0][13]*f->P[13][3] + t->Phi[0][14]*f->P[14][3] +
             t->Phi[0][15]*f->P[15][3] + t->Phi[0][16]*f->P[16][3] + t->Phi[0][17]*f->P[17][3] +
             t->Phi[0][18]*f->P[18][3] + t->Phi[0][19]*f->P[19][3] + t->Phi[0][20]*f->P[20][3];
-    w->M[0][4] = t->Phi[0][0]*f->P[0][4] + t->Phi[0][1]*f->P[1][4] + t->Phi[0][2]*f->P[2][4] +
+    w->M[4] = t->Phi[0][0]*f->P[0][4] + t->Phi[0][1]*f->P[1][4] + t->Phi[0][2]*f->P[2][4] +
             t->Phi[0][3]*f->P[3][4] + t->Phi[0][4]*f->P[4][4] + t->Phi[0][5]*f->P[5][4] +
             t->Phi[0][6]*f->P[6][4] + t->Phi[0][7]*f->P[7][4] + t->Phi[0][8]*f->P[8][4] +
             t->Phi[0][9]*f->P[9][4] + t->Phi[0][10]*f->P[10][4] + t->Phi[0][11]*f->P[11][4] +
             t->Phi[0][12]*f->P[12][4] + t->Phi[0][13]*f->P[13][4] + t->Phi[0][14]*f->P[14][4] +
             t->Phi[0][15]*f->P[15][4] + t->Phi[0][16]*f->P[16][4] + t->Phi[0][17]*f->P[17][4] +
             t->Phi[0][18]*f->P[18][4] + t->Phi[0][19]*f->P[19][4] + t->Phi[0][20]*f->P[20][4];
-    w->M[0][5] = t->Phi[0][0]*f->P[0][5] + t->Phi[0][1]*f->P[1][5] + t->Phi[0][2]*f->P[2][5] +
+    w->M[5] = t->Phi[0][0]*f->P[0][5] + t->Phi[0][1]*f->P[1][5] + t->Phi[0][2]*f->P[2][5] +
             t->Phi[0][3]*f->P[3][5] + t->Phi[0][4]*f->P[4][5] + t->Phi[0][5]*f->P[5][5] +
             t->Phi[0][6]*f->P[6][5] + t->Phi[0][7]*f->P[7][5] + t->Phi[0][8]*f->P[8][5] +
             t->Phi[0][9]*f->P[9][5] + t->Phi[0][10]*f->P[10][5] + t->Phi[0][11]*f->P[11][5] +
             t->Phi[0][12]*f->P[12][5] + t->Phi[0][13]*f->P[13][5] + t->Phi[0][14]*f->P[14][5] +
             t->Phi[0][15]*f->P[15][5] + t->Phi[0][16]*f->P[16][5] + t->Phi[0][17]*f->P[17][5] +
             t->Phi[0][18]*f->P[18][5] + t->Phi[0][19]*f->P[19][5] + t->Phi[0][20]*f->P[20][5];
-    w->M[0][6] = t->Phi[0][0]*f->P[0][6] + t->Phi[0][1]*f->P[1][6] + t->Phi[0][2]*f->P[2][6] +
+    w->M[6] = t->Phi[0][0]*f->P[0][6] + t->Phi[0][1]*f->P[1][6] + t->Phi[0][2]*f->P[2][6] +
             t->Phi[0][3]*f->P[3][6] + t->Phi[0][4]*f->P[4][6] + t->Phi[0][5]*f->P[5][6] +
             t->Phi[0][6]*f->P[6][6] + t->Phi[0][7]*f->P[7][6] + t->Phi[0][8]*f->P[8][6] +
             t->Phi[0][9]*f->P[9][6] + t->Phi[0][10]*f->P[10][6] + t->Phi[0][11]*f->P[11][6] +
             t->Phi[0][12]*f->P[12][6] + t->Phi[0][13]*f->P[13][6] + t->Phi[0][14]*f->P[14][6] +
             t->Phi[0][15]*f->P[15][6] + t->Phi[0][16]*f->P[16][6] + t->Phi[0][17]*f->P[17][6] +
             t->Phi[0][18]*f->P[18][6] + t->Phi[0][19]*f->P[19][6] + t->Phi[0][20]*f->P[20][6];
-    w->M[0][7] = t->Phi[0][0]*f->P[0][7] + t->Phi[0][1]*f->P[1][7] + t->Phi[0][2]*f->P[2][7] +
+    w->M[7] = t->Phi[0][0]*f->P[0][7] + t->Phi[0][1]*f->P[1][7] + t->Phi[0][2]*f->P[2][7] +
             t->Phi[0][3]*f->P[3][7] + t->Phi[0][4]*f->P[4][7] + t->Phi[0][5]*f->P[5][7] +
             t->Phi[0][6]*f->P[6][7] + t->Phi[0][7]*f->P[7][7] + t->Phi[0][8]*f->P[8][7] +
             t->Phi[0][9]*f->P[9][7] + t->Phi[0][10]*f->P[10][7] + t->Phi[0][11]*f->P[11][7] +
             t->Phi[0][12]*f->P[12][7] + t->Phi[0][13]*f->P[13][7] + t->Phi[0][14]*f->P[14][7] +
             t->Phi[0][15]*f->P[15][7] + t->Phi[0][16]*f->P[16][7] + t->Phi[0][17]*f->P[17][7] +
             t->Phi[0][18]*f->P[18][7] + t->Phi[0][19]*f->P[19][7] + t->Phi[0][20]*f->P[20][7];
-    w->M[0][8] = t->Phi[0][0]*f->P[0][8] + t->Phi[0][1]*f->P[1][8] + t->Phi[0][2]*f->P[2][8] +
+    w->M[8] = t->Phi[0][0]*f->P[0][8] + t->Phi[0][1]*f->P[1][8] + t->Phi[0][2]*f->P[2][8] +
             t->Phi[0][3]*f->P[3][8] + t->Phi[0][4]*f->P[4][8] + t->Phi[0][5]*f->P[5][8] +
             t->Phi[0][6]*f->P[6][8] + t->Phi[0][7]*f->P[7][8] + t->Phi[0][8]*f->P[8][8] +
             t->Phi[0][9]*f->P[9][8] + t->Phi[0][10]*f->P[10][8] + t->Phi[0][11]*f->P[11][8] +
             t->Phi[0][12]*f->P[12][8] + t->Phi[0][13]*f->P[13][8] + t->Phi[0][14]*f->P[14][8] +
             t->Phi[0][15]*f->P[15][8] + t->Phi[0][16]*f->P[16][8] + t->Phi[0][17]*f->P[17][8] +
             t->Phi[0][18]*f->P[18][8] + t->Phi[0][19]*f->P[19][8] + t->Phi[0][20]*f->P[20][8];
-    w->M[0][9] = t->Phi[0][0]*f->P[0][9] + t->Phi[0][1]*f->P[1][9] + t->Phi[0][2]*f->P[2][9] +
+    w->M[9] = t->Phi[0][0]*f->P[0][9] + t->Phi[0][1]*f->P[1][9] + t->Phi[0][2]*f->P[2][9] +
             t->Phi[0][3]*f->P[3][9] + t->Phi[0][4]*f->P[4][9] + t->Phi[0][5]*f->P[5][9] +
             t->Phi[0][6]*f->P[6][9] + t->Phi[0][7]*f->P[7][9] + t->Phi[0][8]*f->P[8][9] +
             t->Phi[0][9]*f->P[9][9] + t->Phi[0][10]*f->P[10][9] + t->Phi[0][11]*f->P[11][9] +
             t->Phi[0][12]*f->P[12][9] + t->Phi[0][13]*f->P[13][9] + t->Phi[0][14]*f->P[14][9] +
             t->Phi[0][15]*f->P[15][9] + t->Phi[0][16]*f->P[16][9] + t->Phi[0][17]*f->P[17][9] +
             t->Phi[0][18]*f->P[18][9] + t->Phi[0][19]*f->P[19][9] + t->Phi[0][20]*f->P[20][9];
-    w->M[0][10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] +
+    w->M[10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] +
             t->Phi[0][3]*f->P[3][10] + t->Phi[0][4]*f->P[4][10] + t->Phi[0][5]*f->P[5][10] +
             t->Phi[0][6]*f->P[6][10] + t->Phi[0][7]*f->P[7][10] + t->Phi[0][8]*f->P[8][10] +
             t->Phi[0][9]*f->P[9][10] + t->Phi[0][10]*f->P[10][10] + t->Phi[0][11]*f->P[11][10] +
             t->Phi[0][12]*f->P[12][10] + t->Phi[0][13]*f->P[13][10] + t->Phi[0][14]*f->P[14][10] +
             t->Phi[0][15]*f->P[15][10] + t->Phi[0][16]*f->P[16][10] + t->Phi[0][17]*f->P[17][10] +
             t->Phi[0][18]*f->P[18][10] + t->Phi[0][19]*f->P[19][10] + t->Phi[0][20]*f->P[20][10];
-    w->M[0][11] = t->Phi[0][0]*f->P[0][11] + t->Phi[0][1]*f->P[1][11] + t->Phi[0][2]*f->P[2][11] +
+    w->M[11] = t->Phi[0][0]*f->P[0][11] + t->Phi[0][1]*f->P[1][11] + t->Phi[0][2]*f->P[2][11] +
             t->Phi[0][3]*f->P[3][11] + t->Phi[0][4]*f->P[4][11] + t->Phi[0][5]*f->P[5][11] +
             t->Phi[0][6]*f->P[6][11] + t->Phi[0][7]*f->P[7][11] + t->Phi[0][8]*f->P[8][11] +
             t->Phi[0][9]*f->P[9][11] + t->Phi[0][10]*f->P[10][11] + t->Phi[0][11]*f->P[11][11] +
             t->Phi[0][12]*f->P[12][11] + t->Phi[0][13]*f->P[13][11] + t->Phi[0][14]*f->P[14][11] +
             t->Phi[0][15]*f->P[15][11] + t->Phi[0][16]*f->P[16][11] + t->Phi[0][17]*f->P[17][11] +
             t->Phi[0][18]*f->P[18][11] + t->Phi[0][19]*f->P[19][11] + t->Phi[0][20]*f->P[20][11];
-    w->M[0][12] = t->Phi[0][0]*f->P[0][12] + t->Phi[0][1]*f->P[1][12] + t->Phi[0][2]*f->P[2][12] +
+    w->M[12] = t->Phi[0][0]*f->P[0][12] + t->Phi[0][1]*f->P[1][12] + t->Phi[0][2]*f->P[2][12] +
             t->Phi[0][3]*f->P[3][12] + t->Phi[0][4]*f->P[4][12] + t->Phi[0][5]*f->P[5][12] +
             t->Phi[0][6]*f->P[6][12] + t->Phi[0][7]*f->P[7][12] + t->Phi[0][8]*f->P[8][12] +
             t->Phi[0][9]*f->P[9][12] + t->Phi[0][10]*f->P[10][12] + t->Phi[0][11]*f->P[11][12] +
             t->Phi[0][12]*f->P[12][12] + t->Phi[0][13]*f->P[13][12] + t->Phi[0][14]*f->P[14][12] +
             t->Phi[0][15]*f->P[15][12] + t->Phi[0][16]*f->P[16][12] + t->Phi[0][17]*f->P[17][12] +
             t->Phi[0][18]*f->P[18][12] + t->Phi[0][19]*f->P[19][12] + t->Phi[0][20]*f->P[20][12];
-    w->M[0][13] = t->Phi[0][0]*f->P[0][13] + t->Phi[0][1]*f->P[1][13] + t->Phi[0][2]*f->P[2][13] +
+    w->M[13] = t->Phi[0][0]*f->P[0][13] + t->Phi[0][1]*f->P[1][13] + t->Phi[0][2]*f->P[2][13] +
             t->Phi[0][3]*f->P[3][13] + t->Phi[0][4]*f->P[4][13] + t->Phi[0][5]*f->P[5][13] +
             t->Phi[0][6]*f->P[6][13] + t->Phi[0][7]*f->P[7][13] + t->Phi[0][8]*f->P[8][13] +
             t->Phi[0][9]*f->P[9][13] + t->Phi[0][10]*f->P[10][13] + t->Phi[0][11]*f->P[11][13] +
             t->Phi[0][12]*f->P[12][13] + t->Phi[0][13]*f->P[13][13] + t->Phi[0][14]*f->P[14][13] +
             t->Phi[0][15]*f->P[15][13] + t->Phi[0][16]*f->P[16][13] + t->Phi[0][17]*f->P[17][13] +
             t->Phi[0][18]*f->P[18][13] + t->Phi[0][19]*f->P[19][13] + t->Phi[0][20]*f->P[20][13];
-    w->M[0][14] = t->Phi[0][0]*f->P[0][14] + t->Phi[0][1]*f->P[1][14] + t->Phi[0][2]*f->P[2][14] +
+    w->M[14] = t->Phi[0][0]*f->P[0][14] + t->Phi[0][1]*f->P[1][14] + t->Phi[0][2]*f->P[2][14] +
             t->Phi[0][3]*f->P[3][14] + t->Phi[0][4]*f->P[4][14] + t->Phi[0][5]*f->P[5][14] +
             t->Phi[0][6]*f->P[6][14] + t->Phi[0][7]*f->P[7][14] + t->Phi[0][8]*f->P[8][14] +
             t->Phi[0][9]*f->P[9][14] + t->Phi[0][10]*f->P[10][14] + t->Phi[0][11]*f->P[11][14] +
             t->Phi[0][12]*f->P[12][14] + t->Phi[0][13]*f->P[13][14] + t->Phi[0][14]*f->P[14][14] +
             t->Phi[0][15]*f->P[15][14] + t->Phi[0][16]*f->P[16][14] + t->Phi[0][17]*f->P[17][14] +
             t->Phi[0][18]*f->P[18][14] + t->Phi[0][19]*f->P[19][14] + t->Phi[0][20]*f->P[20][14];
-    w->M[0][15] = t->Phi[0][0]*f->P[0][15] + t->Phi[0][1]*f->P[1][15] + t->Phi[0][2]*f->P[2][15] +
+    w->M[15] = t->Phi[0][0]*f->P[0][15] + t->Phi[0][1]*f->P[1][15] + t->Phi[0][2]*f->P[2][15] +
             t->Phi[0][3]*f->P[3][15] + t->Phi[0][4]*f->P[4][15] + t->Phi[0][5]*f->P[5][15] +
             t->Phi[0][6]*f->P[6][15] + t->Phi[0][7]*f->P[7][15] + t->Phi[0][8]*f->P[8][15] +
             t->Phi[0][9]*f->P[9][15] + t->Phi[0][10]*f->P[10][15] + t->Phi[0][11]*f->P[11][15] +
             t->Phi[0][12]*f->P[12][15] + t->Phi[0][13]*f->P[13][15] + t->Phi[0][14]*f->P[14][15] +
             t->Phi[0][15]*f->P[15][15] + t->Phi[0][16]*f->P[16][15] + t->Phi[0][17]*f->P[17][15] +
             t->Phi[0][18]*f->P[18][15] + t->Phi[0][19]*f->P[19][15] + t->Phi[0][20]*f->P[20][15];
-    w->M[0][16] = t->Phi[0][0]*f->P[0][16] + t->Phi[0][1]*f->P[1][16] + t->Phi[0][2]*f->P[2][16] +
+    w->M[16] = t->Phi[0][0]*f->P[0][16] + t->Phi[0][1]*f->P[1][16] + t->Phi[0][2]*f->P[2][16] +
             t->Phi[0][3]*f->P[3][16] + t->Phi[0][4]*f->P[4][16] + t->Phi[0][5]*f->P[5][16] +
             t->Phi[0][6]*f->P[6][16] + t->Phi[0][7]*f->P[7][16] + t->Phi[0][8]*f->P[8][16] +
             t->Phi[0][9]*f->P[9][16] + t->Phi[0][10]*f->P[10][16] + t->Phi[0][11]*f->P[11][16] +
             t->Phi[0][12]*f->P[12][16] + t->Phi[0][13]*f->P[13][16] + t->Phi[0][14]*f->P[14][16] +
             t->Phi[0][15]*f->P[15][16] + t->Phi[0][16]*f->P[16][16] + t->Phi[0][17]*f->P[17][16] +
             t->Phi[0][18]*f->P[18][16] + t->Phi[0][19]*f->P[19][16] + t->Phi[0][20]*f->P[20][16];
-    w->M[0][17] = t->Phi[0][0]*f->P[0][17] + t->Phi[0][1]*f->P[1][17] + t->Phi[0][2]*f->P[2][17] +
+    w->M[17] = t->Phi[0][0]*f->P[0][17] + t->Phi[0][1]*f->P[1][17] + t->Phi[0][2]*f->P[2][17] +
             t->Phi[0][3]*f->P[3][17] + t->Phi[0][4]*f->P[4][17] + t->Phi[0][5]*f->P[5][17] +
             t->Phi[0][6]*f->P[6][17] + t->Phi[0][7]*f->P[7][17] + t->Phi[0][8]*f->P[8][17] +
             t->Phi[0][9]*f->P[9][17] + t->Phi[0][10]*f->P[10][17] + t->Phi[0][11]*f->P[11][17] +
             t->Phi[0][12]*f->P[12][17] + t->Phi[0][13]*f->P[13][17] + t->Phi[0][14]*f->P[14][17] +
             t->Phi[0][15]*f->P[15][17] + t->Phi[0][16]*f->P[16][17] + t->Phi[0][17]*f->P[17][17] +
             t->Phi[0][18]*f->P[18][17] + t->Phi[0][19]*f->P[19][17] + t->Phi[0][20]*f->P[20][17];
-    w->M[0][18] = t->Phi[0][0]*f->P[0][18] + t->Phi[0][1]*f->P[1][18] + t->Phi[0][2]*f->P[2][18] +
+    w->M[18] = t->Phi[0][0]*f->P[0][18] + t->Phi[0][1]*f->P[1][18] + t->Phi[0][2]*f->P[2][18] +
             t->Phi[0][3]*f->P[3][18] + t->Phi[0][4]*f->P[4][18] + t->Phi[0][5]*f->P[5][18] +
             t->Phi[0][6]*f->P[6][18] + t->Phi[0][7]*f->P[7][18] + t->Phi[0][8]*f->P[8][18] +
             t->Phi[0][9]*f->P[9][18] + t->Phi[0][10]*f->P[10][18] + t->Phi[0][11]*f->P[11][18] +
             t->Phi[0][12]*f->P[12][18] + t->Phi[0][13]*f->P[13][18] + t->Phi[0][14]*f->P[14][18] +
             t->Phi[0][15]*f->P[15][18] + t->Phi[0][16]*f->P[16][18] + t->Phi[0][17]*f->P[17][18] +
             t->Phi[0][18]*f->P[18][18] + t->Phi[0][19]*f->P[19][18] + t->Phi[0][20]*f->P[20][18];
-    w->M[0][19] = t->Phi[0][0]*f->P[0][19] + t->Phi[0][1]*f->P[1][19] + t->Phi[0][2]*f->P[2][19] +
+    w->M[19] = t->Phi[0][0]*f->P[0][19] + t->Phi[0][1]*f->P[1][19] + t->Phi[0][2]*f->P[2][19] +
             t->Phi[0][3]*f->P[3][19] + t->Phi[0][4]*f->P[4][19] + t->Phi[0][5]*f->P[5][19] +
             t->Phi[0][6]*f->P[6][19] + t->Phi[0][7]*f->P[7][19] + t->Phi[0][8]*f->P[8][19] +
             t->Phi[0][9]*f->P[9][19] + t->Phi[0][10]*f->P[10][19] + t->Phi[0][11]*f->P[11][19] +
             t->Phi[0][12]*f->P[12][19] + t->Phi[0][13]*f->P[13][19] + t->Phi[0][14]*f->P[14][19] +
             t->Phi[0][15]*f->P[15][19] + t->Phi[0][16]*f->P[16][19] + t->Phi[0][17]*f->P[17][19] +
             t->Phi[0][18]*f->P[18][19] + t->Phi[0][19]*f->P[19][19] + t->Phi[0][20]*f->P[20][19];
-    w->M[0][20] = t->Phi[0][0]*f->P[0][20] + t->Phi[0][1]*f->P[1][20] + t->Phi[0][2]*f->P[2][20] +
+    w->M[20] = t->Phi[0][0]*f->P[0][20] + t->Phi[0][1]*f->P[1][20] + t->Phi[0][2]*f->P[2][20] +
             t->Phi[0][3]*f->P[3][20] + t->Phi[0][4]*f->P[4][20] + t->Phi[0][5]*f->P[5][20] +
             t->Phi[0][6]*f->P[6][20] + t->Phi[0][7]*f->P[7][20] + t->Phi[0][8]*f->P[8][20] +
             t->Phi[0][9]*f->P[9][20] + t->Phi[0][10]*f->P[10][20] + t->Phi[0][11]*f->P[11][20] +
@@ -4995,150 +4837,242 @@ static void phi_times_p_row_0(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[0][18]*f->P[18][20] + t->Phi[0][19]*f->P[19][20] + t->Phi[0][20]*f->P[20][20];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ins_gnss21_scalar propagate_row_0(const ins_gnss21_transition *restrict t,
+        ins_gnss21_filter_scratch *restrict w)
+{
+    ins_gnss21_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[0][0] + w->M[1]*t->Phi[0][1] + w->M[2]*t->Phi[0][2] + w->M[3]*t->Phi[0][3] +
+            w->M[4]*t->Phi[0][4] + w->M[5]*t->Phi[0][5] + w->M[6]*t->Phi[0][6] +
+            w->M[7]*t->Phi[0][7] + w->M[8]*t->Phi[0][8] + w->M[9]*t->Phi[0][9] +
+            w->M[10]*t->Phi[0][10] + w->M[11]*t->Phi[0][11] + w->M[12]*t->Phi[0][12] +
+            w->M[13]*t->Phi[0][13] + w->M[14]*t->Phi[0][14] + w->M[15]*t->Phi[0][15] +
+            w->M[16]*t->Phi[0][16] + w->M[17]*t->Phi[0][17] + w->M[18]*t->Phi[0][18] +
+            w->M[19]*t->Phi[0][19] + w->M[20]*t->Phi[0][20] + t->Qd[0]; w->Pn[0] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
+            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[6]*t->Phi[1][6] +
+            w->M[7]*t->Phi[1][7] + w->M[8]*t->Phi[1][8] + w->M[9]*t->Phi[1][9] +
+            w->M[10]*t->Phi[1][10] + w->M[11]*t->Phi[1][11] + w->M[12]*t->Phi[1][12] +
+            w->M[13]*t->Phi[1][13] + w->M[14]*t->Phi[1][14] + w->M[15]*t->Phi[1][15] +
+            w->M[16]*t->Phi[1][16] + w->M[17]*t->Phi[1][17] + w->M[18]*t->Phi[1][18] +
+            w->M[19]*t->Phi[1][19] + w->M[20]*t->Phi[1][20] + t->Qd[1]; w->Pn[1] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[6]*t->Phi[2][6] +
+            w->M[7]*t->Phi[2][7] + w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] +
+            w->M[10]*t->Phi[2][10] + w->M[11]*t->Phi[2][11] + w->M[12]*t->Phi[2][12] +
+            w->M[13]*t->Phi[2][13] + w->M[14]*t->Phi[2][14] + w->M[15]*t->Phi[2][15] +
+            w->M[16]*t->Phi[2][16] + w->M[17]*t->Phi[2][17] + w->M[18]*t->Phi[2][18] +
+            w->M[19]*t->Phi[2][19] + w->M[20]*t->Phi[2][20] + t->Qd[2]; w->Pn[2] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
+            w->M[7]*t->Phi[3][7] + w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] +
+            w->M[10]*t->Phi[3][10] + w->M[11]*t->Phi[3][11] + w->M[12]*t->Phi[3][12] +
+            w->M[13]*t->Phi[3][13] + w->M[14]*t->Phi[3][14] + w->M[15]*t->Phi[3][15] +
+            w->M[16]*t->Phi[3][16] + w->M[17]*t->Phi[3][17] + w->M[18]*t->Phi[3][18] +
+            w->M[19]*t->Phi[3][19] + w->M[20]*t->Phi[3][20] + t->Qd[3]; w->Pn[3] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] +
+            w->M[10]*t->Phi[4][10] + w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] +
+            w->M[13]*t->Phi[4][13] + w->M[14]*t->Phi[4][14] + w->M[15]*t->Phi[4][15] +
+            w->M[16]*t->Phi[4][16] + w->M[17]*t->Phi[4][17] + w->M[18]*t->Phi[4][18] +
+            w->M[19]*t->Phi[4][19] + w->M[20]*t->Phi[4][20] + t->Qd[4]; w->Pn[4] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] +
+            w->M[10]*t->Phi[5][10] + w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] +
+            w->M[13]*t->Phi[5][13] + w->M[14]*t->Phi[5][14] + w->M[15]*t->Phi[5][15] +
+            w->M[16]*t->Phi[5][16] + w->M[17]*t->Phi[5][17] + w->M[18]*t->Phi[5][18] +
+            w->M[19]*t->Phi[5][19] + w->M[20]*t->Phi[5][20] + t->Qd[5]; w->Pn[5] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[16]*t->Phi[6][16] + w->M[17]*t->Phi[6][17] + w->M[18]*t->Phi[6][18] +
+            w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] + t->Qd[6]; w->Pn[6] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + w->M[15]*t->Phi[7][15] +
+            w->M[16]*t->Phi[7][16] + w->M[17]*t->Phi[7][17] + w->M[18]*t->Phi[7][18] +
+            w->M[19]*t->Phi[7][19] + w->M[20]*t->Phi[7][20] + t->Qd[7]; w->Pn[7] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] +
+            w->M[10]*t->Phi[8][10] + w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] +
+            w->M[13]*t->Phi[8][13] + w->M[14]*t->Phi[8][14] + w->M[15]*t->Phi[8][15] +
+            w->M[16]*t->Phi[8][16] + w->M[17]*t->Phi[8][17] + w->M[18]*t->Phi[8][18] +
+            w->M[19]*t->Phi[8][19] + w->M[20]*t->Phi[8][20] + t->Qd[8]; w->Pn[8] = v; check += v -
+            v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[9]; w->Pn[9] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[10]; w->Pn[10] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[11]; w->Pn[11] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[12]; w->Pn[12] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[13]; w->Pn[13] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[14]; w->Pn[14] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[15]; w->Pn[15] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16] + t->Qd[16]; w->Pn[16] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17] + t->Qd[17]; w->Pn[17] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18] + t->Qd[18]; w->Pn[18] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19] + t->Qd[19]; w->Pn[19] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20] + t->Qd[20]; w->Pn[20] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_1(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
         *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[1][0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] +
+    w->M[0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] +
             t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] +
             t->Phi[1][6]*f->P[6][0] + t->Phi[1][7]*f->P[7][0] + t->Phi[1][8]*f->P[8][0] +
             t->Phi[1][9]*f->P[9][0] + t->Phi[1][10]*f->P[10][0] + t->Phi[1][11]*f->P[11][0] +
             t->Phi[1][12]*f->P[12][0] + t->Phi[1][13]*f->P[13][0] + t->Phi[1][14]*f->P[14][0] +
             t->Phi[1][15]*f->P[15][0] + t->Phi[1][16]*f->P[16][0] + t->Phi[1][17]*f->P[17][0] +
             t->Phi[1][18]*f->P[18][0] + t->Phi[1][19]*f->P[19][0] + t->Phi[1][20]*f->P[20][0];
-    w->M[1][1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] +
+    w->M[1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] +
             t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] +
             t->Phi[1][6]*f->P[6][1] + t->Phi[1][7]*f->P[7][1] + t->Phi[1][8]*f->P[8][1] +
             t->Phi[1][9]*f->P[9][1] + t->Phi[1][10]*f->P[10][1] + t->Phi[1][11]*f->P[11][1] +
             t->Phi[1][12]*f->P[12][1] + t->Phi[1][13]*f->P[13][1] + t->Phi[1][14]*f->P[14][1] +
             t->Phi[1][15]*f->P[15][1] + t->Phi[1][16]*f->P[16][1] + t->Phi[1][17]*f->P[17][1] +
             t->Phi[1][18]*f->P[18][1] + t->Phi[1][19]*f->P[19][1] + t->Phi[1][20]*f->P[20][1];
-    w->M[1][2] = t->Phi[1][0]*f->P[0][2] + t->Phi[1][1]*f->P[1][2] + t->Phi[1][2]*f->P[2][2] +
+    w->M[2] = t->Phi[1][0]*f->P[0][2] + t->Phi[1][1]*f->P[1][2] + t->Phi[1][2]*f->P[2][2] +
             t->Phi[1][3]*f->P[3][2] + t->Phi[1][4]*f->P[4][2] + t->Phi[1][5]*f->P[5][2] +
             t->Phi[1][6]*f->P[6][2] + t->Phi[1][7]*f->P[7][2] + t->Phi[1][8]*f->P[8][2] +
             t->Phi[1][9]*f->P[9][2] + t->Phi[1][10]*f->P[10][2] + t->Phi[1][11]*f->P[11][2] +
             t->Phi[1][12]*f->P[12][2] + t->Phi[1][13]*f->P[13][2] + t->Phi[1][14]*f->P[14][2] +
             t->Phi[1][15]*f->P[15][2] + t->Phi[1][16]*f->P[16][2] + t->Phi[1][17]*f->P[17][2] +
             t->Phi[1][18]*f->P[18][2] + t->Phi[1][19]*f->P[19][2] + t->Phi[1][20]*f->P[20][2];
-    w->M[1][3] = t->Phi[1][0]*f->P[0][3] + t->Phi[1][1]*f->P[1][3] + t->Phi[1][2]*f->P[2][3] +
+    w->M[3] = t->Phi[1][0]*f->P[0][3] + t->Phi[1][1]*f->P[1][3] + t->Phi[1][2]*f->P[2][3] +
             t->Phi[1][3]*f->P[3][3] + t->Phi[1][4]*f->P[4][3] + t->Phi[1][5]*f->P[5][3] +
             t->Phi[1][6]*f->P[6][3] + t->Phi[1][7]*f->P[7][3] + t->Phi[1][8]*f->P[8][3] +
             t->Phi[1][9]*f->P[9][3] + t->Phi[1][10]*f->P[10][3] + t->Phi[1][11]*f->P[11][3] +
             t->Phi[1][12]*f->P[12][3] + t->Phi[1][13]*f->P[13][3] + t->Phi[1][14]*f->P[14][3] +
             t->Phi[1][15]*f->P[15][3] + t->Phi[1][16]*f->P[16][3] + t->Phi[1][17]*f->P[17][3] +
             t->Phi[1][18]*f->P[18][3] + t->Phi[1][19]*f->P[19][3] + t->Phi[1][20]*f->P[20][3];
-    w->M[1][4] = t->Phi[1][0]*f->P[0][4] + t->Phi[1][1]*f->P[1][4] + t->Phi[1][2]*f->P[2][4] +
+    w->M[4] = t->Phi[1][0]*f->P[0][4] + t->Phi[1][1]*f->P[1][4] + t->Phi[1][2]*f->P[2][4] +
             t->Phi[1][3]*f->P[3][4] + t->Phi[1][4]*f->P[4][4] + t->Phi[1][5]*f->P[5][4] +
             t->Phi[1][6]*f->P[6][4] + t->Phi[1][7]*f->P[7][4] + t->Phi[1][8]*f->P[8][4] +
             t->Phi[1][9]*f->P[9][4] + t->Phi[1][10]*f->P[10][4] + t->Phi[1][11]*f->P[11][4] +
             t->Phi[1][12]*f->P[12][4] + t->Phi[1][13]*f->P[13][4] + t->Phi[1][14]*f->P[14][4] +
             t->Phi[1][15]*f->P[15][4] + t->Phi[1][16]*f->P[16][4] + t->Phi[1][17]*f->P[17][4] +
             t->Phi[1][18]*f->P[18][4] + t->Phi[1][19]*f->P[19][4] + t->Phi[1][20]*f->P[20][4];
-    w->M[1][5] = t->Phi[1][0]*f->P[0][5] + t->Phi[1][1]*f->P[1][5] + t->Phi[1][2]*f->P[2][5] +
+    w->M[5] = t->Phi[1][0]*f->P[0][5] + t->Phi[1][1]*f->P[1][5] + t->Phi[1][2]*f->P[2][5] +
             t->Phi[1][3]*f->P[3][5] + t->Phi[1][4]*f->P[4][5] + t->Phi[1][5]*f->P[5][5] +
             t->Phi[1][6]*f->P[6][5] + t->Phi[1][7]*f->P[7][5] + t->Phi[1][8]*f->P[8][5] +
             t->Phi[1][9]*f->P[9][5] + t->Phi[1][10]*f->P[10][5] + t->Phi[1][11]*f->P[11][5] +
             t->Phi[1][12]*f->P[12][5] + t->Phi[1][13]*f->P[13][5] + t->Phi[1][14]*f->P[14][5] +
             t->Phi[1][15]*f->P[15][5] + t->Phi[1][16]*f->P[16][5] + t->Phi[1][17]*f->P[17][5] +
             t->Phi[1][18]*f->P[18][5] + t->Phi[1][19]*f->P[19][5] + t->Phi[1][20]*f->P[20][5];
-    w->M[1][6] = t->Phi[1][0]*f->P[0][6] + t->Phi[1][1]*f->P[1][6] + t->Phi[1][2]*f->P[2][6] +
+    w->M[6] = t->Phi[1][0]*f->P[0][6] + t->Phi[1][1]*f->P[1][6] + t->Phi[1][2]*f->P[2][6] +
             t->Phi[1][3]*f->P[3][6] + t->Phi[1][4]*f->P[4][6] + t->Phi[1][5]*f->P[5][6] +
             t->Phi[1][6]*f->P[6][6] + t->Phi[1][7]*f->P[7][6] + t->Phi[1][8]*f->P[8][6] +
             t->Phi[1][9]*f->P[9][6] + t->Phi[1][10]*f->P[10][6] + t->Phi[1][11]*f->P[11][6] +
             t->Phi[1][12]*f->P[12][6] + t->Phi[1][13]*f->P[13][6] + t->Phi[1][14]*f->P[14][6] +
             t->Phi[1][15]*f->P[15][6] + t->Phi[1][16]*f->P[16][6] + t->Phi[1][17]*f->P[17][6] +
             t->Phi[1][18]*f->P[18][6] + t->Phi[1][19]*f->P[19][6] + t->Phi[1][20]*f->P[20][6];
-    w->M[1][7] = t->Phi[1][0]*f->P[0][7] + t->Phi[1][1]*f->P[1][7] + t->Phi[1][2]*f->P[2][7] +
+    w->M[7] = t->Phi[1][0]*f->P[0][7] + t->Phi[1][1]*f->P[1][7] + t->Phi[1][2]*f->P[2][7] +
             t->Phi[1][3]*f->P[3][7] + t->Phi[1][4]*f->P[4][7] + t->Phi[1][5]*f->P[5][7] +
             t->Phi[1][6]*f->P[6][7] + t->Phi[1][7]*f->P[7][7] + t->Phi[1][8]*f->P[8][7] +
             t->Phi[1][9]*f->P[9][7] + t->Phi[1][10]*f->P[10][7] + t->Phi[1][11]*f->P[11][7] +
             t->Phi[1][12]*f->P[12][7] + t->Phi[1][13]*f->P[13][7] + t->Phi[1][14]*f->P[14][7] +
             t->Phi[1][15]*f->P[15][7] + t->Phi[1][16]*f->P[16][7] + t->Phi[1][17]*f->P[17][7] +
             t->Phi[1][18]*f->P[18][7] + t->Phi[1][19]*f->P[19][7] + t->Phi[1][20]*f->P[20][7];
-    w->M[1][8] = t->Phi[1][0]*f->P[0][8] + t->Phi[1][1]*f->P[1][8] + t->Phi[1][2]*f->P[2][8] +
+    w->M[8] = t->Phi[1][0]*f->P[0][8] + t->Phi[1][1]*f->P[1][8] + t->Phi[1][2]*f->P[2][8] +
             t->Phi[1][3]*f->P[3][8] + t->Phi[1][4]*f->P[4][8] + t->Phi[1][5]*f->P[5][8] +
             t->Phi[1][6]*f->P[6][8] + t->Phi[1][7]*f->P[7][8] + t->Phi[1][8]*f->P[8][8] +
             t->Phi[1][9]*f->P[9][8] + t->Phi[1][10]*f->P[10][8] + t->Phi[1][11]*f->P[11][8] +
             t->Phi[1][12]*f->P[12][8] + t->Phi[1][13]*f->P[13][8] + t->Phi[1][14]*f->P[14][8] +
             t->Phi[1][15]*f->P[15][8] + t->Phi[1][16]*f->P[16][8] + t->Phi[1][17]*f->P[17][8] +
             t->Phi[1][18]*f->P[18][8] + t->Phi[1][19]*f->P[19][8] + t->Phi[1][20]*f->P[20][8];
-    w->M[1][9] = t->Phi[1][0]*f->P[0][9] + t->Phi[1][1]*f->P[1][9] + t->Phi[1][2]*f->P[2][9] +
+    w->M[9] = t->Phi[1][0]*f->P[0][9] + t->Phi[1][1]*f->P[1][9] + t->Phi[1][2]*f->P[2][9] +
             t->Phi[1][3]*f->P[3][9] + t->Phi[1][4]*f->P[4][9] + t->Phi[1][5]*f->P[5][9] +
             t->Phi[1][6]*f->P[6][9] + t->Phi[1][7]*f->P[7][9] + t->Phi[1][8]*f->P[8][9] +
             t->Phi[1][9]*f->P[9][9] + t->Phi[1][10]*f->P[10][9] + t->Phi[1][11]*f->P[11][9] +
             t->Phi[1][12]*f->P[12][9] + t->Phi[1][13]*f->P[13][9] + t->Phi[1][14]*f->P[14][9] +
             t->Phi[1][15]*f->P[15][9] + t->Phi[1][16]*f->P[16][9] + t->Phi[1][17]*f->P[17][9] +
             t->Phi[1][18]*f->P[18][9] + t->Phi[1][19]*f->P[19][9] + t->Phi[1][20]*f->P[20][9];
-    w->M[1][10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] +
+    w->M[10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] +
             t->Phi[1][3]*f->P[3][10] + t->Phi[1][4]*f->P[4][10] + t->Phi[1][5]*f->P[5][10] +
             t->Phi[1][6]*f->P[6][10] + t->Phi[1][7]*f->P[7][10] + t->Phi[1][8]*f->P[8][10] +
             t->Phi[1][9]*f->P[9][10] + t->Phi[1][10]*f->P[10][10] + t->Phi[1][11]*f->P[11][10] +
             t->Phi[1][12]*f->P[12][10] + t->Phi[1][13]*f->P[13][10] + t->Phi[1][14]*f->P[14][10] +
             t->Phi[1][15]*f->P[15][10] + t->Phi[1][16]*f->P[16][10] + t->Phi[1][17]*f->P[17][10] +
             t->Phi[1][18]*f->P[18][10] + t->Phi[1][19]*f->P[19][10] + t->Phi[1][20]*f->P[20][10];
-    w->M[1][11] = t->Phi[1][0]*f->P[0][11] + t->Phi[1][1]*f->P[1][11] + t->Phi[1][2]*f->P[2][11] +
+    w->M[11] = t->Phi[1][0]*f->P[0][11] + t->Phi[1][1]*f->P[1][11] + t->Phi[1][2]*f->P[2][11] +
             t->Phi[1][3]*f->P[3][11] + t->Phi[1][4]*f->P[4][11] + t->Phi[1][5]*f->P[5][11] +
             t->Phi[1][6]*f->P[6][11] + t->Phi[1][7]*f->P[7][11] + t->Phi[1][8]*f->P[8][11] +
             t->Phi[1][9]*f->P[9][11] + t->Phi[1][10]*f->P[10][11] + t->Phi[1][11]*f->P[11][11] +
             t->Phi[1][12]*f->P[12][11] + t->Phi[1][13]*f->P[13][11] + t->Phi[1][14]*f->P[14][11] +
             t->Phi[1][15]*f->P[15][11] + t->Phi[1][16]*f->P[16][11] + t->Phi[1][17]*f->P[17][11] +
             t->Phi[1][18]*f->P[18][11] + t->Phi[1][19]*f->P[19][11] + t->Phi[1][20]*f->P[20][11];
-    w->M[1][12] = t->Phi[1][0]*f->P[0][12] + t->Phi[1][1]*f->P[1][12] + t->Phi[1][2]*f->P[2][12] +
+    w->M[12] = t->Phi[1][0]*f->P[0][12] + t->Phi[1][1]*f->P[1][12] + t->Phi[1][2]*f->P[2][12] +
             t->Phi[1][3]*f->P[3][12] + t->Phi[1][4]*f->P[4][12] + t->Phi[1][5]*f->P[5][12] +
             t->Phi[1][6]*f->P[6][12] + t->Phi[1][7]*f->P[7][12] + t->Phi[1][8]*f->P[8][12] +
             t->Phi[1][9]*f->P[9][12] + t->Phi[1][10]*f->P[10][12] + t->Phi[1][11]*f->P[11][12] +
             t->Phi[1][12]*f->P[12][12] + t->Phi[1][13]*f->P[13][12] + t->Phi[1][14]*f->P[14][12] +
             t->Phi[1][15]*f->P[15][12] + t->Phi[1][16]*f->P[16][12] + t->Phi[1][17]*f->P[17][12] +
             t->Phi[1][18]*f->P[18][12] + t->Phi[1][19]*f->P[19][12] + t->Phi[1][20]*f->P[20][12];
-    w->M[1][13] = t->Phi[1][0]*f->P[0][13] + t->Phi[1][1]*f->P[1][13] + t->Phi[1][2]*f->P[2][13] +
+    w->M[13] = t->Phi[1][0]*f->P[0][13] + t->Phi[1][1]*f->P[1][13] + t->Phi[1][2]*f->P[2][13] +
             t->Phi[1][3]*f->P[3][13] + t->Phi[1][4]*f->P[4][13] + t->Phi[1][5]*f->P[5][13] +
             t->Phi[1][6]*f->P[6][13] + t->Phi[1][7]*f->P[7][13] + t->Phi[1][8]*f->P[8][13] +
             t->Phi[1][9]*f->P[9][13] + t->Phi[1][10]*f->P[10][13] + t->Phi[1][11]*f->P[11][13] +
             t->Phi[1][12]*f->P[12][13] + t->Phi[1][13]*f->P[13][13] + t->Phi[1][14]*f->P[14][13] +
             t->Phi[1][15]*f->P[15][13] + t->Phi[1][16]*f->P[16][13] + t->Phi[1][17]*f->P[17][13] +
             t->Phi[1][18]*f->P[18][13] + t->Phi[1][19]*f->P[19][13] + t->Phi[1][20]*f->P[20][13];
-    w->M[1][14] = t->Phi[1][0]*f->P[0][14] + t->Phi[1][1]*f->P[1][14] + t->Phi[1][2]*f->P[2][14] +
+    w->M[14] = t->Phi[1][0]*f->P[0][14] + t->Phi[1][1]*f->P[1][14] + t->Phi[1][2]*f->P[2][14] +
             t->Phi[1][3]*f->P[3][14] + t->Phi[1][4]*f->P[4][14] + t->Phi[1][5]*f->P[5][14] +
             t->Phi[1][6]*f->P[6][14] + t->Phi[1][7]*f->P[7][14] + t->Phi[1][8]*f->P[8][14] +
             t->Phi[1][9]*f->P[9][14] + t->Phi[1][10]*f->P[10][14] + t->Phi[1][11]*f->P[11][14] +
             t->Phi[1][12]*f->P[12][14] + t->Phi[1][13]*f->P[13][14] + t->Phi[1][14]*f->P[14][14] +
             t->Phi[1][15]*f->P[15][14] + t->Phi[1][16]*f->P[16][14] + t->Phi[1][17]*f->P[17][14] +
             t->Phi[1][18]*f->P[18][14] + t->Phi[1][19]*f->P[19][14] + t->Phi[1][20]*f->P[20][14];
-    w->M[1][15] = t->Phi[1][0]*f->P[0][15] + t->Phi[1][1]*f->P[1][15] + t->Phi[1][2]*f->P[2][15] +
+    w->M[15] = t->Phi[1][0]*f->P[0][15] + t->Phi[1][1]*f->P[1][15] + t->Phi[1][2]*f->P[2][15] +
             t->Phi[1][3]*f->P[3][15] + t->Phi[1][4]*f->P[4][15] + t->Phi[1][5]*f->P[5][15] +
             t->Phi[1][6]*f->P[6][15] + t->Phi[1][7]*f->P[7][15] + t->Phi[1][8]*f->P[8][15] +
             t->Phi[1][9]*f->P[9][15] + t->Phi[1][10]*f->P[10][15] + t->Phi[1][11]*f->P[11][15] +
             t->Phi[1][12]*f->P[12][15] + t->Phi[1][13]*f->P[13][15] + t->Phi[1][14]*f->P[14][15] +
             t->Phi[1][15]*f->P[15][15] + t->Phi[1][16]*f->P[16][15] + t->Phi[1][17]*f->P[17][15] +
             t->Phi[1][18]*f->P[18][15] + t->Phi[1][19]*f->P[19][15] + t->Phi[1][20]*f->P[20][15];
-    w->M[1][16] = t->Phi[1][0]*f->P[0][16] + t->Phi[1][1]*f->P[1][16] + t->Phi[1][2]*f->P[2][16] +
+    w->M[16] = t->Phi[1][0]*f->P[0][16] + t->Phi[1][1]*f->P[1][16] + t->Phi[1][2]*f->P[2][16] +
             t->Phi[1][3]*f->P[3][16] + t->Phi[1][4]*f->P[4][16] + t->Phi[1][5]*f->P[5][16] +
             t->Phi[1][6]*f->P[6][16] + t->Phi[1][7]*f->P[7][16] + t->Phi[1][8]*f->P[8][16] +
             t->Phi[1][9]*f->P[9][16] + t->Phi[1][10]*f->P[10][16] + t->Phi[1][11]*f->P[11][16] +
             t->Phi[1][12]*f->P[12][16] + t->Phi[1][13]*f->P[13][16] + t->Phi[1][14]*f->P[14][16] +
             t->Phi[1][15]*f->P[15][16] + t->Phi[1][16]*f->P[16][16] + t->Phi[1][17]*f->P[17][16] +
             t->Phi[1][18]*f->P[18][16] + t->Phi[1][19]*f->P[19][16] + t->Phi[1][20]*f->P[20][16];
-    w->M[1][17] = t->Phi[1][0]*f->P[0][17] + t->Phi[1][1]*f->P[1][17] + t->Phi[1][2]*f->P[2][17] +
+    w->M[17] = t->Phi[1][0]*f->P[0][17] + t->Phi[1][1]*f->P[1][17] + t->Phi[1][2]*f->P[2][17] +
             t->Phi[1][3]*f->P[3][17] + t->Phi[1][4]*f->P[4][17] + t->Phi[1][5]*f->P[5][17] +
             t->Phi[1][6]*f->P[6][17] + t->Phi[1][7]*f->P[7][17] + t->Phi[1][8]*f->P[8][17] +
             t->Phi[1][9]*f->P[9][17] + t->Phi[1][10]*f->P[10][17] + t->Phi[1][11]*f->P[11][17] +
             t->Phi[1][12]*f->P[12][17] + t->Phi[1][13]*f->P[13][17] + t->Phi[1][14]*f->P[14][17] +
             t->Phi[1][15]*f->P[15][17] + t->Phi[1][16]*f->P[16][17] + t->Phi[1][17]*f->P[17][17] +
             t->Phi[1][18]*f->P[18][17] + t->Phi[1][19]*f->P[19][17] + t->Phi[1][20]*f->P[20][17];
-    w->M[1][18] = t->Phi[1][0]*f->P[0][18] + t->Phi[1][1]*f->P[1][18] + t->Phi[1][2]*f->P[2][18] +
+    w->M[18] = t->Phi[1][0]*f->P[0][18] + t->Phi[1][1]*f->P[1][18] + t->Phi[1][2]*f->P[2][18] +
             t->Phi[1][3]*f->P[3][18] + t->Phi[1][4]*f->P[4][18] + t->Phi[1][5]*f->P[5][18] +
             t->Phi[1][6]*f->P[6][18] + t->Phi[1][7]*f->P[7][18] + t->Phi[1][8]*f->P[8][18] +
             t->Phi[1][9]*f->P[9][18] + t->Phi[1][10]*f->P[10][18] + t->Phi[1][11]*f->P[11][18] +
             t->Phi[1][12]*f->P[12][18] + t->Phi[1][13]*f->P[13][18] + t->Phi[1][14]*f->P[14][18] +
             t->Phi[1][15]*f->P[15][18] + t->Phi[1][16]*f->P[16][18] + t->Phi[1][17]*f->P[17][18] +
             t->Phi[1][18]*f->P[18][18] + t->Phi[1][19]*f->P[19][18] + t->Phi[1][20]*f->P[20][18];
-    w->M[1][19] = t->Phi[1][0]*f->P[0][19] + t->Phi[1][1]*f->P[1][19] + t->Phi[1][2]*f->P[2][19] +
+    w->M[19] = t->Phi[1][0]*f->P[0][19] + t->Phi[1][1]*f->P[1][19] + t->Phi[1][2]*f->P[2][19] +
             t->Phi[1][3]*f->P[3][19] + t->Phi[1][4]*f->P[4][19] + t->Phi[1][5]*f->P[5][19] +
             t->Phi[1][6]*f->P[6][19] + t->Phi[1][7]*f->P[7][19] + t->Phi[1][8]*f->P[8][19] +
             t->Phi[1][9]*f->P[9][19] + t->Phi[1][10]*f->P[10][19] + t->Phi[1][11]*f->P[11][19] +
             t->Phi[1][12]*f->P[12][19] + t->Phi[1][13]*f->P[13][19] + t->Phi[1][14]*f->P[14][19] +
             t->Phi[1][15]*f->P[15][19] + t->Phi[1][16]*f->P[16][19] + t->Phi[1][17]*f->P[17][19] +
             t->Phi[1][18]*f->P[18][19] + t->Phi[1][19]*f->P[19][19] + t->Phi[1][20]*f->P[20][19];
-    w->M[1][20] = t->Phi[1][0]*f->P[0][20] + t->Phi[1][1]*f->P[1][20] + t->Phi[1][2]*f->P[2][20] +
+    w->M[20] = t->Phi[1][0]*f->P[0][20] + t->Phi[1][1]*f->P[1][20] + t->Phi[1][2]*f->P[2][20] +
             t->Phi[1][3]*f->P[3][20] + t->Phi[1][4]*f->P[4][20] + t->Phi[1][5]*f->P[5][20] +
             t->Phi[1][6]*f->P[6][20] + t->Phi[1][7]*f->P[7][20] + t->Phi[1][8]*f->P[8][20] +
             t->Phi[1][9]*f->P[9][20] + t->Phi[1][10]*f->P[10][20] + t->Phi[1][11]*f->P[11][20] +
@@ -5147,150 +5081,234 @@ static void phi_times_p_row_1(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[1][18]*f->P[18][20] + t->Phi[1][19]*f->P[19][20] + t->Phi[1][20]*f->P[20][20];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ins_gnss21_scalar propagate_row_1(const ins_gnss21_transition *restrict t,
+        ins_gnss21_filter_scratch *restrict w)
+{
+    ins_gnss21_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
+            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[6]*t->Phi[1][6] +
+            w->M[7]*t->Phi[1][7] + w->M[8]*t->Phi[1][8] + w->M[9]*t->Phi[1][9] +
+            w->M[10]*t->Phi[1][10] + w->M[11]*t->Phi[1][11] + w->M[12]*t->Phi[1][12] +
+            w->M[13]*t->Phi[1][13] + w->M[14]*t->Phi[1][14] + w->M[15]*t->Phi[1][15] +
+            w->M[16]*t->Phi[1][16] + w->M[17]*t->Phi[1][17] + w->M[18]*t->Phi[1][18] +
+            w->M[19]*t->Phi[1][19] + w->M[20]*t->Phi[1][20] + t->Qd[21]; w->Pn[21] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[6]*t->Phi[2][6] +
+            w->M[7]*t->Phi[2][7] + w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] +
+            w->M[10]*t->Phi[2][10] + w->M[11]*t->Phi[2][11] + w->M[12]*t->Phi[2][12] +
+            w->M[13]*t->Phi[2][13] + w->M[14]*t->Phi[2][14] + w->M[15]*t->Phi[2][15] +
+            w->M[16]*t->Phi[2][16] + w->M[17]*t->Phi[2][17] + w->M[18]*t->Phi[2][18] +
+            w->M[19]*t->Phi[2][19] + w->M[20]*t->Phi[2][20] + t->Qd[22]; w->Pn[22] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
+            w->M[7]*t->Phi[3][7] + w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] +
+            w->M[10]*t->Phi[3][10] + w->M[11]*t->Phi[3][11] + w->M[12]*t->Phi[3][12] +
+            w->M[13]*t->Phi[3][13] + w->M[14]*t->Phi[3][14] + w->M[15]*t->Phi[3][15] +
+            w->M[16]*t->Phi[3][16] + w->M[17]*t->Phi[3][17] + w->M[18]*t->Phi[3][18] +
+            w->M[19]*t->Phi[3][19] + w->M[20]*t->Phi[3][20] + t->Qd[23]; w->Pn[23] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] +
+            w->M[10]*t->Phi[4][10] + w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] +
+            w->M[13]*t->Phi[4][13] + w->M[14]*t->Phi[4][14] + w->M[15]*t->Phi[4][15] +
+            w->M[16]*t->Phi[4][16] + w->M[17]*t->Phi[4][17] + w->M[18]*t->Phi[4][18] +
+            w->M[19]*t->Phi[4][19] + w->M[20]*t->Phi[4][20] + t->Qd[24]; w->Pn[24] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] +
+            w->M[10]*t->Phi[5][10] + w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] +
+            w->M[13]*t->Phi[5][13] + w->M[14]*t->Phi[5][14] + w->M[15]*t->Phi[5][15] +
+            w->M[16]*t->Phi[5][16] + w->M[17]*t->Phi[5][17] + w->M[18]*t->Phi[5][18] +
+            w->M[19]*t->Phi[5][19] + w->M[20]*t->Phi[5][20] + t->Qd[25]; w->Pn[25] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[16]*t->Phi[6][16] + w->M[17]*t->Phi[6][17] + w->M[18]*t->Phi[6][18] +
+            w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] + t->Qd[26]; w->Pn[26] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + w->M[15]*t->Phi[7][15] +
+            w->M[16]*t->Phi[7][16] + w->M[17]*t->Phi[7][17] + w->M[18]*t->Phi[7][18] +
+            w->M[19]*t->Phi[7][19] + w->M[20]*t->Phi[7][20] + t->Qd[27]; w->Pn[27] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] +
+            w->M[10]*t->Phi[8][10] + w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] +
+            w->M[13]*t->Phi[8][13] + w->M[14]*t->Phi[8][14] + w->M[15]*t->Phi[8][15] +
+            w->M[16]*t->Phi[8][16] + w->M[17]*t->Phi[8][17] + w->M[18]*t->Phi[8][18] +
+            w->M[19]*t->Phi[8][19] + w->M[20]*t->Phi[8][20] + t->Qd[28]; w->Pn[28] = v; check += v -
+            v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[29]; w->Pn[29] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[30]; w->Pn[30] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[31]; w->Pn[31] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[32]; w->Pn[32] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[33]; w->Pn[33] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[34]; w->Pn[34] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[35]; w->Pn[35] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16] + t->Qd[36]; w->Pn[36] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17] + t->Qd[37]; w->Pn[37] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18] + t->Qd[38]; w->Pn[38] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19] + t->Qd[39]; w->Pn[39] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20] + t->Qd[40]; w->Pn[40] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_2(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
         *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[2][0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] +
+    w->M[0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] +
             t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] +
             t->Phi[2][6]*f->P[6][0] + t->Phi[2][7]*f->P[7][0] + t->Phi[2][8]*f->P[8][0] +
             t->Phi[2][9]*f->P[9][0] + t->Phi[2][10]*f->P[10][0] + t->Phi[2][11]*f->P[11][0] +
             t->Phi[2][12]*f->P[12][0] + t->Phi[2][13]*f->P[13][0] + t->Phi[2][14]*f->P[14][0] +
             t->Phi[2][15]*f->P[15][0] + t->Phi[2][16]*f->P[16][0] + t->Phi[2][17]*f->P[17][0] +
             t->Phi[2][18]*f->P[18][0] + t->Phi[2][19]*f->P[19][0] + t->Phi[2][20]*f->P[20][0];
-    w->M[2][1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] +
+    w->M[1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] +
             t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] +
             t->Phi[2][6]*f->P[6][1] + t->Phi[2][7]*f->P[7][1] + t->Phi[2][8]*f->P[8][1] +
             t->Phi[2][9]*f->P[9][1] + t->Phi[2][10]*f->P[10][1] + t->Phi[2][11]*f->P[11][1] +
             t->Phi[2][12]*f->P[12][1] + t->Phi[2][13]*f->P[13][1] + t->Phi[2][14]*f->P[14][1] +
             t->Phi[2][15]*f->P[15][1] + t->Phi[2][16]*f->P[16][1] + t->Phi[2][17]*f->P[17][1] +
             t->Phi[2][18]*f->P[18][1] + t->Phi[2][19]*f->P[19][1] + t->Phi[2][20]*f->P[20][1];
-    w->M[2][2] = t->Phi[2][0]*f->P[0][2] + t->Phi[2][1]*f->P[1][2] + t->Phi[2][2]*f->P[2][2] +
+    w->M[2] = t->Phi[2][0]*f->P[0][2] + t->Phi[2][1]*f->P[1][2] + t->Phi[2][2]*f->P[2][2] +
             t->Phi[2][3]*f->P[3][2] + t->Phi[2][4]*f->P[4][2] + t->Phi[2][5]*f->P[5][2] +
             t->Phi[2][6]*f->P[6][2] + t->Phi[2][7]*f->P[7][2] + t->Phi[2][8]*f->P[8][2] +
             t->Phi[2][9]*f->P[9][2] + t->Phi[2][10]*f->P[10][2] + t->Phi[2][11]*f->P[11][2] +
             t->Phi[2][12]*f->P[12][2] + t->Phi[2][13]*f->P[13][2] + t->Phi[2][14]*f->P[14][2] +
             t->Phi[2][15]*f->P[15][2] + t->Phi[2][16]*f->P[16][2] + t->Phi[2][17]*f->P[17][2] +
             t->Phi[2][18]*f->P[18][2] + t->Phi[2][19]*f->P[19][2] + t->Phi[2][20]*f->P[20][2];
-    w->M[2][3] = t->Phi[2][0]*f->P[0][3] + t->Phi[2][1]*f->P[1][3] + t->Phi[2][2]*f->P[2][3] +
+    w->M[3] = t->Phi[2][0]*f->P[0][3] + t->Phi[2][1]*f->P[1][3] + t->Phi[2][2]*f->P[2][3] +
             t->Phi[2][3]*f->P[3][3] + t->Phi[2][4]*f->P[4][3] + t->Phi[2][5]*f->P[5][3] +
             t->Phi[2][6]*f->P[6][3] + t->Phi[2][7]*f->P[7][3] + t->Phi[2][8]*f->P[8][3] +
             t->Phi[2][9]*f->P[9][3] + t->Phi[2][10]*f->P[10][3] + t->Phi[2][11]*f->P[11][3] +
             t->Phi[2][12]*f->P[12][3] + t->Phi[2][13]*f->P[13][3] + t->Phi[2][14]*f->P[14][3] +
             t->Phi[2][15]*f->P[15][3] + t->Phi[2][16]*f->P[16][3] + t->Phi[2][17]*f->P[17][3] +
             t->Phi[2][18]*f->P[18][3] + t->Phi[2][19]*f->P[19][3] + t->Phi[2][20]*f->P[20][3];
-    w->M[2][4] = t->Phi[2][0]*f->P[0][4] + t->Phi[2][1]*f->P[1][4] + t->Phi[2][2]*f->P[2][4] +
+    w->M[4] = t->Phi[2][0]*f->P[0][4] + t->Phi[2][1]*f->P[1][4] + t->Phi[2][2]*f->P[2][4] +
             t->Phi[2][3]*f->P[3][4] + t->Phi[2][4]*f->P[4][4] + t->Phi[2][5]*f->P[5][4] +
             t->Phi[2][6]*f->P[6][4] + t->Phi[2][7]*f->P[7][4] + t->Phi[2][8]*f->P[8][4] +
             t->Phi[2][9]*f->P[9][4] + t->Phi[2][10]*f->P[10][4] + t->Phi[2][11]*f->P[11][4] +
             t->Phi[2][12]*f->P[12][4] + t->Phi[2][13]*f->P[13][4] + t->Phi[2][14]*f->P[14][4] +
             t->Phi[2][15]*f->P[15][4] + t->Phi[2][16]*f->P[16][4] + t->Phi[2][17]*f->P[17][4] +
             t->Phi[2][18]*f->P[18][4] + t->Phi[2][19]*f->P[19][4] + t->Phi[2][20]*f->P[20][4];
-    w->M[2][5] = t->Phi[2][0]*f->P[0][5] + t->Phi[2][1]*f->P[1][5] + t->Phi[2][2]*f->P[2][5] +
+    w->M[5] = t->Phi[2][0]*f->P[0][5] + t->Phi[2][1]*f->P[1][5] + t->Phi[2][2]*f->P[2][5] +
             t->Phi[2][3]*f->P[3][5] + t->Phi[2][4]*f->P[4][5] + t->Phi[2][5]*f->P[5][5] +
             t->Phi[2][6]*f->P[6][5] + t->Phi[2][7]*f->P[7][5] + t->Phi[2][8]*f->P[8][5] +
             t->Phi[2][9]*f->P[9][5] + t->Phi[2][10]*f->P[10][5] + t->Phi[2][11]*f->P[11][5] +
             t->Phi[2][12]*f->P[12][5] + t->Phi[2][13]*f->P[13][5] + t->Phi[2][14]*f->P[14][5] +
             t->Phi[2][15]*f->P[15][5] + t->Phi[2][16]*f->P[16][5] + t->Phi[2][17]*f->P[17][5] +
             t->Phi[2][18]*f->P[18][5] + t->Phi[2][19]*f->P[19][5] + t->Phi[2][20]*f->P[20][5];
-    w->M[2][6] = t->Phi[2][0]*f->P[0][6] + t->Phi[2][1]*f->P[1][6] + t->Phi[2][2]*f->P[2][6] +
+    w->M[6] = t->Phi[2][0]*f->P[0][6] + t->Phi[2][1]*f->P[1][6] + t->Phi[2][2]*f->P[2][6] +
             t->Phi[2][3]*f->P[3][6] + t->Phi[2][4]*f->P[4][6] + t->Phi[2][5]*f->P[5][6] +
             t->Phi[2][6]*f->P[6][6] + t->Phi[2][7]*f->P[7][6] + t->Phi[2][8]*f->P[8][6] +
             t->Phi[2][9]*f->P[9][6] + t->Phi[2][10]*f->P[10][6] + t->Phi[2][11]*f->P[11][6] +
             t->Phi[2][12]*f->P[12][6] + t->Phi[2][13]*f->P[13][6] + t->Phi[2][14]*f->P[14][6] +
             t->Phi[2][15]*f->P[15][6] + t->Phi[2][16]*f->P[16][6] + t->Phi[2][17]*f->P[17][6] +
             t->Phi[2][18]*f->P[18][6] + t->Phi[2][19]*f->P[19][6] + t->Phi[2][20]*f->P[20][6];
-    w->M[2][7] = t->Phi[2][0]*f->P[0][7] + t->Phi[2][1]*f->P[1][7] + t->Phi[2][2]*f->P[2][7] +
+    w->M[7] = t->Phi[2][0]*f->P[0][7] + t->Phi[2][1]*f->P[1][7] + t->Phi[2][2]*f->P[2][7] +
             t->Phi[2][3]*f->P[3][7] + t->Phi[2][4]*f->P[4][7] + t->Phi[2][5]*f->P[5][7] +
             t->Phi[2][6]*f->P[6][7] + t->Phi[2][7]*f->P[7][7] + t->Phi[2][8]*f->P[8][7] +
             t->Phi[2][9]*f->P[9][7] + t->Phi[2][10]*f->P[10][7] + t->Phi[2][11]*f->P[11][7] +
             t->Phi[2][12]*f->P[12][7] + t->Phi[2][13]*f->P[13][7] + t->Phi[2][14]*f->P[14][7] +
             t->Phi[2][15]*f->P[15][7] + t->Phi[2][16]*f->P[16][7] + t->Phi[2][17]*f->P[17][7] +
             t->Phi[2][18]*f->P[18][7] + t->Phi[2][19]*f->P[19][7] + t->Phi[2][20]*f->P[20][7];
-    w->M[2][8] = t->Phi[2][0]*f->P[0][8] + t->Phi[2][1]*f->P[1][8] + t->Phi[2][2]*f->P[2][8] +
+    w->M[8] = t->Phi[2][0]*f->P[0][8] + t->Phi[2][1]*f->P[1][8] + t->Phi[2][2]*f->P[2][8] +
             t->Phi[2][3]*f->P[3][8] + t->Phi[2][4]*f->P[4][8] + t->Phi[2][5]*f->P[5][8] +
             t->Phi[2][6]*f->P[6][8] + t->Phi[2][7]*f->P[7][8] + t->Phi[2][8]*f->P[8][8] +
             t->Phi[2][9]*f->P[9][8] + t->Phi[2][10]*f->P[10][8] + t->Phi[2][11]*f->P[11][8] +
             t->Phi[2][12]*f->P[12][8] + t->Phi[2][13]*f->P[13][8] + t->Phi[2][14]*f->P[14][8] +
             t->Phi[2][15]*f->P[15][8] + t->Phi[2][16]*f->P[16][8] + t->Phi[2][17]*f->P[17][8] +
             t->Phi[2][18]*f->P[18][8] + t->Phi[2][19]*f->P[19][8] + t->Phi[2][20]*f->P[20][8];
-    w->M[2][9] = t->Phi[2][0]*f->P[0][9] + t->Phi[2][1]*f->P[1][9] + t->Phi[2][2]*f->P[2][9] +
+    w->M[9] = t->Phi[2][0]*f->P[0][9] + t->Phi[2][1]*f->P[1][9] + t->Phi[2][2]*f->P[2][9] +
             t->Phi[2][3]*f->P[3][9] + t->Phi[2][4]*f->P[4][9] + t->Phi[2][5]*f->P[5][9] +
             t->Phi[2][6]*f->P[6][9] + t->Phi[2][7]*f->P[7][9] + t->Phi[2][8]*f->P[8][9] +
             t->Phi[2][9]*f->P[9][9] + t->Phi[2][10]*f->P[10][9] + t->Phi[2][11]*f->P[11][9] +
             t->Phi[2][12]*f->P[12][9] + t->Phi[2][13]*f->P[13][9] + t->Phi[2][14]*f->P[14][9] +
             t->Phi[2][15]*f->P[15][9] + t->Phi[2][16]*f->P[16][9] + t->Phi[2][17]*f->P[17][9] +
             t->Phi[2][18]*f->P[18][9] + t->Phi[2][19]*f->P[19][9] + t->Phi[2][20]*f->P[20][9];
-    w->M[2][10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] +
+    w->M[10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] +
             t->Phi[2][3]*f->P[3][10] + t->Phi[2][4]*f->P[4][10] + t->Phi[2][5]*f->P[5][10] +
             t->Phi[2][6]*f->P[6][10] + t->Phi[2][7]*f->P[7][10] + t->Phi[2][8]*f->P[8][10] +
             t->Phi[2][9]*f->P[9][10] + t->Phi[2][10]*f->P[10][10] + t->Phi[2][11]*f->P[11][10] +
             t->Phi[2][12]*f->P[12][10] + t->Phi[2][13]*f->P[13][10] + t->Phi[2][14]*f->P[14][10] +
             t->Phi[2][15]*f->P[15][10] + t->Phi[2][16]*f->P[16][10] + t->Phi[2][17]*f->P[17][10] +
             t->Phi[2][18]*f->P[18][10] + t->Phi[2][19]*f->P[19][10] + t->Phi[2][20]*f->P[20][10];
-    w->M[2][11] = t->Phi[2][0]*f->P[0][11] + t->Phi[2][1]*f->P[1][11] + t->Phi[2][2]*f->P[2][11] +
+    w->M[11] = t->Phi[2][0]*f->P[0][11] + t->Phi[2][1]*f->P[1][11] + t->Phi[2][2]*f->P[2][11] +
             t->Phi[2][3]*f->P[3][11] + t->Phi[2][4]*f->P[4][11] + t->Phi[2][5]*f->P[5][11] +
             t->Phi[2][6]*f->P[6][11] + t->Phi[2][7]*f->P[7][11] + t->Phi[2][8]*f->P[8][11] +
             t->Phi[2][9]*f->P[9][11] + t->Phi[2][10]*f->P[10][11] + t->Phi[2][11]*f->P[11][11] +
             t->Phi[2][12]*f->P[12][11] + t->Phi[2][13]*f->P[13][11] + t->Phi[2][14]*f->P[14][11] +
             t->Phi[2][15]*f->P[15][11] + t->Phi[2][16]*f->P[16][11] + t->Phi[2][17]*f->P[17][11] +
             t->Phi[2][18]*f->P[18][11] + t->Phi[2][19]*f->P[19][11] + t->Phi[2][20]*f->P[20][11];
-    w->M[2][12] = t->Phi[2][0]*f->P[0][12] + t->Phi[2][1]*f->P[1][12] + t->Phi[2][2]*f->P[2][12] +
+    w->M[12] = t->Phi[2][0]*f->P[0][12] + t->Phi[2][1]*f->P[1][12] + t->Phi[2][2]*f->P[2][12] +
             t->Phi[2][3]*f->P[3][12] + t->Phi[2][4]*f->P[4][12] + t->Phi[2][5]*f->P[5][12] +
             t->Phi[2][6]*f->P[6][12] + t->Phi[2][7]*f->P[7][12] + t->Phi[2][8]*f->P[8][12] +
             t->Phi[2][9]*f->P[9][12] + t->Phi[2][10]*f->P[10][12] + t->Phi[2][11]*f->P[11][12] +
             t->Phi[2][12]*f->P[12][12] + t->Phi[2][13]*f->P[13][12] + t->Phi[2][14]*f->P[14][12] +
             t->Phi[2][15]*f->P[15][12] + t->Phi[2][16]*f->P[16][12] + t->Phi[2][17]*f->P[17][12] +
             t->Phi[2][18]*f->P[18][12] + t->Phi[2][19]*f->P[19][12] + t->Phi[2][20]*f->P[20][12];
-    w->M[2][13] = t->Phi[2][0]*f->P[0][13] + t->Phi[2][1]*f->P[1][13] + t->Phi[2][2]*f->P[2][13] +
+    w->M[13] = t->Phi[2][0]*f->P[0][13] + t->Phi[2][1]*f->P[1][13] + t->Phi[2][2]*f->P[2][13] +
             t->Phi[2][3]*f->P[3][13] + t->Phi[2][4]*f->P[4][13] + t->Phi[2][5]*f->P[5][13] +
             t->Phi[2][6]*f->P[6][13] + t->Phi[2][7]*f->P[7][13] + t->Phi[2][8]*f->P[8][13] +
             t->Phi[2][9]*f->P[9][13] + t->Phi[2][10]*f->P[10][13] + t->Phi[2][11]*f->P[11][13] +
             t->Phi[2][12]*f->P[12][13] + t->Phi[2][13]*f->P[13][13] + t->Phi[2][14]*f->P[14][13] +
             t->Phi[2][15]*f->P[15][13] + t->Phi[2][16]*f->P[16][13] + t->Phi[2][17]*f->P[17][13] +
             t->Phi[2][18]*f->P[18][13] + t->Phi[2][19]*f->P[19][13] + t->Phi[2][20]*f->P[20][13];
-    w->M[2][14] = t->Phi[2][0]*f->P[0][14] + t->Phi[2][1]*f->P[1][14] + t->Phi[2][2]*f->P[2][14] +
+    w->M[14] = t->Phi[2][0]*f->P[0][14] + t->Phi[2][1]*f->P[1][14] + t->Phi[2][2]*f->P[2][14] +
             t->Phi[2][3]*f->P[3][14] + t->Phi[2][4]*f->P[4][14] + t->Phi[2][5]*f->P[5][14] +
             t->Phi[2][6]*f->P[6][14] + t->Phi[2][7]*f->P[7][14] + t->Phi[2][8]*f->P[8][14] +
             t->Phi[2][9]*f->P[9][14] + t->Phi[2][10]*f->P[10][14] + t->Phi[2][11]*f->P[11][14] +
             t->Phi[2][12]*f->P[12][14] + t->Phi[2][13]*f->P[13][14] + t->Phi[2][14]*f->P[14][14] +
             t->Phi[2][15]*f->P[15][14] + t->Phi[2][16]*f->P[16][14] + t->Phi[2][17]*f->P[17][14] +
             t->Phi[2][18]*f->P[18][14] + t->Phi[2][19]*f->P[19][14] + t->Phi[2][20]*f->P[20][14];
-    w->M[2][15] = t->Phi[2][0]*f->P[0][15] + t->Phi[2][1]*f->P[1][15] + t->Phi[2][2]*f->P[2][15] +
+    w->M[15] = t->Phi[2][0]*f->P[0][15] + t->Phi[2][1]*f->P[1][15] + t->Phi[2][2]*f->P[2][15] +
             t->Phi[2][3]*f->P[3][15] + t->Phi[2][4]*f->P[4][15] + t->Phi[2][5]*f->P[5][15] +
             t->Phi[2][6]*f->P[6][15] + t->Phi[2][7]*f->P[7][15] + t->Phi[2][8]*f->P[8][15] +
             t->Phi[2][9]*f->P[9][15] + t->Phi[2][10]*f->P[10][15] + t->Phi[2][11]*f->P[11][15] +
             t->Phi[2][12]*f->P[12][15] + t->Phi[2][13]*f->P[13][15] + t->Phi[2][14]*f->P[14][15] +
             t->Phi[2][15]*f->P[15][15] + t->Phi[2][16]*f->P[16][15] + t->Phi[2][17]*f->P[17][15] +
             t->Phi[2][18]*f->P[18][15] + t->Phi[2][19]*f->P[19][15] + t->Phi[2][20]*f->P[20][15];
-    w->M[2][16] = t->Phi[2][0]*f->P[0][16] + t->Phi[2][1]*f->P[1][16] + t->Phi[2][2]*f->P[2][16] +
+    w->M[16] = t->Phi[2][0]*f->P[0][16] + t->Phi[2][1]*f->P[1][16] + t->Phi[2][2]*f->P[2][16] +
             t->Phi[2][3]*f->P[3][16] + t->Phi[2][4]*f->P[4][16] + t->Phi[2][5]*f->P[5][16] +
             t->Phi[2][6]*f->P[6][16] + t->Phi[2][7]*f->P[7][16] + t->Phi[2][8]*f->P[8][16] +
             t->Phi[2][9]*f->P[9][16] + t->Phi[2][10]*f->P[10][16] + t->Phi[2][11]*f->P[11][16] +
             t->Phi[2][12]*f->P[12][16] + t->Phi[2][13]*f->P[13][16] + t->Phi[2][14]*f->P[14][16] +
             t->Phi[2][15]*f->P[15][16] + t->Phi[2][16]*f->P[16][16] + t->Phi[2][17]*f->P[17][16] +
             t->Phi[2][18]*f->P[18][16] + t->Phi[2][19]*f->P[19][16] + t->Phi[2][20]*f->P[20][16];
-    w->M[2][17] = t->Phi[2][0]*f->P[0][17] + t->Phi[2][1]*f->P[1][17] + t->Phi[2][2]*f->P[2][17] +
+    w->M[17] = t->Phi[2][0]*f->P[0][17] + t->Phi[2][1]*f->P[1][17] + t->Phi[2][2]*f->P[2][17] +
             t->Phi[2][3]*f->P[3][17] + t->Phi[2][4]*f->P[4][17] + t->Phi[2][5]*f->P[5][17] +
             t->Phi[2][6]*f->P[6][17] + t->Phi[2][7]*f->P[7][17] + t->Phi[2][8]*f->P[8][17] +
             t->Phi[2][9]*f->P[9][17] + t->Phi[2][10]*f->P[10][17] + t->Phi[2][11]*f->P[11][17] +
             t->Phi[2][12]*f->P[12][17] + t->Phi[2][13]*f->P[13][17] + t->Phi[2][14]*f->P[14][17] +
             t->Phi[2][15]*f->P[15][17] + t->Phi[2][16]*f->P[16][17] + t->Phi[2][17]*f->P[17][17] +
             t->Phi[2][18]*f->P[18][17] + t->Phi[2][19]*f->P[19][17] + t->Phi[2][20]*f->P[20][17];
-    w->M[2][18] = t->Phi[2][0]*f->P[0][18] + t->Phi[2][1]*f->P[1][18] + t->Phi[2][2]*f->P[2][18] +
+    w->M[18] = t->Phi[2][0]*f->P[0][18] + t->Phi[2][1]*f->P[1][18] + t->Phi[2][2]*f->P[2][18] +
             t->Phi[2][3]*f->P[3][18] + t->Phi[2][4]*f->P[4][18] + t->Phi[2][5]*f->P[5][18] +
             t->Phi[2][6]*f->P[6][18] + t->Phi[2][7]*f->P[7][18] + t->Phi[2][8]*f->P[8][18] +
             t->Phi[2][9]*f->P[9][18] + t->Phi[2][10]*f->P[10][18] + t->Phi[2][11]*f->P[11][18] +
             t->Phi[2][12]*f->P[12][18] + t->Phi[2][13]*f->P[13][18] + t->Phi[2][14]*f->P[14][18] +
             t->Phi[2][15]*f->P[15][18] + t->Phi[2][16]*f->P[16][18] + t->Phi[2][17]*f->P[17][18] +
             t->Phi[2][18]*f->P[18][18] + t->Phi[2][19]*f->P[19][18] + t->Phi[2][20]*f->P[20][18];
-    w->M[2][19] = t->Phi[2][0]*f->P[0][19] + t->Phi[2][1]*f->P[1][19] + t->Phi[2][2]*f->P[2][19] +
+    w->M[19] = t->Phi[2][0]*f->P[0][19] + t->Phi[2][1]*f->P[1][19] + t->Phi[2][2]*f->P[2][19] +
             t->Phi[2][3]*f->P[3][19] + t->Phi[2][4]*f->P[4][19] + t->Phi[2][5]*f->P[5][19] +
             t->Phi[2][6]*f->P[6][19] + t->Phi[2][7]*f->P[7][19] + t->Phi[2][8]*f->P[8][19] +
             t->Phi[2][9]*f->P[9][19] + t->Phi[2][10]*f->P[10][19] + t->Phi[2][11]*f->P[11][19] +
             t->Phi[2][12]*f->P[12][19] + t->Phi[2][13]*f->P[13][19] + t->Phi[2][14]*f->P[14][19] +
             t->Phi[2][15]*f->P[15][19] + t->Phi[2][16]*f->P[16][19] + t->Phi[2][17]*f->P[17][19] +
             t->Phi[2][18]*f->P[18][19] + t->Phi[2][19]*f->P[19][19] + t->Phi[2][20]*f->P[20][19];
-    w->M[2][20] = t->Phi[2][0]*f->P[0][20] + t->Phi[2][1]*f->P[1][20] + t->Phi[2][2]*f->P[2][20] +
+    w->M[20] = t->Phi[2][0]*f->P[0][20] + t->Phi[2][1]*f->P[1][20] + t->Phi[2][2]*f->P[2][20] +
             t->Phi[2][3]*f->P[3][20] + t->Phi[2][4]*f->P[4][20] + t->Phi[2][5]*f->P[5][20] +
             t->Phi[2][6]*f->P[6][20] + t->Phi[2][7]*f->P[7][20] + t->Phi[2][8]*f->P[8][20] +
             t->Phi[2][9]*f->P[9][20] + t->Phi[2][10]*f->P[10][20] + t->Phi[2][11]*f->P[11][20] +
@@ -5299,150 +5317,226 @@ static void phi_times_p_row_2(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[2][18]*f->P[18][20] + t->Phi[2][19]*f->P[19][20] + t->Phi[2][20]*f->P[20][20];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ins_gnss21_scalar propagate_row_2(const ins_gnss21_transition *restrict t,
+        ins_gnss21_filter_scratch *restrict w)
+{
+    ins_gnss21_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[6]*t->Phi[2][6] +
+            w->M[7]*t->Phi[2][7] + w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] +
+            w->M[10]*t->Phi[2][10] + w->M[11]*t->Phi[2][11] + w->M[12]*t->Phi[2][12] +
+            w->M[13]*t->Phi[2][13] + w->M[14]*t->Phi[2][14] + w->M[15]*t->Phi[2][15] +
+            w->M[16]*t->Phi[2][16] + w->M[17]*t->Phi[2][17] + w->M[18]*t->Phi[2][18] +
+            w->M[19]*t->Phi[2][19] + w->M[20]*t->Phi[2][20] + t->Qd[41]; w->Pn[41] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
+            w->M[7]*t->Phi[3][7] + w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] +
+            w->M[10]*t->Phi[3][10] + w->M[11]*t->Phi[3][11] + w->M[12]*t->Phi[3][12] +
+            w->M[13]*t->Phi[3][13] + w->M[14]*t->Phi[3][14] + w->M[15]*t->Phi[3][15] +
+            w->M[16]*t->Phi[3][16] + w->M[17]*t->Phi[3][17] + w->M[18]*t->Phi[3][18] +
+            w->M[19]*t->Phi[3][19] + w->M[20]*t->Phi[3][20] + t->Qd[42]; w->Pn[42] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] +
+            w->M[10]*t->Phi[4][10] + w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] +
+            w->M[13]*t->Phi[4][13] + w->M[14]*t->Phi[4][14] + w->M[15]*t->Phi[4][15] +
+            w->M[16]*t->Phi[4][16] + w->M[17]*t->Phi[4][17] + w->M[18]*t->Phi[4][18] +
+            w->M[19]*t->Phi[4][19] + w->M[20]*t->Phi[4][20] + t->Qd[43]; w->Pn[43] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] +
+            w->M[10]*t->Phi[5][10] + w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] +
+            w->M[13]*t->Phi[5][13] + w->M[14]*t->Phi[5][14] + w->M[15]*t->Phi[5][15] +
+            w->M[16]*t->Phi[5][16] + w->M[17]*t->Phi[5][17] + w->M[18]*t->Phi[5][18] +
+            w->M[19]*t->Phi[5][19] + w->M[20]*t->Phi[5][20] + t->Qd[44]; w->Pn[44] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[16]*t->Phi[6][16] + w->M[17]*t->Phi[6][17] + w->M[18]*t->Phi[6][18] +
+            w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] + t->Qd[45]; w->Pn[45] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + w->M[15]*t->Phi[7][15] +
+            w->M[16]*t->Phi[7][16] + w->M[17]*t->Phi[7][17] + w->M[18]*t->Phi[7][18] +
+            w->M[19]*t->Phi[7][19] + w->M[20]*t->Phi[7][20] + t->Qd[46]; w->Pn[46] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] +
+            w->M[10]*t->Phi[8][10] + w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] +
+            w->M[13]*t->Phi[8][13] + w->M[14]*t->Phi[8][14] + w->M[15]*t->Phi[8][15] +
+            w->M[16]*t->Phi[8][16] + w->M[17]*t->Phi[8][17] + w->M[18]*t->Phi[8][18] +
+            w->M[19]*t->Phi[8][19] + w->M[20]*t->Phi[8][20] + t->Qd[47]; w->Pn[47] = v; check += v -
+            v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[48]; w->Pn[48] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[49]; w->Pn[49] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[50]; w->Pn[50] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[51]; w->Pn[51] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[52]; w->Pn[52] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[53]; w->Pn[53] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[54]; w->Pn[54] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16] + t->Qd[55]; w->Pn[55] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17] + t->Qd[56]; w->Pn[56] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18] + t->Qd[57]; w->Pn[57] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19] + t->Qd[58]; w->Pn[58] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20] + t->Qd[59]; w->Pn[59] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_3(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
         *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[3][0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] +
+    w->M[0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] +
             t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] +
             t->Phi[3][6]*f->P[6][0] + t->Phi[3][7]*f->P[7][0] + t->Phi[3][8]*f->P[8][0] +
             t->Phi[3][9]*f->P[9][0] + t->Phi[3][10]*f->P[10][0] + t->Phi[3][11]*f->P[11][0] +
             t->Phi[3][12]*f->P[12][0] + t->Phi[3][13]*f->P[13][0] + t->Phi[3][14]*f->P[14][0] +
             t->Phi[3][15]*f->P[15][0] + t->Phi[3][16]*f->P[16][0] + t->Phi[3][17]*f->P[17][0] +
             t->Phi[3][18]*f->P[18][0] + t->Phi[3][19]*f->P[19][0] + t->Phi[3][20]*f->P[20][0];
-    w->M[3][1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] +
+    w->M[1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] +
             t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] +
             t->Phi[3][6]*f->P[6][1] + t->Phi[3][7]*f->P[7][1] + t->Phi[3][8]*f->P[8][1] +
             t->Phi[3][9]*f->P[9][1] + t->Phi[3][10]*f->P[10][1] + t->Phi[3][11]*f->P[11][1] +
             t->Phi[3][12]*f->P[12][1] + t->Phi[3][13]*f->P[13][1] + t->Phi[3][14]*f->P[14][1] +
             t->Phi[3][15]*f->P[15][1] + t->Phi[3][16]*f->P[16][1] + t->Phi[3][17]*f->P[17][1] +
             t->Phi[3][18]*f->P[18][1] + t->Phi[3][19]*f->P[19][1] + t->Phi[3][20]*f->P[20][1];
-    w->M[3][2] = t->Phi[3][0]*f->P[0][2] + t->Phi[3][1]*f->P[1][2] + t->Phi[3][2]*f->P[2][2] +
+    w->M[2] = t->Phi[3][0]*f->P[0][2] + t->Phi[3][1]*f->P[1][2] + t->Phi[3][2]*f->P[2][2] +
             t->Phi[3][3]*f->P[3][2] + t->Phi[3][4]*f->P[4][2] + t->Phi[3][5]*f->P[5][2] +
             t->Phi[3][6]*f->P[6][2] + t->Phi[3][7]*f->P[7][2] + t->Phi[3][8]*f->P[8][2] +
             t->Phi[3][9]*f->P[9][2] + t->Phi[3][10]*f->P[10][2] + t->Phi[3][11]*f->P[11][2] +
             t->Phi[3][12]*f->P[12][2] + t->Phi[3][13]*f->P[13][2] + t->Phi[3][14]*f->P[14][2] +
             t->Phi[3][15]*f->P[15][2] + t->Phi[3][16]*f->P[16][2] + t->Phi[3][17]*f->P[17][2] +
             t->Phi[3][18]*f->P[18][2] + t->Phi[3][19]*f->P[19][2] + t->Phi[3][20]*f->P[20][2];
-    w->M[3][3] = t->Phi[3][0]*f->P[0][3] + t->Phi[3][1]*f->P[1][3] + t->Phi[3][2]*f->P[2][3] +
+    w->M[3] = t->Phi[3][0]*f->P[0][3] + t->Phi[3][1]*f->P[1][3] + t->Phi[3][2]*f->P[2][3] +
             t->Phi[3][3]*f->P[3][3] + t->Phi[3][4]*f->P[4][3] + t->Phi[3][5]*f->P[5][3] +
             t->Phi[3][6]*f->P[6][3] + t->Phi[3][7]*f->P[7][3] + t->Phi[3][8]*f->P[8][3] +
             t->Phi[3][9]*f->P[9][3] + t->Phi[3][10]*f->P[10][3] + t->Phi[3][11]*f->P[11][3] +
             t->Phi[3][12]*f->P[12][3] + t->Phi[3][13]*f->P[13][3] + t->Phi[3][14]*f->P[14][3] +
             t->Phi[3][15]*f->P[15][3] + t->Phi[3][16]*f->P[16][3] + t->Phi[3][17]*f->P[17][3] +
             t->Phi[3][18]*f->P[18][3] + t->Phi[3][19]*f->P[19][3] + t->Phi[3][20]*f->P[20][3];
-    w->M[3][4] = t->Phi[3][0]*f->P[0][4] + t->Phi[3][1]*f->P[1][4] + t->Phi[3][2]*f->P[2][4] +
+    w->M[4] = t->Phi[3][0]*f->P[0][4] + t->Phi[3][1]*f->P[1][4] + t->Phi[3][2]*f->P[2][4] +
             t->Phi[3][3]*f->P[3][4] + t->Phi[3][4]*f->P[4][4] + t->Phi[3][5]*f->P[5][4] +
             t->Phi[3][6]*f->P[6][4] + t->Phi[3][7]*f->P[7][4] + t->Phi[3][8]*f->P[8][4] +
             t->Phi[3][9]*f->P[9][4] + t->Phi[3][10]*f->P[10][4] + t->Phi[3][11]*f->P[11][4] +
             t->Phi[3][12]*f->P[12][4] + t->Phi[3][13]*f->P[13][4] + t->Phi[3][14]*f->P[14][4] +
             t->Phi[3][15]*f->P[15][4] + t->Phi[3][16]*f->P[16][4] + t->Phi[3][17]*f->P[17][4] +
             t->Phi[3][18]*f->P[18][4] + t->Phi[3][19]*f->P[19][4] + t->Phi[3][20]*f->P[20][4];
-    w->M[3][5] = t->Phi[3][0]*f->P[0][5] + t->Phi[3][1]*f->P[1][5] + t->Phi[3][2]*f->P[2][5] +
+    w->M[5] = t->Phi[3][0]*f->P[0][5] + t->Phi[3][1]*f->P[1][5] + t->Phi[3][2]*f->P[2][5] +
             t->Phi[3][3]*f->P[3][5] + t->Phi[3][4]*f->P[4][5] + t->Phi[3][5]*f->P[5][5] +
             t->Phi[3][6]*f->P[6][5] + t->Phi[3][7]*f->P[7][5] + t->Phi[3][8]*f->P[8][5] +
             t->Phi[3][9]*f->P[9][5] + t->Phi[3][10]*f->P[10][5] + t->Phi[3][11]*f->P[11][5] +
             t->Phi[3][12]*f->P[12][5] + t->Phi[3][13]*f->P[13][5] + t->Phi[3][14]*f->P[14][5] +
             t->Phi[3][15]*f->P[15][5] + t->Phi[3][16]*f->P[16][5] + t->Phi[3][17]*f->P[17][5] +
             t->Phi[3][18]*f->P[18][5] + t->Phi[3][19]*f->P[19][5] + t->Phi[3][20]*f->P[20][5];
-    w->M[3][6] = t->Phi[3][0]*f->P[0][6] + t->Phi[3][1]*f->P[1][6] + t->Phi[3][2]*f->P[2][6] +
+    w->M[6] = t->Phi[3][0]*f->P[0][6] + t->Phi[3][1]*f->P[1][6] + t->Phi[3][2]*f->P[2][6] +
             t->Phi[3][3]*f->P[3][6] + t->Phi[3][4]*f->P[4][6] + t->Phi[3][5]*f->P[5][6] +
             t->Phi[3][6]*f->P[6][6] + t->Phi[3][7]*f->P[7][6] + t->Phi[3][8]*f->P[8][6] +
             t->Phi[3][9]*f->P[9][6] + t->Phi[3][10]*f->P[10][6] + t->Phi[3][11]*f->P[11][6] +
             t->Phi[3][12]*f->P[12][6] + t->Phi[3][13]*f->P[13][6] + t->Phi[3][14]*f->P[14][6] +
             t->Phi[3][15]*f->P[15][6] + t->Phi[3][16]*f->P[16][6] + t->Phi[3][17]*f->P[17][6] +
             t->Phi[3][18]*f->P[18][6] + t->Phi[3][19]*f->P[19][6] + t->Phi[3][20]*f->P[20][6];
-    w->M[3][7] = t->Phi[3][0]*f->P[0][7] + t->Phi[3][1]*f->P[1][7] + t->Phi[3][2]*f->P[2][7] +
+    w->M[7] = t->Phi[3][0]*f->P[0][7] + t->Phi[3][1]*f->P[1][7] + t->Phi[3][2]*f->P[2][7] +
             t->Phi[3][3]*f->P[3][7] + t->Phi[3][4]*f->P[4][7] + t->Phi[3][5]*f->P[5][7] +
             t->Phi[3][6]*f->P[6][7] + t->Phi[3][7]*f->P[7][7] + t->Phi[3][8]*f->P[8][7] +
             t->Phi[3][9]*f->P[9][7] + t->Phi[3][10]*f->P[10][7] + t->Phi[3][11]*f->P[11][7] +
             t->Phi[3][12]*f->P[12][7] + t->Phi[3][13]*f->P[13][7] + t->Phi[3][14]*f->P[14][7] +
             t->Phi[3][15]*f->P[15][7] + t->Phi[3][16]*f->P[16][7] + t->Phi[3][17]*f->P[17][7] +
             t->Phi[3][18]*f->P[18][7] + t->Phi[3][19]*f->P[19][7] + t->Phi[3][20]*f->P[20][7];
-    w->M[3][8] = t->Phi[3][0]*f->P[0][8] + t->Phi[3][1]*f->P[1][8] + t->Phi[3][2]*f->P[2][8] +
+    w->M[8] = t->Phi[3][0]*f->P[0][8] + t->Phi[3][1]*f->P[1][8] + t->Phi[3][2]*f->P[2][8] +
             t->Phi[3][3]*f->P[3][8] + t->Phi[3][4]*f->P[4][8] + t->Phi[3][5]*f->P[5][8] +
             t->Phi[3][6]*f->P[6][8] + t->Phi[3][7]*f->P[7][8] + t->Phi[3][8]*f->P[8][8] +
             t->Phi[3][9]*f->P[9][8] + t->Phi[3][10]*f->P[10][8] + t->Phi[3][11]*f->P[11][8] +
             t->Phi[3][12]*f->P[12][8] + t->Phi[3][13]*f->P[13][8] + t->Phi[3][14]*f->P[14][8] +
             t->Phi[3][15]*f->P[15][8] + t->Phi[3][16]*f->P[16][8] + t->Phi[3][17]*f->P[17][8] +
             t->Phi[3][18]*f->P[18][8] + t->Phi[3][19]*f->P[19][8] + t->Phi[3][20]*f->P[20][8];
-    w->M[3][9] = t->Phi[3][0]*f->P[0][9] + t->Phi[3][1]*f->P[1][9] + t->Phi[3][2]*f->P[2][9] +
+    w->M[9] = t->Phi[3][0]*f->P[0][9] + t->Phi[3][1]*f->P[1][9] + t->Phi[3][2]*f->P[2][9] +
             t->Phi[3][3]*f->P[3][9] + t->Phi[3][4]*f->P[4][9] + t->Phi[3][5]*f->P[5][9] +
             t->Phi[3][6]*f->P[6][9] + t->Phi[3][7]*f->P[7][9] + t->Phi[3][8]*f->P[8][9] +
             t->Phi[3][9]*f->P[9][9] + t->Phi[3][10]*f->P[10][9] + t->Phi[3][11]*f->P[11][9] +
             t->Phi[3][12]*f->P[12][9] + t->Phi[3][13]*f->P[13][9] + t->Phi[3][14]*f->P[14][9] +
             t->Phi[3][15]*f->P[15][9] + t->Phi[3][16]*f->P[16][9] + t->Phi[3][17]*f->P[17][9] +
             t->Phi[3][18]*f->P[18][9] + t->Phi[3][19]*f->P[19][9] + t->Phi[3][20]*f->P[20][9];
-    w->M[3][10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] +
+    w->M[10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] +
             t->Phi[3][3]*f->P[3][10] + t->Phi[3][4]*f->P[4][10] + t->Phi[3][5]*f->P[5][10] +
             t->Phi[3][6]*f->P[6][10] + t->Phi[3][7]*f->P[7][10] + t->Phi[3][8]*f->P[8][10] +
             t->Phi[3][9]*f->P[9][10] + t->Phi[3][10]*f->P[10][10] + t->Phi[3][11]*f->P[11][10] +
             t->Phi[3][12]*f->P[12][10] + t->Phi[3][13]*f->P[13][10] + t->Phi[3][14]*f->P[14][10] +
             t->Phi[3][15]*f->P[15][10] + t->Phi[3][16]*f->P[16][10] + t->Phi[3][17]*f->P[17][10] +
             t->Phi[3][18]*f->P[18][10] + t->Phi[3][19]*f->P[19][10] + t->Phi[3][20]*f->P[20][10];
-    w->M[3][11] = t->Phi[3][0]*f->P[0][11] + t->Phi[3][1]*f->P[1][11] + t->Phi[3][2]*f->P[2][11] +
+    w->M[11] = t->Phi[3][0]*f->P[0][11] + t->Phi[3][1]*f->P[1][11] + t->Phi[3][2]*f->P[2][11] +
             t->Phi[3][3]*f->P[3][11] + t->Phi[3][4]*f->P[4][11] + t->Phi[3][5]*f->P[5][11] +
             t->Phi[3][6]*f->P[6][11] + t->Phi[3][7]*f->P[7][11] + t->Phi[3][8]*f->P[8][11] +
             t->Phi[3][9]*f->P[9][11] + t->Phi[3][10]*f->P[10][11] + t->Phi[3][11]*f->P[11][11] +
             t->Phi[3][12]*f->P[12][11] + t->Phi[3][13]*f->P[13][11] + t->Phi[3][14]*f->P[14][11] +
             t->Phi[3][15]*f->P[15][11] + t->Phi[3][16]*f->P[16][11] + t->Phi[3][17]*f->P[17][11] +
             t->Phi[3][18]*f->P[18][11] + t->Phi[3][19]*f->P[19][11] + t->Phi[3][20]*f->P[20][11];
-    w->M[3][12] = t->Phi[3][0]*f->P[0][12] + t->Phi[3][1]*f->P[1][12] + t->Phi[3][2]*f->P[2][12] +
+    w->M[12] = t->Phi[3][0]*f->P[0][12] + t->Phi[3][1]*f->P[1][12] + t->Phi[3][2]*f->P[2][12] +
             t->Phi[3][3]*f->P[3][12] + t->Phi[3][4]*f->P[4][12] + t->Phi[3][5]*f->P[5][12] +
             t->Phi[3][6]*f->P[6][12] + t->Phi[3][7]*f->P[7][12] + t->Phi[3][8]*f->P[8][12] +
             t->Phi[3][9]*f->P[9][12] + t->Phi[3][10]*f->P[10][12] + t->Phi[3][11]*f->P[11][12] +
             t->Phi[3][12]*f->P[12][12] + t->Phi[3][13]*f->P[13][12] + t->Phi[3][14]*f->P[14][12] +
             t->Phi[3][15]*f->P[15][12] + t->Phi[3][16]*f->P[16][12] + t->Phi[3][17]*f->P[17][12] +
             t->Phi[3][18]*f->P[18][12] + t->Phi[3][19]*f->P[19][12] + t->Phi[3][20]*f->P[20][12];
-    w->M[3][13] = t->Phi[3][0]*f->P[0][13] + t->Phi[3][1]*f->P[1][13] + t->Phi[3][2]*f->P[2][13] +
+    w->M[13] = t->Phi[3][0]*f->P[0][13] + t->Phi[3][1]*f->P[1][13] + t->Phi[3][2]*f->P[2][13] +
             t->Phi[3][3]*f->P[3][13] + t->Phi[3][4]*f->P[4][13] + t->Phi[3][5]*f->P[5][13] +
             t->Phi[3][6]*f->P[6][13] + t->Phi[3][7]*f->P[7][13] + t->Phi[3][8]*f->P[8][13] +
             t->Phi[3][9]*f->P[9][13] + t->Phi[3][10]*f->P[10][13] + t->Phi[3][11]*f->P[11][13] +
             t->Phi[3][12]*f->P[12][13] + t->Phi[3][13]*f->P[13][13] + t->Phi[3][14]*f->P[14][13] +
             t->Phi[3][15]*f->P[15][13] + t->Phi[3][16]*f->P[16][13] + t->Phi[3][17]*f->P[17][13] +
             t->Phi[3][18]*f->P[18][13] + t->Phi[3][19]*f->P[19][13] + t->Phi[3][20]*f->P[20][13];
-    w->M[3][14] = t->Phi[3][0]*f->P[0][14] + t->Phi[3][1]*f->P[1][14] + t->Phi[3][2]*f->P[2][14] +
+    w->M[14] = t->Phi[3][0]*f->P[0][14] + t->Phi[3][1]*f->P[1][14] + t->Phi[3][2]*f->P[2][14] +
             t->Phi[3][3]*f->P[3][14] + t->Phi[3][4]*f->P[4][14] + t->Phi[3][5]*f->P[5][14] +
             t->Phi[3][6]*f->P[6][14] + t->Phi[3][7]*f->P[7][14] + t->Phi[3][8]*f->P[8][14] +
             t->Phi[3][9]*f->P[9][14] + t->Phi[3][10]*f->P[10][14] + t->Phi[3][11]*f->P[11][14] +
             t->Phi[3][12]*f->P[12][14] + t->Phi[3][13]*f->P[13][14] + t->Phi[3][14]*f->P[14][14] +
             t->Phi[3][15]*f->P[15][14] + t->Phi[3][16]*f->P[16][14] + t->Phi[3][17]*f->P[17][14] +
             t->Phi[3][18]*f->P[18][14] + t->Phi[3][19]*f->P[19][14] + t->Phi[3][20]*f->P[20][14];
-    w->M[3][15] = t->Phi[3][0]*f->P[0][15] + t->Phi[3][1]*f->P[1][15] + t->Phi[3][2]*f->P[2][15] +
+    w->M[15] = t->Phi[3][0]*f->P[0][15] + t->Phi[3][1]*f->P[1][15] + t->Phi[3][2]*f->P[2][15] +
             t->Phi[3][3]*f->P[3][15] + t->Phi[3][4]*f->P[4][15] + t->Phi[3][5]*f->P[5][15] +
             t->Phi[3][6]*f->P[6][15] + t->Phi[3][7]*f->P[7][15] + t->Phi[3][8]*f->P[8][15] +
             t->Phi[3][9]*f->P[9][15] + t->Phi[3][10]*f->P[10][15] + t->Phi[3][11]*f->P[11][15] +
             t->Phi[3][12]*f->P[12][15] + t->Phi[3][13]*f->P[13][15] + t->Phi[3][14]*f->P[14][15] +
             t->Phi[3][15]*f->P[15][15] + t->Phi[3][16]*f->P[16][15] + t->Phi[3][17]*f->P[17][15] +
             t->Phi[3][18]*f->P[18][15] + t->Phi[3][19]*f->P[19][15] + t->Phi[3][20]*f->P[20][15];
-    w->M[3][16] = t->Phi[3][0]*f->P[0][16] + t->Phi[3][1]*f->P[1][16] + t->Phi[3][2]*f->P[2][16] +
+    w->M[16] = t->Phi[3][0]*f->P[0][16] + t->Phi[3][1]*f->P[1][16] + t->Phi[3][2]*f->P[2][16] +
             t->Phi[3][3]*f->P[3][16] + t->Phi[3][4]*f->P[4][16] + t->Phi[3][5]*f->P[5][16] +
             t->Phi[3][6]*f->P[6][16] + t->Phi[3][7]*f->P[7][16] + t->Phi[3][8]*f->P[8][16] +
             t->Phi[3][9]*f->P[9][16] + t->Phi[3][10]*f->P[10][16] + t->Phi[3][11]*f->P[11][16] +
             t->Phi[3][12]*f->P[12][16] + t->Phi[3][13]*f->P[13][16] + t->Phi[3][14]*f->P[14][16] +
             t->Phi[3][15]*f->P[15][16] + t->Phi[3][16]*f->P[16][16] + t->Phi[3][17]*f->P[17][16] +
             t->Phi[3][18]*f->P[18][16] + t->Phi[3][19]*f->P[19][16] + t->Phi[3][20]*f->P[20][16];
-    w->M[3][17] = t->Phi[3][0]*f->P[0][17] + t->Phi[3][1]*f->P[1][17] + t->Phi[3][2]*f->P[2][17] +
+    w->M[17] = t->Phi[3][0]*f->P[0][17] + t->Phi[3][1]*f->P[1][17] + t->Phi[3][2]*f->P[2][17] +
             t->Phi[3][3]*f->P[3][17] + t->Phi[3][4]*f->P[4][17] + t->Phi[3][5]*f->P[5][17] +
             t->Phi[3][6]*f->P[6][17] + t->Phi[3][7]*f->P[7][17] + t->Phi[3][8]*f->P[8][17] +
             t->Phi[3][9]*f->P[9][17] + t->Phi[3][10]*f->P[10][17] + t->Phi[3][11]*f->P[11][17] +
             t->Phi[3][12]*f->P[12][17] + t->Phi[3][13]*f->P[13][17] + t->Phi[3][14]*f->P[14][17] +
             t->Phi[3][15]*f->P[15][17] + t->Phi[3][16]*f->P[16][17] + t->Phi[3][17]*f->P[17][17] +
             t->Phi[3][18]*f->P[18][17] + t->Phi[3][19]*f->P[19][17] + t->Phi[3][20]*f->P[20][17];
-    w->M[3][18] = t->Phi[3][0]*f->P[0][18] + t->Phi[3][1]*f->P[1][18] + t->Phi[3][2]*f->P[2][18] +
+    w->M[18] = t->Phi[3][0]*f->P[0][18] + t->Phi[3][1]*f->P[1][18] + t->Phi[3][2]*f->P[2][18] +
             t->Phi[3][3]*f->P[3][18] + t->Phi[3][4]*f->P[4][18] + t->Phi[3][5]*f->P[5][18] +
             t->Phi[3][6]*f->P[6][18] + t->Phi[3][7]*f->P[7][18] + t->Phi[3][8]*f->P[8][18] +
             t->Phi[3][9]*f->P[9][18] + t->Phi[3][10]*f->P[10][18] + t->Phi[3][11]*f->P[11][18] +
             t->Phi[3][12]*f->P[12][18] + t->Phi[3][13]*f->P[13][18] + t->Phi[3][14]*f->P[14][18] +
             t->Phi[3][15]*f->P[15][18] + t->Phi[3][16]*f->P[16][18] + t->Phi[3][17]*f->P[17][18] +
             t->Phi[3][18]*f->P[18][18] + t->Phi[3][19]*f->P[19][18] + t->Phi[3][20]*f->P[20][18];
-    w->M[3][19] = t->Phi[3][0]*f->P[0][19] + t->Phi[3][1]*f->P[1][19] + t->Phi[3][2]*f->P[2][19] +
+    w->M[19] = t->Phi[3][0]*f->P[0][19] + t->Phi[3][1]*f->P[1][19] + t->Phi[3][2]*f->P[2][19] +
             t->Phi[3][3]*f->P[3][19] + t->Phi[3][4]*f->P[4][19] + t->Phi[3][5]*f->P[5][19] +
             t->Phi[3][6]*f->P[6][19] + t->Phi[3][7]*f->P[7][19] + t->Phi[3][8]*f->P[8][19] +
             t->Phi[3][9]*f->P[9][19] + t->Phi[3][10]*f->P[10][19] + t->Phi[3][11]*f->P[11][19] +
             t->Phi[3][12]*f->P[12][19] + t->Phi[3][13]*f->P[13][19] + t->Phi[3][14]*f->P[14][19] +
             t->Phi[3][15]*f->P[15][19] + t->Phi[3][16]*f->P[16][19] + t->Phi[3][17]*f->P[17][19] +
             t->Phi[3][18]*f->P[18][19] + t->Phi[3][19]*f->P[19][19] + t->Phi[3][20]*f->P[20][19];
-    w->M[3][20] = t->Phi[3][0]*f->P[0][20] + t->Phi[3][1]*f->P[1][20] + t->Phi[3][2]*f->P[2][20] +
+    w->M[20] = t->Phi[3][0]*f->P[0][20] + t->Phi[3][1]*f->P[1][20] + t->Phi[3][2]*f->P[2][20] +
             t->Phi[3][3]*f->P[3][20] + t->Phi[3][4]*f->P[4][20] + t->Phi[3][5]*f->P[5][20] +
             t->Phi[3][6]*f->P[6][20] + t->Phi[3][7]*f->P[7][20] + t->Phi[3][8]*f->P[8][20] +
             t->Phi[3][9]*f->P[9][20] + t->Phi[3][10]*f->P[10][20] + t->Phi[3][11]*f->P[11][20] +
@@ -5451,150 +5545,218 @@ static void phi_times_p_row_3(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[3][18]*f->P[18][20] + t->Phi[3][19]*f->P[19][20] + t->Phi[3][20]*f->P[20][20];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ins_gnss21_scalar propagate_row_3(const ins_gnss21_transition *restrict t,
+        ins_gnss21_filter_scratch *restrict w)
+{
+    ins_gnss21_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
+            w->M[7]*t->Phi[3][7] + w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] +
+            w->M[10]*t->Phi[3][10] + w->M[11]*t->Phi[3][11] + w->M[12]*t->Phi[3][12] +
+            w->M[13]*t->Phi[3][13] + w->M[14]*t->Phi[3][14] + w->M[15]*t->Phi[3][15] +
+            w->M[16]*t->Phi[3][16] + w->M[17]*t->Phi[3][17] + w->M[18]*t->Phi[3][18] +
+            w->M[19]*t->Phi[3][19] + w->M[20]*t->Phi[3][20] + t->Qd[60]; w->Pn[60] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] +
+            w->M[10]*t->Phi[4][10] + w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] +
+            w->M[13]*t->Phi[4][13] + w->M[14]*t->Phi[4][14] + w->M[15]*t->Phi[4][15] +
+            w->M[16]*t->Phi[4][16] + w->M[17]*t->Phi[4][17] + w->M[18]*t->Phi[4][18] +
+            w->M[19]*t->Phi[4][19] + w->M[20]*t->Phi[4][20] + t->Qd[61]; w->Pn[61] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] +
+            w->M[10]*t->Phi[5][10] + w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] +
+            w->M[13]*t->Phi[5][13] + w->M[14]*t->Phi[5][14] + w->M[15]*t->Phi[5][15] +
+            w->M[16]*t->Phi[5][16] + w->M[17]*t->Phi[5][17] + w->M[18]*t->Phi[5][18] +
+            w->M[19]*t->Phi[5][19] + w->M[20]*t->Phi[5][20] + t->Qd[62]; w->Pn[62] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[16]*t->Phi[6][16] + w->M[17]*t->Phi[6][17] + w->M[18]*t->Phi[6][18] +
+            w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] + t->Qd[63]; w->Pn[63] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + w->M[15]*t->Phi[7][15] +
+            w->M[16]*t->Phi[7][16] + w->M[17]*t->Phi[7][17] + w->M[18]*t->Phi[7][18] +
+            w->M[19]*t->Phi[7][19] + w->M[20]*t->Phi[7][20] + t->Qd[64]; w->Pn[64] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] +
+            w->M[10]*t->Phi[8][10] + w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] +
+            w->M[13]*t->Phi[8][13] + w->M[14]*t->Phi[8][14] + w->M[15]*t->Phi[8][15] +
+            w->M[16]*t->Phi[8][16] + w->M[17]*t->Phi[8][17] + w->M[18]*t->Phi[8][18] +
+            w->M[19]*t->Phi[8][19] + w->M[20]*t->Phi[8][20] + t->Qd[65]; w->Pn[65] = v; check += v -
+            v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[66]; w->Pn[66] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[67]; w->Pn[67] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[68]; w->Pn[68] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[69]; w->Pn[69] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[70]; w->Pn[70] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[71]; w->Pn[71] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[72]; w->Pn[72] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16] + t->Qd[73]; w->Pn[73] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17] + t->Qd[74]; w->Pn[74] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18] + t->Qd[75]; w->Pn[75] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19] + t->Qd[76]; w->Pn[76] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20] + t->Qd[77]; w->Pn[77] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_4(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
         *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[4][0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] +
+    w->M[0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] +
             t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] +
             t->Phi[4][6]*f->P[6][0] + t->Phi[4][7]*f->P[7][0] + t->Phi[4][8]*f->P[8][0] +
             t->Phi[4][9]*f->P[9][0] + t->Phi[4][10]*f->P[10][0] + t->Phi[4][11]*f->P[11][0] +
             t->Phi[4][12]*f->P[12][0] + t->Phi[4][13]*f->P[13][0] + t->Phi[4][14]*f->P[14][0] +
             t->Phi[4][15]*f->P[15][0] + t->Phi[4][16]*f->P[16][0] + t->Phi[4][17]*f->P[17][0] +
             t->Phi[4][18]*f->P[18][0] + t->Phi[4][19]*f->P[19][0] + t->Phi[4][20]*f->P[20][0];
-    w->M[4][1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] +
+    w->M[1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] +
             t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] +
             t->Phi[4][6]*f->P[6][1] + t->Phi[4][7]*f->P[7][1] + t->Phi[4][8]*f->P[8][1] +
             t->Phi[4][9]*f->P[9][1] + t->Phi[4][10]*f->P[10][1] + t->Phi[4][11]*f->P[11][1] +
             t->Phi[4][12]*f->P[12][1] + t->Phi[4][13]*f->P[13][1] + t->Phi[4][14]*f->P[14][1] +
             t->Phi[4][15]*f->P[15][1] + t->Phi[4][16]*f->P[16][1] + t->Phi[4][17]*f->P[17][1] +
             t->Phi[4][18]*f->P[18][1] + t->Phi[4][19]*f->P[19][1] + t->Phi[4][20]*f->P[20][1];
-    w->M[4][2] = t->Phi[4][0]*f->P[0][2] + t->Phi[4][1]*f->P[1][2] + t->Phi[4][2]*f->P[2][2] +
+    w->M[2] = t->Phi[4][0]*f->P[0][2] + t->Phi[4][1]*f->P[1][2] + t->Phi[4][2]*f->P[2][2] +
             t->Phi[4][3]*f->P[3][2] + t->Phi[4][4]*f->P[4][2] + t->Phi[4][5]*f->P[5][2] +
             t->Phi[4][6]*f->P[6][2] + t->Phi[4][7]*f->P[7][2] + t->Phi[4][8]*f->P[8][2] +
             t->Phi[4][9]*f->P[9][2] + t->Phi[4][10]*f->P[10][2] + t->Phi[4][11]*f->P[11][2] +
             t->Phi[4][12]*f->P[12][2] + t->Phi[4][13]*f->P[13][2] + t->Phi[4][14]*f->P[14][2] +
             t->Phi[4][15]*f->P[15][2] + t->Phi[4][16]*f->P[16][2] + t->Phi[4][17]*f->P[17][2] +
             t->Phi[4][18]*f->P[18][2] + t->Phi[4][19]*f->P[19][2] + t->Phi[4][20]*f->P[20][2];
-    w->M[4][3] = t->Phi[4][0]*f->P[0][3] + t->Phi[4][1]*f->P[1][3] + t->Phi[4][2]*f->P[2][3] +
+    w->M[3] = t->Phi[4][0]*f->P[0][3] + t->Phi[4][1]*f->P[1][3] + t->Phi[4][2]*f->P[2][3] +
             t->Phi[4][3]*f->P[3][3] + t->Phi[4][4]*f->P[4][3] + t->Phi[4][5]*f->P[5][3] +
             t->Phi[4][6]*f->P[6][3] + t->Phi[4][7]*f->P[7][3] + t->Phi[4][8]*f->P[8][3] +
             t->Phi[4][9]*f->P[9][3] + t->Phi[4][10]*f->P[10][3] + t->Phi[4][11]*f->P[11][3] +
             t->Phi[4][12]*f->P[12][3] + t->Phi[4][13]*f->P[13][3] + t->Phi[4][14]*f->P[14][3] +
             t->Phi[4][15]*f->P[15][3] + t->Phi[4][16]*f->P[16][3] + t->Phi[4][17]*f->P[17][3] +
             t->Phi[4][18]*f->P[18][3] + t->Phi[4][19]*f->P[19][3] + t->Phi[4][20]*f->P[20][3];
-    w->M[4][4] = t->Phi[4][0]*f->P[0][4] + t->Phi[4][1]*f->P[1][4] + t->Phi[4][2]*f->P[2][4] +
+    w->M[4] = t->Phi[4][0]*f->P[0][4] + t->Phi[4][1]*f->P[1][4] + t->Phi[4][2]*f->P[2][4] +
             t->Phi[4][3]*f->P[3][4] + t->Phi[4][4]*f->P[4][4] + t->Phi[4][5]*f->P[5][4] +
             t->Phi[4][6]*f->P[6][4] + t->Phi[4][7]*f->P[7][4] + t->Phi[4][8]*f->P[8][4] +
             t->Phi[4][9]*f->P[9][4] + t->Phi[4][10]*f->P[10][4] + t->Phi[4][11]*f->P[11][4] +
             t->Phi[4][12]*f->P[12][4] + t->Phi[4][13]*f->P[13][4] + t->Phi[4][14]*f->P[14][4] +
             t->Phi[4][15]*f->P[15][4] + t->Phi[4][16]*f->P[16][4] + t->Phi[4][17]*f->P[17][4] +
             t->Phi[4][18]*f->P[18][4] + t->Phi[4][19]*f->P[19][4] + t->Phi[4][20]*f->P[20][4];
-    w->M[4][5] = t->Phi[4][0]*f->P[0][5] + t->Phi[4][1]*f->P[1][5] + t->Phi[4][2]*f->P[2][5] +
+    w->M[5] = t->Phi[4][0]*f->P[0][5] + t->Phi[4][1]*f->P[1][5] + t->Phi[4][2]*f->P[2][5] +
             t->Phi[4][3]*f->P[3][5] + t->Phi[4][4]*f->P[4][5] + t->Phi[4][5]*f->P[5][5] +
             t->Phi[4][6]*f->P[6][5] + t->Phi[4][7]*f->P[7][5] + t->Phi[4][8]*f->P[8][5] +
             t->Phi[4][9]*f->P[9][5] + t->Phi[4][10]*f->P[10][5] + t->Phi[4][11]*f->P[11][5] +
             t->Phi[4][12]*f->P[12][5] + t->Phi[4][13]*f->P[13][5] + t->Phi[4][14]*f->P[14][5] +
             t->Phi[4][15]*f->P[15][5] + t->Phi[4][16]*f->P[16][5] + t->Phi[4][17]*f->P[17][5] +
             t->Phi[4][18]*f->P[18][5] + t->Phi[4][19]*f->P[19][5] + t->Phi[4][20]*f->P[20][5];
-    w->M[4][6] = t->Phi[4][0]*f->P[0][6] + t->Phi[4][1]*f->P[1][6] + t->Phi[4][2]*f->P[2][6] +
+    w->M[6] = t->Phi[4][0]*f->P[0][6] + t->Phi[4][1]*f->P[1][6] + t->Phi[4][2]*f->P[2][6] +
             t->Phi[4][3]*f->P[3][6] + t->Phi[4][4]*f->P[4][6] + t->Phi[4][5]*f->P[5][6] +
             t->Phi[4][6]*f->P[6][6] + t->Phi[4][7]*f->P[7][6] + t->Phi[4][8]*f->P[8][6] +
             t->Phi[4][9]*f->P[9][6] + t->Phi[4][10]*f->P[10][6] + t->Phi[4][11]*f->P[11][6] +
             t->Phi[4][12]*f->P[12][6] + t->Phi[4][13]*f->P[13][6] + t->Phi[4][14]*f->P[14][6] +
             t->Phi[4][15]*f->P[15][6] + t->Phi[4][16]*f->P[16][6] + t->Phi[4][17]*f->P[17][6] +
             t->Phi[4][18]*f->P[18][6] + t->Phi[4][19]*f->P[19][6] + t->Phi[4][20]*f->P[20][6];
-    w->M[4][7] = t->Phi[4][0]*f->P[0][7] + t->Phi[4][1]*f->P[1][7] + t->Phi[4][2]*f->P[2][7] +
+    w->M[7] = t->Phi[4][0]*f->P[0][7] + t->Phi[4][1]*f->P[1][7] + t->Phi[4][2]*f->P[2][7] +
             t->Phi[4][3]*f->P[3][7] + t->Phi[4][4]*f->P[4][7] + t->Phi[4][5]*f->P[5][7] +
             t->Phi[4][6]*f->P[6][7] + t->Phi[4][7]*f->P[7][7] + t->Phi[4][8]*f->P[8][7] +
             t->Phi[4][9]*f->P[9][7] + t->Phi[4][10]*f->P[10][7] + t->Phi[4][11]*f->P[11][7] +
             t->Phi[4][12]*f->P[12][7] + t->Phi[4][13]*f->P[13][7] + t->Phi[4][14]*f->P[14][7] +
             t->Phi[4][15]*f->P[15][7] + t->Phi[4][16]*f->P[16][7] + t->Phi[4][17]*f->P[17][7] +
             t->Phi[4][18]*f->P[18][7] + t->Phi[4][19]*f->P[19][7] + t->Phi[4][20]*f->P[20][7];
-    w->M[4][8] = t->Phi[4][0]*f->P[0][8] + t->Phi[4][1]*f->P[1][8] + t->Phi[4][2]*f->P[2][8] +
+    w->M[8] = t->Phi[4][0]*f->P[0][8] + t->Phi[4][1]*f->P[1][8] + t->Phi[4][2]*f->P[2][8] +
             t->Phi[4][3]*f->P[3][8] + t->Phi[4][4]*f->P[4][8] + t->Phi[4][5]*f->P[5][8] +
             t->Phi[4][6]*f->P[6][8] + t->Phi[4][7]*f->P[7][8] + t->Phi[4][8]*f->P[8][8] +
             t->Phi[4][9]*f->P[9][8] + t->Phi[4][10]*f->P[10][8] + t->Phi[4][11]*f->P[11][8] +
             t->Phi[4][12]*f->P[12][8] + t->Phi[4][13]*f->P[13][8] + t->Phi[4][14]*f->P[14][8] +
             t->Phi[4][15]*f->P[15][8] + t->Phi[4][16]*f->P[16][8] + t->Phi[4][17]*f->P[17][8] +
             t->Phi[4][18]*f->P[18][8] + t->Phi[4][19]*f->P[19][8] + t->Phi[4][20]*f->P[20][8];
-    w->M[4][9] = t->Phi[4][0]*f->P[0][9] + t->Phi[4][1]*f->P[1][9] + t->Phi[4][2]*f->P[2][9] +
+    w->M[9] = t->Phi[4][0]*f->P[0][9] + t->Phi[4][1]*f->P[1][9] + t->Phi[4][2]*f->P[2][9] +
             t->Phi[4][3]*f->P[3][9] + t->Phi[4][4]*f->P[4][9] + t->Phi[4][5]*f->P[5][9] +
             t->Phi[4][6]*f->P[6][9] + t->Phi[4][7]*f->P[7][9] + t->Phi[4][8]*f->P[8][9] +
             t->Phi[4][9]*f->P[9][9] + t->Phi[4][10]*f->P[10][9] + t->Phi[4][11]*f->P[11][9] +
             t->Phi[4][12]*f->P[12][9] + t->Phi[4][13]*f->P[13][9] + t->Phi[4][14]*f->P[14][9] +
             t->Phi[4][15]*f->P[15][9] + t->Phi[4][16]*f->P[16][9] + t->Phi[4][17]*f->P[17][9] +
             t->Phi[4][18]*f->P[18][9] + t->Phi[4][19]*f->P[19][9] + t->Phi[4][20]*f->P[20][9];
-    w->M[4][10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] +
+    w->M[10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] +
             t->Phi[4][3]*f->P[3][10] + t->Phi[4][4]*f->P[4][10] + t->Phi[4][5]*f->P[5][10] +
             t->Phi[4][6]*f->P[6][10] + t->Phi[4][7]*f->P[7][10] + t->Phi[4][8]*f->P[8][10] +
             t->Phi[4][9]*f->P[9][10] + t->Phi[4][10]*f->P[10][10] + t->Phi[4][11]*f->P[11][10] +
             t->Phi[4][12]*f->P[12][10] + t->Phi[4][13]*f->P[13][10] + t->Phi[4][14]*f->P[14][10] +
             t->Phi[4][15]*f->P[15][10] + t->Phi[4][16]*f->P[16][10] + t->Phi[4][17]*f->P[17][10] +
             t->Phi[4][18]*f->P[18][10] + t->Phi[4][19]*f->P[19][10] + t->Phi[4][20]*f->P[20][10];
-    w->M[4][11] = t->Phi[4][0]*f->P[0][11] + t->Phi[4][1]*f->P[1][11] + t->Phi[4][2]*f->P[2][11] +
+    w->M[11] = t->Phi[4][0]*f->P[0][11] + t->Phi[4][1]*f->P[1][11] + t->Phi[4][2]*f->P[2][11] +
             t->Phi[4][3]*f->P[3][11] + t->Phi[4][4]*f->P[4][11] + t->Phi[4][5]*f->P[5][11] +
             t->Phi[4][6]*f->P[6][11] + t->Phi[4][7]*f->P[7][11] + t->Phi[4][8]*f->P[8][11] +
             t->Phi[4][9]*f->P[9][11] + t->Phi[4][10]*f->P[10][11] + t->Phi[4][11]*f->P[11][11] +
             t->Phi[4][12]*f->P[12][11] + t->Phi[4][13]*f->P[13][11] + t->Phi[4][14]*f->P[14][11] +
             t->Phi[4][15]*f->P[15][11] + t->Phi[4][16]*f->P[16][11] + t->Phi[4][17]*f->P[17][11] +
             t->Phi[4][18]*f->P[18][11] + t->Phi[4][19]*f->P[19][11] + t->Phi[4][20]*f->P[20][11];
-    w->M[4][12] = t->Phi[4][0]*f->P[0][12] + t->Phi[4][1]*f->P[1][12] + t->Phi[4][2]*f->P[2][12] +
+    w->M[12] = t->Phi[4][0]*f->P[0][12] + t->Phi[4][1]*f->P[1][12] + t->Phi[4][2]*f->P[2][12] +
             t->Phi[4][3]*f->P[3][12] + t->Phi[4][4]*f->P[4][12] + t->Phi[4][5]*f->P[5][12] +
             t->Phi[4][6]*f->P[6][12] + t->Phi[4][7]*f->P[7][12] + t->Phi[4][8]*f->P[8][12] +
             t->Phi[4][9]*f->P[9][12] + t->Phi[4][10]*f->P[10][12] + t->Phi[4][11]*f->P[11][12] +
             t->Phi[4][12]*f->P[12][12] + t->Phi[4][13]*f->P[13][12] + t->Phi[4][14]*f->P[14][12] +
             t->Phi[4][15]*f->P[15][12] + t->Phi[4][16]*f->P[16][12] + t->Phi[4][17]*f->P[17][12] +
             t->Phi[4][18]*f->P[18][12] + t->Phi[4][19]*f->P[19][12] + t->Phi[4][20]*f->P[20][12];
-    w->M[4][13] = t->Phi[4][0]*f->P[0][13] + t->Phi[4][1]*f->P[1][13] + t->Phi[4][2]*f->P[2][13] +
+    w->M[13] = t->Phi[4][0]*f->P[0][13] + t->Phi[4][1]*f->P[1][13] + t->Phi[4][2]*f->P[2][13] +
             t->Phi[4][3]*f->P[3][13] + t->Phi[4][4]*f->P[4][13] + t->Phi[4][5]*f->P[5][13] +
             t->Phi[4][6]*f->P[6][13] + t->Phi[4][7]*f->P[7][13] + t->Phi[4][8]*f->P[8][13] +
             t->Phi[4][9]*f->P[9][13] + t->Phi[4][10]*f->P[10][13] + t->Phi[4][11]*f->P[11][13] +
             t->Phi[4][12]*f->P[12][13] + t->Phi[4][13]*f->P[13][13] + t->Phi[4][14]*f->P[14][13] +
             t->Phi[4][15]*f->P[15][13] + t->Phi[4][16]*f->P[16][13] + t->Phi[4][17]*f->P[17][13] +
             t->Phi[4][18]*f->P[18][13] + t->Phi[4][19]*f->P[19][13] + t->Phi[4][20]*f->P[20][13];
-    w->M[4][14] = t->Phi[4][0]*f->P[0][14] + t->Phi[4][1]*f->P[1][14] + t->Phi[4][2]*f->P[2][14] +
+    w->M[14] = t->Phi[4][0]*f->P[0][14] + t->Phi[4][1]*f->P[1][14] + t->Phi[4][2]*f->P[2][14] +
             t->Phi[4][3]*f->P[3][14] + t->Phi[4][4]*f->P[4][14] + t->Phi[4][5]*f->P[5][14] +
             t->Phi[4][6]*f->P[6][14] + t->Phi[4][7]*f->P[7][14] + t->Phi[4][8]*f->P[8][14] +
             t->Phi[4][9]*f->P[9][14] + t->Phi[4][10]*f->P[10][14] + t->Phi[4][11]*f->P[11][14] +
             t->Phi[4][12]*f->P[12][14] + t->Phi[4][13]*f->P[13][14] + t->Phi[4][14]*f->P[14][14] +
             t->Phi[4][15]*f->P[15][14] + t->Phi[4][16]*f->P[16][14] + t->Phi[4][17]*f->P[17][14] +
             t->Phi[4][18]*f->P[18][14] + t->Phi[4][19]*f->P[19][14] + t->Phi[4][20]*f->P[20][14];
-    w->M[4][15] = t->Phi[4][0]*f->P[0][15] + t->Phi[4][1]*f->P[1][15] + t->Phi[4][2]*f->P[2][15] +
+    w->M[15] = t->Phi[4][0]*f->P[0][15] + t->Phi[4][1]*f->P[1][15] + t->Phi[4][2]*f->P[2][15] +
             t->Phi[4][3]*f->P[3][15] + t->Phi[4][4]*f->P[4][15] + t->Phi[4][5]*f->P[5][15] +
             t->Phi[4][6]*f->P[6][15] + t->Phi[4][7]*f->P[7][15] + t->Phi[4][8]*f->P[8][15] +
             t->Phi[4][9]*f->P[9][15] + t->Phi[4][10]*f->P[10][15] + t->Phi[4][11]*f->P[11][15] +
             t->Phi[4][12]*f->P[12][15] + t->Phi[4][13]*f->P[13][15] + t->Phi[4][14]*f->P[14][15] +
             t->Phi[4][15]*f->P[15][15] + t->Phi[4][16]*f->P[16][15] + t->Phi[4][17]*f->P[17][15] +
             t->Phi[4][18]*f->P[18][15] + t->Phi[4][19]*f->P[19][15] + t->Phi[4][20]*f->P[20][15];
-    w->M[4][16] = t->Phi[4][0]*f->P[0][16] + t->Phi[4][1]*f->P[1][16] + t->Phi[4][2]*f->P[2][16] +
+    w->M[16] = t->Phi[4][0]*f->P[0][16] + t->Phi[4][1]*f->P[1][16] + t->Phi[4][2]*f->P[2][16] +
             t->Phi[4][3]*f->P[3][16] + t->Phi[4][4]*f->P[4][16] + t->Phi[4][5]*f->P[5][16] +
             t->Phi[4][6]*f->P[6][16] + t->Phi[4][7]*f->P[7][16] + t->Phi[4][8]*f->P[8][16] +
             t->Phi[4][9]*f->P[9][16] + t->Phi[4][10]*f->P[10][16] + t->Phi[4][11]*f->P[11][16] +
             t->Phi[4][12]*f->P[12][16] + t->Phi[4][13]*f->P[13][16] + t->Phi[4][14]*f->P[14][16] +
             t->Phi[4][15]*f->P[15][16] + t->Phi[4][16]*f->P[16][16] + t->Phi[4][17]*f->P[17][16] +
             t->Phi[4][18]*f->P[18][16] + t->Phi[4][19]*f->P[19][16] + t->Phi[4][20]*f->P[20][16];
-    w->M[4][17] = t->Phi[4][0]*f->P[0][17] + t->Phi[4][1]*f->P[1][17] + t->Phi[4][2]*f->P[2][17] +
+    w->M[17] = t->Phi[4][0]*f->P[0][17] + t->Phi[4][1]*f->P[1][17] + t->Phi[4][2]*f->P[2][17] +
             t->Phi[4][3]*f->P[3][17] + t->Phi[4][4]*f->P[4][17] + t->Phi[4][5]*f->P[5][17] +
             t->Phi[4][6]*f->P[6][17] + t->Phi[4][7]*f->P[7][17] + t->Phi[4][8]*f->P[8][17] +
             t->Phi[4][9]*f->P[9][17] + t->Phi[4][10]*f->P[10][17] + t->Phi[4][11]*f->P[11][17] +
             t->Phi[4][12]*f->P[12][17] + t->Phi[4][13]*f->P[13][17] + t->Phi[4][14]*f->P[14][17] +
             t->Phi[4][15]*f->P[15][17] + t->Phi[4][16]*f->P[16][17] + t->Phi[4][17]*f->P[17][17] +
             t->Phi[4][18]*f->P[18][17] + t->Phi[4][19]*f->P[19][17] + t->Phi[4][20]*f->P[20][17];
-    w->M[4][18] = t->Phi[4][0]*f->P[0][18] + t->Phi[4][1]*f->P[1][18] + t->Phi[4][2]*f->P[2][18] +
+    w->M[18] = t->Phi[4][0]*f->P[0][18] + t->Phi[4][1]*f->P[1][18] + t->Phi[4][2]*f->P[2][18] +
             t->Phi[4][3]*f->P[3][18] + t->Phi[4][4]*f->P[4][18] + t->Phi[4][5]*f->P[5][18] +
             t->Phi[4][6]*f->P[6][18] + t->Phi[4][7]*f->P[7][18] + t->Phi[4][8]*f->P[8][18] +
             t->Phi[4][9]*f->P[9][18] + t->Phi[4][10]*f->P[10][18] + t->Phi[4][11]*f->P[11][18] +
             t->Phi[4][12]*f->P[12][18] + t->Phi[4][13]*f->P[13][18] + t->Phi[4][14]*f->P[14][18] +
             t->Phi[4][15]*f->P[15][18] + t->Phi[4][16]*f->P[16][18] + t->Phi[4][17]*f->P[17][18] +
             t->Phi[4][18]*f->P[18][18] + t->Phi[4][19]*f->P[19][18] + t->Phi[4][20]*f->P[20][18];
-    w->M[4][19] = t->Phi[4][0]*f->P[0][19] + t->Phi[4][1]*f->P[1][19] + t->Phi[4][2]*f->P[2][19] +
+    w->M[19] = t->Phi[4][0]*f->P[0][19] + t->Phi[4][1]*f->P[1][19] + t->Phi[4][2]*f->P[2][19] +
             t->Phi[4][3]*f->P[3][19] + t->Phi[4][4]*f->P[4][19] + t->Phi[4][5]*f->P[5][19] +
             t->Phi[4][6]*f->P[6][19] + t->Phi[4][7]*f->P[7][19] + t->Phi[4][8]*f->P[8][19] +
             t->Phi[4][9]*f->P[9][19] + t->Phi[4][10]*f->P[10][19] + t->Phi[4][11]*f->P[11][19] +
             t->Phi[4][12]*f->P[12][19] + t->Phi[4][13]*f->P[13][19] + t->Phi[4][14]*f->P[14][19] +
             t->Phi[4][15]*f->P[15][19] + t->Phi[4][16]*f->P[16][19] + t->Phi[4][17]*f->P[17][19] +
             t->Phi[4][18]*f->P[18][19] + t->Phi[4][19]*f->P[19][19] + t->Phi[4][20]*f->P[20][19];
-    w->M[4][20] = t->Phi[4][0]*f->P[0][20] + t->Phi[4][1]*f->P[1][20] + t->Phi[4][2]*f->P[2][20] +
+    w->M[20] = t->Phi[4][0]*f->P[0][20] + t->Phi[4][1]*f->P[1][20] + t->Phi[4][2]*f->P[2][20] +
             t->Phi[4][3]*f->P[3][20] + t->Phi[4][4]*f->P[4][20] + t->Phi[4][5]*f->P[5][20] +
             t->Phi[4][6]*f->P[6][20] + t->Phi[4][7]*f->P[7][20] + t->Phi[4][8]*f->P[8][20] +
             t->Phi[4][9]*f->P[9][20] + t->Phi[4][10]*f->P[10][20] + t->Phi[4][11]*f->P[11][20] +
@@ -5603,150 +5765,210 @@ static void phi_times_p_row_4(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[4][18]*f->P[18][20] + t->Phi[4][19]*f->P[19][20] + t->Phi[4][20]*f->P[20][20];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ins_gnss21_scalar propagate_row_4(const ins_gnss21_transition *restrict t,
+        ins_gnss21_filter_scratch *restrict w)
+{
+    ins_gnss21_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] +
+            w->M[10]*t->Phi[4][10] + w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] +
+            w->M[13]*t->Phi[4][13] + w->M[14]*t->Phi[4][14] + w->M[15]*t->Phi[4][15] +
+            w->M[16]*t->Phi[4][16] + w->M[17]*t->Phi[4][17] + w->M[18]*t->Phi[4][18] +
+            w->M[19]*t->Phi[4][19] + w->M[20]*t->Phi[4][20] + t->Qd[78]; w->Pn[78] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] +
+            w->M[10]*t->Phi[5][10] + w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] +
+            w->M[13]*t->Phi[5][13] + w->M[14]*t->Phi[5][14] + w->M[15]*t->Phi[5][15] +
+            w->M[16]*t->Phi[5][16] + w->M[17]*t->Phi[5][17] + w->M[18]*t->Phi[5][18] +
+            w->M[19]*t->Phi[5][19] + w->M[20]*t->Phi[5][20] + t->Qd[79]; w->Pn[79] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[16]*t->Phi[6][16] + w->M[17]*t->Phi[6][17] + w->M[18]*t->Phi[6][18] +
+            w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] + t->Qd[80]; w->Pn[80] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + w->M[15]*t->Phi[7][15] +
+            w->M[16]*t->Phi[7][16] + w->M[17]*t->Phi[7][17] + w->M[18]*t->Phi[7][18] +
+            w->M[19]*t->Phi[7][19] + w->M[20]*t->Phi[7][20] + t->Qd[81]; w->Pn[81] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] +
+            w->M[10]*t->Phi[8][10] + w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] +
+            w->M[13]*t->Phi[8][13] + w->M[14]*t->Phi[8][14] + w->M[15]*t->Phi[8][15] +
+            w->M[16]*t->Phi[8][16] + w->M[17]*t->Phi[8][17] + w->M[18]*t->Phi[8][18] +
+            w->M[19]*t->Phi[8][19] + w->M[20]*t->Phi[8][20] + t->Qd[82]; w->Pn[82] = v; check += v -
+            v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[83]; w->Pn[83] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[84]; w->Pn[84] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[85]; w->Pn[85] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[86]; w->Pn[86] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[87]; w->Pn[87] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[88]; w->Pn[88] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[89]; w->Pn[89] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16] + t->Qd[90]; w->Pn[90] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17] + t->Qd[91]; w->Pn[91] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18] + t->Qd[92]; w->Pn[92] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19] + t->Qd[93]; w->Pn[93] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20] + t->Qd[94]; w->Pn[94] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_5(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
         *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[5][0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] +
+    w->M[0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] +
             t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] +
             t->Phi[5][6]*f->P[6][0] + t->Phi[5][7]*f->P[7][0] + t->Phi[5][8]*f->P[8][0] +
             t->Phi[5][9]*f->P[9][0] + t->Phi[5][10]*f->P[10][0] + t->Phi[5][11]*f->P[11][0] +
             t->Phi[5][12]*f->P[12][0] + t->Phi[5][13]*f->P[13][0] + t->Phi[5][14]*f->P[14][0] +
             t->Phi[5][15]*f->P[15][0] + t->Phi[5][16]*f->P[16][0] + t->Phi[5][17]*f->P[17][0] +
             t->Phi[5][18]*f->P[18][0] + t->Phi[5][19]*f->P[19][0] + t->Phi[5][20]*f->P[20][0];
-    w->M[5][1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] +
+    w->M[1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] +
             t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] +
             t->Phi[5][6]*f->P[6][1] + t->Phi[5][7]*f->P[7][1] + t->Phi[5][8]*f->P[8][1] +
             t->Phi[5][9]*f->P[9][1] + t->Phi[5][10]*f->P[10][1] + t->Phi[5][11]*f->P[11][1] +
             t->Phi[5][12]*f->P[12][1] + t->Phi[5][13]*f->P[13][1] + t->Phi[5][14]*f->P[14][1] +
             t->Phi[5][15]*f->P[15][1] + t->Phi[5][16]*f->P[16][1] + t->Phi[5][17]*f->P[17][1] +
             t->Phi[5][18]*f->P[18][1] + t->Phi[5][19]*f->P[19][1] + t->Phi[5][20]*f->P[20][1];
-    w->M[5][2] = t->Phi[5][0]*f->P[0][2] + t->Phi[5][1]*f->P[1][2] + t->Phi[5][2]*f->P[2][2] +
+    w->M[2] = t->Phi[5][0]*f->P[0][2] + t->Phi[5][1]*f->P[1][2] + t->Phi[5][2]*f->P[2][2] +
             t->Phi[5][3]*f->P[3][2] + t->Phi[5][4]*f->P[4][2] + t->Phi[5][5]*f->P[5][2] +
             t->Phi[5][6]*f->P[6][2] + t->Phi[5][7]*f->P[7][2] + t->Phi[5][8]*f->P[8][2] +
             t->Phi[5][9]*f->P[9][2] + t->Phi[5][10]*f->P[10][2] + t->Phi[5][11]*f->P[11][2] +
             t->Phi[5][12]*f->P[12][2] + t->Phi[5][13]*f->P[13][2] + t->Phi[5][14]*f->P[14][2] +
             t->Phi[5][15]*f->P[15][2] + t->Phi[5][16]*f->P[16][2] + t->Phi[5][17]*f->P[17][2] +
             t->Phi[5][18]*f->P[18][2] + t->Phi[5][19]*f->P[19][2] + t->Phi[5][20]*f->P[20][2];
-    w->M[5][3] = t->Phi[5][0]*f->P[0][3] + t->Phi[5][1]*f->P[1][3] + t->Phi[5][2]*f->P[2][3] +
+    w->M[3] = t->Phi[5][0]*f->P[0][3] + t->Phi[5][1]*f->P[1][3] + t->Phi[5][2]*f->P[2][3] +
             t->Phi[5][3]*f->P[3][3] + t->Phi[5][4]*f->P[4][3] + t->Phi[5][5]*f->P[5][3] +
             t->Phi[5][6]*f->P[6][3] + t->Phi[5][7]*f->P[7][3] + t->Phi[5][8]*f->P[8][3] +
             t->Phi[5][9]*f->P[9][3] + t->Phi[5][10]*f->P[10][3] + t->Phi[5][11]*f->P[11][3] +
             t->Phi[5][12]*f->P[12][3] + t->Phi[5][13]*f->P[13][3] + t->Phi[5][14]*f->P[14][3] +
             t->Phi[5][15]*f->P[15][3] + t->Phi[5][16]*f->P[16][3] + t->Phi[5][17]*f->P[17][3] +
             t->Phi[5][18]*f->P[18][3] + t->Phi[5][19]*f->P[19][3] + t->Phi[5][20]*f->P[20][3];
-    w->M[5][4] = t->Phi[5][0]*f->P[0][4] + t->Phi[5][1]*f->P[1][4] + t->Phi[5][2]*f->P[2][4] +
+    w->M[4] = t->Phi[5][0]*f->P[0][4] + t->Phi[5][1]*f->P[1][4] + t->Phi[5][2]*f->P[2][4] +
             t->Phi[5][3]*f->P[3][4] + t->Phi[5][4]*f->P[4][4] + t->Phi[5][5]*f->P[5][4] +
             t->Phi[5][6]*f->P[6][4] + t->Phi[5][7]*f->P[7][4] + t->Phi[5][8]*f->P[8][4] +
             t->Phi[5][9]*f->P[9][4] + t->Phi[5][10]*f->P[10][4] + t->Phi[5][11]*f->P[11][4] +
             t->Phi[5][12]*f->P[12][4] + t->Phi[5][13]*f->P[13][4] + t->Phi[5][14]*f->P[14][4] +
             t->Phi[5][15]*f->P[15][4] + t->Phi[5][16]*f->P[16][4] + t->Phi[5][17]*f->P[17][4] +
             t->Phi[5][18]*f->P[18][4] + t->Phi[5][19]*f->P[19][4] + t->Phi[5][20]*f->P[20][4];
-    w->M[5][5] = t->Phi[5][0]*f->P[0][5] + t->Phi[5][1]*f->P[1][5] + t->Phi[5][2]*f->P[2][5] +
+    w->M[5] = t->Phi[5][0]*f->P[0][5] + t->Phi[5][1]*f->P[1][5] + t->Phi[5][2]*f->P[2][5] +
             t->Phi[5][3]*f->P[3][5] + t->Phi[5][4]*f->P[4][5] + t->Phi[5][5]*f->P[5][5] +
             t->Phi[5][6]*f->P[6][5] + t->Phi[5][7]*f->P[7][5] + t->Phi[5][8]*f->P[8][5] +
             t->Phi[5][9]*f->P[9][5] + t->Phi[5][10]*f->P[10][5] + t->Phi[5][11]*f->P[11][5] +
             t->Phi[5][12]*f->P[12][5] + t->Phi[5][13]*f->P[13][5] + t->Phi[5][14]*f->P[14][5] +
             t->Phi[5][15]*f->P[15][5] + t->Phi[5][16]*f->P[16][5] + t->Phi[5][17]*f->P[17][5] +
             t->Phi[5][18]*f->P[18][5] + t->Phi[5][19]*f->P[19][5] + t->Phi[5][20]*f->P[20][5];
-    w->M[5][6] = t->Phi[5][0]*f->P[0][6] + t->Phi[5][1]*f->P[1][6] + t->Phi[5][2]*f->P[2][6] +
+    w->M[6] = t->Phi[5][0]*f->P[0][6] + t->Phi[5][1]*f->P[1][6] + t->Phi[5][2]*f->P[2][6] +
             t->Phi[5][3]*f->P[3][6] + t->Phi[5][4]*f->P[4][6] + t->Phi[5][5]*f->P[5][6] +
             t->Phi[5][6]*f->P[6][6] + t->Phi[5][7]*f->P[7][6] + t->Phi[5][8]*f->P[8][6] +
             t->Phi[5][9]*f->P[9][6] + t->Phi[5][10]*f->P[10][6] + t->Phi[5][11]*f->P[11][6] +
             t->Phi[5][12]*f->P[12][6] + t->Phi[5][13]*f->P[13][6] + t->Phi[5][14]*f->P[14][6] +
             t->Phi[5][15]*f->P[15][6] + t->Phi[5][16]*f->P[16][6] + t->Phi[5][17]*f->P[17][6] +
             t->Phi[5][18]*f->P[18][6] + t->Phi[5][19]*f->P[19][6] + t->Phi[5][20]*f->P[20][6];
-    w->M[5][7] = t->Phi[5][0]*f->P[0][7] + t->Phi[5][1]*f->P[1][7] + t->Phi[5][2]*f->P[2][7] +
+    w->M[7] = t->Phi[5][0]*f->P[0][7] + t->Phi[5][1]*f->P[1][7] + t->Phi[5][2]*f->P[2][7] +
             t->Phi[5][3]*f->P[3][7] + t->Phi[5][4]*f->P[4][7] + t->Phi[5][5]*f->P[5][7] +
             t->Phi[5][6]*f->P[6][7] + t->Phi[5][7]*f->P[7][7] + t->Phi[5][8]*f->P[8][7] +
             t->Phi[5][9]*f->P[9][7] + t->Phi[5][10]*f->P[10][7] + t->Phi[5][11]*f->P[11][7] +
             t->Phi[5][12]*f->P[12][7] + t->Phi[5][13]*f->P[13][7] + t->Phi[5][14]*f->P[14][7] +
             t->Phi[5][15]*f->P[15][7] + t->Phi[5][16]*f->P[16][7] + t->Phi[5][17]*f->P[17][7] +
             t->Phi[5][18]*f->P[18][7] + t->Phi[5][19]*f->P[19][7] + t->Phi[5][20]*f->P[20][7];
-    w->M[5][8] = t->Phi[5][0]*f->P[0][8] + t->Phi[5][1]*f->P[1][8] + t->Phi[5][2]*f->P[2][8] +
+    w->M[8] = t->Phi[5][0]*f->P[0][8] + t->Phi[5][1]*f->P[1][8] + t->Phi[5][2]*f->P[2][8] +
             t->Phi[5][3]*f->P[3][8] + t->Phi[5][4]*f->P[4][8] + t->Phi[5][5]*f->P[5][8] +
             t->Phi[5][6]*f->P[6][8] + t->Phi[5][7]*f->P[7][8] + t->Phi[5][8]*f->P[8][8] +
             t->Phi[5][9]*f->P[9][8] + t->Phi[5][10]*f->P[10][8] + t->Phi[5][11]*f->P[11][8] +
             t->Phi[5][12]*f->P[12][8] + t->Phi[5][13]*f->P[13][8] + t->Phi[5][14]*f->P[14][8] +
             t->Phi[5][15]*f->P[15][8] + t->Phi[5][16]*f->P[16][8] + t->Phi[5][17]*f->P[17][8] +
             t->Phi[5][18]*f->P[18][8] + t->Phi[5][19]*f->P[19][8] + t->Phi[5][20]*f->P[20][8];
-    w->M[5][9] = t->Phi[5][0]*f->P[0][9] + t->Phi[5][1]*f->P[1][9] + t->Phi[5][2]*f->P[2][9] +
+    w->M[9] = t->Phi[5][0]*f->P[0][9] + t->Phi[5][1]*f->P[1][9] + t->Phi[5][2]*f->P[2][9] +
             t->Phi[5][3]*f->P[3][9] + t->Phi[5][4]*f->P[4][9] + t->Phi[5][5]*f->P[5][9] +
             t->Phi[5][6]*f->P[6][9] + t->Phi[5][7]*f->P[7][9] + t->Phi[5][8]*f->P[8][9] +
             t->Phi[5][9]*f->P[9][9] + t->Phi[5][10]*f->P[10][9] + t->Phi[5][11]*f->P[11][9] +
             t->Phi[5][12]*f->P[12][9] + t->Phi[5][13]*f->P[13][9] + t->Phi[5][14]*f->P[14][9] +
             t->Phi[5][15]*f->P[15][9] + t->Phi[5][16]*f->P[16][9] + t->Phi[5][17]*f->P[17][9] +
             t->Phi[5][18]*f->P[18][9] + t->Phi[5][19]*f->P[19][9] + t->Phi[5][20]*f->P[20][9];
-    w->M[5][10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] +
+    w->M[10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] +
             t->Phi[5][3]*f->P[3][10] + t->Phi[5][4]*f->P[4][10] + t->Phi[5][5]*f->P[5][10] +
             t->Phi[5][6]*f->P[6][10] + t->Phi[5][7]*f->P[7][10] + t->Phi[5][8]*f->P[8][10] +
             t->Phi[5][9]*f->P[9][10] + t->Phi[5][10]*f->P[10][10] + t->Phi[5][11]*f->P[11][10] +
             t->Phi[5][12]*f->P[12][10] + t->Phi[5][13]*f->P[13][10] + t->Phi[5][14]*f->P[14][10] +
             t->Phi[5][15]*f->P[15][10] + t->Phi[5][16]*f->P[16][10] + t->Phi[5][17]*f->P[17][10] +
             t->Phi[5][18]*f->P[18][10] + t->Phi[5][19]*f->P[19][10] + t->Phi[5][20]*f->P[20][10];
-    w->M[5][11] = t->Phi[5][0]*f->P[0][11] + t->Phi[5][1]*f->P[1][11] + t->Phi[5][2]*f->P[2][11] +
+    w->M[11] = t->Phi[5][0]*f->P[0][11] + t->Phi[5][1]*f->P[1][11] + t->Phi[5][2]*f->P[2][11] +
             t->Phi[5][3]*f->P[3][11] + t->Phi[5][4]*f->P[4][11] + t->Phi[5][5]*f->P[5][11] +
             t->Phi[5][6]*f->P[6][11] + t->Phi[5][7]*f->P[7][11] + t->Phi[5][8]*f->P[8][11] +
             t->Phi[5][9]*f->P[9][11] + t->Phi[5][10]*f->P[10][11] + t->Phi[5][11]*f->P[11][11] +
             t->Phi[5][12]*f->P[12][11] + t->Phi[5][13]*f->P[13][11] + t->Phi[5][14]*f->P[14][11] +
             t->Phi[5][15]*f->P[15][11] + t->Phi[5][16]*f->P[16][11] + t->Phi[5][17]*f->P[17][11] +
             t->Phi[5][18]*f->P[18][11] + t->Phi[5][19]*f->P[19][11] + t->Phi[5][20]*f->P[20][11];
-    w->M[5][12] = t->Phi[5][0]*f->P[0][12] + t->Phi[5][1]*f->P[1][12] + t->Phi[5][2]*f->P[2][12] +
+    w->M[12] = t->Phi[5][0]*f->P[0][12] + t->Phi[5][1]*f->P[1][12] + t->Phi[5][2]*f->P[2][12] +
             t->Phi[5][3]*f->P[3][12] + t->Phi[5][4]*f->P[4][12] + t->Phi[5][5]*f->P[5][12] +
             t->Phi[5][6]*f->P[6][12] + t->Phi[5][7]*f->P[7][12] + t->Phi[5][8]*f->P[8][12] +
             t->Phi[5][9]*f->P[9][12] + t->Phi[5][10]*f->P[10][12] + t->Phi[5][11]*f->P[11][12] +
             t->Phi[5][12]*f->P[12][12] + t->Phi[5][13]*f->P[13][12] + t->Phi[5][14]*f->P[14][12] +
             t->Phi[5][15]*f->P[15][12] + t->Phi[5][16]*f->P[16][12] + t->Phi[5][17]*f->P[17][12] +
             t->Phi[5][18]*f->P[18][12] + t->Phi[5][19]*f->P[19][12] + t->Phi[5][20]*f->P[20][12];
-    w->M[5][13] = t->Phi[5][0]*f->P[0][13] + t->Phi[5][1]*f->P[1][13] + t->Phi[5][2]*f->P[2][13] +
+    w->M[13] = t->Phi[5][0]*f->P[0][13] + t->Phi[5][1]*f->P[1][13] + t->Phi[5][2]*f->P[2][13] +
             t->Phi[5][3]*f->P[3][13] + t->Phi[5][4]*f->P[4][13] + t->Phi[5][5]*f->P[5][13] +
             t->Phi[5][6]*f->P[6][13] + t->Phi[5][7]*f->P[7][13] + t->Phi[5][8]*f->P[8][13] +
             t->Phi[5][9]*f->P[9][13] + t->Phi[5][10]*f->P[10][13] + t->Phi[5][11]*f->P[11][13] +
             t->Phi[5][12]*f->P[12][13] + t->Phi[5][13]*f->P[13][13] + t->Phi[5][14]*f->P[14][13] +
             t->Phi[5][15]*f->P[15][13] + t->Phi[5][16]*f->P[16][13] + t->Phi[5][17]*f->P[17][13] +
             t->Phi[5][18]*f->P[18][13] + t->Phi[5][19]*f->P[19][13] + t->Phi[5][20]*f->P[20][13];
-    w->M[5][14] = t->Phi[5][0]*f->P[0][14] + t->Phi[5][1]*f->P[1][14] + t->Phi[5][2]*f->P[2][14] +
+    w->M[14] = t->Phi[5][0]*f->P[0][14] + t->Phi[5][1]*f->P[1][14] + t->Phi[5][2]*f->P[2][14] +
             t->Phi[5][3]*f->P[3][14] + t->Phi[5][4]*f->P[4][14] + t->Phi[5][5]*f->P[5][14] +
             t->Phi[5][6]*f->P[6][14] + t->Phi[5][7]*f->P[7][14] + t->Phi[5][8]*f->P[8][14] +
             t->Phi[5][9]*f->P[9][14] + t->Phi[5][10]*f->P[10][14] + t->Phi[5][11]*f->P[11][14] +
             t->Phi[5][12]*f->P[12][14] + t->Phi[5][13]*f->P[13][14] + t->Phi[5][14]*f->P[14][14] +
             t->Phi[5][15]*f->P[15][14] + t->Phi[5][16]*f->P[16][14] + t->Phi[5][17]*f->P[17][14] +
             t->Phi[5][18]*f->P[18][14] + t->Phi[5][19]*f->P[19][14] + t->Phi[5][20]*f->P[20][14];
-    w->M[5][15] = t->Phi[5][0]*f->P[0][15] + t->Phi[5][1]*f->P[1][15] + t->Phi[5][2]*f->P[2][15] +
+    w->M[15] = t->Phi[5][0]*f->P[0][15] + t->Phi[5][1]*f->P[1][15] + t->Phi[5][2]*f->P[2][15] +
             t->Phi[5][3]*f->P[3][15] + t->Phi[5][4]*f->P[4][15] + t->Phi[5][5]*f->P[5][15] +
             t->Phi[5][6]*f->P[6][15] + t->Phi[5][7]*f->P[7][15] + t->Phi[5][8]*f->P[8][15] +
             t->Phi[5][9]*f->P[9][15] + t->Phi[5][10]*f->P[10][15] + t->Phi[5][11]*f->P[11][15] +
             t->Phi[5][12]*f->P[12][15] + t->Phi[5][13]*f->P[13][15] + t->Phi[5][14]*f->P[14][15] +
             t->Phi[5][15]*f->P[15][15] + t->Phi[5][16]*f->P[16][15] + t->Phi[5][17]*f->P[17][15] +
             t->Phi[5][18]*f->P[18][15] + t->Phi[5][19]*f->P[19][15] + t->Phi[5][20]*f->P[20][15];
-    w->M[5][16] = t->Phi[5][0]*f->P[0][16] + t->Phi[5][1]*f->P[1][16] + t->Phi[5][2]*f->P[2][16] +
+    w->M[16] = t->Phi[5][0]*f->P[0][16] + t->Phi[5][1]*f->P[1][16] + t->Phi[5][2]*f->P[2][16] +
             t->Phi[5][3]*f->P[3][16] + t->Phi[5][4]*f->P[4][16] + t->Phi[5][5]*f->P[5][16] +
             t->Phi[5][6]*f->P[6][16] + t->Phi[5][7]*f->P[7][16] + t->Phi[5][8]*f->P[8][16] +
             t->Phi[5][9]*f->P[9][16] + t->Phi[5][10]*f->P[10][16] + t->Phi[5][11]*f->P[11][16] +
             t->Phi[5][12]*f->P[12][16] + t->Phi[5][13]*f->P[13][16] + t->Phi[5][14]*f->P[14][16] +
             t->Phi[5][15]*f->P[15][16] + t->Phi[5][16]*f->P[16][16] + t->Phi[5][17]*f->P[17][16] +
             t->Phi[5][18]*f->P[18][16] + t->Phi[5][19]*f->P[19][16] + t->Phi[5][20]*f->P[20][16];
-    w->M[5][17] = t->Phi[5][0]*f->P[0][17] + t->Phi[5][1]*f->P[1][17] + t->Phi[5][2]*f->P[2][17] +
+    w->M[17] = t->Phi[5][0]*f->P[0][17] + t->Phi[5][1]*f->P[1][17] + t->Phi[5][2]*f->P[2][17] +
             t->Phi[5][3]*f->P[3][17] + t->Phi[5][4]*f->P[4][17] + t->Phi[5][5]*f->P[5][17] +
             t->Phi[5][6]*f->P[6][17] + t->Phi[5][7]*f->P[7][17] + t->Phi[5][8]*f->P[8][17] +
             t->Phi[5][9]*f->P[9][17] + t->Phi[5][10]*f->P[10][17] + t->Phi[5][11]*f->P[11][17] +
             t->Phi[5][12]*f->P[12][17] + t->Phi[5][13]*f->P[13][17] + t->Phi[5][14]*f->P[14][17] +
             t->Phi[5][15]*f->P[15][17] + t->Phi[5][16]*f->P[16][17] + t->Phi[5][17]*f->P[17][17] +
             t->Phi[5][18]*f->P[18][17] + t->Phi[5][19]*f->P[19][17] + t->Phi[5][20]*f->P[20][17];
-    w->M[5][18] = t->Phi[5][0]*f->P[0][18] + t->Phi[5][1]*f->P[1][18] + t->Phi[5][2]*f->P[2][18] +
+    w->M[18] = t->Phi[5][0]*f->P[0][18] + t->Phi[5][1]*f->P[1][18] + t->Phi[5][2]*f->P[2][18] +
             t->Phi[5][3]*f->P[3][18] + t->Phi[5][4]*f->P[4][18] + t->Phi[5][5]*f->P[5][18] +
             t->Phi[5][6]*f->P[6][18] + t->Phi[5][7]*f->P[7][18] + t->Phi[5][8]*f->P[8][18] +
             t->Phi[5][9]*f->P[9][18] + t->Phi[5][10]*f->P[10][18] + t->Phi[5][11]*f->P[11][18] +
             t->Phi[5][12]*f->P[12][18] + t->Phi[5][13]*f->P[13][18] + t->Phi[5][14]*f->P[14][18] +
             t->Phi[5][15]*f->P[15][18] + t->Phi[5][16]*f->P[16][18] + t->Phi[5][17]*f->P[17][18] +
             t->Phi[5][18]*f->P[18][18] + t->Phi[5][19]*f->P[19][18] + t->Phi[5][20]*f->P[20][18];
-    w->M[5][19] = t->Phi[5][0]*f->P[0][19] + t->Phi[5][1]*f->P[1][19] + t->Phi[5][2]*f->P[2][19] +
+    w->M[19] = t->Phi[5][0]*f->P[0][19] + t->Phi[5][1]*f->P[1][19] + t->Phi[5][2]*f->P[2][19] +
             t->Phi[5][3]*f->P[3][19] + t->Phi[5][4]*f->P[4][19] + t->Phi[5][5]*f->P[5][19] +
             t->Phi[5][6]*f->P[6][19] + t->Phi[5][7]*f->P[7][19] + t->Phi[5][8]*f->P[8][19] +
             t->Phi[5][9]*f->P[9][19] + t->Phi[5][10]*f->P[10][19] + t->Phi[5][11]*f->P[11][19] +
             t->Phi[5][12]*f->P[12][19] + t->Phi[5][13]*f->P[13][19] + t->Phi[5][14]*f->P[14][19] +
             t->Phi[5][15]*f->P[15][19] + t->Phi[5][16]*f->P[16][19] + t->Phi[5][17]*f->P[17][19] +
             t->Phi[5][18]*f->P[18][19] + t->Phi[5][19]*f->P[19][19] + t->Phi[5][20]*f->P[20][19];
-    w->M[5][20] = t->Phi[5][0]*f->P[0][20] + t->Phi[5][1]*f->P[1][20] + t->Phi[5][2]*f->P[2][20] +
+    w->M[20] = t->Phi[5][0]*f->P[0][20] + t->Phi[5][1]*f->P[1][20] + t->Phi[5][2]*f->P[2][20] +
             t->Phi[5][3]*f->P[3][20] + t->Phi[5][4]*f->P[4][20] + t->Phi[5][5]*f->P[5][20] +
             t->Phi[5][6]*f->P[6][20] + t->Phi[5][7]*f->P[7][20] + t->Phi[5][8]*f->P[8][20] +
             t->Phi[5][9]*f->P[9][20] + t->Phi[5][10]*f->P[10][20] + t->Phi[5][11]*f->P[11][20] +
@@ -5755,150 +5977,202 @@ static void phi_times_p_row_5(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[5][18]*f->P[18][20] + t->Phi[5][19]*f->P[19][20] + t->Phi[5][20]*f->P[20][20];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ins_gnss21_scalar propagate_row_5(const ins_gnss21_transition *restrict t,
+        ins_gnss21_filter_scratch *restrict w)
+{
+    ins_gnss21_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] +
+            w->M[10]*t->Phi[5][10] + w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] +
+            w->M[13]*t->Phi[5][13] + w->M[14]*t->Phi[5][14] + w->M[15]*t->Phi[5][15] +
+            w->M[16]*t->Phi[5][16] + w->M[17]*t->Phi[5][17] + w->M[18]*t->Phi[5][18] +
+            w->M[19]*t->Phi[5][19] + w->M[20]*t->Phi[5][20] + t->Qd[95]; w->Pn[95] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[16]*t->Phi[6][16] + w->M[17]*t->Phi[6][17] + w->M[18]*t->Phi[6][18] +
+            w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] + t->Qd[96]; w->Pn[96] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + w->M[15]*t->Phi[7][15] +
+            w->M[16]*t->Phi[7][16] + w->M[17]*t->Phi[7][17] + w->M[18]*t->Phi[7][18] +
+            w->M[19]*t->Phi[7][19] + w->M[20]*t->Phi[7][20] + t->Qd[97]; w->Pn[97] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] +
+            w->M[10]*t->Phi[8][10] + w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] +
+            w->M[13]*t->Phi[8][13] + w->M[14]*t->Phi[8][14] + w->M[15]*t->Phi[8][15] +
+            w->M[16]*t->Phi[8][16] + w->M[17]*t->Phi[8][17] + w->M[18]*t->Phi[8][18] +
+            w->M[19]*t->Phi[8][19] + w->M[20]*t->Phi[8][20] + t->Qd[98]; w->Pn[98] = v; check += v -
+            v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[99]; w->Pn[99] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[100]; w->Pn[100] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[101]; w->Pn[101] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[102]; w->Pn[102] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[103]; w->Pn[103] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[104]; w->Pn[104] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[105]; w->Pn[105] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16] + t->Qd[106]; w->Pn[106] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17] + t->Qd[107]; w->Pn[107] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18] + t->Qd[108]; w->Pn[108] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19] + t->Qd[109]; w->Pn[109] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20] + t->Qd[110]; w->Pn[110] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_6(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
         *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[6][0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] +
+    w->M[0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] +
             t->Phi[6][3]*f->P[3][0] + t->Phi[6][4]*f->P[4][0] + t->Phi[6][5]*f->P[5][0] +
             t->Phi[6][6]*f->P[6][0] + t->Phi[6][7]*f->P[7][0] + t->Phi[6][8]*f->P[8][0] +
             t->Phi[6][9]*f->P[9][0] + t->Phi[6][10]*f->P[10][0] + t->Phi[6][11]*f->P[11][0] +
             t->Phi[6][12]*f->P[12][0] + t->Phi[6][13]*f->P[13][0] + t->Phi[6][14]*f->P[14][0] +
             t->Phi[6][15]*f->P[15][0] + t->Phi[6][16]*f->P[16][0] + t->Phi[6][17]*f->P[17][0] +
             t->Phi[6][18]*f->P[18][0] + t->Phi[6][19]*f->P[19][0] + t->Phi[6][20]*f->P[20][0];
-    w->M[6][1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] +
+    w->M[1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] +
             t->Phi[6][3]*f->P[3][1] + t->Phi[6][4]*f->P[4][1] + t->Phi[6][5]*f->P[5][1] +
             t->Phi[6][6]*f->P[6][1] + t->Phi[6][7]*f->P[7][1] + t->Phi[6][8]*f->P[8][1] +
             t->Phi[6][9]*f->P[9][1] + t->Phi[6][10]*f->P[10][1] + t->Phi[6][11]*f->P[11][1] +
             t->Phi[6][12]*f->P[12][1] + t->Phi[6][13]*f->P[13][1] + t->Phi[6][14]*f->P[14][1] +
             t->Phi[6][15]*f->P[15][1] + t->Phi[6][16]*f->P[16][1] + t->Phi[6][17]*f->P[17][1] +
             t->Phi[6][18]*f->P[18][1] + t->Phi[6][19]*f->P[19][1] + t->Phi[6][20]*f->P[20][1];
-    w->M[6][2] = t->Phi[6][0]*f->P[0][2] + t->Phi[6][1]*f->P[1][2] + t->Phi[6][2]*f->P[2][2] +
+    w->M[2] = t->Phi[6][0]*f->P[0][2] + t->Phi[6][1]*f->P[1][2] + t->Phi[6][2]*f->P[2][2] +
             t->Phi[6][3]*f->P[3][2] + t->Phi[6][4]*f->P[4][2] + t->Phi[6][5]*f->P[5][2] +
             t->Phi[6][6]*f->P[6][2] + t->Phi[6][7]*f->P[7][2] + t->Phi[6][8]*f->P[8][2] +
             t->Phi[6][9]*f->P[9][2] + t->Phi[6][10]*f->P[10][2] + t->Phi[6][11]*f->P[11][2] +
             t->Phi[6][12]*f->P[12][2] + t->Phi[6][13]*f->P[13][2] + t->Phi[6][14]*f->P[14][2] +
             t->Phi[6][15]*f->P[15][2] + t->Phi[6][16]*f->P[16][2] + t->Phi[6][17]*f->P[17][2] +
             t->Phi[6][18]*f->P[18][2] + t->Phi[6][19]*f->P[19][2] + t->Phi[6][20]*f->P[20][2];
-    w->M[6][3] = t->Phi[6][0]*f->P[0][3] + t->Phi[6][1]*f->P[1][3] + t->Phi[6][2]*f->P[2][3] +
+    w->M[3] = t->Phi[6][0]*f->P[0][3] + t->Phi[6][1]*f->P[1][3] + t->Phi[6][2]*f->P[2][3] +
             t->Phi[6][3]*f->P[3][3] + t->Phi[6][4]*f->P[4][3] + t->Phi[6][5]*f->P[5][3] +
             t->Phi[6][6]*f->P[6][3] + t->Phi[6][7]*f->P[7][3] + t->Phi[6][8]*f->P[8][3] +
             t->Phi[6][9]*f->P[9][3] + t->Phi[6][10]*f->P[10][3] + t->Phi[6][11]*f->P[11][3] +
             t->Phi[6][12]*f->P[12][3] + t->Phi[6][13]*f->P[13][3] + t->Phi[6][14]*f->P[14][3] +
             t->Phi[6][15]*f->P[15][3] + t->Phi[6][16]*f->P[16][3] + t->Phi[6][17]*f->P[17][3] +
             t->Phi[6][18]*f->P[18][3] + t->Phi[6][19]*f->P[19][3] + t->Phi[6][20]*f->P[20][3];
-    w->M[6][4] = t->Phi[6][0]*f->P[0][4] + t->Phi[6][1]*f->P[1][4] + t->Phi[6][2]*f->P[2][4] +
+    w->M[4] = t->Phi[6][0]*f->P[0][4] + t->Phi[6][1]*f->P[1][4] + t->Phi[6][2]*f->P[2][4] +
             t->Phi[6][3]*f->P[3][4] + t->Phi[6][4]*f->P[4][4] + t->Phi[6][5]*f->P[5][4] +
             t->Phi[6][6]*f->P[6][4] + t->Phi[6][7]*f->P[7][4] + t->Phi[6][8]*f->P[8][4] +
             t->Phi[6][9]*f->P[9][4] + t->Phi[6][10]*f->P[10][4] + t->Phi[6][11]*f->P[11][4] +
             t->Phi[6][12]*f->P[12][4] + t->Phi[6][13]*f->P[13][4] + t->Phi[6][14]*f->P[14][4] +
             t->Phi[6][15]*f->P[15][4] + t->Phi[6][16]*f->P[16][4] + t->Phi[6][17]*f->P[17][4] +
             t->Phi[6][18]*f->P[18][4] + t->Phi[6][19]*f->P[19][4] + t->Phi[6][20]*f->P[20][4];
-    w->M[6][5] = t->Phi[6][0]*f->P[0][5] + t->Phi[6][1]*f->P[1][5] + t->Phi[6][2]*f->P[2][5] +
+    w->M[5] = t->Phi[6][0]*f->P[0][5] + t->Phi[6][1]*f->P[1][5] + t->Phi[6][2]*f->P[2][5] +
             t->Phi[6][3]*f->P[3][5] + t->Phi[6][4]*f->P[4][5] + t->Phi[6][5]*f->P[5][5] +
             t->Phi[6][6]*f->P[6][5] + t->Phi[6][7]*f->P[7][5] + t->Phi[6][8]*f->P[8][5] +
             t->Phi[6][9]*f->P[9][5] + t->Phi[6][10]*f->P[10][5] + t->Phi[6][11]*f->P[11][5] +
             t->Phi[6][12]*f->P[12][5] + t->Phi[6][13]*f->P[13][5] + t->Phi[6][14]*f->P[14][5] +
             t->Phi[6][15]*f->P[15][5] + t->Phi[6][16]*f->P[16][5] + t->Phi[6][17]*f->P[17][5] +
             t->Phi[6][18]*f->P[18][5] + t->Phi[6][19]*f->P[19][5] + t->Phi[6][20]*f->P[20][5];
-    w->M[6][6] = t->Phi[6][0]*f->P[0][6] + t->Phi[6][1]*f->P[1][6] + t->Phi[6][2]*f->P[2][6] +
+    w->M[6] = t->Phi[6][0]*f->P[0][6] + t->Phi[6][1]*f->P[1][6] + t->Phi[6][2]*f->P[2][6] +
             t->Phi[6][3]*f->P[3][6] + t->Phi[6][4]*f->P[4][6] + t->Phi[6][5]*f->P[5][6] +
             t->Phi[6][6]*f->P[6][6] + t->Phi[6][7]*f->P[7][6] + t->Phi[6][8]*f->P[8][6] +
             t->Phi[6][9]*f->P[9][6] + t->Phi[6][10]*f->P[10][6] + t->Phi[6][11]*f->P[11][6] +
             t->Phi[6][12]*f->P[12][6] + t->Phi[6][13]*f->P[13][6] + t->Phi[6][14]*f->P[14][6] +
             t->Phi[6][15]*f->P[15][6] + t->Phi[6][16]*f->P[16][6] + t->Phi[6][17]*f->P[17][6] +
             t->Phi[6][18]*f->P[18][6] + t->Phi[6][19]*f->P[19][6] + t->Phi[6][20]*f->P[20][6];
-    w->M[6][7] = t->Phi[6][0]*f->P[0][7] + t->Phi[6][1]*f->P[1][7] + t->Phi[6][2]*f->P[2][7] +
+    w->M[7] = t->Phi[6][0]*f->P[0][7] + t->Phi[6][1]*f->P[1][7] + t->Phi[6][2]*f->P[2][7] +
             t->Phi[6][3]*f->P[3][7] + t->Phi[6][4]*f->P[4][7] + t->Phi[6][5]*f->P[5][7] +
             t->Phi[6][6]*f->P[6][7] + t->Phi[6][7]*f->P[7][7] + t->Phi[6][8]*f->P[8][7] +
             t->Phi[6][9]*f->P[9][7] + t->Phi[6][10]*f->P[10][7] + t->Phi[6][11]*f->P[11][7] +
             t->Phi[6][12]*f->P[12][7] + t->Phi[6][13]*f->P[13][7] + t->Phi[6][14]*f->P[14][7] +
             t->Phi[6][15]*f->P[15][7] + t->Phi[6][16]*f->P[16][7] + t->Phi[6][17]*f->P[17][7] +
             t->Phi[6][18]*f->P[18][7] + t->Phi[6][19]*f->P[19][7] + t->Phi[6][20]*f->P[20][7];
-    w->M[6][8] = t->Phi[6][0]*f->P[0][8] + t->Phi[6][1]*f->P[1][8] + t->Phi[6][2]*f->P[2][8] +
+    w->M[8] = t->Phi[6][0]*f->P[0][8] + t->Phi[6][1]*f->P[1][8] + t->Phi[6][2]*f->P[2][8] +
             t->Phi[6][3]*f->P[3][8] + t->Phi[6][4]*f->P[4][8] + t->Phi[6][5]*f->P[5][8] +
             t->Phi[6][6]*f->P[6][8] + t->Phi[6][7]*f->P[7][8] + t->Phi[6][8]*f->P[8][8] +
             t->Phi[6][9]*f->P[9][8] + t->Phi[6][10]*f->P[10][8] + t->Phi[6][11]*f->P[11][8] +
             t->Phi[6][12]*f->P[12][8] + t->Phi[6][13]*f->P[13][8] + t->Phi[6][14]*f->P[14][8] +
             t->Phi[6][15]*f->P[15][8] + t->Phi[6][16]*f->P[16][8] + t->Phi[6][17]*f->P[17][8] +
             t->Phi[6][18]*f->P[18][8] + t->Phi[6][19]*f->P[19][8] + t->Phi[6][20]*f->P[20][8];
-    w->M[6][9] = t->Phi[6][0]*f->P[0][9] + t->Phi[6][1]*f->P[1][9] + t->Phi[6][2]*f->P[2][9] +
+    w->M[9] = t->Phi[6][0]*f->P[0][9] + t->Phi[6][1]*f->P[1][9] + t->Phi[6][2]*f->P[2][9] +
             t->Phi[6][3]*f->P[3][9] + t->Phi[6][4]*f->P[4][9] + t->Phi[6][5]*f->P[5][9] +
             t->Phi[6][6]*f->P[6][9] + t->Phi[6][7]*f->P[7][9] + t->Phi[6][8]*f->P[8][9] +
             t->Phi[6][9]*f->P[9][9] + t->Phi[6][10]*f->P[10][9] + t->Phi[6][11]*f->P[11][9] +
             t->Phi[6][12]*f->P[12][9] + t->Phi[6][13]*f->P[13][9] + t->Phi[6][14]*f->P[14][9] +
             t->Phi[6][15]*f->P[15][9] + t->Phi[6][16]*f->P[16][9] + t->Phi[6][17]*f->P[17][9] +
             t->Phi[6][18]*f->P[18][9] + t->Phi[6][19]*f->P[19][9] + t->Phi[6][20]*f->P[20][9];
-    w->M[6][10] = t->Phi[6][0]*f->P[0][10] + t->Phi[6][1]*f->P[1][10] + t->Phi[6][2]*f->P[2][10] +
+    w->M[10] = t->Phi[6][0]*f->P[0][10] + t->Phi[6][1]*f->P[1][10] + t->Phi[6][2]*f->P[2][10] +
             t->Phi[6][3]*f->P[3][10] + t->Phi[6][4]*f->P[4][10] + t->Phi[6][5]*f->P[5][10] +
             t->Phi[6][6]*f->P[6][10] + t->Phi[6][7]*f->P[7][10] + t->Phi[6][8]*f->P[8][10] +
             t->Phi[6][9]*f->P[9][10] + t->Phi[6][10]*f->P[10][10] + t->Phi[6][11]*f->P[11][10] +
             t->Phi[6][12]*f->P[12][10] + t->Phi[6][13]*f->P[13][10] + t->Phi[6][14]*f->P[14][10] +
             t->Phi[6][15]*f->P[15][10] + t->Phi[6][16]*f->P[16][10] + t->Phi[6][17]*f->P[17][10] +
             t->Phi[6][18]*f->P[18][10] + t->Phi[6][19]*f->P[19][10] + t->Phi[6][20]*f->P[20][10];
-    w->M[6][11] = t->Phi[6][0]*f->P[0][11] + t->Phi[6][1]*f->P[1][11] + t->Phi[6][2]*f->P[2][11] +
+    w->M[11] = t->Phi[6][0]*f->P[0][11] + t->Phi[6][1]*f->P[1][11] + t->Phi[6][2]*f->P[2][11] +
             t->Phi[6][3]*f->P[3][11] + t->Phi[6][4]*f->P[4][11] + t->Phi[6][5]*f->P[5][11] +
             t->Phi[6][6]*f->P[6][11] + t->Phi[6][7]*f->P[7][11] + t->Phi[6][8]*f->P[8][11] +
             t->Phi[6][9]*f->P[9][11] + t->Phi[6][10]*f->P[10][11] + t->Phi[6][11]*f->P[11][11] +
             t->Phi[6][12]*f->P[12][11] + t->Phi[6][13]*f->P[13][11] + t->Phi[6][14]*f->P[14][11] +
             t->Phi[6][15]*f->P[15][11] + t->Phi[6][16]*f->P[16][11] + t->Phi[6][17]*f->P[17][11] +
             t->Phi[6][18]*f->P[18][11] + t->Phi[6][19]*f->P[19][11] + t->Phi[6][20]*f->P[20][11];
-    w->M[6][12] = t->Phi[6][0]*f->P[0][12] + t->Phi[6][1]*f->P[1][12] + t->Phi[6][2]*f->P[2][12] +
+    w->M[12] = t->Phi[6][0]*f->P[0][12] + t->Phi[6][1]*f->P[1][12] + t->Phi[6][2]*f->P[2][12] +
             t->Phi[6][3]*f->P[3][12] + t->Phi[6][4]*f->P[4][12] + t->Phi[6][5]*f->P[5][12] +
             t->Phi[6][6]*f->P[6][12] + t->Phi[6][7]*f->P[7][12] + t->Phi[6][8]*f->P[8][12] +
             t->Phi[6][9]*f->P[9][12] + t->Phi[6][10]*f->P[10][12] + t->Phi[6][11]*f->P[11][12] +
             t->Phi[6][12]*f->P[12][12] + t->Phi[6][13]*f->P[13][12] + t->Phi[6][14]*f->P[14][12] +
             t->Phi[6][15]*f->P[15][12] + t->Phi[6][16]*f->P[16][12] + t->Phi[6][17]*f->P[17][12] +
             t->Phi[6][18]*f->P[18][12] + t->Phi[6][19]*f->P[19][12] + t->Phi[6][20]*f->P[20][12];
-    w->M[6][13] = t->Phi[6][0]*f->P[0][13] + t->Phi[6][1]*f->P[1][13] + t->Phi[6][2]*f->P[2][13] +
+    w->M[13] = t->Phi[6][0]*f->P[0][13] + t->Phi[6][1]*f->P[1][13] + t->Phi[6][2]*f->P[2][13] +
             t->Phi[6][3]*f->P[3][13] + t->Phi[6][4]*f->P[4][13] + t->Phi[6][5]*f->P[5][13] +
             t->Phi[6][6]*f->P[6][13] + t->Phi[6][7]*f->P[7][13] + t->Phi[6][8]*f->P[8][13] +
             t->Phi[6][9]*f->P[9][13] + t->Phi[6][10]*f->P[10][13] + t->Phi[6][11]*f->P[11][13] +
             t->Phi[6][12]*f->P[12][13] + t->Phi[6][13]*f->P[13][13] + t->Phi[6][14]*f->P[14][13] +
             t->Phi[6][15]*f->P[15][13] + t->Phi[6][16]*f->P[16][13] + t->Phi[6][17]*f->P[17][13] +
             t->Phi[6][18]*f->P[18][13] + t->Phi[6][19]*f->P[19][13] + t->Phi[6][20]*f->P[20][13];
-    w->M[6][14] = t->Phi[6][0]*f->P[0][14] + t->Phi[6][1]*f->P[1][14] + t->Phi[6][2]*f->P[2][14] +
+    w->M[14] = t->Phi[6][0]*f->P[0][14] + t->Phi[6][1]*f->P[1][14] + t->Phi[6][2]*f->P[2][14] +
             t->Phi[6][3]*f->P[3][14] + t->Phi[6][4]*f->P[4][14] + t->Phi[6][5]*f->P[5][14] +
             t->Phi[6][6]*f->P[6][14] + t->Phi[6][7]*f->P[7][14] + t->Phi[6][8]*f->P[8][14] +
             t->Phi[6][9]*f->P[9][14] + t->Phi[6][10]*f->P[10][14] + t->Phi[6][11]*f->P[11][14] +
             t->Phi[6][12]*f->P[12][14] + t->Phi[6][13]*f->P[13][14] + t->Phi[6][14]*f->P[14][14] +
             t->Phi[6][15]*f->P[15][14] + t->Phi[6][16]*f->P[16][14] + t->Phi[6][17]*f->P[17][14] +
             t->Phi[6][18]*f->P[18][14] + t->Phi[6][19]*f->P[19][14] + t->Phi[6][20]*f->P[20][14];
-    w->M[6][15] = t->Phi[6][0]*f->P[0][15] + t->Phi[6][1]*f->P[1][15] + t->Phi[6][2]*f->P[2][15] +
+    w->M[15] = t->Phi[6][0]*f->P[0][15] + t->Phi[6][1]*f->P[1][15] + t->Phi[6][2]*f->P[2][15] +
             t->Phi[6][3]*f->P[3][15] + t->Phi[6][4]*f->P[4][15] + t->Phi[6][5]*f->P[5][15] +
             t->Phi[6][6]*f->P[6][15] + t->Phi[6][7]*f->P[7][15] + t->Phi[6][8]*f->P[8][15] +
             t->Phi[6][9]*f->P[9][15] + t->Phi[6][10]*f->P[10][15] + t->Phi[6][11]*f->P[11][15] +
             t->Phi[6][12]*f->P[12][15] + t->Phi[6][13]*f->P[13][15] + t->Phi[6][14]*f->P[14][15] +
             t->Phi[6][15]*f->P[15][15] + t->Phi[6][16]*f->P[16][15] + t->Phi[6][17]*f->P[17][15] +
             t->Phi[6][18]*f->P[18][15] + t->Phi[6][19]*f->P[19][15] + t->Phi[6][20]*f->P[20][15];
-    w->M[6][16] = t->Phi[6][0]*f->P[0][16] + t->Phi[6][1]*f->P[1][16] + t->Phi[6][2]*f->P[2][16] +
+    w->M[16] = t->Phi[6][0]*f->P[0][16] + t->Phi[6][1]*f->P[1][16] + t->Phi[6][2]*f->P[2][16] +
             t->Phi[6][3]*f->P[3][16] + t->Phi[6][4]*f->P[4][16] + t->Phi[6][5]*f->P[5][16] +
             t->Phi[6][6]*f->P[6][16] + t->Phi[6][7]*f->P[7][16] + t->Phi[6][8]*f->P[8][16] +
             t->Phi[6][9]*f->P[9][16] + t->Phi[6][10]*f->P[10][16] + t->Phi[6][11]*f->P[11][16] +
             t->Phi[6][12]*f->P[12][16] + t->Phi[6][13]*f->P[13][16] + t->Phi[6][14]*f->P[14][16] +
             t->Phi[6][15]*f->P[15][16] + t->Phi[6][16]*f->P[16][16] + t->Phi[6][17]*f->P[17][16] +
             t->Phi[6][18]*f->P[18][16] + t->Phi[6][19]*f->P[19][16] + t->Phi[6][20]*f->P[20][16];
-    w->M[6][17] = t->Phi[6][0]*f->P[0][17] + t->Phi[6][1]*f->P[1][17] + t->Phi[6][2]*f->P[2][17] +
+    w->M[17] = t->Phi[6][0]*f->P[0][17] + t->Phi[6][1]*f->P[1][17] + t->Phi[6][2]*f->P[2][17] +
             t->Phi[6][3]*f->P[3][17] + t->Phi[6][4]*f->P[4][17] + t->Phi[6][5]*f->P[5][17] +
             t->Phi[6][6]*f->P[6][17] + t->Phi[6][7]*f->P[7][17] + t->Phi[6][8]*f->P[8][17] +
             t->Phi[6][9]*f->P[9][17] + t->Phi[6][10]*f->P[10][17] + t->Phi[6][11]*f->P[11][17] +
             t->Phi[6][12]*f->P[12][17] + t->Phi[6][13]*f->P[13][17] + t->Phi[6][14]*f->P[14][17] +
             t->Phi[6][15]*f->P[15][17] + t->Phi[6][16]*f->P[16][17] + t->Phi[6][17]*f->P[17][17] +
             t->Phi[6][18]*f->P[18][17] + t->Phi[6][19]*f->P[19][17] + t->Phi[6][20]*f->P[20][17];
-    w->M[6][18] = t->Phi[6][0]*f->P[0][18] + t->Phi[6][1]*f->P[1][18] + t->Phi[6][2]*f->P[2][18] +
+    w->M[18] = t->Phi[6][0]*f->P[0][18] + t->Phi[6][1]*f->P[1][18] + t->Phi[6][2]*f->P[2][18] +
             t->Phi[6][3]*f->P[3][18] + t->Phi[6][4]*f->P[4][18] + t->Phi[6][5]*f->P[5][18] +
             t->Phi[6][6]*f->P[6][18] + t->Phi[6][7]*f->P[7][18] + t->Phi[6][8]*f->P[8][18] +
             t->Phi[6][9]*f->P[9][18] + t->Phi[6][10]*f->P[10][18] + t->Phi[6][11]*f->P[11][18] +
             t->Phi[6][12]*f->P[12][18] + t->Phi[6][13]*f->P[13][18] + t->Phi[6][14]*f->P[14][18] +
             t->Phi[6][15]*f->P[15][18] + t->Phi[6][16]*f->P[16][18] + t->Phi[6][17]*f->P[17][18] +
             t->Phi[6][18]*f->P[18][18] + t->Phi[6][19]*f->P[19][18] + t->Phi[6][20]*f->P[20][18];
-    w->M[6][19] = t->Phi[6][0]*f->P[0][19] + t->Phi[6][1]*f->P[1][19] + t->Phi[6][2]*f->P[2][19] +
+    w->M[19] = t->Phi[6][0]*f->P[0][19] + t->Phi[6][1]*f->P[1][19] + t->Phi[6][2]*f->P[2][19] +
             t->Phi[6][3]*f->P[3][19] + t->Phi[6][4]*f->P[4][19] + t->Phi[6][5]*f->P[5][19] +
             t->Phi[6][6]*f->P[6][19] + t->Phi[6][7]*f->P[7][19] + t->Phi[6][8]*f->P[8][19] +
             t->Phi[6][9]*f->P[9][19] + t->Phi[6][10]*f->P[10][19] + t->Phi[6][11]*f->P[11][19] +
             t->Phi[6][12]*f->P[12][19] + t->Phi[6][13]*f->P[13][19] + t->Phi[6][14]*f->P[14][19] +
             t->Phi[6][15]*f->P[15][19] + t->Phi[6][16]*f->P[16][19] + t->Phi[6][17]*f->P[17][19] +
             t->Phi[6][18]*f->P[18][19] + t->Phi[6][19]*f->P[19][19] + t->Phi[6][20]*f->P[20][19];
-    w->M[6][20] = t->Phi[6][0]*f->P[0][20] + t->Phi[6][1]*f->P[1][20] + t->Phi[6][2]*f->P[2][20] +
+    w->M[20] = t->Phi[6][0]*f->P[0][20] + t->Phi[6][1]*f->P[1][20] + t->Phi[6][2]*f->P[2][20] +
             t->Phi[6][3]*f->P[3][20] + t->Phi[6][4]*f->P[4][20] + t->Phi[6][5]*f->P[5][20] +
             t->Phi[6][6]*f->P[6][20] + t->Phi[6][7]*f->P[7][20] + t->Phi[6][8]*f->P[8][20] +
             t->Phi[6][9]*f->P[9][20] + t->Phi[6][10]*f->P[10][20] + t->Phi[6][11]*f->P[11][20] +
@@ -5907,150 +6181,194 @@ static void phi_times_p_row_6(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[6][18]*f->P[18][20] + t->Phi[6][19]*f->P[19][20] + t->Phi[6][20]*f->P[20][20];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ins_gnss21_scalar propagate_row_6(const ins_gnss21_transition *restrict t,
+        ins_gnss21_filter_scratch *restrict w)
+{
+    ins_gnss21_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[16]*t->Phi[6][16] + w->M[17]*t->Phi[6][17] + w->M[18]*t->Phi[6][18] +
+            w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] + t->Qd[111]; w->Pn[111] = v; check += v
+            - v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + w->M[15]*t->Phi[7][15] +
+            w->M[16]*t->Phi[7][16] + w->M[17]*t->Phi[7][17] + w->M[18]*t->Phi[7][18] +
+            w->M[19]*t->Phi[7][19] + w->M[20]*t->Phi[7][20] + t->Qd[112]; w->Pn[112] = v; check += v
+            - v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] +
+            w->M[10]*t->Phi[8][10] + w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] +
+            w->M[13]*t->Phi[8][13] + w->M[14]*t->Phi[8][14] + w->M[15]*t->Phi[8][15] +
+            w->M[16]*t->Phi[8][16] + w->M[17]*t->Phi[8][17] + w->M[18]*t->Phi[8][18] +
+            w->M[19]*t->Phi[8][19] + w->M[20]*t->Phi[8][20] + t->Qd[113]; w->Pn[113] = v; check += v
+            - v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[114]; w->Pn[114] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[115]; w->Pn[115] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[116]; w->Pn[116] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[117]; w->Pn[117] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[118]; w->Pn[118] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[119]; w->Pn[119] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[120]; w->Pn[120] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16] + t->Qd[121]; w->Pn[121] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17] + t->Qd[122]; w->Pn[122] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18] + t->Qd[123]; w->Pn[123] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19] + t->Qd[124]; w->Pn[124] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20] + t->Qd[125]; w->Pn[125] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_7(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
         *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[7][0] = t->Phi[7][0]*f->P[0][0] + t->Phi[7][1]*f->P[1][0] + t->Phi[7][2]*f->P[2][0] +
+    w->M[0] = t->Phi[7][0]*f->P[0][0] + t->Phi[7][1]*f->P[1][0] + t->Phi[7][2]*f->P[2][0] +
             t->Phi[7][3]*f->P[3][0] + t->Phi[7][4]*f->P[4][0] + t->Phi[7][5]*f->P[5][0] +
             t->Phi[7][6]*f->P[6][0] + t->Phi[7][7]*f->P[7][0] + t->Phi[7][8]*f->P[8][0] +
             t->Phi[7][9]*f->P[9][0] + t->Phi[7][10]*f->P[10][0] + t->Phi[7][11]*f->P[11][0] +
             t->Phi[7][12]*f->P[12][0] + t->Phi[7][13]*f->P[13][0] + t->Phi[7][14]*f->P[14][0] +
             t->Phi[7][15]*f->P[15][0] + t->Phi[7][16]*f->P[16][0] + t->Phi[7][17]*f->P[17][0] +
             t->Phi[7][18]*f->P[18][0] + t->Phi[7][19]*f->P[19][0] + t->Phi[7][20]*f->P[20][0];
-    w->M[7][1] = t->Phi[7][0]*f->P[0][1] + t->Phi[7][1]*f->P[1][1] + t->Phi[7][2]*f->P[2][1] +
+    w->M[1] = t->Phi[7][0]*f->P[0][1] + t->Phi[7][1]*f->P[1][1] + t->Phi[7][2]*f->P[2][1] +
             t->Phi[7][3]*f->P[3][1] + t->Phi[7][4]*f->P[4][1] + t->Phi[7][5]*f->P[5][1] +
             t->Phi[7][6]*f->P[6][1] + t->Phi[7][7]*f->P[7][1] + t->Phi[7][8]*f->P[8][1] +
             t->Phi[7][9]*f->P[9][1] + t->Phi[7][10]*f->P[10][1] + t->Phi[7][11]*f->P[11][1] +
             t->Phi[7][12]*f->P[12][1] + t->Phi[7][13]*f->P[13][1] + t->Phi[7][14]*f->P[14][1] +
             t->Phi[7][15]*f->P[15][1] + t->Phi[7][16]*f->P[16][1] + t->Phi[7][17]*f->P[17][1] +
             t->Phi[7][18]*f->P[18][1] + t->Phi[7][19]*f->P[19][1] + t->Phi[7][20]*f->P[20][1];
-    w->M[7][2] = t->Phi[7][0]*f->P[0][2] + t->Phi[7][1]*f->P[1][2] + t->Phi[7][2]*f->P[2][2] +
+    w->M[2] = t->Phi[7][0]*f->P[0][2] + t->Phi[7][1]*f->P[1][2] + t->Phi[7][2]*f->P[2][2] +
             t->Phi[7][3]*f->P[3][2] + t->Phi[7][4]*f->P[4][2] + t->Phi[7][5]*f->P[5][2] +
             t->Phi[7][6]*f->P[6][2] + t->Phi[7][7]*f->P[7][2] + t->Phi[7][8]*f->P[8][2] +
             t->Phi[7][9]*f->P[9][2] + t->Phi[7][10]*f->P[10][2] + t->Phi[7][11]*f->P[11][2] +
             t->Phi[7][12]*f->P[12][2] + t->Phi[7][13]*f->P[13][2] + t->Phi[7][14]*f->P[14][2] +
             t->Phi[7][15]*f->P[15][2] + t->Phi[7][16]*f->P[16][2] + t->Phi[7][17]*f->P[17][2] +
             t->Phi[7][18]*f->P[18][2] + t->Phi[7][19]*f->P[19][2] + t->Phi[7][20]*f->P[20][2];
-    w->M[7][3] = t->Phi[7][0]*f->P[0][3] + t->Phi[7][1]*f->P[1][3] + t->Phi[7][2]*f->P[2][3] +
+    w->M[3] = t->Phi[7][0]*f->P[0][3] + t->Phi[7][1]*f->P[1][3] + t->Phi[7][2]*f->P[2][3] +
             t->Phi[7][3]*f->P[3][3] + t->Phi[7][4]*f->P[4][3] + t->Phi[7][5]*f->P[5][3] +
             t->Phi[7][6]*f->P[6][3] + t->Phi[7][7]*f->P[7][3] + t->Phi[7][8]*f->P[8][3] +
             t->Phi[7][9]*f->P[9][3] + t->Phi[7][10]*f->P[10][3] + t->Phi[7][11]*f->P[11][3] +
             t->Phi[7][12]*f->P[12][3] + t->Phi[7][13]*f->P[13][3] + t->Phi[7][14]*f->P[14][3] +
             t->Phi[7][15]*f->P[15][3] + t->Phi[7][16]*f->P[16][3] + t->Phi[7][17]*f->P[17][3] +
             t->Phi[7][18]*f->P[18][3] + t->Phi[7][19]*f->P[19][3] + t->Phi[7][20]*f->P[20][3];
-    w->M[7][4] = t->Phi[7][0]*f->P[0][4] + t->Phi[7][1]*f->P[1][4] + t->Phi[7][2]*f->P[2][4] +
+    w->M[4] = t->Phi[7][0]*f->P[0][4] + t->Phi[7][1]*f->P[1][4] + t->Phi[7][2]*f->P[2][4] +
             t->Phi[7][3]*f->P[3][4] + t->Phi[7][4]*f->P[4][4] + t->Phi[7][5]*f->P[5][4] +
             t->Phi[7][6]*f->P[6][4] + t->Phi[7][7]*f->P[7][4] + t->Phi[7][8]*f->P[8][4] +
             t->Phi[7][9]*f->P[9][4] + t->Phi[7][10]*f->P[10][4] + t->Phi[7][11]*f->P[11][4] +
             t->Phi[7][12]*f->P[12][4] + t->Phi[7][13]*f->P[13][4] + t->Phi[7][14]*f->P[14][4] +
             t->Phi[7][15]*f->P[15][4] + t->Phi[7][16]*f->P[16][4] + t->Phi[7][17]*f->P[17][4] +
             t->Phi[7][18]*f->P[18][4] + t->Phi[7][19]*f->P[19][4] + t->Phi[7][20]*f->P[20][4];
-    w->M[7][5] = t->Phi[7][0]*f->P[0][5] + t->Phi[7][1]*f->P[1][5] + t->Phi[7][2]*f->P[2][5] +
+    w->M[5] = t->Phi[7][0]*f->P[0][5] + t->Phi[7][1]*f->P[1][5] + t->Phi[7][2]*f->P[2][5] +
             t->Phi[7][3]*f->P[3][5] + t->Phi[7][4]*f->P[4][5] + t->Phi[7][5]*f->P[5][5] +
             t->Phi[7][6]*f->P[6][5] + t->Phi[7][7]*f->P[7][5] + t->Phi[7][8]*f->P[8][5] +
             t->Phi[7][9]*f->P[9][5] + t->Phi[7][10]*f->P[10][5] + t->Phi[7][11]*f->P[11][5] +
             t->Phi[7][12]*f->P[12][5] + t->Phi[7][13]*f->P[13][5] + t->Phi[7][14]*f->P[14][5] +
             t->Phi[7][15]*f->P[15][5] + t->Phi[7][16]*f->P[16][5] + t->Phi[7][17]*f->P[17][5] +
             t->Phi[7][18]*f->P[18][5] + t->Phi[7][19]*f->P[19][5] + t->Phi[7][20]*f->P[20][5];
-    w->M[7][6] = t->Phi[7][0]*f->P[0][6] + t->Phi[7][1]*f->P[1][6] + t->Phi[7][2]*f->P[2][6] +
+    w->M[6] = t->Phi[7][0]*f->P[0][6] + t->Phi[7][1]*f->P[1][6] + t->Phi[7][2]*f->P[2][6] +
             t->Phi[7][3]*f->P[3][6] + t->Phi[7][4]*f->P[4][6] + t->Phi[7][5]*f->P[5][6] +
             t->Phi[7][6]*f->P[6][6] + t->Phi[7][7]*f->P[7][6] + t->Phi[7][8]*f->P[8][6] +
             t->Phi[7][9]*f->P[9][6] + t->Phi[7][10]*f->P[10][6] + t->Phi[7][11]*f->P[11][6] +
             t->Phi[7][12]*f->P[12][6] + t->Phi[7][13]*f->P[13][6] + t->Phi[7][14]*f->P[14][6] +
             t->Phi[7][15]*f->P[15][6] + t->Phi[7][16]*f->P[16][6] + t->Phi[7][17]*f->P[17][6] +
             t->Phi[7][18]*f->P[18][6] + t->Phi[7][19]*f->P[19][6] + t->Phi[7][20]*f->P[20][6];
-    w->M[7][7] = t->Phi[7][0]*f->P[0][7] + t->Phi[7][1]*f->P[1][7] + t->Phi[7][2]*f->P[2][7] +
+    w->M[7] = t->Phi[7][0]*f->P[0][7] + t->Phi[7][1]*f->P[1][7] + t->Phi[7][2]*f->P[2][7] +
             t->Phi[7][3]*f->P[3][7] + t->Phi[7][4]*f->P[4][7] + t->Phi[7][5]*f->P[5][7] +
             t->Phi[7][6]*f->P[6][7] + t->Phi[7][7]*f->P[7][7] + t->Phi[7][8]*f->P[8][7] +
             t->Phi[7][9]*f->P[9][7] + t->Phi[7][10]*f->P[10][7] + t->Phi[7][11]*f->P[11][7] +
             t->Phi[7][12]*f->P[12][7] + t->Phi[7][13]*f->P[13][7] + t->Phi[7][14]*f->P[14][7] +
             t->Phi[7][15]*f->P[15][7] + t->Phi[7][16]*f->P[16][7] + t->Phi[7][17]*f->P[17][7] +
             t->Phi[7][18]*f->P[18][7] + t->Phi[7][19]*f->P[19][7] + t->Phi[7][20]*f->P[20][7];
-    w->M[7][8] = t->Phi[7][0]*f->P[0][8] + t->Phi[7][1]*f->P[1][8] + t->Phi[7][2]*f->P[2][8] +
+    w->M[8] = t->Phi[7][0]*f->P[0][8] + t->Phi[7][1]*f->P[1][8] + t->Phi[7][2]*f->P[2][8] +
             t->Phi[7][3]*f->P[3][8] + t->Phi[7][4]*f->P[4][8] + t->Phi[7][5]*f->P[5][8] +
             t->Phi[7][6]*f->P[6][8] + t->Phi[7][7]*f->P[7][8] + t->Phi[7][8]*f->P[8][8] +
             t->Phi[7][9]*f->P[9][8] + t->Phi[7][10]*f->P[10][8] + t->Phi[7][11]*f->P[11][8] +
             t->Phi[7][12]*f->P[12][8] + t->Phi[7][13]*f->P[13][8] + t->Phi[7][14]*f->P[14][8] +
             t->Phi[7][15]*f->P[15][8] + t->Phi[7][16]*f->P[16][8] + t->Phi[7][17]*f->P[17][8] +
             t->Phi[7][18]*f->P[18][8] + t->Phi[7][19]*f->P[19][8] + t->Phi[7][20]*f->P[20][8];
-    w->M[7][9] = t->Phi[7][0]*f->P[0][9] + t->Phi[7][1]*f->P[1][9] + t->Phi[7][2]*f->P[2][9] +
+    w->M[9] = t->Phi[7][0]*f->P[0][9] + t->Phi[7][1]*f->P[1][9] + t->Phi[7][2]*f->P[2][9] +
             t->Phi[7][3]*f->P[3][9] + t->Phi[7][4]*f->P[4][9] + t->Phi[7][5]*f->P[5][9] +
             t->Phi[7][6]*f->P[6][9] + t->Phi[7][7]*f->P[7][9] + t->Phi[7][8]*f->P[8][9] +
             t->Phi[7][9]*f->P[9][9] + t->Phi[7][10]*f->P[10][9] + t->Phi[7][11]*f->P[11][9] +
             t->Phi[7][12]*f->P[12][9] + t->Phi[7][13]*f->P[13][9] + t->Phi[7][14]*f->P[14][9] +
             t->Phi[7][15]*f->P[15][9] + t->Phi[7][16]*f->P[16][9] + t->Phi[7][17]*f->P[17][9] +
             t->Phi[7][18]*f->P[18][9] + t->Phi[7][19]*f->P[19][9] + t->Phi[7][20]*f->P[20][9];
-    w->M[7][10] = t->Phi[7][0]*f->P[0][10] + t->Phi[7][1]*f->P[1][10] + t->Phi[7][2]*f->P[2][10] +
+    w->M[10] = t->Phi[7][0]*f->P[0][10] + t->Phi[7][1]*f->P[1][10] + t->Phi[7][2]*f->P[2][10] +
             t->Phi[7][3]*f->P[3][10] + t->Phi[7][4]*f->P[4][10] + t->Phi[7][5]*f->P[5][10] +
             t->Phi[7][6]*f->P[6][10] + t->Phi[7][7]*f->P[7][10] + t->Phi[7][8]*f->P[8][10] +
             t->Phi[7][9]*f->P[9][10] + t->Phi[7][10]*f->P[10][10] + t->Phi[7][11]*f->P[11][10] +
             t->Phi[7][12]*f->P[12][10] + t->Phi[7][13]*f->P[13][10] + t->Phi[7][14]*f->P[14][10] +
             t->Phi[7][15]*f->P[15][10] + t->Phi[7][16]*f->P[16][10] + t->Phi[7][17]*f->P[17][10] +
             t->Phi[7][18]*f->P[18][10] + t->Phi[7][19]*f->P[19][10] + t->Phi[7][20]*f->P[20][10];
-    w->M[7][11] = t->Phi[7][0]*f->P[0][11] + t->Phi[7][1]*f->P[1][11] + t->Phi[7][2]*f->P[2][11] +
+    w->M[11] = t->Phi[7][0]*f->P[0][11] + t->Phi[7][1]*f->P[1][11] + t->Phi[7][2]*f->P[2][11] +
             t->Phi[7][3]*f->P[3][11] + t->Phi[7][4]*f->P[4][11] + t->Phi[7][5]*f->P[5][11] +
             t->Phi[7][6]*f->P[6][11] + t->Phi[7][7]*f->P[7][11] + t->Phi[7][8]*f->P[8][11] +
             t->Phi[7][9]*f->P[9][11] + t->Phi[7][10]*f->P[10][11] + t->Phi[7][11]*f->P[11][11] +
             t->Phi[7][12]*f->P[12][11] + t->Phi[7][13]*f->P[13][11] + t->Phi[7][14]*f->P[14][11] +
             t->Phi[7][15]*f->P[15][11] + t->Phi[7][16]*f->P[16][11] + t->Phi[7][17]*f->P[17][11] +
             t->Phi[7][18]*f->P[18][11] + t->Phi[7][19]*f->P[19][11] + t->Phi[7][20]*f->P[20][11];
-    w->M[7][12] = t->Phi[7][0]*f->P[0][12] + t->Phi[7][1]*f->P[1][12] + t->Phi[7][2]*f->P[2][12] +
+    w->M[12] = t->Phi[7][0]*f->P[0][12] + t->Phi[7][1]*f->P[1][12] + t->Phi[7][2]*f->P[2][12] +
             t->Phi[7][3]*f->P[3][12] + t->Phi[7][4]*f->P[4][12] + t->Phi[7][5]*f->P[5][12] +
             t->Phi[7][6]*f->P[6][12] + t->Phi[7][7]*f->P[7][12] + t->Phi[7][8]*f->P[8][12] +
             t->Phi[7][9]*f->P[9][12] + t->Phi[7][10]*f->P[10][12] + t->Phi[7][11]*f->P[11][12] +
             t->Phi[7][12]*f->P[12][12] + t->Phi[7][13]*f->P[13][12] + t->Phi[7][14]*f->P[14][12] +
             t->Phi[7][15]*f->P[15][12] + t->Phi[7][16]*f->P[16][12] + t->Phi[7][17]*f->P[17][12] +
             t->Phi[7][18]*f->P[18][12] + t->Phi[7][19]*f->P[19][12] + t->Phi[7][20]*f->P[20][12];
-    w->M[7][13] = t->Phi[7][0]*f->P[0][13] + t->Phi[7][1]*f->P[1][13] + t->Phi[7][2]*f->P[2][13] +
+    w->M[13] = t->Phi[7][0]*f->P[0][13] + t->Phi[7][1]*f->P[1][13] + t->Phi[7][2]*f->P[2][13] +
             t->Phi[7][3]*f->P[3][13] + t->Phi[7][4]*f->P[4][13] + t->Phi[7][5]*f->P[5][13] +
             t->Phi[7][6]*f->P[6][13] + t->Phi[7][7]*f->P[7][13] + t->Phi[7][8]*f->P[8][13] +
             t->Phi[7][9]*f->P[9][13] + t->Phi[7][10]*f->P[10][13] + t->Phi[7][11]*f->P[11][13] +
             t->Phi[7][12]*f->P[12][13] + t->Phi[7][13]*f->P[13][13] + t->Phi[7][14]*f->P[14][13] +
             t->Phi[7][15]*f->P[15][13] + t->Phi[7][16]*f->P[16][13] + t->Phi[7][17]*f->P[17][13] +
             t->Phi[7][18]*f->P[18][13] + t->Phi[7][19]*f->P[19][13] + t->Phi[7][20]*f->P[20][13];
-    w->M[7][14] = t->Phi[7][0]*f->P[0][14] + t->Phi[7][1]*f->P[1][14] + t->Phi[7][2]*f->P[2][14] +
+    w->M[14] = t->Phi[7][0]*f->P[0][14] + t->Phi[7][1]*f->P[1][14] + t->Phi[7][2]*f->P[2][14] +
             t->Phi[7][3]*f->P[3][14] + t->Phi[7][4]*f->P[4][14] + t->Phi[7][5]*f->P[5][14] +
             t->Phi[7][6]*f->P[6][14] + t->Phi[7][7]*f->P[7][14] + t->Phi[7][8]*f->P[8][14] +
             t->Phi[7][9]*f->P[9][14] + t->Phi[7][10]*f->P[10][14] + t->Phi[7][11]*f->P[11][14] +
             t->Phi[7][12]*f->P[12][14] + t->Phi[7][13]*f->P[13][14] + t->Phi[7][14]*f->P[14][14] +
             t->Phi[7][15]*f->P[15][14] + t->Phi[7][16]*f->P[16][14] + t->Phi[7][17]*f->P[17][14] +
             t->Phi[7][18]*f->P[18][14] + t->Phi[7][19]*f->P[19][14] + t->Phi[7][20]*f->P[20][14];
-    w->M[7][15] = t->Phi[7][0]*f->P[0][15] + t->Phi[7][1]*f->P[1][15] + t->Phi[7][2]*f->P[2][15] +
+    w->M[15] = t->Phi[7][0]*f->P[0][15] + t->Phi[7][1]*f->P[1][15] + t->Phi[7][2]*f->P[2][15] +
             t->Phi[7][3]*f->P[3][15] + t->Phi[7][4]*f->P[4][15] + t->Phi[7][5]*f->P[5][15] +
             t->Phi[7][6]*f->P[6][15] + t->Phi[7][7]*f->P[7][15] + t->Phi[7][8]*f->P[8][15] +
             t->Phi[7][9]*f->P[9][15] + t->Phi[7][10]*f->P[10][15] + t->Phi[7][11]*f->P[11][15] +
             t->Phi[7][12]*f->P[12][15] + t->Phi[7][13]*f->P[13][15] + t->Phi[7][14]*f->P[14][15] +
             t->Phi[7][15]*f->P[15][15] + t->Phi[7][16]*f->P[16][15] + t->Phi[7][17]*f->P[17][15] +
             t->Phi[7][18]*f->P[18][15] + t->Phi[7][19]*f->P[19][15] + t->Phi[7][20]*f->P[20][15];
-    w->M[7][16] = t->Phi[7][0]*f->P[0][16] + t->Phi[7][1]*f->P[1][16] + t->Phi[7][2]*f->P[2][16] +
+    w->M[16] = t->Phi[7][0]*f->P[0][16] + t->Phi[7][1]*f->P[1][16] + t->Phi[7][2]*f->P[2][16] +
             t->Phi[7][3]*f->P[3][16] + t->Phi[7][4]*f->P[4][16] + t->Phi[7][5]*f->P[5][16] +
             t->Phi[7][6]*f->P[6][16] + t->Phi[7][7]*f->P[7][16] + t->Phi[7][8]*f->P[8][16] +
             t->Phi[7][9]*f->P[9][16] + t->Phi[7][10]*f->P[10][16] + t->Phi[7][11]*f->P[11][16] +
             t->Phi[7][12]*f->P[12][16] + t->Phi[7][13]*f->P[13][16] + t->Phi[7][14]*f->P[14][16] +
             t->Phi[7][15]*f->P[15][16] + t->Phi[7][16]*f->P[16][16] + t->Phi[7][17]*f->P[17][16] +
             t->Phi[7][18]*f->P[18][16] + t->Phi[7][19]*f->P[19][16] + t->Phi[7][20]*f->P[20][16];
-    w->M[7][17] = t->Phi[7][0]*f->P[0][17] + t->Phi[7][1]*f->P[1][17] + t->Phi[7][2]*f->P[2][17] +
+    w->M[17] = t->Phi[7][0]*f->P[0][17] + t->Phi[7][1]*f->P[1][17] + t->Phi[7][2]*f->P[2][17] +
             t->Phi[7][3]*f->P[3][17] + t->Phi[7][4]*f->P[4][17] + t->Phi[7][5]*f->P[5][17] +
             t->Phi[7][6]*f->P[6][17] + t->Phi[7][7]*f->P[7][17] + t->Phi[7][8]*f->P[8][17] +
             t->Phi[7][9]*f->P[9][17] + t->Phi[7][10]*f->P[10][17] + t->Phi[7][11]*f->P[11][17] +
             t->Phi[7][12]*f->P[12][17] + t->Phi[7][13]*f->P[13][17] + t->Phi[7][14]*f->P[14][17] +
             t->Phi[7][15]*f->P[15][17] + t->Phi[7][16]*f->P[16][17] + t->Phi[7][17]*f->P[17][17] +
             t->Phi[7][18]*f->P[18][17] + t->Phi[7][19]*f->P[19][17] + t->Phi[7][20]*f->P[20][17];
-    w->M[7][18] = t->Phi[7][0]*f->P[0][18] + t->Phi[7][1]*f->P[1][18] + t->Phi[7][2]*f->P[2][18] +
+    w->M[18] = t->Phi[7][0]*f->P[0][18] + t->Phi[7][1]*f->P[1][18] + t->Phi[7][2]*f->P[2][18] +
             t->Phi[7][3]*f->P[3][18] + t->Phi[7][4]*f->P[4][18] + t->Phi[7][5]*f->P[5][18] +
             t->Phi[7][6]*f->P[6][18] + t->Phi[7][7]*f->P[7][18] + t->Phi[7][8]*f->P[8][18] +
             t->Phi[7][9]*f->P[9][18] + t->Phi[7][10]*f->P[10][18] + t->Phi[7][11]*f->P[11][18] +
             t->Phi[7][12]*f->P[12][18] + t->Phi[7][13]*f->P[13][18] + t->Phi[7][14]*f->P[14][18] +
             t->Phi[7][15]*f->P[15][18] + t->Phi[7][16]*f->P[16][18] + t->Phi[7][17]*f->P[17][18] +
             t->Phi[7][18]*f->P[18][18] + t->Phi[7][19]*f->P[19][18] + t->Phi[7][20]*f->P[20][18];
-    w->M[7][19] = t->Phi[7][0]*f->P[0][19] + t->Phi[7][1]*f->P[1][19] + t->Phi[7][2]*f->P[2][19] +
+    w->M[19] = t->Phi[7][0]*f->P[0][19] + t->Phi[7][1]*f->P[1][19] + t->Phi[7][2]*f->P[2][19] +
             t->Phi[7][3]*f->P[3][19] + t->Phi[7][4]*f->P[4][19] + t->Phi[7][5]*f->P[5][19] +
             t->Phi[7][6]*f->P[6][19] + t->Phi[7][7]*f->P[7][19] + t->Phi[7][8]*f->P[8][19] +
             t->Phi[7][9]*f->P[9][19] + t->Phi[7][10]*f->P[10][19] + t->Phi[7][11]*f->P[11][19] +
             t->Phi[7][12]*f->P[12][19] + t->Phi[7][13]*f->P[13][19] + t->Phi[7][14]*f->P[14][19] +
             t->Phi[7][15]*f->P[15][19] + t->Phi[7][16]*f->P[16][19] + t->Phi[7][17]*f->P[17][19] +
             t->Phi[7][18]*f->P[18][19] + t->Phi[7][19]*f->P[19][19] + t->Phi[7][20]*f->P[20][19];
-    w->M[7][20] = t->Phi[7][0]*f->P[0][20] + t->Phi[7][1]*f->P[1][20] + t->Phi[7][2]*f->P[2][20] +
+    w->M[20] = t->Phi[7][0]*f->P[0][20] + t->Phi[7][1]*f->P[1][20] + t->Phi[7][2]*f->P[2][20] +
             t->Phi[7][3]*f->P[3][20] + t->Phi[7][4]*f->P[4][20] + t->Phi[7][5]*f->P[5][20] +
             t->Phi[7][6]*f->P[6][20] + t->Phi[7][7]*f->P[7][20] + t->Phi[7][8]*f->P[8][20] +
             t->Phi[7][9]*f->P[9][20] + t->Phi[7][10]*f->P[10][20] + t->Phi[7][11]*f->P[11][20] +
@@ -6059,150 +6377,186 @@ static void phi_times_p_row_7(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[7][18]*f->P[18][20] + t->Phi[7][19]*f->P[19][20] + t->Phi[7][20]*f->P[20][20];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ins_gnss21_scalar propagate_row_7(const ins_gnss21_transition *restrict t,
+        ins_gnss21_filter_scratch *restrict w)
+{
+    ins_gnss21_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + w->M[15]*t->Phi[7][15] +
+            w->M[16]*t->Phi[7][16] + w->M[17]*t->Phi[7][17] + w->M[18]*t->Phi[7][18] +
+            w->M[19]*t->Phi[7][19] + w->M[20]*t->Phi[7][20] + t->Qd[126]; w->Pn[126] = v; check += v
+            - v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] +
+            w->M[10]*t->Phi[8][10] + w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] +
+            w->M[13]*t->Phi[8][13] + w->M[14]*t->Phi[8][14] + w->M[15]*t->Phi[8][15] +
+            w->M[16]*t->Phi[8][16] + w->M[17]*t->Phi[8][17] + w->M[18]*t->Phi[8][18] +
+            w->M[19]*t->Phi[8][19] + w->M[20]*t->Phi[8][20] + t->Qd[127]; w->Pn[127] = v; check += v
+            - v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[128]; w->Pn[128] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[129]; w->Pn[129] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[130]; w->Pn[130] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[131]; w->Pn[131] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[132]; w->Pn[132] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[133]; w->Pn[133] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[134]; w->Pn[134] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16] + t->Qd[135]; w->Pn[135] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17] + t->Qd[136]; w->Pn[136] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18] + t->Qd[137]; w->Pn[137] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19] + t->Qd[138]; w->Pn[138] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20] + t->Qd[139]; w->Pn[139] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_8(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
         *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[8][0] = t->Phi[8][0]*f->P[0][0] + t->Phi[8][1]*f->P[1][0] + t->Phi[8][2]*f->P[2][0] +
+    w->M[0] = t->Phi[8][0]*f->P[0][0] + t->Phi[8][1]*f->P[1][0] + t->Phi[8][2]*f->P[2][0] +
             t->Phi[8][3]*f->P[3][0] + t->Phi[8][4]*f->P[4][0] + t->Phi[8][5]*f->P[5][0] +
             t->Phi[8][6]*f->P[6][0] + t->Phi[8][7]*f->P[7][0] + t->Phi[8][8]*f->P[8][0] +
             t->Phi[8][9]*f->P[9][0] + t->Phi[8][10]*f->P[10][0] + t->Phi[8][11]*f->P[11][0] +
             t->Phi[8][12]*f->P[12][0] + t->Phi[8][13]*f->P[13][0] + t->Phi[8][14]*f->P[14][0] +
             t->Phi[8][15]*f->P[15][0] + t->Phi[8][16]*f->P[16][0] + t->Phi[8][17]*f->P[17][0] +
             t->Phi[8][18]*f->P[18][0] + t->Phi[8][19]*f->P[19][0] + t->Phi[8][20]*f->P[20][0];
-    w->M[8][1] = t->Phi[8][0]*f->P[0][1] + t->Phi[8][1]*f->P[1][1] + t->Phi[8][2]*f->P[2][1] +
+    w->M[1] = t->Phi[8][0]*f->P[0][1] + t->Phi[8][1]*f->P[1][1] + t->Phi[8][2]*f->P[2][1] +
             t->Phi[8][3]*f->P[3][1] + t->Phi[8][4]*f->P[4][1] + t->Phi[8][5]*f->P[5][1] +
             t->Phi[8][6]*f->P[6][1] + t->Phi[8][7]*f->P[7][1] + t->Phi[8][8]*f->P[8][1] +
             t->Phi[8][9]*f->P[9][1] + t->Phi[8][10]*f->P[10][1] + t->Phi[8][11]*f->P[11][1] +
             t->Phi[8][12]*f->P[12][1] + t->Phi[8][13]*f->P[13][1] + t->Phi[8][14]*f->P[14][1] +
             t->Phi[8][15]*f->P[15][1] + t->Phi[8][16]*f->P[16][1] + t->Phi[8][17]*f->P[17][1] +
             t->Phi[8][18]*f->P[18][1] + t->Phi[8][19]*f->P[19][1] + t->Phi[8][20]*f->P[20][1];
-    w->M[8][2] = t->Phi[8][0]*f->P[0][2] + t->Phi[8][1]*f->P[1][2] + t->Phi[8][2]*f->P[2][2] +
+    w->M[2] = t->Phi[8][0]*f->P[0][2] + t->Phi[8][1]*f->P[1][2] + t->Phi[8][2]*f->P[2][2] +
             t->Phi[8][3]*f->P[3][2] + t->Phi[8][4]*f->P[4][2] + t->Phi[8][5]*f->P[5][2] +
             t->Phi[8][6]*f->P[6][2] + t->Phi[8][7]*f->P[7][2] + t->Phi[8][8]*f->P[8][2] +
             t->Phi[8][9]*f->P[9][2] + t->Phi[8][10]*f->P[10][2] + t->Phi[8][11]*f->P[11][2] +
             t->Phi[8][12]*f->P[12][2] + t->Phi[8][13]*f->P[13][2] + t->Phi[8][14]*f->P[14][2] +
             t->Phi[8][15]*f->P[15][2] + t->Phi[8][16]*f->P[16][2] + t->Phi[8][17]*f->P[17][2] +
             t->Phi[8][18]*f->P[18][2] + t->Phi[8][19]*f->P[19][2] + t->Phi[8][20]*f->P[20][2];
-    w->M[8][3] = t->Phi[8][0]*f->P[0][3] + t->Phi[8][1]*f->P[1][3] + t->Phi[8][2]*f->P[2][3] +
+    w->M[3] = t->Phi[8][0]*f->P[0][3] + t->Phi[8][1]*f->P[1][3] + t->Phi[8][2]*f->P[2][3] +
             t->Phi[8][3]*f->P[3][3] + t->Phi[8][4]*f->P[4][3] + t->Phi[8][5]*f->P[5][3] +
             t->Phi[8][6]*f->P[6][3] + t->Phi[8][7]*f->P[7][3] + t->Phi[8][8]*f->P[8][3] +
             t->Phi[8][9]*f->P[9][3] + t->Phi[8][10]*f->P[10][3] + t->Phi[8][11]*f->P[11][3] +
             t->Phi[8][12]*f->P[12][3] + t->Phi[8][13]*f->P[13][3] + t->Phi[8][14]*f->P[14][3] +
             t->Phi[8][15]*f->P[15][3] + t->Phi[8][16]*f->P[16][3] + t->Phi[8][17]*f->P[17][3] +
             t->Phi[8][18]*f->P[18][3] + t->Phi[8][19]*f->P[19][3] + t->Phi[8][20]*f->P[20][3];
-    w->M[8][4] = t->Phi[8][0]*f->P[0][4] + t->Phi[8][1]*f->P[1][4] + t->Phi[8][2]*f->P[2][4] +
+    w->M[4] = t->Phi[8][0]*f->P[0][4] + t->Phi[8][1]*f->P[1][4] + t->Phi[8][2]*f->P[2][4] +
             t->Phi[8][3]*f->P[3][4] + t->Phi[8][4]*f->P[4][4] + t->Phi[8][5]*f->P[5][4] +
             t->Phi[8][6]*f->P[6][4] + t->Phi[8][7]*f->P[7][4] + t->Phi[8][8]*f->P[8][4] +
             t->Phi[8][9]*f->P[9][4] + t->Phi[8][10]*f->P[10][4] + t->Phi[8][11]*f->P[11][4] +
             t->Phi[8][12]*f->P[12][4] + t->Phi[8][13]*f->P[13][4] + t->Phi[8][14]*f->P[14][4] +
             t->Phi[8][15]*f->P[15][4] + t->Phi[8][16]*f->P[16][4] + t->Phi[8][17]*f->P[17][4] +
             t->Phi[8][18]*f->P[18][4] + t->Phi[8][19]*f->P[19][4] + t->Phi[8][20]*f->P[20][4];
-    w->M[8][5] = t->Phi[8][0]*f->P[0][5] + t->Phi[8][1]*f->P[1][5] + t->Phi[8][2]*f->P[2][5] +
+    w->M[5] = t->Phi[8][0]*f->P[0][5] + t->Phi[8][1]*f->P[1][5] + t->Phi[8][2]*f->P[2][5] +
             t->Phi[8][3]*f->P[3][5] + t->Phi[8][4]*f->P[4][5] + t->Phi[8][5]*f->P[5][5] +
             t->Phi[8][6]*f->P[6][5] + t->Phi[8][7]*f->P[7][5] + t->Phi[8][8]*f->P[8][5] +
             t->Phi[8][9]*f->P[9][5] + t->Phi[8][10]*f->P[10][5] + t->Phi[8][11]*f->P[11][5] +
             t->Phi[8][12]*f->P[12][5] + t->Phi[8][13]*f->P[13][5] + t->Phi[8][14]*f->P[14][5] +
             t->Phi[8][15]*f->P[15][5] + t->Phi[8][16]*f->P[16][5] + t->Phi[8][17]*f->P[17][5] +
             t->Phi[8][18]*f->P[18][5] + t->Phi[8][19]*f->P[19][5] + t->Phi[8][20]*f->P[20][5];
-    w->M[8][6] = t->Phi[8][0]*f->P[0][6] + t->Phi[8][1]*f->P[1][6] + t->Phi[8][2]*f->P[2][6] +
+    w->M[6] = t->Phi[8][0]*f->P[0][6] + t->Phi[8][1]*f->P[1][6] + t->Phi[8][2]*f->P[2][6] +
             t->Phi[8][3]*f->P[3][6] + t->Phi[8][4]*f->P[4][6] + t->Phi[8][5]*f->P[5][6] +
             t->Phi[8][6]*f->P[6][6] + t->Phi[8][7]*f->P[7][6] + t->Phi[8][8]*f->P[8][6] +
             t->Phi[8][9]*f->P[9][6] + t->Phi[8][10]*f->P[10][6] + t->Phi[8][11]*f->P[11][6] +
             t->Phi[8][12]*f->P[12][6] + t->Phi[8][13]*f->P[13][6] + t->Phi[8][14]*f->P[14][6] +
             t->Phi[8][15]*f->P[15][6] + t->Phi[8][16]*f->P[16][6] + t->Phi[8][17]*f->P[17][6] +
             t->Phi[8][18]*f->P[18][6] + t->Phi[8][19]*f->P[19][6] + t->Phi[8][20]*f->P[20][6];
-    w->M[8][7] = t->Phi[8][0]*f->P[0][7] + t->Phi[8][1]*f->P[1][7] + t->Phi[8][2]*f->P[2][7] +
+    w->M[7] = t->Phi[8][0]*f->P[0][7] + t->Phi[8][1]*f->P[1][7] + t->Phi[8][2]*f->P[2][7] +
             t->Phi[8][3]*f->P[3][7] + t->Phi[8][4]*f->P[4][7] + t->Phi[8][5]*f->P[5][7] +
             t->Phi[8][6]*f->P[6][7] + t->Phi[8][7]*f->P[7][7] + t->Phi[8][8]*f->P[8][7] +
             t->Phi[8][9]*f->P[9][7] + t->Phi[8][10]*f->P[10][7] + t->Phi[8][11]*f->P[11][7] +
             t->Phi[8][12]*f->P[12][7] + t->Phi[8][13]*f->P[13][7] + t->Phi[8][14]*f->P[14][7] +
             t->Phi[8][15]*f->P[15][7] + t->Phi[8][16]*f->P[16][7] + t->Phi[8][17]*f->P[17][7] +
             t->Phi[8][18]*f->P[18][7] + t->Phi[8][19]*f->P[19][7] + t->Phi[8][20]*f->P[20][7];
-    w->M[8][8] = t->Phi[8][0]*f->P[0][8] + t->Phi[8][1]*f->P[1][8] + t->Phi[8][2]*f->P[2][8] +
+    w->M[8] = t->Phi[8][0]*f->P[0][8] + t->Phi[8][1]*f->P[1][8] + t->Phi[8][2]*f->P[2][8] +
             t->Phi[8][3]*f->P[3][8] + t->Phi[8][4]*f->P[4][8] + t->Phi[8][5]*f->P[5][8] +
             t->Phi[8][6]*f->P[6][8] + t->Phi[8][7]*f->P[7][8] + t->Phi[8][8]*f->P[8][8] +
             t->Phi[8][9]*f->P[9][8] + t->Phi[8][10]*f->P[10][8] + t->Phi[8][11]*f->P[11][8] +
             t->Phi[8][12]*f->P[12][8] + t->Phi[8][13]*f->P[13][8] + t->Phi[8][14]*f->P[14][8] +
             t->Phi[8][15]*f->P[15][8] + t->Phi[8][16]*f->P[16][8] + t->Phi[8][17]*f->P[17][8] +
             t->Phi[8][18]*f->P[18][8] + t->Phi[8][19]*f->P[19][8] + t->Phi[8][20]*f->P[20][8];
-    w->M[8][9] = t->Phi[8][0]*f->P[0][9] + t->Phi[8][1]*f->P[1][9] + t->Phi[8][2]*f->P[2][9] +
+    w->M[9] = t->Phi[8][0]*f->P[0][9] + t->Phi[8][1]*f->P[1][9] + t->Phi[8][2]*f->P[2][9] +
             t->Phi[8][3]*f->P[3][9] + t->Phi[8][4]*f->P[4][9] + t->Phi[8][5]*f->P[5][9] +
             t->Phi[8][6]*f->P[6][9] + t->Phi[8][7]*f->P[7][9] + t->Phi[8][8]*f->P[8][9] +
             t->Phi[8][9]*f->P[9][9] + t->Phi[8][10]*f->P[10][9] + t->Phi[8][11]*f->P[11][9] +
             t->Phi[8][12]*f->P[12][9] + t->Phi[8][13]*f->P[13][9] + t->Phi[8][14]*f->P[14][9] +
             t->Phi[8][15]*f->P[15][9] + t->Phi[8][16]*f->P[16][9] + t->Phi[8][17]*f->P[17][9] +
             t->Phi[8][18]*f->P[18][9] + t->Phi[8][19]*f->P[19][9] + t->Phi[8][20]*f->P[20][9];
-    w->M[8][10] = t->Phi[8][0]*f->P[0][10] + t->Phi[8][1]*f->P[1][10] + t->Phi[8][2]*f->P[2][10] +
+    w->M[10] = t->Phi[8][0]*f->P[0][10] + t->Phi[8][1]*f->P[1][10] + t->Phi[8][2]*f->P[2][10] +
             t->Phi[8][3]*f->P[3][10] + t->Phi[8][4]*f->P[4][10] + t->Phi[8][5]*f->P[5][10] +
             t->Phi[8][6]*f->P[6][10] + t->Phi[8][7]*f->P[7][10] + t->Phi[8][8]*f->P[8][10] +
             t->Phi[8][9]*f->P[9][10] + t->Phi[8][10]*f->P[10][10] + t->Phi[8][11]*f->P[11][10] +
             t->Phi[8][12]*f->P[12][10] + t->Phi[8][13]*f->P[13][10] + t->Phi[8][14]*f->P[14][10] +
             t->Phi[8][15]*f->P[15][10] + t->Phi[8][16]*f->P[16][10] + t->Phi[8][17]*f->P[17][10] +
             t->Phi[8][18]*f->P[18][10] + t->Phi[8][19]*f->P[19][10] + t->Phi[8][20]*f->P[20][10];
-    w->M[8][11] = t->Phi[8][0]*f->P[0][11] + t->Phi[8][1]*f->P[1][11] + t->Phi[8][2]*f->P[2][11] +
+    w->M[11] = t->Phi[8][0]*f->P[0][11] + t->Phi[8][1]*f->P[1][11] + t->Phi[8][2]*f->P[2][11] +
             t->Phi[8][3]*f->P[3][11] + t->Phi[8][4]*f->P[4][11] + t->Phi[8][5]*f->P[5][11] +
             t->Phi[8][6]*f->P[6][11] + t->Phi[8][7]*f->P[7][11] + t->Phi[8][8]*f->P[8][11] +
             t->Phi[8][9]*f->P[9][11] + t->Phi[8][10]*f->P[10][11] + t->Phi[8][11]*f->P[11][11] +
             t->Phi[8][12]*f->P[12][11] + t->Phi[8][13]*f->P[13][11] + t->Phi[8][14]*f->P[14][11] +
             t->Phi[8][15]*f->P[15][11] + t->Phi[8][16]*f->P[16][11] + t->Phi[8][17]*f->P[17][11] +
             t->Phi[8][18]*f->P[18][11] + t->Phi[8][19]*f->P[19][11] + t->Phi[8][20]*f->P[20][11];
-    w->M[8][12] = t->Phi[8][0]*f->P[0][12] + t->Phi[8][1]*f->P[1][12] + t->Phi[8][2]*f->P[2][12] +
+    w->M[12] = t->Phi[8][0]*f->P[0][12] + t->Phi[8][1]*f->P[1][12] + t->Phi[8][2]*f->P[2][12] +
             t->Phi[8][3]*f->P[3][12] + t->Phi[8][4]*f->P[4][12] + t->Phi[8][5]*f->P[5][12] +
             t->Phi[8][6]*f->P[6][12] + t->Phi[8][7]*f->P[7][12] + t->Phi[8][8]*f->P[8][12] +
             t->Phi[8][9]*f->P[9][12] + t->Phi[8][10]*f->P[10][12] + t->Phi[8][11]*f->P[11][12] +
             t->Phi[8][12]*f->P[12][12] + t->Phi[8][13]*f->P[13][12] + t->Phi[8][14]*f->P[14][12] +
             t->Phi[8][15]*f->P[15][12] + t->Phi[8][16]*f->P[16][12] + t->Phi[8][17]*f->P[17][12] +
             t->Phi[8][18]*f->P[18][12] + t->Phi[8][19]*f->P[19][12] + t->Phi[8][20]*f->P[20][12];
-    w->M[8][13] = t->Phi[8][0]*f->P[0][13] + t->Phi[8][1]*f->P[1][13] + t->Phi[8][2]*f->P[2][13] +
+    w->M[13] = t->Phi[8][0]*f->P[0][13] + t->Phi[8][1]*f->P[1][13] + t->Phi[8][2]*f->P[2][13] +
             t->Phi[8][3]*f->P[3][13] + t->Phi[8][4]*f->P[4][13] + t->Phi[8][5]*f->P[5][13] +
             t->Phi[8][6]*f->P[6][13] + t->Phi[8][7]*f->P[7][13] + t->Phi[8][8]*f->P[8][13] +
             t->Phi[8][9]*f->P[9][13] + t->Phi[8][10]*f->P[10][13] + t->Phi[8][11]*f->P[11][13] +
             t->Phi[8][12]*f->P[12][13] + t->Phi[8][13]*f->P[13][13] + t->Phi[8][14]*f->P[14][13] +
             t->Phi[8][15]*f->P[15][13] + t->Phi[8][16]*f->P[16][13] + t->Phi[8][17]*f->P[17][13] +
             t->Phi[8][18]*f->P[18][13] + t->Phi[8][19]*f->P[19][13] + t->Phi[8][20]*f->P[20][13];
-    w->M[8][14] = t->Phi[8][0]*f->P[0][14] + t->Phi[8][1]*f->P[1][14] + t->Phi[8][2]*f->P[2][14] +
+    w->M[14] = t->Phi[8][0]*f->P[0][14] + t->Phi[8][1]*f->P[1][14] + t->Phi[8][2]*f->P[2][14] +
             t->Phi[8][3]*f->P[3][14] + t->Phi[8][4]*f->P[4][14] + t->Phi[8][5]*f->P[5][14] +
             t->Phi[8][6]*f->P[6][14] + t->Phi[8][7]*f->P[7][14] + t->Phi[8][8]*f->P[8][14] +
             t->Phi[8][9]*f->P[9][14] + t->Phi[8][10]*f->P[10][14] + t->Phi[8][11]*f->P[11][14] +
             t->Phi[8][12]*f->P[12][14] + t->Phi[8][13]*f->P[13][14] + t->Phi[8][14]*f->P[14][14] +
             t->Phi[8][15]*f->P[15][14] + t->Phi[8][16]*f->P[16][14] + t->Phi[8][17]*f->P[17][14] +
             t->Phi[8][18]*f->P[18][14] + t->Phi[8][19]*f->P[19][14] + t->Phi[8][20]*f->P[20][14];
-    w->M[8][15] = t->Phi[8][0]*f->P[0][15] + t->Phi[8][1]*f->P[1][15] + t->Phi[8][2]*f->P[2][15] +
+    w->M[15] = t->Phi[8][0]*f->P[0][15] + t->Phi[8][1]*f->P[1][15] + t->Phi[8][2]*f->P[2][15] +
             t->Phi[8][3]*f->P[3][15] + t->Phi[8][4]*f->P[4][15] + t->Phi[8][5]*f->P[5][15] +
             t->Phi[8][6]*f->P[6][15] + t->Phi[8][7]*f->P[7][15] + t->Phi[8][8]*f->P[8][15] +
             t->Phi[8][9]*f->P[9][15] + t->Phi[8][10]*f->P[10][15] + t->Phi[8][11]*f->P[11][15] +
             t->Phi[8][12]*f->P[12][15] + t->Phi[8][13]*f->P[13][15] + t->Phi[8][14]*f->P[14][15] +
             t->Phi[8][15]*f->P[15][15] + t->Phi[8][16]*f->P[16][15] + t->Phi[8][17]*f->P[17][15] +
             t->Phi[8][18]*f->P[18][15] + t->Phi[8][19]*f->P[19][15] + t->Phi[8][20]*f->P[20][15];
-    w->M[8][16] = t->Phi[8][0]*f->P[0][16] + t->Phi[8][1]*f->P[1][16] + t->Phi[8][2]*f->P[2][16] +
+    w->M[16] = t->Phi[8][0]*f->P[0][16] + t->Phi[8][1]*f->P[1][16] + t->Phi[8][2]*f->P[2][16] +
             t->Phi[8][3]*f->P[3][16] + t->Phi[8][4]*f->P[4][16] + t->Phi[8][5]*f->P[5][16] +
             t->Phi[8][6]*f->P[6][16] + t->Phi[8][7]*f->P[7][16] + t->Phi[8][8]*f->P[8][16] +
             t->Phi[8][9]*f->P[9][16] + t->Phi[8][10]*f->P[10][16] + t->Phi[8][11]*f->P[11][16] +
             t->Phi[8][12]*f->P[12][16] + t->Phi[8][13]*f->P[13][16] + t->Phi[8][14]*f->P[14][16] +
             t->Phi[8][15]*f->P[15][16] + t->Phi[8][16]*f->P[16][16] + t->Phi[8][17]*f->P[17][16] +
             t->Phi[8][18]*f->P[18][16] + t->Phi[8][19]*f->P[19][16] + t->Phi[8][20]*f->P[20][16];
-    w->M[8][17] = t->Phi[8][0]*f->P[0][17] + t->Phi[8][1]*f->P[1][17] + t->Phi[8][2]*f->P[2][17] +
+    w->M[17] = t->Phi[8][0]*f->P[0][17] + t->Phi[8][1]*f->P[1][17] + t->Phi[8][2]*f->P[2][17] +
             t->Phi[8][3]*f->P[3][17] + t->Phi[8][4]*f->P[4][17] + t->Phi[8][5]*f->P[5][17] +
             t->Phi[8][6]*f->P[6][17] + t->Phi[8][7]*f->P[7][17] + t->Phi[8][8]*f->P[8][17] +
             t->Phi[8][9]*f->P[9][17] + t->Phi[8][10]*f->P[10][17] + t->Phi[8][11]*f->P[11][17] +
             t->Phi[8][12]*f->P[12][17] + t->Phi[8][13]*f->P[13][17] + t->Phi[8][14]*f->P[14][17] +
             t->Phi[8][15]*f->P[15][17] + t->Phi[8][16]*f->P[16][17] + t->Phi[8][17]*f->P[17][17] +
             t->Phi[8][18]*f->P[18][17] + t->Phi[8][19]*f->P[19][17] + t->Phi[8][20]*f->P[20][17];
-    w->M[8][18] = t->Phi[8][0]*f->P[0][18] + t->Phi[8][1]*f->P[1][18] + t->Phi[8][2]*f->P[2][18] +
+    w->M[18] = t->Phi[8][0]*f->P[0][18] + t->Phi[8][1]*f->P[1][18] + t->Phi[8][2]*f->P[2][18] +
             t->Phi[8][3]*f->P[3][18] + t->Phi[8][4]*f->P[4][18] + t->Phi[8][5]*f->P[5][18] +
             t->Phi[8][6]*f->P[6][18] + t->Phi[8][7]*f->P[7][18] + t->Phi[8][8]*f->P[8][18] +
             t->Phi[8][9]*f->P[9][18] + t->Phi[8][10]*f->P[10][18] + t->Phi[8][11]*f->P[11][18] +
             t->Phi[8][12]*f->P[12][18] + t->Phi[8][13]*f->P[13][18] + t->Phi[8][14]*f->P[14][18] +
             t->Phi[8][15]*f->P[15][18] + t->Phi[8][16]*f->P[16][18] + t->Phi[8][17]*f->P[17][18] +
             t->Phi[8][18]*f->P[18][18] + t->Phi[8][19]*f->P[19][18] + t->Phi[8][20]*f->P[20][18];
-    w->M[8][19] = t->Phi[8][0]*f->P[0][19] + t->Phi[8][1]*f->P[1][19] + t->Phi[8][2]*f->P[2][19] +
+    w->M[19] = t->Phi[8][0]*f->P[0][19] + t->Phi[8][1]*f->P[1][19] + t->Phi[8][2]*f->P[2][19] +
             t->Phi[8][3]*f->P[3][19] + t->Phi[8][4]*f->P[4][19] + t->Phi[8][5]*f->P[5][19] +
             t->Phi[8][6]*f->P[6][19] + t->Phi[8][7]*f->P[7][19] + t->Phi[8][8]*f->P[8][19] +
             t->Phi[8][9]*f->P[9][19] + t->Phi[8][10]*f->P[10][19] + t->Phi[8][11]*f->P[11][19] +
             t->Phi[8][12]*f->P[12][19] + t->Phi[8][13]*f->P[13][19] + t->Phi[8][14]*f->P[14][19] +
             t->Phi[8][15]*f->P[15][19] + t->Phi[8][16]*f->P[16][19] + t->Phi[8][17]*f->P[17][19] +
             t->Phi[8][18]*f->P[18][19] + t->Phi[8][19]*f->P[19][19] + t->Phi[8][20]*f->P[20][19];
-    w->M[8][20] = t->Phi[8][0]*f->P[0][20] + t->Phi[8][1]*f->P[1][20] + t->Phi[8][2]*f->P[2][20] +
+    w->M[20] = t->Phi[8][0]*f->P[0][20] + t->Phi[8][1]*f->P[1][20] + t->Phi[8][2]*f->P[2][20] +
             t->Phi[8][3]*f->P[3][20] + t->Phi[8][4]*f->P[4][20] + t->Phi[8][5]*f->P[5][20] +
             t->Phi[8][6]*f->P[6][20] + t->Phi[8][7]*f->P[7][20] + t->Phi[8][8]*f->P[8][20] +
             t->Phi[8][9]*f->P[9][20] + t->Phi[8][10]*f->P[10][20] + t->Phi[8][11]*f->P[11][20] +
@@ -6211,955 +6565,58 @@ static void phi_times_p_row_8(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[8][18]*f->P[18][20] + t->Phi[8][19]*f->P[19][20] + t->Phi[8][20]*f->P[20][20];
 }
 
-static void phi_times_p_row_9(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
-{
-    w->M[9][0] = t->Phi[9][9]*f->P[9][0];
-    w->M[9][1] = t->Phi[9][9]*f->P[9][1];
-    w->M[9][2] = t->Phi[9][9]*f->P[9][2];
-    w->M[9][3] = t->Phi[9][9]*f->P[9][3];
-    w->M[9][4] = t->Phi[9][9]*f->P[9][4];
-    w->M[9][5] = t->Phi[9][9]*f->P[9][5];
-    w->M[9][6] = t->Phi[9][9]*f->P[9][6];
-    w->M[9][7] = t->Phi[9][9]*f->P[9][7];
-    w->M[9][8] = t->Phi[9][9]*f->P[9][8];
-    w->M[9][9] = t->Phi[9][9]*f->P[9][9];
-    w->M[9][10] = t->Phi[9][9]*f->P[9][10];
-    w->M[9][11] = t->Phi[9][9]*f->P[9][11];
-    w->M[9][12] = t->Phi[9][9]*f->P[9][12];
-    w->M[9][13] = t->Phi[9][9]*f->P[9][13];
-    w->M[9][14] = t->Phi[9][9]*f->P[9][14];
-    w->M[9][15] = t->Phi[9][9]*f->P[9][15];
-    w->M[9][16] = t->Phi[9][9]*f->P[9][16];
-    w->M[9][17] = t->Phi[9][9]*f->P[9][17];
-    w->M[9][18] = t->Phi[9][9]*f->P[9][18];
-    w->M[9][19] = t->Phi[9][9]*f->P[9][19];
-    w->M[9][20] = t->Phi[9][9]*f->P[9][20];
-}
-
-static void phi_times_p_row_10(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
-{
-    w->M[10][0] = t->Phi[10][10]*f->P[10][0];
-    w->M[10][1] = t->Phi[10][10]*f->P[10][1];
-    w->M[10][2] = t->Phi[10][10]*f->P[10][2];
-    w->M[10][3] = t->Phi[10][10]*f->P[10][3];
-    w->M[10][4] = t->Phi[10][10]*f->P[10][4];
-    w->M[10][5] = t->Phi[10][10]*f->P[10][5];
-    w->M[10][6] = t->Phi[10][10]*f->P[10][6];
-    w->M[10][7] = t->Phi[10][10]*f->P[10][7];
-    w->M[10][8] = t->Phi[10][10]*f->P[10][8];
-    w->M[10][9] = t->Phi[10][10]*f->P[10][9];
-    w->M[10][10] = t->Phi[10][10]*f->P[10][10];
-    w->M[10][11] = t->Phi[10][10]*f->P[10][11];
-    w->M[10][12] = t->Phi[10][10]*f->P[10][12];
-    w->M[10][13] = t->Phi[10][10]*f->P[10][13];
-    w->M[10][14] = t->Phi[10][10]*f->P[10][14];
-    w->M[10][15] = t->Phi[10][10]*f->P[10][15];
-    w->M[10][16] = t->Phi[10][10]*f->P[10][16];
-    w->M[10][17] = t->Phi[10][10]*f->P[10][17];
-    w->M[10][18] = t->Phi[10][10]*f->P[10][18];
-    w->M[10][19] = t->Phi[10][10]*f->P[10][19];
-    w->M[10][20] = t->Phi[10][10]*f->P[10][20];
-}
-
-static void phi_times_p_row_11(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
-{
-    w->M[11][0] = t->Phi[11][11]*f->P[11][0];
-    w->M[11][1] = t->Phi[11][11]*f->P[11][1];
-    w->M[11][2] = t->Phi[11][11]*f->P[11][2];
-    w->M[11][3] = t->Phi[11][11]*f->P[11][3];
-    w->M[11][4] = t->Phi[11][11]*f->P[11][4];
-    w->M[11][5] = t->Phi[11][11]*f->P[11][5];
-    w->M[11][6] = t->Phi[11][11]*f->P[11][6];
-    w->M[11][7] = t->Phi[11][11]*f->P[11][7];
-    w->M[11][8] = t->Phi[11][11]*f->P[11][8];
-    w->M[11][9] = t->Phi[11][11]*f->P[11][9];
-    w->M[11][10] = t->Phi[11][11]*f->P[11][10];
-    w->M[11][11] = t->Phi[11][11]*f->P[11][11];
-    w->M[11][12] = t->Phi[11][11]*f->P[11][12];
-    w->M[11][13] = t->Phi[11][11]*f->P[11][13];
-    w->M[11][14] = t->Phi[11][11]*f->P[11][14];
-    w->M[11][15] = t->Phi[11][11]*f->P[11][15];
-    w->M[11][16] = t->Phi[11][11]*f->P[11][16];
-    w->M[11][17] = t->Phi[11][11]*f->P[11][17];
-    w->M[11][18] = t->Phi[11][11]*f->P[11][18];
-    w->M[11][19] = t->Phi[11][11]*f->P[11][19];
-    w->M[11][20] = t->Phi[11][11]*f->P[11][20];
-}
-
-static void phi_times_p_row_12(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
-{
-    w->M[12][0] = t->Phi[12][12]*f->P[12][0];
-    w->M[12][1] = t->Phi[12][12]*f->P[12][1];
-    w->M[12][2] = t->Phi[12][12]*f->P[12][2];
-    w->M[12][3] = t->Phi[12][12]*f->P[12][3];
-    w->M[12][4] = t->Phi[12][12]*f->P[12][4];
-    w->M[12][5] = t->Phi[12][12]*f->P[12][5];
-    w->M[12][6] = t->Phi[12][12]*f->P[12][6];
-    w->M[12][7] = t->Phi[12][12]*f->P[12][7];
-    w->M[12][8] = t->Phi[12][12]*f->P[12][8];
-    w->M[12][9] = t->Phi[12][12]*f->P[12][9];
-    w->M[12][10] = t->Phi[12][12]*f->P[12][10];
-    w->M[12][11] = t->Phi[12][12]*f->P[12][11];
-    w->M[12][12] = t->Phi[12][12]*f->P[12][12];
-    w->M[12][13] = t->Phi[12][12]*f->P[12][13];
-    w->M[12][14] = t->Phi[12][12]*f->P[12][14];
-    w->M[12][15] = t->Phi[12][12]*f->P[12][15];
-    w->M[12][16] = t->Phi[12][12]*f->P[12][16];
-    w->M[12][17] = t->Phi[12][12]*f->P[12][17];
-    w->M[12][18] = t->Phi[12][12]*f->P[12][18];
-    w->M[12][19] = t->Phi[12][12]*f->P[12][19];
-    w->M[12][20] = t->Phi[12][12]*f->P[12][20];
-}
-
-static void phi_times_p_row_13(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
-{
-    w->M[13][0] = t->Phi[13][13]*f->P[13][0];
-    w->M[13][1] = t->Phi[13][13]*f->P[13][1];
-    w->M[13][2] = t->Phi[13][13]*f->P[13][2];
-    w->M[13][3] = t->Phi[13][13]*f->P[13][3];
-    w->M[13][4] = t->Phi[13][13]*f->P[13][4];
-    w->M[13][5] = t->Phi[13][13]*f->P[13][5];
-    w->M[13][6] = t->Phi[13][13]*f->P[13][6];
-    w->M[13][7] = t->Phi[13][13]*f->P[13][7];
-    w->M[13][8] = t->Phi[13][13]*f->P[13][8];
-    w->M[13][9] = t->Phi[13][13]*f->P[13][9];
-    w->M[13][10] = t->Phi[13][13]*f->P[13][10];
-    w->M[13][11] = t->Phi[13][13]*f->P[13][11];
-    w->M[13][12] = t->Phi[13][13]*f->P[13][12];
-    w->M[13][13] = t->Phi[13][13]*f->P[13][13];
-    w->M[13][14] = t->Phi[13][13]*f->P[13][14];
-    w->M[13][15] = t->Phi[13][13]*f->P[13][15];
-    w->M[13][16] = t->Phi[13][13]*f->P[13][16];
-    w->M[13][17] = t->Phi[13][13]*f->P[13][17];
-    w->M[13][18] = t->Phi[13][13]*f->P[13][18];
-    w->M[13][19] = t->Phi[13][13]*f->P[13][19];
-    w->M[13][20] = t->Phi[13][13]*f->P[13][20];
-}
-
-static void phi_times_p_row_14(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
-{
-    w->M[14][0] = t->Phi[14][14]*f->P[14][0];
-    w->M[14][1] = t->Phi[14][14]*f->P[14][1];
-    w->M[14][2] = t->Phi[14][14]*f->P[14][2];
-    w->M[14][3] = t->Phi[14][14]*f->P[14][3];
-    w->M[14][4] = t->Phi[14][14]*f->P[14][4];
-    w->M[14][5] = t->Phi[14][14]*f->P[14][5];
-    w->M[14][6] = t->Phi[14][14]*f->P[14][6];
-    w->M[14][7] = t->Phi[14][14]*f->P[14][7];
-    w->M[14][8] = t->Phi[14][14]*f->P[14][8];
-    w->M[14][9] = t->Phi[14][14]*f->P[14][9];
-    w->M[14][10] = t->Phi[14][14]*f->P[14][10];
-    w->M[14][11] = t->Phi[14][14]*f->P[14][11];
-    w->M[14][12] = t->Phi[14][14]*f->P[14][12];
-    w->M[14][13] = t->Phi[14][14]*f->P[14][13];
-    w->M[14][14] = t->Phi[14][14]*f->P[14][14];
-    w->M[14][15] = t->Phi[14][14]*f->P[14][15];
-    w->M[14][16] = t->Phi[14][14]*f->P[14][16];
-    w->M[14][17] = t->Phi[14][14]*f->P[14][17];
-    w->M[14][18] = t->Phi[14][14]*f->P[14][18];
-    w->M[14][19] = t->Phi[14][14]*f->P[14][19];
-    w->M[14][20] = t->Phi[14][14]*f->P[14][20];
-}
-
-static void phi_times_p_row_15(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
-{
-    w->M[15][0] = t->Phi[15][15]*f->P[15][0];
-    w->M[15][1] = t->Phi[15][15]*f->P[15][1];
-    w->M[15][2] = t->Phi[15][15]*f->P[15][2];
-    w->M[15][3] = t->Phi[15][15]*f->P[15][3];
-    w->M[15][4] = t->Phi[15][15]*f->P[15][4];
-    w->M[15][5] = t->Phi[15][15]*f->P[15][5];
-    w->M[15][6] = t->Phi[15][15]*f->P[15][6];
-    w->M[15][7] = t->Phi[15][15]*f->P[15][7];
-    w->M[15][8] = t->Phi[15][15]*f->P[15][8];
-    w->M[15][9] = t->Phi[15][15]*f->P[15][9];
-    w->M[15][10] = t->Phi[15][15]*f->P[15][10];
-    w->M[15][11] = t->Phi[15][15]*f->P[15][11];
-    w->M[15][12] = t->Phi[15][15]*f->P[15][12];
-    w->M[15][13] = t->Phi[15][15]*f->P[15][13];
-    w->M[15][14] = t->Phi[15][15]*f->P[15][14];
-    w->M[15][15] = t->Phi[15][15]*f->P[15][15];
-    w->M[15][16] = t->Phi[15][15]*f->P[15][16];
-    w->M[15][17] = t->Phi[15][15]*f->P[15][17];
-    w->M[15][18] = t->Phi[15][15]*f->P[15][18];
-    w->M[15][19] = t->Phi[15][15]*f->P[15][19];
-    w->M[15][20] = t->Phi[15][15]*f->P[15][20];
-}
-
-static void phi_times_p_row_16(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
-{
-    w->M[16][0] = t->Phi[16][16]*f->P[16][0];
-    w->M[16][1] = t->Phi[16][16]*f->P[16][1];
-    w->M[16][2] = t->Phi[16][16]*f->P[16][2];
-    w->M[16][3] = t->Phi[16][16]*f->P[16][3];
-    w->M[16][4] = t->Phi[16][16]*f->P[16][4];
-    w->M[16][5] = t->Phi[16][16]*f->P[16][5];
-    w->M[16][6] = t->Phi[16][16]*f->P[16][6];
-    w->M[16][7] = t->Phi[16][16]*f->P[16][7];
-    w->M[16][8] = t->Phi[16][16]*f->P[16][8];
-    w->M[16][9] = t->Phi[16][16]*f->P[16][9];
-    w->M[16][10] = t->Phi[16][16]*f->P[16][10];
-    w->M[16][11] = t->Phi[16][16]*f->P[16][11];
-    w->M[16][12] = t->Phi[16][16]*f->P[16][12];
-    w->M[16][13] = t->Phi[16][16]*f->P[16][13];
-    w->M[16][14] = t->Phi[16][16]*f->P[16][14];
-    w->M[16][15] = t->Phi[16][16]*f->P[16][15];
-    w->M[16][16] = t->Phi[16][16]*f->P[16][16];
-    w->M[16][17] = t->Phi[16][16]*f->P[16][17];
-    w->M[16][18] = t->Phi[16][16]*f->P[16][18];
-    w->M[16][19] = t->Phi[16][16]*f->P[16][19];
-    w->M[16][20] = t->Phi[16][16]*f->P[16][20];
-}
-
-static void phi_times_p_row_17(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
-{
-    w->M[17][0] = t->Phi[17][17]*f->P[17][0];
-    w->M[17][1] = t->Phi[17][17]*f->P[17][1];
-    w->M[17][2] = t->Phi[17][17]*f->P[17][2];
-    w->M[17][3] = t->Phi[17][17]*f->P[17][3];
-    w->M[17][4] = t->Phi[17][17]*f->P[17][4];
-    w->M[17][5] = t->Phi[17][17]*f->P[17][5];
-    w->M[17][6] = t->Phi[17][17]*f->P[17][6];
-    w->M[17][7] = t->Phi[17][17]*f->P[17][7];
-    w->M[17][8] = t->Phi[17][17]*f->P[17][8];
-    w->M[17][9] = t->Phi[17][17]*f->P[17][9];
-    w->M[17][10] = t->Phi[17][17]*f->P[17][10];
-    w->M[17][11] = t->Phi[17][17]*f->P[17][11];
-    w->M[17][12] = t->Phi[17][17]*f->P[17][12];
-    w->M[17][13] = t->Phi[17][17]*f->P[17][13];
-    w->M[17][14] = t->Phi[17][17]*f->P[17][14];
-    w->M[17][15] = t->Phi[17][17]*f->P[17][15];
-    w->M[17][16] = t->Phi[17][17]*f->P[17][16];
-    w->M[17][17] = t->Phi[17][17]*f->P[17][17];
-    w->M[17][18] = t->Phi[17][17]*f->P[17][18];
-    w->M[17][19] = t->Phi[17][17]*f->P[17][19];
-    w->M[17][20] = t->Phi[17][17]*f->P[17][20];
-}
-
-static void phi_times_p_row_18(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
-{
-    w->M[18][0] = t->Phi[18][18]*f->P[18][0];
-    w->M[18][1] = t->Phi[18][18]*f->P[18][1];
-    w->M[18][2] = t->Phi[18][18]*f->P[18][2];
-    w->M[18][3] = t->Phi[18][18]*f->P[18][3];
-    w->M[18][4] = t->Phi[18][18]*f->P[18][4];
-    w->M[18][5] = t->Phi[18][18]*f->P[18][5];
-    w->M[18][6] = t->Phi[18][18]*f->P[18][6];
-    w->M[18][7] = t->Phi[18][18]*f->P[18][7];
-    w->M[18][8] = t->Phi[18][18]*f->P[18][8];
-    w->M[18][9] = t->Phi[18][18]*f->P[18][9];
-    w->M[18][10] = t->Phi[18][18]*f->P[18][10];
-    w->M[18][11] = t->Phi[18][18]*f->P[18][11];
-    w->M[18][12] = t->Phi[18][18]*f->P[18][12];
-    w->M[18][13] = t->Phi[18][18]*f->P[18][13];
-    w->M[18][14] = t->Phi[18][18]*f->P[18][14];
-    w->M[18][15] = t->Phi[18][18]*f->P[18][15];
-    w->M[18][16] = t->Phi[18][18]*f->P[18][16];
-    w->M[18][17] = t->Phi[18][18]*f->P[18][17];
-    w->M[18][18] = t->Phi[18][18]*f->P[18][18];
-    w->M[18][19] = t->Phi[18][18]*f->P[18][19];
-    w->M[18][20] = t->Phi[18][18]*f->P[18][20];
-}
-
-static void phi_times_p_row_19(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
-{
-    w->M[19][0] = t->Phi[19][19]*f->P[19][0];
-    w->M[19][1] = t->Phi[19][19]*f->P[19][1];
-    w->M[19][2] = t->Phi[19][19]*f->P[19][2];
-    w->M[19][3] = t->Phi[19][19]*f->P[19][3];
-    w->M[19][4] = t->Phi[19][19]*f->P[19][4];
-    w->M[19][5] = t->Phi[19][19]*f->P[19][5];
-    w->M[19][6] = t->Phi[19][19]*f->P[19][6];
-    w->M[19][7] = t->Phi[19][19]*f->P[19][7];
-    w->M[19][8] = t->Phi[19][19]*f->P[19][8];
-    w->M[19][9] = t->Phi[19][19]*f->P[19][9];
-    w->M[19][10] = t->Phi[19][19]*f->P[19][10];
-    w->M[19][11] = t->Phi[19][19]*f->P[19][11];
-    w->M[19][12] = t->Phi[19][19]*f->P[19][12];
-    w->M[19][13] = t->Phi[19][19]*f->P[19][13];
-    w->M[19][14] = t->Phi[19][19]*f->P[19][14];
-    w->M[19][15] = t->Phi[19][19]*f->P[19][15];
-    w->M[19][16] = t->Phi[19][19]*f->P[19][16];
-    w->M[19][17] = t->Phi[19][19]*f->P[19][17];
-    w->M[19][18] = t->Phi[19][19]*f->P[19][18];
-    w->M[19][19] = t->Phi[19][19]*f->P[19][19];
-    w->M[19][20] = t->Phi[19][19]*f->P[19][20];
-}
-
-static void phi_times_p_row_20(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
-{
-    w->M[20][0] = t->Phi[20][20]*f->P[20][0];
-    w->M[20][1] = t->Phi[20][20]*f->P[20][1];
-    w->M[20][2] = t->Phi[20][20]*f->P[20][2];
-    w->M[20][3] = t->Phi[20][20]*f->P[20][3];
-    w->M[20][4] = t->Phi[20][20]*f->P[20][4];
-    w->M[20][5] = t->Phi[20][20]*f->P[20][5];
-    w->M[20][6] = t->Phi[20][20]*f->P[20][6];
-    w->M[20][7] = t->Phi[20][20]*f->P[20][7];
-    w->M[20][8] = t->Phi[20][20]*f->P[20][8];
-    w->M[20][9] = t->Phi[20][20]*f->P[20][9];
-    w->M[20][10] = t->Phi[20][20]*f->P[20][10];
-    w->M[20][11] = t->Phi[20][20]*f->P[20][11];
-    w->M[20][12] = t->Phi[20][20]*f->P[20][12];
-    w->M[20][13] = t->Phi[20][20]*f->P[20][13];
-    w->M[20][14] = t->Phi[20][20]*f->P[20][14];
-    w->M[20][15] = t->Phi[20][20]*f->P[20][15];
-    w->M[20][16] = t->Phi[20][20]*f->P[20][16];
-    w->M[20][17] = t->Phi[20][20]*f->P[20][17];
-    w->M[20][18] = t->Phi[20][20]*f->P[20][18];
-    w->M[20][19] = t->Phi[20][20]*f->P[20][19];
-    w->M[20][20] = t->Phi[20][20]*f->P[20][20];
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_0(const ins_gnss21_transition *restrict t,
-        ins_gnss21_filter_scratch *restrict w)
-{
-    ins_gnss21_scalar v, check = 0.0;
-    v = w->M[0][0]*t->Phi[0][0] + w->M[0][1]*t->Phi[0][1] + w->M[0][2]*t->Phi[0][2] +
-            w->M[0][3]*t->Phi[0][3] + w->M[0][4]*t->Phi[0][4] + w->M[0][5]*t->Phi[0][5] +
-            w->M[0][6]*t->Phi[0][6] + w->M[0][7]*t->Phi[0][7] + w->M[0][8]*t->Phi[0][8] +
-            w->M[0][9]*t->Phi[0][9] + w->M[0][10]*t->Phi[0][10] + w->M[0][11]*t->Phi[0][11] +
-            w->M[0][12]*t->Phi[0][12] + w->M[0][13]*t->Phi[0][13] + w->M[0][14]*t->Phi[0][14] +
-            w->M[0][15]*t->Phi[0][15] + w->M[0][16]*t->Phi[0][16] + w->M[0][17]*t->Phi[0][17] +
-            w->M[0][18]*t->Phi[0][18] + w->M[0][19]*t->Phi[0][19] + w->M[0][20]*t->Phi[0][20] +
-            t->Qd[0][0]; w->Pn[0][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[1][0] + w->M[0][1]*t->Phi[1][1] + w->M[0][2]*t->Phi[1][2] +
-            w->M[0][3]*t->Phi[1][3] + w->M[0][4]*t->Phi[1][4] + w->M[0][5]*t->Phi[1][5] +
-            w->M[0][6]*t->Phi[1][6] + w->M[0][7]*t->Phi[1][7] + w->M[0][8]*t->Phi[1][8] +
-            w->M[0][9]*t->Phi[1][9] + w->M[0][10]*t->Phi[1][10] + w->M[0][11]*t->Phi[1][11] +
-            w->M[0][12]*t->Phi[1][12] + w->M[0][13]*t->Phi[1][13] + w->M[0][14]*t->Phi[1][14] +
-            w->M[0][15]*t->Phi[1][15] + w->M[0][16]*t->Phi[1][16] + w->M[0][17]*t->Phi[1][17] +
-            w->M[0][18]*t->Phi[1][18] + w->M[0][19]*t->Phi[1][19] + w->M[0][20]*t->Phi[1][20] +
-            t->Qd[0][1]; w->Pn[0][1] = v; w->Pn[1][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[2][0] + w->M[0][1]*t->Phi[2][1] + w->M[0][2]*t->Phi[2][2] +
-            w->M[0][3]*t->Phi[2][3] + w->M[0][4]*t->Phi[2][4] + w->M[0][5]*t->Phi[2][5] +
-            w->M[0][6]*t->Phi[2][6] + w->M[0][7]*t->Phi[2][7] + w->M[0][8]*t->Phi[2][8] +
-            w->M[0][9]*t->Phi[2][9] + w->M[0][10]*t->Phi[2][10] + w->M[0][11]*t->Phi[2][11] +
-            w->M[0][12]*t->Phi[2][12] + w->M[0][13]*t->Phi[2][13] + w->M[0][14]*t->Phi[2][14] +
-            w->M[0][15]*t->Phi[2][15] + w->M[0][16]*t->Phi[2][16] + w->M[0][17]*t->Phi[2][17] +
-            w->M[0][18]*t->Phi[2][18] + w->M[0][19]*t->Phi[2][19] + w->M[0][20]*t->Phi[2][20] +
-            t->Qd[0][2]; w->Pn[0][2] = v; w->Pn[2][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[3][0] + w->M[0][1]*t->Phi[3][1] + w->M[0][2]*t->Phi[3][2] +
-            w->M[0][3]*t->Phi[3][3] + w->M[0][4]*t->Phi[3][4] + w->M[0][5]*t->Phi[3][5] +
-            w->M[0][6]*t->Phi[3][6] + w->M[0][7]*t->Phi[3][7] + w->M[0][8]*t->Phi[3][8] +
-            w->M[0][9]*t->Phi[3][9] + w->M[0][10]*t->Phi[3][10] + w->M[0][11]*t->Phi[3][11] +
-            w->M[0][12]*t->Phi[3][12] + w->M[0][13]*t->Phi[3][13] + w->M[0][14]*t->Phi[3][14] +
-            w->M[0][15]*t->Phi[3][15] + w->M[0][16]*t->Phi[3][16] + w->M[0][17]*t->Phi[3][17] +
-            w->M[0][18]*t->Phi[3][18] + w->M[0][19]*t->Phi[3][19] + w->M[0][20]*t->Phi[3][20] +
-            t->Qd[0][3]; w->Pn[0][3] = v; w->Pn[3][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[4][0] + w->M[0][1]*t->Phi[4][1] + w->M[0][2]*t->Phi[4][2] +
-            w->M[0][3]*t->Phi[4][3] + w->M[0][4]*t->Phi[4][4] + w->M[0][5]*t->Phi[4][5] +
-            w->M[0][6]*t->Phi[4][6] + w->M[0][7]*t->Phi[4][7] + w->M[0][8]*t->Phi[4][8] +
-            w->M[0][9]*t->Phi[4][9] + w->M[0][10]*t->Phi[4][10] + w->M[0][11]*t->Phi[4][11] +
-            w->M[0][12]*t->Phi[4][12] + w->M[0][13]*t->Phi[4][13] + w->M[0][14]*t->Phi[4][14] +
-            w->M[0][15]*t->Phi[4][15] + w->M[0][16]*t->Phi[4][16] + w->M[0][17]*t->Phi[4][17] +
-            w->M[0][18]*t->Phi[4][18] + w->M[0][19]*t->Phi[4][19] + w->M[0][20]*t->Phi[4][20] +
-            t->Qd[0][4]; w->Pn[0][4] = v; w->Pn[4][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[5][0] + w->M[0][1]*t->Phi[5][1] + w->M[0][2]*t->Phi[5][2] +
-            w->M[0][3]*t->Phi[5][3] + w->M[0][4]*t->Phi[5][4] + w->M[0][5]*t->Phi[5][5] +
-            w->M[0][6]*t->Phi[5][6] + w->M[0][7]*t->Phi[5][7] + w->M[0][8]*t->Phi[5][8] +
-            w->M[0][9]*t->Phi[5][9] + w->M[0][10]*t->Phi[5][10] + w->M[0][11]*t->Phi[5][11] +
-            w->M[0][12]*t->Phi[5][12] + w->M[0][13]*t->Phi[5][13] + w->M[0][14]*t->Phi[5][14] +
-            w->M[0][15]*t->Phi[5][15] + w->M[0][16]*t->Phi[5][16] + w->M[0][17]*t->Phi[5][17] +
-            w->M[0][18]*t->Phi[5][18] + w->M[0][19]*t->Phi[5][19] + w->M[0][20]*t->Phi[5][20] +
-            t->Qd[0][5]; w->Pn[0][5] = v; w->Pn[5][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[6][0] + w->M[0][1]*t->Phi[6][1] + w->M[0][2]*t->Phi[6][2] +
-            w->M[0][3]*t->Phi[6][3] + w->M[0][4]*t->Phi[6][4] + w->M[0][5]*t->Phi[6][5] +
-            w->M[0][6]*t->Phi[6][6] + w->M[0][7]*t->Phi[6][7] + w->M[0][8]*t->Phi[6][8] +
-            w->M[0][9]*t->Phi[6][9] + w->M[0][10]*t->Phi[6][10] + w->M[0][11]*t->Phi[6][11] +
-            w->M[0][12]*t->Phi[6][12] + w->M[0][13]*t->Phi[6][13] + w->M[0][14]*t->Phi[6][14] +
-            w->M[0][15]*t->Phi[6][15] + w->M[0][16]*t->Phi[6][16] + w->M[0][17]*t->Phi[6][17] +
-            w->M[0][18]*t->Phi[6][18] + w->M[0][19]*t->Phi[6][19] + w->M[0][20]*t->Phi[6][20] +
-            t->Qd[0][6]; w->Pn[0][6] = v; w->Pn[6][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[7][0] + w->M[0][1]*t->Phi[7][1] + w->M[0][2]*t->Phi[7][2] +
-            w->M[0][3]*t->Phi[7][3] + w->M[0][4]*t->Phi[7][4] + w->M[0][5]*t->Phi[7][5] +
-            w->M[0][6]*t->Phi[7][6] + w->M[0][7]*t->Phi[7][7] + w->M[0][8]*t->Phi[7][8] +
-            w->M[0][9]*t->Phi[7][9] + w->M[0][10]*t->Phi[7][10] + w->M[0][11]*t->Phi[7][11] +
-            w->M[0][12]*t->Phi[7][12] + w->M[0][13]*t->Phi[7][13] + w->M[0][14]*t->Phi[7][14] +
-            w->M[0][15]*t->Phi[7][15] + w->M[0][16]*t->Phi[7][16] + w->M[0][17]*t->Phi[7][17] +
-            w->M[0][18]*t->Phi[7][18] + w->M[0][19]*t->Phi[7][19] + w->M[0][20]*t->Phi[7][20] +
-            t->Qd[0][7]; w->Pn[0][7] = v; w->Pn[7][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[8][0] + w->M[0][1]*t->Phi[8][1] + w->M[0][2]*t->Phi[8][2] +
-            w->M[0][3]*t->Phi[8][3] + w->M[0][4]*t->Phi[8][4] + w->M[0][5]*t->Phi[8][5] +
-            w->M[0][6]*t->Phi[8][6] + w->M[0][7]*t->Phi[8][7] + w->M[0][8]*t->Phi[8][8] +
-            w->M[0][9]*t->Phi[8][9] + w->M[0][10]*t->Phi[8][10] + w->M[0][11]*t->Phi[8][11] +
-            w->M[0][12]*t->Phi[8][12] + w->M[0][13]*t->Phi[8][13] + w->M[0][14]*t->Phi[8][14] +
-            w->M[0][15]*t->Phi[8][15] + w->M[0][16]*t->Phi[8][16] + w->M[0][17]*t->Phi[8][17] +
-            w->M[0][18]*t->Phi[8][18] + w->M[0][19]*t->Phi[8][19] + w->M[0][20]*t->Phi[8][20] +
-            t->Qd[0][8]; w->Pn[0][8] = v; w->Pn[8][0] = v; check += v - v;
-    v = w->M[0][9]*t->Phi[9][9] + t->Qd[0][9]; w->Pn[0][9] = v; w->Pn[9][0] = v; check += v - v;
-    v = w->M[0][10]*t->Phi[10][10] + t->Qd[0][10]; w->Pn[0][10] = v; w->Pn[10][0] = v; check += v -
-            v;
-    v = w->M[0][11]*t->Phi[11][11] + t->Qd[0][11]; w->Pn[0][11] = v; w->Pn[11][0] = v; check += v -
-            v;
-    v = w->M[0][12]*t->Phi[12][12] + t->Qd[0][12]; w->Pn[0][12] = v; w->Pn[12][0] = v; check += v -
-            v;
-    v = w->M[0][13]*t->Phi[13][13] + t->Qd[0][13]; w->Pn[0][13] = v; w->Pn[13][0] = v; check += v -
-            v;
-    v = w->M[0][14]*t->Phi[14][14] + t->Qd[0][14]; w->Pn[0][14] = v; w->Pn[14][0] = v; check += v -
-            v;
-    v = w->M[0][15]*t->Phi[15][15] + t->Qd[0][15]; w->Pn[0][15] = v; w->Pn[15][0] = v; check += v -
-            v;
-    v = w->M[0][16]*t->Phi[16][16] + t->Qd[0][16]; w->Pn[0][16] = v; w->Pn[16][0] = v; check += v -
-            v;
-    v = w->M[0][17]*t->Phi[17][17] + t->Qd[0][17]; w->Pn[0][17] = v; w->Pn[17][0] = v; check += v -
-            v;
-    v = w->M[0][18]*t->Phi[18][18] + t->Qd[0][18]; w->Pn[0][18] = v; w->Pn[18][0] = v; check += v -
-            v;
-    v = w->M[0][19]*t->Phi[19][19] + t->Qd[0][19]; w->Pn[0][19] = v; w->Pn[19][0] = v; check += v -
-            v;
-    v = w->M[0][20]*t->Phi[20][20] + t->Qd[0][20]; w->Pn[0][20] = v; w->Pn[20][0] = v; check += v -
-            v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_1(const ins_gnss21_transition *restrict t,
-        ins_gnss21_filter_scratch *restrict w)
-{
-    ins_gnss21_scalar v, check = 0.0;
-    v = w->M[1][0]*t->Phi[1][0] + w->M[1][1]*t->Phi[1][1] + w->M[1][2]*t->Phi[1][2] +
-            w->M[1][3]*t->Phi[1][3] + w->M[1][4]*t->Phi[1][4] + w->M[1][5]*t->Phi[1][5] +
-            w->M[1][6]*t->Phi[1][6] + w->M[1][7]*t->Phi[1][7] + w->M[1][8]*t->Phi[1][8] +
-            w->M[1][9]*t->Phi[1][9] + w->M[1][10]*t->Phi[1][10] + w->M[1][11]*t->Phi[1][11] +
-            w->M[1][12]*t->Phi[1][12] + w->M[1][13]*t->Phi[1][13] + w->M[1][14]*t->Phi[1][14] +
-            w->M[1][15]*t->Phi[1][15] + w->M[1][16]*t->Phi[1][16] + w->M[1][17]*t->Phi[1][17] +
-            w->M[1][18]*t->Phi[1][18] + w->M[1][19]*t->Phi[1][19] + w->M[1][20]*t->Phi[1][20] +
-            t->Qd[1][1]; w->Pn[1][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[2][0] + w->M[1][1]*t->Phi[2][1] + w->M[1][2]*t->Phi[2][2] +
-            w->M[1][3]*t->Phi[2][3] + w->M[1][4]*t->Phi[2][4] + w->M[1][5]*t->Phi[2][5] +
-            w->M[1][6]*t->Phi[2][6] + w->M[1][7]*t->Phi[2][7] + w->M[1][8]*t->Phi[2][8] +
-            w->M[1][9]*t->Phi[2][9] + w->M[1][10]*t->Phi[2][10] + w->M[1][11]*t->Phi[2][11] +
-            w->M[1][12]*t->Phi[2][12] + w->M[1][13]*t->Phi[2][13] + w->M[1][14]*t->Phi[2][14] +
-            w->M[1][15]*t->Phi[2][15] + w->M[1][16]*t->Phi[2][16] + w->M[1][17]*t->Phi[2][17] +
-            w->M[1][18]*t->Phi[2][18] + w->M[1][19]*t->Phi[2][19] + w->M[1][20]*t->Phi[2][20] +
-            t->Qd[1][2]; w->Pn[1][2] = v; w->Pn[2][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[3][0] + w->M[1][1]*t->Phi[3][1] + w->M[1][2]*t->Phi[3][2] +
-            w->M[1][3]*t->Phi[3][3] + w->M[1][4]*t->Phi[3][4] + w->M[1][5]*t->Phi[3][5] +
-            w->M[1][6]*t->Phi[3][6] + w->M[1][7]*t->Phi[3][7] + w->M[1][8]*t->Phi[3][8] +
-            w->M[1][9]*t->Phi[3][9] + w->M[1][10]*t->Phi[3][10] + w->M[1][11]*t->Phi[3][11] +
-            w->M[1][12]*t->Phi[3][12] + w->M[1][13]*t->Phi[3][13] + w->M[1][14]*t->Phi[3][14] +
-            w->M[1][15]*t->Phi[3][15] + w->M[1][16]*t->Phi[3][16] + w->M[1][17]*t->Phi[3][17] +
-            w->M[1][18]*t->Phi[3][18] + w->M[1][19]*t->Phi[3][19] + w->M[1][20]*t->Phi[3][20] +
-            t->Qd[1][3]; w->Pn[1][3] = v; w->Pn[3][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[4][0] + w->M[1][1]*t->Phi[4][1] + w->M[1][2]*t->Phi[4][2] +
-            w->M[1][3]*t->Phi[4][3] + w->M[1][4]*t->Phi[4][4] + w->M[1][5]*t->Phi[4][5] +
-            w->M[1][6]*t->Phi[4][6] + w->M[1][7]*t->Phi[4][7] + w->M[1][8]*t->Phi[4][8] +
-            w->M[1][9]*t->Phi[4][9] + w->M[1][10]*t->Phi[4][10] + w->M[1][11]*t->Phi[4][11] +
-            w->M[1][12]*t->Phi[4][12] + w->M[1][13]*t->Phi[4][13] + w->M[1][14]*t->Phi[4][14] +
-            w->M[1][15]*t->Phi[4][15] + w->M[1][16]*t->Phi[4][16] + w->M[1][17]*t->Phi[4][17] +
-            w->M[1][18]*t->Phi[4][18] + w->M[1][19]*t->Phi[4][19] + w->M[1][20]*t->Phi[4][20] +
-            t->Qd[1][4]; w->Pn[1][4] = v; w->Pn[4][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[5][0] + w->M[1][1]*t->Phi[5][1] + w->M[1][2]*t->Phi[5][2] +
-            w->M[1][3]*t->Phi[5][3] + w->M[1][4]*t->Phi[5][4] + w->M[1][5]*t->Phi[5][5] +
-            w->M[1][6]*t->Phi[5][6] + w->M[1][7]*t->Phi[5][7] + w->M[1][8]*t->Phi[5][8] +
-            w->M[1][9]*t->Phi[5][9] + w->M[1][10]*t->Phi[5][10] + w->M[1][11]*t->Phi[5][11] +
-            w->M[1][12]*t->Phi[5][12] + w->M[1][13]*t->Phi[5][13] + w->M[1][14]*t->Phi[5][14] +
-            w->M[1][15]*t->Phi[5][15] + w->M[1][16]*t->Phi[5][16] + w->M[1][17]*t->Phi[5][17] +
-            w->M[1][18]*t->Phi[5][18] + w->M[1][19]*t->Phi[5][19] + w->M[1][20]*t->Phi[5][20] +
-            t->Qd[1][5]; w->Pn[1][5] = v; w->Pn[5][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[6][0] + w->M[1][1]*t->Phi[6][1] + w->M[1][2]*t->Phi[6][2] +
-            w->M[1][3]*t->Phi[6][3] + w->M[1][4]*t->Phi[6][4] + w->M[1][5]*t->Phi[6][5] +
-            w->M[1][6]*t->Phi[6][6] + w->M[1][7]*t->Phi[6][7] + w->M[1][8]*t->Phi[6][8] +
-            w->M[1][9]*t->Phi[6][9] + w->M[1][10]*t->Phi[6][10] + w->M[1][11]*t->Phi[6][11] +
-            w->M[1][12]*t->Phi[6][12] + w->M[1][13]*t->Phi[6][13] + w->M[1][14]*t->Phi[6][14] +
-            w->M[1][15]*t->Phi[6][15] + w->M[1][16]*t->Phi[6][16] + w->M[1][17]*t->Phi[6][17] +
-            w->M[1][18]*t->Phi[6][18] + w->M[1][19]*t->Phi[6][19] + w->M[1][20]*t->Phi[6][20] +
-            t->Qd[1][6]; w->Pn[1][6] = v; w->Pn[6][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[7][0] + w->M[1][1]*t->Phi[7][1] + w->M[1][2]*t->Phi[7][2] +
-            w->M[1][3]*t->Phi[7][3] + w->M[1][4]*t->Phi[7][4] + w->M[1][5]*t->Phi[7][5] +
-            w->M[1][6]*t->Phi[7][6] + w->M[1][7]*t->Phi[7][7] + w->M[1][8]*t->Phi[7][8] +
-            w->M[1][9]*t->Phi[7][9] + w->M[1][10]*t->Phi[7][10] + w->M[1][11]*t->Phi[7][11] +
-            w->M[1][12]*t->Phi[7][12] + w->M[1][13]*t->Phi[7][13] + w->M[1][14]*t->Phi[7][14] +
-            w->M[1][15]*t->Phi[7][15] + w->M[1][16]*t->Phi[7][16] + w->M[1][17]*t->Phi[7][17] +
-            w->M[1][18]*t->Phi[7][18] + w->M[1][19]*t->Phi[7][19] + w->M[1][20]*t->Phi[7][20] +
-            t->Qd[1][7]; w->Pn[1][7] = v; w->Pn[7][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[8][0] + w->M[1][1]*t->Phi[8][1] + w->M[1][2]*t->Phi[8][2] +
-            w->M[1][3]*t->Phi[8][3] + w->M[1][4]*t->Phi[8][4] + w->M[1][5]*t->Phi[8][5] +
-            w->M[1][6]*t->Phi[8][6] + w->M[1][7]*t->Phi[8][7] + w->M[1][8]*t->Phi[8][8] +
-            w->M[1][9]*t->Phi[8][9] + w->M[1][10]*t->Phi[8][10] + w->M[1][11]*t->Phi[8][11] +
-            w->M[1][12]*t->Phi[8][12] + w->M[1][13]*t->Phi[8][13] + w->M[1][14]*t->Phi[8][14] +
-            w->M[1][15]*t->Phi[8][15] + w->M[1][16]*t->Phi[8][16] + w->M[1][17]*t->Phi[8][17] +
-            w->M[1][18]*t->Phi[8][18] + w->M[1][19]*t->Phi[8][19] + w->M[1][20]*t->Phi[8][20] +
-            t->Qd[1][8]; w->Pn[1][8] = v; w->Pn[8][1] = v; check += v - v;
-    v = w->M[1][9]*t->Phi[9][9] + t->Qd[1][9]; w->Pn[1][9] = v; w->Pn[9][1] = v; check += v - v;
-    v = w->M[1][10]*t->Phi[10][10] + t->Qd[1][10]; w->Pn[1][10] = v; w->Pn[10][1] = v; check += v -
-            v;
-    v = w->M[1][11]*t->Phi[11][11] + t->Qd[1][11]; w->Pn[1][11] = v; w->Pn[11][1] = v; check += v -
-            v;
-    v = w->M[1][12]*t->Phi[12][12] + t->Qd[1][12]; w->Pn[1][12] = v; w->Pn[12][1] = v; check += v -
-            v;
-    v = w->M[1][13]*t->Phi[13][13] + t->Qd[1][13]; w->Pn[1][13] = v; w->Pn[13][1] = v; check += v -
-            v;
-    v = w->M[1][14]*t->Phi[14][14] + t->Qd[1][14]; w->Pn[1][14] = v; w->Pn[14][1] = v; check += v -
-            v;
-    v = w->M[1][15]*t->Phi[15][15] + t->Qd[1][15]; w->Pn[1][15] = v; w->Pn[15][1] = v; check += v -
-            v;
-    v = w->M[1][16]*t->Phi[16][16] + t->Qd[1][16]; w->Pn[1][16] = v; w->Pn[16][1] = v; check += v -
-            v;
-    v = w->M[1][17]*t->Phi[17][17] + t->Qd[1][17]; w->Pn[1][17] = v; w->Pn[17][1] = v; check += v -
-            v;
-    v = w->M[1][18]*t->Phi[18][18] + t->Qd[1][18]; w->Pn[1][18] = v; w->Pn[18][1] = v; check += v -
-            v;
-    v = w->M[1][19]*t->Phi[19][19] + t->Qd[1][19]; w->Pn[1][19] = v; w->Pn[19][1] = v; check += v -
-            v;
-    v = w->M[1][20]*t->Phi[20][20] + t->Qd[1][20]; w->Pn[1][20] = v; w->Pn[20][1] = v; check += v -
-            v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_2(const ins_gnss21_transition *restrict t,
-        ins_gnss21_filter_scratch *restrict w)
-{
-    ins_gnss21_scalar v, check = 0.0;
-    v = w->M[2][0]*t->Phi[2][0] + w->M[2][1]*t->Phi[2][1] + w->M[2][2]*t->Phi[2][2] +
-            w->M[2][3]*t->Phi[2][3] + w->M[2][4]*t->Phi[2][4] + w->M[2][5]*t->Phi[2][5] +
-            w->M[2][6]*t->Phi[2][6] + w->M[2][7]*t->Phi[2][7] + w->M[2][8]*t->Phi[2][8] +
-            w->M[2][9]*t->Phi[2][9] + w->M[2][10]*t->Phi[2][10] + w->M[2][11]*t->Phi[2][11] +
-            w->M[2][12]*t->Phi[2][12] + w->M[2][13]*t->Phi[2][13] + w->M[2][14]*t->Phi[2][14] +
-            w->M[2][15]*t->Phi[2][15] + w->M[2][16]*t->Phi[2][16] + w->M[2][17]*t->Phi[2][17] +
-            w->M[2][18]*t->Phi[2][18] + w->M[2][19]*t->Phi[2][19] + w->M[2][20]*t->Phi[2][20] +
-            t->Qd[2][2]; w->Pn[2][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[3][0] + w->M[2][1]*t->Phi[3][1] + w->M[2][2]*t->Phi[3][2] +
-            w->M[2][3]*t->Phi[3][3] + w->M[2][4]*t->Phi[3][4] + w->M[2][5]*t->Phi[3][5] +
-            w->M[2][6]*t->Phi[3][6] + w->M[2][7]*t->Phi[3][7] + w->M[2][8]*t->Phi[3][8] +
-            w->M[2][9]*t->Phi[3][9] + w->M[2][10]*t->Phi[3][10] + w->M[2][11]*t->Phi[3][11] +
-            w->M[2][12]*t->Phi[3][12] + w->M[2][13]*t->Phi[3][13] + w->M[2][14]*t->Phi[3][14] +
-            w->M[2][15]*t->Phi[3][15] + w->M[2][16]*t->Phi[3][16] + w->M[2][17]*t->Phi[3][17] +
-            w->M[2][18]*t->Phi[3][18] + w->M[2][19]*t->Phi[3][19] + w->M[2][20]*t->Phi[3][20] +
-            t->Qd[2][3]; w->Pn[2][3] = v; w->Pn[3][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[4][0] + w->M[2][1]*t->Phi[4][1] + w->M[2][2]*t->Phi[4][2] +
-            w->M[2][3]*t->Phi[4][3] + w->M[2][4]*t->Phi[4][4] + w->M[2][5]*t->Phi[4][5] +
-            w->M[2][6]*t->Phi[4][6] + w->M[2][7]*t->Phi[4][7] + w->M[2][8]*t->Phi[4][8] +
-            w->M[2][9]*t->Phi[4][9] + w->M[2][10]*t->Phi[4][10] + w->M[2][11]*t->Phi[4][11] +
-            w->M[2][12]*t->Phi[4][12] + w->M[2][13]*t->Phi[4][13] + w->M[2][14]*t->Phi[4][14] +
-            w->M[2][15]*t->Phi[4][15] + w->M[2][16]*t->Phi[4][16] + w->M[2][17]*t->Phi[4][17] +
-            w->M[2][18]*t->Phi[4][18] + w->M[2][19]*t->Phi[4][19] + w->M[2][20]*t->Phi[4][20] +
-            t->Qd[2][4]; w->Pn[2][4] = v; w->Pn[4][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[5][0] + w->M[2][1]*t->Phi[5][1] + w->M[2][2]*t->Phi[5][2] +
-            w->M[2][3]*t->Phi[5][3] + w->M[2][4]*t->Phi[5][4] + w->M[2][5]*t->Phi[5][5] +
-            w->M[2][6]*t->Phi[5][6] + w->M[2][7]*t->Phi[5][7] + w->M[2][8]*t->Phi[5][8] +
-            w->M[2][9]*t->Phi[5][9] + w->M[2][10]*t->Phi[5][10] + w->M[2][11]*t->Phi[5][11] +
-            w->M[2][12]*t->Phi[5][12] + w->M[2][13]*t->Phi[5][13] + w->M[2][14]*t->Phi[5][14] +
-            w->M[2][15]*t->Phi[5][15] + w->M[2][16]*t->Phi[5][16] + w->M[2][17]*t->Phi[5][17] +
-            w->M[2][18]*t->Phi[5][18] + w->M[2][19]*t->Phi[5][19] + w->M[2][20]*t->Phi[5][20] +
-            t->Qd[2][5]; w->Pn[2][5] = v; w->Pn[5][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[6][0] + w->M[2][1]*t->Phi[6][1] + w->M[2][2]*t->Phi[6][2] +
-            w->M[2][3]*t->Phi[6][3] + w->M[2][4]*t->Phi[6][4] + w->M[2][5]*t->Phi[6][5] +
-            w->M[2][6]*t->Phi[6][6] + w->M[2][7]*t->Phi[6][7] + w->M[2][8]*t->Phi[6][8] +
-            w->M[2][9]*t->Phi[6][9] + w->M[2][10]*t->Phi[6][10] + w->M[2][11]*t->Phi[6][11] +
-            w->M[2][12]*t->Phi[6][12] + w->M[2][13]*t->Phi[6][13] + w->M[2][14]*t->Phi[6][14] +
-            w->M[2][15]*t->Phi[6][15] + w->M[2][16]*t->Phi[6][16] + w->M[2][17]*t->Phi[6][17] +
-            w->M[2][18]*t->Phi[6][18] + w->M[2][19]*t->Phi[6][19] + w->M[2][20]*t->Phi[6][20] +
-            t->Qd[2][6]; w->Pn[2][6] = v; w->Pn[6][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[7][0] + w->M[2][1]*t->Phi[7][1] + w->M[2][2]*t->Phi[7][2] +
-            w->M[2][3]*t->Phi[7][3] + w->M[2][4]*t->Phi[7][4] + w->M[2][5]*t->Phi[7][5] +
-            w->M[2][6]*t->Phi[7][6] + w->M[2][7]*t->Phi[7][7] + w->M[2][8]*t->Phi[7][8] +
-            w->M[2][9]*t->Phi[7][9] + w->M[2][10]*t->Phi[7][10] + w->M[2][11]*t->Phi[7][11] +
-            w->M[2][12]*t->Phi[7][12] + w->M[2][13]*t->Phi[7][13] + w->M[2][14]*t->Phi[7][14] +
-            w->M[2][15]*t->Phi[7][15] + w->M[2][16]*t->Phi[7][16] + w->M[2][17]*t->Phi[7][17] +
-            w->M[2][18]*t->Phi[7][18] + w->M[2][19]*t->Phi[7][19] + w->M[2][20]*t->Phi[7][20] +
-            t->Qd[2][7]; w->Pn[2][7] = v; w->Pn[7][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[8][0] + w->M[2][1]*t->Phi[8][1] + w->M[2][2]*t->Phi[8][2] +
-            w->M[2][3]*t->Phi[8][3] + w->M[2][4]*t->Phi[8][4] + w->M[2][5]*t->Phi[8][5] +
-            w->M[2][6]*t->Phi[8][6] + w->M[2][7]*t->Phi[8][7] + w->M[2][8]*t->Phi[8][8] +
-            w->M[2][9]*t->Phi[8][9] + w->M[2][10]*t->Phi[8][10] + w->M[2][11]*t->Phi[8][11] +
-            w->M[2][12]*t->Phi[8][12] + w->M[2][13]*t->Phi[8][13] + w->M[2][14]*t->Phi[8][14] +
-            w->M[2][15]*t->Phi[8][15] + w->M[2][16]*t->Phi[8][16] + w->M[2][17]*t->Phi[8][17] +
-            w->M[2][18]*t->Phi[8][18] + w->M[2][19]*t->Phi[8][19] + w->M[2][20]*t->Phi[8][20] +
-            t->Qd[2][8]; w->Pn[2][8] = v; w->Pn[8][2] = v; check += v - v;
-    v = w->M[2][9]*t->Phi[9][9] + t->Qd[2][9]; w->Pn[2][9] = v; w->Pn[9][2] = v; check += v - v;
-    v = w->M[2][10]*t->Phi[10][10] + t->Qd[2][10]; w->Pn[2][10] = v; w->Pn[10][2] = v; check += v -
-            v;
-    v = w->M[2][11]*t->Phi[11][11] + t->Qd[2][11]; w->Pn[2][11] = v; w->Pn[11][2] = v; check += v -
-            v;
-    v = w->M[2][12]*t->Phi[12][12] + t->Qd[2][12]; w->Pn[2][12] = v; w->Pn[12][2] = v; check += v -
-            v;
-    v = w->M[2][13]*t->Phi[13][13] + t->Qd[2][13]; w->Pn[2][13] = v; w->Pn[13][2] = v; check += v -
-            v;
-    v = w->M[2][14]*t->Phi[14][14] + t->Qd[2][14]; w->Pn[2][14] = v; w->Pn[14][2] = v; check += v -
-            v;
-    v = w->M[2][15]*t->Phi[15][15] + t->Qd[2][15]; w->Pn[2][15] = v; w->Pn[15][2] = v; check += v -
-            v;
-    v = w->M[2][16]*t->Phi[16][16] + t->Qd[2][16]; w->Pn[2][16] = v; w->Pn[16][2] = v; check += v -
-            v;
-    v = w->M[2][17]*t->Phi[17][17] + t->Qd[2][17]; w->Pn[2][17] = v; w->Pn[17][2] = v; check += v -
-            v;
-    v = w->M[2][18]*t->Phi[18][18] + t->Qd[2][18]; w->Pn[2][18] = v; w->Pn[18][2] = v; check += v -
-            v;
-    v = w->M[2][19]*t->Phi[19][19] + t->Qd[2][19]; w->Pn[2][19] = v; w->Pn[19][2] = v; check += v -
-            v;
-    v = w->M[2][20]*t->Phi[20][20] + t->Qd[2][20]; w->Pn[2][20] = v; w->Pn[20][2] = v; check += v -
-            v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_3(const ins_gnss21_transition *restrict t,
-        ins_gnss21_filter_scratch *restrict w)
-{
-    ins_gnss21_scalar v, check = 0.0;
-    v = w->M[3][0]*t->Phi[3][0] + w->M[3][1]*t->Phi[3][1] + w->M[3][2]*t->Phi[3][2] +
-            w->M[3][3]*t->Phi[3][3] + w->M[3][4]*t->Phi[3][4] + w->M[3][5]*t->Phi[3][5] +
-            w->M[3][6]*t->Phi[3][6] + w->M[3][7]*t->Phi[3][7] + w->M[3][8]*t->Phi[3][8] +
-            w->M[3][9]*t->Phi[3][9] + w->M[3][10]*t->Phi[3][10] + w->M[3][11]*t->Phi[3][11] +
-            w->M[3][12]*t->Phi[3][12] + w->M[3][13]*t->Phi[3][13] + w->M[3][14]*t->Phi[3][14] +
-            w->M[3][15]*t->Phi[3][15] + w->M[3][16]*t->Phi[3][16] + w->M[3][17]*t->Phi[3][17] +
-            w->M[3][18]*t->Phi[3][18] + w->M[3][19]*t->Phi[3][19] + w->M[3][20]*t->Phi[3][20] +
-            t->Qd[3][3]; w->Pn[3][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[4][0] + w->M[3][1]*t->Phi[4][1] + w->M[3][2]*t->Phi[4][2] +
-            w->M[3][3]*t->Phi[4][3] + w->M[3][4]*t->Phi[4][4] + w->M[3][5]*t->Phi[4][5] +
-            w->M[3][6]*t->Phi[4][6] + w->M[3][7]*t->Phi[4][7] + w->M[3][8]*t->Phi[4][8] +
-            w->M[3][9]*t->Phi[4][9] + w->M[3][10]*t->Phi[4][10] + w->M[3][11]*t->Phi[4][11] +
-            w->M[3][12]*t->Phi[4][12] + w->M[3][13]*t->Phi[4][13] + w->M[3][14]*t->Phi[4][14] +
-            w->M[3][15]*t->Phi[4][15] + w->M[3][16]*t->Phi[4][16] + w->M[3][17]*t->Phi[4][17] +
-            w->M[3][18]*t->Phi[4][18] + w->M[3][19]*t->Phi[4][19] + w->M[3][20]*t->Phi[4][20] +
-            t->Qd[3][4]; w->Pn[3][4] = v; w->Pn[4][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[5][0] + w->M[3][1]*t->Phi[5][1] + w->M[3][2]*t->Phi[5][2] +
-            w->M[3][3]*t->Phi[5][3] + w->M[3][4]*t->Phi[5][4] + w->M[3][5]*t->Phi[5][5] +
-            w->M[3][6]*t->Phi[5][6] + w->M[3][7]*t->Phi[5][7] + w->M[3][8]*t->Phi[5][8] +
-            w->M[3][9]*t->Phi[5][9] + w->M[3][10]*t->Phi[5][10] + w->M[3][11]*t->Phi[5][11] +
-            w->M[3][12]*t->Phi[5][12] + w->M[3][13]*t->Phi[5][13] + w->M[3][14]*t->Phi[5][14] +
-            w->M[3][15]*t->Phi[5][15] + w->M[3][16]*t->Phi[5][16] + w->M[3][17]*t->Phi[5][17] +
-            w->M[3][18]*t->Phi[5][18] + w->M[3][19]*t->Phi[5][19] + w->M[3][20]*t->Phi[5][20] +
-            t->Qd[3][5]; w->Pn[3][5] = v; w->Pn[5][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[6][0] + w->M[3][1]*t->Phi[6][1] + w->M[3][2]*t->Phi[6][2] +
-            w->M[3][3]*t->Phi[6][3] + w->M[3][4]*t->Phi[6][4] + w->M[3][5]*t->Phi[6][5] +
-            w->M[3][6]*t->Phi[6][6] + w->M[3][7]*t->Phi[6][7] + w->M[3][8]*t->Phi[6][8] +
-            w->M[3][9]*t->Phi[6][9] + w->M[3][10]*t->Phi[6][10] + w->M[3][11]*t->Phi[6][11] +
-            w->M[3][12]*t->Phi[6][12] + w->M[3][13]*t->Phi[6][13] + w->M[3][14]*t->Phi[6][14] +
-            w->M[3][15]*t->Phi[6][15] + w->M[3][16]*t->Phi[6][16] + w->M[3][17]*t->Phi[6][17] +
-            w->M[3][18]*t->Phi[6][18] + w->M[3][19]*t->Phi[6][19] + w->M[3][20]*t->Phi[6][20] +
-            t->Qd[3][6]; w->Pn[3][6] = v; w->Pn[6][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[7][0] + w->M[3][1]*t->Phi[7][1] + w->M[3][2]*t->Phi[7][2] +
-            w->M[3][3]*t->Phi[7][3] + w->M[3][4]*t->Phi[7][4] + w->M[3][5]*t->Phi[7][5] +
-            w->M[3][6]*t->Phi[7][6] + w->M[3][7]*t->Phi[7][7] + w->M[3][8]*t->Phi[7][8] +
-            w->M[3][9]*t->Phi[7][9] + w->M[3][10]*t->Phi[7][10] + w->M[3][11]*t->Phi[7][11] +
-            w->M[3][12]*t->Phi[7][12] + w->M[3][13]*t->Phi[7][13] + w->M[3][14]*t->Phi[7][14] +
-            w->M[3][15]*t->Phi[7][15] + w->M[3][16]*t->Phi[7][16] + w->M[3][17]*t->Phi[7][17] +
-            w->M[3][18]*t->Phi[7][18] + w->M[3][19]*t->Phi[7][19] + w->M[3][20]*t->Phi[7][20] +
-            t->Qd[3][7]; w->Pn[3][7] = v; w->Pn[7][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[8][0] + w->M[3][1]*t->Phi[8][1] + w->M[3][2]*t->Phi[8][2] +
-            w->M[3][3]*t->Phi[8][3] + w->M[3][4]*t->Phi[8][4] + w->M[3][5]*t->Phi[8][5] +
-            w->M[3][6]*t->Phi[8][6] + w->M[3][7]*t->Phi[8][7] + w->M[3][8]*t->Phi[8][8] +
-            w->M[3][9]*t->Phi[8][9] + w->M[3][10]*t->Phi[8][10] + w->M[3][11]*t->Phi[8][11] +
-            w->M[3][12]*t->Phi[8][12] + w->M[3][13]*t->Phi[8][13] + w->M[3][14]*t->Phi[8][14] +
-            w->M[3][15]*t->Phi[8][15] + w->M[3][16]*t->Phi[8][16] + w->M[3][17]*t->Phi[8][17] +
-            w->M[3][18]*t->Phi[8][18] + w->M[3][19]*t->Phi[8][19] + w->M[3][20]*t->Phi[8][20] +
-            t->Qd[3][8]; w->Pn[3][8] = v; w->Pn[8][3] = v; check += v - v;
-    v = w->M[3][9]*t->Phi[9][9] + t->Qd[3][9]; w->Pn[3][9] = v; w->Pn[9][3] = v; check += v - v;
-    v = w->M[3][10]*t->Phi[10][10] + t->Qd[3][10]; w->Pn[3][10] = v; w->Pn[10][3] = v; check += v -
-            v;
-    v = w->M[3][11]*t->Phi[11][11] + t->Qd[3][11]; w->Pn[3][11] = v; w->Pn[11][3] = v; check += v -
-            v;
-    v = w->M[3][12]*t->Phi[12][12] + t->Qd[3][12]; w->Pn[3][12] = v; w->Pn[12][3] = v; check += v -
-            v;
-    v = w->M[3][13]*t->Phi[13][13] + t->Qd[3][13]; w->Pn[3][13] = v; w->Pn[13][3] = v; check += v -
-            v;
-    v = w->M[3][14]*t->Phi[14][14] + t->Qd[3][14]; w->Pn[3][14] = v; w->Pn[14][3] = v; check += v -
-            v;
-    v = w->M[3][15]*t->Phi[15][15] + t->Qd[3][15]; w->Pn[3][15] = v; w->Pn[15][3] = v; check += v -
-            v;
-    v = w->M[3][16]*t->Phi[16][16] + t->Qd[3][16]; w->Pn[3][16] = v; w->Pn[16][3] = v; check += v -
-            v;
-    v = w->M[3][17]*t->Phi[17][17] + t->Qd[3][17]; w->Pn[3][17] = v; w->Pn[17][3] = v; check += v -
-            v;
-    v = w->M[3][18]*t->Phi[18][18] + t->Qd[3][18]; w->Pn[3][18] = v; w->Pn[18][3] = v; check += v -
-            v;
-    v = w->M[3][19]*t->Phi[19][19] + t->Qd[3][19]; w->Pn[3][19] = v; w->Pn[19][3] = v; check += v -
-            v;
-    v = w->M[3][20]*t->Phi[20][20] + t->Qd[3][20]; w->Pn[3][20] = v; w->Pn[20][3] = v; check += v -
-            v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_4(const ins_gnss21_transition *restrict t,
-        ins_gnss21_filter_scratch *restrict w)
-{
-    ins_gnss21_scalar v, check = 0.0;
-    v = w->M[4][0]*t->Phi[4][0] + w->M[4][1]*t->Phi[4][1] + w->M[4][2]*t->Phi[4][2] +
-            w->M[4][3]*t->Phi[4][3] + w->M[4][4]*t->Phi[4][4] + w->M[4][5]*t->Phi[4][5] +
-            w->M[4][6]*t->Phi[4][6] + w->M[4][7]*t->Phi[4][7] + w->M[4][8]*t->Phi[4][8] +
-            w->M[4][9]*t->Phi[4][9] + w->M[4][10]*t->Phi[4][10] + w->M[4][11]*t->Phi[4][11] +
-            w->M[4][12]*t->Phi[4][12] + w->M[4][13]*t->Phi[4][13] + w->M[4][14]*t->Phi[4][14] +
-            w->M[4][15]*t->Phi[4][15] + w->M[4][16]*t->Phi[4][16] + w->M[4][17]*t->Phi[4][17] +
-            w->M[4][18]*t->Phi[4][18] + w->M[4][19]*t->Phi[4][19] + w->M[4][20]*t->Phi[4][20] +
-            t->Qd[4][4]; w->Pn[4][4] = v; check += v - v;
-    v = w->M[4][0]*t->Phi[5][0] + w->M[4][1]*t->Phi[5][1] + w->M[4][2]*t->Phi[5][2] +
-            w->M[4][3]*t->Phi[5][3] + w->M[4][4]*t->Phi[5][4] + w->M[4][5]*t->Phi[5][5] +
-            w->M[4][6]*t->Phi[5][6] + w->M[4][7]*t->Phi[5][7] + w->M[4][8]*t->Phi[5][8] +
-            w->M[4][9]*t->Phi[5][9] + w->M[4][10]*t->Phi[5][10] + w->M[4][11]*t->Phi[5][11] +
-            w->M[4][12]*t->Phi[5][12] + w->M[4][13]*t->Phi[5][13] + w->M[4][14]*t->Phi[5][14] +
-            w->M[4][15]*t->Phi[5][15] + w->M[4][16]*t->Phi[5][16] + w->M[4][17]*t->Phi[5][17] +
-            w->M[4][18]*t->Phi[5][18] + w->M[4][19]*t->Phi[5][19] + w->M[4][20]*t->Phi[5][20] +
-            t->Qd[4][5]; w->Pn[4][5] = v; w->Pn[5][4] = v; check += v - v;
-    v = w->M[4][0]*t->Phi[6][0] + w->M[4][1]*t->Phi[6][1] + w->M[4][2]*t->Phi[6][2] +
-            w->M[4][3]*t->Phi[6][3] + w->M[4][4]*t->Phi[6][4] + w->M[4][5]*t->Phi[6][5] +
-            w->M[4][6]*t->Phi[6][6] + w->M[4][7]*t->Phi[6][7] + w->M[4][8]*t->Phi[6][8] +
-            w->M[4][9]*t->Phi[6][9] + w->M[4][10]*t->Phi[6][10] + w->M[4][11]*t->Phi[6][11] +
-            w->M[4][12]*t->Phi[6][12] + w->M[4][13]*t->Phi[6][13] + w->M[4][14]*t->Phi[6][14] +
-            w->M[4][15]*t->Phi[6][15] + w->M[4][16]*t->Phi[6][16] + w->M[4][17]*t->Phi[6][17] +
-            w->M[4][18]*t->Phi[6][18] + w->M[4][19]*t->Phi[6][19] + w->M[4][20]*t->Phi[6][20] +
-            t->Qd[4][6]; w->Pn[4][6] = v; w->Pn[6][4] = v; check += v - v;
-    v = w->M[4][0]*t->Phi[7][0] + w->M[4][1]*t->Phi[7][1] + w->M[4][2]*t->Phi[7][2] +
-            w->M[4][3]*t->Phi[7][3] + w->M[4][4]*t->Phi[7][4] + w->M[4][5]*t->Phi[7][5] +
-            w->M[4][6]*t->Phi[7][6] + w->M[4][7]*t->Phi[7][7] + w->M[4][8]*t->Phi[7][8] +
-            w->M[4][9]*t->Phi[7][9] + w->M[4][10]*t->Phi[7][10] + w->M[4][11]*t->Phi[7][11] +
-            w->M[4][12]*t->Phi[7][12] + w->M[4][13]*t->Phi[7][13] + w->M[4][14]*t->Phi[7][14] +
-            w->M[4][15]*t->Phi[7][15] + w->M[4][16]*t->Phi[7][16] + w->M[4][17]*t->Phi[7][17] +
-            w->M[4][18]*t->Phi[7][18] + w->M[4][19]*t->Phi[7][19] + w->M[4][20]*t->Phi[7][20] +
-            t->Qd[4][7]; w->Pn[4][7] = v; w->Pn[7][4] = v; check += v - v;
-    v = w->M[4][0]*t->Phi[8][0] + w->M[4][1]*t->Phi[8][1] + w->M[4][2]*t->Phi[8][2] +
-            w->M[4][3]*t->Phi[8][3] + w->M[4][4]*t->Phi[8][4] + w->M[4][5]*t->Phi[8][5] +
-            w->M[4][6]*t->Phi[8][6] + w->M[4][7]*t->Phi[8][7] + w->M[4][8]*t->Phi[8][8] +
-            w->M[4][9]*t->Phi[8][9] + w->M[4][10]*t->Phi[8][10] + w->M[4][11]*t->Phi[8][11] +
-            w->M[4][12]*t->Phi[8][12] + w->M[4][13]*t->Phi[8][13] + w->M[4][14]*t->Phi[8][14] +
-            w->M[4][15]*t->Phi[8][15] + w->M[4][16]*t->Phi[8][16] + w->M[4][17]*t->Phi[8][17] +
-            w->M[4][18]*t->Phi[8][18] + w->M[4][19]*t->Phi[8][19] + w->M[4][20]*t->Phi[8][20] +
-            t->Qd[4][8]; w->Pn[4][8] = v; w->Pn[8][4] = v; check += v - v;
-    v = w->M[4][9]*t->Phi[9][9] + t->Qd[4][9]; w->Pn[4][9] = v; w->Pn[9][4] = v; check += v - v;
-    v = w->M[4][10]*t->Phi[10][10] + t->Qd[4][10]; w->Pn[4][10] = v; w->Pn[10][4] = v; check += v -
-            v;
-    v = w->M[4][11]*t->Phi[11][11] + t->Qd[4][11]; w->Pn[4][11] = v; w->Pn[11][4] = v; check += v -
-            v;
-    v = w->M[4][12]*t->Phi[12][12] + t->Qd[4][12]; w->Pn[4][12] = v; w->Pn[12][4] = v; check += v -
-            v;
-    v = w->M[4][13]*t->Phi[13][13] + t->Qd[4][13]; w->Pn[4][13] = v; w->Pn[13][4] = v; check += v -
-            v;
-    v = w->M[4][14]*t->Phi[14][14] + t->Qd[4][14]; w->Pn[4][14] = v; w->Pn[14][4] = v; check += v -
-            v;
-    v = w->M[4][15]*t->Phi[15][15] + t->Qd[4][15]; w->Pn[4][15] = v; w->Pn[15][4] = v; check += v -
-            v;
-    v = w->M[4][16]*t->Phi[16][16] + t->Qd[4][16]; w->Pn[4][16] = v; w->Pn[16][4] = v; check += v -
-            v;
-    v = w->M[4][17]*t->Phi[17][17] + t->Qd[4][17]; w->Pn[4][17] = v; w->Pn[17][4] = v; check += v -
-            v;
-    v = w->M[4][18]*t->Phi[18][18] + t->Qd[4][18]; w->Pn[4][18] = v; w->Pn[18][4] = v; check += v -
-            v;
-    v = w->M[4][19]*t->Phi[19][19] + t->Qd[4][19]; w->Pn[4][19] = v; w->Pn[19][4] = v; check += v -
-            v;
-    v = w->M[4][20]*t->Phi[20][20] + t->Qd[4][20]; w->Pn[4][20] = v; w->Pn[20][4] = v; check += v -
-            v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_5(const ins_gnss21_transition *restrict t,
-        ins_gnss21_filter_scratch *restrict w)
-{
-    ins_gnss21_scalar v, check = 0.0;
-    v = w->M[5][0]*t->Phi[5][0] + w->M[5][1]*t->Phi[5][1] + w->M[5][2]*t->Phi[5][2] +
-            w->M[5][3]*t->Phi[5][3] + w->M[5][4]*t->Phi[5][4] + w->M[5][5]*t->Phi[5][5] +
-            w->M[5][6]*t->Phi[5][6] + w->M[5][7]*t->Phi[5][7] + w->M[5][8]*t->Phi[5][8] +
-            w->M[5][9]*t->Phi[5][9] + w->M[5][10]*t->Phi[5][10] + w->M[5][11]*t->Phi[5][11] +
-            w->M[5][12]*t->Phi[5][12] + w->M[5][13]*t->Phi[5][13] + w->M[5][14]*t->Phi[5][14] +
-            w->M[5][15]*t->Phi[5][15] + w->M[5][16]*t->Phi[5][16] + w->M[5][17]*t->Phi[5][17] +
-            w->M[5][18]*t->Phi[5][18] + w->M[5][19]*t->Phi[5][19] + w->M[5][20]*t->Phi[5][20] +
-            t->Qd[5][5]; w->Pn[5][5] = v; check += v - v;
-    v = w->M[5][0]*t->Phi[6][0] + w->M[5][1]*t->Phi[6][1] + w->M[5][2]*t->Phi[6][2] +
-            w->M[5][3]*t->Phi[6][3] + w->M[5][4]*t->Phi[6][4] + w->M[5][5]*t->Phi[6][5] +
-            w->M[5][6]*t->Phi[6][6] + w->M[5][7]*t->Phi[6][7] + w->M[5][8]*t->Phi[6][8] +
-            w->M[5][9]*t->Phi[6][9] + w->M[5][10]*t->Phi[6][10] + w->M[5][11]*t->Phi[6][11] +
-            w->M[5][12]*t->Phi[6][12] + w->M[5][13]*t->Phi[6][13] + w->M[5][14]*t->Phi[6][14] +
-            w->M[5][15]*t->Phi[6][15] + w->M[5][16]*t->Phi[6][16] + w->M[5][17]*t->Phi[6][17] +
-            w->M[5][18]*t->Phi[6][18] + w->M[5][19]*t->Phi[6][19] + w->M[5][20]*t->Phi[6][20] +
-            t->Qd[5][6]; w->Pn[5][6] = v; w->Pn[6][5] = v; check += v - v;
-    v = w->M[5][0]*t->Phi[7][0] + w->M[5][1]*t->Phi[7][1] + w->M[5][2]*t->Phi[7][2] +
-            w->M[5][3]*t->Phi[7][3] + w->M[5][4]*t->Phi[7][4] + w->M[5][5]*t->Phi[7][5] +
-            w->M[5][6]*t->Phi[7][6] + w->M[5][7]*t->Phi[7][7] + w->M[5][8]*t->Phi[7][8] +
-            w->M[5][9]*t->Phi[7][9] + w->M[5][10]*t->Phi[7][10] + w->M[5][11]*t->Phi[7][11] +
-            w->M[5][12]*t->Phi[7][12] + w->M[5][13]*t->Phi[7][13] + w->M[5][14]*t->Phi[7][14] +
-            w->M[5][15]*t->Phi[7][15] + w->M[5][16]*t->Phi[7][16] + w->M[5][17]*t->Phi[7][17] +
-            w->M[5][18]*t->Phi[7][18] + w->M[5][19]*t->Phi[7][19] + w->M[5][20]*t->Phi[7][20] +
-            t->Qd[5][7]; w->Pn[5][7] = v; w->Pn[7][5] = v; check += v - v;
-    v = w->M[5][0]*t->Phi[8][0] + w->M[5][1]*t->Phi[8][1] + w->M[5][2]*t->Phi[8][2] +
-            w->M[5][3]*t->Phi[8][3] + w->M[5][4]*t->Phi[8][4] + w->M[5][5]*t->Phi[8][5] +
-            w->M[5][6]*t->Phi[8][6] + w->M[5][7]*t->Phi[8][7] + w->M[5][8]*t->Phi[8][8] +
-            w->M[5][9]*t->Phi[8][9] + w->M[5][10]*t->Phi[8][10] + w->M[5][11]*t->Phi[8][11] +
-            w->M[5][12]*t->Phi[8][12] + w->M[5][13]*t->Phi[8][13] + w->M[5][14]*t->Phi[8][14] +
-            w->M[5][15]*t->Phi[8][15] + w->M[5][16]*t->Phi[8][16] + w->M[5][17]*t->Phi[8][17] +
-            w->M[5][18]*t->Phi[8][18] + w->M[5][19]*t->Phi[8][19] + w->M[5][20]*t->Phi[8][20] +
-            t->Qd[5][8]; w->Pn[5][8] = v; w->Pn[8][5] = v; check += v - v;
-    v = w->M[5][9]*t->Phi[9][9] + t->Qd[5][9]; w->Pn[5][9] = v; w->Pn[9][5] = v; check += v - v;
-    v = w->M[5][10]*t->Phi[10][10] + t->Qd[5][10]; w->Pn[5][10] = v; w->Pn[10][5] = v; check += v -
-            v;
-    v = w->M[5][11]*t->Phi[11][11] + t->Qd[5][11]; w->Pn[5][11] = v; w->Pn[11][5] = v; check += v -
-            v;
-    v = w->M[5][12]*t->Phi[12][12] + t->Qd[5][12]; w->Pn[5][12] = v; w->Pn[12][5] = v; check += v -
-            v;
-    v = w->M[5][13]*t->Phi[13][13] + t->Qd[5][13]; w->Pn[5][13] = v; w->Pn[13][5] = v; check += v -
-            v;
-    v = w->M[5][14]*t->Phi[14][14] + t->Qd[5][14]; w->Pn[5][14] = v; w->Pn[14][5] = v; check += v -
-            v;
-    v = w->M[5][15]*t->Phi[15][15] + t->Qd[5][15]; w->Pn[5][15] = v; w->Pn[15][5] = v; check += v -
-            v;
-    v = w->M[5][16]*t->Phi[16][16] + t->Qd[5][16]; w->Pn[5][16] = v; w->Pn[16][5] = v; check += v -
-            v;
-    v = w->M[5][17]*t->Phi[17][17] + t->Qd[5][17]; w->Pn[5][17] = v; w->Pn[17][5] = v; check += v -
-            v;
-    v = w->M[5][18]*t->Phi[18][18] + t->Qd[5][18]; w->Pn[5][18] = v; w->Pn[18][5] = v; check += v -
-            v;
-    v = w->M[5][19]*t->Phi[19][19] + t->Qd[5][19]; w->Pn[5][19] = v; w->Pn[19][5] = v; check += v -
-            v;
-    v = w->M[5][20]*t->Phi[20][20] + t->Qd[5][20]; w->Pn[5][20] = v; w->Pn[20][5] = v; check += v -
-            v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_6(const ins_gnss21_transition *restrict t,
-        ins_gnss21_filter_scratch *restrict w)
-{
-    ins_gnss21_scalar v, check = 0.0;
-    v = w->M[6][0]*t->Phi[6][0] + w->M[6][1]*t->Phi[6][1] + w->M[6][2]*t->Phi[6][2] +
-            w->M[6][3]*t->Phi[6][3] + w->M[6][4]*t->Phi[6][4] + w->M[6][5]*t->Phi[6][5] +
-            w->M[6][6]*t->Phi[6][6] + w->M[6][7]*t->Phi[6][7] + w->M[6][8]*t->Phi[6][8] +
-            w->M[6][9]*t->Phi[6][9] + w->M[6][10]*t->Phi[6][10] + w->M[6][11]*t->Phi[6][11] +
-            w->M[6][12]*t->Phi[6][12] + w->M[6][13]*t->Phi[6][13] + w->M[6][14]*t->Phi[6][14] +
-            w->M[6][15]*t->Phi[6][15] + w->M[6][16]*t->Phi[6][16] + w->M[6][17]*t->Phi[6][17] +
-            w->M[6][18]*t->Phi[6][18] + w->M[6][19]*t->Phi[6][19] + w->M[6][20]*t->Phi[6][20] +
-            t->Qd[6][6]; w->Pn[6][6] = v; check += v - v;
-    v = w->M[6][0]*t->Phi[7][0] + w->M[6][1]*t->Phi[7][1] + w->M[6][2]*t->Phi[7][2] +
-            w->M[6][3]*t->Phi[7][3] + w->M[6][4]*t->Phi[7][4] + w->M[6][5]*t->Phi[7][5] +
-            w->M[6][6]*t->Phi[7][6] + w->M[6][7]*t->Phi[7][7] + w->M[6][8]*t->Phi[7][8] +
-            w->M[6][9]*t->Phi[7][9] + w->M[6][10]*t->Phi[7][10] + w->M[6][11]*t->Phi[7][11] +
-            w->M[6][12]*t->Phi[7][12] + w->M[6][13]*t->Phi[7][13] + w->M[6][14]*t->Phi[7][14] +
-            w->M[6][15]*t->Phi[7][15] + w->M[6][16]*t->Phi[7][16] + w->M[6][17]*t->Phi[7][17] +
-            w->M[6][18]*t->Phi[7][18] + w->M[6][19]*t->Phi[7][19] + w->M[6][20]*t->Phi[7][20] +
-            t->Qd[6][7]; w->Pn[6][7] = v; w->Pn[7][6] = v; check += v - v;
-    v = w->M[6][0]*t->Phi[8][0] + w->M[6][1]*t->Phi[8][1] + w->M[6][2]*t->Phi[8][2] +
-            w->M[6][3]*t->Phi[8][3] + w->M[6][4]*t->Phi[8][4] + w->M[6][5]*t->Phi[8][5] +
-            w->M[6][6]*t->Phi[8][6] + w->M[6][7]*t->Phi[8][7] + w->M[6][8]*t->Phi[8][8] +
-            w->M[6][9]*t->Phi[8][9] + w->M[6][10]*t->Phi[8][10] + w->M[6][11]*t->Phi[8][11] +
-            w->M[6][12]*t->Phi[8][12] + w->M[6][13]*t->Phi[8][13] + w->M[6][14]*t->Phi[8][14] +
-            w->M[6][15]*t->Phi[8][15] + w->M[6][16]*t->Phi[8][16] + w->M[6][17]*t->Phi[8][17] +
-            w->M[6][18]*t->Phi[8][18] + w->M[6][19]*t->Phi[8][19] + w->M[6][20]*t->Phi[8][20] +
-            t->Qd[6][8]; w->Pn[6][8] = v; w->Pn[8][6] = v; check += v - v;
-    v = w->M[6][9]*t->Phi[9][9] + t->Qd[6][9]; w->Pn[6][9] = v; w->Pn[9][6] = v; check += v - v;
-    v = w->M[6][10]*t->Phi[10][10] + t->Qd[6][10]; w->Pn[6][10] = v; w->Pn[10][6] = v; check += v -
-            v;
-    v = w->M[6][11]*t->Phi[11][11] + t->Qd[6][11]; w->Pn[6][11] = v; w->Pn[11][6] = v; check += v -
-            v;
-    v = w->M[6][12]*t->Phi[12][12] + t->Qd[6][12]; w->Pn[6][12] = v; w->Pn[12][6] = v; check += v -
-            v;
-    v = w->M[6][13]*t->Phi[13][13] + t->Qd[6][13]; w->Pn[6][13] = v; w->Pn[13][6] = v; check += v -
-            v;
-    v = w->M[6][14]*t->Phi[14][14] + t->Qd[6][14]; w->Pn[6][14] = v; w->Pn[14][6] = v; check += v -
-            v;
-    v = w->M[6][15]*t->Phi[15][15] + t->Qd[6][15]; w->Pn[6][15] = v; w->Pn[15][6] = v; check += v -
-            v;
-    v = w->M[6][16]*t->Phi[16][16] + t->Qd[6][16]; w->Pn[6][16] = v; w->Pn[16][6] = v; check += v -
-            v;
-    v = w->M[6][17]*t->Phi[17][17] + t->Qd[6][17]; w->Pn[6][17] = v; w->Pn[17][6] = v; check += v -
-            v;
-    v = w->M[6][18]*t->Phi[18][18] + t->Qd[6][18]; w->Pn[6][18] = v; w->Pn[18][6] = v; check += v -
-            v;
-    v = w->M[6][19]*t->Phi[19][19] + t->Qd[6][19]; w->Pn[6][19] = v; w->Pn[19][6] = v; check += v -
-            v;
-    v = w->M[6][20]*t->Phi[20][20] + t->Qd[6][20]; w->Pn[6][20] = v; w->Pn[20][6] = v; check += v -
-            v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_7(const ins_gnss21_transition *restrict t,
-        ins_gnss21_filter_scratch *restrict w)
-{
-    ins_gnss21_scalar v, check = 0.0;
-    v = w->M[7][0]*t->Phi[7][0] + w->M[7][1]*t->Phi[7][1] + w->M[7][2]*t->Phi[7][2] +
-            w->M[7][3]*t->Phi[7][3] + w->M[7][4]*t->Phi[7][4] + w->M[7][5]*t->Phi[7][5] +
-            w->M[7][6]*t->Phi[7][6] + w->M[7][7]*t->Phi[7][7] + w->M[7][8]*t->Phi[7][8] +
-            w->M[7][9]*t->Phi[7][9] + w->M[7][10]*t->Phi[7][10] + w->M[7][11]*t->Phi[7][11] +
-            w->M[7][12]*t->Phi[7][12] + w->M[7][13]*t->Phi[7][13] + w->M[7][14]*t->Phi[7][14] +
-            w->M[7][15]*t->Phi[7][15] + w->M[7][16]*t->Phi[7][16] + w->M[7][17]*t->Phi[7][17] +
-            w->M[7][18]*t->Phi[7][18] + w->M[7][19]*t->Phi[7][19] + w->M[7][20]*t->Phi[7][20] +
-            t->Qd[7][7]; w->Pn[7][7] = v; check += v - v;
-    v = w->M[7][0]*t->Phi[8][0] + w->M[7][1]*t->Phi[8][1] + w->M[7][2]*t->Phi[8][2] +
-            w->M[7][3]*t->Phi[8][3] + w->M[7][4]*t->Phi[8][4] + w->M[7][5]*t->Phi[8][5] +
-            w->M[7][6]*t->Phi[8][6] + w->M[7][7]*t->Phi[8][7] + w->M[7][8]*t->Phi[8][8] +
-            w->M[7][9]*t->Phi[8][9] + w->M[7][10]*t->Phi[8][10] + w->M[7][11]*t->Phi[8][11] +
-            w->M[7][12]*t->Phi[8][12] + w->M[7][13]*t->Phi[8][13] + w->M[7][14]*t->Phi[8][14] +
-            w->M[7][15]*t->Phi[8][15] + w->M[7][16]*t->Phi[8][16] + w->M[7][17]*t->Phi[8][17] +
-            w->M[7][18]*t->Phi[8][18] + w->M[7][19]*t->Phi[8][19] + w->M[7][20]*t->Phi[8][20] +
-            t->Qd[7][8]; w->Pn[7][8] = v; w->Pn[8][7] = v; check += v - v;
-    v = w->M[7][9]*t->Phi[9][9] + t->Qd[7][9]; w->Pn[7][9] = v; w->Pn[9][7] = v; check += v - v;
-    v = w->M[7][10]*t->Phi[10][10] + t->Qd[7][10]; w->Pn[7][10] = v; w->Pn[10][7] = v; check += v -
-            v;
-    v = w->M[7][11]*t->Phi[11][11] + t->Qd[7][11]; w->Pn[7][11] = v; w->Pn[11][7] = v; check += v -
-            v;
-    v = w->M[7][12]*t->Phi[12][12] + t->Qd[7][12]; w->Pn[7][12] = v; w->Pn[12][7] = v; check += v -
-            v;
-    v = w->M[7][13]*t->Phi[13][13] + t->Qd[7][13]; w->Pn[7][13] = v; w->Pn[13][7] = v; check += v -
-            v;
-    v = w->M[7][14]*t->Phi[14][14] + t->Qd[7][14]; w->Pn[7][14] = v; w->Pn[14][7] = v; check += v -
-            v;
-    v = w->M[7][15]*t->Phi[15][15] + t->Qd[7][15]; w->Pn[7][15] = v; w->Pn[15][7] = v; check += v -
-            v;
-    v = w->M[7][16]*t->Phi[16][16] + t->Qd[7][16]; w->Pn[7][16] = v; w->Pn[16][7] = v; check += v -
-            v;
-    v = w->M[7][17]*t->Phi[17][17] + t->Qd[7][17]; w->Pn[7][17] = v; w->Pn[17][7] = v; check += v -
-            v;
-    v = w->M[7][18]*t->Phi[18][18] + t->Qd[7][18]; w->Pn[7][18] = v; w->Pn[18][7] = v; check += v -
-            v;
-    v = w->M[7][19]*t->Phi[19][19] + t->Qd[7][19]; w->Pn[7][19] = v; w->Pn[19][7] = v; check += v -
-            v;
-    v = w->M[7][20]*t->Phi[20][20] + t->Qd[7][20]; w->Pn[7][20] = v; w->Pn[20][7] = v; check += v -
-            v;
-    return check;
-}
-
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
 static ins_gnss21_scalar propagate_row_8(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[8][0]*t->Phi[8][0] + w->M[8][1]*t->Phi[8][1] + w->M[8][2]*t->Phi[8][2] +
-            w->M[8][3]*t->Phi[8][3] + w->M[8][4]*t->Phi[8][4] + w->M[8][5]*t->Phi[8][5] +
-            w->M[8][6]*t->Phi[8][6] + w->M[8][7]*t->Phi[8][7] + w->M[8][8]*t->Phi[8][8] +
-            w->M[8][9]*t->Phi[8][9] + w->M[8][10]*t->Phi[8][10] + w->M[8][11]*t->Phi[8][11] +
-            w->M[8][12]*t->Phi[8][12] + w->M[8][13]*t->Phi[8][13] + w->M[8][14]*t->Phi[8][14] +
-            w->M[8][15]*t->Phi[8][15] + w->M[8][16]*t->Phi[8][16] + w->M[8][17]*t->Phi[8][17] +
-            w->M[8][18]*t->Phi[8][18] + w->M[8][19]*t->Phi[8][19] + w->M[8][20]*t->Phi[8][20] +
-            t->Qd[8][8]; w->Pn[8][8] = v; check += v - v;
-    v = w->M[8][9]*t->Phi[9][9] + t->Qd[8][9]; w->Pn[8][9] = v; w->Pn[9][8] = v; check += v - v;
-    v = w->M[8][10]*t->Phi[10][10] + t->Qd[8][10]; w->Pn[8][10] = v; w->Pn[10][8] = v; check += v -
-            v;
-    v = w->M[8][11]*t->Phi[11][11] + t->Qd[8][11]; w->Pn[8][11] = v; w->Pn[11][8] = v; check += v -
-            v;
-    v = w->M[8][12]*t->Phi[12][12] + t->Qd[8][12]; w->Pn[8][12] = v; w->Pn[12][8] = v; check += v -
-            v;
-    v = w->M[8][13]*t->Phi[13][13] + t->Qd[8][13]; w->Pn[8][13] = v; w->Pn[13][8] = v; check += v -
-            v;
-    v = w->M[8][14]*t->Phi[14][14] + t->Qd[8][14]; w->Pn[8][14] = v; w->Pn[14][8] = v; check += v -
-            v;
-    v = w->M[8][15]*t->Phi[15][15] + t->Qd[8][15]; w->Pn[8][15] = v; w->Pn[15][8] = v; check += v -
-            v;
-    v = w->M[8][16]*t->Phi[16][16] + t->Qd[8][16]; w->Pn[8][16] = v; w->Pn[16][8] = v; check += v -
-            v;
-    v = w->M[8][17]*t->Phi[17][17] + t->Qd[8][17]; w->Pn[8][17] = v; w->Pn[17][8] = v; check += v -
-            v;
-    v = w->M[8][18]*t->Phi[18][18] + t->Qd[8][18]; w->Pn[8][18] = v; w->Pn[18][8] = v; check += v -
-            v;
-    v = w->M[8][19]*t->Phi[19][19] + t->Qd[8][19]; w->Pn[8][19] = v; w->Pn[19][8] = v; check += v -
-            v;
-    v = w->M[8][20]*t->Phi[20][20] + t->Qd[8][20]; w->Pn[8][20] = v; w->Pn[20][8] = v; check += v -
-            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] +
+            w->M[10]*t->Phi[8][10] + w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] +
+            w->M[13]*t->Phi[8][13] + w->M[14]*t->Phi[8][14] + w->M[15]*t->Phi[8][15] +
+            w->M[16]*t->Phi[8][16] + w->M[17]*t->Phi[8][17] + w->M[18]*t->Phi[8][18] +
+            w->M[19]*t->Phi[8][19] + w->M[20]*t->Phi[8][20] + t->Qd[140]; w->Pn[140] = v; check += v
+            - v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[141]; w->Pn[141] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[142]; w->Pn[142] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[143]; w->Pn[143] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[144]; w->Pn[144] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[145]; w->Pn[145] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[146]; w->Pn[146] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[147]; w->Pn[147] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16] + t->Qd[148]; w->Pn[148] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17] + t->Qd[149]; w->Pn[149] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18] + t->Qd[150]; w->Pn[150] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19] + t->Qd[151]; w->Pn[151] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20] + t->Qd[152]; w->Pn[152] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_9(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[9][9]*f->P[9][0];
+    w->M[1] = t->Phi[9][9]*f->P[9][1];
+    w->M[2] = t->Phi[9][9]*f->P[9][2];
+    w->M[3] = t->Phi[9][9]*f->P[9][3];
+    w->M[4] = t->Phi[9][9]*f->P[9][4];
+    w->M[5] = t->Phi[9][9]*f->P[9][5];
+    w->M[6] = t->Phi[9][9]*f->P[9][6];
+    w->M[7] = t->Phi[9][9]*f->P[9][7];
+    w->M[8] = t->Phi[9][9]*f->P[9][8];
+    w->M[9] = t->Phi[9][9]*f->P[9][9];
+    w->M[10] = t->Phi[9][9]*f->P[9][10];
+    w->M[11] = t->Phi[9][9]*f->P[9][11];
+    w->M[12] = t->Phi[9][9]*f->P[9][12];
+    w->M[13] = t->Phi[9][9]*f->P[9][13];
+    w->M[14] = t->Phi[9][9]*f->P[9][14];
+    w->M[15] = t->Phi[9][9]*f->P[9][15];
+    w->M[16] = t->Phi[9][9]*f->P[9][16];
+    w->M[17] = t->Phi[9][9]*f->P[9][17];
+    w->M[18] = t->Phi[9][9]*f->P[9][18];
+    w->M[19] = t->Phi[9][9]*f->P[9][19];
+    w->M[20] = t->Phi[9][9]*f->P[9][20];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -7167,19 +6624,45 @@ static ins_gnss21_scalar propagate_row_9(const ins_gnss21_transition *restrict t
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[9][9]*t->Phi[9][9] + t->Qd[9][9]; w->Pn[9][9] = v; check += v - v;
-    v = w->M[9][10]*t->Phi[10][10]; w->Pn[9][10] = v; w->Pn[10][9] = v; check += v - v;
-    v = w->M[9][11]*t->Phi[11][11]; w->Pn[9][11] = v; w->Pn[11][9] = v; check += v - v;
-    v = w->M[9][12]*t->Phi[12][12]; w->Pn[9][12] = v; w->Pn[12][9] = v; check += v - v;
-    v = w->M[9][13]*t->Phi[13][13]; w->Pn[9][13] = v; w->Pn[13][9] = v; check += v - v;
-    v = w->M[9][14]*t->Phi[14][14]; w->Pn[9][14] = v; w->Pn[14][9] = v; check += v - v;
-    v = w->M[9][15]*t->Phi[15][15]; w->Pn[9][15] = v; w->Pn[15][9] = v; check += v - v;
-    v = w->M[9][16]*t->Phi[16][16]; w->Pn[9][16] = v; w->Pn[16][9] = v; check += v - v;
-    v = w->M[9][17]*t->Phi[17][17]; w->Pn[9][17] = v; w->Pn[17][9] = v; check += v - v;
-    v = w->M[9][18]*t->Phi[18][18]; w->Pn[9][18] = v; w->Pn[18][9] = v; check += v - v;
-    v = w->M[9][19]*t->Phi[19][19]; w->Pn[9][19] = v; w->Pn[19][9] = v; check += v - v;
-    v = w->M[9][20]*t->Phi[20][20]; w->Pn[9][20] = v; w->Pn[20][9] = v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[153]; w->Pn[153] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10]; w->Pn[154] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11]; w->Pn[155] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12]; w->Pn[156] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13]; w->Pn[157] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14]; w->Pn[158] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15]; w->Pn[159] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16]; w->Pn[160] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17]; w->Pn[161] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18]; w->Pn[162] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19]; w->Pn[163] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20]; w->Pn[164] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_10(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[10][10]*f->P[10][0];
+    w->M[1] = t->Phi[10][10]*f->P[10][1];
+    w->M[2] = t->Phi[10][10]*f->P[10][2];
+    w->M[3] = t->Phi[10][10]*f->P[10][3];
+    w->M[4] = t->Phi[10][10]*f->P[10][4];
+    w->M[5] = t->Phi[10][10]*f->P[10][5];
+    w->M[6] = t->Phi[10][10]*f->P[10][6];
+    w->M[7] = t->Phi[10][10]*f->P[10][7];
+    w->M[8] = t->Phi[10][10]*f->P[10][8];
+    w->M[9] = t->Phi[10][10]*f->P[10][9];
+    w->M[10] = t->Phi[10][10]*f->P[10][10];
+    w->M[11] = t->Phi[10][10]*f->P[10][11];
+    w->M[12] = t->Phi[10][10]*f->P[10][12];
+    w->M[13] = t->Phi[10][10]*f->P[10][13];
+    w->M[14] = t->Phi[10][10]*f->P[10][14];
+    w->M[15] = t->Phi[10][10]*f->P[10][15];
+    w->M[16] = t->Phi[10][10]*f->P[10][16];
+    w->M[17] = t->Phi[10][10]*f->P[10][17];
+    w->M[18] = t->Phi[10][10]*f->P[10][18];
+    w->M[19] = t->Phi[10][10]*f->P[10][19];
+    w->M[20] = t->Phi[10][10]*f->P[10][20];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -7187,18 +6670,44 @@ static ins_gnss21_scalar propagate_row_10(const ins_gnss21_transition *restrict 
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[10][10]*t->Phi[10][10] + t->Qd[10][10]; w->Pn[10][10] = v; check += v - v;
-    v = w->M[10][11]*t->Phi[11][11]; w->Pn[10][11] = v; w->Pn[11][10] = v; check += v - v;
-    v = w->M[10][12]*t->Phi[12][12]; w->Pn[10][12] = v; w->Pn[12][10] = v; check += v - v;
-    v = w->M[10][13]*t->Phi[13][13]; w->Pn[10][13] = v; w->Pn[13][10] = v; check += v - v;
-    v = w->M[10][14]*t->Phi[14][14]; w->Pn[10][14] = v; w->Pn[14][10] = v; check += v - v;
-    v = w->M[10][15]*t->Phi[15][15]; w->Pn[10][15] = v; w->Pn[15][10] = v; check += v - v;
-    v = w->M[10][16]*t->Phi[16][16]; w->Pn[10][16] = v; w->Pn[16][10] = v; check += v - v;
-    v = w->M[10][17]*t->Phi[17][17]; w->Pn[10][17] = v; w->Pn[17][10] = v; check += v - v;
-    v = w->M[10][18]*t->Phi[18][18]; w->Pn[10][18] = v; w->Pn[18][10] = v; check += v - v;
-    v = w->M[10][19]*t->Phi[19][19]; w->Pn[10][19] = v; w->Pn[19][10] = v; check += v - v;
-    v = w->M[10][20]*t->Phi[20][20]; w->Pn[10][20] = v; w->Pn[20][10] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[165]; w->Pn[165] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11]; w->Pn[166] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12]; w->Pn[167] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13]; w->Pn[168] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14]; w->Pn[169] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15]; w->Pn[170] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16]; w->Pn[171] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17]; w->Pn[172] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18]; w->Pn[173] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19]; w->Pn[174] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20]; w->Pn[175] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_11(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[11][11]*f->P[11][0];
+    w->M[1] = t->Phi[11][11]*f->P[11][1];
+    w->M[2] = t->Phi[11][11]*f->P[11][2];
+    w->M[3] = t->Phi[11][11]*f->P[11][3];
+    w->M[4] = t->Phi[11][11]*f->P[11][4];
+    w->M[5] = t->Phi[11][11]*f->P[11][5];
+    w->M[6] = t->Phi[11][11]*f->P[11][6];
+    w->M[7] = t->Phi[11][11]*f->P[11][7];
+    w->M[8] = t->Phi[11][11]*f->P[11][8];
+    w->M[9] = t->Phi[11][11]*f->P[11][9];
+    w->M[10] = t->Phi[11][11]*f->P[11][10];
+    w->M[11] = t->Phi[11][11]*f->P[11][11];
+    w->M[12] = t->Phi[11][11]*f->P[11][12];
+    w->M[13] = t->Phi[11][11]*f->P[11][13];
+    w->M[14] = t->Phi[11][11]*f->P[11][14];
+    w->M[15] = t->Phi[11][11]*f->P[11][15];
+    w->M[16] = t->Phi[11][11]*f->P[11][16];
+    w->M[17] = t->Phi[11][11]*f->P[11][17];
+    w->M[18] = t->Phi[11][11]*f->P[11][18];
+    w->M[19] = t->Phi[11][11]*f->P[11][19];
+    w->M[20] = t->Phi[11][11]*f->P[11][20];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -7206,17 +6715,43 @@ static ins_gnss21_scalar propagate_row_11(const ins_gnss21_transition *restrict 
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[11][11]*t->Phi[11][11] + t->Qd[11][11]; w->Pn[11][11] = v; check += v - v;
-    v = w->M[11][12]*t->Phi[12][12]; w->Pn[11][12] = v; w->Pn[12][11] = v; check += v - v;
-    v = w->M[11][13]*t->Phi[13][13]; w->Pn[11][13] = v; w->Pn[13][11] = v; check += v - v;
-    v = w->M[11][14]*t->Phi[14][14]; w->Pn[11][14] = v; w->Pn[14][11] = v; check += v - v;
-    v = w->M[11][15]*t->Phi[15][15]; w->Pn[11][15] = v; w->Pn[15][11] = v; check += v - v;
-    v = w->M[11][16]*t->Phi[16][16]; w->Pn[11][16] = v; w->Pn[16][11] = v; check += v - v;
-    v = w->M[11][17]*t->Phi[17][17]; w->Pn[11][17] = v; w->Pn[17][11] = v; check += v - v;
-    v = w->M[11][18]*t->Phi[18][18]; w->Pn[11][18] = v; w->Pn[18][11] = v; check += v - v;
-    v = w->M[11][19]*t->Phi[19][19]; w->Pn[11][19] = v; w->Pn[19][11] = v; check += v - v;
-    v = w->M[11][20]*t->Phi[20][20]; w->Pn[11][20] = v; w->Pn[20][11] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[176]; w->Pn[176] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12]; w->Pn[177] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13]; w->Pn[178] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14]; w->Pn[179] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15]; w->Pn[180] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16]; w->Pn[181] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17]; w->Pn[182] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18]; w->Pn[183] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19]; w->Pn[184] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20]; w->Pn[185] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_12(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[12][12]*f->P[12][0];
+    w->M[1] = t->Phi[12][12]*f->P[12][1];
+    w->M[2] = t->Phi[12][12]*f->P[12][2];
+    w->M[3] = t->Phi[12][12]*f->P[12][3];
+    w->M[4] = t->Phi[12][12]*f->P[12][4];
+    w->M[5] = t->Phi[12][12]*f->P[12][5];
+    w->M[6] = t->Phi[12][12]*f->P[12][6];
+    w->M[7] = t->Phi[12][12]*f->P[12][7];
+    w->M[8] = t->Phi[12][12]*f->P[12][8];
+    w->M[9] = t->Phi[12][12]*f->P[12][9];
+    w->M[10] = t->Phi[12][12]*f->P[12][10];
+    w->M[11] = t->Phi[12][12]*f->P[12][11];
+    w->M[12] = t->Phi[12][12]*f->P[12][12];
+    w->M[13] = t->Phi[12][12]*f->P[12][13];
+    w->M[14] = t->Phi[12][12]*f->P[12][14];
+    w->M[15] = t->Phi[12][12]*f->P[12][15];
+    w->M[16] = t->Phi[12][12]*f->P[12][16];
+    w->M[17] = t->Phi[12][12]*f->P[12][17];
+    w->M[18] = t->Phi[12][12]*f->P[12][18];
+    w->M[19] = t->Phi[12][12]*f->P[12][19];
+    w->M[20] = t->Phi[12][12]*f->P[12][20];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -7224,16 +6759,42 @@ static ins_gnss21_scalar propagate_row_12(const ins_gnss21_transition *restrict 
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[12][12]*t->Phi[12][12] + t->Qd[12][12]; w->Pn[12][12] = v; check += v - v;
-    v = w->M[12][13]*t->Phi[13][13]; w->Pn[12][13] = v; w->Pn[13][12] = v; check += v - v;
-    v = w->M[12][14]*t->Phi[14][14]; w->Pn[12][14] = v; w->Pn[14][12] = v; check += v - v;
-    v = w->M[12][15]*t->Phi[15][15]; w->Pn[12][15] = v; w->Pn[15][12] = v; check += v - v;
-    v = w->M[12][16]*t->Phi[16][16]; w->Pn[12][16] = v; w->Pn[16][12] = v; check += v - v;
-    v = w->M[12][17]*t->Phi[17][17]; w->Pn[12][17] = v; w->Pn[17][12] = v; check += v - v;
-    v = w->M[12][18]*t->Phi[18][18]; w->Pn[12][18] = v; w->Pn[18][12] = v; check += v - v;
-    v = w->M[12][19]*t->Phi[19][19]; w->Pn[12][19] = v; w->Pn[19][12] = v; check += v - v;
-    v = w->M[12][20]*t->Phi[20][20]; w->Pn[12][20] = v; w->Pn[20][12] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[186]; w->Pn[186] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13]; w->Pn[187] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14]; w->Pn[188] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15]; w->Pn[189] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16]; w->Pn[190] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17]; w->Pn[191] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18]; w->Pn[192] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19]; w->Pn[193] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20]; w->Pn[194] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_13(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[13][13]*f->P[13][0];
+    w->M[1] = t->Phi[13][13]*f->P[13][1];
+    w->M[2] = t->Phi[13][13]*f->P[13][2];
+    w->M[3] = t->Phi[13][13]*f->P[13][3];
+    w->M[4] = t->Phi[13][13]*f->P[13][4];
+    w->M[5] = t->Phi[13][13]*f->P[13][5];
+    w->M[6] = t->Phi[13][13]*f->P[13][6];
+    w->M[7] = t->Phi[13][13]*f->P[13][7];
+    w->M[8] = t->Phi[13][13]*f->P[13][8];
+    w->M[9] = t->Phi[13][13]*f->P[13][9];
+    w->M[10] = t->Phi[13][13]*f->P[13][10];
+    w->M[11] = t->Phi[13][13]*f->P[13][11];
+    w->M[12] = t->Phi[13][13]*f->P[13][12];
+    w->M[13] = t->Phi[13][13]*f->P[13][13];
+    w->M[14] = t->Phi[13][13]*f->P[13][14];
+    w->M[15] = t->Phi[13][13]*f->P[13][15];
+    w->M[16] = t->Phi[13][13]*f->P[13][16];
+    w->M[17] = t->Phi[13][13]*f->P[13][17];
+    w->M[18] = t->Phi[13][13]*f->P[13][18];
+    w->M[19] = t->Phi[13][13]*f->P[13][19];
+    w->M[20] = t->Phi[13][13]*f->P[13][20];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -7241,15 +6802,41 @@ static ins_gnss21_scalar propagate_row_13(const ins_gnss21_transition *restrict 
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[13][13]*t->Phi[13][13] + t->Qd[13][13]; w->Pn[13][13] = v; check += v - v;
-    v = w->M[13][14]*t->Phi[14][14]; w->Pn[13][14] = v; w->Pn[14][13] = v; check += v - v;
-    v = w->M[13][15]*t->Phi[15][15]; w->Pn[13][15] = v; w->Pn[15][13] = v; check += v - v;
-    v = w->M[13][16]*t->Phi[16][16]; w->Pn[13][16] = v; w->Pn[16][13] = v; check += v - v;
-    v = w->M[13][17]*t->Phi[17][17]; w->Pn[13][17] = v; w->Pn[17][13] = v; check += v - v;
-    v = w->M[13][18]*t->Phi[18][18]; w->Pn[13][18] = v; w->Pn[18][13] = v; check += v - v;
-    v = w->M[13][19]*t->Phi[19][19]; w->Pn[13][19] = v; w->Pn[19][13] = v; check += v - v;
-    v = w->M[13][20]*t->Phi[20][20]; w->Pn[13][20] = v; w->Pn[20][13] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[195]; w->Pn[195] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14]; w->Pn[196] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15]; w->Pn[197] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16]; w->Pn[198] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17]; w->Pn[199] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18]; w->Pn[200] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19]; w->Pn[201] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20]; w->Pn[202] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_14(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[14][14]*f->P[14][0];
+    w->M[1] = t->Phi[14][14]*f->P[14][1];
+    w->M[2] = t->Phi[14][14]*f->P[14][2];
+    w->M[3] = t->Phi[14][14]*f->P[14][3];
+    w->M[4] = t->Phi[14][14]*f->P[14][4];
+    w->M[5] = t->Phi[14][14]*f->P[14][5];
+    w->M[6] = t->Phi[14][14]*f->P[14][6];
+    w->M[7] = t->Phi[14][14]*f->P[14][7];
+    w->M[8] = t->Phi[14][14]*f->P[14][8];
+    w->M[9] = t->Phi[14][14]*f->P[14][9];
+    w->M[10] = t->Phi[14][14]*f->P[14][10];
+    w->M[11] = t->Phi[14][14]*f->P[14][11];
+    w->M[12] = t->Phi[14][14]*f->P[14][12];
+    w->M[13] = t->Phi[14][14]*f->P[14][13];
+    w->M[14] = t->Phi[14][14]*f->P[14][14];
+    w->M[15] = t->Phi[14][14]*f->P[14][15];
+    w->M[16] = t->Phi[14][14]*f->P[14][16];
+    w->M[17] = t->Phi[14][14]*f->P[14][17];
+    w->M[18] = t->Phi[14][14]*f->P[14][18];
+    w->M[19] = t->Phi[14][14]*f->P[14][19];
+    w->M[20] = t->Phi[14][14]*f->P[14][20];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -7257,14 +6844,40 @@ static ins_gnss21_scalar propagate_row_14(const ins_gnss21_transition *restrict 
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[14][14]*t->Phi[14][14] + t->Qd[14][14]; w->Pn[14][14] = v; check += v - v;
-    v = w->M[14][15]*t->Phi[15][15]; w->Pn[14][15] = v; w->Pn[15][14] = v; check += v - v;
-    v = w->M[14][16]*t->Phi[16][16]; w->Pn[14][16] = v; w->Pn[16][14] = v; check += v - v;
-    v = w->M[14][17]*t->Phi[17][17]; w->Pn[14][17] = v; w->Pn[17][14] = v; check += v - v;
-    v = w->M[14][18]*t->Phi[18][18]; w->Pn[14][18] = v; w->Pn[18][14] = v; check += v - v;
-    v = w->M[14][19]*t->Phi[19][19]; w->Pn[14][19] = v; w->Pn[19][14] = v; check += v - v;
-    v = w->M[14][20]*t->Phi[20][20]; w->Pn[14][20] = v; w->Pn[20][14] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[203]; w->Pn[203] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15]; w->Pn[204] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16]; w->Pn[205] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17]; w->Pn[206] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18]; w->Pn[207] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19]; w->Pn[208] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20]; w->Pn[209] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_15(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[15][15]*f->P[15][0];
+    w->M[1] = t->Phi[15][15]*f->P[15][1];
+    w->M[2] = t->Phi[15][15]*f->P[15][2];
+    w->M[3] = t->Phi[15][15]*f->P[15][3];
+    w->M[4] = t->Phi[15][15]*f->P[15][4];
+    w->M[5] = t->Phi[15][15]*f->P[15][5];
+    w->M[6] = t->Phi[15][15]*f->P[15][6];
+    w->M[7] = t->Phi[15][15]*f->P[15][7];
+    w->M[8] = t->Phi[15][15]*f->P[15][8];
+    w->M[9] = t->Phi[15][15]*f->P[15][9];
+    w->M[10] = t->Phi[15][15]*f->P[15][10];
+    w->M[11] = t->Phi[15][15]*f->P[15][11];
+    w->M[12] = t->Phi[15][15]*f->P[15][12];
+    w->M[13] = t->Phi[15][15]*f->P[15][13];
+    w->M[14] = t->Phi[15][15]*f->P[15][14];
+    w->M[15] = t->Phi[15][15]*f->P[15][15];
+    w->M[16] = t->Phi[15][15]*f->P[15][16];
+    w->M[17] = t->Phi[15][15]*f->P[15][17];
+    w->M[18] = t->Phi[15][15]*f->P[15][18];
+    w->M[19] = t->Phi[15][15]*f->P[15][19];
+    w->M[20] = t->Phi[15][15]*f->P[15][20];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -7272,13 +6885,39 @@ static ins_gnss21_scalar propagate_row_15(const ins_gnss21_transition *restrict 
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[15][15]*t->Phi[15][15] + t->Qd[15][15]; w->Pn[15][15] = v; check += v - v;
-    v = w->M[15][16]*t->Phi[16][16]; w->Pn[15][16] = v; w->Pn[16][15] = v; check += v - v;
-    v = w->M[15][17]*t->Phi[17][17]; w->Pn[15][17] = v; w->Pn[17][15] = v; check += v - v;
-    v = w->M[15][18]*t->Phi[18][18]; w->Pn[15][18] = v; w->Pn[18][15] = v; check += v - v;
-    v = w->M[15][19]*t->Phi[19][19]; w->Pn[15][19] = v; w->Pn[19][15] = v; check += v - v;
-    v = w->M[15][20]*t->Phi[20][20]; w->Pn[15][20] = v; w->Pn[20][15] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[210]; w->Pn[210] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16]; w->Pn[211] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17]; w->Pn[212] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18]; w->Pn[213] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19]; w->Pn[214] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20]; w->Pn[215] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_16(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[16][16]*f->P[16][0];
+    w->M[1] = t->Phi[16][16]*f->P[16][1];
+    w->M[2] = t->Phi[16][16]*f->P[16][2];
+    w->M[3] = t->Phi[16][16]*f->P[16][3];
+    w->M[4] = t->Phi[16][16]*f->P[16][4];
+    w->M[5] = t->Phi[16][16]*f->P[16][5];
+    w->M[6] = t->Phi[16][16]*f->P[16][6];
+    w->M[7] = t->Phi[16][16]*f->P[16][7];
+    w->M[8] = t->Phi[16][16]*f->P[16][8];
+    w->M[9] = t->Phi[16][16]*f->P[16][9];
+    w->M[10] = t->Phi[16][16]*f->P[16][10];
+    w->M[11] = t->Phi[16][16]*f->P[16][11];
+    w->M[12] = t->Phi[16][16]*f->P[16][12];
+    w->M[13] = t->Phi[16][16]*f->P[16][13];
+    w->M[14] = t->Phi[16][16]*f->P[16][14];
+    w->M[15] = t->Phi[16][16]*f->P[16][15];
+    w->M[16] = t->Phi[16][16]*f->P[16][16];
+    w->M[17] = t->Phi[16][16]*f->P[16][17];
+    w->M[18] = t->Phi[16][16]*f->P[16][18];
+    w->M[19] = t->Phi[16][16]*f->P[16][19];
+    w->M[20] = t->Phi[16][16]*f->P[16][20];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -7286,12 +6925,38 @@ static ins_gnss21_scalar propagate_row_16(const ins_gnss21_transition *restrict 
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[16][16]*t->Phi[16][16] + t->Qd[16][16]; w->Pn[16][16] = v; check += v - v;
-    v = w->M[16][17]*t->Phi[17][17]; w->Pn[16][17] = v; w->Pn[17][16] = v; check += v - v;
-    v = w->M[16][18]*t->Phi[18][18]; w->Pn[16][18] = v; w->Pn[18][16] = v; check += v - v;
-    v = w->M[16][19]*t->Phi[19][19]; w->Pn[16][19] = v; w->Pn[19][16] = v; check += v - v;
-    v = w->M[16][20]*t->Phi[20][20]; w->Pn[16][20] = v; w->Pn[20][16] = v; check += v - v;
+    v = w->M[16]*t->Phi[16][16] + t->Qd[216]; w->Pn[216] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17]; w->Pn[217] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18]; w->Pn[218] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19]; w->Pn[219] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20]; w->Pn[220] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_17(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[17][17]*f->P[17][0];
+    w->M[1] = t->Phi[17][17]*f->P[17][1];
+    w->M[2] = t->Phi[17][17]*f->P[17][2];
+    w->M[3] = t->Phi[17][17]*f->P[17][3];
+    w->M[4] = t->Phi[17][17]*f->P[17][4];
+    w->M[5] = t->Phi[17][17]*f->P[17][5];
+    w->M[6] = t->Phi[17][17]*f->P[17][6];
+    w->M[7] = t->Phi[17][17]*f->P[17][7];
+    w->M[8] = t->Phi[17][17]*f->P[17][8];
+    w->M[9] = t->Phi[17][17]*f->P[17][9];
+    w->M[10] = t->Phi[17][17]*f->P[17][10];
+    w->M[11] = t->Phi[17][17]*f->P[17][11];
+    w->M[12] = t->Phi[17][17]*f->P[17][12];
+    w->M[13] = t->Phi[17][17]*f->P[17][13];
+    w->M[14] = t->Phi[17][17]*f->P[17][14];
+    w->M[15] = t->Phi[17][17]*f->P[17][15];
+    w->M[16] = t->Phi[17][17]*f->P[17][16];
+    w->M[17] = t->Phi[17][17]*f->P[17][17];
+    w->M[18] = t->Phi[17][17]*f->P[17][18];
+    w->M[19] = t->Phi[17][17]*f->P[17][19];
+    w->M[20] = t->Phi[17][17]*f->P[17][20];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -7299,11 +6964,37 @@ static ins_gnss21_scalar propagate_row_17(const ins_gnss21_transition *restrict 
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[17][17]*t->Phi[17][17] + t->Qd[17][17]; w->Pn[17][17] = v; check += v - v;
-    v = w->M[17][18]*t->Phi[18][18]; w->Pn[17][18] = v; w->Pn[18][17] = v; check += v - v;
-    v = w->M[17][19]*t->Phi[19][19]; w->Pn[17][19] = v; w->Pn[19][17] = v; check += v - v;
-    v = w->M[17][20]*t->Phi[20][20]; w->Pn[17][20] = v; w->Pn[20][17] = v; check += v - v;
+    v = w->M[17]*t->Phi[17][17] + t->Qd[221]; w->Pn[221] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18]; w->Pn[222] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19]; w->Pn[223] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20]; w->Pn[224] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_18(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[18][18]*f->P[18][0];
+    w->M[1] = t->Phi[18][18]*f->P[18][1];
+    w->M[2] = t->Phi[18][18]*f->P[18][2];
+    w->M[3] = t->Phi[18][18]*f->P[18][3];
+    w->M[4] = t->Phi[18][18]*f->P[18][4];
+    w->M[5] = t->Phi[18][18]*f->P[18][5];
+    w->M[6] = t->Phi[18][18]*f->P[18][6];
+    w->M[7] = t->Phi[18][18]*f->P[18][7];
+    w->M[8] = t->Phi[18][18]*f->P[18][8];
+    w->M[9] = t->Phi[18][18]*f->P[18][9];
+    w->M[10] = t->Phi[18][18]*f->P[18][10];
+    w->M[11] = t->Phi[18][18]*f->P[18][11];
+    w->M[12] = t->Phi[18][18]*f->P[18][12];
+    w->M[13] = t->Phi[18][18]*f->P[18][13];
+    w->M[14] = t->Phi[18][18]*f->P[18][14];
+    w->M[15] = t->Phi[18][18]*f->P[18][15];
+    w->M[16] = t->Phi[18][18]*f->P[18][16];
+    w->M[17] = t->Phi[18][18]*f->P[18][17];
+    w->M[18] = t->Phi[18][18]*f->P[18][18];
+    w->M[19] = t->Phi[18][18]*f->P[18][19];
+    w->M[20] = t->Phi[18][18]*f->P[18][20];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -7311,10 +7002,36 @@ static ins_gnss21_scalar propagate_row_18(const ins_gnss21_transition *restrict 
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[18][18]*t->Phi[18][18] + t->Qd[18][18]; w->Pn[18][18] = v; check += v - v;
-    v = w->M[18][19]*t->Phi[19][19]; w->Pn[18][19] = v; w->Pn[19][18] = v; check += v - v;
-    v = w->M[18][20]*t->Phi[20][20]; w->Pn[18][20] = v; w->Pn[20][18] = v; check += v - v;
+    v = w->M[18]*t->Phi[18][18] + t->Qd[225]; w->Pn[225] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19]; w->Pn[226] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20]; w->Pn[227] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_19(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[19][19]*f->P[19][0];
+    w->M[1] = t->Phi[19][19]*f->P[19][1];
+    w->M[2] = t->Phi[19][19]*f->P[19][2];
+    w->M[3] = t->Phi[19][19]*f->P[19][3];
+    w->M[4] = t->Phi[19][19]*f->P[19][4];
+    w->M[5] = t->Phi[19][19]*f->P[19][5];
+    w->M[6] = t->Phi[19][19]*f->P[19][6];
+    w->M[7] = t->Phi[19][19]*f->P[19][7];
+    w->M[8] = t->Phi[19][19]*f->P[19][8];
+    w->M[9] = t->Phi[19][19]*f->P[19][9];
+    w->M[10] = t->Phi[19][19]*f->P[19][10];
+    w->M[11] = t->Phi[19][19]*f->P[19][11];
+    w->M[12] = t->Phi[19][19]*f->P[19][12];
+    w->M[13] = t->Phi[19][19]*f->P[19][13];
+    w->M[14] = t->Phi[19][19]*f->P[19][14];
+    w->M[15] = t->Phi[19][19]*f->P[19][15];
+    w->M[16] = t->Phi[19][19]*f->P[19][16];
+    w->M[17] = t->Phi[19][19]*f->P[19][17];
+    w->M[18] = t->Phi[19][19]*f->P[19][18];
+    w->M[19] = t->Phi[19][19]*f->P[19][19];
+    w->M[20] = t->Phi[19][19]*f->P[19][20];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -7322,9 +7039,35 @@ static ins_gnss21_scalar propagate_row_19(const ins_gnss21_transition *restrict 
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[19][19]*t->Phi[19][19] + t->Qd[19][19]; w->Pn[19][19] = v; check += v - v;
-    v = w->M[19][20]*t->Phi[20][20]; w->Pn[19][20] = v; w->Pn[20][19] = v; check += v - v;
+    v = w->M[19]*t->Phi[19][19] + t->Qd[228]; w->Pn[228] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20]; w->Pn[229] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_20(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[20][20]*f->P[20][0];
+    w->M[1] = t->Phi[20][20]*f->P[20][1];
+    w->M[2] = t->Phi[20][20]*f->P[20][2];
+    w->M[3] = t->Phi[20][20]*f->P[20][3];
+    w->M[4] = t->Phi[20][20]*f->P[20][4];
+    w->M[5] = t->Phi[20][20]*f->P[20][5];
+    w->M[6] = t->Phi[20][20]*f->P[20][6];
+    w->M[7] = t->Phi[20][20]*f->P[20][7];
+    w->M[8] = t->Phi[20][20]*f->P[20][8];
+    w->M[9] = t->Phi[20][20]*f->P[20][9];
+    w->M[10] = t->Phi[20][20]*f->P[20][10];
+    w->M[11] = t->Phi[20][20]*f->P[20][11];
+    w->M[12] = t->Phi[20][20]*f->P[20][12];
+    w->M[13] = t->Phi[20][20]*f->P[20][13];
+    w->M[14] = t->Phi[20][20]*f->P[20][14];
+    w->M[15] = t->Phi[20][20]*f->P[20][15];
+    w->M[16] = t->Phi[20][20]*f->P[20][16];
+    w->M[17] = t->Phi[20][20]*f->P[20][17];
+    w->M[18] = t->Phi[20][20]*f->P[20][18];
+    w->M[19] = t->Phi[20][20]*f->P[20][19];
+    w->M[20] = t->Phi[20][20]*f->P[20][20];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -7332,7 +7075,7 @@ static ins_gnss21_scalar propagate_row_20(const ins_gnss21_transition *restrict 
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[20][20]*t->Phi[20][20] + t->Qd[20][20]; w->Pn[20][20] = v; check += v - v;
+    v = w->M[20]*t->Phi[20][20] + t->Qd[230]; w->Pn[230] = v; check += v - v;
     return check;
 }
 
@@ -7438,49 +7181,49 @@ int ins_gnss21_predict(ins_gnss21_filter *restrict f, const ins_gnss21_transitio
     check += w->xn[18] - w->xn[18];
     check += w->xn[19] - w->xn[19];
     check += w->xn[20] - w->xn[20];
-    /* M = Phi P (rows of Phi that are e_i are read from P directly), then
-       Pn = M Phi^T + Q_d (each pair computed once, stored in both triangles) */
+    /* row by row: M = row i of Phi P (a row of Phi that is e_i reads P directly), then
+       row i of Pn = M Phi^T + Q_d (each pair computed once, into the packed upper triangle) */
     phi_times_p_row_0(f, t, w);
-    phi_times_p_row_1(f, t, w);
-    phi_times_p_row_2(f, t, w);
-    phi_times_p_row_3(f, t, w);
-    phi_times_p_row_4(f, t, w);
-    phi_times_p_row_5(f, t, w);
-    phi_times_p_row_6(f, t, w);
-    phi_times_p_row_7(f, t, w);
-    phi_times_p_row_8(f, t, w);
-    phi_times_p_row_9(f, t, w);
-    phi_times_p_row_10(f, t, w);
-    phi_times_p_row_11(f, t, w);
-    phi_times_p_row_12(f, t, w);
-    phi_times_p_row_13(f, t, w);
-    phi_times_p_row_14(f, t, w);
-    phi_times_p_row_15(f, t, w);
-    phi_times_p_row_16(f, t, w);
-    phi_times_p_row_17(f, t, w);
-    phi_times_p_row_18(f, t, w);
-    phi_times_p_row_19(f, t, w);
-    phi_times_p_row_20(f, t, w);
     check += propagate_row_0(t, w);
+    phi_times_p_row_1(f, t, w);
     check += propagate_row_1(t, w);
+    phi_times_p_row_2(f, t, w);
     check += propagate_row_2(t, w);
+    phi_times_p_row_3(f, t, w);
     check += propagate_row_3(t, w);
+    phi_times_p_row_4(f, t, w);
     check += propagate_row_4(t, w);
+    phi_times_p_row_5(f, t, w);
     check += propagate_row_5(t, w);
+    phi_times_p_row_6(f, t, w);
     check += propagate_row_6(t, w);
+    phi_times_p_row_7(f, t, w);
     check += propagate_row_7(t, w);
+    phi_times_p_row_8(f, t, w);
     check += propagate_row_8(t, w);
+    phi_times_p_row_9(f, t, w);
     check += propagate_row_9(t, w);
+    phi_times_p_row_10(f, t, w);
     check += propagate_row_10(t, w);
+    phi_times_p_row_11(f, t, w);
     check += propagate_row_11(t, w);
+    phi_times_p_row_12(f, t, w);
     check += propagate_row_12(t, w);
+    phi_times_p_row_13(f, t, w);
     check += propagate_row_13(t, w);
+    phi_times_p_row_14(f, t, w);
     check += propagate_row_14(t, w);
+    phi_times_p_row_15(f, t, w);
     check += propagate_row_15(t, w);
+    phi_times_p_row_16(f, t, w);
     check += propagate_row_16(t, w);
+    phi_times_p_row_17(f, t, w);
     check += propagate_row_17(t, w);
+    phi_times_p_row_18(f, t, w);
     check += propagate_row_18(t, w);
+    phi_times_p_row_19(f, t, w);
     check += propagate_row_19(t, w);
+    phi_times_p_row_20(f, t, w);
     check += propagate_row_20(t, w);
     if (check != 0.0) {
         return INS_GNSS21_ERR_NONFINITE;
@@ -7506,7 +7249,238 @@ int ins_gnss21_predict(ins_gnss21_filter *restrict f, const ins_gnss21_transitio
     f->x[18] = w->xn[18];
     f->x[19] = w->xn[19];
     f->x[20] = w->xn[20];
-    memcpy(f->P, w->Pn, sizeof f->P);
+    /* row i of P from Pn's packed row, then its column */
+    memcpy(&f->P[0][0], &w->Pn[0], 21 * sizeof w->Pn[0]);
+    f->P[1][0] = f->P[0][1];
+    f->P[2][0] = f->P[0][2];
+    f->P[3][0] = f->P[0][3];
+    f->P[4][0] = f->P[0][4];
+    f->P[5][0] = f->P[0][5];
+    f->P[6][0] = f->P[0][6];
+    f->P[7][0] = f->P[0][7];
+    f->P[8][0] = f->P[0][8];
+    f->P[9][0] = f->P[0][9];
+    f->P[10][0] = f->P[0][10];
+    f->P[11][0] = f->P[0][11];
+    f->P[12][0] = f->P[0][12];
+    f->P[13][0] = f->P[0][13];
+    f->P[14][0] = f->P[0][14];
+    f->P[15][0] = f->P[0][15];
+    f->P[16][0] = f->P[0][16];
+    f->P[17][0] = f->P[0][17];
+    f->P[18][0] = f->P[0][18];
+    f->P[19][0] = f->P[0][19];
+    f->P[20][0] = f->P[0][20];
+    memcpy(&f->P[1][1], &w->Pn[21], 20 * sizeof w->Pn[0]);
+    f->P[2][1] = f->P[1][2];
+    f->P[3][1] = f->P[1][3];
+    f->P[4][1] = f->P[1][4];
+    f->P[5][1] = f->P[1][5];
+    f->P[6][1] = f->P[1][6];
+    f->P[7][1] = f->P[1][7];
+    f->P[8][1] = f->P[1][8];
+    f->P[9][1] = f->P[1][9];
+    f->P[10][1] = f->P[1][10];
+    f->P[11][1] = f->P[1][11];
+    f->P[12][1] = f->P[1][12];
+    f->P[13][1] = f->P[1][13];
+    f->P[14][1] = f->P[1][14];
+    f->P[15][1] = f->P[1][15];
+    f->P[16][1] = f->P[1][16];
+    f->P[17][1] = f->P[1][17];
+    f->P[18][1] = f->P[1][18];
+    f->P[19][1] = f->P[1][19];
+    f->P[20][1] = f->P[1][20];
+    memcpy(&f->P[2][2], &w->Pn[41], 19 * sizeof w->Pn[0]);
+    f->P[3][2] = f->P[2][3];
+    f->P[4][2] = f->P[2][4];
+    f->P[5][2] = f->P[2][5];
+    f->P[6][2] = f->P[2][6];
+    f->P[7][2] = f->P[2][7];
+    f->P[8][2] = f->P[2][8];
+    f->P[9][2] = f->P[2][9];
+    f->P[10][2] = f->P[2][10];
+    f->P[11][2] = f->P[2][11];
+    f->P[12][2] = f->P[2][12];
+    f->P[13][2] = f->P[2][13];
+    f->P[14][2] = f->P[2][14];
+    f->P[15][2] = f->P[2][15];
+    f->P[16][2] = f->P[2][16];
+    f->P[17][2] = f->P[2][17];
+    f->P[18][2] = f->P[2][18];
+    f->P[19][2] = f->P[2][19];
+    f->P[20][2] = f->P[2][20];
+    memcpy(&f->P[3][3], &w->Pn[60], 18 * sizeof w->Pn[0]);
+    f->P[4][3] = f->P[3][4];
+    f->P[5][3] = f->P[3][5];
+    f->P[6][3] = f->P[3][6];
+    f->P[7][3] = f->P[3][7];
+    f->P[8][3] = f->P[3][8];
+    f->P[9][3] = f->P[3][9];
+    f->P[10][3] = f->P[3][10];
+    f->P[11][3] = f->P[3][11];
+    f->P[12][3] = f->P[3][12];
+    f->P[13][3] = f->P[3][13];
+    f->P[14][3] = f->P[3][14];
+    f->P[15][3] = f->P[3][15];
+    f->P[16][3] = f->P[3][16];
+    f->P[17][3] = f->P[3][17];
+    f->P[18][3] = f->P[3][18];
+    f->P[19][3] = f->P[3][19];
+    f->P[20][3] = f->P[3][20];
+    memcpy(&f->P[4][4], &w->Pn[78], 17 * sizeof w->Pn[0]);
+    f->P[5][4] = f->P[4][5];
+    f->P[6][4] = f->P[4][6];
+    f->P[7][4] = f->P[4][7];
+    f->P[8][4] = f->P[4][8];
+    f->P[9][4] = f->P[4][9];
+    f->P[10][4] = f->P[4][10];
+    f->P[11][4] = f->P[4][11];
+    f->P[12][4] = f->P[4][12];
+    f->P[13][4] = f->P[4][13];
+    f->P[14][4] = f->P[4][14];
+    f->P[15][4] = f->P[4][15];
+    f->P[16][4] = f->P[4][16];
+    f->P[17][4] = f->P[4][17];
+    f->P[18][4] = f->P[4][18];
+    f->P[19][4] = f->P[4][19];
+    f->P[20][4] = f->P[4][20];
+    memcpy(&f->P[5][5], &w->Pn[95], 16 * sizeof w->Pn[0]);
+    f->P[6][5] = f->P[5][6];
+    f->P[7][5] = f->P[5][7];
+    f->P[8][5] = f->P[5][8];
+    f->P[9][5] = f->P[5][9];
+    f->P[10][5] = f->P[5][10];
+    f->P[11][5] = f->P[5][11];
+    f->P[12][5] = f->P[5][12];
+    f->P[13][5] = f->P[5][13];
+    f->P[14][5] = f->P[5][14];
+    f->P[15][5] = f->P[5][15];
+    f->P[16][5] = f->P[5][16];
+    f->P[17][5] = f->P[5][17];
+    f->P[18][5] = f->P[5][18];
+    f->P[19][5] = f->P[5][19];
+    f->P[20][5] = f->P[5][20];
+    memcpy(&f->P[6][6], &w->Pn[111], 15 * sizeof w->Pn[0]);
+    f->P[7][6] = f->P[6][7];
+    f->P[8][6] = f->P[6][8];
+    f->P[9][6] = f->P[6][9];
+    f->P[10][6] = f->P[6][10];
+    f->P[11][6] = f->P[6][11];
+    f->P[12][6] = f->P[6][12];
+    f->P[13][6] = f->P[6][13];
+    f->P[14][6] = f->P[6][14];
+    f->P[15][6] = f->P[6][15];
+    f->P[16][6] = f->P[6][16];
+    f->P[17][6] = f->P[6][17];
+    f->P[18][6] = f->P[6][18];
+    f->P[19][6] = f->P[6][19];
+    f->P[20][6] = f->P[6][20];
+    memcpy(&f->P[7][7], &w->Pn[126], 14 * sizeof w->Pn[0]);
+    f->P[8][7] = f->P[7][8];
+    f->P[9][7] = f->P[7][9];
+    f->P[10][7] = f->P[7][10];
+    f->P[11][7] = f->P[7][11];
+    f->P[12][7] = f->P[7][12];
+    f->P[13][7] = f->P[7][13];
+    f->P[14][7] = f->P[7][14];
+    f->P[15][7] = f->P[7][15];
+    f->P[16][7] = f->P[7][16];
+    f->P[17][7] = f->P[7][17];
+    f->P[18][7] = f->P[7][18];
+    f->P[19][7] = f->P[7][19];
+    f->P[20][7] = f->P[7][20];
+    memcpy(&f->P[8][8], &w->Pn[140], 13 * sizeof w->Pn[0]);
+    f->P[9][8] = f->P[8][9];
+    f->P[10][8] = f->P[8][10];
+    f->P[11][8] = f->P[8][11];
+    f->P[12][8] = f->P[8][12];
+    f->P[13][8] = f->P[8][13];
+    f->P[14][8] = f->P[8][14];
+    f->P[15][8] = f->P[8][15];
+    f->P[16][8] = f->P[8][16];
+    f->P[17][8] = f->P[8][17];
+    f->P[18][8] = f->P[8][18];
+    f->P[19][8] = f->P[8][19];
+    f->P[20][8] = f->P[8][20];
+    memcpy(&f->P[9][9], &w->Pn[153], 12 * sizeof w->Pn[0]);
+    f->P[10][9] = f->P[9][10];
+    f->P[11][9] = f->P[9][11];
+    f->P[12][9] = f->P[9][12];
+    f->P[13][9] = f->P[9][13];
+    f->P[14][9] = f->P[9][14];
+    f->P[15][9] = f->P[9][15];
+    f->P[16][9] = f->P[9][16];
+    f->P[17][9] = f->P[9][17];
+    f->P[18][9] = f->P[9][18];
+    f->P[19][9] = f->P[9][19];
+    f->P[20][9] = f->P[9][20];
+    memcpy(&f->P[10][10], &w->Pn[165], 11 * sizeof w->Pn[0]);
+    f->P[11][10] = f->P[10][11];
+    f->P[12][10] = f->P[10][12];
+    f->P[13][10] = f->P[10][13];
+    f->P[14][10] = f->P[10][14];
+    f->P[15][10] = f->P[10][15];
+    f->P[16][10] = f->P[10][16];
+    f->P[17][10] = f->P[10][17];
+    f->P[18][10] = f->P[10][18];
+    f->P[19][10] = f->P[10][19];
+    f->P[20][10] = f->P[10][20];
+    memcpy(&f->P[11][11], &w->Pn[176], 10 * sizeof w->Pn[0]);
+    f->P[12][11] = f->P[11][12];
+    f->P[13][11] = f->P[11][13];
+    f->P[14][11] = f->P[11][14];
+    f->P[15][11] = f->P[11][15];
+    f->P[16][11] = f->P[11][16];
+    f->P[17][11] = f->P[11][17];
+    f->P[18][11] = f->P[11][18];
+    f->P[19][11] = f->P[11][19];
+    f->P[20][11] = f->P[11][20];
+    memcpy(&f->P[12][12], &w->Pn[186], 9 * sizeof w->Pn[0]);
+    f->P[13][12] = f->P[12][13];
+    f->P[14][12] = f->P[12][14];
+    f->P[15][12] = f->P[12][15];
+    f->P[16][12] = f->P[12][16];
+    f->P[17][12] = f->P[12][17];
+    f->P[18][12] = f->P[12][18];
+    f->P[19][12] = f->P[12][19];
+    f->P[20][12] = f->P[12][20];
+    memcpy(&f->P[13][13], &w->Pn[195], 8 * sizeof w->Pn[0]);
+    f->P[14][13] = f->P[13][14];
+    f->P[15][13] = f->P[13][15];
+    f->P[16][13] = f->P[13][16];
+    f->P[17][13] = f->P[13][17];
+    f->P[18][13] = f->P[13][18];
+    f->P[19][13] = f->P[13][19];
+    f->P[20][13] = f->P[13][20];
+    memcpy(&f->P[14][14], &w->Pn[203], 7 * sizeof w->Pn[0]);
+    f->P[15][14] = f->P[14][15];
+    f->P[16][14] = f->P[14][16];
+    f->P[17][14] = f->P[14][17];
+    f->P[18][14] = f->P[14][18];
+    f->P[19][14] = f->P[14][19];
+    f->P[20][14] = f->P[14][20];
+    memcpy(&f->P[15][15], &w->Pn[210], 6 * sizeof w->Pn[0]);
+    f->P[16][15] = f->P[15][16];
+    f->P[17][15] = f->P[15][17];
+    f->P[18][15] = f->P[15][18];
+    f->P[19][15] = f->P[15][19];
+    f->P[20][15] = f->P[15][20];
+    memcpy(&f->P[16][16], &w->Pn[216], 5 * sizeof w->Pn[0]);
+    f->P[17][16] = f->P[16][17];
+    f->P[18][16] = f->P[16][18];
+    f->P[19][16] = f->P[16][19];
+    f->P[20][16] = f->P[16][20];
+    memcpy(&f->P[17][17], &w->Pn[221], 4 * sizeof w->Pn[0]);
+    f->P[18][17] = f->P[17][18];
+    f->P[19][17] = f->P[17][19];
+    f->P[20][17] = f->P[17][20];
+    memcpy(&f->P[18][18], &w->Pn[225], 3 * sizeof w->Pn[0]);
+    f->P[19][18] = f->P[18][19];
+    f->P[20][18] = f->P[18][20];
+    memcpy(&f->P[19][19], &w->Pn[228], 2 * sizeof w->Pn[0]);
+    f->P[20][19] = f->P[19][20];
+    memcpy(&f->P[20][20], &w->Pn[230], 1 * sizeof w->Pn[0]);
     return INS_GNSS21_OK;
 }
 
@@ -7525,7 +7499,7 @@ int ins_gnss21_set_covariance(ins_gnss21_filter *restrict f, const ins_gnss21_sc
     if (check != 0.0) {
         return INS_GNSS21_ERR_NONFINITE;
     }
-    /* factored only to test that P is positive semidefinite (U in M, D in xn) */
+    /* factored only to test that P is positive semidefinite (U in Pn's upper triangle, D in xn) */
     /* The contract (README, "Generated code"), tol = 16 N eps: P_ii >= 0,
        |P_ij - P_ji| <= tol sqrt(P_ii P_jj) and |P_ij| <= sqrt(P_ii P_jj) (1 + tol),
        so that a zero variance carries no correlation. */
@@ -7553,7 +7527,8 @@ int ins_gnss21_set_covariance(ins_gnss21_filter *restrict f, const ins_gnss21_sc
     for (j = INS_GNSS21_N_STATES - 1; j >= 0; --j) {
         ins_gnss21_scalar pivot = P[j * INS_GNSS21_N_STATES + j];
         for (k = j + 1; k < INS_GNSS21_N_STATES; ++k) {
-            pivot -= w->xn[k] * w->M[j][k] * w->M[j][k];
+            pivot -= w->xn[k] * w->Pn[INS_GNSS21_PACKED_UPPER(j, k)] *
+                    w->Pn[INS_GNSS21_PACKED_UPPER(j, k)];
         }
         if (pivot < 0.0) {
             if (pivot < -(16 * INS_GNSS21_N_STATES * DBL_EPSILON) * P[j * INS_GNSS21_N_STATES + j]
@@ -7566,14 +7541,15 @@ int ins_gnss21_set_covariance(ins_gnss21_filter *restrict f, const ins_gnss21_sc
         for (i = 0; i < j; ++i) {
             ins_gnss21_scalar s = P[i * INS_GNSS21_N_STATES + j];
             for (k = j + 1; k < INS_GNSS21_N_STATES; ++k) {
-                s -= w->xn[k] * w->M[i][k] * w->M[j][k];
+                s -= w->xn[k] * w->Pn[INS_GNSS21_PACKED_UPPER(i, k)] *
+                        w->Pn[INS_GNSS21_PACKED_UPPER(j, k)];
             }
             if (!(pivot > 0.0) && fabs(s) > (16 * INS_GNSS21_N_STATES * DBL_EPSILON) * sqrt(P[i *
                     INS_GNSS21_N_STATES + i] * P[j * INS_GNSS21_N_STATES + j])) {
                 return INS_GNSS21_ERR_NOT_POSITIVE;
             }
-            w->M[i][j] = (pivot > 0.0) ? s / pivot : 0.0;
-            check += w->M[i][j] - w->M[i][j];
+            w->Pn[INS_GNSS21_PACKED_UPPER(i, j)] = (pivot > 0.0) ? s / pivot : 0.0;
+            check += w->Pn[INS_GNSS21_PACKED_UPPER(i, j)] - w->Pn[INS_GNSS21_PACKED_UPPER(i, j)];
         }
         check += pivot - pivot;
     }
@@ -7742,7 +7718,7 @@ int ins_gnss21_update_masked(ins_gnss21_filter *restrict f,
                 s += w->C[i][a] * w->K[j][a] - w->K[i][a] * w->HP[a][j] - w->HP[a][i] * w->K[j][a];
             }
             check += s - s;
-            w->Pn[i][j] = s;
+            w->Pn[INS_GNSS21_PACKED_UPPER(i, j)] = s;
         }
         w->xn[i] = f->x[i];
         for (a = 0; a < INS_GNSS21_N_MEASUREMENTS; ++a) {
@@ -7756,11 +7732,239 @@ int ins_gnss21_update_masked(ins_gnss21_filter *restrict f,
     /* commit only once everything is known to be finite */
     for (i = 0; i < INS_GNSS21_N_STATES; ++i) {
         f->x[i] = w->xn[i];
-        for (j = i; j < INS_GNSS21_N_STATES; ++j) {
-            f->P[i][j] = w->Pn[i][j];
-            f->P[j][i] = w->Pn[i][j];
-        }
     }
+    /* row i of P from Pn's packed row, then its column */
+    memcpy(&f->P[0][0], &w->Pn[0], 21 * sizeof w->Pn[0]);
+    f->P[1][0] = f->P[0][1];
+    f->P[2][0] = f->P[0][2];
+    f->P[3][0] = f->P[0][3];
+    f->P[4][0] = f->P[0][4];
+    f->P[5][0] = f->P[0][5];
+    f->P[6][0] = f->P[0][6];
+    f->P[7][0] = f->P[0][7];
+    f->P[8][0] = f->P[0][8];
+    f->P[9][0] = f->P[0][9];
+    f->P[10][0] = f->P[0][10];
+    f->P[11][0] = f->P[0][11];
+    f->P[12][0] = f->P[0][12];
+    f->P[13][0] = f->P[0][13];
+    f->P[14][0] = f->P[0][14];
+    f->P[15][0] = f->P[0][15];
+    f->P[16][0] = f->P[0][16];
+    f->P[17][0] = f->P[0][17];
+    f->P[18][0] = f->P[0][18];
+    f->P[19][0] = f->P[0][19];
+    f->P[20][0] = f->P[0][20];
+    memcpy(&f->P[1][1], &w->Pn[21], 20 * sizeof w->Pn[0]);
+    f->P[2][1] = f->P[1][2];
+    f->P[3][1] = f->P[1][3];
+    f->P[4][1] = f->P[1][4];
+    f->P[5][1] = f->P[1][5];
+    f->P[6][1] = f->P[1][6];
+    f->P[7][1] = f->P[1][7];
+    f->P[8][1] = f->P[1][8];
+    f->P[9][1] = f->P[1][9];
+    f->P[10][1] = f->P[1][10];
+    f->P[11][1] = f->P[1][11];
+    f->P[12][1] = f->P[1][12];
+    f->P[13][1] = f->P[1][13];
+    f->P[14][1] = f->P[1][14];
+    f->P[15][1] = f->P[1][15];
+    f->P[16][1] = f->P[1][16];
+    f->P[17][1] = f->P[1][17];
+    f->P[18][1] = f->P[1][18];
+    f->P[19][1] = f->P[1][19];
+    f->P[20][1] = f->P[1][20];
+    memcpy(&f->P[2][2], &w->Pn[41], 19 * sizeof w->Pn[0]);
+    f->P[3][2] = f->P[2][3];
+    f->P[4][2] = f->P[2][4];
+    f->P[5][2] = f->P[2][5];
+    f->P[6][2] = f->P[2][6];
+    f->P[7][2] = f->P[2][7];
+    f->P[8][2] = f->P[2][8];
+    f->P[9][2] = f->P[2][9];
+    f->P[10][2] = f->P[2][10];
+    f->P[11][2] = f->P[2][11];
+    f->P[12][2] = f->P[2][12];
+    f->P[13][2] = f->P[2][13];
+    f->P[14][2] = f->P[2][14];
+    f->P[15][2] = f->P[2][15];
+    f->P[16][2] = f->P[2][16];
+    f->P[17][2] = f->P[2][17];
+    f->P[18][2] = f->P[2][18];
+    f->P[19][2] = f->P[2][19];
+    f->P[20][2] = f->P[2][20];
+    memcpy(&f->P[3][3], &w->Pn[60], 18 * sizeof w->Pn[0]);
+    f->P[4][3] = f->P[3][4];
+    f->P[5][3] = f->P[3][5];
+    f->P[6][3] = f->P[3][6];
+    f->P[7][3] = f->P[3][7];
+    f->P[8][3] = f->P[3][8];
+    f->P[9][3] = f->P[3][9];
+    f->P[10][3] = f->P[3][10];
+    f->P[11][3] = f->P[3][11];
+    f->P[12][3] = f->P[3][12];
+    f->P[13][3] = f->P[3][13];
+    f->P[14][3] = f->P[3][14];
+    f->P[15][3] = f->P[3][15];
+    f->P[16][3] = f->P[3][16];
+    f->P[17][3] = f->P[3][17];
+    f->P[18][3] = f->P[3][18];
+    f->P[19][3] = f->P[3][19];
+    f->P[20][3] = f->P[3][20];
+    memcpy(&f->P[4][4], &w->Pn[78], 17 * sizeof w->Pn[0]);
+    f->P[5][4] = f->P[4][5];
+    f->P[6][4] = f->P[4][6];
+    f->P[7][4] = f->P[4][7];
+    f->P[8][4] = f->P[4][8];
+    f->P[9][4] = f->P[4][9];
+    f->P[10][4] = f->P[4][10];
+    f->P[11][4] = f->P[4][11];
+    f->P[12][4] = f->P[4][12];
+    f->P[13][4] = f->P[4][13];
+    f->P[14][4] = f->P[4][14];
+    f->P[15][4] = f->P[4][15];
+    f->P[16][4] = f->P[4][16];
+    f->P[17][4] = f->P[4][17];
+    f->P[18][4] = f->P[4][18];
+    f->P[19][4] = f->P[4][19];
+    f->P[20][4] = f->P[4][20];
+    memcpy(&f->P[5][5], &w->Pn[95], 16 * sizeof w->Pn[0]);
+    f->P[6][5] = f->P[5][6];
+    f->P[7][5] = f->P[5][7];
+    f->P[8][5] = f->P[5][8];
+    f->P[9][5] = f->P[5][9];
+    f->P[10][5] = f->P[5][10];
+    f->P[11][5] = f->P[5][11];
+    f->P[12][5] = f->P[5][12];
+    f->P[13][5] = f->P[5][13];
+    f->P[14][5] = f->P[5][14];
+    f->P[15][5] = f->P[5][15];
+    f->P[16][5] = f->P[5][16];
+    f->P[17][5] = f->P[5][17];
+    f->P[18][5] = f->P[5][18];
+    f->P[19][5] = f->P[5][19];
+    f->P[20][5] = f->P[5][20];
+    memcpy(&f->P[6][6], &w->Pn[111], 15 * sizeof w->Pn[0]);
+    f->P[7][6] = f->P[6][7];
+    f->P[8][6] = f->P[6][8];
+    f->P[9][6] = f->P[6][9];
+    f->P[10][6] = f->P[6][10];
+    f->P[11][6] = f->P[6][11];
+    f->P[12][6] = f->P[6][12];
+    f->P[13][6] = f->P[6][13];
+    f->P[14][6] = f->P[6][14];
+    f->P[15][6] = f->P[6][15];
+    f->P[16][6] = f->P[6][16];
+    f->P[17][6] = f->P[6][17];
+    f->P[18][6] = f->P[6][18];
+    f->P[19][6] = f->P[6][19];
+    f->P[20][6] = f->P[6][20];
+    memcpy(&f->P[7][7], &w->Pn[126], 14 * sizeof w->Pn[0]);
+    f->P[8][7] = f->P[7][8];
+    f->P[9][7] = f->P[7][9];
+    f->P[10][7] = f->P[7][10];
+    f->P[11][7] = f->P[7][11];
+    f->P[12][7] = f->P[7][12];
+    f->P[13][7] = f->P[7][13];
+    f->P[14][7] = f->P[7][14];
+    f->P[15][7] = f->P[7][15];
+    f->P[16][7] = f->P[7][16];
+    f->P[17][7] = f->P[7][17];
+    f->P[18][7] = f->P[7][18];
+    f->P[19][7] = f->P[7][19];
+    f->P[20][7] = f->P[7][20];
+    memcpy(&f->P[8][8], &w->Pn[140], 13 * sizeof w->Pn[0]);
+    f->P[9][8] = f->P[8][9];
+    f->P[10][8] = f->P[8][10];
+    f->P[11][8] = f->P[8][11];
+    f->P[12][8] = f->P[8][12];
+    f->P[13][8] = f->P[8][13];
+    f->P[14][8] = f->P[8][14];
+    f->P[15][8] = f->P[8][15];
+    f->P[16][8] = f->P[8][16];
+    f->P[17][8] = f->P[8][17];
+    f->P[18][8] = f->P[8][18];
+    f->P[19][8] = f->P[8][19];
+    f->P[20][8] = f->P[8][20];
+    memcpy(&f->P[9][9], &w->Pn[153], 12 * sizeof w->Pn[0]);
+    f->P[10][9] = f->P[9][10];
+    f->P[11][9] = f->P[9][11];
+    f->P[12][9] = f->P[9][12];
+    f->P[13][9] = f->P[9][13];
+    f->P[14][9] = f->P[9][14];
+    f->P[15][9] = f->P[9][15];
+    f->P[16][9] = f->P[9][16];
+    f->P[17][9] = f->P[9][17];
+    f->P[18][9] = f->P[9][18];
+    f->P[19][9] = f->P[9][19];
+    f->P[20][9] = f->P[9][20];
+    memcpy(&f->P[10][10], &w->Pn[165], 11 * sizeof w->Pn[0]);
+    f->P[11][10] = f->P[10][11];
+    f->P[12][10] = f->P[10][12];
+    f->P[13][10] = f->P[10][13];
+    f->P[14][10] = f->P[10][14];
+    f->P[15][10] = f->P[10][15];
+    f->P[16][10] = f->P[10][16];
+    f->P[17][10] = f->P[10][17];
+    f->P[18][10] = f->P[10][18];
+    f->P[19][10] = f->P[10][19];
+    f->P[20][10] = f->P[10][20];
+    memcpy(&f->P[11][11], &w->Pn[176], 10 * sizeof w->Pn[0]);
+    f->P[12][11] = f->P[11][12];
+    f->P[13][11] = f->P[11][13];
+    f->P[14][11] = f->P[11][14];
+    f->P[15][11] = f->P[11][15];
+    f->P[16][11] = f->P[11][16];
+    f->P[17][11] = f->P[11][17];
+    f->P[18][11] = f->P[11][18];
+    f->P[19][11] = f->P[11][19];
+    f->P[20][11] = f->P[11][20];
+    memcpy(&f->P[12][12], &w->Pn[186], 9 * sizeof w->Pn[0]);
+    f->P[13][12] = f->P[12][13];
+    f->P[14][12] = f->P[12][14];
+    f->P[15][12] = f->P[12][15];
+    f->P[16][12] = f->P[12][16];
+    f->P[17][12] = f->P[12][17];
+    f->P[18][12] = f->P[12][18];
+    f->P[19][12] = f->P[12][19];
+    f->P[20][12] = f->P[12][20];
+    memcpy(&f->P[13][13], &w->Pn[195], 8 * sizeof w->Pn[0]);
+    f->P[14][13] = f->P[13][14];
+    f->P[15][13] = f->P[13][15];
+    f->P[16][13] = f->P[13][16];
+    f->P[17][13] = f->P[13][17];
+    f->P[18][13] = f->P[13][18];
+    f->P[19][13] = f->P[13][19];
+    f->P[20][13] = f->P[13][20];
+    memcpy(&f->P[14][14], &w->Pn[203], 7 * sizeof w->Pn[0]);
+    f->P[15][14] = f->P[14][15];
+    f->P[16][14] = f->P[14][16];
+    f->P[17][14] = f->P[14][17];
+    f->P[18][14] = f->P[14][18];
+    f->P[19][14] = f->P[14][19];
+    f->P[20][14] = f->P[14][20];
+    memcpy(&f->P[15][15], &w->Pn[210], 6 * sizeof w->Pn[0]);
+    f->P[16][15] = f->P[15][16];
+    f->P[17][15] = f->P[15][17];
+    f->P[18][15] = f->P[15][18];
+    f->P[19][15] = f->P[15][19];
+    f->P[20][15] = f->P[15][20];
+    memcpy(&f->P[16][16], &w->Pn[216], 5 * sizeof w->Pn[0]);
+    f->P[17][16] = f->P[16][17];
+    f->P[18][16] = f->P[16][18];
+    f->P[19][16] = f->P[16][19];
+    f->P[20][16] = f->P[16][20];
+    memcpy(&f->P[17][17], &w->Pn[221], 4 * sizeof w->Pn[0]);
+    f->P[18][17] = f->P[17][18];
+    f->P[19][17] = f->P[17][19];
+    f->P[20][17] = f->P[17][20];
+    memcpy(&f->P[18][18], &w->Pn[225], 3 * sizeof w->Pn[0]);
+    f->P[19][18] = f->P[18][19];
+    f->P[20][18] = f->P[18][20];
+    memcpy(&f->P[19][19], &w->Pn[228], 2 * sizeof w->Pn[0]);
+    f->P[20][19] = f->P[19][20];
+    memcpy(&f->P[20][20], &w->Pn[230], 1 * sizeof w->Pn[0]);
     if (innovation != NULL) {
         for (a = 0; a < INS_GNSS21_N_MEASUREMENTS; ++a) {
             innovation[a] = w->nu0[a];

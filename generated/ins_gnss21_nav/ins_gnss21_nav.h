@@ -14,7 +14,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 354 operations after CSE
- *   discretize: 10569 mul + 7983 add = 18552 flops
+ *   discretize: 10413 mul + 7983 add = 18396 flops
  *   discretize, each doubling (long steps): 3355 mul + 3355 add = 6710 flops
  *   predict (C): 5334 mul + 4806 add = 10140 flops
  *   predict (Python): 8442 mul + 8001 add = 16443 flops
@@ -190,8 +190,8 @@ typedef struct {
 typedef struct {
     ins_gnss21_nav_scalar Phi[INS_GNSS21_NAV_N_STATES][INS_GNSS21_NAV_N_STATES]; /* transition
             matrix */
-    ins_gnss21_nav_scalar Qd[INS_GNSS21_NAV_N_STATES][INS_GNSS21_NAV_N_STATES]; /* Gamma (Q/T)
-            Gamma^T */
+    ins_gnss21_nav_scalar Qd[INS_GNSS21_NAV_N_PACKED]; /* Gamma (Q/T) Gamma^T, packed upper
+            triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } ins_gnss21_nav_transition;
 
 /* The filter state: estimate and covariance (or its factors). */
@@ -207,17 +207,14 @@ typedef struct {
     ins_gnss21_nav_scalar S[INS_GNSS21_NAV_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the
             even levels R_k): each block row's dense segment, then the diagonal rows */
     ins_gnss21_nav_scalar fh[INS_GNSS21_NAV_NNZ_F]; /* F h at the nonzeros of F */
-    ins_gnss21_nav_scalar row_sum[INS_GNSS21_NAV_N_STATES]; /* balancing: off-diagonal row sums of
-            D^-1 |F| D */
-    ins_gnss21_nav_scalar col_sum[INS_GNSS21_NAV_N_STATES]; /* balancing: off-diagonal column sums
-            of D^-1 |F| D */
 } ins_gnss21_nav_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */
 typedef struct {
-    ins_gnss21_nav_scalar M[INS_GNSS21_NAV_N_STATES][INS_GNSS21_NAV_N_STATES]; /* Phi P */
-    ins_gnss21_nav_scalar Pn[INS_GNSS21_NAV_N_STATES][INS_GNSS21_NAV_N_STATES]; /* new covariance
-            before it is committed */
+    ins_gnss21_nav_scalar M[INS_GNSS21_NAV_N_STATES]; /* one row of Phi P (predict works row by
+            row) */
+    ins_gnss21_nav_scalar Pn[INS_GNSS21_NAV_N_PACKED]; /* new covariance before it is committed,
+            packed upper triangle */
     ins_gnss21_nav_scalar xn[INS_GNSS21_NAV_N_STATES];
     ins_gnss21_nav_scalar HP[6][INS_GNSS21_NAV_N_STATES];
     ins_gnss21_nav_scalar L[6][6]; /* Cholesky factor of the innovation covariance */

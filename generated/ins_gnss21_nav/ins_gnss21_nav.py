@@ -12,7 +12,7 @@ parameter_vector() to build it from a mapping.
 
 Operation counts (floating-point, per call):
   matrices_evaluate: 354 operations after CSE
-  discretize: 10569 mul + 7983 add = 18552 flops
+  discretize: 10413 mul + 7983 add = 18396 flops
   discretize, each doubling (long steps): 3355 mul + 3355 add = 6710 flops
   predict (C): 5334 mul + 4806 add = 10140 flops
   predict (Python): 8442 mul + 8001 add = 16443 flops
@@ -710,6 +710,7 @@ def discretize(F, G, q, T):
 _LOWER = np.tril(np.ones((N_STATES, N_STATES), dtype=bool), -1)  # mirrored from the upper triangle
 _UPPER = _LOWER.T
 _VECTOR, _SQUARE = (N_STATES,), (N_STATES, N_STATES)
+_PREDICT_SHAPES = (_VECTOR, _SQUARE, _SQUARE, _SQUARE)  # x, P, Phi, Qd
 _IDENTITY = np.eye(N_STATES)
 _IDENTITY.flags.writeable = False
 _DIAGONAL = np.diag_indices(N_STATES)
@@ -733,28 +734,28 @@ def predict(x, P, Phi, Qd):
     NaN or infinity in an argument makes the result non-finite (IEEE
     arithmetic: NaN and 0 * inf are NaN; x_new = Phi x reads every entry of
     Phi, the result before its mirroring every entry of P and Qd), so one
-    sum tests them all and the arguments are tested entry by entry only
-    then, to name the culprit.
+    sum of magnitudes (BLAS dasum) tests them all and the arguments are
+    tested entry by entry only then, to name the culprit.
     """
-    x, P, Phi, Qd = _float(x), _float(P), _float(Phi), _float(Qd)
-    if x.shape != _VECTOR or P.shape != _SQUARE or Phi.shape != _SQUARE or Qd.shape != _SQUARE:
+    x, P, Phi, Qd = _array(x, float), _array(P, float), _array(Phi, float), _array(Qd, float)
+    if (x.shape, P.shape, Phi.shape, Qd.shape) != _PREDICT_SHAPES:
         _check_shapes("predict", x=(x, _VECTOR), P=(P, _SQUARE), Phi=(Phi, _SQUARE), Qd=(Qd, _SQUARE))
     factor = _factor(P)
     if factor is None:  # the contract's test entry by entry, naming what it refuses
         _check_finite("predict", Qd=Qd)
         _check_covariance_entries("predict", P)
-    x_new = Phi @ x
+    x_new = _dot(Phi, x)
     if factor is not None:
-        upper = _syrk(1.0, _trmm(1.0, factor, Phi, side=1, lower=1), beta=1.0, c=Qd, lower=0)  # Fortran order
-        total = _sum(upper, None)  # its strict lower triangle is Qd's
+        upper = _syrk(1.0, _trmm(1.0, factor, Phi, 1, 1), 1.0, Qd)  # Phi L from the right, then its upper triangle; Fortran order
+        total = _asum(upper.ravel("K"))  # its strict lower triangle is Qd's
         P_new = upper.T  # C order; its lower triangle holds the result
         np.copyto(P_new, upper, where=_UPPER)
     else:
         P_new = Phi @ P @ Phi.T
         P_new += Qd
-        total = _sum(P_new, None)
+        total = _asum(P_new.ravel())
         np.copyto(P_new, P_new.T, where=_LOWER)
-    if not math.isfinite(total + sum(x_new.tolist())):
+    if not math.isfinite(total + _asum(x_new)):
         _refuse_non_finite("predict", {"x_result": x_new, "result": P_new}, Qd=Qd, x=x, P=P, Phi=Phi)
     return x_new, P_new
 
@@ -763,12 +764,17 @@ def update(x, P, z, H, r):
     """Kalman update: gain, state, Joseph-form covariance (seed 000, eq. (12)).
 
     ``r`` is the diagonal of R.  With S = H P H^T + R and K = P H^T S^-1,
-    the Joseph form (I - K H) P (I - K H)^T + K R K^T expands to
-    P - K (H P) - C K^T with C = (H P)^T - K S, which is zero but for
-    rounding (the part of the Joseph form that keeps P positive for any
-    gain): two BLAS products of rank m onto P, O(m n^2) flops where the
-    product form takes O(n^3).  The upper triangle is mirrored into the
-    lower one.
+    the Joseph form (I - K H) P (I - K H)^T + K R K^T expands, as in the
+    generated C, to P - K (H P) - (H P)^T K^T + K S K^T, which is
+    P - (G + G^T) with G = K E and E = H P - S K^T / 2 (S as factored, not
+    replaced by the identity K S = (H P)^T, which would reduce it to the
+    standard form and lose its first-order insensitivity to errors in K):
+    one product of rank m, O(m n^2) flops where the product form takes
+    O(n^3).  G + G^T is exactly symmetric (IEEE addition commutes), so for
+    an exactly symmetric P (the usual case, proven with its Cholesky
+    factor) so is the result, without a mirroring pass; a P symmetric only
+    within the contract's tolerance has its upper triangle mirrored into
+    the lower one.
 
     Raises ValueError, naming the argument and leaving x and P untouched,
     for non-finite x, z, H or r, a negative r, a P outside the contract
@@ -776,33 +782,33 @@ def update(x, P, z, H, r):
     definite or a non-finite result.  Non-finite arguments show in the
     result (or the innovation covariance) and are named then, as in predict.
     """
-    x, P, z, H, r = _float(x), _float(P), _float(z), _float(H), _float(r)
+    x, P, z, H, r = _array(x, float), _array(P, float), _array(z, float), _array(H, float), _array(r, float)
     m = z.shape[0] if z.ndim == 1 else -1
-    if x.shape != _VECTOR or P.shape != _SQUARE or z.shape != (m,) or H.shape != (m, N_STATES) or r.shape != (m,):
+    if (x.shape, P.shape, z.shape, H.shape, r.shape) != (_VECTOR, _SQUARE, (m,), (m, N_STATES), (m,)):
         _check_shapes("update", x=(x, _VECTOR), P=(P, _SQUARE), z=(z, (m,)), H=(H, (m, N_STATES)), r=(r, (m,)))
     if not all(v >= 0.0 for v in r.tolist()):  # Python floats: cheaper than numpy calls for a few measurements
         _check_finite("update", r=r)
         raise ValueError("update: r has a negative measurement variance")
-    _check_covariance("update", P)
+    exact = _factor(P) is not None  # the contract's test of P: one Cholesky factorization in the usual case
+    if not exact:
+        _check_covariance_entries("update", P)
     if not m:  # nothing measured: x and P as they were
         _check_result("update", {"x_result": x, "result": P}, x=x, P=P)
         return x.copy(), P.copy()
-    HP = H @ P
-    S = HP @ H.T
+    HP = _dot(H, P)
+    S = _dot(HP, H.T)
     S.ravel()[:: m + 1] += r  # R on the diagonal (ravel: a view of the new S)
-    _, gain_t, info = _cholesky_system(S, HP, lower=1)  # K^T = S^-1 H P, S kept
+    _, gain_t, info = _cholesky_system(S, HP, 1)  # K^T = S^-1 H P (lower triangle of S), S kept
     if info:
         _check_finite("update", x=x, z=z, H=H, P=P)
         raise ValueError("update: the innovation covariance H P H^T + R is not positive definite")
-    x_new = _gemv(1.0, gain_t, z - H @ x, beta=1.0, y=x, trans=1)  # x + K (z - H x)
-    residual_t = HP - S.T @ gain_t  # C^T
-    # P - K (H P) - C K^T, transposed: BLAS works in Fortran order, where P.T is P's memory (no copy)
-    joseph_t = _gemm(-1.0, HP, gain_t, beta=1.0, c=P.T, trans_a=1)
-    joseph_t = _gemm(-1.0, gain_t, residual_t, beta=1.0, c=joseph_t, trans_a=1, overwrite_c=1)
-    P_new = joseph_t.T
-    total = _sum(P_new, None)
-    np.copyto(P_new, P_new.T, where=_LOWER)
-    if not math.isfinite(total + sum(x_new.tolist())):
+    x_new = _gemv(1.0, gain_t, z - _dot(H, x), beta=1.0, y=x, trans=1)  # x + K (z - H x)
+    gram = _dot(gain_t.T, _gemm(-0.5, S, gain_t, 1.0, HP))  # G = K E, E = H P - S K^T / 2
+    P_new = gram + gram.T  # exactly symmetric: IEEE addition commutes
+    np.subtract(P, P_new, out=P_new)
+    if not exact:  # P symmetric within the tolerance only: its upper triangle, mirrored
+        np.copyto(P_new, P_new.T, where=_LOWER)
+    if not math.isfinite(_asum(P_new.ravel()) + _asum(x_new)):
         _refuse_non_finite("update", {"x_result": x_new, "result": P_new}, x=x, P=P, z=z, H=H, r=r)
     return x_new, P_new
 
@@ -854,26 +860,40 @@ def _float(a):
     return np.asarray(a, dtype=float)
 
 
+_array = np.asarray  # _array(a, float) is _float(a) without the Python call: predict and update take it on every call
+
+
 def _check_finite(function, **arrays):
     """Refuse a NaN or infinite entry, naming the argument (or ``result``).
 
-    One reduction per argument: a sum is finite unless an entry is NaN or
-    infinite, or finite entries overflow it; only then is each entry
-    tested, so a large finite array is not refused.
+    One reduction per argument (:func:`_magnitude`): it is finite unless an
+    entry is NaN or infinite, or finite entries overflow it; only then is
+    each entry tested, so a large finite array is not refused.
     """
     for name, value in arrays.items():
-        if not math.isfinite(_sum(value, None)) and not np.isfinite(value).all():
+        if not math.isfinite(_magnitude(value)) and not np.isfinite(value).all():
             raise ValueError(f"{function}: {name} has a non-finite entry")
+
+
+def _magnitude(a):
+    """sum |a_ij| over every entry (BLAS dasum on the memory, no copy when contiguous); 0.0 for an empty array.
+
+    IEEE arithmetic makes it NaN or infinite when an entry is (|NaN| is NaN,
+    and magnitudes cannot cancel an infinity as a plain sum's inf - inf
+    would into NaN), and finite otherwise unless the entries overflow it.
+    """
+    return _asum(a.ravel("K")) if a.size else 0.0
 
 
 def _check_result(function, results, **arguments):
     """Refuse a non-finite result, naming the argument that made it so when one did.
 
-    One sum per result array; only when one is not finite are the
-    arguments tested entry by entry (a NaN or infinity in an argument
-    reaches the result through IEEE arithmetic: NaN and 0 * inf are NaN).
+    One sum of magnitudes per result array; only when one is not finite
+    are the arguments tested entry by entry (a NaN or infinity in an
+    argument reaches the result through IEEE arithmetic: NaN and 0 * inf
+    are NaN).
     """
-    if all(math.isfinite(_sum(value, None)) for value in results.values()):
+    if all(math.isfinite(_magnitude(value)) for value in results.values()):
         return
     _check_finite(function, **arguments)
     _check_finite(function, **results)
@@ -882,7 +902,7 @@ def _check_result(function, results, **arguments):
 def _refuse_non_finite(function, results, **arguments):
     """Name the first argument (in the order given), else the result, with a non-finite entry.
 
-    Called when a sum over the results is not finite; returns when no entry
+    Called when a sum of magnitudes over the results is not finite; returns when no entry
     is (a finite sum that overflowed, or a non-finite entry the mirroring
     discarded: then an argument has one and is named).
     """
@@ -929,7 +949,8 @@ _trmm = blas.dtrmm
 _syrk = blas.dsyrk
 _gemm = blas.dgemm
 _gemv = blas.dgemv
-_sum = np.add.reduce  # with axis None: one reduction over every entry, cheaper than ndarray.sum
+_dot = np.dot  # for small operands, less overhead than the @ operator
+_asum = blas.dasum  # sum |a_i| of a vector: finite only if every entry is (IEEE), one pass, no temporary
 
 
 def _factor(P):
@@ -943,31 +964,25 @@ def _factor(P):
     which accepts what is within the tolerance and names what is not.
     """
     if P.tobytes() == P.T.tobytes():  # exactly symmetric (bytes: no NaN != NaN)
-        factor, info = _cholesky(P.T, lower=1, clean=0)  # P.T: Fortran order, the same matrix, no transposing copy
+        factor, info = _cholesky(P.T, 1, 0)  # lower, upper not cleared; P.T: Fortran order, the same matrix, no copy
         if not info and factor[-1, -1] == factor[-1, -1]:
             return factor
     return None
 
 
-def _check_covariance(function, P):
-    """Refuse a P that is not finite, symmetric and positive semidefinite within PSD_TOLERANCE.
+def _check_covariance_entries(function, P):
+    """Refuse a P that is not finite, symmetric and positive semidefinite within PSD_TOLERANCE, naming the first violation.
 
     Checked: finite entries; |P_ij - P_ji| <= tol sqrt(P_ii P_jj); P_ii >= 0;
     |P_ij| <= sqrt(P_ii P_jj) (1 + tol) (so a zero variance has no
     correlation); the correlation matrix of the states with a positive
     variance, plus tol I, has a Cholesky factor.
 
-    The usual case is one Cholesky factorization (:func:`_factor`); an
-    infinite variance can pass it, but makes the caller's result
-    non-finite, which is then traced back to P.  Anything else takes the
-    test entry by entry (:func:`_check_covariance_entries`).
+    predict and update call it only when :func:`_factor` finds no Cholesky
+    factor of an exactly symmetric P (the usual case costs that one
+    factorization); an infinite variance can pass the factorization, but
+    makes the caller's result non-finite, which is then traced back to P.
     """
-    if _factor(P) is None:
-        _check_covariance_entries(function, P)
-
-
-def _check_covariance_entries(function, P):
-    """:func:`_check_covariance` entry by entry, raising ValueError that names the first violation (or returning)."""
     _check_finite(function, P=P)
     variance = P.diagonal()
     if variance.min() < 0.0:

@@ -11,8 +11,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 113 operations after CSE
- *   discretize: 6275 mul + 4840 add = 11115 flops
- *   discretize, each doubling (long steps): 2173 mul + 2227 add = 4400 flops
+ *   discretize: 3573 mul + 2696 add = 6269 flops
+ *   discretize, each doubling (long steps): 2359 mul + 2351 add = 4710 flops
  *   predict (C): 2670 mul + 2526 add = 5196 flops
  *   predict (Python): 4050 mul + 4005 add = 8055 flops
  *   predict (dense, for comparison): 6765 mul + 6525 add = 13290 flops
@@ -29,6 +29,10 @@
 #include <stdint.h>
 #include <string.h>
 
+/* Index of (i, j), i <= j (and with packed storage of P, of any (i, j)) of a symmetric
+   matrix stored as a packed upper triangle, row by row: Q_d and Pn always, P if packed. */
+#define INS_GPS15_PACKED_UPPER(i, j) \
+        ((i) * (2 * INS_GPS15_N_STATES - (i) - 1) / 2 + (j))
 
 const char *const ins_gps15_state_names[INS_GPS15_N_STATES] = {
     "attitude_error_east",
@@ -509,143 +513,126 @@ INS_GPS15_BLOCK void horner_level_1_into_S(ins_gps15_discretize_scratch *restric
     w->S[4] = w->fh[2]*c_in;
     w->S[5] = 0;
     w->S[6] = 0;
-    w->S[7] = 0;
-    w->S[8] = w->fh[3]*c_in;
-    w->S[9] = w->fh[4]*c_in;
-    w->S[10] = w->fh[5]*c_in;
-    w->S[11] = w->fh[6]*c_in;
+    w->S[7] = w->fh[3]*c_in;
+    w->S[8] = w->fh[7]*c_in;
+    w->S[9] = c_out;
+    w->S[10] = w->fh[8]*c_in;
+    w->S[11] = w->fh[9]*c_in;
     w->S[12] = 0;
     w->S[13] = 0;
-    w->S[14] = 0;
-    w->S[15] = 0;
-    w->S[16] = w->fh[7]*c_in;
-    w->S[17] = c_out;
-    w->S[18] = w->fh[8]*c_in;
-    w->S[19] = w->fh[9]*c_in;
+    w->S[14] = w->fh[10]*c_in;
+    w->S[15] = w->fh[11]*c_in;
+    w->S[16] = w->fh[15]*c_in;
+    w->S[17] = w->fh[16]*c_in;
+    w->S[18] = c_out;
+    w->S[19] = w->fh[17]*c_in;
     w->S[20] = 0;
     w->S[21] = 0;
-    w->S[22] = w->fh[10]*c_in;
-    w->S[23] = 0;
-    w->S[24] = w->fh[11]*c_in;
-    w->S[25] = w->fh[12]*c_in;
-    w->S[26] = w->fh[13]*c_in;
-    w->S[27] = w->fh[14]*c_in;
-    w->S[28] = 0;
-    w->S[29] = 0;
-    w->S[30] = 0;
-    w->S[31] = 0;
-    w->S[32] = w->fh[15]*c_in;
-    w->S[33] = w->fh[16]*c_in;
-    w->S[34] = c_out;
-    w->S[35] = w->fh[17]*c_in;
-    w->S[36] = 0;
-    w->S[37] = 0;
-    w->S[38] = w->fh[18]*c_in;
-    w->S[39] = 0;
-    w->S[40] = w->fh[19]*c_in;
-    w->S[41] = w->fh[20]*c_in;
-    w->S[42] = w->fh[21]*c_in;
-    w->S[43] = w->fh[22]*c_in;
-    w->S[44] = 0;
-    w->S[45] = 0;
-    w->S[46] = 0;
-    w->S[47] = 0;
+    w->S[22] = w->fh[18]*c_in;
+    w->S[23] = w->fh[19]*c_in;
+    w->S[24] = 0;
+    w->S[25] = w->fh[23]*c_in;
+    w->S[26] = w->fh[24]*c_in;
+    w->S[27] = c_out + w->fh[25]*c_in;
+    w->S[28] = w->fh[26]*c_in;
+    w->S[29] = w->fh[27]*c_in;
+    w->S[30] = w->fh[28]*c_in;
+    w->S[31] = w->fh[29]*c_in;
+    w->S[32] = w->fh[33]*c_in;
+    w->S[33] = 0;
+    w->S[34] = w->fh[34]*c_in;
+    w->S[35] = w->fh[35]*c_in;
+    w->S[36] = c_out + w->fh[36]*c_in;
+    w->S[37] = w->fh[37]*c_in;
+    w->S[38] = w->fh[38]*c_in;
+    w->S[39] = w->fh[39]*c_in;
+    w->S[40] = w->fh[43]*c_in;
+    w->S[41] = w->fh[44]*c_in;
+    w->S[42] = 0;
+    w->S[43] = w->fh[45]*c_in;
+    w->S[44] = w->fh[46]*c_in;
+    w->S[45] = c_out;
+    w->S[46] = w->fh[47]*c_in;
+    w->S[47] = w->fh[48]*c_in;
     w->S[48] = 0;
-    w->S[49] = w->fh[23]*c_in;
-    w->S[50] = w->fh[24]*c_in;
-    w->S[51] = c_out + w->fh[25]*c_in;
-    w->S[52] = w->fh[26]*c_in;
-    w->S[53] = w->fh[27]*c_in;
-    w->S[54] = w->fh[28]*c_in;
-    w->S[55] = 0;
-    w->S[56] = w->fh[29]*c_in;
+    w->S[49] = 0;
+    w->S[50] = 0;
+    w->S[51] = 0;
+    w->S[52] = w->fh[52]*c_in;
+    w->S[53] = 0;
+    w->S[54] = c_out;
+    w->S[55] = w->fh[53]*c_in;
+    w->S[56] = 0;
     w->S[57] = 0;
     w->S[58] = 0;
-    w->S[59] = 0;
-    w->S[60] = w->fh[30]*c_in;
-    w->S[61] = w->fh[31]*c_in;
-    w->S[62] = w->fh[32]*c_in;
-    w->S[63] = 0;
-    w->S[64] = w->fh[33]*c_in;
+    w->S[59] = w->fh[54]*c_in;
+    w->S[60] = 0;
+    w->S[61] = 0;
+    w->S[62] = w->fh[55]*c_in;
+    w->S[63] = w->fh[56]*c_in;
+    w->S[64] = 0;
     w->S[65] = 0;
-    w->S[66] = w->fh[34]*c_in;
-    w->S[67] = w->fh[35]*c_in;
-    w->S[68] = c_out + w->fh[36]*c_in;
-    w->S[69] = w->fh[37]*c_in;
-    w->S[70] = w->fh[38]*c_in;
-    w->S[71] = 0;
-    w->S[72] = w->fh[39]*c_in;
-    w->S[73] = 0;
-    w->S[74] = 0;
+    w->S[66] = 0;
+    w->S[67] = 0;
+    w->S[68] = 0;
+    w->S[69] = w->fh[57]*c_in;
+    w->S[70] = 0;
+    w->S[71] = c_out;
+    w->S[72] = w->fh[4]*c_in;
+    w->S[73] = w->fh[5]*c_in;
+    w->S[74] = w->fh[6]*c_in;
     w->S[75] = 0;
-    w->S[76] = w->fh[40]*c_in;
-    w->S[77] = w->fh[41]*c_in;
-    w->S[78] = w->fh[42]*c_in;
-    w->S[79] = 0;
-    w->S[80] = w->fh[43]*c_in;
-    w->S[81] = w->fh[44]*c_in;
+    w->S[76] = 0;
+    w->S[77] = 0;
+    w->S[78] = w->fh[12]*c_in;
+    w->S[79] = w->fh[13]*c_in;
+    w->S[80] = w->fh[14]*c_in;
+    w->S[81] = 0;
     w->S[82] = 0;
-    w->S[83] = w->fh[45]*c_in;
-    w->S[84] = w->fh[46]*c_in;
-    w->S[85] = c_out;
-    w->S[86] = w->fh[47]*c_in;
+    w->S[83] = 0;
+    w->S[84] = w->fh[20]*c_in;
+    w->S[85] = w->fh[21]*c_in;
+    w->S[86] = w->fh[22]*c_in;
     w->S[87] = 0;
-    w->S[88] = w->fh[48]*c_in;
+    w->S[88] = 0;
     w->S[89] = 0;
     w->S[90] = 0;
     w->S[91] = 0;
-    w->S[92] = w->fh[49]*c_in;
-    w->S[93] = w->fh[50]*c_in;
-    w->S[94] = w->fh[51]*c_in;
-    w->S[95] = 0;
+    w->S[92] = 0;
+    w->S[93] = w->fh[30]*c_in;
+    w->S[94] = w->fh[31]*c_in;
+    w->S[95] = w->fh[32]*c_in;
     w->S[96] = 0;
     w->S[97] = 0;
     w->S[98] = 0;
-    w->S[99] = 0;
-    w->S[100] = w->fh[52]*c_in;
-    w->S[101] = 0;
-    w->S[102] = c_out;
+    w->S[99] = w->fh[40]*c_in;
+    w->S[100] = w->fh[41]*c_in;
+    w->S[101] = w->fh[42]*c_in;
+    w->S[102] = 0;
     w->S[103] = 0;
-    w->S[104] = w->fh[53]*c_in;
-    w->S[105] = 0;
-    w->S[106] = 0;
-    w->S[107] = 0;
+    w->S[104] = 0;
+    w->S[105] = w->fh[49]*c_in;
+    w->S[106] = w->fh[50]*c_in;
+    w->S[107] = w->fh[51]*c_in;
     w->S[108] = 0;
     w->S[109] = 0;
     w->S[110] = 0;
     w->S[111] = 0;
     w->S[112] = 0;
     w->S[113] = 0;
-    w->S[114] = 0;
-    w->S[115] = w->fh[54]*c_in;
+    w->S[114] = c_out;
+    w->S[115] = 0;
     w->S[116] = 0;
     w->S[117] = 0;
-    w->S[118] = w->fh[55]*c_in;
-    w->S[119] = c_out;
-    w->S[120] = w->fh[56]*c_in;
+    w->S[118] = 0;
+    w->S[119] = 0;
+    w->S[120] = 0;
     w->S[121] = 0;
     w->S[122] = 0;
     w->S[123] = 0;
     w->S[124] = 0;
     w->S[125] = 0;
     w->S[126] = 0;
-    w->S[127] = 0;
-    w->S[128] = 0;
-    w->S[129] = 0;
-    w->S[130] = 0;
-    w->S[131] = 0;
-    w->S[132] = 0;
-    w->S[133] = w->fh[57]*c_in;
-    w->S[134] = 0;
-    w->S[135] = 0;
-    w->S[136] = c_out;
-    w->S[137] = 0;
-    w->S[138] = 0;
-    w->S[139] = 0;
-    w->S[140] = 0;
-    w->S[141] = 0;
-    w->S[142] = 0;
-    w->S[143] = 0;
 }
 
 INS_GPS15_BLOCK void horner_level_1_into_term(ins_gps15_discretize_scratch *restrict w, const
@@ -658,343 +645,461 @@ INS_GPS15_BLOCK void horner_level_1_into_term(ins_gps15_discretize_scratch *rest
     w->term[1][4] = w->fh[2]*c_in;
     w->term[1][5] = 0;
     w->term[1][6] = 0;
-    w->term[1][7] = 0;
-    w->term[1][8] = w->fh[3]*c_in;
-    w->term[1][9] = w->fh[4]*c_in;
-    w->term[1][10] = w->fh[5]*c_in;
-    w->term[1][11] = w->fh[6]*c_in;
+    w->term[1][7] = w->fh[3]*c_in;
+    w->term[1][8] = w->fh[7]*c_in;
+    w->term[1][9] = c_out;
+    w->term[1][10] = w->fh[8]*c_in;
+    w->term[1][11] = w->fh[9]*c_in;
     w->term[1][12] = 0;
     w->term[1][13] = 0;
-    w->term[1][14] = 0;
-    w->term[1][15] = 0;
-    w->term[1][16] = w->fh[7]*c_in;
-    w->term[1][17] = c_out;
-    w->term[1][18] = w->fh[8]*c_in;
-    w->term[1][19] = w->fh[9]*c_in;
+    w->term[1][14] = w->fh[10]*c_in;
+    w->term[1][15] = w->fh[11]*c_in;
+    w->term[1][16] = w->fh[15]*c_in;
+    w->term[1][17] = w->fh[16]*c_in;
+    w->term[1][18] = c_out;
+    w->term[1][19] = w->fh[17]*c_in;
     w->term[1][20] = 0;
     w->term[1][21] = 0;
-    w->term[1][22] = w->fh[10]*c_in;
-    w->term[1][23] = 0;
-    w->term[1][24] = w->fh[11]*c_in;
-    w->term[1][25] = w->fh[12]*c_in;
-    w->term[1][26] = w->fh[13]*c_in;
-    w->term[1][27] = w->fh[14]*c_in;
-    w->term[1][28] = 0;
-    w->term[1][29] = 0;
-    w->term[1][30] = 0;
-    w->term[1][31] = 0;
-    w->term[1][32] = w->fh[15]*c_in;
-    w->term[1][33] = w->fh[16]*c_in;
-    w->term[1][34] = c_out;
-    w->term[1][35] = w->fh[17]*c_in;
-    w->term[1][36] = 0;
-    w->term[1][37] = 0;
-    w->term[1][38] = w->fh[18]*c_in;
-    w->term[1][39] = 0;
-    w->term[1][40] = w->fh[19]*c_in;
-    w->term[1][41] = w->fh[20]*c_in;
-    w->term[1][42] = w->fh[21]*c_in;
-    w->term[1][43] = w->fh[22]*c_in;
-    w->term[1][44] = 0;
-    w->term[1][45] = 0;
-    w->term[1][46] = 0;
-    w->term[1][47] = 0;
+    w->term[1][22] = w->fh[18]*c_in;
+    w->term[1][23] = w->fh[19]*c_in;
+    w->term[1][24] = 0;
+    w->term[1][25] = w->fh[23]*c_in;
+    w->term[1][26] = w->fh[24]*c_in;
+    w->term[1][27] = c_out + w->fh[25]*c_in;
+    w->term[1][28] = w->fh[26]*c_in;
+    w->term[1][29] = w->fh[27]*c_in;
+    w->term[1][30] = w->fh[28]*c_in;
+    w->term[1][31] = w->fh[29]*c_in;
+    w->term[1][32] = w->fh[33]*c_in;
+    w->term[1][33] = 0;
+    w->term[1][34] = w->fh[34]*c_in;
+    w->term[1][35] = w->fh[35]*c_in;
+    w->term[1][36] = c_out + w->fh[36]*c_in;
+    w->term[1][37] = w->fh[37]*c_in;
+    w->term[1][38] = w->fh[38]*c_in;
+    w->term[1][39] = w->fh[39]*c_in;
+    w->term[1][40] = w->fh[43]*c_in;
+    w->term[1][41] = w->fh[44]*c_in;
+    w->term[1][42] = 0;
+    w->term[1][43] = w->fh[45]*c_in;
+    w->term[1][44] = w->fh[46]*c_in;
+    w->term[1][45] = c_out;
+    w->term[1][46] = w->fh[47]*c_in;
+    w->term[1][47] = w->fh[48]*c_in;
     w->term[1][48] = 0;
-    w->term[1][49] = w->fh[23]*c_in;
-    w->term[1][50] = w->fh[24]*c_in;
-    w->term[1][51] = c_out + w->fh[25]*c_in;
-    w->term[1][52] = w->fh[26]*c_in;
-    w->term[1][53] = w->fh[27]*c_in;
-    w->term[1][54] = w->fh[28]*c_in;
-    w->term[1][55] = 0;
-    w->term[1][56] = w->fh[29]*c_in;
+    w->term[1][49] = 0;
+    w->term[1][50] = 0;
+    w->term[1][51] = 0;
+    w->term[1][52] = w->fh[52]*c_in;
+    w->term[1][53] = 0;
+    w->term[1][54] = c_out;
+    w->term[1][55] = w->fh[53]*c_in;
+    w->term[1][56] = 0;
     w->term[1][57] = 0;
     w->term[1][58] = 0;
-    w->term[1][59] = 0;
-    w->term[1][60] = w->fh[30]*c_in;
-    w->term[1][61] = w->fh[31]*c_in;
-    w->term[1][62] = w->fh[32]*c_in;
-    w->term[1][63] = 0;
-    w->term[1][64] = w->fh[33]*c_in;
+    w->term[1][59] = w->fh[54]*c_in;
+    w->term[1][60] = 0;
+    w->term[1][61] = 0;
+    w->term[1][62] = w->fh[55]*c_in;
+    w->term[1][63] = w->fh[56]*c_in;
+    w->term[1][64] = 0;
     w->term[1][65] = 0;
-    w->term[1][66] = w->fh[34]*c_in;
-    w->term[1][67] = w->fh[35]*c_in;
-    w->term[1][68] = c_out + w->fh[36]*c_in;
-    w->term[1][69] = w->fh[37]*c_in;
-    w->term[1][70] = w->fh[38]*c_in;
-    w->term[1][71] = 0;
-    w->term[1][72] = w->fh[39]*c_in;
-    w->term[1][73] = 0;
-    w->term[1][74] = 0;
+    w->term[1][66] = 0;
+    w->term[1][67] = 0;
+    w->term[1][68] = 0;
+    w->term[1][69] = w->fh[57]*c_in;
+    w->term[1][70] = 0;
+    w->term[1][71] = c_out;
+    w->term[1][72] = w->fh[4]*c_in;
+    w->term[1][73] = w->fh[5]*c_in;
+    w->term[1][74] = w->fh[6]*c_in;
     w->term[1][75] = 0;
-    w->term[1][76] = w->fh[40]*c_in;
-    w->term[1][77] = w->fh[41]*c_in;
-    w->term[1][78] = w->fh[42]*c_in;
-    w->term[1][79] = 0;
-    w->term[1][80] = w->fh[43]*c_in;
-    w->term[1][81] = w->fh[44]*c_in;
+    w->term[1][76] = 0;
+    w->term[1][77] = 0;
+    w->term[1][78] = w->fh[12]*c_in;
+    w->term[1][79] = w->fh[13]*c_in;
+    w->term[1][80] = w->fh[14]*c_in;
+    w->term[1][81] = 0;
     w->term[1][82] = 0;
-    w->term[1][83] = w->fh[45]*c_in;
-    w->term[1][84] = w->fh[46]*c_in;
-    w->term[1][85] = c_out;
-    w->term[1][86] = w->fh[47]*c_in;
+    w->term[1][83] = 0;
+    w->term[1][84] = w->fh[20]*c_in;
+    w->term[1][85] = w->fh[21]*c_in;
+    w->term[1][86] = w->fh[22]*c_in;
     w->term[1][87] = 0;
-    w->term[1][88] = w->fh[48]*c_in;
+    w->term[1][88] = 0;
     w->term[1][89] = 0;
     w->term[1][90] = 0;
     w->term[1][91] = 0;
-    w->term[1][92] = w->fh[49]*c_in;
-    w->term[1][93] = w->fh[50]*c_in;
-    w->term[1][94] = w->fh[51]*c_in;
-    w->term[1][95] = 0;
+    w->term[1][92] = 0;
+    w->term[1][93] = w->fh[30]*c_in;
+    w->term[1][94] = w->fh[31]*c_in;
+    w->term[1][95] = w->fh[32]*c_in;
     w->term[1][96] = 0;
     w->term[1][97] = 0;
     w->term[1][98] = 0;
-    w->term[1][99] = 0;
-    w->term[1][100] = w->fh[52]*c_in;
-    w->term[1][101] = 0;
-    w->term[1][102] = c_out;
+    w->term[1][99] = w->fh[40]*c_in;
+    w->term[1][100] = w->fh[41]*c_in;
+    w->term[1][101] = w->fh[42]*c_in;
+    w->term[1][102] = 0;
     w->term[1][103] = 0;
-    w->term[1][104] = w->fh[53]*c_in;
-    w->term[1][105] = 0;
-    w->term[1][106] = 0;
-    w->term[1][107] = 0;
+    w->term[1][104] = 0;
+    w->term[1][105] = w->fh[49]*c_in;
+    w->term[1][106] = w->fh[50]*c_in;
+    w->term[1][107] = w->fh[51]*c_in;
     w->term[1][108] = 0;
     w->term[1][109] = 0;
     w->term[1][110] = 0;
     w->term[1][111] = 0;
     w->term[1][112] = 0;
     w->term[1][113] = 0;
-    w->term[1][114] = 0;
-    w->term[1][115] = w->fh[54]*c_in;
+    w->term[1][114] = c_out;
+    w->term[1][115] = 0;
     w->term[1][116] = 0;
     w->term[1][117] = 0;
-    w->term[1][118] = w->fh[55]*c_in;
-    w->term[1][119] = c_out;
-    w->term[1][120] = w->fh[56]*c_in;
+    w->term[1][118] = 0;
+    w->term[1][119] = 0;
+    w->term[1][120] = 0;
     w->term[1][121] = 0;
     w->term[1][122] = 0;
     w->term[1][123] = 0;
     w->term[1][124] = 0;
     w->term[1][125] = 0;
     w->term[1][126] = 0;
-    w->term[1][127] = 0;
-    w->term[1][128] = 0;
-    w->term[1][129] = 0;
-    w->term[1][130] = 0;
-    w->term[1][131] = 0;
-    w->term[1][132] = 0;
-    w->term[1][133] = w->fh[57]*c_in;
-    w->term[1][134] = 0;
-    w->term[1][135] = 0;
-    w->term[1][136] = c_out;
-    w->term[1][137] = 0;
-    w->term[1][138] = 0;
-    w->term[1][139] = 0;
-    w->term[1][140] = 0;
-    w->term[1][141] = 0;
-    w->term[1][142] = 0;
-    w->term[1][143] = 0;
 }
 
 INS_GPS15_BLOCK void horner_saturated_into_S(ins_gps15_discretize_scratch *restrict w, const
-        ins_gps15_scalar c_out, const ins_gps15_scalar c_in)
+        ins_gps15_scalar c_out)
 {
     int k;
-    for (k = 0; k < 16; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][16+k] + w->fh[1]*w->term[1][32+k] + w->fh[2]*w->term[1][64+k]
-                + w->fh[3]*w->term[1][128+k];
-        w->S[16+k] = w->fh[7]*w->term[1][k] + w->fh[8]*w->term[1][32+k] + w->fh[9]*w->term[1][48+k]
-                + w->fh[10]*w->term[1][96+k] + w->fh[11]*w->term[1][128+k];
-        w->S[32+k] = w->fh[15]*w->term[1][k] + w->fh[16]*w->term[1][16+k] +
-                w->fh[17]*w->term[1][48+k] + w->fh[18]*w->term[1][96+k] +
-                w->fh[19]*w->term[1][128+k];
-        w->S[48+k] = w->fh[23]*w->term[1][16+k] + w->fh[24]*w->term[1][32+k] +
-                w->fh[25]*w->term[1][48+k] + w->fh[26]*w->term[1][64+k] + w->fh[27]*w->term[1][80+k]
-                + w->fh[28]*w->term[1][96+k] + w->fh[29]*w->term[1][128+k];
-        w->S[64+k] = w->fh[33]*w->term[1][k] + w->fh[34]*w->term[1][32+k] +
-                w->fh[35]*w->term[1][48+k] + w->fh[36]*w->term[1][64+k] + w->fh[37]*w->term[1][80+k]
-                + w->fh[38]*w->term[1][96+k] + w->fh[39]*w->term[1][128+k];
-        w->S[80+k] = w->fh[43]*w->term[1][k] + w->fh[44]*w->term[1][16+k] +
-                w->fh[45]*w->term[1][48+k] + w->fh[46]*w->term[1][64+k] + w->fh[47]*w->term[1][96+k]
-                + w->fh[48]*w->term[1][128+k];
-        w->S[96+k] = w->fh[52]*w->term[1][64+k] + w->fh[53]*w->term[1][128+k];
-        w->S[128+k] = w->fh[57]*w->term[1][80+k];
+    for (k = 0; k < 8; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][8+k] + w->fh[1]*w->term[1][16+k] + w->fh[2]*w->term[1][32+k] +
+                w->fh[3]*w->term[1][64+k];
+        w->S[8+k] = w->fh[7]*w->term[1][k] + w->fh[8]*w->term[1][16+k] + w->fh[9]*w->term[1][24+k] +
+                w->fh[10]*w->term[1][48+k] + w->fh[11]*w->term[1][64+k];
+        w->S[16+k] = w->fh[15]*w->term[1][k] + w->fh[16]*w->term[1][8+k] +
+                w->fh[17]*w->term[1][24+k] + w->fh[18]*w->term[1][48+k] +
+                w->fh[19]*w->term[1][64+k];
+        w->S[24+k] = w->fh[23]*w->term[1][8+k] + w->fh[24]*w->term[1][16+k] +
+                w->fh[25]*w->term[1][24+k] + w->fh[26]*w->term[1][32+k] + w->fh[27]*w->term[1][40+k]
+                + w->fh[28]*w->term[1][48+k] + w->fh[29]*w->term[1][64+k];
+        w->S[32+k] = w->fh[33]*w->term[1][k] + w->fh[34]*w->term[1][16+k] +
+                w->fh[35]*w->term[1][24+k] + w->fh[36]*w->term[1][32+k] + w->fh[37]*w->term[1][40+k]
+                + w->fh[38]*w->term[1][48+k] + w->fh[39]*w->term[1][64+k];
+        w->S[40+k] = w->fh[43]*w->term[1][k] + w->fh[44]*w->term[1][8+k] +
+                w->fh[45]*w->term[1][24+k] + w->fh[46]*w->term[1][32+k] + w->fh[47]*w->term[1][48+k]
+                + w->fh[48]*w->term[1][64+k];
+        w->S[48+k] = w->fh[52]*w->term[1][32+k] + w->fh[53]*w->term[1][64+k];
+        w->S[64+k] = w->fh[57]*w->term[1][40+k];
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[9] = w->S[9] + w->fh[4]*c_in;
-    w->S[10] = w->S[10] + w->fh[5]*c_in;
-    w->S[11] = w->S[11] + w->fh[6]*c_in;
-    w->S[17] = w->S[17] + c_out;
-    w->S[25] = w->S[25] + w->fh[12]*c_in;
-    w->S[26] = w->S[26] + w->fh[13]*c_in;
-    w->S[27] = w->S[27] + w->fh[14]*c_in;
-    w->S[34] = w->S[34] + c_out;
-    w->S[41] = w->S[41] + w->fh[20]*c_in;
-    w->S[42] = w->S[42] + w->fh[21]*c_in;
-    w->S[43] = w->S[43] + w->fh[22]*c_in;
-    w->S[51] = w->S[51] + c_out;
-    w->S[60] = w->S[60] + w->fh[30]*c_in;
-    w->S[61] = w->S[61] + w->fh[31]*c_in;
-    w->S[62] = w->S[62] + w->fh[32]*c_in;
-    w->S[68] = w->S[68] + c_out;
-    w->S[76] = w->S[76] + w->fh[40]*c_in;
-    w->S[77] = w->S[77] + w->fh[41]*c_in;
-    w->S[78] = w->S[78] + w->fh[42]*c_in;
-    w->S[85] = w->S[85] + c_out;
-    w->S[92] = w->S[92] + w->fh[49]*c_in;
-    w->S[93] = w->S[93] + w->fh[50]*c_in;
-    w->S[94] = w->S[94] + w->fh[51]*c_in;
-    w->S[102] = w->S[102] + c_out;
-    w->S[136] = w->S[136] + c_out;
+    w->S[9] = w->S[9] + c_out;
+    w->S[18] = w->S[18] + c_out;
+    w->S[27] = w->S[27] + c_out;
+    w->S[36] = w->S[36] + c_out;
+    w->S[45] = w->S[45] + c_out;
+    w->S[54] = w->S[54] + c_out;
+    w->S[71] = w->S[71] + c_out;
 }
 
 INS_GPS15_BLOCK void horner_saturated_into_term(ins_gps15_discretize_scratch *restrict w, const
-        ins_gps15_scalar c_out, const ins_gps15_scalar c_in)
+        ins_gps15_scalar c_out)
 {
     int k;
-    for (k = 0; k < 16; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[16+k] + w->fh[1]*w->S[32+k] + w->fh[2]*w->S[64+k] +
-                w->fh[3]*w->S[128+k];
-        w->term[1][16+k] = w->fh[7]*w->S[k] + w->fh[8]*w->S[32+k] + w->fh[9]*w->S[48+k] +
-                w->fh[10]*w->S[96+k] + w->fh[11]*w->S[128+k];
-        w->term[1][32+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[16+k] + w->fh[17]*w->S[48+k] +
-                w->fh[18]*w->S[96+k] + w->fh[19]*w->S[128+k];
-        w->term[1][48+k] = w->fh[23]*w->S[16+k] + w->fh[24]*w->S[32+k] + w->fh[25]*w->S[48+k] +
-                w->fh[26]*w->S[64+k] + w->fh[27]*w->S[80+k] + w->fh[28]*w->S[96+k] +
-                w->fh[29]*w->S[128+k];
-        w->term[1][64+k] = w->fh[33]*w->S[k] + w->fh[34]*w->S[32+k] + w->fh[35]*w->S[48+k] +
-                w->fh[36]*w->S[64+k] + w->fh[37]*w->S[80+k] + w->fh[38]*w->S[96+k] +
-                w->fh[39]*w->S[128+k];
-        w->term[1][80+k] = w->fh[43]*w->S[k] + w->fh[44]*w->S[16+k] + w->fh[45]*w->S[48+k] +
-                w->fh[46]*w->S[64+k] + w->fh[47]*w->S[96+k] + w->fh[48]*w->S[128+k];
-        w->term[1][96+k] = w->fh[52]*w->S[64+k] + w->fh[53]*w->S[128+k];
-        w->term[1][128+k] = w->fh[57]*w->S[80+k];
+    for (k = 0; k < 8; ++k) {
+        w->term[1][k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
+                w->fh[3]*w->S[64+k];
+        w->term[1][8+k] = w->fh[7]*w->S[k] + w->fh[8]*w->S[16+k] + w->fh[9]*w->S[24+k] +
+                w->fh[10]*w->S[48+k] + w->fh[11]*w->S[64+k];
+        w->term[1][16+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[24+k] +
+                w->fh[18]*w->S[48+k] + w->fh[19]*w->S[64+k];
+        w->term[1][24+k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
+                w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k] + w->fh[28]*w->S[48+k] +
+                w->fh[29]*w->S[64+k];
+        w->term[1][32+k] = w->fh[33]*w->S[k] + w->fh[34]*w->S[16+k] + w->fh[35]*w->S[24+k] +
+                w->fh[36]*w->S[32+k] + w->fh[37]*w->S[40+k] + w->fh[38]*w->S[48+k] +
+                w->fh[39]*w->S[64+k];
+        w->term[1][40+k] = w->fh[43]*w->S[k] + w->fh[44]*w->S[8+k] + w->fh[45]*w->S[24+k] +
+                w->fh[46]*w->S[32+k] + w->fh[47]*w->S[48+k] + w->fh[48]*w->S[64+k];
+        w->term[1][48+k] = w->fh[52]*w->S[32+k] + w->fh[53]*w->S[64+k];
+        w->term[1][64+k] = w->fh[57]*w->S[40+k];
     }
     w->term[1][0] = w->term[1][0] + c_out;
-    w->term[1][9] = w->term[1][9] + w->fh[4]*c_in;
-    w->term[1][10] = w->term[1][10] + w->fh[5]*c_in;
-    w->term[1][11] = w->term[1][11] + w->fh[6]*c_in;
-    w->term[1][17] = w->term[1][17] + c_out;
-    w->term[1][25] = w->term[1][25] + w->fh[12]*c_in;
-    w->term[1][26] = w->term[1][26] + w->fh[13]*c_in;
-    w->term[1][27] = w->term[1][27] + w->fh[14]*c_in;
-    w->term[1][34] = w->term[1][34] + c_out;
-    w->term[1][41] = w->term[1][41] + w->fh[20]*c_in;
-    w->term[1][42] = w->term[1][42] + w->fh[21]*c_in;
-    w->term[1][43] = w->term[1][43] + w->fh[22]*c_in;
-    w->term[1][51] = w->term[1][51] + c_out;
-    w->term[1][60] = w->term[1][60] + w->fh[30]*c_in;
-    w->term[1][61] = w->term[1][61] + w->fh[31]*c_in;
-    w->term[1][62] = w->term[1][62] + w->fh[32]*c_in;
-    w->term[1][68] = w->term[1][68] + c_out;
-    w->term[1][76] = w->term[1][76] + w->fh[40]*c_in;
-    w->term[1][77] = w->term[1][77] + w->fh[41]*c_in;
-    w->term[1][78] = w->term[1][78] + w->fh[42]*c_in;
-    w->term[1][85] = w->term[1][85] + c_out;
-    w->term[1][92] = w->term[1][92] + w->fh[49]*c_in;
-    w->term[1][93] = w->term[1][93] + w->fh[50]*c_in;
-    w->term[1][94] = w->term[1][94] + w->fh[51]*c_in;
-    w->term[1][102] = w->term[1][102] + c_out;
-    w->term[1][136] = w->term[1][136] + c_out;
+    w->term[1][9] = w->term[1][9] + c_out;
+    w->term[1][18] = w->term[1][18] + c_out;
+    w->term[1][27] = w->term[1][27] + c_out;
+    w->term[1][36] = w->term[1][36] + c_out;
+    w->term[1][45] = w->term[1][45] + c_out;
+    w->term[1][54] = w->term[1][54] + c_out;
+    w->term[1][71] = w->term[1][71] + c_out;
+}
+
+INS_GPS15_BLOCK void horner_first_into_term(ins_gps15_discretize_scratch *restrict w, const
+        ins_gps15_scalar c_out)
+{
+    int k;
+    for (k = 0; k < 8; ++k) {
+        w->term[1][k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
+                w->fh[3]*w->S[64+k];
+        w->term[1][8+k] = w->fh[7]*w->S[k] + w->fh[8]*w->S[16+k] + w->fh[9]*w->S[24+k] +
+                w->fh[10]*w->S[48+k] + w->fh[11]*w->S[64+k];
+        w->term[1][16+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[24+k] +
+                w->fh[18]*w->S[48+k] + w->fh[19]*w->S[64+k];
+        w->term[1][24+k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
+                w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k] + w->fh[28]*w->S[48+k] +
+                w->fh[29]*w->S[64+k];
+        w->term[1][32+k] = w->fh[33]*w->S[k] + w->fh[34]*w->S[16+k] + w->fh[35]*w->S[24+k] +
+                w->fh[36]*w->S[32+k] + w->fh[37]*w->S[40+k] + w->fh[38]*w->S[48+k] +
+                w->fh[39]*w->S[64+k];
+        w->term[1][40+k] = w->fh[43]*w->S[k] + w->fh[44]*w->S[8+k] + w->fh[45]*w->S[24+k] +
+                w->fh[46]*w->S[32+k] + w->fh[47]*w->S[48+k] + w->fh[48]*w->S[64+k];
+        w->term[1][48+k] = w->fh[52]*w->S[32+k] + w->fh[53]*w->S[64+k];
+        w->term[1][56+k] = w->fh[54]*w->S[24+k] + w->fh[55]*w->S[48+k] + w->fh[56]*w->S[64+k];
+        w->term[1][64+k] = w->fh[57]*w->S[40+k];
+    }
+    w->term[1][0] = w->term[1][0] + c_out;
+    w->term[1][9] = w->term[1][9] + c_out;
+    w->term[1][18] = w->term[1][18] + c_out;
+    w->term[1][27] = w->term[1][27] + c_out;
+    w->term[1][36] = w->term[1][36] + c_out;
+    w->term[1][45] = w->term[1][45] + c_out;
+    w->term[1][54] = w->term[1][54] + c_out;
+    w->term[1][114] = c_out;
+    w->term[1][71] = w->term[1][71] + c_out;
 }
 
 INS_GPS15_BLOCK void horner_last_into_S(ins_gps15_discretize_scratch *restrict w, const
-        ins_gps15_scalar c_out, const ins_gps15_scalar c_in)
+        ins_gps15_scalar c_out)
 {
     int k;
-    for (k = 0; k < 16; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][16+k] + w->fh[1]*w->term[1][32+k] + w->fh[2]*w->term[1][64+k]
-                + w->fh[3]*w->term[1][128+k];
-        w->S[16+k] = w->fh[7]*w->term[1][k] + w->fh[8]*w->term[1][32+k] + w->fh[9]*w->term[1][48+k]
-                + w->fh[10]*w->term[1][96+k] + w->fh[11]*w->term[1][128+k];
-        w->S[32+k] = w->fh[15]*w->term[1][k] + w->fh[16]*w->term[1][16+k] +
-                w->fh[17]*w->term[1][48+k] + w->fh[18]*w->term[1][96+k] +
-                w->fh[19]*w->term[1][128+k];
-        w->S[48+k] = w->fh[23]*w->term[1][16+k] + w->fh[24]*w->term[1][32+k] +
-                w->fh[25]*w->term[1][48+k] + w->fh[26]*w->term[1][64+k] + w->fh[27]*w->term[1][80+k]
-                + w->fh[28]*w->term[1][96+k] + w->fh[29]*w->term[1][128+k];
-        w->S[64+k] = w->fh[33]*w->term[1][k] + w->fh[34]*w->term[1][32+k] +
-                w->fh[35]*w->term[1][48+k] + w->fh[36]*w->term[1][64+k] + w->fh[37]*w->term[1][80+k]
-                + w->fh[38]*w->term[1][96+k] + w->fh[39]*w->term[1][128+k];
-        w->S[80+k] = w->fh[43]*w->term[1][k] + w->fh[44]*w->term[1][16+k] +
-                w->fh[45]*w->term[1][48+k] + w->fh[46]*w->term[1][64+k] + w->fh[47]*w->term[1][96+k]
-                + w->fh[48]*w->term[1][128+k];
-        w->S[96+k] = w->fh[52]*w->term[1][64+k] + w->fh[53]*w->term[1][128+k];
-        w->S[112+k] = w->fh[54]*w->term[1][48+k] + w->fh[55]*w->term[1][96+k] +
-                w->fh[56]*w->term[1][128+k];
-        w->S[128+k] = w->fh[57]*w->term[1][80+k];
+    for (k = 0; k < 8; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][8+k] + w->fh[1]*w->term[1][16+k] + w->fh[2]*w->term[1][32+k] +
+                w->fh[3]*w->term[1][64+k];
+        w->S[8+k] = w->fh[7]*w->term[1][k] + w->fh[8]*w->term[1][16+k] + w->fh[9]*w->term[1][24+k] +
+                w->fh[10]*w->term[1][48+k] + w->fh[11]*w->term[1][64+k];
+        w->S[16+k] = w->fh[15]*w->term[1][k] + w->fh[16]*w->term[1][8+k] +
+                w->fh[17]*w->term[1][24+k] + w->fh[18]*w->term[1][48+k] +
+                w->fh[19]*w->term[1][64+k];
+        w->S[24+k] = w->fh[23]*w->term[1][8+k] + w->fh[24]*w->term[1][16+k] +
+                w->fh[25]*w->term[1][24+k] + w->fh[26]*w->term[1][32+k] + w->fh[27]*w->term[1][40+k]
+                + w->fh[28]*w->term[1][48+k] + w->fh[29]*w->term[1][64+k];
+        w->S[32+k] = w->fh[33]*w->term[1][k] + w->fh[34]*w->term[1][16+k] +
+                w->fh[35]*w->term[1][24+k] + w->fh[36]*w->term[1][32+k] + w->fh[37]*w->term[1][40+k]
+                + w->fh[38]*w->term[1][48+k] + w->fh[39]*w->term[1][64+k];
+        w->S[40+k] = w->fh[43]*w->term[1][k] + w->fh[44]*w->term[1][8+k] +
+                w->fh[45]*w->term[1][24+k] + w->fh[46]*w->term[1][32+k] + w->fh[47]*w->term[1][48+k]
+                + w->fh[48]*w->term[1][64+k];
+        w->S[48+k] = w->fh[52]*w->term[1][32+k] + w->fh[53]*w->term[1][64+k];
+        w->S[56+k] = w->fh[54]*w->term[1][24+k] + w->fh[55]*w->term[1][48+k] +
+                w->fh[56]*w->term[1][64+k];
+        w->S[64+k] = w->fh[57]*w->term[1][40+k];
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[9] = w->S[9] + w->fh[4]*c_in;
-    w->S[10] = w->S[10] + w->fh[5]*c_in;
-    w->S[11] = w->S[11] + w->fh[6]*c_in;
-    w->S[17] = w->S[17] + c_out;
-    w->S[25] = w->S[25] + w->fh[12]*c_in;
-    w->S[26] = w->S[26] + w->fh[13]*c_in;
-    w->S[27] = w->S[27] + w->fh[14]*c_in;
-    w->S[34] = w->S[34] + c_out;
-    w->S[41] = w->S[41] + w->fh[20]*c_in;
-    w->S[42] = w->S[42] + w->fh[21]*c_in;
-    w->S[43] = w->S[43] + w->fh[22]*c_in;
-    w->S[51] = w->S[51] + c_out;
-    w->S[60] = w->S[60] + w->fh[30]*c_in;
-    w->S[61] = w->S[61] + w->fh[31]*c_in;
-    w->S[62] = w->S[62] + w->fh[32]*c_in;
-    w->S[68] = w->S[68] + c_out;
-    w->S[76] = w->S[76] + w->fh[40]*c_in;
-    w->S[77] = w->S[77] + w->fh[41]*c_in;
-    w->S[78] = w->S[78] + w->fh[42]*c_in;
-    w->S[85] = w->S[85] + c_out;
-    w->S[92] = w->S[92] + w->fh[49]*c_in;
-    w->S[93] = w->S[93] + w->fh[50]*c_in;
-    w->S[94] = w->S[94] + w->fh[51]*c_in;
-    w->S[102] = w->S[102] + c_out;
-    w->S[119] = w->S[119] + c_out;
-    w->S[136] = w->S[136] + c_out;
+    w->S[9] = w->S[9] + c_out;
+    w->S[18] = w->S[18] + c_out;
+    w->S[27] = w->S[27] + c_out;
+    w->S[36] = w->S[36] + c_out;
+    w->S[45] = w->S[45] + c_out;
+    w->S[54] = w->S[54] + c_out;
+    w->S[114] = c_out;
+    w->S[71] = w->S[71] + c_out;
+}
+
+INS_GPS15_BLOCK void horner_unit_columns(ins_gps15_discretize_scratch *restrict w)
+{
+    w->S[72] = w->term[1][0]*w->fh[4] + w->term[1][1]*w->fh[12] + w->term[1][2]*w->fh[20];
+    w->S[73] = w->term[1][0]*w->fh[5] + w->term[1][1]*w->fh[13] + w->term[1][2]*w->fh[21];
+    w->S[74] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[14] + w->term[1][2]*w->fh[22];
+    w->S[75] = w->term[1][3]*w->fh[30] + w->term[1][4]*w->fh[40] + w->term[1][5]*w->fh[49];
+    w->S[76] = w->term[1][3]*w->fh[31] + w->term[1][4]*w->fh[41] + w->term[1][5]*w->fh[50];
+    w->S[77] = w->term[1][3]*w->fh[32] + w->term[1][4]*w->fh[42] + w->term[1][5]*w->fh[51];
+    w->S[78] = w->term[1][8]*w->fh[4] + w->term[1][9]*w->fh[12] + w->term[1][10]*w->fh[20];
+    w->S[79] = w->term[1][8]*w->fh[5] + w->term[1][9]*w->fh[13] + w->term[1][10]*w->fh[21];
+    w->S[80] = w->term[1][8]*w->fh[6] + w->term[1][9]*w->fh[14] + w->term[1][10]*w->fh[22];
+    w->S[81] = w->term[1][11]*w->fh[30] + w->term[1][12]*w->fh[40] + w->term[1][13]*w->fh[49];
+    w->S[82] = w->term[1][11]*w->fh[31] + w->term[1][12]*w->fh[41] + w->term[1][13]*w->fh[50];
+    w->S[83] = w->term[1][11]*w->fh[32] + w->term[1][12]*w->fh[42] + w->term[1][13]*w->fh[51];
+    w->S[84] = w->term[1][16]*w->fh[4] + w->term[1][17]*w->fh[12] + w->term[1][18]*w->fh[20];
+    w->S[85] = w->term[1][16]*w->fh[5] + w->term[1][17]*w->fh[13] + w->term[1][18]*w->fh[21];
+    w->S[86] = w->term[1][16]*w->fh[6] + w->term[1][17]*w->fh[14] + w->term[1][18]*w->fh[22];
+    w->S[87] = w->term[1][19]*w->fh[30] + w->term[1][20]*w->fh[40] + w->term[1][21]*w->fh[49];
+    w->S[88] = w->term[1][19]*w->fh[31] + w->term[1][20]*w->fh[41] + w->term[1][21]*w->fh[50];
+    w->S[89] = w->term[1][19]*w->fh[32] + w->term[1][20]*w->fh[42] + w->term[1][21]*w->fh[51];
+    w->S[90] = w->term[1][24]*w->fh[4] + w->term[1][25]*w->fh[12] + w->term[1][26]*w->fh[20];
+    w->S[91] = w->term[1][24]*w->fh[5] + w->term[1][25]*w->fh[13] + w->term[1][26]*w->fh[21];
+    w->S[92] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[14] + w->term[1][26]*w->fh[22];
+    w->S[93] = w->term[1][27]*w->fh[30] + w->term[1][28]*w->fh[40] + w->term[1][29]*w->fh[49];
+    w->S[94] = w->term[1][27]*w->fh[31] + w->term[1][28]*w->fh[41] + w->term[1][29]*w->fh[50];
+    w->S[95] = w->term[1][27]*w->fh[32] + w->term[1][28]*w->fh[42] + w->term[1][29]*w->fh[51];
+    w->S[96] = w->term[1][32]*w->fh[4] + w->term[1][33]*w->fh[12] + w->term[1][34]*w->fh[20];
+    w->S[97] = w->term[1][32]*w->fh[5] + w->term[1][33]*w->fh[13] + w->term[1][34]*w->fh[21];
+    w->S[98] = w->term[1][32]*w->fh[6] + w->term[1][33]*w->fh[14] + w->term[1][34]*w->fh[22];
+    w->S[99] = w->term[1][35]*w->fh[30] + w->term[1][36]*w->fh[40] + w->term[1][37]*w->fh[49];
+    w->S[100] = w->term[1][35]*w->fh[31] + w->term[1][36]*w->fh[41] + w->term[1][37]*w->fh[50];
+    w->S[101] = w->term[1][35]*w->fh[32] + w->term[1][36]*w->fh[42] + w->term[1][37]*w->fh[51];
+    w->S[102] = w->term[1][40]*w->fh[4] + w->term[1][41]*w->fh[12] + w->term[1][42]*w->fh[20];
+    w->S[103] = w->term[1][40]*w->fh[5] + w->term[1][41]*w->fh[13] + w->term[1][42]*w->fh[21];
+    w->S[104] = w->term[1][40]*w->fh[6] + w->term[1][41]*w->fh[14] + w->term[1][42]*w->fh[22];
+    w->S[105] = w->term[1][43]*w->fh[30] + w->term[1][44]*w->fh[40] + w->term[1][45]*w->fh[49];
+    w->S[106] = w->term[1][43]*w->fh[31] + w->term[1][44]*w->fh[41] + w->term[1][45]*w->fh[50];
+    w->S[107] = w->term[1][43]*w->fh[32] + w->term[1][44]*w->fh[42] + w->term[1][45]*w->fh[51];
+    w->S[108] = w->term[1][48]*w->fh[4] + w->term[1][49]*w->fh[12] + w->term[1][50]*w->fh[20];
+    w->S[109] = w->term[1][48]*w->fh[5] + w->term[1][49]*w->fh[13] + w->term[1][50]*w->fh[21];
+    w->S[110] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[14] + w->term[1][50]*w->fh[22];
+    w->S[111] = w->term[1][51]*w->fh[30] + w->term[1][52]*w->fh[40] + w->term[1][53]*w->fh[49];
+    w->S[112] = w->term[1][51]*w->fh[31] + w->term[1][52]*w->fh[41] + w->term[1][53]*w->fh[50];
+    w->S[113] = w->term[1][51]*w->fh[32] + w->term[1][52]*w->fh[42] + w->term[1][53]*w->fh[51];
+    w->S[115] = w->term[1][56]*w->fh[4] + w->term[1][57]*w->fh[12] + w->term[1][58]*w->fh[20];
+    w->S[116] = w->term[1][56]*w->fh[5] + w->term[1][57]*w->fh[13] + w->term[1][58]*w->fh[21];
+    w->S[117] = w->term[1][56]*w->fh[6] + w->term[1][57]*w->fh[14] + w->term[1][58]*w->fh[22];
+    w->S[118] = w->term[1][59]*w->fh[30] + w->term[1][60]*w->fh[40] + w->term[1][61]*w->fh[49];
+    w->S[119] = w->term[1][59]*w->fh[31] + w->term[1][60]*w->fh[41] + w->term[1][61]*w->fh[50];
+    w->S[120] = w->term[1][59]*w->fh[32] + w->term[1][60]*w->fh[42] + w->term[1][61]*w->fh[51];
+    w->S[121] = w->term[1][64]*w->fh[4] + w->term[1][65]*w->fh[12] + w->term[1][66]*w->fh[20];
+    w->S[122] = w->term[1][64]*w->fh[5] + w->term[1][65]*w->fh[13] + w->term[1][66]*w->fh[21];
+    w->S[123] = w->term[1][64]*w->fh[6] + w->term[1][65]*w->fh[14] + w->term[1][66]*w->fh[22];
+    w->S[124] = w->term[1][67]*w->fh[30] + w->term[1][68]*w->fh[40] + w->term[1][69]*w->fh[49];
+    w->S[125] = w->term[1][67]*w->fh[31] + w->term[1][68]*w->fh[41] + w->term[1][69]*w->fh[50];
+    w->S[126] = w->term[1][67]*w->fh[32] + w->term[1][68]*w->fh[42] + w->term[1][69]*w->fh[51];
 }
 
 INS_GPS15_BLOCK void horner_transition(ins_gps15_transition *restrict t, const
         ins_gps15_discretize_scratch *restrict w)
 {
+    const ins_gps15_scalar one = 1.0;
     int k;
-    for (k = 0; k < 15; ++k) {
-        t->Phi[0][k] = w->fh[0]*w->S[16+k] + w->fh[1]*w->S[32+k] + w->fh[2]*w->S[64+k] +
-                w->fh[3]*w->S[128+k];
-        t->Phi[1][k] = w->fh[7]*w->S[k] + w->fh[8]*w->S[32+k] + w->fh[9]*w->S[48+k] +
-                w->fh[10]*w->S[96+k] + w->fh[11]*w->S[128+k];
-        t->Phi[2][k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[16+k] + w->fh[17]*w->S[48+k] +
-                w->fh[18]*w->S[96+k] + w->fh[19]*w->S[128+k];
-        t->Phi[3][k] = w->fh[23]*w->S[16+k] + w->fh[24]*w->S[32+k] + w->fh[25]*w->S[48+k] +
-                w->fh[26]*w->S[64+k] + w->fh[27]*w->S[80+k] + w->fh[28]*w->S[96+k] +
-                w->fh[29]*w->S[128+k];
-        t->Phi[4][k] = w->fh[33]*w->S[k] + w->fh[34]*w->S[32+k] + w->fh[35]*w->S[48+k] +
-                w->fh[36]*w->S[64+k] + w->fh[37]*w->S[80+k] + w->fh[38]*w->S[96+k] +
-                w->fh[39]*w->S[128+k];
-        t->Phi[5][k] = w->fh[43]*w->S[k] + w->fh[44]*w->S[16+k] + w->fh[45]*w->S[48+k] +
-                w->fh[46]*w->S[64+k] + w->fh[47]*w->S[96+k] + w->fh[48]*w->S[128+k];
-        t->Phi[6][k] = w->fh[52]*w->S[64+k] + w->fh[53]*w->S[128+k];
-        t->Phi[7][k] = w->fh[54]*w->S[48+k] + w->fh[55]*w->S[96+k] + w->fh[56]*w->S[128+k];
-        t->Phi[8][k] = w->fh[57]*w->S[80+k];
+    for (k = 0; k < 7; ++k) {
+        t->Phi[0][k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
+                w->fh[3]*w->S[64+k];
     }
-    t->Phi[0][9] = t->Phi[0][9] + w->fh[4];
-    t->Phi[0][10] = t->Phi[0][10] + w->fh[5];
-    t->Phi[0][11] = t->Phi[0][11] + w->fh[6];
-    t->Phi[1][9] = t->Phi[1][9] + w->fh[12];
-    t->Phi[1][10] = t->Phi[1][10] + w->fh[13];
-    t->Phi[1][11] = t->Phi[1][11] + w->fh[14];
-    t->Phi[2][9] = t->Phi[2][9] + w->fh[20];
-    t->Phi[2][10] = t->Phi[2][10] + w->fh[21];
-    t->Phi[2][11] = t->Phi[2][11] + w->fh[22];
-    t->Phi[3][12] = t->Phi[3][12] + w->fh[30];
-    t->Phi[3][13] = t->Phi[3][13] + w->fh[31];
-    t->Phi[3][14] = t->Phi[3][14] + w->fh[32];
-    t->Phi[4][12] = t->Phi[4][12] + w->fh[40];
-    t->Phi[4][13] = t->Phi[4][13] + w->fh[41];
-    t->Phi[4][14] = t->Phi[4][14] + w->fh[42];
-    t->Phi[5][12] = t->Phi[5][12] + w->fh[49];
-    t->Phi[5][13] = t->Phi[5][13] + w->fh[50];
-    t->Phi[5][14] = t->Phi[5][14] + w->fh[51];
+    for (k = 0; k < 1; ++k) {
+        t->Phi[0][8+k] = w->fh[0]*w->S[15+k] + w->fh[1]*w->S[23+k] + w->fh[2]*w->S[39+k] +
+                w->fh[3]*w->S[71+k];
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[1][k] = w->fh[7]*w->S[k] + w->fh[8]*w->S[16+k] + w->fh[9]*w->S[24+k] +
+                w->fh[10]*w->S[48+k] + w->fh[11]*w->S[64+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[1][8+k] = w->fh[7]*w->S[7+k] + w->fh[8]*w->S[23+k] + w->fh[9]*w->S[31+k] +
+                w->fh[10]*w->S[55+k] + w->fh[11]*w->S[71+k];
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[2][k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[24+k] +
+                w->fh[18]*w->S[48+k] + w->fh[19]*w->S[64+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[2][8+k] = w->fh[15]*w->S[7+k] + w->fh[16]*w->S[15+k] + w->fh[17]*w->S[31+k] +
+                w->fh[18]*w->S[55+k] + w->fh[19]*w->S[71+k];
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[3][k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
+                w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k] + w->fh[28]*w->S[48+k] +
+                w->fh[29]*w->S[64+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[3][8+k] = w->fh[23]*w->S[15+k] + w->fh[24]*w->S[23+k] + w->fh[25]*w->S[31+k] +
+                w->fh[26]*w->S[39+k] + w->fh[27]*w->S[47+k] + w->fh[28]*w->S[55+k] +
+                w->fh[29]*w->S[71+k];
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[4][k] = w->fh[33]*w->S[k] + w->fh[34]*w->S[16+k] + w->fh[35]*w->S[24+k] +
+                w->fh[36]*w->S[32+k] + w->fh[37]*w->S[40+k] + w->fh[38]*w->S[48+k] +
+                w->fh[39]*w->S[64+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[4][8+k] = w->fh[33]*w->S[7+k] + w->fh[34]*w->S[23+k] + w->fh[35]*w->S[31+k] +
+                w->fh[36]*w->S[39+k] + w->fh[37]*w->S[47+k] + w->fh[38]*w->S[55+k] +
+                w->fh[39]*w->S[71+k];
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[5][k] = w->fh[43]*w->S[k] + w->fh[44]*w->S[8+k] + w->fh[45]*w->S[24+k] +
+                w->fh[46]*w->S[32+k] + w->fh[47]*w->S[48+k] + w->fh[48]*w->S[64+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[5][8+k] = w->fh[43]*w->S[7+k] + w->fh[44]*w->S[15+k] + w->fh[45]*w->S[31+k] +
+                w->fh[46]*w->S[39+k] + w->fh[47]*w->S[55+k] + w->fh[48]*w->S[71+k];
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[6][k] = w->fh[52]*w->S[32+k] + w->fh[53]*w->S[64+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[6][8+k] = w->fh[52]*w->S[39+k] + w->fh[53]*w->S[71+k];
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[7][k] = w->fh[54]*w->S[24+k] + w->fh[55]*w->S[48+k] + w->fh[56]*w->S[64+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[7][8+k] = w->fh[54]*w->S[31+k] + w->fh[55]*w->S[55+k] + w->fh[56]*w->S[71+k];
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[8][k] = w->fh[57]*w->S[40+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[8][8+k] = w->fh[57]*w->S[47+k];
+    }
+    t->Phi[0][9] = w->S[0]*w->fh[4] + w->S[1]*w->fh[12] + w->S[2]*w->fh[20];
+    t->Phi[0][10] = w->S[0]*w->fh[5] + w->S[1]*w->fh[13] + w->S[2]*w->fh[21];
+    t->Phi[0][11] = w->S[0]*w->fh[6] + w->S[1]*w->fh[14] + w->S[2]*w->fh[22];
+    t->Phi[0][12] = w->S[3]*w->fh[30] + w->S[4]*w->fh[40] + w->S[5]*w->fh[49];
+    t->Phi[0][13] = w->S[3]*w->fh[31] + w->S[4]*w->fh[41] + w->S[5]*w->fh[50];
+    t->Phi[0][14] = w->S[3]*w->fh[32] + w->S[4]*w->fh[42] + w->S[5]*w->fh[51];
+    t->Phi[1][9] = w->S[8]*w->fh[4] + w->S[9]*w->fh[12] + w->S[10]*w->fh[20];
+    t->Phi[1][10] = w->S[8]*w->fh[5] + w->S[9]*w->fh[13] + w->S[10]*w->fh[21];
+    t->Phi[1][11] = w->S[8]*w->fh[6] + w->S[9]*w->fh[14] + w->S[10]*w->fh[22];
+    t->Phi[1][12] = w->S[11]*w->fh[30] + w->S[12]*w->fh[40] + w->S[13]*w->fh[49];
+    t->Phi[1][13] = w->S[11]*w->fh[31] + w->S[12]*w->fh[41] + w->S[13]*w->fh[50];
+    t->Phi[1][14] = w->S[11]*w->fh[32] + w->S[12]*w->fh[42] + w->S[13]*w->fh[51];
+    t->Phi[2][9] = w->S[16]*w->fh[4] + w->S[17]*w->fh[12] + w->S[18]*w->fh[20];
+    t->Phi[2][10] = w->S[16]*w->fh[5] + w->S[17]*w->fh[13] + w->S[18]*w->fh[21];
+    t->Phi[2][11] = w->S[16]*w->fh[6] + w->S[17]*w->fh[14] + w->S[18]*w->fh[22];
+    t->Phi[2][12] = w->S[19]*w->fh[30] + w->S[20]*w->fh[40] + w->S[21]*w->fh[49];
+    t->Phi[2][13] = w->S[19]*w->fh[31] + w->S[20]*w->fh[41] + w->S[21]*w->fh[50];
+    t->Phi[2][14] = w->S[19]*w->fh[32] + w->S[20]*w->fh[42] + w->S[21]*w->fh[51];
+    t->Phi[3][9] = w->S[24]*w->fh[4] + w->S[25]*w->fh[12] + w->S[26]*w->fh[20];
+    t->Phi[3][10] = w->S[24]*w->fh[5] + w->S[25]*w->fh[13] + w->S[26]*w->fh[21];
+    t->Phi[3][11] = w->S[24]*w->fh[6] + w->S[25]*w->fh[14] + w->S[26]*w->fh[22];
+    t->Phi[3][12] = w->S[27]*w->fh[30] + w->S[28]*w->fh[40] + w->S[29]*w->fh[49];
+    t->Phi[3][13] = w->S[27]*w->fh[31] + w->S[28]*w->fh[41] + w->S[29]*w->fh[50];
+    t->Phi[3][14] = w->S[27]*w->fh[32] + w->S[28]*w->fh[42] + w->S[29]*w->fh[51];
+    t->Phi[4][9] = w->S[32]*w->fh[4] + w->S[33]*w->fh[12] + w->S[34]*w->fh[20];
+    t->Phi[4][10] = w->S[32]*w->fh[5] + w->S[33]*w->fh[13] + w->S[34]*w->fh[21];
+    t->Phi[4][11] = w->S[32]*w->fh[6] + w->S[33]*w->fh[14] + w->S[34]*w->fh[22];
+    t->Phi[4][12] = w->S[35]*w->fh[30] + w->S[36]*w->fh[40] + w->S[37]*w->fh[49];
+    t->Phi[4][13] = w->S[35]*w->fh[31] + w->S[36]*w->fh[41] + w->S[37]*w->fh[50];
+    t->Phi[4][14] = w->S[35]*w->fh[32] + w->S[36]*w->fh[42] + w->S[37]*w->fh[51];
+    t->Phi[5][9] = w->S[40]*w->fh[4] + w->S[41]*w->fh[12] + w->S[42]*w->fh[20];
+    t->Phi[5][10] = w->S[40]*w->fh[5] + w->S[41]*w->fh[13] + w->S[42]*w->fh[21];
+    t->Phi[5][11] = w->S[40]*w->fh[6] + w->S[41]*w->fh[14] + w->S[42]*w->fh[22];
+    t->Phi[5][12] = w->S[43]*w->fh[30] + w->S[44]*w->fh[40] + w->S[45]*w->fh[49];
+    t->Phi[5][13] = w->S[43]*w->fh[31] + w->S[44]*w->fh[41] + w->S[45]*w->fh[50];
+    t->Phi[5][14] = w->S[43]*w->fh[32] + w->S[44]*w->fh[42] + w->S[45]*w->fh[51];
+    t->Phi[6][9] = w->S[48]*w->fh[4] + w->S[49]*w->fh[12] + w->S[50]*w->fh[20];
+    t->Phi[6][10] = w->S[48]*w->fh[5] + w->S[49]*w->fh[13] + w->S[50]*w->fh[21];
+    t->Phi[6][11] = w->S[48]*w->fh[6] + w->S[49]*w->fh[14] + w->S[50]*w->fh[22];
+    t->Phi[6][12] = w->S[51]*w->fh[30] + w->S[52]*w->fh[40] + w->S[53]*w->fh[49];
+    t->Phi[6][13] = w->S[51]*w->fh[31] + w->S[52]*w->fh[41] + w->S[53]*w->fh[50];
+    t->Phi[6][14] = w->S[51]*w->fh[32] + w->S[52]*w->fh[42] + w->S[53]*w->fh[51];
+    t->Phi[7][9] = w->S[56]*w->fh[4] + w->S[57]*w->fh[12] + w->S[58]*w->fh[20];
+    t->Phi[7][10] = w->S[56]*w->fh[5] + w->S[57]*w->fh[13] + w->S[58]*w->fh[21];
+    t->Phi[7][11] = w->S[56]*w->fh[6] + w->S[57]*w->fh[14] + w->S[58]*w->fh[22];
+    t->Phi[7][12] = w->S[59]*w->fh[30] + w->S[60]*w->fh[40] + w->S[61]*w->fh[49];
+    t->Phi[7][13] = w->S[59]*w->fh[31] + w->S[60]*w->fh[41] + w->S[61]*w->fh[50];
+    t->Phi[7][14] = w->S[59]*w->fh[32] + w->S[60]*w->fh[42] + w->S[61]*w->fh[51];
+    t->Phi[8][9] = w->S[64]*w->fh[4] + w->S[65]*w->fh[12] + w->S[66]*w->fh[20];
+    t->Phi[8][10] = w->S[64]*w->fh[5] + w->S[65]*w->fh[13] + w->S[66]*w->fh[21];
+    t->Phi[8][11] = w->S[64]*w->fh[6] + w->S[65]*w->fh[14] + w->S[66]*w->fh[22];
+    t->Phi[8][12] = w->S[67]*w->fh[30] + w->S[68]*w->fh[40] + w->S[69]*w->fh[49];
+    t->Phi[8][13] = w->S[67]*w->fh[31] + w->S[68]*w->fh[41] + w->S[69]*w->fh[50];
+    t->Phi[8][14] = w->S[67]*w->fh[32] + w->S[68]*w->fh[42] + w->S[69]*w->fh[51];
+    t->Phi[0][7] = 0;
+    t->Phi[1][7] = 0;
+    t->Phi[2][7] = 0;
+    t->Phi[3][7] = 0;
+    t->Phi[4][7] = 0;
+    t->Phi[5][7] = 0;
+    t->Phi[6][7] = 0;
+    t->Phi[7][7] = 0;
+    t->Phi[8][7] = 0;
     t->Phi[9][0] = 0;
     t->Phi[9][1] = 0;
     t->Phi[9][2] = 0;
@@ -1004,7 +1109,7 @@ INS_GPS15_BLOCK void horner_transition(ins_gps15_transition *restrict t, const
     t->Phi[9][6] = 0;
     t->Phi[9][7] = 0;
     t->Phi[9][8] = 0;
-    t->Phi[9][9] = 0;
+    t->Phi[9][9] = one;
     t->Phi[9][10] = 0;
     t->Phi[9][11] = 0;
     t->Phi[9][12] = 0;
@@ -1020,7 +1125,7 @@ INS_GPS15_BLOCK void horner_transition(ins_gps15_transition *restrict t, const
     t->Phi[10][7] = 0;
     t->Phi[10][8] = 0;
     t->Phi[10][9] = 0;
-    t->Phi[10][10] = 0;
+    t->Phi[10][10] = one;
     t->Phi[10][11] = 0;
     t->Phi[10][12] = 0;
     t->Phi[10][13] = 0;
@@ -1036,7 +1141,7 @@ INS_GPS15_BLOCK void horner_transition(ins_gps15_transition *restrict t, const
     t->Phi[11][8] = 0;
     t->Phi[11][9] = 0;
     t->Phi[11][10] = 0;
-    t->Phi[11][11] = 0;
+    t->Phi[11][11] = one;
     t->Phi[11][12] = 0;
     t->Phi[11][13] = 0;
     t->Phi[11][14] = 0;
@@ -1052,7 +1157,7 @@ INS_GPS15_BLOCK void horner_transition(ins_gps15_transition *restrict t, const
     t->Phi[12][9] = 0;
     t->Phi[12][10] = 0;
     t->Phi[12][11] = 0;
-    t->Phi[12][12] = 0;
+    t->Phi[12][12] = one;
     t->Phi[12][13] = 0;
     t->Phi[12][14] = 0;
     t->Phi[13][0] = 0;
@@ -1068,7 +1173,7 @@ INS_GPS15_BLOCK void horner_transition(ins_gps15_transition *restrict t, const
     t->Phi[13][10] = 0;
     t->Phi[13][11] = 0;
     t->Phi[13][12] = 0;
-    t->Phi[13][13] = 0;
+    t->Phi[13][13] = one;
     t->Phi[13][14] = 0;
     t->Phi[14][0] = 0;
     t->Phi[14][1] = 0;
@@ -1084,7 +1189,7 @@ INS_GPS15_BLOCK void horner_transition(ins_gps15_transition *restrict t, const
     t->Phi[14][11] = 0;
     t->Phi[14][12] = 0;
     t->Phi[14][13] = 0;
-    t->Phi[14][14] = 0;
+    t->Phi[14][14] = one;
 }
 
 INS_GPS15_BLOCK void doubling(ins_gps15_transition *restrict t, ins_gps15_discretize_scratch
@@ -1094,780 +1199,780 @@ INS_GPS15_BLOCK void doubling(ins_gps15_transition *restrict t, ins_gps15_discre
     w->term[0][0] = t->Phi[0][0]*t->Phi[0][0] + t->Phi[0][1]*t->Phi[1][0] +
             t->Phi[0][2]*t->Phi[2][0] + t->Phi[0][3]*t->Phi[3][0] + t->Phi[0][4]*t->Phi[4][0] +
             t->Phi[0][5]*t->Phi[5][0] + t->Phi[0][6]*t->Phi[6][0] + t->Phi[0][8]*t->Phi[8][0];
-    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[32] +
-            t->Phi[0][3]*w->S[48] + t->Phi[0][4]*w->S[64] + t->Phi[0][5]*w->S[80] +
-            t->Phi[0][6]*w->S[96] + t->Phi[0][8]*w->S[128];
+    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[8] + t->Phi[0][2]*w->S[16] +
+            t->Phi[0][3]*w->S[24] + t->Phi[0][4]*w->S[32] + t->Phi[0][5]*w->S[40] +
+            t->Phi[0][6]*w->S[48] + t->Phi[0][8]*w->S[64];
     w->term[0][1] = t->Phi[0][0]*t->Phi[0][1] + t->Phi[0][1]*t->Phi[1][1] +
             t->Phi[0][2]*t->Phi[2][1] + t->Phi[0][3]*t->Phi[3][1] + t->Phi[0][4]*t->Phi[4][1] +
             t->Phi[0][5]*t->Phi[5][1] + t->Phi[0][6]*t->Phi[6][1] + t->Phi[0][8]*t->Phi[8][1];
-    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[33] +
-            t->Phi[0][3]*w->S[49] + t->Phi[0][4]*w->S[65] + t->Phi[0][5]*w->S[81] +
-            t->Phi[0][6]*w->S[97] + t->Phi[0][8]*w->S[129];
+    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[9] + t->Phi[0][2]*w->S[17] +
+            t->Phi[0][3]*w->S[25] + t->Phi[0][4]*w->S[33] + t->Phi[0][5]*w->S[41] +
+            t->Phi[0][6]*w->S[49] + t->Phi[0][8]*w->S[65];
     w->term[0][2] = t->Phi[0][0]*t->Phi[0][2] + t->Phi[0][1]*t->Phi[1][2] +
             t->Phi[0][2]*t->Phi[2][2] + t->Phi[0][3]*t->Phi[3][2] + t->Phi[0][4]*t->Phi[4][2] +
             t->Phi[0][5]*t->Phi[5][2] + t->Phi[0][6]*t->Phi[6][2] + t->Phi[0][8]*t->Phi[8][2];
-    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[18] + t->Phi[0][2]*w->S[34] +
-            t->Phi[0][3]*w->S[50] + t->Phi[0][4]*w->S[66] + t->Phi[0][5]*w->S[82] +
-            t->Phi[0][6]*w->S[98] + t->Phi[0][8]*w->S[130];
+    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[10] + t->Phi[0][2]*w->S[18] +
+            t->Phi[0][3]*w->S[26] + t->Phi[0][4]*w->S[34] + t->Phi[0][5]*w->S[42] +
+            t->Phi[0][6]*w->S[50] + t->Phi[0][8]*w->S[66];
     w->term[0][3] = t->Phi[0][0]*t->Phi[0][3] + t->Phi[0][1]*t->Phi[1][3] +
             t->Phi[0][2]*t->Phi[2][3] + t->Phi[0][3]*t->Phi[3][3] + t->Phi[0][4]*t->Phi[4][3] +
             t->Phi[0][5]*t->Phi[5][3] + t->Phi[0][6]*t->Phi[6][3] + t->Phi[0][8]*t->Phi[8][3];
-    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[19] + t->Phi[0][2]*w->S[35] +
-            t->Phi[0][3]*w->S[51] + t->Phi[0][4]*w->S[67] + t->Phi[0][5]*w->S[83] +
-            t->Phi[0][6]*w->S[99] + t->Phi[0][8]*w->S[131];
+    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[11] + t->Phi[0][2]*w->S[19] +
+            t->Phi[0][3]*w->S[27] + t->Phi[0][4]*w->S[35] + t->Phi[0][5]*w->S[43] +
+            t->Phi[0][6]*w->S[51] + t->Phi[0][8]*w->S[67];
     w->term[0][4] = t->Phi[0][0]*t->Phi[0][4] + t->Phi[0][1]*t->Phi[1][4] +
             t->Phi[0][2]*t->Phi[2][4] + t->Phi[0][3]*t->Phi[3][4] + t->Phi[0][4]*t->Phi[4][4] +
             t->Phi[0][5]*t->Phi[5][4] + t->Phi[0][6]*t->Phi[6][4] + t->Phi[0][8]*t->Phi[8][4];
-    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[20] + t->Phi[0][2]*w->S[36] +
-            t->Phi[0][3]*w->S[52] + t->Phi[0][4]*w->S[68] + t->Phi[0][5]*w->S[84] +
-            t->Phi[0][6]*w->S[100] + t->Phi[0][8]*w->S[132];
+    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[12] + t->Phi[0][2]*w->S[20] +
+            t->Phi[0][3]*w->S[28] + t->Phi[0][4]*w->S[36] + t->Phi[0][5]*w->S[44] +
+            t->Phi[0][6]*w->S[52] + t->Phi[0][8]*w->S[68];
     w->term[0][5] = t->Phi[0][0]*t->Phi[0][5] + t->Phi[0][1]*t->Phi[1][5] +
             t->Phi[0][2]*t->Phi[2][5] + t->Phi[0][3]*t->Phi[3][5] + t->Phi[0][4]*t->Phi[4][5] +
             t->Phi[0][5]*t->Phi[5][5] + t->Phi[0][6]*t->Phi[6][5] + t->Phi[0][8]*t->Phi[8][5];
-    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[21] + t->Phi[0][2]*w->S[37] +
-            t->Phi[0][3]*w->S[53] + t->Phi[0][4]*w->S[69] + t->Phi[0][5]*w->S[85] +
-            t->Phi[0][6]*w->S[101] + t->Phi[0][8]*w->S[133];
+    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[13] + t->Phi[0][2]*w->S[21] +
+            t->Phi[0][3]*w->S[29] + t->Phi[0][4]*w->S[37] + t->Phi[0][5]*w->S[45] +
+            t->Phi[0][6]*w->S[53] + t->Phi[0][8]*w->S[69];
     w->term[0][6] = t->Phi[0][0]*t->Phi[0][6] + t->Phi[0][1]*t->Phi[1][6] +
             t->Phi[0][2]*t->Phi[2][6] + t->Phi[0][3]*t->Phi[3][6] + t->Phi[0][4]*t->Phi[4][6] +
             t->Phi[0][5]*t->Phi[5][6] + t->Phi[0][6]*t->Phi[6][6] + t->Phi[0][8]*t->Phi[8][6];
-    w->term[1][6] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[22] + t->Phi[0][2]*w->S[38] +
-            t->Phi[0][3]*w->S[54] + t->Phi[0][4]*w->S[70] + t->Phi[0][5]*w->S[86] +
-            t->Phi[0][6]*w->S[102] + t->Phi[0][8]*w->S[134];
+    w->term[1][6] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[22] +
+            t->Phi[0][3]*w->S[30] + t->Phi[0][4]*w->S[38] + t->Phi[0][5]*w->S[46] +
+            t->Phi[0][6]*w->S[54] + t->Phi[0][8]*w->S[70];
     w->term[0][7] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
             t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
             t->Phi[0][5]*t->Phi[5][8] + t->Phi[0][6]*t->Phi[6][8] + t->Phi[0][8]*t->Phi[8][8];
-    w->term[1][7] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[24] + t->Phi[0][2]*w->S[40] +
-            t->Phi[0][3]*w->S[56] + t->Phi[0][4]*w->S[72] + t->Phi[0][5]*w->S[88] +
-            t->Phi[0][6]*w->S[104] + t->Phi[0][8]*w->S[136];
+    w->term[1][7] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[23] +
+            t->Phi[0][3]*w->S[31] + t->Phi[0][4]*w->S[39] + t->Phi[0][5]*w->S[47] +
+            t->Phi[0][6]*w->S[55] + t->Phi[0][8]*w->S[71];
     w->term[0][8] = t->Phi[0][0]*t->Phi[0][9] + t->Phi[0][1]*t->Phi[1][9] +
             t->Phi[0][2]*t->Phi[2][9] + t->Phi[0][3]*t->Phi[3][9] + t->Phi[0][4]*t->Phi[4][9] +
             t->Phi[0][5]*t->Phi[5][9] + t->Phi[0][6]*t->Phi[6][9] + t->Phi[0][8]*t->Phi[8][9];
-    w->term[1][8] = t->Phi[0][0]*w->S[9] + t->Phi[0][1]*w->S[25] + t->Phi[0][2]*w->S[41] +
-            t->Phi[0][3]*w->S[57] + t->Phi[0][4]*w->S[73] + t->Phi[0][5]*w->S[89] +
-            t->Phi[0][6]*w->S[105] + t->Phi[0][8]*w->S[137] + t->Phi[0][9];
+    w->term[1][8] = t->Phi[0][0]*w->S[72] + t->Phi[0][1]*w->S[78] + t->Phi[0][2]*w->S[84] +
+            t->Phi[0][3]*w->S[90] + t->Phi[0][4]*w->S[96] + t->Phi[0][5]*w->S[102] +
+            t->Phi[0][6]*w->S[108] + t->Phi[0][8]*w->S[121] + t->Phi[0][9];
     w->term[0][9] = t->Phi[0][0]*t->Phi[0][10] + t->Phi[0][1]*t->Phi[1][10] +
             t->Phi[0][2]*t->Phi[2][10] + t->Phi[0][3]*t->Phi[3][10] + t->Phi[0][4]*t->Phi[4][10] +
             t->Phi[0][5]*t->Phi[5][10] + t->Phi[0][6]*t->Phi[6][10] + t->Phi[0][8]*t->Phi[8][10];
-    w->term[1][9] = t->Phi[0][0]*w->S[10] + t->Phi[0][1]*w->S[26] + t->Phi[0][2]*w->S[42] +
-            t->Phi[0][3]*w->S[58] + t->Phi[0][4]*w->S[74] + t->Phi[0][5]*w->S[90] +
-            t->Phi[0][6]*w->S[106] + t->Phi[0][8]*w->S[138] + t->Phi[0][10];
+    w->term[1][9] = t->Phi[0][0]*w->S[73] + t->Phi[0][1]*w->S[79] + t->Phi[0][2]*w->S[85] +
+            t->Phi[0][3]*w->S[91] + t->Phi[0][4]*w->S[97] + t->Phi[0][5]*w->S[103] +
+            t->Phi[0][6]*w->S[109] + t->Phi[0][8]*w->S[122] + t->Phi[0][10];
     w->term[0][10] = t->Phi[0][0]*t->Phi[0][11] + t->Phi[0][1]*t->Phi[1][11] +
             t->Phi[0][2]*t->Phi[2][11] + t->Phi[0][3]*t->Phi[3][11] + t->Phi[0][4]*t->Phi[4][11] +
             t->Phi[0][5]*t->Phi[5][11] + t->Phi[0][6]*t->Phi[6][11] + t->Phi[0][8]*t->Phi[8][11];
-    w->term[1][10] = t->Phi[0][0]*w->S[11] + t->Phi[0][1]*w->S[27] + t->Phi[0][2]*w->S[43] +
-            t->Phi[0][3]*w->S[59] + t->Phi[0][4]*w->S[75] + t->Phi[0][5]*w->S[91] +
-            t->Phi[0][6]*w->S[107] + t->Phi[0][8]*w->S[139] + t->Phi[0][11];
+    w->term[1][10] = t->Phi[0][0]*w->S[74] + t->Phi[0][1]*w->S[80] + t->Phi[0][2]*w->S[86] +
+            t->Phi[0][3]*w->S[92] + t->Phi[0][4]*w->S[98] + t->Phi[0][5]*w->S[104] +
+            t->Phi[0][6]*w->S[110] + t->Phi[0][8]*w->S[123] + t->Phi[0][11];
     w->term[0][11] = t->Phi[0][0]*t->Phi[0][12] + t->Phi[0][1]*t->Phi[1][12] +
             t->Phi[0][2]*t->Phi[2][12] + t->Phi[0][3]*t->Phi[3][12] + t->Phi[0][4]*t->Phi[4][12] +
             t->Phi[0][5]*t->Phi[5][12] + t->Phi[0][6]*t->Phi[6][12] + t->Phi[0][8]*t->Phi[8][12];
-    w->term[1][11] = t->Phi[0][0]*w->S[12] + t->Phi[0][1]*w->S[28] + t->Phi[0][2]*w->S[44] +
-            t->Phi[0][3]*w->S[60] + t->Phi[0][4]*w->S[76] + t->Phi[0][5]*w->S[92] +
-            t->Phi[0][6]*w->S[108] + t->Phi[0][8]*w->S[140] + t->Phi[0][12];
+    w->term[1][11] = t->Phi[0][0]*w->S[75] + t->Phi[0][1]*w->S[81] + t->Phi[0][2]*w->S[87] +
+            t->Phi[0][3]*w->S[93] + t->Phi[0][4]*w->S[99] + t->Phi[0][5]*w->S[105] +
+            t->Phi[0][6]*w->S[111] + t->Phi[0][8]*w->S[124] + t->Phi[0][12];
     w->term[0][12] = t->Phi[0][0]*t->Phi[0][13] + t->Phi[0][1]*t->Phi[1][13] +
             t->Phi[0][2]*t->Phi[2][13] + t->Phi[0][3]*t->Phi[3][13] + t->Phi[0][4]*t->Phi[4][13] +
             t->Phi[0][5]*t->Phi[5][13] + t->Phi[0][6]*t->Phi[6][13] + t->Phi[0][8]*t->Phi[8][13];
-    w->term[1][12] = t->Phi[0][0]*w->S[13] + t->Phi[0][1]*w->S[29] + t->Phi[0][2]*w->S[45] +
-            t->Phi[0][3]*w->S[61] + t->Phi[0][4]*w->S[77] + t->Phi[0][5]*w->S[93] +
-            t->Phi[0][6]*w->S[109] + t->Phi[0][8]*w->S[141] + t->Phi[0][13];
+    w->term[1][12] = t->Phi[0][0]*w->S[76] + t->Phi[0][1]*w->S[82] + t->Phi[0][2]*w->S[88] +
+            t->Phi[0][3]*w->S[94] + t->Phi[0][4]*w->S[100] + t->Phi[0][5]*w->S[106] +
+            t->Phi[0][6]*w->S[112] + t->Phi[0][8]*w->S[125] + t->Phi[0][13];
     w->term[0][13] = t->Phi[0][0]*t->Phi[0][14] + t->Phi[0][1]*t->Phi[1][14] +
             t->Phi[0][2]*t->Phi[2][14] + t->Phi[0][3]*t->Phi[3][14] + t->Phi[0][4]*t->Phi[4][14] +
             t->Phi[0][5]*t->Phi[5][14] + t->Phi[0][6]*t->Phi[6][14] + t->Phi[0][8]*t->Phi[8][14];
-    w->term[1][13] = t->Phi[0][0]*w->S[14] + t->Phi[0][1]*w->S[30] + t->Phi[0][2]*w->S[46] +
-            t->Phi[0][3]*w->S[62] + t->Phi[0][4]*w->S[78] + t->Phi[0][5]*w->S[94] +
-            t->Phi[0][6]*w->S[110] + t->Phi[0][8]*w->S[142] + t->Phi[0][14];
+    w->term[1][13] = t->Phi[0][0]*w->S[77] + t->Phi[0][1]*w->S[83] + t->Phi[0][2]*w->S[89] +
+            t->Phi[0][3]*w->S[95] + t->Phi[0][4]*w->S[101] + t->Phi[0][5]*w->S[107] +
+            t->Phi[0][6]*w->S[113] + t->Phi[0][8]*w->S[126] + t->Phi[0][14];
     w->term[0][14] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
             t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
             t->Phi[1][5]*t->Phi[5][0] + t->Phi[1][6]*t->Phi[6][0] + t->Phi[1][8]*t->Phi[8][0];
-    w->term[1][14] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[32] +
-            t->Phi[1][3]*w->S[48] + t->Phi[1][4]*w->S[64] + t->Phi[1][5]*w->S[80] +
-            t->Phi[1][6]*w->S[96] + t->Phi[1][8]*w->S[128];
+    w->term[1][14] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[8] + t->Phi[1][2]*w->S[16] +
+            t->Phi[1][3]*w->S[24] + t->Phi[1][4]*w->S[32] + t->Phi[1][5]*w->S[40] +
+            t->Phi[1][6]*w->S[48] + t->Phi[1][8]*w->S[64];
     w->term[0][15] = t->Phi[1][0]*t->Phi[0][1] + t->Phi[1][1]*t->Phi[1][1] +
             t->Phi[1][2]*t->Phi[2][1] + t->Phi[1][3]*t->Phi[3][1] + t->Phi[1][4]*t->Phi[4][1] +
             t->Phi[1][5]*t->Phi[5][1] + t->Phi[1][6]*t->Phi[6][1] + t->Phi[1][8]*t->Phi[8][1];
-    w->term[1][15] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[33] +
-            t->Phi[1][3]*w->S[49] + t->Phi[1][4]*w->S[65] + t->Phi[1][5]*w->S[81] +
-            t->Phi[1][6]*w->S[97] + t->Phi[1][8]*w->S[129];
+    w->term[1][15] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[9] + t->Phi[1][2]*w->S[17] +
+            t->Phi[1][3]*w->S[25] + t->Phi[1][4]*w->S[33] + t->Phi[1][5]*w->S[41] +
+            t->Phi[1][6]*w->S[49] + t->Phi[1][8]*w->S[65];
     w->term[0][16] = t->Phi[1][0]*t->Phi[0][2] + t->Phi[1][1]*t->Phi[1][2] +
             t->Phi[1][2]*t->Phi[2][2] + t->Phi[1][3]*t->Phi[3][2] + t->Phi[1][4]*t->Phi[4][2] +
             t->Phi[1][5]*t->Phi[5][2] + t->Phi[1][6]*t->Phi[6][2] + t->Phi[1][8]*t->Phi[8][2];
-    w->term[1][16] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[18] + t->Phi[1][2]*w->S[34] +
-            t->Phi[1][3]*w->S[50] + t->Phi[1][4]*w->S[66] + t->Phi[1][5]*w->S[82] +
-            t->Phi[1][6]*w->S[98] + t->Phi[1][8]*w->S[130];
+    w->term[1][16] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[10] + t->Phi[1][2]*w->S[18] +
+            t->Phi[1][3]*w->S[26] + t->Phi[1][4]*w->S[34] + t->Phi[1][5]*w->S[42] +
+            t->Phi[1][6]*w->S[50] + t->Phi[1][8]*w->S[66];
     w->term[0][17] = t->Phi[1][0]*t->Phi[0][3] + t->Phi[1][1]*t->Phi[1][3] +
             t->Phi[1][2]*t->Phi[2][3] + t->Phi[1][3]*t->Phi[3][3] + t->Phi[1][4]*t->Phi[4][3] +
             t->Phi[1][5]*t->Phi[5][3] + t->Phi[1][6]*t->Phi[6][3] + t->Phi[1][8]*t->Phi[8][3];
-    w->term[1][17] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[19] + t->Phi[1][2]*w->S[35] +
-            t->Phi[1][3]*w->S[51] + t->Phi[1][4]*w->S[67] + t->Phi[1][5]*w->S[83] +
-            t->Phi[1][6]*w->S[99] + t->Phi[1][8]*w->S[131];
+    w->term[1][17] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[11] + t->Phi[1][2]*w->S[19] +
+            t->Phi[1][3]*w->S[27] + t->Phi[1][4]*w->S[35] + t->Phi[1][5]*w->S[43] +
+            t->Phi[1][6]*w->S[51] + t->Phi[1][8]*w->S[67];
     w->term[0][18] = t->Phi[1][0]*t->Phi[0][4] + t->Phi[1][1]*t->Phi[1][4] +
             t->Phi[1][2]*t->Phi[2][4] + t->Phi[1][3]*t->Phi[3][4] + t->Phi[1][4]*t->Phi[4][4] +
             t->Phi[1][5]*t->Phi[5][4] + t->Phi[1][6]*t->Phi[6][4] + t->Phi[1][8]*t->Phi[8][4];
-    w->term[1][18] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[20] + t->Phi[1][2]*w->S[36] +
-            t->Phi[1][3]*w->S[52] + t->Phi[1][4]*w->S[68] + t->Phi[1][5]*w->S[84] +
-            t->Phi[1][6]*w->S[100] + t->Phi[1][8]*w->S[132];
+    w->term[1][18] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[12] + t->Phi[1][2]*w->S[20] +
+            t->Phi[1][3]*w->S[28] + t->Phi[1][4]*w->S[36] + t->Phi[1][5]*w->S[44] +
+            t->Phi[1][6]*w->S[52] + t->Phi[1][8]*w->S[68];
     w->term[0][19] = t->Phi[1][0]*t->Phi[0][5] + t->Phi[1][1]*t->Phi[1][5] +
             t->Phi[1][2]*t->Phi[2][5] + t->Phi[1][3]*t->Phi[3][5] + t->Phi[1][4]*t->Phi[4][5] +
             t->Phi[1][5]*t->Phi[5][5] + t->Phi[1][6]*t->Phi[6][5] + t->Phi[1][8]*t->Phi[8][5];
-    w->term[1][19] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[21] + t->Phi[1][2]*w->S[37] +
-            t->Phi[1][3]*w->S[53] + t->Phi[1][4]*w->S[69] + t->Phi[1][5]*w->S[85] +
-            t->Phi[1][6]*w->S[101] + t->Phi[1][8]*w->S[133];
+    w->term[1][19] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[13] + t->Phi[1][2]*w->S[21] +
+            t->Phi[1][3]*w->S[29] + t->Phi[1][4]*w->S[37] + t->Phi[1][5]*w->S[45] +
+            t->Phi[1][6]*w->S[53] + t->Phi[1][8]*w->S[69];
     w->term[0][20] = t->Phi[1][0]*t->Phi[0][6] + t->Phi[1][1]*t->Phi[1][6] +
             t->Phi[1][2]*t->Phi[2][6] + t->Phi[1][3]*t->Phi[3][6] + t->Phi[1][4]*t->Phi[4][6] +
             t->Phi[1][5]*t->Phi[5][6] + t->Phi[1][6]*t->Phi[6][6] + t->Phi[1][8]*t->Phi[8][6];
-    w->term[1][20] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[22] + t->Phi[1][2]*w->S[38] +
-            t->Phi[1][3]*w->S[54] + t->Phi[1][4]*w->S[70] + t->Phi[1][5]*w->S[86] +
-            t->Phi[1][6]*w->S[102] + t->Phi[1][8]*w->S[134];
+    w->term[1][20] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[22] +
+            t->Phi[1][3]*w->S[30] + t->Phi[1][4]*w->S[38] + t->Phi[1][5]*w->S[46] +
+            t->Phi[1][6]*w->S[54] + t->Phi[1][8]*w->S[70];
     w->term[0][21] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
             t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
             t->Phi[1][5]*t->Phi[5][8] + t->Phi[1][6]*t->Phi[6][8] + t->Phi[1][8]*t->Phi[8][8];
-    w->term[1][21] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[24] + t->Phi[1][2]*w->S[40] +
-            t->Phi[1][3]*w->S[56] + t->Phi[1][4]*w->S[72] + t->Phi[1][5]*w->S[88] +
-            t->Phi[1][6]*w->S[104] + t->Phi[1][8]*w->S[136];
+    w->term[1][21] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[23] +
+            t->Phi[1][3]*w->S[31] + t->Phi[1][4]*w->S[39] + t->Phi[1][5]*w->S[47] +
+            t->Phi[1][6]*w->S[55] + t->Phi[1][8]*w->S[71];
     w->term[0][22] = t->Phi[1][0]*t->Phi[0][9] + t->Phi[1][1]*t->Phi[1][9] +
             t->Phi[1][2]*t->Phi[2][9] + t->Phi[1][3]*t->Phi[3][9] + t->Phi[1][4]*t->Phi[4][9] +
             t->Phi[1][5]*t->Phi[5][9] + t->Phi[1][6]*t->Phi[6][9] + t->Phi[1][8]*t->Phi[8][9];
-    w->term[1][22] = t->Phi[1][0]*w->S[9] + t->Phi[1][1]*w->S[25] + t->Phi[1][2]*w->S[41] +
-            t->Phi[1][3]*w->S[57] + t->Phi[1][4]*w->S[73] + t->Phi[1][5]*w->S[89] +
-            t->Phi[1][6]*w->S[105] + t->Phi[1][8]*w->S[137] + t->Phi[1][9];
+    w->term[1][22] = t->Phi[1][0]*w->S[72] + t->Phi[1][1]*w->S[78] + t->Phi[1][2]*w->S[84] +
+            t->Phi[1][3]*w->S[90] + t->Phi[1][4]*w->S[96] + t->Phi[1][5]*w->S[102] +
+            t->Phi[1][6]*w->S[108] + t->Phi[1][8]*w->S[121] + t->Phi[1][9];
     w->term[0][23] = t->Phi[1][0]*t->Phi[0][10] + t->Phi[1][1]*t->Phi[1][10] +
             t->Phi[1][2]*t->Phi[2][10] + t->Phi[1][3]*t->Phi[3][10] + t->Phi[1][4]*t->Phi[4][10] +
             t->Phi[1][5]*t->Phi[5][10] + t->Phi[1][6]*t->Phi[6][10] + t->Phi[1][8]*t->Phi[8][10];
-    w->term[1][23] = t->Phi[1][0]*w->S[10] + t->Phi[1][1]*w->S[26] + t->Phi[1][2]*w->S[42] +
-            t->Phi[1][3]*w->S[58] + t->Phi[1][4]*w->S[74] + t->Phi[1][5]*w->S[90] +
-            t->Phi[1][6]*w->S[106] + t->Phi[1][8]*w->S[138] + t->Phi[1][10];
+    w->term[1][23] = t->Phi[1][0]*w->S[73] + t->Phi[1][1]*w->S[79] + t->Phi[1][2]*w->S[85] +
+            t->Phi[1][3]*w->S[91] + t->Phi[1][4]*w->S[97] + t->Phi[1][5]*w->S[103] +
+            t->Phi[1][6]*w->S[109] + t->Phi[1][8]*w->S[122] + t->Phi[1][10];
     w->term[0][24] = t->Phi[1][0]*t->Phi[0][11] + t->Phi[1][1]*t->Phi[1][11] +
             t->Phi[1][2]*t->Phi[2][11] + t->Phi[1][3]*t->Phi[3][11] + t->Phi[1][4]*t->Phi[4][11] +
             t->Phi[1][5]*t->Phi[5][11] + t->Phi[1][6]*t->Phi[6][11] + t->Phi[1][8]*t->Phi[8][11];
-    w->term[1][24] = t->Phi[1][0]*w->S[11] + t->Phi[1][1]*w->S[27] + t->Phi[1][2]*w->S[43] +
-            t->Phi[1][3]*w->S[59] + t->Phi[1][4]*w->S[75] + t->Phi[1][5]*w->S[91] +
-            t->Phi[1][6]*w->S[107] + t->Phi[1][8]*w->S[139] + t->Phi[1][11];
+    w->term[1][24] = t->Phi[1][0]*w->S[74] + t->Phi[1][1]*w->S[80] + t->Phi[1][2]*w->S[86] +
+            t->Phi[1][3]*w->S[92] + t->Phi[1][4]*w->S[98] + t->Phi[1][5]*w->S[104] +
+            t->Phi[1][6]*w->S[110] + t->Phi[1][8]*w->S[123] + t->Phi[1][11];
     w->term[0][25] = t->Phi[1][0]*t->Phi[0][12] + t->Phi[1][1]*t->Phi[1][12] +
             t->Phi[1][2]*t->Phi[2][12] + t->Phi[1][3]*t->Phi[3][12] + t->Phi[1][4]*t->Phi[4][12] +
             t->Phi[1][5]*t->Phi[5][12] + t->Phi[1][6]*t->Phi[6][12] + t->Phi[1][8]*t->Phi[8][12];
-    w->term[1][25] = t->Phi[1][0]*w->S[12] + t->Phi[1][1]*w->S[28] + t->Phi[1][2]*w->S[44] +
-            t->Phi[1][3]*w->S[60] + t->Phi[1][4]*w->S[76] + t->Phi[1][5]*w->S[92] +
-            t->Phi[1][6]*w->S[108] + t->Phi[1][8]*w->S[140] + t->Phi[1][12];
+    w->term[1][25] = t->Phi[1][0]*w->S[75] + t->Phi[1][1]*w->S[81] + t->Phi[1][2]*w->S[87] +
+            t->Phi[1][3]*w->S[93] + t->Phi[1][4]*w->S[99] + t->Phi[1][5]*w->S[105] +
+            t->Phi[1][6]*w->S[111] + t->Phi[1][8]*w->S[124] + t->Phi[1][12];
     w->term[0][26] = t->Phi[1][0]*t->Phi[0][13] + t->Phi[1][1]*t->Phi[1][13] +
             t->Phi[1][2]*t->Phi[2][13] + t->Phi[1][3]*t->Phi[3][13] + t->Phi[1][4]*t->Phi[4][13] +
             t->Phi[1][5]*t->Phi[5][13] + t->Phi[1][6]*t->Phi[6][13] + t->Phi[1][8]*t->Phi[8][13];
-    w->term[1][26] = t->Phi[1][0]*w->S[13] + t->Phi[1][1]*w->S[29] + t->Phi[1][2]*w->S[45] +
-            t->Phi[1][3]*w->S[61] + t->Phi[1][4]*w->S[77] + t->Phi[1][5]*w->S[93] +
-            t->Phi[1][6]*w->S[109] + t->Phi[1][8]*w->S[141] + t->Phi[1][13];
+    w->term[1][26] = t->Phi[1][0]*w->S[76] + t->Phi[1][1]*w->S[82] + t->Phi[1][2]*w->S[88] +
+            t->Phi[1][3]*w->S[94] + t->Phi[1][4]*w->S[100] + t->Phi[1][5]*w->S[106] +
+            t->Phi[1][6]*w->S[112] + t->Phi[1][8]*w->S[125] + t->Phi[1][13];
     w->term[0][27] = t->Phi[1][0]*t->Phi[0][14] + t->Phi[1][1]*t->Phi[1][14] +
             t->Phi[1][2]*t->Phi[2][14] + t->Phi[1][3]*t->Phi[3][14] + t->Phi[1][4]*t->Phi[4][14] +
             t->Phi[1][5]*t->Phi[5][14] + t->Phi[1][6]*t->Phi[6][14] + t->Phi[1][8]*t->Phi[8][14];
-    w->term[1][27] = t->Phi[1][0]*w->S[14] + t->Phi[1][1]*w->S[30] + t->Phi[1][2]*w->S[46] +
-            t->Phi[1][3]*w->S[62] + t->Phi[1][4]*w->S[78] + t->Phi[1][5]*w->S[94] +
-            t->Phi[1][6]*w->S[110] + t->Phi[1][8]*w->S[142] + t->Phi[1][14];
+    w->term[1][27] = t->Phi[1][0]*w->S[77] + t->Phi[1][1]*w->S[83] + t->Phi[1][2]*w->S[89] +
+            t->Phi[1][3]*w->S[95] + t->Phi[1][4]*w->S[101] + t->Phi[1][5]*w->S[107] +
+            t->Phi[1][6]*w->S[113] + t->Phi[1][8]*w->S[126] + t->Phi[1][14];
     w->term[0][28] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
             t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
             t->Phi[2][5]*t->Phi[5][0] + t->Phi[2][6]*t->Phi[6][0] + t->Phi[2][8]*t->Phi[8][0];
-    w->term[1][28] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[32] +
-            t->Phi[2][3]*w->S[48] + t->Phi[2][4]*w->S[64] + t->Phi[2][5]*w->S[80] +
-            t->Phi[2][6]*w->S[96] + t->Phi[2][8]*w->S[128];
+    w->term[1][28] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[8] + t->Phi[2][2]*w->S[16] +
+            t->Phi[2][3]*w->S[24] + t->Phi[2][4]*w->S[32] + t->Phi[2][5]*w->S[40] +
+            t->Phi[2][6]*w->S[48] + t->Phi[2][8]*w->S[64];
     w->term[0][29] = t->Phi[2][0]*t->Phi[0][1] + t->Phi[2][1]*t->Phi[1][1] +
             t->Phi[2][2]*t->Phi[2][1] + t->Phi[2][3]*t->Phi[3][1] + t->Phi[2][4]*t->Phi[4][1] +
             t->Phi[2][5]*t->Phi[5][1] + t->Phi[2][6]*t->Phi[6][1] + t->Phi[2][8]*t->Phi[8][1];
-    w->term[1][29] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[33] +
-            t->Phi[2][3]*w->S[49] + t->Phi[2][4]*w->S[65] + t->Phi[2][5]*w->S[81] +
-            t->Phi[2][6]*w->S[97] + t->Phi[2][8]*w->S[129];
+    w->term[1][29] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[9] + t->Phi[2][2]*w->S[17] +
+            t->Phi[2][3]*w->S[25] + t->Phi[2][4]*w->S[33] + t->Phi[2][5]*w->S[41] +
+            t->Phi[2][6]*w->S[49] + t->Phi[2][8]*w->S[65];
     w->term[0][30] = t->Phi[2][0]*t->Phi[0][2] + t->Phi[2][1]*t->Phi[1][2] +
             t->Phi[2][2]*t->Phi[2][2] + t->Phi[2][3]*t->Phi[3][2] + t->Phi[2][4]*t->Phi[4][2] +
             t->Phi[2][5]*t->Phi[5][2] + t->Phi[2][6]*t->Phi[6][2] + t->Phi[2][8]*t->Phi[8][2];
-    w->term[1][30] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[18] + t->Phi[2][2]*w->S[34] +
-            t->Phi[2][3]*w->S[50] + t->Phi[2][4]*w->S[66] + t->Phi[2][5]*w->S[82] +
-            t->Phi[2][6]*w->S[98] + t->Phi[2][8]*w->S[130];
+    w->term[1][30] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[10] + t->Phi[2][2]*w->S[18] +
+            t->Phi[2][3]*w->S[26] + t->Phi[2][4]*w->S[34] + t->Phi[2][5]*w->S[42] +
+            t->Phi[2][6]*w->S[50] + t->Phi[2][8]*w->S[66];
     w->term[0][31] = t->Phi[2][0]*t->Phi[0][3] + t->Phi[2][1]*t->Phi[1][3] +
             t->Phi[2][2]*t->Phi[2][3] + t->Phi[2][3]*t->Phi[3][3] + t->Phi[2][4]*t->Phi[4][3] +
             t->Phi[2][5]*t->Phi[5][3] + t->Phi[2][6]*t->Phi[6][3] + t->Phi[2][8]*t->Phi[8][3];
-    w->term[1][31] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[19] + t->Phi[2][2]*w->S[35] +
-            t->Phi[2][3]*w->S[51] + t->Phi[2][4]*w->S[67] + t->Phi[2][5]*w->S[83] +
-            t->Phi[2][6]*w->S[99] + t->Phi[2][8]*w->S[131];
+    w->term[1][31] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[11] + t->Phi[2][2]*w->S[19] +
+            t->Phi[2][3]*w->S[27] + t->Phi[2][4]*w->S[35] + t->Phi[2][5]*w->S[43] +
+            t->Phi[2][6]*w->S[51] + t->Phi[2][8]*w->S[67];
     w->term[0][32] = t->Phi[2][0]*t->Phi[0][4] + t->Phi[2][1]*t->Phi[1][4] +
             t->Phi[2][2]*t->Phi[2][4] + t->Phi[2][3]*t->Phi[3][4] + t->Phi[2][4]*t->Phi[4][4] +
             t->Phi[2][5]*t->Phi[5][4] + t->Phi[2][6]*t->Phi[6][4] + t->Phi[2][8]*t->Phi[8][4];
-    w->term[1][32] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[20] + t->Phi[2][2]*w->S[36] +
-            t->Phi[2][3]*w->S[52] + t->Phi[2][4]*w->S[68] + t->Phi[2][5]*w->S[84] +
-            t->Phi[2][6]*w->S[100] + t->Phi[2][8]*w->S[132];
+    w->term[1][32] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[12] + t->Phi[2][2]*w->S[20] +
+            t->Phi[2][3]*w->S[28] + t->Phi[2][4]*w->S[36] + t->Phi[2][5]*w->S[44] +
+            t->Phi[2][6]*w->S[52] + t->Phi[2][8]*w->S[68];
     w->term[0][33] = t->Phi[2][0]*t->Phi[0][5] + t->Phi[2][1]*t->Phi[1][5] +
             t->Phi[2][2]*t->Phi[2][5] + t->Phi[2][3]*t->Phi[3][5] + t->Phi[2][4]*t->Phi[4][5] +
             t->Phi[2][5]*t->Phi[5][5] + t->Phi[2][6]*t->Phi[6][5] + t->Phi[2][8]*t->Phi[8][5];
-    w->term[1][33] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[21] + t->Phi[2][2]*w->S[37] +
-            t->Phi[2][3]*w->S[53] + t->Phi[2][4]*w->S[69] + t->Phi[2][5]*w->S[85] +
-            t->Phi[2][6]*w->S[101] + t->Phi[2][8]*w->S[133];
+    w->term[1][33] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[13] + t->Phi[2][2]*w->S[21] +
+            t->Phi[2][3]*w->S[29] + t->Phi[2][4]*w->S[37] + t->Phi[2][5]*w->S[45] +
+            t->Phi[2][6]*w->S[53] + t->Phi[2][8]*w->S[69];
     w->term[0][34] = t->Phi[2][0]*t->Phi[0][6] + t->Phi[2][1]*t->Phi[1][6] +
             t->Phi[2][2]*t->Phi[2][6] + t->Phi[2][3]*t->Phi[3][6] + t->Phi[2][4]*t->Phi[4][6] +
             t->Phi[2][5]*t->Phi[5][6] + t->Phi[2][6]*t->Phi[6][6] + t->Phi[2][8]*t->Phi[8][6];
-    w->term[1][34] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[22] + t->Phi[2][2]*w->S[38] +
-            t->Phi[2][3]*w->S[54] + t->Phi[2][4]*w->S[70] + t->Phi[2][5]*w->S[86] +
-            t->Phi[2][6]*w->S[102] + t->Phi[2][8]*w->S[134];
+    w->term[1][34] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[22] +
+            t->Phi[2][3]*w->S[30] + t->Phi[2][4]*w->S[38] + t->Phi[2][5]*w->S[46] +
+            t->Phi[2][6]*w->S[54] + t->Phi[2][8]*w->S[70];
     w->term[0][35] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
             t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
             t->Phi[2][5]*t->Phi[5][8] + t->Phi[2][6]*t->Phi[6][8] + t->Phi[2][8]*t->Phi[8][8];
-    w->term[1][35] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[24] + t->Phi[2][2]*w->S[40] +
-            t->Phi[2][3]*w->S[56] + t->Phi[2][4]*w->S[72] + t->Phi[2][5]*w->S[88] +
-            t->Phi[2][6]*w->S[104] + t->Phi[2][8]*w->S[136];
+    w->term[1][35] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[23] +
+            t->Phi[2][3]*w->S[31] + t->Phi[2][4]*w->S[39] + t->Phi[2][5]*w->S[47] +
+            t->Phi[2][6]*w->S[55] + t->Phi[2][8]*w->S[71];
     w->term[0][36] = t->Phi[2][0]*t->Phi[0][9] + t->Phi[2][1]*t->Phi[1][9] +
             t->Phi[2][2]*t->Phi[2][9] + t->Phi[2][3]*t->Phi[3][9] + t->Phi[2][4]*t->Phi[4][9] +
             t->Phi[2][5]*t->Phi[5][9] + t->Phi[2][6]*t->Phi[6][9] + t->Phi[2][8]*t->Phi[8][9];
-    w->term[1][36] = t->Phi[2][0]*w->S[9] + t->Phi[2][1]*w->S[25] + t->Phi[2][2]*w->S[41] +
-            t->Phi[2][3]*w->S[57] + t->Phi[2][4]*w->S[73] + t->Phi[2][5]*w->S[89] +
-            t->Phi[2][6]*w->S[105] + t->Phi[2][8]*w->S[137] + t->Phi[2][9];
+    w->term[1][36] = t->Phi[2][0]*w->S[72] + t->Phi[2][1]*w->S[78] + t->Phi[2][2]*w->S[84] +
+            t->Phi[2][3]*w->S[90] + t->Phi[2][4]*w->S[96] + t->Phi[2][5]*w->S[102] +
+            t->Phi[2][6]*w->S[108] + t->Phi[2][8]*w->S[121] + t->Phi[2][9];
     w->term[0][37] = t->Phi[2][0]*t->Phi[0][10] + t->Phi[2][1]*t->Phi[1][10] +
             t->Phi[2][2]*t->Phi[2][10] + t->Phi[2][3]*t->Phi[3][10] + t->Phi[2][4]*t->Phi[4][10] +
             t->Phi[2][5]*t->Phi[5][10] + t->Phi[2][6]*t->Phi[6][10] + t->Phi[2][8]*t->Phi[8][10];
-    w->term[1][37] = t->Phi[2][0]*w->S[10] + t->Phi[2][1]*w->S[26] + t->Phi[2][2]*w->S[42] +
-            t->Phi[2][3]*w->S[58] + t->Phi[2][4]*w->S[74] + t->Phi[2][5]*w->S[90] +
-            t->Phi[2][6]*w->S[106] + t->Phi[2][8]*w->S[138] + t->Phi[2][10];
+    w->term[1][37] = t->Phi[2][0]*w->S[73] + t->Phi[2][1]*w->S[79] + t->Phi[2][2]*w->S[85] +
+            t->Phi[2][3]*w->S[91] + t->Phi[2][4]*w->S[97] + t->Phi[2][5]*w->S[103] +
+            t->Phi[2][6]*w->S[109] + t->Phi[2][8]*w->S[122] + t->Phi[2][10];
     w->term[0][38] = t->Phi[2][0]*t->Phi[0][11] + t->Phi[2][1]*t->Phi[1][11] +
             t->Phi[2][2]*t->Phi[2][11] + t->Phi[2][3]*t->Phi[3][11] + t->Phi[2][4]*t->Phi[4][11] +
             t->Phi[2][5]*t->Phi[5][11] + t->Phi[2][6]*t->Phi[6][11] + t->Phi[2][8]*t->Phi[8][11];
-    w->term[1][38] = t->Phi[2][0]*w->S[11] + t->Phi[2][1]*w->S[27] + t->Phi[2][2]*w->S[43] +
-            t->Phi[2][3]*w->S[59] + t->Phi[2][4]*w->S[75] + t->Phi[2][5]*w->S[91] +
-            t->Phi[2][6]*w->S[107] + t->Phi[2][8]*w->S[139] + t->Phi[2][11];
+    w->term[1][38] = t->Phi[2][0]*w->S[74] + t->Phi[2][1]*w->S[80] + t->Phi[2][2]*w->S[86] +
+            t->Phi[2][3]*w->S[92] + t->Phi[2][4]*w->S[98] + t->Phi[2][5]*w->S[104] +
+            t->Phi[2][6]*w->S[110] + t->Phi[2][8]*w->S[123] + t->Phi[2][11];
     w->term[0][39] = t->Phi[2][0]*t->Phi[0][12] + t->Phi[2][1]*t->Phi[1][12] +
             t->Phi[2][2]*t->Phi[2][12] + t->Phi[2][3]*t->Phi[3][12] + t->Phi[2][4]*t->Phi[4][12] +
             t->Phi[2][5]*t->Phi[5][12] + t->Phi[2][6]*t->Phi[6][12] + t->Phi[2][8]*t->Phi[8][12];
-    w->term[1][39] = t->Phi[2][0]*w->S[12] + t->Phi[2][1]*w->S[28] + t->Phi[2][2]*w->S[44] +
-            t->Phi[2][3]*w->S[60] + t->Phi[2][4]*w->S[76] + t->Phi[2][5]*w->S[92] +
-            t->Phi[2][6]*w->S[108] + t->Phi[2][8]*w->S[140] + t->Phi[2][12];
+    w->term[1][39] = t->Phi[2][0]*w->S[75] + t->Phi[2][1]*w->S[81] + t->Phi[2][2]*w->S[87] +
+            t->Phi[2][3]*w->S[93] + t->Phi[2][4]*w->S[99] + t->Phi[2][5]*w->S[105] +
+            t->Phi[2][6]*w->S[111] + t->Phi[2][8]*w->S[124] + t->Phi[2][12];
     w->term[0][40] = t->Phi[2][0]*t->Phi[0][13] + t->Phi[2][1]*t->Phi[1][13] +
             t->Phi[2][2]*t->Phi[2][13] + t->Phi[2][3]*t->Phi[3][13] + t->Phi[2][4]*t->Phi[4][13] +
             t->Phi[2][5]*t->Phi[5][13] + t->Phi[2][6]*t->Phi[6][13] + t->Phi[2][8]*t->Phi[8][13];
-    w->term[1][40] = t->Phi[2][0]*w->S[13] + t->Phi[2][1]*w->S[29] + t->Phi[2][2]*w->S[45] +
-            t->Phi[2][3]*w->S[61] + t->Phi[2][4]*w->S[77] + t->Phi[2][5]*w->S[93] +
-            t->Phi[2][6]*w->S[109] + t->Phi[2][8]*w->S[141] + t->Phi[2][13];
+    w->term[1][40] = t->Phi[2][0]*w->S[76] + t->Phi[2][1]*w->S[82] + t->Phi[2][2]*w->S[88] +
+            t->Phi[2][3]*w->S[94] + t->Phi[2][4]*w->S[100] + t->Phi[2][5]*w->S[106] +
+            t->Phi[2][6]*w->S[112] + t->Phi[2][8]*w->S[125] + t->Phi[2][13];
     w->term[0][41] = t->Phi[2][0]*t->Phi[0][14] + t->Phi[2][1]*t->Phi[1][14] +
             t->Phi[2][2]*t->Phi[2][14] + t->Phi[2][3]*t->Phi[3][14] + t->Phi[2][4]*t->Phi[4][14] +
             t->Phi[2][5]*t->Phi[5][14] + t->Phi[2][6]*t->Phi[6][14] + t->Phi[2][8]*t->Phi[8][14];
-    w->term[1][41] = t->Phi[2][0]*w->S[14] + t->Phi[2][1]*w->S[30] + t->Phi[2][2]*w->S[46] +
-            t->Phi[2][3]*w->S[62] + t->Phi[2][4]*w->S[78] + t->Phi[2][5]*w->S[94] +
-            t->Phi[2][6]*w->S[110] + t->Phi[2][8]*w->S[142] + t->Phi[2][14];
+    w->term[1][41] = t->Phi[2][0]*w->S[77] + t->Phi[2][1]*w->S[83] + t->Phi[2][2]*w->S[89] +
+            t->Phi[2][3]*w->S[95] + t->Phi[2][4]*w->S[101] + t->Phi[2][5]*w->S[107] +
+            t->Phi[2][6]*w->S[113] + t->Phi[2][8]*w->S[126] + t->Phi[2][14];
     w->term[0][42] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
             t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
             t->Phi[3][5]*t->Phi[5][0] + t->Phi[3][6]*t->Phi[6][0] + t->Phi[3][8]*t->Phi[8][0];
-    w->term[1][42] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[32] +
-            t->Phi[3][3]*w->S[48] + t->Phi[3][4]*w->S[64] + t->Phi[3][5]*w->S[80] +
-            t->Phi[3][6]*w->S[96] + t->Phi[3][8]*w->S[128];
+    w->term[1][42] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[8] + t->Phi[3][2]*w->S[16] +
+            t->Phi[3][3]*w->S[24] + t->Phi[3][4]*w->S[32] + t->Phi[3][5]*w->S[40] +
+            t->Phi[3][6]*w->S[48] + t->Phi[3][8]*w->S[64];
     w->term[0][43] = t->Phi[3][0]*t->Phi[0][1] + t->Phi[3][1]*t->Phi[1][1] +
             t->Phi[3][2]*t->Phi[2][1] + t->Phi[3][3]*t->Phi[3][1] + t->Phi[3][4]*t->Phi[4][1] +
             t->Phi[3][5]*t->Phi[5][1] + t->Phi[3][6]*t->Phi[6][1] + t->Phi[3][8]*t->Phi[8][1];
-    w->term[1][43] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[33] +
-            t->Phi[3][3]*w->S[49] + t->Phi[3][4]*w->S[65] + t->Phi[3][5]*w->S[81] +
-            t->Phi[3][6]*w->S[97] + t->Phi[3][8]*w->S[129];
+    w->term[1][43] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[9] + t->Phi[3][2]*w->S[17] +
+            t->Phi[3][3]*w->S[25] + t->Phi[3][4]*w->S[33] + t->Phi[3][5]*w->S[41] +
+            t->Phi[3][6]*w->S[49] + t->Phi[3][8]*w->S[65];
     w->term[0][44] = t->Phi[3][0]*t->Phi[0][2] + t->Phi[3][1]*t->Phi[1][2] +
             t->Phi[3][2]*t->Phi[2][2] + t->Phi[3][3]*t->Phi[3][2] + t->Phi[3][4]*t->Phi[4][2] +
             t->Phi[3][5]*t->Phi[5][2] + t->Phi[3][6]*t->Phi[6][2] + t->Phi[3][8]*t->Phi[8][2];
-    w->term[1][44] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[18] + t->Phi[3][2]*w->S[34] +
-            t->Phi[3][3]*w->S[50] + t->Phi[3][4]*w->S[66] + t->Phi[3][5]*w->S[82] +
-            t->Phi[3][6]*w->S[98] + t->Phi[3][8]*w->S[130];
+    w->term[1][44] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[10] + t->Phi[3][2]*w->S[18] +
+            t->Phi[3][3]*w->S[26] + t->Phi[3][4]*w->S[34] + t->Phi[3][5]*w->S[42] +
+            t->Phi[3][6]*w->S[50] + t->Phi[3][8]*w->S[66];
     w->term[0][45] = t->Phi[3][0]*t->Phi[0][3] + t->Phi[3][1]*t->Phi[1][3] +
             t->Phi[3][2]*t->Phi[2][3] + t->Phi[3][3]*t->Phi[3][3] + t->Phi[3][4]*t->Phi[4][3] +
             t->Phi[3][5]*t->Phi[5][3] + t->Phi[3][6]*t->Phi[6][3] + t->Phi[3][8]*t->Phi[8][3];
-    w->term[1][45] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[19] + t->Phi[3][2]*w->S[35] +
-            t->Phi[3][3]*w->S[51] + t->Phi[3][4]*w->S[67] + t->Phi[3][5]*w->S[83] +
-            t->Phi[3][6]*w->S[99] + t->Phi[3][8]*w->S[131];
+    w->term[1][45] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[11] + t->Phi[3][2]*w->S[19] +
+            t->Phi[3][3]*w->S[27] + t->Phi[3][4]*w->S[35] + t->Phi[3][5]*w->S[43] +
+            t->Phi[3][6]*w->S[51] + t->Phi[3][8]*w->S[67];
     w->term[0][46] = t->Phi[3][0]*t->Phi[0][4] + t->Phi[3][1]*t->Phi[1][4] +
             t->Phi[3][2]*t->Phi[2][4] + t->Phi[3][3]*t->Phi[3][4] + t->Phi[3][4]*t->Phi[4][4] +
             t->Phi[3][5]*t->Phi[5][4] + t->Phi[3][6]*t->Phi[6][4] + t->Phi[3][8]*t->Phi[8][4];
-    w->term[1][46] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[20] + t->Phi[3][2]*w->S[36] +
-            t->Phi[3][3]*w->S[52] + t->Phi[3][4]*w->S[68] + t->Phi[3][5]*w->S[84] +
-            t->Phi[3][6]*w->S[100] + t->Phi[3][8]*w->S[132];
+    w->term[1][46] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[12] + t->Phi[3][2]*w->S[20] +
+            t->Phi[3][3]*w->S[28] + t->Phi[3][4]*w->S[36] + t->Phi[3][5]*w->S[44] +
+            t->Phi[3][6]*w->S[52] + t->Phi[3][8]*w->S[68];
     w->term[0][47] = t->Phi[3][0]*t->Phi[0][5] + t->Phi[3][1]*t->Phi[1][5] +
             t->Phi[3][2]*t->Phi[2][5] + t->Phi[3][3]*t->Phi[3][5] + t->Phi[3][4]*t->Phi[4][5] +
             t->Phi[3][5]*t->Phi[5][5] + t->Phi[3][6]*t->Phi[6][5] + t->Phi[3][8]*t->Phi[8][5];
-    w->term[1][47] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[21] + t->Phi[3][2]*w->S[37] +
-            t->Phi[3][3]*w->S[53] + t->Phi[3][4]*w->S[69] + t->Phi[3][5]*w->S[85] +
-            t->Phi[3][6]*w->S[101] + t->Phi[3][8]*w->S[133];
+    w->term[1][47] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[13] + t->Phi[3][2]*w->S[21] +
+            t->Phi[3][3]*w->S[29] + t->Phi[3][4]*w->S[37] + t->Phi[3][5]*w->S[45] +
+            t->Phi[3][6]*w->S[53] + t->Phi[3][8]*w->S[69];
     w->term[0][48] = t->Phi[3][0]*t->Phi[0][6] + t->Phi[3][1]*t->Phi[1][6] +
             t->Phi[3][2]*t->Phi[2][6] + t->Phi[3][3]*t->Phi[3][6] + t->Phi[3][4]*t->Phi[4][6] +
             t->Phi[3][5]*t->Phi[5][6] + t->Phi[3][6]*t->Phi[6][6] + t->Phi[3][8]*t->Phi[8][6];
-    w->term[1][48] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[22] + t->Phi[3][2]*w->S[38] +
-            t->Phi[3][3]*w->S[54] + t->Phi[3][4]*w->S[70] + t->Phi[3][5]*w->S[86] +
-            t->Phi[3][6]*w->S[102] + t->Phi[3][8]*w->S[134];
+    w->term[1][48] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[22] +
+            t->Phi[3][3]*w->S[30] + t->Phi[3][4]*w->S[38] + t->Phi[3][5]*w->S[46] +
+            t->Phi[3][6]*w->S[54] + t->Phi[3][8]*w->S[70];
     w->term[0][49] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
             t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
             t->Phi[3][5]*t->Phi[5][8] + t->Phi[3][6]*t->Phi[6][8] + t->Phi[3][8]*t->Phi[8][8];
-    w->term[1][49] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[24] + t->Phi[3][2]*w->S[40] +
-            t->Phi[3][3]*w->S[56] + t->Phi[3][4]*w->S[72] + t->Phi[3][5]*w->S[88] +
-            t->Phi[3][6]*w->S[104] + t->Phi[3][8]*w->S[136];
+    w->term[1][49] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[23] +
+            t->Phi[3][3]*w->S[31] + t->Phi[3][4]*w->S[39] + t->Phi[3][5]*w->S[47] +
+            t->Phi[3][6]*w->S[55] + t->Phi[3][8]*w->S[71];
     w->term[0][50] = t->Phi[3][0]*t->Phi[0][9] + t->Phi[3][1]*t->Phi[1][9] +
             t->Phi[3][2]*t->Phi[2][9] + t->Phi[3][3]*t->Phi[3][9] + t->Phi[3][4]*t->Phi[4][9] +
             t->Phi[3][5]*t->Phi[5][9] + t->Phi[3][6]*t->Phi[6][9] + t->Phi[3][8]*t->Phi[8][9];
-    w->term[1][50] = t->Phi[3][0]*w->S[9] + t->Phi[3][1]*w->S[25] + t->Phi[3][2]*w->S[41] +
-            t->Phi[3][3]*w->S[57] + t->Phi[3][4]*w->S[73] + t->Phi[3][5]*w->S[89] +
-            t->Phi[3][6]*w->S[105] + t->Phi[3][8]*w->S[137] + t->Phi[3][9];
+    w->term[1][50] = t->Phi[3][0]*w->S[72] + t->Phi[3][1]*w->S[78] + t->Phi[3][2]*w->S[84] +
+            t->Phi[3][3]*w->S[90] + t->Phi[3][4]*w->S[96] + t->Phi[3][5]*w->S[102] +
+            t->Phi[3][6]*w->S[108] + t->Phi[3][8]*w->S[121] + t->Phi[3][9];
     w->term[0][51] = t->Phi[3][0]*t->Phi[0][10] + t->Phi[3][1]*t->Phi[1][10] +
             t->Phi[3][2]*t->Phi[2][10] + t->Phi[3][3]*t->Phi[3][10] + t->Phi[3][4]*t->Phi[4][10] +
             t->Phi[3][5]*t->Phi[5][10] + t->Phi[3][6]*t->Phi[6][10] + t->Phi[3][8]*t->Phi[8][10];
-    w->term[1][51] = t->Phi[3][0]*w->S[10] + t->Phi[3][1]*w->S[26] + t->Phi[3][2]*w->S[42] +
-            t->Phi[3][3]*w->S[58] + t->Phi[3][4]*w->S[74] + t->Phi[3][5]*w->S[90] +
-            t->Phi[3][6]*w->S[106] + t->Phi[3][8]*w->S[138] + t->Phi[3][10];
+    w->term[1][51] = t->Phi[3][0]*w->S[73] + t->Phi[3][1]*w->S[79] + t->Phi[3][2]*w->S[85] +
+            t->Phi[3][3]*w->S[91] + t->Phi[3][4]*w->S[97] + t->Phi[3][5]*w->S[103] +
+            t->Phi[3][6]*w->S[109] + t->Phi[3][8]*w->S[122] + t->Phi[3][10];
     w->term[0][52] = t->Phi[3][0]*t->Phi[0][11] + t->Phi[3][1]*t->Phi[1][11] +
             t->Phi[3][2]*t->Phi[2][11] + t->Phi[3][3]*t->Phi[3][11] + t->Phi[3][4]*t->Phi[4][11] +
             t->Phi[3][5]*t->Phi[5][11] + t->Phi[3][6]*t->Phi[6][11] + t->Phi[3][8]*t->Phi[8][11];
-    w->term[1][52] = t->Phi[3][0]*w->S[11] + t->Phi[3][1]*w->S[27] + t->Phi[3][2]*w->S[43] +
-            t->Phi[3][3]*w->S[59] + t->Phi[3][4]*w->S[75] + t->Phi[3][5]*w->S[91] +
-            t->Phi[3][6]*w->S[107] + t->Phi[3][8]*w->S[139] + t->Phi[3][11];
+    w->term[1][52] = t->Phi[3][0]*w->S[74] + t->Phi[3][1]*w->S[80] + t->Phi[3][2]*w->S[86] +
+            t->Phi[3][3]*w->S[92] + t->Phi[3][4]*w->S[98] + t->Phi[3][5]*w->S[104] +
+            t->Phi[3][6]*w->S[110] + t->Phi[3][8]*w->S[123] + t->Phi[3][11];
     w->term[0][53] = t->Phi[3][0]*t->Phi[0][12] + t->Phi[3][1]*t->Phi[1][12] +
             t->Phi[3][2]*t->Phi[2][12] + t->Phi[3][3]*t->Phi[3][12] + t->Phi[3][4]*t->Phi[4][12] +
             t->Phi[3][5]*t->Phi[5][12] + t->Phi[3][6]*t->Phi[6][12] + t->Phi[3][8]*t->Phi[8][12];
-    w->term[1][53] = t->Phi[3][0]*w->S[12] + t->Phi[3][1]*w->S[28] + t->Phi[3][2]*w->S[44] +
-            t->Phi[3][3]*w->S[60] + t->Phi[3][4]*w->S[76] + t->Phi[3][5]*w->S[92] +
-            t->Phi[3][6]*w->S[108] + t->Phi[3][8]*w->S[140] + t->Phi[3][12];
+    w->term[1][53] = t->Phi[3][0]*w->S[75] + t->Phi[3][1]*w->S[81] + t->Phi[3][2]*w->S[87] +
+            t->Phi[3][3]*w->S[93] + t->Phi[3][4]*w->S[99] + t->Phi[3][5]*w->S[105] +
+            t->Phi[3][6]*w->S[111] + t->Phi[3][8]*w->S[124] + t->Phi[3][12];
     w->term[0][54] = t->Phi[3][0]*t->Phi[0][13] + t->Phi[3][1]*t->Phi[1][13] +
             t->Phi[3][2]*t->Phi[2][13] + t->Phi[3][3]*t->Phi[3][13] + t->Phi[3][4]*t->Phi[4][13] +
             t->Phi[3][5]*t->Phi[5][13] + t->Phi[3][6]*t->Phi[6][13] + t->Phi[3][8]*t->Phi[8][13];
-    w->term[1][54] = t->Phi[3][0]*w->S[13] + t->Phi[3][1]*w->S[29] + t->Phi[3][2]*w->S[45] +
-            t->Phi[3][3]*w->S[61] + t->Phi[3][4]*w->S[77] + t->Phi[3][5]*w->S[93] +
-            t->Phi[3][6]*w->S[109] + t->Phi[3][8]*w->S[141] + t->Phi[3][13];
+    w->term[1][54] = t->Phi[3][0]*w->S[76] + t->Phi[3][1]*w->S[82] + t->Phi[3][2]*w->S[88] +
+            t->Phi[3][3]*w->S[94] + t->Phi[3][4]*w->S[100] + t->Phi[3][5]*w->S[106] +
+            t->Phi[3][6]*w->S[112] + t->Phi[3][8]*w->S[125] + t->Phi[3][13];
     w->term[0][55] = t->Phi[3][0]*t->Phi[0][14] + t->Phi[3][1]*t->Phi[1][14] +
             t->Phi[3][2]*t->Phi[2][14] + t->Phi[3][3]*t->Phi[3][14] + t->Phi[3][4]*t->Phi[4][14] +
             t->Phi[3][5]*t->Phi[5][14] + t->Phi[3][6]*t->Phi[6][14] + t->Phi[3][8]*t->Phi[8][14];
-    w->term[1][55] = t->Phi[3][0]*w->S[14] + t->Phi[3][1]*w->S[30] + t->Phi[3][2]*w->S[46] +
-            t->Phi[3][3]*w->S[62] + t->Phi[3][4]*w->S[78] + t->Phi[3][5]*w->S[94] +
-            t->Phi[3][6]*w->S[110] + t->Phi[3][8]*w->S[142] + t->Phi[3][14];
+    w->term[1][55] = t->Phi[3][0]*w->S[77] + t->Phi[3][1]*w->S[83] + t->Phi[3][2]*w->S[89] +
+            t->Phi[3][3]*w->S[95] + t->Phi[3][4]*w->S[101] + t->Phi[3][5]*w->S[107] +
+            t->Phi[3][6]*w->S[113] + t->Phi[3][8]*w->S[126] + t->Phi[3][14];
     w->term[0][56] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
             t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
             t->Phi[4][5]*t->Phi[5][0] + t->Phi[4][6]*t->Phi[6][0] + t->Phi[4][8]*t->Phi[8][0];
-    w->term[1][56] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[32] +
-            t->Phi[4][3]*w->S[48] + t->Phi[4][4]*w->S[64] + t->Phi[4][5]*w->S[80] +
-            t->Phi[4][6]*w->S[96] + t->Phi[4][8]*w->S[128];
+    w->term[1][56] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[8] + t->Phi[4][2]*w->S[16] +
+            t->Phi[4][3]*w->S[24] + t->Phi[4][4]*w->S[32] + t->Phi[4][5]*w->S[40] +
+            t->Phi[4][6]*w->S[48] + t->Phi[4][8]*w->S[64];
     w->term[0][57] = t->Phi[4][0]*t->Phi[0][1] + t->Phi[4][1]*t->Phi[1][1] +
             t->Phi[4][2]*t->Phi[2][1] + t->Phi[4][3]*t->Phi[3][1] + t->Phi[4][4]*t->Phi[4][1] +
             t->Phi[4][5]*t->Phi[5][1] + t->Phi[4][6]*t->Phi[6][1] + t->Phi[4][8]*t->Phi[8][1];
-    w->term[1][57] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[33] +
-            t->Phi[4][3]*w->S[49] + t->Phi[4][4]*w->S[65] + t->Phi[4][5]*w->S[81] +
-            t->Phi[4][6]*w->S[97] + t->Phi[4][8]*w->S[129];
+    w->term[1][57] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[9] + t->Phi[4][2]*w->S[17] +
+            t->Phi[4][3]*w->S[25] + t->Phi[4][4]*w->S[33] + t->Phi[4][5]*w->S[41] +
+            t->Phi[4][6]*w->S[49] + t->Phi[4][8]*w->S[65];
     w->term[0][58] = t->Phi[4][0]*t->Phi[0][2] + t->Phi[4][1]*t->Phi[1][2] +
             t->Phi[4][2]*t->Phi[2][2] + t->Phi[4][3]*t->Phi[3][2] + t->Phi[4][4]*t->Phi[4][2] +
             t->Phi[4][5]*t->Phi[5][2] + t->Phi[4][6]*t->Phi[6][2] + t->Phi[4][8]*t->Phi[8][2];
-    w->term[1][58] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[18] + t->Phi[4][2]*w->S[34] +
-            t->Phi[4][3]*w->S[50] + t->Phi[4][4]*w->S[66] + t->Phi[4][5]*w->S[82] +
-            t->Phi[4][6]*w->S[98] + t->Phi[4][8]*w->S[130];
+    w->term[1][58] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[10] + t->Phi[4][2]*w->S[18] +
+            t->Phi[4][3]*w->S[26] + t->Phi[4][4]*w->S[34] + t->Phi[4][5]*w->S[42] +
+            t->Phi[4][6]*w->S[50] + t->Phi[4][8]*w->S[66];
     w->term[0][59] = t->Phi[4][0]*t->Phi[0][3] + t->Phi[4][1]*t->Phi[1][3] +
             t->Phi[4][2]*t->Phi[2][3] + t->Phi[4][3]*t->Phi[3][3] + t->Phi[4][4]*t->Phi[4][3] +
             t->Phi[4][5]*t->Phi[5][3] + t->Phi[4][6]*t->Phi[6][3] + t->Phi[4][8]*t->Phi[8][3];
-    w->term[1][59] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[19] + t->Phi[4][2]*w->S[35] +
-            t->Phi[4][3]*w->S[51] + t->Phi[4][4]*w->S[67] + t->Phi[4][5]*w->S[83] +
-            t->Phi[4][6]*w->S[99] + t->Phi[4][8]*w->S[131];
+    w->term[1][59] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[11] + t->Phi[4][2]*w->S[19] +
+            t->Phi[4][3]*w->S[27] + t->Phi[4][4]*w->S[35] + t->Phi[4][5]*w->S[43] +
+            t->Phi[4][6]*w->S[51] + t->Phi[4][8]*w->S[67];
     w->term[0][60] = t->Phi[4][0]*t->Phi[0][4] + t->Phi[4][1]*t->Phi[1][4] +
             t->Phi[4][2]*t->Phi[2][4] + t->Phi[4][3]*t->Phi[3][4] + t->Phi[4][4]*t->Phi[4][4] +
             t->Phi[4][5]*t->Phi[5][4] + t->Phi[4][6]*t->Phi[6][4] + t->Phi[4][8]*t->Phi[8][4];
-    w->term[1][60] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[20] + t->Phi[4][2]*w->S[36] +
-            t->Phi[4][3]*w->S[52] + t->Phi[4][4]*w->S[68] + t->Phi[4][5]*w->S[84] +
-            t->Phi[4][6]*w->S[100] + t->Phi[4][8]*w->S[132];
+    w->term[1][60] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[12] + t->Phi[4][2]*w->S[20] +
+            t->Phi[4][3]*w->S[28] + t->Phi[4][4]*w->S[36] + t->Phi[4][5]*w->S[44] +
+            t->Phi[4][6]*w->S[52] + t->Phi[4][8]*w->S[68];
     w->term[0][61] = t->Phi[4][0]*t->Phi[0][5] + t->Phi[4][1]*t->Phi[1][5] +
             t->Phi[4][2]*t->Phi[2][5] + t->Phi[4][3]*t->Phi[3][5] + t->Phi[4][4]*t->Phi[4][5] +
             t->Phi[4][5]*t->Phi[5][5] + t->Phi[4][6]*t->Phi[6][5] + t->Phi[4][8]*t->Phi[8][5];
-    w->term[1][61] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[21] + t->Phi[4][2]*w->S[37] +
-            t->Phi[4][3]*w->S[53] + t->Phi[4][4]*w->S[69] + t->Phi[4][5]*w->S[85] +
-            t->Phi[4][6]*w->S[101] + t->Phi[4][8]*w->S[133];
+    w->term[1][61] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[13] + t->Phi[4][2]*w->S[21] +
+            t->Phi[4][3]*w->S[29] + t->Phi[4][4]*w->S[37] + t->Phi[4][5]*w->S[45] +
+            t->Phi[4][6]*w->S[53] + t->Phi[4][8]*w->S[69];
     w->term[0][62] = t->Phi[4][0]*t->Phi[0][6] + t->Phi[4][1]*t->Phi[1][6] +
             t->Phi[4][2]*t->Phi[2][6] + t->Phi[4][3]*t->Phi[3][6] + t->Phi[4][4]*t->Phi[4][6] +
             t->Phi[4][5]*t->Phi[5][6] + t->Phi[4][6]*t->Phi[6][6] + t->Phi[4][8]*t->Phi[8][6];
-    w->term[1][62] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[22] + t->Phi[4][2]*w->S[38] +
-            t->Phi[4][3]*w->S[54] + t->Phi[4][4]*w->S[70] + t->Phi[4][5]*w->S[86] +
-            t->Phi[4][6]*w->S[102] + t->Phi[4][8]*w->S[134];
+    w->term[1][62] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[22] +
+            t->Phi[4][3]*w->S[30] + t->Phi[4][4]*w->S[38] + t->Phi[4][5]*w->S[46] +
+            t->Phi[4][6]*w->S[54] + t->Phi[4][8]*w->S[70];
     w->term[0][63] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
             t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
             t->Phi[4][5]*t->Phi[5][8] + t->Phi[4][6]*t->Phi[6][8] + t->Phi[4][8]*t->Phi[8][8];
-    w->term[1][63] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[24] + t->Phi[4][2]*w->S[40] +
-            t->Phi[4][3]*w->S[56] + t->Phi[4][4]*w->S[72] + t->Phi[4][5]*w->S[88] +
-            t->Phi[4][6]*w->S[104] + t->Phi[4][8]*w->S[136];
+    w->term[1][63] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[23] +
+            t->Phi[4][3]*w->S[31] + t->Phi[4][4]*w->S[39] + t->Phi[4][5]*w->S[47] +
+            t->Phi[4][6]*w->S[55] + t->Phi[4][8]*w->S[71];
     w->term[0][64] = t->Phi[4][0]*t->Phi[0][9] + t->Phi[4][1]*t->Phi[1][9] +
             t->Phi[4][2]*t->Phi[2][9] + t->Phi[4][3]*t->Phi[3][9] + t->Phi[4][4]*t->Phi[4][9] +
             t->Phi[4][5]*t->Phi[5][9] + t->Phi[4][6]*t->Phi[6][9] + t->Phi[4][8]*t->Phi[8][9];
-    w->term[1][64] = t->Phi[4][0]*w->S[9] + t->Phi[4][1]*w->S[25] + t->Phi[4][2]*w->S[41] +
-            t->Phi[4][3]*w->S[57] + t->Phi[4][4]*w->S[73] + t->Phi[4][5]*w->S[89] +
-            t->Phi[4][6]*w->S[105] + t->Phi[4][8]*w->S[137] + t->Phi[4][9];
+    w->term[1][64] = t->Phi[4][0]*w->S[72] + t->Phi[4][1]*w->S[78] + t->Phi[4][2]*w->S[84] +
+            t->Phi[4][3]*w->S[90] + t->Phi[4][4]*w->S[96] + t->Phi[4][5]*w->S[102] +
+            t->Phi[4][6]*w->S[108] + t->Phi[4][8]*w->S[121] + t->Phi[4][9];
     w->term[0][65] = t->Phi[4][0]*t->Phi[0][10] + t->Phi[4][1]*t->Phi[1][10] +
             t->Phi[4][2]*t->Phi[2][10] + t->Phi[4][3]*t->Phi[3][10] + t->Phi[4][4]*t->Phi[4][10] +
             t->Phi[4][5]*t->Phi[5][10] + t->Phi[4][6]*t->Phi[6][10] + t->Phi[4][8]*t->Phi[8][10];
-    w->term[1][65] = t->Phi[4][0]*w->S[10] + t->Phi[4][1]*w->S[26] + t->Phi[4][2]*w->S[42] +
-            t->Phi[4][3]*w->S[58] + t->Phi[4][4]*w->S[74] + t->Phi[4][5]*w->S[90] +
-            t->Phi[4][6]*w->S[106] + t->Phi[4][8]*w->S[138] + t->Phi[4][10];
+    w->term[1][65] = t->Phi[4][0]*w->S[73] + t->Phi[4][1]*w->S[79] + t->Phi[4][2]*w->S[85] +
+            t->Phi[4][3]*w->S[91] + t->Phi[4][4]*w->S[97] + t->Phi[4][5]*w->S[103] +
+            t->Phi[4][6]*w->S[109] + t->Phi[4][8]*w->S[122] + t->Phi[4][10];
     w->term[0][66] = t->Phi[4][0]*t->Phi[0][11] + t->Phi[4][1]*t->Phi[1][11] +
             t->Phi[4][2]*t->Phi[2][11] + t->Phi[4][3]*t->Phi[3][11] + t->Phi[4][4]*t->Phi[4][11] +
             t->Phi[4][5]*t->Phi[5][11] + t->Phi[4][6]*t->Phi[6][11] + t->Phi[4][8]*t->Phi[8][11];
-    w->term[1][66] = t->Phi[4][0]*w->S[11] + t->Phi[4][1]*w->S[27] + t->Phi[4][2]*w->S[43] +
-            t->Phi[4][3]*w->S[59] + t->Phi[4][4]*w->S[75] + t->Phi[4][5]*w->S[91] +
-            t->Phi[4][6]*w->S[107] + t->Phi[4][8]*w->S[139] + t->Phi[4][11];
+    w->term[1][66] = t->Phi[4][0]*w->S[74] + t->Phi[4][1]*w->S[80] + t->Phi[4][2]*w->S[86] +
+            t->Phi[4][3]*w->S[92] + t->Phi[4][4]*w->S[98] + t->Phi[4][5]*w->S[104] +
+            t->Phi[4][6]*w->S[110] + t->Phi[4][8]*w->S[123] + t->Phi[4][11];
     w->term[0][67] = t->Phi[4][0]*t->Phi[0][12] + t->Phi[4][1]*t->Phi[1][12] +
             t->Phi[4][2]*t->Phi[2][12] + t->Phi[4][3]*t->Phi[3][12] + t->Phi[4][4]*t->Phi[4][12] +
             t->Phi[4][5]*t->Phi[5][12] + t->Phi[4][6]*t->Phi[6][12] + t->Phi[4][8]*t->Phi[8][12];
-    w->term[1][67] = t->Phi[4][0]*w->S[12] + t->Phi[4][1]*w->S[28] + t->Phi[4][2]*w->S[44] +
-            t->Phi[4][3]*w->S[60] + t->Phi[4][4]*w->S[76] + t->Phi[4][5]*w->S[92] +
-            t->Phi[4][6]*w->S[108] + t->Phi[4][8]*w->S[140] + t->Phi[4][12];
+    w->term[1][67] = t->Phi[4][0]*w->S[75] + t->Phi[4][1]*w->S[81] + t->Phi[4][2]*w->S[87] +
+            t->Phi[4][3]*w->S[93] + t->Phi[4][4]*w->S[99] + t->Phi[4][5]*w->S[105] +
+            t->Phi[4][6]*w->S[111] + t->Phi[4][8]*w->S[124] + t->Phi[4][12];
     w->term[0][68] = t->Phi[4][0]*t->Phi[0][13] + t->Phi[4][1]*t->Phi[1][13] +
             t->Phi[4][2]*t->Phi[2][13] + t->Phi[4][3]*t->Phi[3][13] + t->Phi[4][4]*t->Phi[4][13] +
             t->Phi[4][5]*t->Phi[5][13] + t->Phi[4][6]*t->Phi[6][13] + t->Phi[4][8]*t->Phi[8][13];
-    w->term[1][68] = t->Phi[4][0]*w->S[13] + t->Phi[4][1]*w->S[29] + t->Phi[4][2]*w->S[45] +
-            t->Phi[4][3]*w->S[61] + t->Phi[4][4]*w->S[77] + t->Phi[4][5]*w->S[93] +
-            t->Phi[4][6]*w->S[109] + t->Phi[4][8]*w->S[141] + t->Phi[4][13];
+    w->term[1][68] = t->Phi[4][0]*w->S[76] + t->Phi[4][1]*w->S[82] + t->Phi[4][2]*w->S[88] +
+            t->Phi[4][3]*w->S[94] + t->Phi[4][4]*w->S[100] + t->Phi[4][5]*w->S[106] +
+            t->Phi[4][6]*w->S[112] + t->Phi[4][8]*w->S[125] + t->Phi[4][13];
     w->term[0][69] = t->Phi[4][0]*t->Phi[0][14] + t->Phi[4][1]*t->Phi[1][14] +
             t->Phi[4][2]*t->Phi[2][14] + t->Phi[4][3]*t->Phi[3][14] + t->Phi[4][4]*t->Phi[4][14] +
             t->Phi[4][5]*t->Phi[5][14] + t->Phi[4][6]*t->Phi[6][14] + t->Phi[4][8]*t->Phi[8][14];
-    w->term[1][69] = t->Phi[4][0]*w->S[14] + t->Phi[4][1]*w->S[30] + t->Phi[4][2]*w->S[46] +
-            t->Phi[4][3]*w->S[62] + t->Phi[4][4]*w->S[78] + t->Phi[4][5]*w->S[94] +
-            t->Phi[4][6]*w->S[110] + t->Phi[4][8]*w->S[142] + t->Phi[4][14];
+    w->term[1][69] = t->Phi[4][0]*w->S[77] + t->Phi[4][1]*w->S[83] + t->Phi[4][2]*w->S[89] +
+            t->Phi[4][3]*w->S[95] + t->Phi[4][4]*w->S[101] + t->Phi[4][5]*w->S[107] +
+            t->Phi[4][6]*w->S[113] + t->Phi[4][8]*w->S[126] + t->Phi[4][14];
     w->term[0][70] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
             t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
             t->Phi[5][5]*t->Phi[5][0] + t->Phi[5][6]*t->Phi[6][0] + t->Phi[5][8]*t->Phi[8][0];
-    w->term[1][70] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[32] +
-            t->Phi[5][3]*w->S[48] + t->Phi[5][4]*w->S[64] + t->Phi[5][5]*w->S[80] +
-            t->Phi[5][6]*w->S[96] + t->Phi[5][8]*w->S[128];
+    w->term[1][70] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[8] + t->Phi[5][2]*w->S[16] +
+            t->Phi[5][3]*w->S[24] + t->Phi[5][4]*w->S[32] + t->Phi[5][5]*w->S[40] +
+            t->Phi[5][6]*w->S[48] + t->Phi[5][8]*w->S[64];
     w->term[0][71] = t->Phi[5][0]*t->Phi[0][1] + t->Phi[5][1]*t->Phi[1][1] +
             t->Phi[5][2]*t->Phi[2][1] + t->Phi[5][3]*t->Phi[3][1] + t->Phi[5][4]*t->Phi[4][1] +
             t->Phi[5][5]*t->Phi[5][1] + t->Phi[5][6]*t->Phi[6][1] + t->Phi[5][8]*t->Phi[8][1];
-    w->term[1][71] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[33] +
-            t->Phi[5][3]*w->S[49] + t->Phi[5][4]*w->S[65] + t->Phi[5][5]*w->S[81] +
-            t->Phi[5][6]*w->S[97] + t->Phi[5][8]*w->S[129];
+    w->term[1][71] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[9] + t->Phi[5][2]*w->S[17] +
+            t->Phi[5][3]*w->S[25] + t->Phi[5][4]*w->S[33] + t->Phi[5][5]*w->S[41] +
+            t->Phi[5][6]*w->S[49] + t->Phi[5][8]*w->S[65];
     w->term[0][72] = t->Phi[5][0]*t->Phi[0][2] + t->Phi[5][1]*t->Phi[1][2] +
             t->Phi[5][2]*t->Phi[2][2] + t->Phi[5][3]*t->Phi[3][2] + t->Phi[5][4]*t->Phi[4][2] +
             t->Phi[5][5]*t->Phi[5][2] + t->Phi[5][6]*t->Phi[6][2] + t->Phi[5][8]*t->Phi[8][2];
-    w->term[1][72] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[18] + t->Phi[5][2]*w->S[34] +
-            t->Phi[5][3]*w->S[50] + t->Phi[5][4]*w->S[66] + t->Phi[5][5]*w->S[82] +
-            t->Phi[5][6]*w->S[98] + t->Phi[5][8]*w->S[130];
+    w->term[1][72] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[10] + t->Phi[5][2]*w->S[18] +
+            t->Phi[5][3]*w->S[26] + t->Phi[5][4]*w->S[34] + t->Phi[5][5]*w->S[42] +
+            t->Phi[5][6]*w->S[50] + t->Phi[5][8]*w->S[66];
     w->term[0][73] = t->Phi[5][0]*t->Phi[0][3] + t->Phi[5][1]*t->Phi[1][3] +
             t->Phi[5][2]*t->Phi[2][3] + t->Phi[5][3]*t->Phi[3][3] + t->Phi[5][4]*t->Phi[4][3] +
             t->Phi[5][5]*t->Phi[5][3] + t->Phi[5][6]*t->Phi[6][3] + t->Phi[5][8]*t->Phi[8][3];
-    w->term[1][73] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[19] + t->Phi[5][2]*w->S[35] +
-            t->Phi[5][3]*w->S[51] + t->Phi[5][4]*w->S[67] + t->Phi[5][5]*w->S[83] +
-            t->Phi[5][6]*w->S[99] + t->Phi[5][8]*w->S[131];
+    w->term[1][73] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[11] + t->Phi[5][2]*w->S[19] +
+            t->Phi[5][3]*w->S[27] + t->Phi[5][4]*w->S[35] + t->Phi[5][5]*w->S[43] +
+            t->Phi[5][6]*w->S[51] + t->Phi[5][8]*w->S[67];
     w->term[0][74] = t->Phi[5][0]*t->Phi[0][4] + t->Phi[5][1]*t->Phi[1][4] +
             t->Phi[5][2]*t->Phi[2][4] + t->Phi[5][3]*t->Phi[3][4] + t->Phi[5][4]*t->Phi[4][4] +
             t->Phi[5][5]*t->Phi[5][4] + t->Phi[5][6]*t->Phi[6][4] + t->Phi[5][8]*t->Phi[8][4];
-    w->term[1][74] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[20] + t->Phi[5][2]*w->S[36] +
-            t->Phi[5][3]*w->S[52] + t->Phi[5][4]*w->S[68] + t->Phi[5][5]*w->S[84] +
-            t->Phi[5][6]*w->S[100] + t->Phi[5][8]*w->S[132];
+    w->term[1][74] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[12] + t->Phi[5][2]*w->S[20] +
+            t->Phi[5][3]*w->S[28] + t->Phi[5][4]*w->S[36] + t->Phi[5][5]*w->S[44] +
+            t->Phi[5][6]*w->S[52] + t->Phi[5][8]*w->S[68];
     w->term[0][75] = t->Phi[5][0]*t->Phi[0][5] + t->Phi[5][1]*t->Phi[1][5] +
             t->Phi[5][2]*t->Phi[2][5] + t->Phi[5][3]*t->Phi[3][5] + t->Phi[5][4]*t->Phi[4][5] +
             t->Phi[5][5]*t->Phi[5][5] + t->Phi[5][6]*t->Phi[6][5] + t->Phi[5][8]*t->Phi[8][5];
-    w->term[1][75] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[21] + t->Phi[5][2]*w->S[37] +
-            t->Phi[5][3]*w->S[53] + t->Phi[5][4]*w->S[69] + t->Phi[5][5]*w->S[85] +
-            t->Phi[5][6]*w->S[101] + t->Phi[5][8]*w->S[133];
+    w->term[1][75] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[13] + t->Phi[5][2]*w->S[21] +
+            t->Phi[5][3]*w->S[29] + t->Phi[5][4]*w->S[37] + t->Phi[5][5]*w->S[45] +
+            t->Phi[5][6]*w->S[53] + t->Phi[5][8]*w->S[69];
     w->term[0][76] = t->Phi[5][0]*t->Phi[0][6] + t->Phi[5][1]*t->Phi[1][6] +
             t->Phi[5][2]*t->Phi[2][6] + t->Phi[5][3]*t->Phi[3][6] + t->Phi[5][4]*t->Phi[4][6] +
             t->Phi[5][5]*t->Phi[5][6] + t->Phi[5][6]*t->Phi[6][6] + t->Phi[5][8]*t->Phi[8][6];
-    w->term[1][76] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[22] + t->Phi[5][2]*w->S[38] +
-            t->Phi[5][3]*w->S[54] + t->Phi[5][4]*w->S[70] + t->Phi[5][5]*w->S[86] +
-            t->Phi[5][6]*w->S[102] + t->Phi[5][8]*w->S[134];
+    w->term[1][76] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[22] +
+            t->Phi[5][3]*w->S[30] + t->Phi[5][4]*w->S[38] + t->Phi[5][5]*w->S[46] +
+            t->Phi[5][6]*w->S[54] + t->Phi[5][8]*w->S[70];
     w->term[0][77] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
             t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
             t->Phi[5][5]*t->Phi[5][8] + t->Phi[5][6]*t->Phi[6][8] + t->Phi[5][8]*t->Phi[8][8];
-    w->term[1][77] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[24] + t->Phi[5][2]*w->S[40] +
-            t->Phi[5][3]*w->S[56] + t->Phi[5][4]*w->S[72] + t->Phi[5][5]*w->S[88] +
-            t->Phi[5][6]*w->S[104] + t->Phi[5][8]*w->S[136];
+    w->term[1][77] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[23] +
+            t->Phi[5][3]*w->S[31] + t->Phi[5][4]*w->S[39] + t->Phi[5][5]*w->S[47] +
+            t->Phi[5][6]*w->S[55] + t->Phi[5][8]*w->S[71];
     w->term[0][78] = t->Phi[5][0]*t->Phi[0][9] + t->Phi[5][1]*t->Phi[1][9] +
             t->Phi[5][2]*t->Phi[2][9] + t->Phi[5][3]*t->Phi[3][9] + t->Phi[5][4]*t->Phi[4][9] +
             t->Phi[5][5]*t->Phi[5][9] + t->Phi[5][6]*t->Phi[6][9] + t->Phi[5][8]*t->Phi[8][9];
-    w->term[1][78] = t->Phi[5][0]*w->S[9] + t->Phi[5][1]*w->S[25] + t->Phi[5][2]*w->S[41] +
-            t->Phi[5][3]*w->S[57] + t->Phi[5][4]*w->S[73] + t->Phi[5][5]*w->S[89] +
-            t->Phi[5][6]*w->S[105] + t->Phi[5][8]*w->S[137] + t->Phi[5][9];
+    w->term[1][78] = t->Phi[5][0]*w->S[72] + t->Phi[5][1]*w->S[78] + t->Phi[5][2]*w->S[84] +
+            t->Phi[5][3]*w->S[90] + t->Phi[5][4]*w->S[96] + t->Phi[5][5]*w->S[102] +
+            t->Phi[5][6]*w->S[108] + t->Phi[5][8]*w->S[121] + t->Phi[5][9];
     w->term[0][79] = t->Phi[5][0]*t->Phi[0][10] + t->Phi[5][1]*t->Phi[1][10] +
             t->Phi[5][2]*t->Phi[2][10] + t->Phi[5][3]*t->Phi[3][10] + t->Phi[5][4]*t->Phi[4][10] +
             t->Phi[5][5]*t->Phi[5][10] + t->Phi[5][6]*t->Phi[6][10] + t->Phi[5][8]*t->Phi[8][10];
-    w->term[1][79] = t->Phi[5][0]*w->S[10] + t->Phi[5][1]*w->S[26] + t->Phi[5][2]*w->S[42] +
-            t->Phi[5][3]*w->S[58] + t->Phi[5][4]*w->S[74] + t->Phi[5][5]*w->S[90] +
-            t->Phi[5][6]*w->S[106] + t->Phi[5][8]*w->S[138] + t->Phi[5][10];
+    w->term[1][79] = t->Phi[5][0]*w->S[73] + t->Phi[5][1]*w->S[79] + t->Phi[5][2]*w->S[85] +
+            t->Phi[5][3]*w->S[91] + t->Phi[5][4]*w->S[97] + t->Phi[5][5]*w->S[103] +
+            t->Phi[5][6]*w->S[109] + t->Phi[5][8]*w->S[122] + t->Phi[5][10];
     w->term[0][80] = t->Phi[5][0]*t->Phi[0][11] + t->Phi[5][1]*t->Phi[1][11] +
             t->Phi[5][2]*t->Phi[2][11] + t->Phi[5][3]*t->Phi[3][11] + t->Phi[5][4]*t->Phi[4][11] +
             t->Phi[5][5]*t->Phi[5][11] + t->Phi[5][6]*t->Phi[6][11] + t->Phi[5][8]*t->Phi[8][11];
-    w->term[1][80] = t->Phi[5][0]*w->S[11] + t->Phi[5][1]*w->S[27] + t->Phi[5][2]*w->S[43] +
-            t->Phi[5][3]*w->S[59] + t->Phi[5][4]*w->S[75] + t->Phi[5][5]*w->S[91] +
-            t->Phi[5][6]*w->S[107] + t->Phi[5][8]*w->S[139] + t->Phi[5][11];
+    w->term[1][80] = t->Phi[5][0]*w->S[74] + t->Phi[5][1]*w->S[80] + t->Phi[5][2]*w->S[86] +
+            t->Phi[5][3]*w->S[92] + t->Phi[5][4]*w->S[98] + t->Phi[5][5]*w->S[104] +
+            t->Phi[5][6]*w->S[110] + t->Phi[5][8]*w->S[123] + t->Phi[5][11];
     w->term[0][81] = t->Phi[5][0]*t->Phi[0][12] + t->Phi[5][1]*t->Phi[1][12] +
             t->Phi[5][2]*t->Phi[2][12] + t->Phi[5][3]*t->Phi[3][12] + t->Phi[5][4]*t->Phi[4][12] +
             t->Phi[5][5]*t->Phi[5][12] + t->Phi[5][6]*t->Phi[6][12] + t->Phi[5][8]*t->Phi[8][12];
-    w->term[1][81] = t->Phi[5][0]*w->S[12] + t->Phi[5][1]*w->S[28] + t->Phi[5][2]*w->S[44] +
-            t->Phi[5][3]*w->S[60] + t->Phi[5][4]*w->S[76] + t->Phi[5][5]*w->S[92] +
-            t->Phi[5][6]*w->S[108] + t->Phi[5][8]*w->S[140] + t->Phi[5][12];
+    w->term[1][81] = t->Phi[5][0]*w->S[75] + t->Phi[5][1]*w->S[81] + t->Phi[5][2]*w->S[87] +
+            t->Phi[5][3]*w->S[93] + t->Phi[5][4]*w->S[99] + t->Phi[5][5]*w->S[105] +
+            t->Phi[5][6]*w->S[111] + t->Phi[5][8]*w->S[124] + t->Phi[5][12];
     w->term[0][82] = t->Phi[5][0]*t->Phi[0][13] + t->Phi[5][1]*t->Phi[1][13] +
             t->Phi[5][2]*t->Phi[2][13] + t->Phi[5][3]*t->Phi[3][13] + t->Phi[5][4]*t->Phi[4][13] +
             t->Phi[5][5]*t->Phi[5][13] + t->Phi[5][6]*t->Phi[6][13] + t->Phi[5][8]*t->Phi[8][13];
-    w->term[1][82] = t->Phi[5][0]*w->S[13] + t->Phi[5][1]*w->S[29] + t->Phi[5][2]*w->S[45] +
-            t->Phi[5][3]*w->S[61] + t->Phi[5][4]*w->S[77] + t->Phi[5][5]*w->S[93] +
-            t->Phi[5][6]*w->S[109] + t->Phi[5][8]*w->S[141] + t->Phi[5][13];
+    w->term[1][82] = t->Phi[5][0]*w->S[76] + t->Phi[5][1]*w->S[82] + t->Phi[5][2]*w->S[88] +
+            t->Phi[5][3]*w->S[94] + t->Phi[5][4]*w->S[100] + t->Phi[5][5]*w->S[106] +
+            t->Phi[5][6]*w->S[112] + t->Phi[5][8]*w->S[125] + t->Phi[5][13];
     w->term[0][83] = t->Phi[5][0]*t->Phi[0][14] + t->Phi[5][1]*t->Phi[1][14] +
             t->Phi[5][2]*t->Phi[2][14] + t->Phi[5][3]*t->Phi[3][14] + t->Phi[5][4]*t->Phi[4][14] +
             t->Phi[5][5]*t->Phi[5][14] + t->Phi[5][6]*t->Phi[6][14] + t->Phi[5][8]*t->Phi[8][14];
-    w->term[1][83] = t->Phi[5][0]*w->S[14] + t->Phi[5][1]*w->S[30] + t->Phi[5][2]*w->S[46] +
-            t->Phi[5][3]*w->S[62] + t->Phi[5][4]*w->S[78] + t->Phi[5][5]*w->S[94] +
-            t->Phi[5][6]*w->S[110] + t->Phi[5][8]*w->S[142] + t->Phi[5][14];
+    w->term[1][83] = t->Phi[5][0]*w->S[77] + t->Phi[5][1]*w->S[83] + t->Phi[5][2]*w->S[89] +
+            t->Phi[5][3]*w->S[95] + t->Phi[5][4]*w->S[101] + t->Phi[5][5]*w->S[107] +
+            t->Phi[5][6]*w->S[113] + t->Phi[5][8]*w->S[126] + t->Phi[5][14];
     w->term[0][84] = t->Phi[6][0]*t->Phi[0][0] + t->Phi[6][1]*t->Phi[1][0] +
             t->Phi[6][2]*t->Phi[2][0] + t->Phi[6][3]*t->Phi[3][0] + t->Phi[6][4]*t->Phi[4][0] +
             t->Phi[6][5]*t->Phi[5][0] + t->Phi[6][6]*t->Phi[6][0] + t->Phi[6][8]*t->Phi[8][0];
-    w->term[1][84] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[16] + t->Phi[6][2]*w->S[32] +
-            t->Phi[6][3]*w->S[48] + t->Phi[6][4]*w->S[64] + t->Phi[6][5]*w->S[80] +
-            t->Phi[6][6]*w->S[96] + t->Phi[6][8]*w->S[128];
+    w->term[1][84] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[8] + t->Phi[6][2]*w->S[16] +
+            t->Phi[6][3]*w->S[24] + t->Phi[6][4]*w->S[32] + t->Phi[6][5]*w->S[40] +
+            t->Phi[6][6]*w->S[48] + t->Phi[6][8]*w->S[64];
     w->term[0][85] = t->Phi[6][0]*t->Phi[0][1] + t->Phi[6][1]*t->Phi[1][1] +
             t->Phi[6][2]*t->Phi[2][1] + t->Phi[6][3]*t->Phi[3][1] + t->Phi[6][4]*t->Phi[4][1] +
             t->Phi[6][5]*t->Phi[5][1] + t->Phi[6][6]*t->Phi[6][1] + t->Phi[6][8]*t->Phi[8][1];
-    w->term[1][85] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[17] + t->Phi[6][2]*w->S[33] +
-            t->Phi[6][3]*w->S[49] + t->Phi[6][4]*w->S[65] + t->Phi[6][5]*w->S[81] +
-            t->Phi[6][6]*w->S[97] + t->Phi[6][8]*w->S[129];
+    w->term[1][85] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[9] + t->Phi[6][2]*w->S[17] +
+            t->Phi[6][3]*w->S[25] + t->Phi[6][4]*w->S[33] + t->Phi[6][5]*w->S[41] +
+            t->Phi[6][6]*w->S[49] + t->Phi[6][8]*w->S[65];
     w->term[0][86] = t->Phi[6][0]*t->Phi[0][2] + t->Phi[6][1]*t->Phi[1][2] +
             t->Phi[6][2]*t->Phi[2][2] + t->Phi[6][3]*t->Phi[3][2] + t->Phi[6][4]*t->Phi[4][2] +
             t->Phi[6][5]*t->Phi[5][2] + t->Phi[6][6]*t->Phi[6][2] + t->Phi[6][8]*t->Phi[8][2];
-    w->term[1][86] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[18] + t->Phi[6][2]*w->S[34] +
-            t->Phi[6][3]*w->S[50] + t->Phi[6][4]*w->S[66] + t->Phi[6][5]*w->S[82] +
-            t->Phi[6][6]*w->S[98] + t->Phi[6][8]*w->S[130];
+    w->term[1][86] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[10] + t->Phi[6][2]*w->S[18] +
+            t->Phi[6][3]*w->S[26] + t->Phi[6][4]*w->S[34] + t->Phi[6][5]*w->S[42] +
+            t->Phi[6][6]*w->S[50] + t->Phi[6][8]*w->S[66];
     w->term[0][87] = t->Phi[6][0]*t->Phi[0][3] + t->Phi[6][1]*t->Phi[1][3] +
             t->Phi[6][2]*t->Phi[2][3] + t->Phi[6][3]*t->Phi[3][3] + t->Phi[6][4]*t->Phi[4][3] +
             t->Phi[6][5]*t->Phi[5][3] + t->Phi[6][6]*t->Phi[6][3] + t->Phi[6][8]*t->Phi[8][3];
-    w->term[1][87] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[19] + t->Phi[6][2]*w->S[35] +
-            t->Phi[6][3]*w->S[51] + t->Phi[6][4]*w->S[67] + t->Phi[6][5]*w->S[83] +
-            t->Phi[6][6]*w->S[99] + t->Phi[6][8]*w->S[131];
+    w->term[1][87] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[11] + t->Phi[6][2]*w->S[19] +
+            t->Phi[6][3]*w->S[27] + t->Phi[6][4]*w->S[35] + t->Phi[6][5]*w->S[43] +
+            t->Phi[6][6]*w->S[51] + t->Phi[6][8]*w->S[67];
     w->term[0][88] = t->Phi[6][0]*t->Phi[0][4] + t->Phi[6][1]*t->Phi[1][4] +
             t->Phi[6][2]*t->Phi[2][4] + t->Phi[6][3]*t->Phi[3][4] + t->Phi[6][4]*t->Phi[4][4] +
             t->Phi[6][5]*t->Phi[5][4] + t->Phi[6][6]*t->Phi[6][4] + t->Phi[6][8]*t->Phi[8][4];
-    w->term[1][88] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[20] + t->Phi[6][2]*w->S[36] +
-            t->Phi[6][3]*w->S[52] + t->Phi[6][4]*w->S[68] + t->Phi[6][5]*w->S[84] +
-            t->Phi[6][6]*w->S[100] + t->Phi[6][8]*w->S[132];
+    w->term[1][88] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[12] + t->Phi[6][2]*w->S[20] +
+            t->Phi[6][3]*w->S[28] + t->Phi[6][4]*w->S[36] + t->Phi[6][5]*w->S[44] +
+            t->Phi[6][6]*w->S[52] + t->Phi[6][8]*w->S[68];
     w->term[0][89] = t->Phi[6][0]*t->Phi[0][5] + t->Phi[6][1]*t->Phi[1][5] +
             t->Phi[6][2]*t->Phi[2][5] + t->Phi[6][3]*t->Phi[3][5] + t->Phi[6][4]*t->Phi[4][5] +
             t->Phi[6][5]*t->Phi[5][5] + t->Phi[6][6]*t->Phi[6][5] + t->Phi[6][8]*t->Phi[8][5];
-    w->term[1][89] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[21] + t->Phi[6][2]*w->S[37] +
-            t->Phi[6][3]*w->S[53] + t->Phi[6][4]*w->S[69] + t->Phi[6][5]*w->S[85] +
-            t->Phi[6][6]*w->S[101] + t->Phi[6][8]*w->S[133];
+    w->term[1][89] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[13] + t->Phi[6][2]*w->S[21] +
+            t->Phi[6][3]*w->S[29] + t->Phi[6][4]*w->S[37] + t->Phi[6][5]*w->S[45] +
+            t->Phi[6][6]*w->S[53] + t->Phi[6][8]*w->S[69];
     w->term[0][90] = t->Phi[6][0]*t->Phi[0][6] + t->Phi[6][1]*t->Phi[1][6] +
             t->Phi[6][2]*t->Phi[2][6] + t->Phi[6][3]*t->Phi[3][6] + t->Phi[6][4]*t->Phi[4][6] +
             t->Phi[6][5]*t->Phi[5][6] + t->Phi[6][6]*t->Phi[6][6] + t->Phi[6][8]*t->Phi[8][6];
-    w->term[1][90] = t->Phi[6][0]*w->S[6] + t->Phi[6][1]*w->S[22] + t->Phi[6][2]*w->S[38] +
-            t->Phi[6][3]*w->S[54] + t->Phi[6][4]*w->S[70] + t->Phi[6][5]*w->S[86] +
-            t->Phi[6][6]*w->S[102] + t->Phi[6][8]*w->S[134];
+    w->term[1][90] = t->Phi[6][0]*w->S[6] + t->Phi[6][1]*w->S[14] + t->Phi[6][2]*w->S[22] +
+            t->Phi[6][3]*w->S[30] + t->Phi[6][4]*w->S[38] + t->Phi[6][5]*w->S[46] +
+            t->Phi[6][6]*w->S[54] + t->Phi[6][8]*w->S[70];
     w->term[0][91] = t->Phi[6][0]*t->Phi[0][8] + t->Phi[6][1]*t->Phi[1][8] +
             t->Phi[6][2]*t->Phi[2][8] + t->Phi[6][3]*t->Phi[3][8] + t->Phi[6][4]*t->Phi[4][8] +
             t->Phi[6][5]*t->Phi[5][8] + t->Phi[6][6]*t->Phi[6][8] + t->Phi[6][8]*t->Phi[8][8];
-    w->term[1][91] = t->Phi[6][0]*w->S[8] + t->Phi[6][1]*w->S[24] + t->Phi[6][2]*w->S[40] +
-            t->Phi[6][3]*w->S[56] + t->Phi[6][4]*w->S[72] + t->Phi[6][5]*w->S[88] +
-            t->Phi[6][6]*w->S[104] + t->Phi[6][8]*w->S[136];
+    w->term[1][91] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[15] + t->Phi[6][2]*w->S[23] +
+            t->Phi[6][3]*w->S[31] + t->Phi[6][4]*w->S[39] + t->Phi[6][5]*w->S[47] +
+            t->Phi[6][6]*w->S[55] + t->Phi[6][8]*w->S[71];
     w->term[0][92] = t->Phi[6][0]*t->Phi[0][9] + t->Phi[6][1]*t->Phi[1][9] +
             t->Phi[6][2]*t->Phi[2][9] + t->Phi[6][3]*t->Phi[3][9] + t->Phi[6][4]*t->Phi[4][9] +
             t->Phi[6][5]*t->Phi[5][9] + t->Phi[6][6]*t->Phi[6][9] + t->Phi[6][8]*t->Phi[8][9];
-    w->term[1][92] = t->Phi[6][0]*w->S[9] + t->Phi[6][1]*w->S[25] + t->Phi[6][2]*w->S[41] +
-            t->Phi[6][3]*w->S[57] + t->Phi[6][4]*w->S[73] + t->Phi[6][5]*w->S[89] +
-            t->Phi[6][6]*w->S[105] + t->Phi[6][8]*w->S[137] + t->Phi[6][9];
+    w->term[1][92] = t->Phi[6][0]*w->S[72] + t->Phi[6][1]*w->S[78] + t->Phi[6][2]*w->S[84] +
+            t->Phi[6][3]*w->S[90] + t->Phi[6][4]*w->S[96] + t->Phi[6][5]*w->S[102] +
+            t->Phi[6][6]*w->S[108] + t->Phi[6][8]*w->S[121] + t->Phi[6][9];
     w->term[0][93] = t->Phi[6][0]*t->Phi[0][10] + t->Phi[6][1]*t->Phi[1][10] +
             t->Phi[6][2]*t->Phi[2][10] + t->Phi[6][3]*t->Phi[3][10] + t->Phi[6][4]*t->Phi[4][10] +
             t->Phi[6][5]*t->Phi[5][10] + t->Phi[6][6]*t->Phi[6][10] + t->Phi[6][8]*t->Phi[8][10];
-    w->term[1][93] = t->Phi[6][0]*w->S[10] + t->Phi[6][1]*w->S[26] + t->Phi[6][2]*w->S[42] +
-            t->Phi[6][3]*w->S[58] + t->Phi[6][4]*w->S[74] + t->Phi[6][5]*w->S[90] +
-            t->Phi[6][6]*w->S[106] + t->Phi[6][8]*w->S[138] + t->Phi[6][10];
+    w->term[1][93] = t->Phi[6][0]*w->S[73] + t->Phi[6][1]*w->S[79] + t->Phi[6][2]*w->S[85] +
+            t->Phi[6][3]*w->S[91] + t->Phi[6][4]*w->S[97] + t->Phi[6][5]*w->S[103] +
+            t->Phi[6][6]*w->S[109] + t->Phi[6][8]*w->S[122] + t->Phi[6][10];
     w->term[0][94] = t->Phi[6][0]*t->Phi[0][11] + t->Phi[6][1]*t->Phi[1][11] +
             t->Phi[6][2]*t->Phi[2][11] + t->Phi[6][3]*t->Phi[3][11] + t->Phi[6][4]*t->Phi[4][11] +
             t->Phi[6][5]*t->Phi[5][11] + t->Phi[6][6]*t->Phi[6][11] + t->Phi[6][8]*t->Phi[8][11];
-    w->term[1][94] = t->Phi[6][0]*w->S[11] + t->Phi[6][1]*w->S[27] + t->Phi[6][2]*w->S[43] +
-            t->Phi[6][3]*w->S[59] + t->Phi[6][4]*w->S[75] + t->Phi[6][5]*w->S[91] +
-            t->Phi[6][6]*w->S[107] + t->Phi[6][8]*w->S[139] + t->Phi[6][11];
+    w->term[1][94] = t->Phi[6][0]*w->S[74] + t->Phi[6][1]*w->S[80] + t->Phi[6][2]*w->S[86] +
+            t->Phi[6][3]*w->S[92] + t->Phi[6][4]*w->S[98] + t->Phi[6][5]*w->S[104] +
+            t->Phi[6][6]*w->S[110] + t->Phi[6][8]*w->S[123] + t->Phi[6][11];
     w->term[0][95] = t->Phi[6][0]*t->Phi[0][12] + t->Phi[6][1]*t->Phi[1][12] +
             t->Phi[6][2]*t->Phi[2][12] + t->Phi[6][3]*t->Phi[3][12] + t->Phi[6][4]*t->Phi[4][12] +
             t->Phi[6][5]*t->Phi[5][12] + t->Phi[6][6]*t->Phi[6][12] + t->Phi[6][8]*t->Phi[8][12];
-    w->term[1][95] = t->Phi[6][0]*w->S[12] + t->Phi[6][1]*w->S[28] + t->Phi[6][2]*w->S[44] +
-            t->Phi[6][3]*w->S[60] + t->Phi[6][4]*w->S[76] + t->Phi[6][5]*w->S[92] +
-            t->Phi[6][6]*w->S[108] + t->Phi[6][8]*w->S[140] + t->Phi[6][12];
+    w->term[1][95] = t->Phi[6][0]*w->S[75] + t->Phi[6][1]*w->S[81] + t->Phi[6][2]*w->S[87] +
+            t->Phi[6][3]*w->S[93] + t->Phi[6][4]*w->S[99] + t->Phi[6][5]*w->S[105] +
+            t->Phi[6][6]*w->S[111] + t->Phi[6][8]*w->S[124] + t->Phi[6][12];
     w->term[0][96] = t->Phi[6][0]*t->Phi[0][13] + t->Phi[6][1]*t->Phi[1][13] +
             t->Phi[6][2]*t->Phi[2][13] + t->Phi[6][3]*t->Phi[3][13] + t->Phi[6][4]*t->Phi[4][13] +
             t->Phi[6][5]*t->Phi[5][13] + t->Phi[6][6]*t->Phi[6][13] + t->Phi[6][8]*t->Phi[8][13];
-    w->term[1][96] = t->Phi[6][0]*w->S[13] + t->Phi[6][1]*w->S[29] + t->Phi[6][2]*w->S[45] +
-            t->Phi[6][3]*w->S[61] + t->Phi[6][4]*w->S[77] + t->Phi[6][5]*w->S[93] +
-            t->Phi[6][6]*w->S[109] + t->Phi[6][8]*w->S[141] + t->Phi[6][13];
+    w->term[1][96] = t->Phi[6][0]*w->S[76] + t->Phi[6][1]*w->S[82] + t->Phi[6][2]*w->S[88] +
+            t->Phi[6][3]*w->S[94] + t->Phi[6][4]*w->S[100] + t->Phi[6][5]*w->S[106] +
+            t->Phi[6][6]*w->S[112] + t->Phi[6][8]*w->S[125] + t->Phi[6][13];
     w->term[0][97] = t->Phi[6][0]*t->Phi[0][14] + t->Phi[6][1]*t->Phi[1][14] +
             t->Phi[6][2]*t->Phi[2][14] + t->Phi[6][3]*t->Phi[3][14] + t->Phi[6][4]*t->Phi[4][14] +
             t->Phi[6][5]*t->Phi[5][14] + t->Phi[6][6]*t->Phi[6][14] + t->Phi[6][8]*t->Phi[8][14];
-    w->term[1][97] = t->Phi[6][0]*w->S[14] + t->Phi[6][1]*w->S[30] + t->Phi[6][2]*w->S[46] +
-            t->Phi[6][3]*w->S[62] + t->Phi[6][4]*w->S[78] + t->Phi[6][5]*w->S[94] +
-            t->Phi[6][6]*w->S[110] + t->Phi[6][8]*w->S[142] + t->Phi[6][14];
+    w->term[1][97] = t->Phi[6][0]*w->S[77] + t->Phi[6][1]*w->S[83] + t->Phi[6][2]*w->S[89] +
+            t->Phi[6][3]*w->S[95] + t->Phi[6][4]*w->S[101] + t->Phi[6][5]*w->S[107] +
+            t->Phi[6][6]*w->S[113] + t->Phi[6][8]*w->S[126] + t->Phi[6][14];
     w->term[0][98] = t->Phi[7][0]*t->Phi[0][0] + t->Phi[7][1]*t->Phi[1][0] +
             t->Phi[7][2]*t->Phi[2][0] + t->Phi[7][3]*t->Phi[3][0] + t->Phi[7][4]*t->Phi[4][0] +
             t->Phi[7][5]*t->Phi[5][0] + t->Phi[7][6]*t->Phi[6][0] + t->Phi[7][7]*t->Phi[7][0] +
             t->Phi[7][8]*t->Phi[8][0];
-    w->term[1][98] = t->Phi[7][0]*w->S[0] + t->Phi[7][1]*w->S[16] + t->Phi[7][2]*w->S[32] +
-            t->Phi[7][3]*w->S[48] + t->Phi[7][4]*w->S[64] + t->Phi[7][5]*w->S[80] +
-            t->Phi[7][6]*w->S[96] + t->Phi[7][7]*w->S[112] + t->Phi[7][8]*w->S[128];
+    w->term[1][98] = t->Phi[7][0]*w->S[0] + t->Phi[7][1]*w->S[8] + t->Phi[7][2]*w->S[16] +
+            t->Phi[7][3]*w->S[24] + t->Phi[7][4]*w->S[32] + t->Phi[7][5]*w->S[40] +
+            t->Phi[7][6]*w->S[48] + t->Phi[7][7]*w->S[56] + t->Phi[7][8]*w->S[64];
     w->term[0][99] = t->Phi[7][0]*t->Phi[0][1] + t->Phi[7][1]*t->Phi[1][1] +
             t->Phi[7][2]*t->Phi[2][1] + t->Phi[7][3]*t->Phi[3][1] + t->Phi[7][4]*t->Phi[4][1] +
             t->Phi[7][5]*t->Phi[5][1] + t->Phi[7][6]*t->Phi[6][1] + t->Phi[7][7]*t->Phi[7][1] +
             t->Phi[7][8]*t->Phi[8][1];
-    w->term[1][99] = t->Phi[7][0]*w->S[1] + t->Phi[7][1]*w->S[17] + t->Phi[7][2]*w->S[33] +
-            t->Phi[7][3]*w->S[49] + t->Phi[7][4]*w->S[65] + t->Phi[7][5]*w->S[81] +
-            t->Phi[7][6]*w->S[97] + t->Phi[7][7]*w->S[113] + t->Phi[7][8]*w->S[129];
+    w->term[1][99] = t->Phi[7][0]*w->S[1] + t->Phi[7][1]*w->S[9] + t->Phi[7][2]*w->S[17] +
+            t->Phi[7][3]*w->S[25] + t->Phi[7][4]*w->S[33] + t->Phi[7][5]*w->S[41] +
+            t->Phi[7][6]*w->S[49] + t->Phi[7][7]*w->S[57] + t->Phi[7][8]*w->S[65];
     w->term[0][100] = t->Phi[7][0]*t->Phi[0][2] + t->Phi[7][1]*t->Phi[1][2] +
             t->Phi[7][2]*t->Phi[2][2] + t->Phi[7][3]*t->Phi[3][2] + t->Phi[7][4]*t->Phi[4][2] +
             t->Phi[7][5]*t->Phi[5][2] + t->Phi[7][6]*t->Phi[6][2] + t->Phi[7][7]*t->Phi[7][2] +
             t->Phi[7][8]*t->Phi[8][2];
-    w->term[1][100] = t->Phi[7][0]*w->S[2] + t->Phi[7][1]*w->S[18] + t->Phi[7][2]*w->S[34] +
-            t->Phi[7][3]*w->S[50] + t->Phi[7][4]*w->S[66] + t->Phi[7][5]*w->S[82] +
-            t->Phi[7][6]*w->S[98] + t->Phi[7][7]*w->S[114] + t->Phi[7][8]*w->S[130];
+    w->term[1][100] = t->Phi[7][0]*w->S[2] + t->Phi[7][1]*w->S[10] + t->Phi[7][2]*w->S[18] +
+            t->Phi[7][3]*w->S[26] + t->Phi[7][4]*w->S[34] + t->Phi[7][5]*w->S[42] +
+            t->Phi[7][6]*w->S[50] + t->Phi[7][7]*w->S[58] + t->Phi[7][8]*w->S[66];
     w->term[0][101] = t->Phi[7][0]*t->Phi[0][3] + t->Phi[7][1]*t->Phi[1][3] +
             t->Phi[7][2]*t->Phi[2][3] + t->Phi[7][3]*t->Phi[3][3] + t->Phi[7][4]*t->Phi[4][3] +
             t->Phi[7][5]*t->Phi[5][3] + t->Phi[7][6]*t->Phi[6][3] + t->Phi[7][7]*t->Phi[7][3] +
             t->Phi[7][8]*t->Phi[8][3];
-    w->term[1][101] = t->Phi[7][0]*w->S[3] + t->Phi[7][1]*w->S[19] + t->Phi[7][2]*w->S[35] +
-            t->Phi[7][3]*w->S[51] + t->Phi[7][4]*w->S[67] + t->Phi[7][5]*w->S[83] +
-            t->Phi[7][6]*w->S[99] + t->Phi[7][7]*w->S[115] + t->Phi[7][8]*w->S[131];
+    w->term[1][101] = t->Phi[7][0]*w->S[3] + t->Phi[7][1]*w->S[11] + t->Phi[7][2]*w->S[19] +
+            t->Phi[7][3]*w->S[27] + t->Phi[7][4]*w->S[35] + t->Phi[7][5]*w->S[43] +
+            t->Phi[7][6]*w->S[51] + t->Phi[7][7]*w->S[59] + t->Phi[7][8]*w->S[67];
     w->term[0][102] = t->Phi[7][0]*t->Phi[0][4] + t->Phi[7][1]*t->Phi[1][4] +
             t->Phi[7][2]*t->Phi[2][4] + t->Phi[7][3]*t->Phi[3][4] + t->Phi[7][4]*t->Phi[4][4] +
             t->Phi[7][5]*t->Phi[5][4] + t->Phi[7][6]*t->Phi[6][4] + t->Phi[7][7]*t->Phi[7][4] +
             t->Phi[7][8]*t->Phi[8][4];
-    w->term[1][102] = t->Phi[7][0]*w->S[4] + t->Phi[7][1]*w->S[20] + t->Phi[7][2]*w->S[36] +
-            t->Phi[7][3]*w->S[52] + t->Phi[7][4]*w->S[68] + t->Phi[7][5]*w->S[84] +
-            t->Phi[7][6]*w->S[100] + t->Phi[7][7]*w->S[116] + t->Phi[7][8]*w->S[132];
+    w->term[1][102] = t->Phi[7][0]*w->S[4] + t->Phi[7][1]*w->S[12] + t->Phi[7][2]*w->S[20] +
+            t->Phi[7][3]*w->S[28] + t->Phi[7][4]*w->S[36] + t->Phi[7][5]*w->S[44] +
+            t->Phi[7][6]*w->S[52] + t->Phi[7][7]*w->S[60] + t->Phi[7][8]*w->S[68];
     w->term[0][103] = t->Phi[7][0]*t->Phi[0][5] + t->Phi[7][1]*t->Phi[1][5] +
             t->Phi[7][2]*t->Phi[2][5] + t->Phi[7][3]*t->Phi[3][5] + t->Phi[7][4]*t->Phi[4][5] +
             t->Phi[7][5]*t->Phi[5][5] + t->Phi[7][6]*t->Phi[6][5] + t->Phi[7][7]*t->Phi[7][5] +
             t->Phi[7][8]*t->Phi[8][5];
-    w->term[1][103] = t->Phi[7][0]*w->S[5] + t->Phi[7][1]*w->S[21] + t->Phi[7][2]*w->S[37] +
-            t->Phi[7][3]*w->S[53] + t->Phi[7][4]*w->S[69] + t->Phi[7][5]*w->S[85] +
-            t->Phi[7][6]*w->S[101] + t->Phi[7][7]*w->S[117] + t->Phi[7][8]*w->S[133];
+    w->term[1][103] = t->Phi[7][0]*w->S[5] + t->Phi[7][1]*w->S[13] + t->Phi[7][2]*w->S[21] +
+            t->Phi[7][3]*w->S[29] + t->Phi[7][4]*w->S[37] + t->Phi[7][5]*w->S[45] +
+            t->Phi[7][6]*w->S[53] + t->Phi[7][7]*w->S[61] + t->Phi[7][8]*w->S[69];
     w->term[0][104] = t->Phi[7][0]*t->Phi[0][6] + t->Phi[7][1]*t->Phi[1][6] +
             t->Phi[7][2]*t->Phi[2][6] + t->Phi[7][3]*t->Phi[3][6] + t->Phi[7][4]*t->Phi[4][6] +
             t->Phi[7][5]*t->Phi[5][6] + t->Phi[7][6]*t->Phi[6][6] + t->Phi[7][7]*t->Phi[7][6] +
             t->Phi[7][8]*t->Phi[8][6];
-    w->term[1][104] = t->Phi[7][0]*w->S[6] + t->Phi[7][1]*w->S[22] + t->Phi[7][2]*w->S[38] +
-            t->Phi[7][3]*w->S[54] + t->Phi[7][4]*w->S[70] + t->Phi[7][5]*w->S[86] +
-            t->Phi[7][6]*w->S[102] + t->Phi[7][7]*w->S[118] + t->Phi[7][8]*w->S[134];
+    w->term[1][104] = t->Phi[7][0]*w->S[6] + t->Phi[7][1]*w->S[14] + t->Phi[7][2]*w->S[22] +
+            t->Phi[7][3]*w->S[30] + t->Phi[7][4]*w->S[38] + t->Phi[7][5]*w->S[46] +
+            t->Phi[7][6]*w->S[54] + t->Phi[7][7]*w->S[62] + t->Phi[7][8]*w->S[70];
     w->term[0][105] = t->Phi[7][7]*t->Phi[7][7];
-    w->term[1][105] = t->Phi[7][7]*w->S[119];
+    w->term[1][105] = t->Phi[7][7]*w->S[114];
     w->term[0][106] = t->Phi[7][0]*t->Phi[0][8] + t->Phi[7][1]*t->Phi[1][8] +
             t->Phi[7][2]*t->Phi[2][8] + t->Phi[7][3]*t->Phi[3][8] + t->Phi[7][4]*t->Phi[4][8] +
             t->Phi[7][5]*t->Phi[5][8] + t->Phi[7][6]*t->Phi[6][8] + t->Phi[7][7]*t->Phi[7][8] +
             t->Phi[7][8]*t->Phi[8][8];
-    w->term[1][106] = t->Phi[7][0]*w->S[8] + t->Phi[7][1]*w->S[24] + t->Phi[7][2]*w->S[40] +
-            t->Phi[7][3]*w->S[56] + t->Phi[7][4]*w->S[72] + t->Phi[7][5]*w->S[88] +
-            t->Phi[7][6]*w->S[104] + t->Phi[7][7]*w->S[120] + t->Phi[7][8]*w->S[136];
+    w->term[1][106] = t->Phi[7][0]*w->S[7] + t->Phi[7][1]*w->S[15] + t->Phi[7][2]*w->S[23] +
+            t->Phi[7][3]*w->S[31] + t->Phi[7][4]*w->S[39] + t->Phi[7][5]*w->S[47] +
+            t->Phi[7][6]*w->S[55] + t->Phi[7][7]*w->S[63] + t->Phi[7][8]*w->S[71];
     w->term[0][107] = t->Phi[7][0]*t->Phi[0][9] + t->Phi[7][1]*t->Phi[1][9] +
             t->Phi[7][2]*t->Phi[2][9] + t->Phi[7][3]*t->Phi[3][9] + t->Phi[7][4]*t->Phi[4][9] +
             t->Phi[7][5]*t->Phi[5][9] + t->Phi[7][6]*t->Phi[6][9] + t->Phi[7][7]*t->Phi[7][9] +
             t->Phi[7][8]*t->Phi[8][9];
-    w->term[1][107] = t->Phi[7][0]*w->S[9] + t->Phi[7][1]*w->S[25] + t->Phi[7][2]*w->S[41] +
-            t->Phi[7][3]*w->S[57] + t->Phi[7][4]*w->S[73] + t->Phi[7][5]*w->S[89] +
-            t->Phi[7][6]*w->S[105] + t->Phi[7][7]*w->S[121] + t->Phi[7][8]*w->S[137] + t->Phi[7][9];
+    w->term[1][107] = t->Phi[7][0]*w->S[72] + t->Phi[7][1]*w->S[78] + t->Phi[7][2]*w->S[84] +
+            t->Phi[7][3]*w->S[90] + t->Phi[7][4]*w->S[96] + t->Phi[7][5]*w->S[102] +
+            t->Phi[7][6]*w->S[108] + t->Phi[7][7]*w->S[115] + t->Phi[7][8]*w->S[121] + t->Phi[7][9];
     w->term[0][108] = t->Phi[7][0]*t->Phi[0][10] + t->Phi[7][1]*t->Phi[1][10] +
             t->Phi[7][2]*t->Phi[2][10] + t->Phi[7][3]*t->Phi[3][10] + t->Phi[7][4]*t->Phi[4][10] +
             t->Phi[7][5]*t->Phi[5][10] + t->Phi[7][6]*t->Phi[6][10] + t->Phi[7][7]*t->Phi[7][10] +
             t->Phi[7][8]*t->Phi[8][10];
-    w->term[1][108] = t->Phi[7][0]*w->S[10] + t->Phi[7][1]*w->S[26] + t->Phi[7][2]*w->S[42] +
-            t->Phi[7][3]*w->S[58] + t->Phi[7][4]*w->S[74] + t->Phi[7][5]*w->S[90] +
-            t->Phi[7][6]*w->S[106] + t->Phi[7][7]*w->S[122] + t->Phi[7][8]*w->S[138] +
+    w->term[1][108] = t->Phi[7][0]*w->S[73] + t->Phi[7][1]*w->S[79] + t->Phi[7][2]*w->S[85] +
+            t->Phi[7][3]*w->S[91] + t->Phi[7][4]*w->S[97] + t->Phi[7][5]*w->S[103] +
+            t->Phi[7][6]*w->S[109] + t->Phi[7][7]*w->S[116] + t->Phi[7][8]*w->S[122] +
             t->Phi[7][10];
     w->term[0][109] = t->Phi[7][0]*t->Phi[0][11] + t->Phi[7][1]*t->Phi[1][11] +
             t->Phi[7][2]*t->Phi[2][11] + t->Phi[7][3]*t->Phi[3][11] + t->Phi[7][4]*t->Phi[4][11] +
             t->Phi[7][5]*t->Phi[5][11] + t->Phi[7][6]*t->Phi[6][11] + t->Phi[7][7]*t->Phi[7][11] +
             t->Phi[7][8]*t->Phi[8][11];
-    w->term[1][109] = t->Phi[7][0]*w->S[11] + t->Phi[7][1]*w->S[27] + t->Phi[7][2]*w->S[43] +
-            t->Phi[7][3]*w->S[59] + t->Phi[7][4]*w->S[75] + t->Phi[7][5]*w->S[91] +
-            t->Phi[7][6]*w->S[107] + t->Phi[7][7]*w->S[123] + t->Phi[7][8]*w->S[139] +
+    w->term[1][109] = t->Phi[7][0]*w->S[74] + t->Phi[7][1]*w->S[80] + t->Phi[7][2]*w->S[86] +
+            t->Phi[7][3]*w->S[92] + t->Phi[7][4]*w->S[98] + t->Phi[7][5]*w->S[104] +
+            t->Phi[7][6]*w->S[110] + t->Phi[7][7]*w->S[117] + t->Phi[7][8]*w->S[123] +
             t->Phi[7][11];
     w->term[0][110] = t->Phi[7][0]*t->Phi[0][12] + t->Phi[7][1]*t->Phi[1][12] +
             t->Phi[7][2]*t->Phi[2][12] + t->Phi[7][3]*t->Phi[3][12] + t->Phi[7][4]*t->Phi[4][12] +
             t->Phi[7][5]*t->Phi[5][12] + t->Phi[7][6]*t->Phi[6][12] + t->Phi[7][7]*t->Phi[7][12] +
             t->Phi[7][8]*t->Phi[8][12];
-    w->term[1][110] = t->Phi[7][0]*w->S[12] + t->Phi[7][1]*w->S[28] + t->Phi[7][2]*w->S[44] +
-            t->Phi[7][3]*w->S[60] + t->Phi[7][4]*w->S[76] + t->Phi[7][5]*w->S[92] +
-            t->Phi[7][6]*w->S[108] + t->Phi[7][7]*w->S[124] + t->Phi[7][8]*w->S[140] +
+    w->term[1][110] = t->Phi[7][0]*w->S[75] + t->Phi[7][1]*w->S[81] + t->Phi[7][2]*w->S[87] +
+            t->Phi[7][3]*w->S[93] + t->Phi[7][4]*w->S[99] + t->Phi[7][5]*w->S[105] +
+            t->Phi[7][6]*w->S[111] + t->Phi[7][7]*w->S[118] + t->Phi[7][8]*w->S[124] +
             t->Phi[7][12];
     w->term[0][111] = t->Phi[7][0]*t->Phi[0][13] + t->Phi[7][1]*t->Phi[1][13] +
             t->Phi[7][2]*t->Phi[2][13] + t->Phi[7][3]*t->Phi[3][13] + t->Phi[7][4]*t->Phi[4][13] +
             t->Phi[7][5]*t->Phi[5][13] + t->Phi[7][6]*t->Phi[6][13] + t->Phi[7][7]*t->Phi[7][13] +
             t->Phi[7][8]*t->Phi[8][13];
-    w->term[1][111] = t->Phi[7][0]*w->S[13] + t->Phi[7][1]*w->S[29] + t->Phi[7][2]*w->S[45] +
-            t->Phi[7][3]*w->S[61] + t->Phi[7][4]*w->S[77] + t->Phi[7][5]*w->S[93] +
-            t->Phi[7][6]*w->S[109] + t->Phi[7][7]*w->S[125] + t->Phi[7][8]*w->S[141] +
+    w->term[1][111] = t->Phi[7][0]*w->S[76] + t->Phi[7][1]*w->S[82] + t->Phi[7][2]*w->S[88] +
+            t->Phi[7][3]*w->S[94] + t->Phi[7][4]*w->S[100] + t->Phi[7][5]*w->S[106] +
+            t->Phi[7][6]*w->S[112] + t->Phi[7][7]*w->S[119] + t->Phi[7][8]*w->S[125] +
             t->Phi[7][13];
     w->term[0][112] = t->Phi[7][0]*t->Phi[0][14] + t->Phi[7][1]*t->Phi[1][14] +
             t->Phi[7][2]*t->Phi[2][14] + t->Phi[7][3]*t->Phi[3][14] + t->Phi[7][4]*t->Phi[4][14] +
             t->Phi[7][5]*t->Phi[5][14] + t->Phi[7][6]*t->Phi[6][14] + t->Phi[7][7]*t->Phi[7][14] +
             t->Phi[7][8]*t->Phi[8][14];
-    w->term[1][112] = t->Phi[7][0]*w->S[14] + t->Phi[7][1]*w->S[30] + t->Phi[7][2]*w->S[46] +
-            t->Phi[7][3]*w->S[62] + t->Phi[7][4]*w->S[78] + t->Phi[7][5]*w->S[94] +
-            t->Phi[7][6]*w->S[110] + t->Phi[7][7]*w->S[126] + t->Phi[7][8]*w->S[142] +
+    w->term[1][112] = t->Phi[7][0]*w->S[77] + t->Phi[7][1]*w->S[83] + t->Phi[7][2]*w->S[89] +
+            t->Phi[7][3]*w->S[95] + t->Phi[7][4]*w->S[101] + t->Phi[7][5]*w->S[107] +
+            t->Phi[7][6]*w->S[113] + t->Phi[7][7]*w->S[120] + t->Phi[7][8]*w->S[126] +
             t->Phi[7][14];
     w->term[0][113] = t->Phi[8][0]*t->Phi[0][0] + t->Phi[8][1]*t->Phi[1][0] +
             t->Phi[8][2]*t->Phi[2][0] + t->Phi[8][3]*t->Phi[3][0] + t->Phi[8][4]*t->Phi[4][0] +
             t->Phi[8][5]*t->Phi[5][0] + t->Phi[8][6]*t->Phi[6][0] + t->Phi[8][8]*t->Phi[8][0];
-    w->term[1][113] = t->Phi[8][0]*w->S[0] + t->Phi[8][1]*w->S[16] + t->Phi[8][2]*w->S[32] +
-            t->Phi[8][3]*w->S[48] + t->Phi[8][4]*w->S[64] + t->Phi[8][5]*w->S[80] +
-            t->Phi[8][6]*w->S[96] + t->Phi[8][8]*w->S[128];
+    w->term[1][113] = t->Phi[8][0]*w->S[0] + t->Phi[8][1]*w->S[8] + t->Phi[8][2]*w->S[16] +
+            t->Phi[8][3]*w->S[24] + t->Phi[8][4]*w->S[32] + t->Phi[8][5]*w->S[40] +
+            t->Phi[8][6]*w->S[48] + t->Phi[8][8]*w->S[64];
     w->term[0][114] = t->Phi[8][0]*t->Phi[0][1] + t->Phi[8][1]*t->Phi[1][1] +
             t->Phi[8][2]*t->Phi[2][1] + t->Phi[8][3]*t->Phi[3][1] + t->Phi[8][4]*t->Phi[4][1] +
             t->Phi[8][5]*t->Phi[5][1] + t->Phi[8][6]*t->Phi[6][1] + t->Phi[8][8]*t->Phi[8][1];
-    w->term[1][114] = t->Phi[8][0]*w->S[1] + t->Phi[8][1]*w->S[17] + t->Phi[8][2]*w->S[33] +
-            t->Phi[8][3]*w->S[49] + t->Phi[8][4]*w->S[65] + t->Phi[8][5]*w->S[81] +
-            t->Phi[8][6]*w->S[97] + t->Phi[8][8]*w->S[129];
+    w->term[1][114] = t->Phi[8][0]*w->S[1] + t->Phi[8][1]*w->S[9] + t->Phi[8][2]*w->S[17] +
+            t->Phi[8][3]*w->S[25] + t->Phi[8][4]*w->S[33] + t->Phi[8][5]*w->S[41] +
+            t->Phi[8][6]*w->S[49] + t->Phi[8][8]*w->S[65];
     w->term[0][115] = t->Phi[8][0]*t->Phi[0][2] + t->Phi[8][1]*t->Phi[1][2] +
             t->Phi[8][2]*t->Phi[2][2] + t->Phi[8][3]*t->Phi[3][2] + t->Phi[8][4]*t->Phi[4][2] +
             t->Phi[8][5]*t->Phi[5][2] + t->Phi[8][6]*t->Phi[6][2] + t->Phi[8][8]*t->Phi[8][2];
-    w->term[1][115] = t->Phi[8][0]*w->S[2] + t->Phi[8][1]*w->S[18] + t->Phi[8][2]*w->S[34] +
-            t->Phi[8][3]*w->S[50] + t->Phi[8][4]*w->S[66] + t->Phi[8][5]*w->S[82] +
-            t->Phi[8][6]*w->S[98] + t->Phi[8][8]*w->S[130];
+    w->term[1][115] = t->Phi[8][0]*w->S[2] + t->Phi[8][1]*w->S[10] + t->Phi[8][2]*w->S[18] +
+            t->Phi[8][3]*w->S[26] + t->Phi[8][4]*w->S[34] + t->Phi[8][5]*w->S[42] +
+            t->Phi[8][6]*w->S[50] + t->Phi[8][8]*w->S[66];
     w->term[0][116] = t->Phi[8][0]*t->Phi[0][3] + t->Phi[8][1]*t->Phi[1][3] +
             t->Phi[8][2]*t->Phi[2][3] + t->Phi[8][3]*t->Phi[3][3] + t->Phi[8][4]*t->Phi[4][3] +
             t->Phi[8][5]*t->Phi[5][3] + t->Phi[8][6]*t->Phi[6][3] + t->Phi[8][8]*t->Phi[8][3];
-    w->term[1][116] = t->Phi[8][0]*w->S[3] + t->Phi[8][1]*w->S[19] + t->Phi[8][2]*w->S[35] +
-            t->Phi[8][3]*w->S[51] + t->Phi[8][4]*w->S[67] + t->Phi[8][5]*w->S[83] +
-            t->Phi[8][6]*w->S[99] + t->Phi[8][8]*w->S[131];
+    w->term[1][116] = t->Phi[8][0]*w->S[3] + t->Phi[8][1]*w->S[11] + t->Phi[8][2]*w->S[19] +
+            t->Phi[8][3]*w->S[27] + t->Phi[8][4]*w->S[35] + t->Phi[8][5]*w->S[43] +
+            t->Phi[8][6]*w->S[51] + t->Phi[8][8]*w->S[67];
     w->term[0][117] = t->Phi[8][0]*t->Phi[0][4] + t->Phi[8][1]*t->Phi[1][4] +
             t->Phi[8][2]*t->Phi[2][4] + t->Phi[8][3]*t->Phi[3][4] + t->Phi[8][4]*t->Phi[4][4] +
             t->Phi[8][5]*t->Phi[5][4] + t->Phi[8][6]*t->Phi[6][4] + t->Phi[8][8]*t->Phi[8][4];
-    w->term[1][117] = t->Phi[8][0]*w->S[4] + t->Phi[8][1]*w->S[20] + t->Phi[8][2]*w->S[36] +
-            t->Phi[8][3]*w->S[52] + t->Phi[8][4]*w->S[68] + t->Phi[8][5]*w->S[84] +
-            t->Phi[8][6]*w->S[100] + t->Phi[8][8]*w->S[132];
+    w->term[1][117] = t->Phi[8][0]*w->S[4] + t->Phi[8][1]*w->S[12] + t->Phi[8][2]*w->S[20] +
+            t->Phi[8][3]*w->S[28] + t->Phi[8][4]*w->S[36] + t->Phi[8][5]*w->S[44] +
+            t->Phi[8][6]*w->S[52] + t->Phi[8][8]*w->S[68];
     w->term[0][118] = t->Phi[8][0]*t->Phi[0][5] + t->Phi[8][1]*t->Phi[1][5] +
             t->Phi[8][2]*t->Phi[2][5] + t->Phi[8][3]*t->Phi[3][5] + t->Phi[8][4]*t->Phi[4][5] +
             t->Phi[8][5]*t->Phi[5][5] + t->Phi[8][6]*t->Phi[6][5] + t->Phi[8][8]*t->Phi[8][5];
-    w->term[1][118] = t->Phi[8][0]*w->S[5] + t->Phi[8][1]*w->S[21] + t->Phi[8][2]*w->S[37] +
-            t->Phi[8][3]*w->S[53] + t->Phi[8][4]*w->S[69] + t->Phi[8][5]*w->S[85] +
-            t->Phi[8][6]*w->S[101] + t->Phi[8][8]*w->S[133];
+    w->term[1][118] = t->Phi[8][0]*w->S[5] + t->Phi[8][1]*w->S[13] + t->Phi[8][2]*w->S[21] +
+            t->Phi[8][3]*w->S[29] + t->Phi[8][4]*w->S[37] + t->Phi[8][5]*w->S[45] +
+            t->Phi[8][6]*w->S[53] + t->Phi[8][8]*w->S[69];
     w->term[0][119] = t->Phi[8][0]*t->Phi[0][6] + t->Phi[8][1]*t->Phi[1][6] +
             t->Phi[8][2]*t->Phi[2][6] + t->Phi[8][3]*t->Phi[3][6] + t->Phi[8][4]*t->Phi[4][6] +
             t->Phi[8][5]*t->Phi[5][6] + t->Phi[8][6]*t->Phi[6][6] + t->Phi[8][8]*t->Phi[8][6];
-    w->term[1][119] = t->Phi[8][0]*w->S[6] + t->Phi[8][1]*w->S[22] + t->Phi[8][2]*w->S[38] +
-            t->Phi[8][3]*w->S[54] + t->Phi[8][4]*w->S[70] + t->Phi[8][5]*w->S[86] +
-            t->Phi[8][6]*w->S[102] + t->Phi[8][8]*w->S[134];
+    w->term[1][119] = t->Phi[8][0]*w->S[6] + t->Phi[8][1]*w->S[14] + t->Phi[8][2]*w->S[22] +
+            t->Phi[8][3]*w->S[30] + t->Phi[8][4]*w->S[38] + t->Phi[8][5]*w->S[46] +
+            t->Phi[8][6]*w->S[54] + t->Phi[8][8]*w->S[70];
     w->term[0][120] = t->Phi[8][0]*t->Phi[0][8] + t->Phi[8][1]*t->Phi[1][8] +
             t->Phi[8][2]*t->Phi[2][8] + t->Phi[8][3]*t->Phi[3][8] + t->Phi[8][4]*t->Phi[4][8] +
             t->Phi[8][5]*t->Phi[5][8] + t->Phi[8][6]*t->Phi[6][8] + t->Phi[8][8]*t->Phi[8][8];
-    w->term[1][120] = t->Phi[8][0]*w->S[8] + t->Phi[8][1]*w->S[24] + t->Phi[8][2]*w->S[40] +
-            t->Phi[8][3]*w->S[56] + t->Phi[8][4]*w->S[72] + t->Phi[8][5]*w->S[88] +
-            t->Phi[8][6]*w->S[104] + t->Phi[8][8]*w->S[136];
+    w->term[1][120] = t->Phi[8][0]*w->S[7] + t->Phi[8][1]*w->S[15] + t->Phi[8][2]*w->S[23] +
+            t->Phi[8][3]*w->S[31] + t->Phi[8][4]*w->S[39] + t->Phi[8][5]*w->S[47] +
+            t->Phi[8][6]*w->S[55] + t->Phi[8][8]*w->S[71];
     w->term[0][121] = t->Phi[8][0]*t->Phi[0][9] + t->Phi[8][1]*t->Phi[1][9] +
             t->Phi[8][2]*t->Phi[2][9] + t->Phi[8][3]*t->Phi[3][9] + t->Phi[8][4]*t->Phi[4][9] +
             t->Phi[8][5]*t->Phi[5][9] + t->Phi[8][6]*t->Phi[6][9] + t->Phi[8][8]*t->Phi[8][9];
-    w->term[1][121] = t->Phi[8][0]*w->S[9] + t->Phi[8][1]*w->S[25] + t->Phi[8][2]*w->S[41] +
-            t->Phi[8][3]*w->S[57] + t->Phi[8][4]*w->S[73] + t->Phi[8][5]*w->S[89] +
-            t->Phi[8][6]*w->S[105] + t->Phi[8][8]*w->S[137] + t->Phi[8][9];
+    w->term[1][121] = t->Phi[8][0]*w->S[72] + t->Phi[8][1]*w->S[78] + t->Phi[8][2]*w->S[84] +
+            t->Phi[8][3]*w->S[90] + t->Phi[8][4]*w->S[96] + t->Phi[8][5]*w->S[102] +
+            t->Phi[8][6]*w->S[108] + t->Phi[8][8]*w->S[121] + t->Phi[8][9];
     w->term[0][122] = t->Phi[8][0]*t->Phi[0][10] + t->Phi[8][1]*t->Phi[1][10] +
             t->Phi[8][2]*t->Phi[2][10] + t->Phi[8][3]*t->Phi[3][10] + t->Phi[8][4]*t->Phi[4][10] +
             t->Phi[8][5]*t->Phi[5][10] + t->Phi[8][6]*t->Phi[6][10] + t->Phi[8][8]*t->Phi[8][10];
-    w->term[1][122] = t->Phi[8][0]*w->S[10] + t->Phi[8][1]*w->S[26] + t->Phi[8][2]*w->S[42] +
-            t->Phi[8][3]*w->S[58] + t->Phi[8][4]*w->S[74] + t->Phi[8][5]*w->S[90] +
-            t->Phi[8][6]*w->S[106] + t->Phi[8][8]*w->S[138] + t->Phi[8][10];
+    w->term[1][122] = t->Phi[8][0]*w->S[73] + t->Phi[8][1]*w->S[79] + t->Phi[8][2]*w->S[85] +
+            t->Phi[8][3]*w->S[91] + t->Phi[8][4]*w->S[97] + t->Phi[8][5]*w->S[103] +
+            t->Phi[8][6]*w->S[109] + t->Phi[8][8]*w->S[122] + t->Phi[8][10];
     w->term[0][123] = t->Phi[8][0]*t->Phi[0][11] + t->Phi[8][1]*t->Phi[1][11] +
             t->Phi[8][2]*t->Phi[2][11] + t->Phi[8][3]*t->Phi[3][11] + t->Phi[8][4]*t->Phi[4][11] +
             t->Phi[8][5]*t->Phi[5][11] + t->Phi[8][6]*t->Phi[6][11] + t->Phi[8][8]*t->Phi[8][11];
-    w->term[1][123] = t->Phi[8][0]*w->S[11] + t->Phi[8][1]*w->S[27] + t->Phi[8][2]*w->S[43] +
-            t->Phi[8][3]*w->S[59] + t->Phi[8][4]*w->S[75] + t->Phi[8][5]*w->S[91] +
-            t->Phi[8][6]*w->S[107] + t->Phi[8][8]*w->S[139] + t->Phi[8][11];
+    w->term[1][123] = t->Phi[8][0]*w->S[74] + t->Phi[8][1]*w->S[80] + t->Phi[8][2]*w->S[86] +
+            t->Phi[8][3]*w->S[92] + t->Phi[8][4]*w->S[98] + t->Phi[8][5]*w->S[104] +
+            t->Phi[8][6]*w->S[110] + t->Phi[8][8]*w->S[123] + t->Phi[8][11];
     w->term[0][124] = t->Phi[8][0]*t->Phi[0][12] + t->Phi[8][1]*t->Phi[1][12] +
             t->Phi[8][2]*t->Phi[2][12] + t->Phi[8][3]*t->Phi[3][12] + t->Phi[8][4]*t->Phi[4][12] +
             t->Phi[8][5]*t->Phi[5][12] + t->Phi[8][6]*t->Phi[6][12] + t->Phi[8][8]*t->Phi[8][12];
-    w->term[1][124] = t->Phi[8][0]*w->S[12] + t->Phi[8][1]*w->S[28] + t->Phi[8][2]*w->S[44] +
-            t->Phi[8][3]*w->S[60] + t->Phi[8][4]*w->S[76] + t->Phi[8][5]*w->S[92] +
-            t->Phi[8][6]*w->S[108] + t->Phi[8][8]*w->S[140] + t->Phi[8][12];
+    w->term[1][124] = t->Phi[8][0]*w->S[75] + t->Phi[8][1]*w->S[81] + t->Phi[8][2]*w->S[87] +
+            t->Phi[8][3]*w->S[93] + t->Phi[8][4]*w->S[99] + t->Phi[8][5]*w->S[105] +
+            t->Phi[8][6]*w->S[111] + t->Phi[8][8]*w->S[124] + t->Phi[8][12];
     w->term[0][125] = t->Phi[8][0]*t->Phi[0][13] + t->Phi[8][1]*t->Phi[1][13] +
             t->Phi[8][2]*t->Phi[2][13] + t->Phi[8][3]*t->Phi[3][13] + t->Phi[8][4]*t->Phi[4][13] +
             t->Phi[8][5]*t->Phi[5][13] + t->Phi[8][6]*t->Phi[6][13] + t->Phi[8][8]*t->Phi[8][13];
-    w->term[1][125] = t->Phi[8][0]*w->S[13] + t->Phi[8][1]*w->S[29] + t->Phi[8][2]*w->S[45] +
-            t->Phi[8][3]*w->S[61] + t->Phi[8][4]*w->S[77] + t->Phi[8][5]*w->S[93] +
-            t->Phi[8][6]*w->S[109] + t->Phi[8][8]*w->S[141] + t->Phi[8][13];
+    w->term[1][125] = t->Phi[8][0]*w->S[76] + t->Phi[8][1]*w->S[82] + t->Phi[8][2]*w->S[88] +
+            t->Phi[8][3]*w->S[94] + t->Phi[8][4]*w->S[100] + t->Phi[8][5]*w->S[106] +
+            t->Phi[8][6]*w->S[112] + t->Phi[8][8]*w->S[125] + t->Phi[8][13];
     w->term[0][126] = t->Phi[8][0]*t->Phi[0][14] + t->Phi[8][1]*t->Phi[1][14] +
             t->Phi[8][2]*t->Phi[2][14] + t->Phi[8][3]*t->Phi[3][14] + t->Phi[8][4]*t->Phi[4][14] +
             t->Phi[8][5]*t->Phi[5][14] + t->Phi[8][6]*t->Phi[6][14] + t->Phi[8][8]*t->Phi[8][14];
-    w->term[1][126] = t->Phi[8][0]*w->S[14] + t->Phi[8][1]*w->S[30] + t->Phi[8][2]*w->S[46] +
-            t->Phi[8][3]*w->S[62] + t->Phi[8][4]*w->S[78] + t->Phi[8][5]*w->S[94] +
-            t->Phi[8][6]*w->S[110] + t->Phi[8][8]*w->S[142] + t->Phi[8][14];
+    w->term[1][126] = t->Phi[8][0]*w->S[77] + t->Phi[8][1]*w->S[83] + t->Phi[8][2]*w->S[89] +
+            t->Phi[8][3]*w->S[95] + t->Phi[8][4]*w->S[101] + t->Phi[8][5]*w->S[107] +
+            t->Phi[8][6]*w->S[113] + t->Phi[8][8]*w->S[126] + t->Phi[8][14];
     t->Phi[0][0] = t->Phi[0][0] + t->Phi[0][0] + w->term[0][0];
     w->S[0] = w->S[0] + half*w->term[1][0];
     t->Phi[0][1] = t->Phi[0][1] + t->Phi[0][1] + w->term[0][1];
@@ -1883,377 +1988,285 @@ INS_GPS15_BLOCK void doubling(ins_gps15_transition *restrict t, ins_gps15_discre
     t->Phi[0][6] = t->Phi[0][6] + t->Phi[0][6] + w->term[0][6];
     w->S[6] = w->S[6] + half*w->term[1][6];
     t->Phi[0][8] = t->Phi[0][8] + t->Phi[0][8] + w->term[0][7];
-    w->S[8] = w->S[8] + half*w->term[1][7];
+    w->S[7] = w->S[7] + half*w->term[1][7];
     t->Phi[0][9] = t->Phi[0][9] + t->Phi[0][9] + w->term[0][8];
-    w->S[9] = w->S[9] + half*w->term[1][8];
+    w->S[72] = w->S[72] + half*w->term[1][8];
     t->Phi[0][10] = t->Phi[0][10] + t->Phi[0][10] + w->term[0][9];
-    w->S[10] = w->S[10] + half*w->term[1][9];
+    w->S[73] = w->S[73] + half*w->term[1][9];
     t->Phi[0][11] = t->Phi[0][11] + t->Phi[0][11] + w->term[0][10];
-    w->S[11] = w->S[11] + half*w->term[1][10];
+    w->S[74] = w->S[74] + half*w->term[1][10];
     t->Phi[0][12] = t->Phi[0][12] + t->Phi[0][12] + w->term[0][11];
-    w->S[12] = w->S[12] + half*w->term[1][11];
+    w->S[75] = w->S[75] + half*w->term[1][11];
     t->Phi[0][13] = t->Phi[0][13] + t->Phi[0][13] + w->term[0][12];
-    w->S[13] = w->S[13] + half*w->term[1][12];
+    w->S[76] = w->S[76] + half*w->term[1][12];
     t->Phi[0][14] = t->Phi[0][14] + t->Phi[0][14] + w->term[0][13];
-    w->S[14] = w->S[14] + half*w->term[1][13];
+    w->S[77] = w->S[77] + half*w->term[1][13];
     t->Phi[1][0] = t->Phi[1][0] + t->Phi[1][0] + w->term[0][14];
-    w->S[16] = w->S[16] + half*w->term[1][14];
+    w->S[8] = w->S[8] + half*w->term[1][14];
     t->Phi[1][1] = t->Phi[1][1] + t->Phi[1][1] + w->term[0][15];
-    w->S[17] = w->S[17] + half*w->term[1][15];
+    w->S[9] = w->S[9] + half*w->term[1][15];
     t->Phi[1][2] = t->Phi[1][2] + t->Phi[1][2] + w->term[0][16];
-    w->S[18] = w->S[18] + half*w->term[1][16];
+    w->S[10] = w->S[10] + half*w->term[1][16];
     t->Phi[1][3] = t->Phi[1][3] + t->Phi[1][3] + w->term[0][17];
-    w->S[19] = w->S[19] + half*w->term[1][17];
+    w->S[11] = w->S[11] + half*w->term[1][17];
     t->Phi[1][4] = t->Phi[1][4] + t->Phi[1][4] + w->term[0][18];
-    w->S[20] = w->S[20] + half*w->term[1][18];
+    w->S[12] = w->S[12] + half*w->term[1][18];
     t->Phi[1][5] = t->Phi[1][5] + t->Phi[1][5] + w->term[0][19];
-    w->S[21] = w->S[21] + half*w->term[1][19];
+    w->S[13] = w->S[13] + half*w->term[1][19];
     t->Phi[1][6] = t->Phi[1][6] + t->Phi[1][6] + w->term[0][20];
-    w->S[22] = w->S[22] + half*w->term[1][20];
+    w->S[14] = w->S[14] + half*w->term[1][20];
     t->Phi[1][8] = t->Phi[1][8] + t->Phi[1][8] + w->term[0][21];
-    w->S[24] = w->S[24] + half*w->term[1][21];
+    w->S[15] = w->S[15] + half*w->term[1][21];
     t->Phi[1][9] = t->Phi[1][9] + t->Phi[1][9] + w->term[0][22];
-    w->S[25] = w->S[25] + half*w->term[1][22];
+    w->S[78] = w->S[78] + half*w->term[1][22];
     t->Phi[1][10] = t->Phi[1][10] + t->Phi[1][10] + w->term[0][23];
-    w->S[26] = w->S[26] + half*w->term[1][23];
+    w->S[79] = w->S[79] + half*w->term[1][23];
     t->Phi[1][11] = t->Phi[1][11] + t->Phi[1][11] + w->term[0][24];
-    w->S[27] = w->S[27] + half*w->term[1][24];
+    w->S[80] = w->S[80] + half*w->term[1][24];
     t->Phi[1][12] = t->Phi[1][12] + t->Phi[1][12] + w->term[0][25];
-    w->S[28] = w->S[28] + half*w->term[1][25];
+    w->S[81] = w->S[81] + half*w->term[1][25];
     t->Phi[1][13] = t->Phi[1][13] + t->Phi[1][13] + w->term[0][26];
-    w->S[29] = w->S[29] + half*w->term[1][26];
+    w->S[82] = w->S[82] + half*w->term[1][26];
     t->Phi[1][14] = t->Phi[1][14] + t->Phi[1][14] + w->term[0][27];
-    w->S[30] = w->S[30] + half*w->term[1][27];
+    w->S[83] = w->S[83] + half*w->term[1][27];
     t->Phi[2][0] = t->Phi[2][0] + t->Phi[2][0] + w->term[0][28];
-    w->S[32] = w->S[32] + half*w->term[1][28];
+    w->S[16] = w->S[16] + half*w->term[1][28];
     t->Phi[2][1] = t->Phi[2][1] + t->Phi[2][1] + w->term[0][29];
-    w->S[33] = w->S[33] + half*w->term[1][29];
+    w->S[17] = w->S[17] + half*w->term[1][29];
     t->Phi[2][2] = t->Phi[2][2] + t->Phi[2][2] + w->term[0][30];
-    w->S[34] = w->S[34] + half*w->term[1][30];
+    w->S[18] = w->S[18] + half*w->term[1][30];
     t->Phi[2][3] = t->Phi[2][3] + t->Phi[2][3] + w->term[0][31];
-    w->S[35] = w->S[35] + half*w->term[1][31];
+    w->S[19] = w->S[19] + half*w->term[1][31];
     t->Phi[2][4] = t->Phi[2][4] + t->Phi[2][4] + w->term[0][32];
-    w->S[36] = w->S[36] + half*w->term[1][32];
+    w->S[20] = w->S[20] + half*w->term[1][32];
     t->Phi[2][5] = t->Phi[2][5] + t->Phi[2][5] + w->term[0][33];
-    w->S[37] = w->S[37] + half*w->term[1][33];
+    w->S[21] = w->S[21] + half*w->term[1][33];
     t->Phi[2][6] = t->Phi[2][6] + t->Phi[2][6] + w->term[0][34];
-    w->S[38] = w->S[38] + half*w->term[1][34];
+    w->S[22] = w->S[22] + half*w->term[1][34];
     t->Phi[2][8] = t->Phi[2][8] + t->Phi[2][8] + w->term[0][35];
-    w->S[40] = w->S[40] + half*w->term[1][35];
+    w->S[23] = w->S[23] + half*w->term[1][35];
     t->Phi[2][9] = t->Phi[2][9] + t->Phi[2][9] + w->term[0][36];
-    w->S[41] = w->S[41] + half*w->term[1][36];
+    w->S[84] = w->S[84] + half*w->term[1][36];
     t->Phi[2][10] = t->Phi[2][10] + t->Phi[2][10] + w->term[0][37];
-    w->S[42] = w->S[42] + half*w->term[1][37];
+    w->S[85] = w->S[85] + half*w->term[1][37];
     t->Phi[2][11] = t->Phi[2][11] + t->Phi[2][11] + w->term[0][38];
-    w->S[43] = w->S[43] + half*w->term[1][38];
+    w->S[86] = w->S[86] + half*w->term[1][38];
     t->Phi[2][12] = t->Phi[2][12] + t->Phi[2][12] + w->term[0][39];
-    w->S[44] = w->S[44] + half*w->term[1][39];
+    w->S[87] = w->S[87] + half*w->term[1][39];
     t->Phi[2][13] = t->Phi[2][13] + t->Phi[2][13] + w->term[0][40];
-    w->S[45] = w->S[45] + half*w->term[1][40];
+    w->S[88] = w->S[88] + half*w->term[1][40];
     t->Phi[2][14] = t->Phi[2][14] + t->Phi[2][14] + w->term[0][41];
-    w->S[46] = w->S[46] + half*w->term[1][41];
+    w->S[89] = w->S[89] + half*w->term[1][41];
     t->Phi[3][0] = t->Phi[3][0] + t->Phi[3][0] + w->term[0][42];
-    w->S[48] = w->S[48] + half*w->term[1][42];
+    w->S[24] = w->S[24] + half*w->term[1][42];
     t->Phi[3][1] = t->Phi[3][1] + t->Phi[3][1] + w->term[0][43];
-    w->S[49] = w->S[49] + half*w->term[1][43];
+    w->S[25] = w->S[25] + half*w->term[1][43];
     t->Phi[3][2] = t->Phi[3][2] + t->Phi[3][2] + w->term[0][44];
-    w->S[50] = w->S[50] + half*w->term[1][44];
+    w->S[26] = w->S[26] + half*w->term[1][44];
     t->Phi[3][3] = t->Phi[3][3] + t->Phi[3][3] + w->term[0][45];
-    w->S[51] = w->S[51] + half*w->term[1][45];
+    w->S[27] = w->S[27] + half*w->term[1][45];
     t->Phi[3][4] = t->Phi[3][4] + t->Phi[3][4] + w->term[0][46];
-    w->S[52] = w->S[52] + half*w->term[1][46];
+    w->S[28] = w->S[28] + half*w->term[1][46];
     t->Phi[3][5] = t->Phi[3][5] + t->Phi[3][5] + w->term[0][47];
-    w->S[53] = w->S[53] + half*w->term[1][47];
+    w->S[29] = w->S[29] + half*w->term[1][47];
     t->Phi[3][6] = t->Phi[3][6] + t->Phi[3][6] + w->term[0][48];
-    w->S[54] = w->S[54] + half*w->term[1][48];
+    w->S[30] = w->S[30] + half*w->term[1][48];
     t->Phi[3][8] = t->Phi[3][8] + t->Phi[3][8] + w->term[0][49];
-    w->S[56] = w->S[56] + half*w->term[1][49];
+    w->S[31] = w->S[31] + half*w->term[1][49];
     t->Phi[3][9] = t->Phi[3][9] + t->Phi[3][9] + w->term[0][50];
-    w->S[57] = w->S[57] + half*w->term[1][50];
+    w->S[90] = w->S[90] + half*w->term[1][50];
     t->Phi[3][10] = t->Phi[3][10] + t->Phi[3][10] + w->term[0][51];
-    w->S[58] = w->S[58] + half*w->term[1][51];
+    w->S[91] = w->S[91] + half*w->term[1][51];
     t->Phi[3][11] = t->Phi[3][11] + t->Phi[3][11] + w->term[0][52];
-    w->S[59] = w->S[59] + half*w->term[1][52];
+    w->S[92] = w->S[92] + half*w->term[1][52];
     t->Phi[3][12] = t->Phi[3][12] + t->Phi[3][12] + w->term[0][53];
-    w->S[60] = w->S[60] + half*w->term[1][53];
+    w->S[93] = w->S[93] + half*w->term[1][53];
     t->Phi[3][13] = t->Phi[3][13] + t->Phi[3][13] + w->term[0][54];
-    w->S[61] = w->S[61] + half*w->term[1][54];
+    w->S[94] = w->S[94] + half*w->term[1][54];
     t->Phi[3][14] = t->Phi[3][14] + t->Phi[3][14] + w->term[0][55];
-    w->S[62] = w->S[62] + half*w->term[1][55];
+    w->S[95] = w->S[95] + half*w->term[1][55];
     t->Phi[4][0] = t->Phi[4][0] + t->Phi[4][0] + w->term[0][56];
-    w->S[64] = w->S[64] + half*w->term[1][56];
+    w->S[32] = w->S[32] + half*w->term[1][56];
     t->Phi[4][1] = t->Phi[4][1] + t->Phi[4][1] + w->term[0][57];
-    w->S[65] = w->S[65] + half*w->term[1][57];
+    w->S[33] = w->S[33] + half*w->term[1][57];
     t->Phi[4][2] = t->Phi[4][2] + t->Phi[4][2] + w->term[0][58];
-    w->S[66] = w->S[66] + half*w->term[1][58];
+    w->S[34] = w->S[34] + half*w->term[1][58];
     t->Phi[4][3] = t->Phi[4][3] + t->Phi[4][3] + w->term[0][59];
-    w->S[67] = w->S[67] + half*w->term[1][59];
+    w->S[35] = w->S[35] + half*w->term[1][59];
     t->Phi[4][4] = t->Phi[4][4] + t->Phi[4][4] + w->term[0][60];
-    w->S[68] = w->S[68] + half*w->term[1][60];
+    w->S[36] = w->S[36] + half*w->term[1][60];
     t->Phi[4][5] = t->Phi[4][5] + t->Phi[4][5] + w->term[0][61];
-    w->S[69] = w->S[69] + half*w->term[1][61];
+    w->S[37] = w->S[37] + half*w->term[1][61];
     t->Phi[4][6] = t->Phi[4][6] + t->Phi[4][6] + w->term[0][62];
-    w->S[70] = w->S[70] + half*w->term[1][62];
+    w->S[38] = w->S[38] + half*w->term[1][62];
     t->Phi[4][8] = t->Phi[4][8] + t->Phi[4][8] + w->term[0][63];
-    w->S[72] = w->S[72] + half*w->term[1][63];
+    w->S[39] = w->S[39] + half*w->term[1][63];
     t->Phi[4][9] = t->Phi[4][9] + t->Phi[4][9] + w->term[0][64];
-    w->S[73] = w->S[73] + half*w->term[1][64];
+    w->S[96] = w->S[96] + half*w->term[1][64];
     t->Phi[4][10] = t->Phi[4][10] + t->Phi[4][10] + w->term[0][65];
-    w->S[74] = w->S[74] + half*w->term[1][65];
+    w->S[97] = w->S[97] + half*w->term[1][65];
     t->Phi[4][11] = t->Phi[4][11] + t->Phi[4][11] + w->term[0][66];
-    w->S[75] = w->S[75] + half*w->term[1][66];
+    w->S[98] = w->S[98] + half*w->term[1][66];
     t->Phi[4][12] = t->Phi[4][12] + t->Phi[4][12] + w->term[0][67];
-    w->S[76] = w->S[76] + half*w->term[1][67];
+    w->S[99] = w->S[99] + half*w->term[1][67];
     t->Phi[4][13] = t->Phi[4][13] + t->Phi[4][13] + w->term[0][68];
-    w->S[77] = w->S[77] + half*w->term[1][68];
+    w->S[100] = w->S[100] + half*w->term[1][68];
     t->Phi[4][14] = t->Phi[4][14] + t->Phi[4][14] + w->term[0][69];
-    w->S[78] = w->S[78] + half*w->term[1][69];
+    w->S[101] = w->S[101] + half*w->term[1][69];
     t->Phi[5][0] = t->Phi[5][0] + t->Phi[5][0] + w->term[0][70];
-    w->S[80] = w->S[80] + half*w->term[1][70];
+    w->S[40] = w->S[40] + half*w->term[1][70];
     t->Phi[5][1] = t->Phi[5][1] + t->Phi[5][1] + w->term[0][71];
-    w->S[81] = w->S[81] + half*w->term[1][71];
+    w->S[41] = w->S[41] + half*w->term[1][71];
     t->Phi[5][2] = t->Phi[5][2] + t->Phi[5][2] + w->term[0][72];
-    w->S[82] = w->S[82] + half*w->term[1][72];
+    w->S[42] = w->S[42] + half*w->term[1][72];
     t->Phi[5][3] = t->Phi[5][3] + t->Phi[5][3] + w->term[0][73];
-    w->S[83] = w->S[83] + half*w->term[1][73];
+    w->S[43] = w->S[43] + half*w->term[1][73];
     t->Phi[5][4] = t->Phi[5][4] + t->Phi[5][4] + w->term[0][74];
-    w->S[84] = w->S[84] + half*w->term[1][74];
+    w->S[44] = w->S[44] + half*w->term[1][74];
     t->Phi[5][5] = t->Phi[5][5] + t->Phi[5][5] + w->term[0][75];
-    w->S[85] = w->S[85] + half*w->term[1][75];
+    w->S[45] = w->S[45] + half*w->term[1][75];
     t->Phi[5][6] = t->Phi[5][6] + t->Phi[5][6] + w->term[0][76];
-    w->S[86] = w->S[86] + half*w->term[1][76];
+    w->S[46] = w->S[46] + half*w->term[1][76];
     t->Phi[5][8] = t->Phi[5][8] + t->Phi[5][8] + w->term[0][77];
-    w->S[88] = w->S[88] + half*w->term[1][77];
+    w->S[47] = w->S[47] + half*w->term[1][77];
     t->Phi[5][9] = t->Phi[5][9] + t->Phi[5][9] + w->term[0][78];
-    w->S[89] = w->S[89] + half*w->term[1][78];
+    w->S[102] = w->S[102] + half*w->term[1][78];
     t->Phi[5][10] = t->Phi[5][10] + t->Phi[5][10] + w->term[0][79];
-    w->S[90] = w->S[90] + half*w->term[1][79];
+    w->S[103] = w->S[103] + half*w->term[1][79];
     t->Phi[5][11] = t->Phi[5][11] + t->Phi[5][11] + w->term[0][80];
-    w->S[91] = w->S[91] + half*w->term[1][80];
+    w->S[104] = w->S[104] + half*w->term[1][80];
     t->Phi[5][12] = t->Phi[5][12] + t->Phi[5][12] + w->term[0][81];
-    w->S[92] = w->S[92] + half*w->term[1][81];
+    w->S[105] = w->S[105] + half*w->term[1][81];
     t->Phi[5][13] = t->Phi[5][13] + t->Phi[5][13] + w->term[0][82];
-    w->S[93] = w->S[93] + half*w->term[1][82];
+    w->S[106] = w->S[106] + half*w->term[1][82];
     t->Phi[5][14] = t->Phi[5][14] + t->Phi[5][14] + w->term[0][83];
-    w->S[94] = w->S[94] + half*w->term[1][83];
+    w->S[107] = w->S[107] + half*w->term[1][83];
     t->Phi[6][0] = t->Phi[6][0] + t->Phi[6][0] + w->term[0][84];
-    w->S[96] = w->S[96] + half*w->term[1][84];
+    w->S[48] = w->S[48] + half*w->term[1][84];
     t->Phi[6][1] = t->Phi[6][1] + t->Phi[6][1] + w->term[0][85];
-    w->S[97] = w->S[97] + half*w->term[1][85];
+    w->S[49] = w->S[49] + half*w->term[1][85];
     t->Phi[6][2] = t->Phi[6][2] + t->Phi[6][2] + w->term[0][86];
-    w->S[98] = w->S[98] + half*w->term[1][86];
+    w->S[50] = w->S[50] + half*w->term[1][86];
     t->Phi[6][3] = t->Phi[6][3] + t->Phi[6][3] + w->term[0][87];
-    w->S[99] = w->S[99] + half*w->term[1][87];
+    w->S[51] = w->S[51] + half*w->term[1][87];
     t->Phi[6][4] = t->Phi[6][4] + t->Phi[6][4] + w->term[0][88];
-    w->S[100] = w->S[100] + half*w->term[1][88];
+    w->S[52] = w->S[52] + half*w->term[1][88];
     t->Phi[6][5] = t->Phi[6][5] + t->Phi[6][5] + w->term[0][89];
-    w->S[101] = w->S[101] + half*w->term[1][89];
+    w->S[53] = w->S[53] + half*w->term[1][89];
     t->Phi[6][6] = t->Phi[6][6] + t->Phi[6][6] + w->term[0][90];
-    w->S[102] = w->S[102] + half*w->term[1][90];
+    w->S[54] = w->S[54] + half*w->term[1][90];
     t->Phi[6][8] = t->Phi[6][8] + t->Phi[6][8] + w->term[0][91];
-    w->S[104] = w->S[104] + half*w->term[1][91];
+    w->S[55] = w->S[55] + half*w->term[1][91];
     t->Phi[6][9] = t->Phi[6][9] + t->Phi[6][9] + w->term[0][92];
-    w->S[105] = w->S[105] + half*w->term[1][92];
+    w->S[108] = w->S[108] + half*w->term[1][92];
     t->Phi[6][10] = t->Phi[6][10] + t->Phi[6][10] + w->term[0][93];
-    w->S[106] = w->S[106] + half*w->term[1][93];
+    w->S[109] = w->S[109] + half*w->term[1][93];
     t->Phi[6][11] = t->Phi[6][11] + t->Phi[6][11] + w->term[0][94];
-    w->S[107] = w->S[107] + half*w->term[1][94];
+    w->S[110] = w->S[110] + half*w->term[1][94];
     t->Phi[6][12] = t->Phi[6][12] + t->Phi[6][12] + w->term[0][95];
-    w->S[108] = w->S[108] + half*w->term[1][95];
+    w->S[111] = w->S[111] + half*w->term[1][95];
     t->Phi[6][13] = t->Phi[6][13] + t->Phi[6][13] + w->term[0][96];
-    w->S[109] = w->S[109] + half*w->term[1][96];
+    w->S[112] = w->S[112] + half*w->term[1][96];
     t->Phi[6][14] = t->Phi[6][14] + t->Phi[6][14] + w->term[0][97];
-    w->S[110] = w->S[110] + half*w->term[1][97];
+    w->S[113] = w->S[113] + half*w->term[1][97];
     t->Phi[7][0] = t->Phi[7][0] + t->Phi[7][0] + w->term[0][98];
-    w->S[112] = w->S[112] + half*w->term[1][98];
+    w->S[56] = w->S[56] + half*w->term[1][98];
     t->Phi[7][1] = t->Phi[7][1] + t->Phi[7][1] + w->term[0][99];
-    w->S[113] = w->S[113] + half*w->term[1][99];
+    w->S[57] = w->S[57] + half*w->term[1][99];
     t->Phi[7][2] = t->Phi[7][2] + t->Phi[7][2] + w->term[0][100];
-    w->S[114] = w->S[114] + half*w->term[1][100];
+    w->S[58] = w->S[58] + half*w->term[1][100];
     t->Phi[7][3] = t->Phi[7][3] + t->Phi[7][3] + w->term[0][101];
-    w->S[115] = w->S[115] + half*w->term[1][101];
+    w->S[59] = w->S[59] + half*w->term[1][101];
     t->Phi[7][4] = t->Phi[7][4] + t->Phi[7][4] + w->term[0][102];
-    w->S[116] = w->S[116] + half*w->term[1][102];
+    w->S[60] = w->S[60] + half*w->term[1][102];
     t->Phi[7][5] = t->Phi[7][5] + t->Phi[7][5] + w->term[0][103];
-    w->S[117] = w->S[117] + half*w->term[1][103];
+    w->S[61] = w->S[61] + half*w->term[1][103];
     t->Phi[7][6] = t->Phi[7][6] + t->Phi[7][6] + w->term[0][104];
-    w->S[118] = w->S[118] + half*w->term[1][104];
+    w->S[62] = w->S[62] + half*w->term[1][104];
     t->Phi[7][7] = t->Phi[7][7] + t->Phi[7][7] + w->term[0][105];
-    w->S[119] = w->S[119] + half*w->term[1][105];
+    w->S[114] = w->S[114] + half*w->term[1][105];
     t->Phi[7][8] = t->Phi[7][8] + t->Phi[7][8] + w->term[0][106];
-    w->S[120] = w->S[120] + half*w->term[1][106];
+    w->S[63] = w->S[63] + half*w->term[1][106];
     t->Phi[7][9] = t->Phi[7][9] + t->Phi[7][9] + w->term[0][107];
-    w->S[121] = w->S[121] + half*w->term[1][107];
+    w->S[115] = w->S[115] + half*w->term[1][107];
     t->Phi[7][10] = t->Phi[7][10] + t->Phi[7][10] + w->term[0][108];
-    w->S[122] = w->S[122] + half*w->term[1][108];
+    w->S[116] = w->S[116] + half*w->term[1][108];
     t->Phi[7][11] = t->Phi[7][11] + t->Phi[7][11] + w->term[0][109];
-    w->S[123] = w->S[123] + half*w->term[1][109];
+    w->S[117] = w->S[117] + half*w->term[1][109];
     t->Phi[7][12] = t->Phi[7][12] + t->Phi[7][12] + w->term[0][110];
-    w->S[124] = w->S[124] + half*w->term[1][110];
+    w->S[118] = w->S[118] + half*w->term[1][110];
     t->Phi[7][13] = t->Phi[7][13] + t->Phi[7][13] + w->term[0][111];
-    w->S[125] = w->S[125] + half*w->term[1][111];
+    w->S[119] = w->S[119] + half*w->term[1][111];
     t->Phi[7][14] = t->Phi[7][14] + t->Phi[7][14] + w->term[0][112];
-    w->S[126] = w->S[126] + half*w->term[1][112];
+    w->S[120] = w->S[120] + half*w->term[1][112];
     t->Phi[8][0] = t->Phi[8][0] + t->Phi[8][0] + w->term[0][113];
-    w->S[128] = w->S[128] + half*w->term[1][113];
+    w->S[64] = w->S[64] + half*w->term[1][113];
     t->Phi[8][1] = t->Phi[8][1] + t->Phi[8][1] + w->term[0][114];
-    w->S[129] = w->S[129] + half*w->term[1][114];
+    w->S[65] = w->S[65] + half*w->term[1][114];
     t->Phi[8][2] = t->Phi[8][2] + t->Phi[8][2] + w->term[0][115];
-    w->S[130] = w->S[130] + half*w->term[1][115];
+    w->S[66] = w->S[66] + half*w->term[1][115];
     t->Phi[8][3] = t->Phi[8][3] + t->Phi[8][3] + w->term[0][116];
-    w->S[131] = w->S[131] + half*w->term[1][116];
+    w->S[67] = w->S[67] + half*w->term[1][116];
     t->Phi[8][4] = t->Phi[8][4] + t->Phi[8][4] + w->term[0][117];
-    w->S[132] = w->S[132] + half*w->term[1][117];
+    w->S[68] = w->S[68] + half*w->term[1][117];
     t->Phi[8][5] = t->Phi[8][5] + t->Phi[8][5] + w->term[0][118];
-    w->S[133] = w->S[133] + half*w->term[1][118];
+    w->S[69] = w->S[69] + half*w->term[1][118];
     t->Phi[8][6] = t->Phi[8][6] + t->Phi[8][6] + w->term[0][119];
-    w->S[134] = w->S[134] + half*w->term[1][119];
+    w->S[70] = w->S[70] + half*w->term[1][119];
     t->Phi[8][8] = t->Phi[8][8] + t->Phi[8][8] + w->term[0][120];
-    w->S[136] = w->S[136] + half*w->term[1][120];
+    w->S[71] = w->S[71] + half*w->term[1][120];
     t->Phi[8][9] = t->Phi[8][9] + t->Phi[8][9] + w->term[0][121];
-    w->S[137] = w->S[137] + half*w->term[1][121];
+    w->S[121] = w->S[121] + half*w->term[1][121];
     t->Phi[8][10] = t->Phi[8][10] + t->Phi[8][10] + w->term[0][122];
-    w->S[138] = w->S[138] + half*w->term[1][122];
+    w->S[122] = w->S[122] + half*w->term[1][122];
     t->Phi[8][11] = t->Phi[8][11] + t->Phi[8][11] + w->term[0][123];
-    w->S[139] = w->S[139] + half*w->term[1][123];
+    w->S[123] = w->S[123] + half*w->term[1][123];
     t->Phi[8][12] = t->Phi[8][12] + t->Phi[8][12] + w->term[0][124];
-    w->S[140] = w->S[140] + half*w->term[1][124];
+    w->S[124] = w->S[124] + half*w->term[1][124];
     t->Phi[8][13] = t->Phi[8][13] + t->Phi[8][13] + w->term[0][125];
-    w->S[141] = w->S[141] + half*w->term[1][125];
+    w->S[125] = w->S[125] + half*w->term[1][125];
     t->Phi[8][14] = t->Phi[8][14] + t->Phi[8][14] + w->term[0][126];
-    w->S[142] = w->S[142] + half*w->term[1][126];
+    w->S[126] = w->S[126] + half*w->term[1][126];
 }
 
-INS_GPS15_BLOCK ins_gps15_scalar transition_check(ins_gps15_transition *restrict t)
+INS_GPS15_BLOCK ins_gps15_scalar transition_check(ins_gps15_transition *restrict t,
+        ins_gps15_discretize_scratch *restrict w)
 {
+    const ins_gps15_scalar one = 1.0;
     ins_gps15_scalar v, check = 0.0;
-    v = t->Phi[0][0]; t->Phi[0][0] = v; check += v - v;
-    v = t->Phi[0][1]; t->Phi[0][1] = v; check += v - v;
-    v = t->Phi[0][2]; t->Phi[0][2] = v; check += v - v;
-    v = t->Phi[0][3]; t->Phi[0][3] = v; check += v - v;
-    v = t->Phi[0][4]; t->Phi[0][4] = v; check += v - v;
-    v = t->Phi[0][5]; t->Phi[0][5] = v; check += v - v;
-    v = t->Phi[0][6]; t->Phi[0][6] = v; check += v - v;
-    v = t->Phi[0][8]; t->Phi[0][8] = v; check += v - v;
-    v = t->Phi[0][9]; t->Phi[0][9] = v; check += v - v;
-    v = t->Phi[0][10]; t->Phi[0][10] = v; check += v - v;
-    v = t->Phi[0][11]; t->Phi[0][11] = v; check += v - v;
-    v = t->Phi[0][12]; t->Phi[0][12] = v; check += v - v;
-    v = t->Phi[0][13]; t->Phi[0][13] = v; check += v - v;
-    v = t->Phi[0][14]; t->Phi[0][14] = v; check += v - v;
-    v = t->Phi[1][0]; t->Phi[1][0] = v; check += v - v;
-    v = t->Phi[1][1]; t->Phi[1][1] = v; check += v - v;
-    v = t->Phi[1][2]; t->Phi[1][2] = v; check += v - v;
-    v = t->Phi[1][3]; t->Phi[1][3] = v; check += v - v;
-    v = t->Phi[1][4]; t->Phi[1][4] = v; check += v - v;
-    v = t->Phi[1][5]; t->Phi[1][5] = v; check += v - v;
-    v = t->Phi[1][6]; t->Phi[1][6] = v; check += v - v;
-    v = t->Phi[1][8]; t->Phi[1][8] = v; check += v - v;
-    v = t->Phi[1][9]; t->Phi[1][9] = v; check += v - v;
-    v = t->Phi[1][10]; t->Phi[1][10] = v; check += v - v;
-    v = t->Phi[1][11]; t->Phi[1][11] = v; check += v - v;
-    v = t->Phi[1][12]; t->Phi[1][12] = v; check += v - v;
-    v = t->Phi[1][13]; t->Phi[1][13] = v; check += v - v;
-    v = t->Phi[1][14]; t->Phi[1][14] = v; check += v - v;
-    v = t->Phi[2][0]; t->Phi[2][0] = v; check += v - v;
-    v = t->Phi[2][1]; t->Phi[2][1] = v; check += v - v;
-    v = t->Phi[2][2]; t->Phi[2][2] = v; check += v - v;
-    v = t->Phi[2][3]; t->Phi[2][3] = v; check += v - v;
-    v = t->Phi[2][4]; t->Phi[2][4] = v; check += v - v;
-    v = t->Phi[2][5]; t->Phi[2][5] = v; check += v - v;
-    v = t->Phi[2][6]; t->Phi[2][6] = v; check += v - v;
-    v = t->Phi[2][8]; t->Phi[2][8] = v; check += v - v;
-    v = t->Phi[2][9]; t->Phi[2][9] = v; check += v - v;
-    v = t->Phi[2][10]; t->Phi[2][10] = v; check += v - v;
-    v = t->Phi[2][11]; t->Phi[2][11] = v; check += v - v;
-    v = t->Phi[2][12]; t->Phi[2][12] = v; check += v - v;
-    v = t->Phi[2][13]; t->Phi[2][13] = v; check += v - v;
-    v = t->Phi[2][14]; t->Phi[2][14] = v; check += v - v;
-    v = t->Phi[3][0]; t->Phi[3][0] = v; check += v - v;
-    v = t->Phi[3][1]; t->Phi[3][1] = v; check += v - v;
-    v = t->Phi[3][2]; t->Phi[3][2] = v; check += v - v;
-    v = t->Phi[3][3]; t->Phi[3][3] = v; check += v - v;
-    v = t->Phi[3][4]; t->Phi[3][4] = v; check += v - v;
-    v = t->Phi[3][5]; t->Phi[3][5] = v; check += v - v;
-    v = t->Phi[3][6]; t->Phi[3][6] = v; check += v - v;
-    v = t->Phi[3][8]; t->Phi[3][8] = v; check += v - v;
-    v = t->Phi[3][9]; t->Phi[3][9] = v; check += v - v;
-    v = t->Phi[3][10]; t->Phi[3][10] = v; check += v - v;
-    v = t->Phi[3][11]; t->Phi[3][11] = v; check += v - v;
-    v = t->Phi[3][12]; t->Phi[3][12] = v; check += v - v;
-    v = t->Phi[3][13]; t->Phi[3][13] = v; check += v - v;
-    v = t->Phi[3][14]; t->Phi[3][14] = v; check += v - v;
-    v = t->Phi[4][0]; t->Phi[4][0] = v; check += v - v;
-    v = t->Phi[4][1]; t->Phi[4][1] = v; check += v - v;
-    v = t->Phi[4][2]; t->Phi[4][2] = v; check += v - v;
-    v = t->Phi[4][3]; t->Phi[4][3] = v; check += v - v;
-    v = t->Phi[4][4]; t->Phi[4][4] = v; check += v - v;
-    v = t->Phi[4][5]; t->Phi[4][5] = v; check += v - v;
-    v = t->Phi[4][6]; t->Phi[4][6] = v; check += v - v;
-    v = t->Phi[4][8]; t->Phi[4][8] = v; check += v - v;
-    v = t->Phi[4][9]; t->Phi[4][9] = v; check += v - v;
-    v = t->Phi[4][10]; t->Phi[4][10] = v; check += v - v;
-    v = t->Phi[4][11]; t->Phi[4][11] = v; check += v - v;
-    v = t->Phi[4][12]; t->Phi[4][12] = v; check += v - v;
-    v = t->Phi[4][13]; t->Phi[4][13] = v; check += v - v;
-    v = t->Phi[4][14]; t->Phi[4][14] = v; check += v - v;
-    v = t->Phi[5][0]; t->Phi[5][0] = v; check += v - v;
-    v = t->Phi[5][1]; t->Phi[5][1] = v; check += v - v;
-    v = t->Phi[5][2]; t->Phi[5][2] = v; check += v - v;
-    v = t->Phi[5][3]; t->Phi[5][3] = v; check += v - v;
-    v = t->Phi[5][4]; t->Phi[5][4] = v; check += v - v;
-    v = t->Phi[5][5]; t->Phi[5][5] = v; check += v - v;
-    v = t->Phi[5][6]; t->Phi[5][6] = v; check += v - v;
-    v = t->Phi[5][8]; t->Phi[5][8] = v; check += v - v;
-    v = t->Phi[5][9]; t->Phi[5][9] = v; check += v - v;
-    v = t->Phi[5][10]; t->Phi[5][10] = v; check += v - v;
-    v = t->Phi[5][11]; t->Phi[5][11] = v; check += v - v;
-    v = t->Phi[5][12]; t->Phi[5][12] = v; check += v - v;
-    v = t->Phi[5][13]; t->Phi[5][13] = v; check += v - v;
-    v = t->Phi[5][14]; t->Phi[5][14] = v; check += v - v;
-    v = t->Phi[6][0]; t->Phi[6][0] = v; check += v - v;
-    v = t->Phi[6][1]; t->Phi[6][1] = v; check += v - v;
-    v = t->Phi[6][2]; t->Phi[6][2] = v; check += v - v;
-    v = t->Phi[6][3]; t->Phi[6][3] = v; check += v - v;
-    v = t->Phi[6][4]; t->Phi[6][4] = v; check += v - v;
-    v = t->Phi[6][5]; t->Phi[6][5] = v; check += v - v;
-    v = t->Phi[6][6]; t->Phi[6][6] = v; check += v - v;
-    v = t->Phi[6][8]; t->Phi[6][8] = v; check += v - v;
-    v = t->Phi[6][9]; t->Phi[6][9] = v; check += v - v;
-    v = t->Phi[6][10]; t->Phi[6][10] = v; check += v - v;
-    v = t->Phi[6][11]; t->Phi[6][11] = v; check += v - v;
-    v = t->Phi[6][12]; t->Phi[6][12] = v; check += v - v;
-    v = t->Phi[6][13]; t->Phi[6][13] = v; check += v - v;
-    v = t->Phi[6][14]; t->Phi[6][14] = v; check += v - v;
-    v = t->Phi[7][0]; t->Phi[7][0] = v; check += v - v;
-    v = t->Phi[7][1]; t->Phi[7][1] = v; check += v - v;
-    v = t->Phi[7][2]; t->Phi[7][2] = v; check += v - v;
-    v = t->Phi[7][3]; t->Phi[7][3] = v; check += v - v;
-    v = t->Phi[7][4]; t->Phi[7][4] = v; check += v - v;
-    v = t->Phi[7][5]; t->Phi[7][5] = v; check += v - v;
-    v = t->Phi[7][6]; t->Phi[7][6] = v; check += v - v;
-    v = t->Phi[7][7]; t->Phi[7][7] = v; check += v - v;
-    v = t->Phi[7][8]; t->Phi[7][8] = v; check += v - v;
-    v = t->Phi[7][9]; t->Phi[7][9] = v; check += v - v;
-    v = t->Phi[7][10]; t->Phi[7][10] = v; check += v - v;
-    v = t->Phi[7][11]; t->Phi[7][11] = v; check += v - v;
-    v = t->Phi[7][12]; t->Phi[7][12] = v; check += v - v;
-    v = t->Phi[7][13]; t->Phi[7][13] = v; check += v - v;
-    v = t->Phi[7][14]; t->Phi[7][14] = v; check += v - v;
-    v = t->Phi[8][0]; t->Phi[8][0] = v; check += v - v;
-    v = t->Phi[8][1]; t->Phi[8][1] = v; check += v - v;
-    v = t->Phi[8][2]; t->Phi[8][2] = v; check += v - v;
-    v = t->Phi[8][3]; t->Phi[8][3] = v; check += v - v;
-    v = t->Phi[8][4]; t->Phi[8][4] = v; check += v - v;
-    v = t->Phi[8][5]; t->Phi[8][5] = v; check += v - v;
-    v = t->Phi[8][6]; t->Phi[8][6] = v; check += v - v;
-    v = t->Phi[8][8]; t->Phi[8][8] = v; check += v - v;
-    v = t->Phi[8][9]; t->Phi[8][9] = v; check += v - v;
-    v = t->Phi[8][10]; t->Phi[8][10] = v; check += v - v;
-    v = t->Phi[8][11]; t->Phi[8][11] = v; check += v - v;
-    v = t->Phi[8][12]; t->Phi[8][12] = v; check += v - v;
-    v = t->Phi[8][13]; t->Phi[8][13] = v; check += v - v;
-    v = t->Phi[8][14]; t->Phi[8][14] = v; check += v - v;
+    t->Phi[0][0] = t->Phi[0][0] + one;
+    t->Phi[1][1] = t->Phi[1][1] + one;
+    t->Phi[2][2] = t->Phi[2][2] + one;
+    t->Phi[3][3] = t->Phi[3][3] + one;
+    t->Phi[4][4] = t->Phi[4][4] + one;
+    t->Phi[5][5] = t->Phi[5][5] + one;
+    t->Phi[6][6] = t->Phi[6][6] + one;
+    t->Phi[7][7] = t->Phi[7][7] + one;
+    t->Phi[8][8] = t->Phi[8][8] + one;
+    v = t->Phi[0][0] + t->Phi[0][1] + t->Phi[0][2] + t->Phi[0][3] + t->Phi[0][4] + t->Phi[0][5] +
+            t->Phi[0][6] + t->Phi[0][8] + t->Phi[0][9] + t->Phi[0][10] + t->Phi[0][11] +
+            t->Phi[0][12] + t->Phi[0][13] + t->Phi[0][14] + t->Phi[1][0] + t->Phi[1][1] +
+            t->Phi[1][2] + t->Phi[1][3] + t->Phi[1][4] + t->Phi[1][5] + t->Phi[1][6] + t->Phi[1][8]
+            + t->Phi[1][9] + t->Phi[1][10] + t->Phi[1][11] + t->Phi[1][12] + t->Phi[1][13] +
+            t->Phi[1][14] + t->Phi[2][0] + t->Phi[2][1] + t->Phi[2][2] + t->Phi[2][3] + t->Phi[2][4]
+            + t->Phi[2][5] + t->Phi[2][6] + t->Phi[2][8] + t->Phi[2][9] + t->Phi[2][10] +
+            t->Phi[2][11] + t->Phi[2][12] + t->Phi[2][13] + t->Phi[2][14] + t->Phi[3][0] +
+            t->Phi[3][1] + t->Phi[3][2] + t->Phi[3][3] + t->Phi[3][4] + t->Phi[3][5] + t->Phi[3][6]
+            + t->Phi[3][8] + t->Phi[3][9] + t->Phi[3][10] + t->Phi[3][11] + t->Phi[3][12] +
+            t->Phi[3][13] + t->Phi[3][14] + t->Phi[4][0] + t->Phi[4][1] + t->Phi[4][2] +
+            t->Phi[4][3] + t->Phi[4][4] + t->Phi[4][5] + t->Phi[4][6] + t->Phi[4][8] + t->Phi[4][9]
+            + t->Phi[4][10] + t->Phi[4][11] + t->Phi[4][12] + t->Phi[4][13] + t->Phi[4][14] +
+            t->Phi[5][0] + t->Phi[5][1] + t->Phi[5][2] + t->Phi[5][3] + t->Phi[5][4] + t->Phi[5][5]
+            + t->Phi[5][6] + t->Phi[5][8] + t->Phi[5][9] + t->Phi[5][10] + t->Phi[5][11] +
+            t->Phi[5][12] + t->Phi[5][13] + t->Phi[5][14] + t->Phi[6][0] + t->Phi[6][1] +
+            t->Phi[6][2] + t->Phi[6][3] + t->Phi[6][4] + t->Phi[6][5] + t->Phi[6][6] + t->Phi[6][8]
+            + t->Phi[6][9] + t->Phi[6][10] + t->Phi[6][11] + t->Phi[6][12] + t->Phi[6][13] +
+            t->Phi[6][14] + t->Phi[7][0] + t->Phi[7][1] + t->Phi[7][2] + t->Phi[7][3] + t->Phi[7][4]
+            + t->Phi[7][5] + t->Phi[7][6] + t->Phi[7][7] + t->Phi[7][8] + t->Phi[7][9] +
+            t->Phi[7][10] + t->Phi[7][11] + t->Phi[7][12] + t->Phi[7][13] + t->Phi[7][14] +
+            t->Phi[8][0] + t->Phi[8][1] + t->Phi[8][2] + t->Phi[8][3] + t->Phi[8][4] + t->Phi[8][5]
+            + t->Phi[8][6] + t->Phi[8][8] + t->Phi[8][9] + t->Phi[8][10] + t->Phi[8][11] +
+            t->Phi[8][12] + t->Phi[8][13] + t->Phi[8][14]; w->term[0][0] = v; check += v - v;
     return check;
 }
 
@@ -2266,54 +2279,54 @@ INS_GPS15_BLOCK void noise_input(const ins_gps15_matrices *restrict m, ins_gps15
     w->term[0][3] = w->S[3]*m->G[9] + w->S[4]*m->G[12] + w->S[5]*m->G[15];
     w->term[0][4] = w->S[3]*m->G[10] + w->S[4]*m->G[13] + w->S[5]*m->G[16];
     w->term[0][5] = w->S[3]*m->G[11] + w->S[4]*m->G[14] + w->S[5]*m->G[17];
-    w->term[0][6] = w->S[16]*m->G[0] + w->S[17]*m->G[3] + w->S[18]*m->G[6];
-    w->term[0][7] = w->S[16]*m->G[1] + w->S[17]*m->G[4] + w->S[18]*m->G[7];
-    w->term[0][8] = w->S[16]*m->G[2] + w->S[17]*m->G[5] + w->S[18]*m->G[8];
-    w->term[0][9] = w->S[19]*m->G[9] + w->S[20]*m->G[12] + w->S[21]*m->G[15];
-    w->term[0][10] = w->S[19]*m->G[10] + w->S[20]*m->G[13] + w->S[21]*m->G[16];
-    w->term[0][11] = w->S[19]*m->G[11] + w->S[20]*m->G[14] + w->S[21]*m->G[17];
-    w->term[0][12] = w->S[32]*m->G[0] + w->S[33]*m->G[3] + w->S[34]*m->G[6];
-    w->term[0][13] = w->S[32]*m->G[1] + w->S[33]*m->G[4] + w->S[34]*m->G[7];
-    w->term[0][14] = w->S[32]*m->G[2] + w->S[33]*m->G[5] + w->S[34]*m->G[8];
-    w->term[0][15] = w->S[35]*m->G[9] + w->S[36]*m->G[12] + w->S[37]*m->G[15];
-    w->term[0][16] = w->S[35]*m->G[10] + w->S[36]*m->G[13] + w->S[37]*m->G[16];
-    w->term[0][17] = w->S[35]*m->G[11] + w->S[36]*m->G[14] + w->S[37]*m->G[17];
-    w->term[0][18] = w->S[48]*m->G[0] + w->S[49]*m->G[3] + w->S[50]*m->G[6];
-    w->term[0][19] = w->S[48]*m->G[1] + w->S[49]*m->G[4] + w->S[50]*m->G[7];
-    w->term[0][20] = w->S[48]*m->G[2] + w->S[49]*m->G[5] + w->S[50]*m->G[8];
-    w->term[0][21] = w->S[51]*m->G[9] + w->S[52]*m->G[12] + w->S[53]*m->G[15];
-    w->term[0][22] = w->S[51]*m->G[10] + w->S[52]*m->G[13] + w->S[53]*m->G[16];
-    w->term[0][23] = w->S[51]*m->G[11] + w->S[52]*m->G[14] + w->S[53]*m->G[17];
-    w->term[0][24] = w->S[64]*m->G[0] + w->S[65]*m->G[3] + w->S[66]*m->G[6];
-    w->term[0][25] = w->S[64]*m->G[1] + w->S[65]*m->G[4] + w->S[66]*m->G[7];
-    w->term[0][26] = w->S[64]*m->G[2] + w->S[65]*m->G[5] + w->S[66]*m->G[8];
-    w->term[0][27] = w->S[67]*m->G[9] + w->S[68]*m->G[12] + w->S[69]*m->G[15];
-    w->term[0][28] = w->S[67]*m->G[10] + w->S[68]*m->G[13] + w->S[69]*m->G[16];
-    w->term[0][29] = w->S[67]*m->G[11] + w->S[68]*m->G[14] + w->S[69]*m->G[17];
-    w->term[0][30] = w->S[80]*m->G[0] + w->S[81]*m->G[3] + w->S[82]*m->G[6];
-    w->term[0][31] = w->S[80]*m->G[1] + w->S[81]*m->G[4] + w->S[82]*m->G[7];
-    w->term[0][32] = w->S[80]*m->G[2] + w->S[81]*m->G[5] + w->S[82]*m->G[8];
-    w->term[0][33] = w->S[83]*m->G[9] + w->S[84]*m->G[12] + w->S[85]*m->G[15];
-    w->term[0][34] = w->S[83]*m->G[10] + w->S[84]*m->G[13] + w->S[85]*m->G[16];
-    w->term[0][35] = w->S[83]*m->G[11] + w->S[84]*m->G[14] + w->S[85]*m->G[17];
-    w->term[0][36] = w->S[96]*m->G[0] + w->S[97]*m->G[3] + w->S[98]*m->G[6];
-    w->term[0][37] = w->S[96]*m->G[1] + w->S[97]*m->G[4] + w->S[98]*m->G[7];
-    w->term[0][38] = w->S[96]*m->G[2] + w->S[97]*m->G[5] + w->S[98]*m->G[8];
-    w->term[0][39] = w->S[99]*m->G[9] + w->S[100]*m->G[12] + w->S[101]*m->G[15];
-    w->term[0][40] = w->S[99]*m->G[10] + w->S[100]*m->G[13] + w->S[101]*m->G[16];
-    w->term[0][41] = w->S[99]*m->G[11] + w->S[100]*m->G[14] + w->S[101]*m->G[17];
-    w->term[0][42] = w->S[112]*m->G[0] + w->S[113]*m->G[3] + w->S[114]*m->G[6];
-    w->term[0][43] = w->S[112]*m->G[1] + w->S[113]*m->G[4] + w->S[114]*m->G[7];
-    w->term[0][44] = w->S[112]*m->G[2] + w->S[113]*m->G[5] + w->S[114]*m->G[8];
-    w->term[0][45] = w->S[115]*m->G[9] + w->S[116]*m->G[12] + w->S[117]*m->G[15];
-    w->term[0][46] = w->S[115]*m->G[10] + w->S[116]*m->G[13] + w->S[117]*m->G[16];
-    w->term[0][47] = w->S[115]*m->G[11] + w->S[116]*m->G[14] + w->S[117]*m->G[17];
-    w->term[0][48] = w->S[128]*m->G[0] + w->S[129]*m->G[3] + w->S[130]*m->G[6];
-    w->term[0][49] = w->S[128]*m->G[1] + w->S[129]*m->G[4] + w->S[130]*m->G[7];
-    w->term[0][50] = w->S[128]*m->G[2] + w->S[129]*m->G[5] + w->S[130]*m->G[8];
-    w->term[0][51] = w->S[131]*m->G[9] + w->S[132]*m->G[12] + w->S[133]*m->G[15];
-    w->term[0][52] = w->S[131]*m->G[10] + w->S[132]*m->G[13] + w->S[133]*m->G[16];
-    w->term[0][53] = w->S[131]*m->G[11] + w->S[132]*m->G[14] + w->S[133]*m->G[17];
+    w->term[0][6] = w->S[8]*m->G[0] + w->S[9]*m->G[3] + w->S[10]*m->G[6];
+    w->term[0][7] = w->S[8]*m->G[1] + w->S[9]*m->G[4] + w->S[10]*m->G[7];
+    w->term[0][8] = w->S[8]*m->G[2] + w->S[9]*m->G[5] + w->S[10]*m->G[8];
+    w->term[0][9] = w->S[11]*m->G[9] + w->S[12]*m->G[12] + w->S[13]*m->G[15];
+    w->term[0][10] = w->S[11]*m->G[10] + w->S[12]*m->G[13] + w->S[13]*m->G[16];
+    w->term[0][11] = w->S[11]*m->G[11] + w->S[12]*m->G[14] + w->S[13]*m->G[17];
+    w->term[0][12] = w->S[16]*m->G[0] + w->S[17]*m->G[3] + w->S[18]*m->G[6];
+    w->term[0][13] = w->S[16]*m->G[1] + w->S[17]*m->G[4] + w->S[18]*m->G[7];
+    w->term[0][14] = w->S[16]*m->G[2] + w->S[17]*m->G[5] + w->S[18]*m->G[8];
+    w->term[0][15] = w->S[19]*m->G[9] + w->S[20]*m->G[12] + w->S[21]*m->G[15];
+    w->term[0][16] = w->S[19]*m->G[10] + w->S[20]*m->G[13] + w->S[21]*m->G[16];
+    w->term[0][17] = w->S[19]*m->G[11] + w->S[20]*m->G[14] + w->S[21]*m->G[17];
+    w->term[0][18] = w->S[24]*m->G[0] + w->S[25]*m->G[3] + w->S[26]*m->G[6];
+    w->term[0][19] = w->S[24]*m->G[1] + w->S[25]*m->G[4] + w->S[26]*m->G[7];
+    w->term[0][20] = w->S[24]*m->G[2] + w->S[25]*m->G[5] + w->S[26]*m->G[8];
+    w->term[0][21] = w->S[27]*m->G[9] + w->S[28]*m->G[12] + w->S[29]*m->G[15];
+    w->term[0][22] = w->S[27]*m->G[10] + w->S[28]*m->G[13] + w->S[29]*m->G[16];
+    w->term[0][23] = w->S[27]*m->G[11] + w->S[28]*m->G[14] + w->S[29]*m->G[17];
+    w->term[0][24] = w->S[32]*m->G[0] + w->S[33]*m->G[3] + w->S[34]*m->G[6];
+    w->term[0][25] = w->S[32]*m->G[1] + w->S[33]*m->G[4] + w->S[34]*m->G[7];
+    w->term[0][26] = w->S[32]*m->G[2] + w->S[33]*m->G[5] + w->S[34]*m->G[8];
+    w->term[0][27] = w->S[35]*m->G[9] + w->S[36]*m->G[12] + w->S[37]*m->G[15];
+    w->term[0][28] = w->S[35]*m->G[10] + w->S[36]*m->G[13] + w->S[37]*m->G[16];
+    w->term[0][29] = w->S[35]*m->G[11] + w->S[36]*m->G[14] + w->S[37]*m->G[17];
+    w->term[0][30] = w->S[40]*m->G[0] + w->S[41]*m->G[3] + w->S[42]*m->G[6];
+    w->term[0][31] = w->S[40]*m->G[1] + w->S[41]*m->G[4] + w->S[42]*m->G[7];
+    w->term[0][32] = w->S[40]*m->G[2] + w->S[41]*m->G[5] + w->S[42]*m->G[8];
+    w->term[0][33] = w->S[43]*m->G[9] + w->S[44]*m->G[12] + w->S[45]*m->G[15];
+    w->term[0][34] = w->S[43]*m->G[10] + w->S[44]*m->G[13] + w->S[45]*m->G[16];
+    w->term[0][35] = w->S[43]*m->G[11] + w->S[44]*m->G[14] + w->S[45]*m->G[17];
+    w->term[0][36] = w->S[48]*m->G[0] + w->S[49]*m->G[3] + w->S[50]*m->G[6];
+    w->term[0][37] = w->S[48]*m->G[1] + w->S[49]*m->G[4] + w->S[50]*m->G[7];
+    w->term[0][38] = w->S[48]*m->G[2] + w->S[49]*m->G[5] + w->S[50]*m->G[8];
+    w->term[0][39] = w->S[51]*m->G[9] + w->S[52]*m->G[12] + w->S[53]*m->G[15];
+    w->term[0][40] = w->S[51]*m->G[10] + w->S[52]*m->G[13] + w->S[53]*m->G[16];
+    w->term[0][41] = w->S[51]*m->G[11] + w->S[52]*m->G[14] + w->S[53]*m->G[17];
+    w->term[0][42] = w->S[56]*m->G[0] + w->S[57]*m->G[3] + w->S[58]*m->G[6];
+    w->term[0][43] = w->S[56]*m->G[1] + w->S[57]*m->G[4] + w->S[58]*m->G[7];
+    w->term[0][44] = w->S[56]*m->G[2] + w->S[57]*m->G[5] + w->S[58]*m->G[8];
+    w->term[0][45] = w->S[59]*m->G[9] + w->S[60]*m->G[12] + w->S[61]*m->G[15];
+    w->term[0][46] = w->S[59]*m->G[10] + w->S[60]*m->G[13] + w->S[61]*m->G[16];
+    w->term[0][47] = w->S[59]*m->G[11] + w->S[60]*m->G[14] + w->S[61]*m->G[17];
+    w->term[0][48] = w->S[64]*m->G[0] + w->S[65]*m->G[3] + w->S[66]*m->G[6];
+    w->term[0][49] = w->S[64]*m->G[1] + w->S[65]*m->G[4] + w->S[66]*m->G[7];
+    w->term[0][50] = w->S[64]*m->G[2] + w->S[65]*m->G[5] + w->S[66]*m->G[8];
+    w->term[0][51] = w->S[67]*m->G[9] + w->S[68]*m->G[12] + w->S[69]*m->G[15];
+    w->term[0][52] = w->S[67]*m->G[10] + w->S[68]*m->G[13] + w->S[69]*m->G[16];
+    w->term[0][53] = w->S[67]*m->G[11] + w->S[68]*m->G[14] + w->S[69]*m->G[17];
 }
 
 INS_GPS15_BLOCK ins_gps15_scalar process_noise(const ins_gps15_matrices *restrict m,
@@ -2321,367 +2334,304 @@ INS_GPS15_BLOCK ins_gps15_scalar process_noise(const ins_gps15_matrices *restric
         ins_gps15_scalar T)
 {
     ins_gps15_scalar v, check = 0.0;
-    w->term[1][0] = w->term[0][0]*T*m->q[0];
-    w->term[1][1] = w->term[0][1]*T*m->q[1];
-    w->term[1][2] = w->term[0][2]*T*m->q[2];
-    w->term[1][3] = w->term[0][3]*T*m->q[3];
-    w->term[1][4] = w->term[0][4]*T*m->q[4];
-    w->term[1][5] = w->term[0][5]*T*m->q[5];
-    w->term[1][6] = w->term[0][6]*T*m->q[0];
-    w->term[1][7] = w->term[0][7]*T*m->q[1];
-    w->term[1][8] = w->term[0][8]*T*m->q[2];
-    w->term[1][9] = w->term[0][9]*T*m->q[3];
-    w->term[1][10] = w->term[0][10]*T*m->q[4];
-    w->term[1][11] = w->term[0][11]*T*m->q[5];
-    w->term[1][12] = w->term[0][12]*T*m->q[0];
-    w->term[1][13] = w->term[0][13]*T*m->q[1];
-    w->term[1][14] = w->term[0][14]*T*m->q[2];
-    w->term[1][15] = w->term[0][15]*T*m->q[3];
-    w->term[1][16] = w->term[0][16]*T*m->q[4];
-    w->term[1][17] = w->term[0][17]*T*m->q[5];
-    w->term[1][18] = w->term[0][18]*T*m->q[0];
-    w->term[1][19] = w->term[0][19]*T*m->q[1];
-    w->term[1][20] = w->term[0][20]*T*m->q[2];
-    w->term[1][21] = w->term[0][21]*T*m->q[3];
-    w->term[1][22] = w->term[0][22]*T*m->q[4];
-    w->term[1][23] = w->term[0][23]*T*m->q[5];
-    w->term[1][24] = w->term[0][24]*T*m->q[0];
-    w->term[1][25] = w->term[0][25]*T*m->q[1];
-    w->term[1][26] = w->term[0][26]*T*m->q[2];
-    w->term[1][27] = w->term[0][27]*T*m->q[3];
-    w->term[1][28] = w->term[0][28]*T*m->q[4];
-    w->term[1][29] = w->term[0][29]*T*m->q[5];
-    w->term[1][30] = w->term[0][30]*T*m->q[0];
-    w->term[1][31] = w->term[0][31]*T*m->q[1];
-    w->term[1][32] = w->term[0][32]*T*m->q[2];
-    w->term[1][33] = w->term[0][33]*T*m->q[3];
-    w->term[1][34] = w->term[0][34]*T*m->q[4];
-    w->term[1][35] = w->term[0][35]*T*m->q[5];
-    w->term[1][36] = w->term[0][36]*T*m->q[0];
-    w->term[1][37] = w->term[0][37]*T*m->q[1];
-    w->term[1][38] = w->term[0][38]*T*m->q[2];
-    w->term[1][39] = w->term[0][39]*T*m->q[3];
-    w->term[1][40] = w->term[0][40]*T*m->q[4];
-    w->term[1][41] = w->term[0][41]*T*m->q[5];
-    w->term[1][42] = w->term[0][42]*T*m->q[0];
-    w->term[1][43] = w->term[0][43]*T*m->q[1];
-    w->term[1][44] = w->term[0][44]*T*m->q[2];
-    w->term[1][45] = w->term[0][45]*T*m->q[3];
-    w->term[1][46] = w->term[0][46]*T*m->q[4];
-    w->term[1][47] = w->term[0][47]*T*m->q[5];
-    w->term[1][48] = w->term[0][48]*T*m->q[0];
-    w->term[1][49] = w->term[0][49]*T*m->q[1];
-    w->term[1][50] = w->term[0][50]*T*m->q[2];
-    w->term[1][51] = w->term[0][51]*T*m->q[3];
-    w->term[1][52] = w->term[0][52]*T*m->q[4];
-    w->term[1][53] = w->term[0][53]*T*m->q[5];
+    w->term[1][54] = T*m->q[0];
+    w->term[1][55] = T*m->q[1];
+    w->term[1][56] = T*m->q[2];
+    w->term[1][57] = T*m->q[3];
+    w->term[1][58] = T*m->q[4];
+    w->term[1][59] = T*m->q[5];
+    w->term[1][0] = w->term[0][0]*w->term[1][54];
+    w->term[1][1] = w->term[0][1]*w->term[1][55];
+    w->term[1][2] = w->term[0][2]*w->term[1][56];
+    w->term[1][3] = w->term[0][3]*w->term[1][57];
+    w->term[1][4] = w->term[0][4]*w->term[1][58];
+    w->term[1][5] = w->term[0][5]*w->term[1][59];
+    w->term[1][6] = w->term[0][6]*w->term[1][54];
+    w->term[1][7] = w->term[0][7]*w->term[1][55];
+    w->term[1][8] = w->term[0][8]*w->term[1][56];
+    w->term[1][9] = w->term[0][9]*w->term[1][57];
+    w->term[1][10] = w->term[0][10]*w->term[1][58];
+    w->term[1][11] = w->term[0][11]*w->term[1][59];
+    w->term[1][12] = w->term[0][12]*w->term[1][54];
+    w->term[1][13] = w->term[0][13]*w->term[1][55];
+    w->term[1][14] = w->term[0][14]*w->term[1][56];
+    w->term[1][15] = w->term[0][15]*w->term[1][57];
+    w->term[1][16] = w->term[0][16]*w->term[1][58];
+    w->term[1][17] = w->term[0][17]*w->term[1][59];
+    w->term[1][18] = w->term[0][18]*w->term[1][54];
+    w->term[1][19] = w->term[0][19]*w->term[1][55];
+    w->term[1][20] = w->term[0][20]*w->term[1][56];
+    w->term[1][21] = w->term[0][21]*w->term[1][57];
+    w->term[1][22] = w->term[0][22]*w->term[1][58];
+    w->term[1][23] = w->term[0][23]*w->term[1][59];
+    w->term[1][24] = w->term[0][24]*w->term[1][54];
+    w->term[1][25] = w->term[0][25]*w->term[1][55];
+    w->term[1][26] = w->term[0][26]*w->term[1][56];
+    w->term[1][27] = w->term[0][27]*w->term[1][57];
+    w->term[1][28] = w->term[0][28]*w->term[1][58];
+    w->term[1][29] = w->term[0][29]*w->term[1][59];
+    w->term[1][30] = w->term[0][30]*w->term[1][54];
+    w->term[1][31] = w->term[0][31]*w->term[1][55];
+    w->term[1][32] = w->term[0][32]*w->term[1][56];
+    w->term[1][33] = w->term[0][33]*w->term[1][57];
+    w->term[1][34] = w->term[0][34]*w->term[1][58];
+    w->term[1][35] = w->term[0][35]*w->term[1][59];
+    w->term[1][36] = w->term[0][36]*w->term[1][54];
+    w->term[1][37] = w->term[0][37]*w->term[1][55];
+    w->term[1][38] = w->term[0][38]*w->term[1][56];
+    w->term[1][39] = w->term[0][39]*w->term[1][57];
+    w->term[1][40] = w->term[0][40]*w->term[1][58];
+    w->term[1][41] = w->term[0][41]*w->term[1][59];
+    w->term[1][42] = w->term[0][42]*w->term[1][54];
+    w->term[1][43] = w->term[0][43]*w->term[1][55];
+    w->term[1][44] = w->term[0][44]*w->term[1][56];
+    w->term[1][45] = w->term[0][45]*w->term[1][57];
+    w->term[1][46] = w->term[0][46]*w->term[1][58];
+    w->term[1][47] = w->term[0][47]*w->term[1][59];
+    w->term[1][48] = w->term[0][48]*w->term[1][54];
+    w->term[1][49] = w->term[0][49]*w->term[1][55];
+    w->term[1][50] = w->term[0][50]*w->term[1][56];
+    w->term[1][51] = w->term[0][51]*w->term[1][57];
+    w->term[1][52] = w->term[0][52]*w->term[1][58];
+    w->term[1][53] = w->term[0][53]*w->term[1][59];
     v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
             w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0][0] = v; check += v - v;
+            t->Qd[0] = v; check += v - v;
     v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
             w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[0][1] = v; t->Qd[1][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v - v;
     v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
             w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[0][2] = v; t->Qd[2][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v - v;
     v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
             w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[0][3] = v; t->Qd[3][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v - v;
     v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
             w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[0][4] = v; t->Qd[4][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v - v;
     v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
             w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[0][5] = v; t->Qd[5][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v - v;
     v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
             w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
-            w->term[1][5]*w->term[0][41]; t->Qd[0][6] = v; t->Qd[6][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][41]; t->Qd[6] = v; check += v - v;
     v = w->term[1][0]*w->term[0][42] + w->term[1][1]*w->term[0][43] + w->term[1][2]*w->term[0][44] +
             w->term[1][3]*w->term[0][45] + w->term[1][4]*w->term[0][46] +
-            w->term[1][5]*w->term[0][47]; t->Qd[0][7] = v; t->Qd[7][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][47]; t->Qd[7] = v; check += v - v;
     v = w->term[1][0]*w->term[0][48] + w->term[1][1]*w->term[0][49] + w->term[1][2]*w->term[0][50] +
             w->term[1][3]*w->term[0][51] + w->term[1][4]*w->term[0][52] +
-            w->term[1][5]*w->term[0][53]; t->Qd[0][8] = v; t->Qd[8][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][53]; t->Qd[8] = v; check += v - v;
     v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
             w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[1][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][11]; t->Qd[15] = v; check += v - v;
     v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
             w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[1][2] = v; t->Qd[2][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][17]; t->Qd[16] = v; check += v - v;
     v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
             w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[1][3] = v; t->Qd[3][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][23]; t->Qd[17] = v; check += v - v;
     v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
             w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[1][4] = v; t->Qd[4][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][29]; t->Qd[18] = v; check += v - v;
     v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
             w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[1][5] = v; t->Qd[5][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][35]; t->Qd[19] = v; check += v - v;
     v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38] +
             w->term[1][9]*w->term[0][39] + w->term[1][10]*w->term[0][40] +
-            w->term[1][11]*w->term[0][41]; t->Qd[1][6] = v; t->Qd[6][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][41]; t->Qd[20] = v; check += v - v;
     v = w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] + w->term[1][8]*w->term[0][44] +
             w->term[1][9]*w->term[0][45] + w->term[1][10]*w->term[0][46] +
-            w->term[1][11]*w->term[0][47]; t->Qd[1][7] = v; t->Qd[7][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][47]; t->Qd[21] = v; check += v - v;
     v = w->term[1][6]*w->term[0][48] + w->term[1][7]*w->term[0][49] + w->term[1][8]*w->term[0][50] +
             w->term[1][9]*w->term[0][51] + w->term[1][10]*w->term[0][52] +
-            w->term[1][11]*w->term[0][53]; t->Qd[1][8] = v; t->Qd[8][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][53]; t->Qd[22] = v; check += v - v;
     v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
             w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[2][2] = v; check +=
-            v - v;
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[29] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
             w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[2][3] = v;
-            t->Qd[3][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[30] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
             w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[2][4] = v;
-            t->Qd[4][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[31] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
             w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[2][5] = v;
-            t->Qd[5][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[32] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
             w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[2][6] = v;
-            t->Qd[6][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[33] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][42] + w->term[1][13]*w->term[0][43] +
             w->term[1][14]*w->term[0][44] + w->term[1][15]*w->term[0][45] +
-            w->term[1][16]*w->term[0][46] + w->term[1][17]*w->term[0][47]; t->Qd[2][7] = v;
-            t->Qd[7][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][46] + w->term[1][17]*w->term[0][47]; t->Qd[34] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][48] + w->term[1][13]*w->term[0][49] +
             w->term[1][14]*w->term[0][50] + w->term[1][15]*w->term[0][51] +
-            w->term[1][16]*w->term[0][52] + w->term[1][17]*w->term[0][53]; t->Qd[2][8] = v;
-            t->Qd[8][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][52] + w->term[1][17]*w->term[0][53]; t->Qd[35] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
             w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[3][3] = v; check +=
-            v - v;
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[42] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
             w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[3][4] = v;
-            t->Qd[4][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[43] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
             w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[3][5] = v;
-            t->Qd[5][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[44] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
             w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[3][6] = v;
-            t->Qd[6][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[45] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][42] + w->term[1][19]*w->term[0][43] +
             w->term[1][20]*w->term[0][44] + w->term[1][21]*w->term[0][45] +
-            w->term[1][22]*w->term[0][46] + w->term[1][23]*w->term[0][47]; t->Qd[3][7] = v;
-            t->Qd[7][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][46] + w->term[1][23]*w->term[0][47]; t->Qd[46] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][48] + w->term[1][19]*w->term[0][49] +
             w->term[1][20]*w->term[0][50] + w->term[1][21]*w->term[0][51] +
-            w->term[1][22]*w->term[0][52] + w->term[1][23]*w->term[0][53]; t->Qd[3][8] = v;
-            t->Qd[8][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][52] + w->term[1][23]*w->term[0][53]; t->Qd[47] = v; check += v
+            - v;
     v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
             w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[4][4] = v; check +=
-            v - v;
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[54] = v; check += v
+            - v;
     v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
             w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[4][5] = v;
-            t->Qd[5][4] = v; check += v - v;
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[55] = v; check += v
+            - v;
     v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
             w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
-            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[4][6] = v;
-            t->Qd[6][4] = v; check += v - v;
+            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[56] = v; check += v
+            - v;
     v = w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
             w->term[1][26]*w->term[0][44] + w->term[1][27]*w->term[0][45] +
-            w->term[1][28]*w->term[0][46] + w->term[1][29]*w->term[0][47]; t->Qd[4][7] = v;
-            t->Qd[7][4] = v; check += v - v;
+            w->term[1][28]*w->term[0][46] + w->term[1][29]*w->term[0][47]; t->Qd[57] = v; check += v
+            - v;
     v = w->term[1][24]*w->term[0][48] + w->term[1][25]*w->term[0][49] +
             w->term[1][26]*w->term[0][50] + w->term[1][27]*w->term[0][51] +
-            w->term[1][28]*w->term[0][52] + w->term[1][29]*w->term[0][53]; t->Qd[4][8] = v;
-            t->Qd[8][4] = v; check += v - v;
+            w->term[1][28]*w->term[0][52] + w->term[1][29]*w->term[0][53]; t->Qd[58] = v; check += v
+            - v;
     v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
             w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[5][5] = v; check +=
-            v - v;
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[65] = v; check += v
+            - v;
     v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
             w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
-            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[5][6] = v;
-            t->Qd[6][5] = v; check += v - v;
+            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[66] = v; check += v
+            - v;
     v = w->term[1][30]*w->term[0][42] + w->term[1][31]*w->term[0][43] +
             w->term[1][32]*w->term[0][44] + w->term[1][33]*w->term[0][45] +
-            w->term[1][34]*w->term[0][46] + w->term[1][35]*w->term[0][47]; t->Qd[5][7] = v;
-            t->Qd[7][5] = v; check += v - v;
+            w->term[1][34]*w->term[0][46] + w->term[1][35]*w->term[0][47]; t->Qd[67] = v; check += v
+            - v;
     v = w->term[1][30]*w->term[0][48] + w->term[1][31]*w->term[0][49] +
             w->term[1][32]*w->term[0][50] + w->term[1][33]*w->term[0][51] +
-            w->term[1][34]*w->term[0][52] + w->term[1][35]*w->term[0][53]; t->Qd[5][8] = v;
-            t->Qd[8][5] = v; check += v - v;
+            w->term[1][34]*w->term[0][52] + w->term[1][35]*w->term[0][53]; t->Qd[68] = v; check += v
+            - v;
     v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
             w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[6][6] = v; check +=
-            v - v;
+            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[75] = v; check += v
+            - v;
     v = w->term[1][36]*w->term[0][42] + w->term[1][37]*w->term[0][43] +
             w->term[1][38]*w->term[0][44] + w->term[1][39]*w->term[0][45] +
-            w->term[1][40]*w->term[0][46] + w->term[1][41]*w->term[0][47]; t->Qd[6][7] = v;
-            t->Qd[7][6] = v; check += v - v;
+            w->term[1][40]*w->term[0][46] + w->term[1][41]*w->term[0][47]; t->Qd[76] = v; check += v
+            - v;
     v = w->term[1][36]*w->term[0][48] + w->term[1][37]*w->term[0][49] +
             w->term[1][38]*w->term[0][50] + w->term[1][39]*w->term[0][51] +
-            w->term[1][40]*w->term[0][52] + w->term[1][41]*w->term[0][53]; t->Qd[6][8] = v;
-            t->Qd[8][6] = v; check += v - v;
+            w->term[1][40]*w->term[0][52] + w->term[1][41]*w->term[0][53]; t->Qd[77] = v; check += v
+            - v;
     v = w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
             w->term[1][44]*w->term[0][44] + w->term[1][45]*w->term[0][45] +
-            w->term[1][46]*w->term[0][46] + w->term[1][47]*w->term[0][47]; t->Qd[7][7] = v; check +=
-            v - v;
+            w->term[1][46]*w->term[0][46] + w->term[1][47]*w->term[0][47]; t->Qd[84] = v; check += v
+            - v;
     v = w->term[1][42]*w->term[0][48] + w->term[1][43]*w->term[0][49] +
             w->term[1][44]*w->term[0][50] + w->term[1][45]*w->term[0][51] +
-            w->term[1][46]*w->term[0][52] + w->term[1][47]*w->term[0][53]; t->Qd[7][8] = v;
-            t->Qd[8][7] = v; check += v - v;
+            w->term[1][46]*w->term[0][52] + w->term[1][47]*w->term[0][53]; t->Qd[85] = v; check += v
+            - v;
     v = w->term[1][48]*w->term[0][48] + w->term[1][49]*w->term[0][49] +
             w->term[1][50]*w->term[0][50] + w->term[1][51]*w->term[0][51] +
-            w->term[1][52]*w->term[0][52] + w->term[1][53]*w->term[0][53]; t->Qd[8][8] = v; check +=
-            v - v;
-    t->Qd[0][9] = 0;
-    t->Qd[0][10] = 0;
-    t->Qd[0][11] = 0;
-    t->Qd[0][12] = 0;
-    t->Qd[0][13] = 0;
-    t->Qd[0][14] = 0;
-    t->Qd[1][9] = 0;
-    t->Qd[1][10] = 0;
-    t->Qd[1][11] = 0;
-    t->Qd[1][12] = 0;
-    t->Qd[1][13] = 0;
-    t->Qd[1][14] = 0;
-    t->Qd[2][9] = 0;
-    t->Qd[2][10] = 0;
-    t->Qd[2][11] = 0;
-    t->Qd[2][12] = 0;
-    t->Qd[2][13] = 0;
-    t->Qd[2][14] = 0;
-    t->Qd[3][9] = 0;
-    t->Qd[3][10] = 0;
-    t->Qd[3][11] = 0;
-    t->Qd[3][12] = 0;
-    t->Qd[3][13] = 0;
-    t->Qd[3][14] = 0;
-    t->Qd[4][9] = 0;
-    t->Qd[4][10] = 0;
-    t->Qd[4][11] = 0;
-    t->Qd[4][12] = 0;
-    t->Qd[4][13] = 0;
-    t->Qd[4][14] = 0;
-    t->Qd[5][9] = 0;
-    t->Qd[5][10] = 0;
-    t->Qd[5][11] = 0;
-    t->Qd[5][12] = 0;
-    t->Qd[5][13] = 0;
-    t->Qd[5][14] = 0;
-    t->Qd[6][9] = 0;
-    t->Qd[6][10] = 0;
-    t->Qd[6][11] = 0;
-    t->Qd[6][12] = 0;
-    t->Qd[6][13] = 0;
-    t->Qd[6][14] = 0;
-    t->Qd[7][9] = 0;
-    t->Qd[7][10] = 0;
-    t->Qd[7][11] = 0;
-    t->Qd[7][12] = 0;
-    t->Qd[7][13] = 0;
-    t->Qd[7][14] = 0;
-    t->Qd[8][9] = 0;
-    t->Qd[8][10] = 0;
-    t->Qd[8][11] = 0;
-    t->Qd[8][12] = 0;
-    t->Qd[8][13] = 0;
-    t->Qd[8][14] = 0;
-    t->Qd[9][0] = 0;
-    t->Qd[9][1] = 0;
-    t->Qd[9][2] = 0;
-    t->Qd[9][3] = 0;
-    t->Qd[9][4] = 0;
-    t->Qd[9][5] = 0;
-    t->Qd[9][6] = 0;
-    t->Qd[9][7] = 0;
-    t->Qd[9][8] = 0;
-    t->Qd[9][9] = 0;
-    t->Qd[9][10] = 0;
-    t->Qd[9][11] = 0;
-    t->Qd[9][12] = 0;
-    t->Qd[9][13] = 0;
-    t->Qd[9][14] = 0;
-    t->Qd[10][0] = 0;
-    t->Qd[10][1] = 0;
-    t->Qd[10][2] = 0;
-    t->Qd[10][3] = 0;
-    t->Qd[10][4] = 0;
-    t->Qd[10][5] = 0;
-    t->Qd[10][6] = 0;
-    t->Qd[10][7] = 0;
-    t->Qd[10][8] = 0;
-    t->Qd[10][9] = 0;
-    t->Qd[10][10] = 0;
-    t->Qd[10][11] = 0;
-    t->Qd[10][12] = 0;
-    t->Qd[10][13] = 0;
-    t->Qd[10][14] = 0;
-    t->Qd[11][0] = 0;
-    t->Qd[11][1] = 0;
-    t->Qd[11][2] = 0;
-    t->Qd[11][3] = 0;
-    t->Qd[11][4] = 0;
-    t->Qd[11][5] = 0;
-    t->Qd[11][6] = 0;
-    t->Qd[11][7] = 0;
-    t->Qd[11][8] = 0;
-    t->Qd[11][9] = 0;
-    t->Qd[11][10] = 0;
-    t->Qd[11][11] = 0;
-    t->Qd[11][12] = 0;
-    t->Qd[11][13] = 0;
-    t->Qd[11][14] = 0;
-    t->Qd[12][0] = 0;
-    t->Qd[12][1] = 0;
-    t->Qd[12][2] = 0;
-    t->Qd[12][3] = 0;
-    t->Qd[12][4] = 0;
-    t->Qd[12][5] = 0;
-    t->Qd[12][6] = 0;
-    t->Qd[12][7] = 0;
-    t->Qd[12][8] = 0;
-    t->Qd[12][9] = 0;
-    t->Qd[12][10] = 0;
-    t->Qd[12][11] = 0;
-    t->Qd[12][12] = 0;
-    t->Qd[12][13] = 0;
-    t->Qd[12][14] = 0;
-    t->Qd[13][0] = 0;
-    t->Qd[13][1] = 0;
-    t->Qd[13][2] = 0;
-    t->Qd[13][3] = 0;
-    t->Qd[13][4] = 0;
-    t->Qd[13][5] = 0;
-    t->Qd[13][6] = 0;
-    t->Qd[13][7] = 0;
-    t->Qd[13][8] = 0;
-    t->Qd[13][9] = 0;
-    t->Qd[13][10] = 0;
-    t->Qd[13][11] = 0;
-    t->Qd[13][12] = 0;
-    t->Qd[13][13] = 0;
-    t->Qd[13][14] = 0;
-    t->Qd[14][0] = 0;
-    t->Qd[14][1] = 0;
-    t->Qd[14][2] = 0;
-    t->Qd[14][3] = 0;
-    t->Qd[14][4] = 0;
-    t->Qd[14][5] = 0;
-    t->Qd[14][6] = 0;
-    t->Qd[14][7] = 0;
-    t->Qd[14][8] = 0;
-    t->Qd[14][9] = 0;
-    t->Qd[14][10] = 0;
-    t->Qd[14][11] = 0;
-    t->Qd[14][12] = 0;
-    t->Qd[14][13] = 0;
-    t->Qd[14][14] = 0;
+            w->term[1][52]*w->term[0][52] + w->term[1][53]*w->term[0][53]; t->Qd[92] = v; check += v
+            - v;
+    t->Qd[9] = 0;
+    t->Qd[10] = 0;
+    t->Qd[11] = 0;
+    t->Qd[12] = 0;
+    t->Qd[13] = 0;
+    t->Qd[14] = 0;
+    t->Qd[23] = 0;
+    t->Qd[24] = 0;
+    t->Qd[25] = 0;
+    t->Qd[26] = 0;
+    t->Qd[27] = 0;
+    t->Qd[28] = 0;
+    t->Qd[36] = 0;
+    t->Qd[37] = 0;
+    t->Qd[38] = 0;
+    t->Qd[39] = 0;
+    t->Qd[40] = 0;
+    t->Qd[41] = 0;
+    t->Qd[48] = 0;
+    t->Qd[49] = 0;
+    t->Qd[50] = 0;
+    t->Qd[51] = 0;
+    t->Qd[52] = 0;
+    t->Qd[53] = 0;
+    t->Qd[59] = 0;
+    t->Qd[60] = 0;
+    t->Qd[61] = 0;
+    t->Qd[62] = 0;
+    t->Qd[63] = 0;
+    t->Qd[64] = 0;
+    t->Qd[69] = 0;
+    t->Qd[70] = 0;
+    t->Qd[71] = 0;
+    t->Qd[72] = 0;
+    t->Qd[73] = 0;
+    t->Qd[74] = 0;
+    t->Qd[78] = 0;
+    t->Qd[79] = 0;
+    t->Qd[80] = 0;
+    t->Qd[81] = 0;
+    t->Qd[82] = 0;
+    t->Qd[83] = 0;
+    t->Qd[86] = 0;
+    t->Qd[87] = 0;
+    t->Qd[88] = 0;
+    t->Qd[89] = 0;
+    t->Qd[90] = 0;
+    t->Qd[91] = 0;
+    t->Qd[93] = 0;
+    t->Qd[94] = 0;
+    t->Qd[95] = 0;
+    t->Qd[96] = 0;
+    t->Qd[97] = 0;
+    t->Qd[98] = 0;
+    t->Qd[99] = 0;
+    t->Qd[100] = 0;
+    t->Qd[101] = 0;
+    t->Qd[102] = 0;
+    t->Qd[103] = 0;
+    t->Qd[104] = 0;
+    t->Qd[105] = 0;
+    t->Qd[106] = 0;
+    t->Qd[107] = 0;
+    t->Qd[108] = 0;
+    t->Qd[109] = 0;
+    t->Qd[110] = 0;
+    t->Qd[111] = 0;
+    t->Qd[112] = 0;
+    t->Qd[113] = 0;
+    t->Qd[114] = 0;
+    t->Qd[115] = 0;
+    t->Qd[116] = 0;
+    t->Qd[117] = 0;
+    t->Qd[118] = 0;
+    t->Qd[119] = 0;
     return check;
 }
 
@@ -2693,23 +2643,40 @@ int ins_gps15_discretize(const ins_gps15_matrices *restrict m, ins_gps15_scalar 
     int i, e, c;
     int halvings, order, status;
     int k;
-    ins_gps15_scalar check = 0.0;
+    ins_gps15_scalar sum_check;
+    ins_gps15_scalar check = 0.0, sums[2] = { 0.0, 0.0 };
     if (!isfinite(T)) {
         return INS_GPS15_ERR_NONFINITE;
     }
     if (!(T > 0.0)) {
         return INS_GPS15_ERR_NOT_POSITIVE;
     }
-    for (e = 0; e < INS_GPS15_NNZ_F; ++e) {
-        check += m->F[e] - m->F[e];
+    /* the sum of v - v over F, G and q (0 when all are finite) in two partial sums, two entries a
+            step,
+       which gcc -O2 vectorizes (the order of a sum of zeros and NaNs does not change whether it is
+               0) */
+    for (e = 0; e + 1 < INS_GPS15_NNZ_F; e += 2) {
+        sums[0] += m->F[e] - m->F[e];
+        sums[1] += m->F[e + 1] - m->F[e + 1];
     }
-    for (e = 0; e < INS_GPS15_NNZ_G; ++e) {
-        check += m->G[e] - m->G[e];
+    for (; e < INS_GPS15_NNZ_F; ++e) {
+        sums[0] += m->F[e] - m->F[e];
     }
-    for (c = 0; c < INS_GPS15_N_NOISES; ++c) {
-        check += m->q[c] - m->q[c];
+    for (e = 0; e + 1 < INS_GPS15_NNZ_G; e += 2) {
+        sums[0] += m->G[e] - m->G[e];
+        sums[1] += m->G[e + 1] - m->G[e + 1];
     }
-    if (check != 0.0) {
+    for (; e < INS_GPS15_NNZ_G; ++e) {
+        sums[0] += m->G[e] - m->G[e];
+    }
+    for (e = 0; e + 1 < INS_GPS15_N_NOISES; e += 2) {
+        sums[0] += m->q[e] - m->q[e];
+        sums[1] += m->q[e + 1] - m->q[e + 1];
+    }
+    for (; e < INS_GPS15_N_NOISES; ++e) {
+        sums[0] += m->q[e] - m->q[e];
+    }
+    if (sums[0] + sums[1] != 0.0) {
         return INS_GPS15_ERR_NONFINITE;
     }
     for (c = 0; c < INS_GPS15_N_NOISES; ++c) {
@@ -2740,24 +2707,39 @@ int ins_gps15_discretize(const ins_gps15_matrices *restrict m, ins_gps15_scalar 
                 horner_level_1_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
             }
         } else if (k == 0) {
-            horner_last_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]); /* S = R_0:
-                    also the rows no row of F reads */
+            horner_last_into_S(w, taylor_coefficient[k]); /* S = R_0: also the rows no row of F
+                    reads, and the unit columns R_1 A(:, j) */
+        } else if (k == 1 && halvings > 0) {
+            horner_first_into_term(w, taylor_coefficient[k]); /* R_1 in every row: the unit columns
+                    of S read it */
         } else {
             if (k & 1) {
-                horner_saturated_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+                horner_saturated_into_term(w, taylor_coefficient[k]);
             } else {
-                horner_saturated_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+                horner_saturated_into_S(w, taylor_coefficient[k]);
             }
         }
     }
     horner_transition(t, w);
+    if (halvings > 0 && order > 1) {
+        horner_unit_columns(w); /* S(:, j) = R_1 A(:, j), unit columns j: read by the doublings
+                only */
+    }
     for (i = 0; i < halvings; ++i) {
         doubling(t, w);
     }
-    check += transition_check(t);
-    for (i = 0; i < INS_GPS15_N_STATES; ++i) {
-        t->Phi[i][i] += 1.0;
+    /* Phi = I + E, and the sum of its active entries: finite only if every entry is; otherwise (an
+       entry that is not finite, or an overflow of the sum) entry by entry */
+    sum_check = transition_check(t, w);
+    if (sum_check != 0.0) {
+        sum_check = 0.0;
+        for (i = 0; i < INS_GPS15_N_STATES; ++i) {
+            for (k = 0; k < INS_GPS15_N_STATES; ++k) {
+                sum_check += t->Phi[i][k] - t->Phi[i][k];
+            }
+        }
     }
+    check += sum_check;
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
@@ -2802,721 +2784,81 @@ void ins_gps15_reset_error_state(ins_gps15_filter *f)
 static void phi_times_p_row_0(const ins_gps15_filter *restrict f, const ins_gps15_transition
         *restrict t, ins_gps15_filter_scratch *restrict w)
 {
-    w->M[0][0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] +
+    w->M[0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] +
             t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] +
             t->Phi[0][6]*f->P[6][0] + t->Phi[0][8]*f->P[8][0] + t->Phi[0][9]*f->P[9][0] +
             t->Phi[0][10]*f->P[10][0] + t->Phi[0][11]*f->P[11][0] + t->Phi[0][12]*f->P[12][0] +
             t->Phi[0][13]*f->P[13][0] + t->Phi[0][14]*f->P[14][0];
-    w->M[0][1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] +
+    w->M[1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] +
             t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] +
             t->Phi[0][6]*f->P[6][1] + t->Phi[0][8]*f->P[8][1] + t->Phi[0][9]*f->P[9][1] +
             t->Phi[0][10]*f->P[10][1] + t->Phi[0][11]*f->P[11][1] + t->Phi[0][12]*f->P[12][1] +
             t->Phi[0][13]*f->P[13][1] + t->Phi[0][14]*f->P[14][1];
-    w->M[0][2] = t->Phi[0][0]*f->P[0][2] + t->Phi[0][1]*f->P[1][2] + t->Phi[0][2]*f->P[2][2] +
+    w->M[2] = t->Phi[0][0]*f->P[0][2] + t->Phi[0][1]*f->P[1][2] + t->Phi[0][2]*f->P[2][2] +
             t->Phi[0][3]*f->P[3][2] + t->Phi[0][4]*f->P[4][2] + t->Phi[0][5]*f->P[5][2] +
             t->Phi[0][6]*f->P[6][2] + t->Phi[0][8]*f->P[8][2] + t->Phi[0][9]*f->P[9][2] +
             t->Phi[0][10]*f->P[10][2] + t->Phi[0][11]*f->P[11][2] + t->Phi[0][12]*f->P[12][2] +
             t->Phi[0][13]*f->P[13][2] + t->Phi[0][14]*f->P[14][2];
-    w->M[0][3] = t->Phi[0][0]*f->P[0][3] + t->Phi[0][1]*f->P[1][3] + t->Phi[0][2]*f->P[2][3] +
+    w->M[3] = t->Phi[0][0]*f->P[0][3] + t->Phi[0][1]*f->P[1][3] + t->Phi[0][2]*f->P[2][3] +
             t->Phi[0][3]*f->P[3][3] + t->Phi[0][4]*f->P[4][3] + t->Phi[0][5]*f->P[5][3] +
             t->Phi[0][6]*f->P[6][3] + t->Phi[0][8]*f->P[8][3] + t->Phi[0][9]*f->P[9][3] +
             t->Phi[0][10]*f->P[10][3] + t->Phi[0][11]*f->P[11][3] + t->Phi[0][12]*f->P[12][3] +
             t->Phi[0][13]*f->P[13][3] + t->Phi[0][14]*f->P[14][3];
-    w->M[0][4] = t->Phi[0][0]*f->P[0][4] + t->Phi[0][1]*f->P[1][4] + t->Phi[0][2]*f->P[2][4] +
+    w->M[4] = t->Phi[0][0]*f->P[0][4] + t->Phi[0][1]*f->P[1][4] + t->Phi[0][2]*f->P[2][4] +
             t->Phi[0][3]*f->P[3][4] + t->Phi[0][4]*f->P[4][4] + t->Phi[0][5]*f->P[5][4] +
             t->Phi[0][6]*f->P[6][4] + t->Phi[0][8]*f->P[8][4] + t->Phi[0][9]*f->P[9][4] +
             t->Phi[0][10]*f->P[10][4] + t->Phi[0][11]*f->P[11][4] + t->Phi[0][12]*f->P[12][4] +
             t->Phi[0][13]*f->P[13][4] + t->Phi[0][14]*f->P[14][4];
-    w->M[0][5] = t->Phi[0][0]*f->P[0][5] + t->Phi[0][1]*f->P[1][5] + t->Phi[0][2]*f->P[2][5] +
+    w->M[5] = t->Phi[0][0]*f->P[0][5] + t->Phi[0][1]*f->P[1][5] + t->Phi[0][2]*f->P[2][5] +
             t->Phi[0][3]*f->P[3][5] + t->Phi[0][4]*f->P[4][5] + t->Phi[0][5]*f->P[5][5] +
             t->Phi[0][6]*f->P[6][5] + t->Phi[0][8]*f->P[8][5] + t->Phi[0][9]*f->P[9][5] +
             t->Phi[0][10]*f->P[10][5] + t->Phi[0][11]*f->P[11][5] + t->Phi[0][12]*f->P[12][5] +
             t->Phi[0][13]*f->P[13][5] + t->Phi[0][14]*f->P[14][5];
-    w->M[0][6] = t->Phi[0][0]*f->P[0][6] + t->Phi[0][1]*f->P[1][6] + t->Phi[0][2]*f->P[2][6] +
+    w->M[6] = t->Phi[0][0]*f->P[0][6] + t->Phi[0][1]*f->P[1][6] + t->Phi[0][2]*f->P[2][6] +
             t->Phi[0][3]*f->P[3][6] + t->Phi[0][4]*f->P[4][6] + t->Phi[0][5]*f->P[5][6] +
             t->Phi[0][6]*f->P[6][6] + t->Phi[0][8]*f->P[8][6] + t->Phi[0][9]*f->P[9][6] +
             t->Phi[0][10]*f->P[10][6] + t->Phi[0][11]*f->P[11][6] + t->Phi[0][12]*f->P[12][6] +
             t->Phi[0][13]*f->P[13][6] + t->Phi[0][14]*f->P[14][6];
-    w->M[0][7] = t->Phi[0][0]*f->P[0][7] + t->Phi[0][1]*f->P[1][7] + t->Phi[0][2]*f->P[2][7] +
+    w->M[7] = t->Phi[0][0]*f->P[0][7] + t->Phi[0][1]*f->P[1][7] + t->Phi[0][2]*f->P[2][7] +
             t->Phi[0][3]*f->P[3][7] + t->Phi[0][4]*f->P[4][7] + t->Phi[0][5]*f->P[5][7] +
             t->Phi[0][6]*f->P[6][7] + t->Phi[0][8]*f->P[8][7] + t->Phi[0][9]*f->P[9][7] +
             t->Phi[0][10]*f->P[10][7] + t->Phi[0][11]*f->P[11][7] + t->Phi[0][12]*f->P[12][7] +
             t->Phi[0][13]*f->P[13][7] + t->Phi[0][14]*f->P[14][7];
-    w->M[0][8] = t->Phi[0][0]*f->P[0][8] + t->Phi[0][1]*f->P[1][8] + t->Phi[0][2]*f->P[2][8] +
+    w->M[8] = t->Phi[0][0]*f->P[0][8] + t->Phi[0][1]*f->P[1][8] + t->Phi[0][2]*f->P[2][8] +
             t->Phi[0][3]*f->P[3][8] + t->Phi[0][4]*f->P[4][8] + t->Phi[0][5]*f->P[5][8] +
             t->Phi[0][6]*f->P[6][8] + t->Phi[0][8]*f->P[8][8] + t->Phi[0][9]*f->P[9][8] +
             t->Phi[0][10]*f->P[10][8] + t->Phi[0][11]*f->P[11][8] + t->Phi[0][12]*f->P[12][8] +
             t->Phi[0][13]*f->P[13][8] + t->Phi[0][14]*f->P[14][8];
-    w->M[0][9] = t->Phi[0][0]*f->P[0][9] + t->Phi[0][1]*f->P[1][9] + t->Phi[0][2]*f->P[2][9] +
+    w->M[9] = t->Phi[0][0]*f->P[0][9] + t->Phi[0][1]*f->P[1][9] + t->Phi[0][2]*f->P[2][9] +
             t->Phi[0][3]*f->P[3][9] + t->Phi[0][4]*f->P[4][9] + t->Phi[0][5]*f->P[5][9] +
             t->Phi[0][6]*f->P[6][9] + t->Phi[0][8]*f->P[8][9] + t->Phi[0][9]*f->P[9][9] +
             t->Phi[0][10]*f->P[10][9] + t->Phi[0][11]*f->P[11][9] + t->Phi[0][12]*f->P[12][9] +
             t->Phi[0][13]*f->P[13][9] + t->Phi[0][14]*f->P[14][9];
-    w->M[0][10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] +
+    w->M[10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] +
             t->Phi[0][3]*f->P[3][10] + t->Phi[0][4]*f->P[4][10] + t->Phi[0][5]*f->P[5][10] +
             t->Phi[0][6]*f->P[6][10] + t->Phi[0][8]*f->P[8][10] + t->Phi[0][9]*f->P[9][10] +
             t->Phi[0][10]*f->P[10][10] + t->Phi[0][11]*f->P[11][10] + t->Phi[0][12]*f->P[12][10] +
             t->Phi[0][13]*f->P[13][10] + t->Phi[0][14]*f->P[14][10];
-    w->M[0][11] = t->Phi[0][0]*f->P[0][11] + t->Phi[0][1]*f->P[1][11] + t->Phi[0][2]*f->P[2][11] +
+    w->M[11] = t->Phi[0][0]*f->P[0][11] + t->Phi[0][1]*f->P[1][11] + t->Phi[0][2]*f->P[2][11] +
             t->Phi[0][3]*f->P[3][11] + t->Phi[0][4]*f->P[4][11] + t->Phi[0][5]*f->P[5][11] +
             t->Phi[0][6]*f->P[6][11] + t->Phi[0][8]*f->P[8][11] + t->Phi[0][9]*f->P[9][11] +
             t->Phi[0][10]*f->P[10][11] + t->Phi[0][11]*f->P[11][11] + t->Phi[0][12]*f->P[12][11] +
             t->Phi[0][13]*f->P[13][11] + t->Phi[0][14]*f->P[14][11];
-    w->M[0][12] = t->Phi[0][0]*f->P[0][12] + t->Phi[0][1]*f->P[1][12] + t->Phi[0][2]*f->P[2][12] +
+    w->M[12] = t->Phi[0][0]*f->P[0][12] + t->Phi[0][1]*f->P[1][12] + t->Phi[0][2]*f->P[2][12] +
             t->Phi[0][3]*f->P[3][12] + t->Phi[0][4]*f->P[4][12] + t->Phi[0][5]*f->P[5][12] +
             t->Phi[0][6]*f->P[6][12] + t->Phi[0][8]*f->P[8][12] + t->Phi[0][9]*f->P[9][12] +
             t->Phi[0][10]*f->P[10][12] + t->Phi[0][11]*f->P[11][12] + t->Phi[0][12]*f->P[12][12] +
             t->Phi[0][13]*f->P[13][12] + t->Phi[0][14]*f->P[14][12];
-    w->M[0][13] = t->Phi[0][0]*f->P[0][13] + t->Phi[0][1]*f->P[1][13] + t->Phi[0][2]*f->P[2][13] +
+    w->M[13] = t->Phi[0][0]*f->P[0][13] + t->Phi[0][1]*f->P[1][13] + t->Phi[0][2]*f->P[2][13] +
             t->Phi[0][3]*f->P[3][13] + t->Phi[0][4]*f->P[4][13] + t->Phi[0][5]*f->P[5][13] +
             t->Phi[0][6]*f->P[6][13] + t->Phi[0][8]*f->P[8][13] + t->Phi[0][9]*f->P[9][13] +
             t->Phi[0][10]*f->P[10][13] + t->Phi[0][11]*f->P[11][13] + t->Phi[0][12]*f->P[12][13] +
             t->Phi[0][13]*f->P[13][13] + t->Phi[0][14]*f->P[14][13];
-    w->M[0][14] = t->Phi[0][0]*f->P[0][14] + t->Phi[0][1]*f->P[1][14] + t->Phi[0][2]*f->P[2][14] +
+    w->M[14] = t->Phi[0][0]*f->P[0][14] + t->Phi[0][1]*f->P[1][14] + t->Phi[0][2]*f->P[2][14] +
             t->Phi[0][3]*f->P[3][14] + t->Phi[0][4]*f->P[4][14] + t->Phi[0][5]*f->P[5][14] +
             t->Phi[0][6]*f->P[6][14] + t->Phi[0][8]*f->P[8][14] + t->Phi[0][9]*f->P[9][14] +
             t->Phi[0][10]*f->P[10][14] + t->Phi[0][11]*f->P[11][14] + t->Phi[0][12]*f->P[12][14] +
             t->Phi[0][13]*f->P[13][14] + t->Phi[0][14]*f->P[14][14];
-}
-
-static void phi_times_p_row_1(const ins_gps15_filter *restrict f, const ins_gps15_transition
-        *restrict t, ins_gps15_filter_scratch *restrict w)
-{
-    w->M[1][0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] +
-            t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] +
-            t->Phi[1][6]*f->P[6][0] + t->Phi[1][8]*f->P[8][0] + t->Phi[1][9]*f->P[9][0] +
-            t->Phi[1][10]*f->P[10][0] + t->Phi[1][11]*f->P[11][0] + t->Phi[1][12]*f->P[12][0] +
-            t->Phi[1][13]*f->P[13][0] + t->Phi[1][14]*f->P[14][0];
-    w->M[1][1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] +
-            t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] +
-            t->Phi[1][6]*f->P[6][1] + t->Phi[1][8]*f->P[8][1] + t->Phi[1][9]*f->P[9][1] +
-            t->Phi[1][10]*f->P[10][1] + t->Phi[1][11]*f->P[11][1] + t->Phi[1][12]*f->P[12][1] +
-            t->Phi[1][13]*f->P[13][1] + t->Phi[1][14]*f->P[14][1];
-    w->M[1][2] = t->Phi[1][0]*f->P[0][2] + t->Phi[1][1]*f->P[1][2] + t->Phi[1][2]*f->P[2][2] +
-            t->Phi[1][3]*f->P[3][2] + t->Phi[1][4]*f->P[4][2] + t->Phi[1][5]*f->P[5][2] +
-            t->Phi[1][6]*f->P[6][2] + t->Phi[1][8]*f->P[8][2] + t->Phi[1][9]*f->P[9][2] +
-            t->Phi[1][10]*f->P[10][2] + t->Phi[1][11]*f->P[11][2] + t->Phi[1][12]*f->P[12][2] +
-            t->Phi[1][13]*f->P[13][2] + t->Phi[1][14]*f->P[14][2];
-    w->M[1][3] = t->Phi[1][0]*f->P[0][3] + t->Phi[1][1]*f->P[1][3] + t->Phi[1][2]*f->P[2][3] +
-            t->Phi[1][3]*f->P[3][3] + t->Phi[1][4]*f->P[4][3] + t->Phi[1][5]*f->P[5][3] +
-            t->Phi[1][6]*f->P[6][3] + t->Phi[1][8]*f->P[8][3] + t->Phi[1][9]*f->P[9][3] +
-            t->Phi[1][10]*f->P[10][3] + t->Phi[1][11]*f->P[11][3] + t->Phi[1][12]*f->P[12][3] +
-            t->Phi[1][13]*f->P[13][3] + t->Phi[1][14]*f->P[14][3];
-    w->M[1][4] = t->Phi[1][0]*f->P[0][4] + t->Phi[1][1]*f->P[1][4] + t->Phi[1][2]*f->P[2][4] +
-            t->Phi[1][3]*f->P[3][4] + t->Phi[1][4]*f->P[4][4] + t->Phi[1][5]*f->P[5][4] +
-            t->Phi[1][6]*f->P[6][4] + t->Phi[1][8]*f->P[8][4] + t->Phi[1][9]*f->P[9][4] +
-            t->Phi[1][10]*f->P[10][4] + t->Phi[1][11]*f->P[11][4] + t->Phi[1][12]*f->P[12][4] +
-            t->Phi[1][13]*f->P[13][4] + t->Phi[1][14]*f->P[14][4];
-    w->M[1][5] = t->Phi[1][0]*f->P[0][5] + t->Phi[1][1]*f->P[1][5] + t->Phi[1][2]*f->P[2][5] +
-            t->Phi[1][3]*f->P[3][5] + t->Phi[1][4]*f->P[4][5] + t->Phi[1][5]*f->P[5][5] +
-            t->Phi[1][6]*f->P[6][5] + t->Phi[1][8]*f->P[8][5] + t->Phi[1][9]*f->P[9][5] +
-            t->Phi[1][10]*f->P[10][5] + t->Phi[1][11]*f->P[11][5] + t->Phi[1][12]*f->P[12][5] +
-            t->Phi[1][13]*f->P[13][5] + t->Phi[1][14]*f->P[14][5];
-    w->M[1][6] = t->Phi[1][0]*f->P[0][6] + t->Phi[1][1]*f->P[1][6] + t->Phi[1][2]*f->P[2][6] +
-            t->Phi[1][3]*f->P[3][6] + t->Phi[1][4]*f->P[4][6] + t->Phi[1][5]*f->P[5][6] +
-            t->Phi[1][6]*f->P[6][6] + t->Phi[1][8]*f->P[8][6] + t->Phi[1][9]*f->P[9][6] +
-            t->Phi[1][10]*f->P[10][6] + t->Phi[1][11]*f->P[11][6] + t->Phi[1][12]*f->P[12][6] +
-            t->Phi[1][13]*f->P[13][6] + t->Phi[1][14]*f->P[14][6];
-    w->M[1][7] = t->Phi[1][0]*f->P[0][7] + t->Phi[1][1]*f->P[1][7] + t->Phi[1][2]*f->P[2][7] +
-            t->Phi[1][3]*f->P[3][7] + t->Phi[1][4]*f->P[4][7] + t->Phi[1][5]*f->P[5][7] +
-            t->Phi[1][6]*f->P[6][7] + t->Phi[1][8]*f->P[8][7] + t->Phi[1][9]*f->P[9][7] +
-            t->Phi[1][10]*f->P[10][7] + t->Phi[1][11]*f->P[11][7] + t->Phi[1][12]*f->P[12][7] +
-            t->Phi[1][13]*f->P[13][7] + t->Phi[1][14]*f->P[14][7];
-    w->M[1][8] = t->Phi[1][0]*f->P[0][8] + t->Phi[1][1]*f->P[1][8] + t->Phi[1][2]*f->P[2][8] +
-            t->Phi[1][3]*f->P[3][8] + t->Phi[1][4]*f->P[4][8] + t->Phi[1][5]*f->P[5][8] +
-            t->Phi[1][6]*f->P[6][8] + t->Phi[1][8]*f->P[8][8] + t->Phi[1][9]*f->P[9][8] +
-            t->Phi[1][10]*f->P[10][8] + t->Phi[1][11]*f->P[11][8] + t->Phi[1][12]*f->P[12][8] +
-            t->Phi[1][13]*f->P[13][8] + t->Phi[1][14]*f->P[14][8];
-    w->M[1][9] = t->Phi[1][0]*f->P[0][9] + t->Phi[1][1]*f->P[1][9] + t->Phi[1][2]*f->P[2][9] +
-            t->Phi[1][3]*f->P[3][9] + t->Phi[1][4]*f->P[4][9] + t->Phi[1][5]*f->P[5][9] +
-            t->Phi[1][6]*f->P[6][9] + t->Phi[1][8]*f->P[8][9] + t->Phi[1][9]*f->P[9][9] +
-            t->Phi[1][10]*f->P[10][9] + t->Phi[1][11]*f->P[11][9] + t->Phi[1][12]*f->P[12][9] +
-            t->Phi[1][13]*f->P[13][9] + t->Phi[1][14]*f->P[14][9];
-    w->M[1][10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] +
-            t->Phi[1][3]*f->P[3][10] + t->Phi[1][4]*f->P[4][10] + t->Phi[1][5]*f->P[5][10] +
-            t->Phi[1][6]*f->P[6][10] + t->Phi[1][8]*f->P[8][10] + t->Phi[1][9]*f->P[9][10] +
-            t->Phi[1][10]*f->P[10][10] + t->Phi[1][11]*f->P[11][10] + t->Phi[1][12]*f->P[12][10] +
-            t->Phi[1][13]*f->P[13][10] + t->Phi[1][14]*f->P[14][10];
-    w->M[1][11] = t->Phi[1][0]*f->P[0][11] + t->Phi[1][1]*f->P[1][11] + t->Phi[1][2]*f->P[2][11] +
-            t->Phi[1][3]*f->P[3][11] + t->Phi[1][4]*f->P[4][11] + t->Phi[1][5]*f->P[5][11] +
-            t->Phi[1][6]*f->P[6][11] + t->Phi[1][8]*f->P[8][11] + t->Phi[1][9]*f->P[9][11] +
-            t->Phi[1][10]*f->P[10][11] + t->Phi[1][11]*f->P[11][11] + t->Phi[1][12]*f->P[12][11] +
-            t->Phi[1][13]*f->P[13][11] + t->Phi[1][14]*f->P[14][11];
-    w->M[1][12] = t->Phi[1][0]*f->P[0][12] + t->Phi[1][1]*f->P[1][12] + t->Phi[1][2]*f->P[2][12] +
-            t->Phi[1][3]*f->P[3][12] + t->Phi[1][4]*f->P[4][12] + t->Phi[1][5]*f->P[5][12] +
-            t->Phi[1][6]*f->P[6][12] + t->Phi[1][8]*f->P[8][12] + t->Phi[1][9]*f->P[9][12] +
-            t->Phi[1][10]*f->P[10][12] + t->Phi[1][11]*f->P[11][12] + t->Phi[1][12]*f->P[12][12] +
-            t->Phi[1][13]*f->P[13][12] + t->Phi[1][14]*f->P[14][12];
-    w->M[1][13] = t->Phi[1][0]*f->P[0][13] + t->Phi[1][1]*f->P[1][13] + t->Phi[1][2]*f->P[2][13] +
-            t->Phi[1][3]*f->P[3][13] + t->Phi[1][4]*f->P[4][13] + t->Phi[1][5]*f->P[5][13] +
-            t->Phi[1][6]*f->P[6][13] + t->Phi[1][8]*f->P[8][13] + t->Phi[1][9]*f->P[9][13] +
-            t->Phi[1][10]*f->P[10][13] + t->Phi[1][11]*f->P[11][13] + t->Phi[1][12]*f->P[12][13] +
-            t->Phi[1][13]*f->P[13][13] + t->Phi[1][14]*f->P[14][13];
-    w->M[1][14] = t->Phi[1][0]*f->P[0][14] + t->Phi[1][1]*f->P[1][14] + t->Phi[1][2]*f->P[2][14] +
-            t->Phi[1][3]*f->P[3][14] + t->Phi[1][4]*f->P[4][14] + t->Phi[1][5]*f->P[5][14] +
-            t->Phi[1][6]*f->P[6][14] + t->Phi[1][8]*f->P[8][14] + t->Phi[1][9]*f->P[9][14] +
-            t->Phi[1][10]*f->P[10][14] + t->Phi[1][11]*f->P[11][14] + t->Phi[1][12]*f->P[12][14] +
-            t->Phi[1][13]*f->P[13][14] + t->Phi[1][14]*f->P[14][14];
-}
-
-static void phi_times_p_row_2(const ins_gps15_filter *restrict f, const ins_gps15_transition
-        *restrict t, ins_gps15_filter_scratch *restrict w)
-{
-    w->M[2][0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] +
-            t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] +
-            t->Phi[2][6]*f->P[6][0] + t->Phi[2][8]*f->P[8][0] + t->Phi[2][9]*f->P[9][0] +
-            t->Phi[2][10]*f->P[10][0] + t->Phi[2][11]*f->P[11][0] + t->Phi[2][12]*f->P[12][0] +
-            t->Phi[2][13]*f->P[13][0] + t->Phi[2][14]*f->P[14][0];
-    w->M[2][1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] +
-            t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] +
-            t->Phi[2][6]*f->P[6][1] + t->Phi[2][8]*f->P[8][1] + t->Phi[2][9]*f->P[9][1] +
-            t->Phi[2][10]*f->P[10][1] + t->Phi[2][11]*f->P[11][1] + t->Phi[2][12]*f->P[12][1] +
-            t->Phi[2][13]*f->P[13][1] + t->Phi[2][14]*f->P[14][1];
-    w->M[2][2] = t->Phi[2][0]*f->P[0][2] + t->Phi[2][1]*f->P[1][2] + t->Phi[2][2]*f->P[2][2] +
-            t->Phi[2][3]*f->P[3][2] + t->Phi[2][4]*f->P[4][2] + t->Phi[2][5]*f->P[5][2] +
-            t->Phi[2][6]*f->P[6][2] + t->Phi[2][8]*f->P[8][2] + t->Phi[2][9]*f->P[9][2] +
-            t->Phi[2][10]*f->P[10][2] + t->Phi[2][11]*f->P[11][2] + t->Phi[2][12]*f->P[12][2] +
-            t->Phi[2][13]*f->P[13][2] + t->Phi[2][14]*f->P[14][2];
-    w->M[2][3] = t->Phi[2][0]*f->P[0][3] + t->Phi[2][1]*f->P[1][3] + t->Phi[2][2]*f->P[2][3] +
-            t->Phi[2][3]*f->P[3][3] + t->Phi[2][4]*f->P[4][3] + t->Phi[2][5]*f->P[5][3] +
-            t->Phi[2][6]*f->P[6][3] + t->Phi[2][8]*f->P[8][3] + t->Phi[2][9]*f->P[9][3] +
-            t->Phi[2][10]*f->P[10][3] + t->Phi[2][11]*f->P[11][3] + t->Phi[2][12]*f->P[12][3] +
-            t->Phi[2][13]*f->P[13][3] + t->Phi[2][14]*f->P[14][3];
-    w->M[2][4] = t->Phi[2][0]*f->P[0][4] + t->Phi[2][1]*f->P[1][4] + t->Phi[2][2]*f->P[2][4] +
-            t->Phi[2][3]*f->P[3][4] + t->Phi[2][4]*f->P[4][4] + t->Phi[2][5]*f->P[5][4] +
-            t->Phi[2][6]*f->P[6][4] + t->Phi[2][8]*f->P[8][4] + t->Phi[2][9]*f->P[9][4] +
-            t->Phi[2][10]*f->P[10][4] + t->Phi[2][11]*f->P[11][4] + t->Phi[2][12]*f->P[12][4] +
-            t->Phi[2][13]*f->P[13][4] + t->Phi[2][14]*f->P[14][4];
-    w->M[2][5] = t->Phi[2][0]*f->P[0][5] + t->Phi[2][1]*f->P[1][5] + t->Phi[2][2]*f->P[2][5] +
-            t->Phi[2][3]*f->P[3][5] + t->Phi[2][4]*f->P[4][5] + t->Phi[2][5]*f->P[5][5] +
-            t->Phi[2][6]*f->P[6][5] + t->Phi[2][8]*f->P[8][5] + t->Phi[2][9]*f->P[9][5] +
-            t->Phi[2][10]*f->P[10][5] + t->Phi[2][11]*f->P[11][5] + t->Phi[2][12]*f->P[12][5] +
-            t->Phi[2][13]*f->P[13][5] + t->Phi[2][14]*f->P[14][5];
-    w->M[2][6] = t->Phi[2][0]*f->P[0][6] + t->Phi[2][1]*f->P[1][6] + t->Phi[2][2]*f->P[2][6] +
-            t->Phi[2][3]*f->P[3][6] + t->Phi[2][4]*f->P[4][6] + t->Phi[2][5]*f->P[5][6] +
-            t->Phi[2][6]*f->P[6][6] + t->Phi[2][8]*f->P[8][6] + t->Phi[2][9]*f->P[9][6] +
-            t->Phi[2][10]*f->P[10][6] + t->Phi[2][11]*f->P[11][6] + t->Phi[2][12]*f->P[12][6] +
-            t->Phi[2][13]*f->P[13][6] + t->Phi[2][14]*f->P[14][6];
-    w->M[2][7] = t->Phi[2][0]*f->P[0][7] + t->Phi[2][1]*f->P[1][7] + t->Phi[2][2]*f->P[2][7] +
-            t->Phi[2][3]*f->P[3][7] + t->Phi[2][4]*f->P[4][7] + t->Phi[2][5]*f->P[5][7] +
-            t->Phi[2][6]*f->P[6][7] + t->Phi[2][8]*f->P[8][7] + t->Phi[2][9]*f->P[9][7] +
-            t->Phi[2][10]*f->P[10][7] + t->Phi[2][11]*f->P[11][7] + t->Phi[2][12]*f->P[12][7] +
-            t->Phi[2][13]*f->P[13][7] + t->Phi[2][14]*f->P[14][7];
-    w->M[2][8] = t->Phi[2][0]*f->P[0][8] + t->Phi[2][1]*f->P[1][8] + t->Phi[2][2]*f->P[2][8] +
-            t->Phi[2][3]*f->P[3][8] + t->Phi[2][4]*f->P[4][8] + t->Phi[2][5]*f->P[5][8] +
-            t->Phi[2][6]*f->P[6][8] + t->Phi[2][8]*f->P[8][8] + t->Phi[2][9]*f->P[9][8] +
-            t->Phi[2][10]*f->P[10][8] + t->Phi[2][11]*f->P[11][8] + t->Phi[2][12]*f->P[12][8] +
-            t->Phi[2][13]*f->P[13][8] + t->Phi[2][14]*f->P[14][8];
-    w->M[2][9] = t->Phi[2][0]*f->P[0][9] + t->Phi[2][1]*f->P[1][9] + t->Phi[2][2]*f->P[2][9] +
-            t->Phi[2][3]*f->P[3][9] + t->Phi[2][4]*f->P[4][9] + t->Phi[2][5]*f->P[5][9] +
-            t->Phi[2][6]*f->P[6][9] + t->Phi[2][8]*f->P[8][9] + t->Phi[2][9]*f->P[9][9] +
-            t->Phi[2][10]*f->P[10][9] + t->Phi[2][11]*f->P[11][9] + t->Phi[2][12]*f->P[12][9] +
-            t->Phi[2][13]*f->P[13][9] + t->Phi[2][14]*f->P[14][9];
-    w->M[2][10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] +
-            t->Phi[2][3]*f->P[3][10] + t->Phi[2][4]*f->P[4][10] + t->Phi[2][5]*f->P[5][10] +
-            t->Phi[2][6]*f->P[6][10] + t->Phi[2][8]*f->P[8][10] + t->Phi[2][9]*f->P[9][10] +
-            t->Phi[2][10]*f->P[10][10] + t->Phi[2][11]*f->P[11][10] + t->Phi[2][12]*f->P[12][10] +
-            t->Phi[2][13]*f->P[13][10] + t->Phi[2][14]*f->P[14][10];
-    w->M[2][11] = t->Phi[2][0]*f->P[0][11] + t->Phi[2][1]*f->P[1][11] + t->Phi[2][2]*f->P[2][11] +
-            t->Phi[2][3]*f->P[3][11] + t->Phi[2][4]*f->P[4][11] + t->Phi[2][5]*f->P[5][11] +
-            t->Phi[2][6]*f->P[6][11] + t->Phi[2][8]*f->P[8][11] + t->Phi[2][9]*f->P[9][11] +
-            t->Phi[2][10]*f->P[10][11] + t->Phi[2][11]*f->P[11][11] + t->Phi[2][12]*f->P[12][11] +
-            t->Phi[2][13]*f->P[13][11] + t->Phi[2][14]*f->P[14][11];
-    w->M[2][12] = t->Phi[2][0]*f->P[0][12] + t->Phi[2][1]*f->P[1][12] + t->Phi[2][2]*f->P[2][12] +
-            t->Phi[2][3]*f->P[3][12] + t->Phi[2][4]*f->P[4][12] + t->Phi[2][5]*f->P[5][12] +
-            t->Phi[2][6]*f->P[6][12] + t->Phi[2][8]*f->P[8][12] + t->Phi[2][9]*f->P[9][12] +
-            t->Phi[2][10]*f->P[10][12] + t->Phi[2][11]*f->P[11][12] + t->Phi[2][12]*f->P[12][12] +
-            t->Phi[2][13]*f->P[13][12] + t->Phi[2][14]*f->P[14][12];
-    w->M[2][13] = t->Phi[2][0]*f->P[0][13] + t->Phi[2][1]*f->P[1][13] + t->Phi[2][2]*f->P[2][13] +
-            t->Phi[2][3]*f->P[3][13] + t->Phi[2][4]*f->P[4][13] + t->Phi[2][5]*f->P[5][13] +
-            t->Phi[2][6]*f->P[6][13] + t->Phi[2][8]*f->P[8][13] + t->Phi[2][9]*f->P[9][13] +
-            t->Phi[2][10]*f->P[10][13] + t->Phi[2][11]*f->P[11][13] + t->Phi[2][12]*f->P[12][13] +
-            t->Phi[2][13]*f->P[13][13] + t->Phi[2][14]*f->P[14][13];
-    w->M[2][14] = t->Phi[2][0]*f->P[0][14] + t->Phi[2][1]*f->P[1][14] + t->Phi[2][2]*f->P[2][14] +
-            t->Phi[2][3]*f->P[3][14] + t->Phi[2][4]*f->P[4][14] + t->Phi[2][5]*f->P[5][14] +
-            t->Phi[2][6]*f->P[6][14] + t->Phi[2][8]*f->P[8][14] + t->Phi[2][9]*f->P[9][14] +
-            t->Phi[2][10]*f->P[10][14] + t->Phi[2][11]*f->P[11][14] + t->Phi[2][12]*f->P[12][14] +
-            t->Phi[2][13]*f->P[13][14] + t->Phi[2][14]*f->P[14][14];
-}
-
-static void phi_times_p_row_3(const ins_gps15_filter *restrict f, const ins_gps15_transition
-        *restrict t, ins_gps15_filter_scratch *restrict w)
-{
-    w->M[3][0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] +
-            t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] +
-            t->Phi[3][6]*f->P[6][0] + t->Phi[3][8]*f->P[8][0] + t->Phi[3][9]*f->P[9][0] +
-            t->Phi[3][10]*f->P[10][0] + t->Phi[3][11]*f->P[11][0] + t->Phi[3][12]*f->P[12][0] +
-            t->Phi[3][13]*f->P[13][0] + t->Phi[3][14]*f->P[14][0];
-    w->M[3][1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] +
-            t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] +
-            t->Phi[3][6]*f->P[6][1] + t->Phi[3][8]*f->P[8][1] + t->Phi[3][9]*f->P[9][1] +
-            t->Phi[3][10]*f->P[10][1] + t->Phi[3][11]*f->P[11][1] + t->Phi[3][12]*f->P[12][1] +
-            t->Phi[3][13]*f->P[13][1] + t->Phi[3][14]*f->P[14][1];
-    w->M[3][2] = t->Phi[3][0]*f->P[0][2] + t->Phi[3][1]*f->P[1][2] + t->Phi[3][2]*f->P[2][2] +
-            t->Phi[3][3]*f->P[3][2] + t->Phi[3][4]*f->P[4][2] + t->Phi[3][5]*f->P[5][2] +
-            t->Phi[3][6]*f->P[6][2] + t->Phi[3][8]*f->P[8][2] + t->Phi[3][9]*f->P[9][2] +
-            t->Phi[3][10]*f->P[10][2] + t->Phi[3][11]*f->P[11][2] + t->Phi[3][12]*f->P[12][2] +
-            t->Phi[3][13]*f->P[13][2] + t->Phi[3][14]*f->P[14][2];
-    w->M[3][3] = t->Phi[3][0]*f->P[0][3] + t->Phi[3][1]*f->P[1][3] + t->Phi[3][2]*f->P[2][3] +
-            t->Phi[3][3]*f->P[3][3] + t->Phi[3][4]*f->P[4][3] + t->Phi[3][5]*f->P[5][3] +
-            t->Phi[3][6]*f->P[6][3] + t->Phi[3][8]*f->P[8][3] + t->Phi[3][9]*f->P[9][3] +
-            t->Phi[3][10]*f->P[10][3] + t->Phi[3][11]*f->P[11][3] + t->Phi[3][12]*f->P[12][3] +
-            t->Phi[3][13]*f->P[13][3] + t->Phi[3][14]*f->P[14][3];
-    w->M[3][4] = t->Phi[3][0]*f->P[0][4] + t->Phi[3][1]*f->P[1][4] + t->Phi[3][2]*f->P[2][4] +
-            t->Phi[3][3]*f->P[3][4] + t->Phi[3][4]*f->P[4][4] + t->Phi[3][5]*f->P[5][4] +
-            t->Phi[3][6]*f->P[6][4] + t->Phi[3][8]*f->P[8][4] + t->Phi[3][9]*f->P[9][4] +
-            t->Phi[3][10]*f->P[10][4] + t->Phi[3][11]*f->P[11][4] + t->Phi[3][12]*f->P[12][4] +
-            t->Phi[3][13]*f->P[13][4] + t->Phi[3][14]*f->P[14][4];
-    w->M[3][5] = t->Phi[3][0]*f->P[0][5] + t->Phi[3][1]*f->P[1][5] + t->Phi[3][2]*f->P[2][5] +
-            t->Phi[3][3]*f->P[3][5] + t->Phi[3][4]*f->P[4][5] + t->Phi[3][5]*f->P[5][5] +
-            t->Phi[3][6]*f->P[6][5] + t->Phi[3][8]*f->P[8][5] + t->Phi[3][9]*f->P[9][5] +
-            t->Phi[3][10]*f->P[10][5] + t->Phi[3][11]*f->P[11][5] + t->Phi[3][12]*f->P[12][5] +
-            t->Phi[3][13]*f->P[13][5] + t->Phi[3][14]*f->P[14][5];
-    w->M[3][6] = t->Phi[3][0]*f->P[0][6] + t->Phi[3][1]*f->P[1][6] + t->Phi[3][2]*f->P[2][6] +
-            t->Phi[3][3]*f->P[3][6] + t->Phi[3][4]*f->P[4][6] + t->Phi[3][5]*f->P[5][6] +
-            t->Phi[3][6]*f->P[6][6] + t->Phi[3][8]*f->P[8][6] + t->Phi[3][9]*f->P[9][6] +
-            t->Phi[3][10]*f->P[10][6] + t->Phi[3][11]*f->P[11][6] + t->Phi[3][12]*f->P[12][6] +
-            t->Phi[3][13]*f->P[13][6] + t->Phi[3][14]*f->P[14][6];
-    w->M[3][7] = t->Phi[3][0]*f->P[0][7] + t->Phi[3][1]*f->P[1][7] + t->Phi[3][2]*f->P[2][7] +
-            t->Phi[3][3]*f->P[3][7] + t->Phi[3][4]*f->P[4][7] + t->Phi[3][5]*f->P[5][7] +
-            t->Phi[3][6]*f->P[6][7] + t->Phi[3][8]*f->P[8][7] + t->Phi[3][9]*f->P[9][7] +
-            t->Phi[3][10]*f->P[10][7] + t->Phi[3][11]*f->P[11][7] + t->Phi[3][12]*f->P[12][7] +
-            t->Phi[3][13]*f->P[13][7] + t->Phi[3][14]*f->P[14][7];
-    w->M[3][8] = t->Phi[3][0]*f->P[0][8] + t->Phi[3][1]*f->P[1][8] + t->Phi[3][2]*f->P[2][8] +
-            t->Phi[3][3]*f->P[3][8] + t->Phi[3][4]*f->P[4][8] + t->Phi[3][5]*f->P[5][8] +
-            t->Phi[3][6]*f->P[6][8] + t->Phi[3][8]*f->P[8][8] + t->Phi[3][9]*f->P[9][8] +
-            t->Phi[3][10]*f->P[10][8] + t->Phi[3][11]*f->P[11][8] + t->Phi[3][12]*f->P[12][8] +
-            t->Phi[3][13]*f->P[13][8] + t->Phi[3][14]*f->P[14][8];
-    w->M[3][9] = t->Phi[3][0]*f->P[0][9] + t->Phi[3][1]*f->P[1][9] + t->Phi[3][2]*f->P[2][9] +
-            t->Phi[3][3]*f->P[3][9] + t->Phi[3][4]*f->P[4][9] + t->Phi[3][5]*f->P[5][9] +
-            t->Phi[3][6]*f->P[6][9] + t->Phi[3][8]*f->P[8][9] + t->Phi[3][9]*f->P[9][9] +
-            t->Phi[3][10]*f->P[10][9] + t->Phi[3][11]*f->P[11][9] + t->Phi[3][12]*f->P[12][9] +
-            t->Phi[3][13]*f->P[13][9] + t->Phi[3][14]*f->P[14][9];
-    w->M[3][10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] +
-            t->Phi[3][3]*f->P[3][10] + t->Phi[3][4]*f->P[4][10] + t->Phi[3][5]*f->P[5][10] +
-            t->Phi[3][6]*f->P[6][10] + t->Phi[3][8]*f->P[8][10] + t->Phi[3][9]*f->P[9][10] +
-            t->Phi[3][10]*f->P[10][10] + t->Phi[3][11]*f->P[11][10] + t->Phi[3][12]*f->P[12][10] +
-            t->Phi[3][13]*f->P[13][10] + t->Phi[3][14]*f->P[14][10];
-    w->M[3][11] = t->Phi[3][0]*f->P[0][11] + t->Phi[3][1]*f->P[1][11] + t->Phi[3][2]*f->P[2][11] +
-            t->Phi[3][3]*f->P[3][11] + t->Phi[3][4]*f->P[4][11] + t->Phi[3][5]*f->P[5][11] +
-            t->Phi[3][6]*f->P[6][11] + t->Phi[3][8]*f->P[8][11] + t->Phi[3][9]*f->P[9][11] +
-            t->Phi[3][10]*f->P[10][11] + t->Phi[3][11]*f->P[11][11] + t->Phi[3][12]*f->P[12][11] +
-            t->Phi[3][13]*f->P[13][11] + t->Phi[3][14]*f->P[14][11];
-    w->M[3][12] = t->Phi[3][0]*f->P[0][12] + t->Phi[3][1]*f->P[1][12] + t->Phi[3][2]*f->P[2][12] +
-            t->Phi[3][3]*f->P[3][12] + t->Phi[3][4]*f->P[4][12] + t->Phi[3][5]*f->P[5][12] +
-            t->Phi[3][6]*f->P[6][12] + t->Phi[3][8]*f->P[8][12] + t->Phi[3][9]*f->P[9][12] +
-            t->Phi[3][10]*f->P[10][12] + t->Phi[3][11]*f->P[11][12] + t->Phi[3][12]*f->P[12][12] +
-            t->Phi[3][13]*f->P[13][12] + t->Phi[3][14]*f->P[14][12];
-    w->M[3][13] = t->Phi[3][0]*f->P[0][13] + t->Phi[3][1]*f->P[1][13] + t->Phi[3][2]*f->P[2][13] +
-            t->Phi[3][3]*f->P[3][13] + t->Phi[3][4]*f->P[4][13] + t->Phi[3][5]*f->P[5][13] +
-            t->Phi[3][6]*f->P[6][13] + t->Phi[3][8]*f->P[8][13] + t->Phi[3][9]*f->P[9][13] +
-            t->Phi[3][10]*f->P[10][13] + t->Phi[3][11]*f->P[11][13] + t->Phi[3][12]*f->P[12][13] +
-            t->Phi[3][13]*f->P[13][13] + t->Phi[3][14]*f->P[14][13];
-    w->M[3][14] = t->Phi[3][0]*f->P[0][14] + t->Phi[3][1]*f->P[1][14] + t->Phi[3][2]*f->P[2][14] +
-            t->Phi[3][3]*f->P[3][14] + t->Phi[3][4]*f->P[4][14] + t->Phi[3][5]*f->P[5][14] +
-            t->Phi[3][6]*f->P[6][14] + t->Phi[3][8]*f->P[8][14] + t->Phi[3][9]*f->P[9][14] +
-            t->Phi[3][10]*f->P[10][14] + t->Phi[3][11]*f->P[11][14] + t->Phi[3][12]*f->P[12][14] +
-            t->Phi[3][13]*f->P[13][14] + t->Phi[3][14]*f->P[14][14];
-}
-
-static void phi_times_p_row_4(const ins_gps15_filter *restrict f, const ins_gps15_transition
-        *restrict t, ins_gps15_filter_scratch *restrict w)
-{
-    w->M[4][0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] +
-            t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] +
-            t->Phi[4][6]*f->P[6][0] + t->Phi[4][8]*f->P[8][0] + t->Phi[4][9]*f->P[9][0] +
-            t->Phi[4][10]*f->P[10][0] + t->Phi[4][11]*f->P[11][0] + t->Phi[4][12]*f->P[12][0] +
-            t->Phi[4][13]*f->P[13][0] + t->Phi[4][14]*f->P[14][0];
-    w->M[4][1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] +
-            t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] +
-            t->Phi[4][6]*f->P[6][1] + t->Phi[4][8]*f->P[8][1] + t->Phi[4][9]*f->P[9][1] +
-            t->Phi[4][10]*f->P[10][1] + t->Phi[4][11]*f->P[11][1] + t->Phi[4][12]*f->P[12][1] +
-            t->Phi[4][13]*f->P[13][1] + t->Phi[4][14]*f->P[14][1];
-    w->M[4][2] = t->Phi[4][0]*f->P[0][2] + t->Phi[4][1]*f->P[1][2] + t->Phi[4][2]*f->P[2][2] +
-            t->Phi[4][3]*f->P[3][2] + t->Phi[4][4]*f->P[4][2] + t->Phi[4][5]*f->P[5][2] +
-            t->Phi[4][6]*f->P[6][2] + t->Phi[4][8]*f->P[8][2] + t->Phi[4][9]*f->P[9][2] +
-            t->Phi[4][10]*f->P[10][2] + t->Phi[4][11]*f->P[11][2] + t->Phi[4][12]*f->P[12][2] +
-            t->Phi[4][13]*f->P[13][2] + t->Phi[4][14]*f->P[14][2];
-    w->M[4][3] = t->Phi[4][0]*f->P[0][3] + t->Phi[4][1]*f->P[1][3] + t->Phi[4][2]*f->P[2][3] +
-            t->Phi[4][3]*f->P[3][3] + t->Phi[4][4]*f->P[4][3] + t->Phi[4][5]*f->P[5][3] +
-            t->Phi[4][6]*f->P[6][3] + t->Phi[4][8]*f->P[8][3] + t->Phi[4][9]*f->P[9][3] +
-            t->Phi[4][10]*f->P[10][3] + t->Phi[4][11]*f->P[11][3] + t->Phi[4][12]*f->P[12][3] +
-            t->Phi[4][13]*f->P[13][3] + t->Phi[4][14]*f->P[14][3];
-    w->M[4][4] = t->Phi[4][0]*f->P[0][4] + t->Phi[4][1]*f->P[1][4] + t->Phi[4][2]*f->P[2][4] +
-            t->Phi[4][3]*f->P[3][4] + t->Phi[4][4]*f->P[4][4] + t->Phi[4][5]*f->P[5][4] +
-            t->Phi[4][6]*f->P[6][4] + t->Phi[4][8]*f->P[8][4] + t->Phi[4][9]*f->P[9][4] +
-            t->Phi[4][10]*f->P[10][4] + t->Phi[4][11]*f->P[11][4] + t->Phi[4][12]*f->P[12][4] +
-            t->Phi[4][13]*f->P[13][4] + t->Phi[4][14]*f->P[14][4];
-    w->M[4][5] = t->Phi[4][0]*f->P[0][5] + t->Phi[4][1]*f->P[1][5] + t->Phi[4][2]*f->P[2][5] +
-            t->Phi[4][3]*f->P[3][5] + t->Phi[4][4]*f->P[4][5] + t->Phi[4][5]*f->P[5][5] +
-            t->Phi[4][6]*f->P[6][5] + t->Phi[4][8]*f->P[8][5] + t->Phi[4][9]*f->P[9][5] +
-            t->Phi[4][10]*f->P[10][5] + t->Phi[4][11]*f->P[11][5] + t->Phi[4][12]*f->P[12][5] +
-            t->Phi[4][13]*f->P[13][5] + t->Phi[4][14]*f->P[14][5];
-    w->M[4][6] = t->Phi[4][0]*f->P[0][6] + t->Phi[4][1]*f->P[1][6] + t->Phi[4][2]*f->P[2][6] +
-            t->Phi[4][3]*f->P[3][6] + t->Phi[4][4]*f->P[4][6] + t->Phi[4][5]*f->P[5][6] +
-            t->Phi[4][6]*f->P[6][6] + t->Phi[4][8]*f->P[8][6] + t->Phi[4][9]*f->P[9][6] +
-            t->Phi[4][10]*f->P[10][6] + t->Phi[4][11]*f->P[11][6] + t->Phi[4][12]*f->P[12][6] +
-            t->Phi[4][13]*f->P[13][6] + t->Phi[4][14]*f->P[14][6];
-    w->M[4][7] = t->Phi[4][0]*f->P[0][7] + t->Phi[4][1]*f->P[1][7] + t->Phi[4][2]*f->P[2][7] +
-            t->Phi[4][3]*f->P[3][7] + t->Phi[4][4]*f->P[4][7] + t->Phi[4][5]*f->P[5][7] +
-            t->Phi[4][6]*f->P[6][7] + t->Phi[4][8]*f->P[8][7] + t->Phi[4][9]*f->P[9][7] +
-            t->Phi[4][10]*f->P[10][7] + t->Phi[4][11]*f->P[11][7] + t->Phi[4][12]*f->P[12][7] +
-            t->Phi[4][13]*f->P[13][7] + t->Phi[4][14]*f->P[14][7];
-    w->M[4][8] = t->Phi[4][0]*f->P[0][8] + t->Phi[4][1]*f->P[1][8] + t->Phi[4][2]*f->P[2][8] +
-            t->Phi[4][3]*f->P[3][8] + t->Phi[4][4]*f->P[4][8] + t->Phi[4][5]*f->P[5][8] +
-            t->Phi[4][6]*f->P[6][8] + t->Phi[4][8]*f->P[8][8] + t->Phi[4][9]*f->P[9][8] +
-            t->Phi[4][10]*f->P[10][8] + t->Phi[4][11]*f->P[11][8] + t->Phi[4][12]*f->P[12][8] +
-            t->Phi[4][13]*f->P[13][8] + t->Phi[4][14]*f->P[14][8];
-    w->M[4][9] = t->Phi[4][0]*f->P[0][9] + t->Phi[4][1]*f->P[1][9] + t->Phi[4][2]*f->P[2][9] +
-            t->Phi[4][3]*f->P[3][9] + t->Phi[4][4]*f->P[4][9] + t->Phi[4][5]*f->P[5][9] +
-            t->Phi[4][6]*f->P[6][9] + t->Phi[4][8]*f->P[8][9] + t->Phi[4][9]*f->P[9][9] +
-            t->Phi[4][10]*f->P[10][9] + t->Phi[4][11]*f->P[11][9] + t->Phi[4][12]*f->P[12][9] +
-            t->Phi[4][13]*f->P[13][9] + t->Phi[4][14]*f->P[14][9];
-    w->M[4][10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] +
-            t->Phi[4][3]*f->P[3][10] + t->Phi[4][4]*f->P[4][10] + t->Phi[4][5]*f->P[5][10] +
-            t->Phi[4][6]*f->P[6][10] + t->Phi[4][8]*f->P[8][10] + t->Phi[4][9]*f->P[9][10] +
-            t->Phi[4][10]*f->P[10][10] + t->Phi[4][11]*f->P[11][10] + t->Phi[4][12]*f->P[12][10] +
-            t->Phi[4][13]*f->P[13][10] + t->Phi[4][14]*f->P[14][10];
-    w->M[4][11] = t->Phi[4][0]*f->P[0][11] + t->Phi[4][1]*f->P[1][11] + t->Phi[4][2]*f->P[2][11] +
-            t->Phi[4][3]*f->P[3][11] + t->Phi[4][4]*f->P[4][11] + t->Phi[4][5]*f->P[5][11] +
-            t->Phi[4][6]*f->P[6][11] + t->Phi[4][8]*f->P[8][11] + t->Phi[4][9]*f->P[9][11] +
-            t->Phi[4][10]*f->P[10][11] + t->Phi[4][11]*f->P[11][11] + t->Phi[4][12]*f->P[12][11] +
-            t->Phi[4][13]*f->P[13][11] + t->Phi[4][14]*f->P[14][11];
-    w->M[4][12] = t->Phi[4][0]*f->P[0][12] + t->Phi[4][1]*f->P[1][12] + t->Phi[4][2]*f->P[2][12] +
-            t->Phi[4][3]*f->P[3][12] + t->Phi[4][4]*f->P[4][12] + t->Phi[4][5]*f->P[5][12] +
-            t->Phi[4][6]*f->P[6][12] + t->Phi[4][8]*f->P[8][12] + t->Phi[4][9]*f->P[9][12] +
-            t->Phi[4][10]*f->P[10][12] + t->Phi[4][11]*f->P[11][12] + t->Phi[4][12]*f->P[12][12] +
-            t->Phi[4][13]*f->P[13][12] + t->Phi[4][14]*f->P[14][12];
-    w->M[4][13] = t->Phi[4][0]*f->P[0][13] + t->Phi[4][1]*f->P[1][13] + t->Phi[4][2]*f->P[2][13] +
-            t->Phi[4][3]*f->P[3][13] + t->Phi[4][4]*f->P[4][13] + t->Phi[4][5]*f->P[5][13] +
-            t->Phi[4][6]*f->P[6][13] + t->Phi[4][8]*f->P[8][13] + t->Phi[4][9]*f->P[9][13] +
-            t->Phi[4][10]*f->P[10][13] + t->Phi[4][11]*f->P[11][13] + t->Phi[4][12]*f->P[12][13] +
-            t->Phi[4][13]*f->P[13][13] + t->Phi[4][14]*f->P[14][13];
-    w->M[4][14] = t->Phi[4][0]*f->P[0][14] + t->Phi[4][1]*f->P[1][14] + t->Phi[4][2]*f->P[2][14] +
-            t->Phi[4][3]*f->P[3][14] + t->Phi[4][4]*f->P[4][14] + t->Phi[4][5]*f->P[5][14] +
-            t->Phi[4][6]*f->P[6][14] + t->Phi[4][8]*f->P[8][14] + t->Phi[4][9]*f->P[9][14] +
-            t->Phi[4][10]*f->P[10][14] + t->Phi[4][11]*f->P[11][14] + t->Phi[4][12]*f->P[12][14] +
-            t->Phi[4][13]*f->P[13][14] + t->Phi[4][14]*f->P[14][14];
-}
-
-static void phi_times_p_row_5(const ins_gps15_filter *restrict f, const ins_gps15_transition
-        *restrict t, ins_gps15_filter_scratch *restrict w)
-{
-    w->M[5][0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] +
-            t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] +
-            t->Phi[5][6]*f->P[6][0] + t->Phi[5][8]*f->P[8][0] + t->Phi[5][9]*f->P[9][0] +
-            t->Phi[5][10]*f->P[10][0] + t->Phi[5][11]*f->P[11][0] + t->Phi[5][12]*f->P[12][0] +
-            t->Phi[5][13]*f->P[13][0] + t->Phi[5][14]*f->P[14][0];
-    w->M[5][1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] +
-            t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] +
-            t->Phi[5][6]*f->P[6][1] + t->Phi[5][8]*f->P[8][1] + t->Phi[5][9]*f->P[9][1] +
-            t->Phi[5][10]*f->P[10][1] + t->Phi[5][11]*f->P[11][1] + t->Phi[5][12]*f->P[12][1] +
-            t->Phi[5][13]*f->P[13][1] + t->Phi[5][14]*f->P[14][1];
-    w->M[5][2] = t->Phi[5][0]*f->P[0][2] + t->Phi[5][1]*f->P[1][2] + t->Phi[5][2]*f->P[2][2] +
-            t->Phi[5][3]*f->P[3][2] + t->Phi[5][4]*f->P[4][2] + t->Phi[5][5]*f->P[5][2] +
-            t->Phi[5][6]*f->P[6][2] + t->Phi[5][8]*f->P[8][2] + t->Phi[5][9]*f->P[9][2] +
-            t->Phi[5][10]*f->P[10][2] + t->Phi[5][11]*f->P[11][2] + t->Phi[5][12]*f->P[12][2] +
-            t->Phi[5][13]*f->P[13][2] + t->Phi[5][14]*f->P[14][2];
-    w->M[5][3] = t->Phi[5][0]*f->P[0][3] + t->Phi[5][1]*f->P[1][3] + t->Phi[5][2]*f->P[2][3] +
-            t->Phi[5][3]*f->P[3][3] + t->Phi[5][4]*f->P[4][3] + t->Phi[5][5]*f->P[5][3] +
-            t->Phi[5][6]*f->P[6][3] + t->Phi[5][8]*f->P[8][3] + t->Phi[5][9]*f->P[9][3] +
-            t->Phi[5][10]*f->P[10][3] + t->Phi[5][11]*f->P[11][3] + t->Phi[5][12]*f->P[12][3] +
-            t->Phi[5][13]*f->P[13][3] + t->Phi[5][14]*f->P[14][3];
-    w->M[5][4] = t->Phi[5][0]*f->P[0][4] + t->Phi[5][1]*f->P[1][4] + t->Phi[5][2]*f->P[2][4] +
-            t->Phi[5][3]*f->P[3][4] + t->Phi[5][4]*f->P[4][4] + t->Phi[5][5]*f->P[5][4] +
-            t->Phi[5][6]*f->P[6][4] + t->Phi[5][8]*f->P[8][4] + t->Phi[5][9]*f->P[9][4] +
-            t->Phi[5][10]*f->P[10][4] + t->Phi[5][11]*f->P[11][4] + t->Phi[5][12]*f->P[12][4] +
-            t->Phi[5][13]*f->P[13][4] + t->Phi[5][14]*f->P[14][4];
-    w->M[5][5] = t->Phi[5][0]*f->P[0][5] + t->Phi[5][1]*f->P[1][5] + t->Phi[5][2]*f->P[2][5] +
-            t->Phi[5][3]*f->P[3][5] + t->Phi[5][4]*f->P[4][5] + t->Phi[5][5]*f->P[5][5] +
-            t->Phi[5][6]*f->P[6][5] + t->Phi[5][8]*f->P[8][5] + t->Phi[5][9]*f->P[9][5] +
-            t->Phi[5][10]*f->P[10][5] + t->Phi[5][11]*f->P[11][5] + t->Phi[5][12]*f->P[12][5] +
-            t->Phi[5][13]*f->P[13][5] + t->Phi[5][14]*f->P[14][5];
-    w->M[5][6] = t->Phi[5][0]*f->P[0][6] + t->Phi[5][1]*f->P[1][6] + t->Phi[5][2]*f->P[2][6] +
-            t->Phi[5][3]*f->P[3][6] + t->Phi[5][4]*f->P[4][6] + t->Phi[5][5]*f->P[5][6] +
-            t->Phi[5][6]*f->P[6][6] + t->Phi[5][8]*f->P[8][6] + t->Phi[5][9]*f->P[9][6] +
-            t->Phi[5][10]*f->P[10][6] + t->Phi[5][11]*f->P[11][6] + t->Phi[5][12]*f->P[12][6] +
-            t->Phi[5][13]*f->P[13][6] + t->Phi[5][14]*f->P[14][6];
-    w->M[5][7] = t->Phi[5][0]*f->P[0][7] + t->Phi[5][1]*f->P[1][7] + t->Phi[5][2]*f->P[2][7] +
-            t->Phi[5][3]*f->P[3][7] + t->Phi[5][4]*f->P[4][7] + t->Phi[5][5]*f->P[5][7] +
-            t->Phi[5][6]*f->P[6][7] + t->Phi[5][8]*f->P[8][7] + t->Phi[5][9]*f->P[9][7] +
-            t->Phi[5][10]*f->P[10][7] + t->Phi[5][11]*f->P[11][7] + t->Phi[5][12]*f->P[12][7] +
-            t->Phi[5][13]*f->P[13][7] + t->Phi[5][14]*f->P[14][7];
-    w->M[5][8] = t->Phi[5][0]*f->P[0][8] + t->Phi[5][1]*f->P[1][8] + t->Phi[5][2]*f->P[2][8] +
-            t->Phi[5][3]*f->P[3][8] + t->Phi[5][4]*f->P[4][8] + t->Phi[5][5]*f->P[5][8] +
-            t->Phi[5][6]*f->P[6][8] + t->Phi[5][8]*f->P[8][8] + t->Phi[5][9]*f->P[9][8] +
-            t->Phi[5][10]*f->P[10][8] + t->Phi[5][11]*f->P[11][8] + t->Phi[5][12]*f->P[12][8] +
-            t->Phi[5][13]*f->P[13][8] + t->Phi[5][14]*f->P[14][8];
-    w->M[5][9] = t->Phi[5][0]*f->P[0][9] + t->Phi[5][1]*f->P[1][9] + t->Phi[5][2]*f->P[2][9] +
-            t->Phi[5][3]*f->P[3][9] + t->Phi[5][4]*f->P[4][9] + t->Phi[5][5]*f->P[5][9] +
-            t->Phi[5][6]*f->P[6][9] + t->Phi[5][8]*f->P[8][9] + t->Phi[5][9]*f->P[9][9] +
-            t->Phi[5][10]*f->P[10][9] + t->Phi[5][11]*f->P[11][9] + t->Phi[5][12]*f->P[12][9] +
-            t->Phi[5][13]*f->P[13][9] + t->Phi[5][14]*f->P[14][9];
-    w->M[5][10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] +
-            t->Phi[5][3]*f->P[3][10] + t->Phi[5][4]*f->P[4][10] + t->Phi[5][5]*f->P[5][10] +
-            t->Phi[5][6]*f->P[6][10] + t->Phi[5][8]*f->P[8][10] + t->Phi[5][9]*f->P[9][10] +
-            t->Phi[5][10]*f->P[10][10] + t->Phi[5][11]*f->P[11][10] + t->Phi[5][12]*f->P[12][10] +
-            t->Phi[5][13]*f->P[13][10] + t->Phi[5][14]*f->P[14][10];
-    w->M[5][11] = t->Phi[5][0]*f->P[0][11] + t->Phi[5][1]*f->P[1][11] + t->Phi[5][2]*f->P[2][11] +
-            t->Phi[5][3]*f->P[3][11] + t->Phi[5][4]*f->P[4][11] + t->Phi[5][5]*f->P[5][11] +
-            t->Phi[5][6]*f->P[6][11] + t->Phi[5][8]*f->P[8][11] + t->Phi[5][9]*f->P[9][11] +
-            t->Phi[5][10]*f->P[10][11] + t->Phi[5][11]*f->P[11][11] + t->Phi[5][12]*f->P[12][11] +
-            t->Phi[5][13]*f->P[13][11] + t->Phi[5][14]*f->P[14][11];
-    w->M[5][12] = t->Phi[5][0]*f->P[0][12] + t->Phi[5][1]*f->P[1][12] + t->Phi[5][2]*f->P[2][12] +
-            t->Phi[5][3]*f->P[3][12] + t->Phi[5][4]*f->P[4][12] + t->Phi[5][5]*f->P[5][12] +
-            t->Phi[5][6]*f->P[6][12] + t->Phi[5][8]*f->P[8][12] + t->Phi[5][9]*f->P[9][12] +
-            t->Phi[5][10]*f->P[10][12] + t->Phi[5][11]*f->P[11][12] + t->Phi[5][12]*f->P[12][12] +
-            t->Phi[5][13]*f->P[13][12] + t->Phi[5][14]*f->P[14][12];
-    w->M[5][13] = t->Phi[5][0]*f->P[0][13] + t->Phi[5][1]*f->P[1][13] + t->Phi[5][2]*f->P[2][13] +
-            t->Phi[5][3]*f->P[3][13] + t->Phi[5][4]*f->P[4][13] + t->Phi[5][5]*f->P[5][13] +
-            t->Phi[5][6]*f->P[6][13] + t->Phi[5][8]*f->P[8][13] + t->Phi[5][9]*f->P[9][13] +
-            t->Phi[5][10]*f->P[10][13] + t->Phi[5][11]*f->P[11][13] + t->Phi[5][12]*f->P[12][13] +
-            t->Phi[5][13]*f->P[13][13] + t->Phi[5][14]*f->P[14][13];
-    w->M[5][14] = t->Phi[5][0]*f->P[0][14] + t->Phi[5][1]*f->P[1][14] + t->Phi[5][2]*f->P[2][14] +
-            t->Phi[5][3]*f->P[3][14] + t->Phi[5][4]*f->P[4][14] + t->Phi[5][5]*f->P[5][14] +
-            t->Phi[5][6]*f->P[6][14] + t->Phi[5][8]*f->P[8][14] + t->Phi[5][9]*f->P[9][14] +
-            t->Phi[5][10]*f->P[10][14] + t->Phi[5][11]*f->P[11][14] + t->Phi[5][12]*f->P[12][14] +
-            t->Phi[5][13]*f->P[13][14] + t->Phi[5][14]*f->P[14][14];
-}
-
-static void phi_times_p_row_6(const ins_gps15_filter *restrict f, const ins_gps15_transition
-        *restrict t, ins_gps15_filter_scratch *restrict w)
-{
-    w->M[6][0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] +
-            t->Phi[6][3]*f->P[3][0] + t->Phi[6][4]*f->P[4][0] + t->Phi[6][5]*f->P[5][0] +
-            t->Phi[6][6]*f->P[6][0] + t->Phi[6][8]*f->P[8][0] + t->Phi[6][9]*f->P[9][0] +
-            t->Phi[6][10]*f->P[10][0] + t->Phi[6][11]*f->P[11][0] + t->Phi[6][12]*f->P[12][0] +
-            t->Phi[6][13]*f->P[13][0] + t->Phi[6][14]*f->P[14][0];
-    w->M[6][1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] +
-            t->Phi[6][3]*f->P[3][1] + t->Phi[6][4]*f->P[4][1] + t->Phi[6][5]*f->P[5][1] +
-            t->Phi[6][6]*f->P[6][1] + t->Phi[6][8]*f->P[8][1] + t->Phi[6][9]*f->P[9][1] +
-            t->Phi[6][10]*f->P[10][1] + t->Phi[6][11]*f->P[11][1] + t->Phi[6][12]*f->P[12][1] +
-            t->Phi[6][13]*f->P[13][1] + t->Phi[6][14]*f->P[14][1];
-    w->M[6][2] = t->Phi[6][0]*f->P[0][2] + t->Phi[6][1]*f->P[1][2] + t->Phi[6][2]*f->P[2][2] +
-            t->Phi[6][3]*f->P[3][2] + t->Phi[6][4]*f->P[4][2] + t->Phi[6][5]*f->P[5][2] +
-            t->Phi[6][6]*f->P[6][2] + t->Phi[6][8]*f->P[8][2] + t->Phi[6][9]*f->P[9][2] +
-            t->Phi[6][10]*f->P[10][2] + t->Phi[6][11]*f->P[11][2] + t->Phi[6][12]*f->P[12][2] +
-            t->Phi[6][13]*f->P[13][2] + t->Phi[6][14]*f->P[14][2];
-    w->M[6][3] = t->Phi[6][0]*f->P[0][3] + t->Phi[6][1]*f->P[1][3] + t->Phi[6][2]*f->P[2][3] +
-            t->Phi[6][3]*f->P[3][3] + t->Phi[6][4]*f->P[4][3] + t->Phi[6][5]*f->P[5][3] +
-            t->Phi[6][6]*f->P[6][3] + t->Phi[6][8]*f->P[8][3] + t->Phi[6][9]*f->P[9][3] +
-            t->Phi[6][10]*f->P[10][3] + t->Phi[6][11]*f->P[11][3] + t->Phi[6][12]*f->P[12][3] +
-            t->Phi[6][13]*f->P[13][3] + t->Phi[6][14]*f->P[14][3];
-    w->M[6][4] = t->Phi[6][0]*f->P[0][4] + t->Phi[6][1]*f->P[1][4] + t->Phi[6][2]*f->P[2][4] +
-            t->Phi[6][3]*f->P[3][4] + t->Phi[6][4]*f->P[4][4] + t->Phi[6][5]*f->P[5][4] +
-            t->Phi[6][6]*f->P[6][4] + t->Phi[6][8]*f->P[8][4] + t->Phi[6][9]*f->P[9][4] +
-            t->Phi[6][10]*f->P[10][4] + t->Phi[6][11]*f->P[11][4] + t->Phi[6][12]*f->P[12][4] +
-            t->Phi[6][13]*f->P[13][4] + t->Phi[6][14]*f->P[14][4];
-    w->M[6][5] = t->Phi[6][0]*f->P[0][5] + t->Phi[6][1]*f->P[1][5] + t->Phi[6][2]*f->P[2][5] +
-            t->Phi[6][3]*f->P[3][5] + t->Phi[6][4]*f->P[4][5] + t->Phi[6][5]*f->P[5][5] +
-            t->Phi[6][6]*f->P[6][5] + t->Phi[6][8]*f->P[8][5] + t->Phi[6][9]*f->P[9][5] +
-            t->Phi[6][10]*f->P[10][5] + t->Phi[6][11]*f->P[11][5] + t->Phi[6][12]*f->P[12][5] +
-            t->Phi[6][13]*f->P[13][5] + t->Phi[6][14]*f->P[14][5];
-    w->M[6][6] = t->Phi[6][0]*f->P[0][6] + t->Phi[6][1]*f->P[1][6] + t->Phi[6][2]*f->P[2][6] +
-            t->Phi[6][3]*f->P[3][6] + t->Phi[6][4]*f->P[4][6] + t->Phi[6][5]*f->P[5][6] +
-            t->Phi[6][6]*f->P[6][6] + t->Phi[6][8]*f->P[8][6] + t->Phi[6][9]*f->P[9][6] +
-            t->Phi[6][10]*f->P[10][6] + t->Phi[6][11]*f->P[11][6] + t->Phi[6][12]*f->P[12][6] +
-            t->Phi[6][13]*f->P[13][6] + t->Phi[6][14]*f->P[14][6];
-    w->M[6][7] = t->Phi[6][0]*f->P[0][7] + t->Phi[6][1]*f->P[1][7] + t->Phi[6][2]*f->P[2][7] +
-            t->Phi[6][3]*f->P[3][7] + t->Phi[6][4]*f->P[4][7] + t->Phi[6][5]*f->P[5][7] +
-            t->Phi[6][6]*f->P[6][7] + t->Phi[6][8]*f->P[8][7] + t->Phi[6][9]*f->P[9][7] +
-            t->Phi[6][10]*f->P[10][7] + t->Phi[6][11]*f->P[11][7] + t->Phi[6][12]*f->P[12][7] +
-            t->Phi[6][13]*f->P[13][7] + t->Phi[6][14]*f->P[14][7];
-    w->M[6][8] = t->Phi[6][0]*f->P[0][8] + t->Phi[6][1]*f->P[1][8] + t->Phi[6][2]*f->P[2][8] +
-            t->Phi[6][3]*f->P[3][8] + t->Phi[6][4]*f->P[4][8] + t->Phi[6][5]*f->P[5][8] +
-            t->Phi[6][6]*f->P[6][8] + t->Phi[6][8]*f->P[8][8] + t->Phi[6][9]*f->P[9][8] +
-            t->Phi[6][10]*f->P[10][8] + t->Phi[6][11]*f->P[11][8] + t->Phi[6][12]*f->P[12][8] +
-            t->Phi[6][13]*f->P[13][8] + t->Phi[6][14]*f->P[14][8];
-    w->M[6][9] = t->Phi[6][0]*f->P[0][9] + t->Phi[6][1]*f->P[1][9] + t->Phi[6][2]*f->P[2][9] +
-            t->Phi[6][3]*f->P[3][9] + t->Phi[6][4]*f->P[4][9] + t->Phi[6][5]*f->P[5][9] +
-            t->Phi[6][6]*f->P[6][9] + t->Phi[6][8]*f->P[8][9] + t->Phi[6][9]*f->P[9][9] +
-            t->Phi[6][10]*f->P[10][9] + t->Phi[6][11]*f->P[11][9] + t->Phi[6][12]*f->P[12][9] +
-            t->Phi[6][13]*f->P[13][9] + t->Phi[6][14]*f->P[14][9];
-    w->M[6][10] = t->Phi[6][0]*f->P[0][10] + t->Phi[6][1]*f->P[1][10] + t->Phi[6][2]*f->P[2][10] +
-            t->Phi[6][3]*f->P[3][10] + t->Phi[6][4]*f->P[4][10] + t->Phi[6][5]*f->P[5][10] +
-            t->Phi[6][6]*f->P[6][10] + t->Phi[6][8]*f->P[8][10] + t->Phi[6][9]*f->P[9][10] +
-            t->Phi[6][10]*f->P[10][10] + t->Phi[6][11]*f->P[11][10] + t->Phi[6][12]*f->P[12][10] +
-            t->Phi[6][13]*f->P[13][10] + t->Phi[6][14]*f->P[14][10];
-    w->M[6][11] = t->Phi[6][0]*f->P[0][11] + t->Phi[6][1]*f->P[1][11] + t->Phi[6][2]*f->P[2][11] +
-            t->Phi[6][3]*f->P[3][11] + t->Phi[6][4]*f->P[4][11] + t->Phi[6][5]*f->P[5][11] +
-            t->Phi[6][6]*f->P[6][11] + t->Phi[6][8]*f->P[8][11] + t->Phi[6][9]*f->P[9][11] +
-            t->Phi[6][10]*f->P[10][11] + t->Phi[6][11]*f->P[11][11] + t->Phi[6][12]*f->P[12][11] +
-            t->Phi[6][13]*f->P[13][11] + t->Phi[6][14]*f->P[14][11];
-    w->M[6][12] = t->Phi[6][0]*f->P[0][12] + t->Phi[6][1]*f->P[1][12] + t->Phi[6][2]*f->P[2][12] +
-            t->Phi[6][3]*f->P[3][12] + t->Phi[6][4]*f->P[4][12] + t->Phi[6][5]*f->P[5][12] +
-            t->Phi[6][6]*f->P[6][12] + t->Phi[6][8]*f->P[8][12] + t->Phi[6][9]*f->P[9][12] +
-            t->Phi[6][10]*f->P[10][12] + t->Phi[6][11]*f->P[11][12] + t->Phi[6][12]*f->P[12][12] +
-            t->Phi[6][13]*f->P[13][12] + t->Phi[6][14]*f->P[14][12];
-    w->M[6][13] = t->Phi[6][0]*f->P[0][13] + t->Phi[6][1]*f->P[1][13] + t->Phi[6][2]*f->P[2][13] +
-            t->Phi[6][3]*f->P[3][13] + t->Phi[6][4]*f->P[4][13] + t->Phi[6][5]*f->P[5][13] +
-            t->Phi[6][6]*f->P[6][13] + t->Phi[6][8]*f->P[8][13] + t->Phi[6][9]*f->P[9][13] +
-            t->Phi[6][10]*f->P[10][13] + t->Phi[6][11]*f->P[11][13] + t->Phi[6][12]*f->P[12][13] +
-            t->Phi[6][13]*f->P[13][13] + t->Phi[6][14]*f->P[14][13];
-    w->M[6][14] = t->Phi[6][0]*f->P[0][14] + t->Phi[6][1]*f->P[1][14] + t->Phi[6][2]*f->P[2][14] +
-            t->Phi[6][3]*f->P[3][14] + t->Phi[6][4]*f->P[4][14] + t->Phi[6][5]*f->P[5][14] +
-            t->Phi[6][6]*f->P[6][14] + t->Phi[6][8]*f->P[8][14] + t->Phi[6][9]*f->P[9][14] +
-            t->Phi[6][10]*f->P[10][14] + t->Phi[6][11]*f->P[11][14] + t->Phi[6][12]*f->P[12][14] +
-            t->Phi[6][13]*f->P[13][14] + t->Phi[6][14]*f->P[14][14];
-}
-
-static void phi_times_p_row_7(const ins_gps15_filter *restrict f, const ins_gps15_transition
-        *restrict t, ins_gps15_filter_scratch *restrict w)
-{
-    w->M[7][0] = t->Phi[7][0]*f->P[0][0] + t->Phi[7][1]*f->P[1][0] + t->Phi[7][2]*f->P[2][0] +
-            t->Phi[7][3]*f->P[3][0] + t->Phi[7][4]*f->P[4][0] + t->Phi[7][5]*f->P[5][0] +
-            t->Phi[7][6]*f->P[6][0] + t->Phi[7][7]*f->P[7][0] + t->Phi[7][8]*f->P[8][0] +
-            t->Phi[7][9]*f->P[9][0] + t->Phi[7][10]*f->P[10][0] + t->Phi[7][11]*f->P[11][0] +
-            t->Phi[7][12]*f->P[12][0] + t->Phi[7][13]*f->P[13][0] + t->Phi[7][14]*f->P[14][0];
-    w->M[7][1] = t->Phi[7][0]*f->P[0][1] + t->Phi[7][1]*f->P[1][1] + t->Phi[7][2]*f->P[2][1] +
-            t->Phi[7][3]*f->P[3][1] + t->Phi[7][4]*f->P[4][1] + t->Phi[7][5]*f->P[5][1] +
-            t->Phi[7][6]*f->P[6][1] + t->Phi[7][7]*f->P[7][1] + t->Phi[7][8]*f->P[8][1] +
-            t->Phi[7][9]*f->P[9][1] + t->Phi[7][10]*f->P[10][1] + t->Phi[7][11]*f->P[11][1] +
-            t->Phi[7][12]*f->P[12][1] + t->Phi[7][13]*f->P[13][1] + t->Phi[7][14]*f->P[14][1];
-    w->M[7][2] = t->Phi[7][0]*f->P[0][2] + t->Phi[7][1]*f->P[1][2] + t->Phi[7][2]*f->P[2][2] +
-            t->Phi[7][3]*f->P[3][2] + t->Phi[7][4]*f->P[4][2] + t->Phi[7][5]*f->P[5][2] +
-            t->Phi[7][6]*f->P[6][2] + t->Phi[7][7]*f->P[7][2] + t->Phi[7][8]*f->P[8][2] +
-            t->Phi[7][9]*f->P[9][2] + t->Phi[7][10]*f->P[10][2] + t->Phi[7][11]*f->P[11][2] +
-            t->Phi[7][12]*f->P[12][2] + t->Phi[7][13]*f->P[13][2] + t->Phi[7][14]*f->P[14][2];
-    w->M[7][3] = t->Phi[7][0]*f->P[0][3] + t->Phi[7][1]*f->P[1][3] + t->Phi[7][2]*f->P[2][3] +
-            t->Phi[7][3]*f->P[3][3] + t->Phi[7][4]*f->P[4][3] + t->Phi[7][5]*f->P[5][3] +
-            t->Phi[7][6]*f->P[6][3] + t->Phi[7][7]*f->P[7][3] + t->Phi[7][8]*f->P[8][3] +
-            t->Phi[7][9]*f->P[9][3] + t->Phi[7][10]*f->P[10][3] + t->Phi[7][11]*f->P[11][3] +
-            t->Phi[7][12]*f->P[12][3] + t->Phi[7][13]*f->P[13][3] + t->Phi[7][14]*f->P[14][3];
-    w->M[7][4] = t->Phi[7][0]*f->P[0][4] + t->Phi[7][1]*f->P[1][4] + t->Phi[7][2]*f->P[2][4] +
-            t->Phi[7][3]*f->P[3][4] + t->Phi[7][4]*f->P[4][4] + t->Phi[7][5]*f->P[5][4] +
-            t->Phi[7][6]*f->P[6][4] + t->Phi[7][7]*f->P[7][4] + t->Phi[7][8]*f->P[8][4] +
-            t->Phi[7][9]*f->P[9][4] + t->Phi[7][10]*f->P[10][4] + t->Phi[7][11]*f->P[11][4] +
-            t->Phi[7][12]*f->P[12][4] + t->Phi[7][13]*f->P[13][4] + t->Phi[7][14]*f->P[14][4];
-    w->M[7][5] = t->Phi[7][0]*f->P[0][5] + t->Phi[7][1]*f->P[1][5] + t->Phi[7][2]*f->P[2][5] +
-            t->Phi[7][3]*f->P[3][5] + t->Phi[7][4]*f->P[4][5] + t->Phi[7][5]*f->P[5][5] +
-            t->Phi[7][6]*f->P[6][5] + t->Phi[7][7]*f->P[7][5] + t->Phi[7][8]*f->P[8][5] +
-            t->Phi[7][9]*f->P[9][5] + t->Phi[7][10]*f->P[10][5] + t->Phi[7][11]*f->P[11][5] +
-            t->Phi[7][12]*f->P[12][5] + t->Phi[7][13]*f->P[13][5] + t->Phi[7][14]*f->P[14][5];
-    w->M[7][6] = t->Phi[7][0]*f->P[0][6] + t->Phi[7][1]*f->P[1][6] + t->Phi[7][2]*f->P[2][6] +
-            t->Phi[7][3]*f->P[3][6] + t->Phi[7][4]*f->P[4][6] + t->Phi[7][5]*f->P[5][6] +
-            t->Phi[7][6]*f->P[6][6] + t->Phi[7][7]*f->P[7][6] + t->Phi[7][8]*f->P[8][6] +
-            t->Phi[7][9]*f->P[9][6] + t->Phi[7][10]*f->P[10][6] + t->Phi[7][11]*f->P[11][6] +
-            t->Phi[7][12]*f->P[12][6] + t->Phi[7][13]*f->P[13][6] + t->Phi[7][14]*f->P[14][6];
-    w->M[7][7] = t->Phi[7][0]*f->P[0][7] + t->Phi[7][1]*f->P[1][7] + t->Phi[7][2]*f->P[2][7] +
-            t->Phi[7][3]*f->P[3][7] + t->Phi[7][4]*f->P[4][7] + t->Phi[7][5]*f->P[5][7] +
-            t->Phi[7][6]*f->P[6][7] + t->Phi[7][7]*f->P[7][7] + t->Phi[7][8]*f->P[8][7] +
-            t->Phi[7][9]*f->P[9][7] + t->Phi[7][10]*f->P[10][7] + t->Phi[7][11]*f->P[11][7] +
-            t->Phi[7][12]*f->P[12][7] + t->Phi[7][13]*f->P[13][7] + t->Phi[7][14]*f->P[14][7];
-    w->M[7][8] = t->Phi[7][0]*f->P[0][8] + t->Phi[7][1]*f->P[1][8] + t->Phi[7][2]*f->P[2][8] +
-            t->Phi[7][3]*f->P[3][8] + t->Phi[7][4]*f->P[4][8] + t->Phi[7][5]*f->P[5][8] +
-            t->Phi[7][6]*f->P[6][8] + t->Phi[7][7]*f->P[7][8] + t->Phi[7][8]*f->P[8][8] +
-            t->Phi[7][9]*f->P[9][8] + t->Phi[7][10]*f->P[10][8] + t->Phi[7][11]*f->P[11][8] +
-            t->Phi[7][12]*f->P[12][8] + t->Phi[7][13]*f->P[13][8] + t->Phi[7][14]*f->P[14][8];
-    w->M[7][9] = t->Phi[7][0]*f->P[0][9] + t->Phi[7][1]*f->P[1][9] + t->Phi[7][2]*f->P[2][9] +
-            t->Phi[7][3]*f->P[3][9] + t->Phi[7][4]*f->P[4][9] + t->Phi[7][5]*f->P[5][9] +
-            t->Phi[7][6]*f->P[6][9] + t->Phi[7][7]*f->P[7][9] + t->Phi[7][8]*f->P[8][9] +
-            t->Phi[7][9]*f->P[9][9] + t->Phi[7][10]*f->P[10][9] + t->Phi[7][11]*f->P[11][9] +
-            t->Phi[7][12]*f->P[12][9] + t->Phi[7][13]*f->P[13][9] + t->Phi[7][14]*f->P[14][9];
-    w->M[7][10] = t->Phi[7][0]*f->P[0][10] + t->Phi[7][1]*f->P[1][10] + t->Phi[7][2]*f->P[2][10] +
-            t->Phi[7][3]*f->P[3][10] + t->Phi[7][4]*f->P[4][10] + t->Phi[7][5]*f->P[5][10] +
-            t->Phi[7][6]*f->P[6][10] + t->Phi[7][7]*f->P[7][10] + t->Phi[7][8]*f->P[8][10] +
-            t->Phi[7][9]*f->P[9][10] + t->Phi[7][10]*f->P[10][10] + t->Phi[7][11]*f->P[11][10] +
-            t->Phi[7][12]*f->P[12][10] + t->Phi[7][13]*f->P[13][10] + t->Phi[7][14]*f->P[14][10];
-    w->M[7][11] = t->Phi[7][0]*f->P[0][11] + t->Phi[7][1]*f->P[1][11] + t->Phi[7][2]*f->P[2][11] +
-            t->Phi[7][3]*f->P[3][11] + t->Phi[7][4]*f->P[4][11] + t->Phi[7][5]*f->P[5][11] +
-            t->Phi[7][6]*f->P[6][11] + t->Phi[7][7]*f->P[7][11] + t->Phi[7][8]*f->P[8][11] +
-            t->Phi[7][9]*f->P[9][11] + t->Phi[7][10]*f->P[10][11] + t->Phi[7][11]*f->P[11][11] +
-            t->Phi[7][12]*f->P[12][11] + t->Phi[7][13]*f->P[13][11] + t->Phi[7][14]*f->P[14][11];
-    w->M[7][12] = t->Phi[7][0]*f->P[0][12] + t->Phi[7][1]*f->P[1][12] + t->Phi[7][2]*f->P[2][12] +
-            t->Phi[7][3]*f->P[3][12] + t->Phi[7][4]*f->P[4][12] + t->Phi[7][5]*f->P[5][12] +
-            t->Phi[7][6]*f->P[6][12] + t->Phi[7][7]*f->P[7][12] + t->Phi[7][8]*f->P[8][12] +
-            t->Phi[7][9]*f->P[9][12] + t->Phi[7][10]*f->P[10][12] + t->Phi[7][11]*f->P[11][12] +
-            t->Phi[7][12]*f->P[12][12] + t->Phi[7][13]*f->P[13][12] + t->Phi[7][14]*f->P[14][12];
-    w->M[7][13] = t->Phi[7][0]*f->P[0][13] + t->Phi[7][1]*f->P[1][13] + t->Phi[7][2]*f->P[2][13] +
-            t->Phi[7][3]*f->P[3][13] + t->Phi[7][4]*f->P[4][13] + t->Phi[7][5]*f->P[5][13] +
-            t->Phi[7][6]*f->P[6][13] + t->Phi[7][7]*f->P[7][13] + t->Phi[7][8]*f->P[8][13] +
-            t->Phi[7][9]*f->P[9][13] + t->Phi[7][10]*f->P[10][13] + t->Phi[7][11]*f->P[11][13] +
-            t->Phi[7][12]*f->P[12][13] + t->Phi[7][13]*f->P[13][13] + t->Phi[7][14]*f->P[14][13];
-    w->M[7][14] = t->Phi[7][0]*f->P[0][14] + t->Phi[7][1]*f->P[1][14] + t->Phi[7][2]*f->P[2][14] +
-            t->Phi[7][3]*f->P[3][14] + t->Phi[7][4]*f->P[4][14] + t->Phi[7][5]*f->P[5][14] +
-            t->Phi[7][6]*f->P[6][14] + t->Phi[7][7]*f->P[7][14] + t->Phi[7][8]*f->P[8][14] +
-            t->Phi[7][9]*f->P[9][14] + t->Phi[7][10]*f->P[10][14] + t->Phi[7][11]*f->P[11][14] +
-            t->Phi[7][12]*f->P[12][14] + t->Phi[7][13]*f->P[13][14] + t->Phi[7][14]*f->P[14][14];
-}
-
-static void phi_times_p_row_8(const ins_gps15_filter *restrict f, const ins_gps15_transition
-        *restrict t, ins_gps15_filter_scratch *restrict w)
-{
-    w->M[8][0] = t->Phi[8][0]*f->P[0][0] + t->Phi[8][1]*f->P[1][0] + t->Phi[8][2]*f->P[2][0] +
-            t->Phi[8][3]*f->P[3][0] + t->Phi[8][4]*f->P[4][0] + t->Phi[8][5]*f->P[5][0] +
-            t->Phi[8][6]*f->P[6][0] + t->Phi[8][8]*f->P[8][0] + t->Phi[8][9]*f->P[9][0] +
-            t->Phi[8][10]*f->P[10][0] + t->Phi[8][11]*f->P[11][0] + t->Phi[8][12]*f->P[12][0] +
-            t->Phi[8][13]*f->P[13][0] + t->Phi[8][14]*f->P[14][0];
-    w->M[8][1] = t->Phi[8][0]*f->P[0][1] + t->Phi[8][1]*f->P[1][1] + t->Phi[8][2]*f->P[2][1] +
-            t->Phi[8][3]*f->P[3][1] + t->Phi[8][4]*f->P[4][1] + t->Phi[8][5]*f->P[5][1] +
-            t->Phi[8][6]*f->P[6][1] + t->Phi[8][8]*f->P[8][1] + t->Phi[8][9]*f->P[9][1] +
-            t->Phi[8][10]*f->P[10][1] + t->Phi[8][11]*f->P[11][1] + t->Phi[8][12]*f->P[12][1] +
-            t->Phi[8][13]*f->P[13][1] + t->Phi[8][14]*f->P[14][1];
-    w->M[8][2] = t->Phi[8][0]*f->P[0][2] + t->Phi[8][1]*f->P[1][2] + t->Phi[8][2]*f->P[2][2] +
-            t->Phi[8][3]*f->P[3][2] + t->Phi[8][4]*f->P[4][2] + t->Phi[8][5]*f->P[5][2] +
-            t->Phi[8][6]*f->P[6][2] + t->Phi[8][8]*f->P[8][2] + t->Phi[8][9]*f->P[9][2] +
-            t->Phi[8][10]*f->P[10][2] + t->Phi[8][11]*f->P[11][2] + t->Phi[8][12]*f->P[12][2] +
-            t->Phi[8][13]*f->P[13][2] + t->Phi[8][14]*f->P[14][2];
-    w->M[8][3] = t->Phi[8][0]*f->P[0][3] + t->Phi[8][1]*f->P[1][3] + t->Phi[8][2]*f->P[2][3] +
-            t->Phi[8][3]*f->P[3][3] + t->Phi[8][4]*f->P[4][3] + t->Phi[8][5]*f->P[5][3] +
-            t->Phi[8][6]*f->P[6][3] + t->Phi[8][8]*f->P[8][3] + t->Phi[8][9]*f->P[9][3] +
-            t->Phi[8][10]*f->P[10][3] + t->Phi[8][11]*f->P[11][3] + t->Phi[8][12]*f->P[12][3] +
-            t->Phi[8][13]*f->P[13][3] + t->Phi[8][14]*f->P[14][3];
-    w->M[8][4] = t->Phi[8][0]*f->P[0][4] + t->Phi[8][1]*f->P[1][4] + t->Phi[8][2]*f->P[2][4] +
-            t->Phi[8][3]*f->P[3][4] + t->Phi[8][4]*f->P[4][4] + t->Phi[8][5]*f->P[5][4] +
-            t->Phi[8][6]*f->P[6][4] + t->Phi[8][8]*f->P[8][4] + t->Phi[8][9]*f->P[9][4] +
-            t->Phi[8][10]*f->P[10][4] + t->Phi[8][11]*f->P[11][4] + t->Phi[8][12]*f->P[12][4] +
-            t->Phi[8][13]*f->P[13][4] + t->Phi[8][14]*f->P[14][4];
-    w->M[8][5] = t->Phi[8][0]*f->P[0][5] + t->Phi[8][1]*f->P[1][5] + t->Phi[8][2]*f->P[2][5] +
-            t->Phi[8][3]*f->P[3][5] + t->Phi[8][4]*f->P[4][5] + t->Phi[8][5]*f->P[5][5] +
-            t->Phi[8][6]*f->P[6][5] + t->Phi[8][8]*f->P[8][5] + t->Phi[8][9]*f->P[9][5] +
-            t->Phi[8][10]*f->P[10][5] + t->Phi[8][11]*f->P[11][5] + t->Phi[8][12]*f->P[12][5] +
-            t->Phi[8][13]*f->P[13][5] + t->Phi[8][14]*f->P[14][5];
-    w->M[8][6] = t->Phi[8][0]*f->P[0][6] + t->Phi[8][1]*f->P[1][6] + t->Phi[8][2]*f->P[2][6] +
-            t->Phi[8][3]*f->P[3][6] + t->Phi[8][4]*f->P[4][6] + t->Phi[8][5]*f->P[5][6] +
-            t->Phi[8][6]*f->P[6][6] + t->Phi[8][8]*f->P[8][6] + t->Phi[8][9]*f->P[9][6] +
-            t->Phi[8][10]*f->P[10][6] + t->Phi[8][11]*f->P[11][6] + t->Phi[8][12]*f->P[12][6] +
-            t->Phi[8][13]*f->P[13][6] + t->Phi[8][14]*f->P[14][6];
-    w->M[8][7] = t->Phi[8][0]*f->P[0][7] + t->Phi[8][1]*f->P[1][7] + t->Phi[8][2]*f->P[2][7] +
-            t->Phi[8][3]*f->P[3][7] + t->Phi[8][4]*f->P[4][7] + t->Phi[8][5]*f->P[5][7] +
-            t->Phi[8][6]*f->P[6][7] + t->Phi[8][8]*f->P[8][7] + t->Phi[8][9]*f->P[9][7] +
-            t->Phi[8][10]*f->P[10][7] + t->Phi[8][11]*f->P[11][7] + t->Phi[8][12]*f->P[12][7] +
-            t->Phi[8][13]*f->P[13][7] + t->Phi[8][14]*f->P[14][7];
-    w->M[8][8] = t->Phi[8][0]*f->P[0][8] + t->Phi[8][1]*f->P[1][8] + t->Phi[8][2]*f->P[2][8] +
-            t->Phi[8][3]*f->P[3][8] + t->Phi[8][4]*f->P[4][8] + t->Phi[8][5]*f->P[5][8] +
-            t->Phi[8][6]*f->P[6][8] + t->Phi[8][8]*f->P[8][8] + t->Phi[8][9]*f->P[9][8] +
-            t->Phi[8][10]*f->P[10][8] + t->Phi[8][11]*f->P[11][8] + t->Phi[8][12]*f->P[12][8] +
-            t->Phi[8][13]*f->P[13][8] + t->Phi[8][14]*f->P[14][8];
-    w->M[8][9] = t->Phi[8][0]*f->P[0][9] + t->Phi[8][1]*f->P[1][9] + t->Phi[8][2]*f->P[2][9] +
-            t->Phi[8][3]*f->P[3][9] + t->Phi[8][4]*f->P[4][9] + t->Phi[8][5]*f->P[5][9] +
-            t->Phi[8][6]*f->P[6][9] + t->Phi[8][8]*f->P[8][9] + t->Phi[8][9]*f->P[9][9] +
-            t->Phi[8][10]*f->P[10][9] + t->Phi[8][11]*f->P[11][9] + t->Phi[8][12]*f->P[12][9] +
-            t->Phi[8][13]*f->P[13][9] + t->Phi[8][14]*f->P[14][9];
-    w->M[8][10] = t->Phi[8][0]*f->P[0][10] + t->Phi[8][1]*f->P[1][10] + t->Phi[8][2]*f->P[2][10] +
-            t->Phi[8][3]*f->P[3][10] + t->Phi[8][4]*f->P[4][10] + t->Phi[8][5]*f->P[5][10] +
-            t->Phi[8][6]*f->P[6][10] + t->Phi[8][8]*f->P[8][10] + t->Phi[8][9]*f->P[9][10] +
-            t->Phi[8][10]*f->P[10][10] + t->Phi[8][11]*f->P[11][10] + t->Phi[8][12]*f->P[12][10] +
-            t->Phi[8][13]*f->P[13][10] + t->Phi[8][14]*f->P[14][10];
-    w->M[8][11] = t->Phi[8][0]*f->P[0][11] + t->Phi[8][1]*f->P[1][11] + t->Phi[8][2]*f->P[2][11] +
-            t->Phi[8][3]*f->P[3][11] + t->Phi[8][4]*f->P[4][11] + t->Phi[8][5]*f->P[5][11] +
-            t->Phi[8][6]*f->P[6][11] + t->Phi[8][8]*f->P[8][11] + t->Phi[8][9]*f->P[9][11] +
-            t->Phi[8][10]*f->P[10][11] + t->Phi[8][11]*f->P[11][11] + t->Phi[8][12]*f->P[12][11] +
-            t->Phi[8][13]*f->P[13][11] + t->Phi[8][14]*f->P[14][11];
-    w->M[8][12] = t->Phi[8][0]*f->P[0][12] + t->Phi[8][1]*f->P[1][12] + t->Phi[8][2]*f->P[2][12] +
-            t->Phi[8][3]*f->P[3][12] + t->Phi[8][4]*f->P[4][12] + t->Phi[8][5]*f->P[5][12] +
-            t->Phi[8][6]*f->P[6][12] + t->Phi[8][8]*f->P[8][12] + t->Phi[8][9]*f->P[9][12] +
-            t->Phi[8][10]*f->P[10][12] + t->Phi[8][11]*f->P[11][12] + t->Phi[8][12]*f->P[12][12] +
-            t->Phi[8][13]*f->P[13][12] + t->Phi[8][14]*f->P[14][12];
-    w->M[8][13] = t->Phi[8][0]*f->P[0][13] + t->Phi[8][1]*f->P[1][13] + t->Phi[8][2]*f->P[2][13] +
-            t->Phi[8][3]*f->P[3][13] + t->Phi[8][4]*f->P[4][13] + t->Phi[8][5]*f->P[5][13] +
-            t->Phi[8][6]*f->P[6][13] + t->Phi[8][8]*f->P[8][13] + t->Phi[8][9]*f->P[9][13] +
-            t->Phi[8][10]*f->P[10][13] + t->Phi[8][11]*f->P[11][13] + t->Phi[8][12]*f->P[12][13] +
-            t->Phi[8][13]*f->P[13][13] + t->Phi[8][14]*f->P[14][13];
-    w->M[8][14] = t->Phi[8][0]*f->P[0][14] + t->Phi[8][1]*f->P[1][14] + t->Phi[8][2]*f->P[2][14] +
-            t->Phi[8][3]*f->P[3][14] + t->Phi[8][4]*f->P[4][14] + t->Phi[8][5]*f->P[5][14] +
-            t->Phi[8][6]*f->P[6][14] + t->Phi[8][8]*f->P[8][14] + t->Phi[8][9]*f->P[9][14] +
-            t->Phi[8][10]*f->P[10][14] + t->Phi[8][11]*f->P[11][14] + t->Phi[8][12]*f->P[12][14] +
-            t->Phi[8][13]*f->P[13][14] + t->Phi[8][14]*f->P[14][14];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -3524,67 +2866,139 @@ static ins_gps15_scalar propagate_row_0(const ins_gps15_transition *restrict t,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[0][0]*t->Phi[0][0] + w->M[0][1]*t->Phi[0][1] + w->M[0][2]*t->Phi[0][2] +
-            w->M[0][3]*t->Phi[0][3] + w->M[0][4]*t->Phi[0][4] + w->M[0][5]*t->Phi[0][5] +
-            w->M[0][6]*t->Phi[0][6] + w->M[0][8]*t->Phi[0][8] + w->M[0][9]*t->Phi[0][9] +
-            w->M[0][10]*t->Phi[0][10] + w->M[0][11]*t->Phi[0][11] + w->M[0][12]*t->Phi[0][12] +
-            w->M[0][13]*t->Phi[0][13] + w->M[0][14]*t->Phi[0][14] + t->Qd[0][0]; w->Pn[0][0] = v;
-            check += v - v;
-    v = w->M[0][0]*t->Phi[1][0] + w->M[0][1]*t->Phi[1][1] + w->M[0][2]*t->Phi[1][2] +
-            w->M[0][3]*t->Phi[1][3] + w->M[0][4]*t->Phi[1][4] + w->M[0][5]*t->Phi[1][5] +
-            w->M[0][6]*t->Phi[1][6] + w->M[0][8]*t->Phi[1][8] + w->M[0][9]*t->Phi[1][9] +
-            w->M[0][10]*t->Phi[1][10] + w->M[0][11]*t->Phi[1][11] + w->M[0][12]*t->Phi[1][12] +
-            w->M[0][13]*t->Phi[1][13] + w->M[0][14]*t->Phi[1][14] + t->Qd[0][1]; w->Pn[0][1] = v;
-            w->Pn[1][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[2][0] + w->M[0][1]*t->Phi[2][1] + w->M[0][2]*t->Phi[2][2] +
-            w->M[0][3]*t->Phi[2][3] + w->M[0][4]*t->Phi[2][4] + w->M[0][5]*t->Phi[2][5] +
-            w->M[0][6]*t->Phi[2][6] + w->M[0][8]*t->Phi[2][8] + w->M[0][9]*t->Phi[2][9] +
-            w->M[0][10]*t->Phi[2][10] + w->M[0][11]*t->Phi[2][11] + w->M[0][12]*t->Phi[2][12] +
-            w->M[0][13]*t->Phi[2][13] + w->M[0][14]*t->Phi[2][14] + t->Qd[0][2]; w->Pn[0][2] = v;
-            w->Pn[2][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[3][0] + w->M[0][1]*t->Phi[3][1] + w->M[0][2]*t->Phi[3][2] +
-            w->M[0][3]*t->Phi[3][3] + w->M[0][4]*t->Phi[3][4] + w->M[0][5]*t->Phi[3][5] +
-            w->M[0][6]*t->Phi[3][6] + w->M[0][8]*t->Phi[3][8] + w->M[0][9]*t->Phi[3][9] +
-            w->M[0][10]*t->Phi[3][10] + w->M[0][11]*t->Phi[3][11] + w->M[0][12]*t->Phi[3][12] +
-            w->M[0][13]*t->Phi[3][13] + w->M[0][14]*t->Phi[3][14] + t->Qd[0][3]; w->Pn[0][3] = v;
-            w->Pn[3][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[4][0] + w->M[0][1]*t->Phi[4][1] + w->M[0][2]*t->Phi[4][2] +
-            w->M[0][3]*t->Phi[4][3] + w->M[0][4]*t->Phi[4][4] + w->M[0][5]*t->Phi[4][5] +
-            w->M[0][6]*t->Phi[4][6] + w->M[0][8]*t->Phi[4][8] + w->M[0][9]*t->Phi[4][9] +
-            w->M[0][10]*t->Phi[4][10] + w->M[0][11]*t->Phi[4][11] + w->M[0][12]*t->Phi[4][12] +
-            w->M[0][13]*t->Phi[4][13] + w->M[0][14]*t->Phi[4][14] + t->Qd[0][4]; w->Pn[0][4] = v;
-            w->Pn[4][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[5][0] + w->M[0][1]*t->Phi[5][1] + w->M[0][2]*t->Phi[5][2] +
-            w->M[0][3]*t->Phi[5][3] + w->M[0][4]*t->Phi[5][4] + w->M[0][5]*t->Phi[5][5] +
-            w->M[0][6]*t->Phi[5][6] + w->M[0][8]*t->Phi[5][8] + w->M[0][9]*t->Phi[5][9] +
-            w->M[0][10]*t->Phi[5][10] + w->M[0][11]*t->Phi[5][11] + w->M[0][12]*t->Phi[5][12] +
-            w->M[0][13]*t->Phi[5][13] + w->M[0][14]*t->Phi[5][14] + t->Qd[0][5]; w->Pn[0][5] = v;
-            w->Pn[5][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[6][0] + w->M[0][1]*t->Phi[6][1] + w->M[0][2]*t->Phi[6][2] +
-            w->M[0][3]*t->Phi[6][3] + w->M[0][4]*t->Phi[6][4] + w->M[0][5]*t->Phi[6][5] +
-            w->M[0][6]*t->Phi[6][6] + w->M[0][8]*t->Phi[6][8] + w->M[0][9]*t->Phi[6][9] +
-            w->M[0][10]*t->Phi[6][10] + w->M[0][11]*t->Phi[6][11] + w->M[0][12]*t->Phi[6][12] +
-            w->M[0][13]*t->Phi[6][13] + w->M[0][14]*t->Phi[6][14] + t->Qd[0][6]; w->Pn[0][6] = v;
-            w->Pn[6][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[7][0] + w->M[0][1]*t->Phi[7][1] + w->M[0][2]*t->Phi[7][2] +
-            w->M[0][3]*t->Phi[7][3] + w->M[0][4]*t->Phi[7][4] + w->M[0][5]*t->Phi[7][5] +
-            w->M[0][6]*t->Phi[7][6] + w->M[0][7]*t->Phi[7][7] + w->M[0][8]*t->Phi[7][8] +
-            w->M[0][9]*t->Phi[7][9] + w->M[0][10]*t->Phi[7][10] + w->M[0][11]*t->Phi[7][11] +
-            w->M[0][12]*t->Phi[7][12] + w->M[0][13]*t->Phi[7][13] + w->M[0][14]*t->Phi[7][14] +
-            t->Qd[0][7]; w->Pn[0][7] = v; w->Pn[7][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[8][0] + w->M[0][1]*t->Phi[8][1] + w->M[0][2]*t->Phi[8][2] +
-            w->M[0][3]*t->Phi[8][3] + w->M[0][4]*t->Phi[8][4] + w->M[0][5]*t->Phi[8][5] +
-            w->M[0][6]*t->Phi[8][6] + w->M[0][8]*t->Phi[8][8] + w->M[0][9]*t->Phi[8][9] +
-            w->M[0][10]*t->Phi[8][10] + w->M[0][11]*t->Phi[8][11] + w->M[0][12]*t->Phi[8][12] +
-            w->M[0][13]*t->Phi[8][13] + w->M[0][14]*t->Phi[8][14] + t->Qd[0][8]; w->Pn[0][8] = v;
-            w->Pn[8][0] = v; check += v - v;
-    v = w->M[0][9]; w->Pn[0][9] = v; w->Pn[9][0] = v; check += v - v;
-    v = w->M[0][10]; w->Pn[0][10] = v; w->Pn[10][0] = v; check += v - v;
-    v = w->M[0][11]; w->Pn[0][11] = v; w->Pn[11][0] = v; check += v - v;
-    v = w->M[0][12]; w->Pn[0][12] = v; w->Pn[12][0] = v; check += v - v;
-    v = w->M[0][13]; w->Pn[0][13] = v; w->Pn[13][0] = v; check += v - v;
-    v = w->M[0][14]; w->Pn[0][14] = v; w->Pn[14][0] = v; check += v - v;
+    v = w->M[0]*t->Phi[0][0] + w->M[1]*t->Phi[0][1] + w->M[2]*t->Phi[0][2] + w->M[3]*t->Phi[0][3] +
+            w->M[4]*t->Phi[0][4] + w->M[5]*t->Phi[0][5] + w->M[6]*t->Phi[0][6] +
+            w->M[8]*t->Phi[0][8] + w->M[9]*t->Phi[0][9] + w->M[10]*t->Phi[0][10] +
+            w->M[11]*t->Phi[0][11] + w->M[12]*t->Phi[0][12] + w->M[13]*t->Phi[0][13] +
+            w->M[14]*t->Phi[0][14] + t->Qd[0]; w->Pn[0] = v; check += v - v;
+    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
+            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[6]*t->Phi[1][6] +
+            w->M[8]*t->Phi[1][8] + w->M[9]*t->Phi[1][9] + w->M[10]*t->Phi[1][10] +
+            w->M[11]*t->Phi[1][11] + w->M[12]*t->Phi[1][12] + w->M[13]*t->Phi[1][13] +
+            w->M[14]*t->Phi[1][14] + t->Qd[1]; w->Pn[1] = v; check += v - v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[6]*t->Phi[2][6] +
+            w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] + w->M[10]*t->Phi[2][10] +
+            w->M[11]*t->Phi[2][11] + w->M[12]*t->Phi[2][12] + w->M[13]*t->Phi[2][13] +
+            w->M[14]*t->Phi[2][14] + t->Qd[2]; w->Pn[2] = v; check += v - v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
+            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] +
+            w->M[11]*t->Phi[3][11] + w->M[12]*t->Phi[3][12] + w->M[13]*t->Phi[3][13] +
+            w->M[14]*t->Phi[3][14] + t->Qd[3]; w->Pn[3] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] +
+            w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] + w->M[13]*t->Phi[4][13] +
+            w->M[14]*t->Phi[4][14] + t->Qd[4]; w->Pn[4] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] +
+            w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] + w->M[13]*t->Phi[5][13] +
+            w->M[14]*t->Phi[5][14] + t->Qd[5]; w->Pn[5] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] + w->M[10]*t->Phi[6][10] +
+            w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] + w->M[13]*t->Phi[6][13] +
+            w->M[14]*t->Phi[6][14] + t->Qd[6]; w->Pn[6] = v; check += v - v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + t->Qd[7]; w->Pn[7] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] + w->M[10]*t->Phi[8][10] +
+            w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] + w->M[13]*t->Phi[8][13] +
+            w->M[14]*t->Phi[8][14] + t->Qd[8]; w->Pn[8] = v; check += v - v;
+    v = w->M[9]; w->Pn[9] = v; check += v - v;
+    v = w->M[10]; w->Pn[10] = v; check += v - v;
+    v = w->M[11]; w->Pn[11] = v; check += v - v;
+    v = w->M[12]; w->Pn[12] = v; check += v - v;
+    v = w->M[13]; w->Pn[13] = v; check += v - v;
+    v = w->M[14]; w->Pn[14] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_1(const ins_gps15_filter *restrict f, const ins_gps15_transition
+        *restrict t, ins_gps15_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] +
+            t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] +
+            t->Phi[1][6]*f->P[6][0] + t->Phi[1][8]*f->P[8][0] + t->Phi[1][9]*f->P[9][0] +
+            t->Phi[1][10]*f->P[10][0] + t->Phi[1][11]*f->P[11][0] + t->Phi[1][12]*f->P[12][0] +
+            t->Phi[1][13]*f->P[13][0] + t->Phi[1][14]*f->P[14][0];
+    w->M[1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] +
+            t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] +
+            t->Phi[1][6]*f->P[6][1] + t->Phi[1][8]*f->P[8][1] + t->Phi[1][9]*f->P[9][1] +
+            t->Phi[1][10]*f->P[10][1] + t->Phi[1][11]*f->P[11][1] + t->Phi[1][12]*f->P[12][1] +
+            t->Phi[1][13]*f->P[13][1] + t->Phi[1][14]*f->P[14][1];
+    w->M[2] = t->Phi[1][0]*f->P[0][2] + t->Phi[1][1]*f->P[1][2] + t->Phi[1][2]*f->P[2][2] +
+            t->Phi[1][3]*f->P[3][2] + t->Phi[1][4]*f->P[4][2] + t->Phi[1][5]*f->P[5][2] +
+            t->Phi[1][6]*f->P[6][2] + t->Phi[1][8]*f->P[8][2] + t->Phi[1][9]*f->P[9][2] +
+            t->Phi[1][10]*f->P[10][2] + t->Phi[1][11]*f->P[11][2] + t->Phi[1][12]*f->P[12][2] +
+            t->Phi[1][13]*f->P[13][2] + t->Phi[1][14]*f->P[14][2];
+    w->M[3] = t->Phi[1][0]*f->P[0][3] + t->Phi[1][1]*f->P[1][3] + t->Phi[1][2]*f->P[2][3] +
+            t->Phi[1][3]*f->P[3][3] + t->Phi[1][4]*f->P[4][3] + t->Phi[1][5]*f->P[5][3] +
+            t->Phi[1][6]*f->P[6][3] + t->Phi[1][8]*f->P[8][3] + t->Phi[1][9]*f->P[9][3] +
+            t->Phi[1][10]*f->P[10][3] + t->Phi[1][11]*f->P[11][3] + t->Phi[1][12]*f->P[12][3] +
+            t->Phi[1][13]*f->P[13][3] + t->Phi[1][14]*f->P[14][3];
+    w->M[4] = t->Phi[1][0]*f->P[0][4] + t->Phi[1][1]*f->P[1][4] + t->Phi[1][2]*f->P[2][4] +
+            t->Phi[1][3]*f->P[3][4] + t->Phi[1][4]*f->P[4][4] + t->Phi[1][5]*f->P[5][4] +
+            t->Phi[1][6]*f->P[6][4] + t->Phi[1][8]*f->P[8][4] + t->Phi[1][9]*f->P[9][4] +
+            t->Phi[1][10]*f->P[10][4] + t->Phi[1][11]*f->P[11][4] + t->Phi[1][12]*f->P[12][4] +
+            t->Phi[1][13]*f->P[13][4] + t->Phi[1][14]*f->P[14][4];
+    w->M[5] = t->Phi[1][0]*f->P[0][5] + t->Phi[1][1]*f->P[1][5] + t->Phi[1][2]*f->P[2][5] +
+            t->Phi[1][3]*f->P[3][5] + t->Phi[1][4]*f->P[4][5] + t->Phi[1][5]*f->P[5][5] +
+            t->Phi[1][6]*f->P[6][5] + t->Phi[1][8]*f->P[8][5] + t->Phi[1][9]*f->P[9][5] +
+            t->Phi[1][10]*f->P[10][5] + t->Phi[1][11]*f->P[11][5] + t->Phi[1][12]*f->P[12][5] +
+            t->Phi[1][13]*f->P[13][5] + t->Phi[1][14]*f->P[14][5];
+    w->M[6] = t->Phi[1][0]*f->P[0][6] + t->Phi[1][1]*f->P[1][6] + t->Phi[1][2]*f->P[2][6] +
+            t->Phi[1][3]*f->P[3][6] + t->Phi[1][4]*f->P[4][6] + t->Phi[1][5]*f->P[5][6] +
+            t->Phi[1][6]*f->P[6][6] + t->Phi[1][8]*f->P[8][6] + t->Phi[1][9]*f->P[9][6] +
+            t->Phi[1][10]*f->P[10][6] + t->Phi[1][11]*f->P[11][6] + t->Phi[1][12]*f->P[12][6] +
+            t->Phi[1][13]*f->P[13][6] + t->Phi[1][14]*f->P[14][6];
+    w->M[7] = t->Phi[1][0]*f->P[0][7] + t->Phi[1][1]*f->P[1][7] + t->Phi[1][2]*f->P[2][7] +
+            t->Phi[1][3]*f->P[3][7] + t->Phi[1][4]*f->P[4][7] + t->Phi[1][5]*f->P[5][7] +
+            t->Phi[1][6]*f->P[6][7] + t->Phi[1][8]*f->P[8][7] + t->Phi[1][9]*f->P[9][7] +
+            t->Phi[1][10]*f->P[10][7] + t->Phi[1][11]*f->P[11][7] + t->Phi[1][12]*f->P[12][7] +
+            t->Phi[1][13]*f->P[13][7] + t->Phi[1][14]*f->P[14][7];
+    w->M[8] = t->Phi[1][0]*f->P[0][8] + t->Phi[1][1]*f->P[1][8] + t->Phi[1][2]*f->P[2][8] +
+            t->Phi[1][3]*f->P[3][8] + t->Phi[1][4]*f->P[4][8] + t->Phi[1][5]*f->P[5][8] +
+            t->Phi[1][6]*f->P[6][8] + t->Phi[1][8]*f->P[8][8] + t->Phi[1][9]*f->P[9][8] +
+            t->Phi[1][10]*f->P[10][8] + t->Phi[1][11]*f->P[11][8] + t->Phi[1][12]*f->P[12][8] +
+            t->Phi[1][13]*f->P[13][8] + t->Phi[1][14]*f->P[14][8];
+    w->M[9] = t->Phi[1][0]*f->P[0][9] + t->Phi[1][1]*f->P[1][9] + t->Phi[1][2]*f->P[2][9] +
+            t->Phi[1][3]*f->P[3][9] + t->Phi[1][4]*f->P[4][9] + t->Phi[1][5]*f->P[5][9] +
+            t->Phi[1][6]*f->P[6][9] + t->Phi[1][8]*f->P[8][9] + t->Phi[1][9]*f->P[9][9] +
+            t->Phi[1][10]*f->P[10][9] + t->Phi[1][11]*f->P[11][9] + t->Phi[1][12]*f->P[12][9] +
+            t->Phi[1][13]*f->P[13][9] + t->Phi[1][14]*f->P[14][9];
+    w->M[10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] +
+            t->Phi[1][3]*f->P[3][10] + t->Phi[1][4]*f->P[4][10] + t->Phi[1][5]*f->P[5][10] +
+            t->Phi[1][6]*f->P[6][10] + t->Phi[1][8]*f->P[8][10] + t->Phi[1][9]*f->P[9][10] +
+            t->Phi[1][10]*f->P[10][10] + t->Phi[1][11]*f->P[11][10] + t->Phi[1][12]*f->P[12][10] +
+            t->Phi[1][13]*f->P[13][10] + t->Phi[1][14]*f->P[14][10];
+    w->M[11] = t->Phi[1][0]*f->P[0][11] + t->Phi[1][1]*f->P[1][11] + t->Phi[1][2]*f->P[2][11] +
+            t->Phi[1][3]*f->P[3][11] + t->Phi[1][4]*f->P[4][11] + t->Phi[1][5]*f->P[5][11] +
+            t->Phi[1][6]*f->P[6][11] + t->Phi[1][8]*f->P[8][11] + t->Phi[1][9]*f->P[9][11] +
+            t->Phi[1][10]*f->P[10][11] + t->Phi[1][11]*f->P[11][11] + t->Phi[1][12]*f->P[12][11] +
+            t->Phi[1][13]*f->P[13][11] + t->Phi[1][14]*f->P[14][11];
+    w->M[12] = t->Phi[1][0]*f->P[0][12] + t->Phi[1][1]*f->P[1][12] + t->Phi[1][2]*f->P[2][12] +
+            t->Phi[1][3]*f->P[3][12] + t->Phi[1][4]*f->P[4][12] + t->Phi[1][5]*f->P[5][12] +
+            t->Phi[1][6]*f->P[6][12] + t->Phi[1][8]*f->P[8][12] + t->Phi[1][9]*f->P[9][12] +
+            t->Phi[1][10]*f->P[10][12] + t->Phi[1][11]*f->P[11][12] + t->Phi[1][12]*f->P[12][12] +
+            t->Phi[1][13]*f->P[13][12] + t->Phi[1][14]*f->P[14][12];
+    w->M[13] = t->Phi[1][0]*f->P[0][13] + t->Phi[1][1]*f->P[1][13] + t->Phi[1][2]*f->P[2][13] +
+            t->Phi[1][3]*f->P[3][13] + t->Phi[1][4]*f->P[4][13] + t->Phi[1][5]*f->P[5][13] +
+            t->Phi[1][6]*f->P[6][13] + t->Phi[1][8]*f->P[8][13] + t->Phi[1][9]*f->P[9][13] +
+            t->Phi[1][10]*f->P[10][13] + t->Phi[1][11]*f->P[11][13] + t->Phi[1][12]*f->P[12][13] +
+            t->Phi[1][13]*f->P[13][13] + t->Phi[1][14]*f->P[14][13];
+    w->M[14] = t->Phi[1][0]*f->P[0][14] + t->Phi[1][1]*f->P[1][14] + t->Phi[1][2]*f->P[2][14] +
+            t->Phi[1][3]*f->P[3][14] + t->Phi[1][4]*f->P[4][14] + t->Phi[1][5]*f->P[5][14] +
+            t->Phi[1][6]*f->P[6][14] + t->Phi[1][8]*f->P[8][14] + t->Phi[1][9]*f->P[9][14] +
+            t->Phi[1][10]*f->P[10][14] + t->Phi[1][11]*f->P[11][14] + t->Phi[1][12]*f->P[12][14] +
+            t->Phi[1][13]*f->P[13][14] + t->Phi[1][14]*f->P[14][14];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -3592,61 +3006,134 @@ static ins_gps15_scalar propagate_row_1(const ins_gps15_transition *restrict t,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[1][0]*t->Phi[1][0] + w->M[1][1]*t->Phi[1][1] + w->M[1][2]*t->Phi[1][2] +
-            w->M[1][3]*t->Phi[1][3] + w->M[1][4]*t->Phi[1][4] + w->M[1][5]*t->Phi[1][5] +
-            w->M[1][6]*t->Phi[1][6] + w->M[1][8]*t->Phi[1][8] + w->M[1][9]*t->Phi[1][9] +
-            w->M[1][10]*t->Phi[1][10] + w->M[1][11]*t->Phi[1][11] + w->M[1][12]*t->Phi[1][12] +
-            w->M[1][13]*t->Phi[1][13] + w->M[1][14]*t->Phi[1][14] + t->Qd[1][1]; w->Pn[1][1] = v;
-            check += v - v;
-    v = w->M[1][0]*t->Phi[2][0] + w->M[1][1]*t->Phi[2][1] + w->M[1][2]*t->Phi[2][2] +
-            w->M[1][3]*t->Phi[2][3] + w->M[1][4]*t->Phi[2][4] + w->M[1][5]*t->Phi[2][5] +
-            w->M[1][6]*t->Phi[2][6] + w->M[1][8]*t->Phi[2][8] + w->M[1][9]*t->Phi[2][9] +
-            w->M[1][10]*t->Phi[2][10] + w->M[1][11]*t->Phi[2][11] + w->M[1][12]*t->Phi[2][12] +
-            w->M[1][13]*t->Phi[2][13] + w->M[1][14]*t->Phi[2][14] + t->Qd[1][2]; w->Pn[1][2] = v;
-            w->Pn[2][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[3][0] + w->M[1][1]*t->Phi[3][1] + w->M[1][2]*t->Phi[3][2] +
-            w->M[1][3]*t->Phi[3][3] + w->M[1][4]*t->Phi[3][4] + w->M[1][5]*t->Phi[3][5] +
-            w->M[1][6]*t->Phi[3][6] + w->M[1][8]*t->Phi[3][8] + w->M[1][9]*t->Phi[3][9] +
-            w->M[1][10]*t->Phi[3][10] + w->M[1][11]*t->Phi[3][11] + w->M[1][12]*t->Phi[3][12] +
-            w->M[1][13]*t->Phi[3][13] + w->M[1][14]*t->Phi[3][14] + t->Qd[1][3]; w->Pn[1][3] = v;
-            w->Pn[3][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[4][0] + w->M[1][1]*t->Phi[4][1] + w->M[1][2]*t->Phi[4][2] +
-            w->M[1][3]*t->Phi[4][3] + w->M[1][4]*t->Phi[4][4] + w->M[1][5]*t->Phi[4][5] +
-            w->M[1][6]*t->Phi[4][6] + w->M[1][8]*t->Phi[4][8] + w->M[1][9]*t->Phi[4][9] +
-            w->M[1][10]*t->Phi[4][10] + w->M[1][11]*t->Phi[4][11] + w->M[1][12]*t->Phi[4][12] +
-            w->M[1][13]*t->Phi[4][13] + w->M[1][14]*t->Phi[4][14] + t->Qd[1][4]; w->Pn[1][4] = v;
-            w->Pn[4][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[5][0] + w->M[1][1]*t->Phi[5][1] + w->M[1][2]*t->Phi[5][2] +
-            w->M[1][3]*t->Phi[5][3] + w->M[1][4]*t->Phi[5][4] + w->M[1][5]*t->Phi[5][5] +
-            w->M[1][6]*t->Phi[5][6] + w->M[1][8]*t->Phi[5][8] + w->M[1][9]*t->Phi[5][9] +
-            w->M[1][10]*t->Phi[5][10] + w->M[1][11]*t->Phi[5][11] + w->M[1][12]*t->Phi[5][12] +
-            w->M[1][13]*t->Phi[5][13] + w->M[1][14]*t->Phi[5][14] + t->Qd[1][5]; w->Pn[1][5] = v;
-            w->Pn[5][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[6][0] + w->M[1][1]*t->Phi[6][1] + w->M[1][2]*t->Phi[6][2] +
-            w->M[1][3]*t->Phi[6][3] + w->M[1][4]*t->Phi[6][4] + w->M[1][5]*t->Phi[6][5] +
-            w->M[1][6]*t->Phi[6][6] + w->M[1][8]*t->Phi[6][8] + w->M[1][9]*t->Phi[6][9] +
-            w->M[1][10]*t->Phi[6][10] + w->M[1][11]*t->Phi[6][11] + w->M[1][12]*t->Phi[6][12] +
-            w->M[1][13]*t->Phi[6][13] + w->M[1][14]*t->Phi[6][14] + t->Qd[1][6]; w->Pn[1][6] = v;
-            w->Pn[6][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[7][0] + w->M[1][1]*t->Phi[7][1] + w->M[1][2]*t->Phi[7][2] +
-            w->M[1][3]*t->Phi[7][3] + w->M[1][4]*t->Phi[7][4] + w->M[1][5]*t->Phi[7][5] +
-            w->M[1][6]*t->Phi[7][6] + w->M[1][7]*t->Phi[7][7] + w->M[1][8]*t->Phi[7][8] +
-            w->M[1][9]*t->Phi[7][9] + w->M[1][10]*t->Phi[7][10] + w->M[1][11]*t->Phi[7][11] +
-            w->M[1][12]*t->Phi[7][12] + w->M[1][13]*t->Phi[7][13] + w->M[1][14]*t->Phi[7][14] +
-            t->Qd[1][7]; w->Pn[1][7] = v; w->Pn[7][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[8][0] + w->M[1][1]*t->Phi[8][1] + w->M[1][2]*t->Phi[8][2] +
-            w->M[1][3]*t->Phi[8][3] + w->M[1][4]*t->Phi[8][4] + w->M[1][5]*t->Phi[8][5] +
-            w->M[1][6]*t->Phi[8][6] + w->M[1][8]*t->Phi[8][8] + w->M[1][9]*t->Phi[8][9] +
-            w->M[1][10]*t->Phi[8][10] + w->M[1][11]*t->Phi[8][11] + w->M[1][12]*t->Phi[8][12] +
-            w->M[1][13]*t->Phi[8][13] + w->M[1][14]*t->Phi[8][14] + t->Qd[1][8]; w->Pn[1][8] = v;
-            w->Pn[8][1] = v; check += v - v;
-    v = w->M[1][9]; w->Pn[1][9] = v; w->Pn[9][1] = v; check += v - v;
-    v = w->M[1][10]; w->Pn[1][10] = v; w->Pn[10][1] = v; check += v - v;
-    v = w->M[1][11]; w->Pn[1][11] = v; w->Pn[11][1] = v; check += v - v;
-    v = w->M[1][12]; w->Pn[1][12] = v; w->Pn[12][1] = v; check += v - v;
-    v = w->M[1][13]; w->Pn[1][13] = v; w->Pn[13][1] = v; check += v - v;
-    v = w->M[1][14]; w->Pn[1][14] = v; w->Pn[14][1] = v; check += v - v;
+    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
+            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[6]*t->Phi[1][6] +
+            w->M[8]*t->Phi[1][8] + w->M[9]*t->Phi[1][9] + w->M[10]*t->Phi[1][10] +
+            w->M[11]*t->Phi[1][11] + w->M[12]*t->Phi[1][12] + w->M[13]*t->Phi[1][13] +
+            w->M[14]*t->Phi[1][14] + t->Qd[15]; w->Pn[15] = v; check += v - v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[6]*t->Phi[2][6] +
+            w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] + w->M[10]*t->Phi[2][10] +
+            w->M[11]*t->Phi[2][11] + w->M[12]*t->Phi[2][12] + w->M[13]*t->Phi[2][13] +
+            w->M[14]*t->Phi[2][14] + t->Qd[16]; w->Pn[16] = v; check += v - v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
+            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] +
+            w->M[11]*t->Phi[3][11] + w->M[12]*t->Phi[3][12] + w->M[13]*t->Phi[3][13] +
+            w->M[14]*t->Phi[3][14] + t->Qd[17]; w->Pn[17] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] +
+            w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] + w->M[13]*t->Phi[4][13] +
+            w->M[14]*t->Phi[4][14] + t->Qd[18]; w->Pn[18] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] +
+            w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] + w->M[13]*t->Phi[5][13] +
+            w->M[14]*t->Phi[5][14] + t->Qd[19]; w->Pn[19] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] + w->M[10]*t->Phi[6][10] +
+            w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] + w->M[13]*t->Phi[6][13] +
+            w->M[14]*t->Phi[6][14] + t->Qd[20]; w->Pn[20] = v; check += v - v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + t->Qd[21]; w->Pn[21] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] + w->M[10]*t->Phi[8][10] +
+            w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] + w->M[13]*t->Phi[8][13] +
+            w->M[14]*t->Phi[8][14] + t->Qd[22]; w->Pn[22] = v; check += v - v;
+    v = w->M[9]; w->Pn[23] = v; check += v - v;
+    v = w->M[10]; w->Pn[24] = v; check += v - v;
+    v = w->M[11]; w->Pn[25] = v; check += v - v;
+    v = w->M[12]; w->Pn[26] = v; check += v - v;
+    v = w->M[13]; w->Pn[27] = v; check += v - v;
+    v = w->M[14]; w->Pn[28] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_2(const ins_gps15_filter *restrict f, const ins_gps15_transition
+        *restrict t, ins_gps15_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] +
+            t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] +
+            t->Phi[2][6]*f->P[6][0] + t->Phi[2][8]*f->P[8][0] + t->Phi[2][9]*f->P[9][0] +
+            t->Phi[2][10]*f->P[10][0] + t->Phi[2][11]*f->P[11][0] + t->Phi[2][12]*f->P[12][0] +
+            t->Phi[2][13]*f->P[13][0] + t->Phi[2][14]*f->P[14][0];
+    w->M[1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] +
+            t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] +
+            t->Phi[2][6]*f->P[6][1] + t->Phi[2][8]*f->P[8][1] + t->Phi[2][9]*f->P[9][1] +
+            t->Phi[2][10]*f->P[10][1] + t->Phi[2][11]*f->P[11][1] + t->Phi[2][12]*f->P[12][1] +
+            t->Phi[2][13]*f->P[13][1] + t->Phi[2][14]*f->P[14][1];
+    w->M[2] = t->Phi[2][0]*f->P[0][2] + t->Phi[2][1]*f->P[1][2] + t->Phi[2][2]*f->P[2][2] +
+            t->Phi[2][3]*f->P[3][2] + t->Phi[2][4]*f->P[4][2] + t->Phi[2][5]*f->P[5][2] +
+            t->Phi[2][6]*f->P[6][2] + t->Phi[2][8]*f->P[8][2] + t->Phi[2][9]*f->P[9][2] +
+            t->Phi[2][10]*f->P[10][2] + t->Phi[2][11]*f->P[11][2] + t->Phi[2][12]*f->P[12][2] +
+            t->Phi[2][13]*f->P[13][2] + t->Phi[2][14]*f->P[14][2];
+    w->M[3] = t->Phi[2][0]*f->P[0][3] + t->Phi[2][1]*f->P[1][3] + t->Phi[2][2]*f->P[2][3] +
+            t->Phi[2][3]*f->P[3][3] + t->Phi[2][4]*f->P[4][3] + t->Phi[2][5]*f->P[5][3] +
+            t->Phi[2][6]*f->P[6][3] + t->Phi[2][8]*f->P[8][3] + t->Phi[2][9]*f->P[9][3] +
+            t->Phi[2][10]*f->P[10][3] + t->Phi[2][11]*f->P[11][3] + t->Phi[2][12]*f->P[12][3] +
+            t->Phi[2][13]*f->P[13][3] + t->Phi[2][14]*f->P[14][3];
+    w->M[4] = t->Phi[2][0]*f->P[0][4] + t->Phi[2][1]*f->P[1][4] + t->Phi[2][2]*f->P[2][4] +
+            t->Phi[2][3]*f->P[3][4] + t->Phi[2][4]*f->P[4][4] + t->Phi[2][5]*f->P[5][4] +
+            t->Phi[2][6]*f->P[6][4] + t->Phi[2][8]*f->P[8][4] + t->Phi[2][9]*f->P[9][4] +
+            t->Phi[2][10]*f->P[10][4] + t->Phi[2][11]*f->P[11][4] + t->Phi[2][12]*f->P[12][4] +
+            t->Phi[2][13]*f->P[13][4] + t->Phi[2][14]*f->P[14][4];
+    w->M[5] = t->Phi[2][0]*f->P[0][5] + t->Phi[2][1]*f->P[1][5] + t->Phi[2][2]*f->P[2][5] +
+            t->Phi[2][3]*f->P[3][5] + t->Phi[2][4]*f->P[4][5] + t->Phi[2][5]*f->P[5][5] +
+            t->Phi[2][6]*f->P[6][5] + t->Phi[2][8]*f->P[8][5] + t->Phi[2][9]*f->P[9][5] +
+            t->Phi[2][10]*f->P[10][5] + t->Phi[2][11]*f->P[11][5] + t->Phi[2][12]*f->P[12][5] +
+            t->Phi[2][13]*f->P[13][5] + t->Phi[2][14]*f->P[14][5];
+    w->M[6] = t->Phi[2][0]*f->P[0][6] + t->Phi[2][1]*f->P[1][6] + t->Phi[2][2]*f->P[2][6] +
+            t->Phi[2][3]*f->P[3][6] + t->Phi[2][4]*f->P[4][6] + t->Phi[2][5]*f->P[5][6] +
+            t->Phi[2][6]*f->P[6][6] + t->Phi[2][8]*f->P[8][6] + t->Phi[2][9]*f->P[9][6] +
+            t->Phi[2][10]*f->P[10][6] + t->Phi[2][11]*f->P[11][6] + t->Phi[2][12]*f->P[12][6] +
+            t->Phi[2][13]*f->P[13][6] + t->Phi[2][14]*f->P[14][6];
+    w->M[7] = t->Phi[2][0]*f->P[0][7] + t->Phi[2][1]*f->P[1][7] + t->Phi[2][2]*f->P[2][7] +
+            t->Phi[2][3]*f->P[3][7] + t->Phi[2][4]*f->P[4][7] + t->Phi[2][5]*f->P[5][7] +
+            t->Phi[2][6]*f->P[6][7] + t->Phi[2][8]*f->P[8][7] + t->Phi[2][9]*f->P[9][7] +
+            t->Phi[2][10]*f->P[10][7] + t->Phi[2][11]*f->P[11][7] + t->Phi[2][12]*f->P[12][7] +
+            t->Phi[2][13]*f->P[13][7] + t->Phi[2][14]*f->P[14][7];
+    w->M[8] = t->Phi[2][0]*f->P[0][8] + t->Phi[2][1]*f->P[1][8] + t->Phi[2][2]*f->P[2][8] +
+            t->Phi[2][3]*f->P[3][8] + t->Phi[2][4]*f->P[4][8] + t->Phi[2][5]*f->P[5][8] +
+            t->Phi[2][6]*f->P[6][8] + t->Phi[2][8]*f->P[8][8] + t->Phi[2][9]*f->P[9][8] +
+            t->Phi[2][10]*f->P[10][8] + t->Phi[2][11]*f->P[11][8] + t->Phi[2][12]*f->P[12][8] +
+            t->Phi[2][13]*f->P[13][8] + t->Phi[2][14]*f->P[14][8];
+    w->M[9] = t->Phi[2][0]*f->P[0][9] + t->Phi[2][1]*f->P[1][9] + t->Phi[2][2]*f->P[2][9] +
+            t->Phi[2][3]*f->P[3][9] + t->Phi[2][4]*f->P[4][9] + t->Phi[2][5]*f->P[5][9] +
+            t->Phi[2][6]*f->P[6][9] + t->Phi[2][8]*f->P[8][9] + t->Phi[2][9]*f->P[9][9] +
+            t->Phi[2][10]*f->P[10][9] + t->Phi[2][11]*f->P[11][9] + t->Phi[2][12]*f->P[12][9] +
+            t->Phi[2][13]*f->P[13][9] + t->Phi[2][14]*f->P[14][9];
+    w->M[10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] +
+            t->Phi[2][3]*f->P[3][10] + t->Phi[2][4]*f->P[4][10] + t->Phi[2][5]*f->P[5][10] +
+            t->Phi[2][6]*f->P[6][10] + t->Phi[2][8]*f->P[8][10] + t->Phi[2][9]*f->P[9][10] +
+            t->Phi[2][10]*f->P[10][10] + t->Phi[2][11]*f->P[11][10] + t->Phi[2][12]*f->P[12][10] +
+            t->Phi[2][13]*f->P[13][10] + t->Phi[2][14]*f->P[14][10];
+    w->M[11] = t->Phi[2][0]*f->P[0][11] + t->Phi[2][1]*f->P[1][11] + t->Phi[2][2]*f->P[2][11] +
+            t->Phi[2][3]*f->P[3][11] + t->Phi[2][4]*f->P[4][11] + t->Phi[2][5]*f->P[5][11] +
+            t->Phi[2][6]*f->P[6][11] + t->Phi[2][8]*f->P[8][11] + t->Phi[2][9]*f->P[9][11] +
+            t->Phi[2][10]*f->P[10][11] + t->Phi[2][11]*f->P[11][11] + t->Phi[2][12]*f->P[12][11] +
+            t->Phi[2][13]*f->P[13][11] + t->Phi[2][14]*f->P[14][11];
+    w->M[12] = t->Phi[2][0]*f->P[0][12] + t->Phi[2][1]*f->P[1][12] + t->Phi[2][2]*f->P[2][12] +
+            t->Phi[2][3]*f->P[3][12] + t->Phi[2][4]*f->P[4][12] + t->Phi[2][5]*f->P[5][12] +
+            t->Phi[2][6]*f->P[6][12] + t->Phi[2][8]*f->P[8][12] + t->Phi[2][9]*f->P[9][12] +
+            t->Phi[2][10]*f->P[10][12] + t->Phi[2][11]*f->P[11][12] + t->Phi[2][12]*f->P[12][12] +
+            t->Phi[2][13]*f->P[13][12] + t->Phi[2][14]*f->P[14][12];
+    w->M[13] = t->Phi[2][0]*f->P[0][13] + t->Phi[2][1]*f->P[1][13] + t->Phi[2][2]*f->P[2][13] +
+            t->Phi[2][3]*f->P[3][13] + t->Phi[2][4]*f->P[4][13] + t->Phi[2][5]*f->P[5][13] +
+            t->Phi[2][6]*f->P[6][13] + t->Phi[2][8]*f->P[8][13] + t->Phi[2][9]*f->P[9][13] +
+            t->Phi[2][10]*f->P[10][13] + t->Phi[2][11]*f->P[11][13] + t->Phi[2][12]*f->P[12][13] +
+            t->Phi[2][13]*f->P[13][13] + t->Phi[2][14]*f->P[14][13];
+    w->M[14] = t->Phi[2][0]*f->P[0][14] + t->Phi[2][1]*f->P[1][14] + t->Phi[2][2]*f->P[2][14] +
+            t->Phi[2][3]*f->P[3][14] + t->Phi[2][4]*f->P[4][14] + t->Phi[2][5]*f->P[5][14] +
+            t->Phi[2][6]*f->P[6][14] + t->Phi[2][8]*f->P[8][14] + t->Phi[2][9]*f->P[9][14] +
+            t->Phi[2][10]*f->P[10][14] + t->Phi[2][11]*f->P[11][14] + t->Phi[2][12]*f->P[12][14] +
+            t->Phi[2][13]*f->P[13][14] + t->Phi[2][14]*f->P[14][14];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -3654,55 +3141,129 @@ static ins_gps15_scalar propagate_row_2(const ins_gps15_transition *restrict t,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[2][0]*t->Phi[2][0] + w->M[2][1]*t->Phi[2][1] + w->M[2][2]*t->Phi[2][2] +
-            w->M[2][3]*t->Phi[2][3] + w->M[2][4]*t->Phi[2][4] + w->M[2][5]*t->Phi[2][5] +
-            w->M[2][6]*t->Phi[2][6] + w->M[2][8]*t->Phi[2][8] + w->M[2][9]*t->Phi[2][9] +
-            w->M[2][10]*t->Phi[2][10] + w->M[2][11]*t->Phi[2][11] + w->M[2][12]*t->Phi[2][12] +
-            w->M[2][13]*t->Phi[2][13] + w->M[2][14]*t->Phi[2][14] + t->Qd[2][2]; w->Pn[2][2] = v;
-            check += v - v;
-    v = w->M[2][0]*t->Phi[3][0] + w->M[2][1]*t->Phi[3][1] + w->M[2][2]*t->Phi[3][2] +
-            w->M[2][3]*t->Phi[3][3] + w->M[2][4]*t->Phi[3][4] + w->M[2][5]*t->Phi[3][5] +
-            w->M[2][6]*t->Phi[3][6] + w->M[2][8]*t->Phi[3][8] + w->M[2][9]*t->Phi[3][9] +
-            w->M[2][10]*t->Phi[3][10] + w->M[2][11]*t->Phi[3][11] + w->M[2][12]*t->Phi[3][12] +
-            w->M[2][13]*t->Phi[3][13] + w->M[2][14]*t->Phi[3][14] + t->Qd[2][3]; w->Pn[2][3] = v;
-            w->Pn[3][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[4][0] + w->M[2][1]*t->Phi[4][1] + w->M[2][2]*t->Phi[4][2] +
-            w->M[2][3]*t->Phi[4][3] + w->M[2][4]*t->Phi[4][4] + w->M[2][5]*t->Phi[4][5] +
-            w->M[2][6]*t->Phi[4][6] + w->M[2][8]*t->Phi[4][8] + w->M[2][9]*t->Phi[4][9] +
-            w->M[2][10]*t->Phi[4][10] + w->M[2][11]*t->Phi[4][11] + w->M[2][12]*t->Phi[4][12] +
-            w->M[2][13]*t->Phi[4][13] + w->M[2][14]*t->Phi[4][14] + t->Qd[2][4]; w->Pn[2][4] = v;
-            w->Pn[4][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[5][0] + w->M[2][1]*t->Phi[5][1] + w->M[2][2]*t->Phi[5][2] +
-            w->M[2][3]*t->Phi[5][3] + w->M[2][4]*t->Phi[5][4] + w->M[2][5]*t->Phi[5][5] +
-            w->M[2][6]*t->Phi[5][6] + w->M[2][8]*t->Phi[5][8] + w->M[2][9]*t->Phi[5][9] +
-            w->M[2][10]*t->Phi[5][10] + w->M[2][11]*t->Phi[5][11] + w->M[2][12]*t->Phi[5][12] +
-            w->M[2][13]*t->Phi[5][13] + w->M[2][14]*t->Phi[5][14] + t->Qd[2][5]; w->Pn[2][5] = v;
-            w->Pn[5][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[6][0] + w->M[2][1]*t->Phi[6][1] + w->M[2][2]*t->Phi[6][2] +
-            w->M[2][3]*t->Phi[6][3] + w->M[2][4]*t->Phi[6][4] + w->M[2][5]*t->Phi[6][5] +
-            w->M[2][6]*t->Phi[6][6] + w->M[2][8]*t->Phi[6][8] + w->M[2][9]*t->Phi[6][9] +
-            w->M[2][10]*t->Phi[6][10] + w->M[2][11]*t->Phi[6][11] + w->M[2][12]*t->Phi[6][12] +
-            w->M[2][13]*t->Phi[6][13] + w->M[2][14]*t->Phi[6][14] + t->Qd[2][6]; w->Pn[2][6] = v;
-            w->Pn[6][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[7][0] + w->M[2][1]*t->Phi[7][1] + w->M[2][2]*t->Phi[7][2] +
-            w->M[2][3]*t->Phi[7][3] + w->M[2][4]*t->Phi[7][4] + w->M[2][5]*t->Phi[7][5] +
-            w->M[2][6]*t->Phi[7][6] + w->M[2][7]*t->Phi[7][7] + w->M[2][8]*t->Phi[7][8] +
-            w->M[2][9]*t->Phi[7][9] + w->M[2][10]*t->Phi[7][10] + w->M[2][11]*t->Phi[7][11] +
-            w->M[2][12]*t->Phi[7][12] + w->M[2][13]*t->Phi[7][13] + w->M[2][14]*t->Phi[7][14] +
-            t->Qd[2][7]; w->Pn[2][7] = v; w->Pn[7][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[8][0] + w->M[2][1]*t->Phi[8][1] + w->M[2][2]*t->Phi[8][2] +
-            w->M[2][3]*t->Phi[8][3] + w->M[2][4]*t->Phi[8][4] + w->M[2][5]*t->Phi[8][5] +
-            w->M[2][6]*t->Phi[8][6] + w->M[2][8]*t->Phi[8][8] + w->M[2][9]*t->Phi[8][9] +
-            w->M[2][10]*t->Phi[8][10] + w->M[2][11]*t->Phi[8][11] + w->M[2][12]*t->Phi[8][12] +
-            w->M[2][13]*t->Phi[8][13] + w->M[2][14]*t->Phi[8][14] + t->Qd[2][8]; w->Pn[2][8] = v;
-            w->Pn[8][2] = v; check += v - v;
-    v = w->M[2][9]; w->Pn[2][9] = v; w->Pn[9][2] = v; check += v - v;
-    v = w->M[2][10]; w->Pn[2][10] = v; w->Pn[10][2] = v; check += v - v;
-    v = w->M[2][11]; w->Pn[2][11] = v; w->Pn[11][2] = v; check += v - v;
-    v = w->M[2][12]; w->Pn[2][12] = v; w->Pn[12][2] = v; check += v - v;
-    v = w->M[2][13]; w->Pn[2][13] = v; w->Pn[13][2] = v; check += v - v;
-    v = w->M[2][14]; w->Pn[2][14] = v; w->Pn[14][2] = v; check += v - v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[6]*t->Phi[2][6] +
+            w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] + w->M[10]*t->Phi[2][10] +
+            w->M[11]*t->Phi[2][11] + w->M[12]*t->Phi[2][12] + w->M[13]*t->Phi[2][13] +
+            w->M[14]*t->Phi[2][14] + t->Qd[29]; w->Pn[29] = v; check += v - v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
+            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] +
+            w->M[11]*t->Phi[3][11] + w->M[12]*t->Phi[3][12] + w->M[13]*t->Phi[3][13] +
+            w->M[14]*t->Phi[3][14] + t->Qd[30]; w->Pn[30] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] +
+            w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] + w->M[13]*t->Phi[4][13] +
+            w->M[14]*t->Phi[4][14] + t->Qd[31]; w->Pn[31] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] +
+            w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] + w->M[13]*t->Phi[5][13] +
+            w->M[14]*t->Phi[5][14] + t->Qd[32]; w->Pn[32] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] + w->M[10]*t->Phi[6][10] +
+            w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] + w->M[13]*t->Phi[6][13] +
+            w->M[14]*t->Phi[6][14] + t->Qd[33]; w->Pn[33] = v; check += v - v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + t->Qd[34]; w->Pn[34] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] + w->M[10]*t->Phi[8][10] +
+            w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] + w->M[13]*t->Phi[8][13] +
+            w->M[14]*t->Phi[8][14] + t->Qd[35]; w->Pn[35] = v; check += v - v;
+    v = w->M[9]; w->Pn[36] = v; check += v - v;
+    v = w->M[10]; w->Pn[37] = v; check += v - v;
+    v = w->M[11]; w->Pn[38] = v; check += v - v;
+    v = w->M[12]; w->Pn[39] = v; check += v - v;
+    v = w->M[13]; w->Pn[40] = v; check += v - v;
+    v = w->M[14]; w->Pn[41] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_3(const ins_gps15_filter *restrict f, const ins_gps15_transition
+        *restrict t, ins_gps15_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] +
+            t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] +
+            t->Phi[3][6]*f->P[6][0] + t->Phi[3][8]*f->P[8][0] + t->Phi[3][9]*f->P[9][0] +
+            t->Phi[3][10]*f->P[10][0] + t->Phi[3][11]*f->P[11][0] + t->Phi[3][12]*f->P[12][0] +
+            t->Phi[3][13]*f->P[13][0] + t->Phi[3][14]*f->P[14][0];
+    w->M[1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] +
+            t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] +
+            t->Phi[3][6]*f->P[6][1] + t->Phi[3][8]*f->P[8][1] + t->Phi[3][9]*f->P[9][1] +
+            t->Phi[3][10]*f->P[10][1] + t->Phi[3][11]*f->P[11][1] + t->Phi[3][12]*f->P[12][1] +
+            t->Phi[3][13]*f->P[13][1] + t->Phi[3][14]*f->P[14][1];
+    w->M[2] = t->Phi[3][0]*f->P[0][2] + t->Phi[3][1]*f->P[1][2] + t->Phi[3][2]*f->P[2][2] +
+            t->Phi[3][3]*f->P[3][2] + t->Phi[3][4]*f->P[4][2] + t->Phi[3][5]*f->P[5][2] +
+            t->Phi[3][6]*f->P[6][2] + t->Phi[3][8]*f->P[8][2] + t->Phi[3][9]*f->P[9][2] +
+            t->Phi[3][10]*f->P[10][2] + t->Phi[3][11]*f->P[11][2] + t->Phi[3][12]*f->P[12][2] +
+            t->Phi[3][13]*f->P[13][2] + t->Phi[3][14]*f->P[14][2];
+    w->M[3] = t->Phi[3][0]*f->P[0][3] + t->Phi[3][1]*f->P[1][3] + t->Phi[3][2]*f->P[2][3] +
+            t->Phi[3][3]*f->P[3][3] + t->Phi[3][4]*f->P[4][3] + t->Phi[3][5]*f->P[5][3] +
+            t->Phi[3][6]*f->P[6][3] + t->Phi[3][8]*f->P[8][3] + t->Phi[3][9]*f->P[9][3] +
+            t->Phi[3][10]*f->P[10][3] + t->Phi[3][11]*f->P[11][3] + t->Phi[3][12]*f->P[12][3] +
+            t->Phi[3][13]*f->P[13][3] + t->Phi[3][14]*f->P[14][3];
+    w->M[4] = t->Phi[3][0]*f->P[0][4] + t->Phi[3][1]*f->P[1][4] + t->Phi[3][2]*f->P[2][4] +
+            t->Phi[3][3]*f->P[3][4] + t->Phi[3][4]*f->P[4][4] + t->Phi[3][5]*f->P[5][4] +
+            t->Phi[3][6]*f->P[6][4] + t->Phi[3][8]*f->P[8][4] + t->Phi[3][9]*f->P[9][4] +
+            t->Phi[3][10]*f->P[10][4] + t->Phi[3][11]*f->P[11][4] + t->Phi[3][12]*f->P[12][4] +
+            t->Phi[3][13]*f->P[13][4] + t->Phi[3][14]*f->P[14][4];
+    w->M[5] = t->Phi[3][0]*f->P[0][5] + t->Phi[3][1]*f->P[1][5] + t->Phi[3][2]*f->P[2][5] +
+            t->Phi[3][3]*f->P[3][5] + t->Phi[3][4]*f->P[4][5] + t->Phi[3][5]*f->P[5][5] +
+            t->Phi[3][6]*f->P[6][5] + t->Phi[3][8]*f->P[8][5] + t->Phi[3][9]*f->P[9][5] +
+            t->Phi[3][10]*f->P[10][5] + t->Phi[3][11]*f->P[11][5] + t->Phi[3][12]*f->P[12][5] +
+            t->Phi[3][13]*f->P[13][5] + t->Phi[3][14]*f->P[14][5];
+    w->M[6] = t->Phi[3][0]*f->P[0][6] + t->Phi[3][1]*f->P[1][6] + t->Phi[3][2]*f->P[2][6] +
+            t->Phi[3][3]*f->P[3][6] + t->Phi[3][4]*f->P[4][6] + t->Phi[3][5]*f->P[5][6] +
+            t->Phi[3][6]*f->P[6][6] + t->Phi[3][8]*f->P[8][6] + t->Phi[3][9]*f->P[9][6] +
+            t->Phi[3][10]*f->P[10][6] + t->Phi[3][11]*f->P[11][6] + t->Phi[3][12]*f->P[12][6] +
+            t->Phi[3][13]*f->P[13][6] + t->Phi[3][14]*f->P[14][6];
+    w->M[7] = t->Phi[3][0]*f->P[0][7] + t->Phi[3][1]*f->P[1][7] + t->Phi[3][2]*f->P[2][7] +
+            t->Phi[3][3]*f->P[3][7] + t->Phi[3][4]*f->P[4][7] + t->Phi[3][5]*f->P[5][7] +
+            t->Phi[3][6]*f->P[6][7] + t->Phi[3][8]*f->P[8][7] + t->Phi[3][9]*f->P[9][7] +
+            t->Phi[3][10]*f->P[10][7] + t->Phi[3][11]*f->P[11][7] + t->Phi[3][12]*f->P[12][7] +
+            t->Phi[3][13]*f->P[13][7] + t->Phi[3][14]*f->P[14][7];
+    w->M[8] = t->Phi[3][0]*f->P[0][8] + t->Phi[3][1]*f->P[1][8] + t->Phi[3][2]*f->P[2][8] +
+            t->Phi[3][3]*f->P[3][8] + t->Phi[3][4]*f->P[4][8] + t->Phi[3][5]*f->P[5][8] +
+            t->Phi[3][6]*f->P[6][8] + t->Phi[3][8]*f->P[8][8] + t->Phi[3][9]*f->P[9][8] +
+            t->Phi[3][10]*f->P[10][8] + t->Phi[3][11]*f->P[11][8] + t->Phi[3][12]*f->P[12][8] +
+            t->Phi[3][13]*f->P[13][8] + t->Phi[3][14]*f->P[14][8];
+    w->M[9] = t->Phi[3][0]*f->P[0][9] + t->Phi[3][1]*f->P[1][9] + t->Phi[3][2]*f->P[2][9] +
+            t->Phi[3][3]*f->P[3][9] + t->Phi[3][4]*f->P[4][9] + t->Phi[3][5]*f->P[5][9] +
+            t->Phi[3][6]*f->P[6][9] + t->Phi[3][8]*f->P[8][9] + t->Phi[3][9]*f->P[9][9] +
+            t->Phi[3][10]*f->P[10][9] + t->Phi[3][11]*f->P[11][9] + t->Phi[3][12]*f->P[12][9] +
+            t->Phi[3][13]*f->P[13][9] + t->Phi[3][14]*f->P[14][9];
+    w->M[10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] +
+            t->Phi[3][3]*f->P[3][10] + t->Phi[3][4]*f->P[4][10] + t->Phi[3][5]*f->P[5][10] +
+            t->Phi[3][6]*f->P[6][10] + t->Phi[3][8]*f->P[8][10] + t->Phi[3][9]*f->P[9][10] +
+            t->Phi[3][10]*f->P[10][10] + t->Phi[3][11]*f->P[11][10] + t->Phi[3][12]*f->P[12][10] +
+            t->Phi[3][13]*f->P[13][10] + t->Phi[3][14]*f->P[14][10];
+    w->M[11] = t->Phi[3][0]*f->P[0][11] + t->Phi[3][1]*f->P[1][11] + t->Phi[3][2]*f->P[2][11] +
+            t->Phi[3][3]*f->P[3][11] + t->Phi[3][4]*f->P[4][11] + t->Phi[3][5]*f->P[5][11] +
+            t->Phi[3][6]*f->P[6][11] + t->Phi[3][8]*f->P[8][11] + t->Phi[3][9]*f->P[9][11] +
+            t->Phi[3][10]*f->P[10][11] + t->Phi[3][11]*f->P[11][11] + t->Phi[3][12]*f->P[12][11] +
+            t->Phi[3][13]*f->P[13][11] + t->Phi[3][14]*f->P[14][11];
+    w->M[12] = t->Phi[3][0]*f->P[0][12] + t->Phi[3][1]*f->P[1][12] + t->Phi[3][2]*f->P[2][12] +
+            t->Phi[3][3]*f->P[3][12] + t->Phi[3][4]*f->P[4][12] + t->Phi[3][5]*f->P[5][12] +
+            t->Phi[3][6]*f->P[6][12] + t->Phi[3][8]*f->P[8][12] + t->Phi[3][9]*f->P[9][12] +
+            t->Phi[3][10]*f->P[10][12] + t->Phi[3][11]*f->P[11][12] + t->Phi[3][12]*f->P[12][12] +
+            t->Phi[3][13]*f->P[13][12] + t->Phi[3][14]*f->P[14][12];
+    w->M[13] = t->Phi[3][0]*f->P[0][13] + t->Phi[3][1]*f->P[1][13] + t->Phi[3][2]*f->P[2][13] +
+            t->Phi[3][3]*f->P[3][13] + t->Phi[3][4]*f->P[4][13] + t->Phi[3][5]*f->P[5][13] +
+            t->Phi[3][6]*f->P[6][13] + t->Phi[3][8]*f->P[8][13] + t->Phi[3][9]*f->P[9][13] +
+            t->Phi[3][10]*f->P[10][13] + t->Phi[3][11]*f->P[11][13] + t->Phi[3][12]*f->P[12][13] +
+            t->Phi[3][13]*f->P[13][13] + t->Phi[3][14]*f->P[14][13];
+    w->M[14] = t->Phi[3][0]*f->P[0][14] + t->Phi[3][1]*f->P[1][14] + t->Phi[3][2]*f->P[2][14] +
+            t->Phi[3][3]*f->P[3][14] + t->Phi[3][4]*f->P[4][14] + t->Phi[3][5]*f->P[5][14] +
+            t->Phi[3][6]*f->P[6][14] + t->Phi[3][8]*f->P[8][14] + t->Phi[3][9]*f->P[9][14] +
+            t->Phi[3][10]*f->P[10][14] + t->Phi[3][11]*f->P[11][14] + t->Phi[3][12]*f->P[12][14] +
+            t->Phi[3][13]*f->P[13][14] + t->Phi[3][14]*f->P[14][14];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -3710,49 +3271,124 @@ static ins_gps15_scalar propagate_row_3(const ins_gps15_transition *restrict t,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[3][0]*t->Phi[3][0] + w->M[3][1]*t->Phi[3][1] + w->M[3][2]*t->Phi[3][2] +
-            w->M[3][3]*t->Phi[3][3] + w->M[3][4]*t->Phi[3][4] + w->M[3][5]*t->Phi[3][5] +
-            w->M[3][6]*t->Phi[3][6] + w->M[3][8]*t->Phi[3][8] + w->M[3][9]*t->Phi[3][9] +
-            w->M[3][10]*t->Phi[3][10] + w->M[3][11]*t->Phi[3][11] + w->M[3][12]*t->Phi[3][12] +
-            w->M[3][13]*t->Phi[3][13] + w->M[3][14]*t->Phi[3][14] + t->Qd[3][3]; w->Pn[3][3] = v;
-            check += v - v;
-    v = w->M[3][0]*t->Phi[4][0] + w->M[3][1]*t->Phi[4][1] + w->M[3][2]*t->Phi[4][2] +
-            w->M[3][3]*t->Phi[4][3] + w->M[3][4]*t->Phi[4][4] + w->M[3][5]*t->Phi[4][5] +
-            w->M[3][6]*t->Phi[4][6] + w->M[3][8]*t->Phi[4][8] + w->M[3][9]*t->Phi[4][9] +
-            w->M[3][10]*t->Phi[4][10] + w->M[3][11]*t->Phi[4][11] + w->M[3][12]*t->Phi[4][12] +
-            w->M[3][13]*t->Phi[4][13] + w->M[3][14]*t->Phi[4][14] + t->Qd[3][4]; w->Pn[3][4] = v;
-            w->Pn[4][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[5][0] + w->M[3][1]*t->Phi[5][1] + w->M[3][2]*t->Phi[5][2] +
-            w->M[3][3]*t->Phi[5][3] + w->M[3][4]*t->Phi[5][4] + w->M[3][5]*t->Phi[5][5] +
-            w->M[3][6]*t->Phi[5][6] + w->M[3][8]*t->Phi[5][8] + w->M[3][9]*t->Phi[5][9] +
-            w->M[3][10]*t->Phi[5][10] + w->M[3][11]*t->Phi[5][11] + w->M[3][12]*t->Phi[5][12] +
-            w->M[3][13]*t->Phi[5][13] + w->M[3][14]*t->Phi[5][14] + t->Qd[3][5]; w->Pn[3][5] = v;
-            w->Pn[5][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[6][0] + w->M[3][1]*t->Phi[6][1] + w->M[3][2]*t->Phi[6][2] +
-            w->M[3][3]*t->Phi[6][3] + w->M[3][4]*t->Phi[6][4] + w->M[3][5]*t->Phi[6][5] +
-            w->M[3][6]*t->Phi[6][6] + w->M[3][8]*t->Phi[6][8] + w->M[3][9]*t->Phi[6][9] +
-            w->M[3][10]*t->Phi[6][10] + w->M[3][11]*t->Phi[6][11] + w->M[3][12]*t->Phi[6][12] +
-            w->M[3][13]*t->Phi[6][13] + w->M[3][14]*t->Phi[6][14] + t->Qd[3][6]; w->Pn[3][6] = v;
-            w->Pn[6][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[7][0] + w->M[3][1]*t->Phi[7][1] + w->M[3][2]*t->Phi[7][2] +
-            w->M[3][3]*t->Phi[7][3] + w->M[3][4]*t->Phi[7][4] + w->M[3][5]*t->Phi[7][5] +
-            w->M[3][6]*t->Phi[7][6] + w->M[3][7]*t->Phi[7][7] + w->M[3][8]*t->Phi[7][8] +
-            w->M[3][9]*t->Phi[7][9] + w->M[3][10]*t->Phi[7][10] + w->M[3][11]*t->Phi[7][11] +
-            w->M[3][12]*t->Phi[7][12] + w->M[3][13]*t->Phi[7][13] + w->M[3][14]*t->Phi[7][14] +
-            t->Qd[3][7]; w->Pn[3][7] = v; w->Pn[7][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[8][0] + w->M[3][1]*t->Phi[8][1] + w->M[3][2]*t->Phi[8][2] +
-            w->M[3][3]*t->Phi[8][3] + w->M[3][4]*t->Phi[8][4] + w->M[3][5]*t->Phi[8][5] +
-            w->M[3][6]*t->Phi[8][6] + w->M[3][8]*t->Phi[8][8] + w->M[3][9]*t->Phi[8][9] +
-            w->M[3][10]*t->Phi[8][10] + w->M[3][11]*t->Phi[8][11] + w->M[3][12]*t->Phi[8][12] +
-            w->M[3][13]*t->Phi[8][13] + w->M[3][14]*t->Phi[8][14] + t->Qd[3][8]; w->Pn[3][8] = v;
-            w->Pn[8][3] = v; check += v - v;
-    v = w->M[3][9]; w->Pn[3][9] = v; w->Pn[9][3] = v; check += v - v;
-    v = w->M[3][10]; w->Pn[3][10] = v; w->Pn[10][3] = v; check += v - v;
-    v = w->M[3][11]; w->Pn[3][11] = v; w->Pn[11][3] = v; check += v - v;
-    v = w->M[3][12]; w->Pn[3][12] = v; w->Pn[12][3] = v; check += v - v;
-    v = w->M[3][13]; w->Pn[3][13] = v; w->Pn[13][3] = v; check += v - v;
-    v = w->M[3][14]; w->Pn[3][14] = v; w->Pn[14][3] = v; check += v - v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
+            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] +
+            w->M[11]*t->Phi[3][11] + w->M[12]*t->Phi[3][12] + w->M[13]*t->Phi[3][13] +
+            w->M[14]*t->Phi[3][14] + t->Qd[42]; w->Pn[42] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] +
+            w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] + w->M[13]*t->Phi[4][13] +
+            w->M[14]*t->Phi[4][14] + t->Qd[43]; w->Pn[43] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] +
+            w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] + w->M[13]*t->Phi[5][13] +
+            w->M[14]*t->Phi[5][14] + t->Qd[44]; w->Pn[44] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] + w->M[10]*t->Phi[6][10] +
+            w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] + w->M[13]*t->Phi[6][13] +
+            w->M[14]*t->Phi[6][14] + t->Qd[45]; w->Pn[45] = v; check += v - v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + t->Qd[46]; w->Pn[46] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] + w->M[10]*t->Phi[8][10] +
+            w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] + w->M[13]*t->Phi[8][13] +
+            w->M[14]*t->Phi[8][14] + t->Qd[47]; w->Pn[47] = v; check += v - v;
+    v = w->M[9]; w->Pn[48] = v; check += v - v;
+    v = w->M[10]; w->Pn[49] = v; check += v - v;
+    v = w->M[11]; w->Pn[50] = v; check += v - v;
+    v = w->M[12]; w->Pn[51] = v; check += v - v;
+    v = w->M[13]; w->Pn[52] = v; check += v - v;
+    v = w->M[14]; w->Pn[53] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_4(const ins_gps15_filter *restrict f, const ins_gps15_transition
+        *restrict t, ins_gps15_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] +
+            t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] +
+            t->Phi[4][6]*f->P[6][0] + t->Phi[4][8]*f->P[8][0] + t->Phi[4][9]*f->P[9][0] +
+            t->Phi[4][10]*f->P[10][0] + t->Phi[4][11]*f->P[11][0] + t->Phi[4][12]*f->P[12][0] +
+            t->Phi[4][13]*f->P[13][0] + t->Phi[4][14]*f->P[14][0];
+    w->M[1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] +
+            t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] +
+            t->Phi[4][6]*f->P[6][1] + t->Phi[4][8]*f->P[8][1] + t->Phi[4][9]*f->P[9][1] +
+            t->Phi[4][10]*f->P[10][1] + t->Phi[4][11]*f->P[11][1] + t->Phi[4][12]*f->P[12][1] +
+            t->Phi[4][13]*f->P[13][1] + t->Phi[4][14]*f->P[14][1];
+    w->M[2] = t->Phi[4][0]*f->P[0][2] + t->Phi[4][1]*f->P[1][2] + t->Phi[4][2]*f->P[2][2] +
+            t->Phi[4][3]*f->P[3][2] + t->Phi[4][4]*f->P[4][2] + t->Phi[4][5]*f->P[5][2] +
+            t->Phi[4][6]*f->P[6][2] + t->Phi[4][8]*f->P[8][2] + t->Phi[4][9]*f->P[9][2] +
+            t->Phi[4][10]*f->P[10][2] + t->Phi[4][11]*f->P[11][2] + t->Phi[4][12]*f->P[12][2] +
+            t->Phi[4][13]*f->P[13][2] + t->Phi[4][14]*f->P[14][2];
+    w->M[3] = t->Phi[4][0]*f->P[0][3] + t->Phi[4][1]*f->P[1][3] + t->Phi[4][2]*f->P[2][3] +
+            t->Phi[4][3]*f->P[3][3] + t->Phi[4][4]*f->P[4][3] + t->Phi[4][5]*f->P[5][3] +
+            t->Phi[4][6]*f->P[6][3] + t->Phi[4][8]*f->P[8][3] + t->Phi[4][9]*f->P[9][3] +
+            t->Phi[4][10]*f->P[10][3] + t->Phi[4][11]*f->P[11][3] + t->Phi[4][12]*f->P[12][3] +
+            t->Phi[4][13]*f->P[13][3] + t->Phi[4][14]*f->P[14][3];
+    w->M[4] = t->Phi[4][0]*f->P[0][4] + t->Phi[4][1]*f->P[1][4] + t->Phi[4][2]*f->P[2][4] +
+            t->Phi[4][3]*f->P[3][4] + t->Phi[4][4]*f->P[4][4] + t->Phi[4][5]*f->P[5][4] +
+            t->Phi[4][6]*f->P[6][4] + t->Phi[4][8]*f->P[8][4] + t->Phi[4][9]*f->P[9][4] +
+            t->Phi[4][10]*f->P[10][4] + t->Phi[4][11]*f->P[11][4] + t->Phi[4][12]*f->P[12][4] +
+            t->Phi[4][13]*f->P[13][4] + t->Phi[4][14]*f->P[14][4];
+    w->M[5] = t->Phi[4][0]*f->P[0][5] + t->Phi[4][1]*f->P[1][5] + t->Phi[4][2]*f->P[2][5] +
+            t->Phi[4][3]*f->P[3][5] + t->Phi[4][4]*f->P[4][5] + t->Phi[4][5]*f->P[5][5] +
+            t->Phi[4][6]*f->P[6][5] + t->Phi[4][8]*f->P[8][5] + t->Phi[4][9]*f->P[9][5] +
+            t->Phi[4][10]*f->P[10][5] + t->Phi[4][11]*f->P[11][5] + t->Phi[4][12]*f->P[12][5] +
+            t->Phi[4][13]*f->P[13][5] + t->Phi[4][14]*f->P[14][5];
+    w->M[6] = t->Phi[4][0]*f->P[0][6] + t->Phi[4][1]*f->P[1][6] + t->Phi[4][2]*f->P[2][6] +
+            t->Phi[4][3]*f->P[3][6] + t->Phi[4][4]*f->P[4][6] + t->Phi[4][5]*f->P[5][6] +
+            t->Phi[4][6]*f->P[6][6] + t->Phi[4][8]*f->P[8][6] + t->Phi[4][9]*f->P[9][6] +
+            t->Phi[4][10]*f->P[10][6] + t->Phi[4][11]*f->P[11][6] + t->Phi[4][12]*f->P[12][6] +
+            t->Phi[4][13]*f->P[13][6] + t->Phi[4][14]*f->P[14][6];
+    w->M[7] = t->Phi[4][0]*f->P[0][7] + t->Phi[4][1]*f->P[1][7] + t->Phi[4][2]*f->P[2][7] +
+            t->Phi[4][3]*f->P[3][7] + t->Phi[4][4]*f->P[4][7] + t->Phi[4][5]*f->P[5][7] +
+            t->Phi[4][6]*f->P[6][7] + t->Phi[4][8]*f->P[8][7] + t->Phi[4][9]*f->P[9][7] +
+            t->Phi[4][10]*f->P[10][7] + t->Phi[4][11]*f->P[11][7] + t->Phi[4][12]*f->P[12][7] +
+            t->Phi[4][13]*f->P[13][7] + t->Phi[4][14]*f->P[14][7];
+    w->M[8] = t->Phi[4][0]*f->P[0][8] + t->Phi[4][1]*f->P[1][8] + t->Phi[4][2]*f->P[2][8] +
+            t->Phi[4][3]*f->P[3][8] + t->Phi[4][4]*f->P[4][8] + t->Phi[4][5]*f->P[5][8] +
+            t->Phi[4][6]*f->P[6][8] + t->Phi[4][8]*f->P[8][8] + t->Phi[4][9]*f->P[9][8] +
+            t->Phi[4][10]*f->P[10][8] + t->Phi[4][11]*f->P[11][8] + t->Phi[4][12]*f->P[12][8] +
+            t->Phi[4][13]*f->P[13][8] + t->Phi[4][14]*f->P[14][8];
+    w->M[9] = t->Phi[4][0]*f->P[0][9] + t->Phi[4][1]*f->P[1][9] + t->Phi[4][2]*f->P[2][9] +
+            t->Phi[4][3]*f->P[3][9] + t->Phi[4][4]*f->P[4][9] + t->Phi[4][5]*f->P[5][9] +
+            t->Phi[4][6]*f->P[6][9] + t->Phi[4][8]*f->P[8][9] + t->Phi[4][9]*f->P[9][9] +
+            t->Phi[4][10]*f->P[10][9] + t->Phi[4][11]*f->P[11][9] + t->Phi[4][12]*f->P[12][9] +
+            t->Phi[4][13]*f->P[13][9] + t->Phi[4][14]*f->P[14][9];
+    w->M[10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] +
+            t->Phi[4][3]*f->P[3][10] + t->Phi[4][4]*f->P[4][10] + t->Phi[4][5]*f->P[5][10] +
+            t->Phi[4][6]*f->P[6][10] + t->Phi[4][8]*f->P[8][10] + t->Phi[4][9]*f->P[9][10] +
+            t->Phi[4][10]*f->P[10][10] + t->Phi[4][11]*f->P[11][10] + t->Phi[4][12]*f->P[12][10] +
+            t->Phi[4][13]*f->P[13][10] + t->Phi[4][14]*f->P[14][10];
+    w->M[11] = t->Phi[4][0]*f->P[0][11] + t->Phi[4][1]*f->P[1][11] + t->Phi[4][2]*f->P[2][11] +
+            t->Phi[4][3]*f->P[3][11] + t->Phi[4][4]*f->P[4][11] + t->Phi[4][5]*f->P[5][11] +
+            t->Phi[4][6]*f->P[6][11] + t->Phi[4][8]*f->P[8][11] + t->Phi[4][9]*f->P[9][11] +
+            t->Phi[4][10]*f->P[10][11] + t->Phi[4][11]*f->P[11][11] + t->Phi[4][12]*f->P[12][11] +
+            t->Phi[4][13]*f->P[13][11] + t->Phi[4][14]*f->P[14][11];
+    w->M[12] = t->Phi[4][0]*f->P[0][12] + t->Phi[4][1]*f->P[1][12] + t->Phi[4][2]*f->P[2][12] +
+            t->Phi[4][3]*f->P[3][12] + t->Phi[4][4]*f->P[4][12] + t->Phi[4][5]*f->P[5][12] +
+            t->Phi[4][6]*f->P[6][12] + t->Phi[4][8]*f->P[8][12] + t->Phi[4][9]*f->P[9][12] +
+            t->Phi[4][10]*f->P[10][12] + t->Phi[4][11]*f->P[11][12] + t->Phi[4][12]*f->P[12][12] +
+            t->Phi[4][13]*f->P[13][12] + t->Phi[4][14]*f->P[14][12];
+    w->M[13] = t->Phi[4][0]*f->P[0][13] + t->Phi[4][1]*f->P[1][13] + t->Phi[4][2]*f->P[2][13] +
+            t->Phi[4][3]*f->P[3][13] + t->Phi[4][4]*f->P[4][13] + t->Phi[4][5]*f->P[5][13] +
+            t->Phi[4][6]*f->P[6][13] + t->Phi[4][8]*f->P[8][13] + t->Phi[4][9]*f->P[9][13] +
+            t->Phi[4][10]*f->P[10][13] + t->Phi[4][11]*f->P[11][13] + t->Phi[4][12]*f->P[12][13] +
+            t->Phi[4][13]*f->P[13][13] + t->Phi[4][14]*f->P[14][13];
+    w->M[14] = t->Phi[4][0]*f->P[0][14] + t->Phi[4][1]*f->P[1][14] + t->Phi[4][2]*f->P[2][14] +
+            t->Phi[4][3]*f->P[3][14] + t->Phi[4][4]*f->P[4][14] + t->Phi[4][5]*f->P[5][14] +
+            t->Phi[4][6]*f->P[6][14] + t->Phi[4][8]*f->P[8][14] + t->Phi[4][9]*f->P[9][14] +
+            t->Phi[4][10]*f->P[10][14] + t->Phi[4][11]*f->P[11][14] + t->Phi[4][12]*f->P[12][14] +
+            t->Phi[4][13]*f->P[13][14] + t->Phi[4][14]*f->P[14][14];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -3760,43 +3396,119 @@ static ins_gps15_scalar propagate_row_4(const ins_gps15_transition *restrict t,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[4][0]*t->Phi[4][0] + w->M[4][1]*t->Phi[4][1] + w->M[4][2]*t->Phi[4][2] +
-            w->M[4][3]*t->Phi[4][3] + w->M[4][4]*t->Phi[4][4] + w->M[4][5]*t->Phi[4][5] +
-            w->M[4][6]*t->Phi[4][6] + w->M[4][8]*t->Phi[4][8] + w->M[4][9]*t->Phi[4][9] +
-            w->M[4][10]*t->Phi[4][10] + w->M[4][11]*t->Phi[4][11] + w->M[4][12]*t->Phi[4][12] +
-            w->M[4][13]*t->Phi[4][13] + w->M[4][14]*t->Phi[4][14] + t->Qd[4][4]; w->Pn[4][4] = v;
-            check += v - v;
-    v = w->M[4][0]*t->Phi[5][0] + w->M[4][1]*t->Phi[5][1] + w->M[4][2]*t->Phi[5][2] +
-            w->M[4][3]*t->Phi[5][3] + w->M[4][4]*t->Phi[5][4] + w->M[4][5]*t->Phi[5][5] +
-            w->M[4][6]*t->Phi[5][6] + w->M[4][8]*t->Phi[5][8] + w->M[4][9]*t->Phi[5][9] +
-            w->M[4][10]*t->Phi[5][10] + w->M[4][11]*t->Phi[5][11] + w->M[4][12]*t->Phi[5][12] +
-            w->M[4][13]*t->Phi[5][13] + w->M[4][14]*t->Phi[5][14] + t->Qd[4][5]; w->Pn[4][5] = v;
-            w->Pn[5][4] = v; check += v - v;
-    v = w->M[4][0]*t->Phi[6][0] + w->M[4][1]*t->Phi[6][1] + w->M[4][2]*t->Phi[6][2] +
-            w->M[4][3]*t->Phi[6][3] + w->M[4][4]*t->Phi[6][4] + w->M[4][5]*t->Phi[6][5] +
-            w->M[4][6]*t->Phi[6][6] + w->M[4][8]*t->Phi[6][8] + w->M[4][9]*t->Phi[6][9] +
-            w->M[4][10]*t->Phi[6][10] + w->M[4][11]*t->Phi[6][11] + w->M[4][12]*t->Phi[6][12] +
-            w->M[4][13]*t->Phi[6][13] + w->M[4][14]*t->Phi[6][14] + t->Qd[4][6]; w->Pn[4][6] = v;
-            w->Pn[6][4] = v; check += v - v;
-    v = w->M[4][0]*t->Phi[7][0] + w->M[4][1]*t->Phi[7][1] + w->M[4][2]*t->Phi[7][2] +
-            w->M[4][3]*t->Phi[7][3] + w->M[4][4]*t->Phi[7][4] + w->M[4][5]*t->Phi[7][5] +
-            w->M[4][6]*t->Phi[7][6] + w->M[4][7]*t->Phi[7][7] + w->M[4][8]*t->Phi[7][8] +
-            w->M[4][9]*t->Phi[7][9] + w->M[4][10]*t->Phi[7][10] + w->M[4][11]*t->Phi[7][11] +
-            w->M[4][12]*t->Phi[7][12] + w->M[4][13]*t->Phi[7][13] + w->M[4][14]*t->Phi[7][14] +
-            t->Qd[4][7]; w->Pn[4][7] = v; w->Pn[7][4] = v; check += v - v;
-    v = w->M[4][0]*t->Phi[8][0] + w->M[4][1]*t->Phi[8][1] + w->M[4][2]*t->Phi[8][2] +
-            w->M[4][3]*t->Phi[8][3] + w->M[4][4]*t->Phi[8][4] + w->M[4][5]*t->Phi[8][5] +
-            w->M[4][6]*t->Phi[8][6] + w->M[4][8]*t->Phi[8][8] + w->M[4][9]*t->Phi[8][9] +
-            w->M[4][10]*t->Phi[8][10] + w->M[4][11]*t->Phi[8][11] + w->M[4][12]*t->Phi[8][12] +
-            w->M[4][13]*t->Phi[8][13] + w->M[4][14]*t->Phi[8][14] + t->Qd[4][8]; w->Pn[4][8] = v;
-            w->Pn[8][4] = v; check += v - v;
-    v = w->M[4][9]; w->Pn[4][9] = v; w->Pn[9][4] = v; check += v - v;
-    v = w->M[4][10]; w->Pn[4][10] = v; w->Pn[10][4] = v; check += v - v;
-    v = w->M[4][11]; w->Pn[4][11] = v; w->Pn[11][4] = v; check += v - v;
-    v = w->M[4][12]; w->Pn[4][12] = v; w->Pn[12][4] = v; check += v - v;
-    v = w->M[4][13]; w->Pn[4][13] = v; w->Pn[13][4] = v; check += v - v;
-    v = w->M[4][14]; w->Pn[4][14] = v; w->Pn[14][4] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] +
+            w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] + w->M[13]*t->Phi[4][13] +
+            w->M[14]*t->Phi[4][14] + t->Qd[54]; w->Pn[54] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] +
+            w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] + w->M[13]*t->Phi[5][13] +
+            w->M[14]*t->Phi[5][14] + t->Qd[55]; w->Pn[55] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] + w->M[10]*t->Phi[6][10] +
+            w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] + w->M[13]*t->Phi[6][13] +
+            w->M[14]*t->Phi[6][14] + t->Qd[56]; w->Pn[56] = v; check += v - v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + t->Qd[57]; w->Pn[57] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] + w->M[10]*t->Phi[8][10] +
+            w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] + w->M[13]*t->Phi[8][13] +
+            w->M[14]*t->Phi[8][14] + t->Qd[58]; w->Pn[58] = v; check += v - v;
+    v = w->M[9]; w->Pn[59] = v; check += v - v;
+    v = w->M[10]; w->Pn[60] = v; check += v - v;
+    v = w->M[11]; w->Pn[61] = v; check += v - v;
+    v = w->M[12]; w->Pn[62] = v; check += v - v;
+    v = w->M[13]; w->Pn[63] = v; check += v - v;
+    v = w->M[14]; w->Pn[64] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_5(const ins_gps15_filter *restrict f, const ins_gps15_transition
+        *restrict t, ins_gps15_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] +
+            t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] +
+            t->Phi[5][6]*f->P[6][0] + t->Phi[5][8]*f->P[8][0] + t->Phi[5][9]*f->P[9][0] +
+            t->Phi[5][10]*f->P[10][0] + t->Phi[5][11]*f->P[11][0] + t->Phi[5][12]*f->P[12][0] +
+            t->Phi[5][13]*f->P[13][0] + t->Phi[5][14]*f->P[14][0];
+    w->M[1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] +
+            t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] +
+            t->Phi[5][6]*f->P[6][1] + t->Phi[5][8]*f->P[8][1] + t->Phi[5][9]*f->P[9][1] +
+            t->Phi[5][10]*f->P[10][1] + t->Phi[5][11]*f->P[11][1] + t->Phi[5][12]*f->P[12][1] +
+            t->Phi[5][13]*f->P[13][1] + t->Phi[5][14]*f->P[14][1];
+    w->M[2] = t->Phi[5][0]*f->P[0][2] + t->Phi[5][1]*f->P[1][2] + t->Phi[5][2]*f->P[2][2] +
+            t->Phi[5][3]*f->P[3][2] + t->Phi[5][4]*f->P[4][2] + t->Phi[5][5]*f->P[5][2] +
+            t->Phi[5][6]*f->P[6][2] + t->Phi[5][8]*f->P[8][2] + t->Phi[5][9]*f->P[9][2] +
+            t->Phi[5][10]*f->P[10][2] + t->Phi[5][11]*f->P[11][2] + t->Phi[5][12]*f->P[12][2] +
+            t->Phi[5][13]*f->P[13][2] + t->Phi[5][14]*f->P[14][2];
+    w->M[3] = t->Phi[5][0]*f->P[0][3] + t->Phi[5][1]*f->P[1][3] + t->Phi[5][2]*f->P[2][3] +
+            t->Phi[5][3]*f->P[3][3] + t->Phi[5][4]*f->P[4][3] + t->Phi[5][5]*f->P[5][3] +
+            t->Phi[5][6]*f->P[6][3] + t->Phi[5][8]*f->P[8][3] + t->Phi[5][9]*f->P[9][3] +
+            t->Phi[5][10]*f->P[10][3] + t->Phi[5][11]*f->P[11][3] + t->Phi[5][12]*f->P[12][3] +
+            t->Phi[5][13]*f->P[13][3] + t->Phi[5][14]*f->P[14][3];
+    w->M[4] = t->Phi[5][0]*f->P[0][4] + t->Phi[5][1]*f->P[1][4] + t->Phi[5][2]*f->P[2][4] +
+            t->Phi[5][3]*f->P[3][4] + t->Phi[5][4]*f->P[4][4] + t->Phi[5][5]*f->P[5][4] +
+            t->Phi[5][6]*f->P[6][4] + t->Phi[5][8]*f->P[8][4] + t->Phi[5][9]*f->P[9][4] +
+            t->Phi[5][10]*f->P[10][4] + t->Phi[5][11]*f->P[11][4] + t->Phi[5][12]*f->P[12][4] +
+            t->Phi[5][13]*f->P[13][4] + t->Phi[5][14]*f->P[14][4];
+    w->M[5] = t->Phi[5][0]*f->P[0][5] + t->Phi[5][1]*f->P[1][5] + t->Phi[5][2]*f->P[2][5] +
+            t->Phi[5][3]*f->P[3][5] + t->Phi[5][4]*f->P[4][5] + t->Phi[5][5]*f->P[5][5] +
+            t->Phi[5][6]*f->P[6][5] + t->Phi[5][8]*f->P[8][5] + t->Phi[5][9]*f->P[9][5] +
+            t->Phi[5][10]*f->P[10][5] + t->Phi[5][11]*f->P[11][5] + t->Phi[5][12]*f->P[12][5] +
+            t->Phi[5][13]*f->P[13][5] + t->Phi[5][14]*f->P[14][5];
+    w->M[6] = t->Phi[5][0]*f->P[0][6] + t->Phi[5][1]*f->P[1][6] + t->Phi[5][2]*f->P[2][6] +
+            t->Phi[5][3]*f->P[3][6] + t->Phi[5][4]*f->P[4][6] + t->Phi[5][5]*f->P[5][6] +
+            t->Phi[5][6]*f->P[6][6] + t->Phi[5][8]*f->P[8][6] + t->Phi[5][9]*f->P[9][6] +
+            t->Phi[5][10]*f->P[10][6] + t->Phi[5][11]*f->P[11][6] + t->Phi[5][12]*f->P[12][6] +
+            t->Phi[5][13]*f->P[13][6] + t->Phi[5][14]*f->P[14][6];
+    w->M[7] = t->Phi[5][0]*f->P[0][7] + t->Phi[5][1]*f->P[1][7] + t->Phi[5][2]*f->P[2][7] +
+            t->Phi[5][3]*f->P[3][7] + t->Phi[5][4]*f->P[4][7] + t->Phi[5][5]*f->P[5][7] +
+            t->Phi[5][6]*f->P[6][7] + t->Phi[5][8]*f->P[8][7] + t->Phi[5][9]*f->P[9][7] +
+            t->Phi[5][10]*f->P[10][7] + t->Phi[5][11]*f->P[11][7] + t->Phi[5][12]*f->P[12][7] +
+            t->Phi[5][13]*f->P[13][7] + t->Phi[5][14]*f->P[14][7];
+    w->M[8] = t->Phi[5][0]*f->P[0][8] + t->Phi[5][1]*f->P[1][8] + t->Phi[5][2]*f->P[2][8] +
+            t->Phi[5][3]*f->P[3][8] + t->Phi[5][4]*f->P[4][8] + t->Phi[5][5]*f->P[5][8] +
+            t->Phi[5][6]*f->P[6][8] + t->Phi[5][8]*f->P[8][8] + t->Phi[5][9]*f->P[9][8] +
+            t->Phi[5][10]*f->P[10][8] + t->Phi[5][11]*f->P[11][8] + t->Phi[5][12]*f->P[12][8] +
+            t->Phi[5][13]*f->P[13][8] + t->Phi[5][14]*f->P[14][8];
+    w->M[9] = t->Phi[5][0]*f->P[0][9] + t->Phi[5][1]*f->P[1][9] + t->Phi[5][2]*f->P[2][9] +
+            t->Phi[5][3]*f->P[3][9] + t->Phi[5][4]*f->P[4][9] + t->Phi[5][5]*f->P[5][9] +
+            t->Phi[5][6]*f->P[6][9] + t->Phi[5][8]*f->P[8][9] + t->Phi[5][9]*f->P[9][9] +
+            t->Phi[5][10]*f->P[10][9] + t->Phi[5][11]*f->P[11][9] + t->Phi[5][12]*f->P[12][9] +
+            t->Phi[5][13]*f->P[13][9] + t->Phi[5][14]*f->P[14][9];
+    w->M[10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] +
+            t->Phi[5][3]*f->P[3][10] + t->Phi[5][4]*f->P[4][10] + t->Phi[5][5]*f->P[5][10] +
+            t->Phi[5][6]*f->P[6][10] + t->Phi[5][8]*f->P[8][10] + t->Phi[5][9]*f->P[9][10] +
+            t->Phi[5][10]*f->P[10][10] + t->Phi[5][11]*f->P[11][10] + t->Phi[5][12]*f->P[12][10] +
+            t->Phi[5][13]*f->P[13][10] + t->Phi[5][14]*f->P[14][10];
+    w->M[11] = t->Phi[5][0]*f->P[0][11] + t->Phi[5][1]*f->P[1][11] + t->Phi[5][2]*f->P[2][11] +
+            t->Phi[5][3]*f->P[3][11] + t->Phi[5][4]*f->P[4][11] + t->Phi[5][5]*f->P[5][11] +
+            t->Phi[5][6]*f->P[6][11] + t->Phi[5][8]*f->P[8][11] + t->Phi[5][9]*f->P[9][11] +
+            t->Phi[5][10]*f->P[10][11] + t->Phi[5][11]*f->P[11][11] + t->Phi[5][12]*f->P[12][11] +
+            t->Phi[5][13]*f->P[13][11] + t->Phi[5][14]*f->P[14][11];
+    w->M[12] = t->Phi[5][0]*f->P[0][12] + t->Phi[5][1]*f->P[1][12] + t->Phi[5][2]*f->P[2][12] +
+            t->Phi[5][3]*f->P[3][12] + t->Phi[5][4]*f->P[4][12] + t->Phi[5][5]*f->P[5][12] +
+            t->Phi[5][6]*f->P[6][12] + t->Phi[5][8]*f->P[8][12] + t->Phi[5][9]*f->P[9][12] +
+            t->Phi[5][10]*f->P[10][12] + t->Phi[5][11]*f->P[11][12] + t->Phi[5][12]*f->P[12][12] +
+            t->Phi[5][13]*f->P[13][12] + t->Phi[5][14]*f->P[14][12];
+    w->M[13] = t->Phi[5][0]*f->P[0][13] + t->Phi[5][1]*f->P[1][13] + t->Phi[5][2]*f->P[2][13] +
+            t->Phi[5][3]*f->P[3][13] + t->Phi[5][4]*f->P[4][13] + t->Phi[5][5]*f->P[5][13] +
+            t->Phi[5][6]*f->P[6][13] + t->Phi[5][8]*f->P[8][13] + t->Phi[5][9]*f->P[9][13] +
+            t->Phi[5][10]*f->P[10][13] + t->Phi[5][11]*f->P[11][13] + t->Phi[5][12]*f->P[12][13] +
+            t->Phi[5][13]*f->P[13][13] + t->Phi[5][14]*f->P[14][13];
+    w->M[14] = t->Phi[5][0]*f->P[0][14] + t->Phi[5][1]*f->P[1][14] + t->Phi[5][2]*f->P[2][14] +
+            t->Phi[5][3]*f->P[3][14] + t->Phi[5][4]*f->P[4][14] + t->Phi[5][5]*f->P[5][14] +
+            t->Phi[5][6]*f->P[6][14] + t->Phi[5][8]*f->P[8][14] + t->Phi[5][9]*f->P[9][14] +
+            t->Phi[5][10]*f->P[10][14] + t->Phi[5][11]*f->P[11][14] + t->Phi[5][12]*f->P[12][14] +
+            t->Phi[5][13]*f->P[13][14] + t->Phi[5][14]*f->P[14][14];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -3804,37 +3516,114 @@ static ins_gps15_scalar propagate_row_5(const ins_gps15_transition *restrict t,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[5][0]*t->Phi[5][0] + w->M[5][1]*t->Phi[5][1] + w->M[5][2]*t->Phi[5][2] +
-            w->M[5][3]*t->Phi[5][3] + w->M[5][4]*t->Phi[5][4] + w->M[5][5]*t->Phi[5][5] +
-            w->M[5][6]*t->Phi[5][6] + w->M[5][8]*t->Phi[5][8] + w->M[5][9]*t->Phi[5][9] +
-            w->M[5][10]*t->Phi[5][10] + w->M[5][11]*t->Phi[5][11] + w->M[5][12]*t->Phi[5][12] +
-            w->M[5][13]*t->Phi[5][13] + w->M[5][14]*t->Phi[5][14] + t->Qd[5][5]; w->Pn[5][5] = v;
-            check += v - v;
-    v = w->M[5][0]*t->Phi[6][0] + w->M[5][1]*t->Phi[6][1] + w->M[5][2]*t->Phi[6][2] +
-            w->M[5][3]*t->Phi[6][3] + w->M[5][4]*t->Phi[6][4] + w->M[5][5]*t->Phi[6][5] +
-            w->M[5][6]*t->Phi[6][6] + w->M[5][8]*t->Phi[6][8] + w->M[5][9]*t->Phi[6][9] +
-            w->M[5][10]*t->Phi[6][10] + w->M[5][11]*t->Phi[6][11] + w->M[5][12]*t->Phi[6][12] +
-            w->M[5][13]*t->Phi[6][13] + w->M[5][14]*t->Phi[6][14] + t->Qd[5][6]; w->Pn[5][6] = v;
-            w->Pn[6][5] = v; check += v - v;
-    v = w->M[5][0]*t->Phi[7][0] + w->M[5][1]*t->Phi[7][1] + w->M[5][2]*t->Phi[7][2] +
-            w->M[5][3]*t->Phi[7][3] + w->M[5][4]*t->Phi[7][4] + w->M[5][5]*t->Phi[7][5] +
-            w->M[5][6]*t->Phi[7][6] + w->M[5][7]*t->Phi[7][7] + w->M[5][8]*t->Phi[7][8] +
-            w->M[5][9]*t->Phi[7][9] + w->M[5][10]*t->Phi[7][10] + w->M[5][11]*t->Phi[7][11] +
-            w->M[5][12]*t->Phi[7][12] + w->M[5][13]*t->Phi[7][13] + w->M[5][14]*t->Phi[7][14] +
-            t->Qd[5][7]; w->Pn[5][7] = v; w->Pn[7][5] = v; check += v - v;
-    v = w->M[5][0]*t->Phi[8][0] + w->M[5][1]*t->Phi[8][1] + w->M[5][2]*t->Phi[8][2] +
-            w->M[5][3]*t->Phi[8][3] + w->M[5][4]*t->Phi[8][4] + w->M[5][5]*t->Phi[8][5] +
-            w->M[5][6]*t->Phi[8][6] + w->M[5][8]*t->Phi[8][8] + w->M[5][9]*t->Phi[8][9] +
-            w->M[5][10]*t->Phi[8][10] + w->M[5][11]*t->Phi[8][11] + w->M[5][12]*t->Phi[8][12] +
-            w->M[5][13]*t->Phi[8][13] + w->M[5][14]*t->Phi[8][14] + t->Qd[5][8]; w->Pn[5][8] = v;
-            w->Pn[8][5] = v; check += v - v;
-    v = w->M[5][9]; w->Pn[5][9] = v; w->Pn[9][5] = v; check += v - v;
-    v = w->M[5][10]; w->Pn[5][10] = v; w->Pn[10][5] = v; check += v - v;
-    v = w->M[5][11]; w->Pn[5][11] = v; w->Pn[11][5] = v; check += v - v;
-    v = w->M[5][12]; w->Pn[5][12] = v; w->Pn[12][5] = v; check += v - v;
-    v = w->M[5][13]; w->Pn[5][13] = v; w->Pn[13][5] = v; check += v - v;
-    v = w->M[5][14]; w->Pn[5][14] = v; w->Pn[14][5] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] +
+            w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] + w->M[13]*t->Phi[5][13] +
+            w->M[14]*t->Phi[5][14] + t->Qd[65]; w->Pn[65] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] + w->M[10]*t->Phi[6][10] +
+            w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] + w->M[13]*t->Phi[6][13] +
+            w->M[14]*t->Phi[6][14] + t->Qd[66]; w->Pn[66] = v; check += v - v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + t->Qd[67]; w->Pn[67] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] + w->M[10]*t->Phi[8][10] +
+            w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] + w->M[13]*t->Phi[8][13] +
+            w->M[14]*t->Phi[8][14] + t->Qd[68]; w->Pn[68] = v; check += v - v;
+    v = w->M[9]; w->Pn[69] = v; check += v - v;
+    v = w->M[10]; w->Pn[70] = v; check += v - v;
+    v = w->M[11]; w->Pn[71] = v; check += v - v;
+    v = w->M[12]; w->Pn[72] = v; check += v - v;
+    v = w->M[13]; w->Pn[73] = v; check += v - v;
+    v = w->M[14]; w->Pn[74] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_6(const ins_gps15_filter *restrict f, const ins_gps15_transition
+        *restrict t, ins_gps15_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] +
+            t->Phi[6][3]*f->P[3][0] + t->Phi[6][4]*f->P[4][0] + t->Phi[6][5]*f->P[5][0] +
+            t->Phi[6][6]*f->P[6][0] + t->Phi[6][8]*f->P[8][0] + t->Phi[6][9]*f->P[9][0] +
+            t->Phi[6][10]*f->P[10][0] + t->Phi[6][11]*f->P[11][0] + t->Phi[6][12]*f->P[12][0] +
+            t->Phi[6][13]*f->P[13][0] + t->Phi[6][14]*f->P[14][0];
+    w->M[1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] +
+            t->Phi[6][3]*f->P[3][1] + t->Phi[6][4]*f->P[4][1] + t->Phi[6][5]*f->P[5][1] +
+            t->Phi[6][6]*f->P[6][1] + t->Phi[6][8]*f->P[8][1] + t->Phi[6][9]*f->P[9][1] +
+            t->Phi[6][10]*f->P[10][1] + t->Phi[6][11]*f->P[11][1] + t->Phi[6][12]*f->P[12][1] +
+            t->Phi[6][13]*f->P[13][1] + t->Phi[6][14]*f->P[14][1];
+    w->M[2] = t->Phi[6][0]*f->P[0][2] + t->Phi[6][1]*f->P[1][2] + t->Phi[6][2]*f->P[2][2] +
+            t->Phi[6][3]*f->P[3][2] + t->Phi[6][4]*f->P[4][2] + t->Phi[6][5]*f->P[5][2] +
+            t->Phi[6][6]*f->P[6][2] + t->Phi[6][8]*f->P[8][2] + t->Phi[6][9]*f->P[9][2] +
+            t->Phi[6][10]*f->P[10][2] + t->Phi[6][11]*f->P[11][2] + t->Phi[6][12]*f->P[12][2] +
+            t->Phi[6][13]*f->P[13][2] + t->Phi[6][14]*f->P[14][2];
+    w->M[3] = t->Phi[6][0]*f->P[0][3] + t->Phi[6][1]*f->P[1][3] + t->Phi[6][2]*f->P[2][3] +
+            t->Phi[6][3]*f->P[3][3] + t->Phi[6][4]*f->P[4][3] + t->Phi[6][5]*f->P[5][3] +
+            t->Phi[6][6]*f->P[6][3] + t->Phi[6][8]*f->P[8][3] + t->Phi[6][9]*f->P[9][3] +
+            t->Phi[6][10]*f->P[10][3] + t->Phi[6][11]*f->P[11][3] + t->Phi[6][12]*f->P[12][3] +
+            t->Phi[6][13]*f->P[13][3] + t->Phi[6][14]*f->P[14][3];
+    w->M[4] = t->Phi[6][0]*f->P[0][4] + t->Phi[6][1]*f->P[1][4] + t->Phi[6][2]*f->P[2][4] +
+            t->Phi[6][3]*f->P[3][4] + t->Phi[6][4]*f->P[4][4] + t->Phi[6][5]*f->P[5][4] +
+            t->Phi[6][6]*f->P[6][4] + t->Phi[6][8]*f->P[8][4] + t->Phi[6][9]*f->P[9][4] +
+            t->Phi[6][10]*f->P[10][4] + t->Phi[6][11]*f->P[11][4] + t->Phi[6][12]*f->P[12][4] +
+            t->Phi[6][13]*f->P[13][4] + t->Phi[6][14]*f->P[14][4];
+    w->M[5] = t->Phi[6][0]*f->P[0][5] + t->Phi[6][1]*f->P[1][5] + t->Phi[6][2]*f->P[2][5] +
+            t->Phi[6][3]*f->P[3][5] + t->Phi[6][4]*f->P[4][5] + t->Phi[6][5]*f->P[5][5] +
+            t->Phi[6][6]*f->P[6][5] + t->Phi[6][8]*f->P[8][5] + t->Phi[6][9]*f->P[9][5] +
+            t->Phi[6][10]*f->P[10][5] + t->Phi[6][11]*f->P[11][5] + t->Phi[6][12]*f->P[12][5] +
+            t->Phi[6][13]*f->P[13][5] + t->Phi[6][14]*f->P[14][5];
+    w->M[6] = t->Phi[6][0]*f->P[0][6] + t->Phi[6][1]*f->P[1][6] + t->Phi[6][2]*f->P[2][6] +
+            t->Phi[6][3]*f->P[3][6] + t->Phi[6][4]*f->P[4][6] + t->Phi[6][5]*f->P[5][6] +
+            t->Phi[6][6]*f->P[6][6] + t->Phi[6][8]*f->P[8][6] + t->Phi[6][9]*f->P[9][6] +
+            t->Phi[6][10]*f->P[10][6] + t->Phi[6][11]*f->P[11][6] + t->Phi[6][12]*f->P[12][6] +
+            t->Phi[6][13]*f->P[13][6] + t->Phi[6][14]*f->P[14][6];
+    w->M[7] = t->Phi[6][0]*f->P[0][7] + t->Phi[6][1]*f->P[1][7] + t->Phi[6][2]*f->P[2][7] +
+            t->Phi[6][3]*f->P[3][7] + t->Phi[6][4]*f->P[4][7] + t->Phi[6][5]*f->P[5][7] +
+            t->Phi[6][6]*f->P[6][7] + t->Phi[6][8]*f->P[8][7] + t->Phi[6][9]*f->P[9][7] +
+            t->Phi[6][10]*f->P[10][7] + t->Phi[6][11]*f->P[11][7] + t->Phi[6][12]*f->P[12][7] +
+            t->Phi[6][13]*f->P[13][7] + t->Phi[6][14]*f->P[14][7];
+    w->M[8] = t->Phi[6][0]*f->P[0][8] + t->Phi[6][1]*f->P[1][8] + t->Phi[6][2]*f->P[2][8] +
+            t->Phi[6][3]*f->P[3][8] + t->Phi[6][4]*f->P[4][8] + t->Phi[6][5]*f->P[5][8] +
+            t->Phi[6][6]*f->P[6][8] + t->Phi[6][8]*f->P[8][8] + t->Phi[6][9]*f->P[9][8] +
+            t->Phi[6][10]*f->P[10][8] + t->Phi[6][11]*f->P[11][8] + t->Phi[6][12]*f->P[12][8] +
+            t->Phi[6][13]*f->P[13][8] + t->Phi[6][14]*f->P[14][8];
+    w->M[9] = t->Phi[6][0]*f->P[0][9] + t->Phi[6][1]*f->P[1][9] + t->Phi[6][2]*f->P[2][9] +
+            t->Phi[6][3]*f->P[3][9] + t->Phi[6][4]*f->P[4][9] + t->Phi[6][5]*f->P[5][9] +
+            t->Phi[6][6]*f->P[6][9] + t->Phi[6][8]*f->P[8][9] + t->Phi[6][9]*f->P[9][9] +
+            t->Phi[6][10]*f->P[10][9] + t->Phi[6][11]*f->P[11][9] + t->Phi[6][12]*f->P[12][9] +
+            t->Phi[6][13]*f->P[13][9] + t->Phi[6][14]*f->P[14][9];
+    w->M[10] = t->Phi[6][0]*f->P[0][10] + t->Phi[6][1]*f->P[1][10] + t->Phi[6][2]*f->P[2][10] +
+            t->Phi[6][3]*f->P[3][10] + t->Phi[6][4]*f->P[4][10] + t->Phi[6][5]*f->P[5][10] +
+            t->Phi[6][6]*f->P[6][10] + t->Phi[6][8]*f->P[8][10] + t->Phi[6][9]*f->P[9][10] +
+            t->Phi[6][10]*f->P[10][10] + t->Phi[6][11]*f->P[11][10] + t->Phi[6][12]*f->P[12][10] +
+            t->Phi[6][13]*f->P[13][10] + t->Phi[6][14]*f->P[14][10];
+    w->M[11] = t->Phi[6][0]*f->P[0][11] + t->Phi[6][1]*f->P[1][11] + t->Phi[6][2]*f->P[2][11] +
+            t->Phi[6][3]*f->P[3][11] + t->Phi[6][4]*f->P[4][11] + t->Phi[6][5]*f->P[5][11] +
+            t->Phi[6][6]*f->P[6][11] + t->Phi[6][8]*f->P[8][11] + t->Phi[6][9]*f->P[9][11] +
+            t->Phi[6][10]*f->P[10][11] + t->Phi[6][11]*f->P[11][11] + t->Phi[6][12]*f->P[12][11] +
+            t->Phi[6][13]*f->P[13][11] + t->Phi[6][14]*f->P[14][11];
+    w->M[12] = t->Phi[6][0]*f->P[0][12] + t->Phi[6][1]*f->P[1][12] + t->Phi[6][2]*f->P[2][12] +
+            t->Phi[6][3]*f->P[3][12] + t->Phi[6][4]*f->P[4][12] + t->Phi[6][5]*f->P[5][12] +
+            t->Phi[6][6]*f->P[6][12] + t->Phi[6][8]*f->P[8][12] + t->Phi[6][9]*f->P[9][12] +
+            t->Phi[6][10]*f->P[10][12] + t->Phi[6][11]*f->P[11][12] + t->Phi[6][12]*f->P[12][12] +
+            t->Phi[6][13]*f->P[13][12] + t->Phi[6][14]*f->P[14][12];
+    w->M[13] = t->Phi[6][0]*f->P[0][13] + t->Phi[6][1]*f->P[1][13] + t->Phi[6][2]*f->P[2][13] +
+            t->Phi[6][3]*f->P[3][13] + t->Phi[6][4]*f->P[4][13] + t->Phi[6][5]*f->P[5][13] +
+            t->Phi[6][6]*f->P[6][13] + t->Phi[6][8]*f->P[8][13] + t->Phi[6][9]*f->P[9][13] +
+            t->Phi[6][10]*f->P[10][13] + t->Phi[6][11]*f->P[11][13] + t->Phi[6][12]*f->P[12][13] +
+            t->Phi[6][13]*f->P[13][13] + t->Phi[6][14]*f->P[14][13];
+    w->M[14] = t->Phi[6][0]*f->P[0][14] + t->Phi[6][1]*f->P[1][14] + t->Phi[6][2]*f->P[2][14] +
+            t->Phi[6][3]*f->P[3][14] + t->Phi[6][4]*f->P[4][14] + t->Phi[6][5]*f->P[5][14] +
+            t->Phi[6][6]*f->P[6][14] + t->Phi[6][8]*f->P[8][14] + t->Phi[6][9]*f->P[9][14] +
+            t->Phi[6][10]*f->P[10][14] + t->Phi[6][11]*f->P[11][14] + t->Phi[6][12]*f->P[12][14] +
+            t->Phi[6][13]*f->P[13][14] + t->Phi[6][14]*f->P[14][14];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -3842,31 +3631,109 @@ static ins_gps15_scalar propagate_row_6(const ins_gps15_transition *restrict t,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[6][0]*t->Phi[6][0] + w->M[6][1]*t->Phi[6][1] + w->M[6][2]*t->Phi[6][2] +
-            w->M[6][3]*t->Phi[6][3] + w->M[6][4]*t->Phi[6][4] + w->M[6][5]*t->Phi[6][5] +
-            w->M[6][6]*t->Phi[6][6] + w->M[6][8]*t->Phi[6][8] + w->M[6][9]*t->Phi[6][9] +
-            w->M[6][10]*t->Phi[6][10] + w->M[6][11]*t->Phi[6][11] + w->M[6][12]*t->Phi[6][12] +
-            w->M[6][13]*t->Phi[6][13] + w->M[6][14]*t->Phi[6][14] + t->Qd[6][6]; w->Pn[6][6] = v;
-            check += v - v;
-    v = w->M[6][0]*t->Phi[7][0] + w->M[6][1]*t->Phi[7][1] + w->M[6][2]*t->Phi[7][2] +
-            w->M[6][3]*t->Phi[7][3] + w->M[6][4]*t->Phi[7][4] + w->M[6][5]*t->Phi[7][5] +
-            w->M[6][6]*t->Phi[7][6] + w->M[6][7]*t->Phi[7][7] + w->M[6][8]*t->Phi[7][8] +
-            w->M[6][9]*t->Phi[7][9] + w->M[6][10]*t->Phi[7][10] + w->M[6][11]*t->Phi[7][11] +
-            w->M[6][12]*t->Phi[7][12] + w->M[6][13]*t->Phi[7][13] + w->M[6][14]*t->Phi[7][14] +
-            t->Qd[6][7]; w->Pn[6][7] = v; w->Pn[7][6] = v; check += v - v;
-    v = w->M[6][0]*t->Phi[8][0] + w->M[6][1]*t->Phi[8][1] + w->M[6][2]*t->Phi[8][2] +
-            w->M[6][3]*t->Phi[8][3] + w->M[6][4]*t->Phi[8][4] + w->M[6][5]*t->Phi[8][5] +
-            w->M[6][6]*t->Phi[8][6] + w->M[6][8]*t->Phi[8][8] + w->M[6][9]*t->Phi[8][9] +
-            w->M[6][10]*t->Phi[8][10] + w->M[6][11]*t->Phi[8][11] + w->M[6][12]*t->Phi[8][12] +
-            w->M[6][13]*t->Phi[8][13] + w->M[6][14]*t->Phi[8][14] + t->Qd[6][8]; w->Pn[6][8] = v;
-            w->Pn[8][6] = v; check += v - v;
-    v = w->M[6][9]; w->Pn[6][9] = v; w->Pn[9][6] = v; check += v - v;
-    v = w->M[6][10]; w->Pn[6][10] = v; w->Pn[10][6] = v; check += v - v;
-    v = w->M[6][11]; w->Pn[6][11] = v; w->Pn[11][6] = v; check += v - v;
-    v = w->M[6][12]; w->Pn[6][12] = v; w->Pn[12][6] = v; check += v - v;
-    v = w->M[6][13]; w->Pn[6][13] = v; w->Pn[13][6] = v; check += v - v;
-    v = w->M[6][14]; w->Pn[6][14] = v; w->Pn[14][6] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] + w->M[10]*t->Phi[6][10] +
+            w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] + w->M[13]*t->Phi[6][13] +
+            w->M[14]*t->Phi[6][14] + t->Qd[75]; w->Pn[75] = v; check += v - v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + t->Qd[76]; w->Pn[76] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] + w->M[10]*t->Phi[8][10] +
+            w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] + w->M[13]*t->Phi[8][13] +
+            w->M[14]*t->Phi[8][14] + t->Qd[77]; w->Pn[77] = v; check += v - v;
+    v = w->M[9]; w->Pn[78] = v; check += v - v;
+    v = w->M[10]; w->Pn[79] = v; check += v - v;
+    v = w->M[11]; w->Pn[80] = v; check += v - v;
+    v = w->M[12]; w->Pn[81] = v; check += v - v;
+    v = w->M[13]; w->Pn[82] = v; check += v - v;
+    v = w->M[14]; w->Pn[83] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_7(const ins_gps15_filter *restrict f, const ins_gps15_transition
+        *restrict t, ins_gps15_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[7][0]*f->P[0][0] + t->Phi[7][1]*f->P[1][0] + t->Phi[7][2]*f->P[2][0] +
+            t->Phi[7][3]*f->P[3][0] + t->Phi[7][4]*f->P[4][0] + t->Phi[7][5]*f->P[5][0] +
+            t->Phi[7][6]*f->P[6][0] + t->Phi[7][7]*f->P[7][0] + t->Phi[7][8]*f->P[8][0] +
+            t->Phi[7][9]*f->P[9][0] + t->Phi[7][10]*f->P[10][0] + t->Phi[7][11]*f->P[11][0] +
+            t->Phi[7][12]*f->P[12][0] + t->Phi[7][13]*f->P[13][0] + t->Phi[7][14]*f->P[14][0];
+    w->M[1] = t->Phi[7][0]*f->P[0][1] + t->Phi[7][1]*f->P[1][1] + t->Phi[7][2]*f->P[2][1] +
+            t->Phi[7][3]*f->P[3][1] + t->Phi[7][4]*f->P[4][1] + t->Phi[7][5]*f->P[5][1] +
+            t->Phi[7][6]*f->P[6][1] + t->Phi[7][7]*f->P[7][1] + t->Phi[7][8]*f->P[8][1] +
+            t->Phi[7][9]*f->P[9][1] + t->Phi[7][10]*f->P[10][1] + t->Phi[7][11]*f->P[11][1] +
+            t->Phi[7][12]*f->P[12][1] + t->Phi[7][13]*f->P[13][1] + t->Phi[7][14]*f->P[14][1];
+    w->M[2] = t->Phi[7][0]*f->P[0][2] + t->Phi[7][1]*f->P[1][2] + t->Phi[7][2]*f->P[2][2] +
+            t->Phi[7][3]*f->P[3][2] + t->Phi[7][4]*f->P[4][2] + t->Phi[7][5]*f->P[5][2] +
+            t->Phi[7][6]*f->P[6][2] + t->Phi[7][7]*f->P[7][2] + t->Phi[7][8]*f->P[8][2] +
+            t->Phi[7][9]*f->P[9][2] + t->Phi[7][10]*f->P[10][2] + t->Phi[7][11]*f->P[11][2] +
+            t->Phi[7][12]*f->P[12][2] + t->Phi[7][13]*f->P[13][2] + t->Phi[7][14]*f->P[14][2];
+    w->M[3] = t->Phi[7][0]*f->P[0][3] + t->Phi[7][1]*f->P[1][3] + t->Phi[7][2]*f->P[2][3] +
+            t->Phi[7][3]*f->P[3][3] + t->Phi[7][4]*f->P[4][3] + t->Phi[7][5]*f->P[5][3] +
+            t->Phi[7][6]*f->P[6][3] + t->Phi[7][7]*f->P[7][3] + t->Phi[7][8]*f->P[8][3] +
+            t->Phi[7][9]*f->P[9][3] + t->Phi[7][10]*f->P[10][3] + t->Phi[7][11]*f->P[11][3] +
+            t->Phi[7][12]*f->P[12][3] + t->Phi[7][13]*f->P[13][3] + t->Phi[7][14]*f->P[14][3];
+    w->M[4] = t->Phi[7][0]*f->P[0][4] + t->Phi[7][1]*f->P[1][4] + t->Phi[7][2]*f->P[2][4] +
+            t->Phi[7][3]*f->P[3][4] + t->Phi[7][4]*f->P[4][4] + t->Phi[7][5]*f->P[5][4] +
+            t->Phi[7][6]*f->P[6][4] + t->Phi[7][7]*f->P[7][4] + t->Phi[7][8]*f->P[8][4] +
+            t->Phi[7][9]*f->P[9][4] + t->Phi[7][10]*f->P[10][4] + t->Phi[7][11]*f->P[11][4] +
+            t->Phi[7][12]*f->P[12][4] + t->Phi[7][13]*f->P[13][4] + t->Phi[7][14]*f->P[14][4];
+    w->M[5] = t->Phi[7][0]*f->P[0][5] + t->Phi[7][1]*f->P[1][5] + t->Phi[7][2]*f->P[2][5] +
+            t->Phi[7][3]*f->P[3][5] + t->Phi[7][4]*f->P[4][5] + t->Phi[7][5]*f->P[5][5] +
+            t->Phi[7][6]*f->P[6][5] + t->Phi[7][7]*f->P[7][5] + t->Phi[7][8]*f->P[8][5] +
+            t->Phi[7][9]*f->P[9][5] + t->Phi[7][10]*f->P[10][5] + t->Phi[7][11]*f->P[11][5] +
+            t->Phi[7][12]*f->P[12][5] + t->Phi[7][13]*f->P[13][5] + t->Phi[7][14]*f->P[14][5];
+    w->M[6] = t->Phi[7][0]*f->P[0][6] + t->Phi[7][1]*f->P[1][6] + t->Phi[7][2]*f->P[2][6] +
+            t->Phi[7][3]*f->P[3][6] + t->Phi[7][4]*f->P[4][6] + t->Phi[7][5]*f->P[5][6] +
+            t->Phi[7][6]*f->P[6][6] + t->Phi[7][7]*f->P[7][6] + t->Phi[7][8]*f->P[8][6] +
+            t->Phi[7][9]*f->P[9][6] + t->Phi[7][10]*f->P[10][6] + t->Phi[7][11]*f->P[11][6] +
+            t->Phi[7][12]*f->P[12][6] + t->Phi[7][13]*f->P[13][6] + t->Phi[7][14]*f->P[14][6];
+    w->M[7] = t->Phi[7][0]*f->P[0][7] + t->Phi[7][1]*f->P[1][7] + t->Phi[7][2]*f->P[2][7] +
+            t->Phi[7][3]*f->P[3][7] + t->Phi[7][4]*f->P[4][7] + t->Phi[7][5]*f->P[5][7] +
+            t->Phi[7][6]*f->P[6][7] + t->Phi[7][7]*f->P[7][7] + t->Phi[7][8]*f->P[8][7] +
+            t->Phi[7][9]*f->P[9][7] + t->Phi[7][10]*f->P[10][7] + t->Phi[7][11]*f->P[11][7] +
+            t->Phi[7][12]*f->P[12][7] + t->Phi[7][13]*f->P[13][7] + t->Phi[7][14]*f->P[14][7];
+    w->M[8] = t->Phi[7][0]*f->P[0][8] + t->Phi[7][1]*f->P[1][8] + t->Phi[7][2]*f->P[2][8] +
+            t->Phi[7][3]*f->P[3][8] + t->Phi[7][4]*f->P[4][8] + t->Phi[7][5]*f->P[5][8] +
+            t->Phi[7][6]*f->P[6][8] + t->Phi[7][7]*f->P[7][8] + t->Phi[7][8]*f->P[8][8] +
+            t->Phi[7][9]*f->P[9][8] + t->Phi[7][10]*f->P[10][8] + t->Phi[7][11]*f->P[11][8] +
+            t->Phi[7][12]*f->P[12][8] + t->Phi[7][13]*f->P[13][8] + t->Phi[7][14]*f->P[14][8];
+    w->M[9] = t->Phi[7][0]*f->P[0][9] + t->Phi[7][1]*f->P[1][9] + t->Phi[7][2]*f->P[2][9] +
+            t->Phi[7][3]*f->P[3][9] + t->Phi[7][4]*f->P[4][9] + t->Phi[7][5]*f->P[5][9] +
+            t->Phi[7][6]*f->P[6][9] + t->Phi[7][7]*f->P[7][9] + t->Phi[7][8]*f->P[8][9] +
+            t->Phi[7][9]*f->P[9][9] + t->Phi[7][10]*f->P[10][9] + t->Phi[7][11]*f->P[11][9] +
+            t->Phi[7][12]*f->P[12][9] + t->Phi[7][13]*f->P[13][9] + t->Phi[7][14]*f->P[14][9];
+    w->M[10] = t->Phi[7][0]*f->P[0][10] + t->Phi[7][1]*f->P[1][10] + t->Phi[7][2]*f->P[2][10] +
+            t->Phi[7][3]*f->P[3][10] + t->Phi[7][4]*f->P[4][10] + t->Phi[7][5]*f->P[5][10] +
+            t->Phi[7][6]*f->P[6][10] + t->Phi[7][7]*f->P[7][10] + t->Phi[7][8]*f->P[8][10] +
+            t->Phi[7][9]*f->P[9][10] + t->Phi[7][10]*f->P[10][10] + t->Phi[7][11]*f->P[11][10] +
+            t->Phi[7][12]*f->P[12][10] + t->Phi[7][13]*f->P[13][10] + t->Phi[7][14]*f->P[14][10];
+    w->M[11] = t->Phi[7][0]*f->P[0][11] + t->Phi[7][1]*f->P[1][11] + t->Phi[7][2]*f->P[2][11] +
+            t->Phi[7][3]*f->P[3][11] + t->Phi[7][4]*f->P[4][11] + t->Phi[7][5]*f->P[5][11] +
+            t->Phi[7][6]*f->P[6][11] + t->Phi[7][7]*f->P[7][11] + t->Phi[7][8]*f->P[8][11] +
+            t->Phi[7][9]*f->P[9][11] + t->Phi[7][10]*f->P[10][11] + t->Phi[7][11]*f->P[11][11] +
+            t->Phi[7][12]*f->P[12][11] + t->Phi[7][13]*f->P[13][11] + t->Phi[7][14]*f->P[14][11];
+    w->M[12] = t->Phi[7][0]*f->P[0][12] + t->Phi[7][1]*f->P[1][12] + t->Phi[7][2]*f->P[2][12] +
+            t->Phi[7][3]*f->P[3][12] + t->Phi[7][4]*f->P[4][12] + t->Phi[7][5]*f->P[5][12] +
+            t->Phi[7][6]*f->P[6][12] + t->Phi[7][7]*f->P[7][12] + t->Phi[7][8]*f->P[8][12] +
+            t->Phi[7][9]*f->P[9][12] + t->Phi[7][10]*f->P[10][12] + t->Phi[7][11]*f->P[11][12] +
+            t->Phi[7][12]*f->P[12][12] + t->Phi[7][13]*f->P[13][12] + t->Phi[7][14]*f->P[14][12];
+    w->M[13] = t->Phi[7][0]*f->P[0][13] + t->Phi[7][1]*f->P[1][13] + t->Phi[7][2]*f->P[2][13] +
+            t->Phi[7][3]*f->P[3][13] + t->Phi[7][4]*f->P[4][13] + t->Phi[7][5]*f->P[5][13] +
+            t->Phi[7][6]*f->P[6][13] + t->Phi[7][7]*f->P[7][13] + t->Phi[7][8]*f->P[8][13] +
+            t->Phi[7][9]*f->P[9][13] + t->Phi[7][10]*f->P[10][13] + t->Phi[7][11]*f->P[11][13] +
+            t->Phi[7][12]*f->P[12][13] + t->Phi[7][13]*f->P[13][13] + t->Phi[7][14]*f->P[14][13];
+    w->M[14] = t->Phi[7][0]*f->P[0][14] + t->Phi[7][1]*f->P[1][14] + t->Phi[7][2]*f->P[2][14] +
+            t->Phi[7][3]*f->P[3][14] + t->Phi[7][4]*f->P[4][14] + t->Phi[7][5]*f->P[5][14] +
+            t->Phi[7][6]*f->P[6][14] + t->Phi[7][7]*f->P[7][14] + t->Phi[7][8]*f->P[8][14] +
+            t->Phi[7][9]*f->P[9][14] + t->Phi[7][10]*f->P[10][14] + t->Phi[7][11]*f->P[11][14] +
+            t->Phi[7][12]*f->P[12][14] + t->Phi[7][13]*f->P[13][14] + t->Phi[7][14]*f->P[14][14];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -3874,25 +3741,104 @@ static ins_gps15_scalar propagate_row_7(const ins_gps15_transition *restrict t,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[7][0]*t->Phi[7][0] + w->M[7][1]*t->Phi[7][1] + w->M[7][2]*t->Phi[7][2] +
-            w->M[7][3]*t->Phi[7][3] + w->M[7][4]*t->Phi[7][4] + w->M[7][5]*t->Phi[7][5] +
-            w->M[7][6]*t->Phi[7][6] + w->M[7][7]*t->Phi[7][7] + w->M[7][8]*t->Phi[7][8] +
-            w->M[7][9]*t->Phi[7][9] + w->M[7][10]*t->Phi[7][10] + w->M[7][11]*t->Phi[7][11] +
-            w->M[7][12]*t->Phi[7][12] + w->M[7][13]*t->Phi[7][13] + w->M[7][14]*t->Phi[7][14] +
-            t->Qd[7][7]; w->Pn[7][7] = v; check += v - v;
-    v = w->M[7][0]*t->Phi[8][0] + w->M[7][1]*t->Phi[8][1] + w->M[7][2]*t->Phi[8][2] +
-            w->M[7][3]*t->Phi[8][3] + w->M[7][4]*t->Phi[8][4] + w->M[7][5]*t->Phi[8][5] +
-            w->M[7][6]*t->Phi[8][6] + w->M[7][8]*t->Phi[8][8] + w->M[7][9]*t->Phi[8][9] +
-            w->M[7][10]*t->Phi[8][10] + w->M[7][11]*t->Phi[8][11] + w->M[7][12]*t->Phi[8][12] +
-            w->M[7][13]*t->Phi[8][13] + w->M[7][14]*t->Phi[8][14] + t->Qd[7][8]; w->Pn[7][8] = v;
-            w->Pn[8][7] = v; check += v - v;
-    v = w->M[7][9]; w->Pn[7][9] = v; w->Pn[9][7] = v; check += v - v;
-    v = w->M[7][10]; w->Pn[7][10] = v; w->Pn[10][7] = v; check += v - v;
-    v = w->M[7][11]; w->Pn[7][11] = v; w->Pn[11][7] = v; check += v - v;
-    v = w->M[7][12]; w->Pn[7][12] = v; w->Pn[12][7] = v; check += v - v;
-    v = w->M[7][13]; w->Pn[7][13] = v; w->Pn[13][7] = v; check += v - v;
-    v = w->M[7][14]; w->Pn[7][14] = v; w->Pn[14][7] = v; check += v - v;
+    v = w->M[0]*t->Phi[7][0] + w->M[1]*t->Phi[7][1] + w->M[2]*t->Phi[7][2] + w->M[3]*t->Phi[7][3] +
+            w->M[4]*t->Phi[7][4] + w->M[5]*t->Phi[7][5] + w->M[6]*t->Phi[7][6] +
+            w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + w->M[9]*t->Phi[7][9] +
+            w->M[10]*t->Phi[7][10] + w->M[11]*t->Phi[7][11] + w->M[12]*t->Phi[7][12] +
+            w->M[13]*t->Phi[7][13] + w->M[14]*t->Phi[7][14] + t->Qd[84]; w->Pn[84] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] + w->M[10]*t->Phi[8][10] +
+            w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] + w->M[13]*t->Phi[8][13] +
+            w->M[14]*t->Phi[8][14] + t->Qd[85]; w->Pn[85] = v; check += v - v;
+    v = w->M[9]; w->Pn[86] = v; check += v - v;
+    v = w->M[10]; w->Pn[87] = v; check += v - v;
+    v = w->M[11]; w->Pn[88] = v; check += v - v;
+    v = w->M[12]; w->Pn[89] = v; check += v - v;
+    v = w->M[13]; w->Pn[90] = v; check += v - v;
+    v = w->M[14]; w->Pn[91] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_8(const ins_gps15_filter *restrict f, const ins_gps15_transition
+        *restrict t, ins_gps15_filter_scratch *restrict w)
+{
+    w->M[0] = t->Phi[8][0]*f->P[0][0] + t->Phi[8][1]*f->P[1][0] + t->Phi[8][2]*f->P[2][0] +
+            t->Phi[8][3]*f->P[3][0] + t->Phi[8][4]*f->P[4][0] + t->Phi[8][5]*f->P[5][0] +
+            t->Phi[8][6]*f->P[6][0] + t->Phi[8][8]*f->P[8][0] + t->Phi[8][9]*f->P[9][0] +
+            t->Phi[8][10]*f->P[10][0] + t->Phi[8][11]*f->P[11][0] + t->Phi[8][12]*f->P[12][0] +
+            t->Phi[8][13]*f->P[13][0] + t->Phi[8][14]*f->P[14][0];
+    w->M[1] = t->Phi[8][0]*f->P[0][1] + t->Phi[8][1]*f->P[1][1] + t->Phi[8][2]*f->P[2][1] +
+            t->Phi[8][3]*f->P[3][1] + t->Phi[8][4]*f->P[4][1] + t->Phi[8][5]*f->P[5][1] +
+            t->Phi[8][6]*f->P[6][1] + t->Phi[8][8]*f->P[8][1] + t->Phi[8][9]*f->P[9][1] +
+            t->Phi[8][10]*f->P[10][1] + t->Phi[8][11]*f->P[11][1] + t->Phi[8][12]*f->P[12][1] +
+            t->Phi[8][13]*f->P[13][1] + t->Phi[8][14]*f->P[14][1];
+    w->M[2] = t->Phi[8][0]*f->P[0][2] + t->Phi[8][1]*f->P[1][2] + t->Phi[8][2]*f->P[2][2] +
+            t->Phi[8][3]*f->P[3][2] + t->Phi[8][4]*f->P[4][2] + t->Phi[8][5]*f->P[5][2] +
+            t->Phi[8][6]*f->P[6][2] + t->Phi[8][8]*f->P[8][2] + t->Phi[8][9]*f->P[9][2] +
+            t->Phi[8][10]*f->P[10][2] + t->Phi[8][11]*f->P[11][2] + t->Phi[8][12]*f->P[12][2] +
+            t->Phi[8][13]*f->P[13][2] + t->Phi[8][14]*f->P[14][2];
+    w->M[3] = t->Phi[8][0]*f->P[0][3] + t->Phi[8][1]*f->P[1][3] + t->Phi[8][2]*f->P[2][3] +
+            t->Phi[8][3]*f->P[3][3] + t->Phi[8][4]*f->P[4][3] + t->Phi[8][5]*f->P[5][3] +
+            t->Phi[8][6]*f->P[6][3] + t->Phi[8][8]*f->P[8][3] + t->Phi[8][9]*f->P[9][3] +
+            t->Phi[8][10]*f->P[10][3] + t->Phi[8][11]*f->P[11][3] + t->Phi[8][12]*f->P[12][3] +
+            t->Phi[8][13]*f->P[13][3] + t->Phi[8][14]*f->P[14][3];
+    w->M[4] = t->Phi[8][0]*f->P[0][4] + t->Phi[8][1]*f->P[1][4] + t->Phi[8][2]*f->P[2][4] +
+            t->Phi[8][3]*f->P[3][4] + t->Phi[8][4]*f->P[4][4] + t->Phi[8][5]*f->P[5][4] +
+            t->Phi[8][6]*f->P[6][4] + t->Phi[8][8]*f->P[8][4] + t->Phi[8][9]*f->P[9][4] +
+            t->Phi[8][10]*f->P[10][4] + t->Phi[8][11]*f->P[11][4] + t->Phi[8][12]*f->P[12][4] +
+            t->Phi[8][13]*f->P[13][4] + t->Phi[8][14]*f->P[14][4];
+    w->M[5] = t->Phi[8][0]*f->P[0][5] + t->Phi[8][1]*f->P[1][5] + t->Phi[8][2]*f->P[2][5] +
+            t->Phi[8][3]*f->P[3][5] + t->Phi[8][4]*f->P[4][5] + t->Phi[8][5]*f->P[5][5] +
+            t->Phi[8][6]*f->P[6][5] + t->Phi[8][8]*f->P[8][5] + t->Phi[8][9]*f->P[9][5] +
+            t->Phi[8][10]*f->P[10][5] + t->Phi[8][11]*f->P[11][5] + t->Phi[8][12]*f->P[12][5] +
+            t->Phi[8][13]*f->P[13][5] + t->Phi[8][14]*f->P[14][5];
+    w->M[6] = t->Phi[8][0]*f->P[0][6] + t->Phi[8][1]*f->P[1][6] + t->Phi[8][2]*f->P[2][6] +
+            t->Phi[8][3]*f->P[3][6] + t->Phi[8][4]*f->P[4][6] + t->Phi[8][5]*f->P[5][6] +
+            t->Phi[8][6]*f->P[6][6] + t->Phi[8][8]*f->P[8][6] + t->Phi[8][9]*f->P[9][6] +
+            t->Phi[8][10]*f->P[10][6] + t->Phi[8][11]*f->P[11][6] + t->Phi[8][12]*f->P[12][6] +
+            t->Phi[8][13]*f->P[13][6] + t->Phi[8][14]*f->P[14][6];
+    w->M[7] = t->Phi[8][0]*f->P[0][7] + t->Phi[8][1]*f->P[1][7] + t->Phi[8][2]*f->P[2][7] +
+            t->Phi[8][3]*f->P[3][7] + t->Phi[8][4]*f->P[4][7] + t->Phi[8][5]*f->P[5][7] +
+            t->Phi[8][6]*f->P[6][7] + t->Phi[8][8]*f->P[8][7] + t->Phi[8][9]*f->P[9][7] +
+            t->Phi[8][10]*f->P[10][7] + t->Phi[8][11]*f->P[11][7] + t->Phi[8][12]*f->P[12][7] +
+            t->Phi[8][13]*f->P[13][7] + t->Phi[8][14]*f->P[14][7];
+    w->M[8] = t->Phi[8][0]*f->P[0][8] + t->Phi[8][1]*f->P[1][8] + t->Phi[8][2]*f->P[2][8] +
+            t->Phi[8][3]*f->P[3][8] + t->Phi[8][4]*f->P[4][8] + t->Phi[8][5]*f->P[5][8] +
+            t->Phi[8][6]*f->P[6][8] + t->Phi[8][8]*f->P[8][8] + t->Phi[8][9]*f->P[9][8] +
+            t->Phi[8][10]*f->P[10][8] + t->Phi[8][11]*f->P[11][8] + t->Phi[8][12]*f->P[12][8] +
+            t->Phi[8][13]*f->P[13][8] + t->Phi[8][14]*f->P[14][8];
+    w->M[9] = t->Phi[8][0]*f->P[0][9] + t->Phi[8][1]*f->P[1][9] + t->Phi[8][2]*f->P[2][9] +
+            t->Phi[8][3]*f->P[3][9] + t->Phi[8][4]*f->P[4][9] + t->Phi[8][5]*f->P[5][9] +
+            t->Phi[8][6]*f->P[6][9] + t->Phi[8][8]*f->P[8][9] + t->Phi[8][9]*f->P[9][9] +
+            t->Phi[8][10]*f->P[10][9] + t->Phi[8][11]*f->P[11][9] + t->Phi[8][12]*f->P[12][9] +
+            t->Phi[8][13]*f->P[13][9] + t->Phi[8][14]*f->P[14][9];
+    w->M[10] = t->Phi[8][0]*f->P[0][10] + t->Phi[8][1]*f->P[1][10] + t->Phi[8][2]*f->P[2][10] +
+            t->Phi[8][3]*f->P[3][10] + t->Phi[8][4]*f->P[4][10] + t->Phi[8][5]*f->P[5][10] +
+            t->Phi[8][6]*f->P[6][10] + t->Phi[8][8]*f->P[8][10] + t->Phi[8][9]*f->P[9][10] +
+            t->Phi[8][10]*f->P[10][10] + t->Phi[8][11]*f->P[11][10] + t->Phi[8][12]*f->P[12][10] +
+            t->Phi[8][13]*f->P[13][10] + t->Phi[8][14]*f->P[14][10];
+    w->M[11] = t->Phi[8][0]*f->P[0][11] + t->Phi[8][1]*f->P[1][11] + t->Phi[8][2]*f->P[2][11] +
+            t->Phi[8][3]*f->P[3][11] + t->Phi[8][4]*f->P[4][11] + t->Phi[8][5]*f->P[5][11] +
+            t->Phi[8][6]*f->P[6][11] + t->Phi[8][8]*f->P[8][11] + t->Phi[8][9]*f->P[9][11] +
+            t->Phi[8][10]*f->P[10][11] + t->Phi[8][11]*f->P[11][11] + t->Phi[8][12]*f->P[12][11] +
+            t->Phi[8][13]*f->P[13][11] + t->Phi[8][14]*f->P[14][11];
+    w->M[12] = t->Phi[8][0]*f->P[0][12] + t->Phi[8][1]*f->P[1][12] + t->Phi[8][2]*f->P[2][12] +
+            t->Phi[8][3]*f->P[3][12] + t->Phi[8][4]*f->P[4][12] + t->Phi[8][5]*f->P[5][12] +
+            t->Phi[8][6]*f->P[6][12] + t->Phi[8][8]*f->P[8][12] + t->Phi[8][9]*f->P[9][12] +
+            t->Phi[8][10]*f->P[10][12] + t->Phi[8][11]*f->P[11][12] + t->Phi[8][12]*f->P[12][12] +
+            t->Phi[8][13]*f->P[13][12] + t->Phi[8][14]*f->P[14][12];
+    w->M[13] = t->Phi[8][0]*f->P[0][13] + t->Phi[8][1]*f->P[1][13] + t->Phi[8][2]*f->P[2][13] +
+            t->Phi[8][3]*f->P[3][13] + t->Phi[8][4]*f->P[4][13] + t->Phi[8][5]*f->P[5][13] +
+            t->Phi[8][6]*f->P[6][13] + t->Phi[8][8]*f->P[8][13] + t->Phi[8][9]*f->P[9][13] +
+            t->Phi[8][10]*f->P[10][13] + t->Phi[8][11]*f->P[11][13] + t->Phi[8][12]*f->P[12][13] +
+            t->Phi[8][13]*f->P[13][13] + t->Phi[8][14]*f->P[14][13];
+    w->M[14] = t->Phi[8][0]*f->P[0][14] + t->Phi[8][1]*f->P[1][14] + t->Phi[8][2]*f->P[2][14] +
+            t->Phi[8][3]*f->P[3][14] + t->Phi[8][4]*f->P[4][14] + t->Phi[8][5]*f->P[5][14] +
+            t->Phi[8][6]*f->P[6][14] + t->Phi[8][8]*f->P[8][14] + t->Phi[8][9]*f->P[9][14] +
+            t->Phi[8][10]*f->P[10][14] + t->Phi[8][11]*f->P[11][14] + t->Phi[8][12]*f->P[12][14] +
+            t->Phi[8][13]*f->P[13][14] + t->Phi[8][14]*f->P[14][14];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -3900,18 +3846,17 @@ static ins_gps15_scalar propagate_row_8(const ins_gps15_transition *restrict t,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[8][0]*t->Phi[8][0] + w->M[8][1]*t->Phi[8][1] + w->M[8][2]*t->Phi[8][2] +
-            w->M[8][3]*t->Phi[8][3] + w->M[8][4]*t->Phi[8][4] + w->M[8][5]*t->Phi[8][5] +
-            w->M[8][6]*t->Phi[8][6] + w->M[8][8]*t->Phi[8][8] + w->M[8][9]*t->Phi[8][9] +
-            w->M[8][10]*t->Phi[8][10] + w->M[8][11]*t->Phi[8][11] + w->M[8][12]*t->Phi[8][12] +
-            w->M[8][13]*t->Phi[8][13] + w->M[8][14]*t->Phi[8][14] + t->Qd[8][8]; w->Pn[8][8] = v;
-            check += v - v;
-    v = w->M[8][9]; w->Pn[8][9] = v; w->Pn[9][8] = v; check += v - v;
-    v = w->M[8][10]; w->Pn[8][10] = v; w->Pn[10][8] = v; check += v - v;
-    v = w->M[8][11]; w->Pn[8][11] = v; w->Pn[11][8] = v; check += v - v;
-    v = w->M[8][12]; w->Pn[8][12] = v; w->Pn[12][8] = v; check += v - v;
-    v = w->M[8][13]; w->Pn[8][13] = v; w->Pn[13][8] = v; check += v - v;
-    v = w->M[8][14]; w->Pn[8][14] = v; w->Pn[14][8] = v; check += v - v;
+    v = w->M[0]*t->Phi[8][0] + w->M[1]*t->Phi[8][1] + w->M[2]*t->Phi[8][2] + w->M[3]*t->Phi[8][3] +
+            w->M[4]*t->Phi[8][4] + w->M[5]*t->Phi[8][5] + w->M[6]*t->Phi[8][6] +
+            w->M[8]*t->Phi[8][8] + w->M[9]*t->Phi[8][9] + w->M[10]*t->Phi[8][10] +
+            w->M[11]*t->Phi[8][11] + w->M[12]*t->Phi[8][12] + w->M[13]*t->Phi[8][13] +
+            w->M[14]*t->Phi[8][14] + t->Qd[92]; w->Pn[92] = v; check += v - v;
+    v = w->M[9]; w->Pn[93] = v; check += v - v;
+    v = w->M[10]; w->Pn[94] = v; check += v - v;
+    v = w->M[11]; w->Pn[95] = v; check += v - v;
+    v = w->M[12]; w->Pn[96] = v; check += v - v;
+    v = w->M[13]; w->Pn[97] = v; check += v - v;
+    v = w->M[14]; w->Pn[98] = v; check += v - v;
     return check;
 }
 
@@ -3920,12 +3865,12 @@ static ins_gps15_scalar propagate_row_9(const ins_gps15_filter *restrict f, ins_
         *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = f->P[9][9]; w->Pn[9][9] = v; check += v - v;
-    v = f->P[9][10]; w->Pn[9][10] = v; w->Pn[10][9] = v; check += v - v;
-    v = f->P[9][11]; w->Pn[9][11] = v; w->Pn[11][9] = v; check += v - v;
-    v = f->P[9][12]; w->Pn[9][12] = v; w->Pn[12][9] = v; check += v - v;
-    v = f->P[9][13]; w->Pn[9][13] = v; w->Pn[13][9] = v; check += v - v;
-    v = f->P[9][14]; w->Pn[9][14] = v; w->Pn[14][9] = v; check += v - v;
+    v = f->P[9][9]; w->Pn[99] = v; check += v - v;
+    v = f->P[9][10]; w->Pn[100] = v; check += v - v;
+    v = f->P[9][11]; w->Pn[101] = v; check += v - v;
+    v = f->P[9][12]; w->Pn[102] = v; check += v - v;
+    v = f->P[9][13]; w->Pn[103] = v; check += v - v;
+    v = f->P[9][14]; w->Pn[104] = v; check += v - v;
     return check;
 }
 
@@ -3934,11 +3879,11 @@ static ins_gps15_scalar propagate_row_10(const ins_gps15_filter *restrict f,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = f->P[10][10]; w->Pn[10][10] = v; check += v - v;
-    v = f->P[10][11]; w->Pn[10][11] = v; w->Pn[11][10] = v; check += v - v;
-    v = f->P[10][12]; w->Pn[10][12] = v; w->Pn[12][10] = v; check += v - v;
-    v = f->P[10][13]; w->Pn[10][13] = v; w->Pn[13][10] = v; check += v - v;
-    v = f->P[10][14]; w->Pn[10][14] = v; w->Pn[14][10] = v; check += v - v;
+    v = f->P[10][10]; w->Pn[105] = v; check += v - v;
+    v = f->P[10][11]; w->Pn[106] = v; check += v - v;
+    v = f->P[10][12]; w->Pn[107] = v; check += v - v;
+    v = f->P[10][13]; w->Pn[108] = v; check += v - v;
+    v = f->P[10][14]; w->Pn[109] = v; check += v - v;
     return check;
 }
 
@@ -3947,10 +3892,10 @@ static ins_gps15_scalar propagate_row_11(const ins_gps15_filter *restrict f,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = f->P[11][11]; w->Pn[11][11] = v; check += v - v;
-    v = f->P[11][12]; w->Pn[11][12] = v; w->Pn[12][11] = v; check += v - v;
-    v = f->P[11][13]; w->Pn[11][13] = v; w->Pn[13][11] = v; check += v - v;
-    v = f->P[11][14]; w->Pn[11][14] = v; w->Pn[14][11] = v; check += v - v;
+    v = f->P[11][11]; w->Pn[110] = v; check += v - v;
+    v = f->P[11][12]; w->Pn[111] = v; check += v - v;
+    v = f->P[11][13]; w->Pn[112] = v; check += v - v;
+    v = f->P[11][14]; w->Pn[113] = v; check += v - v;
     return check;
 }
 
@@ -3959,9 +3904,9 @@ static ins_gps15_scalar propagate_row_12(const ins_gps15_filter *restrict f,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = f->P[12][12]; w->Pn[12][12] = v; check += v - v;
-    v = f->P[12][13]; w->Pn[12][13] = v; w->Pn[13][12] = v; check += v - v;
-    v = f->P[12][14]; w->Pn[12][14] = v; w->Pn[14][12] = v; check += v - v;
+    v = f->P[12][12]; w->Pn[114] = v; check += v - v;
+    v = f->P[12][13]; w->Pn[115] = v; check += v - v;
+    v = f->P[12][14]; w->Pn[116] = v; check += v - v;
     return check;
 }
 
@@ -3970,8 +3915,8 @@ static ins_gps15_scalar propagate_row_13(const ins_gps15_filter *restrict f,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = f->P[13][13]; w->Pn[13][13] = v; check += v - v;
-    v = f->P[13][14]; w->Pn[13][14] = v; w->Pn[14][13] = v; check += v - v;
+    v = f->P[13][13]; w->Pn[117] = v; check += v - v;
+    v = f->P[13][14]; w->Pn[118] = v; check += v - v;
     return check;
 }
 
@@ -3980,7 +3925,7 @@ static ins_gps15_scalar propagate_row_14(const ins_gps15_filter *restrict f,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = f->P[14][14]; w->Pn[14][14] = v; check += v - v;
+    v = f->P[14][14]; w->Pn[119] = v; check += v - v;
     return check;
 }
 
@@ -4050,25 +3995,25 @@ int ins_gps15_predict(ins_gps15_filter *restrict f, const ins_gps15_transition *
     check += f->x[12] - f->x[12];
     check += f->x[13] - f->x[13];
     check += f->x[14] - f->x[14];
-    /* M = Phi P (rows of Phi that are e_i are read from P directly), then
-       Pn = M Phi^T + Q_d (each pair computed once, stored in both triangles) */
+    /* row by row: M = row i of Phi P (a row of Phi that is e_i reads P directly), then
+       row i of Pn = M Phi^T + Q_d (each pair computed once, into the packed upper triangle) */
     phi_times_p_row_0(f, t, w);
-    phi_times_p_row_1(f, t, w);
-    phi_times_p_row_2(f, t, w);
-    phi_times_p_row_3(f, t, w);
-    phi_times_p_row_4(f, t, w);
-    phi_times_p_row_5(f, t, w);
-    phi_times_p_row_6(f, t, w);
-    phi_times_p_row_7(f, t, w);
-    phi_times_p_row_8(f, t, w);
     check += propagate_row_0(t, w);
+    phi_times_p_row_1(f, t, w);
     check += propagate_row_1(t, w);
+    phi_times_p_row_2(f, t, w);
     check += propagate_row_2(t, w);
+    phi_times_p_row_3(f, t, w);
     check += propagate_row_3(t, w);
+    phi_times_p_row_4(f, t, w);
     check += propagate_row_4(t, w);
+    phi_times_p_row_5(f, t, w);
     check += propagate_row_5(t, w);
+    phi_times_p_row_6(f, t, w);
     check += propagate_row_6(t, w);
+    phi_times_p_row_7(f, t, w);
     check += propagate_row_7(t, w);
+    phi_times_p_row_8(f, t, w);
     check += propagate_row_8(t, w);
     check += propagate_row_9(f, w);
     check += propagate_row_10(f, w);
@@ -4088,7 +4033,127 @@ int ins_gps15_predict(ins_gps15_filter *restrict f, const ins_gps15_transition *
     f->x[6] = w->xn[6];
     f->x[7] = w->xn[7];
     f->x[8] = w->xn[8];
-    memcpy(f->P, w->Pn, sizeof f->P);
+    /* row i of P from Pn's packed row, then its column */
+    memcpy(&f->P[0][0], &w->Pn[0], 15 * sizeof w->Pn[0]);
+    f->P[1][0] = f->P[0][1];
+    f->P[2][0] = f->P[0][2];
+    f->P[3][0] = f->P[0][3];
+    f->P[4][0] = f->P[0][4];
+    f->P[5][0] = f->P[0][5];
+    f->P[6][0] = f->P[0][6];
+    f->P[7][0] = f->P[0][7];
+    f->P[8][0] = f->P[0][8];
+    f->P[9][0] = f->P[0][9];
+    f->P[10][0] = f->P[0][10];
+    f->P[11][0] = f->P[0][11];
+    f->P[12][0] = f->P[0][12];
+    f->P[13][0] = f->P[0][13];
+    f->P[14][0] = f->P[0][14];
+    memcpy(&f->P[1][1], &w->Pn[15], 14 * sizeof w->Pn[0]);
+    f->P[2][1] = f->P[1][2];
+    f->P[3][1] = f->P[1][3];
+    f->P[4][1] = f->P[1][4];
+    f->P[5][1] = f->P[1][5];
+    f->P[6][1] = f->P[1][6];
+    f->P[7][1] = f->P[1][7];
+    f->P[8][1] = f->P[1][8];
+    f->P[9][1] = f->P[1][9];
+    f->P[10][1] = f->P[1][10];
+    f->P[11][1] = f->P[1][11];
+    f->P[12][1] = f->P[1][12];
+    f->P[13][1] = f->P[1][13];
+    f->P[14][1] = f->P[1][14];
+    memcpy(&f->P[2][2], &w->Pn[29], 13 * sizeof w->Pn[0]);
+    f->P[3][2] = f->P[2][3];
+    f->P[4][2] = f->P[2][4];
+    f->P[5][2] = f->P[2][5];
+    f->P[6][2] = f->P[2][6];
+    f->P[7][2] = f->P[2][7];
+    f->P[8][2] = f->P[2][8];
+    f->P[9][2] = f->P[2][9];
+    f->P[10][2] = f->P[2][10];
+    f->P[11][2] = f->P[2][11];
+    f->P[12][2] = f->P[2][12];
+    f->P[13][2] = f->P[2][13];
+    f->P[14][2] = f->P[2][14];
+    memcpy(&f->P[3][3], &w->Pn[42], 12 * sizeof w->Pn[0]);
+    f->P[4][3] = f->P[3][4];
+    f->P[5][3] = f->P[3][5];
+    f->P[6][3] = f->P[3][6];
+    f->P[7][3] = f->P[3][7];
+    f->P[8][3] = f->P[3][8];
+    f->P[9][3] = f->P[3][9];
+    f->P[10][3] = f->P[3][10];
+    f->P[11][3] = f->P[3][11];
+    f->P[12][3] = f->P[3][12];
+    f->P[13][3] = f->P[3][13];
+    f->P[14][3] = f->P[3][14];
+    memcpy(&f->P[4][4], &w->Pn[54], 11 * sizeof w->Pn[0]);
+    f->P[5][4] = f->P[4][5];
+    f->P[6][4] = f->P[4][6];
+    f->P[7][4] = f->P[4][7];
+    f->P[8][4] = f->P[4][8];
+    f->P[9][4] = f->P[4][9];
+    f->P[10][4] = f->P[4][10];
+    f->P[11][4] = f->P[4][11];
+    f->P[12][4] = f->P[4][12];
+    f->P[13][4] = f->P[4][13];
+    f->P[14][4] = f->P[4][14];
+    memcpy(&f->P[5][5], &w->Pn[65], 10 * sizeof w->Pn[0]);
+    f->P[6][5] = f->P[5][6];
+    f->P[7][5] = f->P[5][7];
+    f->P[8][5] = f->P[5][8];
+    f->P[9][5] = f->P[5][9];
+    f->P[10][5] = f->P[5][10];
+    f->P[11][5] = f->P[5][11];
+    f->P[12][5] = f->P[5][12];
+    f->P[13][5] = f->P[5][13];
+    f->P[14][5] = f->P[5][14];
+    memcpy(&f->P[6][6], &w->Pn[75], 9 * sizeof w->Pn[0]);
+    f->P[7][6] = f->P[6][7];
+    f->P[8][6] = f->P[6][8];
+    f->P[9][6] = f->P[6][9];
+    f->P[10][6] = f->P[6][10];
+    f->P[11][6] = f->P[6][11];
+    f->P[12][6] = f->P[6][12];
+    f->P[13][6] = f->P[6][13];
+    f->P[14][6] = f->P[6][14];
+    memcpy(&f->P[7][7], &w->Pn[84], 8 * sizeof w->Pn[0]);
+    f->P[8][7] = f->P[7][8];
+    f->P[9][7] = f->P[7][9];
+    f->P[10][7] = f->P[7][10];
+    f->P[11][7] = f->P[7][11];
+    f->P[12][7] = f->P[7][12];
+    f->P[13][7] = f->P[7][13];
+    f->P[14][7] = f->P[7][14];
+    memcpy(&f->P[8][8], &w->Pn[92], 7 * sizeof w->Pn[0]);
+    f->P[9][8] = f->P[8][9];
+    f->P[10][8] = f->P[8][10];
+    f->P[11][8] = f->P[8][11];
+    f->P[12][8] = f->P[8][12];
+    f->P[13][8] = f->P[8][13];
+    f->P[14][8] = f->P[8][14];
+    memcpy(&f->P[9][9], &w->Pn[99], 6 * sizeof w->Pn[0]);
+    f->P[10][9] = f->P[9][10];
+    f->P[11][9] = f->P[9][11];
+    f->P[12][9] = f->P[9][12];
+    f->P[13][9] = f->P[9][13];
+    f->P[14][9] = f->P[9][14];
+    memcpy(&f->P[10][10], &w->Pn[105], 5 * sizeof w->Pn[0]);
+    f->P[11][10] = f->P[10][11];
+    f->P[12][10] = f->P[10][12];
+    f->P[13][10] = f->P[10][13];
+    f->P[14][10] = f->P[10][14];
+    memcpy(&f->P[11][11], &w->Pn[110], 4 * sizeof w->Pn[0]);
+    f->P[12][11] = f->P[11][12];
+    f->P[13][11] = f->P[11][13];
+    f->P[14][11] = f->P[11][14];
+    memcpy(&f->P[12][12], &w->Pn[114], 3 * sizeof w->Pn[0]);
+    f->P[13][12] = f->P[12][13];
+    f->P[14][12] = f->P[12][14];
+    memcpy(&f->P[13][13], &w->Pn[117], 2 * sizeof w->Pn[0]);
+    f->P[14][13] = f->P[13][14];
+    memcpy(&f->P[14][14], &w->Pn[119], 1 * sizeof w->Pn[0]);
     return INS_GPS15_OK;
 }
 
@@ -4107,7 +4172,7 @@ int ins_gps15_set_covariance(ins_gps15_filter *restrict f, const ins_gps15_scala
     if (check != 0.0) {
         return INS_GPS15_ERR_NONFINITE;
     }
-    /* factored only to test that P is positive semidefinite (U in M, D in xn) */
+    /* factored only to test that P is positive semidefinite (U in Pn's upper triangle, D in xn) */
     /* The contract (README, "Generated code"), tol = 16 N eps: P_ii >= 0,
        |P_ij - P_ji| <= tol sqrt(P_ii P_jj) and |P_ij| <= sqrt(P_ii P_jj) (1 + tol),
        so that a zero variance carries no correlation. */
@@ -4135,7 +4200,8 @@ int ins_gps15_set_covariance(ins_gps15_filter *restrict f, const ins_gps15_scala
     for (j = INS_GPS15_N_STATES - 1; j >= 0; --j) {
         ins_gps15_scalar pivot = P[j * INS_GPS15_N_STATES + j];
         for (k = j + 1; k < INS_GPS15_N_STATES; ++k) {
-            pivot -= w->xn[k] * w->M[j][k] * w->M[j][k];
+            pivot -= w->xn[k] * w->Pn[INS_GPS15_PACKED_UPPER(j, k)] *
+                    w->Pn[INS_GPS15_PACKED_UPPER(j, k)];
         }
         if (pivot < 0.0) {
             if (pivot < -(16 * INS_GPS15_N_STATES * DBL_EPSILON) * P[j * INS_GPS15_N_STATES + j] ||
@@ -4148,14 +4214,15 @@ int ins_gps15_set_covariance(ins_gps15_filter *restrict f, const ins_gps15_scala
         for (i = 0; i < j; ++i) {
             ins_gps15_scalar s = P[i * INS_GPS15_N_STATES + j];
             for (k = j + 1; k < INS_GPS15_N_STATES; ++k) {
-                s -= w->xn[k] * w->M[i][k] * w->M[j][k];
+                s -= w->xn[k] * w->Pn[INS_GPS15_PACKED_UPPER(i, k)] *
+                        w->Pn[INS_GPS15_PACKED_UPPER(j, k)];
             }
             if (!(pivot > 0.0) && fabs(s) > (16 * INS_GPS15_N_STATES * DBL_EPSILON) * sqrt(P[i *
                     INS_GPS15_N_STATES + i] * P[j * INS_GPS15_N_STATES + j])) {
                 return INS_GPS15_ERR_NOT_POSITIVE;
             }
-            w->M[i][j] = (pivot > 0.0) ? s / pivot : 0.0;
-            check += w->M[i][j] - w->M[i][j];
+            w->Pn[INS_GPS15_PACKED_UPPER(i, j)] = (pivot > 0.0) ? s / pivot : 0.0;
+            check += w->Pn[INS_GPS15_PACKED_UPPER(i, j)] - w->Pn[INS_GPS15_PACKED_UPPER(i, j)];
         }
         check += pivot - pivot;
     }
@@ -4324,7 +4391,7 @@ int ins_gps15_update_masked(ins_gps15_filter *restrict f,
                 s += w->C[i][a] * w->K[j][a] - w->K[i][a] * w->HP[a][j] - w->HP[a][i] * w->K[j][a];
             }
             check += s - s;
-            w->Pn[i][j] = s;
+            w->Pn[INS_GPS15_PACKED_UPPER(i, j)] = s;
         }
         w->xn[i] = f->x[i];
         for (a = 0; a < INS_GPS15_N_MEASUREMENTS; ++a) {
@@ -4338,11 +4405,128 @@ int ins_gps15_update_masked(ins_gps15_filter *restrict f,
     /* commit only once everything is known to be finite */
     for (i = 0; i < INS_GPS15_N_STATES; ++i) {
         f->x[i] = w->xn[i];
-        for (j = i; j < INS_GPS15_N_STATES; ++j) {
-            f->P[i][j] = w->Pn[i][j];
-            f->P[j][i] = w->Pn[i][j];
-        }
     }
+    /* row i of P from Pn's packed row, then its column */
+    memcpy(&f->P[0][0], &w->Pn[0], 15 * sizeof w->Pn[0]);
+    f->P[1][0] = f->P[0][1];
+    f->P[2][0] = f->P[0][2];
+    f->P[3][0] = f->P[0][3];
+    f->P[4][0] = f->P[0][4];
+    f->P[5][0] = f->P[0][5];
+    f->P[6][0] = f->P[0][6];
+    f->P[7][0] = f->P[0][7];
+    f->P[8][0] = f->P[0][8];
+    f->P[9][0] = f->P[0][9];
+    f->P[10][0] = f->P[0][10];
+    f->P[11][0] = f->P[0][11];
+    f->P[12][0] = f->P[0][12];
+    f->P[13][0] = f->P[0][13];
+    f->P[14][0] = f->P[0][14];
+    memcpy(&f->P[1][1], &w->Pn[15], 14 * sizeof w->Pn[0]);
+    f->P[2][1] = f->P[1][2];
+    f->P[3][1] = f->P[1][3];
+    f->P[4][1] = f->P[1][4];
+    f->P[5][1] = f->P[1][5];
+    f->P[6][1] = f->P[1][6];
+    f->P[7][1] = f->P[1][7];
+    f->P[8][1] = f->P[1][8];
+    f->P[9][1] = f->P[1][9];
+    f->P[10][1] = f->P[1][10];
+    f->P[11][1] = f->P[1][11];
+    f->P[12][1] = f->P[1][12];
+    f->P[13][1] = f->P[1][13];
+    f->P[14][1] = f->P[1][14];
+    memcpy(&f->P[2][2], &w->Pn[29], 13 * sizeof w->Pn[0]);
+    f->P[3][2] = f->P[2][3];
+    f->P[4][2] = f->P[2][4];
+    f->P[5][2] = f->P[2][5];
+    f->P[6][2] = f->P[2][6];
+    f->P[7][2] = f->P[2][7];
+    f->P[8][2] = f->P[2][8];
+    f->P[9][2] = f->P[2][9];
+    f->P[10][2] = f->P[2][10];
+    f->P[11][2] = f->P[2][11];
+    f->P[12][2] = f->P[2][12];
+    f->P[13][2] = f->P[2][13];
+    f->P[14][2] = f->P[2][14];
+    memcpy(&f->P[3][3], &w->Pn[42], 12 * sizeof w->Pn[0]);
+    f->P[4][3] = f->P[3][4];
+    f->P[5][3] = f->P[3][5];
+    f->P[6][3] = f->P[3][6];
+    f->P[7][3] = f->P[3][7];
+    f->P[8][3] = f->P[3][8];
+    f->P[9][3] = f->P[3][9];
+    f->P[10][3] = f->P[3][10];
+    f->P[11][3] = f->P[3][11];
+    f->P[12][3] = f->P[3][12];
+    f->P[13][3] = f->P[3][13];
+    f->P[14][3] = f->P[3][14];
+    memcpy(&f->P[4][4], &w->Pn[54], 11 * sizeof w->Pn[0]);
+    f->P[5][4] = f->P[4][5];
+    f->P[6][4] = f->P[4][6];
+    f->P[7][4] = f->P[4][7];
+    f->P[8][4] = f->P[4][8];
+    f->P[9][4] = f->P[4][9];
+    f->P[10][4] = f->P[4][10];
+    f->P[11][4] = f->P[4][11];
+    f->P[12][4] = f->P[4][12];
+    f->P[13][4] = f->P[4][13];
+    f->P[14][4] = f->P[4][14];
+    memcpy(&f->P[5][5], &w->Pn[65], 10 * sizeof w->Pn[0]);
+    f->P[6][5] = f->P[5][6];
+    f->P[7][5] = f->P[5][7];
+    f->P[8][5] = f->P[5][8];
+    f->P[9][5] = f->P[5][9];
+    f->P[10][5] = f->P[5][10];
+    f->P[11][5] = f->P[5][11];
+    f->P[12][5] = f->P[5][12];
+    f->P[13][5] = f->P[5][13];
+    f->P[14][5] = f->P[5][14];
+    memcpy(&f->P[6][6], &w->Pn[75], 9 * sizeof w->Pn[0]);
+    f->P[7][6] = f->P[6][7];
+    f->P[8][6] = f->P[6][8];
+    f->P[9][6] = f->P[6][9];
+    f->P[10][6] = f->P[6][10];
+    f->P[11][6] = f->P[6][11];
+    f->P[12][6] = f->P[6][12];
+    f->P[13][6] = f->P[6][13];
+    f->P[14][6] = f->P[6][14];
+    memcpy(&f->P[7][7], &w->Pn[84], 8 * sizeof w->Pn[0]);
+    f->P[8][7] = f->P[7][8];
+    f->P[9][7] = f->P[7][9];
+    f->P[10][7] = f->P[7][10];
+    f->P[11][7] = f->P[7][11];
+    f->P[12][7] = f->P[7][12];
+    f->P[13][7] = f->P[7][13];
+    f->P[14][7] = f->P[7][14];
+    memcpy(&f->P[8][8], &w->Pn[92], 7 * sizeof w->Pn[0]);
+    f->P[9][8] = f->P[8][9];
+    f->P[10][8] = f->P[8][10];
+    f->P[11][8] = f->P[8][11];
+    f->P[12][8] = f->P[8][12];
+    f->P[13][8] = f->P[8][13];
+    f->P[14][8] = f->P[8][14];
+    memcpy(&f->P[9][9], &w->Pn[99], 6 * sizeof w->Pn[0]);
+    f->P[10][9] = f->P[9][10];
+    f->P[11][9] = f->P[9][11];
+    f->P[12][9] = f->P[9][12];
+    f->P[13][9] = f->P[9][13];
+    f->P[14][9] = f->P[9][14];
+    memcpy(&f->P[10][10], &w->Pn[105], 5 * sizeof w->Pn[0]);
+    f->P[11][10] = f->P[10][11];
+    f->P[12][10] = f->P[10][12];
+    f->P[13][10] = f->P[10][13];
+    f->P[14][10] = f->P[10][14];
+    memcpy(&f->P[11][11], &w->Pn[110], 4 * sizeof w->Pn[0]);
+    f->P[12][11] = f->P[11][12];
+    f->P[13][11] = f->P[11][13];
+    f->P[14][11] = f->P[11][14];
+    memcpy(&f->P[12][12], &w->Pn[114], 3 * sizeof w->Pn[0]);
+    f->P[13][12] = f->P[12][13];
+    f->P[14][12] = f->P[12][14];
+    memcpy(&f->P[13][13], &w->Pn[117], 2 * sizeof w->Pn[0]);
+    f->P[14][13] = f->P[13][14];
+    memcpy(&f->P[14][14], &w->Pn[119], 1 * sizeof w->Pn[0]);
     if (innovation != NULL) {
         for (a = 0; a < INS_GPS15_N_MEASUREMENTS; ++a) {
             innovation[a] = w->nu0[a];

@@ -14,8 +14,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 113 operations after CSE
- *   discretize: 6275 mul + 4840 add = 11115 flops
- *   discretize, each doubling (long steps): 2173 mul + 2227 add = 4400 flops
+ *   discretize: 3573 mul + 2696 add = 6269 flops
+ *   discretize, each doubling (long steps): 2359 mul + 2351 add = 4710 flops
  *   predict (C): 2670 mul + 2526 add = 5196 flops
  *   predict (Python): 4050 mul + 4005 add = 8055 flops
  *   predict (dense, for comparison): 6765 mul + 6525 add = 13290 flops
@@ -34,8 +34,8 @@
 #define INS_GPS15_NNZ_G 18
 #define INS_GPS15_NNZ_H 6
 #define INS_GPS15_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
-#define INS_GPS15_N_TERMS 144   /* entries of discretize's compressed term arrays */
-#define INS_GPS15_N_ACTIVE_ENTRIES 144   /* entries of Phi in rows that are not e_i */
+#define INS_GPS15_N_TERMS 127   /* entries of discretize's compressed term arrays */
+#define INS_GPS15_N_ACTIVE_ENTRIES 127   /* entries of Phi in rows that are not e_i */
 #define INS_GPS15_FORM_COVARIANCE 1
 
 #define INS_GPS15_OK 0
@@ -138,7 +138,8 @@ typedef struct {
 /* The transition over one step T (from discretize). */
 typedef struct {
     ins_gps15_scalar Phi[INS_GPS15_N_STATES][INS_GPS15_N_STATES]; /* transition matrix */
-    ins_gps15_scalar Qd[INS_GPS15_N_STATES][INS_GPS15_N_STATES]; /* Gamma (Q/T) Gamma^T */
+    ins_gps15_scalar Qd[INS_GPS15_N_PACKED]; /* Gamma (Q/T) Gamma^T, packed upper triangle: (i, j),
+            i <= j, at i (2N - i - 1) / 2 + j */
 } ins_gps15_transition;
 
 /* The filter state: estimate and covariance (or its factors). */
@@ -154,17 +155,13 @@ typedef struct {
     ins_gps15_scalar S[INS_GPS15_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the even
             levels R_k): each block row's dense segment, then the diagonal rows */
     ins_gps15_scalar fh[INS_GPS15_NNZ_F]; /* F h at the nonzeros of F */
-    ins_gps15_scalar row_sum[INS_GPS15_N_STATES]; /* balancing: off-diagonal row sums of D^-1 |F|
-            D */
-    ins_gps15_scalar col_sum[INS_GPS15_N_STATES]; /* balancing: off-diagonal column sums of D^-1 |F|
-            D */
 } ins_gps15_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */
 typedef struct {
-    ins_gps15_scalar M[INS_GPS15_N_STATES][INS_GPS15_N_STATES]; /* Phi P */
-    ins_gps15_scalar Pn[INS_GPS15_N_STATES][INS_GPS15_N_STATES]; /* new covariance before it is
-            committed */
+    ins_gps15_scalar M[INS_GPS15_N_STATES]; /* one row of Phi P (predict works row by row) */
+    ins_gps15_scalar Pn[INS_GPS15_N_PACKED]; /* new covariance before it is committed, packed upper
+            triangle */
     ins_gps15_scalar xn[INS_GPS15_N_STATES];
     ins_gps15_scalar HP[6][INS_GPS15_N_STATES];
     ins_gps15_scalar L[6][6]; /* Cholesky factor of the innovation covariance */

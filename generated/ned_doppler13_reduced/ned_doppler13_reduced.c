@@ -11,8 +11,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 73 operations after CSE
- *   discretize: 3042 mul + 2153 add = 5195 flops
- *   discretize, each doubling (long steps): 967 mul + 981 add = 1948 flops
+ *   discretize: 2190 mul + 1542 add = 3732 flops
+ *   discretize, each doubling (long steps): 1025 mul + 1017 add = 2042 flops
  *   predict (C): 1330 mul + 1199 add = 2529 flops
  *   predict (Python): 2054 mul + 1989 add = 4043 flops
  *   predict (dense, for comparison): 4407 mul + 4225 add = 8632 flops
@@ -29,6 +29,10 @@
 #include <stdint.h>
 #include <string.h>
 
+/* Index of (i, j), i <= j (and with packed storage of P, of any (i, j)) of a symmetric
+   matrix stored as a packed upper triangle, row by row: Q_d and Pn always, P if packed. */
+#define NED_DOPPLER13_REDUCED_PACKED_UPPER(i, j) \
+        ((i) * (2 * NED_DOPPLER13_REDUCED_N_STATES - (i) - 1) / 2 + (j))
 
 const char *const ned_doppler13_reduced_state_names[NED_DOPPLER13_REDUCED_N_STATES] = {
     "attitude_error_north",
@@ -423,86 +427,73 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_level_1_into_S(ned_doppler13_reduced_dis
     w->S[3] = 0;
     w->S[4] = w->fh[2]*c_in;
     w->S[5] = w->fh[3]*c_in;
-    w->S[6] = 0;
-    w->S[7] = w->fh[4]*c_in;
-    w->S[8] = w->fh[5]*c_in;
-    w->S[9] = w->fh[6]*c_in;
-    w->S[10] = w->fh[7]*c_in;
-    w->S[11] = 0;
-    w->S[12] = w->fh[8]*c_in;
-    w->S[13] = c_out;
-    w->S[14] = w->fh[9]*c_in;
-    w->S[15] = w->fh[10]*c_in;
-    w->S[16] = 0;
-    w->S[17] = 0;
-    w->S[18] = 0;
-    w->S[19] = w->fh[11]*c_in;
-    w->S[20] = w->fh[12]*c_in;
-    w->S[21] = w->fh[13]*c_in;
-    w->S[22] = w->fh[14]*c_in;
-    w->S[23] = 0;
-    w->S[24] = w->fh[15]*c_in;
-    w->S[25] = w->fh[16]*c_in;
-    w->S[26] = c_out;
-    w->S[27] = 0;
-    w->S[28] = w->fh[17]*c_in;
-    w->S[29] = w->fh[18]*c_in;
+    w->S[6] = w->fh[6]*c_in;
+    w->S[7] = w->fh[7]*c_in;
+    w->S[8] = w->fh[8]*c_in;
+    w->S[9] = c_out;
+    w->S[10] = w->fh[9]*c_in;
+    w->S[11] = w->fh[10]*c_in;
+    w->S[12] = 0;
+    w->S[13] = 0;
+    w->S[14] = w->fh[13]*c_in;
+    w->S[15] = w->fh[14]*c_in;
+    w->S[16] = w->fh[15]*c_in;
+    w->S[17] = w->fh[16]*c_in;
+    w->S[18] = c_out;
+    w->S[19] = 0;
+    w->S[20] = w->fh[17]*c_in;
+    w->S[21] = w->fh[18]*c_in;
+    w->S[22] = w->fh[21]*c_in;
+    w->S[23] = w->fh[22]*c_in;
+    w->S[24] = 0;
+    w->S[25] = w->fh[23]*c_in;
+    w->S[26] = w->fh[24]*c_in;
+    w->S[27] = c_out + w->fh[25]*c_in;
+    w->S[28] = w->fh[26]*c_in;
+    w->S[29] = w->fh[27]*c_in;
     w->S[30] = 0;
-    w->S[31] = w->fh[19]*c_in;
-    w->S[32] = w->fh[20]*c_in;
-    w->S[33] = w->fh[21]*c_in;
-    w->S[34] = w->fh[22]*c_in;
-    w->S[35] = 0;
-    w->S[36] = 0;
-    w->S[37] = w->fh[23]*c_in;
-    w->S[38] = w->fh[24]*c_in;
-    w->S[39] = c_out + w->fh[25]*c_in;
-    w->S[40] = w->fh[26]*c_in;
-    w->S[41] = w->fh[27]*c_in;
+    w->S[31] = 0;
+    w->S[32] = w->fh[28]*c_in;
+    w->S[33] = 0;
+    w->S[34] = w->fh[29]*c_in;
+    w->S[35] = w->fh[30]*c_in;
+    w->S[36] = c_out + w->fh[31]*c_in;
+    w->S[37] = w->fh[32]*c_in;
+    w->S[38] = 0;
+    w->S[39] = 0;
+    w->S[40] = 0;
+    w->S[41] = 0;
     w->S[42] = 0;
-    w->S[43] = 0;
+    w->S[43] = w->fh[33]*c_in;
     w->S[44] = 0;
-    w->S[45] = 0;
+    w->S[45] = c_out;
     w->S[46] = 0;
     w->S[47] = 0;
-    w->S[48] = w->fh[28]*c_in;
+    w->S[48] = 0;
     w->S[49] = 0;
-    w->S[50] = w->fh[29]*c_in;
-    w->S[51] = w->fh[30]*c_in;
-    w->S[52] = c_out + w->fh[31]*c_in;
-    w->S[53] = w->fh[32]*c_in;
+    w->S[50] = 0;
+    w->S[51] = 0;
+    w->S[52] = w->fh[34]*c_in;
+    w->S[53] = w->fh[35]*c_in;
     w->S[54] = 0;
     w->S[55] = 0;
-    w->S[56] = 0;
-    w->S[57] = 0;
-    w->S[58] = 0;
-    w->S[59] = 0;
-    w->S[60] = 0;
-    w->S[61] = 0;
-    w->S[62] = 0;
-    w->S[63] = w->fh[33]*c_in;
+    w->S[56] = c_out + w->fh[36]*c_in;
+    w->S[57] = c_out + w->fh[37]*c_in;
+    w->S[58] = w->fh[4]*c_in;
+    w->S[59] = w->fh[5]*c_in;
+    w->S[60] = w->fh[11]*c_in;
+    w->S[61] = w->fh[12]*c_in;
+    w->S[62] = w->fh[19]*c_in;
+    w->S[63] = w->fh[20]*c_in;
     w->S[64] = 0;
-    w->S[65] = c_out;
+    w->S[65] = 0;
     w->S[66] = 0;
     w->S[67] = 0;
     w->S[68] = 0;
     w->S[69] = 0;
-    w->S[70] = 0;
+    w->S[70] = c_out;
     w->S[71] = 0;
     w->S[72] = 0;
-    w->S[73] = 0;
-    w->S[74] = 0;
-    w->S[75] = 0;
-    w->S[76] = w->fh[34]*c_in;
-    w->S[77] = w->fh[35]*c_in;
-    w->S[78] = c_out;
-    w->S[79] = 0;
-    w->S[80] = 0;
-    w->S[81] = 0;
-    w->S[82] = 0;
-    w->S[83] = 0;
-    w->S[84] = c_out + w->fh[36]*c_in;
-    w->S[85] = c_out + w->fh[37]*c_in;
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_level_1_into_term(ned_doppler13_reduced_discretize_scratch
@@ -515,250 +506,327 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_level_1_into_term(ned_doppler13_reduced_
     w->term[1][3] = 0;
     w->term[1][4] = w->fh[2]*c_in;
     w->term[1][5] = w->fh[3]*c_in;
-    w->term[1][6] = 0;
-    w->term[1][7] = w->fh[4]*c_in;
-    w->term[1][8] = w->fh[5]*c_in;
-    w->term[1][9] = w->fh[6]*c_in;
-    w->term[1][10] = w->fh[7]*c_in;
-    w->term[1][11] = 0;
-    w->term[1][12] = w->fh[8]*c_in;
-    w->term[1][13] = c_out;
-    w->term[1][14] = w->fh[9]*c_in;
-    w->term[1][15] = w->fh[10]*c_in;
-    w->term[1][16] = 0;
-    w->term[1][17] = 0;
-    w->term[1][18] = 0;
-    w->term[1][19] = w->fh[11]*c_in;
-    w->term[1][20] = w->fh[12]*c_in;
-    w->term[1][21] = w->fh[13]*c_in;
-    w->term[1][22] = w->fh[14]*c_in;
-    w->term[1][23] = 0;
-    w->term[1][24] = w->fh[15]*c_in;
-    w->term[1][25] = w->fh[16]*c_in;
-    w->term[1][26] = c_out;
-    w->term[1][27] = 0;
-    w->term[1][28] = w->fh[17]*c_in;
-    w->term[1][29] = w->fh[18]*c_in;
+    w->term[1][6] = w->fh[6]*c_in;
+    w->term[1][7] = w->fh[7]*c_in;
+    w->term[1][8] = w->fh[8]*c_in;
+    w->term[1][9] = c_out;
+    w->term[1][10] = w->fh[9]*c_in;
+    w->term[1][11] = w->fh[10]*c_in;
+    w->term[1][12] = 0;
+    w->term[1][13] = 0;
+    w->term[1][14] = w->fh[13]*c_in;
+    w->term[1][15] = w->fh[14]*c_in;
+    w->term[1][16] = w->fh[15]*c_in;
+    w->term[1][17] = w->fh[16]*c_in;
+    w->term[1][18] = c_out;
+    w->term[1][19] = 0;
+    w->term[1][20] = w->fh[17]*c_in;
+    w->term[1][21] = w->fh[18]*c_in;
+    w->term[1][22] = w->fh[21]*c_in;
+    w->term[1][23] = w->fh[22]*c_in;
+    w->term[1][24] = 0;
+    w->term[1][25] = w->fh[23]*c_in;
+    w->term[1][26] = w->fh[24]*c_in;
+    w->term[1][27] = c_out + w->fh[25]*c_in;
+    w->term[1][28] = w->fh[26]*c_in;
+    w->term[1][29] = w->fh[27]*c_in;
     w->term[1][30] = 0;
-    w->term[1][31] = w->fh[19]*c_in;
-    w->term[1][32] = w->fh[20]*c_in;
-    w->term[1][33] = w->fh[21]*c_in;
-    w->term[1][34] = w->fh[22]*c_in;
-    w->term[1][35] = 0;
-    w->term[1][36] = 0;
-    w->term[1][37] = w->fh[23]*c_in;
-    w->term[1][38] = w->fh[24]*c_in;
-    w->term[1][39] = c_out + w->fh[25]*c_in;
-    w->term[1][40] = w->fh[26]*c_in;
-    w->term[1][41] = w->fh[27]*c_in;
+    w->term[1][31] = 0;
+    w->term[1][32] = w->fh[28]*c_in;
+    w->term[1][33] = 0;
+    w->term[1][34] = w->fh[29]*c_in;
+    w->term[1][35] = w->fh[30]*c_in;
+    w->term[1][36] = c_out + w->fh[31]*c_in;
+    w->term[1][37] = w->fh[32]*c_in;
+    w->term[1][38] = 0;
+    w->term[1][39] = 0;
+    w->term[1][40] = 0;
+    w->term[1][41] = 0;
     w->term[1][42] = 0;
-    w->term[1][43] = 0;
+    w->term[1][43] = w->fh[33]*c_in;
     w->term[1][44] = 0;
-    w->term[1][45] = 0;
+    w->term[1][45] = c_out;
     w->term[1][46] = 0;
     w->term[1][47] = 0;
-    w->term[1][48] = w->fh[28]*c_in;
+    w->term[1][48] = 0;
     w->term[1][49] = 0;
-    w->term[1][50] = w->fh[29]*c_in;
-    w->term[1][51] = w->fh[30]*c_in;
-    w->term[1][52] = c_out + w->fh[31]*c_in;
-    w->term[1][53] = w->fh[32]*c_in;
+    w->term[1][50] = 0;
+    w->term[1][51] = 0;
+    w->term[1][52] = w->fh[34]*c_in;
+    w->term[1][53] = w->fh[35]*c_in;
     w->term[1][54] = 0;
     w->term[1][55] = 0;
-    w->term[1][56] = 0;
-    w->term[1][57] = 0;
-    w->term[1][58] = 0;
-    w->term[1][59] = 0;
-    w->term[1][60] = 0;
-    w->term[1][61] = 0;
-    w->term[1][62] = 0;
-    w->term[1][63] = w->fh[33]*c_in;
+    w->term[1][56] = c_out + w->fh[36]*c_in;
+    w->term[1][57] = c_out + w->fh[37]*c_in;
+    w->term[1][58] = w->fh[4]*c_in;
+    w->term[1][59] = w->fh[5]*c_in;
+    w->term[1][60] = w->fh[11]*c_in;
+    w->term[1][61] = w->fh[12]*c_in;
+    w->term[1][62] = w->fh[19]*c_in;
+    w->term[1][63] = w->fh[20]*c_in;
     w->term[1][64] = 0;
-    w->term[1][65] = c_out;
+    w->term[1][65] = 0;
     w->term[1][66] = 0;
     w->term[1][67] = 0;
     w->term[1][68] = 0;
     w->term[1][69] = 0;
-    w->term[1][70] = 0;
+    w->term[1][70] = c_out;
     w->term[1][71] = 0;
     w->term[1][72] = 0;
-    w->term[1][73] = 0;
-    w->term[1][74] = 0;
-    w->term[1][75] = 0;
-    w->term[1][76] = w->fh[34]*c_in;
-    w->term[1][77] = w->fh[35]*c_in;
-    w->term[1][78] = c_out;
-    w->term[1][79] = 0;
-    w->term[1][80] = 0;
-    w->term[1][81] = 0;
-    w->term[1][82] = 0;
-    w->term[1][83] = 0;
-    w->term[1][84] = c_out + w->fh[36]*c_in;
-    w->term[1][85] = c_out + w->fh[37]*c_in;
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_saturated_into_S(ned_doppler13_reduced_discretize_scratch
-        *restrict w, const ned_doppler13_reduced_scalar c_out, const ned_doppler13_reduced_scalar
-        c_in)
+        *restrict w, const ned_doppler13_reduced_scalar c_out)
 {
     int k;
-    for (k = 0; k < 12; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][12+k] + w->fh[1]*w->term[1][24+k] + w->fh[2]*w->term[1][48+k]
-                + w->fh[3]*w->term[1][60+k];
-        w->S[12+k] = w->fh[8]*w->term[1][k] + w->fh[9]*w->term[1][24+k] +
-                w->fh[10]*w->term[1][36+k];
-        w->S[24+k] = w->fh[15]*w->term[1][k] + w->fh[16]*w->term[1][12+k] +
-                w->fh[17]*w->term[1][48+k] + w->fh[18]*w->term[1][60+k];
-        w->S[36+k] = w->fh[23]*w->term[1][12+k] + w->fh[24]*w->term[1][24+k] +
-                w->fh[25]*w->term[1][36+k] + w->fh[26]*w->term[1][48+k] +
-                w->fh[27]*w->term[1][60+k];
-        w->S[48+k] = w->fh[28]*w->term[1][k] + w->fh[29]*w->term[1][24+k] +
-                w->fh[30]*w->term[1][36+k] + w->fh[31]*w->term[1][48+k] +
-                w->fh[32]*w->term[1][60+k];
-        w->S[60+k] = w->fh[33]*w->term[1][36+k];
+    for (k = 0; k < 8; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][8+k] + w->fh[1]*w->term[1][16+k] + w->fh[2]*w->term[1][32+k] +
+                w->fh[3]*w->term[1][40+k];
+        w->S[8+k] = w->fh[8]*w->term[1][k] + w->fh[9]*w->term[1][16+k] + w->fh[10]*w->term[1][24+k];
+        w->S[16+k] = w->fh[15]*w->term[1][k] + w->fh[16]*w->term[1][8+k] +
+                w->fh[17]*w->term[1][32+k] + w->fh[18]*w->term[1][40+k];
+        w->S[24+k] = w->fh[23]*w->term[1][8+k] + w->fh[24]*w->term[1][16+k] +
+                w->fh[25]*w->term[1][24+k] + w->fh[26]*w->term[1][32+k] +
+                w->fh[27]*w->term[1][40+k];
+        w->S[32+k] = w->fh[28]*w->term[1][k] + w->fh[29]*w->term[1][16+k] +
+                w->fh[30]*w->term[1][24+k] + w->fh[31]*w->term[1][32+k] +
+                w->fh[32]*w->term[1][40+k];
+        w->S[40+k] = w->fh[33]*w->term[1][24+k];
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[7] = w->S[7] + w->fh[4]*c_in;
-    w->S[8] = w->S[8] + w->fh[5]*c_in;
-    w->S[9] = w->S[9] + w->fh[6]*w->term[1][84];
-    w->S[10] = w->S[10] + w->fh[7]*w->term[1][85];
-    w->S[13] = w->S[13] + c_out;
-    w->S[19] = w->S[19] + w->fh[11]*c_in;
-    w->S[20] = w->S[20] + w->fh[12]*c_in;
-    w->S[21] = w->S[21] + w->fh[13]*w->term[1][84];
-    w->S[22] = w->S[22] + w->fh[14]*w->term[1][85];
-    w->S[26] = w->S[26] + c_out;
-    w->S[31] = w->S[31] + w->fh[19]*c_in;
-    w->S[32] = w->S[32] + w->fh[20]*c_in;
-    w->S[33] = w->S[33] + w->fh[21]*w->term[1][84];
-    w->S[34] = w->S[34] + w->fh[22]*w->term[1][85];
-    w->S[39] = w->S[39] + c_out;
-    w->S[52] = w->S[52] + c_out;
-    w->S[65] = w->S[65] + c_out;
-    w->S[84] = c_out + w->fh[36]*w->term[1][84];
-    w->S[85] = c_out + w->fh[37]*w->term[1][85];
+    w->S[6] = w->S[6] + w->fh[6]*w->term[1][56];
+    w->S[7] = w->S[7] + w->fh[7]*w->term[1][57];
+    w->S[9] = w->S[9] + c_out;
+    w->S[14] = w->S[14] + w->fh[13]*w->term[1][56];
+    w->S[15] = w->S[15] + w->fh[14]*w->term[1][57];
+    w->S[18] = w->S[18] + c_out;
+    w->S[22] = w->S[22] + w->fh[21]*w->term[1][56];
+    w->S[23] = w->S[23] + w->fh[22]*w->term[1][57];
+    w->S[27] = w->S[27] + c_out;
+    w->S[36] = w->S[36] + c_out;
+    w->S[45] = w->S[45] + c_out;
+    w->S[56] = c_out + w->fh[36]*w->term[1][56];
+    w->S[57] = c_out + w->fh[37]*w->term[1][57];
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_saturated_into_term(ned_doppler13_reduced_discretize_scratch
-        *restrict w, const ned_doppler13_reduced_scalar c_out, const ned_doppler13_reduced_scalar
-        c_in)
+        *restrict w, const ned_doppler13_reduced_scalar c_out)
 {
     int k;
-    for (k = 0; k < 12; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
-                w->fh[3]*w->S[60+k];
-        w->term[1][12+k] = w->fh[8]*w->S[k] + w->fh[9]*w->S[24+k] + w->fh[10]*w->S[36+k];
-        w->term[1][24+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[12+k] + w->fh[17]*w->S[48+k] +
-                w->fh[18]*w->S[60+k];
-        w->term[1][36+k] = w->fh[23]*w->S[12+k] + w->fh[24]*w->S[24+k] + w->fh[25]*w->S[36+k] +
-                w->fh[26]*w->S[48+k] + w->fh[27]*w->S[60+k];
-        w->term[1][48+k] = w->fh[28]*w->S[k] + w->fh[29]*w->S[24+k] + w->fh[30]*w->S[36+k] +
-                w->fh[31]*w->S[48+k] + w->fh[32]*w->S[60+k];
-        w->term[1][60+k] = w->fh[33]*w->S[36+k];
+    for (k = 0; k < 8; ++k) {
+        w->term[1][k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
+                w->fh[3]*w->S[40+k];
+        w->term[1][8+k] = w->fh[8]*w->S[k] + w->fh[9]*w->S[16+k] + w->fh[10]*w->S[24+k];
+        w->term[1][16+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[32+k] +
+                w->fh[18]*w->S[40+k];
+        w->term[1][24+k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
+                w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k];
+        w->term[1][32+k] = w->fh[28]*w->S[k] + w->fh[29]*w->S[16+k] + w->fh[30]*w->S[24+k] +
+                w->fh[31]*w->S[32+k] + w->fh[32]*w->S[40+k];
+        w->term[1][40+k] = w->fh[33]*w->S[24+k];
     }
     w->term[1][0] = w->term[1][0] + c_out;
-    w->term[1][7] = w->term[1][7] + w->fh[4]*c_in;
-    w->term[1][8] = w->term[1][8] + w->fh[5]*c_in;
-    w->term[1][9] = w->term[1][9] + w->fh[6]*w->S[84];
-    w->term[1][10] = w->term[1][10] + w->fh[7]*w->S[85];
-    w->term[1][13] = w->term[1][13] + c_out;
-    w->term[1][19] = w->term[1][19] + w->fh[11]*c_in;
-    w->term[1][20] = w->term[1][20] + w->fh[12]*c_in;
-    w->term[1][21] = w->term[1][21] + w->fh[13]*w->S[84];
-    w->term[1][22] = w->term[1][22] + w->fh[14]*w->S[85];
-    w->term[1][26] = w->term[1][26] + c_out;
-    w->term[1][31] = w->term[1][31] + w->fh[19]*c_in;
-    w->term[1][32] = w->term[1][32] + w->fh[20]*c_in;
-    w->term[1][33] = w->term[1][33] + w->fh[21]*w->S[84];
-    w->term[1][34] = w->term[1][34] + w->fh[22]*w->S[85];
-    w->term[1][39] = w->term[1][39] + c_out;
-    w->term[1][52] = w->term[1][52] + c_out;
-    w->term[1][65] = w->term[1][65] + c_out;
-    w->term[1][84] = c_out + w->fh[36]*w->S[84];
-    w->term[1][85] = c_out + w->fh[37]*w->S[85];
+    w->term[1][6] = w->term[1][6] + w->fh[6]*w->S[56];
+    w->term[1][7] = w->term[1][7] + w->fh[7]*w->S[57];
+    w->term[1][9] = w->term[1][9] + c_out;
+    w->term[1][14] = w->term[1][14] + w->fh[13]*w->S[56];
+    w->term[1][15] = w->term[1][15] + w->fh[14]*w->S[57];
+    w->term[1][18] = w->term[1][18] + c_out;
+    w->term[1][22] = w->term[1][22] + w->fh[21]*w->S[56];
+    w->term[1][23] = w->term[1][23] + w->fh[22]*w->S[57];
+    w->term[1][27] = w->term[1][27] + c_out;
+    w->term[1][36] = w->term[1][36] + c_out;
+    w->term[1][45] = w->term[1][45] + c_out;
+    w->term[1][56] = c_out + w->fh[36]*w->S[56];
+    w->term[1][57] = c_out + w->fh[37]*w->S[57];
+}
+
+NED_DOPPLER13_REDUCED_BLOCK void horner_first_into_term(ned_doppler13_reduced_discretize_scratch
+        *restrict w, const ned_doppler13_reduced_scalar c_out)
+{
+    int k;
+    for (k = 0; k < 8; ++k) {
+        w->term[1][k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
+                w->fh[3]*w->S[40+k];
+        w->term[1][8+k] = w->fh[8]*w->S[k] + w->fh[9]*w->S[16+k] + w->fh[10]*w->S[24+k];
+        w->term[1][16+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[32+k] +
+                w->fh[18]*w->S[40+k];
+        w->term[1][24+k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
+                w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k];
+        w->term[1][32+k] = w->fh[28]*w->S[k] + w->fh[29]*w->S[16+k] + w->fh[30]*w->S[24+k] +
+                w->fh[31]*w->S[32+k] + w->fh[32]*w->S[40+k];
+        w->term[1][40+k] = w->fh[33]*w->S[24+k];
+        w->term[1][48+k] = w->fh[34]*w->S[32+k] + w->fh[35]*w->S[40+k];
+    }
+    w->term[1][0] = w->term[1][0] + c_out;
+    w->term[1][6] = w->term[1][6] + w->fh[6]*w->S[56];
+    w->term[1][7] = w->term[1][7] + w->fh[7]*w->S[57];
+    w->term[1][9] = w->term[1][9] + c_out;
+    w->term[1][14] = w->term[1][14] + w->fh[13]*w->S[56];
+    w->term[1][15] = w->term[1][15] + w->fh[14]*w->S[57];
+    w->term[1][18] = w->term[1][18] + c_out;
+    w->term[1][22] = w->term[1][22] + w->fh[21]*w->S[56];
+    w->term[1][23] = w->term[1][23] + w->fh[22]*w->S[57];
+    w->term[1][27] = w->term[1][27] + c_out;
+    w->term[1][36] = w->term[1][36] + c_out;
+    w->term[1][45] = w->term[1][45] + c_out;
+    w->term[1][70] = c_out;
+    w->term[1][56] = c_out + w->fh[36]*w->S[56];
+    w->term[1][57] = c_out + w->fh[37]*w->S[57];
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_last_into_S(ned_doppler13_reduced_discretize_scratch
-        *restrict w, const ned_doppler13_reduced_scalar c_out, const ned_doppler13_reduced_scalar
-        c_in)
+        *restrict w, const ned_doppler13_reduced_scalar c_out)
 {
     int k;
-    for (k = 0; k < 12; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][12+k] + w->fh[1]*w->term[1][24+k] + w->fh[2]*w->term[1][48+k]
-                + w->fh[3]*w->term[1][60+k];
-        w->S[12+k] = w->fh[8]*w->term[1][k] + w->fh[9]*w->term[1][24+k] +
-                w->fh[10]*w->term[1][36+k];
-        w->S[24+k] = w->fh[15]*w->term[1][k] + w->fh[16]*w->term[1][12+k] +
-                w->fh[17]*w->term[1][48+k] + w->fh[18]*w->term[1][60+k];
-        w->S[36+k] = w->fh[23]*w->term[1][12+k] + w->fh[24]*w->term[1][24+k] +
-                w->fh[25]*w->term[1][36+k] + w->fh[26]*w->term[1][48+k] +
-                w->fh[27]*w->term[1][60+k];
-        w->S[48+k] = w->fh[28]*w->term[1][k] + w->fh[29]*w->term[1][24+k] +
-                w->fh[30]*w->term[1][36+k] + w->fh[31]*w->term[1][48+k] +
-                w->fh[32]*w->term[1][60+k];
-        w->S[60+k] = w->fh[33]*w->term[1][36+k];
-        w->S[72+k] = w->fh[34]*w->term[1][48+k] + w->fh[35]*w->term[1][60+k];
+    for (k = 0; k < 8; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][8+k] + w->fh[1]*w->term[1][16+k] + w->fh[2]*w->term[1][32+k] +
+                w->fh[3]*w->term[1][40+k];
+        w->S[8+k] = w->fh[8]*w->term[1][k] + w->fh[9]*w->term[1][16+k] + w->fh[10]*w->term[1][24+k];
+        w->S[16+k] = w->fh[15]*w->term[1][k] + w->fh[16]*w->term[1][8+k] +
+                w->fh[17]*w->term[1][32+k] + w->fh[18]*w->term[1][40+k];
+        w->S[24+k] = w->fh[23]*w->term[1][8+k] + w->fh[24]*w->term[1][16+k] +
+                w->fh[25]*w->term[1][24+k] + w->fh[26]*w->term[1][32+k] +
+                w->fh[27]*w->term[1][40+k];
+        w->S[32+k] = w->fh[28]*w->term[1][k] + w->fh[29]*w->term[1][16+k] +
+                w->fh[30]*w->term[1][24+k] + w->fh[31]*w->term[1][32+k] +
+                w->fh[32]*w->term[1][40+k];
+        w->S[40+k] = w->fh[33]*w->term[1][24+k];
+        w->S[48+k] = w->fh[34]*w->term[1][32+k] + w->fh[35]*w->term[1][40+k];
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[7] = w->S[7] + w->fh[4]*c_in;
-    w->S[8] = w->S[8] + w->fh[5]*c_in;
-    w->S[9] = w->S[9] + w->fh[6]*w->term[1][84];
-    w->S[10] = w->S[10] + w->fh[7]*w->term[1][85];
-    w->S[13] = w->S[13] + c_out;
-    w->S[19] = w->S[19] + w->fh[11]*c_in;
-    w->S[20] = w->S[20] + w->fh[12]*c_in;
-    w->S[21] = w->S[21] + w->fh[13]*w->term[1][84];
-    w->S[22] = w->S[22] + w->fh[14]*w->term[1][85];
-    w->S[26] = w->S[26] + c_out;
-    w->S[31] = w->S[31] + w->fh[19]*c_in;
-    w->S[32] = w->S[32] + w->fh[20]*c_in;
-    w->S[33] = w->S[33] + w->fh[21]*w->term[1][84];
-    w->S[34] = w->S[34] + w->fh[22]*w->term[1][85];
-    w->S[39] = w->S[39] + c_out;
-    w->S[52] = w->S[52] + c_out;
-    w->S[65] = w->S[65] + c_out;
-    w->S[78] = w->S[78] + c_out;
-    w->S[84] = c_out + w->fh[36]*w->term[1][84];
-    w->S[85] = c_out + w->fh[37]*w->term[1][85];
+    w->S[6] = w->S[6] + w->fh[6]*w->term[1][56];
+    w->S[7] = w->S[7] + w->fh[7]*w->term[1][57];
+    w->S[9] = w->S[9] + c_out;
+    w->S[14] = w->S[14] + w->fh[13]*w->term[1][56];
+    w->S[15] = w->S[15] + w->fh[14]*w->term[1][57];
+    w->S[18] = w->S[18] + c_out;
+    w->S[22] = w->S[22] + w->fh[21]*w->term[1][56];
+    w->S[23] = w->S[23] + w->fh[22]*w->term[1][57];
+    w->S[27] = w->S[27] + c_out;
+    w->S[36] = w->S[36] + c_out;
+    w->S[45] = w->S[45] + c_out;
+    w->S[70] = c_out;
+    w->S[56] = c_out + w->fh[36]*w->term[1][56];
+    w->S[57] = c_out + w->fh[37]*w->term[1][57];
+}
+
+NED_DOPPLER13_REDUCED_BLOCK void horner_unit_columns(ned_doppler13_reduced_discretize_scratch
+        *restrict w)
+{
+    w->S[58] = w->term[1][0]*w->fh[4] + w->term[1][1]*w->fh[11] + w->term[1][2]*w->fh[19];
+    w->S[59] = w->term[1][0]*w->fh[5] + w->term[1][1]*w->fh[12] + w->term[1][2]*w->fh[20];
+    w->S[60] = w->term[1][8]*w->fh[4] + w->term[1][9]*w->fh[11] + w->term[1][10]*w->fh[19];
+    w->S[61] = w->term[1][8]*w->fh[5] + w->term[1][9]*w->fh[12] + w->term[1][10]*w->fh[20];
+    w->S[62] = w->term[1][16]*w->fh[4] + w->term[1][17]*w->fh[11] + w->term[1][18]*w->fh[19];
+    w->S[63] = w->term[1][16]*w->fh[5] + w->term[1][17]*w->fh[12] + w->term[1][18]*w->fh[20];
+    w->S[64] = w->term[1][24]*w->fh[4] + w->term[1][25]*w->fh[11] + w->term[1][26]*w->fh[19];
+    w->S[65] = w->term[1][24]*w->fh[5] + w->term[1][25]*w->fh[12] + w->term[1][26]*w->fh[20];
+    w->S[66] = w->term[1][32]*w->fh[4] + w->term[1][33]*w->fh[11] + w->term[1][34]*w->fh[19];
+    w->S[67] = w->term[1][32]*w->fh[5] + w->term[1][33]*w->fh[12] + w->term[1][34]*w->fh[20];
+    w->S[68] = w->term[1][40]*w->fh[4] + w->term[1][41]*w->fh[11] + w->term[1][42]*w->fh[19];
+    w->S[69] = w->term[1][40]*w->fh[5] + w->term[1][41]*w->fh[12] + w->term[1][42]*w->fh[20];
+    w->S[71] = w->term[1][48]*w->fh[4] + w->term[1][49]*w->fh[11] + w->term[1][50]*w->fh[19];
+    w->S[72] = w->term[1][48]*w->fh[5] + w->term[1][49]*w->fh[12] + w->term[1][50]*w->fh[20];
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_transition(ned_doppler13_reduced_transition *restrict t,
         const ned_doppler13_reduced_discretize_scratch *restrict w)
 {
+    const ned_doppler13_reduced_scalar one = 1.0;
     int k;
-    for (k = 0; k < 12; ++k) {
-        t->Phi[0][k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
-                w->fh[3]*w->S[60+k];
-        t->Phi[1][k] = w->fh[8]*w->S[k] + w->fh[9]*w->S[24+k] + w->fh[10]*w->S[36+k];
-        t->Phi[2][k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[12+k] + w->fh[17]*w->S[48+k] +
-                w->fh[18]*w->S[60+k];
-        t->Phi[3][k] = w->fh[23]*w->S[12+k] + w->fh[24]*w->S[24+k] + w->fh[25]*w->S[36+k] +
-                w->fh[26]*w->S[48+k] + w->fh[27]*w->S[60+k];
-        t->Phi[4][k] = w->fh[28]*w->S[k] + w->fh[29]*w->S[24+k] + w->fh[30]*w->S[36+k] +
-                w->fh[31]*w->S[48+k] + w->fh[32]*w->S[60+k];
-        t->Phi[5][k] = w->fh[33]*w->S[36+k];
-        t->Phi[6][k] = w->fh[34]*w->S[48+k] + w->fh[35]*w->S[60+k];
+    for (k = 0; k < 6; ++k) {
+        t->Phi[0][k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
+                w->fh[3]*w->S[40+k];
     }
-    t->Phi[0][7] = t->Phi[0][7] + w->fh[4];
-    t->Phi[0][8] = t->Phi[0][8] + w->fh[5];
-    t->Phi[0][9] = t->Phi[0][9] + w->fh[6]*w->S[84];
-    t->Phi[0][10] = t->Phi[0][10] + w->fh[7]*w->S[85];
-    t->Phi[1][7] = t->Phi[1][7] + w->fh[11];
-    t->Phi[1][8] = t->Phi[1][8] + w->fh[12];
-    t->Phi[1][9] = t->Phi[1][9] + w->fh[13]*w->S[84];
-    t->Phi[1][10] = t->Phi[1][10] + w->fh[14]*w->S[85];
-    t->Phi[2][7] = t->Phi[2][7] + w->fh[19];
-    t->Phi[2][8] = t->Phi[2][8] + w->fh[20];
-    t->Phi[2][9] = t->Phi[2][9] + w->fh[21]*w->S[84];
-    t->Phi[2][10] = t->Phi[2][10] + w->fh[22]*w->S[85];
-    t->Phi[9][9] = w->fh[36]*w->S[84];
-    t->Phi[10][10] = w->fh[37]*w->S[85];
+    for (k = 0; k < 2; ++k) {
+        t->Phi[0][9+k] = w->fh[0]*w->S[14+k] + w->fh[1]*w->S[22+k] + w->fh[2]*w->S[38+k] +
+                w->fh[3]*w->S[46+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        t->Phi[1][k] = w->fh[8]*w->S[k] + w->fh[9]*w->S[16+k] + w->fh[10]*w->S[24+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        t->Phi[1][9+k] = w->fh[8]*w->S[6+k] + w->fh[9]*w->S[22+k] + w->fh[10]*w->S[30+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        t->Phi[2][k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[32+k] +
+                w->fh[18]*w->S[40+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        t->Phi[2][9+k] = w->fh[15]*w->S[6+k] + w->fh[16]*w->S[14+k] + w->fh[17]*w->S[38+k] +
+                w->fh[18]*w->S[46+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        t->Phi[3][k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
+                w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        t->Phi[3][9+k] = w->fh[23]*w->S[14+k] + w->fh[24]*w->S[22+k] + w->fh[25]*w->S[30+k] +
+                w->fh[26]*w->S[38+k] + w->fh[27]*w->S[46+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        t->Phi[4][k] = w->fh[28]*w->S[k] + w->fh[29]*w->S[16+k] + w->fh[30]*w->S[24+k] +
+                w->fh[31]*w->S[32+k] + w->fh[32]*w->S[40+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        t->Phi[4][9+k] = w->fh[28]*w->S[6+k] + w->fh[29]*w->S[22+k] + w->fh[30]*w->S[30+k] +
+                w->fh[31]*w->S[38+k] + w->fh[32]*w->S[46+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        t->Phi[5][k] = w->fh[33]*w->S[24+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        t->Phi[5][9+k] = w->fh[33]*w->S[30+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        t->Phi[6][k] = w->fh[34]*w->S[32+k] + w->fh[35]*w->S[40+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        t->Phi[6][9+k] = w->fh[34]*w->S[38+k] + w->fh[35]*w->S[46+k];
+    }
+    t->Phi[0][9] = t->Phi[0][9] + w->fh[6]*w->S[56];
+    t->Phi[0][10] = t->Phi[0][10] + w->fh[7]*w->S[57];
+    t->Phi[1][9] = t->Phi[1][9] + w->fh[13]*w->S[56];
+    t->Phi[1][10] = t->Phi[1][10] + w->fh[14]*w->S[57];
+    t->Phi[2][9] = t->Phi[2][9] + w->fh[21]*w->S[56];
+    t->Phi[2][10] = t->Phi[2][10] + w->fh[22]*w->S[57];
+    t->Phi[9][9] = w->fh[36]*w->S[56];
+    t->Phi[10][10] = w->fh[37]*w->S[57];
+    t->Phi[0][7] = w->S[0]*w->fh[4] + w->S[1]*w->fh[11] + w->S[2]*w->fh[19];
+    t->Phi[0][8] = w->S[0]*w->fh[5] + w->S[1]*w->fh[12] + w->S[2]*w->fh[20];
+    t->Phi[1][7] = w->S[8]*w->fh[4] + w->S[9]*w->fh[11] + w->S[10]*w->fh[19];
+    t->Phi[1][8] = w->S[8]*w->fh[5] + w->S[9]*w->fh[12] + w->S[10]*w->fh[20];
+    t->Phi[2][7] = w->S[16]*w->fh[4] + w->S[17]*w->fh[11] + w->S[18]*w->fh[19];
+    t->Phi[2][8] = w->S[16]*w->fh[5] + w->S[17]*w->fh[12] + w->S[18]*w->fh[20];
+    t->Phi[3][7] = w->S[24]*w->fh[4] + w->S[25]*w->fh[11] + w->S[26]*w->fh[19];
+    t->Phi[3][8] = w->S[24]*w->fh[5] + w->S[25]*w->fh[12] + w->S[26]*w->fh[20];
+    t->Phi[4][7] = w->S[32]*w->fh[4] + w->S[33]*w->fh[11] + w->S[34]*w->fh[19];
+    t->Phi[4][8] = w->S[32]*w->fh[5] + w->S[33]*w->fh[12] + w->S[34]*w->fh[20];
+    t->Phi[5][7] = w->S[40]*w->fh[4] + w->S[41]*w->fh[11] + w->S[42]*w->fh[19];
+    t->Phi[5][8] = w->S[40]*w->fh[5] + w->S[41]*w->fh[12] + w->S[42]*w->fh[20];
+    t->Phi[6][7] = w->S[48]*w->fh[4] + w->S[49]*w->fh[11] + w->S[50]*w->fh[19];
+    t->Phi[6][8] = w->S[48]*w->fh[5] + w->S[49]*w->fh[12] + w->S[50]*w->fh[20];
+    t->Phi[0][6] = 0;
+    t->Phi[0][11] = 0;
     t->Phi[0][12] = 0;
+    t->Phi[1][6] = 0;
+    t->Phi[1][11] = 0;
     t->Phi[1][12] = 0;
+    t->Phi[2][6] = 0;
+    t->Phi[2][11] = 0;
     t->Phi[2][12] = 0;
+    t->Phi[3][6] = 0;
+    t->Phi[3][11] = 0;
     t->Phi[3][12] = 0;
+    t->Phi[4][6] = 0;
+    t->Phi[4][11] = 0;
     t->Phi[4][12] = 0;
+    t->Phi[5][6] = 0;
+    t->Phi[5][11] = 0;
     t->Phi[5][12] = 0;
+    t->Phi[6][6] = 0;
+    t->Phi[6][11] = 0;
     t->Phi[6][12] = 0;
     t->Phi[7][0] = 0;
     t->Phi[7][1] = 0;
@@ -767,7 +835,7 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_transition(ned_doppler13_reduced_transit
     t->Phi[7][4] = 0;
     t->Phi[7][5] = 0;
     t->Phi[7][6] = 0;
-    t->Phi[7][7] = 0;
+    t->Phi[7][7] = one;
     t->Phi[7][8] = 0;
     t->Phi[7][9] = 0;
     t->Phi[7][10] = 0;
@@ -781,7 +849,7 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_transition(ned_doppler13_reduced_transit
     t->Phi[8][5] = 0;
     t->Phi[8][6] = 0;
     t->Phi[8][7] = 0;
-    t->Phi[8][8] = 0;
+    t->Phi[8][8] = one;
     t->Phi[8][9] = 0;
     t->Phi[8][10] = 0;
     t->Phi[8][11] = 0;
@@ -821,7 +889,7 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_transition(ned_doppler13_reduced_transit
     t->Phi[11][8] = 0;
     t->Phi[11][9] = 0;
     t->Phi[11][10] = 0;
-    t->Phi[11][11] = 0;
+    t->Phi[11][11] = one;
     t->Phi[11][12] = 0;
     t->Phi[12][0] = 0;
     t->Phi[12][1] = 0;
@@ -835,7 +903,7 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_transition(ned_doppler13_reduced_transit
     t->Phi[12][9] = 0;
     t->Phi[12][10] = 0;
     t->Phi[12][11] = 0;
-    t->Phi[12][12] = 0;
+    t->Phi[12][12] = one;
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void doubling(ned_doppler13_reduced_transition *restrict t,
@@ -845,381 +913,381 @@ NED_DOPPLER13_REDUCED_BLOCK void doubling(ned_doppler13_reduced_transition *rest
     w->term[0][0] = t->Phi[0][0]*t->Phi[0][0] + t->Phi[0][1]*t->Phi[1][0] +
             t->Phi[0][2]*t->Phi[2][0] + t->Phi[0][3]*t->Phi[3][0] + t->Phi[0][4]*t->Phi[4][0] +
             t->Phi[0][5]*t->Phi[5][0];
-    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[12] + t->Phi[0][2]*w->S[24] +
-            t->Phi[0][3]*w->S[36] + t->Phi[0][4]*w->S[48] + t->Phi[0][5]*w->S[60];
+    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[8] + t->Phi[0][2]*w->S[16] +
+            t->Phi[0][3]*w->S[24] + t->Phi[0][4]*w->S[32] + t->Phi[0][5]*w->S[40];
     w->term[0][1] = t->Phi[0][0]*t->Phi[0][1] + t->Phi[0][1]*t->Phi[1][1] +
             t->Phi[0][2]*t->Phi[2][1] + t->Phi[0][3]*t->Phi[3][1] + t->Phi[0][4]*t->Phi[4][1] +
             t->Phi[0][5]*t->Phi[5][1];
-    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[13] + t->Phi[0][2]*w->S[25] +
-            t->Phi[0][3]*w->S[37] + t->Phi[0][4]*w->S[49] + t->Phi[0][5]*w->S[61];
+    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[9] + t->Phi[0][2]*w->S[17] +
+            t->Phi[0][3]*w->S[25] + t->Phi[0][4]*w->S[33] + t->Phi[0][5]*w->S[41];
     w->term[0][2] = t->Phi[0][0]*t->Phi[0][2] + t->Phi[0][1]*t->Phi[1][2] +
             t->Phi[0][2]*t->Phi[2][2] + t->Phi[0][3]*t->Phi[3][2] + t->Phi[0][4]*t->Phi[4][2] +
             t->Phi[0][5]*t->Phi[5][2];
-    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[26] +
-            t->Phi[0][3]*w->S[38] + t->Phi[0][4]*w->S[50] + t->Phi[0][5]*w->S[62];
+    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[10] + t->Phi[0][2]*w->S[18] +
+            t->Phi[0][3]*w->S[26] + t->Phi[0][4]*w->S[34] + t->Phi[0][5]*w->S[42];
     w->term[0][3] = t->Phi[0][0]*t->Phi[0][3] + t->Phi[0][1]*t->Phi[1][3] +
             t->Phi[0][2]*t->Phi[2][3] + t->Phi[0][3]*t->Phi[3][3] + t->Phi[0][4]*t->Phi[4][3] +
             t->Phi[0][5]*t->Phi[5][3];
-    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[27] +
-            t->Phi[0][3]*w->S[39] + t->Phi[0][4]*w->S[51] + t->Phi[0][5]*w->S[63];
+    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[11] + t->Phi[0][2]*w->S[19] +
+            t->Phi[0][3]*w->S[27] + t->Phi[0][4]*w->S[35] + t->Phi[0][5]*w->S[43];
     w->term[0][4] = t->Phi[0][0]*t->Phi[0][4] + t->Phi[0][1]*t->Phi[1][4] +
             t->Phi[0][2]*t->Phi[2][4] + t->Phi[0][3]*t->Phi[3][4] + t->Phi[0][4]*t->Phi[4][4] +
             t->Phi[0][5]*t->Phi[5][4];
-    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[28] +
-            t->Phi[0][3]*w->S[40] + t->Phi[0][4]*w->S[52] + t->Phi[0][5]*w->S[64];
+    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[12] + t->Phi[0][2]*w->S[20] +
+            t->Phi[0][3]*w->S[28] + t->Phi[0][4]*w->S[36] + t->Phi[0][5]*w->S[44];
     w->term[0][5] = t->Phi[0][0]*t->Phi[0][5] + t->Phi[0][1]*t->Phi[1][5] +
             t->Phi[0][2]*t->Phi[2][5] + t->Phi[0][3]*t->Phi[3][5] + t->Phi[0][4]*t->Phi[4][5] +
             t->Phi[0][5]*t->Phi[5][5];
-    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[29] +
-            t->Phi[0][3]*w->S[41] + t->Phi[0][4]*w->S[53] + t->Phi[0][5]*w->S[65];
+    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[13] + t->Phi[0][2]*w->S[21] +
+            t->Phi[0][3]*w->S[29] + t->Phi[0][4]*w->S[37] + t->Phi[0][5]*w->S[45];
     w->term[0][6] = t->Phi[0][0]*t->Phi[0][7] + t->Phi[0][1]*t->Phi[1][7] +
             t->Phi[0][2]*t->Phi[2][7] + t->Phi[0][3]*t->Phi[3][7] + t->Phi[0][4]*t->Phi[4][7] +
             t->Phi[0][5]*t->Phi[5][7];
-    w->term[1][6] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[19] + t->Phi[0][2]*w->S[31] +
-            t->Phi[0][3]*w->S[43] + t->Phi[0][4]*w->S[55] + t->Phi[0][5]*w->S[67] + t->Phi[0][7];
+    w->term[1][6] = t->Phi[0][0]*w->S[58] + t->Phi[0][1]*w->S[60] + t->Phi[0][2]*w->S[62] +
+            t->Phi[0][3]*w->S[64] + t->Phi[0][4]*w->S[66] + t->Phi[0][5]*w->S[68] + t->Phi[0][7];
     w->term[0][7] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
             t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
             t->Phi[0][5]*t->Phi[5][8];
-    w->term[1][7] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[20] + t->Phi[0][2]*w->S[32] +
-            t->Phi[0][3]*w->S[44] + t->Phi[0][4]*w->S[56] + t->Phi[0][5]*w->S[68] + t->Phi[0][8];
+    w->term[1][7] = t->Phi[0][0]*w->S[59] + t->Phi[0][1]*w->S[61] + t->Phi[0][2]*w->S[63] +
+            t->Phi[0][3]*w->S[65] + t->Phi[0][4]*w->S[67] + t->Phi[0][5]*w->S[69] + t->Phi[0][8];
     w->term[0][8] = t->Phi[0][0]*t->Phi[0][9] + t->Phi[0][1]*t->Phi[1][9] +
             t->Phi[0][2]*t->Phi[2][9] + t->Phi[0][3]*t->Phi[3][9] + t->Phi[0][4]*t->Phi[4][9] +
             t->Phi[0][5]*t->Phi[5][9] + t->Phi[0][9]*t->Phi[9][9];
-    w->term[1][8] = t->Phi[0][0]*w->S[9] + t->Phi[0][1]*w->S[21] + t->Phi[0][2]*w->S[33] +
-            t->Phi[0][3]*w->S[45] + t->Phi[0][4]*w->S[57] + t->Phi[0][5]*w->S[69] +
-            t->Phi[0][9]*w->S[84];
+    w->term[1][8] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[22] +
+            t->Phi[0][3]*w->S[30] + t->Phi[0][4]*w->S[38] + t->Phi[0][5]*w->S[46] +
+            t->Phi[0][9]*w->S[56];
     w->term[0][9] = t->Phi[0][0]*t->Phi[0][10] + t->Phi[0][1]*t->Phi[1][10] +
             t->Phi[0][2]*t->Phi[2][10] + t->Phi[0][3]*t->Phi[3][10] + t->Phi[0][4]*t->Phi[4][10] +
             t->Phi[0][5]*t->Phi[5][10] + t->Phi[0][10]*t->Phi[10][10];
-    w->term[1][9] = t->Phi[0][0]*w->S[10] + t->Phi[0][1]*w->S[22] + t->Phi[0][2]*w->S[34] +
-            t->Phi[0][3]*w->S[46] + t->Phi[0][4]*w->S[58] + t->Phi[0][5]*w->S[70] +
-            t->Phi[0][10]*w->S[85];
+    w->term[1][9] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[23] +
+            t->Phi[0][3]*w->S[31] + t->Phi[0][4]*w->S[39] + t->Phi[0][5]*w->S[47] +
+            t->Phi[0][10]*w->S[57];
     w->term[0][10] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
             t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
             t->Phi[1][5]*t->Phi[5][0];
-    w->term[1][10] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[12] + t->Phi[1][2]*w->S[24] +
-            t->Phi[1][3]*w->S[36] + t->Phi[1][4]*w->S[48] + t->Phi[1][5]*w->S[60];
+    w->term[1][10] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[8] + t->Phi[1][2]*w->S[16] +
+            t->Phi[1][3]*w->S[24] + t->Phi[1][4]*w->S[32] + t->Phi[1][5]*w->S[40];
     w->term[0][11] = t->Phi[1][0]*t->Phi[0][1] + t->Phi[1][1]*t->Phi[1][1] +
             t->Phi[1][2]*t->Phi[2][1] + t->Phi[1][3]*t->Phi[3][1] + t->Phi[1][4]*t->Phi[4][1] +
             t->Phi[1][5]*t->Phi[5][1];
-    w->term[1][11] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[13] + t->Phi[1][2]*w->S[25] +
-            t->Phi[1][3]*w->S[37] + t->Phi[1][4]*w->S[49] + t->Phi[1][5]*w->S[61];
+    w->term[1][11] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[9] + t->Phi[1][2]*w->S[17] +
+            t->Phi[1][3]*w->S[25] + t->Phi[1][4]*w->S[33] + t->Phi[1][5]*w->S[41];
     w->term[0][12] = t->Phi[1][0]*t->Phi[0][2] + t->Phi[1][1]*t->Phi[1][2] +
             t->Phi[1][2]*t->Phi[2][2] + t->Phi[1][3]*t->Phi[3][2] + t->Phi[1][4]*t->Phi[4][2] +
             t->Phi[1][5]*t->Phi[5][2];
-    w->term[1][12] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[26] +
-            t->Phi[1][3]*w->S[38] + t->Phi[1][4]*w->S[50] + t->Phi[1][5]*w->S[62];
+    w->term[1][12] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[10] + t->Phi[1][2]*w->S[18] +
+            t->Phi[1][3]*w->S[26] + t->Phi[1][4]*w->S[34] + t->Phi[1][5]*w->S[42];
     w->term[0][13] = t->Phi[1][0]*t->Phi[0][3] + t->Phi[1][1]*t->Phi[1][3] +
             t->Phi[1][2]*t->Phi[2][3] + t->Phi[1][3]*t->Phi[3][3] + t->Phi[1][4]*t->Phi[4][3] +
             t->Phi[1][5]*t->Phi[5][3];
-    w->term[1][13] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[27] +
-            t->Phi[1][3]*w->S[39] + t->Phi[1][4]*w->S[51] + t->Phi[1][5]*w->S[63];
+    w->term[1][13] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[11] + t->Phi[1][2]*w->S[19] +
+            t->Phi[1][3]*w->S[27] + t->Phi[1][4]*w->S[35] + t->Phi[1][5]*w->S[43];
     w->term[0][14] = t->Phi[1][0]*t->Phi[0][4] + t->Phi[1][1]*t->Phi[1][4] +
             t->Phi[1][2]*t->Phi[2][4] + t->Phi[1][3]*t->Phi[3][4] + t->Phi[1][4]*t->Phi[4][4] +
             t->Phi[1][5]*t->Phi[5][4];
-    w->term[1][14] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[28] +
-            t->Phi[1][3]*w->S[40] + t->Phi[1][4]*w->S[52] + t->Phi[1][5]*w->S[64];
+    w->term[1][14] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[12] + t->Phi[1][2]*w->S[20] +
+            t->Phi[1][3]*w->S[28] + t->Phi[1][4]*w->S[36] + t->Phi[1][5]*w->S[44];
     w->term[0][15] = t->Phi[1][0]*t->Phi[0][5] + t->Phi[1][1]*t->Phi[1][5] +
             t->Phi[1][2]*t->Phi[2][5] + t->Phi[1][3]*t->Phi[3][5] + t->Phi[1][4]*t->Phi[4][5] +
             t->Phi[1][5]*t->Phi[5][5];
-    w->term[1][15] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[29] +
-            t->Phi[1][3]*w->S[41] + t->Phi[1][4]*w->S[53] + t->Phi[1][5]*w->S[65];
+    w->term[1][15] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[13] + t->Phi[1][2]*w->S[21] +
+            t->Phi[1][3]*w->S[29] + t->Phi[1][4]*w->S[37] + t->Phi[1][5]*w->S[45];
     w->term[0][16] = t->Phi[1][0]*t->Phi[0][7] + t->Phi[1][1]*t->Phi[1][7] +
             t->Phi[1][2]*t->Phi[2][7] + t->Phi[1][3]*t->Phi[3][7] + t->Phi[1][4]*t->Phi[4][7] +
             t->Phi[1][5]*t->Phi[5][7];
-    w->term[1][16] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[19] + t->Phi[1][2]*w->S[31] +
-            t->Phi[1][3]*w->S[43] + t->Phi[1][4]*w->S[55] + t->Phi[1][5]*w->S[67] + t->Phi[1][7];
+    w->term[1][16] = t->Phi[1][0]*w->S[58] + t->Phi[1][1]*w->S[60] + t->Phi[1][2]*w->S[62] +
+            t->Phi[1][3]*w->S[64] + t->Phi[1][4]*w->S[66] + t->Phi[1][5]*w->S[68] + t->Phi[1][7];
     w->term[0][17] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
             t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
             t->Phi[1][5]*t->Phi[5][8];
-    w->term[1][17] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[20] + t->Phi[1][2]*w->S[32] +
-            t->Phi[1][3]*w->S[44] + t->Phi[1][4]*w->S[56] + t->Phi[1][5]*w->S[68] + t->Phi[1][8];
+    w->term[1][17] = t->Phi[1][0]*w->S[59] + t->Phi[1][1]*w->S[61] + t->Phi[1][2]*w->S[63] +
+            t->Phi[1][3]*w->S[65] + t->Phi[1][4]*w->S[67] + t->Phi[1][5]*w->S[69] + t->Phi[1][8];
     w->term[0][18] = t->Phi[1][0]*t->Phi[0][9] + t->Phi[1][1]*t->Phi[1][9] +
             t->Phi[1][2]*t->Phi[2][9] + t->Phi[1][3]*t->Phi[3][9] + t->Phi[1][4]*t->Phi[4][9] +
             t->Phi[1][5]*t->Phi[5][9] + t->Phi[1][9]*t->Phi[9][9];
-    w->term[1][18] = t->Phi[1][0]*w->S[9] + t->Phi[1][1]*w->S[21] + t->Phi[1][2]*w->S[33] +
-            t->Phi[1][3]*w->S[45] + t->Phi[1][4]*w->S[57] + t->Phi[1][5]*w->S[69] +
-            t->Phi[1][9]*w->S[84];
+    w->term[1][18] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[22] +
+            t->Phi[1][3]*w->S[30] + t->Phi[1][4]*w->S[38] + t->Phi[1][5]*w->S[46] +
+            t->Phi[1][9]*w->S[56];
     w->term[0][19] = t->Phi[1][0]*t->Phi[0][10] + t->Phi[1][1]*t->Phi[1][10] +
             t->Phi[1][2]*t->Phi[2][10] + t->Phi[1][3]*t->Phi[3][10] + t->Phi[1][4]*t->Phi[4][10] +
             t->Phi[1][5]*t->Phi[5][10] + t->Phi[1][10]*t->Phi[10][10];
-    w->term[1][19] = t->Phi[1][0]*w->S[10] + t->Phi[1][1]*w->S[22] + t->Phi[1][2]*w->S[34] +
-            t->Phi[1][3]*w->S[46] + t->Phi[1][4]*w->S[58] + t->Phi[1][5]*w->S[70] +
-            t->Phi[1][10]*w->S[85];
+    w->term[1][19] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[23] +
+            t->Phi[1][3]*w->S[31] + t->Phi[1][4]*w->S[39] + t->Phi[1][5]*w->S[47] +
+            t->Phi[1][10]*w->S[57];
     w->term[0][20] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
             t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
             t->Phi[2][5]*t->Phi[5][0];
-    w->term[1][20] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[12] + t->Phi[2][2]*w->S[24] +
-            t->Phi[2][3]*w->S[36] + t->Phi[2][4]*w->S[48] + t->Phi[2][5]*w->S[60];
+    w->term[1][20] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[8] + t->Phi[2][2]*w->S[16] +
+            t->Phi[2][3]*w->S[24] + t->Phi[2][4]*w->S[32] + t->Phi[2][5]*w->S[40];
     w->term[0][21] = t->Phi[2][0]*t->Phi[0][1] + t->Phi[2][1]*t->Phi[1][1] +
             t->Phi[2][2]*t->Phi[2][1] + t->Phi[2][3]*t->Phi[3][1] + t->Phi[2][4]*t->Phi[4][1] +
             t->Phi[2][5]*t->Phi[5][1];
-    w->term[1][21] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[13] + t->Phi[2][2]*w->S[25] +
-            t->Phi[2][3]*w->S[37] + t->Phi[2][4]*w->S[49] + t->Phi[2][5]*w->S[61];
+    w->term[1][21] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[9] + t->Phi[2][2]*w->S[17] +
+            t->Phi[2][3]*w->S[25] + t->Phi[2][4]*w->S[33] + t->Phi[2][5]*w->S[41];
     w->term[0][22] = t->Phi[2][0]*t->Phi[0][2] + t->Phi[2][1]*t->Phi[1][2] +
             t->Phi[2][2]*t->Phi[2][2] + t->Phi[2][3]*t->Phi[3][2] + t->Phi[2][4]*t->Phi[4][2] +
             t->Phi[2][5]*t->Phi[5][2];
-    w->term[1][22] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[26] +
-            t->Phi[2][3]*w->S[38] + t->Phi[2][4]*w->S[50] + t->Phi[2][5]*w->S[62];
+    w->term[1][22] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[10] + t->Phi[2][2]*w->S[18] +
+            t->Phi[2][3]*w->S[26] + t->Phi[2][4]*w->S[34] + t->Phi[2][5]*w->S[42];
     w->term[0][23] = t->Phi[2][0]*t->Phi[0][3] + t->Phi[2][1]*t->Phi[1][3] +
             t->Phi[2][2]*t->Phi[2][3] + t->Phi[2][3]*t->Phi[3][3] + t->Phi[2][4]*t->Phi[4][3] +
             t->Phi[2][5]*t->Phi[5][3];
-    w->term[1][23] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[27] +
-            t->Phi[2][3]*w->S[39] + t->Phi[2][4]*w->S[51] + t->Phi[2][5]*w->S[63];
+    w->term[1][23] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[11] + t->Phi[2][2]*w->S[19] +
+            t->Phi[2][3]*w->S[27] + t->Phi[2][4]*w->S[35] + t->Phi[2][5]*w->S[43];
     w->term[0][24] = t->Phi[2][0]*t->Phi[0][4] + t->Phi[2][1]*t->Phi[1][4] +
             t->Phi[2][2]*t->Phi[2][4] + t->Phi[2][3]*t->Phi[3][4] + t->Phi[2][4]*t->Phi[4][4] +
             t->Phi[2][5]*t->Phi[5][4];
-    w->term[1][24] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[28] +
-            t->Phi[2][3]*w->S[40] + t->Phi[2][4]*w->S[52] + t->Phi[2][5]*w->S[64];
+    w->term[1][24] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[12] + t->Phi[2][2]*w->S[20] +
+            t->Phi[2][3]*w->S[28] + t->Phi[2][4]*w->S[36] + t->Phi[2][5]*w->S[44];
     w->term[0][25] = t->Phi[2][0]*t->Phi[0][5] + t->Phi[2][1]*t->Phi[1][5] +
             t->Phi[2][2]*t->Phi[2][5] + t->Phi[2][3]*t->Phi[3][5] + t->Phi[2][4]*t->Phi[4][5] +
             t->Phi[2][5]*t->Phi[5][5];
-    w->term[1][25] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[29] +
-            t->Phi[2][3]*w->S[41] + t->Phi[2][4]*w->S[53] + t->Phi[2][5]*w->S[65];
+    w->term[1][25] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[13] + t->Phi[2][2]*w->S[21] +
+            t->Phi[2][3]*w->S[29] + t->Phi[2][4]*w->S[37] + t->Phi[2][5]*w->S[45];
     w->term[0][26] = t->Phi[2][0]*t->Phi[0][7] + t->Phi[2][1]*t->Phi[1][7] +
             t->Phi[2][2]*t->Phi[2][7] + t->Phi[2][3]*t->Phi[3][7] + t->Phi[2][4]*t->Phi[4][7] +
             t->Phi[2][5]*t->Phi[5][7];
-    w->term[1][26] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[19] + t->Phi[2][2]*w->S[31] +
-            t->Phi[2][3]*w->S[43] + t->Phi[2][4]*w->S[55] + t->Phi[2][5]*w->S[67] + t->Phi[2][7];
+    w->term[1][26] = t->Phi[2][0]*w->S[58] + t->Phi[2][1]*w->S[60] + t->Phi[2][2]*w->S[62] +
+            t->Phi[2][3]*w->S[64] + t->Phi[2][4]*w->S[66] + t->Phi[2][5]*w->S[68] + t->Phi[2][7];
     w->term[0][27] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
             t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
             t->Phi[2][5]*t->Phi[5][8];
-    w->term[1][27] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[20] + t->Phi[2][2]*w->S[32] +
-            t->Phi[2][3]*w->S[44] + t->Phi[2][4]*w->S[56] + t->Phi[2][5]*w->S[68] + t->Phi[2][8];
+    w->term[1][27] = t->Phi[2][0]*w->S[59] + t->Phi[2][1]*w->S[61] + t->Phi[2][2]*w->S[63] +
+            t->Phi[2][3]*w->S[65] + t->Phi[2][4]*w->S[67] + t->Phi[2][5]*w->S[69] + t->Phi[2][8];
     w->term[0][28] = t->Phi[2][0]*t->Phi[0][9] + t->Phi[2][1]*t->Phi[1][9] +
             t->Phi[2][2]*t->Phi[2][9] + t->Phi[2][3]*t->Phi[3][9] + t->Phi[2][4]*t->Phi[4][9] +
             t->Phi[2][5]*t->Phi[5][9] + t->Phi[2][9]*t->Phi[9][9];
-    w->term[1][28] = t->Phi[2][0]*w->S[9] + t->Phi[2][1]*w->S[21] + t->Phi[2][2]*w->S[33] +
-            t->Phi[2][3]*w->S[45] + t->Phi[2][4]*w->S[57] + t->Phi[2][5]*w->S[69] +
-            t->Phi[2][9]*w->S[84];
+    w->term[1][28] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[22] +
+            t->Phi[2][3]*w->S[30] + t->Phi[2][4]*w->S[38] + t->Phi[2][5]*w->S[46] +
+            t->Phi[2][9]*w->S[56];
     w->term[0][29] = t->Phi[2][0]*t->Phi[0][10] + t->Phi[2][1]*t->Phi[1][10] +
             t->Phi[2][2]*t->Phi[2][10] + t->Phi[2][3]*t->Phi[3][10] + t->Phi[2][4]*t->Phi[4][10] +
             t->Phi[2][5]*t->Phi[5][10] + t->Phi[2][10]*t->Phi[10][10];
-    w->term[1][29] = t->Phi[2][0]*w->S[10] + t->Phi[2][1]*w->S[22] + t->Phi[2][2]*w->S[34] +
-            t->Phi[2][3]*w->S[46] + t->Phi[2][4]*w->S[58] + t->Phi[2][5]*w->S[70] +
-            t->Phi[2][10]*w->S[85];
+    w->term[1][29] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[23] +
+            t->Phi[2][3]*w->S[31] + t->Phi[2][4]*w->S[39] + t->Phi[2][5]*w->S[47] +
+            t->Phi[2][10]*w->S[57];
     w->term[0][30] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
             t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
             t->Phi[3][5]*t->Phi[5][0];
-    w->term[1][30] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[12] + t->Phi[3][2]*w->S[24] +
-            t->Phi[3][3]*w->S[36] + t->Phi[3][4]*w->S[48] + t->Phi[3][5]*w->S[60];
+    w->term[1][30] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[8] + t->Phi[3][2]*w->S[16] +
+            t->Phi[3][3]*w->S[24] + t->Phi[3][4]*w->S[32] + t->Phi[3][5]*w->S[40];
     w->term[0][31] = t->Phi[3][0]*t->Phi[0][1] + t->Phi[3][1]*t->Phi[1][1] +
             t->Phi[3][2]*t->Phi[2][1] + t->Phi[3][3]*t->Phi[3][1] + t->Phi[3][4]*t->Phi[4][1] +
             t->Phi[3][5]*t->Phi[5][1];
-    w->term[1][31] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[13] + t->Phi[3][2]*w->S[25] +
-            t->Phi[3][3]*w->S[37] + t->Phi[3][4]*w->S[49] + t->Phi[3][5]*w->S[61];
+    w->term[1][31] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[9] + t->Phi[3][2]*w->S[17] +
+            t->Phi[3][3]*w->S[25] + t->Phi[3][4]*w->S[33] + t->Phi[3][5]*w->S[41];
     w->term[0][32] = t->Phi[3][0]*t->Phi[0][2] + t->Phi[3][1]*t->Phi[1][2] +
             t->Phi[3][2]*t->Phi[2][2] + t->Phi[3][3]*t->Phi[3][2] + t->Phi[3][4]*t->Phi[4][2] +
             t->Phi[3][5]*t->Phi[5][2];
-    w->term[1][32] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[26] +
-            t->Phi[3][3]*w->S[38] + t->Phi[3][4]*w->S[50] + t->Phi[3][5]*w->S[62];
+    w->term[1][32] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[10] + t->Phi[3][2]*w->S[18] +
+            t->Phi[3][3]*w->S[26] + t->Phi[3][4]*w->S[34] + t->Phi[3][5]*w->S[42];
     w->term[0][33] = t->Phi[3][0]*t->Phi[0][3] + t->Phi[3][1]*t->Phi[1][3] +
             t->Phi[3][2]*t->Phi[2][3] + t->Phi[3][3]*t->Phi[3][3] + t->Phi[3][4]*t->Phi[4][3] +
             t->Phi[3][5]*t->Phi[5][3];
-    w->term[1][33] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[27] +
-            t->Phi[3][3]*w->S[39] + t->Phi[3][4]*w->S[51] + t->Phi[3][5]*w->S[63];
+    w->term[1][33] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[11] + t->Phi[3][2]*w->S[19] +
+            t->Phi[3][3]*w->S[27] + t->Phi[3][4]*w->S[35] + t->Phi[3][5]*w->S[43];
     w->term[0][34] = t->Phi[3][0]*t->Phi[0][4] + t->Phi[3][1]*t->Phi[1][4] +
             t->Phi[3][2]*t->Phi[2][4] + t->Phi[3][3]*t->Phi[3][4] + t->Phi[3][4]*t->Phi[4][4] +
             t->Phi[3][5]*t->Phi[5][4];
-    w->term[1][34] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[28] +
-            t->Phi[3][3]*w->S[40] + t->Phi[3][4]*w->S[52] + t->Phi[3][5]*w->S[64];
+    w->term[1][34] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[12] + t->Phi[3][2]*w->S[20] +
+            t->Phi[3][3]*w->S[28] + t->Phi[3][4]*w->S[36] + t->Phi[3][5]*w->S[44];
     w->term[0][35] = t->Phi[3][0]*t->Phi[0][5] + t->Phi[3][1]*t->Phi[1][5] +
             t->Phi[3][2]*t->Phi[2][5] + t->Phi[3][3]*t->Phi[3][5] + t->Phi[3][4]*t->Phi[4][5] +
             t->Phi[3][5]*t->Phi[5][5];
-    w->term[1][35] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[29] +
-            t->Phi[3][3]*w->S[41] + t->Phi[3][4]*w->S[53] + t->Phi[3][5]*w->S[65];
+    w->term[1][35] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[13] + t->Phi[3][2]*w->S[21] +
+            t->Phi[3][3]*w->S[29] + t->Phi[3][4]*w->S[37] + t->Phi[3][5]*w->S[45];
     w->term[0][36] = t->Phi[3][0]*t->Phi[0][7] + t->Phi[3][1]*t->Phi[1][7] +
             t->Phi[3][2]*t->Phi[2][7] + t->Phi[3][3]*t->Phi[3][7] + t->Phi[3][4]*t->Phi[4][7] +
             t->Phi[3][5]*t->Phi[5][7];
-    w->term[1][36] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[19] + t->Phi[3][2]*w->S[31] +
-            t->Phi[3][3]*w->S[43] + t->Phi[3][4]*w->S[55] + t->Phi[3][5]*w->S[67] + t->Phi[3][7];
+    w->term[1][36] = t->Phi[3][0]*w->S[58] + t->Phi[3][1]*w->S[60] + t->Phi[3][2]*w->S[62] +
+            t->Phi[3][3]*w->S[64] + t->Phi[3][4]*w->S[66] + t->Phi[3][5]*w->S[68] + t->Phi[3][7];
     w->term[0][37] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
             t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
             t->Phi[3][5]*t->Phi[5][8];
-    w->term[1][37] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[20] + t->Phi[3][2]*w->S[32] +
-            t->Phi[3][3]*w->S[44] + t->Phi[3][4]*w->S[56] + t->Phi[3][5]*w->S[68] + t->Phi[3][8];
+    w->term[1][37] = t->Phi[3][0]*w->S[59] + t->Phi[3][1]*w->S[61] + t->Phi[3][2]*w->S[63] +
+            t->Phi[3][3]*w->S[65] + t->Phi[3][4]*w->S[67] + t->Phi[3][5]*w->S[69] + t->Phi[3][8];
     w->term[0][38] = t->Phi[3][0]*t->Phi[0][9] + t->Phi[3][1]*t->Phi[1][9] +
             t->Phi[3][2]*t->Phi[2][9] + t->Phi[3][3]*t->Phi[3][9] + t->Phi[3][4]*t->Phi[4][9] +
             t->Phi[3][5]*t->Phi[5][9] + t->Phi[3][9]*t->Phi[9][9];
-    w->term[1][38] = t->Phi[3][0]*w->S[9] + t->Phi[3][1]*w->S[21] + t->Phi[3][2]*w->S[33] +
-            t->Phi[3][3]*w->S[45] + t->Phi[3][4]*w->S[57] + t->Phi[3][5]*w->S[69] +
-            t->Phi[3][9]*w->S[84];
+    w->term[1][38] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[22] +
+            t->Phi[3][3]*w->S[30] + t->Phi[3][4]*w->S[38] + t->Phi[3][5]*w->S[46] +
+            t->Phi[3][9]*w->S[56];
     w->term[0][39] = t->Phi[3][0]*t->Phi[0][10] + t->Phi[3][1]*t->Phi[1][10] +
             t->Phi[3][2]*t->Phi[2][10] + t->Phi[3][3]*t->Phi[3][10] + t->Phi[3][4]*t->Phi[4][10] +
             t->Phi[3][5]*t->Phi[5][10] + t->Phi[3][10]*t->Phi[10][10];
-    w->term[1][39] = t->Phi[3][0]*w->S[10] + t->Phi[3][1]*w->S[22] + t->Phi[3][2]*w->S[34] +
-            t->Phi[3][3]*w->S[46] + t->Phi[3][4]*w->S[58] + t->Phi[3][5]*w->S[70] +
-            t->Phi[3][10]*w->S[85];
+    w->term[1][39] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[23] +
+            t->Phi[3][3]*w->S[31] + t->Phi[3][4]*w->S[39] + t->Phi[3][5]*w->S[47] +
+            t->Phi[3][10]*w->S[57];
     w->term[0][40] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
             t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
             t->Phi[4][5]*t->Phi[5][0];
-    w->term[1][40] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[12] + t->Phi[4][2]*w->S[24] +
-            t->Phi[4][3]*w->S[36] + t->Phi[4][4]*w->S[48] + t->Phi[4][5]*w->S[60];
+    w->term[1][40] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[8] + t->Phi[4][2]*w->S[16] +
+            t->Phi[4][3]*w->S[24] + t->Phi[4][4]*w->S[32] + t->Phi[4][5]*w->S[40];
     w->term[0][41] = t->Phi[4][0]*t->Phi[0][1] + t->Phi[4][1]*t->Phi[1][1] +
             t->Phi[4][2]*t->Phi[2][1] + t->Phi[4][3]*t->Phi[3][1] + t->Phi[4][4]*t->Phi[4][1] +
             t->Phi[4][5]*t->Phi[5][1];
-    w->term[1][41] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[13] + t->Phi[4][2]*w->S[25] +
-            t->Phi[4][3]*w->S[37] + t->Phi[4][4]*w->S[49] + t->Phi[4][5]*w->S[61];
+    w->term[1][41] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[9] + t->Phi[4][2]*w->S[17] +
+            t->Phi[4][3]*w->S[25] + t->Phi[4][4]*w->S[33] + t->Phi[4][5]*w->S[41];
     w->term[0][42] = t->Phi[4][0]*t->Phi[0][2] + t->Phi[4][1]*t->Phi[1][2] +
             t->Phi[4][2]*t->Phi[2][2] + t->Phi[4][3]*t->Phi[3][2] + t->Phi[4][4]*t->Phi[4][2] +
             t->Phi[4][5]*t->Phi[5][2];
-    w->term[1][42] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[26] +
-            t->Phi[4][3]*w->S[38] + t->Phi[4][4]*w->S[50] + t->Phi[4][5]*w->S[62];
+    w->term[1][42] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[10] + t->Phi[4][2]*w->S[18] +
+            t->Phi[4][3]*w->S[26] + t->Phi[4][4]*w->S[34] + t->Phi[4][5]*w->S[42];
     w->term[0][43] = t->Phi[4][0]*t->Phi[0][3] + t->Phi[4][1]*t->Phi[1][3] +
             t->Phi[4][2]*t->Phi[2][3] + t->Phi[4][3]*t->Phi[3][3] + t->Phi[4][4]*t->Phi[4][3] +
             t->Phi[4][5]*t->Phi[5][3];
-    w->term[1][43] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[27] +
-            t->Phi[4][3]*w->S[39] + t->Phi[4][4]*w->S[51] + t->Phi[4][5]*w->S[63];
+    w->term[1][43] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[11] + t->Phi[4][2]*w->S[19] +
+            t->Phi[4][3]*w->S[27] + t->Phi[4][4]*w->S[35] + t->Phi[4][5]*w->S[43];
     w->term[0][44] = t->Phi[4][0]*t->Phi[0][4] + t->Phi[4][1]*t->Phi[1][4] +
             t->Phi[4][2]*t->Phi[2][4] + t->Phi[4][3]*t->Phi[3][4] + t->Phi[4][4]*t->Phi[4][4] +
             t->Phi[4][5]*t->Phi[5][4];
-    w->term[1][44] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[28] +
-            t->Phi[4][3]*w->S[40] + t->Phi[4][4]*w->S[52] + t->Phi[4][5]*w->S[64];
+    w->term[1][44] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[12] + t->Phi[4][2]*w->S[20] +
+            t->Phi[4][3]*w->S[28] + t->Phi[4][4]*w->S[36] + t->Phi[4][5]*w->S[44];
     w->term[0][45] = t->Phi[4][0]*t->Phi[0][5] + t->Phi[4][1]*t->Phi[1][5] +
             t->Phi[4][2]*t->Phi[2][5] + t->Phi[4][3]*t->Phi[3][5] + t->Phi[4][4]*t->Phi[4][5] +
             t->Phi[4][5]*t->Phi[5][5];
-    w->term[1][45] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[29] +
-            t->Phi[4][3]*w->S[41] + t->Phi[4][4]*w->S[53] + t->Phi[4][5]*w->S[65];
+    w->term[1][45] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[13] + t->Phi[4][2]*w->S[21] +
+            t->Phi[4][3]*w->S[29] + t->Phi[4][4]*w->S[37] + t->Phi[4][5]*w->S[45];
     w->term[0][46] = t->Phi[4][0]*t->Phi[0][7] + t->Phi[4][1]*t->Phi[1][7] +
             t->Phi[4][2]*t->Phi[2][7] + t->Phi[4][3]*t->Phi[3][7] + t->Phi[4][4]*t->Phi[4][7] +
             t->Phi[4][5]*t->Phi[5][7];
-    w->term[1][46] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[19] + t->Phi[4][2]*w->S[31] +
-            t->Phi[4][3]*w->S[43] + t->Phi[4][4]*w->S[55] + t->Phi[4][5]*w->S[67] + t->Phi[4][7];
+    w->term[1][46] = t->Phi[4][0]*w->S[58] + t->Phi[4][1]*w->S[60] + t->Phi[4][2]*w->S[62] +
+            t->Phi[4][3]*w->S[64] + t->Phi[4][4]*w->S[66] + t->Phi[4][5]*w->S[68] + t->Phi[4][7];
     w->term[0][47] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
             t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
             t->Phi[4][5]*t->Phi[5][8];
-    w->term[1][47] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[20] + t->Phi[4][2]*w->S[32] +
-            t->Phi[4][3]*w->S[44] + t->Phi[4][4]*w->S[56] + t->Phi[4][5]*w->S[68] + t->Phi[4][8];
+    w->term[1][47] = t->Phi[4][0]*w->S[59] + t->Phi[4][1]*w->S[61] + t->Phi[4][2]*w->S[63] +
+            t->Phi[4][3]*w->S[65] + t->Phi[4][4]*w->S[67] + t->Phi[4][5]*w->S[69] + t->Phi[4][8];
     w->term[0][48] = t->Phi[4][0]*t->Phi[0][9] + t->Phi[4][1]*t->Phi[1][9] +
             t->Phi[4][2]*t->Phi[2][9] + t->Phi[4][3]*t->Phi[3][9] + t->Phi[4][4]*t->Phi[4][9] +
             t->Phi[4][5]*t->Phi[5][9] + t->Phi[4][9]*t->Phi[9][9];
-    w->term[1][48] = t->Phi[4][0]*w->S[9] + t->Phi[4][1]*w->S[21] + t->Phi[4][2]*w->S[33] +
-            t->Phi[4][3]*w->S[45] + t->Phi[4][4]*w->S[57] + t->Phi[4][5]*w->S[69] +
-            t->Phi[4][9]*w->S[84];
+    w->term[1][48] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[22] +
+            t->Phi[4][3]*w->S[30] + t->Phi[4][4]*w->S[38] + t->Phi[4][5]*w->S[46] +
+            t->Phi[4][9]*w->S[56];
     w->term[0][49] = t->Phi[4][0]*t->Phi[0][10] + t->Phi[4][1]*t->Phi[1][10] +
             t->Phi[4][2]*t->Phi[2][10] + t->Phi[4][3]*t->Phi[3][10] + t->Phi[4][4]*t->Phi[4][10] +
             t->Phi[4][5]*t->Phi[5][10] + t->Phi[4][10]*t->Phi[10][10];
-    w->term[1][49] = t->Phi[4][0]*w->S[10] + t->Phi[4][1]*w->S[22] + t->Phi[4][2]*w->S[34] +
-            t->Phi[4][3]*w->S[46] + t->Phi[4][4]*w->S[58] + t->Phi[4][5]*w->S[70] +
-            t->Phi[4][10]*w->S[85];
+    w->term[1][49] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[23] +
+            t->Phi[4][3]*w->S[31] + t->Phi[4][4]*w->S[39] + t->Phi[4][5]*w->S[47] +
+            t->Phi[4][10]*w->S[57];
     w->term[0][50] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
             t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
             t->Phi[5][5]*t->Phi[5][0];
-    w->term[1][50] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[12] + t->Phi[5][2]*w->S[24] +
-            t->Phi[5][3]*w->S[36] + t->Phi[5][4]*w->S[48] + t->Phi[5][5]*w->S[60];
+    w->term[1][50] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[8] + t->Phi[5][2]*w->S[16] +
+            t->Phi[5][3]*w->S[24] + t->Phi[5][4]*w->S[32] + t->Phi[5][5]*w->S[40];
     w->term[0][51] = t->Phi[5][0]*t->Phi[0][1] + t->Phi[5][1]*t->Phi[1][1] +
             t->Phi[5][2]*t->Phi[2][1] + t->Phi[5][3]*t->Phi[3][1] + t->Phi[5][4]*t->Phi[4][1] +
             t->Phi[5][5]*t->Phi[5][1];
-    w->term[1][51] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[13] + t->Phi[5][2]*w->S[25] +
-            t->Phi[5][3]*w->S[37] + t->Phi[5][4]*w->S[49] + t->Phi[5][5]*w->S[61];
+    w->term[1][51] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[9] + t->Phi[5][2]*w->S[17] +
+            t->Phi[5][3]*w->S[25] + t->Phi[5][4]*w->S[33] + t->Phi[5][5]*w->S[41];
     w->term[0][52] = t->Phi[5][0]*t->Phi[0][2] + t->Phi[5][1]*t->Phi[1][2] +
             t->Phi[5][2]*t->Phi[2][2] + t->Phi[5][3]*t->Phi[3][2] + t->Phi[5][4]*t->Phi[4][2] +
             t->Phi[5][5]*t->Phi[5][2];
-    w->term[1][52] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[26] +
-            t->Phi[5][3]*w->S[38] + t->Phi[5][4]*w->S[50] + t->Phi[5][5]*w->S[62];
+    w->term[1][52] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[10] + t->Phi[5][2]*w->S[18] +
+            t->Phi[5][3]*w->S[26] + t->Phi[5][4]*w->S[34] + t->Phi[5][5]*w->S[42];
     w->term[0][53] = t->Phi[5][0]*t->Phi[0][3] + t->Phi[5][1]*t->Phi[1][3] +
             t->Phi[5][2]*t->Phi[2][3] + t->Phi[5][3]*t->Phi[3][3] + t->Phi[5][4]*t->Phi[4][3] +
             t->Phi[5][5]*t->Phi[5][3];
-    w->term[1][53] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[27] +
-            t->Phi[5][3]*w->S[39] + t->Phi[5][4]*w->S[51] + t->Phi[5][5]*w->S[63];
+    w->term[1][53] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[11] + t->Phi[5][2]*w->S[19] +
+            t->Phi[5][3]*w->S[27] + t->Phi[5][4]*w->S[35] + t->Phi[5][5]*w->S[43];
     w->term[0][54] = t->Phi[5][0]*t->Phi[0][4] + t->Phi[5][1]*t->Phi[1][4] +
             t->Phi[5][2]*t->Phi[2][4] + t->Phi[5][3]*t->Phi[3][4] + t->Phi[5][4]*t->Phi[4][4] +
             t->Phi[5][5]*t->Phi[5][4];
-    w->term[1][54] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[28] +
-            t->Phi[5][3]*w->S[40] + t->Phi[5][4]*w->S[52] + t->Phi[5][5]*w->S[64];
+    w->term[1][54] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[12] + t->Phi[5][2]*w->S[20] +
+            t->Phi[5][3]*w->S[28] + t->Phi[5][4]*w->S[36] + t->Phi[5][5]*w->S[44];
     w->term[0][55] = t->Phi[5][0]*t->Phi[0][5] + t->Phi[5][1]*t->Phi[1][5] +
             t->Phi[5][2]*t->Phi[2][5] + t->Phi[5][3]*t->Phi[3][5] + t->Phi[5][4]*t->Phi[4][5] +
             t->Phi[5][5]*t->Phi[5][5];
-    w->term[1][55] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[29] +
-            t->Phi[5][3]*w->S[41] + t->Phi[5][4]*w->S[53] + t->Phi[5][5]*w->S[65];
+    w->term[1][55] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[13] + t->Phi[5][2]*w->S[21] +
+            t->Phi[5][3]*w->S[29] + t->Phi[5][4]*w->S[37] + t->Phi[5][5]*w->S[45];
     w->term[0][56] = t->Phi[5][0]*t->Phi[0][7] + t->Phi[5][1]*t->Phi[1][7] +
             t->Phi[5][2]*t->Phi[2][7] + t->Phi[5][3]*t->Phi[3][7] + t->Phi[5][4]*t->Phi[4][7] +
             t->Phi[5][5]*t->Phi[5][7];
-    w->term[1][56] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[19] + t->Phi[5][2]*w->S[31] +
-            t->Phi[5][3]*w->S[43] + t->Phi[5][4]*w->S[55] + t->Phi[5][5]*w->S[67] + t->Phi[5][7];
+    w->term[1][56] = t->Phi[5][0]*w->S[58] + t->Phi[5][1]*w->S[60] + t->Phi[5][2]*w->S[62] +
+            t->Phi[5][3]*w->S[64] + t->Phi[5][4]*w->S[66] + t->Phi[5][5]*w->S[68] + t->Phi[5][7];
     w->term[0][57] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
             t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
             t->Phi[5][5]*t->Phi[5][8];
-    w->term[1][57] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[20] + t->Phi[5][2]*w->S[32] +
-            t->Phi[5][3]*w->S[44] + t->Phi[5][4]*w->S[56] + t->Phi[5][5]*w->S[68] + t->Phi[5][8];
+    w->term[1][57] = t->Phi[5][0]*w->S[59] + t->Phi[5][1]*w->S[61] + t->Phi[5][2]*w->S[63] +
+            t->Phi[5][3]*w->S[65] + t->Phi[5][4]*w->S[67] + t->Phi[5][5]*w->S[69] + t->Phi[5][8];
     w->term[0][58] = t->Phi[5][0]*t->Phi[0][9] + t->Phi[5][1]*t->Phi[1][9] +
             t->Phi[5][2]*t->Phi[2][9] + t->Phi[5][3]*t->Phi[3][9] + t->Phi[5][4]*t->Phi[4][9] +
             t->Phi[5][5]*t->Phi[5][9] + t->Phi[5][9]*t->Phi[9][9];
-    w->term[1][58] = t->Phi[5][0]*w->S[9] + t->Phi[5][1]*w->S[21] + t->Phi[5][2]*w->S[33] +
-            t->Phi[5][3]*w->S[45] + t->Phi[5][4]*w->S[57] + t->Phi[5][5]*w->S[69] +
-            t->Phi[5][9]*w->S[84];
+    w->term[1][58] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[22] +
+            t->Phi[5][3]*w->S[30] + t->Phi[5][4]*w->S[38] + t->Phi[5][5]*w->S[46] +
+            t->Phi[5][9]*w->S[56];
     w->term[0][59] = t->Phi[5][0]*t->Phi[0][10] + t->Phi[5][1]*t->Phi[1][10] +
             t->Phi[5][2]*t->Phi[2][10] + t->Phi[5][3]*t->Phi[3][10] + t->Phi[5][4]*t->Phi[4][10] +
             t->Phi[5][5]*t->Phi[5][10] + t->Phi[5][10]*t->Phi[10][10];
-    w->term[1][59] = t->Phi[5][0]*w->S[10] + t->Phi[5][1]*w->S[22] + t->Phi[5][2]*w->S[34] +
-            t->Phi[5][3]*w->S[46] + t->Phi[5][4]*w->S[58] + t->Phi[5][5]*w->S[70] +
-            t->Phi[5][10]*w->S[85];
+    w->term[1][59] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[23] +
+            t->Phi[5][3]*w->S[31] + t->Phi[5][4]*w->S[39] + t->Phi[5][5]*w->S[47] +
+            t->Phi[5][10]*w->S[57];
     w->term[0][60] = t->Phi[6][0]*t->Phi[0][0] + t->Phi[6][1]*t->Phi[1][0] +
             t->Phi[6][2]*t->Phi[2][0] + t->Phi[6][3]*t->Phi[3][0] + t->Phi[6][4]*t->Phi[4][0] +
             t->Phi[6][5]*t->Phi[5][0] + t->Phi[6][6]*t->Phi[6][0];
-    w->term[1][60] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[12] + t->Phi[6][2]*w->S[24] +
-            t->Phi[6][3]*w->S[36] + t->Phi[6][4]*w->S[48] + t->Phi[6][5]*w->S[60] +
-            t->Phi[6][6]*w->S[72];
+    w->term[1][60] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[8] + t->Phi[6][2]*w->S[16] +
+            t->Phi[6][3]*w->S[24] + t->Phi[6][4]*w->S[32] + t->Phi[6][5]*w->S[40] +
+            t->Phi[6][6]*w->S[48];
     w->term[0][61] = t->Phi[6][0]*t->Phi[0][1] + t->Phi[6][1]*t->Phi[1][1] +
             t->Phi[6][2]*t->Phi[2][1] + t->Phi[6][3]*t->Phi[3][1] + t->Phi[6][4]*t->Phi[4][1] +
             t->Phi[6][5]*t->Phi[5][1] + t->Phi[6][6]*t->Phi[6][1];
-    w->term[1][61] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[13] + t->Phi[6][2]*w->S[25] +
-            t->Phi[6][3]*w->S[37] + t->Phi[6][4]*w->S[49] + t->Phi[6][5]*w->S[61] +
-            t->Phi[6][6]*w->S[73];
+    w->term[1][61] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[9] + t->Phi[6][2]*w->S[17] +
+            t->Phi[6][3]*w->S[25] + t->Phi[6][4]*w->S[33] + t->Phi[6][5]*w->S[41] +
+            t->Phi[6][6]*w->S[49];
     w->term[0][62] = t->Phi[6][0]*t->Phi[0][2] + t->Phi[6][1]*t->Phi[1][2] +
             t->Phi[6][2]*t->Phi[2][2] + t->Phi[6][3]*t->Phi[3][2] + t->Phi[6][4]*t->Phi[4][2] +
             t->Phi[6][5]*t->Phi[5][2] + t->Phi[6][6]*t->Phi[6][2];
-    w->term[1][62] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[14] + t->Phi[6][2]*w->S[26] +
-            t->Phi[6][3]*w->S[38] + t->Phi[6][4]*w->S[50] + t->Phi[6][5]*w->S[62] +
-            t->Phi[6][6]*w->S[74];
+    w->term[1][62] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[10] + t->Phi[6][2]*w->S[18] +
+            t->Phi[6][3]*w->S[26] + t->Phi[6][4]*w->S[34] + t->Phi[6][5]*w->S[42] +
+            t->Phi[6][6]*w->S[50];
     w->term[0][63] = t->Phi[6][0]*t->Phi[0][3] + t->Phi[6][1]*t->Phi[1][3] +
             t->Phi[6][2]*t->Phi[2][3] + t->Phi[6][3]*t->Phi[3][3] + t->Phi[6][4]*t->Phi[4][3] +
             t->Phi[6][5]*t->Phi[5][3] + t->Phi[6][6]*t->Phi[6][3];
-    w->term[1][63] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[15] + t->Phi[6][2]*w->S[27] +
-            t->Phi[6][3]*w->S[39] + t->Phi[6][4]*w->S[51] + t->Phi[6][5]*w->S[63] +
-            t->Phi[6][6]*w->S[75];
+    w->term[1][63] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[11] + t->Phi[6][2]*w->S[19] +
+            t->Phi[6][3]*w->S[27] + t->Phi[6][4]*w->S[35] + t->Phi[6][5]*w->S[43] +
+            t->Phi[6][6]*w->S[51];
     w->term[0][64] = t->Phi[6][0]*t->Phi[0][4] + t->Phi[6][1]*t->Phi[1][4] +
             t->Phi[6][2]*t->Phi[2][4] + t->Phi[6][3]*t->Phi[3][4] + t->Phi[6][4]*t->Phi[4][4] +
             t->Phi[6][5]*t->Phi[5][4] + t->Phi[6][6]*t->Phi[6][4];
-    w->term[1][64] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[16] + t->Phi[6][2]*w->S[28] +
-            t->Phi[6][3]*w->S[40] + t->Phi[6][4]*w->S[52] + t->Phi[6][5]*w->S[64] +
-            t->Phi[6][6]*w->S[76];
+    w->term[1][64] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[12] + t->Phi[6][2]*w->S[20] +
+            t->Phi[6][3]*w->S[28] + t->Phi[6][4]*w->S[36] + t->Phi[6][5]*w->S[44] +
+            t->Phi[6][6]*w->S[52];
     w->term[0][65] = t->Phi[6][0]*t->Phi[0][5] + t->Phi[6][1]*t->Phi[1][5] +
             t->Phi[6][2]*t->Phi[2][5] + t->Phi[6][3]*t->Phi[3][5] + t->Phi[6][4]*t->Phi[4][5] +
             t->Phi[6][5]*t->Phi[5][5] + t->Phi[6][6]*t->Phi[6][5];
-    w->term[1][65] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[17] + t->Phi[6][2]*w->S[29] +
-            t->Phi[6][3]*w->S[41] + t->Phi[6][4]*w->S[53] + t->Phi[6][5]*w->S[65] +
-            t->Phi[6][6]*w->S[77];
+    w->term[1][65] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[13] + t->Phi[6][2]*w->S[21] +
+            t->Phi[6][3]*w->S[29] + t->Phi[6][4]*w->S[37] + t->Phi[6][5]*w->S[45] +
+            t->Phi[6][6]*w->S[53];
     w->term[0][66] = t->Phi[6][6]*t->Phi[6][6];
-    w->term[1][66] = t->Phi[6][6]*w->S[78];
+    w->term[1][66] = t->Phi[6][6]*w->S[70];
     w->term[0][67] = t->Phi[6][0]*t->Phi[0][7] + t->Phi[6][1]*t->Phi[1][7] +
             t->Phi[6][2]*t->Phi[2][7] + t->Phi[6][3]*t->Phi[3][7] + t->Phi[6][4]*t->Phi[4][7] +
             t->Phi[6][5]*t->Phi[5][7] + t->Phi[6][6]*t->Phi[6][7];
-    w->term[1][67] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[19] + t->Phi[6][2]*w->S[31] +
-            t->Phi[6][3]*w->S[43] + t->Phi[6][4]*w->S[55] + t->Phi[6][5]*w->S[67] +
-            t->Phi[6][6]*w->S[79] + t->Phi[6][7];
+    w->term[1][67] = t->Phi[6][0]*w->S[58] + t->Phi[6][1]*w->S[60] + t->Phi[6][2]*w->S[62] +
+            t->Phi[6][3]*w->S[64] + t->Phi[6][4]*w->S[66] + t->Phi[6][5]*w->S[68] +
+            t->Phi[6][6]*w->S[71] + t->Phi[6][7];
     w->term[0][68] = t->Phi[6][0]*t->Phi[0][8] + t->Phi[6][1]*t->Phi[1][8] +
             t->Phi[6][2]*t->Phi[2][8] + t->Phi[6][3]*t->Phi[3][8] + t->Phi[6][4]*t->Phi[4][8] +
             t->Phi[6][5]*t->Phi[5][8] + t->Phi[6][6]*t->Phi[6][8];
-    w->term[1][68] = t->Phi[6][0]*w->S[8] + t->Phi[6][1]*w->S[20] + t->Phi[6][2]*w->S[32] +
-            t->Phi[6][3]*w->S[44] + t->Phi[6][4]*w->S[56] + t->Phi[6][5]*w->S[68] +
-            t->Phi[6][6]*w->S[80] + t->Phi[6][8];
+    w->term[1][68] = t->Phi[6][0]*w->S[59] + t->Phi[6][1]*w->S[61] + t->Phi[6][2]*w->S[63] +
+            t->Phi[6][3]*w->S[65] + t->Phi[6][4]*w->S[67] + t->Phi[6][5]*w->S[69] +
+            t->Phi[6][6]*w->S[72] + t->Phi[6][8];
     w->term[0][69] = t->Phi[6][0]*t->Phi[0][9] + t->Phi[6][1]*t->Phi[1][9] +
             t->Phi[6][2]*t->Phi[2][9] + t->Phi[6][3]*t->Phi[3][9] + t->Phi[6][4]*t->Phi[4][9] +
             t->Phi[6][5]*t->Phi[5][9] + t->Phi[6][6]*t->Phi[6][9] + t->Phi[6][9]*t->Phi[9][9];
-    w->term[1][69] = t->Phi[6][0]*w->S[9] + t->Phi[6][1]*w->S[21] + t->Phi[6][2]*w->S[33] +
-            t->Phi[6][3]*w->S[45] + t->Phi[6][4]*w->S[57] + t->Phi[6][5]*w->S[69] +
-            t->Phi[6][6]*w->S[81] + t->Phi[6][9]*w->S[84];
+    w->term[1][69] = t->Phi[6][0]*w->S[6] + t->Phi[6][1]*w->S[14] + t->Phi[6][2]*w->S[22] +
+            t->Phi[6][3]*w->S[30] + t->Phi[6][4]*w->S[38] + t->Phi[6][5]*w->S[46] +
+            t->Phi[6][6]*w->S[54] + t->Phi[6][9]*w->S[56];
     w->term[0][70] = t->Phi[6][0]*t->Phi[0][10] + t->Phi[6][1]*t->Phi[1][10] +
             t->Phi[6][2]*t->Phi[2][10] + t->Phi[6][3]*t->Phi[3][10] + t->Phi[6][4]*t->Phi[4][10] +
             t->Phi[6][5]*t->Phi[5][10] + t->Phi[6][6]*t->Phi[6][10] + t->Phi[6][10]*t->Phi[10][10];
-    w->term[1][70] = t->Phi[6][0]*w->S[10] + t->Phi[6][1]*w->S[22] + t->Phi[6][2]*w->S[34] +
-            t->Phi[6][3]*w->S[46] + t->Phi[6][4]*w->S[58] + t->Phi[6][5]*w->S[70] +
-            t->Phi[6][6]*w->S[82] + t->Phi[6][10]*w->S[85];
+    w->term[1][70] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[15] + t->Phi[6][2]*w->S[23] +
+            t->Phi[6][3]*w->S[31] + t->Phi[6][4]*w->S[39] + t->Phi[6][5]*w->S[47] +
+            t->Phi[6][6]*w->S[55] + t->Phi[6][10]*w->S[57];
     w->term[0][71] = t->Phi[9][9]*t->Phi[9][9];
-    w->term[1][71] = t->Phi[9][9]*w->S[84];
+    w->term[1][71] = t->Phi[9][9]*w->S[56];
     w->term[0][72] = t->Phi[10][10]*t->Phi[10][10];
-    w->term[1][72] = t->Phi[10][10]*w->S[85];
+    w->term[1][72] = t->Phi[10][10]*w->S[57];
     t->Phi[0][0] = t->Phi[0][0] + t->Phi[0][0] + w->term[0][0];
     w->S[0] = w->S[0] + half*w->term[1][0];
     t->Phi[0][1] = t->Phi[0][1] + t->Phi[0][1] + w->term[0][1];
@@ -1233,268 +1301,220 @@ NED_DOPPLER13_REDUCED_BLOCK void doubling(ned_doppler13_reduced_transition *rest
     t->Phi[0][5] = t->Phi[0][5] + t->Phi[0][5] + w->term[0][5];
     w->S[5] = w->S[5] + half*w->term[1][5];
     t->Phi[0][7] = t->Phi[0][7] + t->Phi[0][7] + w->term[0][6];
-    w->S[7] = w->S[7] + half*w->term[1][6];
+    w->S[58] = w->S[58] + half*w->term[1][6];
     t->Phi[0][8] = t->Phi[0][8] + t->Phi[0][8] + w->term[0][7];
-    w->S[8] = w->S[8] + half*w->term[1][7];
+    w->S[59] = w->S[59] + half*w->term[1][7];
     t->Phi[0][9] = t->Phi[0][9] + t->Phi[0][9] + w->term[0][8];
-    w->S[9] = w->S[9] + half*w->term[1][8];
+    w->S[6] = w->S[6] + half*w->term[1][8];
     t->Phi[0][10] = t->Phi[0][10] + t->Phi[0][10] + w->term[0][9];
-    w->S[10] = w->S[10] + half*w->term[1][9];
+    w->S[7] = w->S[7] + half*w->term[1][9];
     t->Phi[1][0] = t->Phi[1][0] + t->Phi[1][0] + w->term[0][10];
-    w->S[12] = w->S[12] + half*w->term[1][10];
+    w->S[8] = w->S[8] + half*w->term[1][10];
     t->Phi[1][1] = t->Phi[1][1] + t->Phi[1][1] + w->term[0][11];
-    w->S[13] = w->S[13] + half*w->term[1][11];
+    w->S[9] = w->S[9] + half*w->term[1][11];
     t->Phi[1][2] = t->Phi[1][2] + t->Phi[1][2] + w->term[0][12];
-    w->S[14] = w->S[14] + half*w->term[1][12];
+    w->S[10] = w->S[10] + half*w->term[1][12];
     t->Phi[1][3] = t->Phi[1][3] + t->Phi[1][3] + w->term[0][13];
-    w->S[15] = w->S[15] + half*w->term[1][13];
+    w->S[11] = w->S[11] + half*w->term[1][13];
     t->Phi[1][4] = t->Phi[1][4] + t->Phi[1][4] + w->term[0][14];
-    w->S[16] = w->S[16] + half*w->term[1][14];
+    w->S[12] = w->S[12] + half*w->term[1][14];
     t->Phi[1][5] = t->Phi[1][5] + t->Phi[1][5] + w->term[0][15];
-    w->S[17] = w->S[17] + half*w->term[1][15];
+    w->S[13] = w->S[13] + half*w->term[1][15];
     t->Phi[1][7] = t->Phi[1][7] + t->Phi[1][7] + w->term[0][16];
-    w->S[19] = w->S[19] + half*w->term[1][16];
+    w->S[60] = w->S[60] + half*w->term[1][16];
     t->Phi[1][8] = t->Phi[1][8] + t->Phi[1][8] + w->term[0][17];
-    w->S[20] = w->S[20] + half*w->term[1][17];
+    w->S[61] = w->S[61] + half*w->term[1][17];
     t->Phi[1][9] = t->Phi[1][9] + t->Phi[1][9] + w->term[0][18];
-    w->S[21] = w->S[21] + half*w->term[1][18];
+    w->S[14] = w->S[14] + half*w->term[1][18];
     t->Phi[1][10] = t->Phi[1][10] + t->Phi[1][10] + w->term[0][19];
-    w->S[22] = w->S[22] + half*w->term[1][19];
+    w->S[15] = w->S[15] + half*w->term[1][19];
     t->Phi[2][0] = t->Phi[2][0] + t->Phi[2][0] + w->term[0][20];
-    w->S[24] = w->S[24] + half*w->term[1][20];
+    w->S[16] = w->S[16] + half*w->term[1][20];
     t->Phi[2][1] = t->Phi[2][1] + t->Phi[2][1] + w->term[0][21];
-    w->S[25] = w->S[25] + half*w->term[1][21];
+    w->S[17] = w->S[17] + half*w->term[1][21];
     t->Phi[2][2] = t->Phi[2][2] + t->Phi[2][2] + w->term[0][22];
-    w->S[26] = w->S[26] + half*w->term[1][22];
+    w->S[18] = w->S[18] + half*w->term[1][22];
     t->Phi[2][3] = t->Phi[2][3] + t->Phi[2][3] + w->term[0][23];
-    w->S[27] = w->S[27] + half*w->term[1][23];
+    w->S[19] = w->S[19] + half*w->term[1][23];
     t->Phi[2][4] = t->Phi[2][4] + t->Phi[2][4] + w->term[0][24];
-    w->S[28] = w->S[28] + half*w->term[1][24];
+    w->S[20] = w->S[20] + half*w->term[1][24];
     t->Phi[2][5] = t->Phi[2][5] + t->Phi[2][5] + w->term[0][25];
-    w->S[29] = w->S[29] + half*w->term[1][25];
+    w->S[21] = w->S[21] + half*w->term[1][25];
     t->Phi[2][7] = t->Phi[2][7] + t->Phi[2][7] + w->term[0][26];
-    w->S[31] = w->S[31] + half*w->term[1][26];
+    w->S[62] = w->S[62] + half*w->term[1][26];
     t->Phi[2][8] = t->Phi[2][8] + t->Phi[2][8] + w->term[0][27];
-    w->S[32] = w->S[32] + half*w->term[1][27];
+    w->S[63] = w->S[63] + half*w->term[1][27];
     t->Phi[2][9] = t->Phi[2][9] + t->Phi[2][9] + w->term[0][28];
-    w->S[33] = w->S[33] + half*w->term[1][28];
+    w->S[22] = w->S[22] + half*w->term[1][28];
     t->Phi[2][10] = t->Phi[2][10] + t->Phi[2][10] + w->term[0][29];
-    w->S[34] = w->S[34] + half*w->term[1][29];
+    w->S[23] = w->S[23] + half*w->term[1][29];
     t->Phi[3][0] = t->Phi[3][0] + t->Phi[3][0] + w->term[0][30];
-    w->S[36] = w->S[36] + half*w->term[1][30];
+    w->S[24] = w->S[24] + half*w->term[1][30];
     t->Phi[3][1] = t->Phi[3][1] + t->Phi[3][1] + w->term[0][31];
-    w->S[37] = w->S[37] + half*w->term[1][31];
+    w->S[25] = w->S[25] + half*w->term[1][31];
     t->Phi[3][2] = t->Phi[3][2] + t->Phi[3][2] + w->term[0][32];
-    w->S[38] = w->S[38] + half*w->term[1][32];
+    w->S[26] = w->S[26] + half*w->term[1][32];
     t->Phi[3][3] = t->Phi[3][3] + t->Phi[3][3] + w->term[0][33];
-    w->S[39] = w->S[39] + half*w->term[1][33];
+    w->S[27] = w->S[27] + half*w->term[1][33];
     t->Phi[3][4] = t->Phi[3][4] + t->Phi[3][4] + w->term[0][34];
-    w->S[40] = w->S[40] + half*w->term[1][34];
+    w->S[28] = w->S[28] + half*w->term[1][34];
     t->Phi[3][5] = t->Phi[3][5] + t->Phi[3][5] + w->term[0][35];
-    w->S[41] = w->S[41] + half*w->term[1][35];
+    w->S[29] = w->S[29] + half*w->term[1][35];
     t->Phi[3][7] = t->Phi[3][7] + t->Phi[3][7] + w->term[0][36];
-    w->S[43] = w->S[43] + half*w->term[1][36];
+    w->S[64] = w->S[64] + half*w->term[1][36];
     t->Phi[3][8] = t->Phi[3][8] + t->Phi[3][8] + w->term[0][37];
-    w->S[44] = w->S[44] + half*w->term[1][37];
+    w->S[65] = w->S[65] + half*w->term[1][37];
     t->Phi[3][9] = t->Phi[3][9] + t->Phi[3][9] + w->term[0][38];
-    w->S[45] = w->S[45] + half*w->term[1][38];
+    w->S[30] = w->S[30] + half*w->term[1][38];
     t->Phi[3][10] = t->Phi[3][10] + t->Phi[3][10] + w->term[0][39];
-    w->S[46] = w->S[46] + half*w->term[1][39];
+    w->S[31] = w->S[31] + half*w->term[1][39];
     t->Phi[4][0] = t->Phi[4][0] + t->Phi[4][0] + w->term[0][40];
-    w->S[48] = w->S[48] + half*w->term[1][40];
+    w->S[32] = w->S[32] + half*w->term[1][40];
     t->Phi[4][1] = t->Phi[4][1] + t->Phi[4][1] + w->term[0][41];
-    w->S[49] = w->S[49] + half*w->term[1][41];
+    w->S[33] = w->S[33] + half*w->term[1][41];
     t->Phi[4][2] = t->Phi[4][2] + t->Phi[4][2] + w->term[0][42];
-    w->S[50] = w->S[50] + half*w->term[1][42];
+    w->S[34] = w->S[34] + half*w->term[1][42];
     t->Phi[4][3] = t->Phi[4][3] + t->Phi[4][3] + w->term[0][43];
-    w->S[51] = w->S[51] + half*w->term[1][43];
+    w->S[35] = w->S[35] + half*w->term[1][43];
     t->Phi[4][4] = t->Phi[4][4] + t->Phi[4][4] + w->term[0][44];
-    w->S[52] = w->S[52] + half*w->term[1][44];
+    w->S[36] = w->S[36] + half*w->term[1][44];
     t->Phi[4][5] = t->Phi[4][5] + t->Phi[4][5] + w->term[0][45];
-    w->S[53] = w->S[53] + half*w->term[1][45];
+    w->S[37] = w->S[37] + half*w->term[1][45];
     t->Phi[4][7] = t->Phi[4][7] + t->Phi[4][7] + w->term[0][46];
-    w->S[55] = w->S[55] + half*w->term[1][46];
+    w->S[66] = w->S[66] + half*w->term[1][46];
     t->Phi[4][8] = t->Phi[4][8] + t->Phi[4][8] + w->term[0][47];
-    w->S[56] = w->S[56] + half*w->term[1][47];
+    w->S[67] = w->S[67] + half*w->term[1][47];
     t->Phi[4][9] = t->Phi[4][9] + t->Phi[4][9] + w->term[0][48];
-    w->S[57] = w->S[57] + half*w->term[1][48];
+    w->S[38] = w->S[38] + half*w->term[1][48];
     t->Phi[4][10] = t->Phi[4][10] + t->Phi[4][10] + w->term[0][49];
-    w->S[58] = w->S[58] + half*w->term[1][49];
+    w->S[39] = w->S[39] + half*w->term[1][49];
     t->Phi[5][0] = t->Phi[5][0] + t->Phi[5][0] + w->term[0][50];
-    w->S[60] = w->S[60] + half*w->term[1][50];
+    w->S[40] = w->S[40] + half*w->term[1][50];
     t->Phi[5][1] = t->Phi[5][1] + t->Phi[5][1] + w->term[0][51];
-    w->S[61] = w->S[61] + half*w->term[1][51];
+    w->S[41] = w->S[41] + half*w->term[1][51];
     t->Phi[5][2] = t->Phi[5][2] + t->Phi[5][2] + w->term[0][52];
-    w->S[62] = w->S[62] + half*w->term[1][52];
+    w->S[42] = w->S[42] + half*w->term[1][52];
     t->Phi[5][3] = t->Phi[5][3] + t->Phi[5][3] + w->term[0][53];
-    w->S[63] = w->S[63] + half*w->term[1][53];
+    w->S[43] = w->S[43] + half*w->term[1][53];
     t->Phi[5][4] = t->Phi[5][4] + t->Phi[5][4] + w->term[0][54];
-    w->S[64] = w->S[64] + half*w->term[1][54];
+    w->S[44] = w->S[44] + half*w->term[1][54];
     t->Phi[5][5] = t->Phi[5][5] + t->Phi[5][5] + w->term[0][55];
-    w->S[65] = w->S[65] + half*w->term[1][55];
+    w->S[45] = w->S[45] + half*w->term[1][55];
     t->Phi[5][7] = t->Phi[5][7] + t->Phi[5][7] + w->term[0][56];
-    w->S[67] = w->S[67] + half*w->term[1][56];
+    w->S[68] = w->S[68] + half*w->term[1][56];
     t->Phi[5][8] = t->Phi[5][8] + t->Phi[5][8] + w->term[0][57];
-    w->S[68] = w->S[68] + half*w->term[1][57];
+    w->S[69] = w->S[69] + half*w->term[1][57];
     t->Phi[5][9] = t->Phi[5][9] + t->Phi[5][9] + w->term[0][58];
-    w->S[69] = w->S[69] + half*w->term[1][58];
+    w->S[46] = w->S[46] + half*w->term[1][58];
     t->Phi[5][10] = t->Phi[5][10] + t->Phi[5][10] + w->term[0][59];
-    w->S[70] = w->S[70] + half*w->term[1][59];
+    w->S[47] = w->S[47] + half*w->term[1][59];
     t->Phi[6][0] = t->Phi[6][0] + t->Phi[6][0] + w->term[0][60];
-    w->S[72] = w->S[72] + half*w->term[1][60];
+    w->S[48] = w->S[48] + half*w->term[1][60];
     t->Phi[6][1] = t->Phi[6][1] + t->Phi[6][1] + w->term[0][61];
-    w->S[73] = w->S[73] + half*w->term[1][61];
+    w->S[49] = w->S[49] + half*w->term[1][61];
     t->Phi[6][2] = t->Phi[6][2] + t->Phi[6][2] + w->term[0][62];
-    w->S[74] = w->S[74] + half*w->term[1][62];
+    w->S[50] = w->S[50] + half*w->term[1][62];
     t->Phi[6][3] = t->Phi[6][3] + t->Phi[6][3] + w->term[0][63];
-    w->S[75] = w->S[75] + half*w->term[1][63];
+    w->S[51] = w->S[51] + half*w->term[1][63];
     t->Phi[6][4] = t->Phi[6][4] + t->Phi[6][4] + w->term[0][64];
-    w->S[76] = w->S[76] + half*w->term[1][64];
+    w->S[52] = w->S[52] + half*w->term[1][64];
     t->Phi[6][5] = t->Phi[6][5] + t->Phi[6][5] + w->term[0][65];
-    w->S[77] = w->S[77] + half*w->term[1][65];
+    w->S[53] = w->S[53] + half*w->term[1][65];
     t->Phi[6][6] = t->Phi[6][6] + t->Phi[6][6] + w->term[0][66];
-    w->S[78] = w->S[78] + half*w->term[1][66];
+    w->S[70] = w->S[70] + half*w->term[1][66];
     t->Phi[6][7] = t->Phi[6][7] + t->Phi[6][7] + w->term[0][67];
-    w->S[79] = w->S[79] + half*w->term[1][67];
+    w->S[71] = w->S[71] + half*w->term[1][67];
     t->Phi[6][8] = t->Phi[6][8] + t->Phi[6][8] + w->term[0][68];
-    w->S[80] = w->S[80] + half*w->term[1][68];
+    w->S[72] = w->S[72] + half*w->term[1][68];
     t->Phi[6][9] = t->Phi[6][9] + t->Phi[6][9] + w->term[0][69];
-    w->S[81] = w->S[81] + half*w->term[1][69];
+    w->S[54] = w->S[54] + half*w->term[1][69];
     t->Phi[6][10] = t->Phi[6][10] + t->Phi[6][10] + w->term[0][70];
-    w->S[82] = w->S[82] + half*w->term[1][70];
+    w->S[55] = w->S[55] + half*w->term[1][70];
     t->Phi[9][9] = t->Phi[9][9] + t->Phi[9][9] + w->term[0][71];
-    w->S[84] = w->S[84] + half*w->term[1][71];
+    w->S[56] = w->S[56] + half*w->term[1][71];
     t->Phi[10][10] = t->Phi[10][10] + t->Phi[10][10] + w->term[0][72];
-    w->S[85] = w->S[85] + half*w->term[1][72];
+    w->S[57] = w->S[57] + half*w->term[1][72];
 }
 
 NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar
-        transition_check(ned_doppler13_reduced_transition *restrict t)
+        transition_check(ned_doppler13_reduced_transition *restrict t,
+        ned_doppler13_reduced_discretize_scratch *restrict w)
 {
+    const ned_doppler13_reduced_scalar one = 1.0;
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = t->Phi[0][0]; t->Phi[0][0] = v; check += v - v;
-    v = t->Phi[0][1]; t->Phi[0][1] = v; check += v - v;
-    v = t->Phi[0][2]; t->Phi[0][2] = v; check += v - v;
-    v = t->Phi[0][3]; t->Phi[0][3] = v; check += v - v;
-    v = t->Phi[0][4]; t->Phi[0][4] = v; check += v - v;
-    v = t->Phi[0][5]; t->Phi[0][5] = v; check += v - v;
-    v = t->Phi[0][7]; t->Phi[0][7] = v; check += v - v;
-    v = t->Phi[0][8]; t->Phi[0][8] = v; check += v - v;
-    v = t->Phi[0][9]; t->Phi[0][9] = v; check += v - v;
-    v = t->Phi[0][10]; t->Phi[0][10] = v; check += v - v;
-    v = t->Phi[1][0]; t->Phi[1][0] = v; check += v - v;
-    v = t->Phi[1][1]; t->Phi[1][1] = v; check += v - v;
-    v = t->Phi[1][2]; t->Phi[1][2] = v; check += v - v;
-    v = t->Phi[1][3]; t->Phi[1][3] = v; check += v - v;
-    v = t->Phi[1][4]; t->Phi[1][4] = v; check += v - v;
-    v = t->Phi[1][5]; t->Phi[1][5] = v; check += v - v;
-    v = t->Phi[1][7]; t->Phi[1][7] = v; check += v - v;
-    v = t->Phi[1][8]; t->Phi[1][8] = v; check += v - v;
-    v = t->Phi[1][9]; t->Phi[1][9] = v; check += v - v;
-    v = t->Phi[1][10]; t->Phi[1][10] = v; check += v - v;
-    v = t->Phi[2][0]; t->Phi[2][0] = v; check += v - v;
-    v = t->Phi[2][1]; t->Phi[2][1] = v; check += v - v;
-    v = t->Phi[2][2]; t->Phi[2][2] = v; check += v - v;
-    v = t->Phi[2][3]; t->Phi[2][3] = v; check += v - v;
-    v = t->Phi[2][4]; t->Phi[2][4] = v; check += v - v;
-    v = t->Phi[2][5]; t->Phi[2][5] = v; check += v - v;
-    v = t->Phi[2][7]; t->Phi[2][7] = v; check += v - v;
-    v = t->Phi[2][8]; t->Phi[2][8] = v; check += v - v;
-    v = t->Phi[2][9]; t->Phi[2][9] = v; check += v - v;
-    v = t->Phi[2][10]; t->Phi[2][10] = v; check += v - v;
-    v = t->Phi[3][0]; t->Phi[3][0] = v; check += v - v;
-    v = t->Phi[3][1]; t->Phi[3][1] = v; check += v - v;
-    v = t->Phi[3][2]; t->Phi[3][2] = v; check += v - v;
-    v = t->Phi[3][3]; t->Phi[3][3] = v; check += v - v;
-    v = t->Phi[3][4]; t->Phi[3][4] = v; check += v - v;
-    v = t->Phi[3][5]; t->Phi[3][5] = v; check += v - v;
-    v = t->Phi[3][7]; t->Phi[3][7] = v; check += v - v;
-    v = t->Phi[3][8]; t->Phi[3][8] = v; check += v - v;
-    v = t->Phi[3][9]; t->Phi[3][9] = v; check += v - v;
-    v = t->Phi[3][10]; t->Phi[3][10] = v; check += v - v;
-    v = t->Phi[4][0]; t->Phi[4][0] = v; check += v - v;
-    v = t->Phi[4][1]; t->Phi[4][1] = v; check += v - v;
-    v = t->Phi[4][2]; t->Phi[4][2] = v; check += v - v;
-    v = t->Phi[4][3]; t->Phi[4][3] = v; check += v - v;
-    v = t->Phi[4][4]; t->Phi[4][4] = v; check += v - v;
-    v = t->Phi[4][5]; t->Phi[4][5] = v; check += v - v;
-    v = t->Phi[4][7]; t->Phi[4][7] = v; check += v - v;
-    v = t->Phi[4][8]; t->Phi[4][8] = v; check += v - v;
-    v = t->Phi[4][9]; t->Phi[4][9] = v; check += v - v;
-    v = t->Phi[4][10]; t->Phi[4][10] = v; check += v - v;
-    v = t->Phi[5][0]; t->Phi[5][0] = v; check += v - v;
-    v = t->Phi[5][1]; t->Phi[5][1] = v; check += v - v;
-    v = t->Phi[5][2]; t->Phi[5][2] = v; check += v - v;
-    v = t->Phi[5][3]; t->Phi[5][3] = v; check += v - v;
-    v = t->Phi[5][4]; t->Phi[5][4] = v; check += v - v;
-    v = t->Phi[5][5]; t->Phi[5][5] = v; check += v - v;
-    v = t->Phi[5][7]; t->Phi[5][7] = v; check += v - v;
-    v = t->Phi[5][8]; t->Phi[5][8] = v; check += v - v;
-    v = t->Phi[5][9]; t->Phi[5][9] = v; check += v - v;
-    v = t->Phi[5][10]; t->Phi[5][10] = v; check += v - v;
-    v = t->Phi[6][0]; t->Phi[6][0] = v; check += v - v;
-    v = t->Phi[6][1]; t->Phi[6][1] = v; check += v - v;
-    v = t->Phi[6][2]; t->Phi[6][2] = v; check += v - v;
-    v = t->Phi[6][3]; t->Phi[6][3] = v; check += v - v;
-    v = t->Phi[6][4]; t->Phi[6][4] = v; check += v - v;
-    v = t->Phi[6][5]; t->Phi[6][5] = v; check += v - v;
-    v = t->Phi[6][6]; t->Phi[6][6] = v; check += v - v;
-    v = t->Phi[6][7]; t->Phi[6][7] = v; check += v - v;
-    v = t->Phi[6][8]; t->Phi[6][8] = v; check += v - v;
-    v = t->Phi[6][9]; t->Phi[6][9] = v; check += v - v;
-    v = t->Phi[6][10]; t->Phi[6][10] = v; check += v - v;
-    v = t->Phi[9][9]; t->Phi[9][9] = v; check += v - v;
-    v = t->Phi[10][10]; t->Phi[10][10] = v; check += v - v;
+    t->Phi[0][0] = t->Phi[0][0] + one;
+    t->Phi[1][1] = t->Phi[1][1] + one;
+    t->Phi[2][2] = t->Phi[2][2] + one;
+    t->Phi[3][3] = t->Phi[3][3] + one;
+    t->Phi[4][4] = t->Phi[4][4] + one;
+    t->Phi[5][5] = t->Phi[5][5] + one;
+    t->Phi[6][6] = t->Phi[6][6] + one;
+    t->Phi[9][9] = t->Phi[9][9] + one;
+    t->Phi[10][10] = t->Phi[10][10] + one;
+    v = t->Phi[0][0] + t->Phi[0][1] + t->Phi[0][2] + t->Phi[0][3] + t->Phi[0][4] + t->Phi[0][5] +
+            t->Phi[0][7] + t->Phi[0][8] + t->Phi[0][9] + t->Phi[0][10] + t->Phi[1][0] + t->Phi[1][1]
+            + t->Phi[1][2] + t->Phi[1][3] + t->Phi[1][4] + t->Phi[1][5] + t->Phi[1][7] +
+            t->Phi[1][8] + t->Phi[1][9] + t->Phi[1][10] + t->Phi[2][0] + t->Phi[2][1] + t->Phi[2][2]
+            + t->Phi[2][3] + t->Phi[2][4] + t->Phi[2][5] + t->Phi[2][7] + t->Phi[2][8] +
+            t->Phi[2][9] + t->Phi[2][10] + t->Phi[3][0] + t->Phi[3][1] + t->Phi[3][2] + t->Phi[3][3]
+            + t->Phi[3][4] + t->Phi[3][5] + t->Phi[3][7] + t->Phi[3][8] + t->Phi[3][9] +
+            t->Phi[3][10] + t->Phi[4][0] + t->Phi[4][1] + t->Phi[4][2] + t->Phi[4][3] + t->Phi[4][4]
+            + t->Phi[4][5] + t->Phi[4][7] + t->Phi[4][8] + t->Phi[4][9] + t->Phi[4][10] +
+            t->Phi[5][0] + t->Phi[5][1] + t->Phi[5][2] + t->Phi[5][3] + t->Phi[5][4] + t->Phi[5][5]
+            + t->Phi[5][7] + t->Phi[5][8] + t->Phi[5][9] + t->Phi[5][10] + t->Phi[6][0] +
+            t->Phi[6][1] + t->Phi[6][2] + t->Phi[6][3] + t->Phi[6][4] + t->Phi[6][5] + t->Phi[6][6]
+            + t->Phi[6][7] + t->Phi[6][8] + t->Phi[6][9] + t->Phi[6][10] + t->Phi[9][9] +
+            t->Phi[10][10]; w->term[0][0] = v; check += v - v;
     return check;
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void noise_input(const ned_doppler13_reduced_matrices *restrict m,
         ned_doppler13_reduced_discretize_scratch *restrict w)
 {
-    w->term[0][0] = w->S[9]*m->G[9];
-    w->term[0][1] = w->S[10]*m->G[10];
+    w->term[0][0] = w->S[6]*m->G[9];
+    w->term[0][1] = w->S[7]*m->G[10];
     w->term[0][2] = w->S[0]*m->G[0] + w->S[1]*m->G[1] + w->S[2]*m->G[2];
     w->term[0][3] = w->S[3]*m->G[3] + w->S[4]*m->G[6];
     w->term[0][4] = w->S[3]*m->G[4] + w->S[4]*m->G[7];
     w->term[0][5] = w->S[3]*m->G[5] + w->S[4]*m->G[8];
-    w->term[0][6] = w->S[21]*m->G[9];
-    w->term[0][7] = w->S[22]*m->G[10];
-    w->term[0][8] = w->S[12]*m->G[0] + w->S[13]*m->G[1] + w->S[14]*m->G[2];
-    w->term[0][9] = w->S[15]*m->G[3] + w->S[16]*m->G[6];
-    w->term[0][10] = w->S[15]*m->G[4] + w->S[16]*m->G[7];
-    w->term[0][11] = w->S[15]*m->G[5] + w->S[16]*m->G[8];
-    w->term[0][12] = w->S[33]*m->G[9];
-    w->term[0][13] = w->S[34]*m->G[10];
-    w->term[0][14] = w->S[24]*m->G[0] + w->S[25]*m->G[1] + w->S[26]*m->G[2];
-    w->term[0][15] = w->S[27]*m->G[3] + w->S[28]*m->G[6];
-    w->term[0][16] = w->S[27]*m->G[4] + w->S[28]*m->G[7];
-    w->term[0][17] = w->S[27]*m->G[5] + w->S[28]*m->G[8];
-    w->term[0][18] = w->S[45]*m->G[9];
-    w->term[0][19] = w->S[46]*m->G[10];
-    w->term[0][20] = w->S[36]*m->G[0] + w->S[37]*m->G[1] + w->S[38]*m->G[2];
-    w->term[0][21] = w->S[39]*m->G[3] + w->S[40]*m->G[6];
-    w->term[0][22] = w->S[39]*m->G[4] + w->S[40]*m->G[7];
-    w->term[0][23] = w->S[39]*m->G[5] + w->S[40]*m->G[8];
-    w->term[0][24] = w->S[57]*m->G[9];
-    w->term[0][25] = w->S[58]*m->G[10];
-    w->term[0][26] = w->S[48]*m->G[0] + w->S[49]*m->G[1] + w->S[50]*m->G[2];
-    w->term[0][27] = w->S[51]*m->G[3] + w->S[52]*m->G[6];
-    w->term[0][28] = w->S[51]*m->G[4] + w->S[52]*m->G[7];
-    w->term[0][29] = w->S[51]*m->G[5] + w->S[52]*m->G[8];
-    w->term[0][30] = w->S[69]*m->G[9];
-    w->term[0][31] = w->S[70]*m->G[10];
-    w->term[0][32] = w->S[60]*m->G[0] + w->S[61]*m->G[1] + w->S[62]*m->G[2];
-    w->term[0][33] = w->S[63]*m->G[3] + w->S[64]*m->G[6];
-    w->term[0][34] = w->S[63]*m->G[4] + w->S[64]*m->G[7];
-    w->term[0][35] = w->S[63]*m->G[5] + w->S[64]*m->G[8];
-    w->term[0][36] = w->S[81]*m->G[9];
-    w->term[0][37] = w->S[82]*m->G[10];
-    w->term[0][38] = w->S[72]*m->G[0] + w->S[73]*m->G[1] + w->S[74]*m->G[2];
-    w->term[0][39] = w->S[75]*m->G[3] + w->S[76]*m->G[6];
-    w->term[0][40] = w->S[75]*m->G[4] + w->S[76]*m->G[7];
-    w->term[0][41] = w->S[75]*m->G[5] + w->S[76]*m->G[8];
-    w->term[0][42] = w->S[84]*m->G[9];
-    w->term[0][43] = w->S[85]*m->G[10];
+    w->term[0][6] = w->S[14]*m->G[9];
+    w->term[0][7] = w->S[15]*m->G[10];
+    w->term[0][8] = w->S[8]*m->G[0] + w->S[9]*m->G[1] + w->S[10]*m->G[2];
+    w->term[0][9] = w->S[11]*m->G[3] + w->S[12]*m->G[6];
+    w->term[0][10] = w->S[11]*m->G[4] + w->S[12]*m->G[7];
+    w->term[0][11] = w->S[11]*m->G[5] + w->S[12]*m->G[8];
+    w->term[0][12] = w->S[22]*m->G[9];
+    w->term[0][13] = w->S[23]*m->G[10];
+    w->term[0][14] = w->S[16]*m->G[0] + w->S[17]*m->G[1] + w->S[18]*m->G[2];
+    w->term[0][15] = w->S[19]*m->G[3] + w->S[20]*m->G[6];
+    w->term[0][16] = w->S[19]*m->G[4] + w->S[20]*m->G[7];
+    w->term[0][17] = w->S[19]*m->G[5] + w->S[20]*m->G[8];
+    w->term[0][18] = w->S[30]*m->G[9];
+    w->term[0][19] = w->S[31]*m->G[10];
+    w->term[0][20] = w->S[24]*m->G[0] + w->S[25]*m->G[1] + w->S[26]*m->G[2];
+    w->term[0][21] = w->S[27]*m->G[3] + w->S[28]*m->G[6];
+    w->term[0][22] = w->S[27]*m->G[4] + w->S[28]*m->G[7];
+    w->term[0][23] = w->S[27]*m->G[5] + w->S[28]*m->G[8];
+    w->term[0][24] = w->S[38]*m->G[9];
+    w->term[0][25] = w->S[39]*m->G[10];
+    w->term[0][26] = w->S[32]*m->G[0] + w->S[33]*m->G[1] + w->S[34]*m->G[2];
+    w->term[0][27] = w->S[35]*m->G[3] + w->S[36]*m->G[6];
+    w->term[0][28] = w->S[35]*m->G[4] + w->S[36]*m->G[7];
+    w->term[0][29] = w->S[35]*m->G[5] + w->S[36]*m->G[8];
+    w->term[0][30] = w->S[46]*m->G[9];
+    w->term[0][31] = w->S[47]*m->G[10];
+    w->term[0][32] = w->S[40]*m->G[0] + w->S[41]*m->G[1] + w->S[42]*m->G[2];
+    w->term[0][33] = w->S[43]*m->G[3] + w->S[44]*m->G[6];
+    w->term[0][34] = w->S[43]*m->G[4] + w->S[44]*m->G[7];
+    w->term[0][35] = w->S[43]*m->G[5] + w->S[44]*m->G[8];
+    w->term[0][36] = w->S[54]*m->G[9];
+    w->term[0][37] = w->S[55]*m->G[10];
+    w->term[0][38] = w->S[48]*m->G[0] + w->S[49]*m->G[1] + w->S[50]*m->G[2];
+    w->term[0][39] = w->S[51]*m->G[3] + w->S[52]*m->G[6];
+    w->term[0][40] = w->S[51]*m->G[4] + w->S[52]*m->G[7];
+    w->term[0][41] = w->S[51]*m->G[5] + w->S[52]*m->G[8];
+    w->term[0][42] = w->S[56]*m->G[9];
+    w->term[0][43] = w->S[57]*m->G[10];
 }
 
 NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar process_noise(const
@@ -1502,255 +1522,218 @@ NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar process_noise(const
         ned_doppler13_reduced_discretize_scratch *restrict w, const ned_doppler13_reduced_scalar T)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    w->term[1][0] = w->term[0][0]*T*m->q[0];
-    w->term[1][1] = w->term[0][1]*T*m->q[1];
-    w->term[1][2] = w->term[0][2]*T*m->q[2];
-    w->term[1][3] = w->term[0][3]*T*m->q[3];
-    w->term[1][4] = w->term[0][4]*T*m->q[4];
-    w->term[1][5] = w->term[0][5]*T*m->q[5];
-    w->term[1][6] = w->term[0][6]*T*m->q[0];
-    w->term[1][7] = w->term[0][7]*T*m->q[1];
-    w->term[1][8] = w->term[0][8]*T*m->q[2];
-    w->term[1][9] = w->term[0][9]*T*m->q[3];
-    w->term[1][10] = w->term[0][10]*T*m->q[4];
-    w->term[1][11] = w->term[0][11]*T*m->q[5];
-    w->term[1][12] = w->term[0][12]*T*m->q[0];
-    w->term[1][13] = w->term[0][13]*T*m->q[1];
-    w->term[1][14] = w->term[0][14]*T*m->q[2];
-    w->term[1][15] = w->term[0][15]*T*m->q[3];
-    w->term[1][16] = w->term[0][16]*T*m->q[4];
-    w->term[1][17] = w->term[0][17]*T*m->q[5];
-    w->term[1][18] = w->term[0][18]*T*m->q[0];
-    w->term[1][19] = w->term[0][19]*T*m->q[1];
-    w->term[1][20] = w->term[0][20]*T*m->q[2];
-    w->term[1][21] = w->term[0][21]*T*m->q[3];
-    w->term[1][22] = w->term[0][22]*T*m->q[4];
-    w->term[1][23] = w->term[0][23]*T*m->q[5];
-    w->term[1][24] = w->term[0][24]*T*m->q[0];
-    w->term[1][25] = w->term[0][25]*T*m->q[1];
-    w->term[1][26] = w->term[0][26]*T*m->q[2];
-    w->term[1][27] = w->term[0][27]*T*m->q[3];
-    w->term[1][28] = w->term[0][28]*T*m->q[4];
-    w->term[1][29] = w->term[0][29]*T*m->q[5];
-    w->term[1][30] = w->term[0][30]*T*m->q[0];
-    w->term[1][31] = w->term[0][31]*T*m->q[1];
-    w->term[1][32] = w->term[0][32]*T*m->q[2];
-    w->term[1][33] = w->term[0][33]*T*m->q[3];
-    w->term[1][34] = w->term[0][34]*T*m->q[4];
-    w->term[1][35] = w->term[0][35]*T*m->q[5];
-    w->term[1][36] = w->term[0][36]*T*m->q[0];
-    w->term[1][37] = w->term[0][37]*T*m->q[1];
-    w->term[1][38] = w->term[0][38]*T*m->q[2];
-    w->term[1][39] = w->term[0][39]*T*m->q[3];
-    w->term[1][40] = w->term[0][40]*T*m->q[4];
-    w->term[1][41] = w->term[0][41]*T*m->q[5];
-    w->term[1][42] = w->term[0][42]*T*m->q[0];
-    w->term[1][43] = w->term[0][43]*T*m->q[1];
+    w->term[1][44] = T*m->q[0];
+    w->term[1][45] = T*m->q[1];
+    w->term[1][46] = T*m->q[2];
+    w->term[1][47] = T*m->q[3];
+    w->term[1][48] = T*m->q[4];
+    w->term[1][49] = T*m->q[5];
+    w->term[1][0] = w->term[0][0]*w->term[1][44];
+    w->term[1][1] = w->term[0][1]*w->term[1][45];
+    w->term[1][2] = w->term[0][2]*w->term[1][46];
+    w->term[1][3] = w->term[0][3]*w->term[1][47];
+    w->term[1][4] = w->term[0][4]*w->term[1][48];
+    w->term[1][5] = w->term[0][5]*w->term[1][49];
+    w->term[1][6] = w->term[0][6]*w->term[1][44];
+    w->term[1][7] = w->term[0][7]*w->term[1][45];
+    w->term[1][8] = w->term[0][8]*w->term[1][46];
+    w->term[1][9] = w->term[0][9]*w->term[1][47];
+    w->term[1][10] = w->term[0][10]*w->term[1][48];
+    w->term[1][11] = w->term[0][11]*w->term[1][49];
+    w->term[1][12] = w->term[0][12]*w->term[1][44];
+    w->term[1][13] = w->term[0][13]*w->term[1][45];
+    w->term[1][14] = w->term[0][14]*w->term[1][46];
+    w->term[1][15] = w->term[0][15]*w->term[1][47];
+    w->term[1][16] = w->term[0][16]*w->term[1][48];
+    w->term[1][17] = w->term[0][17]*w->term[1][49];
+    w->term[1][18] = w->term[0][18]*w->term[1][44];
+    w->term[1][19] = w->term[0][19]*w->term[1][45];
+    w->term[1][20] = w->term[0][20]*w->term[1][46];
+    w->term[1][21] = w->term[0][21]*w->term[1][47];
+    w->term[1][22] = w->term[0][22]*w->term[1][48];
+    w->term[1][23] = w->term[0][23]*w->term[1][49];
+    w->term[1][24] = w->term[0][24]*w->term[1][44];
+    w->term[1][25] = w->term[0][25]*w->term[1][45];
+    w->term[1][26] = w->term[0][26]*w->term[1][46];
+    w->term[1][27] = w->term[0][27]*w->term[1][47];
+    w->term[1][28] = w->term[0][28]*w->term[1][48];
+    w->term[1][29] = w->term[0][29]*w->term[1][49];
+    w->term[1][30] = w->term[0][30]*w->term[1][44];
+    w->term[1][31] = w->term[0][31]*w->term[1][45];
+    w->term[1][32] = w->term[0][32]*w->term[1][46];
+    w->term[1][33] = w->term[0][33]*w->term[1][47];
+    w->term[1][34] = w->term[0][34]*w->term[1][48];
+    w->term[1][35] = w->term[0][35]*w->term[1][49];
+    w->term[1][36] = w->term[0][36]*w->term[1][44];
+    w->term[1][37] = w->term[0][37]*w->term[1][45];
+    w->term[1][38] = w->term[0][38]*w->term[1][46];
+    w->term[1][39] = w->term[0][39]*w->term[1][47];
+    w->term[1][40] = w->term[0][40]*w->term[1][48];
+    w->term[1][41] = w->term[0][41]*w->term[1][49];
+    w->term[1][42] = w->term[0][42]*w->term[1][44];
+    w->term[1][43] = w->term[0][43]*w->term[1][45];
     v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
             w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0][0] = v; check += v - v;
+            t->Qd[0] = v; check += v - v;
     v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
             w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[0][1] = v; t->Qd[1][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v - v;
     v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
             w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[0][2] = v; t->Qd[2][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v - v;
     v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
             w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[0][3] = v; t->Qd[3][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v - v;
     v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
             w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[0][4] = v; t->Qd[4][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v - v;
     v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
             w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[0][5] = v; t->Qd[5][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v - v;
     v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
             w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
-            w->term[1][5]*w->term[0][41]; t->Qd[0][6] = v; t->Qd[6][0] = v; check += v - v;
-    v = w->term[1][0]*w->term[0][42]; t->Qd[0][9] = v; t->Qd[9][0] = v; check += v - v;
-    v = w->term[1][1]*w->term[0][43]; t->Qd[0][10] = v; t->Qd[10][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][41]; t->Qd[6] = v; check += v - v;
+    v = w->term[1][0]*w->term[0][42]; t->Qd[9] = v; check += v - v;
+    v = w->term[1][1]*w->term[0][43]; t->Qd[10] = v; check += v - v;
     v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
             w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[1][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][11]; t->Qd[13] = v; check += v - v;
     v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
             w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[1][2] = v; t->Qd[2][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][17]; t->Qd[14] = v; check += v - v;
     v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
             w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[1][3] = v; t->Qd[3][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][23]; t->Qd[15] = v; check += v - v;
     v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
             w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[1][4] = v; t->Qd[4][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][29]; t->Qd[16] = v; check += v - v;
     v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
             w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[1][5] = v; t->Qd[5][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][35]; t->Qd[17] = v; check += v - v;
     v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38] +
             w->term[1][9]*w->term[0][39] + w->term[1][10]*w->term[0][40] +
-            w->term[1][11]*w->term[0][41]; t->Qd[1][6] = v; t->Qd[6][1] = v; check += v - v;
-    v = w->term[1][6]*w->term[0][42]; t->Qd[1][9] = v; t->Qd[9][1] = v; check += v - v;
-    v = w->term[1][7]*w->term[0][43]; t->Qd[1][10] = v; t->Qd[10][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][41]; t->Qd[18] = v; check += v - v;
+    v = w->term[1][6]*w->term[0][42]; t->Qd[21] = v; check += v - v;
+    v = w->term[1][7]*w->term[0][43]; t->Qd[22] = v; check += v - v;
     v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
             w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[2][2] = v; check +=
-            v - v;
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[25] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
             w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[2][3] = v;
-            t->Qd[3][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[26] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
             w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[2][4] = v;
-            t->Qd[4][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[27] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
             w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[2][5] = v;
-            t->Qd[5][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[28] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
             w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[2][6] = v;
-            t->Qd[6][2] = v; check += v - v;
-    v = w->term[1][12]*w->term[0][42]; t->Qd[2][9] = v; t->Qd[9][2] = v; check += v - v;
-    v = w->term[1][13]*w->term[0][43]; t->Qd[2][10] = v; t->Qd[10][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[29] = v; check += v
+            - v;
+    v = w->term[1][12]*w->term[0][42]; t->Qd[32] = v; check += v - v;
+    v = w->term[1][13]*w->term[0][43]; t->Qd[33] = v; check += v - v;
     v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
             w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[3][3] = v; check +=
-            v - v;
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[36] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
             w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[3][4] = v;
-            t->Qd[4][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[37] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
             w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[3][5] = v;
-            t->Qd[5][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[38] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
             w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[3][6] = v;
-            t->Qd[6][3] = v; check += v - v;
-    v = w->term[1][18]*w->term[0][42]; t->Qd[3][9] = v; t->Qd[9][3] = v; check += v - v;
-    v = w->term[1][19]*w->term[0][43]; t->Qd[3][10] = v; t->Qd[10][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[39] = v; check += v
+            - v;
+    v = w->term[1][18]*w->term[0][42]; t->Qd[42] = v; check += v - v;
+    v = w->term[1][19]*w->term[0][43]; t->Qd[43] = v; check += v - v;
     v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
             w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[4][4] = v; check +=
-            v - v;
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[46] = v; check += v
+            - v;
     v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
             w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[4][5] = v;
-            t->Qd[5][4] = v; check += v - v;
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[47] = v; check += v
+            - v;
     v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
             w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
-            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[4][6] = v;
-            t->Qd[6][4] = v; check += v - v;
-    v = w->term[1][24]*w->term[0][42]; t->Qd[4][9] = v; t->Qd[9][4] = v; check += v - v;
-    v = w->term[1][25]*w->term[0][43]; t->Qd[4][10] = v; t->Qd[10][4] = v; check += v - v;
+            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[48] = v; check += v
+            - v;
+    v = w->term[1][24]*w->term[0][42]; t->Qd[51] = v; check += v - v;
+    v = w->term[1][25]*w->term[0][43]; t->Qd[52] = v; check += v - v;
     v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
             w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[5][5] = v; check +=
-            v - v;
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[55] = v; check += v
+            - v;
     v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
             w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
-            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[5][6] = v;
-            t->Qd[6][5] = v; check += v - v;
-    v = w->term[1][30]*w->term[0][42]; t->Qd[5][9] = v; t->Qd[9][5] = v; check += v - v;
-    v = w->term[1][31]*w->term[0][43]; t->Qd[5][10] = v; t->Qd[10][5] = v; check += v - v;
+            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[56] = v; check += v
+            - v;
+    v = w->term[1][30]*w->term[0][42]; t->Qd[59] = v; check += v - v;
+    v = w->term[1][31]*w->term[0][43]; t->Qd[60] = v; check += v - v;
     v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
             w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[6][6] = v; check +=
-            v - v;
-    v = w->term[1][36]*w->term[0][42]; t->Qd[6][9] = v; t->Qd[9][6] = v; check += v - v;
-    v = w->term[1][37]*w->term[0][43]; t->Qd[6][10] = v; t->Qd[10][6] = v; check += v - v;
-    v = w->term[1][42]*w->term[0][42]; t->Qd[9][9] = v; check += v - v;
-    v = w->term[1][43]*w->term[0][43]; t->Qd[10][10] = v; check += v - v;
-    t->Qd[0][7] = 0;
-    t->Qd[0][8] = 0;
-    t->Qd[0][11] = 0;
-    t->Qd[0][12] = 0;
-    t->Qd[1][7] = 0;
-    t->Qd[1][8] = 0;
-    t->Qd[1][11] = 0;
-    t->Qd[1][12] = 0;
-    t->Qd[2][7] = 0;
-    t->Qd[2][8] = 0;
-    t->Qd[2][11] = 0;
-    t->Qd[2][12] = 0;
-    t->Qd[3][7] = 0;
-    t->Qd[3][8] = 0;
-    t->Qd[3][11] = 0;
-    t->Qd[3][12] = 0;
-    t->Qd[4][7] = 0;
-    t->Qd[4][8] = 0;
-    t->Qd[4][11] = 0;
-    t->Qd[4][12] = 0;
-    t->Qd[5][7] = 0;
-    t->Qd[5][8] = 0;
-    t->Qd[5][11] = 0;
-    t->Qd[5][12] = 0;
-    t->Qd[6][7] = 0;
-    t->Qd[6][8] = 0;
-    t->Qd[6][11] = 0;
-    t->Qd[6][12] = 0;
-    t->Qd[7][0] = 0;
-    t->Qd[7][1] = 0;
-    t->Qd[7][2] = 0;
-    t->Qd[7][3] = 0;
-    t->Qd[7][4] = 0;
-    t->Qd[7][5] = 0;
-    t->Qd[7][6] = 0;
-    t->Qd[7][7] = 0;
-    t->Qd[7][8] = 0;
-    t->Qd[7][9] = 0;
-    t->Qd[7][10] = 0;
-    t->Qd[7][11] = 0;
-    t->Qd[7][12] = 0;
-    t->Qd[8][0] = 0;
-    t->Qd[8][1] = 0;
-    t->Qd[8][2] = 0;
-    t->Qd[8][3] = 0;
-    t->Qd[8][4] = 0;
-    t->Qd[8][5] = 0;
-    t->Qd[8][6] = 0;
-    t->Qd[8][7] = 0;
-    t->Qd[8][8] = 0;
-    t->Qd[8][9] = 0;
-    t->Qd[8][10] = 0;
-    t->Qd[8][11] = 0;
-    t->Qd[8][12] = 0;
-    t->Qd[9][7] = 0;
-    t->Qd[9][8] = 0;
-    t->Qd[9][10] = 0;
-    t->Qd[9][11] = 0;
-    t->Qd[9][12] = 0;
-    t->Qd[10][7] = 0;
-    t->Qd[10][8] = 0;
-    t->Qd[10][9] = 0;
-    t->Qd[10][11] = 0;
-    t->Qd[10][12] = 0;
-    t->Qd[11][0] = 0;
-    t->Qd[11][1] = 0;
-    t->Qd[11][2] = 0;
-    t->Qd[11][3] = 0;
-    t->Qd[11][4] = 0;
-    t->Qd[11][5] = 0;
-    t->Qd[11][6] = 0;
-    t->Qd[11][7] = 0;
-    t->Qd[11][8] = 0;
-    t->Qd[11][9] = 0;
-    t->Qd[11][10] = 0;
-    t->Qd[11][11] = 0;
-    t->Qd[11][12] = 0;
-    t->Qd[12][0] = 0;
-    t->Qd[12][1] = 0;
-    t->Qd[12][2] = 0;
-    t->Qd[12][3] = 0;
-    t->Qd[12][4] = 0;
-    t->Qd[12][5] = 0;
-    t->Qd[12][6] = 0;
-    t->Qd[12][7] = 0;
-    t->Qd[12][8] = 0;
-    t->Qd[12][9] = 0;
-    t->Qd[12][10] = 0;
-    t->Qd[12][11] = 0;
-    t->Qd[12][12] = 0;
+            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[63] = v; check += v
+            - v;
+    v = w->term[1][36]*w->term[0][42]; t->Qd[66] = v; check += v - v;
+    v = w->term[1][37]*w->term[0][43]; t->Qd[67] = v; check += v - v;
+    v = w->term[1][42]*w->term[0][42]; t->Qd[81] = v; check += v - v;
+    v = w->term[1][43]*w->term[0][43]; t->Qd[85] = v; check += v - v;
+    t->Qd[7] = 0;
+    t->Qd[8] = 0;
+    t->Qd[11] = 0;
+    t->Qd[12] = 0;
+    t->Qd[19] = 0;
+    t->Qd[20] = 0;
+    t->Qd[23] = 0;
+    t->Qd[24] = 0;
+    t->Qd[30] = 0;
+    t->Qd[31] = 0;
+    t->Qd[34] = 0;
+    t->Qd[35] = 0;
+    t->Qd[40] = 0;
+    t->Qd[41] = 0;
+    t->Qd[44] = 0;
+    t->Qd[45] = 0;
+    t->Qd[49] = 0;
+    t->Qd[50] = 0;
+    t->Qd[53] = 0;
+    t->Qd[54] = 0;
+    t->Qd[57] = 0;
+    t->Qd[58] = 0;
+    t->Qd[61] = 0;
+    t->Qd[62] = 0;
+    t->Qd[64] = 0;
+    t->Qd[65] = 0;
+    t->Qd[68] = 0;
+    t->Qd[69] = 0;
+    t->Qd[70] = 0;
+    t->Qd[71] = 0;
+    t->Qd[72] = 0;
+    t->Qd[73] = 0;
+    t->Qd[74] = 0;
+    t->Qd[75] = 0;
+    t->Qd[76] = 0;
+    t->Qd[77] = 0;
+    t->Qd[78] = 0;
+    t->Qd[79] = 0;
+    t->Qd[80] = 0;
+    t->Qd[82] = 0;
+    t->Qd[83] = 0;
+    t->Qd[84] = 0;
+    t->Qd[86] = 0;
+    t->Qd[87] = 0;
+    t->Qd[88] = 0;
+    t->Qd[89] = 0;
+    t->Qd[90] = 0;
     return check;
 }
 
@@ -1762,23 +1745,40 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restr
     int i, e, c;
     int halvings, order, status;
     int k;
-    ned_doppler13_reduced_scalar check = 0.0;
+    ned_doppler13_reduced_scalar sum_check;
+    ned_doppler13_reduced_scalar check = 0.0, sums[2] = { 0.0, 0.0 };
     if (!isfinite(T)) {
         return NED_DOPPLER13_REDUCED_ERR_NONFINITE;
     }
     if (!(T > 0.0)) {
         return NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE;
     }
-    for (e = 0; e < NED_DOPPLER13_REDUCED_NNZ_F; ++e) {
-        check += m->F[e] - m->F[e];
+    /* the sum of v - v over F, G and q (0 when all are finite) in two partial sums, two entries a
+            step,
+       which gcc -O2 vectorizes (the order of a sum of zeros and NaNs does not change whether it is
+               0) */
+    for (e = 0; e + 1 < NED_DOPPLER13_REDUCED_NNZ_F; e += 2) {
+        sums[0] += m->F[e] - m->F[e];
+        sums[1] += m->F[e + 1] - m->F[e + 1];
     }
-    for (e = 0; e < NED_DOPPLER13_REDUCED_NNZ_G; ++e) {
-        check += m->G[e] - m->G[e];
+    for (; e < NED_DOPPLER13_REDUCED_NNZ_F; ++e) {
+        sums[0] += m->F[e] - m->F[e];
     }
-    for (c = 0; c < NED_DOPPLER13_REDUCED_N_NOISES; ++c) {
-        check += m->q[c] - m->q[c];
+    for (e = 0; e + 1 < NED_DOPPLER13_REDUCED_NNZ_G; e += 2) {
+        sums[0] += m->G[e] - m->G[e];
+        sums[1] += m->G[e + 1] - m->G[e + 1];
     }
-    if (check != 0.0) {
+    for (; e < NED_DOPPLER13_REDUCED_NNZ_G; ++e) {
+        sums[0] += m->G[e] - m->G[e];
+    }
+    for (e = 0; e + 1 < NED_DOPPLER13_REDUCED_N_NOISES; e += 2) {
+        sums[0] += m->q[e] - m->q[e];
+        sums[1] += m->q[e + 1] - m->q[e + 1];
+    }
+    for (; e < NED_DOPPLER13_REDUCED_N_NOISES; ++e) {
+        sums[0] += m->q[e] - m->q[e];
+    }
+    if (sums[0] + sums[1] != 0.0) {
         return NED_DOPPLER13_REDUCED_ERR_NONFINITE;
     }
     for (c = 0; c < NED_DOPPLER13_REDUCED_N_NOISES; ++c) {
@@ -1809,24 +1809,39 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restr
                 horner_level_1_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
             }
         } else if (k == 0) {
-            horner_last_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]); /* S = R_0:
-                    also the rows no row of F reads */
+            horner_last_into_S(w, taylor_coefficient[k]); /* S = R_0: also the rows no row of F
+                    reads, and the unit columns R_1 A(:, j) */
+        } else if (k == 1 && halvings > 0) {
+            horner_first_into_term(w, taylor_coefficient[k]); /* R_1 in every row: the unit columns
+                    of S read it */
         } else {
             if (k & 1) {
-                horner_saturated_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+                horner_saturated_into_term(w, taylor_coefficient[k]);
             } else {
-                horner_saturated_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+                horner_saturated_into_S(w, taylor_coefficient[k]);
             }
         }
     }
     horner_transition(t, w);
+    if (halvings > 0 && order > 1) {
+        horner_unit_columns(w); /* S(:, j) = R_1 A(:, j), unit columns j: read by the doublings
+                only */
+    }
     for (i = 0; i < halvings; ++i) {
         doubling(t, w);
     }
-    check += transition_check(t);
-    for (i = 0; i < NED_DOPPLER13_REDUCED_N_STATES; ++i) {
-        t->Phi[i][i] += 1.0;
+    /* Phi = I + E, and the sum of its active entries: finite only if every entry is; otherwise (an
+       entry that is not finite, or an overflow of the sum) entry by entry */
+    sum_check = transition_check(t, w);
+    if (sum_check != 0.0) {
+        sum_check = 0.0;
+        for (i = 0; i < NED_DOPPLER13_REDUCED_N_STATES; ++i) {
+            for (k = 0; k < NED_DOPPLER13_REDUCED_N_STATES; ++k) {
+                sum_check += t->Phi[i][k] - t->Phi[i][k];
+            }
+        }
     }
+    check += sum_check;
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
@@ -1872,444 +1887,58 @@ static void phi_times_p_row_0(const ned_doppler13_reduced_filter *restrict f, co
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
         w)
 {
-    w->M[0][0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] +
+    w->M[0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] +
             t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] +
             t->Phi[0][7]*f->P[7][0] + t->Phi[0][8]*f->P[8][0] + t->Phi[0][9]*f->P[9][0] +
             t->Phi[0][10]*f->P[10][0];
-    w->M[0][1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] +
+    w->M[1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] +
             t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] +
             t->Phi[0][7]*f->P[7][1] + t->Phi[0][8]*f->P[8][1] + t->Phi[0][9]*f->P[9][1] +
             t->Phi[0][10]*f->P[10][1];
-    w->M[0][2] = t->Phi[0][0]*f->P[0][2] + t->Phi[0][1]*f->P[1][2] + t->Phi[0][2]*f->P[2][2] +
+    w->M[2] = t->Phi[0][0]*f->P[0][2] + t->Phi[0][1]*f->P[1][2] + t->Phi[0][2]*f->P[2][2] +
             t->Phi[0][3]*f->P[3][2] + t->Phi[0][4]*f->P[4][2] + t->Phi[0][5]*f->P[5][2] +
             t->Phi[0][7]*f->P[7][2] + t->Phi[0][8]*f->P[8][2] + t->Phi[0][9]*f->P[9][2] +
             t->Phi[0][10]*f->P[10][2];
-    w->M[0][3] = t->Phi[0][0]*f->P[0][3] + t->Phi[0][1]*f->P[1][3] + t->Phi[0][2]*f->P[2][3] +
+    w->M[3] = t->Phi[0][0]*f->P[0][3] + t->Phi[0][1]*f->P[1][3] + t->Phi[0][2]*f->P[2][3] +
             t->Phi[0][3]*f->P[3][3] + t->Phi[0][4]*f->P[4][3] + t->Phi[0][5]*f->P[5][3] +
             t->Phi[0][7]*f->P[7][3] + t->Phi[0][8]*f->P[8][3] + t->Phi[0][9]*f->P[9][3] +
             t->Phi[0][10]*f->P[10][3];
-    w->M[0][4] = t->Phi[0][0]*f->P[0][4] + t->Phi[0][1]*f->P[1][4] + t->Phi[0][2]*f->P[2][4] +
+    w->M[4] = t->Phi[0][0]*f->P[0][4] + t->Phi[0][1]*f->P[1][4] + t->Phi[0][2]*f->P[2][4] +
             t->Phi[0][3]*f->P[3][4] + t->Phi[0][4]*f->P[4][4] + t->Phi[0][5]*f->P[5][4] +
             t->Phi[0][7]*f->P[7][4] + t->Phi[0][8]*f->P[8][4] + t->Phi[0][9]*f->P[9][4] +
             t->Phi[0][10]*f->P[10][4];
-    w->M[0][5] = t->Phi[0][0]*f->P[0][5] + t->Phi[0][1]*f->P[1][5] + t->Phi[0][2]*f->P[2][5] +
+    w->M[5] = t->Phi[0][0]*f->P[0][5] + t->Phi[0][1]*f->P[1][5] + t->Phi[0][2]*f->P[2][5] +
             t->Phi[0][3]*f->P[3][5] + t->Phi[0][4]*f->P[4][5] + t->Phi[0][5]*f->P[5][5] +
             t->Phi[0][7]*f->P[7][5] + t->Phi[0][8]*f->P[8][5] + t->Phi[0][9]*f->P[9][5] +
             t->Phi[0][10]*f->P[10][5];
-    w->M[0][6] = t->Phi[0][0]*f->P[0][6] + t->Phi[0][1]*f->P[1][6] + t->Phi[0][2]*f->P[2][6] +
+    w->M[6] = t->Phi[0][0]*f->P[0][6] + t->Phi[0][1]*f->P[1][6] + t->Phi[0][2]*f->P[2][6] +
             t->Phi[0][3]*f->P[3][6] + t->Phi[0][4]*f->P[4][6] + t->Phi[0][5]*f->P[5][6] +
             t->Phi[0][7]*f->P[7][6] + t->Phi[0][8]*f->P[8][6] + t->Phi[0][9]*f->P[9][6] +
             t->Phi[0][10]*f->P[10][6];
-    w->M[0][7] = t->Phi[0][0]*f->P[0][7] + t->Phi[0][1]*f->P[1][7] + t->Phi[0][2]*f->P[2][7] +
+    w->M[7] = t->Phi[0][0]*f->P[0][7] + t->Phi[0][1]*f->P[1][7] + t->Phi[0][2]*f->P[2][7] +
             t->Phi[0][3]*f->P[3][7] + t->Phi[0][4]*f->P[4][7] + t->Phi[0][5]*f->P[5][7] +
             t->Phi[0][7]*f->P[7][7] + t->Phi[0][8]*f->P[8][7] + t->Phi[0][9]*f->P[9][7] +
             t->Phi[0][10]*f->P[10][7];
-    w->M[0][8] = t->Phi[0][0]*f->P[0][8] + t->Phi[0][1]*f->P[1][8] + t->Phi[0][2]*f->P[2][8] +
+    w->M[8] = t->Phi[0][0]*f->P[0][8] + t->Phi[0][1]*f->P[1][8] + t->Phi[0][2]*f->P[2][8] +
             t->Phi[0][3]*f->P[3][8] + t->Phi[0][4]*f->P[4][8] + t->Phi[0][5]*f->P[5][8] +
             t->Phi[0][7]*f->P[7][8] + t->Phi[0][8]*f->P[8][8] + t->Phi[0][9]*f->P[9][8] +
             t->Phi[0][10]*f->P[10][8];
-    w->M[0][9] = t->Phi[0][0]*f->P[0][9] + t->Phi[0][1]*f->P[1][9] + t->Phi[0][2]*f->P[2][9] +
+    w->M[9] = t->Phi[0][0]*f->P[0][9] + t->Phi[0][1]*f->P[1][9] + t->Phi[0][2]*f->P[2][9] +
             t->Phi[0][3]*f->P[3][9] + t->Phi[0][4]*f->P[4][9] + t->Phi[0][5]*f->P[5][9] +
             t->Phi[0][7]*f->P[7][9] + t->Phi[0][8]*f->P[8][9] + t->Phi[0][9]*f->P[9][9] +
             t->Phi[0][10]*f->P[10][9];
-    w->M[0][10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] +
+    w->M[10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] +
             t->Phi[0][3]*f->P[3][10] + t->Phi[0][4]*f->P[4][10] + t->Phi[0][5]*f->P[5][10] +
             t->Phi[0][7]*f->P[7][10] + t->Phi[0][8]*f->P[8][10] + t->Phi[0][9]*f->P[9][10] +
             t->Phi[0][10]*f->P[10][10];
-    w->M[0][11] = t->Phi[0][0]*f->P[0][11] + t->Phi[0][1]*f->P[1][11] + t->Phi[0][2]*f->P[2][11] +
+    w->M[11] = t->Phi[0][0]*f->P[0][11] + t->Phi[0][1]*f->P[1][11] + t->Phi[0][2]*f->P[2][11] +
             t->Phi[0][3]*f->P[3][11] + t->Phi[0][4]*f->P[4][11] + t->Phi[0][5]*f->P[5][11] +
             t->Phi[0][7]*f->P[7][11] + t->Phi[0][8]*f->P[8][11] + t->Phi[0][9]*f->P[9][11] +
             t->Phi[0][10]*f->P[10][11];
-    w->M[0][12] = t->Phi[0][0]*f->P[0][12] + t->Phi[0][1]*f->P[1][12] + t->Phi[0][2]*f->P[2][12] +
+    w->M[12] = t->Phi[0][0]*f->P[0][12] + t->Phi[0][1]*f->P[1][12] + t->Phi[0][2]*f->P[2][12] +
             t->Phi[0][3]*f->P[3][12] + t->Phi[0][4]*f->P[4][12] + t->Phi[0][5]*f->P[5][12] +
             t->Phi[0][7]*f->P[7][12] + t->Phi[0][8]*f->P[8][12] + t->Phi[0][9]*f->P[9][12] +
             t->Phi[0][10]*f->P[10][12];
-}
-
-static void phi_times_p_row_1(const ned_doppler13_reduced_filter *restrict f, const
-        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
-        w)
-{
-    w->M[1][0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] +
-            t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] +
-            t->Phi[1][7]*f->P[7][0] + t->Phi[1][8]*f->P[8][0] + t->Phi[1][9]*f->P[9][0] +
-            t->Phi[1][10]*f->P[10][0];
-    w->M[1][1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] +
-            t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] +
-            t->Phi[1][7]*f->P[7][1] + t->Phi[1][8]*f->P[8][1] + t->Phi[1][9]*f->P[9][1] +
-            t->Phi[1][10]*f->P[10][1];
-    w->M[1][2] = t->Phi[1][0]*f->P[0][2] + t->Phi[1][1]*f->P[1][2] + t->Phi[1][2]*f->P[2][2] +
-            t->Phi[1][3]*f->P[3][2] + t->Phi[1][4]*f->P[4][2] + t->Phi[1][5]*f->P[5][2] +
-            t->Phi[1][7]*f->P[7][2] + t->Phi[1][8]*f->P[8][2] + t->Phi[1][9]*f->P[9][2] +
-            t->Phi[1][10]*f->P[10][2];
-    w->M[1][3] = t->Phi[1][0]*f->P[0][3] + t->Phi[1][1]*f->P[1][3] + t->Phi[1][2]*f->P[2][3] +
-            t->Phi[1][3]*f->P[3][3] + t->Phi[1][4]*f->P[4][3] + t->Phi[1][5]*f->P[5][3] +
-            t->Phi[1][7]*f->P[7][3] + t->Phi[1][8]*f->P[8][3] + t->Phi[1][9]*f->P[9][3] +
-            t->Phi[1][10]*f->P[10][3];
-    w->M[1][4] = t->Phi[1][0]*f->P[0][4] + t->Phi[1][1]*f->P[1][4] + t->Phi[1][2]*f->P[2][4] +
-            t->Phi[1][3]*f->P[3][4] + t->Phi[1][4]*f->P[4][4] + t->Phi[1][5]*f->P[5][4] +
-            t->Phi[1][7]*f->P[7][4] + t->Phi[1][8]*f->P[8][4] + t->Phi[1][9]*f->P[9][4] +
-            t->Phi[1][10]*f->P[10][4];
-    w->M[1][5] = t->Phi[1][0]*f->P[0][5] + t->Phi[1][1]*f->P[1][5] + t->Phi[1][2]*f->P[2][5] +
-            t->Phi[1][3]*f->P[3][5] + t->Phi[1][4]*f->P[4][5] + t->Phi[1][5]*f->P[5][5] +
-            t->Phi[1][7]*f->P[7][5] + t->Phi[1][8]*f->P[8][5] + t->Phi[1][9]*f->P[9][5] +
-            t->Phi[1][10]*f->P[10][5];
-    w->M[1][6] = t->Phi[1][0]*f->P[0][6] + t->Phi[1][1]*f->P[1][6] + t->Phi[1][2]*f->P[2][6] +
-            t->Phi[1][3]*f->P[3][6] + t->Phi[1][4]*f->P[4][6] + t->Phi[1][5]*f->P[5][6] +
-            t->Phi[1][7]*f->P[7][6] + t->Phi[1][8]*f->P[8][6] + t->Phi[1][9]*f->P[9][6] +
-            t->Phi[1][10]*f->P[10][6];
-    w->M[1][7] = t->Phi[1][0]*f->P[0][7] + t->Phi[1][1]*f->P[1][7] + t->Phi[1][2]*f->P[2][7] +
-            t->Phi[1][3]*f->P[3][7] + t->Phi[1][4]*f->P[4][7] + t->Phi[1][5]*f->P[5][7] +
-            t->Phi[1][7]*f->P[7][7] + t->Phi[1][8]*f->P[8][7] + t->Phi[1][9]*f->P[9][7] +
-            t->Phi[1][10]*f->P[10][7];
-    w->M[1][8] = t->Phi[1][0]*f->P[0][8] + t->Phi[1][1]*f->P[1][8] + t->Phi[1][2]*f->P[2][8] +
-            t->Phi[1][3]*f->P[3][8] + t->Phi[1][4]*f->P[4][8] + t->Phi[1][5]*f->P[5][8] +
-            t->Phi[1][7]*f->P[7][8] + t->Phi[1][8]*f->P[8][8] + t->Phi[1][9]*f->P[9][8] +
-            t->Phi[1][10]*f->P[10][8];
-    w->M[1][9] = t->Phi[1][0]*f->P[0][9] + t->Phi[1][1]*f->P[1][9] + t->Phi[1][2]*f->P[2][9] +
-            t->Phi[1][3]*f->P[3][9] + t->Phi[1][4]*f->P[4][9] + t->Phi[1][5]*f->P[5][9] +
-            t->Phi[1][7]*f->P[7][9] + t->Phi[1][8]*f->P[8][9] + t->Phi[1][9]*f->P[9][9] +
-            t->Phi[1][10]*f->P[10][9];
-    w->M[1][10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] +
-            t->Phi[1][3]*f->P[3][10] + t->Phi[1][4]*f->P[4][10] + t->Phi[1][5]*f->P[5][10] +
-            t->Phi[1][7]*f->P[7][10] + t->Phi[1][8]*f->P[8][10] + t->Phi[1][9]*f->P[9][10] +
-            t->Phi[1][10]*f->P[10][10];
-    w->M[1][11] = t->Phi[1][0]*f->P[0][11] + t->Phi[1][1]*f->P[1][11] + t->Phi[1][2]*f->P[2][11] +
-            t->Phi[1][3]*f->P[3][11] + t->Phi[1][4]*f->P[4][11] + t->Phi[1][5]*f->P[5][11] +
-            t->Phi[1][7]*f->P[7][11] + t->Phi[1][8]*f->P[8][11] + t->Phi[1][9]*f->P[9][11] +
-            t->Phi[1][10]*f->P[10][11];
-    w->M[1][12] = t->Phi[1][0]*f->P[0][12] + t->Phi[1][1]*f->P[1][12] + t->Phi[1][2]*f->P[2][12] +
-            t->Phi[1][3]*f->P[3][12] + t->Phi[1][4]*f->P[4][12] + t->Phi[1][5]*f->P[5][12] +
-            t->Phi[1][7]*f->P[7][12] + t->Phi[1][8]*f->P[8][12] + t->Phi[1][9]*f->P[9][12] +
-            t->Phi[1][10]*f->P[10][12];
-}
-
-static void phi_times_p_row_2(const ned_doppler13_reduced_filter *restrict f, const
-        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
-        w)
-{
-    w->M[2][0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] +
-            t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] +
-            t->Phi[2][7]*f->P[7][0] + t->Phi[2][8]*f->P[8][0] + t->Phi[2][9]*f->P[9][0] +
-            t->Phi[2][10]*f->P[10][0];
-    w->M[2][1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] +
-            t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] +
-            t->Phi[2][7]*f->P[7][1] + t->Phi[2][8]*f->P[8][1] + t->Phi[2][9]*f->P[9][1] +
-            t->Phi[2][10]*f->P[10][1];
-    w->M[2][2] = t->Phi[2][0]*f->P[0][2] + t->Phi[2][1]*f->P[1][2] + t->Phi[2][2]*f->P[2][2] +
-            t->Phi[2][3]*f->P[3][2] + t->Phi[2][4]*f->P[4][2] + t->Phi[2][5]*f->P[5][2] +
-            t->Phi[2][7]*f->P[7][2] + t->Phi[2][8]*f->P[8][2] + t->Phi[2][9]*f->P[9][2] +
-            t->Phi[2][10]*f->P[10][2];
-    w->M[2][3] = t->Phi[2][0]*f->P[0][3] + t->Phi[2][1]*f->P[1][3] + t->Phi[2][2]*f->P[2][3] +
-            t->Phi[2][3]*f->P[3][3] + t->Phi[2][4]*f->P[4][3] + t->Phi[2][5]*f->P[5][3] +
-            t->Phi[2][7]*f->P[7][3] + t->Phi[2][8]*f->P[8][3] + t->Phi[2][9]*f->P[9][3] +
-            t->Phi[2][10]*f->P[10][3];
-    w->M[2][4] = t->Phi[2][0]*f->P[0][4] + t->Phi[2][1]*f->P[1][4] + t->Phi[2][2]*f->P[2][4] +
-            t->Phi[2][3]*f->P[3][4] + t->Phi[2][4]*f->P[4][4] + t->Phi[2][5]*f->P[5][4] +
-            t->Phi[2][7]*f->P[7][4] + t->Phi[2][8]*f->P[8][4] + t->Phi[2][9]*f->P[9][4] +
-            t->Phi[2][10]*f->P[10][4];
-    w->M[2][5] = t->Phi[2][0]*f->P[0][5] + t->Phi[2][1]*f->P[1][5] + t->Phi[2][2]*f->P[2][5] +
-            t->Phi[2][3]*f->P[3][5] + t->Phi[2][4]*f->P[4][5] + t->Phi[2][5]*f->P[5][5] +
-            t->Phi[2][7]*f->P[7][5] + t->Phi[2][8]*f->P[8][5] + t->Phi[2][9]*f->P[9][5] +
-            t->Phi[2][10]*f->P[10][5];
-    w->M[2][6] = t->Phi[2][0]*f->P[0][6] + t->Phi[2][1]*f->P[1][6] + t->Phi[2][2]*f->P[2][6] +
-            t->Phi[2][3]*f->P[3][6] + t->Phi[2][4]*f->P[4][6] + t->Phi[2][5]*f->P[5][6] +
-            t->Phi[2][7]*f->P[7][6] + t->Phi[2][8]*f->P[8][6] + t->Phi[2][9]*f->P[9][6] +
-            t->Phi[2][10]*f->P[10][6];
-    w->M[2][7] = t->Phi[2][0]*f->P[0][7] + t->Phi[2][1]*f->P[1][7] + t->Phi[2][2]*f->P[2][7] +
-            t->Phi[2][3]*f->P[3][7] + t->Phi[2][4]*f->P[4][7] + t->Phi[2][5]*f->P[5][7] +
-            t->Phi[2][7]*f->P[7][7] + t->Phi[2][8]*f->P[8][7] + t->Phi[2][9]*f->P[9][7] +
-            t->Phi[2][10]*f->P[10][7];
-    w->M[2][8] = t->Phi[2][0]*f->P[0][8] + t->Phi[2][1]*f->P[1][8] + t->Phi[2][2]*f->P[2][8] +
-            t->Phi[2][3]*f->P[3][8] + t->Phi[2][4]*f->P[4][8] + t->Phi[2][5]*f->P[5][8] +
-            t->Phi[2][7]*f->P[7][8] + t->Phi[2][8]*f->P[8][8] + t->Phi[2][9]*f->P[9][8] +
-            t->Phi[2][10]*f->P[10][8];
-    w->M[2][9] = t->Phi[2][0]*f->P[0][9] + t->Phi[2][1]*f->P[1][9] + t->Phi[2][2]*f->P[2][9] +
-            t->Phi[2][3]*f->P[3][9] + t->Phi[2][4]*f->P[4][9] + t->Phi[2][5]*f->P[5][9] +
-            t->Phi[2][7]*f->P[7][9] + t->Phi[2][8]*f->P[8][9] + t->Phi[2][9]*f->P[9][9] +
-            t->Phi[2][10]*f->P[10][9];
-    w->M[2][10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] +
-            t->Phi[2][3]*f->P[3][10] + t->Phi[2][4]*f->P[4][10] + t->Phi[2][5]*f->P[5][10] +
-            t->Phi[2][7]*f->P[7][10] + t->Phi[2][8]*f->P[8][10] + t->Phi[2][9]*f->P[9][10] +
-            t->Phi[2][10]*f->P[10][10];
-    w->M[2][11] = t->Phi[2][0]*f->P[0][11] + t->Phi[2][1]*f->P[1][11] + t->Phi[2][2]*f->P[2][11] +
-            t->Phi[2][3]*f->P[3][11] + t->Phi[2][4]*f->P[4][11] + t->Phi[2][5]*f->P[5][11] +
-            t->Phi[2][7]*f->P[7][11] + t->Phi[2][8]*f->P[8][11] + t->Phi[2][9]*f->P[9][11] +
-            t->Phi[2][10]*f->P[10][11];
-    w->M[2][12] = t->Phi[2][0]*f->P[0][12] + t->Phi[2][1]*f->P[1][12] + t->Phi[2][2]*f->P[2][12] +
-            t->Phi[2][3]*f->P[3][12] + t->Phi[2][4]*f->P[4][12] + t->Phi[2][5]*f->P[5][12] +
-            t->Phi[2][7]*f->P[7][12] + t->Phi[2][8]*f->P[8][12] + t->Phi[2][9]*f->P[9][12] +
-            t->Phi[2][10]*f->P[10][12];
-}
-
-static void phi_times_p_row_3(const ned_doppler13_reduced_filter *restrict f, const
-        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
-        w)
-{
-    w->M[3][0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] +
-            t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] +
-            t->Phi[3][7]*f->P[7][0] + t->Phi[3][8]*f->P[8][0] + t->Phi[3][9]*f->P[9][0] +
-            t->Phi[3][10]*f->P[10][0];
-    w->M[3][1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] +
-            t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] +
-            t->Phi[3][7]*f->P[7][1] + t->Phi[3][8]*f->P[8][1] + t->Phi[3][9]*f->P[9][1] +
-            t->Phi[3][10]*f->P[10][1];
-    w->M[3][2] = t->Phi[3][0]*f->P[0][2] + t->Phi[3][1]*f->P[1][2] + t->Phi[3][2]*f->P[2][2] +
-            t->Phi[3][3]*f->P[3][2] + t->Phi[3][4]*f->P[4][2] + t->Phi[3][5]*f->P[5][2] +
-            t->Phi[3][7]*f->P[7][2] + t->Phi[3][8]*f->P[8][2] + t->Phi[3][9]*f->P[9][2] +
-            t->Phi[3][10]*f->P[10][2];
-    w->M[3][3] = t->Phi[3][0]*f->P[0][3] + t->Phi[3][1]*f->P[1][3] + t->Phi[3][2]*f->P[2][3] +
-            t->Phi[3][3]*f->P[3][3] + t->Phi[3][4]*f->P[4][3] + t->Phi[3][5]*f->P[5][3] +
-            t->Phi[3][7]*f->P[7][3] + t->Phi[3][8]*f->P[8][3] + t->Phi[3][9]*f->P[9][3] +
-            t->Phi[3][10]*f->P[10][3];
-    w->M[3][4] = t->Phi[3][0]*f->P[0][4] + t->Phi[3][1]*f->P[1][4] + t->Phi[3][2]*f->P[2][4] +
-            t->Phi[3][3]*f->P[3][4] + t->Phi[3][4]*f->P[4][4] + t->Phi[3][5]*f->P[5][4] +
-            t->Phi[3][7]*f->P[7][4] + t->Phi[3][8]*f->P[8][4] + t->Phi[3][9]*f->P[9][4] +
-            t->Phi[3][10]*f->P[10][4];
-    w->M[3][5] = t->Phi[3][0]*f->P[0][5] + t->Phi[3][1]*f->P[1][5] + t->Phi[3][2]*f->P[2][5] +
-            t->Phi[3][3]*f->P[3][5] + t->Phi[3][4]*f->P[4][5] + t->Phi[3][5]*f->P[5][5] +
-            t->Phi[3][7]*f->P[7][5] + t->Phi[3][8]*f->P[8][5] + t->Phi[3][9]*f->P[9][5] +
-            t->Phi[3][10]*f->P[10][5];
-    w->M[3][6] = t->Phi[3][0]*f->P[0][6] + t->Phi[3][1]*f->P[1][6] + t->Phi[3][2]*f->P[2][6] +
-            t->Phi[3][3]*f->P[3][6] + t->Phi[3][4]*f->P[4][6] + t->Phi[3][5]*f->P[5][6] +
-            t->Phi[3][7]*f->P[7][6] + t->Phi[3][8]*f->P[8][6] + t->Phi[3][9]*f->P[9][6] +
-            t->Phi[3][10]*f->P[10][6];
-    w->M[3][7] = t->Phi[3][0]*f->P[0][7] + t->Phi[3][1]*f->P[1][7] + t->Phi[3][2]*f->P[2][7] +
-            t->Phi[3][3]*f->P[3][7] + t->Phi[3][4]*f->P[4][7] + t->Phi[3][5]*f->P[5][7] +
-            t->Phi[3][7]*f->P[7][7] + t->Phi[3][8]*f->P[8][7] + t->Phi[3][9]*f->P[9][7] +
-            t->Phi[3][10]*f->P[10][7];
-    w->M[3][8] = t->Phi[3][0]*f->P[0][8] + t->Phi[3][1]*f->P[1][8] + t->Phi[3][2]*f->P[2][8] +
-            t->Phi[3][3]*f->P[3][8] + t->Phi[3][4]*f->P[4][8] + t->Phi[3][5]*f->P[5][8] +
-            t->Phi[3][7]*f->P[7][8] + t->Phi[3][8]*f->P[8][8] + t->Phi[3][9]*f->P[9][8] +
-            t->Phi[3][10]*f->P[10][8];
-    w->M[3][9] = t->Phi[3][0]*f->P[0][9] + t->Phi[3][1]*f->P[1][9] + t->Phi[3][2]*f->P[2][9] +
-            t->Phi[3][3]*f->P[3][9] + t->Phi[3][4]*f->P[4][9] + t->Phi[3][5]*f->P[5][9] +
-            t->Phi[3][7]*f->P[7][9] + t->Phi[3][8]*f->P[8][9] + t->Phi[3][9]*f->P[9][9] +
-            t->Phi[3][10]*f->P[10][9];
-    w->M[3][10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] +
-            t->Phi[3][3]*f->P[3][10] + t->Phi[3][4]*f->P[4][10] + t->Phi[3][5]*f->P[5][10] +
-            t->Phi[3][7]*f->P[7][10] + t->Phi[3][8]*f->P[8][10] + t->Phi[3][9]*f->P[9][10] +
-            t->Phi[3][10]*f->P[10][10];
-    w->M[3][11] = t->Phi[3][0]*f->P[0][11] + t->Phi[3][1]*f->P[1][11] + t->Phi[3][2]*f->P[2][11] +
-            t->Phi[3][3]*f->P[3][11] + t->Phi[3][4]*f->P[4][11] + t->Phi[3][5]*f->P[5][11] +
-            t->Phi[3][7]*f->P[7][11] + t->Phi[3][8]*f->P[8][11] + t->Phi[3][9]*f->P[9][11] +
-            t->Phi[3][10]*f->P[10][11];
-    w->M[3][12] = t->Phi[3][0]*f->P[0][12] + t->Phi[3][1]*f->P[1][12] + t->Phi[3][2]*f->P[2][12] +
-            t->Phi[3][3]*f->P[3][12] + t->Phi[3][4]*f->P[4][12] + t->Phi[3][5]*f->P[5][12] +
-            t->Phi[3][7]*f->P[7][12] + t->Phi[3][8]*f->P[8][12] + t->Phi[3][9]*f->P[9][12] +
-            t->Phi[3][10]*f->P[10][12];
-}
-
-static void phi_times_p_row_4(const ned_doppler13_reduced_filter *restrict f, const
-        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
-        w)
-{
-    w->M[4][0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] +
-            t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] +
-            t->Phi[4][7]*f->P[7][0] + t->Phi[4][8]*f->P[8][0] + t->Phi[4][9]*f->P[9][0] +
-            t->Phi[4][10]*f->P[10][0];
-    w->M[4][1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] +
-            t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] +
-            t->Phi[4][7]*f->P[7][1] + t->Phi[4][8]*f->P[8][1] + t->Phi[4][9]*f->P[9][1] +
-            t->Phi[4][10]*f->P[10][1];
-    w->M[4][2] = t->Phi[4][0]*f->P[0][2] + t->Phi[4][1]*f->P[1][2] + t->Phi[4][2]*f->P[2][2] +
-            t->Phi[4][3]*f->P[3][2] + t->Phi[4][4]*f->P[4][2] + t->Phi[4][5]*f->P[5][2] +
-            t->Phi[4][7]*f->P[7][2] + t->Phi[4][8]*f->P[8][2] + t->Phi[4][9]*f->P[9][2] +
-            t->Phi[4][10]*f->P[10][2];
-    w->M[4][3] = t->Phi[4][0]*f->P[0][3] + t->Phi[4][1]*f->P[1][3] + t->Phi[4][2]*f->P[2][3] +
-            t->Phi[4][3]*f->P[3][3] + t->Phi[4][4]*f->P[4][3] + t->Phi[4][5]*f->P[5][3] +
-            t->Phi[4][7]*f->P[7][3] + t->Phi[4][8]*f->P[8][3] + t->Phi[4][9]*f->P[9][3] +
-            t->Phi[4][10]*f->P[10][3];
-    w->M[4][4] = t->Phi[4][0]*f->P[0][4] + t->Phi[4][1]*f->P[1][4] + t->Phi[4][2]*f->P[2][4] +
-            t->Phi[4][3]*f->P[3][4] + t->Phi[4][4]*f->P[4][4] + t->Phi[4][5]*f->P[5][4] +
-            t->Phi[4][7]*f->P[7][4] + t->Phi[4][8]*f->P[8][4] + t->Phi[4][9]*f->P[9][4] +
-            t->Phi[4][10]*f->P[10][4];
-    w->M[4][5] = t->Phi[4][0]*f->P[0][5] + t->Phi[4][1]*f->P[1][5] + t->Phi[4][2]*f->P[2][5] +
-            t->Phi[4][3]*f->P[3][5] + t->Phi[4][4]*f->P[4][5] + t->Phi[4][5]*f->P[5][5] +
-            t->Phi[4][7]*f->P[7][5] + t->Phi[4][8]*f->P[8][5] + t->Phi[4][9]*f->P[9][5] +
-            t->Phi[4][10]*f->P[10][5];
-    w->M[4][6] = t->Phi[4][0]*f->P[0][6] + t->Phi[4][1]*f->P[1][6] + t->Phi[4][2]*f->P[2][6] +
-            t->Phi[4][3]*f->P[3][6] + t->Phi[4][4]*f->P[4][6] + t->Phi[4][5]*f->P[5][6] +
-            t->Phi[4][7]*f->P[7][6] + t->Phi[4][8]*f->P[8][6] + t->Phi[4][9]*f->P[9][6] +
-            t->Phi[4][10]*f->P[10][6];
-    w->M[4][7] = t->Phi[4][0]*f->P[0][7] + t->Phi[4][1]*f->P[1][7] + t->Phi[4][2]*f->P[2][7] +
-            t->Phi[4][3]*f->P[3][7] + t->Phi[4][4]*f->P[4][7] + t->Phi[4][5]*f->P[5][7] +
-            t->Phi[4][7]*f->P[7][7] + t->Phi[4][8]*f->P[8][7] + t->Phi[4][9]*f->P[9][7] +
-            t->Phi[4][10]*f->P[10][7];
-    w->M[4][8] = t->Phi[4][0]*f->P[0][8] + t->Phi[4][1]*f->P[1][8] + t->Phi[4][2]*f->P[2][8] +
-            t->Phi[4][3]*f->P[3][8] + t->Phi[4][4]*f->P[4][8] + t->Phi[4][5]*f->P[5][8] +
-            t->Phi[4][7]*f->P[7][8] + t->Phi[4][8]*f->P[8][8] + t->Phi[4][9]*f->P[9][8] +
-            t->Phi[4][10]*f->P[10][8];
-    w->M[4][9] = t->Phi[4][0]*f->P[0][9] + t->Phi[4][1]*f->P[1][9] + t->Phi[4][2]*f->P[2][9] +
-            t->Phi[4][3]*f->P[3][9] + t->Phi[4][4]*f->P[4][9] + t->Phi[4][5]*f->P[5][9] +
-            t->Phi[4][7]*f->P[7][9] + t->Phi[4][8]*f->P[8][9] + t->Phi[4][9]*f->P[9][9] +
-            t->Phi[4][10]*f->P[10][9];
-    w->M[4][10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] +
-            t->Phi[4][3]*f->P[3][10] + t->Phi[4][4]*f->P[4][10] + t->Phi[4][5]*f->P[5][10] +
-            t->Phi[4][7]*f->P[7][10] + t->Phi[4][8]*f->P[8][10] + t->Phi[4][9]*f->P[9][10] +
-            t->Phi[4][10]*f->P[10][10];
-    w->M[4][11] = t->Phi[4][0]*f->P[0][11] + t->Phi[4][1]*f->P[1][11] + t->Phi[4][2]*f->P[2][11] +
-            t->Phi[4][3]*f->P[3][11] + t->Phi[4][4]*f->P[4][11] + t->Phi[4][5]*f->P[5][11] +
-            t->Phi[4][7]*f->P[7][11] + t->Phi[4][8]*f->P[8][11] + t->Phi[4][9]*f->P[9][11] +
-            t->Phi[4][10]*f->P[10][11];
-    w->M[4][12] = t->Phi[4][0]*f->P[0][12] + t->Phi[4][1]*f->P[1][12] + t->Phi[4][2]*f->P[2][12] +
-            t->Phi[4][3]*f->P[3][12] + t->Phi[4][4]*f->P[4][12] + t->Phi[4][5]*f->P[5][12] +
-            t->Phi[4][7]*f->P[7][12] + t->Phi[4][8]*f->P[8][12] + t->Phi[4][9]*f->P[9][12] +
-            t->Phi[4][10]*f->P[10][12];
-}
-
-static void phi_times_p_row_5(const ned_doppler13_reduced_filter *restrict f, const
-        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
-        w)
-{
-    w->M[5][0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] +
-            t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] +
-            t->Phi[5][7]*f->P[7][0] + t->Phi[5][8]*f->P[8][0] + t->Phi[5][9]*f->P[9][0] +
-            t->Phi[5][10]*f->P[10][0];
-    w->M[5][1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] +
-            t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] +
-            t->Phi[5][7]*f->P[7][1] + t->Phi[5][8]*f->P[8][1] + t->Phi[5][9]*f->P[9][1] +
-            t->Phi[5][10]*f->P[10][1];
-    w->M[5][2] = t->Phi[5][0]*f->P[0][2] + t->Phi[5][1]*f->P[1][2] + t->Phi[5][2]*f->P[2][2] +
-            t->Phi[5][3]*f->P[3][2] + t->Phi[5][4]*f->P[4][2] + t->Phi[5][5]*f->P[5][2] +
-            t->Phi[5][7]*f->P[7][2] + t->Phi[5][8]*f->P[8][2] + t->Phi[5][9]*f->P[9][2] +
-            t->Phi[5][10]*f->P[10][2];
-    w->M[5][3] = t->Phi[5][0]*f->P[0][3] + t->Phi[5][1]*f->P[1][3] + t->Phi[5][2]*f->P[2][3] +
-            t->Phi[5][3]*f->P[3][3] + t->Phi[5][4]*f->P[4][3] + t->Phi[5][5]*f->P[5][3] +
-            t->Phi[5][7]*f->P[7][3] + t->Phi[5][8]*f->P[8][3] + t->Phi[5][9]*f->P[9][3] +
-            t->Phi[5][10]*f->P[10][3];
-    w->M[5][4] = t->Phi[5][0]*f->P[0][4] + t->Phi[5][1]*f->P[1][4] + t->Phi[5][2]*f->P[2][4] +
-            t->Phi[5][3]*f->P[3][4] + t->Phi[5][4]*f->P[4][4] + t->Phi[5][5]*f->P[5][4] +
-            t->Phi[5][7]*f->P[7][4] + t->Phi[5][8]*f->P[8][4] + t->Phi[5][9]*f->P[9][4] +
-            t->Phi[5][10]*f->P[10][4];
-    w->M[5][5] = t->Phi[5][0]*f->P[0][5] + t->Phi[5][1]*f->P[1][5] + t->Phi[5][2]*f->P[2][5] +
-            t->Phi[5][3]*f->P[3][5] + t->Phi[5][4]*f->P[4][5] + t->Phi[5][5]*f->P[5][5] +
-            t->Phi[5][7]*f->P[7][5] + t->Phi[5][8]*f->P[8][5] + t->Phi[5][9]*f->P[9][5] +
-            t->Phi[5][10]*f->P[10][5];
-    w->M[5][6] = t->Phi[5][0]*f->P[0][6] + t->Phi[5][1]*f->P[1][6] + t->Phi[5][2]*f->P[2][6] +
-            t->Phi[5][3]*f->P[3][6] + t->Phi[5][4]*f->P[4][6] + t->Phi[5][5]*f->P[5][6] +
-            t->Phi[5][7]*f->P[7][6] + t->Phi[5][8]*f->P[8][6] + t->Phi[5][9]*f->P[9][6] +
-            t->Phi[5][10]*f->P[10][6];
-    w->M[5][7] = t->Phi[5][0]*f->P[0][7] + t->Phi[5][1]*f->P[1][7] + t->Phi[5][2]*f->P[2][7] +
-            t->Phi[5][3]*f->P[3][7] + t->Phi[5][4]*f->P[4][7] + t->Phi[5][5]*f->P[5][7] +
-            t->Phi[5][7]*f->P[7][7] + t->Phi[5][8]*f->P[8][7] + t->Phi[5][9]*f->P[9][7] +
-            t->Phi[5][10]*f->P[10][7];
-    w->M[5][8] = t->Phi[5][0]*f->P[0][8] + t->Phi[5][1]*f->P[1][8] + t->Phi[5][2]*f->P[2][8] +
-            t->Phi[5][3]*f->P[3][8] + t->Phi[5][4]*f->P[4][8] + t->Phi[5][5]*f->P[5][8] +
-            t->Phi[5][7]*f->P[7][8] + t->Phi[5][8]*f->P[8][8] + t->Phi[5][9]*f->P[9][8] +
-            t->Phi[5][10]*f->P[10][8];
-    w->M[5][9] = t->Phi[5][0]*f->P[0][9] + t->Phi[5][1]*f->P[1][9] + t->Phi[5][2]*f->P[2][9] +
-            t->Phi[5][3]*f->P[3][9] + t->Phi[5][4]*f->P[4][9] + t->Phi[5][5]*f->P[5][9] +
-            t->Phi[5][7]*f->P[7][9] + t->Phi[5][8]*f->P[8][9] + t->Phi[5][9]*f->P[9][9] +
-            t->Phi[5][10]*f->P[10][9];
-    w->M[5][10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] +
-            t->Phi[5][3]*f->P[3][10] + t->Phi[5][4]*f->P[4][10] + t->Phi[5][5]*f->P[5][10] +
-            t->Phi[5][7]*f->P[7][10] + t->Phi[5][8]*f->P[8][10] + t->Phi[5][9]*f->P[9][10] +
-            t->Phi[5][10]*f->P[10][10];
-    w->M[5][11] = t->Phi[5][0]*f->P[0][11] + t->Phi[5][1]*f->P[1][11] + t->Phi[5][2]*f->P[2][11] +
-            t->Phi[5][3]*f->P[3][11] + t->Phi[5][4]*f->P[4][11] + t->Phi[5][5]*f->P[5][11] +
-            t->Phi[5][7]*f->P[7][11] + t->Phi[5][8]*f->P[8][11] + t->Phi[5][9]*f->P[9][11] +
-            t->Phi[5][10]*f->P[10][11];
-    w->M[5][12] = t->Phi[5][0]*f->P[0][12] + t->Phi[5][1]*f->P[1][12] + t->Phi[5][2]*f->P[2][12] +
-            t->Phi[5][3]*f->P[3][12] + t->Phi[5][4]*f->P[4][12] + t->Phi[5][5]*f->P[5][12] +
-            t->Phi[5][7]*f->P[7][12] + t->Phi[5][8]*f->P[8][12] + t->Phi[5][9]*f->P[9][12] +
-            t->Phi[5][10]*f->P[10][12];
-}
-
-static void phi_times_p_row_6(const ned_doppler13_reduced_filter *restrict f, const
-        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
-        w)
-{
-    w->M[6][0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] +
-            t->Phi[6][3]*f->P[3][0] + t->Phi[6][4]*f->P[4][0] + t->Phi[6][5]*f->P[5][0] +
-            t->Phi[6][6]*f->P[6][0] + t->Phi[6][7]*f->P[7][0] + t->Phi[6][8]*f->P[8][0] +
-            t->Phi[6][9]*f->P[9][0] + t->Phi[6][10]*f->P[10][0];
-    w->M[6][1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] +
-            t->Phi[6][3]*f->P[3][1] + t->Phi[6][4]*f->P[4][1] + t->Phi[6][5]*f->P[5][1] +
-            t->Phi[6][6]*f->P[6][1] + t->Phi[6][7]*f->P[7][1] + t->Phi[6][8]*f->P[8][1] +
-            t->Phi[6][9]*f->P[9][1] + t->Phi[6][10]*f->P[10][1];
-    w->M[6][2] = t->Phi[6][0]*f->P[0][2] + t->Phi[6][1]*f->P[1][2] + t->Phi[6][2]*f->P[2][2] +
-            t->Phi[6][3]*f->P[3][2] + t->Phi[6][4]*f->P[4][2] + t->Phi[6][5]*f->P[5][2] +
-            t->Phi[6][6]*f->P[6][2] + t->Phi[6][7]*f->P[7][2] + t->Phi[6][8]*f->P[8][2] +
-            t->Phi[6][9]*f->P[9][2] + t->Phi[6][10]*f->P[10][2];
-    w->M[6][3] = t->Phi[6][0]*f->P[0][3] + t->Phi[6][1]*f->P[1][3] + t->Phi[6][2]*f->P[2][3] +
-            t->Phi[6][3]*f->P[3][3] + t->Phi[6][4]*f->P[4][3] + t->Phi[6][5]*f->P[5][3] +
-            t->Phi[6][6]*f->P[6][3] + t->Phi[6][7]*f->P[7][3] + t->Phi[6][8]*f->P[8][3] +
-            t->Phi[6][9]*f->P[9][3] + t->Phi[6][10]*f->P[10][3];
-    w->M[6][4] = t->Phi[6][0]*f->P[0][4] + t->Phi[6][1]*f->P[1][4] + t->Phi[6][2]*f->P[2][4] +
-            t->Phi[6][3]*f->P[3][4] + t->Phi[6][4]*f->P[4][4] + t->Phi[6][5]*f->P[5][4] +
-            t->Phi[6][6]*f->P[6][4] + t->Phi[6][7]*f->P[7][4] + t->Phi[6][8]*f->P[8][4] +
-            t->Phi[6][9]*f->P[9][4] + t->Phi[6][10]*f->P[10][4];
-    w->M[6][5] = t->Phi[6][0]*f->P[0][5] + t->Phi[6][1]*f->P[1][5] + t->Phi[6][2]*f->P[2][5] +
-            t->Phi[6][3]*f->P[3][5] + t->Phi[6][4]*f->P[4][5] + t->Phi[6][5]*f->P[5][5] +
-            t->Phi[6][6]*f->P[6][5] + t->Phi[6][7]*f->P[7][5] + t->Phi[6][8]*f->P[8][5] +
-            t->Phi[6][9]*f->P[9][5] + t->Phi[6][10]*f->P[10][5];
-    w->M[6][6] = t->Phi[6][0]*f->P[0][6] + t->Phi[6][1]*f->P[1][6] + t->Phi[6][2]*f->P[2][6] +
-            t->Phi[6][3]*f->P[3][6] + t->Phi[6][4]*f->P[4][6] + t->Phi[6][5]*f->P[5][6] +
-            t->Phi[6][6]*f->P[6][6] + t->Phi[6][7]*f->P[7][6] + t->Phi[6][8]*f->P[8][6] +
-            t->Phi[6][9]*f->P[9][6] + t->Phi[6][10]*f->P[10][6];
-    w->M[6][7] = t->Phi[6][0]*f->P[0][7] + t->Phi[6][1]*f->P[1][7] + t->Phi[6][2]*f->P[2][7] +
-            t->Phi[6][3]*f->P[3][7] + t->Phi[6][4]*f->P[4][7] + t->Phi[6][5]*f->P[5][7] +
-            t->Phi[6][6]*f->P[6][7] + t->Phi[6][7]*f->P[7][7] + t->Phi[6][8]*f->P[8][7] +
-            t->Phi[6][9]*f->P[9][7] + t->Phi[6][10]*f->P[10][7];
-    w->M[6][8] = t->Phi[6][0]*f->P[0][8] + t->Phi[6][1]*f->P[1][8] + t->Phi[6][2]*f->P[2][8] +
-            t->Phi[6][3]*f->P[3][8] + t->Phi[6][4]*f->P[4][8] + t->Phi[6][5]*f->P[5][8] +
-            t->Phi[6][6]*f->P[6][8] + t->Phi[6][7]*f->P[7][8] + t->Phi[6][8]*f->P[8][8] +
-            t->Phi[6][9]*f->P[9][8] + t->Phi[6][10]*f->P[10][8];
-    w->M[6][9] = t->Phi[6][0]*f->P[0][9] + t->Phi[6][1]*f->P[1][9] + t->Phi[6][2]*f->P[2][9] +
-            t->Phi[6][3]*f->P[3][9] + t->Phi[6][4]*f->P[4][9] + t->Phi[6][5]*f->P[5][9] +
-            t->Phi[6][6]*f->P[6][9] + t->Phi[6][7]*f->P[7][9] + t->Phi[6][8]*f->P[8][9] +
-            t->Phi[6][9]*f->P[9][9] + t->Phi[6][10]*f->P[10][9];
-    w->M[6][10] = t->Phi[6][0]*f->P[0][10] + t->Phi[6][1]*f->P[1][10] + t->Phi[6][2]*f->P[2][10] +
-            t->Phi[6][3]*f->P[3][10] + t->Phi[6][4]*f->P[4][10] + t->Phi[6][5]*f->P[5][10] +
-            t->Phi[6][6]*f->P[6][10] + t->Phi[6][7]*f->P[7][10] + t->Phi[6][8]*f->P[8][10] +
-            t->Phi[6][9]*f->P[9][10] + t->Phi[6][10]*f->P[10][10];
-    w->M[6][11] = t->Phi[6][0]*f->P[0][11] + t->Phi[6][1]*f->P[1][11] + t->Phi[6][2]*f->P[2][11] +
-            t->Phi[6][3]*f->P[3][11] + t->Phi[6][4]*f->P[4][11] + t->Phi[6][5]*f->P[5][11] +
-            t->Phi[6][6]*f->P[6][11] + t->Phi[6][7]*f->P[7][11] + t->Phi[6][8]*f->P[8][11] +
-            t->Phi[6][9]*f->P[9][11] + t->Phi[6][10]*f->P[10][11];
-    w->M[6][12] = t->Phi[6][0]*f->P[0][12] + t->Phi[6][1]*f->P[1][12] + t->Phi[6][2]*f->P[2][12] +
-            t->Phi[6][3]*f->P[3][12] + t->Phi[6][4]*f->P[4][12] + t->Phi[6][5]*f->P[5][12] +
-            t->Phi[6][6]*f->P[6][12] + t->Phi[6][7]*f->P[7][12] + t->Phi[6][8]*f->P[8][12] +
-            t->Phi[6][9]*f->P[9][12] + t->Phi[6][10]*f->P[10][12];
-}
-
-static void phi_times_p_row_9(const ned_doppler13_reduced_filter *restrict f, const
-        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
-        w)
-{
-    w->M[9][0] = t->Phi[9][9]*f->P[9][0];
-    w->M[9][1] = t->Phi[9][9]*f->P[9][1];
-    w->M[9][2] = t->Phi[9][9]*f->P[9][2];
-    w->M[9][3] = t->Phi[9][9]*f->P[9][3];
-    w->M[9][4] = t->Phi[9][9]*f->P[9][4];
-    w->M[9][5] = t->Phi[9][9]*f->P[9][5];
-    w->M[9][6] = t->Phi[9][9]*f->P[9][6];
-    w->M[9][7] = t->Phi[9][9]*f->P[9][7];
-    w->M[9][8] = t->Phi[9][9]*f->P[9][8];
-    w->M[9][9] = t->Phi[9][9]*f->P[9][9];
-    w->M[9][10] = t->Phi[9][9]*f->P[9][10];
-    w->M[9][11] = t->Phi[9][9]*f->P[9][11];
-    w->M[9][12] = t->Phi[9][9]*f->P[9][12];
-}
-
-static void phi_times_p_row_10(const ned_doppler13_reduced_filter *restrict f, const
-        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
-        w)
-{
-    w->M[10][0] = t->Phi[10][10]*f->P[10][0];
-    w->M[10][1] = t->Phi[10][10]*f->P[10][1];
-    w->M[10][2] = t->Phi[10][10]*f->P[10][2];
-    w->M[10][3] = t->Phi[10][10]*f->P[10][3];
-    w->M[10][4] = t->Phi[10][10]*f->P[10][4];
-    w->M[10][5] = t->Phi[10][10]*f->P[10][5];
-    w->M[10][6] = t->Phi[10][10]*f->P[10][6];
-    w->M[10][7] = t->Phi[10][10]*f->P[10][7];
-    w->M[10][8] = t->Phi[10][10]*f->P[10][8];
-    w->M[10][9] = t->Phi[10][10]*f->P[10][9];
-    w->M[10][10] = t->Phi[10][10]*f->P[10][10];
-    w->M[10][11] = t->Phi[10][10]*f->P[10][11];
-    w->M[10][12] = t->Phi[10][10]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2317,48 +1946,99 @@ static ned_doppler13_reduced_scalar propagate_row_0(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[0][0]*t->Phi[0][0] + w->M[0][1]*t->Phi[0][1] + w->M[0][2]*t->Phi[0][2] +
-            w->M[0][3]*t->Phi[0][3] + w->M[0][4]*t->Phi[0][4] + w->M[0][5]*t->Phi[0][5] +
-            w->M[0][7]*t->Phi[0][7] + w->M[0][8]*t->Phi[0][8] + w->M[0][9]*t->Phi[0][9] +
-            w->M[0][10]*t->Phi[0][10] + t->Qd[0][0]; w->Pn[0][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[1][0] + w->M[0][1]*t->Phi[1][1] + w->M[0][2]*t->Phi[1][2] +
-            w->M[0][3]*t->Phi[1][3] + w->M[0][4]*t->Phi[1][4] + w->M[0][5]*t->Phi[1][5] +
-            w->M[0][7]*t->Phi[1][7] + w->M[0][8]*t->Phi[1][8] + w->M[0][9]*t->Phi[1][9] +
-            w->M[0][10]*t->Phi[1][10] + t->Qd[0][1]; w->Pn[0][1] = v; w->Pn[1][0] = v; check += v -
-            v;
-    v = w->M[0][0]*t->Phi[2][0] + w->M[0][1]*t->Phi[2][1] + w->M[0][2]*t->Phi[2][2] +
-            w->M[0][3]*t->Phi[2][3] + w->M[0][4]*t->Phi[2][4] + w->M[0][5]*t->Phi[2][5] +
-            w->M[0][7]*t->Phi[2][7] + w->M[0][8]*t->Phi[2][8] + w->M[0][9]*t->Phi[2][9] +
-            w->M[0][10]*t->Phi[2][10] + t->Qd[0][2]; w->Pn[0][2] = v; w->Pn[2][0] = v; check += v -
-            v;
-    v = w->M[0][0]*t->Phi[3][0] + w->M[0][1]*t->Phi[3][1] + w->M[0][2]*t->Phi[3][2] +
-            w->M[0][3]*t->Phi[3][3] + w->M[0][4]*t->Phi[3][4] + w->M[0][5]*t->Phi[3][5] +
-            w->M[0][7]*t->Phi[3][7] + w->M[0][8]*t->Phi[3][8] + w->M[0][9]*t->Phi[3][9] +
-            w->M[0][10]*t->Phi[3][10] + t->Qd[0][3]; w->Pn[0][3] = v; w->Pn[3][0] = v; check += v -
-            v;
-    v = w->M[0][0]*t->Phi[4][0] + w->M[0][1]*t->Phi[4][1] + w->M[0][2]*t->Phi[4][2] +
-            w->M[0][3]*t->Phi[4][3] + w->M[0][4]*t->Phi[4][4] + w->M[0][5]*t->Phi[4][5] +
-            w->M[0][7]*t->Phi[4][7] + w->M[0][8]*t->Phi[4][8] + w->M[0][9]*t->Phi[4][9] +
-            w->M[0][10]*t->Phi[4][10] + t->Qd[0][4]; w->Pn[0][4] = v; w->Pn[4][0] = v; check += v -
-            v;
-    v = w->M[0][0]*t->Phi[5][0] + w->M[0][1]*t->Phi[5][1] + w->M[0][2]*t->Phi[5][2] +
-            w->M[0][3]*t->Phi[5][3] + w->M[0][4]*t->Phi[5][4] + w->M[0][5]*t->Phi[5][5] +
-            w->M[0][7]*t->Phi[5][7] + w->M[0][8]*t->Phi[5][8] + w->M[0][9]*t->Phi[5][9] +
-            w->M[0][10]*t->Phi[5][10] + t->Qd[0][5]; w->Pn[0][5] = v; w->Pn[5][0] = v; check += v -
-            v;
-    v = w->M[0][0]*t->Phi[6][0] + w->M[0][1]*t->Phi[6][1] + w->M[0][2]*t->Phi[6][2] +
-            w->M[0][3]*t->Phi[6][3] + w->M[0][4]*t->Phi[6][4] + w->M[0][5]*t->Phi[6][5] +
-            w->M[0][6]*t->Phi[6][6] + w->M[0][7]*t->Phi[6][7] + w->M[0][8]*t->Phi[6][8] +
-            w->M[0][9]*t->Phi[6][9] + w->M[0][10]*t->Phi[6][10] + t->Qd[0][6]; w->Pn[0][6] = v;
-            w->Pn[6][0] = v; check += v - v;
-    v = w->M[0][7]; w->Pn[0][7] = v; w->Pn[7][0] = v; check += v - v;
-    v = w->M[0][8]; w->Pn[0][8] = v; w->Pn[8][0] = v; check += v - v;
-    v = w->M[0][9]*t->Phi[9][9] + t->Qd[0][9]; w->Pn[0][9] = v; w->Pn[9][0] = v; check += v - v;
-    v = w->M[0][10]*t->Phi[10][10] + t->Qd[0][10]; w->Pn[0][10] = v; w->Pn[10][0] = v; check += v -
-            v;
-    v = w->M[0][11]; w->Pn[0][11] = v; w->Pn[11][0] = v; check += v - v;
-    v = w->M[0][12]; w->Pn[0][12] = v; w->Pn[12][0] = v; check += v - v;
+    v = w->M[0]*t->Phi[0][0] + w->M[1]*t->Phi[0][1] + w->M[2]*t->Phi[0][2] + w->M[3]*t->Phi[0][3] +
+            w->M[4]*t->Phi[0][4] + w->M[5]*t->Phi[0][5] + w->M[7]*t->Phi[0][7] +
+            w->M[8]*t->Phi[0][8] + w->M[9]*t->Phi[0][9] + w->M[10]*t->Phi[0][10] + t->Qd[0];
+            w->Pn[0] = v; check += v - v;
+    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
+            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[7]*t->Phi[1][7] +
+            w->M[8]*t->Phi[1][8] + w->M[9]*t->Phi[1][9] + w->M[10]*t->Phi[1][10] + t->Qd[1];
+            w->Pn[1] = v; check += v - v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[7]*t->Phi[2][7] +
+            w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] + w->M[10]*t->Phi[2][10] + t->Qd[2];
+            w->Pn[2] = v; check += v - v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[7]*t->Phi[3][7] +
+            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] + t->Qd[3];
+            w->Pn[3] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] + t->Qd[4];
+            w->Pn[4] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] + t->Qd[5];
+            w->Pn[5] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + t->Qd[6]; w->Pn[6] = v; check += v - v;
+    v = w->M[7]; w->Pn[7] = v; check += v - v;
+    v = w->M[8]; w->Pn[8] = v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[9]; w->Pn[9] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[10]; w->Pn[10] = v; check += v - v;
+    v = w->M[11]; w->Pn[11] = v; check += v - v;
+    v = w->M[12]; w->Pn[12] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_1(const ned_doppler13_reduced_filter *restrict f, const
+        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
+        w)
+{
+    w->M[0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] +
+            t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] +
+            t->Phi[1][7]*f->P[7][0] + t->Phi[1][8]*f->P[8][0] + t->Phi[1][9]*f->P[9][0] +
+            t->Phi[1][10]*f->P[10][0];
+    w->M[1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] +
+            t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] +
+            t->Phi[1][7]*f->P[7][1] + t->Phi[1][8]*f->P[8][1] + t->Phi[1][9]*f->P[9][1] +
+            t->Phi[1][10]*f->P[10][1];
+    w->M[2] = t->Phi[1][0]*f->P[0][2] + t->Phi[1][1]*f->P[1][2] + t->Phi[1][2]*f->P[2][2] +
+            t->Phi[1][3]*f->P[3][2] + t->Phi[1][4]*f->P[4][2] + t->Phi[1][5]*f->P[5][2] +
+            t->Phi[1][7]*f->P[7][2] + t->Phi[1][8]*f->P[8][2] + t->Phi[1][9]*f->P[9][2] +
+            t->Phi[1][10]*f->P[10][2];
+    w->M[3] = t->Phi[1][0]*f->P[0][3] + t->Phi[1][1]*f->P[1][3] + t->Phi[1][2]*f->P[2][3] +
+            t->Phi[1][3]*f->P[3][3] + t->Phi[1][4]*f->P[4][3] + t->Phi[1][5]*f->P[5][3] +
+            t->Phi[1][7]*f->P[7][3] + t->Phi[1][8]*f->P[8][3] + t->Phi[1][9]*f->P[9][3] +
+            t->Phi[1][10]*f->P[10][3];
+    w->M[4] = t->Phi[1][0]*f->P[0][4] + t->Phi[1][1]*f->P[1][4] + t->Phi[1][2]*f->P[2][4] +
+            t->Phi[1][3]*f->P[3][4] + t->Phi[1][4]*f->P[4][4] + t->Phi[1][5]*f->P[5][4] +
+            t->Phi[1][7]*f->P[7][4] + t->Phi[1][8]*f->P[8][4] + t->Phi[1][9]*f->P[9][4] +
+            t->Phi[1][10]*f->P[10][4];
+    w->M[5] = t->Phi[1][0]*f->P[0][5] + t->Phi[1][1]*f->P[1][5] + t->Phi[1][2]*f->P[2][5] +
+            t->Phi[1][3]*f->P[3][5] + t->Phi[1][4]*f->P[4][5] + t->Phi[1][5]*f->P[5][5] +
+            t->Phi[1][7]*f->P[7][5] + t->Phi[1][8]*f->P[8][5] + t->Phi[1][9]*f->P[9][5] +
+            t->Phi[1][10]*f->P[10][5];
+    w->M[6] = t->Phi[1][0]*f->P[0][6] + t->Phi[1][1]*f->P[1][6] + t->Phi[1][2]*f->P[2][6] +
+            t->Phi[1][3]*f->P[3][6] + t->Phi[1][4]*f->P[4][6] + t->Phi[1][5]*f->P[5][6] +
+            t->Phi[1][7]*f->P[7][6] + t->Phi[1][8]*f->P[8][6] + t->Phi[1][9]*f->P[9][6] +
+            t->Phi[1][10]*f->P[10][6];
+    w->M[7] = t->Phi[1][0]*f->P[0][7] + t->Phi[1][1]*f->P[1][7] + t->Phi[1][2]*f->P[2][7] +
+            t->Phi[1][3]*f->P[3][7] + t->Phi[1][4]*f->P[4][7] + t->Phi[1][5]*f->P[5][7] +
+            t->Phi[1][7]*f->P[7][7] + t->Phi[1][8]*f->P[8][7] + t->Phi[1][9]*f->P[9][7] +
+            t->Phi[1][10]*f->P[10][7];
+    w->M[8] = t->Phi[1][0]*f->P[0][8] + t->Phi[1][1]*f->P[1][8] + t->Phi[1][2]*f->P[2][8] +
+            t->Phi[1][3]*f->P[3][8] + t->Phi[1][4]*f->P[4][8] + t->Phi[1][5]*f->P[5][8] +
+            t->Phi[1][7]*f->P[7][8] + t->Phi[1][8]*f->P[8][8] + t->Phi[1][9]*f->P[9][8] +
+            t->Phi[1][10]*f->P[10][8];
+    w->M[9] = t->Phi[1][0]*f->P[0][9] + t->Phi[1][1]*f->P[1][9] + t->Phi[1][2]*f->P[2][9] +
+            t->Phi[1][3]*f->P[3][9] + t->Phi[1][4]*f->P[4][9] + t->Phi[1][5]*f->P[5][9] +
+            t->Phi[1][7]*f->P[7][9] + t->Phi[1][8]*f->P[8][9] + t->Phi[1][9]*f->P[9][9] +
+            t->Phi[1][10]*f->P[10][9];
+    w->M[10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] +
+            t->Phi[1][3]*f->P[3][10] + t->Phi[1][4]*f->P[4][10] + t->Phi[1][5]*f->P[5][10] +
+            t->Phi[1][7]*f->P[7][10] + t->Phi[1][8]*f->P[8][10] + t->Phi[1][9]*f->P[9][10] +
+            t->Phi[1][10]*f->P[10][10];
+    w->M[11] = t->Phi[1][0]*f->P[0][11] + t->Phi[1][1]*f->P[1][11] + t->Phi[1][2]*f->P[2][11] +
+            t->Phi[1][3]*f->P[3][11] + t->Phi[1][4]*f->P[4][11] + t->Phi[1][5]*f->P[5][11] +
+            t->Phi[1][7]*f->P[7][11] + t->Phi[1][8]*f->P[8][11] + t->Phi[1][9]*f->P[9][11] +
+            t->Phi[1][10]*f->P[10][11];
+    w->M[12] = t->Phi[1][0]*f->P[0][12] + t->Phi[1][1]*f->P[1][12] + t->Phi[1][2]*f->P[2][12] +
+            t->Phi[1][3]*f->P[3][12] + t->Phi[1][4]*f->P[4][12] + t->Phi[1][5]*f->P[5][12] +
+            t->Phi[1][7]*f->P[7][12] + t->Phi[1][8]*f->P[8][12] + t->Phi[1][9]*f->P[9][12] +
+            t->Phi[1][10]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2366,43 +2046,95 @@ static ned_doppler13_reduced_scalar propagate_row_1(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[1][0]*t->Phi[1][0] + w->M[1][1]*t->Phi[1][1] + w->M[1][2]*t->Phi[1][2] +
-            w->M[1][3]*t->Phi[1][3] + w->M[1][4]*t->Phi[1][4] + w->M[1][5]*t->Phi[1][5] +
-            w->M[1][7]*t->Phi[1][7] + w->M[1][8]*t->Phi[1][8] + w->M[1][9]*t->Phi[1][9] +
-            w->M[1][10]*t->Phi[1][10] + t->Qd[1][1]; w->Pn[1][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[2][0] + w->M[1][1]*t->Phi[2][1] + w->M[1][2]*t->Phi[2][2] +
-            w->M[1][3]*t->Phi[2][3] + w->M[1][4]*t->Phi[2][4] + w->M[1][5]*t->Phi[2][5] +
-            w->M[1][7]*t->Phi[2][7] + w->M[1][8]*t->Phi[2][8] + w->M[1][9]*t->Phi[2][9] +
-            w->M[1][10]*t->Phi[2][10] + t->Qd[1][2]; w->Pn[1][2] = v; w->Pn[2][1] = v; check += v -
-            v;
-    v = w->M[1][0]*t->Phi[3][0] + w->M[1][1]*t->Phi[3][1] + w->M[1][2]*t->Phi[3][2] +
-            w->M[1][3]*t->Phi[3][3] + w->M[1][4]*t->Phi[3][4] + w->M[1][5]*t->Phi[3][5] +
-            w->M[1][7]*t->Phi[3][7] + w->M[1][8]*t->Phi[3][8] + w->M[1][9]*t->Phi[3][9] +
-            w->M[1][10]*t->Phi[3][10] + t->Qd[1][3]; w->Pn[1][3] = v; w->Pn[3][1] = v; check += v -
-            v;
-    v = w->M[1][0]*t->Phi[4][0] + w->M[1][1]*t->Phi[4][1] + w->M[1][2]*t->Phi[4][2] +
-            w->M[1][3]*t->Phi[4][3] + w->M[1][4]*t->Phi[4][4] + w->M[1][5]*t->Phi[4][5] +
-            w->M[1][7]*t->Phi[4][7] + w->M[1][8]*t->Phi[4][8] + w->M[1][9]*t->Phi[4][9] +
-            w->M[1][10]*t->Phi[4][10] + t->Qd[1][4]; w->Pn[1][4] = v; w->Pn[4][1] = v; check += v -
-            v;
-    v = w->M[1][0]*t->Phi[5][0] + w->M[1][1]*t->Phi[5][1] + w->M[1][2]*t->Phi[5][2] +
-            w->M[1][3]*t->Phi[5][3] + w->M[1][4]*t->Phi[5][4] + w->M[1][5]*t->Phi[5][5] +
-            w->M[1][7]*t->Phi[5][7] + w->M[1][8]*t->Phi[5][8] + w->M[1][9]*t->Phi[5][9] +
-            w->M[1][10]*t->Phi[5][10] + t->Qd[1][5]; w->Pn[1][5] = v; w->Pn[5][1] = v; check += v -
-            v;
-    v = w->M[1][0]*t->Phi[6][0] + w->M[1][1]*t->Phi[6][1] + w->M[1][2]*t->Phi[6][2] +
-            w->M[1][3]*t->Phi[6][3] + w->M[1][4]*t->Phi[6][4] + w->M[1][5]*t->Phi[6][5] +
-            w->M[1][6]*t->Phi[6][6] + w->M[1][7]*t->Phi[6][7] + w->M[1][8]*t->Phi[6][8] +
-            w->M[1][9]*t->Phi[6][9] + w->M[1][10]*t->Phi[6][10] + t->Qd[1][6]; w->Pn[1][6] = v;
-            w->Pn[6][1] = v; check += v - v;
-    v = w->M[1][7]; w->Pn[1][7] = v; w->Pn[7][1] = v; check += v - v;
-    v = w->M[1][8]; w->Pn[1][8] = v; w->Pn[8][1] = v; check += v - v;
-    v = w->M[1][9]*t->Phi[9][9] + t->Qd[1][9]; w->Pn[1][9] = v; w->Pn[9][1] = v; check += v - v;
-    v = w->M[1][10]*t->Phi[10][10] + t->Qd[1][10]; w->Pn[1][10] = v; w->Pn[10][1] = v; check += v -
-            v;
-    v = w->M[1][11]; w->Pn[1][11] = v; w->Pn[11][1] = v; check += v - v;
-    v = w->M[1][12]; w->Pn[1][12] = v; w->Pn[12][1] = v; check += v - v;
+    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
+            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[7]*t->Phi[1][7] +
+            w->M[8]*t->Phi[1][8] + w->M[9]*t->Phi[1][9] + w->M[10]*t->Phi[1][10] + t->Qd[13];
+            w->Pn[13] = v; check += v - v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[7]*t->Phi[2][7] +
+            w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] + w->M[10]*t->Phi[2][10] + t->Qd[14];
+            w->Pn[14] = v; check += v - v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[7]*t->Phi[3][7] +
+            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] + t->Qd[15];
+            w->Pn[15] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] + t->Qd[16];
+            w->Pn[16] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] + t->Qd[17];
+            w->Pn[17] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + t->Qd[18]; w->Pn[18] = v; check += v - v;
+    v = w->M[7]; w->Pn[19] = v; check += v - v;
+    v = w->M[8]; w->Pn[20] = v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[21]; w->Pn[21] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[22]; w->Pn[22] = v; check += v - v;
+    v = w->M[11]; w->Pn[23] = v; check += v - v;
+    v = w->M[12]; w->Pn[24] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_2(const ned_doppler13_reduced_filter *restrict f, const
+        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
+        w)
+{
+    w->M[0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] +
+            t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] +
+            t->Phi[2][7]*f->P[7][0] + t->Phi[2][8]*f->P[8][0] + t->Phi[2][9]*f->P[9][0] +
+            t->Phi[2][10]*f->P[10][0];
+    w->M[1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] +
+            t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] +
+            t->Phi[2][7]*f->P[7][1] + t->Phi[2][8]*f->P[8][1] + t->Phi[2][9]*f->P[9][1] +
+            t->Phi[2][10]*f->P[10][1];
+    w->M[2] = t->Phi[2][0]*f->P[0][2] + t->Phi[2][1]*f->P[1][2] + t->Phi[2][2]*f->P[2][2] +
+            t->Phi[2][3]*f->P[3][2] + t->Phi[2][4]*f->P[4][2] + t->Phi[2][5]*f->P[5][2] +
+            t->Phi[2][7]*f->P[7][2] + t->Phi[2][8]*f->P[8][2] + t->Phi[2][9]*f->P[9][2] +
+            t->Phi[2][10]*f->P[10][2];
+    w->M[3] = t->Phi[2][0]*f->P[0][3] + t->Phi[2][1]*f->P[1][3] + t->Phi[2][2]*f->P[2][3] +
+            t->Phi[2][3]*f->P[3][3] + t->Phi[2][4]*f->P[4][3] + t->Phi[2][5]*f->P[5][3] +
+            t->Phi[2][7]*f->P[7][3] + t->Phi[2][8]*f->P[8][3] + t->Phi[2][9]*f->P[9][3] +
+            t->Phi[2][10]*f->P[10][3];
+    w->M[4] = t->Phi[2][0]*f->P[0][4] + t->Phi[2][1]*f->P[1][4] + t->Phi[2][2]*f->P[2][4] +
+            t->Phi[2][3]*f->P[3][4] + t->Phi[2][4]*f->P[4][4] + t->Phi[2][5]*f->P[5][4] +
+            t->Phi[2][7]*f->P[7][4] + t->Phi[2][8]*f->P[8][4] + t->Phi[2][9]*f->P[9][4] +
+            t->Phi[2][10]*f->P[10][4];
+    w->M[5] = t->Phi[2][0]*f->P[0][5] + t->Phi[2][1]*f->P[1][5] + t->Phi[2][2]*f->P[2][5] +
+            t->Phi[2][3]*f->P[3][5] + t->Phi[2][4]*f->P[4][5] + t->Phi[2][5]*f->P[5][5] +
+            t->Phi[2][7]*f->P[7][5] + t->Phi[2][8]*f->P[8][5] + t->Phi[2][9]*f->P[9][5] +
+            t->Phi[2][10]*f->P[10][5];
+    w->M[6] = t->Phi[2][0]*f->P[0][6] + t->Phi[2][1]*f->P[1][6] + t->Phi[2][2]*f->P[2][6] +
+            t->Phi[2][3]*f->P[3][6] + t->Phi[2][4]*f->P[4][6] + t->Phi[2][5]*f->P[5][6] +
+            t->Phi[2][7]*f->P[7][6] + t->Phi[2][8]*f->P[8][6] + t->Phi[2][9]*f->P[9][6] +
+            t->Phi[2][10]*f->P[10][6];
+    w->M[7] = t->Phi[2][0]*f->P[0][7] + t->Phi[2][1]*f->P[1][7] + t->Phi[2][2]*f->P[2][7] +
+            t->Phi[2][3]*f->P[3][7] + t->Phi[2][4]*f->P[4][7] + t->Phi[2][5]*f->P[5][7] +
+            t->Phi[2][7]*f->P[7][7] + t->Phi[2][8]*f->P[8][7] + t->Phi[2][9]*f->P[9][7] +
+            t->Phi[2][10]*f->P[10][7];
+    w->M[8] = t->Phi[2][0]*f->P[0][8] + t->Phi[2][1]*f->P[1][8] + t->Phi[2][2]*f->P[2][8] +
+            t->Phi[2][3]*f->P[3][8] + t->Phi[2][4]*f->P[4][8] + t->Phi[2][5]*f->P[5][8] +
+            t->Phi[2][7]*f->P[7][8] + t->Phi[2][8]*f->P[8][8] + t->Phi[2][9]*f->P[9][8] +
+            t->Phi[2][10]*f->P[10][8];
+    w->M[9] = t->Phi[2][0]*f->P[0][9] + t->Phi[2][1]*f->P[1][9] + t->Phi[2][2]*f->P[2][9] +
+            t->Phi[2][3]*f->P[3][9] + t->Phi[2][4]*f->P[4][9] + t->Phi[2][5]*f->P[5][9] +
+            t->Phi[2][7]*f->P[7][9] + t->Phi[2][8]*f->P[8][9] + t->Phi[2][9]*f->P[9][9] +
+            t->Phi[2][10]*f->P[10][9];
+    w->M[10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] +
+            t->Phi[2][3]*f->P[3][10] + t->Phi[2][4]*f->P[4][10] + t->Phi[2][5]*f->P[5][10] +
+            t->Phi[2][7]*f->P[7][10] + t->Phi[2][8]*f->P[8][10] + t->Phi[2][9]*f->P[9][10] +
+            t->Phi[2][10]*f->P[10][10];
+    w->M[11] = t->Phi[2][0]*f->P[0][11] + t->Phi[2][1]*f->P[1][11] + t->Phi[2][2]*f->P[2][11] +
+            t->Phi[2][3]*f->P[3][11] + t->Phi[2][4]*f->P[4][11] + t->Phi[2][5]*f->P[5][11] +
+            t->Phi[2][7]*f->P[7][11] + t->Phi[2][8]*f->P[8][11] + t->Phi[2][9]*f->P[9][11] +
+            t->Phi[2][10]*f->P[10][11];
+    w->M[12] = t->Phi[2][0]*f->P[0][12] + t->Phi[2][1]*f->P[1][12] + t->Phi[2][2]*f->P[2][12] +
+            t->Phi[2][3]*f->P[3][12] + t->Phi[2][4]*f->P[4][12] + t->Phi[2][5]*f->P[5][12] +
+            t->Phi[2][7]*f->P[7][12] + t->Phi[2][8]*f->P[8][12] + t->Phi[2][9]*f->P[9][12] +
+            t->Phi[2][10]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2410,38 +2142,91 @@ static ned_doppler13_reduced_scalar propagate_row_2(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[2][0]*t->Phi[2][0] + w->M[2][1]*t->Phi[2][1] + w->M[2][2]*t->Phi[2][2] +
-            w->M[2][3]*t->Phi[2][3] + w->M[2][4]*t->Phi[2][4] + w->M[2][5]*t->Phi[2][5] +
-            w->M[2][7]*t->Phi[2][7] + w->M[2][8]*t->Phi[2][8] + w->M[2][9]*t->Phi[2][9] +
-            w->M[2][10]*t->Phi[2][10] + t->Qd[2][2]; w->Pn[2][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[3][0] + w->M[2][1]*t->Phi[3][1] + w->M[2][2]*t->Phi[3][2] +
-            w->M[2][3]*t->Phi[3][3] + w->M[2][4]*t->Phi[3][4] + w->M[2][5]*t->Phi[3][5] +
-            w->M[2][7]*t->Phi[3][7] + w->M[2][8]*t->Phi[3][8] + w->M[2][9]*t->Phi[3][9] +
-            w->M[2][10]*t->Phi[3][10] + t->Qd[2][3]; w->Pn[2][3] = v; w->Pn[3][2] = v; check += v -
-            v;
-    v = w->M[2][0]*t->Phi[4][0] + w->M[2][1]*t->Phi[4][1] + w->M[2][2]*t->Phi[4][2] +
-            w->M[2][3]*t->Phi[4][3] + w->M[2][4]*t->Phi[4][4] + w->M[2][5]*t->Phi[4][5] +
-            w->M[2][7]*t->Phi[4][7] + w->M[2][8]*t->Phi[4][8] + w->M[2][9]*t->Phi[4][9] +
-            w->M[2][10]*t->Phi[4][10] + t->Qd[2][4]; w->Pn[2][4] = v; w->Pn[4][2] = v; check += v -
-            v;
-    v = w->M[2][0]*t->Phi[5][0] + w->M[2][1]*t->Phi[5][1] + w->M[2][2]*t->Phi[5][2] +
-            w->M[2][3]*t->Phi[5][3] + w->M[2][4]*t->Phi[5][4] + w->M[2][5]*t->Phi[5][5] +
-            w->M[2][7]*t->Phi[5][7] + w->M[2][8]*t->Phi[5][8] + w->M[2][9]*t->Phi[5][9] +
-            w->M[2][10]*t->Phi[5][10] + t->Qd[2][5]; w->Pn[2][5] = v; w->Pn[5][2] = v; check += v -
-            v;
-    v = w->M[2][0]*t->Phi[6][0] + w->M[2][1]*t->Phi[6][1] + w->M[2][2]*t->Phi[6][2] +
-            w->M[2][3]*t->Phi[6][3] + w->M[2][4]*t->Phi[6][4] + w->M[2][5]*t->Phi[6][5] +
-            w->M[2][6]*t->Phi[6][6] + w->M[2][7]*t->Phi[6][7] + w->M[2][8]*t->Phi[6][8] +
-            w->M[2][9]*t->Phi[6][9] + w->M[2][10]*t->Phi[6][10] + t->Qd[2][6]; w->Pn[2][6] = v;
-            w->Pn[6][2] = v; check += v - v;
-    v = w->M[2][7]; w->Pn[2][7] = v; w->Pn[7][2] = v; check += v - v;
-    v = w->M[2][8]; w->Pn[2][8] = v; w->Pn[8][2] = v; check += v - v;
-    v = w->M[2][9]*t->Phi[9][9] + t->Qd[2][9]; w->Pn[2][9] = v; w->Pn[9][2] = v; check += v - v;
-    v = w->M[2][10]*t->Phi[10][10] + t->Qd[2][10]; w->Pn[2][10] = v; w->Pn[10][2] = v; check += v -
-            v;
-    v = w->M[2][11]; w->Pn[2][11] = v; w->Pn[11][2] = v; check += v - v;
-    v = w->M[2][12]; w->Pn[2][12] = v; w->Pn[12][2] = v; check += v - v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[7]*t->Phi[2][7] +
+            w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] + w->M[10]*t->Phi[2][10] + t->Qd[25];
+            w->Pn[25] = v; check += v - v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[7]*t->Phi[3][7] +
+            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] + t->Qd[26];
+            w->Pn[26] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] + t->Qd[27];
+            w->Pn[27] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] + t->Qd[28];
+            w->Pn[28] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + t->Qd[29]; w->Pn[29] = v; check += v - v;
+    v = w->M[7]; w->Pn[30] = v; check += v - v;
+    v = w->M[8]; w->Pn[31] = v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[32]; w->Pn[32] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[33]; w->Pn[33] = v; check += v - v;
+    v = w->M[11]; w->Pn[34] = v; check += v - v;
+    v = w->M[12]; w->Pn[35] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_3(const ned_doppler13_reduced_filter *restrict f, const
+        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
+        w)
+{
+    w->M[0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] +
+            t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] +
+            t->Phi[3][7]*f->P[7][0] + t->Phi[3][8]*f->P[8][0] + t->Phi[3][9]*f->P[9][0] +
+            t->Phi[3][10]*f->P[10][0];
+    w->M[1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] +
+            t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] +
+            t->Phi[3][7]*f->P[7][1] + t->Phi[3][8]*f->P[8][1] + t->Phi[3][9]*f->P[9][1] +
+            t->Phi[3][10]*f->P[10][1];
+    w->M[2] = t->Phi[3][0]*f->P[0][2] + t->Phi[3][1]*f->P[1][2] + t->Phi[3][2]*f->P[2][2] +
+            t->Phi[3][3]*f->P[3][2] + t->Phi[3][4]*f->P[4][2] + t->Phi[3][5]*f->P[5][2] +
+            t->Phi[3][7]*f->P[7][2] + t->Phi[3][8]*f->P[8][2] + t->Phi[3][9]*f->P[9][2] +
+            t->Phi[3][10]*f->P[10][2];
+    w->M[3] = t->Phi[3][0]*f->P[0][3] + t->Phi[3][1]*f->P[1][3] + t->Phi[3][2]*f->P[2][3] +
+            t->Phi[3][3]*f->P[3][3] + t->Phi[3][4]*f->P[4][3] + t->Phi[3][5]*f->P[5][3] +
+            t->Phi[3][7]*f->P[7][3] + t->Phi[3][8]*f->P[8][3] + t->Phi[3][9]*f->P[9][3] +
+            t->Phi[3][10]*f->P[10][3];
+    w->M[4] = t->Phi[3][0]*f->P[0][4] + t->Phi[3][1]*f->P[1][4] + t->Phi[3][2]*f->P[2][4] +
+            t->Phi[3][3]*f->P[3][4] + t->Phi[3][4]*f->P[4][4] + t->Phi[3][5]*f->P[5][4] +
+            t->Phi[3][7]*f->P[7][4] + t->Phi[3][8]*f->P[8][4] + t->Phi[3][9]*f->P[9][4] +
+            t->Phi[3][10]*f->P[10][4];
+    w->M[5] = t->Phi[3][0]*f->P[0][5] + t->Phi[3][1]*f->P[1][5] + t->Phi[3][2]*f->P[2][5] +
+            t->Phi[3][3]*f->P[3][5] + t->Phi[3][4]*f->P[4][5] + t->Phi[3][5]*f->P[5][5] +
+            t->Phi[3][7]*f->P[7][5] + t->Phi[3][8]*f->P[8][5] + t->Phi[3][9]*f->P[9][5] +
+            t->Phi[3][10]*f->P[10][5];
+    w->M[6] = t->Phi[3][0]*f->P[0][6] + t->Phi[3][1]*f->P[1][6] + t->Phi[3][2]*f->P[2][6] +
+            t->Phi[3][3]*f->P[3][6] + t->Phi[3][4]*f->P[4][6] + t->Phi[3][5]*f->P[5][6] +
+            t->Phi[3][7]*f->P[7][6] + t->Phi[3][8]*f->P[8][6] + t->Phi[3][9]*f->P[9][6] +
+            t->Phi[3][10]*f->P[10][6];
+    w->M[7] = t->Phi[3][0]*f->P[0][7] + t->Phi[3][1]*f->P[1][7] + t->Phi[3][2]*f->P[2][7] +
+            t->Phi[3][3]*f->P[3][7] + t->Phi[3][4]*f->P[4][7] + t->Phi[3][5]*f->P[5][7] +
+            t->Phi[3][7]*f->P[7][7] + t->Phi[3][8]*f->P[8][7] + t->Phi[3][9]*f->P[9][7] +
+            t->Phi[3][10]*f->P[10][7];
+    w->M[8] = t->Phi[3][0]*f->P[0][8] + t->Phi[3][1]*f->P[1][8] + t->Phi[3][2]*f->P[2][8] +
+            t->Phi[3][3]*f->P[3][8] + t->Phi[3][4]*f->P[4][8] + t->Phi[3][5]*f->P[5][8] +
+            t->Phi[3][7]*f->P[7][8] + t->Phi[3][8]*f->P[8][8] + t->Phi[3][9]*f->P[9][8] +
+            t->Phi[3][10]*f->P[10][8];
+    w->M[9] = t->Phi[3][0]*f->P[0][9] + t->Phi[3][1]*f->P[1][9] + t->Phi[3][2]*f->P[2][9] +
+            t->Phi[3][3]*f->P[3][9] + t->Phi[3][4]*f->P[4][9] + t->Phi[3][5]*f->P[5][9] +
+            t->Phi[3][7]*f->P[7][9] + t->Phi[3][8]*f->P[8][9] + t->Phi[3][9]*f->P[9][9] +
+            t->Phi[3][10]*f->P[10][9];
+    w->M[10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] +
+            t->Phi[3][3]*f->P[3][10] + t->Phi[3][4]*f->P[4][10] + t->Phi[3][5]*f->P[5][10] +
+            t->Phi[3][7]*f->P[7][10] + t->Phi[3][8]*f->P[8][10] + t->Phi[3][9]*f->P[9][10] +
+            t->Phi[3][10]*f->P[10][10];
+    w->M[11] = t->Phi[3][0]*f->P[0][11] + t->Phi[3][1]*f->P[1][11] + t->Phi[3][2]*f->P[2][11] +
+            t->Phi[3][3]*f->P[3][11] + t->Phi[3][4]*f->P[4][11] + t->Phi[3][5]*f->P[5][11] +
+            t->Phi[3][7]*f->P[7][11] + t->Phi[3][8]*f->P[8][11] + t->Phi[3][9]*f->P[9][11] +
+            t->Phi[3][10]*f->P[10][11];
+    w->M[12] = t->Phi[3][0]*f->P[0][12] + t->Phi[3][1]*f->P[1][12] + t->Phi[3][2]*f->P[2][12] +
+            t->Phi[3][3]*f->P[3][12] + t->Phi[3][4]*f->P[4][12] + t->Phi[3][5]*f->P[5][12] +
+            t->Phi[3][7]*f->P[7][12] + t->Phi[3][8]*f->P[8][12] + t->Phi[3][9]*f->P[9][12] +
+            t->Phi[3][10]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2449,33 +2234,87 @@ static ned_doppler13_reduced_scalar propagate_row_3(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[3][0]*t->Phi[3][0] + w->M[3][1]*t->Phi[3][1] + w->M[3][2]*t->Phi[3][2] +
-            w->M[3][3]*t->Phi[3][3] + w->M[3][4]*t->Phi[3][4] + w->M[3][5]*t->Phi[3][5] +
-            w->M[3][7]*t->Phi[3][7] + w->M[3][8]*t->Phi[3][8] + w->M[3][9]*t->Phi[3][9] +
-            w->M[3][10]*t->Phi[3][10] + t->Qd[3][3]; w->Pn[3][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[4][0] + w->M[3][1]*t->Phi[4][1] + w->M[3][2]*t->Phi[4][2] +
-            w->M[3][3]*t->Phi[4][3] + w->M[3][4]*t->Phi[4][4] + w->M[3][5]*t->Phi[4][5] +
-            w->M[3][7]*t->Phi[4][7] + w->M[3][8]*t->Phi[4][8] + w->M[3][9]*t->Phi[4][9] +
-            w->M[3][10]*t->Phi[4][10] + t->Qd[3][4]; w->Pn[3][4] = v; w->Pn[4][3] = v; check += v -
-            v;
-    v = w->M[3][0]*t->Phi[5][0] + w->M[3][1]*t->Phi[5][1] + w->M[3][2]*t->Phi[5][2] +
-            w->M[3][3]*t->Phi[5][3] + w->M[3][4]*t->Phi[5][4] + w->M[3][5]*t->Phi[5][5] +
-            w->M[3][7]*t->Phi[5][7] + w->M[3][8]*t->Phi[5][8] + w->M[3][9]*t->Phi[5][9] +
-            w->M[3][10]*t->Phi[5][10] + t->Qd[3][5]; w->Pn[3][5] = v; w->Pn[5][3] = v; check += v -
-            v;
-    v = w->M[3][0]*t->Phi[6][0] + w->M[3][1]*t->Phi[6][1] + w->M[3][2]*t->Phi[6][2] +
-            w->M[3][3]*t->Phi[6][3] + w->M[3][4]*t->Phi[6][4] + w->M[3][5]*t->Phi[6][5] +
-            w->M[3][6]*t->Phi[6][6] + w->M[3][7]*t->Phi[6][7] + w->M[3][8]*t->Phi[6][8] +
-            w->M[3][9]*t->Phi[6][9] + w->M[3][10]*t->Phi[6][10] + t->Qd[3][6]; w->Pn[3][6] = v;
-            w->Pn[6][3] = v; check += v - v;
-    v = w->M[3][7]; w->Pn[3][7] = v; w->Pn[7][3] = v; check += v - v;
-    v = w->M[3][8]; w->Pn[3][8] = v; w->Pn[8][3] = v; check += v - v;
-    v = w->M[3][9]*t->Phi[9][9] + t->Qd[3][9]; w->Pn[3][9] = v; w->Pn[9][3] = v; check += v - v;
-    v = w->M[3][10]*t->Phi[10][10] + t->Qd[3][10]; w->Pn[3][10] = v; w->Pn[10][3] = v; check += v -
-            v;
-    v = w->M[3][11]; w->Pn[3][11] = v; w->Pn[11][3] = v; check += v - v;
-    v = w->M[3][12]; w->Pn[3][12] = v; w->Pn[12][3] = v; check += v - v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[7]*t->Phi[3][7] +
+            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] + t->Qd[36];
+            w->Pn[36] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] + t->Qd[37];
+            w->Pn[37] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] + t->Qd[38];
+            w->Pn[38] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + t->Qd[39]; w->Pn[39] = v; check += v - v;
+    v = w->M[7]; w->Pn[40] = v; check += v - v;
+    v = w->M[8]; w->Pn[41] = v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[42]; w->Pn[42] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[43]; w->Pn[43] = v; check += v - v;
+    v = w->M[11]; w->Pn[44] = v; check += v - v;
+    v = w->M[12]; w->Pn[45] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_4(const ned_doppler13_reduced_filter *restrict f, const
+        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
+        w)
+{
+    w->M[0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] +
+            t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] +
+            t->Phi[4][7]*f->P[7][0] + t->Phi[4][8]*f->P[8][0] + t->Phi[4][9]*f->P[9][0] +
+            t->Phi[4][10]*f->P[10][0];
+    w->M[1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] +
+            t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] +
+            t->Phi[4][7]*f->P[7][1] + t->Phi[4][8]*f->P[8][1] + t->Phi[4][9]*f->P[9][1] +
+            t->Phi[4][10]*f->P[10][1];
+    w->M[2] = t->Phi[4][0]*f->P[0][2] + t->Phi[4][1]*f->P[1][2] + t->Phi[4][2]*f->P[2][2] +
+            t->Phi[4][3]*f->P[3][2] + t->Phi[4][4]*f->P[4][2] + t->Phi[4][5]*f->P[5][2] +
+            t->Phi[4][7]*f->P[7][2] + t->Phi[4][8]*f->P[8][2] + t->Phi[4][9]*f->P[9][2] +
+            t->Phi[4][10]*f->P[10][2];
+    w->M[3] = t->Phi[4][0]*f->P[0][3] + t->Phi[4][1]*f->P[1][3] + t->Phi[4][2]*f->P[2][3] +
+            t->Phi[4][3]*f->P[3][3] + t->Phi[4][4]*f->P[4][3] + t->Phi[4][5]*f->P[5][3] +
+            t->Phi[4][7]*f->P[7][3] + t->Phi[4][8]*f->P[8][3] + t->Phi[4][9]*f->P[9][3] +
+            t->Phi[4][10]*f->P[10][3];
+    w->M[4] = t->Phi[4][0]*f->P[0][4] + t->Phi[4][1]*f->P[1][4] + t->Phi[4][2]*f->P[2][4] +
+            t->Phi[4][3]*f->P[3][4] + t->Phi[4][4]*f->P[4][4] + t->Phi[4][5]*f->P[5][4] +
+            t->Phi[4][7]*f->P[7][4] + t->Phi[4][8]*f->P[8][4] + t->Phi[4][9]*f->P[9][4] +
+            t->Phi[4][10]*f->P[10][4];
+    w->M[5] = t->Phi[4][0]*f->P[0][5] + t->Phi[4][1]*f->P[1][5] + t->Phi[4][2]*f->P[2][5] +
+            t->Phi[4][3]*f->P[3][5] + t->Phi[4][4]*f->P[4][5] + t->Phi[4][5]*f->P[5][5] +
+            t->Phi[4][7]*f->P[7][5] + t->Phi[4][8]*f->P[8][5] + t->Phi[4][9]*f->P[9][5] +
+            t->Phi[4][10]*f->P[10][5];
+    w->M[6] = t->Phi[4][0]*f->P[0][6] + t->Phi[4][1]*f->P[1][6] + t->Phi[4][2]*f->P[2][6] +
+            t->Phi[4][3]*f->P[3][6] + t->Phi[4][4]*f->P[4][6] + t->Phi[4][5]*f->P[5][6] +
+            t->Phi[4][7]*f->P[7][6] + t->Phi[4][8]*f->P[8][6] + t->Phi[4][9]*f->P[9][6] +
+            t->Phi[4][10]*f->P[10][6];
+    w->M[7] = t->Phi[4][0]*f->P[0][7] + t->Phi[4][1]*f->P[1][7] + t->Phi[4][2]*f->P[2][7] +
+            t->Phi[4][3]*f->P[3][7] + t->Phi[4][4]*f->P[4][7] + t->Phi[4][5]*f->P[5][7] +
+            t->Phi[4][7]*f->P[7][7] + t->Phi[4][8]*f->P[8][7] + t->Phi[4][9]*f->P[9][7] +
+            t->Phi[4][10]*f->P[10][7];
+    w->M[8] = t->Phi[4][0]*f->P[0][8] + t->Phi[4][1]*f->P[1][8] + t->Phi[4][2]*f->P[2][8] +
+            t->Phi[4][3]*f->P[3][8] + t->Phi[4][4]*f->P[4][8] + t->Phi[4][5]*f->P[5][8] +
+            t->Phi[4][7]*f->P[7][8] + t->Phi[4][8]*f->P[8][8] + t->Phi[4][9]*f->P[9][8] +
+            t->Phi[4][10]*f->P[10][8];
+    w->M[9] = t->Phi[4][0]*f->P[0][9] + t->Phi[4][1]*f->P[1][9] + t->Phi[4][2]*f->P[2][9] +
+            t->Phi[4][3]*f->P[3][9] + t->Phi[4][4]*f->P[4][9] + t->Phi[4][5]*f->P[5][9] +
+            t->Phi[4][7]*f->P[7][9] + t->Phi[4][8]*f->P[8][9] + t->Phi[4][9]*f->P[9][9] +
+            t->Phi[4][10]*f->P[10][9];
+    w->M[10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] +
+            t->Phi[4][3]*f->P[3][10] + t->Phi[4][4]*f->P[4][10] + t->Phi[4][5]*f->P[5][10] +
+            t->Phi[4][7]*f->P[7][10] + t->Phi[4][8]*f->P[8][10] + t->Phi[4][9]*f->P[9][10] +
+            t->Phi[4][10]*f->P[10][10];
+    w->M[11] = t->Phi[4][0]*f->P[0][11] + t->Phi[4][1]*f->P[1][11] + t->Phi[4][2]*f->P[2][11] +
+            t->Phi[4][3]*f->P[3][11] + t->Phi[4][4]*f->P[4][11] + t->Phi[4][5]*f->P[5][11] +
+            t->Phi[4][7]*f->P[7][11] + t->Phi[4][8]*f->P[8][11] + t->Phi[4][9]*f->P[9][11] +
+            t->Phi[4][10]*f->P[10][11];
+    w->M[12] = t->Phi[4][0]*f->P[0][12] + t->Phi[4][1]*f->P[1][12] + t->Phi[4][2]*f->P[2][12] +
+            t->Phi[4][3]*f->P[3][12] + t->Phi[4][4]*f->P[4][12] + t->Phi[4][5]*f->P[5][12] +
+            t->Phi[4][7]*f->P[7][12] + t->Phi[4][8]*f->P[8][12] + t->Phi[4][9]*f->P[9][12] +
+            t->Phi[4][10]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2483,28 +2322,83 @@ static ned_doppler13_reduced_scalar propagate_row_4(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[4][0]*t->Phi[4][0] + w->M[4][1]*t->Phi[4][1] + w->M[4][2]*t->Phi[4][2] +
-            w->M[4][3]*t->Phi[4][3] + w->M[4][4]*t->Phi[4][4] + w->M[4][5]*t->Phi[4][5] +
-            w->M[4][7]*t->Phi[4][7] + w->M[4][8]*t->Phi[4][8] + w->M[4][9]*t->Phi[4][9] +
-            w->M[4][10]*t->Phi[4][10] + t->Qd[4][4]; w->Pn[4][4] = v; check += v - v;
-    v = w->M[4][0]*t->Phi[5][0] + w->M[4][1]*t->Phi[5][1] + w->M[4][2]*t->Phi[5][2] +
-            w->M[4][3]*t->Phi[5][3] + w->M[4][4]*t->Phi[5][4] + w->M[4][5]*t->Phi[5][5] +
-            w->M[4][7]*t->Phi[5][7] + w->M[4][8]*t->Phi[5][8] + w->M[4][9]*t->Phi[5][9] +
-            w->M[4][10]*t->Phi[5][10] + t->Qd[4][5]; w->Pn[4][5] = v; w->Pn[5][4] = v; check += v -
-            v;
-    v = w->M[4][0]*t->Phi[6][0] + w->M[4][1]*t->Phi[6][1] + w->M[4][2]*t->Phi[6][2] +
-            w->M[4][3]*t->Phi[6][3] + w->M[4][4]*t->Phi[6][4] + w->M[4][5]*t->Phi[6][5] +
-            w->M[4][6]*t->Phi[6][6] + w->M[4][7]*t->Phi[6][7] + w->M[4][8]*t->Phi[6][8] +
-            w->M[4][9]*t->Phi[6][9] + w->M[4][10]*t->Phi[6][10] + t->Qd[4][6]; w->Pn[4][6] = v;
-            w->Pn[6][4] = v; check += v - v;
-    v = w->M[4][7]; w->Pn[4][7] = v; w->Pn[7][4] = v; check += v - v;
-    v = w->M[4][8]; w->Pn[4][8] = v; w->Pn[8][4] = v; check += v - v;
-    v = w->M[4][9]*t->Phi[9][9] + t->Qd[4][9]; w->Pn[4][9] = v; w->Pn[9][4] = v; check += v - v;
-    v = w->M[4][10]*t->Phi[10][10] + t->Qd[4][10]; w->Pn[4][10] = v; w->Pn[10][4] = v; check += v -
-            v;
-    v = w->M[4][11]; w->Pn[4][11] = v; w->Pn[11][4] = v; check += v - v;
-    v = w->M[4][12]; w->Pn[4][12] = v; w->Pn[12][4] = v; check += v - v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] + t->Qd[46];
+            w->Pn[46] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] + t->Qd[47];
+            w->Pn[47] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + t->Qd[48]; w->Pn[48] = v; check += v - v;
+    v = w->M[7]; w->Pn[49] = v; check += v - v;
+    v = w->M[8]; w->Pn[50] = v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[51]; w->Pn[51] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[52]; w->Pn[52] = v; check += v - v;
+    v = w->M[11]; w->Pn[53] = v; check += v - v;
+    v = w->M[12]; w->Pn[54] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_5(const ned_doppler13_reduced_filter *restrict f, const
+        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
+        w)
+{
+    w->M[0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] +
+            t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] +
+            t->Phi[5][7]*f->P[7][0] + t->Phi[5][8]*f->P[8][0] + t->Phi[5][9]*f->P[9][0] +
+            t->Phi[5][10]*f->P[10][0];
+    w->M[1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] +
+            t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] +
+            t->Phi[5][7]*f->P[7][1] + t->Phi[5][8]*f->P[8][1] + t->Phi[5][9]*f->P[9][1] +
+            t->Phi[5][10]*f->P[10][1];
+    w->M[2] = t->Phi[5][0]*f->P[0][2] + t->Phi[5][1]*f->P[1][2] + t->Phi[5][2]*f->P[2][2] +
+            t->Phi[5][3]*f->P[3][2] + t->Phi[5][4]*f->P[4][2] + t->Phi[5][5]*f->P[5][2] +
+            t->Phi[5][7]*f->P[7][2] + t->Phi[5][8]*f->P[8][2] + t->Phi[5][9]*f->P[9][2] +
+            t->Phi[5][10]*f->P[10][2];
+    w->M[3] = t->Phi[5][0]*f->P[0][3] + t->Phi[5][1]*f->P[1][3] + t->Phi[5][2]*f->P[2][3] +
+            t->Phi[5][3]*f->P[3][3] + t->Phi[5][4]*f->P[4][3] + t->Phi[5][5]*f->P[5][3] +
+            t->Phi[5][7]*f->P[7][3] + t->Phi[5][8]*f->P[8][3] + t->Phi[5][9]*f->P[9][3] +
+            t->Phi[5][10]*f->P[10][3];
+    w->M[4] = t->Phi[5][0]*f->P[0][4] + t->Phi[5][1]*f->P[1][4] + t->Phi[5][2]*f->P[2][4] +
+            t->Phi[5][3]*f->P[3][4] + t->Phi[5][4]*f->P[4][4] + t->Phi[5][5]*f->P[5][4] +
+            t->Phi[5][7]*f->P[7][4] + t->Phi[5][8]*f->P[8][4] + t->Phi[5][9]*f->P[9][4] +
+            t->Phi[5][10]*f->P[10][4];
+    w->M[5] = t->Phi[5][0]*f->P[0][5] + t->Phi[5][1]*f->P[1][5] + t->Phi[5][2]*f->P[2][5] +
+            t->Phi[5][3]*f->P[3][5] + t->Phi[5][4]*f->P[4][5] + t->Phi[5][5]*f->P[5][5] +
+            t->Phi[5][7]*f->P[7][5] + t->Phi[5][8]*f->P[8][5] + t->Phi[5][9]*f->P[9][5] +
+            t->Phi[5][10]*f->P[10][5];
+    w->M[6] = t->Phi[5][0]*f->P[0][6] + t->Phi[5][1]*f->P[1][6] + t->Phi[5][2]*f->P[2][6] +
+            t->Phi[5][3]*f->P[3][6] + t->Phi[5][4]*f->P[4][6] + t->Phi[5][5]*f->P[5][6] +
+            t->Phi[5][7]*f->P[7][6] + t->Phi[5][8]*f->P[8][6] + t->Phi[5][9]*f->P[9][6] +
+            t->Phi[5][10]*f->P[10][6];
+    w->M[7] = t->Phi[5][0]*f->P[0][7] + t->Phi[5][1]*f->P[1][7] + t->Phi[5][2]*f->P[2][7] +
+            t->Phi[5][3]*f->P[3][7] + t->Phi[5][4]*f->P[4][7] + t->Phi[5][5]*f->P[5][7] +
+            t->Phi[5][7]*f->P[7][7] + t->Phi[5][8]*f->P[8][7] + t->Phi[5][9]*f->P[9][7] +
+            t->Phi[5][10]*f->P[10][7];
+    w->M[8] = t->Phi[5][0]*f->P[0][8] + t->Phi[5][1]*f->P[1][8] + t->Phi[5][2]*f->P[2][8] +
+            t->Phi[5][3]*f->P[3][8] + t->Phi[5][4]*f->P[4][8] + t->Phi[5][5]*f->P[5][8] +
+            t->Phi[5][7]*f->P[7][8] + t->Phi[5][8]*f->P[8][8] + t->Phi[5][9]*f->P[9][8] +
+            t->Phi[5][10]*f->P[10][8];
+    w->M[9] = t->Phi[5][0]*f->P[0][9] + t->Phi[5][1]*f->P[1][9] + t->Phi[5][2]*f->P[2][9] +
+            t->Phi[5][3]*f->P[3][9] + t->Phi[5][4]*f->P[4][9] + t->Phi[5][5]*f->P[5][9] +
+            t->Phi[5][7]*f->P[7][9] + t->Phi[5][8]*f->P[8][9] + t->Phi[5][9]*f->P[9][9] +
+            t->Phi[5][10]*f->P[10][9];
+    w->M[10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] +
+            t->Phi[5][3]*f->P[3][10] + t->Phi[5][4]*f->P[4][10] + t->Phi[5][5]*f->P[5][10] +
+            t->Phi[5][7]*f->P[7][10] + t->Phi[5][8]*f->P[8][10] + t->Phi[5][9]*f->P[9][10] +
+            t->Phi[5][10]*f->P[10][10];
+    w->M[11] = t->Phi[5][0]*f->P[0][11] + t->Phi[5][1]*f->P[1][11] + t->Phi[5][2]*f->P[2][11] +
+            t->Phi[5][3]*f->P[3][11] + t->Phi[5][4]*f->P[4][11] + t->Phi[5][5]*f->P[5][11] +
+            t->Phi[5][7]*f->P[7][11] + t->Phi[5][8]*f->P[8][11] + t->Phi[5][9]*f->P[9][11] +
+            t->Phi[5][10]*f->P[10][11];
+    w->M[12] = t->Phi[5][0]*f->P[0][12] + t->Phi[5][1]*f->P[1][12] + t->Phi[5][2]*f->P[2][12] +
+            t->Phi[5][3]*f->P[3][12] + t->Phi[5][4]*f->P[4][12] + t->Phi[5][5]*f->P[5][12] +
+            t->Phi[5][7]*f->P[7][12] + t->Phi[5][8]*f->P[8][12] + t->Phi[5][9]*f->P[9][12] +
+            t->Phi[5][10]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2512,23 +2406,79 @@ static ned_doppler13_reduced_scalar propagate_row_5(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[5][0]*t->Phi[5][0] + w->M[5][1]*t->Phi[5][1] + w->M[5][2]*t->Phi[5][2] +
-            w->M[5][3]*t->Phi[5][3] + w->M[5][4]*t->Phi[5][4] + w->M[5][5]*t->Phi[5][5] +
-            w->M[5][7]*t->Phi[5][7] + w->M[5][8]*t->Phi[5][8] + w->M[5][9]*t->Phi[5][9] +
-            w->M[5][10]*t->Phi[5][10] + t->Qd[5][5]; w->Pn[5][5] = v; check += v - v;
-    v = w->M[5][0]*t->Phi[6][0] + w->M[5][1]*t->Phi[6][1] + w->M[5][2]*t->Phi[6][2] +
-            w->M[5][3]*t->Phi[6][3] + w->M[5][4]*t->Phi[6][4] + w->M[5][5]*t->Phi[6][5] +
-            w->M[5][6]*t->Phi[6][6] + w->M[5][7]*t->Phi[6][7] + w->M[5][8]*t->Phi[6][8] +
-            w->M[5][9]*t->Phi[6][9] + w->M[5][10]*t->Phi[6][10] + t->Qd[5][6]; w->Pn[5][6] = v;
-            w->Pn[6][5] = v; check += v - v;
-    v = w->M[5][7]; w->Pn[5][7] = v; w->Pn[7][5] = v; check += v - v;
-    v = w->M[5][8]; w->Pn[5][8] = v; w->Pn[8][5] = v; check += v - v;
-    v = w->M[5][9]*t->Phi[9][9] + t->Qd[5][9]; w->Pn[5][9] = v; w->Pn[9][5] = v; check += v - v;
-    v = w->M[5][10]*t->Phi[10][10] + t->Qd[5][10]; w->Pn[5][10] = v; w->Pn[10][5] = v; check += v -
-            v;
-    v = w->M[5][11]; w->Pn[5][11] = v; w->Pn[11][5] = v; check += v - v;
-    v = w->M[5][12]; w->Pn[5][12] = v; w->Pn[12][5] = v; check += v - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] + t->Qd[55];
+            w->Pn[55] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + t->Qd[56]; w->Pn[56] = v; check += v - v;
+    v = w->M[7]; w->Pn[57] = v; check += v - v;
+    v = w->M[8]; w->Pn[58] = v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[59]; w->Pn[59] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[60]; w->Pn[60] = v; check += v - v;
+    v = w->M[11]; w->Pn[61] = v; check += v - v;
+    v = w->M[12]; w->Pn[62] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_6(const ned_doppler13_reduced_filter *restrict f, const
+        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
+        w)
+{
+    w->M[0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] +
+            t->Phi[6][3]*f->P[3][0] + t->Phi[6][4]*f->P[4][0] + t->Phi[6][5]*f->P[5][0] +
+            t->Phi[6][6]*f->P[6][0] + t->Phi[6][7]*f->P[7][0] + t->Phi[6][8]*f->P[8][0] +
+            t->Phi[6][9]*f->P[9][0] + t->Phi[6][10]*f->P[10][0];
+    w->M[1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] +
+            t->Phi[6][3]*f->P[3][1] + t->Phi[6][4]*f->P[4][1] + t->Phi[6][5]*f->P[5][1] +
+            t->Phi[6][6]*f->P[6][1] + t->Phi[6][7]*f->P[7][1] + t->Phi[6][8]*f->P[8][1] +
+            t->Phi[6][9]*f->P[9][1] + t->Phi[6][10]*f->P[10][1];
+    w->M[2] = t->Phi[6][0]*f->P[0][2] + t->Phi[6][1]*f->P[1][2] + t->Phi[6][2]*f->P[2][2] +
+            t->Phi[6][3]*f->P[3][2] + t->Phi[6][4]*f->P[4][2] + t->Phi[6][5]*f->P[5][2] +
+            t->Phi[6][6]*f->P[6][2] + t->Phi[6][7]*f->P[7][2] + t->Phi[6][8]*f->P[8][2] +
+            t->Phi[6][9]*f->P[9][2] + t->Phi[6][10]*f->P[10][2];
+    w->M[3] = t->Phi[6][0]*f->P[0][3] + t->Phi[6][1]*f->P[1][3] + t->Phi[6][2]*f->P[2][3] +
+            t->Phi[6][3]*f->P[3][3] + t->Phi[6][4]*f->P[4][3] + t->Phi[6][5]*f->P[5][3] +
+            t->Phi[6][6]*f->P[6][3] + t->Phi[6][7]*f->P[7][3] + t->Phi[6][8]*f->P[8][3] +
+            t->Phi[6][9]*f->P[9][3] + t->Phi[6][10]*f->P[10][3];
+    w->M[4] = t->Phi[6][0]*f->P[0][4] + t->Phi[6][1]*f->P[1][4] + t->Phi[6][2]*f->P[2][4] +
+            t->Phi[6][3]*f->P[3][4] + t->Phi[6][4]*f->P[4][4] + t->Phi[6][5]*f->P[5][4] +
+            t->Phi[6][6]*f->P[6][4] + t->Phi[6][7]*f->P[7][4] + t->Phi[6][8]*f->P[8][4] +
+            t->Phi[6][9]*f->P[9][4] + t->Phi[6][10]*f->P[10][4];
+    w->M[5] = t->Phi[6][0]*f->P[0][5] + t->Phi[6][1]*f->P[1][5] + t->Phi[6][2]*f->P[2][5] +
+            t->Phi[6][3]*f->P[3][5] + t->Phi[6][4]*f->P[4][5] + t->Phi[6][5]*f->P[5][5] +
+            t->Phi[6][6]*f->P[6][5] + t->Phi[6][7]*f->P[7][5] + t->Phi[6][8]*f->P[8][5] +
+            t->Phi[6][9]*f->P[9][5] + t->Phi[6][10]*f->P[10][5];
+    w->M[6] = t->Phi[6][0]*f->P[0][6] + t->Phi[6][1]*f->P[1][6] + t->Phi[6][2]*f->P[2][6] +
+            t->Phi[6][3]*f->P[3][6] + t->Phi[6][4]*f->P[4][6] + t->Phi[6][5]*f->P[5][6] +
+            t->Phi[6][6]*f->P[6][6] + t->Phi[6][7]*f->P[7][6] + t->Phi[6][8]*f->P[8][6] +
+            t->Phi[6][9]*f->P[9][6] + t->Phi[6][10]*f->P[10][6];
+    w->M[7] = t->Phi[6][0]*f->P[0][7] + t->Phi[6][1]*f->P[1][7] + t->Phi[6][2]*f->P[2][7] +
+            t->Phi[6][3]*f->P[3][7] + t->Phi[6][4]*f->P[4][7] + t->Phi[6][5]*f->P[5][7] +
+            t->Phi[6][6]*f->P[6][7] + t->Phi[6][7]*f->P[7][7] + t->Phi[6][8]*f->P[8][7] +
+            t->Phi[6][9]*f->P[9][7] + t->Phi[6][10]*f->P[10][7];
+    w->M[8] = t->Phi[6][0]*f->P[0][8] + t->Phi[6][1]*f->P[1][8] + t->Phi[6][2]*f->P[2][8] +
+            t->Phi[6][3]*f->P[3][8] + t->Phi[6][4]*f->P[4][8] + t->Phi[6][5]*f->P[5][8] +
+            t->Phi[6][6]*f->P[6][8] + t->Phi[6][7]*f->P[7][8] + t->Phi[6][8]*f->P[8][8] +
+            t->Phi[6][9]*f->P[9][8] + t->Phi[6][10]*f->P[10][8];
+    w->M[9] = t->Phi[6][0]*f->P[0][9] + t->Phi[6][1]*f->P[1][9] + t->Phi[6][2]*f->P[2][9] +
+            t->Phi[6][3]*f->P[3][9] + t->Phi[6][4]*f->P[4][9] + t->Phi[6][5]*f->P[5][9] +
+            t->Phi[6][6]*f->P[6][9] + t->Phi[6][7]*f->P[7][9] + t->Phi[6][8]*f->P[8][9] +
+            t->Phi[6][9]*f->P[9][9] + t->Phi[6][10]*f->P[10][9];
+    w->M[10] = t->Phi[6][0]*f->P[0][10] + t->Phi[6][1]*f->P[1][10] + t->Phi[6][2]*f->P[2][10] +
+            t->Phi[6][3]*f->P[3][10] + t->Phi[6][4]*f->P[4][10] + t->Phi[6][5]*f->P[5][10] +
+            t->Phi[6][6]*f->P[6][10] + t->Phi[6][7]*f->P[7][10] + t->Phi[6][8]*f->P[8][10] +
+            t->Phi[6][9]*f->P[9][10] + t->Phi[6][10]*f->P[10][10];
+    w->M[11] = t->Phi[6][0]*f->P[0][11] + t->Phi[6][1]*f->P[1][11] + t->Phi[6][2]*f->P[2][11] +
+            t->Phi[6][3]*f->P[3][11] + t->Phi[6][4]*f->P[4][11] + t->Phi[6][5]*f->P[5][11] +
+            t->Phi[6][6]*f->P[6][11] + t->Phi[6][7]*f->P[7][11] + t->Phi[6][8]*f->P[8][11] +
+            t->Phi[6][9]*f->P[9][11] + t->Phi[6][10]*f->P[10][11];
+    w->M[12] = t->Phi[6][0]*f->P[0][12] + t->Phi[6][1]*f->P[1][12] + t->Phi[6][2]*f->P[2][12] +
+            t->Phi[6][3]*f->P[3][12] + t->Phi[6][4]*f->P[4][12] + t->Phi[6][5]*f->P[5][12] +
+            t->Phi[6][6]*f->P[6][12] + t->Phi[6][7]*f->P[7][12] + t->Phi[6][8]*f->P[8][12] +
+            t->Phi[6][9]*f->P[9][12] + t->Phi[6][10]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2536,18 +2486,16 @@ static ned_doppler13_reduced_scalar propagate_row_6(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[6][0]*t->Phi[6][0] + w->M[6][1]*t->Phi[6][1] + w->M[6][2]*t->Phi[6][2] +
-            w->M[6][3]*t->Phi[6][3] + w->M[6][4]*t->Phi[6][4] + w->M[6][5]*t->Phi[6][5] +
-            w->M[6][6]*t->Phi[6][6] + w->M[6][7]*t->Phi[6][7] + w->M[6][8]*t->Phi[6][8] +
-            w->M[6][9]*t->Phi[6][9] + w->M[6][10]*t->Phi[6][10] + t->Qd[6][6]; w->Pn[6][6] = v;
-            check += v - v;
-    v = w->M[6][7]; w->Pn[6][7] = v; w->Pn[7][6] = v; check += v - v;
-    v = w->M[6][8]; w->Pn[6][8] = v; w->Pn[8][6] = v; check += v - v;
-    v = w->M[6][9]*t->Phi[9][9] + t->Qd[6][9]; w->Pn[6][9] = v; w->Pn[9][6] = v; check += v - v;
-    v = w->M[6][10]*t->Phi[10][10] + t->Qd[6][10]; w->Pn[6][10] = v; w->Pn[10][6] = v; check += v -
-            v;
-    v = w->M[6][11]; w->Pn[6][11] = v; w->Pn[11][6] = v; check += v - v;
-    v = w->M[6][12]; w->Pn[6][12] = v; w->Pn[12][6] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + t->Qd[63]; w->Pn[63] = v; check += v - v;
+    v = w->M[7]; w->Pn[64] = v; check += v - v;
+    v = w->M[8]; w->Pn[65] = v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[66]; w->Pn[66] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[67]; w->Pn[67] = v; check += v - v;
+    v = w->M[11]; w->Pn[68] = v; check += v - v;
+    v = w->M[12]; w->Pn[69] = v; check += v - v;
     return check;
 }
 
@@ -2557,12 +2505,12 @@ static ned_doppler13_reduced_scalar propagate_row_7(const ned_doppler13_reduced_
         *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = f->P[7][7]; w->Pn[7][7] = v; check += v - v;
-    v = f->P[7][8]; w->Pn[7][8] = v; w->Pn[8][7] = v; check += v - v;
-    v = f->P[7][9]*t->Phi[9][9]; w->Pn[7][9] = v; w->Pn[9][7] = v; check += v - v;
-    v = f->P[7][10]*t->Phi[10][10]; w->Pn[7][10] = v; w->Pn[10][7] = v; check += v - v;
-    v = f->P[7][11]; w->Pn[7][11] = v; w->Pn[11][7] = v; check += v - v;
-    v = f->P[7][12]; w->Pn[7][12] = v; w->Pn[12][7] = v; check += v - v;
+    v = f->P[7][7]; w->Pn[70] = v; check += v - v;
+    v = f->P[7][8]; w->Pn[71] = v; check += v - v;
+    v = f->P[7][9]*t->Phi[9][9]; w->Pn[72] = v; check += v - v;
+    v = f->P[7][10]*t->Phi[10][10]; w->Pn[73] = v; check += v - v;
+    v = f->P[7][11]; w->Pn[74] = v; check += v - v;
+    v = f->P[7][12]; w->Pn[75] = v; check += v - v;
     return check;
 }
 
@@ -2572,12 +2520,31 @@ static ned_doppler13_reduced_scalar propagate_row_8(const ned_doppler13_reduced_
         *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = f->P[8][8]; w->Pn[8][8] = v; check += v - v;
-    v = f->P[8][9]*t->Phi[9][9]; w->Pn[8][9] = v; w->Pn[9][8] = v; check += v - v;
-    v = f->P[8][10]*t->Phi[10][10]; w->Pn[8][10] = v; w->Pn[10][8] = v; check += v - v;
-    v = f->P[8][11]; w->Pn[8][11] = v; w->Pn[11][8] = v; check += v - v;
-    v = f->P[8][12]; w->Pn[8][12] = v; w->Pn[12][8] = v; check += v - v;
+    v = f->P[8][8]; w->Pn[76] = v; check += v - v;
+    v = f->P[8][9]*t->Phi[9][9]; w->Pn[77] = v; check += v - v;
+    v = f->P[8][10]*t->Phi[10][10]; w->Pn[78] = v; check += v - v;
+    v = f->P[8][11]; w->Pn[79] = v; check += v - v;
+    v = f->P[8][12]; w->Pn[80] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_9(const ned_doppler13_reduced_filter *restrict f, const
+        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
+        w)
+{
+    w->M[0] = t->Phi[9][9]*f->P[9][0];
+    w->M[1] = t->Phi[9][9]*f->P[9][1];
+    w->M[2] = t->Phi[9][9]*f->P[9][2];
+    w->M[3] = t->Phi[9][9]*f->P[9][3];
+    w->M[4] = t->Phi[9][9]*f->P[9][4];
+    w->M[5] = t->Phi[9][9]*f->P[9][5];
+    w->M[6] = t->Phi[9][9]*f->P[9][6];
+    w->M[7] = t->Phi[9][9]*f->P[9][7];
+    w->M[8] = t->Phi[9][9]*f->P[9][8];
+    w->M[9] = t->Phi[9][9]*f->P[9][9];
+    w->M[10] = t->Phi[9][9]*f->P[9][10];
+    w->M[11] = t->Phi[9][9]*f->P[9][11];
+    w->M[12] = t->Phi[9][9]*f->P[9][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2585,11 +2552,30 @@ static ned_doppler13_reduced_scalar propagate_row_9(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[9][9]*t->Phi[9][9] + t->Qd[9][9]; w->Pn[9][9] = v; check += v - v;
-    v = w->M[9][10]*t->Phi[10][10]; w->Pn[9][10] = v; w->Pn[10][9] = v; check += v - v;
-    v = w->M[9][11]; w->Pn[9][11] = v; w->Pn[11][9] = v; check += v - v;
-    v = w->M[9][12]; w->Pn[9][12] = v; w->Pn[12][9] = v; check += v - v;
+    v = w->M[9]*t->Phi[9][9] + t->Qd[81]; w->Pn[81] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10]; w->Pn[82] = v; check += v - v;
+    v = w->M[11]; w->Pn[83] = v; check += v - v;
+    v = w->M[12]; w->Pn[84] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_10(const ned_doppler13_reduced_filter *restrict f, const
+        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
+        w)
+{
+    w->M[0] = t->Phi[10][10]*f->P[10][0];
+    w->M[1] = t->Phi[10][10]*f->P[10][1];
+    w->M[2] = t->Phi[10][10]*f->P[10][2];
+    w->M[3] = t->Phi[10][10]*f->P[10][3];
+    w->M[4] = t->Phi[10][10]*f->P[10][4];
+    w->M[5] = t->Phi[10][10]*f->P[10][5];
+    w->M[6] = t->Phi[10][10]*f->P[10][6];
+    w->M[7] = t->Phi[10][10]*f->P[10][7];
+    w->M[8] = t->Phi[10][10]*f->P[10][8];
+    w->M[9] = t->Phi[10][10]*f->P[10][9];
+    w->M[10] = t->Phi[10][10]*f->P[10][10];
+    w->M[11] = t->Phi[10][10]*f->P[10][11];
+    w->M[12] = t->Phi[10][10]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2597,9 +2583,9 @@ static ned_doppler13_reduced_scalar propagate_row_10(const ned_doppler13_reduced
         *restrict t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[10][10]*t->Phi[10][10] + t->Qd[10][10]; w->Pn[10][10] = v; check += v - v;
-    v = w->M[10][11]; w->Pn[10][11] = v; w->Pn[11][10] = v; check += v - v;
-    v = w->M[10][12]; w->Pn[10][12] = v; w->Pn[12][10] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[85]; w->Pn[85] = v; check += v - v;
+    v = w->M[11]; w->Pn[86] = v; check += v - v;
+    v = w->M[12]; w->Pn[87] = v; check += v - v;
     return check;
 }
 
@@ -2608,8 +2594,8 @@ static ned_doppler13_reduced_scalar propagate_row_11(const ned_doppler13_reduced
         ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = f->P[11][11]; w->Pn[11][11] = v; check += v - v;
-    v = f->P[11][12]; w->Pn[11][12] = v; w->Pn[12][11] = v; check += v - v;
+    v = f->P[11][11]; w->Pn[88] = v; check += v - v;
+    v = f->P[11][12]; w->Pn[89] = v; check += v - v;
     return check;
 }
 
@@ -2618,7 +2604,7 @@ static ned_doppler13_reduced_scalar propagate_row_12(const ned_doppler13_reduced
         ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = f->P[12][12]; w->Pn[12][12] = v; check += v - v;
+    v = f->P[12][12]; w->Pn[90] = v; check += v - v;
     return check;
 }
 
@@ -2672,27 +2658,27 @@ int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, cons
     check += f->x[8] - f->x[8];
     check += f->x[11] - f->x[11];
     check += f->x[12] - f->x[12];
-    /* M = Phi P (rows of Phi that are e_i are read from P directly), then
-       Pn = M Phi^T + Q_d (each pair computed once, stored in both triangles) */
+    /* row by row: M = row i of Phi P (a row of Phi that is e_i reads P directly), then
+       row i of Pn = M Phi^T + Q_d (each pair computed once, into the packed upper triangle) */
     phi_times_p_row_0(f, t, w);
-    phi_times_p_row_1(f, t, w);
-    phi_times_p_row_2(f, t, w);
-    phi_times_p_row_3(f, t, w);
-    phi_times_p_row_4(f, t, w);
-    phi_times_p_row_5(f, t, w);
-    phi_times_p_row_6(f, t, w);
-    phi_times_p_row_9(f, t, w);
-    phi_times_p_row_10(f, t, w);
     check += propagate_row_0(t, w);
+    phi_times_p_row_1(f, t, w);
     check += propagate_row_1(t, w);
+    phi_times_p_row_2(f, t, w);
     check += propagate_row_2(t, w);
+    phi_times_p_row_3(f, t, w);
     check += propagate_row_3(t, w);
+    phi_times_p_row_4(f, t, w);
     check += propagate_row_4(t, w);
+    phi_times_p_row_5(f, t, w);
     check += propagate_row_5(t, w);
+    phi_times_p_row_6(f, t, w);
     check += propagate_row_6(t, w);
     check += propagate_row_7(f, t, w);
     check += propagate_row_8(f, t, w);
+    phi_times_p_row_9(f, t, w);
     check += propagate_row_9(t, w);
+    phi_times_p_row_10(f, t, w);
     check += propagate_row_10(t, w);
     check += propagate_row_11(f, w);
     check += propagate_row_12(f, w);
@@ -2708,7 +2694,98 @@ int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, cons
     f->x[6] = w->xn[6];
     f->x[9] = w->xn[9];
     f->x[10] = w->xn[10];
-    memcpy(f->P, w->Pn, sizeof f->P);
+    /* row i of P from Pn's packed row, then its column */
+    memcpy(&f->P[0][0], &w->Pn[0], 13 * sizeof w->Pn[0]);
+    f->P[1][0] = f->P[0][1];
+    f->P[2][0] = f->P[0][2];
+    f->P[3][0] = f->P[0][3];
+    f->P[4][0] = f->P[0][4];
+    f->P[5][0] = f->P[0][5];
+    f->P[6][0] = f->P[0][6];
+    f->P[7][0] = f->P[0][7];
+    f->P[8][0] = f->P[0][8];
+    f->P[9][0] = f->P[0][9];
+    f->P[10][0] = f->P[0][10];
+    f->P[11][0] = f->P[0][11];
+    f->P[12][0] = f->P[0][12];
+    memcpy(&f->P[1][1], &w->Pn[13], 12 * sizeof w->Pn[0]);
+    f->P[2][1] = f->P[1][2];
+    f->P[3][1] = f->P[1][3];
+    f->P[4][1] = f->P[1][4];
+    f->P[5][1] = f->P[1][5];
+    f->P[6][1] = f->P[1][6];
+    f->P[7][1] = f->P[1][7];
+    f->P[8][1] = f->P[1][8];
+    f->P[9][1] = f->P[1][9];
+    f->P[10][1] = f->P[1][10];
+    f->P[11][1] = f->P[1][11];
+    f->P[12][1] = f->P[1][12];
+    memcpy(&f->P[2][2], &w->Pn[25], 11 * sizeof w->Pn[0]);
+    f->P[3][2] = f->P[2][3];
+    f->P[4][2] = f->P[2][4];
+    f->P[5][2] = f->P[2][5];
+    f->P[6][2] = f->P[2][6];
+    f->P[7][2] = f->P[2][7];
+    f->P[8][2] = f->P[2][8];
+    f->P[9][2] = f->P[2][9];
+    f->P[10][2] = f->P[2][10];
+    f->P[11][2] = f->P[2][11];
+    f->P[12][2] = f->P[2][12];
+    memcpy(&f->P[3][3], &w->Pn[36], 10 * sizeof w->Pn[0]);
+    f->P[4][3] = f->P[3][4];
+    f->P[5][3] = f->P[3][5];
+    f->P[6][3] = f->P[3][6];
+    f->P[7][3] = f->P[3][7];
+    f->P[8][3] = f->P[3][8];
+    f->P[9][3] = f->P[3][9];
+    f->P[10][3] = f->P[3][10];
+    f->P[11][3] = f->P[3][11];
+    f->P[12][3] = f->P[3][12];
+    memcpy(&f->P[4][4], &w->Pn[46], 9 * sizeof w->Pn[0]);
+    f->P[5][4] = f->P[4][5];
+    f->P[6][4] = f->P[4][6];
+    f->P[7][4] = f->P[4][7];
+    f->P[8][4] = f->P[4][8];
+    f->P[9][4] = f->P[4][9];
+    f->P[10][4] = f->P[4][10];
+    f->P[11][4] = f->P[4][11];
+    f->P[12][4] = f->P[4][12];
+    memcpy(&f->P[5][5], &w->Pn[55], 8 * sizeof w->Pn[0]);
+    f->P[6][5] = f->P[5][6];
+    f->P[7][5] = f->P[5][7];
+    f->P[8][5] = f->P[5][8];
+    f->P[9][5] = f->P[5][9];
+    f->P[10][5] = f->P[5][10];
+    f->P[11][5] = f->P[5][11];
+    f->P[12][5] = f->P[5][12];
+    memcpy(&f->P[6][6], &w->Pn[63], 7 * sizeof w->Pn[0]);
+    f->P[7][6] = f->P[6][7];
+    f->P[8][6] = f->P[6][8];
+    f->P[9][6] = f->P[6][9];
+    f->P[10][6] = f->P[6][10];
+    f->P[11][6] = f->P[6][11];
+    f->P[12][6] = f->P[6][12];
+    memcpy(&f->P[7][7], &w->Pn[70], 6 * sizeof w->Pn[0]);
+    f->P[8][7] = f->P[7][8];
+    f->P[9][7] = f->P[7][9];
+    f->P[10][7] = f->P[7][10];
+    f->P[11][7] = f->P[7][11];
+    f->P[12][7] = f->P[7][12];
+    memcpy(&f->P[8][8], &w->Pn[76], 5 * sizeof w->Pn[0]);
+    f->P[9][8] = f->P[8][9];
+    f->P[10][8] = f->P[8][10];
+    f->P[11][8] = f->P[8][11];
+    f->P[12][8] = f->P[8][12];
+    memcpy(&f->P[9][9], &w->Pn[81], 4 * sizeof w->Pn[0]);
+    f->P[10][9] = f->P[9][10];
+    f->P[11][9] = f->P[9][11];
+    f->P[12][9] = f->P[9][12];
+    memcpy(&f->P[10][10], &w->Pn[85], 3 * sizeof w->Pn[0]);
+    f->P[11][10] = f->P[10][11];
+    f->P[12][10] = f->P[10][12];
+    memcpy(&f->P[11][11], &w->Pn[88], 2 * sizeof w->Pn[0]);
+    f->P[12][11] = f->P[11][12];
+    memcpy(&f->P[12][12], &w->Pn[90], 1 * sizeof w->Pn[0]);
     return NED_DOPPLER13_REDUCED_OK;
 }
 
@@ -2729,7 +2806,7 @@ int ned_doppler13_reduced_set_covariance(ned_doppler13_reduced_filter *restrict 
     if (check != 0.0) {
         return NED_DOPPLER13_REDUCED_ERR_NONFINITE;
     }
-    /* factored only to test that P is positive semidefinite (U in M, D in xn) */
+    /* factored only to test that P is positive semidefinite (U in Pn's upper triangle, D in xn) */
     /* The contract (README, "Generated code"), tol = 16 N eps: P_ii >= 0,
        |P_ij - P_ji| <= tol sqrt(P_ii P_jj) and |P_ij| <= sqrt(P_ii P_jj) (1 + tol),
        so that a zero variance carries no correlation. */
@@ -2758,7 +2835,8 @@ int ned_doppler13_reduced_set_covariance(ned_doppler13_reduced_filter *restrict 
     for (j = NED_DOPPLER13_REDUCED_N_STATES - 1; j >= 0; --j) {
         ned_doppler13_reduced_scalar pivot = P[j * NED_DOPPLER13_REDUCED_N_STATES + j];
         for (k = j + 1; k < NED_DOPPLER13_REDUCED_N_STATES; ++k) {
-            pivot -= w->xn[k] * w->M[j][k] * w->M[j][k];
+            pivot -= w->xn[k] * w->Pn[NED_DOPPLER13_REDUCED_PACKED_UPPER(j, k)] *
+                    w->Pn[NED_DOPPLER13_REDUCED_PACKED_UPPER(j, k)];
         }
         if (pivot < 0.0) {
             if (pivot < -(16 * NED_DOPPLER13_REDUCED_N_STATES * DBL_EPSILON) * P[j *
@@ -2772,15 +2850,17 @@ int ned_doppler13_reduced_set_covariance(ned_doppler13_reduced_filter *restrict 
         for (i = 0; i < j; ++i) {
             ned_doppler13_reduced_scalar s = P[i * NED_DOPPLER13_REDUCED_N_STATES + j];
             for (k = j + 1; k < NED_DOPPLER13_REDUCED_N_STATES; ++k) {
-                s -= w->xn[k] * w->M[i][k] * w->M[j][k];
+                s -= w->xn[k] * w->Pn[NED_DOPPLER13_REDUCED_PACKED_UPPER(i, k)] *
+                        w->Pn[NED_DOPPLER13_REDUCED_PACKED_UPPER(j, k)];
             }
             if (!(pivot > 0.0) && fabs(s) > (16 * NED_DOPPLER13_REDUCED_N_STATES * DBL_EPSILON) *
                     sqrt(P[i * NED_DOPPLER13_REDUCED_N_STATES + i] * P[j *
                     NED_DOPPLER13_REDUCED_N_STATES + j])) {
                 return NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE;
             }
-            w->M[i][j] = (pivot > 0.0) ? s / pivot : 0.0;
-            check += w->M[i][j] - w->M[i][j];
+            w->Pn[NED_DOPPLER13_REDUCED_PACKED_UPPER(i, j)] = (pivot > 0.0) ? s / pivot : 0.0;
+            check += w->Pn[NED_DOPPLER13_REDUCED_PACKED_UPPER(i, j)] -
+                    w->Pn[NED_DOPPLER13_REDUCED_PACKED_UPPER(i, j)];
         }
         check += pivot - pivot;
     }
@@ -2954,7 +3034,7 @@ int ned_doppler13_reduced_update_masked(ned_doppler13_reduced_filter *restrict f
                 s += w->C[i][a] * w->K[j][a] - w->K[i][a] * w->HP[a][j] - w->HP[a][i] * w->K[j][a];
             }
             check += s - s;
-            w->Pn[i][j] = s;
+            w->Pn[NED_DOPPLER13_REDUCED_PACKED_UPPER(i, j)] = s;
         }
         w->xn[i] = f->x[i];
         for (a = 0; a < NED_DOPPLER13_REDUCED_N_MEASUREMENTS; ++a) {
@@ -2968,11 +3048,99 @@ int ned_doppler13_reduced_update_masked(ned_doppler13_reduced_filter *restrict f
     /* commit only once everything is known to be finite */
     for (i = 0; i < NED_DOPPLER13_REDUCED_N_STATES; ++i) {
         f->x[i] = w->xn[i];
-        for (j = i; j < NED_DOPPLER13_REDUCED_N_STATES; ++j) {
-            f->P[i][j] = w->Pn[i][j];
-            f->P[j][i] = w->Pn[i][j];
-        }
     }
+    /* row i of P from Pn's packed row, then its column */
+    memcpy(&f->P[0][0], &w->Pn[0], 13 * sizeof w->Pn[0]);
+    f->P[1][0] = f->P[0][1];
+    f->P[2][0] = f->P[0][2];
+    f->P[3][0] = f->P[0][3];
+    f->P[4][0] = f->P[0][4];
+    f->P[5][0] = f->P[0][5];
+    f->P[6][0] = f->P[0][6];
+    f->P[7][0] = f->P[0][7];
+    f->P[8][0] = f->P[0][8];
+    f->P[9][0] = f->P[0][9];
+    f->P[10][0] = f->P[0][10];
+    f->P[11][0] = f->P[0][11];
+    f->P[12][0] = f->P[0][12];
+    memcpy(&f->P[1][1], &w->Pn[13], 12 * sizeof w->Pn[0]);
+    f->P[2][1] = f->P[1][2];
+    f->P[3][1] = f->P[1][3];
+    f->P[4][1] = f->P[1][4];
+    f->P[5][1] = f->P[1][5];
+    f->P[6][1] = f->P[1][6];
+    f->P[7][1] = f->P[1][7];
+    f->P[8][1] = f->P[1][8];
+    f->P[9][1] = f->P[1][9];
+    f->P[10][1] = f->P[1][10];
+    f->P[11][1] = f->P[1][11];
+    f->P[12][1] = f->P[1][12];
+    memcpy(&f->P[2][2], &w->Pn[25], 11 * sizeof w->Pn[0]);
+    f->P[3][2] = f->P[2][3];
+    f->P[4][2] = f->P[2][4];
+    f->P[5][2] = f->P[2][5];
+    f->P[6][2] = f->P[2][6];
+    f->P[7][2] = f->P[2][7];
+    f->P[8][2] = f->P[2][8];
+    f->P[9][2] = f->P[2][9];
+    f->P[10][2] = f->P[2][10];
+    f->P[11][2] = f->P[2][11];
+    f->P[12][2] = f->P[2][12];
+    memcpy(&f->P[3][3], &w->Pn[36], 10 * sizeof w->Pn[0]);
+    f->P[4][3] = f->P[3][4];
+    f->P[5][3] = f->P[3][5];
+    f->P[6][3] = f->P[3][6];
+    f->P[7][3] = f->P[3][7];
+    f->P[8][3] = f->P[3][8];
+    f->P[9][3] = f->P[3][9];
+    f->P[10][3] = f->P[3][10];
+    f->P[11][3] = f->P[3][11];
+    f->P[12][3] = f->P[3][12];
+    memcpy(&f->P[4][4], &w->Pn[46], 9 * sizeof w->Pn[0]);
+    f->P[5][4] = f->P[4][5];
+    f->P[6][4] = f->P[4][6];
+    f->P[7][4] = f->P[4][7];
+    f->P[8][4] = f->P[4][8];
+    f->P[9][4] = f->P[4][9];
+    f->P[10][4] = f->P[4][10];
+    f->P[11][4] = f->P[4][11];
+    f->P[12][4] = f->P[4][12];
+    memcpy(&f->P[5][5], &w->Pn[55], 8 * sizeof w->Pn[0]);
+    f->P[6][5] = f->P[5][6];
+    f->P[7][5] = f->P[5][7];
+    f->P[8][5] = f->P[5][8];
+    f->P[9][5] = f->P[5][9];
+    f->P[10][5] = f->P[5][10];
+    f->P[11][5] = f->P[5][11];
+    f->P[12][5] = f->P[5][12];
+    memcpy(&f->P[6][6], &w->Pn[63], 7 * sizeof w->Pn[0]);
+    f->P[7][6] = f->P[6][7];
+    f->P[8][6] = f->P[6][8];
+    f->P[9][6] = f->P[6][9];
+    f->P[10][6] = f->P[6][10];
+    f->P[11][6] = f->P[6][11];
+    f->P[12][6] = f->P[6][12];
+    memcpy(&f->P[7][7], &w->Pn[70], 6 * sizeof w->Pn[0]);
+    f->P[8][7] = f->P[7][8];
+    f->P[9][7] = f->P[7][9];
+    f->P[10][7] = f->P[7][10];
+    f->P[11][7] = f->P[7][11];
+    f->P[12][7] = f->P[7][12];
+    memcpy(&f->P[8][8], &w->Pn[76], 5 * sizeof w->Pn[0]);
+    f->P[9][8] = f->P[8][9];
+    f->P[10][8] = f->P[8][10];
+    f->P[11][8] = f->P[8][11];
+    f->P[12][8] = f->P[8][12];
+    memcpy(&f->P[9][9], &w->Pn[81], 4 * sizeof w->Pn[0]);
+    f->P[10][9] = f->P[9][10];
+    f->P[11][9] = f->P[9][11];
+    f->P[12][9] = f->P[9][12];
+    memcpy(&f->P[10][10], &w->Pn[85], 3 * sizeof w->Pn[0]);
+    f->P[11][10] = f->P[10][11];
+    f->P[12][10] = f->P[10][12];
+    memcpy(&f->P[11][11], &w->Pn[88], 2 * sizeof w->Pn[0]);
+    f->P[12][11] = f->P[11][12];
+    memcpy(&f->P[12][12], &w->Pn[90], 1 * sizeof w->Pn[0]);
     if (innovation != NULL) {
         for (a = 0; a < NED_DOPPLER13_REDUCED_N_MEASUREMENTS; ++a) {
             innovation[a] = w->nu0[a];

@@ -14,8 +14,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 73 operations after CSE
- *   discretize: 3042 mul + 2153 add = 5195 flops
- *   discretize, each doubling (long steps): 967 mul + 981 add = 1948 flops
+ *   discretize: 2190 mul + 1542 add = 3732 flops
+ *   discretize, each doubling (long steps): 1025 mul + 1017 add = 2042 flops
  *   predict (C): 1330 mul + 1199 add = 2529 flops
  *   predict (Python): 2054 mul + 1989 add = 4043 flops
  *   predict (dense, for comparison): 4407 mul + 4225 add = 8632 flops
@@ -36,8 +36,8 @@
 #define NED_DOPPLER13_REDUCED_NNZ_H 4
 /* highest order of the Taylor series of discretize */
 #define NED_DOPPLER13_REDUCED_TAYLOR_ORDER 9
-#define NED_DOPPLER13_REDUCED_N_TERMS 86   /* entries of discretize's compressed term arrays */
-#define NED_DOPPLER13_REDUCED_N_ACTIVE_ENTRIES 86   /* entries of Phi in rows that are not e_i */
+#define NED_DOPPLER13_REDUCED_N_TERMS 73   /* entries of discretize's compressed term arrays */
+#define NED_DOPPLER13_REDUCED_N_ACTIVE_ENTRIES 73   /* entries of Phi in rows that are not e_i */
 #define NED_DOPPLER13_REDUCED_FORM_COVARIANCE 1
 
 #define NED_DOPPLER13_REDUCED_OK 0
@@ -156,8 +156,8 @@ typedef struct {
     ned_doppler13_reduced_scalar
             Phi[NED_DOPPLER13_REDUCED_N_STATES][NED_DOPPLER13_REDUCED_N_STATES]; /* transition
             matrix */
-    ned_doppler13_reduced_scalar Qd[NED_DOPPLER13_REDUCED_N_STATES][NED_DOPPLER13_REDUCED_N_STATES];
-            /* Gamma (Q/T) Gamma^T */
+    ned_doppler13_reduced_scalar Qd[NED_DOPPLER13_REDUCED_N_PACKED]; /* Gamma (Q/T) Gamma^T, packed
+            upper triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } ned_doppler13_reduced_transition;
 
 /* The filter state: estimate and covariance (or its factors). */
@@ -175,18 +175,14 @@ typedef struct {
             + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal
             rows */
     ned_doppler13_reduced_scalar fh[NED_DOPPLER13_REDUCED_NNZ_F]; /* F h at the nonzeros of F */
-    ned_doppler13_reduced_scalar row_sum[NED_DOPPLER13_REDUCED_N_STATES]; /* balancing: off-diagonal
-            row sums of D^-1 |F| D */
-    ned_doppler13_reduced_scalar col_sum[NED_DOPPLER13_REDUCED_N_STATES]; /* balancing: off-diagonal
-            column sums of D^-1 |F| D */
 } ned_doppler13_reduced_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */
 typedef struct {
-    ned_doppler13_reduced_scalar M[NED_DOPPLER13_REDUCED_N_STATES][NED_DOPPLER13_REDUCED_N_STATES];
-            /* Phi P */
-    ned_doppler13_reduced_scalar Pn[NED_DOPPLER13_REDUCED_N_STATES][NED_DOPPLER13_REDUCED_N_STATES];
-            /* new covariance before it is committed */
+    ned_doppler13_reduced_scalar M[NED_DOPPLER13_REDUCED_N_STATES]; /* one row of Phi P (predict
+            works row by row) */
+    ned_doppler13_reduced_scalar Pn[NED_DOPPLER13_REDUCED_N_PACKED]; /* new covariance before it is
+            committed, packed upper triangle */
     ned_doppler13_reduced_scalar xn[NED_DOPPLER13_REDUCED_N_STATES];
     ned_doppler13_reduced_scalar HP[2][NED_DOPPLER13_REDUCED_N_STATES];
     ned_doppler13_reduced_scalar L[2][2]; /* Cholesky factor of the innovation covariance */

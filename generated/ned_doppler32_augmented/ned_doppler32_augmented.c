@@ -11,8 +11,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 112 operations after CSE
- *   discretize: 7239 mul + 5236 add = 12475 flops
- *   discretize, each doubling (long steps): 2616 mul + 2721 add = 5337 flops
+ *   discretize: 3519 mul + 2418 add = 5937 flops
+ *   discretize, each doubling (long steps): 2934 mul + 2922 add = 5856 flops
  *   predict (C): 7312 mul + 6850 add = 14162 flops
  *   predict (Python): 12928 mul + 13120 add = 26048 flops
  *   predict (dense, for comparison): 65568 mul + 64512 add = 130080 flops
@@ -29,6 +29,10 @@
 #include <stdint.h>
 #include <string.h>
 
+/* Index of (i, j), i <= j (and with packed storage of P, of any (i, j)) of a symmetric
+   matrix stored as a packed upper triangle, row by row: Q_d and Pn always, P if packed. */
+#define NED_DOPPLER32_AUGMENTED_PACKED_UPPER(i, j) \
+        ((i) * (2 * NED_DOPPLER32_AUGMENTED_N_STATES - (i) - 1) / 2 + (j))
 
 const char *const ned_doppler32_augmented_state_names[NED_DOPPLER32_AUGMENTED_N_STATES] = {
     "attitude_error_north",
@@ -583,136 +587,136 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_level_1_into_S(ned_doppler32_augmented
     w->S[3] = 0;
     w->S[4] = w->fh[2]*c_in;
     w->S[5] = w->fh[3]*c_in;
-    w->S[6] = 0;
-    w->S[7] = w->fh[4]*c_in;
-    w->S[8] = w->fh[5]*c_in;
-    w->S[9] = w->fh[6]*c_in;
-    w->S[10] = w->fh[7]*c_in;
-    w->S[11] = w->fh[8]*c_in;
-    w->S[12] = w->fh[9]*c_in;
-    w->S[13] = 0;
-    w->S[14] = 0;
-    w->S[15] = 0;
+    w->S[6] = w->fh[7]*c_in;
+    w->S[7] = w->fh[8]*c_in;
+    w->S[8] = w->fh[9]*c_in;
+    w->S[9] = 0;
+    w->S[10] = 0;
+    w->S[11] = 0;
+    w->S[12] = w->fh[19]*c_in;
+    w->S[13] = c_out;
+    w->S[14] = w->fh[20]*c_in;
+    w->S[15] = w->fh[21]*c_in;
     w->S[16] = 0;
     w->S[17] = 0;
-    w->S[18] = w->fh[10]*c_in;
-    w->S[19] = w->fh[11]*c_in;
-    w->S[20] = w->fh[12]*c_in;
-    w->S[21] = w->fh[13]*c_in;
-    w->S[22] = w->fh[14]*c_in;
-    w->S[23] = w->fh[15]*c_in;
-    w->S[24] = w->fh[16]*c_in;
-    w->S[25] = w->fh[17]*c_in;
-    w->S[26] = w->fh[18]*c_in;
+    w->S[18] = w->fh[25]*c_in;
+    w->S[19] = w->fh[26]*c_in;
+    w->S[20] = w->fh[27]*c_in;
+    w->S[21] = 0;
+    w->S[22] = 0;
+    w->S[23] = 0;
+    w->S[24] = w->fh[37]*c_in;
+    w->S[25] = w->fh[38]*c_in;
+    w->S[26] = c_out;
     w->S[27] = 0;
-    w->S[28] = 0;
-    w->S[29] = 0;
-    w->S[30] = w->fh[19]*c_in;
-    w->S[31] = c_out;
-    w->S[32] = w->fh[20]*c_in;
-    w->S[33] = w->fh[21]*c_in;
+    w->S[28] = w->fh[39]*c_in;
+    w->S[29] = w->fh[40]*c_in;
+    w->S[30] = w->fh[44]*c_in;
+    w->S[31] = w->fh[45]*c_in;
+    w->S[32] = w->fh[46]*c_in;
+    w->S[33] = 0;
     w->S[34] = 0;
     w->S[35] = 0;
     w->S[36] = 0;
-    w->S[37] = w->fh[22]*c_in;
-    w->S[38] = w->fh[23]*c_in;
-    w->S[39] = w->fh[24]*c_in;
-    w->S[40] = w->fh[25]*c_in;
-    w->S[41] = w->fh[26]*c_in;
-    w->S[42] = w->fh[27]*c_in;
+    w->S[37] = w->fh[56]*c_in;
+    w->S[38] = w->fh[57]*c_in;
+    w->S[39] = c_out + w->fh[58]*c_in;
+    w->S[40] = w->fh[59]*c_in;
+    w->S[41] = w->fh[60]*c_in;
+    w->S[42] = 0;
     w->S[43] = 0;
     w->S[44] = 0;
-    w->S[45] = 0;
-    w->S[46] = 0;
-    w->S[47] = 0;
-    w->S[48] = w->fh[28]*c_in;
-    w->S[49] = w->fh[29]*c_in;
-    w->S[50] = w->fh[30]*c_in;
-    w->S[51] = w->fh[31]*c_in;
-    w->S[52] = w->fh[32]*c_in;
-    w->S[53] = w->fh[33]*c_in;
-    w->S[54] = w->fh[34]*c_in;
-    w->S[55] = w->fh[35]*c_in;
-    w->S[56] = w->fh[36]*c_in;
-    w->S[57] = 0;
-    w->S[58] = 0;
-    w->S[59] = 0;
-    w->S[60] = w->fh[37]*c_in;
-    w->S[61] = w->fh[38]*c_in;
-    w->S[62] = c_out;
-    w->S[63] = 0;
-    w->S[64] = w->fh[39]*c_in;
-    w->S[65] = w->fh[40]*c_in;
+    w->S[45] = w->fh[61]*c_in;
+    w->S[46] = w->fh[62]*c_in;
+    w->S[47] = w->fh[63]*c_in;
+    w->S[48] = w->fh[67]*c_in;
+    w->S[49] = 0;
+    w->S[50] = w->fh[68]*c_in;
+    w->S[51] = w->fh[69]*c_in;
+    w->S[52] = c_out + w->fh[70]*c_in;
+    w->S[53] = w->fh[71]*c_in;
+    w->S[54] = 0;
+    w->S[55] = 0;
+    w->S[56] = 0;
+    w->S[57] = w->fh[72]*c_in;
+    w->S[58] = w->fh[73]*c_in;
+    w->S[59] = w->fh[74]*c_in;
+    w->S[60] = 0;
+    w->S[61] = 0;
+    w->S[62] = 0;
+    w->S[63] = w->fh[78]*c_in;
+    w->S[64] = 0;
+    w->S[65] = c_out;
     w->S[66] = 0;
-    w->S[67] = w->fh[41]*c_in;
-    w->S[68] = w->fh[42]*c_in;
-    w->S[69] = w->fh[43]*c_in;
-    w->S[70] = w->fh[44]*c_in;
-    w->S[71] = w->fh[45]*c_in;
-    w->S[72] = w->fh[46]*c_in;
+    w->S[67] = 0;
+    w->S[68] = 0;
+    w->S[69] = 0;
+    w->S[70] = 0;
+    w->S[71] = 0;
+    w->S[72] = 0;
     w->S[73] = 0;
     w->S[74] = 0;
     w->S[75] = 0;
-    w->S[76] = 0;
-    w->S[77] = 0;
-    w->S[78] = w->fh[47]*c_in;
-    w->S[79] = w->fh[48]*c_in;
-    w->S[80] = w->fh[49]*c_in;
-    w->S[81] = w->fh[50]*c_in;
-    w->S[82] = w->fh[51]*c_in;
-    w->S[83] = w->fh[52]*c_in;
-    w->S[84] = w->fh[53]*c_in;
-    w->S[85] = w->fh[54]*c_in;
-    w->S[86] = w->fh[55]*c_in;
-    w->S[87] = 0;
-    w->S[88] = 0;
-    w->S[89] = 0;
-    w->S[90] = 0;
-    w->S[91] = w->fh[56]*c_in;
-    w->S[92] = w->fh[57]*c_in;
-    w->S[93] = c_out + w->fh[58]*c_in;
-    w->S[94] = w->fh[59]*c_in;
-    w->S[95] = w->fh[60]*c_in;
-    w->S[96] = 0;
-    w->S[97] = 0;
-    w->S[98] = 0;
-    w->S[99] = 0;
-    w->S[100] = 0;
-    w->S[101] = 0;
+    w->S[76] = w->fh[79]*c_in;
+    w->S[77] = w->fh[80]*c_in;
+    w->S[78] = 0;
+    w->S[79] = 0;
+    w->S[80] = 0;
+    w->S[81] = 0;
+    w->S[82] = 0;
+    w->S[83] = 0;
+    w->S[84] = c_out + w->fh[81]*c_in;
+    w->S[85] = c_out + w->fh[82]*c_in;
+    w->S[86] = c_out + w->fh[83]*c_in;
+    w->S[87] = c_out + w->fh[84]*c_in;
+    w->S[88] = c_out + w->fh[85]*c_in;
+    w->S[89] = c_out + w->fh[86]*c_in;
+    w->S[90] = w->fh[4]*c_in;
+    w->S[91] = w->fh[5]*c_in;
+    w->S[92] = w->fh[6]*c_in;
+    w->S[93] = w->fh[10]*c_in;
+    w->S[94] = w->fh[11]*c_in;
+    w->S[95] = w->fh[12]*c_in;
+    w->S[96] = w->fh[13]*c_in;
+    w->S[97] = w->fh[14]*c_in;
+    w->S[98] = w->fh[15]*c_in;
+    w->S[99] = w->fh[16]*c_in;
+    w->S[100] = w->fh[17]*c_in;
+    w->S[101] = w->fh[18]*c_in;
     w->S[102] = 0;
-    w->S[103] = w->fh[61]*c_in;
-    w->S[104] = w->fh[62]*c_in;
-    w->S[105] = w->fh[63]*c_in;
-    w->S[106] = 0;
-    w->S[107] = 0;
-    w->S[108] = 0;
-    w->S[109] = 0;
-    w->S[110] = 0;
-    w->S[111] = 0;
-    w->S[112] = 0;
-    w->S[113] = 0;
-    w->S[114] = 0;
-    w->S[115] = 0;
-    w->S[116] = 0;
-    w->S[117] = w->fh[64]*c_in;
-    w->S[118] = w->fh[65]*c_in;
-    w->S[119] = w->fh[66]*c_in;
-    w->S[120] = w->fh[67]*c_in;
-    w->S[121] = 0;
-    w->S[122] = w->fh[68]*c_in;
-    w->S[123] = w->fh[69]*c_in;
-    w->S[124] = c_out + w->fh[70]*c_in;
-    w->S[125] = w->fh[71]*c_in;
-    w->S[126] = 0;
-    w->S[127] = 0;
-    w->S[128] = 0;
-    w->S[129] = 0;
-    w->S[130] = 0;
-    w->S[131] = 0;
+    w->S[103] = 0;
+    w->S[104] = 0;
+    w->S[105] = w->fh[22]*c_in;
+    w->S[106] = w->fh[23]*c_in;
+    w->S[107] = w->fh[24]*c_in;
+    w->S[108] = w->fh[28]*c_in;
+    w->S[109] = w->fh[29]*c_in;
+    w->S[110] = w->fh[30]*c_in;
+    w->S[111] = w->fh[31]*c_in;
+    w->S[112] = w->fh[32]*c_in;
+    w->S[113] = w->fh[33]*c_in;
+    w->S[114] = w->fh[34]*c_in;
+    w->S[115] = w->fh[35]*c_in;
+    w->S[116] = w->fh[36]*c_in;
+    w->S[117] = 0;
+    w->S[118] = 0;
+    w->S[119] = 0;
+    w->S[120] = w->fh[41]*c_in;
+    w->S[121] = w->fh[42]*c_in;
+    w->S[122] = w->fh[43]*c_in;
+    w->S[123] = w->fh[47]*c_in;
+    w->S[124] = w->fh[48]*c_in;
+    w->S[125] = w->fh[49]*c_in;
+    w->S[126] = w->fh[50]*c_in;
+    w->S[127] = w->fh[51]*c_in;
+    w->S[128] = w->fh[52]*c_in;
+    w->S[129] = w->fh[53]*c_in;
+    w->S[130] = w->fh[54]*c_in;
+    w->S[131] = w->fh[55]*c_in;
     w->S[132] = 0;
-    w->S[133] = w->fh[72]*c_in;
-    w->S[134] = w->fh[73]*c_in;
-    w->S[135] = w->fh[74]*c_in;
+    w->S[133] = 0;
+    w->S[134] = 0;
+    w->S[135] = 0;
     w->S[136] = 0;
     w->S[137] = 0;
     w->S[138] = 0;
@@ -724,24 +728,24 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_level_1_into_S(ned_doppler32_augmented
     w->S[144] = 0;
     w->S[145] = 0;
     w->S[146] = 0;
-    w->S[147] = w->fh[75]*c_in;
-    w->S[148] = w->fh[76]*c_in;
-    w->S[149] = w->fh[77]*c_in;
+    w->S[147] = w->fh[64]*c_in;
+    w->S[148] = w->fh[65]*c_in;
+    w->S[149] = w->fh[66]*c_in;
     w->S[150] = 0;
     w->S[151] = 0;
     w->S[152] = 0;
-    w->S[153] = w->fh[78]*c_in;
+    w->S[153] = 0;
     w->S[154] = 0;
-    w->S[155] = c_out;
+    w->S[155] = 0;
     w->S[156] = 0;
     w->S[157] = 0;
     w->S[158] = 0;
     w->S[159] = 0;
     w->S[160] = 0;
     w->S[161] = 0;
-    w->S[162] = 0;
-    w->S[163] = 0;
-    w->S[164] = 0;
+    w->S[162] = w->fh[75]*c_in;
+    w->S[163] = w->fh[76]*c_in;
+    w->S[164] = w->fh[77]*c_in;
     w->S[165] = 0;
     w->S[166] = 0;
     w->S[167] = 0;
@@ -757,13 +761,13 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_level_1_into_S(ned_doppler32_augmented
     w->S[177] = 0;
     w->S[178] = 0;
     w->S[179] = 0;
-    w->S[180] = 0;
+    w->S[180] = c_out;
     w->S[181] = 0;
     w->S[182] = 0;
     w->S[183] = 0;
-    w->S[184] = w->fh[79]*c_in;
-    w->S[185] = w->fh[80]*c_in;
-    w->S[186] = c_out;
+    w->S[184] = 0;
+    w->S[185] = 0;
+    w->S[186] = 0;
     w->S[187] = 0;
     w->S[188] = 0;
     w->S[189] = 0;
@@ -773,26 +777,6 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_level_1_into_S(ned_doppler32_augmented
     w->S[193] = 0;
     w->S[194] = 0;
     w->S[195] = 0;
-    w->S[196] = 0;
-    w->S[197] = 0;
-    w->S[198] = 0;
-    w->S[199] = 0;
-    w->S[200] = 0;
-    w->S[201] = 0;
-    w->S[202] = 0;
-    w->S[203] = 0;
-    w->S[204] = 0;
-    w->S[205] = 0;
-    w->S[206] = 0;
-    w->S[207] = 0;
-    w->S[208] = 0;
-    w->S[209] = 0;
-    w->S[210] = c_out + w->fh[81]*c_in;
-    w->S[211] = c_out + w->fh[82]*c_in;
-    w->S[212] = c_out + w->fh[83]*c_in;
-    w->S[213] = c_out + w->fh[84]*c_in;
-    w->S[214] = c_out + w->fh[85]*c_in;
-    w->S[215] = c_out + w->fh[86]*c_in;
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void
@@ -805,136 +789,136 @@ NED_DOPPLER32_AUGMENTED_BLOCK void
     w->term[1][3] = 0;
     w->term[1][4] = w->fh[2]*c_in;
     w->term[1][5] = w->fh[3]*c_in;
-    w->term[1][6] = 0;
-    w->term[1][7] = w->fh[4]*c_in;
-    w->term[1][8] = w->fh[5]*c_in;
-    w->term[1][9] = w->fh[6]*c_in;
-    w->term[1][10] = w->fh[7]*c_in;
-    w->term[1][11] = w->fh[8]*c_in;
-    w->term[1][12] = w->fh[9]*c_in;
-    w->term[1][13] = 0;
-    w->term[1][14] = 0;
-    w->term[1][15] = 0;
+    w->term[1][6] = w->fh[7]*c_in;
+    w->term[1][7] = w->fh[8]*c_in;
+    w->term[1][8] = w->fh[9]*c_in;
+    w->term[1][9] = 0;
+    w->term[1][10] = 0;
+    w->term[1][11] = 0;
+    w->term[1][12] = w->fh[19]*c_in;
+    w->term[1][13] = c_out;
+    w->term[1][14] = w->fh[20]*c_in;
+    w->term[1][15] = w->fh[21]*c_in;
     w->term[1][16] = 0;
     w->term[1][17] = 0;
-    w->term[1][18] = w->fh[10]*c_in;
-    w->term[1][19] = w->fh[11]*c_in;
-    w->term[1][20] = w->fh[12]*c_in;
-    w->term[1][21] = w->fh[13]*c_in;
-    w->term[1][22] = w->fh[14]*c_in;
-    w->term[1][23] = w->fh[15]*c_in;
-    w->term[1][24] = w->fh[16]*c_in;
-    w->term[1][25] = w->fh[17]*c_in;
-    w->term[1][26] = w->fh[18]*c_in;
+    w->term[1][18] = w->fh[25]*c_in;
+    w->term[1][19] = w->fh[26]*c_in;
+    w->term[1][20] = w->fh[27]*c_in;
+    w->term[1][21] = 0;
+    w->term[1][22] = 0;
+    w->term[1][23] = 0;
+    w->term[1][24] = w->fh[37]*c_in;
+    w->term[1][25] = w->fh[38]*c_in;
+    w->term[1][26] = c_out;
     w->term[1][27] = 0;
-    w->term[1][28] = 0;
-    w->term[1][29] = 0;
-    w->term[1][30] = w->fh[19]*c_in;
-    w->term[1][31] = c_out;
-    w->term[1][32] = w->fh[20]*c_in;
-    w->term[1][33] = w->fh[21]*c_in;
+    w->term[1][28] = w->fh[39]*c_in;
+    w->term[1][29] = w->fh[40]*c_in;
+    w->term[1][30] = w->fh[44]*c_in;
+    w->term[1][31] = w->fh[45]*c_in;
+    w->term[1][32] = w->fh[46]*c_in;
+    w->term[1][33] = 0;
     w->term[1][34] = 0;
     w->term[1][35] = 0;
     w->term[1][36] = 0;
-    w->term[1][37] = w->fh[22]*c_in;
-    w->term[1][38] = w->fh[23]*c_in;
-    w->term[1][39] = w->fh[24]*c_in;
-    w->term[1][40] = w->fh[25]*c_in;
-    w->term[1][41] = w->fh[26]*c_in;
-    w->term[1][42] = w->fh[27]*c_in;
+    w->term[1][37] = w->fh[56]*c_in;
+    w->term[1][38] = w->fh[57]*c_in;
+    w->term[1][39] = c_out + w->fh[58]*c_in;
+    w->term[1][40] = w->fh[59]*c_in;
+    w->term[1][41] = w->fh[60]*c_in;
+    w->term[1][42] = 0;
     w->term[1][43] = 0;
     w->term[1][44] = 0;
-    w->term[1][45] = 0;
-    w->term[1][46] = 0;
-    w->term[1][47] = 0;
-    w->term[1][48] = w->fh[28]*c_in;
-    w->term[1][49] = w->fh[29]*c_in;
-    w->term[1][50] = w->fh[30]*c_in;
-    w->term[1][51] = w->fh[31]*c_in;
-    w->term[1][52] = w->fh[32]*c_in;
-    w->term[1][53] = w->fh[33]*c_in;
-    w->term[1][54] = w->fh[34]*c_in;
-    w->term[1][55] = w->fh[35]*c_in;
-    w->term[1][56] = w->fh[36]*c_in;
-    w->term[1][57] = 0;
-    w->term[1][58] = 0;
-    w->term[1][59] = 0;
-    w->term[1][60] = w->fh[37]*c_in;
-    w->term[1][61] = w->fh[38]*c_in;
-    w->term[1][62] = c_out;
-    w->term[1][63] = 0;
-    w->term[1][64] = w->fh[39]*c_in;
-    w->term[1][65] = w->fh[40]*c_in;
+    w->term[1][45] = w->fh[61]*c_in;
+    w->term[1][46] = w->fh[62]*c_in;
+    w->term[1][47] = w->fh[63]*c_in;
+    w->term[1][48] = w->fh[67]*c_in;
+    w->term[1][49] = 0;
+    w->term[1][50] = w->fh[68]*c_in;
+    w->term[1][51] = w->fh[69]*c_in;
+    w->term[1][52] = c_out + w->fh[70]*c_in;
+    w->term[1][53] = w->fh[71]*c_in;
+    w->term[1][54] = 0;
+    w->term[1][55] = 0;
+    w->term[1][56] = 0;
+    w->term[1][57] = w->fh[72]*c_in;
+    w->term[1][58] = w->fh[73]*c_in;
+    w->term[1][59] = w->fh[74]*c_in;
+    w->term[1][60] = 0;
+    w->term[1][61] = 0;
+    w->term[1][62] = 0;
+    w->term[1][63] = w->fh[78]*c_in;
+    w->term[1][64] = 0;
+    w->term[1][65] = c_out;
     w->term[1][66] = 0;
-    w->term[1][67] = w->fh[41]*c_in;
-    w->term[1][68] = w->fh[42]*c_in;
-    w->term[1][69] = w->fh[43]*c_in;
-    w->term[1][70] = w->fh[44]*c_in;
-    w->term[1][71] = w->fh[45]*c_in;
-    w->term[1][72] = w->fh[46]*c_in;
+    w->term[1][67] = 0;
+    w->term[1][68] = 0;
+    w->term[1][69] = 0;
+    w->term[1][70] = 0;
+    w->term[1][71] = 0;
+    w->term[1][72] = 0;
     w->term[1][73] = 0;
     w->term[1][74] = 0;
     w->term[1][75] = 0;
-    w->term[1][76] = 0;
-    w->term[1][77] = 0;
-    w->term[1][78] = w->fh[47]*c_in;
-    w->term[1][79] = w->fh[48]*c_in;
-    w->term[1][80] = w->fh[49]*c_in;
-    w->term[1][81] = w->fh[50]*c_in;
-    w->term[1][82] = w->fh[51]*c_in;
-    w->term[1][83] = w->fh[52]*c_in;
-    w->term[1][84] = w->fh[53]*c_in;
-    w->term[1][85] = w->fh[54]*c_in;
-    w->term[1][86] = w->fh[55]*c_in;
-    w->term[1][87] = 0;
-    w->term[1][88] = 0;
-    w->term[1][89] = 0;
-    w->term[1][90] = 0;
-    w->term[1][91] = w->fh[56]*c_in;
-    w->term[1][92] = w->fh[57]*c_in;
-    w->term[1][93] = c_out + w->fh[58]*c_in;
-    w->term[1][94] = w->fh[59]*c_in;
-    w->term[1][95] = w->fh[60]*c_in;
-    w->term[1][96] = 0;
-    w->term[1][97] = 0;
-    w->term[1][98] = 0;
-    w->term[1][99] = 0;
-    w->term[1][100] = 0;
-    w->term[1][101] = 0;
+    w->term[1][76] = w->fh[79]*c_in;
+    w->term[1][77] = w->fh[80]*c_in;
+    w->term[1][78] = 0;
+    w->term[1][79] = 0;
+    w->term[1][80] = 0;
+    w->term[1][81] = 0;
+    w->term[1][82] = 0;
+    w->term[1][83] = 0;
+    w->term[1][84] = c_out + w->fh[81]*c_in;
+    w->term[1][85] = c_out + w->fh[82]*c_in;
+    w->term[1][86] = c_out + w->fh[83]*c_in;
+    w->term[1][87] = c_out + w->fh[84]*c_in;
+    w->term[1][88] = c_out + w->fh[85]*c_in;
+    w->term[1][89] = c_out + w->fh[86]*c_in;
+    w->term[1][90] = w->fh[4]*c_in;
+    w->term[1][91] = w->fh[5]*c_in;
+    w->term[1][92] = w->fh[6]*c_in;
+    w->term[1][93] = w->fh[10]*c_in;
+    w->term[1][94] = w->fh[11]*c_in;
+    w->term[1][95] = w->fh[12]*c_in;
+    w->term[1][96] = w->fh[13]*c_in;
+    w->term[1][97] = w->fh[14]*c_in;
+    w->term[1][98] = w->fh[15]*c_in;
+    w->term[1][99] = w->fh[16]*c_in;
+    w->term[1][100] = w->fh[17]*c_in;
+    w->term[1][101] = w->fh[18]*c_in;
     w->term[1][102] = 0;
-    w->term[1][103] = w->fh[61]*c_in;
-    w->term[1][104] = w->fh[62]*c_in;
-    w->term[1][105] = w->fh[63]*c_in;
-    w->term[1][106] = 0;
-    w->term[1][107] = 0;
-    w->term[1][108] = 0;
-    w->term[1][109] = 0;
-    w->term[1][110] = 0;
-    w->term[1][111] = 0;
-    w->term[1][112] = 0;
-    w->term[1][113] = 0;
-    w->term[1][114] = 0;
-    w->term[1][115] = 0;
-    w->term[1][116] = 0;
-    w->term[1][117] = w->fh[64]*c_in;
-    w->term[1][118] = w->fh[65]*c_in;
-    w->term[1][119] = w->fh[66]*c_in;
-    w->term[1][120] = w->fh[67]*c_in;
-    w->term[1][121] = 0;
-    w->term[1][122] = w->fh[68]*c_in;
-    w->term[1][123] = w->fh[69]*c_in;
-    w->term[1][124] = c_out + w->fh[70]*c_in;
-    w->term[1][125] = w->fh[71]*c_in;
-    w->term[1][126] = 0;
-    w->term[1][127] = 0;
-    w->term[1][128] = 0;
-    w->term[1][129] = 0;
-    w->term[1][130] = 0;
-    w->term[1][131] = 0;
+    w->term[1][103] = 0;
+    w->term[1][104] = 0;
+    w->term[1][105] = w->fh[22]*c_in;
+    w->term[1][106] = w->fh[23]*c_in;
+    w->term[1][107] = w->fh[24]*c_in;
+    w->term[1][108] = w->fh[28]*c_in;
+    w->term[1][109] = w->fh[29]*c_in;
+    w->term[1][110] = w->fh[30]*c_in;
+    w->term[1][111] = w->fh[31]*c_in;
+    w->term[1][112] = w->fh[32]*c_in;
+    w->term[1][113] = w->fh[33]*c_in;
+    w->term[1][114] = w->fh[34]*c_in;
+    w->term[1][115] = w->fh[35]*c_in;
+    w->term[1][116] = w->fh[36]*c_in;
+    w->term[1][117] = 0;
+    w->term[1][118] = 0;
+    w->term[1][119] = 0;
+    w->term[1][120] = w->fh[41]*c_in;
+    w->term[1][121] = w->fh[42]*c_in;
+    w->term[1][122] = w->fh[43]*c_in;
+    w->term[1][123] = w->fh[47]*c_in;
+    w->term[1][124] = w->fh[48]*c_in;
+    w->term[1][125] = w->fh[49]*c_in;
+    w->term[1][126] = w->fh[50]*c_in;
+    w->term[1][127] = w->fh[51]*c_in;
+    w->term[1][128] = w->fh[52]*c_in;
+    w->term[1][129] = w->fh[53]*c_in;
+    w->term[1][130] = w->fh[54]*c_in;
+    w->term[1][131] = w->fh[55]*c_in;
     w->term[1][132] = 0;
-    w->term[1][133] = w->fh[72]*c_in;
-    w->term[1][134] = w->fh[73]*c_in;
-    w->term[1][135] = w->fh[74]*c_in;
+    w->term[1][133] = 0;
+    w->term[1][134] = 0;
+    w->term[1][135] = 0;
     w->term[1][136] = 0;
     w->term[1][137] = 0;
     w->term[1][138] = 0;
@@ -946,24 +930,24 @@ NED_DOPPLER32_AUGMENTED_BLOCK void
     w->term[1][144] = 0;
     w->term[1][145] = 0;
     w->term[1][146] = 0;
-    w->term[1][147] = w->fh[75]*c_in;
-    w->term[1][148] = w->fh[76]*c_in;
-    w->term[1][149] = w->fh[77]*c_in;
+    w->term[1][147] = w->fh[64]*c_in;
+    w->term[1][148] = w->fh[65]*c_in;
+    w->term[1][149] = w->fh[66]*c_in;
     w->term[1][150] = 0;
     w->term[1][151] = 0;
     w->term[1][152] = 0;
-    w->term[1][153] = w->fh[78]*c_in;
+    w->term[1][153] = 0;
     w->term[1][154] = 0;
-    w->term[1][155] = c_out;
+    w->term[1][155] = 0;
     w->term[1][156] = 0;
     w->term[1][157] = 0;
     w->term[1][158] = 0;
     w->term[1][159] = 0;
     w->term[1][160] = 0;
     w->term[1][161] = 0;
-    w->term[1][162] = 0;
-    w->term[1][163] = 0;
-    w->term[1][164] = 0;
+    w->term[1][162] = w->fh[75]*c_in;
+    w->term[1][163] = w->fh[76]*c_in;
+    w->term[1][164] = w->fh[77]*c_in;
     w->term[1][165] = 0;
     w->term[1][166] = 0;
     w->term[1][167] = 0;
@@ -979,13 +963,13 @@ NED_DOPPLER32_AUGMENTED_BLOCK void
     w->term[1][177] = 0;
     w->term[1][178] = 0;
     w->term[1][179] = 0;
-    w->term[1][180] = 0;
+    w->term[1][180] = c_out;
     w->term[1][181] = 0;
     w->term[1][182] = 0;
     w->term[1][183] = 0;
-    w->term[1][184] = w->fh[79]*c_in;
-    w->term[1][185] = w->fh[80]*c_in;
-    w->term[1][186] = c_out;
+    w->term[1][184] = 0;
+    w->term[1][185] = 0;
+    w->term[1][186] = 0;
     w->term[1][187] = 0;
     w->term[1][188] = 0;
     w->term[1][189] = 0;
@@ -995,392 +979,498 @@ NED_DOPPLER32_AUGMENTED_BLOCK void
     w->term[1][193] = 0;
     w->term[1][194] = 0;
     w->term[1][195] = 0;
-    w->term[1][196] = 0;
-    w->term[1][197] = 0;
-    w->term[1][198] = 0;
-    w->term[1][199] = 0;
-    w->term[1][200] = 0;
-    w->term[1][201] = 0;
-    w->term[1][202] = 0;
-    w->term[1][203] = 0;
-    w->term[1][204] = 0;
-    w->term[1][205] = 0;
-    w->term[1][206] = 0;
-    w->term[1][207] = 0;
-    w->term[1][208] = 0;
-    w->term[1][209] = 0;
-    w->term[1][210] = c_out + w->fh[81]*c_in;
-    w->term[1][211] = c_out + w->fh[82]*c_in;
-    w->term[1][212] = c_out + w->fh[83]*c_in;
-    w->term[1][213] = c_out + w->fh[84]*c_in;
-    w->term[1][214] = c_out + w->fh[85]*c_in;
-    w->term[1][215] = c_out + w->fh[86]*c_in;
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void
         horner_saturated_into_S(ned_doppler32_augmented_discretize_scratch *restrict w, const
-        ned_doppler32_augmented_scalar c_out, const ned_doppler32_augmented_scalar c_in)
+        ned_doppler32_augmented_scalar c_out)
 {
     int k;
-    for (k = 0; k < 30; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][30+k] + w->fh[1]*w->term[1][60+k] + w->fh[2]*w->term[1][120+k]
-                + w->fh[3]*w->term[1][150+k];
-        w->S[30+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][60+k] +
-                w->fh[21]*w->term[1][90+k];
-        w->S[60+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][30+k] +
-                w->fh[39]*w->term[1][120+k] + w->fh[40]*w->term[1][150+k];
-        w->S[90+k] = w->fh[56]*w->term[1][30+k] + w->fh[57]*w->term[1][60+k] +
-                w->fh[58]*w->term[1][90+k] + w->fh[59]*w->term[1][120+k] +
-                w->fh[60]*w->term[1][150+k];
-        w->S[120+k] = w->fh[67]*w->term[1][k] + w->fh[68]*w->term[1][60+k] +
-                w->fh[69]*w->term[1][90+k] + w->fh[70]*w->term[1][120+k] +
-                w->fh[71]*w->term[1][150+k];
-        w->S[150+k] = w->fh[78]*w->term[1][90+k];
+    for (k = 0; k < 12; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][12+k] + w->fh[1]*w->term[1][24+k] + w->fh[2]*w->term[1][48+k]
+                + w->fh[3]*w->term[1][60+k];
+        w->S[12+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][24+k] +
+                w->fh[21]*w->term[1][36+k];
+        w->S[24+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][12+k] +
+                w->fh[39]*w->term[1][48+k] + w->fh[40]*w->term[1][60+k];
+        w->S[36+k] = w->fh[56]*w->term[1][12+k] + w->fh[57]*w->term[1][24+k] +
+                w->fh[58]*w->term[1][36+k] + w->fh[59]*w->term[1][48+k] +
+                w->fh[60]*w->term[1][60+k];
+        w->S[48+k] = w->fh[67]*w->term[1][k] + w->fh[68]*w->term[1][24+k] +
+                w->fh[69]*w->term[1][36+k] + w->fh[70]*w->term[1][48+k] +
+                w->fh[71]*w->term[1][60+k];
+        w->S[60+k] = w->fh[78]*w->term[1][36+k];
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[7] = w->S[7] + w->fh[4]*c_in;
-    w->S[8] = w->S[8] + w->fh[5]*c_in;
-    w->S[9] = w->S[9] + w->fh[6]*c_in;
-    w->S[10] = w->S[10] + w->fh[7]*w->term[1][210];
-    w->S[11] = w->S[11] + w->fh[8]*w->term[1][211];
-    w->S[12] = w->S[12] + w->fh[9]*w->term[1][212];
-    w->S[18] = w->S[18] + w->fh[10]*c_in;
-    w->S[19] = w->S[19] + w->fh[11]*c_in;
-    w->S[20] = w->S[20] + w->fh[12]*c_in;
-    w->S[21] = w->S[21] + w->fh[13]*c_in;
-    w->S[22] = w->S[22] + w->fh[14]*c_in;
-    w->S[23] = w->S[23] + w->fh[15]*c_in;
-    w->S[24] = w->S[24] + w->fh[16]*c_in;
-    w->S[25] = w->S[25] + w->fh[17]*c_in;
-    w->S[26] = w->S[26] + w->fh[18]*c_in;
-    w->S[31] = w->S[31] + c_out;
-    w->S[37] = w->S[37] + w->fh[22]*c_in;
-    w->S[38] = w->S[38] + w->fh[23]*c_in;
-    w->S[39] = w->S[39] + w->fh[24]*c_in;
-    w->S[40] = w->S[40] + w->fh[25]*w->term[1][210];
-    w->S[41] = w->S[41] + w->fh[26]*w->term[1][211];
-    w->S[42] = w->S[42] + w->fh[27]*w->term[1][212];
-    w->S[48] = w->S[48] + w->fh[28]*c_in;
-    w->S[49] = w->S[49] + w->fh[29]*c_in;
-    w->S[50] = w->S[50] + w->fh[30]*c_in;
-    w->S[51] = w->S[51] + w->fh[31]*c_in;
-    w->S[52] = w->S[52] + w->fh[32]*c_in;
-    w->S[53] = w->S[53] + w->fh[33]*c_in;
-    w->S[54] = w->S[54] + w->fh[34]*c_in;
-    w->S[55] = w->S[55] + w->fh[35]*c_in;
-    w->S[56] = w->S[56] + w->fh[36]*c_in;
-    w->S[62] = w->S[62] + c_out;
-    w->S[67] = w->S[67] + w->fh[41]*c_in;
-    w->S[68] = w->S[68] + w->fh[42]*c_in;
-    w->S[69] = w->S[69] + w->fh[43]*c_in;
-    w->S[70] = w->S[70] + w->fh[44]*w->term[1][210];
-    w->S[71] = w->S[71] + w->fh[45]*w->term[1][211];
-    w->S[72] = w->S[72] + w->fh[46]*w->term[1][212];
-    w->S[78] = w->S[78] + w->fh[47]*c_in;
-    w->S[79] = w->S[79] + w->fh[48]*c_in;
-    w->S[80] = w->S[80] + w->fh[49]*c_in;
-    w->S[81] = w->S[81] + w->fh[50]*c_in;
-    w->S[82] = w->S[82] + w->fh[51]*c_in;
-    w->S[83] = w->S[83] + w->fh[52]*c_in;
-    w->S[84] = w->S[84] + w->fh[53]*c_in;
-    w->S[85] = w->S[85] + w->fh[54]*c_in;
-    w->S[86] = w->S[86] + w->fh[55]*c_in;
-    w->S[93] = w->S[93] + c_out;
-    w->S[103] = w->S[103] + w->fh[61]*w->term[1][213];
-    w->S[104] = w->S[104] + w->fh[62]*w->term[1][214];
-    w->S[105] = w->S[105] + w->fh[63]*w->term[1][215];
-    w->S[117] = w->S[117] + w->fh[64]*c_in;
-    w->S[118] = w->S[118] + w->fh[65]*c_in;
-    w->S[119] = w->S[119] + w->fh[66]*c_in;
-    w->S[124] = w->S[124] + c_out;
-    w->S[133] = w->S[133] + w->fh[72]*w->term[1][213];
-    w->S[134] = w->S[134] + w->fh[73]*w->term[1][214];
-    w->S[135] = w->S[135] + w->fh[74]*w->term[1][215];
-    w->S[147] = w->S[147] + w->fh[75]*c_in;
-    w->S[148] = w->S[148] + w->fh[76]*c_in;
-    w->S[149] = w->S[149] + w->fh[77]*c_in;
-    w->S[155] = w->S[155] + c_out;
-    w->S[210] = c_out + w->fh[81]*w->term[1][210];
-    w->S[211] = c_out + w->fh[82]*w->term[1][211];
-    w->S[212] = c_out + w->fh[83]*w->term[1][212];
-    w->S[213] = c_out + w->fh[84]*w->term[1][213];
-    w->S[214] = c_out + w->fh[85]*w->term[1][214];
-    w->S[215] = c_out + w->fh[86]*w->term[1][215];
+    w->S[6] = w->S[6] + w->fh[7]*w->term[1][84];
+    w->S[7] = w->S[7] + w->fh[8]*w->term[1][85];
+    w->S[8] = w->S[8] + w->fh[9]*w->term[1][86];
+    w->S[13] = w->S[13] + c_out;
+    w->S[18] = w->S[18] + w->fh[25]*w->term[1][84];
+    w->S[19] = w->S[19] + w->fh[26]*w->term[1][85];
+    w->S[20] = w->S[20] + w->fh[27]*w->term[1][86];
+    w->S[26] = w->S[26] + c_out;
+    w->S[30] = w->S[30] + w->fh[44]*w->term[1][84];
+    w->S[31] = w->S[31] + w->fh[45]*w->term[1][85];
+    w->S[32] = w->S[32] + w->fh[46]*w->term[1][86];
+    w->S[39] = w->S[39] + c_out;
+    w->S[45] = w->S[45] + w->fh[61]*w->term[1][87];
+    w->S[46] = w->S[46] + w->fh[62]*w->term[1][88];
+    w->S[47] = w->S[47] + w->fh[63]*w->term[1][89];
+    w->S[52] = w->S[52] + c_out;
+    w->S[57] = w->S[57] + w->fh[72]*w->term[1][87];
+    w->S[58] = w->S[58] + w->fh[73]*w->term[1][88];
+    w->S[59] = w->S[59] + w->fh[74]*w->term[1][89];
+    w->S[65] = w->S[65] + c_out;
+    w->S[84] = c_out + w->fh[81]*w->term[1][84];
+    w->S[85] = c_out + w->fh[82]*w->term[1][85];
+    w->S[86] = c_out + w->fh[83]*w->term[1][86];
+    w->S[87] = c_out + w->fh[84]*w->term[1][87];
+    w->S[88] = c_out + w->fh[85]*w->term[1][88];
+    w->S[89] = c_out + w->fh[86]*w->term[1][89];
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void
         horner_saturated_into_term(ned_doppler32_augmented_discretize_scratch *restrict w, const
-        ned_doppler32_augmented_scalar c_out, const ned_doppler32_augmented_scalar c_in)
+        ned_doppler32_augmented_scalar c_out)
 {
     int k;
-    for (k = 0; k < 30; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[30+k] + w->fh[1]*w->S[60+k] + w->fh[2]*w->S[120+k] +
-                w->fh[3]*w->S[150+k];
-        w->term[1][30+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[60+k] + w->fh[21]*w->S[90+k];
-        w->term[1][60+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[30+k] + w->fh[39]*w->S[120+k] +
-                w->fh[40]*w->S[150+k];
-        w->term[1][90+k] = w->fh[56]*w->S[30+k] + w->fh[57]*w->S[60+k] + w->fh[58]*w->S[90+k] +
-                w->fh[59]*w->S[120+k] + w->fh[60]*w->S[150+k];
-        w->term[1][120+k] = w->fh[67]*w->S[k] + w->fh[68]*w->S[60+k] + w->fh[69]*w->S[90+k] +
-                w->fh[70]*w->S[120+k] + w->fh[71]*w->S[150+k];
-        w->term[1][150+k] = w->fh[78]*w->S[90+k];
+    for (k = 0; k < 12; ++k) {
+        w->term[1][k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
+                w->fh[3]*w->S[60+k];
+        w->term[1][12+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[24+k] + w->fh[21]*w->S[36+k];
+        w->term[1][24+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[12+k] + w->fh[39]*w->S[48+k] +
+                w->fh[40]*w->S[60+k];
+        w->term[1][36+k] = w->fh[56]*w->S[12+k] + w->fh[57]*w->S[24+k] + w->fh[58]*w->S[36+k] +
+                w->fh[59]*w->S[48+k] + w->fh[60]*w->S[60+k];
+        w->term[1][48+k] = w->fh[67]*w->S[k] + w->fh[68]*w->S[24+k] + w->fh[69]*w->S[36+k] +
+                w->fh[70]*w->S[48+k] + w->fh[71]*w->S[60+k];
+        w->term[1][60+k] = w->fh[78]*w->S[36+k];
     }
     w->term[1][0] = w->term[1][0] + c_out;
-    w->term[1][7] = w->term[1][7] + w->fh[4]*c_in;
-    w->term[1][8] = w->term[1][8] + w->fh[5]*c_in;
-    w->term[1][9] = w->term[1][9] + w->fh[6]*c_in;
-    w->term[1][10] = w->term[1][10] + w->fh[7]*w->S[210];
-    w->term[1][11] = w->term[1][11] + w->fh[8]*w->S[211];
-    w->term[1][12] = w->term[1][12] + w->fh[9]*w->S[212];
-    w->term[1][18] = w->term[1][18] + w->fh[10]*c_in;
-    w->term[1][19] = w->term[1][19] + w->fh[11]*c_in;
-    w->term[1][20] = w->term[1][20] + w->fh[12]*c_in;
-    w->term[1][21] = w->term[1][21] + w->fh[13]*c_in;
-    w->term[1][22] = w->term[1][22] + w->fh[14]*c_in;
-    w->term[1][23] = w->term[1][23] + w->fh[15]*c_in;
-    w->term[1][24] = w->term[1][24] + w->fh[16]*c_in;
-    w->term[1][25] = w->term[1][25] + w->fh[17]*c_in;
-    w->term[1][26] = w->term[1][26] + w->fh[18]*c_in;
-    w->term[1][31] = w->term[1][31] + c_out;
-    w->term[1][37] = w->term[1][37] + w->fh[22]*c_in;
-    w->term[1][38] = w->term[1][38] + w->fh[23]*c_in;
-    w->term[1][39] = w->term[1][39] + w->fh[24]*c_in;
-    w->term[1][40] = w->term[1][40] + w->fh[25]*w->S[210];
-    w->term[1][41] = w->term[1][41] + w->fh[26]*w->S[211];
-    w->term[1][42] = w->term[1][42] + w->fh[27]*w->S[212];
-    w->term[1][48] = w->term[1][48] + w->fh[28]*c_in;
-    w->term[1][49] = w->term[1][49] + w->fh[29]*c_in;
-    w->term[1][50] = w->term[1][50] + w->fh[30]*c_in;
-    w->term[1][51] = w->term[1][51] + w->fh[31]*c_in;
-    w->term[1][52] = w->term[1][52] + w->fh[32]*c_in;
-    w->term[1][53] = w->term[1][53] + w->fh[33]*c_in;
-    w->term[1][54] = w->term[1][54] + w->fh[34]*c_in;
-    w->term[1][55] = w->term[1][55] + w->fh[35]*c_in;
-    w->term[1][56] = w->term[1][56] + w->fh[36]*c_in;
-    w->term[1][62] = w->term[1][62] + c_out;
-    w->term[1][67] = w->term[1][67] + w->fh[41]*c_in;
-    w->term[1][68] = w->term[1][68] + w->fh[42]*c_in;
-    w->term[1][69] = w->term[1][69] + w->fh[43]*c_in;
-    w->term[1][70] = w->term[1][70] + w->fh[44]*w->S[210];
-    w->term[1][71] = w->term[1][71] + w->fh[45]*w->S[211];
-    w->term[1][72] = w->term[1][72] + w->fh[46]*w->S[212];
-    w->term[1][78] = w->term[1][78] + w->fh[47]*c_in;
-    w->term[1][79] = w->term[1][79] + w->fh[48]*c_in;
-    w->term[1][80] = w->term[1][80] + w->fh[49]*c_in;
-    w->term[1][81] = w->term[1][81] + w->fh[50]*c_in;
-    w->term[1][82] = w->term[1][82] + w->fh[51]*c_in;
-    w->term[1][83] = w->term[1][83] + w->fh[52]*c_in;
-    w->term[1][84] = w->term[1][84] + w->fh[53]*c_in;
-    w->term[1][85] = w->term[1][85] + w->fh[54]*c_in;
-    w->term[1][86] = w->term[1][86] + w->fh[55]*c_in;
-    w->term[1][93] = w->term[1][93] + c_out;
-    w->term[1][103] = w->term[1][103] + w->fh[61]*w->S[213];
-    w->term[1][104] = w->term[1][104] + w->fh[62]*w->S[214];
-    w->term[1][105] = w->term[1][105] + w->fh[63]*w->S[215];
-    w->term[1][117] = w->term[1][117] + w->fh[64]*c_in;
-    w->term[1][118] = w->term[1][118] + w->fh[65]*c_in;
-    w->term[1][119] = w->term[1][119] + w->fh[66]*c_in;
-    w->term[1][124] = w->term[1][124] + c_out;
-    w->term[1][133] = w->term[1][133] + w->fh[72]*w->S[213];
-    w->term[1][134] = w->term[1][134] + w->fh[73]*w->S[214];
-    w->term[1][135] = w->term[1][135] + w->fh[74]*w->S[215];
-    w->term[1][147] = w->term[1][147] + w->fh[75]*c_in;
-    w->term[1][148] = w->term[1][148] + w->fh[76]*c_in;
-    w->term[1][149] = w->term[1][149] + w->fh[77]*c_in;
-    w->term[1][155] = w->term[1][155] + c_out;
-    w->term[1][210] = c_out + w->fh[81]*w->S[210];
-    w->term[1][211] = c_out + w->fh[82]*w->S[211];
-    w->term[1][212] = c_out + w->fh[83]*w->S[212];
-    w->term[1][213] = c_out + w->fh[84]*w->S[213];
-    w->term[1][214] = c_out + w->fh[85]*w->S[214];
-    w->term[1][215] = c_out + w->fh[86]*w->S[215];
+    w->term[1][6] = w->term[1][6] + w->fh[7]*w->S[84];
+    w->term[1][7] = w->term[1][7] + w->fh[8]*w->S[85];
+    w->term[1][8] = w->term[1][8] + w->fh[9]*w->S[86];
+    w->term[1][13] = w->term[1][13] + c_out;
+    w->term[1][18] = w->term[1][18] + w->fh[25]*w->S[84];
+    w->term[1][19] = w->term[1][19] + w->fh[26]*w->S[85];
+    w->term[1][20] = w->term[1][20] + w->fh[27]*w->S[86];
+    w->term[1][26] = w->term[1][26] + c_out;
+    w->term[1][30] = w->term[1][30] + w->fh[44]*w->S[84];
+    w->term[1][31] = w->term[1][31] + w->fh[45]*w->S[85];
+    w->term[1][32] = w->term[1][32] + w->fh[46]*w->S[86];
+    w->term[1][39] = w->term[1][39] + c_out;
+    w->term[1][45] = w->term[1][45] + w->fh[61]*w->S[87];
+    w->term[1][46] = w->term[1][46] + w->fh[62]*w->S[88];
+    w->term[1][47] = w->term[1][47] + w->fh[63]*w->S[89];
+    w->term[1][52] = w->term[1][52] + c_out;
+    w->term[1][57] = w->term[1][57] + w->fh[72]*w->S[87];
+    w->term[1][58] = w->term[1][58] + w->fh[73]*w->S[88];
+    w->term[1][59] = w->term[1][59] + w->fh[74]*w->S[89];
+    w->term[1][65] = w->term[1][65] + c_out;
+    w->term[1][84] = c_out + w->fh[81]*w->S[84];
+    w->term[1][85] = c_out + w->fh[82]*w->S[85];
+    w->term[1][86] = c_out + w->fh[83]*w->S[86];
+    w->term[1][87] = c_out + w->fh[84]*w->S[87];
+    w->term[1][88] = c_out + w->fh[85]*w->S[88];
+    w->term[1][89] = c_out + w->fh[86]*w->S[89];
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK void horner_first_into_term(ned_doppler32_augmented_discretize_scratch
+        *restrict w, const ned_doppler32_augmented_scalar c_out)
+{
+    int k;
+    for (k = 0; k < 12; ++k) {
+        w->term[1][k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
+                w->fh[3]*w->S[60+k];
+        w->term[1][12+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[24+k] + w->fh[21]*w->S[36+k];
+        w->term[1][24+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[12+k] + w->fh[39]*w->S[48+k] +
+                w->fh[40]*w->S[60+k];
+        w->term[1][36+k] = w->fh[56]*w->S[12+k] + w->fh[57]*w->S[24+k] + w->fh[58]*w->S[36+k] +
+                w->fh[59]*w->S[48+k] + w->fh[60]*w->S[60+k];
+        w->term[1][48+k] = w->fh[67]*w->S[k] + w->fh[68]*w->S[24+k] + w->fh[69]*w->S[36+k] +
+                w->fh[70]*w->S[48+k] + w->fh[71]*w->S[60+k];
+        w->term[1][60+k] = w->fh[78]*w->S[36+k];
+        w->term[1][72+k] = w->fh[79]*w->S[48+k] + w->fh[80]*w->S[60+k];
+    }
+    w->term[1][0] = w->term[1][0] + c_out;
+    w->term[1][6] = w->term[1][6] + w->fh[7]*w->S[84];
+    w->term[1][7] = w->term[1][7] + w->fh[8]*w->S[85];
+    w->term[1][8] = w->term[1][8] + w->fh[9]*w->S[86];
+    w->term[1][13] = w->term[1][13] + c_out;
+    w->term[1][18] = w->term[1][18] + w->fh[25]*w->S[84];
+    w->term[1][19] = w->term[1][19] + w->fh[26]*w->S[85];
+    w->term[1][20] = w->term[1][20] + w->fh[27]*w->S[86];
+    w->term[1][26] = w->term[1][26] + c_out;
+    w->term[1][30] = w->term[1][30] + w->fh[44]*w->S[84];
+    w->term[1][31] = w->term[1][31] + w->fh[45]*w->S[85];
+    w->term[1][32] = w->term[1][32] + w->fh[46]*w->S[86];
+    w->term[1][39] = w->term[1][39] + c_out;
+    w->term[1][45] = w->term[1][45] + w->fh[61]*w->S[87];
+    w->term[1][46] = w->term[1][46] + w->fh[62]*w->S[88];
+    w->term[1][47] = w->term[1][47] + w->fh[63]*w->S[89];
+    w->term[1][52] = w->term[1][52] + c_out;
+    w->term[1][57] = w->term[1][57] + w->fh[72]*w->S[87];
+    w->term[1][58] = w->term[1][58] + w->fh[73]*w->S[88];
+    w->term[1][59] = w->term[1][59] + w->fh[74]*w->S[89];
+    w->term[1][65] = w->term[1][65] + c_out;
+    w->term[1][180] = c_out;
+    w->term[1][84] = c_out + w->fh[81]*w->S[84];
+    w->term[1][85] = c_out + w->fh[82]*w->S[85];
+    w->term[1][86] = c_out + w->fh[83]*w->S[86];
+    w->term[1][87] = c_out + w->fh[84]*w->S[87];
+    w->term[1][88] = c_out + w->fh[85]*w->S[88];
+    w->term[1][89] = c_out + w->fh[86]*w->S[89];
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void horner_last_into_S(ned_doppler32_augmented_discretize_scratch
-        *restrict w, const ned_doppler32_augmented_scalar c_out, const
-        ned_doppler32_augmented_scalar c_in)
+        *restrict w, const ned_doppler32_augmented_scalar c_out)
 {
     int k;
-    for (k = 0; k < 30; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][30+k] + w->fh[1]*w->term[1][60+k] + w->fh[2]*w->term[1][120+k]
-                + w->fh[3]*w->term[1][150+k];
-        w->S[30+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][60+k] +
-                w->fh[21]*w->term[1][90+k];
-        w->S[60+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][30+k] +
-                w->fh[39]*w->term[1][120+k] + w->fh[40]*w->term[1][150+k];
-        w->S[90+k] = w->fh[56]*w->term[1][30+k] + w->fh[57]*w->term[1][60+k] +
-                w->fh[58]*w->term[1][90+k] + w->fh[59]*w->term[1][120+k] +
-                w->fh[60]*w->term[1][150+k];
-        w->S[120+k] = w->fh[67]*w->term[1][k] + w->fh[68]*w->term[1][60+k] +
-                w->fh[69]*w->term[1][90+k] + w->fh[70]*w->term[1][120+k] +
-                w->fh[71]*w->term[1][150+k];
-        w->S[150+k] = w->fh[78]*w->term[1][90+k];
-        w->S[180+k] = w->fh[79]*w->term[1][120+k] + w->fh[80]*w->term[1][150+k];
+    for (k = 0; k < 12; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][12+k] + w->fh[1]*w->term[1][24+k] + w->fh[2]*w->term[1][48+k]
+                + w->fh[3]*w->term[1][60+k];
+        w->S[12+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][24+k] +
+                w->fh[21]*w->term[1][36+k];
+        w->S[24+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][12+k] +
+                w->fh[39]*w->term[1][48+k] + w->fh[40]*w->term[1][60+k];
+        w->S[36+k] = w->fh[56]*w->term[1][12+k] + w->fh[57]*w->term[1][24+k] +
+                w->fh[58]*w->term[1][36+k] + w->fh[59]*w->term[1][48+k] +
+                w->fh[60]*w->term[1][60+k];
+        w->S[48+k] = w->fh[67]*w->term[1][k] + w->fh[68]*w->term[1][24+k] +
+                w->fh[69]*w->term[1][36+k] + w->fh[70]*w->term[1][48+k] +
+                w->fh[71]*w->term[1][60+k];
+        w->S[60+k] = w->fh[78]*w->term[1][36+k];
+        w->S[72+k] = w->fh[79]*w->term[1][48+k] + w->fh[80]*w->term[1][60+k];
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[7] = w->S[7] + w->fh[4]*c_in;
-    w->S[8] = w->S[8] + w->fh[5]*c_in;
-    w->S[9] = w->S[9] + w->fh[6]*c_in;
-    w->S[10] = w->S[10] + w->fh[7]*w->term[1][210];
-    w->S[11] = w->S[11] + w->fh[8]*w->term[1][211];
-    w->S[12] = w->S[12] + w->fh[9]*w->term[1][212];
-    w->S[18] = w->S[18] + w->fh[10]*c_in;
-    w->S[19] = w->S[19] + w->fh[11]*c_in;
-    w->S[20] = w->S[20] + w->fh[12]*c_in;
-    w->S[21] = w->S[21] + w->fh[13]*c_in;
-    w->S[22] = w->S[22] + w->fh[14]*c_in;
-    w->S[23] = w->S[23] + w->fh[15]*c_in;
-    w->S[24] = w->S[24] + w->fh[16]*c_in;
-    w->S[25] = w->S[25] + w->fh[17]*c_in;
-    w->S[26] = w->S[26] + w->fh[18]*c_in;
-    w->S[31] = w->S[31] + c_out;
-    w->S[37] = w->S[37] + w->fh[22]*c_in;
-    w->S[38] = w->S[38] + w->fh[23]*c_in;
-    w->S[39] = w->S[39] + w->fh[24]*c_in;
-    w->S[40] = w->S[40] + w->fh[25]*w->term[1][210];
-    w->S[41] = w->S[41] + w->fh[26]*w->term[1][211];
-    w->S[42] = w->S[42] + w->fh[27]*w->term[1][212];
-    w->S[48] = w->S[48] + w->fh[28]*c_in;
-    w->S[49] = w->S[49] + w->fh[29]*c_in;
-    w->S[50] = w->S[50] + w->fh[30]*c_in;
-    w->S[51] = w->S[51] + w->fh[31]*c_in;
-    w->S[52] = w->S[52] + w->fh[32]*c_in;
-    w->S[53] = w->S[53] + w->fh[33]*c_in;
-    w->S[54] = w->S[54] + w->fh[34]*c_in;
-    w->S[55] = w->S[55] + w->fh[35]*c_in;
-    w->S[56] = w->S[56] + w->fh[36]*c_in;
-    w->S[62] = w->S[62] + c_out;
-    w->S[67] = w->S[67] + w->fh[41]*c_in;
-    w->S[68] = w->S[68] + w->fh[42]*c_in;
-    w->S[69] = w->S[69] + w->fh[43]*c_in;
-    w->S[70] = w->S[70] + w->fh[44]*w->term[1][210];
-    w->S[71] = w->S[71] + w->fh[45]*w->term[1][211];
-    w->S[72] = w->S[72] + w->fh[46]*w->term[1][212];
-    w->S[78] = w->S[78] + w->fh[47]*c_in;
-    w->S[79] = w->S[79] + w->fh[48]*c_in;
-    w->S[80] = w->S[80] + w->fh[49]*c_in;
-    w->S[81] = w->S[81] + w->fh[50]*c_in;
-    w->S[82] = w->S[82] + w->fh[51]*c_in;
-    w->S[83] = w->S[83] + w->fh[52]*c_in;
-    w->S[84] = w->S[84] + w->fh[53]*c_in;
-    w->S[85] = w->S[85] + w->fh[54]*c_in;
-    w->S[86] = w->S[86] + w->fh[55]*c_in;
-    w->S[93] = w->S[93] + c_out;
-    w->S[103] = w->S[103] + w->fh[61]*w->term[1][213];
-    w->S[104] = w->S[104] + w->fh[62]*w->term[1][214];
-    w->S[105] = w->S[105] + w->fh[63]*w->term[1][215];
-    w->S[117] = w->S[117] + w->fh[64]*c_in;
-    w->S[118] = w->S[118] + w->fh[65]*c_in;
-    w->S[119] = w->S[119] + w->fh[66]*c_in;
-    w->S[124] = w->S[124] + c_out;
-    w->S[133] = w->S[133] + w->fh[72]*w->term[1][213];
-    w->S[134] = w->S[134] + w->fh[73]*w->term[1][214];
-    w->S[135] = w->S[135] + w->fh[74]*w->term[1][215];
-    w->S[147] = w->S[147] + w->fh[75]*c_in;
-    w->S[148] = w->S[148] + w->fh[76]*c_in;
-    w->S[149] = w->S[149] + w->fh[77]*c_in;
-    w->S[155] = w->S[155] + c_out;
-    w->S[186] = w->S[186] + c_out;
-    w->S[210] = c_out + w->fh[81]*w->term[1][210];
-    w->S[211] = c_out + w->fh[82]*w->term[1][211];
-    w->S[212] = c_out + w->fh[83]*w->term[1][212];
-    w->S[213] = c_out + w->fh[84]*w->term[1][213];
-    w->S[214] = c_out + w->fh[85]*w->term[1][214];
-    w->S[215] = c_out + w->fh[86]*w->term[1][215];
+    w->S[6] = w->S[6] + w->fh[7]*w->term[1][84];
+    w->S[7] = w->S[7] + w->fh[8]*w->term[1][85];
+    w->S[8] = w->S[8] + w->fh[9]*w->term[1][86];
+    w->S[13] = w->S[13] + c_out;
+    w->S[18] = w->S[18] + w->fh[25]*w->term[1][84];
+    w->S[19] = w->S[19] + w->fh[26]*w->term[1][85];
+    w->S[20] = w->S[20] + w->fh[27]*w->term[1][86];
+    w->S[26] = w->S[26] + c_out;
+    w->S[30] = w->S[30] + w->fh[44]*w->term[1][84];
+    w->S[31] = w->S[31] + w->fh[45]*w->term[1][85];
+    w->S[32] = w->S[32] + w->fh[46]*w->term[1][86];
+    w->S[39] = w->S[39] + c_out;
+    w->S[45] = w->S[45] + w->fh[61]*w->term[1][87];
+    w->S[46] = w->S[46] + w->fh[62]*w->term[1][88];
+    w->S[47] = w->S[47] + w->fh[63]*w->term[1][89];
+    w->S[52] = w->S[52] + c_out;
+    w->S[57] = w->S[57] + w->fh[72]*w->term[1][87];
+    w->S[58] = w->S[58] + w->fh[73]*w->term[1][88];
+    w->S[59] = w->S[59] + w->fh[74]*w->term[1][89];
+    w->S[65] = w->S[65] + c_out;
+    w->S[180] = c_out;
+    w->S[84] = c_out + w->fh[81]*w->term[1][84];
+    w->S[85] = c_out + w->fh[82]*w->term[1][85];
+    w->S[86] = c_out + w->fh[83]*w->term[1][86];
+    w->S[87] = c_out + w->fh[84]*w->term[1][87];
+    w->S[88] = c_out + w->fh[85]*w->term[1][88];
+    w->S[89] = c_out + w->fh[86]*w->term[1][89];
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK void horner_unit_columns(ned_doppler32_augmented_discretize_scratch
+        *restrict w)
+{
+    w->S[90] = w->term[1][0]*w->fh[4] + w->term[1][1]*w->fh[22] + w->term[1][2]*w->fh[41];
+    w->S[91] = w->term[1][0]*w->fh[5] + w->term[1][1]*w->fh[23] + w->term[1][2]*w->fh[42];
+    w->S[92] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[24] + w->term[1][2]*w->fh[43];
+    w->S[93] = w->term[1][0]*w->fh[10] + w->term[1][1]*w->fh[28] + w->term[1][2]*w->fh[47];
+    w->S[94] = w->term[1][0]*w->fh[11] + w->term[1][1]*w->fh[29] + w->term[1][2]*w->fh[48];
+    w->S[95] = w->term[1][0]*w->fh[12] + w->term[1][1]*w->fh[30] + w->term[1][2]*w->fh[49];
+    w->S[96] = w->term[1][0]*w->fh[13] + w->term[1][1]*w->fh[31] + w->term[1][2]*w->fh[50];
+    w->S[97] = w->term[1][0]*w->fh[14] + w->term[1][1]*w->fh[32] + w->term[1][2]*w->fh[51];
+    w->S[98] = w->term[1][0]*w->fh[15] + w->term[1][1]*w->fh[33] + w->term[1][2]*w->fh[52];
+    w->S[99] = w->term[1][0]*w->fh[16] + w->term[1][1]*w->fh[34] + w->term[1][2]*w->fh[53];
+    w->S[100] = w->term[1][0]*w->fh[17] + w->term[1][1]*w->fh[35] + w->term[1][2]*w->fh[54];
+    w->S[101] = w->term[1][0]*w->fh[18] + w->term[1][1]*w->fh[36] + w->term[1][2]*w->fh[55];
+    w->S[102] = w->term[1][3]*w->fh[64] + w->term[1][4]*w->fh[75];
+    w->S[103] = w->term[1][3]*w->fh[65] + w->term[1][4]*w->fh[76];
+    w->S[104] = w->term[1][3]*w->fh[66] + w->term[1][4]*w->fh[77];
+    w->S[105] = w->term[1][12]*w->fh[4] + w->term[1][13]*w->fh[22] + w->term[1][14]*w->fh[41];
+    w->S[106] = w->term[1][12]*w->fh[5] + w->term[1][13]*w->fh[23] + w->term[1][14]*w->fh[42];
+    w->S[107] = w->term[1][12]*w->fh[6] + w->term[1][13]*w->fh[24] + w->term[1][14]*w->fh[43];
+    w->S[108] = w->term[1][12]*w->fh[10] + w->term[1][13]*w->fh[28] + w->term[1][14]*w->fh[47];
+    w->S[109] = w->term[1][12]*w->fh[11] + w->term[1][13]*w->fh[29] + w->term[1][14]*w->fh[48];
+    w->S[110] = w->term[1][12]*w->fh[12] + w->term[1][13]*w->fh[30] + w->term[1][14]*w->fh[49];
+    w->S[111] = w->term[1][12]*w->fh[13] + w->term[1][13]*w->fh[31] + w->term[1][14]*w->fh[50];
+    w->S[112] = w->term[1][12]*w->fh[14] + w->term[1][13]*w->fh[32] + w->term[1][14]*w->fh[51];
+    w->S[113] = w->term[1][12]*w->fh[15] + w->term[1][13]*w->fh[33] + w->term[1][14]*w->fh[52];
+    w->S[114] = w->term[1][12]*w->fh[16] + w->term[1][13]*w->fh[34] + w->term[1][14]*w->fh[53];
+    w->S[115] = w->term[1][12]*w->fh[17] + w->term[1][13]*w->fh[35] + w->term[1][14]*w->fh[54];
+    w->S[116] = w->term[1][12]*w->fh[18] + w->term[1][13]*w->fh[36] + w->term[1][14]*w->fh[55];
+    w->S[117] = w->term[1][15]*w->fh[64] + w->term[1][16]*w->fh[75];
+    w->S[118] = w->term[1][15]*w->fh[65] + w->term[1][16]*w->fh[76];
+    w->S[119] = w->term[1][15]*w->fh[66] + w->term[1][16]*w->fh[77];
+    w->S[120] = w->term[1][24]*w->fh[4] + w->term[1][25]*w->fh[22] + w->term[1][26]*w->fh[41];
+    w->S[121] = w->term[1][24]*w->fh[5] + w->term[1][25]*w->fh[23] + w->term[1][26]*w->fh[42];
+    w->S[122] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[24] + w->term[1][26]*w->fh[43];
+    w->S[123] = w->term[1][24]*w->fh[10] + w->term[1][25]*w->fh[28] + w->term[1][26]*w->fh[47];
+    w->S[124] = w->term[1][24]*w->fh[11] + w->term[1][25]*w->fh[29] + w->term[1][26]*w->fh[48];
+    w->S[125] = w->term[1][24]*w->fh[12] + w->term[1][25]*w->fh[30] + w->term[1][26]*w->fh[49];
+    w->S[126] = w->term[1][24]*w->fh[13] + w->term[1][25]*w->fh[31] + w->term[1][26]*w->fh[50];
+    w->S[127] = w->term[1][24]*w->fh[14] + w->term[1][25]*w->fh[32] + w->term[1][26]*w->fh[51];
+    w->S[128] = w->term[1][24]*w->fh[15] + w->term[1][25]*w->fh[33] + w->term[1][26]*w->fh[52];
+    w->S[129] = w->term[1][24]*w->fh[16] + w->term[1][25]*w->fh[34] + w->term[1][26]*w->fh[53];
+    w->S[130] = w->term[1][24]*w->fh[17] + w->term[1][25]*w->fh[35] + w->term[1][26]*w->fh[54];
+    w->S[131] = w->term[1][24]*w->fh[18] + w->term[1][25]*w->fh[36] + w->term[1][26]*w->fh[55];
+    w->S[132] = w->term[1][27]*w->fh[64] + w->term[1][28]*w->fh[75];
+    w->S[133] = w->term[1][27]*w->fh[65] + w->term[1][28]*w->fh[76];
+    w->S[134] = w->term[1][27]*w->fh[66] + w->term[1][28]*w->fh[77];
+    w->S[135] = w->term[1][36]*w->fh[4] + w->term[1][37]*w->fh[22] + w->term[1][38]*w->fh[41];
+    w->S[136] = w->term[1][36]*w->fh[5] + w->term[1][37]*w->fh[23] + w->term[1][38]*w->fh[42];
+    w->S[137] = w->term[1][36]*w->fh[6] + w->term[1][37]*w->fh[24] + w->term[1][38]*w->fh[43];
+    w->S[138] = w->term[1][36]*w->fh[10] + w->term[1][37]*w->fh[28] + w->term[1][38]*w->fh[47];
+    w->S[139] = w->term[1][36]*w->fh[11] + w->term[1][37]*w->fh[29] + w->term[1][38]*w->fh[48];
+    w->S[140] = w->term[1][36]*w->fh[12] + w->term[1][37]*w->fh[30] + w->term[1][38]*w->fh[49];
+    w->S[141] = w->term[1][36]*w->fh[13] + w->term[1][37]*w->fh[31] + w->term[1][38]*w->fh[50];
+    w->S[142] = w->term[1][36]*w->fh[14] + w->term[1][37]*w->fh[32] + w->term[1][38]*w->fh[51];
+    w->S[143] = w->term[1][36]*w->fh[15] + w->term[1][37]*w->fh[33] + w->term[1][38]*w->fh[52];
+    w->S[144] = w->term[1][36]*w->fh[16] + w->term[1][37]*w->fh[34] + w->term[1][38]*w->fh[53];
+    w->S[145] = w->term[1][36]*w->fh[17] + w->term[1][37]*w->fh[35] + w->term[1][38]*w->fh[54];
+    w->S[146] = w->term[1][36]*w->fh[18] + w->term[1][37]*w->fh[36] + w->term[1][38]*w->fh[55];
+    w->S[147] = w->term[1][39]*w->fh[64] + w->term[1][40]*w->fh[75];
+    w->S[148] = w->term[1][39]*w->fh[65] + w->term[1][40]*w->fh[76];
+    w->S[149] = w->term[1][39]*w->fh[66] + w->term[1][40]*w->fh[77];
+    w->S[150] = w->term[1][48]*w->fh[4] + w->term[1][49]*w->fh[22] + w->term[1][50]*w->fh[41];
+    w->S[151] = w->term[1][48]*w->fh[5] + w->term[1][49]*w->fh[23] + w->term[1][50]*w->fh[42];
+    w->S[152] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[24] + w->term[1][50]*w->fh[43];
+    w->S[153] = w->term[1][48]*w->fh[10] + w->term[1][49]*w->fh[28] + w->term[1][50]*w->fh[47];
+    w->S[154] = w->term[1][48]*w->fh[11] + w->term[1][49]*w->fh[29] + w->term[1][50]*w->fh[48];
+    w->S[155] = w->term[1][48]*w->fh[12] + w->term[1][49]*w->fh[30] + w->term[1][50]*w->fh[49];
+    w->S[156] = w->term[1][48]*w->fh[13] + w->term[1][49]*w->fh[31] + w->term[1][50]*w->fh[50];
+    w->S[157] = w->term[1][48]*w->fh[14] + w->term[1][49]*w->fh[32] + w->term[1][50]*w->fh[51];
+    w->S[158] = w->term[1][48]*w->fh[15] + w->term[1][49]*w->fh[33] + w->term[1][50]*w->fh[52];
+    w->S[159] = w->term[1][48]*w->fh[16] + w->term[1][49]*w->fh[34] + w->term[1][50]*w->fh[53];
+    w->S[160] = w->term[1][48]*w->fh[17] + w->term[1][49]*w->fh[35] + w->term[1][50]*w->fh[54];
+    w->S[161] = w->term[1][48]*w->fh[18] + w->term[1][49]*w->fh[36] + w->term[1][50]*w->fh[55];
+    w->S[162] = w->term[1][51]*w->fh[64] + w->term[1][52]*w->fh[75];
+    w->S[163] = w->term[1][51]*w->fh[65] + w->term[1][52]*w->fh[76];
+    w->S[164] = w->term[1][51]*w->fh[66] + w->term[1][52]*w->fh[77];
+    w->S[165] = w->term[1][60]*w->fh[4] + w->term[1][61]*w->fh[22] + w->term[1][62]*w->fh[41];
+    w->S[166] = w->term[1][60]*w->fh[5] + w->term[1][61]*w->fh[23] + w->term[1][62]*w->fh[42];
+    w->S[167] = w->term[1][60]*w->fh[6] + w->term[1][61]*w->fh[24] + w->term[1][62]*w->fh[43];
+    w->S[168] = w->term[1][60]*w->fh[10] + w->term[1][61]*w->fh[28] + w->term[1][62]*w->fh[47];
+    w->S[169] = w->term[1][60]*w->fh[11] + w->term[1][61]*w->fh[29] + w->term[1][62]*w->fh[48];
+    w->S[170] = w->term[1][60]*w->fh[12] + w->term[1][61]*w->fh[30] + w->term[1][62]*w->fh[49];
+    w->S[171] = w->term[1][60]*w->fh[13] + w->term[1][61]*w->fh[31] + w->term[1][62]*w->fh[50];
+    w->S[172] = w->term[1][60]*w->fh[14] + w->term[1][61]*w->fh[32] + w->term[1][62]*w->fh[51];
+    w->S[173] = w->term[1][60]*w->fh[15] + w->term[1][61]*w->fh[33] + w->term[1][62]*w->fh[52];
+    w->S[174] = w->term[1][60]*w->fh[16] + w->term[1][61]*w->fh[34] + w->term[1][62]*w->fh[53];
+    w->S[175] = w->term[1][60]*w->fh[17] + w->term[1][61]*w->fh[35] + w->term[1][62]*w->fh[54];
+    w->S[176] = w->term[1][60]*w->fh[18] + w->term[1][61]*w->fh[36] + w->term[1][62]*w->fh[55];
+    w->S[177] = w->term[1][63]*w->fh[64] + w->term[1][64]*w->fh[75];
+    w->S[178] = w->term[1][63]*w->fh[65] + w->term[1][64]*w->fh[76];
+    w->S[179] = w->term[1][63]*w->fh[66] + w->term[1][64]*w->fh[77];
+    w->S[181] = w->term[1][72]*w->fh[4] + w->term[1][73]*w->fh[22] + w->term[1][74]*w->fh[41];
+    w->S[182] = w->term[1][72]*w->fh[5] + w->term[1][73]*w->fh[23] + w->term[1][74]*w->fh[42];
+    w->S[183] = w->term[1][72]*w->fh[6] + w->term[1][73]*w->fh[24] + w->term[1][74]*w->fh[43];
+    w->S[184] = w->term[1][72]*w->fh[10] + w->term[1][73]*w->fh[28] + w->term[1][74]*w->fh[47];
+    w->S[185] = w->term[1][72]*w->fh[11] + w->term[1][73]*w->fh[29] + w->term[1][74]*w->fh[48];
+    w->S[186] = w->term[1][72]*w->fh[12] + w->term[1][73]*w->fh[30] + w->term[1][74]*w->fh[49];
+    w->S[187] = w->term[1][72]*w->fh[13] + w->term[1][73]*w->fh[31] + w->term[1][74]*w->fh[50];
+    w->S[188] = w->term[1][72]*w->fh[14] + w->term[1][73]*w->fh[32] + w->term[1][74]*w->fh[51];
+    w->S[189] = w->term[1][72]*w->fh[15] + w->term[1][73]*w->fh[33] + w->term[1][74]*w->fh[52];
+    w->S[190] = w->term[1][72]*w->fh[16] + w->term[1][73]*w->fh[34] + w->term[1][74]*w->fh[53];
+    w->S[191] = w->term[1][72]*w->fh[17] + w->term[1][73]*w->fh[35] + w->term[1][74]*w->fh[54];
+    w->S[192] = w->term[1][72]*w->fh[18] + w->term[1][73]*w->fh[36] + w->term[1][74]*w->fh[55];
+    w->S[193] = w->term[1][75]*w->fh[64] + w->term[1][76]*w->fh[75];
+    w->S[194] = w->term[1][75]*w->fh[65] + w->term[1][76]*w->fh[76];
+    w->S[195] = w->term[1][75]*w->fh[66] + w->term[1][76]*w->fh[77];
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_transition *restrict t,
         const ned_doppler32_augmented_discretize_scratch *restrict w)
 {
+    const ned_doppler32_augmented_scalar one = 1.0;
     int k;
-    for (k = 0; k < 30; ++k) {
-        t->Phi[0][k] = w->fh[0]*w->S[30+k] + w->fh[1]*w->S[60+k] + w->fh[2]*w->S[120+k] +
-                w->fh[3]*w->S[150+k];
-        t->Phi[1][k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[60+k] + w->fh[21]*w->S[90+k];
-        t->Phi[2][k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[30+k] + w->fh[39]*w->S[120+k] +
-                w->fh[40]*w->S[150+k];
-        t->Phi[3][k] = w->fh[56]*w->S[30+k] + w->fh[57]*w->S[60+k] + w->fh[58]*w->S[90+k] +
-                w->fh[59]*w->S[120+k] + w->fh[60]*w->S[150+k];
-        t->Phi[4][k] = w->fh[67]*w->S[k] + w->fh[68]*w->S[60+k] + w->fh[69]*w->S[90+k] +
-                w->fh[70]*w->S[120+k] + w->fh[71]*w->S[150+k];
-        t->Phi[5][k] = w->fh[78]*w->S[90+k];
-        t->Phi[6][k] = w->fh[79]*w->S[120+k] + w->fh[80]*w->S[150+k];
+    for (k = 0; k < 6; ++k) {
+        t->Phi[0][k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
+                w->fh[3]*w->S[60+k];
+        t->Phi[0][10+k] = w->fh[0]*w->S[18+k] + w->fh[1]*w->S[30+k] + w->fh[2]*w->S[54+k] +
+                w->fh[3]*w->S[66+k];
+        t->Phi[1][k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[24+k] + w->fh[21]*w->S[36+k];
+        t->Phi[1][10+k] = w->fh[19]*w->S[6+k] + w->fh[20]*w->S[30+k] + w->fh[21]*w->S[42+k];
+        t->Phi[2][k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[12+k] + w->fh[39]*w->S[48+k] +
+                w->fh[40]*w->S[60+k];
+        t->Phi[2][10+k] = w->fh[37]*w->S[6+k] + w->fh[38]*w->S[18+k] + w->fh[39]*w->S[54+k] +
+                w->fh[40]*w->S[66+k];
+        t->Phi[3][k] = w->fh[56]*w->S[12+k] + w->fh[57]*w->S[24+k] + w->fh[58]*w->S[36+k] +
+                w->fh[59]*w->S[48+k] + w->fh[60]*w->S[60+k];
+        t->Phi[3][10+k] = w->fh[56]*w->S[18+k] + w->fh[57]*w->S[30+k] + w->fh[58]*w->S[42+k] +
+                w->fh[59]*w->S[54+k] + w->fh[60]*w->S[66+k];
+        t->Phi[4][k] = w->fh[67]*w->S[k] + w->fh[68]*w->S[24+k] + w->fh[69]*w->S[36+k] +
+                w->fh[70]*w->S[48+k] + w->fh[71]*w->S[60+k];
+        t->Phi[4][10+k] = w->fh[67]*w->S[6+k] + w->fh[68]*w->S[30+k] + w->fh[69]*w->S[42+k] +
+                w->fh[70]*w->S[54+k] + w->fh[71]*w->S[66+k];
+        t->Phi[5][k] = w->fh[78]*w->S[36+k];
+        t->Phi[5][10+k] = w->fh[78]*w->S[42+k];
+        t->Phi[6][k] = w->fh[79]*w->S[48+k] + w->fh[80]*w->S[60+k];
+        t->Phi[6][10+k] = w->fh[79]*w->S[54+k] + w->fh[80]*w->S[66+k];
     }
-    t->Phi[0][7] = t->Phi[0][7] + w->fh[4];
-    t->Phi[0][8] = t->Phi[0][8] + w->fh[5];
-    t->Phi[0][9] = t->Phi[0][9] + w->fh[6];
-    t->Phi[0][10] = t->Phi[0][10] + w->fh[7]*w->S[210];
-    t->Phi[0][11] = t->Phi[0][11] + w->fh[8]*w->S[211];
-    t->Phi[0][12] = t->Phi[0][12] + w->fh[9]*w->S[212];
-    t->Phi[0][18] = t->Phi[0][18] + w->fh[10];
-    t->Phi[0][19] = t->Phi[0][19] + w->fh[11];
-    t->Phi[0][20] = t->Phi[0][20] + w->fh[12];
-    t->Phi[0][21] = t->Phi[0][21] + w->fh[13];
-    t->Phi[0][22] = t->Phi[0][22] + w->fh[14];
-    t->Phi[0][23] = t->Phi[0][23] + w->fh[15];
-    t->Phi[0][24] = t->Phi[0][24] + w->fh[16];
-    t->Phi[0][25] = t->Phi[0][25] + w->fh[17];
-    t->Phi[0][26] = t->Phi[0][26] + w->fh[18];
-    t->Phi[1][7] = t->Phi[1][7] + w->fh[22];
-    t->Phi[1][8] = t->Phi[1][8] + w->fh[23];
-    t->Phi[1][9] = t->Phi[1][9] + w->fh[24];
-    t->Phi[1][10] = t->Phi[1][10] + w->fh[25]*w->S[210];
-    t->Phi[1][11] = t->Phi[1][11] + w->fh[26]*w->S[211];
-    t->Phi[1][12] = t->Phi[1][12] + w->fh[27]*w->S[212];
-    t->Phi[1][18] = t->Phi[1][18] + w->fh[28];
-    t->Phi[1][19] = t->Phi[1][19] + w->fh[29];
-    t->Phi[1][20] = t->Phi[1][20] + w->fh[30];
-    t->Phi[1][21] = t->Phi[1][21] + w->fh[31];
-    t->Phi[1][22] = t->Phi[1][22] + w->fh[32];
-    t->Phi[1][23] = t->Phi[1][23] + w->fh[33];
-    t->Phi[1][24] = t->Phi[1][24] + w->fh[34];
-    t->Phi[1][25] = t->Phi[1][25] + w->fh[35];
-    t->Phi[1][26] = t->Phi[1][26] + w->fh[36];
-    t->Phi[2][7] = t->Phi[2][7] + w->fh[41];
-    t->Phi[2][8] = t->Phi[2][8] + w->fh[42];
-    t->Phi[2][9] = t->Phi[2][9] + w->fh[43];
-    t->Phi[2][10] = t->Phi[2][10] + w->fh[44]*w->S[210];
-    t->Phi[2][11] = t->Phi[2][11] + w->fh[45]*w->S[211];
-    t->Phi[2][12] = t->Phi[2][12] + w->fh[46]*w->S[212];
-    t->Phi[2][18] = t->Phi[2][18] + w->fh[47];
-    t->Phi[2][19] = t->Phi[2][19] + w->fh[48];
-    t->Phi[2][20] = t->Phi[2][20] + w->fh[49];
-    t->Phi[2][21] = t->Phi[2][21] + w->fh[50];
-    t->Phi[2][22] = t->Phi[2][22] + w->fh[51];
-    t->Phi[2][23] = t->Phi[2][23] + w->fh[52];
-    t->Phi[2][24] = t->Phi[2][24] + w->fh[53];
-    t->Phi[2][25] = t->Phi[2][25] + w->fh[54];
-    t->Phi[2][26] = t->Phi[2][26] + w->fh[55];
-    t->Phi[3][13] = t->Phi[3][13] + w->fh[61]*w->S[213];
-    t->Phi[3][14] = t->Phi[3][14] + w->fh[62]*w->S[214];
-    t->Phi[3][15] = t->Phi[3][15] + w->fh[63]*w->S[215];
-    t->Phi[3][27] = t->Phi[3][27] + w->fh[64];
-    t->Phi[3][28] = t->Phi[3][28] + w->fh[65];
-    t->Phi[3][29] = t->Phi[3][29] + w->fh[66];
-    t->Phi[4][13] = t->Phi[4][13] + w->fh[72]*w->S[213];
-    t->Phi[4][14] = t->Phi[4][14] + w->fh[73]*w->S[214];
-    t->Phi[4][15] = t->Phi[4][15] + w->fh[74]*w->S[215];
-    t->Phi[4][27] = t->Phi[4][27] + w->fh[75];
-    t->Phi[4][28] = t->Phi[4][28] + w->fh[76];
-    t->Phi[4][29] = t->Phi[4][29] + w->fh[77];
-    t->Phi[10][10] = w->fh[81]*w->S[210];
-    t->Phi[11][11] = w->fh[82]*w->S[211];
-    t->Phi[12][12] = w->fh[83]*w->S[212];
-    t->Phi[13][13] = w->fh[84]*w->S[213];
-    t->Phi[14][14] = w->fh[85]*w->S[214];
-    t->Phi[15][15] = w->fh[86]*w->S[215];
+    t->Phi[0][10] = t->Phi[0][10] + w->fh[7]*w->S[84];
+    t->Phi[0][11] = t->Phi[0][11] + w->fh[8]*w->S[85];
+    t->Phi[0][12] = t->Phi[0][12] + w->fh[9]*w->S[86];
+    t->Phi[1][10] = t->Phi[1][10] + w->fh[25]*w->S[84];
+    t->Phi[1][11] = t->Phi[1][11] + w->fh[26]*w->S[85];
+    t->Phi[1][12] = t->Phi[1][12] + w->fh[27]*w->S[86];
+    t->Phi[2][10] = t->Phi[2][10] + w->fh[44]*w->S[84];
+    t->Phi[2][11] = t->Phi[2][11] + w->fh[45]*w->S[85];
+    t->Phi[2][12] = t->Phi[2][12] + w->fh[46]*w->S[86];
+    t->Phi[3][13] = t->Phi[3][13] + w->fh[61]*w->S[87];
+    t->Phi[3][14] = t->Phi[3][14] + w->fh[62]*w->S[88];
+    t->Phi[3][15] = t->Phi[3][15] + w->fh[63]*w->S[89];
+    t->Phi[4][13] = t->Phi[4][13] + w->fh[72]*w->S[87];
+    t->Phi[4][14] = t->Phi[4][14] + w->fh[73]*w->S[88];
+    t->Phi[4][15] = t->Phi[4][15] + w->fh[74]*w->S[89];
+    t->Phi[10][10] = w->fh[81]*w->S[84];
+    t->Phi[11][11] = w->fh[82]*w->S[85];
+    t->Phi[12][12] = w->fh[83]*w->S[86];
+    t->Phi[13][13] = w->fh[84]*w->S[87];
+    t->Phi[14][14] = w->fh[85]*w->S[88];
+    t->Phi[15][15] = w->fh[86]*w->S[89];
+    t->Phi[0][7] = w->S[0]*w->fh[4] + w->S[1]*w->fh[22] + w->S[2]*w->fh[41];
+    t->Phi[0][8] = w->S[0]*w->fh[5] + w->S[1]*w->fh[23] + w->S[2]*w->fh[42];
+    t->Phi[0][9] = w->S[0]*w->fh[6] + w->S[1]*w->fh[24] + w->S[2]*w->fh[43];
+    t->Phi[0][18] = w->S[0]*w->fh[10] + w->S[1]*w->fh[28] + w->S[2]*w->fh[47];
+    t->Phi[0][19] = w->S[0]*w->fh[11] + w->S[1]*w->fh[29] + w->S[2]*w->fh[48];
+    t->Phi[0][20] = w->S[0]*w->fh[12] + w->S[1]*w->fh[30] + w->S[2]*w->fh[49];
+    t->Phi[0][21] = w->S[0]*w->fh[13] + w->S[1]*w->fh[31] + w->S[2]*w->fh[50];
+    t->Phi[0][22] = w->S[0]*w->fh[14] + w->S[1]*w->fh[32] + w->S[2]*w->fh[51];
+    t->Phi[0][23] = w->S[0]*w->fh[15] + w->S[1]*w->fh[33] + w->S[2]*w->fh[52];
+    t->Phi[0][24] = w->S[0]*w->fh[16] + w->S[1]*w->fh[34] + w->S[2]*w->fh[53];
+    t->Phi[0][25] = w->S[0]*w->fh[17] + w->S[1]*w->fh[35] + w->S[2]*w->fh[54];
+    t->Phi[0][26] = w->S[0]*w->fh[18] + w->S[1]*w->fh[36] + w->S[2]*w->fh[55];
+    t->Phi[0][27] = w->S[3]*w->fh[64] + w->S[4]*w->fh[75];
+    t->Phi[0][28] = w->S[3]*w->fh[65] + w->S[4]*w->fh[76];
+    t->Phi[0][29] = w->S[3]*w->fh[66] + w->S[4]*w->fh[77];
+    t->Phi[1][7] = w->S[12]*w->fh[4] + w->S[13]*w->fh[22] + w->S[14]*w->fh[41];
+    t->Phi[1][8] = w->S[12]*w->fh[5] + w->S[13]*w->fh[23] + w->S[14]*w->fh[42];
+    t->Phi[1][9] = w->S[12]*w->fh[6] + w->S[13]*w->fh[24] + w->S[14]*w->fh[43];
+    t->Phi[1][18] = w->S[12]*w->fh[10] + w->S[13]*w->fh[28] + w->S[14]*w->fh[47];
+    t->Phi[1][19] = w->S[12]*w->fh[11] + w->S[13]*w->fh[29] + w->S[14]*w->fh[48];
+    t->Phi[1][20] = w->S[12]*w->fh[12] + w->S[13]*w->fh[30] + w->S[14]*w->fh[49];
+    t->Phi[1][21] = w->S[12]*w->fh[13] + w->S[13]*w->fh[31] + w->S[14]*w->fh[50];
+    t->Phi[1][22] = w->S[12]*w->fh[14] + w->S[13]*w->fh[32] + w->S[14]*w->fh[51];
+    t->Phi[1][23] = w->S[12]*w->fh[15] + w->S[13]*w->fh[33] + w->S[14]*w->fh[52];
+    t->Phi[1][24] = w->S[12]*w->fh[16] + w->S[13]*w->fh[34] + w->S[14]*w->fh[53];
+    t->Phi[1][25] = w->S[12]*w->fh[17] + w->S[13]*w->fh[35] + w->S[14]*w->fh[54];
+    t->Phi[1][26] = w->S[12]*w->fh[18] + w->S[13]*w->fh[36] + w->S[14]*w->fh[55];
+    t->Phi[1][27] = w->S[15]*w->fh[64] + w->S[16]*w->fh[75];
+    t->Phi[1][28] = w->S[15]*w->fh[65] + w->S[16]*w->fh[76];
+    t->Phi[1][29] = w->S[15]*w->fh[66] + w->S[16]*w->fh[77];
+    t->Phi[2][7] = w->S[24]*w->fh[4] + w->S[25]*w->fh[22] + w->S[26]*w->fh[41];
+    t->Phi[2][8] = w->S[24]*w->fh[5] + w->S[25]*w->fh[23] + w->S[26]*w->fh[42];
+    t->Phi[2][9] = w->S[24]*w->fh[6] + w->S[25]*w->fh[24] + w->S[26]*w->fh[43];
+    t->Phi[2][18] = w->S[24]*w->fh[10] + w->S[25]*w->fh[28] + w->S[26]*w->fh[47];
+    t->Phi[2][19] = w->S[24]*w->fh[11] + w->S[25]*w->fh[29] + w->S[26]*w->fh[48];
+    t->Phi[2][20] = w->S[24]*w->fh[12] + w->S[25]*w->fh[30] + w->S[26]*w->fh[49];
+    t->Phi[2][21] = w->S[24]*w->fh[13] + w->S[25]*w->fh[31] + w->S[26]*w->fh[50];
+    t->Phi[2][22] = w->S[24]*w->fh[14] + w->S[25]*w->fh[32] + w->S[26]*w->fh[51];
+    t->Phi[2][23] = w->S[24]*w->fh[15] + w->S[25]*w->fh[33] + w->S[26]*w->fh[52];
+    t->Phi[2][24] = w->S[24]*w->fh[16] + w->S[25]*w->fh[34] + w->S[26]*w->fh[53];
+    t->Phi[2][25] = w->S[24]*w->fh[17] + w->S[25]*w->fh[35] + w->S[26]*w->fh[54];
+    t->Phi[2][26] = w->S[24]*w->fh[18] + w->S[25]*w->fh[36] + w->S[26]*w->fh[55];
+    t->Phi[2][27] = w->S[27]*w->fh[64] + w->S[28]*w->fh[75];
+    t->Phi[2][28] = w->S[27]*w->fh[65] + w->S[28]*w->fh[76];
+    t->Phi[2][29] = w->S[27]*w->fh[66] + w->S[28]*w->fh[77];
+    t->Phi[3][7] = w->S[36]*w->fh[4] + w->S[37]*w->fh[22] + w->S[38]*w->fh[41];
+    t->Phi[3][8] = w->S[36]*w->fh[5] + w->S[37]*w->fh[23] + w->S[38]*w->fh[42];
+    t->Phi[3][9] = w->S[36]*w->fh[6] + w->S[37]*w->fh[24] + w->S[38]*w->fh[43];
+    t->Phi[3][18] = w->S[36]*w->fh[10] + w->S[37]*w->fh[28] + w->S[38]*w->fh[47];
+    t->Phi[3][19] = w->S[36]*w->fh[11] + w->S[37]*w->fh[29] + w->S[38]*w->fh[48];
+    t->Phi[3][20] = w->S[36]*w->fh[12] + w->S[37]*w->fh[30] + w->S[38]*w->fh[49];
+    t->Phi[3][21] = w->S[36]*w->fh[13] + w->S[37]*w->fh[31] + w->S[38]*w->fh[50];
+    t->Phi[3][22] = w->S[36]*w->fh[14] + w->S[37]*w->fh[32] + w->S[38]*w->fh[51];
+    t->Phi[3][23] = w->S[36]*w->fh[15] + w->S[37]*w->fh[33] + w->S[38]*w->fh[52];
+    t->Phi[3][24] = w->S[36]*w->fh[16] + w->S[37]*w->fh[34] + w->S[38]*w->fh[53];
+    t->Phi[3][25] = w->S[36]*w->fh[17] + w->S[37]*w->fh[35] + w->S[38]*w->fh[54];
+    t->Phi[3][26] = w->S[36]*w->fh[18] + w->S[37]*w->fh[36] + w->S[38]*w->fh[55];
+    t->Phi[3][27] = w->S[39]*w->fh[64] + w->S[40]*w->fh[75];
+    t->Phi[3][28] = w->S[39]*w->fh[65] + w->S[40]*w->fh[76];
+    t->Phi[3][29] = w->S[39]*w->fh[66] + w->S[40]*w->fh[77];
+    t->Phi[4][7] = w->S[48]*w->fh[4] + w->S[49]*w->fh[22] + w->S[50]*w->fh[41];
+    t->Phi[4][8] = w->S[48]*w->fh[5] + w->S[49]*w->fh[23] + w->S[50]*w->fh[42];
+    t->Phi[4][9] = w->S[48]*w->fh[6] + w->S[49]*w->fh[24] + w->S[50]*w->fh[43];
+    t->Phi[4][18] = w->S[48]*w->fh[10] + w->S[49]*w->fh[28] + w->S[50]*w->fh[47];
+    t->Phi[4][19] = w->S[48]*w->fh[11] + w->S[49]*w->fh[29] + w->S[50]*w->fh[48];
+    t->Phi[4][20] = w->S[48]*w->fh[12] + w->S[49]*w->fh[30] + w->S[50]*w->fh[49];
+    t->Phi[4][21] = w->S[48]*w->fh[13] + w->S[49]*w->fh[31] + w->S[50]*w->fh[50];
+    t->Phi[4][22] = w->S[48]*w->fh[14] + w->S[49]*w->fh[32] + w->S[50]*w->fh[51];
+    t->Phi[4][23] = w->S[48]*w->fh[15] + w->S[49]*w->fh[33] + w->S[50]*w->fh[52];
+    t->Phi[4][24] = w->S[48]*w->fh[16] + w->S[49]*w->fh[34] + w->S[50]*w->fh[53];
+    t->Phi[4][25] = w->S[48]*w->fh[17] + w->S[49]*w->fh[35] + w->S[50]*w->fh[54];
+    t->Phi[4][26] = w->S[48]*w->fh[18] + w->S[49]*w->fh[36] + w->S[50]*w->fh[55];
+    t->Phi[4][27] = w->S[51]*w->fh[64] + w->S[52]*w->fh[75];
+    t->Phi[4][28] = w->S[51]*w->fh[65] + w->S[52]*w->fh[76];
+    t->Phi[4][29] = w->S[51]*w->fh[66] + w->S[52]*w->fh[77];
+    t->Phi[5][7] = w->S[60]*w->fh[4] + w->S[61]*w->fh[22] + w->S[62]*w->fh[41];
+    t->Phi[5][8] = w->S[60]*w->fh[5] + w->S[61]*w->fh[23] + w->S[62]*w->fh[42];
+    t->Phi[5][9] = w->S[60]*w->fh[6] + w->S[61]*w->fh[24] + w->S[62]*w->fh[43];
+    t->Phi[5][18] = w->S[60]*w->fh[10] + w->S[61]*w->fh[28] + w->S[62]*w->fh[47];
+    t->Phi[5][19] = w->S[60]*w->fh[11] + w->S[61]*w->fh[29] + w->S[62]*w->fh[48];
+    t->Phi[5][20] = w->S[60]*w->fh[12] + w->S[61]*w->fh[30] + w->S[62]*w->fh[49];
+    t->Phi[5][21] = w->S[60]*w->fh[13] + w->S[61]*w->fh[31] + w->S[62]*w->fh[50];
+    t->Phi[5][22] = w->S[60]*w->fh[14] + w->S[61]*w->fh[32] + w->S[62]*w->fh[51];
+    t->Phi[5][23] = w->S[60]*w->fh[15] + w->S[61]*w->fh[33] + w->S[62]*w->fh[52];
+    t->Phi[5][24] = w->S[60]*w->fh[16] + w->S[61]*w->fh[34] + w->S[62]*w->fh[53];
+    t->Phi[5][25] = w->S[60]*w->fh[17] + w->S[61]*w->fh[35] + w->S[62]*w->fh[54];
+    t->Phi[5][26] = w->S[60]*w->fh[18] + w->S[61]*w->fh[36] + w->S[62]*w->fh[55];
+    t->Phi[5][27] = w->S[63]*w->fh[64] + w->S[64]*w->fh[75];
+    t->Phi[5][28] = w->S[63]*w->fh[65] + w->S[64]*w->fh[76];
+    t->Phi[5][29] = w->S[63]*w->fh[66] + w->S[64]*w->fh[77];
+    t->Phi[6][7] = w->S[72]*w->fh[4] + w->S[73]*w->fh[22] + w->S[74]*w->fh[41];
+    t->Phi[6][8] = w->S[72]*w->fh[5] + w->S[73]*w->fh[23] + w->S[74]*w->fh[42];
+    t->Phi[6][9] = w->S[72]*w->fh[6] + w->S[73]*w->fh[24] + w->S[74]*w->fh[43];
+    t->Phi[6][18] = w->S[72]*w->fh[10] + w->S[73]*w->fh[28] + w->S[74]*w->fh[47];
+    t->Phi[6][19] = w->S[72]*w->fh[11] + w->S[73]*w->fh[29] + w->S[74]*w->fh[48];
+    t->Phi[6][20] = w->S[72]*w->fh[12] + w->S[73]*w->fh[30] + w->S[74]*w->fh[49];
+    t->Phi[6][21] = w->S[72]*w->fh[13] + w->S[73]*w->fh[31] + w->S[74]*w->fh[50];
+    t->Phi[6][22] = w->S[72]*w->fh[14] + w->S[73]*w->fh[32] + w->S[74]*w->fh[51];
+    t->Phi[6][23] = w->S[72]*w->fh[15] + w->S[73]*w->fh[33] + w->S[74]*w->fh[52];
+    t->Phi[6][24] = w->S[72]*w->fh[16] + w->S[73]*w->fh[34] + w->S[74]*w->fh[53];
+    t->Phi[6][25] = w->S[72]*w->fh[17] + w->S[73]*w->fh[35] + w->S[74]*w->fh[54];
+    t->Phi[6][26] = w->S[72]*w->fh[18] + w->S[73]*w->fh[36] + w->S[74]*w->fh[55];
+    t->Phi[6][27] = w->S[75]*w->fh[64] + w->S[76]*w->fh[75];
+    t->Phi[6][28] = w->S[75]*w->fh[65] + w->S[76]*w->fh[76];
+    t->Phi[6][29] = w->S[75]*w->fh[66] + w->S[76]*w->fh[77];
+    t->Phi[0][6] = 0;
+    t->Phi[0][16] = 0;
+    t->Phi[0][17] = 0;
     t->Phi[0][30] = 0;
     t->Phi[0][31] = 0;
+    t->Phi[1][6] = 0;
+    t->Phi[1][16] = 0;
+    t->Phi[1][17] = 0;
     t->Phi[1][30] = 0;
     t->Phi[1][31] = 0;
+    t->Phi[2][6] = 0;
+    t->Phi[2][16] = 0;
+    t->Phi[2][17] = 0;
     t->Phi[2][30] = 0;
     t->Phi[2][31] = 0;
+    t->Phi[3][6] = 0;
+    t->Phi[3][16] = 0;
+    t->Phi[3][17] = 0;
     t->Phi[3][30] = 0;
     t->Phi[3][31] = 0;
+    t->Phi[4][6] = 0;
+    t->Phi[4][16] = 0;
+    t->Phi[4][17] = 0;
     t->Phi[4][30] = 0;
     t->Phi[4][31] = 0;
+    t->Phi[5][6] = 0;
+    t->Phi[5][16] = 0;
+    t->Phi[5][17] = 0;
     t->Phi[5][30] = 0;
     t->Phi[5][31] = 0;
+    t->Phi[6][6] = 0;
+    t->Phi[6][16] = 0;
+    t->Phi[6][17] = 0;
     t->Phi[6][30] = 0;
     t->Phi[6][31] = 0;
     t->Phi[7][0] = 0;
@@ -1390,7 +1480,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[7][4] = 0;
     t->Phi[7][5] = 0;
     t->Phi[7][6] = 0;
-    t->Phi[7][7] = 0;
+    t->Phi[7][7] = one;
     t->Phi[7][8] = 0;
     t->Phi[7][9] = 0;
     t->Phi[7][10] = 0;
@@ -1423,7 +1513,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[8][5] = 0;
     t->Phi[8][6] = 0;
     t->Phi[8][7] = 0;
-    t->Phi[8][8] = 0;
+    t->Phi[8][8] = one;
     t->Phi[8][9] = 0;
     t->Phi[8][10] = 0;
     t->Phi[8][11] = 0;
@@ -1456,7 +1546,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[9][6] = 0;
     t->Phi[9][7] = 0;
     t->Phi[9][8] = 0;
-    t->Phi[9][9] = 0;
+    t->Phi[9][9] = one;
     t->Phi[9][10] = 0;
     t->Phi[9][11] = 0;
     t->Phi[9][12] = 0;
@@ -1681,7 +1771,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[16][13] = 0;
     t->Phi[16][14] = 0;
     t->Phi[16][15] = 0;
-    t->Phi[16][16] = 0;
+    t->Phi[16][16] = one;
     t->Phi[16][17] = 0;
     t->Phi[16][18] = 0;
     t->Phi[16][19] = 0;
@@ -1714,7 +1804,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[17][14] = 0;
     t->Phi[17][15] = 0;
     t->Phi[17][16] = 0;
-    t->Phi[17][17] = 0;
+    t->Phi[17][17] = one;
     t->Phi[17][18] = 0;
     t->Phi[17][19] = 0;
     t->Phi[17][20] = 0;
@@ -1747,7 +1837,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[18][15] = 0;
     t->Phi[18][16] = 0;
     t->Phi[18][17] = 0;
-    t->Phi[18][18] = 0;
+    t->Phi[18][18] = one;
     t->Phi[18][19] = 0;
     t->Phi[18][20] = 0;
     t->Phi[18][21] = 0;
@@ -1780,7 +1870,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[19][16] = 0;
     t->Phi[19][17] = 0;
     t->Phi[19][18] = 0;
-    t->Phi[19][19] = 0;
+    t->Phi[19][19] = one;
     t->Phi[19][20] = 0;
     t->Phi[19][21] = 0;
     t->Phi[19][22] = 0;
@@ -1813,7 +1903,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[20][17] = 0;
     t->Phi[20][18] = 0;
     t->Phi[20][19] = 0;
-    t->Phi[20][20] = 0;
+    t->Phi[20][20] = one;
     t->Phi[20][21] = 0;
     t->Phi[20][22] = 0;
     t->Phi[20][23] = 0;
@@ -1846,7 +1936,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[21][18] = 0;
     t->Phi[21][19] = 0;
     t->Phi[21][20] = 0;
-    t->Phi[21][21] = 0;
+    t->Phi[21][21] = one;
     t->Phi[21][22] = 0;
     t->Phi[21][23] = 0;
     t->Phi[21][24] = 0;
@@ -1879,7 +1969,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[22][19] = 0;
     t->Phi[22][20] = 0;
     t->Phi[22][21] = 0;
-    t->Phi[22][22] = 0;
+    t->Phi[22][22] = one;
     t->Phi[22][23] = 0;
     t->Phi[22][24] = 0;
     t->Phi[22][25] = 0;
@@ -1912,7 +2002,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[23][20] = 0;
     t->Phi[23][21] = 0;
     t->Phi[23][22] = 0;
-    t->Phi[23][23] = 0;
+    t->Phi[23][23] = one;
     t->Phi[23][24] = 0;
     t->Phi[23][25] = 0;
     t->Phi[23][26] = 0;
@@ -1945,7 +2035,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[24][21] = 0;
     t->Phi[24][22] = 0;
     t->Phi[24][23] = 0;
-    t->Phi[24][24] = 0;
+    t->Phi[24][24] = one;
     t->Phi[24][25] = 0;
     t->Phi[24][26] = 0;
     t->Phi[24][27] = 0;
@@ -1978,7 +2068,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[25][22] = 0;
     t->Phi[25][23] = 0;
     t->Phi[25][24] = 0;
-    t->Phi[25][25] = 0;
+    t->Phi[25][25] = one;
     t->Phi[25][26] = 0;
     t->Phi[25][27] = 0;
     t->Phi[25][28] = 0;
@@ -2011,7 +2101,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[26][23] = 0;
     t->Phi[26][24] = 0;
     t->Phi[26][25] = 0;
-    t->Phi[26][26] = 0;
+    t->Phi[26][26] = one;
     t->Phi[26][27] = 0;
     t->Phi[26][28] = 0;
     t->Phi[26][29] = 0;
@@ -2044,7 +2134,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[27][24] = 0;
     t->Phi[27][25] = 0;
     t->Phi[27][26] = 0;
-    t->Phi[27][27] = 0;
+    t->Phi[27][27] = one;
     t->Phi[27][28] = 0;
     t->Phi[27][29] = 0;
     t->Phi[27][30] = 0;
@@ -2077,7 +2167,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[28][25] = 0;
     t->Phi[28][26] = 0;
     t->Phi[28][27] = 0;
-    t->Phi[28][28] = 0;
+    t->Phi[28][28] = one;
     t->Phi[28][29] = 0;
     t->Phi[28][30] = 0;
     t->Phi[28][31] = 0;
@@ -2110,7 +2200,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[29][26] = 0;
     t->Phi[29][27] = 0;
     t->Phi[29][28] = 0;
-    t->Phi[29][29] = 0;
+    t->Phi[29][29] = one;
     t->Phi[29][30] = 0;
     t->Phi[29][31] = 0;
     t->Phi[30][0] = 0;
@@ -2143,7 +2233,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[30][27] = 0;
     t->Phi[30][28] = 0;
     t->Phi[30][29] = 0;
-    t->Phi[30][30] = 0;
+    t->Phi[30][30] = one;
     t->Phi[30][31] = 0;
     t->Phi[31][0] = 0;
     t->Phi[31][1] = 0;
@@ -2176,7 +2266,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[31][28] = 0;
     t->Phi[31][29] = 0;
     t->Phi[31][30] = 0;
-    t->Phi[31][31] = 0;
+    t->Phi[31][31] = one;
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void doubling(ned_doppler32_augmented_transition *restrict t,
@@ -2186,1097 +2276,1097 @@ NED_DOPPLER32_AUGMENTED_BLOCK void doubling(ned_doppler32_augmented_transition *
     w->term[0][0] = t->Phi[0][0]*t->Phi[0][0] + t->Phi[0][1]*t->Phi[1][0] +
             t->Phi[0][2]*t->Phi[2][0] + t->Phi[0][3]*t->Phi[3][0] + t->Phi[0][4]*t->Phi[4][0] +
             t->Phi[0][5]*t->Phi[5][0];
-    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[30] + t->Phi[0][2]*w->S[60] +
-            t->Phi[0][3]*w->S[90] + t->Phi[0][4]*w->S[120] + t->Phi[0][5]*w->S[150];
+    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[12] + t->Phi[0][2]*w->S[24] +
+            t->Phi[0][3]*w->S[36] + t->Phi[0][4]*w->S[48] + t->Phi[0][5]*w->S[60];
     w->term[0][1] = t->Phi[0][0]*t->Phi[0][1] + t->Phi[0][1]*t->Phi[1][1] +
             t->Phi[0][2]*t->Phi[2][1] + t->Phi[0][3]*t->Phi[3][1] + t->Phi[0][4]*t->Phi[4][1] +
             t->Phi[0][5]*t->Phi[5][1];
-    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[31] + t->Phi[0][2]*w->S[61] +
-            t->Phi[0][3]*w->S[91] + t->Phi[0][4]*w->S[121] + t->Phi[0][5]*w->S[151];
+    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[13] + t->Phi[0][2]*w->S[25] +
+            t->Phi[0][3]*w->S[37] + t->Phi[0][4]*w->S[49] + t->Phi[0][5]*w->S[61];
     w->term[0][2] = t->Phi[0][0]*t->Phi[0][2] + t->Phi[0][1]*t->Phi[1][2] +
             t->Phi[0][2]*t->Phi[2][2] + t->Phi[0][3]*t->Phi[3][2] + t->Phi[0][4]*t->Phi[4][2] +
             t->Phi[0][5]*t->Phi[5][2];
-    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[32] + t->Phi[0][2]*w->S[62] +
-            t->Phi[0][3]*w->S[92] + t->Phi[0][4]*w->S[122] + t->Phi[0][5]*w->S[152];
+    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[26] +
+            t->Phi[0][3]*w->S[38] + t->Phi[0][4]*w->S[50] + t->Phi[0][5]*w->S[62];
     w->term[0][3] = t->Phi[0][0]*t->Phi[0][3] + t->Phi[0][1]*t->Phi[1][3] +
             t->Phi[0][2]*t->Phi[2][3] + t->Phi[0][3]*t->Phi[3][3] + t->Phi[0][4]*t->Phi[4][3] +
             t->Phi[0][5]*t->Phi[5][3];
-    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[33] + t->Phi[0][2]*w->S[63] +
-            t->Phi[0][3]*w->S[93] + t->Phi[0][4]*w->S[123] + t->Phi[0][5]*w->S[153];
+    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[27] +
+            t->Phi[0][3]*w->S[39] + t->Phi[0][4]*w->S[51] + t->Phi[0][5]*w->S[63];
     w->term[0][4] = t->Phi[0][0]*t->Phi[0][4] + t->Phi[0][1]*t->Phi[1][4] +
             t->Phi[0][2]*t->Phi[2][4] + t->Phi[0][3]*t->Phi[3][4] + t->Phi[0][4]*t->Phi[4][4] +
             t->Phi[0][5]*t->Phi[5][4];
-    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[34] + t->Phi[0][2]*w->S[64] +
-            t->Phi[0][3]*w->S[94] + t->Phi[0][4]*w->S[124] + t->Phi[0][5]*w->S[154];
+    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[28] +
+            t->Phi[0][3]*w->S[40] + t->Phi[0][4]*w->S[52] + t->Phi[0][5]*w->S[64];
     w->term[0][5] = t->Phi[0][0]*t->Phi[0][5] + t->Phi[0][1]*t->Phi[1][5] +
             t->Phi[0][2]*t->Phi[2][5] + t->Phi[0][3]*t->Phi[3][5] + t->Phi[0][4]*t->Phi[4][5] +
             t->Phi[0][5]*t->Phi[5][5];
-    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[35] + t->Phi[0][2]*w->S[65] +
-            t->Phi[0][3]*w->S[95] + t->Phi[0][4]*w->S[125] + t->Phi[0][5]*w->S[155];
+    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[29] +
+            t->Phi[0][3]*w->S[41] + t->Phi[0][4]*w->S[53] + t->Phi[0][5]*w->S[65];
     w->term[0][6] = t->Phi[0][0]*t->Phi[0][7] + t->Phi[0][1]*t->Phi[1][7] +
             t->Phi[0][2]*t->Phi[2][7] + t->Phi[0][3]*t->Phi[3][7] + t->Phi[0][4]*t->Phi[4][7] +
             t->Phi[0][5]*t->Phi[5][7];
-    w->term[1][6] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[37] + t->Phi[0][2]*w->S[67] +
-            t->Phi[0][3]*w->S[97] + t->Phi[0][4]*w->S[127] + t->Phi[0][5]*w->S[157] + t->Phi[0][7];
+    w->term[1][6] = t->Phi[0][0]*w->S[90] + t->Phi[0][1]*w->S[105] + t->Phi[0][2]*w->S[120] +
+            t->Phi[0][3]*w->S[135] + t->Phi[0][4]*w->S[150] + t->Phi[0][5]*w->S[165] + t->Phi[0][7];
     w->term[0][7] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
             t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
             t->Phi[0][5]*t->Phi[5][8];
-    w->term[1][7] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[38] + t->Phi[0][2]*w->S[68] +
-            t->Phi[0][3]*w->S[98] + t->Phi[0][4]*w->S[128] + t->Phi[0][5]*w->S[158] + t->Phi[0][8];
+    w->term[1][7] = t->Phi[0][0]*w->S[91] + t->Phi[0][1]*w->S[106] + t->Phi[0][2]*w->S[121] +
+            t->Phi[0][3]*w->S[136] + t->Phi[0][4]*w->S[151] + t->Phi[0][5]*w->S[166] + t->Phi[0][8];
     w->term[0][8] = t->Phi[0][0]*t->Phi[0][9] + t->Phi[0][1]*t->Phi[1][9] +
             t->Phi[0][2]*t->Phi[2][9] + t->Phi[0][3]*t->Phi[3][9] + t->Phi[0][4]*t->Phi[4][9] +
             t->Phi[0][5]*t->Phi[5][9];
-    w->term[1][8] = t->Phi[0][0]*w->S[9] + t->Phi[0][1]*w->S[39] + t->Phi[0][2]*w->S[69] +
-            t->Phi[0][3]*w->S[99] + t->Phi[0][4]*w->S[129] + t->Phi[0][5]*w->S[159] + t->Phi[0][9];
+    w->term[1][8] = t->Phi[0][0]*w->S[92] + t->Phi[0][1]*w->S[107] + t->Phi[0][2]*w->S[122] +
+            t->Phi[0][3]*w->S[137] + t->Phi[0][4]*w->S[152] + t->Phi[0][5]*w->S[167] + t->Phi[0][9];
     w->term[0][9] = t->Phi[0][0]*t->Phi[0][10] + t->Phi[0][1]*t->Phi[1][10] +
             t->Phi[0][2]*t->Phi[2][10] + t->Phi[0][3]*t->Phi[3][10] + t->Phi[0][4]*t->Phi[4][10] +
             t->Phi[0][5]*t->Phi[5][10] + t->Phi[0][10]*t->Phi[10][10];
-    w->term[1][9] = t->Phi[0][0]*w->S[10] + t->Phi[0][1]*w->S[40] + t->Phi[0][2]*w->S[70] +
-            t->Phi[0][3]*w->S[100] + t->Phi[0][4]*w->S[130] + t->Phi[0][5]*w->S[160] +
-            t->Phi[0][10]*w->S[210];
+    w->term[1][9] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[18] + t->Phi[0][2]*w->S[30] +
+            t->Phi[0][3]*w->S[42] + t->Phi[0][4]*w->S[54] + t->Phi[0][5]*w->S[66] +
+            t->Phi[0][10]*w->S[84];
     w->term[0][10] = t->Phi[0][0]*t->Phi[0][11] + t->Phi[0][1]*t->Phi[1][11] +
             t->Phi[0][2]*t->Phi[2][11] + t->Phi[0][3]*t->Phi[3][11] + t->Phi[0][4]*t->Phi[4][11] +
             t->Phi[0][5]*t->Phi[5][11] + t->Phi[0][11]*t->Phi[11][11];
-    w->term[1][10] = t->Phi[0][0]*w->S[11] + t->Phi[0][1]*w->S[41] + t->Phi[0][2]*w->S[71] +
-            t->Phi[0][3]*w->S[101] + t->Phi[0][4]*w->S[131] + t->Phi[0][5]*w->S[161] +
-            t->Phi[0][11]*w->S[211];
+    w->term[1][10] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[19] + t->Phi[0][2]*w->S[31] +
+            t->Phi[0][3]*w->S[43] + t->Phi[0][4]*w->S[55] + t->Phi[0][5]*w->S[67] +
+            t->Phi[0][11]*w->S[85];
     w->term[0][11] = t->Phi[0][0]*t->Phi[0][12] + t->Phi[0][1]*t->Phi[1][12] +
             t->Phi[0][2]*t->Phi[2][12] + t->Phi[0][3]*t->Phi[3][12] + t->Phi[0][4]*t->Phi[4][12] +
             t->Phi[0][5]*t->Phi[5][12] + t->Phi[0][12]*t->Phi[12][12];
-    w->term[1][11] = t->Phi[0][0]*w->S[12] + t->Phi[0][1]*w->S[42] + t->Phi[0][2]*w->S[72] +
-            t->Phi[0][3]*w->S[102] + t->Phi[0][4]*w->S[132] + t->Phi[0][5]*w->S[162] +
-            t->Phi[0][12]*w->S[212];
+    w->term[1][11] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[20] + t->Phi[0][2]*w->S[32] +
+            t->Phi[0][3]*w->S[44] + t->Phi[0][4]*w->S[56] + t->Phi[0][5]*w->S[68] +
+            t->Phi[0][12]*w->S[86];
     w->term[0][12] = t->Phi[0][0]*t->Phi[0][13] + t->Phi[0][1]*t->Phi[1][13] +
             t->Phi[0][2]*t->Phi[2][13] + t->Phi[0][3]*t->Phi[3][13] + t->Phi[0][4]*t->Phi[4][13] +
             t->Phi[0][5]*t->Phi[5][13] + t->Phi[0][13]*t->Phi[13][13];
-    w->term[1][12] = t->Phi[0][0]*w->S[13] + t->Phi[0][1]*w->S[43] + t->Phi[0][2]*w->S[73] +
-            t->Phi[0][3]*w->S[103] + t->Phi[0][4]*w->S[133] + t->Phi[0][5]*w->S[163] +
-            t->Phi[0][13]*w->S[213];
+    w->term[1][12] = t->Phi[0][0]*w->S[9] + t->Phi[0][1]*w->S[21] + t->Phi[0][2]*w->S[33] +
+            t->Phi[0][3]*w->S[45] + t->Phi[0][4]*w->S[57] + t->Phi[0][5]*w->S[69] +
+            t->Phi[0][13]*w->S[87];
     w->term[0][13] = t->Phi[0][0]*t->Phi[0][14] + t->Phi[0][1]*t->Phi[1][14] +
             t->Phi[0][2]*t->Phi[2][14] + t->Phi[0][3]*t->Phi[3][14] + t->Phi[0][4]*t->Phi[4][14] +
             t->Phi[0][5]*t->Phi[5][14] + t->Phi[0][14]*t->Phi[14][14];
-    w->term[1][13] = t->Phi[0][0]*w->S[14] + t->Phi[0][1]*w->S[44] + t->Phi[0][2]*w->S[74] +
-            t->Phi[0][3]*w->S[104] + t->Phi[0][4]*w->S[134] + t->Phi[0][5]*w->S[164] +
-            t->Phi[0][14]*w->S[214];
+    w->term[1][13] = t->Phi[0][0]*w->S[10] + t->Phi[0][1]*w->S[22] + t->Phi[0][2]*w->S[34] +
+            t->Phi[0][3]*w->S[46] + t->Phi[0][4]*w->S[58] + t->Phi[0][5]*w->S[70] +
+            t->Phi[0][14]*w->S[88];
     w->term[0][14] = t->Phi[0][0]*t->Phi[0][15] + t->Phi[0][1]*t->Phi[1][15] +
             t->Phi[0][2]*t->Phi[2][15] + t->Phi[0][3]*t->Phi[3][15] + t->Phi[0][4]*t->Phi[4][15] +
             t->Phi[0][5]*t->Phi[5][15] + t->Phi[0][15]*t->Phi[15][15];
-    w->term[1][14] = t->Phi[0][0]*w->S[15] + t->Phi[0][1]*w->S[45] + t->Phi[0][2]*w->S[75] +
-            t->Phi[0][3]*w->S[105] + t->Phi[0][4]*w->S[135] + t->Phi[0][5]*w->S[165] +
-            t->Phi[0][15]*w->S[215];
+    w->term[1][14] = t->Phi[0][0]*w->S[11] + t->Phi[0][1]*w->S[23] + t->Phi[0][2]*w->S[35] +
+            t->Phi[0][3]*w->S[47] + t->Phi[0][4]*w->S[59] + t->Phi[0][5]*w->S[71] +
+            t->Phi[0][15]*w->S[89];
     w->term[0][15] = t->Phi[0][0]*t->Phi[0][18] + t->Phi[0][1]*t->Phi[1][18] +
             t->Phi[0][2]*t->Phi[2][18] + t->Phi[0][3]*t->Phi[3][18] + t->Phi[0][4]*t->Phi[4][18] +
             t->Phi[0][5]*t->Phi[5][18];
-    w->term[1][15] = t->Phi[0][0]*w->S[18] + t->Phi[0][1]*w->S[48] + t->Phi[0][2]*w->S[78] +
-            t->Phi[0][3]*w->S[108] + t->Phi[0][4]*w->S[138] + t->Phi[0][5]*w->S[168] +
+    w->term[1][15] = t->Phi[0][0]*w->S[93] + t->Phi[0][1]*w->S[108] + t->Phi[0][2]*w->S[123] +
+            t->Phi[0][3]*w->S[138] + t->Phi[0][4]*w->S[153] + t->Phi[0][5]*w->S[168] +
             t->Phi[0][18];
     w->term[0][16] = t->Phi[0][0]*t->Phi[0][19] + t->Phi[0][1]*t->Phi[1][19] +
             t->Phi[0][2]*t->Phi[2][19] + t->Phi[0][3]*t->Phi[3][19] + t->Phi[0][4]*t->Phi[4][19] +
             t->Phi[0][5]*t->Phi[5][19];
-    w->term[1][16] = t->Phi[0][0]*w->S[19] + t->Phi[0][1]*w->S[49] + t->Phi[0][2]*w->S[79] +
-            t->Phi[0][3]*w->S[109] + t->Phi[0][4]*w->S[139] + t->Phi[0][5]*w->S[169] +
+    w->term[1][16] = t->Phi[0][0]*w->S[94] + t->Phi[0][1]*w->S[109] + t->Phi[0][2]*w->S[124] +
+            t->Phi[0][3]*w->S[139] + t->Phi[0][4]*w->S[154] + t->Phi[0][5]*w->S[169] +
             t->Phi[0][19];
     w->term[0][17] = t->Phi[0][0]*t->Phi[0][20] + t->Phi[0][1]*t->Phi[1][20] +
             t->Phi[0][2]*t->Phi[2][20] + t->Phi[0][3]*t->Phi[3][20] + t->Phi[0][4]*t->Phi[4][20] +
             t->Phi[0][5]*t->Phi[5][20];
-    w->term[1][17] = t->Phi[0][0]*w->S[20] + t->Phi[0][1]*w->S[50] + t->Phi[0][2]*w->S[80] +
-            t->Phi[0][3]*w->S[110] + t->Phi[0][4]*w->S[140] + t->Phi[0][5]*w->S[170] +
+    w->term[1][17] = t->Phi[0][0]*w->S[95] + t->Phi[0][1]*w->S[110] + t->Phi[0][2]*w->S[125] +
+            t->Phi[0][3]*w->S[140] + t->Phi[0][4]*w->S[155] + t->Phi[0][5]*w->S[170] +
             t->Phi[0][20];
     w->term[0][18] = t->Phi[0][0]*t->Phi[0][21] + t->Phi[0][1]*t->Phi[1][21] +
             t->Phi[0][2]*t->Phi[2][21] + t->Phi[0][3]*t->Phi[3][21] + t->Phi[0][4]*t->Phi[4][21] +
             t->Phi[0][5]*t->Phi[5][21];
-    w->term[1][18] = t->Phi[0][0]*w->S[21] + t->Phi[0][1]*w->S[51] + t->Phi[0][2]*w->S[81] +
-            t->Phi[0][3]*w->S[111] + t->Phi[0][4]*w->S[141] + t->Phi[0][5]*w->S[171] +
+    w->term[1][18] = t->Phi[0][0]*w->S[96] + t->Phi[0][1]*w->S[111] + t->Phi[0][2]*w->S[126] +
+            t->Phi[0][3]*w->S[141] + t->Phi[0][4]*w->S[156] + t->Phi[0][5]*w->S[171] +
             t->Phi[0][21];
     w->term[0][19] = t->Phi[0][0]*t->Phi[0][22] + t->Phi[0][1]*t->Phi[1][22] +
             t->Phi[0][2]*t->Phi[2][22] + t->Phi[0][3]*t->Phi[3][22] + t->Phi[0][4]*t->Phi[4][22] +
             t->Phi[0][5]*t->Phi[5][22];
-    w->term[1][19] = t->Phi[0][0]*w->S[22] + t->Phi[0][1]*w->S[52] + t->Phi[0][2]*w->S[82] +
-            t->Phi[0][3]*w->S[112] + t->Phi[0][4]*w->S[142] + t->Phi[0][5]*w->S[172] +
+    w->term[1][19] = t->Phi[0][0]*w->S[97] + t->Phi[0][1]*w->S[112] + t->Phi[0][2]*w->S[127] +
+            t->Phi[0][3]*w->S[142] + t->Phi[0][4]*w->S[157] + t->Phi[0][5]*w->S[172] +
             t->Phi[0][22];
     w->term[0][20] = t->Phi[0][0]*t->Phi[0][23] + t->Phi[0][1]*t->Phi[1][23] +
             t->Phi[0][2]*t->Phi[2][23] + t->Phi[0][3]*t->Phi[3][23] + t->Phi[0][4]*t->Phi[4][23] +
             t->Phi[0][5]*t->Phi[5][23];
-    w->term[1][20] = t->Phi[0][0]*w->S[23] + t->Phi[0][1]*w->S[53] + t->Phi[0][2]*w->S[83] +
-            t->Phi[0][3]*w->S[113] + t->Phi[0][4]*w->S[143] + t->Phi[0][5]*w->S[173] +
+    w->term[1][20] = t->Phi[0][0]*w->S[98] + t->Phi[0][1]*w->S[113] + t->Phi[0][2]*w->S[128] +
+            t->Phi[0][3]*w->S[143] + t->Phi[0][4]*w->S[158] + t->Phi[0][5]*w->S[173] +
             t->Phi[0][23];
     w->term[0][21] = t->Phi[0][0]*t->Phi[0][24] + t->Phi[0][1]*t->Phi[1][24] +
             t->Phi[0][2]*t->Phi[2][24] + t->Phi[0][3]*t->Phi[3][24] + t->Phi[0][4]*t->Phi[4][24] +
             t->Phi[0][5]*t->Phi[5][24];
-    w->term[1][21] = t->Phi[0][0]*w->S[24] + t->Phi[0][1]*w->S[54] + t->Phi[0][2]*w->S[84] +
-            t->Phi[0][3]*w->S[114] + t->Phi[0][4]*w->S[144] + t->Phi[0][5]*w->S[174] +
+    w->term[1][21] = t->Phi[0][0]*w->S[99] + t->Phi[0][1]*w->S[114] + t->Phi[0][2]*w->S[129] +
+            t->Phi[0][3]*w->S[144] + t->Phi[0][4]*w->S[159] + t->Phi[0][5]*w->S[174] +
             t->Phi[0][24];
     w->term[0][22] = t->Phi[0][0]*t->Phi[0][25] + t->Phi[0][1]*t->Phi[1][25] +
             t->Phi[0][2]*t->Phi[2][25] + t->Phi[0][3]*t->Phi[3][25] + t->Phi[0][4]*t->Phi[4][25] +
             t->Phi[0][5]*t->Phi[5][25];
-    w->term[1][22] = t->Phi[0][0]*w->S[25] + t->Phi[0][1]*w->S[55] + t->Phi[0][2]*w->S[85] +
-            t->Phi[0][3]*w->S[115] + t->Phi[0][4]*w->S[145] + t->Phi[0][5]*w->S[175] +
+    w->term[1][22] = t->Phi[0][0]*w->S[100] + t->Phi[0][1]*w->S[115] + t->Phi[0][2]*w->S[130] +
+            t->Phi[0][3]*w->S[145] + t->Phi[0][4]*w->S[160] + t->Phi[0][5]*w->S[175] +
             t->Phi[0][25];
     w->term[0][23] = t->Phi[0][0]*t->Phi[0][26] + t->Phi[0][1]*t->Phi[1][26] +
             t->Phi[0][2]*t->Phi[2][26] + t->Phi[0][3]*t->Phi[3][26] + t->Phi[0][4]*t->Phi[4][26] +
             t->Phi[0][5]*t->Phi[5][26];
-    w->term[1][23] = t->Phi[0][0]*w->S[26] + t->Phi[0][1]*w->S[56] + t->Phi[0][2]*w->S[86] +
-            t->Phi[0][3]*w->S[116] + t->Phi[0][4]*w->S[146] + t->Phi[0][5]*w->S[176] +
+    w->term[1][23] = t->Phi[0][0]*w->S[101] + t->Phi[0][1]*w->S[116] + t->Phi[0][2]*w->S[131] +
+            t->Phi[0][3]*w->S[146] + t->Phi[0][4]*w->S[161] + t->Phi[0][5]*w->S[176] +
             t->Phi[0][26];
     w->term[0][24] = t->Phi[0][0]*t->Phi[0][27] + t->Phi[0][1]*t->Phi[1][27] +
             t->Phi[0][2]*t->Phi[2][27] + t->Phi[0][3]*t->Phi[3][27] + t->Phi[0][4]*t->Phi[4][27] +
             t->Phi[0][5]*t->Phi[5][27];
-    w->term[1][24] = t->Phi[0][0]*w->S[27] + t->Phi[0][1]*w->S[57] + t->Phi[0][2]*w->S[87] +
-            t->Phi[0][3]*w->S[117] + t->Phi[0][4]*w->S[147] + t->Phi[0][5]*w->S[177] +
+    w->term[1][24] = t->Phi[0][0]*w->S[102] + t->Phi[0][1]*w->S[117] + t->Phi[0][2]*w->S[132] +
+            t->Phi[0][3]*w->S[147] + t->Phi[0][4]*w->S[162] + t->Phi[0][5]*w->S[177] +
             t->Phi[0][27];
     w->term[0][25] = t->Phi[0][0]*t->Phi[0][28] + t->Phi[0][1]*t->Phi[1][28] +
             t->Phi[0][2]*t->Phi[2][28] + t->Phi[0][3]*t->Phi[3][28] + t->Phi[0][4]*t->Phi[4][28] +
             t->Phi[0][5]*t->Phi[5][28];
-    w->term[1][25] = t->Phi[0][0]*w->S[28] + t->Phi[0][1]*w->S[58] + t->Phi[0][2]*w->S[88] +
-            t->Phi[0][3]*w->S[118] + t->Phi[0][4]*w->S[148] + t->Phi[0][5]*w->S[178] +
+    w->term[1][25] = t->Phi[0][0]*w->S[103] + t->Phi[0][1]*w->S[118] + t->Phi[0][2]*w->S[133] +
+            t->Phi[0][3]*w->S[148] + t->Phi[0][4]*w->S[163] + t->Phi[0][5]*w->S[178] +
             t->Phi[0][28];
     w->term[0][26] = t->Phi[0][0]*t->Phi[0][29] + t->Phi[0][1]*t->Phi[1][29] +
             t->Phi[0][2]*t->Phi[2][29] + t->Phi[0][3]*t->Phi[3][29] + t->Phi[0][4]*t->Phi[4][29] +
             t->Phi[0][5]*t->Phi[5][29];
-    w->term[1][26] = t->Phi[0][0]*w->S[29] + t->Phi[0][1]*w->S[59] + t->Phi[0][2]*w->S[89] +
-            t->Phi[0][3]*w->S[119] + t->Phi[0][4]*w->S[149] + t->Phi[0][5]*w->S[179] +
+    w->term[1][26] = t->Phi[0][0]*w->S[104] + t->Phi[0][1]*w->S[119] + t->Phi[0][2]*w->S[134] +
+            t->Phi[0][3]*w->S[149] + t->Phi[0][4]*w->S[164] + t->Phi[0][5]*w->S[179] +
             t->Phi[0][29];
     w->term[0][27] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
             t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
             t->Phi[1][5]*t->Phi[5][0];
-    w->term[1][27] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[30] + t->Phi[1][2]*w->S[60] +
-            t->Phi[1][3]*w->S[90] + t->Phi[1][4]*w->S[120] + t->Phi[1][5]*w->S[150];
+    w->term[1][27] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[12] + t->Phi[1][2]*w->S[24] +
+            t->Phi[1][3]*w->S[36] + t->Phi[1][4]*w->S[48] + t->Phi[1][5]*w->S[60];
     w->term[0][28] = t->Phi[1][0]*t->Phi[0][1] + t->Phi[1][1]*t->Phi[1][1] +
             t->Phi[1][2]*t->Phi[2][1] + t->Phi[1][3]*t->Phi[3][1] + t->Phi[1][4]*t->Phi[4][1] +
             t->Phi[1][5]*t->Phi[5][1];
-    w->term[1][28] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[31] + t->Phi[1][2]*w->S[61] +
-            t->Phi[1][3]*w->S[91] + t->Phi[1][4]*w->S[121] + t->Phi[1][5]*w->S[151];
+    w->term[1][28] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[13] + t->Phi[1][2]*w->S[25] +
+            t->Phi[1][3]*w->S[37] + t->Phi[1][4]*w->S[49] + t->Phi[1][5]*w->S[61];
     w->term[0][29] = t->Phi[1][0]*t->Phi[0][2] + t->Phi[1][1]*t->Phi[1][2] +
             t->Phi[1][2]*t->Phi[2][2] + t->Phi[1][3]*t->Phi[3][2] + t->Phi[1][4]*t->Phi[4][2] +
             t->Phi[1][5]*t->Phi[5][2];
-    w->term[1][29] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[32] + t->Phi[1][2]*w->S[62] +
-            t->Phi[1][3]*w->S[92] + t->Phi[1][4]*w->S[122] + t->Phi[1][5]*w->S[152];
+    w->term[1][29] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[26] +
+            t->Phi[1][3]*w->S[38] + t->Phi[1][4]*w->S[50] + t->Phi[1][5]*w->S[62];
     w->term[0][30] = t->Phi[1][0]*t->Phi[0][3] + t->Phi[1][1]*t->Phi[1][3] +
             t->Phi[1][2]*t->Phi[2][3] + t->Phi[1][3]*t->Phi[3][3] + t->Phi[1][4]*t->Phi[4][3] +
             t->Phi[1][5]*t->Phi[5][3];
-    w->term[1][30] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[33] + t->Phi[1][2]*w->S[63] +
-            t->Phi[1][3]*w->S[93] + t->Phi[1][4]*w->S[123] + t->Phi[1][5]*w->S[153];
+    w->term[1][30] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[27] +
+            t->Phi[1][3]*w->S[39] + t->Phi[1][4]*w->S[51] + t->Phi[1][5]*w->S[63];
     w->term[0][31] = t->Phi[1][0]*t->Phi[0][4] + t->Phi[1][1]*t->Phi[1][4] +
             t->Phi[1][2]*t->Phi[2][4] + t->Phi[1][3]*t->Phi[3][4] + t->Phi[1][4]*t->Phi[4][4] +
             t->Phi[1][5]*t->Phi[5][4];
-    w->term[1][31] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[34] + t->Phi[1][2]*w->S[64] +
-            t->Phi[1][3]*w->S[94] + t->Phi[1][4]*w->S[124] + t->Phi[1][5]*w->S[154];
+    w->term[1][31] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[28] +
+            t->Phi[1][3]*w->S[40] + t->Phi[1][4]*w->S[52] + t->Phi[1][5]*w->S[64];
     w->term[0][32] = t->Phi[1][0]*t->Phi[0][5] + t->Phi[1][1]*t->Phi[1][5] +
             t->Phi[1][2]*t->Phi[2][5] + t->Phi[1][3]*t->Phi[3][5] + t->Phi[1][4]*t->Phi[4][5] +
             t->Phi[1][5]*t->Phi[5][5];
-    w->term[1][32] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[35] + t->Phi[1][2]*w->S[65] +
-            t->Phi[1][3]*w->S[95] + t->Phi[1][4]*w->S[125] + t->Phi[1][5]*w->S[155];
+    w->term[1][32] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[29] +
+            t->Phi[1][3]*w->S[41] + t->Phi[1][4]*w->S[53] + t->Phi[1][5]*w->S[65];
     w->term[0][33] = t->Phi[1][0]*t->Phi[0][7] + t->Phi[1][1]*t->Phi[1][7] +
             t->Phi[1][2]*t->Phi[2][7] + t->Phi[1][3]*t->Phi[3][7] + t->Phi[1][4]*t->Phi[4][7] +
             t->Phi[1][5]*t->Phi[5][7];
-    w->term[1][33] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[37] + t->Phi[1][2]*w->S[67] +
-            t->Phi[1][3]*w->S[97] + t->Phi[1][4]*w->S[127] + t->Phi[1][5]*w->S[157] + t->Phi[1][7];
+    w->term[1][33] = t->Phi[1][0]*w->S[90] + t->Phi[1][1]*w->S[105] + t->Phi[1][2]*w->S[120] +
+            t->Phi[1][3]*w->S[135] + t->Phi[1][4]*w->S[150] + t->Phi[1][5]*w->S[165] + t->Phi[1][7];
     w->term[0][34] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
             t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
             t->Phi[1][5]*t->Phi[5][8];
-    w->term[1][34] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[38] + t->Phi[1][2]*w->S[68] +
-            t->Phi[1][3]*w->S[98] + t->Phi[1][4]*w->S[128] + t->Phi[1][5]*w->S[158] + t->Phi[1][8];
+    w->term[1][34] = t->Phi[1][0]*w->S[91] + t->Phi[1][1]*w->S[106] + t->Phi[1][2]*w->S[121] +
+            t->Phi[1][3]*w->S[136] + t->Phi[1][4]*w->S[151] + t->Phi[1][5]*w->S[166] + t->Phi[1][8];
     w->term[0][35] = t->Phi[1][0]*t->Phi[0][9] + t->Phi[1][1]*t->Phi[1][9] +
             t->Phi[1][2]*t->Phi[2][9] + t->Phi[1][3]*t->Phi[3][9] + t->Phi[1][4]*t->Phi[4][9] +
             t->Phi[1][5]*t->Phi[5][9];
-    w->term[1][35] = t->Phi[1][0]*w->S[9] + t->Phi[1][1]*w->S[39] + t->Phi[1][2]*w->S[69] +
-            t->Phi[1][3]*w->S[99] + t->Phi[1][4]*w->S[129] + t->Phi[1][5]*w->S[159] + t->Phi[1][9];
+    w->term[1][35] = t->Phi[1][0]*w->S[92] + t->Phi[1][1]*w->S[107] + t->Phi[1][2]*w->S[122] +
+            t->Phi[1][3]*w->S[137] + t->Phi[1][4]*w->S[152] + t->Phi[1][5]*w->S[167] + t->Phi[1][9];
     w->term[0][36] = t->Phi[1][0]*t->Phi[0][10] + t->Phi[1][1]*t->Phi[1][10] +
             t->Phi[1][2]*t->Phi[2][10] + t->Phi[1][3]*t->Phi[3][10] + t->Phi[1][4]*t->Phi[4][10] +
             t->Phi[1][5]*t->Phi[5][10] + t->Phi[1][10]*t->Phi[10][10];
-    w->term[1][36] = t->Phi[1][0]*w->S[10] + t->Phi[1][1]*w->S[40] + t->Phi[1][2]*w->S[70] +
-            t->Phi[1][3]*w->S[100] + t->Phi[1][4]*w->S[130] + t->Phi[1][5]*w->S[160] +
-            t->Phi[1][10]*w->S[210];
+    w->term[1][36] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[18] + t->Phi[1][2]*w->S[30] +
+            t->Phi[1][3]*w->S[42] + t->Phi[1][4]*w->S[54] + t->Phi[1][5]*w->S[66] +
+            t->Phi[1][10]*w->S[84];
     w->term[0][37] = t->Phi[1][0]*t->Phi[0][11] + t->Phi[1][1]*t->Phi[1][11] +
             t->Phi[1][2]*t->Phi[2][11] + t->Phi[1][3]*t->Phi[3][11] + t->Phi[1][4]*t->Phi[4][11] +
             t->Phi[1][5]*t->Phi[5][11] + t->Phi[1][11]*t->Phi[11][11];
-    w->term[1][37] = t->Phi[1][0]*w->S[11] + t->Phi[1][1]*w->S[41] + t->Phi[1][2]*w->S[71] +
-            t->Phi[1][3]*w->S[101] + t->Phi[1][4]*w->S[131] + t->Phi[1][5]*w->S[161] +
-            t->Phi[1][11]*w->S[211];
+    w->term[1][37] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[19] + t->Phi[1][2]*w->S[31] +
+            t->Phi[1][3]*w->S[43] + t->Phi[1][4]*w->S[55] + t->Phi[1][5]*w->S[67] +
+            t->Phi[1][11]*w->S[85];
     w->term[0][38] = t->Phi[1][0]*t->Phi[0][12] + t->Phi[1][1]*t->Phi[1][12] +
             t->Phi[1][2]*t->Phi[2][12] + t->Phi[1][3]*t->Phi[3][12] + t->Phi[1][4]*t->Phi[4][12] +
             t->Phi[1][5]*t->Phi[5][12] + t->Phi[1][12]*t->Phi[12][12];
-    w->term[1][38] = t->Phi[1][0]*w->S[12] + t->Phi[1][1]*w->S[42] + t->Phi[1][2]*w->S[72] +
-            t->Phi[1][3]*w->S[102] + t->Phi[1][4]*w->S[132] + t->Phi[1][5]*w->S[162] +
-            t->Phi[1][12]*w->S[212];
+    w->term[1][38] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[20] + t->Phi[1][2]*w->S[32] +
+            t->Phi[1][3]*w->S[44] + t->Phi[1][4]*w->S[56] + t->Phi[1][5]*w->S[68] +
+            t->Phi[1][12]*w->S[86];
     w->term[0][39] = t->Phi[1][0]*t->Phi[0][13] + t->Phi[1][1]*t->Phi[1][13] +
             t->Phi[1][2]*t->Phi[2][13] + t->Phi[1][3]*t->Phi[3][13] + t->Phi[1][4]*t->Phi[4][13] +
             t->Phi[1][5]*t->Phi[5][13] + t->Phi[1][13]*t->Phi[13][13];
-    w->term[1][39] = t->Phi[1][0]*w->S[13] + t->Phi[1][1]*w->S[43] + t->Phi[1][2]*w->S[73] +
-            t->Phi[1][3]*w->S[103] + t->Phi[1][4]*w->S[133] + t->Phi[1][5]*w->S[163] +
-            t->Phi[1][13]*w->S[213];
+    w->term[1][39] = t->Phi[1][0]*w->S[9] + t->Phi[1][1]*w->S[21] + t->Phi[1][2]*w->S[33] +
+            t->Phi[1][3]*w->S[45] + t->Phi[1][4]*w->S[57] + t->Phi[1][5]*w->S[69] +
+            t->Phi[1][13]*w->S[87];
     w->term[0][40] = t->Phi[1][0]*t->Phi[0][14] + t->Phi[1][1]*t->Phi[1][14] +
             t->Phi[1][2]*t->Phi[2][14] + t->Phi[1][3]*t->Phi[3][14] + t->Phi[1][4]*t->Phi[4][14] +
             t->Phi[1][5]*t->Phi[5][14] + t->Phi[1][14]*t->Phi[14][14];
-    w->term[1][40] = t->Phi[1][0]*w->S[14] + t->Phi[1][1]*w->S[44] + t->Phi[1][2]*w->S[74] +
-            t->Phi[1][3]*w->S[104] + t->Phi[1][4]*w->S[134] + t->Phi[1][5]*w->S[164] +
-            t->Phi[1][14]*w->S[214];
+    w->term[1][40] = t->Phi[1][0]*w->S[10] + t->Phi[1][1]*w->S[22] + t->Phi[1][2]*w->S[34] +
+            t->Phi[1][3]*w->S[46] + t->Phi[1][4]*w->S[58] + t->Phi[1][5]*w->S[70] +
+            t->Phi[1][14]*w->S[88];
     w->term[0][41] = t->Phi[1][0]*t->Phi[0][15] + t->Phi[1][1]*t->Phi[1][15] +
             t->Phi[1][2]*t->Phi[2][15] + t->Phi[1][3]*t->Phi[3][15] + t->Phi[1][4]*t->Phi[4][15] +
             t->Phi[1][5]*t->Phi[5][15] + t->Phi[1][15]*t->Phi[15][15];
-    w->term[1][41] = t->Phi[1][0]*w->S[15] + t->Phi[1][1]*w->S[45] + t->Phi[1][2]*w->S[75] +
-            t->Phi[1][3]*w->S[105] + t->Phi[1][4]*w->S[135] + t->Phi[1][5]*w->S[165] +
-            t->Phi[1][15]*w->S[215];
+    w->term[1][41] = t->Phi[1][0]*w->S[11] + t->Phi[1][1]*w->S[23] + t->Phi[1][2]*w->S[35] +
+            t->Phi[1][3]*w->S[47] + t->Phi[1][4]*w->S[59] + t->Phi[1][5]*w->S[71] +
+            t->Phi[1][15]*w->S[89];
     w->term[0][42] = t->Phi[1][0]*t->Phi[0][18] + t->Phi[1][1]*t->Phi[1][18] +
             t->Phi[1][2]*t->Phi[2][18] + t->Phi[1][3]*t->Phi[3][18] + t->Phi[1][4]*t->Phi[4][18] +
             t->Phi[1][5]*t->Phi[5][18];
-    w->term[1][42] = t->Phi[1][0]*w->S[18] + t->Phi[1][1]*w->S[48] + t->Phi[1][2]*w->S[78] +
-            t->Phi[1][3]*w->S[108] + t->Phi[1][4]*w->S[138] + t->Phi[1][5]*w->S[168] +
+    w->term[1][42] = t->Phi[1][0]*w->S[93] + t->Phi[1][1]*w->S[108] + t->Phi[1][2]*w->S[123] +
+            t->Phi[1][3]*w->S[138] + t->Phi[1][4]*w->S[153] + t->Phi[1][5]*w->S[168] +
             t->Phi[1][18];
     w->term[0][43] = t->Phi[1][0]*t->Phi[0][19] + t->Phi[1][1]*t->Phi[1][19] +
             t->Phi[1][2]*t->Phi[2][19] + t->Phi[1][3]*t->Phi[3][19] + t->Phi[1][4]*t->Phi[4][19] +
             t->Phi[1][5]*t->Phi[5][19];
-    w->term[1][43] = t->Phi[1][0]*w->S[19] + t->Phi[1][1]*w->S[49] + t->Phi[1][2]*w->S[79] +
-            t->Phi[1][3]*w->S[109] + t->Phi[1][4]*w->S[139] + t->Phi[1][5]*w->S[169] +
+    w->term[1][43] = t->Phi[1][0]*w->S[94] + t->Phi[1][1]*w->S[109] + t->Phi[1][2]*w->S[124] +
+            t->Phi[1][3]*w->S[139] + t->Phi[1][4]*w->S[154] + t->Phi[1][5]*w->S[169] +
             t->Phi[1][19];
     w->term[0][44] = t->Phi[1][0]*t->Phi[0][20] + t->Phi[1][1]*t->Phi[1][20] +
             t->Phi[1][2]*t->Phi[2][20] + t->Phi[1][3]*t->Phi[3][20] + t->Phi[1][4]*t->Phi[4][20] +
             t->Phi[1][5]*t->Phi[5][20];
-    w->term[1][44] = t->Phi[1][0]*w->S[20] + t->Phi[1][1]*w->S[50] + t->Phi[1][2]*w->S[80] +
-            t->Phi[1][3]*w->S[110] + t->Phi[1][4]*w->S[140] + t->Phi[1][5]*w->S[170] +
+    w->term[1][44] = t->Phi[1][0]*w->S[95] + t->Phi[1][1]*w->S[110] + t->Phi[1][2]*w->S[125] +
+            t->Phi[1][3]*w->S[140] + t->Phi[1][4]*w->S[155] + t->Phi[1][5]*w->S[170] +
             t->Phi[1][20];
     w->term[0][45] = t->Phi[1][0]*t->Phi[0][21] + t->Phi[1][1]*t->Phi[1][21] +
             t->Phi[1][2]*t->Phi[2][21] + t->Phi[1][3]*t->Phi[3][21] + t->Phi[1][4]*t->Phi[4][21] +
             t->Phi[1][5]*t->Phi[5][21];
-    w->term[1][45] = t->Phi[1][0]*w->S[21] + t->Phi[1][1]*w->S[51] + t->Phi[1][2]*w->S[81] +
-            t->Phi[1][3]*w->S[111] + t->Phi[1][4]*w->S[141] + t->Phi[1][5]*w->S[171] +
+    w->term[1][45] = t->Phi[1][0]*w->S[96] + t->Phi[1][1]*w->S[111] + t->Phi[1][2]*w->S[126] +
+            t->Phi[1][3]*w->S[141] + t->Phi[1][4]*w->S[156] + t->Phi[1][5]*w->S[171] +
             t->Phi[1][21];
     w->term[0][46] = t->Phi[1][0]*t->Phi[0][22] + t->Phi[1][1]*t->Phi[1][22] +
             t->Phi[1][2]*t->Phi[2][22] + t->Phi[1][3]*t->Phi[3][22] + t->Phi[1][4]*t->Phi[4][22] +
             t->Phi[1][5]*t->Phi[5][22];
-    w->term[1][46] = t->Phi[1][0]*w->S[22] + t->Phi[1][1]*w->S[52] + t->Phi[1][2]*w->S[82] +
-            t->Phi[1][3]*w->S[112] + t->Phi[1][4]*w->S[142] + t->Phi[1][5]*w->S[172] +
+    w->term[1][46] = t->Phi[1][0]*w->S[97] + t->Phi[1][1]*w->S[112] + t->Phi[1][2]*w->S[127] +
+            t->Phi[1][3]*w->S[142] + t->Phi[1][4]*w->S[157] + t->Phi[1][5]*w->S[172] +
             t->Phi[1][22];
     w->term[0][47] = t->Phi[1][0]*t->Phi[0][23] + t->Phi[1][1]*t->Phi[1][23] +
             t->Phi[1][2]*t->Phi[2][23] + t->Phi[1][3]*t->Phi[3][23] + t->Phi[1][4]*t->Phi[4][23] +
             t->Phi[1][5]*t->Phi[5][23];
-    w->term[1][47] = t->Phi[1][0]*w->S[23] + t->Phi[1][1]*w->S[53] + t->Phi[1][2]*w->S[83] +
-            t->Phi[1][3]*w->S[113] + t->Phi[1][4]*w->S[143] + t->Phi[1][5]*w->S[173] +
+    w->term[1][47] = t->Phi[1][0]*w->S[98] + t->Phi[1][1]*w->S[113] + t->Phi[1][2]*w->S[128] +
+            t->Phi[1][3]*w->S[143] + t->Phi[1][4]*w->S[158] + t->Phi[1][5]*w->S[173] +
             t->Phi[1][23];
     w->term[0][48] = t->Phi[1][0]*t->Phi[0][24] + t->Phi[1][1]*t->Phi[1][24] +
             t->Phi[1][2]*t->Phi[2][24] + t->Phi[1][3]*t->Phi[3][24] + t->Phi[1][4]*t->Phi[4][24] +
             t->Phi[1][5]*t->Phi[5][24];
-    w->term[1][48] = t->Phi[1][0]*w->S[24] + t->Phi[1][1]*w->S[54] + t->Phi[1][2]*w->S[84] +
-            t->Phi[1][3]*w->S[114] + t->Phi[1][4]*w->S[144] + t->Phi[1][5]*w->S[174] +
+    w->term[1][48] = t->Phi[1][0]*w->S[99] + t->Phi[1][1]*w->S[114] + t->Phi[1][2]*w->S[129] +
+            t->Phi[1][3]*w->S[144] + t->Phi[1][4]*w->S[159] + t->Phi[1][5]*w->S[174] +
             t->Phi[1][24];
     w->term[0][49] = t->Phi[1][0]*t->Phi[0][25] + t->Phi[1][1]*t->Phi[1][25] +
             t->Phi[1][2]*t->Phi[2][25] + t->Phi[1][3]*t->Phi[3][25] + t->Phi[1][4]*t->Phi[4][25] +
             t->Phi[1][5]*t->Phi[5][25];
-    w->term[1][49] = t->Phi[1][0]*w->S[25] + t->Phi[1][1]*w->S[55] + t->Phi[1][2]*w->S[85] +
-            t->Phi[1][3]*w->S[115] + t->Phi[1][4]*w->S[145] + t->Phi[1][5]*w->S[175] +
+    w->term[1][49] = t->Phi[1][0]*w->S[100] + t->Phi[1][1]*w->S[115] + t->Phi[1][2]*w->S[130] +
+            t->Phi[1][3]*w->S[145] + t->Phi[1][4]*w->S[160] + t->Phi[1][5]*w->S[175] +
             t->Phi[1][25];
     w->term[0][50] = t->Phi[1][0]*t->Phi[0][26] + t->Phi[1][1]*t->Phi[1][26] +
             t->Phi[1][2]*t->Phi[2][26] + t->Phi[1][3]*t->Phi[3][26] + t->Phi[1][4]*t->Phi[4][26] +
             t->Phi[1][5]*t->Phi[5][26];
-    w->term[1][50] = t->Phi[1][0]*w->S[26] + t->Phi[1][1]*w->S[56] + t->Phi[1][2]*w->S[86] +
-            t->Phi[1][3]*w->S[116] + t->Phi[1][4]*w->S[146] + t->Phi[1][5]*w->S[176] +
+    w->term[1][50] = t->Phi[1][0]*w->S[101] + t->Phi[1][1]*w->S[116] + t->Phi[1][2]*w->S[131] +
+            t->Phi[1][3]*w->S[146] + t->Phi[1][4]*w->S[161] + t->Phi[1][5]*w->S[176] +
             t->Phi[1][26];
     w->term[0][51] = t->Phi[1][0]*t->Phi[0][27] + t->Phi[1][1]*t->Phi[1][27] +
             t->Phi[1][2]*t->Phi[2][27] + t->Phi[1][3]*t->Phi[3][27] + t->Phi[1][4]*t->Phi[4][27] +
             t->Phi[1][5]*t->Phi[5][27];
-    w->term[1][51] = t->Phi[1][0]*w->S[27] + t->Phi[1][1]*w->S[57] + t->Phi[1][2]*w->S[87] +
-            t->Phi[1][3]*w->S[117] + t->Phi[1][4]*w->S[147] + t->Phi[1][5]*w->S[177] +
+    w->term[1][51] = t->Phi[1][0]*w->S[102] + t->Phi[1][1]*w->S[117] + t->Phi[1][2]*w->S[132] +
+            t->Phi[1][3]*w->S[147] + t->Phi[1][4]*w->S[162] + t->Phi[1][5]*w->S[177] +
             t->Phi[1][27];
     w->term[0][52] = t->Phi[1][0]*t->Phi[0][28] + t->Phi[1][1]*t->Phi[1][28] +
             t->Phi[1][2]*t->Phi[2][28] + t->Phi[1][3]*t->Phi[3][28] + t->Phi[1][4]*t->Phi[4][28] +
             t->Phi[1][5]*t->Phi[5][28];
-    w->term[1][52] = t->Phi[1][0]*w->S[28] + t->Phi[1][1]*w->S[58] + t->Phi[1][2]*w->S[88] +
-            t->Phi[1][3]*w->S[118] + t->Phi[1][4]*w->S[148] + t->Phi[1][5]*w->S[178] +
+    w->term[1][52] = t->Phi[1][0]*w->S[103] + t->Phi[1][1]*w->S[118] + t->Phi[1][2]*w->S[133] +
+            t->Phi[1][3]*w->S[148] + t->Phi[1][4]*w->S[163] + t->Phi[1][5]*w->S[178] +
             t->Phi[1][28];
     w->term[0][53] = t->Phi[1][0]*t->Phi[0][29] + t->Phi[1][1]*t->Phi[1][29] +
             t->Phi[1][2]*t->Phi[2][29] + t->Phi[1][3]*t->Phi[3][29] + t->Phi[1][4]*t->Phi[4][29] +
             t->Phi[1][5]*t->Phi[5][29];
-    w->term[1][53] = t->Phi[1][0]*w->S[29] + t->Phi[1][1]*w->S[59] + t->Phi[1][2]*w->S[89] +
-            t->Phi[1][3]*w->S[119] + t->Phi[1][4]*w->S[149] + t->Phi[1][5]*w->S[179] +
+    w->term[1][53] = t->Phi[1][0]*w->S[104] + t->Phi[1][1]*w->S[119] + t->Phi[1][2]*w->S[134] +
+            t->Phi[1][3]*w->S[149] + t->Phi[1][4]*w->S[164] + t->Phi[1][5]*w->S[179] +
             t->Phi[1][29];
     w->term[0][54] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
             t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
             t->Phi[2][5]*t->Phi[5][0];
-    w->term[1][54] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[30] + t->Phi[2][2]*w->S[60] +
-            t->Phi[2][3]*w->S[90] + t->Phi[2][4]*w->S[120] + t->Phi[2][5]*w->S[150];
+    w->term[1][54] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[12] + t->Phi[2][2]*w->S[24] +
+            t->Phi[2][3]*w->S[36] + t->Phi[2][4]*w->S[48] + t->Phi[2][5]*w->S[60];
     w->term[0][55] = t->Phi[2][0]*t->Phi[0][1] + t->Phi[2][1]*t->Phi[1][1] +
             t->Phi[2][2]*t->Phi[2][1] + t->Phi[2][3]*t->Phi[3][1] + t->Phi[2][4]*t->Phi[4][1] +
             t->Phi[2][5]*t->Phi[5][1];
-    w->term[1][55] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[31] + t->Phi[2][2]*w->S[61] +
-            t->Phi[2][3]*w->S[91] + t->Phi[2][4]*w->S[121] + t->Phi[2][5]*w->S[151];
+    w->term[1][55] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[13] + t->Phi[2][2]*w->S[25] +
+            t->Phi[2][3]*w->S[37] + t->Phi[2][4]*w->S[49] + t->Phi[2][5]*w->S[61];
     w->term[0][56] = t->Phi[2][0]*t->Phi[0][2] + t->Phi[2][1]*t->Phi[1][2] +
             t->Phi[2][2]*t->Phi[2][2] + t->Phi[2][3]*t->Phi[3][2] + t->Phi[2][4]*t->Phi[4][2] +
             t->Phi[2][5]*t->Phi[5][2];
-    w->term[1][56] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[32] + t->Phi[2][2]*w->S[62] +
-            t->Phi[2][3]*w->S[92] + t->Phi[2][4]*w->S[122] + t->Phi[2][5]*w->S[152];
+    w->term[1][56] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[26] +
+            t->Phi[2][3]*w->S[38] + t->Phi[2][4]*w->S[50] + t->Phi[2][5]*w->S[62];
     w->term[0][57] = t->Phi[2][0]*t->Phi[0][3] + t->Phi[2][1]*t->Phi[1][3] +
             t->Phi[2][2]*t->Phi[2][3] + t->Phi[2][3]*t->Phi[3][3] + t->Phi[2][4]*t->Phi[4][3] +
             t->Phi[2][5]*t->Phi[5][3];
-    w->term[1][57] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[33] + t->Phi[2][2]*w->S[63] +
-            t->Phi[2][3]*w->S[93] + t->Phi[2][4]*w->S[123] + t->Phi[2][5]*w->S[153];
+    w->term[1][57] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[27] +
+            t->Phi[2][3]*w->S[39] + t->Phi[2][4]*w->S[51] + t->Phi[2][5]*w->S[63];
     w->term[0][58] = t->Phi[2][0]*t->Phi[0][4] + t->Phi[2][1]*t->Phi[1][4] +
             t->Phi[2][2]*t->Phi[2][4] + t->Phi[2][3]*t->Phi[3][4] + t->Phi[2][4]*t->Phi[4][4] +
             t->Phi[2][5]*t->Phi[5][4];
-    w->term[1][58] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[34] + t->Phi[2][2]*w->S[64] +
-            t->Phi[2][3]*w->S[94] + t->Phi[2][4]*w->S[124] + t->Phi[2][5]*w->S[154];
+    w->term[1][58] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[28] +
+            t->Phi[2][3]*w->S[40] + t->Phi[2][4]*w->S[52] + t->Phi[2][5]*w->S[64];
     w->term[0][59] = t->Phi[2][0]*t->Phi[0][5] + t->Phi[2][1]*t->Phi[1][5] +
             t->Phi[2][2]*t->Phi[2][5] + t->Phi[2][3]*t->Phi[3][5] + t->Phi[2][4]*t->Phi[4][5] +
             t->Phi[2][5]*t->Phi[5][5];
-    w->term[1][59] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[35] + t->Phi[2][2]*w->S[65] +
-            t->Phi[2][3]*w->S[95] + t->Phi[2][4]*w->S[125] + t->Phi[2][5]*w->S[155];
+    w->term[1][59] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[29] +
+            t->Phi[2][3]*w->S[41] + t->Phi[2][4]*w->S[53] + t->Phi[2][5]*w->S[65];
     w->term[0][60] = t->Phi[2][0]*t->Phi[0][7] + t->Phi[2][1]*t->Phi[1][7] +
             t->Phi[2][2]*t->Phi[2][7] + t->Phi[2][3]*t->Phi[3][7] + t->Phi[2][4]*t->Phi[4][7] +
             t->Phi[2][5]*t->Phi[5][7];
-    w->term[1][60] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[37] + t->Phi[2][2]*w->S[67] +
-            t->Phi[2][3]*w->S[97] + t->Phi[2][4]*w->S[127] + t->Phi[2][5]*w->S[157] + t->Phi[2][7];
+    w->term[1][60] = t->Phi[2][0]*w->S[90] + t->Phi[2][1]*w->S[105] + t->Phi[2][2]*w->S[120] +
+            t->Phi[2][3]*w->S[135] + t->Phi[2][4]*w->S[150] + t->Phi[2][5]*w->S[165] + t->Phi[2][7];
     w->term[0][61] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
             t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
             t->Phi[2][5]*t->Phi[5][8];
-    w->term[1][61] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[38] + t->Phi[2][2]*w->S[68] +
-            t->Phi[2][3]*w->S[98] + t->Phi[2][4]*w->S[128] + t->Phi[2][5]*w->S[158] + t->Phi[2][8];
+    w->term[1][61] = t->Phi[2][0]*w->S[91] + t->Phi[2][1]*w->S[106] + t->Phi[2][2]*w->S[121] +
+            t->Phi[2][3]*w->S[136] + t->Phi[2][4]*w->S[151] + t->Phi[2][5]*w->S[166] + t->Phi[2][8];
     w->term[0][62] = t->Phi[2][0]*t->Phi[0][9] + t->Phi[2][1]*t->Phi[1][9] +
             t->Phi[2][2]*t->Phi[2][9] + t->Phi[2][3]*t->Phi[3][9] + t->Phi[2][4]*t->Phi[4][9] +
             t->Phi[2][5]*t->Phi[5][9];
-    w->term[1][62] = t->Phi[2][0]*w->S[9] + t->Phi[2][1]*w->S[39] + t->Phi[2][2]*w->S[69] +
-            t->Phi[2][3]*w->S[99] + t->Phi[2][4]*w->S[129] + t->Phi[2][5]*w->S[159] + t->Phi[2][9];
+    w->term[1][62] = t->Phi[2][0]*w->S[92] + t->Phi[2][1]*w->S[107] + t->Phi[2][2]*w->S[122] +
+            t->Phi[2][3]*w->S[137] + t->Phi[2][4]*w->S[152] + t->Phi[2][5]*w->S[167] + t->Phi[2][9];
     w->term[0][63] = t->Phi[2][0]*t->Phi[0][10] + t->Phi[2][1]*t->Phi[1][10] +
             t->Phi[2][2]*t->Phi[2][10] + t->Phi[2][3]*t->Phi[3][10] + t->Phi[2][4]*t->Phi[4][10] +
             t->Phi[2][5]*t->Phi[5][10] + t->Phi[2][10]*t->Phi[10][10];
-    w->term[1][63] = t->Phi[2][0]*w->S[10] + t->Phi[2][1]*w->S[40] + t->Phi[2][2]*w->S[70] +
-            t->Phi[2][3]*w->S[100] + t->Phi[2][4]*w->S[130] + t->Phi[2][5]*w->S[160] +
-            t->Phi[2][10]*w->S[210];
+    w->term[1][63] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[18] + t->Phi[2][2]*w->S[30] +
+            t->Phi[2][3]*w->S[42] + t->Phi[2][4]*w->S[54] + t->Phi[2][5]*w->S[66] +
+            t->Phi[2][10]*w->S[84];
     w->term[0][64] = t->Phi[2][0]*t->Phi[0][11] + t->Phi[2][1]*t->Phi[1][11] +
             t->Phi[2][2]*t->Phi[2][11] + t->Phi[2][3]*t->Phi[3][11] + t->Phi[2][4]*t->Phi[4][11] +
             t->Phi[2][5]*t->Phi[5][11] + t->Phi[2][11]*t->Phi[11][11];
-    w->term[1][64] = t->Phi[2][0]*w->S[11] + t->Phi[2][1]*w->S[41] + t->Phi[2][2]*w->S[71] +
-            t->Phi[2][3]*w->S[101] + t->Phi[2][4]*w->S[131] + t->Phi[2][5]*w->S[161] +
-            t->Phi[2][11]*w->S[211];
+    w->term[1][64] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[19] + t->Phi[2][2]*w->S[31] +
+            t->Phi[2][3]*w->S[43] + t->Phi[2][4]*w->S[55] + t->Phi[2][5]*w->S[67] +
+            t->Phi[2][11]*w->S[85];
     w->term[0][65] = t->Phi[2][0]*t->Phi[0][12] + t->Phi[2][1]*t->Phi[1][12] +
             t->Phi[2][2]*t->Phi[2][12] + t->Phi[2][3]*t->Phi[3][12] + t->Phi[2][4]*t->Phi[4][12] +
             t->Phi[2][5]*t->Phi[5][12] + t->Phi[2][12]*t->Phi[12][12];
-    w->term[1][65] = t->Phi[2][0]*w->S[12] + t->Phi[2][1]*w->S[42] + t->Phi[2][2]*w->S[72] +
-            t->Phi[2][3]*w->S[102] + t->Phi[2][4]*w->S[132] + t->Phi[2][5]*w->S[162] +
-            t->Phi[2][12]*w->S[212];
+    w->term[1][65] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[20] + t->Phi[2][2]*w->S[32] +
+            t->Phi[2][3]*w->S[44] + t->Phi[2][4]*w->S[56] + t->Phi[2][5]*w->S[68] +
+            t->Phi[2][12]*w->S[86];
     w->term[0][66] = t->Phi[2][0]*t->Phi[0][13] + t->Phi[2][1]*t->Phi[1][13] +
             t->Phi[2][2]*t->Phi[2][13] + t->Phi[2][3]*t->Phi[3][13] + t->Phi[2][4]*t->Phi[4][13] +
             t->Phi[2][5]*t->Phi[5][13] + t->Phi[2][13]*t->Phi[13][13];
-    w->term[1][66] = t->Phi[2][0]*w->S[13] + t->Phi[2][1]*w->S[43] + t->Phi[2][2]*w->S[73] +
-            t->Phi[2][3]*w->S[103] + t->Phi[2][4]*w->S[133] + t->Phi[2][5]*w->S[163] +
-            t->Phi[2][13]*w->S[213];
+    w->term[1][66] = t->Phi[2][0]*w->S[9] + t->Phi[2][1]*w->S[21] + t->Phi[2][2]*w->S[33] +
+            t->Phi[2][3]*w->S[45] + t->Phi[2][4]*w->S[57] + t->Phi[2][5]*w->S[69] +
+            t->Phi[2][13]*w->S[87];
     w->term[0][67] = t->Phi[2][0]*t->Phi[0][14] + t->Phi[2][1]*t->Phi[1][14] +
             t->Phi[2][2]*t->Phi[2][14] + t->Phi[2][3]*t->Phi[3][14] + t->Phi[2][4]*t->Phi[4][14] +
             t->Phi[2][5]*t->Phi[5][14] + t->Phi[2][14]*t->Phi[14][14];
-    w->term[1][67] = t->Phi[2][0]*w->S[14] + t->Phi[2][1]*w->S[44] + t->Phi[2][2]*w->S[74] +
-            t->Phi[2][3]*w->S[104] + t->Phi[2][4]*w->S[134] + t->Phi[2][5]*w->S[164] +
-            t->Phi[2][14]*w->S[214];
+    w->term[1][67] = t->Phi[2][0]*w->S[10] + t->Phi[2][1]*w->S[22] + t->Phi[2][2]*w->S[34] +
+            t->Phi[2][3]*w->S[46] + t->Phi[2][4]*w->S[58] + t->Phi[2][5]*w->S[70] +
+            t->Phi[2][14]*w->S[88];
     w->term[0][68] = t->Phi[2][0]*t->Phi[0][15] + t->Phi[2][1]*t->Phi[1][15] +
             t->Phi[2][2]*t->Phi[2][15] + t->Phi[2][3]*t->Phi[3][15] + t->Phi[2][4]*t->Phi[4][15] +
             t->Phi[2][5]*t->Phi[5][15] + t->Phi[2][15]*t->Phi[15][15];
-    w->term[1][68] = t->Phi[2][0]*w->S[15] + t->Phi[2][1]*w->S[45] + t->Phi[2][2]*w->S[75] +
-            t->Phi[2][3]*w->S[105] + t->Phi[2][4]*w->S[135] + t->Phi[2][5]*w->S[165] +
-            t->Phi[2][15]*w->S[215];
+    w->term[1][68] = t->Phi[2][0]*w->S[11] + t->Phi[2][1]*w->S[23] + t->Phi[2][2]*w->S[35] +
+            t->Phi[2][3]*w->S[47] + t->Phi[2][4]*w->S[59] + t->Phi[2][5]*w->S[71] +
+            t->Phi[2][15]*w->S[89];
     w->term[0][69] = t->Phi[2][0]*t->Phi[0][18] + t->Phi[2][1]*t->Phi[1][18] +
             t->Phi[2][2]*t->Phi[2][18] + t->Phi[2][3]*t->Phi[3][18] + t->Phi[2][4]*t->Phi[4][18] +
             t->Phi[2][5]*t->Phi[5][18];
-    w->term[1][69] = t->Phi[2][0]*w->S[18] + t->Phi[2][1]*w->S[48] + t->Phi[2][2]*w->S[78] +
-            t->Phi[2][3]*w->S[108] + t->Phi[2][4]*w->S[138] + t->Phi[2][5]*w->S[168] +
+    w->term[1][69] = t->Phi[2][0]*w->S[93] + t->Phi[2][1]*w->S[108] + t->Phi[2][2]*w->S[123] +
+            t->Phi[2][3]*w->S[138] + t->Phi[2][4]*w->S[153] + t->Phi[2][5]*w->S[168] +
             t->Phi[2][18];
     w->term[0][70] = t->Phi[2][0]*t->Phi[0][19] + t->Phi[2][1]*t->Phi[1][19] +
             t->Phi[2][2]*t->Phi[2][19] + t->Phi[2][3]*t->Phi[3][19] + t->Phi[2][4]*t->Phi[4][19] +
             t->Phi[2][5]*t->Phi[5][19];
-    w->term[1][70] = t->Phi[2][0]*w->S[19] + t->Phi[2][1]*w->S[49] + t->Phi[2][2]*w->S[79] +
-            t->Phi[2][3]*w->S[109] + t->Phi[2][4]*w->S[139] + t->Phi[2][5]*w->S[169] +
+    w->term[1][70] = t->Phi[2][0]*w->S[94] + t->Phi[2][1]*w->S[109] + t->Phi[2][2]*w->S[124] +
+            t->Phi[2][3]*w->S[139] + t->Phi[2][4]*w->S[154] + t->Phi[2][5]*w->S[169] +
             t->Phi[2][19];
     w->term[0][71] = t->Phi[2][0]*t->Phi[0][20] + t->Phi[2][1]*t->Phi[1][20] +
             t->Phi[2][2]*t->Phi[2][20] + t->Phi[2][3]*t->Phi[3][20] + t->Phi[2][4]*t->Phi[4][20] +
             t->Phi[2][5]*t->Phi[5][20];
-    w->term[1][71] = t->Phi[2][0]*w->S[20] + t->Phi[2][1]*w->S[50] + t->Phi[2][2]*w->S[80] +
-            t->Phi[2][3]*w->S[110] + t->Phi[2][4]*w->S[140] + t->Phi[2][5]*w->S[170] +
+    w->term[1][71] = t->Phi[2][0]*w->S[95] + t->Phi[2][1]*w->S[110] + t->Phi[2][2]*w->S[125] +
+            t->Phi[2][3]*w->S[140] + t->Phi[2][4]*w->S[155] + t->Phi[2][5]*w->S[170] +
             t->Phi[2][20];
     w->term[0][72] = t->Phi[2][0]*t->Phi[0][21] + t->Phi[2][1]*t->Phi[1][21] +
             t->Phi[2][2]*t->Phi[2][21] + t->Phi[2][3]*t->Phi[3][21] + t->Phi[2][4]*t->Phi[4][21] +
             t->Phi[2][5]*t->Phi[5][21];
-    w->term[1][72] = t->Phi[2][0]*w->S[21] + t->Phi[2][1]*w->S[51] + t->Phi[2][2]*w->S[81] +
-            t->Phi[2][3]*w->S[111] + t->Phi[2][4]*w->S[141] + t->Phi[2][5]*w->S[171] +
+    w->term[1][72] = t->Phi[2][0]*w->S[96] + t->Phi[2][1]*w->S[111] + t->Phi[2][2]*w->S[126] +
+            t->Phi[2][3]*w->S[141] + t->Phi[2][4]*w->S[156] + t->Phi[2][5]*w->S[171] +
             t->Phi[2][21];
     w->term[0][73] = t->Phi[2][0]*t->Phi[0][22] + t->Phi[2][1]*t->Phi[1][22] +
             t->Phi[2][2]*t->Phi[2][22] + t->Phi[2][3]*t->Phi[3][22] + t->Phi[2][4]*t->Phi[4][22] +
             t->Phi[2][5]*t->Phi[5][22];
-    w->term[1][73] = t->Phi[2][0]*w->S[22] + t->Phi[2][1]*w->S[52] + t->Phi[2][2]*w->S[82] +
-            t->Phi[2][3]*w->S[112] + t->Phi[2][4]*w->S[142] + t->Phi[2][5]*w->S[172] +
+    w->term[1][73] = t->Phi[2][0]*w->S[97] + t->Phi[2][1]*w->S[112] + t->Phi[2][2]*w->S[127] +
+            t->Phi[2][3]*w->S[142] + t->Phi[2][4]*w->S[157] + t->Phi[2][5]*w->S[172] +
             t->Phi[2][22];
     w->term[0][74] = t->Phi[2][0]*t->Phi[0][23] + t->Phi[2][1]*t->Phi[1][23] +
             t->Phi[2][2]*t->Phi[2][23] + t->Phi[2][3]*t->Phi[3][23] + t->Phi[2][4]*t->Phi[4][23] +
             t->Phi[2][5]*t->Phi[5][23];
-    w->term[1][74] = t->Phi[2][0]*w->S[23] + t->Phi[2][1]*w->S[53] + t->Phi[2][2]*w->S[83] +
-            t->Phi[2][3]*w->S[113] + t->Phi[2][4]*w->S[143] + t->Phi[2][5]*w->S[173] +
+    w->term[1][74] = t->Phi[2][0]*w->S[98] + t->Phi[2][1]*w->S[113] + t->Phi[2][2]*w->S[128] +
+            t->Phi[2][3]*w->S[143] + t->Phi[2][4]*w->S[158] + t->Phi[2][5]*w->S[173] +
             t->Phi[2][23];
     w->term[0][75] = t->Phi[2][0]*t->Phi[0][24] + t->Phi[2][1]*t->Phi[1][24] +
             t->Phi[2][2]*t->Phi[2][24] + t->Phi[2][3]*t->Phi[3][24] + t->Phi[2][4]*t->Phi[4][24] +
             t->Phi[2][5]*t->Phi[5][24];
-    w->term[1][75] = t->Phi[2][0]*w->S[24] + t->Phi[2][1]*w->S[54] + t->Phi[2][2]*w->S[84] +
-            t->Phi[2][3]*w->S[114] + t->Phi[2][4]*w->S[144] + t->Phi[2][5]*w->S[174] +
+    w->term[1][75] = t->Phi[2][0]*w->S[99] + t->Phi[2][1]*w->S[114] + t->Phi[2][2]*w->S[129] +
+            t->Phi[2][3]*w->S[144] + t->Phi[2][4]*w->S[159] + t->Phi[2][5]*w->S[174] +
             t->Phi[2][24];
     w->term[0][76] = t->Phi[2][0]*t->Phi[0][25] + t->Phi[2][1]*t->Phi[1][25] +
             t->Phi[2][2]*t->Phi[2][25] + t->Phi[2][3]*t->Phi[3][25] + t->Phi[2][4]*t->Phi[4][25] +
             t->Phi[2][5]*t->Phi[5][25];
-    w->term[1][76] = t->Phi[2][0]*w->S[25] + t->Phi[2][1]*w->S[55] + t->Phi[2][2]*w->S[85] +
-            t->Phi[2][3]*w->S[115] + t->Phi[2][4]*w->S[145] + t->Phi[2][5]*w->S[175] +
+    w->term[1][76] = t->Phi[2][0]*w->S[100] + t->Phi[2][1]*w->S[115] + t->Phi[2][2]*w->S[130] +
+            t->Phi[2][3]*w->S[145] + t->Phi[2][4]*w->S[160] + t->Phi[2][5]*w->S[175] +
             t->Phi[2][25];
     w->term[0][77] = t->Phi[2][0]*t->Phi[0][26] + t->Phi[2][1]*t->Phi[1][26] +
             t->Phi[2][2]*t->Phi[2][26] + t->Phi[2][3]*t->Phi[3][26] + t->Phi[2][4]*t->Phi[4][26] +
             t->Phi[2][5]*t->Phi[5][26];
-    w->term[1][77] = t->Phi[2][0]*w->S[26] + t->Phi[2][1]*w->S[56] + t->Phi[2][2]*w->S[86] +
-            t->Phi[2][3]*w->S[116] + t->Phi[2][4]*w->S[146] + t->Phi[2][5]*w->S[176] +
+    w->term[1][77] = t->Phi[2][0]*w->S[101] + t->Phi[2][1]*w->S[116] + t->Phi[2][2]*w->S[131] +
+            t->Phi[2][3]*w->S[146] + t->Phi[2][4]*w->S[161] + t->Phi[2][5]*w->S[176] +
             t->Phi[2][26];
     w->term[0][78] = t->Phi[2][0]*t->Phi[0][27] + t->Phi[2][1]*t->Phi[1][27] +
             t->Phi[2][2]*t->Phi[2][27] + t->Phi[2][3]*t->Phi[3][27] + t->Phi[2][4]*t->Phi[4][27] +
             t->Phi[2][5]*t->Phi[5][27];
-    w->term[1][78] = t->Phi[2][0]*w->S[27] + t->Phi[2][1]*w->S[57] + t->Phi[2][2]*w->S[87] +
-            t->Phi[2][3]*w->S[117] + t->Phi[2][4]*w->S[147] + t->Phi[2][5]*w->S[177] +
+    w->term[1][78] = t->Phi[2][0]*w->S[102] + t->Phi[2][1]*w->S[117] + t->Phi[2][2]*w->S[132] +
+            t->Phi[2][3]*w->S[147] + t->Phi[2][4]*w->S[162] + t->Phi[2][5]*w->S[177] +
             t->Phi[2][27];
     w->term[0][79] = t->Phi[2][0]*t->Phi[0][28] + t->Phi[2][1]*t->Phi[1][28] +
             t->Phi[2][2]*t->Phi[2][28] + t->Phi[2][3]*t->Phi[3][28] + t->Phi[2][4]*t->Phi[4][28] +
             t->Phi[2][5]*t->Phi[5][28];
-    w->term[1][79] = t->Phi[2][0]*w->S[28] + t->Phi[2][1]*w->S[58] + t->Phi[2][2]*w->S[88] +
-            t->Phi[2][3]*w->S[118] + t->Phi[2][4]*w->S[148] + t->Phi[2][5]*w->S[178] +
+    w->term[1][79] = t->Phi[2][0]*w->S[103] + t->Phi[2][1]*w->S[118] + t->Phi[2][2]*w->S[133] +
+            t->Phi[2][3]*w->S[148] + t->Phi[2][4]*w->S[163] + t->Phi[2][5]*w->S[178] +
             t->Phi[2][28];
     w->term[0][80] = t->Phi[2][0]*t->Phi[0][29] + t->Phi[2][1]*t->Phi[1][29] +
             t->Phi[2][2]*t->Phi[2][29] + t->Phi[2][3]*t->Phi[3][29] + t->Phi[2][4]*t->Phi[4][29] +
             t->Phi[2][5]*t->Phi[5][29];
-    w->term[1][80] = t->Phi[2][0]*w->S[29] + t->Phi[2][1]*w->S[59] + t->Phi[2][2]*w->S[89] +
-            t->Phi[2][3]*w->S[119] + t->Phi[2][4]*w->S[149] + t->Phi[2][5]*w->S[179] +
+    w->term[1][80] = t->Phi[2][0]*w->S[104] + t->Phi[2][1]*w->S[119] + t->Phi[2][2]*w->S[134] +
+            t->Phi[2][3]*w->S[149] + t->Phi[2][4]*w->S[164] + t->Phi[2][5]*w->S[179] +
             t->Phi[2][29];
     w->term[0][81] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
             t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
             t->Phi[3][5]*t->Phi[5][0];
-    w->term[1][81] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[30] + t->Phi[3][2]*w->S[60] +
-            t->Phi[3][3]*w->S[90] + t->Phi[3][4]*w->S[120] + t->Phi[3][5]*w->S[150];
+    w->term[1][81] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[12] + t->Phi[3][2]*w->S[24] +
+            t->Phi[3][3]*w->S[36] + t->Phi[3][4]*w->S[48] + t->Phi[3][5]*w->S[60];
     w->term[0][82] = t->Phi[3][0]*t->Phi[0][1] + t->Phi[3][1]*t->Phi[1][1] +
             t->Phi[3][2]*t->Phi[2][1] + t->Phi[3][3]*t->Phi[3][1] + t->Phi[3][4]*t->Phi[4][1] +
             t->Phi[3][5]*t->Phi[5][1];
-    w->term[1][82] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[31] + t->Phi[3][2]*w->S[61] +
-            t->Phi[3][3]*w->S[91] + t->Phi[3][4]*w->S[121] + t->Phi[3][5]*w->S[151];
+    w->term[1][82] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[13] + t->Phi[3][2]*w->S[25] +
+            t->Phi[3][3]*w->S[37] + t->Phi[3][4]*w->S[49] + t->Phi[3][5]*w->S[61];
     w->term[0][83] = t->Phi[3][0]*t->Phi[0][2] + t->Phi[3][1]*t->Phi[1][2] +
             t->Phi[3][2]*t->Phi[2][2] + t->Phi[3][3]*t->Phi[3][2] + t->Phi[3][4]*t->Phi[4][2] +
             t->Phi[3][5]*t->Phi[5][2];
-    w->term[1][83] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[32] + t->Phi[3][2]*w->S[62] +
-            t->Phi[3][3]*w->S[92] + t->Phi[3][4]*w->S[122] + t->Phi[3][5]*w->S[152];
+    w->term[1][83] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[26] +
+            t->Phi[3][3]*w->S[38] + t->Phi[3][4]*w->S[50] + t->Phi[3][5]*w->S[62];
     w->term[0][84] = t->Phi[3][0]*t->Phi[0][3] + t->Phi[3][1]*t->Phi[1][3] +
             t->Phi[3][2]*t->Phi[2][3] + t->Phi[3][3]*t->Phi[3][3] + t->Phi[3][4]*t->Phi[4][3] +
             t->Phi[3][5]*t->Phi[5][3];
-    w->term[1][84] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[33] + t->Phi[3][2]*w->S[63] +
-            t->Phi[3][3]*w->S[93] + t->Phi[3][4]*w->S[123] + t->Phi[3][5]*w->S[153];
+    w->term[1][84] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[27] +
+            t->Phi[3][3]*w->S[39] + t->Phi[3][4]*w->S[51] + t->Phi[3][5]*w->S[63];
     w->term[0][85] = t->Phi[3][0]*t->Phi[0][4] + t->Phi[3][1]*t->Phi[1][4] +
             t->Phi[3][2]*t->Phi[2][4] + t->Phi[3][3]*t->Phi[3][4] + t->Phi[3][4]*t->Phi[4][4] +
             t->Phi[3][5]*t->Phi[5][4];
-    w->term[1][85] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[34] + t->Phi[3][2]*w->S[64] +
-            t->Phi[3][3]*w->S[94] + t->Phi[3][4]*w->S[124] + t->Phi[3][5]*w->S[154];
+    w->term[1][85] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[28] +
+            t->Phi[3][3]*w->S[40] + t->Phi[3][4]*w->S[52] + t->Phi[3][5]*w->S[64];
     w->term[0][86] = t->Phi[3][0]*t->Phi[0][5] + t->Phi[3][1]*t->Phi[1][5] +
             t->Phi[3][2]*t->Phi[2][5] + t->Phi[3][3]*t->Phi[3][5] + t->Phi[3][4]*t->Phi[4][5] +
             t->Phi[3][5]*t->Phi[5][5];
-    w->term[1][86] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[35] + t->Phi[3][2]*w->S[65] +
-            t->Phi[3][3]*w->S[95] + t->Phi[3][4]*w->S[125] + t->Phi[3][5]*w->S[155];
+    w->term[1][86] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[29] +
+            t->Phi[3][3]*w->S[41] + t->Phi[3][4]*w->S[53] + t->Phi[3][5]*w->S[65];
     w->term[0][87] = t->Phi[3][0]*t->Phi[0][7] + t->Phi[3][1]*t->Phi[1][7] +
             t->Phi[3][2]*t->Phi[2][7] + t->Phi[3][3]*t->Phi[3][7] + t->Phi[3][4]*t->Phi[4][7] +
             t->Phi[3][5]*t->Phi[5][7];
-    w->term[1][87] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[37] + t->Phi[3][2]*w->S[67] +
-            t->Phi[3][3]*w->S[97] + t->Phi[3][4]*w->S[127] + t->Phi[3][5]*w->S[157] + t->Phi[3][7];
+    w->term[1][87] = t->Phi[3][0]*w->S[90] + t->Phi[3][1]*w->S[105] + t->Phi[3][2]*w->S[120] +
+            t->Phi[3][3]*w->S[135] + t->Phi[3][4]*w->S[150] + t->Phi[3][5]*w->S[165] + t->Phi[3][7];
     w->term[0][88] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
             t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
             t->Phi[3][5]*t->Phi[5][8];
-    w->term[1][88] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[38] + t->Phi[3][2]*w->S[68] +
-            t->Phi[3][3]*w->S[98] + t->Phi[3][4]*w->S[128] + t->Phi[3][5]*w->S[158] + t->Phi[3][8];
+    w->term[1][88] = t->Phi[3][0]*w->S[91] + t->Phi[3][1]*w->S[106] + t->Phi[3][2]*w->S[121] +
+            t->Phi[3][3]*w->S[136] + t->Phi[3][4]*w->S[151] + t->Phi[3][5]*w->S[166] + t->Phi[3][8];
     w->term[0][89] = t->Phi[3][0]*t->Phi[0][9] + t->Phi[3][1]*t->Phi[1][9] +
             t->Phi[3][2]*t->Phi[2][9] + t->Phi[3][3]*t->Phi[3][9] + t->Phi[3][4]*t->Phi[4][9] +
             t->Phi[3][5]*t->Phi[5][9];
-    w->term[1][89] = t->Phi[3][0]*w->S[9] + t->Phi[3][1]*w->S[39] + t->Phi[3][2]*w->S[69] +
-            t->Phi[3][3]*w->S[99] + t->Phi[3][4]*w->S[129] + t->Phi[3][5]*w->S[159] + t->Phi[3][9];
+    w->term[1][89] = t->Phi[3][0]*w->S[92] + t->Phi[3][1]*w->S[107] + t->Phi[3][2]*w->S[122] +
+            t->Phi[3][3]*w->S[137] + t->Phi[3][4]*w->S[152] + t->Phi[3][5]*w->S[167] + t->Phi[3][9];
     w->term[0][90] = t->Phi[3][0]*t->Phi[0][10] + t->Phi[3][1]*t->Phi[1][10] +
             t->Phi[3][2]*t->Phi[2][10] + t->Phi[3][3]*t->Phi[3][10] + t->Phi[3][4]*t->Phi[4][10] +
             t->Phi[3][5]*t->Phi[5][10] + t->Phi[3][10]*t->Phi[10][10];
-    w->term[1][90] = t->Phi[3][0]*w->S[10] + t->Phi[3][1]*w->S[40] + t->Phi[3][2]*w->S[70] +
-            t->Phi[3][3]*w->S[100] + t->Phi[3][4]*w->S[130] + t->Phi[3][5]*w->S[160] +
-            t->Phi[3][10]*w->S[210];
+    w->term[1][90] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[18] + t->Phi[3][2]*w->S[30] +
+            t->Phi[3][3]*w->S[42] + t->Phi[3][4]*w->S[54] + t->Phi[3][5]*w->S[66] +
+            t->Phi[3][10]*w->S[84];
     w->term[0][91] = t->Phi[3][0]*t->Phi[0][11] + t->Phi[3][1]*t->Phi[1][11] +
             t->Phi[3][2]*t->Phi[2][11] + t->Phi[3][3]*t->Phi[3][11] + t->Phi[3][4]*t->Phi[4][11] +
             t->Phi[3][5]*t->Phi[5][11] + t->Phi[3][11]*t->Phi[11][11];
-    w->term[1][91] = t->Phi[3][0]*w->S[11] + t->Phi[3][1]*w->S[41] + t->Phi[3][2]*w->S[71] +
-            t->Phi[3][3]*w->S[101] + t->Phi[3][4]*w->S[131] + t->Phi[3][5]*w->S[161] +
-            t->Phi[3][11]*w->S[211];
+    w->term[1][91] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[19] + t->Phi[3][2]*w->S[31] +
+            t->Phi[3][3]*w->S[43] + t->Phi[3][4]*w->S[55] + t->Phi[3][5]*w->S[67] +
+            t->Phi[3][11]*w->S[85];
     w->term[0][92] = t->Phi[3][0]*t->Phi[0][12] + t->Phi[3][1]*t->Phi[1][12] +
             t->Phi[3][2]*t->Phi[2][12] + t->Phi[3][3]*t->Phi[3][12] + t->Phi[3][4]*t->Phi[4][12] +
             t->Phi[3][5]*t->Phi[5][12] + t->Phi[3][12]*t->Phi[12][12];
-    w->term[1][92] = t->Phi[3][0]*w->S[12] + t->Phi[3][1]*w->S[42] + t->Phi[3][2]*w->S[72] +
-            t->Phi[3][3]*w->S[102] + t->Phi[3][4]*w->S[132] + t->Phi[3][5]*w->S[162] +
-            t->Phi[3][12]*w->S[212];
+    w->term[1][92] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[20] + t->Phi[3][2]*w->S[32] +
+            t->Phi[3][3]*w->S[44] + t->Phi[3][4]*w->S[56] + t->Phi[3][5]*w->S[68] +
+            t->Phi[3][12]*w->S[86];
     w->term[0][93] = t->Phi[3][0]*t->Phi[0][13] + t->Phi[3][1]*t->Phi[1][13] +
             t->Phi[3][2]*t->Phi[2][13] + t->Phi[3][3]*t->Phi[3][13] + t->Phi[3][4]*t->Phi[4][13] +
             t->Phi[3][5]*t->Phi[5][13] + t->Phi[3][13]*t->Phi[13][13];
-    w->term[1][93] = t->Phi[3][0]*w->S[13] + t->Phi[3][1]*w->S[43] + t->Phi[3][2]*w->S[73] +
-            t->Phi[3][3]*w->S[103] + t->Phi[3][4]*w->S[133] + t->Phi[3][5]*w->S[163] +
-            t->Phi[3][13]*w->S[213];
+    w->term[1][93] = t->Phi[3][0]*w->S[9] + t->Phi[3][1]*w->S[21] + t->Phi[3][2]*w->S[33] +
+            t->Phi[3][3]*w->S[45] + t->Phi[3][4]*w->S[57] + t->Phi[3][5]*w->S[69] +
+            t->Phi[3][13]*w->S[87];
     w->term[0][94] = t->Phi[3][0]*t->Phi[0][14] + t->Phi[3][1]*t->Phi[1][14] +
             t->Phi[3][2]*t->Phi[2][14] + t->Phi[3][3]*t->Phi[3][14] + t->Phi[3][4]*t->Phi[4][14] +
             t->Phi[3][5]*t->Phi[5][14] + t->Phi[3][14]*t->Phi[14][14];
-    w->term[1][94] = t->Phi[3][0]*w->S[14] + t->Phi[3][1]*w->S[44] + t->Phi[3][2]*w->S[74] +
-            t->Phi[3][3]*w->S[104] + t->Phi[3][4]*w->S[134] + t->Phi[3][5]*w->S[164] +
-            t->Phi[3][14]*w->S[214];
+    w->term[1][94] = t->Phi[3][0]*w->S[10] + t->Phi[3][1]*w->S[22] + t->Phi[3][2]*w->S[34] +
+            t->Phi[3][3]*w->S[46] + t->Phi[3][4]*w->S[58] + t->Phi[3][5]*w->S[70] +
+            t->Phi[3][14]*w->S[88];
     w->term[0][95] = t->Phi[3][0]*t->Phi[0][15] + t->Phi[3][1]*t->Phi[1][15] +
             t->Phi[3][2]*t->Phi[2][15] + t->Phi[3][3]*t->Phi[3][15] + t->Phi[3][4]*t->Phi[4][15] +
             t->Phi[3][5]*t->Phi[5][15] + t->Phi[3][15]*t->Phi[15][15];
-    w->term[1][95] = t->Phi[3][0]*w->S[15] + t->Phi[3][1]*w->S[45] + t->Phi[3][2]*w->S[75] +
-            t->Phi[3][3]*w->S[105] + t->Phi[3][4]*w->S[135] + t->Phi[3][5]*w->S[165] +
-            t->Phi[3][15]*w->S[215];
+    w->term[1][95] = t->Phi[3][0]*w->S[11] + t->Phi[3][1]*w->S[23] + t->Phi[3][2]*w->S[35] +
+            t->Phi[3][3]*w->S[47] + t->Phi[3][4]*w->S[59] + t->Phi[3][5]*w->S[71] +
+            t->Phi[3][15]*w->S[89];
     w->term[0][96] = t->Phi[3][0]*t->Phi[0][18] + t->Phi[3][1]*t->Phi[1][18] +
             t->Phi[3][2]*t->Phi[2][18] + t->Phi[3][3]*t->Phi[3][18] + t->Phi[3][4]*t->Phi[4][18] +
             t->Phi[3][5]*t->Phi[5][18];
-    w->term[1][96] = t->Phi[3][0]*w->S[18] + t->Phi[3][1]*w->S[48] + t->Phi[3][2]*w->S[78] +
-            t->Phi[3][3]*w->S[108] + t->Phi[3][4]*w->S[138] + t->Phi[3][5]*w->S[168] +
+    w->term[1][96] = t->Phi[3][0]*w->S[93] + t->Phi[3][1]*w->S[108] + t->Phi[3][2]*w->S[123] +
+            t->Phi[3][3]*w->S[138] + t->Phi[3][4]*w->S[153] + t->Phi[3][5]*w->S[168] +
             t->Phi[3][18];
     w->term[0][97] = t->Phi[3][0]*t->Phi[0][19] + t->Phi[3][1]*t->Phi[1][19] +
             t->Phi[3][2]*t->Phi[2][19] + t->Phi[3][3]*t->Phi[3][19] + t->Phi[3][4]*t->Phi[4][19] +
             t->Phi[3][5]*t->Phi[5][19];
-    w->term[1][97] = t->Phi[3][0]*w->S[19] + t->Phi[3][1]*w->S[49] + t->Phi[3][2]*w->S[79] +
-            t->Phi[3][3]*w->S[109] + t->Phi[3][4]*w->S[139] + t->Phi[3][5]*w->S[169] +
+    w->term[1][97] = t->Phi[3][0]*w->S[94] + t->Phi[3][1]*w->S[109] + t->Phi[3][2]*w->S[124] +
+            t->Phi[3][3]*w->S[139] + t->Phi[3][4]*w->S[154] + t->Phi[3][5]*w->S[169] +
             t->Phi[3][19];
     w->term[0][98] = t->Phi[3][0]*t->Phi[0][20] + t->Phi[3][1]*t->Phi[1][20] +
             t->Phi[3][2]*t->Phi[2][20] + t->Phi[3][3]*t->Phi[3][20] + t->Phi[3][4]*t->Phi[4][20] +
             t->Phi[3][5]*t->Phi[5][20];
-    w->term[1][98] = t->Phi[3][0]*w->S[20] + t->Phi[3][1]*w->S[50] + t->Phi[3][2]*w->S[80] +
-            t->Phi[3][3]*w->S[110] + t->Phi[3][4]*w->S[140] + t->Phi[3][5]*w->S[170] +
+    w->term[1][98] = t->Phi[3][0]*w->S[95] + t->Phi[3][1]*w->S[110] + t->Phi[3][2]*w->S[125] +
+            t->Phi[3][3]*w->S[140] + t->Phi[3][4]*w->S[155] + t->Phi[3][5]*w->S[170] +
             t->Phi[3][20];
     w->term[0][99] = t->Phi[3][0]*t->Phi[0][21] + t->Phi[3][1]*t->Phi[1][21] +
             t->Phi[3][2]*t->Phi[2][21] + t->Phi[3][3]*t->Phi[3][21] + t->Phi[3][4]*t->Phi[4][21] +
             t->Phi[3][5]*t->Phi[5][21];
-    w->term[1][99] = t->Phi[3][0]*w->S[21] + t->Phi[3][1]*w->S[51] + t->Phi[3][2]*w->S[81] +
-            t->Phi[3][3]*w->S[111] + t->Phi[3][4]*w->S[141] + t->Phi[3][5]*w->S[171] +
+    w->term[1][99] = t->Phi[3][0]*w->S[96] + t->Phi[3][1]*w->S[111] + t->Phi[3][2]*w->S[126] +
+            t->Phi[3][3]*w->S[141] + t->Phi[3][4]*w->S[156] + t->Phi[3][5]*w->S[171] +
             t->Phi[3][21];
     w->term[0][100] = t->Phi[3][0]*t->Phi[0][22] + t->Phi[3][1]*t->Phi[1][22] +
             t->Phi[3][2]*t->Phi[2][22] + t->Phi[3][3]*t->Phi[3][22] + t->Phi[3][4]*t->Phi[4][22] +
             t->Phi[3][5]*t->Phi[5][22];
-    w->term[1][100] = t->Phi[3][0]*w->S[22] + t->Phi[3][1]*w->S[52] + t->Phi[3][2]*w->S[82] +
-            t->Phi[3][3]*w->S[112] + t->Phi[3][4]*w->S[142] + t->Phi[3][5]*w->S[172] +
+    w->term[1][100] = t->Phi[3][0]*w->S[97] + t->Phi[3][1]*w->S[112] + t->Phi[3][2]*w->S[127] +
+            t->Phi[3][3]*w->S[142] + t->Phi[3][4]*w->S[157] + t->Phi[3][5]*w->S[172] +
             t->Phi[3][22];
     w->term[0][101] = t->Phi[3][0]*t->Phi[0][23] + t->Phi[3][1]*t->Phi[1][23] +
             t->Phi[3][2]*t->Phi[2][23] + t->Phi[3][3]*t->Phi[3][23] + t->Phi[3][4]*t->Phi[4][23] +
             t->Phi[3][5]*t->Phi[5][23];
-    w->term[1][101] = t->Phi[3][0]*w->S[23] + t->Phi[3][1]*w->S[53] + t->Phi[3][2]*w->S[83] +
-            t->Phi[3][3]*w->S[113] + t->Phi[3][4]*w->S[143] + t->Phi[3][5]*w->S[173] +
+    w->term[1][101] = t->Phi[3][0]*w->S[98] + t->Phi[3][1]*w->S[113] + t->Phi[3][2]*w->S[128] +
+            t->Phi[3][3]*w->S[143] + t->Phi[3][4]*w->S[158] + t->Phi[3][5]*w->S[173] +
             t->Phi[3][23];
     w->term[0][102] = t->Phi[3][0]*t->Phi[0][24] + t->Phi[3][1]*t->Phi[1][24] +
             t->Phi[3][2]*t->Phi[2][24] + t->Phi[3][3]*t->Phi[3][24] + t->Phi[3][4]*t->Phi[4][24] +
             t->Phi[3][5]*t->Phi[5][24];
-    w->term[1][102] = t->Phi[3][0]*w->S[24] + t->Phi[3][1]*w->S[54] + t->Phi[3][2]*w->S[84] +
-            t->Phi[3][3]*w->S[114] + t->Phi[3][4]*w->S[144] + t->Phi[3][5]*w->S[174] +
+    w->term[1][102] = t->Phi[3][0]*w->S[99] + t->Phi[3][1]*w->S[114] + t->Phi[3][2]*w->S[129] +
+            t->Phi[3][3]*w->S[144] + t->Phi[3][4]*w->S[159] + t->Phi[3][5]*w->S[174] +
             t->Phi[3][24];
     w->term[0][103] = t->Phi[3][0]*t->Phi[0][25] + t->Phi[3][1]*t->Phi[1][25] +
             t->Phi[3][2]*t->Phi[2][25] + t->Phi[3][3]*t->Phi[3][25] + t->Phi[3][4]*t->Phi[4][25] +
             t->Phi[3][5]*t->Phi[5][25];
-    w->term[1][103] = t->Phi[3][0]*w->S[25] + t->Phi[3][1]*w->S[55] + t->Phi[3][2]*w->S[85] +
-            t->Phi[3][3]*w->S[115] + t->Phi[3][4]*w->S[145] + t->Phi[3][5]*w->S[175] +
+    w->term[1][103] = t->Phi[3][0]*w->S[100] + t->Phi[3][1]*w->S[115] + t->Phi[3][2]*w->S[130] +
+            t->Phi[3][3]*w->S[145] + t->Phi[3][4]*w->S[160] + t->Phi[3][5]*w->S[175] +
             t->Phi[3][25];
     w->term[0][104] = t->Phi[3][0]*t->Phi[0][26] + t->Phi[3][1]*t->Phi[1][26] +
             t->Phi[3][2]*t->Phi[2][26] + t->Phi[3][3]*t->Phi[3][26] + t->Phi[3][4]*t->Phi[4][26] +
             t->Phi[3][5]*t->Phi[5][26];
-    w->term[1][104] = t->Phi[3][0]*w->S[26] + t->Phi[3][1]*w->S[56] + t->Phi[3][2]*w->S[86] +
-            t->Phi[3][3]*w->S[116] + t->Phi[3][4]*w->S[146] + t->Phi[3][5]*w->S[176] +
+    w->term[1][104] = t->Phi[3][0]*w->S[101] + t->Phi[3][1]*w->S[116] + t->Phi[3][2]*w->S[131] +
+            t->Phi[3][3]*w->S[146] + t->Phi[3][4]*w->S[161] + t->Phi[3][5]*w->S[176] +
             t->Phi[3][26];
     w->term[0][105] = t->Phi[3][0]*t->Phi[0][27] + t->Phi[3][1]*t->Phi[1][27] +
             t->Phi[3][2]*t->Phi[2][27] + t->Phi[3][3]*t->Phi[3][27] + t->Phi[3][4]*t->Phi[4][27] +
             t->Phi[3][5]*t->Phi[5][27];
-    w->term[1][105] = t->Phi[3][0]*w->S[27] + t->Phi[3][1]*w->S[57] + t->Phi[3][2]*w->S[87] +
-            t->Phi[3][3]*w->S[117] + t->Phi[3][4]*w->S[147] + t->Phi[3][5]*w->S[177] +
+    w->term[1][105] = t->Phi[3][0]*w->S[102] + t->Phi[3][1]*w->S[117] + t->Phi[3][2]*w->S[132] +
+            t->Phi[3][3]*w->S[147] + t->Phi[3][4]*w->S[162] + t->Phi[3][5]*w->S[177] +
             t->Phi[3][27];
     w->term[0][106] = t->Phi[3][0]*t->Phi[0][28] + t->Phi[3][1]*t->Phi[1][28] +
             t->Phi[3][2]*t->Phi[2][28] + t->Phi[3][3]*t->Phi[3][28] + t->Phi[3][4]*t->Phi[4][28] +
             t->Phi[3][5]*t->Phi[5][28];
-    w->term[1][106] = t->Phi[3][0]*w->S[28] + t->Phi[3][1]*w->S[58] + t->Phi[3][2]*w->S[88] +
-            t->Phi[3][3]*w->S[118] + t->Phi[3][4]*w->S[148] + t->Phi[3][5]*w->S[178] +
+    w->term[1][106] = t->Phi[3][0]*w->S[103] + t->Phi[3][1]*w->S[118] + t->Phi[3][2]*w->S[133] +
+            t->Phi[3][3]*w->S[148] + t->Phi[3][4]*w->S[163] + t->Phi[3][5]*w->S[178] +
             t->Phi[3][28];
     w->term[0][107] = t->Phi[3][0]*t->Phi[0][29] + t->Phi[3][1]*t->Phi[1][29] +
             t->Phi[3][2]*t->Phi[2][29] + t->Phi[3][3]*t->Phi[3][29] + t->Phi[3][4]*t->Phi[4][29] +
             t->Phi[3][5]*t->Phi[5][29];
-    w->term[1][107] = t->Phi[3][0]*w->S[29] + t->Phi[3][1]*w->S[59] + t->Phi[3][2]*w->S[89] +
-            t->Phi[3][3]*w->S[119] + t->Phi[3][4]*w->S[149] + t->Phi[3][5]*w->S[179] +
+    w->term[1][107] = t->Phi[3][0]*w->S[104] + t->Phi[3][1]*w->S[119] + t->Phi[3][2]*w->S[134] +
+            t->Phi[3][3]*w->S[149] + t->Phi[3][4]*w->S[164] + t->Phi[3][5]*w->S[179] +
             t->Phi[3][29];
     w->term[0][108] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
             t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
             t->Phi[4][5]*t->Phi[5][0];
-    w->term[1][108] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[30] + t->Phi[4][2]*w->S[60] +
-            t->Phi[4][3]*w->S[90] + t->Phi[4][4]*w->S[120] + t->Phi[4][5]*w->S[150];
+    w->term[1][108] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[12] + t->Phi[4][2]*w->S[24] +
+            t->Phi[4][3]*w->S[36] + t->Phi[4][4]*w->S[48] + t->Phi[4][5]*w->S[60];
     w->term[0][109] = t->Phi[4][0]*t->Phi[0][1] + t->Phi[4][1]*t->Phi[1][1] +
             t->Phi[4][2]*t->Phi[2][1] + t->Phi[4][3]*t->Phi[3][1] + t->Phi[4][4]*t->Phi[4][1] +
             t->Phi[4][5]*t->Phi[5][1];
-    w->term[1][109] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[31] + t->Phi[4][2]*w->S[61] +
-            t->Phi[4][3]*w->S[91] + t->Phi[4][4]*w->S[121] + t->Phi[4][5]*w->S[151];
+    w->term[1][109] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[13] + t->Phi[4][2]*w->S[25] +
+            t->Phi[4][3]*w->S[37] + t->Phi[4][4]*w->S[49] + t->Phi[4][5]*w->S[61];
     w->term[0][110] = t->Phi[4][0]*t->Phi[0][2] + t->Phi[4][1]*t->Phi[1][2] +
             t->Phi[4][2]*t->Phi[2][2] + t->Phi[4][3]*t->Phi[3][2] + t->Phi[4][4]*t->Phi[4][2] +
             t->Phi[4][5]*t->Phi[5][2];
-    w->term[1][110] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[32] + t->Phi[4][2]*w->S[62] +
-            t->Phi[4][3]*w->S[92] + t->Phi[4][4]*w->S[122] + t->Phi[4][5]*w->S[152];
+    w->term[1][110] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[26] +
+            t->Phi[4][3]*w->S[38] + t->Phi[4][4]*w->S[50] + t->Phi[4][5]*w->S[62];
     w->term[0][111] = t->Phi[4][0]*t->Phi[0][3] + t->Phi[4][1]*t->Phi[1][3] +
             t->Phi[4][2]*t->Phi[2][3] + t->Phi[4][3]*t->Phi[3][3] + t->Phi[4][4]*t->Phi[4][3] +
             t->Phi[4][5]*t->Phi[5][3];
-    w->term[1][111] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[33] + t->Phi[4][2]*w->S[63] +
-            t->Phi[4][3]*w->S[93] + t->Phi[4][4]*w->S[123] + t->Phi[4][5]*w->S[153];
+    w->term[1][111] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[27] +
+            t->Phi[4][3]*w->S[39] + t->Phi[4][4]*w->S[51] + t->Phi[4][5]*w->S[63];
     w->term[0][112] = t->Phi[4][0]*t->Phi[0][4] + t->Phi[4][1]*t->Phi[1][4] +
             t->Phi[4][2]*t->Phi[2][4] + t->Phi[4][3]*t->Phi[3][4] + t->Phi[4][4]*t->Phi[4][4] +
             t->Phi[4][5]*t->Phi[5][4];
-    w->term[1][112] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[34] + t->Phi[4][2]*w->S[64] +
-            t->Phi[4][3]*w->S[94] + t->Phi[4][4]*w->S[124] + t->Phi[4][5]*w->S[154];
+    w->term[1][112] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[28] +
+            t->Phi[4][3]*w->S[40] + t->Phi[4][4]*w->S[52] + t->Phi[4][5]*w->S[64];
     w->term[0][113] = t->Phi[4][0]*t->Phi[0][5] + t->Phi[4][1]*t->Phi[1][5] +
             t->Phi[4][2]*t->Phi[2][5] + t->Phi[4][3]*t->Phi[3][5] + t->Phi[4][4]*t->Phi[4][5] +
             t->Phi[4][5]*t->Phi[5][5];
-    w->term[1][113] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[35] + t->Phi[4][2]*w->S[65] +
-            t->Phi[4][3]*w->S[95] + t->Phi[4][4]*w->S[125] + t->Phi[4][5]*w->S[155];
+    w->term[1][113] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[29] +
+            t->Phi[4][3]*w->S[41] + t->Phi[4][4]*w->S[53] + t->Phi[4][5]*w->S[65];
     w->term[0][114] = t->Phi[4][0]*t->Phi[0][7] + t->Phi[4][1]*t->Phi[1][7] +
             t->Phi[4][2]*t->Phi[2][7] + t->Phi[4][3]*t->Phi[3][7] + t->Phi[4][4]*t->Phi[4][7] +
             t->Phi[4][5]*t->Phi[5][7];
-    w->term[1][114] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[37] + t->Phi[4][2]*w->S[67] +
-            t->Phi[4][3]*w->S[97] + t->Phi[4][4]*w->S[127] + t->Phi[4][5]*w->S[157] + t->Phi[4][7];
+    w->term[1][114] = t->Phi[4][0]*w->S[90] + t->Phi[4][1]*w->S[105] + t->Phi[4][2]*w->S[120] +
+            t->Phi[4][3]*w->S[135] + t->Phi[4][4]*w->S[150] + t->Phi[4][5]*w->S[165] + t->Phi[4][7];
     w->term[0][115] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
             t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
             t->Phi[4][5]*t->Phi[5][8];
-    w->term[1][115] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[38] + t->Phi[4][2]*w->S[68] +
-            t->Phi[4][3]*w->S[98] + t->Phi[4][4]*w->S[128] + t->Phi[4][5]*w->S[158] + t->Phi[4][8];
+    w->term[1][115] = t->Phi[4][0]*w->S[91] + t->Phi[4][1]*w->S[106] + t->Phi[4][2]*w->S[121] +
+            t->Phi[4][3]*w->S[136] + t->Phi[4][4]*w->S[151] + t->Phi[4][5]*w->S[166] + t->Phi[4][8];
     w->term[0][116] = t->Phi[4][0]*t->Phi[0][9] + t->Phi[4][1]*t->Phi[1][9] +
             t->Phi[4][2]*t->Phi[2][9] + t->Phi[4][3]*t->Phi[3][9] + t->Phi[4][4]*t->Phi[4][9] +
             t->Phi[4][5]*t->Phi[5][9];
-    w->term[1][116] = t->Phi[4][0]*w->S[9] + t->Phi[4][1]*w->S[39] + t->Phi[4][2]*w->S[69] +
-            t->Phi[4][3]*w->S[99] + t->Phi[4][4]*w->S[129] + t->Phi[4][5]*w->S[159] + t->Phi[4][9];
+    w->term[1][116] = t->Phi[4][0]*w->S[92] + t->Phi[4][1]*w->S[107] + t->Phi[4][2]*w->S[122] +
+            t->Phi[4][3]*w->S[137] + t->Phi[4][4]*w->S[152] + t->Phi[4][5]*w->S[167] + t->Phi[4][9];
     w->term[0][117] = t->Phi[4][0]*t->Phi[0][10] + t->Phi[4][1]*t->Phi[1][10] +
             t->Phi[4][2]*t->Phi[2][10] + t->Phi[4][3]*t->Phi[3][10] + t->Phi[4][4]*t->Phi[4][10] +
             t->Phi[4][5]*t->Phi[5][10] + t->Phi[4][10]*t->Phi[10][10];
-    w->term[1][117] = t->Phi[4][0]*w->S[10] + t->Phi[4][1]*w->S[40] + t->Phi[4][2]*w->S[70] +
-            t->Phi[4][3]*w->S[100] + t->Phi[4][4]*w->S[130] + t->Phi[4][5]*w->S[160] +
-            t->Phi[4][10]*w->S[210];
+    w->term[1][117] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[18] + t->Phi[4][2]*w->S[30] +
+            t->Phi[4][3]*w->S[42] + t->Phi[4][4]*w->S[54] + t->Phi[4][5]*w->S[66] +
+            t->Phi[4][10]*w->S[84];
     w->term[0][118] = t->Phi[4][0]*t->Phi[0][11] + t->Phi[4][1]*t->Phi[1][11] +
             t->Phi[4][2]*t->Phi[2][11] + t->Phi[4][3]*t->Phi[3][11] + t->Phi[4][4]*t->Phi[4][11] +
             t->Phi[4][5]*t->Phi[5][11] + t->Phi[4][11]*t->Phi[11][11];
-    w->term[1][118] = t->Phi[4][0]*w->S[11] + t->Phi[4][1]*w->S[41] + t->Phi[4][2]*w->S[71] +
-            t->Phi[4][3]*w->S[101] + t->Phi[4][4]*w->S[131] + t->Phi[4][5]*w->S[161] +
-            t->Phi[4][11]*w->S[211];
+    w->term[1][118] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[19] + t->Phi[4][2]*w->S[31] +
+            t->Phi[4][3]*w->S[43] + t->Phi[4][4]*w->S[55] + t->Phi[4][5]*w->S[67] +
+            t->Phi[4][11]*w->S[85];
     w->term[0][119] = t->Phi[4][0]*t->Phi[0][12] + t->Phi[4][1]*t->Phi[1][12] +
             t->Phi[4][2]*t->Phi[2][12] + t->Phi[4][3]*t->Phi[3][12] + t->Phi[4][4]*t->Phi[4][12] +
             t->Phi[4][5]*t->Phi[5][12] + t->Phi[4][12]*t->Phi[12][12];
-    w->term[1][119] = t->Phi[4][0]*w->S[12] + t->Phi[4][1]*w->S[42] + t->Phi[4][2]*w->S[72] +
-            t->Phi[4][3]*w->S[102] + t->Phi[4][4]*w->S[132] + t->Phi[4][5]*w->S[162] +
-            t->Phi[4][12]*w->S[212];
+    w->term[1][119] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[20] + t->Phi[4][2]*w->S[32] +
+            t->Phi[4][3]*w->S[44] + t->Phi[4][4]*w->S[56] + t->Phi[4][5]*w->S[68] +
+            t->Phi[4][12]*w->S[86];
     w->term[0][120] = t->Phi[4][0]*t->Phi[0][13] + t->Phi[4][1]*t->Phi[1][13] +
             t->Phi[4][2]*t->Phi[2][13] + t->Phi[4][3]*t->Phi[3][13] + t->Phi[4][4]*t->Phi[4][13] +
             t->Phi[4][5]*t->Phi[5][13] + t->Phi[4][13]*t->Phi[13][13];
-    w->term[1][120] = t->Phi[4][0]*w->S[13] + t->Phi[4][1]*w->S[43] + t->Phi[4][2]*w->S[73] +
-            t->Phi[4][3]*w->S[103] + t->Phi[4][4]*w->S[133] + t->Phi[4][5]*w->S[163] +
-            t->Phi[4][13]*w->S[213];
+    w->term[1][120] = t->Phi[4][0]*w->S[9] + t->Phi[4][1]*w->S[21] + t->Phi[4][2]*w->S[33] +
+            t->Phi[4][3]*w->S[45] + t->Phi[4][4]*w->S[57] + t->Phi[4][5]*w->S[69] +
+            t->Phi[4][13]*w->S[87];
     w->term[0][121] = t->Phi[4][0]*t->Phi[0][14] + t->Phi[4][1]*t->Phi[1][14] +
             t->Phi[4][2]*t->Phi[2][14] + t->Phi[4][3]*t->Phi[3][14] + t->Phi[4][4]*t->Phi[4][14] +
             t->Phi[4][5]*t->Phi[5][14] + t->Phi[4][14]*t->Phi[14][14];
-    w->term[1][121] = t->Phi[4][0]*w->S[14] + t->Phi[4][1]*w->S[44] + t->Phi[4][2]*w->S[74] +
-            t->Phi[4][3]*w->S[104] + t->Phi[4][4]*w->S[134] + t->Phi[4][5]*w->S[164] +
-            t->Phi[4][14]*w->S[214];
+    w->term[1][121] = t->Phi[4][0]*w->S[10] + t->Phi[4][1]*w->S[22] + t->Phi[4][2]*w->S[34] +
+            t->Phi[4][3]*w->S[46] + t->Phi[4][4]*w->S[58] + t->Phi[4][5]*w->S[70] +
+            t->Phi[4][14]*w->S[88];
     w->term[0][122] = t->Phi[4][0]*t->Phi[0][15] + t->Phi[4][1]*t->Phi[1][15] +
             t->Phi[4][2]*t->Phi[2][15] + t->Phi[4][3]*t->Phi[3][15] + t->Phi[4][4]*t->Phi[4][15] +
             t->Phi[4][5]*t->Phi[5][15] + t->Phi[4][15]*t->Phi[15][15];
-    w->term[1][122] = t->Phi[4][0]*w->S[15] + t->Phi[4][1]*w->S[45] + t->Phi[4][2]*w->S[75] +
-            t->Phi[4][3]*w->S[105] + t->Phi[4][4]*w->S[135] + t->Phi[4][5]*w->S[165] +
-            t->Phi[4][15]*w->S[215];
+    w->term[1][122] = t->Phi[4][0]*w->S[11] + t->Phi[4][1]*w->S[23] + t->Phi[4][2]*w->S[35] +
+            t->Phi[4][3]*w->S[47] + t->Phi[4][4]*w->S[59] + t->Phi[4][5]*w->S[71] +
+            t->Phi[4][15]*w->S[89];
     w->term[0][123] = t->Phi[4][0]*t->Phi[0][18] + t->Phi[4][1]*t->Phi[1][18] +
             t->Phi[4][2]*t->Phi[2][18] + t->Phi[4][3]*t->Phi[3][18] + t->Phi[4][4]*t->Phi[4][18] +
             t->Phi[4][5]*t->Phi[5][18];
-    w->term[1][123] = t->Phi[4][0]*w->S[18] + t->Phi[4][1]*w->S[48] + t->Phi[4][2]*w->S[78] +
-            t->Phi[4][3]*w->S[108] + t->Phi[4][4]*w->S[138] + t->Phi[4][5]*w->S[168] +
+    w->term[1][123] = t->Phi[4][0]*w->S[93] + t->Phi[4][1]*w->S[108] + t->Phi[4][2]*w->S[123] +
+            t->Phi[4][3]*w->S[138] + t->Phi[4][4]*w->S[153] + t->Phi[4][5]*w->S[168] +
             t->Phi[4][18];
     w->term[0][124] = t->Phi[4][0]*t->Phi[0][19] + t->Phi[4][1]*t->Phi[1][19] +
             t->Phi[4][2]*t->Phi[2][19] + t->Phi[4][3]*t->Phi[3][19] + t->Phi[4][4]*t->Phi[4][19] +
             t->Phi[4][5]*t->Phi[5][19];
-    w->term[1][124] = t->Phi[4][0]*w->S[19] + t->Phi[4][1]*w->S[49] + t->Phi[4][2]*w->S[79] +
-            t->Phi[4][3]*w->S[109] + t->Phi[4][4]*w->S[139] + t->Phi[4][5]*w->S[169] +
+    w->term[1][124] = t->Phi[4][0]*w->S[94] + t->Phi[4][1]*w->S[109] + t->Phi[4][2]*w->S[124] +
+            t->Phi[4][3]*w->S[139] + t->Phi[4][4]*w->S[154] + t->Phi[4][5]*w->S[169] +
             t->Phi[4][19];
     w->term[0][125] = t->Phi[4][0]*t->Phi[0][20] + t->Phi[4][1]*t->Phi[1][20] +
             t->Phi[4][2]*t->Phi[2][20] + t->Phi[4][3]*t->Phi[3][20] + t->Phi[4][4]*t->Phi[4][20] +
             t->Phi[4][5]*t->Phi[5][20];
-    w->term[1][125] = t->Phi[4][0]*w->S[20] + t->Phi[4][1]*w->S[50] + t->Phi[4][2]*w->S[80] +
-            t->Phi[4][3]*w->S[110] + t->Phi[4][4]*w->S[140] + t->Phi[4][5]*w->S[170] +
+    w->term[1][125] = t->Phi[4][0]*w->S[95] + t->Phi[4][1]*w->S[110] + t->Phi[4][2]*w->S[125] +
+            t->Phi[4][3]*w->S[140] + t->Phi[4][4]*w->S[155] + t->Phi[4][5]*w->S[170] +
             t->Phi[4][20];
     w->term[0][126] = t->Phi[4][0]*t->Phi[0][21] + t->Phi[4][1]*t->Phi[1][21] +
             t->Phi[4][2]*t->Phi[2][21] + t->Phi[4][3]*t->Phi[3][21] + t->Phi[4][4]*t->Phi[4][21] +
             t->Phi[4][5]*t->Phi[5][21];
-    w->term[1][126] = t->Phi[4][0]*w->S[21] + t->Phi[4][1]*w->S[51] + t->Phi[4][2]*w->S[81] +
-            t->Phi[4][3]*w->S[111] + t->Phi[4][4]*w->S[141] + t->Phi[4][5]*w->S[171] +
+    w->term[1][126] = t->Phi[4][0]*w->S[96] + t->Phi[4][1]*w->S[111] + t->Phi[4][2]*w->S[126] +
+            t->Phi[4][3]*w->S[141] + t->Phi[4][4]*w->S[156] + t->Phi[4][5]*w->S[171] +
             t->Phi[4][21];
     w->term[0][127] = t->Phi[4][0]*t->Phi[0][22] + t->Phi[4][1]*t->Phi[1][22] +
             t->Phi[4][2]*t->Phi[2][22] + t->Phi[4][3]*t->Phi[3][22] + t->Phi[4][4]*t->Phi[4][22] +
             t->Phi[4][5]*t->Phi[5][22];
-    w->term[1][127] = t->Phi[4][0]*w->S[22] + t->Phi[4][1]*w->S[52] + t->Phi[4][2]*w->S[82] +
-            t->Phi[4][3]*w->S[112] + t->Phi[4][4]*w->S[142] + t->Phi[4][5]*w->S[172] +
+    w->term[1][127] = t->Phi[4][0]*w->S[97] + t->Phi[4][1]*w->S[112] + t->Phi[4][2]*w->S[127] +
+            t->Phi[4][3]*w->S[142] + t->Phi[4][4]*w->S[157] + t->Phi[4][5]*w->S[172] +
             t->Phi[4][22];
     w->term[0][128] = t->Phi[4][0]*t->Phi[0][23] + t->Phi[4][1]*t->Phi[1][23] +
             t->Phi[4][2]*t->Phi[2][23] + t->Phi[4][3]*t->Phi[3][23] + t->Phi[4][4]*t->Phi[4][23] +
             t->Phi[4][5]*t->Phi[5][23];
-    w->term[1][128] = t->Phi[4][0]*w->S[23] + t->Phi[4][1]*w->S[53] + t->Phi[4][2]*w->S[83] +
-            t->Phi[4][3]*w->S[113] + t->Phi[4][4]*w->S[143] + t->Phi[4][5]*w->S[173] +
+    w->term[1][128] = t->Phi[4][0]*w->S[98] + t->Phi[4][1]*w->S[113] + t->Phi[4][2]*w->S[128] +
+            t->Phi[4][3]*w->S[143] + t->Phi[4][4]*w->S[158] + t->Phi[4][5]*w->S[173] +
             t->Phi[4][23];
     w->term[0][129] = t->Phi[4][0]*t->Phi[0][24] + t->Phi[4][1]*t->Phi[1][24] +
             t->Phi[4][2]*t->Phi[2][24] + t->Phi[4][3]*t->Phi[3][24] + t->Phi[4][4]*t->Phi[4][24] +
             t->Phi[4][5]*t->Phi[5][24];
-    w->term[1][129] = t->Phi[4][0]*w->S[24] + t->Phi[4][1]*w->S[54] + t->Phi[4][2]*w->S[84] +
-            t->Phi[4][3]*w->S[114] + t->Phi[4][4]*w->S[144] + t->Phi[4][5]*w->S[174] +
+    w->term[1][129] = t->Phi[4][0]*w->S[99] + t->Phi[4][1]*w->S[114] + t->Phi[4][2]*w->S[129] +
+            t->Phi[4][3]*w->S[144] + t->Phi[4][4]*w->S[159] + t->Phi[4][5]*w->S[174] +
             t->Phi[4][24];
     w->term[0][130] = t->Phi[4][0]*t->Phi[0][25] + t->Phi[4][1]*t->Phi[1][25] +
             t->Phi[4][2]*t->Phi[2][25] + t->Phi[4][3]*t->Phi[3][25] + t->Phi[4][4]*t->Phi[4][25] +
             t->Phi[4][5]*t->Phi[5][25];
-    w->term[1][130] = t->Phi[4][0]*w->S[25] + t->Phi[4][1]*w->S[55] + t->Phi[4][2]*w->S[85] +
-            t->Phi[4][3]*w->S[115] + t->Phi[4][4]*w->S[145] + t->Phi[4][5]*w->S[175] +
+    w->term[1][130] = t->Phi[4][0]*w->S[100] + t->Phi[4][1]*w->S[115] + t->Phi[4][2]*w->S[130] +
+            t->Phi[4][3]*w->S[145] + t->Phi[4][4]*w->S[160] + t->Phi[4][5]*w->S[175] +
             t->Phi[4][25];
     w->term[0][131] = t->Phi[4][0]*t->Phi[0][26] + t->Phi[4][1]*t->Phi[1][26] +
             t->Phi[4][2]*t->Phi[2][26] + t->Phi[4][3]*t->Phi[3][26] + t->Phi[4][4]*t->Phi[4][26] +
             t->Phi[4][5]*t->Phi[5][26];
-    w->term[1][131] = t->Phi[4][0]*w->S[26] + t->Phi[4][1]*w->S[56] + t->Phi[4][2]*w->S[86] +
-            t->Phi[4][3]*w->S[116] + t->Phi[4][4]*w->S[146] + t->Phi[4][5]*w->S[176] +
+    w->term[1][131] = t->Phi[4][0]*w->S[101] + t->Phi[4][1]*w->S[116] + t->Phi[4][2]*w->S[131] +
+            t->Phi[4][3]*w->S[146] + t->Phi[4][4]*w->S[161] + t->Phi[4][5]*w->S[176] +
             t->Phi[4][26];
     w->term[0][132] = t->Phi[4][0]*t->Phi[0][27] + t->Phi[4][1]*t->Phi[1][27] +
             t->Phi[4][2]*t->Phi[2][27] + t->Phi[4][3]*t->Phi[3][27] + t->Phi[4][4]*t->Phi[4][27] +
             t->Phi[4][5]*t->Phi[5][27];
-    w->term[1][132] = t->Phi[4][0]*w->S[27] + t->Phi[4][1]*w->S[57] + t->Phi[4][2]*w->S[87] +
-            t->Phi[4][3]*w->S[117] + t->Phi[4][4]*w->S[147] + t->Phi[4][5]*w->S[177] +
+    w->term[1][132] = t->Phi[4][0]*w->S[102] + t->Phi[4][1]*w->S[117] + t->Phi[4][2]*w->S[132] +
+            t->Phi[4][3]*w->S[147] + t->Phi[4][4]*w->S[162] + t->Phi[4][5]*w->S[177] +
             t->Phi[4][27];
     w->term[0][133] = t->Phi[4][0]*t->Phi[0][28] + t->Phi[4][1]*t->Phi[1][28] +
             t->Phi[4][2]*t->Phi[2][28] + t->Phi[4][3]*t->Phi[3][28] + t->Phi[4][4]*t->Phi[4][28] +
             t->Phi[4][5]*t->Phi[5][28];
-    w->term[1][133] = t->Phi[4][0]*w->S[28] + t->Phi[4][1]*w->S[58] + t->Phi[4][2]*w->S[88] +
-            t->Phi[4][3]*w->S[118] + t->Phi[4][4]*w->S[148] + t->Phi[4][5]*w->S[178] +
+    w->term[1][133] = t->Phi[4][0]*w->S[103] + t->Phi[4][1]*w->S[118] + t->Phi[4][2]*w->S[133] +
+            t->Phi[4][3]*w->S[148] + t->Phi[4][4]*w->S[163] + t->Phi[4][5]*w->S[178] +
             t->Phi[4][28];
     w->term[0][134] = t->Phi[4][0]*t->Phi[0][29] + t->Phi[4][1]*t->Phi[1][29] +
             t->Phi[4][2]*t->Phi[2][29] + t->Phi[4][3]*t->Phi[3][29] + t->Phi[4][4]*t->Phi[4][29] +
             t->Phi[4][5]*t->Phi[5][29];
-    w->term[1][134] = t->Phi[4][0]*w->S[29] + t->Phi[4][1]*w->S[59] + t->Phi[4][2]*w->S[89] +
-            t->Phi[4][3]*w->S[119] + t->Phi[4][4]*w->S[149] + t->Phi[4][5]*w->S[179] +
+    w->term[1][134] = t->Phi[4][0]*w->S[104] + t->Phi[4][1]*w->S[119] + t->Phi[4][2]*w->S[134] +
+            t->Phi[4][3]*w->S[149] + t->Phi[4][4]*w->S[164] + t->Phi[4][5]*w->S[179] +
             t->Phi[4][29];
     w->term[0][135] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
             t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
             t->Phi[5][5]*t->Phi[5][0];
-    w->term[1][135] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[30] + t->Phi[5][2]*w->S[60] +
-            t->Phi[5][3]*w->S[90] + t->Phi[5][4]*w->S[120] + t->Phi[5][5]*w->S[150];
+    w->term[1][135] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[12] + t->Phi[5][2]*w->S[24] +
+            t->Phi[5][3]*w->S[36] + t->Phi[5][4]*w->S[48] + t->Phi[5][5]*w->S[60];
     w->term[0][136] = t->Phi[5][0]*t->Phi[0][1] + t->Phi[5][1]*t->Phi[1][1] +
             t->Phi[5][2]*t->Phi[2][1] + t->Phi[5][3]*t->Phi[3][1] + t->Phi[5][4]*t->Phi[4][1] +
             t->Phi[5][5]*t->Phi[5][1];
-    w->term[1][136] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[31] + t->Phi[5][2]*w->S[61] +
-            t->Phi[5][3]*w->S[91] + t->Phi[5][4]*w->S[121] + t->Phi[5][5]*w->S[151];
+    w->term[1][136] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[13] + t->Phi[5][2]*w->S[25] +
+            t->Phi[5][3]*w->S[37] + t->Phi[5][4]*w->S[49] + t->Phi[5][5]*w->S[61];
     w->term[0][137] = t->Phi[5][0]*t->Phi[0][2] + t->Phi[5][1]*t->Phi[1][2] +
             t->Phi[5][2]*t->Phi[2][2] + t->Phi[5][3]*t->Phi[3][2] + t->Phi[5][4]*t->Phi[4][2] +
             t->Phi[5][5]*t->Phi[5][2];
-    w->term[1][137] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[32] + t->Phi[5][2]*w->S[62] +
-            t->Phi[5][3]*w->S[92] + t->Phi[5][4]*w->S[122] + t->Phi[5][5]*w->S[152];
+    w->term[1][137] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[26] +
+            t->Phi[5][3]*w->S[38] + t->Phi[5][4]*w->S[50] + t->Phi[5][5]*w->S[62];
     w->term[0][138] = t->Phi[5][0]*t->Phi[0][3] + t->Phi[5][1]*t->Phi[1][3] +
             t->Phi[5][2]*t->Phi[2][3] + t->Phi[5][3]*t->Phi[3][3] + t->Phi[5][4]*t->Phi[4][3] +
             t->Phi[5][5]*t->Phi[5][3];
-    w->term[1][138] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[33] + t->Phi[5][2]*w->S[63] +
-            t->Phi[5][3]*w->S[93] + t->Phi[5][4]*w->S[123] + t->Phi[5][5]*w->S[153];
+    w->term[1][138] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[27] +
+            t->Phi[5][3]*w->S[39] + t->Phi[5][4]*w->S[51] + t->Phi[5][5]*w->S[63];
     w->term[0][139] = t->Phi[5][0]*t->Phi[0][4] + t->Phi[5][1]*t->Phi[1][4] +
             t->Phi[5][2]*t->Phi[2][4] + t->Phi[5][3]*t->Phi[3][4] + t->Phi[5][4]*t->Phi[4][4] +
             t->Phi[5][5]*t->Phi[5][4];
-    w->term[1][139] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[34] + t->Phi[5][2]*w->S[64] +
-            t->Phi[5][3]*w->S[94] + t->Phi[5][4]*w->S[124] + t->Phi[5][5]*w->S[154];
+    w->term[1][139] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[28] +
+            t->Phi[5][3]*w->S[40] + t->Phi[5][4]*w->S[52] + t->Phi[5][5]*w->S[64];
     w->term[0][140] = t->Phi[5][0]*t->Phi[0][5] + t->Phi[5][1]*t->Phi[1][5] +
             t->Phi[5][2]*t->Phi[2][5] + t->Phi[5][3]*t->Phi[3][5] + t->Phi[5][4]*t->Phi[4][5] +
             t->Phi[5][5]*t->Phi[5][5];
-    w->term[1][140] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[35] + t->Phi[5][2]*w->S[65] +
-            t->Phi[5][3]*w->S[95] + t->Phi[5][4]*w->S[125] + t->Phi[5][5]*w->S[155];
+    w->term[1][140] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[29] +
+            t->Phi[5][3]*w->S[41] + t->Phi[5][4]*w->S[53] + t->Phi[5][5]*w->S[65];
     w->term[0][141] = t->Phi[5][0]*t->Phi[0][7] + t->Phi[5][1]*t->Phi[1][7] +
             t->Phi[5][2]*t->Phi[2][7] + t->Phi[5][3]*t->Phi[3][7] + t->Phi[5][4]*t->Phi[4][7] +
             t->Phi[5][5]*t->Phi[5][7];
-    w->term[1][141] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[37] + t->Phi[5][2]*w->S[67] +
-            t->Phi[5][3]*w->S[97] + t->Phi[5][4]*w->S[127] + t->Phi[5][5]*w->S[157] + t->Phi[5][7];
+    w->term[1][141] = t->Phi[5][0]*w->S[90] + t->Phi[5][1]*w->S[105] + t->Phi[5][2]*w->S[120] +
+            t->Phi[5][3]*w->S[135] + t->Phi[5][4]*w->S[150] + t->Phi[5][5]*w->S[165] + t->Phi[5][7];
     w->term[0][142] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
             t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
             t->Phi[5][5]*t->Phi[5][8];
-    w->term[1][142] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[38] + t->Phi[5][2]*w->S[68] +
-            t->Phi[5][3]*w->S[98] + t->Phi[5][4]*w->S[128] + t->Phi[5][5]*w->S[158] + t->Phi[5][8];
+    w->term[1][142] = t->Phi[5][0]*w->S[91] + t->Phi[5][1]*w->S[106] + t->Phi[5][2]*w->S[121] +
+            t->Phi[5][3]*w->S[136] + t->Phi[5][4]*w->S[151] + t->Phi[5][5]*w->S[166] + t->Phi[5][8];
     w->term[0][143] = t->Phi[5][0]*t->Phi[0][9] + t->Phi[5][1]*t->Phi[1][9] +
             t->Phi[5][2]*t->Phi[2][9] + t->Phi[5][3]*t->Phi[3][9] + t->Phi[5][4]*t->Phi[4][9] +
             t->Phi[5][5]*t->Phi[5][9];
-    w->term[1][143] = t->Phi[5][0]*w->S[9] + t->Phi[5][1]*w->S[39] + t->Phi[5][2]*w->S[69] +
-            t->Phi[5][3]*w->S[99] + t->Phi[5][4]*w->S[129] + t->Phi[5][5]*w->S[159] + t->Phi[5][9];
+    w->term[1][143] = t->Phi[5][0]*w->S[92] + t->Phi[5][1]*w->S[107] + t->Phi[5][2]*w->S[122] +
+            t->Phi[5][3]*w->S[137] + t->Phi[5][4]*w->S[152] + t->Phi[5][5]*w->S[167] + t->Phi[5][9];
     w->term[0][144] = t->Phi[5][0]*t->Phi[0][10] + t->Phi[5][1]*t->Phi[1][10] +
             t->Phi[5][2]*t->Phi[2][10] + t->Phi[5][3]*t->Phi[3][10] + t->Phi[5][4]*t->Phi[4][10] +
             t->Phi[5][5]*t->Phi[5][10] + t->Phi[5][10]*t->Phi[10][10];
-    w->term[1][144] = t->Phi[5][0]*w->S[10] + t->Phi[5][1]*w->S[40] + t->Phi[5][2]*w->S[70] +
-            t->Phi[5][3]*w->S[100] + t->Phi[5][4]*w->S[130] + t->Phi[5][5]*w->S[160] +
-            t->Phi[5][10]*w->S[210];
+    w->term[1][144] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[18] + t->Phi[5][2]*w->S[30] +
+            t->Phi[5][3]*w->S[42] + t->Phi[5][4]*w->S[54] + t->Phi[5][5]*w->S[66] +
+            t->Phi[5][10]*w->S[84];
     w->term[0][145] = t->Phi[5][0]*t->Phi[0][11] + t->Phi[5][1]*t->Phi[1][11] +
             t->Phi[5][2]*t->Phi[2][11] + t->Phi[5][3]*t->Phi[3][11] + t->Phi[5][4]*t->Phi[4][11] +
             t->Phi[5][5]*t->Phi[5][11] + t->Phi[5][11]*t->Phi[11][11];
-    w->term[1][145] = t->Phi[5][0]*w->S[11] + t->Phi[5][1]*w->S[41] + t->Phi[5][2]*w->S[71] +
-            t->Phi[5][3]*w->S[101] + t->Phi[5][4]*w->S[131] + t->Phi[5][5]*w->S[161] +
-            t->Phi[5][11]*w->S[211];
+    w->term[1][145] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[19] + t->Phi[5][2]*w->S[31] +
+            t->Phi[5][3]*w->S[43] + t->Phi[5][4]*w->S[55] + t->Phi[5][5]*w->S[67] +
+            t->Phi[5][11]*w->S[85];
     w->term[0][146] = t->Phi[5][0]*t->Phi[0][12] + t->Phi[5][1]*t->Phi[1][12] +
             t->Phi[5][2]*t->Phi[2][12] + t->Phi[5][3]*t->Phi[3][12] + t->Phi[5][4]*t->Phi[4][12] +
             t->Phi[5][5]*t->Phi[5][12] + t->Phi[5][12]*t->Phi[12][12];
-    w->term[1][146] = t->Phi[5][0]*w->S[12] + t->Phi[5][1]*w->S[42] + t->Phi[5][2]*w->S[72] +
-            t->Phi[5][3]*w->S[102] + t->Phi[5][4]*w->S[132] + t->Phi[5][5]*w->S[162] +
-            t->Phi[5][12]*w->S[212];
+    w->term[1][146] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[20] + t->Phi[5][2]*w->S[32] +
+            t->Phi[5][3]*w->S[44] + t->Phi[5][4]*w->S[56] + t->Phi[5][5]*w->S[68] +
+            t->Phi[5][12]*w->S[86];
     w->term[0][147] = t->Phi[5][0]*t->Phi[0][13] + t->Phi[5][1]*t->Phi[1][13] +
             t->Phi[5][2]*t->Phi[2][13] + t->Phi[5][3]*t->Phi[3][13] + t->Phi[5][4]*t->Phi[4][13] +
             t->Phi[5][5]*t->Phi[5][13] + t->Phi[5][13]*t->Phi[13][13];
-    w->term[1][147] = t->Phi[5][0]*w->S[13] + t->Phi[5][1]*w->S[43] + t->Phi[5][2]*w->S[73] +
-            t->Phi[5][3]*w->S[103] + t->Phi[5][4]*w->S[133] + t->Phi[5][5]*w->S[163] +
-            t->Phi[5][13]*w->S[213];
+    w->term[1][147] = t->Phi[5][0]*w->S[9] + t->Phi[5][1]*w->S[21] + t->Phi[5][2]*w->S[33] +
+            t->Phi[5][3]*w->S[45] + t->Phi[5][4]*w->S[57] + t->Phi[5][5]*w->S[69] +
+            t->Phi[5][13]*w->S[87];
     w->term[0][148] = t->Phi[5][0]*t->Phi[0][14] + t->Phi[5][1]*t->Phi[1][14] +
             t->Phi[5][2]*t->Phi[2][14] + t->Phi[5][3]*t->Phi[3][14] + t->Phi[5][4]*t->Phi[4][14] +
             t->Phi[5][5]*t->Phi[5][14] + t->Phi[5][14]*t->Phi[14][14];
-    w->term[1][148] = t->Phi[5][0]*w->S[14] + t->Phi[5][1]*w->S[44] + t->Phi[5][2]*w->S[74] +
-            t->Phi[5][3]*w->S[104] + t->Phi[5][4]*w->S[134] + t->Phi[5][5]*w->S[164] +
-            t->Phi[5][14]*w->S[214];
+    w->term[1][148] = t->Phi[5][0]*w->S[10] + t->Phi[5][1]*w->S[22] + t->Phi[5][2]*w->S[34] +
+            t->Phi[5][3]*w->S[46] + t->Phi[5][4]*w->S[58] + t->Phi[5][5]*w->S[70] +
+            t->Phi[5][14]*w->S[88];
     w->term[0][149] = t->Phi[5][0]*t->Phi[0][15] + t->Phi[5][1]*t->Phi[1][15] +
             t->Phi[5][2]*t->Phi[2][15] + t->Phi[5][3]*t->Phi[3][15] + t->Phi[5][4]*t->Phi[4][15] +
             t->Phi[5][5]*t->Phi[5][15] + t->Phi[5][15]*t->Phi[15][15];
-    w->term[1][149] = t->Phi[5][0]*w->S[15] + t->Phi[5][1]*w->S[45] + t->Phi[5][2]*w->S[75] +
-            t->Phi[5][3]*w->S[105] + t->Phi[5][4]*w->S[135] + t->Phi[5][5]*w->S[165] +
-            t->Phi[5][15]*w->S[215];
+    w->term[1][149] = t->Phi[5][0]*w->S[11] + t->Phi[5][1]*w->S[23] + t->Phi[5][2]*w->S[35] +
+            t->Phi[5][3]*w->S[47] + t->Phi[5][4]*w->S[59] + t->Phi[5][5]*w->S[71] +
+            t->Phi[5][15]*w->S[89];
     w->term[0][150] = t->Phi[5][0]*t->Phi[0][18] + t->Phi[5][1]*t->Phi[1][18] +
             t->Phi[5][2]*t->Phi[2][18] + t->Phi[5][3]*t->Phi[3][18] + t->Phi[5][4]*t->Phi[4][18] +
             t->Phi[5][5]*t->Phi[5][18];
-    w->term[1][150] = t->Phi[5][0]*w->S[18] + t->Phi[5][1]*w->S[48] + t->Phi[5][2]*w->S[78] +
-            t->Phi[5][3]*w->S[108] + t->Phi[5][4]*w->S[138] + t->Phi[5][5]*w->S[168] +
+    w->term[1][150] = t->Phi[5][0]*w->S[93] + t->Phi[5][1]*w->S[108] + t->Phi[5][2]*w->S[123] +
+            t->Phi[5][3]*w->S[138] + t->Phi[5][4]*w->S[153] + t->Phi[5][5]*w->S[168] +
             t->Phi[5][18];
     w->term[0][151] = t->Phi[5][0]*t->Phi[0][19] + t->Phi[5][1]*t->Phi[1][19] +
             t->Phi[5][2]*t->Phi[2][19] + t->Phi[5][3]*t->Phi[3][19] + t->Phi[5][4]*t->Phi[4][19] +
             t->Phi[5][5]*t->Phi[5][19];
-    w->term[1][151] = t->Phi[5][0]*w->S[19] + t->Phi[5][1]*w->S[49] + t->Phi[5][2]*w->S[79] +
-            t->Phi[5][3]*w->S[109] + t->Phi[5][4]*w->S[139] + t->Phi[5][5]*w->S[169] +
+    w->term[1][151] = t->Phi[5][0]*w->S[94] + t->Phi[5][1]*w->S[109] + t->Phi[5][2]*w->S[124] +
+            t->Phi[5][3]*w->S[139] + t->Phi[5][4]*w->S[154] + t->Phi[5][5]*w->S[169] +
             t->Phi[5][19];
     w->term[0][152] = t->Phi[5][0]*t->Phi[0][20] + t->Phi[5][1]*t->Phi[1][20] +
             t->Phi[5][2]*t->Phi[2][20] + t->Phi[5][3]*t->Phi[3][20] + t->Phi[5][4]*t->Phi[4][20] +
             t->Phi[5][5]*t->Phi[5][20];
-    w->term[1][152] = t->Phi[5][0]*w->S[20] + t->Phi[5][1]*w->S[50] + t->Phi[5][2]*w->S[80] +
-            t->Phi[5][3]*w->S[110] + t->Phi[5][4]*w->S[140] + t->Phi[5][5]*w->S[170] +
+    w->term[1][152] = t->Phi[5][0]*w->S[95] + t->Phi[5][1]*w->S[110] + t->Phi[5][2]*w->S[125] +
+            t->Phi[5][3]*w->S[140] + t->Phi[5][4]*w->S[155] + t->Phi[5][5]*w->S[170] +
             t->Phi[5][20];
     w->term[0][153] = t->Phi[5][0]*t->Phi[0][21] + t->Phi[5][1]*t->Phi[1][21] +
             t->Phi[5][2]*t->Phi[2][21] + t->Phi[5][3]*t->Phi[3][21] + t->Phi[5][4]*t->Phi[4][21] +
             t->Phi[5][5]*t->Phi[5][21];
-    w->term[1][153] = t->Phi[5][0]*w->S[21] + t->Phi[5][1]*w->S[51] + t->Phi[5][2]*w->S[81] +
-            t->Phi[5][3]*w->S[111] + t->Phi[5][4]*w->S[141] + t->Phi[5][5]*w->S[171] +
+    w->term[1][153] = t->Phi[5][0]*w->S[96] + t->Phi[5][1]*w->S[111] + t->Phi[5][2]*w->S[126] +
+            t->Phi[5][3]*w->S[141] + t->Phi[5][4]*w->S[156] + t->Phi[5][5]*w->S[171] +
             t->Phi[5][21];
     w->term[0][154] = t->Phi[5][0]*t->Phi[0][22] + t->Phi[5][1]*t->Phi[1][22] +
             t->Phi[5][2]*t->Phi[2][22] + t->Phi[5][3]*t->Phi[3][22] + t->Phi[5][4]*t->Phi[4][22] +
             t->Phi[5][5]*t->Phi[5][22];
-    w->term[1][154] = t->Phi[5][0]*w->S[22] + t->Phi[5][1]*w->S[52] + t->Phi[5][2]*w->S[82] +
-            t->Phi[5][3]*w->S[112] + t->Phi[5][4]*w->S[142] + t->Phi[5][5]*w->S[172] +
+    w->term[1][154] = t->Phi[5][0]*w->S[97] + t->Phi[5][1]*w->S[112] + t->Phi[5][2]*w->S[127] +
+            t->Phi[5][3]*w->S[142] + t->Phi[5][4]*w->S[157] + t->Phi[5][5]*w->S[172] +
             t->Phi[5][22];
     w->term[0][155] = t->Phi[5][0]*t->Phi[0][23] + t->Phi[5][1]*t->Phi[1][23] +
             t->Phi[5][2]*t->Phi[2][23] + t->Phi[5][3]*t->Phi[3][23] + t->Phi[5][4]*t->Phi[4][23] +
             t->Phi[5][5]*t->Phi[5][23];
-    w->term[1][155] = t->Phi[5][0]*w->S[23] + t->Phi[5][1]*w->S[53] + t->Phi[5][2]*w->S[83] +
-            t->Phi[5][3]*w->S[113] + t->Phi[5][4]*w->S[143] + t->Phi[5][5]*w->S[173] +
+    w->term[1][155] = t->Phi[5][0]*w->S[98] + t->Phi[5][1]*w->S[113] + t->Phi[5][2]*w->S[128] +
+            t->Phi[5][3]*w->S[143] + t->Phi[5][4]*w->S[158] + t->Phi[5][5]*w->S[173] +
             t->Phi[5][23];
     w->term[0][156] = t->Phi[5][0]*t->Phi[0][24] + t->Phi[5][1]*t->Phi[1][24] +
             t->Phi[5][2]*t->Phi[2][24] + t->Phi[5][3]*t->Phi[3][24] + t->Phi[5][4]*t->Phi[4][24] +
             t->Phi[5][5]*t->Phi[5][24];
-    w->term[1][156] = t->Phi[5][0]*w->S[24] + t->Phi[5][1]*w->S[54] + t->Phi[5][2]*w->S[84] +
-            t->Phi[5][3]*w->S[114] + t->Phi[5][4]*w->S[144] + t->Phi[5][5]*w->S[174] +
+    w->term[1][156] = t->Phi[5][0]*w->S[99] + t->Phi[5][1]*w->S[114] + t->Phi[5][2]*w->S[129] +
+            t->Phi[5][3]*w->S[144] + t->Phi[5][4]*w->S[159] + t->Phi[5][5]*w->S[174] +
             t->Phi[5][24];
     w->term[0][157] = t->Phi[5][0]*t->Phi[0][25] + t->Phi[5][1]*t->Phi[1][25] +
             t->Phi[5][2]*t->Phi[2][25] + t->Phi[5][3]*t->Phi[3][25] + t->Phi[5][4]*t->Phi[4][25] +
             t->Phi[5][5]*t->Phi[5][25];
-    w->term[1][157] = t->Phi[5][0]*w->S[25] + t->Phi[5][1]*w->S[55] + t->Phi[5][2]*w->S[85] +
-            t->Phi[5][3]*w->S[115] + t->Phi[5][4]*w->S[145] + t->Phi[5][5]*w->S[175] +
+    w->term[1][157] = t->Phi[5][0]*w->S[100] + t->Phi[5][1]*w->S[115] + t->Phi[5][2]*w->S[130] +
+            t->Phi[5][3]*w->S[145] + t->Phi[5][4]*w->S[160] + t->Phi[5][5]*w->S[175] +
             t->Phi[5][25];
     w->term[0][158] = t->Phi[5][0]*t->Phi[0][26] + t->Phi[5][1]*t->Phi[1][26] +
             t->Phi[5][2]*t->Phi[2][26] + t->Phi[5][3]*t->Phi[3][26] + t->Phi[5][4]*t->Phi[4][26] +
             t->Phi[5][5]*t->Phi[5][26];
-    w->term[1][158] = t->Phi[5][0]*w->S[26] + t->Phi[5][1]*w->S[56] + t->Phi[5][2]*w->S[86] +
-            t->Phi[5][3]*w->S[116] + t->Phi[5][4]*w->S[146] + t->Phi[5][5]*w->S[176] +
+    w->term[1][158] = t->Phi[5][0]*w->S[101] + t->Phi[5][1]*w->S[116] + t->Phi[5][2]*w->S[131] +
+            t->Phi[5][3]*w->S[146] + t->Phi[5][4]*w->S[161] + t->Phi[5][5]*w->S[176] +
             t->Phi[5][26];
     w->term[0][159] = t->Phi[5][0]*t->Phi[0][27] + t->Phi[5][1]*t->Phi[1][27] +
             t->Phi[5][2]*t->Phi[2][27] + t->Phi[5][3]*t->Phi[3][27] + t->Phi[5][4]*t->Phi[4][27] +
             t->Phi[5][5]*t->Phi[5][27];
-    w->term[1][159] = t->Phi[5][0]*w->S[27] + t->Phi[5][1]*w->S[57] + t->Phi[5][2]*w->S[87] +
-            t->Phi[5][3]*w->S[117] + t->Phi[5][4]*w->S[147] + t->Phi[5][5]*w->S[177] +
+    w->term[1][159] = t->Phi[5][0]*w->S[102] + t->Phi[5][1]*w->S[117] + t->Phi[5][2]*w->S[132] +
+            t->Phi[5][3]*w->S[147] + t->Phi[5][4]*w->S[162] + t->Phi[5][5]*w->S[177] +
             t->Phi[5][27];
     w->term[0][160] = t->Phi[5][0]*t->Phi[0][28] + t->Phi[5][1]*t->Phi[1][28] +
             t->Phi[5][2]*t->Phi[2][28] + t->Phi[5][3]*t->Phi[3][28] + t->Phi[5][4]*t->Phi[4][28] +
             t->Phi[5][5]*t->Phi[5][28];
-    w->term[1][160] = t->Phi[5][0]*w->S[28] + t->Phi[5][1]*w->S[58] + t->Phi[5][2]*w->S[88] +
-            t->Phi[5][3]*w->S[118] + t->Phi[5][4]*w->S[148] + t->Phi[5][5]*w->S[178] +
+    w->term[1][160] = t->Phi[5][0]*w->S[103] + t->Phi[5][1]*w->S[118] + t->Phi[5][2]*w->S[133] +
+            t->Phi[5][3]*w->S[148] + t->Phi[5][4]*w->S[163] + t->Phi[5][5]*w->S[178] +
             t->Phi[5][28];
     w->term[0][161] = t->Phi[5][0]*t->Phi[0][29] + t->Phi[5][1]*t->Phi[1][29] +
             t->Phi[5][2]*t->Phi[2][29] + t->Phi[5][3]*t->Phi[3][29] + t->Phi[5][4]*t->Phi[4][29] +
             t->Phi[5][5]*t->Phi[5][29];
-    w->term[1][161] = t->Phi[5][0]*w->S[29] + t->Phi[5][1]*w->S[59] + t->Phi[5][2]*w->S[89] +
-            t->Phi[5][3]*w->S[119] + t->Phi[5][4]*w->S[149] + t->Phi[5][5]*w->S[179] +
+    w->term[1][161] = t->Phi[5][0]*w->S[104] + t->Phi[5][1]*w->S[119] + t->Phi[5][2]*w->S[134] +
+            t->Phi[5][3]*w->S[149] + t->Phi[5][4]*w->S[164] + t->Phi[5][5]*w->S[179] +
             t->Phi[5][29];
     w->term[0][162] = t->Phi[6][0]*t->Phi[0][0] + t->Phi[6][1]*t->Phi[1][0] +
             t->Phi[6][2]*t->Phi[2][0] + t->Phi[6][3]*t->Phi[3][0] + t->Phi[6][4]*t->Phi[4][0] +
             t->Phi[6][5]*t->Phi[5][0] + t->Phi[6][6]*t->Phi[6][0];
-    w->term[1][162] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[30] + t->Phi[6][2]*w->S[60] +
-            t->Phi[6][3]*w->S[90] + t->Phi[6][4]*w->S[120] + t->Phi[6][5]*w->S[150] +
-            t->Phi[6][6]*w->S[180];
+    w->term[1][162] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[12] + t->Phi[6][2]*w->S[24] +
+            t->Phi[6][3]*w->S[36] + t->Phi[6][4]*w->S[48] + t->Phi[6][5]*w->S[60] +
+            t->Phi[6][6]*w->S[72];
     w->term[0][163] = t->Phi[6][0]*t->Phi[0][1] + t->Phi[6][1]*t->Phi[1][1] +
             t->Phi[6][2]*t->Phi[2][1] + t->Phi[6][3]*t->Phi[3][1] + t->Phi[6][4]*t->Phi[4][1] +
             t->Phi[6][5]*t->Phi[5][1] + t->Phi[6][6]*t->Phi[6][1];
-    w->term[1][163] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[31] + t->Phi[6][2]*w->S[61] +
-            t->Phi[6][3]*w->S[91] + t->Phi[6][4]*w->S[121] + t->Phi[6][5]*w->S[151] +
-            t->Phi[6][6]*w->S[181];
+    w->term[1][163] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[13] + t->Phi[6][2]*w->S[25] +
+            t->Phi[6][3]*w->S[37] + t->Phi[6][4]*w->S[49] + t->Phi[6][5]*w->S[61] +
+            t->Phi[6][6]*w->S[73];
     w->term[0][164] = t->Phi[6][0]*t->Phi[0][2] + t->Phi[6][1]*t->Phi[1][2] +
             t->Phi[6][2]*t->Phi[2][2] + t->Phi[6][3]*t->Phi[3][2] + t->Phi[6][4]*t->Phi[4][2] +
             t->Phi[6][5]*t->Phi[5][2] + t->Phi[6][6]*t->Phi[6][2];
-    w->term[1][164] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[32] + t->Phi[6][2]*w->S[62] +
-            t->Phi[6][3]*w->S[92] + t->Phi[6][4]*w->S[122] + t->Phi[6][5]*w->S[152] +
-            t->Phi[6][6]*w->S[182];
+    w->term[1][164] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[14] + t->Phi[6][2]*w->S[26] +
+            t->Phi[6][3]*w->S[38] + t->Phi[6][4]*w->S[50] + t->Phi[6][5]*w->S[62] +
+            t->Phi[6][6]*w->S[74];
     w->term[0][165] = t->Phi[6][0]*t->Phi[0][3] + t->Phi[6][1]*t->Phi[1][3] +
             t->Phi[6][2]*t->Phi[2][3] + t->Phi[6][3]*t->Phi[3][3] + t->Phi[6][4]*t->Phi[4][3] +
             t->Phi[6][5]*t->Phi[5][3] + t->Phi[6][6]*t->Phi[6][3];
-    w->term[1][165] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[33] + t->Phi[6][2]*w->S[63] +
-            t->Phi[6][3]*w->S[93] + t->Phi[6][4]*w->S[123] + t->Phi[6][5]*w->S[153] +
-            t->Phi[6][6]*w->S[183];
+    w->term[1][165] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[15] + t->Phi[6][2]*w->S[27] +
+            t->Phi[6][3]*w->S[39] + t->Phi[6][4]*w->S[51] + t->Phi[6][5]*w->S[63] +
+            t->Phi[6][6]*w->S[75];
     w->term[0][166] = t->Phi[6][0]*t->Phi[0][4] + t->Phi[6][1]*t->Phi[1][4] +
             t->Phi[6][2]*t->Phi[2][4] + t->Phi[6][3]*t->Phi[3][4] + t->Phi[6][4]*t->Phi[4][4] +
             t->Phi[6][5]*t->Phi[5][4] + t->Phi[6][6]*t->Phi[6][4];
-    w->term[1][166] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[34] + t->Phi[6][2]*w->S[64] +
-            t->Phi[6][3]*w->S[94] + t->Phi[6][4]*w->S[124] + t->Phi[6][5]*w->S[154] +
-            t->Phi[6][6]*w->S[184];
+    w->term[1][166] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[16] + t->Phi[6][2]*w->S[28] +
+            t->Phi[6][3]*w->S[40] + t->Phi[6][4]*w->S[52] + t->Phi[6][5]*w->S[64] +
+            t->Phi[6][6]*w->S[76];
     w->term[0][167] = t->Phi[6][0]*t->Phi[0][5] + t->Phi[6][1]*t->Phi[1][5] +
             t->Phi[6][2]*t->Phi[2][5] + t->Phi[6][3]*t->Phi[3][5] + t->Phi[6][4]*t->Phi[4][5] +
             t->Phi[6][5]*t->Phi[5][5] + t->Phi[6][6]*t->Phi[6][5];
-    w->term[1][167] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[35] + t->Phi[6][2]*w->S[65] +
-            t->Phi[6][3]*w->S[95] + t->Phi[6][4]*w->S[125] + t->Phi[6][5]*w->S[155] +
-            t->Phi[6][6]*w->S[185];
+    w->term[1][167] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[17] + t->Phi[6][2]*w->S[29] +
+            t->Phi[6][3]*w->S[41] + t->Phi[6][4]*w->S[53] + t->Phi[6][5]*w->S[65] +
+            t->Phi[6][6]*w->S[77];
     w->term[0][168] = t->Phi[6][6]*t->Phi[6][6];
-    w->term[1][168] = t->Phi[6][6]*w->S[186];
+    w->term[1][168] = t->Phi[6][6]*w->S[180];
     w->term[0][169] = t->Phi[6][0]*t->Phi[0][7] + t->Phi[6][1]*t->Phi[1][7] +
             t->Phi[6][2]*t->Phi[2][7] + t->Phi[6][3]*t->Phi[3][7] + t->Phi[6][4]*t->Phi[4][7] +
             t->Phi[6][5]*t->Phi[5][7] + t->Phi[6][6]*t->Phi[6][7];
-    w->term[1][169] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[37] + t->Phi[6][2]*w->S[67] +
-            t->Phi[6][3]*w->S[97] + t->Phi[6][4]*w->S[127] + t->Phi[6][5]*w->S[157] +
-            t->Phi[6][6]*w->S[187] + t->Phi[6][7];
+    w->term[1][169] = t->Phi[6][0]*w->S[90] + t->Phi[6][1]*w->S[105] + t->Phi[6][2]*w->S[120] +
+            t->Phi[6][3]*w->S[135] + t->Phi[6][4]*w->S[150] + t->Phi[6][5]*w->S[165] +
+            t->Phi[6][6]*w->S[181] + t->Phi[6][7];
     w->term[0][170] = t->Phi[6][0]*t->Phi[0][8] + t->Phi[6][1]*t->Phi[1][8] +
             t->Phi[6][2]*t->Phi[2][8] + t->Phi[6][3]*t->Phi[3][8] + t->Phi[6][4]*t->Phi[4][8] +
             t->Phi[6][5]*t->Phi[5][8] + t->Phi[6][6]*t->Phi[6][8];
-    w->term[1][170] = t->Phi[6][0]*w->S[8] + t->Phi[6][1]*w->S[38] + t->Phi[6][2]*w->S[68] +
-            t->Phi[6][3]*w->S[98] + t->Phi[6][4]*w->S[128] + t->Phi[6][5]*w->S[158] +
-            t->Phi[6][6]*w->S[188] + t->Phi[6][8];
+    w->term[1][170] = t->Phi[6][0]*w->S[91] + t->Phi[6][1]*w->S[106] + t->Phi[6][2]*w->S[121] +
+            t->Phi[6][3]*w->S[136] + t->Phi[6][4]*w->S[151] + t->Phi[6][5]*w->S[166] +
+            t->Phi[6][6]*w->S[182] + t->Phi[6][8];
     w->term[0][171] = t->Phi[6][0]*t->Phi[0][9] + t->Phi[6][1]*t->Phi[1][9] +
             t->Phi[6][2]*t->Phi[2][9] + t->Phi[6][3]*t->Phi[3][9] + t->Phi[6][4]*t->Phi[4][9] +
             t->Phi[6][5]*t->Phi[5][9] + t->Phi[6][6]*t->Phi[6][9];
-    w->term[1][171] = t->Phi[6][0]*w->S[9] + t->Phi[6][1]*w->S[39] + t->Phi[6][2]*w->S[69] +
-            t->Phi[6][3]*w->S[99] + t->Phi[6][4]*w->S[129] + t->Phi[6][5]*w->S[159] +
-            t->Phi[6][6]*w->S[189] + t->Phi[6][9];
+    w->term[1][171] = t->Phi[6][0]*w->S[92] + t->Phi[6][1]*w->S[107] + t->Phi[6][2]*w->S[122] +
+            t->Phi[6][3]*w->S[137] + t->Phi[6][4]*w->S[152] + t->Phi[6][5]*w->S[167] +
+            t->Phi[6][6]*w->S[183] + t->Phi[6][9];
     w->term[0][172] = t->Phi[6][0]*t->Phi[0][10] + t->Phi[6][1]*t->Phi[1][10] +
             t->Phi[6][2]*t->Phi[2][10] + t->Phi[6][3]*t->Phi[3][10] + t->Phi[6][4]*t->Phi[4][10] +
             t->Phi[6][5]*t->Phi[5][10] + t->Phi[6][6]*t->Phi[6][10] + t->Phi[6][10]*t->Phi[10][10];
-    w->term[1][172] = t->Phi[6][0]*w->S[10] + t->Phi[6][1]*w->S[40] + t->Phi[6][2]*w->S[70] +
-            t->Phi[6][3]*w->S[100] + t->Phi[6][4]*w->S[130] + t->Phi[6][5]*w->S[160] +
-            t->Phi[6][6]*w->S[190] + t->Phi[6][10]*w->S[210];
+    w->term[1][172] = t->Phi[6][0]*w->S[6] + t->Phi[6][1]*w->S[18] + t->Phi[6][2]*w->S[30] +
+            t->Phi[6][3]*w->S[42] + t->Phi[6][4]*w->S[54] + t->Phi[6][5]*w->S[66] +
+            t->Phi[6][6]*w->S[78] + t->Phi[6][10]*w->S[84];
     w->term[0][173] = t->Phi[6][0]*t->Phi[0][11] + t->Phi[6][1]*t->Phi[1][11] +
             t->Phi[6][2]*t->Phi[2][11] + t->Phi[6][3]*t->Phi[3][11] + t->Phi[6][4]*t->Phi[4][11] +
             t->Phi[6][5]*t->Phi[5][11] + t->Phi[6][6]*t->Phi[6][11] + t->Phi[6][11]*t->Phi[11][11];
-    w->term[1][173] = t->Phi[6][0]*w->S[11] + t->Phi[6][1]*w->S[41] + t->Phi[6][2]*w->S[71] +
-            t->Phi[6][3]*w->S[101] + t->Phi[6][4]*w->S[131] + t->Phi[6][5]*w->S[161] +
-            t->Phi[6][6]*w->S[191] + t->Phi[6][11]*w->S[211];
+    w->term[1][173] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[19] + t->Phi[6][2]*w->S[31] +
+            t->Phi[6][3]*w->S[43] + t->Phi[6][4]*w->S[55] + t->Phi[6][5]*w->S[67] +
+            t->Phi[6][6]*w->S[79] + t->Phi[6][11]*w->S[85];
     w->term[0][174] = t->Phi[6][0]*t->Phi[0][12] + t->Phi[6][1]*t->Phi[1][12] +
             t->Phi[6][2]*t->Phi[2][12] + t->Phi[6][3]*t->Phi[3][12] + t->Phi[6][4]*t->Phi[4][12] +
             t->Phi[6][5]*t->Phi[5][12] + t->Phi[6][6]*t->Phi[6][12] + t->Phi[6][12]*t->Phi[12][12];
-    w->term[1][174] = t->Phi[6][0]*w->S[12] + t->Phi[6][1]*w->S[42] + t->Phi[6][2]*w->S[72] +
-            t->Phi[6][3]*w->S[102] + t->Phi[6][4]*w->S[132] + t->Phi[6][5]*w->S[162] +
-            t->Phi[6][6]*w->S[192] + t->Phi[6][12]*w->S[212];
+    w->term[1][174] = t->Phi[6][0]*w->S[8] + t->Phi[6][1]*w->S[20] + t->Phi[6][2]*w->S[32] +
+            t->Phi[6][3]*w->S[44] + t->Phi[6][4]*w->S[56] + t->Phi[6][5]*w->S[68] +
+            t->Phi[6][6]*w->S[80] + t->Phi[6][12]*w->S[86];
     w->term[0][175] = t->Phi[6][0]*t->Phi[0][13] + t->Phi[6][1]*t->Phi[1][13] +
             t->Phi[6][2]*t->Phi[2][13] + t->Phi[6][3]*t->Phi[3][13] + t->Phi[6][4]*t->Phi[4][13] +
             t->Phi[6][5]*t->Phi[5][13] + t->Phi[6][6]*t->Phi[6][13] + t->Phi[6][13]*t->Phi[13][13];
-    w->term[1][175] = t->Phi[6][0]*w->S[13] + t->Phi[6][1]*w->S[43] + t->Phi[6][2]*w->S[73] +
-            t->Phi[6][3]*w->S[103] + t->Phi[6][4]*w->S[133] + t->Phi[6][5]*w->S[163] +
-            t->Phi[6][6]*w->S[193] + t->Phi[6][13]*w->S[213];
+    w->term[1][175] = t->Phi[6][0]*w->S[9] + t->Phi[6][1]*w->S[21] + t->Phi[6][2]*w->S[33] +
+            t->Phi[6][3]*w->S[45] + t->Phi[6][4]*w->S[57] + t->Phi[6][5]*w->S[69] +
+            t->Phi[6][6]*w->S[81] + t->Phi[6][13]*w->S[87];
     w->term[0][176] = t->Phi[6][0]*t->Phi[0][14] + t->Phi[6][1]*t->Phi[1][14] +
             t->Phi[6][2]*t->Phi[2][14] + t->Phi[6][3]*t->Phi[3][14] + t->Phi[6][4]*t->Phi[4][14] +
             t->Phi[6][5]*t->Phi[5][14] + t->Phi[6][6]*t->Phi[6][14] + t->Phi[6][14]*t->Phi[14][14];
-    w->term[1][176] = t->Phi[6][0]*w->S[14] + t->Phi[6][1]*w->S[44] + t->Phi[6][2]*w->S[74] +
-            t->Phi[6][3]*w->S[104] + t->Phi[6][4]*w->S[134] + t->Phi[6][5]*w->S[164] +
-            t->Phi[6][6]*w->S[194] + t->Phi[6][14]*w->S[214];
+    w->term[1][176] = t->Phi[6][0]*w->S[10] + t->Phi[6][1]*w->S[22] + t->Phi[6][2]*w->S[34] +
+            t->Phi[6][3]*w->S[46] + t->Phi[6][4]*w->S[58] + t->Phi[6][5]*w->S[70] +
+            t->Phi[6][6]*w->S[82] + t->Phi[6][14]*w->S[88];
     w->term[0][177] = t->Phi[6][0]*t->Phi[0][15] + t->Phi[6][1]*t->Phi[1][15] +
             t->Phi[6][2]*t->Phi[2][15] + t->Phi[6][3]*t->Phi[3][15] + t->Phi[6][4]*t->Phi[4][15] +
             t->Phi[6][5]*t->Phi[5][15] + t->Phi[6][6]*t->Phi[6][15] + t->Phi[6][15]*t->Phi[15][15];
-    w->term[1][177] = t->Phi[6][0]*w->S[15] + t->Phi[6][1]*w->S[45] + t->Phi[6][2]*w->S[75] +
-            t->Phi[6][3]*w->S[105] + t->Phi[6][4]*w->S[135] + t->Phi[6][5]*w->S[165] +
-            t->Phi[6][6]*w->S[195] + t->Phi[6][15]*w->S[215];
+    w->term[1][177] = t->Phi[6][0]*w->S[11] + t->Phi[6][1]*w->S[23] + t->Phi[6][2]*w->S[35] +
+            t->Phi[6][3]*w->S[47] + t->Phi[6][4]*w->S[59] + t->Phi[6][5]*w->S[71] +
+            t->Phi[6][6]*w->S[83] + t->Phi[6][15]*w->S[89];
     w->term[0][178] = t->Phi[6][0]*t->Phi[0][18] + t->Phi[6][1]*t->Phi[1][18] +
             t->Phi[6][2]*t->Phi[2][18] + t->Phi[6][3]*t->Phi[3][18] + t->Phi[6][4]*t->Phi[4][18] +
             t->Phi[6][5]*t->Phi[5][18] + t->Phi[6][6]*t->Phi[6][18];
-    w->term[1][178] = t->Phi[6][0]*w->S[18] + t->Phi[6][1]*w->S[48] + t->Phi[6][2]*w->S[78] +
-            t->Phi[6][3]*w->S[108] + t->Phi[6][4]*w->S[138] + t->Phi[6][5]*w->S[168] +
-            t->Phi[6][6]*w->S[198] + t->Phi[6][18];
+    w->term[1][178] = t->Phi[6][0]*w->S[93] + t->Phi[6][1]*w->S[108] + t->Phi[6][2]*w->S[123] +
+            t->Phi[6][3]*w->S[138] + t->Phi[6][4]*w->S[153] + t->Phi[6][5]*w->S[168] +
+            t->Phi[6][6]*w->S[184] + t->Phi[6][18];
     w->term[0][179] = t->Phi[6][0]*t->Phi[0][19] + t->Phi[6][1]*t->Phi[1][19] +
             t->Phi[6][2]*t->Phi[2][19] + t->Phi[6][3]*t->Phi[3][19] + t->Phi[6][4]*t->Phi[4][19] +
             t->Phi[6][5]*t->Phi[5][19] + t->Phi[6][6]*t->Phi[6][19];
-    w->term[1][179] = t->Phi[6][0]*w->S[19] + t->Phi[6][1]*w->S[49] + t->Phi[6][2]*w->S[79] +
-            t->Phi[6][3]*w->S[109] + t->Phi[6][4]*w->S[139] + t->Phi[6][5]*w->S[169] +
-            t->Phi[6][6]*w->S[199] + t->Phi[6][19];
+    w->term[1][179] = t->Phi[6][0]*w->S[94] + t->Phi[6][1]*w->S[109] + t->Phi[6][2]*w->S[124] +
+            t->Phi[6][3]*w->S[139] + t->Phi[6][4]*w->S[154] + t->Phi[6][5]*w->S[169] +
+            t->Phi[6][6]*w->S[185] + t->Phi[6][19];
     w->term[0][180] = t->Phi[6][0]*t->Phi[0][20] + t->Phi[6][1]*t->Phi[1][20] +
             t->Phi[6][2]*t->Phi[2][20] + t->Phi[6][3]*t->Phi[3][20] + t->Phi[6][4]*t->Phi[4][20] +
             t->Phi[6][5]*t->Phi[5][20] + t->Phi[6][6]*t->Phi[6][20];
-    w->term[1][180] = t->Phi[6][0]*w->S[20] + t->Phi[6][1]*w->S[50] + t->Phi[6][2]*w->S[80] +
-            t->Phi[6][3]*w->S[110] + t->Phi[6][4]*w->S[140] + t->Phi[6][5]*w->S[170] +
-            t->Phi[6][6]*w->S[200] + t->Phi[6][20];
+    w->term[1][180] = t->Phi[6][0]*w->S[95] + t->Phi[6][1]*w->S[110] + t->Phi[6][2]*w->S[125] +
+            t->Phi[6][3]*w->S[140] + t->Phi[6][4]*w->S[155] + t->Phi[6][5]*w->S[170] +
+            t->Phi[6][6]*w->S[186] + t->Phi[6][20];
     w->term[0][181] = t->Phi[6][0]*t->Phi[0][21] + t->Phi[6][1]*t->Phi[1][21] +
             t->Phi[6][2]*t->Phi[2][21] + t->Phi[6][3]*t->Phi[3][21] + t->Phi[6][4]*t->Phi[4][21] +
             t->Phi[6][5]*t->Phi[5][21] + t->Phi[6][6]*t->Phi[6][21];
-    w->term[1][181] = t->Phi[6][0]*w->S[21] + t->Phi[6][1]*w->S[51] + t->Phi[6][2]*w->S[81] +
-            t->Phi[6][3]*w->S[111] + t->Phi[6][4]*w->S[141] + t->Phi[6][5]*w->S[171] +
-            t->Phi[6][6]*w->S[201] + t->Phi[6][21];
+    w->term[1][181] = t->Phi[6][0]*w->S[96] + t->Phi[6][1]*w->S[111] + t->Phi[6][2]*w->S[126] +
+            t->Phi[6][3]*w->S[141] + t->Phi[6][4]*w->S[156] + t->Phi[6][5]*w->S[171] +
+            t->Phi[6][6]*w->S[187] + t->Phi[6][21];
     w->term[0][182] = t->Phi[6][0]*t->Phi[0][22] + t->Phi[6][1]*t->Phi[1][22] +
             t->Phi[6][2]*t->Phi[2][22] + t->Phi[6][3]*t->Phi[3][22] + t->Phi[6][4]*t->Phi[4][22] +
             t->Phi[6][5]*t->Phi[5][22] + t->Phi[6][6]*t->Phi[6][22];
-    w->term[1][182] = t->Phi[6][0]*w->S[22] + t->Phi[6][1]*w->S[52] + t->Phi[6][2]*w->S[82] +
-            t->Phi[6][3]*w->S[112] + t->Phi[6][4]*w->S[142] + t->Phi[6][5]*w->S[172] +
-            t->Phi[6][6]*w->S[202] + t->Phi[6][22];
+    w->term[1][182] = t->Phi[6][0]*w->S[97] + t->Phi[6][1]*w->S[112] + t->Phi[6][2]*w->S[127] +
+            t->Phi[6][3]*w->S[142] + t->Phi[6][4]*w->S[157] + t->Phi[6][5]*w->S[172] +
+            t->Phi[6][6]*w->S[188] + t->Phi[6][22];
     w->term[0][183] = t->Phi[6][0]*t->Phi[0][23] + t->Phi[6][1]*t->Phi[1][23] +
             t->Phi[6][2]*t->Phi[2][23] + t->Phi[6][3]*t->Phi[3][23] + t->Phi[6][4]*t->Phi[4][23] +
             t->Phi[6][5]*t->Phi[5][23] + t->Phi[6][6]*t->Phi[6][23];
-    w->term[1][183] = t->Phi[6][0]*w->S[23] + t->Phi[6][1]*w->S[53] + t->Phi[6][2]*w->S[83] +
-            t->Phi[6][3]*w->S[113] + t->Phi[6][4]*w->S[143] + t->Phi[6][5]*w->S[173] +
-            t->Phi[6][6]*w->S[203] + t->Phi[6][23];
+    w->term[1][183] = t->Phi[6][0]*w->S[98] + t->Phi[6][1]*w->S[113] + t->Phi[6][2]*w->S[128] +
+            t->Phi[6][3]*w->S[143] + t->Phi[6][4]*w->S[158] + t->Phi[6][5]*w->S[173] +
+            t->Phi[6][6]*w->S[189] + t->Phi[6][23];
     w->term[0][184] = t->Phi[6][0]*t->Phi[0][24] + t->Phi[6][1]*t->Phi[1][24] +
             t->Phi[6][2]*t->Phi[2][24] + t->Phi[6][3]*t->Phi[3][24] + t->Phi[6][4]*t->Phi[4][24] +
             t->Phi[6][5]*t->Phi[5][24] + t->Phi[6][6]*t->Phi[6][24];
-    w->term[1][184] = t->Phi[6][0]*w->S[24] + t->Phi[6][1]*w->S[54] + t->Phi[6][2]*w->S[84] +
-            t->Phi[6][3]*w->S[114] + t->Phi[6][4]*w->S[144] + t->Phi[6][5]*w->S[174] +
-            t->Phi[6][6]*w->S[204] + t->Phi[6][24];
+    w->term[1][184] = t->Phi[6][0]*w->S[99] + t->Phi[6][1]*w->S[114] + t->Phi[6][2]*w->S[129] +
+            t->Phi[6][3]*w->S[144] + t->Phi[6][4]*w->S[159] + t->Phi[6][5]*w->S[174] +
+            t->Phi[6][6]*w->S[190] + t->Phi[6][24];
     w->term[0][185] = t->Phi[6][0]*t->Phi[0][25] + t->Phi[6][1]*t->Phi[1][25] +
             t->Phi[6][2]*t->Phi[2][25] + t->Phi[6][3]*t->Phi[3][25] + t->Phi[6][4]*t->Phi[4][25] +
             t->Phi[6][5]*t->Phi[5][25] + t->Phi[6][6]*t->Phi[6][25];
-    w->term[1][185] = t->Phi[6][0]*w->S[25] + t->Phi[6][1]*w->S[55] + t->Phi[6][2]*w->S[85] +
-            t->Phi[6][3]*w->S[115] + t->Phi[6][4]*w->S[145] + t->Phi[6][5]*w->S[175] +
-            t->Phi[6][6]*w->S[205] + t->Phi[6][25];
+    w->term[1][185] = t->Phi[6][0]*w->S[100] + t->Phi[6][1]*w->S[115] + t->Phi[6][2]*w->S[130] +
+            t->Phi[6][3]*w->S[145] + t->Phi[6][4]*w->S[160] + t->Phi[6][5]*w->S[175] +
+            t->Phi[6][6]*w->S[191] + t->Phi[6][25];
     w->term[0][186] = t->Phi[6][0]*t->Phi[0][26] + t->Phi[6][1]*t->Phi[1][26] +
             t->Phi[6][2]*t->Phi[2][26] + t->Phi[6][3]*t->Phi[3][26] + t->Phi[6][4]*t->Phi[4][26] +
             t->Phi[6][5]*t->Phi[5][26] + t->Phi[6][6]*t->Phi[6][26];
-    w->term[1][186] = t->Phi[6][0]*w->S[26] + t->Phi[6][1]*w->S[56] + t->Phi[6][2]*w->S[86] +
-            t->Phi[6][3]*w->S[116] + t->Phi[6][4]*w->S[146] + t->Phi[6][5]*w->S[176] +
-            t->Phi[6][6]*w->S[206] + t->Phi[6][26];
+    w->term[1][186] = t->Phi[6][0]*w->S[101] + t->Phi[6][1]*w->S[116] + t->Phi[6][2]*w->S[131] +
+            t->Phi[6][3]*w->S[146] + t->Phi[6][4]*w->S[161] + t->Phi[6][5]*w->S[176] +
+            t->Phi[6][6]*w->S[192] + t->Phi[6][26];
     w->term[0][187] = t->Phi[6][0]*t->Phi[0][27] + t->Phi[6][1]*t->Phi[1][27] +
             t->Phi[6][2]*t->Phi[2][27] + t->Phi[6][3]*t->Phi[3][27] + t->Phi[6][4]*t->Phi[4][27] +
             t->Phi[6][5]*t->Phi[5][27] + t->Phi[6][6]*t->Phi[6][27];
-    w->term[1][187] = t->Phi[6][0]*w->S[27] + t->Phi[6][1]*w->S[57] + t->Phi[6][2]*w->S[87] +
-            t->Phi[6][3]*w->S[117] + t->Phi[6][4]*w->S[147] + t->Phi[6][5]*w->S[177] +
-            t->Phi[6][6]*w->S[207] + t->Phi[6][27];
+    w->term[1][187] = t->Phi[6][0]*w->S[102] + t->Phi[6][1]*w->S[117] + t->Phi[6][2]*w->S[132] +
+            t->Phi[6][3]*w->S[147] + t->Phi[6][4]*w->S[162] + t->Phi[6][5]*w->S[177] +
+            t->Phi[6][6]*w->S[193] + t->Phi[6][27];
     w->term[0][188] = t->Phi[6][0]*t->Phi[0][28] + t->Phi[6][1]*t->Phi[1][28] +
             t->Phi[6][2]*t->Phi[2][28] + t->Phi[6][3]*t->Phi[3][28] + t->Phi[6][4]*t->Phi[4][28] +
             t->Phi[6][5]*t->Phi[5][28] + t->Phi[6][6]*t->Phi[6][28];
-    w->term[1][188] = t->Phi[6][0]*w->S[28] + t->Phi[6][1]*w->S[58] + t->Phi[6][2]*w->S[88] +
-            t->Phi[6][3]*w->S[118] + t->Phi[6][4]*w->S[148] + t->Phi[6][5]*w->S[178] +
-            t->Phi[6][6]*w->S[208] + t->Phi[6][28];
+    w->term[1][188] = t->Phi[6][0]*w->S[103] + t->Phi[6][1]*w->S[118] + t->Phi[6][2]*w->S[133] +
+            t->Phi[6][3]*w->S[148] + t->Phi[6][4]*w->S[163] + t->Phi[6][5]*w->S[178] +
+            t->Phi[6][6]*w->S[194] + t->Phi[6][28];
     w->term[0][189] = t->Phi[6][0]*t->Phi[0][29] + t->Phi[6][1]*t->Phi[1][29] +
             t->Phi[6][2]*t->Phi[2][29] + t->Phi[6][3]*t->Phi[3][29] + t->Phi[6][4]*t->Phi[4][29] +
             t->Phi[6][5]*t->Phi[5][29] + t->Phi[6][6]*t->Phi[6][29];
-    w->term[1][189] = t->Phi[6][0]*w->S[29] + t->Phi[6][1]*w->S[59] + t->Phi[6][2]*w->S[89] +
-            t->Phi[6][3]*w->S[119] + t->Phi[6][4]*w->S[149] + t->Phi[6][5]*w->S[179] +
-            t->Phi[6][6]*w->S[209] + t->Phi[6][29];
+    w->term[1][189] = t->Phi[6][0]*w->S[104] + t->Phi[6][1]*w->S[119] + t->Phi[6][2]*w->S[134] +
+            t->Phi[6][3]*w->S[149] + t->Phi[6][4]*w->S[164] + t->Phi[6][5]*w->S[179] +
+            t->Phi[6][6]*w->S[195] + t->Phi[6][29];
     w->term[0][190] = t->Phi[10][10]*t->Phi[10][10];
-    w->term[1][190] = t->Phi[10][10]*w->S[210];
+    w->term[1][190] = t->Phi[10][10]*w->S[84];
     w->term[0][191] = t->Phi[11][11]*t->Phi[11][11];
-    w->term[1][191] = t->Phi[11][11]*w->S[211];
+    w->term[1][191] = t->Phi[11][11]*w->S[85];
     w->term[0][192] = t->Phi[12][12]*t->Phi[12][12];
-    w->term[1][192] = t->Phi[12][12]*w->S[212];
+    w->term[1][192] = t->Phi[12][12]*w->S[86];
     w->term[0][193] = t->Phi[13][13]*t->Phi[13][13];
-    w->term[1][193] = t->Phi[13][13]*w->S[213];
+    w->term[1][193] = t->Phi[13][13]*w->S[87];
     w->term[0][194] = t->Phi[14][14]*t->Phi[14][14];
-    w->term[1][194] = t->Phi[14][14]*w->S[214];
+    w->term[1][194] = t->Phi[14][14]*w->S[88];
     w->term[0][195] = t->Phi[15][15]*t->Phi[15][15];
-    w->term[1][195] = t->Phi[15][15]*w->S[215];
+    w->term[1][195] = t->Phi[15][15]*w->S[89];
     t->Phi[0][0] = t->Phi[0][0] + t->Phi[0][0] + w->term[0][0];
     w->S[0] = w->S[0] + half*w->term[1][0];
     t->Phi[0][1] = t->Phi[0][1] + t->Phi[0][1] + w->term[0][1];
@@ -3290,293 +3380,293 @@ NED_DOPPLER32_AUGMENTED_BLOCK void doubling(ned_doppler32_augmented_transition *
     t->Phi[0][5] = t->Phi[0][5] + t->Phi[0][5] + w->term[0][5];
     w->S[5] = w->S[5] + half*w->term[1][5];
     t->Phi[0][7] = t->Phi[0][7] + t->Phi[0][7] + w->term[0][6];
-    w->S[7] = w->S[7] + half*w->term[1][6];
+    w->S[90] = w->S[90] + half*w->term[1][6];
     t->Phi[0][8] = t->Phi[0][8] + t->Phi[0][8] + w->term[0][7];
-    w->S[8] = w->S[8] + half*w->term[1][7];
+    w->S[91] = w->S[91] + half*w->term[1][7];
     t->Phi[0][9] = t->Phi[0][9] + t->Phi[0][9] + w->term[0][8];
-    w->S[9] = w->S[9] + half*w->term[1][8];
+    w->S[92] = w->S[92] + half*w->term[1][8];
     t->Phi[0][10] = t->Phi[0][10] + t->Phi[0][10] + w->term[0][9];
-    w->S[10] = w->S[10] + half*w->term[1][9];
+    w->S[6] = w->S[6] + half*w->term[1][9];
     t->Phi[0][11] = t->Phi[0][11] + t->Phi[0][11] + w->term[0][10];
-    w->S[11] = w->S[11] + half*w->term[1][10];
+    w->S[7] = w->S[7] + half*w->term[1][10];
     t->Phi[0][12] = t->Phi[0][12] + t->Phi[0][12] + w->term[0][11];
-    w->S[12] = w->S[12] + half*w->term[1][11];
+    w->S[8] = w->S[8] + half*w->term[1][11];
     t->Phi[0][13] = t->Phi[0][13] + t->Phi[0][13] + w->term[0][12];
-    w->S[13] = w->S[13] + half*w->term[1][12];
+    w->S[9] = w->S[9] + half*w->term[1][12];
     t->Phi[0][14] = t->Phi[0][14] + t->Phi[0][14] + w->term[0][13];
-    w->S[14] = w->S[14] + half*w->term[1][13];
+    w->S[10] = w->S[10] + half*w->term[1][13];
     t->Phi[0][15] = t->Phi[0][15] + t->Phi[0][15] + w->term[0][14];
-    w->S[15] = w->S[15] + half*w->term[1][14];
+    w->S[11] = w->S[11] + half*w->term[1][14];
     t->Phi[0][18] = t->Phi[0][18] + t->Phi[0][18] + w->term[0][15];
-    w->S[18] = w->S[18] + half*w->term[1][15];
+    w->S[93] = w->S[93] + half*w->term[1][15];
     t->Phi[0][19] = t->Phi[0][19] + t->Phi[0][19] + w->term[0][16];
-    w->S[19] = w->S[19] + half*w->term[1][16];
+    w->S[94] = w->S[94] + half*w->term[1][16];
     t->Phi[0][20] = t->Phi[0][20] + t->Phi[0][20] + w->term[0][17];
-    w->S[20] = w->S[20] + half*w->term[1][17];
+    w->S[95] = w->S[95] + half*w->term[1][17];
     t->Phi[0][21] = t->Phi[0][21] + t->Phi[0][21] + w->term[0][18];
-    w->S[21] = w->S[21] + half*w->term[1][18];
+    w->S[96] = w->S[96] + half*w->term[1][18];
     t->Phi[0][22] = t->Phi[0][22] + t->Phi[0][22] + w->term[0][19];
-    w->S[22] = w->S[22] + half*w->term[1][19];
+    w->S[97] = w->S[97] + half*w->term[1][19];
     t->Phi[0][23] = t->Phi[0][23] + t->Phi[0][23] + w->term[0][20];
-    w->S[23] = w->S[23] + half*w->term[1][20];
+    w->S[98] = w->S[98] + half*w->term[1][20];
     t->Phi[0][24] = t->Phi[0][24] + t->Phi[0][24] + w->term[0][21];
-    w->S[24] = w->S[24] + half*w->term[1][21];
+    w->S[99] = w->S[99] + half*w->term[1][21];
     t->Phi[0][25] = t->Phi[0][25] + t->Phi[0][25] + w->term[0][22];
-    w->S[25] = w->S[25] + half*w->term[1][22];
+    w->S[100] = w->S[100] + half*w->term[1][22];
     t->Phi[0][26] = t->Phi[0][26] + t->Phi[0][26] + w->term[0][23];
-    w->S[26] = w->S[26] + half*w->term[1][23];
+    w->S[101] = w->S[101] + half*w->term[1][23];
     t->Phi[0][27] = t->Phi[0][27] + t->Phi[0][27] + w->term[0][24];
-    w->S[27] = w->S[27] + half*w->term[1][24];
+    w->S[102] = w->S[102] + half*w->term[1][24];
     t->Phi[0][28] = t->Phi[0][28] + t->Phi[0][28] + w->term[0][25];
-    w->S[28] = w->S[28] + half*w->term[1][25];
+    w->S[103] = w->S[103] + half*w->term[1][25];
     t->Phi[0][29] = t->Phi[0][29] + t->Phi[0][29] + w->term[0][26];
-    w->S[29] = w->S[29] + half*w->term[1][26];
+    w->S[104] = w->S[104] + half*w->term[1][26];
     t->Phi[1][0] = t->Phi[1][0] + t->Phi[1][0] + w->term[0][27];
-    w->S[30] = w->S[30] + half*w->term[1][27];
+    w->S[12] = w->S[12] + half*w->term[1][27];
     t->Phi[1][1] = t->Phi[1][1] + t->Phi[1][1] + w->term[0][28];
-    w->S[31] = w->S[31] + half*w->term[1][28];
+    w->S[13] = w->S[13] + half*w->term[1][28];
     t->Phi[1][2] = t->Phi[1][2] + t->Phi[1][2] + w->term[0][29];
-    w->S[32] = w->S[32] + half*w->term[1][29];
+    w->S[14] = w->S[14] + half*w->term[1][29];
     t->Phi[1][3] = t->Phi[1][3] + t->Phi[1][3] + w->term[0][30];
-    w->S[33] = w->S[33] + half*w->term[1][30];
+    w->S[15] = w->S[15] + half*w->term[1][30];
     t->Phi[1][4] = t->Phi[1][4] + t->Phi[1][4] + w->term[0][31];
-    w->S[34] = w->S[34] + half*w->term[1][31];
+    w->S[16] = w->S[16] + half*w->term[1][31];
     t->Phi[1][5] = t->Phi[1][5] + t->Phi[1][5] + w->term[0][32];
-    w->S[35] = w->S[35] + half*w->term[1][32];
+    w->S[17] = w->S[17] + half*w->term[1][32];
     t->Phi[1][7] = t->Phi[1][7] + t->Phi[1][7] + w->term[0][33];
-    w->S[37] = w->S[37] + half*w->term[1][33];
+    w->S[105] = w->S[105] + half*w->term[1][33];
     t->Phi[1][8] = t->Phi[1][8] + t->Phi[1][8] + w->term[0][34];
-    w->S[38] = w->S[38] + half*w->term[1][34];
+    w->S[106] = w->S[106] + half*w->term[1][34];
     t->Phi[1][9] = t->Phi[1][9] + t->Phi[1][9] + w->term[0][35];
-    w->S[39] = w->S[39] + half*w->term[1][35];
+    w->S[107] = w->S[107] + half*w->term[1][35];
     t->Phi[1][10] = t->Phi[1][10] + t->Phi[1][10] + w->term[0][36];
-    w->S[40] = w->S[40] + half*w->term[1][36];
+    w->S[18] = w->S[18] + half*w->term[1][36];
     t->Phi[1][11] = t->Phi[1][11] + t->Phi[1][11] + w->term[0][37];
-    w->S[41] = w->S[41] + half*w->term[1][37];
+    w->S[19] = w->S[19] + half*w->term[1][37];
     t->Phi[1][12] = t->Phi[1][12] + t->Phi[1][12] + w->term[0][38];
-    w->S[42] = w->S[42] + half*w->term[1][38];
+    w->S[20] = w->S[20] + half*w->term[1][38];
     t->Phi[1][13] = t->Phi[1][13] + t->Phi[1][13] + w->term[0][39];
-    w->S[43] = w->S[43] + half*w->term[1][39];
+    w->S[21] = w->S[21] + half*w->term[1][39];
     t->Phi[1][14] = t->Phi[1][14] + t->Phi[1][14] + w->term[0][40];
-    w->S[44] = w->S[44] + half*w->term[1][40];
+    w->S[22] = w->S[22] + half*w->term[1][40];
     t->Phi[1][15] = t->Phi[1][15] + t->Phi[1][15] + w->term[0][41];
-    w->S[45] = w->S[45] + half*w->term[1][41];
+    w->S[23] = w->S[23] + half*w->term[1][41];
     t->Phi[1][18] = t->Phi[1][18] + t->Phi[1][18] + w->term[0][42];
-    w->S[48] = w->S[48] + half*w->term[1][42];
+    w->S[108] = w->S[108] + half*w->term[1][42];
     t->Phi[1][19] = t->Phi[1][19] + t->Phi[1][19] + w->term[0][43];
-    w->S[49] = w->S[49] + half*w->term[1][43];
+    w->S[109] = w->S[109] + half*w->term[1][43];
     t->Phi[1][20] = t->Phi[1][20] + t->Phi[1][20] + w->term[0][44];
-    w->S[50] = w->S[50] + half*w->term[1][44];
+    w->S[110] = w->S[110] + half*w->term[1][44];
     t->Phi[1][21] = t->Phi[1][21] + t->Phi[1][21] + w->term[0][45];
-    w->S[51] = w->S[51] + half*w->term[1][45];
+    w->S[111] = w->S[111] + half*w->term[1][45];
     t->Phi[1][22] = t->Phi[1][22] + t->Phi[1][22] + w->term[0][46];
-    w->S[52] = w->S[52] + half*w->term[1][46];
+    w->S[112] = w->S[112] + half*w->term[1][46];
     t->Phi[1][23] = t->Phi[1][23] + t->Phi[1][23] + w->term[0][47];
-    w->S[53] = w->S[53] + half*w->term[1][47];
+    w->S[113] = w->S[113] + half*w->term[1][47];
     t->Phi[1][24] = t->Phi[1][24] + t->Phi[1][24] + w->term[0][48];
-    w->S[54] = w->S[54] + half*w->term[1][48];
+    w->S[114] = w->S[114] + half*w->term[1][48];
     t->Phi[1][25] = t->Phi[1][25] + t->Phi[1][25] + w->term[0][49];
-    w->S[55] = w->S[55] + half*w->term[1][49];
+    w->S[115] = w->S[115] + half*w->term[1][49];
     t->Phi[1][26] = t->Phi[1][26] + t->Phi[1][26] + w->term[0][50];
-    w->S[56] = w->S[56] + half*w->term[1][50];
+    w->S[116] = w->S[116] + half*w->term[1][50];
     t->Phi[1][27] = t->Phi[1][27] + t->Phi[1][27] + w->term[0][51];
-    w->S[57] = w->S[57] + half*w->term[1][51];
+    w->S[117] = w->S[117] + half*w->term[1][51];
     t->Phi[1][28] = t->Phi[1][28] + t->Phi[1][28] + w->term[0][52];
-    w->S[58] = w->S[58] + half*w->term[1][52];
+    w->S[118] = w->S[118] + half*w->term[1][52];
     t->Phi[1][29] = t->Phi[1][29] + t->Phi[1][29] + w->term[0][53];
-    w->S[59] = w->S[59] + half*w->term[1][53];
+    w->S[119] = w->S[119] + half*w->term[1][53];
     t->Phi[2][0] = t->Phi[2][0] + t->Phi[2][0] + w->term[0][54];
-    w->S[60] = w->S[60] + half*w->term[1][54];
+    w->S[24] = w->S[24] + half*w->term[1][54];
     t->Phi[2][1] = t->Phi[2][1] + t->Phi[2][1] + w->term[0][55];
-    w->S[61] = w->S[61] + half*w->term[1][55];
+    w->S[25] = w->S[25] + half*w->term[1][55];
     t->Phi[2][2] = t->Phi[2][2] + t->Phi[2][2] + w->term[0][56];
-    w->S[62] = w->S[62] + half*w->term[1][56];
+    w->S[26] = w->S[26] + half*w->term[1][56];
     t->Phi[2][3] = t->Phi[2][3] + t->Phi[2][3] + w->term[0][57];
-    w->S[63] = w->S[63] + half*w->term[1][57];
+    w->S[27] = w->S[27] + half*w->term[1][57];
     t->Phi[2][4] = t->Phi[2][4] + t->Phi[2][4] + w->term[0][58];
-    w->S[64] = w->S[64] + half*w->term[1][58];
+    w->S[28] = w->S[28] + half*w->term[1][58];
     t->Phi[2][5] = t->Phi[2][5] + t->Phi[2][5] + w->term[0][59];
-    w->S[65] = w->S[65] + half*w->term[1][59];
+    w->S[29] = w->S[29] + half*w->term[1][59];
     t->Phi[2][7] = t->Phi[2][7] + t->Phi[2][7] + w->term[0][60];
-    w->S[67] = w->S[67] + half*w->term[1][60];
+    w->S[120] = w->S[120] + half*w->term[1][60];
     t->Phi[2][8] = t->Phi[2][8] + t->Phi[2][8] + w->term[0][61];
-    w->S[68] = w->S[68] + half*w->term[1][61];
+    w->S[121] = w->S[121] + half*w->term[1][61];
     t->Phi[2][9] = t->Phi[2][9] + t->Phi[2][9] + w->term[0][62];
-    w->S[69] = w->S[69] + half*w->term[1][62];
+    w->S[122] = w->S[122] + half*w->term[1][62];
     t->Phi[2][10] = t->Phi[2][10] + t->Phi[2][10] + w->term[0][63];
-    w->S[70] = w->S[70] + half*w->term[1][63];
+    w->S[30] = w->S[30] + half*w->term[1][63];
     t->Phi[2][11] = t->Phi[2][11] + t->Phi[2][11] + w->term[0][64];
-    w->S[71] = w->S[71] + half*w->term[1][64];
+    w->S[31] = w->S[31] + half*w->term[1][64];
     t->Phi[2][12] = t->Phi[2][12] + t->Phi[2][12] + w->term[0][65];
-    w->S[72] = w->S[72] + half*w->term[1][65];
+    w->S[32] = w->S[32] + half*w->term[1][65];
     t->Phi[2][13] = t->Phi[2][13] + t->Phi[2][13] + w->term[0][66];
-    w->S[73] = w->S[73] + half*w->term[1][66];
+    w->S[33] = w->S[33] + half*w->term[1][66];
     t->Phi[2][14] = t->Phi[2][14] + t->Phi[2][14] + w->term[0][67];
-    w->S[74] = w->S[74] + half*w->term[1][67];
+    w->S[34] = w->S[34] + half*w->term[1][67];
     t->Phi[2][15] = t->Phi[2][15] + t->Phi[2][15] + w->term[0][68];
-    w->S[75] = w->S[75] + half*w->term[1][68];
+    w->S[35] = w->S[35] + half*w->term[1][68];
     t->Phi[2][18] = t->Phi[2][18] + t->Phi[2][18] + w->term[0][69];
-    w->S[78] = w->S[78] + half*w->term[1][69];
+    w->S[123] = w->S[123] + half*w->term[1][69];
     t->Phi[2][19] = t->Phi[2][19] + t->Phi[2][19] + w->term[0][70];
-    w->S[79] = w->S[79] + half*w->term[1][70];
+    w->S[124] = w->S[124] + half*w->term[1][70];
     t->Phi[2][20] = t->Phi[2][20] + t->Phi[2][20] + w->term[0][71];
-    w->S[80] = w->S[80] + half*w->term[1][71];
+    w->S[125] = w->S[125] + half*w->term[1][71];
     t->Phi[2][21] = t->Phi[2][21] + t->Phi[2][21] + w->term[0][72];
-    w->S[81] = w->S[81] + half*w->term[1][72];
+    w->S[126] = w->S[126] + half*w->term[1][72];
     t->Phi[2][22] = t->Phi[2][22] + t->Phi[2][22] + w->term[0][73];
-    w->S[82] = w->S[82] + half*w->term[1][73];
+    w->S[127] = w->S[127] + half*w->term[1][73];
     t->Phi[2][23] = t->Phi[2][23] + t->Phi[2][23] + w->term[0][74];
-    w->S[83] = w->S[83] + half*w->term[1][74];
+    w->S[128] = w->S[128] + half*w->term[1][74];
     t->Phi[2][24] = t->Phi[2][24] + t->Phi[2][24] + w->term[0][75];
-    w->S[84] = w->S[84] + half*w->term[1][75];
+    w->S[129] = w->S[129] + half*w->term[1][75];
     t->Phi[2][25] = t->Phi[2][25] + t->Phi[2][25] + w->term[0][76];
-    w->S[85] = w->S[85] + half*w->term[1][76];
+    w->S[130] = w->S[130] + half*w->term[1][76];
     t->Phi[2][26] = t->Phi[2][26] + t->Phi[2][26] + w->term[0][77];
-    w->S[86] = w->S[86] + half*w->term[1][77];
+    w->S[131] = w->S[131] + half*w->term[1][77];
     t->Phi[2][27] = t->Phi[2][27] + t->Phi[2][27] + w->term[0][78];
-    w->S[87] = w->S[87] + half*w->term[1][78];
+    w->S[132] = w->S[132] + half*w->term[1][78];
     t->Phi[2][28] = t->Phi[2][28] + t->Phi[2][28] + w->term[0][79];
-    w->S[88] = w->S[88] + half*w->term[1][79];
+    w->S[133] = w->S[133] + half*w->term[1][79];
     t->Phi[2][29] = t->Phi[2][29] + t->Phi[2][29] + w->term[0][80];
-    w->S[89] = w->S[89] + half*w->term[1][80];
+    w->S[134] = w->S[134] + half*w->term[1][80];
     t->Phi[3][0] = t->Phi[3][0] + t->Phi[3][0] + w->term[0][81];
-    w->S[90] = w->S[90] + half*w->term[1][81];
+    w->S[36] = w->S[36] + half*w->term[1][81];
     t->Phi[3][1] = t->Phi[3][1] + t->Phi[3][1] + w->term[0][82];
-    w->S[91] = w->S[91] + half*w->term[1][82];
+    w->S[37] = w->S[37] + half*w->term[1][82];
     t->Phi[3][2] = t->Phi[3][2] + t->Phi[3][2] + w->term[0][83];
-    w->S[92] = w->S[92] + half*w->term[1][83];
+    w->S[38] = w->S[38] + half*w->term[1][83];
     t->Phi[3][3] = t->Phi[3][3] + t->Phi[3][3] + w->term[0][84];
-    w->S[93] = w->S[93] + half*w->term[1][84];
+    w->S[39] = w->S[39] + half*w->term[1][84];
     t->Phi[3][4] = t->Phi[3][4] + t->Phi[3][4] + w->term[0][85];
-    w->S[94] = w->S[94] + half*w->term[1][85];
+    w->S[40] = w->S[40] + half*w->term[1][85];
     t->Phi[3][5] = t->Phi[3][5] + t->Phi[3][5] + w->term[0][86];
-    w->S[95] = w->S[95] + half*w->term[1][86];
+    w->S[41] = w->S[41] + half*w->term[1][86];
     t->Phi[3][7] = t->Phi[3][7] + t->Phi[3][7] + w->term[0][87];
-    w->S[97] = w->S[97] + half*w->term[1][87];
+    w->S[135] = w->S[135] + half*w->term[1][87];
     t->Phi[3][8] = t->Phi[3][8] + t->Phi[3][8] + w->term[0][88];
-    w->S[98] = w->S[98] + half*w->term[1][88];
+    w->S[136] = w->S[136] + half*w->term[1][88];
     t->Phi[3][9] = t->Phi[3][9] + t->Phi[3][9] + w->term[0][89];
-    w->S[99] = w->S[99] + half*w->term[1][89];
+    w->S[137] = w->S[137] + half*w->term[1][89];
     t->Phi[3][10] = t->Phi[3][10] + t->Phi[3][10] + w->term[0][90];
-    w->S[100] = w->S[100] + half*w->term[1][90];
+    w->S[42] = w->S[42] + half*w->term[1][90];
     t->Phi[3][11] = t->Phi[3][11] + t->Phi[3][11] + w->term[0][91];
-    w->S[101] = w->S[101] + half*w->term[1][91];
+    w->S[43] = w->S[43] + half*w->term[1][91];
     t->Phi[3][12] = t->Phi[3][12] + t->Phi[3][12] + w->term[0][92];
-    w->S[102] = w->S[102] + half*w->term[1][92];
+    w->S[44] = w->S[44] + half*w->term[1][92];
     t->Phi[3][13] = t->Phi[3][13] + t->Phi[3][13] + w->term[0][93];
-    w->S[103] = w->S[103] + half*w->term[1][93];
+    w->S[45] = w->S[45] + half*w->term[1][93];
     t->Phi[3][14] = t->Phi[3][14] + t->Phi[3][14] + w->term[0][94];
-    w->S[104] = w->S[104] + half*w->term[1][94];
+    w->S[46] = w->S[46] + half*w->term[1][94];
     t->Phi[3][15] = t->Phi[3][15] + t->Phi[3][15] + w->term[0][95];
-    w->S[105] = w->S[105] + half*w->term[1][95];
+    w->S[47] = w->S[47] + half*w->term[1][95];
     t->Phi[3][18] = t->Phi[3][18] + t->Phi[3][18] + w->term[0][96];
-    w->S[108] = w->S[108] + half*w->term[1][96];
+    w->S[138] = w->S[138] + half*w->term[1][96];
     t->Phi[3][19] = t->Phi[3][19] + t->Phi[3][19] + w->term[0][97];
-    w->S[109] = w->S[109] + half*w->term[1][97];
+    w->S[139] = w->S[139] + half*w->term[1][97];
     t->Phi[3][20] = t->Phi[3][20] + t->Phi[3][20] + w->term[0][98];
-    w->S[110] = w->S[110] + half*w->term[1][98];
+    w->S[140] = w->S[140] + half*w->term[1][98];
     t->Phi[3][21] = t->Phi[3][21] + t->Phi[3][21] + w->term[0][99];
-    w->S[111] = w->S[111] + half*w->term[1][99];
+    w->S[141] = w->S[141] + half*w->term[1][99];
     t->Phi[3][22] = t->Phi[3][22] + t->Phi[3][22] + w->term[0][100];
-    w->S[112] = w->S[112] + half*w->term[1][100];
+    w->S[142] = w->S[142] + half*w->term[1][100];
     t->Phi[3][23] = t->Phi[3][23] + t->Phi[3][23] + w->term[0][101];
-    w->S[113] = w->S[113] + half*w->term[1][101];
+    w->S[143] = w->S[143] + half*w->term[1][101];
     t->Phi[3][24] = t->Phi[3][24] + t->Phi[3][24] + w->term[0][102];
-    w->S[114] = w->S[114] + half*w->term[1][102];
+    w->S[144] = w->S[144] + half*w->term[1][102];
     t->Phi[3][25] = t->Phi[3][25] + t->Phi[3][25] + w->term[0][103];
-    w->S[115] = w->S[115] + half*w->term[1][103];
+    w->S[145] = w->S[145] + half*w->term[1][103];
     t->Phi[3][26] = t->Phi[3][26] + t->Phi[3][26] + w->term[0][104];
-    w->S[116] = w->S[116] + half*w->term[1][104];
+    w->S[146] = w->S[146] + half*w->term[1][104];
     t->Phi[3][27] = t->Phi[3][27] + t->Phi[3][27] + w->term[0][105];
-    w->S[117] = w->S[117] + half*w->term[1][105];
+    w->S[147] = w->S[147] + half*w->term[1][105];
     t->Phi[3][28] = t->Phi[3][28] + t->Phi[3][28] + w->term[0][106];
-    w->S[118] = w->S[118] + half*w->term[1][106];
+    w->S[148] = w->S[148] + half*w->term[1][106];
     t->Phi[3][29] = t->Phi[3][29] + t->Phi[3][29] + w->term[0][107];
-    w->S[119] = w->S[119] + half*w->term[1][107];
+    w->S[149] = w->S[149] + half*w->term[1][107];
     t->Phi[4][0] = t->Phi[4][0] + t->Phi[4][0] + w->term[0][108];
-    w->S[120] = w->S[120] + half*w->term[1][108];
+    w->S[48] = w->S[48] + half*w->term[1][108];
     t->Phi[4][1] = t->Phi[4][1] + t->Phi[4][1] + w->term[0][109];
-    w->S[121] = w->S[121] + half*w->term[1][109];
+    w->S[49] = w->S[49] + half*w->term[1][109];
     t->Phi[4][2] = t->Phi[4][2] + t->Phi[4][2] + w->term[0][110];
-    w->S[122] = w->S[122] + half*w->term[1][110];
+    w->S[50] = w->S[50] + half*w->term[1][110];
     t->Phi[4][3] = t->Phi[4][3] + t->Phi[4][3] + w->term[0][111];
-    w->S[123] = w->S[123] + half*w->term[1][111];
+    w->S[51] = w->S[51] + half*w->term[1][111];
     t->Phi[4][4] = t->Phi[4][4] + t->Phi[4][4] + w->term[0][112];
-    w->S[124] = w->S[124] + half*w->term[1][112];
+    w->S[52] = w->S[52] + half*w->term[1][112];
     t->Phi[4][5] = t->Phi[4][5] + t->Phi[4][5] + w->term[0][113];
-    w->S[125] = w->S[125] + half*w->term[1][113];
+    w->S[53] = w->S[53] + half*w->term[1][113];
     t->Phi[4][7] = t->Phi[4][7] + t->Phi[4][7] + w->term[0][114];
-    w->S[127] = w->S[127] + half*w->term[1][114];
+    w->S[150] = w->S[150] + half*w->term[1][114];
     t->Phi[4][8] = t->Phi[4][8] + t->Phi[4][8] + w->term[0][115];
-    w->S[128] = w->S[128] + half*w->term[1][115];
+    w->S[151] = w->S[151] + half*w->term[1][115];
     t->Phi[4][9] = t->Phi[4][9] + t->Phi[4][9] + w->term[0][116];
-    w->S[129] = w->S[129] + half*w->term[1][116];
+    w->S[152] = w->S[152] + half*w->term[1][116];
     t->Phi[4][10] = t->Phi[4][10] + t->Phi[4][10] + w->term[0][117];
-    w->S[130] = w->S[130] + half*w->term[1][117];
+    w->S[54] = w->S[54] + half*w->term[1][117];
     t->Phi[4][11] = t->Phi[4][11] + t->Phi[4][11] + w->term[0][118];
-    w->S[131] = w->S[131] + half*w->term[1][118];
+    w->S[55] = w->S[55] + half*w->term[1][118];
     t->Phi[4][12] = t->Phi[4][12] + t->Phi[4][12] + w->term[0][119];
-    w->S[132] = w->S[132] + half*w->term[1][119];
+    w->S[56] = w->S[56] + half*w->term[1][119];
     t->Phi[4][13] = t->Phi[4][13] + t->Phi[4][13] + w->term[0][120];
-    w->S[133] = w->S[133] + half*w->term[1][120];
+    w->S[57] = w->S[57] + half*w->term[1][120];
     t->Phi[4][14] = t->Phi[4][14] + t->Phi[4][14] + w->term[0][121];
-    w->S[134] = w->S[134] + half*w->term[1][121];
+    w->S[58] = w->S[58] + half*w->term[1][121];
     t->Phi[4][15] = t->Phi[4][15] + t->Phi[4][15] + w->term[0][122];
-    w->S[135] = w->S[135] + half*w->term[1][122];
+    w->S[59] = w->S[59] + half*w->term[1][122];
     t->Phi[4][18] = t->Phi[4][18] + t->Phi[4][18] + w->term[0][123];
-    w->S[138] = w->S[138] + half*w->term[1][123];
+    w->S[153] = w->S[153] + half*w->term[1][123];
     t->Phi[4][19] = t->Phi[4][19] + t->Phi[4][19] + w->term[0][124];
-    w->S[139] = w->S[139] + half*w->term[1][124];
+    w->S[154] = w->S[154] + half*w->term[1][124];
     t->Phi[4][20] = t->Phi[4][20] + t->Phi[4][20] + w->term[0][125];
-    w->S[140] = w->S[140] + half*w->term[1][125];
+    w->S[155] = w->S[155] + half*w->term[1][125];
     t->Phi[4][21] = t->Phi[4][21] + t->Phi[4][21] + w->term[0][126];
-    w->S[141] = w->S[141] + half*w->term[1][126];
+    w->S[156] = w->S[156] + half*w->term[1][126];
     t->Phi[4][22] = t->Phi[4][22] + t->Phi[4][22] + w->term[0][127];
-    w->S[142] = w->S[142] + half*w->term[1][127];
+    w->S[157] = w->S[157] + half*w->term[1][127];
     t->Phi[4][23] = t->Phi[4][23] + t->Phi[4][23] + w->term[0][128];
-    w->S[143] = w->S[143] + half*w->term[1][128];
+    w->S[158] = w->S[158] + half*w->term[1][128];
     t->Phi[4][24] = t->Phi[4][24] + t->Phi[4][24] + w->term[0][129];
-    w->S[144] = w->S[144] + half*w->term[1][129];
+    w->S[159] = w->S[159] + half*w->term[1][129];
     t->Phi[4][25] = t->Phi[4][25] + t->Phi[4][25] + w->term[0][130];
-    w->S[145] = w->S[145] + half*w->term[1][130];
+    w->S[160] = w->S[160] + half*w->term[1][130];
     t->Phi[4][26] = t->Phi[4][26] + t->Phi[4][26] + w->term[0][131];
-    w->S[146] = w->S[146] + half*w->term[1][131];
+    w->S[161] = w->S[161] + half*w->term[1][131];
     t->Phi[4][27] = t->Phi[4][27] + t->Phi[4][27] + w->term[0][132];
-    w->S[147] = w->S[147] + half*w->term[1][132];
+    w->S[162] = w->S[162] + half*w->term[1][132];
     t->Phi[4][28] = t->Phi[4][28] + t->Phi[4][28] + w->term[0][133];
-    w->S[148] = w->S[148] + half*w->term[1][133];
+    w->S[163] = w->S[163] + half*w->term[1][133];
     t->Phi[4][29] = t->Phi[4][29] + t->Phi[4][29] + w->term[0][134];
-    w->S[149] = w->S[149] + half*w->term[1][134];
+    w->S[164] = w->S[164] + half*w->term[1][134];
     t->Phi[5][0] = t->Phi[5][0] + t->Phi[5][0] + w->term[0][135];
-    w->S[150] = w->S[150] + half*w->term[1][135];
+    w->S[60] = w->S[60] + half*w->term[1][135];
     t->Phi[5][1] = t->Phi[5][1] + t->Phi[5][1] + w->term[0][136];
-    w->S[151] = w->S[151] + half*w->term[1][136];
+    w->S[61] = w->S[61] + half*w->term[1][136];
     t->Phi[5][2] = t->Phi[5][2] + t->Phi[5][2] + w->term[0][137];
-    w->S[152] = w->S[152] + half*w->term[1][137];
+    w->S[62] = w->S[62] + half*w->term[1][137];
     t->Phi[5][3] = t->Phi[5][3] + t->Phi[5][3] + w->term[0][138];
-    w->S[153] = w->S[153] + half*w->term[1][138];
+    w->S[63] = w->S[63] + half*w->term[1][138];
     t->Phi[5][4] = t->Phi[5][4] + t->Phi[5][4] + w->term[0][139];
-    w->S[154] = w->S[154] + half*w->term[1][139];
+    w->S[64] = w->S[64] + half*w->term[1][139];
     t->Phi[5][5] = t->Phi[5][5] + t->Phi[5][5] + w->term[0][140];
-    w->S[155] = w->S[155] + half*w->term[1][140];
+    w->S[65] = w->S[65] + half*w->term[1][140];
     t->Phi[5][7] = t->Phi[5][7] + t->Phi[5][7] + w->term[0][141];
-    w->S[157] = w->S[157] + half*w->term[1][141];
+    w->S[165] = w->S[165] + half*w->term[1][141];
     t->Phi[5][8] = t->Phi[5][8] + t->Phi[5][8] + w->term[0][142];
-    w->S[158] = w->S[158] + half*w->term[1][142];
+    w->S[166] = w->S[166] + half*w->term[1][142];
     t->Phi[5][9] = t->Phi[5][9] + t->Phi[5][9] + w->term[0][143];
-    w->S[159] = w->S[159] + half*w->term[1][143];
+    w->S[167] = w->S[167] + half*w->term[1][143];
     t->Phi[5][10] = t->Phi[5][10] + t->Phi[5][10] + w->term[0][144];
-    w->S[160] = w->S[160] + half*w->term[1][144];
+    w->S[66] = w->S[66] + half*w->term[1][144];
     t->Phi[5][11] = t->Phi[5][11] + t->Phi[5][11] + w->term[0][145];
-    w->S[161] = w->S[161] + half*w->term[1][145];
+    w->S[67] = w->S[67] + half*w->term[1][145];
     t->Phi[5][12] = t->Phi[5][12] + t->Phi[5][12] + w->term[0][146];
-    w->S[162] = w->S[162] + half*w->term[1][146];
+    w->S[68] = w->S[68] + half*w->term[1][146];
     t->Phi[5][13] = t->Phi[5][13] + t->Phi[5][13] + w->term[0][147];
-    w->S[163] = w->S[163] + half*w->term[1][147];
+    w->S[69] = w->S[69] + half*w->term[1][147];
     t->Phi[5][14] = t->Phi[5][14] + t->Phi[5][14] + w->term[0][148];
-    w->S[164] = w->S[164] + half*w->term[1][148];
+    w->S[70] = w->S[70] + half*w->term[1][148];
     t->Phi[5][15] = t->Phi[5][15] + t->Phi[5][15] + w->term[0][149];
-    w->S[165] = w->S[165] + half*w->term[1][149];
+    w->S[71] = w->S[71] + half*w->term[1][149];
     t->Phi[5][18] = t->Phi[5][18] + t->Phi[5][18] + w->term[0][150];
     w->S[168] = w->S[168] + half*w->term[1][150];
     t->Phi[5][19] = t->Phi[5][19] + t->Phi[5][19] + w->term[0][151];
@@ -3602,329 +3692,187 @@ NED_DOPPLER32_AUGMENTED_BLOCK void doubling(ned_doppler32_augmented_transition *
     t->Phi[5][29] = t->Phi[5][29] + t->Phi[5][29] + w->term[0][161];
     w->S[179] = w->S[179] + half*w->term[1][161];
     t->Phi[6][0] = t->Phi[6][0] + t->Phi[6][0] + w->term[0][162];
-    w->S[180] = w->S[180] + half*w->term[1][162];
+    w->S[72] = w->S[72] + half*w->term[1][162];
     t->Phi[6][1] = t->Phi[6][1] + t->Phi[6][1] + w->term[0][163];
-    w->S[181] = w->S[181] + half*w->term[1][163];
+    w->S[73] = w->S[73] + half*w->term[1][163];
     t->Phi[6][2] = t->Phi[6][2] + t->Phi[6][2] + w->term[0][164];
-    w->S[182] = w->S[182] + half*w->term[1][164];
+    w->S[74] = w->S[74] + half*w->term[1][164];
     t->Phi[6][3] = t->Phi[6][3] + t->Phi[6][3] + w->term[0][165];
-    w->S[183] = w->S[183] + half*w->term[1][165];
+    w->S[75] = w->S[75] + half*w->term[1][165];
     t->Phi[6][4] = t->Phi[6][4] + t->Phi[6][4] + w->term[0][166];
-    w->S[184] = w->S[184] + half*w->term[1][166];
+    w->S[76] = w->S[76] + half*w->term[1][166];
     t->Phi[6][5] = t->Phi[6][5] + t->Phi[6][5] + w->term[0][167];
-    w->S[185] = w->S[185] + half*w->term[1][167];
+    w->S[77] = w->S[77] + half*w->term[1][167];
     t->Phi[6][6] = t->Phi[6][6] + t->Phi[6][6] + w->term[0][168];
-    w->S[186] = w->S[186] + half*w->term[1][168];
+    w->S[180] = w->S[180] + half*w->term[1][168];
     t->Phi[6][7] = t->Phi[6][7] + t->Phi[6][7] + w->term[0][169];
-    w->S[187] = w->S[187] + half*w->term[1][169];
+    w->S[181] = w->S[181] + half*w->term[1][169];
     t->Phi[6][8] = t->Phi[6][8] + t->Phi[6][8] + w->term[0][170];
-    w->S[188] = w->S[188] + half*w->term[1][170];
+    w->S[182] = w->S[182] + half*w->term[1][170];
     t->Phi[6][9] = t->Phi[6][9] + t->Phi[6][9] + w->term[0][171];
-    w->S[189] = w->S[189] + half*w->term[1][171];
+    w->S[183] = w->S[183] + half*w->term[1][171];
     t->Phi[6][10] = t->Phi[6][10] + t->Phi[6][10] + w->term[0][172];
-    w->S[190] = w->S[190] + half*w->term[1][172];
+    w->S[78] = w->S[78] + half*w->term[1][172];
     t->Phi[6][11] = t->Phi[6][11] + t->Phi[6][11] + w->term[0][173];
-    w->S[191] = w->S[191] + half*w->term[1][173];
+    w->S[79] = w->S[79] + half*w->term[1][173];
     t->Phi[6][12] = t->Phi[6][12] + t->Phi[6][12] + w->term[0][174];
-    w->S[192] = w->S[192] + half*w->term[1][174];
+    w->S[80] = w->S[80] + half*w->term[1][174];
     t->Phi[6][13] = t->Phi[6][13] + t->Phi[6][13] + w->term[0][175];
-    w->S[193] = w->S[193] + half*w->term[1][175];
+    w->S[81] = w->S[81] + half*w->term[1][175];
     t->Phi[6][14] = t->Phi[6][14] + t->Phi[6][14] + w->term[0][176];
-    w->S[194] = w->S[194] + half*w->term[1][176];
+    w->S[82] = w->S[82] + half*w->term[1][176];
     t->Phi[6][15] = t->Phi[6][15] + t->Phi[6][15] + w->term[0][177];
-    w->S[195] = w->S[195] + half*w->term[1][177];
+    w->S[83] = w->S[83] + half*w->term[1][177];
     t->Phi[6][18] = t->Phi[6][18] + t->Phi[6][18] + w->term[0][178];
-    w->S[198] = w->S[198] + half*w->term[1][178];
+    w->S[184] = w->S[184] + half*w->term[1][178];
     t->Phi[6][19] = t->Phi[6][19] + t->Phi[6][19] + w->term[0][179];
-    w->S[199] = w->S[199] + half*w->term[1][179];
+    w->S[185] = w->S[185] + half*w->term[1][179];
     t->Phi[6][20] = t->Phi[6][20] + t->Phi[6][20] + w->term[0][180];
-    w->S[200] = w->S[200] + half*w->term[1][180];
+    w->S[186] = w->S[186] + half*w->term[1][180];
     t->Phi[6][21] = t->Phi[6][21] + t->Phi[6][21] + w->term[0][181];
-    w->S[201] = w->S[201] + half*w->term[1][181];
+    w->S[187] = w->S[187] + half*w->term[1][181];
     t->Phi[6][22] = t->Phi[6][22] + t->Phi[6][22] + w->term[0][182];
-    w->S[202] = w->S[202] + half*w->term[1][182];
+    w->S[188] = w->S[188] + half*w->term[1][182];
     t->Phi[6][23] = t->Phi[6][23] + t->Phi[6][23] + w->term[0][183];
-    w->S[203] = w->S[203] + half*w->term[1][183];
+    w->S[189] = w->S[189] + half*w->term[1][183];
     t->Phi[6][24] = t->Phi[6][24] + t->Phi[6][24] + w->term[0][184];
-    w->S[204] = w->S[204] + half*w->term[1][184];
+    w->S[190] = w->S[190] + half*w->term[1][184];
     t->Phi[6][25] = t->Phi[6][25] + t->Phi[6][25] + w->term[0][185];
-    w->S[205] = w->S[205] + half*w->term[1][185];
+    w->S[191] = w->S[191] + half*w->term[1][185];
     t->Phi[6][26] = t->Phi[6][26] + t->Phi[6][26] + w->term[0][186];
-    w->S[206] = w->S[206] + half*w->term[1][186];
+    w->S[192] = w->S[192] + half*w->term[1][186];
     t->Phi[6][27] = t->Phi[6][27] + t->Phi[6][27] + w->term[0][187];
-    w->S[207] = w->S[207] + half*w->term[1][187];
+    w->S[193] = w->S[193] + half*w->term[1][187];
     t->Phi[6][28] = t->Phi[6][28] + t->Phi[6][28] + w->term[0][188];
-    w->S[208] = w->S[208] + half*w->term[1][188];
+    w->S[194] = w->S[194] + half*w->term[1][188];
     t->Phi[6][29] = t->Phi[6][29] + t->Phi[6][29] + w->term[0][189];
-    w->S[209] = w->S[209] + half*w->term[1][189];
+    w->S[195] = w->S[195] + half*w->term[1][189];
     t->Phi[10][10] = t->Phi[10][10] + t->Phi[10][10] + w->term[0][190];
-    w->S[210] = w->S[210] + half*w->term[1][190];
+    w->S[84] = w->S[84] + half*w->term[1][190];
     t->Phi[11][11] = t->Phi[11][11] + t->Phi[11][11] + w->term[0][191];
-    w->S[211] = w->S[211] + half*w->term[1][191];
+    w->S[85] = w->S[85] + half*w->term[1][191];
     t->Phi[12][12] = t->Phi[12][12] + t->Phi[12][12] + w->term[0][192];
-    w->S[212] = w->S[212] + half*w->term[1][192];
+    w->S[86] = w->S[86] + half*w->term[1][192];
     t->Phi[13][13] = t->Phi[13][13] + t->Phi[13][13] + w->term[0][193];
-    w->S[213] = w->S[213] + half*w->term[1][193];
+    w->S[87] = w->S[87] + half*w->term[1][193];
     t->Phi[14][14] = t->Phi[14][14] + t->Phi[14][14] + w->term[0][194];
-    w->S[214] = w->S[214] + half*w->term[1][194];
+    w->S[88] = w->S[88] + half*w->term[1][194];
     t->Phi[15][15] = t->Phi[15][15] + t->Phi[15][15] + w->term[0][195];
-    w->S[215] = w->S[215] + half*w->term[1][195];
+    w->S[89] = w->S[89] + half*w->term[1][195];
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
-        transition_check(ned_doppler32_augmented_transition *restrict t)
+        transition_check(ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_discretize_scratch *restrict w)
 {
+    const ned_doppler32_augmented_scalar one = 1.0;
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = t->Phi[0][0]; t->Phi[0][0] = v; check += v - v;
-    v = t->Phi[0][1]; t->Phi[0][1] = v; check += v - v;
-    v = t->Phi[0][2]; t->Phi[0][2] = v; check += v - v;
-    v = t->Phi[0][3]; t->Phi[0][3] = v; check += v - v;
-    v = t->Phi[0][4]; t->Phi[0][4] = v; check += v - v;
-    v = t->Phi[0][5]; t->Phi[0][5] = v; check += v - v;
-    v = t->Phi[0][7]; t->Phi[0][7] = v; check += v - v;
-    v = t->Phi[0][8]; t->Phi[0][8] = v; check += v - v;
-    v = t->Phi[0][9]; t->Phi[0][9] = v; check += v - v;
-    v = t->Phi[0][10]; t->Phi[0][10] = v; check += v - v;
-    v = t->Phi[0][11]; t->Phi[0][11] = v; check += v - v;
-    v = t->Phi[0][12]; t->Phi[0][12] = v; check += v - v;
-    v = t->Phi[0][13]; t->Phi[0][13] = v; check += v - v;
-    v = t->Phi[0][14]; t->Phi[0][14] = v; check += v - v;
-    v = t->Phi[0][15]; t->Phi[0][15] = v; check += v - v;
-    v = t->Phi[0][18]; t->Phi[0][18] = v; check += v - v;
-    v = t->Phi[0][19]; t->Phi[0][19] = v; check += v - v;
-    v = t->Phi[0][20]; t->Phi[0][20] = v; check += v - v;
-    v = t->Phi[0][21]; t->Phi[0][21] = v; check += v - v;
-    v = t->Phi[0][22]; t->Phi[0][22] = v; check += v - v;
-    v = t->Phi[0][23]; t->Phi[0][23] = v; check += v - v;
-    v = t->Phi[0][24]; t->Phi[0][24] = v; check += v - v;
-    v = t->Phi[0][25]; t->Phi[0][25] = v; check += v - v;
-    v = t->Phi[0][26]; t->Phi[0][26] = v; check += v - v;
-    v = t->Phi[0][27]; t->Phi[0][27] = v; check += v - v;
-    v = t->Phi[0][28]; t->Phi[0][28] = v; check += v - v;
-    v = t->Phi[0][29]; t->Phi[0][29] = v; check += v - v;
-    v = t->Phi[1][0]; t->Phi[1][0] = v; check += v - v;
-    v = t->Phi[1][1]; t->Phi[1][1] = v; check += v - v;
-    v = t->Phi[1][2]; t->Phi[1][2] = v; check += v - v;
-    v = t->Phi[1][3]; t->Phi[1][3] = v; check += v - v;
-    v = t->Phi[1][4]; t->Phi[1][4] = v; check += v - v;
-    v = t->Phi[1][5]; t->Phi[1][5] = v; check += v - v;
-    v = t->Phi[1][7]; t->Phi[1][7] = v; check += v - v;
-    v = t->Phi[1][8]; t->Phi[1][8] = v; check += v - v;
-    v = t->Phi[1][9]; t->Phi[1][9] = v; check += v - v;
-    v = t->Phi[1][10]; t->Phi[1][10] = v; check += v - v;
-    v = t->Phi[1][11]; t->Phi[1][11] = v; check += v - v;
-    v = t->Phi[1][12]; t->Phi[1][12] = v; check += v - v;
-    v = t->Phi[1][13]; t->Phi[1][13] = v; check += v - v;
-    v = t->Phi[1][14]; t->Phi[1][14] = v; check += v - v;
-    v = t->Phi[1][15]; t->Phi[1][15] = v; check += v - v;
-    v = t->Phi[1][18]; t->Phi[1][18] = v; check += v - v;
-    v = t->Phi[1][19]; t->Phi[1][19] = v; check += v - v;
-    v = t->Phi[1][20]; t->Phi[1][20] = v; check += v - v;
-    v = t->Phi[1][21]; t->Phi[1][21] = v; check += v - v;
-    v = t->Phi[1][22]; t->Phi[1][22] = v; check += v - v;
-    v = t->Phi[1][23]; t->Phi[1][23] = v; check += v - v;
-    v = t->Phi[1][24]; t->Phi[1][24] = v; check += v - v;
-    v = t->Phi[1][25]; t->Phi[1][25] = v; check += v - v;
-    v = t->Phi[1][26]; t->Phi[1][26] = v; check += v - v;
-    v = t->Phi[1][27]; t->Phi[1][27] = v; check += v - v;
-    v = t->Phi[1][28]; t->Phi[1][28] = v; check += v - v;
-    v = t->Phi[1][29]; t->Phi[1][29] = v; check += v - v;
-    v = t->Phi[2][0]; t->Phi[2][0] = v; check += v - v;
-    v = t->Phi[2][1]; t->Phi[2][1] = v; check += v - v;
-    v = t->Phi[2][2]; t->Phi[2][2] = v; check += v - v;
-    v = t->Phi[2][3]; t->Phi[2][3] = v; check += v - v;
-    v = t->Phi[2][4]; t->Phi[2][4] = v; check += v - v;
-    v = t->Phi[2][5]; t->Phi[2][5] = v; check += v - v;
-    v = t->Phi[2][7]; t->Phi[2][7] = v; check += v - v;
-    v = t->Phi[2][8]; t->Phi[2][8] = v; check += v - v;
-    v = t->Phi[2][9]; t->Phi[2][9] = v; check += v - v;
-    v = t->Phi[2][10]; t->Phi[2][10] = v; check += v - v;
-    v = t->Phi[2][11]; t->Phi[2][11] = v; check += v - v;
-    v = t->Phi[2][12]; t->Phi[2][12] = v; check += v - v;
-    v = t->Phi[2][13]; t->Phi[2][13] = v; check += v - v;
-    v = t->Phi[2][14]; t->Phi[2][14] = v; check += v - v;
-    v = t->Phi[2][15]; t->Phi[2][15] = v; check += v - v;
-    v = t->Phi[2][18]; t->Phi[2][18] = v; check += v - v;
-    v = t->Phi[2][19]; t->Phi[2][19] = v; check += v - v;
-    v = t->Phi[2][20]; t->Phi[2][20] = v; check += v - v;
-    v = t->Phi[2][21]; t->Phi[2][21] = v; check += v - v;
-    v = t->Phi[2][22]; t->Phi[2][22] = v; check += v - v;
-    v = t->Phi[2][23]; t->Phi[2][23] = v; check += v - v;
-    v = t->Phi[2][24]; t->Phi[2][24] = v; check += v - v;
-    v = t->Phi[2][25]; t->Phi[2][25] = v; check += v - v;
-    v = t->Phi[2][26]; t->Phi[2][26] = v; check += v - v;
-    v = t->Phi[2][27]; t->Phi[2][27] = v; check += v - v;
-    v = t->Phi[2][28]; t->Phi[2][28] = v; check += v - v;
-    v = t->Phi[2][29]; t->Phi[2][29] = v; check += v - v;
-    v = t->Phi[3][0]; t->Phi[3][0] = v; check += v - v;
-    v = t->Phi[3][1]; t->Phi[3][1] = v; check += v - v;
-    v = t->Phi[3][2]; t->Phi[3][2] = v; check += v - v;
-    v = t->Phi[3][3]; t->Phi[3][3] = v; check += v - v;
-    v = t->Phi[3][4]; t->Phi[3][4] = v; check += v - v;
-    v = t->Phi[3][5]; t->Phi[3][5] = v; check += v - v;
-    v = t->Phi[3][7]; t->Phi[3][7] = v; check += v - v;
-    v = t->Phi[3][8]; t->Phi[3][8] = v; check += v - v;
-    v = t->Phi[3][9]; t->Phi[3][9] = v; check += v - v;
-    v = t->Phi[3][10]; t->Phi[3][10] = v; check += v - v;
-    v = t->Phi[3][11]; t->Phi[3][11] = v; check += v - v;
-    v = t->Phi[3][12]; t->Phi[3][12] = v; check += v - v;
-    v = t->Phi[3][13]; t->Phi[3][13] = v; check += v - v;
-    v = t->Phi[3][14]; t->Phi[3][14] = v; check += v - v;
-    v = t->Phi[3][15]; t->Phi[3][15] = v; check += v - v;
-    v = t->Phi[3][18]; t->Phi[3][18] = v; check += v - v;
-    v = t->Phi[3][19]; t->Phi[3][19] = v; check += v - v;
-    v = t->Phi[3][20]; t->Phi[3][20] = v; check += v - v;
-    v = t->Phi[3][21]; t->Phi[3][21] = v; check += v - v;
-    v = t->Phi[3][22]; t->Phi[3][22] = v; check += v - v;
-    v = t->Phi[3][23]; t->Phi[3][23] = v; check += v - v;
-    v = t->Phi[3][24]; t->Phi[3][24] = v; check += v - v;
-    v = t->Phi[3][25]; t->Phi[3][25] = v; check += v - v;
-    v = t->Phi[3][26]; t->Phi[3][26] = v; check += v - v;
-    v = t->Phi[3][27]; t->Phi[3][27] = v; check += v - v;
-    v = t->Phi[3][28]; t->Phi[3][28] = v; check += v - v;
-    v = t->Phi[3][29]; t->Phi[3][29] = v; check += v - v;
-    v = t->Phi[4][0]; t->Phi[4][0] = v; check += v - v;
-    v = t->Phi[4][1]; t->Phi[4][1] = v; check += v - v;
-    v = t->Phi[4][2]; t->Phi[4][2] = v; check += v - v;
-    v = t->Phi[4][3]; t->Phi[4][3] = v; check += v - v;
-    v = t->Phi[4][4]; t->Phi[4][4] = v; check += v - v;
-    v = t->Phi[4][5]; t->Phi[4][5] = v; check += v - v;
-    v = t->Phi[4][7]; t->Phi[4][7] = v; check += v - v;
-    v = t->Phi[4][8]; t->Phi[4][8] = v; check += v - v;
-    v = t->Phi[4][9]; t->Phi[4][9] = v; check += v - v;
-    v = t->Phi[4][10]; t->Phi[4][10] = v; check += v - v;
-    v = t->Phi[4][11]; t->Phi[4][11] = v; check += v - v;
-    v = t->Phi[4][12]; t->Phi[4][12] = v; check += v - v;
-    v = t->Phi[4][13]; t->Phi[4][13] = v; check += v - v;
-    v = t->Phi[4][14]; t->Phi[4][14] = v; check += v - v;
-    v = t->Phi[4][15]; t->Phi[4][15] = v; check += v - v;
-    v = t->Phi[4][18]; t->Phi[4][18] = v; check += v - v;
-    v = t->Phi[4][19]; t->Phi[4][19] = v; check += v - v;
-    v = t->Phi[4][20]; t->Phi[4][20] = v; check += v - v;
-    v = t->Phi[4][21]; t->Phi[4][21] = v; check += v - v;
-    v = t->Phi[4][22]; t->Phi[4][22] = v; check += v - v;
-    v = t->Phi[4][23]; t->Phi[4][23] = v; check += v - v;
-    v = t->Phi[4][24]; t->Phi[4][24] = v; check += v - v;
-    v = t->Phi[4][25]; t->Phi[4][25] = v; check += v - v;
-    v = t->Phi[4][26]; t->Phi[4][26] = v; check += v - v;
-    v = t->Phi[4][27]; t->Phi[4][27] = v; check += v - v;
-    v = t->Phi[4][28]; t->Phi[4][28] = v; check += v - v;
-    v = t->Phi[4][29]; t->Phi[4][29] = v; check += v - v;
-    v = t->Phi[5][0]; t->Phi[5][0] = v; check += v - v;
-    v = t->Phi[5][1]; t->Phi[5][1] = v; check += v - v;
-    v = t->Phi[5][2]; t->Phi[5][2] = v; check += v - v;
-    v = t->Phi[5][3]; t->Phi[5][3] = v; check += v - v;
-    v = t->Phi[5][4]; t->Phi[5][4] = v; check += v - v;
-    v = t->Phi[5][5]; t->Phi[5][5] = v; check += v - v;
-    v = t->Phi[5][7]; t->Phi[5][7] = v; check += v - v;
-    v = t->Phi[5][8]; t->Phi[5][8] = v; check += v - v;
-    v = t->Phi[5][9]; t->Phi[5][9] = v; check += v - v;
-    v = t->Phi[5][10]; t->Phi[5][10] = v; check += v - v;
-    v = t->Phi[5][11]; t->Phi[5][11] = v; check += v - v;
-    v = t->Phi[5][12]; t->Phi[5][12] = v; check += v - v;
-    v = t->Phi[5][13]; t->Phi[5][13] = v; check += v - v;
-    v = t->Phi[5][14]; t->Phi[5][14] = v; check += v - v;
-    v = t->Phi[5][15]; t->Phi[5][15] = v; check += v - v;
-    v = t->Phi[5][18]; t->Phi[5][18] = v; check += v - v;
-    v = t->Phi[5][19]; t->Phi[5][19] = v; check += v - v;
-    v = t->Phi[5][20]; t->Phi[5][20] = v; check += v - v;
-    v = t->Phi[5][21]; t->Phi[5][21] = v; check += v - v;
-    v = t->Phi[5][22]; t->Phi[5][22] = v; check += v - v;
-    v = t->Phi[5][23]; t->Phi[5][23] = v; check += v - v;
-    v = t->Phi[5][24]; t->Phi[5][24] = v; check += v - v;
-    v = t->Phi[5][25]; t->Phi[5][25] = v; check += v - v;
-    v = t->Phi[5][26]; t->Phi[5][26] = v; check += v - v;
-    v = t->Phi[5][27]; t->Phi[5][27] = v; check += v - v;
-    v = t->Phi[5][28]; t->Phi[5][28] = v; check += v - v;
-    v = t->Phi[5][29]; t->Phi[5][29] = v; check += v - v;
-    v = t->Phi[6][0]; t->Phi[6][0] = v; check += v - v;
-    v = t->Phi[6][1]; t->Phi[6][1] = v; check += v - v;
-    v = t->Phi[6][2]; t->Phi[6][2] = v; check += v - v;
-    v = t->Phi[6][3]; t->Phi[6][3] = v; check += v - v;
-    v = t->Phi[6][4]; t->Phi[6][4] = v; check += v - v;
-    v = t->Phi[6][5]; t->Phi[6][5] = v; check += v - v;
-    v = t->Phi[6][6]; t->Phi[6][6] = v; check += v - v;
-    v = t->Phi[6][7]; t->Phi[6][7] = v; check += v - v;
-    v = t->Phi[6][8]; t->Phi[6][8] = v; check += v - v;
-    v = t->Phi[6][9]; t->Phi[6][9] = v; check += v - v;
-    v = t->Phi[6][10]; t->Phi[6][10] = v; check += v - v;
-    v = t->Phi[6][11]; t->Phi[6][11] = v; check += v - v;
-    v = t->Phi[6][12]; t->Phi[6][12] = v; check += v - v;
-    v = t->Phi[6][13]; t->Phi[6][13] = v; check += v - v;
-    v = t->Phi[6][14]; t->Phi[6][14] = v; check += v - v;
-    v = t->Phi[6][15]; t->Phi[6][15] = v; check += v - v;
-    v = t->Phi[6][18]; t->Phi[6][18] = v; check += v - v;
-    v = t->Phi[6][19]; t->Phi[6][19] = v; check += v - v;
-    v = t->Phi[6][20]; t->Phi[6][20] = v; check += v - v;
-    v = t->Phi[6][21]; t->Phi[6][21] = v; check += v - v;
-    v = t->Phi[6][22]; t->Phi[6][22] = v; check += v - v;
-    v = t->Phi[6][23]; t->Phi[6][23] = v; check += v - v;
-    v = t->Phi[6][24]; t->Phi[6][24] = v; check += v - v;
-    v = t->Phi[6][25]; t->Phi[6][25] = v; check += v - v;
-    v = t->Phi[6][26]; t->Phi[6][26] = v; check += v - v;
-    v = t->Phi[6][27]; t->Phi[6][27] = v; check += v - v;
-    v = t->Phi[6][28]; t->Phi[6][28] = v; check += v - v;
-    v = t->Phi[6][29]; t->Phi[6][29] = v; check += v - v;
-    v = t->Phi[10][10]; t->Phi[10][10] = v; check += v - v;
-    v = t->Phi[11][11]; t->Phi[11][11] = v; check += v - v;
-    v = t->Phi[12][12]; t->Phi[12][12] = v; check += v - v;
-    v = t->Phi[13][13]; t->Phi[13][13] = v; check += v - v;
-    v = t->Phi[14][14]; t->Phi[14][14] = v; check += v - v;
-    v = t->Phi[15][15]; t->Phi[15][15] = v; check += v - v;
+    t->Phi[0][0] = t->Phi[0][0] + one;
+    t->Phi[1][1] = t->Phi[1][1] + one;
+    t->Phi[2][2] = t->Phi[2][2] + one;
+    t->Phi[3][3] = t->Phi[3][3] + one;
+    t->Phi[4][4] = t->Phi[4][4] + one;
+    t->Phi[5][5] = t->Phi[5][5] + one;
+    t->Phi[6][6] = t->Phi[6][6] + one;
+    t->Phi[10][10] = t->Phi[10][10] + one;
+    t->Phi[11][11] = t->Phi[11][11] + one;
+    t->Phi[12][12] = t->Phi[12][12] + one;
+    t->Phi[13][13] = t->Phi[13][13] + one;
+    t->Phi[14][14] = t->Phi[14][14] + one;
+    t->Phi[15][15] = t->Phi[15][15] + one;
+    v = t->Phi[0][0] + t->Phi[0][1] + t->Phi[0][2] + t->Phi[0][3] + t->Phi[0][4] + t->Phi[0][5] +
+            t->Phi[0][7] + t->Phi[0][8] + t->Phi[0][9] + t->Phi[0][10] + t->Phi[0][11] +
+            t->Phi[0][12] + t->Phi[0][13] + t->Phi[0][14] + t->Phi[0][15] + t->Phi[0][18] +
+            t->Phi[0][19] + t->Phi[0][20] + t->Phi[0][21] + t->Phi[0][22] + t->Phi[0][23] +
+            t->Phi[0][24] + t->Phi[0][25] + t->Phi[0][26] + t->Phi[0][27] + t->Phi[0][28] +
+            t->Phi[0][29] + t->Phi[1][0] + t->Phi[1][1] + t->Phi[1][2] + t->Phi[1][3] + t->Phi[1][4]
+            + t->Phi[1][5] + t->Phi[1][7] + t->Phi[1][8] + t->Phi[1][9] + t->Phi[1][10] +
+            t->Phi[1][11] + t->Phi[1][12] + t->Phi[1][13] + t->Phi[1][14] + t->Phi[1][15] +
+            t->Phi[1][18] + t->Phi[1][19] + t->Phi[1][20] + t->Phi[1][21] + t->Phi[1][22] +
+            t->Phi[1][23] + t->Phi[1][24] + t->Phi[1][25] + t->Phi[1][26] + t->Phi[1][27] +
+            t->Phi[1][28] + t->Phi[1][29] + t->Phi[2][0] + t->Phi[2][1] + t->Phi[2][2] +
+            t->Phi[2][3] + t->Phi[2][4] + t->Phi[2][5] + t->Phi[2][7] + t->Phi[2][8] + t->Phi[2][9]
+            + t->Phi[2][10] + t->Phi[2][11] + t->Phi[2][12] + t->Phi[2][13] + t->Phi[2][14] +
+            t->Phi[2][15] + t->Phi[2][18] + t->Phi[2][19] + t->Phi[2][20] + t->Phi[2][21] +
+            t->Phi[2][22] + t->Phi[2][23] + t->Phi[2][24] + t->Phi[2][25] + t->Phi[2][26] +
+            t->Phi[2][27] + t->Phi[2][28] + t->Phi[2][29] + t->Phi[3][0] + t->Phi[3][1] +
+            t->Phi[3][2] + t->Phi[3][3] + t->Phi[3][4] + t->Phi[3][5] + t->Phi[3][7] + t->Phi[3][8]
+            + t->Phi[3][9] + t->Phi[3][10] + t->Phi[3][11] + t->Phi[3][12] + t->Phi[3][13] +
+            t->Phi[3][14] + t->Phi[3][15] + t->Phi[3][18] + t->Phi[3][19] + t->Phi[3][20] +
+            t->Phi[3][21] + t->Phi[3][22] + t->Phi[3][23] + t->Phi[3][24] + t->Phi[3][25] +
+            t->Phi[3][26] + t->Phi[3][27] + t->Phi[3][28] + t->Phi[3][29] + t->Phi[4][0] +
+            t->Phi[4][1] + t->Phi[4][2] + t->Phi[4][3] + t->Phi[4][4] + t->Phi[4][5] + t->Phi[4][7]
+            + t->Phi[4][8] + t->Phi[4][9] + t->Phi[4][10] + t->Phi[4][11] + t->Phi[4][12] +
+            t->Phi[4][13] + t->Phi[4][14] + t->Phi[4][15] + t->Phi[4][18] + t->Phi[4][19] +
+            t->Phi[4][20] + t->Phi[4][21] + t->Phi[4][22] + t->Phi[4][23] + t->Phi[4][24] +
+            t->Phi[4][25] + t->Phi[4][26] + t->Phi[4][27] + t->Phi[4][28] + t->Phi[4][29] +
+            t->Phi[5][0] + t->Phi[5][1] + t->Phi[5][2] + t->Phi[5][3] + t->Phi[5][4] + t->Phi[5][5]
+            + t->Phi[5][7] + t->Phi[5][8] + t->Phi[5][9] + t->Phi[5][10] + t->Phi[5][11] +
+            t->Phi[5][12] + t->Phi[5][13] + t->Phi[5][14] + t->Phi[5][15] + t->Phi[5][18] +
+            t->Phi[5][19] + t->Phi[5][20] + t->Phi[5][21] + t->Phi[5][22] + t->Phi[5][23] +
+            t->Phi[5][24] + t->Phi[5][25] + t->Phi[5][26] + t->Phi[5][27] + t->Phi[5][28] +
+            t->Phi[5][29] + t->Phi[6][0] + t->Phi[6][1] + t->Phi[6][2] + t->Phi[6][3] + t->Phi[6][4]
+            + t->Phi[6][5] + t->Phi[6][6] + t->Phi[6][7] + t->Phi[6][8] + t->Phi[6][9] +
+            t->Phi[6][10] + t->Phi[6][11] + t->Phi[6][12] + t->Phi[6][13] + t->Phi[6][14] +
+            t->Phi[6][15] + t->Phi[6][18] + t->Phi[6][19] + t->Phi[6][20] + t->Phi[6][21] +
+            t->Phi[6][22] + t->Phi[6][23] + t->Phi[6][24] + t->Phi[6][25] + t->Phi[6][26] +
+            t->Phi[6][27] + t->Phi[6][28] + t->Phi[6][29] + t->Phi[10][10] + t->Phi[11][11] +
+            t->Phi[12][12] + t->Phi[13][13] + t->Phi[14][14] + t->Phi[15][15]; w->term[0][0] = v;
+            check += v - v;
     return check;
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void noise_input(const ned_doppler32_augmented_matrices *restrict m,
         ned_doppler32_augmented_discretize_scratch *restrict w)
 {
-    w->term[0][0] = w->S[10]*m->G[0];
-    w->term[0][1] = w->S[11]*m->G[1];
-    w->term[0][2] = w->S[12]*m->G[2];
-    w->term[0][3] = w->S[13]*m->G[3];
-    w->term[0][4] = w->S[14]*m->G[4];
-    w->term[0][5] = w->S[15]*m->G[5];
-    w->term[0][6] = w->S[40]*m->G[0];
-    w->term[0][7] = w->S[41]*m->G[1];
-    w->term[0][8] = w->S[42]*m->G[2];
-    w->term[0][9] = w->S[43]*m->G[3];
-    w->term[0][10] = w->S[44]*m->G[4];
-    w->term[0][11] = w->S[45]*m->G[5];
-    w->term[0][12] = w->S[70]*m->G[0];
-    w->term[0][13] = w->S[71]*m->G[1];
-    w->term[0][14] = w->S[72]*m->G[2];
-    w->term[0][15] = w->S[73]*m->G[3];
-    w->term[0][16] = w->S[74]*m->G[4];
-    w->term[0][17] = w->S[75]*m->G[5];
-    w->term[0][18] = w->S[100]*m->G[0];
-    w->term[0][19] = w->S[101]*m->G[1];
-    w->term[0][20] = w->S[102]*m->G[2];
-    w->term[0][21] = w->S[103]*m->G[3];
-    w->term[0][22] = w->S[104]*m->G[4];
-    w->term[0][23] = w->S[105]*m->G[5];
-    w->term[0][24] = w->S[130]*m->G[0];
-    w->term[0][25] = w->S[131]*m->G[1];
-    w->term[0][26] = w->S[132]*m->G[2];
-    w->term[0][27] = w->S[133]*m->G[3];
-    w->term[0][28] = w->S[134]*m->G[4];
-    w->term[0][29] = w->S[135]*m->G[5];
-    w->term[0][30] = w->S[160]*m->G[0];
-    w->term[0][31] = w->S[161]*m->G[1];
-    w->term[0][32] = w->S[162]*m->G[2];
-    w->term[0][33] = w->S[163]*m->G[3];
-    w->term[0][34] = w->S[164]*m->G[4];
-    w->term[0][35] = w->S[165]*m->G[5];
-    w->term[0][36] = w->S[190]*m->G[0];
-    w->term[0][37] = w->S[191]*m->G[1];
-    w->term[0][38] = w->S[192]*m->G[2];
-    w->term[0][39] = w->S[193]*m->G[3];
-    w->term[0][40] = w->S[194]*m->G[4];
-    w->term[0][41] = w->S[195]*m->G[5];
-    w->term[0][42] = w->S[210]*m->G[0];
-    w->term[0][43] = w->S[211]*m->G[1];
-    w->term[0][44] = w->S[212]*m->G[2];
-    w->term[0][45] = w->S[213]*m->G[3];
-    w->term[0][46] = w->S[214]*m->G[4];
-    w->term[0][47] = w->S[215]*m->G[5];
+    w->term[0][0] = w->S[6]*m->G[0];
+    w->term[0][1] = w->S[7]*m->G[1];
+    w->term[0][2] = w->S[8]*m->G[2];
+    w->term[0][3] = w->S[9]*m->G[3];
+    w->term[0][4] = w->S[10]*m->G[4];
+    w->term[0][5] = w->S[11]*m->G[5];
+    w->term[0][6] = w->S[18]*m->G[0];
+    w->term[0][7] = w->S[19]*m->G[1];
+    w->term[0][8] = w->S[20]*m->G[2];
+    w->term[0][9] = w->S[21]*m->G[3];
+    w->term[0][10] = w->S[22]*m->G[4];
+    w->term[0][11] = w->S[23]*m->G[5];
+    w->term[0][12] = w->S[30]*m->G[0];
+    w->term[0][13] = w->S[31]*m->G[1];
+    w->term[0][14] = w->S[32]*m->G[2];
+    w->term[0][15] = w->S[33]*m->G[3];
+    w->term[0][16] = w->S[34]*m->G[4];
+    w->term[0][17] = w->S[35]*m->G[5];
+    w->term[0][18] = w->S[42]*m->G[0];
+    w->term[0][19] = w->S[43]*m->G[1];
+    w->term[0][20] = w->S[44]*m->G[2];
+    w->term[0][21] = w->S[45]*m->G[3];
+    w->term[0][22] = w->S[46]*m->G[4];
+    w->term[0][23] = w->S[47]*m->G[5];
+    w->term[0][24] = w->S[54]*m->G[0];
+    w->term[0][25] = w->S[55]*m->G[1];
+    w->term[0][26] = w->S[56]*m->G[2];
+    w->term[0][27] = w->S[57]*m->G[3];
+    w->term[0][28] = w->S[58]*m->G[4];
+    w->term[0][29] = w->S[59]*m->G[5];
+    w->term[0][30] = w->S[66]*m->G[0];
+    w->term[0][31] = w->S[67]*m->G[1];
+    w->term[0][32] = w->S[68]*m->G[2];
+    w->term[0][33] = w->S[69]*m->G[3];
+    w->term[0][34] = w->S[70]*m->G[4];
+    w->term[0][35] = w->S[71]*m->G[5];
+    w->term[0][36] = w->S[78]*m->G[0];
+    w->term[0][37] = w->S[79]*m->G[1];
+    w->term[0][38] = w->S[80]*m->G[2];
+    w->term[0][39] = w->S[81]*m->G[3];
+    w->term[0][40] = w->S[82]*m->G[4];
+    w->term[0][41] = w->S[83]*m->G[5];
+    w->term[0][42] = w->S[84]*m->G[0];
+    w->term[0][43] = w->S[85]*m->G[1];
+    w->term[0][44] = w->S[86]*m->G[2];
+    w->term[0][45] = w->S[87]*m->G[3];
+    w->term[0][46] = w->S[88]*m->G[4];
+    w->term[0][47] = w->S[89]*m->G[5];
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar process_noise(const
@@ -3933,1086 +3881,659 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar process_noise(const
         ned_doppler32_augmented_scalar T)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    w->term[1][0] = w->term[0][0]*T*m->q[0];
-    w->term[1][1] = w->term[0][1]*T*m->q[1];
-    w->term[1][2] = w->term[0][2]*T*m->q[2];
-    w->term[1][3] = w->term[0][3]*T*m->q[3];
-    w->term[1][4] = w->term[0][4]*T*m->q[4];
-    w->term[1][5] = w->term[0][5]*T*m->q[5];
-    w->term[1][6] = w->term[0][6]*T*m->q[0];
-    w->term[1][7] = w->term[0][7]*T*m->q[1];
-    w->term[1][8] = w->term[0][8]*T*m->q[2];
-    w->term[1][9] = w->term[0][9]*T*m->q[3];
-    w->term[1][10] = w->term[0][10]*T*m->q[4];
-    w->term[1][11] = w->term[0][11]*T*m->q[5];
-    w->term[1][12] = w->term[0][12]*T*m->q[0];
-    w->term[1][13] = w->term[0][13]*T*m->q[1];
-    w->term[1][14] = w->term[0][14]*T*m->q[2];
-    w->term[1][15] = w->term[0][15]*T*m->q[3];
-    w->term[1][16] = w->term[0][16]*T*m->q[4];
-    w->term[1][17] = w->term[0][17]*T*m->q[5];
-    w->term[1][18] = w->term[0][18]*T*m->q[0];
-    w->term[1][19] = w->term[0][19]*T*m->q[1];
-    w->term[1][20] = w->term[0][20]*T*m->q[2];
-    w->term[1][21] = w->term[0][21]*T*m->q[3];
-    w->term[1][22] = w->term[0][22]*T*m->q[4];
-    w->term[1][23] = w->term[0][23]*T*m->q[5];
-    w->term[1][24] = w->term[0][24]*T*m->q[0];
-    w->term[1][25] = w->term[0][25]*T*m->q[1];
-    w->term[1][26] = w->term[0][26]*T*m->q[2];
-    w->term[1][27] = w->term[0][27]*T*m->q[3];
-    w->term[1][28] = w->term[0][28]*T*m->q[4];
-    w->term[1][29] = w->term[0][29]*T*m->q[5];
-    w->term[1][30] = w->term[0][30]*T*m->q[0];
-    w->term[1][31] = w->term[0][31]*T*m->q[1];
-    w->term[1][32] = w->term[0][32]*T*m->q[2];
-    w->term[1][33] = w->term[0][33]*T*m->q[3];
-    w->term[1][34] = w->term[0][34]*T*m->q[4];
-    w->term[1][35] = w->term[0][35]*T*m->q[5];
-    w->term[1][36] = w->term[0][36]*T*m->q[0];
-    w->term[1][37] = w->term[0][37]*T*m->q[1];
-    w->term[1][38] = w->term[0][38]*T*m->q[2];
-    w->term[1][39] = w->term[0][39]*T*m->q[3];
-    w->term[1][40] = w->term[0][40]*T*m->q[4];
-    w->term[1][41] = w->term[0][41]*T*m->q[5];
-    w->term[1][42] = w->term[0][42]*T*m->q[0];
-    w->term[1][43] = w->term[0][43]*T*m->q[1];
-    w->term[1][44] = w->term[0][44]*T*m->q[2];
-    w->term[1][45] = w->term[0][45]*T*m->q[3];
-    w->term[1][46] = w->term[0][46]*T*m->q[4];
-    w->term[1][47] = w->term[0][47]*T*m->q[5];
+    w->term[1][48] = T*m->q[0];
+    w->term[1][49] = T*m->q[1];
+    w->term[1][50] = T*m->q[2];
+    w->term[1][51] = T*m->q[3];
+    w->term[1][52] = T*m->q[4];
+    w->term[1][53] = T*m->q[5];
+    w->term[1][0] = w->term[0][0]*w->term[1][48];
+    w->term[1][1] = w->term[0][1]*w->term[1][49];
+    w->term[1][2] = w->term[0][2]*w->term[1][50];
+    w->term[1][3] = w->term[0][3]*w->term[1][51];
+    w->term[1][4] = w->term[0][4]*w->term[1][52];
+    w->term[1][5] = w->term[0][5]*w->term[1][53];
+    w->term[1][6] = w->term[0][6]*w->term[1][48];
+    w->term[1][7] = w->term[0][7]*w->term[1][49];
+    w->term[1][8] = w->term[0][8]*w->term[1][50];
+    w->term[1][9] = w->term[0][9]*w->term[1][51];
+    w->term[1][10] = w->term[0][10]*w->term[1][52];
+    w->term[1][11] = w->term[0][11]*w->term[1][53];
+    w->term[1][12] = w->term[0][12]*w->term[1][48];
+    w->term[1][13] = w->term[0][13]*w->term[1][49];
+    w->term[1][14] = w->term[0][14]*w->term[1][50];
+    w->term[1][15] = w->term[0][15]*w->term[1][51];
+    w->term[1][16] = w->term[0][16]*w->term[1][52];
+    w->term[1][17] = w->term[0][17]*w->term[1][53];
+    w->term[1][18] = w->term[0][18]*w->term[1][48];
+    w->term[1][19] = w->term[0][19]*w->term[1][49];
+    w->term[1][20] = w->term[0][20]*w->term[1][50];
+    w->term[1][21] = w->term[0][21]*w->term[1][51];
+    w->term[1][22] = w->term[0][22]*w->term[1][52];
+    w->term[1][23] = w->term[0][23]*w->term[1][53];
+    w->term[1][24] = w->term[0][24]*w->term[1][48];
+    w->term[1][25] = w->term[0][25]*w->term[1][49];
+    w->term[1][26] = w->term[0][26]*w->term[1][50];
+    w->term[1][27] = w->term[0][27]*w->term[1][51];
+    w->term[1][28] = w->term[0][28]*w->term[1][52];
+    w->term[1][29] = w->term[0][29]*w->term[1][53];
+    w->term[1][30] = w->term[0][30]*w->term[1][48];
+    w->term[1][31] = w->term[0][31]*w->term[1][49];
+    w->term[1][32] = w->term[0][32]*w->term[1][50];
+    w->term[1][33] = w->term[0][33]*w->term[1][51];
+    w->term[1][34] = w->term[0][34]*w->term[1][52];
+    w->term[1][35] = w->term[0][35]*w->term[1][53];
+    w->term[1][36] = w->term[0][36]*w->term[1][48];
+    w->term[1][37] = w->term[0][37]*w->term[1][49];
+    w->term[1][38] = w->term[0][38]*w->term[1][50];
+    w->term[1][39] = w->term[0][39]*w->term[1][51];
+    w->term[1][40] = w->term[0][40]*w->term[1][52];
+    w->term[1][41] = w->term[0][41]*w->term[1][53];
+    w->term[1][42] = w->term[0][42]*w->term[1][48];
+    w->term[1][43] = w->term[0][43]*w->term[1][49];
+    w->term[1][44] = w->term[0][44]*w->term[1][50];
+    w->term[1][45] = w->term[0][45]*w->term[1][51];
+    w->term[1][46] = w->term[0][46]*w->term[1][52];
+    w->term[1][47] = w->term[0][47]*w->term[1][53];
     v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
             w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0][0] = v; check += v - v;
+            t->Qd[0] = v; check += v - v;
     v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
             w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[0][1] = v; t->Qd[1][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v - v;
     v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
             w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[0][2] = v; t->Qd[2][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v - v;
     v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
             w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[0][3] = v; t->Qd[3][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v - v;
     v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
             w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[0][4] = v; t->Qd[4][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v - v;
     v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
             w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[0][5] = v; t->Qd[5][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v - v;
     v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
             w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
-            w->term[1][5]*w->term[0][41]; t->Qd[0][6] = v; t->Qd[6][0] = v; check += v - v;
-    v = w->term[1][0]*w->term[0][42]; t->Qd[0][10] = v; t->Qd[10][0] = v; check += v - v;
-    v = w->term[1][1]*w->term[0][43]; t->Qd[0][11] = v; t->Qd[11][0] = v; check += v - v;
-    v = w->term[1][2]*w->term[0][44]; t->Qd[0][12] = v; t->Qd[12][0] = v; check += v - v;
-    v = w->term[1][3]*w->term[0][45]; t->Qd[0][13] = v; t->Qd[13][0] = v; check += v - v;
-    v = w->term[1][4]*w->term[0][46]; t->Qd[0][14] = v; t->Qd[14][0] = v; check += v - v;
-    v = w->term[1][5]*w->term[0][47]; t->Qd[0][15] = v; t->Qd[15][0] = v; check += v - v;
+            w->term[1][5]*w->term[0][41]; t->Qd[6] = v; check += v - v;
+    v = w->term[1][0]*w->term[0][42]; t->Qd[10] = v; check += v - v;
+    v = w->term[1][1]*w->term[0][43]; t->Qd[11] = v; check += v - v;
+    v = w->term[1][2]*w->term[0][44]; t->Qd[12] = v; check += v - v;
+    v = w->term[1][3]*w->term[0][45]; t->Qd[13] = v; check += v - v;
+    v = w->term[1][4]*w->term[0][46]; t->Qd[14] = v; check += v - v;
+    v = w->term[1][5]*w->term[0][47]; t->Qd[15] = v; check += v - v;
     v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
             w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[1][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][11]; t->Qd[32] = v; check += v - v;
     v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
             w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[1][2] = v; t->Qd[2][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][17]; t->Qd[33] = v; check += v - v;
     v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
             w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[1][3] = v; t->Qd[3][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][23]; t->Qd[34] = v; check += v - v;
     v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
             w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[1][4] = v; t->Qd[4][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][29]; t->Qd[35] = v; check += v - v;
     v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
             w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[1][5] = v; t->Qd[5][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][35]; t->Qd[36] = v; check += v - v;
     v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38] +
             w->term[1][9]*w->term[0][39] + w->term[1][10]*w->term[0][40] +
-            w->term[1][11]*w->term[0][41]; t->Qd[1][6] = v; t->Qd[6][1] = v; check += v - v;
-    v = w->term[1][6]*w->term[0][42]; t->Qd[1][10] = v; t->Qd[10][1] = v; check += v - v;
-    v = w->term[1][7]*w->term[0][43]; t->Qd[1][11] = v; t->Qd[11][1] = v; check += v - v;
-    v = w->term[1][8]*w->term[0][44]; t->Qd[1][12] = v; t->Qd[12][1] = v; check += v - v;
-    v = w->term[1][9]*w->term[0][45]; t->Qd[1][13] = v; t->Qd[13][1] = v; check += v - v;
-    v = w->term[1][10]*w->term[0][46]; t->Qd[1][14] = v; t->Qd[14][1] = v; check += v - v;
-    v = w->term[1][11]*w->term[0][47]; t->Qd[1][15] = v; t->Qd[15][1] = v; check += v - v;
+            w->term[1][11]*w->term[0][41]; t->Qd[37] = v; check += v - v;
+    v = w->term[1][6]*w->term[0][42]; t->Qd[41] = v; check += v - v;
+    v = w->term[1][7]*w->term[0][43]; t->Qd[42] = v; check += v - v;
+    v = w->term[1][8]*w->term[0][44]; t->Qd[43] = v; check += v - v;
+    v = w->term[1][9]*w->term[0][45]; t->Qd[44] = v; check += v - v;
+    v = w->term[1][10]*w->term[0][46]; t->Qd[45] = v; check += v - v;
+    v = w->term[1][11]*w->term[0][47]; t->Qd[46] = v; check += v - v;
     v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
             w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[2][2] = v; check +=
-            v - v;
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[63] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
             w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[2][3] = v;
-            t->Qd[3][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[64] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
             w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[2][4] = v;
-            t->Qd[4][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[65] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
             w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[2][5] = v;
-            t->Qd[5][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[66] = v; check += v
+            - v;
     v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
             w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[2][6] = v;
-            t->Qd[6][2] = v; check += v - v;
-    v = w->term[1][12]*w->term[0][42]; t->Qd[2][10] = v; t->Qd[10][2] = v; check += v - v;
-    v = w->term[1][13]*w->term[0][43]; t->Qd[2][11] = v; t->Qd[11][2] = v; check += v - v;
-    v = w->term[1][14]*w->term[0][44]; t->Qd[2][12] = v; t->Qd[12][2] = v; check += v - v;
-    v = w->term[1][15]*w->term[0][45]; t->Qd[2][13] = v; t->Qd[13][2] = v; check += v - v;
-    v = w->term[1][16]*w->term[0][46]; t->Qd[2][14] = v; t->Qd[14][2] = v; check += v - v;
-    v = w->term[1][17]*w->term[0][47]; t->Qd[2][15] = v; t->Qd[15][2] = v; check += v - v;
+            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[67] = v; check += v
+            - v;
+    v = w->term[1][12]*w->term[0][42]; t->Qd[71] = v; check += v - v;
+    v = w->term[1][13]*w->term[0][43]; t->Qd[72] = v; check += v - v;
+    v = w->term[1][14]*w->term[0][44]; t->Qd[73] = v; check += v - v;
+    v = w->term[1][15]*w->term[0][45]; t->Qd[74] = v; check += v - v;
+    v = w->term[1][16]*w->term[0][46]; t->Qd[75] = v; check += v - v;
+    v = w->term[1][17]*w->term[0][47]; t->Qd[76] = v; check += v - v;
     v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
             w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[3][3] = v; check +=
-            v - v;
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[93] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
             w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[3][4] = v;
-            t->Qd[4][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[94] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
             w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[3][5] = v;
-            t->Qd[5][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[95] = v; check += v
+            - v;
     v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
             w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[3][6] = v;
-            t->Qd[6][3] = v; check += v - v;
-    v = w->term[1][18]*w->term[0][42]; t->Qd[3][10] = v; t->Qd[10][3] = v; check += v - v;
-    v = w->term[1][19]*w->term[0][43]; t->Qd[3][11] = v; t->Qd[11][3] = v; check += v - v;
-    v = w->term[1][20]*w->term[0][44]; t->Qd[3][12] = v; t->Qd[12][3] = v; check += v - v;
-    v = w->term[1][21]*w->term[0][45]; t->Qd[3][13] = v; t->Qd[13][3] = v; check += v - v;
-    v = w->term[1][22]*w->term[0][46]; t->Qd[3][14] = v; t->Qd[14][3] = v; check += v - v;
-    v = w->term[1][23]*w->term[0][47]; t->Qd[3][15] = v; t->Qd[15][3] = v; check += v - v;
+            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[96] = v; check += v
+            - v;
+    v = w->term[1][18]*w->term[0][42]; t->Qd[100] = v; check += v - v;
+    v = w->term[1][19]*w->term[0][43]; t->Qd[101] = v; check += v - v;
+    v = w->term[1][20]*w->term[0][44]; t->Qd[102] = v; check += v - v;
+    v = w->term[1][21]*w->term[0][45]; t->Qd[103] = v; check += v - v;
+    v = w->term[1][22]*w->term[0][46]; t->Qd[104] = v; check += v - v;
+    v = w->term[1][23]*w->term[0][47]; t->Qd[105] = v; check += v - v;
     v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
             w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[4][4] = v; check +=
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[122] = v; check +=
             v - v;
     v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
             w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[4][5] = v;
-            t->Qd[5][4] = v; check += v - v;
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[123] = v; check +=
+            v - v;
     v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
             w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
-            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[4][6] = v;
-            t->Qd[6][4] = v; check += v - v;
-    v = w->term[1][24]*w->term[0][42]; t->Qd[4][10] = v; t->Qd[10][4] = v; check += v - v;
-    v = w->term[1][25]*w->term[0][43]; t->Qd[4][11] = v; t->Qd[11][4] = v; check += v - v;
-    v = w->term[1][26]*w->term[0][44]; t->Qd[4][12] = v; t->Qd[12][4] = v; check += v - v;
-    v = w->term[1][27]*w->term[0][45]; t->Qd[4][13] = v; t->Qd[13][4] = v; check += v - v;
-    v = w->term[1][28]*w->term[0][46]; t->Qd[4][14] = v; t->Qd[14][4] = v; check += v - v;
-    v = w->term[1][29]*w->term[0][47]; t->Qd[4][15] = v; t->Qd[15][4] = v; check += v - v;
+            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[124] = v; check +=
+            v - v;
+    v = w->term[1][24]*w->term[0][42]; t->Qd[128] = v; check += v - v;
+    v = w->term[1][25]*w->term[0][43]; t->Qd[129] = v; check += v - v;
+    v = w->term[1][26]*w->term[0][44]; t->Qd[130] = v; check += v - v;
+    v = w->term[1][27]*w->term[0][45]; t->Qd[131] = v; check += v - v;
+    v = w->term[1][28]*w->term[0][46]; t->Qd[132] = v; check += v - v;
+    v = w->term[1][29]*w->term[0][47]; t->Qd[133] = v; check += v - v;
     v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
             w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[5][5] = v; check +=
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[150] = v; check +=
             v - v;
     v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
             w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
-            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[5][6] = v;
-            t->Qd[6][5] = v; check += v - v;
-    v = w->term[1][30]*w->term[0][42]; t->Qd[5][10] = v; t->Qd[10][5] = v; check += v - v;
-    v = w->term[1][31]*w->term[0][43]; t->Qd[5][11] = v; t->Qd[11][5] = v; check += v - v;
-    v = w->term[1][32]*w->term[0][44]; t->Qd[5][12] = v; t->Qd[12][5] = v; check += v - v;
-    v = w->term[1][33]*w->term[0][45]; t->Qd[5][13] = v; t->Qd[13][5] = v; check += v - v;
-    v = w->term[1][34]*w->term[0][46]; t->Qd[5][14] = v; t->Qd[14][5] = v; check += v - v;
-    v = w->term[1][35]*w->term[0][47]; t->Qd[5][15] = v; t->Qd[15][5] = v; check += v - v;
+            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[151] = v; check +=
+            v - v;
+    v = w->term[1][30]*w->term[0][42]; t->Qd[155] = v; check += v - v;
+    v = w->term[1][31]*w->term[0][43]; t->Qd[156] = v; check += v - v;
+    v = w->term[1][32]*w->term[0][44]; t->Qd[157] = v; check += v - v;
+    v = w->term[1][33]*w->term[0][45]; t->Qd[158] = v; check += v - v;
+    v = w->term[1][34]*w->term[0][46]; t->Qd[159] = v; check += v - v;
+    v = w->term[1][35]*w->term[0][47]; t->Qd[160] = v; check += v - v;
     v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
             w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[6][6] = v; check +=
+            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[177] = v; check +=
             v - v;
-    v = w->term[1][36]*w->term[0][42]; t->Qd[6][10] = v; t->Qd[10][6] = v; check += v - v;
-    v = w->term[1][37]*w->term[0][43]; t->Qd[6][11] = v; t->Qd[11][6] = v; check += v - v;
-    v = w->term[1][38]*w->term[0][44]; t->Qd[6][12] = v; t->Qd[12][6] = v; check += v - v;
-    v = w->term[1][39]*w->term[0][45]; t->Qd[6][13] = v; t->Qd[13][6] = v; check += v - v;
-    v = w->term[1][40]*w->term[0][46]; t->Qd[6][14] = v; t->Qd[14][6] = v; check += v - v;
-    v = w->term[1][41]*w->term[0][47]; t->Qd[6][15] = v; t->Qd[15][6] = v; check += v - v;
-    v = w->term[1][42]*w->term[0][42]; t->Qd[10][10] = v; check += v - v;
-    v = w->term[1][43]*w->term[0][43]; t->Qd[11][11] = v; check += v - v;
-    v = w->term[1][44]*w->term[0][44]; t->Qd[12][12] = v; check += v - v;
-    v = w->term[1][45]*w->term[0][45]; t->Qd[13][13] = v; check += v - v;
-    v = w->term[1][46]*w->term[0][46]; t->Qd[14][14] = v; check += v - v;
-    v = w->term[1][47]*w->term[0][47]; t->Qd[15][15] = v; check += v - v;
-    t->Qd[0][7] = 0;
-    t->Qd[0][8] = 0;
-    t->Qd[0][9] = 0;
-    t->Qd[0][16] = 0;
-    t->Qd[0][17] = 0;
-    t->Qd[0][18] = 0;
-    t->Qd[0][19] = 0;
-    t->Qd[0][20] = 0;
-    t->Qd[0][21] = 0;
-    t->Qd[0][22] = 0;
-    t->Qd[0][23] = 0;
-    t->Qd[0][24] = 0;
-    t->Qd[0][25] = 0;
-    t->Qd[0][26] = 0;
-    t->Qd[0][27] = 0;
-    t->Qd[0][28] = 0;
-    t->Qd[0][29] = 0;
-    t->Qd[0][30] = 0;
-    t->Qd[0][31] = 0;
-    t->Qd[1][7] = 0;
-    t->Qd[1][8] = 0;
-    t->Qd[1][9] = 0;
-    t->Qd[1][16] = 0;
-    t->Qd[1][17] = 0;
-    t->Qd[1][18] = 0;
-    t->Qd[1][19] = 0;
-    t->Qd[1][20] = 0;
-    t->Qd[1][21] = 0;
-    t->Qd[1][22] = 0;
-    t->Qd[1][23] = 0;
-    t->Qd[1][24] = 0;
-    t->Qd[1][25] = 0;
-    t->Qd[1][26] = 0;
-    t->Qd[1][27] = 0;
-    t->Qd[1][28] = 0;
-    t->Qd[1][29] = 0;
-    t->Qd[1][30] = 0;
-    t->Qd[1][31] = 0;
-    t->Qd[2][7] = 0;
-    t->Qd[2][8] = 0;
-    t->Qd[2][9] = 0;
-    t->Qd[2][16] = 0;
-    t->Qd[2][17] = 0;
-    t->Qd[2][18] = 0;
-    t->Qd[2][19] = 0;
-    t->Qd[2][20] = 0;
-    t->Qd[2][21] = 0;
-    t->Qd[2][22] = 0;
-    t->Qd[2][23] = 0;
-    t->Qd[2][24] = 0;
-    t->Qd[2][25] = 0;
-    t->Qd[2][26] = 0;
-    t->Qd[2][27] = 0;
-    t->Qd[2][28] = 0;
-    t->Qd[2][29] = 0;
-    t->Qd[2][30] = 0;
-    t->Qd[2][31] = 0;
-    t->Qd[3][7] = 0;
-    t->Qd[3][8] = 0;
-    t->Qd[3][9] = 0;
-    t->Qd[3][16] = 0;
-    t->Qd[3][17] = 0;
-    t->Qd[3][18] = 0;
-    t->Qd[3][19] = 0;
-    t->Qd[3][20] = 0;
-    t->Qd[3][21] = 0;
-    t->Qd[3][22] = 0;
-    t->Qd[3][23] = 0;
-    t->Qd[3][24] = 0;
-    t->Qd[3][25] = 0;
-    t->Qd[3][26] = 0;
-    t->Qd[3][27] = 0;
-    t->Qd[3][28] = 0;
-    t->Qd[3][29] = 0;
-    t->Qd[3][30] = 0;
-    t->Qd[3][31] = 0;
-    t->Qd[4][7] = 0;
-    t->Qd[4][8] = 0;
-    t->Qd[4][9] = 0;
-    t->Qd[4][16] = 0;
-    t->Qd[4][17] = 0;
-    t->Qd[4][18] = 0;
-    t->Qd[4][19] = 0;
-    t->Qd[4][20] = 0;
-    t->Qd[4][21] = 0;
-    t->Qd[4][22] = 0;
-    t->Qd[4][23] = 0;
-    t->Qd[4][24] = 0;
-    t->Qd[4][25] = 0;
-    t->Qd[4][26] = 0;
-    t->Qd[4][27] = 0;
-    t->Qd[4][28] = 0;
-    t->Qd[4][29] = 0;
-    t->Qd[4][30] = 0;
-    t->Qd[4][31] = 0;
-    t->Qd[5][7] = 0;
-    t->Qd[5][8] = 0;
-    t->Qd[5][9] = 0;
-    t->Qd[5][16] = 0;
-    t->Qd[5][17] = 0;
-    t->Qd[5][18] = 0;
-    t->Qd[5][19] = 0;
-    t->Qd[5][20] = 0;
-    t->Qd[5][21] = 0;
-    t->Qd[5][22] = 0;
-    t->Qd[5][23] = 0;
-    t->Qd[5][24] = 0;
-    t->Qd[5][25] = 0;
-    t->Qd[5][26] = 0;
-    t->Qd[5][27] = 0;
-    t->Qd[5][28] = 0;
-    t->Qd[5][29] = 0;
-    t->Qd[5][30] = 0;
-    t->Qd[5][31] = 0;
-    t->Qd[6][7] = 0;
-    t->Qd[6][8] = 0;
-    t->Qd[6][9] = 0;
-    t->Qd[6][16] = 0;
-    t->Qd[6][17] = 0;
-    t->Qd[6][18] = 0;
-    t->Qd[6][19] = 0;
-    t->Qd[6][20] = 0;
-    t->Qd[6][21] = 0;
-    t->Qd[6][22] = 0;
-    t->Qd[6][23] = 0;
-    t->Qd[6][24] = 0;
-    t->Qd[6][25] = 0;
-    t->Qd[6][26] = 0;
-    t->Qd[6][27] = 0;
-    t->Qd[6][28] = 0;
-    t->Qd[6][29] = 0;
-    t->Qd[6][30] = 0;
-    t->Qd[6][31] = 0;
-    t->Qd[7][0] = 0;
-    t->Qd[7][1] = 0;
-    t->Qd[7][2] = 0;
-    t->Qd[7][3] = 0;
-    t->Qd[7][4] = 0;
-    t->Qd[7][5] = 0;
-    t->Qd[7][6] = 0;
-    t->Qd[7][7] = 0;
-    t->Qd[7][8] = 0;
-    t->Qd[7][9] = 0;
-    t->Qd[7][10] = 0;
-    t->Qd[7][11] = 0;
-    t->Qd[7][12] = 0;
-    t->Qd[7][13] = 0;
-    t->Qd[7][14] = 0;
-    t->Qd[7][15] = 0;
-    t->Qd[7][16] = 0;
-    t->Qd[7][17] = 0;
-    t->Qd[7][18] = 0;
-    t->Qd[7][19] = 0;
-    t->Qd[7][20] = 0;
-    t->Qd[7][21] = 0;
-    t->Qd[7][22] = 0;
-    t->Qd[7][23] = 0;
-    t->Qd[7][24] = 0;
-    t->Qd[7][25] = 0;
-    t->Qd[7][26] = 0;
-    t->Qd[7][27] = 0;
-    t->Qd[7][28] = 0;
-    t->Qd[7][29] = 0;
-    t->Qd[7][30] = 0;
-    t->Qd[7][31] = 0;
-    t->Qd[8][0] = 0;
-    t->Qd[8][1] = 0;
-    t->Qd[8][2] = 0;
-    t->Qd[8][3] = 0;
-    t->Qd[8][4] = 0;
-    t->Qd[8][5] = 0;
-    t->Qd[8][6] = 0;
-    t->Qd[8][7] = 0;
-    t->Qd[8][8] = 0;
-    t->Qd[8][9] = 0;
-    t->Qd[8][10] = 0;
-    t->Qd[8][11] = 0;
-    t->Qd[8][12] = 0;
-    t->Qd[8][13] = 0;
-    t->Qd[8][14] = 0;
-    t->Qd[8][15] = 0;
-    t->Qd[8][16] = 0;
-    t->Qd[8][17] = 0;
-    t->Qd[8][18] = 0;
-    t->Qd[8][19] = 0;
-    t->Qd[8][20] = 0;
-    t->Qd[8][21] = 0;
-    t->Qd[8][22] = 0;
-    t->Qd[8][23] = 0;
-    t->Qd[8][24] = 0;
-    t->Qd[8][25] = 0;
-    t->Qd[8][26] = 0;
-    t->Qd[8][27] = 0;
-    t->Qd[8][28] = 0;
-    t->Qd[8][29] = 0;
-    t->Qd[8][30] = 0;
-    t->Qd[8][31] = 0;
-    t->Qd[9][0] = 0;
-    t->Qd[9][1] = 0;
-    t->Qd[9][2] = 0;
-    t->Qd[9][3] = 0;
-    t->Qd[9][4] = 0;
-    t->Qd[9][5] = 0;
-    t->Qd[9][6] = 0;
-    t->Qd[9][7] = 0;
-    t->Qd[9][8] = 0;
-    t->Qd[9][9] = 0;
-    t->Qd[9][10] = 0;
-    t->Qd[9][11] = 0;
-    t->Qd[9][12] = 0;
-    t->Qd[9][13] = 0;
-    t->Qd[9][14] = 0;
-    t->Qd[9][15] = 0;
-    t->Qd[9][16] = 0;
-    t->Qd[9][17] = 0;
-    t->Qd[9][18] = 0;
-    t->Qd[9][19] = 0;
-    t->Qd[9][20] = 0;
-    t->Qd[9][21] = 0;
-    t->Qd[9][22] = 0;
-    t->Qd[9][23] = 0;
-    t->Qd[9][24] = 0;
-    t->Qd[9][25] = 0;
-    t->Qd[9][26] = 0;
-    t->Qd[9][27] = 0;
-    t->Qd[9][28] = 0;
-    t->Qd[9][29] = 0;
-    t->Qd[9][30] = 0;
-    t->Qd[9][31] = 0;
-    t->Qd[10][7] = 0;
-    t->Qd[10][8] = 0;
-    t->Qd[10][9] = 0;
-    t->Qd[10][11] = 0;
-    t->Qd[10][12] = 0;
-    t->Qd[10][13] = 0;
-    t->Qd[10][14] = 0;
-    t->Qd[10][15] = 0;
-    t->Qd[10][16] = 0;
-    t->Qd[10][17] = 0;
-    t->Qd[10][18] = 0;
-    t->Qd[10][19] = 0;
-    t->Qd[10][20] = 0;
-    t->Qd[10][21] = 0;
-    t->Qd[10][22] = 0;
-    t->Qd[10][23] = 0;
-    t->Qd[10][24] = 0;
-    t->Qd[10][25] = 0;
-    t->Qd[10][26] = 0;
-    t->Qd[10][27] = 0;
-    t->Qd[10][28] = 0;
-    t->Qd[10][29] = 0;
-    t->Qd[10][30] = 0;
-    t->Qd[10][31] = 0;
-    t->Qd[11][7] = 0;
-    t->Qd[11][8] = 0;
-    t->Qd[11][9] = 0;
-    t->Qd[11][10] = 0;
-    t->Qd[11][12] = 0;
-    t->Qd[11][13] = 0;
-    t->Qd[11][14] = 0;
-    t->Qd[11][15] = 0;
-    t->Qd[11][16] = 0;
-    t->Qd[11][17] = 0;
-    t->Qd[11][18] = 0;
-    t->Qd[11][19] = 0;
-    t->Qd[11][20] = 0;
-    t->Qd[11][21] = 0;
-    t->Qd[11][22] = 0;
-    t->Qd[11][23] = 0;
-    t->Qd[11][24] = 0;
-    t->Qd[11][25] = 0;
-    t->Qd[11][26] = 0;
-    t->Qd[11][27] = 0;
-    t->Qd[11][28] = 0;
-    t->Qd[11][29] = 0;
-    t->Qd[11][30] = 0;
-    t->Qd[11][31] = 0;
-    t->Qd[12][7] = 0;
-    t->Qd[12][8] = 0;
-    t->Qd[12][9] = 0;
-    t->Qd[12][10] = 0;
-    t->Qd[12][11] = 0;
-    t->Qd[12][13] = 0;
-    t->Qd[12][14] = 0;
-    t->Qd[12][15] = 0;
-    t->Qd[12][16] = 0;
-    t->Qd[12][17] = 0;
-    t->Qd[12][18] = 0;
-    t->Qd[12][19] = 0;
-    t->Qd[12][20] = 0;
-    t->Qd[12][21] = 0;
-    t->Qd[12][22] = 0;
-    t->Qd[12][23] = 0;
-    t->Qd[12][24] = 0;
-    t->Qd[12][25] = 0;
-    t->Qd[12][26] = 0;
-    t->Qd[12][27] = 0;
-    t->Qd[12][28] = 0;
-    t->Qd[12][29] = 0;
-    t->Qd[12][30] = 0;
-    t->Qd[12][31] = 0;
-    t->Qd[13][7] = 0;
-    t->Qd[13][8] = 0;
-    t->Qd[13][9] = 0;
-    t->Qd[13][10] = 0;
-    t->Qd[13][11] = 0;
-    t->Qd[13][12] = 0;
-    t->Qd[13][14] = 0;
-    t->Qd[13][15] = 0;
-    t->Qd[13][16] = 0;
-    t->Qd[13][17] = 0;
-    t->Qd[13][18] = 0;
-    t->Qd[13][19] = 0;
-    t->Qd[13][20] = 0;
-    t->Qd[13][21] = 0;
-    t->Qd[13][22] = 0;
-    t->Qd[13][23] = 0;
-    t->Qd[13][24] = 0;
-    t->Qd[13][25] = 0;
-    t->Qd[13][26] = 0;
-    t->Qd[13][27] = 0;
-    t->Qd[13][28] = 0;
-    t->Qd[13][29] = 0;
-    t->Qd[13][30] = 0;
-    t->Qd[13][31] = 0;
-    t->Qd[14][7] = 0;
-    t->Qd[14][8] = 0;
-    t->Qd[14][9] = 0;
-    t->Qd[14][10] = 0;
-    t->Qd[14][11] = 0;
-    t->Qd[14][12] = 0;
-    t->Qd[14][13] = 0;
-    t->Qd[14][15] = 0;
-    t->Qd[14][16] = 0;
-    t->Qd[14][17] = 0;
-    t->Qd[14][18] = 0;
-    t->Qd[14][19] = 0;
-    t->Qd[14][20] = 0;
-    t->Qd[14][21] = 0;
-    t->Qd[14][22] = 0;
-    t->Qd[14][23] = 0;
-    t->Qd[14][24] = 0;
-    t->Qd[14][25] = 0;
-    t->Qd[14][26] = 0;
-    t->Qd[14][27] = 0;
-    t->Qd[14][28] = 0;
-    t->Qd[14][29] = 0;
-    t->Qd[14][30] = 0;
-    t->Qd[14][31] = 0;
-    t->Qd[15][7] = 0;
-    t->Qd[15][8] = 0;
-    t->Qd[15][9] = 0;
-    t->Qd[15][10] = 0;
-    t->Qd[15][11] = 0;
-    t->Qd[15][12] = 0;
-    t->Qd[15][13] = 0;
-    t->Qd[15][14] = 0;
-    t->Qd[15][16] = 0;
-    t->Qd[15][17] = 0;
-    t->Qd[15][18] = 0;
-    t->Qd[15][19] = 0;
-    t->Qd[15][20] = 0;
-    t->Qd[15][21] = 0;
-    t->Qd[15][22] = 0;
-    t->Qd[15][23] = 0;
-    t->Qd[15][24] = 0;
-    t->Qd[15][25] = 0;
-    t->Qd[15][26] = 0;
-    t->Qd[15][27] = 0;
-    t->Qd[15][28] = 0;
-    t->Qd[15][29] = 0;
-    t->Qd[15][30] = 0;
-    t->Qd[15][31] = 0;
-    t->Qd[16][0] = 0;
-    t->Qd[16][1] = 0;
-    t->Qd[16][2] = 0;
-    t->Qd[16][3] = 0;
-    t->Qd[16][4] = 0;
-    t->Qd[16][5] = 0;
-    t->Qd[16][6] = 0;
-    t->Qd[16][7] = 0;
-    t->Qd[16][8] = 0;
-    t->Qd[16][9] = 0;
-    t->Qd[16][10] = 0;
-    t->Qd[16][11] = 0;
-    t->Qd[16][12] = 0;
-    t->Qd[16][13] = 0;
-    t->Qd[16][14] = 0;
-    t->Qd[16][15] = 0;
-    t->Qd[16][16] = 0;
-    t->Qd[16][17] = 0;
-    t->Qd[16][18] = 0;
-    t->Qd[16][19] = 0;
-    t->Qd[16][20] = 0;
-    t->Qd[16][21] = 0;
-    t->Qd[16][22] = 0;
-    t->Qd[16][23] = 0;
-    t->Qd[16][24] = 0;
-    t->Qd[16][25] = 0;
-    t->Qd[16][26] = 0;
-    t->Qd[16][27] = 0;
-    t->Qd[16][28] = 0;
-    t->Qd[16][29] = 0;
-    t->Qd[16][30] = 0;
-    t->Qd[16][31] = 0;
-    t->Qd[17][0] = 0;
-    t->Qd[17][1] = 0;
-    t->Qd[17][2] = 0;
-    t->Qd[17][3] = 0;
-    t->Qd[17][4] = 0;
-    t->Qd[17][5] = 0;
-    t->Qd[17][6] = 0;
-    t->Qd[17][7] = 0;
-    t->Qd[17][8] = 0;
-    t->Qd[17][9] = 0;
-    t->Qd[17][10] = 0;
-    t->Qd[17][11] = 0;
-    t->Qd[17][12] = 0;
-    t->Qd[17][13] = 0;
-    t->Qd[17][14] = 0;
-    t->Qd[17][15] = 0;
-    t->Qd[17][16] = 0;
-    t->Qd[17][17] = 0;
-    t->Qd[17][18] = 0;
-    t->Qd[17][19] = 0;
-    t->Qd[17][20] = 0;
-    t->Qd[17][21] = 0;
-    t->Qd[17][22] = 0;
-    t->Qd[17][23] = 0;
-    t->Qd[17][24] = 0;
-    t->Qd[17][25] = 0;
-    t->Qd[17][26] = 0;
-    t->Qd[17][27] = 0;
-    t->Qd[17][28] = 0;
-    t->Qd[17][29] = 0;
-    t->Qd[17][30] = 0;
-    t->Qd[17][31] = 0;
-    t->Qd[18][0] = 0;
-    t->Qd[18][1] = 0;
-    t->Qd[18][2] = 0;
-    t->Qd[18][3] = 0;
-    t->Qd[18][4] = 0;
-    t->Qd[18][5] = 0;
-    t->Qd[18][6] = 0;
-    t->Qd[18][7] = 0;
-    t->Qd[18][8] = 0;
-    t->Qd[18][9] = 0;
-    t->Qd[18][10] = 0;
-    t->Qd[18][11] = 0;
-    t->Qd[18][12] = 0;
-    t->Qd[18][13] = 0;
-    t->Qd[18][14] = 0;
-    t->Qd[18][15] = 0;
-    t->Qd[18][16] = 0;
-    t->Qd[18][17] = 0;
-    t->Qd[18][18] = 0;
-    t->Qd[18][19] = 0;
-    t->Qd[18][20] = 0;
-    t->Qd[18][21] = 0;
-    t->Qd[18][22] = 0;
-    t->Qd[18][23] = 0;
-    t->Qd[18][24] = 0;
-    t->Qd[18][25] = 0;
-    t->Qd[18][26] = 0;
-    t->Qd[18][27] = 0;
-    t->Qd[18][28] = 0;
-    t->Qd[18][29] = 0;
-    t->Qd[18][30] = 0;
-    t->Qd[18][31] = 0;
-    t->Qd[19][0] = 0;
-    t->Qd[19][1] = 0;
-    t->Qd[19][2] = 0;
-    t->Qd[19][3] = 0;
-    t->Qd[19][4] = 0;
-    t->Qd[19][5] = 0;
-    t->Qd[19][6] = 0;
-    t->Qd[19][7] = 0;
-    t->Qd[19][8] = 0;
-    t->Qd[19][9] = 0;
-    t->Qd[19][10] = 0;
-    t->Qd[19][11] = 0;
-    t->Qd[19][12] = 0;
-    t->Qd[19][13] = 0;
-    t->Qd[19][14] = 0;
-    t->Qd[19][15] = 0;
-    t->Qd[19][16] = 0;
-    t->Qd[19][17] = 0;
-    t->Qd[19][18] = 0;
-    t->Qd[19][19] = 0;
-    t->Qd[19][20] = 0;
-    t->Qd[19][21] = 0;
-    t->Qd[19][22] = 0;
-    t->Qd[19][23] = 0;
-    t->Qd[19][24] = 0;
-    t->Qd[19][25] = 0;
-    t->Qd[19][26] = 0;
-    t->Qd[19][27] = 0;
-    t->Qd[19][28] = 0;
-    t->Qd[19][29] = 0;
-    t->Qd[19][30] = 0;
-    t->Qd[19][31] = 0;
-    t->Qd[20][0] = 0;
-    t->Qd[20][1] = 0;
-    t->Qd[20][2] = 0;
-    t->Qd[20][3] = 0;
-    t->Qd[20][4] = 0;
-    t->Qd[20][5] = 0;
-    t->Qd[20][6] = 0;
-    t->Qd[20][7] = 0;
-    t->Qd[20][8] = 0;
-    t->Qd[20][9] = 0;
-    t->Qd[20][10] = 0;
-    t->Qd[20][11] = 0;
-    t->Qd[20][12] = 0;
-    t->Qd[20][13] = 0;
-    t->Qd[20][14] = 0;
-    t->Qd[20][15] = 0;
-    t->Qd[20][16] = 0;
-    t->Qd[20][17] = 0;
-    t->Qd[20][18] = 0;
-    t->Qd[20][19] = 0;
-    t->Qd[20][20] = 0;
-    t->Qd[20][21] = 0;
-    t->Qd[20][22] = 0;
-    t->Qd[20][23] = 0;
-    t->Qd[20][24] = 0;
-    t->Qd[20][25] = 0;
-    t->Qd[20][26] = 0;
-    t->Qd[20][27] = 0;
-    t->Qd[20][28] = 0;
-    t->Qd[20][29] = 0;
-    t->Qd[20][30] = 0;
-    t->Qd[20][31] = 0;
-    t->Qd[21][0] = 0;
-    t->Qd[21][1] = 0;
-    t->Qd[21][2] = 0;
-    t->Qd[21][3] = 0;
-    t->Qd[21][4] = 0;
-    t->Qd[21][5] = 0;
-    t->Qd[21][6] = 0;
-    t->Qd[21][7] = 0;
-    t->Qd[21][8] = 0;
-    t->Qd[21][9] = 0;
-    t->Qd[21][10] = 0;
-    t->Qd[21][11] = 0;
-    t->Qd[21][12] = 0;
-    t->Qd[21][13] = 0;
-    t->Qd[21][14] = 0;
-    t->Qd[21][15] = 0;
-    t->Qd[21][16] = 0;
-    t->Qd[21][17] = 0;
-    t->Qd[21][18] = 0;
-    t->Qd[21][19] = 0;
-    t->Qd[21][20] = 0;
-    t->Qd[21][21] = 0;
-    t->Qd[21][22] = 0;
-    t->Qd[21][23] = 0;
-    t->Qd[21][24] = 0;
-    t->Qd[21][25] = 0;
-    t->Qd[21][26] = 0;
-    t->Qd[21][27] = 0;
-    t->Qd[21][28] = 0;
-    t->Qd[21][29] = 0;
-    t->Qd[21][30] = 0;
-    t->Qd[21][31] = 0;
-    t->Qd[22][0] = 0;
-    t->Qd[22][1] = 0;
-    t->Qd[22][2] = 0;
-    t->Qd[22][3] = 0;
-    t->Qd[22][4] = 0;
-    t->Qd[22][5] = 0;
-    t->Qd[22][6] = 0;
-    t->Qd[22][7] = 0;
-    t->Qd[22][8] = 0;
-    t->Qd[22][9] = 0;
-    t->Qd[22][10] = 0;
-    t->Qd[22][11] = 0;
-    t->Qd[22][12] = 0;
-    t->Qd[22][13] = 0;
-    t->Qd[22][14] = 0;
-    t->Qd[22][15] = 0;
-    t->Qd[22][16] = 0;
-    t->Qd[22][17] = 0;
-    t->Qd[22][18] = 0;
-    t->Qd[22][19] = 0;
-    t->Qd[22][20] = 0;
-    t->Qd[22][21] = 0;
-    t->Qd[22][22] = 0;
-    t->Qd[22][23] = 0;
-    t->Qd[22][24] = 0;
-    t->Qd[22][25] = 0;
-    t->Qd[22][26] = 0;
-    t->Qd[22][27] = 0;
-    t->Qd[22][28] = 0;
-    t->Qd[22][29] = 0;
-    t->Qd[22][30] = 0;
-    t->Qd[22][31] = 0;
-    t->Qd[23][0] = 0;
-    t->Qd[23][1] = 0;
-    t->Qd[23][2] = 0;
-    t->Qd[23][3] = 0;
-    t->Qd[23][4] = 0;
-    t->Qd[23][5] = 0;
-    t->Qd[23][6] = 0;
-    t->Qd[23][7] = 0;
-    t->Qd[23][8] = 0;
-    t->Qd[23][9] = 0;
-    t->Qd[23][10] = 0;
-    t->Qd[23][11] = 0;
-    t->Qd[23][12] = 0;
-    t->Qd[23][13] = 0;
-    t->Qd[23][14] = 0;
-    t->Qd[23][15] = 0;
-    t->Qd[23][16] = 0;
-    t->Qd[23][17] = 0;
-    t->Qd[23][18] = 0;
-    t->Qd[23][19] = 0;
-    t->Qd[23][20] = 0;
-    t->Qd[23][21] = 0;
-    t->Qd[23][22] = 0;
-    t->Qd[23][23] = 0;
-    t->Qd[23][24] = 0;
-    t->Qd[23][25] = 0;
-    t->Qd[23][26] = 0;
-    t->Qd[23][27] = 0;
-    t->Qd[23][28] = 0;
-    t->Qd[23][29] = 0;
-    t->Qd[23][30] = 0;
-    t->Qd[23][31] = 0;
-    t->Qd[24][0] = 0;
-    t->Qd[24][1] = 0;
-    t->Qd[24][2] = 0;
-    t->Qd[24][3] = 0;
-    t->Qd[24][4] = 0;
-    t->Qd[24][5] = 0;
-    t->Qd[24][6] = 0;
-    t->Qd[24][7] = 0;
-    t->Qd[24][8] = 0;
-    t->Qd[24][9] = 0;
-    t->Qd[24][10] = 0;
-    t->Qd[24][11] = 0;
-    t->Qd[24][12] = 0;
-    t->Qd[24][13] = 0;
-    t->Qd[24][14] = 0;
-    t->Qd[24][15] = 0;
-    t->Qd[24][16] = 0;
-    t->Qd[24][17] = 0;
-    t->Qd[24][18] = 0;
-    t->Qd[24][19] = 0;
-    t->Qd[24][20] = 0;
-    t->Qd[24][21] = 0;
-    t->Qd[24][22] = 0;
-    t->Qd[24][23] = 0;
-    t->Qd[24][24] = 0;
-    t->Qd[24][25] = 0;
-    t->Qd[24][26] = 0;
-    t->Qd[24][27] = 0;
-    t->Qd[24][28] = 0;
-    t->Qd[24][29] = 0;
-    t->Qd[24][30] = 0;
-    t->Qd[24][31] = 0;
-    t->Qd[25][0] = 0;
-    t->Qd[25][1] = 0;
-    t->Qd[25][2] = 0;
-    t->Qd[25][3] = 0;
-    t->Qd[25][4] = 0;
-    t->Qd[25][5] = 0;
-    t->Qd[25][6] = 0;
-    t->Qd[25][7] = 0;
-    t->Qd[25][8] = 0;
-    t->Qd[25][9] = 0;
-    t->Qd[25][10] = 0;
-    t->Qd[25][11] = 0;
-    t->Qd[25][12] = 0;
-    t->Qd[25][13] = 0;
-    t->Qd[25][14] = 0;
-    t->Qd[25][15] = 0;
-    t->Qd[25][16] = 0;
-    t->Qd[25][17] = 0;
-    t->Qd[25][18] = 0;
-    t->Qd[25][19] = 0;
-    t->Qd[25][20] = 0;
-    t->Qd[25][21] = 0;
-    t->Qd[25][22] = 0;
-    t->Qd[25][23] = 0;
-    t->Qd[25][24] = 0;
-    t->Qd[25][25] = 0;
-    t->Qd[25][26] = 0;
-    t->Qd[25][27] = 0;
-    t->Qd[25][28] = 0;
-    t->Qd[25][29] = 0;
-    t->Qd[25][30] = 0;
-    t->Qd[25][31] = 0;
-    t->Qd[26][0] = 0;
-    t->Qd[26][1] = 0;
-    t->Qd[26][2] = 0;
-    t->Qd[26][3] = 0;
-    t->Qd[26][4] = 0;
-    t->Qd[26][5] = 0;
-    t->Qd[26][6] = 0;
-    t->Qd[26][7] = 0;
-    t->Qd[26][8] = 0;
-    t->Qd[26][9] = 0;
-    t->Qd[26][10] = 0;
-    t->Qd[26][11] = 0;
-    t->Qd[26][12] = 0;
-    t->Qd[26][13] = 0;
-    t->Qd[26][14] = 0;
-    t->Qd[26][15] = 0;
-    t->Qd[26][16] = 0;
-    t->Qd[26][17] = 0;
-    t->Qd[26][18] = 0;
-    t->Qd[26][19] = 0;
-    t->Qd[26][20] = 0;
-    t->Qd[26][21] = 0;
-    t->Qd[26][22] = 0;
-    t->Qd[26][23] = 0;
-    t->Qd[26][24] = 0;
-    t->Qd[26][25] = 0;
-    t->Qd[26][26] = 0;
-    t->Qd[26][27] = 0;
-    t->Qd[26][28] = 0;
-    t->Qd[26][29] = 0;
-    t->Qd[26][30] = 0;
-    t->Qd[26][31] = 0;
-    t->Qd[27][0] = 0;
-    t->Qd[27][1] = 0;
-    t->Qd[27][2] = 0;
-    t->Qd[27][3] = 0;
-    t->Qd[27][4] = 0;
-    t->Qd[27][5] = 0;
-    t->Qd[27][6] = 0;
-    t->Qd[27][7] = 0;
-    t->Qd[27][8] = 0;
-    t->Qd[27][9] = 0;
-    t->Qd[27][10] = 0;
-    t->Qd[27][11] = 0;
-    t->Qd[27][12] = 0;
-    t->Qd[27][13] = 0;
-    t->Qd[27][14] = 0;
-    t->Qd[27][15] = 0;
-    t->Qd[27][16] = 0;
-    t->Qd[27][17] = 0;
-    t->Qd[27][18] = 0;
-    t->Qd[27][19] = 0;
-    t->Qd[27][20] = 0;
-    t->Qd[27][21] = 0;
-    t->Qd[27][22] = 0;
-    t->Qd[27][23] = 0;
-    t->Qd[27][24] = 0;
-    t->Qd[27][25] = 0;
-    t->Qd[27][26] = 0;
-    t->Qd[27][27] = 0;
-    t->Qd[27][28] = 0;
-    t->Qd[27][29] = 0;
-    t->Qd[27][30] = 0;
-    t->Qd[27][31] = 0;
-    t->Qd[28][0] = 0;
-    t->Qd[28][1] = 0;
-    t->Qd[28][2] = 0;
-    t->Qd[28][3] = 0;
-    t->Qd[28][4] = 0;
-    t->Qd[28][5] = 0;
-    t->Qd[28][6] = 0;
-    t->Qd[28][7] = 0;
-    t->Qd[28][8] = 0;
-    t->Qd[28][9] = 0;
-    t->Qd[28][10] = 0;
-    t->Qd[28][11] = 0;
-    t->Qd[28][12] = 0;
-    t->Qd[28][13] = 0;
-    t->Qd[28][14] = 0;
-    t->Qd[28][15] = 0;
-    t->Qd[28][16] = 0;
-    t->Qd[28][17] = 0;
-    t->Qd[28][18] = 0;
-    t->Qd[28][19] = 0;
-    t->Qd[28][20] = 0;
-    t->Qd[28][21] = 0;
-    t->Qd[28][22] = 0;
-    t->Qd[28][23] = 0;
-    t->Qd[28][24] = 0;
-    t->Qd[28][25] = 0;
-    t->Qd[28][26] = 0;
-    t->Qd[28][27] = 0;
-    t->Qd[28][28] = 0;
-    t->Qd[28][29] = 0;
-    t->Qd[28][30] = 0;
-    t->Qd[28][31] = 0;
-    t->Qd[29][0] = 0;
-    t->Qd[29][1] = 0;
-    t->Qd[29][2] = 0;
-    t->Qd[29][3] = 0;
-    t->Qd[29][4] = 0;
-    t->Qd[29][5] = 0;
-    t->Qd[29][6] = 0;
-    t->Qd[29][7] = 0;
-    t->Qd[29][8] = 0;
-    t->Qd[29][9] = 0;
-    t->Qd[29][10] = 0;
-    t->Qd[29][11] = 0;
-    t->Qd[29][12] = 0;
-    t->Qd[29][13] = 0;
-    t->Qd[29][14] = 0;
-    t->Qd[29][15] = 0;
-    t->Qd[29][16] = 0;
-    t->Qd[29][17] = 0;
-    t->Qd[29][18] = 0;
-    t->Qd[29][19] = 0;
-    t->Qd[29][20] = 0;
-    t->Qd[29][21] = 0;
-    t->Qd[29][22] = 0;
-    t->Qd[29][23] = 0;
-    t->Qd[29][24] = 0;
-    t->Qd[29][25] = 0;
-    t->Qd[29][26] = 0;
-    t->Qd[29][27] = 0;
-    t->Qd[29][28] = 0;
-    t->Qd[29][29] = 0;
-    t->Qd[29][30] = 0;
-    t->Qd[29][31] = 0;
-    t->Qd[30][0] = 0;
-    t->Qd[30][1] = 0;
-    t->Qd[30][2] = 0;
-    t->Qd[30][3] = 0;
-    t->Qd[30][4] = 0;
-    t->Qd[30][5] = 0;
-    t->Qd[30][6] = 0;
-    t->Qd[30][7] = 0;
-    t->Qd[30][8] = 0;
-    t->Qd[30][9] = 0;
-    t->Qd[30][10] = 0;
-    t->Qd[30][11] = 0;
-    t->Qd[30][12] = 0;
-    t->Qd[30][13] = 0;
-    t->Qd[30][14] = 0;
-    t->Qd[30][15] = 0;
-    t->Qd[30][16] = 0;
-    t->Qd[30][17] = 0;
-    t->Qd[30][18] = 0;
-    t->Qd[30][19] = 0;
-    t->Qd[30][20] = 0;
-    t->Qd[30][21] = 0;
-    t->Qd[30][22] = 0;
-    t->Qd[30][23] = 0;
-    t->Qd[30][24] = 0;
-    t->Qd[30][25] = 0;
-    t->Qd[30][26] = 0;
-    t->Qd[30][27] = 0;
-    t->Qd[30][28] = 0;
-    t->Qd[30][29] = 0;
-    t->Qd[30][30] = 0;
-    t->Qd[30][31] = 0;
-    t->Qd[31][0] = 0;
-    t->Qd[31][1] = 0;
-    t->Qd[31][2] = 0;
-    t->Qd[31][3] = 0;
-    t->Qd[31][4] = 0;
-    t->Qd[31][5] = 0;
-    t->Qd[31][6] = 0;
-    t->Qd[31][7] = 0;
-    t->Qd[31][8] = 0;
-    t->Qd[31][9] = 0;
-    t->Qd[31][10] = 0;
-    t->Qd[31][11] = 0;
-    t->Qd[31][12] = 0;
-    t->Qd[31][13] = 0;
-    t->Qd[31][14] = 0;
-    t->Qd[31][15] = 0;
-    t->Qd[31][16] = 0;
-    t->Qd[31][17] = 0;
-    t->Qd[31][18] = 0;
-    t->Qd[31][19] = 0;
-    t->Qd[31][20] = 0;
-    t->Qd[31][21] = 0;
-    t->Qd[31][22] = 0;
-    t->Qd[31][23] = 0;
-    t->Qd[31][24] = 0;
-    t->Qd[31][25] = 0;
-    t->Qd[31][26] = 0;
-    t->Qd[31][27] = 0;
-    t->Qd[31][28] = 0;
-    t->Qd[31][29] = 0;
-    t->Qd[31][30] = 0;
-    t->Qd[31][31] = 0;
+    v = w->term[1][36]*w->term[0][42]; t->Qd[181] = v; check += v - v;
+    v = w->term[1][37]*w->term[0][43]; t->Qd[182] = v; check += v - v;
+    v = w->term[1][38]*w->term[0][44]; t->Qd[183] = v; check += v - v;
+    v = w->term[1][39]*w->term[0][45]; t->Qd[184] = v; check += v - v;
+    v = w->term[1][40]*w->term[0][46]; t->Qd[185] = v; check += v - v;
+    v = w->term[1][41]*w->term[0][47]; t->Qd[186] = v; check += v - v;
+    v = w->term[1][42]*w->term[0][42]; t->Qd[275] = v; check += v - v;
+    v = w->term[1][43]*w->term[0][43]; t->Qd[297] = v; check += v - v;
+    v = w->term[1][44]*w->term[0][44]; t->Qd[318] = v; check += v - v;
+    v = w->term[1][45]*w->term[0][45]; t->Qd[338] = v; check += v - v;
+    v = w->term[1][46]*w->term[0][46]; t->Qd[357] = v; check += v - v;
+    v = w->term[1][47]*w->term[0][47]; t->Qd[375] = v; check += v - v;
+    t->Qd[7] = 0;
+    t->Qd[8] = 0;
+    t->Qd[9] = 0;
+    t->Qd[16] = 0;
+    t->Qd[17] = 0;
+    t->Qd[18] = 0;
+    t->Qd[19] = 0;
+    t->Qd[20] = 0;
+    t->Qd[21] = 0;
+    t->Qd[22] = 0;
+    t->Qd[23] = 0;
+    t->Qd[24] = 0;
+    t->Qd[25] = 0;
+    t->Qd[26] = 0;
+    t->Qd[27] = 0;
+    t->Qd[28] = 0;
+    t->Qd[29] = 0;
+    t->Qd[30] = 0;
+    t->Qd[31] = 0;
+    t->Qd[38] = 0;
+    t->Qd[39] = 0;
+    t->Qd[40] = 0;
+    t->Qd[47] = 0;
+    t->Qd[48] = 0;
+    t->Qd[49] = 0;
+    t->Qd[50] = 0;
+    t->Qd[51] = 0;
+    t->Qd[52] = 0;
+    t->Qd[53] = 0;
+    t->Qd[54] = 0;
+    t->Qd[55] = 0;
+    t->Qd[56] = 0;
+    t->Qd[57] = 0;
+    t->Qd[58] = 0;
+    t->Qd[59] = 0;
+    t->Qd[60] = 0;
+    t->Qd[61] = 0;
+    t->Qd[62] = 0;
+    t->Qd[68] = 0;
+    t->Qd[69] = 0;
+    t->Qd[70] = 0;
+    t->Qd[77] = 0;
+    t->Qd[78] = 0;
+    t->Qd[79] = 0;
+    t->Qd[80] = 0;
+    t->Qd[81] = 0;
+    t->Qd[82] = 0;
+    t->Qd[83] = 0;
+    t->Qd[84] = 0;
+    t->Qd[85] = 0;
+    t->Qd[86] = 0;
+    t->Qd[87] = 0;
+    t->Qd[88] = 0;
+    t->Qd[89] = 0;
+    t->Qd[90] = 0;
+    t->Qd[91] = 0;
+    t->Qd[92] = 0;
+    t->Qd[97] = 0;
+    t->Qd[98] = 0;
+    t->Qd[99] = 0;
+    t->Qd[106] = 0;
+    t->Qd[107] = 0;
+    t->Qd[108] = 0;
+    t->Qd[109] = 0;
+    t->Qd[110] = 0;
+    t->Qd[111] = 0;
+    t->Qd[112] = 0;
+    t->Qd[113] = 0;
+    t->Qd[114] = 0;
+    t->Qd[115] = 0;
+    t->Qd[116] = 0;
+    t->Qd[117] = 0;
+    t->Qd[118] = 0;
+    t->Qd[119] = 0;
+    t->Qd[120] = 0;
+    t->Qd[121] = 0;
+    t->Qd[125] = 0;
+    t->Qd[126] = 0;
+    t->Qd[127] = 0;
+    t->Qd[134] = 0;
+    t->Qd[135] = 0;
+    t->Qd[136] = 0;
+    t->Qd[137] = 0;
+    t->Qd[138] = 0;
+    t->Qd[139] = 0;
+    t->Qd[140] = 0;
+    t->Qd[141] = 0;
+    t->Qd[142] = 0;
+    t->Qd[143] = 0;
+    t->Qd[144] = 0;
+    t->Qd[145] = 0;
+    t->Qd[146] = 0;
+    t->Qd[147] = 0;
+    t->Qd[148] = 0;
+    t->Qd[149] = 0;
+    t->Qd[152] = 0;
+    t->Qd[153] = 0;
+    t->Qd[154] = 0;
+    t->Qd[161] = 0;
+    t->Qd[162] = 0;
+    t->Qd[163] = 0;
+    t->Qd[164] = 0;
+    t->Qd[165] = 0;
+    t->Qd[166] = 0;
+    t->Qd[167] = 0;
+    t->Qd[168] = 0;
+    t->Qd[169] = 0;
+    t->Qd[170] = 0;
+    t->Qd[171] = 0;
+    t->Qd[172] = 0;
+    t->Qd[173] = 0;
+    t->Qd[174] = 0;
+    t->Qd[175] = 0;
+    t->Qd[176] = 0;
+    t->Qd[178] = 0;
+    t->Qd[179] = 0;
+    t->Qd[180] = 0;
+    t->Qd[187] = 0;
+    t->Qd[188] = 0;
+    t->Qd[189] = 0;
+    t->Qd[190] = 0;
+    t->Qd[191] = 0;
+    t->Qd[192] = 0;
+    t->Qd[193] = 0;
+    t->Qd[194] = 0;
+    t->Qd[195] = 0;
+    t->Qd[196] = 0;
+    t->Qd[197] = 0;
+    t->Qd[198] = 0;
+    t->Qd[199] = 0;
+    t->Qd[200] = 0;
+    t->Qd[201] = 0;
+    t->Qd[202] = 0;
+    t->Qd[203] = 0;
+    t->Qd[204] = 0;
+    t->Qd[205] = 0;
+    t->Qd[206] = 0;
+    t->Qd[207] = 0;
+    t->Qd[208] = 0;
+    t->Qd[209] = 0;
+    t->Qd[210] = 0;
+    t->Qd[211] = 0;
+    t->Qd[212] = 0;
+    t->Qd[213] = 0;
+    t->Qd[214] = 0;
+    t->Qd[215] = 0;
+    t->Qd[216] = 0;
+    t->Qd[217] = 0;
+    t->Qd[218] = 0;
+    t->Qd[219] = 0;
+    t->Qd[220] = 0;
+    t->Qd[221] = 0;
+    t->Qd[222] = 0;
+    t->Qd[223] = 0;
+    t->Qd[224] = 0;
+    t->Qd[225] = 0;
+    t->Qd[226] = 0;
+    t->Qd[227] = 0;
+    t->Qd[228] = 0;
+    t->Qd[229] = 0;
+    t->Qd[230] = 0;
+    t->Qd[231] = 0;
+    t->Qd[232] = 0;
+    t->Qd[233] = 0;
+    t->Qd[234] = 0;
+    t->Qd[235] = 0;
+    t->Qd[236] = 0;
+    t->Qd[237] = 0;
+    t->Qd[238] = 0;
+    t->Qd[239] = 0;
+    t->Qd[240] = 0;
+    t->Qd[241] = 0;
+    t->Qd[242] = 0;
+    t->Qd[243] = 0;
+    t->Qd[244] = 0;
+    t->Qd[245] = 0;
+    t->Qd[246] = 0;
+    t->Qd[247] = 0;
+    t->Qd[248] = 0;
+    t->Qd[249] = 0;
+    t->Qd[250] = 0;
+    t->Qd[251] = 0;
+    t->Qd[252] = 0;
+    t->Qd[253] = 0;
+    t->Qd[254] = 0;
+    t->Qd[255] = 0;
+    t->Qd[256] = 0;
+    t->Qd[257] = 0;
+    t->Qd[258] = 0;
+    t->Qd[259] = 0;
+    t->Qd[260] = 0;
+    t->Qd[261] = 0;
+    t->Qd[262] = 0;
+    t->Qd[263] = 0;
+    t->Qd[264] = 0;
+    t->Qd[265] = 0;
+    t->Qd[266] = 0;
+    t->Qd[267] = 0;
+    t->Qd[268] = 0;
+    t->Qd[269] = 0;
+    t->Qd[270] = 0;
+    t->Qd[271] = 0;
+    t->Qd[272] = 0;
+    t->Qd[273] = 0;
+    t->Qd[274] = 0;
+    t->Qd[276] = 0;
+    t->Qd[277] = 0;
+    t->Qd[278] = 0;
+    t->Qd[279] = 0;
+    t->Qd[280] = 0;
+    t->Qd[281] = 0;
+    t->Qd[282] = 0;
+    t->Qd[283] = 0;
+    t->Qd[284] = 0;
+    t->Qd[285] = 0;
+    t->Qd[286] = 0;
+    t->Qd[287] = 0;
+    t->Qd[288] = 0;
+    t->Qd[289] = 0;
+    t->Qd[290] = 0;
+    t->Qd[291] = 0;
+    t->Qd[292] = 0;
+    t->Qd[293] = 0;
+    t->Qd[294] = 0;
+    t->Qd[295] = 0;
+    t->Qd[296] = 0;
+    t->Qd[298] = 0;
+    t->Qd[299] = 0;
+    t->Qd[300] = 0;
+    t->Qd[301] = 0;
+    t->Qd[302] = 0;
+    t->Qd[303] = 0;
+    t->Qd[304] = 0;
+    t->Qd[305] = 0;
+    t->Qd[306] = 0;
+    t->Qd[307] = 0;
+    t->Qd[308] = 0;
+    t->Qd[309] = 0;
+    t->Qd[310] = 0;
+    t->Qd[311] = 0;
+    t->Qd[312] = 0;
+    t->Qd[313] = 0;
+    t->Qd[314] = 0;
+    t->Qd[315] = 0;
+    t->Qd[316] = 0;
+    t->Qd[317] = 0;
+    t->Qd[319] = 0;
+    t->Qd[320] = 0;
+    t->Qd[321] = 0;
+    t->Qd[322] = 0;
+    t->Qd[323] = 0;
+    t->Qd[324] = 0;
+    t->Qd[325] = 0;
+    t->Qd[326] = 0;
+    t->Qd[327] = 0;
+    t->Qd[328] = 0;
+    t->Qd[329] = 0;
+    t->Qd[330] = 0;
+    t->Qd[331] = 0;
+    t->Qd[332] = 0;
+    t->Qd[333] = 0;
+    t->Qd[334] = 0;
+    t->Qd[335] = 0;
+    t->Qd[336] = 0;
+    t->Qd[337] = 0;
+    t->Qd[339] = 0;
+    t->Qd[340] = 0;
+    t->Qd[341] = 0;
+    t->Qd[342] = 0;
+    t->Qd[343] = 0;
+    t->Qd[344] = 0;
+    t->Qd[345] = 0;
+    t->Qd[346] = 0;
+    t->Qd[347] = 0;
+    t->Qd[348] = 0;
+    t->Qd[349] = 0;
+    t->Qd[350] = 0;
+    t->Qd[351] = 0;
+    t->Qd[352] = 0;
+    t->Qd[353] = 0;
+    t->Qd[354] = 0;
+    t->Qd[355] = 0;
+    t->Qd[356] = 0;
+    t->Qd[358] = 0;
+    t->Qd[359] = 0;
+    t->Qd[360] = 0;
+    t->Qd[361] = 0;
+    t->Qd[362] = 0;
+    t->Qd[363] = 0;
+    t->Qd[364] = 0;
+    t->Qd[365] = 0;
+    t->Qd[366] = 0;
+    t->Qd[367] = 0;
+    t->Qd[368] = 0;
+    t->Qd[369] = 0;
+    t->Qd[370] = 0;
+    t->Qd[371] = 0;
+    t->Qd[372] = 0;
+    t->Qd[373] = 0;
+    t->Qd[374] = 0;
+    t->Qd[376] = 0;
+    t->Qd[377] = 0;
+    t->Qd[378] = 0;
+    t->Qd[379] = 0;
+    t->Qd[380] = 0;
+    t->Qd[381] = 0;
+    t->Qd[382] = 0;
+    t->Qd[383] = 0;
+    t->Qd[384] = 0;
+    t->Qd[385] = 0;
+    t->Qd[386] = 0;
+    t->Qd[387] = 0;
+    t->Qd[388] = 0;
+    t->Qd[389] = 0;
+    t->Qd[390] = 0;
+    t->Qd[391] = 0;
+    t->Qd[392] = 0;
+    t->Qd[393] = 0;
+    t->Qd[394] = 0;
+    t->Qd[395] = 0;
+    t->Qd[396] = 0;
+    t->Qd[397] = 0;
+    t->Qd[398] = 0;
+    t->Qd[399] = 0;
+    t->Qd[400] = 0;
+    t->Qd[401] = 0;
+    t->Qd[402] = 0;
+    t->Qd[403] = 0;
+    t->Qd[404] = 0;
+    t->Qd[405] = 0;
+    t->Qd[406] = 0;
+    t->Qd[407] = 0;
+    t->Qd[408] = 0;
+    t->Qd[409] = 0;
+    t->Qd[410] = 0;
+    t->Qd[411] = 0;
+    t->Qd[412] = 0;
+    t->Qd[413] = 0;
+    t->Qd[414] = 0;
+    t->Qd[415] = 0;
+    t->Qd[416] = 0;
+    t->Qd[417] = 0;
+    t->Qd[418] = 0;
+    t->Qd[419] = 0;
+    t->Qd[420] = 0;
+    t->Qd[421] = 0;
+    t->Qd[422] = 0;
+    t->Qd[423] = 0;
+    t->Qd[424] = 0;
+    t->Qd[425] = 0;
+    t->Qd[426] = 0;
+    t->Qd[427] = 0;
+    t->Qd[428] = 0;
+    t->Qd[429] = 0;
+    t->Qd[430] = 0;
+    t->Qd[431] = 0;
+    t->Qd[432] = 0;
+    t->Qd[433] = 0;
+    t->Qd[434] = 0;
+    t->Qd[435] = 0;
+    t->Qd[436] = 0;
+    t->Qd[437] = 0;
+    t->Qd[438] = 0;
+    t->Qd[439] = 0;
+    t->Qd[440] = 0;
+    t->Qd[441] = 0;
+    t->Qd[442] = 0;
+    t->Qd[443] = 0;
+    t->Qd[444] = 0;
+    t->Qd[445] = 0;
+    t->Qd[446] = 0;
+    t->Qd[447] = 0;
+    t->Qd[448] = 0;
+    t->Qd[449] = 0;
+    t->Qd[450] = 0;
+    t->Qd[451] = 0;
+    t->Qd[452] = 0;
+    t->Qd[453] = 0;
+    t->Qd[454] = 0;
+    t->Qd[455] = 0;
+    t->Qd[456] = 0;
+    t->Qd[457] = 0;
+    t->Qd[458] = 0;
+    t->Qd[459] = 0;
+    t->Qd[460] = 0;
+    t->Qd[461] = 0;
+    t->Qd[462] = 0;
+    t->Qd[463] = 0;
+    t->Qd[464] = 0;
+    t->Qd[465] = 0;
+    t->Qd[466] = 0;
+    t->Qd[467] = 0;
+    t->Qd[468] = 0;
+    t->Qd[469] = 0;
+    t->Qd[470] = 0;
+    t->Qd[471] = 0;
+    t->Qd[472] = 0;
+    t->Qd[473] = 0;
+    t->Qd[474] = 0;
+    t->Qd[475] = 0;
+    t->Qd[476] = 0;
+    t->Qd[477] = 0;
+    t->Qd[478] = 0;
+    t->Qd[479] = 0;
+    t->Qd[480] = 0;
+    t->Qd[481] = 0;
+    t->Qd[482] = 0;
+    t->Qd[483] = 0;
+    t->Qd[484] = 0;
+    t->Qd[485] = 0;
+    t->Qd[486] = 0;
+    t->Qd[487] = 0;
+    t->Qd[488] = 0;
+    t->Qd[489] = 0;
+    t->Qd[490] = 0;
+    t->Qd[491] = 0;
+    t->Qd[492] = 0;
+    t->Qd[493] = 0;
+    t->Qd[494] = 0;
+    t->Qd[495] = 0;
+    t->Qd[496] = 0;
+    t->Qd[497] = 0;
+    t->Qd[498] = 0;
+    t->Qd[499] = 0;
+    t->Qd[500] = 0;
+    t->Qd[501] = 0;
+    t->Qd[502] = 0;
+    t->Qd[503] = 0;
+    t->Qd[504] = 0;
+    t->Qd[505] = 0;
+    t->Qd[506] = 0;
+    t->Qd[507] = 0;
+    t->Qd[508] = 0;
+    t->Qd[509] = 0;
+    t->Qd[510] = 0;
+    t->Qd[511] = 0;
+    t->Qd[512] = 0;
+    t->Qd[513] = 0;
+    t->Qd[514] = 0;
+    t->Qd[515] = 0;
+    t->Qd[516] = 0;
+    t->Qd[517] = 0;
+    t->Qd[518] = 0;
+    t->Qd[519] = 0;
+    t->Qd[520] = 0;
+    t->Qd[521] = 0;
+    t->Qd[522] = 0;
+    t->Qd[523] = 0;
+    t->Qd[524] = 0;
+    t->Qd[525] = 0;
+    t->Qd[526] = 0;
+    t->Qd[527] = 0;
     return check;
 }
 
@@ -5024,23 +4545,40 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
     int i, e, c;
     int halvings, order, status;
     int k;
-    ned_doppler32_augmented_scalar check = 0.0;
+    ned_doppler32_augmented_scalar sum_check;
+    ned_doppler32_augmented_scalar check = 0.0, sums[2] = { 0.0, 0.0 };
     if (!isfinite(T)) {
         return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
     }
     if (!(T > 0.0)) {
         return NED_DOPPLER32_AUGMENTED_ERR_NOT_POSITIVE;
     }
-    for (e = 0; e < NED_DOPPLER32_AUGMENTED_NNZ_F; ++e) {
-        check += m->F[e] - m->F[e];
+    /* the sum of v - v over F, G and q (0 when all are finite) in two partial sums, two entries a
+            step,
+       which gcc -O2 vectorizes (the order of a sum of zeros and NaNs does not change whether it is
+               0) */
+    for (e = 0; e + 1 < NED_DOPPLER32_AUGMENTED_NNZ_F; e += 2) {
+        sums[0] += m->F[e] - m->F[e];
+        sums[1] += m->F[e + 1] - m->F[e + 1];
     }
-    for (e = 0; e < NED_DOPPLER32_AUGMENTED_NNZ_G; ++e) {
-        check += m->G[e] - m->G[e];
+    for (; e < NED_DOPPLER32_AUGMENTED_NNZ_F; ++e) {
+        sums[0] += m->F[e] - m->F[e];
     }
-    for (c = 0; c < NED_DOPPLER32_AUGMENTED_N_NOISES; ++c) {
-        check += m->q[c] - m->q[c];
+    for (e = 0; e + 1 < NED_DOPPLER32_AUGMENTED_NNZ_G; e += 2) {
+        sums[0] += m->G[e] - m->G[e];
+        sums[1] += m->G[e + 1] - m->G[e + 1];
     }
-    if (check != 0.0) {
+    for (; e < NED_DOPPLER32_AUGMENTED_NNZ_G; ++e) {
+        sums[0] += m->G[e] - m->G[e];
+    }
+    for (e = 0; e + 1 < NED_DOPPLER32_AUGMENTED_N_NOISES; e += 2) {
+        sums[0] += m->q[e] - m->q[e];
+        sums[1] += m->q[e + 1] - m->q[e + 1];
+    }
+    for (; e < NED_DOPPLER32_AUGMENTED_N_NOISES; ++e) {
+        sums[0] += m->q[e] - m->q[e];
+    }
+    if (sums[0] + sums[1] != 0.0) {
         return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
     }
     for (c = 0; c < NED_DOPPLER32_AUGMENTED_N_NOISES; ++c) {
@@ -5071,24 +4609,39 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
                 horner_level_1_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
             }
         } else if (k == 0) {
-            horner_last_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]); /* S = R_0:
-                    also the rows no row of F reads */
+            horner_last_into_S(w, taylor_coefficient[k]); /* S = R_0: also the rows no row of F
+                    reads, and the unit columns R_1 A(:, j) */
+        } else if (k == 1 && halvings > 0) {
+            horner_first_into_term(w, taylor_coefficient[k]); /* R_1 in every row: the unit columns
+                    of S read it */
         } else {
             if (k & 1) {
-                horner_saturated_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+                horner_saturated_into_term(w, taylor_coefficient[k]);
             } else {
-                horner_saturated_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+                horner_saturated_into_S(w, taylor_coefficient[k]);
             }
         }
     }
     horner_transition(t, w);
+    if (halvings > 0 && order > 1) {
+        horner_unit_columns(w); /* S(:, j) = R_1 A(:, j), unit columns j: read by the doublings
+                only */
+    }
     for (i = 0; i < halvings; ++i) {
         doubling(t, w);
     }
-    check += transition_check(t);
-    for (i = 0; i < NED_DOPPLER32_AUGMENTED_N_STATES; ++i) {
-        t->Phi[i][i] += 1.0;
+    /* Phi = I + E, and the sum of its active entries: finite only if every entry is; otherwise (an
+       entry that is not finite, or an overflow of the sum) entry by entry */
+    sum_check = transition_check(t, w);
+    if (sum_check != 0.0) {
+        sum_check = 0.0;
+        for (i = 0; i < NED_DOPPLER32_AUGMENTED_N_STATES; ++i) {
+            for (k = 0; k < NED_DOPPLER32_AUGMENTED_N_STATES; ++k) {
+                sum_check += t->Phi[i][k] - t->Phi[i][k];
+            }
+        }
     }
+    check += sum_check;
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
@@ -5134,7 +4687,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
         *restrict w)
 {
-    w->M[0][0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] +
+    w->M[0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] +
             t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] +
             t->Phi[0][7]*f->P[7][0] + t->Phi[0][8]*f->P[8][0] + t->Phi[0][9]*f->P[9][0] +
             t->Phi[0][10]*f->P[10][0] + t->Phi[0][11]*f->P[11][0] + t->Phi[0][12]*f->P[12][0] +
@@ -5143,7 +4696,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][0] + t->Phi[0][22]*f->P[22][0] + t->Phi[0][23]*f->P[23][0] +
             t->Phi[0][24]*f->P[24][0] + t->Phi[0][25]*f->P[25][0] + t->Phi[0][26]*f->P[26][0] +
             t->Phi[0][27]*f->P[27][0] + t->Phi[0][28]*f->P[28][0] + t->Phi[0][29]*f->P[29][0];
-    w->M[0][1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] +
+    w->M[1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] +
             t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] +
             t->Phi[0][7]*f->P[7][1] + t->Phi[0][8]*f->P[8][1] + t->Phi[0][9]*f->P[9][1] +
             t->Phi[0][10]*f->P[10][1] + t->Phi[0][11]*f->P[11][1] + t->Phi[0][12]*f->P[12][1] +
@@ -5152,7 +4705,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][1] + t->Phi[0][22]*f->P[22][1] + t->Phi[0][23]*f->P[23][1] +
             t->Phi[0][24]*f->P[24][1] + t->Phi[0][25]*f->P[25][1] + t->Phi[0][26]*f->P[26][1] +
             t->Phi[0][27]*f->P[27][1] + t->Phi[0][28]*f->P[28][1] + t->Phi[0][29]*f->P[29][1];
-    w->M[0][2] = t->Phi[0][0]*f->P[0][2] + t->Phi[0][1]*f->P[1][2] + t->Phi[0][2]*f->P[2][2] +
+    w->M[2] = t->Phi[0][0]*f->P[0][2] + t->Phi[0][1]*f->P[1][2] + t->Phi[0][2]*f->P[2][2] +
             t->Phi[0][3]*f->P[3][2] + t->Phi[0][4]*f->P[4][2] + t->Phi[0][5]*f->P[5][2] +
             t->Phi[0][7]*f->P[7][2] + t->Phi[0][8]*f->P[8][2] + t->Phi[0][9]*f->P[9][2] +
             t->Phi[0][10]*f->P[10][2] + t->Phi[0][11]*f->P[11][2] + t->Phi[0][12]*f->P[12][2] +
@@ -5161,7 +4714,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][2] + t->Phi[0][22]*f->P[22][2] + t->Phi[0][23]*f->P[23][2] +
             t->Phi[0][24]*f->P[24][2] + t->Phi[0][25]*f->P[25][2] + t->Phi[0][26]*f->P[26][2] +
             t->Phi[0][27]*f->P[27][2] + t->Phi[0][28]*f->P[28][2] + t->Phi[0][29]*f->P[29][2];
-    w->M[0][3] = t->Phi[0][0]*f->P[0][3] + t->Phi[0][1]*f->P[1][3] + t->Phi[0][2]*f->P[2][3] +
+    w->M[3] = t->Phi[0][0]*f->P[0][3] + t->Phi[0][1]*f->P[1][3] + t->Phi[0][2]*f->P[2][3] +
             t->Phi[0][3]*f->P[3][3] + t->Phi[0][4]*f->P[4][3] + t->Phi[0][5]*f->P[5][3] +
             t->Phi[0][7]*f->P[7][3] + t->Phi[0][8]*f->P[8][3] + t->Phi[0][9]*f->P[9][3] +
             t->Phi[0][10]*f->P[10][3] + t->Phi[0][11]*f->P[11][3] + t->Phi[0][12]*f->P[12][3] +
@@ -5170,7 +4723,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][3] + t->Phi[0][22]*f->P[22][3] + t->Phi[0][23]*f->P[23][3] +
             t->Phi[0][24]*f->P[24][3] + t->Phi[0][25]*f->P[25][3] + t->Phi[0][26]*f->P[26][3] +
             t->Phi[0][27]*f->P[27][3] + t->Phi[0][28]*f->P[28][3] + t->Phi[0][29]*f->P[29][3];
-    w->M[0][4] = t->Phi[0][0]*f->P[0][4] + t->Phi[0][1]*f->P[1][4] + t->Phi[0][2]*f->P[2][4] +
+    w->M[4] = t->Phi[0][0]*f->P[0][4] + t->Phi[0][1]*f->P[1][4] + t->Phi[0][2]*f->P[2][4] +
             t->Phi[0][3]*f->P[3][4] + t->Phi[0][4]*f->P[4][4] + t->Phi[0][5]*f->P[5][4] +
             t->Phi[0][7]*f->P[7][4] + t->Phi[0][8]*f->P[8][4] + t->Phi[0][9]*f->P[9][4] +
             t->Phi[0][10]*f->P[10][4] + t->Phi[0][11]*f->P[11][4] + t->Phi[0][12]*f->P[12][4] +
@@ -5179,7 +4732,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][4] + t->Phi[0][22]*f->P[22][4] + t->Phi[0][23]*f->P[23][4] +
             t->Phi[0][24]*f->P[24][4] + t->Phi[0][25]*f->P[25][4] + t->Phi[0][26]*f->P[26][4] +
             t->Phi[0][27]*f->P[27][4] + t->Phi[0][28]*f->P[28][4] + t->Phi[0][29]*f->P[29][4];
-    w->M[0][5] = t->Phi[0][0]*f->P[0][5] + t->Phi[0][1]*f->P[1][5] + t->Phi[0][2]*f->P[2][5] +
+    w->M[5] = t->Phi[0][0]*f->P[0][5] + t->Phi[0][1]*f->P[1][5] + t->Phi[0][2]*f->P[2][5] +
             t->Phi[0][3]*f->P[3][5] + t->Phi[0][4]*f->P[4][5] + t->Phi[0][5]*f->P[5][5] +
             t->Phi[0][7]*f->P[7][5] + t->Phi[0][8]*f->P[8][5] + t->Phi[0][9]*f->P[9][5] +
             t->Phi[0][10]*f->P[10][5] + t->Phi[0][11]*f->P[11][5] + t->Phi[0][12]*f->P[12][5] +
@@ -5188,7 +4741,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][5] + t->Phi[0][22]*f->P[22][5] + t->Phi[0][23]*f->P[23][5] +
             t->Phi[0][24]*f->P[24][5] + t->Phi[0][25]*f->P[25][5] + t->Phi[0][26]*f->P[26][5] +
             t->Phi[0][27]*f->P[27][5] + t->Phi[0][28]*f->P[28][5] + t->Phi[0][29]*f->P[29][5];
-    w->M[0][6] = t->Phi[0][0]*f->P[0][6] + t->Phi[0][1]*f->P[1][6] + t->Phi[0][2]*f->P[2][6] +
+    w->M[6] = t->Phi[0][0]*f->P[0][6] + t->Phi[0][1]*f->P[1][6] + t->Phi[0][2]*f->P[2][6] +
             t->Phi[0][3]*f->P[3][6] + t->Phi[0][4]*f->P[4][6] + t->Phi[0][5]*f->P[5][6] +
             t->Phi[0][7]*f->P[7][6] + t->Phi[0][8]*f->P[8][6] + t->Phi[0][9]*f->P[9][6] +
             t->Phi[0][10]*f->P[10][6] + t->Phi[0][11]*f->P[11][6] + t->Phi[0][12]*f->P[12][6] +
@@ -5197,7 +4750,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][6] + t->Phi[0][22]*f->P[22][6] + t->Phi[0][23]*f->P[23][6] +
             t->Phi[0][24]*f->P[24][6] + t->Phi[0][25]*f->P[25][6] + t->Phi[0][26]*f->P[26][6] +
             t->Phi[0][27]*f->P[27][6] + t->Phi[0][28]*f->P[28][6] + t->Phi[0][29]*f->P[29][6];
-    w->M[0][7] = t->Phi[0][0]*f->P[0][7] + t->Phi[0][1]*f->P[1][7] + t->Phi[0][2]*f->P[2][7] +
+    w->M[7] = t->Phi[0][0]*f->P[0][7] + t->Phi[0][1]*f->P[1][7] + t->Phi[0][2]*f->P[2][7] +
             t->Phi[0][3]*f->P[3][7] + t->Phi[0][4]*f->P[4][7] + t->Phi[0][5]*f->P[5][7] +
             t->Phi[0][7]*f->P[7][7] + t->Phi[0][8]*f->P[8][7] + t->Phi[0][9]*f->P[9][7] +
             t->Phi[0][10]*f->P[10][7] + t->Phi[0][11]*f->P[11][7] + t->Phi[0][12]*f->P[12][7] +
@@ -5206,7 +4759,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][7] + t->Phi[0][22]*f->P[22][7] + t->Phi[0][23]*f->P[23][7] +
             t->Phi[0][24]*f->P[24][7] + t->Phi[0][25]*f->P[25][7] + t->Phi[0][26]*f->P[26][7] +
             t->Phi[0][27]*f->P[27][7] + t->Phi[0][28]*f->P[28][7] + t->Phi[0][29]*f->P[29][7];
-    w->M[0][8] = t->Phi[0][0]*f->P[0][8] + t->Phi[0][1]*f->P[1][8] + t->Phi[0][2]*f->P[2][8] +
+    w->M[8] = t->Phi[0][0]*f->P[0][8] + t->Phi[0][1]*f->P[1][8] + t->Phi[0][2]*f->P[2][8] +
             t->Phi[0][3]*f->P[3][8] + t->Phi[0][4]*f->P[4][8] + t->Phi[0][5]*f->P[5][8] +
             t->Phi[0][7]*f->P[7][8] + t->Phi[0][8]*f->P[8][8] + t->Phi[0][9]*f->P[9][8] +
             t->Phi[0][10]*f->P[10][8] + t->Phi[0][11]*f->P[11][8] + t->Phi[0][12]*f->P[12][8] +
@@ -5215,7 +4768,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][8] + t->Phi[0][22]*f->P[22][8] + t->Phi[0][23]*f->P[23][8] +
             t->Phi[0][24]*f->P[24][8] + t->Phi[0][25]*f->P[25][8] + t->Phi[0][26]*f->P[26][8] +
             t->Phi[0][27]*f->P[27][8] + t->Phi[0][28]*f->P[28][8] + t->Phi[0][29]*f->P[29][8];
-    w->M[0][9] = t->Phi[0][0]*f->P[0][9] + t->Phi[0][1]*f->P[1][9] + t->Phi[0][2]*f->P[2][9] +
+    w->M[9] = t->Phi[0][0]*f->P[0][9] + t->Phi[0][1]*f->P[1][9] + t->Phi[0][2]*f->P[2][9] +
             t->Phi[0][3]*f->P[3][9] + t->Phi[0][4]*f->P[4][9] + t->Phi[0][5]*f->P[5][9] +
             t->Phi[0][7]*f->P[7][9] + t->Phi[0][8]*f->P[8][9] + t->Phi[0][9]*f->P[9][9] +
             t->Phi[0][10]*f->P[10][9] + t->Phi[0][11]*f->P[11][9] + t->Phi[0][12]*f->P[12][9] +
@@ -5224,7 +4777,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][9] + t->Phi[0][22]*f->P[22][9] + t->Phi[0][23]*f->P[23][9] +
             t->Phi[0][24]*f->P[24][9] + t->Phi[0][25]*f->P[25][9] + t->Phi[0][26]*f->P[26][9] +
             t->Phi[0][27]*f->P[27][9] + t->Phi[0][28]*f->P[28][9] + t->Phi[0][29]*f->P[29][9];
-    w->M[0][10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] +
+    w->M[10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] +
             t->Phi[0][3]*f->P[3][10] + t->Phi[0][4]*f->P[4][10] + t->Phi[0][5]*f->P[5][10] +
             t->Phi[0][7]*f->P[7][10] + t->Phi[0][8]*f->P[8][10] + t->Phi[0][9]*f->P[9][10] +
             t->Phi[0][10]*f->P[10][10] + t->Phi[0][11]*f->P[11][10] + t->Phi[0][12]*f->P[12][10] +
@@ -5233,7 +4786,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][10] + t->Phi[0][22]*f->P[22][10] + t->Phi[0][23]*f->P[23][10] +
             t->Phi[0][24]*f->P[24][10] + t->Phi[0][25]*f->P[25][10] + t->Phi[0][26]*f->P[26][10] +
             t->Phi[0][27]*f->P[27][10] + t->Phi[0][28]*f->P[28][10] + t->Phi[0][29]*f->P[29][10];
-    w->M[0][11] = t->Phi[0][0]*f->P[0][11] + t->Phi[0][1]*f->P[1][11] + t->Phi[0][2]*f->P[2][11] +
+    w->M[11] = t->Phi[0][0]*f->P[0][11] + t->Phi[0][1]*f->P[1][11] + t->Phi[0][2]*f->P[2][11] +
             t->Phi[0][3]*f->P[3][11] + t->Phi[0][4]*f->P[4][11] + t->Phi[0][5]*f->P[5][11] +
             t->Phi[0][7]*f->P[7][11] + t->Phi[0][8]*f->P[8][11] + t->Phi[0][9]*f->P[9][11] +
             t->Phi[0][10]*f->P[10][11] + t->Phi[0][11]*f->P[11][11] + t->Phi[0][12]*f->P[12][11] +
@@ -5242,7 +4795,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][11] + t->Phi[0][22]*f->P[22][11] + t->Phi[0][23]*f->P[23][11] +
             t->Phi[0][24]*f->P[24][11] + t->Phi[0][25]*f->P[25][11] + t->Phi[0][26]*f->P[26][11] +
             t->Phi[0][27]*f->P[27][11] + t->Phi[0][28]*f->P[28][11] + t->Phi[0][29]*f->P[29][11];
-    w->M[0][12] = t->Phi[0][0]*f->P[0][12] + t->Phi[0][1]*f->P[1][12] + t->Phi[0][2]*f->P[2][12] +
+    w->M[12] = t->Phi[0][0]*f->P[0][12] + t->Phi[0][1]*f->P[1][12] + t->Phi[0][2]*f->P[2][12] +
             t->Phi[0][3]*f->P[3][12] + t->Phi[0][4]*f->P[4][12] + t->Phi[0][5]*f->P[5][12] +
             t->Phi[0][7]*f->P[7][12] + t->Phi[0][8]*f->P[8][12] + t->Phi[0][9]*f->P[9][12] +
             t->Phi[0][10]*f->P[10][12] + t->Phi[0][11]*f->P[11][12] + t->Phi[0][12]*f->P[12][12] +
@@ -5251,7 +4804,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][12] + t->Phi[0][22]*f->P[22][12] + t->Phi[0][23]*f->P[23][12] +
             t->Phi[0][24]*f->P[24][12] + t->Phi[0][25]*f->P[25][12] + t->Phi[0][26]*f->P[26][12] +
             t->Phi[0][27]*f->P[27][12] + t->Phi[0][28]*f->P[28][12] + t->Phi[0][29]*f->P[29][12];
-    w->M[0][13] = t->Phi[0][0]*f->P[0][13] + t->Phi[0][1]*f->P[1][13] + t->Phi[0][2]*f->P[2][13] +
+    w->M[13] = t->Phi[0][0]*f->P[0][13] + t->Phi[0][1]*f->P[1][13] + t->Phi[0][2]*f->P[2][13] +
             t->Phi[0][3]*f->P[3][13] + t->Phi[0][4]*f->P[4][13] + t->Phi[0][5]*f->P[5][13] +
             t->Phi[0][7]*f->P[7][13] + t->Phi[0][8]*f->P[8][13] + t->Phi[0][9]*f->P[9][13] +
             t->Phi[0][10]*f->P[10][13] + t->Phi[0][11]*f->P[11][13] + t->Phi[0][12]*f->P[12][13] +
@@ -5260,7 +4813,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][13] + t->Phi[0][22]*f->P[22][13] + t->Phi[0][23]*f->P[23][13] +
             t->Phi[0][24]*f->P[24][13] + t->Phi[0][25]*f->P[25][13] + t->Phi[0][26]*f->P[26][13] +
             t->Phi[0][27]*f->P[27][13] + t->Phi[0][28]*f->P[28][13] + t->Phi[0][29]*f->P[29][13];
-    w->M[0][14] = t->Phi[0][0]*f->P[0][14] + t->Phi[0][1]*f->P[1][14] + t->Phi[0][2]*f->P[2][14] +
+    w->M[14] = t->Phi[0][0]*f->P[0][14] + t->Phi[0][1]*f->P[1][14] + t->Phi[0][2]*f->P[2][14] +
             t->Phi[0][3]*f->P[3][14] + t->Phi[0][4]*f->P[4][14] + t->Phi[0][5]*f->P[5][14] +
             t->Phi[0][7]*f->P[7][14] + t->Phi[0][8]*f->P[8][14] + t->Phi[0][9]*f->P[9][14] +
             t->Phi[0][10]*f->P[10][14] + t->Phi[0][11]*f->P[11][14] + t->Phi[0][12]*f->P[12][14] +
@@ -5269,7 +4822,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][14] + t->Phi[0][22]*f->P[22][14] + t->Phi[0][23]*f->P[23][14] +
             t->Phi[0][24]*f->P[24][14] + t->Phi[0][25]*f->P[25][14] + t->Phi[0][26]*f->P[26][14] +
             t->Phi[0][27]*f->P[27][14] + t->Phi[0][28]*f->P[28][14] + t->Phi[0][29]*f->P[29][14];
-    w->M[0][15] = t->Phi[0][0]*f->P[0][15] + t->Phi[0][1]*f->P[1][15] + t->Phi[0][2]*f->P[2][15] +
+    w->M[15] = t->Phi[0][0]*f->P[0][15] + t->Phi[0][1]*f->P[1][15] + t->Phi[0][2]*f->P[2][15] +
             t->Phi[0][3]*f->P[3][15] + t->Phi[0][4]*f->P[4][15] + t->Phi[0][5]*f->P[5][15] +
             t->Phi[0][7]*f->P[7][15] + t->Phi[0][8]*f->P[8][15] + t->Phi[0][9]*f->P[9][15] +
             t->Phi[0][10]*f->P[10][15] + t->Phi[0][11]*f->P[11][15] + t->Phi[0][12]*f->P[12][15] +
@@ -5278,7 +4831,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][15] + t->Phi[0][22]*f->P[22][15] + t->Phi[0][23]*f->P[23][15] +
             t->Phi[0][24]*f->P[24][15] + t->Phi[0][25]*f->P[25][15] + t->Phi[0][26]*f->P[26][15] +
             t->Phi[0][27]*f->P[27][15] + t->Phi[0][28]*f->P[28][15] + t->Phi[0][29]*f->P[29][15];
-    w->M[0][16] = t->Phi[0][0]*f->P[0][16] + t->Phi[0][1]*f->P[1][16] + t->Phi[0][2]*f->P[2][16] +
+    w->M[16] = t->Phi[0][0]*f->P[0][16] + t->Phi[0][1]*f->P[1][16] + t->Phi[0][2]*f->P[2][16] +
             t->Phi[0][3]*f->P[3][16] + t->Phi[0][4]*f->P[4][16] + t->Phi[0][5]*f->P[5][16] +
             t->Phi[0][7]*f->P[7][16] + t->Phi[0][8]*f->P[8][16] + t->Phi[0][9]*f->P[9][16] +
             t->Phi[0][10]*f->P[10][16] + t->Phi[0][11]*f->P[11][16] + t->Phi[0][12]*f->P[12][16] +
@@ -5287,7 +4840,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][16] + t->Phi[0][22]*f->P[22][16] + t->Phi[0][23]*f->P[23][16] +
             t->Phi[0][24]*f->P[24][16] + t->Phi[0][25]*f->P[25][16] + t->Phi[0][26]*f->P[26][16] +
             t->Phi[0][27]*f->P[27][16] + t->Phi[0][28]*f->P[28][16] + t->Phi[0][29]*f->P[29][16];
-    w->M[0][17] = t->Phi[0][0]*f->P[0][17] + t->Phi[0][1]*f->P[1][17] + t->Phi[0][2]*f->P[2][17] +
+    w->M[17] = t->Phi[0][0]*f->P[0][17] + t->Phi[0][1]*f->P[1][17] + t->Phi[0][2]*f->P[2][17] +
             t->Phi[0][3]*f->P[3][17] + t->Phi[0][4]*f->P[4][17] + t->Phi[0][5]*f->P[5][17] +
             t->Phi[0][7]*f->P[7][17] + t->Phi[0][8]*f->P[8][17] + t->Phi[0][9]*f->P[9][17] +
             t->Phi[0][10]*f->P[10][17] + t->Phi[0][11]*f->P[11][17] + t->Phi[0][12]*f->P[12][17] +
@@ -5296,7 +4849,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][17] + t->Phi[0][22]*f->P[22][17] + t->Phi[0][23]*f->P[23][17] +
             t->Phi[0][24]*f->P[24][17] + t->Phi[0][25]*f->P[25][17] + t->Phi[0][26]*f->P[26][17] +
             t->Phi[0][27]*f->P[27][17] + t->Phi[0][28]*f->P[28][17] + t->Phi[0][29]*f->P[29][17];
-    w->M[0][18] = t->Phi[0][0]*f->P[0][18] + t->Phi[0][1]*f->P[1][18] + t->Phi[0][2]*f->P[2][18] +
+    w->M[18] = t->Phi[0][0]*f->P[0][18] + t->Phi[0][1]*f->P[1][18] + t->Phi[0][2]*f->P[2][18] +
             t->Phi[0][3]*f->P[3][18] + t->Phi[0][4]*f->P[4][18] + t->Phi[0][5]*f->P[5][18] +
             t->Phi[0][7]*f->P[7][18] + t->Phi[0][8]*f->P[8][18] + t->Phi[0][9]*f->P[9][18] +
             t->Phi[0][10]*f->P[10][18] + t->Phi[0][11]*f->P[11][18] + t->Phi[0][12]*f->P[12][18] +
@@ -5305,7 +4858,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][18] + t->Phi[0][22]*f->P[22][18] + t->Phi[0][23]*f->P[23][18] +
             t->Phi[0][24]*f->P[24][18] + t->Phi[0][25]*f->P[25][18] + t->Phi[0][26]*f->P[26][18] +
             t->Phi[0][27]*f->P[27][18] + t->Phi[0][28]*f->P[28][18] + t->Phi[0][29]*f->P[29][18];
-    w->M[0][19] = t->Phi[0][0]*f->P[0][19] + t->Phi[0][1]*f->P[1][19] + t->Phi[0][2]*f->P[2][19] +
+    w->M[19] = t->Phi[0][0]*f->P[0][19] + t->Phi[0][1]*f->P[1][19] + t->Phi[0][2]*f->P[2][19] +
             t->Phi[0][3]*f->P[3][19] + t->Phi[0][4]*f->P[4][19] + t->Phi[0][5]*f->P[5][19] +
             t->Phi[0][7]*f->P[7][19] + t->Phi[0][8]*f->P[8][19] + t->Phi[0][9]*f->P[9][19] +
             t->Phi[0][10]*f->P[10][19] + t->Phi[0][11]*f->P[11][19] + t->Phi[0][12]*f->P[12][19] +
@@ -5314,7 +4867,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][19] + t->Phi[0][22]*f->P[22][19] + t->Phi[0][23]*f->P[23][19] +
             t->Phi[0][24]*f->P[24][19] + t->Phi[0][25]*f->P[25][19] + t->Phi[0][26]*f->P[26][19] +
             t->Phi[0][27]*f->P[27][19] + t->Phi[0][28]*f->P[28][19] + t->Phi[0][29]*f->P[29][19];
-    w->M[0][20] = t->Phi[0][0]*f->P[0][20] + t->Phi[0][1]*f->P[1][20] + t->Phi[0][2]*f->P[2][20] +
+    w->M[20] = t->Phi[0][0]*f->P[0][20] + t->Phi[0][1]*f->P[1][20] + t->Phi[0][2]*f->P[2][20] +
             t->Phi[0][3]*f->P[3][20] + t->Phi[0][4]*f->P[4][20] + t->Phi[0][5]*f->P[5][20] +
             t->Phi[0][7]*f->P[7][20] + t->Phi[0][8]*f->P[8][20] + t->Phi[0][9]*f->P[9][20] +
             t->Phi[0][10]*f->P[10][20] + t->Phi[0][11]*f->P[11][20] + t->Phi[0][12]*f->P[12][20] +
@@ -5323,7 +4876,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][20] + t->Phi[0][22]*f->P[22][20] + t->Phi[0][23]*f->P[23][20] +
             t->Phi[0][24]*f->P[24][20] + t->Phi[0][25]*f->P[25][20] + t->Phi[0][26]*f->P[26][20] +
             t->Phi[0][27]*f->P[27][20] + t->Phi[0][28]*f->P[28][20] + t->Phi[0][29]*f->P[29][20];
-    w->M[0][21] = t->Phi[0][0]*f->P[0][21] + t->Phi[0][1]*f->P[1][21] + t->Phi[0][2]*f->P[2][21] +
+    w->M[21] = t->Phi[0][0]*f->P[0][21] + t->Phi[0][1]*f->P[1][21] + t->Phi[0][2]*f->P[2][21] +
             t->Phi[0][3]*f->P[3][21] + t->Phi[0][4]*f->P[4][21] + t->Phi[0][5]*f->P[5][21] +
             t->Phi[0][7]*f->P[7][21] + t->Phi[0][8]*f->P[8][21] + t->Phi[0][9]*f->P[9][21] +
             t->Phi[0][10]*f->P[10][21] + t->Phi[0][11]*f->P[11][21] + t->Phi[0][12]*f->P[12][21] +
@@ -5332,7 +4885,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][21] + t->Phi[0][22]*f->P[22][21] + t->Phi[0][23]*f->P[23][21] +
             t->Phi[0][24]*f->P[24][21] + t->Phi[0][25]*f->P[25][21] + t->Phi[0][26]*f->P[26][21] +
             t->Phi[0][27]*f->P[27][21] + t->Phi[0][28]*f->P[28][21] + t->Phi[0][29]*f->P[29][21];
-    w->M[0][22] = t->Phi[0][0]*f->P[0][22] + t->Phi[0][1]*f->P[1][22] + t->Phi[0][2]*f->P[2][22] +
+    w->M[22] = t->Phi[0][0]*f->P[0][22] + t->Phi[0][1]*f->P[1][22] + t->Phi[0][2]*f->P[2][22] +
             t->Phi[0][3]*f->P[3][22] + t->Phi[0][4]*f->P[4][22] + t->Phi[0][5]*f->P[5][22] +
             t->Phi[0][7]*f->P[7][22] + t->Phi[0][8]*f->P[8][22] + t->Phi[0][9]*f->P[9][22] +
             t->Phi[0][10]*f->P[10][22] + t->Phi[0][11]*f->P[11][22] + t->Phi[0][12]*f->P[12][22] +
@@ -5341,7 +4894,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][22] + t->Phi[0][22]*f->P[22][22] + t->Phi[0][23]*f->P[23][22] +
             t->Phi[0][24]*f->P[24][22] + t->Phi[0][25]*f->P[25][22] + t->Phi[0][26]*f->P[26][22] +
             t->Phi[0][27]*f->P[27][22] + t->Phi[0][28]*f->P[28][22] + t->Phi[0][29]*f->P[29][22];
-    w->M[0][23] = t->Phi[0][0]*f->P[0][23] + t->Phi[0][1]*f->P[1][23] + t->Phi[0][2]*f->P[2][23] +
+    w->M[23] = t->Phi[0][0]*f->P[0][23] + t->Phi[0][1]*f->P[1][23] + t->Phi[0][2]*f->P[2][23] +
             t->Phi[0][3]*f->P[3][23] + t->Phi[0][4]*f->P[4][23] + t->Phi[0][5]*f->P[5][23] +
             t->Phi[0][7]*f->P[7][23] + t->Phi[0][8]*f->P[8][23] + t->Phi[0][9]*f->P[9][23] +
             t->Phi[0][10]*f->P[10][23] + t->Phi[0][11]*f->P[11][23] + t->Phi[0][12]*f->P[12][23] +
@@ -5350,7 +4903,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][23] + t->Phi[0][22]*f->P[22][23] + t->Phi[0][23]*f->P[23][23] +
             t->Phi[0][24]*f->P[24][23] + t->Phi[0][25]*f->P[25][23] + t->Phi[0][26]*f->P[26][23] +
             t->Phi[0][27]*f->P[27][23] + t->Phi[0][28]*f->P[28][23] + t->Phi[0][29]*f->P[29][23];
-    w->M[0][24] = t->Phi[0][0]*f->P[0][24] + t->Phi[0][1]*f->P[1][24] + t->Phi[0][2]*f->P[2][24] +
+    w->M[24] = t->Phi[0][0]*f->P[0][24] + t->Phi[0][1]*f->P[1][24] + t->Phi[0][2]*f->P[2][24] +
             t->Phi[0][3]*f->P[3][24] + t->Phi[0][4]*f->P[4][24] + t->Phi[0][5]*f->P[5][24] +
             t->Phi[0][7]*f->P[7][24] + t->Phi[0][8]*f->P[8][24] + t->Phi[0][9]*f->P[9][24] +
             t->Phi[0][10]*f->P[10][24] + t->Phi[0][11]*f->P[11][24] + t->Phi[0][12]*f->P[12][24] +
@@ -5359,7 +4912,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][24] + t->Phi[0][22]*f->P[22][24] + t->Phi[0][23]*f->P[23][24] +
             t->Phi[0][24]*f->P[24][24] + t->Phi[0][25]*f->P[25][24] + t->Phi[0][26]*f->P[26][24] +
             t->Phi[0][27]*f->P[27][24] + t->Phi[0][28]*f->P[28][24] + t->Phi[0][29]*f->P[29][24];
-    w->M[0][25] = t->Phi[0][0]*f->P[0][25] + t->Phi[0][1]*f->P[1][25] + t->Phi[0][2]*f->P[2][25] +
+    w->M[25] = t->Phi[0][0]*f->P[0][25] + t->Phi[0][1]*f->P[1][25] + t->Phi[0][2]*f->P[2][25] +
             t->Phi[0][3]*f->P[3][25] + t->Phi[0][4]*f->P[4][25] + t->Phi[0][5]*f->P[5][25] +
             t->Phi[0][7]*f->P[7][25] + t->Phi[0][8]*f->P[8][25] + t->Phi[0][9]*f->P[9][25] +
             t->Phi[0][10]*f->P[10][25] + t->Phi[0][11]*f->P[11][25] + t->Phi[0][12]*f->P[12][25] +
@@ -5368,7 +4921,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][25] + t->Phi[0][22]*f->P[22][25] + t->Phi[0][23]*f->P[23][25] +
             t->Phi[0][24]*f->P[24][25] + t->Phi[0][25]*f->P[25][25] + t->Phi[0][26]*f->P[26][25] +
             t->Phi[0][27]*f->P[27][25] + t->Phi[0][28]*f->P[28][25] + t->Phi[0][29]*f->P[29][25];
-    w->M[0][26] = t->Phi[0][0]*f->P[0][26] + t->Phi[0][1]*f->P[1][26] + t->Phi[0][2]*f->P[2][26] +
+    w->M[26] = t->Phi[0][0]*f->P[0][26] + t->Phi[0][1]*f->P[1][26] + t->Phi[0][2]*f->P[2][26] +
             t->Phi[0][3]*f->P[3][26] + t->Phi[0][4]*f->P[4][26] + t->Phi[0][5]*f->P[5][26] +
             t->Phi[0][7]*f->P[7][26] + t->Phi[0][8]*f->P[8][26] + t->Phi[0][9]*f->P[9][26] +
             t->Phi[0][10]*f->P[10][26] + t->Phi[0][11]*f->P[11][26] + t->Phi[0][12]*f->P[12][26] +
@@ -5377,7 +4930,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][26] + t->Phi[0][22]*f->P[22][26] + t->Phi[0][23]*f->P[23][26] +
             t->Phi[0][24]*f->P[24][26] + t->Phi[0][25]*f->P[25][26] + t->Phi[0][26]*f->P[26][26] +
             t->Phi[0][27]*f->P[27][26] + t->Phi[0][28]*f->P[28][26] + t->Phi[0][29]*f->P[29][26];
-    w->M[0][27] = t->Phi[0][0]*f->P[0][27] + t->Phi[0][1]*f->P[1][27] + t->Phi[0][2]*f->P[2][27] +
+    w->M[27] = t->Phi[0][0]*f->P[0][27] + t->Phi[0][1]*f->P[1][27] + t->Phi[0][2]*f->P[2][27] +
             t->Phi[0][3]*f->P[3][27] + t->Phi[0][4]*f->P[4][27] + t->Phi[0][5]*f->P[5][27] +
             t->Phi[0][7]*f->P[7][27] + t->Phi[0][8]*f->P[8][27] + t->Phi[0][9]*f->P[9][27] +
             t->Phi[0][10]*f->P[10][27] + t->Phi[0][11]*f->P[11][27] + t->Phi[0][12]*f->P[12][27] +
@@ -5386,7 +4939,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][27] + t->Phi[0][22]*f->P[22][27] + t->Phi[0][23]*f->P[23][27] +
             t->Phi[0][24]*f->P[24][27] + t->Phi[0][25]*f->P[25][27] + t->Phi[0][26]*f->P[26][27] +
             t->Phi[0][27]*f->P[27][27] + t->Phi[0][28]*f->P[28][27] + t->Phi[0][29]*f->P[29][27];
-    w->M[0][28] = t->Phi[0][0]*f->P[0][28] + t->Phi[0][1]*f->P[1][28] + t->Phi[0][2]*f->P[2][28] +
+    w->M[28] = t->Phi[0][0]*f->P[0][28] + t->Phi[0][1]*f->P[1][28] + t->Phi[0][2]*f->P[2][28] +
             t->Phi[0][3]*f->P[3][28] + t->Phi[0][4]*f->P[4][28] + t->Phi[0][5]*f->P[5][28] +
             t->Phi[0][7]*f->P[7][28] + t->Phi[0][8]*f->P[8][28] + t->Phi[0][9]*f->P[9][28] +
             t->Phi[0][10]*f->P[10][28] + t->Phi[0][11]*f->P[11][28] + t->Phi[0][12]*f->P[12][28] +
@@ -5395,7 +4948,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][28] + t->Phi[0][22]*f->P[22][28] + t->Phi[0][23]*f->P[23][28] +
             t->Phi[0][24]*f->P[24][28] + t->Phi[0][25]*f->P[25][28] + t->Phi[0][26]*f->P[26][28] +
             t->Phi[0][27]*f->P[27][28] + t->Phi[0][28]*f->P[28][28] + t->Phi[0][29]*f->P[29][28];
-    w->M[0][29] = t->Phi[0][0]*f->P[0][29] + t->Phi[0][1]*f->P[1][29] + t->Phi[0][2]*f->P[2][29] +
+    w->M[29] = t->Phi[0][0]*f->P[0][29] + t->Phi[0][1]*f->P[1][29] + t->Phi[0][2]*f->P[2][29] +
             t->Phi[0][3]*f->P[3][29] + t->Phi[0][4]*f->P[4][29] + t->Phi[0][5]*f->P[5][29] +
             t->Phi[0][7]*f->P[7][29] + t->Phi[0][8]*f->P[8][29] + t->Phi[0][9]*f->P[9][29] +
             t->Phi[0][10]*f->P[10][29] + t->Phi[0][11]*f->P[11][29] + t->Phi[0][12]*f->P[12][29] +
@@ -5404,7 +4957,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][29] + t->Phi[0][22]*f->P[22][29] + t->Phi[0][23]*f->P[23][29] +
             t->Phi[0][24]*f->P[24][29] + t->Phi[0][25]*f->P[25][29] + t->Phi[0][26]*f->P[26][29] +
             t->Phi[0][27]*f->P[27][29] + t->Phi[0][28]*f->P[28][29] + t->Phi[0][29]*f->P[29][29];
-    w->M[0][30] = t->Phi[0][0]*f->P[0][30] + t->Phi[0][1]*f->P[1][30] + t->Phi[0][2]*f->P[2][30] +
+    w->M[30] = t->Phi[0][0]*f->P[0][30] + t->Phi[0][1]*f->P[1][30] + t->Phi[0][2]*f->P[2][30] +
             t->Phi[0][3]*f->P[3][30] + t->Phi[0][4]*f->P[4][30] + t->Phi[0][5]*f->P[5][30] +
             t->Phi[0][7]*f->P[7][30] + t->Phi[0][8]*f->P[8][30] + t->Phi[0][9]*f->P[9][30] +
             t->Phi[0][10]*f->P[10][30] + t->Phi[0][11]*f->P[11][30] + t->Phi[0][12]*f->P[12][30] +
@@ -5413,7 +4966,7 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][21]*f->P[21][30] + t->Phi[0][22]*f->P[22][30] + t->Phi[0][23]*f->P[23][30] +
             t->Phi[0][24]*f->P[24][30] + t->Phi[0][25]*f->P[25][30] + t->Phi[0][26]*f->P[26][30] +
             t->Phi[0][27]*f->P[27][30] + t->Phi[0][28]*f->P[28][30] + t->Phi[0][29]*f->P[29][30];
-    w->M[0][31] = t->Phi[0][0]*f->P[0][31] + t->Phi[0][1]*f->P[1][31] + t->Phi[0][2]*f->P[2][31] +
+    w->M[31] = t->Phi[0][0]*f->P[0][31] + t->Phi[0][1]*f->P[1][31] + t->Phi[0][2]*f->P[2][31] +
             t->Phi[0][3]*f->P[3][31] + t->Phi[0][4]*f->P[4][31] + t->Phi[0][5]*f->P[5][31] +
             t->Phi[0][7]*f->P[7][31] + t->Phi[0][8]*f->P[8][31] + t->Phi[0][9]*f->P[9][31] +
             t->Phi[0][10]*f->P[10][31] + t->Phi[0][11]*f->P[11][31] + t->Phi[0][12]*f->P[12][31] +
@@ -5424,11 +4977,114 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[0][27]*f->P[27][31] + t->Phi[0][28]*f->P[28][31] + t->Phi[0][29]*f->P[29][31];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[0][0] + w->M[1]*t->Phi[0][1] + w->M[2]*t->Phi[0][2] + w->M[3]*t->Phi[0][3] +
+            w->M[4]*t->Phi[0][4] + w->M[5]*t->Phi[0][5] + w->M[7]*t->Phi[0][7] +
+            w->M[8]*t->Phi[0][8] + w->M[9]*t->Phi[0][9] + w->M[10]*t->Phi[0][10] +
+            w->M[11]*t->Phi[0][11] + w->M[12]*t->Phi[0][12] + w->M[13]*t->Phi[0][13] +
+            w->M[14]*t->Phi[0][14] + w->M[15]*t->Phi[0][15] + w->M[18]*t->Phi[0][18] +
+            w->M[19]*t->Phi[0][19] + w->M[20]*t->Phi[0][20] + w->M[21]*t->Phi[0][21] +
+            w->M[22]*t->Phi[0][22] + w->M[23]*t->Phi[0][23] + w->M[24]*t->Phi[0][24] +
+            w->M[25]*t->Phi[0][25] + w->M[26]*t->Phi[0][26] + w->M[27]*t->Phi[0][27] +
+            w->M[28]*t->Phi[0][28] + w->M[29]*t->Phi[0][29] + t->Qd[0]; w->Pn[0] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
+            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[7]*t->Phi[1][7] +
+            w->M[8]*t->Phi[1][8] + w->M[9]*t->Phi[1][9] + w->M[10]*t->Phi[1][10] +
+            w->M[11]*t->Phi[1][11] + w->M[12]*t->Phi[1][12] + w->M[13]*t->Phi[1][13] +
+            w->M[14]*t->Phi[1][14] + w->M[15]*t->Phi[1][15] + w->M[18]*t->Phi[1][18] +
+            w->M[19]*t->Phi[1][19] + w->M[20]*t->Phi[1][20] + w->M[21]*t->Phi[1][21] +
+            w->M[22]*t->Phi[1][22] + w->M[23]*t->Phi[1][23] + w->M[24]*t->Phi[1][24] +
+            w->M[25]*t->Phi[1][25] + w->M[26]*t->Phi[1][26] + w->M[27]*t->Phi[1][27] +
+            w->M[28]*t->Phi[1][28] + w->M[29]*t->Phi[1][29] + t->Qd[1]; w->Pn[1] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[7]*t->Phi[2][7] +
+            w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] + w->M[10]*t->Phi[2][10] +
+            w->M[11]*t->Phi[2][11] + w->M[12]*t->Phi[2][12] + w->M[13]*t->Phi[2][13] +
+            w->M[14]*t->Phi[2][14] + w->M[15]*t->Phi[2][15] + w->M[18]*t->Phi[2][18] +
+            w->M[19]*t->Phi[2][19] + w->M[20]*t->Phi[2][20] + w->M[21]*t->Phi[2][21] +
+            w->M[22]*t->Phi[2][22] + w->M[23]*t->Phi[2][23] + w->M[24]*t->Phi[2][24] +
+            w->M[25]*t->Phi[2][25] + w->M[26]*t->Phi[2][26] + w->M[27]*t->Phi[2][27] +
+            w->M[28]*t->Phi[2][28] + w->M[29]*t->Phi[2][29] + t->Qd[2]; w->Pn[2] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[7]*t->Phi[3][7] +
+            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] +
+            w->M[11]*t->Phi[3][11] + w->M[12]*t->Phi[3][12] + w->M[13]*t->Phi[3][13] +
+            w->M[14]*t->Phi[3][14] + w->M[15]*t->Phi[3][15] + w->M[18]*t->Phi[3][18] +
+            w->M[19]*t->Phi[3][19] + w->M[20]*t->Phi[3][20] + w->M[21]*t->Phi[3][21] +
+            w->M[22]*t->Phi[3][22] + w->M[23]*t->Phi[3][23] + w->M[24]*t->Phi[3][24] +
+            w->M[25]*t->Phi[3][25] + w->M[26]*t->Phi[3][26] + w->M[27]*t->Phi[3][27] +
+            w->M[28]*t->Phi[3][28] + w->M[29]*t->Phi[3][29] + t->Qd[3]; w->Pn[3] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] +
+            w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] + w->M[13]*t->Phi[4][13] +
+            w->M[14]*t->Phi[4][14] + w->M[15]*t->Phi[4][15] + w->M[18]*t->Phi[4][18] +
+            w->M[19]*t->Phi[4][19] + w->M[20]*t->Phi[4][20] + w->M[21]*t->Phi[4][21] +
+            w->M[22]*t->Phi[4][22] + w->M[23]*t->Phi[4][23] + w->M[24]*t->Phi[4][24] +
+            w->M[25]*t->Phi[4][25] + w->M[26]*t->Phi[4][26] + w->M[27]*t->Phi[4][27] +
+            w->M[28]*t->Phi[4][28] + w->M[29]*t->Phi[4][29] + t->Qd[4]; w->Pn[4] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] +
+            w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] + w->M[13]*t->Phi[5][13] +
+            w->M[14]*t->Phi[5][14] + w->M[15]*t->Phi[5][15] + w->M[18]*t->Phi[5][18] +
+            w->M[19]*t->Phi[5][19] + w->M[20]*t->Phi[5][20] + w->M[21]*t->Phi[5][21] +
+            w->M[22]*t->Phi[5][22] + w->M[23]*t->Phi[5][23] + w->M[24]*t->Phi[5][24] +
+            w->M[25]*t->Phi[5][25] + w->M[26]*t->Phi[5][26] + w->M[27]*t->Phi[5][27] +
+            w->M[28]*t->Phi[5][28] + w->M[29]*t->Phi[5][29] + t->Qd[5]; w->Pn[5] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[18]*t->Phi[6][18] + w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] +
+            w->M[21]*t->Phi[6][21] + w->M[22]*t->Phi[6][22] + w->M[23]*t->Phi[6][23] +
+            w->M[24]*t->Phi[6][24] + w->M[25]*t->Phi[6][25] + w->M[26]*t->Phi[6][26] +
+            w->M[27]*t->Phi[6][27] + w->M[28]*t->Phi[6][28] + w->M[29]*t->Phi[6][29] + t->Qd[6];
+            w->Pn[6] = v; check += v - v;
+    v = w->M[7]; w->Pn[7] = v; check += v - v;
+    v = w->M[8]; w->Pn[8] = v; check += v - v;
+    v = w->M[9]; w->Pn[9] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[10]; w->Pn[10] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[11]; w->Pn[11] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[12]; w->Pn[12] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[13]; w->Pn[13] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[14]; w->Pn[14] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[15]; w->Pn[15] = v; check += v - v;
+    v = w->M[16]; w->Pn[16] = v; check += v - v;
+    v = w->M[17]; w->Pn[17] = v; check += v - v;
+    v = w->M[18]; w->Pn[18] = v; check += v - v;
+    v = w->M[19]; w->Pn[19] = v; check += v - v;
+    v = w->M[20]; w->Pn[20] = v; check += v - v;
+    v = w->M[21]; w->Pn[21] = v; check += v - v;
+    v = w->M[22]; w->Pn[22] = v; check += v - v;
+    v = w->M[23]; w->Pn[23] = v; check += v - v;
+    v = w->M[24]; w->Pn[24] = v; check += v - v;
+    v = w->M[25]; w->Pn[25] = v; check += v - v;
+    v = w->M[26]; w->Pn[26] = v; check += v - v;
+    v = w->M[27]; w->Pn[27] = v; check += v - v;
+    v = w->M[28]; w->Pn[28] = v; check += v - v;
+    v = w->M[29]; w->Pn[29] = v; check += v - v;
+    v = w->M[30]; w->Pn[30] = v; check += v - v;
+    v = w->M[31]; w->Pn[31] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, const
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
         *restrict w)
 {
-    w->M[1][0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] +
+    w->M[0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] +
             t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] +
             t->Phi[1][7]*f->P[7][0] + t->Phi[1][8]*f->P[8][0] + t->Phi[1][9]*f->P[9][0] +
             t->Phi[1][10]*f->P[10][0] + t->Phi[1][11]*f->P[11][0] + t->Phi[1][12]*f->P[12][0] +
@@ -5437,7 +5093,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][0] + t->Phi[1][22]*f->P[22][0] + t->Phi[1][23]*f->P[23][0] +
             t->Phi[1][24]*f->P[24][0] + t->Phi[1][25]*f->P[25][0] + t->Phi[1][26]*f->P[26][0] +
             t->Phi[1][27]*f->P[27][0] + t->Phi[1][28]*f->P[28][0] + t->Phi[1][29]*f->P[29][0];
-    w->M[1][1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] +
+    w->M[1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] +
             t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] +
             t->Phi[1][7]*f->P[7][1] + t->Phi[1][8]*f->P[8][1] + t->Phi[1][9]*f->P[9][1] +
             t->Phi[1][10]*f->P[10][1] + t->Phi[1][11]*f->P[11][1] + t->Phi[1][12]*f->P[12][1] +
@@ -5446,7 +5102,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][1] + t->Phi[1][22]*f->P[22][1] + t->Phi[1][23]*f->P[23][1] +
             t->Phi[1][24]*f->P[24][1] + t->Phi[1][25]*f->P[25][1] + t->Phi[1][26]*f->P[26][1] +
             t->Phi[1][27]*f->P[27][1] + t->Phi[1][28]*f->P[28][1] + t->Phi[1][29]*f->P[29][1];
-    w->M[1][2] = t->Phi[1][0]*f->P[0][2] + t->Phi[1][1]*f->P[1][2] + t->Phi[1][2]*f->P[2][2] +
+    w->M[2] = t->Phi[1][0]*f->P[0][2] + t->Phi[1][1]*f->P[1][2] + t->Phi[1][2]*f->P[2][2] +
             t->Phi[1][3]*f->P[3][2] + t->Phi[1][4]*f->P[4][2] + t->Phi[1][5]*f->P[5][2] +
             t->Phi[1][7]*f->P[7][2] + t->Phi[1][8]*f->P[8][2] + t->Phi[1][9]*f->P[9][2] +
             t->Phi[1][10]*f->P[10][2] + t->Phi[1][11]*f->P[11][2] + t->Phi[1][12]*f->P[12][2] +
@@ -5455,7 +5111,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][2] + t->Phi[1][22]*f->P[22][2] + t->Phi[1][23]*f->P[23][2] +
             t->Phi[1][24]*f->P[24][2] + t->Phi[1][25]*f->P[25][2] + t->Phi[1][26]*f->P[26][2] +
             t->Phi[1][27]*f->P[27][2] + t->Phi[1][28]*f->P[28][2] + t->Phi[1][29]*f->P[29][2];
-    w->M[1][3] = t->Phi[1][0]*f->P[0][3] + t->Phi[1][1]*f->P[1][3] + t->Phi[1][2]*f->P[2][3] +
+    w->M[3] = t->Phi[1][0]*f->P[0][3] + t->Phi[1][1]*f->P[1][3] + t->Phi[1][2]*f->P[2][3] +
             t->Phi[1][3]*f->P[3][3] + t->Phi[1][4]*f->P[4][3] + t->Phi[1][5]*f->P[5][3] +
             t->Phi[1][7]*f->P[7][3] + t->Phi[1][8]*f->P[8][3] + t->Phi[1][9]*f->P[9][3] +
             t->Phi[1][10]*f->P[10][3] + t->Phi[1][11]*f->P[11][3] + t->Phi[1][12]*f->P[12][3] +
@@ -5464,7 +5120,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][3] + t->Phi[1][22]*f->P[22][3] + t->Phi[1][23]*f->P[23][3] +
             t->Phi[1][24]*f->P[24][3] + t->Phi[1][25]*f->P[25][3] + t->Phi[1][26]*f->P[26][3] +
             t->Phi[1][27]*f->P[27][3] + t->Phi[1][28]*f->P[28][3] + t->Phi[1][29]*f->P[29][3];
-    w->M[1][4] = t->Phi[1][0]*f->P[0][4] + t->Phi[1][1]*f->P[1][4] + t->Phi[1][2]*f->P[2][4] +
+    w->M[4] = t->Phi[1][0]*f->P[0][4] + t->Phi[1][1]*f->P[1][4] + t->Phi[1][2]*f->P[2][4] +
             t->Phi[1][3]*f->P[3][4] + t->Phi[1][4]*f->P[4][4] + t->Phi[1][5]*f->P[5][4] +
             t->Phi[1][7]*f->P[7][4] + t->Phi[1][8]*f->P[8][4] + t->Phi[1][9]*f->P[9][4] +
             t->Phi[1][10]*f->P[10][4] + t->Phi[1][11]*f->P[11][4] + t->Phi[1][12]*f->P[12][4] +
@@ -5473,7 +5129,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][4] + t->Phi[1][22]*f->P[22][4] + t->Phi[1][23]*f->P[23][4] +
             t->Phi[1][24]*f->P[24][4] + t->Phi[1][25]*f->P[25][4] + t->Phi[1][26]*f->P[26][4] +
             t->Phi[1][27]*f->P[27][4] + t->Phi[1][28]*f->P[28][4] + t->Phi[1][29]*f->P[29][4];
-    w->M[1][5] = t->Phi[1][0]*f->P[0][5] + t->Phi[1][1]*f->P[1][5] + t->Phi[1][2]*f->P[2][5] +
+    w->M[5] = t->Phi[1][0]*f->P[0][5] + t->Phi[1][1]*f->P[1][5] + t->Phi[1][2]*f->P[2][5] +
             t->Phi[1][3]*f->P[3][5] + t->Phi[1][4]*f->P[4][5] + t->Phi[1][5]*f->P[5][5] +
             t->Phi[1][7]*f->P[7][5] + t->Phi[1][8]*f->P[8][5] + t->Phi[1][9]*f->P[9][5] +
             t->Phi[1][10]*f->P[10][5] + t->Phi[1][11]*f->P[11][5] + t->Phi[1][12]*f->P[12][5] +
@@ -5482,7 +5138,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][5] + t->Phi[1][22]*f->P[22][5] + t->Phi[1][23]*f->P[23][5] +
             t->Phi[1][24]*f->P[24][5] + t->Phi[1][25]*f->P[25][5] + t->Phi[1][26]*f->P[26][5] +
             t->Phi[1][27]*f->P[27][5] + t->Phi[1][28]*f->P[28][5] + t->Phi[1][29]*f->P[29][5];
-    w->M[1][6] = t->Phi[1][0]*f->P[0][6] + t->Phi[1][1]*f->P[1][6] + t->Phi[1][2]*f->P[2][6] +
+    w->M[6] = t->Phi[1][0]*f->P[0][6] + t->Phi[1][1]*f->P[1][6] + t->Phi[1][2]*f->P[2][6] +
             t->Phi[1][3]*f->P[3][6] + t->Phi[1][4]*f->P[4][6] + t->Phi[1][5]*f->P[5][6] +
             t->Phi[1][7]*f->P[7][6] + t->Phi[1][8]*f->P[8][6] + t->Phi[1][9]*f->P[9][6] +
             t->Phi[1][10]*f->P[10][6] + t->Phi[1][11]*f->P[11][6] + t->Phi[1][12]*f->P[12][6] +
@@ -5491,7 +5147,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][6] + t->Phi[1][22]*f->P[22][6] + t->Phi[1][23]*f->P[23][6] +
             t->Phi[1][24]*f->P[24][6] + t->Phi[1][25]*f->P[25][6] + t->Phi[1][26]*f->P[26][6] +
             t->Phi[1][27]*f->P[27][6] + t->Phi[1][28]*f->P[28][6] + t->Phi[1][29]*f->P[29][6];
-    w->M[1][7] = t->Phi[1][0]*f->P[0][7] + t->Phi[1][1]*f->P[1][7] + t->Phi[1][2]*f->P[2][7] +
+    w->M[7] = t->Phi[1][0]*f->P[0][7] + t->Phi[1][1]*f->P[1][7] + t->Phi[1][2]*f->P[2][7] +
             t->Phi[1][3]*f->P[3][7] + t->Phi[1][4]*f->P[4][7] + t->Phi[1][5]*f->P[5][7] +
             t->Phi[1][7]*f->P[7][7] + t->Phi[1][8]*f->P[8][7] + t->Phi[1][9]*f->P[9][7] +
             t->Phi[1][10]*f->P[10][7] + t->Phi[1][11]*f->P[11][7] + t->Phi[1][12]*f->P[12][7] +
@@ -5500,7 +5156,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][7] + t->Phi[1][22]*f->P[22][7] + t->Phi[1][23]*f->P[23][7] +
             t->Phi[1][24]*f->P[24][7] + t->Phi[1][25]*f->P[25][7] + t->Phi[1][26]*f->P[26][7] +
             t->Phi[1][27]*f->P[27][7] + t->Phi[1][28]*f->P[28][7] + t->Phi[1][29]*f->P[29][7];
-    w->M[1][8] = t->Phi[1][0]*f->P[0][8] + t->Phi[1][1]*f->P[1][8] + t->Phi[1][2]*f->P[2][8] +
+    w->M[8] = t->Phi[1][0]*f->P[0][8] + t->Phi[1][1]*f->P[1][8] + t->Phi[1][2]*f->P[2][8] +
             t->Phi[1][3]*f->P[3][8] + t->Phi[1][4]*f->P[4][8] + t->Phi[1][5]*f->P[5][8] +
             t->Phi[1][7]*f->P[7][8] + t->Phi[1][8]*f->P[8][8] + t->Phi[1][9]*f->P[9][8] +
             t->Phi[1][10]*f->P[10][8] + t->Phi[1][11]*f->P[11][8] + t->Phi[1][12]*f->P[12][8] +
@@ -5509,7 +5165,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][8] + t->Phi[1][22]*f->P[22][8] + t->Phi[1][23]*f->P[23][8] +
             t->Phi[1][24]*f->P[24][8] + t->Phi[1][25]*f->P[25][8] + t->Phi[1][26]*f->P[26][8] +
             t->Phi[1][27]*f->P[27][8] + t->Phi[1][28]*f->P[28][8] + t->Phi[1][29]*f->P[29][8];
-    w->M[1][9] = t->Phi[1][0]*f->P[0][9] + t->Phi[1][1]*f->P[1][9] + t->Phi[1][2]*f->P[2][9] +
+    w->M[9] = t->Phi[1][0]*f->P[0][9] + t->Phi[1][1]*f->P[1][9] + t->Phi[1][2]*f->P[2][9] +
             t->Phi[1][3]*f->P[3][9] + t->Phi[1][4]*f->P[4][9] + t->Phi[1][5]*f->P[5][9] +
             t->Phi[1][7]*f->P[7][9] + t->Phi[1][8]*f->P[8][9] + t->Phi[1][9]*f->P[9][9] +
             t->Phi[1][10]*f->P[10][9] + t->Phi[1][11]*f->P[11][9] + t->Phi[1][12]*f->P[12][9] +
@@ -5518,7 +5174,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][9] + t->Phi[1][22]*f->P[22][9] + t->Phi[1][23]*f->P[23][9] +
             t->Phi[1][24]*f->P[24][9] + t->Phi[1][25]*f->P[25][9] + t->Phi[1][26]*f->P[26][9] +
             t->Phi[1][27]*f->P[27][9] + t->Phi[1][28]*f->P[28][9] + t->Phi[1][29]*f->P[29][9];
-    w->M[1][10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] +
+    w->M[10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] +
             t->Phi[1][3]*f->P[3][10] + t->Phi[1][4]*f->P[4][10] + t->Phi[1][5]*f->P[5][10] +
             t->Phi[1][7]*f->P[7][10] + t->Phi[1][8]*f->P[8][10] + t->Phi[1][9]*f->P[9][10] +
             t->Phi[1][10]*f->P[10][10] + t->Phi[1][11]*f->P[11][10] + t->Phi[1][12]*f->P[12][10] +
@@ -5527,7 +5183,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][10] + t->Phi[1][22]*f->P[22][10] + t->Phi[1][23]*f->P[23][10] +
             t->Phi[1][24]*f->P[24][10] + t->Phi[1][25]*f->P[25][10] + t->Phi[1][26]*f->P[26][10] +
             t->Phi[1][27]*f->P[27][10] + t->Phi[1][28]*f->P[28][10] + t->Phi[1][29]*f->P[29][10];
-    w->M[1][11] = t->Phi[1][0]*f->P[0][11] + t->Phi[1][1]*f->P[1][11] + t->Phi[1][2]*f->P[2][11] +
+    w->M[11] = t->Phi[1][0]*f->P[0][11] + t->Phi[1][1]*f->P[1][11] + t->Phi[1][2]*f->P[2][11] +
             t->Phi[1][3]*f->P[3][11] + t->Phi[1][4]*f->P[4][11] + t->Phi[1][5]*f->P[5][11] +
             t->Phi[1][7]*f->P[7][11] + t->Phi[1][8]*f->P[8][11] + t->Phi[1][9]*f->P[9][11] +
             t->Phi[1][10]*f->P[10][11] + t->Phi[1][11]*f->P[11][11] + t->Phi[1][12]*f->P[12][11] +
@@ -5536,7 +5192,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][11] + t->Phi[1][22]*f->P[22][11] + t->Phi[1][23]*f->P[23][11] +
             t->Phi[1][24]*f->P[24][11] + t->Phi[1][25]*f->P[25][11] + t->Phi[1][26]*f->P[26][11] +
             t->Phi[1][27]*f->P[27][11] + t->Phi[1][28]*f->P[28][11] + t->Phi[1][29]*f->P[29][11];
-    w->M[1][12] = t->Phi[1][0]*f->P[0][12] + t->Phi[1][1]*f->P[1][12] + t->Phi[1][2]*f->P[2][12] +
+    w->M[12] = t->Phi[1][0]*f->P[0][12] + t->Phi[1][1]*f->P[1][12] + t->Phi[1][2]*f->P[2][12] +
             t->Phi[1][3]*f->P[3][12] + t->Phi[1][4]*f->P[4][12] + t->Phi[1][5]*f->P[5][12] +
             t->Phi[1][7]*f->P[7][12] + t->Phi[1][8]*f->P[8][12] + t->Phi[1][9]*f->P[9][12] +
             t->Phi[1][10]*f->P[10][12] + t->Phi[1][11]*f->P[11][12] + t->Phi[1][12]*f->P[12][12] +
@@ -5545,7 +5201,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][12] + t->Phi[1][22]*f->P[22][12] + t->Phi[1][23]*f->P[23][12] +
             t->Phi[1][24]*f->P[24][12] + t->Phi[1][25]*f->P[25][12] + t->Phi[1][26]*f->P[26][12] +
             t->Phi[1][27]*f->P[27][12] + t->Phi[1][28]*f->P[28][12] + t->Phi[1][29]*f->P[29][12];
-    w->M[1][13] = t->Phi[1][0]*f->P[0][13] + t->Phi[1][1]*f->P[1][13] + t->Phi[1][2]*f->P[2][13] +
+    w->M[13] = t->Phi[1][0]*f->P[0][13] + t->Phi[1][1]*f->P[1][13] + t->Phi[1][2]*f->P[2][13] +
             t->Phi[1][3]*f->P[3][13] + t->Phi[1][4]*f->P[4][13] + t->Phi[1][5]*f->P[5][13] +
             t->Phi[1][7]*f->P[7][13] + t->Phi[1][8]*f->P[8][13] + t->Phi[1][9]*f->P[9][13] +
             t->Phi[1][10]*f->P[10][13] + t->Phi[1][11]*f->P[11][13] + t->Phi[1][12]*f->P[12][13] +
@@ -5554,7 +5210,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][13] + t->Phi[1][22]*f->P[22][13] + t->Phi[1][23]*f->P[23][13] +
             t->Phi[1][24]*f->P[24][13] + t->Phi[1][25]*f->P[25][13] + t->Phi[1][26]*f->P[26][13] +
             t->Phi[1][27]*f->P[27][13] + t->Phi[1][28]*f->P[28][13] + t->Phi[1][29]*f->P[29][13];
-    w->M[1][14] = t->Phi[1][0]*f->P[0][14] + t->Phi[1][1]*f->P[1][14] + t->Phi[1][2]*f->P[2][14] +
+    w->M[14] = t->Phi[1][0]*f->P[0][14] + t->Phi[1][1]*f->P[1][14] + t->Phi[1][2]*f->P[2][14] +
             t->Phi[1][3]*f->P[3][14] + t->Phi[1][4]*f->P[4][14] + t->Phi[1][5]*f->P[5][14] +
             t->Phi[1][7]*f->P[7][14] + t->Phi[1][8]*f->P[8][14] + t->Phi[1][9]*f->P[9][14] +
             t->Phi[1][10]*f->P[10][14] + t->Phi[1][11]*f->P[11][14] + t->Phi[1][12]*f->P[12][14] +
@@ -5563,7 +5219,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][14] + t->Phi[1][22]*f->P[22][14] + t->Phi[1][23]*f->P[23][14] +
             t->Phi[1][24]*f->P[24][14] + t->Phi[1][25]*f->P[25][14] + t->Phi[1][26]*f->P[26][14] +
             t->Phi[1][27]*f->P[27][14] + t->Phi[1][28]*f->P[28][14] + t->Phi[1][29]*f->P[29][14];
-    w->M[1][15] = t->Phi[1][0]*f->P[0][15] + t->Phi[1][1]*f->P[1][15] + t->Phi[1][2]*f->P[2][15] +
+    w->M[15] = t->Phi[1][0]*f->P[0][15] + t->Phi[1][1]*f->P[1][15] + t->Phi[1][2]*f->P[2][15] +
             t->Phi[1][3]*f->P[3][15] + t->Phi[1][4]*f->P[4][15] + t->Phi[1][5]*f->P[5][15] +
             t->Phi[1][7]*f->P[7][15] + t->Phi[1][8]*f->P[8][15] + t->Phi[1][9]*f->P[9][15] +
             t->Phi[1][10]*f->P[10][15] + t->Phi[1][11]*f->P[11][15] + t->Phi[1][12]*f->P[12][15] +
@@ -5572,7 +5228,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][15] + t->Phi[1][22]*f->P[22][15] + t->Phi[1][23]*f->P[23][15] +
             t->Phi[1][24]*f->P[24][15] + t->Phi[1][25]*f->P[25][15] + t->Phi[1][26]*f->P[26][15] +
             t->Phi[1][27]*f->P[27][15] + t->Phi[1][28]*f->P[28][15] + t->Phi[1][29]*f->P[29][15];
-    w->M[1][16] = t->Phi[1][0]*f->P[0][16] + t->Phi[1][1]*f->P[1][16] + t->Phi[1][2]*f->P[2][16] +
+    w->M[16] = t->Phi[1][0]*f->P[0][16] + t->Phi[1][1]*f->P[1][16] + t->Phi[1][2]*f->P[2][16] +
             t->Phi[1][3]*f->P[3][16] + t->Phi[1][4]*f->P[4][16] + t->Phi[1][5]*f->P[5][16] +
             t->Phi[1][7]*f->P[7][16] + t->Phi[1][8]*f->P[8][16] + t->Phi[1][9]*f->P[9][16] +
             t->Phi[1][10]*f->P[10][16] + t->Phi[1][11]*f->P[11][16] + t->Phi[1][12]*f->P[12][16] +
@@ -5581,7 +5237,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][16] + t->Phi[1][22]*f->P[22][16] + t->Phi[1][23]*f->P[23][16] +
             t->Phi[1][24]*f->P[24][16] + t->Phi[1][25]*f->P[25][16] + t->Phi[1][26]*f->P[26][16] +
             t->Phi[1][27]*f->P[27][16] + t->Phi[1][28]*f->P[28][16] + t->Phi[1][29]*f->P[29][16];
-    w->M[1][17] = t->Phi[1][0]*f->P[0][17] + t->Phi[1][1]*f->P[1][17] + t->Phi[1][2]*f->P[2][17] +
+    w->M[17] = t->Phi[1][0]*f->P[0][17] + t->Phi[1][1]*f->P[1][17] + t->Phi[1][2]*f->P[2][17] +
             t->Phi[1][3]*f->P[3][17] + t->Phi[1][4]*f->P[4][17] + t->Phi[1][5]*f->P[5][17] +
             t->Phi[1][7]*f->P[7][17] + t->Phi[1][8]*f->P[8][17] + t->Phi[1][9]*f->P[9][17] +
             t->Phi[1][10]*f->P[10][17] + t->Phi[1][11]*f->P[11][17] + t->Phi[1][12]*f->P[12][17] +
@@ -5590,7 +5246,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][17] + t->Phi[1][22]*f->P[22][17] + t->Phi[1][23]*f->P[23][17] +
             t->Phi[1][24]*f->P[24][17] + t->Phi[1][25]*f->P[25][17] + t->Phi[1][26]*f->P[26][17] +
             t->Phi[1][27]*f->P[27][17] + t->Phi[1][28]*f->P[28][17] + t->Phi[1][29]*f->P[29][17];
-    w->M[1][18] = t->Phi[1][0]*f->P[0][18] + t->Phi[1][1]*f->P[1][18] + t->Phi[1][2]*f->P[2][18] +
+    w->M[18] = t->Phi[1][0]*f->P[0][18] + t->Phi[1][1]*f->P[1][18] + t->Phi[1][2]*f->P[2][18] +
             t->Phi[1][3]*f->P[3][18] + t->Phi[1][4]*f->P[4][18] + t->Phi[1][5]*f->P[5][18] +
             t->Phi[1][7]*f->P[7][18] + t->Phi[1][8]*f->P[8][18] + t->Phi[1][9]*f->P[9][18] +
             t->Phi[1][10]*f->P[10][18] + t->Phi[1][11]*f->P[11][18] + t->Phi[1][12]*f->P[12][18] +
@@ -5599,7 +5255,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][18] + t->Phi[1][22]*f->P[22][18] + t->Phi[1][23]*f->P[23][18] +
             t->Phi[1][24]*f->P[24][18] + t->Phi[1][25]*f->P[25][18] + t->Phi[1][26]*f->P[26][18] +
             t->Phi[1][27]*f->P[27][18] + t->Phi[1][28]*f->P[28][18] + t->Phi[1][29]*f->P[29][18];
-    w->M[1][19] = t->Phi[1][0]*f->P[0][19] + t->Phi[1][1]*f->P[1][19] + t->Phi[1][2]*f->P[2][19] +
+    w->M[19] = t->Phi[1][0]*f->P[0][19] + t->Phi[1][1]*f->P[1][19] + t->Phi[1][2]*f->P[2][19] +
             t->Phi[1][3]*f->P[3][19] + t->Phi[1][4]*f->P[4][19] + t->Phi[1][5]*f->P[5][19] +
             t->Phi[1][7]*f->P[7][19] + t->Phi[1][8]*f->P[8][19] + t->Phi[1][9]*f->P[9][19] +
             t->Phi[1][10]*f->P[10][19] + t->Phi[1][11]*f->P[11][19] + t->Phi[1][12]*f->P[12][19] +
@@ -5608,7 +5264,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][19] + t->Phi[1][22]*f->P[22][19] + t->Phi[1][23]*f->P[23][19] +
             t->Phi[1][24]*f->P[24][19] + t->Phi[1][25]*f->P[25][19] + t->Phi[1][26]*f->P[26][19] +
             t->Phi[1][27]*f->P[27][19] + t->Phi[1][28]*f->P[28][19] + t->Phi[1][29]*f->P[29][19];
-    w->M[1][20] = t->Phi[1][0]*f->P[0][20] + t->Phi[1][1]*f->P[1][20] + t->Phi[1][2]*f->P[2][20] +
+    w->M[20] = t->Phi[1][0]*f->P[0][20] + t->Phi[1][1]*f->P[1][20] + t->Phi[1][2]*f->P[2][20] +
             t->Phi[1][3]*f->P[3][20] + t->Phi[1][4]*f->P[4][20] + t->Phi[1][5]*f->P[5][20] +
             t->Phi[1][7]*f->P[7][20] + t->Phi[1][8]*f->P[8][20] + t->Phi[1][9]*f->P[9][20] +
             t->Phi[1][10]*f->P[10][20] + t->Phi[1][11]*f->P[11][20] + t->Phi[1][12]*f->P[12][20] +
@@ -5617,7 +5273,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][20] + t->Phi[1][22]*f->P[22][20] + t->Phi[1][23]*f->P[23][20] +
             t->Phi[1][24]*f->P[24][20] + t->Phi[1][25]*f->P[25][20] + t->Phi[1][26]*f->P[26][20] +
             t->Phi[1][27]*f->P[27][20] + t->Phi[1][28]*f->P[28][20] + t->Phi[1][29]*f->P[29][20];
-    w->M[1][21] = t->Phi[1][0]*f->P[0][21] + t->Phi[1][1]*f->P[1][21] + t->Phi[1][2]*f->P[2][21] +
+    w->M[21] = t->Phi[1][0]*f->P[0][21] + t->Phi[1][1]*f->P[1][21] + t->Phi[1][2]*f->P[2][21] +
             t->Phi[1][3]*f->P[3][21] + t->Phi[1][4]*f->P[4][21] + t->Phi[1][5]*f->P[5][21] +
             t->Phi[1][7]*f->P[7][21] + t->Phi[1][8]*f->P[8][21] + t->Phi[1][9]*f->P[9][21] +
             t->Phi[1][10]*f->P[10][21] + t->Phi[1][11]*f->P[11][21] + t->Phi[1][12]*f->P[12][21] +
@@ -5626,7 +5282,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][21] + t->Phi[1][22]*f->P[22][21] + t->Phi[1][23]*f->P[23][21] +
             t->Phi[1][24]*f->P[24][21] + t->Phi[1][25]*f->P[25][21] + t->Phi[1][26]*f->P[26][21] +
             t->Phi[1][27]*f->P[27][21] + t->Phi[1][28]*f->P[28][21] + t->Phi[1][29]*f->P[29][21];
-    w->M[1][22] = t->Phi[1][0]*f->P[0][22] + t->Phi[1][1]*f->P[1][22] + t->Phi[1][2]*f->P[2][22] +
+    w->M[22] = t->Phi[1][0]*f->P[0][22] + t->Phi[1][1]*f->P[1][22] + t->Phi[1][2]*f->P[2][22] +
             t->Phi[1][3]*f->P[3][22] + t->Phi[1][4]*f->P[4][22] + t->Phi[1][5]*f->P[5][22] +
             t->Phi[1][7]*f->P[7][22] + t->Phi[1][8]*f->P[8][22] + t->Phi[1][9]*f->P[9][22] +
             t->Phi[1][10]*f->P[10][22] + t->Phi[1][11]*f->P[11][22] + t->Phi[1][12]*f->P[12][22] +
@@ -5635,7 +5291,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][22] + t->Phi[1][22]*f->P[22][22] + t->Phi[1][23]*f->P[23][22] +
             t->Phi[1][24]*f->P[24][22] + t->Phi[1][25]*f->P[25][22] + t->Phi[1][26]*f->P[26][22] +
             t->Phi[1][27]*f->P[27][22] + t->Phi[1][28]*f->P[28][22] + t->Phi[1][29]*f->P[29][22];
-    w->M[1][23] = t->Phi[1][0]*f->P[0][23] + t->Phi[1][1]*f->P[1][23] + t->Phi[1][2]*f->P[2][23] +
+    w->M[23] = t->Phi[1][0]*f->P[0][23] + t->Phi[1][1]*f->P[1][23] + t->Phi[1][2]*f->P[2][23] +
             t->Phi[1][3]*f->P[3][23] + t->Phi[1][4]*f->P[4][23] + t->Phi[1][5]*f->P[5][23] +
             t->Phi[1][7]*f->P[7][23] + t->Phi[1][8]*f->P[8][23] + t->Phi[1][9]*f->P[9][23] +
             t->Phi[1][10]*f->P[10][23] + t->Phi[1][11]*f->P[11][23] + t->Phi[1][12]*f->P[12][23] +
@@ -5644,7 +5300,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][23] + t->Phi[1][22]*f->P[22][23] + t->Phi[1][23]*f->P[23][23] +
             t->Phi[1][24]*f->P[24][23] + t->Phi[1][25]*f->P[25][23] + t->Phi[1][26]*f->P[26][23] +
             t->Phi[1][27]*f->P[27][23] + t->Phi[1][28]*f->P[28][23] + t->Phi[1][29]*f->P[29][23];
-    w->M[1][24] = t->Phi[1][0]*f->P[0][24] + t->Phi[1][1]*f->P[1][24] + t->Phi[1][2]*f->P[2][24] +
+    w->M[24] = t->Phi[1][0]*f->P[0][24] + t->Phi[1][1]*f->P[1][24] + t->Phi[1][2]*f->P[2][24] +
             t->Phi[1][3]*f->P[3][24] + t->Phi[1][4]*f->P[4][24] + t->Phi[1][5]*f->P[5][24] +
             t->Phi[1][7]*f->P[7][24] + t->Phi[1][8]*f->P[8][24] + t->Phi[1][9]*f->P[9][24] +
             t->Phi[1][10]*f->P[10][24] + t->Phi[1][11]*f->P[11][24] + t->Phi[1][12]*f->P[12][24] +
@@ -5653,7 +5309,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][24] + t->Phi[1][22]*f->P[22][24] + t->Phi[1][23]*f->P[23][24] +
             t->Phi[1][24]*f->P[24][24] + t->Phi[1][25]*f->P[25][24] + t->Phi[1][26]*f->P[26][24] +
             t->Phi[1][27]*f->P[27][24] + t->Phi[1][28]*f->P[28][24] + t->Phi[1][29]*f->P[29][24];
-    w->M[1][25] = t->Phi[1][0]*f->P[0][25] + t->Phi[1][1]*f->P[1][25] + t->Phi[1][2]*f->P[2][25] +
+    w->M[25] = t->Phi[1][0]*f->P[0][25] + t->Phi[1][1]*f->P[1][25] + t->Phi[1][2]*f->P[2][25] +
             t->Phi[1][3]*f->P[3][25] + t->Phi[1][4]*f->P[4][25] + t->Phi[1][5]*f->P[5][25] +
             t->Phi[1][7]*f->P[7][25] + t->Phi[1][8]*f->P[8][25] + t->Phi[1][9]*f->P[9][25] +
             t->Phi[1][10]*f->P[10][25] + t->Phi[1][11]*f->P[11][25] + t->Phi[1][12]*f->P[12][25] +
@@ -5662,7 +5318,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][25] + t->Phi[1][22]*f->P[22][25] + t->Phi[1][23]*f->P[23][25] +
             t->Phi[1][24]*f->P[24][25] + t->Phi[1][25]*f->P[25][25] + t->Phi[1][26]*f->P[26][25] +
             t->Phi[1][27]*f->P[27][25] + t->Phi[1][28]*f->P[28][25] + t->Phi[1][29]*f->P[29][25];
-    w->M[1][26] = t->Phi[1][0]*f->P[0][26] + t->Phi[1][1]*f->P[1][26] + t->Phi[1][2]*f->P[2][26] +
+    w->M[26] = t->Phi[1][0]*f->P[0][26] + t->Phi[1][1]*f->P[1][26] + t->Phi[1][2]*f->P[2][26] +
             t->Phi[1][3]*f->P[3][26] + t->Phi[1][4]*f->P[4][26] + t->Phi[1][5]*f->P[5][26] +
             t->Phi[1][7]*f->P[7][26] + t->Phi[1][8]*f->P[8][26] + t->Phi[1][9]*f->P[9][26] +
             t->Phi[1][10]*f->P[10][26] + t->Phi[1][11]*f->P[11][26] + t->Phi[1][12]*f->P[12][26] +
@@ -5671,7 +5327,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][26] + t->Phi[1][22]*f->P[22][26] + t->Phi[1][23]*f->P[23][26] +
             t->Phi[1][24]*f->P[24][26] + t->Phi[1][25]*f->P[25][26] + t->Phi[1][26]*f->P[26][26] +
             t->Phi[1][27]*f->P[27][26] + t->Phi[1][28]*f->P[28][26] + t->Phi[1][29]*f->P[29][26];
-    w->M[1][27] = t->Phi[1][0]*f->P[0][27] + t->Phi[1][1]*f->P[1][27] + t->Phi[1][2]*f->P[2][27] +
+    w->M[27] = t->Phi[1][0]*f->P[0][27] + t->Phi[1][1]*f->P[1][27] + t->Phi[1][2]*f->P[2][27] +
             t->Phi[1][3]*f->P[3][27] + t->Phi[1][4]*f->P[4][27] + t->Phi[1][5]*f->P[5][27] +
             t->Phi[1][7]*f->P[7][27] + t->Phi[1][8]*f->P[8][27] + t->Phi[1][9]*f->P[9][27] +
             t->Phi[1][10]*f->P[10][27] + t->Phi[1][11]*f->P[11][27] + t->Phi[1][12]*f->P[12][27] +
@@ -5680,7 +5336,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][27] + t->Phi[1][22]*f->P[22][27] + t->Phi[1][23]*f->P[23][27] +
             t->Phi[1][24]*f->P[24][27] + t->Phi[1][25]*f->P[25][27] + t->Phi[1][26]*f->P[26][27] +
             t->Phi[1][27]*f->P[27][27] + t->Phi[1][28]*f->P[28][27] + t->Phi[1][29]*f->P[29][27];
-    w->M[1][28] = t->Phi[1][0]*f->P[0][28] + t->Phi[1][1]*f->P[1][28] + t->Phi[1][2]*f->P[2][28] +
+    w->M[28] = t->Phi[1][0]*f->P[0][28] + t->Phi[1][1]*f->P[1][28] + t->Phi[1][2]*f->P[2][28] +
             t->Phi[1][3]*f->P[3][28] + t->Phi[1][4]*f->P[4][28] + t->Phi[1][5]*f->P[5][28] +
             t->Phi[1][7]*f->P[7][28] + t->Phi[1][8]*f->P[8][28] + t->Phi[1][9]*f->P[9][28] +
             t->Phi[1][10]*f->P[10][28] + t->Phi[1][11]*f->P[11][28] + t->Phi[1][12]*f->P[12][28] +
@@ -5689,7 +5345,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][28] + t->Phi[1][22]*f->P[22][28] + t->Phi[1][23]*f->P[23][28] +
             t->Phi[1][24]*f->P[24][28] + t->Phi[1][25]*f->P[25][28] + t->Phi[1][26]*f->P[26][28] +
             t->Phi[1][27]*f->P[27][28] + t->Phi[1][28]*f->P[28][28] + t->Phi[1][29]*f->P[29][28];
-    w->M[1][29] = t->Phi[1][0]*f->P[0][29] + t->Phi[1][1]*f->P[1][29] + t->Phi[1][2]*f->P[2][29] +
+    w->M[29] = t->Phi[1][0]*f->P[0][29] + t->Phi[1][1]*f->P[1][29] + t->Phi[1][2]*f->P[2][29] +
             t->Phi[1][3]*f->P[3][29] + t->Phi[1][4]*f->P[4][29] + t->Phi[1][5]*f->P[5][29] +
             t->Phi[1][7]*f->P[7][29] + t->Phi[1][8]*f->P[8][29] + t->Phi[1][9]*f->P[9][29] +
             t->Phi[1][10]*f->P[10][29] + t->Phi[1][11]*f->P[11][29] + t->Phi[1][12]*f->P[12][29] +
@@ -5698,7 +5354,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][29] + t->Phi[1][22]*f->P[22][29] + t->Phi[1][23]*f->P[23][29] +
             t->Phi[1][24]*f->P[24][29] + t->Phi[1][25]*f->P[25][29] + t->Phi[1][26]*f->P[26][29] +
             t->Phi[1][27]*f->P[27][29] + t->Phi[1][28]*f->P[28][29] + t->Phi[1][29]*f->P[29][29];
-    w->M[1][30] = t->Phi[1][0]*f->P[0][30] + t->Phi[1][1]*f->P[1][30] + t->Phi[1][2]*f->P[2][30] +
+    w->M[30] = t->Phi[1][0]*f->P[0][30] + t->Phi[1][1]*f->P[1][30] + t->Phi[1][2]*f->P[2][30] +
             t->Phi[1][3]*f->P[3][30] + t->Phi[1][4]*f->P[4][30] + t->Phi[1][5]*f->P[5][30] +
             t->Phi[1][7]*f->P[7][30] + t->Phi[1][8]*f->P[8][30] + t->Phi[1][9]*f->P[9][30] +
             t->Phi[1][10]*f->P[10][30] + t->Phi[1][11]*f->P[11][30] + t->Phi[1][12]*f->P[12][30] +
@@ -5707,7 +5363,7 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][21]*f->P[21][30] + t->Phi[1][22]*f->P[22][30] + t->Phi[1][23]*f->P[23][30] +
             t->Phi[1][24]*f->P[24][30] + t->Phi[1][25]*f->P[25][30] + t->Phi[1][26]*f->P[26][30] +
             t->Phi[1][27]*f->P[27][30] + t->Phi[1][28]*f->P[28][30] + t->Phi[1][29]*f->P[29][30];
-    w->M[1][31] = t->Phi[1][0]*f->P[0][31] + t->Phi[1][1]*f->P[1][31] + t->Phi[1][2]*f->P[2][31] +
+    w->M[31] = t->Phi[1][0]*f->P[0][31] + t->Phi[1][1]*f->P[1][31] + t->Phi[1][2]*f->P[2][31] +
             t->Phi[1][3]*f->P[3][31] + t->Phi[1][4]*f->P[4][31] + t->Phi[1][5]*f->P[5][31] +
             t->Phi[1][7]*f->P[7][31] + t->Phi[1][8]*f->P[8][31] + t->Phi[1][9]*f->P[9][31] +
             t->Phi[1][10]*f->P[10][31] + t->Phi[1][11]*f->P[11][31] + t->Phi[1][12]*f->P[12][31] +
@@ -5718,11 +5374,104 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[1][27]*f->P[27][31] + t->Phi[1][28]*f->P[28][31] + t->Phi[1][29]*f->P[29][31];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ned_doppler32_augmented_scalar propagate_row_1(const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
+            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[7]*t->Phi[1][7] +
+            w->M[8]*t->Phi[1][8] + w->M[9]*t->Phi[1][9] + w->M[10]*t->Phi[1][10] +
+            w->M[11]*t->Phi[1][11] + w->M[12]*t->Phi[1][12] + w->M[13]*t->Phi[1][13] +
+            w->M[14]*t->Phi[1][14] + w->M[15]*t->Phi[1][15] + w->M[18]*t->Phi[1][18] +
+            w->M[19]*t->Phi[1][19] + w->M[20]*t->Phi[1][20] + w->M[21]*t->Phi[1][21] +
+            w->M[22]*t->Phi[1][22] + w->M[23]*t->Phi[1][23] + w->M[24]*t->Phi[1][24] +
+            w->M[25]*t->Phi[1][25] + w->M[26]*t->Phi[1][26] + w->M[27]*t->Phi[1][27] +
+            w->M[28]*t->Phi[1][28] + w->M[29]*t->Phi[1][29] + t->Qd[32]; w->Pn[32] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[7]*t->Phi[2][7] +
+            w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] + w->M[10]*t->Phi[2][10] +
+            w->M[11]*t->Phi[2][11] + w->M[12]*t->Phi[2][12] + w->M[13]*t->Phi[2][13] +
+            w->M[14]*t->Phi[2][14] + w->M[15]*t->Phi[2][15] + w->M[18]*t->Phi[2][18] +
+            w->M[19]*t->Phi[2][19] + w->M[20]*t->Phi[2][20] + w->M[21]*t->Phi[2][21] +
+            w->M[22]*t->Phi[2][22] + w->M[23]*t->Phi[2][23] + w->M[24]*t->Phi[2][24] +
+            w->M[25]*t->Phi[2][25] + w->M[26]*t->Phi[2][26] + w->M[27]*t->Phi[2][27] +
+            w->M[28]*t->Phi[2][28] + w->M[29]*t->Phi[2][29] + t->Qd[33]; w->Pn[33] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[7]*t->Phi[3][7] +
+            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] +
+            w->M[11]*t->Phi[3][11] + w->M[12]*t->Phi[3][12] + w->M[13]*t->Phi[3][13] +
+            w->M[14]*t->Phi[3][14] + w->M[15]*t->Phi[3][15] + w->M[18]*t->Phi[3][18] +
+            w->M[19]*t->Phi[3][19] + w->M[20]*t->Phi[3][20] + w->M[21]*t->Phi[3][21] +
+            w->M[22]*t->Phi[3][22] + w->M[23]*t->Phi[3][23] + w->M[24]*t->Phi[3][24] +
+            w->M[25]*t->Phi[3][25] + w->M[26]*t->Phi[3][26] + w->M[27]*t->Phi[3][27] +
+            w->M[28]*t->Phi[3][28] + w->M[29]*t->Phi[3][29] + t->Qd[34]; w->Pn[34] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] +
+            w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] + w->M[13]*t->Phi[4][13] +
+            w->M[14]*t->Phi[4][14] + w->M[15]*t->Phi[4][15] + w->M[18]*t->Phi[4][18] +
+            w->M[19]*t->Phi[4][19] + w->M[20]*t->Phi[4][20] + w->M[21]*t->Phi[4][21] +
+            w->M[22]*t->Phi[4][22] + w->M[23]*t->Phi[4][23] + w->M[24]*t->Phi[4][24] +
+            w->M[25]*t->Phi[4][25] + w->M[26]*t->Phi[4][26] + w->M[27]*t->Phi[4][27] +
+            w->M[28]*t->Phi[4][28] + w->M[29]*t->Phi[4][29] + t->Qd[35]; w->Pn[35] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] +
+            w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] + w->M[13]*t->Phi[5][13] +
+            w->M[14]*t->Phi[5][14] + w->M[15]*t->Phi[5][15] + w->M[18]*t->Phi[5][18] +
+            w->M[19]*t->Phi[5][19] + w->M[20]*t->Phi[5][20] + w->M[21]*t->Phi[5][21] +
+            w->M[22]*t->Phi[5][22] + w->M[23]*t->Phi[5][23] + w->M[24]*t->Phi[5][24] +
+            w->M[25]*t->Phi[5][25] + w->M[26]*t->Phi[5][26] + w->M[27]*t->Phi[5][27] +
+            w->M[28]*t->Phi[5][28] + w->M[29]*t->Phi[5][29] + t->Qd[36]; w->Pn[36] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[18]*t->Phi[6][18] + w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] +
+            w->M[21]*t->Phi[6][21] + w->M[22]*t->Phi[6][22] + w->M[23]*t->Phi[6][23] +
+            w->M[24]*t->Phi[6][24] + w->M[25]*t->Phi[6][25] + w->M[26]*t->Phi[6][26] +
+            w->M[27]*t->Phi[6][27] + w->M[28]*t->Phi[6][28] + w->M[29]*t->Phi[6][29] + t->Qd[37];
+            w->Pn[37] = v; check += v - v;
+    v = w->M[7]; w->Pn[38] = v; check += v - v;
+    v = w->M[8]; w->Pn[39] = v; check += v - v;
+    v = w->M[9]; w->Pn[40] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[41]; w->Pn[41] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[42]; w->Pn[42] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[43]; w->Pn[43] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[44]; w->Pn[44] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[45]; w->Pn[45] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[46]; w->Pn[46] = v; check += v - v;
+    v = w->M[16]; w->Pn[47] = v; check += v - v;
+    v = w->M[17]; w->Pn[48] = v; check += v - v;
+    v = w->M[18]; w->Pn[49] = v; check += v - v;
+    v = w->M[19]; w->Pn[50] = v; check += v - v;
+    v = w->M[20]; w->Pn[51] = v; check += v - v;
+    v = w->M[21]; w->Pn[52] = v; check += v - v;
+    v = w->M[22]; w->Pn[53] = v; check += v - v;
+    v = w->M[23]; w->Pn[54] = v; check += v - v;
+    v = w->M[24]; w->Pn[55] = v; check += v - v;
+    v = w->M[25]; w->Pn[56] = v; check += v - v;
+    v = w->M[26]; w->Pn[57] = v; check += v - v;
+    v = w->M[27]; w->Pn[58] = v; check += v - v;
+    v = w->M[28]; w->Pn[59] = v; check += v - v;
+    v = w->M[29]; w->Pn[60] = v; check += v - v;
+    v = w->M[30]; w->Pn[61] = v; check += v - v;
+    v = w->M[31]; w->Pn[62] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, const
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
         *restrict w)
 {
-    w->M[2][0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] +
+    w->M[0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] +
             t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] +
             t->Phi[2][7]*f->P[7][0] + t->Phi[2][8]*f->P[8][0] + t->Phi[2][9]*f->P[9][0] +
             t->Phi[2][10]*f->P[10][0] + t->Phi[2][11]*f->P[11][0] + t->Phi[2][12]*f->P[12][0] +
@@ -5731,7 +5480,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][0] + t->Phi[2][22]*f->P[22][0] + t->Phi[2][23]*f->P[23][0] +
             t->Phi[2][24]*f->P[24][0] + t->Phi[2][25]*f->P[25][0] + t->Phi[2][26]*f->P[26][0] +
             t->Phi[2][27]*f->P[27][0] + t->Phi[2][28]*f->P[28][0] + t->Phi[2][29]*f->P[29][0];
-    w->M[2][1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] +
+    w->M[1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] +
             t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] +
             t->Phi[2][7]*f->P[7][1] + t->Phi[2][8]*f->P[8][1] + t->Phi[2][9]*f->P[9][1] +
             t->Phi[2][10]*f->P[10][1] + t->Phi[2][11]*f->P[11][1] + t->Phi[2][12]*f->P[12][1] +
@@ -5740,7 +5489,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][1] + t->Phi[2][22]*f->P[22][1] + t->Phi[2][23]*f->P[23][1] +
             t->Phi[2][24]*f->P[24][1] + t->Phi[2][25]*f->P[25][1] + t->Phi[2][26]*f->P[26][1] +
             t->Phi[2][27]*f->P[27][1] + t->Phi[2][28]*f->P[28][1] + t->Phi[2][29]*f->P[29][1];
-    w->M[2][2] = t->Phi[2][0]*f->P[0][2] + t->Phi[2][1]*f->P[1][2] + t->Phi[2][2]*f->P[2][2] +
+    w->M[2] = t->Phi[2][0]*f->P[0][2] + t->Phi[2][1]*f->P[1][2] + t->Phi[2][2]*f->P[2][2] +
             t->Phi[2][3]*f->P[3][2] + t->Phi[2][4]*f->P[4][2] + t->Phi[2][5]*f->P[5][2] +
             t->Phi[2][7]*f->P[7][2] + t->Phi[2][8]*f->P[8][2] + t->Phi[2][9]*f->P[9][2] +
             t->Phi[2][10]*f->P[10][2] + t->Phi[2][11]*f->P[11][2] + t->Phi[2][12]*f->P[12][2] +
@@ -5749,7 +5498,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][2] + t->Phi[2][22]*f->P[22][2] + t->Phi[2][23]*f->P[23][2] +
             t->Phi[2][24]*f->P[24][2] + t->Phi[2][25]*f->P[25][2] + t->Phi[2][26]*f->P[26][2] +
             t->Phi[2][27]*f->P[27][2] + t->Phi[2][28]*f->P[28][2] + t->Phi[2][29]*f->P[29][2];
-    w->M[2][3] = t->Phi[2][0]*f->P[0][3] + t->Phi[2][1]*f->P[1][3] + t->Phi[2][2]*f->P[2][3] +
+    w->M[3] = t->Phi[2][0]*f->P[0][3] + t->Phi[2][1]*f->P[1][3] + t->Phi[2][2]*f->P[2][3] +
             t->Phi[2][3]*f->P[3][3] + t->Phi[2][4]*f->P[4][3] + t->Phi[2][5]*f->P[5][3] +
             t->Phi[2][7]*f->P[7][3] + t->Phi[2][8]*f->P[8][3] + t->Phi[2][9]*f->P[9][3] +
             t->Phi[2][10]*f->P[10][3] + t->Phi[2][11]*f->P[11][3] + t->Phi[2][12]*f->P[12][3] +
@@ -5758,7 +5507,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][3] + t->Phi[2][22]*f->P[22][3] + t->Phi[2][23]*f->P[23][3] +
             t->Phi[2][24]*f->P[24][3] + t->Phi[2][25]*f->P[25][3] + t->Phi[2][26]*f->P[26][3] +
             t->Phi[2][27]*f->P[27][3] + t->Phi[2][28]*f->P[28][3] + t->Phi[2][29]*f->P[29][3];
-    w->M[2][4] = t->Phi[2][0]*f->P[0][4] + t->Phi[2][1]*f->P[1][4] + t->Phi[2][2]*f->P[2][4] +
+    w->M[4] = t->Phi[2][0]*f->P[0][4] + t->Phi[2][1]*f->P[1][4] + t->Phi[2][2]*f->P[2][4] +
             t->Phi[2][3]*f->P[3][4] + t->Phi[2][4]*f->P[4][4] + t->Phi[2][5]*f->P[5][4] +
             t->Phi[2][7]*f->P[7][4] + t->Phi[2][8]*f->P[8][4] + t->Phi[2][9]*f->P[9][4] +
             t->Phi[2][10]*f->P[10][4] + t->Phi[2][11]*f->P[11][4] + t->Phi[2][12]*f->P[12][4] +
@@ -5767,7 +5516,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][4] + t->Phi[2][22]*f->P[22][4] + t->Phi[2][23]*f->P[23][4] +
             t->Phi[2][24]*f->P[24][4] + t->Phi[2][25]*f->P[25][4] + t->Phi[2][26]*f->P[26][4] +
             t->Phi[2][27]*f->P[27][4] + t->Phi[2][28]*f->P[28][4] + t->Phi[2][29]*f->P[29][4];
-    w->M[2][5] = t->Phi[2][0]*f->P[0][5] + t->Phi[2][1]*f->P[1][5] + t->Phi[2][2]*f->P[2][5] +
+    w->M[5] = t->Phi[2][0]*f->P[0][5] + t->Phi[2][1]*f->P[1][5] + t->Phi[2][2]*f->P[2][5] +
             t->Phi[2][3]*f->P[3][5] + t->Phi[2][4]*f->P[4][5] + t->Phi[2][5]*f->P[5][5] +
             t->Phi[2][7]*f->P[7][5] + t->Phi[2][8]*f->P[8][5] + t->Phi[2][9]*f->P[9][5] +
             t->Phi[2][10]*f->P[10][5] + t->Phi[2][11]*f->P[11][5] + t->Phi[2][12]*f->P[12][5] +
@@ -5776,7 +5525,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][5] + t->Phi[2][22]*f->P[22][5] + t->Phi[2][23]*f->P[23][5] +
             t->Phi[2][24]*f->P[24][5] + t->Phi[2][25]*f->P[25][5] + t->Phi[2][26]*f->P[26][5] +
             t->Phi[2][27]*f->P[27][5] + t->Phi[2][28]*f->P[28][5] + t->Phi[2][29]*f->P[29][5];
-    w->M[2][6] = t->Phi[2][0]*f->P[0][6] + t->Phi[2][1]*f->P[1][6] + t->Phi[2][2]*f->P[2][6] +
+    w->M[6] = t->Phi[2][0]*f->P[0][6] + t->Phi[2][1]*f->P[1][6] + t->Phi[2][2]*f->P[2][6] +
             t->Phi[2][3]*f->P[3][6] + t->Phi[2][4]*f->P[4][6] + t->Phi[2][5]*f->P[5][6] +
             t->Phi[2][7]*f->P[7][6] + t->Phi[2][8]*f->P[8][6] + t->Phi[2][9]*f->P[9][6] +
             t->Phi[2][10]*f->P[10][6] + t->Phi[2][11]*f->P[11][6] + t->Phi[2][12]*f->P[12][6] +
@@ -5785,7 +5534,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][6] + t->Phi[2][22]*f->P[22][6] + t->Phi[2][23]*f->P[23][6] +
             t->Phi[2][24]*f->P[24][6] + t->Phi[2][25]*f->P[25][6] + t->Phi[2][26]*f->P[26][6] +
             t->Phi[2][27]*f->P[27][6] + t->Phi[2][28]*f->P[28][6] + t->Phi[2][29]*f->P[29][6];
-    w->M[2][7] = t->Phi[2][0]*f->P[0][7] + t->Phi[2][1]*f->P[1][7] + t->Phi[2][2]*f->P[2][7] +
+    w->M[7] = t->Phi[2][0]*f->P[0][7] + t->Phi[2][1]*f->P[1][7] + t->Phi[2][2]*f->P[2][7] +
             t->Phi[2][3]*f->P[3][7] + t->Phi[2][4]*f->P[4][7] + t->Phi[2][5]*f->P[5][7] +
             t->Phi[2][7]*f->P[7][7] + t->Phi[2][8]*f->P[8][7] + t->Phi[2][9]*f->P[9][7] +
             t->Phi[2][10]*f->P[10][7] + t->Phi[2][11]*f->P[11][7] + t->Phi[2][12]*f->P[12][7] +
@@ -5794,7 +5543,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][7] + t->Phi[2][22]*f->P[22][7] + t->Phi[2][23]*f->P[23][7] +
             t->Phi[2][24]*f->P[24][7] + t->Phi[2][25]*f->P[25][7] + t->Phi[2][26]*f->P[26][7] +
             t->Phi[2][27]*f->P[27][7] + t->Phi[2][28]*f->P[28][7] + t->Phi[2][29]*f->P[29][7];
-    w->M[2][8] = t->Phi[2][0]*f->P[0][8] + t->Phi[2][1]*f->P[1][8] + t->Phi[2][2]*f->P[2][8] +
+    w->M[8] = t->Phi[2][0]*f->P[0][8] + t->Phi[2][1]*f->P[1][8] + t->Phi[2][2]*f->P[2][8] +
             t->Phi[2][3]*f->P[3][8] + t->Phi[2][4]*f->P[4][8] + t->Phi[2][5]*f->P[5][8] +
             t->Phi[2][7]*f->P[7][8] + t->Phi[2][8]*f->P[8][8] + t->Phi[2][9]*f->P[9][8] +
             t->Phi[2][10]*f->P[10][8] + t->Phi[2][11]*f->P[11][8] + t->Phi[2][12]*f->P[12][8] +
@@ -5803,7 +5552,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][8] + t->Phi[2][22]*f->P[22][8] + t->Phi[2][23]*f->P[23][8] +
             t->Phi[2][24]*f->P[24][8] + t->Phi[2][25]*f->P[25][8] + t->Phi[2][26]*f->P[26][8] +
             t->Phi[2][27]*f->P[27][8] + t->Phi[2][28]*f->P[28][8] + t->Phi[2][29]*f->P[29][8];
-    w->M[2][9] = t->Phi[2][0]*f->P[0][9] + t->Phi[2][1]*f->P[1][9] + t->Phi[2][2]*f->P[2][9] +
+    w->M[9] = t->Phi[2][0]*f->P[0][9] + t->Phi[2][1]*f->P[1][9] + t->Phi[2][2]*f->P[2][9] +
             t->Phi[2][3]*f->P[3][9] + t->Phi[2][4]*f->P[4][9] + t->Phi[2][5]*f->P[5][9] +
             t->Phi[2][7]*f->P[7][9] + t->Phi[2][8]*f->P[8][9] + t->Phi[2][9]*f->P[9][9] +
             t->Phi[2][10]*f->P[10][9] + t->Phi[2][11]*f->P[11][9] + t->Phi[2][12]*f->P[12][9] +
@@ -5812,7 +5561,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][9] + t->Phi[2][22]*f->P[22][9] + t->Phi[2][23]*f->P[23][9] +
             t->Phi[2][24]*f->P[24][9] + t->Phi[2][25]*f->P[25][9] + t->Phi[2][26]*f->P[26][9] +
             t->Phi[2][27]*f->P[27][9] + t->Phi[2][28]*f->P[28][9] + t->Phi[2][29]*f->P[29][9];
-    w->M[2][10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] +
+    w->M[10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] +
             t->Phi[2][3]*f->P[3][10] + t->Phi[2][4]*f->P[4][10] + t->Phi[2][5]*f->P[5][10] +
             t->Phi[2][7]*f->P[7][10] + t->Phi[2][8]*f->P[8][10] + t->Phi[2][9]*f->P[9][10] +
             t->Phi[2][10]*f->P[10][10] + t->Phi[2][11]*f->P[11][10] + t->Phi[2][12]*f->P[12][10] +
@@ -5821,7 +5570,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][10] + t->Phi[2][22]*f->P[22][10] + t->Phi[2][23]*f->P[23][10] +
             t->Phi[2][24]*f->P[24][10] + t->Phi[2][25]*f->P[25][10] + t->Phi[2][26]*f->P[26][10] +
             t->Phi[2][27]*f->P[27][10] + t->Phi[2][28]*f->P[28][10] + t->Phi[2][29]*f->P[29][10];
-    w->M[2][11] = t->Phi[2][0]*f->P[0][11] + t->Phi[2][1]*f->P[1][11] + t->Phi[2][2]*f->P[2][11] +
+    w->M[11] = t->Phi[2][0]*f->P[0][11] + t->Phi[2][1]*f->P[1][11] + t->Phi[2][2]*f->P[2][11] +
             t->Phi[2][3]*f->P[3][11] + t->Phi[2][4]*f->P[4][11] + t->Phi[2][5]*f->P[5][11] +
             t->Phi[2][7]*f->P[7][11] + t->Phi[2][8]*f->P[8][11] + t->Phi[2][9]*f->P[9][11] +
             t->Phi[2][10]*f->P[10][11] + t->Phi[2][11]*f->P[11][11] + t->Phi[2][12]*f->P[12][11] +
@@ -5830,7 +5579,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][11] + t->Phi[2][22]*f->P[22][11] + t->Phi[2][23]*f->P[23][11] +
             t->Phi[2][24]*f->P[24][11] + t->Phi[2][25]*f->P[25][11] + t->Phi[2][26]*f->P[26][11] +
             t->Phi[2][27]*f->P[27][11] + t->Phi[2][28]*f->P[28][11] + t->Phi[2][29]*f->P[29][11];
-    w->M[2][12] = t->Phi[2][0]*f->P[0][12] + t->Phi[2][1]*f->P[1][12] + t->Phi[2][2]*f->P[2][12] +
+    w->M[12] = t->Phi[2][0]*f->P[0][12] + t->Phi[2][1]*f->P[1][12] + t->Phi[2][2]*f->P[2][12] +
             t->Phi[2][3]*f->P[3][12] + t->Phi[2][4]*f->P[4][12] + t->Phi[2][5]*f->P[5][12] +
             t->Phi[2][7]*f->P[7][12] + t->Phi[2][8]*f->P[8][12] + t->Phi[2][9]*f->P[9][12] +
             t->Phi[2][10]*f->P[10][12] + t->Phi[2][11]*f->P[11][12] + t->Phi[2][12]*f->P[12][12] +
@@ -5839,7 +5588,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][12] + t->Phi[2][22]*f->P[22][12] + t->Phi[2][23]*f->P[23][12] +
             t->Phi[2][24]*f->P[24][12] + t->Phi[2][25]*f->P[25][12] + t->Phi[2][26]*f->P[26][12] +
             t->Phi[2][27]*f->P[27][12] + t->Phi[2][28]*f->P[28][12] + t->Phi[2][29]*f->P[29][12];
-    w->M[2][13] = t->Phi[2][0]*f->P[0][13] + t->Phi[2][1]*f->P[1][13] + t->Phi[2][2]*f->P[2][13] +
+    w->M[13] = t->Phi[2][0]*f->P[0][13] + t->Phi[2][1]*f->P[1][13] + t->Phi[2][2]*f->P[2][13] +
             t->Phi[2][3]*f->P[3][13] + t->Phi[2][4]*f->P[4][13] + t->Phi[2][5]*f->P[5][13] +
             t->Phi[2][7]*f->P[7][13] + t->Phi[2][8]*f->P[8][13] + t->Phi[2][9]*f->P[9][13] +
             t->Phi[2][10]*f->P[10][13] + t->Phi[2][11]*f->P[11][13] + t->Phi[2][12]*f->P[12][13] +
@@ -5848,7 +5597,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][13] + t->Phi[2][22]*f->P[22][13] + t->Phi[2][23]*f->P[23][13] +
             t->Phi[2][24]*f->P[24][13] + t->Phi[2][25]*f->P[25][13] + t->Phi[2][26]*f->P[26][13] +
             t->Phi[2][27]*f->P[27][13] + t->Phi[2][28]*f->P[28][13] + t->Phi[2][29]*f->P[29][13];
-    w->M[2][14] = t->Phi[2][0]*f->P[0][14] + t->Phi[2][1]*f->P[1][14] + t->Phi[2][2]*f->P[2][14] +
+    w->M[14] = t->Phi[2][0]*f->P[0][14] + t->Phi[2][1]*f->P[1][14] + t->Phi[2][2]*f->P[2][14] +
             t->Phi[2][3]*f->P[3][14] + t->Phi[2][4]*f->P[4][14] + t->Phi[2][5]*f->P[5][14] +
             t->Phi[2][7]*f->P[7][14] + t->Phi[2][8]*f->P[8][14] + t->Phi[2][9]*f->P[9][14] +
             t->Phi[2][10]*f->P[10][14] + t->Phi[2][11]*f->P[11][14] + t->Phi[2][12]*f->P[12][14] +
@@ -5857,7 +5606,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][14] + t->Phi[2][22]*f->P[22][14] + t->Phi[2][23]*f->P[23][14] +
             t->Phi[2][24]*f->P[24][14] + t->Phi[2][25]*f->P[25][14] + t->Phi[2][26]*f->P[26][14] +
             t->Phi[2][27]*f->P[27][14] + t->Phi[2][28]*f->P[28][14] + t->Phi[2][29]*f->P[29][14];
-    w->M[2][15] = t->Phi[2][0]*f->P[0][15] + t->Phi[2][1]*f->P[1][15] + t->Phi[2][2]*f->P[2][15] +
+    w->M[15] = t->Phi[2][0]*f->P[0][15] + t->Phi[2][1]*f->P[1][15] + t->Phi[2][2]*f->P[2][15] +
             t->Phi[2][3]*f->P[3][15] + t->Phi[2][4]*f->P[4][15] + t->Phi[2][5]*f->P[5][15] +
             t->Phi[2][7]*f->P[7][15] + t->Phi[2][8]*f->P[8][15] + t->Phi[2][9]*f->P[9][15] +
             t->Phi[2][10]*f->P[10][15] + t->Phi[2][11]*f->P[11][15] + t->Phi[2][12]*f->P[12][15] +
@@ -5866,7 +5615,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][15] + t->Phi[2][22]*f->P[22][15] + t->Phi[2][23]*f->P[23][15] +
             t->Phi[2][24]*f->P[24][15] + t->Phi[2][25]*f->P[25][15] + t->Phi[2][26]*f->P[26][15] +
             t->Phi[2][27]*f->P[27][15] + t->Phi[2][28]*f->P[28][15] + t->Phi[2][29]*f->P[29][15];
-    w->M[2][16] = t->Phi[2][0]*f->P[0][16] + t->Phi[2][1]*f->P[1][16] + t->Phi[2][2]*f->P[2][16] +
+    w->M[16] = t->Phi[2][0]*f->P[0][16] + t->Phi[2][1]*f->P[1][16] + t->Phi[2][2]*f->P[2][16] +
             t->Phi[2][3]*f->P[3][16] + t->Phi[2][4]*f->P[4][16] + t->Phi[2][5]*f->P[5][16] +
             t->Phi[2][7]*f->P[7][16] + t->Phi[2][8]*f->P[8][16] + t->Phi[2][9]*f->P[9][16] +
             t->Phi[2][10]*f->P[10][16] + t->Phi[2][11]*f->P[11][16] + t->Phi[2][12]*f->P[12][16] +
@@ -5875,7 +5624,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][16] + t->Phi[2][22]*f->P[22][16] + t->Phi[2][23]*f->P[23][16] +
             t->Phi[2][24]*f->P[24][16] + t->Phi[2][25]*f->P[25][16] + t->Phi[2][26]*f->P[26][16] +
             t->Phi[2][27]*f->P[27][16] + t->Phi[2][28]*f->P[28][16] + t->Phi[2][29]*f->P[29][16];
-    w->M[2][17] = t->Phi[2][0]*f->P[0][17] + t->Phi[2][1]*f->P[1][17] + t->Phi[2][2]*f->P[2][17] +
+    w->M[17] = t->Phi[2][0]*f->P[0][17] + t->Phi[2][1]*f->P[1][17] + t->Phi[2][2]*f->P[2][17] +
             t->Phi[2][3]*f->P[3][17] + t->Phi[2][4]*f->P[4][17] + t->Phi[2][5]*f->P[5][17] +
             t->Phi[2][7]*f->P[7][17] + t->Phi[2][8]*f->P[8][17] + t->Phi[2][9]*f->P[9][17] +
             t->Phi[2][10]*f->P[10][17] + t->Phi[2][11]*f->P[11][17] + t->Phi[2][12]*f->P[12][17] +
@@ -5884,7 +5633,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][17] + t->Phi[2][22]*f->P[22][17] + t->Phi[2][23]*f->P[23][17] +
             t->Phi[2][24]*f->P[24][17] + t->Phi[2][25]*f->P[25][17] + t->Phi[2][26]*f->P[26][17] +
             t->Phi[2][27]*f->P[27][17] + t->Phi[2][28]*f->P[28][17] + t->Phi[2][29]*f->P[29][17];
-    w->M[2][18] = t->Phi[2][0]*f->P[0][18] + t->Phi[2][1]*f->P[1][18] + t->Phi[2][2]*f->P[2][18] +
+    w->M[18] = t->Phi[2][0]*f->P[0][18] + t->Phi[2][1]*f->P[1][18] + t->Phi[2][2]*f->P[2][18] +
             t->Phi[2][3]*f->P[3][18] + t->Phi[2][4]*f->P[4][18] + t->Phi[2][5]*f->P[5][18] +
             t->Phi[2][7]*f->P[7][18] + t->Phi[2][8]*f->P[8][18] + t->Phi[2][9]*f->P[9][18] +
             t->Phi[2][10]*f->P[10][18] + t->Phi[2][11]*f->P[11][18] + t->Phi[2][12]*f->P[12][18] +
@@ -5893,7 +5642,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][18] + t->Phi[2][22]*f->P[22][18] + t->Phi[2][23]*f->P[23][18] +
             t->Phi[2][24]*f->P[24][18] + t->Phi[2][25]*f->P[25][18] + t->Phi[2][26]*f->P[26][18] +
             t->Phi[2][27]*f->P[27][18] + t->Phi[2][28]*f->P[28][18] + t->Phi[2][29]*f->P[29][18];
-    w->M[2][19] = t->Phi[2][0]*f->P[0][19] + t->Phi[2][1]*f->P[1][19] + t->Phi[2][2]*f->P[2][19] +
+    w->M[19] = t->Phi[2][0]*f->P[0][19] + t->Phi[2][1]*f->P[1][19] + t->Phi[2][2]*f->P[2][19] +
             t->Phi[2][3]*f->P[3][19] + t->Phi[2][4]*f->P[4][19] + t->Phi[2][5]*f->P[5][19] +
             t->Phi[2][7]*f->P[7][19] + t->Phi[2][8]*f->P[8][19] + t->Phi[2][9]*f->P[9][19] +
             t->Phi[2][10]*f->P[10][19] + t->Phi[2][11]*f->P[11][19] + t->Phi[2][12]*f->P[12][19] +
@@ -5902,7 +5651,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][19] + t->Phi[2][22]*f->P[22][19] + t->Phi[2][23]*f->P[23][19] +
             t->Phi[2][24]*f->P[24][19] + t->Phi[2][25]*f->P[25][19] + t->Phi[2][26]*f->P[26][19] +
             t->Phi[2][27]*f->P[27][19] + t->Phi[2][28]*f->P[28][19] + t->Phi[2][29]*f->P[29][19];
-    w->M[2][20] = t->Phi[2][0]*f->P[0][20] + t->Phi[2][1]*f->P[1][20] + t->Phi[2][2]*f->P[2][20] +
+    w->M[20] = t->Phi[2][0]*f->P[0][20] + t->Phi[2][1]*f->P[1][20] + t->Phi[2][2]*f->P[2][20] +
             t->Phi[2][3]*f->P[3][20] + t->Phi[2][4]*f->P[4][20] + t->Phi[2][5]*f->P[5][20] +
             t->Phi[2][7]*f->P[7][20] + t->Phi[2][8]*f->P[8][20] + t->Phi[2][9]*f->P[9][20] +
             t->Phi[2][10]*f->P[10][20] + t->Phi[2][11]*f->P[11][20] + t->Phi[2][12]*f->P[12][20] +
@@ -5911,7 +5660,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][20] + t->Phi[2][22]*f->P[22][20] + t->Phi[2][23]*f->P[23][20] +
             t->Phi[2][24]*f->P[24][20] + t->Phi[2][25]*f->P[25][20] + t->Phi[2][26]*f->P[26][20] +
             t->Phi[2][27]*f->P[27][20] + t->Phi[2][28]*f->P[28][20] + t->Phi[2][29]*f->P[29][20];
-    w->M[2][21] = t->Phi[2][0]*f->P[0][21] + t->Phi[2][1]*f->P[1][21] + t->Phi[2][2]*f->P[2][21] +
+    w->M[21] = t->Phi[2][0]*f->P[0][21] + t->Phi[2][1]*f->P[1][21] + t->Phi[2][2]*f->P[2][21] +
             t->Phi[2][3]*f->P[3][21] + t->Phi[2][4]*f->P[4][21] + t->Phi[2][5]*f->P[5][21] +
             t->Phi[2][7]*f->P[7][21] + t->Phi[2][8]*f->P[8][21] + t->Phi[2][9]*f->P[9][21] +
             t->Phi[2][10]*f->P[10][21] + t->Phi[2][11]*f->P[11][21] + t->Phi[2][12]*f->P[12][21] +
@@ -5920,7 +5669,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][21] + t->Phi[2][22]*f->P[22][21] + t->Phi[2][23]*f->P[23][21] +
             t->Phi[2][24]*f->P[24][21] + t->Phi[2][25]*f->P[25][21] + t->Phi[2][26]*f->P[26][21] +
             t->Phi[2][27]*f->P[27][21] + t->Phi[2][28]*f->P[28][21] + t->Phi[2][29]*f->P[29][21];
-    w->M[2][22] = t->Phi[2][0]*f->P[0][22] + t->Phi[2][1]*f->P[1][22] + t->Phi[2][2]*f->P[2][22] +
+    w->M[22] = t->Phi[2][0]*f->P[0][22] + t->Phi[2][1]*f->P[1][22] + t->Phi[2][2]*f->P[2][22] +
             t->Phi[2][3]*f->P[3][22] + t->Phi[2][4]*f->P[4][22] + t->Phi[2][5]*f->P[5][22] +
             t->Phi[2][7]*f->P[7][22] + t->Phi[2][8]*f->P[8][22] + t->Phi[2][9]*f->P[9][22] +
             t->Phi[2][10]*f->P[10][22] + t->Phi[2][11]*f->P[11][22] + t->Phi[2][12]*f->P[12][22] +
@@ -5929,7 +5678,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][22] + t->Phi[2][22]*f->P[22][22] + t->Phi[2][23]*f->P[23][22] +
             t->Phi[2][24]*f->P[24][22] + t->Phi[2][25]*f->P[25][22] + t->Phi[2][26]*f->P[26][22] +
             t->Phi[2][27]*f->P[27][22] + t->Phi[2][28]*f->P[28][22] + t->Phi[2][29]*f->P[29][22];
-    w->M[2][23] = t->Phi[2][0]*f->P[0][23] + t->Phi[2][1]*f->P[1][23] + t->Phi[2][2]*f->P[2][23] +
+    w->M[23] = t->Phi[2][0]*f->P[0][23] + t->Phi[2][1]*f->P[1][23] + t->Phi[2][2]*f->P[2][23] +
             t->Phi[2][3]*f->P[3][23] + t->Phi[2][4]*f->P[4][23] + t->Phi[2][5]*f->P[5][23] +
             t->Phi[2][7]*f->P[7][23] + t->Phi[2][8]*f->P[8][23] + t->Phi[2][9]*f->P[9][23] +
             t->Phi[2][10]*f->P[10][23] + t->Phi[2][11]*f->P[11][23] + t->Phi[2][12]*f->P[12][23] +
@@ -5938,7 +5687,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][23] + t->Phi[2][22]*f->P[22][23] + t->Phi[2][23]*f->P[23][23] +
             t->Phi[2][24]*f->P[24][23] + t->Phi[2][25]*f->P[25][23] + t->Phi[2][26]*f->P[26][23] +
             t->Phi[2][27]*f->P[27][23] + t->Phi[2][28]*f->P[28][23] + t->Phi[2][29]*f->P[29][23];
-    w->M[2][24] = t->Phi[2][0]*f->P[0][24] + t->Phi[2][1]*f->P[1][24] + t->Phi[2][2]*f->P[2][24] +
+    w->M[24] = t->Phi[2][0]*f->P[0][24] + t->Phi[2][1]*f->P[1][24] + t->Phi[2][2]*f->P[2][24] +
             t->Phi[2][3]*f->P[3][24] + t->Phi[2][4]*f->P[4][24] + t->Phi[2][5]*f->P[5][24] +
             t->Phi[2][7]*f->P[7][24] + t->Phi[2][8]*f->P[8][24] + t->Phi[2][9]*f->P[9][24] +
             t->Phi[2][10]*f->P[10][24] + t->Phi[2][11]*f->P[11][24] + t->Phi[2][12]*f->P[12][24] +
@@ -5947,7 +5696,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][24] + t->Phi[2][22]*f->P[22][24] + t->Phi[2][23]*f->P[23][24] +
             t->Phi[2][24]*f->P[24][24] + t->Phi[2][25]*f->P[25][24] + t->Phi[2][26]*f->P[26][24] +
             t->Phi[2][27]*f->P[27][24] + t->Phi[2][28]*f->P[28][24] + t->Phi[2][29]*f->P[29][24];
-    w->M[2][25] = t->Phi[2][0]*f->P[0][25] + t->Phi[2][1]*f->P[1][25] + t->Phi[2][2]*f->P[2][25] +
+    w->M[25] = t->Phi[2][0]*f->P[0][25] + t->Phi[2][1]*f->P[1][25] + t->Phi[2][2]*f->P[2][25] +
             t->Phi[2][3]*f->P[3][25] + t->Phi[2][4]*f->P[4][25] + t->Phi[2][5]*f->P[5][25] +
             t->Phi[2][7]*f->P[7][25] + t->Phi[2][8]*f->P[8][25] + t->Phi[2][9]*f->P[9][25] +
             t->Phi[2][10]*f->P[10][25] + t->Phi[2][11]*f->P[11][25] + t->Phi[2][12]*f->P[12][25] +
@@ -5956,7 +5705,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][25] + t->Phi[2][22]*f->P[22][25] + t->Phi[2][23]*f->P[23][25] +
             t->Phi[2][24]*f->P[24][25] + t->Phi[2][25]*f->P[25][25] + t->Phi[2][26]*f->P[26][25] +
             t->Phi[2][27]*f->P[27][25] + t->Phi[2][28]*f->P[28][25] + t->Phi[2][29]*f->P[29][25];
-    w->M[2][26] = t->Phi[2][0]*f->P[0][26] + t->Phi[2][1]*f->P[1][26] + t->Phi[2][2]*f->P[2][26] +
+    w->M[26] = t->Phi[2][0]*f->P[0][26] + t->Phi[2][1]*f->P[1][26] + t->Phi[2][2]*f->P[2][26] +
             t->Phi[2][3]*f->P[3][26] + t->Phi[2][4]*f->P[4][26] + t->Phi[2][5]*f->P[5][26] +
             t->Phi[2][7]*f->P[7][26] + t->Phi[2][8]*f->P[8][26] + t->Phi[2][9]*f->P[9][26] +
             t->Phi[2][10]*f->P[10][26] + t->Phi[2][11]*f->P[11][26] + t->Phi[2][12]*f->P[12][26] +
@@ -5965,7 +5714,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][26] + t->Phi[2][22]*f->P[22][26] + t->Phi[2][23]*f->P[23][26] +
             t->Phi[2][24]*f->P[24][26] + t->Phi[2][25]*f->P[25][26] + t->Phi[2][26]*f->P[26][26] +
             t->Phi[2][27]*f->P[27][26] + t->Phi[2][28]*f->P[28][26] + t->Phi[2][29]*f->P[29][26];
-    w->M[2][27] = t->Phi[2][0]*f->P[0][27] + t->Phi[2][1]*f->P[1][27] + t->Phi[2][2]*f->P[2][27] +
+    w->M[27] = t->Phi[2][0]*f->P[0][27] + t->Phi[2][1]*f->P[1][27] + t->Phi[2][2]*f->P[2][27] +
             t->Phi[2][3]*f->P[3][27] + t->Phi[2][4]*f->P[4][27] + t->Phi[2][5]*f->P[5][27] +
             t->Phi[2][7]*f->P[7][27] + t->Phi[2][8]*f->P[8][27] + t->Phi[2][9]*f->P[9][27] +
             t->Phi[2][10]*f->P[10][27] + t->Phi[2][11]*f->P[11][27] + t->Phi[2][12]*f->P[12][27] +
@@ -5974,7 +5723,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][27] + t->Phi[2][22]*f->P[22][27] + t->Phi[2][23]*f->P[23][27] +
             t->Phi[2][24]*f->P[24][27] + t->Phi[2][25]*f->P[25][27] + t->Phi[2][26]*f->P[26][27] +
             t->Phi[2][27]*f->P[27][27] + t->Phi[2][28]*f->P[28][27] + t->Phi[2][29]*f->P[29][27];
-    w->M[2][28] = t->Phi[2][0]*f->P[0][28] + t->Phi[2][1]*f->P[1][28] + t->Phi[2][2]*f->P[2][28] +
+    w->M[28] = t->Phi[2][0]*f->P[0][28] + t->Phi[2][1]*f->P[1][28] + t->Phi[2][2]*f->P[2][28] +
             t->Phi[2][3]*f->P[3][28] + t->Phi[2][4]*f->P[4][28] + t->Phi[2][5]*f->P[5][28] +
             t->Phi[2][7]*f->P[7][28] + t->Phi[2][8]*f->P[8][28] + t->Phi[2][9]*f->P[9][28] +
             t->Phi[2][10]*f->P[10][28] + t->Phi[2][11]*f->P[11][28] + t->Phi[2][12]*f->P[12][28] +
@@ -5983,7 +5732,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][28] + t->Phi[2][22]*f->P[22][28] + t->Phi[2][23]*f->P[23][28] +
             t->Phi[2][24]*f->P[24][28] + t->Phi[2][25]*f->P[25][28] + t->Phi[2][26]*f->P[26][28] +
             t->Phi[2][27]*f->P[27][28] + t->Phi[2][28]*f->P[28][28] + t->Phi[2][29]*f->P[29][28];
-    w->M[2][29] = t->Phi[2][0]*f->P[0][29] + t->Phi[2][1]*f->P[1][29] + t->Phi[2][2]*f->P[2][29] +
+    w->M[29] = t->Phi[2][0]*f->P[0][29] + t->Phi[2][1]*f->P[1][29] + t->Phi[2][2]*f->P[2][29] +
             t->Phi[2][3]*f->P[3][29] + t->Phi[2][4]*f->P[4][29] + t->Phi[2][5]*f->P[5][29] +
             t->Phi[2][7]*f->P[7][29] + t->Phi[2][8]*f->P[8][29] + t->Phi[2][9]*f->P[9][29] +
             t->Phi[2][10]*f->P[10][29] + t->Phi[2][11]*f->P[11][29] + t->Phi[2][12]*f->P[12][29] +
@@ -5992,7 +5741,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][29] + t->Phi[2][22]*f->P[22][29] + t->Phi[2][23]*f->P[23][29] +
             t->Phi[2][24]*f->P[24][29] + t->Phi[2][25]*f->P[25][29] + t->Phi[2][26]*f->P[26][29] +
             t->Phi[2][27]*f->P[27][29] + t->Phi[2][28]*f->P[28][29] + t->Phi[2][29]*f->P[29][29];
-    w->M[2][30] = t->Phi[2][0]*f->P[0][30] + t->Phi[2][1]*f->P[1][30] + t->Phi[2][2]*f->P[2][30] +
+    w->M[30] = t->Phi[2][0]*f->P[0][30] + t->Phi[2][1]*f->P[1][30] + t->Phi[2][2]*f->P[2][30] +
             t->Phi[2][3]*f->P[3][30] + t->Phi[2][4]*f->P[4][30] + t->Phi[2][5]*f->P[5][30] +
             t->Phi[2][7]*f->P[7][30] + t->Phi[2][8]*f->P[8][30] + t->Phi[2][9]*f->P[9][30] +
             t->Phi[2][10]*f->P[10][30] + t->Phi[2][11]*f->P[11][30] + t->Phi[2][12]*f->P[12][30] +
@@ -6001,7 +5750,7 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][21]*f->P[21][30] + t->Phi[2][22]*f->P[22][30] + t->Phi[2][23]*f->P[23][30] +
             t->Phi[2][24]*f->P[24][30] + t->Phi[2][25]*f->P[25][30] + t->Phi[2][26]*f->P[26][30] +
             t->Phi[2][27]*f->P[27][30] + t->Phi[2][28]*f->P[28][30] + t->Phi[2][29]*f->P[29][30];
-    w->M[2][31] = t->Phi[2][0]*f->P[0][31] + t->Phi[2][1]*f->P[1][31] + t->Phi[2][2]*f->P[2][31] +
+    w->M[31] = t->Phi[2][0]*f->P[0][31] + t->Phi[2][1]*f->P[1][31] + t->Phi[2][2]*f->P[2][31] +
             t->Phi[2][3]*f->P[3][31] + t->Phi[2][4]*f->P[4][31] + t->Phi[2][5]*f->P[5][31] +
             t->Phi[2][7]*f->P[7][31] + t->Phi[2][8]*f->P[8][31] + t->Phi[2][9]*f->P[9][31] +
             t->Phi[2][10]*f->P[10][31] + t->Phi[2][11]*f->P[11][31] + t->Phi[2][12]*f->P[12][31] +
@@ -6012,11 +5761,94 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[2][27]*f->P[27][31] + t->Phi[2][28]*f->P[28][31] + t->Phi[2][29]*f->P[29][31];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ned_doppler32_augmented_scalar propagate_row_2(const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
+            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[7]*t->Phi[2][7] +
+            w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] + w->M[10]*t->Phi[2][10] +
+            w->M[11]*t->Phi[2][11] + w->M[12]*t->Phi[2][12] + w->M[13]*t->Phi[2][13] +
+            w->M[14]*t->Phi[2][14] + w->M[15]*t->Phi[2][15] + w->M[18]*t->Phi[2][18] +
+            w->M[19]*t->Phi[2][19] + w->M[20]*t->Phi[2][20] + w->M[21]*t->Phi[2][21] +
+            w->M[22]*t->Phi[2][22] + w->M[23]*t->Phi[2][23] + w->M[24]*t->Phi[2][24] +
+            w->M[25]*t->Phi[2][25] + w->M[26]*t->Phi[2][26] + w->M[27]*t->Phi[2][27] +
+            w->M[28]*t->Phi[2][28] + w->M[29]*t->Phi[2][29] + t->Qd[63]; w->Pn[63] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[7]*t->Phi[3][7] +
+            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] +
+            w->M[11]*t->Phi[3][11] + w->M[12]*t->Phi[3][12] + w->M[13]*t->Phi[3][13] +
+            w->M[14]*t->Phi[3][14] + w->M[15]*t->Phi[3][15] + w->M[18]*t->Phi[3][18] +
+            w->M[19]*t->Phi[3][19] + w->M[20]*t->Phi[3][20] + w->M[21]*t->Phi[3][21] +
+            w->M[22]*t->Phi[3][22] + w->M[23]*t->Phi[3][23] + w->M[24]*t->Phi[3][24] +
+            w->M[25]*t->Phi[3][25] + w->M[26]*t->Phi[3][26] + w->M[27]*t->Phi[3][27] +
+            w->M[28]*t->Phi[3][28] + w->M[29]*t->Phi[3][29] + t->Qd[64]; w->Pn[64] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] +
+            w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] + w->M[13]*t->Phi[4][13] +
+            w->M[14]*t->Phi[4][14] + w->M[15]*t->Phi[4][15] + w->M[18]*t->Phi[4][18] +
+            w->M[19]*t->Phi[4][19] + w->M[20]*t->Phi[4][20] + w->M[21]*t->Phi[4][21] +
+            w->M[22]*t->Phi[4][22] + w->M[23]*t->Phi[4][23] + w->M[24]*t->Phi[4][24] +
+            w->M[25]*t->Phi[4][25] + w->M[26]*t->Phi[4][26] + w->M[27]*t->Phi[4][27] +
+            w->M[28]*t->Phi[4][28] + w->M[29]*t->Phi[4][29] + t->Qd[65]; w->Pn[65] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] +
+            w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] + w->M[13]*t->Phi[5][13] +
+            w->M[14]*t->Phi[5][14] + w->M[15]*t->Phi[5][15] + w->M[18]*t->Phi[5][18] +
+            w->M[19]*t->Phi[5][19] + w->M[20]*t->Phi[5][20] + w->M[21]*t->Phi[5][21] +
+            w->M[22]*t->Phi[5][22] + w->M[23]*t->Phi[5][23] + w->M[24]*t->Phi[5][24] +
+            w->M[25]*t->Phi[5][25] + w->M[26]*t->Phi[5][26] + w->M[27]*t->Phi[5][27] +
+            w->M[28]*t->Phi[5][28] + w->M[29]*t->Phi[5][29] + t->Qd[66]; w->Pn[66] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[18]*t->Phi[6][18] + w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] +
+            w->M[21]*t->Phi[6][21] + w->M[22]*t->Phi[6][22] + w->M[23]*t->Phi[6][23] +
+            w->M[24]*t->Phi[6][24] + w->M[25]*t->Phi[6][25] + w->M[26]*t->Phi[6][26] +
+            w->M[27]*t->Phi[6][27] + w->M[28]*t->Phi[6][28] + w->M[29]*t->Phi[6][29] + t->Qd[67];
+            w->Pn[67] = v; check += v - v;
+    v = w->M[7]; w->Pn[68] = v; check += v - v;
+    v = w->M[8]; w->Pn[69] = v; check += v - v;
+    v = w->M[9]; w->Pn[70] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[71]; w->Pn[71] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[72]; w->Pn[72] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[73]; w->Pn[73] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[74]; w->Pn[74] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[75]; w->Pn[75] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[76]; w->Pn[76] = v; check += v - v;
+    v = w->M[16]; w->Pn[77] = v; check += v - v;
+    v = w->M[17]; w->Pn[78] = v; check += v - v;
+    v = w->M[18]; w->Pn[79] = v; check += v - v;
+    v = w->M[19]; w->Pn[80] = v; check += v - v;
+    v = w->M[20]; w->Pn[81] = v; check += v - v;
+    v = w->M[21]; w->Pn[82] = v; check += v - v;
+    v = w->M[22]; w->Pn[83] = v; check += v - v;
+    v = w->M[23]; w->Pn[84] = v; check += v - v;
+    v = w->M[24]; w->Pn[85] = v; check += v - v;
+    v = w->M[25]; w->Pn[86] = v; check += v - v;
+    v = w->M[26]; w->Pn[87] = v; check += v - v;
+    v = w->M[27]; w->Pn[88] = v; check += v - v;
+    v = w->M[28]; w->Pn[89] = v; check += v - v;
+    v = w->M[29]; w->Pn[90] = v; check += v - v;
+    v = w->M[30]; w->Pn[91] = v; check += v - v;
+    v = w->M[31]; w->Pn[92] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, const
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
         *restrict w)
 {
-    w->M[3][0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] +
+    w->M[0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] +
             t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] +
             t->Phi[3][7]*f->P[7][0] + t->Phi[3][8]*f->P[8][0] + t->Phi[3][9]*f->P[9][0] +
             t->Phi[3][10]*f->P[10][0] + t->Phi[3][11]*f->P[11][0] + t->Phi[3][12]*f->P[12][0] +
@@ -6025,7 +5857,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][0] + t->Phi[3][22]*f->P[22][0] + t->Phi[3][23]*f->P[23][0] +
             t->Phi[3][24]*f->P[24][0] + t->Phi[3][25]*f->P[25][0] + t->Phi[3][26]*f->P[26][0] +
             t->Phi[3][27]*f->P[27][0] + t->Phi[3][28]*f->P[28][0] + t->Phi[3][29]*f->P[29][0];
-    w->M[3][1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] +
+    w->M[1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] +
             t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] +
             t->Phi[3][7]*f->P[7][1] + t->Phi[3][8]*f->P[8][1] + t->Phi[3][9]*f->P[9][1] +
             t->Phi[3][10]*f->P[10][1] + t->Phi[3][11]*f->P[11][1] + t->Phi[3][12]*f->P[12][1] +
@@ -6034,7 +5866,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][1] + t->Phi[3][22]*f->P[22][1] + t->Phi[3][23]*f->P[23][1] +
             t->Phi[3][24]*f->P[24][1] + t->Phi[3][25]*f->P[25][1] + t->Phi[3][26]*f->P[26][1] +
             t->Phi[3][27]*f->P[27][1] + t->Phi[3][28]*f->P[28][1] + t->Phi[3][29]*f->P[29][1];
-    w->M[3][2] = t->Phi[3][0]*f->P[0][2] + t->Phi[3][1]*f->P[1][2] + t->Phi[3][2]*f->P[2][2] +
+    w->M[2] = t->Phi[3][0]*f->P[0][2] + t->Phi[3][1]*f->P[1][2] + t->Phi[3][2]*f->P[2][2] +
             t->Phi[3][3]*f->P[3][2] + t->Phi[3][4]*f->P[4][2] + t->Phi[3][5]*f->P[5][2] +
             t->Phi[3][7]*f->P[7][2] + t->Phi[3][8]*f->P[8][2] + t->Phi[3][9]*f->P[9][2] +
             t->Phi[3][10]*f->P[10][2] + t->Phi[3][11]*f->P[11][2] + t->Phi[3][12]*f->P[12][2] +
@@ -6043,7 +5875,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][2] + t->Phi[3][22]*f->P[22][2] + t->Phi[3][23]*f->P[23][2] +
             t->Phi[3][24]*f->P[24][2] + t->Phi[3][25]*f->P[25][2] + t->Phi[3][26]*f->P[26][2] +
             t->Phi[3][27]*f->P[27][2] + t->Phi[3][28]*f->P[28][2] + t->Phi[3][29]*f->P[29][2];
-    w->M[3][3] = t->Phi[3][0]*f->P[0][3] + t->Phi[3][1]*f->P[1][3] + t->Phi[3][2]*f->P[2][3] +
+    w->M[3] = t->Phi[3][0]*f->P[0][3] + t->Phi[3][1]*f->P[1][3] + t->Phi[3][2]*f->P[2][3] +
             t->Phi[3][3]*f->P[3][3] + t->Phi[3][4]*f->P[4][3] + t->Phi[3][5]*f->P[5][3] +
             t->Phi[3][7]*f->P[7][3] + t->Phi[3][8]*f->P[8][3] + t->Phi[3][9]*f->P[9][3] +
             t->Phi[3][10]*f->P[10][3] + t->Phi[3][11]*f->P[11][3] + t->Phi[3][12]*f->P[12][3] +
@@ -6052,7 +5884,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][3] + t->Phi[3][22]*f->P[22][3] + t->Phi[3][23]*f->P[23][3] +
             t->Phi[3][24]*f->P[24][3] + t->Phi[3][25]*f->P[25][3] + t->Phi[3][26]*f->P[26][3] +
             t->Phi[3][27]*f->P[27][3] + t->Phi[3][28]*f->P[28][3] + t->Phi[3][29]*f->P[29][3];
-    w->M[3][4] = t->Phi[3][0]*f->P[0][4] + t->Phi[3][1]*f->P[1][4] + t->Phi[3][2]*f->P[2][4] +
+    w->M[4] = t->Phi[3][0]*f->P[0][4] + t->Phi[3][1]*f->P[1][4] + t->Phi[3][2]*f->P[2][4] +
             t->Phi[3][3]*f->P[3][4] + t->Phi[3][4]*f->P[4][4] + t->Phi[3][5]*f->P[5][4] +
             t->Phi[3][7]*f->P[7][4] + t->Phi[3][8]*f->P[8][4] + t->Phi[3][9]*f->P[9][4] +
             t->Phi[3][10]*f->P[10][4] + t->Phi[3][11]*f->P[11][4] + t->Phi[3][12]*f->P[12][4] +
@@ -6061,7 +5893,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][4] + t->Phi[3][22]*f->P[22][4] + t->Phi[3][23]*f->P[23][4] +
             t->Phi[3][24]*f->P[24][4] + t->Phi[3][25]*f->P[25][4] + t->Phi[3][26]*f->P[26][4] +
             t->Phi[3][27]*f->P[27][4] + t->Phi[3][28]*f->P[28][4] + t->Phi[3][29]*f->P[29][4];
-    w->M[3][5] = t->Phi[3][0]*f->P[0][5] + t->Phi[3][1]*f->P[1][5] + t->Phi[3][2]*f->P[2][5] +
+    w->M[5] = t->Phi[3][0]*f->P[0][5] + t->Phi[3][1]*f->P[1][5] + t->Phi[3][2]*f->P[2][5] +
             t->Phi[3][3]*f->P[3][5] + t->Phi[3][4]*f->P[4][5] + t->Phi[3][5]*f->P[5][5] +
             t->Phi[3][7]*f->P[7][5] + t->Phi[3][8]*f->P[8][5] + t->Phi[3][9]*f->P[9][5] +
             t->Phi[3][10]*f->P[10][5] + t->Phi[3][11]*f->P[11][5] + t->Phi[3][12]*f->P[12][5] +
@@ -6070,7 +5902,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][5] + t->Phi[3][22]*f->P[22][5] + t->Phi[3][23]*f->P[23][5] +
             t->Phi[3][24]*f->P[24][5] + t->Phi[3][25]*f->P[25][5] + t->Phi[3][26]*f->P[26][5] +
             t->Phi[3][27]*f->P[27][5] + t->Phi[3][28]*f->P[28][5] + t->Phi[3][29]*f->P[29][5];
-    w->M[3][6] = t->Phi[3][0]*f->P[0][6] + t->Phi[3][1]*f->P[1][6] + t->Phi[3][2]*f->P[2][6] +
+    w->M[6] = t->Phi[3][0]*f->P[0][6] + t->Phi[3][1]*f->P[1][6] + t->Phi[3][2]*f->P[2][6] +
             t->Phi[3][3]*f->P[3][6] + t->Phi[3][4]*f->P[4][6] + t->Phi[3][5]*f->P[5][6] +
             t->Phi[3][7]*f->P[7][6] + t->Phi[3][8]*f->P[8][6] + t->Phi[3][9]*f->P[9][6] +
             t->Phi[3][10]*f->P[10][6] + t->Phi[3][11]*f->P[11][6] + t->Phi[3][12]*f->P[12][6] +
@@ -6079,7 +5911,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][6] + t->Phi[3][22]*f->P[22][6] + t->Phi[3][23]*f->P[23][6] +
             t->Phi[3][24]*f->P[24][6] + t->Phi[3][25]*f->P[25][6] + t->Phi[3][26]*f->P[26][6] +
             t->Phi[3][27]*f->P[27][6] + t->Phi[3][28]*f->P[28][6] + t->Phi[3][29]*f->P[29][6];
-    w->M[3][7] = t->Phi[3][0]*f->P[0][7] + t->Phi[3][1]*f->P[1][7] + t->Phi[3][2]*f->P[2][7] +
+    w->M[7] = t->Phi[3][0]*f->P[0][7] + t->Phi[3][1]*f->P[1][7] + t->Phi[3][2]*f->P[2][7] +
             t->Phi[3][3]*f->P[3][7] + t->Phi[3][4]*f->P[4][7] + t->Phi[3][5]*f->P[5][7] +
             t->Phi[3][7]*f->P[7][7] + t->Phi[3][8]*f->P[8][7] + t->Phi[3][9]*f->P[9][7] +
             t->Phi[3][10]*f->P[10][7] + t->Phi[3][11]*f->P[11][7] + t->Phi[3][12]*f->P[12][7] +
@@ -6088,7 +5920,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][7] + t->Phi[3][22]*f->P[22][7] + t->Phi[3][23]*f->P[23][7] +
             t->Phi[3][24]*f->P[24][7] + t->Phi[3][25]*f->P[25][7] + t->Phi[3][26]*f->P[26][7] +
             t->Phi[3][27]*f->P[27][7] + t->Phi[3][28]*f->P[28][7] + t->Phi[3][29]*f->P[29][7];
-    w->M[3][8] = t->Phi[3][0]*f->P[0][8] + t->Phi[3][1]*f->P[1][8] + t->Phi[3][2]*f->P[2][8] +
+    w->M[8] = t->Phi[3][0]*f->P[0][8] + t->Phi[3][1]*f->P[1][8] + t->Phi[3][2]*f->P[2][8] +
             t->Phi[3][3]*f->P[3][8] + t->Phi[3][4]*f->P[4][8] + t->Phi[3][5]*f->P[5][8] +
             t->Phi[3][7]*f->P[7][8] + t->Phi[3][8]*f->P[8][8] + t->Phi[3][9]*f->P[9][8] +
             t->Phi[3][10]*f->P[10][8] + t->Phi[3][11]*f->P[11][8] + t->Phi[3][12]*f->P[12][8] +
@@ -6097,7 +5929,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][8] + t->Phi[3][22]*f->P[22][8] + t->Phi[3][23]*f->P[23][8] +
             t->Phi[3][24]*f->P[24][8] + t->Phi[3][25]*f->P[25][8] + t->Phi[3][26]*f->P[26][8] +
             t->Phi[3][27]*f->P[27][8] + t->Phi[3][28]*f->P[28][8] + t->Phi[3][29]*f->P[29][8];
-    w->M[3][9] = t->Phi[3][0]*f->P[0][9] + t->Phi[3][1]*f->P[1][9] + t->Phi[3][2]*f->P[2][9] +
+    w->M[9] = t->Phi[3][0]*f->P[0][9] + t->Phi[3][1]*f->P[1][9] + t->Phi[3][2]*f->P[2][9] +
             t->Phi[3][3]*f->P[3][9] + t->Phi[3][4]*f->P[4][9] + t->Phi[3][5]*f->P[5][9] +
             t->Phi[3][7]*f->P[7][9] + t->Phi[3][8]*f->P[8][9] + t->Phi[3][9]*f->P[9][9] +
             t->Phi[3][10]*f->P[10][9] + t->Phi[3][11]*f->P[11][9] + t->Phi[3][12]*f->P[12][9] +
@@ -6106,7 +5938,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][9] + t->Phi[3][22]*f->P[22][9] + t->Phi[3][23]*f->P[23][9] +
             t->Phi[3][24]*f->P[24][9] + t->Phi[3][25]*f->P[25][9] + t->Phi[3][26]*f->P[26][9] +
             t->Phi[3][27]*f->P[27][9] + t->Phi[3][28]*f->P[28][9] + t->Phi[3][29]*f->P[29][9];
-    w->M[3][10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] +
+    w->M[10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] +
             t->Phi[3][3]*f->P[3][10] + t->Phi[3][4]*f->P[4][10] + t->Phi[3][5]*f->P[5][10] +
             t->Phi[3][7]*f->P[7][10] + t->Phi[3][8]*f->P[8][10] + t->Phi[3][9]*f->P[9][10] +
             t->Phi[3][10]*f->P[10][10] + t->Phi[3][11]*f->P[11][10] + t->Phi[3][12]*f->P[12][10] +
@@ -6115,7 +5947,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][10] + t->Phi[3][22]*f->P[22][10] + t->Phi[3][23]*f->P[23][10] +
             t->Phi[3][24]*f->P[24][10] + t->Phi[3][25]*f->P[25][10] + t->Phi[3][26]*f->P[26][10] +
             t->Phi[3][27]*f->P[27][10] + t->Phi[3][28]*f->P[28][10] + t->Phi[3][29]*f->P[29][10];
-    w->M[3][11] = t->Phi[3][0]*f->P[0][11] + t->Phi[3][1]*f->P[1][11] + t->Phi[3][2]*f->P[2][11] +
+    w->M[11] = t->Phi[3][0]*f->P[0][11] + t->Phi[3][1]*f->P[1][11] + t->Phi[3][2]*f->P[2][11] +
             t->Phi[3][3]*f->P[3][11] + t->Phi[3][4]*f->P[4][11] + t->Phi[3][5]*f->P[5][11] +
             t->Phi[3][7]*f->P[7][11] + t->Phi[3][8]*f->P[8][11] + t->Phi[3][9]*f->P[9][11] +
             t->Phi[3][10]*f->P[10][11] + t->Phi[3][11]*f->P[11][11] + t->Phi[3][12]*f->P[12][11] +
@@ -6124,7 +5956,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][11] + t->Phi[3][22]*f->P[22][11] + t->Phi[3][23]*f->P[23][11] +
             t->Phi[3][24]*f->P[24][11] + t->Phi[3][25]*f->P[25][11] + t->Phi[3][26]*f->P[26][11] +
             t->Phi[3][27]*f->P[27][11] + t->Phi[3][28]*f->P[28][11] + t->Phi[3][29]*f->P[29][11];
-    w->M[3][12] = t->Phi[3][0]*f->P[0][12] + t->Phi[3][1]*f->P[1][12] + t->Phi[3][2]*f->P[2][12] +
+    w->M[12] = t->Phi[3][0]*f->P[0][12] + t->Phi[3][1]*f->P[1][12] + t->Phi[3][2]*f->P[2][12] +
             t->Phi[3][3]*f->P[3][12] + t->Phi[3][4]*f->P[4][12] + t->Phi[3][5]*f->P[5][12] +
             t->Phi[3][7]*f->P[7][12] + t->Phi[3][8]*f->P[8][12] + t->Phi[3][9]*f->P[9][12] +
             t->Phi[3][10]*f->P[10][12] + t->Phi[3][11]*f->P[11][12] + t->Phi[3][12]*f->P[12][12] +
@@ -6133,7 +5965,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][12] + t->Phi[3][22]*f->P[22][12] + t->Phi[3][23]*f->P[23][12] +
             t->Phi[3][24]*f->P[24][12] + t->Phi[3][25]*f->P[25][12] + t->Phi[3][26]*f->P[26][12] +
             t->Phi[3][27]*f->P[27][12] + t->Phi[3][28]*f->P[28][12] + t->Phi[3][29]*f->P[29][12];
-    w->M[3][13] = t->Phi[3][0]*f->P[0][13] + t->Phi[3][1]*f->P[1][13] + t->Phi[3][2]*f->P[2][13] +
+    w->M[13] = t->Phi[3][0]*f->P[0][13] + t->Phi[3][1]*f->P[1][13] + t->Phi[3][2]*f->P[2][13] +
             t->Phi[3][3]*f->P[3][13] + t->Phi[3][4]*f->P[4][13] + t->Phi[3][5]*f->P[5][13] +
             t->Phi[3][7]*f->P[7][13] + t->Phi[3][8]*f->P[8][13] + t->Phi[3][9]*f->P[9][13] +
             t->Phi[3][10]*f->P[10][13] + t->Phi[3][11]*f->P[11][13] + t->Phi[3][12]*f->P[12][13] +
@@ -6142,7 +5974,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][13] + t->Phi[3][22]*f->P[22][13] + t->Phi[3][23]*f->P[23][13] +
             t->Phi[3][24]*f->P[24][13] + t->Phi[3][25]*f->P[25][13] + t->Phi[3][26]*f->P[26][13] +
             t->Phi[3][27]*f->P[27][13] + t->Phi[3][28]*f->P[28][13] + t->Phi[3][29]*f->P[29][13];
-    w->M[3][14] = t->Phi[3][0]*f->P[0][14] + t->Phi[3][1]*f->P[1][14] + t->Phi[3][2]*f->P[2][14] +
+    w->M[14] = t->Phi[3][0]*f->P[0][14] + t->Phi[3][1]*f->P[1][14] + t->Phi[3][2]*f->P[2][14] +
             t->Phi[3][3]*f->P[3][14] + t->Phi[3][4]*f->P[4][14] + t->Phi[3][5]*f->P[5][14] +
             t->Phi[3][7]*f->P[7][14] + t->Phi[3][8]*f->P[8][14] + t->Phi[3][9]*f->P[9][14] +
             t->Phi[3][10]*f->P[10][14] + t->Phi[3][11]*f->P[11][14] + t->Phi[3][12]*f->P[12][14] +
@@ -6151,7 +5983,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][14] + t->Phi[3][22]*f->P[22][14] + t->Phi[3][23]*f->P[23][14] +
             t->Phi[3][24]*f->P[24][14] + t->Phi[3][25]*f->P[25][14] + t->Phi[3][26]*f->P[26][14] +
             t->Phi[3][27]*f->P[27][14] + t->Phi[3][28]*f->P[28][14] + t->Phi[3][29]*f->P[29][14];
-    w->M[3][15] = t->Phi[3][0]*f->P[0][15] + t->Phi[3][1]*f->P[1][15] + t->Phi[3][2]*f->P[2][15] +
+    w->M[15] = t->Phi[3][0]*f->P[0][15] + t->Phi[3][1]*f->P[1][15] + t->Phi[3][2]*f->P[2][15] +
             t->Phi[3][3]*f->P[3][15] + t->Phi[3][4]*f->P[4][15] + t->Phi[3][5]*f->P[5][15] +
             t->Phi[3][7]*f->P[7][15] + t->Phi[3][8]*f->P[8][15] + t->Phi[3][9]*f->P[9][15] +
             t->Phi[3][10]*f->P[10][15] + t->Phi[3][11]*f->P[11][15] + t->Phi[3][12]*f->P[12][15] +
@@ -6160,7 +5992,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][15] + t->Phi[3][22]*f->P[22][15] + t->Phi[3][23]*f->P[23][15] +
             t->Phi[3][24]*f->P[24][15] + t->Phi[3][25]*f->P[25][15] + t->Phi[3][26]*f->P[26][15] +
             t->Phi[3][27]*f->P[27][15] + t->Phi[3][28]*f->P[28][15] + t->Phi[3][29]*f->P[29][15];
-    w->M[3][16] = t->Phi[3][0]*f->P[0][16] + t->Phi[3][1]*f->P[1][16] + t->Phi[3][2]*f->P[2][16] +
+    w->M[16] = t->Phi[3][0]*f->P[0][16] + t->Phi[3][1]*f->P[1][16] + t->Phi[3][2]*f->P[2][16] +
             t->Phi[3][3]*f->P[3][16] + t->Phi[3][4]*f->P[4][16] + t->Phi[3][5]*f->P[5][16] +
             t->Phi[3][7]*f->P[7][16] + t->Phi[3][8]*f->P[8][16] + t->Phi[3][9]*f->P[9][16] +
             t->Phi[3][10]*f->P[10][16] + t->Phi[3][11]*f->P[11][16] + t->Phi[3][12]*f->P[12][16] +
@@ -6169,7 +6001,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][16] + t->Phi[3][22]*f->P[22][16] + t->Phi[3][23]*f->P[23][16] +
             t->Phi[3][24]*f->P[24][16] + t->Phi[3][25]*f->P[25][16] + t->Phi[3][26]*f->P[26][16] +
             t->Phi[3][27]*f->P[27][16] + t->Phi[3][28]*f->P[28][16] + t->Phi[3][29]*f->P[29][16];
-    w->M[3][17] = t->Phi[3][0]*f->P[0][17] + t->Phi[3][1]*f->P[1][17] + t->Phi[3][2]*f->P[2][17] +
+    w->M[17] = t->Phi[3][0]*f->P[0][17] + t->Phi[3][1]*f->P[1][17] + t->Phi[3][2]*f->P[2][17] +
             t->Phi[3][3]*f->P[3][17] + t->Phi[3][4]*f->P[4][17] + t->Phi[3][5]*f->P[5][17] +
             t->Phi[3][7]*f->P[7][17] + t->Phi[3][8]*f->P[8][17] + t->Phi[3][9]*f->P[9][17] +
             t->Phi[3][10]*f->P[10][17] + t->Phi[3][11]*f->P[11][17] + t->Phi[3][12]*f->P[12][17] +
@@ -6178,7 +6010,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][17] + t->Phi[3][22]*f->P[22][17] + t->Phi[3][23]*f->P[23][17] +
             t->Phi[3][24]*f->P[24][17] + t->Phi[3][25]*f->P[25][17] + t->Phi[3][26]*f->P[26][17] +
             t->Phi[3][27]*f->P[27][17] + t->Phi[3][28]*f->P[28][17] + t->Phi[3][29]*f->P[29][17];
-    w->M[3][18] = t->Phi[3][0]*f->P[0][18] + t->Phi[3][1]*f->P[1][18] + t->Phi[3][2]*f->P[2][18] +
+    w->M[18] = t->Phi[3][0]*f->P[0][18] + t->Phi[3][1]*f->P[1][18] + t->Phi[3][2]*f->P[2][18] +
             t->Phi[3][3]*f->P[3][18] + t->Phi[3][4]*f->P[4][18] + t->Phi[3][5]*f->P[5][18] +
             t->Phi[3][7]*f->P[7][18] + t->Phi[3][8]*f->P[8][18] + t->Phi[3][9]*f->P[9][18] +
             t->Phi[3][10]*f->P[10][18] + t->Phi[3][11]*f->P[11][18] + t->Phi[3][12]*f->P[12][18] +
@@ -6187,7 +6019,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][18] + t->Phi[3][22]*f->P[22][18] + t->Phi[3][23]*f->P[23][18] +
             t->Phi[3][24]*f->P[24][18] + t->Phi[3][25]*f->P[25][18] + t->Phi[3][26]*f->P[26][18] +
             t->Phi[3][27]*f->P[27][18] + t->Phi[3][28]*f->P[28][18] + t->Phi[3][29]*f->P[29][18];
-    w->M[3][19] = t->Phi[3][0]*f->P[0][19] + t->Phi[3][1]*f->P[1][19] + t->Phi[3][2]*f->P[2][19] +
+    w->M[19] = t->Phi[3][0]*f->P[0][19] + t->Phi[3][1]*f->P[1][19] + t->Phi[3][2]*f->P[2][19] +
             t->Phi[3][3]*f->P[3][19] + t->Phi[3][4]*f->P[4][19] + t->Phi[3][5]*f->P[5][19] +
             t->Phi[3][7]*f->P[7][19] + t->Phi[3][8]*f->P[8][19] + t->Phi[3][9]*f->P[9][19] +
             t->Phi[3][10]*f->P[10][19] + t->Phi[3][11]*f->P[11][19] + t->Phi[3][12]*f->P[12][19] +
@@ -6196,7 +6028,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][19] + t->Phi[3][22]*f->P[22][19] + t->Phi[3][23]*f->P[23][19] +
             t->Phi[3][24]*f->P[24][19] + t->Phi[3][25]*f->P[25][19] + t->Phi[3][26]*f->P[26][19] +
             t->Phi[3][27]*f->P[27][19] + t->Phi[3][28]*f->P[28][19] + t->Phi[3][29]*f->P[29][19];
-    w->M[3][20] = t->Phi[3][0]*f->P[0][20] + t->Phi[3][1]*f->P[1][20] + t->Phi[3][2]*f->P[2][20] +
+    w->M[20] = t->Phi[3][0]*f->P[0][20] + t->Phi[3][1]*f->P[1][20] + t->Phi[3][2]*f->P[2][20] +
             t->Phi[3][3]*f->P[3][20] + t->Phi[3][4]*f->P[4][20] + t->Phi[3][5]*f->P[5][20] +
             t->Phi[3][7]*f->P[7][20] + t->Phi[3][8]*f->P[8][20] + t->Phi[3][9]*f->P[9][20] +
             t->Phi[3][10]*f->P[10][20] + t->Phi[3][11]*f->P[11][20] + t->Phi[3][12]*f->P[12][20] +
@@ -6205,7 +6037,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][20] + t->Phi[3][22]*f->P[22][20] + t->Phi[3][23]*f->P[23][20] +
             t->Phi[3][24]*f->P[24][20] + t->Phi[3][25]*f->P[25][20] + t->Phi[3][26]*f->P[26][20] +
             t->Phi[3][27]*f->P[27][20] + t->Phi[3][28]*f->P[28][20] + t->Phi[3][29]*f->P[29][20];
-    w->M[3][21] = t->Phi[3][0]*f->P[0][21] + t->Phi[3][1]*f->P[1][21] + t->Phi[3][2]*f->P[2][21] +
+    w->M[21] = t->Phi[3][0]*f->P[0][21] + t->Phi[3][1]*f->P[1][21] + t->Phi[3][2]*f->P[2][21] +
             t->Phi[3][3]*f->P[3][21] + t->Phi[3][4]*f->P[4][21] + t->Phi[3][5]*f->P[5][21] +
             t->Phi[3][7]*f->P[7][21] + t->Phi[3][8]*f->P[8][21] + t->Phi[3][9]*f->P[9][21] +
             t->Phi[3][10]*f->P[10][21] + t->Phi[3][11]*f->P[11][21] + t->Phi[3][12]*f->P[12][21] +
@@ -6214,7 +6046,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][21] + t->Phi[3][22]*f->P[22][21] + t->Phi[3][23]*f->P[23][21] +
             t->Phi[3][24]*f->P[24][21] + t->Phi[3][25]*f->P[25][21] + t->Phi[3][26]*f->P[26][21] +
             t->Phi[3][27]*f->P[27][21] + t->Phi[3][28]*f->P[28][21] + t->Phi[3][29]*f->P[29][21];
-    w->M[3][22] = t->Phi[3][0]*f->P[0][22] + t->Phi[3][1]*f->P[1][22] + t->Phi[3][2]*f->P[2][22] +
+    w->M[22] = t->Phi[3][0]*f->P[0][22] + t->Phi[3][1]*f->P[1][22] + t->Phi[3][2]*f->P[2][22] +
             t->Phi[3][3]*f->P[3][22] + t->Phi[3][4]*f->P[4][22] + t->Phi[3][5]*f->P[5][22] +
             t->Phi[3][7]*f->P[7][22] + t->Phi[3][8]*f->P[8][22] + t->Phi[3][9]*f->P[9][22] +
             t->Phi[3][10]*f->P[10][22] + t->Phi[3][11]*f->P[11][22] + t->Phi[3][12]*f->P[12][22] +
@@ -6223,7 +6055,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][22] + t->Phi[3][22]*f->P[22][22] + t->Phi[3][23]*f->P[23][22] +
             t->Phi[3][24]*f->P[24][22] + t->Phi[3][25]*f->P[25][22] + t->Phi[3][26]*f->P[26][22] +
             t->Phi[3][27]*f->P[27][22] + t->Phi[3][28]*f->P[28][22] + t->Phi[3][29]*f->P[29][22];
-    w->M[3][23] = t->Phi[3][0]*f->P[0][23] + t->Phi[3][1]*f->P[1][23] + t->Phi[3][2]*f->P[2][23] +
+    w->M[23] = t->Phi[3][0]*f->P[0][23] + t->Phi[3][1]*f->P[1][23] + t->Phi[3][2]*f->P[2][23] +
             t->Phi[3][3]*f->P[3][23] + t->Phi[3][4]*f->P[4][23] + t->Phi[3][5]*f->P[5][23] +
             t->Phi[3][7]*f->P[7][23] + t->Phi[3][8]*f->P[8][23] + t->Phi[3][9]*f->P[9][23] +
             t->Phi[3][10]*f->P[10][23] + t->Phi[3][11]*f->P[11][23] + t->Phi[3][12]*f->P[12][23] +
@@ -6232,7 +6064,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][23] + t->Phi[3][22]*f->P[22][23] + t->Phi[3][23]*f->P[23][23] +
             t->Phi[3][24]*f->P[24][23] + t->Phi[3][25]*f->P[25][23] + t->Phi[3][26]*f->P[26][23] +
             t->Phi[3][27]*f->P[27][23] + t->Phi[3][28]*f->P[28][23] + t->Phi[3][29]*f->P[29][23];
-    w->M[3][24] = t->Phi[3][0]*f->P[0][24] + t->Phi[3][1]*f->P[1][24] + t->Phi[3][2]*f->P[2][24] +
+    w->M[24] = t->Phi[3][0]*f->P[0][24] + t->Phi[3][1]*f->P[1][24] + t->Phi[3][2]*f->P[2][24] +
             t->Phi[3][3]*f->P[3][24] + t->Phi[3][4]*f->P[4][24] + t->Phi[3][5]*f->P[5][24] +
             t->Phi[3][7]*f->P[7][24] + t->Phi[3][8]*f->P[8][24] + t->Phi[3][9]*f->P[9][24] +
             t->Phi[3][10]*f->P[10][24] + t->Phi[3][11]*f->P[11][24] + t->Phi[3][12]*f->P[12][24] +
@@ -6241,7 +6073,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][24] + t->Phi[3][22]*f->P[22][24] + t->Phi[3][23]*f->P[23][24] +
             t->Phi[3][24]*f->P[24][24] + t->Phi[3][25]*f->P[25][24] + t->Phi[3][26]*f->P[26][24] +
             t->Phi[3][27]*f->P[27][24] + t->Phi[3][28]*f->P[28][24] + t->Phi[3][29]*f->P[29][24];
-    w->M[3][25] = t->Phi[3][0]*f->P[0][25] + t->Phi[3][1]*f->P[1][25] + t->Phi[3][2]*f->P[2][25] +
+    w->M[25] = t->Phi[3][0]*f->P[0][25] + t->Phi[3][1]*f->P[1][25] + t->Phi[3][2]*f->P[2][25] +
             t->Phi[3][3]*f->P[3][25] + t->Phi[3][4]*f->P[4][25] + t->Phi[3][5]*f->P[5][25] +
             t->Phi[3][7]*f->P[7][25] + t->Phi[3][8]*f->P[8][25] + t->Phi[3][9]*f->P[9][25] +
             t->Phi[3][10]*f->P[10][25] + t->Phi[3][11]*f->P[11][25] + t->Phi[3][12]*f->P[12][25] +
@@ -6250,7 +6082,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][25] + t->Phi[3][22]*f->P[22][25] + t->Phi[3][23]*f->P[23][25] +
             t->Phi[3][24]*f->P[24][25] + t->Phi[3][25]*f->P[25][25] + t->Phi[3][26]*f->P[26][25] +
             t->Phi[3][27]*f->P[27][25] + t->Phi[3][28]*f->P[28][25] + t->Phi[3][29]*f->P[29][25];
-    w->M[3][26] = t->Phi[3][0]*f->P[0][26] + t->Phi[3][1]*f->P[1][26] + t->Phi[3][2]*f->P[2][26] +
+    w->M[26] = t->Phi[3][0]*f->P[0][26] + t->Phi[3][1]*f->P[1][26] + t->Phi[3][2]*f->P[2][26] +
             t->Phi[3][3]*f->P[3][26] + t->Phi[3][4]*f->P[4][26] + t->Phi[3][5]*f->P[5][26] +
             t->Phi[3][7]*f->P[7][26] + t->Phi[3][8]*f->P[8][26] + t->Phi[3][9]*f->P[9][26] +
             t->Phi[3][10]*f->P[10][26] + t->Phi[3][11]*f->P[11][26] + t->Phi[3][12]*f->P[12][26] +
@@ -6259,7 +6091,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][26] + t->Phi[3][22]*f->P[22][26] + t->Phi[3][23]*f->P[23][26] +
             t->Phi[3][24]*f->P[24][26] + t->Phi[3][25]*f->P[25][26] + t->Phi[3][26]*f->P[26][26] +
             t->Phi[3][27]*f->P[27][26] + t->Phi[3][28]*f->P[28][26] + t->Phi[3][29]*f->P[29][26];
-    w->M[3][27] = t->Phi[3][0]*f->P[0][27] + t->Phi[3][1]*f->P[1][27] + t->Phi[3][2]*f->P[2][27] +
+    w->M[27] = t->Phi[3][0]*f->P[0][27] + t->Phi[3][1]*f->P[1][27] + t->Phi[3][2]*f->P[2][27] +
             t->Phi[3][3]*f->P[3][27] + t->Phi[3][4]*f->P[4][27] + t->Phi[3][5]*f->P[5][27] +
             t->Phi[3][7]*f->P[7][27] + t->Phi[3][8]*f->P[8][27] + t->Phi[3][9]*f->P[9][27] +
             t->Phi[3][10]*f->P[10][27] + t->Phi[3][11]*f->P[11][27] + t->Phi[3][12]*f->P[12][27] +
@@ -6268,7 +6100,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][27] + t->Phi[3][22]*f->P[22][27] + t->Phi[3][23]*f->P[23][27] +
             t->Phi[3][24]*f->P[24][27] + t->Phi[3][25]*f->P[25][27] + t->Phi[3][26]*f->P[26][27] +
             t->Phi[3][27]*f->P[27][27] + t->Phi[3][28]*f->P[28][27] + t->Phi[3][29]*f->P[29][27];
-    w->M[3][28] = t->Phi[3][0]*f->P[0][28] + t->Phi[3][1]*f->P[1][28] + t->Phi[3][2]*f->P[2][28] +
+    w->M[28] = t->Phi[3][0]*f->P[0][28] + t->Phi[3][1]*f->P[1][28] + t->Phi[3][2]*f->P[2][28] +
             t->Phi[3][3]*f->P[3][28] + t->Phi[3][4]*f->P[4][28] + t->Phi[3][5]*f->P[5][28] +
             t->Phi[3][7]*f->P[7][28] + t->Phi[3][8]*f->P[8][28] + t->Phi[3][9]*f->P[9][28] +
             t->Phi[3][10]*f->P[10][28] + t->Phi[3][11]*f->P[11][28] + t->Phi[3][12]*f->P[12][28] +
@@ -6277,7 +6109,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][28] + t->Phi[3][22]*f->P[22][28] + t->Phi[3][23]*f->P[23][28] +
             t->Phi[3][24]*f->P[24][28] + t->Phi[3][25]*f->P[25][28] + t->Phi[3][26]*f->P[26][28] +
             t->Phi[3][27]*f->P[27][28] + t->Phi[3][28]*f->P[28][28] + t->Phi[3][29]*f->P[29][28];
-    w->M[3][29] = t->Phi[3][0]*f->P[0][29] + t->Phi[3][1]*f->P[1][29] + t->Phi[3][2]*f->P[2][29] +
+    w->M[29] = t->Phi[3][0]*f->P[0][29] + t->Phi[3][1]*f->P[1][29] + t->Phi[3][2]*f->P[2][29] +
             t->Phi[3][3]*f->P[3][29] + t->Phi[3][4]*f->P[4][29] + t->Phi[3][5]*f->P[5][29] +
             t->Phi[3][7]*f->P[7][29] + t->Phi[3][8]*f->P[8][29] + t->Phi[3][9]*f->P[9][29] +
             t->Phi[3][10]*f->P[10][29] + t->Phi[3][11]*f->P[11][29] + t->Phi[3][12]*f->P[12][29] +
@@ -6286,7 +6118,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][29] + t->Phi[3][22]*f->P[22][29] + t->Phi[3][23]*f->P[23][29] +
             t->Phi[3][24]*f->P[24][29] + t->Phi[3][25]*f->P[25][29] + t->Phi[3][26]*f->P[26][29] +
             t->Phi[3][27]*f->P[27][29] + t->Phi[3][28]*f->P[28][29] + t->Phi[3][29]*f->P[29][29];
-    w->M[3][30] = t->Phi[3][0]*f->P[0][30] + t->Phi[3][1]*f->P[1][30] + t->Phi[3][2]*f->P[2][30] +
+    w->M[30] = t->Phi[3][0]*f->P[0][30] + t->Phi[3][1]*f->P[1][30] + t->Phi[3][2]*f->P[2][30] +
             t->Phi[3][3]*f->P[3][30] + t->Phi[3][4]*f->P[4][30] + t->Phi[3][5]*f->P[5][30] +
             t->Phi[3][7]*f->P[7][30] + t->Phi[3][8]*f->P[8][30] + t->Phi[3][9]*f->P[9][30] +
             t->Phi[3][10]*f->P[10][30] + t->Phi[3][11]*f->P[11][30] + t->Phi[3][12]*f->P[12][30] +
@@ -6295,7 +6127,7 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][21]*f->P[21][30] + t->Phi[3][22]*f->P[22][30] + t->Phi[3][23]*f->P[23][30] +
             t->Phi[3][24]*f->P[24][30] + t->Phi[3][25]*f->P[25][30] + t->Phi[3][26]*f->P[26][30] +
             t->Phi[3][27]*f->P[27][30] + t->Phi[3][28]*f->P[28][30] + t->Phi[3][29]*f->P[29][30];
-    w->M[3][31] = t->Phi[3][0]*f->P[0][31] + t->Phi[3][1]*f->P[1][31] + t->Phi[3][2]*f->P[2][31] +
+    w->M[31] = t->Phi[3][0]*f->P[0][31] + t->Phi[3][1]*f->P[1][31] + t->Phi[3][2]*f->P[2][31] +
             t->Phi[3][3]*f->P[3][31] + t->Phi[3][4]*f->P[4][31] + t->Phi[3][5]*f->P[5][31] +
             t->Phi[3][7]*f->P[7][31] + t->Phi[3][8]*f->P[8][31] + t->Phi[3][9]*f->P[9][31] +
             t->Phi[3][10]*f->P[10][31] + t->Phi[3][11]*f->P[11][31] + t->Phi[3][12]*f->P[12][31] +
@@ -6306,11 +6138,84 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[3][27]*f->P[27][31] + t->Phi[3][28]*f->P[28][31] + t->Phi[3][29]*f->P[29][31];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ned_doppler32_augmented_scalar propagate_row_3(const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
+            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[7]*t->Phi[3][7] +
+            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] +
+            w->M[11]*t->Phi[3][11] + w->M[12]*t->Phi[3][12] + w->M[13]*t->Phi[3][13] +
+            w->M[14]*t->Phi[3][14] + w->M[15]*t->Phi[3][15] + w->M[18]*t->Phi[3][18] +
+            w->M[19]*t->Phi[3][19] + w->M[20]*t->Phi[3][20] + w->M[21]*t->Phi[3][21] +
+            w->M[22]*t->Phi[3][22] + w->M[23]*t->Phi[3][23] + w->M[24]*t->Phi[3][24] +
+            w->M[25]*t->Phi[3][25] + w->M[26]*t->Phi[3][26] + w->M[27]*t->Phi[3][27] +
+            w->M[28]*t->Phi[3][28] + w->M[29]*t->Phi[3][29] + t->Qd[93]; w->Pn[93] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] +
+            w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] + w->M[13]*t->Phi[4][13] +
+            w->M[14]*t->Phi[4][14] + w->M[15]*t->Phi[4][15] + w->M[18]*t->Phi[4][18] +
+            w->M[19]*t->Phi[4][19] + w->M[20]*t->Phi[4][20] + w->M[21]*t->Phi[4][21] +
+            w->M[22]*t->Phi[4][22] + w->M[23]*t->Phi[4][23] + w->M[24]*t->Phi[4][24] +
+            w->M[25]*t->Phi[4][25] + w->M[26]*t->Phi[4][26] + w->M[27]*t->Phi[4][27] +
+            w->M[28]*t->Phi[4][28] + w->M[29]*t->Phi[4][29] + t->Qd[94]; w->Pn[94] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] +
+            w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] + w->M[13]*t->Phi[5][13] +
+            w->M[14]*t->Phi[5][14] + w->M[15]*t->Phi[5][15] + w->M[18]*t->Phi[5][18] +
+            w->M[19]*t->Phi[5][19] + w->M[20]*t->Phi[5][20] + w->M[21]*t->Phi[5][21] +
+            w->M[22]*t->Phi[5][22] + w->M[23]*t->Phi[5][23] + w->M[24]*t->Phi[5][24] +
+            w->M[25]*t->Phi[5][25] + w->M[26]*t->Phi[5][26] + w->M[27]*t->Phi[5][27] +
+            w->M[28]*t->Phi[5][28] + w->M[29]*t->Phi[5][29] + t->Qd[95]; w->Pn[95] = v; check += v -
+            v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[18]*t->Phi[6][18] + w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] +
+            w->M[21]*t->Phi[6][21] + w->M[22]*t->Phi[6][22] + w->M[23]*t->Phi[6][23] +
+            w->M[24]*t->Phi[6][24] + w->M[25]*t->Phi[6][25] + w->M[26]*t->Phi[6][26] +
+            w->M[27]*t->Phi[6][27] + w->M[28]*t->Phi[6][28] + w->M[29]*t->Phi[6][29] + t->Qd[96];
+            w->Pn[96] = v; check += v - v;
+    v = w->M[7]; w->Pn[97] = v; check += v - v;
+    v = w->M[8]; w->Pn[98] = v; check += v - v;
+    v = w->M[9]; w->Pn[99] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[100]; w->Pn[100] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[101]; w->Pn[101] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[102]; w->Pn[102] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[103]; w->Pn[103] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[104]; w->Pn[104] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[105]; w->Pn[105] = v; check += v - v;
+    v = w->M[16]; w->Pn[106] = v; check += v - v;
+    v = w->M[17]; w->Pn[107] = v; check += v - v;
+    v = w->M[18]; w->Pn[108] = v; check += v - v;
+    v = w->M[19]; w->Pn[109] = v; check += v - v;
+    v = w->M[20]; w->Pn[110] = v; check += v - v;
+    v = w->M[21]; w->Pn[111] = v; check += v - v;
+    v = w->M[22]; w->Pn[112] = v; check += v - v;
+    v = w->M[23]; w->Pn[113] = v; check += v - v;
+    v = w->M[24]; w->Pn[114] = v; check += v - v;
+    v = w->M[25]; w->Pn[115] = v; check += v - v;
+    v = w->M[26]; w->Pn[116] = v; check += v - v;
+    v = w->M[27]; w->Pn[117] = v; check += v - v;
+    v = w->M[28]; w->Pn[118] = v; check += v - v;
+    v = w->M[29]; w->Pn[119] = v; check += v - v;
+    v = w->M[30]; w->Pn[120] = v; check += v - v;
+    v = w->M[31]; w->Pn[121] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, const
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
         *restrict w)
 {
-    w->M[4][0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] +
+    w->M[0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] +
             t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] +
             t->Phi[4][7]*f->P[7][0] + t->Phi[4][8]*f->P[8][0] + t->Phi[4][9]*f->P[9][0] +
             t->Phi[4][10]*f->P[10][0] + t->Phi[4][11]*f->P[11][0] + t->Phi[4][12]*f->P[12][0] +
@@ -6319,7 +6224,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][0] + t->Phi[4][22]*f->P[22][0] + t->Phi[4][23]*f->P[23][0] +
             t->Phi[4][24]*f->P[24][0] + t->Phi[4][25]*f->P[25][0] + t->Phi[4][26]*f->P[26][0] +
             t->Phi[4][27]*f->P[27][0] + t->Phi[4][28]*f->P[28][0] + t->Phi[4][29]*f->P[29][0];
-    w->M[4][1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] +
+    w->M[1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] +
             t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] +
             t->Phi[4][7]*f->P[7][1] + t->Phi[4][8]*f->P[8][1] + t->Phi[4][9]*f->P[9][1] +
             t->Phi[4][10]*f->P[10][1] + t->Phi[4][11]*f->P[11][1] + t->Phi[4][12]*f->P[12][1] +
@@ -6328,7 +6233,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][1] + t->Phi[4][22]*f->P[22][1] + t->Phi[4][23]*f->P[23][1] +
             t->Phi[4][24]*f->P[24][1] + t->Phi[4][25]*f->P[25][1] + t->Phi[4][26]*f->P[26][1] +
             t->Phi[4][27]*f->P[27][1] + t->Phi[4][28]*f->P[28][1] + t->Phi[4][29]*f->P[29][1];
-    w->M[4][2] = t->Phi[4][0]*f->P[0][2] + t->Phi[4][1]*f->P[1][2] + t->Phi[4][2]*f->P[2][2] +
+    w->M[2] = t->Phi[4][0]*f->P[0][2] + t->Phi[4][1]*f->P[1][2] + t->Phi[4][2]*f->P[2][2] +
             t->Phi[4][3]*f->P[3][2] + t->Phi[4][4]*f->P[4][2] + t->Phi[4][5]*f->P[5][2] +
             t->Phi[4][7]*f->P[7][2] + t->Phi[4][8]*f->P[8][2] + t->Phi[4][9]*f->P[9][2] +
             t->Phi[4][10]*f->P[10][2] + t->Phi[4][11]*f->P[11][2] + t->Phi[4][12]*f->P[12][2] +
@@ -6337,7 +6242,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][2] + t->Phi[4][22]*f->P[22][2] + t->Phi[4][23]*f->P[23][2] +
             t->Phi[4][24]*f->P[24][2] + t->Phi[4][25]*f->P[25][2] + t->Phi[4][26]*f->P[26][2] +
             t->Phi[4][27]*f->P[27][2] + t->Phi[4][28]*f->P[28][2] + t->Phi[4][29]*f->P[29][2];
-    w->M[4][3] = t->Phi[4][0]*f->P[0][3] + t->Phi[4][1]*f->P[1][3] + t->Phi[4][2]*f->P[2][3] +
+    w->M[3] = t->Phi[4][0]*f->P[0][3] + t->Phi[4][1]*f->P[1][3] + t->Phi[4][2]*f->P[2][3] +
             t->Phi[4][3]*f->P[3][3] + t->Phi[4][4]*f->P[4][3] + t->Phi[4][5]*f->P[5][3] +
             t->Phi[4][7]*f->P[7][3] + t->Phi[4][8]*f->P[8][3] + t->Phi[4][9]*f->P[9][3] +
             t->Phi[4][10]*f->P[10][3] + t->Phi[4][11]*f->P[11][3] + t->Phi[4][12]*f->P[12][3] +
@@ -6346,7 +6251,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][3] + t->Phi[4][22]*f->P[22][3] + t->Phi[4][23]*f->P[23][3] +
             t->Phi[4][24]*f->P[24][3] + t->Phi[4][25]*f->P[25][3] + t->Phi[4][26]*f->P[26][3] +
             t->Phi[4][27]*f->P[27][3] + t->Phi[4][28]*f->P[28][3] + t->Phi[4][29]*f->P[29][3];
-    w->M[4][4] = t->Phi[4][0]*f->P[0][4] + t->Phi[4][1]*f->P[1][4] + t->Phi[4][2]*f->P[2][4] +
+    w->M[4] = t->Phi[4][0]*f->P[0][4] + t->Phi[4][1]*f->P[1][4] + t->Phi[4][2]*f->P[2][4] +
             t->Phi[4][3]*f->P[3][4] + t->Phi[4][4]*f->P[4][4] + t->Phi[4][5]*f->P[5][4] +
             t->Phi[4][7]*f->P[7][4] + t->Phi[4][8]*f->P[8][4] + t->Phi[4][9]*f->P[9][4] +
             t->Phi[4][10]*f->P[10][4] + t->Phi[4][11]*f->P[11][4] + t->Phi[4][12]*f->P[12][4] +
@@ -6355,7 +6260,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][4] + t->Phi[4][22]*f->P[22][4] + t->Phi[4][23]*f->P[23][4] +
             t->Phi[4][24]*f->P[24][4] + t->Phi[4][25]*f->P[25][4] + t->Phi[4][26]*f->P[26][4] +
             t->Phi[4][27]*f->P[27][4] + t->Phi[4][28]*f->P[28][4] + t->Phi[4][29]*f->P[29][4];
-    w->M[4][5] = t->Phi[4][0]*f->P[0][5] + t->Phi[4][1]*f->P[1][5] + t->Phi[4][2]*f->P[2][5] +
+    w->M[5] = t->Phi[4][0]*f->P[0][5] + t->Phi[4][1]*f->P[1][5] + t->Phi[4][2]*f->P[2][5] +
             t->Phi[4][3]*f->P[3][5] + t->Phi[4][4]*f->P[4][5] + t->Phi[4][5]*f->P[5][5] +
             t->Phi[4][7]*f->P[7][5] + t->Phi[4][8]*f->P[8][5] + t->Phi[4][9]*f->P[9][5] +
             t->Phi[4][10]*f->P[10][5] + t->Phi[4][11]*f->P[11][5] + t->Phi[4][12]*f->P[12][5] +
@@ -6364,7 +6269,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][5] + t->Phi[4][22]*f->P[22][5] + t->Phi[4][23]*f->P[23][5] +
             t->Phi[4][24]*f->P[24][5] + t->Phi[4][25]*f->P[25][5] + t->Phi[4][26]*f->P[26][5] +
             t->Phi[4][27]*f->P[27][5] + t->Phi[4][28]*f->P[28][5] + t->Phi[4][29]*f->P[29][5];
-    w->M[4][6] = t->Phi[4][0]*f->P[0][6] + t->Phi[4][1]*f->P[1][6] + t->Phi[4][2]*f->P[2][6] +
+    w->M[6] = t->Phi[4][0]*f->P[0][6] + t->Phi[4][1]*f->P[1][6] + t->Phi[4][2]*f->P[2][6] +
             t->Phi[4][3]*f->P[3][6] + t->Phi[4][4]*f->P[4][6] + t->Phi[4][5]*f->P[5][6] +
             t->Phi[4][7]*f->P[7][6] + t->Phi[4][8]*f->P[8][6] + t->Phi[4][9]*f->P[9][6] +
             t->Phi[4][10]*f->P[10][6] + t->Phi[4][11]*f->P[11][6] + t->Phi[4][12]*f->P[12][6] +
@@ -6373,7 +6278,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][6] + t->Phi[4][22]*f->P[22][6] + t->Phi[4][23]*f->P[23][6] +
             t->Phi[4][24]*f->P[24][6] + t->Phi[4][25]*f->P[25][6] + t->Phi[4][26]*f->P[26][6] +
             t->Phi[4][27]*f->P[27][6] + t->Phi[4][28]*f->P[28][6] + t->Phi[4][29]*f->P[29][6];
-    w->M[4][7] = t->Phi[4][0]*f->P[0][7] + t->Phi[4][1]*f->P[1][7] + t->Phi[4][2]*f->P[2][7] +
+    w->M[7] = t->Phi[4][0]*f->P[0][7] + t->Phi[4][1]*f->P[1][7] + t->Phi[4][2]*f->P[2][7] +
             t->Phi[4][3]*f->P[3][7] + t->Phi[4][4]*f->P[4][7] + t->Phi[4][5]*f->P[5][7] +
             t->Phi[4][7]*f->P[7][7] + t->Phi[4][8]*f->P[8][7] + t->Phi[4][9]*f->P[9][7] +
             t->Phi[4][10]*f->P[10][7] + t->Phi[4][11]*f->P[11][7] + t->Phi[4][12]*f->P[12][7] +
@@ -6382,7 +6287,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][7] + t->Phi[4][22]*f->P[22][7] + t->Phi[4][23]*f->P[23][7] +
             t->Phi[4][24]*f->P[24][7] + t->Phi[4][25]*f->P[25][7] + t->Phi[4][26]*f->P[26][7] +
             t->Phi[4][27]*f->P[27][7] + t->Phi[4][28]*f->P[28][7] + t->Phi[4][29]*f->P[29][7];
-    w->M[4][8] = t->Phi[4][0]*f->P[0][8] + t->Phi[4][1]*f->P[1][8] + t->Phi[4][2]*f->P[2][8] +
+    w->M[8] = t->Phi[4][0]*f->P[0][8] + t->Phi[4][1]*f->P[1][8] + t->Phi[4][2]*f->P[2][8] +
             t->Phi[4][3]*f->P[3][8] + t->Phi[4][4]*f->P[4][8] + t->Phi[4][5]*f->P[5][8] +
             t->Phi[4][7]*f->P[7][8] + t->Phi[4][8]*f->P[8][8] + t->Phi[4][9]*f->P[9][8] +
             t->Phi[4][10]*f->P[10][8] + t->Phi[4][11]*f->P[11][8] + t->Phi[4][12]*f->P[12][8] +
@@ -6391,7 +6296,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][8] + t->Phi[4][22]*f->P[22][8] + t->Phi[4][23]*f->P[23][8] +
             t->Phi[4][24]*f->P[24][8] + t->Phi[4][25]*f->P[25][8] + t->Phi[4][26]*f->P[26][8] +
             t->Phi[4][27]*f->P[27][8] + t->Phi[4][28]*f->P[28][8] + t->Phi[4][29]*f->P[29][8];
-    w->M[4][9] = t->Phi[4][0]*f->P[0][9] + t->Phi[4][1]*f->P[1][9] + t->Phi[4][2]*f->P[2][9] +
+    w->M[9] = t->Phi[4][0]*f->P[0][9] + t->Phi[4][1]*f->P[1][9] + t->Phi[4][2]*f->P[2][9] +
             t->Phi[4][3]*f->P[3][9] + t->Phi[4][4]*f->P[4][9] + t->Phi[4][5]*f->P[5][9] +
             t->Phi[4][7]*f->P[7][9] + t->Phi[4][8]*f->P[8][9] + t->Phi[4][9]*f->P[9][9] +
             t->Phi[4][10]*f->P[10][9] + t->Phi[4][11]*f->P[11][9] + t->Phi[4][12]*f->P[12][9] +
@@ -6400,7 +6305,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][9] + t->Phi[4][22]*f->P[22][9] + t->Phi[4][23]*f->P[23][9] +
             t->Phi[4][24]*f->P[24][9] + t->Phi[4][25]*f->P[25][9] + t->Phi[4][26]*f->P[26][9] +
             t->Phi[4][27]*f->P[27][9] + t->Phi[4][28]*f->P[28][9] + t->Phi[4][29]*f->P[29][9];
-    w->M[4][10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] +
+    w->M[10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] +
             t->Phi[4][3]*f->P[3][10] + t->Phi[4][4]*f->P[4][10] + t->Phi[4][5]*f->P[5][10] +
             t->Phi[4][7]*f->P[7][10] + t->Phi[4][8]*f->P[8][10] + t->Phi[4][9]*f->P[9][10] +
             t->Phi[4][10]*f->P[10][10] + t->Phi[4][11]*f->P[11][10] + t->Phi[4][12]*f->P[12][10] +
@@ -6409,7 +6314,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][10] + t->Phi[4][22]*f->P[22][10] + t->Phi[4][23]*f->P[23][10] +
             t->Phi[4][24]*f->P[24][10] + t->Phi[4][25]*f->P[25][10] + t->Phi[4][26]*f->P[26][10] +
             t->Phi[4][27]*f->P[27][10] + t->Phi[4][28]*f->P[28][10] + t->Phi[4][29]*f->P[29][10];
-    w->M[4][11] = t->Phi[4][0]*f->P[0][11] + t->Phi[4][1]*f->P[1][11] + t->Phi[4][2]*f->P[2][11] +
+    w->M[11] = t->Phi[4][0]*f->P[0][11] + t->Phi[4][1]*f->P[1][11] + t->Phi[4][2]*f->P[2][11] +
             t->Phi[4][3]*f->P[3][11] + t->Phi[4][4]*f->P[4][11] + t->Phi[4][5]*f->P[5][11] +
             t->Phi[4][7]*f->P[7][11] + t->Phi[4][8]*f->P[8][11] + t->Phi[4][9]*f->P[9][11] +
             t->Phi[4][10]*f->P[10][11] + t->Phi[4][11]*f->P[11][11] + t->Phi[4][12]*f->P[12][11] +
@@ -6418,7 +6323,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][11] + t->Phi[4][22]*f->P[22][11] + t->Phi[4][23]*f->P[23][11] +
             t->Phi[4][24]*f->P[24][11] + t->Phi[4][25]*f->P[25][11] + t->Phi[4][26]*f->P[26][11] +
             t->Phi[4][27]*f->P[27][11] + t->Phi[4][28]*f->P[28][11] + t->Phi[4][29]*f->P[29][11];
-    w->M[4][12] = t->Phi[4][0]*f->P[0][12] + t->Phi[4][1]*f->P[1][12] + t->Phi[4][2]*f->P[2][12] +
+    w->M[12] = t->Phi[4][0]*f->P[0][12] + t->Phi[4][1]*f->P[1][12] + t->Phi[4][2]*f->P[2][12] +
             t->Phi[4][3]*f->P[3][12] + t->Phi[4][4]*f->P[4][12] + t->Phi[4][5]*f->P[5][12] +
             t->Phi[4][7]*f->P[7][12] + t->Phi[4][8]*f->P[8][12] + t->Phi[4][9]*f->P[9][12] +
             t->Phi[4][10]*f->P[10][12] + t->Phi[4][11]*f->P[11][12] + t->Phi[4][12]*f->P[12][12] +
@@ -6427,7 +6332,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][12] + t->Phi[4][22]*f->P[22][12] + t->Phi[4][23]*f->P[23][12] +
             t->Phi[4][24]*f->P[24][12] + t->Phi[4][25]*f->P[25][12] + t->Phi[4][26]*f->P[26][12] +
             t->Phi[4][27]*f->P[27][12] + t->Phi[4][28]*f->P[28][12] + t->Phi[4][29]*f->P[29][12];
-    w->M[4][13] = t->Phi[4][0]*f->P[0][13] + t->Phi[4][1]*f->P[1][13] + t->Phi[4][2]*f->P[2][13] +
+    w->M[13] = t->Phi[4][0]*f->P[0][13] + t->Phi[4][1]*f->P[1][13] + t->Phi[4][2]*f->P[2][13] +
             t->Phi[4][3]*f->P[3][13] + t->Phi[4][4]*f->P[4][13] + t->Phi[4][5]*f->P[5][13] +
             t->Phi[4][7]*f->P[7][13] + t->Phi[4][8]*f->P[8][13] + t->Phi[4][9]*f->P[9][13] +
             t->Phi[4][10]*f->P[10][13] + t->Phi[4][11]*f->P[11][13] + t->Phi[4][12]*f->P[12][13] +
@@ -6436,7 +6341,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][13] + t->Phi[4][22]*f->P[22][13] + t->Phi[4][23]*f->P[23][13] +
             t->Phi[4][24]*f->P[24][13] + t->Phi[4][25]*f->P[25][13] + t->Phi[4][26]*f->P[26][13] +
             t->Phi[4][27]*f->P[27][13] + t->Phi[4][28]*f->P[28][13] + t->Phi[4][29]*f->P[29][13];
-    w->M[4][14] = t->Phi[4][0]*f->P[0][14] + t->Phi[4][1]*f->P[1][14] + t->Phi[4][2]*f->P[2][14] +
+    w->M[14] = t->Phi[4][0]*f->P[0][14] + t->Phi[4][1]*f->P[1][14] + t->Phi[4][2]*f->P[2][14] +
             t->Phi[4][3]*f->P[3][14] + t->Phi[4][4]*f->P[4][14] + t->Phi[4][5]*f->P[5][14] +
             t->Phi[4][7]*f->P[7][14] + t->Phi[4][8]*f->P[8][14] + t->Phi[4][9]*f->P[9][14] +
             t->Phi[4][10]*f->P[10][14] + t->Phi[4][11]*f->P[11][14] + t->Phi[4][12]*f->P[12][14] +
@@ -6445,7 +6350,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][14] + t->Phi[4][22]*f->P[22][14] + t->Phi[4][23]*f->P[23][14] +
             t->Phi[4][24]*f->P[24][14] + t->Phi[4][25]*f->P[25][14] + t->Phi[4][26]*f->P[26][14] +
             t->Phi[4][27]*f->P[27][14] + t->Phi[4][28]*f->P[28][14] + t->Phi[4][29]*f->P[29][14];
-    w->M[4][15] = t->Phi[4][0]*f->P[0][15] + t->Phi[4][1]*f->P[1][15] + t->Phi[4][2]*f->P[2][15] +
+    w->M[15] = t->Phi[4][0]*f->P[0][15] + t->Phi[4][1]*f->P[1][15] + t->Phi[4][2]*f->P[2][15] +
             t->Phi[4][3]*f->P[3][15] + t->Phi[4][4]*f->P[4][15] + t->Phi[4][5]*f->P[5][15] +
             t->Phi[4][7]*f->P[7][15] + t->Phi[4][8]*f->P[8][15] + t->Phi[4][9]*f->P[9][15] +
             t->Phi[4][10]*f->P[10][15] + t->Phi[4][11]*f->P[11][15] + t->Phi[4][12]*f->P[12][15] +
@@ -6454,7 +6359,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][15] + t->Phi[4][22]*f->P[22][15] + t->Phi[4][23]*f->P[23][15] +
             t->Phi[4][24]*f->P[24][15] + t->Phi[4][25]*f->P[25][15] + t->Phi[4][26]*f->P[26][15] +
             t->Phi[4][27]*f->P[27][15] + t->Phi[4][28]*f->P[28][15] + t->Phi[4][29]*f->P[29][15];
-    w->M[4][16] = t->Phi[4][0]*f->P[0][16] + t->Phi[4][1]*f->P[1][16] + t->Phi[4][2]*f->P[2][16] +
+    w->M[16] = t->Phi[4][0]*f->P[0][16] + t->Phi[4][1]*f->P[1][16] + t->Phi[4][2]*f->P[2][16] +
             t->Phi[4][3]*f->P[3][16] + t->Phi[4][4]*f->P[4][16] + t->Phi[4][5]*f->P[5][16] +
             t->Phi[4][7]*f->P[7][16] + t->Phi[4][8]*f->P[8][16] + t->Phi[4][9]*f->P[9][16] +
             t->Phi[4][10]*f->P[10][16] + t->Phi[4][11]*f->P[11][16] + t->Phi[4][12]*f->P[12][16] +
@@ -6463,7 +6368,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][16] + t->Phi[4][22]*f->P[22][16] + t->Phi[4][23]*f->P[23][16] +
             t->Phi[4][24]*f->P[24][16] + t->Phi[4][25]*f->P[25][16] + t->Phi[4][26]*f->P[26][16] +
             t->Phi[4][27]*f->P[27][16] + t->Phi[4][28]*f->P[28][16] + t->Phi[4][29]*f->P[29][16];
-    w->M[4][17] = t->Phi[4][0]*f->P[0][17] + t->Phi[4][1]*f->P[1][17] + t->Phi[4][2]*f->P[2][17] +
+    w->M[17] = t->Phi[4][0]*f->P[0][17] + t->Phi[4][1]*f->P[1][17] + t->Phi[4][2]*f->P[2][17] +
             t->Phi[4][3]*f->P[3][17] + t->Phi[4][4]*f->P[4][17] + t->Phi[4][5]*f->P[5][17] +
             t->Phi[4][7]*f->P[7][17] + t->Phi[4][8]*f->P[8][17] + t->Phi[4][9]*f->P[9][17] +
             t->Phi[4][10]*f->P[10][17] + t->Phi[4][11]*f->P[11][17] + t->Phi[4][12]*f->P[12][17] +
@@ -6472,7 +6377,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][17] + t->Phi[4][22]*f->P[22][17] + t->Phi[4][23]*f->P[23][17] +
             t->Phi[4][24]*f->P[24][17] + t->Phi[4][25]*f->P[25][17] + t->Phi[4][26]*f->P[26][17] +
             t->Phi[4][27]*f->P[27][17] + t->Phi[4][28]*f->P[28][17] + t->Phi[4][29]*f->P[29][17];
-    w->M[4][18] = t->Phi[4][0]*f->P[0][18] + t->Phi[4][1]*f->P[1][18] + t->Phi[4][2]*f->P[2][18] +
+    w->M[18] = t->Phi[4][0]*f->P[0][18] + t->Phi[4][1]*f->P[1][18] + t->Phi[4][2]*f->P[2][18] +
             t->Phi[4][3]*f->P[3][18] + t->Phi[4][4]*f->P[4][18] + t->Phi[4][5]*f->P[5][18] +
             t->Phi[4][7]*f->P[7][18] + t->Phi[4][8]*f->P[8][18] + t->Phi[4][9]*f->P[9][18] +
             t->Phi[4][10]*f->P[10][18] + t->Phi[4][11]*f->P[11][18] + t->Phi[4][12]*f->P[12][18] +
@@ -6481,7 +6386,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][18] + t->Phi[4][22]*f->P[22][18] + t->Phi[4][23]*f->P[23][18] +
             t->Phi[4][24]*f->P[24][18] + t->Phi[4][25]*f->P[25][18] + t->Phi[4][26]*f->P[26][18] +
             t->Phi[4][27]*f->P[27][18] + t->Phi[4][28]*f->P[28][18] + t->Phi[4][29]*f->P[29][18];
-    w->M[4][19] = t->Phi[4][0]*f->P[0][19] + t->Phi[4][1]*f->P[1][19] + t->Phi[4][2]*f->P[2][19] +
+    w->M[19] = t->Phi[4][0]*f->P[0][19] + t->Phi[4][1]*f->P[1][19] + t->Phi[4][2]*f->P[2][19] +
             t->Phi[4][3]*f->P[3][19] + t->Phi[4][4]*f->P[4][19] + t->Phi[4][5]*f->P[5][19] +
             t->Phi[4][7]*f->P[7][19] + t->Phi[4][8]*f->P[8][19] + t->Phi[4][9]*f->P[9][19] +
             t->Phi[4][10]*f->P[10][19] + t->Phi[4][11]*f->P[11][19] + t->Phi[4][12]*f->P[12][19] +
@@ -6490,7 +6395,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][19] + t->Phi[4][22]*f->P[22][19] + t->Phi[4][23]*f->P[23][19] +
             t->Phi[4][24]*f->P[24][19] + t->Phi[4][25]*f->P[25][19] + t->Phi[4][26]*f->P[26][19] +
             t->Phi[4][27]*f->P[27][19] + t->Phi[4][28]*f->P[28][19] + t->Phi[4][29]*f->P[29][19];
-    w->M[4][20] = t->Phi[4][0]*f->P[0][20] + t->Phi[4][1]*f->P[1][20] + t->Phi[4][2]*f->P[2][20] +
+    w->M[20] = t->Phi[4][0]*f->P[0][20] + t->Phi[4][1]*f->P[1][20] + t->Phi[4][2]*f->P[2][20] +
             t->Phi[4][3]*f->P[3][20] + t->Phi[4][4]*f->P[4][20] + t->Phi[4][5]*f->P[5][20] +
             t->Phi[4][7]*f->P[7][20] + t->Phi[4][8]*f->P[8][20] + t->Phi[4][9]*f->P[9][20] +
             t->Phi[4][10]*f->P[10][20] + t->Phi[4][11]*f->P[11][20] + t->Phi[4][12]*f->P[12][20] +
@@ -6499,7 +6404,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][20] + t->Phi[4][22]*f->P[22][20] + t->Phi[4][23]*f->P[23][20] +
             t->Phi[4][24]*f->P[24][20] + t->Phi[4][25]*f->P[25][20] + t->Phi[4][26]*f->P[26][20] +
             t->Phi[4][27]*f->P[27][20] + t->Phi[4][28]*f->P[28][20] + t->Phi[4][29]*f->P[29][20];
-    w->M[4][21] = t->Phi[4][0]*f->P[0][21] + t->Phi[4][1]*f->P[1][21] + t->Phi[4][2]*f->P[2][21] +
+    w->M[21] = t->Phi[4][0]*f->P[0][21] + t->Phi[4][1]*f->P[1][21] + t->Phi[4][2]*f->P[2][21] +
             t->Phi[4][3]*f->P[3][21] + t->Phi[4][4]*f->P[4][21] + t->Phi[4][5]*f->P[5][21] +
             t->Phi[4][7]*f->P[7][21] + t->Phi[4][8]*f->P[8][21] + t->Phi[4][9]*f->P[9][21] +
             t->Phi[4][10]*f->P[10][21] + t->Phi[4][11]*f->P[11][21] + t->Phi[4][12]*f->P[12][21] +
@@ -6508,7 +6413,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][21] + t->Phi[4][22]*f->P[22][21] + t->Phi[4][23]*f->P[23][21] +
             t->Phi[4][24]*f->P[24][21] + t->Phi[4][25]*f->P[25][21] + t->Phi[4][26]*f->P[26][21] +
             t->Phi[4][27]*f->P[27][21] + t->Phi[4][28]*f->P[28][21] + t->Phi[4][29]*f->P[29][21];
-    w->M[4][22] = t->Phi[4][0]*f->P[0][22] + t->Phi[4][1]*f->P[1][22] + t->Phi[4][2]*f->P[2][22] +
+    w->M[22] = t->Phi[4][0]*f->P[0][22] + t->Phi[4][1]*f->P[1][22] + t->Phi[4][2]*f->P[2][22] +
             t->Phi[4][3]*f->P[3][22] + t->Phi[4][4]*f->P[4][22] + t->Phi[4][5]*f->P[5][22] +
             t->Phi[4][7]*f->P[7][22] + t->Phi[4][8]*f->P[8][22] + t->Phi[4][9]*f->P[9][22] +
             t->Phi[4][10]*f->P[10][22] + t->Phi[4][11]*f->P[11][22] + t->Phi[4][12]*f->P[12][22] +
@@ -6517,7 +6422,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][22] + t->Phi[4][22]*f->P[22][22] + t->Phi[4][23]*f->P[23][22] +
             t->Phi[4][24]*f->P[24][22] + t->Phi[4][25]*f->P[25][22] + t->Phi[4][26]*f->P[26][22] +
             t->Phi[4][27]*f->P[27][22] + t->Phi[4][28]*f->P[28][22] + t->Phi[4][29]*f->P[29][22];
-    w->M[4][23] = t->Phi[4][0]*f->P[0][23] + t->Phi[4][1]*f->P[1][23] + t->Phi[4][2]*f->P[2][23] +
+    w->M[23] = t->Phi[4][0]*f->P[0][23] + t->Phi[4][1]*f->P[1][23] + t->Phi[4][2]*f->P[2][23] +
             t->Phi[4][3]*f->P[3][23] + t->Phi[4][4]*f->P[4][23] + t->Phi[4][5]*f->P[5][23] +
             t->Phi[4][7]*f->P[7][23] + t->Phi[4][8]*f->P[8][23] + t->Phi[4][9]*f->P[9][23] +
             t->Phi[4][10]*f->P[10][23] + t->Phi[4][11]*f->P[11][23] + t->Phi[4][12]*f->P[12][23] +
@@ -6526,7 +6431,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][23] + t->Phi[4][22]*f->P[22][23] + t->Phi[4][23]*f->P[23][23] +
             t->Phi[4][24]*f->P[24][23] + t->Phi[4][25]*f->P[25][23] + t->Phi[4][26]*f->P[26][23] +
             t->Phi[4][27]*f->P[27][23] + t->Phi[4][28]*f->P[28][23] + t->Phi[4][29]*f->P[29][23];
-    w->M[4][24] = t->Phi[4][0]*f->P[0][24] + t->Phi[4][1]*f->P[1][24] + t->Phi[4][2]*f->P[2][24] +
+    w->M[24] = t->Phi[4][0]*f->P[0][24] + t->Phi[4][1]*f->P[1][24] + t->Phi[4][2]*f->P[2][24] +
             t->Phi[4][3]*f->P[3][24] + t->Phi[4][4]*f->P[4][24] + t->Phi[4][5]*f->P[5][24] +
             t->Phi[4][7]*f->P[7][24] + t->Phi[4][8]*f->P[8][24] + t->Phi[4][9]*f->P[9][24] +
             t->Phi[4][10]*f->P[10][24] + t->Phi[4][11]*f->P[11][24] + t->Phi[4][12]*f->P[12][24] +
@@ -6535,7 +6440,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][24] + t->Phi[4][22]*f->P[22][24] + t->Phi[4][23]*f->P[23][24] +
             t->Phi[4][24]*f->P[24][24] + t->Phi[4][25]*f->P[25][24] + t->Phi[4][26]*f->P[26][24] +
             t->Phi[4][27]*f->P[27][24] + t->Phi[4][28]*f->P[28][24] + t->Phi[4][29]*f->P[29][24];
-    w->M[4][25] = t->Phi[4][0]*f->P[0][25] + t->Phi[4][1]*f->P[1][25] + t->Phi[4][2]*f->P[2][25] +
+    w->M[25] = t->Phi[4][0]*f->P[0][25] + t->Phi[4][1]*f->P[1][25] + t->Phi[4][2]*f->P[2][25] +
             t->Phi[4][3]*f->P[3][25] + t->Phi[4][4]*f->P[4][25] + t->Phi[4][5]*f->P[5][25] +
             t->Phi[4][7]*f->P[7][25] + t->Phi[4][8]*f->P[8][25] + t->Phi[4][9]*f->P[9][25] +
             t->Phi[4][10]*f->P[10][25] + t->Phi[4][11]*f->P[11][25] + t->Phi[4][12]*f->P[12][25] +
@@ -6544,7 +6449,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][25] + t->Phi[4][22]*f->P[22][25] + t->Phi[4][23]*f->P[23][25] +
             t->Phi[4][24]*f->P[24][25] + t->Phi[4][25]*f->P[25][25] + t->Phi[4][26]*f->P[26][25] +
             t->Phi[4][27]*f->P[27][25] + t->Phi[4][28]*f->P[28][25] + t->Phi[4][29]*f->P[29][25];
-    w->M[4][26] = t->Phi[4][0]*f->P[0][26] + t->Phi[4][1]*f->P[1][26] + t->Phi[4][2]*f->P[2][26] +
+    w->M[26] = t->Phi[4][0]*f->P[0][26] + t->Phi[4][1]*f->P[1][26] + t->Phi[4][2]*f->P[2][26] +
             t->Phi[4][3]*f->P[3][26] + t->Phi[4][4]*f->P[4][26] + t->Phi[4][5]*f->P[5][26] +
             t->Phi[4][7]*f->P[7][26] + t->Phi[4][8]*f->P[8][26] + t->Phi[4][9]*f->P[9][26] +
             t->Phi[4][10]*f->P[10][26] + t->Phi[4][11]*f->P[11][26] + t->Phi[4][12]*f->P[12][26] +
@@ -6553,7 +6458,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][26] + t->Phi[4][22]*f->P[22][26] + t->Phi[4][23]*f->P[23][26] +
             t->Phi[4][24]*f->P[24][26] + t->Phi[4][25]*f->P[25][26] + t->Phi[4][26]*f->P[26][26] +
             t->Phi[4][27]*f->P[27][26] + t->Phi[4][28]*f->P[28][26] + t->Phi[4][29]*f->P[29][26];
-    w->M[4][27] = t->Phi[4][0]*f->P[0][27] + t->Phi[4][1]*f->P[1][27] + t->Phi[4][2]*f->P[2][27] +
+    w->M[27] = t->Phi[4][0]*f->P[0][27] + t->Phi[4][1]*f->P[1][27] + t->Phi[4][2]*f->P[2][27] +
             t->Phi[4][3]*f->P[3][27] + t->Phi[4][4]*f->P[4][27] + t->Phi[4][5]*f->P[5][27] +
             t->Phi[4][7]*f->P[7][27] + t->Phi[4][8]*f->P[8][27] + t->Phi[4][9]*f->P[9][27] +
             t->Phi[4][10]*f->P[10][27] + t->Phi[4][11]*f->P[11][27] + t->Phi[4][12]*f->P[12][27] +
@@ -6562,7 +6467,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][27] + t->Phi[4][22]*f->P[22][27] + t->Phi[4][23]*f->P[23][27] +
             t->Phi[4][24]*f->P[24][27] + t->Phi[4][25]*f->P[25][27] + t->Phi[4][26]*f->P[26][27] +
             t->Phi[4][27]*f->P[27][27] + t->Phi[4][28]*f->P[28][27] + t->Phi[4][29]*f->P[29][27];
-    w->M[4][28] = t->Phi[4][0]*f->P[0][28] + t->Phi[4][1]*f->P[1][28] + t->Phi[4][2]*f->P[2][28] +
+    w->M[28] = t->Phi[4][0]*f->P[0][28] + t->Phi[4][1]*f->P[1][28] + t->Phi[4][2]*f->P[2][28] +
             t->Phi[4][3]*f->P[3][28] + t->Phi[4][4]*f->P[4][28] + t->Phi[4][5]*f->P[5][28] +
             t->Phi[4][7]*f->P[7][28] + t->Phi[4][8]*f->P[8][28] + t->Phi[4][9]*f->P[9][28] +
             t->Phi[4][10]*f->P[10][28] + t->Phi[4][11]*f->P[11][28] + t->Phi[4][12]*f->P[12][28] +
@@ -6571,7 +6476,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][28] + t->Phi[4][22]*f->P[22][28] + t->Phi[4][23]*f->P[23][28] +
             t->Phi[4][24]*f->P[24][28] + t->Phi[4][25]*f->P[25][28] + t->Phi[4][26]*f->P[26][28] +
             t->Phi[4][27]*f->P[27][28] + t->Phi[4][28]*f->P[28][28] + t->Phi[4][29]*f->P[29][28];
-    w->M[4][29] = t->Phi[4][0]*f->P[0][29] + t->Phi[4][1]*f->P[1][29] + t->Phi[4][2]*f->P[2][29] +
+    w->M[29] = t->Phi[4][0]*f->P[0][29] + t->Phi[4][1]*f->P[1][29] + t->Phi[4][2]*f->P[2][29] +
             t->Phi[4][3]*f->P[3][29] + t->Phi[4][4]*f->P[4][29] + t->Phi[4][5]*f->P[5][29] +
             t->Phi[4][7]*f->P[7][29] + t->Phi[4][8]*f->P[8][29] + t->Phi[4][9]*f->P[9][29] +
             t->Phi[4][10]*f->P[10][29] + t->Phi[4][11]*f->P[11][29] + t->Phi[4][12]*f->P[12][29] +
@@ -6580,7 +6485,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][29] + t->Phi[4][22]*f->P[22][29] + t->Phi[4][23]*f->P[23][29] +
             t->Phi[4][24]*f->P[24][29] + t->Phi[4][25]*f->P[25][29] + t->Phi[4][26]*f->P[26][29] +
             t->Phi[4][27]*f->P[27][29] + t->Phi[4][28]*f->P[28][29] + t->Phi[4][29]*f->P[29][29];
-    w->M[4][30] = t->Phi[4][0]*f->P[0][30] + t->Phi[4][1]*f->P[1][30] + t->Phi[4][2]*f->P[2][30] +
+    w->M[30] = t->Phi[4][0]*f->P[0][30] + t->Phi[4][1]*f->P[1][30] + t->Phi[4][2]*f->P[2][30] +
             t->Phi[4][3]*f->P[3][30] + t->Phi[4][4]*f->P[4][30] + t->Phi[4][5]*f->P[5][30] +
             t->Phi[4][7]*f->P[7][30] + t->Phi[4][8]*f->P[8][30] + t->Phi[4][9]*f->P[9][30] +
             t->Phi[4][10]*f->P[10][30] + t->Phi[4][11]*f->P[11][30] + t->Phi[4][12]*f->P[12][30] +
@@ -6589,7 +6494,7 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][21]*f->P[21][30] + t->Phi[4][22]*f->P[22][30] + t->Phi[4][23]*f->P[23][30] +
             t->Phi[4][24]*f->P[24][30] + t->Phi[4][25]*f->P[25][30] + t->Phi[4][26]*f->P[26][30] +
             t->Phi[4][27]*f->P[27][30] + t->Phi[4][28]*f->P[28][30] + t->Phi[4][29]*f->P[29][30];
-    w->M[4][31] = t->Phi[4][0]*f->P[0][31] + t->Phi[4][1]*f->P[1][31] + t->Phi[4][2]*f->P[2][31] +
+    w->M[31] = t->Phi[4][0]*f->P[0][31] + t->Phi[4][1]*f->P[1][31] + t->Phi[4][2]*f->P[2][31] +
             t->Phi[4][3]*f->P[3][31] + t->Phi[4][4]*f->P[4][31] + t->Phi[4][5]*f->P[5][31] +
             t->Phi[4][7]*f->P[7][31] + t->Phi[4][8]*f->P[8][31] + t->Phi[4][9]*f->P[9][31] +
             t->Phi[4][10]*f->P[10][31] + t->Phi[4][11]*f->P[11][31] + t->Phi[4][12]*f->P[12][31] +
@@ -6600,11 +6505,74 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[4][27]*f->P[27][31] + t->Phi[4][28]*f->P[28][31] + t->Phi[4][29]*f->P[29][31];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ned_doppler32_augmented_scalar propagate_row_4(const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
+            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
+            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] +
+            w->M[11]*t->Phi[4][11] + w->M[12]*t->Phi[4][12] + w->M[13]*t->Phi[4][13] +
+            w->M[14]*t->Phi[4][14] + w->M[15]*t->Phi[4][15] + w->M[18]*t->Phi[4][18] +
+            w->M[19]*t->Phi[4][19] + w->M[20]*t->Phi[4][20] + w->M[21]*t->Phi[4][21] +
+            w->M[22]*t->Phi[4][22] + w->M[23]*t->Phi[4][23] + w->M[24]*t->Phi[4][24] +
+            w->M[25]*t->Phi[4][25] + w->M[26]*t->Phi[4][26] + w->M[27]*t->Phi[4][27] +
+            w->M[28]*t->Phi[4][28] + w->M[29]*t->Phi[4][29] + t->Qd[122]; w->Pn[122] = v; check += v
+            - v;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] +
+            w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] + w->M[13]*t->Phi[5][13] +
+            w->M[14]*t->Phi[5][14] + w->M[15]*t->Phi[5][15] + w->M[18]*t->Phi[5][18] +
+            w->M[19]*t->Phi[5][19] + w->M[20]*t->Phi[5][20] + w->M[21]*t->Phi[5][21] +
+            w->M[22]*t->Phi[5][22] + w->M[23]*t->Phi[5][23] + w->M[24]*t->Phi[5][24] +
+            w->M[25]*t->Phi[5][25] + w->M[26]*t->Phi[5][26] + w->M[27]*t->Phi[5][27] +
+            w->M[28]*t->Phi[5][28] + w->M[29]*t->Phi[5][29] + t->Qd[123]; w->Pn[123] = v; check += v
+            - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[18]*t->Phi[6][18] + w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] +
+            w->M[21]*t->Phi[6][21] + w->M[22]*t->Phi[6][22] + w->M[23]*t->Phi[6][23] +
+            w->M[24]*t->Phi[6][24] + w->M[25]*t->Phi[6][25] + w->M[26]*t->Phi[6][26] +
+            w->M[27]*t->Phi[6][27] + w->M[28]*t->Phi[6][28] + w->M[29]*t->Phi[6][29] + t->Qd[124];
+            w->Pn[124] = v; check += v - v;
+    v = w->M[7]; w->Pn[125] = v; check += v - v;
+    v = w->M[8]; w->Pn[126] = v; check += v - v;
+    v = w->M[9]; w->Pn[127] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[128]; w->Pn[128] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[129]; w->Pn[129] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[130]; w->Pn[130] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[131]; w->Pn[131] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[132]; w->Pn[132] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[133]; w->Pn[133] = v; check += v - v;
+    v = w->M[16]; w->Pn[134] = v; check += v - v;
+    v = w->M[17]; w->Pn[135] = v; check += v - v;
+    v = w->M[18]; w->Pn[136] = v; check += v - v;
+    v = w->M[19]; w->Pn[137] = v; check += v - v;
+    v = w->M[20]; w->Pn[138] = v; check += v - v;
+    v = w->M[21]; w->Pn[139] = v; check += v - v;
+    v = w->M[22]; w->Pn[140] = v; check += v - v;
+    v = w->M[23]; w->Pn[141] = v; check += v - v;
+    v = w->M[24]; w->Pn[142] = v; check += v - v;
+    v = w->M[25]; w->Pn[143] = v; check += v - v;
+    v = w->M[26]; w->Pn[144] = v; check += v - v;
+    v = w->M[27]; w->Pn[145] = v; check += v - v;
+    v = w->M[28]; w->Pn[146] = v; check += v - v;
+    v = w->M[29]; w->Pn[147] = v; check += v - v;
+    v = w->M[30]; w->Pn[148] = v; check += v - v;
+    v = w->M[31]; w->Pn[149] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, const
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
         *restrict w)
 {
-    w->M[5][0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] +
+    w->M[0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] +
             t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] +
             t->Phi[5][7]*f->P[7][0] + t->Phi[5][8]*f->P[8][0] + t->Phi[5][9]*f->P[9][0] +
             t->Phi[5][10]*f->P[10][0] + t->Phi[5][11]*f->P[11][0] + t->Phi[5][12]*f->P[12][0] +
@@ -6613,7 +6581,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][0] + t->Phi[5][22]*f->P[22][0] + t->Phi[5][23]*f->P[23][0] +
             t->Phi[5][24]*f->P[24][0] + t->Phi[5][25]*f->P[25][0] + t->Phi[5][26]*f->P[26][0] +
             t->Phi[5][27]*f->P[27][0] + t->Phi[5][28]*f->P[28][0] + t->Phi[5][29]*f->P[29][0];
-    w->M[5][1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] +
+    w->M[1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] +
             t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] +
             t->Phi[5][7]*f->P[7][1] + t->Phi[5][8]*f->P[8][1] + t->Phi[5][9]*f->P[9][1] +
             t->Phi[5][10]*f->P[10][1] + t->Phi[5][11]*f->P[11][1] + t->Phi[5][12]*f->P[12][1] +
@@ -6622,7 +6590,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][1] + t->Phi[5][22]*f->P[22][1] + t->Phi[5][23]*f->P[23][1] +
             t->Phi[5][24]*f->P[24][1] + t->Phi[5][25]*f->P[25][1] + t->Phi[5][26]*f->P[26][1] +
             t->Phi[5][27]*f->P[27][1] + t->Phi[5][28]*f->P[28][1] + t->Phi[5][29]*f->P[29][1];
-    w->M[5][2] = t->Phi[5][0]*f->P[0][2] + t->Phi[5][1]*f->P[1][2] + t->Phi[5][2]*f->P[2][2] +
+    w->M[2] = t->Phi[5][0]*f->P[0][2] + t->Phi[5][1]*f->P[1][2] + t->Phi[5][2]*f->P[2][2] +
             t->Phi[5][3]*f->P[3][2] + t->Phi[5][4]*f->P[4][2] + t->Phi[5][5]*f->P[5][2] +
             t->Phi[5][7]*f->P[7][2] + t->Phi[5][8]*f->P[8][2] + t->Phi[5][9]*f->P[9][2] +
             t->Phi[5][10]*f->P[10][2] + t->Phi[5][11]*f->P[11][2] + t->Phi[5][12]*f->P[12][2] +
@@ -6631,7 +6599,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][2] + t->Phi[5][22]*f->P[22][2] + t->Phi[5][23]*f->P[23][2] +
             t->Phi[5][24]*f->P[24][2] + t->Phi[5][25]*f->P[25][2] + t->Phi[5][26]*f->P[26][2] +
             t->Phi[5][27]*f->P[27][2] + t->Phi[5][28]*f->P[28][2] + t->Phi[5][29]*f->P[29][2];
-    w->M[5][3] = t->Phi[5][0]*f->P[0][3] + t->Phi[5][1]*f->P[1][3] + t->Phi[5][2]*f->P[2][3] +
+    w->M[3] = t->Phi[5][0]*f->P[0][3] + t->Phi[5][1]*f->P[1][3] + t->Phi[5][2]*f->P[2][3] +
             t->Phi[5][3]*f->P[3][3] + t->Phi[5][4]*f->P[4][3] + t->Phi[5][5]*f->P[5][3] +
             t->Phi[5][7]*f->P[7][3] + t->Phi[5][8]*f->P[8][3] + t->Phi[5][9]*f->P[9][3] +
             t->Phi[5][10]*f->P[10][3] + t->Phi[5][11]*f->P[11][3] + t->Phi[5][12]*f->P[12][3] +
@@ -6640,7 +6608,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][3] + t->Phi[5][22]*f->P[22][3] + t->Phi[5][23]*f->P[23][3] +
             t->Phi[5][24]*f->P[24][3] + t->Phi[5][25]*f->P[25][3] + t->Phi[5][26]*f->P[26][3] +
             t->Phi[5][27]*f->P[27][3] + t->Phi[5][28]*f->P[28][3] + t->Phi[5][29]*f->P[29][3];
-    w->M[5][4] = t->Phi[5][0]*f->P[0][4] + t->Phi[5][1]*f->P[1][4] + t->Phi[5][2]*f->P[2][4] +
+    w->M[4] = t->Phi[5][0]*f->P[0][4] + t->Phi[5][1]*f->P[1][4] + t->Phi[5][2]*f->P[2][4] +
             t->Phi[5][3]*f->P[3][4] + t->Phi[5][4]*f->P[4][4] + t->Phi[5][5]*f->P[5][4] +
             t->Phi[5][7]*f->P[7][4] + t->Phi[5][8]*f->P[8][4] + t->Phi[5][9]*f->P[9][4] +
             t->Phi[5][10]*f->P[10][4] + t->Phi[5][11]*f->P[11][4] + t->Phi[5][12]*f->P[12][4] +
@@ -6649,7 +6617,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][4] + t->Phi[5][22]*f->P[22][4] + t->Phi[5][23]*f->P[23][4] +
             t->Phi[5][24]*f->P[24][4] + t->Phi[5][25]*f->P[25][4] + t->Phi[5][26]*f->P[26][4] +
             t->Phi[5][27]*f->P[27][4] + t->Phi[5][28]*f->P[28][4] + t->Phi[5][29]*f->P[29][4];
-    w->M[5][5] = t->Phi[5][0]*f->P[0][5] + t->Phi[5][1]*f->P[1][5] + t->Phi[5][2]*f->P[2][5] +
+    w->M[5] = t->Phi[5][0]*f->P[0][5] + t->Phi[5][1]*f->P[1][5] + t->Phi[5][2]*f->P[2][5] +
             t->Phi[5][3]*f->P[3][5] + t->Phi[5][4]*f->P[4][5] + t->Phi[5][5]*f->P[5][5] +
             t->Phi[5][7]*f->P[7][5] + t->Phi[5][8]*f->P[8][5] + t->Phi[5][9]*f->P[9][5] +
             t->Phi[5][10]*f->P[10][5] + t->Phi[5][11]*f->P[11][5] + t->Phi[5][12]*f->P[12][5] +
@@ -6658,7 +6626,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][5] + t->Phi[5][22]*f->P[22][5] + t->Phi[5][23]*f->P[23][5] +
             t->Phi[5][24]*f->P[24][5] + t->Phi[5][25]*f->P[25][5] + t->Phi[5][26]*f->P[26][5] +
             t->Phi[5][27]*f->P[27][5] + t->Phi[5][28]*f->P[28][5] + t->Phi[5][29]*f->P[29][5];
-    w->M[5][6] = t->Phi[5][0]*f->P[0][6] + t->Phi[5][1]*f->P[1][6] + t->Phi[5][2]*f->P[2][6] +
+    w->M[6] = t->Phi[5][0]*f->P[0][6] + t->Phi[5][1]*f->P[1][6] + t->Phi[5][2]*f->P[2][6] +
             t->Phi[5][3]*f->P[3][6] + t->Phi[5][4]*f->P[4][6] + t->Phi[5][5]*f->P[5][6] +
             t->Phi[5][7]*f->P[7][6] + t->Phi[5][8]*f->P[8][6] + t->Phi[5][9]*f->P[9][6] +
             t->Phi[5][10]*f->P[10][6] + t->Phi[5][11]*f->P[11][6] + t->Phi[5][12]*f->P[12][6] +
@@ -6667,7 +6635,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][6] + t->Phi[5][22]*f->P[22][6] + t->Phi[5][23]*f->P[23][6] +
             t->Phi[5][24]*f->P[24][6] + t->Phi[5][25]*f->P[25][6] + t->Phi[5][26]*f->P[26][6] +
             t->Phi[5][27]*f->P[27][6] + t->Phi[5][28]*f->P[28][6] + t->Phi[5][29]*f->P[29][6];
-    w->M[5][7] = t->Phi[5][0]*f->P[0][7] + t->Phi[5][1]*f->P[1][7] + t->Phi[5][2]*f->P[2][7] +
+    w->M[7] = t->Phi[5][0]*f->P[0][7] + t->Phi[5][1]*f->P[1][7] + t->Phi[5][2]*f->P[2][7] +
             t->Phi[5][3]*f->P[3][7] + t->Phi[5][4]*f->P[4][7] + t->Phi[5][5]*f->P[5][7] +
             t->Phi[5][7]*f->P[7][7] + t->Phi[5][8]*f->P[8][7] + t->Phi[5][9]*f->P[9][7] +
             t->Phi[5][10]*f->P[10][7] + t->Phi[5][11]*f->P[11][7] + t->Phi[5][12]*f->P[12][7] +
@@ -6676,7 +6644,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][7] + t->Phi[5][22]*f->P[22][7] + t->Phi[5][23]*f->P[23][7] +
             t->Phi[5][24]*f->P[24][7] + t->Phi[5][25]*f->P[25][7] + t->Phi[5][26]*f->P[26][7] +
             t->Phi[5][27]*f->P[27][7] + t->Phi[5][28]*f->P[28][7] + t->Phi[5][29]*f->P[29][7];
-    w->M[5][8] = t->Phi[5][0]*f->P[0][8] + t->Phi[5][1]*f->P[1][8] + t->Phi[5][2]*f->P[2][8] +
+    w->M[8] = t->Phi[5][0]*f->P[0][8] + t->Phi[5][1]*f->P[1][8] + t->Phi[5][2]*f->P[2][8] +
             t->Phi[5][3]*f->P[3][8] + t->Phi[5][4]*f->P[4][8] + t->Phi[5][5]*f->P[5][8] +
             t->Phi[5][7]*f->P[7][8] + t->Phi[5][8]*f->P[8][8] + t->Phi[5][9]*f->P[9][8] +
             t->Phi[5][10]*f->P[10][8] + t->Phi[5][11]*f->P[11][8] + t->Phi[5][12]*f->P[12][8] +
@@ -6685,7 +6653,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][8] + t->Phi[5][22]*f->P[22][8] + t->Phi[5][23]*f->P[23][8] +
             t->Phi[5][24]*f->P[24][8] + t->Phi[5][25]*f->P[25][8] + t->Phi[5][26]*f->P[26][8] +
             t->Phi[5][27]*f->P[27][8] + t->Phi[5][28]*f->P[28][8] + t->Phi[5][29]*f->P[29][8];
-    w->M[5][9] = t->Phi[5][0]*f->P[0][9] + t->Phi[5][1]*f->P[1][9] + t->Phi[5][2]*f->P[2][9] +
+    w->M[9] = t->Phi[5][0]*f->P[0][9] + t->Phi[5][1]*f->P[1][9] + t->Phi[5][2]*f->P[2][9] +
             t->Phi[5][3]*f->P[3][9] + t->Phi[5][4]*f->P[4][9] + t->Phi[5][5]*f->P[5][9] +
             t->Phi[5][7]*f->P[7][9] + t->Phi[5][8]*f->P[8][9] + t->Phi[5][9]*f->P[9][9] +
             t->Phi[5][10]*f->P[10][9] + t->Phi[5][11]*f->P[11][9] + t->Phi[5][12]*f->P[12][9] +
@@ -6694,7 +6662,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][9] + t->Phi[5][22]*f->P[22][9] + t->Phi[5][23]*f->P[23][9] +
             t->Phi[5][24]*f->P[24][9] + t->Phi[5][25]*f->P[25][9] + t->Phi[5][26]*f->P[26][9] +
             t->Phi[5][27]*f->P[27][9] + t->Phi[5][28]*f->P[28][9] + t->Phi[5][29]*f->P[29][9];
-    w->M[5][10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] +
+    w->M[10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] +
             t->Phi[5][3]*f->P[3][10] + t->Phi[5][4]*f->P[4][10] + t->Phi[5][5]*f->P[5][10] +
             t->Phi[5][7]*f->P[7][10] + t->Phi[5][8]*f->P[8][10] + t->Phi[5][9]*f->P[9][10] +
             t->Phi[5][10]*f->P[10][10] + t->Phi[5][11]*f->P[11][10] + t->Phi[5][12]*f->P[12][10] +
@@ -6703,7 +6671,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][10] + t->Phi[5][22]*f->P[22][10] + t->Phi[5][23]*f->P[23][10] +
             t->Phi[5][24]*f->P[24][10] + t->Phi[5][25]*f->P[25][10] + t->Phi[5][26]*f->P[26][10] +
             t->Phi[5][27]*f->P[27][10] + t->Phi[5][28]*f->P[28][10] + t->Phi[5][29]*f->P[29][10];
-    w->M[5][11] = t->Phi[5][0]*f->P[0][11] + t->Phi[5][1]*f->P[1][11] + t->Phi[5][2]*f->P[2][11] +
+    w->M[11] = t->Phi[5][0]*f->P[0][11] + t->Phi[5][1]*f->P[1][11] + t->Phi[5][2]*f->P[2][11] +
             t->Phi[5][3]*f->P[3][11] + t->Phi[5][4]*f->P[4][11] + t->Phi[5][5]*f->P[5][11] +
             t->Phi[5][7]*f->P[7][11] + t->Phi[5][8]*f->P[8][11] + t->Phi[5][9]*f->P[9][11] +
             t->Phi[5][10]*f->P[10][11] + t->Phi[5][11]*f->P[11][11] + t->Phi[5][12]*f->P[12][11] +
@@ -6712,7 +6680,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][11] + t->Phi[5][22]*f->P[22][11] + t->Phi[5][23]*f->P[23][11] +
             t->Phi[5][24]*f->P[24][11] + t->Phi[5][25]*f->P[25][11] + t->Phi[5][26]*f->P[26][11] +
             t->Phi[5][27]*f->P[27][11] + t->Phi[5][28]*f->P[28][11] + t->Phi[5][29]*f->P[29][11];
-    w->M[5][12] = t->Phi[5][0]*f->P[0][12] + t->Phi[5][1]*f->P[1][12] + t->Phi[5][2]*f->P[2][12] +
+    w->M[12] = t->Phi[5][0]*f->P[0][12] + t->Phi[5][1]*f->P[1][12] + t->Phi[5][2]*f->P[2][12] +
             t->Phi[5][3]*f->P[3][12] + t->Phi[5][4]*f->P[4][12] + t->Phi[5][5]*f->P[5][12] +
             t->Phi[5][7]*f->P[7][12] + t->Phi[5][8]*f->P[8][12] + t->Phi[5][9]*f->P[9][12] +
             t->Phi[5][10]*f->P[10][12] + t->Phi[5][11]*f->P[11][12] + t->Phi[5][12]*f->P[12][12] +
@@ -6721,7 +6689,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][12] + t->Phi[5][22]*f->P[22][12] + t->Phi[5][23]*f->P[23][12] +
             t->Phi[5][24]*f->P[24][12] + t->Phi[5][25]*f->P[25][12] + t->Phi[5][26]*f->P[26][12] +
             t->Phi[5][27]*f->P[27][12] + t->Phi[5][28]*f->P[28][12] + t->Phi[5][29]*f->P[29][12];
-    w->M[5][13] = t->Phi[5][0]*f->P[0][13] + t->Phi[5][1]*f->P[1][13] + t->Phi[5][2]*f->P[2][13] +
+    w->M[13] = t->Phi[5][0]*f->P[0][13] + t->Phi[5][1]*f->P[1][13] + t->Phi[5][2]*f->P[2][13] +
             t->Phi[5][3]*f->P[3][13] + t->Phi[5][4]*f->P[4][13] + t->Phi[5][5]*f->P[5][13] +
             t->Phi[5][7]*f->P[7][13] + t->Phi[5][8]*f->P[8][13] + t->Phi[5][9]*f->P[9][13] +
             t->Phi[5][10]*f->P[10][13] + t->Phi[5][11]*f->P[11][13] + t->Phi[5][12]*f->P[12][13] +
@@ -6730,7 +6698,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][13] + t->Phi[5][22]*f->P[22][13] + t->Phi[5][23]*f->P[23][13] +
             t->Phi[5][24]*f->P[24][13] + t->Phi[5][25]*f->P[25][13] + t->Phi[5][26]*f->P[26][13] +
             t->Phi[5][27]*f->P[27][13] + t->Phi[5][28]*f->P[28][13] + t->Phi[5][29]*f->P[29][13];
-    w->M[5][14] = t->Phi[5][0]*f->P[0][14] + t->Phi[5][1]*f->P[1][14] + t->Phi[5][2]*f->P[2][14] +
+    w->M[14] = t->Phi[5][0]*f->P[0][14] + t->Phi[5][1]*f->P[1][14] + t->Phi[5][2]*f->P[2][14] +
             t->Phi[5][3]*f->P[3][14] + t->Phi[5][4]*f->P[4][14] + t->Phi[5][5]*f->P[5][14] +
             t->Phi[5][7]*f->P[7][14] + t->Phi[5][8]*f->P[8][14] + t->Phi[5][9]*f->P[9][14] +
             t->Phi[5][10]*f->P[10][14] + t->Phi[5][11]*f->P[11][14] + t->Phi[5][12]*f->P[12][14] +
@@ -6739,7 +6707,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][14] + t->Phi[5][22]*f->P[22][14] + t->Phi[5][23]*f->P[23][14] +
             t->Phi[5][24]*f->P[24][14] + t->Phi[5][25]*f->P[25][14] + t->Phi[5][26]*f->P[26][14] +
             t->Phi[5][27]*f->P[27][14] + t->Phi[5][28]*f->P[28][14] + t->Phi[5][29]*f->P[29][14];
-    w->M[5][15] = t->Phi[5][0]*f->P[0][15] + t->Phi[5][1]*f->P[1][15] + t->Phi[5][2]*f->P[2][15] +
+    w->M[15] = t->Phi[5][0]*f->P[0][15] + t->Phi[5][1]*f->P[1][15] + t->Phi[5][2]*f->P[2][15] +
             t->Phi[5][3]*f->P[3][15] + t->Phi[5][4]*f->P[4][15] + t->Phi[5][5]*f->P[5][15] +
             t->Phi[5][7]*f->P[7][15] + t->Phi[5][8]*f->P[8][15] + t->Phi[5][9]*f->P[9][15] +
             t->Phi[5][10]*f->P[10][15] + t->Phi[5][11]*f->P[11][15] + t->Phi[5][12]*f->P[12][15] +
@@ -6748,7 +6716,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][15] + t->Phi[5][22]*f->P[22][15] + t->Phi[5][23]*f->P[23][15] +
             t->Phi[5][24]*f->P[24][15] + t->Phi[5][25]*f->P[25][15] + t->Phi[5][26]*f->P[26][15] +
             t->Phi[5][27]*f->P[27][15] + t->Phi[5][28]*f->P[28][15] + t->Phi[5][29]*f->P[29][15];
-    w->M[5][16] = t->Phi[5][0]*f->P[0][16] + t->Phi[5][1]*f->P[1][16] + t->Phi[5][2]*f->P[2][16] +
+    w->M[16] = t->Phi[5][0]*f->P[0][16] + t->Phi[5][1]*f->P[1][16] + t->Phi[5][2]*f->P[2][16] +
             t->Phi[5][3]*f->P[3][16] + t->Phi[5][4]*f->P[4][16] + t->Phi[5][5]*f->P[5][16] +
             t->Phi[5][7]*f->P[7][16] + t->Phi[5][8]*f->P[8][16] + t->Phi[5][9]*f->P[9][16] +
             t->Phi[5][10]*f->P[10][16] + t->Phi[5][11]*f->P[11][16] + t->Phi[5][12]*f->P[12][16] +
@@ -6757,7 +6725,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][16] + t->Phi[5][22]*f->P[22][16] + t->Phi[5][23]*f->P[23][16] +
             t->Phi[5][24]*f->P[24][16] + t->Phi[5][25]*f->P[25][16] + t->Phi[5][26]*f->P[26][16] +
             t->Phi[5][27]*f->P[27][16] + t->Phi[5][28]*f->P[28][16] + t->Phi[5][29]*f->P[29][16];
-    w->M[5][17] = t->Phi[5][0]*f->P[0][17] + t->Phi[5][1]*f->P[1][17] + t->Phi[5][2]*f->P[2][17] +
+    w->M[17] = t->Phi[5][0]*f->P[0][17] + t->Phi[5][1]*f->P[1][17] + t->Phi[5][2]*f->P[2][17] +
             t->Phi[5][3]*f->P[3][17] + t->Phi[5][4]*f->P[4][17] + t->Phi[5][5]*f->P[5][17] +
             t->Phi[5][7]*f->P[7][17] + t->Phi[5][8]*f->P[8][17] + t->Phi[5][9]*f->P[9][17] +
             t->Phi[5][10]*f->P[10][17] + t->Phi[5][11]*f->P[11][17] + t->Phi[5][12]*f->P[12][17] +
@@ -6766,7 +6734,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][17] + t->Phi[5][22]*f->P[22][17] + t->Phi[5][23]*f->P[23][17] +
             t->Phi[5][24]*f->P[24][17] + t->Phi[5][25]*f->P[25][17] + t->Phi[5][26]*f->P[26][17] +
             t->Phi[5][27]*f->P[27][17] + t->Phi[5][28]*f->P[28][17] + t->Phi[5][29]*f->P[29][17];
-    w->M[5][18] = t->Phi[5][0]*f->P[0][18] + t->Phi[5][1]*f->P[1][18] + t->Phi[5][2]*f->P[2][18] +
+    w->M[18] = t->Phi[5][0]*f->P[0][18] + t->Phi[5][1]*f->P[1][18] + t->Phi[5][2]*f->P[2][18] +
             t->Phi[5][3]*f->P[3][18] + t->Phi[5][4]*f->P[4][18] + t->Phi[5][5]*f->P[5][18] +
             t->Phi[5][7]*f->P[7][18] + t->Phi[5][8]*f->P[8][18] + t->Phi[5][9]*f->P[9][18] +
             t->Phi[5][10]*f->P[10][18] + t->Phi[5][11]*f->P[11][18] + t->Phi[5][12]*f->P[12][18] +
@@ -6775,7 +6743,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][18] + t->Phi[5][22]*f->P[22][18] + t->Phi[5][23]*f->P[23][18] +
             t->Phi[5][24]*f->P[24][18] + t->Phi[5][25]*f->P[25][18] + t->Phi[5][26]*f->P[26][18] +
             t->Phi[5][27]*f->P[27][18] + t->Phi[5][28]*f->P[28][18] + t->Phi[5][29]*f->P[29][18];
-    w->M[5][19] = t->Phi[5][0]*f->P[0][19] + t->Phi[5][1]*f->P[1][19] + t->Phi[5][2]*f->P[2][19] +
+    w->M[19] = t->Phi[5][0]*f->P[0][19] + t->Phi[5][1]*f->P[1][19] + t->Phi[5][2]*f->P[2][19] +
             t->Phi[5][3]*f->P[3][19] + t->Phi[5][4]*f->P[4][19] + t->Phi[5][5]*f->P[5][19] +
             t->Phi[5][7]*f->P[7][19] + t->Phi[5][8]*f->P[8][19] + t->Phi[5][9]*f->P[9][19] +
             t->Phi[5][10]*f->P[10][19] + t->Phi[5][11]*f->P[11][19] + t->Phi[5][12]*f->P[12][19] +
@@ -6784,7 +6752,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][19] + t->Phi[5][22]*f->P[22][19] + t->Phi[5][23]*f->P[23][19] +
             t->Phi[5][24]*f->P[24][19] + t->Phi[5][25]*f->P[25][19] + t->Phi[5][26]*f->P[26][19] +
             t->Phi[5][27]*f->P[27][19] + t->Phi[5][28]*f->P[28][19] + t->Phi[5][29]*f->P[29][19];
-    w->M[5][20] = t->Phi[5][0]*f->P[0][20] + t->Phi[5][1]*f->P[1][20] + t->Phi[5][2]*f->P[2][20] +
+    w->M[20] = t->Phi[5][0]*f->P[0][20] + t->Phi[5][1]*f->P[1][20] + t->Phi[5][2]*f->P[2][20] +
             t->Phi[5][3]*f->P[3][20] + t->Phi[5][4]*f->P[4][20] + t->Phi[5][5]*f->P[5][20] +
             t->Phi[5][7]*f->P[7][20] + t->Phi[5][8]*f->P[8][20] + t->Phi[5][9]*f->P[9][20] +
             t->Phi[5][10]*f->P[10][20] + t->Phi[5][11]*f->P[11][20] + t->Phi[5][12]*f->P[12][20] +
@@ -6793,7 +6761,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][20] + t->Phi[5][22]*f->P[22][20] + t->Phi[5][23]*f->P[23][20] +
             t->Phi[5][24]*f->P[24][20] + t->Phi[5][25]*f->P[25][20] + t->Phi[5][26]*f->P[26][20] +
             t->Phi[5][27]*f->P[27][20] + t->Phi[5][28]*f->P[28][20] + t->Phi[5][29]*f->P[29][20];
-    w->M[5][21] = t->Phi[5][0]*f->P[0][21] + t->Phi[5][1]*f->P[1][21] + t->Phi[5][2]*f->P[2][21] +
+    w->M[21] = t->Phi[5][0]*f->P[0][21] + t->Phi[5][1]*f->P[1][21] + t->Phi[5][2]*f->P[2][21] +
             t->Phi[5][3]*f->P[3][21] + t->Phi[5][4]*f->P[4][21] + t->Phi[5][5]*f->P[5][21] +
             t->Phi[5][7]*f->P[7][21] + t->Phi[5][8]*f->P[8][21] + t->Phi[5][9]*f->P[9][21] +
             t->Phi[5][10]*f->P[10][21] + t->Phi[5][11]*f->P[11][21] + t->Phi[5][12]*f->P[12][21] +
@@ -6802,7 +6770,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][21] + t->Phi[5][22]*f->P[22][21] + t->Phi[5][23]*f->P[23][21] +
             t->Phi[5][24]*f->P[24][21] + t->Phi[5][25]*f->P[25][21] + t->Phi[5][26]*f->P[26][21] +
             t->Phi[5][27]*f->P[27][21] + t->Phi[5][28]*f->P[28][21] + t->Phi[5][29]*f->P[29][21];
-    w->M[5][22] = t->Phi[5][0]*f->P[0][22] + t->Phi[5][1]*f->P[1][22] + t->Phi[5][2]*f->P[2][22] +
+    w->M[22] = t->Phi[5][0]*f->P[0][22] + t->Phi[5][1]*f->P[1][22] + t->Phi[5][2]*f->P[2][22] +
             t->Phi[5][3]*f->P[3][22] + t->Phi[5][4]*f->P[4][22] + t->Phi[5][5]*f->P[5][22] +
             t->Phi[5][7]*f->P[7][22] + t->Phi[5][8]*f->P[8][22] + t->Phi[5][9]*f->P[9][22] +
             t->Phi[5][10]*f->P[10][22] + t->Phi[5][11]*f->P[11][22] + t->Phi[5][12]*f->P[12][22] +
@@ -6811,7 +6779,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][22] + t->Phi[5][22]*f->P[22][22] + t->Phi[5][23]*f->P[23][22] +
             t->Phi[5][24]*f->P[24][22] + t->Phi[5][25]*f->P[25][22] + t->Phi[5][26]*f->P[26][22] +
             t->Phi[5][27]*f->P[27][22] + t->Phi[5][28]*f->P[28][22] + t->Phi[5][29]*f->P[29][22];
-    w->M[5][23] = t->Phi[5][0]*f->P[0][23] + t->Phi[5][1]*f->P[1][23] + t->Phi[5][2]*f->P[2][23] +
+    w->M[23] = t->Phi[5][0]*f->P[0][23] + t->Phi[5][1]*f->P[1][23] + t->Phi[5][2]*f->P[2][23] +
             t->Phi[5][3]*f->P[3][23] + t->Phi[5][4]*f->P[4][23] + t->Phi[5][5]*f->P[5][23] +
             t->Phi[5][7]*f->P[7][23] + t->Phi[5][8]*f->P[8][23] + t->Phi[5][9]*f->P[9][23] +
             t->Phi[5][10]*f->P[10][23] + t->Phi[5][11]*f->P[11][23] + t->Phi[5][12]*f->P[12][23] +
@@ -6820,7 +6788,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][23] + t->Phi[5][22]*f->P[22][23] + t->Phi[5][23]*f->P[23][23] +
             t->Phi[5][24]*f->P[24][23] + t->Phi[5][25]*f->P[25][23] + t->Phi[5][26]*f->P[26][23] +
             t->Phi[5][27]*f->P[27][23] + t->Phi[5][28]*f->P[28][23] + t->Phi[5][29]*f->P[29][23];
-    w->M[5][24] = t->Phi[5][0]*f->P[0][24] + t->Phi[5][1]*f->P[1][24] + t->Phi[5][2]*f->P[2][24] +
+    w->M[24] = t->Phi[5][0]*f->P[0][24] + t->Phi[5][1]*f->P[1][24] + t->Phi[5][2]*f->P[2][24] +
             t->Phi[5][3]*f->P[3][24] + t->Phi[5][4]*f->P[4][24] + t->Phi[5][5]*f->P[5][24] +
             t->Phi[5][7]*f->P[7][24] + t->Phi[5][8]*f->P[8][24] + t->Phi[5][9]*f->P[9][24] +
             t->Phi[5][10]*f->P[10][24] + t->Phi[5][11]*f->P[11][24] + t->Phi[5][12]*f->P[12][24] +
@@ -6829,7 +6797,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][24] + t->Phi[5][22]*f->P[22][24] + t->Phi[5][23]*f->P[23][24] +
             t->Phi[5][24]*f->P[24][24] + t->Phi[5][25]*f->P[25][24] + t->Phi[5][26]*f->P[26][24] +
             t->Phi[5][27]*f->P[27][24] + t->Phi[5][28]*f->P[28][24] + t->Phi[5][29]*f->P[29][24];
-    w->M[5][25] = t->Phi[5][0]*f->P[0][25] + t->Phi[5][1]*f->P[1][25] + t->Phi[5][2]*f->P[2][25] +
+    w->M[25] = t->Phi[5][0]*f->P[0][25] + t->Phi[5][1]*f->P[1][25] + t->Phi[5][2]*f->P[2][25] +
             t->Phi[5][3]*f->P[3][25] + t->Phi[5][4]*f->P[4][25] + t->Phi[5][5]*f->P[5][25] +
             t->Phi[5][7]*f->P[7][25] + t->Phi[5][8]*f->P[8][25] + t->Phi[5][9]*f->P[9][25] +
             t->Phi[5][10]*f->P[10][25] + t->Phi[5][11]*f->P[11][25] + t->Phi[5][12]*f->P[12][25] +
@@ -6838,7 +6806,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][25] + t->Phi[5][22]*f->P[22][25] + t->Phi[5][23]*f->P[23][25] +
             t->Phi[5][24]*f->P[24][25] + t->Phi[5][25]*f->P[25][25] + t->Phi[5][26]*f->P[26][25] +
             t->Phi[5][27]*f->P[27][25] + t->Phi[5][28]*f->P[28][25] + t->Phi[5][29]*f->P[29][25];
-    w->M[5][26] = t->Phi[5][0]*f->P[0][26] + t->Phi[5][1]*f->P[1][26] + t->Phi[5][2]*f->P[2][26] +
+    w->M[26] = t->Phi[5][0]*f->P[0][26] + t->Phi[5][1]*f->P[1][26] + t->Phi[5][2]*f->P[2][26] +
             t->Phi[5][3]*f->P[3][26] + t->Phi[5][4]*f->P[4][26] + t->Phi[5][5]*f->P[5][26] +
             t->Phi[5][7]*f->P[7][26] + t->Phi[5][8]*f->P[8][26] + t->Phi[5][9]*f->P[9][26] +
             t->Phi[5][10]*f->P[10][26] + t->Phi[5][11]*f->P[11][26] + t->Phi[5][12]*f->P[12][26] +
@@ -6847,7 +6815,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][26] + t->Phi[5][22]*f->P[22][26] + t->Phi[5][23]*f->P[23][26] +
             t->Phi[5][24]*f->P[24][26] + t->Phi[5][25]*f->P[25][26] + t->Phi[5][26]*f->P[26][26] +
             t->Phi[5][27]*f->P[27][26] + t->Phi[5][28]*f->P[28][26] + t->Phi[5][29]*f->P[29][26];
-    w->M[5][27] = t->Phi[5][0]*f->P[0][27] + t->Phi[5][1]*f->P[1][27] + t->Phi[5][2]*f->P[2][27] +
+    w->M[27] = t->Phi[5][0]*f->P[0][27] + t->Phi[5][1]*f->P[1][27] + t->Phi[5][2]*f->P[2][27] +
             t->Phi[5][3]*f->P[3][27] + t->Phi[5][4]*f->P[4][27] + t->Phi[5][5]*f->P[5][27] +
             t->Phi[5][7]*f->P[7][27] + t->Phi[5][8]*f->P[8][27] + t->Phi[5][9]*f->P[9][27] +
             t->Phi[5][10]*f->P[10][27] + t->Phi[5][11]*f->P[11][27] + t->Phi[5][12]*f->P[12][27] +
@@ -6856,7 +6824,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][27] + t->Phi[5][22]*f->P[22][27] + t->Phi[5][23]*f->P[23][27] +
             t->Phi[5][24]*f->P[24][27] + t->Phi[5][25]*f->P[25][27] + t->Phi[5][26]*f->P[26][27] +
             t->Phi[5][27]*f->P[27][27] + t->Phi[5][28]*f->P[28][27] + t->Phi[5][29]*f->P[29][27];
-    w->M[5][28] = t->Phi[5][0]*f->P[0][28] + t->Phi[5][1]*f->P[1][28] + t->Phi[5][2]*f->P[2][28] +
+    w->M[28] = t->Phi[5][0]*f->P[0][28] + t->Phi[5][1]*f->P[1][28] + t->Phi[5][2]*f->P[2][28] +
             t->Phi[5][3]*f->P[3][28] + t->Phi[5][4]*f->P[4][28] + t->Phi[5][5]*f->P[5][28] +
             t->Phi[5][7]*f->P[7][28] + t->Phi[5][8]*f->P[8][28] + t->Phi[5][9]*f->P[9][28] +
             t->Phi[5][10]*f->P[10][28] + t->Phi[5][11]*f->P[11][28] + t->Phi[5][12]*f->P[12][28] +
@@ -6865,7 +6833,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][28] + t->Phi[5][22]*f->P[22][28] + t->Phi[5][23]*f->P[23][28] +
             t->Phi[5][24]*f->P[24][28] + t->Phi[5][25]*f->P[25][28] + t->Phi[5][26]*f->P[26][28] +
             t->Phi[5][27]*f->P[27][28] + t->Phi[5][28]*f->P[28][28] + t->Phi[5][29]*f->P[29][28];
-    w->M[5][29] = t->Phi[5][0]*f->P[0][29] + t->Phi[5][1]*f->P[1][29] + t->Phi[5][2]*f->P[2][29] +
+    w->M[29] = t->Phi[5][0]*f->P[0][29] + t->Phi[5][1]*f->P[1][29] + t->Phi[5][2]*f->P[2][29] +
             t->Phi[5][3]*f->P[3][29] + t->Phi[5][4]*f->P[4][29] + t->Phi[5][5]*f->P[5][29] +
             t->Phi[5][7]*f->P[7][29] + t->Phi[5][8]*f->P[8][29] + t->Phi[5][9]*f->P[9][29] +
             t->Phi[5][10]*f->P[10][29] + t->Phi[5][11]*f->P[11][29] + t->Phi[5][12]*f->P[12][29] +
@@ -6874,7 +6842,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][29] + t->Phi[5][22]*f->P[22][29] + t->Phi[5][23]*f->P[23][29] +
             t->Phi[5][24]*f->P[24][29] + t->Phi[5][25]*f->P[25][29] + t->Phi[5][26]*f->P[26][29] +
             t->Phi[5][27]*f->P[27][29] + t->Phi[5][28]*f->P[28][29] + t->Phi[5][29]*f->P[29][29];
-    w->M[5][30] = t->Phi[5][0]*f->P[0][30] + t->Phi[5][1]*f->P[1][30] + t->Phi[5][2]*f->P[2][30] +
+    w->M[30] = t->Phi[5][0]*f->P[0][30] + t->Phi[5][1]*f->P[1][30] + t->Phi[5][2]*f->P[2][30] +
             t->Phi[5][3]*f->P[3][30] + t->Phi[5][4]*f->P[4][30] + t->Phi[5][5]*f->P[5][30] +
             t->Phi[5][7]*f->P[7][30] + t->Phi[5][8]*f->P[8][30] + t->Phi[5][9]*f->P[9][30] +
             t->Phi[5][10]*f->P[10][30] + t->Phi[5][11]*f->P[11][30] + t->Phi[5][12]*f->P[12][30] +
@@ -6883,7 +6851,7 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][21]*f->P[21][30] + t->Phi[5][22]*f->P[22][30] + t->Phi[5][23]*f->P[23][30] +
             t->Phi[5][24]*f->P[24][30] + t->Phi[5][25]*f->P[25][30] + t->Phi[5][26]*f->P[26][30] +
             t->Phi[5][27]*f->P[27][30] + t->Phi[5][28]*f->P[28][30] + t->Phi[5][29]*f->P[29][30];
-    w->M[5][31] = t->Phi[5][0]*f->P[0][31] + t->Phi[5][1]*f->P[1][31] + t->Phi[5][2]*f->P[2][31] +
+    w->M[31] = t->Phi[5][0]*f->P[0][31] + t->Phi[5][1]*f->P[1][31] + t->Phi[5][2]*f->P[2][31] +
             t->Phi[5][3]*f->P[3][31] + t->Phi[5][4]*f->P[4][31] + t->Phi[5][5]*f->P[5][31] +
             t->Phi[5][7]*f->P[7][31] + t->Phi[5][8]*f->P[8][31] + t->Phi[5][9]*f->P[9][31] +
             t->Phi[5][10]*f->P[10][31] + t->Phi[5][11]*f->P[11][31] + t->Phi[5][12]*f->P[12][31] +
@@ -6894,11 +6862,64 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[5][27]*f->P[27][31] + t->Phi[5][28]*f->P[28][31] + t->Phi[5][29]*f->P[29][31];
 }
 
+/* Returns 0 when every value it stored is finite, NaN otherwise. */
+static ned_doppler32_augmented_scalar propagate_row_5(const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar v, check = 0.0;
+    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
+            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
+            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] +
+            w->M[11]*t->Phi[5][11] + w->M[12]*t->Phi[5][12] + w->M[13]*t->Phi[5][13] +
+            w->M[14]*t->Phi[5][14] + w->M[15]*t->Phi[5][15] + w->M[18]*t->Phi[5][18] +
+            w->M[19]*t->Phi[5][19] + w->M[20]*t->Phi[5][20] + w->M[21]*t->Phi[5][21] +
+            w->M[22]*t->Phi[5][22] + w->M[23]*t->Phi[5][23] + w->M[24]*t->Phi[5][24] +
+            w->M[25]*t->Phi[5][25] + w->M[26]*t->Phi[5][26] + w->M[27]*t->Phi[5][27] +
+            w->M[28]*t->Phi[5][28] + w->M[29]*t->Phi[5][29] + t->Qd[150]; w->Pn[150] = v; check += v
+            - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[18]*t->Phi[6][18] + w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] +
+            w->M[21]*t->Phi[6][21] + w->M[22]*t->Phi[6][22] + w->M[23]*t->Phi[6][23] +
+            w->M[24]*t->Phi[6][24] + w->M[25]*t->Phi[6][25] + w->M[26]*t->Phi[6][26] +
+            w->M[27]*t->Phi[6][27] + w->M[28]*t->Phi[6][28] + w->M[29]*t->Phi[6][29] + t->Qd[151];
+            w->Pn[151] = v; check += v - v;
+    v = w->M[7]; w->Pn[152] = v; check += v - v;
+    v = w->M[8]; w->Pn[153] = v; check += v - v;
+    v = w->M[9]; w->Pn[154] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[155]; w->Pn[155] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[156]; w->Pn[156] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[157]; w->Pn[157] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[158]; w->Pn[158] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[159]; w->Pn[159] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[160]; w->Pn[160] = v; check += v - v;
+    v = w->M[16]; w->Pn[161] = v; check += v - v;
+    v = w->M[17]; w->Pn[162] = v; check += v - v;
+    v = w->M[18]; w->Pn[163] = v; check += v - v;
+    v = w->M[19]; w->Pn[164] = v; check += v - v;
+    v = w->M[20]; w->Pn[165] = v; check += v - v;
+    v = w->M[21]; w->Pn[166] = v; check += v - v;
+    v = w->M[22]; w->Pn[167] = v; check += v - v;
+    v = w->M[23]; w->Pn[168] = v; check += v - v;
+    v = w->M[24]; w->Pn[169] = v; check += v - v;
+    v = w->M[25]; w->Pn[170] = v; check += v - v;
+    v = w->M[26]; w->Pn[171] = v; check += v - v;
+    v = w->M[27]; w->Pn[172] = v; check += v - v;
+    v = w->M[28]; w->Pn[173] = v; check += v - v;
+    v = w->M[29]; w->Pn[174] = v; check += v - v;
+    v = w->M[30]; w->Pn[175] = v; check += v - v;
+    v = w->M[31]; w->Pn[176] = v; check += v - v;
+    return check;
+}
+
 static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, const
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
         *restrict w)
 {
-    w->M[6][0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] +
+    w->M[0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] +
             t->Phi[6][3]*f->P[3][0] + t->Phi[6][4]*f->P[4][0] + t->Phi[6][5]*f->P[5][0] +
             t->Phi[6][6]*f->P[6][0] + t->Phi[6][7]*f->P[7][0] + t->Phi[6][8]*f->P[8][0] +
             t->Phi[6][9]*f->P[9][0] + t->Phi[6][10]*f->P[10][0] + t->Phi[6][11]*f->P[11][0] +
@@ -6908,7 +6929,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][0] + t->Phi[6][24]*f->P[24][0] + t->Phi[6][25]*f->P[25][0] +
             t->Phi[6][26]*f->P[26][0] + t->Phi[6][27]*f->P[27][0] + t->Phi[6][28]*f->P[28][0] +
             t->Phi[6][29]*f->P[29][0];
-    w->M[6][1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] +
+    w->M[1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] +
             t->Phi[6][3]*f->P[3][1] + t->Phi[6][4]*f->P[4][1] + t->Phi[6][5]*f->P[5][1] +
             t->Phi[6][6]*f->P[6][1] + t->Phi[6][7]*f->P[7][1] + t->Phi[6][8]*f->P[8][1] +
             t->Phi[6][9]*f->P[9][1] + t->Phi[6][10]*f->P[10][1] + t->Phi[6][11]*f->P[11][1] +
@@ -6918,7 +6939,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][1] + t->Phi[6][24]*f->P[24][1] + t->Phi[6][25]*f->P[25][1] +
             t->Phi[6][26]*f->P[26][1] + t->Phi[6][27]*f->P[27][1] + t->Phi[6][28]*f->P[28][1] +
             t->Phi[6][29]*f->P[29][1];
-    w->M[6][2] = t->Phi[6][0]*f->P[0][2] + t->Phi[6][1]*f->P[1][2] + t->Phi[6][2]*f->P[2][2] +
+    w->M[2] = t->Phi[6][0]*f->P[0][2] + t->Phi[6][1]*f->P[1][2] + t->Phi[6][2]*f->P[2][2] +
             t->Phi[6][3]*f->P[3][2] + t->Phi[6][4]*f->P[4][2] + t->Phi[6][5]*f->P[5][2] +
             t->Phi[6][6]*f->P[6][2] + t->Phi[6][7]*f->P[7][2] + t->Phi[6][8]*f->P[8][2] +
             t->Phi[6][9]*f->P[9][2] + t->Phi[6][10]*f->P[10][2] + t->Phi[6][11]*f->P[11][2] +
@@ -6928,7 +6949,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][2] + t->Phi[6][24]*f->P[24][2] + t->Phi[6][25]*f->P[25][2] +
             t->Phi[6][26]*f->P[26][2] + t->Phi[6][27]*f->P[27][2] + t->Phi[6][28]*f->P[28][2] +
             t->Phi[6][29]*f->P[29][2];
-    w->M[6][3] = t->Phi[6][0]*f->P[0][3] + t->Phi[6][1]*f->P[1][3] + t->Phi[6][2]*f->P[2][3] +
+    w->M[3] = t->Phi[6][0]*f->P[0][3] + t->Phi[6][1]*f->P[1][3] + t->Phi[6][2]*f->P[2][3] +
             t->Phi[6][3]*f->P[3][3] + t->Phi[6][4]*f->P[4][3] + t->Phi[6][5]*f->P[5][3] +
             t->Phi[6][6]*f->P[6][3] + t->Phi[6][7]*f->P[7][3] + t->Phi[6][8]*f->P[8][3] +
             t->Phi[6][9]*f->P[9][3] + t->Phi[6][10]*f->P[10][3] + t->Phi[6][11]*f->P[11][3] +
@@ -6938,7 +6959,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][3] + t->Phi[6][24]*f->P[24][3] + t->Phi[6][25]*f->P[25][3] +
             t->Phi[6][26]*f->P[26][3] + t->Phi[6][27]*f->P[27][3] + t->Phi[6][28]*f->P[28][3] +
             t->Phi[6][29]*f->P[29][3];
-    w->M[6][4] = t->Phi[6][0]*f->P[0][4] + t->Phi[6][1]*f->P[1][4] + t->Phi[6][2]*f->P[2][4] +
+    w->M[4] = t->Phi[6][0]*f->P[0][4] + t->Phi[6][1]*f->P[1][4] + t->Phi[6][2]*f->P[2][4] +
             t->Phi[6][3]*f->P[3][4] + t->Phi[6][4]*f->P[4][4] + t->Phi[6][5]*f->P[5][4] +
             t->Phi[6][6]*f->P[6][4] + t->Phi[6][7]*f->P[7][4] + t->Phi[6][8]*f->P[8][4] +
             t->Phi[6][9]*f->P[9][4] + t->Phi[6][10]*f->P[10][4] + t->Phi[6][11]*f->P[11][4] +
@@ -6948,7 +6969,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][4] + t->Phi[6][24]*f->P[24][4] + t->Phi[6][25]*f->P[25][4] +
             t->Phi[6][26]*f->P[26][4] + t->Phi[6][27]*f->P[27][4] + t->Phi[6][28]*f->P[28][4] +
             t->Phi[6][29]*f->P[29][4];
-    w->M[6][5] = t->Phi[6][0]*f->P[0][5] + t->Phi[6][1]*f->P[1][5] + t->Phi[6][2]*f->P[2][5] +
+    w->M[5] = t->Phi[6][0]*f->P[0][5] + t->Phi[6][1]*f->P[1][5] + t->Phi[6][2]*f->P[2][5] +
             t->Phi[6][3]*f->P[3][5] + t->Phi[6][4]*f->P[4][5] + t->Phi[6][5]*f->P[5][5] +
             t->Phi[6][6]*f->P[6][5] + t->Phi[6][7]*f->P[7][5] + t->Phi[6][8]*f->P[8][5] +
             t->Phi[6][9]*f->P[9][5] + t->Phi[6][10]*f->P[10][5] + t->Phi[6][11]*f->P[11][5] +
@@ -6958,7 +6979,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][5] + t->Phi[6][24]*f->P[24][5] + t->Phi[6][25]*f->P[25][5] +
             t->Phi[6][26]*f->P[26][5] + t->Phi[6][27]*f->P[27][5] + t->Phi[6][28]*f->P[28][5] +
             t->Phi[6][29]*f->P[29][5];
-    w->M[6][6] = t->Phi[6][0]*f->P[0][6] + t->Phi[6][1]*f->P[1][6] + t->Phi[6][2]*f->P[2][6] +
+    w->M[6] = t->Phi[6][0]*f->P[0][6] + t->Phi[6][1]*f->P[1][6] + t->Phi[6][2]*f->P[2][6] +
             t->Phi[6][3]*f->P[3][6] + t->Phi[6][4]*f->P[4][6] + t->Phi[6][5]*f->P[5][6] +
             t->Phi[6][6]*f->P[6][6] + t->Phi[6][7]*f->P[7][6] + t->Phi[6][8]*f->P[8][6] +
             t->Phi[6][9]*f->P[9][6] + t->Phi[6][10]*f->P[10][6] + t->Phi[6][11]*f->P[11][6] +
@@ -6968,7 +6989,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][6] + t->Phi[6][24]*f->P[24][6] + t->Phi[6][25]*f->P[25][6] +
             t->Phi[6][26]*f->P[26][6] + t->Phi[6][27]*f->P[27][6] + t->Phi[6][28]*f->P[28][6] +
             t->Phi[6][29]*f->P[29][6];
-    w->M[6][7] = t->Phi[6][0]*f->P[0][7] + t->Phi[6][1]*f->P[1][7] + t->Phi[6][2]*f->P[2][7] +
+    w->M[7] = t->Phi[6][0]*f->P[0][7] + t->Phi[6][1]*f->P[1][7] + t->Phi[6][2]*f->P[2][7] +
             t->Phi[6][3]*f->P[3][7] + t->Phi[6][4]*f->P[4][7] + t->Phi[6][5]*f->P[5][7] +
             t->Phi[6][6]*f->P[6][7] + t->Phi[6][7]*f->P[7][7] + t->Phi[6][8]*f->P[8][7] +
             t->Phi[6][9]*f->P[9][7] + t->Phi[6][10]*f->P[10][7] + t->Phi[6][11]*f->P[11][7] +
@@ -6978,7 +6999,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][7] + t->Phi[6][24]*f->P[24][7] + t->Phi[6][25]*f->P[25][7] +
             t->Phi[6][26]*f->P[26][7] + t->Phi[6][27]*f->P[27][7] + t->Phi[6][28]*f->P[28][7] +
             t->Phi[6][29]*f->P[29][7];
-    w->M[6][8] = t->Phi[6][0]*f->P[0][8] + t->Phi[6][1]*f->P[1][8] + t->Phi[6][2]*f->P[2][8] +
+    w->M[8] = t->Phi[6][0]*f->P[0][8] + t->Phi[6][1]*f->P[1][8] + t->Phi[6][2]*f->P[2][8] +
             t->Phi[6][3]*f->P[3][8] + t->Phi[6][4]*f->P[4][8] + t->Phi[6][5]*f->P[5][8] +
             t->Phi[6][6]*f->P[6][8] + t->Phi[6][7]*f->P[7][8] + t->Phi[6][8]*f->P[8][8] +
             t->Phi[6][9]*f->P[9][8] + t->Phi[6][10]*f->P[10][8] + t->Phi[6][11]*f->P[11][8] +
@@ -6988,7 +7009,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][8] + t->Phi[6][24]*f->P[24][8] + t->Phi[6][25]*f->P[25][8] +
             t->Phi[6][26]*f->P[26][8] + t->Phi[6][27]*f->P[27][8] + t->Phi[6][28]*f->P[28][8] +
             t->Phi[6][29]*f->P[29][8];
-    w->M[6][9] = t->Phi[6][0]*f->P[0][9] + t->Phi[6][1]*f->P[1][9] + t->Phi[6][2]*f->P[2][9] +
+    w->M[9] = t->Phi[6][0]*f->P[0][9] + t->Phi[6][1]*f->P[1][9] + t->Phi[6][2]*f->P[2][9] +
             t->Phi[6][3]*f->P[3][9] + t->Phi[6][4]*f->P[4][9] + t->Phi[6][5]*f->P[5][9] +
             t->Phi[6][6]*f->P[6][9] + t->Phi[6][7]*f->P[7][9] + t->Phi[6][8]*f->P[8][9] +
             t->Phi[6][9]*f->P[9][9] + t->Phi[6][10]*f->P[10][9] + t->Phi[6][11]*f->P[11][9] +
@@ -6998,7 +7019,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][9] + t->Phi[6][24]*f->P[24][9] + t->Phi[6][25]*f->P[25][9] +
             t->Phi[6][26]*f->P[26][9] + t->Phi[6][27]*f->P[27][9] + t->Phi[6][28]*f->P[28][9] +
             t->Phi[6][29]*f->P[29][9];
-    w->M[6][10] = t->Phi[6][0]*f->P[0][10] + t->Phi[6][1]*f->P[1][10] + t->Phi[6][2]*f->P[2][10] +
+    w->M[10] = t->Phi[6][0]*f->P[0][10] + t->Phi[6][1]*f->P[1][10] + t->Phi[6][2]*f->P[2][10] +
             t->Phi[6][3]*f->P[3][10] + t->Phi[6][4]*f->P[4][10] + t->Phi[6][5]*f->P[5][10] +
             t->Phi[6][6]*f->P[6][10] + t->Phi[6][7]*f->P[7][10] + t->Phi[6][8]*f->P[8][10] +
             t->Phi[6][9]*f->P[9][10] + t->Phi[6][10]*f->P[10][10] + t->Phi[6][11]*f->P[11][10] +
@@ -7008,7 +7029,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][10] + t->Phi[6][24]*f->P[24][10] + t->Phi[6][25]*f->P[25][10] +
             t->Phi[6][26]*f->P[26][10] + t->Phi[6][27]*f->P[27][10] + t->Phi[6][28]*f->P[28][10] +
             t->Phi[6][29]*f->P[29][10];
-    w->M[6][11] = t->Phi[6][0]*f->P[0][11] + t->Phi[6][1]*f->P[1][11] + t->Phi[6][2]*f->P[2][11] +
+    w->M[11] = t->Phi[6][0]*f->P[0][11] + t->Phi[6][1]*f->P[1][11] + t->Phi[6][2]*f->P[2][11] +
             t->Phi[6][3]*f->P[3][11] + t->Phi[6][4]*f->P[4][11] + t->Phi[6][5]*f->P[5][11] +
             t->Phi[6][6]*f->P[6][11] + t->Phi[6][7]*f->P[7][11] + t->Phi[6][8]*f->P[8][11] +
             t->Phi[6][9]*f->P[9][11] + t->Phi[6][10]*f->P[10][11] + t->Phi[6][11]*f->P[11][11] +
@@ -7018,7 +7039,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][11] + t->Phi[6][24]*f->P[24][11] + t->Phi[6][25]*f->P[25][11] +
             t->Phi[6][26]*f->P[26][11] + t->Phi[6][27]*f->P[27][11] + t->Phi[6][28]*f->P[28][11] +
             t->Phi[6][29]*f->P[29][11];
-    w->M[6][12] = t->Phi[6][0]*f->P[0][12] + t->Phi[6][1]*f->P[1][12] + t->Phi[6][2]*f->P[2][12] +
+    w->M[12] = t->Phi[6][0]*f->P[0][12] + t->Phi[6][1]*f->P[1][12] + t->Phi[6][2]*f->P[2][12] +
             t->Phi[6][3]*f->P[3][12] + t->Phi[6][4]*f->P[4][12] + t->Phi[6][5]*f->P[5][12] +
             t->Phi[6][6]*f->P[6][12] + t->Phi[6][7]*f->P[7][12] + t->Phi[6][8]*f->P[8][12] +
             t->Phi[6][9]*f->P[9][12] + t->Phi[6][10]*f->P[10][12] + t->Phi[6][11]*f->P[11][12] +
@@ -7028,7 +7049,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][12] + t->Phi[6][24]*f->P[24][12] + t->Phi[6][25]*f->P[25][12] +
             t->Phi[6][26]*f->P[26][12] + t->Phi[6][27]*f->P[27][12] + t->Phi[6][28]*f->P[28][12] +
             t->Phi[6][29]*f->P[29][12];
-    w->M[6][13] = t->Phi[6][0]*f->P[0][13] + t->Phi[6][1]*f->P[1][13] + t->Phi[6][2]*f->P[2][13] +
+    w->M[13] = t->Phi[6][0]*f->P[0][13] + t->Phi[6][1]*f->P[1][13] + t->Phi[6][2]*f->P[2][13] +
             t->Phi[6][3]*f->P[3][13] + t->Phi[6][4]*f->P[4][13] + t->Phi[6][5]*f->P[5][13] +
             t->Phi[6][6]*f->P[6][13] + t->Phi[6][7]*f->P[7][13] + t->Phi[6][8]*f->P[8][13] +
             t->Phi[6][9]*f->P[9][13] + t->Phi[6][10]*f->P[10][13] + t->Phi[6][11]*f->P[11][13] +
@@ -7038,7 +7059,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][13] + t->Phi[6][24]*f->P[24][13] + t->Phi[6][25]*f->P[25][13] +
             t->Phi[6][26]*f->P[26][13] + t->Phi[6][27]*f->P[27][13] + t->Phi[6][28]*f->P[28][13] +
             t->Phi[6][29]*f->P[29][13];
-    w->M[6][14] = t->Phi[6][0]*f->P[0][14] + t->Phi[6][1]*f->P[1][14] + t->Phi[6][2]*f->P[2][14] +
+    w->M[14] = t->Phi[6][0]*f->P[0][14] + t->Phi[6][1]*f->P[1][14] + t->Phi[6][2]*f->P[2][14] +
             t->Phi[6][3]*f->P[3][14] + t->Phi[6][4]*f->P[4][14] + t->Phi[6][5]*f->P[5][14] +
             t->Phi[6][6]*f->P[6][14] + t->Phi[6][7]*f->P[7][14] + t->Phi[6][8]*f->P[8][14] +
             t->Phi[6][9]*f->P[9][14] + t->Phi[6][10]*f->P[10][14] + t->Phi[6][11]*f->P[11][14] +
@@ -7048,7 +7069,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][14] + t->Phi[6][24]*f->P[24][14] + t->Phi[6][25]*f->P[25][14] +
             t->Phi[6][26]*f->P[26][14] + t->Phi[6][27]*f->P[27][14] + t->Phi[6][28]*f->P[28][14] +
             t->Phi[6][29]*f->P[29][14];
-    w->M[6][15] = t->Phi[6][0]*f->P[0][15] + t->Phi[6][1]*f->P[1][15] + t->Phi[6][2]*f->P[2][15] +
+    w->M[15] = t->Phi[6][0]*f->P[0][15] + t->Phi[6][1]*f->P[1][15] + t->Phi[6][2]*f->P[2][15] +
             t->Phi[6][3]*f->P[3][15] + t->Phi[6][4]*f->P[4][15] + t->Phi[6][5]*f->P[5][15] +
             t->Phi[6][6]*f->P[6][15] + t->Phi[6][7]*f->P[7][15] + t->Phi[6][8]*f->P[8][15] +
             t->Phi[6][9]*f->P[9][15] + t->Phi[6][10]*f->P[10][15] + t->Phi[6][11]*f->P[11][15] +
@@ -7058,7 +7079,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][15] + t->Phi[6][24]*f->P[24][15] + t->Phi[6][25]*f->P[25][15] +
             t->Phi[6][26]*f->P[26][15] + t->Phi[6][27]*f->P[27][15] + t->Phi[6][28]*f->P[28][15] +
             t->Phi[6][29]*f->P[29][15];
-    w->M[6][16] = t->Phi[6][0]*f->P[0][16] + t->Phi[6][1]*f->P[1][16] + t->Phi[6][2]*f->P[2][16] +
+    w->M[16] = t->Phi[6][0]*f->P[0][16] + t->Phi[6][1]*f->P[1][16] + t->Phi[6][2]*f->P[2][16] +
             t->Phi[6][3]*f->P[3][16] + t->Phi[6][4]*f->P[4][16] + t->Phi[6][5]*f->P[5][16] +
             t->Phi[6][6]*f->P[6][16] + t->Phi[6][7]*f->P[7][16] + t->Phi[6][8]*f->P[8][16] +
             t->Phi[6][9]*f->P[9][16] + t->Phi[6][10]*f->P[10][16] + t->Phi[6][11]*f->P[11][16] +
@@ -7068,7 +7089,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][16] + t->Phi[6][24]*f->P[24][16] + t->Phi[6][25]*f->P[25][16] +
             t->Phi[6][26]*f->P[26][16] + t->Phi[6][27]*f->P[27][16] + t->Phi[6][28]*f->P[28][16] +
             t->Phi[6][29]*f->P[29][16];
-    w->M[6][17] = t->Phi[6][0]*f->P[0][17] + t->Phi[6][1]*f->P[1][17] + t->Phi[6][2]*f->P[2][17] +
+    w->M[17] = t->Phi[6][0]*f->P[0][17] + t->Phi[6][1]*f->P[1][17] + t->Phi[6][2]*f->P[2][17] +
             t->Phi[6][3]*f->P[3][17] + t->Phi[6][4]*f->P[4][17] + t->Phi[6][5]*f->P[5][17] +
             t->Phi[6][6]*f->P[6][17] + t->Phi[6][7]*f->P[7][17] + t->Phi[6][8]*f->P[8][17] +
             t->Phi[6][9]*f->P[9][17] + t->Phi[6][10]*f->P[10][17] + t->Phi[6][11]*f->P[11][17] +
@@ -7078,7 +7099,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][17] + t->Phi[6][24]*f->P[24][17] + t->Phi[6][25]*f->P[25][17] +
             t->Phi[6][26]*f->P[26][17] + t->Phi[6][27]*f->P[27][17] + t->Phi[6][28]*f->P[28][17] +
             t->Phi[6][29]*f->P[29][17];
-    w->M[6][18] = t->Phi[6][0]*f->P[0][18] + t->Phi[6][1]*f->P[1][18] + t->Phi[6][2]*f->P[2][18] +
+    w->M[18] = t->Phi[6][0]*f->P[0][18] + t->Phi[6][1]*f->P[1][18] + t->Phi[6][2]*f->P[2][18] +
             t->Phi[6][3]*f->P[3][18] + t->Phi[6][4]*f->P[4][18] + t->Phi[6][5]*f->P[5][18] +
             t->Phi[6][6]*f->P[6][18] + t->Phi[6][7]*f->P[7][18] + t->Phi[6][8]*f->P[8][18] +
             t->Phi[6][9]*f->P[9][18] + t->Phi[6][10]*f->P[10][18] + t->Phi[6][11]*f->P[11][18] +
@@ -7088,7 +7109,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][18] + t->Phi[6][24]*f->P[24][18] + t->Phi[6][25]*f->P[25][18] +
             t->Phi[6][26]*f->P[26][18] + t->Phi[6][27]*f->P[27][18] + t->Phi[6][28]*f->P[28][18] +
             t->Phi[6][29]*f->P[29][18];
-    w->M[6][19] = t->Phi[6][0]*f->P[0][19] + t->Phi[6][1]*f->P[1][19] + t->Phi[6][2]*f->P[2][19] +
+    w->M[19] = t->Phi[6][0]*f->P[0][19] + t->Phi[6][1]*f->P[1][19] + t->Phi[6][2]*f->P[2][19] +
             t->Phi[6][3]*f->P[3][19] + t->Phi[6][4]*f->P[4][19] + t->Phi[6][5]*f->P[5][19] +
             t->Phi[6][6]*f->P[6][19] + t->Phi[6][7]*f->P[7][19] + t->Phi[6][8]*f->P[8][19] +
             t->Phi[6][9]*f->P[9][19] + t->Phi[6][10]*f->P[10][19] + t->Phi[6][11]*f->P[11][19] +
@@ -7098,7 +7119,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][19] + t->Phi[6][24]*f->P[24][19] + t->Phi[6][25]*f->P[25][19] +
             t->Phi[6][26]*f->P[26][19] + t->Phi[6][27]*f->P[27][19] + t->Phi[6][28]*f->P[28][19] +
             t->Phi[6][29]*f->P[29][19];
-    w->M[6][20] = t->Phi[6][0]*f->P[0][20] + t->Phi[6][1]*f->P[1][20] + t->Phi[6][2]*f->P[2][20] +
+    w->M[20] = t->Phi[6][0]*f->P[0][20] + t->Phi[6][1]*f->P[1][20] + t->Phi[6][2]*f->P[2][20] +
             t->Phi[6][3]*f->P[3][20] + t->Phi[6][4]*f->P[4][20] + t->Phi[6][5]*f->P[5][20] +
             t->Phi[6][6]*f->P[6][20] + t->Phi[6][7]*f->P[7][20] + t->Phi[6][8]*f->P[8][20] +
             t->Phi[6][9]*f->P[9][20] + t->Phi[6][10]*f->P[10][20] + t->Phi[6][11]*f->P[11][20] +
@@ -7108,7 +7129,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][20] + t->Phi[6][24]*f->P[24][20] + t->Phi[6][25]*f->P[25][20] +
             t->Phi[6][26]*f->P[26][20] + t->Phi[6][27]*f->P[27][20] + t->Phi[6][28]*f->P[28][20] +
             t->Phi[6][29]*f->P[29][20];
-    w->M[6][21] = t->Phi[6][0]*f->P[0][21] + t->Phi[6][1]*f->P[1][21] + t->Phi[6][2]*f->P[2][21] +
+    w->M[21] = t->Phi[6][0]*f->P[0][21] + t->Phi[6][1]*f->P[1][21] + t->Phi[6][2]*f->P[2][21] +
             t->Phi[6][3]*f->P[3][21] + t->Phi[6][4]*f->P[4][21] + t->Phi[6][5]*f->P[5][21] +
             t->Phi[6][6]*f->P[6][21] + t->Phi[6][7]*f->P[7][21] + t->Phi[6][8]*f->P[8][21] +
             t->Phi[6][9]*f->P[9][21] + t->Phi[6][10]*f->P[10][21] + t->Phi[6][11]*f->P[11][21] +
@@ -7118,7 +7139,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][21] + t->Phi[6][24]*f->P[24][21] + t->Phi[6][25]*f->P[25][21] +
             t->Phi[6][26]*f->P[26][21] + t->Phi[6][27]*f->P[27][21] + t->Phi[6][28]*f->P[28][21] +
             t->Phi[6][29]*f->P[29][21];
-    w->M[6][22] = t->Phi[6][0]*f->P[0][22] + t->Phi[6][1]*f->P[1][22] + t->Phi[6][2]*f->P[2][22] +
+    w->M[22] = t->Phi[6][0]*f->P[0][22] + t->Phi[6][1]*f->P[1][22] + t->Phi[6][2]*f->P[2][22] +
             t->Phi[6][3]*f->P[3][22] + t->Phi[6][4]*f->P[4][22] + t->Phi[6][5]*f->P[5][22] +
             t->Phi[6][6]*f->P[6][22] + t->Phi[6][7]*f->P[7][22] + t->Phi[6][8]*f->P[8][22] +
             t->Phi[6][9]*f->P[9][22] + t->Phi[6][10]*f->P[10][22] + t->Phi[6][11]*f->P[11][22] +
@@ -7128,7 +7149,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][22] + t->Phi[6][24]*f->P[24][22] + t->Phi[6][25]*f->P[25][22] +
             t->Phi[6][26]*f->P[26][22] + t->Phi[6][27]*f->P[27][22] + t->Phi[6][28]*f->P[28][22] +
             t->Phi[6][29]*f->P[29][22];
-    w->M[6][23] = t->Phi[6][0]*f->P[0][23] + t->Phi[6][1]*f->P[1][23] + t->Phi[6][2]*f->P[2][23] +
+    w->M[23] = t->Phi[6][0]*f->P[0][23] + t->Phi[6][1]*f->P[1][23] + t->Phi[6][2]*f->P[2][23] +
             t->Phi[6][3]*f->P[3][23] + t->Phi[6][4]*f->P[4][23] + t->Phi[6][5]*f->P[5][23] +
             t->Phi[6][6]*f->P[6][23] + t->Phi[6][7]*f->P[7][23] + t->Phi[6][8]*f->P[8][23] +
             t->Phi[6][9]*f->P[9][23] + t->Phi[6][10]*f->P[10][23] + t->Phi[6][11]*f->P[11][23] +
@@ -7138,7 +7159,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][23] + t->Phi[6][24]*f->P[24][23] + t->Phi[6][25]*f->P[25][23] +
             t->Phi[6][26]*f->P[26][23] + t->Phi[6][27]*f->P[27][23] + t->Phi[6][28]*f->P[28][23] +
             t->Phi[6][29]*f->P[29][23];
-    w->M[6][24] = t->Phi[6][0]*f->P[0][24] + t->Phi[6][1]*f->P[1][24] + t->Phi[6][2]*f->P[2][24] +
+    w->M[24] = t->Phi[6][0]*f->P[0][24] + t->Phi[6][1]*f->P[1][24] + t->Phi[6][2]*f->P[2][24] +
             t->Phi[6][3]*f->P[3][24] + t->Phi[6][4]*f->P[4][24] + t->Phi[6][5]*f->P[5][24] +
             t->Phi[6][6]*f->P[6][24] + t->Phi[6][7]*f->P[7][24] + t->Phi[6][8]*f->P[8][24] +
             t->Phi[6][9]*f->P[9][24] + t->Phi[6][10]*f->P[10][24] + t->Phi[6][11]*f->P[11][24] +
@@ -7148,7 +7169,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][24] + t->Phi[6][24]*f->P[24][24] + t->Phi[6][25]*f->P[25][24] +
             t->Phi[6][26]*f->P[26][24] + t->Phi[6][27]*f->P[27][24] + t->Phi[6][28]*f->P[28][24] +
             t->Phi[6][29]*f->P[29][24];
-    w->M[6][25] = t->Phi[6][0]*f->P[0][25] + t->Phi[6][1]*f->P[1][25] + t->Phi[6][2]*f->P[2][25] +
+    w->M[25] = t->Phi[6][0]*f->P[0][25] + t->Phi[6][1]*f->P[1][25] + t->Phi[6][2]*f->P[2][25] +
             t->Phi[6][3]*f->P[3][25] + t->Phi[6][4]*f->P[4][25] + t->Phi[6][5]*f->P[5][25] +
             t->Phi[6][6]*f->P[6][25] + t->Phi[6][7]*f->P[7][25] + t->Phi[6][8]*f->P[8][25] +
             t->Phi[6][9]*f->P[9][25] + t->Phi[6][10]*f->P[10][25] + t->Phi[6][11]*f->P[11][25] +
@@ -7158,7 +7179,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][25] + t->Phi[6][24]*f->P[24][25] + t->Phi[6][25]*f->P[25][25] +
             t->Phi[6][26]*f->P[26][25] + t->Phi[6][27]*f->P[27][25] + t->Phi[6][28]*f->P[28][25] +
             t->Phi[6][29]*f->P[29][25];
-    w->M[6][26] = t->Phi[6][0]*f->P[0][26] + t->Phi[6][1]*f->P[1][26] + t->Phi[6][2]*f->P[2][26] +
+    w->M[26] = t->Phi[6][0]*f->P[0][26] + t->Phi[6][1]*f->P[1][26] + t->Phi[6][2]*f->P[2][26] +
             t->Phi[6][3]*f->P[3][26] + t->Phi[6][4]*f->P[4][26] + t->Phi[6][5]*f->P[5][26] +
             t->Phi[6][6]*f->P[6][26] + t->Phi[6][7]*f->P[7][26] + t->Phi[6][8]*f->P[8][26] +
             t->Phi[6][9]*f->P[9][26] + t->Phi[6][10]*f->P[10][26] + t->Phi[6][11]*f->P[11][26] +
@@ -7168,7 +7189,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][26] + t->Phi[6][24]*f->P[24][26] + t->Phi[6][25]*f->P[25][26] +
             t->Phi[6][26]*f->P[26][26] + t->Phi[6][27]*f->P[27][26] + t->Phi[6][28]*f->P[28][26] +
             t->Phi[6][29]*f->P[29][26];
-    w->M[6][27] = t->Phi[6][0]*f->P[0][27] + t->Phi[6][1]*f->P[1][27] + t->Phi[6][2]*f->P[2][27] +
+    w->M[27] = t->Phi[6][0]*f->P[0][27] + t->Phi[6][1]*f->P[1][27] + t->Phi[6][2]*f->P[2][27] +
             t->Phi[6][3]*f->P[3][27] + t->Phi[6][4]*f->P[4][27] + t->Phi[6][5]*f->P[5][27] +
             t->Phi[6][6]*f->P[6][27] + t->Phi[6][7]*f->P[7][27] + t->Phi[6][8]*f->P[8][27] +
             t->Phi[6][9]*f->P[9][27] + t->Phi[6][10]*f->P[10][27] + t->Phi[6][11]*f->P[11][27] +
@@ -7178,7 +7199,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][27] + t->Phi[6][24]*f->P[24][27] + t->Phi[6][25]*f->P[25][27] +
             t->Phi[6][26]*f->P[26][27] + t->Phi[6][27]*f->P[27][27] + t->Phi[6][28]*f->P[28][27] +
             t->Phi[6][29]*f->P[29][27];
-    w->M[6][28] = t->Phi[6][0]*f->P[0][28] + t->Phi[6][1]*f->P[1][28] + t->Phi[6][2]*f->P[2][28] +
+    w->M[28] = t->Phi[6][0]*f->P[0][28] + t->Phi[6][1]*f->P[1][28] + t->Phi[6][2]*f->P[2][28] +
             t->Phi[6][3]*f->P[3][28] + t->Phi[6][4]*f->P[4][28] + t->Phi[6][5]*f->P[5][28] +
             t->Phi[6][6]*f->P[6][28] + t->Phi[6][7]*f->P[7][28] + t->Phi[6][8]*f->P[8][28] +
             t->Phi[6][9]*f->P[9][28] + t->Phi[6][10]*f->P[10][28] + t->Phi[6][11]*f->P[11][28] +
@@ -7188,7 +7209,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][28] + t->Phi[6][24]*f->P[24][28] + t->Phi[6][25]*f->P[25][28] +
             t->Phi[6][26]*f->P[26][28] + t->Phi[6][27]*f->P[27][28] + t->Phi[6][28]*f->P[28][28] +
             t->Phi[6][29]*f->P[29][28];
-    w->M[6][29] = t->Phi[6][0]*f->P[0][29] + t->Phi[6][1]*f->P[1][29] + t->Phi[6][2]*f->P[2][29] +
+    w->M[29] = t->Phi[6][0]*f->P[0][29] + t->Phi[6][1]*f->P[1][29] + t->Phi[6][2]*f->P[2][29] +
             t->Phi[6][3]*f->P[3][29] + t->Phi[6][4]*f->P[4][29] + t->Phi[6][5]*f->P[5][29] +
             t->Phi[6][6]*f->P[6][29] + t->Phi[6][7]*f->P[7][29] + t->Phi[6][8]*f->P[8][29] +
             t->Phi[6][9]*f->P[9][29] + t->Phi[6][10]*f->P[10][29] + t->Phi[6][11]*f->P[11][29] +
@@ -7198,7 +7219,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][29] + t->Phi[6][24]*f->P[24][29] + t->Phi[6][25]*f->P[25][29] +
             t->Phi[6][26]*f->P[26][29] + t->Phi[6][27]*f->P[27][29] + t->Phi[6][28]*f->P[28][29] +
             t->Phi[6][29]*f->P[29][29];
-    w->M[6][30] = t->Phi[6][0]*f->P[0][30] + t->Phi[6][1]*f->P[1][30] + t->Phi[6][2]*f->P[2][30] +
+    w->M[30] = t->Phi[6][0]*f->P[0][30] + t->Phi[6][1]*f->P[1][30] + t->Phi[6][2]*f->P[2][30] +
             t->Phi[6][3]*f->P[3][30] + t->Phi[6][4]*f->P[4][30] + t->Phi[6][5]*f->P[5][30] +
             t->Phi[6][6]*f->P[6][30] + t->Phi[6][7]*f->P[7][30] + t->Phi[6][8]*f->P[8][30] +
             t->Phi[6][9]*f->P[9][30] + t->Phi[6][10]*f->P[10][30] + t->Phi[6][11]*f->P[11][30] +
@@ -7208,7 +7229,7 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][23]*f->P[23][30] + t->Phi[6][24]*f->P[24][30] + t->Phi[6][25]*f->P[25][30] +
             t->Phi[6][26]*f->P[26][30] + t->Phi[6][27]*f->P[27][30] + t->Phi[6][28]*f->P[28][30] +
             t->Phi[6][29]*f->P[29][30];
-    w->M[6][31] = t->Phi[6][0]*f->P[0][31] + t->Phi[6][1]*f->P[1][31] + t->Phi[6][2]*f->P[2][31] +
+    w->M[31] = t->Phi[6][0]*f->P[0][31] + t->Phi[6][1]*f->P[1][31] + t->Phi[6][2]*f->P[2][31] +
             t->Phi[6][3]*f->P[3][31] + t->Phi[6][4]*f->P[4][31] + t->Phi[6][5]*f->P[5][31] +
             t->Phi[6][6]*f->P[6][31] + t->Phi[6][7]*f->P[7][31] + t->Phi[6][8]*f->P[8][31] +
             t->Phi[6][9]*f->P[9][31] + t->Phi[6][10]*f->P[10][31] + t->Phi[6][11]*f->P[11][31] +
@@ -7220,790 +7241,46 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[6][29]*f->P[29][31];
 }
 
-static void phi_times_p_row_10(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
-{
-    w->M[10][0] = t->Phi[10][10]*f->P[10][0];
-    w->M[10][1] = t->Phi[10][10]*f->P[10][1];
-    w->M[10][2] = t->Phi[10][10]*f->P[10][2];
-    w->M[10][3] = t->Phi[10][10]*f->P[10][3];
-    w->M[10][4] = t->Phi[10][10]*f->P[10][4];
-    w->M[10][5] = t->Phi[10][10]*f->P[10][5];
-    w->M[10][6] = t->Phi[10][10]*f->P[10][6];
-    w->M[10][7] = t->Phi[10][10]*f->P[10][7];
-    w->M[10][8] = t->Phi[10][10]*f->P[10][8];
-    w->M[10][9] = t->Phi[10][10]*f->P[10][9];
-    w->M[10][10] = t->Phi[10][10]*f->P[10][10];
-    w->M[10][11] = t->Phi[10][10]*f->P[10][11];
-    w->M[10][12] = t->Phi[10][10]*f->P[10][12];
-    w->M[10][13] = t->Phi[10][10]*f->P[10][13];
-    w->M[10][14] = t->Phi[10][10]*f->P[10][14];
-    w->M[10][15] = t->Phi[10][10]*f->P[10][15];
-    w->M[10][16] = t->Phi[10][10]*f->P[10][16];
-    w->M[10][17] = t->Phi[10][10]*f->P[10][17];
-    w->M[10][18] = t->Phi[10][10]*f->P[10][18];
-    w->M[10][19] = t->Phi[10][10]*f->P[10][19];
-    w->M[10][20] = t->Phi[10][10]*f->P[10][20];
-    w->M[10][21] = t->Phi[10][10]*f->P[10][21];
-    w->M[10][22] = t->Phi[10][10]*f->P[10][22];
-    w->M[10][23] = t->Phi[10][10]*f->P[10][23];
-    w->M[10][24] = t->Phi[10][10]*f->P[10][24];
-    w->M[10][25] = t->Phi[10][10]*f->P[10][25];
-    w->M[10][26] = t->Phi[10][10]*f->P[10][26];
-    w->M[10][27] = t->Phi[10][10]*f->P[10][27];
-    w->M[10][28] = t->Phi[10][10]*f->P[10][28];
-    w->M[10][29] = t->Phi[10][10]*f->P[10][29];
-    w->M[10][30] = t->Phi[10][10]*f->P[10][30];
-    w->M[10][31] = t->Phi[10][10]*f->P[10][31];
-}
-
-static void phi_times_p_row_11(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
-{
-    w->M[11][0] = t->Phi[11][11]*f->P[11][0];
-    w->M[11][1] = t->Phi[11][11]*f->P[11][1];
-    w->M[11][2] = t->Phi[11][11]*f->P[11][2];
-    w->M[11][3] = t->Phi[11][11]*f->P[11][3];
-    w->M[11][4] = t->Phi[11][11]*f->P[11][4];
-    w->M[11][5] = t->Phi[11][11]*f->P[11][5];
-    w->M[11][6] = t->Phi[11][11]*f->P[11][6];
-    w->M[11][7] = t->Phi[11][11]*f->P[11][7];
-    w->M[11][8] = t->Phi[11][11]*f->P[11][8];
-    w->M[11][9] = t->Phi[11][11]*f->P[11][9];
-    w->M[11][10] = t->Phi[11][11]*f->P[11][10];
-    w->M[11][11] = t->Phi[11][11]*f->P[11][11];
-    w->M[11][12] = t->Phi[11][11]*f->P[11][12];
-    w->M[11][13] = t->Phi[11][11]*f->P[11][13];
-    w->M[11][14] = t->Phi[11][11]*f->P[11][14];
-    w->M[11][15] = t->Phi[11][11]*f->P[11][15];
-    w->M[11][16] = t->Phi[11][11]*f->P[11][16];
-    w->M[11][17] = t->Phi[11][11]*f->P[11][17];
-    w->M[11][18] = t->Phi[11][11]*f->P[11][18];
-    w->M[11][19] = t->Phi[11][11]*f->P[11][19];
-    w->M[11][20] = t->Phi[11][11]*f->P[11][20];
-    w->M[11][21] = t->Phi[11][11]*f->P[11][21];
-    w->M[11][22] = t->Phi[11][11]*f->P[11][22];
-    w->M[11][23] = t->Phi[11][11]*f->P[11][23];
-    w->M[11][24] = t->Phi[11][11]*f->P[11][24];
-    w->M[11][25] = t->Phi[11][11]*f->P[11][25];
-    w->M[11][26] = t->Phi[11][11]*f->P[11][26];
-    w->M[11][27] = t->Phi[11][11]*f->P[11][27];
-    w->M[11][28] = t->Phi[11][11]*f->P[11][28];
-    w->M[11][29] = t->Phi[11][11]*f->P[11][29];
-    w->M[11][30] = t->Phi[11][11]*f->P[11][30];
-    w->M[11][31] = t->Phi[11][11]*f->P[11][31];
-}
-
-static void phi_times_p_row_12(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
-{
-    w->M[12][0] = t->Phi[12][12]*f->P[12][0];
-    w->M[12][1] = t->Phi[12][12]*f->P[12][1];
-    w->M[12][2] = t->Phi[12][12]*f->P[12][2];
-    w->M[12][3] = t->Phi[12][12]*f->P[12][3];
-    w->M[12][4] = t->Phi[12][12]*f->P[12][4];
-    w->M[12][5] = t->Phi[12][12]*f->P[12][5];
-    w->M[12][6] = t->Phi[12][12]*f->P[12][6];
-    w->M[12][7] = t->Phi[12][12]*f->P[12][7];
-    w->M[12][8] = t->Phi[12][12]*f->P[12][8];
-    w->M[12][9] = t->Phi[12][12]*f->P[12][9];
-    w->M[12][10] = t->Phi[12][12]*f->P[12][10];
-    w->M[12][11] = t->Phi[12][12]*f->P[12][11];
-    w->M[12][12] = t->Phi[12][12]*f->P[12][12];
-    w->M[12][13] = t->Phi[12][12]*f->P[12][13];
-    w->M[12][14] = t->Phi[12][12]*f->P[12][14];
-    w->M[12][15] = t->Phi[12][12]*f->P[12][15];
-    w->M[12][16] = t->Phi[12][12]*f->P[12][16];
-    w->M[12][17] = t->Phi[12][12]*f->P[12][17];
-    w->M[12][18] = t->Phi[12][12]*f->P[12][18];
-    w->M[12][19] = t->Phi[12][12]*f->P[12][19];
-    w->M[12][20] = t->Phi[12][12]*f->P[12][20];
-    w->M[12][21] = t->Phi[12][12]*f->P[12][21];
-    w->M[12][22] = t->Phi[12][12]*f->P[12][22];
-    w->M[12][23] = t->Phi[12][12]*f->P[12][23];
-    w->M[12][24] = t->Phi[12][12]*f->P[12][24];
-    w->M[12][25] = t->Phi[12][12]*f->P[12][25];
-    w->M[12][26] = t->Phi[12][12]*f->P[12][26];
-    w->M[12][27] = t->Phi[12][12]*f->P[12][27];
-    w->M[12][28] = t->Phi[12][12]*f->P[12][28];
-    w->M[12][29] = t->Phi[12][12]*f->P[12][29];
-    w->M[12][30] = t->Phi[12][12]*f->P[12][30];
-    w->M[12][31] = t->Phi[12][12]*f->P[12][31];
-}
-
-static void phi_times_p_row_13(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
-{
-    w->M[13][0] = t->Phi[13][13]*f->P[13][0];
-    w->M[13][1] = t->Phi[13][13]*f->P[13][1];
-    w->M[13][2] = t->Phi[13][13]*f->P[13][2];
-    w->M[13][3] = t->Phi[13][13]*f->P[13][3];
-    w->M[13][4] = t->Phi[13][13]*f->P[13][4];
-    w->M[13][5] = t->Phi[13][13]*f->P[13][5];
-    w->M[13][6] = t->Phi[13][13]*f->P[13][6];
-    w->M[13][7] = t->Phi[13][13]*f->P[13][7];
-    w->M[13][8] = t->Phi[13][13]*f->P[13][8];
-    w->M[13][9] = t->Phi[13][13]*f->P[13][9];
-    w->M[13][10] = t->Phi[13][13]*f->P[13][10];
-    w->M[13][11] = t->Phi[13][13]*f->P[13][11];
-    w->M[13][12] = t->Phi[13][13]*f->P[13][12];
-    w->M[13][13] = t->Phi[13][13]*f->P[13][13];
-    w->M[13][14] = t->Phi[13][13]*f->P[13][14];
-    w->M[13][15] = t->Phi[13][13]*f->P[13][15];
-    w->M[13][16] = t->Phi[13][13]*f->P[13][16];
-    w->M[13][17] = t->Phi[13][13]*f->P[13][17];
-    w->M[13][18] = t->Phi[13][13]*f->P[13][18];
-    w->M[13][19] = t->Phi[13][13]*f->P[13][19];
-    w->M[13][20] = t->Phi[13][13]*f->P[13][20];
-    w->M[13][21] = t->Phi[13][13]*f->P[13][21];
-    w->M[13][22] = t->Phi[13][13]*f->P[13][22];
-    w->M[13][23] = t->Phi[13][13]*f->P[13][23];
-    w->M[13][24] = t->Phi[13][13]*f->P[13][24];
-    w->M[13][25] = t->Phi[13][13]*f->P[13][25];
-    w->M[13][26] = t->Phi[13][13]*f->P[13][26];
-    w->M[13][27] = t->Phi[13][13]*f->P[13][27];
-    w->M[13][28] = t->Phi[13][13]*f->P[13][28];
-    w->M[13][29] = t->Phi[13][13]*f->P[13][29];
-    w->M[13][30] = t->Phi[13][13]*f->P[13][30];
-    w->M[13][31] = t->Phi[13][13]*f->P[13][31];
-}
-
-static void phi_times_p_row_14(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
-{
-    w->M[14][0] = t->Phi[14][14]*f->P[14][0];
-    w->M[14][1] = t->Phi[14][14]*f->P[14][1];
-    w->M[14][2] = t->Phi[14][14]*f->P[14][2];
-    w->M[14][3] = t->Phi[14][14]*f->P[14][3];
-    w->M[14][4] = t->Phi[14][14]*f->P[14][4];
-    w->M[14][5] = t->Phi[14][14]*f->P[14][5];
-    w->M[14][6] = t->Phi[14][14]*f->P[14][6];
-    w->M[14][7] = t->Phi[14][14]*f->P[14][7];
-    w->M[14][8] = t->Phi[14][14]*f->P[14][8];
-    w->M[14][9] = t->Phi[14][14]*f->P[14][9];
-    w->M[14][10] = t->Phi[14][14]*f->P[14][10];
-    w->M[14][11] = t->Phi[14][14]*f->P[14][11];
-    w->M[14][12] = t->Phi[14][14]*f->P[14][12];
-    w->M[14][13] = t->Phi[14][14]*f->P[14][13];
-    w->M[14][14] = t->Phi[14][14]*f->P[14][14];
-    w->M[14][15] = t->Phi[14][14]*f->P[14][15];
-    w->M[14][16] = t->Phi[14][14]*f->P[14][16];
-    w->M[14][17] = t->Phi[14][14]*f->P[14][17];
-    w->M[14][18] = t->Phi[14][14]*f->P[14][18];
-    w->M[14][19] = t->Phi[14][14]*f->P[14][19];
-    w->M[14][20] = t->Phi[14][14]*f->P[14][20];
-    w->M[14][21] = t->Phi[14][14]*f->P[14][21];
-    w->M[14][22] = t->Phi[14][14]*f->P[14][22];
-    w->M[14][23] = t->Phi[14][14]*f->P[14][23];
-    w->M[14][24] = t->Phi[14][14]*f->P[14][24];
-    w->M[14][25] = t->Phi[14][14]*f->P[14][25];
-    w->M[14][26] = t->Phi[14][14]*f->P[14][26];
-    w->M[14][27] = t->Phi[14][14]*f->P[14][27];
-    w->M[14][28] = t->Phi[14][14]*f->P[14][28];
-    w->M[14][29] = t->Phi[14][14]*f->P[14][29];
-    w->M[14][30] = t->Phi[14][14]*f->P[14][30];
-    w->M[14][31] = t->Phi[14][14]*f->P[14][31];
-}
-
-static void phi_times_p_row_15(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
-{
-    w->M[15][0] = t->Phi[15][15]*f->P[15][0];
-    w->M[15][1] = t->Phi[15][15]*f->P[15][1];
-    w->M[15][2] = t->Phi[15][15]*f->P[15][2];
-    w->M[15][3] = t->Phi[15][15]*f->P[15][3];
-    w->M[15][4] = t->Phi[15][15]*f->P[15][4];
-    w->M[15][5] = t->Phi[15][15]*f->P[15][5];
-    w->M[15][6] = t->Phi[15][15]*f->P[15][6];
-    w->M[15][7] = t->Phi[15][15]*f->P[15][7];
-    w->M[15][8] = t->Phi[15][15]*f->P[15][8];
-    w->M[15][9] = t->Phi[15][15]*f->P[15][9];
-    w->M[15][10] = t->Phi[15][15]*f->P[15][10];
-    w->M[15][11] = t->Phi[15][15]*f->P[15][11];
-    w->M[15][12] = t->Phi[15][15]*f->P[15][12];
-    w->M[15][13] = t->Phi[15][15]*f->P[15][13];
-    w->M[15][14] = t->Phi[15][15]*f->P[15][14];
-    w->M[15][15] = t->Phi[15][15]*f->P[15][15];
-    w->M[15][16] = t->Phi[15][15]*f->P[15][16];
-    w->M[15][17] = t->Phi[15][15]*f->P[15][17];
-    w->M[15][18] = t->Phi[15][15]*f->P[15][18];
-    w->M[15][19] = t->Phi[15][15]*f->P[15][19];
-    w->M[15][20] = t->Phi[15][15]*f->P[15][20];
-    w->M[15][21] = t->Phi[15][15]*f->P[15][21];
-    w->M[15][22] = t->Phi[15][15]*f->P[15][22];
-    w->M[15][23] = t->Phi[15][15]*f->P[15][23];
-    w->M[15][24] = t->Phi[15][15]*f->P[15][24];
-    w->M[15][25] = t->Phi[15][15]*f->P[15][25];
-    w->M[15][26] = t->Phi[15][15]*f->P[15][26];
-    w->M[15][27] = t->Phi[15][15]*f->P[15][27];
-    w->M[15][28] = t->Phi[15][15]*f->P[15][28];
-    w->M[15][29] = t->Phi[15][15]*f->P[15][29];
-    w->M[15][30] = t->Phi[15][15]*f->P[15][30];
-    w->M[15][31] = t->Phi[15][15]*f->P[15][31];
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[0][0]*t->Phi[0][0] + w->M[0][1]*t->Phi[0][1] + w->M[0][2]*t->Phi[0][2] +
-            w->M[0][3]*t->Phi[0][3] + w->M[0][4]*t->Phi[0][4] + w->M[0][5]*t->Phi[0][5] +
-            w->M[0][7]*t->Phi[0][7] + w->M[0][8]*t->Phi[0][8] + w->M[0][9]*t->Phi[0][9] +
-            w->M[0][10]*t->Phi[0][10] + w->M[0][11]*t->Phi[0][11] + w->M[0][12]*t->Phi[0][12] +
-            w->M[0][13]*t->Phi[0][13] + w->M[0][14]*t->Phi[0][14] + w->M[0][15]*t->Phi[0][15] +
-            w->M[0][18]*t->Phi[0][18] + w->M[0][19]*t->Phi[0][19] + w->M[0][20]*t->Phi[0][20] +
-            w->M[0][21]*t->Phi[0][21] + w->M[0][22]*t->Phi[0][22] + w->M[0][23]*t->Phi[0][23] +
-            w->M[0][24]*t->Phi[0][24] + w->M[0][25]*t->Phi[0][25] + w->M[0][26]*t->Phi[0][26] +
-            w->M[0][27]*t->Phi[0][27] + w->M[0][28]*t->Phi[0][28] + w->M[0][29]*t->Phi[0][29] +
-            t->Qd[0][0]; w->Pn[0][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[1][0] + w->M[0][1]*t->Phi[1][1] + w->M[0][2]*t->Phi[1][2] +
-            w->M[0][3]*t->Phi[1][3] + w->M[0][4]*t->Phi[1][4] + w->M[0][5]*t->Phi[1][5] +
-            w->M[0][7]*t->Phi[1][7] + w->M[0][8]*t->Phi[1][8] + w->M[0][9]*t->Phi[1][9] +
-            w->M[0][10]*t->Phi[1][10] + w->M[0][11]*t->Phi[1][11] + w->M[0][12]*t->Phi[1][12] +
-            w->M[0][13]*t->Phi[1][13] + w->M[0][14]*t->Phi[1][14] + w->M[0][15]*t->Phi[1][15] +
-            w->M[0][18]*t->Phi[1][18] + w->M[0][19]*t->Phi[1][19] + w->M[0][20]*t->Phi[1][20] +
-            w->M[0][21]*t->Phi[1][21] + w->M[0][22]*t->Phi[1][22] + w->M[0][23]*t->Phi[1][23] +
-            w->M[0][24]*t->Phi[1][24] + w->M[0][25]*t->Phi[1][25] + w->M[0][26]*t->Phi[1][26] +
-            w->M[0][27]*t->Phi[1][27] + w->M[0][28]*t->Phi[1][28] + w->M[0][29]*t->Phi[1][29] +
-            t->Qd[0][1]; w->Pn[0][1] = v; w->Pn[1][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[2][0] + w->M[0][1]*t->Phi[2][1] + w->M[0][2]*t->Phi[2][2] +
-            w->M[0][3]*t->Phi[2][3] + w->M[0][4]*t->Phi[2][4] + w->M[0][5]*t->Phi[2][5] +
-            w->M[0][7]*t->Phi[2][7] + w->M[0][8]*t->Phi[2][8] + w->M[0][9]*t->Phi[2][9] +
-            w->M[0][10]*t->Phi[2][10] + w->M[0][11]*t->Phi[2][11] + w->M[0][12]*t->Phi[2][12] +
-            w->M[0][13]*t->Phi[2][13] + w->M[0][14]*t->Phi[2][14] + w->M[0][15]*t->Phi[2][15] +
-            w->M[0][18]*t->Phi[2][18] + w->M[0][19]*t->Phi[2][19] + w->M[0][20]*t->Phi[2][20] +
-            w->M[0][21]*t->Phi[2][21] + w->M[0][22]*t->Phi[2][22] + w->M[0][23]*t->Phi[2][23] +
-            w->M[0][24]*t->Phi[2][24] + w->M[0][25]*t->Phi[2][25] + w->M[0][26]*t->Phi[2][26] +
-            w->M[0][27]*t->Phi[2][27] + w->M[0][28]*t->Phi[2][28] + w->M[0][29]*t->Phi[2][29] +
-            t->Qd[0][2]; w->Pn[0][2] = v; w->Pn[2][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[3][0] + w->M[0][1]*t->Phi[3][1] + w->M[0][2]*t->Phi[3][2] +
-            w->M[0][3]*t->Phi[3][3] + w->M[0][4]*t->Phi[3][4] + w->M[0][5]*t->Phi[3][5] +
-            w->M[0][7]*t->Phi[3][7] + w->M[0][8]*t->Phi[3][8] + w->M[0][9]*t->Phi[3][9] +
-            w->M[0][10]*t->Phi[3][10] + w->M[0][11]*t->Phi[3][11] + w->M[0][12]*t->Phi[3][12] +
-            w->M[0][13]*t->Phi[3][13] + w->M[0][14]*t->Phi[3][14] + w->M[0][15]*t->Phi[3][15] +
-            w->M[0][18]*t->Phi[3][18] + w->M[0][19]*t->Phi[3][19] + w->M[0][20]*t->Phi[3][20] +
-            w->M[0][21]*t->Phi[3][21] + w->M[0][22]*t->Phi[3][22] + w->M[0][23]*t->Phi[3][23] +
-            w->M[0][24]*t->Phi[3][24] + w->M[0][25]*t->Phi[3][25] + w->M[0][26]*t->Phi[3][26] +
-            w->M[0][27]*t->Phi[3][27] + w->M[0][28]*t->Phi[3][28] + w->M[0][29]*t->Phi[3][29] +
-            t->Qd[0][3]; w->Pn[0][3] = v; w->Pn[3][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[4][0] + w->M[0][1]*t->Phi[4][1] + w->M[0][2]*t->Phi[4][2] +
-            w->M[0][3]*t->Phi[4][3] + w->M[0][4]*t->Phi[4][4] + w->M[0][5]*t->Phi[4][5] +
-            w->M[0][7]*t->Phi[4][7] + w->M[0][8]*t->Phi[4][8] + w->M[0][9]*t->Phi[4][9] +
-            w->M[0][10]*t->Phi[4][10] + w->M[0][11]*t->Phi[4][11] + w->M[0][12]*t->Phi[4][12] +
-            w->M[0][13]*t->Phi[4][13] + w->M[0][14]*t->Phi[4][14] + w->M[0][15]*t->Phi[4][15] +
-            w->M[0][18]*t->Phi[4][18] + w->M[0][19]*t->Phi[4][19] + w->M[0][20]*t->Phi[4][20] +
-            w->M[0][21]*t->Phi[4][21] + w->M[0][22]*t->Phi[4][22] + w->M[0][23]*t->Phi[4][23] +
-            w->M[0][24]*t->Phi[4][24] + w->M[0][25]*t->Phi[4][25] + w->M[0][26]*t->Phi[4][26] +
-            w->M[0][27]*t->Phi[4][27] + w->M[0][28]*t->Phi[4][28] + w->M[0][29]*t->Phi[4][29] +
-            t->Qd[0][4]; w->Pn[0][4] = v; w->Pn[4][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[5][0] + w->M[0][1]*t->Phi[5][1] + w->M[0][2]*t->Phi[5][2] +
-            w->M[0][3]*t->Phi[5][3] + w->M[0][4]*t->Phi[5][4] + w->M[0][5]*t->Phi[5][5] +
-            w->M[0][7]*t->Phi[5][7] + w->M[0][8]*t->Phi[5][8] + w->M[0][9]*t->Phi[5][9] +
-            w->M[0][10]*t->Phi[5][10] + w->M[0][11]*t->Phi[5][11] + w->M[0][12]*t->Phi[5][12] +
-            w->M[0][13]*t->Phi[5][13] + w->M[0][14]*t->Phi[5][14] + w->M[0][15]*t->Phi[5][15] +
-            w->M[0][18]*t->Phi[5][18] + w->M[0][19]*t->Phi[5][19] + w->M[0][20]*t->Phi[5][20] +
-            w->M[0][21]*t->Phi[5][21] + w->M[0][22]*t->Phi[5][22] + w->M[0][23]*t->Phi[5][23] +
-            w->M[0][24]*t->Phi[5][24] + w->M[0][25]*t->Phi[5][25] + w->M[0][26]*t->Phi[5][26] +
-            w->M[0][27]*t->Phi[5][27] + w->M[0][28]*t->Phi[5][28] + w->M[0][29]*t->Phi[5][29] +
-            t->Qd[0][5]; w->Pn[0][5] = v; w->Pn[5][0] = v; check += v - v;
-    v = w->M[0][0]*t->Phi[6][0] + w->M[0][1]*t->Phi[6][1] + w->M[0][2]*t->Phi[6][2] +
-            w->M[0][3]*t->Phi[6][3] + w->M[0][4]*t->Phi[6][4] + w->M[0][5]*t->Phi[6][5] +
-            w->M[0][6]*t->Phi[6][6] + w->M[0][7]*t->Phi[6][7] + w->M[0][8]*t->Phi[6][8] +
-            w->M[0][9]*t->Phi[6][9] + w->M[0][10]*t->Phi[6][10] + w->M[0][11]*t->Phi[6][11] +
-            w->M[0][12]*t->Phi[6][12] + w->M[0][13]*t->Phi[6][13] + w->M[0][14]*t->Phi[6][14] +
-            w->M[0][15]*t->Phi[6][15] + w->M[0][18]*t->Phi[6][18] + w->M[0][19]*t->Phi[6][19] +
-            w->M[0][20]*t->Phi[6][20] + w->M[0][21]*t->Phi[6][21] + w->M[0][22]*t->Phi[6][22] +
-            w->M[0][23]*t->Phi[6][23] + w->M[0][24]*t->Phi[6][24] + w->M[0][25]*t->Phi[6][25] +
-            w->M[0][26]*t->Phi[6][26] + w->M[0][27]*t->Phi[6][27] + w->M[0][28]*t->Phi[6][28] +
-            w->M[0][29]*t->Phi[6][29] + t->Qd[0][6]; w->Pn[0][6] = v; w->Pn[6][0] = v; check += v -
-            v;
-    v = w->M[0][7]; w->Pn[0][7] = v; w->Pn[7][0] = v; check += v - v;
-    v = w->M[0][8]; w->Pn[0][8] = v; w->Pn[8][0] = v; check += v - v;
-    v = w->M[0][9]; w->Pn[0][9] = v; w->Pn[9][0] = v; check += v - v;
-    v = w->M[0][10]*t->Phi[10][10] + t->Qd[0][10]; w->Pn[0][10] = v; w->Pn[10][0] = v; check += v -
-            v;
-    v = w->M[0][11]*t->Phi[11][11] + t->Qd[0][11]; w->Pn[0][11] = v; w->Pn[11][0] = v; check += v -
-            v;
-    v = w->M[0][12]*t->Phi[12][12] + t->Qd[0][12]; w->Pn[0][12] = v; w->Pn[12][0] = v; check += v -
-            v;
-    v = w->M[0][13]*t->Phi[13][13] + t->Qd[0][13]; w->Pn[0][13] = v; w->Pn[13][0] = v; check += v -
-            v;
-    v = w->M[0][14]*t->Phi[14][14] + t->Qd[0][14]; w->Pn[0][14] = v; w->Pn[14][0] = v; check += v -
-            v;
-    v = w->M[0][15]*t->Phi[15][15] + t->Qd[0][15]; w->Pn[0][15] = v; w->Pn[15][0] = v; check += v -
-            v;
-    v = w->M[0][16]; w->Pn[0][16] = v; w->Pn[16][0] = v; check += v - v;
-    v = w->M[0][17]; w->Pn[0][17] = v; w->Pn[17][0] = v; check += v - v;
-    v = w->M[0][18]; w->Pn[0][18] = v; w->Pn[18][0] = v; check += v - v;
-    v = w->M[0][19]; w->Pn[0][19] = v; w->Pn[19][0] = v; check += v - v;
-    v = w->M[0][20]; w->Pn[0][20] = v; w->Pn[20][0] = v; check += v - v;
-    v = w->M[0][21]; w->Pn[0][21] = v; w->Pn[21][0] = v; check += v - v;
-    v = w->M[0][22]; w->Pn[0][22] = v; w->Pn[22][0] = v; check += v - v;
-    v = w->M[0][23]; w->Pn[0][23] = v; w->Pn[23][0] = v; check += v - v;
-    v = w->M[0][24]; w->Pn[0][24] = v; w->Pn[24][0] = v; check += v - v;
-    v = w->M[0][25]; w->Pn[0][25] = v; w->Pn[25][0] = v; check += v - v;
-    v = w->M[0][26]; w->Pn[0][26] = v; w->Pn[26][0] = v; check += v - v;
-    v = w->M[0][27]; w->Pn[0][27] = v; w->Pn[27][0] = v; check += v - v;
-    v = w->M[0][28]; w->Pn[0][28] = v; w->Pn[28][0] = v; check += v - v;
-    v = w->M[0][29]; w->Pn[0][29] = v; w->Pn[29][0] = v; check += v - v;
-    v = w->M[0][30]; w->Pn[0][30] = v; w->Pn[30][0] = v; check += v - v;
-    v = w->M[0][31]; w->Pn[0][31] = v; w->Pn[31][0] = v; check += v - v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_1(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[1][0]*t->Phi[1][0] + w->M[1][1]*t->Phi[1][1] + w->M[1][2]*t->Phi[1][2] +
-            w->M[1][3]*t->Phi[1][3] + w->M[1][4]*t->Phi[1][4] + w->M[1][5]*t->Phi[1][5] +
-            w->M[1][7]*t->Phi[1][7] + w->M[1][8]*t->Phi[1][8] + w->M[1][9]*t->Phi[1][9] +
-            w->M[1][10]*t->Phi[1][10] + w->M[1][11]*t->Phi[1][11] + w->M[1][12]*t->Phi[1][12] +
-            w->M[1][13]*t->Phi[1][13] + w->M[1][14]*t->Phi[1][14] + w->M[1][15]*t->Phi[1][15] +
-            w->M[1][18]*t->Phi[1][18] + w->M[1][19]*t->Phi[1][19] + w->M[1][20]*t->Phi[1][20] +
-            w->M[1][21]*t->Phi[1][21] + w->M[1][22]*t->Phi[1][22] + w->M[1][23]*t->Phi[1][23] +
-            w->M[1][24]*t->Phi[1][24] + w->M[1][25]*t->Phi[1][25] + w->M[1][26]*t->Phi[1][26] +
-            w->M[1][27]*t->Phi[1][27] + w->M[1][28]*t->Phi[1][28] + w->M[1][29]*t->Phi[1][29] +
-            t->Qd[1][1]; w->Pn[1][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[2][0] + w->M[1][1]*t->Phi[2][1] + w->M[1][2]*t->Phi[2][2] +
-            w->M[1][3]*t->Phi[2][3] + w->M[1][4]*t->Phi[2][4] + w->M[1][5]*t->Phi[2][5] +
-            w->M[1][7]*t->Phi[2][7] + w->M[1][8]*t->Phi[2][8] + w->M[1][9]*t->Phi[2][9] +
-            w->M[1][10]*t->Phi[2][10] + w->M[1][11]*t->Phi[2][11] + w->M[1][12]*t->Phi[2][12] +
-            w->M[1][13]*t->Phi[2][13] + w->M[1][14]*t->Phi[2][14] + w->M[1][15]*t->Phi[2][15] +
-            w->M[1][18]*t->Phi[2][18] + w->M[1][19]*t->Phi[2][19] + w->M[1][20]*t->Phi[2][20] +
-            w->M[1][21]*t->Phi[2][21] + w->M[1][22]*t->Phi[2][22] + w->M[1][23]*t->Phi[2][23] +
-            w->M[1][24]*t->Phi[2][24] + w->M[1][25]*t->Phi[2][25] + w->M[1][26]*t->Phi[2][26] +
-            w->M[1][27]*t->Phi[2][27] + w->M[1][28]*t->Phi[2][28] + w->M[1][29]*t->Phi[2][29] +
-            t->Qd[1][2]; w->Pn[1][2] = v; w->Pn[2][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[3][0] + w->M[1][1]*t->Phi[3][1] + w->M[1][2]*t->Phi[3][2] +
-            w->M[1][3]*t->Phi[3][3] + w->M[1][4]*t->Phi[3][4] + w->M[1][5]*t->Phi[3][5] +
-            w->M[1][7]*t->Phi[3][7] + w->M[1][8]*t->Phi[3][8] + w->M[1][9]*t->Phi[3][9] +
-            w->M[1][10]*t->Phi[3][10] + w->M[1][11]*t->Phi[3][11] + w->M[1][12]*t->Phi[3][12] +
-            w->M[1][13]*t->Phi[3][13] + w->M[1][14]*t->Phi[3][14] + w->M[1][15]*t->Phi[3][15] +
-            w->M[1][18]*t->Phi[3][18] + w->M[1][19]*t->Phi[3][19] + w->M[1][20]*t->Phi[3][20] +
-            w->M[1][21]*t->Phi[3][21] + w->M[1][22]*t->Phi[3][22] + w->M[1][23]*t->Phi[3][23] +
-            w->M[1][24]*t->Phi[3][24] + w->M[1][25]*t->Phi[3][25] + w->M[1][26]*t->Phi[3][26] +
-            w->M[1][27]*t->Phi[3][27] + w->M[1][28]*t->Phi[3][28] + w->M[1][29]*t->Phi[3][29] +
-            t->Qd[1][3]; w->Pn[1][3] = v; w->Pn[3][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[4][0] + w->M[1][1]*t->Phi[4][1] + w->M[1][2]*t->Phi[4][2] +
-            w->M[1][3]*t->Phi[4][3] + w->M[1][4]*t->Phi[4][4] + w->M[1][5]*t->Phi[4][5] +
-            w->M[1][7]*t->Phi[4][7] + w->M[1][8]*t->Phi[4][8] + w->M[1][9]*t->Phi[4][9] +
-            w->M[1][10]*t->Phi[4][10] + w->M[1][11]*t->Phi[4][11] + w->M[1][12]*t->Phi[4][12] +
-            w->M[1][13]*t->Phi[4][13] + w->M[1][14]*t->Phi[4][14] + w->M[1][15]*t->Phi[4][15] +
-            w->M[1][18]*t->Phi[4][18] + w->M[1][19]*t->Phi[4][19] + w->M[1][20]*t->Phi[4][20] +
-            w->M[1][21]*t->Phi[4][21] + w->M[1][22]*t->Phi[4][22] + w->M[1][23]*t->Phi[4][23] +
-            w->M[1][24]*t->Phi[4][24] + w->M[1][25]*t->Phi[4][25] + w->M[1][26]*t->Phi[4][26] +
-            w->M[1][27]*t->Phi[4][27] + w->M[1][28]*t->Phi[4][28] + w->M[1][29]*t->Phi[4][29] +
-            t->Qd[1][4]; w->Pn[1][4] = v; w->Pn[4][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[5][0] + w->M[1][1]*t->Phi[5][1] + w->M[1][2]*t->Phi[5][2] +
-            w->M[1][3]*t->Phi[5][3] + w->M[1][4]*t->Phi[5][4] + w->M[1][5]*t->Phi[5][5] +
-            w->M[1][7]*t->Phi[5][7] + w->M[1][8]*t->Phi[5][8] + w->M[1][9]*t->Phi[5][9] +
-            w->M[1][10]*t->Phi[5][10] + w->M[1][11]*t->Phi[5][11] + w->M[1][12]*t->Phi[5][12] +
-            w->M[1][13]*t->Phi[5][13] + w->M[1][14]*t->Phi[5][14] + w->M[1][15]*t->Phi[5][15] +
-            w->M[1][18]*t->Phi[5][18] + w->M[1][19]*t->Phi[5][19] + w->M[1][20]*t->Phi[5][20] +
-            w->M[1][21]*t->Phi[5][21] + w->M[1][22]*t->Phi[5][22] + w->M[1][23]*t->Phi[5][23] +
-            w->M[1][24]*t->Phi[5][24] + w->M[1][25]*t->Phi[5][25] + w->M[1][26]*t->Phi[5][26] +
-            w->M[1][27]*t->Phi[5][27] + w->M[1][28]*t->Phi[5][28] + w->M[1][29]*t->Phi[5][29] +
-            t->Qd[1][5]; w->Pn[1][5] = v; w->Pn[5][1] = v; check += v - v;
-    v = w->M[1][0]*t->Phi[6][0] + w->M[1][1]*t->Phi[6][1] + w->M[1][2]*t->Phi[6][2] +
-            w->M[1][3]*t->Phi[6][3] + w->M[1][4]*t->Phi[6][4] + w->M[1][5]*t->Phi[6][5] +
-            w->M[1][6]*t->Phi[6][6] + w->M[1][7]*t->Phi[6][7] + w->M[1][8]*t->Phi[6][8] +
-            w->M[1][9]*t->Phi[6][9] + w->M[1][10]*t->Phi[6][10] + w->M[1][11]*t->Phi[6][11] +
-            w->M[1][12]*t->Phi[6][12] + w->M[1][13]*t->Phi[6][13] + w->M[1][14]*t->Phi[6][14] +
-            w->M[1][15]*t->Phi[6][15] + w->M[1][18]*t->Phi[6][18] + w->M[1][19]*t->Phi[6][19] +
-            w->M[1][20]*t->Phi[6][20] + w->M[1][21]*t->Phi[6][21] + w->M[1][22]*t->Phi[6][22] +
-            w->M[1][23]*t->Phi[6][23] + w->M[1][24]*t->Phi[6][24] + w->M[1][25]*t->Phi[6][25] +
-            w->M[1][26]*t->Phi[6][26] + w->M[1][27]*t->Phi[6][27] + w->M[1][28]*t->Phi[6][28] +
-            w->M[1][29]*t->Phi[6][29] + t->Qd[1][6]; w->Pn[1][6] = v; w->Pn[6][1] = v; check += v -
-            v;
-    v = w->M[1][7]; w->Pn[1][7] = v; w->Pn[7][1] = v; check += v - v;
-    v = w->M[1][8]; w->Pn[1][8] = v; w->Pn[8][1] = v; check += v - v;
-    v = w->M[1][9]; w->Pn[1][9] = v; w->Pn[9][1] = v; check += v - v;
-    v = w->M[1][10]*t->Phi[10][10] + t->Qd[1][10]; w->Pn[1][10] = v; w->Pn[10][1] = v; check += v -
-            v;
-    v = w->M[1][11]*t->Phi[11][11] + t->Qd[1][11]; w->Pn[1][11] = v; w->Pn[11][1] = v; check += v -
-            v;
-    v = w->M[1][12]*t->Phi[12][12] + t->Qd[1][12]; w->Pn[1][12] = v; w->Pn[12][1] = v; check += v -
-            v;
-    v = w->M[1][13]*t->Phi[13][13] + t->Qd[1][13]; w->Pn[1][13] = v; w->Pn[13][1] = v; check += v -
-            v;
-    v = w->M[1][14]*t->Phi[14][14] + t->Qd[1][14]; w->Pn[1][14] = v; w->Pn[14][1] = v; check += v -
-            v;
-    v = w->M[1][15]*t->Phi[15][15] + t->Qd[1][15]; w->Pn[1][15] = v; w->Pn[15][1] = v; check += v -
-            v;
-    v = w->M[1][16]; w->Pn[1][16] = v; w->Pn[16][1] = v; check += v - v;
-    v = w->M[1][17]; w->Pn[1][17] = v; w->Pn[17][1] = v; check += v - v;
-    v = w->M[1][18]; w->Pn[1][18] = v; w->Pn[18][1] = v; check += v - v;
-    v = w->M[1][19]; w->Pn[1][19] = v; w->Pn[19][1] = v; check += v - v;
-    v = w->M[1][20]; w->Pn[1][20] = v; w->Pn[20][1] = v; check += v - v;
-    v = w->M[1][21]; w->Pn[1][21] = v; w->Pn[21][1] = v; check += v - v;
-    v = w->M[1][22]; w->Pn[1][22] = v; w->Pn[22][1] = v; check += v - v;
-    v = w->M[1][23]; w->Pn[1][23] = v; w->Pn[23][1] = v; check += v - v;
-    v = w->M[1][24]; w->Pn[1][24] = v; w->Pn[24][1] = v; check += v - v;
-    v = w->M[1][25]; w->Pn[1][25] = v; w->Pn[25][1] = v; check += v - v;
-    v = w->M[1][26]; w->Pn[1][26] = v; w->Pn[26][1] = v; check += v - v;
-    v = w->M[1][27]; w->Pn[1][27] = v; w->Pn[27][1] = v; check += v - v;
-    v = w->M[1][28]; w->Pn[1][28] = v; w->Pn[28][1] = v; check += v - v;
-    v = w->M[1][29]; w->Pn[1][29] = v; w->Pn[29][1] = v; check += v - v;
-    v = w->M[1][30]; w->Pn[1][30] = v; w->Pn[30][1] = v; check += v - v;
-    v = w->M[1][31]; w->Pn[1][31] = v; w->Pn[31][1] = v; check += v - v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_2(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[2][0]*t->Phi[2][0] + w->M[2][1]*t->Phi[2][1] + w->M[2][2]*t->Phi[2][2] +
-            w->M[2][3]*t->Phi[2][3] + w->M[2][4]*t->Phi[2][4] + w->M[2][5]*t->Phi[2][5] +
-            w->M[2][7]*t->Phi[2][7] + w->M[2][8]*t->Phi[2][8] + w->M[2][9]*t->Phi[2][9] +
-            w->M[2][10]*t->Phi[2][10] + w->M[2][11]*t->Phi[2][11] + w->M[2][12]*t->Phi[2][12] +
-            w->M[2][13]*t->Phi[2][13] + w->M[2][14]*t->Phi[2][14] + w->M[2][15]*t->Phi[2][15] +
-            w->M[2][18]*t->Phi[2][18] + w->M[2][19]*t->Phi[2][19] + w->M[2][20]*t->Phi[2][20] +
-            w->M[2][21]*t->Phi[2][21] + w->M[2][22]*t->Phi[2][22] + w->M[2][23]*t->Phi[2][23] +
-            w->M[2][24]*t->Phi[2][24] + w->M[2][25]*t->Phi[2][25] + w->M[2][26]*t->Phi[2][26] +
-            w->M[2][27]*t->Phi[2][27] + w->M[2][28]*t->Phi[2][28] + w->M[2][29]*t->Phi[2][29] +
-            t->Qd[2][2]; w->Pn[2][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[3][0] + w->M[2][1]*t->Phi[3][1] + w->M[2][2]*t->Phi[3][2] +
-            w->M[2][3]*t->Phi[3][3] + w->M[2][4]*t->Phi[3][4] + w->M[2][5]*t->Phi[3][5] +
-            w->M[2][7]*t->Phi[3][7] + w->M[2][8]*t->Phi[3][8] + w->M[2][9]*t->Phi[3][9] +
-            w->M[2][10]*t->Phi[3][10] + w->M[2][11]*t->Phi[3][11] + w->M[2][12]*t->Phi[3][12] +
-            w->M[2][13]*t->Phi[3][13] + w->M[2][14]*t->Phi[3][14] + w->M[2][15]*t->Phi[3][15] +
-            w->M[2][18]*t->Phi[3][18] + w->M[2][19]*t->Phi[3][19] + w->M[2][20]*t->Phi[3][20] +
-            w->M[2][21]*t->Phi[3][21] + w->M[2][22]*t->Phi[3][22] + w->M[2][23]*t->Phi[3][23] +
-            w->M[2][24]*t->Phi[3][24] + w->M[2][25]*t->Phi[3][25] + w->M[2][26]*t->Phi[3][26] +
-            w->M[2][27]*t->Phi[3][27] + w->M[2][28]*t->Phi[3][28] + w->M[2][29]*t->Phi[3][29] +
-            t->Qd[2][3]; w->Pn[2][3] = v; w->Pn[3][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[4][0] + w->M[2][1]*t->Phi[4][1] + w->M[2][2]*t->Phi[4][2] +
-            w->M[2][3]*t->Phi[4][3] + w->M[2][4]*t->Phi[4][4] + w->M[2][5]*t->Phi[4][5] +
-            w->M[2][7]*t->Phi[4][7] + w->M[2][8]*t->Phi[4][8] + w->M[2][9]*t->Phi[4][9] +
-            w->M[2][10]*t->Phi[4][10] + w->M[2][11]*t->Phi[4][11] + w->M[2][12]*t->Phi[4][12] +
-            w->M[2][13]*t->Phi[4][13] + w->M[2][14]*t->Phi[4][14] + w->M[2][15]*t->Phi[4][15] +
-            w->M[2][18]*t->Phi[4][18] + w->M[2][19]*t->Phi[4][19] + w->M[2][20]*t->Phi[4][20] +
-            w->M[2][21]*t->Phi[4][21] + w->M[2][22]*t->Phi[4][22] + w->M[2][23]*t->Phi[4][23] +
-            w->M[2][24]*t->Phi[4][24] + w->M[2][25]*t->Phi[4][25] + w->M[2][26]*t->Phi[4][26] +
-            w->M[2][27]*t->Phi[4][27] + w->M[2][28]*t->Phi[4][28] + w->M[2][29]*t->Phi[4][29] +
-            t->Qd[2][4]; w->Pn[2][4] = v; w->Pn[4][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[5][0] + w->M[2][1]*t->Phi[5][1] + w->M[2][2]*t->Phi[5][2] +
-            w->M[2][3]*t->Phi[5][3] + w->M[2][4]*t->Phi[5][4] + w->M[2][5]*t->Phi[5][5] +
-            w->M[2][7]*t->Phi[5][7] + w->M[2][8]*t->Phi[5][8] + w->M[2][9]*t->Phi[5][9] +
-            w->M[2][10]*t->Phi[5][10] + w->M[2][11]*t->Phi[5][11] + w->M[2][12]*t->Phi[5][12] +
-            w->M[2][13]*t->Phi[5][13] + w->M[2][14]*t->Phi[5][14] + w->M[2][15]*t->Phi[5][15] +
-            w->M[2][18]*t->Phi[5][18] + w->M[2][19]*t->Phi[5][19] + w->M[2][20]*t->Phi[5][20] +
-            w->M[2][21]*t->Phi[5][21] + w->M[2][22]*t->Phi[5][22] + w->M[2][23]*t->Phi[5][23] +
-            w->M[2][24]*t->Phi[5][24] + w->M[2][25]*t->Phi[5][25] + w->M[2][26]*t->Phi[5][26] +
-            w->M[2][27]*t->Phi[5][27] + w->M[2][28]*t->Phi[5][28] + w->M[2][29]*t->Phi[5][29] +
-            t->Qd[2][5]; w->Pn[2][5] = v; w->Pn[5][2] = v; check += v - v;
-    v = w->M[2][0]*t->Phi[6][0] + w->M[2][1]*t->Phi[6][1] + w->M[2][2]*t->Phi[6][2] +
-            w->M[2][3]*t->Phi[6][3] + w->M[2][4]*t->Phi[6][4] + w->M[2][5]*t->Phi[6][5] +
-            w->M[2][6]*t->Phi[6][6] + w->M[2][7]*t->Phi[6][7] + w->M[2][8]*t->Phi[6][8] +
-            w->M[2][9]*t->Phi[6][9] + w->M[2][10]*t->Phi[6][10] + w->M[2][11]*t->Phi[6][11] +
-            w->M[2][12]*t->Phi[6][12] + w->M[2][13]*t->Phi[6][13] + w->M[2][14]*t->Phi[6][14] +
-            w->M[2][15]*t->Phi[6][15] + w->M[2][18]*t->Phi[6][18] + w->M[2][19]*t->Phi[6][19] +
-            w->M[2][20]*t->Phi[6][20] + w->M[2][21]*t->Phi[6][21] + w->M[2][22]*t->Phi[6][22] +
-            w->M[2][23]*t->Phi[6][23] + w->M[2][24]*t->Phi[6][24] + w->M[2][25]*t->Phi[6][25] +
-            w->M[2][26]*t->Phi[6][26] + w->M[2][27]*t->Phi[6][27] + w->M[2][28]*t->Phi[6][28] +
-            w->M[2][29]*t->Phi[6][29] + t->Qd[2][6]; w->Pn[2][6] = v; w->Pn[6][2] = v; check += v -
-            v;
-    v = w->M[2][7]; w->Pn[2][7] = v; w->Pn[7][2] = v; check += v - v;
-    v = w->M[2][8]; w->Pn[2][8] = v; w->Pn[8][2] = v; check += v - v;
-    v = w->M[2][9]; w->Pn[2][9] = v; w->Pn[9][2] = v; check += v - v;
-    v = w->M[2][10]*t->Phi[10][10] + t->Qd[2][10]; w->Pn[2][10] = v; w->Pn[10][2] = v; check += v -
-            v;
-    v = w->M[2][11]*t->Phi[11][11] + t->Qd[2][11]; w->Pn[2][11] = v; w->Pn[11][2] = v; check += v -
-            v;
-    v = w->M[2][12]*t->Phi[12][12] + t->Qd[2][12]; w->Pn[2][12] = v; w->Pn[12][2] = v; check += v -
-            v;
-    v = w->M[2][13]*t->Phi[13][13] + t->Qd[2][13]; w->Pn[2][13] = v; w->Pn[13][2] = v; check += v -
-            v;
-    v = w->M[2][14]*t->Phi[14][14] + t->Qd[2][14]; w->Pn[2][14] = v; w->Pn[14][2] = v; check += v -
-            v;
-    v = w->M[2][15]*t->Phi[15][15] + t->Qd[2][15]; w->Pn[2][15] = v; w->Pn[15][2] = v; check += v -
-            v;
-    v = w->M[2][16]; w->Pn[2][16] = v; w->Pn[16][2] = v; check += v - v;
-    v = w->M[2][17]; w->Pn[2][17] = v; w->Pn[17][2] = v; check += v - v;
-    v = w->M[2][18]; w->Pn[2][18] = v; w->Pn[18][2] = v; check += v - v;
-    v = w->M[2][19]; w->Pn[2][19] = v; w->Pn[19][2] = v; check += v - v;
-    v = w->M[2][20]; w->Pn[2][20] = v; w->Pn[20][2] = v; check += v - v;
-    v = w->M[2][21]; w->Pn[2][21] = v; w->Pn[21][2] = v; check += v - v;
-    v = w->M[2][22]; w->Pn[2][22] = v; w->Pn[22][2] = v; check += v - v;
-    v = w->M[2][23]; w->Pn[2][23] = v; w->Pn[23][2] = v; check += v - v;
-    v = w->M[2][24]; w->Pn[2][24] = v; w->Pn[24][2] = v; check += v - v;
-    v = w->M[2][25]; w->Pn[2][25] = v; w->Pn[25][2] = v; check += v - v;
-    v = w->M[2][26]; w->Pn[2][26] = v; w->Pn[26][2] = v; check += v - v;
-    v = w->M[2][27]; w->Pn[2][27] = v; w->Pn[27][2] = v; check += v - v;
-    v = w->M[2][28]; w->Pn[2][28] = v; w->Pn[28][2] = v; check += v - v;
-    v = w->M[2][29]; w->Pn[2][29] = v; w->Pn[29][2] = v; check += v - v;
-    v = w->M[2][30]; w->Pn[2][30] = v; w->Pn[30][2] = v; check += v - v;
-    v = w->M[2][31]; w->Pn[2][31] = v; w->Pn[31][2] = v; check += v - v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_3(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[3][0]*t->Phi[3][0] + w->M[3][1]*t->Phi[3][1] + w->M[3][2]*t->Phi[3][2] +
-            w->M[3][3]*t->Phi[3][3] + w->M[3][4]*t->Phi[3][4] + w->M[3][5]*t->Phi[3][5] +
-            w->M[3][7]*t->Phi[3][7] + w->M[3][8]*t->Phi[3][8] + w->M[3][9]*t->Phi[3][9] +
-            w->M[3][10]*t->Phi[3][10] + w->M[3][11]*t->Phi[3][11] + w->M[3][12]*t->Phi[3][12] +
-            w->M[3][13]*t->Phi[3][13] + w->M[3][14]*t->Phi[3][14] + w->M[3][15]*t->Phi[3][15] +
-            w->M[3][18]*t->Phi[3][18] + w->M[3][19]*t->Phi[3][19] + w->M[3][20]*t->Phi[3][20] +
-            w->M[3][21]*t->Phi[3][21] + w->M[3][22]*t->Phi[3][22] + w->M[3][23]*t->Phi[3][23] +
-            w->M[3][24]*t->Phi[3][24] + w->M[3][25]*t->Phi[3][25] + w->M[3][26]*t->Phi[3][26] +
-            w->M[3][27]*t->Phi[3][27] + w->M[3][28]*t->Phi[3][28] + w->M[3][29]*t->Phi[3][29] +
-            t->Qd[3][3]; w->Pn[3][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[4][0] + w->M[3][1]*t->Phi[4][1] + w->M[3][2]*t->Phi[4][2] +
-            w->M[3][3]*t->Phi[4][3] + w->M[3][4]*t->Phi[4][4] + w->M[3][5]*t->Phi[4][5] +
-            w->M[3][7]*t->Phi[4][7] + w->M[3][8]*t->Phi[4][8] + w->M[3][9]*t->Phi[4][9] +
-            w->M[3][10]*t->Phi[4][10] + w->M[3][11]*t->Phi[4][11] + w->M[3][12]*t->Phi[4][12] +
-            w->M[3][13]*t->Phi[4][13] + w->M[3][14]*t->Phi[4][14] + w->M[3][15]*t->Phi[4][15] +
-            w->M[3][18]*t->Phi[4][18] + w->M[3][19]*t->Phi[4][19] + w->M[3][20]*t->Phi[4][20] +
-            w->M[3][21]*t->Phi[4][21] + w->M[3][22]*t->Phi[4][22] + w->M[3][23]*t->Phi[4][23] +
-            w->M[3][24]*t->Phi[4][24] + w->M[3][25]*t->Phi[4][25] + w->M[3][26]*t->Phi[4][26] +
-            w->M[3][27]*t->Phi[4][27] + w->M[3][28]*t->Phi[4][28] + w->M[3][29]*t->Phi[4][29] +
-            t->Qd[3][4]; w->Pn[3][4] = v; w->Pn[4][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[5][0] + w->M[3][1]*t->Phi[5][1] + w->M[3][2]*t->Phi[5][2] +
-            w->M[3][3]*t->Phi[5][3] + w->M[3][4]*t->Phi[5][4] + w->M[3][5]*t->Phi[5][5] +
-            w->M[3][7]*t->Phi[5][7] + w->M[3][8]*t->Phi[5][8] + w->M[3][9]*t->Phi[5][9] +
-            w->M[3][10]*t->Phi[5][10] + w->M[3][11]*t->Phi[5][11] + w->M[3][12]*t->Phi[5][12] +
-            w->M[3][13]*t->Phi[5][13] + w->M[3][14]*t->Phi[5][14] + w->M[3][15]*t->Phi[5][15] +
-            w->M[3][18]*t->Phi[5][18] + w->M[3][19]*t->Phi[5][19] + w->M[3][20]*t->Phi[5][20] +
-            w->M[3][21]*t->Phi[5][21] + w->M[3][22]*t->Phi[5][22] + w->M[3][23]*t->Phi[5][23] +
-            w->M[3][24]*t->Phi[5][24] + w->M[3][25]*t->Phi[5][25] + w->M[3][26]*t->Phi[5][26] +
-            w->M[3][27]*t->Phi[5][27] + w->M[3][28]*t->Phi[5][28] + w->M[3][29]*t->Phi[5][29] +
-            t->Qd[3][5]; w->Pn[3][5] = v; w->Pn[5][3] = v; check += v - v;
-    v = w->M[3][0]*t->Phi[6][0] + w->M[3][1]*t->Phi[6][1] + w->M[3][2]*t->Phi[6][2] +
-            w->M[3][3]*t->Phi[6][3] + w->M[3][4]*t->Phi[6][4] + w->M[3][5]*t->Phi[6][5] +
-            w->M[3][6]*t->Phi[6][6] + w->M[3][7]*t->Phi[6][7] + w->M[3][8]*t->Phi[6][8] +
-            w->M[3][9]*t->Phi[6][9] + w->M[3][10]*t->Phi[6][10] + w->M[3][11]*t->Phi[6][11] +
-            w->M[3][12]*t->Phi[6][12] + w->M[3][13]*t->Phi[6][13] + w->M[3][14]*t->Phi[6][14] +
-            w->M[3][15]*t->Phi[6][15] + w->M[3][18]*t->Phi[6][18] + w->M[3][19]*t->Phi[6][19] +
-            w->M[3][20]*t->Phi[6][20] + w->M[3][21]*t->Phi[6][21] + w->M[3][22]*t->Phi[6][22] +
-            w->M[3][23]*t->Phi[6][23] + w->M[3][24]*t->Phi[6][24] + w->M[3][25]*t->Phi[6][25] +
-            w->M[3][26]*t->Phi[6][26] + w->M[3][27]*t->Phi[6][27] + w->M[3][28]*t->Phi[6][28] +
-            w->M[3][29]*t->Phi[6][29] + t->Qd[3][6]; w->Pn[3][6] = v; w->Pn[6][3] = v; check += v -
-            v;
-    v = w->M[3][7]; w->Pn[3][7] = v; w->Pn[7][3] = v; check += v - v;
-    v = w->M[3][8]; w->Pn[3][8] = v; w->Pn[8][3] = v; check += v - v;
-    v = w->M[3][9]; w->Pn[3][9] = v; w->Pn[9][3] = v; check += v - v;
-    v = w->M[3][10]*t->Phi[10][10] + t->Qd[3][10]; w->Pn[3][10] = v; w->Pn[10][3] = v; check += v -
-            v;
-    v = w->M[3][11]*t->Phi[11][11] + t->Qd[3][11]; w->Pn[3][11] = v; w->Pn[11][3] = v; check += v -
-            v;
-    v = w->M[3][12]*t->Phi[12][12] + t->Qd[3][12]; w->Pn[3][12] = v; w->Pn[12][3] = v; check += v -
-            v;
-    v = w->M[3][13]*t->Phi[13][13] + t->Qd[3][13]; w->Pn[3][13] = v; w->Pn[13][3] = v; check += v -
-            v;
-    v = w->M[3][14]*t->Phi[14][14] + t->Qd[3][14]; w->Pn[3][14] = v; w->Pn[14][3] = v; check += v -
-            v;
-    v = w->M[3][15]*t->Phi[15][15] + t->Qd[3][15]; w->Pn[3][15] = v; w->Pn[15][3] = v; check += v -
-            v;
-    v = w->M[3][16]; w->Pn[3][16] = v; w->Pn[16][3] = v; check += v - v;
-    v = w->M[3][17]; w->Pn[3][17] = v; w->Pn[17][3] = v; check += v - v;
-    v = w->M[3][18]; w->Pn[3][18] = v; w->Pn[18][3] = v; check += v - v;
-    v = w->M[3][19]; w->Pn[3][19] = v; w->Pn[19][3] = v; check += v - v;
-    v = w->M[3][20]; w->Pn[3][20] = v; w->Pn[20][3] = v; check += v - v;
-    v = w->M[3][21]; w->Pn[3][21] = v; w->Pn[21][3] = v; check += v - v;
-    v = w->M[3][22]; w->Pn[3][22] = v; w->Pn[22][3] = v; check += v - v;
-    v = w->M[3][23]; w->Pn[3][23] = v; w->Pn[23][3] = v; check += v - v;
-    v = w->M[3][24]; w->Pn[3][24] = v; w->Pn[24][3] = v; check += v - v;
-    v = w->M[3][25]; w->Pn[3][25] = v; w->Pn[25][3] = v; check += v - v;
-    v = w->M[3][26]; w->Pn[3][26] = v; w->Pn[26][3] = v; check += v - v;
-    v = w->M[3][27]; w->Pn[3][27] = v; w->Pn[27][3] = v; check += v - v;
-    v = w->M[3][28]; w->Pn[3][28] = v; w->Pn[28][3] = v; check += v - v;
-    v = w->M[3][29]; w->Pn[3][29] = v; w->Pn[29][3] = v; check += v - v;
-    v = w->M[3][30]; w->Pn[3][30] = v; w->Pn[30][3] = v; check += v - v;
-    v = w->M[3][31]; w->Pn[3][31] = v; w->Pn[31][3] = v; check += v - v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_4(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[4][0]*t->Phi[4][0] + w->M[4][1]*t->Phi[4][1] + w->M[4][2]*t->Phi[4][2] +
-            w->M[4][3]*t->Phi[4][3] + w->M[4][4]*t->Phi[4][4] + w->M[4][5]*t->Phi[4][5] +
-            w->M[4][7]*t->Phi[4][7] + w->M[4][8]*t->Phi[4][8] + w->M[4][9]*t->Phi[4][9] +
-            w->M[4][10]*t->Phi[4][10] + w->M[4][11]*t->Phi[4][11] + w->M[4][12]*t->Phi[4][12] +
-            w->M[4][13]*t->Phi[4][13] + w->M[4][14]*t->Phi[4][14] + w->M[4][15]*t->Phi[4][15] +
-            w->M[4][18]*t->Phi[4][18] + w->M[4][19]*t->Phi[4][19] + w->M[4][20]*t->Phi[4][20] +
-            w->M[4][21]*t->Phi[4][21] + w->M[4][22]*t->Phi[4][22] + w->M[4][23]*t->Phi[4][23] +
-            w->M[4][24]*t->Phi[4][24] + w->M[4][25]*t->Phi[4][25] + w->M[4][26]*t->Phi[4][26] +
-            w->M[4][27]*t->Phi[4][27] + w->M[4][28]*t->Phi[4][28] + w->M[4][29]*t->Phi[4][29] +
-            t->Qd[4][4]; w->Pn[4][4] = v; check += v - v;
-    v = w->M[4][0]*t->Phi[5][0] + w->M[4][1]*t->Phi[5][1] + w->M[4][2]*t->Phi[5][2] +
-            w->M[4][3]*t->Phi[5][3] + w->M[4][4]*t->Phi[5][4] + w->M[4][5]*t->Phi[5][5] +
-            w->M[4][7]*t->Phi[5][7] + w->M[4][8]*t->Phi[5][8] + w->M[4][9]*t->Phi[5][9] +
-            w->M[4][10]*t->Phi[5][10] + w->M[4][11]*t->Phi[5][11] + w->M[4][12]*t->Phi[5][12] +
-            w->M[4][13]*t->Phi[5][13] + w->M[4][14]*t->Phi[5][14] + w->M[4][15]*t->Phi[5][15] +
-            w->M[4][18]*t->Phi[5][18] + w->M[4][19]*t->Phi[5][19] + w->M[4][20]*t->Phi[5][20] +
-            w->M[4][21]*t->Phi[5][21] + w->M[4][22]*t->Phi[5][22] + w->M[4][23]*t->Phi[5][23] +
-            w->M[4][24]*t->Phi[5][24] + w->M[4][25]*t->Phi[5][25] + w->M[4][26]*t->Phi[5][26] +
-            w->M[4][27]*t->Phi[5][27] + w->M[4][28]*t->Phi[5][28] + w->M[4][29]*t->Phi[5][29] +
-            t->Qd[4][5]; w->Pn[4][5] = v; w->Pn[5][4] = v; check += v - v;
-    v = w->M[4][0]*t->Phi[6][0] + w->M[4][1]*t->Phi[6][1] + w->M[4][2]*t->Phi[6][2] +
-            w->M[4][3]*t->Phi[6][3] + w->M[4][4]*t->Phi[6][4] + w->M[4][5]*t->Phi[6][5] +
-            w->M[4][6]*t->Phi[6][6] + w->M[4][7]*t->Phi[6][7] + w->M[4][8]*t->Phi[6][8] +
-            w->M[4][9]*t->Phi[6][9] + w->M[4][10]*t->Phi[6][10] + w->M[4][11]*t->Phi[6][11] +
-            w->M[4][12]*t->Phi[6][12] + w->M[4][13]*t->Phi[6][13] + w->M[4][14]*t->Phi[6][14] +
-            w->M[4][15]*t->Phi[6][15] + w->M[4][18]*t->Phi[6][18] + w->M[4][19]*t->Phi[6][19] +
-            w->M[4][20]*t->Phi[6][20] + w->M[4][21]*t->Phi[6][21] + w->M[4][22]*t->Phi[6][22] +
-            w->M[4][23]*t->Phi[6][23] + w->M[4][24]*t->Phi[6][24] + w->M[4][25]*t->Phi[6][25] +
-            w->M[4][26]*t->Phi[6][26] + w->M[4][27]*t->Phi[6][27] + w->M[4][28]*t->Phi[6][28] +
-            w->M[4][29]*t->Phi[6][29] + t->Qd[4][6]; w->Pn[4][6] = v; w->Pn[6][4] = v; check += v -
-            v;
-    v = w->M[4][7]; w->Pn[4][7] = v; w->Pn[7][4] = v; check += v - v;
-    v = w->M[4][8]; w->Pn[4][8] = v; w->Pn[8][4] = v; check += v - v;
-    v = w->M[4][9]; w->Pn[4][9] = v; w->Pn[9][4] = v; check += v - v;
-    v = w->M[4][10]*t->Phi[10][10] + t->Qd[4][10]; w->Pn[4][10] = v; w->Pn[10][4] = v; check += v -
-            v;
-    v = w->M[4][11]*t->Phi[11][11] + t->Qd[4][11]; w->Pn[4][11] = v; w->Pn[11][4] = v; check += v -
-            v;
-    v = w->M[4][12]*t->Phi[12][12] + t->Qd[4][12]; w->Pn[4][12] = v; w->Pn[12][4] = v; check += v -
-            v;
-    v = w->M[4][13]*t->Phi[13][13] + t->Qd[4][13]; w->Pn[4][13] = v; w->Pn[13][4] = v; check += v -
-            v;
-    v = w->M[4][14]*t->Phi[14][14] + t->Qd[4][14]; w->Pn[4][14] = v; w->Pn[14][4] = v; check += v -
-            v;
-    v = w->M[4][15]*t->Phi[15][15] + t->Qd[4][15]; w->Pn[4][15] = v; w->Pn[15][4] = v; check += v -
-            v;
-    v = w->M[4][16]; w->Pn[4][16] = v; w->Pn[16][4] = v; check += v - v;
-    v = w->M[4][17]; w->Pn[4][17] = v; w->Pn[17][4] = v; check += v - v;
-    v = w->M[4][18]; w->Pn[4][18] = v; w->Pn[18][4] = v; check += v - v;
-    v = w->M[4][19]; w->Pn[4][19] = v; w->Pn[19][4] = v; check += v - v;
-    v = w->M[4][20]; w->Pn[4][20] = v; w->Pn[20][4] = v; check += v - v;
-    v = w->M[4][21]; w->Pn[4][21] = v; w->Pn[21][4] = v; check += v - v;
-    v = w->M[4][22]; w->Pn[4][22] = v; w->Pn[22][4] = v; check += v - v;
-    v = w->M[4][23]; w->Pn[4][23] = v; w->Pn[23][4] = v; check += v - v;
-    v = w->M[4][24]; w->Pn[4][24] = v; w->Pn[24][4] = v; check += v - v;
-    v = w->M[4][25]; w->Pn[4][25] = v; w->Pn[25][4] = v; check += v - v;
-    v = w->M[4][26]; w->Pn[4][26] = v; w->Pn[26][4] = v; check += v - v;
-    v = w->M[4][27]; w->Pn[4][27] = v; w->Pn[27][4] = v; check += v - v;
-    v = w->M[4][28]; w->Pn[4][28] = v; w->Pn[28][4] = v; check += v - v;
-    v = w->M[4][29]; w->Pn[4][29] = v; w->Pn[29][4] = v; check += v - v;
-    v = w->M[4][30]; w->Pn[4][30] = v; w->Pn[30][4] = v; check += v - v;
-    v = w->M[4][31]; w->Pn[4][31] = v; w->Pn[31][4] = v; check += v - v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_5(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[5][0]*t->Phi[5][0] + w->M[5][1]*t->Phi[5][1] + w->M[5][2]*t->Phi[5][2] +
-            w->M[5][3]*t->Phi[5][3] + w->M[5][4]*t->Phi[5][4] + w->M[5][5]*t->Phi[5][5] +
-            w->M[5][7]*t->Phi[5][7] + w->M[5][8]*t->Phi[5][8] + w->M[5][9]*t->Phi[5][9] +
-            w->M[5][10]*t->Phi[5][10] + w->M[5][11]*t->Phi[5][11] + w->M[5][12]*t->Phi[5][12] +
-            w->M[5][13]*t->Phi[5][13] + w->M[5][14]*t->Phi[5][14] + w->M[5][15]*t->Phi[5][15] +
-            w->M[5][18]*t->Phi[5][18] + w->M[5][19]*t->Phi[5][19] + w->M[5][20]*t->Phi[5][20] +
-            w->M[5][21]*t->Phi[5][21] + w->M[5][22]*t->Phi[5][22] + w->M[5][23]*t->Phi[5][23] +
-            w->M[5][24]*t->Phi[5][24] + w->M[5][25]*t->Phi[5][25] + w->M[5][26]*t->Phi[5][26] +
-            w->M[5][27]*t->Phi[5][27] + w->M[5][28]*t->Phi[5][28] + w->M[5][29]*t->Phi[5][29] +
-            t->Qd[5][5]; w->Pn[5][5] = v; check += v - v;
-    v = w->M[5][0]*t->Phi[6][0] + w->M[5][1]*t->Phi[6][1] + w->M[5][2]*t->Phi[6][2] +
-            w->M[5][3]*t->Phi[6][3] + w->M[5][4]*t->Phi[6][4] + w->M[5][5]*t->Phi[6][5] +
-            w->M[5][6]*t->Phi[6][6] + w->M[5][7]*t->Phi[6][7] + w->M[5][8]*t->Phi[6][8] +
-            w->M[5][9]*t->Phi[6][9] + w->M[5][10]*t->Phi[6][10] + w->M[5][11]*t->Phi[6][11] +
-            w->M[5][12]*t->Phi[6][12] + w->M[5][13]*t->Phi[6][13] + w->M[5][14]*t->Phi[6][14] +
-            w->M[5][15]*t->Phi[6][15] + w->M[5][18]*t->Phi[6][18] + w->M[5][19]*t->Phi[6][19] +
-            w->M[5][20]*t->Phi[6][20] + w->M[5][21]*t->Phi[6][21] + w->M[5][22]*t->Phi[6][22] +
-            w->M[5][23]*t->Phi[6][23] + w->M[5][24]*t->Phi[6][24] + w->M[5][25]*t->Phi[6][25] +
-            w->M[5][26]*t->Phi[6][26] + w->M[5][27]*t->Phi[6][27] + w->M[5][28]*t->Phi[6][28] +
-            w->M[5][29]*t->Phi[6][29] + t->Qd[5][6]; w->Pn[5][6] = v; w->Pn[6][5] = v; check += v -
-            v;
-    v = w->M[5][7]; w->Pn[5][7] = v; w->Pn[7][5] = v; check += v - v;
-    v = w->M[5][8]; w->Pn[5][8] = v; w->Pn[8][5] = v; check += v - v;
-    v = w->M[5][9]; w->Pn[5][9] = v; w->Pn[9][5] = v; check += v - v;
-    v = w->M[5][10]*t->Phi[10][10] + t->Qd[5][10]; w->Pn[5][10] = v; w->Pn[10][5] = v; check += v -
-            v;
-    v = w->M[5][11]*t->Phi[11][11] + t->Qd[5][11]; w->Pn[5][11] = v; w->Pn[11][5] = v; check += v -
-            v;
-    v = w->M[5][12]*t->Phi[12][12] + t->Qd[5][12]; w->Pn[5][12] = v; w->Pn[12][5] = v; check += v -
-            v;
-    v = w->M[5][13]*t->Phi[13][13] + t->Qd[5][13]; w->Pn[5][13] = v; w->Pn[13][5] = v; check += v -
-            v;
-    v = w->M[5][14]*t->Phi[14][14] + t->Qd[5][14]; w->Pn[5][14] = v; w->Pn[14][5] = v; check += v -
-            v;
-    v = w->M[5][15]*t->Phi[15][15] + t->Qd[5][15]; w->Pn[5][15] = v; w->Pn[15][5] = v; check += v -
-            v;
-    v = w->M[5][16]; w->Pn[5][16] = v; w->Pn[16][5] = v; check += v - v;
-    v = w->M[5][17]; w->Pn[5][17] = v; w->Pn[17][5] = v; check += v - v;
-    v = w->M[5][18]; w->Pn[5][18] = v; w->Pn[18][5] = v; check += v - v;
-    v = w->M[5][19]; w->Pn[5][19] = v; w->Pn[19][5] = v; check += v - v;
-    v = w->M[5][20]; w->Pn[5][20] = v; w->Pn[20][5] = v; check += v - v;
-    v = w->M[5][21]; w->Pn[5][21] = v; w->Pn[21][5] = v; check += v - v;
-    v = w->M[5][22]; w->Pn[5][22] = v; w->Pn[22][5] = v; check += v - v;
-    v = w->M[5][23]; w->Pn[5][23] = v; w->Pn[23][5] = v; check += v - v;
-    v = w->M[5][24]; w->Pn[5][24] = v; w->Pn[24][5] = v; check += v - v;
-    v = w->M[5][25]; w->Pn[5][25] = v; w->Pn[25][5] = v; check += v - v;
-    v = w->M[5][26]; w->Pn[5][26] = v; w->Pn[26][5] = v; check += v - v;
-    v = w->M[5][27]; w->Pn[5][27] = v; w->Pn[27][5] = v; check += v - v;
-    v = w->M[5][28]; w->Pn[5][28] = v; w->Pn[28][5] = v; check += v - v;
-    v = w->M[5][29]; w->Pn[5][29] = v; w->Pn[29][5] = v; check += v - v;
-    v = w->M[5][30]; w->Pn[5][30] = v; w->Pn[30][5] = v; check += v - v;
-    v = w->M[5][31]; w->Pn[5][31] = v; w->Pn[31][5] = v; check += v - v;
-    return check;
-}
-
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
 static ned_doppler32_augmented_scalar propagate_row_6(const ned_doppler32_augmented_transition
         *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[6][0]*t->Phi[6][0] + w->M[6][1]*t->Phi[6][1] + w->M[6][2]*t->Phi[6][2] +
-            w->M[6][3]*t->Phi[6][3] + w->M[6][4]*t->Phi[6][4] + w->M[6][5]*t->Phi[6][5] +
-            w->M[6][6]*t->Phi[6][6] + w->M[6][7]*t->Phi[6][7] + w->M[6][8]*t->Phi[6][8] +
-            w->M[6][9]*t->Phi[6][9] + w->M[6][10]*t->Phi[6][10] + w->M[6][11]*t->Phi[6][11] +
-            w->M[6][12]*t->Phi[6][12] + w->M[6][13]*t->Phi[6][13] + w->M[6][14]*t->Phi[6][14] +
-            w->M[6][15]*t->Phi[6][15] + w->M[6][18]*t->Phi[6][18] + w->M[6][19]*t->Phi[6][19] +
-            w->M[6][20]*t->Phi[6][20] + w->M[6][21]*t->Phi[6][21] + w->M[6][22]*t->Phi[6][22] +
-            w->M[6][23]*t->Phi[6][23] + w->M[6][24]*t->Phi[6][24] + w->M[6][25]*t->Phi[6][25] +
-            w->M[6][26]*t->Phi[6][26] + w->M[6][27]*t->Phi[6][27] + w->M[6][28]*t->Phi[6][28] +
-            w->M[6][29]*t->Phi[6][29] + t->Qd[6][6]; w->Pn[6][6] = v; check += v - v;
-    v = w->M[6][7]; w->Pn[6][7] = v; w->Pn[7][6] = v; check += v - v;
-    v = w->M[6][8]; w->Pn[6][8] = v; w->Pn[8][6] = v; check += v - v;
-    v = w->M[6][9]; w->Pn[6][9] = v; w->Pn[9][6] = v; check += v - v;
-    v = w->M[6][10]*t->Phi[10][10] + t->Qd[6][10]; w->Pn[6][10] = v; w->Pn[10][6] = v; check += v -
-            v;
-    v = w->M[6][11]*t->Phi[11][11] + t->Qd[6][11]; w->Pn[6][11] = v; w->Pn[11][6] = v; check += v -
-            v;
-    v = w->M[6][12]*t->Phi[12][12] + t->Qd[6][12]; w->Pn[6][12] = v; w->Pn[12][6] = v; check += v -
-            v;
-    v = w->M[6][13]*t->Phi[13][13] + t->Qd[6][13]; w->Pn[6][13] = v; w->Pn[13][6] = v; check += v -
-            v;
-    v = w->M[6][14]*t->Phi[14][14] + t->Qd[6][14]; w->Pn[6][14] = v; w->Pn[14][6] = v; check += v -
-            v;
-    v = w->M[6][15]*t->Phi[15][15] + t->Qd[6][15]; w->Pn[6][15] = v; w->Pn[15][6] = v; check += v -
-            v;
-    v = w->M[6][16]; w->Pn[6][16] = v; w->Pn[16][6] = v; check += v - v;
-    v = w->M[6][17]; w->Pn[6][17] = v; w->Pn[17][6] = v; check += v - v;
-    v = w->M[6][18]; w->Pn[6][18] = v; w->Pn[18][6] = v; check += v - v;
-    v = w->M[6][19]; w->Pn[6][19] = v; w->Pn[19][6] = v; check += v - v;
-    v = w->M[6][20]; w->Pn[6][20] = v; w->Pn[20][6] = v; check += v - v;
-    v = w->M[6][21]; w->Pn[6][21] = v; w->Pn[21][6] = v; check += v - v;
-    v = w->M[6][22]; w->Pn[6][22] = v; w->Pn[22][6] = v; check += v - v;
-    v = w->M[6][23]; w->Pn[6][23] = v; w->Pn[23][6] = v; check += v - v;
-    v = w->M[6][24]; w->Pn[6][24] = v; w->Pn[24][6] = v; check += v - v;
-    v = w->M[6][25]; w->Pn[6][25] = v; w->Pn[25][6] = v; check += v - v;
-    v = w->M[6][26]; w->Pn[6][26] = v; w->Pn[26][6] = v; check += v - v;
-    v = w->M[6][27]; w->Pn[6][27] = v; w->Pn[27][6] = v; check += v - v;
-    v = w->M[6][28]; w->Pn[6][28] = v; w->Pn[28][6] = v; check += v - v;
-    v = w->M[6][29]; w->Pn[6][29] = v; w->Pn[29][6] = v; check += v - v;
-    v = w->M[6][30]; w->Pn[6][30] = v; w->Pn[30][6] = v; check += v - v;
-    v = w->M[6][31]; w->Pn[6][31] = v; w->Pn[31][6] = v; check += v - v;
+    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
+            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
+            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
+            w->M[10]*t->Phi[6][10] + w->M[11]*t->Phi[6][11] + w->M[12]*t->Phi[6][12] +
+            w->M[13]*t->Phi[6][13] + w->M[14]*t->Phi[6][14] + w->M[15]*t->Phi[6][15] +
+            w->M[18]*t->Phi[6][18] + w->M[19]*t->Phi[6][19] + w->M[20]*t->Phi[6][20] +
+            w->M[21]*t->Phi[6][21] + w->M[22]*t->Phi[6][22] + w->M[23]*t->Phi[6][23] +
+            w->M[24]*t->Phi[6][24] + w->M[25]*t->Phi[6][25] + w->M[26]*t->Phi[6][26] +
+            w->M[27]*t->Phi[6][27] + w->M[28]*t->Phi[6][28] + w->M[29]*t->Phi[6][29] + t->Qd[177];
+            w->Pn[177] = v; check += v - v;
+    v = w->M[7]; w->Pn[178] = v; check += v - v;
+    v = w->M[8]; w->Pn[179] = v; check += v - v;
+    v = w->M[9]; w->Pn[180] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[181]; w->Pn[181] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[182]; w->Pn[182] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[183]; w->Pn[183] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[184]; w->Pn[184] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[185]; w->Pn[185] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[186]; w->Pn[186] = v; check += v - v;
+    v = w->M[16]; w->Pn[187] = v; check += v - v;
+    v = w->M[17]; w->Pn[188] = v; check += v - v;
+    v = w->M[18]; w->Pn[189] = v; check += v - v;
+    v = w->M[19]; w->Pn[190] = v; check += v - v;
+    v = w->M[20]; w->Pn[191] = v; check += v - v;
+    v = w->M[21]; w->Pn[192] = v; check += v - v;
+    v = w->M[22]; w->Pn[193] = v; check += v - v;
+    v = w->M[23]; w->Pn[194] = v; check += v - v;
+    v = w->M[24]; w->Pn[195] = v; check += v - v;
+    v = w->M[25]; w->Pn[196] = v; check += v - v;
+    v = w->M[26]; w->Pn[197] = v; check += v - v;
+    v = w->M[27]; w->Pn[198] = v; check += v - v;
+    v = w->M[28]; w->Pn[199] = v; check += v - v;
+    v = w->M[29]; w->Pn[200] = v; check += v - v;
+    v = w->M[30]; w->Pn[201] = v; check += v - v;
+    v = w->M[31]; w->Pn[202] = v; check += v - v;
     return check;
 }
 
@@ -8013,31 +7290,31 @@ static ned_doppler32_augmented_scalar propagate_row_7(const ned_doppler32_augmen
         ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[7][7]; w->Pn[7][7] = v; check += v - v;
-    v = f->P[7][8]; w->Pn[7][8] = v; w->Pn[8][7] = v; check += v - v;
-    v = f->P[7][9]; w->Pn[7][9] = v; w->Pn[9][7] = v; check += v - v;
-    v = f->P[7][10]*t->Phi[10][10]; w->Pn[7][10] = v; w->Pn[10][7] = v; check += v - v;
-    v = f->P[7][11]*t->Phi[11][11]; w->Pn[7][11] = v; w->Pn[11][7] = v; check += v - v;
-    v = f->P[7][12]*t->Phi[12][12]; w->Pn[7][12] = v; w->Pn[12][7] = v; check += v - v;
-    v = f->P[7][13]*t->Phi[13][13]; w->Pn[7][13] = v; w->Pn[13][7] = v; check += v - v;
-    v = f->P[7][14]*t->Phi[14][14]; w->Pn[7][14] = v; w->Pn[14][7] = v; check += v - v;
-    v = f->P[7][15]*t->Phi[15][15]; w->Pn[7][15] = v; w->Pn[15][7] = v; check += v - v;
-    v = f->P[7][16]; w->Pn[7][16] = v; w->Pn[16][7] = v; check += v - v;
-    v = f->P[7][17]; w->Pn[7][17] = v; w->Pn[17][7] = v; check += v - v;
-    v = f->P[7][18]; w->Pn[7][18] = v; w->Pn[18][7] = v; check += v - v;
-    v = f->P[7][19]; w->Pn[7][19] = v; w->Pn[19][7] = v; check += v - v;
-    v = f->P[7][20]; w->Pn[7][20] = v; w->Pn[20][7] = v; check += v - v;
-    v = f->P[7][21]; w->Pn[7][21] = v; w->Pn[21][7] = v; check += v - v;
-    v = f->P[7][22]; w->Pn[7][22] = v; w->Pn[22][7] = v; check += v - v;
-    v = f->P[7][23]; w->Pn[7][23] = v; w->Pn[23][7] = v; check += v - v;
-    v = f->P[7][24]; w->Pn[7][24] = v; w->Pn[24][7] = v; check += v - v;
-    v = f->P[7][25]; w->Pn[7][25] = v; w->Pn[25][7] = v; check += v - v;
-    v = f->P[7][26]; w->Pn[7][26] = v; w->Pn[26][7] = v; check += v - v;
-    v = f->P[7][27]; w->Pn[7][27] = v; w->Pn[27][7] = v; check += v - v;
-    v = f->P[7][28]; w->Pn[7][28] = v; w->Pn[28][7] = v; check += v - v;
-    v = f->P[7][29]; w->Pn[7][29] = v; w->Pn[29][7] = v; check += v - v;
-    v = f->P[7][30]; w->Pn[7][30] = v; w->Pn[30][7] = v; check += v - v;
-    v = f->P[7][31]; w->Pn[7][31] = v; w->Pn[31][7] = v; check += v - v;
+    v = f->P[7][7]; w->Pn[203] = v; check += v - v;
+    v = f->P[7][8]; w->Pn[204] = v; check += v - v;
+    v = f->P[7][9]; w->Pn[205] = v; check += v - v;
+    v = f->P[7][10]*t->Phi[10][10]; w->Pn[206] = v; check += v - v;
+    v = f->P[7][11]*t->Phi[11][11]; w->Pn[207] = v; check += v - v;
+    v = f->P[7][12]*t->Phi[12][12]; w->Pn[208] = v; check += v - v;
+    v = f->P[7][13]*t->Phi[13][13]; w->Pn[209] = v; check += v - v;
+    v = f->P[7][14]*t->Phi[14][14]; w->Pn[210] = v; check += v - v;
+    v = f->P[7][15]*t->Phi[15][15]; w->Pn[211] = v; check += v - v;
+    v = f->P[7][16]; w->Pn[212] = v; check += v - v;
+    v = f->P[7][17]; w->Pn[213] = v; check += v - v;
+    v = f->P[7][18]; w->Pn[214] = v; check += v - v;
+    v = f->P[7][19]; w->Pn[215] = v; check += v - v;
+    v = f->P[7][20]; w->Pn[216] = v; check += v - v;
+    v = f->P[7][21]; w->Pn[217] = v; check += v - v;
+    v = f->P[7][22]; w->Pn[218] = v; check += v - v;
+    v = f->P[7][23]; w->Pn[219] = v; check += v - v;
+    v = f->P[7][24]; w->Pn[220] = v; check += v - v;
+    v = f->P[7][25]; w->Pn[221] = v; check += v - v;
+    v = f->P[7][26]; w->Pn[222] = v; check += v - v;
+    v = f->P[7][27]; w->Pn[223] = v; check += v - v;
+    v = f->P[7][28]; w->Pn[224] = v; check += v - v;
+    v = f->P[7][29]; w->Pn[225] = v; check += v - v;
+    v = f->P[7][30]; w->Pn[226] = v; check += v - v;
+    v = f->P[7][31]; w->Pn[227] = v; check += v - v;
     return check;
 }
 
@@ -8047,30 +7324,30 @@ static ned_doppler32_augmented_scalar propagate_row_8(const ned_doppler32_augmen
         ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[8][8]; w->Pn[8][8] = v; check += v - v;
-    v = f->P[8][9]; w->Pn[8][9] = v; w->Pn[9][8] = v; check += v - v;
-    v = f->P[8][10]*t->Phi[10][10]; w->Pn[8][10] = v; w->Pn[10][8] = v; check += v - v;
-    v = f->P[8][11]*t->Phi[11][11]; w->Pn[8][11] = v; w->Pn[11][8] = v; check += v - v;
-    v = f->P[8][12]*t->Phi[12][12]; w->Pn[8][12] = v; w->Pn[12][8] = v; check += v - v;
-    v = f->P[8][13]*t->Phi[13][13]; w->Pn[8][13] = v; w->Pn[13][8] = v; check += v - v;
-    v = f->P[8][14]*t->Phi[14][14]; w->Pn[8][14] = v; w->Pn[14][8] = v; check += v - v;
-    v = f->P[8][15]*t->Phi[15][15]; w->Pn[8][15] = v; w->Pn[15][8] = v; check += v - v;
-    v = f->P[8][16]; w->Pn[8][16] = v; w->Pn[16][8] = v; check += v - v;
-    v = f->P[8][17]; w->Pn[8][17] = v; w->Pn[17][8] = v; check += v - v;
-    v = f->P[8][18]; w->Pn[8][18] = v; w->Pn[18][8] = v; check += v - v;
-    v = f->P[8][19]; w->Pn[8][19] = v; w->Pn[19][8] = v; check += v - v;
-    v = f->P[8][20]; w->Pn[8][20] = v; w->Pn[20][8] = v; check += v - v;
-    v = f->P[8][21]; w->Pn[8][21] = v; w->Pn[21][8] = v; check += v - v;
-    v = f->P[8][22]; w->Pn[8][22] = v; w->Pn[22][8] = v; check += v - v;
-    v = f->P[8][23]; w->Pn[8][23] = v; w->Pn[23][8] = v; check += v - v;
-    v = f->P[8][24]; w->Pn[8][24] = v; w->Pn[24][8] = v; check += v - v;
-    v = f->P[8][25]; w->Pn[8][25] = v; w->Pn[25][8] = v; check += v - v;
-    v = f->P[8][26]; w->Pn[8][26] = v; w->Pn[26][8] = v; check += v - v;
-    v = f->P[8][27]; w->Pn[8][27] = v; w->Pn[27][8] = v; check += v - v;
-    v = f->P[8][28]; w->Pn[8][28] = v; w->Pn[28][8] = v; check += v - v;
-    v = f->P[8][29]; w->Pn[8][29] = v; w->Pn[29][8] = v; check += v - v;
-    v = f->P[8][30]; w->Pn[8][30] = v; w->Pn[30][8] = v; check += v - v;
-    v = f->P[8][31]; w->Pn[8][31] = v; w->Pn[31][8] = v; check += v - v;
+    v = f->P[8][8]; w->Pn[228] = v; check += v - v;
+    v = f->P[8][9]; w->Pn[229] = v; check += v - v;
+    v = f->P[8][10]*t->Phi[10][10]; w->Pn[230] = v; check += v - v;
+    v = f->P[8][11]*t->Phi[11][11]; w->Pn[231] = v; check += v - v;
+    v = f->P[8][12]*t->Phi[12][12]; w->Pn[232] = v; check += v - v;
+    v = f->P[8][13]*t->Phi[13][13]; w->Pn[233] = v; check += v - v;
+    v = f->P[8][14]*t->Phi[14][14]; w->Pn[234] = v; check += v - v;
+    v = f->P[8][15]*t->Phi[15][15]; w->Pn[235] = v; check += v - v;
+    v = f->P[8][16]; w->Pn[236] = v; check += v - v;
+    v = f->P[8][17]; w->Pn[237] = v; check += v - v;
+    v = f->P[8][18]; w->Pn[238] = v; check += v - v;
+    v = f->P[8][19]; w->Pn[239] = v; check += v - v;
+    v = f->P[8][20]; w->Pn[240] = v; check += v - v;
+    v = f->P[8][21]; w->Pn[241] = v; check += v - v;
+    v = f->P[8][22]; w->Pn[242] = v; check += v - v;
+    v = f->P[8][23]; w->Pn[243] = v; check += v - v;
+    v = f->P[8][24]; w->Pn[244] = v; check += v - v;
+    v = f->P[8][25]; w->Pn[245] = v; check += v - v;
+    v = f->P[8][26]; w->Pn[246] = v; check += v - v;
+    v = f->P[8][27]; w->Pn[247] = v; check += v - v;
+    v = f->P[8][28]; w->Pn[248] = v; check += v - v;
+    v = f->P[8][29]; w->Pn[249] = v; check += v - v;
+    v = f->P[8][30]; w->Pn[250] = v; check += v - v;
+    v = f->P[8][31]; w->Pn[251] = v; check += v - v;
     return check;
 }
 
@@ -8080,30 +7357,68 @@ static ned_doppler32_augmented_scalar propagate_row_9(const ned_doppler32_augmen
         ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[9][9]; w->Pn[9][9] = v; check += v - v;
-    v = f->P[9][10]*t->Phi[10][10]; w->Pn[9][10] = v; w->Pn[10][9] = v; check += v - v;
-    v = f->P[9][11]*t->Phi[11][11]; w->Pn[9][11] = v; w->Pn[11][9] = v; check += v - v;
-    v = f->P[9][12]*t->Phi[12][12]; w->Pn[9][12] = v; w->Pn[12][9] = v; check += v - v;
-    v = f->P[9][13]*t->Phi[13][13]; w->Pn[9][13] = v; w->Pn[13][9] = v; check += v - v;
-    v = f->P[9][14]*t->Phi[14][14]; w->Pn[9][14] = v; w->Pn[14][9] = v; check += v - v;
-    v = f->P[9][15]*t->Phi[15][15]; w->Pn[9][15] = v; w->Pn[15][9] = v; check += v - v;
-    v = f->P[9][16]; w->Pn[9][16] = v; w->Pn[16][9] = v; check += v - v;
-    v = f->P[9][17]; w->Pn[9][17] = v; w->Pn[17][9] = v; check += v - v;
-    v = f->P[9][18]; w->Pn[9][18] = v; w->Pn[18][9] = v; check += v - v;
-    v = f->P[9][19]; w->Pn[9][19] = v; w->Pn[19][9] = v; check += v - v;
-    v = f->P[9][20]; w->Pn[9][20] = v; w->Pn[20][9] = v; check += v - v;
-    v = f->P[9][21]; w->Pn[9][21] = v; w->Pn[21][9] = v; check += v - v;
-    v = f->P[9][22]; w->Pn[9][22] = v; w->Pn[22][9] = v; check += v - v;
-    v = f->P[9][23]; w->Pn[9][23] = v; w->Pn[23][9] = v; check += v - v;
-    v = f->P[9][24]; w->Pn[9][24] = v; w->Pn[24][9] = v; check += v - v;
-    v = f->P[9][25]; w->Pn[9][25] = v; w->Pn[25][9] = v; check += v - v;
-    v = f->P[9][26]; w->Pn[9][26] = v; w->Pn[26][9] = v; check += v - v;
-    v = f->P[9][27]; w->Pn[9][27] = v; w->Pn[27][9] = v; check += v - v;
-    v = f->P[9][28]; w->Pn[9][28] = v; w->Pn[28][9] = v; check += v - v;
-    v = f->P[9][29]; w->Pn[9][29] = v; w->Pn[29][9] = v; check += v - v;
-    v = f->P[9][30]; w->Pn[9][30] = v; w->Pn[30][9] = v; check += v - v;
-    v = f->P[9][31]; w->Pn[9][31] = v; w->Pn[31][9] = v; check += v - v;
+    v = f->P[9][9]; w->Pn[252] = v; check += v - v;
+    v = f->P[9][10]*t->Phi[10][10]; w->Pn[253] = v; check += v - v;
+    v = f->P[9][11]*t->Phi[11][11]; w->Pn[254] = v; check += v - v;
+    v = f->P[9][12]*t->Phi[12][12]; w->Pn[255] = v; check += v - v;
+    v = f->P[9][13]*t->Phi[13][13]; w->Pn[256] = v; check += v - v;
+    v = f->P[9][14]*t->Phi[14][14]; w->Pn[257] = v; check += v - v;
+    v = f->P[9][15]*t->Phi[15][15]; w->Pn[258] = v; check += v - v;
+    v = f->P[9][16]; w->Pn[259] = v; check += v - v;
+    v = f->P[9][17]; w->Pn[260] = v; check += v - v;
+    v = f->P[9][18]; w->Pn[261] = v; check += v - v;
+    v = f->P[9][19]; w->Pn[262] = v; check += v - v;
+    v = f->P[9][20]; w->Pn[263] = v; check += v - v;
+    v = f->P[9][21]; w->Pn[264] = v; check += v - v;
+    v = f->P[9][22]; w->Pn[265] = v; check += v - v;
+    v = f->P[9][23]; w->Pn[266] = v; check += v - v;
+    v = f->P[9][24]; w->Pn[267] = v; check += v - v;
+    v = f->P[9][25]; w->Pn[268] = v; check += v - v;
+    v = f->P[9][26]; w->Pn[269] = v; check += v - v;
+    v = f->P[9][27]; w->Pn[270] = v; check += v - v;
+    v = f->P[9][28]; w->Pn[271] = v; check += v - v;
+    v = f->P[9][29]; w->Pn[272] = v; check += v - v;
+    v = f->P[9][30]; w->Pn[273] = v; check += v - v;
+    v = f->P[9][31]; w->Pn[274] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_10(const ned_doppler32_augmented_filter *restrict f, const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[10][10]*f->P[10][0];
+    w->M[1] = t->Phi[10][10]*f->P[10][1];
+    w->M[2] = t->Phi[10][10]*f->P[10][2];
+    w->M[3] = t->Phi[10][10]*f->P[10][3];
+    w->M[4] = t->Phi[10][10]*f->P[10][4];
+    w->M[5] = t->Phi[10][10]*f->P[10][5];
+    w->M[6] = t->Phi[10][10]*f->P[10][6];
+    w->M[7] = t->Phi[10][10]*f->P[10][7];
+    w->M[8] = t->Phi[10][10]*f->P[10][8];
+    w->M[9] = t->Phi[10][10]*f->P[10][9];
+    w->M[10] = t->Phi[10][10]*f->P[10][10];
+    w->M[11] = t->Phi[10][10]*f->P[10][11];
+    w->M[12] = t->Phi[10][10]*f->P[10][12];
+    w->M[13] = t->Phi[10][10]*f->P[10][13];
+    w->M[14] = t->Phi[10][10]*f->P[10][14];
+    w->M[15] = t->Phi[10][10]*f->P[10][15];
+    w->M[16] = t->Phi[10][10]*f->P[10][16];
+    w->M[17] = t->Phi[10][10]*f->P[10][17];
+    w->M[18] = t->Phi[10][10]*f->P[10][18];
+    w->M[19] = t->Phi[10][10]*f->P[10][19];
+    w->M[20] = t->Phi[10][10]*f->P[10][20];
+    w->M[21] = t->Phi[10][10]*f->P[10][21];
+    w->M[22] = t->Phi[10][10]*f->P[10][22];
+    w->M[23] = t->Phi[10][10]*f->P[10][23];
+    w->M[24] = t->Phi[10][10]*f->P[10][24];
+    w->M[25] = t->Phi[10][10]*f->P[10][25];
+    w->M[26] = t->Phi[10][10]*f->P[10][26];
+    w->M[27] = t->Phi[10][10]*f->P[10][27];
+    w->M[28] = t->Phi[10][10]*f->P[10][28];
+    w->M[29] = t->Phi[10][10]*f->P[10][29];
+    w->M[30] = t->Phi[10][10]*f->P[10][30];
+    w->M[31] = t->Phi[10][10]*f->P[10][31];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -8111,29 +7426,67 @@ static ned_doppler32_augmented_scalar propagate_row_10(const ned_doppler32_augme
         *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[10][10]*t->Phi[10][10] + t->Qd[10][10]; w->Pn[10][10] = v; check += v - v;
-    v = w->M[10][11]*t->Phi[11][11]; w->Pn[10][11] = v; w->Pn[11][10] = v; check += v - v;
-    v = w->M[10][12]*t->Phi[12][12]; w->Pn[10][12] = v; w->Pn[12][10] = v; check += v - v;
-    v = w->M[10][13]*t->Phi[13][13]; w->Pn[10][13] = v; w->Pn[13][10] = v; check += v - v;
-    v = w->M[10][14]*t->Phi[14][14]; w->Pn[10][14] = v; w->Pn[14][10] = v; check += v - v;
-    v = w->M[10][15]*t->Phi[15][15]; w->Pn[10][15] = v; w->Pn[15][10] = v; check += v - v;
-    v = w->M[10][16]; w->Pn[10][16] = v; w->Pn[16][10] = v; check += v - v;
-    v = w->M[10][17]; w->Pn[10][17] = v; w->Pn[17][10] = v; check += v - v;
-    v = w->M[10][18]; w->Pn[10][18] = v; w->Pn[18][10] = v; check += v - v;
-    v = w->M[10][19]; w->Pn[10][19] = v; w->Pn[19][10] = v; check += v - v;
-    v = w->M[10][20]; w->Pn[10][20] = v; w->Pn[20][10] = v; check += v - v;
-    v = w->M[10][21]; w->Pn[10][21] = v; w->Pn[21][10] = v; check += v - v;
-    v = w->M[10][22]; w->Pn[10][22] = v; w->Pn[22][10] = v; check += v - v;
-    v = w->M[10][23]; w->Pn[10][23] = v; w->Pn[23][10] = v; check += v - v;
-    v = w->M[10][24]; w->Pn[10][24] = v; w->Pn[24][10] = v; check += v - v;
-    v = w->M[10][25]; w->Pn[10][25] = v; w->Pn[25][10] = v; check += v - v;
-    v = w->M[10][26]; w->Pn[10][26] = v; w->Pn[26][10] = v; check += v - v;
-    v = w->M[10][27]; w->Pn[10][27] = v; w->Pn[27][10] = v; check += v - v;
-    v = w->M[10][28]; w->Pn[10][28] = v; w->Pn[28][10] = v; check += v - v;
-    v = w->M[10][29]; w->Pn[10][29] = v; w->Pn[29][10] = v; check += v - v;
-    v = w->M[10][30]; w->Pn[10][30] = v; w->Pn[30][10] = v; check += v - v;
-    v = w->M[10][31]; w->Pn[10][31] = v; w->Pn[31][10] = v; check += v - v;
+    v = w->M[10]*t->Phi[10][10] + t->Qd[275]; w->Pn[275] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11]; w->Pn[276] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12]; w->Pn[277] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13]; w->Pn[278] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14]; w->Pn[279] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15]; w->Pn[280] = v; check += v - v;
+    v = w->M[16]; w->Pn[281] = v; check += v - v;
+    v = w->M[17]; w->Pn[282] = v; check += v - v;
+    v = w->M[18]; w->Pn[283] = v; check += v - v;
+    v = w->M[19]; w->Pn[284] = v; check += v - v;
+    v = w->M[20]; w->Pn[285] = v; check += v - v;
+    v = w->M[21]; w->Pn[286] = v; check += v - v;
+    v = w->M[22]; w->Pn[287] = v; check += v - v;
+    v = w->M[23]; w->Pn[288] = v; check += v - v;
+    v = w->M[24]; w->Pn[289] = v; check += v - v;
+    v = w->M[25]; w->Pn[290] = v; check += v - v;
+    v = w->M[26]; w->Pn[291] = v; check += v - v;
+    v = w->M[27]; w->Pn[292] = v; check += v - v;
+    v = w->M[28]; w->Pn[293] = v; check += v - v;
+    v = w->M[29]; w->Pn[294] = v; check += v - v;
+    v = w->M[30]; w->Pn[295] = v; check += v - v;
+    v = w->M[31]; w->Pn[296] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_11(const ned_doppler32_augmented_filter *restrict f, const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[11][11]*f->P[11][0];
+    w->M[1] = t->Phi[11][11]*f->P[11][1];
+    w->M[2] = t->Phi[11][11]*f->P[11][2];
+    w->M[3] = t->Phi[11][11]*f->P[11][3];
+    w->M[4] = t->Phi[11][11]*f->P[11][4];
+    w->M[5] = t->Phi[11][11]*f->P[11][5];
+    w->M[6] = t->Phi[11][11]*f->P[11][6];
+    w->M[7] = t->Phi[11][11]*f->P[11][7];
+    w->M[8] = t->Phi[11][11]*f->P[11][8];
+    w->M[9] = t->Phi[11][11]*f->P[11][9];
+    w->M[10] = t->Phi[11][11]*f->P[11][10];
+    w->M[11] = t->Phi[11][11]*f->P[11][11];
+    w->M[12] = t->Phi[11][11]*f->P[11][12];
+    w->M[13] = t->Phi[11][11]*f->P[11][13];
+    w->M[14] = t->Phi[11][11]*f->P[11][14];
+    w->M[15] = t->Phi[11][11]*f->P[11][15];
+    w->M[16] = t->Phi[11][11]*f->P[11][16];
+    w->M[17] = t->Phi[11][11]*f->P[11][17];
+    w->M[18] = t->Phi[11][11]*f->P[11][18];
+    w->M[19] = t->Phi[11][11]*f->P[11][19];
+    w->M[20] = t->Phi[11][11]*f->P[11][20];
+    w->M[21] = t->Phi[11][11]*f->P[11][21];
+    w->M[22] = t->Phi[11][11]*f->P[11][22];
+    w->M[23] = t->Phi[11][11]*f->P[11][23];
+    w->M[24] = t->Phi[11][11]*f->P[11][24];
+    w->M[25] = t->Phi[11][11]*f->P[11][25];
+    w->M[26] = t->Phi[11][11]*f->P[11][26];
+    w->M[27] = t->Phi[11][11]*f->P[11][27];
+    w->M[28] = t->Phi[11][11]*f->P[11][28];
+    w->M[29] = t->Phi[11][11]*f->P[11][29];
+    w->M[30] = t->Phi[11][11]*f->P[11][30];
+    w->M[31] = t->Phi[11][11]*f->P[11][31];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -8141,28 +7494,66 @@ static ned_doppler32_augmented_scalar propagate_row_11(const ned_doppler32_augme
         *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[11][11]*t->Phi[11][11] + t->Qd[11][11]; w->Pn[11][11] = v; check += v - v;
-    v = w->M[11][12]*t->Phi[12][12]; w->Pn[11][12] = v; w->Pn[12][11] = v; check += v - v;
-    v = w->M[11][13]*t->Phi[13][13]; w->Pn[11][13] = v; w->Pn[13][11] = v; check += v - v;
-    v = w->M[11][14]*t->Phi[14][14]; w->Pn[11][14] = v; w->Pn[14][11] = v; check += v - v;
-    v = w->M[11][15]*t->Phi[15][15]; w->Pn[11][15] = v; w->Pn[15][11] = v; check += v - v;
-    v = w->M[11][16]; w->Pn[11][16] = v; w->Pn[16][11] = v; check += v - v;
-    v = w->M[11][17]; w->Pn[11][17] = v; w->Pn[17][11] = v; check += v - v;
-    v = w->M[11][18]; w->Pn[11][18] = v; w->Pn[18][11] = v; check += v - v;
-    v = w->M[11][19]; w->Pn[11][19] = v; w->Pn[19][11] = v; check += v - v;
-    v = w->M[11][20]; w->Pn[11][20] = v; w->Pn[20][11] = v; check += v - v;
-    v = w->M[11][21]; w->Pn[11][21] = v; w->Pn[21][11] = v; check += v - v;
-    v = w->M[11][22]; w->Pn[11][22] = v; w->Pn[22][11] = v; check += v - v;
-    v = w->M[11][23]; w->Pn[11][23] = v; w->Pn[23][11] = v; check += v - v;
-    v = w->M[11][24]; w->Pn[11][24] = v; w->Pn[24][11] = v; check += v - v;
-    v = w->M[11][25]; w->Pn[11][25] = v; w->Pn[25][11] = v; check += v - v;
-    v = w->M[11][26]; w->Pn[11][26] = v; w->Pn[26][11] = v; check += v - v;
-    v = w->M[11][27]; w->Pn[11][27] = v; w->Pn[27][11] = v; check += v - v;
-    v = w->M[11][28]; w->Pn[11][28] = v; w->Pn[28][11] = v; check += v - v;
-    v = w->M[11][29]; w->Pn[11][29] = v; w->Pn[29][11] = v; check += v - v;
-    v = w->M[11][30]; w->Pn[11][30] = v; w->Pn[30][11] = v; check += v - v;
-    v = w->M[11][31]; w->Pn[11][31] = v; w->Pn[31][11] = v; check += v - v;
+    v = w->M[11]*t->Phi[11][11] + t->Qd[297]; w->Pn[297] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12]; w->Pn[298] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13]; w->Pn[299] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14]; w->Pn[300] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15]; w->Pn[301] = v; check += v - v;
+    v = w->M[16]; w->Pn[302] = v; check += v - v;
+    v = w->M[17]; w->Pn[303] = v; check += v - v;
+    v = w->M[18]; w->Pn[304] = v; check += v - v;
+    v = w->M[19]; w->Pn[305] = v; check += v - v;
+    v = w->M[20]; w->Pn[306] = v; check += v - v;
+    v = w->M[21]; w->Pn[307] = v; check += v - v;
+    v = w->M[22]; w->Pn[308] = v; check += v - v;
+    v = w->M[23]; w->Pn[309] = v; check += v - v;
+    v = w->M[24]; w->Pn[310] = v; check += v - v;
+    v = w->M[25]; w->Pn[311] = v; check += v - v;
+    v = w->M[26]; w->Pn[312] = v; check += v - v;
+    v = w->M[27]; w->Pn[313] = v; check += v - v;
+    v = w->M[28]; w->Pn[314] = v; check += v - v;
+    v = w->M[29]; w->Pn[315] = v; check += v - v;
+    v = w->M[30]; w->Pn[316] = v; check += v - v;
+    v = w->M[31]; w->Pn[317] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_12(const ned_doppler32_augmented_filter *restrict f, const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[12][12]*f->P[12][0];
+    w->M[1] = t->Phi[12][12]*f->P[12][1];
+    w->M[2] = t->Phi[12][12]*f->P[12][2];
+    w->M[3] = t->Phi[12][12]*f->P[12][3];
+    w->M[4] = t->Phi[12][12]*f->P[12][4];
+    w->M[5] = t->Phi[12][12]*f->P[12][5];
+    w->M[6] = t->Phi[12][12]*f->P[12][6];
+    w->M[7] = t->Phi[12][12]*f->P[12][7];
+    w->M[8] = t->Phi[12][12]*f->P[12][8];
+    w->M[9] = t->Phi[12][12]*f->P[12][9];
+    w->M[10] = t->Phi[12][12]*f->P[12][10];
+    w->M[11] = t->Phi[12][12]*f->P[12][11];
+    w->M[12] = t->Phi[12][12]*f->P[12][12];
+    w->M[13] = t->Phi[12][12]*f->P[12][13];
+    w->M[14] = t->Phi[12][12]*f->P[12][14];
+    w->M[15] = t->Phi[12][12]*f->P[12][15];
+    w->M[16] = t->Phi[12][12]*f->P[12][16];
+    w->M[17] = t->Phi[12][12]*f->P[12][17];
+    w->M[18] = t->Phi[12][12]*f->P[12][18];
+    w->M[19] = t->Phi[12][12]*f->P[12][19];
+    w->M[20] = t->Phi[12][12]*f->P[12][20];
+    w->M[21] = t->Phi[12][12]*f->P[12][21];
+    w->M[22] = t->Phi[12][12]*f->P[12][22];
+    w->M[23] = t->Phi[12][12]*f->P[12][23];
+    w->M[24] = t->Phi[12][12]*f->P[12][24];
+    w->M[25] = t->Phi[12][12]*f->P[12][25];
+    w->M[26] = t->Phi[12][12]*f->P[12][26];
+    w->M[27] = t->Phi[12][12]*f->P[12][27];
+    w->M[28] = t->Phi[12][12]*f->P[12][28];
+    w->M[29] = t->Phi[12][12]*f->P[12][29];
+    w->M[30] = t->Phi[12][12]*f->P[12][30];
+    w->M[31] = t->Phi[12][12]*f->P[12][31];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -8170,27 +7561,65 @@ static ned_doppler32_augmented_scalar propagate_row_12(const ned_doppler32_augme
         *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[12][12]*t->Phi[12][12] + t->Qd[12][12]; w->Pn[12][12] = v; check += v - v;
-    v = w->M[12][13]*t->Phi[13][13]; w->Pn[12][13] = v; w->Pn[13][12] = v; check += v - v;
-    v = w->M[12][14]*t->Phi[14][14]; w->Pn[12][14] = v; w->Pn[14][12] = v; check += v - v;
-    v = w->M[12][15]*t->Phi[15][15]; w->Pn[12][15] = v; w->Pn[15][12] = v; check += v - v;
-    v = w->M[12][16]; w->Pn[12][16] = v; w->Pn[16][12] = v; check += v - v;
-    v = w->M[12][17]; w->Pn[12][17] = v; w->Pn[17][12] = v; check += v - v;
-    v = w->M[12][18]; w->Pn[12][18] = v; w->Pn[18][12] = v; check += v - v;
-    v = w->M[12][19]; w->Pn[12][19] = v; w->Pn[19][12] = v; check += v - v;
-    v = w->M[12][20]; w->Pn[12][20] = v; w->Pn[20][12] = v; check += v - v;
-    v = w->M[12][21]; w->Pn[12][21] = v; w->Pn[21][12] = v; check += v - v;
-    v = w->M[12][22]; w->Pn[12][22] = v; w->Pn[22][12] = v; check += v - v;
-    v = w->M[12][23]; w->Pn[12][23] = v; w->Pn[23][12] = v; check += v - v;
-    v = w->M[12][24]; w->Pn[12][24] = v; w->Pn[24][12] = v; check += v - v;
-    v = w->M[12][25]; w->Pn[12][25] = v; w->Pn[25][12] = v; check += v - v;
-    v = w->M[12][26]; w->Pn[12][26] = v; w->Pn[26][12] = v; check += v - v;
-    v = w->M[12][27]; w->Pn[12][27] = v; w->Pn[27][12] = v; check += v - v;
-    v = w->M[12][28]; w->Pn[12][28] = v; w->Pn[28][12] = v; check += v - v;
-    v = w->M[12][29]; w->Pn[12][29] = v; w->Pn[29][12] = v; check += v - v;
-    v = w->M[12][30]; w->Pn[12][30] = v; w->Pn[30][12] = v; check += v - v;
-    v = w->M[12][31]; w->Pn[12][31] = v; w->Pn[31][12] = v; check += v - v;
+    v = w->M[12]*t->Phi[12][12] + t->Qd[318]; w->Pn[318] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13]; w->Pn[319] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14]; w->Pn[320] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15]; w->Pn[321] = v; check += v - v;
+    v = w->M[16]; w->Pn[322] = v; check += v - v;
+    v = w->M[17]; w->Pn[323] = v; check += v - v;
+    v = w->M[18]; w->Pn[324] = v; check += v - v;
+    v = w->M[19]; w->Pn[325] = v; check += v - v;
+    v = w->M[20]; w->Pn[326] = v; check += v - v;
+    v = w->M[21]; w->Pn[327] = v; check += v - v;
+    v = w->M[22]; w->Pn[328] = v; check += v - v;
+    v = w->M[23]; w->Pn[329] = v; check += v - v;
+    v = w->M[24]; w->Pn[330] = v; check += v - v;
+    v = w->M[25]; w->Pn[331] = v; check += v - v;
+    v = w->M[26]; w->Pn[332] = v; check += v - v;
+    v = w->M[27]; w->Pn[333] = v; check += v - v;
+    v = w->M[28]; w->Pn[334] = v; check += v - v;
+    v = w->M[29]; w->Pn[335] = v; check += v - v;
+    v = w->M[30]; w->Pn[336] = v; check += v - v;
+    v = w->M[31]; w->Pn[337] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_13(const ned_doppler32_augmented_filter *restrict f, const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[13][13]*f->P[13][0];
+    w->M[1] = t->Phi[13][13]*f->P[13][1];
+    w->M[2] = t->Phi[13][13]*f->P[13][2];
+    w->M[3] = t->Phi[13][13]*f->P[13][3];
+    w->M[4] = t->Phi[13][13]*f->P[13][4];
+    w->M[5] = t->Phi[13][13]*f->P[13][5];
+    w->M[6] = t->Phi[13][13]*f->P[13][6];
+    w->M[7] = t->Phi[13][13]*f->P[13][7];
+    w->M[8] = t->Phi[13][13]*f->P[13][8];
+    w->M[9] = t->Phi[13][13]*f->P[13][9];
+    w->M[10] = t->Phi[13][13]*f->P[13][10];
+    w->M[11] = t->Phi[13][13]*f->P[13][11];
+    w->M[12] = t->Phi[13][13]*f->P[13][12];
+    w->M[13] = t->Phi[13][13]*f->P[13][13];
+    w->M[14] = t->Phi[13][13]*f->P[13][14];
+    w->M[15] = t->Phi[13][13]*f->P[13][15];
+    w->M[16] = t->Phi[13][13]*f->P[13][16];
+    w->M[17] = t->Phi[13][13]*f->P[13][17];
+    w->M[18] = t->Phi[13][13]*f->P[13][18];
+    w->M[19] = t->Phi[13][13]*f->P[13][19];
+    w->M[20] = t->Phi[13][13]*f->P[13][20];
+    w->M[21] = t->Phi[13][13]*f->P[13][21];
+    w->M[22] = t->Phi[13][13]*f->P[13][22];
+    w->M[23] = t->Phi[13][13]*f->P[13][23];
+    w->M[24] = t->Phi[13][13]*f->P[13][24];
+    w->M[25] = t->Phi[13][13]*f->P[13][25];
+    w->M[26] = t->Phi[13][13]*f->P[13][26];
+    w->M[27] = t->Phi[13][13]*f->P[13][27];
+    w->M[28] = t->Phi[13][13]*f->P[13][28];
+    w->M[29] = t->Phi[13][13]*f->P[13][29];
+    w->M[30] = t->Phi[13][13]*f->P[13][30];
+    w->M[31] = t->Phi[13][13]*f->P[13][31];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -8198,26 +7627,64 @@ static ned_doppler32_augmented_scalar propagate_row_13(const ned_doppler32_augme
         *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[13][13]*t->Phi[13][13] + t->Qd[13][13]; w->Pn[13][13] = v; check += v - v;
-    v = w->M[13][14]*t->Phi[14][14]; w->Pn[13][14] = v; w->Pn[14][13] = v; check += v - v;
-    v = w->M[13][15]*t->Phi[15][15]; w->Pn[13][15] = v; w->Pn[15][13] = v; check += v - v;
-    v = w->M[13][16]; w->Pn[13][16] = v; w->Pn[16][13] = v; check += v - v;
-    v = w->M[13][17]; w->Pn[13][17] = v; w->Pn[17][13] = v; check += v - v;
-    v = w->M[13][18]; w->Pn[13][18] = v; w->Pn[18][13] = v; check += v - v;
-    v = w->M[13][19]; w->Pn[13][19] = v; w->Pn[19][13] = v; check += v - v;
-    v = w->M[13][20]; w->Pn[13][20] = v; w->Pn[20][13] = v; check += v - v;
-    v = w->M[13][21]; w->Pn[13][21] = v; w->Pn[21][13] = v; check += v - v;
-    v = w->M[13][22]; w->Pn[13][22] = v; w->Pn[22][13] = v; check += v - v;
-    v = w->M[13][23]; w->Pn[13][23] = v; w->Pn[23][13] = v; check += v - v;
-    v = w->M[13][24]; w->Pn[13][24] = v; w->Pn[24][13] = v; check += v - v;
-    v = w->M[13][25]; w->Pn[13][25] = v; w->Pn[25][13] = v; check += v - v;
-    v = w->M[13][26]; w->Pn[13][26] = v; w->Pn[26][13] = v; check += v - v;
-    v = w->M[13][27]; w->Pn[13][27] = v; w->Pn[27][13] = v; check += v - v;
-    v = w->M[13][28]; w->Pn[13][28] = v; w->Pn[28][13] = v; check += v - v;
-    v = w->M[13][29]; w->Pn[13][29] = v; w->Pn[29][13] = v; check += v - v;
-    v = w->M[13][30]; w->Pn[13][30] = v; w->Pn[30][13] = v; check += v - v;
-    v = w->M[13][31]; w->Pn[13][31] = v; w->Pn[31][13] = v; check += v - v;
+    v = w->M[13]*t->Phi[13][13] + t->Qd[338]; w->Pn[338] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14]; w->Pn[339] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15]; w->Pn[340] = v; check += v - v;
+    v = w->M[16]; w->Pn[341] = v; check += v - v;
+    v = w->M[17]; w->Pn[342] = v; check += v - v;
+    v = w->M[18]; w->Pn[343] = v; check += v - v;
+    v = w->M[19]; w->Pn[344] = v; check += v - v;
+    v = w->M[20]; w->Pn[345] = v; check += v - v;
+    v = w->M[21]; w->Pn[346] = v; check += v - v;
+    v = w->M[22]; w->Pn[347] = v; check += v - v;
+    v = w->M[23]; w->Pn[348] = v; check += v - v;
+    v = w->M[24]; w->Pn[349] = v; check += v - v;
+    v = w->M[25]; w->Pn[350] = v; check += v - v;
+    v = w->M[26]; w->Pn[351] = v; check += v - v;
+    v = w->M[27]; w->Pn[352] = v; check += v - v;
+    v = w->M[28]; w->Pn[353] = v; check += v - v;
+    v = w->M[29]; w->Pn[354] = v; check += v - v;
+    v = w->M[30]; w->Pn[355] = v; check += v - v;
+    v = w->M[31]; w->Pn[356] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_14(const ned_doppler32_augmented_filter *restrict f, const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[14][14]*f->P[14][0];
+    w->M[1] = t->Phi[14][14]*f->P[14][1];
+    w->M[2] = t->Phi[14][14]*f->P[14][2];
+    w->M[3] = t->Phi[14][14]*f->P[14][3];
+    w->M[4] = t->Phi[14][14]*f->P[14][4];
+    w->M[5] = t->Phi[14][14]*f->P[14][5];
+    w->M[6] = t->Phi[14][14]*f->P[14][6];
+    w->M[7] = t->Phi[14][14]*f->P[14][7];
+    w->M[8] = t->Phi[14][14]*f->P[14][8];
+    w->M[9] = t->Phi[14][14]*f->P[14][9];
+    w->M[10] = t->Phi[14][14]*f->P[14][10];
+    w->M[11] = t->Phi[14][14]*f->P[14][11];
+    w->M[12] = t->Phi[14][14]*f->P[14][12];
+    w->M[13] = t->Phi[14][14]*f->P[14][13];
+    w->M[14] = t->Phi[14][14]*f->P[14][14];
+    w->M[15] = t->Phi[14][14]*f->P[14][15];
+    w->M[16] = t->Phi[14][14]*f->P[14][16];
+    w->M[17] = t->Phi[14][14]*f->P[14][17];
+    w->M[18] = t->Phi[14][14]*f->P[14][18];
+    w->M[19] = t->Phi[14][14]*f->P[14][19];
+    w->M[20] = t->Phi[14][14]*f->P[14][20];
+    w->M[21] = t->Phi[14][14]*f->P[14][21];
+    w->M[22] = t->Phi[14][14]*f->P[14][22];
+    w->M[23] = t->Phi[14][14]*f->P[14][23];
+    w->M[24] = t->Phi[14][14]*f->P[14][24];
+    w->M[25] = t->Phi[14][14]*f->P[14][25];
+    w->M[26] = t->Phi[14][14]*f->P[14][26];
+    w->M[27] = t->Phi[14][14]*f->P[14][27];
+    w->M[28] = t->Phi[14][14]*f->P[14][28];
+    w->M[29] = t->Phi[14][14]*f->P[14][29];
+    w->M[30] = t->Phi[14][14]*f->P[14][30];
+    w->M[31] = t->Phi[14][14]*f->P[14][31];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -8225,25 +7692,63 @@ static ned_doppler32_augmented_scalar propagate_row_14(const ned_doppler32_augme
         *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[14][14]*t->Phi[14][14] + t->Qd[14][14]; w->Pn[14][14] = v; check += v - v;
-    v = w->M[14][15]*t->Phi[15][15]; w->Pn[14][15] = v; w->Pn[15][14] = v; check += v - v;
-    v = w->M[14][16]; w->Pn[14][16] = v; w->Pn[16][14] = v; check += v - v;
-    v = w->M[14][17]; w->Pn[14][17] = v; w->Pn[17][14] = v; check += v - v;
-    v = w->M[14][18]; w->Pn[14][18] = v; w->Pn[18][14] = v; check += v - v;
-    v = w->M[14][19]; w->Pn[14][19] = v; w->Pn[19][14] = v; check += v - v;
-    v = w->M[14][20]; w->Pn[14][20] = v; w->Pn[20][14] = v; check += v - v;
-    v = w->M[14][21]; w->Pn[14][21] = v; w->Pn[21][14] = v; check += v - v;
-    v = w->M[14][22]; w->Pn[14][22] = v; w->Pn[22][14] = v; check += v - v;
-    v = w->M[14][23]; w->Pn[14][23] = v; w->Pn[23][14] = v; check += v - v;
-    v = w->M[14][24]; w->Pn[14][24] = v; w->Pn[24][14] = v; check += v - v;
-    v = w->M[14][25]; w->Pn[14][25] = v; w->Pn[25][14] = v; check += v - v;
-    v = w->M[14][26]; w->Pn[14][26] = v; w->Pn[26][14] = v; check += v - v;
-    v = w->M[14][27]; w->Pn[14][27] = v; w->Pn[27][14] = v; check += v - v;
-    v = w->M[14][28]; w->Pn[14][28] = v; w->Pn[28][14] = v; check += v - v;
-    v = w->M[14][29]; w->Pn[14][29] = v; w->Pn[29][14] = v; check += v - v;
-    v = w->M[14][30]; w->Pn[14][30] = v; w->Pn[30][14] = v; check += v - v;
-    v = w->M[14][31]; w->Pn[14][31] = v; w->Pn[31][14] = v; check += v - v;
+    v = w->M[14]*t->Phi[14][14] + t->Qd[357]; w->Pn[357] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15]; w->Pn[358] = v; check += v - v;
+    v = w->M[16]; w->Pn[359] = v; check += v - v;
+    v = w->M[17]; w->Pn[360] = v; check += v - v;
+    v = w->M[18]; w->Pn[361] = v; check += v - v;
+    v = w->M[19]; w->Pn[362] = v; check += v - v;
+    v = w->M[20]; w->Pn[363] = v; check += v - v;
+    v = w->M[21]; w->Pn[364] = v; check += v - v;
+    v = w->M[22]; w->Pn[365] = v; check += v - v;
+    v = w->M[23]; w->Pn[366] = v; check += v - v;
+    v = w->M[24]; w->Pn[367] = v; check += v - v;
+    v = w->M[25]; w->Pn[368] = v; check += v - v;
+    v = w->M[26]; w->Pn[369] = v; check += v - v;
+    v = w->M[27]; w->Pn[370] = v; check += v - v;
+    v = w->M[28]; w->Pn[371] = v; check += v - v;
+    v = w->M[29]; w->Pn[372] = v; check += v - v;
+    v = w->M[30]; w->Pn[373] = v; check += v - v;
+    v = w->M[31]; w->Pn[374] = v; check += v - v;
     return check;
+}
+
+static void phi_times_p_row_15(const ned_doppler32_augmented_filter *restrict f, const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
+{
+    w->M[0] = t->Phi[15][15]*f->P[15][0];
+    w->M[1] = t->Phi[15][15]*f->P[15][1];
+    w->M[2] = t->Phi[15][15]*f->P[15][2];
+    w->M[3] = t->Phi[15][15]*f->P[15][3];
+    w->M[4] = t->Phi[15][15]*f->P[15][4];
+    w->M[5] = t->Phi[15][15]*f->P[15][5];
+    w->M[6] = t->Phi[15][15]*f->P[15][6];
+    w->M[7] = t->Phi[15][15]*f->P[15][7];
+    w->M[8] = t->Phi[15][15]*f->P[15][8];
+    w->M[9] = t->Phi[15][15]*f->P[15][9];
+    w->M[10] = t->Phi[15][15]*f->P[15][10];
+    w->M[11] = t->Phi[15][15]*f->P[15][11];
+    w->M[12] = t->Phi[15][15]*f->P[15][12];
+    w->M[13] = t->Phi[15][15]*f->P[15][13];
+    w->M[14] = t->Phi[15][15]*f->P[15][14];
+    w->M[15] = t->Phi[15][15]*f->P[15][15];
+    w->M[16] = t->Phi[15][15]*f->P[15][16];
+    w->M[17] = t->Phi[15][15]*f->P[15][17];
+    w->M[18] = t->Phi[15][15]*f->P[15][18];
+    w->M[19] = t->Phi[15][15]*f->P[15][19];
+    w->M[20] = t->Phi[15][15]*f->P[15][20];
+    w->M[21] = t->Phi[15][15]*f->P[15][21];
+    w->M[22] = t->Phi[15][15]*f->P[15][22];
+    w->M[23] = t->Phi[15][15]*f->P[15][23];
+    w->M[24] = t->Phi[15][15]*f->P[15][24];
+    w->M[25] = t->Phi[15][15]*f->P[15][25];
+    w->M[26] = t->Phi[15][15]*f->P[15][26];
+    w->M[27] = t->Phi[15][15]*f->P[15][27];
+    w->M[28] = t->Phi[15][15]*f->P[15][28];
+    w->M[29] = t->Phi[15][15]*f->P[15][29];
+    w->M[30] = t->Phi[15][15]*f->P[15][30];
+    w->M[31] = t->Phi[15][15]*f->P[15][31];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -8251,23 +7756,23 @@ static ned_doppler32_augmented_scalar propagate_row_15(const ned_doppler32_augme
         *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[15][15]*t->Phi[15][15] + t->Qd[15][15]; w->Pn[15][15] = v; check += v - v;
-    v = w->M[15][16]; w->Pn[15][16] = v; w->Pn[16][15] = v; check += v - v;
-    v = w->M[15][17]; w->Pn[15][17] = v; w->Pn[17][15] = v; check += v - v;
-    v = w->M[15][18]; w->Pn[15][18] = v; w->Pn[18][15] = v; check += v - v;
-    v = w->M[15][19]; w->Pn[15][19] = v; w->Pn[19][15] = v; check += v - v;
-    v = w->M[15][20]; w->Pn[15][20] = v; w->Pn[20][15] = v; check += v - v;
-    v = w->M[15][21]; w->Pn[15][21] = v; w->Pn[21][15] = v; check += v - v;
-    v = w->M[15][22]; w->Pn[15][22] = v; w->Pn[22][15] = v; check += v - v;
-    v = w->M[15][23]; w->Pn[15][23] = v; w->Pn[23][15] = v; check += v - v;
-    v = w->M[15][24]; w->Pn[15][24] = v; w->Pn[24][15] = v; check += v - v;
-    v = w->M[15][25]; w->Pn[15][25] = v; w->Pn[25][15] = v; check += v - v;
-    v = w->M[15][26]; w->Pn[15][26] = v; w->Pn[26][15] = v; check += v - v;
-    v = w->M[15][27]; w->Pn[15][27] = v; w->Pn[27][15] = v; check += v - v;
-    v = w->M[15][28]; w->Pn[15][28] = v; w->Pn[28][15] = v; check += v - v;
-    v = w->M[15][29]; w->Pn[15][29] = v; w->Pn[29][15] = v; check += v - v;
-    v = w->M[15][30]; w->Pn[15][30] = v; w->Pn[30][15] = v; check += v - v;
-    v = w->M[15][31]; w->Pn[15][31] = v; w->Pn[31][15] = v; check += v - v;
+    v = w->M[15]*t->Phi[15][15] + t->Qd[375]; w->Pn[375] = v; check += v - v;
+    v = w->M[16]; w->Pn[376] = v; check += v - v;
+    v = w->M[17]; w->Pn[377] = v; check += v - v;
+    v = w->M[18]; w->Pn[378] = v; check += v - v;
+    v = w->M[19]; w->Pn[379] = v; check += v - v;
+    v = w->M[20]; w->Pn[380] = v; check += v - v;
+    v = w->M[21]; w->Pn[381] = v; check += v - v;
+    v = w->M[22]; w->Pn[382] = v; check += v - v;
+    v = w->M[23]; w->Pn[383] = v; check += v - v;
+    v = w->M[24]; w->Pn[384] = v; check += v - v;
+    v = w->M[25]; w->Pn[385] = v; check += v - v;
+    v = w->M[26]; w->Pn[386] = v; check += v - v;
+    v = w->M[27]; w->Pn[387] = v; check += v - v;
+    v = w->M[28]; w->Pn[388] = v; check += v - v;
+    v = w->M[29]; w->Pn[389] = v; check += v - v;
+    v = w->M[30]; w->Pn[390] = v; check += v - v;
+    v = w->M[31]; w->Pn[391] = v; check += v - v;
     return check;
 }
 
@@ -8276,22 +7781,22 @@ static ned_doppler32_augmented_scalar propagate_row_16(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[16][16]; w->Pn[16][16] = v; check += v - v;
-    v = f->P[16][17]; w->Pn[16][17] = v; w->Pn[17][16] = v; check += v - v;
-    v = f->P[16][18]; w->Pn[16][18] = v; w->Pn[18][16] = v; check += v - v;
-    v = f->P[16][19]; w->Pn[16][19] = v; w->Pn[19][16] = v; check += v - v;
-    v = f->P[16][20]; w->Pn[16][20] = v; w->Pn[20][16] = v; check += v - v;
-    v = f->P[16][21]; w->Pn[16][21] = v; w->Pn[21][16] = v; check += v - v;
-    v = f->P[16][22]; w->Pn[16][22] = v; w->Pn[22][16] = v; check += v - v;
-    v = f->P[16][23]; w->Pn[16][23] = v; w->Pn[23][16] = v; check += v - v;
-    v = f->P[16][24]; w->Pn[16][24] = v; w->Pn[24][16] = v; check += v - v;
-    v = f->P[16][25]; w->Pn[16][25] = v; w->Pn[25][16] = v; check += v - v;
-    v = f->P[16][26]; w->Pn[16][26] = v; w->Pn[26][16] = v; check += v - v;
-    v = f->P[16][27]; w->Pn[16][27] = v; w->Pn[27][16] = v; check += v - v;
-    v = f->P[16][28]; w->Pn[16][28] = v; w->Pn[28][16] = v; check += v - v;
-    v = f->P[16][29]; w->Pn[16][29] = v; w->Pn[29][16] = v; check += v - v;
-    v = f->P[16][30]; w->Pn[16][30] = v; w->Pn[30][16] = v; check += v - v;
-    v = f->P[16][31]; w->Pn[16][31] = v; w->Pn[31][16] = v; check += v - v;
+    v = f->P[16][16]; w->Pn[392] = v; check += v - v;
+    v = f->P[16][17]; w->Pn[393] = v; check += v - v;
+    v = f->P[16][18]; w->Pn[394] = v; check += v - v;
+    v = f->P[16][19]; w->Pn[395] = v; check += v - v;
+    v = f->P[16][20]; w->Pn[396] = v; check += v - v;
+    v = f->P[16][21]; w->Pn[397] = v; check += v - v;
+    v = f->P[16][22]; w->Pn[398] = v; check += v - v;
+    v = f->P[16][23]; w->Pn[399] = v; check += v - v;
+    v = f->P[16][24]; w->Pn[400] = v; check += v - v;
+    v = f->P[16][25]; w->Pn[401] = v; check += v - v;
+    v = f->P[16][26]; w->Pn[402] = v; check += v - v;
+    v = f->P[16][27]; w->Pn[403] = v; check += v - v;
+    v = f->P[16][28]; w->Pn[404] = v; check += v - v;
+    v = f->P[16][29]; w->Pn[405] = v; check += v - v;
+    v = f->P[16][30]; w->Pn[406] = v; check += v - v;
+    v = f->P[16][31]; w->Pn[407] = v; check += v - v;
     return check;
 }
 
@@ -8300,21 +7805,21 @@ static ned_doppler32_augmented_scalar propagate_row_17(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[17][17]; w->Pn[17][17] = v; check += v - v;
-    v = f->P[17][18]; w->Pn[17][18] = v; w->Pn[18][17] = v; check += v - v;
-    v = f->P[17][19]; w->Pn[17][19] = v; w->Pn[19][17] = v; check += v - v;
-    v = f->P[17][20]; w->Pn[17][20] = v; w->Pn[20][17] = v; check += v - v;
-    v = f->P[17][21]; w->Pn[17][21] = v; w->Pn[21][17] = v; check += v - v;
-    v = f->P[17][22]; w->Pn[17][22] = v; w->Pn[22][17] = v; check += v - v;
-    v = f->P[17][23]; w->Pn[17][23] = v; w->Pn[23][17] = v; check += v - v;
-    v = f->P[17][24]; w->Pn[17][24] = v; w->Pn[24][17] = v; check += v - v;
-    v = f->P[17][25]; w->Pn[17][25] = v; w->Pn[25][17] = v; check += v - v;
-    v = f->P[17][26]; w->Pn[17][26] = v; w->Pn[26][17] = v; check += v - v;
-    v = f->P[17][27]; w->Pn[17][27] = v; w->Pn[27][17] = v; check += v - v;
-    v = f->P[17][28]; w->Pn[17][28] = v; w->Pn[28][17] = v; check += v - v;
-    v = f->P[17][29]; w->Pn[17][29] = v; w->Pn[29][17] = v; check += v - v;
-    v = f->P[17][30]; w->Pn[17][30] = v; w->Pn[30][17] = v; check += v - v;
-    v = f->P[17][31]; w->Pn[17][31] = v; w->Pn[31][17] = v; check += v - v;
+    v = f->P[17][17]; w->Pn[408] = v; check += v - v;
+    v = f->P[17][18]; w->Pn[409] = v; check += v - v;
+    v = f->P[17][19]; w->Pn[410] = v; check += v - v;
+    v = f->P[17][20]; w->Pn[411] = v; check += v - v;
+    v = f->P[17][21]; w->Pn[412] = v; check += v - v;
+    v = f->P[17][22]; w->Pn[413] = v; check += v - v;
+    v = f->P[17][23]; w->Pn[414] = v; check += v - v;
+    v = f->P[17][24]; w->Pn[415] = v; check += v - v;
+    v = f->P[17][25]; w->Pn[416] = v; check += v - v;
+    v = f->P[17][26]; w->Pn[417] = v; check += v - v;
+    v = f->P[17][27]; w->Pn[418] = v; check += v - v;
+    v = f->P[17][28]; w->Pn[419] = v; check += v - v;
+    v = f->P[17][29]; w->Pn[420] = v; check += v - v;
+    v = f->P[17][30]; w->Pn[421] = v; check += v - v;
+    v = f->P[17][31]; w->Pn[422] = v; check += v - v;
     return check;
 }
 
@@ -8323,20 +7828,20 @@ static ned_doppler32_augmented_scalar propagate_row_18(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[18][18]; w->Pn[18][18] = v; check += v - v;
-    v = f->P[18][19]; w->Pn[18][19] = v; w->Pn[19][18] = v; check += v - v;
-    v = f->P[18][20]; w->Pn[18][20] = v; w->Pn[20][18] = v; check += v - v;
-    v = f->P[18][21]; w->Pn[18][21] = v; w->Pn[21][18] = v; check += v - v;
-    v = f->P[18][22]; w->Pn[18][22] = v; w->Pn[22][18] = v; check += v - v;
-    v = f->P[18][23]; w->Pn[18][23] = v; w->Pn[23][18] = v; check += v - v;
-    v = f->P[18][24]; w->Pn[18][24] = v; w->Pn[24][18] = v; check += v - v;
-    v = f->P[18][25]; w->Pn[18][25] = v; w->Pn[25][18] = v; check += v - v;
-    v = f->P[18][26]; w->Pn[18][26] = v; w->Pn[26][18] = v; check += v - v;
-    v = f->P[18][27]; w->Pn[18][27] = v; w->Pn[27][18] = v; check += v - v;
-    v = f->P[18][28]; w->Pn[18][28] = v; w->Pn[28][18] = v; check += v - v;
-    v = f->P[18][29]; w->Pn[18][29] = v; w->Pn[29][18] = v; check += v - v;
-    v = f->P[18][30]; w->Pn[18][30] = v; w->Pn[30][18] = v; check += v - v;
-    v = f->P[18][31]; w->Pn[18][31] = v; w->Pn[31][18] = v; check += v - v;
+    v = f->P[18][18]; w->Pn[423] = v; check += v - v;
+    v = f->P[18][19]; w->Pn[424] = v; check += v - v;
+    v = f->P[18][20]; w->Pn[425] = v; check += v - v;
+    v = f->P[18][21]; w->Pn[426] = v; check += v - v;
+    v = f->P[18][22]; w->Pn[427] = v; check += v - v;
+    v = f->P[18][23]; w->Pn[428] = v; check += v - v;
+    v = f->P[18][24]; w->Pn[429] = v; check += v - v;
+    v = f->P[18][25]; w->Pn[430] = v; check += v - v;
+    v = f->P[18][26]; w->Pn[431] = v; check += v - v;
+    v = f->P[18][27]; w->Pn[432] = v; check += v - v;
+    v = f->P[18][28]; w->Pn[433] = v; check += v - v;
+    v = f->P[18][29]; w->Pn[434] = v; check += v - v;
+    v = f->P[18][30]; w->Pn[435] = v; check += v - v;
+    v = f->P[18][31]; w->Pn[436] = v; check += v - v;
     return check;
 }
 
@@ -8345,19 +7850,19 @@ static ned_doppler32_augmented_scalar propagate_row_19(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[19][19]; w->Pn[19][19] = v; check += v - v;
-    v = f->P[19][20]; w->Pn[19][20] = v; w->Pn[20][19] = v; check += v - v;
-    v = f->P[19][21]; w->Pn[19][21] = v; w->Pn[21][19] = v; check += v - v;
-    v = f->P[19][22]; w->Pn[19][22] = v; w->Pn[22][19] = v; check += v - v;
-    v = f->P[19][23]; w->Pn[19][23] = v; w->Pn[23][19] = v; check += v - v;
-    v = f->P[19][24]; w->Pn[19][24] = v; w->Pn[24][19] = v; check += v - v;
-    v = f->P[19][25]; w->Pn[19][25] = v; w->Pn[25][19] = v; check += v - v;
-    v = f->P[19][26]; w->Pn[19][26] = v; w->Pn[26][19] = v; check += v - v;
-    v = f->P[19][27]; w->Pn[19][27] = v; w->Pn[27][19] = v; check += v - v;
-    v = f->P[19][28]; w->Pn[19][28] = v; w->Pn[28][19] = v; check += v - v;
-    v = f->P[19][29]; w->Pn[19][29] = v; w->Pn[29][19] = v; check += v - v;
-    v = f->P[19][30]; w->Pn[19][30] = v; w->Pn[30][19] = v; check += v - v;
-    v = f->P[19][31]; w->Pn[19][31] = v; w->Pn[31][19] = v; check += v - v;
+    v = f->P[19][19]; w->Pn[437] = v; check += v - v;
+    v = f->P[19][20]; w->Pn[438] = v; check += v - v;
+    v = f->P[19][21]; w->Pn[439] = v; check += v - v;
+    v = f->P[19][22]; w->Pn[440] = v; check += v - v;
+    v = f->P[19][23]; w->Pn[441] = v; check += v - v;
+    v = f->P[19][24]; w->Pn[442] = v; check += v - v;
+    v = f->P[19][25]; w->Pn[443] = v; check += v - v;
+    v = f->P[19][26]; w->Pn[444] = v; check += v - v;
+    v = f->P[19][27]; w->Pn[445] = v; check += v - v;
+    v = f->P[19][28]; w->Pn[446] = v; check += v - v;
+    v = f->P[19][29]; w->Pn[447] = v; check += v - v;
+    v = f->P[19][30]; w->Pn[448] = v; check += v - v;
+    v = f->P[19][31]; w->Pn[449] = v; check += v - v;
     return check;
 }
 
@@ -8366,18 +7871,18 @@ static ned_doppler32_augmented_scalar propagate_row_20(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[20][20]; w->Pn[20][20] = v; check += v - v;
-    v = f->P[20][21]; w->Pn[20][21] = v; w->Pn[21][20] = v; check += v - v;
-    v = f->P[20][22]; w->Pn[20][22] = v; w->Pn[22][20] = v; check += v - v;
-    v = f->P[20][23]; w->Pn[20][23] = v; w->Pn[23][20] = v; check += v - v;
-    v = f->P[20][24]; w->Pn[20][24] = v; w->Pn[24][20] = v; check += v - v;
-    v = f->P[20][25]; w->Pn[20][25] = v; w->Pn[25][20] = v; check += v - v;
-    v = f->P[20][26]; w->Pn[20][26] = v; w->Pn[26][20] = v; check += v - v;
-    v = f->P[20][27]; w->Pn[20][27] = v; w->Pn[27][20] = v; check += v - v;
-    v = f->P[20][28]; w->Pn[20][28] = v; w->Pn[28][20] = v; check += v - v;
-    v = f->P[20][29]; w->Pn[20][29] = v; w->Pn[29][20] = v; check += v - v;
-    v = f->P[20][30]; w->Pn[20][30] = v; w->Pn[30][20] = v; check += v - v;
-    v = f->P[20][31]; w->Pn[20][31] = v; w->Pn[31][20] = v; check += v - v;
+    v = f->P[20][20]; w->Pn[450] = v; check += v - v;
+    v = f->P[20][21]; w->Pn[451] = v; check += v - v;
+    v = f->P[20][22]; w->Pn[452] = v; check += v - v;
+    v = f->P[20][23]; w->Pn[453] = v; check += v - v;
+    v = f->P[20][24]; w->Pn[454] = v; check += v - v;
+    v = f->P[20][25]; w->Pn[455] = v; check += v - v;
+    v = f->P[20][26]; w->Pn[456] = v; check += v - v;
+    v = f->P[20][27]; w->Pn[457] = v; check += v - v;
+    v = f->P[20][28]; w->Pn[458] = v; check += v - v;
+    v = f->P[20][29]; w->Pn[459] = v; check += v - v;
+    v = f->P[20][30]; w->Pn[460] = v; check += v - v;
+    v = f->P[20][31]; w->Pn[461] = v; check += v - v;
     return check;
 }
 
@@ -8386,17 +7891,17 @@ static ned_doppler32_augmented_scalar propagate_row_21(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[21][21]; w->Pn[21][21] = v; check += v - v;
-    v = f->P[21][22]; w->Pn[21][22] = v; w->Pn[22][21] = v; check += v - v;
-    v = f->P[21][23]; w->Pn[21][23] = v; w->Pn[23][21] = v; check += v - v;
-    v = f->P[21][24]; w->Pn[21][24] = v; w->Pn[24][21] = v; check += v - v;
-    v = f->P[21][25]; w->Pn[21][25] = v; w->Pn[25][21] = v; check += v - v;
-    v = f->P[21][26]; w->Pn[21][26] = v; w->Pn[26][21] = v; check += v - v;
-    v = f->P[21][27]; w->Pn[21][27] = v; w->Pn[27][21] = v; check += v - v;
-    v = f->P[21][28]; w->Pn[21][28] = v; w->Pn[28][21] = v; check += v - v;
-    v = f->P[21][29]; w->Pn[21][29] = v; w->Pn[29][21] = v; check += v - v;
-    v = f->P[21][30]; w->Pn[21][30] = v; w->Pn[30][21] = v; check += v - v;
-    v = f->P[21][31]; w->Pn[21][31] = v; w->Pn[31][21] = v; check += v - v;
+    v = f->P[21][21]; w->Pn[462] = v; check += v - v;
+    v = f->P[21][22]; w->Pn[463] = v; check += v - v;
+    v = f->P[21][23]; w->Pn[464] = v; check += v - v;
+    v = f->P[21][24]; w->Pn[465] = v; check += v - v;
+    v = f->P[21][25]; w->Pn[466] = v; check += v - v;
+    v = f->P[21][26]; w->Pn[467] = v; check += v - v;
+    v = f->P[21][27]; w->Pn[468] = v; check += v - v;
+    v = f->P[21][28]; w->Pn[469] = v; check += v - v;
+    v = f->P[21][29]; w->Pn[470] = v; check += v - v;
+    v = f->P[21][30]; w->Pn[471] = v; check += v - v;
+    v = f->P[21][31]; w->Pn[472] = v; check += v - v;
     return check;
 }
 
@@ -8405,16 +7910,16 @@ static ned_doppler32_augmented_scalar propagate_row_22(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[22][22]; w->Pn[22][22] = v; check += v - v;
-    v = f->P[22][23]; w->Pn[22][23] = v; w->Pn[23][22] = v; check += v - v;
-    v = f->P[22][24]; w->Pn[22][24] = v; w->Pn[24][22] = v; check += v - v;
-    v = f->P[22][25]; w->Pn[22][25] = v; w->Pn[25][22] = v; check += v - v;
-    v = f->P[22][26]; w->Pn[22][26] = v; w->Pn[26][22] = v; check += v - v;
-    v = f->P[22][27]; w->Pn[22][27] = v; w->Pn[27][22] = v; check += v - v;
-    v = f->P[22][28]; w->Pn[22][28] = v; w->Pn[28][22] = v; check += v - v;
-    v = f->P[22][29]; w->Pn[22][29] = v; w->Pn[29][22] = v; check += v - v;
-    v = f->P[22][30]; w->Pn[22][30] = v; w->Pn[30][22] = v; check += v - v;
-    v = f->P[22][31]; w->Pn[22][31] = v; w->Pn[31][22] = v; check += v - v;
+    v = f->P[22][22]; w->Pn[473] = v; check += v - v;
+    v = f->P[22][23]; w->Pn[474] = v; check += v - v;
+    v = f->P[22][24]; w->Pn[475] = v; check += v - v;
+    v = f->P[22][25]; w->Pn[476] = v; check += v - v;
+    v = f->P[22][26]; w->Pn[477] = v; check += v - v;
+    v = f->P[22][27]; w->Pn[478] = v; check += v - v;
+    v = f->P[22][28]; w->Pn[479] = v; check += v - v;
+    v = f->P[22][29]; w->Pn[480] = v; check += v - v;
+    v = f->P[22][30]; w->Pn[481] = v; check += v - v;
+    v = f->P[22][31]; w->Pn[482] = v; check += v - v;
     return check;
 }
 
@@ -8423,15 +7928,15 @@ static ned_doppler32_augmented_scalar propagate_row_23(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[23][23]; w->Pn[23][23] = v; check += v - v;
-    v = f->P[23][24]; w->Pn[23][24] = v; w->Pn[24][23] = v; check += v - v;
-    v = f->P[23][25]; w->Pn[23][25] = v; w->Pn[25][23] = v; check += v - v;
-    v = f->P[23][26]; w->Pn[23][26] = v; w->Pn[26][23] = v; check += v - v;
-    v = f->P[23][27]; w->Pn[23][27] = v; w->Pn[27][23] = v; check += v - v;
-    v = f->P[23][28]; w->Pn[23][28] = v; w->Pn[28][23] = v; check += v - v;
-    v = f->P[23][29]; w->Pn[23][29] = v; w->Pn[29][23] = v; check += v - v;
-    v = f->P[23][30]; w->Pn[23][30] = v; w->Pn[30][23] = v; check += v - v;
-    v = f->P[23][31]; w->Pn[23][31] = v; w->Pn[31][23] = v; check += v - v;
+    v = f->P[23][23]; w->Pn[483] = v; check += v - v;
+    v = f->P[23][24]; w->Pn[484] = v; check += v - v;
+    v = f->P[23][25]; w->Pn[485] = v; check += v - v;
+    v = f->P[23][26]; w->Pn[486] = v; check += v - v;
+    v = f->P[23][27]; w->Pn[487] = v; check += v - v;
+    v = f->P[23][28]; w->Pn[488] = v; check += v - v;
+    v = f->P[23][29]; w->Pn[489] = v; check += v - v;
+    v = f->P[23][30]; w->Pn[490] = v; check += v - v;
+    v = f->P[23][31]; w->Pn[491] = v; check += v - v;
     return check;
 }
 
@@ -8440,14 +7945,14 @@ static ned_doppler32_augmented_scalar propagate_row_24(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[24][24]; w->Pn[24][24] = v; check += v - v;
-    v = f->P[24][25]; w->Pn[24][25] = v; w->Pn[25][24] = v; check += v - v;
-    v = f->P[24][26]; w->Pn[24][26] = v; w->Pn[26][24] = v; check += v - v;
-    v = f->P[24][27]; w->Pn[24][27] = v; w->Pn[27][24] = v; check += v - v;
-    v = f->P[24][28]; w->Pn[24][28] = v; w->Pn[28][24] = v; check += v - v;
-    v = f->P[24][29]; w->Pn[24][29] = v; w->Pn[29][24] = v; check += v - v;
-    v = f->P[24][30]; w->Pn[24][30] = v; w->Pn[30][24] = v; check += v - v;
-    v = f->P[24][31]; w->Pn[24][31] = v; w->Pn[31][24] = v; check += v - v;
+    v = f->P[24][24]; w->Pn[492] = v; check += v - v;
+    v = f->P[24][25]; w->Pn[493] = v; check += v - v;
+    v = f->P[24][26]; w->Pn[494] = v; check += v - v;
+    v = f->P[24][27]; w->Pn[495] = v; check += v - v;
+    v = f->P[24][28]; w->Pn[496] = v; check += v - v;
+    v = f->P[24][29]; w->Pn[497] = v; check += v - v;
+    v = f->P[24][30]; w->Pn[498] = v; check += v - v;
+    v = f->P[24][31]; w->Pn[499] = v; check += v - v;
     return check;
 }
 
@@ -8456,13 +7961,13 @@ static ned_doppler32_augmented_scalar propagate_row_25(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[25][25]; w->Pn[25][25] = v; check += v - v;
-    v = f->P[25][26]; w->Pn[25][26] = v; w->Pn[26][25] = v; check += v - v;
-    v = f->P[25][27]; w->Pn[25][27] = v; w->Pn[27][25] = v; check += v - v;
-    v = f->P[25][28]; w->Pn[25][28] = v; w->Pn[28][25] = v; check += v - v;
-    v = f->P[25][29]; w->Pn[25][29] = v; w->Pn[29][25] = v; check += v - v;
-    v = f->P[25][30]; w->Pn[25][30] = v; w->Pn[30][25] = v; check += v - v;
-    v = f->P[25][31]; w->Pn[25][31] = v; w->Pn[31][25] = v; check += v - v;
+    v = f->P[25][25]; w->Pn[500] = v; check += v - v;
+    v = f->P[25][26]; w->Pn[501] = v; check += v - v;
+    v = f->P[25][27]; w->Pn[502] = v; check += v - v;
+    v = f->P[25][28]; w->Pn[503] = v; check += v - v;
+    v = f->P[25][29]; w->Pn[504] = v; check += v - v;
+    v = f->P[25][30]; w->Pn[505] = v; check += v - v;
+    v = f->P[25][31]; w->Pn[506] = v; check += v - v;
     return check;
 }
 
@@ -8471,12 +7976,12 @@ static ned_doppler32_augmented_scalar propagate_row_26(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[26][26]; w->Pn[26][26] = v; check += v - v;
-    v = f->P[26][27]; w->Pn[26][27] = v; w->Pn[27][26] = v; check += v - v;
-    v = f->P[26][28]; w->Pn[26][28] = v; w->Pn[28][26] = v; check += v - v;
-    v = f->P[26][29]; w->Pn[26][29] = v; w->Pn[29][26] = v; check += v - v;
-    v = f->P[26][30]; w->Pn[26][30] = v; w->Pn[30][26] = v; check += v - v;
-    v = f->P[26][31]; w->Pn[26][31] = v; w->Pn[31][26] = v; check += v - v;
+    v = f->P[26][26]; w->Pn[507] = v; check += v - v;
+    v = f->P[26][27]; w->Pn[508] = v; check += v - v;
+    v = f->P[26][28]; w->Pn[509] = v; check += v - v;
+    v = f->P[26][29]; w->Pn[510] = v; check += v - v;
+    v = f->P[26][30]; w->Pn[511] = v; check += v - v;
+    v = f->P[26][31]; w->Pn[512] = v; check += v - v;
     return check;
 }
 
@@ -8485,11 +7990,11 @@ static ned_doppler32_augmented_scalar propagate_row_27(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[27][27]; w->Pn[27][27] = v; check += v - v;
-    v = f->P[27][28]; w->Pn[27][28] = v; w->Pn[28][27] = v; check += v - v;
-    v = f->P[27][29]; w->Pn[27][29] = v; w->Pn[29][27] = v; check += v - v;
-    v = f->P[27][30]; w->Pn[27][30] = v; w->Pn[30][27] = v; check += v - v;
-    v = f->P[27][31]; w->Pn[27][31] = v; w->Pn[31][27] = v; check += v - v;
+    v = f->P[27][27]; w->Pn[513] = v; check += v - v;
+    v = f->P[27][28]; w->Pn[514] = v; check += v - v;
+    v = f->P[27][29]; w->Pn[515] = v; check += v - v;
+    v = f->P[27][30]; w->Pn[516] = v; check += v - v;
+    v = f->P[27][31]; w->Pn[517] = v; check += v - v;
     return check;
 }
 
@@ -8498,10 +8003,10 @@ static ned_doppler32_augmented_scalar propagate_row_28(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[28][28]; w->Pn[28][28] = v; check += v - v;
-    v = f->P[28][29]; w->Pn[28][29] = v; w->Pn[29][28] = v; check += v - v;
-    v = f->P[28][30]; w->Pn[28][30] = v; w->Pn[30][28] = v; check += v - v;
-    v = f->P[28][31]; w->Pn[28][31] = v; w->Pn[31][28] = v; check += v - v;
+    v = f->P[28][28]; w->Pn[518] = v; check += v - v;
+    v = f->P[28][29]; w->Pn[519] = v; check += v - v;
+    v = f->P[28][30]; w->Pn[520] = v; check += v - v;
+    v = f->P[28][31]; w->Pn[521] = v; check += v - v;
     return check;
 }
 
@@ -8510,9 +8015,9 @@ static ned_doppler32_augmented_scalar propagate_row_29(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[29][29]; w->Pn[29][29] = v; check += v - v;
-    v = f->P[29][30]; w->Pn[29][30] = v; w->Pn[30][29] = v; check += v - v;
-    v = f->P[29][31]; w->Pn[29][31] = v; w->Pn[31][29] = v; check += v - v;
+    v = f->P[29][29]; w->Pn[522] = v; check += v - v;
+    v = f->P[29][30]; w->Pn[523] = v; check += v - v;
+    v = f->P[29][31]; w->Pn[524] = v; check += v - v;
     return check;
 }
 
@@ -8521,8 +8026,8 @@ static ned_doppler32_augmented_scalar propagate_row_30(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[30][30]; w->Pn[30][30] = v; check += v - v;
-    v = f->P[30][31]; w->Pn[30][31] = v; w->Pn[31][30] = v; check += v - v;
+    v = f->P[30][30]; w->Pn[525] = v; check += v - v;
+    v = f->P[30][31]; w->Pn[526] = v; check += v - v;
     return check;
 }
 
@@ -8531,7 +8036,7 @@ static ned_doppler32_augmented_scalar propagate_row_31(const ned_doppler32_augme
         *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[31][31]; w->Pn[31][31] = v; check += v - v;
+    v = f->P[31][31]; w->Pn[527] = v; check += v - v;
     return check;
 }
 
@@ -8644,36 +8149,36 @@ int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, 
     check += f->x[29] - f->x[29];
     check += f->x[30] - f->x[30];
     check += f->x[31] - f->x[31];
-    /* M = Phi P (rows of Phi that are e_i are read from P directly), then
-       Pn = M Phi^T + Q_d (each pair computed once, stored in both triangles) */
+    /* row by row: M = row i of Phi P (a row of Phi that is e_i reads P directly), then
+       row i of Pn = M Phi^T + Q_d (each pair computed once, into the packed upper triangle) */
     phi_times_p_row_0(f, t, w);
-    phi_times_p_row_1(f, t, w);
-    phi_times_p_row_2(f, t, w);
-    phi_times_p_row_3(f, t, w);
-    phi_times_p_row_4(f, t, w);
-    phi_times_p_row_5(f, t, w);
-    phi_times_p_row_6(f, t, w);
-    phi_times_p_row_10(f, t, w);
-    phi_times_p_row_11(f, t, w);
-    phi_times_p_row_12(f, t, w);
-    phi_times_p_row_13(f, t, w);
-    phi_times_p_row_14(f, t, w);
-    phi_times_p_row_15(f, t, w);
     check += propagate_row_0(t, w);
+    phi_times_p_row_1(f, t, w);
     check += propagate_row_1(t, w);
+    phi_times_p_row_2(f, t, w);
     check += propagate_row_2(t, w);
+    phi_times_p_row_3(f, t, w);
     check += propagate_row_3(t, w);
+    phi_times_p_row_4(f, t, w);
     check += propagate_row_4(t, w);
+    phi_times_p_row_5(f, t, w);
     check += propagate_row_5(t, w);
+    phi_times_p_row_6(f, t, w);
     check += propagate_row_6(t, w);
     check += propagate_row_7(f, t, w);
     check += propagate_row_8(f, t, w);
     check += propagate_row_9(f, t, w);
+    phi_times_p_row_10(f, t, w);
     check += propagate_row_10(t, w);
+    phi_times_p_row_11(f, t, w);
     check += propagate_row_11(t, w);
+    phi_times_p_row_12(f, t, w);
     check += propagate_row_12(t, w);
+    phi_times_p_row_13(f, t, w);
     check += propagate_row_13(t, w);
+    phi_times_p_row_14(f, t, w);
     check += propagate_row_14(t, w);
+    phi_times_p_row_15(f, t, w);
     check += propagate_row_15(t, w);
     check += propagate_row_16(f, w);
     check += propagate_row_17(f, w);
@@ -8707,7 +8212,535 @@ int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, 
     f->x[13] = w->xn[13];
     f->x[14] = w->xn[14];
     f->x[15] = w->xn[15];
-    memcpy(f->P, w->Pn, sizeof f->P);
+    /* row i of P from Pn's packed row, then its column */
+    memcpy(&f->P[0][0], &w->Pn[0], 32 * sizeof w->Pn[0]);
+    f->P[1][0] = f->P[0][1];
+    f->P[2][0] = f->P[0][2];
+    f->P[3][0] = f->P[0][3];
+    f->P[4][0] = f->P[0][4];
+    f->P[5][0] = f->P[0][5];
+    f->P[6][0] = f->P[0][6];
+    f->P[7][0] = f->P[0][7];
+    f->P[8][0] = f->P[0][8];
+    f->P[9][0] = f->P[0][9];
+    f->P[10][0] = f->P[0][10];
+    f->P[11][0] = f->P[0][11];
+    f->P[12][0] = f->P[0][12];
+    f->P[13][0] = f->P[0][13];
+    f->P[14][0] = f->P[0][14];
+    f->P[15][0] = f->P[0][15];
+    f->P[16][0] = f->P[0][16];
+    f->P[17][0] = f->P[0][17];
+    f->P[18][0] = f->P[0][18];
+    f->P[19][0] = f->P[0][19];
+    f->P[20][0] = f->P[0][20];
+    f->P[21][0] = f->P[0][21];
+    f->P[22][0] = f->P[0][22];
+    f->P[23][0] = f->P[0][23];
+    f->P[24][0] = f->P[0][24];
+    f->P[25][0] = f->P[0][25];
+    f->P[26][0] = f->P[0][26];
+    f->P[27][0] = f->P[0][27];
+    f->P[28][0] = f->P[0][28];
+    f->P[29][0] = f->P[0][29];
+    f->P[30][0] = f->P[0][30];
+    f->P[31][0] = f->P[0][31];
+    memcpy(&f->P[1][1], &w->Pn[32], 31 * sizeof w->Pn[0]);
+    f->P[2][1] = f->P[1][2];
+    f->P[3][1] = f->P[1][3];
+    f->P[4][1] = f->P[1][4];
+    f->P[5][1] = f->P[1][5];
+    f->P[6][1] = f->P[1][6];
+    f->P[7][1] = f->P[1][7];
+    f->P[8][1] = f->P[1][8];
+    f->P[9][1] = f->P[1][9];
+    f->P[10][1] = f->P[1][10];
+    f->P[11][1] = f->P[1][11];
+    f->P[12][1] = f->P[1][12];
+    f->P[13][1] = f->P[1][13];
+    f->P[14][1] = f->P[1][14];
+    f->P[15][1] = f->P[1][15];
+    f->P[16][1] = f->P[1][16];
+    f->P[17][1] = f->P[1][17];
+    f->P[18][1] = f->P[1][18];
+    f->P[19][1] = f->P[1][19];
+    f->P[20][1] = f->P[1][20];
+    f->P[21][1] = f->P[1][21];
+    f->P[22][1] = f->P[1][22];
+    f->P[23][1] = f->P[1][23];
+    f->P[24][1] = f->P[1][24];
+    f->P[25][1] = f->P[1][25];
+    f->P[26][1] = f->P[1][26];
+    f->P[27][1] = f->P[1][27];
+    f->P[28][1] = f->P[1][28];
+    f->P[29][1] = f->P[1][29];
+    f->P[30][1] = f->P[1][30];
+    f->P[31][1] = f->P[1][31];
+    memcpy(&f->P[2][2], &w->Pn[63], 30 * sizeof w->Pn[0]);
+    f->P[3][2] = f->P[2][3];
+    f->P[4][2] = f->P[2][4];
+    f->P[5][2] = f->P[2][5];
+    f->P[6][2] = f->P[2][6];
+    f->P[7][2] = f->P[2][7];
+    f->P[8][2] = f->P[2][8];
+    f->P[9][2] = f->P[2][9];
+    f->P[10][2] = f->P[2][10];
+    f->P[11][2] = f->P[2][11];
+    f->P[12][2] = f->P[2][12];
+    f->P[13][2] = f->P[2][13];
+    f->P[14][2] = f->P[2][14];
+    f->P[15][2] = f->P[2][15];
+    f->P[16][2] = f->P[2][16];
+    f->P[17][2] = f->P[2][17];
+    f->P[18][2] = f->P[2][18];
+    f->P[19][2] = f->P[2][19];
+    f->P[20][2] = f->P[2][20];
+    f->P[21][2] = f->P[2][21];
+    f->P[22][2] = f->P[2][22];
+    f->P[23][2] = f->P[2][23];
+    f->P[24][2] = f->P[2][24];
+    f->P[25][2] = f->P[2][25];
+    f->P[26][2] = f->P[2][26];
+    f->P[27][2] = f->P[2][27];
+    f->P[28][2] = f->P[2][28];
+    f->P[29][2] = f->P[2][29];
+    f->P[30][2] = f->P[2][30];
+    f->P[31][2] = f->P[2][31];
+    memcpy(&f->P[3][3], &w->Pn[93], 29 * sizeof w->Pn[0]);
+    f->P[4][3] = f->P[3][4];
+    f->P[5][3] = f->P[3][5];
+    f->P[6][3] = f->P[3][6];
+    f->P[7][3] = f->P[3][7];
+    f->P[8][3] = f->P[3][8];
+    f->P[9][3] = f->P[3][9];
+    f->P[10][3] = f->P[3][10];
+    f->P[11][3] = f->P[3][11];
+    f->P[12][3] = f->P[3][12];
+    f->P[13][3] = f->P[3][13];
+    f->P[14][3] = f->P[3][14];
+    f->P[15][3] = f->P[3][15];
+    f->P[16][3] = f->P[3][16];
+    f->P[17][3] = f->P[3][17];
+    f->P[18][3] = f->P[3][18];
+    f->P[19][3] = f->P[3][19];
+    f->P[20][3] = f->P[3][20];
+    f->P[21][3] = f->P[3][21];
+    f->P[22][3] = f->P[3][22];
+    f->P[23][3] = f->P[3][23];
+    f->P[24][3] = f->P[3][24];
+    f->P[25][3] = f->P[3][25];
+    f->P[26][3] = f->P[3][26];
+    f->P[27][3] = f->P[3][27];
+    f->P[28][3] = f->P[3][28];
+    f->P[29][3] = f->P[3][29];
+    f->P[30][3] = f->P[3][30];
+    f->P[31][3] = f->P[3][31];
+    memcpy(&f->P[4][4], &w->Pn[122], 28 * sizeof w->Pn[0]);
+    f->P[5][4] = f->P[4][5];
+    f->P[6][4] = f->P[4][6];
+    f->P[7][4] = f->P[4][7];
+    f->P[8][4] = f->P[4][8];
+    f->P[9][4] = f->P[4][9];
+    f->P[10][4] = f->P[4][10];
+    f->P[11][4] = f->P[4][11];
+    f->P[12][4] = f->P[4][12];
+    f->P[13][4] = f->P[4][13];
+    f->P[14][4] = f->P[4][14];
+    f->P[15][4] = f->P[4][15];
+    f->P[16][4] = f->P[4][16];
+    f->P[17][4] = f->P[4][17];
+    f->P[18][4] = f->P[4][18];
+    f->P[19][4] = f->P[4][19];
+    f->P[20][4] = f->P[4][20];
+    f->P[21][4] = f->P[4][21];
+    f->P[22][4] = f->P[4][22];
+    f->P[23][4] = f->P[4][23];
+    f->P[24][4] = f->P[4][24];
+    f->P[25][4] = f->P[4][25];
+    f->P[26][4] = f->P[4][26];
+    f->P[27][4] = f->P[4][27];
+    f->P[28][4] = f->P[4][28];
+    f->P[29][4] = f->P[4][29];
+    f->P[30][4] = f->P[4][30];
+    f->P[31][4] = f->P[4][31];
+    memcpy(&f->P[5][5], &w->Pn[150], 27 * sizeof w->Pn[0]);
+    f->P[6][5] = f->P[5][6];
+    f->P[7][5] = f->P[5][7];
+    f->P[8][5] = f->P[5][8];
+    f->P[9][5] = f->P[5][9];
+    f->P[10][5] = f->P[5][10];
+    f->P[11][5] = f->P[5][11];
+    f->P[12][5] = f->P[5][12];
+    f->P[13][5] = f->P[5][13];
+    f->P[14][5] = f->P[5][14];
+    f->P[15][5] = f->P[5][15];
+    f->P[16][5] = f->P[5][16];
+    f->P[17][5] = f->P[5][17];
+    f->P[18][5] = f->P[5][18];
+    f->P[19][5] = f->P[5][19];
+    f->P[20][5] = f->P[5][20];
+    f->P[21][5] = f->P[5][21];
+    f->P[22][5] = f->P[5][22];
+    f->P[23][5] = f->P[5][23];
+    f->P[24][5] = f->P[5][24];
+    f->P[25][5] = f->P[5][25];
+    f->P[26][5] = f->P[5][26];
+    f->P[27][5] = f->P[5][27];
+    f->P[28][5] = f->P[5][28];
+    f->P[29][5] = f->P[5][29];
+    f->P[30][5] = f->P[5][30];
+    f->P[31][5] = f->P[5][31];
+    memcpy(&f->P[6][6], &w->Pn[177], 26 * sizeof w->Pn[0]);
+    f->P[7][6] = f->P[6][7];
+    f->P[8][6] = f->P[6][8];
+    f->P[9][6] = f->P[6][9];
+    f->P[10][6] = f->P[6][10];
+    f->P[11][6] = f->P[6][11];
+    f->P[12][6] = f->P[6][12];
+    f->P[13][6] = f->P[6][13];
+    f->P[14][6] = f->P[6][14];
+    f->P[15][6] = f->P[6][15];
+    f->P[16][6] = f->P[6][16];
+    f->P[17][6] = f->P[6][17];
+    f->P[18][6] = f->P[6][18];
+    f->P[19][6] = f->P[6][19];
+    f->P[20][6] = f->P[6][20];
+    f->P[21][6] = f->P[6][21];
+    f->P[22][6] = f->P[6][22];
+    f->P[23][6] = f->P[6][23];
+    f->P[24][6] = f->P[6][24];
+    f->P[25][6] = f->P[6][25];
+    f->P[26][6] = f->P[6][26];
+    f->P[27][6] = f->P[6][27];
+    f->P[28][6] = f->P[6][28];
+    f->P[29][6] = f->P[6][29];
+    f->P[30][6] = f->P[6][30];
+    f->P[31][6] = f->P[6][31];
+    memcpy(&f->P[7][7], &w->Pn[203], 25 * sizeof w->Pn[0]);
+    f->P[8][7] = f->P[7][8];
+    f->P[9][7] = f->P[7][9];
+    f->P[10][7] = f->P[7][10];
+    f->P[11][7] = f->P[7][11];
+    f->P[12][7] = f->P[7][12];
+    f->P[13][7] = f->P[7][13];
+    f->P[14][7] = f->P[7][14];
+    f->P[15][7] = f->P[7][15];
+    f->P[16][7] = f->P[7][16];
+    f->P[17][7] = f->P[7][17];
+    f->P[18][7] = f->P[7][18];
+    f->P[19][7] = f->P[7][19];
+    f->P[20][7] = f->P[7][20];
+    f->P[21][7] = f->P[7][21];
+    f->P[22][7] = f->P[7][22];
+    f->P[23][7] = f->P[7][23];
+    f->P[24][7] = f->P[7][24];
+    f->P[25][7] = f->P[7][25];
+    f->P[26][7] = f->P[7][26];
+    f->P[27][7] = f->P[7][27];
+    f->P[28][7] = f->P[7][28];
+    f->P[29][7] = f->P[7][29];
+    f->P[30][7] = f->P[7][30];
+    f->P[31][7] = f->P[7][31];
+    memcpy(&f->P[8][8], &w->Pn[228], 24 * sizeof w->Pn[0]);
+    f->P[9][8] = f->P[8][9];
+    f->P[10][8] = f->P[8][10];
+    f->P[11][8] = f->P[8][11];
+    f->P[12][8] = f->P[8][12];
+    f->P[13][8] = f->P[8][13];
+    f->P[14][8] = f->P[8][14];
+    f->P[15][8] = f->P[8][15];
+    f->P[16][8] = f->P[8][16];
+    f->P[17][8] = f->P[8][17];
+    f->P[18][8] = f->P[8][18];
+    f->P[19][8] = f->P[8][19];
+    f->P[20][8] = f->P[8][20];
+    f->P[21][8] = f->P[8][21];
+    f->P[22][8] = f->P[8][22];
+    f->P[23][8] = f->P[8][23];
+    f->P[24][8] = f->P[8][24];
+    f->P[25][8] = f->P[8][25];
+    f->P[26][8] = f->P[8][26];
+    f->P[27][8] = f->P[8][27];
+    f->P[28][8] = f->P[8][28];
+    f->P[29][8] = f->P[8][29];
+    f->P[30][8] = f->P[8][30];
+    f->P[31][8] = f->P[8][31];
+    memcpy(&f->P[9][9], &w->Pn[252], 23 * sizeof w->Pn[0]);
+    f->P[10][9] = f->P[9][10];
+    f->P[11][9] = f->P[9][11];
+    f->P[12][9] = f->P[9][12];
+    f->P[13][9] = f->P[9][13];
+    f->P[14][9] = f->P[9][14];
+    f->P[15][9] = f->P[9][15];
+    f->P[16][9] = f->P[9][16];
+    f->P[17][9] = f->P[9][17];
+    f->P[18][9] = f->P[9][18];
+    f->P[19][9] = f->P[9][19];
+    f->P[20][9] = f->P[9][20];
+    f->P[21][9] = f->P[9][21];
+    f->P[22][9] = f->P[9][22];
+    f->P[23][9] = f->P[9][23];
+    f->P[24][9] = f->P[9][24];
+    f->P[25][9] = f->P[9][25];
+    f->P[26][9] = f->P[9][26];
+    f->P[27][9] = f->P[9][27];
+    f->P[28][9] = f->P[9][28];
+    f->P[29][9] = f->P[9][29];
+    f->P[30][9] = f->P[9][30];
+    f->P[31][9] = f->P[9][31];
+    memcpy(&f->P[10][10], &w->Pn[275], 22 * sizeof w->Pn[0]);
+    f->P[11][10] = f->P[10][11];
+    f->P[12][10] = f->P[10][12];
+    f->P[13][10] = f->P[10][13];
+    f->P[14][10] = f->P[10][14];
+    f->P[15][10] = f->P[10][15];
+    f->P[16][10] = f->P[10][16];
+    f->P[17][10] = f->P[10][17];
+    f->P[18][10] = f->P[10][18];
+    f->P[19][10] = f->P[10][19];
+    f->P[20][10] = f->P[10][20];
+    f->P[21][10] = f->P[10][21];
+    f->P[22][10] = f->P[10][22];
+    f->P[23][10] = f->P[10][23];
+    f->P[24][10] = f->P[10][24];
+    f->P[25][10] = f->P[10][25];
+    f->P[26][10] = f->P[10][26];
+    f->P[27][10] = f->P[10][27];
+    f->P[28][10] = f->P[10][28];
+    f->P[29][10] = f->P[10][29];
+    f->P[30][10] = f->P[10][30];
+    f->P[31][10] = f->P[10][31];
+    memcpy(&f->P[11][11], &w->Pn[297], 21 * sizeof w->Pn[0]);
+    f->P[12][11] = f->P[11][12];
+    f->P[13][11] = f->P[11][13];
+    f->P[14][11] = f->P[11][14];
+    f->P[15][11] = f->P[11][15];
+    f->P[16][11] = f->P[11][16];
+    f->P[17][11] = f->P[11][17];
+    f->P[18][11] = f->P[11][18];
+    f->P[19][11] = f->P[11][19];
+    f->P[20][11] = f->P[11][20];
+    f->P[21][11] = f->P[11][21];
+    f->P[22][11] = f->P[11][22];
+    f->P[23][11] = f->P[11][23];
+    f->P[24][11] = f->P[11][24];
+    f->P[25][11] = f->P[11][25];
+    f->P[26][11] = f->P[11][26];
+    f->P[27][11] = f->P[11][27];
+    f->P[28][11] = f->P[11][28];
+    f->P[29][11] = f->P[11][29];
+    f->P[30][11] = f->P[11][30];
+    f->P[31][11] = f->P[11][31];
+    memcpy(&f->P[12][12], &w->Pn[318], 20 * sizeof w->Pn[0]);
+    f->P[13][12] = f->P[12][13];
+    f->P[14][12] = f->P[12][14];
+    f->P[15][12] = f->P[12][15];
+    f->P[16][12] = f->P[12][16];
+    f->P[17][12] = f->P[12][17];
+    f->P[18][12] = f->P[12][18];
+    f->P[19][12] = f->P[12][19];
+    f->P[20][12] = f->P[12][20];
+    f->P[21][12] = f->P[12][21];
+    f->P[22][12] = f->P[12][22];
+    f->P[23][12] = f->P[12][23];
+    f->P[24][12] = f->P[12][24];
+    f->P[25][12] = f->P[12][25];
+    f->P[26][12] = f->P[12][26];
+    f->P[27][12] = f->P[12][27];
+    f->P[28][12] = f->P[12][28];
+    f->P[29][12] = f->P[12][29];
+    f->P[30][12] = f->P[12][30];
+    f->P[31][12] = f->P[12][31];
+    memcpy(&f->P[13][13], &w->Pn[338], 19 * sizeof w->Pn[0]);
+    f->P[14][13] = f->P[13][14];
+    f->P[15][13] = f->P[13][15];
+    f->P[16][13] = f->P[13][16];
+    f->P[17][13] = f->P[13][17];
+    f->P[18][13] = f->P[13][18];
+    f->P[19][13] = f->P[13][19];
+    f->P[20][13] = f->P[13][20];
+    f->P[21][13] = f->P[13][21];
+    f->P[22][13] = f->P[13][22];
+    f->P[23][13] = f->P[13][23];
+    f->P[24][13] = f->P[13][24];
+    f->P[25][13] = f->P[13][25];
+    f->P[26][13] = f->P[13][26];
+    f->P[27][13] = f->P[13][27];
+    f->P[28][13] = f->P[13][28];
+    f->P[29][13] = f->P[13][29];
+    f->P[30][13] = f->P[13][30];
+    f->P[31][13] = f->P[13][31];
+    memcpy(&f->P[14][14], &w->Pn[357], 18 * sizeof w->Pn[0]);
+    f->P[15][14] = f->P[14][15];
+    f->P[16][14] = f->P[14][16];
+    f->P[17][14] = f->P[14][17];
+    f->P[18][14] = f->P[14][18];
+    f->P[19][14] = f->P[14][19];
+    f->P[20][14] = f->P[14][20];
+    f->P[21][14] = f->P[14][21];
+    f->P[22][14] = f->P[14][22];
+    f->P[23][14] = f->P[14][23];
+    f->P[24][14] = f->P[14][24];
+    f->P[25][14] = f->P[14][25];
+    f->P[26][14] = f->P[14][26];
+    f->P[27][14] = f->P[14][27];
+    f->P[28][14] = f->P[14][28];
+    f->P[29][14] = f->P[14][29];
+    f->P[30][14] = f->P[14][30];
+    f->P[31][14] = f->P[14][31];
+    memcpy(&f->P[15][15], &w->Pn[375], 17 * sizeof w->Pn[0]);
+    f->P[16][15] = f->P[15][16];
+    f->P[17][15] = f->P[15][17];
+    f->P[18][15] = f->P[15][18];
+    f->P[19][15] = f->P[15][19];
+    f->P[20][15] = f->P[15][20];
+    f->P[21][15] = f->P[15][21];
+    f->P[22][15] = f->P[15][22];
+    f->P[23][15] = f->P[15][23];
+    f->P[24][15] = f->P[15][24];
+    f->P[25][15] = f->P[15][25];
+    f->P[26][15] = f->P[15][26];
+    f->P[27][15] = f->P[15][27];
+    f->P[28][15] = f->P[15][28];
+    f->P[29][15] = f->P[15][29];
+    f->P[30][15] = f->P[15][30];
+    f->P[31][15] = f->P[15][31];
+    memcpy(&f->P[16][16], &w->Pn[392], 16 * sizeof w->Pn[0]);
+    f->P[17][16] = f->P[16][17];
+    f->P[18][16] = f->P[16][18];
+    f->P[19][16] = f->P[16][19];
+    f->P[20][16] = f->P[16][20];
+    f->P[21][16] = f->P[16][21];
+    f->P[22][16] = f->P[16][22];
+    f->P[23][16] = f->P[16][23];
+    f->P[24][16] = f->P[16][24];
+    f->P[25][16] = f->P[16][25];
+    f->P[26][16] = f->P[16][26];
+    f->P[27][16] = f->P[16][27];
+    f->P[28][16] = f->P[16][28];
+    f->P[29][16] = f->P[16][29];
+    f->P[30][16] = f->P[16][30];
+    f->P[31][16] = f->P[16][31];
+    memcpy(&f->P[17][17], &w->Pn[408], 15 * sizeof w->Pn[0]);
+    f->P[18][17] = f->P[17][18];
+    f->P[19][17] = f->P[17][19];
+    f->P[20][17] = f->P[17][20];
+    f->P[21][17] = f->P[17][21];
+    f->P[22][17] = f->P[17][22];
+    f->P[23][17] = f->P[17][23];
+    f->P[24][17] = f->P[17][24];
+    f->P[25][17] = f->P[17][25];
+    f->P[26][17] = f->P[17][26];
+    f->P[27][17] = f->P[17][27];
+    f->P[28][17] = f->P[17][28];
+    f->P[29][17] = f->P[17][29];
+    f->P[30][17] = f->P[17][30];
+    f->P[31][17] = f->P[17][31];
+    memcpy(&f->P[18][18], &w->Pn[423], 14 * sizeof w->Pn[0]);
+    f->P[19][18] = f->P[18][19];
+    f->P[20][18] = f->P[18][20];
+    f->P[21][18] = f->P[18][21];
+    f->P[22][18] = f->P[18][22];
+    f->P[23][18] = f->P[18][23];
+    f->P[24][18] = f->P[18][24];
+    f->P[25][18] = f->P[18][25];
+    f->P[26][18] = f->P[18][26];
+    f->P[27][18] = f->P[18][27];
+    f->P[28][18] = f->P[18][28];
+    f->P[29][18] = f->P[18][29];
+    f->P[30][18] = f->P[18][30];
+    f->P[31][18] = f->P[18][31];
+    memcpy(&f->P[19][19], &w->Pn[437], 13 * sizeof w->Pn[0]);
+    f->P[20][19] = f->P[19][20];
+    f->P[21][19] = f->P[19][21];
+    f->P[22][19] = f->P[19][22];
+    f->P[23][19] = f->P[19][23];
+    f->P[24][19] = f->P[19][24];
+    f->P[25][19] = f->P[19][25];
+    f->P[26][19] = f->P[19][26];
+    f->P[27][19] = f->P[19][27];
+    f->P[28][19] = f->P[19][28];
+    f->P[29][19] = f->P[19][29];
+    f->P[30][19] = f->P[19][30];
+    f->P[31][19] = f->P[19][31];
+    memcpy(&f->P[20][20], &w->Pn[450], 12 * sizeof w->Pn[0]);
+    f->P[21][20] = f->P[20][21];
+    f->P[22][20] = f->P[20][22];
+    f->P[23][20] = f->P[20][23];
+    f->P[24][20] = f->P[20][24];
+    f->P[25][20] = f->P[20][25];
+    f->P[26][20] = f->P[20][26];
+    f->P[27][20] = f->P[20][27];
+    f->P[28][20] = f->P[20][28];
+    f->P[29][20] = f->P[20][29];
+    f->P[30][20] = f->P[20][30];
+    f->P[31][20] = f->P[20][31];
+    memcpy(&f->P[21][21], &w->Pn[462], 11 * sizeof w->Pn[0]);
+    f->P[22][21] = f->P[21][22];
+    f->P[23][21] = f->P[21][23];
+    f->P[24][21] = f->P[21][24];
+    f->P[25][21] = f->P[21][25];
+    f->P[26][21] = f->P[21][26];
+    f->P[27][21] = f->P[21][27];
+    f->P[28][21] = f->P[21][28];
+    f->P[29][21] = f->P[21][29];
+    f->P[30][21] = f->P[21][30];
+    f->P[31][21] = f->P[21][31];
+    memcpy(&f->P[22][22], &w->Pn[473], 10 * sizeof w->Pn[0]);
+    f->P[23][22] = f->P[22][23];
+    f->P[24][22] = f->P[22][24];
+    f->P[25][22] = f->P[22][25];
+    f->P[26][22] = f->P[22][26];
+    f->P[27][22] = f->P[22][27];
+    f->P[28][22] = f->P[22][28];
+    f->P[29][22] = f->P[22][29];
+    f->P[30][22] = f->P[22][30];
+    f->P[31][22] = f->P[22][31];
+    memcpy(&f->P[23][23], &w->Pn[483], 9 * sizeof w->Pn[0]);
+    f->P[24][23] = f->P[23][24];
+    f->P[25][23] = f->P[23][25];
+    f->P[26][23] = f->P[23][26];
+    f->P[27][23] = f->P[23][27];
+    f->P[28][23] = f->P[23][28];
+    f->P[29][23] = f->P[23][29];
+    f->P[30][23] = f->P[23][30];
+    f->P[31][23] = f->P[23][31];
+    memcpy(&f->P[24][24], &w->Pn[492], 8 * sizeof w->Pn[0]);
+    f->P[25][24] = f->P[24][25];
+    f->P[26][24] = f->P[24][26];
+    f->P[27][24] = f->P[24][27];
+    f->P[28][24] = f->P[24][28];
+    f->P[29][24] = f->P[24][29];
+    f->P[30][24] = f->P[24][30];
+    f->P[31][24] = f->P[24][31];
+    memcpy(&f->P[25][25], &w->Pn[500], 7 * sizeof w->Pn[0]);
+    f->P[26][25] = f->P[25][26];
+    f->P[27][25] = f->P[25][27];
+    f->P[28][25] = f->P[25][28];
+    f->P[29][25] = f->P[25][29];
+    f->P[30][25] = f->P[25][30];
+    f->P[31][25] = f->P[25][31];
+    memcpy(&f->P[26][26], &w->Pn[507], 6 * sizeof w->Pn[0]);
+    f->P[27][26] = f->P[26][27];
+    f->P[28][26] = f->P[26][28];
+    f->P[29][26] = f->P[26][29];
+    f->P[30][26] = f->P[26][30];
+    f->P[31][26] = f->P[26][31];
+    memcpy(&f->P[27][27], &w->Pn[513], 5 * sizeof w->Pn[0]);
+    f->P[28][27] = f->P[27][28];
+    f->P[29][27] = f->P[27][29];
+    f->P[30][27] = f->P[27][30];
+    f->P[31][27] = f->P[27][31];
+    memcpy(&f->P[28][28], &w->Pn[518], 4 * sizeof w->Pn[0]);
+    f->P[29][28] = f->P[28][29];
+    f->P[30][28] = f->P[28][30];
+    f->P[31][28] = f->P[28][31];
+    memcpy(&f->P[29][29], &w->Pn[522], 3 * sizeof w->Pn[0]);
+    f->P[30][29] = f->P[29][30];
+    f->P[31][29] = f->P[29][31];
+    memcpy(&f->P[30][30], &w->Pn[525], 2 * sizeof w->Pn[0]);
+    f->P[31][30] = f->P[30][31];
+    memcpy(&f->P[31][31], &w->Pn[527], 1 * sizeof w->Pn[0]);
     return NED_DOPPLER32_AUGMENTED_OK;
 }
 
@@ -8728,7 +8761,7 @@ int ned_doppler32_augmented_set_covariance(ned_doppler32_augmented_filter *restr
     if (check != 0.0) {
         return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
     }
-    /* factored only to test that P is positive semidefinite (U in M, D in xn) */
+    /* factored only to test that P is positive semidefinite (U in Pn's upper triangle, D in xn) */
     /* The contract (README, "Generated code"), tol = 16 N eps: P_ii >= 0,
        |P_ij - P_ji| <= tol sqrt(P_ii P_jj) and |P_ij| <= sqrt(P_ii P_jj) (1 + tol),
        so that a zero variance carries no correlation. */
@@ -8757,7 +8790,8 @@ int ned_doppler32_augmented_set_covariance(ned_doppler32_augmented_filter *restr
     for (j = NED_DOPPLER32_AUGMENTED_N_STATES - 1; j >= 0; --j) {
         ned_doppler32_augmented_scalar pivot = P[j * NED_DOPPLER32_AUGMENTED_N_STATES + j];
         for (k = j + 1; k < NED_DOPPLER32_AUGMENTED_N_STATES; ++k) {
-            pivot -= w->xn[k] * w->M[j][k] * w->M[j][k];
+            pivot -= w->xn[k] * w->Pn[NED_DOPPLER32_AUGMENTED_PACKED_UPPER(j, k)] *
+                    w->Pn[NED_DOPPLER32_AUGMENTED_PACKED_UPPER(j, k)];
         }
         if (pivot < 0.0) {
             if (pivot < -(16 * NED_DOPPLER32_AUGMENTED_N_STATES * DBL_EPSILON) * P[j *
@@ -8771,15 +8805,17 @@ int ned_doppler32_augmented_set_covariance(ned_doppler32_augmented_filter *restr
         for (i = 0; i < j; ++i) {
             ned_doppler32_augmented_scalar s = P[i * NED_DOPPLER32_AUGMENTED_N_STATES + j];
             for (k = j + 1; k < NED_DOPPLER32_AUGMENTED_N_STATES; ++k) {
-                s -= w->xn[k] * w->M[i][k] * w->M[j][k];
+                s -= w->xn[k] * w->Pn[NED_DOPPLER32_AUGMENTED_PACKED_UPPER(i, k)] *
+                        w->Pn[NED_DOPPLER32_AUGMENTED_PACKED_UPPER(j, k)];
             }
             if (!(pivot > 0.0) && fabs(s) > (16 * NED_DOPPLER32_AUGMENTED_N_STATES * DBL_EPSILON) *
                     sqrt(P[i * NED_DOPPLER32_AUGMENTED_N_STATES + i] * P[j *
                     NED_DOPPLER32_AUGMENTED_N_STATES + j])) {
                 return NED_DOPPLER32_AUGMENTED_ERR_NOT_POSITIVE;
             }
-            w->M[i][j] = (pivot > 0.0) ? s / pivot : 0.0;
-            check += w->M[i][j] - w->M[i][j];
+            w->Pn[NED_DOPPLER32_AUGMENTED_PACKED_UPPER(i, j)] = (pivot > 0.0) ? s / pivot : 0.0;
+            check += w->Pn[NED_DOPPLER32_AUGMENTED_PACKED_UPPER(i, j)] -
+                    w->Pn[NED_DOPPLER32_AUGMENTED_PACKED_UPPER(i, j)];
         }
         check += pivot - pivot;
     }
@@ -8953,7 +8989,7 @@ int ned_doppler32_augmented_update_masked(ned_doppler32_augmented_filter *restri
                 s += w->C[i][a] * w->K[j][a] - w->K[i][a] * w->HP[a][j] - w->HP[a][i] * w->K[j][a];
             }
             check += s - s;
-            w->Pn[i][j] = s;
+            w->Pn[NED_DOPPLER32_AUGMENTED_PACKED_UPPER(i, j)] = s;
         }
         w->xn[i] = f->x[i];
         for (a = 0; a < NED_DOPPLER32_AUGMENTED_N_MEASUREMENTS; ++a) {
@@ -8967,11 +9003,536 @@ int ned_doppler32_augmented_update_masked(ned_doppler32_augmented_filter *restri
     /* commit only once everything is known to be finite */
     for (i = 0; i < NED_DOPPLER32_AUGMENTED_N_STATES; ++i) {
         f->x[i] = w->xn[i];
-        for (j = i; j < NED_DOPPLER32_AUGMENTED_N_STATES; ++j) {
-            f->P[i][j] = w->Pn[i][j];
-            f->P[j][i] = w->Pn[i][j];
-        }
     }
+    /* row i of P from Pn's packed row, then its column */
+    memcpy(&f->P[0][0], &w->Pn[0], 32 * sizeof w->Pn[0]);
+    f->P[1][0] = f->P[0][1];
+    f->P[2][0] = f->P[0][2];
+    f->P[3][0] = f->P[0][3];
+    f->P[4][0] = f->P[0][4];
+    f->P[5][0] = f->P[0][5];
+    f->P[6][0] = f->P[0][6];
+    f->P[7][0] = f->P[0][7];
+    f->P[8][0] = f->P[0][8];
+    f->P[9][0] = f->P[0][9];
+    f->P[10][0] = f->P[0][10];
+    f->P[11][0] = f->P[0][11];
+    f->P[12][0] = f->P[0][12];
+    f->P[13][0] = f->P[0][13];
+    f->P[14][0] = f->P[0][14];
+    f->P[15][0] = f->P[0][15];
+    f->P[16][0] = f->P[0][16];
+    f->P[17][0] = f->P[0][17];
+    f->P[18][0] = f->P[0][18];
+    f->P[19][0] = f->P[0][19];
+    f->P[20][0] = f->P[0][20];
+    f->P[21][0] = f->P[0][21];
+    f->P[22][0] = f->P[0][22];
+    f->P[23][0] = f->P[0][23];
+    f->P[24][0] = f->P[0][24];
+    f->P[25][0] = f->P[0][25];
+    f->P[26][0] = f->P[0][26];
+    f->P[27][0] = f->P[0][27];
+    f->P[28][0] = f->P[0][28];
+    f->P[29][0] = f->P[0][29];
+    f->P[30][0] = f->P[0][30];
+    f->P[31][0] = f->P[0][31];
+    memcpy(&f->P[1][1], &w->Pn[32], 31 * sizeof w->Pn[0]);
+    f->P[2][1] = f->P[1][2];
+    f->P[3][1] = f->P[1][3];
+    f->P[4][1] = f->P[1][4];
+    f->P[5][1] = f->P[1][5];
+    f->P[6][1] = f->P[1][6];
+    f->P[7][1] = f->P[1][7];
+    f->P[8][1] = f->P[1][8];
+    f->P[9][1] = f->P[1][9];
+    f->P[10][1] = f->P[1][10];
+    f->P[11][1] = f->P[1][11];
+    f->P[12][1] = f->P[1][12];
+    f->P[13][1] = f->P[1][13];
+    f->P[14][1] = f->P[1][14];
+    f->P[15][1] = f->P[1][15];
+    f->P[16][1] = f->P[1][16];
+    f->P[17][1] = f->P[1][17];
+    f->P[18][1] = f->P[1][18];
+    f->P[19][1] = f->P[1][19];
+    f->P[20][1] = f->P[1][20];
+    f->P[21][1] = f->P[1][21];
+    f->P[22][1] = f->P[1][22];
+    f->P[23][1] = f->P[1][23];
+    f->P[24][1] = f->P[1][24];
+    f->P[25][1] = f->P[1][25];
+    f->P[26][1] = f->P[1][26];
+    f->P[27][1] = f->P[1][27];
+    f->P[28][1] = f->P[1][28];
+    f->P[29][1] = f->P[1][29];
+    f->P[30][1] = f->P[1][30];
+    f->P[31][1] = f->P[1][31];
+    memcpy(&f->P[2][2], &w->Pn[63], 30 * sizeof w->Pn[0]);
+    f->P[3][2] = f->P[2][3];
+    f->P[4][2] = f->P[2][4];
+    f->P[5][2] = f->P[2][5];
+    f->P[6][2] = f->P[2][6];
+    f->P[7][2] = f->P[2][7];
+    f->P[8][2] = f->P[2][8];
+    f->P[9][2] = f->P[2][9];
+    f->P[10][2] = f->P[2][10];
+    f->P[11][2] = f->P[2][11];
+    f->P[12][2] = f->P[2][12];
+    f->P[13][2] = f->P[2][13];
+    f->P[14][2] = f->P[2][14];
+    f->P[15][2] = f->P[2][15];
+    f->P[16][2] = f->P[2][16];
+    f->P[17][2] = f->P[2][17];
+    f->P[18][2] = f->P[2][18];
+    f->P[19][2] = f->P[2][19];
+    f->P[20][2] = f->P[2][20];
+    f->P[21][2] = f->P[2][21];
+    f->P[22][2] = f->P[2][22];
+    f->P[23][2] = f->P[2][23];
+    f->P[24][2] = f->P[2][24];
+    f->P[25][2] = f->P[2][25];
+    f->P[26][2] = f->P[2][26];
+    f->P[27][2] = f->P[2][27];
+    f->P[28][2] = f->P[2][28];
+    f->P[29][2] = f->P[2][29];
+    f->P[30][2] = f->P[2][30];
+    f->P[31][2] = f->P[2][31];
+    memcpy(&f->P[3][3], &w->Pn[93], 29 * sizeof w->Pn[0]);
+    f->P[4][3] = f->P[3][4];
+    f->P[5][3] = f->P[3][5];
+    f->P[6][3] = f->P[3][6];
+    f->P[7][3] = f->P[3][7];
+    f->P[8][3] = f->P[3][8];
+    f->P[9][3] = f->P[3][9];
+    f->P[10][3] = f->P[3][10];
+    f->P[11][3] = f->P[3][11];
+    f->P[12][3] = f->P[3][12];
+    f->P[13][3] = f->P[3][13];
+    f->P[14][3] = f->P[3][14];
+    f->P[15][3] = f->P[3][15];
+    f->P[16][3] = f->P[3][16];
+    f->P[17][3] = f->P[3][17];
+    f->P[18][3] = f->P[3][18];
+    f->P[19][3] = f->P[3][19];
+    f->P[20][3] = f->P[3][20];
+    f->P[21][3] = f->P[3][21];
+    f->P[22][3] = f->P[3][22];
+    f->P[23][3] = f->P[3][23];
+    f->P[24][3] = f->P[3][24];
+    f->P[25][3] = f->P[3][25];
+    f->P[26][3] = f->P[3][26];
+    f->P[27][3] = f->P[3][27];
+    f->P[28][3] = f->P[3][28];
+    f->P[29][3] = f->P[3][29];
+    f->P[30][3] = f->P[3][30];
+    f->P[31][3] = f->P[3][31];
+    memcpy(&f->P[4][4], &w->Pn[122], 28 * sizeof w->Pn[0]);
+    f->P[5][4] = f->P[4][5];
+    f->P[6][4] = f->P[4][6];
+    f->P[7][4] = f->P[4][7];
+    f->P[8][4] = f->P[4][8];
+    f->P[9][4] = f->P[4][9];
+    f->P[10][4] = f->P[4][10];
+    f->P[11][4] = f->P[4][11];
+    f->P[12][4] = f->P[4][12];
+    f->P[13][4] = f->P[4][13];
+    f->P[14][4] = f->P[4][14];
+    f->P[15][4] = f->P[4][15];
+    f->P[16][4] = f->P[4][16];
+    f->P[17][4] = f->P[4][17];
+    f->P[18][4] = f->P[4][18];
+    f->P[19][4] = f->P[4][19];
+    f->P[20][4] = f->P[4][20];
+    f->P[21][4] = f->P[4][21];
+    f->P[22][4] = f->P[4][22];
+    f->P[23][4] = f->P[4][23];
+    f->P[24][4] = f->P[4][24];
+    f->P[25][4] = f->P[4][25];
+    f->P[26][4] = f->P[4][26];
+    f->P[27][4] = f->P[4][27];
+    f->P[28][4] = f->P[4][28];
+    f->P[29][4] = f->P[4][29];
+    f->P[30][4] = f->P[4][30];
+    f->P[31][4] = f->P[4][31];
+    memcpy(&f->P[5][5], &w->Pn[150], 27 * sizeof w->Pn[0]);
+    f->P[6][5] = f->P[5][6];
+    f->P[7][5] = f->P[5][7];
+    f->P[8][5] = f->P[5][8];
+    f->P[9][5] = f->P[5][9];
+    f->P[10][5] = f->P[5][10];
+    f->P[11][5] = f->P[5][11];
+    f->P[12][5] = f->P[5][12];
+    f->P[13][5] = f->P[5][13];
+    f->P[14][5] = f->P[5][14];
+    f->P[15][5] = f->P[5][15];
+    f->P[16][5] = f->P[5][16];
+    f->P[17][5] = f->P[5][17];
+    f->P[18][5] = f->P[5][18];
+    f->P[19][5] = f->P[5][19];
+    f->P[20][5] = f->P[5][20];
+    f->P[21][5] = f->P[5][21];
+    f->P[22][5] = f->P[5][22];
+    f->P[23][5] = f->P[5][23];
+    f->P[24][5] = f->P[5][24];
+    f->P[25][5] = f->P[5][25];
+    f->P[26][5] = f->P[5][26];
+    f->P[27][5] = f->P[5][27];
+    f->P[28][5] = f->P[5][28];
+    f->P[29][5] = f->P[5][29];
+    f->P[30][5] = f->P[5][30];
+    f->P[31][5] = f->P[5][31];
+    memcpy(&f->P[6][6], &w->Pn[177], 26 * sizeof w->Pn[0]);
+    f->P[7][6] = f->P[6][7];
+    f->P[8][6] = f->P[6][8];
+    f->P[9][6] = f->P[6][9];
+    f->P[10][6] = f->P[6][10];
+    f->P[11][6] = f->P[6][11];
+    f->P[12][6] = f->P[6][12];
+    f->P[13][6] = f->P[6][13];
+    f->P[14][6] = f->P[6][14];
+    f->P[15][6] = f->P[6][15];
+    f->P[16][6] = f->P[6][16];
+    f->P[17][6] = f->P[6][17];
+    f->P[18][6] = f->P[6][18];
+    f->P[19][6] = f->P[6][19];
+    f->P[20][6] = f->P[6][20];
+    f->P[21][6] = f->P[6][21];
+    f->P[22][6] = f->P[6][22];
+    f->P[23][6] = f->P[6][23];
+    f->P[24][6] = f->P[6][24];
+    f->P[25][6] = f->P[6][25];
+    f->P[26][6] = f->P[6][26];
+    f->P[27][6] = f->P[6][27];
+    f->P[28][6] = f->P[6][28];
+    f->P[29][6] = f->P[6][29];
+    f->P[30][6] = f->P[6][30];
+    f->P[31][6] = f->P[6][31];
+    memcpy(&f->P[7][7], &w->Pn[203], 25 * sizeof w->Pn[0]);
+    f->P[8][7] = f->P[7][8];
+    f->P[9][7] = f->P[7][9];
+    f->P[10][7] = f->P[7][10];
+    f->P[11][7] = f->P[7][11];
+    f->P[12][7] = f->P[7][12];
+    f->P[13][7] = f->P[7][13];
+    f->P[14][7] = f->P[7][14];
+    f->P[15][7] = f->P[7][15];
+    f->P[16][7] = f->P[7][16];
+    f->P[17][7] = f->P[7][17];
+    f->P[18][7] = f->P[7][18];
+    f->P[19][7] = f->P[7][19];
+    f->P[20][7] = f->P[7][20];
+    f->P[21][7] = f->P[7][21];
+    f->P[22][7] = f->P[7][22];
+    f->P[23][7] = f->P[7][23];
+    f->P[24][7] = f->P[7][24];
+    f->P[25][7] = f->P[7][25];
+    f->P[26][7] = f->P[7][26];
+    f->P[27][7] = f->P[7][27];
+    f->P[28][7] = f->P[7][28];
+    f->P[29][7] = f->P[7][29];
+    f->P[30][7] = f->P[7][30];
+    f->P[31][7] = f->P[7][31];
+    memcpy(&f->P[8][8], &w->Pn[228], 24 * sizeof w->Pn[0]);
+    f->P[9][8] = f->P[8][9];
+    f->P[10][8] = f->P[8][10];
+    f->P[11][8] = f->P[8][11];
+    f->P[12][8] = f->P[8][12];
+    f->P[13][8] = f->P[8][13];
+    f->P[14][8] = f->P[8][14];
+    f->P[15][8] = f->P[8][15];
+    f->P[16][8] = f->P[8][16];
+    f->P[17][8] = f->P[8][17];
+    f->P[18][8] = f->P[8][18];
+    f->P[19][8] = f->P[8][19];
+    f->P[20][8] = f->P[8][20];
+    f->P[21][8] = f->P[8][21];
+    f->P[22][8] = f->P[8][22];
+    f->P[23][8] = f->P[8][23];
+    f->P[24][8] = f->P[8][24];
+    f->P[25][8] = f->P[8][25];
+    f->P[26][8] = f->P[8][26];
+    f->P[27][8] = f->P[8][27];
+    f->P[28][8] = f->P[8][28];
+    f->P[29][8] = f->P[8][29];
+    f->P[30][8] = f->P[8][30];
+    f->P[31][8] = f->P[8][31];
+    memcpy(&f->P[9][9], &w->Pn[252], 23 * sizeof w->Pn[0]);
+    f->P[10][9] = f->P[9][10];
+    f->P[11][9] = f->P[9][11];
+    f->P[12][9] = f->P[9][12];
+    f->P[13][9] = f->P[9][13];
+    f->P[14][9] = f->P[9][14];
+    f->P[15][9] = f->P[9][15];
+    f->P[16][9] = f->P[9][16];
+    f->P[17][9] = f->P[9][17];
+    f->P[18][9] = f->P[9][18];
+    f->P[19][9] = f->P[9][19];
+    f->P[20][9] = f->P[9][20];
+    f->P[21][9] = f->P[9][21];
+    f->P[22][9] = f->P[9][22];
+    f->P[23][9] = f->P[9][23];
+    f->P[24][9] = f->P[9][24];
+    f->P[25][9] = f->P[9][25];
+    f->P[26][9] = f->P[9][26];
+    f->P[27][9] = f->P[9][27];
+    f->P[28][9] = f->P[9][28];
+    f->P[29][9] = f->P[9][29];
+    f->P[30][9] = f->P[9][30];
+    f->P[31][9] = f->P[9][31];
+    memcpy(&f->P[10][10], &w->Pn[275], 22 * sizeof w->Pn[0]);
+    f->P[11][10] = f->P[10][11];
+    f->P[12][10] = f->P[10][12];
+    f->P[13][10] = f->P[10][13];
+    f->P[14][10] = f->P[10][14];
+    f->P[15][10] = f->P[10][15];
+    f->P[16][10] = f->P[10][16];
+    f->P[17][10] = f->P[10][17];
+    f->P[18][10] = f->P[10][18];
+    f->P[19][10] = f->P[10][19];
+    f->P[20][10] = f->P[10][20];
+    f->P[21][10] = f->P[10][21];
+    f->P[22][10] = f->P[10][22];
+    f->P[23][10] = f->P[10][23];
+    f->P[24][10] = f->P[10][24];
+    f->P[25][10] = f->P[10][25];
+    f->P[26][10] = f->P[10][26];
+    f->P[27][10] = f->P[10][27];
+    f->P[28][10] = f->P[10][28];
+    f->P[29][10] = f->P[10][29];
+    f->P[30][10] = f->P[10][30];
+    f->P[31][10] = f->P[10][31];
+    memcpy(&f->P[11][11], &w->Pn[297], 21 * sizeof w->Pn[0]);
+    f->P[12][11] = f->P[11][12];
+    f->P[13][11] = f->P[11][13];
+    f->P[14][11] = f->P[11][14];
+    f->P[15][11] = f->P[11][15];
+    f->P[16][11] = f->P[11][16];
+    f->P[17][11] = f->P[11][17];
+    f->P[18][11] = f->P[11][18];
+    f->P[19][11] = f->P[11][19];
+    f->P[20][11] = f->P[11][20];
+    f->P[21][11] = f->P[11][21];
+    f->P[22][11] = f->P[11][22];
+    f->P[23][11] = f->P[11][23];
+    f->P[24][11] = f->P[11][24];
+    f->P[25][11] = f->P[11][25];
+    f->P[26][11] = f->P[11][26];
+    f->P[27][11] = f->P[11][27];
+    f->P[28][11] = f->P[11][28];
+    f->P[29][11] = f->P[11][29];
+    f->P[30][11] = f->P[11][30];
+    f->P[31][11] = f->P[11][31];
+    memcpy(&f->P[12][12], &w->Pn[318], 20 * sizeof w->Pn[0]);
+    f->P[13][12] = f->P[12][13];
+    f->P[14][12] = f->P[12][14];
+    f->P[15][12] = f->P[12][15];
+    f->P[16][12] = f->P[12][16];
+    f->P[17][12] = f->P[12][17];
+    f->P[18][12] = f->P[12][18];
+    f->P[19][12] = f->P[12][19];
+    f->P[20][12] = f->P[12][20];
+    f->P[21][12] = f->P[12][21];
+    f->P[22][12] = f->P[12][22];
+    f->P[23][12] = f->P[12][23];
+    f->P[24][12] = f->P[12][24];
+    f->P[25][12] = f->P[12][25];
+    f->P[26][12] = f->P[12][26];
+    f->P[27][12] = f->P[12][27];
+    f->P[28][12] = f->P[12][28];
+    f->P[29][12] = f->P[12][29];
+    f->P[30][12] = f->P[12][30];
+    f->P[31][12] = f->P[12][31];
+    memcpy(&f->P[13][13], &w->Pn[338], 19 * sizeof w->Pn[0]);
+    f->P[14][13] = f->P[13][14];
+    f->P[15][13] = f->P[13][15];
+    f->P[16][13] = f->P[13][16];
+    f->P[17][13] = f->P[13][17];
+    f->P[18][13] = f->P[13][18];
+    f->P[19][13] = f->P[13][19];
+    f->P[20][13] = f->P[13][20];
+    f->P[21][13] = f->P[13][21];
+    f->P[22][13] = f->P[13][22];
+    f->P[23][13] = f->P[13][23];
+    f->P[24][13] = f->P[13][24];
+    f->P[25][13] = f->P[13][25];
+    f->P[26][13] = f->P[13][26];
+    f->P[27][13] = f->P[13][27];
+    f->P[28][13] = f->P[13][28];
+    f->P[29][13] = f->P[13][29];
+    f->P[30][13] = f->P[13][30];
+    f->P[31][13] = f->P[13][31];
+    memcpy(&f->P[14][14], &w->Pn[357], 18 * sizeof w->Pn[0]);
+    f->P[15][14] = f->P[14][15];
+    f->P[16][14] = f->P[14][16];
+    f->P[17][14] = f->P[14][17];
+    f->P[18][14] = f->P[14][18];
+    f->P[19][14] = f->P[14][19];
+    f->P[20][14] = f->P[14][20];
+    f->P[21][14] = f->P[14][21];
+    f->P[22][14] = f->P[14][22];
+    f->P[23][14] = f->P[14][23];
+    f->P[24][14] = f->P[14][24];
+    f->P[25][14] = f->P[14][25];
+    f->P[26][14] = f->P[14][26];
+    f->P[27][14] = f->P[14][27];
+    f->P[28][14] = f->P[14][28];
+    f->P[29][14] = f->P[14][29];
+    f->P[30][14] = f->P[14][30];
+    f->P[31][14] = f->P[14][31];
+    memcpy(&f->P[15][15], &w->Pn[375], 17 * sizeof w->Pn[0]);
+    f->P[16][15] = f->P[15][16];
+    f->P[17][15] = f->P[15][17];
+    f->P[18][15] = f->P[15][18];
+    f->P[19][15] = f->P[15][19];
+    f->P[20][15] = f->P[15][20];
+    f->P[21][15] = f->P[15][21];
+    f->P[22][15] = f->P[15][22];
+    f->P[23][15] = f->P[15][23];
+    f->P[24][15] = f->P[15][24];
+    f->P[25][15] = f->P[15][25];
+    f->P[26][15] = f->P[15][26];
+    f->P[27][15] = f->P[15][27];
+    f->P[28][15] = f->P[15][28];
+    f->P[29][15] = f->P[15][29];
+    f->P[30][15] = f->P[15][30];
+    f->P[31][15] = f->P[15][31];
+    memcpy(&f->P[16][16], &w->Pn[392], 16 * sizeof w->Pn[0]);
+    f->P[17][16] = f->P[16][17];
+    f->P[18][16] = f->P[16][18];
+    f->P[19][16] = f->P[16][19];
+    f->P[20][16] = f->P[16][20];
+    f->P[21][16] = f->P[16][21];
+    f->P[22][16] = f->P[16][22];
+    f->P[23][16] = f->P[16][23];
+    f->P[24][16] = f->P[16][24];
+    f->P[25][16] = f->P[16][25];
+    f->P[26][16] = f->P[16][26];
+    f->P[27][16] = f->P[16][27];
+    f->P[28][16] = f->P[16][28];
+    f->P[29][16] = f->P[16][29];
+    f->P[30][16] = f->P[16][30];
+    f->P[31][16] = f->P[16][31];
+    memcpy(&f->P[17][17], &w->Pn[408], 15 * sizeof w->Pn[0]);
+    f->P[18][17] = f->P[17][18];
+    f->P[19][17] = f->P[17][19];
+    f->P[20][17] = f->P[17][20];
+    f->P[21][17] = f->P[17][21];
+    f->P[22][17] = f->P[17][22];
+    f->P[23][17] = f->P[17][23];
+    f->P[24][17] = f->P[17][24];
+    f->P[25][17] = f->P[17][25];
+    f->P[26][17] = f->P[17][26];
+    f->P[27][17] = f->P[17][27];
+    f->P[28][17] = f->P[17][28];
+    f->P[29][17] = f->P[17][29];
+    f->P[30][17] = f->P[17][30];
+    f->P[31][17] = f->P[17][31];
+    memcpy(&f->P[18][18], &w->Pn[423], 14 * sizeof w->Pn[0]);
+    f->P[19][18] = f->P[18][19];
+    f->P[20][18] = f->P[18][20];
+    f->P[21][18] = f->P[18][21];
+    f->P[22][18] = f->P[18][22];
+    f->P[23][18] = f->P[18][23];
+    f->P[24][18] = f->P[18][24];
+    f->P[25][18] = f->P[18][25];
+    f->P[26][18] = f->P[18][26];
+    f->P[27][18] = f->P[18][27];
+    f->P[28][18] = f->P[18][28];
+    f->P[29][18] = f->P[18][29];
+    f->P[30][18] = f->P[18][30];
+    f->P[31][18] = f->P[18][31];
+    memcpy(&f->P[19][19], &w->Pn[437], 13 * sizeof w->Pn[0]);
+    f->P[20][19] = f->P[19][20];
+    f->P[21][19] = f->P[19][21];
+    f->P[22][19] = f->P[19][22];
+    f->P[23][19] = f->P[19][23];
+    f->P[24][19] = f->P[19][24];
+    f->P[25][19] = f->P[19][25];
+    f->P[26][19] = f->P[19][26];
+    f->P[27][19] = f->P[19][27];
+    f->P[28][19] = f->P[19][28];
+    f->P[29][19] = f->P[19][29];
+    f->P[30][19] = f->P[19][30];
+    f->P[31][19] = f->P[19][31];
+    memcpy(&f->P[20][20], &w->Pn[450], 12 * sizeof w->Pn[0]);
+    f->P[21][20] = f->P[20][21];
+    f->P[22][20] = f->P[20][22];
+    f->P[23][20] = f->P[20][23];
+    f->P[24][20] = f->P[20][24];
+    f->P[25][20] = f->P[20][25];
+    f->P[26][20] = f->P[20][26];
+    f->P[27][20] = f->P[20][27];
+    f->P[28][20] = f->P[20][28];
+    f->P[29][20] = f->P[20][29];
+    f->P[30][20] = f->P[20][30];
+    f->P[31][20] = f->P[20][31];
+    memcpy(&f->P[21][21], &w->Pn[462], 11 * sizeof w->Pn[0]);
+    f->P[22][21] = f->P[21][22];
+    f->P[23][21] = f->P[21][23];
+    f->P[24][21] = f->P[21][24];
+    f->P[25][21] = f->P[21][25];
+    f->P[26][21] = f->P[21][26];
+    f->P[27][21] = f->P[21][27];
+    f->P[28][21] = f->P[21][28];
+    f->P[29][21] = f->P[21][29];
+    f->P[30][21] = f->P[21][30];
+    f->P[31][21] = f->P[21][31];
+    memcpy(&f->P[22][22], &w->Pn[473], 10 * sizeof w->Pn[0]);
+    f->P[23][22] = f->P[22][23];
+    f->P[24][22] = f->P[22][24];
+    f->P[25][22] = f->P[22][25];
+    f->P[26][22] = f->P[22][26];
+    f->P[27][22] = f->P[22][27];
+    f->P[28][22] = f->P[22][28];
+    f->P[29][22] = f->P[22][29];
+    f->P[30][22] = f->P[22][30];
+    f->P[31][22] = f->P[22][31];
+    memcpy(&f->P[23][23], &w->Pn[483], 9 * sizeof w->Pn[0]);
+    f->P[24][23] = f->P[23][24];
+    f->P[25][23] = f->P[23][25];
+    f->P[26][23] = f->P[23][26];
+    f->P[27][23] = f->P[23][27];
+    f->P[28][23] = f->P[23][28];
+    f->P[29][23] = f->P[23][29];
+    f->P[30][23] = f->P[23][30];
+    f->P[31][23] = f->P[23][31];
+    memcpy(&f->P[24][24], &w->Pn[492], 8 * sizeof w->Pn[0]);
+    f->P[25][24] = f->P[24][25];
+    f->P[26][24] = f->P[24][26];
+    f->P[27][24] = f->P[24][27];
+    f->P[28][24] = f->P[24][28];
+    f->P[29][24] = f->P[24][29];
+    f->P[30][24] = f->P[24][30];
+    f->P[31][24] = f->P[24][31];
+    memcpy(&f->P[25][25], &w->Pn[500], 7 * sizeof w->Pn[0]);
+    f->P[26][25] = f->P[25][26];
+    f->P[27][25] = f->P[25][27];
+    f->P[28][25] = f->P[25][28];
+    f->P[29][25] = f->P[25][29];
+    f->P[30][25] = f->P[25][30];
+    f->P[31][25] = f->P[25][31];
+    memcpy(&f->P[26][26], &w->Pn[507], 6 * sizeof w->Pn[0]);
+    f->P[27][26] = f->P[26][27];
+    f->P[28][26] = f->P[26][28];
+    f->P[29][26] = f->P[26][29];
+    f->P[30][26] = f->P[26][30];
+    f->P[31][26] = f->P[26][31];
+    memcpy(&f->P[27][27], &w->Pn[513], 5 * sizeof w->Pn[0]);
+    f->P[28][27] = f->P[27][28];
+    f->P[29][27] = f->P[27][29];
+    f->P[30][27] = f->P[27][30];
+    f->P[31][27] = f->P[27][31];
+    memcpy(&f->P[28][28], &w->Pn[518], 4 * sizeof w->Pn[0]);
+    f->P[29][28] = f->P[28][29];
+    f->P[30][28] = f->P[28][30];
+    f->P[31][28] = f->P[28][31];
+    memcpy(&f->P[29][29], &w->Pn[522], 3 * sizeof w->Pn[0]);
+    f->P[30][29] = f->P[29][30];
+    f->P[31][29] = f->P[29][31];
+    memcpy(&f->P[30][30], &w->Pn[525], 2 * sizeof w->Pn[0]);
+    f->P[31][30] = f->P[30][31];
+    memcpy(&f->P[31][31], &w->Pn[527], 1 * sizeof w->Pn[0]);
     if (innovation != NULL) {
         for (a = 0; a < NED_DOPPLER32_AUGMENTED_N_MEASUREMENTS; ++a) {
             innovation[a] = w->nu0[a];

@@ -14,8 +14,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 112 operations after CSE
- *   discretize: 7239 mul + 5236 add = 12475 flops
- *   discretize, each doubling (long steps): 2616 mul + 2721 add = 5337 flops
+ *   discretize: 3519 mul + 2418 add = 5937 flops
+ *   discretize, each doubling (long steps): 2934 mul + 2922 add = 5856 flops
  *   predict (C): 7312 mul + 6850 add = 14162 flops
  *   predict (Python): 12928 mul + 13120 add = 26048 flops
  *   predict (dense, for comparison): 65568 mul + 64512 add = 130080 flops
@@ -36,8 +36,8 @@
 #define NED_DOPPLER32_AUGMENTED_NNZ_H 8
 /* highest order of the Taylor series of discretize */
 #define NED_DOPPLER32_AUGMENTED_TAYLOR_ORDER 9
-#define NED_DOPPLER32_AUGMENTED_N_TERMS 216   /* entries of discretize's compressed term arrays */
-#define NED_DOPPLER32_AUGMENTED_N_ACTIVE_ENTRIES 216   /* entries of Phi in rows that are not e_i */
+#define NED_DOPPLER32_AUGMENTED_N_TERMS 196   /* entries of discretize's compressed term arrays */
+#define NED_DOPPLER32_AUGMENTED_N_ACTIVE_ENTRIES 196   /* entries of Phi in rows that are not e_i */
 #define NED_DOPPLER32_AUGMENTED_FORM_COVARIANCE 1
 
 #define NED_DOPPLER32_AUGMENTED_OK 0
@@ -188,9 +188,8 @@ typedef struct {
     ned_doppler32_augmented_scalar
             Phi[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* transition
             matrix */
-    ned_doppler32_augmented_scalar
-            Qd[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* Gamma (Q/T)
-            Gamma^T */
+    ned_doppler32_augmented_scalar Qd[NED_DOPPLER32_AUGMENTED_N_PACKED]; /* Gamma (Q/T) Gamma^T,
+            packed upper triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } ned_doppler32_augmented_transition;
 
 /* The filter state: estimate and covariance (or its factors). */
@@ -208,19 +207,14 @@ typedef struct {
             (k + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal
             rows */
     ned_doppler32_augmented_scalar fh[NED_DOPPLER32_AUGMENTED_NNZ_F]; /* F h at the nonzeros of F */
-    ned_doppler32_augmented_scalar row_sum[NED_DOPPLER32_AUGMENTED_N_STATES]; /* balancing:
-            off-diagonal row sums of D^-1 |F| D */
-    ned_doppler32_augmented_scalar col_sum[NED_DOPPLER32_AUGMENTED_N_STATES]; /* balancing:
-            off-diagonal column sums of D^-1 |F| D */
 } ned_doppler32_augmented_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */
 typedef struct {
-    ned_doppler32_augmented_scalar
-            M[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* Phi P */
-    ned_doppler32_augmented_scalar
-            Pn[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* new
-            covariance before it is committed */
+    ned_doppler32_augmented_scalar M[NED_DOPPLER32_AUGMENTED_N_STATES]; /* one row of Phi P (predict
+            works row by row) */
+    ned_doppler32_augmented_scalar Pn[NED_DOPPLER32_AUGMENTED_N_PACKED]; /* new covariance before it
+            is committed, packed upper triangle */
     ned_doppler32_augmented_scalar xn[NED_DOPPLER32_AUGMENTED_N_STATES];
     ned_doppler32_augmented_scalar HP[2][NED_DOPPLER32_AUGMENTED_N_STATES];
     ned_doppler32_augmented_scalar L[2][2]; /* Cholesky factor of the innovation covariance */

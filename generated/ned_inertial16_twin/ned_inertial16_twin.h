@@ -14,8 +14,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 71 operations after CSE
- *   discretize: 4048 mul + 2862 add = 6910 flops
- *   discretize, each doubling (long steps): 1500 mul + 1521 add = 3021 flops
+ *   discretize: 3189 mul + 2238 add = 5427 flops
+ *   discretize, each doubling (long steps): 1587 mul + 1575 add = 3162 flops
  *   predict (C): 2412 mul + 2158 add = 4570 flops
  *   predict (Python): 3776 mul + 3616 add = 7392 flops
  *   predict (dense, for comparison): 8208 mul + 7936 add = 16144 flops
@@ -34,8 +34,8 @@
 #define NED_INERTIAL16_TWIN_NNZ_G 6
 #define NED_INERTIAL16_TWIN_NNZ_H 0
 #define NED_INERTIAL16_TWIN_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
-#define NED_INERTIAL16_TWIN_N_TERMS 118   /* entries of discretize's compressed term arrays */
-#define NED_INERTIAL16_TWIN_N_ACTIVE_ENTRIES 118   /* entries of Phi in rows that are not e_i */
+#define NED_INERTIAL16_TWIN_N_TERMS 112   /* entries of discretize's compressed term arrays */
+#define NED_INERTIAL16_TWIN_N_ACTIVE_ENTRIES 112   /* entries of Phi in rows that are not e_i */
 #define NED_INERTIAL16_TWIN_FORM_COVARIANCE 1
 
 #define NED_INERTIAL16_TWIN_OK 0
@@ -130,8 +130,8 @@ typedef struct {
 typedef struct {
     ned_inertial16_twin_scalar Phi[NED_INERTIAL16_TWIN_N_STATES][NED_INERTIAL16_TWIN_N_STATES]; /*
             transition matrix */
-    ned_inertial16_twin_scalar Qd[NED_INERTIAL16_TWIN_N_STATES][NED_INERTIAL16_TWIN_N_STATES]; /*
-            Gamma (Q/T) Gamma^T */
+    ned_inertial16_twin_scalar Qd[NED_INERTIAL16_TWIN_N_PACKED]; /* Gamma (Q/T) Gamma^T, packed
+            upper triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } ned_inertial16_twin_transition;
 
 /* The filter state: estimate and covariance (or its factors). */
@@ -148,18 +148,14 @@ typedef struct {
     ned_inertial16_twin_scalar S[NED_INERTIAL16_TWIN_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k +
             1)! (and the even levels R_k): each block row's dense segment, then the diagonal rows */
     ned_inertial16_twin_scalar fh[NED_INERTIAL16_TWIN_NNZ_F]; /* F h at the nonzeros of F */
-    ned_inertial16_twin_scalar row_sum[NED_INERTIAL16_TWIN_N_STATES]; /* balancing: off-diagonal row
-            sums of D^-1 |F| D */
-    ned_inertial16_twin_scalar col_sum[NED_INERTIAL16_TWIN_N_STATES]; /* balancing: off-diagonal
-            column sums of D^-1 |F| D */
 } ned_inertial16_twin_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */
 typedef struct {
-    ned_inertial16_twin_scalar M[NED_INERTIAL16_TWIN_N_STATES][NED_INERTIAL16_TWIN_N_STATES]; /* Phi
-            P */
-    ned_inertial16_twin_scalar Pn[NED_INERTIAL16_TWIN_N_STATES][NED_INERTIAL16_TWIN_N_STATES]; /*
-            new covariance before it is committed */
+    ned_inertial16_twin_scalar M[NED_INERTIAL16_TWIN_N_STATES]; /* one row of Phi P (predict works
+            row by row) */
+    ned_inertial16_twin_scalar Pn[NED_INERTIAL16_TWIN_N_PACKED]; /* new covariance before it is
+            committed, packed upper triangle */
     ned_inertial16_twin_scalar xn[NED_INERTIAL16_TWIN_N_STATES];
     ned_inertial16_twin_scalar HP[1][NED_INERTIAL16_TWIN_N_STATES];
     ned_inertial16_twin_scalar L[1][1]; /* Cholesky factor of the innovation covariance */

@@ -14,8 +14,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 77 operations after CSE
- *   discretize: 4048 mul + 2862 add = 6910 flops
- *   discretize, each doubling (long steps): 1500 mul + 1521 add = 3021 flops
+ *   discretize: 3189 mul + 2238 add = 5427 flops
+ *   discretize, each doubling (long steps): 1587 mul + 1575 add = 3162 flops
  *   predict (C): 2636 mul + 2356 add = 4992 flops
  *   predict (Python): 4248 mul + 4104 add = 8352 flops
  *   predict (dense, for comparison): 11682 mul + 11340 add = 23022 flops
@@ -34,8 +34,8 @@
 #define NED_DOPPLER18_NNZ_G 6
 #define NED_DOPPLER18_NNZ_H 4
 #define NED_DOPPLER18_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
-#define NED_DOPPLER18_N_TERMS 118   /* entries of discretize's compressed term arrays */
-#define NED_DOPPLER18_N_ACTIVE_ENTRIES 118   /* entries of Phi in rows that are not e_i */
+#define NED_DOPPLER18_N_TERMS 112   /* entries of discretize's compressed term arrays */
+#define NED_DOPPLER18_N_ACTIVE_ENTRIES 112   /* entries of Phi in rows that are not e_i */
 #define NED_DOPPLER18_FORM_COVARIANCE 1
 
 #define NED_DOPPLER18_OK 0
@@ -162,8 +162,8 @@ typedef struct {
 typedef struct {
     ned_doppler18_scalar Phi[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* transition
             matrix */
-    ned_doppler18_scalar Qd[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* Gamma (Q/T)
-            Gamma^T */
+    ned_doppler18_scalar Qd[NED_DOPPLER18_N_PACKED]; /* Gamma (Q/T) Gamma^T, packed upper triangle:
+            (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } ned_doppler18_transition;
 
 /* The filter state: estimate and covariance (or its factors). */
@@ -179,17 +179,14 @@ typedef struct {
     ned_doppler18_scalar S[NED_DOPPLER18_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the
             even levels R_k): each block row's dense segment, then the diagonal rows */
     ned_doppler18_scalar fh[NED_DOPPLER18_NNZ_F]; /* F h at the nonzeros of F */
-    ned_doppler18_scalar row_sum[NED_DOPPLER18_N_STATES]; /* balancing: off-diagonal row sums of
-            D^-1 |F| D */
-    ned_doppler18_scalar col_sum[NED_DOPPLER18_N_STATES]; /* balancing: off-diagonal column sums of
-            D^-1 |F| D */
 } ned_doppler18_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */
 typedef struct {
-    ned_doppler18_scalar M[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* Phi P */
-    ned_doppler18_scalar Pn[NED_DOPPLER18_N_STATES][NED_DOPPLER18_N_STATES]; /* new covariance
-            before it is committed */
+    ned_doppler18_scalar M[NED_DOPPLER18_N_STATES]; /* one row of Phi P (predict works row by
+            row) */
+    ned_doppler18_scalar Pn[NED_DOPPLER18_N_PACKED]; /* new covariance before it is committed,
+            packed upper triangle */
     ned_doppler18_scalar xn[NED_DOPPLER18_N_STATES];
     ned_doppler18_scalar ph[NED_DOPPLER18_N_STATES]; /* P h^T of one scalar measurement */
     ned_doppler18_scalar k[NED_DOPPLER18_N_STATES]; /* gain of one scalar measurement */

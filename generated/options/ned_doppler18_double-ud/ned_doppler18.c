@@ -11,8 +11,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 77 operations after CSE
- *   discretize: 3784 mul + 2722 add = 6506 flops
- *   discretize, each doubling (long steps): 1500 mul + 1521 add = 3021 flops
+ *   discretize: 2967 mul + 2098 add = 5065 flops
+ *   discretize, each doubling (long steps): 1587 mul + 1575 add = 3162 flops
  *   predict (C): 9526 mul + 8853 add = 18379 flops
  *   predict (Python): 4248 mul + 4104 add = 8352 flops
  *   predict (dense, for comparison): 11682 mul + 11340 add = 23022 flops
@@ -30,7 +30,8 @@
 #include <string.h>
 
 /* Index of U(i, j), i < j, stored as a packed strictly upper triangle, row by row. */
-#define NED_DOPPLER18_STRICT_UPPER(i, j) ((i) * (2 * NED_DOPPLER18_N_STATES - (i) - 3) / 2 + (j) - 1)
+#define NED_DOPPLER18_STRICT_UPPER(i, j) \
+        ((i) * (2 * NED_DOPPLER18_N_STATES - (i) - 3) / 2 + (j) - 1)
 
 const char *const ned_doppler18_state_names[NED_DOPPLER18_N_STATES] = {
     "attitude_error_north",
@@ -469,118 +470,112 @@ NED_DOPPLER18_BLOCK void horner_level_1_into_S(ned_doppler18_discretize_scratch 
     w->S[3] = 0;
     w->S[4] = w->fh[2]*c_in;
     w->S[5] = w->fh[3]*c_in;
-    w->S[6] = 0;
-    w->S[7] = w->fh[4]*c_in;
-    w->S[8] = w->fh[5]*c_in;
-    w->S[9] = w->fh[6]*c_in;
-    w->S[10] = w->fh[7]*c_in;
-    w->S[11] = w->fh[8]*c_in;
-    w->S[12] = w->fh[9]*c_in;
-    w->S[13] = 0;
-    w->S[14] = 0;
-    w->S[15] = 0;
-    w->S[16] = w->fh[10]*c_in;
-    w->S[17] = c_out;
-    w->S[18] = w->fh[11]*c_in;
-    w->S[19] = w->fh[12]*c_in;
-    w->S[20] = 0;
+    w->S[6] = w->fh[7]*c_in;
+    w->S[7] = w->fh[8]*c_in;
+    w->S[8] = w->fh[9]*c_in;
+    w->S[9] = 0;
+    w->S[10] = 0;
+    w->S[11] = 0;
+    w->S[12] = w->fh[10]*c_in;
+    w->S[13] = c_out;
+    w->S[14] = w->fh[11]*c_in;
+    w->S[15] = w->fh[12]*c_in;
+    w->S[16] = 0;
+    w->S[17] = 0;
+    w->S[18] = w->fh[16]*c_in;
+    w->S[19] = w->fh[17]*c_in;
+    w->S[20] = w->fh[18]*c_in;
     w->S[21] = 0;
     w->S[22] = 0;
-    w->S[23] = w->fh[13]*c_in;
-    w->S[24] = w->fh[14]*c_in;
-    w->S[25] = w->fh[15]*c_in;
-    w->S[26] = w->fh[16]*c_in;
-    w->S[27] = w->fh[17]*c_in;
-    w->S[28] = w->fh[18]*c_in;
-    w->S[29] = 0;
-    w->S[30] = 0;
-    w->S[31] = 0;
-    w->S[32] = w->fh[19]*c_in;
-    w->S[33] = w->fh[20]*c_in;
-    w->S[34] = c_out;
+    w->S[23] = 0;
+    w->S[24] = w->fh[19]*c_in;
+    w->S[25] = w->fh[20]*c_in;
+    w->S[26] = c_out;
+    w->S[27] = 0;
+    w->S[28] = w->fh[21]*c_in;
+    w->S[29] = w->fh[22]*c_in;
+    w->S[30] = w->fh[26]*c_in;
+    w->S[31] = w->fh[27]*c_in;
+    w->S[32] = w->fh[28]*c_in;
+    w->S[33] = 0;
+    w->S[34] = 0;
     w->S[35] = 0;
-    w->S[36] = w->fh[21]*c_in;
-    w->S[37] = w->fh[22]*c_in;
-    w->S[38] = 0;
-    w->S[39] = w->fh[23]*c_in;
-    w->S[40] = w->fh[24]*c_in;
-    w->S[41] = w->fh[25]*c_in;
-    w->S[42] = w->fh[26]*c_in;
-    w->S[43] = w->fh[27]*c_in;
-    w->S[44] = w->fh[28]*c_in;
-    w->S[45] = 0;
-    w->S[46] = 0;
-    w->S[47] = 0;
-    w->S[48] = 0;
-    w->S[49] = w->fh[29]*c_in;
-    w->S[50] = w->fh[30]*c_in;
-    w->S[51] = c_out + w->fh[31]*c_in;
-    w->S[52] = w->fh[32]*c_in;
-    w->S[53] = w->fh[33]*c_in;
+    w->S[36] = 0;
+    w->S[37] = w->fh[29]*c_in;
+    w->S[38] = w->fh[30]*c_in;
+    w->S[39] = c_out + w->fh[31]*c_in;
+    w->S[40] = w->fh[32]*c_in;
+    w->S[41] = w->fh[33]*c_in;
+    w->S[42] = 0;
+    w->S[43] = 0;
+    w->S[44] = 0;
+    w->S[45] = w->fh[34]*c_in;
+    w->S[46] = w->fh[35]*c_in;
+    w->S[47] = w->fh[36]*c_in;
+    w->S[48] = w->fh[37]*c_in;
+    w->S[49] = 0;
+    w->S[50] = w->fh[38]*c_in;
+    w->S[51] = w->fh[39]*c_in;
+    w->S[52] = c_out + w->fh[40]*c_in;
+    w->S[53] = w->fh[41]*c_in;
     w->S[54] = 0;
     w->S[55] = 0;
     w->S[56] = 0;
-    w->S[57] = 0;
-    w->S[58] = 0;
-    w->S[59] = 0;
+    w->S[57] = w->fh[42]*c_in;
+    w->S[58] = w->fh[43]*c_in;
+    w->S[59] = w->fh[44]*c_in;
     w->S[60] = 0;
-    w->S[61] = w->fh[34]*c_in;
-    w->S[62] = w->fh[35]*c_in;
-    w->S[63] = w->fh[36]*c_in;
-    w->S[64] = w->fh[37]*c_in;
-    w->S[65] = 0;
-    w->S[66] = w->fh[38]*c_in;
-    w->S[67] = w->fh[39]*c_in;
-    w->S[68] = c_out + w->fh[40]*c_in;
-    w->S[69] = w->fh[41]*c_in;
+    w->S[61] = 0;
+    w->S[62] = 0;
+    w->S[63] = w->fh[45]*c_in;
+    w->S[64] = 0;
+    w->S[65] = c_out;
+    w->S[66] = 0;
+    w->S[67] = 0;
+    w->S[68] = 0;
+    w->S[69] = 0;
     w->S[70] = 0;
     w->S[71] = 0;
     w->S[72] = 0;
     w->S[73] = 0;
     w->S[74] = 0;
     w->S[75] = 0;
-    w->S[76] = 0;
-    w->S[77] = w->fh[42]*c_in;
-    w->S[78] = w->fh[43]*c_in;
-    w->S[79] = w->fh[44]*c_in;
+    w->S[76] = w->fh[46]*c_in;
+    w->S[77] = w->fh[47]*c_in;
+    w->S[78] = 0;
+    w->S[79] = 0;
     w->S[80] = 0;
     w->S[81] = 0;
     w->S[82] = 0;
-    w->S[83] = w->fh[45]*c_in;
-    w->S[84] = 0;
-    w->S[85] = c_out;
-    w->S[86] = 0;
-    w->S[87] = 0;
-    w->S[88] = 0;
-    w->S[89] = 0;
-    w->S[90] = 0;
-    w->S[91] = 0;
-    w->S[92] = 0;
-    w->S[93] = 0;
-    w->S[94] = 0;
-    w->S[95] = 0;
-    w->S[96] = 0;
-    w->S[97] = 0;
-    w->S[98] = 0;
+    w->S[83] = 0;
+    w->S[84] = c_out + w->fh[48]*c_in;
+    w->S[85] = c_out + w->fh[49]*c_in;
+    w->S[86] = c_out + w->fh[50]*c_in;
+    w->S[87] = c_out + w->fh[51]*c_in;
+    w->S[88] = c_out + w->fh[52]*c_in;
+    w->S[89] = c_out + w->fh[53]*c_in;
+    w->S[90] = w->fh[4]*c_in;
+    w->S[91] = w->fh[5]*c_in;
+    w->S[92] = w->fh[6]*c_in;
+    w->S[93] = w->fh[13]*c_in;
+    w->S[94] = w->fh[14]*c_in;
+    w->S[95] = w->fh[15]*c_in;
+    w->S[96] = w->fh[23]*c_in;
+    w->S[97] = w->fh[24]*c_in;
+    w->S[98] = w->fh[25]*c_in;
     w->S[99] = 0;
-    w->S[100] = w->fh[46]*c_in;
-    w->S[101] = w->fh[47]*c_in;
-    w->S[102] = c_out;
+    w->S[100] = 0;
+    w->S[101] = 0;
+    w->S[102] = 0;
     w->S[103] = 0;
     w->S[104] = 0;
     w->S[105] = 0;
     w->S[106] = 0;
     w->S[107] = 0;
-    w->S[108] = 0;
+    w->S[108] = c_out;
     w->S[109] = 0;
     w->S[110] = 0;
     w->S[111] = 0;
-    w->S[112] = c_out + w->fh[48]*c_in;
-    w->S[113] = c_out + w->fh[49]*c_in;
-    w->S[114] = c_out + w->fh[50]*c_in;
-    w->S[115] = c_out + w->fh[51]*c_in;
-    w->S[116] = c_out + w->fh[52]*c_in;
-    w->S[117] = c_out + w->fh[53]*c_in;
 }
 
 NED_DOPPLER18_BLOCK void horner_level_1_into_term(ned_doppler18_discretize_scratch *restrict w,
@@ -592,349 +587,419 @@ NED_DOPPLER18_BLOCK void horner_level_1_into_term(ned_doppler18_discretize_scrat
     w->term[1][3] = 0;
     w->term[1][4] = w->fh[2]*c_in;
     w->term[1][5] = w->fh[3]*c_in;
-    w->term[1][6] = 0;
-    w->term[1][7] = w->fh[4]*c_in;
-    w->term[1][8] = w->fh[5]*c_in;
-    w->term[1][9] = w->fh[6]*c_in;
-    w->term[1][10] = w->fh[7]*c_in;
-    w->term[1][11] = w->fh[8]*c_in;
-    w->term[1][12] = w->fh[9]*c_in;
-    w->term[1][13] = 0;
-    w->term[1][14] = 0;
-    w->term[1][15] = 0;
-    w->term[1][16] = w->fh[10]*c_in;
-    w->term[1][17] = c_out;
-    w->term[1][18] = w->fh[11]*c_in;
-    w->term[1][19] = w->fh[12]*c_in;
-    w->term[1][20] = 0;
+    w->term[1][6] = w->fh[7]*c_in;
+    w->term[1][7] = w->fh[8]*c_in;
+    w->term[1][8] = w->fh[9]*c_in;
+    w->term[1][9] = 0;
+    w->term[1][10] = 0;
+    w->term[1][11] = 0;
+    w->term[1][12] = w->fh[10]*c_in;
+    w->term[1][13] = c_out;
+    w->term[1][14] = w->fh[11]*c_in;
+    w->term[1][15] = w->fh[12]*c_in;
+    w->term[1][16] = 0;
+    w->term[1][17] = 0;
+    w->term[1][18] = w->fh[16]*c_in;
+    w->term[1][19] = w->fh[17]*c_in;
+    w->term[1][20] = w->fh[18]*c_in;
     w->term[1][21] = 0;
     w->term[1][22] = 0;
-    w->term[1][23] = w->fh[13]*c_in;
-    w->term[1][24] = w->fh[14]*c_in;
-    w->term[1][25] = w->fh[15]*c_in;
-    w->term[1][26] = w->fh[16]*c_in;
-    w->term[1][27] = w->fh[17]*c_in;
-    w->term[1][28] = w->fh[18]*c_in;
-    w->term[1][29] = 0;
-    w->term[1][30] = 0;
-    w->term[1][31] = 0;
-    w->term[1][32] = w->fh[19]*c_in;
-    w->term[1][33] = w->fh[20]*c_in;
-    w->term[1][34] = c_out;
+    w->term[1][23] = 0;
+    w->term[1][24] = w->fh[19]*c_in;
+    w->term[1][25] = w->fh[20]*c_in;
+    w->term[1][26] = c_out;
+    w->term[1][27] = 0;
+    w->term[1][28] = w->fh[21]*c_in;
+    w->term[1][29] = w->fh[22]*c_in;
+    w->term[1][30] = w->fh[26]*c_in;
+    w->term[1][31] = w->fh[27]*c_in;
+    w->term[1][32] = w->fh[28]*c_in;
+    w->term[1][33] = 0;
+    w->term[1][34] = 0;
     w->term[1][35] = 0;
-    w->term[1][36] = w->fh[21]*c_in;
-    w->term[1][37] = w->fh[22]*c_in;
-    w->term[1][38] = 0;
-    w->term[1][39] = w->fh[23]*c_in;
-    w->term[1][40] = w->fh[24]*c_in;
-    w->term[1][41] = w->fh[25]*c_in;
-    w->term[1][42] = w->fh[26]*c_in;
-    w->term[1][43] = w->fh[27]*c_in;
-    w->term[1][44] = w->fh[28]*c_in;
-    w->term[1][45] = 0;
-    w->term[1][46] = 0;
-    w->term[1][47] = 0;
-    w->term[1][48] = 0;
-    w->term[1][49] = w->fh[29]*c_in;
-    w->term[1][50] = w->fh[30]*c_in;
-    w->term[1][51] = c_out + w->fh[31]*c_in;
-    w->term[1][52] = w->fh[32]*c_in;
-    w->term[1][53] = w->fh[33]*c_in;
+    w->term[1][36] = 0;
+    w->term[1][37] = w->fh[29]*c_in;
+    w->term[1][38] = w->fh[30]*c_in;
+    w->term[1][39] = c_out + w->fh[31]*c_in;
+    w->term[1][40] = w->fh[32]*c_in;
+    w->term[1][41] = w->fh[33]*c_in;
+    w->term[1][42] = 0;
+    w->term[1][43] = 0;
+    w->term[1][44] = 0;
+    w->term[1][45] = w->fh[34]*c_in;
+    w->term[1][46] = w->fh[35]*c_in;
+    w->term[1][47] = w->fh[36]*c_in;
+    w->term[1][48] = w->fh[37]*c_in;
+    w->term[1][49] = 0;
+    w->term[1][50] = w->fh[38]*c_in;
+    w->term[1][51] = w->fh[39]*c_in;
+    w->term[1][52] = c_out + w->fh[40]*c_in;
+    w->term[1][53] = w->fh[41]*c_in;
     w->term[1][54] = 0;
     w->term[1][55] = 0;
     w->term[1][56] = 0;
-    w->term[1][57] = 0;
-    w->term[1][58] = 0;
-    w->term[1][59] = 0;
+    w->term[1][57] = w->fh[42]*c_in;
+    w->term[1][58] = w->fh[43]*c_in;
+    w->term[1][59] = w->fh[44]*c_in;
     w->term[1][60] = 0;
-    w->term[1][61] = w->fh[34]*c_in;
-    w->term[1][62] = w->fh[35]*c_in;
-    w->term[1][63] = w->fh[36]*c_in;
-    w->term[1][64] = w->fh[37]*c_in;
-    w->term[1][65] = 0;
-    w->term[1][66] = w->fh[38]*c_in;
-    w->term[1][67] = w->fh[39]*c_in;
-    w->term[1][68] = c_out + w->fh[40]*c_in;
-    w->term[1][69] = w->fh[41]*c_in;
+    w->term[1][61] = 0;
+    w->term[1][62] = 0;
+    w->term[1][63] = w->fh[45]*c_in;
+    w->term[1][64] = 0;
+    w->term[1][65] = c_out;
+    w->term[1][66] = 0;
+    w->term[1][67] = 0;
+    w->term[1][68] = 0;
+    w->term[1][69] = 0;
     w->term[1][70] = 0;
     w->term[1][71] = 0;
     w->term[1][72] = 0;
     w->term[1][73] = 0;
     w->term[1][74] = 0;
     w->term[1][75] = 0;
-    w->term[1][76] = 0;
-    w->term[1][77] = w->fh[42]*c_in;
-    w->term[1][78] = w->fh[43]*c_in;
-    w->term[1][79] = w->fh[44]*c_in;
+    w->term[1][76] = w->fh[46]*c_in;
+    w->term[1][77] = w->fh[47]*c_in;
+    w->term[1][78] = 0;
+    w->term[1][79] = 0;
     w->term[1][80] = 0;
     w->term[1][81] = 0;
     w->term[1][82] = 0;
-    w->term[1][83] = w->fh[45]*c_in;
-    w->term[1][84] = 0;
-    w->term[1][85] = c_out;
-    w->term[1][86] = 0;
-    w->term[1][87] = 0;
-    w->term[1][88] = 0;
-    w->term[1][89] = 0;
-    w->term[1][90] = 0;
-    w->term[1][91] = 0;
-    w->term[1][92] = 0;
-    w->term[1][93] = 0;
-    w->term[1][94] = 0;
-    w->term[1][95] = 0;
-    w->term[1][96] = 0;
-    w->term[1][97] = 0;
-    w->term[1][98] = 0;
+    w->term[1][83] = 0;
+    w->term[1][84] = c_out + w->fh[48]*c_in;
+    w->term[1][85] = c_out + w->fh[49]*c_in;
+    w->term[1][86] = c_out + w->fh[50]*c_in;
+    w->term[1][87] = c_out + w->fh[51]*c_in;
+    w->term[1][88] = c_out + w->fh[52]*c_in;
+    w->term[1][89] = c_out + w->fh[53]*c_in;
+    w->term[1][90] = w->fh[4]*c_in;
+    w->term[1][91] = w->fh[5]*c_in;
+    w->term[1][92] = w->fh[6]*c_in;
+    w->term[1][93] = w->fh[13]*c_in;
+    w->term[1][94] = w->fh[14]*c_in;
+    w->term[1][95] = w->fh[15]*c_in;
+    w->term[1][96] = w->fh[23]*c_in;
+    w->term[1][97] = w->fh[24]*c_in;
+    w->term[1][98] = w->fh[25]*c_in;
     w->term[1][99] = 0;
-    w->term[1][100] = w->fh[46]*c_in;
-    w->term[1][101] = w->fh[47]*c_in;
-    w->term[1][102] = c_out;
+    w->term[1][100] = 0;
+    w->term[1][101] = 0;
+    w->term[1][102] = 0;
     w->term[1][103] = 0;
     w->term[1][104] = 0;
     w->term[1][105] = 0;
     w->term[1][106] = 0;
     w->term[1][107] = 0;
-    w->term[1][108] = 0;
+    w->term[1][108] = c_out;
     w->term[1][109] = 0;
     w->term[1][110] = 0;
     w->term[1][111] = 0;
-    w->term[1][112] = c_out + w->fh[48]*c_in;
-    w->term[1][113] = c_out + w->fh[49]*c_in;
-    w->term[1][114] = c_out + w->fh[50]*c_in;
-    w->term[1][115] = c_out + w->fh[51]*c_in;
-    w->term[1][116] = c_out + w->fh[52]*c_in;
-    w->term[1][117] = c_out + w->fh[53]*c_in;
 }
 
 NED_DOPPLER18_BLOCK void horner_saturated_into_S(ned_doppler18_discretize_scratch *restrict w, const
-        ned_doppler18_scalar c_out, const ned_doppler18_scalar c_in)
+        ned_doppler18_scalar c_out)
 {
     int k;
-    for (k = 0; k < 16; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][16+k] + w->fh[1]*w->term[1][32+k] + w->fh[2]*w->term[1][64+k]
-                + w->fh[3]*w->term[1][80+k];
-        w->S[16+k] = w->fh[10]*w->term[1][k] + w->fh[11]*w->term[1][32+k] +
-                w->fh[12]*w->term[1][48+k];
-        w->S[32+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][16+k] +
-                w->fh[21]*w->term[1][64+k] + w->fh[22]*w->term[1][80+k];
-        w->S[48+k] = w->fh[29]*w->term[1][16+k] + w->fh[30]*w->term[1][32+k] +
-                w->fh[31]*w->term[1][48+k] + w->fh[32]*w->term[1][64+k] +
-                w->fh[33]*w->term[1][80+k];
-        w->S[64+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][32+k] +
-                w->fh[39]*w->term[1][48+k] + w->fh[40]*w->term[1][64+k] +
-                w->fh[41]*w->term[1][80+k];
-        w->S[80+k] = w->fh[45]*w->term[1][48+k];
+    for (k = 0; k < 12; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][12+k] + w->fh[1]*w->term[1][24+k] + w->fh[2]*w->term[1][48+k]
+                + w->fh[3]*w->term[1][60+k];
+        w->S[12+k] = w->fh[10]*w->term[1][k] + w->fh[11]*w->term[1][24+k] +
+                w->fh[12]*w->term[1][36+k];
+        w->S[24+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][12+k] +
+                w->fh[21]*w->term[1][48+k] + w->fh[22]*w->term[1][60+k];
+        w->S[36+k] = w->fh[29]*w->term[1][12+k] + w->fh[30]*w->term[1][24+k] +
+                w->fh[31]*w->term[1][36+k] + w->fh[32]*w->term[1][48+k] +
+                w->fh[33]*w->term[1][60+k];
+        w->S[48+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][24+k] +
+                w->fh[39]*w->term[1][36+k] + w->fh[40]*w->term[1][48+k] +
+                w->fh[41]*w->term[1][60+k];
+        w->S[60+k] = w->fh[45]*w->term[1][36+k];
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[7] = w->S[7] + w->fh[4]*c_in;
-    w->S[8] = w->S[8] + w->fh[5]*c_in;
-    w->S[9] = w->S[9] + w->fh[6]*c_in;
-    w->S[10] = w->S[10] + w->fh[7]*w->term[1][112];
-    w->S[11] = w->S[11] + w->fh[8]*w->term[1][113];
-    w->S[12] = w->S[12] + w->fh[9]*w->term[1][114];
-    w->S[17] = w->S[17] + c_out;
-    w->S[23] = w->S[23] + w->fh[13]*c_in;
-    w->S[24] = w->S[24] + w->fh[14]*c_in;
-    w->S[25] = w->S[25] + w->fh[15]*c_in;
-    w->S[26] = w->S[26] + w->fh[16]*w->term[1][112];
-    w->S[27] = w->S[27] + w->fh[17]*w->term[1][113];
-    w->S[28] = w->S[28] + w->fh[18]*w->term[1][114];
-    w->S[34] = w->S[34] + c_out;
-    w->S[39] = w->S[39] + w->fh[23]*c_in;
-    w->S[40] = w->S[40] + w->fh[24]*c_in;
-    w->S[41] = w->S[41] + w->fh[25]*c_in;
-    w->S[42] = w->S[42] + w->fh[26]*w->term[1][112];
-    w->S[43] = w->S[43] + w->fh[27]*w->term[1][113];
-    w->S[44] = w->S[44] + w->fh[28]*w->term[1][114];
-    w->S[51] = w->S[51] + c_out;
-    w->S[61] = w->S[61] + w->fh[34]*w->term[1][115];
-    w->S[62] = w->S[62] + w->fh[35]*w->term[1][116];
-    w->S[63] = w->S[63] + w->fh[36]*w->term[1][117];
-    w->S[68] = w->S[68] + c_out;
-    w->S[77] = w->S[77] + w->fh[42]*w->term[1][115];
-    w->S[78] = w->S[78] + w->fh[43]*w->term[1][116];
-    w->S[79] = w->S[79] + w->fh[44]*w->term[1][117];
-    w->S[85] = w->S[85] + c_out;
-    w->S[112] = c_out + w->fh[48]*w->term[1][112];
-    w->S[113] = c_out + w->fh[49]*w->term[1][113];
-    w->S[114] = c_out + w->fh[50]*w->term[1][114];
-    w->S[115] = c_out + w->fh[51]*w->term[1][115];
-    w->S[116] = c_out + w->fh[52]*w->term[1][116];
-    w->S[117] = c_out + w->fh[53]*w->term[1][117];
+    w->S[6] = w->S[6] + w->fh[7]*w->term[1][84];
+    w->S[7] = w->S[7] + w->fh[8]*w->term[1][85];
+    w->S[8] = w->S[8] + w->fh[9]*w->term[1][86];
+    w->S[13] = w->S[13] + c_out;
+    w->S[18] = w->S[18] + w->fh[16]*w->term[1][84];
+    w->S[19] = w->S[19] + w->fh[17]*w->term[1][85];
+    w->S[20] = w->S[20] + w->fh[18]*w->term[1][86];
+    w->S[26] = w->S[26] + c_out;
+    w->S[30] = w->S[30] + w->fh[26]*w->term[1][84];
+    w->S[31] = w->S[31] + w->fh[27]*w->term[1][85];
+    w->S[32] = w->S[32] + w->fh[28]*w->term[1][86];
+    w->S[39] = w->S[39] + c_out;
+    w->S[45] = w->S[45] + w->fh[34]*w->term[1][87];
+    w->S[46] = w->S[46] + w->fh[35]*w->term[1][88];
+    w->S[47] = w->S[47] + w->fh[36]*w->term[1][89];
+    w->S[52] = w->S[52] + c_out;
+    w->S[57] = w->S[57] + w->fh[42]*w->term[1][87];
+    w->S[58] = w->S[58] + w->fh[43]*w->term[1][88];
+    w->S[59] = w->S[59] + w->fh[44]*w->term[1][89];
+    w->S[65] = w->S[65] + c_out;
+    w->S[84] = c_out + w->fh[48]*w->term[1][84];
+    w->S[85] = c_out + w->fh[49]*w->term[1][85];
+    w->S[86] = c_out + w->fh[50]*w->term[1][86];
+    w->S[87] = c_out + w->fh[51]*w->term[1][87];
+    w->S[88] = c_out + w->fh[52]*w->term[1][88];
+    w->S[89] = c_out + w->fh[53]*w->term[1][89];
 }
 
 NED_DOPPLER18_BLOCK void horner_saturated_into_term(ned_doppler18_discretize_scratch *restrict w,
-        const ned_doppler18_scalar c_out, const ned_doppler18_scalar c_in)
+        const ned_doppler18_scalar c_out)
 {
     int k;
-    for (k = 0; k < 16; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[16+k] + w->fh[1]*w->S[32+k] + w->fh[2]*w->S[64+k] +
-                w->fh[3]*w->S[80+k];
-        w->term[1][16+k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[32+k] + w->fh[12]*w->S[48+k];
-        w->term[1][32+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[16+k] + w->fh[21]*w->S[64+k] +
-                w->fh[22]*w->S[80+k];
-        w->term[1][48+k] = w->fh[29]*w->S[16+k] + w->fh[30]*w->S[32+k] + w->fh[31]*w->S[48+k] +
-                w->fh[32]*w->S[64+k] + w->fh[33]*w->S[80+k];
-        w->term[1][64+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[32+k] + w->fh[39]*w->S[48+k] +
-                w->fh[40]*w->S[64+k] + w->fh[41]*w->S[80+k];
-        w->term[1][80+k] = w->fh[45]*w->S[48+k];
+    for (k = 0; k < 12; ++k) {
+        w->term[1][k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
+                w->fh[3]*w->S[60+k];
+        w->term[1][12+k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[24+k] + w->fh[12]*w->S[36+k];
+        w->term[1][24+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[12+k] + w->fh[21]*w->S[48+k] +
+                w->fh[22]*w->S[60+k];
+        w->term[1][36+k] = w->fh[29]*w->S[12+k] + w->fh[30]*w->S[24+k] + w->fh[31]*w->S[36+k] +
+                w->fh[32]*w->S[48+k] + w->fh[33]*w->S[60+k];
+        w->term[1][48+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[24+k] + w->fh[39]*w->S[36+k] +
+                w->fh[40]*w->S[48+k] + w->fh[41]*w->S[60+k];
+        w->term[1][60+k] = w->fh[45]*w->S[36+k];
     }
     w->term[1][0] = w->term[1][0] + c_out;
-    w->term[1][7] = w->term[1][7] + w->fh[4]*c_in;
-    w->term[1][8] = w->term[1][8] + w->fh[5]*c_in;
-    w->term[1][9] = w->term[1][9] + w->fh[6]*c_in;
-    w->term[1][10] = w->term[1][10] + w->fh[7]*w->S[112];
-    w->term[1][11] = w->term[1][11] + w->fh[8]*w->S[113];
-    w->term[1][12] = w->term[1][12] + w->fh[9]*w->S[114];
-    w->term[1][17] = w->term[1][17] + c_out;
-    w->term[1][23] = w->term[1][23] + w->fh[13]*c_in;
-    w->term[1][24] = w->term[1][24] + w->fh[14]*c_in;
-    w->term[1][25] = w->term[1][25] + w->fh[15]*c_in;
-    w->term[1][26] = w->term[1][26] + w->fh[16]*w->S[112];
-    w->term[1][27] = w->term[1][27] + w->fh[17]*w->S[113];
-    w->term[1][28] = w->term[1][28] + w->fh[18]*w->S[114];
-    w->term[1][34] = w->term[1][34] + c_out;
-    w->term[1][39] = w->term[1][39] + w->fh[23]*c_in;
-    w->term[1][40] = w->term[1][40] + w->fh[24]*c_in;
-    w->term[1][41] = w->term[1][41] + w->fh[25]*c_in;
-    w->term[1][42] = w->term[1][42] + w->fh[26]*w->S[112];
-    w->term[1][43] = w->term[1][43] + w->fh[27]*w->S[113];
-    w->term[1][44] = w->term[1][44] + w->fh[28]*w->S[114];
-    w->term[1][51] = w->term[1][51] + c_out;
-    w->term[1][61] = w->term[1][61] + w->fh[34]*w->S[115];
-    w->term[1][62] = w->term[1][62] + w->fh[35]*w->S[116];
-    w->term[1][63] = w->term[1][63] + w->fh[36]*w->S[117];
-    w->term[1][68] = w->term[1][68] + c_out;
-    w->term[1][77] = w->term[1][77] + w->fh[42]*w->S[115];
-    w->term[1][78] = w->term[1][78] + w->fh[43]*w->S[116];
-    w->term[1][79] = w->term[1][79] + w->fh[44]*w->S[117];
-    w->term[1][85] = w->term[1][85] + c_out;
-    w->term[1][112] = c_out + w->fh[48]*w->S[112];
-    w->term[1][113] = c_out + w->fh[49]*w->S[113];
-    w->term[1][114] = c_out + w->fh[50]*w->S[114];
-    w->term[1][115] = c_out + w->fh[51]*w->S[115];
-    w->term[1][116] = c_out + w->fh[52]*w->S[116];
-    w->term[1][117] = c_out + w->fh[53]*w->S[117];
+    w->term[1][6] = w->term[1][6] + w->fh[7]*w->S[84];
+    w->term[1][7] = w->term[1][7] + w->fh[8]*w->S[85];
+    w->term[1][8] = w->term[1][8] + w->fh[9]*w->S[86];
+    w->term[1][13] = w->term[1][13] + c_out;
+    w->term[1][18] = w->term[1][18] + w->fh[16]*w->S[84];
+    w->term[1][19] = w->term[1][19] + w->fh[17]*w->S[85];
+    w->term[1][20] = w->term[1][20] + w->fh[18]*w->S[86];
+    w->term[1][26] = w->term[1][26] + c_out;
+    w->term[1][30] = w->term[1][30] + w->fh[26]*w->S[84];
+    w->term[1][31] = w->term[1][31] + w->fh[27]*w->S[85];
+    w->term[1][32] = w->term[1][32] + w->fh[28]*w->S[86];
+    w->term[1][39] = w->term[1][39] + c_out;
+    w->term[1][45] = w->term[1][45] + w->fh[34]*w->S[87];
+    w->term[1][46] = w->term[1][46] + w->fh[35]*w->S[88];
+    w->term[1][47] = w->term[1][47] + w->fh[36]*w->S[89];
+    w->term[1][52] = w->term[1][52] + c_out;
+    w->term[1][57] = w->term[1][57] + w->fh[42]*w->S[87];
+    w->term[1][58] = w->term[1][58] + w->fh[43]*w->S[88];
+    w->term[1][59] = w->term[1][59] + w->fh[44]*w->S[89];
+    w->term[1][65] = w->term[1][65] + c_out;
+    w->term[1][84] = c_out + w->fh[48]*w->S[84];
+    w->term[1][85] = c_out + w->fh[49]*w->S[85];
+    w->term[1][86] = c_out + w->fh[50]*w->S[86];
+    w->term[1][87] = c_out + w->fh[51]*w->S[87];
+    w->term[1][88] = c_out + w->fh[52]*w->S[88];
+    w->term[1][89] = c_out + w->fh[53]*w->S[89];
+}
+
+NED_DOPPLER18_BLOCK void horner_first_into_term(ned_doppler18_discretize_scratch *restrict w, const
+        ned_doppler18_scalar c_out)
+{
+    int k;
+    for (k = 0; k < 12; ++k) {
+        w->term[1][k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
+                w->fh[3]*w->S[60+k];
+        w->term[1][12+k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[24+k] + w->fh[12]*w->S[36+k];
+        w->term[1][24+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[12+k] + w->fh[21]*w->S[48+k] +
+                w->fh[22]*w->S[60+k];
+        w->term[1][36+k] = w->fh[29]*w->S[12+k] + w->fh[30]*w->S[24+k] + w->fh[31]*w->S[36+k] +
+                w->fh[32]*w->S[48+k] + w->fh[33]*w->S[60+k];
+        w->term[1][48+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[24+k] + w->fh[39]*w->S[36+k] +
+                w->fh[40]*w->S[48+k] + w->fh[41]*w->S[60+k];
+        w->term[1][60+k] = w->fh[45]*w->S[36+k];
+        w->term[1][72+k] = w->fh[46]*w->S[48+k] + w->fh[47]*w->S[60+k];
+    }
+    w->term[1][0] = w->term[1][0] + c_out;
+    w->term[1][6] = w->term[1][6] + w->fh[7]*w->S[84];
+    w->term[1][7] = w->term[1][7] + w->fh[8]*w->S[85];
+    w->term[1][8] = w->term[1][8] + w->fh[9]*w->S[86];
+    w->term[1][13] = w->term[1][13] + c_out;
+    w->term[1][18] = w->term[1][18] + w->fh[16]*w->S[84];
+    w->term[1][19] = w->term[1][19] + w->fh[17]*w->S[85];
+    w->term[1][20] = w->term[1][20] + w->fh[18]*w->S[86];
+    w->term[1][26] = w->term[1][26] + c_out;
+    w->term[1][30] = w->term[1][30] + w->fh[26]*w->S[84];
+    w->term[1][31] = w->term[1][31] + w->fh[27]*w->S[85];
+    w->term[1][32] = w->term[1][32] + w->fh[28]*w->S[86];
+    w->term[1][39] = w->term[1][39] + c_out;
+    w->term[1][45] = w->term[1][45] + w->fh[34]*w->S[87];
+    w->term[1][46] = w->term[1][46] + w->fh[35]*w->S[88];
+    w->term[1][47] = w->term[1][47] + w->fh[36]*w->S[89];
+    w->term[1][52] = w->term[1][52] + c_out;
+    w->term[1][57] = w->term[1][57] + w->fh[42]*w->S[87];
+    w->term[1][58] = w->term[1][58] + w->fh[43]*w->S[88];
+    w->term[1][59] = w->term[1][59] + w->fh[44]*w->S[89];
+    w->term[1][65] = w->term[1][65] + c_out;
+    w->term[1][108] = c_out;
+    w->term[1][84] = c_out + w->fh[48]*w->S[84];
+    w->term[1][85] = c_out + w->fh[49]*w->S[85];
+    w->term[1][86] = c_out + w->fh[50]*w->S[86];
+    w->term[1][87] = c_out + w->fh[51]*w->S[87];
+    w->term[1][88] = c_out + w->fh[52]*w->S[88];
+    w->term[1][89] = c_out + w->fh[53]*w->S[89];
 }
 
 NED_DOPPLER18_BLOCK void horner_last_into_S(ned_doppler18_discretize_scratch *restrict w, const
-        ned_doppler18_scalar c_out, const ned_doppler18_scalar c_in)
+        ned_doppler18_scalar c_out)
 {
     int k;
-    for (k = 0; k < 16; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][16+k] + w->fh[1]*w->term[1][32+k] + w->fh[2]*w->term[1][64+k]
-                + w->fh[3]*w->term[1][80+k];
-        w->S[16+k] = w->fh[10]*w->term[1][k] + w->fh[11]*w->term[1][32+k] +
-                w->fh[12]*w->term[1][48+k];
-        w->S[32+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][16+k] +
-                w->fh[21]*w->term[1][64+k] + w->fh[22]*w->term[1][80+k];
-        w->S[48+k] = w->fh[29]*w->term[1][16+k] + w->fh[30]*w->term[1][32+k] +
-                w->fh[31]*w->term[1][48+k] + w->fh[32]*w->term[1][64+k] +
-                w->fh[33]*w->term[1][80+k];
-        w->S[64+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][32+k] +
-                w->fh[39]*w->term[1][48+k] + w->fh[40]*w->term[1][64+k] +
-                w->fh[41]*w->term[1][80+k];
-        w->S[80+k] = w->fh[45]*w->term[1][48+k];
-        w->S[96+k] = w->fh[46]*w->term[1][64+k] + w->fh[47]*w->term[1][80+k];
+    for (k = 0; k < 12; ++k) {
+        w->S[k] = w->fh[0]*w->term[1][12+k] + w->fh[1]*w->term[1][24+k] + w->fh[2]*w->term[1][48+k]
+                + w->fh[3]*w->term[1][60+k];
+        w->S[12+k] = w->fh[10]*w->term[1][k] + w->fh[11]*w->term[1][24+k] +
+                w->fh[12]*w->term[1][36+k];
+        w->S[24+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][12+k] +
+                w->fh[21]*w->term[1][48+k] + w->fh[22]*w->term[1][60+k];
+        w->S[36+k] = w->fh[29]*w->term[1][12+k] + w->fh[30]*w->term[1][24+k] +
+                w->fh[31]*w->term[1][36+k] + w->fh[32]*w->term[1][48+k] +
+                w->fh[33]*w->term[1][60+k];
+        w->S[48+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][24+k] +
+                w->fh[39]*w->term[1][36+k] + w->fh[40]*w->term[1][48+k] +
+                w->fh[41]*w->term[1][60+k];
+        w->S[60+k] = w->fh[45]*w->term[1][36+k];
+        w->S[72+k] = w->fh[46]*w->term[1][48+k] + w->fh[47]*w->term[1][60+k];
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[7] = w->S[7] + w->fh[4]*c_in;
-    w->S[8] = w->S[8] + w->fh[5]*c_in;
-    w->S[9] = w->S[9] + w->fh[6]*c_in;
-    w->S[10] = w->S[10] + w->fh[7]*w->term[1][112];
-    w->S[11] = w->S[11] + w->fh[8]*w->term[1][113];
-    w->S[12] = w->S[12] + w->fh[9]*w->term[1][114];
-    w->S[17] = w->S[17] + c_out;
-    w->S[23] = w->S[23] + w->fh[13]*c_in;
-    w->S[24] = w->S[24] + w->fh[14]*c_in;
-    w->S[25] = w->S[25] + w->fh[15]*c_in;
-    w->S[26] = w->S[26] + w->fh[16]*w->term[1][112];
-    w->S[27] = w->S[27] + w->fh[17]*w->term[1][113];
-    w->S[28] = w->S[28] + w->fh[18]*w->term[1][114];
-    w->S[34] = w->S[34] + c_out;
-    w->S[39] = w->S[39] + w->fh[23]*c_in;
-    w->S[40] = w->S[40] + w->fh[24]*c_in;
-    w->S[41] = w->S[41] + w->fh[25]*c_in;
-    w->S[42] = w->S[42] + w->fh[26]*w->term[1][112];
-    w->S[43] = w->S[43] + w->fh[27]*w->term[1][113];
-    w->S[44] = w->S[44] + w->fh[28]*w->term[1][114];
-    w->S[51] = w->S[51] + c_out;
-    w->S[61] = w->S[61] + w->fh[34]*w->term[1][115];
-    w->S[62] = w->S[62] + w->fh[35]*w->term[1][116];
-    w->S[63] = w->S[63] + w->fh[36]*w->term[1][117];
-    w->S[68] = w->S[68] + c_out;
-    w->S[77] = w->S[77] + w->fh[42]*w->term[1][115];
-    w->S[78] = w->S[78] + w->fh[43]*w->term[1][116];
-    w->S[79] = w->S[79] + w->fh[44]*w->term[1][117];
-    w->S[85] = w->S[85] + c_out;
-    w->S[102] = w->S[102] + c_out;
-    w->S[112] = c_out + w->fh[48]*w->term[1][112];
-    w->S[113] = c_out + w->fh[49]*w->term[1][113];
-    w->S[114] = c_out + w->fh[50]*w->term[1][114];
-    w->S[115] = c_out + w->fh[51]*w->term[1][115];
-    w->S[116] = c_out + w->fh[52]*w->term[1][116];
-    w->S[117] = c_out + w->fh[53]*w->term[1][117];
+    w->S[6] = w->S[6] + w->fh[7]*w->term[1][84];
+    w->S[7] = w->S[7] + w->fh[8]*w->term[1][85];
+    w->S[8] = w->S[8] + w->fh[9]*w->term[1][86];
+    w->S[13] = w->S[13] + c_out;
+    w->S[18] = w->S[18] + w->fh[16]*w->term[1][84];
+    w->S[19] = w->S[19] + w->fh[17]*w->term[1][85];
+    w->S[20] = w->S[20] + w->fh[18]*w->term[1][86];
+    w->S[26] = w->S[26] + c_out;
+    w->S[30] = w->S[30] + w->fh[26]*w->term[1][84];
+    w->S[31] = w->S[31] + w->fh[27]*w->term[1][85];
+    w->S[32] = w->S[32] + w->fh[28]*w->term[1][86];
+    w->S[39] = w->S[39] + c_out;
+    w->S[45] = w->S[45] + w->fh[34]*w->term[1][87];
+    w->S[46] = w->S[46] + w->fh[35]*w->term[1][88];
+    w->S[47] = w->S[47] + w->fh[36]*w->term[1][89];
+    w->S[52] = w->S[52] + c_out;
+    w->S[57] = w->S[57] + w->fh[42]*w->term[1][87];
+    w->S[58] = w->S[58] + w->fh[43]*w->term[1][88];
+    w->S[59] = w->S[59] + w->fh[44]*w->term[1][89];
+    w->S[65] = w->S[65] + c_out;
+    w->S[108] = c_out;
+    w->S[84] = c_out + w->fh[48]*w->term[1][84];
+    w->S[85] = c_out + w->fh[49]*w->term[1][85];
+    w->S[86] = c_out + w->fh[50]*w->term[1][86];
+    w->S[87] = c_out + w->fh[51]*w->term[1][87];
+    w->S[88] = c_out + w->fh[52]*w->term[1][88];
+    w->S[89] = c_out + w->fh[53]*w->term[1][89];
+}
+
+NED_DOPPLER18_BLOCK void horner_unit_columns(ned_doppler18_discretize_scratch *restrict w)
+{
+    w->S[90] = w->term[1][0]*w->fh[4] + w->term[1][1]*w->fh[13] + w->term[1][2]*w->fh[23];
+    w->S[91] = w->term[1][0]*w->fh[5] + w->term[1][1]*w->fh[14] + w->term[1][2]*w->fh[24];
+    w->S[92] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[15] + w->term[1][2]*w->fh[25];
+    w->S[93] = w->term[1][12]*w->fh[4] + w->term[1][13]*w->fh[13] + w->term[1][14]*w->fh[23];
+    w->S[94] = w->term[1][12]*w->fh[5] + w->term[1][13]*w->fh[14] + w->term[1][14]*w->fh[24];
+    w->S[95] = w->term[1][12]*w->fh[6] + w->term[1][13]*w->fh[15] + w->term[1][14]*w->fh[25];
+    w->S[96] = w->term[1][24]*w->fh[4] + w->term[1][25]*w->fh[13] + w->term[1][26]*w->fh[23];
+    w->S[97] = w->term[1][24]*w->fh[5] + w->term[1][25]*w->fh[14] + w->term[1][26]*w->fh[24];
+    w->S[98] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[15] + w->term[1][26]*w->fh[25];
+    w->S[99] = w->term[1][36]*w->fh[4] + w->term[1][37]*w->fh[13] + w->term[1][38]*w->fh[23];
+    w->S[100] = w->term[1][36]*w->fh[5] + w->term[1][37]*w->fh[14] + w->term[1][38]*w->fh[24];
+    w->S[101] = w->term[1][36]*w->fh[6] + w->term[1][37]*w->fh[15] + w->term[1][38]*w->fh[25];
+    w->S[102] = w->term[1][48]*w->fh[4] + w->term[1][49]*w->fh[13] + w->term[1][50]*w->fh[23];
+    w->S[103] = w->term[1][48]*w->fh[5] + w->term[1][49]*w->fh[14] + w->term[1][50]*w->fh[24];
+    w->S[104] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[15] + w->term[1][50]*w->fh[25];
+    w->S[105] = w->term[1][60]*w->fh[4] + w->term[1][61]*w->fh[13] + w->term[1][62]*w->fh[23];
+    w->S[106] = w->term[1][60]*w->fh[5] + w->term[1][61]*w->fh[14] + w->term[1][62]*w->fh[24];
+    w->S[107] = w->term[1][60]*w->fh[6] + w->term[1][61]*w->fh[15] + w->term[1][62]*w->fh[25];
+    w->S[109] = w->term[1][72]*w->fh[4] + w->term[1][73]*w->fh[13] + w->term[1][74]*w->fh[23];
+    w->S[110] = w->term[1][72]*w->fh[5] + w->term[1][73]*w->fh[14] + w->term[1][74]*w->fh[24];
+    w->S[111] = w->term[1][72]*w->fh[6] + w->term[1][73]*w->fh[15] + w->term[1][74]*w->fh[25];
 }
 
 NED_DOPPLER18_BLOCK void horner_transition(ned_doppler18_transition *restrict t, const
         ned_doppler18_discretize_scratch *restrict w)
 {
+    const ned_doppler18_scalar one = 1.0;
     int k;
-    for (k = 0; k < 16; ++k) {
-        t->Phi[0][k] = w->fh[0]*w->S[16+k] + w->fh[1]*w->S[32+k] + w->fh[2]*w->S[64+k] +
-                w->fh[3]*w->S[80+k];
-        t->Phi[1][k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[32+k] + w->fh[12]*w->S[48+k];
-        t->Phi[2][k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[16+k] + w->fh[21]*w->S[64+k] +
-                w->fh[22]*w->S[80+k];
-        t->Phi[3][k] = w->fh[29]*w->S[16+k] + w->fh[30]*w->S[32+k] + w->fh[31]*w->S[48+k] +
-                w->fh[32]*w->S[64+k] + w->fh[33]*w->S[80+k];
-        t->Phi[4][k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[32+k] + w->fh[39]*w->S[48+k] +
-                w->fh[40]*w->S[64+k] + w->fh[41]*w->S[80+k];
-        t->Phi[5][k] = w->fh[45]*w->S[48+k];
-        t->Phi[6][k] = w->fh[46]*w->S[64+k] + w->fh[47]*w->S[80+k];
+    for (k = 0; k < 6; ++k) {
+        t->Phi[0][k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
+                w->fh[3]*w->S[60+k];
+        t->Phi[0][10+k] = w->fh[0]*w->S[18+k] + w->fh[1]*w->S[30+k] + w->fh[2]*w->S[54+k] +
+                w->fh[3]*w->S[66+k];
+        t->Phi[1][k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[24+k] + w->fh[12]*w->S[36+k];
+        t->Phi[1][10+k] = w->fh[10]*w->S[6+k] + w->fh[11]*w->S[30+k] + w->fh[12]*w->S[42+k];
+        t->Phi[2][k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[12+k] + w->fh[21]*w->S[48+k] +
+                w->fh[22]*w->S[60+k];
+        t->Phi[2][10+k] = w->fh[19]*w->S[6+k] + w->fh[20]*w->S[18+k] + w->fh[21]*w->S[54+k] +
+                w->fh[22]*w->S[66+k];
+        t->Phi[3][k] = w->fh[29]*w->S[12+k] + w->fh[30]*w->S[24+k] + w->fh[31]*w->S[36+k] +
+                w->fh[32]*w->S[48+k] + w->fh[33]*w->S[60+k];
+        t->Phi[3][10+k] = w->fh[29]*w->S[18+k] + w->fh[30]*w->S[30+k] + w->fh[31]*w->S[42+k] +
+                w->fh[32]*w->S[54+k] + w->fh[33]*w->S[66+k];
+        t->Phi[4][k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[24+k] + w->fh[39]*w->S[36+k] +
+                w->fh[40]*w->S[48+k] + w->fh[41]*w->S[60+k];
+        t->Phi[4][10+k] = w->fh[37]*w->S[6+k] + w->fh[38]*w->S[30+k] + w->fh[39]*w->S[42+k] +
+                w->fh[40]*w->S[54+k] + w->fh[41]*w->S[66+k];
+        t->Phi[5][k] = w->fh[45]*w->S[36+k];
+        t->Phi[5][10+k] = w->fh[45]*w->S[42+k];
+        t->Phi[6][k] = w->fh[46]*w->S[48+k] + w->fh[47]*w->S[60+k];
+        t->Phi[6][10+k] = w->fh[46]*w->S[54+k] + w->fh[47]*w->S[66+k];
     }
-    t->Phi[0][7] = t->Phi[0][7] + w->fh[4];
-    t->Phi[0][8] = t->Phi[0][8] + w->fh[5];
-    t->Phi[0][9] = t->Phi[0][9] + w->fh[6];
-    t->Phi[0][10] = t->Phi[0][10] + w->fh[7]*w->S[112];
-    t->Phi[0][11] = t->Phi[0][11] + w->fh[8]*w->S[113];
-    t->Phi[0][12] = t->Phi[0][12] + w->fh[9]*w->S[114];
-    t->Phi[1][7] = t->Phi[1][7] + w->fh[13];
-    t->Phi[1][8] = t->Phi[1][8] + w->fh[14];
-    t->Phi[1][9] = t->Phi[1][9] + w->fh[15];
-    t->Phi[1][10] = t->Phi[1][10] + w->fh[16]*w->S[112];
-    t->Phi[1][11] = t->Phi[1][11] + w->fh[17]*w->S[113];
-    t->Phi[1][12] = t->Phi[1][12] + w->fh[18]*w->S[114];
-    t->Phi[2][7] = t->Phi[2][7] + w->fh[23];
-    t->Phi[2][8] = t->Phi[2][8] + w->fh[24];
-    t->Phi[2][9] = t->Phi[2][9] + w->fh[25];
-    t->Phi[2][10] = t->Phi[2][10] + w->fh[26]*w->S[112];
-    t->Phi[2][11] = t->Phi[2][11] + w->fh[27]*w->S[113];
-    t->Phi[2][12] = t->Phi[2][12] + w->fh[28]*w->S[114];
-    t->Phi[3][13] = t->Phi[3][13] + w->fh[34]*w->S[115];
-    t->Phi[3][14] = t->Phi[3][14] + w->fh[35]*w->S[116];
-    t->Phi[3][15] = t->Phi[3][15] + w->fh[36]*w->S[117];
-    t->Phi[4][13] = t->Phi[4][13] + w->fh[42]*w->S[115];
-    t->Phi[4][14] = t->Phi[4][14] + w->fh[43]*w->S[116];
-    t->Phi[4][15] = t->Phi[4][15] + w->fh[44]*w->S[117];
-    t->Phi[10][10] = w->fh[48]*w->S[112];
-    t->Phi[11][11] = w->fh[49]*w->S[113];
-    t->Phi[12][12] = w->fh[50]*w->S[114];
-    t->Phi[13][13] = w->fh[51]*w->S[115];
-    t->Phi[14][14] = w->fh[52]*w->S[116];
-    t->Phi[15][15] = w->fh[53]*w->S[117];
+    t->Phi[0][10] = t->Phi[0][10] + w->fh[7]*w->S[84];
+    t->Phi[0][11] = t->Phi[0][11] + w->fh[8]*w->S[85];
+    t->Phi[0][12] = t->Phi[0][12] + w->fh[9]*w->S[86];
+    t->Phi[1][10] = t->Phi[1][10] + w->fh[16]*w->S[84];
+    t->Phi[1][11] = t->Phi[1][11] + w->fh[17]*w->S[85];
+    t->Phi[1][12] = t->Phi[1][12] + w->fh[18]*w->S[86];
+    t->Phi[2][10] = t->Phi[2][10] + w->fh[26]*w->S[84];
+    t->Phi[2][11] = t->Phi[2][11] + w->fh[27]*w->S[85];
+    t->Phi[2][12] = t->Phi[2][12] + w->fh[28]*w->S[86];
+    t->Phi[3][13] = t->Phi[3][13] + w->fh[34]*w->S[87];
+    t->Phi[3][14] = t->Phi[3][14] + w->fh[35]*w->S[88];
+    t->Phi[3][15] = t->Phi[3][15] + w->fh[36]*w->S[89];
+    t->Phi[4][13] = t->Phi[4][13] + w->fh[42]*w->S[87];
+    t->Phi[4][14] = t->Phi[4][14] + w->fh[43]*w->S[88];
+    t->Phi[4][15] = t->Phi[4][15] + w->fh[44]*w->S[89];
+    t->Phi[10][10] = w->fh[48]*w->S[84];
+    t->Phi[11][11] = w->fh[49]*w->S[85];
+    t->Phi[12][12] = w->fh[50]*w->S[86];
+    t->Phi[13][13] = w->fh[51]*w->S[87];
+    t->Phi[14][14] = w->fh[52]*w->S[88];
+    t->Phi[15][15] = w->fh[53]*w->S[89];
+    t->Phi[0][7] = w->S[0]*w->fh[4] + w->S[1]*w->fh[13] + w->S[2]*w->fh[23];
+    t->Phi[0][8] = w->S[0]*w->fh[5] + w->S[1]*w->fh[14] + w->S[2]*w->fh[24];
+    t->Phi[0][9] = w->S[0]*w->fh[6] + w->S[1]*w->fh[15] + w->S[2]*w->fh[25];
+    t->Phi[1][7] = w->S[12]*w->fh[4] + w->S[13]*w->fh[13] + w->S[14]*w->fh[23];
+    t->Phi[1][8] = w->S[12]*w->fh[5] + w->S[13]*w->fh[14] + w->S[14]*w->fh[24];
+    t->Phi[1][9] = w->S[12]*w->fh[6] + w->S[13]*w->fh[15] + w->S[14]*w->fh[25];
+    t->Phi[2][7] = w->S[24]*w->fh[4] + w->S[25]*w->fh[13] + w->S[26]*w->fh[23];
+    t->Phi[2][8] = w->S[24]*w->fh[5] + w->S[25]*w->fh[14] + w->S[26]*w->fh[24];
+    t->Phi[2][9] = w->S[24]*w->fh[6] + w->S[25]*w->fh[15] + w->S[26]*w->fh[25];
+    t->Phi[3][7] = w->S[36]*w->fh[4] + w->S[37]*w->fh[13] + w->S[38]*w->fh[23];
+    t->Phi[3][8] = w->S[36]*w->fh[5] + w->S[37]*w->fh[14] + w->S[38]*w->fh[24];
+    t->Phi[3][9] = w->S[36]*w->fh[6] + w->S[37]*w->fh[15] + w->S[38]*w->fh[25];
+    t->Phi[4][7] = w->S[48]*w->fh[4] + w->S[49]*w->fh[13] + w->S[50]*w->fh[23];
+    t->Phi[4][8] = w->S[48]*w->fh[5] + w->S[49]*w->fh[14] + w->S[50]*w->fh[24];
+    t->Phi[4][9] = w->S[48]*w->fh[6] + w->S[49]*w->fh[15] + w->S[50]*w->fh[25];
+    t->Phi[5][7] = w->S[60]*w->fh[4] + w->S[61]*w->fh[13] + w->S[62]*w->fh[23];
+    t->Phi[5][8] = w->S[60]*w->fh[5] + w->S[61]*w->fh[14] + w->S[62]*w->fh[24];
+    t->Phi[5][9] = w->S[60]*w->fh[6] + w->S[61]*w->fh[15] + w->S[62]*w->fh[25];
+    t->Phi[6][7] = w->S[72]*w->fh[4] + w->S[73]*w->fh[13] + w->S[74]*w->fh[23];
+    t->Phi[6][8] = w->S[72]*w->fh[5] + w->S[73]*w->fh[14] + w->S[74]*w->fh[24];
+    t->Phi[6][9] = w->S[72]*w->fh[6] + w->S[73]*w->fh[15] + w->S[74]*w->fh[25];
+    t->Phi[0][6] = 0;
     t->Phi[0][16] = 0;
     t->Phi[0][17] = 0;
+    t->Phi[1][6] = 0;
     t->Phi[1][16] = 0;
     t->Phi[1][17] = 0;
+    t->Phi[2][6] = 0;
     t->Phi[2][16] = 0;
     t->Phi[2][17] = 0;
+    t->Phi[3][6] = 0;
     t->Phi[3][16] = 0;
     t->Phi[3][17] = 0;
+    t->Phi[4][6] = 0;
     t->Phi[4][16] = 0;
     t->Phi[4][17] = 0;
+    t->Phi[5][6] = 0;
     t->Phi[5][16] = 0;
     t->Phi[5][17] = 0;
+    t->Phi[6][6] = 0;
     t->Phi[6][16] = 0;
     t->Phi[6][17] = 0;
     t->Phi[7][0] = 0;
@@ -944,7 +1009,7 @@ NED_DOPPLER18_BLOCK void horner_transition(ned_doppler18_transition *restrict t,
     t->Phi[7][4] = 0;
     t->Phi[7][5] = 0;
     t->Phi[7][6] = 0;
-    t->Phi[7][7] = 0;
+    t->Phi[7][7] = one;
     t->Phi[7][8] = 0;
     t->Phi[7][9] = 0;
     t->Phi[7][10] = 0;
@@ -963,7 +1028,7 @@ NED_DOPPLER18_BLOCK void horner_transition(ned_doppler18_transition *restrict t,
     t->Phi[8][5] = 0;
     t->Phi[8][6] = 0;
     t->Phi[8][7] = 0;
-    t->Phi[8][8] = 0;
+    t->Phi[8][8] = one;
     t->Phi[8][9] = 0;
     t->Phi[8][10] = 0;
     t->Phi[8][11] = 0;
@@ -982,7 +1047,7 @@ NED_DOPPLER18_BLOCK void horner_transition(ned_doppler18_transition *restrict t,
     t->Phi[9][6] = 0;
     t->Phi[9][7] = 0;
     t->Phi[9][8] = 0;
-    t->Phi[9][9] = 0;
+    t->Phi[9][9] = one;
     t->Phi[9][10] = 0;
     t->Phi[9][11] = 0;
     t->Phi[9][12] = 0;
@@ -1109,7 +1174,7 @@ NED_DOPPLER18_BLOCK void horner_transition(ned_doppler18_transition *restrict t,
     t->Phi[16][13] = 0;
     t->Phi[16][14] = 0;
     t->Phi[16][15] = 0;
-    t->Phi[16][16] = 0;
+    t->Phi[16][16] = one;
     t->Phi[16][17] = 0;
     t->Phi[17][0] = 0;
     t->Phi[17][1] = 0;
@@ -1128,7 +1193,7 @@ NED_DOPPLER18_BLOCK void horner_transition(ned_doppler18_transition *restrict t,
     t->Phi[17][14] = 0;
     t->Phi[17][15] = 0;
     t->Phi[17][16] = 0;
-    t->Phi[17][17] = 0;
+    t->Phi[17][17] = one;
 }
 
 NED_DOPPLER18_BLOCK void doubling(ned_doppler18_transition *restrict t,
@@ -1138,593 +1203,593 @@ NED_DOPPLER18_BLOCK void doubling(ned_doppler18_transition *restrict t,
     w->term[0][0] = t->Phi[0][0]*t->Phi[0][0] + t->Phi[0][1]*t->Phi[1][0] +
             t->Phi[0][2]*t->Phi[2][0] + t->Phi[0][3]*t->Phi[3][0] + t->Phi[0][4]*t->Phi[4][0] +
             t->Phi[0][5]*t->Phi[5][0];
-    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[32] +
-            t->Phi[0][3]*w->S[48] + t->Phi[0][4]*w->S[64] + t->Phi[0][5]*w->S[80];
+    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[12] + t->Phi[0][2]*w->S[24] +
+            t->Phi[0][3]*w->S[36] + t->Phi[0][4]*w->S[48] + t->Phi[0][5]*w->S[60];
     w->term[0][1] = t->Phi[0][0]*t->Phi[0][1] + t->Phi[0][1]*t->Phi[1][1] +
             t->Phi[0][2]*t->Phi[2][1] + t->Phi[0][3]*t->Phi[3][1] + t->Phi[0][4]*t->Phi[4][1] +
             t->Phi[0][5]*t->Phi[5][1];
-    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[33] +
-            t->Phi[0][3]*w->S[49] + t->Phi[0][4]*w->S[65] + t->Phi[0][5]*w->S[81];
+    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[13] + t->Phi[0][2]*w->S[25] +
+            t->Phi[0][3]*w->S[37] + t->Phi[0][4]*w->S[49] + t->Phi[0][5]*w->S[61];
     w->term[0][2] = t->Phi[0][0]*t->Phi[0][2] + t->Phi[0][1]*t->Phi[1][2] +
             t->Phi[0][2]*t->Phi[2][2] + t->Phi[0][3]*t->Phi[3][2] + t->Phi[0][4]*t->Phi[4][2] +
             t->Phi[0][5]*t->Phi[5][2];
-    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[18] + t->Phi[0][2]*w->S[34] +
-            t->Phi[0][3]*w->S[50] + t->Phi[0][4]*w->S[66] + t->Phi[0][5]*w->S[82];
+    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[26] +
+            t->Phi[0][3]*w->S[38] + t->Phi[0][4]*w->S[50] + t->Phi[0][5]*w->S[62];
     w->term[0][3] = t->Phi[0][0]*t->Phi[0][3] + t->Phi[0][1]*t->Phi[1][3] +
             t->Phi[0][2]*t->Phi[2][3] + t->Phi[0][3]*t->Phi[3][3] + t->Phi[0][4]*t->Phi[4][3] +
             t->Phi[0][5]*t->Phi[5][3];
-    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[19] + t->Phi[0][2]*w->S[35] +
-            t->Phi[0][3]*w->S[51] + t->Phi[0][4]*w->S[67] + t->Phi[0][5]*w->S[83];
+    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[27] +
+            t->Phi[0][3]*w->S[39] + t->Phi[0][4]*w->S[51] + t->Phi[0][5]*w->S[63];
     w->term[0][4] = t->Phi[0][0]*t->Phi[0][4] + t->Phi[0][1]*t->Phi[1][4] +
             t->Phi[0][2]*t->Phi[2][4] + t->Phi[0][3]*t->Phi[3][4] + t->Phi[0][4]*t->Phi[4][4] +
             t->Phi[0][5]*t->Phi[5][4];
-    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[20] + t->Phi[0][2]*w->S[36] +
-            t->Phi[0][3]*w->S[52] + t->Phi[0][4]*w->S[68] + t->Phi[0][5]*w->S[84];
+    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[28] +
+            t->Phi[0][3]*w->S[40] + t->Phi[0][4]*w->S[52] + t->Phi[0][5]*w->S[64];
     w->term[0][5] = t->Phi[0][0]*t->Phi[0][5] + t->Phi[0][1]*t->Phi[1][5] +
             t->Phi[0][2]*t->Phi[2][5] + t->Phi[0][3]*t->Phi[3][5] + t->Phi[0][4]*t->Phi[4][5] +
             t->Phi[0][5]*t->Phi[5][5];
-    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[21] + t->Phi[0][2]*w->S[37] +
-            t->Phi[0][3]*w->S[53] + t->Phi[0][4]*w->S[69] + t->Phi[0][5]*w->S[85];
+    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[29] +
+            t->Phi[0][3]*w->S[41] + t->Phi[0][4]*w->S[53] + t->Phi[0][5]*w->S[65];
     w->term[0][6] = t->Phi[0][0]*t->Phi[0][7] + t->Phi[0][1]*t->Phi[1][7] +
             t->Phi[0][2]*t->Phi[2][7] + t->Phi[0][3]*t->Phi[3][7] + t->Phi[0][4]*t->Phi[4][7] +
             t->Phi[0][5]*t->Phi[5][7];
-    w->term[1][6] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[23] + t->Phi[0][2]*w->S[39] +
-            t->Phi[0][3]*w->S[55] + t->Phi[0][4]*w->S[71] + t->Phi[0][5]*w->S[87] + t->Phi[0][7];
+    w->term[1][6] = t->Phi[0][0]*w->S[90] + t->Phi[0][1]*w->S[93] + t->Phi[0][2]*w->S[96] +
+            t->Phi[0][3]*w->S[99] + t->Phi[0][4]*w->S[102] + t->Phi[0][5]*w->S[105] + t->Phi[0][7];
     w->term[0][7] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
             t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
             t->Phi[0][5]*t->Phi[5][8];
-    w->term[1][7] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[24] + t->Phi[0][2]*w->S[40] +
-            t->Phi[0][3]*w->S[56] + t->Phi[0][4]*w->S[72] + t->Phi[0][5]*w->S[88] + t->Phi[0][8];
+    w->term[1][7] = t->Phi[0][0]*w->S[91] + t->Phi[0][1]*w->S[94] + t->Phi[0][2]*w->S[97] +
+            t->Phi[0][3]*w->S[100] + t->Phi[0][4]*w->S[103] + t->Phi[0][5]*w->S[106] + t->Phi[0][8];
     w->term[0][8] = t->Phi[0][0]*t->Phi[0][9] + t->Phi[0][1]*t->Phi[1][9] +
             t->Phi[0][2]*t->Phi[2][9] + t->Phi[0][3]*t->Phi[3][9] + t->Phi[0][4]*t->Phi[4][9] +
             t->Phi[0][5]*t->Phi[5][9];
-    w->term[1][8] = t->Phi[0][0]*w->S[9] + t->Phi[0][1]*w->S[25] + t->Phi[0][2]*w->S[41] +
-            t->Phi[0][3]*w->S[57] + t->Phi[0][4]*w->S[73] + t->Phi[0][5]*w->S[89] + t->Phi[0][9];
+    w->term[1][8] = t->Phi[0][0]*w->S[92] + t->Phi[0][1]*w->S[95] + t->Phi[0][2]*w->S[98] +
+            t->Phi[0][3]*w->S[101] + t->Phi[0][4]*w->S[104] + t->Phi[0][5]*w->S[107] + t->Phi[0][9];
     w->term[0][9] = t->Phi[0][0]*t->Phi[0][10] + t->Phi[0][1]*t->Phi[1][10] +
             t->Phi[0][2]*t->Phi[2][10] + t->Phi[0][3]*t->Phi[3][10] + t->Phi[0][4]*t->Phi[4][10] +
             t->Phi[0][5]*t->Phi[5][10] + t->Phi[0][10]*t->Phi[10][10];
-    w->term[1][9] = t->Phi[0][0]*w->S[10] + t->Phi[0][1]*w->S[26] + t->Phi[0][2]*w->S[42] +
-            t->Phi[0][3]*w->S[58] + t->Phi[0][4]*w->S[74] + t->Phi[0][5]*w->S[90] +
-            t->Phi[0][10]*w->S[112];
+    w->term[1][9] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[18] + t->Phi[0][2]*w->S[30] +
+            t->Phi[0][3]*w->S[42] + t->Phi[0][4]*w->S[54] + t->Phi[0][5]*w->S[66] +
+            t->Phi[0][10]*w->S[84];
     w->term[0][10] = t->Phi[0][0]*t->Phi[0][11] + t->Phi[0][1]*t->Phi[1][11] +
             t->Phi[0][2]*t->Phi[2][11] + t->Phi[0][3]*t->Phi[3][11] + t->Phi[0][4]*t->Phi[4][11] +
             t->Phi[0][5]*t->Phi[5][11] + t->Phi[0][11]*t->Phi[11][11];
-    w->term[1][10] = t->Phi[0][0]*w->S[11] + t->Phi[0][1]*w->S[27] + t->Phi[0][2]*w->S[43] +
-            t->Phi[0][3]*w->S[59] + t->Phi[0][4]*w->S[75] + t->Phi[0][5]*w->S[91] +
-            t->Phi[0][11]*w->S[113];
+    w->term[1][10] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[19] + t->Phi[0][2]*w->S[31] +
+            t->Phi[0][3]*w->S[43] + t->Phi[0][4]*w->S[55] + t->Phi[0][5]*w->S[67] +
+            t->Phi[0][11]*w->S[85];
     w->term[0][11] = t->Phi[0][0]*t->Phi[0][12] + t->Phi[0][1]*t->Phi[1][12] +
             t->Phi[0][2]*t->Phi[2][12] + t->Phi[0][3]*t->Phi[3][12] + t->Phi[0][4]*t->Phi[4][12] +
             t->Phi[0][5]*t->Phi[5][12] + t->Phi[0][12]*t->Phi[12][12];
-    w->term[1][11] = t->Phi[0][0]*w->S[12] + t->Phi[0][1]*w->S[28] + t->Phi[0][2]*w->S[44] +
-            t->Phi[0][3]*w->S[60] + t->Phi[0][4]*w->S[76] + t->Phi[0][5]*w->S[92] +
-            t->Phi[0][12]*w->S[114];
+    w->term[1][11] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[20] + t->Phi[0][2]*w->S[32] +
+            t->Phi[0][3]*w->S[44] + t->Phi[0][4]*w->S[56] + t->Phi[0][5]*w->S[68] +
+            t->Phi[0][12]*w->S[86];
     w->term[0][12] = t->Phi[0][0]*t->Phi[0][13] + t->Phi[0][1]*t->Phi[1][13] +
             t->Phi[0][2]*t->Phi[2][13] + t->Phi[0][3]*t->Phi[3][13] + t->Phi[0][4]*t->Phi[4][13] +
             t->Phi[0][5]*t->Phi[5][13] + t->Phi[0][13]*t->Phi[13][13];
-    w->term[1][12] = t->Phi[0][0]*w->S[13] + t->Phi[0][1]*w->S[29] + t->Phi[0][2]*w->S[45] +
-            t->Phi[0][3]*w->S[61] + t->Phi[0][4]*w->S[77] + t->Phi[0][5]*w->S[93] +
-            t->Phi[0][13]*w->S[115];
+    w->term[1][12] = t->Phi[0][0]*w->S[9] + t->Phi[0][1]*w->S[21] + t->Phi[0][2]*w->S[33] +
+            t->Phi[0][3]*w->S[45] + t->Phi[0][4]*w->S[57] + t->Phi[0][5]*w->S[69] +
+            t->Phi[0][13]*w->S[87];
     w->term[0][13] = t->Phi[0][0]*t->Phi[0][14] + t->Phi[0][1]*t->Phi[1][14] +
             t->Phi[0][2]*t->Phi[2][14] + t->Phi[0][3]*t->Phi[3][14] + t->Phi[0][4]*t->Phi[4][14] +
             t->Phi[0][5]*t->Phi[5][14] + t->Phi[0][14]*t->Phi[14][14];
-    w->term[1][13] = t->Phi[0][0]*w->S[14] + t->Phi[0][1]*w->S[30] + t->Phi[0][2]*w->S[46] +
-            t->Phi[0][3]*w->S[62] + t->Phi[0][4]*w->S[78] + t->Phi[0][5]*w->S[94] +
-            t->Phi[0][14]*w->S[116];
+    w->term[1][13] = t->Phi[0][0]*w->S[10] + t->Phi[0][1]*w->S[22] + t->Phi[0][2]*w->S[34] +
+            t->Phi[0][3]*w->S[46] + t->Phi[0][4]*w->S[58] + t->Phi[0][5]*w->S[70] +
+            t->Phi[0][14]*w->S[88];
     w->term[0][14] = t->Phi[0][0]*t->Phi[0][15] + t->Phi[0][1]*t->Phi[1][15] +
             t->Phi[0][2]*t->Phi[2][15] + t->Phi[0][3]*t->Phi[3][15] + t->Phi[0][4]*t->Phi[4][15] +
             t->Phi[0][5]*t->Phi[5][15] + t->Phi[0][15]*t->Phi[15][15];
-    w->term[1][14] = t->Phi[0][0]*w->S[15] + t->Phi[0][1]*w->S[31] + t->Phi[0][2]*w->S[47] +
-            t->Phi[0][3]*w->S[63] + t->Phi[0][4]*w->S[79] + t->Phi[0][5]*w->S[95] +
-            t->Phi[0][15]*w->S[117];
+    w->term[1][14] = t->Phi[0][0]*w->S[11] + t->Phi[0][1]*w->S[23] + t->Phi[0][2]*w->S[35] +
+            t->Phi[0][3]*w->S[47] + t->Phi[0][4]*w->S[59] + t->Phi[0][5]*w->S[71] +
+            t->Phi[0][15]*w->S[89];
     w->term[0][15] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
             t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
             t->Phi[1][5]*t->Phi[5][0];
-    w->term[1][15] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[32] +
-            t->Phi[1][3]*w->S[48] + t->Phi[1][4]*w->S[64] + t->Phi[1][5]*w->S[80];
+    w->term[1][15] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[12] + t->Phi[1][2]*w->S[24] +
+            t->Phi[1][3]*w->S[36] + t->Phi[1][4]*w->S[48] + t->Phi[1][5]*w->S[60];
     w->term[0][16] = t->Phi[1][0]*t->Phi[0][1] + t->Phi[1][1]*t->Phi[1][1] +
             t->Phi[1][2]*t->Phi[2][1] + t->Phi[1][3]*t->Phi[3][1] + t->Phi[1][4]*t->Phi[4][1] +
             t->Phi[1][5]*t->Phi[5][1];
-    w->term[1][16] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[33] +
-            t->Phi[1][3]*w->S[49] + t->Phi[1][4]*w->S[65] + t->Phi[1][5]*w->S[81];
+    w->term[1][16] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[13] + t->Phi[1][2]*w->S[25] +
+            t->Phi[1][3]*w->S[37] + t->Phi[1][4]*w->S[49] + t->Phi[1][5]*w->S[61];
     w->term[0][17] = t->Phi[1][0]*t->Phi[0][2] + t->Phi[1][1]*t->Phi[1][2] +
             t->Phi[1][2]*t->Phi[2][2] + t->Phi[1][3]*t->Phi[3][2] + t->Phi[1][4]*t->Phi[4][2] +
             t->Phi[1][5]*t->Phi[5][2];
-    w->term[1][17] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[18] + t->Phi[1][2]*w->S[34] +
-            t->Phi[1][3]*w->S[50] + t->Phi[1][4]*w->S[66] + t->Phi[1][5]*w->S[82];
+    w->term[1][17] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[26] +
+            t->Phi[1][3]*w->S[38] + t->Phi[1][4]*w->S[50] + t->Phi[1][5]*w->S[62];
     w->term[0][18] = t->Phi[1][0]*t->Phi[0][3] + t->Phi[1][1]*t->Phi[1][3] +
             t->Phi[1][2]*t->Phi[2][3] + t->Phi[1][3]*t->Phi[3][3] + t->Phi[1][4]*t->Phi[4][3] +
             t->Phi[1][5]*t->Phi[5][3];
-    w->term[1][18] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[19] + t->Phi[1][2]*w->S[35] +
-            t->Phi[1][3]*w->S[51] + t->Phi[1][4]*w->S[67] + t->Phi[1][5]*w->S[83];
+    w->term[1][18] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[27] +
+            t->Phi[1][3]*w->S[39] + t->Phi[1][4]*w->S[51] + t->Phi[1][5]*w->S[63];
     w->term[0][19] = t->Phi[1][0]*t->Phi[0][4] + t->Phi[1][1]*t->Phi[1][4] +
             t->Phi[1][2]*t->Phi[2][4] + t->Phi[1][3]*t->Phi[3][4] + t->Phi[1][4]*t->Phi[4][4] +
             t->Phi[1][5]*t->Phi[5][4];
-    w->term[1][19] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[20] + t->Phi[1][2]*w->S[36] +
-            t->Phi[1][3]*w->S[52] + t->Phi[1][4]*w->S[68] + t->Phi[1][5]*w->S[84];
+    w->term[1][19] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[28] +
+            t->Phi[1][3]*w->S[40] + t->Phi[1][4]*w->S[52] + t->Phi[1][5]*w->S[64];
     w->term[0][20] = t->Phi[1][0]*t->Phi[0][5] + t->Phi[1][1]*t->Phi[1][5] +
             t->Phi[1][2]*t->Phi[2][5] + t->Phi[1][3]*t->Phi[3][5] + t->Phi[1][4]*t->Phi[4][5] +
             t->Phi[1][5]*t->Phi[5][5];
-    w->term[1][20] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[21] + t->Phi[1][2]*w->S[37] +
-            t->Phi[1][3]*w->S[53] + t->Phi[1][4]*w->S[69] + t->Phi[1][5]*w->S[85];
+    w->term[1][20] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[29] +
+            t->Phi[1][3]*w->S[41] + t->Phi[1][4]*w->S[53] + t->Phi[1][5]*w->S[65];
     w->term[0][21] = t->Phi[1][0]*t->Phi[0][7] + t->Phi[1][1]*t->Phi[1][7] +
             t->Phi[1][2]*t->Phi[2][7] + t->Phi[1][3]*t->Phi[3][7] + t->Phi[1][4]*t->Phi[4][7] +
             t->Phi[1][5]*t->Phi[5][7];
-    w->term[1][21] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[23] + t->Phi[1][2]*w->S[39] +
-            t->Phi[1][3]*w->S[55] + t->Phi[1][4]*w->S[71] + t->Phi[1][5]*w->S[87] + t->Phi[1][7];
+    w->term[1][21] = t->Phi[1][0]*w->S[90] + t->Phi[1][1]*w->S[93] + t->Phi[1][2]*w->S[96] +
+            t->Phi[1][3]*w->S[99] + t->Phi[1][4]*w->S[102] + t->Phi[1][5]*w->S[105] + t->Phi[1][7];
     w->term[0][22] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
             t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
             t->Phi[1][5]*t->Phi[5][8];
-    w->term[1][22] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[24] + t->Phi[1][2]*w->S[40] +
-            t->Phi[1][3]*w->S[56] + t->Phi[1][4]*w->S[72] + t->Phi[1][5]*w->S[88] + t->Phi[1][8];
+    w->term[1][22] = t->Phi[1][0]*w->S[91] + t->Phi[1][1]*w->S[94] + t->Phi[1][2]*w->S[97] +
+            t->Phi[1][3]*w->S[100] + t->Phi[1][4]*w->S[103] + t->Phi[1][5]*w->S[106] + t->Phi[1][8];
     w->term[0][23] = t->Phi[1][0]*t->Phi[0][9] + t->Phi[1][1]*t->Phi[1][9] +
             t->Phi[1][2]*t->Phi[2][9] + t->Phi[1][3]*t->Phi[3][9] + t->Phi[1][4]*t->Phi[4][9] +
             t->Phi[1][5]*t->Phi[5][9];
-    w->term[1][23] = t->Phi[1][0]*w->S[9] + t->Phi[1][1]*w->S[25] + t->Phi[1][2]*w->S[41] +
-            t->Phi[1][3]*w->S[57] + t->Phi[1][4]*w->S[73] + t->Phi[1][5]*w->S[89] + t->Phi[1][9];
+    w->term[1][23] = t->Phi[1][0]*w->S[92] + t->Phi[1][1]*w->S[95] + t->Phi[1][2]*w->S[98] +
+            t->Phi[1][3]*w->S[101] + t->Phi[1][4]*w->S[104] + t->Phi[1][5]*w->S[107] + t->Phi[1][9];
     w->term[0][24] = t->Phi[1][0]*t->Phi[0][10] + t->Phi[1][1]*t->Phi[1][10] +
             t->Phi[1][2]*t->Phi[2][10] + t->Phi[1][3]*t->Phi[3][10] + t->Phi[1][4]*t->Phi[4][10] +
             t->Phi[1][5]*t->Phi[5][10] + t->Phi[1][10]*t->Phi[10][10];
-    w->term[1][24] = t->Phi[1][0]*w->S[10] + t->Phi[1][1]*w->S[26] + t->Phi[1][2]*w->S[42] +
-            t->Phi[1][3]*w->S[58] + t->Phi[1][4]*w->S[74] + t->Phi[1][5]*w->S[90] +
-            t->Phi[1][10]*w->S[112];
+    w->term[1][24] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[18] + t->Phi[1][2]*w->S[30] +
+            t->Phi[1][3]*w->S[42] + t->Phi[1][4]*w->S[54] + t->Phi[1][5]*w->S[66] +
+            t->Phi[1][10]*w->S[84];
     w->term[0][25] = t->Phi[1][0]*t->Phi[0][11] + t->Phi[1][1]*t->Phi[1][11] +
             t->Phi[1][2]*t->Phi[2][11] + t->Phi[1][3]*t->Phi[3][11] + t->Phi[1][4]*t->Phi[4][11] +
             t->Phi[1][5]*t->Phi[5][11] + t->Phi[1][11]*t->Phi[11][11];
-    w->term[1][25] = t->Phi[1][0]*w->S[11] + t->Phi[1][1]*w->S[27] + t->Phi[1][2]*w->S[43] +
-            t->Phi[1][3]*w->S[59] + t->Phi[1][4]*w->S[75] + t->Phi[1][5]*w->S[91] +
-            t->Phi[1][11]*w->S[113];
+    w->term[1][25] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[19] + t->Phi[1][2]*w->S[31] +
+            t->Phi[1][3]*w->S[43] + t->Phi[1][4]*w->S[55] + t->Phi[1][5]*w->S[67] +
+            t->Phi[1][11]*w->S[85];
     w->term[0][26] = t->Phi[1][0]*t->Phi[0][12] + t->Phi[1][1]*t->Phi[1][12] +
             t->Phi[1][2]*t->Phi[2][12] + t->Phi[1][3]*t->Phi[3][12] + t->Phi[1][4]*t->Phi[4][12] +
             t->Phi[1][5]*t->Phi[5][12] + t->Phi[1][12]*t->Phi[12][12];
-    w->term[1][26] = t->Phi[1][0]*w->S[12] + t->Phi[1][1]*w->S[28] + t->Phi[1][2]*w->S[44] +
-            t->Phi[1][3]*w->S[60] + t->Phi[1][4]*w->S[76] + t->Phi[1][5]*w->S[92] +
-            t->Phi[1][12]*w->S[114];
+    w->term[1][26] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[20] + t->Phi[1][2]*w->S[32] +
+            t->Phi[1][3]*w->S[44] + t->Phi[1][4]*w->S[56] + t->Phi[1][5]*w->S[68] +
+            t->Phi[1][12]*w->S[86];
     w->term[0][27] = t->Phi[1][0]*t->Phi[0][13] + t->Phi[1][1]*t->Phi[1][13] +
             t->Phi[1][2]*t->Phi[2][13] + t->Phi[1][3]*t->Phi[3][13] + t->Phi[1][4]*t->Phi[4][13] +
             t->Phi[1][5]*t->Phi[5][13] + t->Phi[1][13]*t->Phi[13][13];
-    w->term[1][27] = t->Phi[1][0]*w->S[13] + t->Phi[1][1]*w->S[29] + t->Phi[1][2]*w->S[45] +
-            t->Phi[1][3]*w->S[61] + t->Phi[1][4]*w->S[77] + t->Phi[1][5]*w->S[93] +
-            t->Phi[1][13]*w->S[115];
+    w->term[1][27] = t->Phi[1][0]*w->S[9] + t->Phi[1][1]*w->S[21] + t->Phi[1][2]*w->S[33] +
+            t->Phi[1][3]*w->S[45] + t->Phi[1][4]*w->S[57] + t->Phi[1][5]*w->S[69] +
+            t->Phi[1][13]*w->S[87];
     w->term[0][28] = t->Phi[1][0]*t->Phi[0][14] + t->Phi[1][1]*t->Phi[1][14] +
             t->Phi[1][2]*t->Phi[2][14] + t->Phi[1][3]*t->Phi[3][14] + t->Phi[1][4]*t->Phi[4][14] +
             t->Phi[1][5]*t->Phi[5][14] + t->Phi[1][14]*t->Phi[14][14];
-    w->term[1][28] = t->Phi[1][0]*w->S[14] + t->Phi[1][1]*w->S[30] + t->Phi[1][2]*w->S[46] +
-            t->Phi[1][3]*w->S[62] + t->Phi[1][4]*w->S[78] + t->Phi[1][5]*w->S[94] +
-            t->Phi[1][14]*w->S[116];
+    w->term[1][28] = t->Phi[1][0]*w->S[10] + t->Phi[1][1]*w->S[22] + t->Phi[1][2]*w->S[34] +
+            t->Phi[1][3]*w->S[46] + t->Phi[1][4]*w->S[58] + t->Phi[1][5]*w->S[70] +
+            t->Phi[1][14]*w->S[88];
     w->term[0][29] = t->Phi[1][0]*t->Phi[0][15] + t->Phi[1][1]*t->Phi[1][15] +
             t->Phi[1][2]*t->Phi[2][15] + t->Phi[1][3]*t->Phi[3][15] + t->Phi[1][4]*t->Phi[4][15] +
             t->Phi[1][5]*t->Phi[5][15] + t->Phi[1][15]*t->Phi[15][15];
-    w->term[1][29] = t->Phi[1][0]*w->S[15] + t->Phi[1][1]*w->S[31] + t->Phi[1][2]*w->S[47] +
-            t->Phi[1][3]*w->S[63] + t->Phi[1][4]*w->S[79] + t->Phi[1][5]*w->S[95] +
-            t->Phi[1][15]*w->S[117];
+    w->term[1][29] = t->Phi[1][0]*w->S[11] + t->Phi[1][1]*w->S[23] + t->Phi[1][2]*w->S[35] +
+            t->Phi[1][3]*w->S[47] + t->Phi[1][4]*w->S[59] + t->Phi[1][5]*w->S[71] +
+            t->Phi[1][15]*w->S[89];
     w->term[0][30] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
             t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
             t->Phi[2][5]*t->Phi[5][0];
-    w->term[1][30] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[32] +
-            t->Phi[2][3]*w->S[48] + t->Phi[2][4]*w->S[64] + t->Phi[2][5]*w->S[80];
+    w->term[1][30] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[12] + t->Phi[2][2]*w->S[24] +
+            t->Phi[2][3]*w->S[36] + t->Phi[2][4]*w->S[48] + t->Phi[2][5]*w->S[60];
     w->term[0][31] = t->Phi[2][0]*t->Phi[0][1] + t->Phi[2][1]*t->Phi[1][1] +
             t->Phi[2][2]*t->Phi[2][1] + t->Phi[2][3]*t->Phi[3][1] + t->Phi[2][4]*t->Phi[4][1] +
             t->Phi[2][5]*t->Phi[5][1];
-    w->term[1][31] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[33] +
-            t->Phi[2][3]*w->S[49] + t->Phi[2][4]*w->S[65] + t->Phi[2][5]*w->S[81];
+    w->term[1][31] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[13] + t->Phi[2][2]*w->S[25] +
+            t->Phi[2][3]*w->S[37] + t->Phi[2][4]*w->S[49] + t->Phi[2][5]*w->S[61];
     w->term[0][32] = t->Phi[2][0]*t->Phi[0][2] + t->Phi[2][1]*t->Phi[1][2] +
             t->Phi[2][2]*t->Phi[2][2] + t->Phi[2][3]*t->Phi[3][2] + t->Phi[2][4]*t->Phi[4][2] +
             t->Phi[2][5]*t->Phi[5][2];
-    w->term[1][32] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[18] + t->Phi[2][2]*w->S[34] +
-            t->Phi[2][3]*w->S[50] + t->Phi[2][4]*w->S[66] + t->Phi[2][5]*w->S[82];
+    w->term[1][32] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[26] +
+            t->Phi[2][3]*w->S[38] + t->Phi[2][4]*w->S[50] + t->Phi[2][5]*w->S[62];
     w->term[0][33] = t->Phi[2][0]*t->Phi[0][3] + t->Phi[2][1]*t->Phi[1][3] +
             t->Phi[2][2]*t->Phi[2][3] + t->Phi[2][3]*t->Phi[3][3] + t->Phi[2][4]*t->Phi[4][3] +
             t->Phi[2][5]*t->Phi[5][3];
-    w->term[1][33] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[19] + t->Phi[2][2]*w->S[35] +
-            t->Phi[2][3]*w->S[51] + t->Phi[2][4]*w->S[67] + t->Phi[2][5]*w->S[83];
+    w->term[1][33] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[27] +
+            t->Phi[2][3]*w->S[39] + t->Phi[2][4]*w->S[51] + t->Phi[2][5]*w->S[63];
     w->term[0][34] = t->Phi[2][0]*t->Phi[0][4] + t->Phi[2][1]*t->Phi[1][4] +
             t->Phi[2][2]*t->Phi[2][4] + t->Phi[2][3]*t->Phi[3][4] + t->Phi[2][4]*t->Phi[4][4] +
             t->Phi[2][5]*t->Phi[5][4];
-    w->term[1][34] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[20] + t->Phi[2][2]*w->S[36] +
-            t->Phi[2][3]*w->S[52] + t->Phi[2][4]*w->S[68] + t->Phi[2][5]*w->S[84];
+    w->term[1][34] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[28] +
+            t->Phi[2][3]*w->S[40] + t->Phi[2][4]*w->S[52] + t->Phi[2][5]*w->S[64];
     w->term[0][35] = t->Phi[2][0]*t->Phi[0][5] + t->Phi[2][1]*t->Phi[1][5] +
             t->Phi[2][2]*t->Phi[2][5] + t->Phi[2][3]*t->Phi[3][5] + t->Phi[2][4]*t->Phi[4][5] +
             t->Phi[2][5]*t->Phi[5][5];
-    w->term[1][35] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[21] + t->Phi[2][2]*w->S[37] +
-            t->Phi[2][3]*w->S[53] + t->Phi[2][4]*w->S[69] + t->Phi[2][5]*w->S[85];
+    w->term[1][35] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[29] +
+            t->Phi[2][3]*w->S[41] + t->Phi[2][4]*w->S[53] + t->Phi[2][5]*w->S[65];
     w->term[0][36] = t->Phi[2][0]*t->Phi[0][7] + t->Phi[2][1]*t->Phi[1][7] +
             t->Phi[2][2]*t->Phi[2][7] + t->Phi[2][3]*t->Phi[3][7] + t->Phi[2][4]*t->Phi[4][7] +
             t->Phi[2][5]*t->Phi[5][7];
-    w->term[1][36] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[23] + t->Phi[2][2]*w->S[39] +
-            t->Phi[2][3]*w->S[55] + t->Phi[2][4]*w->S[71] + t->Phi[2][5]*w->S[87] + t->Phi[2][7];
+    w->term[1][36] = t->Phi[2][0]*w->S[90] + t->Phi[2][1]*w->S[93] + t->Phi[2][2]*w->S[96] +
+            t->Phi[2][3]*w->S[99] + t->Phi[2][4]*w->S[102] + t->Phi[2][5]*w->S[105] + t->Phi[2][7];
     w->term[0][37] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
             t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
             t->Phi[2][5]*t->Phi[5][8];
-    w->term[1][37] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[24] + t->Phi[2][2]*w->S[40] +
-            t->Phi[2][3]*w->S[56] + t->Phi[2][4]*w->S[72] + t->Phi[2][5]*w->S[88] + t->Phi[2][8];
+    w->term[1][37] = t->Phi[2][0]*w->S[91] + t->Phi[2][1]*w->S[94] + t->Phi[2][2]*w->S[97] +
+            t->Phi[2][3]*w->S[100] + t->Phi[2][4]*w->S[103] + t->Phi[2][5]*w->S[106] + t->Phi[2][8];
     w->term[0][38] = t->Phi[2][0]*t->Phi[0][9] + t->Phi[2][1]*t->Phi[1][9] +
             t->Phi[2][2]*t->Phi[2][9] + t->Phi[2][3]*t->Phi[3][9] + t->Phi[2][4]*t->Phi[4][9] +
             t->Phi[2][5]*t->Phi[5][9];
-    w->term[1][38] = t->Phi[2][0]*w->S[9] + t->Phi[2][1]*w->S[25] + t->Phi[2][2]*w->S[41] +
-            t->Phi[2][3]*w->S[57] + t->Phi[2][4]*w->S[73] + t->Phi[2][5]*w->S[89] + t->Phi[2][9];
+    w->term[1][38] = t->Phi[2][0]*w->S[92] + t->Phi[2][1]*w->S[95] + t->Phi[2][2]*w->S[98] +
+            t->Phi[2][3]*w->S[101] + t->Phi[2][4]*w->S[104] + t->Phi[2][5]*w->S[107] + t->Phi[2][9];
     w->term[0][39] = t->Phi[2][0]*t->Phi[0][10] + t->Phi[2][1]*t->Phi[1][10] +
             t->Phi[2][2]*t->Phi[2][10] + t->Phi[2][3]*t->Phi[3][10] + t->Phi[2][4]*t->Phi[4][10] +
             t->Phi[2][5]*t->Phi[5][10] + t->Phi[2][10]*t->Phi[10][10];
-    w->term[1][39] = t->Phi[2][0]*w->S[10] + t->Phi[2][1]*w->S[26] + t->Phi[2][2]*w->S[42] +
-            t->Phi[2][3]*w->S[58] + t->Phi[2][4]*w->S[74] + t->Phi[2][5]*w->S[90] +
-            t->Phi[2][10]*w->S[112];
+    w->term[1][39] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[18] + t->Phi[2][2]*w->S[30] +
+            t->Phi[2][3]*w->S[42] + t->Phi[2][4]*w->S[54] + t->Phi[2][5]*w->S[66] +
+            t->Phi[2][10]*w->S[84];
     w->term[0][40] = t->Phi[2][0]*t->Phi[0][11] + t->Phi[2][1]*t->Phi[1][11] +
             t->Phi[2][2]*t->Phi[2][11] + t->Phi[2][3]*t->Phi[3][11] + t->Phi[2][4]*t->Phi[4][11] +
             t->Phi[2][5]*t->Phi[5][11] + t->Phi[2][11]*t->Phi[11][11];
-    w->term[1][40] = t->Phi[2][0]*w->S[11] + t->Phi[2][1]*w->S[27] + t->Phi[2][2]*w->S[43] +
-            t->Phi[2][3]*w->S[59] + t->Phi[2][4]*w->S[75] + t->Phi[2][5]*w->S[91] +
-            t->Phi[2][11]*w->S[113];
+    w->term[1][40] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[19] + t->Phi[2][2]*w->S[31] +
+            t->Phi[2][3]*w->S[43] + t->Phi[2][4]*w->S[55] + t->Phi[2][5]*w->S[67] +
+            t->Phi[2][11]*w->S[85];
     w->term[0][41] = t->Phi[2][0]*t->Phi[0][12] + t->Phi[2][1]*t->Phi[1][12] +
             t->Phi[2][2]*t->Phi[2][12] + t->Phi[2][3]*t->Phi[3][12] + t->Phi[2][4]*t->Phi[4][12] +
             t->Phi[2][5]*t->Phi[5][12] + t->Phi[2][12]*t->Phi[12][12];
-    w->term[1][41] = t->Phi[2][0]*w->S[12] + t->Phi[2][1]*w->S[28] + t->Phi[2][2]*w->S[44] +
-            t->Phi[2][3]*w->S[60] + t->Phi[2][4]*w->S[76] + t->Phi[2][5]*w->S[92] +
-            t->Phi[2][12]*w->S[114];
+    w->term[1][41] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[20] + t->Phi[2][2]*w->S[32] +
+            t->Phi[2][3]*w->S[44] + t->Phi[2][4]*w->S[56] + t->Phi[2][5]*w->S[68] +
+            t->Phi[2][12]*w->S[86];
     w->term[0][42] = t->Phi[2][0]*t->Phi[0][13] + t->Phi[2][1]*t->Phi[1][13] +
             t->Phi[2][2]*t->Phi[2][13] + t->Phi[2][3]*t->Phi[3][13] + t->Phi[2][4]*t->Phi[4][13] +
             t->Phi[2][5]*t->Phi[5][13] + t->Phi[2][13]*t->Phi[13][13];
-    w->term[1][42] = t->Phi[2][0]*w->S[13] + t->Phi[2][1]*w->S[29] + t->Phi[2][2]*w->S[45] +
-            t->Phi[2][3]*w->S[61] + t->Phi[2][4]*w->S[77] + t->Phi[2][5]*w->S[93] +
-            t->Phi[2][13]*w->S[115];
+    w->term[1][42] = t->Phi[2][0]*w->S[9] + t->Phi[2][1]*w->S[21] + t->Phi[2][2]*w->S[33] +
+            t->Phi[2][3]*w->S[45] + t->Phi[2][4]*w->S[57] + t->Phi[2][5]*w->S[69] +
+            t->Phi[2][13]*w->S[87];
     w->term[0][43] = t->Phi[2][0]*t->Phi[0][14] + t->Phi[2][1]*t->Phi[1][14] +
             t->Phi[2][2]*t->Phi[2][14] + t->Phi[2][3]*t->Phi[3][14] + t->Phi[2][4]*t->Phi[4][14] +
             t->Phi[2][5]*t->Phi[5][14] + t->Phi[2][14]*t->Phi[14][14];
-    w->term[1][43] = t->Phi[2][0]*w->S[14] + t->Phi[2][1]*w->S[30] + t->Phi[2][2]*w->S[46] +
-            t->Phi[2][3]*w->S[62] + t->Phi[2][4]*w->S[78] + t->Phi[2][5]*w->S[94] +
-            t->Phi[2][14]*w->S[116];
+    w->term[1][43] = t->Phi[2][0]*w->S[10] + t->Phi[2][1]*w->S[22] + t->Phi[2][2]*w->S[34] +
+            t->Phi[2][3]*w->S[46] + t->Phi[2][4]*w->S[58] + t->Phi[2][5]*w->S[70] +
+            t->Phi[2][14]*w->S[88];
     w->term[0][44] = t->Phi[2][0]*t->Phi[0][15] + t->Phi[2][1]*t->Phi[1][15] +
             t->Phi[2][2]*t->Phi[2][15] + t->Phi[2][3]*t->Phi[3][15] + t->Phi[2][4]*t->Phi[4][15] +
             t->Phi[2][5]*t->Phi[5][15] + t->Phi[2][15]*t->Phi[15][15];
-    w->term[1][44] = t->Phi[2][0]*w->S[15] + t->Phi[2][1]*w->S[31] + t->Phi[2][2]*w->S[47] +
-            t->Phi[2][3]*w->S[63] + t->Phi[2][4]*w->S[79] + t->Phi[2][5]*w->S[95] +
-            t->Phi[2][15]*w->S[117];
+    w->term[1][44] = t->Phi[2][0]*w->S[11] + t->Phi[2][1]*w->S[23] + t->Phi[2][2]*w->S[35] +
+            t->Phi[2][3]*w->S[47] + t->Phi[2][4]*w->S[59] + t->Phi[2][5]*w->S[71] +
+            t->Phi[2][15]*w->S[89];
     w->term[0][45] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
             t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
             t->Phi[3][5]*t->Phi[5][0];
-    w->term[1][45] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[32] +
-            t->Phi[3][3]*w->S[48] + t->Phi[3][4]*w->S[64] + t->Phi[3][5]*w->S[80];
+    w->term[1][45] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[12] + t->Phi[3][2]*w->S[24] +
+            t->Phi[3][3]*w->S[36] + t->Phi[3][4]*w->S[48] + t->Phi[3][5]*w->S[60];
     w->term[0][46] = t->Phi[3][0]*t->Phi[0][1] + t->Phi[3][1]*t->Phi[1][1] +
             t->Phi[3][2]*t->Phi[2][1] + t->Phi[3][3]*t->Phi[3][1] + t->Phi[3][4]*t->Phi[4][1] +
             t->Phi[3][5]*t->Phi[5][1];
-    w->term[1][46] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[33] +
-            t->Phi[3][3]*w->S[49] + t->Phi[3][4]*w->S[65] + t->Phi[3][5]*w->S[81];
+    w->term[1][46] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[13] + t->Phi[3][2]*w->S[25] +
+            t->Phi[3][3]*w->S[37] + t->Phi[3][4]*w->S[49] + t->Phi[3][5]*w->S[61];
     w->term[0][47] = t->Phi[3][0]*t->Phi[0][2] + t->Phi[3][1]*t->Phi[1][2] +
             t->Phi[3][2]*t->Phi[2][2] + t->Phi[3][3]*t->Phi[3][2] + t->Phi[3][4]*t->Phi[4][2] +
             t->Phi[3][5]*t->Phi[5][2];
-    w->term[1][47] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[18] + t->Phi[3][2]*w->S[34] +
-            t->Phi[3][3]*w->S[50] + t->Phi[3][4]*w->S[66] + t->Phi[3][5]*w->S[82];
+    w->term[1][47] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[26] +
+            t->Phi[3][3]*w->S[38] + t->Phi[3][4]*w->S[50] + t->Phi[3][5]*w->S[62];
     w->term[0][48] = t->Phi[3][0]*t->Phi[0][3] + t->Phi[3][1]*t->Phi[1][3] +
             t->Phi[3][2]*t->Phi[2][3] + t->Phi[3][3]*t->Phi[3][3] + t->Phi[3][4]*t->Phi[4][3] +
             t->Phi[3][5]*t->Phi[5][3];
-    w->term[1][48] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[19] + t->Phi[3][2]*w->S[35] +
-            t->Phi[3][3]*w->S[51] + t->Phi[3][4]*w->S[67] + t->Phi[3][5]*w->S[83];
+    w->term[1][48] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[27] +
+            t->Phi[3][3]*w->S[39] + t->Phi[3][4]*w->S[51] + t->Phi[3][5]*w->S[63];
     w->term[0][49] = t->Phi[3][0]*t->Phi[0][4] + t->Phi[3][1]*t->Phi[1][4] +
             t->Phi[3][2]*t->Phi[2][4] + t->Phi[3][3]*t->Phi[3][4] + t->Phi[3][4]*t->Phi[4][4] +
             t->Phi[3][5]*t->Phi[5][4];
-    w->term[1][49] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[20] + t->Phi[3][2]*w->S[36] +
-            t->Phi[3][3]*w->S[52] + t->Phi[3][4]*w->S[68] + t->Phi[3][5]*w->S[84];
+    w->term[1][49] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[28] +
+            t->Phi[3][3]*w->S[40] + t->Phi[3][4]*w->S[52] + t->Phi[3][5]*w->S[64];
     w->term[0][50] = t->Phi[3][0]*t->Phi[0][5] + t->Phi[3][1]*t->Phi[1][5] +
             t->Phi[3][2]*t->Phi[2][5] + t->Phi[3][3]*t->Phi[3][5] + t->Phi[3][4]*t->Phi[4][5] +
             t->Phi[3][5]*t->Phi[5][5];
-    w->term[1][50] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[21] + t->Phi[3][2]*w->S[37] +
-            t->Phi[3][3]*w->S[53] + t->Phi[3][4]*w->S[69] + t->Phi[3][5]*w->S[85];
+    w->term[1][50] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[29] +
+            t->Phi[3][3]*w->S[41] + t->Phi[3][4]*w->S[53] + t->Phi[3][5]*w->S[65];
     w->term[0][51] = t->Phi[3][0]*t->Phi[0][7] + t->Phi[3][1]*t->Phi[1][7] +
             t->Phi[3][2]*t->Phi[2][7] + t->Phi[3][3]*t->Phi[3][7] + t->Phi[3][4]*t->Phi[4][7] +
             t->Phi[3][5]*t->Phi[5][7];
-    w->term[1][51] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[23] + t->Phi[3][2]*w->S[39] +
-            t->Phi[3][3]*w->S[55] + t->Phi[3][4]*w->S[71] + t->Phi[3][5]*w->S[87] + t->Phi[3][7];
+    w->term[1][51] = t->Phi[3][0]*w->S[90] + t->Phi[3][1]*w->S[93] + t->Phi[3][2]*w->S[96] +
+            t->Phi[3][3]*w->S[99] + t->Phi[3][4]*w->S[102] + t->Phi[3][5]*w->S[105] + t->Phi[3][7];
     w->term[0][52] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
             t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
             t->Phi[3][5]*t->Phi[5][8];
-    w->term[1][52] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[24] + t->Phi[3][2]*w->S[40] +
-            t->Phi[3][3]*w->S[56] + t->Phi[3][4]*w->S[72] + t->Phi[3][5]*w->S[88] + t->Phi[3][8];
+    w->term[1][52] = t->Phi[3][0]*w->S[91] + t->Phi[3][1]*w->S[94] + t->Phi[3][2]*w->S[97] +
+            t->Phi[3][3]*w->S[100] + t->Phi[3][4]*w->S[103] + t->Phi[3][5]*w->S[106] + t->Phi[3][8];
     w->term[0][53] = t->Phi[3][0]*t->Phi[0][9] + t->Phi[3][1]*t->Phi[1][9] +
             t->Phi[3][2]*t->Phi[2][9] + t->Phi[3][3]*t->Phi[3][9] + t->Phi[3][4]*t->Phi[4][9] +
             t->Phi[3][5]*t->Phi[5][9];
-    w->term[1][53] = t->Phi[3][0]*w->S[9] + t->Phi[3][1]*w->S[25] + t->Phi[3][2]*w->S[41] +
-            t->Phi[3][3]*w->S[57] + t->Phi[3][4]*w->S[73] + t->Phi[3][5]*w->S[89] + t->Phi[3][9];
+    w->term[1][53] = t->Phi[3][0]*w->S[92] + t->Phi[3][1]*w->S[95] + t->Phi[3][2]*w->S[98] +
+            t->Phi[3][3]*w->S[101] + t->Phi[3][4]*w->S[104] + t->Phi[3][5]*w->S[107] + t->Phi[3][9];
     w->term[0][54] = t->Phi[3][0]*t->Phi[0][10] + t->Phi[3][1]*t->Phi[1][10] +
             t->Phi[3][2]*t->Phi[2][10] + t->Phi[3][3]*t->Phi[3][10] + t->Phi[3][4]*t->Phi[4][10] +
             t->Phi[3][5]*t->Phi[5][10] + t->Phi[3][10]*t->Phi[10][10];
-    w->term[1][54] = t->Phi[3][0]*w->S[10] + t->Phi[3][1]*w->S[26] + t->Phi[3][2]*w->S[42] +
-            t->Phi[3][3]*w->S[58] + t->Phi[3][4]*w->S[74] + t->Phi[3][5]*w->S[90] +
-            t->Phi[3][10]*w->S[112];
+    w->term[1][54] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[18] + t->Phi[3][2]*w->S[30] +
+            t->Phi[3][3]*w->S[42] + t->Phi[3][4]*w->S[54] + t->Phi[3][5]*w->S[66] +
+            t->Phi[3][10]*w->S[84];
     w->term[0][55] = t->Phi[3][0]*t->Phi[0][11] + t->Phi[3][1]*t->Phi[1][11] +
             t->Phi[3][2]*t->Phi[2][11] + t->Phi[3][3]*t->Phi[3][11] + t->Phi[3][4]*t->Phi[4][11] +
             t->Phi[3][5]*t->Phi[5][11] + t->Phi[3][11]*t->Phi[11][11];
-    w->term[1][55] = t->Phi[3][0]*w->S[11] + t->Phi[3][1]*w->S[27] + t->Phi[3][2]*w->S[43] +
-            t->Phi[3][3]*w->S[59] + t->Phi[3][4]*w->S[75] + t->Phi[3][5]*w->S[91] +
-            t->Phi[3][11]*w->S[113];
+    w->term[1][55] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[19] + t->Phi[3][2]*w->S[31] +
+            t->Phi[3][3]*w->S[43] + t->Phi[3][4]*w->S[55] + t->Phi[3][5]*w->S[67] +
+            t->Phi[3][11]*w->S[85];
     w->term[0][56] = t->Phi[3][0]*t->Phi[0][12] + t->Phi[3][1]*t->Phi[1][12] +
             t->Phi[3][2]*t->Phi[2][12] + t->Phi[3][3]*t->Phi[3][12] + t->Phi[3][4]*t->Phi[4][12] +
             t->Phi[3][5]*t->Phi[5][12] + t->Phi[3][12]*t->Phi[12][12];
-    w->term[1][56] = t->Phi[3][0]*w->S[12] + t->Phi[3][1]*w->S[28] + t->Phi[3][2]*w->S[44] +
-            t->Phi[3][3]*w->S[60] + t->Phi[3][4]*w->S[76] + t->Phi[3][5]*w->S[92] +
-            t->Phi[3][12]*w->S[114];
+    w->term[1][56] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[20] + t->Phi[3][2]*w->S[32] +
+            t->Phi[3][3]*w->S[44] + t->Phi[3][4]*w->S[56] + t->Phi[3][5]*w->S[68] +
+            t->Phi[3][12]*w->S[86];
     w->term[0][57] = t->Phi[3][0]*t->Phi[0][13] + t->Phi[3][1]*t->Phi[1][13] +
             t->Phi[3][2]*t->Phi[2][13] + t->Phi[3][3]*t->Phi[3][13] + t->Phi[3][4]*t->Phi[4][13] +
             t->Phi[3][5]*t->Phi[5][13] + t->Phi[3][13]*t->Phi[13][13];
-    w->term[1][57] = t->Phi[3][0]*w->S[13] + t->Phi[3][1]*w->S[29] + t->Phi[3][2]*w->S[45] +
-            t->Phi[3][3]*w->S[61] + t->Phi[3][4]*w->S[77] + t->Phi[3][5]*w->S[93] +
-            t->Phi[3][13]*w->S[115];
+    w->term[1][57] = t->Phi[3][0]*w->S[9] + t->Phi[3][1]*w->S[21] + t->Phi[3][2]*w->S[33] +
+            t->Phi[3][3]*w->S[45] + t->Phi[3][4]*w->S[57] + t->Phi[3][5]*w->S[69] +
+            t->Phi[3][13]*w->S[87];
     w->term[0][58] = t->Phi[3][0]*t->Phi[0][14] + t->Phi[3][1]*t->Phi[1][14] +
             t->Phi[3][2]*t->Phi[2][14] + t->Phi[3][3]*t->Phi[3][14] + t->Phi[3][4]*t->Phi[4][14] +
             t->Phi[3][5]*t->Phi[5][14] + t->Phi[3][14]*t->Phi[14][14];
-    w->term[1][58] = t->Phi[3][0]*w->S[14] + t->Phi[3][1]*w->S[30] + t->Phi[3][2]*w->S[46] +
-            t->Phi[3][3]*w->S[62] + t->Phi[3][4]*w->S[78] + t->Phi[3][5]*w->S[94] +
-            t->Phi[3][14]*w->S[116];
+    w->term[1][58] = t->Phi[3][0]*w->S[10] + t->Phi[3][1]*w->S[22] + t->Phi[3][2]*w->S[34] +
+            t->Phi[3][3]*w->S[46] + t->Phi[3][4]*w->S[58] + t->Phi[3][5]*w->S[70] +
+            t->Phi[3][14]*w->S[88];
     w->term[0][59] = t->Phi[3][0]*t->Phi[0][15] + t->Phi[3][1]*t->Phi[1][15] +
             t->Phi[3][2]*t->Phi[2][15] + t->Phi[3][3]*t->Phi[3][15] + t->Phi[3][4]*t->Phi[4][15] +
             t->Phi[3][5]*t->Phi[5][15] + t->Phi[3][15]*t->Phi[15][15];
-    w->term[1][59] = t->Phi[3][0]*w->S[15] + t->Phi[3][1]*w->S[31] + t->Phi[3][2]*w->S[47] +
-            t->Phi[3][3]*w->S[63] + t->Phi[3][4]*w->S[79] + t->Phi[3][5]*w->S[95] +
-            t->Phi[3][15]*w->S[117];
+    w->term[1][59] = t->Phi[3][0]*w->S[11] + t->Phi[3][1]*w->S[23] + t->Phi[3][2]*w->S[35] +
+            t->Phi[3][3]*w->S[47] + t->Phi[3][4]*w->S[59] + t->Phi[3][5]*w->S[71] +
+            t->Phi[3][15]*w->S[89];
     w->term[0][60] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
             t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
             t->Phi[4][5]*t->Phi[5][0];
-    w->term[1][60] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[32] +
-            t->Phi[4][3]*w->S[48] + t->Phi[4][4]*w->S[64] + t->Phi[4][5]*w->S[80];
+    w->term[1][60] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[12] + t->Phi[4][2]*w->S[24] +
+            t->Phi[4][3]*w->S[36] + t->Phi[4][4]*w->S[48] + t->Phi[4][5]*w->S[60];
     w->term[0][61] = t->Phi[4][0]*t->Phi[0][1] + t->Phi[4][1]*t->Phi[1][1] +
             t->Phi[4][2]*t->Phi[2][1] + t->Phi[4][3]*t->Phi[3][1] + t->Phi[4][4]*t->Phi[4][1] +
             t->Phi[4][5]*t->Phi[5][1];
-    w->term[1][61] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[33] +
-            t->Phi[4][3]*w->S[49] + t->Phi[4][4]*w->S[65] + t->Phi[4][5]*w->S[81];
+    w->term[1][61] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[13] + t->Phi[4][2]*w->S[25] +
+            t->Phi[4][3]*w->S[37] + t->Phi[4][4]*w->S[49] + t->Phi[4][5]*w->S[61];
     w->term[0][62] = t->Phi[4][0]*t->Phi[0][2] + t->Phi[4][1]*t->Phi[1][2] +
             t->Phi[4][2]*t->Phi[2][2] + t->Phi[4][3]*t->Phi[3][2] + t->Phi[4][4]*t->Phi[4][2] +
             t->Phi[4][5]*t->Phi[5][2];
-    w->term[1][62] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[18] + t->Phi[4][2]*w->S[34] +
-            t->Phi[4][3]*w->S[50] + t->Phi[4][4]*w->S[66] + t->Phi[4][5]*w->S[82];
+    w->term[1][62] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[26] +
+            t->Phi[4][3]*w->S[38] + t->Phi[4][4]*w->S[50] + t->Phi[4][5]*w->S[62];
     w->term[0][63] = t->Phi[4][0]*t->Phi[0][3] + t->Phi[4][1]*t->Phi[1][3] +
             t->Phi[4][2]*t->Phi[2][3] + t->Phi[4][3]*t->Phi[3][3] + t->Phi[4][4]*t->Phi[4][3] +
             t->Phi[4][5]*t->Phi[5][3];
-    w->term[1][63] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[19] + t->Phi[4][2]*w->S[35] +
-            t->Phi[4][3]*w->S[51] + t->Phi[4][4]*w->S[67] + t->Phi[4][5]*w->S[83];
+    w->term[1][63] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[27] +
+            t->Phi[4][3]*w->S[39] + t->Phi[4][4]*w->S[51] + t->Phi[4][5]*w->S[63];
     w->term[0][64] = t->Phi[4][0]*t->Phi[0][4] + t->Phi[4][1]*t->Phi[1][4] +
             t->Phi[4][2]*t->Phi[2][4] + t->Phi[4][3]*t->Phi[3][4] + t->Phi[4][4]*t->Phi[4][4] +
             t->Phi[4][5]*t->Phi[5][4];
-    w->term[1][64] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[20] + t->Phi[4][2]*w->S[36] +
-            t->Phi[4][3]*w->S[52] + t->Phi[4][4]*w->S[68] + t->Phi[4][5]*w->S[84];
+    w->term[1][64] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[28] +
+            t->Phi[4][3]*w->S[40] + t->Phi[4][4]*w->S[52] + t->Phi[4][5]*w->S[64];
     w->term[0][65] = t->Phi[4][0]*t->Phi[0][5] + t->Phi[4][1]*t->Phi[1][5] +
             t->Phi[4][2]*t->Phi[2][5] + t->Phi[4][3]*t->Phi[3][5] + t->Phi[4][4]*t->Phi[4][5] +
             t->Phi[4][5]*t->Phi[5][5];
-    w->term[1][65] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[21] + t->Phi[4][2]*w->S[37] +
-            t->Phi[4][3]*w->S[53] + t->Phi[4][4]*w->S[69] + t->Phi[4][5]*w->S[85];
+    w->term[1][65] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[29] +
+            t->Phi[4][3]*w->S[41] + t->Phi[4][4]*w->S[53] + t->Phi[4][5]*w->S[65];
     w->term[0][66] = t->Phi[4][0]*t->Phi[0][7] + t->Phi[4][1]*t->Phi[1][7] +
             t->Phi[4][2]*t->Phi[2][7] + t->Phi[4][3]*t->Phi[3][7] + t->Phi[4][4]*t->Phi[4][7] +
             t->Phi[4][5]*t->Phi[5][7];
-    w->term[1][66] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[23] + t->Phi[4][2]*w->S[39] +
-            t->Phi[4][3]*w->S[55] + t->Phi[4][4]*w->S[71] + t->Phi[4][5]*w->S[87] + t->Phi[4][7];
+    w->term[1][66] = t->Phi[4][0]*w->S[90] + t->Phi[4][1]*w->S[93] + t->Phi[4][2]*w->S[96] +
+            t->Phi[4][3]*w->S[99] + t->Phi[4][4]*w->S[102] + t->Phi[4][5]*w->S[105] + t->Phi[4][7];
     w->term[0][67] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
             t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
             t->Phi[4][5]*t->Phi[5][8];
-    w->term[1][67] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[24] + t->Phi[4][2]*w->S[40] +
-            t->Phi[4][3]*w->S[56] + t->Phi[4][4]*w->S[72] + t->Phi[4][5]*w->S[88] + t->Phi[4][8];
+    w->term[1][67] = t->Phi[4][0]*w->S[91] + t->Phi[4][1]*w->S[94] + t->Phi[4][2]*w->S[97] +
+            t->Phi[4][3]*w->S[100] + t->Phi[4][4]*w->S[103] + t->Phi[4][5]*w->S[106] + t->Phi[4][8];
     w->term[0][68] = t->Phi[4][0]*t->Phi[0][9] + t->Phi[4][1]*t->Phi[1][9] +
             t->Phi[4][2]*t->Phi[2][9] + t->Phi[4][3]*t->Phi[3][9] + t->Phi[4][4]*t->Phi[4][9] +
             t->Phi[4][5]*t->Phi[5][9];
-    w->term[1][68] = t->Phi[4][0]*w->S[9] + t->Phi[4][1]*w->S[25] + t->Phi[4][2]*w->S[41] +
-            t->Phi[4][3]*w->S[57] + t->Phi[4][4]*w->S[73] + t->Phi[4][5]*w->S[89] + t->Phi[4][9];
+    w->term[1][68] = t->Phi[4][0]*w->S[92] + t->Phi[4][1]*w->S[95] + t->Phi[4][2]*w->S[98] +
+            t->Phi[4][3]*w->S[101] + t->Phi[4][4]*w->S[104] + t->Phi[4][5]*w->S[107] + t->Phi[4][9];
     w->term[0][69] = t->Phi[4][0]*t->Phi[0][10] + t->Phi[4][1]*t->Phi[1][10] +
             t->Phi[4][2]*t->Phi[2][10] + t->Phi[4][3]*t->Phi[3][10] + t->Phi[4][4]*t->Phi[4][10] +
             t->Phi[4][5]*t->Phi[5][10] + t->Phi[4][10]*t->Phi[10][10];
-    w->term[1][69] = t->Phi[4][0]*w->S[10] + t->Phi[4][1]*w->S[26] + t->Phi[4][2]*w->S[42] +
-            t->Phi[4][3]*w->S[58] + t->Phi[4][4]*w->S[74] + t->Phi[4][5]*w->S[90] +
-            t->Phi[4][10]*w->S[112];
+    w->term[1][69] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[18] + t->Phi[4][2]*w->S[30] +
+            t->Phi[4][3]*w->S[42] + t->Phi[4][4]*w->S[54] + t->Phi[4][5]*w->S[66] +
+            t->Phi[4][10]*w->S[84];
     w->term[0][70] = t->Phi[4][0]*t->Phi[0][11] + t->Phi[4][1]*t->Phi[1][11] +
             t->Phi[4][2]*t->Phi[2][11] + t->Phi[4][3]*t->Phi[3][11] + t->Phi[4][4]*t->Phi[4][11] +
             t->Phi[4][5]*t->Phi[5][11] + t->Phi[4][11]*t->Phi[11][11];
-    w->term[1][70] = t->Phi[4][0]*w->S[11] + t->Phi[4][1]*w->S[27] + t->Phi[4][2]*w->S[43] +
-            t->Phi[4][3]*w->S[59] + t->Phi[4][4]*w->S[75] + t->Phi[4][5]*w->S[91] +
-            t->Phi[4][11]*w->S[113];
+    w->term[1][70] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[19] + t->Phi[4][2]*w->S[31] +
+            t->Phi[4][3]*w->S[43] + t->Phi[4][4]*w->S[55] + t->Phi[4][5]*w->S[67] +
+            t->Phi[4][11]*w->S[85];
     w->term[0][71] = t->Phi[4][0]*t->Phi[0][12] + t->Phi[4][1]*t->Phi[1][12] +
             t->Phi[4][2]*t->Phi[2][12] + t->Phi[4][3]*t->Phi[3][12] + t->Phi[4][4]*t->Phi[4][12] +
             t->Phi[4][5]*t->Phi[5][12] + t->Phi[4][12]*t->Phi[12][12];
-    w->term[1][71] = t->Phi[4][0]*w->S[12] + t->Phi[4][1]*w->S[28] + t->Phi[4][2]*w->S[44] +
-            t->Phi[4][3]*w->S[60] + t->Phi[4][4]*w->S[76] + t->Phi[4][5]*w->S[92] +
-            t->Phi[4][12]*w->S[114];
+    w->term[1][71] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[20] + t->Phi[4][2]*w->S[32] +
+            t->Phi[4][3]*w->S[44] + t->Phi[4][4]*w->S[56] + t->Phi[4][5]*w->S[68] +
+            t->Phi[4][12]*w->S[86];
     w->term[0][72] = t->Phi[4][0]*t->Phi[0][13] + t->Phi[4][1]*t->Phi[1][13] +
             t->Phi[4][2]*t->Phi[2][13] + t->Phi[4][3]*t->Phi[3][13] + t->Phi[4][4]*t->Phi[4][13] +
             t->Phi[4][5]*t->Phi[5][13] + t->Phi[4][13]*t->Phi[13][13];
-    w->term[1][72] = t->Phi[4][0]*w->S[13] + t->Phi[4][1]*w->S[29] + t->Phi[4][2]*w->S[45] +
-            t->Phi[4][3]*w->S[61] + t->Phi[4][4]*w->S[77] + t->Phi[4][5]*w->S[93] +
-            t->Phi[4][13]*w->S[115];
+    w->term[1][72] = t->Phi[4][0]*w->S[9] + t->Phi[4][1]*w->S[21] + t->Phi[4][2]*w->S[33] +
+            t->Phi[4][3]*w->S[45] + t->Phi[4][4]*w->S[57] + t->Phi[4][5]*w->S[69] +
+            t->Phi[4][13]*w->S[87];
     w->term[0][73] = t->Phi[4][0]*t->Phi[0][14] + t->Phi[4][1]*t->Phi[1][14] +
             t->Phi[4][2]*t->Phi[2][14] + t->Phi[4][3]*t->Phi[3][14] + t->Phi[4][4]*t->Phi[4][14] +
             t->Phi[4][5]*t->Phi[5][14] + t->Phi[4][14]*t->Phi[14][14];
-    w->term[1][73] = t->Phi[4][0]*w->S[14] + t->Phi[4][1]*w->S[30] + t->Phi[4][2]*w->S[46] +
-            t->Phi[4][3]*w->S[62] + t->Phi[4][4]*w->S[78] + t->Phi[4][5]*w->S[94] +
-            t->Phi[4][14]*w->S[116];
+    w->term[1][73] = t->Phi[4][0]*w->S[10] + t->Phi[4][1]*w->S[22] + t->Phi[4][2]*w->S[34] +
+            t->Phi[4][3]*w->S[46] + t->Phi[4][4]*w->S[58] + t->Phi[4][5]*w->S[70] +
+            t->Phi[4][14]*w->S[88];
     w->term[0][74] = t->Phi[4][0]*t->Phi[0][15] + t->Phi[4][1]*t->Phi[1][15] +
             t->Phi[4][2]*t->Phi[2][15] + t->Phi[4][3]*t->Phi[3][15] + t->Phi[4][4]*t->Phi[4][15] +
             t->Phi[4][5]*t->Phi[5][15] + t->Phi[4][15]*t->Phi[15][15];
-    w->term[1][74] = t->Phi[4][0]*w->S[15] + t->Phi[4][1]*w->S[31] + t->Phi[4][2]*w->S[47] +
-            t->Phi[4][3]*w->S[63] + t->Phi[4][4]*w->S[79] + t->Phi[4][5]*w->S[95] +
-            t->Phi[4][15]*w->S[117];
+    w->term[1][74] = t->Phi[4][0]*w->S[11] + t->Phi[4][1]*w->S[23] + t->Phi[4][2]*w->S[35] +
+            t->Phi[4][3]*w->S[47] + t->Phi[4][4]*w->S[59] + t->Phi[4][5]*w->S[71] +
+            t->Phi[4][15]*w->S[89];
     w->term[0][75] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
             t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
             t->Phi[5][5]*t->Phi[5][0];
-    w->term[1][75] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[32] +
-            t->Phi[5][3]*w->S[48] + t->Phi[5][4]*w->S[64] + t->Phi[5][5]*w->S[80];
+    w->term[1][75] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[12] + t->Phi[5][2]*w->S[24] +
+            t->Phi[5][3]*w->S[36] + t->Phi[5][4]*w->S[48] + t->Phi[5][5]*w->S[60];
     w->term[0][76] = t->Phi[5][0]*t->Phi[0][1] + t->Phi[5][1]*t->Phi[1][1] +
             t->Phi[5][2]*t->Phi[2][1] + t->Phi[5][3]*t->Phi[3][1] + t->Phi[5][4]*t->Phi[4][1] +
             t->Phi[5][5]*t->Phi[5][1];
-    w->term[1][76] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[33] +
-            t->Phi[5][3]*w->S[49] + t->Phi[5][4]*w->S[65] + t->Phi[5][5]*w->S[81];
+    w->term[1][76] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[13] + t->Phi[5][2]*w->S[25] +
+            t->Phi[5][3]*w->S[37] + t->Phi[5][4]*w->S[49] + t->Phi[5][5]*w->S[61];
     w->term[0][77] = t->Phi[5][0]*t->Phi[0][2] + t->Phi[5][1]*t->Phi[1][2] +
             t->Phi[5][2]*t->Phi[2][2] + t->Phi[5][3]*t->Phi[3][2] + t->Phi[5][4]*t->Phi[4][2] +
             t->Phi[5][5]*t->Phi[5][2];
-    w->term[1][77] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[18] + t->Phi[5][2]*w->S[34] +
-            t->Phi[5][3]*w->S[50] + t->Phi[5][4]*w->S[66] + t->Phi[5][5]*w->S[82];
+    w->term[1][77] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[26] +
+            t->Phi[5][3]*w->S[38] + t->Phi[5][4]*w->S[50] + t->Phi[5][5]*w->S[62];
     w->term[0][78] = t->Phi[5][0]*t->Phi[0][3] + t->Phi[5][1]*t->Phi[1][3] +
             t->Phi[5][2]*t->Phi[2][3] + t->Phi[5][3]*t->Phi[3][3] + t->Phi[5][4]*t->Phi[4][3] +
             t->Phi[5][5]*t->Phi[5][3];
-    w->term[1][78] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[19] + t->Phi[5][2]*w->S[35] +
-            t->Phi[5][3]*w->S[51] + t->Phi[5][4]*w->S[67] + t->Phi[5][5]*w->S[83];
+    w->term[1][78] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[27] +
+            t->Phi[5][3]*w->S[39] + t->Phi[5][4]*w->S[51] + t->Phi[5][5]*w->S[63];
     w->term[0][79] = t->Phi[5][0]*t->Phi[0][4] + t->Phi[5][1]*t->Phi[1][4] +
             t->Phi[5][2]*t->Phi[2][4] + t->Phi[5][3]*t->Phi[3][4] + t->Phi[5][4]*t->Phi[4][4] +
             t->Phi[5][5]*t->Phi[5][4];
-    w->term[1][79] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[20] + t->Phi[5][2]*w->S[36] +
-            t->Phi[5][3]*w->S[52] + t->Phi[5][4]*w->S[68] + t->Phi[5][5]*w->S[84];
+    w->term[1][79] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[28] +
+            t->Phi[5][3]*w->S[40] + t->Phi[5][4]*w->S[52] + t->Phi[5][5]*w->S[64];
     w->term[0][80] = t->Phi[5][0]*t->Phi[0][5] + t->Phi[5][1]*t->Phi[1][5] +
             t->Phi[5][2]*t->Phi[2][5] + t->Phi[5][3]*t->Phi[3][5] + t->Phi[5][4]*t->Phi[4][5] +
             t->Phi[5][5]*t->Phi[5][5];
-    w->term[1][80] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[21] + t->Phi[5][2]*w->S[37] +
-            t->Phi[5][3]*w->S[53] + t->Phi[5][4]*w->S[69] + t->Phi[5][5]*w->S[85];
+    w->term[1][80] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[29] +
+            t->Phi[5][3]*w->S[41] + t->Phi[5][4]*w->S[53] + t->Phi[5][5]*w->S[65];
     w->term[0][81] = t->Phi[5][0]*t->Phi[0][7] + t->Phi[5][1]*t->Phi[1][7] +
             t->Phi[5][2]*t->Phi[2][7] + t->Phi[5][3]*t->Phi[3][7] + t->Phi[5][4]*t->Phi[4][7] +
             t->Phi[5][5]*t->Phi[5][7];
-    w->term[1][81] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[23] + t->Phi[5][2]*w->S[39] +
-            t->Phi[5][3]*w->S[55] + t->Phi[5][4]*w->S[71] + t->Phi[5][5]*w->S[87] + t->Phi[5][7];
+    w->term[1][81] = t->Phi[5][0]*w->S[90] + t->Phi[5][1]*w->S[93] + t->Phi[5][2]*w->S[96] +
+            t->Phi[5][3]*w->S[99] + t->Phi[5][4]*w->S[102] + t->Phi[5][5]*w->S[105] + t->Phi[5][7];
     w->term[0][82] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
             t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
             t->Phi[5][5]*t->Phi[5][8];
-    w->term[1][82] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[24] + t->Phi[5][2]*w->S[40] +
-            t->Phi[5][3]*w->S[56] + t->Phi[5][4]*w->S[72] + t->Phi[5][5]*w->S[88] + t->Phi[5][8];
+    w->term[1][82] = t->Phi[5][0]*w->S[91] + t->Phi[5][1]*w->S[94] + t->Phi[5][2]*w->S[97] +
+            t->Phi[5][3]*w->S[100] + t->Phi[5][4]*w->S[103] + t->Phi[5][5]*w->S[106] + t->Phi[5][8];
     w->term[0][83] = t->Phi[5][0]*t->Phi[0][9] + t->Phi[5][1]*t->Phi[1][9] +
             t->Phi[5][2]*t->Phi[2][9] + t->Phi[5][3]*t->Phi[3][9] + t->Phi[5][4]*t->Phi[4][9] +
             t->Phi[5][5]*t->Phi[5][9];
-    w->term[1][83] = t->Phi[5][0]*w->S[9] + t->Phi[5][1]*w->S[25] + t->Phi[5][2]*w->S[41] +
-            t->Phi[5][3]*w->S[57] + t->Phi[5][4]*w->S[73] + t->Phi[5][5]*w->S[89] + t->Phi[5][9];
+    w->term[1][83] = t->Phi[5][0]*w->S[92] + t->Phi[5][1]*w->S[95] + t->Phi[5][2]*w->S[98] +
+            t->Phi[5][3]*w->S[101] + t->Phi[5][4]*w->S[104] + t->Phi[5][5]*w->S[107] + t->Phi[5][9];
     w->term[0][84] = t->Phi[5][0]*t->Phi[0][10] + t->Phi[5][1]*t->Phi[1][10] +
             t->Phi[5][2]*t->Phi[2][10] + t->Phi[5][3]*t->Phi[3][10] + t->Phi[5][4]*t->Phi[4][10] +
             t->Phi[5][5]*t->Phi[5][10] + t->Phi[5][10]*t->Phi[10][10];
-    w->term[1][84] = t->Phi[5][0]*w->S[10] + t->Phi[5][1]*w->S[26] + t->Phi[5][2]*w->S[42] +
-            t->Phi[5][3]*w->S[58] + t->Phi[5][4]*w->S[74] + t->Phi[5][5]*w->S[90] +
-            t->Phi[5][10]*w->S[112];
+    w->term[1][84] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[18] + t->Phi[5][2]*w->S[30] +
+            t->Phi[5][3]*w->S[42] + t->Phi[5][4]*w->S[54] + t->Phi[5][5]*w->S[66] +
+            t->Phi[5][10]*w->S[84];
     w->term[0][85] = t->Phi[5][0]*t->Phi[0][11] + t->Phi[5][1]*t->Phi[1][11] +
             t->Phi[5][2]*t->Phi[2][11] + t->Phi[5][3]*t->Phi[3][11] + t->Phi[5][4]*t->Phi[4][11] +
             t->Phi[5][5]*t->Phi[5][11] + t->Phi[5][11]*t->Phi[11][11];
-    w->term[1][85] = t->Phi[5][0]*w->S[11] + t->Phi[5][1]*w->S[27] + t->Phi[5][2]*w->S[43] +
-            t->Phi[5][3]*w->S[59] + t->Phi[5][4]*w->S[75] + t->Phi[5][5]*w->S[91] +
-            t->Phi[5][11]*w->S[113];
+    w->term[1][85] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[19] + t->Phi[5][2]*w->S[31] +
+            t->Phi[5][3]*w->S[43] + t->Phi[5][4]*w->S[55] + t->Phi[5][5]*w->S[67] +
+            t->Phi[5][11]*w->S[85];
     w->term[0][86] = t->Phi[5][0]*t->Phi[0][12] + t->Phi[5][1]*t->Phi[1][12] +
             t->Phi[5][2]*t->Phi[2][12] + t->Phi[5][3]*t->Phi[3][12] + t->Phi[5][4]*t->Phi[4][12] +
             t->Phi[5][5]*t->Phi[5][12] + t->Phi[5][12]*t->Phi[12][12];
-    w->term[1][86] = t->Phi[5][0]*w->S[12] + t->Phi[5][1]*w->S[28] + t->Phi[5][2]*w->S[44] +
-            t->Phi[5][3]*w->S[60] + t->Phi[5][4]*w->S[76] + t->Phi[5][5]*w->S[92] +
-            t->Phi[5][12]*w->S[114];
+    w->term[1][86] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[20] + t->Phi[5][2]*w->S[32] +
+            t->Phi[5][3]*w->S[44] + t->Phi[5][4]*w->S[56] + t->Phi[5][5]*w->S[68] +
+            t->Phi[5][12]*w->S[86];
     w->term[0][87] = t->Phi[5][0]*t->Phi[0][13] + t->Phi[5][1]*t->Phi[1][13] +
             t->Phi[5][2]*t->Phi[2][13] + t->Phi[5][3]*t->Phi[3][13] + t->Phi[5][4]*t->Phi[4][13] +
             t->Phi[5][5]*t->Phi[5][13] + t->Phi[5][13]*t->Phi[13][13];
-    w->term[1][87] = t->Phi[5][0]*w->S[13] + t->Phi[5][1]*w->S[29] + t->Phi[5][2]*w->S[45] +
-            t->Phi[5][3]*w->S[61] + t->Phi[5][4]*w->S[77] + t->Phi[5][5]*w->S[93] +
-            t->Phi[5][13]*w->S[115];
+    w->term[1][87] = t->Phi[5][0]*w->S[9] + t->Phi[5][1]*w->S[21] + t->Phi[5][2]*w->S[33] +
+            t->Phi[5][3]*w->S[45] + t->Phi[5][4]*w->S[57] + t->Phi[5][5]*w->S[69] +
+            t->Phi[5][13]*w->S[87];
     w->term[0][88] = t->Phi[5][0]*t->Phi[0][14] + t->Phi[5][1]*t->Phi[1][14] +
             t->Phi[5][2]*t->Phi[2][14] + t->Phi[5][3]*t->Phi[3][14] + t->Phi[5][4]*t->Phi[4][14] +
             t->Phi[5][5]*t->Phi[5][14] + t->Phi[5][14]*t->Phi[14][14];
-    w->term[1][88] = t->Phi[5][0]*w->S[14] + t->Phi[5][1]*w->S[30] + t->Phi[5][2]*w->S[46] +
-            t->Phi[5][3]*w->S[62] + t->Phi[5][4]*w->S[78] + t->Phi[5][5]*w->S[94] +
-            t->Phi[5][14]*w->S[116];
+    w->term[1][88] = t->Phi[5][0]*w->S[10] + t->Phi[5][1]*w->S[22] + t->Phi[5][2]*w->S[34] +
+            t->Phi[5][3]*w->S[46] + t->Phi[5][4]*w->S[58] + t->Phi[5][5]*w->S[70] +
+            t->Phi[5][14]*w->S[88];
     w->term[0][89] = t->Phi[5][0]*t->Phi[0][15] + t->Phi[5][1]*t->Phi[1][15] +
             t->Phi[5][2]*t->Phi[2][15] + t->Phi[5][3]*t->Phi[3][15] + t->Phi[5][4]*t->Phi[4][15] +
             t->Phi[5][5]*t->Phi[5][15] + t->Phi[5][15]*t->Phi[15][15];
-    w->term[1][89] = t->Phi[5][0]*w->S[15] + t->Phi[5][1]*w->S[31] + t->Phi[5][2]*w->S[47] +
-            t->Phi[5][3]*w->S[63] + t->Phi[5][4]*w->S[79] + t->Phi[5][5]*w->S[95] +
-            t->Phi[5][15]*w->S[117];
+    w->term[1][89] = t->Phi[5][0]*w->S[11] + t->Phi[5][1]*w->S[23] + t->Phi[5][2]*w->S[35] +
+            t->Phi[5][3]*w->S[47] + t->Phi[5][4]*w->S[59] + t->Phi[5][5]*w->S[71] +
+            t->Phi[5][15]*w->S[89];
     w->term[0][90] = t->Phi[6][0]*t->Phi[0][0] + t->Phi[6][1]*t->Phi[1][0] +
             t->Phi[6][2]*t->Phi[2][0] + t->Phi[6][3]*t->Phi[3][0] + t->Phi[6][4]*t->Phi[4][0] +
             t->Phi[6][5]*t->Phi[5][0] + t->Phi[6][6]*t->Phi[6][0];
-    w->term[1][90] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[16] + t->Phi[6][2]*w->S[32] +
-            t->Phi[6][3]*w->S[48] + t->Phi[6][4]*w->S[64] + t->Phi[6][5]*w->S[80] +
-            t->Phi[6][6]*w->S[96];
+    w->term[1][90] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[12] + t->Phi[6][2]*w->S[24] +
+            t->Phi[6][3]*w->S[36] + t->Phi[6][4]*w->S[48] + t->Phi[6][5]*w->S[60] +
+            t->Phi[6][6]*w->S[72];
     w->term[0][91] = t->Phi[6][0]*t->Phi[0][1] + t->Phi[6][1]*t->Phi[1][1] +
             t->Phi[6][2]*t->Phi[2][1] + t->Phi[6][3]*t->Phi[3][1] + t->Phi[6][4]*t->Phi[4][1] +
             t->Phi[6][5]*t->Phi[5][1] + t->Phi[6][6]*t->Phi[6][1];
-    w->term[1][91] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[17] + t->Phi[6][2]*w->S[33] +
-            t->Phi[6][3]*w->S[49] + t->Phi[6][4]*w->S[65] + t->Phi[6][5]*w->S[81] +
-            t->Phi[6][6]*w->S[97];
+    w->term[1][91] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[13] + t->Phi[6][2]*w->S[25] +
+            t->Phi[6][3]*w->S[37] + t->Phi[6][4]*w->S[49] + t->Phi[6][5]*w->S[61] +
+            t->Phi[6][6]*w->S[73];
     w->term[0][92] = t->Phi[6][0]*t->Phi[0][2] + t->Phi[6][1]*t->Phi[1][2] +
             t->Phi[6][2]*t->Phi[2][2] + t->Phi[6][3]*t->Phi[3][2] + t->Phi[6][4]*t->Phi[4][2] +
             t->Phi[6][5]*t->Phi[5][2] + t->Phi[6][6]*t->Phi[6][2];
-    w->term[1][92] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[18] + t->Phi[6][2]*w->S[34] +
-            t->Phi[6][3]*w->S[50] + t->Phi[6][4]*w->S[66] + t->Phi[6][5]*w->S[82] +
-            t->Phi[6][6]*w->S[98];
+    w->term[1][92] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[14] + t->Phi[6][2]*w->S[26] +
+            t->Phi[6][3]*w->S[38] + t->Phi[6][4]*w->S[50] + t->Phi[6][5]*w->S[62] +
+            t->Phi[6][6]*w->S[74];
     w->term[0][93] = t->Phi[6][0]*t->Phi[0][3] + t->Phi[6][1]*t->Phi[1][3] +
             t->Phi[6][2]*t->Phi[2][3] + t->Phi[6][3]*t->Phi[3][3] + t->Phi[6][4]*t->Phi[4][3] +
             t->Phi[6][5]*t->Phi[5][3] + t->Phi[6][6]*t->Phi[6][3];
-    w->term[1][93] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[19] + t->Phi[6][2]*w->S[35] +
-            t->Phi[6][3]*w->S[51] + t->Phi[6][4]*w->S[67] + t->Phi[6][5]*w->S[83] +
-            t->Phi[6][6]*w->S[99];
+    w->term[1][93] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[15] + t->Phi[6][2]*w->S[27] +
+            t->Phi[6][3]*w->S[39] + t->Phi[6][4]*w->S[51] + t->Phi[6][5]*w->S[63] +
+            t->Phi[6][6]*w->S[75];
     w->term[0][94] = t->Phi[6][0]*t->Phi[0][4] + t->Phi[6][1]*t->Phi[1][4] +
             t->Phi[6][2]*t->Phi[2][4] + t->Phi[6][3]*t->Phi[3][4] + t->Phi[6][4]*t->Phi[4][4] +
             t->Phi[6][5]*t->Phi[5][4] + t->Phi[6][6]*t->Phi[6][4];
-    w->term[1][94] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[20] + t->Phi[6][2]*w->S[36] +
-            t->Phi[6][3]*w->S[52] + t->Phi[6][4]*w->S[68] + t->Phi[6][5]*w->S[84] +
-            t->Phi[6][6]*w->S[100];
+    w->term[1][94] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[16] + t->Phi[6][2]*w->S[28] +
+            t->Phi[6][3]*w->S[40] + t->Phi[6][4]*w->S[52] + t->Phi[6][5]*w->S[64] +
+            t->Phi[6][6]*w->S[76];
     w->term[0][95] = t->Phi[6][0]*t->Phi[0][5] + t->Phi[6][1]*t->Phi[1][5] +
             t->Phi[6][2]*t->Phi[2][5] + t->Phi[6][3]*t->Phi[3][5] + t->Phi[6][4]*t->Phi[4][5] +
             t->Phi[6][5]*t->Phi[5][5] + t->Phi[6][6]*t->Phi[6][5];
-    w->term[1][95] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[21] + t->Phi[6][2]*w->S[37] +
-            t->Phi[6][3]*w->S[53] + t->Phi[6][4]*w->S[69] + t->Phi[6][5]*w->S[85] +
-            t->Phi[6][6]*w->S[101];
+    w->term[1][95] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[17] + t->Phi[6][2]*w->S[29] +
+            t->Phi[6][3]*w->S[41] + t->Phi[6][4]*w->S[53] + t->Phi[6][5]*w->S[65] +
+            t->Phi[6][6]*w->S[77];
     w->term[0][96] = t->Phi[6][6]*t->Phi[6][6];
-    w->term[1][96] = t->Phi[6][6]*w->S[102];
+    w->term[1][96] = t->Phi[6][6]*w->S[108];
     w->term[0][97] = t->Phi[6][0]*t->Phi[0][7] + t->Phi[6][1]*t->Phi[1][7] +
             t->Phi[6][2]*t->Phi[2][7] + t->Phi[6][3]*t->Phi[3][7] + t->Phi[6][4]*t->Phi[4][7] +
             t->Phi[6][5]*t->Phi[5][7] + t->Phi[6][6]*t->Phi[6][7];
-    w->term[1][97] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[23] + t->Phi[6][2]*w->S[39] +
-            t->Phi[6][3]*w->S[55] + t->Phi[6][4]*w->S[71] + t->Phi[6][5]*w->S[87] +
-            t->Phi[6][6]*w->S[103] + t->Phi[6][7];
+    w->term[1][97] = t->Phi[6][0]*w->S[90] + t->Phi[6][1]*w->S[93] + t->Phi[6][2]*w->S[96] +
+            t->Phi[6][3]*w->S[99] + t->Phi[6][4]*w->S[102] + t->Phi[6][5]*w->S[105] +
+            t->Phi[6][6]*w->S[109] + t->Phi[6][7];
     w->term[0][98] = t->Phi[6][0]*t->Phi[0][8] + t->Phi[6][1]*t->Phi[1][8] +
             t->Phi[6][2]*t->Phi[2][8] + t->Phi[6][3]*t->Phi[3][8] + t->Phi[6][4]*t->Phi[4][8] +
             t->Phi[6][5]*t->Phi[5][8] + t->Phi[6][6]*t->Phi[6][8];
-    w->term[1][98] = t->Phi[6][0]*w->S[8] + t->Phi[6][1]*w->S[24] + t->Phi[6][2]*w->S[40] +
-            t->Phi[6][3]*w->S[56] + t->Phi[6][4]*w->S[72] + t->Phi[6][5]*w->S[88] +
-            t->Phi[6][6]*w->S[104] + t->Phi[6][8];
+    w->term[1][98] = t->Phi[6][0]*w->S[91] + t->Phi[6][1]*w->S[94] + t->Phi[6][2]*w->S[97] +
+            t->Phi[6][3]*w->S[100] + t->Phi[6][4]*w->S[103] + t->Phi[6][5]*w->S[106] +
+            t->Phi[6][6]*w->S[110] + t->Phi[6][8];
     w->term[0][99] = t->Phi[6][0]*t->Phi[0][9] + t->Phi[6][1]*t->Phi[1][9] +
             t->Phi[6][2]*t->Phi[2][9] + t->Phi[6][3]*t->Phi[3][9] + t->Phi[6][4]*t->Phi[4][9] +
             t->Phi[6][5]*t->Phi[5][9] + t->Phi[6][6]*t->Phi[6][9];
-    w->term[1][99] = t->Phi[6][0]*w->S[9] + t->Phi[6][1]*w->S[25] + t->Phi[6][2]*w->S[41] +
-            t->Phi[6][3]*w->S[57] + t->Phi[6][4]*w->S[73] + t->Phi[6][5]*w->S[89] +
-            t->Phi[6][6]*w->S[105] + t->Phi[6][9];
+    w->term[1][99] = t->Phi[6][0]*w->S[92] + t->Phi[6][1]*w->S[95] + t->Phi[6][2]*w->S[98] +
+            t->Phi[6][3]*w->S[101] + t->Phi[6][4]*w->S[104] + t->Phi[6][5]*w->S[107] +
+            t->Phi[6][6]*w->S[111] + t->Phi[6][9];
     w->term[0][100] = t->Phi[6][0]*t->Phi[0][10] + t->Phi[6][1]*t->Phi[1][10] +
             t->Phi[6][2]*t->Phi[2][10] + t->Phi[6][3]*t->Phi[3][10] + t->Phi[6][4]*t->Phi[4][10] +
             t->Phi[6][5]*t->Phi[5][10] + t->Phi[6][6]*t->Phi[6][10] + t->Phi[6][10]*t->Phi[10][10];
-    w->term[1][100] = t->Phi[6][0]*w->S[10] + t->Phi[6][1]*w->S[26] + t->Phi[6][2]*w->S[42] +
-            t->Phi[6][3]*w->S[58] + t->Phi[6][4]*w->S[74] + t->Phi[6][5]*w->S[90] +
-            t->Phi[6][6]*w->S[106] + t->Phi[6][10]*w->S[112];
+    w->term[1][100] = t->Phi[6][0]*w->S[6] + t->Phi[6][1]*w->S[18] + t->Phi[6][2]*w->S[30] +
+            t->Phi[6][3]*w->S[42] + t->Phi[6][4]*w->S[54] + t->Phi[6][5]*w->S[66] +
+            t->Phi[6][6]*w->S[78] + t->Phi[6][10]*w->S[84];
     w->term[0][101] = t->Phi[6][0]*t->Phi[0][11] + t->Phi[6][1]*t->Phi[1][11] +
             t->Phi[6][2]*t->Phi[2][11] + t->Phi[6][3]*t->Phi[3][11] + t->Phi[6][4]*t->Phi[4][11] +
             t->Phi[6][5]*t->Phi[5][11] + t->Phi[6][6]*t->Phi[6][11] + t->Phi[6][11]*t->Phi[11][11];
-    w->term[1][101] = t->Phi[6][0]*w->S[11] + t->Phi[6][1]*w->S[27] + t->Phi[6][2]*w->S[43] +
-            t->Phi[6][3]*w->S[59] + t->Phi[6][4]*w->S[75] + t->Phi[6][5]*w->S[91] +
-            t->Phi[6][6]*w->S[107] + t->Phi[6][11]*w->S[113];
+    w->term[1][101] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[19] + t->Phi[6][2]*w->S[31] +
+            t->Phi[6][3]*w->S[43] + t->Phi[6][4]*w->S[55] + t->Phi[6][5]*w->S[67] +
+            t->Phi[6][6]*w->S[79] + t->Phi[6][11]*w->S[85];
     w->term[0][102] = t->Phi[6][0]*t->Phi[0][12] + t->Phi[6][1]*t->Phi[1][12] +
             t->Phi[6][2]*t->Phi[2][12] + t->Phi[6][3]*t->Phi[3][12] + t->Phi[6][4]*t->Phi[4][12] +
             t->Phi[6][5]*t->Phi[5][12] + t->Phi[6][6]*t->Phi[6][12] + t->Phi[6][12]*t->Phi[12][12];
-    w->term[1][102] = t->Phi[6][0]*w->S[12] + t->Phi[6][1]*w->S[28] + t->Phi[6][2]*w->S[44] +
-            t->Phi[6][3]*w->S[60] + t->Phi[6][4]*w->S[76] + t->Phi[6][5]*w->S[92] +
-            t->Phi[6][6]*w->S[108] + t->Phi[6][12]*w->S[114];
+    w->term[1][102] = t->Phi[6][0]*w->S[8] + t->Phi[6][1]*w->S[20] + t->Phi[6][2]*w->S[32] +
+            t->Phi[6][3]*w->S[44] + t->Phi[6][4]*w->S[56] + t->Phi[6][5]*w->S[68] +
+            t->Phi[6][6]*w->S[80] + t->Phi[6][12]*w->S[86];
     w->term[0][103] = t->Phi[6][0]*t->Phi[0][13] + t->Phi[6][1]*t->Phi[1][13] +
             t->Phi[6][2]*t->Phi[2][13] + t->Phi[6][3]*t->Phi[3][13] + t->Phi[6][4]*t->Phi[4][13] +
             t->Phi[6][5]*t->Phi[5][13] + t->Phi[6][6]*t->Phi[6][13] + t->Phi[6][13]*t->Phi[13][13];
-    w->term[1][103] = t->Phi[6][0]*w->S[13] + t->Phi[6][1]*w->S[29] + t->Phi[6][2]*w->S[45] +
-            t->Phi[6][3]*w->S[61] + t->Phi[6][4]*w->S[77] + t->Phi[6][5]*w->S[93] +
-            t->Phi[6][6]*w->S[109] + t->Phi[6][13]*w->S[115];
+    w->term[1][103] = t->Phi[6][0]*w->S[9] + t->Phi[6][1]*w->S[21] + t->Phi[6][2]*w->S[33] +
+            t->Phi[6][3]*w->S[45] + t->Phi[6][4]*w->S[57] + t->Phi[6][5]*w->S[69] +
+            t->Phi[6][6]*w->S[81] + t->Phi[6][13]*w->S[87];
     w->term[0][104] = t->Phi[6][0]*t->Phi[0][14] + t->Phi[6][1]*t->Phi[1][14] +
             t->Phi[6][2]*t->Phi[2][14] + t->Phi[6][3]*t->Phi[3][14] + t->Phi[6][4]*t->Phi[4][14] +
             t->Phi[6][5]*t->Phi[5][14] + t->Phi[6][6]*t->Phi[6][14] + t->Phi[6][14]*t->Phi[14][14];
-    w->term[1][104] = t->Phi[6][0]*w->S[14] + t->Phi[6][1]*w->S[30] + t->Phi[6][2]*w->S[46] +
-            t->Phi[6][3]*w->S[62] + t->Phi[6][4]*w->S[78] + t->Phi[6][5]*w->S[94] +
-            t->Phi[6][6]*w->S[110] + t->Phi[6][14]*w->S[116];
+    w->term[1][104] = t->Phi[6][0]*w->S[10] + t->Phi[6][1]*w->S[22] + t->Phi[6][2]*w->S[34] +
+            t->Phi[6][3]*w->S[46] + t->Phi[6][4]*w->S[58] + t->Phi[6][5]*w->S[70] +
+            t->Phi[6][6]*w->S[82] + t->Phi[6][14]*w->S[88];
     w->term[0][105] = t->Phi[6][0]*t->Phi[0][15] + t->Phi[6][1]*t->Phi[1][15] +
             t->Phi[6][2]*t->Phi[2][15] + t->Phi[6][3]*t->Phi[3][15] + t->Phi[6][4]*t->Phi[4][15] +
             t->Phi[6][5]*t->Phi[5][15] + t->Phi[6][6]*t->Phi[6][15] + t->Phi[6][15]*t->Phi[15][15];
-    w->term[1][105] = t->Phi[6][0]*w->S[15] + t->Phi[6][1]*w->S[31] + t->Phi[6][2]*w->S[47] +
-            t->Phi[6][3]*w->S[63] + t->Phi[6][4]*w->S[79] + t->Phi[6][5]*w->S[95] +
-            t->Phi[6][6]*w->S[111] + t->Phi[6][15]*w->S[117];
+    w->term[1][105] = t->Phi[6][0]*w->S[11] + t->Phi[6][1]*w->S[23] + t->Phi[6][2]*w->S[35] +
+            t->Phi[6][3]*w->S[47] + t->Phi[6][4]*w->S[59] + t->Phi[6][5]*w->S[71] +
+            t->Phi[6][6]*w->S[83] + t->Phi[6][15]*w->S[89];
     w->term[0][106] = t->Phi[10][10]*t->Phi[10][10];
-    w->term[1][106] = t->Phi[10][10]*w->S[112];
+    w->term[1][106] = t->Phi[10][10]*w->S[84];
     w->term[0][107] = t->Phi[11][11]*t->Phi[11][11];
-    w->term[1][107] = t->Phi[11][11]*w->S[113];
+    w->term[1][107] = t->Phi[11][11]*w->S[85];
     w->term[0][108] = t->Phi[12][12]*t->Phi[12][12];
-    w->term[1][108] = t->Phi[12][12]*w->S[114];
+    w->term[1][108] = t->Phi[12][12]*w->S[86];
     w->term[0][109] = t->Phi[13][13]*t->Phi[13][13];
-    w->term[1][109] = t->Phi[13][13]*w->S[115];
+    w->term[1][109] = t->Phi[13][13]*w->S[87];
     w->term[0][110] = t->Phi[14][14]*t->Phi[14][14];
-    w->term[1][110] = t->Phi[14][14]*w->S[116];
+    w->term[1][110] = t->Phi[14][14]*w->S[88];
     w->term[0][111] = t->Phi[15][15]*t->Phi[15][15];
-    w->term[1][111] = t->Phi[15][15]*w->S[117];
+    w->term[1][111] = t->Phi[15][15]*w->S[89];
     t->Phi[0][0] = t->Phi[0][0] + t->Phi[0][0] + w->term[0][0];
     w->S[0] = w->S[0] + half*w->term[1][0];
     t->Phi[0][1] = t->Phi[0][1] + t->Phi[0][1] + w->term[0][1];
@@ -1738,388 +1803,313 @@ NED_DOPPLER18_BLOCK void doubling(ned_doppler18_transition *restrict t,
     t->Phi[0][5] = t->Phi[0][5] + t->Phi[0][5] + w->term[0][5];
     w->S[5] = w->S[5] + half*w->term[1][5];
     t->Phi[0][7] = t->Phi[0][7] + t->Phi[0][7] + w->term[0][6];
-    w->S[7] = w->S[7] + half*w->term[1][6];
+    w->S[90] = w->S[90] + half*w->term[1][6];
     t->Phi[0][8] = t->Phi[0][8] + t->Phi[0][8] + w->term[0][7];
-    w->S[8] = w->S[8] + half*w->term[1][7];
+    w->S[91] = w->S[91] + half*w->term[1][7];
     t->Phi[0][9] = t->Phi[0][9] + t->Phi[0][9] + w->term[0][8];
-    w->S[9] = w->S[9] + half*w->term[1][8];
+    w->S[92] = w->S[92] + half*w->term[1][8];
     t->Phi[0][10] = t->Phi[0][10] + t->Phi[0][10] + w->term[0][9];
-    w->S[10] = w->S[10] + half*w->term[1][9];
+    w->S[6] = w->S[6] + half*w->term[1][9];
     t->Phi[0][11] = t->Phi[0][11] + t->Phi[0][11] + w->term[0][10];
-    w->S[11] = w->S[11] + half*w->term[1][10];
+    w->S[7] = w->S[7] + half*w->term[1][10];
     t->Phi[0][12] = t->Phi[0][12] + t->Phi[0][12] + w->term[0][11];
-    w->S[12] = w->S[12] + half*w->term[1][11];
+    w->S[8] = w->S[8] + half*w->term[1][11];
     t->Phi[0][13] = t->Phi[0][13] + t->Phi[0][13] + w->term[0][12];
-    w->S[13] = w->S[13] + half*w->term[1][12];
+    w->S[9] = w->S[9] + half*w->term[1][12];
     t->Phi[0][14] = t->Phi[0][14] + t->Phi[0][14] + w->term[0][13];
-    w->S[14] = w->S[14] + half*w->term[1][13];
+    w->S[10] = w->S[10] + half*w->term[1][13];
     t->Phi[0][15] = t->Phi[0][15] + t->Phi[0][15] + w->term[0][14];
-    w->S[15] = w->S[15] + half*w->term[1][14];
+    w->S[11] = w->S[11] + half*w->term[1][14];
     t->Phi[1][0] = t->Phi[1][0] + t->Phi[1][0] + w->term[0][15];
-    w->S[16] = w->S[16] + half*w->term[1][15];
+    w->S[12] = w->S[12] + half*w->term[1][15];
     t->Phi[1][1] = t->Phi[1][1] + t->Phi[1][1] + w->term[0][16];
-    w->S[17] = w->S[17] + half*w->term[1][16];
+    w->S[13] = w->S[13] + half*w->term[1][16];
     t->Phi[1][2] = t->Phi[1][2] + t->Phi[1][2] + w->term[0][17];
-    w->S[18] = w->S[18] + half*w->term[1][17];
+    w->S[14] = w->S[14] + half*w->term[1][17];
     t->Phi[1][3] = t->Phi[1][3] + t->Phi[1][3] + w->term[0][18];
-    w->S[19] = w->S[19] + half*w->term[1][18];
+    w->S[15] = w->S[15] + half*w->term[1][18];
     t->Phi[1][4] = t->Phi[1][4] + t->Phi[1][4] + w->term[0][19];
-    w->S[20] = w->S[20] + half*w->term[1][19];
+    w->S[16] = w->S[16] + half*w->term[1][19];
     t->Phi[1][5] = t->Phi[1][5] + t->Phi[1][5] + w->term[0][20];
-    w->S[21] = w->S[21] + half*w->term[1][20];
+    w->S[17] = w->S[17] + half*w->term[1][20];
     t->Phi[1][7] = t->Phi[1][7] + t->Phi[1][7] + w->term[0][21];
-    w->S[23] = w->S[23] + half*w->term[1][21];
+    w->S[93] = w->S[93] + half*w->term[1][21];
     t->Phi[1][8] = t->Phi[1][8] + t->Phi[1][8] + w->term[0][22];
-    w->S[24] = w->S[24] + half*w->term[1][22];
+    w->S[94] = w->S[94] + half*w->term[1][22];
     t->Phi[1][9] = t->Phi[1][9] + t->Phi[1][9] + w->term[0][23];
-    w->S[25] = w->S[25] + half*w->term[1][23];
+    w->S[95] = w->S[95] + half*w->term[1][23];
     t->Phi[1][10] = t->Phi[1][10] + t->Phi[1][10] + w->term[0][24];
-    w->S[26] = w->S[26] + half*w->term[1][24];
+    w->S[18] = w->S[18] + half*w->term[1][24];
     t->Phi[1][11] = t->Phi[1][11] + t->Phi[1][11] + w->term[0][25];
-    w->S[27] = w->S[27] + half*w->term[1][25];
+    w->S[19] = w->S[19] + half*w->term[1][25];
     t->Phi[1][12] = t->Phi[1][12] + t->Phi[1][12] + w->term[0][26];
-    w->S[28] = w->S[28] + half*w->term[1][26];
+    w->S[20] = w->S[20] + half*w->term[1][26];
     t->Phi[1][13] = t->Phi[1][13] + t->Phi[1][13] + w->term[0][27];
-    w->S[29] = w->S[29] + half*w->term[1][27];
+    w->S[21] = w->S[21] + half*w->term[1][27];
     t->Phi[1][14] = t->Phi[1][14] + t->Phi[1][14] + w->term[0][28];
-    w->S[30] = w->S[30] + half*w->term[1][28];
+    w->S[22] = w->S[22] + half*w->term[1][28];
     t->Phi[1][15] = t->Phi[1][15] + t->Phi[1][15] + w->term[0][29];
-    w->S[31] = w->S[31] + half*w->term[1][29];
+    w->S[23] = w->S[23] + half*w->term[1][29];
     t->Phi[2][0] = t->Phi[2][0] + t->Phi[2][0] + w->term[0][30];
-    w->S[32] = w->S[32] + half*w->term[1][30];
+    w->S[24] = w->S[24] + half*w->term[1][30];
     t->Phi[2][1] = t->Phi[2][1] + t->Phi[2][1] + w->term[0][31];
-    w->S[33] = w->S[33] + half*w->term[1][31];
+    w->S[25] = w->S[25] + half*w->term[1][31];
     t->Phi[2][2] = t->Phi[2][2] + t->Phi[2][2] + w->term[0][32];
-    w->S[34] = w->S[34] + half*w->term[1][32];
+    w->S[26] = w->S[26] + half*w->term[1][32];
     t->Phi[2][3] = t->Phi[2][3] + t->Phi[2][3] + w->term[0][33];
-    w->S[35] = w->S[35] + half*w->term[1][33];
+    w->S[27] = w->S[27] + half*w->term[1][33];
     t->Phi[2][4] = t->Phi[2][4] + t->Phi[2][4] + w->term[0][34];
-    w->S[36] = w->S[36] + half*w->term[1][34];
+    w->S[28] = w->S[28] + half*w->term[1][34];
     t->Phi[2][5] = t->Phi[2][5] + t->Phi[2][5] + w->term[0][35];
-    w->S[37] = w->S[37] + half*w->term[1][35];
+    w->S[29] = w->S[29] + half*w->term[1][35];
     t->Phi[2][7] = t->Phi[2][7] + t->Phi[2][7] + w->term[0][36];
-    w->S[39] = w->S[39] + half*w->term[1][36];
+    w->S[96] = w->S[96] + half*w->term[1][36];
     t->Phi[2][8] = t->Phi[2][8] + t->Phi[2][8] + w->term[0][37];
-    w->S[40] = w->S[40] + half*w->term[1][37];
+    w->S[97] = w->S[97] + half*w->term[1][37];
     t->Phi[2][9] = t->Phi[2][9] + t->Phi[2][9] + w->term[0][38];
-    w->S[41] = w->S[41] + half*w->term[1][38];
+    w->S[98] = w->S[98] + half*w->term[1][38];
     t->Phi[2][10] = t->Phi[2][10] + t->Phi[2][10] + w->term[0][39];
-    w->S[42] = w->S[42] + half*w->term[1][39];
+    w->S[30] = w->S[30] + half*w->term[1][39];
     t->Phi[2][11] = t->Phi[2][11] + t->Phi[2][11] + w->term[0][40];
-    w->S[43] = w->S[43] + half*w->term[1][40];
+    w->S[31] = w->S[31] + half*w->term[1][40];
     t->Phi[2][12] = t->Phi[2][12] + t->Phi[2][12] + w->term[0][41];
-    w->S[44] = w->S[44] + half*w->term[1][41];
+    w->S[32] = w->S[32] + half*w->term[1][41];
     t->Phi[2][13] = t->Phi[2][13] + t->Phi[2][13] + w->term[0][42];
-    w->S[45] = w->S[45] + half*w->term[1][42];
+    w->S[33] = w->S[33] + half*w->term[1][42];
     t->Phi[2][14] = t->Phi[2][14] + t->Phi[2][14] + w->term[0][43];
-    w->S[46] = w->S[46] + half*w->term[1][43];
+    w->S[34] = w->S[34] + half*w->term[1][43];
     t->Phi[2][15] = t->Phi[2][15] + t->Phi[2][15] + w->term[0][44];
-    w->S[47] = w->S[47] + half*w->term[1][44];
+    w->S[35] = w->S[35] + half*w->term[1][44];
     t->Phi[3][0] = t->Phi[3][0] + t->Phi[3][0] + w->term[0][45];
-    w->S[48] = w->S[48] + half*w->term[1][45];
+    w->S[36] = w->S[36] + half*w->term[1][45];
     t->Phi[3][1] = t->Phi[3][1] + t->Phi[3][1] + w->term[0][46];
-    w->S[49] = w->S[49] + half*w->term[1][46];
+    w->S[37] = w->S[37] + half*w->term[1][46];
     t->Phi[3][2] = t->Phi[3][2] + t->Phi[3][2] + w->term[0][47];
-    w->S[50] = w->S[50] + half*w->term[1][47];
+    w->S[38] = w->S[38] + half*w->term[1][47];
     t->Phi[3][3] = t->Phi[3][3] + t->Phi[3][3] + w->term[0][48];
-    w->S[51] = w->S[51] + half*w->term[1][48];
+    w->S[39] = w->S[39] + half*w->term[1][48];
     t->Phi[3][4] = t->Phi[3][4] + t->Phi[3][4] + w->term[0][49];
-    w->S[52] = w->S[52] + half*w->term[1][49];
+    w->S[40] = w->S[40] + half*w->term[1][49];
     t->Phi[3][5] = t->Phi[3][5] + t->Phi[3][5] + w->term[0][50];
-    w->S[53] = w->S[53] + half*w->term[1][50];
+    w->S[41] = w->S[41] + half*w->term[1][50];
     t->Phi[3][7] = t->Phi[3][7] + t->Phi[3][7] + w->term[0][51];
-    w->S[55] = w->S[55] + half*w->term[1][51];
+    w->S[99] = w->S[99] + half*w->term[1][51];
     t->Phi[3][8] = t->Phi[3][8] + t->Phi[3][8] + w->term[0][52];
-    w->S[56] = w->S[56] + half*w->term[1][52];
+    w->S[100] = w->S[100] + half*w->term[1][52];
     t->Phi[3][9] = t->Phi[3][9] + t->Phi[3][9] + w->term[0][53];
-    w->S[57] = w->S[57] + half*w->term[1][53];
+    w->S[101] = w->S[101] + half*w->term[1][53];
     t->Phi[3][10] = t->Phi[3][10] + t->Phi[3][10] + w->term[0][54];
-    w->S[58] = w->S[58] + half*w->term[1][54];
+    w->S[42] = w->S[42] + half*w->term[1][54];
     t->Phi[3][11] = t->Phi[3][11] + t->Phi[3][11] + w->term[0][55];
-    w->S[59] = w->S[59] + half*w->term[1][55];
+    w->S[43] = w->S[43] + half*w->term[1][55];
     t->Phi[3][12] = t->Phi[3][12] + t->Phi[3][12] + w->term[0][56];
-    w->S[60] = w->S[60] + half*w->term[1][56];
+    w->S[44] = w->S[44] + half*w->term[1][56];
     t->Phi[3][13] = t->Phi[3][13] + t->Phi[3][13] + w->term[0][57];
-    w->S[61] = w->S[61] + half*w->term[1][57];
+    w->S[45] = w->S[45] + half*w->term[1][57];
     t->Phi[3][14] = t->Phi[3][14] + t->Phi[3][14] + w->term[0][58];
-    w->S[62] = w->S[62] + half*w->term[1][58];
+    w->S[46] = w->S[46] + half*w->term[1][58];
     t->Phi[3][15] = t->Phi[3][15] + t->Phi[3][15] + w->term[0][59];
-    w->S[63] = w->S[63] + half*w->term[1][59];
+    w->S[47] = w->S[47] + half*w->term[1][59];
     t->Phi[4][0] = t->Phi[4][0] + t->Phi[4][0] + w->term[0][60];
-    w->S[64] = w->S[64] + half*w->term[1][60];
+    w->S[48] = w->S[48] + half*w->term[1][60];
     t->Phi[4][1] = t->Phi[4][1] + t->Phi[4][1] + w->term[0][61];
-    w->S[65] = w->S[65] + half*w->term[1][61];
+    w->S[49] = w->S[49] + half*w->term[1][61];
     t->Phi[4][2] = t->Phi[4][2] + t->Phi[4][2] + w->term[0][62];
-    w->S[66] = w->S[66] + half*w->term[1][62];
+    w->S[50] = w->S[50] + half*w->term[1][62];
     t->Phi[4][3] = t->Phi[4][3] + t->Phi[4][3] + w->term[0][63];
-    w->S[67] = w->S[67] + half*w->term[1][63];
+    w->S[51] = w->S[51] + half*w->term[1][63];
     t->Phi[4][4] = t->Phi[4][4] + t->Phi[4][4] + w->term[0][64];
-    w->S[68] = w->S[68] + half*w->term[1][64];
+    w->S[52] = w->S[52] + half*w->term[1][64];
     t->Phi[4][5] = t->Phi[4][5] + t->Phi[4][5] + w->term[0][65];
-    w->S[69] = w->S[69] + half*w->term[1][65];
+    w->S[53] = w->S[53] + half*w->term[1][65];
     t->Phi[4][7] = t->Phi[4][7] + t->Phi[4][7] + w->term[0][66];
-    w->S[71] = w->S[71] + half*w->term[1][66];
+    w->S[102] = w->S[102] + half*w->term[1][66];
     t->Phi[4][8] = t->Phi[4][8] + t->Phi[4][8] + w->term[0][67];
-    w->S[72] = w->S[72] + half*w->term[1][67];
+    w->S[103] = w->S[103] + half*w->term[1][67];
     t->Phi[4][9] = t->Phi[4][9] + t->Phi[4][9] + w->term[0][68];
-    w->S[73] = w->S[73] + half*w->term[1][68];
+    w->S[104] = w->S[104] + half*w->term[1][68];
     t->Phi[4][10] = t->Phi[4][10] + t->Phi[4][10] + w->term[0][69];
-    w->S[74] = w->S[74] + half*w->term[1][69];
+    w->S[54] = w->S[54] + half*w->term[1][69];
     t->Phi[4][11] = t->Phi[4][11] + t->Phi[4][11] + w->term[0][70];
-    w->S[75] = w->S[75] + half*w->term[1][70];
+    w->S[55] = w->S[55] + half*w->term[1][70];
     t->Phi[4][12] = t->Phi[4][12] + t->Phi[4][12] + w->term[0][71];
-    w->S[76] = w->S[76] + half*w->term[1][71];
+    w->S[56] = w->S[56] + half*w->term[1][71];
     t->Phi[4][13] = t->Phi[4][13] + t->Phi[4][13] + w->term[0][72];
-    w->S[77] = w->S[77] + half*w->term[1][72];
+    w->S[57] = w->S[57] + half*w->term[1][72];
     t->Phi[4][14] = t->Phi[4][14] + t->Phi[4][14] + w->term[0][73];
-    w->S[78] = w->S[78] + half*w->term[1][73];
+    w->S[58] = w->S[58] + half*w->term[1][73];
     t->Phi[4][15] = t->Phi[4][15] + t->Phi[4][15] + w->term[0][74];
-    w->S[79] = w->S[79] + half*w->term[1][74];
+    w->S[59] = w->S[59] + half*w->term[1][74];
     t->Phi[5][0] = t->Phi[5][0] + t->Phi[5][0] + w->term[0][75];
-    w->S[80] = w->S[80] + half*w->term[1][75];
+    w->S[60] = w->S[60] + half*w->term[1][75];
     t->Phi[5][1] = t->Phi[5][1] + t->Phi[5][1] + w->term[0][76];
-    w->S[81] = w->S[81] + half*w->term[1][76];
+    w->S[61] = w->S[61] + half*w->term[1][76];
     t->Phi[5][2] = t->Phi[5][2] + t->Phi[5][2] + w->term[0][77];
-    w->S[82] = w->S[82] + half*w->term[1][77];
+    w->S[62] = w->S[62] + half*w->term[1][77];
     t->Phi[5][3] = t->Phi[5][3] + t->Phi[5][3] + w->term[0][78];
-    w->S[83] = w->S[83] + half*w->term[1][78];
+    w->S[63] = w->S[63] + half*w->term[1][78];
     t->Phi[5][4] = t->Phi[5][4] + t->Phi[5][4] + w->term[0][79];
-    w->S[84] = w->S[84] + half*w->term[1][79];
+    w->S[64] = w->S[64] + half*w->term[1][79];
     t->Phi[5][5] = t->Phi[5][5] + t->Phi[5][5] + w->term[0][80];
-    w->S[85] = w->S[85] + half*w->term[1][80];
+    w->S[65] = w->S[65] + half*w->term[1][80];
     t->Phi[5][7] = t->Phi[5][7] + t->Phi[5][7] + w->term[0][81];
-    w->S[87] = w->S[87] + half*w->term[1][81];
+    w->S[105] = w->S[105] + half*w->term[1][81];
     t->Phi[5][8] = t->Phi[5][8] + t->Phi[5][8] + w->term[0][82];
-    w->S[88] = w->S[88] + half*w->term[1][82];
+    w->S[106] = w->S[106] + half*w->term[1][82];
     t->Phi[5][9] = t->Phi[5][9] + t->Phi[5][9] + w->term[0][83];
-    w->S[89] = w->S[89] + half*w->term[1][83];
+    w->S[107] = w->S[107] + half*w->term[1][83];
     t->Phi[5][10] = t->Phi[5][10] + t->Phi[5][10] + w->term[0][84];
-    w->S[90] = w->S[90] + half*w->term[1][84];
+    w->S[66] = w->S[66] + half*w->term[1][84];
     t->Phi[5][11] = t->Phi[5][11] + t->Phi[5][11] + w->term[0][85];
-    w->S[91] = w->S[91] + half*w->term[1][85];
+    w->S[67] = w->S[67] + half*w->term[1][85];
     t->Phi[5][12] = t->Phi[5][12] + t->Phi[5][12] + w->term[0][86];
-    w->S[92] = w->S[92] + half*w->term[1][86];
+    w->S[68] = w->S[68] + half*w->term[1][86];
     t->Phi[5][13] = t->Phi[5][13] + t->Phi[5][13] + w->term[0][87];
-    w->S[93] = w->S[93] + half*w->term[1][87];
+    w->S[69] = w->S[69] + half*w->term[1][87];
     t->Phi[5][14] = t->Phi[5][14] + t->Phi[5][14] + w->term[0][88];
-    w->S[94] = w->S[94] + half*w->term[1][88];
+    w->S[70] = w->S[70] + half*w->term[1][88];
     t->Phi[5][15] = t->Phi[5][15] + t->Phi[5][15] + w->term[0][89];
-    w->S[95] = w->S[95] + half*w->term[1][89];
+    w->S[71] = w->S[71] + half*w->term[1][89];
     t->Phi[6][0] = t->Phi[6][0] + t->Phi[6][0] + w->term[0][90];
-    w->S[96] = w->S[96] + half*w->term[1][90];
+    w->S[72] = w->S[72] + half*w->term[1][90];
     t->Phi[6][1] = t->Phi[6][1] + t->Phi[6][1] + w->term[0][91];
-    w->S[97] = w->S[97] + half*w->term[1][91];
+    w->S[73] = w->S[73] + half*w->term[1][91];
     t->Phi[6][2] = t->Phi[6][2] + t->Phi[6][2] + w->term[0][92];
-    w->S[98] = w->S[98] + half*w->term[1][92];
+    w->S[74] = w->S[74] + half*w->term[1][92];
     t->Phi[6][3] = t->Phi[6][3] + t->Phi[6][3] + w->term[0][93];
-    w->S[99] = w->S[99] + half*w->term[1][93];
+    w->S[75] = w->S[75] + half*w->term[1][93];
     t->Phi[6][4] = t->Phi[6][4] + t->Phi[6][4] + w->term[0][94];
-    w->S[100] = w->S[100] + half*w->term[1][94];
+    w->S[76] = w->S[76] + half*w->term[1][94];
     t->Phi[6][5] = t->Phi[6][5] + t->Phi[6][5] + w->term[0][95];
-    w->S[101] = w->S[101] + half*w->term[1][95];
+    w->S[77] = w->S[77] + half*w->term[1][95];
     t->Phi[6][6] = t->Phi[6][6] + t->Phi[6][6] + w->term[0][96];
-    w->S[102] = w->S[102] + half*w->term[1][96];
+    w->S[108] = w->S[108] + half*w->term[1][96];
     t->Phi[6][7] = t->Phi[6][7] + t->Phi[6][7] + w->term[0][97];
-    w->S[103] = w->S[103] + half*w->term[1][97];
+    w->S[109] = w->S[109] + half*w->term[1][97];
     t->Phi[6][8] = t->Phi[6][8] + t->Phi[6][8] + w->term[0][98];
-    w->S[104] = w->S[104] + half*w->term[1][98];
+    w->S[110] = w->S[110] + half*w->term[1][98];
     t->Phi[6][9] = t->Phi[6][9] + t->Phi[6][9] + w->term[0][99];
-    w->S[105] = w->S[105] + half*w->term[1][99];
+    w->S[111] = w->S[111] + half*w->term[1][99];
     t->Phi[6][10] = t->Phi[6][10] + t->Phi[6][10] + w->term[0][100];
-    w->S[106] = w->S[106] + half*w->term[1][100];
+    w->S[78] = w->S[78] + half*w->term[1][100];
     t->Phi[6][11] = t->Phi[6][11] + t->Phi[6][11] + w->term[0][101];
-    w->S[107] = w->S[107] + half*w->term[1][101];
+    w->S[79] = w->S[79] + half*w->term[1][101];
     t->Phi[6][12] = t->Phi[6][12] + t->Phi[6][12] + w->term[0][102];
-    w->S[108] = w->S[108] + half*w->term[1][102];
+    w->S[80] = w->S[80] + half*w->term[1][102];
     t->Phi[6][13] = t->Phi[6][13] + t->Phi[6][13] + w->term[0][103];
-    w->S[109] = w->S[109] + half*w->term[1][103];
+    w->S[81] = w->S[81] + half*w->term[1][103];
     t->Phi[6][14] = t->Phi[6][14] + t->Phi[6][14] + w->term[0][104];
-    w->S[110] = w->S[110] + half*w->term[1][104];
+    w->S[82] = w->S[82] + half*w->term[1][104];
     t->Phi[6][15] = t->Phi[6][15] + t->Phi[6][15] + w->term[0][105];
-    w->S[111] = w->S[111] + half*w->term[1][105];
+    w->S[83] = w->S[83] + half*w->term[1][105];
     t->Phi[10][10] = t->Phi[10][10] + t->Phi[10][10] + w->term[0][106];
-    w->S[112] = w->S[112] + half*w->term[1][106];
+    w->S[84] = w->S[84] + half*w->term[1][106];
     t->Phi[11][11] = t->Phi[11][11] + t->Phi[11][11] + w->term[0][107];
-    w->S[113] = w->S[113] + half*w->term[1][107];
+    w->S[85] = w->S[85] + half*w->term[1][107];
     t->Phi[12][12] = t->Phi[12][12] + t->Phi[12][12] + w->term[0][108];
-    w->S[114] = w->S[114] + half*w->term[1][108];
+    w->S[86] = w->S[86] + half*w->term[1][108];
     t->Phi[13][13] = t->Phi[13][13] + t->Phi[13][13] + w->term[0][109];
-    w->S[115] = w->S[115] + half*w->term[1][109];
+    w->S[87] = w->S[87] + half*w->term[1][109];
     t->Phi[14][14] = t->Phi[14][14] + t->Phi[14][14] + w->term[0][110];
-    w->S[116] = w->S[116] + half*w->term[1][110];
+    w->S[88] = w->S[88] + half*w->term[1][110];
     t->Phi[15][15] = t->Phi[15][15] + t->Phi[15][15] + w->term[0][111];
-    w->S[117] = w->S[117] + half*w->term[1][111];
+    w->S[89] = w->S[89] + half*w->term[1][111];
 }
 
-NED_DOPPLER18_BLOCK ned_doppler18_scalar transition_check(ned_doppler18_transition *restrict t)
+NED_DOPPLER18_BLOCK ned_doppler18_scalar transition_check(ned_doppler18_transition *restrict t,
+        ned_doppler18_discretize_scratch *restrict w)
 {
+    const ned_doppler18_scalar one = 1.0;
     ned_doppler18_scalar v, check = 0.0;
-    v = t->Phi[0][0]; t->Phi[0][0] = v; check += v - v;
-    v = t->Phi[0][1]; t->Phi[0][1] = v; check += v - v;
-    v = t->Phi[0][2]; t->Phi[0][2] = v; check += v - v;
-    v = t->Phi[0][3]; t->Phi[0][3] = v; check += v - v;
-    v = t->Phi[0][4]; t->Phi[0][4] = v; check += v - v;
-    v = t->Phi[0][5]; t->Phi[0][5] = v; check += v - v;
-    v = t->Phi[0][7]; t->Phi[0][7] = v; check += v - v;
-    v = t->Phi[0][8]; t->Phi[0][8] = v; check += v - v;
-    v = t->Phi[0][9]; t->Phi[0][9] = v; check += v - v;
-    v = t->Phi[0][10]; t->Phi[0][10] = v; check += v - v;
-    v = t->Phi[0][11]; t->Phi[0][11] = v; check += v - v;
-    v = t->Phi[0][12]; t->Phi[0][12] = v; check += v - v;
-    v = t->Phi[0][13]; t->Phi[0][13] = v; check += v - v;
-    v = t->Phi[0][14]; t->Phi[0][14] = v; check += v - v;
-    v = t->Phi[0][15]; t->Phi[0][15] = v; check += v - v;
-    v = t->Phi[1][0]; t->Phi[1][0] = v; check += v - v;
-    v = t->Phi[1][1]; t->Phi[1][1] = v; check += v - v;
-    v = t->Phi[1][2]; t->Phi[1][2] = v; check += v - v;
-    v = t->Phi[1][3]; t->Phi[1][3] = v; check += v - v;
-    v = t->Phi[1][4]; t->Phi[1][4] = v; check += v - v;
-    v = t->Phi[1][5]; t->Phi[1][5] = v; check += v - v;
-    v = t->Phi[1][7]; t->Phi[1][7] = v; check += v - v;
-    v = t->Phi[1][8]; t->Phi[1][8] = v; check += v - v;
-    v = t->Phi[1][9]; t->Phi[1][9] = v; check += v - v;
-    v = t->Phi[1][10]; t->Phi[1][10] = v; check += v - v;
-    v = t->Phi[1][11]; t->Phi[1][11] = v; check += v - v;
-    v = t->Phi[1][12]; t->Phi[1][12] = v; check += v - v;
-    v = t->Phi[1][13]; t->Phi[1][13] = v; check += v - v;
-    v = t->Phi[1][14]; t->Phi[1][14] = v; check += v - v;
-    v = t->Phi[1][15]; t->Phi[1][15] = v; check += v - v;
-    v = t->Phi[2][0]; t->Phi[2][0] = v; check += v - v;
-    v = t->Phi[2][1]; t->Phi[2][1] = v; check += v - v;
-    v = t->Phi[2][2]; t->Phi[2][2] = v; check += v - v;
-    v = t->Phi[2][3]; t->Phi[2][3] = v; check += v - v;
-    v = t->Phi[2][4]; t->Phi[2][4] = v; check += v - v;
-    v = t->Phi[2][5]; t->Phi[2][5] = v; check += v - v;
-    v = t->Phi[2][7]; t->Phi[2][7] = v; check += v - v;
-    v = t->Phi[2][8]; t->Phi[2][8] = v; check += v - v;
-    v = t->Phi[2][9]; t->Phi[2][9] = v; check += v - v;
-    v = t->Phi[2][10]; t->Phi[2][10] = v; check += v - v;
-    v = t->Phi[2][11]; t->Phi[2][11] = v; check += v - v;
-    v = t->Phi[2][12]; t->Phi[2][12] = v; check += v - v;
-    v = t->Phi[2][13]; t->Phi[2][13] = v; check += v - v;
-    v = t->Phi[2][14]; t->Phi[2][14] = v; check += v - v;
-    v = t->Phi[2][15]; t->Phi[2][15] = v; check += v - v;
-    v = t->Phi[3][0]; t->Phi[3][0] = v; check += v - v;
-    v = t->Phi[3][1]; t->Phi[3][1] = v; check += v - v;
-    v = t->Phi[3][2]; t->Phi[3][2] = v; check += v - v;
-    v = t->Phi[3][3]; t->Phi[3][3] = v; check += v - v;
-    v = t->Phi[3][4]; t->Phi[3][4] = v; check += v - v;
-    v = t->Phi[3][5]; t->Phi[3][5] = v; check += v - v;
-    v = t->Phi[3][7]; t->Phi[3][7] = v; check += v - v;
-    v = t->Phi[3][8]; t->Phi[3][8] = v; check += v - v;
-    v = t->Phi[3][9]; t->Phi[3][9] = v; check += v - v;
-    v = t->Phi[3][10]; t->Phi[3][10] = v; check += v - v;
-    v = t->Phi[3][11]; t->Phi[3][11] = v; check += v - v;
-    v = t->Phi[3][12]; t->Phi[3][12] = v; check += v - v;
-    v = t->Phi[3][13]; t->Phi[3][13] = v; check += v - v;
-    v = t->Phi[3][14]; t->Phi[3][14] = v; check += v - v;
-    v = t->Phi[3][15]; t->Phi[3][15] = v; check += v - v;
-    v = t->Phi[4][0]; t->Phi[4][0] = v; check += v - v;
-    v = t->Phi[4][1]; t->Phi[4][1] = v; check += v - v;
-    v = t->Phi[4][2]; t->Phi[4][2] = v; check += v - v;
-    v = t->Phi[4][3]; t->Phi[4][3] = v; check += v - v;
-    v = t->Phi[4][4]; t->Phi[4][4] = v; check += v - v;
-    v = t->Phi[4][5]; t->Phi[4][5] = v; check += v - v;
-    v = t->Phi[4][7]; t->Phi[4][7] = v; check += v - v;
-    v = t->Phi[4][8]; t->Phi[4][8] = v; check += v - v;
-    v = t->Phi[4][9]; t->Phi[4][9] = v; check += v - v;
-    v = t->Phi[4][10]; t->Phi[4][10] = v; check += v - v;
-    v = t->Phi[4][11]; t->Phi[4][11] = v; check += v - v;
-    v = t->Phi[4][12]; t->Phi[4][12] = v; check += v - v;
-    v = t->Phi[4][13]; t->Phi[4][13] = v; check += v - v;
-    v = t->Phi[4][14]; t->Phi[4][14] = v; check += v - v;
-    v = t->Phi[4][15]; t->Phi[4][15] = v; check += v - v;
-    v = t->Phi[5][0]; t->Phi[5][0] = v; check += v - v;
-    v = t->Phi[5][1]; t->Phi[5][1] = v; check += v - v;
-    v = t->Phi[5][2]; t->Phi[5][2] = v; check += v - v;
-    v = t->Phi[5][3]; t->Phi[5][3] = v; check += v - v;
-    v = t->Phi[5][4]; t->Phi[5][4] = v; check += v - v;
-    v = t->Phi[5][5]; t->Phi[5][5] = v; check += v - v;
-    v = t->Phi[5][7]; t->Phi[5][7] = v; check += v - v;
-    v = t->Phi[5][8]; t->Phi[5][8] = v; check += v - v;
-    v = t->Phi[5][9]; t->Phi[5][9] = v; check += v - v;
-    v = t->Phi[5][10]; t->Phi[5][10] = v; check += v - v;
-    v = t->Phi[5][11]; t->Phi[5][11] = v; check += v - v;
-    v = t->Phi[5][12]; t->Phi[5][12] = v; check += v - v;
-    v = t->Phi[5][13]; t->Phi[5][13] = v; check += v - v;
-    v = t->Phi[5][14]; t->Phi[5][14] = v; check += v - v;
-    v = t->Phi[5][15]; t->Phi[5][15] = v; check += v - v;
-    v = t->Phi[6][0]; t->Phi[6][0] = v; check += v - v;
-    v = t->Phi[6][1]; t->Phi[6][1] = v; check += v - v;
-    v = t->Phi[6][2]; t->Phi[6][2] = v; check += v - v;
-    v = t->Phi[6][3]; t->Phi[6][3] = v; check += v - v;
-    v = t->Phi[6][4]; t->Phi[6][4] = v; check += v - v;
-    v = t->Phi[6][5]; t->Phi[6][5] = v; check += v - v;
-    v = t->Phi[6][6]; t->Phi[6][6] = v; check += v - v;
-    v = t->Phi[6][7]; t->Phi[6][7] = v; check += v - v;
-    v = t->Phi[6][8]; t->Phi[6][8] = v; check += v - v;
-    v = t->Phi[6][9]; t->Phi[6][9] = v; check += v - v;
-    v = t->Phi[6][10]; t->Phi[6][10] = v; check += v - v;
-    v = t->Phi[6][11]; t->Phi[6][11] = v; check += v - v;
-    v = t->Phi[6][12]; t->Phi[6][12] = v; check += v - v;
-    v = t->Phi[6][13]; t->Phi[6][13] = v; check += v - v;
-    v = t->Phi[6][14]; t->Phi[6][14] = v; check += v - v;
-    v = t->Phi[6][15]; t->Phi[6][15] = v; check += v - v;
-    v = t->Phi[10][10]; t->Phi[10][10] = v; check += v - v;
-    v = t->Phi[11][11]; t->Phi[11][11] = v; check += v - v;
-    v = t->Phi[12][12]; t->Phi[12][12] = v; check += v - v;
-    v = t->Phi[13][13]; t->Phi[13][13] = v; check += v - v;
-    v = t->Phi[14][14]; t->Phi[14][14] = v; check += v - v;
-    v = t->Phi[15][15]; t->Phi[15][15] = v; check += v - v;
+    t->Phi[0][0] = t->Phi[0][0] + one;
+    t->Phi[1][1] = t->Phi[1][1] + one;
+    t->Phi[2][2] = t->Phi[2][2] + one;
+    t->Phi[3][3] = t->Phi[3][3] + one;
+    t->Phi[4][4] = t->Phi[4][4] + one;
+    t->Phi[5][5] = t->Phi[5][5] + one;
+    t->Phi[6][6] = t->Phi[6][6] + one;
+    t->Phi[10][10] = t->Phi[10][10] + one;
+    t->Phi[11][11] = t->Phi[11][11] + one;
+    t->Phi[12][12] = t->Phi[12][12] + one;
+    t->Phi[13][13] = t->Phi[13][13] + one;
+    t->Phi[14][14] = t->Phi[14][14] + one;
+    t->Phi[15][15] = t->Phi[15][15] + one;
+    v = t->Phi[0][0] + t->Phi[0][1] + t->Phi[0][2] + t->Phi[0][3] + t->Phi[0][4] + t->Phi[0][5] +
+            t->Phi[0][7] + t->Phi[0][8] + t->Phi[0][9] + t->Phi[0][10] + t->Phi[0][11] +
+            t->Phi[0][12] + t->Phi[0][13] + t->Phi[0][14] + t->Phi[0][15] + t->Phi[1][0] +
+            t->Phi[1][1] + t->Phi[1][2] + t->Phi[1][3] + t->Phi[1][4] + t->Phi[1][5] + t->Phi[1][7]
+            + t->Phi[1][8] + t->Phi[1][9] + t->Phi[1][10] + t->Phi[1][11] + t->Phi[1][12] +
+            t->Phi[1][13] + t->Phi[1][14] + t->Phi[1][15] + t->Phi[2][0] + t->Phi[2][1] +
+            t->Phi[2][2] + t->Phi[2][3] + t->Phi[2][4] + t->Phi[2][5] + t->Phi[2][7] + t->Phi[2][8]
+            + t->Phi[2][9] + t->Phi[2][10] + t->Phi[2][11] + t->Phi[2][12] + t->Phi[2][13] +
+            t->Phi[2][14] + t->Phi[2][15] + t->Phi[3][0] + t->Phi[3][1] + t->Phi[3][2] +
+            t->Phi[3][3] + t->Phi[3][4] + t->Phi[3][5] + t->Phi[3][7] + t->Phi[3][8] + t->Phi[3][9]
+            + t->Phi[3][10] + t->Phi[3][11] + t->Phi[3][12] + t->Phi[3][13] + t->Phi[3][14] +
+            t->Phi[3][15] + t->Phi[4][0] + t->Phi[4][1] + t->Phi[4][2] + t->Phi[4][3] + t->Phi[4][4]
+            + t->Phi[4][5] + t->Phi[4][7] + t->Phi[4][8] + t->Phi[4][9] + t->Phi[4][10] +
+            t->Phi[4][11] + t->Phi[4][12] + t->Phi[4][13] + t->Phi[4][14] + t->Phi[4][15] +
+            t->Phi[5][0] + t->Phi[5][1] + t->Phi[5][2] + t->Phi[5][3] + t->Phi[5][4] + t->Phi[5][5]
+            + t->Phi[5][7] + t->Phi[5][8] + t->Phi[5][9] + t->Phi[5][10] + t->Phi[5][11] +
+            t->Phi[5][12] + t->Phi[5][13] + t->Phi[5][14] + t->Phi[5][15] + t->Phi[6][0] +
+            t->Phi[6][1] + t->Phi[6][2] + t->Phi[6][3] + t->Phi[6][4] + t->Phi[6][5] + t->Phi[6][6]
+            + t->Phi[6][7] + t->Phi[6][8] + t->Phi[6][9] + t->Phi[6][10] + t->Phi[6][11] +
+            t->Phi[6][12] + t->Phi[6][13] + t->Phi[6][14] + t->Phi[6][15] + t->Phi[10][10] +
+            t->Phi[11][11] + t->Phi[12][12] + t->Phi[13][13] + t->Phi[14][14] + t->Phi[15][15];
+            w->term[0][0] = v; check += v - v;
     return check;
 }
 
 NED_DOPPLER18_BLOCK void noise_input(const ned_doppler18_matrices *restrict m,
         ned_doppler18_discretize_scratch *restrict w)
 {
-    w->term[0][0] = w->S[10]*m->G[0];
-    w->term[0][1] = w->S[11]*m->G[1];
-    w->term[0][2] = w->S[12]*m->G[2];
-    w->term[0][3] = w->S[13]*m->G[3];
-    w->term[0][4] = w->S[14]*m->G[4];
-    w->term[0][5] = w->S[15]*m->G[5];
-    w->term[0][6] = w->S[26]*m->G[0];
-    w->term[0][7] = w->S[27]*m->G[1];
-    w->term[0][8] = w->S[28]*m->G[2];
-    w->term[0][9] = w->S[29]*m->G[3];
-    w->term[0][10] = w->S[30]*m->G[4];
-    w->term[0][11] = w->S[31]*m->G[5];
-    w->term[0][12] = w->S[42]*m->G[0];
-    w->term[0][13] = w->S[43]*m->G[1];
-    w->term[0][14] = w->S[44]*m->G[2];
-    w->term[0][15] = w->S[45]*m->G[3];
-    w->term[0][16] = w->S[46]*m->G[4];
-    w->term[0][17] = w->S[47]*m->G[5];
-    w->term[0][18] = w->S[58]*m->G[0];
-    w->term[0][19] = w->S[59]*m->G[1];
-    w->term[0][20] = w->S[60]*m->G[2];
-    w->term[0][21] = w->S[61]*m->G[3];
-    w->term[0][22] = w->S[62]*m->G[4];
-    w->term[0][23] = w->S[63]*m->G[5];
-    w->term[0][24] = w->S[74]*m->G[0];
-    w->term[0][25] = w->S[75]*m->G[1];
-    w->term[0][26] = w->S[76]*m->G[2];
-    w->term[0][27] = w->S[77]*m->G[3];
-    w->term[0][28] = w->S[78]*m->G[4];
-    w->term[0][29] = w->S[79]*m->G[5];
-    w->term[0][30] = w->S[90]*m->G[0];
-    w->term[0][31] = w->S[91]*m->G[1];
-    w->term[0][32] = w->S[92]*m->G[2];
-    w->term[0][33] = w->S[93]*m->G[3];
-    w->term[0][34] = w->S[94]*m->G[4];
-    w->term[0][35] = w->S[95]*m->G[5];
-    w->term[0][36] = w->S[106]*m->G[0];
-    w->term[0][37] = w->S[107]*m->G[1];
-    w->term[0][38] = w->S[108]*m->G[2];
-    w->term[0][39] = w->S[109]*m->G[3];
-    w->term[0][40] = w->S[110]*m->G[4];
-    w->term[0][41] = w->S[111]*m->G[5];
-    w->term[0][42] = w->S[112]*m->G[0];
-    w->term[0][43] = w->S[113]*m->G[1];
-    w->term[0][44] = w->S[114]*m->G[2];
-    w->term[0][45] = w->S[115]*m->G[3];
-    w->term[0][46] = w->S[116]*m->G[4];
-    w->term[0][47] = w->S[117]*m->G[5];
+    w->term[0][0] = w->S[6]*m->G[0];
+    w->term[0][1] = w->S[7]*m->G[1];
+    w->term[0][2] = w->S[8]*m->G[2];
+    w->term[0][3] = w->S[9]*m->G[3];
+    w->term[0][4] = w->S[10]*m->G[4];
+    w->term[0][5] = w->S[11]*m->G[5];
+    w->term[0][6] = w->S[18]*m->G[0];
+    w->term[0][7] = w->S[19]*m->G[1];
+    w->term[0][8] = w->S[20]*m->G[2];
+    w->term[0][9] = w->S[21]*m->G[3];
+    w->term[0][10] = w->S[22]*m->G[4];
+    w->term[0][11] = w->S[23]*m->G[5];
+    w->term[0][12] = w->S[30]*m->G[0];
+    w->term[0][13] = w->S[31]*m->G[1];
+    w->term[0][14] = w->S[32]*m->G[2];
+    w->term[0][15] = w->S[33]*m->G[3];
+    w->term[0][16] = w->S[34]*m->G[4];
+    w->term[0][17] = w->S[35]*m->G[5];
+    w->term[0][18] = w->S[42]*m->G[0];
+    w->term[0][19] = w->S[43]*m->G[1];
+    w->term[0][20] = w->S[44]*m->G[2];
+    w->term[0][21] = w->S[45]*m->G[3];
+    w->term[0][22] = w->S[46]*m->G[4];
+    w->term[0][23] = w->S[47]*m->G[5];
+    w->term[0][24] = w->S[54]*m->G[0];
+    w->term[0][25] = w->S[55]*m->G[1];
+    w->term[0][26] = w->S[56]*m->G[2];
+    w->term[0][27] = w->S[57]*m->G[3];
+    w->term[0][28] = w->S[58]*m->G[4];
+    w->term[0][29] = w->S[59]*m->G[5];
+    w->term[0][30] = w->S[66]*m->G[0];
+    w->term[0][31] = w->S[67]*m->G[1];
+    w->term[0][32] = w->S[68]*m->G[2];
+    w->term[0][33] = w->S[69]*m->G[3];
+    w->term[0][34] = w->S[70]*m->G[4];
+    w->term[0][35] = w->S[71]*m->G[5];
+    w->term[0][36] = w->S[78]*m->G[0];
+    w->term[0][37] = w->S[79]*m->G[1];
+    w->term[0][38] = w->S[80]*m->G[2];
+    w->term[0][39] = w->S[81]*m->G[3];
+    w->term[0][40] = w->S[82]*m->G[4];
+    w->term[0][41] = w->S[83]*m->G[5];
+    w->term[0][42] = w->S[84]*m->G[0];
+    w->term[0][43] = w->S[85]*m->G[1];
+    w->term[0][44] = w->S[86]*m->G[2];
+    w->term[0][45] = w->S[87]*m->G[3];
+    w->term[0][46] = w->S[88]*m->G[4];
+    w->term[0][47] = w->S[89]*m->G[5];
 }
 
 NED_DOPPLER18_BLOCK void noise_input_times_step(ned_doppler18_transition *restrict t, const
@@ -2185,23 +2175,40 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
             here */
     int halvings, order, status;
     int k;
-    ned_doppler18_scalar check = 0.0;
+    ned_doppler18_scalar sum_check;
+    ned_doppler18_scalar check = 0.0, sums[2] = { 0.0, 0.0 };
     if (!isfinite(T)) {
         return NED_DOPPLER18_ERR_NONFINITE;
     }
     if (!(T > 0.0)) {
         return NED_DOPPLER18_ERR_NOT_POSITIVE;
     }
-    for (e = 0; e < NED_DOPPLER18_NNZ_F; ++e) {
-        check += m->F[e] - m->F[e];
+    /* the sum of v - v over F, G and q (0 when all are finite) in two partial sums, two entries a
+            step,
+       which gcc -O2 vectorizes (the order of a sum of zeros and NaNs does not change whether it is
+               0) */
+    for (e = 0; e + 1 < NED_DOPPLER18_NNZ_F; e += 2) {
+        sums[0] += m->F[e] - m->F[e];
+        sums[1] += m->F[e + 1] - m->F[e + 1];
     }
-    for (e = 0; e < NED_DOPPLER18_NNZ_G; ++e) {
-        check += m->G[e] - m->G[e];
+    for (; e < NED_DOPPLER18_NNZ_F; ++e) {
+        sums[0] += m->F[e] - m->F[e];
     }
-    for (c = 0; c < NED_DOPPLER18_N_NOISES; ++c) {
-        check += m->q[c] - m->q[c];
+    for (e = 0; e + 1 < NED_DOPPLER18_NNZ_G; e += 2) {
+        sums[0] += m->G[e] - m->G[e];
+        sums[1] += m->G[e + 1] - m->G[e + 1];
     }
-    if (check != 0.0) {
+    for (; e < NED_DOPPLER18_NNZ_G; ++e) {
+        sums[0] += m->G[e] - m->G[e];
+    }
+    for (e = 0; e + 1 < NED_DOPPLER18_N_NOISES; e += 2) {
+        sums[0] += m->q[e] - m->q[e];
+        sums[1] += m->q[e + 1] - m->q[e + 1];
+    }
+    for (; e < NED_DOPPLER18_N_NOISES; ++e) {
+        sums[0] += m->q[e] - m->q[e];
+    }
+    if (sums[0] + sums[1] != 0.0) {
         return NED_DOPPLER18_ERR_NONFINITE;
     }
     for (c = 0; c < NED_DOPPLER18_N_NOISES; ++c) {
@@ -2232,24 +2239,39 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
                 horner_level_1_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
             }
         } else if (k == 0) {
-            horner_last_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]); /* S = R_0:
-                    also the rows no row of F reads */
+            horner_last_into_S(w, taylor_coefficient[k]); /* S = R_0: also the rows no row of F
+                    reads, and the unit columns R_1 A(:, j) */
+        } else if (k == 1 && halvings > 0) {
+            horner_first_into_term(w, taylor_coefficient[k]); /* R_1 in every row: the unit columns
+                    of S read it */
         } else {
             if (k & 1) {
-                horner_saturated_into_term(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+                horner_saturated_into_term(w, taylor_coefficient[k]);
             } else {
-                horner_saturated_into_S(w, taylor_coefficient[k], taylor_coefficient[k + 1]);
+                horner_saturated_into_S(w, taylor_coefficient[k]);
             }
         }
     }
     horner_transition(t, w);
+    if (halvings > 0 && order > 1) {
+        horner_unit_columns(w); /* S(:, j) = R_1 A(:, j), unit columns j: read by the doublings
+                only */
+    }
     for (i = 0; i < halvings; ++i) {
         doubling(t, w);
     }
-    check += transition_check(t);
-    for (i = 0; i < NED_DOPPLER18_N_STATES; ++i) {
-        t->Phi[i][i] += 1.0;
+    /* Phi = I + E, and the sum of its active entries: finite only if every entry is; otherwise (an
+       entry that is not finite, or an overflow of the sum) entry by entry */
+    sum_check = transition_check(t, w);
+    if (sum_check != 0.0) {
+        sum_check = 0.0;
+        for (i = 0; i < NED_DOPPLER18_N_STATES; ++i) {
+            for (k = 0; k < NED_DOPPLER18_N_STATES; ++k) {
+                sum_check += t->Phi[i][k] - t->Phi[i][k];
+            }
+        }
     }
+    check += sum_check;
     /* Gamma = T S G over its pattern, and the weights q / T: Q_d = Gamma diag(q / T) Gamma^T */
     for (i = 0; i < NED_DOPPLER18_N_STATES; ++i) {
         for (j = 0; j < 6; ++j) {

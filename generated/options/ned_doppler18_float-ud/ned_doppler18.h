@@ -14,8 +14,8 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 77 operations after CSE
- *   discretize: 3784 mul + 2722 add = 6506 flops
- *   discretize, each doubling (long steps): 1500 mul + 1521 add = 3021 flops
+ *   discretize: 2967 mul + 2098 add = 5065 flops
+ *   discretize, each doubling (long steps): 1587 mul + 1575 add = 3162 flops
  *   predict (C): 9526 mul + 8853 add = 18379 flops
  *   predict (Python): 4248 mul + 4104 add = 8352 flops
  *   predict (dense, for comparison): 11682 mul + 11340 add = 23022 flops
@@ -34,8 +34,8 @@
 #define NED_DOPPLER18_NNZ_G 6
 #define NED_DOPPLER18_NNZ_H 4
 #define NED_DOPPLER18_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
-#define NED_DOPPLER18_N_TERMS 118   /* entries of discretize's compressed term arrays */
-#define NED_DOPPLER18_N_ACTIVE_ENTRIES 118   /* entries of Phi in rows that are not e_i */
+#define NED_DOPPLER18_N_TERMS 112   /* entries of discretize's compressed term arrays */
+#define NED_DOPPLER18_N_ACTIVE_ENTRIES 112   /* entries of Phi in rows that are not e_i */
 #define NED_DOPPLER18_FORM_UD 1
 
 #define NED_DOPPLER18_OK 0
@@ -181,10 +181,6 @@ typedef struct {
     ned_doppler18_scalar S[NED_DOPPLER18_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the
             even levels R_k): each block row's dense segment, then the diagonal rows */
     ned_doppler18_scalar fh[NED_DOPPLER18_NNZ_F]; /* F h at the nonzeros of F */
-    ned_doppler18_scalar row_sum[NED_DOPPLER18_N_STATES]; /* balancing: off-diagonal row sums of
-            D^-1 |F| D */
-    ned_doppler18_scalar col_sum[NED_DOPPLER18_N_STATES]; /* balancing: off-diagonal column sums of
-            D^-1 |F| D */
 } ned_doppler18_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */
