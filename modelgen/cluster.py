@@ -169,7 +169,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
         cluster.close()
 
 
-def import_on_workers(client: Any, module: str) -> None:
+def import_on_workers(client: Any, module: str, warm_up: str | None = None) -> None:
     """Have every worker of ``client`` import ``module`` now, all at once, without waiting for them.
 
     A fresh worker otherwise imports a study's task code only when its first
@@ -183,27 +183,33 @@ def import_on_workers(client: Any, module: str) -> None:
     that already has the module does nothing; one that fails to import it
     fails again, with its message, on its first task.  The imported objects
     live as long as the worker: they are moved out of the collector's sight
-    (``gc.freeze``), so its later collections do not walk them.
+    (``gc.freeze``), so its later collections do not walk them.  ``warm_up``
+    names a function of ``module`` the thread calls next (what the worker's
+    first task would otherwise pay for), once per worker process.
     """
-    client.run(_import_module, module, wait=False)
+    client.run(_import_module, module, warm_up, wait=False)
 
 
-def import_long_lived(module: str) -> None:
+def import_long_lived(module: str, warm_up: str | None = None) -> None:
     """Import ``module`` with the collector paused, then keep everything made so far out of its sight (``gc.freeze``).
 
-    Only a first import freezes: a worker asked again, study after study,
-    must not freeze the garbage cycles of its earlier studies for good.
+    Only a first import freezes (and calls ``module.warm_up``): a worker asked
+    again, study after study, must not freeze the garbage cycles of its
+    earlier studies for good.
     """
     if module in sys.modules:
         return
     with collector_paused():
-        importlib.import_module(module)
+        imported = importlib.import_module(module)
+        if warm_up is not None:
+            getattr(imported, warm_up)()
     gc.freeze()
 
 
-async def _import_module(module: str) -> None:
+async def _import_module(module: str, warm_up: str | None = None) -> None:
     """On a worker: :func:`import_long_lived` in a thread (a coroutine: what ``Client.run`` can start without waiting for it)."""
-    threading.Thread(target=import_long_lived, args=(module,), name=f"modelgen-import {module}", daemon=True).start()
+    threading.Thread(target=import_long_lived, args=(module, warm_up), name=f"modelgen-import {module}",
+                     daemon=True).start()
 
 
 def held(value: T) -> T:

@@ -29,3 +29,18 @@ def compiled(function: F) -> F:
     if _numba is None:
         return function
     return _numba.njit(cache=True, fastmath=False, nogil=True)(function)  # type: ignore[return-value]
+
+
+@compiled
+def _first_call(x):
+    """The smallest compiled function: calling it loads what any first compiled call loads."""
+    return x + 1.0
+
+
+def load_compiled_machinery() -> None:
+    """Load numba's typing and target registries now (about 0.2 s, else paid by a process's first compiled call).
+
+    A Monte Carlo worker does this in its import thread, while the caller
+    still makes the study's set-up (:func:`modelgen.simulation.montecarlo.warm_worker`).
+    """
+    _first_call(1.0)

@@ -55,6 +55,7 @@ from modelgen.model.declaration import ErrorModel
 from modelgen.simulation.error_layout import ErrorLayout
 from modelgen.simulation.filters import IMPLEMENTATIONS, filter_factory, generated_filter_files
 from modelgen.simulation.flight import fly_profile, profile_layout
+from modelgen.simulation.jit import load_compiled_machinery
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.trajectory import Trajectory, generate_trajectory
 from modelgen.simulation.trajectory_cache import cached_trajectory
@@ -266,6 +267,19 @@ def fly_one_run(key: str, sent: MonteCarloSetup | bytes, seed: np.random.SeedSeq
                      len(result.rejected), result.updates)
 
 
+def warm_worker() -> None:
+    """What a fresh worker's first run would otherwise pay for, done in its import thread (:func:`import_on_workers`).
+
+    numba's registries (loaded by a process's first compiled call, 0.2 s) and
+    scipy.special (the innovation gate's chi-square quantile,
+    :func:`modelgen.simulation.filter_loop.gate_threshold`, 0.14 s), while
+    the caller still makes the set-up.
+    """
+    import scipy.special  # noqa: F401  (the gate's, imported at a run's start otherwise)
+
+    load_compiled_machinery()
+
+
 def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, seed: int = 0, mode: str | None = None,
                     workers: int = 1, client: Any = None, store_every: int | None = None,
                     progress: Callable[[int, int], None] | None = None,
@@ -304,7 +318,8 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
     finished = kept is not None and len(kept.completed()) == runs  # all in the journal: nothing to build or ship
     shared: Any
     if client is not None and not finished:
-        import_on_workers(client, __name__)  # first: fresh workers import side by side while the set-up is made here
+        # first: fresh workers import (and warm up) side by side while the set-up is made here
+        import_on_workers(client, __name__, warm_up="warm_worker")
         setup = worker_setup(profile, truth_profile, derived, mode, store_every, implementation, key)
         # the set-up (the code: ~400 kB of text) travels once, pickled, as a task of its own, not once per run
         shared = client.submit(held, pickle.dumps(setup, protocol=pickle.HIGHEST_PROTOCOL), pure=False,

@@ -1,5 +1,6 @@
 """What a fresh Monte Carlo worker does before its first run: imports side by side, the trajectory mapped from the cache."""
 
+import gc
 import sys
 import time
 
@@ -42,6 +43,32 @@ def test_fresh_workers_import_the_study_code_when_asked_without_a_task():
         while not all(client.run(_has_module, module).values()):
             assert time.monotonic() < deadline, "the workers did not import the module"
             time.sleep(0.1)
+
+
+def test_fresh_workers_warm_up_after_the_import_what_their_first_run_would_pay_for():
+    module = "modelgen.simulation.montecarlo"
+    with dask_client(workers=2) as client:
+        client.wait_for_workers(2)
+        assert not any(client.run(_has_module, "scipy.special").values())  # the study code alone does not load it
+        import_on_workers(client, module, warm_up="warm_worker")
+        deadline = time.monotonic() + 60
+        while not all(client.run(_has_module, "scipy.special").values()):
+            assert time.monotonic() < deadline, "the workers did not warm up"
+            time.sleep(0.1)
+
+
+def test_a_module_imported_long_lived_is_warmed_up_once(tmp_path, monkeypatch):
+    from modelgen.cluster import import_long_lived
+
+    (tmp_path / "modelgen_warm_up_probe.py").write_text("CALLS = []\n\ndef warm():\n    CALLS.append(1)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "modelgen_warm_up_probe", raising=False)
+    try:
+        import_long_lived("modelgen_warm_up_probe", "warm")
+        import_long_lived("modelgen_warm_up_probe", "warm")  # already imported: neither imported nor warmed again
+    finally:
+        gc.unfreeze()  # import_long_lived froze this test session's objects, as a worker's
+    assert sys.modules["modelgen_warm_up_probe"].CALLS == [1]
 
 
 def test_fresh_workers_map_the_trajectory_the_caller_kept_in_the_cache(paper_derived, tmp_path, monkeypatch):
