@@ -4,10 +4,11 @@ The module predicts in factored form (the Cholesky factor of the
 contract's check reused: P_n = (Phi L)(Phi L)^T + Q_d), falls back to the
 dense products for a P without a factor, may predict by row class of Phi
 (``structured``, chosen by ``kernels.python_predict_kernel``; the general
-rows as a slice when contiguous, else a list), updates by two rank-m BLAS
-products onto P, balances F in plain Python floats or in numpy
-(``PYTHON_BALANCING_ENTRIES``), and finds a non-finite argument through one
-sum over the result.  Each choice must give the reference's numbers, and a
+rows as a slice when contiguous, else a list), updates by one rank-m
+product onto P (P - (G + G^T), G = K (H P - S K^T / 2)), balances F in plain
+Python floats or in numpy (``PYTHON_BALANCING_ENTRIES``), and finds a
+non-finite argument through one BLAS sum of magnitudes (dasum) over the
+result.  Each choice must give the reference's numbers, and a
 NaN or infinity anywhere in any argument must still be refused, naming that
 argument, on the factored path as on the fallback.
 """
@@ -190,8 +191,8 @@ def test_a_non_finite_predict_argument_is_named_wherever_it_is(paper_module, str
     """Also where it meets zeros (a state with zero variance): NaN and 0 * inf are NaN, so the result shows it.
 
     With a zero variance P has no Cholesky factor (the dense fallback);
-    without, the factored or structured kernel runs and one sum over the
-    result before its mirroring must show the culprit.
+    without, the factored or structured kernel runs and one sum of
+    magnitudes over the result before its mirroring must show the culprit.
     """
     module = paper_module if kernel == "factored" else structured_module
     n = inputs["P"].shape[0]
