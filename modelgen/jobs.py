@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from modelgen.codegen.options import CodegenOptions
 from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path
@@ -39,13 +40,12 @@ if TYPE_CHECKING:
     from modelgen.checks.paper_check import VerificationResult
     from modelgen.checks.paper_equations import PaperEquationsResult
     from modelgen.checks.twins import TwinChecks
-    from modelgen.codegen.generate import CodegenOptions, GeneratedCode
+    from modelgen.codegen.generate import GeneratedCode
 
-#: names the command line and the Python API take from this module (they import only jobs; builtin_models too),
-#: by the module that defines them: imported on first use, as each job imports the layers it uses (the checks and
-#: the code generator are 0.2 s of imports that ``modelgen simulate`` does not need before its flight starts)
+#: names the command line and the Python API take from this module (they import only jobs; builtin_models and
+#: CodegenOptions too), by the module that defines them: imported on first use, as each job imports the layers it
+#: uses (the checks are 0.2 s of imports that ``modelgen simulate`` does not need before its flight starts)
 _REEXPORTED = {
-    "CodegenOptions": "modelgen.codegen.options",
     "verify": "modelgen.checks.paper_check",
     "write_verification_report": "modelgen.checks.paper_check",
     "differences_summary": "modelgen.checks.paper_equations",
@@ -135,7 +135,7 @@ def generate(
     new files overwrite files in the folder that modelgen did not write or
     that were edited since.
     """
-    from modelgen.codegen.generate import CodegenOptions, generate_code
+    from modelgen.codegen.generate import generate_code
 
     derived = model if isinstance(model, DerivedModel) else load_and_derive(model)
     options = options or CodegenOptions()
@@ -223,7 +223,6 @@ def check(
     conditioning (modelgen.checks.code_check.conformance_tolerance).
     """
     from modelgen.checks.code_check import check_generated
-    from modelgen.codegen.options import CodegenOptions
 
     options = options or CodegenOptions()
     scenario = scenario or check_scenario(derived)

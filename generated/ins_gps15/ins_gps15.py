@@ -460,7 +460,7 @@ def discretize(F, G, q, T):
     T, a non-finite F, G or q, a negative q, or an e^{F T} that is not
     representable (more than 64 doublings) or overflows.
     """
-    F, G, q = _float(F), _float(G), _float(q)
+    F, G, q = _array(F, float), _array(G, float), _array(q, float)
     _check_shapes("discretize", F=(F, (N_STATES, N_STATES)), G=(G, (N_STATES, N_NOISES)), q=(q, (N_NOISES,)))
     T = _check_step(T)
     if N_NOISES and not q.min() >= 0.0:
@@ -638,12 +638,7 @@ def _check_shapes(function, **arrays):
             raise ValueError(f"{function}: {name} has shape {shape}, expected {expected}")
 
 
-def _float(a):
-    """``a`` as a float array (no copy when it already is one)."""
-    return np.asarray(a, dtype=float)
-
-
-_array = np.asarray  # _array(a, float) is _float(a) without the Python call: predict and update take it on every call
+_array = np.asarray  # _array(a, float): a as a float array, no copy when it is one (no Python call of our own)
 
 
 def _check_finite(function, **arrays):
