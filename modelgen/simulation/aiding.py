@@ -23,11 +23,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Protocol
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Protocol
 
 import numpy as np
 
-from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.simulation import earth
 from modelgen.simulation.error_layout import ErrorLayout, frame_matrix
@@ -38,6 +37,9 @@ from modelgen.simulation.profile_keys import ProfileSection
 from modelgen.simulation.rotation import quaternion_to_dcm
 from modelgen.simulation.strapdown import ALGORITHMS
 from modelgen.simulation.trajectory import Trajectory
+
+if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
+    from modelgen.derive.symbolic import DerivedModel
 
 #: the maker of a fresh filter from (x0, P0), see :func:`modelgen.simulation.filters.filter_factory`
 FilterMaker = Callable[[np.ndarray, np.ndarray], KalmanFilter]

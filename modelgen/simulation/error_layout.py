@@ -26,13 +26,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.simulation import earth
 from modelgen.simulation.rotation import misalignment, rotate_attitude
+
+if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
+    from modelgen.derive.symbolic import DerivedModel
+    from modelgen.simulation.model_outline import ModelOutline
 
 NED_AXIS = {"north": (0, 1.0), "east": (1, 1.0), "down": (2, 1.0), "up": (2, -1.0)}
 BODY_AXIS = {"x": 0, "y": 1, "z": 2}
@@ -62,7 +66,7 @@ class Entry:
 
 @dataclass
 class ErrorLayout:
-    derived: DerivedModel
+    derived: DerivedModel | ModelOutline  # read for its number of states and names only
     groups: dict[str, list[Entry]]
     conventions: dict[str, float] = field(default_factory=dict)
 

@@ -33,13 +33,15 @@ import pickle
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping, Protocol
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Protocol
 
 import numpy as np
 
 from modelgen.derive import reference
-from modelgen.derive.symbolic import DerivedModel, parameter_vector
 from modelgen.errors import ModelError
+
+if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
+    from modelgen.derive.symbolic import DerivedModel
 
 
 class KalmanFilter(Protocol):
@@ -219,7 +221,7 @@ class NativeFilter:
     addresses: np.ndarray  # params, matrices, transition, filter, workspace (uint64)
     parameters: np.ndarray  # view of the params struct (model parameter order)
     state: np.ndarray  # view of filter.x
-    transition_matrix: np.ndarray  # view of transition.Phi (n, n)
+    transition_matrix: tuple  # (view of transition.Phi, its stored entries; their rows, columns; a dense (n, n) to expand into)
     filter_bytes: np.ndarray  # the filter struct as bytes (snapshot / restore around a gated update)
 
     @classmethod
@@ -249,9 +251,11 @@ class NativeFilter:
         size = ctypes.sizeof(compiled.filter)
         filter_bytes = np.ctypeslib.as_array((ctypes.c_uint8 * size).from_address(int(addresses[3])))
         state = np.ctypeslib.as_array(compiled.filter.x)
-        transition_matrix = np.ctypeslib.as_array(compiled.transition.Phi)
-        if transition_matrix.shape != (compiled.n, compiled.n):
-            raise ModelError("native filter loop: the transition struct has no full Phi")
+        stored = np.ctypeslib.as_array(compiled.transition.Phi)  # Phi compressed to its structural nonzeros
+        rows, cols = compiled.phi_entries
+        if stored.shape != rows.shape:
+            raise ModelError("native filter loop: the transition's Phi does not match its layout")
+        transition_matrix = (stored, rows, cols, np.zeros((compiled.n, compiled.n)))
         return cls(compiled, functions, addresses, parameters, state, transition_matrix, filter_bytes)
 
 
@@ -420,6 +424,8 @@ def named_parameters(derived: DerivedModel, available: Mapping[str, float], vali
     """The model's parameters from a larger vocabulary; a missing one is refused by name."""
     chosen = {name: available[name] for name in derived.model.parameter_names if name in available}
     if validate:
+        from modelgen.derive.symbolic import parameter_vector  # sympy-based: here, where a derived model validates
+
         missing = [p for p in derived.model.parameters if p.name not in chosen and p.value is None]
         if missing:
             raise ModelError(unsupplied_parameters_message(derived.model.name, [f"{p.name} ({p.symbol})" for p in missing],

@@ -11,10 +11,10 @@ which sensor it is: the profile's sensor object does.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.simulation import earth
 from modelgen.simulation.aiding import FilterMaker, Progress, SensorData
@@ -25,6 +25,9 @@ from modelgen.simulation.rotation import quaternion_product, rotation_vectors_to
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.streaming import PIECE_SECONDS, fly_modes
 from modelgen.simulation.trajectory import Trajectory
+
+if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
+    from modelgen.derive.symbolic import DerivedModel
 
 
 def perturbed_initial_state(truth0: np.ndarray, attitude: np.ndarray, velocity: np.ndarray,

@@ -20,11 +20,10 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.simulation import earth
 from modelgen.simulation.aiding import (
@@ -44,6 +43,9 @@ from modelgen.simulation.profile_keys import ProfileSection
 from modelgen.simulation.rotation import quaternion_to_dcm
 from modelgen.simulation.strapdown import Strapdown
 from modelgen.simulation.trajectory import Trajectory
+
+if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
+    from modelgen.derive.symbolic import DerivedModel
 
 #: sensor quantity -> (kind, NED axis or position index, sign)
 QUANTITIES = {

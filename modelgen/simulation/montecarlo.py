@@ -7,9 +7,12 @@ in which order runs are flown.  Runs are dask tasks (:mod:`modelgen.cluster`):
 on the caller's client (a local cluster sized to the machine, or an existing
 scheduler), else one after another in this process.  A task carries only
 plain data (:class:`MonteCarloSetup`: the flight profile, the filter model's
-declaration, the seed and, for the generated filter, the generated code as
-text, made once by the caller, the caller's derived model and the error layout, made by the
-caller from the flight's first filter cycle); each worker takes the
+outline (names and matrix structure), the seed and, for the generated
+filter, the generated code as text, made once by the caller, and the error
+layout, made by the caller from the flight's first filter cycle; the
+caller's derived model travels pickled, unpickled only by a worker whose
+runs need the symbolic matrices: one that flies the generated C in the
+compiled loop never imports sympy); each worker takes the
 trajectory (truth and ideal IMU increments) from its machine's trajectory
 cache (:mod:`modelgen.simulation.trajectory_cache`: mapped read-only, made
 and kept there by the first worker that needs it) and writes and compiles
@@ -43,22 +46,26 @@ import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 import numpy as np
 
 from modelgen.cluster import (Journal, dask_client, describe_client, forget_cached, held, import_on_workers, run_tasks,
                               worker_cached)
-from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.errors import ModelError
-from modelgen.model.declaration import ErrorModel
 from modelgen.simulation.error_layout import ErrorLayout
 from modelgen.simulation.filters import IMPLEMENTATIONS, filter_factory, generated_filter_files
 from modelgen.simulation.flight import fly_profile, profile_layout
 from modelgen.simulation.jit import load_compiled_machinery
+from modelgen.simulation.model_outline import ModelOutline
+from modelgen.simulation.native_loop import native_supported
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.trajectory import Trajectory, generate_trajectory
 from modelgen.simulation.trajectory_cache import cached_trajectory
+
+if TYPE_CHECKING:  # sympy-based: a worker flying the compiled loop never imports them (module docstring)
+    from modelgen.derive.symbolic import DerivedModel
+    from modelgen.model.declaration import ErrorModel
 
 
 @dataclass
@@ -134,29 +141,33 @@ class MonteCarloSetup:
     """What every run of a study shares, as plain data a worker can receive.
 
     ``key`` names the set-up in a worker's cache (computed once by the
-    caller from everything else here).  ``code`` is the generated filter's
-    files (name -> text) for the ``c`` and ``python`` implementations,
-    generated once by the caller; None for the reference.  ``derived``: the
-    caller's derived model of ``model`` (:func:`symbolic_only`: its symbolic
-    matrices, 12 kB), so that a worker need not derive it again (0.13 s of
-    sympy against 2 ms to unpickle); without it the worker derives ``model``.
-    ``layout``: the error layout of the flight for ``derived`` (its ``derived``
-    is that one), made by the caller (:func:`caller_layout`), so that a worker
-    need not make it (30 ms: the model's matrices lambdified to evaluate them
-    once; the 0.15 s the step used to take was mostly numba's registries,
-    which its first compiled call loaded and the first run loads now); without
-    it the worker makes it.
+    caller from everything else here).  ``outline``: the filter model's names
+    and matrix structure (:class:`~modelgen.simulation.model_outline.ModelOutline`),
+    all that a run flown in the compiled loop (the generated C filter, a
+    sensor with a fix table) reads of the model: such a worker unpickles no
+    sympy expression and never imports sympy (0.2 s of its start).  ``code``
+    is the generated filter's files (name -> text) for the ``c`` and
+    ``python`` implementations, generated once by the caller; None for the
+    reference.  ``derived``: the caller's derived model (:func:`symbolic_only`:
+    its symbolic matrices, 12 kB), pickled, for the runs that need the
+    symbolic matrices (the Python filter loop evaluates H and R with them,
+    the reference filter F, G and Q): a worker unpickles it only then
+    (:func:`received_model`), instead of deriving the model again (0.13 s).
+    ``layout``: the error layout of the flight (its ``derived`` is ``outline``),
+    made by the caller (:func:`caller_layout`), so that a worker need not make
+    it (30 ms, and sympy: the model's matrices lambdified to evaluate them
+    once); without it the worker makes it with the derived model.
     """
 
     profile: FlightProfile
     truth_profile: FlightProfile | None
-    model: ErrorModel
+    outline: ModelOutline
     mode: str
     store_every: int
     implementation: str
     key: str
     code: Mapping[str, str] | None = None
-    derived: DerivedModel | None = None
+    derived: bytes | None = None
     layout: ErrorLayout | None = None
 
 
@@ -175,12 +186,13 @@ def flight_start(profile: FlightProfile) -> Trajectory:
     return generate_trajectory(profile.path.truncated(period), profile.imu_rate, 1.0 / period)
 
 
-def caller_layout(profile: FlightProfile, derived: DerivedModel, shipped: DerivedModel) -> ErrorLayout:
-    """The error layout of ``profile`` for ``derived``, made here, holding ``shipped`` (the model the workers receive).
+def caller_layout(profile: FlightProfile, derived: DerivedModel, shipped: ModelOutline) -> ErrorLayout:
+    """The error layout of ``profile`` for ``derived``, made here, holding ``shipped`` (what the workers receive).
 
     The layout's groups and conventions (indices and signs) are plain data;
     ``derived`` evaluates the model's matrices (with the functions it keeps
-    from earlier flights of this process), ``shipped`` travels instead.
+    from earlier flights of this process), ``shipped`` (the model's outline:
+    the layout reads only its number of states and names) travels instead.
     """
     return dataclasses.replace(profile_layout(profile, derived, flight_start(profile)), derived=shipped)
 
@@ -220,34 +232,66 @@ def setup_key(profile: FlightProfile, truth_profile: FlightProfile | None, model
 
 def worker_setup(profile: FlightProfile, truth_profile: FlightProfile | None, derived: DerivedModel, mode: str,
                  store_every: int, implementation: str, key: str) -> MonteCarloSetup:
-    """The set-up the workers receive: the code generated here, the derived model and the layout made here."""
+    """The set-up the workers receive: the code generated here, the model's outline, derived model and layout made here."""
     code = generated_filter_files(derived) if implementation != "reference" else None
-    shipped = symbolic_only(derived)
-    return MonteCarloSetup(profile, truth_profile, derived.model, mode, store_every, implementation, key, code, shipped,
-                           caller_layout(profile, derived, shipped))
+    outline = ModelOutline.of(derived)
+    symbolic = pickle.dumps(symbolic_only(derived), protocol=pickle.HIGHEST_PROTOCOL)
+    return MonteCarloSetup(profile, truth_profile, outline, mode, store_every, implementation, key, code, symbolic,
+                           caller_layout(profile, derived, outline))
+
+
+def flies_compiled_loop(profile: FlightProfile, make_filter: Any) -> bool:
+    """Whether :func:`fly_profile` flies ``profile`` with ``make_filter`` in the compiled loop.
+
+    The compiled loop (:mod:`modelgen.simulation.native_loop`) reads only the
+    model's outline; the Python loop evaluates the symbolic H and R.  Same
+    rule as :func:`modelgen.simulation.streaming.fly_modes` (its default glue, no sinks).
+    """
+    sensor = profile.aiding_sensor
+    return hasattr(sensor, "filter_loop") and native_supported(sensor, make_filter)
+
+
+def received_model(setup: MonteCarloSetup) -> DerivedModel:
+    """The caller's derived model sent with ``setup`` (unpickling it imports sympy), for runs that need it."""
+    if setup.derived is None:
+        raise ModelError(f"Monte Carlo set-up {setup.key}: its runs (filter {setup.implementation!r}, sensor "
+                         f"{setup.profile.aiding_sensor.name!r}) need the derived model, and the set-up carries none")
+    return pickle.loads(setup.derived)
 
 
 def _prepare(setup: MonteCarloSetup, derived: DerivedModel | None = None,
              mark: Callable[[str], None] = lambda step: None) -> dict:
-    """What a worker builds once per set-up: the derived model, trajectory, error layout and filter maker.
+    """What a worker builds once per set-up: trajectory, filter maker, the model its runs need, error layout.
 
     The trajectory comes from the trajectory cache (made and kept there on a
     miss); the shipped code is written to a folder the context owns (removed
-    with it) and compiled through the compile cache.  ``mark(step)`` is called after
-    each step (the benchmark times a worker's set-up with it).
+    with it) and compiled through the compile cache.  The model is
+    ``derived`` if given (the caller's own, in its process), else the
+    set-up's outline when the runs fly the compiled loop, else the derived
+    model the set-up carries (:func:`received_model`).  ``mark(step)`` is
+    called after each step (the benchmark times a worker's set-up with it).
     """
-    derived = derived if derived is not None else setup.derived if setup.derived is not None else derive(setup.model)
-    mark("the derived model (the caller's, received with the set-up)")
     profile = setup.profile
     trajectory = cached_trajectory(profile.path, profile.imu_rate, 1.0 / profile.filter.period)
     mark("trajectory (truth and ideal IMU increments: from the trajectory cache, or made and kept there)")
-    shipped = setup.layout is not None and setup.layout.derived is derived
-    layout = setup.layout if shipped else profile_layout(profile, derived, trajectory)
-    mark("error layout (the caller's, received with the set-up)" if shipped else "error layout")
+    model: DerivedModel | ModelOutline | None = derived
+    if model is None and (setup.implementation == "reference" or setup.layout is None):
+        # the reference filter and a layout made here evaluate the symbolic matrices
+        model = received_model(setup)
+        mark("the model: the caller's derived model, unpickled (sympy)")
     code_dir = tempfile.TemporaryDirectory(prefix="modelgen-montecarlo-")
-    make_filter = filter_factory(derived, setup.implementation, code_dir.name, setup.code)
+    make_filter = filter_factory(model if model is not None else setup.outline, setup.implementation, code_dir.name,
+                                 setup.code)
     mark(f"filter: write the shipped code, compile or take from the cache ({setup.implementation})")
-    return {"setup": setup, "derived": derived, "trajectory": trajectory, "layout": layout, "make_filter": make_filter,
+    if model is None and flies_compiled_loop(profile, make_filter):
+        model = setup.outline
+        mark("the model: its outline, received with the set-up (the compiled loop needs no sympy)")
+    elif model is None:
+        model = received_model(setup)
+        mark("the model: the caller's derived model, unpickled (the Python loop evaluates H and R; sympy)")
+    layout = setup.layout if setup.layout is not None else profile_layout(profile, model, trajectory)
+    mark("error layout (the caller's, received with the set-up)" if setup.layout is not None else "error layout")
+    return {"setup": setup, "derived": model, "trajectory": trajectory, "layout": layout, "make_filter": make_filter,
             "code_dir": code_dir}
 
 
@@ -326,8 +370,8 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
                                key=f"modelgen-montecarlo-setup-{key}-{uuid.uuid4().hex[:8]}")
     else:  # this process flies with the caller's derived model (and makes the layout with the whole trajectory)
         code = generated_filter_files(derived) if implementation != "reference" and not finished else None
-        setup = shared = MonteCarloSetup(profile, truth_profile, derived.model, mode, store_every, implementation, key,
-                                         code)
+        setup = shared = MonteCarloSetup(profile, truth_profile, ModelOutline.of(derived), mode, store_every,
+                                         implementation, key, code)
         if not finished:
             worker_cached(key, lambda: _prepare(setup, derived))
     try:

@@ -56,11 +56,10 @@ flies it free, as the model assumes: no barometer, the pseudo-ranges bound it.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.simulation import earth
 from modelgen.simulation.error_layout import frame_matrix
@@ -81,6 +80,9 @@ from modelgen.simulation.profile_keys import DEG, ProfileSection
 from modelgen.simulation.rotation import misalignment, rotate_attitude
 from modelgen.simulation.strapdown import Strapdown
 from modelgen.simulation.trajectory import Trajectory
+
+if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
+    from modelgen.derive.symbolic import DerivedModel
 
 #: the model's states, in the order the navigator maps them (pseudorange_model(n), gps_pseudorange11)
 STATE_NAMES = (

@@ -26,11 +26,10 @@ from __future__ import annotations
 import math
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 import numpy as np
 
-from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.simulation.aiding import FilterMaker, Progress, SensorData
 from modelgen.simulation.error_layout import ErrorLayout
@@ -38,6 +37,9 @@ from modelgen.simulation.filter_loop import RunResult
 from modelgen.simulation.native_loop import native_supported, share_mechanization
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.trajectory import Trajectory
+
+if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
+    from modelgen.derive.symbolic import DerivedModel
 
 #: default piece length: 30 s of IMU data (9,000 samples at 300 Hz, 432 kB of increments); Python is
 #: entered once per piece and mode, so much shorter pieces cost interpreter time (10-s pieces: 0.3 s more CPU

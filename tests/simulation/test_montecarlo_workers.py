@@ -3,6 +3,7 @@
 import gc
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -152,26 +153,28 @@ def test_a_task_of_modelgen_travels_by_name_and_a_worker_imports_its_module_only
     assert _named(np.sum) == (np.sum, ())
 
 
-def test_a_worker_takes_the_callers_derived_model_instead_of_deriving_it(paper_derived, monkeypatch):
+def test_a_worker_flying_the_reference_takes_the_callers_derived_model_instead_of_deriving_it(paper_derived,
+                                                                                              monkeypatch):
     import pickle
 
+    import modelgen.derive.symbolic as symbolic
     from modelgen.simulation import montecarlo
 
     paper_derived._numeric  # the caller's model has made its lambdified matrices: code, which cannot travel
     with pytest.raises(Exception):
         pickle.dumps(paper_derived)
-    sent = pickle.loads(pickle.dumps(montecarlo.symbolic_only(paper_derived)))
-    assert all(getattr(sent, name) == getattr(paper_derived, name) for name in ("model", "F", "G", "H", "Q", "R"))
+    short = load_short_profile()
+    setup = montecarlo.worker_setup(short, None, paper_derived, short.filter.mode, 60, "reference", "test-key")
+    received = pickle.loads(pickle.dumps(setup))  # as a worker receives it
 
     def refuse(model):
         raise AssertionError("the worker derived the model again")
 
-    monkeypatch.setattr(montecarlo, "derive", refuse)
-    short = load_short_profile()
-    setup = montecarlo.MonteCarloSetup(short, None, paper_derived.model, short.filter.mode, 60, "reference", "test-key",
-                                       None, sent)
-    context = montecarlo._prepare(setup)
-    assert context["derived"] is sent
+    monkeypatch.setattr(symbolic, "derive", refuse)
+    context = montecarlo._prepare(received)
+    model = context["derived"]
+    assert isinstance(model, symbolic.DerivedModel)  # the reference filter evaluates its symbolic matrices
+    assert all(getattr(model, name) == getattr(paper_derived, name) for name in ("model", "F", "G", "H", "Q", "R"))
     context["code_dir"].cleanup()
 
 
@@ -181,19 +184,70 @@ def test_a_worker_takes_the_callers_error_layout_instead_of_making_it(paper_deri
     from modelgen.simulation import montecarlo
 
     short = load_short_profile()
-    shipped = montecarlo.symbolic_only(paper_derived)
-    setup = montecarlo.MonteCarloSetup(short, None, paper_derived.model, short.filter.mode, 60, "reference", "test-key",
-                                       None, shipped, montecarlo.caller_layout(short, paper_derived, shipped))
-    received = pickle.loads(pickle.dumps(setup))  # as a worker receives it: the layout holds the received model
-    assert received.layout.derived is received.derived
+    setup = montecarlo.worker_setup(short, None, paper_derived, short.filter.mode, 60, "reference", "test-key")
+    received = pickle.loads(pickle.dumps(setup))  # as a worker receives it: the layout holds the received outline
+    assert received.layout.derived is received.outline
 
     def refuse(*args):
         raise AssertionError("the worker made the error layout again")
 
     monkeypatch.setattr(montecarlo, "profile_layout", refuse)
     context = montecarlo._prepare(received)
-    assert context["layout"] is received.layout and context["derived"] is received.derived
+    assert context["layout"] is received.layout
     context["code_dir"].cleanup()
+
+
+def test_the_models_outline_has_the_names_and_sizes_the_compiled_loop_reads(paper_derived):
+    import pickle
+
+    from modelgen.codegen.layout import ModelSizes
+    from modelgen.simulation.model_outline import ModelOutline
+
+    outline = pickle.loads(pickle.dumps(ModelOutline.of(paper_derived)))
+    model = paper_derived.model
+    assert (outline.model.name, outline.model.frame) == (model.name, model.frame)
+    for names in ("state_names", "noise_names", "parameter_names", "measurement_names"):
+        assert list(getattr(outline.model, names)) == list(getattr(model, names))
+    assert ModelSizes.of(outline) == ModelSizes.of(paper_derived)
+    assert np.array_equal(outline.structure("H"), paper_derived.structure("H"))
+    with pytest.raises(Exception, match="keeps the structure of F, G, H only"):
+        outline.structure("Q")
+
+
+_WORKER_RUN = """
+import pickle, sys
+import numpy as np
+from modelgen import cluster
+cluster.import_long_lived("modelgen.simulation.montecarlo", "warm_worker")  # what a worker is asked first
+from modelgen.simulation import montecarlo
+sent = open(sys.argv[1], "rb").read()
+output = montecarlo.fly_one_run(sys.argv[2], sent, np.random.SeedSequence(5).spawn(2)[1])
+np.save(sys.argv[3], np.concatenate([output.errors.ravel(), output.sigma.ravel(), output.nees.ravel()]))
+print(sorted(name for name in sys.modules if name == "sympy" or name.startswith("sympy.")))
+"""
+
+
+def test_a_worker_flying_the_generated_c_in_the_compiled_loop_never_imports_sympy(paper_derived, tmp_path):
+    import os
+    import pickle
+    import subprocess
+
+    from modelgen.simulation import montecarlo
+
+    short = load_short_profile()
+    here = montecarlo.run_monte_carlo(short, paper_derived, runs=2, seed=5, implementation="c", store_every=60)
+    key = montecarlo.setup_key(short, None, paper_derived.model, short.filter.mode, 60, "c")
+    setup = montecarlo.worker_setup(short, None, paper_derived, short.filter.mode, 60, "c", key)
+    (tmp_path / "setup.pickle").write_bytes(pickle.dumps(setup, protocol=pickle.HIGHEST_PROTOCOL))
+    repo = str(Path(__file__).resolve().parents[2])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([repo, os.environ.get("PYTHONPATH", "")])}
+    done = subprocess.run([sys.executable, "-c", _WORKER_RUN, str(tmp_path / "setup.pickle"), key,
+                           str(tmp_path / "run.npy")], capture_output=True, text=True, env=env, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "[]"  # the set-up, the filter and the run: not one sympy module
+    run = here.runs - 1  # the same run (seed 5, run 2 of 2) flown in this process
+    expected = np.concatenate([here.errors[run].ravel(), here.sigma[run].ravel(), here.nees[run].ravel()])
+    assert np.array_equal(np.load(tmp_path / "run.npy"), expected, equal_nan=True)
 
 
 @pytest.mark.parametrize("name", ["profile_000", "profile_001", "profile_003"])
