@@ -394,6 +394,19 @@ def python_predict_kernel(structure: FilterStructure) -> str:
     return "structured" if saving > PYTHON_STRUCTURED_SAVING_FLOPS else "factored"
 
 
+#: The same choice for the generated ``Filter`` class, whose P is trusted (proven once, in
+#: set_covariance): no Cholesky factor to reuse, so the dense form is M = Phi P then one dgemm
+#: (M Phi^T + Q_d) on Fortran views.  bench/bench_python_module.py times both forms of the class
+#: (CPU time per call, one BLAS thread, bench/results/python_module.md "Filter predict kernels").
+PYTHON_FILTER_STRUCTURED_SAVING_FLOPS = 500_000
+
+
+def python_filter_predict_kernel(structure: FilterStructure) -> str:
+    """``dense`` (Phi P, then one BLAS dgemm) or ``structured`` (by row class) for the Filter class's predict."""
+    saving = dense_predict_cost(structure.n_states).total - python_predict_cost(structure).total
+    return "structured" if saving > PYTHON_FILTER_STRUCTURED_SAVING_FLOPS else "dense"
+
+
 def discretize_cost(structure: FilterStructure, order: int) -> OperationCount:
     """Flops of the Taylor series over CSR F, Gamma = T S G and Q_d (upper triangle)."""
     n = structure.n_states

@@ -102,6 +102,12 @@ def test_an_invalid_covariance_is_refused_by_c_set_covariance_and_python_predict
             py.predict(x, P, phi, qd)
         with pytest.raises(ValueError, match=r"update: P"):
             py.update(x, P, np.zeros(len(r)), H, r)
+        with pytest.raises(ValueError, match=r"set_covariance: P"):  # the Filter class, as the C's set_covariance
+            py.Filter(x, P)
+        f = py.Filter(x, correlated(n))
+        with pytest.raises(ValueError, match=r"set_covariance: P"):
+            f.set_covariance(P)
+        assert np.array_equal(f.get_covariance(), correlated(n)), what
 
 
 @pytest.mark.parametrize("options", FAMILIES, ids=lambda o: o.slug())
@@ -160,6 +166,44 @@ def test_bad_measurements_and_states_are_refused_by_both_and_leave_the_c_filter_
         py.predict(x_nan, P, phi, qd)
     with pytest.raises(ValueError, match="update: x"):
         py.update(x_nan, P, z, H, r)
+    with pytest.raises(ValueError, match="set_state: x"):  # the Filter class refuses it, as the C's set_state does
+        py.Filter(x_nan, P)
+
+
+@pytest.mark.parametrize("options", [FAMILIES[0], FAMILIES[4]], ids=lambda o: o.slug())
+def test_the_python_filter_class_refuses_what_the_c_filter_refuses_and_is_then_unchanged(builds, options, operating_point):
+    """The stateful API of both languages: set_covariance, update and update_masked on the same bad inputs."""
+    built = builds[options.slug()]
+    n = built.derived.n_states
+    c = ready_c_filter(built, options, operating_point)
+    py = built.python
+    p, phi, qd, x, P = python_inputs(py, operating_point, n)
+    H, r = py.measurement_matrix(p), py.measurement_variance(p)
+    f = py.Filter(x, P)
+    f.predict(phi, qd)
+    assert c.predict() == 0
+    state = (f.get_state().tobytes(), f.get_covariance().tobytes())
+    cases = {
+        "z": (np.array([math.nan] + [0.0] * (len(r) - 1)), None),
+        "r": (np.zeros(len(r)), -1.0),
+    }
+    r_c = np.ctypeslib.as_array(c.matrices.r)
+    for what, (z, r0) in cases.items():
+        before = snapshot(c)
+        saved = r_c[0]
+        if r0 is not None:
+            r_c[0] = r0
+        assert c.update(z) != 0, what
+        status, _, _ = c.update_masked(z, None)
+        assert status != 0, what
+        r_c[0] = saved
+        assert snapshot(c) == before, what
+        r_py = r if r0 is None else np.concatenate([[r0], r[1:]])
+        with pytest.raises(ValueError, match=f"update: {what}"):
+            f.update(z, H, r_py)
+        with pytest.raises(ValueError, match=f"update: {what}"):
+            f.update_masked(z, H, r_py)
+        assert (f.get_state().tobytes(), f.get_covariance().tobytes()) == state, what
 
 
 @pytest.mark.parametrize("latitude_deg", [90.0, -90.0])

@@ -7,7 +7,7 @@ import json
 from modelgen.codegen.backends.python.printer import parameter_locals
 from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.expressions import Block, eliminate_common_subexpressions, poles
-from modelgen.codegen.kernels import python_predict_kernel, python_predict_plan
+from modelgen.codegen.kernels import python_filter_predict_kernel, python_predict_kernel, python_predict_plan
 from modelgen.derive.discretization import DOUBLE_ROUNDOFF, nominal_scaling, series_range
 
 BANNER = "# GENERATED FILE - DO NOT EDIT (modelgen)"
@@ -91,6 +91,7 @@ def python_context(description: FilterDescription) -> dict[str, object]:
         "functions": matrix_functions(description),
         "plan": python_predict_plan(structure),
         "predict_kernel": python_predict_kernel(structure),
+        "filter_predict_kernel": python_filter_predict_kernel(structure),
         "general_rows": index_expression(python_predict_plan(structure)["general"]),
         "van_loan": options.van_loan,
         "balance_in_python": int(structure.F.sum()) <= PYTHON_BALANCING_ENTRIES,
