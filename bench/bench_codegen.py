@@ -153,7 +153,7 @@ static {model}_matrices mat;
 static void setup(void)
 {{
     int e, a, i, j;
-    memcpy(tr.Phi, in_Phi, sizeof in_Phi);
+    for (e = 0; e < {model.upper()}_N_PHI; ++e) tr.Phi[e] = in_Phi[{model}_Phi_row[e]][{model}_Phi_col[e]]; /* Phi compressed to its pattern */
     for (i = 0, e = 0; i < BENCH_N; ++i) {{
         for (j = i; j < BENCH_N; ++j) tr.Qd[e++] = in_Qd[i][j]; /* the transition keeps Q_d packed (upper) */
     }}

@@ -211,7 +211,7 @@ def _ctypes_struct(name: str, fields, real) -> type:
 def _model_sizes(sizes: dict[str, int] | ModelSizes) -> ModelSizes:
     if isinstance(sizes, ModelSizes):
         return sizes
-    return ModelSizes(**{k: int(sizes[k]) for k in ("n", "nw", "nm", "nnz_f", "nnz_g", "nnz_h")})
+    return ModelSizes(**{k: int(sizes[k]) for k in ("n", "nw", "nm", "nnz_f", "nnz_g", "nnz_h", "nnz_phi")})
 
 
 class CompiledFilter:
@@ -262,6 +262,10 @@ class CompiledFilter:
         self._get_covariance = getattr(self.lib, f"{model}_get_covariance")
         self._get_covariance.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
         self._get_covariance.restype = None
+        self._get_transition_matrix = getattr(self.lib, f"{model}_get_transition_matrix")
+        self._get_transition_matrix.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+        self._get_transition_matrix.restype = None
+        self._set_transition_matrix = self._function("set_transition_matrix", [ctypes.c_void_p] * 2)
         self._update = getattr(self.lib, f"{model}_update", None)
         if self._update is not None:
             self._update.argtypes = [ctypes.c_void_p] * 4
@@ -345,7 +349,34 @@ class CompiledFilter:
 
     @property
     def Phi(self) -> np.ndarray:
-        return self._view(self.transition.Phi).astype(float)
+        """Phi as a full matrix (the generated get_transition_matrix expands the compressed transition)."""
+        buffer = self._square()
+        self._get_transition_matrix(ctypes.byref(self.transition), buffer)
+        return np.ctypeslib.as_array(buffer).astype(float)
+
+    @functools.cached_property
+    def phi_entries(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, columns) of the transition's stored Phi entries, read from the C itself.
+
+        A scratch transition holding 1, 2, ... in its stored entries is
+        expanded by the generated get_transition_matrix: entry k lands at its
+        (row, column), so no index table or index type is assumed here.
+        """
+        scratch = type(self.transition)()
+        stored = self._view(scratch.Phi)
+        stored[:] = np.arange(1, stored.size + 1)
+        buffer = self._square()
+        self._get_transition_matrix(ctypes.byref(scratch), buffer)
+        dense = np.ctypeslib.as_array(buffer).astype(float)
+        rows, cols = np.nonzero(dense)
+        order = np.argsort(dense[rows, cols])
+        return rows[order].astype(np.int64), cols[order].astype(np.int64)
+
+    def set_transition_matrix(self, Phi: np.ndarray) -> int:
+        """The generated set_transition_matrix from a full Phi; returns its status (ERR_STRUCTURE off the pattern)."""
+        buffer = self._square()
+        np.ctypeslib.as_array(buffer)[:] = np.asarray(Phi, dtype=float)
+        return self._set_transition_matrix(ctypes.byref(self.transition), buffer)
 
     @property
     def Qd(self) -> np.ndarray:

@@ -60,7 +60,7 @@ from functools import cached_property
 import numpy as np
 
 from modelgen.codegen.kernels import Assign, CheckedAssign, KernelBlock, OperationCount, Ref
-from modelgen.codegen.layout import packed_index
+from modelgen.codegen.layout import packed_index, phi_positions
 from modelgen.codegen.structure import FilterStructure
 
 #: Scalars a discretize block receives by value (printed as the parameter's name).
@@ -99,6 +99,15 @@ class DiscretizePlan:
 
     structure: FilterStructure
     order: int
+
+    @cached_property
+    def phi_position(self) -> dict[tuple[int, int], int]:
+        """Where entry (i, j) of Phi is stored in the transition (its structural pattern, ``layout.phi_entries``)."""
+        return phi_positions(self.structure.Phi)
+
+    def phi(self, i: int, j: int) -> Ref:
+        """Entry (i, j) of the transition's compressed Phi (a structural nonzero)."""
+        return Ref("transition", "Phi", (self.phi_position[(i, j)],))
 
     @cached_property
     def f_entries(self) -> list[tuple[int, int]]:
@@ -321,10 +330,6 @@ def scalar_statements(statements) -> list:
     return [e for s in statements for e in (s.expand() if isinstance(s, SegmentAssign) else (s,))]
 
 
-def _phi(i: int, j: int) -> Ref:
-    return Ref("transition", "Phi", (i, j))
-
-
 def _s(plan: DiscretizePlan, i: int, j: int) -> Ref | None:
     """S(i, j): stored in an active row, None (meaning delta_ij) in a unit row."""
     return Ref("scratch", "S", (plan.s_position[(i, j)],)) if i not in set(plan.structure.unit_rows) else None
@@ -384,13 +389,20 @@ def horner_top_block(plan: DiscretizePlan, parity: int) -> DiscretizeBlock:
     return DiscretizeBlock(KernelBlock(horner_level_name(1, parity), tuple(lines)), (), _scalars_used(lines))
 
 
-def _column_runs(plan: DiscretizePlan, lo: int, hi: int) -> list[tuple[int, int]]:
-    """Segment positions [lo, hi) cut into runs over consecutive columns of the matrix (padding positions left out)."""
+def _column_runs(plan: DiscretizePlan, lo: int, hi: int, row: int | None = None) -> list[tuple[int, int]]:
+    """Segment positions [lo, hi) cut into runs over consecutive columns of the matrix (padding positions left out).
+
+    With ``row`` the runs cover only the structural nonzeros of that row of
+    Phi (the stored entries of the compressed transition, consecutive in
+    storage along a run); the segment's other columns are structural zeros
+    of the row, not stored.
+    """
     n = plan.structure.n_states
+    pattern = plan.structure.Phi
     runs: list[tuple[int, int]] = []
     for p in range(lo, hi):
         j = plan.position_column(p)
-        if j >= n:
+        if j >= n or (row is not None and not pattern[row, j]):
             continue
         if runs and runs[-1][1] == p and plan.position_column(p - 1) == j - 1:
             runs[-1] = (runs[-1][0], p + 1)
@@ -411,8 +423,9 @@ def _product_rows(plan: DiscretizePlan, target, source, diagonal: Ref | None, in
     (which C sums in loops over all rows: each source segment is loaded once
     per step).  The unit columns are left to :func:`unit_column_terms`; a leaf
     column's only entry is the diagonal constant.  ``into_matrix``: the target
-    is an N x N matrix, so each segment is cut into runs of consecutive
-    columns (no padding); the rows in ``skip`` are not computed.
+    is Phi, stored compressed, so each segment is cut into runs of consecutive
+    structural nonzeros (no padding, no structural zeros); the rows in
+    ``skip`` are not computed.
     """
     blocks = set(plan.block_rows)
     unit = set(plan.structure.unit_rows)
@@ -421,8 +434,8 @@ def _product_rows(plan: DiscretizePlan, target, source, diagonal: Ref | None, in
     spans = plan.spans
     column = plan.position_column
 
-    def pieces(lo: int, hi: int) -> list[tuple[int, int]]:
-        return _column_runs(plan, lo, hi) if into_matrix else [(lo, hi)]
+    def pieces(i: int, lo: int, hi: int) -> list[tuple[int, int]]:
+        return _column_runs(plan, lo, hi, i) if into_matrix else [(lo, hi)]
 
     rows = [r for r in plan.block_rows if r not in skip]
     whole: list = []
@@ -441,11 +454,11 @@ def _product_rows(plan: DiscretizePlan, target, source, diagonal: Ref | None, in
                 same.append((c, e))
             elif hi > lo:
                 narrower.setdefault((lo, hi), []).append((c, e))
-        for a, b in pieces(first, end):
+        for a, b in pieces(i, first, end):
             terms = tuple((Ref("scratch", "fh", (e,)), source(c, column(a))) for c, e in same)
             whole.append(SegmentAssign(target(i, column(a)), terms, b - a))
         for (lo, hi), sources in narrower.items():
-            for a, b in pieces(lo, hi):
+            for a, b in pieces(i, lo, hi):
                 terms = tuple((Ref("scratch", "fh", (e,)), source(c, column(a))) for c, e in sources)
                 parts.append(SegmentAssign(target(i, column(a)), terms, b - a, accumulate=True))
     lines = whole + parts
@@ -514,27 +527,25 @@ def horner_transition_block(plan: DiscretizePlan) -> DiscretizeBlock:
     """E = Phi - I = A S over the stored rows, into Phi (S = e_c on a row c of random constants).
 
     The block rows' segments are written into Phi's rows as runs of
-    consecutive columns (their structural zeros are stored zeros), the unit
-    columns as S A(:, j), every other entry of Phi is set to zero here:
-    straight-line zero stores, which gcc -O2 pairs into vector stores,
-    instead of a loop over N x N that it turns into ``rep stos`` (one
-    instruction per entry).  The identity is added after the doublings
-    (:func:`doubling_block`).
+    consecutive structural nonzeros (Phi is stored compressed to its
+    pattern, ``layout.phi_entries``), the unit columns as S A(:, j); every
+    other stored entry (a unit row's diagonal 1, a structural nonzero no
+    product reaches) is set here by straight-line stores.  The identity is
+    added after the doublings (:func:`transition_check_block`).
     """
-    n = plan.structure.n_states
 
     def source(c: int, j: int) -> Ref:
         return Ref("scratch", "S", (plan.s_position[(c, j)],))
 
+    _phi = plan.phi
     lines = _product_rows(plan, _phi, source, None, True)
     lines += unit_column_terms(plan, _phi, source)
     written = {s.target.index for s in scalar_statements(lines)}
     unit = set(plan.structure.unit_rows)
     lines += [
         Assign(_phi(i, j), ((_local("one"),),) if i == j and i in unit else ())  # a unit row is e_i of Phi now
-        for i in range(n)
-        for j in range(n)
-        if (i, j) not in written
+        for (i, j), k in plan.phi_position.items()
+        if (k,) not in written
     ]
     return DiscretizeBlock(KernelBlock("horner_transition", tuple(lines)), (("one", 1, 1),) if unit else ())
 
@@ -597,6 +608,7 @@ def doubling_block(plan: DiscretizePlan) -> DiscretizeBlock:
     """
     unit = set(plan.structure.unit_rows)
     active = _index(plan.active)
+    _phi = plan.phi
     rows: dict[int, list[int]] = {}
     for i, c in plan.active:
         rows.setdefault(i, []).append(c)
@@ -692,6 +704,7 @@ def transition_check_block(plan: DiscretizePlan) -> DiscretizeBlock:
     finite may be an overflow of finite entries, which the C then decides
     entry by entry: one addition per entry instead of two.
     """
+    _phi = plan.phi
     lines: list = [Assign(_phi(i, i), ((_phi(i, i),), (_local("one"),))) for i, j in plan.active if i == j]
     lines.append(CheckedAssign((Ref("scratch", "term", (0, 0)),), tuple((_phi(i, j),) for i, j in plan.active)))
     return DiscretizeBlock(KernelBlock("transition_check", tuple(lines), checked=True), (("one", 1, 1),))

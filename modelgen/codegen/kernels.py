@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from modelgen.codegen.layout import packed_index, upper_index
+from modelgen.codegen.layout import packed_index, phi_positions, upper_index
 from modelgen.codegen.options import CodegenOptions
 from modelgen.codegen.structure import FilterStructure
 
@@ -82,8 +82,14 @@ def _symmetric(owner: str, array: str, n: int, packed: bool, i: int, j: int) -> 
     return Ref(owner, array, (i, j))
 
 
-def _phi(i: int, k: int) -> Ref:
-    return Ref("transition", "Phi", (i, k))
+def phi_reference(structure: FilterStructure):
+    """Entry (i, k) of the transition's Phi, stored compressed to its structural pattern (``layout.phi_entries``)."""
+    positions = phi_positions(structure.Phi)
+
+    def phi(i: int, k: int) -> Ref:
+        return Ref("transition", "Phi", (positions[(i, k)],))
+
+    return phi
 
 
 def state_predict(structure: FilterStructure) -> tuple[list[Assign], list[Assign], OperationCount]:
@@ -95,6 +101,7 @@ def state_predict(structure: FilterStructure) -> tuple[list[Assign], list[Assign
     """
     rows = structure.rows("Phi")
     unit = set(structure.unit_rows)
+    _phi = phi_reference(structure)
     mul = add = 0
     lines, commit = [], []
     for i in range(structure.n_states):
@@ -149,6 +156,7 @@ def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[K
     n = structure.n_states
     rows = structure.rows("Phi")
     unit = set(structure.unit_rows)
+    _phi = phi_reference(structure)
     mul = add = 0
     blocks = []
 
@@ -255,7 +263,9 @@ def compact_kernels(structure: FilterStructure) -> bool:
 def compact_predict_tables(structure: FilterStructure) -> dict[str, list[int]]:
     """The CSR pattern of Phi over every row (a unit row holds its diagonal) and the unit-row flags.
 
-    The compact kernels (C templates ``c_predict_covariance.c.j2``,
+    Entry e of the pattern is entry e of the transition's compressed Phi
+    (``layout.phi_entries``: the same row-major order), so the loops read
+    ``t->Phi[e]``.  The compact kernels (C templates ``c_predict_covariance.c.j2``,
     ``c_predict_ud.c.j2``) loop over these tables in the same order as the
     unrolled code adds its terms, so both give the same bits.
     """
@@ -299,6 +309,7 @@ def ud_weights(structure: FilterStructure) -> tuple[list[KernelBlock], Operation
     """
     n = structure.n_states
     rows = structure.rows("Phi")
+    _phi = phi_reference(structure)
     mul = add = 0
     blocks = []
     for i in range(n):

@@ -13,6 +13,15 @@ writes and predict reads each pair i <= j once, and the transition is
 N (N - 1) / 2 entries smaller than a full one.  The UD form
 keeps the strictly upper part of U the same way:
 ``(i, j), i < j -> i (2N - i - 3) / 2 + j - 1`` (``upper_index``).
+
+The transition's Phi is compressed to its structural pattern
+(``phi_entries``): the structural nonzeros of e^{F T} (the closure of F's
+pattern with the identity, ``modelgen.codegen.structure``), row by row, a
+row of random constants holding its diagonal 1 alone.  Every discretization
+(Taylor, its doublings, the compact kernels, Van Loan) gives zero elsewhere,
+so the other N^2 - nnz entries are not stored; the generated C exports the
+(row, column) of each stored entry and expands it for callers
+(``<prefix>_get_transition_matrix``).
 """
 
 from __future__ import annotations
@@ -34,6 +43,7 @@ class ModelSizes:
     nnz_f: int
     nnz_g: int
     nnz_h: int
+    nnz_phi: int  # structural nonzeros of Phi, the entries of the transition's compressed Phi
 
     @classmethod
     def of(cls, derived) -> "ModelSizes":
@@ -45,6 +55,7 @@ class ModelSizes:
             nnz_f=int(np.count_nonzero(derived.structure("F"))),
             nnz_g=int(np.count_nonzero(derived.structure("G"))),
             nnz_h=int(np.count_nonzero(derived.structure("H"))),
+            nnz_phi=int(np.count_nonzero(phi_pattern(derived.structure("F")))),
         )
 
     @property
@@ -54,6 +65,32 @@ class ModelSizes:
     @property
     def upper(self) -> int:
         return self.n * (self.n - 1) // 2
+
+
+def phi_pattern(F: np.ndarray) -> np.ndarray:
+    """Structural pattern of Phi = e^{F T}: which state reaches which along nonzeros of F (with the identity).
+
+    The transitive closure of I + F's pattern by repeated squaring (log2 N
+    boolean products), the same pattern as ``structure.filter_structure``'s
+    Phi, which sums paths up to length N one at a time.
+    """
+    F = np.asarray(F, dtype=bool)
+    closure = (np.eye(F.shape[0]) + F) > 0
+    while True:
+        wider = (closure.astype(float) @ closure.astype(float)) > 0
+        if np.array_equal(wider, closure):
+            return closure
+        closure = wider
+
+
+def phi_entries(pattern: np.ndarray) -> list[tuple[int, int]]:
+    """(row, column) of each stored entry of the transition's Phi, in storage order (row-major)."""
+    return [(int(i), int(j)) for i, j in zip(*np.nonzero(np.asarray(pattern, dtype=bool)))]
+
+
+def phi_positions(pattern: np.ndarray) -> dict[tuple[int, int], int]:
+    """Storage index of each structural nonzero (i, j) of Phi (``phi_entries``' order)."""
+    return {entry: k for k, entry in enumerate(phi_entries(pattern))}
 
 
 def packed_index(n: int, i: int, j: int) -> int:
@@ -184,6 +221,7 @@ def _van_loan_scratch(N: Dim, dim_w: Dim) -> tuple[Field, ...]:
     """Members of Van Loan's discretize (modelgen.codegen.van_loan): two terms, E12's sum, rows, balancing sums."""
     N2 = Dim(f"2 * {N.text}", 2 * N.value)
     return (
+        Field("Phi", (N, N), "Phi(h) dense (E22(h)^T), then its doublings; stored compressed at the end"),
         Field("B", (N, N), "upper-right term B_k of e^{M h}; the doubling's products"),
         Field("C", (N, N), "lower-right term (F^T h)^k / k!; then Q_d of each doubling"),
         Field("S", (N, N), "W, then the sum of the B terms (E12), then the doubling's new Q_d"),
@@ -234,6 +272,9 @@ def c_layout(
     dim_w = Dim(str(max(sizes.nw, 1)), max(sizes.nw, 1))
     dim_m = Dim(str(max(sizes.nm, 1)), max(sizes.nm, 1))
     symmetric = (NP,) if options.packed else (N, N)
+    phi = Field("Phi", (Dim(f"{prefix}_N_PHI", max(sizes.nnz_phi, 1)),),
+                f"transition matrix, its structural nonzeros row by row: entry k is (i, j) = ({prefix.lower()}_Phi_row[k], "
+                f"{prefix.lower()}_Phi_col[k]), every other entry is 0 ({prefix.lower()}_get_transition_matrix expands it)")
 
     matrices = (
         Field("F", (nnz_f,)),
@@ -244,7 +285,7 @@ def c_layout(
     )
     if options.ud:
         transition = (
-            Field("Phi", (N, N), "transition matrix"),
+            phi,
             Field("Gamma", (N, dim_w), "noise input matrix of the step"),
             Field("qw", (dim_w,), "discrete noise weights q / T: Q_d = Gamma diag(qw) Gamma^T"),
         ) + _recompute_fields(options, nnz_f, dim_g, dim_w)
@@ -272,7 +313,7 @@ def c_layout(
 
     qd_kind = "int_0^T e^{F s} G Q G^T e^{F^T s} ds (Van Loan)" if options.van_loan else "Gamma (Q/T) Gamma^T"
     transition = (  # Q_d packed whatever P's storage (module doc)
-        Field("Phi", (N, N), "transition matrix"),
+        phi,
         Field("Qd", (NP,), qd_kind + ", packed upper triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j"),
     ) + _recompute_fields(options, nnz_f, dim_g, dim_w)
     filt = (

@@ -221,7 +221,7 @@ class NativeFilter:
     addresses: np.ndarray  # params, matrices, transition, filter, workspace (uint64)
     parameters: np.ndarray  # view of the params struct (model parameter order)
     state: np.ndarray  # view of filter.x
-    transition_matrix: np.ndarray  # view of transition.Phi (n, n)
+    transition_matrix: tuple  # (view of transition.Phi, its stored entries; their rows, columns; a dense (n, n) to expand into)
     filter_bytes: np.ndarray  # the filter struct as bytes (snapshot / restore around a gated update)
 
     @classmethod
@@ -251,9 +251,11 @@ class NativeFilter:
         size = ctypes.sizeof(compiled.filter)
         filter_bytes = np.ctypeslib.as_array((ctypes.c_uint8 * size).from_address(int(addresses[3])))
         state = np.ctypeslib.as_array(compiled.filter.x)
-        transition_matrix = np.ctypeslib.as_array(compiled.transition.Phi)
-        if transition_matrix.shape != (compiled.n, compiled.n):
-            raise ModelError("native filter loop: the transition struct has no full Phi")
+        stored = np.ctypeslib.as_array(compiled.transition.Phi)  # Phi compressed to its structural nonzeros
+        rows, cols = compiled.phi_entries
+        if stored.shape != rows.shape:
+            raise ModelError("native filter loop: the transition's Phi does not match its layout")
+        transition_matrix = (stored, rows, cols, np.zeros((compiled.n, compiled.n)))
         return cls(compiled, functions, addresses, parameters, state, transition_matrix, filter_bytes)
 
 

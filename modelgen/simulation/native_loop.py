@@ -294,7 +294,10 @@ def _fly_piece(first, last, mode, period, n_cycles, record_every,
             if predict(addresses[3], addresses[2], addresses[4]) != 0:
                 return ERR_PREDICT
             if mode == 2:
-                carried = phi @ accumulated
+                stored, phi_rows, phi_cols, dense = phi  # the transition's compressed Phi, expanded (zeros stay 0)
+                for e in range(stored.shape[0]):
+                    dense[phi_rows[e], phi_cols[e]] = stored[e]
+                carried = dense @ accumulated
                 for i in range(n):
                     accumulated[i] = carried[i]
                 _corrected(raw, accumulated, attitude, velocity, position, for_filter)

@@ -187,7 +187,7 @@ def run_chain(plan: DiscretizePlan, F: np.ndarray, h: float, order: int, doublin
         ("scratch", "fh"): np.full(len(plan.f_entries), np.nan),
         ("scratch", "S"): np.full(plan.active_size, np.nan),
         ("scratch", "term"): np.full((2, plan.term_size), np.nan),
-        ("transition", "Phi"): np.zeros((n, n)),  # E = Phi - I, as the C holds it until the doublings are done
+        ("transition", "Phi"): np.full(len(plan.phi_position), np.nan),  # compressed; E = Phi - I until the doublings are done
     }
 
     def run(name: str, local: dict[str, float]) -> None:
@@ -211,7 +211,10 @@ def run_chain(plan: DiscretizePlan, F: np.ndarray, h: float, order: int, doublin
     S = np.eye(n)
     for i, j in plan.active:
         S[i, j] = arrays[("scratch", "S")][plan.s_position[(i, j)]]
-    return arrays[("transition", "Phi")].copy(), S
+    phi = np.zeros((n, n))  # the stored entries expanded: every other entry of Phi is a structural zero
+    for (i, j), k in plan.phi_position.items():
+        phi[i, j] = arrays[("transition", "Phi")][k]
+    return phi, S
 
 
 @pytest.mark.parametrize("order", [1, 2, 3, 4, 5, 9])
@@ -245,14 +248,17 @@ def test_rows_of_random_constants_are_only_set_to_e_i(plan):
     for b in blocks:
         for s in scalar_statements(b.block.statements):
             for target in s.targets if hasattr(s, "targets") else (s.target,):
-                if target.array == "Phi" and target.index[0] in unit:
-                    i, j = target.index
+                entry = {k: e for e, k in plan.phi_position.items()}
+                if target.array == "Phi" and entry[target.index[0]][0] in unit:
+                    i, j = entry[target.index[0]]
                     assert b.block.name == "horner_transition"
                     assert s.terms == ((Ref("local", "one", ()),),) if i == j else not s.terms
 
 
 def test_the_transition_and_process_noise_set_every_entry_once(plan):
-    """discretize does not clear Phi and Q_d first: the blocks write each entry exactly once (E = A S or zero; Q_d or zero)."""
+    """discretize does not clear Phi and Q_d first: the blocks write each stored entry exactly once (E = A S or zero; Q_d or zero).
+
+    Phi is stored compressed to its structural nonzeros: every one of them is written, and nothing else."""
     n = plan.structure.n_states
     (transition,) = [b for b in series_blocks(plan) if b.block.name == "horner_transition"]
     stores, added = [], set()
@@ -261,7 +267,8 @@ def test_the_transition_and_process_noise_set_every_entry_once(plan):
             added.add(s.target.index)
         else:
             stores.append(s.target.index)
-    assert sorted(stores) == [(i, j) for i in range(n) for j in range(n)]
+    assert sorted(stores) == [(k,) for k in range(len(plan.phi_position))]
+    assert len(plan.phi_position) == int(plan.structure.Phi.sum())
     assert added <= set(stores)
     for packed in (False, True):
         noise = noise_blocks(plan, packed=packed, ud=False)[-1].block.statements

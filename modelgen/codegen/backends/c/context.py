@@ -10,7 +10,7 @@ from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.discretize_kernels import HORNER_LAST, DiscretizeBlock, SegmentAssign, horner_level_name, scalar_statements
 from modelgen.codegen.kernels import KernelBlock, compact_predict_tables
 from modelgen.codegen.compact_discretize import CompactDiscretizeTables
-from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout
+from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout, phi_entries
 from modelgen.codegen.structure import FilterStructure
 from modelgen.codegen.van_loan import QD_MARGIN
 from modelgen.derive.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range
@@ -53,6 +53,9 @@ def index_tables(structure: FilterStructure) -> dict[str, object]:
         "active_col": _table([j for _, j in active]),
         "n_unit": len(unit),
         "unit_row": _table(sorted(unit)),
+        "unit_flags": _table([1 if i in unit else 0 for i in range(n)]),
+        "Phi_row": _table([i for i, _ in phi_entries(structure.Phi)]),
+        "Phi_col": _table([j for _, j in phi_entries(structure.Phi)]),
         "n_qd": len(qd),
         "qd_row": _table([i for i, _ in qd]),
         "qd_col": _table([j for _, j in qd]),
@@ -318,6 +321,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "nnz_f": sizes.nnz_f,
         "nnz_g": sizes.nnz_g,
         "nnz_h": sizes.nnz_h,
+        "nnz_phi": sizes.nnz_phi,
         "n_packed": sizes.packed,
         "n_upper": max(sizes.upper, 1),
         "n_upper_real": sizes.upper,
@@ -391,6 +395,10 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         if len(structure.unit_rows) < n
         else (0, 0),
         "predict_state_commit": [c_statement(s) for s in state_commit],
+        "probe_entry": phi_entries(structure.Phi).index(
+            next((i, j) for i, j in structure.entries("Phi") if i not in set(structure.unit_rows))
+            if len(structure.unit_rows) < n else (0, 0)
+        ),
         "covariance_commit_rows": description.covariance_commit,
         "predict_blocks": block_functions(blocks, model.name),
         "compact": bool(compact),

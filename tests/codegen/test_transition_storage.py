@@ -1,0 +1,96 @@
+"""The transition's Phi is stored compressed to its structural pattern (issue 14, item 6).
+
+The C keeps only the structural nonzeros of Phi, row by row (``layout.phi_entries``):
+get_transition_matrix expands them, set_transition_matrix takes a full Phi and
+refuses one that predict could not represent; discretize and predict agree with
+the full matrix they stand for.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from modelgen.codegen.build import CompiledFilter, compile_shared_library
+from modelgen.codegen.layout import ModelSizes, phi_entries, phi_pattern
+from modelgen.codegen.options import CodegenOptions
+from modelgen.codegen.generate import generate_code
+from modelgen.codegen.structure import filter_structure
+
+from generated_support import write_files
+
+OK, ERR_NONFINITE, ERR_STRUCTURE = 0, 1, 3
+VALUES = {"latitude": 0.6}
+
+
+@pytest.fixture(scope="module", params=[CodegenOptions(), CodegenOptions(form="ud", scalar="float")], ids=lambda o: o.slug())
+def compiled(request, paper_derived, tmp_path_factory) -> CompiledFilter:
+    options = request.param
+    folder = write_files(tmp_path_factory.mktemp(options.slug()), generate_code(paper_derived, options).files)
+    library = compile_shared_library([folder / "ned_doppler18.c"], folder / "libned_doppler18.so")
+    model = paper_derived.model
+    c = CompiledFilter(library, model.name, ModelSizes.of(paper_derived), model.parameter_names, options=options)
+    values = {q.name: VALUES.get(q.name, 20.0) for q in model.parameters if q.value is None}
+    assert c.set_parameters(values) == OK
+    assert c.discretize(60.0) == OK
+    return c
+
+
+def test_the_closure_by_squaring_is_the_structure_modules_pattern(paper_derived):
+    """layout.phi_pattern (repeated squaring) gives the same pattern as the codegen structure (paths one at a time)."""
+    F = paper_derived.structure("F")
+    structure = filter_structure(F, paper_derived.structure("G"), paper_derived.structure("H"), 9)
+    assert np.array_equal(phi_pattern(F), structure.Phi)
+    assert ModelSizes.of(paper_derived).nnz_phi == 117 == len(phi_entries(structure.Phi))
+
+
+def test_the_transition_stores_only_the_structural_nonzeros_of_phi(compiled, paper_derived):
+    """117 of 324 entries for the paper's model; the C's own layout is the row-major pattern of layout.phi_entries."""
+    rows, cols = compiled.phi_entries
+    assert list(zip(rows.tolist(), cols.tolist())) == phi_entries(phi_pattern(paper_derived.structure("F")))
+    assert np.ctypeslib.as_array(compiled.transition.Phi).shape == (117,)
+
+
+def test_get_expands_and_set_round_trips_a_discretized_phi(compiled):
+    """The expanded Phi is zero off the pattern; setting it back leaves the stored entries bit for bit."""
+    phi = compiled.Phi
+    rows, cols = compiled.phi_entries
+    off = np.ones(phi.shape, bool)
+    off[rows, cols] = False
+    assert not phi[off].any() and phi[rows, cols].any()
+    stored = np.ctypeslib.as_array(compiled.transition.Phi).copy()
+    assert compiled.set_transition_matrix(phi) == OK
+    assert np.array_equal(np.ctypeslib.as_array(compiled.transition.Phi), stored)
+
+
+def test_set_refuses_an_entry_outside_the_pattern_and_leaves_the_transition(compiled):
+    """A nonzero structural zero, a random constant's row that is not e_i, a NaN: refused, nothing written."""
+    phi = compiled.Phi
+    stored = np.ctypeslib.as_array(compiled.transition.Phi).copy()
+    rows, cols = compiled.phi_entries
+    off_pattern = next((i, j) for i in range(18) for j in range(18) if phi[i, j] == 0 and not ((rows == i) & (cols == j)).any())
+    for (i, j), value, status in ((off_pattern, 1e-9, ERR_STRUCTURE), ((7, 7), 1.5, ERR_STRUCTURE), ((0, 0), np.nan, ERR_NONFINITE)):
+        bad = phi.copy()
+        bad[i, j] = value
+        assert compiled.set_transition_matrix(bad) == status, (i, j)
+        assert np.array_equal(np.ctypeslib.as_array(compiled.transition.Phi), stored)
+
+
+def test_predict_with_a_set_phi_is_the_dense_prediction(compiled):
+    """A Phi set from outside (scaled inside its pattern) drives predict exactly as the full matrix would."""
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(18, 18))
+    P0 = A @ A.T * 1e-3 + np.eye(18) * 1e-2
+    x0 = rng.normal(size=18) * 0.1
+    phi = compiled.Phi
+    rows, cols = compiled.phi_entries
+    unit = [i for i in range(18) if np.array_equal(phi[i], np.eye(18)[i]) and ((rows == i).sum() == 1)]
+    scale = np.ones((18, 18))
+    scale[[i for i in range(18) if i not in unit]] = 1.25
+    assert compiled.set_transition_matrix(phi * scale) == OK
+    qd = compiled.Qd
+    assert compiled.set_state(x0, P0) == OK and compiled.predict() == OK
+    phi = compiled.Phi
+    tol = 1e-12 if compiled.dtype == np.float64 else 1e-4
+    for actual, expected in ((compiled.x, phi @ x0), (compiled.P, phi @ P0 @ phi.T + qd)):
+        np.testing.assert_allclose(actual, expected, rtol=tol, atol=tol * np.abs(expected).max())
