@@ -275,10 +275,40 @@ def _kinematics(t, table, i):
 
 
 @compiled
-def _position_rate(t, lat, table, i):
+def _ned_motion(t, table, i):
+    """Height and north, east, down velocity at time t in segment i: what the position rates read.
+
+    They do not depend on the latitude, so the two RK4 mid-point stages share
+    them, and the last stage shares them with the rate at the end of the sample.
+    """
     vh, psi, vd, roll, h, a_h, turn, a_v, rr = _kinematics(t, table, i)
     cpsi, spsi = _heading_trig(table, i, psi)
-    return earth.position_rates(lat, h, vh * cpsi, vh * spsi, vd)
+    return h, vh * cpsi, vh * spsi, vd
+
+
+@compiled
+def _position_rate(t, lat, table, i):
+    """d(latitude)/dt, d(longitude)/dt and d(height)/dt at time t in segment i and latitude ``lat``."""
+    return _rates_at(lat, _ned_motion(t, table, i))
+
+
+@compiled
+def _rates_at(lat, motion):
+    """The position rates at latitude ``lat`` for the motion (h, v_N, v_E, v_D) of :func:`_ned_motion`."""
+    h, vn, ve, vd = motion
+    return earth.position_rates(lat, h, vn, ve, vd)
+
+
+@compiled
+def _rk4_stage(lat, step, rate, motion):
+    """An RK4 stage: the position rates at ``lat + step * rate`` for the motion of the stage's time."""
+    return _rates_at(lat + step * rate, motion)
+
+
+@compiled
+def _rk4_sum(x, dt, k1, k2, k3, k4):
+    """x one RK4 step on: x + dt/6 (k1 + 2 k2 + 2 k3 + k4)."""
+    return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
 @compiled
@@ -352,14 +382,14 @@ def _rk4_from(table, starts, seg, k, dt, lat, lon, k1a, k1o):
     """
     t0 = k * dt
     t1 = (k + 1) * dt
-    im = _segment_index(t0 + 0.5 * dt, starts, seg)
+    tm = t0 + 0.5 * dt
+    im = _segment_index(tm, starts, seg)
     i1 = _segment_index(t1, starts, seg)
-    k2a, k2o, _ = _position_rate(t0 + 0.5 * dt, lat + 0.5 * dt * k1a, table, im)
-    k3a, k3o, _ = _position_rate(t0 + 0.5 * dt, lat + 0.5 * dt * k2a, table, im)
-    k4a, k4o, _ = _position_rate(t1, lat + dt * k3a, table, i1)
-    lat1 = lat + dt / 6.0 * (k1a + 2 * k2a + 2 * k3a + k4a)
-    lon1 = lon + dt / 6.0 * (k1o + 2 * k2o + 2 * k3o + k4o)
-    return lat1, lon1, k1a, i1
+    middle = _ned_motion(tm, table, im)
+    k2a, k2o, _ = _rk4_stage(lat, 0.5 * dt, k1a, middle)
+    k3a, k3o, _ = _rk4_stage(lat, 0.5 * dt, k2a, middle)
+    k4a, k4o, _ = _rk4_stage(lat, dt, k3a, _ned_motion(t1, table, i1))
+    return _rk4_sum(lat, dt, k1a, k2a, k3a, k4a), _rk4_sum(lon, dt, k1o, k2o, k3o, k4o), k1a, i1
 
 
 @compiled
@@ -420,73 +450,132 @@ def _truth_motion(table, lat0, lon0, dt, n_samples, record_every, truth):
 
 
 @compiled
+def _weighted_sum(sums, weight, values):
+    """The six running quadrature sums plus ``weight`` times the six integrand values (omega_ib^b, f^b)."""
+    return (sums[0] + weight * values[0], sums[1] + weight * values[1], sums[2] + weight * values[2],
+            sums[3] + weight * values[3], sums[4] + weight * values[4], sums[5] + weight * values[5])
+
+
+@compiled
+def _node_integrands(t, t0, dt, lat, k1a, lat1, m1, table, i):
+    """:func:`_integrands` at time t of the sample [t0, t0 + dt] in segment i, the latitude Hermite-interpolated
+    between (lat, its rate k1a) at t0 and (lat1, m1) at the sample's end."""
+    return _integrands(t, _hermite((t - t0) / dt, dt, lat, k1a, lat1, m1), table, i)
+
+
+@compiled
+def _split_sample_increments(table, starts, seg, t0, t1, dt, lat, k1a, lat1, m1):
+    """(delta theta, delta v) of a sample that crosses a segment boundary: Gauss-Legendre on each part."""
+    gl_x0 = -math.sqrt(0.6)
+    gl_x2 = math.sqrt(0.6)
+    gl_w0 = 5.0 / 9.0
+    gl_w1 = 8.0 / 9.0
+    sums = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    a = t0
+    i = seg
+    while a < t1:
+        i = _segment_index(a, starts, i)
+        b = t1
+        if i + 1 < starts.shape[0] and starts[i + 1] < t1:
+            b = starts[i + 1]
+        half = 0.5 * (b - a)
+        mid = 0.5 * (a + b)
+        for node in range(3):
+            if node == 0:
+                x, w = gl_x0, gl_w0
+            elif node == 1:
+                x, w = 0.0, gl_w1
+            else:
+                x, w = gl_x2, gl_w0
+            # nodes lie strictly inside [a, b], hence inside segment i
+            sums = _weighted_sum(sums, w * half, _node_integrands(mid + half * x, t0, dt, lat, k1a, lat1, m1, table, i))
+        a = b
+    return sums
+
+
+@compiled
 def _increments(table, lat0, lon0, dt, k_start, k_stop, delta_theta, delta_velocity, truth, record_every,
                 fill_positions):
     """Ideal increments of samples [k_start, k_stop) into rows 0.. of the arrays, from the latitude and
     longitude at sample k_start: RK4 latitude, Gauss-Legendre increments split at segment boundaries.
     ``fill_positions``: the latitude and longitude reached at each record sample (a multiple of
-    ``record_every``) are written into that row of ``truth`` (what :func:`_truth_records` computes there)."""
+    ``record_every``) are written into that row of ``truth`` (what :func:`_truth_records` computes there).
+
+    Software-pipelined: while the three Gauss nodes of sample k are evaluated,
+    the RK4 stages of sample k + 1 (a serial chain of sines, square roots and
+    divisions, independent of those nodes) are interleaved with them, one stage
+    between two nodes, so the processor overlaps the two.  Every number is the
+    same operation on the same operands as when the samples go one after the
+    other (bit for bit; tests/simulation/test_trajectory.py).  A sample within
+    one segment (the common case) takes its nodes without any segment search;
+    one that crosses a boundary is split (:func:`_split_sample_increments`).
+    """
     starts = table[:, 0]
     gl_x0 = -math.sqrt(0.6)
     gl_x2 = math.sqrt(0.6)
     gl_w0 = 5.0 / 9.0
     gl_w1 = 8.0 / 9.0
     lat, lon = lat0, lon0
-    seg = 0
-    rate_lat = rate_lon = 0.0
-    if k_start < k_stop:
+    seg = i1 = 0
+    k1a = k1o = lat1 = lon1 = m1 = mo1 = 0.0
+    if k_start < k_stop:  # the first sample's RK4: the loop then makes sample k + 1's while sample k's nodes go
         seg = _segment_index(k_start * dt, starts, seg)
-        rate_lat, rate_lon, _ = _position_rate(k_start * dt, lat, table, seg)
+        k1a, k1o, _ = _position_rate(k_start * dt, lat, table, seg)
+        lat1, lon1, _, i1 = _rk4_from(table, starts, seg, k_start, dt, lat, lon, k1a, k1o)
+        m1, mo1, _ = _position_rate((k_start + 1) * dt, lat1, table, i1)
     for k in range(k_start, k_stop):
+        # sample k: [t0, t1] from (lat, lon, rates k1a, k1o) to (lat1, lon1, rates m1, mo1), t1 in segment i1
         t0 = k * dt
         seg = _segment_index(t0, starts, seg)
         t1 = (k + 1) * dt
-        k1a = rate_lat
-        lat1, lon1, _, i1 = _rk4_from(table, starts, seg, k, dt, lat, lon, k1a, rate_lon)
-        # the rate at the end is the next sample's first RK4 stage: the segment of t1 is the same
-        # whatever the search starts from (_segment_index), and (k + 1) * dt is the next t0
-        m1, rate_lon, _ = _position_rate(t1, lat1, table, i1)
-        rate_lat = m1
-        # increments, split at segment boundaries
-        sx = sy = sz = vx = vy = vz = 0.0
-        a = t0
-        i = seg
-        while a < t1:
-            i = _segment_index(a, starts, i)
-            b = t1
-            if i + 1 < starts.shape[0] and starts[i + 1] < t1:
-                b = starts[i + 1]
-            half = 0.5 * (b - a)
-            mid = 0.5 * (a + b)
-            for node in range(3):
-                if node == 0:
-                    x, w = gl_x0, gl_w0
-                elif node == 1:
-                    x, w = 0.0, gl_w1
-                else:
-                    x, w = gl_x2, gl_w0
-                t = mid + half * x
-                lat_t = _hermite((t - t0) / dt, dt, lat, k1a, lat1, m1)
-                # nodes lie strictly inside [a, b], hence inside segment i
-                wx, wy, wz, fx, fy, fz = _integrands(t, lat_t, table, i)
-                sx += w * half * wx
-                sy += w * half * wy
-                sz += w * half * wz
-                vx += w * half * fx
-                vy += w * half * fy
-                vz += w * half * fz
-            a = b
+        whole = i1 == seg  # the sample lies in one segment: no boundary to split at
+        more = k + 1 < k_stop
+        half = 0.5 * (t1 - t0)
+        mid = 0.5 * (t0 + t1)
+        # sample k + 1: [t1, t2] from (lat1, lon1, m1, mo1); its rate at the end is sample k + 2's first stage
+        tm = t1 + 0.5 * dt
+        t2 = (k + 2) * dt
+        im = i2 = i1
+        middle = end = (0.0, 0.0, 0.0, 0.0)
+        k2a = k2o = k3a = k3o = k4a = k4o = lat2 = lon2 = m2 = mo2 = 0.0
+        sums = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        if more:
+            im = _segment_index(tm, starts, i1)
+            i2 = _segment_index(t2, starts, i1)
+            middle = _ned_motion(tm, table, im)
+            k2a, k2o, _ = _rk4_stage(lat1, 0.5 * dt, m1, middle)
+        if whole:
+            sums = _weighted_sum(sums, gl_w0 * half, _node_integrands(mid + half * gl_x0, t0, dt, lat, k1a, lat1, m1,
+                                                                      table, seg))
+        if more:
+            k3a, k3o, _ = _rk4_stage(lat1, 0.5 * dt, k2a, middle)
+        if whole:
+            sums = _weighted_sum(sums, gl_w1 * half, _node_integrands(mid + half * 0.0, t0, dt, lat, k1a, lat1, m1,
+                                                                      table, seg))
+        if more:
+            end = _ned_motion(t2, table, i2)
+            k4a, k4o, _ = _rk4_stage(lat1, dt, k3a, end)
+        if whole:
+            sums = _weighted_sum(sums, gl_w0 * half, _node_integrands(mid + half * gl_x2, t0, dt, lat, k1a, lat1, m1,
+                                                                      table, seg))
+        if more:
+            lat2 = _rk4_sum(lat1, dt, m1, k2a, k3a, k4a)
+            lon2 = _rk4_sum(lon1, dt, mo1, k2o, k3o, k4o)
+            m2, mo2, _ = _rates_at(lat2, end)
+        if not whole:
+            sums = _split_sample_increments(table, starts, seg, t0, t1, dt, lat, k1a, lat1, m1)
         if fill_positions and (k + 1) % record_every == 0:
             truth[(k + 1) // record_every, 1] = lat1
             truth[(k + 1) // record_every, 2] = lon1
         row = k - k_start
-        delta_theta[row, 0] = sx
-        delta_theta[row, 1] = sy
-        delta_theta[row, 2] = sz
-        delta_velocity[row, 0] = vx
-        delta_velocity[row, 1] = vy
-        delta_velocity[row, 2] = vz
-        lat, lon = lat1, lon1
+        delta_theta[row, 0] = sums[0]
+        delta_theta[row, 1] = sums[1]
+        delta_theta[row, 2] = sums[2]
+        delta_velocity[row, 0] = sums[3]
+        delta_velocity[row, 1] = sums[4]
+        delta_velocity[row, 2] = sums[5]
+        lat, lon, k1a, k1o = lat1, lon1, m1, mo1
+        lat1, lon1, m1, mo1, i1 = lat2, lon2, m2, mo2, i2
     return k_stop - k_start
 
 
