@@ -122,7 +122,7 @@ def perturbed_copy(folder, name, tmp_path):
     for f in folder.iterdir():
         (broken / f.name).write_text(f.read_text())
     source = (broken / f"{name}.c").read_text()
-    source, count = re.subn(r"(w->Pn\[0\] = )", r"\g<1>1.000000001*", source, count=1)  # P_n(0, 0), packed
+    source, count = re.subn(r"(w->Pn\[0\] =\s+)", r"\g<1>1.000000001*", source, count=1)  # P_n(0, 0), packed (its value may wrap)
     assert count == 1
     (broken / f"{name}.c").write_text(source)
     return broken
