@@ -9,12 +9,16 @@ cluster already started.  Both sides give identical results (checked).
 
 1. Worker set-up.  What a fresh worker process does before its first run,
    in a fresh process of its own, step by step (wall and CPU, the compiler's
-   CPU included): import, receive the set-up (the caller's derived model
-   with it, and the error layout the caller made), take the
+   CPU included): import (no sympy: the generated C flies in the compiled
+   loop, which reads only the model's outline), receive the set-up (the
+   model's outline, the error layout the caller made, the code), take the
    trajectory (made and kept in the trajectory cache when it is empty, mapped
    from it when filled), write the shipped code and compile it (compile
-   cache empty) or take it from the cache (filled), numba's registries (what
-   the first compiled call loads), then two runs.
+   cache empty) or take it from the cache (filled), take the model's outline,
+   numba's registries (what the first compiled call loads; numba imports
+   scipy.linalg there), then two runs.  A worker of the clusters below does
+   the import and the registries in its import thread, while the caller
+   makes the set-up.
 2. Scaling, in three states of the workers:
    * ``cold, caches empty``: new worker processes, nothing compiled and no
      trajectory kept (the first study of a new model and flight on a new
@@ -71,11 +75,11 @@ RESULTS = Path(__file__).resolve().parent / "results"
 #: cores; CPU seconds.  Kept beside this run's figures for comparison.
 BEFORE = {"commit": "0293297", "import_cpu_s": 1.22, "prepare_cpu_s": 7.12, "first_run_cpu_s": 0.39,
           "note": "prepare = derive + trajectory + layout + generate the code (~0.5 s) + gcc -O2 (~5 s)"}
-#: Not measured by this script: the scaling at commit c029031 (before the caller's error layout, the quiet local
-#: cluster and the set-up served as bytes while the workers import in a thread), best of 3 per side, load 1.0-1.4
-#: on 2 cores.  Kept beside this run's figures for comparison.
-PREVIOUS = {"commit": "c029031", "efficiency": {"cold, caches empty": 0.59, "cold, caches filled": 0.72, "warm": 0.91},
-            "cpu_efficiency": {"cold, caches empty": 0.61, "cold, caches filled": 0.76, "warm": 0.95}}
+#: Not measured by this script: the scaling at commit cc6efa0 (workers warmed up in their import thread, but
+#: importing sympy and unpickling the caller's derived model: before the model's outline), best of 3 per side,
+#: quiet machine (load 0.9-1.6 on 2 cores, this benchmark included).  Kept beside this run's figures for comparison.
+PREVIOUS = {"commit": "cc6efa0", "efficiency": {"cold, caches empty": 0.62, "cold, caches filled": 0.80, "warm": 0.92},
+            "cpu_efficiency": {"cold, caches empty": 0.64, "cold, caches filled": 0.84, "warm": 0.97}}
 STATES = ("cold, caches empty", "cold, caches filled", "warm")
 
 
@@ -110,9 +114,9 @@ def setup_child(setup_file: str) -> None:
     cluster.import_long_lived("modelgen.simulation.montecarlo")  # what run_monte_carlo has each worker do first
     from modelgen.simulation import montecarlo
 
-    mark("import modelgen's Monte Carlo (numpy, numba, sympy, modelgen)")
+    mark("import modelgen's Monte Carlo (numpy, numba, modelgen)")
     setup = pickle.loads(Path(setup_file).read_bytes())
-    mark("receive the set-up (unpickle the profile, model and code)")
+    mark("receive the set-up (unpickle the profile, the model's outline, the layout and the code)")
     context = cluster.worker_cached(setup.key, lambda: montecarlo._prepare(setup, mark=mark))  # as fly_one_run
     from modelgen.simulation import jit
 
@@ -126,6 +130,8 @@ def setup_child(setup_file: str) -> None:
         montecarlo.fly_profile(setup.profile, context["derived"], context["trajectory"], np.random.default_rng(seed),
                                context["make_filter"], mode=setup.mode, layout=context["layout"])
         mark(f"run {run + 1} (1 flight)")
+    if "sympy" in sys.modules and context["derived"] is setup.outline:  # the compiled loop needs none of it
+        raise SystemExit("the worker's set-up and runs of the compiled loop imported sympy")
     print(json.dumps(steps))
 
 
