@@ -613,12 +613,14 @@ def generate_trajectory(profile: FlightPath, imu_rate: float, record_rate: float
     table = segment_table(profile)
     n_records = n_samples // record_every + 1
     truth = np.empty((n_records, len(TRUTH_COLUMNS)))
-    records = _truth_motion if positions_in_pieces else _truth_records
+    # a held trajectory's increments integrate the positions anyway: they fill the truth rows' (bit for bit what
+    # _truth_records computes there), so the position is integrated once
+    records = _truth_records if streamed and not positions_in_pieces else _truth_motion
     records(table, profile.latitude, profile.longitude, 1.0 / imu_rate, n_samples, record_every, truth)
     if streamed:
         return Trajectory(profile, float(imu_rate), record_every, None, None, truth, n_samples, positions_in_pieces)
     delta_theta = np.empty((n_samples, 3))
     delta_velocity = np.empty((n_samples, 3))
     _increments(table, profile.latitude, profile.longitude, 1.0 / imu_rate, 0, n_samples, delta_theta, delta_velocity,
-                truth, record_every, False)
+                truth, record_every, True)
     return Trajectory(profile, float(imu_rate), record_every, delta_theta, delta_velocity, truth)
