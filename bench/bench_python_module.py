@@ -6,9 +6,25 @@ For the paper's 18-state model, the 32-state augmented model and a
 same inputs for both sides (Phi and Q_d from the reference discretization,
 a covariance after ten filter cycles):
 
-* ``predict`` -- generated ``predict(x, P, Phi, Qd)``, which checks its
+Two generated APIs are timed, each against the same numpy sides:
+
+* the *functional* API, ``predict(x, P, Phi, Qd)`` and ``update(x, P, z,
+  H, r)``: the caller holds P, so every call proves it against the contract
+  (exact symmetry and a LAPACK Cholesky, ``_factor``) before using it;
+* the *Filter* class, ``Filter(x, P)`` then ``f.predict(Phi, Qd)`` and
+  ``f.update(z, H, r)``: like the generated C's filter struct it owns x and
+  P, proves P once (``set_covariance``) and trusts what its own steps made
+  of it, testing only that the results are finite (and Phi, Q_d, z, H, r
+  as the functional API does).  Each timed call also restores the filter's
+  x and P (two attribute assignments) so that every call starts from the
+  same P; that cost is counted on the generated side.
+
+The functions:
+
+* ``predict`` -- generated ``predict``, which checks its
   arguments against the contract (finite; P symmetric and positive
-  semidefinite, proven by a Cholesky factorization) and the result, against
+  semidefinite, proven by a Cholesky factorization) and the result
+  (the Filter: Phi, Q_d and the result), against
   two dense numpy functions computing the same numbers with the same
   symmetrization (upper triangle mirrored into the lower,
   ``np.copyto(..., where=lower)``):
@@ -35,16 +51,18 @@ the process, BLAS on one thread); each ratio is numpy time / generated time
 what the contract's test of P costs inside the generated predict and update
 (``_factor``: the exact-symmetry test and the LAPACK Cholesky, timed
 alone): the part of the generated time that the bare numpy does not do.
-For predict the two kernels the generator chooses between (the factored
-form by BLAS trmm and syrk, or by row class of Phi: D P D elementwise and
-one product of the general rows) are both timed, to justify the rule
-``kernels.python_predict_kernel``.  The machine's load (``os.getloadavg``)
+For predict the two kernels the generator chooses between are both
+timed, to justify its rules: for the functional API the factored form
+(BLAS trmm and syrk on the Cholesky factor of the P test) or by row class
+of Phi (D P D elementwise and one product of the general rows),
+``kernels.python_predict_kernel``; for the Filter the dense form (M = Phi
+P, then one dgemm) or by row class, ``kernels.python_filter_predict_kernel``.  The machine's load (``os.getloadavg``)
 is recorded before and after.  Writes bench/results/python_module.json,
 .md and .png.
 
 Target (issue 14, item 3): ratio >= 1.0 for predict, update and discretize
 at 18, 32 and 100 states (against the bare numpy; the checked ratio shows
-what the same contract costs in numpy).
+what the same contract costs in numpy).  Both APIs' rows are reported.
 
 usage: nice python bench/bench_python_module.py [--sizes 18 32 100] [--kernel-sizes 40 48 64 80]
 """
@@ -105,17 +123,26 @@ def per_call_us(function, repeats: int = 7) -> float:
     return min(timer.repeat(repeats, number)) / number * 1e6
 
 
+RULES = ("PYTHON_STRUCTURED_SAVING_FLOPS", "PYTHON_FILTER_STRUCTURED_SAVING_FLOPS")  # functional, Filter
+
+
 def module_for(derived, folder: Path, kernel: str | None):
-    """The generated Python module with the default kernel rule (None) or a forced predict kernel."""
-    saved = kernels.PYTHON_STRUCTURED_SAVING_FLOPS
+    """The generated Python module with the default kernel rules (None) or forced predict kernels.
+
+    ``structured``: both APIs by row class; ``dense``: the functional API
+    factored (trmm, syrk) and the Filter dense (Phi P, one dgemm).
+    """
+    saved = {name: getattr(kernels, name) for name in RULES}
     if kernel is not None:
-        kernels.PYTHON_STRUCTURED_SAVING_FLOPS = -10**12 if kernel == "structured" else 10**15
+        for name in RULES:
+            setattr(kernels, name, -10**12 if kernel == "structured" else 10**15)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             files = backend("python").render(describe(derived))  # the Python module only
     finally:
-        kernels.PYTHON_STRUCTURED_SAVING_FLOPS = saved
+        for name, value in saved.items():
+            setattr(kernels, name, value)
     out = folder / (kernel or "default")
     write_atomically(out, files)
     return load_python_module(out / f"{derived.model.name}.py")
@@ -218,101 +245,163 @@ def checked_discretize(F, G, q, T):
     return phi, qd
 
 
+#: (API, kernel rule name, first kernel, second kernel): the predict kernels each API chooses between.
+KERNELS = (("functional", "python_predict_kernel", "factored", "structured"),
+           ("Filter", "python_filter_predict_kernel", "dense", "structured"))
+FUNCTIONS = ("predict", "update", "discretize")
+APIS = {"predict": ("functional", "Filter"), "update": ("functional", "Filter"), "discretize": ("functional",)}
+
+
+def filter_calls(module, a: dict):
+    """Filter.predict and Filter.update, each restoring x and P after the call (the same start every call)."""
+    f = module.Filter(a["x"], a["P"])
+    x, P = f.get_state(), f.get_covariance()
+
+    def predict():
+        f.predict(a["Phi"], a["Qd"])
+        f._x, f._P = x, P  # restored: two attribute assignments, counted on the generated side
+
+    def update():
+        f.update(a["z"], a["H"], a["r"])
+        f._x, f._P = x, P
+
+    def results(name):
+        """The filter's x and P after one call of ``name``, then restored."""
+        if name == "predict":
+            f.predict(a["Phi"], a["Qd"])
+        else:
+            f.update(a["z"], a["H"], a["r"])
+        out = f.get_state(), f.get_covariance()
+        f._x, f._P = x, P
+        return out
+
+    return {"predict": predict, "update": update, "results": results}
+
+
+def kernel_times(derived, a: dict, folder: Path) -> dict:
+    """CPU us per call of each API's two predict kernels (forced), the flops the row classes save, the rules' choices."""
+    structure = describe(derived).structure
+    out = {}
+    for kernel in ("dense", "structured"):
+        module = module_for(derived, folder, kernel)
+        calls = filter_calls(module, a)
+        x, P, Phi, Qd = (a[k] for k in ("x", "P", "Phi", "Qd"))
+        out["functional", "factored" if kernel == "dense" else kernel] = min(
+            per_call_us(lambda: module.predict(x, P, Phi, Qd)) for _ in range(ROUNDS))
+        out["Filter", kernel] = min(per_call_us(calls["predict"]) for _ in range(ROUNDS))
+    return {"states": derived.n_states,
+            "saving_flops": int(kernels.dense_predict_cost(derived.n_states).total - kernels.python_predict_cost(structure).total),
+            "chosen": kernels.python_predict_kernel(structure), "filter_chosen": kernels.python_filter_predict_kernel(structure),
+            **{f"{api}_{kernel}_us": us for (api, kernel), us in out.items()}}
+
+
 def measure(n: int, folder: Path) -> dict:
     derived = derive(load_model(BUILTIN[n]) if n in BUILTIN else large_model(n))
     scenario = paper_scenario(derived) if n == 18 else synthetic_scenario(derived)
     a = inputs(derived, scenario)
     lower = np.tril(np.ones((n, n), dtype=bool), -1)
-    chosen = kernels.python_predict_kernel(describe(derived).structure)
+    structure = describe(derived).structure
+    chosen = {"functional": kernels.python_predict_kernel(structure), "Filter": kernels.python_filter_predict_kernel(structure)}
     gen = module_for(derived, folder, None)
-    variants = {k: module_for(derived, folder, k) for k in ("factored", "structured")}
+    calls = filter_calls(gen, a)
     x, P, Phi, Qd, H, r, z = (a[k] for k in ("x", "P", "Phi", "Qd", "H", "r", "z"))
     F, G, q, T = a["F"], a["G"], a["q"], a["T"]
-    cases = {  # generated, bare numpy, checked numpy: the same function
-        "predict": (lambda: gen.predict(x, P, Phi, Qd), lambda: dense_predict(lower)(x, P, Phi, Qd),
-                    lambda: checked_predict(lower)(x, P, Phi, Qd)),
-        "update": (lambda: gen.update(x, P, z, H, r), lambda: dense_update(lower)(x, P, z, H, r),
-                   lambda: checked_update(lower)(x, P, z, H, r)),
-        "discretize": (lambda: gen.discretize(F, G, q, T), lambda: dense_discretize(F, G, q, T),
-                       lambda: checked_discretize(F, G, q, T)),
+    numpy_sides = {  # bare numpy, checked numpy: the same function
+        "predict": (lambda: dense_predict(lower)(x, P, Phi, Qd), lambda: checked_predict(lower)(x, P, Phi, Qd)),
+        "update": (lambda: dense_update(lower)(x, P, z, H, r), lambda: checked_update(lower)(x, P, z, H, r)),
+        "discretize": (lambda: dense_discretize(F, G, q, T), lambda: checked_discretize(F, G, q, T)),
     }
-    for name, sides in cases.items():  # the same numbers from every side, and P exactly symmetric
-        want = sides[1]()
-        for side in (sides[0], sides[2]):
-            for g, w in zip(side(), want):
-                assert np.allclose(g, w, rtol=1e-9, atol=1e-12 * np.abs(w).max()), f"{name}: generated and numpy differ"
+    generated = {
+        ("predict", "functional"): lambda: gen.predict(x, P, Phi, Qd),
+        ("update", "functional"): lambda: gen.update(x, P, z, H, r),
+        ("discretize", "functional"): lambda: gen.discretize(F, G, q, T),
+        ("predict", "Filter"): calls["predict"],
+        ("update", "Filter"): calls["update"],
+    }
+    for (name, api), side in generated.items():  # the same numbers from every side, and P exactly symmetric
+        want = numpy_sides[name][0]()
+        got = calls["results"](name) if api == "Filter" else side()
+        for g, w in zip(list(got) + list(numpy_sides[name][1]()), list(want) * 2):
+            assert np.allclose(g, w, rtol=1e-9, atol=1e-12 * np.abs(w).max()), f"{name} ({api}): generated and numpy differ"
         if name != "discretize":
-            assert np.array_equal(sides[0]()[1], sides[0]()[1].T), f"{name}: generated P not exactly symmetric"
-    row = {"states": n, "model": derived.model.name, "predict_kernel": chosen}
-    for name, (generated, bare, checked) in cases.items():
-        g = b = c = float("inf")
+            assert np.array_equal(got[1], got[1].T), f"{name} ({api}): generated P not exactly symmetric"
+    row = {"states": n, "model": derived.model.name, "predict_kernel": chosen["functional"],
+           "filter_predict_kernel": chosen["Filter"]}
+    for name in FUNCTIONS:
+        g = {api: float("inf") for api in APIS[name]}
+        b = c = float("inf")
         for _ in range(ROUNDS):  # interleaved, so that a busy spell hits every side
-            g = min(g, per_call_us(generated))
-            b = min(b, per_call_us(bare))
-            c = min(c, per_call_us(checked))
-        row[name] = {"generated_us": g, "dense_numpy_us": b, "ratio": b / g, "checked_numpy_us": c, "checked_ratio": c / g}
-        progress(f"{n} states {name}: generated {g:.1f} us, bare numpy {b:.1f} us (ratio {b / g:.2f}), "
-                 f"checked numpy {c:.1f} us (ratio {c / g:.2f})")
+            for api in APIS[name]:
+                g[api] = min(g[api], per_call_us(generated[name, api]))
+            b = min(b, per_call_us(numpy_sides[name][0]))
+            c = min(c, per_call_us(numpy_sides[name][1]))
+        for api in APIS[name]:
+            key = name if api == "functional" else f"{name}_filter"
+            row[key] = {"api": api, "generated_us": g[api], "dense_numpy_us": b, "ratio": b / g[api],
+                        "checked_numpy_us": c, "checked_ratio": c / g[api]}
+            progress(f"{n} states {name} ({api}): generated {g[api]:.1f} us, bare numpy {b:.1f} us (ratio {b / g[api]:.2f}), "
+                     f"checked numpy {c:.1f} us (ratio {c / g[api]:.2f})")
+    p_test = min(per_call_us(lambda: gen._factor(P)) for _ in range(ROUNDS))
     for name in ("predict", "update"):
-        row[name]["p_test_us"] = min(per_call_us(lambda: gen._factor(P)) for _ in range(ROUNDS))
-    for kernel, module in variants.items():
-        row["predict"][f"{kernel}_kernel_us"] = min(per_call_us(lambda: module.predict(x, P, Phi, Qd))
-                                                    for _ in range(ROUNDS))
-    progress(f"{n} states predict kernels: factored {row['predict']['factored_kernel_us']:.1f} us, "
-             f"structured {row['predict']['structured_kernel_us']:.1f} us; the rule chose {chosen}")
+        row[name]["p_test_us"] = p_test  # the functional API's; the Filter does not test P per call
+    row["predict_kernels"] = kernel_times(derived, a, folder)
+    progress(f"{n} states predict kernels: " + ", ".join(f"{k} {v:.1f} us" for k, v in row["predict_kernels"].items()
+                                                          if k.endswith("_us"))
+             + f"; the rules chose {chosen['functional']} (functional) and {chosen['Filter']} (Filter)")
     return row
 
 
 def measure_kernels(n: int, folder: Path) -> dict:
-    """The two predict kernels alone at an intermediate size (a large_model of n states), for the kernel rule."""
+    """Each API's two predict kernels alone at an intermediate size (a large_model of n states), for the kernel rules."""
     derived = derive(large_model(n))
-    a = inputs(derived, synthetic_scenario(derived))
-    structure = describe(derived).structure
-    saving = kernels.dense_predict_cost(n).total - kernels.python_predict_cost(structure).total
-    x, P, Phi, Qd = (a[k] for k in ("x", "P", "Phi", "Qd"))
-    row = {"states": n, "saving_flops": int(saving), "chosen": kernels.python_predict_kernel(structure)}
-    for kernel in ("factored", "structured"):
-        module = module_for(derived, folder, kernel)
-        row[f"{kernel}_kernel_us"] = min(per_call_us(lambda: module.predict(x, P, Phi, Qd)) for _ in range(ROUNDS))
-    progress(f"{n} states predict kernels: factored {row['factored_kernel_us']:.1f} us, "
-             f"structured {row['structured_kernel_us']:.1f} us; the rule chose {row['chosen']}")
+    row = kernel_times(derived, inputs(derived, synthetic_scenario(derived)), folder)
+    progress(f"{n} states predict kernels: " + ", ".join(f"{k} {v:.1f} us" for k, v in row.items() if k.endswith("_us"))
+             + f"; the rules chose {row['chosen']} (functional) and {row['filter_chosen']} (Filter)")
     return row
 
 
 def kernel_markdown(rows: list[dict]) -> str:
-    lines = ["| states | flops the row classes save | factored us | structured us | chosen by the rule |",
-             "|---|---|---|---|---|"]
-    lines += [f"| {r['states']} | {r['saving_flops']:,} | {r['factored_kernel_us']:.1f} | {r['structured_kernel_us']:.1f} "
-              f"| {r['chosen']} |" for r in rows]
+    lines = ["| states | flops the row classes save | functional: factored us | structured us | chosen "
+             "| Filter: dense us | structured us | chosen |",
+             "|---|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['states']} | {r['saving_flops']:,} | {r['functional_factored_us']:.1f} | {r['functional_structured_us']:.1f} "
+              f"| {r['chosen']} | {r['Filter_dense_us']:.1f} | {r['Filter_structured_us']:.1f} | {r['filter_chosen']} |"
+              for r in rows]
     return "\n".join(lines) + "\n" + kernel_rule_note(rows)
 
 
 def kernel_rule_note(rows: list[dict]) -> str:
-    """Where the rule picks the slower of the two predict kernels (empty when it never does)."""
+    """Where a rule picks the slower of its two predict kernels (empty when neither does)."""
     wrong = []
     for r in rows:
-        chosen, other = r["chosen"], "structured" if r["chosen"] == "factored" else "factored"
-        chosen_us, other_us = r[f"{chosen}_kernel_us"], r[f"{other}_kernel_us"]
-        if other_us < chosen_us:
-            wrong.append(f"{r['states']} states ({other} {other_us:.1f} us against {chosen} {chosen_us:.1f})")
+        for api, rule, first, second in KERNELS:
+            chosen = r["chosen"] if api == "functional" else r["filter_chosen"]
+            other = second if chosen == first else first
+            chosen_us, other_us = r[f"{api}_{chosen}_us"], r[f"{api}_{other}_us"]
+            if other_us < chosen_us:
+                wrong.append(f"{r['states']} states, {api} ({other} {other_us:.1f} us against {chosen} {chosen_us:.1f}; "
+                             f"`kernels.{rule}`)")
     if not wrong:
         return ""
-    return ("\nThe rule (`kernels.PYTHON_STRUCTURED_SAVING_FLOPS` = "
-            f"{kernels.PYTHON_STRUCTURED_SAVING_FLOPS:,} saved flops) picks the slower kernel at " + ", ".join(wrong) + ".\n")
+    return "\nA rule picks the slower kernel at " + ", ".join(wrong) + ".\n"
 
 
 def markdown(rows: list[dict]) -> str:
-    lines = ["| states | function | generated us | bare numpy us | ratio to bare | checked numpy us "
-             "| ratio to checked | P test us | predict kernel: factored us | structured us | chosen |",
+    lines = ["| states | function | API | generated us | bare numpy us | ratio to bare | checked numpy us "
+             "| ratio to checked | P test us | predict kernels us | chosen |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        for name in ("predict", "update", "discretize"):
-            c = r[name]
-            kernel = (f"{c['factored_kernel_us']:.1f} | {c['structured_kernel_us']:.1f} | {r['predict_kernel']}"
-                      if name == "predict" else " | | ")
-            test = f"{c['p_test_us']:.1f}" if "p_test_us" in c else ""
-            lines.append(f"| {r['states']} | {name} | {c['generated_us']:.1f} | {c['dense_numpy_us']:.1f} "
-                         f"| {c['ratio']:.2f} | {c['checked_numpy_us']:.1f} | {c['checked_ratio']:.2f} | {test} | {kernel} |")
+        k = r["predict_kernels"]
+        for name in FUNCTIONS:
+            for api in APIS[name]:
+                c = r[name if api == "functional" else f"{name}_filter"]
+                kernel = chosen = ""
+                if name == "predict":
+                    first, chosen = ("factored", r["predict_kernel"]) if api == "functional" else ("dense", r["filter_predict_kernel"])
+                    kernel = f"{first} {k[f'{api}_{first}_us']:.1f}, structured {k[f'{api}_structured_us']:.1f}"
+                test = f"{c['p_test_us']:.1f}" if "p_test_us" in c else ("none (trusted)" if api == "Filter" else "")
+                lines.append(f"| {r['states']} | {name} | {api} | {c['generated_us']:.1f} | {c['dense_numpy_us']:.1f} "
+                             f"| {c['ratio']:.2f} | {c['checked_numpy_us']:.1f} | {c['checked_ratio']:.2f} | {test} | {kernel} | {chosen} |")
     return "\n".join(lines) + "\n"
 
 
@@ -321,38 +410,46 @@ repeats; BLAS on one thread).  Every side computes the same function on the same
 from the reference discretization, P after ten filter cycles) and returns the same numbers, P exactly
 symmetric (upper triangle mirrored):
 
-* generated: the module `modelgen generate` writes, with the contract's checks (finite arguments and
-  results, P exactly symmetric and positive definite by a Cholesky factor, else entry by entry within
-  16 N eps; r, q >= 0);
+* generated, functional API (`predict(x, P, Phi, Qd)`, `update(x, P, z, H, r)`, `discretize`): the caller
+  holds P, so every call proves it against the contract (P exactly symmetric and positive definite by a
+  Cholesky factor, else entry by entry within 16 N eps), and checks finite arguments and results, r, q >= 0;
+* generated, Filter class (`f.predict(Phi, Qd)`, `f.update(z, H, r)`), the generated C's API: the filter
+  owns x and P, proves P once (constructor, `set_covariance`, not timed) and trusts what its own steps
+  made of it, as the C does; it checks Phi, Q_d, z, H, r (finite, r >= 0) and finite results like the
+  functional API.  Its time includes restoring x and P after each call (two attribute assignments);
 * bare numpy: the same products with no checks at all (`Phi @ P @ Phi.T + Qd`; the Joseph update with
   `np.linalg.solve`; `modelgen.derive.discretization` for discretize) -- the issue's baseline;
-* checked numpy: bare numpy plus the same contract in plain numpy (`np.isfinite(a).all()` per argument
-  and result, `np.array_equal(P, P.T)`, `np.linalg.cholesky(P)`, `r >= 0` / `q >= 0`).
+* checked numpy: bare numpy plus the functional API's contract in plain numpy (`np.isfinite(a).all()`
+  per argument and result, `np.array_equal(P, P.T)`, `np.linalg.cholesky(P)`, `r >= 0` / `q >= 0`).
 
-ratio = numpy time / generated time (>= 1: the generated module is at least as fast).  P test: the
-generated module's test of P alone (`_factor`: exact symmetry and LAPACK dpotrf), which the bare numpy
-does not do.  Predict kernels: the factored form (BLAS trmm and syrk on the Cholesky factor) and the
-row-class form (D P D elementwise plus one product of the general rows of Phi), both timed; `chosen` is
-what `kernels.python_predict_kernel` picks.  The generated update forms the same Joseph covariance as
-P - (G + G^T) with G = K (H P - S K^T / 2): one product of rank m (the measurements), exactly symmetric
-without a mirroring pass.  The finiteness of the results is one BLAS dasum (sum of magnitudes) each.
+ratio = numpy time / generated time (>= 1: the generated side is at least as fast).  P test: the
+functional API's test of P alone (`_factor`: exact symmetry and LAPACK dpotrf), which neither the bare
+numpy nor the Filter does per call.  Predict kernels, each timed with the other forced: for the
+functional API the factored form (BLAS trmm and syrk on the Cholesky factor) or by row class (D P D
+elementwise plus one product of the general rows of Phi), chosen by `kernels.python_predict_kernel`;
+for the Filter the dense form (M = Phi P, then one dgemm M Phi^T + Q_d on Fortran views) or by row
+class, chosen by `kernels.python_filter_predict_kernel`.  The generated update forms the Joseph
+covariance as P - (G + G^T) with G = K (H P - S K^T / 2): one product of rank m (the measurements),
+exactly symmetric without a mirroring pass; the Filter's is the same code, bit for bit.  The finiteness
+of the results is one BLAS dasum (sum of magnitudes) each.
 """
 
 
 def misses_note(rows: list[dict]) -> str:
-    """Each ratio below 1.0 to the bare numpy, with what the contract's test of P alone costs there."""
+    """Each ratio below 1.0 to the bare numpy, per API, with what the functional API's test of P alone costs there."""
     misses = []
     for r in rows:
-        for name in ("predict", "update", "discretize"):
-            c = r[name]
-            if c["ratio"] < 1.0:
-                test = (f"; the test of P alone takes {c['p_test_us']:.1f} us, {c['p_test_us'] / c['dense_numpy_us']:.0%} "
-                        f"of the bare numpy time, and the rest {c['generated_us'] - c['p_test_us']:.1f} us"
-                        if "p_test_us" in c else "")
-                misses.append(f"* {r['states']} states {name}: {c['generated_us']:.1f} us against {c['dense_numpy_us']:.1f} us "
-                              f"(ratio {c['ratio']:.2f}){test}.")
+        for name in FUNCTIONS:
+            for api in APIS[name]:
+                c = r[name if api == "functional" else f"{name}_filter"]
+                if c["ratio"] < 1.0:
+                    test = (f"; its test of P alone takes {c['p_test_us']:.1f} us, {c['p_test_us'] / c['dense_numpy_us']:.0%} "
+                            f"of the bare numpy time, and the rest {c['generated_us'] - c['p_test_us']:.1f} us"
+                            if "p_test_us" in c else "")
+                    misses.append(f"* {r['states']} states {name}, {api} API: {c['generated_us']:.1f} us against "
+                                  f"{c['dense_numpy_us']:.1f} us (ratio {c['ratio']:.2f}){test}.")
     if not misses:
-        return "\nEvery ratio to the bare numpy is at least 1.0.\n"
+        return "\nEvery ratio to the bare numpy is at least 1.0, for both APIs.\n"
     return "\nBelow 1.0 to the bare numpy (which checks nothing):\n\n" + "\n".join(misses) + "\n"
 
 
@@ -362,19 +459,20 @@ def figure(rows: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 5))
-    names = ("predict", "update", "discretize")
+    fig, ax = plt.subplots(figsize=(8.5, 5))
+    groups = [(name, api) for name in FUNCTIONS for api in APIS[name]]
     width = 0.8 / len(rows)
     for k, r in enumerate(rows):
-        at = np.arange(3) + k * width
-        bars = ax.bar(at, [r[nm]["ratio"] for nm in names], width, label=f"{r['states']} states: to bare numpy")
-        ax.scatter(at, [r[nm]["checked_ratio"] for nm in names], marker="D", s=25, color=bars[0].get_facecolor(),
+        at = np.arange(len(groups)) + k * width
+        cells = [r[name if api == "functional" else f"{name}_filter"] for name, api in groups]
+        bars = ax.bar(at, [c["ratio"] for c in cells], width, label=f"{r['states']} states: to bare numpy")
+        ax.scatter(at, [c["checked_ratio"] for c in cells], marker="D", s=25, color=bars[0].get_facecolor(),
                    edgecolors="black", zorder=3, label=f"{r['states']} states: to checked numpy")
     ax.axhline(1.0, color="gray", linestyle=":", label="as fast as numpy")
-    ax.set_xticks(np.arange(3) + width * (len(rows) - 1) / 2, names)
+    ax.set_xticks(np.arange(len(groups)) + width * (len(rows) - 1) / 2, [f"{name}\n({api})" for name, api in groups])
     ax.set_ylabel("numpy time / generated time [-]")
     ax.set_title("generated Python module against dense numpy (per call, same function)")
-    ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.1))  # below the axes: no bar hidden
+    ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.15))  # below the axes: no bar hidden
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 
@@ -401,8 +499,8 @@ def main() -> None:
     (RESULTS / "python_module.md").write_text(
         "# Generated Python module against dense numpy (bench/bench_python_module.py)\n\n"
         + LEGEND.format(rounds=ROUNDS) + "\n" + load + "\n\n" + table + misses_note(rows)
-        + ("\n## The predict kernels at intermediate sizes (large_model, CPU time per call)\n\n"
-           + kernel_markdown(kernel_rows) if kernel_rows else ""))
+        + "\n## The predict kernels of both APIs at every size (CPU time per call; between 32 and 100 states a large_model)\n\n"
+        + kernel_markdown(sorted([r["predict_kernels"] for r in rows] + kernel_rows, key=lambda r: r["states"])))
     progress(load)
     figure(rows, RESULTS / "python_module.png")
     print(table)

@@ -408,8 +408,11 @@ def python_predict_kernel(structure: FilterStructure) -> str:
 #: The same choice for the generated ``Filter`` class, whose P is trusted (proven once, in
 #: set_covariance): no Cholesky factor to reuse, so the dense form is M = Phi P then one dgemm
 #: (M Phi^T + Q_d) on Fortran views.  bench/bench_python_module.py times both forms of the class
-#: (CPU time per call, one BLAS thread, bench/results/python_module.md "Filter predict kernels").
-PYTHON_FILTER_STRUCTURED_SAVING_FLOPS = 500_000
+#: (CPU time per call, one BLAS thread, each call restoring x and P): dense wins at 18 states
+#: (saving 15k flops: 5.2 against 11.6 us), 32 (8.0 against 13.0 us) and 40 (215k: 12.0 against
+#: 14.9 us); 48 is a tie (383k: 16.2 against 16.3 us); by row class wins at 64 (939k: 20.4 against
+#: 31.0 us) and 80 (1.9M: 25.3 against 53.3 us).  The threshold sits between 40 and 48 states.
+PYTHON_FILTER_STRUCTURED_SAVING_FLOPS = 300_000
 
 
 def python_filter_predict_kernel(structure: FilterStructure) -> str:
