@@ -44,6 +44,7 @@ from modelgen.codegen.layout import ModelSizes, c_layout
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
 from modelgen.fileio.cache_entry import link_new_entry
+from modelgen.fileio.cache_eviction import keep_within_cap, mark_used
 from modelgen.fileio.output import write_bytes_atomically
 
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
@@ -159,11 +160,12 @@ def _verified_payload(path: Path, key: str) -> bytes | None:
 
 
 def cached_library(folder: Path, key: str) -> bytes | None:
-    """The cached library of ``key`` (the first entry that verifies), or None."""
+    """The cached library of ``key`` (the first entry that verifies, marked used for the size cap), or None."""
     for path in _entry_paths(folder, key):
         if path.exists():
             payload = _verified_payload(path, key)
             if payload is not None:
+                mark_used(path)
                 return payload
     return None
 
@@ -177,9 +179,14 @@ def store_library(folder: Path, key: str, payload: bytes) -> Path | None:
     verify is left alone and the next name tried.  Only the temporary file,
     ours, is removed.  A cache that cannot be written (read-only, no room, no
     hard links) just stays without the entry: the caller has its library.
+    The cache is then kept within its size cap, least recently used entries
+    first (:func:`modelgen.fileio.cache_eviction.keep_within_cap`).
     """
-    return link_new_entry(folder, key, lambda handle: handle.write(_entry(key, payload)), _entry_paths(folder, key),
+    kept = link_new_entry(folder, key, lambda handle: handle.write(_entry(key, payload)), _entry_paths(folder, key),
                           lambda path: path if _verified_payload(path, key) is not None else None)
+    if kept is not None:
+        keep_within_cap(folder.parent, stored=kept)
+    return kept
 
 
 def load_python_module(path: Path) -> ModuleType:

@@ -232,7 +232,7 @@ def setup_key(profile: FlightProfile, truth_profile: FlightProfile | None, model
 
 def worker_setup(profile: FlightProfile, truth_profile: FlightProfile | None, derived: DerivedModel, mode: str,
                  store_every: int, implementation: str, key: str) -> MonteCarloSetup:
-    """The set-up the workers receive: the code generated here, the model's outline, derived model and layout made here."""
+    """The set-up the workers receive: the code generated here; the model's outline, derived model and layout."""
     code = generated_filter_files(derived) if implementation != "reference" else None
     outline = ModelOutline.of(derived)
     symbolic = pickle.dumps(symbolic_only(derived), protocol=pickle.HIGHEST_PROTOCOL)

@@ -45,6 +45,7 @@ import numpy as np
 
 from modelgen.codegen.build import library_cache_folder
 from modelgen.fileio.cache_entry import link_new_entry
+from modelgen.fileio.cache_eviction import keep_within_cap, mark_used
 from modelgen.simulation import earth, jit, rotation, trajectory as trajectory_module
 from modelgen.simulation.trajectory import TRUTH_COLUMNS, FlightPath, Trajectory, generate_trajectory, sample_counts
 
@@ -153,14 +154,24 @@ def _store(folder: Path, key: str, arrays: list[np.ndarray], shapes: dict[str, t
 
     Written to a temporary file and hard-linked to the first free name (never
     replacing a file); an entry of the same key linked first by another
-    worker is used.  Only the temporary file, ours, is removed.
+    worker is used.  Only the temporary file, ours, is removed.  The cache
+    is then kept within its size cap, least recently used entries first
+    (:func:`modelgen.fileio.cache_eviction.keep_within_cap`).
     """
     def write(handle) -> None:
         handle.write(_header(key, shapes, _crc(arrays)))
         for array in arrays:
             handle.write(memoryview(np.ascontiguousarray(array)).cast("B"))
 
-    return link_new_entry(folder, key, write, entry_paths(folder, key), lambda path: _mapped(path, key, shapes))
+    def accept(path: Path) -> tuple[Path, list[np.ndarray]] | None:
+        mapped = _mapped(path, key, shapes)
+        return None if mapped is None else (path, mapped)
+
+    kept = link_new_entry(folder, key, write, entry_paths(folder, key), accept)
+    if kept is None:
+        return None
+    keep_within_cap(folder.parent, stored=kept[0])
+    return kept[1]
 
 
 def _read_only(arrays: list[np.ndarray]) -> list[np.ndarray]:
@@ -187,6 +198,7 @@ def cached_trajectory(path: FlightPath, imu_rate: float, record_rate: float, fol
         if entry.exists():
             arrays = _mapped(entry, key, shapes)
             if arrays is not None:
+                mark_used(entry)
                 break
     if arrays is None:
         made = generate_trajectory(path, imu_rate, record_rate)
