@@ -51,10 +51,24 @@ def normal_gravity(latitude: float, height: float) -> float:
     Somigliana's closed formula on the ellipsoid with the second-order free-air
     correction g(h) = g0 (1 - 2 h/a (1 + f + m - 2 f sin^2 L) + 3 h^2/a^2).
     """
+    g0, slope = gravity_latitude_terms(latitude)
+    return gravity_at_height(g0, slope, height)
+
+
+@compiled
+def gravity_latitude_terms(latitude: float) -> tuple[float, float]:
+    """The terms of :func:`normal_gravity` in the latitude alone: g0 on the ellipsoid and the free-air slope
+    factor (1 + f + m - 2 f sin^2 L); a caller that meets one latitude again may keep them."""
     s2 = math.sin(latitude) ** 2
     g0 = EQUATORIAL_GRAVITY * (1.0 + SOMIGLIANA_K * s2) / math.sqrt(1.0 - ECCENTRICITY_SQUARED * s2)
+    return g0, 1.0 + FLATTENING + GRAVITY_RATIO_M - 2.0 * FLATTENING * s2
+
+
+@compiled
+def gravity_at_height(g0: float, slope: float, height: float) -> float:
+    """:func:`normal_gravity` from its latitude terms (:func:`gravity_latitude_terms`) at ``height``."""
     a = SEMI_MAJOR_AXIS
-    factor = 1.0 - 2.0 * height / a * (1.0 + FLATTENING + GRAVITY_RATIO_M - 2.0 * FLATTENING * s2)
+    factor = 1.0 - 2.0 * height / a * slope
     return g0 * (factor + 3.0 * height * height / (a * a))
 
 
@@ -73,11 +87,20 @@ def transport_rate_ned(
     omega_en^n = [V_e/(R_N+h), -V_n/(R_M+h), -V_e tan L/(R_N+h)].
     """
     meridian, prime_vertical = radii_of_curvature(latitude)
+    return transport_rate_from_radii(meridian, prime_vertical, math.tan(latitude), height, velocity_north, velocity_east)
+
+
+@compiled
+def transport_rate_from_radii(
+    meridian: float, prime_vertical: float, tan_latitude: float, height: float, velocity_north: float,
+    velocity_east: float
+) -> tuple[float, float, float]:
+    """:func:`transport_rate_ned` from the radii of curvature and tangent of the latitude."""
     rn = prime_vertical + height
     return (
         velocity_east / rn,
         -velocity_north / (meridian + height),
-        -velocity_east * math.tan(latitude) / rn,
+        -velocity_east * tan_latitude / rn,
     )
 
 
@@ -94,6 +117,16 @@ def position_rates(
     """
     cos_latitude = math.cos(latitude)
     meridian, prime_vertical = radii_of_curvature(latitude)
+    return position_rates_from_radii(meridian, prime_vertical, cos_latitude, height, velocity_north, velocity_east,
+                                     velocity_down)
+
+
+@compiled
+def position_rates_from_radii(
+    meridian: float, prime_vertical: float, cos_latitude: float, height: float, velocity_north: float,
+    velocity_east: float, velocity_down: float
+) -> tuple[float, float, float]:
+    """:func:`position_rates` from the radii of curvature and cosine of the latitude (a caller may keep them)."""
     return (
         velocity_north / (meridian + height),
         velocity_east / ((prime_vertical + height) * cos_latitude),

@@ -305,6 +305,63 @@ def _rk4_stage(lat, step, rate, motion):
     return _rates_at(lat + step * rate, motion)
 
 
+# -- latitude memos ----------------------------------------------------------------------------------------------
+# The functions of the latitude alone (sines, cosines, tangent, square roots and divisions of the radii and of
+# gravity) are most of a position rate's and an integrand's work.  A flight along a parallel keeps its latitude to
+# the last bit (profile_000 flies east: v_N = v_h cos(90 deg) ~ 1e-14 m/s), so consecutive evaluations meet the very
+# same latitude again: a memo holds the last latitude's functions and gives them back when the latitude is equal
+# (same value; a zero, whose sign its sine keeps, and NaN always recomputed).  The functions are earth.py's own,
+# so the numbers are those of computing them every time, bit for bit.
+
+
+@compiled
+def _same_latitude(lat, memo):
+    """True when ``memo`` holds the functions of this very latitude (equal, and not a signed zero or NaN)."""
+    return lat == memo[0] and lat != 0.0
+
+
+@compiled
+def _no_rate_terms():
+    """An empty position-rate memo (its latitude NaN: equal to none)."""
+    return (math.nan, 0.0, 0.0, 0.0)
+
+
+@compiled
+def _rate_terms(lat, memo):
+    """(latitude, meridian radius, prime-vertical radius, cos latitude): the latitude terms of the position rates,
+    from ``memo`` when it holds them."""
+    if _same_latitude(lat, memo):
+        return memo
+    cos_latitude = math.cos(lat)
+    meridian, prime_vertical = earth.radii_of_curvature(lat)
+    return (lat, meridian, prime_vertical, cos_latitude)
+
+
+@compiled
+def _rates_from_terms(terms, motion):
+    """:func:`_rates_at` from the latitude terms (:func:`_rate_terms`)."""
+    h, vn, ve, vd = motion
+    return earth.position_rates_from_radii(terms[1], terms[2], terms[3], h, vn, ve, vd)
+
+
+@compiled
+def _no_node_terms():
+    """An empty integrand memo (its latitude NaN: equal to none)."""
+    return (math.nan, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@compiled
+def _node_terms(lat, memo):
+    """(latitude, omega_ie^n (3), tan latitude, meridian and prime-vertical radii, gravity's g0 and slope): the
+    latitude terms of :func:`_integrands`, from ``memo`` when it holds them."""
+    if _same_latitude(lat, memo):
+        return memo
+    ie_n, ie_e, ie_d = earth.earth_rate_ned(lat)
+    meridian, prime_vertical = earth.radii_of_curvature(lat)
+    g0, slope = earth.gravity_latitude_terms(lat)
+    return (lat, ie_n, ie_e, ie_d, math.tan(lat), meridian, prime_vertical, g0, slope)
+
+
 @compiled
 def _rk4_sum(x, dt, k1, k2, k3, k4):
     """x one RK4 step on: x + dt/6 (k1 + 2 k2 + 2 k3 + k4)."""
@@ -314,6 +371,12 @@ def _rk4_sum(x, dt, k1, k2, k3, k4):
 @compiled
 def _integrands(t, lat, table, i):
     """omega_ib^b and f^b at time t (latitude supplied by the caller)."""
+    return _integrands_from_terms(t, _node_terms(lat, _no_node_terms()), table, i)
+
+
+@compiled
+def _integrands_from_terms(t, terms, table, i):
+    """:func:`_integrands` given the latitude terms (:func:`_node_terms`)."""
     vh, psi, vd, roll, h, a_h, turn, a_v, roll_rate = _kinematics(t, table, i)
     if table[i, HEADING_HELD] != 0.0:
         cpsi, spsi = table[i, HEADING_HELD + 1], table[i, HEADING_HELD + 2]
@@ -342,8 +405,8 @@ def _integrands(t, lat, table, i):
     wx = roll_rate - turn * sp
     wy = pitch_rate * cr + turn * cp * sr
     wz = -pitch_rate * sr + turn * cp * cr
-    ie_n, ie_e, ie_d = earth.earth_rate_ned(lat)
-    en_n, en_e, en_d = earth.transport_rate_ned(lat, h, vn, ve)
+    ie_n, ie_e, ie_d = terms[1], terms[2], terms[3]
+    en_n, en_e, en_d = earth.transport_rate_from_radii(terms[5], terms[6], terms[4], h, vn, ve)
     # C_n^b (omega_ie + omega_en): rotate by the conjugate quaternion
     bx, by, bz = rotate_vector(q0, -q1, -q2, -q3, ie_n + en_n, ie_e + en_e, ie_d + en_d)
     # f^n = dv/dt + (2 omega_ie + omega_en) x v - g
@@ -353,7 +416,7 @@ def _integrands(t, lat, table, i):
     ox, oy, oz = 2.0 * ie_n + en_n, 2.0 * ie_e + en_e, 2.0 * ie_d + en_d
     fn = dvn + (oy * vd - oz * ve)
     fe = dve + (oz * vn - ox * vd)
-    fd = dvd + (ox * ve - oy * vn) - earth.normal_gravity(lat, h)
+    fd = dvd + (ox * ve - oy * vn) - earth.gravity_at_height(terms[7], terms[8], h)
     fx, fy, fz = rotate_vector(q0, -q1, -q2, -q3, fn, fe, fd)
     return wx + bx, wy + by, wz + bz, fx, fy, fz
 
@@ -457,10 +520,11 @@ def _weighted_sum(sums, weight, values):
 
 
 @compiled
-def _node_integrands(t, t0, dt, lat, k1a, lat1, m1, table, i):
-    """:func:`_integrands` at time t of the sample [t0, t0 + dt] in segment i, the latitude Hermite-interpolated
-    between (lat, its rate k1a) at t0 and (lat1, m1) at the sample's end."""
-    return _integrands(t, _hermite((t - t0) / dt, dt, lat, k1a, lat1, m1), table, i)
+def _node_integrands(t, t0, dt, lat, k1a, lat1, m1, table, i, memo):
+    """(:func:`_integrands` at time t of the sample [t0, t0 + dt] in segment i, the latitude Hermite-interpolated
+    between (lat, its rate k1a) at t0 and (lat1, m1) at the sample's end; the latitude memo of that latitude)."""
+    terms = _node_terms(_hermite((t - t0) / dt, dt, lat, k1a, lat1, m1), memo)
+    return _integrands_from_terms(t, terms, table, i), terms
 
 
 @compiled
@@ -488,7 +552,8 @@ def _split_sample_increments(table, starts, seg, t0, t1, dt, lat, k1a, lat1, m1)
             else:
                 x, w = gl_x2, gl_w0
             # nodes lie strictly inside [a, b], hence inside segment i
-            sums = _weighted_sum(sums, w * half, _node_integrands(mid + half * x, t0, dt, lat, k1a, lat1, m1, table, i))
+            values, _ = _node_integrands(mid + half * x, t0, dt, lat, k1a, lat1, m1, table, i, _no_node_terms())
+            sums = _weighted_sum(sums, w * half, values)
         a = b
     return sums
 
@@ -518,6 +583,8 @@ def _increments(table, lat0, lon0, dt, k_start, k_stop, delta_theta, delta_veloc
     lat, lon = lat0, lon0
     seg = i1 = 0
     k1a = k1o = lat1 = lon1 = m1 = mo1 = 0.0
+    rates = _no_rate_terms()  # latitude memos: the position rates', each Gauss node's
+    memo0 = memo1 = memo2 = _no_node_terms()
     if k_start < k_stop:  # the first sample's RK4: the loop then makes sample k + 1's while sample k's nodes go
         seg = _segment_index(k_start * dt, starts, seg)
         k1a, k1o, _ = _position_rate(k_start * dt, lat, table, seg)
@@ -543,25 +610,29 @@ def _increments(table, lat0, lon0, dt, k_start, k_stop, delta_theta, delta_veloc
             im = _segment_index(tm, starts, i1)
             i2 = _segment_index(t2, starts, i1)
             middle = _ned_motion(tm, table, im)
-            k2a, k2o, _ = _rk4_stage(lat1, 0.5 * dt, m1, middle)
+            rates = _rate_terms(lat1 + 0.5 * dt * m1, rates)
+            k2a, k2o, _ = _rates_from_terms(rates, middle)
         if whole:
-            sums = _weighted_sum(sums, gl_w0 * half, _node_integrands(mid + half * gl_x0, t0, dt, lat, k1a, lat1, m1,
-                                                                      table, seg))
+            values, memo0 = _node_integrands(mid + half * gl_x0, t0, dt, lat, k1a, lat1, m1, table, seg, memo0)
+            sums = _weighted_sum(sums, gl_w0 * half, values)
         if more:
-            k3a, k3o, _ = _rk4_stage(lat1, 0.5 * dt, k2a, middle)
+            rates = _rate_terms(lat1 + 0.5 * dt * k2a, rates)
+            k3a, k3o, _ = _rates_from_terms(rates, middle)
         if whole:
-            sums = _weighted_sum(sums, gl_w1 * half, _node_integrands(mid + half * 0.0, t0, dt, lat, k1a, lat1, m1,
-                                                                      table, seg))
+            values, memo1 = _node_integrands(mid + half * 0.0, t0, dt, lat, k1a, lat1, m1, table, seg, memo1)
+            sums = _weighted_sum(sums, gl_w1 * half, values)
         if more:
             end = _ned_motion(t2, table, i2)
-            k4a, k4o, _ = _rk4_stage(lat1, dt, k3a, end)
+            rates = _rate_terms(lat1 + dt * k3a, rates)
+            k4a, k4o, _ = _rates_from_terms(rates, end)
         if whole:
-            sums = _weighted_sum(sums, gl_w0 * half, _node_integrands(mid + half * gl_x2, t0, dt, lat, k1a, lat1, m1,
-                                                                      table, seg))
+            values, memo2 = _node_integrands(mid + half * gl_x2, t0, dt, lat, k1a, lat1, m1, table, seg, memo2)
+            sums = _weighted_sum(sums, gl_w0 * half, values)
         if more:
             lat2 = _rk4_sum(lat1, dt, m1, k2a, k3a, k4a)
             lon2 = _rk4_sum(lon1, dt, mo1, k2o, k3o, k4o)
-            m2, mo2, _ = _rates_at(lat2, end)
+            rates = _rate_terms(lat2, rates)
+            m2, mo2, _ = _rates_from_terms(rates, end)
         if not whole:
             sums = _split_sample_increments(table, starts, seg, t0, t1, dt, lat, k1a, lat1, m1)
         if fill_positions and (k + 1) % record_every == 0:
