@@ -42,6 +42,7 @@ from modelgen.errors import ModelError
 
 if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
     from modelgen.derive.symbolic import DerivedModel
+    from modelgen.simulation.model_outline import ModelOutline
 
 
 class KalmanFilter(Protocol):
@@ -386,7 +387,7 @@ def generated_filter_files(derived: DerivedModel) -> dict[str, str]:
     return dict(_GENERATED[key])
 
 
-def filter_factory(derived: DerivedModel, implementation: str, work_dir: str | Path,
+def filter_factory(derived: DerivedModel | ModelOutline, implementation: str, work_dir: str | Path,
                    files: Mapping[str, str] | None = None) -> Callable[[np.ndarray, np.ndarray], KalmanFilter]:
     """A maker of fresh filters (x0, P0) -> filter for ``implementation``.
 

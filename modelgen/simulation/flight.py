@@ -28,6 +28,7 @@ from modelgen.simulation.trajectory import Trajectory
 
 if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
     from modelgen.derive.symbolic import DerivedModel
+    from modelgen.simulation.model_outline import ModelOutline
 
 
 def perturbed_initial_state(truth0: np.ndarray, attitude: np.ndarray, velocity: np.ndarray,
@@ -97,8 +98,9 @@ def profile_layout(profile: FlightProfile, derived: DerivedModel, trajectory: Tr
     return profile.aiding_sensor.layout(profile, derived, trajectory)
 
 
-def fly_profile(profile: FlightProfile, derived: DerivedModel, trajectory: Trajectory, rng: np.random.Generator,
-                make_filter: FilterMaker, mode: str | None = None, sensors: SensorData | None = None,
+def fly_profile(profile: FlightProfile, derived: DerivedModel | ModelOutline, trajectory: Trajectory,
+                rng: np.random.Generator, make_filter: FilterMaker, mode: str | None = None,
+                sensors: SensorData | None = None,
                 layout: ErrorLayout | None = None, progress: Progress | None = None,
                 truth_profile: FlightProfile | None = None, record_every: int = 1,
                 piece_seconds: float | None = None) -> RunResult:

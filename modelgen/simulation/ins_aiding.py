@@ -46,6 +46,7 @@ from modelgen.simulation.trajectory import Trajectory
 
 if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
     from modelgen.derive.symbolic import DerivedModel
+    from modelgen.simulation.model_outline import ModelOutline
 
 #: sensor quantity -> (kind, NED axis or position index, sign)
 QUANTITIES = {
@@ -151,7 +152,8 @@ class NavigationQuantitySensor(ABC):
                           trajectory.record_period, layout.fed_back_mask(), profile.filter.gate_probability,
                           getattr(kalman, "name", type(kalman).__name__), progress, record_every=record_every, sink=sink)
 
-    def native_loop(self, profile: Any, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
+    def native_loop(self, profile: Any, derived: DerivedModel | ModelOutline, trajectory: Trajectory,
+                    sensors: SensorData,
                     layout: ErrorLayout, make_filter: Any, mode: str, progress: Progress | None,
                     record_every: int = 1) -> Any:
         """The same loop in compiled code with the generated C filter (:mod:`modelgen.simulation.native_loop`).

@@ -40,6 +40,7 @@ from modelgen.simulation.trajectory import Trajectory
 
 if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
     from modelgen.derive.symbolic import DerivedModel
+    from modelgen.simulation.model_outline import ModelOutline
 
 #: default piece length: 30 s of IMU data (9,000 samples at 300 Hz, 432 kB of increments); Python is
 #: entered once per piece and mode, so much shorter pieces cost interpreter time (10-s pieces: 0.3 s more CPU
@@ -99,8 +100,8 @@ def load_piece(sensors: SensorData, cursor, first_cycle: int, last_cycle: int,
     sensors.sample_offset = start
 
 
-def fly_modes(profile: FlightProfile, derived: DerivedModel, trajectory: Trajectory, sensors: SensorData,
-              layout: ErrorLayout, make_filter: FilterMaker, modes: Iterable[str],
+def fly_modes(profile: FlightProfile, derived: DerivedModel | ModelOutline, trajectory: Trajectory,
+              sensors: SensorData, layout: ErrorLayout, make_filter: FilterMaker, modes: Iterable[str],
               progress: Callable[[str], Progress] | None = None, piece_seconds: float = PIECE_SECONDS,
               record_every: int = 1, sinks: dict[str, Sink] | None = None,
               glue: str = "compiled", histories: dict[str, Any] | None = None) -> dict[str, RunResult]:
