@@ -274,3 +274,31 @@ def test_the_filter_class_passes_the_reference_conformance_check_for_every_built
     ref = reference_run(derived, scenario, options.taylor_order, options.taylor_tolerance, options.process_noise)
     result = compare("python Filter", filter_run(module, derived, scenario), ref, scenario_tolerance(derived, scenario, options.taylor_order))
     assert result.passed(), result
+
+
+@pytest.mark.parametrize("name", ["random_constants_only", "one_state_no_measurement", "nothing_but_a_constant"])
+def test_the_filter_class_runs_degenerate_models_as_the_functional_api_does(name, tmp_path):
+    """Phi = I, no measurements, no noises: the Filter's steps give the functional API's x and P.
+
+    Within rounding only: the Filter's dense predict and the functional
+    factored one add the same products in different orders (4 n eps
+    relative), and the updates then start from those P.
+    """
+    from modelgen.model.loading import load_model_text
+    from tests.codegen.test_degenerate_models import MODELS
+
+    derived = derive(load_model_text(MODELS[name], filename=f"{name}.yaml"))
+    module = python_module(derived, tmp_path)
+    p = module.parameter_vector({})
+    phi, qd = module.discretize(module.system_matrix(p), module.noise_input_matrix(p), module.noise_psd(p), 1.0)
+    H, r = module.measurement_matrix(p), module.measurement_variance(p)
+    n = derived.n_states
+    x, P = np.full(n, 0.5), np.eye(n) * 2.0
+    f = module.Filter(x, P)
+    for _ in range(3):
+        x, P = module.predict(x, P, phi, qd)
+        f.predict(phi, qd)
+        x, P = module.update(x, P, np.ones(len(r)), H, r)
+        f.update(np.ones(len(r)), H, r)
+        np.testing.assert_allclose(f.get_state(), x, rtol=1e-15, atol=0.0)
+        np.testing.assert_allclose(f.get_covariance(), P, rtol=4 * n * EPS, atol=0.0)
