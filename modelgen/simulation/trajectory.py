@@ -371,13 +371,14 @@ def _rk4_sum(x, dt, k1, k2, k3, k4):
 @compiled
 def _integrands(t, lat, table, i):
     """omega_ib^b and f^b at time t (latitude supplied by the caller)."""
-    return _integrands_from_terms(t, _node_terms(lat, _no_node_terms()), table, i)
+    return _integrands_of_motion(_kinematics(t, table, i), _node_terms(lat, _no_node_terms()), table, i)
 
 
 @compiled
-def _integrands_from_terms(t, terms, table, i):
-    """:func:`_integrands` given the latitude terms (:func:`_node_terms`)."""
-    vh, psi, vd, roll, h, a_h, turn, a_v, roll_rate = _kinematics(t, table, i)
+def _integrands_of_motion(motion, terms, table, i):
+    """:func:`_integrands` given the motion (:func:`_kinematics`) and the latitude terms (:func:`_node_terms`):
+    a function of those and of segment i's row of the table alone."""
+    vh, psi, vd, roll, h, a_h, turn, a_v, roll_rate = motion
     if table[i, HEADING_HELD] != 0.0:
         cpsi, spsi = table[i, HEADING_HELD + 1], table[i, HEADING_HELD + 2]
         chalf_y, shalf_y = table[i, HEADING_HELD + 3], table[i, HEADING_HELD + 4]
@@ -520,16 +521,54 @@ def _weighted_sum(sums, weight, values):
 
 
 @compiled
-def _node_integrands(t, t0, dt, lat, k1a, lat1, m1, table, i, memo):
-    """(:func:`_integrands` at time t of the sample [t0, t0 + dt] in segment i, the latitude Hermite-interpolated
-    between (lat, its rate k1a) at t0 and (lat1, m1) at the sample's end; the latitude memo of that latitude)."""
-    terms = _node_terms(_hermite((t - t0) / dt, dt, lat, k1a, lat1, m1), memo)
-    return _integrands_from_terms(t, terms, table, i), terms
+def _identical(a, b):
+    """a and b are the same number: equal, and of the same sign when zero (NaN is identical to nothing)."""
+    return a == b and math.copysign(1.0, a) == math.copysign(1.0, b)
+
+
+#: columns of a node memo row (:func:`_node_integrands`): the latitude (NaN: none), its terms (:func:`_node_terms`),
+#: the segment and motion they were computed for, the integrands
+MEMO_LATITUDE, MEMO_TERMS, MEMO_SEGMENT, MEMO_MOTION, MEMO_VALUES, MEMO_COLUMNS = 0, 1, 9, 10, 15, 21
 
 
 @compiled
-def _split_sample_increments(table, starts, seg, t0, t1, dt, lat, k1a, lat1, m1):
-    """(delta theta, delta v) of a sample that crosses a segment boundary: Gauss-Legendre on each part."""
+def _node_integrands(t, t0, dt, lat, k1a, lat1, m1, table, i, memo, j):
+    """:func:`_integrands` at time t of the sample [t0, t0 + dt] in segment i, the latitude Hermite-interpolated
+    between (lat, its rate k1a) at t0 and (lat1, m1) at the sample's end; ``memo[j]`` is this node's memo.
+
+    The integrands are a function of the latitude, the motion (ground speed, heading, down velocity, roll, height)
+    and segment i; in steady flight along a parallel (a cruise) those are the same numbers node after node, and
+    the memo gives the integrands back without computing them again (the latitude terms alone when only the
+    motion changed).
+    """
+    row = memo[j]
+    lat_t = _hermite((t - t0) / dt, dt, lat, k1a, lat1, m1)
+    motion = _kinematics(t, table, i)
+    same_latitude = _same_latitude(lat_t, (row[MEMO_LATITUDE],))
+    if (same_latitude and row[MEMO_SEGMENT] == i and _identical(motion[0], row[MEMO_MOTION])
+            and _identical(motion[1], row[MEMO_MOTION + 1]) and _identical(motion[2], row[MEMO_MOTION + 2])
+            and _identical(motion[3], row[MEMO_MOTION + 3]) and _identical(motion[4], row[MEMO_MOTION + 4])):
+        return (row[MEMO_VALUES], row[MEMO_VALUES + 1], row[MEMO_VALUES + 2], row[MEMO_VALUES + 3],
+                row[MEMO_VALUES + 4], row[MEMO_VALUES + 5])
+    if same_latitude:
+        terms = (row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7], row[8])
+    else:
+        terms = _node_terms(lat_t, _no_node_terms())
+        for c in range(9):
+            row[MEMO_LATITUDE + c] = terms[c]
+    values = _integrands_of_motion(motion, terms, table, i)
+    row[MEMO_SEGMENT] = i
+    for c in range(5):
+        row[MEMO_MOTION + c] = motion[c]
+    for c in range(6):
+        row[MEMO_VALUES + c] = values[c]
+    return values
+
+
+@compiled
+def _split_sample_increments(table, starts, seg, t0, t1, dt, lat, k1a, lat1, m1, memos):
+    """(delta theta, delta v) of a sample that crosses a segment boundary: Gauss-Legendre on each part (``memos``:
+    the three node memos of :func:`_node_integrands`)."""
     gl_x0 = -math.sqrt(0.6)
     gl_x2 = math.sqrt(0.6)
     gl_w0 = 5.0 / 9.0
@@ -552,7 +591,7 @@ def _split_sample_increments(table, starts, seg, t0, t1, dt, lat, k1a, lat1, m1)
             else:
                 x, w = gl_x2, gl_w0
             # nodes lie strictly inside [a, b], hence inside segment i
-            values, _ = _node_integrands(mid + half * x, t0, dt, lat, k1a, lat1, m1, table, i, _no_node_terms())
+            values = _node_integrands(mid + half * x, t0, dt, lat, k1a, lat1, m1, table, i, memos, node)
             sums = _weighted_sum(sums, w * half, values)
         a = b
     return sums
@@ -584,7 +623,7 @@ def _increments(table, lat0, lon0, dt, k_start, k_stop, delta_theta, delta_veloc
     seg = i1 = 0
     k1a = k1o = lat1 = lon1 = m1 = mo1 = 0.0
     rates = _no_rate_terms()  # latitude memos: the position rates', each Gauss node's
-    memo0 = memo1 = memo2 = _no_node_terms()
+    memos = np.full((3, MEMO_COLUMNS), np.nan)
     if k_start < k_stop:  # the first sample's RK4: the loop then makes sample k + 1's while sample k's nodes go
         seg = _segment_index(k_start * dt, starts, seg)
         k1a, k1o, _ = _position_rate(k_start * dt, lat, table, seg)
@@ -613,20 +652,20 @@ def _increments(table, lat0, lon0, dt, k_start, k_stop, delta_theta, delta_veloc
             rates = _rate_terms(lat1 + 0.5 * dt * m1, rates)
             k2a, k2o, _ = _rates_from_terms(rates, middle)
         if whole:
-            values, memo0 = _node_integrands(mid + half * gl_x0, t0, dt, lat, k1a, lat1, m1, table, seg, memo0)
+            values = _node_integrands(mid + half * gl_x0, t0, dt, lat, k1a, lat1, m1, table, seg, memos, 0)
             sums = _weighted_sum(sums, gl_w0 * half, values)
         if more:
             rates = _rate_terms(lat1 + 0.5 * dt * k2a, rates)
             k3a, k3o, _ = _rates_from_terms(rates, middle)
         if whole:
-            values, memo1 = _node_integrands(mid + half * 0.0, t0, dt, lat, k1a, lat1, m1, table, seg, memo1)
+            values = _node_integrands(mid + half * 0.0, t0, dt, lat, k1a, lat1, m1, table, seg, memos, 1)
             sums = _weighted_sum(sums, gl_w1 * half, values)
         if more:
             end = _ned_motion(t2, table, i2)
             rates = _rate_terms(lat1 + dt * k3a, rates)
             k4a, k4o, _ = _rates_from_terms(rates, end)
         if whole:
-            values, memo2 = _node_integrands(mid + half * gl_x2, t0, dt, lat, k1a, lat1, m1, table, seg, memo2)
+            values = _node_integrands(mid + half * gl_x2, t0, dt, lat, k1a, lat1, m1, table, seg, memos, 2)
             sums = _weighted_sum(sums, gl_w0 * half, values)
         if more:
             lat2 = _rk4_sum(lat1, dt, m1, k2a, k3a, k4a)
@@ -634,7 +673,7 @@ def _increments(table, lat0, lon0, dt, k_start, k_stop, delta_theta, delta_veloc
             rates = _rate_terms(lat2, rates)
             m2, mo2, _ = _rates_from_terms(rates, end)
         if not whole:
-            sums = _split_sample_increments(table, starts, seg, t0, t1, dt, lat, k1a, lat1, m1)
+            sums = _split_sample_increments(table, starts, seg, t0, t1, dt, lat, k1a, lat1, m1, memos)
         if fill_positions and (k + 1) % record_every == 0:
             truth[(k + 1) // record_every, 1] = lat1
             truth[(k + 1) // record_every, 2] = lon1

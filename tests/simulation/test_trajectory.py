@@ -1,15 +1,17 @@
 """Trajectory generation: the held-angle shortcut gives the numbers of computing every angle each sample; the
-software-pipelined increments give the numbers of taking the samples one after the other; a held trajectory's truth
+software-pipelined, memoized increments give the numbers of taking the samples one after the other; a held trajectory's truth
 positions, filled by its increments, are those the truth integration computes."""
 
 import math
 
 import numpy as np
+import pytest
 
 from modelgen.simulation.scenario import load_profile
-from modelgen.simulation.trajectory import (HEADING_HELD, PITCH_HELD, ROLL_HELD, FlightPath, Segment, _increments,
-                                            _position_rate, _rk4_from, _segment_index, _split_sample_increments,
-                                            _truth_records, generate_trajectory, segment_table)
+from modelgen.simulation.trajectory import (HEADING_HELD, MEMO_COLUMNS, PITCH_HELD, ROLL_HELD, FlightPath, Segment,
+                                            _increments, _position_rate, _rk4_from, _segment_index,
+                                            _split_sample_increments, _truth_records, generate_trajectory,
+                                            segment_table)
 
 
 def _every_kind_of_segment() -> FlightPath:
@@ -43,7 +45,8 @@ def test_held_angles_give_the_increments_and_truth_of_computing_every_angle_bit_
 
 def _one_sample_after_the_other(table: np.ndarray, path: FlightPath, dt: float, n: int) -> tuple[np.ndarray, ...]:
     """The increments as the plain algorithm takes them: each sample's RK4, then its Gauss nodes on each part of the
-    sample a segment boundary leaves (every sample by the general, splitting path), then the next sample."""
+    sample a segment boundary leaves (every sample by the general, splitting path, every node computed), then the
+    next sample."""
     starts = table[:, 0]
     lat, lon, seg = path.latitude, path.longitude, 0
     theta, velocity = np.empty((n, 3)), np.empty((n, 3))
@@ -52,15 +55,28 @@ def _one_sample_after_the_other(table: np.ndarray, path: FlightPath, dt: float, 
         k1a, k1o, _ = _position_rate(k * dt, lat, table, seg)
         lat1, lon1, _, i1 = _rk4_from(table, starts, seg, k, dt, lat, lon, k1a, k1o)
         m1, _, _ = _position_rate((k + 1) * dt, lat1, table, i1)
-        sums = _split_sample_increments(table, starts, seg, k * dt, (k + 1) * dt, dt, lat, k1a, lat1, m1)
+        sums = _split_sample_increments(table, starts, seg, k * dt, (k + 1) * dt, dt, lat, k1a, lat1, m1,
+                                        np.full((3, MEMO_COLUMNS), np.nan))  # no memo: every node computed
         theta[k], velocity[k] = sums[:3], sums[3:]
         lat, lon = lat1, lon1
     return theta, velocity
 
 
-def test_pipelined_increments_are_those_of_taking_the_samples_one_after_the_other_bit_for_bit():
-    path = _every_kind_of_segment()
-    dt = 1.0 / 7.3  # segment boundaries fall inside samples: those samples are split
+def _along_a_parallel(latitude_deg: float, heading_deg: float) -> FlightPath:
+    """Climb, level off and cruise on one heading: due east (90 deg) the latitude stays the same to the last bit and
+    the cruise repeats its integrands node after node (the memos give them back); the equator's latitude is a zero."""
+    d = math.radians
+    return FlightPath("parallel", d(latitude_deg), d(7.0), 300.0, 100.0, d(heading_deg), -3.0, 0.0, (
+        Segment("climb", 3.0), Segment("level off", 3.0, vertical_acceleration=1.0), Segment("cruise", 40.0)))
+
+
+@pytest.mark.parametrize("path, dt", [
+    (_every_kind_of_segment(), 1.0 / 7.3),  # segment boundaries fall inside samples: those samples are split
+    (_along_a_parallel(45.0, 90.0), 0.01),  # the memos hit
+    (_along_a_parallel(0.0, 90.0), 0.01),  # a zero latitude: never taken from a memo
+    (_along_a_parallel(-30.0, 0.0), 0.01),  # due north: heading and roll zeros in the memo keys
+], ids=["every kind of segment", "east", "east on the equator", "north"])
+def test_pipelined_memoized_increments_are_those_of_taking_the_samples_one_after_the_other_bit_for_bit(path, dt):
     n = int(path.duration / dt)
     table = segment_table(path)
     plain = _one_sample_after_the_other(table, path, dt, n)
