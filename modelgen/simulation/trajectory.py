@@ -315,9 +315,10 @@ def _rk4_stage(lat, step, rate, motion):
 
 
 @compiled
-def _same_latitude(lat, memo):
-    """True when ``memo`` holds the functions of this very latitude (equal, and not a signed zero or NaN)."""
-    return lat == memo[0] and lat != 0.0
+def _same_latitude(lat, kept):
+    """True when ``lat`` is the latitude ``kept`` to the last bit, and neither a zero (whose sign its sine keeps)
+    nor NaN: its functions may then be taken from a memo."""
+    return lat == kept and lat != 0.0
 
 
 @compiled
@@ -330,7 +331,7 @@ def _no_rate_terms():
 def _rate_terms(lat, memo):
     """(latitude, meridian radius, prime-vertical radius, cos latitude): the latitude terms of the position rates,
     from ``memo`` when it holds them."""
-    if _same_latitude(lat, memo):
+    if _same_latitude(lat, memo[0]):
         return memo
     cos_latitude = math.cos(lat)
     meridian, prime_vertical = earth.radii_of_curvature(lat)
@@ -345,17 +346,9 @@ def _rates_from_terms(terms, motion):
 
 
 @compiled
-def _no_node_terms():
-    """An empty integrand memo (its latitude NaN: equal to none)."""
-    return (math.nan, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-
-
-@compiled
-def _node_terms(lat, memo):
+def _node_terms(lat):
     """(latitude, omega_ie^n (3), tan latitude, meridian and prime-vertical radii, gravity's g0 and slope): the
-    latitude terms of :func:`_integrands`, from ``memo`` when it holds them."""
-    if _same_latitude(lat, memo):
-        return memo
+    latitude terms of :func:`_integrands` (a node memo keeps them: :func:`_node_integrands`)."""
     ie_n, ie_e, ie_d = earth.earth_rate_ned(lat)
     meridian, prime_vertical = earth.radii_of_curvature(lat)
     g0, slope = earth.gravity_latitude_terms(lat)
@@ -371,7 +364,7 @@ def _rk4_sum(x, dt, k1, k2, k3, k4):
 @compiled
 def _integrands(t, lat, table, i):
     """omega_ib^b and f^b at time t (latitude supplied by the caller)."""
-    return _integrands_of_motion(_kinematics(t, table, i), _node_terms(lat, _no_node_terms()), table, i)
+    return _integrands_of_motion(_kinematics(t, table, i), _node_terms(lat), table, i)
 
 
 @compiled
@@ -526,9 +519,9 @@ def _identical(a, b):
     return a == b and math.copysign(1.0, a) == math.copysign(1.0, b)
 
 
-#: columns of a node memo row (:func:`_node_integrands`): the latitude (NaN: none), its terms (:func:`_node_terms`),
-#: the segment and motion they were computed for, the integrands
-MEMO_LATITUDE, MEMO_TERMS, MEMO_SEGMENT, MEMO_MOTION, MEMO_VALUES, MEMO_COLUMNS = 0, 1, 9, 10, 15, 21
+#: columns of a node memo row (:func:`_node_integrands`): the latitude (NaN: none) and its terms (the 9 values of
+#: :func:`_node_terms`), the segment and the motion (5) the integrands were computed for, the integrands (6)
+MEMO_LATITUDE, MEMO_SEGMENT, MEMO_MOTION, MEMO_VALUES, MEMO_COLUMNS = 0, 9, 10, 15, 21
 
 
 @compiled
@@ -544,16 +537,16 @@ def _node_integrands(t, t0, dt, lat, k1a, lat1, m1, table, i, memo, j):
     row = memo[j]
     lat_t = _hermite((t - t0) / dt, dt, lat, k1a, lat1, m1)
     motion = _kinematics(t, table, i)
-    same_latitude = _same_latitude(lat_t, (row[MEMO_LATITUDE],))
+    same_latitude = _same_latitude(lat_t, row[MEMO_LATITUDE])
     if (same_latitude and row[MEMO_SEGMENT] == i and _identical(motion[0], row[MEMO_MOTION])
             and _identical(motion[1], row[MEMO_MOTION + 1]) and _identical(motion[2], row[MEMO_MOTION + 2])
             and _identical(motion[3], row[MEMO_MOTION + 3]) and _identical(motion[4], row[MEMO_MOTION + 4])):
         return (row[MEMO_VALUES], row[MEMO_VALUES + 1], row[MEMO_VALUES + 2], row[MEMO_VALUES + 3],
                 row[MEMO_VALUES + 4], row[MEMO_VALUES + 5])
     if same_latitude:
-        terms = (row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7], row[8])
+        terms = (row[MEMO_LATITUDE], row[1], row[2], row[3], row[4], row[5], row[6], row[7], row[8])
     else:
-        terms = _node_terms(lat_t, _no_node_terms())
+        terms = _node_terms(lat_t)
         for c in range(9):
             row[MEMO_LATITUDE + c] = terms[c]
     values = _integrands_of_motion(motion, terms, table, i)
@@ -613,6 +606,9 @@ def _increments(table, lat0, lon0, dt, k_start, k_stop, delta_theta, delta_veloc
     other (bit for bit; tests/simulation/test_trajectory.py).  A sample within
     one segment (the common case) takes its nodes without any segment search;
     one that crosses a boundary is split (:func:`_split_sample_increments`).
+    Latitude memos (the position rates', :func:`_rate_terms`) and node memos
+    (each Gauss node's, :func:`_node_integrands`) give back what was computed
+    for the very same inputs: in steady flight along a parallel nearly all.
     """
     starts = table[:, 0]
     gl_x0 = -math.sqrt(0.6)
