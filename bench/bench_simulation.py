@@ -58,7 +58,7 @@ from modelgen.simulation.filter_loop import MODES
 from modelgen.simulation.filters import filter_factory
 from modelgen.simulation.flight import profile_layout, simulate_sensors
 from modelgen.simulation.scenario import load_profile
-from modelgen.simulation.streaming import fly_modes, history_every
+from modelgen.simulation.streaming import PIECE_SECONDS, cycles_per_piece, fly_modes, history_every
 from modelgen.simulation.strapdown import Strapdown
 from modelgen.simulation.trajectory import generate_trajectory
 
@@ -120,6 +120,19 @@ def fly(scenario, derived, make, streamed: bool, glue: str, modes=("closed_loop"
     return results, trajectory, {"trajectory": c_trajectory, "sensors": c_sensors, "fly": c_fly}
 
 
+def increments_clock(scenario) -> "Clock":
+    """The ideal IMU increments of the whole flight alone (trajectory._increments), in the pieces the new mode's pass
+    makes them (PIECE_SECONDS of IMU data, the truth positions integrated by the pieces), one after the other."""
+    trajectory = generate_trajectory(scenario.path, scenario.imu_rate, 1.0 / scenario.filter.period, streamed=True,
+                                     positions_in_pieces=True)
+    step = cycles_per_piece(trajectory, PIECE_SECONDS) * trajectory.record_every
+    with Clock() as clock:
+        for start in range(0, trajectory.n_samples, step):
+            trajectory.increments(start, start + step)
+    clock.samples = trajectory.n_samples
+    return clock
+
+
 def c_filter_seconds(make, cycles: int) -> float:
     """CPU seconds of the C filter's own work over ``cycles`` cycles: evaluate, discretize, predict (via ctypes)."""
     native = make.native(np.zeros(make.sizes.n), np.eye(make.sizes.n) * 1e-6)
@@ -177,6 +190,7 @@ def measure_time(scenario, derived, report: dict) -> None:
         del trajectory
         # -- new: streamed, compiled loop: the data alone, one mode, three modes ------------------
         _, _, t_data = fly(scenario, derived, make, True, "compiled", modes=())
+        c_increments = increments_clock(scenario)
         new, _, t_one = fly(scenario, derived, make, True, "compiled", label="new")
         _, _, t_three = fly(scenario, derived, make, True, "compiled", modes=MODES)
         c_filter = c_filter_seconds(make, cycles)
@@ -205,6 +219,10 @@ def measure_time(scenario, derived, report: dict) -> None:
               f"+ pass {t_one['fly'].cpu:.2f}, the pass: increments, IMU errors, the mode): {one_cpu:.2f} s CPU, "
               f"wall {one_wall:.2f} s; the data alone {data_cpu(t_data) + t_data['fly'].cpu:.2f} s CPU; target <= {target} s",
               flush=True)
+        print(f"    of the data: the ideal IMU increments alone ({c_increments.samples:,} samples, delta theta and delta v "
+              f"by Gauss-Legendre over each sample, latitude by RK4, in {PIECE_SECONDS:g}-s pieces): "
+              f"{c_increments.cpu:.2f} s CPU ({c_increments.cpu / c_increments.samples * 1e9:.0f} ns per sample), "
+              f"wall {c_increments.wall:.2f} s", flush=True)
         print(f"    new, three modes with their data (one pass): {three_cpu:.2f} s CPU, wall {three_wall:.2f} s "
               f"(the pass {t_three['fly'].cpu:.2f} s CPU)", flush=True)
         print(f"    of the mode: mechanization {c_mech.cpu:.2f} s, C filter (evaluate + discretize + predict, "
@@ -218,7 +236,9 @@ def measure_time(scenario, derived, report: dict) -> None:
                     "with_data_cpu_s": one_cpu, "with_data_wall_s": one_wall,
                     "truth_cpu_s": t_one["trajectory"].cpu, "sensors_cpu_s": t_one["sensors"].cpu,
                     "one_mode_pass_cpu_s": t_one["fly"].cpu, "data_only_pass_cpu_s": t_data["fly"].cpu,
-                    "data_only_cpu_s": data_cpu(t_data) + t_data["fly"].cpu}}
+                    "data_only_cpu_s": data_cpu(t_data) + t_data["fly"].cpu,
+                    "increments_cpu_s": c_increments.cpu, "increments_wall_s": c_increments.wall,
+                    "increments_samples": c_increments.samples}}
         report["three_modes"] = {"with_data_cpu_s": three_cpu, "with_data_wall_s": three_wall,
                                  "pass_cpu_s": t_three["fly"].cpu, "pass_wall_s": t_three["fly"].wall}
 
@@ -297,6 +317,9 @@ def markdown(report: dict) -> str:
             f"{new['with_data_cpu_s']:.2f} | {new['with_data_wall_s']:.2f} | <= 1.0 s |",
             f"| the data alone | truth {new['truth_cpu_s']:.2f} + sensors {new['sensors_cpu_s']:.2f} + a pass integrating the "
             f"truth positions, making and corrupting the increments {new['data_only_pass_cpu_s']:.2f} | {new['data_only_cpu_s']:.2f} | - | - |",
+            f"| of the data: the ideal IMU increments alone | delta theta, delta v of the {new['increments_samples']:,} "
+            f"samples (Gauss-Legendre nodes, RK4 latitude) in the pass's {PIECE_SECONDS:g}-s pieces, one after the other "
+            f"| {new['increments_cpu_s']:.2f} | {new['increments_wall_s']:.2f} | - |",
             f"| three modes with their data | the same data, open loop, closed loop, accumulated in one pass | "
             f"{three['with_data_cpu_s']:.2f} | {three['with_data_wall_s']:.2f} | - |",
             f"| old: one mode | held data, Python loop through ctypes (its data {old['data_cpu_s']:.2f} s CPU not counted) "
