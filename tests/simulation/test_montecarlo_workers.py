@@ -197,6 +197,19 @@ def test_a_worker_takes_the_callers_error_layout_instead_of_making_it(paper_deri
     context["code_dir"].cleanup()
 
 
+def test_a_set_up_whose_runs_need_the_derived_model_and_carry_none_is_refused_by_name(paper_derived):
+    import dataclasses
+
+    from modelgen.errors import ModelError
+    from modelgen.simulation import montecarlo
+
+    short = load_short_profile()
+    setup = montecarlo.worker_setup(short, None, paper_derived, short.filter.mode, 60, "reference", "test-key")
+    with pytest.raises(ModelError, match="test-key: its runs \\(filter 'reference', sensor 'doppler'\\) need the "
+                                         "derived model, and the set-up carries none"):
+        montecarlo._prepare(dataclasses.replace(setup, derived=None))
+
+
 def test_the_models_outline_has_the_names_and_sizes_the_compiled_loop_reads(paper_derived):
     import pickle
 
