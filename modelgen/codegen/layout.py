@@ -218,7 +218,7 @@ def _compact_discretize_scratch(sizes: ModelSizes, compact: CompactDiscretizeSiz
 
 
 def _van_loan_scratch(N: Dim, dim_w: Dim) -> tuple[Field, ...]:
-    """Members of Van Loan's discretize (modelgen.codegen.van_loan): two terms, E12's sum, rows, balancing sums."""
+    """Members of Van Loan's discretize (modelgen.codegen.van_loan): Phi dense while it is squared, two terms, E12's sum, rows, balancing sums."""
     N2 = Dim(f"2 * {N.text}", 2 * N.value)
     return (
         Field("Phi", (N, N), "Phi(h) dense (E22(h)^T), then its doublings; stored compressed at the end"),

@@ -42,11 +42,12 @@ grow with the model), exploiting the block-triangular form:
   4 N^3, and Q_d stays symmetric: its upper triangle is computed, then
   mirrored).
 
-Scratch: three N x N arrays (B, C, and S: W for the norm, then the sum of the
-B terms), two rows, one noise vector and the balancing's 2N scales, row and
-column sums (modelgen.codegen.layout); 8976 bytes for the paper's model in
-double against 6304 for the Taylor discretize's workspace
-(bench/bench_van_loan.py).  The balancing runs over F's nonzeros (the blocks
+Scratch: four N x N arrays (Phi, dense while it is squared: the transition
+keeps only its structural nonzeros, written at the end; B, C, and S: W for
+the norm, then the sum of the B terms), two rows, one noise vector and the
+balancing's 2N scales, row and column sums (modelgen.codegen.layout); 11,568
+bytes for the paper's model in double against 3,120 for the Taylor
+discretize's workspace.  The balancing runs over F's nonzeros (the blocks
 -F and F^T) and W, not over the dense 2N x 2N block.  The UD form takes
 Gamma and q, not Q_d, so the option is refused with it
 (modelgen.codegen.options).
