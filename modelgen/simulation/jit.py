@@ -31,6 +31,18 @@ def compiled(function: F) -> F:
     return _numba.njit(cache=True, fastmath=False, nogil=True)(function)  # type: ignore[return-value]
 
 
+def inlined(function: F) -> F:
+    """:func:`compiled`, and inlined by numba into its compiled callers (no call: arguments and tuples stay in registers).
+
+    For small helpers of a hot loop.  Only for helpers whose callers are in the
+    same file: numba's on-disk cache of a caller notices changes to its own
+    file, not to another's.
+    """
+    if _numba is None:
+        return function
+    return _numba.njit(cache=True, fastmath=False, nogil=True, inline="always")(function)  # type: ignore[return-value]
+
+
 @compiled
 def _first_call(x):
     """The smallest compiled function: calling it loads what any first compiled call loads."""

@@ -31,7 +31,7 @@ import numpy as np
 
 from modelgen.errors import ModelError
 from modelgen.simulation import earth
-from modelgen.simulation.jit import HAVE_NUMBA, compiled
+from modelgen.simulation.jit import compiled, inlined
 from modelgen.simulation.rotation import euler_quaternion, half_angle_quaternion, rotate_vector
 
 # Column layout of the recorded truth (one row per record time).
@@ -49,18 +49,6 @@ TRUTH_COLUMNS = (
     "q3",
 )
 MINIMUM_SPEED = 1.0  # m/s; the flight-path angle is undefined for a hovering vehicle
-
-
-def _inlined(function):
-    """:func:`~modelgen.simulation.jit.compiled`, and inlined by numba into its compiled callers: no call, its
-    arguments and tuples stay in registers (the per-node helpers of the increments' loop: 12% of its time).
-    Plain Python without numba, as ``compiled``.  Only for helpers whose callers are in this file (numba's cache
-    of a caller knows this file's changes, not another's)."""
-    if not HAVE_NUMBA:
-        return function
-    import numba
-
-    return numba.njit(cache=True, fastmath=False, nogil=True, inline="always")(function)
 
 
 @dataclass(frozen=True)
@@ -518,7 +506,7 @@ def _truth_motion(table, lat0, lon0, dt, n_samples, record_every, truth):
     return rec
 
 
-@_inlined
+@inlined
 def _weighted_sum(sums, weight, values):
     """The six running quadrature sums plus ``weight`` times the six integrand values (omega_ib^b, f^b)."""
     return (sums[0] + weight * values[0], sums[1] + weight * values[1], sums[2] + weight * values[2],
@@ -536,7 +524,7 @@ def _identical(a, b):
 MEMO_LATITUDE, MEMO_SEGMENT, MEMO_MOTION, MEMO_VALUES, MEMO_COLUMNS = 0, 9, 10, 15, 21
 
 
-@_inlined
+@inlined
 def _node_integrands(t, t0, dt, lat, k1a, lat1, m1, table, i, memo, j):
     """:func:`_integrands` at time t of the sample [t0, t0 + dt] in segment i, the latitude Hermite-interpolated
     between (lat, its rate k1a) at t0 and (lat1, m1) at the sample's end; ``memo[j]`` is this node's memo.
