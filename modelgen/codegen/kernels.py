@@ -15,6 +15,7 @@ kernel does the same work vectorized by row class (unit, diagonal, general).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -82,7 +83,7 @@ def _symmetric(owner: str, array: str, n: int, packed: bool, i: int, j: int) -> 
     return Ref(owner, array, (i, j))
 
 
-def phi_reference(structure: FilterStructure):
+def phi_reference(structure: FilterStructure) -> Callable[[int, int], Ref]:
     """Entry (i, k) of the transition's Phi, stored compressed to its structural pattern (``layout.phi_entries``)."""
     positions = phi_positions(structure.Phi)
 
