@@ -33,6 +33,8 @@
 #define ENU_DOPPLER18_NNZ_F 73
 #define ENU_DOPPLER18_NNZ_G 15
 #define ENU_DOPPLER18_NNZ_H 3
+/* stored entries of the transition's Phi: its structural nonzeros */
+#define ENU_DOPPLER18_N_PHI 163
 #define ENU_DOPPLER18_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
 #define ENU_DOPPLER18_N_TERMS 160   /* entries of discretize's compressed term arrays */
 #define ENU_DOPPLER18_N_ACTIVE_ENTRIES 160   /* entries of Phi in rows that are not e_i */
@@ -42,6 +44,8 @@
 #define ENU_DOPPLER18_ERR_NONFINITE 1      /* a non-finite input or result was refused */
 /* a variance or the innovation variance is not positive */
 #define ENU_DOPPLER18_ERR_NOT_POSITIVE 2
+/* a transition entry that must be 0 (or a unit row's 1) is not */
+#define ENU_DOPPLER18_ERR_STRUCTURE 3
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
@@ -176,8 +180,9 @@ typedef struct {
 
 /* The transition over one step T (from discretize). */
 typedef struct {
-    enu_doppler18_scalar Phi[ENU_DOPPLER18_N_STATES][ENU_DOPPLER18_N_STATES]; /* transition
-            matrix */
+    enu_doppler18_scalar Phi[ENU_DOPPLER18_N_PHI]; /* transition matrix, its structural nonzeros row
+            by row: entry k is (i, j) = (enu_doppler18_Phi_row[k], enu_doppler18_Phi_col[k]), every
+            other entry is 0 (enu_doppler18_get_transition_matrix expands it) */
     enu_doppler18_scalar Qd[ENU_DOPPLER18_N_PACKED]; /* Gamma (Q/T) Gamma^T, packed upper triangle:
             (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } enu_doppler18_transition;
@@ -230,6 +235,13 @@ extern const char *const enu_doppler18_measurement_names[3];
 extern const unsigned char enu_doppler18_F_row[73], enu_doppler18_F_col[73];
 extern const unsigned char enu_doppler18_G_row[15], enu_doppler18_G_col[15];
 extern const unsigned char enu_doppler18_H_row[3], enu_doppler18_H_col[3];
+/* The transition's Phi is stored compressed: t->Phi[k] is Phi(i, j) with i =
+        enu_doppler18_Phi_row[k],
+   j = enu_doppler18_Phi_col[k] (the structural nonzeros of e^{F T}, row by row, columns ascending;
+           a row of
+   random constants holds its diagonal 1 alone); every other entry of Phi is 0. */
+extern const unsigned char enu_doppler18_Phi_row[ENU_DOPPLER18_N_PHI],
+        enu_doppler18_Phi_col[ENU_DOPPLER18_N_PHI];
 
 /* Fill the parameters that have defaults in the model; the others become 0. */
 void enu_doppler18_default_params(enu_doppler18_params *params);
@@ -251,6 +263,19 @@ int enu_doppler18_matrices_evaluate(const enu_doppler18_params *restrict params,
 int enu_doppler18_discretize(const enu_doppler18_matrices *restrict m, enu_doppler18_scalar T,
         enu_doppler18_transition *restrict t,
                 enu_doppler18_workspace *restrict work);
+
+/* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
+void enu_doppler18_get_transition_matrix(const enu_doppler18_transition *restrict t,
+                enu_doppler18_scalar Phi[restrict ENU_DOPPLER18_N_STATES * ENU_DOPPLER18_N_STATES]);
+
+/* Set the transition's Phi from a full N * N array in row-major order (a Phi
+   computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
+   (ERR_NONFINITE), a nonzero entry outside the structural pattern of Phi or a row
+   of random constants that is not exactly e_i (ERR_STRUCTURE: predict would not
+   read it); on error t is unchanged. */
+int enu_doppler18_set_transition_matrix(enu_doppler18_transition *restrict t,
+                const enu_doppler18_scalar Phi[restrict ENU_DOPPLER18_N_STATES *
+                        ENU_DOPPLER18_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).

@@ -12,7 +12,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 37 operations after CSE
- *   discretize: 2467 mul + 1660 add = 4127 flops
+ *   discretize: 2461 mul + 1657 add = 4118 flops
  *   discretize, each doubling (long steps): 879 mul + 880 add = 1759 flops
  *   predict (C): 1061 mul + 934 add = 1995 flops
  *   predict (Python): 2420 mul + 2321 add = 4741 flops
@@ -75,6 +75,15 @@ const unsigned char gps_pseudorange11_twin_H_row[16] = { 0, 0, 0, 0, 1, 1, 1, 1,
         3, 3 };
 const unsigned char gps_pseudorange11_twin_H_col[16] = { 0, 1, 2, 9, 0, 1, 2, 9, 0, 1, 2, 9, 0, 1,
         2, 9 };
+/* The structural nonzeros of Phi, row by row: entry k of the transition's Phi is (Phi_row[k],
+        Phi_col[k]). */
+const unsigned char gps_pseudorange11_twin_Phi_row[GPS_PSEUDORANGE11_TWIN_N_PHI] = { 0, 0, 0, 0, 0,
+        0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3,
+        4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 9, 9, 10 };
+const unsigned char gps_pseudorange11_twin_Phi_col[GPS_PSEUDORANGE11_TWIN_N_PHI] = { 0, 1, 2, 3, 4,
+        5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8,
+        0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 1, 2, 3, 4, 5, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8, 9, 10, 10
+        };
 
 /* First entry of each row of H in the compact arrays (CSR row starts). */
 /* Entries (row, column) of Phi that the Taylor terms can change: rows that are not e_i. */
@@ -714,548 +723,290 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void horner_transition(gps_pseudorange11_twin_trans
     const gps_pseudorange11_twin_scalar one = 1.0;
     int k;
     for (k = 0; k < 9; ++k) {
-        t->Phi[0][k] = w->fh[0]*w->S[10+k] + w->fh[1]*w->S[20+k] + w->fh[2]*w->S[30+k];
-        t->Phi[1][k] = w->fh[3]*w->S[k] + w->fh[4]*w->S[20+k] + w->fh[5]*w->S[40+k];
-        t->Phi[2][k] = w->fh[6]*w->S[k] + w->fh[7]*w->S[10+k] + w->fh[8]*w->S[50+k];
-        t->Phi[3][k] = w->fh[9]*w->S[k] + w->fh[10]*w->S[40+k] + w->fh[11]*w->S[50+k];
-        t->Phi[4][k] = w->fh[14]*w->S[10+k] + w->fh[15]*w->S[30+k] + w->fh[16]*w->S[50+k];
-        t->Phi[5][k] = w->fh[19]*w->S[20+k] + w->fh[20]*w->S[30+k] + w->fh[21]*w->S[40+k];
+        t->Phi[k] = w->fh[0]*w->S[10+k] + w->fh[1]*w->S[20+k] + w->fh[2]*w->S[30+k];
+        t->Phi[9+k] = w->fh[3]*w->S[k] + w->fh[4]*w->S[20+k] + w->fh[5]*w->S[40+k];
+        t->Phi[18+k] = w->fh[6]*w->S[k] + w->fh[7]*w->S[10+k] + w->fh[8]*w->S[50+k];
+        t->Phi[27+k] = w->fh[9]*w->S[k] + w->fh[10]*w->S[40+k] + w->fh[11]*w->S[50+k];
+        t->Phi[36+k] = w->fh[14]*w->S[10+k] + w->fh[15]*w->S[30+k] + w->fh[16]*w->S[50+k];
+        t->Phi[45+k] = w->fh[19]*w->S[20+k] + w->fh[20]*w->S[30+k] + w->fh[21]*w->S[40+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        t->Phi[54+k] = w->fh[24]*w->S[65+k] + w->fh[25]*w->S[69+k];
+        t->Phi[57+k] = w->fh[26]*w->S[61+k] + w->fh[27]*w->S[69+k];
+        t->Phi[60+k] = w->fh[28]*w->S[61+k] + w->fh[29]*w->S[65+k];
     }
     for (k = 0; k < 4; ++k) {
-        t->Phi[6][5+k] = w->fh[24]*w->S[64+k] + w->fh[25]*w->S[68+k];
-        t->Phi[7][5+k] = w->fh[26]*w->S[60+k] + w->fh[27]*w->S[68+k];
-        t->Phi[8][5+k] = w->fh[28]*w->S[60+k] + w->fh[29]*w->S[64+k];
-        t->Phi[3][5+k] = t->Phi[3][5+k] + w->fh[12]*w->S[64+k] + w->fh[13]*w->S[68+k];
-        t->Phi[4][5+k] = t->Phi[4][5+k] + w->fh[17]*w->S[60+k] + w->fh[18]*w->S[68+k];
-        t->Phi[5][5+k] = t->Phi[5][5+k] + w->fh[22]*w->S[60+k] + w->fh[23]*w->S[64+k];
+        t->Phi[32+k] = t->Phi[32+k] + w->fh[12]*w->S[64+k] + w->fh[13]*w->S[68+k];
+        t->Phi[41+k] = t->Phi[41+k] + w->fh[17]*w->S[60+k] + w->fh[18]*w->S[68+k];
+        t->Phi[50+k] = t->Phi[50+k] + w->fh[22]*w->S[60+k] + w->fh[23]*w->S[64+k];
     }
-    t->Phi[9][10] = w->S[72]*w->fh[30];
-    t->Phi[0][9] = 0;
-    t->Phi[0][10] = 0;
-    t->Phi[1][9] = 0;
-    t->Phi[1][10] = 0;
-    t->Phi[2][9] = 0;
-    t->Phi[2][10] = 0;
-    t->Phi[3][9] = 0;
-    t->Phi[3][10] = 0;
-    t->Phi[4][9] = 0;
-    t->Phi[4][10] = 0;
-    t->Phi[5][9] = 0;
-    t->Phi[5][10] = 0;
-    t->Phi[6][0] = 0;
-    t->Phi[6][1] = 0;
-    t->Phi[6][2] = 0;
-    t->Phi[6][3] = 0;
-    t->Phi[6][4] = 0;
-    t->Phi[6][9] = 0;
-    t->Phi[6][10] = 0;
-    t->Phi[7][0] = 0;
-    t->Phi[7][1] = 0;
-    t->Phi[7][2] = 0;
-    t->Phi[7][3] = 0;
-    t->Phi[7][4] = 0;
-    t->Phi[7][9] = 0;
-    t->Phi[7][10] = 0;
-    t->Phi[8][0] = 0;
-    t->Phi[8][1] = 0;
-    t->Phi[8][2] = 0;
-    t->Phi[8][3] = 0;
-    t->Phi[8][4] = 0;
-    t->Phi[8][9] = 0;
-    t->Phi[8][10] = 0;
-    t->Phi[9][0] = 0;
-    t->Phi[9][1] = 0;
-    t->Phi[9][2] = 0;
-    t->Phi[9][3] = 0;
-    t->Phi[9][4] = 0;
-    t->Phi[9][5] = 0;
-    t->Phi[9][6] = 0;
-    t->Phi[9][7] = 0;
-    t->Phi[9][8] = 0;
-    t->Phi[9][9] = 0;
-    t->Phi[10][0] = 0;
-    t->Phi[10][1] = 0;
-    t->Phi[10][2] = 0;
-    t->Phi[10][3] = 0;
-    t->Phi[10][4] = 0;
-    t->Phi[10][5] = 0;
-    t->Phi[10][6] = 0;
-    t->Phi[10][7] = 0;
-    t->Phi[10][8] = 0;
-    t->Phi[10][9] = 0;
-    t->Phi[10][10] = one;
+    t->Phi[64] = w->S[72]*w->fh[30];
+    t->Phi[63] = 0;
+    t->Phi[65] = one;
 }
 
 GPS_PSEUDORANGE11_TWIN_BLOCK void doubling(gps_pseudorange11_twin_transition *restrict t,
         gps_pseudorange11_twin_discretize_scratch *restrict w)
 {
     const gps_pseudorange11_twin_scalar half = 1.0 / 2.0;
-    w->term[0][0] = t->Phi[0][0]*t->Phi[0][0] + t->Phi[0][1]*t->Phi[1][0] +
-            t->Phi[0][2]*t->Phi[2][0] + t->Phi[0][3]*t->Phi[3][0] + t->Phi[0][4]*t->Phi[4][0] +
-            t->Phi[0][5]*t->Phi[5][0];
-    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[10] + t->Phi[0][2]*w->S[20] +
-            t->Phi[0][3]*w->S[30] + t->Phi[0][4]*w->S[40] + t->Phi[0][5]*w->S[50];
-    w->term[0][1] = t->Phi[0][0]*t->Phi[0][1] + t->Phi[0][1]*t->Phi[1][1] +
-            t->Phi[0][2]*t->Phi[2][1] + t->Phi[0][3]*t->Phi[3][1] + t->Phi[0][4]*t->Phi[4][1] +
-            t->Phi[0][5]*t->Phi[5][1];
-    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[11] + t->Phi[0][2]*w->S[21] +
-            t->Phi[0][3]*w->S[31] + t->Phi[0][4]*w->S[41] + t->Phi[0][5]*w->S[51];
-    w->term[0][2] = t->Phi[0][0]*t->Phi[0][2] + t->Phi[0][1]*t->Phi[1][2] +
-            t->Phi[0][2]*t->Phi[2][2] + t->Phi[0][3]*t->Phi[3][2] + t->Phi[0][4]*t->Phi[4][2] +
-            t->Phi[0][5]*t->Phi[5][2];
-    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[12] + t->Phi[0][2]*w->S[22] +
-            t->Phi[0][3]*w->S[32] + t->Phi[0][4]*w->S[42] + t->Phi[0][5]*w->S[52];
-    w->term[0][3] = t->Phi[0][0]*t->Phi[0][3] + t->Phi[0][1]*t->Phi[1][3] +
-            t->Phi[0][2]*t->Phi[2][3] + t->Phi[0][3]*t->Phi[3][3] + t->Phi[0][4]*t->Phi[4][3] +
-            t->Phi[0][5]*t->Phi[5][3];
-    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[13] + t->Phi[0][2]*w->S[23] +
-            t->Phi[0][3]*w->S[33] + t->Phi[0][4]*w->S[43] + t->Phi[0][5]*w->S[53];
-    w->term[0][4] = t->Phi[0][0]*t->Phi[0][4] + t->Phi[0][1]*t->Phi[1][4] +
-            t->Phi[0][2]*t->Phi[2][4] + t->Phi[0][3]*t->Phi[3][4] + t->Phi[0][4]*t->Phi[4][4] +
-            t->Phi[0][5]*t->Phi[5][4];
-    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[24] +
-            t->Phi[0][3]*w->S[34] + t->Phi[0][4]*w->S[44] + t->Phi[0][5]*w->S[54];
-    w->term[0][5] = t->Phi[0][0]*t->Phi[0][5] + t->Phi[0][1]*t->Phi[1][5] +
-            t->Phi[0][2]*t->Phi[2][5] + t->Phi[0][3]*t->Phi[3][5] + t->Phi[0][4]*t->Phi[4][5] +
-            t->Phi[0][5]*t->Phi[5][5];
-    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[25] +
-            t->Phi[0][3]*w->S[35] + t->Phi[0][4]*w->S[45] + t->Phi[0][5]*w->S[55];
-    w->term[0][6] = t->Phi[0][0]*t->Phi[0][6] + t->Phi[0][1]*t->Phi[1][6] +
-            t->Phi[0][2]*t->Phi[2][6] + t->Phi[0][3]*t->Phi[3][6] + t->Phi[0][4]*t->Phi[4][6] +
-            t->Phi[0][5]*t->Phi[5][6] + t->Phi[0][6]*t->Phi[6][6] + t->Phi[0][7]*t->Phi[7][6] +
-            t->Phi[0][8]*t->Phi[8][6];
-    w->term[1][6] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[16] + t->Phi[0][2]*w->S[26] +
-            t->Phi[0][3]*w->S[36] + t->Phi[0][4]*w->S[46] + t->Phi[0][5]*w->S[56] +
-            t->Phi[0][6]*w->S[61] + t->Phi[0][7]*w->S[65] + t->Phi[0][8]*w->S[69];
-    w->term[0][7] = t->Phi[0][0]*t->Phi[0][7] + t->Phi[0][1]*t->Phi[1][7] +
-            t->Phi[0][2]*t->Phi[2][7] + t->Phi[0][3]*t->Phi[3][7] + t->Phi[0][4]*t->Phi[4][7] +
-            t->Phi[0][5]*t->Phi[5][7] + t->Phi[0][6]*t->Phi[6][7] + t->Phi[0][7]*t->Phi[7][7] +
-            t->Phi[0][8]*t->Phi[8][7];
-    w->term[1][7] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[17] + t->Phi[0][2]*w->S[27] +
-            t->Phi[0][3]*w->S[37] + t->Phi[0][4]*w->S[47] + t->Phi[0][5]*w->S[57] +
-            t->Phi[0][6]*w->S[62] + t->Phi[0][7]*w->S[66] + t->Phi[0][8]*w->S[70];
-    w->term[0][8] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
-            t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
-            t->Phi[0][5]*t->Phi[5][8] + t->Phi[0][6]*t->Phi[6][8] + t->Phi[0][7]*t->Phi[7][8] +
-            t->Phi[0][8]*t->Phi[8][8];
-    w->term[1][8] = t->Phi[0][0]*w->S[8] + t->Phi[0][1]*w->S[18] + t->Phi[0][2]*w->S[28] +
-            t->Phi[0][3]*w->S[38] + t->Phi[0][4]*w->S[48] + t->Phi[0][5]*w->S[58] +
-            t->Phi[0][6]*w->S[63] + t->Phi[0][7]*w->S[67] + t->Phi[0][8]*w->S[71];
-    w->term[0][9] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
-            t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
-            t->Phi[1][5]*t->Phi[5][0];
-    w->term[1][9] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[10] + t->Phi[1][2]*w->S[20] +
-            t->Phi[1][3]*w->S[30] + t->Phi[1][4]*w->S[40] + t->Phi[1][5]*w->S[50];
-    w->term[0][10] = t->Phi[1][0]*t->Phi[0][1] + t->Phi[1][1]*t->Phi[1][1] +
-            t->Phi[1][2]*t->Phi[2][1] + t->Phi[1][3]*t->Phi[3][1] + t->Phi[1][4]*t->Phi[4][1] +
-            t->Phi[1][5]*t->Phi[5][1];
-    w->term[1][10] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[11] + t->Phi[1][2]*w->S[21] +
-            t->Phi[1][3]*w->S[31] + t->Phi[1][4]*w->S[41] + t->Phi[1][5]*w->S[51];
-    w->term[0][11] = t->Phi[1][0]*t->Phi[0][2] + t->Phi[1][1]*t->Phi[1][2] +
-            t->Phi[1][2]*t->Phi[2][2] + t->Phi[1][3]*t->Phi[3][2] + t->Phi[1][4]*t->Phi[4][2] +
-            t->Phi[1][5]*t->Phi[5][2];
-    w->term[1][11] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[12] + t->Phi[1][2]*w->S[22] +
-            t->Phi[1][3]*w->S[32] + t->Phi[1][4]*w->S[42] + t->Phi[1][5]*w->S[52];
-    w->term[0][12] = t->Phi[1][0]*t->Phi[0][3] + t->Phi[1][1]*t->Phi[1][3] +
-            t->Phi[1][2]*t->Phi[2][3] + t->Phi[1][3]*t->Phi[3][3] + t->Phi[1][4]*t->Phi[4][3] +
-            t->Phi[1][5]*t->Phi[5][3];
-    w->term[1][12] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[13] + t->Phi[1][2]*w->S[23] +
-            t->Phi[1][3]*w->S[33] + t->Phi[1][4]*w->S[43] + t->Phi[1][5]*w->S[53];
-    w->term[0][13] = t->Phi[1][0]*t->Phi[0][4] + t->Phi[1][1]*t->Phi[1][4] +
-            t->Phi[1][2]*t->Phi[2][4] + t->Phi[1][3]*t->Phi[3][4] + t->Phi[1][4]*t->Phi[4][4] +
-            t->Phi[1][5]*t->Phi[5][4];
-    w->term[1][13] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[24] +
-            t->Phi[1][3]*w->S[34] + t->Phi[1][4]*w->S[44] + t->Phi[1][5]*w->S[54];
-    w->term[0][14] = t->Phi[1][0]*t->Phi[0][5] + t->Phi[1][1]*t->Phi[1][5] +
-            t->Phi[1][2]*t->Phi[2][5] + t->Phi[1][3]*t->Phi[3][5] + t->Phi[1][4]*t->Phi[4][5] +
-            t->Phi[1][5]*t->Phi[5][5];
-    w->term[1][14] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[25] +
-            t->Phi[1][3]*w->S[35] + t->Phi[1][4]*w->S[45] + t->Phi[1][5]*w->S[55];
-    w->term[0][15] = t->Phi[1][0]*t->Phi[0][6] + t->Phi[1][1]*t->Phi[1][6] +
-            t->Phi[1][2]*t->Phi[2][6] + t->Phi[1][3]*t->Phi[3][6] + t->Phi[1][4]*t->Phi[4][6] +
-            t->Phi[1][5]*t->Phi[5][6] + t->Phi[1][6]*t->Phi[6][6] + t->Phi[1][7]*t->Phi[7][6] +
-            t->Phi[1][8]*t->Phi[8][6];
-    w->term[1][15] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[16] + t->Phi[1][2]*w->S[26] +
-            t->Phi[1][3]*w->S[36] + t->Phi[1][4]*w->S[46] + t->Phi[1][5]*w->S[56] +
-            t->Phi[1][6]*w->S[61] + t->Phi[1][7]*w->S[65] + t->Phi[1][8]*w->S[69];
-    w->term[0][16] = t->Phi[1][0]*t->Phi[0][7] + t->Phi[1][1]*t->Phi[1][7] +
-            t->Phi[1][2]*t->Phi[2][7] + t->Phi[1][3]*t->Phi[3][7] + t->Phi[1][4]*t->Phi[4][7] +
-            t->Phi[1][5]*t->Phi[5][7] + t->Phi[1][6]*t->Phi[6][7] + t->Phi[1][7]*t->Phi[7][7] +
-            t->Phi[1][8]*t->Phi[8][7];
-    w->term[1][16] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[17] + t->Phi[1][2]*w->S[27] +
-            t->Phi[1][3]*w->S[37] + t->Phi[1][4]*w->S[47] + t->Phi[1][5]*w->S[57] +
-            t->Phi[1][6]*w->S[62] + t->Phi[1][7]*w->S[66] + t->Phi[1][8]*w->S[70];
-    w->term[0][17] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
-            t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
-            t->Phi[1][5]*t->Phi[5][8] + t->Phi[1][6]*t->Phi[6][8] + t->Phi[1][7]*t->Phi[7][8] +
-            t->Phi[1][8]*t->Phi[8][8];
-    w->term[1][17] = t->Phi[1][0]*w->S[8] + t->Phi[1][1]*w->S[18] + t->Phi[1][2]*w->S[28] +
-            t->Phi[1][3]*w->S[38] + t->Phi[1][4]*w->S[48] + t->Phi[1][5]*w->S[58] +
-            t->Phi[1][6]*w->S[63] + t->Phi[1][7]*w->S[67] + t->Phi[1][8]*w->S[71];
-    w->term[0][18] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
-            t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
-            t->Phi[2][5]*t->Phi[5][0];
-    w->term[1][18] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[10] + t->Phi[2][2]*w->S[20] +
-            t->Phi[2][3]*w->S[30] + t->Phi[2][4]*w->S[40] + t->Phi[2][5]*w->S[50];
-    w->term[0][19] = t->Phi[2][0]*t->Phi[0][1] + t->Phi[2][1]*t->Phi[1][1] +
-            t->Phi[2][2]*t->Phi[2][1] + t->Phi[2][3]*t->Phi[3][1] + t->Phi[2][4]*t->Phi[4][1] +
-            t->Phi[2][5]*t->Phi[5][1];
-    w->term[1][19] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[11] + t->Phi[2][2]*w->S[21] +
-            t->Phi[2][3]*w->S[31] + t->Phi[2][4]*w->S[41] + t->Phi[2][5]*w->S[51];
-    w->term[0][20] = t->Phi[2][0]*t->Phi[0][2] + t->Phi[2][1]*t->Phi[1][2] +
-            t->Phi[2][2]*t->Phi[2][2] + t->Phi[2][3]*t->Phi[3][2] + t->Phi[2][4]*t->Phi[4][2] +
-            t->Phi[2][5]*t->Phi[5][2];
-    w->term[1][20] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[12] + t->Phi[2][2]*w->S[22] +
-            t->Phi[2][3]*w->S[32] + t->Phi[2][4]*w->S[42] + t->Phi[2][5]*w->S[52];
-    w->term[0][21] = t->Phi[2][0]*t->Phi[0][3] + t->Phi[2][1]*t->Phi[1][3] +
-            t->Phi[2][2]*t->Phi[2][3] + t->Phi[2][3]*t->Phi[3][3] + t->Phi[2][4]*t->Phi[4][3] +
-            t->Phi[2][5]*t->Phi[5][3];
-    w->term[1][21] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[13] + t->Phi[2][2]*w->S[23] +
-            t->Phi[2][3]*w->S[33] + t->Phi[2][4]*w->S[43] + t->Phi[2][5]*w->S[53];
-    w->term[0][22] = t->Phi[2][0]*t->Phi[0][4] + t->Phi[2][1]*t->Phi[1][4] +
-            t->Phi[2][2]*t->Phi[2][4] + t->Phi[2][3]*t->Phi[3][4] + t->Phi[2][4]*t->Phi[4][4] +
-            t->Phi[2][5]*t->Phi[5][4];
-    w->term[1][22] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[24] +
-            t->Phi[2][3]*w->S[34] + t->Phi[2][4]*w->S[44] + t->Phi[2][5]*w->S[54];
-    w->term[0][23] = t->Phi[2][0]*t->Phi[0][5] + t->Phi[2][1]*t->Phi[1][5] +
-            t->Phi[2][2]*t->Phi[2][5] + t->Phi[2][3]*t->Phi[3][5] + t->Phi[2][4]*t->Phi[4][5] +
-            t->Phi[2][5]*t->Phi[5][5];
-    w->term[1][23] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[25] +
-            t->Phi[2][3]*w->S[35] + t->Phi[2][4]*w->S[45] + t->Phi[2][5]*w->S[55];
-    w->term[0][24] = t->Phi[2][0]*t->Phi[0][6] + t->Phi[2][1]*t->Phi[1][6] +
-            t->Phi[2][2]*t->Phi[2][6] + t->Phi[2][3]*t->Phi[3][6] + t->Phi[2][4]*t->Phi[4][6] +
-            t->Phi[2][5]*t->Phi[5][6] + t->Phi[2][6]*t->Phi[6][6] + t->Phi[2][7]*t->Phi[7][6] +
-            t->Phi[2][8]*t->Phi[8][6];
-    w->term[1][24] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[16] + t->Phi[2][2]*w->S[26] +
-            t->Phi[2][3]*w->S[36] + t->Phi[2][4]*w->S[46] + t->Phi[2][5]*w->S[56] +
-            t->Phi[2][6]*w->S[61] + t->Phi[2][7]*w->S[65] + t->Phi[2][8]*w->S[69];
-    w->term[0][25] = t->Phi[2][0]*t->Phi[0][7] + t->Phi[2][1]*t->Phi[1][7] +
-            t->Phi[2][2]*t->Phi[2][7] + t->Phi[2][3]*t->Phi[3][7] + t->Phi[2][4]*t->Phi[4][7] +
-            t->Phi[2][5]*t->Phi[5][7] + t->Phi[2][6]*t->Phi[6][7] + t->Phi[2][7]*t->Phi[7][7] +
-            t->Phi[2][8]*t->Phi[8][7];
-    w->term[1][25] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[17] + t->Phi[2][2]*w->S[27] +
-            t->Phi[2][3]*w->S[37] + t->Phi[2][4]*w->S[47] + t->Phi[2][5]*w->S[57] +
-            t->Phi[2][6]*w->S[62] + t->Phi[2][7]*w->S[66] + t->Phi[2][8]*w->S[70];
-    w->term[0][26] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
-            t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
-            t->Phi[2][5]*t->Phi[5][8] + t->Phi[2][6]*t->Phi[6][8] + t->Phi[2][7]*t->Phi[7][8] +
-            t->Phi[2][8]*t->Phi[8][8];
-    w->term[1][26] = t->Phi[2][0]*w->S[8] + t->Phi[2][1]*w->S[18] + t->Phi[2][2]*w->S[28] +
-            t->Phi[2][3]*w->S[38] + t->Phi[2][4]*w->S[48] + t->Phi[2][5]*w->S[58] +
-            t->Phi[2][6]*w->S[63] + t->Phi[2][7]*w->S[67] + t->Phi[2][8]*w->S[71];
-    w->term[0][27] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
-            t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
-            t->Phi[3][5]*t->Phi[5][0];
-    w->term[1][27] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[10] + t->Phi[3][2]*w->S[20] +
-            t->Phi[3][3]*w->S[30] + t->Phi[3][4]*w->S[40] + t->Phi[3][5]*w->S[50];
-    w->term[0][28] = t->Phi[3][0]*t->Phi[0][1] + t->Phi[3][1]*t->Phi[1][1] +
-            t->Phi[3][2]*t->Phi[2][1] + t->Phi[3][3]*t->Phi[3][1] + t->Phi[3][4]*t->Phi[4][1] +
-            t->Phi[3][5]*t->Phi[5][1];
-    w->term[1][28] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[11] + t->Phi[3][2]*w->S[21] +
-            t->Phi[3][3]*w->S[31] + t->Phi[3][4]*w->S[41] + t->Phi[3][5]*w->S[51];
-    w->term[0][29] = t->Phi[3][0]*t->Phi[0][2] + t->Phi[3][1]*t->Phi[1][2] +
-            t->Phi[3][2]*t->Phi[2][2] + t->Phi[3][3]*t->Phi[3][2] + t->Phi[3][4]*t->Phi[4][2] +
-            t->Phi[3][5]*t->Phi[5][2];
-    w->term[1][29] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[12] + t->Phi[3][2]*w->S[22] +
-            t->Phi[3][3]*w->S[32] + t->Phi[3][4]*w->S[42] + t->Phi[3][5]*w->S[52];
-    w->term[0][30] = t->Phi[3][0]*t->Phi[0][3] + t->Phi[3][1]*t->Phi[1][3] +
-            t->Phi[3][2]*t->Phi[2][3] + t->Phi[3][3]*t->Phi[3][3] + t->Phi[3][4]*t->Phi[4][3] +
-            t->Phi[3][5]*t->Phi[5][3];
-    w->term[1][30] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[13] + t->Phi[3][2]*w->S[23] +
-            t->Phi[3][3]*w->S[33] + t->Phi[3][4]*w->S[43] + t->Phi[3][5]*w->S[53];
-    w->term[0][31] = t->Phi[3][0]*t->Phi[0][4] + t->Phi[3][1]*t->Phi[1][4] +
-            t->Phi[3][2]*t->Phi[2][4] + t->Phi[3][3]*t->Phi[3][4] + t->Phi[3][4]*t->Phi[4][4] +
-            t->Phi[3][5]*t->Phi[5][4];
-    w->term[1][31] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[24] +
-            t->Phi[3][3]*w->S[34] + t->Phi[3][4]*w->S[44] + t->Phi[3][5]*w->S[54];
-    w->term[0][32] = t->Phi[3][0]*t->Phi[0][5] + t->Phi[3][1]*t->Phi[1][5] +
-            t->Phi[3][2]*t->Phi[2][5] + t->Phi[3][3]*t->Phi[3][5] + t->Phi[3][4]*t->Phi[4][5] +
-            t->Phi[3][5]*t->Phi[5][5];
-    w->term[1][32] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[25] +
-            t->Phi[3][3]*w->S[35] + t->Phi[3][4]*w->S[45] + t->Phi[3][5]*w->S[55];
-    w->term[0][33] = t->Phi[3][0]*t->Phi[0][6] + t->Phi[3][1]*t->Phi[1][6] +
-            t->Phi[3][2]*t->Phi[2][6] + t->Phi[3][3]*t->Phi[3][6] + t->Phi[3][4]*t->Phi[4][6] +
-            t->Phi[3][5]*t->Phi[5][6] + t->Phi[3][6]*t->Phi[6][6] + t->Phi[3][7]*t->Phi[7][6] +
-            t->Phi[3][8]*t->Phi[8][6];
-    w->term[1][33] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[16] + t->Phi[3][2]*w->S[26] +
-            t->Phi[3][3]*w->S[36] + t->Phi[3][4]*w->S[46] + t->Phi[3][5]*w->S[56] +
-            t->Phi[3][6]*w->S[61] + t->Phi[3][7]*w->S[65] + t->Phi[3][8]*w->S[69];
-    w->term[0][34] = t->Phi[3][0]*t->Phi[0][7] + t->Phi[3][1]*t->Phi[1][7] +
-            t->Phi[3][2]*t->Phi[2][7] + t->Phi[3][3]*t->Phi[3][7] + t->Phi[3][4]*t->Phi[4][7] +
-            t->Phi[3][5]*t->Phi[5][7] + t->Phi[3][6]*t->Phi[6][7] + t->Phi[3][7]*t->Phi[7][7] +
-            t->Phi[3][8]*t->Phi[8][7];
-    w->term[1][34] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[17] + t->Phi[3][2]*w->S[27] +
-            t->Phi[3][3]*w->S[37] + t->Phi[3][4]*w->S[47] + t->Phi[3][5]*w->S[57] +
-            t->Phi[3][6]*w->S[62] + t->Phi[3][7]*w->S[66] + t->Phi[3][8]*w->S[70];
-    w->term[0][35] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
-            t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
-            t->Phi[3][5]*t->Phi[5][8] + t->Phi[3][6]*t->Phi[6][8] + t->Phi[3][7]*t->Phi[7][8] +
-            t->Phi[3][8]*t->Phi[8][8];
-    w->term[1][35] = t->Phi[3][0]*w->S[8] + t->Phi[3][1]*w->S[18] + t->Phi[3][2]*w->S[28] +
-            t->Phi[3][3]*w->S[38] + t->Phi[3][4]*w->S[48] + t->Phi[3][5]*w->S[58] +
-            t->Phi[3][6]*w->S[63] + t->Phi[3][7]*w->S[67] + t->Phi[3][8]*w->S[71];
-    w->term[0][36] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
-            t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
-            t->Phi[4][5]*t->Phi[5][0];
-    w->term[1][36] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[10] + t->Phi[4][2]*w->S[20] +
-            t->Phi[4][3]*w->S[30] + t->Phi[4][4]*w->S[40] + t->Phi[4][5]*w->S[50];
-    w->term[0][37] = t->Phi[4][0]*t->Phi[0][1] + t->Phi[4][1]*t->Phi[1][1] +
-            t->Phi[4][2]*t->Phi[2][1] + t->Phi[4][3]*t->Phi[3][1] + t->Phi[4][4]*t->Phi[4][1] +
-            t->Phi[4][5]*t->Phi[5][1];
-    w->term[1][37] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[11] + t->Phi[4][2]*w->S[21] +
-            t->Phi[4][3]*w->S[31] + t->Phi[4][4]*w->S[41] + t->Phi[4][5]*w->S[51];
-    w->term[0][38] = t->Phi[4][0]*t->Phi[0][2] + t->Phi[4][1]*t->Phi[1][2] +
-            t->Phi[4][2]*t->Phi[2][2] + t->Phi[4][3]*t->Phi[3][2] + t->Phi[4][4]*t->Phi[4][2] +
-            t->Phi[4][5]*t->Phi[5][2];
-    w->term[1][38] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[12] + t->Phi[4][2]*w->S[22] +
-            t->Phi[4][3]*w->S[32] + t->Phi[4][4]*w->S[42] + t->Phi[4][5]*w->S[52];
-    w->term[0][39] = t->Phi[4][0]*t->Phi[0][3] + t->Phi[4][1]*t->Phi[1][3] +
-            t->Phi[4][2]*t->Phi[2][3] + t->Phi[4][3]*t->Phi[3][3] + t->Phi[4][4]*t->Phi[4][3] +
-            t->Phi[4][5]*t->Phi[5][3];
-    w->term[1][39] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[13] + t->Phi[4][2]*w->S[23] +
-            t->Phi[4][3]*w->S[33] + t->Phi[4][4]*w->S[43] + t->Phi[4][5]*w->S[53];
-    w->term[0][40] = t->Phi[4][0]*t->Phi[0][4] + t->Phi[4][1]*t->Phi[1][4] +
-            t->Phi[4][2]*t->Phi[2][4] + t->Phi[4][3]*t->Phi[3][4] + t->Phi[4][4]*t->Phi[4][4] +
-            t->Phi[4][5]*t->Phi[5][4];
-    w->term[1][40] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[24] +
-            t->Phi[4][3]*w->S[34] + t->Phi[4][4]*w->S[44] + t->Phi[4][5]*w->S[54];
-    w->term[0][41] = t->Phi[4][0]*t->Phi[0][5] + t->Phi[4][1]*t->Phi[1][5] +
-            t->Phi[4][2]*t->Phi[2][5] + t->Phi[4][3]*t->Phi[3][5] + t->Phi[4][4]*t->Phi[4][5] +
-            t->Phi[4][5]*t->Phi[5][5];
-    w->term[1][41] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[25] +
-            t->Phi[4][3]*w->S[35] + t->Phi[4][4]*w->S[45] + t->Phi[4][5]*w->S[55];
-    w->term[0][42] = t->Phi[4][0]*t->Phi[0][6] + t->Phi[4][1]*t->Phi[1][6] +
-            t->Phi[4][2]*t->Phi[2][6] + t->Phi[4][3]*t->Phi[3][6] + t->Phi[4][4]*t->Phi[4][6] +
-            t->Phi[4][5]*t->Phi[5][6] + t->Phi[4][6]*t->Phi[6][6] + t->Phi[4][7]*t->Phi[7][6] +
-            t->Phi[4][8]*t->Phi[8][6];
-    w->term[1][42] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[16] + t->Phi[4][2]*w->S[26] +
-            t->Phi[4][3]*w->S[36] + t->Phi[4][4]*w->S[46] + t->Phi[4][5]*w->S[56] +
-            t->Phi[4][6]*w->S[61] + t->Phi[4][7]*w->S[65] + t->Phi[4][8]*w->S[69];
-    w->term[0][43] = t->Phi[4][0]*t->Phi[0][7] + t->Phi[4][1]*t->Phi[1][7] +
-            t->Phi[4][2]*t->Phi[2][7] + t->Phi[4][3]*t->Phi[3][7] + t->Phi[4][4]*t->Phi[4][7] +
-            t->Phi[4][5]*t->Phi[5][7] + t->Phi[4][6]*t->Phi[6][7] + t->Phi[4][7]*t->Phi[7][7] +
-            t->Phi[4][8]*t->Phi[8][7];
-    w->term[1][43] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[17] + t->Phi[4][2]*w->S[27] +
-            t->Phi[4][3]*w->S[37] + t->Phi[4][4]*w->S[47] + t->Phi[4][5]*w->S[57] +
-            t->Phi[4][6]*w->S[62] + t->Phi[4][7]*w->S[66] + t->Phi[4][8]*w->S[70];
-    w->term[0][44] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
-            t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
-            t->Phi[4][5]*t->Phi[5][8] + t->Phi[4][6]*t->Phi[6][8] + t->Phi[4][7]*t->Phi[7][8] +
-            t->Phi[4][8]*t->Phi[8][8];
-    w->term[1][44] = t->Phi[4][0]*w->S[8] + t->Phi[4][1]*w->S[18] + t->Phi[4][2]*w->S[28] +
-            t->Phi[4][3]*w->S[38] + t->Phi[4][4]*w->S[48] + t->Phi[4][5]*w->S[58] +
-            t->Phi[4][6]*w->S[63] + t->Phi[4][7]*w->S[67] + t->Phi[4][8]*w->S[71];
-    w->term[0][45] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
-            t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
-            t->Phi[5][5]*t->Phi[5][0];
-    w->term[1][45] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[10] + t->Phi[5][2]*w->S[20] +
-            t->Phi[5][3]*w->S[30] + t->Phi[5][4]*w->S[40] + t->Phi[5][5]*w->S[50];
-    w->term[0][46] = t->Phi[5][0]*t->Phi[0][1] + t->Phi[5][1]*t->Phi[1][1] +
-            t->Phi[5][2]*t->Phi[2][1] + t->Phi[5][3]*t->Phi[3][1] + t->Phi[5][4]*t->Phi[4][1] +
-            t->Phi[5][5]*t->Phi[5][1];
-    w->term[1][46] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[11] + t->Phi[5][2]*w->S[21] +
-            t->Phi[5][3]*w->S[31] + t->Phi[5][4]*w->S[41] + t->Phi[5][5]*w->S[51];
-    w->term[0][47] = t->Phi[5][0]*t->Phi[0][2] + t->Phi[5][1]*t->Phi[1][2] +
-            t->Phi[5][2]*t->Phi[2][2] + t->Phi[5][3]*t->Phi[3][2] + t->Phi[5][4]*t->Phi[4][2] +
-            t->Phi[5][5]*t->Phi[5][2];
-    w->term[1][47] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[12] + t->Phi[5][2]*w->S[22] +
-            t->Phi[5][3]*w->S[32] + t->Phi[5][4]*w->S[42] + t->Phi[5][5]*w->S[52];
-    w->term[0][48] = t->Phi[5][0]*t->Phi[0][3] + t->Phi[5][1]*t->Phi[1][3] +
-            t->Phi[5][2]*t->Phi[2][3] + t->Phi[5][3]*t->Phi[3][3] + t->Phi[5][4]*t->Phi[4][3] +
-            t->Phi[5][5]*t->Phi[5][3];
-    w->term[1][48] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[13] + t->Phi[5][2]*w->S[23] +
-            t->Phi[5][3]*w->S[33] + t->Phi[5][4]*w->S[43] + t->Phi[5][5]*w->S[53];
-    w->term[0][49] = t->Phi[5][0]*t->Phi[0][4] + t->Phi[5][1]*t->Phi[1][4] +
-            t->Phi[5][2]*t->Phi[2][4] + t->Phi[5][3]*t->Phi[3][4] + t->Phi[5][4]*t->Phi[4][4] +
-            t->Phi[5][5]*t->Phi[5][4];
-    w->term[1][49] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[24] +
-            t->Phi[5][3]*w->S[34] + t->Phi[5][4]*w->S[44] + t->Phi[5][5]*w->S[54];
-    w->term[0][50] = t->Phi[5][0]*t->Phi[0][5] + t->Phi[5][1]*t->Phi[1][5] +
-            t->Phi[5][2]*t->Phi[2][5] + t->Phi[5][3]*t->Phi[3][5] + t->Phi[5][4]*t->Phi[4][5] +
-            t->Phi[5][5]*t->Phi[5][5];
-    w->term[1][50] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[25] +
-            t->Phi[5][3]*w->S[35] + t->Phi[5][4]*w->S[45] + t->Phi[5][5]*w->S[55];
-    w->term[0][51] = t->Phi[5][0]*t->Phi[0][6] + t->Phi[5][1]*t->Phi[1][6] +
-            t->Phi[5][2]*t->Phi[2][6] + t->Phi[5][3]*t->Phi[3][6] + t->Phi[5][4]*t->Phi[4][6] +
-            t->Phi[5][5]*t->Phi[5][6] + t->Phi[5][6]*t->Phi[6][6] + t->Phi[5][7]*t->Phi[7][6] +
-            t->Phi[5][8]*t->Phi[8][6];
-    w->term[1][51] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[16] + t->Phi[5][2]*w->S[26] +
-            t->Phi[5][3]*w->S[36] + t->Phi[5][4]*w->S[46] + t->Phi[5][5]*w->S[56] +
-            t->Phi[5][6]*w->S[61] + t->Phi[5][7]*w->S[65] + t->Phi[5][8]*w->S[69];
-    w->term[0][52] = t->Phi[5][0]*t->Phi[0][7] + t->Phi[5][1]*t->Phi[1][7] +
-            t->Phi[5][2]*t->Phi[2][7] + t->Phi[5][3]*t->Phi[3][7] + t->Phi[5][4]*t->Phi[4][7] +
-            t->Phi[5][5]*t->Phi[5][7] + t->Phi[5][6]*t->Phi[6][7] + t->Phi[5][7]*t->Phi[7][7] +
-            t->Phi[5][8]*t->Phi[8][7];
-    w->term[1][52] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[17] + t->Phi[5][2]*w->S[27] +
-            t->Phi[5][3]*w->S[37] + t->Phi[5][4]*w->S[47] + t->Phi[5][5]*w->S[57] +
-            t->Phi[5][6]*w->S[62] + t->Phi[5][7]*w->S[66] + t->Phi[5][8]*w->S[70];
-    w->term[0][53] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
-            t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
-            t->Phi[5][5]*t->Phi[5][8] + t->Phi[5][6]*t->Phi[6][8] + t->Phi[5][7]*t->Phi[7][8] +
-            t->Phi[5][8]*t->Phi[8][8];
-    w->term[1][53] = t->Phi[5][0]*w->S[8] + t->Phi[5][1]*w->S[18] + t->Phi[5][2]*w->S[28] +
-            t->Phi[5][3]*w->S[38] + t->Phi[5][4]*w->S[48] + t->Phi[5][5]*w->S[58] +
-            t->Phi[5][6]*w->S[63] + t->Phi[5][7]*w->S[67] + t->Phi[5][8]*w->S[71];
-    w->term[0][54] = t->Phi[6][6]*t->Phi[6][6] + t->Phi[6][7]*t->Phi[7][6] +
-            t->Phi[6][8]*t->Phi[8][6];
-    w->term[1][54] = t->Phi[6][6]*w->S[61] + t->Phi[6][7]*w->S[65] + t->Phi[6][8]*w->S[69];
-    w->term[0][55] = t->Phi[6][6]*t->Phi[6][7] + t->Phi[6][7]*t->Phi[7][7] +
-            t->Phi[6][8]*t->Phi[8][7];
-    w->term[1][55] = t->Phi[6][6]*w->S[62] + t->Phi[6][7]*w->S[66] + t->Phi[6][8]*w->S[70];
-    w->term[0][56] = t->Phi[6][6]*t->Phi[6][8] + t->Phi[6][7]*t->Phi[7][8] +
-            t->Phi[6][8]*t->Phi[8][8];
-    w->term[1][56] = t->Phi[6][6]*w->S[63] + t->Phi[6][7]*w->S[67] + t->Phi[6][8]*w->S[71];
-    w->term[0][57] = t->Phi[7][6]*t->Phi[6][6] + t->Phi[7][7]*t->Phi[7][6] +
-            t->Phi[7][8]*t->Phi[8][6];
-    w->term[1][57] = t->Phi[7][6]*w->S[61] + t->Phi[7][7]*w->S[65] + t->Phi[7][8]*w->S[69];
-    w->term[0][58] = t->Phi[7][6]*t->Phi[6][7] + t->Phi[7][7]*t->Phi[7][7] +
-            t->Phi[7][8]*t->Phi[8][7];
-    w->term[1][58] = t->Phi[7][6]*w->S[62] + t->Phi[7][7]*w->S[66] + t->Phi[7][8]*w->S[70];
-    w->term[0][59] = t->Phi[7][6]*t->Phi[6][8] + t->Phi[7][7]*t->Phi[7][8] +
-            t->Phi[7][8]*t->Phi[8][8];
-    w->term[1][59] = t->Phi[7][6]*w->S[63] + t->Phi[7][7]*w->S[67] + t->Phi[7][8]*w->S[71];
-    w->term[0][60] = t->Phi[8][6]*t->Phi[6][6] + t->Phi[8][7]*t->Phi[7][6] +
-            t->Phi[8][8]*t->Phi[8][6];
-    w->term[1][60] = t->Phi[8][6]*w->S[61] + t->Phi[8][7]*w->S[65] + t->Phi[8][8]*w->S[69];
-    w->term[0][61] = t->Phi[8][6]*t->Phi[6][7] + t->Phi[8][7]*t->Phi[7][7] +
-            t->Phi[8][8]*t->Phi[8][7];
-    w->term[1][61] = t->Phi[8][6]*w->S[62] + t->Phi[8][7]*w->S[66] + t->Phi[8][8]*w->S[70];
-    w->term[0][62] = t->Phi[8][6]*t->Phi[6][8] + t->Phi[8][7]*t->Phi[7][8] +
-            t->Phi[8][8]*t->Phi[8][8];
-    w->term[1][62] = t->Phi[8][6]*w->S[63] + t->Phi[8][7]*w->S[67] + t->Phi[8][8]*w->S[71];
-    w->term[0][63] = t->Phi[9][9]*t->Phi[9][9];
-    w->term[1][63] = t->Phi[9][9]*w->S[72];
-    w->term[0][64] = t->Phi[9][9]*t->Phi[9][10];
-    w->term[1][64] = t->Phi[9][9]*w->S[73] + t->Phi[9][10];
-    t->Phi[0][0] = t->Phi[0][0] + t->Phi[0][0] + w->term[0][0];
+    int k;
+    for (k = 0; k < 6; ++k) {
+        w->term[0][k] = t->Phi[0]*t->Phi[k] + t->Phi[1]*t->Phi[9+k] + t->Phi[2]*t->Phi[18+k] +
+                t->Phi[3]*t->Phi[27+k] + t->Phi[4]*t->Phi[36+k] + t->Phi[5]*t->Phi[45+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        w->term[0][6+k] = t->Phi[0]*t->Phi[6+k] + t->Phi[1]*t->Phi[15+k] + t->Phi[2]*t->Phi[24+k] +
+                t->Phi[3]*t->Phi[33+k] + t->Phi[4]*t->Phi[42+k] + t->Phi[5]*t->Phi[51+k] +
+                t->Phi[6]*t->Phi[54+k] + t->Phi[7]*t->Phi[57+k] + t->Phi[8]*t->Phi[60+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[0][9+k] = t->Phi[9]*t->Phi[k] + t->Phi[10]*t->Phi[9+k] + t->Phi[11]*t->Phi[18+k] +
+                t->Phi[12]*t->Phi[27+k] + t->Phi[13]*t->Phi[36+k] + t->Phi[14]*t->Phi[45+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        w->term[0][15+k] = t->Phi[9]*t->Phi[6+k] + t->Phi[10]*t->Phi[15+k] + t->Phi[11]*t->Phi[24+k]
+                + t->Phi[12]*t->Phi[33+k] + t->Phi[13]*t->Phi[42+k] + t->Phi[14]*t->Phi[51+k] +
+                t->Phi[15]*t->Phi[54+k] + t->Phi[16]*t->Phi[57+k] + t->Phi[17]*t->Phi[60+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[0][18+k] = t->Phi[18]*t->Phi[k] + t->Phi[19]*t->Phi[9+k] + t->Phi[20]*t->Phi[18+k] +
+                t->Phi[21]*t->Phi[27+k] + t->Phi[22]*t->Phi[36+k] + t->Phi[23]*t->Phi[45+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        w->term[0][24+k] = t->Phi[18]*t->Phi[6+k] + t->Phi[19]*t->Phi[15+k] +
+                t->Phi[20]*t->Phi[24+k] + t->Phi[21]*t->Phi[33+k] + t->Phi[22]*t->Phi[42+k] +
+                t->Phi[23]*t->Phi[51+k] + t->Phi[24]*t->Phi[54+k] + t->Phi[25]*t->Phi[57+k] +
+                t->Phi[26]*t->Phi[60+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[0][27+k] = t->Phi[27]*t->Phi[k] + t->Phi[28]*t->Phi[9+k] + t->Phi[29]*t->Phi[18+k] +
+                t->Phi[30]*t->Phi[27+k] + t->Phi[31]*t->Phi[36+k] + t->Phi[32]*t->Phi[45+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        w->term[0][33+k] = t->Phi[27]*t->Phi[6+k] + t->Phi[28]*t->Phi[15+k] +
+                t->Phi[29]*t->Phi[24+k] + t->Phi[30]*t->Phi[33+k] + t->Phi[31]*t->Phi[42+k] +
+                t->Phi[32]*t->Phi[51+k] + t->Phi[33]*t->Phi[54+k] + t->Phi[34]*t->Phi[57+k] +
+                t->Phi[35]*t->Phi[60+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[0][36+k] = t->Phi[36]*t->Phi[k] + t->Phi[37]*t->Phi[9+k] + t->Phi[38]*t->Phi[18+k] +
+                t->Phi[39]*t->Phi[27+k] + t->Phi[40]*t->Phi[36+k] + t->Phi[41]*t->Phi[45+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        w->term[0][42+k] = t->Phi[36]*t->Phi[6+k] + t->Phi[37]*t->Phi[15+k] +
+                t->Phi[38]*t->Phi[24+k] + t->Phi[39]*t->Phi[33+k] + t->Phi[40]*t->Phi[42+k] +
+                t->Phi[41]*t->Phi[51+k] + t->Phi[42]*t->Phi[54+k] + t->Phi[43]*t->Phi[57+k] +
+                t->Phi[44]*t->Phi[60+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[0][45+k] = t->Phi[45]*t->Phi[k] + t->Phi[46]*t->Phi[9+k] + t->Phi[47]*t->Phi[18+k] +
+                t->Phi[48]*t->Phi[27+k] + t->Phi[49]*t->Phi[36+k] + t->Phi[50]*t->Phi[45+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        w->term[0][51+k] = t->Phi[45]*t->Phi[6+k] + t->Phi[46]*t->Phi[15+k] +
+                t->Phi[47]*t->Phi[24+k] + t->Phi[48]*t->Phi[33+k] + t->Phi[49]*t->Phi[42+k] +
+                t->Phi[50]*t->Phi[51+k] + t->Phi[51]*t->Phi[54+k] + t->Phi[52]*t->Phi[57+k] +
+                t->Phi[53]*t->Phi[60+k];
+        w->term[0][54+k] = t->Phi[54]*t->Phi[54+k] + t->Phi[55]*t->Phi[57+k] +
+                t->Phi[56]*t->Phi[60+k];
+        w->term[0][57+k] = t->Phi[57]*t->Phi[54+k] + t->Phi[58]*t->Phi[57+k] +
+                t->Phi[59]*t->Phi[60+k];
+        w->term[0][60+k] = t->Phi[60]*t->Phi[54+k] + t->Phi[61]*t->Phi[57+k] +
+                t->Phi[62]*t->Phi[60+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[0][63+k] = t->Phi[63]*t->Phi[63+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[1][k] = t->Phi[0]*w->S[k] + t->Phi[1]*w->S[10+k] + t->Phi[2]*w->S[20+k] +
+                t->Phi[3]*w->S[30+k] + t->Phi[4]*w->S[40+k] + t->Phi[5]*w->S[50+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        w->term[1][6+k] = t->Phi[0]*w->S[6+k] + t->Phi[1]*w->S[16+k] + t->Phi[2]*w->S[26+k] +
+                t->Phi[3]*w->S[36+k] + t->Phi[4]*w->S[46+k] + t->Phi[5]*w->S[56+k] +
+                t->Phi[6]*w->S[61+k] + t->Phi[7]*w->S[65+k] + t->Phi[8]*w->S[69+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[1][9+k] = t->Phi[9]*w->S[k] + t->Phi[10]*w->S[10+k] + t->Phi[11]*w->S[20+k] +
+                t->Phi[12]*w->S[30+k] + t->Phi[13]*w->S[40+k] + t->Phi[14]*w->S[50+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        w->term[1][15+k] = t->Phi[9]*w->S[6+k] + t->Phi[10]*w->S[16+k] + t->Phi[11]*w->S[26+k] +
+                t->Phi[12]*w->S[36+k] + t->Phi[13]*w->S[46+k] + t->Phi[14]*w->S[56+k] +
+                t->Phi[15]*w->S[61+k] + t->Phi[16]*w->S[65+k] + t->Phi[17]*w->S[69+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[1][18+k] = t->Phi[18]*w->S[k] + t->Phi[19]*w->S[10+k] + t->Phi[20]*w->S[20+k] +
+                t->Phi[21]*w->S[30+k] + t->Phi[22]*w->S[40+k] + t->Phi[23]*w->S[50+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        w->term[1][24+k] = t->Phi[18]*w->S[6+k] + t->Phi[19]*w->S[16+k] + t->Phi[20]*w->S[26+k] +
+                t->Phi[21]*w->S[36+k] + t->Phi[22]*w->S[46+k] + t->Phi[23]*w->S[56+k] +
+                t->Phi[24]*w->S[61+k] + t->Phi[25]*w->S[65+k] + t->Phi[26]*w->S[69+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[1][27+k] = t->Phi[27]*w->S[k] + t->Phi[28]*w->S[10+k] + t->Phi[29]*w->S[20+k] +
+                t->Phi[30]*w->S[30+k] + t->Phi[31]*w->S[40+k] + t->Phi[32]*w->S[50+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        w->term[1][33+k] = t->Phi[27]*w->S[6+k] + t->Phi[28]*w->S[16+k] + t->Phi[29]*w->S[26+k] +
+                t->Phi[30]*w->S[36+k] + t->Phi[31]*w->S[46+k] + t->Phi[32]*w->S[56+k] +
+                t->Phi[33]*w->S[61+k] + t->Phi[34]*w->S[65+k] + t->Phi[35]*w->S[69+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[1][36+k] = t->Phi[36]*w->S[k] + t->Phi[37]*w->S[10+k] + t->Phi[38]*w->S[20+k] +
+                t->Phi[39]*w->S[30+k] + t->Phi[40]*w->S[40+k] + t->Phi[41]*w->S[50+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        w->term[1][42+k] = t->Phi[36]*w->S[6+k] + t->Phi[37]*w->S[16+k] + t->Phi[38]*w->S[26+k] +
+                t->Phi[39]*w->S[36+k] + t->Phi[40]*w->S[46+k] + t->Phi[41]*w->S[56+k] +
+                t->Phi[42]*w->S[61+k] + t->Phi[43]*w->S[65+k] + t->Phi[44]*w->S[69+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[1][45+k] = t->Phi[45]*w->S[k] + t->Phi[46]*w->S[10+k] + t->Phi[47]*w->S[20+k] +
+                t->Phi[48]*w->S[30+k] + t->Phi[49]*w->S[40+k] + t->Phi[50]*w->S[50+k];
+    }
+    for (k = 0; k < 3; ++k) {
+        w->term[1][51+k] = t->Phi[45]*w->S[6+k] + t->Phi[46]*w->S[16+k] + t->Phi[47]*w->S[26+k] +
+                t->Phi[48]*w->S[36+k] + t->Phi[49]*w->S[46+k] + t->Phi[50]*w->S[56+k] +
+                t->Phi[51]*w->S[61+k] + t->Phi[52]*w->S[65+k] + t->Phi[53]*w->S[69+k];
+        w->term[1][54+k] = t->Phi[54]*w->S[61+k] + t->Phi[55]*w->S[65+k] + t->Phi[56]*w->S[69+k];
+        w->term[1][57+k] = t->Phi[57]*w->S[61+k] + t->Phi[58]*w->S[65+k] + t->Phi[59]*w->S[69+k];
+        w->term[1][60+k] = t->Phi[60]*w->S[61+k] + t->Phi[61]*w->S[65+k] + t->Phi[62]*w->S[69+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[1][63+k] = t->Phi[63]*w->S[72+k];
+    }
+    w->term[1][64] = w->term[1][64] + t->Phi[64];
+    t->Phi[0] = t->Phi[0] + t->Phi[0] + w->term[0][0];
+    t->Phi[1] = t->Phi[1] + t->Phi[1] + w->term[0][1];
+    t->Phi[2] = t->Phi[2] + t->Phi[2] + w->term[0][2];
+    t->Phi[3] = t->Phi[3] + t->Phi[3] + w->term[0][3];
+    t->Phi[4] = t->Phi[4] + t->Phi[4] + w->term[0][4];
+    t->Phi[5] = t->Phi[5] + t->Phi[5] + w->term[0][5];
+    t->Phi[6] = t->Phi[6] + t->Phi[6] + w->term[0][6];
+    t->Phi[7] = t->Phi[7] + t->Phi[7] + w->term[0][7];
+    t->Phi[8] = t->Phi[8] + t->Phi[8] + w->term[0][8];
+    t->Phi[9] = t->Phi[9] + t->Phi[9] + w->term[0][9];
+    t->Phi[10] = t->Phi[10] + t->Phi[10] + w->term[0][10];
+    t->Phi[11] = t->Phi[11] + t->Phi[11] + w->term[0][11];
+    t->Phi[12] = t->Phi[12] + t->Phi[12] + w->term[0][12];
+    t->Phi[13] = t->Phi[13] + t->Phi[13] + w->term[0][13];
+    t->Phi[14] = t->Phi[14] + t->Phi[14] + w->term[0][14];
+    t->Phi[15] = t->Phi[15] + t->Phi[15] + w->term[0][15];
+    t->Phi[16] = t->Phi[16] + t->Phi[16] + w->term[0][16];
+    t->Phi[17] = t->Phi[17] + t->Phi[17] + w->term[0][17];
+    t->Phi[18] = t->Phi[18] + t->Phi[18] + w->term[0][18];
+    t->Phi[19] = t->Phi[19] + t->Phi[19] + w->term[0][19];
+    t->Phi[20] = t->Phi[20] + t->Phi[20] + w->term[0][20];
+    t->Phi[21] = t->Phi[21] + t->Phi[21] + w->term[0][21];
+    t->Phi[22] = t->Phi[22] + t->Phi[22] + w->term[0][22];
+    t->Phi[23] = t->Phi[23] + t->Phi[23] + w->term[0][23];
+    t->Phi[24] = t->Phi[24] + t->Phi[24] + w->term[0][24];
+    t->Phi[25] = t->Phi[25] + t->Phi[25] + w->term[0][25];
+    t->Phi[26] = t->Phi[26] + t->Phi[26] + w->term[0][26];
+    t->Phi[27] = t->Phi[27] + t->Phi[27] + w->term[0][27];
+    t->Phi[28] = t->Phi[28] + t->Phi[28] + w->term[0][28];
+    t->Phi[29] = t->Phi[29] + t->Phi[29] + w->term[0][29];
+    t->Phi[30] = t->Phi[30] + t->Phi[30] + w->term[0][30];
+    t->Phi[31] = t->Phi[31] + t->Phi[31] + w->term[0][31];
+    t->Phi[32] = t->Phi[32] + t->Phi[32] + w->term[0][32];
+    t->Phi[33] = t->Phi[33] + t->Phi[33] + w->term[0][33];
+    t->Phi[34] = t->Phi[34] + t->Phi[34] + w->term[0][34];
+    t->Phi[35] = t->Phi[35] + t->Phi[35] + w->term[0][35];
+    t->Phi[36] = t->Phi[36] + t->Phi[36] + w->term[0][36];
+    t->Phi[37] = t->Phi[37] + t->Phi[37] + w->term[0][37];
+    t->Phi[38] = t->Phi[38] + t->Phi[38] + w->term[0][38];
+    t->Phi[39] = t->Phi[39] + t->Phi[39] + w->term[0][39];
+    t->Phi[40] = t->Phi[40] + t->Phi[40] + w->term[0][40];
+    t->Phi[41] = t->Phi[41] + t->Phi[41] + w->term[0][41];
+    t->Phi[42] = t->Phi[42] + t->Phi[42] + w->term[0][42];
+    t->Phi[43] = t->Phi[43] + t->Phi[43] + w->term[0][43];
+    t->Phi[44] = t->Phi[44] + t->Phi[44] + w->term[0][44];
+    t->Phi[45] = t->Phi[45] + t->Phi[45] + w->term[0][45];
+    t->Phi[46] = t->Phi[46] + t->Phi[46] + w->term[0][46];
+    t->Phi[47] = t->Phi[47] + t->Phi[47] + w->term[0][47];
+    t->Phi[48] = t->Phi[48] + t->Phi[48] + w->term[0][48];
+    t->Phi[49] = t->Phi[49] + t->Phi[49] + w->term[0][49];
+    t->Phi[50] = t->Phi[50] + t->Phi[50] + w->term[0][50];
+    t->Phi[51] = t->Phi[51] + t->Phi[51] + w->term[0][51];
+    t->Phi[52] = t->Phi[52] + t->Phi[52] + w->term[0][52];
+    t->Phi[53] = t->Phi[53] + t->Phi[53] + w->term[0][53];
+    t->Phi[54] = t->Phi[54] + t->Phi[54] + w->term[0][54];
+    t->Phi[55] = t->Phi[55] + t->Phi[55] + w->term[0][55];
+    t->Phi[56] = t->Phi[56] + t->Phi[56] + w->term[0][56];
+    t->Phi[57] = t->Phi[57] + t->Phi[57] + w->term[0][57];
+    t->Phi[58] = t->Phi[58] + t->Phi[58] + w->term[0][58];
+    t->Phi[59] = t->Phi[59] + t->Phi[59] + w->term[0][59];
+    t->Phi[60] = t->Phi[60] + t->Phi[60] + w->term[0][60];
+    t->Phi[61] = t->Phi[61] + t->Phi[61] + w->term[0][61];
+    t->Phi[62] = t->Phi[62] + t->Phi[62] + w->term[0][62];
+    t->Phi[63] = t->Phi[63] + t->Phi[63] + w->term[0][63];
+    t->Phi[64] = t->Phi[64] + t->Phi[64] + w->term[0][64];
     w->S[0] = w->S[0] + half*w->term[1][0];
-    t->Phi[0][1] = t->Phi[0][1] + t->Phi[0][1] + w->term[0][1];
     w->S[1] = w->S[1] + half*w->term[1][1];
-    t->Phi[0][2] = t->Phi[0][2] + t->Phi[0][2] + w->term[0][2];
     w->S[2] = w->S[2] + half*w->term[1][2];
-    t->Phi[0][3] = t->Phi[0][3] + t->Phi[0][3] + w->term[0][3];
     w->S[3] = w->S[3] + half*w->term[1][3];
-    t->Phi[0][4] = t->Phi[0][4] + t->Phi[0][4] + w->term[0][4];
     w->S[4] = w->S[4] + half*w->term[1][4];
-    t->Phi[0][5] = t->Phi[0][5] + t->Phi[0][5] + w->term[0][5];
     w->S[5] = w->S[5] + half*w->term[1][5];
-    t->Phi[0][6] = t->Phi[0][6] + t->Phi[0][6] + w->term[0][6];
     w->S[6] = w->S[6] + half*w->term[1][6];
-    t->Phi[0][7] = t->Phi[0][7] + t->Phi[0][7] + w->term[0][7];
     w->S[7] = w->S[7] + half*w->term[1][7];
-    t->Phi[0][8] = t->Phi[0][8] + t->Phi[0][8] + w->term[0][8];
     w->S[8] = w->S[8] + half*w->term[1][8];
-    t->Phi[1][0] = t->Phi[1][0] + t->Phi[1][0] + w->term[0][9];
     w->S[10] = w->S[10] + half*w->term[1][9];
-    t->Phi[1][1] = t->Phi[1][1] + t->Phi[1][1] + w->term[0][10];
     w->S[11] = w->S[11] + half*w->term[1][10];
-    t->Phi[1][2] = t->Phi[1][2] + t->Phi[1][2] + w->term[0][11];
     w->S[12] = w->S[12] + half*w->term[1][11];
-    t->Phi[1][3] = t->Phi[1][3] + t->Phi[1][3] + w->term[0][12];
     w->S[13] = w->S[13] + half*w->term[1][12];
-    t->Phi[1][4] = t->Phi[1][4] + t->Phi[1][4] + w->term[0][13];
     w->S[14] = w->S[14] + half*w->term[1][13];
-    t->Phi[1][5] = t->Phi[1][5] + t->Phi[1][5] + w->term[0][14];
     w->S[15] = w->S[15] + half*w->term[1][14];
-    t->Phi[1][6] = t->Phi[1][6] + t->Phi[1][6] + w->term[0][15];
     w->S[16] = w->S[16] + half*w->term[1][15];
-    t->Phi[1][7] = t->Phi[1][7] + t->Phi[1][7] + w->term[0][16];
     w->S[17] = w->S[17] + half*w->term[1][16];
-    t->Phi[1][8] = t->Phi[1][8] + t->Phi[1][8] + w->term[0][17];
     w->S[18] = w->S[18] + half*w->term[1][17];
-    t->Phi[2][0] = t->Phi[2][0] + t->Phi[2][0] + w->term[0][18];
     w->S[20] = w->S[20] + half*w->term[1][18];
-    t->Phi[2][1] = t->Phi[2][1] + t->Phi[2][1] + w->term[0][19];
     w->S[21] = w->S[21] + half*w->term[1][19];
-    t->Phi[2][2] = t->Phi[2][2] + t->Phi[2][2] + w->term[0][20];
     w->S[22] = w->S[22] + half*w->term[1][20];
-    t->Phi[2][3] = t->Phi[2][3] + t->Phi[2][3] + w->term[0][21];
     w->S[23] = w->S[23] + half*w->term[1][21];
-    t->Phi[2][4] = t->Phi[2][4] + t->Phi[2][4] + w->term[0][22];
     w->S[24] = w->S[24] + half*w->term[1][22];
-    t->Phi[2][5] = t->Phi[2][5] + t->Phi[2][5] + w->term[0][23];
     w->S[25] = w->S[25] + half*w->term[1][23];
-    t->Phi[2][6] = t->Phi[2][6] + t->Phi[2][6] + w->term[0][24];
     w->S[26] = w->S[26] + half*w->term[1][24];
-    t->Phi[2][7] = t->Phi[2][7] + t->Phi[2][7] + w->term[0][25];
     w->S[27] = w->S[27] + half*w->term[1][25];
-    t->Phi[2][8] = t->Phi[2][8] + t->Phi[2][8] + w->term[0][26];
     w->S[28] = w->S[28] + half*w->term[1][26];
-    t->Phi[3][0] = t->Phi[3][0] + t->Phi[3][0] + w->term[0][27];
     w->S[30] = w->S[30] + half*w->term[1][27];
-    t->Phi[3][1] = t->Phi[3][1] + t->Phi[3][1] + w->term[0][28];
     w->S[31] = w->S[31] + half*w->term[1][28];
-    t->Phi[3][2] = t->Phi[3][2] + t->Phi[3][2] + w->term[0][29];
     w->S[32] = w->S[32] + half*w->term[1][29];
-    t->Phi[3][3] = t->Phi[3][3] + t->Phi[3][3] + w->term[0][30];
     w->S[33] = w->S[33] + half*w->term[1][30];
-    t->Phi[3][4] = t->Phi[3][4] + t->Phi[3][4] + w->term[0][31];
     w->S[34] = w->S[34] + half*w->term[1][31];
-    t->Phi[3][5] = t->Phi[3][5] + t->Phi[3][5] + w->term[0][32];
     w->S[35] = w->S[35] + half*w->term[1][32];
-    t->Phi[3][6] = t->Phi[3][6] + t->Phi[3][6] + w->term[0][33];
     w->S[36] = w->S[36] + half*w->term[1][33];
-    t->Phi[3][7] = t->Phi[3][7] + t->Phi[3][7] + w->term[0][34];
     w->S[37] = w->S[37] + half*w->term[1][34];
-    t->Phi[3][8] = t->Phi[3][8] + t->Phi[3][8] + w->term[0][35];
     w->S[38] = w->S[38] + half*w->term[1][35];
-    t->Phi[4][0] = t->Phi[4][0] + t->Phi[4][0] + w->term[0][36];
     w->S[40] = w->S[40] + half*w->term[1][36];
-    t->Phi[4][1] = t->Phi[4][1] + t->Phi[4][1] + w->term[0][37];
     w->S[41] = w->S[41] + half*w->term[1][37];
-    t->Phi[4][2] = t->Phi[4][2] + t->Phi[4][2] + w->term[0][38];
     w->S[42] = w->S[42] + half*w->term[1][38];
-    t->Phi[4][3] = t->Phi[4][3] + t->Phi[4][3] + w->term[0][39];
     w->S[43] = w->S[43] + half*w->term[1][39];
-    t->Phi[4][4] = t->Phi[4][4] + t->Phi[4][4] + w->term[0][40];
     w->S[44] = w->S[44] + half*w->term[1][40];
-    t->Phi[4][5] = t->Phi[4][5] + t->Phi[4][5] + w->term[0][41];
     w->S[45] = w->S[45] + half*w->term[1][41];
-    t->Phi[4][6] = t->Phi[4][6] + t->Phi[4][6] + w->term[0][42];
     w->S[46] = w->S[46] + half*w->term[1][42];
-    t->Phi[4][7] = t->Phi[4][7] + t->Phi[4][7] + w->term[0][43];
     w->S[47] = w->S[47] + half*w->term[1][43];
-    t->Phi[4][8] = t->Phi[4][8] + t->Phi[4][8] + w->term[0][44];
     w->S[48] = w->S[48] + half*w->term[1][44];
-    t->Phi[5][0] = t->Phi[5][0] + t->Phi[5][0] + w->term[0][45];
     w->S[50] = w->S[50] + half*w->term[1][45];
-    t->Phi[5][1] = t->Phi[5][1] + t->Phi[5][1] + w->term[0][46];
     w->S[51] = w->S[51] + half*w->term[1][46];
-    t->Phi[5][2] = t->Phi[5][2] + t->Phi[5][2] + w->term[0][47];
     w->S[52] = w->S[52] + half*w->term[1][47];
-    t->Phi[5][3] = t->Phi[5][3] + t->Phi[5][3] + w->term[0][48];
     w->S[53] = w->S[53] + half*w->term[1][48];
-    t->Phi[5][4] = t->Phi[5][4] + t->Phi[5][4] + w->term[0][49];
     w->S[54] = w->S[54] + half*w->term[1][49];
-    t->Phi[5][5] = t->Phi[5][5] + t->Phi[5][5] + w->term[0][50];
     w->S[55] = w->S[55] + half*w->term[1][50];
-    t->Phi[5][6] = t->Phi[5][6] + t->Phi[5][6] + w->term[0][51];
     w->S[56] = w->S[56] + half*w->term[1][51];
-    t->Phi[5][7] = t->Phi[5][7] + t->Phi[5][7] + w->term[0][52];
     w->S[57] = w->S[57] + half*w->term[1][52];
-    t->Phi[5][8] = t->Phi[5][8] + t->Phi[5][8] + w->term[0][53];
     w->S[58] = w->S[58] + half*w->term[1][53];
-    t->Phi[6][6] = t->Phi[6][6] + t->Phi[6][6] + w->term[0][54];
     w->S[61] = w->S[61] + half*w->term[1][54];
-    t->Phi[6][7] = t->Phi[6][7] + t->Phi[6][7] + w->term[0][55];
     w->S[62] = w->S[62] + half*w->term[1][55];
-    t->Phi[6][8] = t->Phi[6][8] + t->Phi[6][8] + w->term[0][56];
     w->S[63] = w->S[63] + half*w->term[1][56];
-    t->Phi[7][6] = t->Phi[7][6] + t->Phi[7][6] + w->term[0][57];
     w->S[65] = w->S[65] + half*w->term[1][57];
-    t->Phi[7][7] = t->Phi[7][7] + t->Phi[7][7] + w->term[0][58];
     w->S[66] = w->S[66] + half*w->term[1][58];
-    t->Phi[7][8] = t->Phi[7][8] + t->Phi[7][8] + w->term[0][59];
     w->S[67] = w->S[67] + half*w->term[1][59];
-    t->Phi[8][6] = t->Phi[8][6] + t->Phi[8][6] + w->term[0][60];
     w->S[69] = w->S[69] + half*w->term[1][60];
-    t->Phi[8][7] = t->Phi[8][7] + t->Phi[8][7] + w->term[0][61];
     w->S[70] = w->S[70] + half*w->term[1][61];
-    t->Phi[8][8] = t->Phi[8][8] + t->Phi[8][8] + w->term[0][62];
     w->S[71] = w->S[71] + half*w->term[1][62];
-    t->Phi[9][9] = t->Phi[9][9] + t->Phi[9][9] + w->term[0][63];
     w->S[72] = w->S[72] + half*w->term[1][63];
-    t->Phi[9][10] = t->Phi[9][10] + t->Phi[9][10] + w->term[0][64];
     w->S[73] = w->S[73] + half*w->term[1][64];
 }
 
@@ -1265,29 +1016,27 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar
 {
     const gps_pseudorange11_twin_scalar one = 1.0;
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    t->Phi[0][0] = t->Phi[0][0] + one;
-    t->Phi[1][1] = t->Phi[1][1] + one;
-    t->Phi[2][2] = t->Phi[2][2] + one;
-    t->Phi[3][3] = t->Phi[3][3] + one;
-    t->Phi[4][4] = t->Phi[4][4] + one;
-    t->Phi[5][5] = t->Phi[5][5] + one;
-    t->Phi[6][6] = t->Phi[6][6] + one;
-    t->Phi[7][7] = t->Phi[7][7] + one;
-    t->Phi[8][8] = t->Phi[8][8] + one;
-    t->Phi[9][9] = t->Phi[9][9] + one;
-    v = t->Phi[0][0] + t->Phi[0][1] + t->Phi[0][2] + t->Phi[0][3] + t->Phi[0][4] + t->Phi[0][5] +
-            t->Phi[0][6] + t->Phi[0][7] + t->Phi[0][8] + t->Phi[1][0] + t->Phi[1][1] + t->Phi[1][2]
-            + t->Phi[1][3] + t->Phi[1][4] + t->Phi[1][5] + t->Phi[1][6] + t->Phi[1][7] +
-            t->Phi[1][8] + t->Phi[2][0] + t->Phi[2][1] + t->Phi[2][2] + t->Phi[2][3] + t->Phi[2][4]
-            + t->Phi[2][5] + t->Phi[2][6] + t->Phi[2][7] + t->Phi[2][8] + t->Phi[3][0] +
-            t->Phi[3][1] + t->Phi[3][2] + t->Phi[3][3] + t->Phi[3][4] + t->Phi[3][5] + t->Phi[3][6]
-            + t->Phi[3][7] + t->Phi[3][8] + t->Phi[4][0] + t->Phi[4][1] + t->Phi[4][2] +
-            t->Phi[4][3] + t->Phi[4][4] + t->Phi[4][5] + t->Phi[4][6] + t->Phi[4][7] + t->Phi[4][8]
-            + t->Phi[5][0] + t->Phi[5][1] + t->Phi[5][2] + t->Phi[5][3] + t->Phi[5][4] +
-            t->Phi[5][5] + t->Phi[5][6] + t->Phi[5][7] + t->Phi[5][8] + t->Phi[6][6] + t->Phi[6][7]
-            + t->Phi[6][8] + t->Phi[7][6] + t->Phi[7][7] + t->Phi[7][8] + t->Phi[8][6] +
-            t->Phi[8][7] + t->Phi[8][8] + t->Phi[9][9] + t->Phi[9][10]; w->term[0][0] = v; check +=
-            v - v;
+    t->Phi[0] = t->Phi[0] + one;
+    t->Phi[10] = t->Phi[10] + one;
+    t->Phi[20] = t->Phi[20] + one;
+    t->Phi[30] = t->Phi[30] + one;
+    t->Phi[40] = t->Phi[40] + one;
+    t->Phi[50] = t->Phi[50] + one;
+    t->Phi[54] = t->Phi[54] + one;
+    t->Phi[58] = t->Phi[58] + one;
+    t->Phi[62] = t->Phi[62] + one;
+    t->Phi[63] = t->Phi[63] + one;
+    v = t->Phi[0] + t->Phi[1] + t->Phi[2] + t->Phi[3] + t->Phi[4] + t->Phi[5] + t->Phi[6] +
+            t->Phi[7] + t->Phi[8] + t->Phi[9] + t->Phi[10] + t->Phi[11] + t->Phi[12] + t->Phi[13] +
+            t->Phi[14] + t->Phi[15] + t->Phi[16] + t->Phi[17] + t->Phi[18] + t->Phi[19] + t->Phi[20]
+            + t->Phi[21] + t->Phi[22] + t->Phi[23] + t->Phi[24] + t->Phi[25] + t->Phi[26] +
+            t->Phi[27] + t->Phi[28] + t->Phi[29] + t->Phi[30] + t->Phi[31] + t->Phi[32] + t->Phi[33]
+            + t->Phi[34] + t->Phi[35] + t->Phi[36] + t->Phi[37] + t->Phi[38] + t->Phi[39] +
+            t->Phi[40] + t->Phi[41] + t->Phi[42] + t->Phi[43] + t->Phi[44] + t->Phi[45] + t->Phi[46]
+            + t->Phi[47] + t->Phi[48] + t->Phi[49] + t->Phi[50] + t->Phi[51] + t->Phi[52] +
+            t->Phi[53] + t->Phi[54] + t->Phi[55] + t->Phi[56] + t->Phi[57] + t->Phi[58] + t->Phi[59]
+            + t->Phi[60] + t->Phi[61] + t->Phi[62] + t->Phi[63] + t->Phi[64]; w->term[0][0] = v;
+            check += v - v;
     return check;
 }
 
@@ -1613,8 +1362,8 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
     /* Horner's rule over the structural nonzeros (modelgen/codegen/discretize_kernels.py): A = F h,
        R_m = I / (m+1)!, R_k = I / (k+1)! + A R_(k+1) down to S = R_0 (R_k in S for even k, in term
        for odd k), the top level over its pattern and every lower one as dense row segments, then
-       E = A S and zero elsewhere in Phi; the doublings run over the entries of Phi that are not
-               e_i. */
+       E = A S into Phi (stored compressed to its structural nonzeros); the doublings run over the
+       entries of Phi that are not e_i. */
     horner_input(m, w, T * power_of_two(-halvings));
     for (k = order - 1; k >= 0; --k) {
         if (order - k == 1) {
@@ -1646,10 +1395,8 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
     sum_check = transition_check(t, w);
     if (sum_check != 0.0) {
         sum_check = 0.0;
-        for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_STATES; ++i) {
-            for (k = 0; k < GPS_PSEUDORANGE11_TWIN_N_STATES; ++k) {
-                sum_check += t->Phi[i][k] - t->Phi[i][k];
-            }
+        for (k = 0; k < GPS_PSEUDORANGE11_TWIN_N_PHI; ++k) {
+            sum_check += t->Phi[k] - t->Phi[k];
         }
     }
     check += sum_check;
@@ -1658,6 +1405,61 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
     noise_input(m, w);
     check += process_noise(m, t, w, T);
     return (check != 0.0) ? GPS_PSEUDORANGE11_TWIN_ERR_NONFINITE : GPS_PSEUDORANGE11_TWIN_OK;
+}
+
+void gps_pseudorange11_twin_get_transition_matrix(const gps_pseudorange11_twin_transition *restrict
+        t,
+                gps_pseudorange11_twin_scalar Phi[restrict GPS_PSEUDORANGE11_TWIN_N_STATES *
+                        GPS_PSEUDORANGE11_TWIN_N_STATES])
+{
+    int i;
+    for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_STATES * GPS_PSEUDORANGE11_TWIN_N_STATES; ++i) {
+        Phi[i] = 0.0;
+    }
+    for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_PHI; ++i) {
+        Phi[gps_pseudorange11_twin_Phi_row[i] * GPS_PSEUDORANGE11_TWIN_N_STATES +
+                gps_pseudorange11_twin_Phi_col[i]] = t->Phi[i];
+    }
+}
+
+/* Rows of Phi that are exactly e_i (a state whose row of F is empty: a random constant). */
+static const unsigned char transition_unit_row[GPS_PSEUDORANGE11_TWIN_N_STATES] = { 0, 0, 0, 0, 0,
+        0, 0, 0, 0, 0, 1 };
+
+int gps_pseudorange11_twin_set_transition_matrix(gps_pseudorange11_twin_transition *restrict t,
+                const gps_pseudorange11_twin_scalar Phi[restrict GPS_PSEUDORANGE11_TWIN_N_STATES *
+                        GPS_PSEUDORANGE11_TWIN_N_STATES])
+{
+    int i, j, k = 0;
+    gps_pseudorange11_twin_scalar check = 0.0;
+    for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_STATES * GPS_PSEUDORANGE11_TWIN_N_STATES; ++i) {
+        check += Phi[i] - Phi[i];
+    }
+    if (check != 0.0) {
+        return GPS_PSEUDORANGE11_TWIN_ERR_NONFINITE;
+    }
+    /* the dense entries in the order of the stored ones: each is either the next stored entry or a
+       structural zero, which must be 0 */
+    for (i = 0; i < GPS_PSEUDORANGE11_TWIN_N_STATES; ++i) {
+        for (j = 0; j < GPS_PSEUDORANGE11_TWIN_N_STATES; ++j) {
+            const gps_pseudorange11_twin_scalar v = Phi[i * GPS_PSEUDORANGE11_TWIN_N_STATES + j];
+            if (k < GPS_PSEUDORANGE11_TWIN_N_PHI && gps_pseudorange11_twin_Phi_row[k] == i &&
+                    gps_pseudorange11_twin_Phi_col[k] == j) {
+                ++k;
+                if (transition_unit_row[i] && v != 1.0) {
+                    return GPS_PSEUDORANGE11_TWIN_ERR_STRUCTURE; /* predict keeps a random constant:
+                            its row is e_i */
+                }
+            } else if (v != 0.0) {
+                return GPS_PSEUDORANGE11_TWIN_ERR_STRUCTURE;
+            }
+        }
+    }
+    for (k = 0; k < GPS_PSEUDORANGE11_TWIN_N_PHI; ++k) {
+        t->Phi[k] = Phi[gps_pseudorange11_twin_Phi_row[k] * GPS_PSEUDORANGE11_TWIN_N_STATES +
+                gps_pseudorange11_twin_Phi_col[k]];
+    }
+    return GPS_PSEUDORANGE11_TWIN_OK;
 }
 
 void gps_pseudorange11_twin_get_state(const gps_pseudorange11_twin_filter *restrict f,
@@ -1698,39 +1500,39 @@ static void phi_times_p_row_0(const gps_pseudorange11_twin_filter *restrict f, c
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] +
-            t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] +
-            t->Phi[0][6]*f->P[6][0] + t->Phi[0][7]*f->P[7][0] + t->Phi[0][8]*f->P[8][0];
-    w->M[1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] +
-            t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] +
-            t->Phi[0][6]*f->P[6][1] + t->Phi[0][7]*f->P[7][1] + t->Phi[0][8]*f->P[8][1];
-    w->M[2] = t->Phi[0][0]*f->P[0][2] + t->Phi[0][1]*f->P[1][2] + t->Phi[0][2]*f->P[2][2] +
-            t->Phi[0][3]*f->P[3][2] + t->Phi[0][4]*f->P[4][2] + t->Phi[0][5]*f->P[5][2] +
-            t->Phi[0][6]*f->P[6][2] + t->Phi[0][7]*f->P[7][2] + t->Phi[0][8]*f->P[8][2];
-    w->M[3] = t->Phi[0][0]*f->P[0][3] + t->Phi[0][1]*f->P[1][3] + t->Phi[0][2]*f->P[2][3] +
-            t->Phi[0][3]*f->P[3][3] + t->Phi[0][4]*f->P[4][3] + t->Phi[0][5]*f->P[5][3] +
-            t->Phi[0][6]*f->P[6][3] + t->Phi[0][7]*f->P[7][3] + t->Phi[0][8]*f->P[8][3];
-    w->M[4] = t->Phi[0][0]*f->P[0][4] + t->Phi[0][1]*f->P[1][4] + t->Phi[0][2]*f->P[2][4] +
-            t->Phi[0][3]*f->P[3][4] + t->Phi[0][4]*f->P[4][4] + t->Phi[0][5]*f->P[5][4] +
-            t->Phi[0][6]*f->P[6][4] + t->Phi[0][7]*f->P[7][4] + t->Phi[0][8]*f->P[8][4];
-    w->M[5] = t->Phi[0][0]*f->P[0][5] + t->Phi[0][1]*f->P[1][5] + t->Phi[0][2]*f->P[2][5] +
-            t->Phi[0][3]*f->P[3][5] + t->Phi[0][4]*f->P[4][5] + t->Phi[0][5]*f->P[5][5] +
-            t->Phi[0][6]*f->P[6][5] + t->Phi[0][7]*f->P[7][5] + t->Phi[0][8]*f->P[8][5];
-    w->M[6] = t->Phi[0][0]*f->P[0][6] + t->Phi[0][1]*f->P[1][6] + t->Phi[0][2]*f->P[2][6] +
-            t->Phi[0][3]*f->P[3][6] + t->Phi[0][4]*f->P[4][6] + t->Phi[0][5]*f->P[5][6] +
-            t->Phi[0][6]*f->P[6][6] + t->Phi[0][7]*f->P[7][6] + t->Phi[0][8]*f->P[8][6];
-    w->M[7] = t->Phi[0][0]*f->P[0][7] + t->Phi[0][1]*f->P[1][7] + t->Phi[0][2]*f->P[2][7] +
-            t->Phi[0][3]*f->P[3][7] + t->Phi[0][4]*f->P[4][7] + t->Phi[0][5]*f->P[5][7] +
-            t->Phi[0][6]*f->P[6][7] + t->Phi[0][7]*f->P[7][7] + t->Phi[0][8]*f->P[8][7];
-    w->M[8] = t->Phi[0][0]*f->P[0][8] + t->Phi[0][1]*f->P[1][8] + t->Phi[0][2]*f->P[2][8] +
-            t->Phi[0][3]*f->P[3][8] + t->Phi[0][4]*f->P[4][8] + t->Phi[0][5]*f->P[5][8] +
-            t->Phi[0][6]*f->P[6][8] + t->Phi[0][7]*f->P[7][8] + t->Phi[0][8]*f->P[8][8];
-    w->M[9] = t->Phi[0][0]*f->P[0][9] + t->Phi[0][1]*f->P[1][9] + t->Phi[0][2]*f->P[2][9] +
-            t->Phi[0][3]*f->P[3][9] + t->Phi[0][4]*f->P[4][9] + t->Phi[0][5]*f->P[5][9] +
-            t->Phi[0][6]*f->P[6][9] + t->Phi[0][7]*f->P[7][9] + t->Phi[0][8]*f->P[8][9];
-    w->M[10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] +
-            t->Phi[0][3]*f->P[3][10] + t->Phi[0][4]*f->P[4][10] + t->Phi[0][5]*f->P[5][10] +
-            t->Phi[0][6]*f->P[6][10] + t->Phi[0][7]*f->P[7][10] + t->Phi[0][8]*f->P[8][10];
+    w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
+            t->Phi[3]*f->P[3][0] + t->Phi[4]*f->P[4][0] + t->Phi[5]*f->P[5][0] +
+            t->Phi[6]*f->P[6][0] + t->Phi[7]*f->P[7][0] + t->Phi[8]*f->P[8][0];
+    w->M[1] = t->Phi[0]*f->P[0][1] + t->Phi[1]*f->P[1][1] + t->Phi[2]*f->P[2][1] +
+            t->Phi[3]*f->P[3][1] + t->Phi[4]*f->P[4][1] + t->Phi[5]*f->P[5][1] +
+            t->Phi[6]*f->P[6][1] + t->Phi[7]*f->P[7][1] + t->Phi[8]*f->P[8][1];
+    w->M[2] = t->Phi[0]*f->P[0][2] + t->Phi[1]*f->P[1][2] + t->Phi[2]*f->P[2][2] +
+            t->Phi[3]*f->P[3][2] + t->Phi[4]*f->P[4][2] + t->Phi[5]*f->P[5][2] +
+            t->Phi[6]*f->P[6][2] + t->Phi[7]*f->P[7][2] + t->Phi[8]*f->P[8][2];
+    w->M[3] = t->Phi[0]*f->P[0][3] + t->Phi[1]*f->P[1][3] + t->Phi[2]*f->P[2][3] +
+            t->Phi[3]*f->P[3][3] + t->Phi[4]*f->P[4][3] + t->Phi[5]*f->P[5][3] +
+            t->Phi[6]*f->P[6][3] + t->Phi[7]*f->P[7][3] + t->Phi[8]*f->P[8][3];
+    w->M[4] = t->Phi[0]*f->P[0][4] + t->Phi[1]*f->P[1][4] + t->Phi[2]*f->P[2][4] +
+            t->Phi[3]*f->P[3][4] + t->Phi[4]*f->P[4][4] + t->Phi[5]*f->P[5][4] +
+            t->Phi[6]*f->P[6][4] + t->Phi[7]*f->P[7][4] + t->Phi[8]*f->P[8][4];
+    w->M[5] = t->Phi[0]*f->P[0][5] + t->Phi[1]*f->P[1][5] + t->Phi[2]*f->P[2][5] +
+            t->Phi[3]*f->P[3][5] + t->Phi[4]*f->P[4][5] + t->Phi[5]*f->P[5][5] +
+            t->Phi[6]*f->P[6][5] + t->Phi[7]*f->P[7][5] + t->Phi[8]*f->P[8][5];
+    w->M[6] = t->Phi[0]*f->P[0][6] + t->Phi[1]*f->P[1][6] + t->Phi[2]*f->P[2][6] +
+            t->Phi[3]*f->P[3][6] + t->Phi[4]*f->P[4][6] + t->Phi[5]*f->P[5][6] +
+            t->Phi[6]*f->P[6][6] + t->Phi[7]*f->P[7][6] + t->Phi[8]*f->P[8][6];
+    w->M[7] = t->Phi[0]*f->P[0][7] + t->Phi[1]*f->P[1][7] + t->Phi[2]*f->P[2][7] +
+            t->Phi[3]*f->P[3][7] + t->Phi[4]*f->P[4][7] + t->Phi[5]*f->P[5][7] +
+            t->Phi[6]*f->P[6][7] + t->Phi[7]*f->P[7][7] + t->Phi[8]*f->P[8][7];
+    w->M[8] = t->Phi[0]*f->P[0][8] + t->Phi[1]*f->P[1][8] + t->Phi[2]*f->P[2][8] +
+            t->Phi[3]*f->P[3][8] + t->Phi[4]*f->P[4][8] + t->Phi[5]*f->P[5][8] +
+            t->Phi[6]*f->P[6][8] + t->Phi[7]*f->P[7][8] + t->Phi[8]*f->P[8][8];
+    w->M[9] = t->Phi[0]*f->P[0][9] + t->Phi[1]*f->P[1][9] + t->Phi[2]*f->P[2][9] +
+            t->Phi[3]*f->P[3][9] + t->Phi[4]*f->P[4][9] + t->Phi[5]*f->P[5][9] +
+            t->Phi[6]*f->P[6][9] + t->Phi[7]*f->P[7][9] + t->Phi[8]*f->P[8][9];
+    w->M[10] = t->Phi[0]*f->P[0][10] + t->Phi[1]*f->P[1][10] + t->Phi[2]*f->P[2][10] +
+            t->Phi[3]*f->P[3][10] + t->Phi[4]*f->P[4][10] + t->Phi[5]*f->P[5][10] +
+            t->Phi[6]*f->P[6][10] + t->Phi[7]*f->P[7][10] + t->Phi[8]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -1738,31 +1540,31 @@ static gps_pseudorange11_twin_scalar propagate_row_0(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[0][0] + w->M[1]*t->Phi[0][1] + w->M[2]*t->Phi[0][2] + w->M[3]*t->Phi[0][3] +
-            w->M[4]*t->Phi[0][4] + w->M[5]*t->Phi[0][5] + w->M[6]*t->Phi[0][6] +
-            w->M[7]*t->Phi[0][7] + w->M[8]*t->Phi[0][8] + t->Qd[0]; w->Pn[0] = v; check += v - v;
-    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
-            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[6]*t->Phi[1][6] +
-            w->M[7]*t->Phi[1][7] + w->M[8]*t->Phi[1][8] + t->Qd[1]; w->Pn[1] = v; check += v - v;
-    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
-            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[6]*t->Phi[2][6] +
-            w->M[7]*t->Phi[2][7] + w->M[8]*t->Phi[2][8] + t->Qd[2]; w->Pn[2] = v; check += v - v;
-    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
-            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
-            w->M[7]*t->Phi[3][7] + w->M[8]*t->Phi[3][8] + t->Qd[3]; w->Pn[3] = v; check += v - v;
-    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
-            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
-            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + t->Qd[4]; w->Pn[4] = v; check += v - v;
-    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
-            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
-            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + t->Qd[5]; w->Pn[5] = v; check += v - v;
-    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[6]; w->Pn[6] = v;
-            check += v - v;
-    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[7]; w->Pn[7] = v;
-            check += v - v;
-    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[8]; w->Pn[8] = v;
-            check += v - v;
-    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[9] = v; check += v - v;
+    v = w->M[0]*t->Phi[0] + w->M[1]*t->Phi[1] + w->M[2]*t->Phi[2] + w->M[3]*t->Phi[3] +
+            w->M[4]*t->Phi[4] + w->M[5]*t->Phi[5] + w->M[6]*t->Phi[6] + w->M[7]*t->Phi[7] +
+            w->M[8]*t->Phi[8] + t->Qd[0]; w->Pn[0] = v; check += v - v;
+    v = w->M[0]*t->Phi[9] + w->M[1]*t->Phi[10] + w->M[2]*t->Phi[11] + w->M[3]*t->Phi[12] +
+            w->M[4]*t->Phi[13] + w->M[5]*t->Phi[14] + w->M[6]*t->Phi[15] + w->M[7]*t->Phi[16] +
+            w->M[8]*t->Phi[17] + t->Qd[1]; w->Pn[1] = v; check += v - v;
+    v = w->M[0]*t->Phi[18] + w->M[1]*t->Phi[19] + w->M[2]*t->Phi[20] + w->M[3]*t->Phi[21] +
+            w->M[4]*t->Phi[22] + w->M[5]*t->Phi[23] + w->M[6]*t->Phi[24] + w->M[7]*t->Phi[25] +
+            w->M[8]*t->Phi[26] + t->Qd[2]; w->Pn[2] = v; check += v - v;
+    v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
+            w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[6]*t->Phi[33] + w->M[7]*t->Phi[34] +
+            w->M[8]*t->Phi[35] + t->Qd[3]; w->Pn[3] = v; check += v - v;
+    v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
+            w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
+            w->M[8]*t->Phi[44] + t->Qd[4]; w->Pn[4] = v; check += v - v;
+    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
+            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
+            w->M[8]*t->Phi[53] + t->Qd[5]; w->Pn[5] = v; check += v - v;
+    v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[6]; w->Pn[6] = v; check
+            += v - v;
+    v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[7]; w->Pn[7] = v; check
+            += v - v;
+    v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[8]; w->Pn[8] = v; check
+            += v - v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[9] = v; check += v - v;
     v = w->M[10]; w->Pn[10] = v; check += v - v;
     return check;
 }
@@ -1771,39 +1573,39 @@ static void phi_times_p_row_1(const gps_pseudorange11_twin_filter *restrict f, c
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] +
-            t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] +
-            t->Phi[1][6]*f->P[6][0] + t->Phi[1][7]*f->P[7][0] + t->Phi[1][8]*f->P[8][0];
-    w->M[1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] +
-            t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] +
-            t->Phi[1][6]*f->P[6][1] + t->Phi[1][7]*f->P[7][1] + t->Phi[1][8]*f->P[8][1];
-    w->M[2] = t->Phi[1][0]*f->P[0][2] + t->Phi[1][1]*f->P[1][2] + t->Phi[1][2]*f->P[2][2] +
-            t->Phi[1][3]*f->P[3][2] + t->Phi[1][4]*f->P[4][2] + t->Phi[1][5]*f->P[5][2] +
-            t->Phi[1][6]*f->P[6][2] + t->Phi[1][7]*f->P[7][2] + t->Phi[1][8]*f->P[8][2];
-    w->M[3] = t->Phi[1][0]*f->P[0][3] + t->Phi[1][1]*f->P[1][3] + t->Phi[1][2]*f->P[2][3] +
-            t->Phi[1][3]*f->P[3][3] + t->Phi[1][4]*f->P[4][3] + t->Phi[1][5]*f->P[5][3] +
-            t->Phi[1][6]*f->P[6][3] + t->Phi[1][7]*f->P[7][3] + t->Phi[1][8]*f->P[8][3];
-    w->M[4] = t->Phi[1][0]*f->P[0][4] + t->Phi[1][1]*f->P[1][4] + t->Phi[1][2]*f->P[2][4] +
-            t->Phi[1][3]*f->P[3][4] + t->Phi[1][4]*f->P[4][4] + t->Phi[1][5]*f->P[5][4] +
-            t->Phi[1][6]*f->P[6][4] + t->Phi[1][7]*f->P[7][4] + t->Phi[1][8]*f->P[8][4];
-    w->M[5] = t->Phi[1][0]*f->P[0][5] + t->Phi[1][1]*f->P[1][5] + t->Phi[1][2]*f->P[2][5] +
-            t->Phi[1][3]*f->P[3][5] + t->Phi[1][4]*f->P[4][5] + t->Phi[1][5]*f->P[5][5] +
-            t->Phi[1][6]*f->P[6][5] + t->Phi[1][7]*f->P[7][5] + t->Phi[1][8]*f->P[8][5];
-    w->M[6] = t->Phi[1][0]*f->P[0][6] + t->Phi[1][1]*f->P[1][6] + t->Phi[1][2]*f->P[2][6] +
-            t->Phi[1][3]*f->P[3][6] + t->Phi[1][4]*f->P[4][6] + t->Phi[1][5]*f->P[5][6] +
-            t->Phi[1][6]*f->P[6][6] + t->Phi[1][7]*f->P[7][6] + t->Phi[1][8]*f->P[8][6];
-    w->M[7] = t->Phi[1][0]*f->P[0][7] + t->Phi[1][1]*f->P[1][7] + t->Phi[1][2]*f->P[2][7] +
-            t->Phi[1][3]*f->P[3][7] + t->Phi[1][4]*f->P[4][7] + t->Phi[1][5]*f->P[5][7] +
-            t->Phi[1][6]*f->P[6][7] + t->Phi[1][7]*f->P[7][7] + t->Phi[1][8]*f->P[8][7];
-    w->M[8] = t->Phi[1][0]*f->P[0][8] + t->Phi[1][1]*f->P[1][8] + t->Phi[1][2]*f->P[2][8] +
-            t->Phi[1][3]*f->P[3][8] + t->Phi[1][4]*f->P[4][8] + t->Phi[1][5]*f->P[5][8] +
-            t->Phi[1][6]*f->P[6][8] + t->Phi[1][7]*f->P[7][8] + t->Phi[1][8]*f->P[8][8];
-    w->M[9] = t->Phi[1][0]*f->P[0][9] + t->Phi[1][1]*f->P[1][9] + t->Phi[1][2]*f->P[2][9] +
-            t->Phi[1][3]*f->P[3][9] + t->Phi[1][4]*f->P[4][9] + t->Phi[1][5]*f->P[5][9] +
-            t->Phi[1][6]*f->P[6][9] + t->Phi[1][7]*f->P[7][9] + t->Phi[1][8]*f->P[8][9];
-    w->M[10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] +
-            t->Phi[1][3]*f->P[3][10] + t->Phi[1][4]*f->P[4][10] + t->Phi[1][5]*f->P[5][10] +
-            t->Phi[1][6]*f->P[6][10] + t->Phi[1][7]*f->P[7][10] + t->Phi[1][8]*f->P[8][10];
+    w->M[0] = t->Phi[9]*f->P[0][0] + t->Phi[10]*f->P[1][0] + t->Phi[11]*f->P[2][0] +
+            t->Phi[12]*f->P[3][0] + t->Phi[13]*f->P[4][0] + t->Phi[14]*f->P[5][0] +
+            t->Phi[15]*f->P[6][0] + t->Phi[16]*f->P[7][0] + t->Phi[17]*f->P[8][0];
+    w->M[1] = t->Phi[9]*f->P[0][1] + t->Phi[10]*f->P[1][1] + t->Phi[11]*f->P[2][1] +
+            t->Phi[12]*f->P[3][1] + t->Phi[13]*f->P[4][1] + t->Phi[14]*f->P[5][1] +
+            t->Phi[15]*f->P[6][1] + t->Phi[16]*f->P[7][1] + t->Phi[17]*f->P[8][1];
+    w->M[2] = t->Phi[9]*f->P[0][2] + t->Phi[10]*f->P[1][2] + t->Phi[11]*f->P[2][2] +
+            t->Phi[12]*f->P[3][2] + t->Phi[13]*f->P[4][2] + t->Phi[14]*f->P[5][2] +
+            t->Phi[15]*f->P[6][2] + t->Phi[16]*f->P[7][2] + t->Phi[17]*f->P[8][2];
+    w->M[3] = t->Phi[9]*f->P[0][3] + t->Phi[10]*f->P[1][3] + t->Phi[11]*f->P[2][3] +
+            t->Phi[12]*f->P[3][3] + t->Phi[13]*f->P[4][3] + t->Phi[14]*f->P[5][3] +
+            t->Phi[15]*f->P[6][3] + t->Phi[16]*f->P[7][3] + t->Phi[17]*f->P[8][3];
+    w->M[4] = t->Phi[9]*f->P[0][4] + t->Phi[10]*f->P[1][4] + t->Phi[11]*f->P[2][4] +
+            t->Phi[12]*f->P[3][4] + t->Phi[13]*f->P[4][4] + t->Phi[14]*f->P[5][4] +
+            t->Phi[15]*f->P[6][4] + t->Phi[16]*f->P[7][4] + t->Phi[17]*f->P[8][4];
+    w->M[5] = t->Phi[9]*f->P[0][5] + t->Phi[10]*f->P[1][5] + t->Phi[11]*f->P[2][5] +
+            t->Phi[12]*f->P[3][5] + t->Phi[13]*f->P[4][5] + t->Phi[14]*f->P[5][5] +
+            t->Phi[15]*f->P[6][5] + t->Phi[16]*f->P[7][5] + t->Phi[17]*f->P[8][5];
+    w->M[6] = t->Phi[9]*f->P[0][6] + t->Phi[10]*f->P[1][6] + t->Phi[11]*f->P[2][6] +
+            t->Phi[12]*f->P[3][6] + t->Phi[13]*f->P[4][6] + t->Phi[14]*f->P[5][6] +
+            t->Phi[15]*f->P[6][6] + t->Phi[16]*f->P[7][6] + t->Phi[17]*f->P[8][6];
+    w->M[7] = t->Phi[9]*f->P[0][7] + t->Phi[10]*f->P[1][7] + t->Phi[11]*f->P[2][7] +
+            t->Phi[12]*f->P[3][7] + t->Phi[13]*f->P[4][7] + t->Phi[14]*f->P[5][7] +
+            t->Phi[15]*f->P[6][7] + t->Phi[16]*f->P[7][7] + t->Phi[17]*f->P[8][7];
+    w->M[8] = t->Phi[9]*f->P[0][8] + t->Phi[10]*f->P[1][8] + t->Phi[11]*f->P[2][8] +
+            t->Phi[12]*f->P[3][8] + t->Phi[13]*f->P[4][8] + t->Phi[14]*f->P[5][8] +
+            t->Phi[15]*f->P[6][8] + t->Phi[16]*f->P[7][8] + t->Phi[17]*f->P[8][8];
+    w->M[9] = t->Phi[9]*f->P[0][9] + t->Phi[10]*f->P[1][9] + t->Phi[11]*f->P[2][9] +
+            t->Phi[12]*f->P[3][9] + t->Phi[13]*f->P[4][9] + t->Phi[14]*f->P[5][9] +
+            t->Phi[15]*f->P[6][9] + t->Phi[16]*f->P[7][9] + t->Phi[17]*f->P[8][9];
+    w->M[10] = t->Phi[9]*f->P[0][10] + t->Phi[10]*f->P[1][10] + t->Phi[11]*f->P[2][10] +
+            t->Phi[12]*f->P[3][10] + t->Phi[13]*f->P[4][10] + t->Phi[14]*f->P[5][10] +
+            t->Phi[15]*f->P[6][10] + t->Phi[16]*f->P[7][10] + t->Phi[17]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -1811,28 +1613,28 @@ static gps_pseudorange11_twin_scalar propagate_row_1(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
-            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[6]*t->Phi[1][6] +
-            w->M[7]*t->Phi[1][7] + w->M[8]*t->Phi[1][8] + t->Qd[11]; w->Pn[11] = v; check += v - v;
-    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
-            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[6]*t->Phi[2][6] +
-            w->M[7]*t->Phi[2][7] + w->M[8]*t->Phi[2][8] + t->Qd[12]; w->Pn[12] = v; check += v - v;
-    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
-            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
-            w->M[7]*t->Phi[3][7] + w->M[8]*t->Phi[3][8] + t->Qd[13]; w->Pn[13] = v; check += v - v;
-    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
-            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
-            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + t->Qd[14]; w->Pn[14] = v; check += v - v;
-    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
-            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
-            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + t->Qd[15]; w->Pn[15] = v; check += v - v;
-    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[16]; w->Pn[16] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[17]; w->Pn[17] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[18]; w->Pn[18] =
-            v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[19] = v; check += v - v;
+    v = w->M[0]*t->Phi[9] + w->M[1]*t->Phi[10] + w->M[2]*t->Phi[11] + w->M[3]*t->Phi[12] +
+            w->M[4]*t->Phi[13] + w->M[5]*t->Phi[14] + w->M[6]*t->Phi[15] + w->M[7]*t->Phi[16] +
+            w->M[8]*t->Phi[17] + t->Qd[11]; w->Pn[11] = v; check += v - v;
+    v = w->M[0]*t->Phi[18] + w->M[1]*t->Phi[19] + w->M[2]*t->Phi[20] + w->M[3]*t->Phi[21] +
+            w->M[4]*t->Phi[22] + w->M[5]*t->Phi[23] + w->M[6]*t->Phi[24] + w->M[7]*t->Phi[25] +
+            w->M[8]*t->Phi[26] + t->Qd[12]; w->Pn[12] = v; check += v - v;
+    v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
+            w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[6]*t->Phi[33] + w->M[7]*t->Phi[34] +
+            w->M[8]*t->Phi[35] + t->Qd[13]; w->Pn[13] = v; check += v - v;
+    v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
+            w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
+            w->M[8]*t->Phi[44] + t->Qd[14]; w->Pn[14] = v; check += v - v;
+    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
+            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
+            w->M[8]*t->Phi[53] + t->Qd[15]; w->Pn[15] = v; check += v - v;
+    v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[16]; w->Pn[16] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[17]; w->Pn[17] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[18]; w->Pn[18] = v;
+            check += v - v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[19] = v; check += v - v;
     v = w->M[10]; w->Pn[20] = v; check += v - v;
     return check;
 }
@@ -1841,39 +1643,39 @@ static void phi_times_p_row_2(const gps_pseudorange11_twin_filter *restrict f, c
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] +
-            t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] +
-            t->Phi[2][6]*f->P[6][0] + t->Phi[2][7]*f->P[7][0] + t->Phi[2][8]*f->P[8][0];
-    w->M[1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] +
-            t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] +
-            t->Phi[2][6]*f->P[6][1] + t->Phi[2][7]*f->P[7][1] + t->Phi[2][8]*f->P[8][1];
-    w->M[2] = t->Phi[2][0]*f->P[0][2] + t->Phi[2][1]*f->P[1][2] + t->Phi[2][2]*f->P[2][2] +
-            t->Phi[2][3]*f->P[3][2] + t->Phi[2][4]*f->P[4][2] + t->Phi[2][5]*f->P[5][2] +
-            t->Phi[2][6]*f->P[6][2] + t->Phi[2][7]*f->P[7][2] + t->Phi[2][8]*f->P[8][2];
-    w->M[3] = t->Phi[2][0]*f->P[0][3] + t->Phi[2][1]*f->P[1][3] + t->Phi[2][2]*f->P[2][3] +
-            t->Phi[2][3]*f->P[3][3] + t->Phi[2][4]*f->P[4][3] + t->Phi[2][5]*f->P[5][3] +
-            t->Phi[2][6]*f->P[6][3] + t->Phi[2][7]*f->P[7][3] + t->Phi[2][8]*f->P[8][3];
-    w->M[4] = t->Phi[2][0]*f->P[0][4] + t->Phi[2][1]*f->P[1][4] + t->Phi[2][2]*f->P[2][4] +
-            t->Phi[2][3]*f->P[3][4] + t->Phi[2][4]*f->P[4][4] + t->Phi[2][5]*f->P[5][4] +
-            t->Phi[2][6]*f->P[6][4] + t->Phi[2][7]*f->P[7][4] + t->Phi[2][8]*f->P[8][4];
-    w->M[5] = t->Phi[2][0]*f->P[0][5] + t->Phi[2][1]*f->P[1][5] + t->Phi[2][2]*f->P[2][5] +
-            t->Phi[2][3]*f->P[3][5] + t->Phi[2][4]*f->P[4][5] + t->Phi[2][5]*f->P[5][5] +
-            t->Phi[2][6]*f->P[6][5] + t->Phi[2][7]*f->P[7][5] + t->Phi[2][8]*f->P[8][5];
-    w->M[6] = t->Phi[2][0]*f->P[0][6] + t->Phi[2][1]*f->P[1][6] + t->Phi[2][2]*f->P[2][6] +
-            t->Phi[2][3]*f->P[3][6] + t->Phi[2][4]*f->P[4][6] + t->Phi[2][5]*f->P[5][6] +
-            t->Phi[2][6]*f->P[6][6] + t->Phi[2][7]*f->P[7][6] + t->Phi[2][8]*f->P[8][6];
-    w->M[7] = t->Phi[2][0]*f->P[0][7] + t->Phi[2][1]*f->P[1][7] + t->Phi[2][2]*f->P[2][7] +
-            t->Phi[2][3]*f->P[3][7] + t->Phi[2][4]*f->P[4][7] + t->Phi[2][5]*f->P[5][7] +
-            t->Phi[2][6]*f->P[6][7] + t->Phi[2][7]*f->P[7][7] + t->Phi[2][8]*f->P[8][7];
-    w->M[8] = t->Phi[2][0]*f->P[0][8] + t->Phi[2][1]*f->P[1][8] + t->Phi[2][2]*f->P[2][8] +
-            t->Phi[2][3]*f->P[3][8] + t->Phi[2][4]*f->P[4][8] + t->Phi[2][5]*f->P[5][8] +
-            t->Phi[2][6]*f->P[6][8] + t->Phi[2][7]*f->P[7][8] + t->Phi[2][8]*f->P[8][8];
-    w->M[9] = t->Phi[2][0]*f->P[0][9] + t->Phi[2][1]*f->P[1][9] + t->Phi[2][2]*f->P[2][9] +
-            t->Phi[2][3]*f->P[3][9] + t->Phi[2][4]*f->P[4][9] + t->Phi[2][5]*f->P[5][9] +
-            t->Phi[2][6]*f->P[6][9] + t->Phi[2][7]*f->P[7][9] + t->Phi[2][8]*f->P[8][9];
-    w->M[10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] +
-            t->Phi[2][3]*f->P[3][10] + t->Phi[2][4]*f->P[4][10] + t->Phi[2][5]*f->P[5][10] +
-            t->Phi[2][6]*f->P[6][10] + t->Phi[2][7]*f->P[7][10] + t->Phi[2][8]*f->P[8][10];
+    w->M[0] = t->Phi[18]*f->P[0][0] + t->Phi[19]*f->P[1][0] + t->Phi[20]*f->P[2][0] +
+            t->Phi[21]*f->P[3][0] + t->Phi[22]*f->P[4][0] + t->Phi[23]*f->P[5][0] +
+            t->Phi[24]*f->P[6][0] + t->Phi[25]*f->P[7][0] + t->Phi[26]*f->P[8][0];
+    w->M[1] = t->Phi[18]*f->P[0][1] + t->Phi[19]*f->P[1][1] + t->Phi[20]*f->P[2][1] +
+            t->Phi[21]*f->P[3][1] + t->Phi[22]*f->P[4][1] + t->Phi[23]*f->P[5][1] +
+            t->Phi[24]*f->P[6][1] + t->Phi[25]*f->P[7][1] + t->Phi[26]*f->P[8][1];
+    w->M[2] = t->Phi[18]*f->P[0][2] + t->Phi[19]*f->P[1][2] + t->Phi[20]*f->P[2][2] +
+            t->Phi[21]*f->P[3][2] + t->Phi[22]*f->P[4][2] + t->Phi[23]*f->P[5][2] +
+            t->Phi[24]*f->P[6][2] + t->Phi[25]*f->P[7][2] + t->Phi[26]*f->P[8][2];
+    w->M[3] = t->Phi[18]*f->P[0][3] + t->Phi[19]*f->P[1][3] + t->Phi[20]*f->P[2][3] +
+            t->Phi[21]*f->P[3][3] + t->Phi[22]*f->P[4][3] + t->Phi[23]*f->P[5][3] +
+            t->Phi[24]*f->P[6][3] + t->Phi[25]*f->P[7][3] + t->Phi[26]*f->P[8][3];
+    w->M[4] = t->Phi[18]*f->P[0][4] + t->Phi[19]*f->P[1][4] + t->Phi[20]*f->P[2][4] +
+            t->Phi[21]*f->P[3][4] + t->Phi[22]*f->P[4][4] + t->Phi[23]*f->P[5][4] +
+            t->Phi[24]*f->P[6][4] + t->Phi[25]*f->P[7][4] + t->Phi[26]*f->P[8][4];
+    w->M[5] = t->Phi[18]*f->P[0][5] + t->Phi[19]*f->P[1][5] + t->Phi[20]*f->P[2][5] +
+            t->Phi[21]*f->P[3][5] + t->Phi[22]*f->P[4][5] + t->Phi[23]*f->P[5][5] +
+            t->Phi[24]*f->P[6][5] + t->Phi[25]*f->P[7][5] + t->Phi[26]*f->P[8][5];
+    w->M[6] = t->Phi[18]*f->P[0][6] + t->Phi[19]*f->P[1][6] + t->Phi[20]*f->P[2][6] +
+            t->Phi[21]*f->P[3][6] + t->Phi[22]*f->P[4][6] + t->Phi[23]*f->P[5][6] +
+            t->Phi[24]*f->P[6][6] + t->Phi[25]*f->P[7][6] + t->Phi[26]*f->P[8][6];
+    w->M[7] = t->Phi[18]*f->P[0][7] + t->Phi[19]*f->P[1][7] + t->Phi[20]*f->P[2][7] +
+            t->Phi[21]*f->P[3][7] + t->Phi[22]*f->P[4][7] + t->Phi[23]*f->P[5][7] +
+            t->Phi[24]*f->P[6][7] + t->Phi[25]*f->P[7][7] + t->Phi[26]*f->P[8][7];
+    w->M[8] = t->Phi[18]*f->P[0][8] + t->Phi[19]*f->P[1][8] + t->Phi[20]*f->P[2][8] +
+            t->Phi[21]*f->P[3][8] + t->Phi[22]*f->P[4][8] + t->Phi[23]*f->P[5][8] +
+            t->Phi[24]*f->P[6][8] + t->Phi[25]*f->P[7][8] + t->Phi[26]*f->P[8][8];
+    w->M[9] = t->Phi[18]*f->P[0][9] + t->Phi[19]*f->P[1][9] + t->Phi[20]*f->P[2][9] +
+            t->Phi[21]*f->P[3][9] + t->Phi[22]*f->P[4][9] + t->Phi[23]*f->P[5][9] +
+            t->Phi[24]*f->P[6][9] + t->Phi[25]*f->P[7][9] + t->Phi[26]*f->P[8][9];
+    w->M[10] = t->Phi[18]*f->P[0][10] + t->Phi[19]*f->P[1][10] + t->Phi[20]*f->P[2][10] +
+            t->Phi[21]*f->P[3][10] + t->Phi[22]*f->P[4][10] + t->Phi[23]*f->P[5][10] +
+            t->Phi[24]*f->P[6][10] + t->Phi[25]*f->P[7][10] + t->Phi[26]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -1881,25 +1683,25 @@ static gps_pseudorange11_twin_scalar propagate_row_2(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
-            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[6]*t->Phi[2][6] +
-            w->M[7]*t->Phi[2][7] + w->M[8]*t->Phi[2][8] + t->Qd[21]; w->Pn[21] = v; check += v - v;
-    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
-            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
-            w->M[7]*t->Phi[3][7] + w->M[8]*t->Phi[3][8] + t->Qd[22]; w->Pn[22] = v; check += v - v;
-    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
-            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
-            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + t->Qd[23]; w->Pn[23] = v; check += v - v;
-    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
-            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
-            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + t->Qd[24]; w->Pn[24] = v; check += v - v;
-    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[25]; w->Pn[25] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[26]; w->Pn[26] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[27]; w->Pn[27] =
-            v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[28] = v; check += v - v;
+    v = w->M[0]*t->Phi[18] + w->M[1]*t->Phi[19] + w->M[2]*t->Phi[20] + w->M[3]*t->Phi[21] +
+            w->M[4]*t->Phi[22] + w->M[5]*t->Phi[23] + w->M[6]*t->Phi[24] + w->M[7]*t->Phi[25] +
+            w->M[8]*t->Phi[26] + t->Qd[21]; w->Pn[21] = v; check += v - v;
+    v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
+            w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[6]*t->Phi[33] + w->M[7]*t->Phi[34] +
+            w->M[8]*t->Phi[35] + t->Qd[22]; w->Pn[22] = v; check += v - v;
+    v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
+            w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
+            w->M[8]*t->Phi[44] + t->Qd[23]; w->Pn[23] = v; check += v - v;
+    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
+            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
+            w->M[8]*t->Phi[53] + t->Qd[24]; w->Pn[24] = v; check += v - v;
+    v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[25]; w->Pn[25] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[26]; w->Pn[26] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[27]; w->Pn[27] = v;
+            check += v - v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[28] = v; check += v - v;
     v = w->M[10]; w->Pn[29] = v; check += v - v;
     return check;
 }
@@ -1908,39 +1710,39 @@ static void phi_times_p_row_3(const gps_pseudorange11_twin_filter *restrict f, c
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] +
-            t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] +
-            t->Phi[3][6]*f->P[6][0] + t->Phi[3][7]*f->P[7][0] + t->Phi[3][8]*f->P[8][0];
-    w->M[1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] +
-            t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] +
-            t->Phi[3][6]*f->P[6][1] + t->Phi[3][7]*f->P[7][1] + t->Phi[3][8]*f->P[8][1];
-    w->M[2] = t->Phi[3][0]*f->P[0][2] + t->Phi[3][1]*f->P[1][2] + t->Phi[3][2]*f->P[2][2] +
-            t->Phi[3][3]*f->P[3][2] + t->Phi[3][4]*f->P[4][2] + t->Phi[3][5]*f->P[5][2] +
-            t->Phi[3][6]*f->P[6][2] + t->Phi[3][7]*f->P[7][2] + t->Phi[3][8]*f->P[8][2];
-    w->M[3] = t->Phi[3][0]*f->P[0][3] + t->Phi[3][1]*f->P[1][3] + t->Phi[3][2]*f->P[2][3] +
-            t->Phi[3][3]*f->P[3][3] + t->Phi[3][4]*f->P[4][3] + t->Phi[3][5]*f->P[5][3] +
-            t->Phi[3][6]*f->P[6][3] + t->Phi[3][7]*f->P[7][3] + t->Phi[3][8]*f->P[8][3];
-    w->M[4] = t->Phi[3][0]*f->P[0][4] + t->Phi[3][1]*f->P[1][4] + t->Phi[3][2]*f->P[2][4] +
-            t->Phi[3][3]*f->P[3][4] + t->Phi[3][4]*f->P[4][4] + t->Phi[3][5]*f->P[5][4] +
-            t->Phi[3][6]*f->P[6][4] + t->Phi[3][7]*f->P[7][4] + t->Phi[3][8]*f->P[8][4];
-    w->M[5] = t->Phi[3][0]*f->P[0][5] + t->Phi[3][1]*f->P[1][5] + t->Phi[3][2]*f->P[2][5] +
-            t->Phi[3][3]*f->P[3][5] + t->Phi[3][4]*f->P[4][5] + t->Phi[3][5]*f->P[5][5] +
-            t->Phi[3][6]*f->P[6][5] + t->Phi[3][7]*f->P[7][5] + t->Phi[3][8]*f->P[8][5];
-    w->M[6] = t->Phi[3][0]*f->P[0][6] + t->Phi[3][1]*f->P[1][6] + t->Phi[3][2]*f->P[2][6] +
-            t->Phi[3][3]*f->P[3][6] + t->Phi[3][4]*f->P[4][6] + t->Phi[3][5]*f->P[5][6] +
-            t->Phi[3][6]*f->P[6][6] + t->Phi[3][7]*f->P[7][6] + t->Phi[3][8]*f->P[8][6];
-    w->M[7] = t->Phi[3][0]*f->P[0][7] + t->Phi[3][1]*f->P[1][7] + t->Phi[3][2]*f->P[2][7] +
-            t->Phi[3][3]*f->P[3][7] + t->Phi[3][4]*f->P[4][7] + t->Phi[3][5]*f->P[5][7] +
-            t->Phi[3][6]*f->P[6][7] + t->Phi[3][7]*f->P[7][7] + t->Phi[3][8]*f->P[8][7];
-    w->M[8] = t->Phi[3][0]*f->P[0][8] + t->Phi[3][1]*f->P[1][8] + t->Phi[3][2]*f->P[2][8] +
-            t->Phi[3][3]*f->P[3][8] + t->Phi[3][4]*f->P[4][8] + t->Phi[3][5]*f->P[5][8] +
-            t->Phi[3][6]*f->P[6][8] + t->Phi[3][7]*f->P[7][8] + t->Phi[3][8]*f->P[8][8];
-    w->M[9] = t->Phi[3][0]*f->P[0][9] + t->Phi[3][1]*f->P[1][9] + t->Phi[3][2]*f->P[2][9] +
-            t->Phi[3][3]*f->P[3][9] + t->Phi[3][4]*f->P[4][9] + t->Phi[3][5]*f->P[5][9] +
-            t->Phi[3][6]*f->P[6][9] + t->Phi[3][7]*f->P[7][9] + t->Phi[3][8]*f->P[8][9];
-    w->M[10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] +
-            t->Phi[3][3]*f->P[3][10] + t->Phi[3][4]*f->P[4][10] + t->Phi[3][5]*f->P[5][10] +
-            t->Phi[3][6]*f->P[6][10] + t->Phi[3][7]*f->P[7][10] + t->Phi[3][8]*f->P[8][10];
+    w->M[0] = t->Phi[27]*f->P[0][0] + t->Phi[28]*f->P[1][0] + t->Phi[29]*f->P[2][0] +
+            t->Phi[30]*f->P[3][0] + t->Phi[31]*f->P[4][0] + t->Phi[32]*f->P[5][0] +
+            t->Phi[33]*f->P[6][0] + t->Phi[34]*f->P[7][0] + t->Phi[35]*f->P[8][0];
+    w->M[1] = t->Phi[27]*f->P[0][1] + t->Phi[28]*f->P[1][1] + t->Phi[29]*f->P[2][1] +
+            t->Phi[30]*f->P[3][1] + t->Phi[31]*f->P[4][1] + t->Phi[32]*f->P[5][1] +
+            t->Phi[33]*f->P[6][1] + t->Phi[34]*f->P[7][1] + t->Phi[35]*f->P[8][1];
+    w->M[2] = t->Phi[27]*f->P[0][2] + t->Phi[28]*f->P[1][2] + t->Phi[29]*f->P[2][2] +
+            t->Phi[30]*f->P[3][2] + t->Phi[31]*f->P[4][2] + t->Phi[32]*f->P[5][2] +
+            t->Phi[33]*f->P[6][2] + t->Phi[34]*f->P[7][2] + t->Phi[35]*f->P[8][2];
+    w->M[3] = t->Phi[27]*f->P[0][3] + t->Phi[28]*f->P[1][3] + t->Phi[29]*f->P[2][3] +
+            t->Phi[30]*f->P[3][3] + t->Phi[31]*f->P[4][3] + t->Phi[32]*f->P[5][3] +
+            t->Phi[33]*f->P[6][3] + t->Phi[34]*f->P[7][3] + t->Phi[35]*f->P[8][3];
+    w->M[4] = t->Phi[27]*f->P[0][4] + t->Phi[28]*f->P[1][4] + t->Phi[29]*f->P[2][4] +
+            t->Phi[30]*f->P[3][4] + t->Phi[31]*f->P[4][4] + t->Phi[32]*f->P[5][4] +
+            t->Phi[33]*f->P[6][4] + t->Phi[34]*f->P[7][4] + t->Phi[35]*f->P[8][4];
+    w->M[5] = t->Phi[27]*f->P[0][5] + t->Phi[28]*f->P[1][5] + t->Phi[29]*f->P[2][5] +
+            t->Phi[30]*f->P[3][5] + t->Phi[31]*f->P[4][5] + t->Phi[32]*f->P[5][5] +
+            t->Phi[33]*f->P[6][5] + t->Phi[34]*f->P[7][5] + t->Phi[35]*f->P[8][5];
+    w->M[6] = t->Phi[27]*f->P[0][6] + t->Phi[28]*f->P[1][6] + t->Phi[29]*f->P[2][6] +
+            t->Phi[30]*f->P[3][6] + t->Phi[31]*f->P[4][6] + t->Phi[32]*f->P[5][6] +
+            t->Phi[33]*f->P[6][6] + t->Phi[34]*f->P[7][6] + t->Phi[35]*f->P[8][6];
+    w->M[7] = t->Phi[27]*f->P[0][7] + t->Phi[28]*f->P[1][7] + t->Phi[29]*f->P[2][7] +
+            t->Phi[30]*f->P[3][7] + t->Phi[31]*f->P[4][7] + t->Phi[32]*f->P[5][7] +
+            t->Phi[33]*f->P[6][7] + t->Phi[34]*f->P[7][7] + t->Phi[35]*f->P[8][7];
+    w->M[8] = t->Phi[27]*f->P[0][8] + t->Phi[28]*f->P[1][8] + t->Phi[29]*f->P[2][8] +
+            t->Phi[30]*f->P[3][8] + t->Phi[31]*f->P[4][8] + t->Phi[32]*f->P[5][8] +
+            t->Phi[33]*f->P[6][8] + t->Phi[34]*f->P[7][8] + t->Phi[35]*f->P[8][8];
+    w->M[9] = t->Phi[27]*f->P[0][9] + t->Phi[28]*f->P[1][9] + t->Phi[29]*f->P[2][9] +
+            t->Phi[30]*f->P[3][9] + t->Phi[31]*f->P[4][9] + t->Phi[32]*f->P[5][9] +
+            t->Phi[33]*f->P[6][9] + t->Phi[34]*f->P[7][9] + t->Phi[35]*f->P[8][9];
+    w->M[10] = t->Phi[27]*f->P[0][10] + t->Phi[28]*f->P[1][10] + t->Phi[29]*f->P[2][10] +
+            t->Phi[30]*f->P[3][10] + t->Phi[31]*f->P[4][10] + t->Phi[32]*f->P[5][10] +
+            t->Phi[33]*f->P[6][10] + t->Phi[34]*f->P[7][10] + t->Phi[35]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -1948,22 +1750,22 @@ static gps_pseudorange11_twin_scalar propagate_row_3(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
-            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[6]*t->Phi[3][6] +
-            w->M[7]*t->Phi[3][7] + w->M[8]*t->Phi[3][8] + t->Qd[30]; w->Pn[30] = v; check += v - v;
-    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
-            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
-            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + t->Qd[31]; w->Pn[31] = v; check += v - v;
-    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
-            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
-            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + t->Qd[32]; w->Pn[32] = v; check += v - v;
-    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[33]; w->Pn[33] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[34]; w->Pn[34] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[35]; w->Pn[35] =
-            v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[36] = v; check += v - v;
+    v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
+            w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[6]*t->Phi[33] + w->M[7]*t->Phi[34] +
+            w->M[8]*t->Phi[35] + t->Qd[30]; w->Pn[30] = v; check += v - v;
+    v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
+            w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
+            w->M[8]*t->Phi[44] + t->Qd[31]; w->Pn[31] = v; check += v - v;
+    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
+            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
+            w->M[8]*t->Phi[53] + t->Qd[32]; w->Pn[32] = v; check += v - v;
+    v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[33]; w->Pn[33] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[34]; w->Pn[34] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[35]; w->Pn[35] = v;
+            check += v - v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[36] = v; check += v - v;
     v = w->M[10]; w->Pn[37] = v; check += v - v;
     return check;
 }
@@ -1972,39 +1774,39 @@ static void phi_times_p_row_4(const gps_pseudorange11_twin_filter *restrict f, c
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] +
-            t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] +
-            t->Phi[4][6]*f->P[6][0] + t->Phi[4][7]*f->P[7][0] + t->Phi[4][8]*f->P[8][0];
-    w->M[1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] +
-            t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] +
-            t->Phi[4][6]*f->P[6][1] + t->Phi[4][7]*f->P[7][1] + t->Phi[4][8]*f->P[8][1];
-    w->M[2] = t->Phi[4][0]*f->P[0][2] + t->Phi[4][1]*f->P[1][2] + t->Phi[4][2]*f->P[2][2] +
-            t->Phi[4][3]*f->P[3][2] + t->Phi[4][4]*f->P[4][2] + t->Phi[4][5]*f->P[5][2] +
-            t->Phi[4][6]*f->P[6][2] + t->Phi[4][7]*f->P[7][2] + t->Phi[4][8]*f->P[8][2];
-    w->M[3] = t->Phi[4][0]*f->P[0][3] + t->Phi[4][1]*f->P[1][3] + t->Phi[4][2]*f->P[2][3] +
-            t->Phi[4][3]*f->P[3][3] + t->Phi[4][4]*f->P[4][3] + t->Phi[4][5]*f->P[5][3] +
-            t->Phi[4][6]*f->P[6][3] + t->Phi[4][7]*f->P[7][3] + t->Phi[4][8]*f->P[8][3];
-    w->M[4] = t->Phi[4][0]*f->P[0][4] + t->Phi[4][1]*f->P[1][4] + t->Phi[4][2]*f->P[2][4] +
-            t->Phi[4][3]*f->P[3][4] + t->Phi[4][4]*f->P[4][4] + t->Phi[4][5]*f->P[5][4] +
-            t->Phi[4][6]*f->P[6][4] + t->Phi[4][7]*f->P[7][4] + t->Phi[4][8]*f->P[8][4];
-    w->M[5] = t->Phi[4][0]*f->P[0][5] + t->Phi[4][1]*f->P[1][5] + t->Phi[4][2]*f->P[2][5] +
-            t->Phi[4][3]*f->P[3][5] + t->Phi[4][4]*f->P[4][5] + t->Phi[4][5]*f->P[5][5] +
-            t->Phi[4][6]*f->P[6][5] + t->Phi[4][7]*f->P[7][5] + t->Phi[4][8]*f->P[8][5];
-    w->M[6] = t->Phi[4][0]*f->P[0][6] + t->Phi[4][1]*f->P[1][6] + t->Phi[4][2]*f->P[2][6] +
-            t->Phi[4][3]*f->P[3][6] + t->Phi[4][4]*f->P[4][6] + t->Phi[4][5]*f->P[5][6] +
-            t->Phi[4][6]*f->P[6][6] + t->Phi[4][7]*f->P[7][6] + t->Phi[4][8]*f->P[8][6];
-    w->M[7] = t->Phi[4][0]*f->P[0][7] + t->Phi[4][1]*f->P[1][7] + t->Phi[4][2]*f->P[2][7] +
-            t->Phi[4][3]*f->P[3][7] + t->Phi[4][4]*f->P[4][7] + t->Phi[4][5]*f->P[5][7] +
-            t->Phi[4][6]*f->P[6][7] + t->Phi[4][7]*f->P[7][7] + t->Phi[4][8]*f->P[8][7];
-    w->M[8] = t->Phi[4][0]*f->P[0][8] + t->Phi[4][1]*f->P[1][8] + t->Phi[4][2]*f->P[2][8] +
-            t->Phi[4][3]*f->P[3][8] + t->Phi[4][4]*f->P[4][8] + t->Phi[4][5]*f->P[5][8] +
-            t->Phi[4][6]*f->P[6][8] + t->Phi[4][7]*f->P[7][8] + t->Phi[4][8]*f->P[8][8];
-    w->M[9] = t->Phi[4][0]*f->P[0][9] + t->Phi[4][1]*f->P[1][9] + t->Phi[4][2]*f->P[2][9] +
-            t->Phi[4][3]*f->P[3][9] + t->Phi[4][4]*f->P[4][9] + t->Phi[4][5]*f->P[5][9] +
-            t->Phi[4][6]*f->P[6][9] + t->Phi[4][7]*f->P[7][9] + t->Phi[4][8]*f->P[8][9];
-    w->M[10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] +
-            t->Phi[4][3]*f->P[3][10] + t->Phi[4][4]*f->P[4][10] + t->Phi[4][5]*f->P[5][10] +
-            t->Phi[4][6]*f->P[6][10] + t->Phi[4][7]*f->P[7][10] + t->Phi[4][8]*f->P[8][10];
+    w->M[0] = t->Phi[36]*f->P[0][0] + t->Phi[37]*f->P[1][0] + t->Phi[38]*f->P[2][0] +
+            t->Phi[39]*f->P[3][0] + t->Phi[40]*f->P[4][0] + t->Phi[41]*f->P[5][0] +
+            t->Phi[42]*f->P[6][0] + t->Phi[43]*f->P[7][0] + t->Phi[44]*f->P[8][0];
+    w->M[1] = t->Phi[36]*f->P[0][1] + t->Phi[37]*f->P[1][1] + t->Phi[38]*f->P[2][1] +
+            t->Phi[39]*f->P[3][1] + t->Phi[40]*f->P[4][1] + t->Phi[41]*f->P[5][1] +
+            t->Phi[42]*f->P[6][1] + t->Phi[43]*f->P[7][1] + t->Phi[44]*f->P[8][1];
+    w->M[2] = t->Phi[36]*f->P[0][2] + t->Phi[37]*f->P[1][2] + t->Phi[38]*f->P[2][2] +
+            t->Phi[39]*f->P[3][2] + t->Phi[40]*f->P[4][2] + t->Phi[41]*f->P[5][2] +
+            t->Phi[42]*f->P[6][2] + t->Phi[43]*f->P[7][2] + t->Phi[44]*f->P[8][2];
+    w->M[3] = t->Phi[36]*f->P[0][3] + t->Phi[37]*f->P[1][3] + t->Phi[38]*f->P[2][3] +
+            t->Phi[39]*f->P[3][3] + t->Phi[40]*f->P[4][3] + t->Phi[41]*f->P[5][3] +
+            t->Phi[42]*f->P[6][3] + t->Phi[43]*f->P[7][3] + t->Phi[44]*f->P[8][3];
+    w->M[4] = t->Phi[36]*f->P[0][4] + t->Phi[37]*f->P[1][4] + t->Phi[38]*f->P[2][4] +
+            t->Phi[39]*f->P[3][4] + t->Phi[40]*f->P[4][4] + t->Phi[41]*f->P[5][4] +
+            t->Phi[42]*f->P[6][4] + t->Phi[43]*f->P[7][4] + t->Phi[44]*f->P[8][4];
+    w->M[5] = t->Phi[36]*f->P[0][5] + t->Phi[37]*f->P[1][5] + t->Phi[38]*f->P[2][5] +
+            t->Phi[39]*f->P[3][5] + t->Phi[40]*f->P[4][5] + t->Phi[41]*f->P[5][5] +
+            t->Phi[42]*f->P[6][5] + t->Phi[43]*f->P[7][5] + t->Phi[44]*f->P[8][5];
+    w->M[6] = t->Phi[36]*f->P[0][6] + t->Phi[37]*f->P[1][6] + t->Phi[38]*f->P[2][6] +
+            t->Phi[39]*f->P[3][6] + t->Phi[40]*f->P[4][6] + t->Phi[41]*f->P[5][6] +
+            t->Phi[42]*f->P[6][6] + t->Phi[43]*f->P[7][6] + t->Phi[44]*f->P[8][6];
+    w->M[7] = t->Phi[36]*f->P[0][7] + t->Phi[37]*f->P[1][7] + t->Phi[38]*f->P[2][7] +
+            t->Phi[39]*f->P[3][7] + t->Phi[40]*f->P[4][7] + t->Phi[41]*f->P[5][7] +
+            t->Phi[42]*f->P[6][7] + t->Phi[43]*f->P[7][7] + t->Phi[44]*f->P[8][7];
+    w->M[8] = t->Phi[36]*f->P[0][8] + t->Phi[37]*f->P[1][8] + t->Phi[38]*f->P[2][8] +
+            t->Phi[39]*f->P[3][8] + t->Phi[40]*f->P[4][8] + t->Phi[41]*f->P[5][8] +
+            t->Phi[42]*f->P[6][8] + t->Phi[43]*f->P[7][8] + t->Phi[44]*f->P[8][8];
+    w->M[9] = t->Phi[36]*f->P[0][9] + t->Phi[37]*f->P[1][9] + t->Phi[38]*f->P[2][9] +
+            t->Phi[39]*f->P[3][9] + t->Phi[40]*f->P[4][9] + t->Phi[41]*f->P[5][9] +
+            t->Phi[42]*f->P[6][9] + t->Phi[43]*f->P[7][9] + t->Phi[44]*f->P[8][9];
+    w->M[10] = t->Phi[36]*f->P[0][10] + t->Phi[37]*f->P[1][10] + t->Phi[38]*f->P[2][10] +
+            t->Phi[39]*f->P[3][10] + t->Phi[40]*f->P[4][10] + t->Phi[41]*f->P[5][10] +
+            t->Phi[42]*f->P[6][10] + t->Phi[43]*f->P[7][10] + t->Phi[44]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2012,19 +1814,19 @@ static gps_pseudorange11_twin_scalar propagate_row_4(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
-            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[6]*t->Phi[4][6] +
-            w->M[7]*t->Phi[4][7] + w->M[8]*t->Phi[4][8] + t->Qd[38]; w->Pn[38] = v; check += v - v;
-    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
-            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
-            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + t->Qd[39]; w->Pn[39] = v; check += v - v;
-    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[40]; w->Pn[40] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[41]; w->Pn[41] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[42]; w->Pn[42] =
-            v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[43] = v; check += v - v;
+    v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
+            w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
+            w->M[8]*t->Phi[44] + t->Qd[38]; w->Pn[38] = v; check += v - v;
+    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
+            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
+            w->M[8]*t->Phi[53] + t->Qd[39]; w->Pn[39] = v; check += v - v;
+    v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[40]; w->Pn[40] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[41]; w->Pn[41] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[42]; w->Pn[42] = v;
+            check += v - v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[43] = v; check += v - v;
     v = w->M[10]; w->Pn[44] = v; check += v - v;
     return check;
 }
@@ -2033,39 +1835,39 @@ static void phi_times_p_row_5(const gps_pseudorange11_twin_filter *restrict f, c
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] +
-            t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] +
-            t->Phi[5][6]*f->P[6][0] + t->Phi[5][7]*f->P[7][0] + t->Phi[5][8]*f->P[8][0];
-    w->M[1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] +
-            t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] +
-            t->Phi[5][6]*f->P[6][1] + t->Phi[5][7]*f->P[7][1] + t->Phi[5][8]*f->P[8][1];
-    w->M[2] = t->Phi[5][0]*f->P[0][2] + t->Phi[5][1]*f->P[1][2] + t->Phi[5][2]*f->P[2][2] +
-            t->Phi[5][3]*f->P[3][2] + t->Phi[5][4]*f->P[4][2] + t->Phi[5][5]*f->P[5][2] +
-            t->Phi[5][6]*f->P[6][2] + t->Phi[5][7]*f->P[7][2] + t->Phi[5][8]*f->P[8][2];
-    w->M[3] = t->Phi[5][0]*f->P[0][3] + t->Phi[5][1]*f->P[1][3] + t->Phi[5][2]*f->P[2][3] +
-            t->Phi[5][3]*f->P[3][3] + t->Phi[5][4]*f->P[4][3] + t->Phi[5][5]*f->P[5][3] +
-            t->Phi[5][6]*f->P[6][3] + t->Phi[5][7]*f->P[7][3] + t->Phi[5][8]*f->P[8][3];
-    w->M[4] = t->Phi[5][0]*f->P[0][4] + t->Phi[5][1]*f->P[1][4] + t->Phi[5][2]*f->P[2][4] +
-            t->Phi[5][3]*f->P[3][4] + t->Phi[5][4]*f->P[4][4] + t->Phi[5][5]*f->P[5][4] +
-            t->Phi[5][6]*f->P[6][4] + t->Phi[5][7]*f->P[7][4] + t->Phi[5][8]*f->P[8][4];
-    w->M[5] = t->Phi[5][0]*f->P[0][5] + t->Phi[5][1]*f->P[1][5] + t->Phi[5][2]*f->P[2][5] +
-            t->Phi[5][3]*f->P[3][5] + t->Phi[5][4]*f->P[4][5] + t->Phi[5][5]*f->P[5][5] +
-            t->Phi[5][6]*f->P[6][5] + t->Phi[5][7]*f->P[7][5] + t->Phi[5][8]*f->P[8][5];
-    w->M[6] = t->Phi[5][0]*f->P[0][6] + t->Phi[5][1]*f->P[1][6] + t->Phi[5][2]*f->P[2][6] +
-            t->Phi[5][3]*f->P[3][6] + t->Phi[5][4]*f->P[4][6] + t->Phi[5][5]*f->P[5][6] +
-            t->Phi[5][6]*f->P[6][6] + t->Phi[5][7]*f->P[7][6] + t->Phi[5][8]*f->P[8][6];
-    w->M[7] = t->Phi[5][0]*f->P[0][7] + t->Phi[5][1]*f->P[1][7] + t->Phi[5][2]*f->P[2][7] +
-            t->Phi[5][3]*f->P[3][7] + t->Phi[5][4]*f->P[4][7] + t->Phi[5][5]*f->P[5][7] +
-            t->Phi[5][6]*f->P[6][7] + t->Phi[5][7]*f->P[7][7] + t->Phi[5][8]*f->P[8][7];
-    w->M[8] = t->Phi[5][0]*f->P[0][8] + t->Phi[5][1]*f->P[1][8] + t->Phi[5][2]*f->P[2][8] +
-            t->Phi[5][3]*f->P[3][8] + t->Phi[5][4]*f->P[4][8] + t->Phi[5][5]*f->P[5][8] +
-            t->Phi[5][6]*f->P[6][8] + t->Phi[5][7]*f->P[7][8] + t->Phi[5][8]*f->P[8][8];
-    w->M[9] = t->Phi[5][0]*f->P[0][9] + t->Phi[5][1]*f->P[1][9] + t->Phi[5][2]*f->P[2][9] +
-            t->Phi[5][3]*f->P[3][9] + t->Phi[5][4]*f->P[4][9] + t->Phi[5][5]*f->P[5][9] +
-            t->Phi[5][6]*f->P[6][9] + t->Phi[5][7]*f->P[7][9] + t->Phi[5][8]*f->P[8][9];
-    w->M[10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] +
-            t->Phi[5][3]*f->P[3][10] + t->Phi[5][4]*f->P[4][10] + t->Phi[5][5]*f->P[5][10] +
-            t->Phi[5][6]*f->P[6][10] + t->Phi[5][7]*f->P[7][10] + t->Phi[5][8]*f->P[8][10];
+    w->M[0] = t->Phi[45]*f->P[0][0] + t->Phi[46]*f->P[1][0] + t->Phi[47]*f->P[2][0] +
+            t->Phi[48]*f->P[3][0] + t->Phi[49]*f->P[4][0] + t->Phi[50]*f->P[5][0] +
+            t->Phi[51]*f->P[6][0] + t->Phi[52]*f->P[7][0] + t->Phi[53]*f->P[8][0];
+    w->M[1] = t->Phi[45]*f->P[0][1] + t->Phi[46]*f->P[1][1] + t->Phi[47]*f->P[2][1] +
+            t->Phi[48]*f->P[3][1] + t->Phi[49]*f->P[4][1] + t->Phi[50]*f->P[5][1] +
+            t->Phi[51]*f->P[6][1] + t->Phi[52]*f->P[7][1] + t->Phi[53]*f->P[8][1];
+    w->M[2] = t->Phi[45]*f->P[0][2] + t->Phi[46]*f->P[1][2] + t->Phi[47]*f->P[2][2] +
+            t->Phi[48]*f->P[3][2] + t->Phi[49]*f->P[4][2] + t->Phi[50]*f->P[5][2] +
+            t->Phi[51]*f->P[6][2] + t->Phi[52]*f->P[7][2] + t->Phi[53]*f->P[8][2];
+    w->M[3] = t->Phi[45]*f->P[0][3] + t->Phi[46]*f->P[1][3] + t->Phi[47]*f->P[2][3] +
+            t->Phi[48]*f->P[3][3] + t->Phi[49]*f->P[4][3] + t->Phi[50]*f->P[5][3] +
+            t->Phi[51]*f->P[6][3] + t->Phi[52]*f->P[7][3] + t->Phi[53]*f->P[8][3];
+    w->M[4] = t->Phi[45]*f->P[0][4] + t->Phi[46]*f->P[1][4] + t->Phi[47]*f->P[2][4] +
+            t->Phi[48]*f->P[3][4] + t->Phi[49]*f->P[4][4] + t->Phi[50]*f->P[5][4] +
+            t->Phi[51]*f->P[6][4] + t->Phi[52]*f->P[7][4] + t->Phi[53]*f->P[8][4];
+    w->M[5] = t->Phi[45]*f->P[0][5] + t->Phi[46]*f->P[1][5] + t->Phi[47]*f->P[2][5] +
+            t->Phi[48]*f->P[3][5] + t->Phi[49]*f->P[4][5] + t->Phi[50]*f->P[5][5] +
+            t->Phi[51]*f->P[6][5] + t->Phi[52]*f->P[7][5] + t->Phi[53]*f->P[8][5];
+    w->M[6] = t->Phi[45]*f->P[0][6] + t->Phi[46]*f->P[1][6] + t->Phi[47]*f->P[2][6] +
+            t->Phi[48]*f->P[3][6] + t->Phi[49]*f->P[4][6] + t->Phi[50]*f->P[5][6] +
+            t->Phi[51]*f->P[6][6] + t->Phi[52]*f->P[7][6] + t->Phi[53]*f->P[8][6];
+    w->M[7] = t->Phi[45]*f->P[0][7] + t->Phi[46]*f->P[1][7] + t->Phi[47]*f->P[2][7] +
+            t->Phi[48]*f->P[3][7] + t->Phi[49]*f->P[4][7] + t->Phi[50]*f->P[5][7] +
+            t->Phi[51]*f->P[6][7] + t->Phi[52]*f->P[7][7] + t->Phi[53]*f->P[8][7];
+    w->M[8] = t->Phi[45]*f->P[0][8] + t->Phi[46]*f->P[1][8] + t->Phi[47]*f->P[2][8] +
+            t->Phi[48]*f->P[3][8] + t->Phi[49]*f->P[4][8] + t->Phi[50]*f->P[5][8] +
+            t->Phi[51]*f->P[6][8] + t->Phi[52]*f->P[7][8] + t->Phi[53]*f->P[8][8];
+    w->M[9] = t->Phi[45]*f->P[0][9] + t->Phi[46]*f->P[1][9] + t->Phi[47]*f->P[2][9] +
+            t->Phi[48]*f->P[3][9] + t->Phi[49]*f->P[4][9] + t->Phi[50]*f->P[5][9] +
+            t->Phi[51]*f->P[6][9] + t->Phi[52]*f->P[7][9] + t->Phi[53]*f->P[8][9];
+    w->M[10] = t->Phi[45]*f->P[0][10] + t->Phi[46]*f->P[1][10] + t->Phi[47]*f->P[2][10] +
+            t->Phi[48]*f->P[3][10] + t->Phi[49]*f->P[4][10] + t->Phi[50]*f->P[5][10] +
+            t->Phi[51]*f->P[6][10] + t->Phi[52]*f->P[7][10] + t->Phi[53]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2073,16 +1875,16 @@ static gps_pseudorange11_twin_scalar propagate_row_5(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
-            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[6]*t->Phi[5][6] +
-            w->M[7]*t->Phi[5][7] + w->M[8]*t->Phi[5][8] + t->Qd[45]; w->Pn[45] = v; check += v - v;
-    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[46]; w->Pn[46] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[47]; w->Pn[47] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[48]; w->Pn[48] =
-            v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[49] = v; check += v - v;
+    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
+            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
+            w->M[8]*t->Phi[53] + t->Qd[45]; w->Pn[45] = v; check += v - v;
+    v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[46]; w->Pn[46] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[47]; w->Pn[47] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[48]; w->Pn[48] = v;
+            check += v - v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[49] = v; check += v - v;
     v = w->M[10]; w->Pn[50] = v; check += v - v;
     return check;
 }
@@ -2091,17 +1893,17 @@ static void phi_times_p_row_6(const gps_pseudorange11_twin_filter *restrict f, c
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[6][6]*f->P[6][0] + t->Phi[6][7]*f->P[7][0] + t->Phi[6][8]*f->P[8][0];
-    w->M[1] = t->Phi[6][6]*f->P[6][1] + t->Phi[6][7]*f->P[7][1] + t->Phi[6][8]*f->P[8][1];
-    w->M[2] = t->Phi[6][6]*f->P[6][2] + t->Phi[6][7]*f->P[7][2] + t->Phi[6][8]*f->P[8][2];
-    w->M[3] = t->Phi[6][6]*f->P[6][3] + t->Phi[6][7]*f->P[7][3] + t->Phi[6][8]*f->P[8][3];
-    w->M[4] = t->Phi[6][6]*f->P[6][4] + t->Phi[6][7]*f->P[7][4] + t->Phi[6][8]*f->P[8][4];
-    w->M[5] = t->Phi[6][6]*f->P[6][5] + t->Phi[6][7]*f->P[7][5] + t->Phi[6][8]*f->P[8][5];
-    w->M[6] = t->Phi[6][6]*f->P[6][6] + t->Phi[6][7]*f->P[7][6] + t->Phi[6][8]*f->P[8][6];
-    w->M[7] = t->Phi[6][6]*f->P[6][7] + t->Phi[6][7]*f->P[7][7] + t->Phi[6][8]*f->P[8][7];
-    w->M[8] = t->Phi[6][6]*f->P[6][8] + t->Phi[6][7]*f->P[7][8] + t->Phi[6][8]*f->P[8][8];
-    w->M[9] = t->Phi[6][6]*f->P[6][9] + t->Phi[6][7]*f->P[7][9] + t->Phi[6][8]*f->P[8][9];
-    w->M[10] = t->Phi[6][6]*f->P[6][10] + t->Phi[6][7]*f->P[7][10] + t->Phi[6][8]*f->P[8][10];
+    w->M[0] = t->Phi[54]*f->P[6][0] + t->Phi[55]*f->P[7][0] + t->Phi[56]*f->P[8][0];
+    w->M[1] = t->Phi[54]*f->P[6][1] + t->Phi[55]*f->P[7][1] + t->Phi[56]*f->P[8][1];
+    w->M[2] = t->Phi[54]*f->P[6][2] + t->Phi[55]*f->P[7][2] + t->Phi[56]*f->P[8][2];
+    w->M[3] = t->Phi[54]*f->P[6][3] + t->Phi[55]*f->P[7][3] + t->Phi[56]*f->P[8][3];
+    w->M[4] = t->Phi[54]*f->P[6][4] + t->Phi[55]*f->P[7][4] + t->Phi[56]*f->P[8][4];
+    w->M[5] = t->Phi[54]*f->P[6][5] + t->Phi[55]*f->P[7][5] + t->Phi[56]*f->P[8][5];
+    w->M[6] = t->Phi[54]*f->P[6][6] + t->Phi[55]*f->P[7][6] + t->Phi[56]*f->P[8][6];
+    w->M[7] = t->Phi[54]*f->P[6][7] + t->Phi[55]*f->P[7][7] + t->Phi[56]*f->P[8][7];
+    w->M[8] = t->Phi[54]*f->P[6][8] + t->Phi[55]*f->P[7][8] + t->Phi[56]*f->P[8][8];
+    w->M[9] = t->Phi[54]*f->P[6][9] + t->Phi[55]*f->P[7][9] + t->Phi[56]*f->P[8][9];
+    w->M[10] = t->Phi[54]*f->P[6][10] + t->Phi[55]*f->P[7][10] + t->Phi[56]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2109,13 +1911,13 @@ static gps_pseudorange11_twin_scalar propagate_row_6(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[6]*t->Phi[6][6] + w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + t->Qd[51]; w->Pn[51] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[52]; w->Pn[52] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[53]; w->Pn[53] =
-            v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[54] = v; check += v - v;
+    v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[51]; w->Pn[51] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[52]; w->Pn[52] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[53]; w->Pn[53] = v;
+            check += v - v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[54] = v; check += v - v;
     v = w->M[10]; w->Pn[55] = v; check += v - v;
     return check;
 }
@@ -2124,17 +1926,17 @@ static void phi_times_p_row_7(const gps_pseudorange11_twin_filter *restrict f, c
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[7][6]*f->P[6][0] + t->Phi[7][7]*f->P[7][0] + t->Phi[7][8]*f->P[8][0];
-    w->M[1] = t->Phi[7][6]*f->P[6][1] + t->Phi[7][7]*f->P[7][1] + t->Phi[7][8]*f->P[8][1];
-    w->M[2] = t->Phi[7][6]*f->P[6][2] + t->Phi[7][7]*f->P[7][2] + t->Phi[7][8]*f->P[8][2];
-    w->M[3] = t->Phi[7][6]*f->P[6][3] + t->Phi[7][7]*f->P[7][3] + t->Phi[7][8]*f->P[8][3];
-    w->M[4] = t->Phi[7][6]*f->P[6][4] + t->Phi[7][7]*f->P[7][4] + t->Phi[7][8]*f->P[8][4];
-    w->M[5] = t->Phi[7][6]*f->P[6][5] + t->Phi[7][7]*f->P[7][5] + t->Phi[7][8]*f->P[8][5];
-    w->M[6] = t->Phi[7][6]*f->P[6][6] + t->Phi[7][7]*f->P[7][6] + t->Phi[7][8]*f->P[8][6];
-    w->M[7] = t->Phi[7][6]*f->P[6][7] + t->Phi[7][7]*f->P[7][7] + t->Phi[7][8]*f->P[8][7];
-    w->M[8] = t->Phi[7][6]*f->P[6][8] + t->Phi[7][7]*f->P[7][8] + t->Phi[7][8]*f->P[8][8];
-    w->M[9] = t->Phi[7][6]*f->P[6][9] + t->Phi[7][7]*f->P[7][9] + t->Phi[7][8]*f->P[8][9];
-    w->M[10] = t->Phi[7][6]*f->P[6][10] + t->Phi[7][7]*f->P[7][10] + t->Phi[7][8]*f->P[8][10];
+    w->M[0] = t->Phi[57]*f->P[6][0] + t->Phi[58]*f->P[7][0] + t->Phi[59]*f->P[8][0];
+    w->M[1] = t->Phi[57]*f->P[6][1] + t->Phi[58]*f->P[7][1] + t->Phi[59]*f->P[8][1];
+    w->M[2] = t->Phi[57]*f->P[6][2] + t->Phi[58]*f->P[7][2] + t->Phi[59]*f->P[8][2];
+    w->M[3] = t->Phi[57]*f->P[6][3] + t->Phi[58]*f->P[7][3] + t->Phi[59]*f->P[8][3];
+    w->M[4] = t->Phi[57]*f->P[6][4] + t->Phi[58]*f->P[7][4] + t->Phi[59]*f->P[8][4];
+    w->M[5] = t->Phi[57]*f->P[6][5] + t->Phi[58]*f->P[7][5] + t->Phi[59]*f->P[8][5];
+    w->M[6] = t->Phi[57]*f->P[6][6] + t->Phi[58]*f->P[7][6] + t->Phi[59]*f->P[8][6];
+    w->M[7] = t->Phi[57]*f->P[6][7] + t->Phi[58]*f->P[7][7] + t->Phi[59]*f->P[8][7];
+    w->M[8] = t->Phi[57]*f->P[6][8] + t->Phi[58]*f->P[7][8] + t->Phi[59]*f->P[8][8];
+    w->M[9] = t->Phi[57]*f->P[6][9] + t->Phi[58]*f->P[7][9] + t->Phi[59]*f->P[8][9];
+    w->M[10] = t->Phi[57]*f->P[6][10] + t->Phi[58]*f->P[7][10] + t->Phi[59]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2142,11 +1944,11 @@ static gps_pseudorange11_twin_scalar propagate_row_7(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[6]*t->Phi[7][6] + w->M[7]*t->Phi[7][7] + w->M[8]*t->Phi[7][8] + t->Qd[56]; w->Pn[56] =
-            v; check += v - v;
-    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[57]; w->Pn[57] =
-            v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[58] = v; check += v - v;
+    v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[56]; w->Pn[56] = v;
+            check += v - v;
+    v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[57]; w->Pn[57] = v;
+            check += v - v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[58] = v; check += v - v;
     v = w->M[10]; w->Pn[59] = v; check += v - v;
     return check;
 }
@@ -2155,17 +1957,17 @@ static void phi_times_p_row_8(const gps_pseudorange11_twin_filter *restrict f, c
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[8][6]*f->P[6][0] + t->Phi[8][7]*f->P[7][0] + t->Phi[8][8]*f->P[8][0];
-    w->M[1] = t->Phi[8][6]*f->P[6][1] + t->Phi[8][7]*f->P[7][1] + t->Phi[8][8]*f->P[8][1];
-    w->M[2] = t->Phi[8][6]*f->P[6][2] + t->Phi[8][7]*f->P[7][2] + t->Phi[8][8]*f->P[8][2];
-    w->M[3] = t->Phi[8][6]*f->P[6][3] + t->Phi[8][7]*f->P[7][3] + t->Phi[8][8]*f->P[8][3];
-    w->M[4] = t->Phi[8][6]*f->P[6][4] + t->Phi[8][7]*f->P[7][4] + t->Phi[8][8]*f->P[8][4];
-    w->M[5] = t->Phi[8][6]*f->P[6][5] + t->Phi[8][7]*f->P[7][5] + t->Phi[8][8]*f->P[8][5];
-    w->M[6] = t->Phi[8][6]*f->P[6][6] + t->Phi[8][7]*f->P[7][6] + t->Phi[8][8]*f->P[8][6];
-    w->M[7] = t->Phi[8][6]*f->P[6][7] + t->Phi[8][7]*f->P[7][7] + t->Phi[8][8]*f->P[8][7];
-    w->M[8] = t->Phi[8][6]*f->P[6][8] + t->Phi[8][7]*f->P[7][8] + t->Phi[8][8]*f->P[8][8];
-    w->M[9] = t->Phi[8][6]*f->P[6][9] + t->Phi[8][7]*f->P[7][9] + t->Phi[8][8]*f->P[8][9];
-    w->M[10] = t->Phi[8][6]*f->P[6][10] + t->Phi[8][7]*f->P[7][10] + t->Phi[8][8]*f->P[8][10];
+    w->M[0] = t->Phi[60]*f->P[6][0] + t->Phi[61]*f->P[7][0] + t->Phi[62]*f->P[8][0];
+    w->M[1] = t->Phi[60]*f->P[6][1] + t->Phi[61]*f->P[7][1] + t->Phi[62]*f->P[8][1];
+    w->M[2] = t->Phi[60]*f->P[6][2] + t->Phi[61]*f->P[7][2] + t->Phi[62]*f->P[8][2];
+    w->M[3] = t->Phi[60]*f->P[6][3] + t->Phi[61]*f->P[7][3] + t->Phi[62]*f->P[8][3];
+    w->M[4] = t->Phi[60]*f->P[6][4] + t->Phi[61]*f->P[7][4] + t->Phi[62]*f->P[8][4];
+    w->M[5] = t->Phi[60]*f->P[6][5] + t->Phi[61]*f->P[7][5] + t->Phi[62]*f->P[8][5];
+    w->M[6] = t->Phi[60]*f->P[6][6] + t->Phi[61]*f->P[7][6] + t->Phi[62]*f->P[8][6];
+    w->M[7] = t->Phi[60]*f->P[6][7] + t->Phi[61]*f->P[7][7] + t->Phi[62]*f->P[8][7];
+    w->M[8] = t->Phi[60]*f->P[6][8] + t->Phi[61]*f->P[7][8] + t->Phi[62]*f->P[8][8];
+    w->M[9] = t->Phi[60]*f->P[6][9] + t->Phi[61]*f->P[7][9] + t->Phi[62]*f->P[8][9];
+    w->M[10] = t->Phi[60]*f->P[6][10] + t->Phi[61]*f->P[7][10] + t->Phi[62]*f->P[8][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2173,9 +1975,9 @@ static gps_pseudorange11_twin_scalar propagate_row_8(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[6]*t->Phi[8][6] + w->M[7]*t->Phi[8][7] + w->M[8]*t->Phi[8][8] + t->Qd[60]; w->Pn[60] =
-            v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10]; w->Pn[61] = v; check += v - v;
+    v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[60]; w->Pn[60] = v;
+            check += v - v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[61] = v; check += v - v;
     v = w->M[10]; w->Pn[62] = v; check += v - v;
     return check;
 }
@@ -2184,17 +1986,17 @@ static void phi_times_p_row_9(const gps_pseudorange11_twin_filter *restrict f, c
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[9][9]*f->P[9][0] + t->Phi[9][10]*f->P[10][0];
-    w->M[1] = t->Phi[9][9]*f->P[9][1] + t->Phi[9][10]*f->P[10][1];
-    w->M[2] = t->Phi[9][9]*f->P[9][2] + t->Phi[9][10]*f->P[10][2];
-    w->M[3] = t->Phi[9][9]*f->P[9][3] + t->Phi[9][10]*f->P[10][3];
-    w->M[4] = t->Phi[9][9]*f->P[9][4] + t->Phi[9][10]*f->P[10][4];
-    w->M[5] = t->Phi[9][9]*f->P[9][5] + t->Phi[9][10]*f->P[10][5];
-    w->M[6] = t->Phi[9][9]*f->P[9][6] + t->Phi[9][10]*f->P[10][6];
-    w->M[7] = t->Phi[9][9]*f->P[9][7] + t->Phi[9][10]*f->P[10][7];
-    w->M[8] = t->Phi[9][9]*f->P[9][8] + t->Phi[9][10]*f->P[10][8];
-    w->M[9] = t->Phi[9][9]*f->P[9][9] + t->Phi[9][10]*f->P[10][9];
-    w->M[10] = t->Phi[9][9]*f->P[9][10] + t->Phi[9][10]*f->P[10][10];
+    w->M[0] = t->Phi[63]*f->P[9][0] + t->Phi[64]*f->P[10][0];
+    w->M[1] = t->Phi[63]*f->P[9][1] + t->Phi[64]*f->P[10][1];
+    w->M[2] = t->Phi[63]*f->P[9][2] + t->Phi[64]*f->P[10][2];
+    w->M[3] = t->Phi[63]*f->P[9][3] + t->Phi[64]*f->P[10][3];
+    w->M[4] = t->Phi[63]*f->P[9][4] + t->Phi[64]*f->P[10][4];
+    w->M[5] = t->Phi[63]*f->P[9][5] + t->Phi[64]*f->P[10][5];
+    w->M[6] = t->Phi[63]*f->P[9][6] + t->Phi[64]*f->P[10][6];
+    w->M[7] = t->Phi[63]*f->P[9][7] + t->Phi[64]*f->P[10][7];
+    w->M[8] = t->Phi[63]*f->P[9][8] + t->Phi[64]*f->P[10][8];
+    w->M[9] = t->Phi[63]*f->P[9][9] + t->Phi[64]*f->P[10][9];
+    w->M[10] = t->Phi[63]*f->P[9][10] + t->Phi[64]*f->P[10][10];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2202,7 +2004,7 @@ static gps_pseudorange11_twin_scalar propagate_row_9(const gps_pseudorange11_twi
         *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[9]*t->Phi[9][9] + w->M[10]*t->Phi[9][10] + t->Qd[63]; w->Pn[63] = v; check += v - v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64] + t->Qd[63]; w->Pn[63] = v; check += v - v;
     v = w->M[10] + t->Qd[64]; w->Pn[64] = v; check += v - v;
     return check;
 }
@@ -2224,28 +2026,28 @@ int gps_pseudorange11_twin_predict(gps_pseudorange11_twin_filter *restrict f, co
     gps_pseudorange11_twin_filter_scratch *w = &work->filter;
     gps_pseudorange11_twin_scalar check = 0.0;
     /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
-    w->xn[0] = t->Phi[0][0]*f->x[0] + t->Phi[0][1]*f->x[1] + t->Phi[0][2]*f->x[2] +
-            t->Phi[0][3]*f->x[3] + t->Phi[0][4]*f->x[4] + t->Phi[0][5]*f->x[5] +
-            t->Phi[0][6]*f->x[6] + t->Phi[0][7]*f->x[7] + t->Phi[0][8]*f->x[8];
-    w->xn[1] = t->Phi[1][0]*f->x[0] + t->Phi[1][1]*f->x[1] + t->Phi[1][2]*f->x[2] +
-            t->Phi[1][3]*f->x[3] + t->Phi[1][4]*f->x[4] + t->Phi[1][5]*f->x[5] +
-            t->Phi[1][6]*f->x[6] + t->Phi[1][7]*f->x[7] + t->Phi[1][8]*f->x[8];
-    w->xn[2] = t->Phi[2][0]*f->x[0] + t->Phi[2][1]*f->x[1] + t->Phi[2][2]*f->x[2] +
-            t->Phi[2][3]*f->x[3] + t->Phi[2][4]*f->x[4] + t->Phi[2][5]*f->x[5] +
-            t->Phi[2][6]*f->x[6] + t->Phi[2][7]*f->x[7] + t->Phi[2][8]*f->x[8];
-    w->xn[3] = t->Phi[3][0]*f->x[0] + t->Phi[3][1]*f->x[1] + t->Phi[3][2]*f->x[2] +
-            t->Phi[3][3]*f->x[3] + t->Phi[3][4]*f->x[4] + t->Phi[3][5]*f->x[5] +
-            t->Phi[3][6]*f->x[6] + t->Phi[3][7]*f->x[7] + t->Phi[3][8]*f->x[8];
-    w->xn[4] = t->Phi[4][0]*f->x[0] + t->Phi[4][1]*f->x[1] + t->Phi[4][2]*f->x[2] +
-            t->Phi[4][3]*f->x[3] + t->Phi[4][4]*f->x[4] + t->Phi[4][5]*f->x[5] +
-            t->Phi[4][6]*f->x[6] + t->Phi[4][7]*f->x[7] + t->Phi[4][8]*f->x[8];
-    w->xn[5] = t->Phi[5][0]*f->x[0] + t->Phi[5][1]*f->x[1] + t->Phi[5][2]*f->x[2] +
-            t->Phi[5][3]*f->x[3] + t->Phi[5][4]*f->x[4] + t->Phi[5][5]*f->x[5] +
-            t->Phi[5][6]*f->x[6] + t->Phi[5][7]*f->x[7] + t->Phi[5][8]*f->x[8];
-    w->xn[6] = t->Phi[6][6]*f->x[6] + t->Phi[6][7]*f->x[7] + t->Phi[6][8]*f->x[8];
-    w->xn[7] = t->Phi[7][6]*f->x[6] + t->Phi[7][7]*f->x[7] + t->Phi[7][8]*f->x[8];
-    w->xn[8] = t->Phi[8][6]*f->x[6] + t->Phi[8][7]*f->x[7] + t->Phi[8][8]*f->x[8];
-    w->xn[9] = t->Phi[9][9]*f->x[9] + t->Phi[9][10]*f->x[10];
+    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
+            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[6] + t->Phi[7]*f->x[7] +
+            t->Phi[8]*f->x[8];
+    w->xn[1] = t->Phi[9]*f->x[0] + t->Phi[10]*f->x[1] + t->Phi[11]*f->x[2] + t->Phi[12]*f->x[3] +
+            t->Phi[13]*f->x[4] + t->Phi[14]*f->x[5] + t->Phi[15]*f->x[6] + t->Phi[16]*f->x[7] +
+            t->Phi[17]*f->x[8];
+    w->xn[2] = t->Phi[18]*f->x[0] + t->Phi[19]*f->x[1] + t->Phi[20]*f->x[2] + t->Phi[21]*f->x[3] +
+            t->Phi[22]*f->x[4] + t->Phi[23]*f->x[5] + t->Phi[24]*f->x[6] + t->Phi[25]*f->x[7] +
+            t->Phi[26]*f->x[8];
+    w->xn[3] = t->Phi[27]*f->x[0] + t->Phi[28]*f->x[1] + t->Phi[29]*f->x[2] + t->Phi[30]*f->x[3] +
+            t->Phi[31]*f->x[4] + t->Phi[32]*f->x[5] + t->Phi[33]*f->x[6] + t->Phi[34]*f->x[7] +
+            t->Phi[35]*f->x[8];
+    w->xn[4] = t->Phi[36]*f->x[0] + t->Phi[37]*f->x[1] + t->Phi[38]*f->x[2] + t->Phi[39]*f->x[3] +
+            t->Phi[40]*f->x[4] + t->Phi[41]*f->x[5] + t->Phi[42]*f->x[6] + t->Phi[43]*f->x[7] +
+            t->Phi[44]*f->x[8];
+    w->xn[5] = t->Phi[45]*f->x[0] + t->Phi[46]*f->x[1] + t->Phi[47]*f->x[2] + t->Phi[48]*f->x[3] +
+            t->Phi[49]*f->x[4] + t->Phi[50]*f->x[5] + t->Phi[51]*f->x[6] + t->Phi[52]*f->x[7] +
+            t->Phi[53]*f->x[8];
+    w->xn[6] = t->Phi[54]*f->x[6] + t->Phi[55]*f->x[7] + t->Phi[56]*f->x[8];
+    w->xn[7] = t->Phi[57]*f->x[6] + t->Phi[58]*f->x[7] + t->Phi[59]*f->x[8];
+    w->xn[8] = t->Phi[60]*f->x[6] + t->Phi[61]*f->x[7] + t->Phi[62]*f->x[8];
+    w->xn[9] = t->Phi[63]*f->x[9] + t->Phi[64]*f->x[10];
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];
     check += w->xn[2] - w->xn[2];

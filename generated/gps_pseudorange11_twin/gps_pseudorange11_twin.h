@@ -15,7 +15,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 37 operations after CSE
- *   discretize: 2467 mul + 1660 add = 4127 flops
+ *   discretize: 2461 mul + 1657 add = 4118 flops
  *   discretize, each doubling (long steps): 879 mul + 880 add = 1759 flops
  *   predict (C): 1061 mul + 934 add = 1995 flops
  *   predict (Python): 2420 mul + 2321 add = 4741 flops
@@ -35,6 +35,8 @@
 #define GPS_PSEUDORANGE11_TWIN_NNZ_F 31
 #define GPS_PSEUDORANGE11_TWIN_NNZ_G 8
 #define GPS_PSEUDORANGE11_TWIN_NNZ_H 16
+/* stored entries of the transition's Phi: its structural nonzeros */
+#define GPS_PSEUDORANGE11_TWIN_N_PHI 66
 /* highest order of the Taylor series of discretize */
 #define GPS_PSEUDORANGE11_TWIN_TAYLOR_ORDER 9
 #define GPS_PSEUDORANGE11_TWIN_N_TERMS 74   /* entries of discretize's compressed term arrays */
@@ -45,6 +47,8 @@
 #define GPS_PSEUDORANGE11_TWIN_ERR_NONFINITE 1      /* a non-finite input or result was refused */
 /* a variance or the innovation variance is not positive */
 #define GPS_PSEUDORANGE11_TWIN_ERR_NOT_POSITIVE 2
+/* a transition entry that must be 0 (or a unit row's 1) is not */
+#define GPS_PSEUDORANGE11_TWIN_ERR_STRUCTURE 3
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
@@ -170,9 +174,10 @@ typedef struct {
 
 /* The transition over one step T (from discretize). */
 typedef struct {
-    gps_pseudorange11_twin_scalar
-            Phi[GPS_PSEUDORANGE11_TWIN_N_STATES][GPS_PSEUDORANGE11_TWIN_N_STATES]; /* transition
-            matrix */
+    gps_pseudorange11_twin_scalar Phi[GPS_PSEUDORANGE11_TWIN_N_PHI]; /* transition matrix, its
+            structural nonzeros row by row: entry k is (i, j) = (gps_pseudorange11_twin_Phi_row[k],
+            gps_pseudorange11_twin_Phi_col[k]), every other entry is 0
+            (gps_pseudorange11_twin_get_transition_matrix expands it) */
     gps_pseudorange11_twin_scalar Qd[GPS_PSEUDORANGE11_TWIN_N_PACKED]; /* Gamma (Q/T) Gamma^T,
             packed upper triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } gps_pseudorange11_twin_transition;
@@ -227,6 +232,13 @@ extern const char *const gps_pseudorange11_twin_measurement_names[4];
 extern const unsigned char gps_pseudorange11_twin_F_row[31], gps_pseudorange11_twin_F_col[31];
 extern const unsigned char gps_pseudorange11_twin_G_row[8], gps_pseudorange11_twin_G_col[8];
 extern const unsigned char gps_pseudorange11_twin_H_row[16], gps_pseudorange11_twin_H_col[16];
+/* The transition's Phi is stored compressed: t->Phi[k] is Phi(i, j) with i =
+        gps_pseudorange11_twin_Phi_row[k],
+   j = gps_pseudorange11_twin_Phi_col[k] (the structural nonzeros of e^{F T}, row by row, columns
+           ascending; a row of
+   random constants holds its diagonal 1 alone); every other entry of Phi is 0. */
+extern const unsigned char gps_pseudorange11_twin_Phi_row[GPS_PSEUDORANGE11_TWIN_N_PHI],
+        gps_pseudorange11_twin_Phi_col[GPS_PSEUDORANGE11_TWIN_N_PHI];
 
 /* Fill the parameters that have defaults in the model; the others become 0. */
 void gps_pseudorange11_twin_default_params(gps_pseudorange11_twin_params *params);
@@ -248,6 +260,21 @@ int gps_pseudorange11_twin_matrices_evaluate(const gps_pseudorange11_twin_params
 int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *restrict m,
         gps_pseudorange11_twin_scalar T, gps_pseudorange11_twin_transition *restrict t,
                 gps_pseudorange11_twin_workspace *restrict work);
+
+/* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
+void gps_pseudorange11_twin_get_transition_matrix(const gps_pseudorange11_twin_transition *restrict
+        t,
+                gps_pseudorange11_twin_scalar Phi[restrict GPS_PSEUDORANGE11_TWIN_N_STATES *
+                        GPS_PSEUDORANGE11_TWIN_N_STATES]);
+
+/* Set the transition's Phi from a full N * N array in row-major order (a Phi
+   computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
+   (ERR_NONFINITE), a nonzero entry outside the structural pattern of Phi or a row
+   of random constants that is not exactly e_i (ERR_STRUCTURE: predict would not
+   read it); on error t is unchanged. */
+int gps_pseudorange11_twin_set_transition_matrix(gps_pseudorange11_twin_transition *restrict t,
+                const gps_pseudorange11_twin_scalar Phi[restrict GPS_PSEUDORANGE11_TWIN_N_STATES *
+                        GPS_PSEUDORANGE11_TWIN_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).

@@ -14,7 +14,7 @@
  *
  * Operation counts (floating-point, per call):
  *   matrices_evaluate: 354 operations after CSE
- *   discretize: 10413 mul + 7983 add = 18396 flops
+ *   discretize: 10375 mul + 7953 add = 18328 flops
  *   discretize, each doubling (long steps): 3355 mul + 3355 add = 6710 flops
  *   predict (C): 5334 mul + 4806 add = 10140 flops
  *   predict (Python): 8442 mul + 8001 add = 16443 flops
@@ -33,6 +33,8 @@
 #define INS_GNSS21_NAV_NNZ_F 90
 #define INS_GNSS21_NAV_NNZ_G 30
 #define INS_GNSS21_NAV_NNZ_H 42
+/* stored entries of the transition's Phi: its structural nonzeros */
+#define INS_GNSS21_NAV_N_PHI 193
 #define INS_GNSS21_NAV_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
 #define INS_GNSS21_NAV_N_TERMS 210   /* entries of discretize's compressed term arrays */
 #define INS_GNSS21_NAV_N_ACTIVE_ENTRIES 210   /* entries of Phi in rows that are not e_i */
@@ -42,6 +44,8 @@
 #define INS_GNSS21_NAV_ERR_NONFINITE 1      /* a non-finite input or result was refused */
 /* a variance or the innovation variance is not positive */
 #define INS_GNSS21_NAV_ERR_NOT_POSITIVE 2
+/* a transition entry that must be 0 (or a unit row's 1) is not */
+#define INS_GNSS21_NAV_ERR_STRUCTURE 3
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
@@ -188,8 +192,9 @@ typedef struct {
 
 /* The transition over one step T (from discretize). */
 typedef struct {
-    ins_gnss21_nav_scalar Phi[INS_GNSS21_NAV_N_STATES][INS_GNSS21_NAV_N_STATES]; /* transition
-            matrix */
+    ins_gnss21_nav_scalar Phi[INS_GNSS21_NAV_N_PHI]; /* transition matrix, its structural nonzeros
+            row by row: entry k is (i, j) = (ins_gnss21_nav_Phi_row[k], ins_gnss21_nav_Phi_col[k]),
+            every other entry is 0 (ins_gnss21_nav_get_transition_matrix expands it) */
     ins_gnss21_nav_scalar Qd[INS_GNSS21_NAV_N_PACKED]; /* Gamma (Q/T) Gamma^T, packed upper
             triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } ins_gnss21_nav_transition;
@@ -242,6 +247,13 @@ extern const char *const ins_gnss21_nav_measurement_names[6];
 extern const unsigned char ins_gnss21_nav_F_row[90], ins_gnss21_nav_F_col[90];
 extern const unsigned char ins_gnss21_nav_G_row[30], ins_gnss21_nav_G_col[30];
 extern const unsigned char ins_gnss21_nav_H_row[42], ins_gnss21_nav_H_col[42];
+/* The transition's Phi is stored compressed: t->Phi[k] is Phi(i, j) with i =
+        ins_gnss21_nav_Phi_row[k],
+   j = ins_gnss21_nav_Phi_col[k] (the structural nonzeros of e^{F T}, row by row, columns ascending;
+           a row of
+   random constants holds its diagonal 1 alone); every other entry of Phi is 0. */
+extern const unsigned char ins_gnss21_nav_Phi_row[INS_GNSS21_NAV_N_PHI],
+        ins_gnss21_nav_Phi_col[INS_GNSS21_NAV_N_PHI];
 
 /* Fill the parameters that have defaults in the model; the others become 0. */
 void ins_gnss21_nav_default_params(ins_gnss21_nav_params *params);
@@ -263,6 +275,20 @@ int ins_gnss21_nav_matrices_evaluate(const ins_gnss21_nav_params *restrict param
 int ins_gnss21_nav_discretize(const ins_gnss21_nav_matrices *restrict m, ins_gnss21_nav_scalar T,
         ins_gnss21_nav_transition *restrict t,
                 ins_gnss21_nav_workspace *restrict work);
+
+/* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
+void ins_gnss21_nav_get_transition_matrix(const ins_gnss21_nav_transition *restrict t,
+                ins_gnss21_nav_scalar Phi[restrict INS_GNSS21_NAV_N_STATES *
+                        INS_GNSS21_NAV_N_STATES]);
+
+/* Set the transition's Phi from a full N * N array in row-major order (a Phi
+   computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
+   (ERR_NONFINITE), a nonzero entry outside the structural pattern of Phi or a row
+   of random constants that is not exactly e_i (ERR_STRUCTURE: predict would not
+   read it); on error t is unchanged. */
+int ins_gnss21_nav_set_transition_matrix(ins_gnss21_nav_transition *restrict t,
+                const ins_gnss21_nav_scalar Phi[restrict INS_GNSS21_NAV_N_STATES *
+                        INS_GNSS21_NAV_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).

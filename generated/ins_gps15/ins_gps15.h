@@ -33,6 +33,7 @@
 #define INS_GPS15_NNZ_F 58
 #define INS_GPS15_NNZ_G 18
 #define INS_GPS15_NNZ_H 6
+#define INS_GPS15_N_PHI 133   /* stored entries of the transition's Phi: its structural nonzeros */
 #define INS_GPS15_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
 #define INS_GPS15_N_TERMS 127   /* entries of discretize's compressed term arrays */
 #define INS_GPS15_N_ACTIVE_ENTRIES 127   /* entries of Phi in rows that are not e_i */
@@ -41,6 +42,8 @@
 #define INS_GPS15_OK 0
 #define INS_GPS15_ERR_NONFINITE 1      /* a non-finite input or result was refused */
 #define INS_GPS15_ERR_NOT_POSITIVE 2   /* a variance or the innovation variance is not positive */
+/* a transition entry that must be 0 (or a unit row's 1) is not */
+#define INS_GPS15_ERR_STRUCTURE 3
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
@@ -137,7 +140,9 @@ typedef struct {
 
 /* The transition over one step T (from discretize). */
 typedef struct {
-    ins_gps15_scalar Phi[INS_GPS15_N_STATES][INS_GPS15_N_STATES]; /* transition matrix */
+    ins_gps15_scalar Phi[INS_GPS15_N_PHI]; /* transition matrix, its structural nonzeros row by row:
+            entry k is (i, j) = (ins_gps15_Phi_row[k], ins_gps15_Phi_col[k]), every other entry is 0
+            (ins_gps15_get_transition_matrix expands it) */
     ins_gps15_scalar Qd[INS_GPS15_N_PACKED]; /* Gamma (Q/T) Gamma^T, packed upper triangle: (i, j),
             i <= j, at i (2N - i - 1) / 2 + j */
 } ins_gps15_transition;
@@ -189,6 +194,11 @@ extern const char *const ins_gps15_measurement_names[6];
 extern const unsigned char ins_gps15_F_row[58], ins_gps15_F_col[58];
 extern const unsigned char ins_gps15_G_row[18], ins_gps15_G_col[18];
 extern const unsigned char ins_gps15_H_row[6], ins_gps15_H_col[6];
+/* The transition's Phi is stored compressed: t->Phi[k] is Phi(i, j) with i = ins_gps15_Phi_row[k],
+   j = ins_gps15_Phi_col[k] (the structural nonzeros of e^{F T}, row by row, columns ascending; a
+           row of
+   random constants holds its diagonal 1 alone); every other entry of Phi is 0. */
+extern const unsigned char ins_gps15_Phi_row[INS_GPS15_N_PHI], ins_gps15_Phi_col[INS_GPS15_N_PHI];
 
 /* Fill the parameters that have defaults in the model; the others become 0. */
 void ins_gps15_default_params(ins_gps15_params *params);
@@ -210,6 +220,18 @@ int ins_gps15_matrices_evaluate(const ins_gps15_params *restrict params, ins_gps
 int ins_gps15_discretize(const ins_gps15_matrices *restrict m, ins_gps15_scalar T,
         ins_gps15_transition *restrict t,
                 ins_gps15_workspace *restrict work);
+
+/* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
+void ins_gps15_get_transition_matrix(const ins_gps15_transition *restrict t,
+                ins_gps15_scalar Phi[restrict INS_GPS15_N_STATES * INS_GPS15_N_STATES]);
+
+/* Set the transition's Phi from a full N * N array in row-major order (a Phi
+   computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
+   (ERR_NONFINITE), a nonzero entry outside the structural pattern of Phi or a row
+   of random constants that is not exactly e_i (ERR_STRUCTURE: predict would not
+   read it); on error t is unchanged. */
+int ins_gps15_set_transition_matrix(ins_gps15_transition *restrict t,
+                const ins_gps15_scalar Phi[restrict INS_GPS15_N_STATES * INS_GPS15_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).

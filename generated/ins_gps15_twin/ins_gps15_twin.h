@@ -34,6 +34,8 @@
 #define INS_GPS15_TWIN_NNZ_F 58
 #define INS_GPS15_TWIN_NNZ_G 18
 #define INS_GPS15_TWIN_NNZ_H 6
+/* stored entries of the transition's Phi: its structural nonzeros */
+#define INS_GPS15_TWIN_N_PHI 133
 #define INS_GPS15_TWIN_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
 #define INS_GPS15_TWIN_N_TERMS 127   /* entries of discretize's compressed term arrays */
 #define INS_GPS15_TWIN_N_ACTIVE_ENTRIES 127   /* entries of Phi in rows that are not e_i */
@@ -43,6 +45,8 @@
 #define INS_GPS15_TWIN_ERR_NONFINITE 1      /* a non-finite input or result was refused */
 /* a variance or the innovation variance is not positive */
 #define INS_GPS15_TWIN_ERR_NOT_POSITIVE 2
+/* a transition entry that must be 0 (or a unit row's 1) is not */
+#define INS_GPS15_TWIN_ERR_STRUCTURE 3
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
@@ -151,8 +155,9 @@ typedef struct {
 
 /* The transition over one step T (from discretize). */
 typedef struct {
-    ins_gps15_twin_scalar Phi[INS_GPS15_TWIN_N_STATES][INS_GPS15_TWIN_N_STATES]; /* transition
-            matrix */
+    ins_gps15_twin_scalar Phi[INS_GPS15_TWIN_N_PHI]; /* transition matrix, its structural nonzeros
+            row by row: entry k is (i, j) = (ins_gps15_twin_Phi_row[k], ins_gps15_twin_Phi_col[k]),
+            every other entry is 0 (ins_gps15_twin_get_transition_matrix expands it) */
     ins_gps15_twin_scalar Qd[INS_GPS15_TWIN_N_PACKED]; /* Gamma (Q/T) Gamma^T, packed upper
             triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } ins_gps15_twin_transition;
@@ -205,6 +210,13 @@ extern const char *const ins_gps15_twin_measurement_names[6];
 extern const unsigned char ins_gps15_twin_F_row[58], ins_gps15_twin_F_col[58];
 extern const unsigned char ins_gps15_twin_G_row[18], ins_gps15_twin_G_col[18];
 extern const unsigned char ins_gps15_twin_H_row[6], ins_gps15_twin_H_col[6];
+/* The transition's Phi is stored compressed: t->Phi[k] is Phi(i, j) with i =
+        ins_gps15_twin_Phi_row[k],
+   j = ins_gps15_twin_Phi_col[k] (the structural nonzeros of e^{F T}, row by row, columns ascending;
+           a row of
+   random constants holds its diagonal 1 alone); every other entry of Phi is 0. */
+extern const unsigned char ins_gps15_twin_Phi_row[INS_GPS15_TWIN_N_PHI],
+        ins_gps15_twin_Phi_col[INS_GPS15_TWIN_N_PHI];
 
 /* Fill the parameters that have defaults in the model; the others become 0. */
 void ins_gps15_twin_default_params(ins_gps15_twin_params *params);
@@ -226,6 +238,20 @@ int ins_gps15_twin_matrices_evaluate(const ins_gps15_twin_params *restrict param
 int ins_gps15_twin_discretize(const ins_gps15_twin_matrices *restrict m, ins_gps15_twin_scalar T,
         ins_gps15_twin_transition *restrict t,
                 ins_gps15_twin_workspace *restrict work);
+
+/* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
+void ins_gps15_twin_get_transition_matrix(const ins_gps15_twin_transition *restrict t,
+                ins_gps15_twin_scalar Phi[restrict INS_GPS15_TWIN_N_STATES *
+                        INS_GPS15_TWIN_N_STATES]);
+
+/* Set the transition's Phi from a full N * N array in row-major order (a Phi
+   computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
+   (ERR_NONFINITE), a nonzero entry outside the structural pattern of Phi or a row
+   of random constants that is not exactly e_i (ERR_STRUCTURE: predict would not
+   read it); on error t is unchanged. */
+int ins_gps15_twin_set_transition_matrix(ins_gps15_twin_transition *restrict t,
+                const ins_gps15_twin_scalar Phi[restrict INS_GPS15_TWIN_N_STATES *
+                        INS_GPS15_TWIN_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).

@@ -70,6 +70,16 @@ const unsigned char ned_doppler13_reduced_G_row[11] = { 0, 1, 2, 3, 3, 3, 4, 4, 
 const unsigned char ned_doppler13_reduced_G_col[11] = { 2, 2, 2, 3, 4, 5, 3, 4, 5, 0, 1 };
 const unsigned char ned_doppler13_reduced_H_row[4] = { 0, 0, 1, 1 };
 const unsigned char ned_doppler13_reduced_H_col[4] = { 3, 11, 4, 12 };
+/* The structural nonzeros of Phi, row by row: entry k of the transition's Phi is (Phi_row[k],
+        Phi_col[k]). */
+const unsigned char ned_doppler13_reduced_Phi_row[NED_DOPPLER13_REDUCED_N_PHI] = { 0, 0, 0, 0, 0, 0,
+        0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3,
+        3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6,
+        6, 6, 6, 7, 8, 9, 10, 11, 12 };
+const unsigned char ned_doppler13_reduced_Phi_col[NED_DOPPLER13_REDUCED_N_PHI] = { 0, 1, 2, 3, 4, 5,
+        7, 8, 9, 10, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 0, 1, 2, 3, 4, 5,
+        7, 8, 9, 10, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 0, 1, 2, 3, 4, 5,
+        6, 7, 8, 9, 10, 7, 8, 9, 10, 11, 12 };
 
 /* First entry of each row of H in the compact arrays (CSR row starts). */
 /* Entries (row, column) of Phi that the Taylor terms can change: rows that are not e_i. */
@@ -736,703 +746,438 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_transition(ned_doppler13_reduced_transit
     const ned_doppler13_reduced_scalar one = 1.0;
     int k;
     for (k = 0; k < 6; ++k) {
-        t->Phi[0][k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
+        t->Phi[k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
                 w->fh[3]*w->S[40+k];
     }
     for (k = 0; k < 2; ++k) {
-        t->Phi[0][9+k] = w->fh[0]*w->S[14+k] + w->fh[1]*w->S[22+k] + w->fh[2]*w->S[38+k] +
+        t->Phi[8+k] = w->fh[0]*w->S[14+k] + w->fh[1]*w->S[22+k] + w->fh[2]*w->S[38+k] +
                 w->fh[3]*w->S[46+k];
     }
     for (k = 0; k < 6; ++k) {
-        t->Phi[1][k] = w->fh[8]*w->S[k] + w->fh[9]*w->S[16+k] + w->fh[10]*w->S[24+k];
+        t->Phi[10+k] = w->fh[8]*w->S[k] + w->fh[9]*w->S[16+k] + w->fh[10]*w->S[24+k];
     }
     for (k = 0; k < 2; ++k) {
-        t->Phi[1][9+k] = w->fh[8]*w->S[6+k] + w->fh[9]*w->S[22+k] + w->fh[10]*w->S[30+k];
+        t->Phi[18+k] = w->fh[8]*w->S[6+k] + w->fh[9]*w->S[22+k] + w->fh[10]*w->S[30+k];
     }
     for (k = 0; k < 6; ++k) {
-        t->Phi[2][k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[32+k] +
+        t->Phi[20+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[32+k] +
                 w->fh[18]*w->S[40+k];
     }
     for (k = 0; k < 2; ++k) {
-        t->Phi[2][9+k] = w->fh[15]*w->S[6+k] + w->fh[16]*w->S[14+k] + w->fh[17]*w->S[38+k] +
+        t->Phi[28+k] = w->fh[15]*w->S[6+k] + w->fh[16]*w->S[14+k] + w->fh[17]*w->S[38+k] +
                 w->fh[18]*w->S[46+k];
     }
     for (k = 0; k < 6; ++k) {
-        t->Phi[3][k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
+        t->Phi[30+k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
                 w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k];
     }
     for (k = 0; k < 2; ++k) {
-        t->Phi[3][9+k] = w->fh[23]*w->S[14+k] + w->fh[24]*w->S[22+k] + w->fh[25]*w->S[30+k] +
+        t->Phi[38+k] = w->fh[23]*w->S[14+k] + w->fh[24]*w->S[22+k] + w->fh[25]*w->S[30+k] +
                 w->fh[26]*w->S[38+k] + w->fh[27]*w->S[46+k];
     }
     for (k = 0; k < 6; ++k) {
-        t->Phi[4][k] = w->fh[28]*w->S[k] + w->fh[29]*w->S[16+k] + w->fh[30]*w->S[24+k] +
+        t->Phi[40+k] = w->fh[28]*w->S[k] + w->fh[29]*w->S[16+k] + w->fh[30]*w->S[24+k] +
                 w->fh[31]*w->S[32+k] + w->fh[32]*w->S[40+k];
     }
     for (k = 0; k < 2; ++k) {
-        t->Phi[4][9+k] = w->fh[28]*w->S[6+k] + w->fh[29]*w->S[22+k] + w->fh[30]*w->S[30+k] +
+        t->Phi[48+k] = w->fh[28]*w->S[6+k] + w->fh[29]*w->S[22+k] + w->fh[30]*w->S[30+k] +
                 w->fh[31]*w->S[38+k] + w->fh[32]*w->S[46+k];
     }
     for (k = 0; k < 6; ++k) {
-        t->Phi[5][k] = w->fh[33]*w->S[24+k];
+        t->Phi[50+k] = w->fh[33]*w->S[24+k];
     }
     for (k = 0; k < 2; ++k) {
-        t->Phi[5][9+k] = w->fh[33]*w->S[30+k];
+        t->Phi[58+k] = w->fh[33]*w->S[30+k];
     }
     for (k = 0; k < 6; ++k) {
-        t->Phi[6][k] = w->fh[34]*w->S[32+k] + w->fh[35]*w->S[40+k];
+        t->Phi[60+k] = w->fh[34]*w->S[32+k] + w->fh[35]*w->S[40+k];
     }
     for (k = 0; k < 2; ++k) {
-        t->Phi[6][9+k] = w->fh[34]*w->S[38+k] + w->fh[35]*w->S[46+k];
+        t->Phi[69+k] = w->fh[34]*w->S[38+k] + w->fh[35]*w->S[46+k];
     }
-    t->Phi[0][9] = t->Phi[0][9] + w->fh[6]*w->S[56];
-    t->Phi[0][10] = t->Phi[0][10] + w->fh[7]*w->S[57];
-    t->Phi[1][9] = t->Phi[1][9] + w->fh[13]*w->S[56];
-    t->Phi[1][10] = t->Phi[1][10] + w->fh[14]*w->S[57];
-    t->Phi[2][9] = t->Phi[2][9] + w->fh[21]*w->S[56];
-    t->Phi[2][10] = t->Phi[2][10] + w->fh[22]*w->S[57];
-    t->Phi[9][9] = w->fh[36]*w->S[56];
-    t->Phi[10][10] = w->fh[37]*w->S[57];
-    t->Phi[0][7] = w->S[0]*w->fh[4] + w->S[1]*w->fh[11] + w->S[2]*w->fh[19];
-    t->Phi[0][8] = w->S[0]*w->fh[5] + w->S[1]*w->fh[12] + w->S[2]*w->fh[20];
-    t->Phi[1][7] = w->S[8]*w->fh[4] + w->S[9]*w->fh[11] + w->S[10]*w->fh[19];
-    t->Phi[1][8] = w->S[8]*w->fh[5] + w->S[9]*w->fh[12] + w->S[10]*w->fh[20];
-    t->Phi[2][7] = w->S[16]*w->fh[4] + w->S[17]*w->fh[11] + w->S[18]*w->fh[19];
-    t->Phi[2][8] = w->S[16]*w->fh[5] + w->S[17]*w->fh[12] + w->S[18]*w->fh[20];
-    t->Phi[3][7] = w->S[24]*w->fh[4] + w->S[25]*w->fh[11] + w->S[26]*w->fh[19];
-    t->Phi[3][8] = w->S[24]*w->fh[5] + w->S[25]*w->fh[12] + w->S[26]*w->fh[20];
-    t->Phi[4][7] = w->S[32]*w->fh[4] + w->S[33]*w->fh[11] + w->S[34]*w->fh[19];
-    t->Phi[4][8] = w->S[32]*w->fh[5] + w->S[33]*w->fh[12] + w->S[34]*w->fh[20];
-    t->Phi[5][7] = w->S[40]*w->fh[4] + w->S[41]*w->fh[11] + w->S[42]*w->fh[19];
-    t->Phi[5][8] = w->S[40]*w->fh[5] + w->S[41]*w->fh[12] + w->S[42]*w->fh[20];
-    t->Phi[6][7] = w->S[48]*w->fh[4] + w->S[49]*w->fh[11] + w->S[50]*w->fh[19];
-    t->Phi[6][8] = w->S[48]*w->fh[5] + w->S[49]*w->fh[12] + w->S[50]*w->fh[20];
-    t->Phi[0][6] = 0;
-    t->Phi[0][11] = 0;
-    t->Phi[0][12] = 0;
-    t->Phi[1][6] = 0;
-    t->Phi[1][11] = 0;
-    t->Phi[1][12] = 0;
-    t->Phi[2][6] = 0;
-    t->Phi[2][11] = 0;
-    t->Phi[2][12] = 0;
-    t->Phi[3][6] = 0;
-    t->Phi[3][11] = 0;
-    t->Phi[3][12] = 0;
-    t->Phi[4][6] = 0;
-    t->Phi[4][11] = 0;
-    t->Phi[4][12] = 0;
-    t->Phi[5][6] = 0;
-    t->Phi[5][11] = 0;
-    t->Phi[5][12] = 0;
-    t->Phi[6][6] = 0;
-    t->Phi[6][11] = 0;
-    t->Phi[6][12] = 0;
-    t->Phi[7][0] = 0;
-    t->Phi[7][1] = 0;
-    t->Phi[7][2] = 0;
-    t->Phi[7][3] = 0;
-    t->Phi[7][4] = 0;
-    t->Phi[7][5] = 0;
-    t->Phi[7][6] = 0;
-    t->Phi[7][7] = one;
-    t->Phi[7][8] = 0;
-    t->Phi[7][9] = 0;
-    t->Phi[7][10] = 0;
-    t->Phi[7][11] = 0;
-    t->Phi[7][12] = 0;
-    t->Phi[8][0] = 0;
-    t->Phi[8][1] = 0;
-    t->Phi[8][2] = 0;
-    t->Phi[8][3] = 0;
-    t->Phi[8][4] = 0;
-    t->Phi[8][5] = 0;
-    t->Phi[8][6] = 0;
-    t->Phi[8][7] = 0;
-    t->Phi[8][8] = one;
-    t->Phi[8][9] = 0;
-    t->Phi[8][10] = 0;
-    t->Phi[8][11] = 0;
-    t->Phi[8][12] = 0;
-    t->Phi[9][0] = 0;
-    t->Phi[9][1] = 0;
-    t->Phi[9][2] = 0;
-    t->Phi[9][3] = 0;
-    t->Phi[9][4] = 0;
-    t->Phi[9][5] = 0;
-    t->Phi[9][6] = 0;
-    t->Phi[9][7] = 0;
-    t->Phi[9][8] = 0;
-    t->Phi[9][10] = 0;
-    t->Phi[9][11] = 0;
-    t->Phi[9][12] = 0;
-    t->Phi[10][0] = 0;
-    t->Phi[10][1] = 0;
-    t->Phi[10][2] = 0;
-    t->Phi[10][3] = 0;
-    t->Phi[10][4] = 0;
-    t->Phi[10][5] = 0;
-    t->Phi[10][6] = 0;
-    t->Phi[10][7] = 0;
-    t->Phi[10][8] = 0;
-    t->Phi[10][9] = 0;
-    t->Phi[10][11] = 0;
-    t->Phi[10][12] = 0;
-    t->Phi[11][0] = 0;
-    t->Phi[11][1] = 0;
-    t->Phi[11][2] = 0;
-    t->Phi[11][3] = 0;
-    t->Phi[11][4] = 0;
-    t->Phi[11][5] = 0;
-    t->Phi[11][6] = 0;
-    t->Phi[11][7] = 0;
-    t->Phi[11][8] = 0;
-    t->Phi[11][9] = 0;
-    t->Phi[11][10] = 0;
-    t->Phi[11][11] = one;
-    t->Phi[11][12] = 0;
-    t->Phi[12][0] = 0;
-    t->Phi[12][1] = 0;
-    t->Phi[12][2] = 0;
-    t->Phi[12][3] = 0;
-    t->Phi[12][4] = 0;
-    t->Phi[12][5] = 0;
-    t->Phi[12][6] = 0;
-    t->Phi[12][7] = 0;
-    t->Phi[12][8] = 0;
-    t->Phi[12][9] = 0;
-    t->Phi[12][10] = 0;
-    t->Phi[12][11] = 0;
-    t->Phi[12][12] = one;
+    t->Phi[8] = t->Phi[8] + w->fh[6]*w->S[56];
+    t->Phi[9] = t->Phi[9] + w->fh[7]*w->S[57];
+    t->Phi[18] = t->Phi[18] + w->fh[13]*w->S[56];
+    t->Phi[19] = t->Phi[19] + w->fh[14]*w->S[57];
+    t->Phi[28] = t->Phi[28] + w->fh[21]*w->S[56];
+    t->Phi[29] = t->Phi[29] + w->fh[22]*w->S[57];
+    t->Phi[73] = w->fh[36]*w->S[56];
+    t->Phi[74] = w->fh[37]*w->S[57];
+    t->Phi[6] = w->S[0]*w->fh[4] + w->S[1]*w->fh[11] + w->S[2]*w->fh[19];
+    t->Phi[7] = w->S[0]*w->fh[5] + w->S[1]*w->fh[12] + w->S[2]*w->fh[20];
+    t->Phi[16] = w->S[8]*w->fh[4] + w->S[9]*w->fh[11] + w->S[10]*w->fh[19];
+    t->Phi[17] = w->S[8]*w->fh[5] + w->S[9]*w->fh[12] + w->S[10]*w->fh[20];
+    t->Phi[26] = w->S[16]*w->fh[4] + w->S[17]*w->fh[11] + w->S[18]*w->fh[19];
+    t->Phi[27] = w->S[16]*w->fh[5] + w->S[17]*w->fh[12] + w->S[18]*w->fh[20];
+    t->Phi[36] = w->S[24]*w->fh[4] + w->S[25]*w->fh[11] + w->S[26]*w->fh[19];
+    t->Phi[37] = w->S[24]*w->fh[5] + w->S[25]*w->fh[12] + w->S[26]*w->fh[20];
+    t->Phi[46] = w->S[32]*w->fh[4] + w->S[33]*w->fh[11] + w->S[34]*w->fh[19];
+    t->Phi[47] = w->S[32]*w->fh[5] + w->S[33]*w->fh[12] + w->S[34]*w->fh[20];
+    t->Phi[56] = w->S[40]*w->fh[4] + w->S[41]*w->fh[11] + w->S[42]*w->fh[19];
+    t->Phi[57] = w->S[40]*w->fh[5] + w->S[41]*w->fh[12] + w->S[42]*w->fh[20];
+    t->Phi[67] = w->S[48]*w->fh[4] + w->S[49]*w->fh[11] + w->S[50]*w->fh[19];
+    t->Phi[68] = w->S[48]*w->fh[5] + w->S[49]*w->fh[12] + w->S[50]*w->fh[20];
+    t->Phi[66] = 0;
+    t->Phi[71] = one;
+    t->Phi[72] = one;
+    t->Phi[75] = one;
+    t->Phi[76] = one;
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void doubling(ned_doppler13_reduced_transition *restrict t,
         ned_doppler13_reduced_discretize_scratch *restrict w)
 {
     const ned_doppler13_reduced_scalar half = 1.0 / 2.0;
-    w->term[0][0] = t->Phi[0][0]*t->Phi[0][0] + t->Phi[0][1]*t->Phi[1][0] +
-            t->Phi[0][2]*t->Phi[2][0] + t->Phi[0][3]*t->Phi[3][0] + t->Phi[0][4]*t->Phi[4][0] +
-            t->Phi[0][5]*t->Phi[5][0];
-    w->term[1][0] = t->Phi[0][0]*w->S[0] + t->Phi[0][1]*w->S[8] + t->Phi[0][2]*w->S[16] +
-            t->Phi[0][3]*w->S[24] + t->Phi[0][4]*w->S[32] + t->Phi[0][5]*w->S[40];
-    w->term[0][1] = t->Phi[0][0]*t->Phi[0][1] + t->Phi[0][1]*t->Phi[1][1] +
-            t->Phi[0][2]*t->Phi[2][1] + t->Phi[0][3]*t->Phi[3][1] + t->Phi[0][4]*t->Phi[4][1] +
-            t->Phi[0][5]*t->Phi[5][1];
-    w->term[1][1] = t->Phi[0][0]*w->S[1] + t->Phi[0][1]*w->S[9] + t->Phi[0][2]*w->S[17] +
-            t->Phi[0][3]*w->S[25] + t->Phi[0][4]*w->S[33] + t->Phi[0][5]*w->S[41];
-    w->term[0][2] = t->Phi[0][0]*t->Phi[0][2] + t->Phi[0][1]*t->Phi[1][2] +
-            t->Phi[0][2]*t->Phi[2][2] + t->Phi[0][3]*t->Phi[3][2] + t->Phi[0][4]*t->Phi[4][2] +
-            t->Phi[0][5]*t->Phi[5][2];
-    w->term[1][2] = t->Phi[0][0]*w->S[2] + t->Phi[0][1]*w->S[10] + t->Phi[0][2]*w->S[18] +
-            t->Phi[0][3]*w->S[26] + t->Phi[0][4]*w->S[34] + t->Phi[0][5]*w->S[42];
-    w->term[0][3] = t->Phi[0][0]*t->Phi[0][3] + t->Phi[0][1]*t->Phi[1][3] +
-            t->Phi[0][2]*t->Phi[2][3] + t->Phi[0][3]*t->Phi[3][3] + t->Phi[0][4]*t->Phi[4][3] +
-            t->Phi[0][5]*t->Phi[5][3];
-    w->term[1][3] = t->Phi[0][0]*w->S[3] + t->Phi[0][1]*w->S[11] + t->Phi[0][2]*w->S[19] +
-            t->Phi[0][3]*w->S[27] + t->Phi[0][4]*w->S[35] + t->Phi[0][5]*w->S[43];
-    w->term[0][4] = t->Phi[0][0]*t->Phi[0][4] + t->Phi[0][1]*t->Phi[1][4] +
-            t->Phi[0][2]*t->Phi[2][4] + t->Phi[0][3]*t->Phi[3][4] + t->Phi[0][4]*t->Phi[4][4] +
-            t->Phi[0][5]*t->Phi[5][4];
-    w->term[1][4] = t->Phi[0][0]*w->S[4] + t->Phi[0][1]*w->S[12] + t->Phi[0][2]*w->S[20] +
-            t->Phi[0][3]*w->S[28] + t->Phi[0][4]*w->S[36] + t->Phi[0][5]*w->S[44];
-    w->term[0][5] = t->Phi[0][0]*t->Phi[0][5] + t->Phi[0][1]*t->Phi[1][5] +
-            t->Phi[0][2]*t->Phi[2][5] + t->Phi[0][3]*t->Phi[3][5] + t->Phi[0][4]*t->Phi[4][5] +
-            t->Phi[0][5]*t->Phi[5][5];
-    w->term[1][5] = t->Phi[0][0]*w->S[5] + t->Phi[0][1]*w->S[13] + t->Phi[0][2]*w->S[21] +
-            t->Phi[0][3]*w->S[29] + t->Phi[0][4]*w->S[37] + t->Phi[0][5]*w->S[45];
-    w->term[0][6] = t->Phi[0][0]*t->Phi[0][7] + t->Phi[0][1]*t->Phi[1][7] +
-            t->Phi[0][2]*t->Phi[2][7] + t->Phi[0][3]*t->Phi[3][7] + t->Phi[0][4]*t->Phi[4][7] +
-            t->Phi[0][5]*t->Phi[5][7];
-    w->term[1][6] = t->Phi[0][0]*w->S[58] + t->Phi[0][1]*w->S[60] + t->Phi[0][2]*w->S[62] +
-            t->Phi[0][3]*w->S[64] + t->Phi[0][4]*w->S[66] + t->Phi[0][5]*w->S[68] + t->Phi[0][7];
-    w->term[0][7] = t->Phi[0][0]*t->Phi[0][8] + t->Phi[0][1]*t->Phi[1][8] +
-            t->Phi[0][2]*t->Phi[2][8] + t->Phi[0][3]*t->Phi[3][8] + t->Phi[0][4]*t->Phi[4][8] +
-            t->Phi[0][5]*t->Phi[5][8];
-    w->term[1][7] = t->Phi[0][0]*w->S[59] + t->Phi[0][1]*w->S[61] + t->Phi[0][2]*w->S[63] +
-            t->Phi[0][3]*w->S[65] + t->Phi[0][4]*w->S[67] + t->Phi[0][5]*w->S[69] + t->Phi[0][8];
-    w->term[0][8] = t->Phi[0][0]*t->Phi[0][9] + t->Phi[0][1]*t->Phi[1][9] +
-            t->Phi[0][2]*t->Phi[2][9] + t->Phi[0][3]*t->Phi[3][9] + t->Phi[0][4]*t->Phi[4][9] +
-            t->Phi[0][5]*t->Phi[5][9] + t->Phi[0][9]*t->Phi[9][9];
-    w->term[1][8] = t->Phi[0][0]*w->S[6] + t->Phi[0][1]*w->S[14] + t->Phi[0][2]*w->S[22] +
-            t->Phi[0][3]*w->S[30] + t->Phi[0][4]*w->S[38] + t->Phi[0][5]*w->S[46] +
-            t->Phi[0][9]*w->S[56];
-    w->term[0][9] = t->Phi[0][0]*t->Phi[0][10] + t->Phi[0][1]*t->Phi[1][10] +
-            t->Phi[0][2]*t->Phi[2][10] + t->Phi[0][3]*t->Phi[3][10] + t->Phi[0][4]*t->Phi[4][10] +
-            t->Phi[0][5]*t->Phi[5][10] + t->Phi[0][10]*t->Phi[10][10];
-    w->term[1][9] = t->Phi[0][0]*w->S[7] + t->Phi[0][1]*w->S[15] + t->Phi[0][2]*w->S[23] +
-            t->Phi[0][3]*w->S[31] + t->Phi[0][4]*w->S[39] + t->Phi[0][5]*w->S[47] +
-            t->Phi[0][10]*w->S[57];
-    w->term[0][10] = t->Phi[1][0]*t->Phi[0][0] + t->Phi[1][1]*t->Phi[1][0] +
-            t->Phi[1][2]*t->Phi[2][0] + t->Phi[1][3]*t->Phi[3][0] + t->Phi[1][4]*t->Phi[4][0] +
-            t->Phi[1][5]*t->Phi[5][0];
-    w->term[1][10] = t->Phi[1][0]*w->S[0] + t->Phi[1][1]*w->S[8] + t->Phi[1][2]*w->S[16] +
-            t->Phi[1][3]*w->S[24] + t->Phi[1][4]*w->S[32] + t->Phi[1][5]*w->S[40];
-    w->term[0][11] = t->Phi[1][0]*t->Phi[0][1] + t->Phi[1][1]*t->Phi[1][1] +
-            t->Phi[1][2]*t->Phi[2][1] + t->Phi[1][3]*t->Phi[3][1] + t->Phi[1][4]*t->Phi[4][1] +
-            t->Phi[1][5]*t->Phi[5][1];
-    w->term[1][11] = t->Phi[1][0]*w->S[1] + t->Phi[1][1]*w->S[9] + t->Phi[1][2]*w->S[17] +
-            t->Phi[1][3]*w->S[25] + t->Phi[1][4]*w->S[33] + t->Phi[1][5]*w->S[41];
-    w->term[0][12] = t->Phi[1][0]*t->Phi[0][2] + t->Phi[1][1]*t->Phi[1][2] +
-            t->Phi[1][2]*t->Phi[2][2] + t->Phi[1][3]*t->Phi[3][2] + t->Phi[1][4]*t->Phi[4][2] +
-            t->Phi[1][5]*t->Phi[5][2];
-    w->term[1][12] = t->Phi[1][0]*w->S[2] + t->Phi[1][1]*w->S[10] + t->Phi[1][2]*w->S[18] +
-            t->Phi[1][3]*w->S[26] + t->Phi[1][4]*w->S[34] + t->Phi[1][5]*w->S[42];
-    w->term[0][13] = t->Phi[1][0]*t->Phi[0][3] + t->Phi[1][1]*t->Phi[1][3] +
-            t->Phi[1][2]*t->Phi[2][3] + t->Phi[1][3]*t->Phi[3][3] + t->Phi[1][4]*t->Phi[4][3] +
-            t->Phi[1][5]*t->Phi[5][3];
-    w->term[1][13] = t->Phi[1][0]*w->S[3] + t->Phi[1][1]*w->S[11] + t->Phi[1][2]*w->S[19] +
-            t->Phi[1][3]*w->S[27] + t->Phi[1][4]*w->S[35] + t->Phi[1][5]*w->S[43];
-    w->term[0][14] = t->Phi[1][0]*t->Phi[0][4] + t->Phi[1][1]*t->Phi[1][4] +
-            t->Phi[1][2]*t->Phi[2][4] + t->Phi[1][3]*t->Phi[3][4] + t->Phi[1][4]*t->Phi[4][4] +
-            t->Phi[1][5]*t->Phi[5][4];
-    w->term[1][14] = t->Phi[1][0]*w->S[4] + t->Phi[1][1]*w->S[12] + t->Phi[1][2]*w->S[20] +
-            t->Phi[1][3]*w->S[28] + t->Phi[1][4]*w->S[36] + t->Phi[1][5]*w->S[44];
-    w->term[0][15] = t->Phi[1][0]*t->Phi[0][5] + t->Phi[1][1]*t->Phi[1][5] +
-            t->Phi[1][2]*t->Phi[2][5] + t->Phi[1][3]*t->Phi[3][5] + t->Phi[1][4]*t->Phi[4][5] +
-            t->Phi[1][5]*t->Phi[5][5];
-    w->term[1][15] = t->Phi[1][0]*w->S[5] + t->Phi[1][1]*w->S[13] + t->Phi[1][2]*w->S[21] +
-            t->Phi[1][3]*w->S[29] + t->Phi[1][4]*w->S[37] + t->Phi[1][5]*w->S[45];
-    w->term[0][16] = t->Phi[1][0]*t->Phi[0][7] + t->Phi[1][1]*t->Phi[1][7] +
-            t->Phi[1][2]*t->Phi[2][7] + t->Phi[1][3]*t->Phi[3][7] + t->Phi[1][4]*t->Phi[4][7] +
-            t->Phi[1][5]*t->Phi[5][7];
-    w->term[1][16] = t->Phi[1][0]*w->S[58] + t->Phi[1][1]*w->S[60] + t->Phi[1][2]*w->S[62] +
-            t->Phi[1][3]*w->S[64] + t->Phi[1][4]*w->S[66] + t->Phi[1][5]*w->S[68] + t->Phi[1][7];
-    w->term[0][17] = t->Phi[1][0]*t->Phi[0][8] + t->Phi[1][1]*t->Phi[1][8] +
-            t->Phi[1][2]*t->Phi[2][8] + t->Phi[1][3]*t->Phi[3][8] + t->Phi[1][4]*t->Phi[4][8] +
-            t->Phi[1][5]*t->Phi[5][8];
-    w->term[1][17] = t->Phi[1][0]*w->S[59] + t->Phi[1][1]*w->S[61] + t->Phi[1][2]*w->S[63] +
-            t->Phi[1][3]*w->S[65] + t->Phi[1][4]*w->S[67] + t->Phi[1][5]*w->S[69] + t->Phi[1][8];
-    w->term[0][18] = t->Phi[1][0]*t->Phi[0][9] + t->Phi[1][1]*t->Phi[1][9] +
-            t->Phi[1][2]*t->Phi[2][9] + t->Phi[1][3]*t->Phi[3][9] + t->Phi[1][4]*t->Phi[4][9] +
-            t->Phi[1][5]*t->Phi[5][9] + t->Phi[1][9]*t->Phi[9][9];
-    w->term[1][18] = t->Phi[1][0]*w->S[6] + t->Phi[1][1]*w->S[14] + t->Phi[1][2]*w->S[22] +
-            t->Phi[1][3]*w->S[30] + t->Phi[1][4]*w->S[38] + t->Phi[1][5]*w->S[46] +
-            t->Phi[1][9]*w->S[56];
-    w->term[0][19] = t->Phi[1][0]*t->Phi[0][10] + t->Phi[1][1]*t->Phi[1][10] +
-            t->Phi[1][2]*t->Phi[2][10] + t->Phi[1][3]*t->Phi[3][10] + t->Phi[1][4]*t->Phi[4][10] +
-            t->Phi[1][5]*t->Phi[5][10] + t->Phi[1][10]*t->Phi[10][10];
-    w->term[1][19] = t->Phi[1][0]*w->S[7] + t->Phi[1][1]*w->S[15] + t->Phi[1][2]*w->S[23] +
-            t->Phi[1][3]*w->S[31] + t->Phi[1][4]*w->S[39] + t->Phi[1][5]*w->S[47] +
-            t->Phi[1][10]*w->S[57];
-    w->term[0][20] = t->Phi[2][0]*t->Phi[0][0] + t->Phi[2][1]*t->Phi[1][0] +
-            t->Phi[2][2]*t->Phi[2][0] + t->Phi[2][3]*t->Phi[3][0] + t->Phi[2][4]*t->Phi[4][0] +
-            t->Phi[2][5]*t->Phi[5][0];
-    w->term[1][20] = t->Phi[2][0]*w->S[0] + t->Phi[2][1]*w->S[8] + t->Phi[2][2]*w->S[16] +
-            t->Phi[2][3]*w->S[24] + t->Phi[2][4]*w->S[32] + t->Phi[2][5]*w->S[40];
-    w->term[0][21] = t->Phi[2][0]*t->Phi[0][1] + t->Phi[2][1]*t->Phi[1][1] +
-            t->Phi[2][2]*t->Phi[2][1] + t->Phi[2][3]*t->Phi[3][1] + t->Phi[2][4]*t->Phi[4][1] +
-            t->Phi[2][5]*t->Phi[5][1];
-    w->term[1][21] = t->Phi[2][0]*w->S[1] + t->Phi[2][1]*w->S[9] + t->Phi[2][2]*w->S[17] +
-            t->Phi[2][3]*w->S[25] + t->Phi[2][4]*w->S[33] + t->Phi[2][5]*w->S[41];
-    w->term[0][22] = t->Phi[2][0]*t->Phi[0][2] + t->Phi[2][1]*t->Phi[1][2] +
-            t->Phi[2][2]*t->Phi[2][2] + t->Phi[2][3]*t->Phi[3][2] + t->Phi[2][4]*t->Phi[4][2] +
-            t->Phi[2][5]*t->Phi[5][2];
-    w->term[1][22] = t->Phi[2][0]*w->S[2] + t->Phi[2][1]*w->S[10] + t->Phi[2][2]*w->S[18] +
-            t->Phi[2][3]*w->S[26] + t->Phi[2][4]*w->S[34] + t->Phi[2][5]*w->S[42];
-    w->term[0][23] = t->Phi[2][0]*t->Phi[0][3] + t->Phi[2][1]*t->Phi[1][3] +
-            t->Phi[2][2]*t->Phi[2][3] + t->Phi[2][3]*t->Phi[3][3] + t->Phi[2][4]*t->Phi[4][3] +
-            t->Phi[2][5]*t->Phi[5][3];
-    w->term[1][23] = t->Phi[2][0]*w->S[3] + t->Phi[2][1]*w->S[11] + t->Phi[2][2]*w->S[19] +
-            t->Phi[2][3]*w->S[27] + t->Phi[2][4]*w->S[35] + t->Phi[2][5]*w->S[43];
-    w->term[0][24] = t->Phi[2][0]*t->Phi[0][4] + t->Phi[2][1]*t->Phi[1][4] +
-            t->Phi[2][2]*t->Phi[2][4] + t->Phi[2][3]*t->Phi[3][4] + t->Phi[2][4]*t->Phi[4][4] +
-            t->Phi[2][5]*t->Phi[5][4];
-    w->term[1][24] = t->Phi[2][0]*w->S[4] + t->Phi[2][1]*w->S[12] + t->Phi[2][2]*w->S[20] +
-            t->Phi[2][3]*w->S[28] + t->Phi[2][4]*w->S[36] + t->Phi[2][5]*w->S[44];
-    w->term[0][25] = t->Phi[2][0]*t->Phi[0][5] + t->Phi[2][1]*t->Phi[1][5] +
-            t->Phi[2][2]*t->Phi[2][5] + t->Phi[2][3]*t->Phi[3][5] + t->Phi[2][4]*t->Phi[4][5] +
-            t->Phi[2][5]*t->Phi[5][5];
-    w->term[1][25] = t->Phi[2][0]*w->S[5] + t->Phi[2][1]*w->S[13] + t->Phi[2][2]*w->S[21] +
-            t->Phi[2][3]*w->S[29] + t->Phi[2][4]*w->S[37] + t->Phi[2][5]*w->S[45];
-    w->term[0][26] = t->Phi[2][0]*t->Phi[0][7] + t->Phi[2][1]*t->Phi[1][7] +
-            t->Phi[2][2]*t->Phi[2][7] + t->Phi[2][3]*t->Phi[3][7] + t->Phi[2][4]*t->Phi[4][7] +
-            t->Phi[2][5]*t->Phi[5][7];
-    w->term[1][26] = t->Phi[2][0]*w->S[58] + t->Phi[2][1]*w->S[60] + t->Phi[2][2]*w->S[62] +
-            t->Phi[2][3]*w->S[64] + t->Phi[2][4]*w->S[66] + t->Phi[2][5]*w->S[68] + t->Phi[2][7];
-    w->term[0][27] = t->Phi[2][0]*t->Phi[0][8] + t->Phi[2][1]*t->Phi[1][8] +
-            t->Phi[2][2]*t->Phi[2][8] + t->Phi[2][3]*t->Phi[3][8] + t->Phi[2][4]*t->Phi[4][8] +
-            t->Phi[2][5]*t->Phi[5][8];
-    w->term[1][27] = t->Phi[2][0]*w->S[59] + t->Phi[2][1]*w->S[61] + t->Phi[2][2]*w->S[63] +
-            t->Phi[2][3]*w->S[65] + t->Phi[2][4]*w->S[67] + t->Phi[2][5]*w->S[69] + t->Phi[2][8];
-    w->term[0][28] = t->Phi[2][0]*t->Phi[0][9] + t->Phi[2][1]*t->Phi[1][9] +
-            t->Phi[2][2]*t->Phi[2][9] + t->Phi[2][3]*t->Phi[3][9] + t->Phi[2][4]*t->Phi[4][9] +
-            t->Phi[2][5]*t->Phi[5][9] + t->Phi[2][9]*t->Phi[9][9];
-    w->term[1][28] = t->Phi[2][0]*w->S[6] + t->Phi[2][1]*w->S[14] + t->Phi[2][2]*w->S[22] +
-            t->Phi[2][3]*w->S[30] + t->Phi[2][4]*w->S[38] + t->Phi[2][5]*w->S[46] +
-            t->Phi[2][9]*w->S[56];
-    w->term[0][29] = t->Phi[2][0]*t->Phi[0][10] + t->Phi[2][1]*t->Phi[1][10] +
-            t->Phi[2][2]*t->Phi[2][10] + t->Phi[2][3]*t->Phi[3][10] + t->Phi[2][4]*t->Phi[4][10] +
-            t->Phi[2][5]*t->Phi[5][10] + t->Phi[2][10]*t->Phi[10][10];
-    w->term[1][29] = t->Phi[2][0]*w->S[7] + t->Phi[2][1]*w->S[15] + t->Phi[2][2]*w->S[23] +
-            t->Phi[2][3]*w->S[31] + t->Phi[2][4]*w->S[39] + t->Phi[2][5]*w->S[47] +
-            t->Phi[2][10]*w->S[57];
-    w->term[0][30] = t->Phi[3][0]*t->Phi[0][0] + t->Phi[3][1]*t->Phi[1][0] +
-            t->Phi[3][2]*t->Phi[2][0] + t->Phi[3][3]*t->Phi[3][0] + t->Phi[3][4]*t->Phi[4][0] +
-            t->Phi[3][5]*t->Phi[5][0];
-    w->term[1][30] = t->Phi[3][0]*w->S[0] + t->Phi[3][1]*w->S[8] + t->Phi[3][2]*w->S[16] +
-            t->Phi[3][3]*w->S[24] + t->Phi[3][4]*w->S[32] + t->Phi[3][5]*w->S[40];
-    w->term[0][31] = t->Phi[3][0]*t->Phi[0][1] + t->Phi[3][1]*t->Phi[1][1] +
-            t->Phi[3][2]*t->Phi[2][1] + t->Phi[3][3]*t->Phi[3][1] + t->Phi[3][4]*t->Phi[4][1] +
-            t->Phi[3][5]*t->Phi[5][1];
-    w->term[1][31] = t->Phi[3][0]*w->S[1] + t->Phi[3][1]*w->S[9] + t->Phi[3][2]*w->S[17] +
-            t->Phi[3][3]*w->S[25] + t->Phi[3][4]*w->S[33] + t->Phi[3][5]*w->S[41];
-    w->term[0][32] = t->Phi[3][0]*t->Phi[0][2] + t->Phi[3][1]*t->Phi[1][2] +
-            t->Phi[3][2]*t->Phi[2][2] + t->Phi[3][3]*t->Phi[3][2] + t->Phi[3][4]*t->Phi[4][2] +
-            t->Phi[3][5]*t->Phi[5][2];
-    w->term[1][32] = t->Phi[3][0]*w->S[2] + t->Phi[3][1]*w->S[10] + t->Phi[3][2]*w->S[18] +
-            t->Phi[3][3]*w->S[26] + t->Phi[3][4]*w->S[34] + t->Phi[3][5]*w->S[42];
-    w->term[0][33] = t->Phi[3][0]*t->Phi[0][3] + t->Phi[3][1]*t->Phi[1][3] +
-            t->Phi[3][2]*t->Phi[2][3] + t->Phi[3][3]*t->Phi[3][3] + t->Phi[3][4]*t->Phi[4][3] +
-            t->Phi[3][5]*t->Phi[5][3];
-    w->term[1][33] = t->Phi[3][0]*w->S[3] + t->Phi[3][1]*w->S[11] + t->Phi[3][2]*w->S[19] +
-            t->Phi[3][3]*w->S[27] + t->Phi[3][4]*w->S[35] + t->Phi[3][5]*w->S[43];
-    w->term[0][34] = t->Phi[3][0]*t->Phi[0][4] + t->Phi[3][1]*t->Phi[1][4] +
-            t->Phi[3][2]*t->Phi[2][4] + t->Phi[3][3]*t->Phi[3][4] + t->Phi[3][4]*t->Phi[4][4] +
-            t->Phi[3][5]*t->Phi[5][4];
-    w->term[1][34] = t->Phi[3][0]*w->S[4] + t->Phi[3][1]*w->S[12] + t->Phi[3][2]*w->S[20] +
-            t->Phi[3][3]*w->S[28] + t->Phi[3][4]*w->S[36] + t->Phi[3][5]*w->S[44];
-    w->term[0][35] = t->Phi[3][0]*t->Phi[0][5] + t->Phi[3][1]*t->Phi[1][5] +
-            t->Phi[3][2]*t->Phi[2][5] + t->Phi[3][3]*t->Phi[3][5] + t->Phi[3][4]*t->Phi[4][5] +
-            t->Phi[3][5]*t->Phi[5][5];
-    w->term[1][35] = t->Phi[3][0]*w->S[5] + t->Phi[3][1]*w->S[13] + t->Phi[3][2]*w->S[21] +
-            t->Phi[3][3]*w->S[29] + t->Phi[3][4]*w->S[37] + t->Phi[3][5]*w->S[45];
-    w->term[0][36] = t->Phi[3][0]*t->Phi[0][7] + t->Phi[3][1]*t->Phi[1][7] +
-            t->Phi[3][2]*t->Phi[2][7] + t->Phi[3][3]*t->Phi[3][7] + t->Phi[3][4]*t->Phi[4][7] +
-            t->Phi[3][5]*t->Phi[5][7];
-    w->term[1][36] = t->Phi[3][0]*w->S[58] + t->Phi[3][1]*w->S[60] + t->Phi[3][2]*w->S[62] +
-            t->Phi[3][3]*w->S[64] + t->Phi[3][4]*w->S[66] + t->Phi[3][5]*w->S[68] + t->Phi[3][7];
-    w->term[0][37] = t->Phi[3][0]*t->Phi[0][8] + t->Phi[3][1]*t->Phi[1][8] +
-            t->Phi[3][2]*t->Phi[2][8] + t->Phi[3][3]*t->Phi[3][8] + t->Phi[3][4]*t->Phi[4][8] +
-            t->Phi[3][5]*t->Phi[5][8];
-    w->term[1][37] = t->Phi[3][0]*w->S[59] + t->Phi[3][1]*w->S[61] + t->Phi[3][2]*w->S[63] +
-            t->Phi[3][3]*w->S[65] + t->Phi[3][4]*w->S[67] + t->Phi[3][5]*w->S[69] + t->Phi[3][8];
-    w->term[0][38] = t->Phi[3][0]*t->Phi[0][9] + t->Phi[3][1]*t->Phi[1][9] +
-            t->Phi[3][2]*t->Phi[2][9] + t->Phi[3][3]*t->Phi[3][9] + t->Phi[3][4]*t->Phi[4][9] +
-            t->Phi[3][5]*t->Phi[5][9] + t->Phi[3][9]*t->Phi[9][9];
-    w->term[1][38] = t->Phi[3][0]*w->S[6] + t->Phi[3][1]*w->S[14] + t->Phi[3][2]*w->S[22] +
-            t->Phi[3][3]*w->S[30] + t->Phi[3][4]*w->S[38] + t->Phi[3][5]*w->S[46] +
-            t->Phi[3][9]*w->S[56];
-    w->term[0][39] = t->Phi[3][0]*t->Phi[0][10] + t->Phi[3][1]*t->Phi[1][10] +
-            t->Phi[3][2]*t->Phi[2][10] + t->Phi[3][3]*t->Phi[3][10] + t->Phi[3][4]*t->Phi[4][10] +
-            t->Phi[3][5]*t->Phi[5][10] + t->Phi[3][10]*t->Phi[10][10];
-    w->term[1][39] = t->Phi[3][0]*w->S[7] + t->Phi[3][1]*w->S[15] + t->Phi[3][2]*w->S[23] +
-            t->Phi[3][3]*w->S[31] + t->Phi[3][4]*w->S[39] + t->Phi[3][5]*w->S[47] +
-            t->Phi[3][10]*w->S[57];
-    w->term[0][40] = t->Phi[4][0]*t->Phi[0][0] + t->Phi[4][1]*t->Phi[1][0] +
-            t->Phi[4][2]*t->Phi[2][0] + t->Phi[4][3]*t->Phi[3][0] + t->Phi[4][4]*t->Phi[4][0] +
-            t->Phi[4][5]*t->Phi[5][0];
-    w->term[1][40] = t->Phi[4][0]*w->S[0] + t->Phi[4][1]*w->S[8] + t->Phi[4][2]*w->S[16] +
-            t->Phi[4][3]*w->S[24] + t->Phi[4][4]*w->S[32] + t->Phi[4][5]*w->S[40];
-    w->term[0][41] = t->Phi[4][0]*t->Phi[0][1] + t->Phi[4][1]*t->Phi[1][1] +
-            t->Phi[4][2]*t->Phi[2][1] + t->Phi[4][3]*t->Phi[3][1] + t->Phi[4][4]*t->Phi[4][1] +
-            t->Phi[4][5]*t->Phi[5][1];
-    w->term[1][41] = t->Phi[4][0]*w->S[1] + t->Phi[4][1]*w->S[9] + t->Phi[4][2]*w->S[17] +
-            t->Phi[4][3]*w->S[25] + t->Phi[4][4]*w->S[33] + t->Phi[4][5]*w->S[41];
-    w->term[0][42] = t->Phi[4][0]*t->Phi[0][2] + t->Phi[4][1]*t->Phi[1][2] +
-            t->Phi[4][2]*t->Phi[2][2] + t->Phi[4][3]*t->Phi[3][2] + t->Phi[4][4]*t->Phi[4][2] +
-            t->Phi[4][5]*t->Phi[5][2];
-    w->term[1][42] = t->Phi[4][0]*w->S[2] + t->Phi[4][1]*w->S[10] + t->Phi[4][2]*w->S[18] +
-            t->Phi[4][3]*w->S[26] + t->Phi[4][4]*w->S[34] + t->Phi[4][5]*w->S[42];
-    w->term[0][43] = t->Phi[4][0]*t->Phi[0][3] + t->Phi[4][1]*t->Phi[1][3] +
-            t->Phi[4][2]*t->Phi[2][3] + t->Phi[4][3]*t->Phi[3][3] + t->Phi[4][4]*t->Phi[4][3] +
-            t->Phi[4][5]*t->Phi[5][3];
-    w->term[1][43] = t->Phi[4][0]*w->S[3] + t->Phi[4][1]*w->S[11] + t->Phi[4][2]*w->S[19] +
-            t->Phi[4][3]*w->S[27] + t->Phi[4][4]*w->S[35] + t->Phi[4][5]*w->S[43];
-    w->term[0][44] = t->Phi[4][0]*t->Phi[0][4] + t->Phi[4][1]*t->Phi[1][4] +
-            t->Phi[4][2]*t->Phi[2][4] + t->Phi[4][3]*t->Phi[3][4] + t->Phi[4][4]*t->Phi[4][4] +
-            t->Phi[4][5]*t->Phi[5][4];
-    w->term[1][44] = t->Phi[4][0]*w->S[4] + t->Phi[4][1]*w->S[12] + t->Phi[4][2]*w->S[20] +
-            t->Phi[4][3]*w->S[28] + t->Phi[4][4]*w->S[36] + t->Phi[4][5]*w->S[44];
-    w->term[0][45] = t->Phi[4][0]*t->Phi[0][5] + t->Phi[4][1]*t->Phi[1][5] +
-            t->Phi[4][2]*t->Phi[2][5] + t->Phi[4][3]*t->Phi[3][5] + t->Phi[4][4]*t->Phi[4][5] +
-            t->Phi[4][5]*t->Phi[5][5];
-    w->term[1][45] = t->Phi[4][0]*w->S[5] + t->Phi[4][1]*w->S[13] + t->Phi[4][2]*w->S[21] +
-            t->Phi[4][3]*w->S[29] + t->Phi[4][4]*w->S[37] + t->Phi[4][5]*w->S[45];
-    w->term[0][46] = t->Phi[4][0]*t->Phi[0][7] + t->Phi[4][1]*t->Phi[1][7] +
-            t->Phi[4][2]*t->Phi[2][7] + t->Phi[4][3]*t->Phi[3][7] + t->Phi[4][4]*t->Phi[4][7] +
-            t->Phi[4][5]*t->Phi[5][7];
-    w->term[1][46] = t->Phi[4][0]*w->S[58] + t->Phi[4][1]*w->S[60] + t->Phi[4][2]*w->S[62] +
-            t->Phi[4][3]*w->S[64] + t->Phi[4][4]*w->S[66] + t->Phi[4][5]*w->S[68] + t->Phi[4][7];
-    w->term[0][47] = t->Phi[4][0]*t->Phi[0][8] + t->Phi[4][1]*t->Phi[1][8] +
-            t->Phi[4][2]*t->Phi[2][8] + t->Phi[4][3]*t->Phi[3][8] + t->Phi[4][4]*t->Phi[4][8] +
-            t->Phi[4][5]*t->Phi[5][8];
-    w->term[1][47] = t->Phi[4][0]*w->S[59] + t->Phi[4][1]*w->S[61] + t->Phi[4][2]*w->S[63] +
-            t->Phi[4][3]*w->S[65] + t->Phi[4][4]*w->S[67] + t->Phi[4][5]*w->S[69] + t->Phi[4][8];
-    w->term[0][48] = t->Phi[4][0]*t->Phi[0][9] + t->Phi[4][1]*t->Phi[1][9] +
-            t->Phi[4][2]*t->Phi[2][9] + t->Phi[4][3]*t->Phi[3][9] + t->Phi[4][4]*t->Phi[4][9] +
-            t->Phi[4][5]*t->Phi[5][9] + t->Phi[4][9]*t->Phi[9][9];
-    w->term[1][48] = t->Phi[4][0]*w->S[6] + t->Phi[4][1]*w->S[14] + t->Phi[4][2]*w->S[22] +
-            t->Phi[4][3]*w->S[30] + t->Phi[4][4]*w->S[38] + t->Phi[4][5]*w->S[46] +
-            t->Phi[4][9]*w->S[56];
-    w->term[0][49] = t->Phi[4][0]*t->Phi[0][10] + t->Phi[4][1]*t->Phi[1][10] +
-            t->Phi[4][2]*t->Phi[2][10] + t->Phi[4][3]*t->Phi[3][10] + t->Phi[4][4]*t->Phi[4][10] +
-            t->Phi[4][5]*t->Phi[5][10] + t->Phi[4][10]*t->Phi[10][10];
-    w->term[1][49] = t->Phi[4][0]*w->S[7] + t->Phi[4][1]*w->S[15] + t->Phi[4][2]*w->S[23] +
-            t->Phi[4][3]*w->S[31] + t->Phi[4][4]*w->S[39] + t->Phi[4][5]*w->S[47] +
-            t->Phi[4][10]*w->S[57];
-    w->term[0][50] = t->Phi[5][0]*t->Phi[0][0] + t->Phi[5][1]*t->Phi[1][0] +
-            t->Phi[5][2]*t->Phi[2][0] + t->Phi[5][3]*t->Phi[3][0] + t->Phi[5][4]*t->Phi[4][0] +
-            t->Phi[5][5]*t->Phi[5][0];
-    w->term[1][50] = t->Phi[5][0]*w->S[0] + t->Phi[5][1]*w->S[8] + t->Phi[5][2]*w->S[16] +
-            t->Phi[5][3]*w->S[24] + t->Phi[5][4]*w->S[32] + t->Phi[5][5]*w->S[40];
-    w->term[0][51] = t->Phi[5][0]*t->Phi[0][1] + t->Phi[5][1]*t->Phi[1][1] +
-            t->Phi[5][2]*t->Phi[2][1] + t->Phi[5][3]*t->Phi[3][1] + t->Phi[5][4]*t->Phi[4][1] +
-            t->Phi[5][5]*t->Phi[5][1];
-    w->term[1][51] = t->Phi[5][0]*w->S[1] + t->Phi[5][1]*w->S[9] + t->Phi[5][2]*w->S[17] +
-            t->Phi[5][3]*w->S[25] + t->Phi[5][4]*w->S[33] + t->Phi[5][5]*w->S[41];
-    w->term[0][52] = t->Phi[5][0]*t->Phi[0][2] + t->Phi[5][1]*t->Phi[1][2] +
-            t->Phi[5][2]*t->Phi[2][2] + t->Phi[5][3]*t->Phi[3][2] + t->Phi[5][4]*t->Phi[4][2] +
-            t->Phi[5][5]*t->Phi[5][2];
-    w->term[1][52] = t->Phi[5][0]*w->S[2] + t->Phi[5][1]*w->S[10] + t->Phi[5][2]*w->S[18] +
-            t->Phi[5][3]*w->S[26] + t->Phi[5][4]*w->S[34] + t->Phi[5][5]*w->S[42];
-    w->term[0][53] = t->Phi[5][0]*t->Phi[0][3] + t->Phi[5][1]*t->Phi[1][3] +
-            t->Phi[5][2]*t->Phi[2][3] + t->Phi[5][3]*t->Phi[3][3] + t->Phi[5][4]*t->Phi[4][3] +
-            t->Phi[5][5]*t->Phi[5][3];
-    w->term[1][53] = t->Phi[5][0]*w->S[3] + t->Phi[5][1]*w->S[11] + t->Phi[5][2]*w->S[19] +
-            t->Phi[5][3]*w->S[27] + t->Phi[5][4]*w->S[35] + t->Phi[5][5]*w->S[43];
-    w->term[0][54] = t->Phi[5][0]*t->Phi[0][4] + t->Phi[5][1]*t->Phi[1][4] +
-            t->Phi[5][2]*t->Phi[2][4] + t->Phi[5][3]*t->Phi[3][4] + t->Phi[5][4]*t->Phi[4][4] +
-            t->Phi[5][5]*t->Phi[5][4];
-    w->term[1][54] = t->Phi[5][0]*w->S[4] + t->Phi[5][1]*w->S[12] + t->Phi[5][2]*w->S[20] +
-            t->Phi[5][3]*w->S[28] + t->Phi[5][4]*w->S[36] + t->Phi[5][5]*w->S[44];
-    w->term[0][55] = t->Phi[5][0]*t->Phi[0][5] + t->Phi[5][1]*t->Phi[1][5] +
-            t->Phi[5][2]*t->Phi[2][5] + t->Phi[5][3]*t->Phi[3][5] + t->Phi[5][4]*t->Phi[4][5] +
-            t->Phi[5][5]*t->Phi[5][5];
-    w->term[1][55] = t->Phi[5][0]*w->S[5] + t->Phi[5][1]*w->S[13] + t->Phi[5][2]*w->S[21] +
-            t->Phi[5][3]*w->S[29] + t->Phi[5][4]*w->S[37] + t->Phi[5][5]*w->S[45];
-    w->term[0][56] = t->Phi[5][0]*t->Phi[0][7] + t->Phi[5][1]*t->Phi[1][7] +
-            t->Phi[5][2]*t->Phi[2][7] + t->Phi[5][3]*t->Phi[3][7] + t->Phi[5][4]*t->Phi[4][7] +
-            t->Phi[5][5]*t->Phi[5][7];
-    w->term[1][56] = t->Phi[5][0]*w->S[58] + t->Phi[5][1]*w->S[60] + t->Phi[5][2]*w->S[62] +
-            t->Phi[5][3]*w->S[64] + t->Phi[5][4]*w->S[66] + t->Phi[5][5]*w->S[68] + t->Phi[5][7];
-    w->term[0][57] = t->Phi[5][0]*t->Phi[0][8] + t->Phi[5][1]*t->Phi[1][8] +
-            t->Phi[5][2]*t->Phi[2][8] + t->Phi[5][3]*t->Phi[3][8] + t->Phi[5][4]*t->Phi[4][8] +
-            t->Phi[5][5]*t->Phi[5][8];
-    w->term[1][57] = t->Phi[5][0]*w->S[59] + t->Phi[5][1]*w->S[61] + t->Phi[5][2]*w->S[63] +
-            t->Phi[5][3]*w->S[65] + t->Phi[5][4]*w->S[67] + t->Phi[5][5]*w->S[69] + t->Phi[5][8];
-    w->term[0][58] = t->Phi[5][0]*t->Phi[0][9] + t->Phi[5][1]*t->Phi[1][9] +
-            t->Phi[5][2]*t->Phi[2][9] + t->Phi[5][3]*t->Phi[3][9] + t->Phi[5][4]*t->Phi[4][9] +
-            t->Phi[5][5]*t->Phi[5][9] + t->Phi[5][9]*t->Phi[9][9];
-    w->term[1][58] = t->Phi[5][0]*w->S[6] + t->Phi[5][1]*w->S[14] + t->Phi[5][2]*w->S[22] +
-            t->Phi[5][3]*w->S[30] + t->Phi[5][4]*w->S[38] + t->Phi[5][5]*w->S[46] +
-            t->Phi[5][9]*w->S[56];
-    w->term[0][59] = t->Phi[5][0]*t->Phi[0][10] + t->Phi[5][1]*t->Phi[1][10] +
-            t->Phi[5][2]*t->Phi[2][10] + t->Phi[5][3]*t->Phi[3][10] + t->Phi[5][4]*t->Phi[4][10] +
-            t->Phi[5][5]*t->Phi[5][10] + t->Phi[5][10]*t->Phi[10][10];
-    w->term[1][59] = t->Phi[5][0]*w->S[7] + t->Phi[5][1]*w->S[15] + t->Phi[5][2]*w->S[23] +
-            t->Phi[5][3]*w->S[31] + t->Phi[5][4]*w->S[39] + t->Phi[5][5]*w->S[47] +
-            t->Phi[5][10]*w->S[57];
-    w->term[0][60] = t->Phi[6][0]*t->Phi[0][0] + t->Phi[6][1]*t->Phi[1][0] +
-            t->Phi[6][2]*t->Phi[2][0] + t->Phi[6][3]*t->Phi[3][0] + t->Phi[6][4]*t->Phi[4][0] +
-            t->Phi[6][5]*t->Phi[5][0] + t->Phi[6][6]*t->Phi[6][0];
-    w->term[1][60] = t->Phi[6][0]*w->S[0] + t->Phi[6][1]*w->S[8] + t->Phi[6][2]*w->S[16] +
-            t->Phi[6][3]*w->S[24] + t->Phi[6][4]*w->S[32] + t->Phi[6][5]*w->S[40] +
-            t->Phi[6][6]*w->S[48];
-    w->term[0][61] = t->Phi[6][0]*t->Phi[0][1] + t->Phi[6][1]*t->Phi[1][1] +
-            t->Phi[6][2]*t->Phi[2][1] + t->Phi[6][3]*t->Phi[3][1] + t->Phi[6][4]*t->Phi[4][1] +
-            t->Phi[6][5]*t->Phi[5][1] + t->Phi[6][6]*t->Phi[6][1];
-    w->term[1][61] = t->Phi[6][0]*w->S[1] + t->Phi[6][1]*w->S[9] + t->Phi[6][2]*w->S[17] +
-            t->Phi[6][3]*w->S[25] + t->Phi[6][4]*w->S[33] + t->Phi[6][5]*w->S[41] +
-            t->Phi[6][6]*w->S[49];
-    w->term[0][62] = t->Phi[6][0]*t->Phi[0][2] + t->Phi[6][1]*t->Phi[1][2] +
-            t->Phi[6][2]*t->Phi[2][2] + t->Phi[6][3]*t->Phi[3][2] + t->Phi[6][4]*t->Phi[4][2] +
-            t->Phi[6][5]*t->Phi[5][2] + t->Phi[6][6]*t->Phi[6][2];
-    w->term[1][62] = t->Phi[6][0]*w->S[2] + t->Phi[6][1]*w->S[10] + t->Phi[6][2]*w->S[18] +
-            t->Phi[6][3]*w->S[26] + t->Phi[6][4]*w->S[34] + t->Phi[6][5]*w->S[42] +
-            t->Phi[6][6]*w->S[50];
-    w->term[0][63] = t->Phi[6][0]*t->Phi[0][3] + t->Phi[6][1]*t->Phi[1][3] +
-            t->Phi[6][2]*t->Phi[2][3] + t->Phi[6][3]*t->Phi[3][3] + t->Phi[6][4]*t->Phi[4][3] +
-            t->Phi[6][5]*t->Phi[5][3] + t->Phi[6][6]*t->Phi[6][3];
-    w->term[1][63] = t->Phi[6][0]*w->S[3] + t->Phi[6][1]*w->S[11] + t->Phi[6][2]*w->S[19] +
-            t->Phi[6][3]*w->S[27] + t->Phi[6][4]*w->S[35] + t->Phi[6][5]*w->S[43] +
-            t->Phi[6][6]*w->S[51];
-    w->term[0][64] = t->Phi[6][0]*t->Phi[0][4] + t->Phi[6][1]*t->Phi[1][4] +
-            t->Phi[6][2]*t->Phi[2][4] + t->Phi[6][3]*t->Phi[3][4] + t->Phi[6][4]*t->Phi[4][4] +
-            t->Phi[6][5]*t->Phi[5][4] + t->Phi[6][6]*t->Phi[6][4];
-    w->term[1][64] = t->Phi[6][0]*w->S[4] + t->Phi[6][1]*w->S[12] + t->Phi[6][2]*w->S[20] +
-            t->Phi[6][3]*w->S[28] + t->Phi[6][4]*w->S[36] + t->Phi[6][5]*w->S[44] +
-            t->Phi[6][6]*w->S[52];
-    w->term[0][65] = t->Phi[6][0]*t->Phi[0][5] + t->Phi[6][1]*t->Phi[1][5] +
-            t->Phi[6][2]*t->Phi[2][5] + t->Phi[6][3]*t->Phi[3][5] + t->Phi[6][4]*t->Phi[4][5] +
-            t->Phi[6][5]*t->Phi[5][5] + t->Phi[6][6]*t->Phi[6][5];
-    w->term[1][65] = t->Phi[6][0]*w->S[5] + t->Phi[6][1]*w->S[13] + t->Phi[6][2]*w->S[21] +
-            t->Phi[6][3]*w->S[29] + t->Phi[6][4]*w->S[37] + t->Phi[6][5]*w->S[45] +
-            t->Phi[6][6]*w->S[53];
-    w->term[0][66] = t->Phi[6][6]*t->Phi[6][6];
-    w->term[1][66] = t->Phi[6][6]*w->S[70];
-    w->term[0][67] = t->Phi[6][0]*t->Phi[0][7] + t->Phi[6][1]*t->Phi[1][7] +
-            t->Phi[6][2]*t->Phi[2][7] + t->Phi[6][3]*t->Phi[3][7] + t->Phi[6][4]*t->Phi[4][7] +
-            t->Phi[6][5]*t->Phi[5][7] + t->Phi[6][6]*t->Phi[6][7];
-    w->term[1][67] = t->Phi[6][0]*w->S[58] + t->Phi[6][1]*w->S[60] + t->Phi[6][2]*w->S[62] +
-            t->Phi[6][3]*w->S[64] + t->Phi[6][4]*w->S[66] + t->Phi[6][5]*w->S[68] +
-            t->Phi[6][6]*w->S[71] + t->Phi[6][7];
-    w->term[0][68] = t->Phi[6][0]*t->Phi[0][8] + t->Phi[6][1]*t->Phi[1][8] +
-            t->Phi[6][2]*t->Phi[2][8] + t->Phi[6][3]*t->Phi[3][8] + t->Phi[6][4]*t->Phi[4][8] +
-            t->Phi[6][5]*t->Phi[5][8] + t->Phi[6][6]*t->Phi[6][8];
-    w->term[1][68] = t->Phi[6][0]*w->S[59] + t->Phi[6][1]*w->S[61] + t->Phi[6][2]*w->S[63] +
-            t->Phi[6][3]*w->S[65] + t->Phi[6][4]*w->S[67] + t->Phi[6][5]*w->S[69] +
-            t->Phi[6][6]*w->S[72] + t->Phi[6][8];
-    w->term[0][69] = t->Phi[6][0]*t->Phi[0][9] + t->Phi[6][1]*t->Phi[1][9] +
-            t->Phi[6][2]*t->Phi[2][9] + t->Phi[6][3]*t->Phi[3][9] + t->Phi[6][4]*t->Phi[4][9] +
-            t->Phi[6][5]*t->Phi[5][9] + t->Phi[6][6]*t->Phi[6][9] + t->Phi[6][9]*t->Phi[9][9];
-    w->term[1][69] = t->Phi[6][0]*w->S[6] + t->Phi[6][1]*w->S[14] + t->Phi[6][2]*w->S[22] +
-            t->Phi[6][3]*w->S[30] + t->Phi[6][4]*w->S[38] + t->Phi[6][5]*w->S[46] +
-            t->Phi[6][6]*w->S[54] + t->Phi[6][9]*w->S[56];
-    w->term[0][70] = t->Phi[6][0]*t->Phi[0][10] + t->Phi[6][1]*t->Phi[1][10] +
-            t->Phi[6][2]*t->Phi[2][10] + t->Phi[6][3]*t->Phi[3][10] + t->Phi[6][4]*t->Phi[4][10] +
-            t->Phi[6][5]*t->Phi[5][10] + t->Phi[6][6]*t->Phi[6][10] + t->Phi[6][10]*t->Phi[10][10];
-    w->term[1][70] = t->Phi[6][0]*w->S[7] + t->Phi[6][1]*w->S[15] + t->Phi[6][2]*w->S[23] +
-            t->Phi[6][3]*w->S[31] + t->Phi[6][4]*w->S[39] + t->Phi[6][5]*w->S[47] +
-            t->Phi[6][6]*w->S[55] + t->Phi[6][10]*w->S[57];
-    w->term[0][71] = t->Phi[9][9]*t->Phi[9][9];
-    w->term[1][71] = t->Phi[9][9]*w->S[56];
-    w->term[0][72] = t->Phi[10][10]*t->Phi[10][10];
-    w->term[1][72] = t->Phi[10][10]*w->S[57];
-    t->Phi[0][0] = t->Phi[0][0] + t->Phi[0][0] + w->term[0][0];
+    int k;
+    for (k = 0; k < 6; ++k) {
+        w->term[0][k] = t->Phi[0]*t->Phi[k] + t->Phi[1]*t->Phi[10+k] + t->Phi[2]*t->Phi[20+k] +
+                t->Phi[3]*t->Phi[30+k] + t->Phi[4]*t->Phi[40+k] + t->Phi[5]*t->Phi[50+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[0][6+k] = t->Phi[0]*t->Phi[6+k] + t->Phi[1]*t->Phi[16+k] + t->Phi[2]*t->Phi[26+k] +
+                t->Phi[3]*t->Phi[36+k] + t->Phi[4]*t->Phi[46+k] + t->Phi[5]*t->Phi[56+k];
+        w->term[0][8+k] = t->Phi[0]*t->Phi[8+k] + t->Phi[1]*t->Phi[18+k] + t->Phi[2]*t->Phi[28+k] +
+                t->Phi[3]*t->Phi[38+k] + t->Phi[4]*t->Phi[48+k] + t->Phi[5]*t->Phi[58+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[0][10+k] = t->Phi[10]*t->Phi[k] + t->Phi[11]*t->Phi[10+k] + t->Phi[12]*t->Phi[20+k]
+                + t->Phi[13]*t->Phi[30+k] + t->Phi[14]*t->Phi[40+k] + t->Phi[15]*t->Phi[50+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[0][16+k] = t->Phi[10]*t->Phi[6+k] + t->Phi[11]*t->Phi[16+k] +
+                t->Phi[12]*t->Phi[26+k] + t->Phi[13]*t->Phi[36+k] + t->Phi[14]*t->Phi[46+k] +
+                t->Phi[15]*t->Phi[56+k];
+        w->term[0][18+k] = t->Phi[10]*t->Phi[8+k] + t->Phi[11]*t->Phi[18+k] +
+                t->Phi[12]*t->Phi[28+k] + t->Phi[13]*t->Phi[38+k] + t->Phi[14]*t->Phi[48+k] +
+                t->Phi[15]*t->Phi[58+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[0][20+k] = t->Phi[20]*t->Phi[k] + t->Phi[21]*t->Phi[10+k] + t->Phi[22]*t->Phi[20+k]
+                + t->Phi[23]*t->Phi[30+k] + t->Phi[24]*t->Phi[40+k] + t->Phi[25]*t->Phi[50+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[0][26+k] = t->Phi[20]*t->Phi[6+k] + t->Phi[21]*t->Phi[16+k] +
+                t->Phi[22]*t->Phi[26+k] + t->Phi[23]*t->Phi[36+k] + t->Phi[24]*t->Phi[46+k] +
+                t->Phi[25]*t->Phi[56+k];
+        w->term[0][28+k] = t->Phi[20]*t->Phi[8+k] + t->Phi[21]*t->Phi[18+k] +
+                t->Phi[22]*t->Phi[28+k] + t->Phi[23]*t->Phi[38+k] + t->Phi[24]*t->Phi[48+k] +
+                t->Phi[25]*t->Phi[58+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[0][30+k] = t->Phi[30]*t->Phi[k] + t->Phi[31]*t->Phi[10+k] + t->Phi[32]*t->Phi[20+k]
+                + t->Phi[33]*t->Phi[30+k] + t->Phi[34]*t->Phi[40+k] + t->Phi[35]*t->Phi[50+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[0][36+k] = t->Phi[30]*t->Phi[6+k] + t->Phi[31]*t->Phi[16+k] +
+                t->Phi[32]*t->Phi[26+k] + t->Phi[33]*t->Phi[36+k] + t->Phi[34]*t->Phi[46+k] +
+                t->Phi[35]*t->Phi[56+k];
+        w->term[0][38+k] = t->Phi[30]*t->Phi[8+k] + t->Phi[31]*t->Phi[18+k] +
+                t->Phi[32]*t->Phi[28+k] + t->Phi[33]*t->Phi[38+k] + t->Phi[34]*t->Phi[48+k] +
+                t->Phi[35]*t->Phi[58+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[0][40+k] = t->Phi[40]*t->Phi[k] + t->Phi[41]*t->Phi[10+k] + t->Phi[42]*t->Phi[20+k]
+                + t->Phi[43]*t->Phi[30+k] + t->Phi[44]*t->Phi[40+k] + t->Phi[45]*t->Phi[50+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[0][46+k] = t->Phi[40]*t->Phi[6+k] + t->Phi[41]*t->Phi[16+k] +
+                t->Phi[42]*t->Phi[26+k] + t->Phi[43]*t->Phi[36+k] + t->Phi[44]*t->Phi[46+k] +
+                t->Phi[45]*t->Phi[56+k];
+        w->term[0][48+k] = t->Phi[40]*t->Phi[8+k] + t->Phi[41]*t->Phi[18+k] +
+                t->Phi[42]*t->Phi[28+k] + t->Phi[43]*t->Phi[38+k] + t->Phi[44]*t->Phi[48+k] +
+                t->Phi[45]*t->Phi[58+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[0][50+k] = t->Phi[50]*t->Phi[k] + t->Phi[51]*t->Phi[10+k] + t->Phi[52]*t->Phi[20+k]
+                + t->Phi[53]*t->Phi[30+k] + t->Phi[54]*t->Phi[40+k] + t->Phi[55]*t->Phi[50+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[0][56+k] = t->Phi[50]*t->Phi[6+k] + t->Phi[51]*t->Phi[16+k] +
+                t->Phi[52]*t->Phi[26+k] + t->Phi[53]*t->Phi[36+k] + t->Phi[54]*t->Phi[46+k] +
+                t->Phi[55]*t->Phi[56+k];
+        w->term[0][58+k] = t->Phi[50]*t->Phi[8+k] + t->Phi[51]*t->Phi[18+k] +
+                t->Phi[52]*t->Phi[28+k] + t->Phi[53]*t->Phi[38+k] + t->Phi[54]*t->Phi[48+k] +
+                t->Phi[55]*t->Phi[58+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[0][60+k] = t->Phi[60]*t->Phi[k] + t->Phi[61]*t->Phi[10+k] + t->Phi[62]*t->Phi[20+k]
+                + t->Phi[63]*t->Phi[30+k] + t->Phi[64]*t->Phi[40+k] + t->Phi[65]*t->Phi[50+k] +
+                t->Phi[66]*t->Phi[60+k];
+    }
+    w->term[0][66] = t->Phi[66]*t->Phi[66];
+    for (k = 0; k < 2; ++k) {
+        w->term[0][67+k] = t->Phi[60]*t->Phi[6+k] + t->Phi[61]*t->Phi[16+k] +
+                t->Phi[62]*t->Phi[26+k] + t->Phi[63]*t->Phi[36+k] + t->Phi[64]*t->Phi[46+k] +
+                t->Phi[65]*t->Phi[56+k] + t->Phi[66]*t->Phi[67+k];
+        w->term[0][69+k] = t->Phi[60]*t->Phi[8+k] + t->Phi[61]*t->Phi[18+k] +
+                t->Phi[62]*t->Phi[28+k] + t->Phi[63]*t->Phi[38+k] + t->Phi[64]*t->Phi[48+k] +
+                t->Phi[65]*t->Phi[58+k] + t->Phi[66]*t->Phi[69+k];
+    }
+    w->term[0][71] = t->Phi[73]*t->Phi[73];
+    w->term[0][72] = t->Phi[74]*t->Phi[74];
+    for (k = 0; k < 6; ++k) {
+        w->term[1][k] = t->Phi[0]*w->S[k] + t->Phi[1]*w->S[8+k] + t->Phi[2]*w->S[16+k] +
+                t->Phi[3]*w->S[24+k] + t->Phi[4]*w->S[32+k] + t->Phi[5]*w->S[40+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[1][6+k] = t->Phi[0]*w->S[58+k] + t->Phi[1]*w->S[60+k] + t->Phi[2]*w->S[62+k] +
+                t->Phi[3]*w->S[64+k] + t->Phi[4]*w->S[66+k] + t->Phi[5]*w->S[68+k];
+        w->term[1][8+k] = t->Phi[0]*w->S[6+k] + t->Phi[1]*w->S[14+k] + t->Phi[2]*w->S[22+k] +
+                t->Phi[3]*w->S[30+k] + t->Phi[4]*w->S[38+k] + t->Phi[5]*w->S[46+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[1][10+k] = t->Phi[10]*w->S[k] + t->Phi[11]*w->S[8+k] + t->Phi[12]*w->S[16+k] +
+                t->Phi[13]*w->S[24+k] + t->Phi[14]*w->S[32+k] + t->Phi[15]*w->S[40+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[1][16+k] = t->Phi[10]*w->S[58+k] + t->Phi[11]*w->S[60+k] + t->Phi[12]*w->S[62+k] +
+                t->Phi[13]*w->S[64+k] + t->Phi[14]*w->S[66+k] + t->Phi[15]*w->S[68+k];
+        w->term[1][18+k] = t->Phi[10]*w->S[6+k] + t->Phi[11]*w->S[14+k] + t->Phi[12]*w->S[22+k] +
+                t->Phi[13]*w->S[30+k] + t->Phi[14]*w->S[38+k] + t->Phi[15]*w->S[46+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[1][20+k] = t->Phi[20]*w->S[k] + t->Phi[21]*w->S[8+k] + t->Phi[22]*w->S[16+k] +
+                t->Phi[23]*w->S[24+k] + t->Phi[24]*w->S[32+k] + t->Phi[25]*w->S[40+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[1][26+k] = t->Phi[20]*w->S[58+k] + t->Phi[21]*w->S[60+k] + t->Phi[22]*w->S[62+k] +
+                t->Phi[23]*w->S[64+k] + t->Phi[24]*w->S[66+k] + t->Phi[25]*w->S[68+k];
+        w->term[1][28+k] = t->Phi[20]*w->S[6+k] + t->Phi[21]*w->S[14+k] + t->Phi[22]*w->S[22+k] +
+                t->Phi[23]*w->S[30+k] + t->Phi[24]*w->S[38+k] + t->Phi[25]*w->S[46+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[1][30+k] = t->Phi[30]*w->S[k] + t->Phi[31]*w->S[8+k] + t->Phi[32]*w->S[16+k] +
+                t->Phi[33]*w->S[24+k] + t->Phi[34]*w->S[32+k] + t->Phi[35]*w->S[40+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[1][36+k] = t->Phi[30]*w->S[58+k] + t->Phi[31]*w->S[60+k] + t->Phi[32]*w->S[62+k] +
+                t->Phi[33]*w->S[64+k] + t->Phi[34]*w->S[66+k] + t->Phi[35]*w->S[68+k];
+        w->term[1][38+k] = t->Phi[30]*w->S[6+k] + t->Phi[31]*w->S[14+k] + t->Phi[32]*w->S[22+k] +
+                t->Phi[33]*w->S[30+k] + t->Phi[34]*w->S[38+k] + t->Phi[35]*w->S[46+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[1][40+k] = t->Phi[40]*w->S[k] + t->Phi[41]*w->S[8+k] + t->Phi[42]*w->S[16+k] +
+                t->Phi[43]*w->S[24+k] + t->Phi[44]*w->S[32+k] + t->Phi[45]*w->S[40+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[1][46+k] = t->Phi[40]*w->S[58+k] + t->Phi[41]*w->S[60+k] + t->Phi[42]*w->S[62+k] +
+                t->Phi[43]*w->S[64+k] + t->Phi[44]*w->S[66+k] + t->Phi[45]*w->S[68+k];
+        w->term[1][48+k] = t->Phi[40]*w->S[6+k] + t->Phi[41]*w->S[14+k] + t->Phi[42]*w->S[22+k] +
+                t->Phi[43]*w->S[30+k] + t->Phi[44]*w->S[38+k] + t->Phi[45]*w->S[46+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[1][50+k] = t->Phi[50]*w->S[k] + t->Phi[51]*w->S[8+k] + t->Phi[52]*w->S[16+k] +
+                t->Phi[53]*w->S[24+k] + t->Phi[54]*w->S[32+k] + t->Phi[55]*w->S[40+k];
+    }
+    for (k = 0; k < 2; ++k) {
+        w->term[1][56+k] = t->Phi[50]*w->S[58+k] + t->Phi[51]*w->S[60+k] + t->Phi[52]*w->S[62+k] +
+                t->Phi[53]*w->S[64+k] + t->Phi[54]*w->S[66+k] + t->Phi[55]*w->S[68+k];
+        w->term[1][58+k] = t->Phi[50]*w->S[6+k] + t->Phi[51]*w->S[14+k] + t->Phi[52]*w->S[22+k] +
+                t->Phi[53]*w->S[30+k] + t->Phi[54]*w->S[38+k] + t->Phi[55]*w->S[46+k];
+    }
+    for (k = 0; k < 6; ++k) {
+        w->term[1][60+k] = t->Phi[60]*w->S[k] + t->Phi[61]*w->S[8+k] + t->Phi[62]*w->S[16+k] +
+                t->Phi[63]*w->S[24+k] + t->Phi[64]*w->S[32+k] + t->Phi[65]*w->S[40+k] +
+                t->Phi[66]*w->S[48+k];
+    }
+    w->term[1][66] = t->Phi[66]*w->S[70];
+    for (k = 0; k < 2; ++k) {
+        w->term[1][67+k] = t->Phi[60]*w->S[58+k] + t->Phi[61]*w->S[60+k] + t->Phi[62]*w->S[62+k] +
+                t->Phi[63]*w->S[64+k] + t->Phi[64]*w->S[66+k] + t->Phi[65]*w->S[68+k] +
+                t->Phi[66]*w->S[71+k];
+        w->term[1][69+k] = t->Phi[60]*w->S[6+k] + t->Phi[61]*w->S[14+k] + t->Phi[62]*w->S[22+k] +
+                t->Phi[63]*w->S[30+k] + t->Phi[64]*w->S[38+k] + t->Phi[65]*w->S[46+k] +
+                t->Phi[66]*w->S[54+k];
+    }
+    w->term[1][71] = t->Phi[73]*w->S[56];
+    w->term[1][72] = t->Phi[74]*w->S[57];
+    w->term[0][8] = w->term[0][8] + t->Phi[8]*t->Phi[73];
+    w->term[0][9] = w->term[0][9] + t->Phi[9]*t->Phi[74];
+    w->term[0][18] = w->term[0][18] + t->Phi[18]*t->Phi[73];
+    w->term[0][19] = w->term[0][19] + t->Phi[19]*t->Phi[74];
+    w->term[0][28] = w->term[0][28] + t->Phi[28]*t->Phi[73];
+    w->term[0][29] = w->term[0][29] + t->Phi[29]*t->Phi[74];
+    w->term[0][38] = w->term[0][38] + t->Phi[38]*t->Phi[73];
+    w->term[0][39] = w->term[0][39] + t->Phi[39]*t->Phi[74];
+    w->term[0][48] = w->term[0][48] + t->Phi[48]*t->Phi[73];
+    w->term[0][49] = w->term[0][49] + t->Phi[49]*t->Phi[74];
+    w->term[0][58] = w->term[0][58] + t->Phi[58]*t->Phi[73];
+    w->term[0][59] = w->term[0][59] + t->Phi[59]*t->Phi[74];
+    w->term[0][69] = w->term[0][69] + t->Phi[69]*t->Phi[73];
+    w->term[0][70] = w->term[0][70] + t->Phi[70]*t->Phi[74];
+    w->term[1][6] = w->term[1][6] + t->Phi[6];
+    w->term[1][7] = w->term[1][7] + t->Phi[7];
+    w->term[1][8] = w->term[1][8] + t->Phi[8]*w->S[56];
+    w->term[1][9] = w->term[1][9] + t->Phi[9]*w->S[57];
+    w->term[1][16] = w->term[1][16] + t->Phi[16];
+    w->term[1][17] = w->term[1][17] + t->Phi[17];
+    w->term[1][18] = w->term[1][18] + t->Phi[18]*w->S[56];
+    w->term[1][19] = w->term[1][19] + t->Phi[19]*w->S[57];
+    w->term[1][26] = w->term[1][26] + t->Phi[26];
+    w->term[1][27] = w->term[1][27] + t->Phi[27];
+    w->term[1][28] = w->term[1][28] + t->Phi[28]*w->S[56];
+    w->term[1][29] = w->term[1][29] + t->Phi[29]*w->S[57];
+    w->term[1][36] = w->term[1][36] + t->Phi[36];
+    w->term[1][37] = w->term[1][37] + t->Phi[37];
+    w->term[1][38] = w->term[1][38] + t->Phi[38]*w->S[56];
+    w->term[1][39] = w->term[1][39] + t->Phi[39]*w->S[57];
+    w->term[1][46] = w->term[1][46] + t->Phi[46];
+    w->term[1][47] = w->term[1][47] + t->Phi[47];
+    w->term[1][48] = w->term[1][48] + t->Phi[48]*w->S[56];
+    w->term[1][49] = w->term[1][49] + t->Phi[49]*w->S[57];
+    w->term[1][56] = w->term[1][56] + t->Phi[56];
+    w->term[1][57] = w->term[1][57] + t->Phi[57];
+    w->term[1][58] = w->term[1][58] + t->Phi[58]*w->S[56];
+    w->term[1][59] = w->term[1][59] + t->Phi[59]*w->S[57];
+    w->term[1][67] = w->term[1][67] + t->Phi[67];
+    w->term[1][68] = w->term[1][68] + t->Phi[68];
+    w->term[1][69] = w->term[1][69] + t->Phi[69]*w->S[56];
+    w->term[1][70] = w->term[1][70] + t->Phi[70]*w->S[57];
+    t->Phi[0] = t->Phi[0] + t->Phi[0] + w->term[0][0];
+    t->Phi[1] = t->Phi[1] + t->Phi[1] + w->term[0][1];
+    t->Phi[2] = t->Phi[2] + t->Phi[2] + w->term[0][2];
+    t->Phi[3] = t->Phi[3] + t->Phi[3] + w->term[0][3];
+    t->Phi[4] = t->Phi[4] + t->Phi[4] + w->term[0][4];
+    t->Phi[5] = t->Phi[5] + t->Phi[5] + w->term[0][5];
+    t->Phi[6] = t->Phi[6] + t->Phi[6] + w->term[0][6];
+    t->Phi[7] = t->Phi[7] + t->Phi[7] + w->term[0][7];
+    t->Phi[8] = t->Phi[8] + t->Phi[8] + w->term[0][8];
+    t->Phi[9] = t->Phi[9] + t->Phi[9] + w->term[0][9];
+    t->Phi[10] = t->Phi[10] + t->Phi[10] + w->term[0][10];
+    t->Phi[11] = t->Phi[11] + t->Phi[11] + w->term[0][11];
+    t->Phi[12] = t->Phi[12] + t->Phi[12] + w->term[0][12];
+    t->Phi[13] = t->Phi[13] + t->Phi[13] + w->term[0][13];
+    t->Phi[14] = t->Phi[14] + t->Phi[14] + w->term[0][14];
+    t->Phi[15] = t->Phi[15] + t->Phi[15] + w->term[0][15];
+    t->Phi[16] = t->Phi[16] + t->Phi[16] + w->term[0][16];
+    t->Phi[17] = t->Phi[17] + t->Phi[17] + w->term[0][17];
+    t->Phi[18] = t->Phi[18] + t->Phi[18] + w->term[0][18];
+    t->Phi[19] = t->Phi[19] + t->Phi[19] + w->term[0][19];
+    t->Phi[20] = t->Phi[20] + t->Phi[20] + w->term[0][20];
+    t->Phi[21] = t->Phi[21] + t->Phi[21] + w->term[0][21];
+    t->Phi[22] = t->Phi[22] + t->Phi[22] + w->term[0][22];
+    t->Phi[23] = t->Phi[23] + t->Phi[23] + w->term[0][23];
+    t->Phi[24] = t->Phi[24] + t->Phi[24] + w->term[0][24];
+    t->Phi[25] = t->Phi[25] + t->Phi[25] + w->term[0][25];
+    t->Phi[26] = t->Phi[26] + t->Phi[26] + w->term[0][26];
+    t->Phi[27] = t->Phi[27] + t->Phi[27] + w->term[0][27];
+    t->Phi[28] = t->Phi[28] + t->Phi[28] + w->term[0][28];
+    t->Phi[29] = t->Phi[29] + t->Phi[29] + w->term[0][29];
+    t->Phi[30] = t->Phi[30] + t->Phi[30] + w->term[0][30];
+    t->Phi[31] = t->Phi[31] + t->Phi[31] + w->term[0][31];
+    t->Phi[32] = t->Phi[32] + t->Phi[32] + w->term[0][32];
+    t->Phi[33] = t->Phi[33] + t->Phi[33] + w->term[0][33];
+    t->Phi[34] = t->Phi[34] + t->Phi[34] + w->term[0][34];
+    t->Phi[35] = t->Phi[35] + t->Phi[35] + w->term[0][35];
+    t->Phi[36] = t->Phi[36] + t->Phi[36] + w->term[0][36];
+    t->Phi[37] = t->Phi[37] + t->Phi[37] + w->term[0][37];
+    t->Phi[38] = t->Phi[38] + t->Phi[38] + w->term[0][38];
+    t->Phi[39] = t->Phi[39] + t->Phi[39] + w->term[0][39];
+    t->Phi[40] = t->Phi[40] + t->Phi[40] + w->term[0][40];
+    t->Phi[41] = t->Phi[41] + t->Phi[41] + w->term[0][41];
+    t->Phi[42] = t->Phi[42] + t->Phi[42] + w->term[0][42];
+    t->Phi[43] = t->Phi[43] + t->Phi[43] + w->term[0][43];
+    t->Phi[44] = t->Phi[44] + t->Phi[44] + w->term[0][44];
+    t->Phi[45] = t->Phi[45] + t->Phi[45] + w->term[0][45];
+    t->Phi[46] = t->Phi[46] + t->Phi[46] + w->term[0][46];
+    t->Phi[47] = t->Phi[47] + t->Phi[47] + w->term[0][47];
+    t->Phi[48] = t->Phi[48] + t->Phi[48] + w->term[0][48];
+    t->Phi[49] = t->Phi[49] + t->Phi[49] + w->term[0][49];
+    t->Phi[50] = t->Phi[50] + t->Phi[50] + w->term[0][50];
+    t->Phi[51] = t->Phi[51] + t->Phi[51] + w->term[0][51];
+    t->Phi[52] = t->Phi[52] + t->Phi[52] + w->term[0][52];
+    t->Phi[53] = t->Phi[53] + t->Phi[53] + w->term[0][53];
+    t->Phi[54] = t->Phi[54] + t->Phi[54] + w->term[0][54];
+    t->Phi[55] = t->Phi[55] + t->Phi[55] + w->term[0][55];
+    t->Phi[56] = t->Phi[56] + t->Phi[56] + w->term[0][56];
+    t->Phi[57] = t->Phi[57] + t->Phi[57] + w->term[0][57];
+    t->Phi[58] = t->Phi[58] + t->Phi[58] + w->term[0][58];
+    t->Phi[59] = t->Phi[59] + t->Phi[59] + w->term[0][59];
+    t->Phi[60] = t->Phi[60] + t->Phi[60] + w->term[0][60];
+    t->Phi[61] = t->Phi[61] + t->Phi[61] + w->term[0][61];
+    t->Phi[62] = t->Phi[62] + t->Phi[62] + w->term[0][62];
+    t->Phi[63] = t->Phi[63] + t->Phi[63] + w->term[0][63];
+    t->Phi[64] = t->Phi[64] + t->Phi[64] + w->term[0][64];
+    t->Phi[65] = t->Phi[65] + t->Phi[65] + w->term[0][65];
+    t->Phi[66] = t->Phi[66] + t->Phi[66] + w->term[0][66];
+    t->Phi[67] = t->Phi[67] + t->Phi[67] + w->term[0][67];
+    t->Phi[68] = t->Phi[68] + t->Phi[68] + w->term[0][68];
+    t->Phi[69] = t->Phi[69] + t->Phi[69] + w->term[0][69];
+    t->Phi[70] = t->Phi[70] + t->Phi[70] + w->term[0][70];
+    t->Phi[73] = t->Phi[73] + t->Phi[73] + w->term[0][71];
+    t->Phi[74] = t->Phi[74] + t->Phi[74] + w->term[0][72];
     w->S[0] = w->S[0] + half*w->term[1][0];
-    t->Phi[0][1] = t->Phi[0][1] + t->Phi[0][1] + w->term[0][1];
     w->S[1] = w->S[1] + half*w->term[1][1];
-    t->Phi[0][2] = t->Phi[0][2] + t->Phi[0][2] + w->term[0][2];
     w->S[2] = w->S[2] + half*w->term[1][2];
-    t->Phi[0][3] = t->Phi[0][3] + t->Phi[0][3] + w->term[0][3];
     w->S[3] = w->S[3] + half*w->term[1][3];
-    t->Phi[0][4] = t->Phi[0][4] + t->Phi[0][4] + w->term[0][4];
     w->S[4] = w->S[4] + half*w->term[1][4];
-    t->Phi[0][5] = t->Phi[0][5] + t->Phi[0][5] + w->term[0][5];
     w->S[5] = w->S[5] + half*w->term[1][5];
-    t->Phi[0][7] = t->Phi[0][7] + t->Phi[0][7] + w->term[0][6];
     w->S[58] = w->S[58] + half*w->term[1][6];
-    t->Phi[0][8] = t->Phi[0][8] + t->Phi[0][8] + w->term[0][7];
     w->S[59] = w->S[59] + half*w->term[1][7];
-    t->Phi[0][9] = t->Phi[0][9] + t->Phi[0][9] + w->term[0][8];
     w->S[6] = w->S[6] + half*w->term[1][8];
-    t->Phi[0][10] = t->Phi[0][10] + t->Phi[0][10] + w->term[0][9];
     w->S[7] = w->S[7] + half*w->term[1][9];
-    t->Phi[1][0] = t->Phi[1][0] + t->Phi[1][0] + w->term[0][10];
     w->S[8] = w->S[8] + half*w->term[1][10];
-    t->Phi[1][1] = t->Phi[1][1] + t->Phi[1][1] + w->term[0][11];
     w->S[9] = w->S[9] + half*w->term[1][11];
-    t->Phi[1][2] = t->Phi[1][2] + t->Phi[1][2] + w->term[0][12];
     w->S[10] = w->S[10] + half*w->term[1][12];
-    t->Phi[1][3] = t->Phi[1][3] + t->Phi[1][3] + w->term[0][13];
     w->S[11] = w->S[11] + half*w->term[1][13];
-    t->Phi[1][4] = t->Phi[1][4] + t->Phi[1][4] + w->term[0][14];
     w->S[12] = w->S[12] + half*w->term[1][14];
-    t->Phi[1][5] = t->Phi[1][5] + t->Phi[1][5] + w->term[0][15];
     w->S[13] = w->S[13] + half*w->term[1][15];
-    t->Phi[1][7] = t->Phi[1][7] + t->Phi[1][7] + w->term[0][16];
     w->S[60] = w->S[60] + half*w->term[1][16];
-    t->Phi[1][8] = t->Phi[1][8] + t->Phi[1][8] + w->term[0][17];
     w->S[61] = w->S[61] + half*w->term[1][17];
-    t->Phi[1][9] = t->Phi[1][9] + t->Phi[1][9] + w->term[0][18];
     w->S[14] = w->S[14] + half*w->term[1][18];
-    t->Phi[1][10] = t->Phi[1][10] + t->Phi[1][10] + w->term[0][19];
     w->S[15] = w->S[15] + half*w->term[1][19];
-    t->Phi[2][0] = t->Phi[2][0] + t->Phi[2][0] + w->term[0][20];
     w->S[16] = w->S[16] + half*w->term[1][20];
-    t->Phi[2][1] = t->Phi[2][1] + t->Phi[2][1] + w->term[0][21];
     w->S[17] = w->S[17] + half*w->term[1][21];
-    t->Phi[2][2] = t->Phi[2][2] + t->Phi[2][2] + w->term[0][22];
     w->S[18] = w->S[18] + half*w->term[1][22];
-    t->Phi[2][3] = t->Phi[2][3] + t->Phi[2][3] + w->term[0][23];
     w->S[19] = w->S[19] + half*w->term[1][23];
-    t->Phi[2][4] = t->Phi[2][4] + t->Phi[2][4] + w->term[0][24];
     w->S[20] = w->S[20] + half*w->term[1][24];
-    t->Phi[2][5] = t->Phi[2][5] + t->Phi[2][5] + w->term[0][25];
     w->S[21] = w->S[21] + half*w->term[1][25];
-    t->Phi[2][7] = t->Phi[2][7] + t->Phi[2][7] + w->term[0][26];
     w->S[62] = w->S[62] + half*w->term[1][26];
-    t->Phi[2][8] = t->Phi[2][8] + t->Phi[2][8] + w->term[0][27];
     w->S[63] = w->S[63] + half*w->term[1][27];
-    t->Phi[2][9] = t->Phi[2][9] + t->Phi[2][9] + w->term[0][28];
     w->S[22] = w->S[22] + half*w->term[1][28];
-    t->Phi[2][10] = t->Phi[2][10] + t->Phi[2][10] + w->term[0][29];
     w->S[23] = w->S[23] + half*w->term[1][29];
-    t->Phi[3][0] = t->Phi[3][0] + t->Phi[3][0] + w->term[0][30];
     w->S[24] = w->S[24] + half*w->term[1][30];
-    t->Phi[3][1] = t->Phi[3][1] + t->Phi[3][1] + w->term[0][31];
     w->S[25] = w->S[25] + half*w->term[1][31];
-    t->Phi[3][2] = t->Phi[3][2] + t->Phi[3][2] + w->term[0][32];
     w->S[26] = w->S[26] + half*w->term[1][32];
-    t->Phi[3][3] = t->Phi[3][3] + t->Phi[3][3] + w->term[0][33];
     w->S[27] = w->S[27] + half*w->term[1][33];
-    t->Phi[3][4] = t->Phi[3][4] + t->Phi[3][4] + w->term[0][34];
     w->S[28] = w->S[28] + half*w->term[1][34];
-    t->Phi[3][5] = t->Phi[3][5] + t->Phi[3][5] + w->term[0][35];
     w->S[29] = w->S[29] + half*w->term[1][35];
-    t->Phi[3][7] = t->Phi[3][7] + t->Phi[3][7] + w->term[0][36];
     w->S[64] = w->S[64] + half*w->term[1][36];
-    t->Phi[3][8] = t->Phi[3][8] + t->Phi[3][8] + w->term[0][37];
     w->S[65] = w->S[65] + half*w->term[1][37];
-    t->Phi[3][9] = t->Phi[3][9] + t->Phi[3][9] + w->term[0][38];
     w->S[30] = w->S[30] + half*w->term[1][38];
-    t->Phi[3][10] = t->Phi[3][10] + t->Phi[3][10] + w->term[0][39];
     w->S[31] = w->S[31] + half*w->term[1][39];
-    t->Phi[4][0] = t->Phi[4][0] + t->Phi[4][0] + w->term[0][40];
     w->S[32] = w->S[32] + half*w->term[1][40];
-    t->Phi[4][1] = t->Phi[4][1] + t->Phi[4][1] + w->term[0][41];
     w->S[33] = w->S[33] + half*w->term[1][41];
-    t->Phi[4][2] = t->Phi[4][2] + t->Phi[4][2] + w->term[0][42];
     w->S[34] = w->S[34] + half*w->term[1][42];
-    t->Phi[4][3] = t->Phi[4][3] + t->Phi[4][3] + w->term[0][43];
     w->S[35] = w->S[35] + half*w->term[1][43];
-    t->Phi[4][4] = t->Phi[4][4] + t->Phi[4][4] + w->term[0][44];
     w->S[36] = w->S[36] + half*w->term[1][44];
-    t->Phi[4][5] = t->Phi[4][5] + t->Phi[4][5] + w->term[0][45];
     w->S[37] = w->S[37] + half*w->term[1][45];
-    t->Phi[4][7] = t->Phi[4][7] + t->Phi[4][7] + w->term[0][46];
     w->S[66] = w->S[66] + half*w->term[1][46];
-    t->Phi[4][8] = t->Phi[4][8] + t->Phi[4][8] + w->term[0][47];
     w->S[67] = w->S[67] + half*w->term[1][47];
-    t->Phi[4][9] = t->Phi[4][9] + t->Phi[4][9] + w->term[0][48];
     w->S[38] = w->S[38] + half*w->term[1][48];
-    t->Phi[4][10] = t->Phi[4][10] + t->Phi[4][10] + w->term[0][49];
     w->S[39] = w->S[39] + half*w->term[1][49];
-    t->Phi[5][0] = t->Phi[5][0] + t->Phi[5][0] + w->term[0][50];
     w->S[40] = w->S[40] + half*w->term[1][50];
-    t->Phi[5][1] = t->Phi[5][1] + t->Phi[5][1] + w->term[0][51];
     w->S[41] = w->S[41] + half*w->term[1][51];
-    t->Phi[5][2] = t->Phi[5][2] + t->Phi[5][2] + w->term[0][52];
     w->S[42] = w->S[42] + half*w->term[1][52];
-    t->Phi[5][3] = t->Phi[5][3] + t->Phi[5][3] + w->term[0][53];
     w->S[43] = w->S[43] + half*w->term[1][53];
-    t->Phi[5][4] = t->Phi[5][4] + t->Phi[5][4] + w->term[0][54];
     w->S[44] = w->S[44] + half*w->term[1][54];
-    t->Phi[5][5] = t->Phi[5][5] + t->Phi[5][5] + w->term[0][55];
     w->S[45] = w->S[45] + half*w->term[1][55];
-    t->Phi[5][7] = t->Phi[5][7] + t->Phi[5][7] + w->term[0][56];
     w->S[68] = w->S[68] + half*w->term[1][56];
-    t->Phi[5][8] = t->Phi[5][8] + t->Phi[5][8] + w->term[0][57];
     w->S[69] = w->S[69] + half*w->term[1][57];
-    t->Phi[5][9] = t->Phi[5][9] + t->Phi[5][9] + w->term[0][58];
     w->S[46] = w->S[46] + half*w->term[1][58];
-    t->Phi[5][10] = t->Phi[5][10] + t->Phi[5][10] + w->term[0][59];
     w->S[47] = w->S[47] + half*w->term[1][59];
-    t->Phi[6][0] = t->Phi[6][0] + t->Phi[6][0] + w->term[0][60];
     w->S[48] = w->S[48] + half*w->term[1][60];
-    t->Phi[6][1] = t->Phi[6][1] + t->Phi[6][1] + w->term[0][61];
     w->S[49] = w->S[49] + half*w->term[1][61];
-    t->Phi[6][2] = t->Phi[6][2] + t->Phi[6][2] + w->term[0][62];
     w->S[50] = w->S[50] + half*w->term[1][62];
-    t->Phi[6][3] = t->Phi[6][3] + t->Phi[6][3] + w->term[0][63];
     w->S[51] = w->S[51] + half*w->term[1][63];
-    t->Phi[6][4] = t->Phi[6][4] + t->Phi[6][4] + w->term[0][64];
     w->S[52] = w->S[52] + half*w->term[1][64];
-    t->Phi[6][5] = t->Phi[6][5] + t->Phi[6][5] + w->term[0][65];
     w->S[53] = w->S[53] + half*w->term[1][65];
-    t->Phi[6][6] = t->Phi[6][6] + t->Phi[6][6] + w->term[0][66];
     w->S[70] = w->S[70] + half*w->term[1][66];
-    t->Phi[6][7] = t->Phi[6][7] + t->Phi[6][7] + w->term[0][67];
     w->S[71] = w->S[71] + half*w->term[1][67];
-    t->Phi[6][8] = t->Phi[6][8] + t->Phi[6][8] + w->term[0][68];
     w->S[72] = w->S[72] + half*w->term[1][68];
-    t->Phi[6][9] = t->Phi[6][9] + t->Phi[6][9] + w->term[0][69];
     w->S[54] = w->S[54] + half*w->term[1][69];
-    t->Phi[6][10] = t->Phi[6][10] + t->Phi[6][10] + w->term[0][70];
     w->S[55] = w->S[55] + half*w->term[1][70];
-    t->Phi[9][9] = t->Phi[9][9] + t->Phi[9][9] + w->term[0][71];
     w->S[56] = w->S[56] + half*w->term[1][71];
-    t->Phi[10][10] = t->Phi[10][10] + t->Phi[10][10] + w->term[0][72];
     w->S[57] = w->S[57] + half*w->term[1][72];
 }
 
@@ -1442,29 +1187,27 @@ NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar
 {
     const ned_doppler13_reduced_scalar one = 1.0;
     ned_doppler13_reduced_scalar v, check = 0.0;
-    t->Phi[0][0] = t->Phi[0][0] + one;
-    t->Phi[1][1] = t->Phi[1][1] + one;
-    t->Phi[2][2] = t->Phi[2][2] + one;
-    t->Phi[3][3] = t->Phi[3][3] + one;
-    t->Phi[4][4] = t->Phi[4][4] + one;
-    t->Phi[5][5] = t->Phi[5][5] + one;
-    t->Phi[6][6] = t->Phi[6][6] + one;
-    t->Phi[9][9] = t->Phi[9][9] + one;
-    t->Phi[10][10] = t->Phi[10][10] + one;
-    v = t->Phi[0][0] + t->Phi[0][1] + t->Phi[0][2] + t->Phi[0][3] + t->Phi[0][4] + t->Phi[0][5] +
-            t->Phi[0][7] + t->Phi[0][8] + t->Phi[0][9] + t->Phi[0][10] + t->Phi[1][0] + t->Phi[1][1]
-            + t->Phi[1][2] + t->Phi[1][3] + t->Phi[1][4] + t->Phi[1][5] + t->Phi[1][7] +
-            t->Phi[1][8] + t->Phi[1][9] + t->Phi[1][10] + t->Phi[2][0] + t->Phi[2][1] + t->Phi[2][2]
-            + t->Phi[2][3] + t->Phi[2][4] + t->Phi[2][5] + t->Phi[2][7] + t->Phi[2][8] +
-            t->Phi[2][9] + t->Phi[2][10] + t->Phi[3][0] + t->Phi[3][1] + t->Phi[3][2] + t->Phi[3][3]
-            + t->Phi[3][4] + t->Phi[3][5] + t->Phi[3][7] + t->Phi[3][8] + t->Phi[3][9] +
-            t->Phi[3][10] + t->Phi[4][0] + t->Phi[4][1] + t->Phi[4][2] + t->Phi[4][3] + t->Phi[4][4]
-            + t->Phi[4][5] + t->Phi[4][7] + t->Phi[4][8] + t->Phi[4][9] + t->Phi[4][10] +
-            t->Phi[5][0] + t->Phi[5][1] + t->Phi[5][2] + t->Phi[5][3] + t->Phi[5][4] + t->Phi[5][5]
-            + t->Phi[5][7] + t->Phi[5][8] + t->Phi[5][9] + t->Phi[5][10] + t->Phi[6][0] +
-            t->Phi[6][1] + t->Phi[6][2] + t->Phi[6][3] + t->Phi[6][4] + t->Phi[6][5] + t->Phi[6][6]
-            + t->Phi[6][7] + t->Phi[6][8] + t->Phi[6][9] + t->Phi[6][10] + t->Phi[9][9] +
-            t->Phi[10][10]; w->term[0][0] = v; check += v - v;
+    t->Phi[0] = t->Phi[0] + one;
+    t->Phi[11] = t->Phi[11] + one;
+    t->Phi[22] = t->Phi[22] + one;
+    t->Phi[33] = t->Phi[33] + one;
+    t->Phi[44] = t->Phi[44] + one;
+    t->Phi[55] = t->Phi[55] + one;
+    t->Phi[66] = t->Phi[66] + one;
+    t->Phi[73] = t->Phi[73] + one;
+    t->Phi[74] = t->Phi[74] + one;
+    v = t->Phi[0] + t->Phi[1] + t->Phi[2] + t->Phi[3] + t->Phi[4] + t->Phi[5] + t->Phi[6] +
+            t->Phi[7] + t->Phi[8] + t->Phi[9] + t->Phi[10] + t->Phi[11] + t->Phi[12] + t->Phi[13] +
+            t->Phi[14] + t->Phi[15] + t->Phi[16] + t->Phi[17] + t->Phi[18] + t->Phi[19] + t->Phi[20]
+            + t->Phi[21] + t->Phi[22] + t->Phi[23] + t->Phi[24] + t->Phi[25] + t->Phi[26] +
+            t->Phi[27] + t->Phi[28] + t->Phi[29] + t->Phi[30] + t->Phi[31] + t->Phi[32] + t->Phi[33]
+            + t->Phi[34] + t->Phi[35] + t->Phi[36] + t->Phi[37] + t->Phi[38] + t->Phi[39] +
+            t->Phi[40] + t->Phi[41] + t->Phi[42] + t->Phi[43] + t->Phi[44] + t->Phi[45] + t->Phi[46]
+            + t->Phi[47] + t->Phi[48] + t->Phi[49] + t->Phi[50] + t->Phi[51] + t->Phi[52] +
+            t->Phi[53] + t->Phi[54] + t->Phi[55] + t->Phi[56] + t->Phi[57] + t->Phi[58] + t->Phi[59]
+            + t->Phi[60] + t->Phi[61] + t->Phi[62] + t->Phi[63] + t->Phi[64] + t->Phi[65] +
+            t->Phi[66] + t->Phi[67] + t->Phi[68] + t->Phi[69] + t->Phi[70] + t->Phi[73] +
+            t->Phi[74]; w->term[0][0] = v; check += v - v;
     return check;
 }
 
@@ -1798,8 +1541,8 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restr
     /* Horner's rule over the structural nonzeros (modelgen/codegen/discretize_kernels.py): A = F h,
        R_m = I / (m+1)!, R_k = I / (k+1)! + A R_(k+1) down to S = R_0 (R_k in S for even k, in term
        for odd k), the top level over its pattern and every lower one as dense row segments, then
-       E = A S and zero elsewhere in Phi; the doublings run over the entries of Phi that are not
-               e_i. */
+       E = A S into Phi (stored compressed to its structural nonzeros); the doublings run over the
+       entries of Phi that are not e_i. */
     horner_input(m, w, T * power_of_two(-halvings));
     for (k = order - 1; k >= 0; --k) {
         if (order - k == 1) {
@@ -1835,10 +1578,8 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restr
     sum_check = transition_check(t, w);
     if (sum_check != 0.0) {
         sum_check = 0.0;
-        for (i = 0; i < NED_DOPPLER13_REDUCED_N_STATES; ++i) {
-            for (k = 0; k < NED_DOPPLER13_REDUCED_N_STATES; ++k) {
-                sum_check += t->Phi[i][k] - t->Phi[i][k];
-            }
+        for (k = 0; k < NED_DOPPLER13_REDUCED_N_PHI; ++k) {
+            sum_check += t->Phi[k] - t->Phi[k];
         }
     }
     check += sum_check;
@@ -1847,6 +1588,60 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restr
     noise_input(m, w);
     check += process_noise(m, t, w, T);
     return (check != 0.0) ? NED_DOPPLER13_REDUCED_ERR_NONFINITE : NED_DOPPLER13_REDUCED_OK;
+}
+
+void ned_doppler13_reduced_get_transition_matrix(const ned_doppler13_reduced_transition *restrict t,
+                ned_doppler13_reduced_scalar Phi[restrict NED_DOPPLER13_REDUCED_N_STATES *
+                        NED_DOPPLER13_REDUCED_N_STATES])
+{
+    int i;
+    for (i = 0; i < NED_DOPPLER13_REDUCED_N_STATES * NED_DOPPLER13_REDUCED_N_STATES; ++i) {
+        Phi[i] = 0.0;
+    }
+    for (i = 0; i < NED_DOPPLER13_REDUCED_N_PHI; ++i) {
+        Phi[ned_doppler13_reduced_Phi_row[i] * NED_DOPPLER13_REDUCED_N_STATES +
+                ned_doppler13_reduced_Phi_col[i]] = t->Phi[i];
+    }
+}
+
+/* Rows of Phi that are exactly e_i (a state whose row of F is empty: a random constant). */
+static const unsigned char transition_unit_row[NED_DOPPLER13_REDUCED_N_STATES] = { 0, 0, 0, 0, 0, 0,
+        0, 1, 1, 0, 0, 1, 1 };
+
+int ned_doppler13_reduced_set_transition_matrix(ned_doppler13_reduced_transition *restrict t,
+                const ned_doppler13_reduced_scalar Phi[restrict NED_DOPPLER13_REDUCED_N_STATES *
+                        NED_DOPPLER13_REDUCED_N_STATES])
+{
+    int i, j, k = 0;
+    ned_doppler13_reduced_scalar check = 0.0;
+    for (i = 0; i < NED_DOPPLER13_REDUCED_N_STATES * NED_DOPPLER13_REDUCED_N_STATES; ++i) {
+        check += Phi[i] - Phi[i];
+    }
+    if (check != 0.0) {
+        return NED_DOPPLER13_REDUCED_ERR_NONFINITE;
+    }
+    /* the dense entries in the order of the stored ones: each is either the next stored entry or a
+       structural zero, which must be 0 */
+    for (i = 0; i < NED_DOPPLER13_REDUCED_N_STATES; ++i) {
+        for (j = 0; j < NED_DOPPLER13_REDUCED_N_STATES; ++j) {
+            const ned_doppler13_reduced_scalar v = Phi[i * NED_DOPPLER13_REDUCED_N_STATES + j];
+            if (k < NED_DOPPLER13_REDUCED_N_PHI && ned_doppler13_reduced_Phi_row[k] == i &&
+                    ned_doppler13_reduced_Phi_col[k] == j) {
+                ++k;
+                if (transition_unit_row[i] && v != 1.0) {
+                    return NED_DOPPLER13_REDUCED_ERR_STRUCTURE; /* predict keeps a random constant:
+                            its row is e_i */
+                }
+            } else if (v != 0.0) {
+                return NED_DOPPLER13_REDUCED_ERR_STRUCTURE;
+            }
+        }
+    }
+    for (k = 0; k < NED_DOPPLER13_REDUCED_N_PHI; ++k) {
+        t->Phi[k] = Phi[ned_doppler13_reduced_Phi_row[k] * NED_DOPPLER13_REDUCED_N_STATES +
+                ned_doppler13_reduced_Phi_col[k]];
+    }
+    return NED_DOPPLER13_REDUCED_OK;
 }
 
 void ned_doppler13_reduced_get_state(const ned_doppler13_reduced_filter *restrict f,
@@ -1887,58 +1682,58 @@ static void phi_times_p_row_0(const ned_doppler13_reduced_filter *restrict f, co
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
         w)
 {
-    w->M[0] = t->Phi[0][0]*f->P[0][0] + t->Phi[0][1]*f->P[1][0] + t->Phi[0][2]*f->P[2][0] +
-            t->Phi[0][3]*f->P[3][0] + t->Phi[0][4]*f->P[4][0] + t->Phi[0][5]*f->P[5][0] +
-            t->Phi[0][7]*f->P[7][0] + t->Phi[0][8]*f->P[8][0] + t->Phi[0][9]*f->P[9][0] +
-            t->Phi[0][10]*f->P[10][0];
-    w->M[1] = t->Phi[0][0]*f->P[0][1] + t->Phi[0][1]*f->P[1][1] + t->Phi[0][2]*f->P[2][1] +
-            t->Phi[0][3]*f->P[3][1] + t->Phi[0][4]*f->P[4][1] + t->Phi[0][5]*f->P[5][1] +
-            t->Phi[0][7]*f->P[7][1] + t->Phi[0][8]*f->P[8][1] + t->Phi[0][9]*f->P[9][1] +
-            t->Phi[0][10]*f->P[10][1];
-    w->M[2] = t->Phi[0][0]*f->P[0][2] + t->Phi[0][1]*f->P[1][2] + t->Phi[0][2]*f->P[2][2] +
-            t->Phi[0][3]*f->P[3][2] + t->Phi[0][4]*f->P[4][2] + t->Phi[0][5]*f->P[5][2] +
-            t->Phi[0][7]*f->P[7][2] + t->Phi[0][8]*f->P[8][2] + t->Phi[0][9]*f->P[9][2] +
-            t->Phi[0][10]*f->P[10][2];
-    w->M[3] = t->Phi[0][0]*f->P[0][3] + t->Phi[0][1]*f->P[1][3] + t->Phi[0][2]*f->P[2][3] +
-            t->Phi[0][3]*f->P[3][3] + t->Phi[0][4]*f->P[4][3] + t->Phi[0][5]*f->P[5][3] +
-            t->Phi[0][7]*f->P[7][3] + t->Phi[0][8]*f->P[8][3] + t->Phi[0][9]*f->P[9][3] +
-            t->Phi[0][10]*f->P[10][3];
-    w->M[4] = t->Phi[0][0]*f->P[0][4] + t->Phi[0][1]*f->P[1][4] + t->Phi[0][2]*f->P[2][4] +
-            t->Phi[0][3]*f->P[3][4] + t->Phi[0][4]*f->P[4][4] + t->Phi[0][5]*f->P[5][4] +
-            t->Phi[0][7]*f->P[7][4] + t->Phi[0][8]*f->P[8][4] + t->Phi[0][9]*f->P[9][4] +
-            t->Phi[0][10]*f->P[10][4];
-    w->M[5] = t->Phi[0][0]*f->P[0][5] + t->Phi[0][1]*f->P[1][5] + t->Phi[0][2]*f->P[2][5] +
-            t->Phi[0][3]*f->P[3][5] + t->Phi[0][4]*f->P[4][5] + t->Phi[0][5]*f->P[5][5] +
-            t->Phi[0][7]*f->P[7][5] + t->Phi[0][8]*f->P[8][5] + t->Phi[0][9]*f->P[9][5] +
-            t->Phi[0][10]*f->P[10][5];
-    w->M[6] = t->Phi[0][0]*f->P[0][6] + t->Phi[0][1]*f->P[1][6] + t->Phi[0][2]*f->P[2][6] +
-            t->Phi[0][3]*f->P[3][6] + t->Phi[0][4]*f->P[4][6] + t->Phi[0][5]*f->P[5][6] +
-            t->Phi[0][7]*f->P[7][6] + t->Phi[0][8]*f->P[8][6] + t->Phi[0][9]*f->P[9][6] +
-            t->Phi[0][10]*f->P[10][6];
-    w->M[7] = t->Phi[0][0]*f->P[0][7] + t->Phi[0][1]*f->P[1][7] + t->Phi[0][2]*f->P[2][7] +
-            t->Phi[0][3]*f->P[3][7] + t->Phi[0][4]*f->P[4][7] + t->Phi[0][5]*f->P[5][7] +
-            t->Phi[0][7]*f->P[7][7] + t->Phi[0][8]*f->P[8][7] + t->Phi[0][9]*f->P[9][7] +
-            t->Phi[0][10]*f->P[10][7];
-    w->M[8] = t->Phi[0][0]*f->P[0][8] + t->Phi[0][1]*f->P[1][8] + t->Phi[0][2]*f->P[2][8] +
-            t->Phi[0][3]*f->P[3][8] + t->Phi[0][4]*f->P[4][8] + t->Phi[0][5]*f->P[5][8] +
-            t->Phi[0][7]*f->P[7][8] + t->Phi[0][8]*f->P[8][8] + t->Phi[0][9]*f->P[9][8] +
-            t->Phi[0][10]*f->P[10][8];
-    w->M[9] = t->Phi[0][0]*f->P[0][9] + t->Phi[0][1]*f->P[1][9] + t->Phi[0][2]*f->P[2][9] +
-            t->Phi[0][3]*f->P[3][9] + t->Phi[0][4]*f->P[4][9] + t->Phi[0][5]*f->P[5][9] +
-            t->Phi[0][7]*f->P[7][9] + t->Phi[0][8]*f->P[8][9] + t->Phi[0][9]*f->P[9][9] +
-            t->Phi[0][10]*f->P[10][9];
-    w->M[10] = t->Phi[0][0]*f->P[0][10] + t->Phi[0][1]*f->P[1][10] + t->Phi[0][2]*f->P[2][10] +
-            t->Phi[0][3]*f->P[3][10] + t->Phi[0][4]*f->P[4][10] + t->Phi[0][5]*f->P[5][10] +
-            t->Phi[0][7]*f->P[7][10] + t->Phi[0][8]*f->P[8][10] + t->Phi[0][9]*f->P[9][10] +
-            t->Phi[0][10]*f->P[10][10];
-    w->M[11] = t->Phi[0][0]*f->P[0][11] + t->Phi[0][1]*f->P[1][11] + t->Phi[0][2]*f->P[2][11] +
-            t->Phi[0][3]*f->P[3][11] + t->Phi[0][4]*f->P[4][11] + t->Phi[0][5]*f->P[5][11] +
-            t->Phi[0][7]*f->P[7][11] + t->Phi[0][8]*f->P[8][11] + t->Phi[0][9]*f->P[9][11] +
-            t->Phi[0][10]*f->P[10][11];
-    w->M[12] = t->Phi[0][0]*f->P[0][12] + t->Phi[0][1]*f->P[1][12] + t->Phi[0][2]*f->P[2][12] +
-            t->Phi[0][3]*f->P[3][12] + t->Phi[0][4]*f->P[4][12] + t->Phi[0][5]*f->P[5][12] +
-            t->Phi[0][7]*f->P[7][12] + t->Phi[0][8]*f->P[8][12] + t->Phi[0][9]*f->P[9][12] +
-            t->Phi[0][10]*f->P[10][12];
+    w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
+            t->Phi[3]*f->P[3][0] + t->Phi[4]*f->P[4][0] + t->Phi[5]*f->P[5][0] +
+            t->Phi[6]*f->P[7][0] + t->Phi[7]*f->P[8][0] + t->Phi[8]*f->P[9][0] +
+            t->Phi[9]*f->P[10][0];
+    w->M[1] = t->Phi[0]*f->P[0][1] + t->Phi[1]*f->P[1][1] + t->Phi[2]*f->P[2][1] +
+            t->Phi[3]*f->P[3][1] + t->Phi[4]*f->P[4][1] + t->Phi[5]*f->P[5][1] +
+            t->Phi[6]*f->P[7][1] + t->Phi[7]*f->P[8][1] + t->Phi[8]*f->P[9][1] +
+            t->Phi[9]*f->P[10][1];
+    w->M[2] = t->Phi[0]*f->P[0][2] + t->Phi[1]*f->P[1][2] + t->Phi[2]*f->P[2][2] +
+            t->Phi[3]*f->P[3][2] + t->Phi[4]*f->P[4][2] + t->Phi[5]*f->P[5][2] +
+            t->Phi[6]*f->P[7][2] + t->Phi[7]*f->P[8][2] + t->Phi[8]*f->P[9][2] +
+            t->Phi[9]*f->P[10][2];
+    w->M[3] = t->Phi[0]*f->P[0][3] + t->Phi[1]*f->P[1][3] + t->Phi[2]*f->P[2][3] +
+            t->Phi[3]*f->P[3][3] + t->Phi[4]*f->P[4][3] + t->Phi[5]*f->P[5][3] +
+            t->Phi[6]*f->P[7][3] + t->Phi[7]*f->P[8][3] + t->Phi[8]*f->P[9][3] +
+            t->Phi[9]*f->P[10][3];
+    w->M[4] = t->Phi[0]*f->P[0][4] + t->Phi[1]*f->P[1][4] + t->Phi[2]*f->P[2][4] +
+            t->Phi[3]*f->P[3][4] + t->Phi[4]*f->P[4][4] + t->Phi[5]*f->P[5][4] +
+            t->Phi[6]*f->P[7][4] + t->Phi[7]*f->P[8][4] + t->Phi[8]*f->P[9][4] +
+            t->Phi[9]*f->P[10][4];
+    w->M[5] = t->Phi[0]*f->P[0][5] + t->Phi[1]*f->P[1][5] + t->Phi[2]*f->P[2][5] +
+            t->Phi[3]*f->P[3][5] + t->Phi[4]*f->P[4][5] + t->Phi[5]*f->P[5][5] +
+            t->Phi[6]*f->P[7][5] + t->Phi[7]*f->P[8][5] + t->Phi[8]*f->P[9][5] +
+            t->Phi[9]*f->P[10][5];
+    w->M[6] = t->Phi[0]*f->P[0][6] + t->Phi[1]*f->P[1][6] + t->Phi[2]*f->P[2][6] +
+            t->Phi[3]*f->P[3][6] + t->Phi[4]*f->P[4][6] + t->Phi[5]*f->P[5][6] +
+            t->Phi[6]*f->P[7][6] + t->Phi[7]*f->P[8][6] + t->Phi[8]*f->P[9][6] +
+            t->Phi[9]*f->P[10][6];
+    w->M[7] = t->Phi[0]*f->P[0][7] + t->Phi[1]*f->P[1][7] + t->Phi[2]*f->P[2][7] +
+            t->Phi[3]*f->P[3][7] + t->Phi[4]*f->P[4][7] + t->Phi[5]*f->P[5][7] +
+            t->Phi[6]*f->P[7][7] + t->Phi[7]*f->P[8][7] + t->Phi[8]*f->P[9][7] +
+            t->Phi[9]*f->P[10][7];
+    w->M[8] = t->Phi[0]*f->P[0][8] + t->Phi[1]*f->P[1][8] + t->Phi[2]*f->P[2][8] +
+            t->Phi[3]*f->P[3][8] + t->Phi[4]*f->P[4][8] + t->Phi[5]*f->P[5][8] +
+            t->Phi[6]*f->P[7][8] + t->Phi[7]*f->P[8][8] + t->Phi[8]*f->P[9][8] +
+            t->Phi[9]*f->P[10][8];
+    w->M[9] = t->Phi[0]*f->P[0][9] + t->Phi[1]*f->P[1][9] + t->Phi[2]*f->P[2][9] +
+            t->Phi[3]*f->P[3][9] + t->Phi[4]*f->P[4][9] + t->Phi[5]*f->P[5][9] +
+            t->Phi[6]*f->P[7][9] + t->Phi[7]*f->P[8][9] + t->Phi[8]*f->P[9][9] +
+            t->Phi[9]*f->P[10][9];
+    w->M[10] = t->Phi[0]*f->P[0][10] + t->Phi[1]*f->P[1][10] + t->Phi[2]*f->P[2][10] +
+            t->Phi[3]*f->P[3][10] + t->Phi[4]*f->P[4][10] + t->Phi[5]*f->P[5][10] +
+            t->Phi[6]*f->P[7][10] + t->Phi[7]*f->P[8][10] + t->Phi[8]*f->P[9][10] +
+            t->Phi[9]*f->P[10][10];
+    w->M[11] = t->Phi[0]*f->P[0][11] + t->Phi[1]*f->P[1][11] + t->Phi[2]*f->P[2][11] +
+            t->Phi[3]*f->P[3][11] + t->Phi[4]*f->P[4][11] + t->Phi[5]*f->P[5][11] +
+            t->Phi[6]*f->P[7][11] + t->Phi[7]*f->P[8][11] + t->Phi[8]*f->P[9][11] +
+            t->Phi[9]*f->P[10][11];
+    w->M[12] = t->Phi[0]*f->P[0][12] + t->Phi[1]*f->P[1][12] + t->Phi[2]*f->P[2][12] +
+            t->Phi[3]*f->P[3][12] + t->Phi[4]*f->P[4][12] + t->Phi[5]*f->P[5][12] +
+            t->Phi[6]*f->P[7][12] + t->Phi[7]*f->P[8][12] + t->Phi[8]*f->P[9][12] +
+            t->Phi[9]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -1946,38 +1741,32 @@ static ned_doppler13_reduced_scalar propagate_row_0(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[0][0] + w->M[1]*t->Phi[0][1] + w->M[2]*t->Phi[0][2] + w->M[3]*t->Phi[0][3] +
-            w->M[4]*t->Phi[0][4] + w->M[5]*t->Phi[0][5] + w->M[7]*t->Phi[0][7] +
-            w->M[8]*t->Phi[0][8] + w->M[9]*t->Phi[0][9] + w->M[10]*t->Phi[0][10] + t->Qd[0];
-            w->Pn[0] = v; check += v - v;
-    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
-            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[7]*t->Phi[1][7] +
-            w->M[8]*t->Phi[1][8] + w->M[9]*t->Phi[1][9] + w->M[10]*t->Phi[1][10] + t->Qd[1];
-            w->Pn[1] = v; check += v - v;
-    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
-            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[7]*t->Phi[2][7] +
-            w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] + w->M[10]*t->Phi[2][10] + t->Qd[2];
-            w->Pn[2] = v; check += v - v;
-    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
-            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[7]*t->Phi[3][7] +
-            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] + t->Qd[3];
-            w->Pn[3] = v; check += v - v;
-    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
-            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
-            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] + t->Qd[4];
-            w->Pn[4] = v; check += v - v;
-    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
-            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
-            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] + t->Qd[5];
-            w->Pn[5] = v; check += v - v;
-    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
-            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
-            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
-            w->M[10]*t->Phi[6][10] + t->Qd[6]; w->Pn[6] = v; check += v - v;
+    v = w->M[0]*t->Phi[0] + w->M[1]*t->Phi[1] + w->M[2]*t->Phi[2] + w->M[3]*t->Phi[3] +
+            w->M[4]*t->Phi[4] + w->M[5]*t->Phi[5] + w->M[7]*t->Phi[6] + w->M[8]*t->Phi[7] +
+            w->M[9]*t->Phi[8] + w->M[10]*t->Phi[9] + t->Qd[0]; w->Pn[0] = v; check += v - v;
+    v = w->M[0]*t->Phi[10] + w->M[1]*t->Phi[11] + w->M[2]*t->Phi[12] + w->M[3]*t->Phi[13] +
+            w->M[4]*t->Phi[14] + w->M[5]*t->Phi[15] + w->M[7]*t->Phi[16] + w->M[8]*t->Phi[17] +
+            w->M[9]*t->Phi[18] + w->M[10]*t->Phi[19] + t->Qd[1]; w->Pn[1] = v; check += v - v;
+    v = w->M[0]*t->Phi[20] + w->M[1]*t->Phi[21] + w->M[2]*t->Phi[22] + w->M[3]*t->Phi[23] +
+            w->M[4]*t->Phi[24] + w->M[5]*t->Phi[25] + w->M[7]*t->Phi[26] + w->M[8]*t->Phi[27] +
+            w->M[9]*t->Phi[28] + w->M[10]*t->Phi[29] + t->Qd[2]; w->Pn[2] = v; check += v - v;
+    v = w->M[0]*t->Phi[30] + w->M[1]*t->Phi[31] + w->M[2]*t->Phi[32] + w->M[3]*t->Phi[33] +
+            w->M[4]*t->Phi[34] + w->M[5]*t->Phi[35] + w->M[7]*t->Phi[36] + w->M[8]*t->Phi[37] +
+            w->M[9]*t->Phi[38] + w->M[10]*t->Phi[39] + t->Qd[3]; w->Pn[3] = v; check += v - v;
+    v = w->M[0]*t->Phi[40] + w->M[1]*t->Phi[41] + w->M[2]*t->Phi[42] + w->M[3]*t->Phi[43] +
+            w->M[4]*t->Phi[44] + w->M[5]*t->Phi[45] + w->M[7]*t->Phi[46] + w->M[8]*t->Phi[47] +
+            w->M[9]*t->Phi[48] + w->M[10]*t->Phi[49] + t->Qd[4]; w->Pn[4] = v; check += v - v;
+    v = w->M[0]*t->Phi[50] + w->M[1]*t->Phi[51] + w->M[2]*t->Phi[52] + w->M[3]*t->Phi[53] +
+            w->M[4]*t->Phi[54] + w->M[5]*t->Phi[55] + w->M[7]*t->Phi[56] + w->M[8]*t->Phi[57] +
+            w->M[9]*t->Phi[58] + w->M[10]*t->Phi[59] + t->Qd[5]; w->Pn[5] = v; check += v - v;
+    v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
+            w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[6]*t->Phi[66] + w->M[7]*t->Phi[67] +
+            w->M[8]*t->Phi[68] + w->M[9]*t->Phi[69] + w->M[10]*t->Phi[70] + t->Qd[6]; w->Pn[6] = v;
+            check += v - v;
     v = w->M[7]; w->Pn[7] = v; check += v - v;
     v = w->M[8]; w->Pn[8] = v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + t->Qd[9]; w->Pn[9] = v; check += v - v;
-    v = w->M[10]*t->Phi[10][10] + t->Qd[10]; w->Pn[10] = v; check += v - v;
+    v = w->M[9]*t->Phi[73] + t->Qd[9]; w->Pn[9] = v; check += v - v;
+    v = w->M[10]*t->Phi[74] + t->Qd[10]; w->Pn[10] = v; check += v - v;
     v = w->M[11]; w->Pn[11] = v; check += v - v;
     v = w->M[12]; w->Pn[12] = v; check += v - v;
     return check;
@@ -1987,58 +1776,58 @@ static void phi_times_p_row_1(const ned_doppler13_reduced_filter *restrict f, co
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
         w)
 {
-    w->M[0] = t->Phi[1][0]*f->P[0][0] + t->Phi[1][1]*f->P[1][0] + t->Phi[1][2]*f->P[2][0] +
-            t->Phi[1][3]*f->P[3][0] + t->Phi[1][4]*f->P[4][0] + t->Phi[1][5]*f->P[5][0] +
-            t->Phi[1][7]*f->P[7][0] + t->Phi[1][8]*f->P[8][0] + t->Phi[1][9]*f->P[9][0] +
-            t->Phi[1][10]*f->P[10][0];
-    w->M[1] = t->Phi[1][0]*f->P[0][1] + t->Phi[1][1]*f->P[1][1] + t->Phi[1][2]*f->P[2][1] +
-            t->Phi[1][3]*f->P[3][1] + t->Phi[1][4]*f->P[4][1] + t->Phi[1][5]*f->P[5][1] +
-            t->Phi[1][7]*f->P[7][1] + t->Phi[1][8]*f->P[8][1] + t->Phi[1][9]*f->P[9][1] +
-            t->Phi[1][10]*f->P[10][1];
-    w->M[2] = t->Phi[1][0]*f->P[0][2] + t->Phi[1][1]*f->P[1][2] + t->Phi[1][2]*f->P[2][2] +
-            t->Phi[1][3]*f->P[3][2] + t->Phi[1][4]*f->P[4][2] + t->Phi[1][5]*f->P[5][2] +
-            t->Phi[1][7]*f->P[7][2] + t->Phi[1][8]*f->P[8][2] + t->Phi[1][9]*f->P[9][2] +
-            t->Phi[1][10]*f->P[10][2];
-    w->M[3] = t->Phi[1][0]*f->P[0][3] + t->Phi[1][1]*f->P[1][3] + t->Phi[1][2]*f->P[2][3] +
-            t->Phi[1][3]*f->P[3][3] + t->Phi[1][4]*f->P[4][3] + t->Phi[1][5]*f->P[5][3] +
-            t->Phi[1][7]*f->P[7][3] + t->Phi[1][8]*f->P[8][3] + t->Phi[1][9]*f->P[9][3] +
-            t->Phi[1][10]*f->P[10][3];
-    w->M[4] = t->Phi[1][0]*f->P[0][4] + t->Phi[1][1]*f->P[1][4] + t->Phi[1][2]*f->P[2][4] +
-            t->Phi[1][3]*f->P[3][4] + t->Phi[1][4]*f->P[4][4] + t->Phi[1][5]*f->P[5][4] +
-            t->Phi[1][7]*f->P[7][4] + t->Phi[1][8]*f->P[8][4] + t->Phi[1][9]*f->P[9][4] +
-            t->Phi[1][10]*f->P[10][4];
-    w->M[5] = t->Phi[1][0]*f->P[0][5] + t->Phi[1][1]*f->P[1][5] + t->Phi[1][2]*f->P[2][5] +
-            t->Phi[1][3]*f->P[3][5] + t->Phi[1][4]*f->P[4][5] + t->Phi[1][5]*f->P[5][5] +
-            t->Phi[1][7]*f->P[7][5] + t->Phi[1][8]*f->P[8][5] + t->Phi[1][9]*f->P[9][5] +
-            t->Phi[1][10]*f->P[10][5];
-    w->M[6] = t->Phi[1][0]*f->P[0][6] + t->Phi[1][1]*f->P[1][6] + t->Phi[1][2]*f->P[2][6] +
-            t->Phi[1][3]*f->P[3][6] + t->Phi[1][4]*f->P[4][6] + t->Phi[1][5]*f->P[5][6] +
-            t->Phi[1][7]*f->P[7][6] + t->Phi[1][8]*f->P[8][6] + t->Phi[1][9]*f->P[9][6] +
-            t->Phi[1][10]*f->P[10][6];
-    w->M[7] = t->Phi[1][0]*f->P[0][7] + t->Phi[1][1]*f->P[1][7] + t->Phi[1][2]*f->P[2][7] +
-            t->Phi[1][3]*f->P[3][7] + t->Phi[1][4]*f->P[4][7] + t->Phi[1][5]*f->P[5][7] +
-            t->Phi[1][7]*f->P[7][7] + t->Phi[1][8]*f->P[8][7] + t->Phi[1][9]*f->P[9][7] +
-            t->Phi[1][10]*f->P[10][7];
-    w->M[8] = t->Phi[1][0]*f->P[0][8] + t->Phi[1][1]*f->P[1][8] + t->Phi[1][2]*f->P[2][8] +
-            t->Phi[1][3]*f->P[3][8] + t->Phi[1][4]*f->P[4][8] + t->Phi[1][5]*f->P[5][8] +
-            t->Phi[1][7]*f->P[7][8] + t->Phi[1][8]*f->P[8][8] + t->Phi[1][9]*f->P[9][8] +
-            t->Phi[1][10]*f->P[10][8];
-    w->M[9] = t->Phi[1][0]*f->P[0][9] + t->Phi[1][1]*f->P[1][9] + t->Phi[1][2]*f->P[2][9] +
-            t->Phi[1][3]*f->P[3][9] + t->Phi[1][4]*f->P[4][9] + t->Phi[1][5]*f->P[5][9] +
-            t->Phi[1][7]*f->P[7][9] + t->Phi[1][8]*f->P[8][9] + t->Phi[1][9]*f->P[9][9] +
-            t->Phi[1][10]*f->P[10][9];
-    w->M[10] = t->Phi[1][0]*f->P[0][10] + t->Phi[1][1]*f->P[1][10] + t->Phi[1][2]*f->P[2][10] +
-            t->Phi[1][3]*f->P[3][10] + t->Phi[1][4]*f->P[4][10] + t->Phi[1][5]*f->P[5][10] +
-            t->Phi[1][7]*f->P[7][10] + t->Phi[1][8]*f->P[8][10] + t->Phi[1][9]*f->P[9][10] +
-            t->Phi[1][10]*f->P[10][10];
-    w->M[11] = t->Phi[1][0]*f->P[0][11] + t->Phi[1][1]*f->P[1][11] + t->Phi[1][2]*f->P[2][11] +
-            t->Phi[1][3]*f->P[3][11] + t->Phi[1][4]*f->P[4][11] + t->Phi[1][5]*f->P[5][11] +
-            t->Phi[1][7]*f->P[7][11] + t->Phi[1][8]*f->P[8][11] + t->Phi[1][9]*f->P[9][11] +
-            t->Phi[1][10]*f->P[10][11];
-    w->M[12] = t->Phi[1][0]*f->P[0][12] + t->Phi[1][1]*f->P[1][12] + t->Phi[1][2]*f->P[2][12] +
-            t->Phi[1][3]*f->P[3][12] + t->Phi[1][4]*f->P[4][12] + t->Phi[1][5]*f->P[5][12] +
-            t->Phi[1][7]*f->P[7][12] + t->Phi[1][8]*f->P[8][12] + t->Phi[1][9]*f->P[9][12] +
-            t->Phi[1][10]*f->P[10][12];
+    w->M[0] = t->Phi[10]*f->P[0][0] + t->Phi[11]*f->P[1][0] + t->Phi[12]*f->P[2][0] +
+            t->Phi[13]*f->P[3][0] + t->Phi[14]*f->P[4][0] + t->Phi[15]*f->P[5][0] +
+            t->Phi[16]*f->P[7][0] + t->Phi[17]*f->P[8][0] + t->Phi[18]*f->P[9][0] +
+            t->Phi[19]*f->P[10][0];
+    w->M[1] = t->Phi[10]*f->P[0][1] + t->Phi[11]*f->P[1][1] + t->Phi[12]*f->P[2][1] +
+            t->Phi[13]*f->P[3][1] + t->Phi[14]*f->P[4][1] + t->Phi[15]*f->P[5][1] +
+            t->Phi[16]*f->P[7][1] + t->Phi[17]*f->P[8][1] + t->Phi[18]*f->P[9][1] +
+            t->Phi[19]*f->P[10][1];
+    w->M[2] = t->Phi[10]*f->P[0][2] + t->Phi[11]*f->P[1][2] + t->Phi[12]*f->P[2][2] +
+            t->Phi[13]*f->P[3][2] + t->Phi[14]*f->P[4][2] + t->Phi[15]*f->P[5][2] +
+            t->Phi[16]*f->P[7][2] + t->Phi[17]*f->P[8][2] + t->Phi[18]*f->P[9][2] +
+            t->Phi[19]*f->P[10][2];
+    w->M[3] = t->Phi[10]*f->P[0][3] + t->Phi[11]*f->P[1][3] + t->Phi[12]*f->P[2][3] +
+            t->Phi[13]*f->P[3][3] + t->Phi[14]*f->P[4][3] + t->Phi[15]*f->P[5][3] +
+            t->Phi[16]*f->P[7][3] + t->Phi[17]*f->P[8][3] + t->Phi[18]*f->P[9][3] +
+            t->Phi[19]*f->P[10][3];
+    w->M[4] = t->Phi[10]*f->P[0][4] + t->Phi[11]*f->P[1][4] + t->Phi[12]*f->P[2][4] +
+            t->Phi[13]*f->P[3][4] + t->Phi[14]*f->P[4][4] + t->Phi[15]*f->P[5][4] +
+            t->Phi[16]*f->P[7][4] + t->Phi[17]*f->P[8][4] + t->Phi[18]*f->P[9][4] +
+            t->Phi[19]*f->P[10][4];
+    w->M[5] = t->Phi[10]*f->P[0][5] + t->Phi[11]*f->P[1][5] + t->Phi[12]*f->P[2][5] +
+            t->Phi[13]*f->P[3][5] + t->Phi[14]*f->P[4][5] + t->Phi[15]*f->P[5][5] +
+            t->Phi[16]*f->P[7][5] + t->Phi[17]*f->P[8][5] + t->Phi[18]*f->P[9][5] +
+            t->Phi[19]*f->P[10][5];
+    w->M[6] = t->Phi[10]*f->P[0][6] + t->Phi[11]*f->P[1][6] + t->Phi[12]*f->P[2][6] +
+            t->Phi[13]*f->P[3][6] + t->Phi[14]*f->P[4][6] + t->Phi[15]*f->P[5][6] +
+            t->Phi[16]*f->P[7][6] + t->Phi[17]*f->P[8][6] + t->Phi[18]*f->P[9][6] +
+            t->Phi[19]*f->P[10][6];
+    w->M[7] = t->Phi[10]*f->P[0][7] + t->Phi[11]*f->P[1][7] + t->Phi[12]*f->P[2][7] +
+            t->Phi[13]*f->P[3][7] + t->Phi[14]*f->P[4][7] + t->Phi[15]*f->P[5][7] +
+            t->Phi[16]*f->P[7][7] + t->Phi[17]*f->P[8][7] + t->Phi[18]*f->P[9][7] +
+            t->Phi[19]*f->P[10][7];
+    w->M[8] = t->Phi[10]*f->P[0][8] + t->Phi[11]*f->P[1][8] + t->Phi[12]*f->P[2][8] +
+            t->Phi[13]*f->P[3][8] + t->Phi[14]*f->P[4][8] + t->Phi[15]*f->P[5][8] +
+            t->Phi[16]*f->P[7][8] + t->Phi[17]*f->P[8][8] + t->Phi[18]*f->P[9][8] +
+            t->Phi[19]*f->P[10][8];
+    w->M[9] = t->Phi[10]*f->P[0][9] + t->Phi[11]*f->P[1][9] + t->Phi[12]*f->P[2][9] +
+            t->Phi[13]*f->P[3][9] + t->Phi[14]*f->P[4][9] + t->Phi[15]*f->P[5][9] +
+            t->Phi[16]*f->P[7][9] + t->Phi[17]*f->P[8][9] + t->Phi[18]*f->P[9][9] +
+            t->Phi[19]*f->P[10][9];
+    w->M[10] = t->Phi[10]*f->P[0][10] + t->Phi[11]*f->P[1][10] + t->Phi[12]*f->P[2][10] +
+            t->Phi[13]*f->P[3][10] + t->Phi[14]*f->P[4][10] + t->Phi[15]*f->P[5][10] +
+            t->Phi[16]*f->P[7][10] + t->Phi[17]*f->P[8][10] + t->Phi[18]*f->P[9][10] +
+            t->Phi[19]*f->P[10][10];
+    w->M[11] = t->Phi[10]*f->P[0][11] + t->Phi[11]*f->P[1][11] + t->Phi[12]*f->P[2][11] +
+            t->Phi[13]*f->P[3][11] + t->Phi[14]*f->P[4][11] + t->Phi[15]*f->P[5][11] +
+            t->Phi[16]*f->P[7][11] + t->Phi[17]*f->P[8][11] + t->Phi[18]*f->P[9][11] +
+            t->Phi[19]*f->P[10][11];
+    w->M[12] = t->Phi[10]*f->P[0][12] + t->Phi[11]*f->P[1][12] + t->Phi[12]*f->P[2][12] +
+            t->Phi[13]*f->P[3][12] + t->Phi[14]*f->P[4][12] + t->Phi[15]*f->P[5][12] +
+            t->Phi[16]*f->P[7][12] + t->Phi[17]*f->P[8][12] + t->Phi[18]*f->P[9][12] +
+            t->Phi[19]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2046,34 +1835,29 @@ static ned_doppler13_reduced_scalar propagate_row_1(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[1][0] + w->M[1]*t->Phi[1][1] + w->M[2]*t->Phi[1][2] + w->M[3]*t->Phi[1][3] +
-            w->M[4]*t->Phi[1][4] + w->M[5]*t->Phi[1][5] + w->M[7]*t->Phi[1][7] +
-            w->M[8]*t->Phi[1][8] + w->M[9]*t->Phi[1][9] + w->M[10]*t->Phi[1][10] + t->Qd[13];
-            w->Pn[13] = v; check += v - v;
-    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
-            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[7]*t->Phi[2][7] +
-            w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] + w->M[10]*t->Phi[2][10] + t->Qd[14];
-            w->Pn[14] = v; check += v - v;
-    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
-            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[7]*t->Phi[3][7] +
-            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] + t->Qd[15];
-            w->Pn[15] = v; check += v - v;
-    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
-            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
-            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] + t->Qd[16];
-            w->Pn[16] = v; check += v - v;
-    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
-            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
-            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] + t->Qd[17];
-            w->Pn[17] = v; check += v - v;
-    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
-            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
-            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
-            w->M[10]*t->Phi[6][10] + t->Qd[18]; w->Pn[18] = v; check += v - v;
+    v = w->M[0]*t->Phi[10] + w->M[1]*t->Phi[11] + w->M[2]*t->Phi[12] + w->M[3]*t->Phi[13] +
+            w->M[4]*t->Phi[14] + w->M[5]*t->Phi[15] + w->M[7]*t->Phi[16] + w->M[8]*t->Phi[17] +
+            w->M[9]*t->Phi[18] + w->M[10]*t->Phi[19] + t->Qd[13]; w->Pn[13] = v; check += v - v;
+    v = w->M[0]*t->Phi[20] + w->M[1]*t->Phi[21] + w->M[2]*t->Phi[22] + w->M[3]*t->Phi[23] +
+            w->M[4]*t->Phi[24] + w->M[5]*t->Phi[25] + w->M[7]*t->Phi[26] + w->M[8]*t->Phi[27] +
+            w->M[9]*t->Phi[28] + w->M[10]*t->Phi[29] + t->Qd[14]; w->Pn[14] = v; check += v - v;
+    v = w->M[0]*t->Phi[30] + w->M[1]*t->Phi[31] + w->M[2]*t->Phi[32] + w->M[3]*t->Phi[33] +
+            w->M[4]*t->Phi[34] + w->M[5]*t->Phi[35] + w->M[7]*t->Phi[36] + w->M[8]*t->Phi[37] +
+            w->M[9]*t->Phi[38] + w->M[10]*t->Phi[39] + t->Qd[15]; w->Pn[15] = v; check += v - v;
+    v = w->M[0]*t->Phi[40] + w->M[1]*t->Phi[41] + w->M[2]*t->Phi[42] + w->M[3]*t->Phi[43] +
+            w->M[4]*t->Phi[44] + w->M[5]*t->Phi[45] + w->M[7]*t->Phi[46] + w->M[8]*t->Phi[47] +
+            w->M[9]*t->Phi[48] + w->M[10]*t->Phi[49] + t->Qd[16]; w->Pn[16] = v; check += v - v;
+    v = w->M[0]*t->Phi[50] + w->M[1]*t->Phi[51] + w->M[2]*t->Phi[52] + w->M[3]*t->Phi[53] +
+            w->M[4]*t->Phi[54] + w->M[5]*t->Phi[55] + w->M[7]*t->Phi[56] + w->M[8]*t->Phi[57] +
+            w->M[9]*t->Phi[58] + w->M[10]*t->Phi[59] + t->Qd[17]; w->Pn[17] = v; check += v - v;
+    v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
+            w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[6]*t->Phi[66] + w->M[7]*t->Phi[67] +
+            w->M[8]*t->Phi[68] + w->M[9]*t->Phi[69] + w->M[10]*t->Phi[70] + t->Qd[18]; w->Pn[18] =
+            v; check += v - v;
     v = w->M[7]; w->Pn[19] = v; check += v - v;
     v = w->M[8]; w->Pn[20] = v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + t->Qd[21]; w->Pn[21] = v; check += v - v;
-    v = w->M[10]*t->Phi[10][10] + t->Qd[22]; w->Pn[22] = v; check += v - v;
+    v = w->M[9]*t->Phi[73] + t->Qd[21]; w->Pn[21] = v; check += v - v;
+    v = w->M[10]*t->Phi[74] + t->Qd[22]; w->Pn[22] = v; check += v - v;
     v = w->M[11]; w->Pn[23] = v; check += v - v;
     v = w->M[12]; w->Pn[24] = v; check += v - v;
     return check;
@@ -2083,58 +1867,58 @@ static void phi_times_p_row_2(const ned_doppler13_reduced_filter *restrict f, co
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
         w)
 {
-    w->M[0] = t->Phi[2][0]*f->P[0][0] + t->Phi[2][1]*f->P[1][0] + t->Phi[2][2]*f->P[2][0] +
-            t->Phi[2][3]*f->P[3][0] + t->Phi[2][4]*f->P[4][0] + t->Phi[2][5]*f->P[5][0] +
-            t->Phi[2][7]*f->P[7][0] + t->Phi[2][8]*f->P[8][0] + t->Phi[2][9]*f->P[9][0] +
-            t->Phi[2][10]*f->P[10][0];
-    w->M[1] = t->Phi[2][0]*f->P[0][1] + t->Phi[2][1]*f->P[1][1] + t->Phi[2][2]*f->P[2][1] +
-            t->Phi[2][3]*f->P[3][1] + t->Phi[2][4]*f->P[4][1] + t->Phi[2][5]*f->P[5][1] +
-            t->Phi[2][7]*f->P[7][1] + t->Phi[2][8]*f->P[8][1] + t->Phi[2][9]*f->P[9][1] +
-            t->Phi[2][10]*f->P[10][1];
-    w->M[2] = t->Phi[2][0]*f->P[0][2] + t->Phi[2][1]*f->P[1][2] + t->Phi[2][2]*f->P[2][2] +
-            t->Phi[2][3]*f->P[3][2] + t->Phi[2][4]*f->P[4][2] + t->Phi[2][5]*f->P[5][2] +
-            t->Phi[2][7]*f->P[7][2] + t->Phi[2][8]*f->P[8][2] + t->Phi[2][9]*f->P[9][2] +
-            t->Phi[2][10]*f->P[10][2];
-    w->M[3] = t->Phi[2][0]*f->P[0][3] + t->Phi[2][1]*f->P[1][3] + t->Phi[2][2]*f->P[2][3] +
-            t->Phi[2][3]*f->P[3][3] + t->Phi[2][4]*f->P[4][3] + t->Phi[2][5]*f->P[5][3] +
-            t->Phi[2][7]*f->P[7][3] + t->Phi[2][8]*f->P[8][3] + t->Phi[2][9]*f->P[9][3] +
-            t->Phi[2][10]*f->P[10][3];
-    w->M[4] = t->Phi[2][0]*f->P[0][4] + t->Phi[2][1]*f->P[1][4] + t->Phi[2][2]*f->P[2][4] +
-            t->Phi[2][3]*f->P[3][4] + t->Phi[2][4]*f->P[4][4] + t->Phi[2][5]*f->P[5][4] +
-            t->Phi[2][7]*f->P[7][4] + t->Phi[2][8]*f->P[8][4] + t->Phi[2][9]*f->P[9][4] +
-            t->Phi[2][10]*f->P[10][4];
-    w->M[5] = t->Phi[2][0]*f->P[0][5] + t->Phi[2][1]*f->P[1][5] + t->Phi[2][2]*f->P[2][5] +
-            t->Phi[2][3]*f->P[3][5] + t->Phi[2][4]*f->P[4][5] + t->Phi[2][5]*f->P[5][5] +
-            t->Phi[2][7]*f->P[7][5] + t->Phi[2][8]*f->P[8][5] + t->Phi[2][9]*f->P[9][5] +
-            t->Phi[2][10]*f->P[10][5];
-    w->M[6] = t->Phi[2][0]*f->P[0][6] + t->Phi[2][1]*f->P[1][6] + t->Phi[2][2]*f->P[2][6] +
-            t->Phi[2][3]*f->P[3][6] + t->Phi[2][4]*f->P[4][6] + t->Phi[2][5]*f->P[5][6] +
-            t->Phi[2][7]*f->P[7][6] + t->Phi[2][8]*f->P[8][6] + t->Phi[2][9]*f->P[9][6] +
-            t->Phi[2][10]*f->P[10][6];
-    w->M[7] = t->Phi[2][0]*f->P[0][7] + t->Phi[2][1]*f->P[1][7] + t->Phi[2][2]*f->P[2][7] +
-            t->Phi[2][3]*f->P[3][7] + t->Phi[2][4]*f->P[4][7] + t->Phi[2][5]*f->P[5][7] +
-            t->Phi[2][7]*f->P[7][7] + t->Phi[2][8]*f->P[8][7] + t->Phi[2][9]*f->P[9][7] +
-            t->Phi[2][10]*f->P[10][7];
-    w->M[8] = t->Phi[2][0]*f->P[0][8] + t->Phi[2][1]*f->P[1][8] + t->Phi[2][2]*f->P[2][8] +
-            t->Phi[2][3]*f->P[3][8] + t->Phi[2][4]*f->P[4][8] + t->Phi[2][5]*f->P[5][8] +
-            t->Phi[2][7]*f->P[7][8] + t->Phi[2][8]*f->P[8][8] + t->Phi[2][9]*f->P[9][8] +
-            t->Phi[2][10]*f->P[10][8];
-    w->M[9] = t->Phi[2][0]*f->P[0][9] + t->Phi[2][1]*f->P[1][9] + t->Phi[2][2]*f->P[2][9] +
-            t->Phi[2][3]*f->P[3][9] + t->Phi[2][4]*f->P[4][9] + t->Phi[2][5]*f->P[5][9] +
-            t->Phi[2][7]*f->P[7][9] + t->Phi[2][8]*f->P[8][9] + t->Phi[2][9]*f->P[9][9] +
-            t->Phi[2][10]*f->P[10][9];
-    w->M[10] = t->Phi[2][0]*f->P[0][10] + t->Phi[2][1]*f->P[1][10] + t->Phi[2][2]*f->P[2][10] +
-            t->Phi[2][3]*f->P[3][10] + t->Phi[2][4]*f->P[4][10] + t->Phi[2][5]*f->P[5][10] +
-            t->Phi[2][7]*f->P[7][10] + t->Phi[2][8]*f->P[8][10] + t->Phi[2][9]*f->P[9][10] +
-            t->Phi[2][10]*f->P[10][10];
-    w->M[11] = t->Phi[2][0]*f->P[0][11] + t->Phi[2][1]*f->P[1][11] + t->Phi[2][2]*f->P[2][11] +
-            t->Phi[2][3]*f->P[3][11] + t->Phi[2][4]*f->P[4][11] + t->Phi[2][5]*f->P[5][11] +
-            t->Phi[2][7]*f->P[7][11] + t->Phi[2][8]*f->P[8][11] + t->Phi[2][9]*f->P[9][11] +
-            t->Phi[2][10]*f->P[10][11];
-    w->M[12] = t->Phi[2][0]*f->P[0][12] + t->Phi[2][1]*f->P[1][12] + t->Phi[2][2]*f->P[2][12] +
-            t->Phi[2][3]*f->P[3][12] + t->Phi[2][4]*f->P[4][12] + t->Phi[2][5]*f->P[5][12] +
-            t->Phi[2][7]*f->P[7][12] + t->Phi[2][8]*f->P[8][12] + t->Phi[2][9]*f->P[9][12] +
-            t->Phi[2][10]*f->P[10][12];
+    w->M[0] = t->Phi[20]*f->P[0][0] + t->Phi[21]*f->P[1][0] + t->Phi[22]*f->P[2][0] +
+            t->Phi[23]*f->P[3][0] + t->Phi[24]*f->P[4][0] + t->Phi[25]*f->P[5][0] +
+            t->Phi[26]*f->P[7][0] + t->Phi[27]*f->P[8][0] + t->Phi[28]*f->P[9][0] +
+            t->Phi[29]*f->P[10][0];
+    w->M[1] = t->Phi[20]*f->P[0][1] + t->Phi[21]*f->P[1][1] + t->Phi[22]*f->P[2][1] +
+            t->Phi[23]*f->P[3][1] + t->Phi[24]*f->P[4][1] + t->Phi[25]*f->P[5][1] +
+            t->Phi[26]*f->P[7][1] + t->Phi[27]*f->P[8][1] + t->Phi[28]*f->P[9][1] +
+            t->Phi[29]*f->P[10][1];
+    w->M[2] = t->Phi[20]*f->P[0][2] + t->Phi[21]*f->P[1][2] + t->Phi[22]*f->P[2][2] +
+            t->Phi[23]*f->P[3][2] + t->Phi[24]*f->P[4][2] + t->Phi[25]*f->P[5][2] +
+            t->Phi[26]*f->P[7][2] + t->Phi[27]*f->P[8][2] + t->Phi[28]*f->P[9][2] +
+            t->Phi[29]*f->P[10][2];
+    w->M[3] = t->Phi[20]*f->P[0][3] + t->Phi[21]*f->P[1][3] + t->Phi[22]*f->P[2][3] +
+            t->Phi[23]*f->P[3][3] + t->Phi[24]*f->P[4][3] + t->Phi[25]*f->P[5][3] +
+            t->Phi[26]*f->P[7][3] + t->Phi[27]*f->P[8][3] + t->Phi[28]*f->P[9][3] +
+            t->Phi[29]*f->P[10][3];
+    w->M[4] = t->Phi[20]*f->P[0][4] + t->Phi[21]*f->P[1][4] + t->Phi[22]*f->P[2][4] +
+            t->Phi[23]*f->P[3][4] + t->Phi[24]*f->P[4][4] + t->Phi[25]*f->P[5][4] +
+            t->Phi[26]*f->P[7][4] + t->Phi[27]*f->P[8][4] + t->Phi[28]*f->P[9][4] +
+            t->Phi[29]*f->P[10][4];
+    w->M[5] = t->Phi[20]*f->P[0][5] + t->Phi[21]*f->P[1][5] + t->Phi[22]*f->P[2][5] +
+            t->Phi[23]*f->P[3][5] + t->Phi[24]*f->P[4][5] + t->Phi[25]*f->P[5][5] +
+            t->Phi[26]*f->P[7][5] + t->Phi[27]*f->P[8][5] + t->Phi[28]*f->P[9][5] +
+            t->Phi[29]*f->P[10][5];
+    w->M[6] = t->Phi[20]*f->P[0][6] + t->Phi[21]*f->P[1][6] + t->Phi[22]*f->P[2][6] +
+            t->Phi[23]*f->P[3][6] + t->Phi[24]*f->P[4][6] + t->Phi[25]*f->P[5][6] +
+            t->Phi[26]*f->P[7][6] + t->Phi[27]*f->P[8][6] + t->Phi[28]*f->P[9][6] +
+            t->Phi[29]*f->P[10][6];
+    w->M[7] = t->Phi[20]*f->P[0][7] + t->Phi[21]*f->P[1][7] + t->Phi[22]*f->P[2][7] +
+            t->Phi[23]*f->P[3][7] + t->Phi[24]*f->P[4][7] + t->Phi[25]*f->P[5][7] +
+            t->Phi[26]*f->P[7][7] + t->Phi[27]*f->P[8][7] + t->Phi[28]*f->P[9][7] +
+            t->Phi[29]*f->P[10][7];
+    w->M[8] = t->Phi[20]*f->P[0][8] + t->Phi[21]*f->P[1][8] + t->Phi[22]*f->P[2][8] +
+            t->Phi[23]*f->P[3][8] + t->Phi[24]*f->P[4][8] + t->Phi[25]*f->P[5][8] +
+            t->Phi[26]*f->P[7][8] + t->Phi[27]*f->P[8][8] + t->Phi[28]*f->P[9][8] +
+            t->Phi[29]*f->P[10][8];
+    w->M[9] = t->Phi[20]*f->P[0][9] + t->Phi[21]*f->P[1][9] + t->Phi[22]*f->P[2][9] +
+            t->Phi[23]*f->P[3][9] + t->Phi[24]*f->P[4][9] + t->Phi[25]*f->P[5][9] +
+            t->Phi[26]*f->P[7][9] + t->Phi[27]*f->P[8][9] + t->Phi[28]*f->P[9][9] +
+            t->Phi[29]*f->P[10][9];
+    w->M[10] = t->Phi[20]*f->P[0][10] + t->Phi[21]*f->P[1][10] + t->Phi[22]*f->P[2][10] +
+            t->Phi[23]*f->P[3][10] + t->Phi[24]*f->P[4][10] + t->Phi[25]*f->P[5][10] +
+            t->Phi[26]*f->P[7][10] + t->Phi[27]*f->P[8][10] + t->Phi[28]*f->P[9][10] +
+            t->Phi[29]*f->P[10][10];
+    w->M[11] = t->Phi[20]*f->P[0][11] + t->Phi[21]*f->P[1][11] + t->Phi[22]*f->P[2][11] +
+            t->Phi[23]*f->P[3][11] + t->Phi[24]*f->P[4][11] + t->Phi[25]*f->P[5][11] +
+            t->Phi[26]*f->P[7][11] + t->Phi[27]*f->P[8][11] + t->Phi[28]*f->P[9][11] +
+            t->Phi[29]*f->P[10][11];
+    w->M[12] = t->Phi[20]*f->P[0][12] + t->Phi[21]*f->P[1][12] + t->Phi[22]*f->P[2][12] +
+            t->Phi[23]*f->P[3][12] + t->Phi[24]*f->P[4][12] + t->Phi[25]*f->P[5][12] +
+            t->Phi[26]*f->P[7][12] + t->Phi[27]*f->P[8][12] + t->Phi[28]*f->P[9][12] +
+            t->Phi[29]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2142,30 +1926,26 @@ static ned_doppler13_reduced_scalar propagate_row_2(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[2][0] + w->M[1]*t->Phi[2][1] + w->M[2]*t->Phi[2][2] + w->M[3]*t->Phi[2][3] +
-            w->M[4]*t->Phi[2][4] + w->M[5]*t->Phi[2][5] + w->M[7]*t->Phi[2][7] +
-            w->M[8]*t->Phi[2][8] + w->M[9]*t->Phi[2][9] + w->M[10]*t->Phi[2][10] + t->Qd[25];
-            w->Pn[25] = v; check += v - v;
-    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
-            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[7]*t->Phi[3][7] +
-            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] + t->Qd[26];
-            w->Pn[26] = v; check += v - v;
-    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
-            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
-            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] + t->Qd[27];
-            w->Pn[27] = v; check += v - v;
-    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
-            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
-            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] + t->Qd[28];
-            w->Pn[28] = v; check += v - v;
-    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
-            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
-            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
-            w->M[10]*t->Phi[6][10] + t->Qd[29]; w->Pn[29] = v; check += v - v;
+    v = w->M[0]*t->Phi[20] + w->M[1]*t->Phi[21] + w->M[2]*t->Phi[22] + w->M[3]*t->Phi[23] +
+            w->M[4]*t->Phi[24] + w->M[5]*t->Phi[25] + w->M[7]*t->Phi[26] + w->M[8]*t->Phi[27] +
+            w->M[9]*t->Phi[28] + w->M[10]*t->Phi[29] + t->Qd[25]; w->Pn[25] = v; check += v - v;
+    v = w->M[0]*t->Phi[30] + w->M[1]*t->Phi[31] + w->M[2]*t->Phi[32] + w->M[3]*t->Phi[33] +
+            w->M[4]*t->Phi[34] + w->M[5]*t->Phi[35] + w->M[7]*t->Phi[36] + w->M[8]*t->Phi[37] +
+            w->M[9]*t->Phi[38] + w->M[10]*t->Phi[39] + t->Qd[26]; w->Pn[26] = v; check += v - v;
+    v = w->M[0]*t->Phi[40] + w->M[1]*t->Phi[41] + w->M[2]*t->Phi[42] + w->M[3]*t->Phi[43] +
+            w->M[4]*t->Phi[44] + w->M[5]*t->Phi[45] + w->M[7]*t->Phi[46] + w->M[8]*t->Phi[47] +
+            w->M[9]*t->Phi[48] + w->M[10]*t->Phi[49] + t->Qd[27]; w->Pn[27] = v; check += v - v;
+    v = w->M[0]*t->Phi[50] + w->M[1]*t->Phi[51] + w->M[2]*t->Phi[52] + w->M[3]*t->Phi[53] +
+            w->M[4]*t->Phi[54] + w->M[5]*t->Phi[55] + w->M[7]*t->Phi[56] + w->M[8]*t->Phi[57] +
+            w->M[9]*t->Phi[58] + w->M[10]*t->Phi[59] + t->Qd[28]; w->Pn[28] = v; check += v - v;
+    v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
+            w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[6]*t->Phi[66] + w->M[7]*t->Phi[67] +
+            w->M[8]*t->Phi[68] + w->M[9]*t->Phi[69] + w->M[10]*t->Phi[70] + t->Qd[29]; w->Pn[29] =
+            v; check += v - v;
     v = w->M[7]; w->Pn[30] = v; check += v - v;
     v = w->M[8]; w->Pn[31] = v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + t->Qd[32]; w->Pn[32] = v; check += v - v;
-    v = w->M[10]*t->Phi[10][10] + t->Qd[33]; w->Pn[33] = v; check += v - v;
+    v = w->M[9]*t->Phi[73] + t->Qd[32]; w->Pn[32] = v; check += v - v;
+    v = w->M[10]*t->Phi[74] + t->Qd[33]; w->Pn[33] = v; check += v - v;
     v = w->M[11]; w->Pn[34] = v; check += v - v;
     v = w->M[12]; w->Pn[35] = v; check += v - v;
     return check;
@@ -2175,58 +1955,58 @@ static void phi_times_p_row_3(const ned_doppler13_reduced_filter *restrict f, co
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
         w)
 {
-    w->M[0] = t->Phi[3][0]*f->P[0][0] + t->Phi[3][1]*f->P[1][0] + t->Phi[3][2]*f->P[2][0] +
-            t->Phi[3][3]*f->P[3][0] + t->Phi[3][4]*f->P[4][0] + t->Phi[3][5]*f->P[5][0] +
-            t->Phi[3][7]*f->P[7][0] + t->Phi[3][8]*f->P[8][0] + t->Phi[3][9]*f->P[9][0] +
-            t->Phi[3][10]*f->P[10][0];
-    w->M[1] = t->Phi[3][0]*f->P[0][1] + t->Phi[3][1]*f->P[1][1] + t->Phi[3][2]*f->P[2][1] +
-            t->Phi[3][3]*f->P[3][1] + t->Phi[3][4]*f->P[4][1] + t->Phi[3][5]*f->P[5][1] +
-            t->Phi[3][7]*f->P[7][1] + t->Phi[3][8]*f->P[8][1] + t->Phi[3][9]*f->P[9][1] +
-            t->Phi[3][10]*f->P[10][1];
-    w->M[2] = t->Phi[3][0]*f->P[0][2] + t->Phi[3][1]*f->P[1][2] + t->Phi[3][2]*f->P[2][2] +
-            t->Phi[3][3]*f->P[3][2] + t->Phi[3][4]*f->P[4][2] + t->Phi[3][5]*f->P[5][2] +
-            t->Phi[3][7]*f->P[7][2] + t->Phi[3][8]*f->P[8][2] + t->Phi[3][9]*f->P[9][2] +
-            t->Phi[3][10]*f->P[10][2];
-    w->M[3] = t->Phi[3][0]*f->P[0][3] + t->Phi[3][1]*f->P[1][3] + t->Phi[3][2]*f->P[2][3] +
-            t->Phi[3][3]*f->P[3][3] + t->Phi[3][4]*f->P[4][3] + t->Phi[3][5]*f->P[5][3] +
-            t->Phi[3][7]*f->P[7][3] + t->Phi[3][8]*f->P[8][3] + t->Phi[3][9]*f->P[9][3] +
-            t->Phi[3][10]*f->P[10][3];
-    w->M[4] = t->Phi[3][0]*f->P[0][4] + t->Phi[3][1]*f->P[1][4] + t->Phi[3][2]*f->P[2][4] +
-            t->Phi[3][3]*f->P[3][4] + t->Phi[3][4]*f->P[4][4] + t->Phi[3][5]*f->P[5][4] +
-            t->Phi[3][7]*f->P[7][4] + t->Phi[3][8]*f->P[8][4] + t->Phi[3][9]*f->P[9][4] +
-            t->Phi[3][10]*f->P[10][4];
-    w->M[5] = t->Phi[3][0]*f->P[0][5] + t->Phi[3][1]*f->P[1][5] + t->Phi[3][2]*f->P[2][5] +
-            t->Phi[3][3]*f->P[3][5] + t->Phi[3][4]*f->P[4][5] + t->Phi[3][5]*f->P[5][5] +
-            t->Phi[3][7]*f->P[7][5] + t->Phi[3][8]*f->P[8][5] + t->Phi[3][9]*f->P[9][5] +
-            t->Phi[3][10]*f->P[10][5];
-    w->M[6] = t->Phi[3][0]*f->P[0][6] + t->Phi[3][1]*f->P[1][6] + t->Phi[3][2]*f->P[2][6] +
-            t->Phi[3][3]*f->P[3][6] + t->Phi[3][4]*f->P[4][6] + t->Phi[3][5]*f->P[5][6] +
-            t->Phi[3][7]*f->P[7][6] + t->Phi[3][8]*f->P[8][6] + t->Phi[3][9]*f->P[9][6] +
-            t->Phi[3][10]*f->P[10][6];
-    w->M[7] = t->Phi[3][0]*f->P[0][7] + t->Phi[3][1]*f->P[1][7] + t->Phi[3][2]*f->P[2][7] +
-            t->Phi[3][3]*f->P[3][7] + t->Phi[3][4]*f->P[4][7] + t->Phi[3][5]*f->P[5][7] +
-            t->Phi[3][7]*f->P[7][7] + t->Phi[3][8]*f->P[8][7] + t->Phi[3][9]*f->P[9][7] +
-            t->Phi[3][10]*f->P[10][7];
-    w->M[8] = t->Phi[3][0]*f->P[0][8] + t->Phi[3][1]*f->P[1][8] + t->Phi[3][2]*f->P[2][8] +
-            t->Phi[3][3]*f->P[3][8] + t->Phi[3][4]*f->P[4][8] + t->Phi[3][5]*f->P[5][8] +
-            t->Phi[3][7]*f->P[7][8] + t->Phi[3][8]*f->P[8][8] + t->Phi[3][9]*f->P[9][8] +
-            t->Phi[3][10]*f->P[10][8];
-    w->M[9] = t->Phi[3][0]*f->P[0][9] + t->Phi[3][1]*f->P[1][9] + t->Phi[3][2]*f->P[2][9] +
-            t->Phi[3][3]*f->P[3][9] + t->Phi[3][4]*f->P[4][9] + t->Phi[3][5]*f->P[5][9] +
-            t->Phi[3][7]*f->P[7][9] + t->Phi[3][8]*f->P[8][9] + t->Phi[3][9]*f->P[9][9] +
-            t->Phi[3][10]*f->P[10][9];
-    w->M[10] = t->Phi[3][0]*f->P[0][10] + t->Phi[3][1]*f->P[1][10] + t->Phi[3][2]*f->P[2][10] +
-            t->Phi[3][3]*f->P[3][10] + t->Phi[3][4]*f->P[4][10] + t->Phi[3][5]*f->P[5][10] +
-            t->Phi[3][7]*f->P[7][10] + t->Phi[3][8]*f->P[8][10] + t->Phi[3][9]*f->P[9][10] +
-            t->Phi[3][10]*f->P[10][10];
-    w->M[11] = t->Phi[3][0]*f->P[0][11] + t->Phi[3][1]*f->P[1][11] + t->Phi[3][2]*f->P[2][11] +
-            t->Phi[3][3]*f->P[3][11] + t->Phi[3][4]*f->P[4][11] + t->Phi[3][5]*f->P[5][11] +
-            t->Phi[3][7]*f->P[7][11] + t->Phi[3][8]*f->P[8][11] + t->Phi[3][9]*f->P[9][11] +
-            t->Phi[3][10]*f->P[10][11];
-    w->M[12] = t->Phi[3][0]*f->P[0][12] + t->Phi[3][1]*f->P[1][12] + t->Phi[3][2]*f->P[2][12] +
-            t->Phi[3][3]*f->P[3][12] + t->Phi[3][4]*f->P[4][12] + t->Phi[3][5]*f->P[5][12] +
-            t->Phi[3][7]*f->P[7][12] + t->Phi[3][8]*f->P[8][12] + t->Phi[3][9]*f->P[9][12] +
-            t->Phi[3][10]*f->P[10][12];
+    w->M[0] = t->Phi[30]*f->P[0][0] + t->Phi[31]*f->P[1][0] + t->Phi[32]*f->P[2][0] +
+            t->Phi[33]*f->P[3][0] + t->Phi[34]*f->P[4][0] + t->Phi[35]*f->P[5][0] +
+            t->Phi[36]*f->P[7][0] + t->Phi[37]*f->P[8][0] + t->Phi[38]*f->P[9][0] +
+            t->Phi[39]*f->P[10][0];
+    w->M[1] = t->Phi[30]*f->P[0][1] + t->Phi[31]*f->P[1][1] + t->Phi[32]*f->P[2][1] +
+            t->Phi[33]*f->P[3][1] + t->Phi[34]*f->P[4][1] + t->Phi[35]*f->P[5][1] +
+            t->Phi[36]*f->P[7][1] + t->Phi[37]*f->P[8][1] + t->Phi[38]*f->P[9][1] +
+            t->Phi[39]*f->P[10][1];
+    w->M[2] = t->Phi[30]*f->P[0][2] + t->Phi[31]*f->P[1][2] + t->Phi[32]*f->P[2][2] +
+            t->Phi[33]*f->P[3][2] + t->Phi[34]*f->P[4][2] + t->Phi[35]*f->P[5][2] +
+            t->Phi[36]*f->P[7][2] + t->Phi[37]*f->P[8][2] + t->Phi[38]*f->P[9][2] +
+            t->Phi[39]*f->P[10][2];
+    w->M[3] = t->Phi[30]*f->P[0][3] + t->Phi[31]*f->P[1][3] + t->Phi[32]*f->P[2][3] +
+            t->Phi[33]*f->P[3][3] + t->Phi[34]*f->P[4][3] + t->Phi[35]*f->P[5][3] +
+            t->Phi[36]*f->P[7][3] + t->Phi[37]*f->P[8][3] + t->Phi[38]*f->P[9][3] +
+            t->Phi[39]*f->P[10][3];
+    w->M[4] = t->Phi[30]*f->P[0][4] + t->Phi[31]*f->P[1][4] + t->Phi[32]*f->P[2][4] +
+            t->Phi[33]*f->P[3][4] + t->Phi[34]*f->P[4][4] + t->Phi[35]*f->P[5][4] +
+            t->Phi[36]*f->P[7][4] + t->Phi[37]*f->P[8][4] + t->Phi[38]*f->P[9][4] +
+            t->Phi[39]*f->P[10][4];
+    w->M[5] = t->Phi[30]*f->P[0][5] + t->Phi[31]*f->P[1][5] + t->Phi[32]*f->P[2][5] +
+            t->Phi[33]*f->P[3][5] + t->Phi[34]*f->P[4][5] + t->Phi[35]*f->P[5][5] +
+            t->Phi[36]*f->P[7][5] + t->Phi[37]*f->P[8][5] + t->Phi[38]*f->P[9][5] +
+            t->Phi[39]*f->P[10][5];
+    w->M[6] = t->Phi[30]*f->P[0][6] + t->Phi[31]*f->P[1][6] + t->Phi[32]*f->P[2][6] +
+            t->Phi[33]*f->P[3][6] + t->Phi[34]*f->P[4][6] + t->Phi[35]*f->P[5][6] +
+            t->Phi[36]*f->P[7][6] + t->Phi[37]*f->P[8][6] + t->Phi[38]*f->P[9][6] +
+            t->Phi[39]*f->P[10][6];
+    w->M[7] = t->Phi[30]*f->P[0][7] + t->Phi[31]*f->P[1][7] + t->Phi[32]*f->P[2][7] +
+            t->Phi[33]*f->P[3][7] + t->Phi[34]*f->P[4][7] + t->Phi[35]*f->P[5][7] +
+            t->Phi[36]*f->P[7][7] + t->Phi[37]*f->P[8][7] + t->Phi[38]*f->P[9][7] +
+            t->Phi[39]*f->P[10][7];
+    w->M[8] = t->Phi[30]*f->P[0][8] + t->Phi[31]*f->P[1][8] + t->Phi[32]*f->P[2][8] +
+            t->Phi[33]*f->P[3][8] + t->Phi[34]*f->P[4][8] + t->Phi[35]*f->P[5][8] +
+            t->Phi[36]*f->P[7][8] + t->Phi[37]*f->P[8][8] + t->Phi[38]*f->P[9][8] +
+            t->Phi[39]*f->P[10][8];
+    w->M[9] = t->Phi[30]*f->P[0][9] + t->Phi[31]*f->P[1][9] + t->Phi[32]*f->P[2][9] +
+            t->Phi[33]*f->P[3][9] + t->Phi[34]*f->P[4][9] + t->Phi[35]*f->P[5][9] +
+            t->Phi[36]*f->P[7][9] + t->Phi[37]*f->P[8][9] + t->Phi[38]*f->P[9][9] +
+            t->Phi[39]*f->P[10][9];
+    w->M[10] = t->Phi[30]*f->P[0][10] + t->Phi[31]*f->P[1][10] + t->Phi[32]*f->P[2][10] +
+            t->Phi[33]*f->P[3][10] + t->Phi[34]*f->P[4][10] + t->Phi[35]*f->P[5][10] +
+            t->Phi[36]*f->P[7][10] + t->Phi[37]*f->P[8][10] + t->Phi[38]*f->P[9][10] +
+            t->Phi[39]*f->P[10][10];
+    w->M[11] = t->Phi[30]*f->P[0][11] + t->Phi[31]*f->P[1][11] + t->Phi[32]*f->P[2][11] +
+            t->Phi[33]*f->P[3][11] + t->Phi[34]*f->P[4][11] + t->Phi[35]*f->P[5][11] +
+            t->Phi[36]*f->P[7][11] + t->Phi[37]*f->P[8][11] + t->Phi[38]*f->P[9][11] +
+            t->Phi[39]*f->P[10][11];
+    w->M[12] = t->Phi[30]*f->P[0][12] + t->Phi[31]*f->P[1][12] + t->Phi[32]*f->P[2][12] +
+            t->Phi[33]*f->P[3][12] + t->Phi[34]*f->P[4][12] + t->Phi[35]*f->P[5][12] +
+            t->Phi[36]*f->P[7][12] + t->Phi[37]*f->P[8][12] + t->Phi[38]*f->P[9][12] +
+            t->Phi[39]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2234,26 +2014,23 @@ static ned_doppler13_reduced_scalar propagate_row_3(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[3][0] + w->M[1]*t->Phi[3][1] + w->M[2]*t->Phi[3][2] + w->M[3]*t->Phi[3][3] +
-            w->M[4]*t->Phi[3][4] + w->M[5]*t->Phi[3][5] + w->M[7]*t->Phi[3][7] +
-            w->M[8]*t->Phi[3][8] + w->M[9]*t->Phi[3][9] + w->M[10]*t->Phi[3][10] + t->Qd[36];
-            w->Pn[36] = v; check += v - v;
-    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
-            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
-            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] + t->Qd[37];
-            w->Pn[37] = v; check += v - v;
-    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
-            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
-            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] + t->Qd[38];
-            w->Pn[38] = v; check += v - v;
-    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
-            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
-            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
-            w->M[10]*t->Phi[6][10] + t->Qd[39]; w->Pn[39] = v; check += v - v;
+    v = w->M[0]*t->Phi[30] + w->M[1]*t->Phi[31] + w->M[2]*t->Phi[32] + w->M[3]*t->Phi[33] +
+            w->M[4]*t->Phi[34] + w->M[5]*t->Phi[35] + w->M[7]*t->Phi[36] + w->M[8]*t->Phi[37] +
+            w->M[9]*t->Phi[38] + w->M[10]*t->Phi[39] + t->Qd[36]; w->Pn[36] = v; check += v - v;
+    v = w->M[0]*t->Phi[40] + w->M[1]*t->Phi[41] + w->M[2]*t->Phi[42] + w->M[3]*t->Phi[43] +
+            w->M[4]*t->Phi[44] + w->M[5]*t->Phi[45] + w->M[7]*t->Phi[46] + w->M[8]*t->Phi[47] +
+            w->M[9]*t->Phi[48] + w->M[10]*t->Phi[49] + t->Qd[37]; w->Pn[37] = v; check += v - v;
+    v = w->M[0]*t->Phi[50] + w->M[1]*t->Phi[51] + w->M[2]*t->Phi[52] + w->M[3]*t->Phi[53] +
+            w->M[4]*t->Phi[54] + w->M[5]*t->Phi[55] + w->M[7]*t->Phi[56] + w->M[8]*t->Phi[57] +
+            w->M[9]*t->Phi[58] + w->M[10]*t->Phi[59] + t->Qd[38]; w->Pn[38] = v; check += v - v;
+    v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
+            w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[6]*t->Phi[66] + w->M[7]*t->Phi[67] +
+            w->M[8]*t->Phi[68] + w->M[9]*t->Phi[69] + w->M[10]*t->Phi[70] + t->Qd[39]; w->Pn[39] =
+            v; check += v - v;
     v = w->M[7]; w->Pn[40] = v; check += v - v;
     v = w->M[8]; w->Pn[41] = v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + t->Qd[42]; w->Pn[42] = v; check += v - v;
-    v = w->M[10]*t->Phi[10][10] + t->Qd[43]; w->Pn[43] = v; check += v - v;
+    v = w->M[9]*t->Phi[73] + t->Qd[42]; w->Pn[42] = v; check += v - v;
+    v = w->M[10]*t->Phi[74] + t->Qd[43]; w->Pn[43] = v; check += v - v;
     v = w->M[11]; w->Pn[44] = v; check += v - v;
     v = w->M[12]; w->Pn[45] = v; check += v - v;
     return check;
@@ -2263,58 +2040,58 @@ static void phi_times_p_row_4(const ned_doppler13_reduced_filter *restrict f, co
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
         w)
 {
-    w->M[0] = t->Phi[4][0]*f->P[0][0] + t->Phi[4][1]*f->P[1][0] + t->Phi[4][2]*f->P[2][0] +
-            t->Phi[4][3]*f->P[3][0] + t->Phi[4][4]*f->P[4][0] + t->Phi[4][5]*f->P[5][0] +
-            t->Phi[4][7]*f->P[7][0] + t->Phi[4][8]*f->P[8][0] + t->Phi[4][9]*f->P[9][0] +
-            t->Phi[4][10]*f->P[10][0];
-    w->M[1] = t->Phi[4][0]*f->P[0][1] + t->Phi[4][1]*f->P[1][1] + t->Phi[4][2]*f->P[2][1] +
-            t->Phi[4][3]*f->P[3][1] + t->Phi[4][4]*f->P[4][1] + t->Phi[4][5]*f->P[5][1] +
-            t->Phi[4][7]*f->P[7][1] + t->Phi[4][8]*f->P[8][1] + t->Phi[4][9]*f->P[9][1] +
-            t->Phi[4][10]*f->P[10][1];
-    w->M[2] = t->Phi[4][0]*f->P[0][2] + t->Phi[4][1]*f->P[1][2] + t->Phi[4][2]*f->P[2][2] +
-            t->Phi[4][3]*f->P[3][2] + t->Phi[4][4]*f->P[4][2] + t->Phi[4][5]*f->P[5][2] +
-            t->Phi[4][7]*f->P[7][2] + t->Phi[4][8]*f->P[8][2] + t->Phi[4][9]*f->P[9][2] +
-            t->Phi[4][10]*f->P[10][2];
-    w->M[3] = t->Phi[4][0]*f->P[0][3] + t->Phi[4][1]*f->P[1][3] + t->Phi[4][2]*f->P[2][3] +
-            t->Phi[4][3]*f->P[3][3] + t->Phi[4][4]*f->P[4][3] + t->Phi[4][5]*f->P[5][3] +
-            t->Phi[4][7]*f->P[7][3] + t->Phi[4][8]*f->P[8][3] + t->Phi[4][9]*f->P[9][3] +
-            t->Phi[4][10]*f->P[10][3];
-    w->M[4] = t->Phi[4][0]*f->P[0][4] + t->Phi[4][1]*f->P[1][4] + t->Phi[4][2]*f->P[2][4] +
-            t->Phi[4][3]*f->P[3][4] + t->Phi[4][4]*f->P[4][4] + t->Phi[4][5]*f->P[5][4] +
-            t->Phi[4][7]*f->P[7][4] + t->Phi[4][8]*f->P[8][4] + t->Phi[4][9]*f->P[9][4] +
-            t->Phi[4][10]*f->P[10][4];
-    w->M[5] = t->Phi[4][0]*f->P[0][5] + t->Phi[4][1]*f->P[1][5] + t->Phi[4][2]*f->P[2][5] +
-            t->Phi[4][3]*f->P[3][5] + t->Phi[4][4]*f->P[4][5] + t->Phi[4][5]*f->P[5][5] +
-            t->Phi[4][7]*f->P[7][5] + t->Phi[4][8]*f->P[8][5] + t->Phi[4][9]*f->P[9][5] +
-            t->Phi[4][10]*f->P[10][5];
-    w->M[6] = t->Phi[4][0]*f->P[0][6] + t->Phi[4][1]*f->P[1][6] + t->Phi[4][2]*f->P[2][6] +
-            t->Phi[4][3]*f->P[3][6] + t->Phi[4][4]*f->P[4][6] + t->Phi[4][5]*f->P[5][6] +
-            t->Phi[4][7]*f->P[7][6] + t->Phi[4][8]*f->P[8][6] + t->Phi[4][9]*f->P[9][6] +
-            t->Phi[4][10]*f->P[10][6];
-    w->M[7] = t->Phi[4][0]*f->P[0][7] + t->Phi[4][1]*f->P[1][7] + t->Phi[4][2]*f->P[2][7] +
-            t->Phi[4][3]*f->P[3][7] + t->Phi[4][4]*f->P[4][7] + t->Phi[4][5]*f->P[5][7] +
-            t->Phi[4][7]*f->P[7][7] + t->Phi[4][8]*f->P[8][7] + t->Phi[4][9]*f->P[9][7] +
-            t->Phi[4][10]*f->P[10][7];
-    w->M[8] = t->Phi[4][0]*f->P[0][8] + t->Phi[4][1]*f->P[1][8] + t->Phi[4][2]*f->P[2][8] +
-            t->Phi[4][3]*f->P[3][8] + t->Phi[4][4]*f->P[4][8] + t->Phi[4][5]*f->P[5][8] +
-            t->Phi[4][7]*f->P[7][8] + t->Phi[4][8]*f->P[8][8] + t->Phi[4][9]*f->P[9][8] +
-            t->Phi[4][10]*f->P[10][8];
-    w->M[9] = t->Phi[4][0]*f->P[0][9] + t->Phi[4][1]*f->P[1][9] + t->Phi[4][2]*f->P[2][9] +
-            t->Phi[4][3]*f->P[3][9] + t->Phi[4][4]*f->P[4][9] + t->Phi[4][5]*f->P[5][9] +
-            t->Phi[4][7]*f->P[7][9] + t->Phi[4][8]*f->P[8][9] + t->Phi[4][9]*f->P[9][9] +
-            t->Phi[4][10]*f->P[10][9];
-    w->M[10] = t->Phi[4][0]*f->P[0][10] + t->Phi[4][1]*f->P[1][10] + t->Phi[4][2]*f->P[2][10] +
-            t->Phi[4][3]*f->P[3][10] + t->Phi[4][4]*f->P[4][10] + t->Phi[4][5]*f->P[5][10] +
-            t->Phi[4][7]*f->P[7][10] + t->Phi[4][8]*f->P[8][10] + t->Phi[4][9]*f->P[9][10] +
-            t->Phi[4][10]*f->P[10][10];
-    w->M[11] = t->Phi[4][0]*f->P[0][11] + t->Phi[4][1]*f->P[1][11] + t->Phi[4][2]*f->P[2][11] +
-            t->Phi[4][3]*f->P[3][11] + t->Phi[4][4]*f->P[4][11] + t->Phi[4][5]*f->P[5][11] +
-            t->Phi[4][7]*f->P[7][11] + t->Phi[4][8]*f->P[8][11] + t->Phi[4][9]*f->P[9][11] +
-            t->Phi[4][10]*f->P[10][11];
-    w->M[12] = t->Phi[4][0]*f->P[0][12] + t->Phi[4][1]*f->P[1][12] + t->Phi[4][2]*f->P[2][12] +
-            t->Phi[4][3]*f->P[3][12] + t->Phi[4][4]*f->P[4][12] + t->Phi[4][5]*f->P[5][12] +
-            t->Phi[4][7]*f->P[7][12] + t->Phi[4][8]*f->P[8][12] + t->Phi[4][9]*f->P[9][12] +
-            t->Phi[4][10]*f->P[10][12];
+    w->M[0] = t->Phi[40]*f->P[0][0] + t->Phi[41]*f->P[1][0] + t->Phi[42]*f->P[2][0] +
+            t->Phi[43]*f->P[3][0] + t->Phi[44]*f->P[4][0] + t->Phi[45]*f->P[5][0] +
+            t->Phi[46]*f->P[7][0] + t->Phi[47]*f->P[8][0] + t->Phi[48]*f->P[9][0] +
+            t->Phi[49]*f->P[10][0];
+    w->M[1] = t->Phi[40]*f->P[0][1] + t->Phi[41]*f->P[1][1] + t->Phi[42]*f->P[2][1] +
+            t->Phi[43]*f->P[3][1] + t->Phi[44]*f->P[4][1] + t->Phi[45]*f->P[5][1] +
+            t->Phi[46]*f->P[7][1] + t->Phi[47]*f->P[8][1] + t->Phi[48]*f->P[9][1] +
+            t->Phi[49]*f->P[10][1];
+    w->M[2] = t->Phi[40]*f->P[0][2] + t->Phi[41]*f->P[1][2] + t->Phi[42]*f->P[2][2] +
+            t->Phi[43]*f->P[3][2] + t->Phi[44]*f->P[4][2] + t->Phi[45]*f->P[5][2] +
+            t->Phi[46]*f->P[7][2] + t->Phi[47]*f->P[8][2] + t->Phi[48]*f->P[9][2] +
+            t->Phi[49]*f->P[10][2];
+    w->M[3] = t->Phi[40]*f->P[0][3] + t->Phi[41]*f->P[1][3] + t->Phi[42]*f->P[2][3] +
+            t->Phi[43]*f->P[3][3] + t->Phi[44]*f->P[4][3] + t->Phi[45]*f->P[5][3] +
+            t->Phi[46]*f->P[7][3] + t->Phi[47]*f->P[8][3] + t->Phi[48]*f->P[9][3] +
+            t->Phi[49]*f->P[10][3];
+    w->M[4] = t->Phi[40]*f->P[0][4] + t->Phi[41]*f->P[1][4] + t->Phi[42]*f->P[2][4] +
+            t->Phi[43]*f->P[3][4] + t->Phi[44]*f->P[4][4] + t->Phi[45]*f->P[5][4] +
+            t->Phi[46]*f->P[7][4] + t->Phi[47]*f->P[8][4] + t->Phi[48]*f->P[9][4] +
+            t->Phi[49]*f->P[10][4];
+    w->M[5] = t->Phi[40]*f->P[0][5] + t->Phi[41]*f->P[1][5] + t->Phi[42]*f->P[2][5] +
+            t->Phi[43]*f->P[3][5] + t->Phi[44]*f->P[4][5] + t->Phi[45]*f->P[5][5] +
+            t->Phi[46]*f->P[7][5] + t->Phi[47]*f->P[8][5] + t->Phi[48]*f->P[9][5] +
+            t->Phi[49]*f->P[10][5];
+    w->M[6] = t->Phi[40]*f->P[0][6] + t->Phi[41]*f->P[1][6] + t->Phi[42]*f->P[2][6] +
+            t->Phi[43]*f->P[3][6] + t->Phi[44]*f->P[4][6] + t->Phi[45]*f->P[5][6] +
+            t->Phi[46]*f->P[7][6] + t->Phi[47]*f->P[8][6] + t->Phi[48]*f->P[9][6] +
+            t->Phi[49]*f->P[10][6];
+    w->M[7] = t->Phi[40]*f->P[0][7] + t->Phi[41]*f->P[1][7] + t->Phi[42]*f->P[2][7] +
+            t->Phi[43]*f->P[3][7] + t->Phi[44]*f->P[4][7] + t->Phi[45]*f->P[5][7] +
+            t->Phi[46]*f->P[7][7] + t->Phi[47]*f->P[8][7] + t->Phi[48]*f->P[9][7] +
+            t->Phi[49]*f->P[10][7];
+    w->M[8] = t->Phi[40]*f->P[0][8] + t->Phi[41]*f->P[1][8] + t->Phi[42]*f->P[2][8] +
+            t->Phi[43]*f->P[3][8] + t->Phi[44]*f->P[4][8] + t->Phi[45]*f->P[5][8] +
+            t->Phi[46]*f->P[7][8] + t->Phi[47]*f->P[8][8] + t->Phi[48]*f->P[9][8] +
+            t->Phi[49]*f->P[10][8];
+    w->M[9] = t->Phi[40]*f->P[0][9] + t->Phi[41]*f->P[1][9] + t->Phi[42]*f->P[2][9] +
+            t->Phi[43]*f->P[3][9] + t->Phi[44]*f->P[4][9] + t->Phi[45]*f->P[5][9] +
+            t->Phi[46]*f->P[7][9] + t->Phi[47]*f->P[8][9] + t->Phi[48]*f->P[9][9] +
+            t->Phi[49]*f->P[10][9];
+    w->M[10] = t->Phi[40]*f->P[0][10] + t->Phi[41]*f->P[1][10] + t->Phi[42]*f->P[2][10] +
+            t->Phi[43]*f->P[3][10] + t->Phi[44]*f->P[4][10] + t->Phi[45]*f->P[5][10] +
+            t->Phi[46]*f->P[7][10] + t->Phi[47]*f->P[8][10] + t->Phi[48]*f->P[9][10] +
+            t->Phi[49]*f->P[10][10];
+    w->M[11] = t->Phi[40]*f->P[0][11] + t->Phi[41]*f->P[1][11] + t->Phi[42]*f->P[2][11] +
+            t->Phi[43]*f->P[3][11] + t->Phi[44]*f->P[4][11] + t->Phi[45]*f->P[5][11] +
+            t->Phi[46]*f->P[7][11] + t->Phi[47]*f->P[8][11] + t->Phi[48]*f->P[9][11] +
+            t->Phi[49]*f->P[10][11];
+    w->M[12] = t->Phi[40]*f->P[0][12] + t->Phi[41]*f->P[1][12] + t->Phi[42]*f->P[2][12] +
+            t->Phi[43]*f->P[3][12] + t->Phi[44]*f->P[4][12] + t->Phi[45]*f->P[5][12] +
+            t->Phi[46]*f->P[7][12] + t->Phi[47]*f->P[8][12] + t->Phi[48]*f->P[9][12] +
+            t->Phi[49]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2322,22 +2099,20 @@ static ned_doppler13_reduced_scalar propagate_row_4(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[4][0] + w->M[1]*t->Phi[4][1] + w->M[2]*t->Phi[4][2] + w->M[3]*t->Phi[4][3] +
-            w->M[4]*t->Phi[4][4] + w->M[5]*t->Phi[4][5] + w->M[7]*t->Phi[4][7] +
-            w->M[8]*t->Phi[4][8] + w->M[9]*t->Phi[4][9] + w->M[10]*t->Phi[4][10] + t->Qd[46];
-            w->Pn[46] = v; check += v - v;
-    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
-            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
-            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] + t->Qd[47];
-            w->Pn[47] = v; check += v - v;
-    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
-            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
-            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
-            w->M[10]*t->Phi[6][10] + t->Qd[48]; w->Pn[48] = v; check += v - v;
+    v = w->M[0]*t->Phi[40] + w->M[1]*t->Phi[41] + w->M[2]*t->Phi[42] + w->M[3]*t->Phi[43] +
+            w->M[4]*t->Phi[44] + w->M[5]*t->Phi[45] + w->M[7]*t->Phi[46] + w->M[8]*t->Phi[47] +
+            w->M[9]*t->Phi[48] + w->M[10]*t->Phi[49] + t->Qd[46]; w->Pn[46] = v; check += v - v;
+    v = w->M[0]*t->Phi[50] + w->M[1]*t->Phi[51] + w->M[2]*t->Phi[52] + w->M[3]*t->Phi[53] +
+            w->M[4]*t->Phi[54] + w->M[5]*t->Phi[55] + w->M[7]*t->Phi[56] + w->M[8]*t->Phi[57] +
+            w->M[9]*t->Phi[58] + w->M[10]*t->Phi[59] + t->Qd[47]; w->Pn[47] = v; check += v - v;
+    v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
+            w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[6]*t->Phi[66] + w->M[7]*t->Phi[67] +
+            w->M[8]*t->Phi[68] + w->M[9]*t->Phi[69] + w->M[10]*t->Phi[70] + t->Qd[48]; w->Pn[48] =
+            v; check += v - v;
     v = w->M[7]; w->Pn[49] = v; check += v - v;
     v = w->M[8]; w->Pn[50] = v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + t->Qd[51]; w->Pn[51] = v; check += v - v;
-    v = w->M[10]*t->Phi[10][10] + t->Qd[52]; w->Pn[52] = v; check += v - v;
+    v = w->M[9]*t->Phi[73] + t->Qd[51]; w->Pn[51] = v; check += v - v;
+    v = w->M[10]*t->Phi[74] + t->Qd[52]; w->Pn[52] = v; check += v - v;
     v = w->M[11]; w->Pn[53] = v; check += v - v;
     v = w->M[12]; w->Pn[54] = v; check += v - v;
     return check;
@@ -2347,58 +2122,58 @@ static void phi_times_p_row_5(const ned_doppler13_reduced_filter *restrict f, co
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
         w)
 {
-    w->M[0] = t->Phi[5][0]*f->P[0][0] + t->Phi[5][1]*f->P[1][0] + t->Phi[5][2]*f->P[2][0] +
-            t->Phi[5][3]*f->P[3][0] + t->Phi[5][4]*f->P[4][0] + t->Phi[5][5]*f->P[5][0] +
-            t->Phi[5][7]*f->P[7][0] + t->Phi[5][8]*f->P[8][0] + t->Phi[5][9]*f->P[9][0] +
-            t->Phi[5][10]*f->P[10][0];
-    w->M[1] = t->Phi[5][0]*f->P[0][1] + t->Phi[5][1]*f->P[1][1] + t->Phi[5][2]*f->P[2][1] +
-            t->Phi[5][3]*f->P[3][1] + t->Phi[5][4]*f->P[4][1] + t->Phi[5][5]*f->P[5][1] +
-            t->Phi[5][7]*f->P[7][1] + t->Phi[5][8]*f->P[8][1] + t->Phi[5][9]*f->P[9][1] +
-            t->Phi[5][10]*f->P[10][1];
-    w->M[2] = t->Phi[5][0]*f->P[0][2] + t->Phi[5][1]*f->P[1][2] + t->Phi[5][2]*f->P[2][2] +
-            t->Phi[5][3]*f->P[3][2] + t->Phi[5][4]*f->P[4][2] + t->Phi[5][5]*f->P[5][2] +
-            t->Phi[5][7]*f->P[7][2] + t->Phi[5][8]*f->P[8][2] + t->Phi[5][9]*f->P[9][2] +
-            t->Phi[5][10]*f->P[10][2];
-    w->M[3] = t->Phi[5][0]*f->P[0][3] + t->Phi[5][1]*f->P[1][3] + t->Phi[5][2]*f->P[2][3] +
-            t->Phi[5][3]*f->P[3][3] + t->Phi[5][4]*f->P[4][3] + t->Phi[5][5]*f->P[5][3] +
-            t->Phi[5][7]*f->P[7][3] + t->Phi[5][8]*f->P[8][3] + t->Phi[5][9]*f->P[9][3] +
-            t->Phi[5][10]*f->P[10][3];
-    w->M[4] = t->Phi[5][0]*f->P[0][4] + t->Phi[5][1]*f->P[1][4] + t->Phi[5][2]*f->P[2][4] +
-            t->Phi[5][3]*f->P[3][4] + t->Phi[5][4]*f->P[4][4] + t->Phi[5][5]*f->P[5][4] +
-            t->Phi[5][7]*f->P[7][4] + t->Phi[5][8]*f->P[8][4] + t->Phi[5][9]*f->P[9][4] +
-            t->Phi[5][10]*f->P[10][4];
-    w->M[5] = t->Phi[5][0]*f->P[0][5] + t->Phi[5][1]*f->P[1][5] + t->Phi[5][2]*f->P[2][5] +
-            t->Phi[5][3]*f->P[3][5] + t->Phi[5][4]*f->P[4][5] + t->Phi[5][5]*f->P[5][5] +
-            t->Phi[5][7]*f->P[7][5] + t->Phi[5][8]*f->P[8][5] + t->Phi[5][9]*f->P[9][5] +
-            t->Phi[5][10]*f->P[10][5];
-    w->M[6] = t->Phi[5][0]*f->P[0][6] + t->Phi[5][1]*f->P[1][6] + t->Phi[5][2]*f->P[2][6] +
-            t->Phi[5][3]*f->P[3][6] + t->Phi[5][4]*f->P[4][6] + t->Phi[5][5]*f->P[5][6] +
-            t->Phi[5][7]*f->P[7][6] + t->Phi[5][8]*f->P[8][6] + t->Phi[5][9]*f->P[9][6] +
-            t->Phi[5][10]*f->P[10][6];
-    w->M[7] = t->Phi[5][0]*f->P[0][7] + t->Phi[5][1]*f->P[1][7] + t->Phi[5][2]*f->P[2][7] +
-            t->Phi[5][3]*f->P[3][7] + t->Phi[5][4]*f->P[4][7] + t->Phi[5][5]*f->P[5][7] +
-            t->Phi[5][7]*f->P[7][7] + t->Phi[5][8]*f->P[8][7] + t->Phi[5][9]*f->P[9][7] +
-            t->Phi[5][10]*f->P[10][7];
-    w->M[8] = t->Phi[5][0]*f->P[0][8] + t->Phi[5][1]*f->P[1][8] + t->Phi[5][2]*f->P[2][8] +
-            t->Phi[5][3]*f->P[3][8] + t->Phi[5][4]*f->P[4][8] + t->Phi[5][5]*f->P[5][8] +
-            t->Phi[5][7]*f->P[7][8] + t->Phi[5][8]*f->P[8][8] + t->Phi[5][9]*f->P[9][8] +
-            t->Phi[5][10]*f->P[10][8];
-    w->M[9] = t->Phi[5][0]*f->P[0][9] + t->Phi[5][1]*f->P[1][9] + t->Phi[5][2]*f->P[2][9] +
-            t->Phi[5][3]*f->P[3][9] + t->Phi[5][4]*f->P[4][9] + t->Phi[5][5]*f->P[5][9] +
-            t->Phi[5][7]*f->P[7][9] + t->Phi[5][8]*f->P[8][9] + t->Phi[5][9]*f->P[9][9] +
-            t->Phi[5][10]*f->P[10][9];
-    w->M[10] = t->Phi[5][0]*f->P[0][10] + t->Phi[5][1]*f->P[1][10] + t->Phi[5][2]*f->P[2][10] +
-            t->Phi[5][3]*f->P[3][10] + t->Phi[5][4]*f->P[4][10] + t->Phi[5][5]*f->P[5][10] +
-            t->Phi[5][7]*f->P[7][10] + t->Phi[5][8]*f->P[8][10] + t->Phi[5][9]*f->P[9][10] +
-            t->Phi[5][10]*f->P[10][10];
-    w->M[11] = t->Phi[5][0]*f->P[0][11] + t->Phi[5][1]*f->P[1][11] + t->Phi[5][2]*f->P[2][11] +
-            t->Phi[5][3]*f->P[3][11] + t->Phi[5][4]*f->P[4][11] + t->Phi[5][5]*f->P[5][11] +
-            t->Phi[5][7]*f->P[7][11] + t->Phi[5][8]*f->P[8][11] + t->Phi[5][9]*f->P[9][11] +
-            t->Phi[5][10]*f->P[10][11];
-    w->M[12] = t->Phi[5][0]*f->P[0][12] + t->Phi[5][1]*f->P[1][12] + t->Phi[5][2]*f->P[2][12] +
-            t->Phi[5][3]*f->P[3][12] + t->Phi[5][4]*f->P[4][12] + t->Phi[5][5]*f->P[5][12] +
-            t->Phi[5][7]*f->P[7][12] + t->Phi[5][8]*f->P[8][12] + t->Phi[5][9]*f->P[9][12] +
-            t->Phi[5][10]*f->P[10][12];
+    w->M[0] = t->Phi[50]*f->P[0][0] + t->Phi[51]*f->P[1][0] + t->Phi[52]*f->P[2][0] +
+            t->Phi[53]*f->P[3][0] + t->Phi[54]*f->P[4][0] + t->Phi[55]*f->P[5][0] +
+            t->Phi[56]*f->P[7][0] + t->Phi[57]*f->P[8][0] + t->Phi[58]*f->P[9][0] +
+            t->Phi[59]*f->P[10][0];
+    w->M[1] = t->Phi[50]*f->P[0][1] + t->Phi[51]*f->P[1][1] + t->Phi[52]*f->P[2][1] +
+            t->Phi[53]*f->P[3][1] + t->Phi[54]*f->P[4][1] + t->Phi[55]*f->P[5][1] +
+            t->Phi[56]*f->P[7][1] + t->Phi[57]*f->P[8][1] + t->Phi[58]*f->P[9][1] +
+            t->Phi[59]*f->P[10][1];
+    w->M[2] = t->Phi[50]*f->P[0][2] + t->Phi[51]*f->P[1][2] + t->Phi[52]*f->P[2][2] +
+            t->Phi[53]*f->P[3][2] + t->Phi[54]*f->P[4][2] + t->Phi[55]*f->P[5][2] +
+            t->Phi[56]*f->P[7][2] + t->Phi[57]*f->P[8][2] + t->Phi[58]*f->P[9][2] +
+            t->Phi[59]*f->P[10][2];
+    w->M[3] = t->Phi[50]*f->P[0][3] + t->Phi[51]*f->P[1][3] + t->Phi[52]*f->P[2][3] +
+            t->Phi[53]*f->P[3][3] + t->Phi[54]*f->P[4][3] + t->Phi[55]*f->P[5][3] +
+            t->Phi[56]*f->P[7][3] + t->Phi[57]*f->P[8][3] + t->Phi[58]*f->P[9][3] +
+            t->Phi[59]*f->P[10][3];
+    w->M[4] = t->Phi[50]*f->P[0][4] + t->Phi[51]*f->P[1][4] + t->Phi[52]*f->P[2][4] +
+            t->Phi[53]*f->P[3][4] + t->Phi[54]*f->P[4][4] + t->Phi[55]*f->P[5][4] +
+            t->Phi[56]*f->P[7][4] + t->Phi[57]*f->P[8][4] + t->Phi[58]*f->P[9][4] +
+            t->Phi[59]*f->P[10][4];
+    w->M[5] = t->Phi[50]*f->P[0][5] + t->Phi[51]*f->P[1][5] + t->Phi[52]*f->P[2][5] +
+            t->Phi[53]*f->P[3][5] + t->Phi[54]*f->P[4][5] + t->Phi[55]*f->P[5][5] +
+            t->Phi[56]*f->P[7][5] + t->Phi[57]*f->P[8][5] + t->Phi[58]*f->P[9][5] +
+            t->Phi[59]*f->P[10][5];
+    w->M[6] = t->Phi[50]*f->P[0][6] + t->Phi[51]*f->P[1][6] + t->Phi[52]*f->P[2][6] +
+            t->Phi[53]*f->P[3][6] + t->Phi[54]*f->P[4][6] + t->Phi[55]*f->P[5][6] +
+            t->Phi[56]*f->P[7][6] + t->Phi[57]*f->P[8][6] + t->Phi[58]*f->P[9][6] +
+            t->Phi[59]*f->P[10][6];
+    w->M[7] = t->Phi[50]*f->P[0][7] + t->Phi[51]*f->P[1][7] + t->Phi[52]*f->P[2][7] +
+            t->Phi[53]*f->P[3][7] + t->Phi[54]*f->P[4][7] + t->Phi[55]*f->P[5][7] +
+            t->Phi[56]*f->P[7][7] + t->Phi[57]*f->P[8][7] + t->Phi[58]*f->P[9][7] +
+            t->Phi[59]*f->P[10][7];
+    w->M[8] = t->Phi[50]*f->P[0][8] + t->Phi[51]*f->P[1][8] + t->Phi[52]*f->P[2][8] +
+            t->Phi[53]*f->P[3][8] + t->Phi[54]*f->P[4][8] + t->Phi[55]*f->P[5][8] +
+            t->Phi[56]*f->P[7][8] + t->Phi[57]*f->P[8][8] + t->Phi[58]*f->P[9][8] +
+            t->Phi[59]*f->P[10][8];
+    w->M[9] = t->Phi[50]*f->P[0][9] + t->Phi[51]*f->P[1][9] + t->Phi[52]*f->P[2][9] +
+            t->Phi[53]*f->P[3][9] + t->Phi[54]*f->P[4][9] + t->Phi[55]*f->P[5][9] +
+            t->Phi[56]*f->P[7][9] + t->Phi[57]*f->P[8][9] + t->Phi[58]*f->P[9][9] +
+            t->Phi[59]*f->P[10][9];
+    w->M[10] = t->Phi[50]*f->P[0][10] + t->Phi[51]*f->P[1][10] + t->Phi[52]*f->P[2][10] +
+            t->Phi[53]*f->P[3][10] + t->Phi[54]*f->P[4][10] + t->Phi[55]*f->P[5][10] +
+            t->Phi[56]*f->P[7][10] + t->Phi[57]*f->P[8][10] + t->Phi[58]*f->P[9][10] +
+            t->Phi[59]*f->P[10][10];
+    w->M[11] = t->Phi[50]*f->P[0][11] + t->Phi[51]*f->P[1][11] + t->Phi[52]*f->P[2][11] +
+            t->Phi[53]*f->P[3][11] + t->Phi[54]*f->P[4][11] + t->Phi[55]*f->P[5][11] +
+            t->Phi[56]*f->P[7][11] + t->Phi[57]*f->P[8][11] + t->Phi[58]*f->P[9][11] +
+            t->Phi[59]*f->P[10][11];
+    w->M[12] = t->Phi[50]*f->P[0][12] + t->Phi[51]*f->P[1][12] + t->Phi[52]*f->P[2][12] +
+            t->Phi[53]*f->P[3][12] + t->Phi[54]*f->P[4][12] + t->Phi[55]*f->P[5][12] +
+            t->Phi[56]*f->P[7][12] + t->Phi[57]*f->P[8][12] + t->Phi[58]*f->P[9][12] +
+            t->Phi[59]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2406,18 +2181,17 @@ static ned_doppler13_reduced_scalar propagate_row_5(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[5][0] + w->M[1]*t->Phi[5][1] + w->M[2]*t->Phi[5][2] + w->M[3]*t->Phi[5][3] +
-            w->M[4]*t->Phi[5][4] + w->M[5]*t->Phi[5][5] + w->M[7]*t->Phi[5][7] +
-            w->M[8]*t->Phi[5][8] + w->M[9]*t->Phi[5][9] + w->M[10]*t->Phi[5][10] + t->Qd[55];
-            w->Pn[55] = v; check += v - v;
-    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
-            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
-            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
-            w->M[10]*t->Phi[6][10] + t->Qd[56]; w->Pn[56] = v; check += v - v;
+    v = w->M[0]*t->Phi[50] + w->M[1]*t->Phi[51] + w->M[2]*t->Phi[52] + w->M[3]*t->Phi[53] +
+            w->M[4]*t->Phi[54] + w->M[5]*t->Phi[55] + w->M[7]*t->Phi[56] + w->M[8]*t->Phi[57] +
+            w->M[9]*t->Phi[58] + w->M[10]*t->Phi[59] + t->Qd[55]; w->Pn[55] = v; check += v - v;
+    v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
+            w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[6]*t->Phi[66] + w->M[7]*t->Phi[67] +
+            w->M[8]*t->Phi[68] + w->M[9]*t->Phi[69] + w->M[10]*t->Phi[70] + t->Qd[56]; w->Pn[56] =
+            v; check += v - v;
     v = w->M[7]; w->Pn[57] = v; check += v - v;
     v = w->M[8]; w->Pn[58] = v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + t->Qd[59]; w->Pn[59] = v; check += v - v;
-    v = w->M[10]*t->Phi[10][10] + t->Qd[60]; w->Pn[60] = v; check += v - v;
+    v = w->M[9]*t->Phi[73] + t->Qd[59]; w->Pn[59] = v; check += v - v;
+    v = w->M[10]*t->Phi[74] + t->Qd[60]; w->Pn[60] = v; check += v - v;
     v = w->M[11]; w->Pn[61] = v; check += v - v;
     v = w->M[12]; w->Pn[62] = v; check += v - v;
     return check;
@@ -2427,58 +2201,58 @@ static void phi_times_p_row_6(const ned_doppler13_reduced_filter *restrict f, co
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
         w)
 {
-    w->M[0] = t->Phi[6][0]*f->P[0][0] + t->Phi[6][1]*f->P[1][0] + t->Phi[6][2]*f->P[2][0] +
-            t->Phi[6][3]*f->P[3][0] + t->Phi[6][4]*f->P[4][0] + t->Phi[6][5]*f->P[5][0] +
-            t->Phi[6][6]*f->P[6][0] + t->Phi[6][7]*f->P[7][0] + t->Phi[6][8]*f->P[8][0] +
-            t->Phi[6][9]*f->P[9][0] + t->Phi[6][10]*f->P[10][0];
-    w->M[1] = t->Phi[6][0]*f->P[0][1] + t->Phi[6][1]*f->P[1][1] + t->Phi[6][2]*f->P[2][1] +
-            t->Phi[6][3]*f->P[3][1] + t->Phi[6][4]*f->P[4][1] + t->Phi[6][5]*f->P[5][1] +
-            t->Phi[6][6]*f->P[6][1] + t->Phi[6][7]*f->P[7][1] + t->Phi[6][8]*f->P[8][1] +
-            t->Phi[6][9]*f->P[9][1] + t->Phi[6][10]*f->P[10][1];
-    w->M[2] = t->Phi[6][0]*f->P[0][2] + t->Phi[6][1]*f->P[1][2] + t->Phi[6][2]*f->P[2][2] +
-            t->Phi[6][3]*f->P[3][2] + t->Phi[6][4]*f->P[4][2] + t->Phi[6][5]*f->P[5][2] +
-            t->Phi[6][6]*f->P[6][2] + t->Phi[6][7]*f->P[7][2] + t->Phi[6][8]*f->P[8][2] +
-            t->Phi[6][9]*f->P[9][2] + t->Phi[6][10]*f->P[10][2];
-    w->M[3] = t->Phi[6][0]*f->P[0][3] + t->Phi[6][1]*f->P[1][3] + t->Phi[6][2]*f->P[2][3] +
-            t->Phi[6][3]*f->P[3][3] + t->Phi[6][4]*f->P[4][3] + t->Phi[6][5]*f->P[5][3] +
-            t->Phi[6][6]*f->P[6][3] + t->Phi[6][7]*f->P[7][3] + t->Phi[6][8]*f->P[8][3] +
-            t->Phi[6][9]*f->P[9][3] + t->Phi[6][10]*f->P[10][3];
-    w->M[4] = t->Phi[6][0]*f->P[0][4] + t->Phi[6][1]*f->P[1][4] + t->Phi[6][2]*f->P[2][4] +
-            t->Phi[6][3]*f->P[3][4] + t->Phi[6][4]*f->P[4][4] + t->Phi[6][5]*f->P[5][4] +
-            t->Phi[6][6]*f->P[6][4] + t->Phi[6][7]*f->P[7][4] + t->Phi[6][8]*f->P[8][4] +
-            t->Phi[6][9]*f->P[9][4] + t->Phi[6][10]*f->P[10][4];
-    w->M[5] = t->Phi[6][0]*f->P[0][5] + t->Phi[6][1]*f->P[1][5] + t->Phi[6][2]*f->P[2][5] +
-            t->Phi[6][3]*f->P[3][5] + t->Phi[6][4]*f->P[4][5] + t->Phi[6][5]*f->P[5][5] +
-            t->Phi[6][6]*f->P[6][5] + t->Phi[6][7]*f->P[7][5] + t->Phi[6][8]*f->P[8][5] +
-            t->Phi[6][9]*f->P[9][5] + t->Phi[6][10]*f->P[10][5];
-    w->M[6] = t->Phi[6][0]*f->P[0][6] + t->Phi[6][1]*f->P[1][6] + t->Phi[6][2]*f->P[2][6] +
-            t->Phi[6][3]*f->P[3][6] + t->Phi[6][4]*f->P[4][6] + t->Phi[6][5]*f->P[5][6] +
-            t->Phi[6][6]*f->P[6][6] + t->Phi[6][7]*f->P[7][6] + t->Phi[6][8]*f->P[8][6] +
-            t->Phi[6][9]*f->P[9][6] + t->Phi[6][10]*f->P[10][6];
-    w->M[7] = t->Phi[6][0]*f->P[0][7] + t->Phi[6][1]*f->P[1][7] + t->Phi[6][2]*f->P[2][7] +
-            t->Phi[6][3]*f->P[3][7] + t->Phi[6][4]*f->P[4][7] + t->Phi[6][5]*f->P[5][7] +
-            t->Phi[6][6]*f->P[6][7] + t->Phi[6][7]*f->P[7][7] + t->Phi[6][8]*f->P[8][7] +
-            t->Phi[6][9]*f->P[9][7] + t->Phi[6][10]*f->P[10][7];
-    w->M[8] = t->Phi[6][0]*f->P[0][8] + t->Phi[6][1]*f->P[1][8] + t->Phi[6][2]*f->P[2][8] +
-            t->Phi[6][3]*f->P[3][8] + t->Phi[6][4]*f->P[4][8] + t->Phi[6][5]*f->P[5][8] +
-            t->Phi[6][6]*f->P[6][8] + t->Phi[6][7]*f->P[7][8] + t->Phi[6][8]*f->P[8][8] +
-            t->Phi[6][9]*f->P[9][8] + t->Phi[6][10]*f->P[10][8];
-    w->M[9] = t->Phi[6][0]*f->P[0][9] + t->Phi[6][1]*f->P[1][9] + t->Phi[6][2]*f->P[2][9] +
-            t->Phi[6][3]*f->P[3][9] + t->Phi[6][4]*f->P[4][9] + t->Phi[6][5]*f->P[5][9] +
-            t->Phi[6][6]*f->P[6][9] + t->Phi[6][7]*f->P[7][9] + t->Phi[6][8]*f->P[8][9] +
-            t->Phi[6][9]*f->P[9][9] + t->Phi[6][10]*f->P[10][9];
-    w->M[10] = t->Phi[6][0]*f->P[0][10] + t->Phi[6][1]*f->P[1][10] + t->Phi[6][2]*f->P[2][10] +
-            t->Phi[6][3]*f->P[3][10] + t->Phi[6][4]*f->P[4][10] + t->Phi[6][5]*f->P[5][10] +
-            t->Phi[6][6]*f->P[6][10] + t->Phi[6][7]*f->P[7][10] + t->Phi[6][8]*f->P[8][10] +
-            t->Phi[6][9]*f->P[9][10] + t->Phi[6][10]*f->P[10][10];
-    w->M[11] = t->Phi[6][0]*f->P[0][11] + t->Phi[6][1]*f->P[1][11] + t->Phi[6][2]*f->P[2][11] +
-            t->Phi[6][3]*f->P[3][11] + t->Phi[6][4]*f->P[4][11] + t->Phi[6][5]*f->P[5][11] +
-            t->Phi[6][6]*f->P[6][11] + t->Phi[6][7]*f->P[7][11] + t->Phi[6][8]*f->P[8][11] +
-            t->Phi[6][9]*f->P[9][11] + t->Phi[6][10]*f->P[10][11];
-    w->M[12] = t->Phi[6][0]*f->P[0][12] + t->Phi[6][1]*f->P[1][12] + t->Phi[6][2]*f->P[2][12] +
-            t->Phi[6][3]*f->P[3][12] + t->Phi[6][4]*f->P[4][12] + t->Phi[6][5]*f->P[5][12] +
-            t->Phi[6][6]*f->P[6][12] + t->Phi[6][7]*f->P[7][12] + t->Phi[6][8]*f->P[8][12] +
-            t->Phi[6][9]*f->P[9][12] + t->Phi[6][10]*f->P[10][12];
+    w->M[0] = t->Phi[60]*f->P[0][0] + t->Phi[61]*f->P[1][0] + t->Phi[62]*f->P[2][0] +
+            t->Phi[63]*f->P[3][0] + t->Phi[64]*f->P[4][0] + t->Phi[65]*f->P[5][0] +
+            t->Phi[66]*f->P[6][0] + t->Phi[67]*f->P[7][0] + t->Phi[68]*f->P[8][0] +
+            t->Phi[69]*f->P[9][0] + t->Phi[70]*f->P[10][0];
+    w->M[1] = t->Phi[60]*f->P[0][1] + t->Phi[61]*f->P[1][1] + t->Phi[62]*f->P[2][1] +
+            t->Phi[63]*f->P[3][1] + t->Phi[64]*f->P[4][1] + t->Phi[65]*f->P[5][1] +
+            t->Phi[66]*f->P[6][1] + t->Phi[67]*f->P[7][1] + t->Phi[68]*f->P[8][1] +
+            t->Phi[69]*f->P[9][1] + t->Phi[70]*f->P[10][1];
+    w->M[2] = t->Phi[60]*f->P[0][2] + t->Phi[61]*f->P[1][2] + t->Phi[62]*f->P[2][2] +
+            t->Phi[63]*f->P[3][2] + t->Phi[64]*f->P[4][2] + t->Phi[65]*f->P[5][2] +
+            t->Phi[66]*f->P[6][2] + t->Phi[67]*f->P[7][2] + t->Phi[68]*f->P[8][2] +
+            t->Phi[69]*f->P[9][2] + t->Phi[70]*f->P[10][2];
+    w->M[3] = t->Phi[60]*f->P[0][3] + t->Phi[61]*f->P[1][3] + t->Phi[62]*f->P[2][3] +
+            t->Phi[63]*f->P[3][3] + t->Phi[64]*f->P[4][3] + t->Phi[65]*f->P[5][3] +
+            t->Phi[66]*f->P[6][3] + t->Phi[67]*f->P[7][3] + t->Phi[68]*f->P[8][3] +
+            t->Phi[69]*f->P[9][3] + t->Phi[70]*f->P[10][3];
+    w->M[4] = t->Phi[60]*f->P[0][4] + t->Phi[61]*f->P[1][4] + t->Phi[62]*f->P[2][4] +
+            t->Phi[63]*f->P[3][4] + t->Phi[64]*f->P[4][4] + t->Phi[65]*f->P[5][4] +
+            t->Phi[66]*f->P[6][4] + t->Phi[67]*f->P[7][4] + t->Phi[68]*f->P[8][4] +
+            t->Phi[69]*f->P[9][4] + t->Phi[70]*f->P[10][4];
+    w->M[5] = t->Phi[60]*f->P[0][5] + t->Phi[61]*f->P[1][5] + t->Phi[62]*f->P[2][5] +
+            t->Phi[63]*f->P[3][5] + t->Phi[64]*f->P[4][5] + t->Phi[65]*f->P[5][5] +
+            t->Phi[66]*f->P[6][5] + t->Phi[67]*f->P[7][5] + t->Phi[68]*f->P[8][5] +
+            t->Phi[69]*f->P[9][5] + t->Phi[70]*f->P[10][5];
+    w->M[6] = t->Phi[60]*f->P[0][6] + t->Phi[61]*f->P[1][6] + t->Phi[62]*f->P[2][6] +
+            t->Phi[63]*f->P[3][6] + t->Phi[64]*f->P[4][6] + t->Phi[65]*f->P[5][6] +
+            t->Phi[66]*f->P[6][6] + t->Phi[67]*f->P[7][6] + t->Phi[68]*f->P[8][6] +
+            t->Phi[69]*f->P[9][6] + t->Phi[70]*f->P[10][6];
+    w->M[7] = t->Phi[60]*f->P[0][7] + t->Phi[61]*f->P[1][7] + t->Phi[62]*f->P[2][7] +
+            t->Phi[63]*f->P[3][7] + t->Phi[64]*f->P[4][7] + t->Phi[65]*f->P[5][7] +
+            t->Phi[66]*f->P[6][7] + t->Phi[67]*f->P[7][7] + t->Phi[68]*f->P[8][7] +
+            t->Phi[69]*f->P[9][7] + t->Phi[70]*f->P[10][7];
+    w->M[8] = t->Phi[60]*f->P[0][8] + t->Phi[61]*f->P[1][8] + t->Phi[62]*f->P[2][8] +
+            t->Phi[63]*f->P[3][8] + t->Phi[64]*f->P[4][8] + t->Phi[65]*f->P[5][8] +
+            t->Phi[66]*f->P[6][8] + t->Phi[67]*f->P[7][8] + t->Phi[68]*f->P[8][8] +
+            t->Phi[69]*f->P[9][8] + t->Phi[70]*f->P[10][8];
+    w->M[9] = t->Phi[60]*f->P[0][9] + t->Phi[61]*f->P[1][9] + t->Phi[62]*f->P[2][9] +
+            t->Phi[63]*f->P[3][9] + t->Phi[64]*f->P[4][9] + t->Phi[65]*f->P[5][9] +
+            t->Phi[66]*f->P[6][9] + t->Phi[67]*f->P[7][9] + t->Phi[68]*f->P[8][9] +
+            t->Phi[69]*f->P[9][9] + t->Phi[70]*f->P[10][9];
+    w->M[10] = t->Phi[60]*f->P[0][10] + t->Phi[61]*f->P[1][10] + t->Phi[62]*f->P[2][10] +
+            t->Phi[63]*f->P[3][10] + t->Phi[64]*f->P[4][10] + t->Phi[65]*f->P[5][10] +
+            t->Phi[66]*f->P[6][10] + t->Phi[67]*f->P[7][10] + t->Phi[68]*f->P[8][10] +
+            t->Phi[69]*f->P[9][10] + t->Phi[70]*f->P[10][10];
+    w->M[11] = t->Phi[60]*f->P[0][11] + t->Phi[61]*f->P[1][11] + t->Phi[62]*f->P[2][11] +
+            t->Phi[63]*f->P[3][11] + t->Phi[64]*f->P[4][11] + t->Phi[65]*f->P[5][11] +
+            t->Phi[66]*f->P[6][11] + t->Phi[67]*f->P[7][11] + t->Phi[68]*f->P[8][11] +
+            t->Phi[69]*f->P[9][11] + t->Phi[70]*f->P[10][11];
+    w->M[12] = t->Phi[60]*f->P[0][12] + t->Phi[61]*f->P[1][12] + t->Phi[62]*f->P[2][12] +
+            t->Phi[63]*f->P[3][12] + t->Phi[64]*f->P[4][12] + t->Phi[65]*f->P[5][12] +
+            t->Phi[66]*f->P[6][12] + t->Phi[67]*f->P[7][12] + t->Phi[68]*f->P[8][12] +
+            t->Phi[69]*f->P[9][12] + t->Phi[70]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2486,14 +2260,14 @@ static ned_doppler13_reduced_scalar propagate_row_6(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[6][0] + w->M[1]*t->Phi[6][1] + w->M[2]*t->Phi[6][2] + w->M[3]*t->Phi[6][3] +
-            w->M[4]*t->Phi[6][4] + w->M[5]*t->Phi[6][5] + w->M[6]*t->Phi[6][6] +
-            w->M[7]*t->Phi[6][7] + w->M[8]*t->Phi[6][8] + w->M[9]*t->Phi[6][9] +
-            w->M[10]*t->Phi[6][10] + t->Qd[63]; w->Pn[63] = v; check += v - v;
+    v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
+            w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[6]*t->Phi[66] + w->M[7]*t->Phi[67] +
+            w->M[8]*t->Phi[68] + w->M[9]*t->Phi[69] + w->M[10]*t->Phi[70] + t->Qd[63]; w->Pn[63] =
+            v; check += v - v;
     v = w->M[7]; w->Pn[64] = v; check += v - v;
     v = w->M[8]; w->Pn[65] = v; check += v - v;
-    v = w->M[9]*t->Phi[9][9] + t->Qd[66]; w->Pn[66] = v; check += v - v;
-    v = w->M[10]*t->Phi[10][10] + t->Qd[67]; w->Pn[67] = v; check += v - v;
+    v = w->M[9]*t->Phi[73] + t->Qd[66]; w->Pn[66] = v; check += v - v;
+    v = w->M[10]*t->Phi[74] + t->Qd[67]; w->Pn[67] = v; check += v - v;
     v = w->M[11]; w->Pn[68] = v; check += v - v;
     v = w->M[12]; w->Pn[69] = v; check += v - v;
     return check;
@@ -2507,8 +2281,8 @@ static ned_doppler13_reduced_scalar propagate_row_7(const ned_doppler13_reduced_
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = f->P[7][7]; w->Pn[70] = v; check += v - v;
     v = f->P[7][8]; w->Pn[71] = v; check += v - v;
-    v = f->P[7][9]*t->Phi[9][9]; w->Pn[72] = v; check += v - v;
-    v = f->P[7][10]*t->Phi[10][10]; w->Pn[73] = v; check += v - v;
+    v = f->P[7][9]*t->Phi[73]; w->Pn[72] = v; check += v - v;
+    v = f->P[7][10]*t->Phi[74]; w->Pn[73] = v; check += v - v;
     v = f->P[7][11]; w->Pn[74] = v; check += v - v;
     v = f->P[7][12]; w->Pn[75] = v; check += v - v;
     return check;
@@ -2521,8 +2295,8 @@ static ned_doppler13_reduced_scalar propagate_row_8(const ned_doppler13_reduced_
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = f->P[8][8]; w->Pn[76] = v; check += v - v;
-    v = f->P[8][9]*t->Phi[9][9]; w->Pn[77] = v; check += v - v;
-    v = f->P[8][10]*t->Phi[10][10]; w->Pn[78] = v; check += v - v;
+    v = f->P[8][9]*t->Phi[73]; w->Pn[77] = v; check += v - v;
+    v = f->P[8][10]*t->Phi[74]; w->Pn[78] = v; check += v - v;
     v = f->P[8][11]; w->Pn[79] = v; check += v - v;
     v = f->P[8][12]; w->Pn[80] = v; check += v - v;
     return check;
@@ -2532,19 +2306,19 @@ static void phi_times_p_row_9(const ned_doppler13_reduced_filter *restrict f, co
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
         w)
 {
-    w->M[0] = t->Phi[9][9]*f->P[9][0];
-    w->M[1] = t->Phi[9][9]*f->P[9][1];
-    w->M[2] = t->Phi[9][9]*f->P[9][2];
-    w->M[3] = t->Phi[9][9]*f->P[9][3];
-    w->M[4] = t->Phi[9][9]*f->P[9][4];
-    w->M[5] = t->Phi[9][9]*f->P[9][5];
-    w->M[6] = t->Phi[9][9]*f->P[9][6];
-    w->M[7] = t->Phi[9][9]*f->P[9][7];
-    w->M[8] = t->Phi[9][9]*f->P[9][8];
-    w->M[9] = t->Phi[9][9]*f->P[9][9];
-    w->M[10] = t->Phi[9][9]*f->P[9][10];
-    w->M[11] = t->Phi[9][9]*f->P[9][11];
-    w->M[12] = t->Phi[9][9]*f->P[9][12];
+    w->M[0] = t->Phi[73]*f->P[9][0];
+    w->M[1] = t->Phi[73]*f->P[9][1];
+    w->M[2] = t->Phi[73]*f->P[9][2];
+    w->M[3] = t->Phi[73]*f->P[9][3];
+    w->M[4] = t->Phi[73]*f->P[9][4];
+    w->M[5] = t->Phi[73]*f->P[9][5];
+    w->M[6] = t->Phi[73]*f->P[9][6];
+    w->M[7] = t->Phi[73]*f->P[9][7];
+    w->M[8] = t->Phi[73]*f->P[9][8];
+    w->M[9] = t->Phi[73]*f->P[9][9];
+    w->M[10] = t->Phi[73]*f->P[9][10];
+    w->M[11] = t->Phi[73]*f->P[9][11];
+    w->M[12] = t->Phi[73]*f->P[9][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2552,8 +2326,8 @@ static ned_doppler13_reduced_scalar propagate_row_9(const ned_doppler13_reduced_
         t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[9]*t->Phi[9][9] + t->Qd[81]; w->Pn[81] = v; check += v - v;
-    v = w->M[10]*t->Phi[10][10]; w->Pn[82] = v; check += v - v;
+    v = w->M[9]*t->Phi[73] + t->Qd[81]; w->Pn[81] = v; check += v - v;
+    v = w->M[10]*t->Phi[74]; w->Pn[82] = v; check += v - v;
     v = w->M[11]; w->Pn[83] = v; check += v - v;
     v = w->M[12]; w->Pn[84] = v; check += v - v;
     return check;
@@ -2563,19 +2337,19 @@ static void phi_times_p_row_10(const ned_doppler13_reduced_filter *restrict f, c
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
         w)
 {
-    w->M[0] = t->Phi[10][10]*f->P[10][0];
-    w->M[1] = t->Phi[10][10]*f->P[10][1];
-    w->M[2] = t->Phi[10][10]*f->P[10][2];
-    w->M[3] = t->Phi[10][10]*f->P[10][3];
-    w->M[4] = t->Phi[10][10]*f->P[10][4];
-    w->M[5] = t->Phi[10][10]*f->P[10][5];
-    w->M[6] = t->Phi[10][10]*f->P[10][6];
-    w->M[7] = t->Phi[10][10]*f->P[10][7];
-    w->M[8] = t->Phi[10][10]*f->P[10][8];
-    w->M[9] = t->Phi[10][10]*f->P[10][9];
-    w->M[10] = t->Phi[10][10]*f->P[10][10];
-    w->M[11] = t->Phi[10][10]*f->P[10][11];
-    w->M[12] = t->Phi[10][10]*f->P[10][12];
+    w->M[0] = t->Phi[74]*f->P[10][0];
+    w->M[1] = t->Phi[74]*f->P[10][1];
+    w->M[2] = t->Phi[74]*f->P[10][2];
+    w->M[3] = t->Phi[74]*f->P[10][3];
+    w->M[4] = t->Phi[74]*f->P[10][4];
+    w->M[5] = t->Phi[74]*f->P[10][5];
+    w->M[6] = t->Phi[74]*f->P[10][6];
+    w->M[7] = t->Phi[74]*f->P[10][7];
+    w->M[8] = t->Phi[74]*f->P[10][8];
+    w->M[9] = t->Phi[74]*f->P[10][9];
+    w->M[10] = t->Phi[74]*f->P[10][10];
+    w->M[11] = t->Phi[74]*f->P[10][11];
+    w->M[12] = t->Phi[74]*f->P[10][12];
 }
 
 /* Returns 0 when every value it stored is finite, NaN otherwise. */
@@ -2583,7 +2357,7 @@ static ned_doppler13_reduced_scalar propagate_row_10(const ned_doppler13_reduced
         *restrict t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = w->M[10]*t->Phi[10][10] + t->Qd[85]; w->Pn[85] = v; check += v - v;
+    v = w->M[10]*t->Phi[74] + t->Qd[85]; w->Pn[85] = v; check += v - v;
     v = w->M[11]; w->Pn[86] = v; check += v - v;
     v = w->M[12]; w->Pn[87] = v; check += v - v;
     return check;
@@ -2615,36 +2389,29 @@ int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, cons
     ned_doppler13_reduced_filter_scratch *w = &work->filter;
     ned_doppler13_reduced_scalar check = 0.0;
     /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
-    w->xn[0] = t->Phi[0][0]*f->x[0] + t->Phi[0][1]*f->x[1] + t->Phi[0][2]*f->x[2] +
-            t->Phi[0][3]*f->x[3] + t->Phi[0][4]*f->x[4] + t->Phi[0][5]*f->x[5] +
-            t->Phi[0][7]*f->x[7] + t->Phi[0][8]*f->x[8] + t->Phi[0][9]*f->x[9] +
-            t->Phi[0][10]*f->x[10];
-    w->xn[1] = t->Phi[1][0]*f->x[0] + t->Phi[1][1]*f->x[1] + t->Phi[1][2]*f->x[2] +
-            t->Phi[1][3]*f->x[3] + t->Phi[1][4]*f->x[4] + t->Phi[1][5]*f->x[5] +
-            t->Phi[1][7]*f->x[7] + t->Phi[1][8]*f->x[8] + t->Phi[1][9]*f->x[9] +
-            t->Phi[1][10]*f->x[10];
-    w->xn[2] = t->Phi[2][0]*f->x[0] + t->Phi[2][1]*f->x[1] + t->Phi[2][2]*f->x[2] +
-            t->Phi[2][3]*f->x[3] + t->Phi[2][4]*f->x[4] + t->Phi[2][5]*f->x[5] +
-            t->Phi[2][7]*f->x[7] + t->Phi[2][8]*f->x[8] + t->Phi[2][9]*f->x[9] +
-            t->Phi[2][10]*f->x[10];
-    w->xn[3] = t->Phi[3][0]*f->x[0] + t->Phi[3][1]*f->x[1] + t->Phi[3][2]*f->x[2] +
-            t->Phi[3][3]*f->x[3] + t->Phi[3][4]*f->x[4] + t->Phi[3][5]*f->x[5] +
-            t->Phi[3][7]*f->x[7] + t->Phi[3][8]*f->x[8] + t->Phi[3][9]*f->x[9] +
-            t->Phi[3][10]*f->x[10];
-    w->xn[4] = t->Phi[4][0]*f->x[0] + t->Phi[4][1]*f->x[1] + t->Phi[4][2]*f->x[2] +
-            t->Phi[4][3]*f->x[3] + t->Phi[4][4]*f->x[4] + t->Phi[4][5]*f->x[5] +
-            t->Phi[4][7]*f->x[7] + t->Phi[4][8]*f->x[8] + t->Phi[4][9]*f->x[9] +
-            t->Phi[4][10]*f->x[10];
-    w->xn[5] = t->Phi[5][0]*f->x[0] + t->Phi[5][1]*f->x[1] + t->Phi[5][2]*f->x[2] +
-            t->Phi[5][3]*f->x[3] + t->Phi[5][4]*f->x[4] + t->Phi[5][5]*f->x[5] +
-            t->Phi[5][7]*f->x[7] + t->Phi[5][8]*f->x[8] + t->Phi[5][9]*f->x[9] +
-            t->Phi[5][10]*f->x[10];
-    w->xn[6] = t->Phi[6][0]*f->x[0] + t->Phi[6][1]*f->x[1] + t->Phi[6][2]*f->x[2] +
-            t->Phi[6][3]*f->x[3] + t->Phi[6][4]*f->x[4] + t->Phi[6][5]*f->x[5] +
-            t->Phi[6][6]*f->x[6] + t->Phi[6][7]*f->x[7] + t->Phi[6][8]*f->x[8] +
-            t->Phi[6][9]*f->x[9] + t->Phi[6][10]*f->x[10];
-    w->xn[9] = t->Phi[9][9]*f->x[9];
-    w->xn[10] = t->Phi[10][10]*f->x[10];
+    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
+            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[7] + t->Phi[7]*f->x[8] +
+            t->Phi[8]*f->x[9] + t->Phi[9]*f->x[10];
+    w->xn[1] = t->Phi[10]*f->x[0] + t->Phi[11]*f->x[1] + t->Phi[12]*f->x[2] + t->Phi[13]*f->x[3] +
+            t->Phi[14]*f->x[4] + t->Phi[15]*f->x[5] + t->Phi[16]*f->x[7] + t->Phi[17]*f->x[8] +
+            t->Phi[18]*f->x[9] + t->Phi[19]*f->x[10];
+    w->xn[2] = t->Phi[20]*f->x[0] + t->Phi[21]*f->x[1] + t->Phi[22]*f->x[2] + t->Phi[23]*f->x[3] +
+            t->Phi[24]*f->x[4] + t->Phi[25]*f->x[5] + t->Phi[26]*f->x[7] + t->Phi[27]*f->x[8] +
+            t->Phi[28]*f->x[9] + t->Phi[29]*f->x[10];
+    w->xn[3] = t->Phi[30]*f->x[0] + t->Phi[31]*f->x[1] + t->Phi[32]*f->x[2] + t->Phi[33]*f->x[3] +
+            t->Phi[34]*f->x[4] + t->Phi[35]*f->x[5] + t->Phi[36]*f->x[7] + t->Phi[37]*f->x[8] +
+            t->Phi[38]*f->x[9] + t->Phi[39]*f->x[10];
+    w->xn[4] = t->Phi[40]*f->x[0] + t->Phi[41]*f->x[1] + t->Phi[42]*f->x[2] + t->Phi[43]*f->x[3] +
+            t->Phi[44]*f->x[4] + t->Phi[45]*f->x[5] + t->Phi[46]*f->x[7] + t->Phi[47]*f->x[8] +
+            t->Phi[48]*f->x[9] + t->Phi[49]*f->x[10];
+    w->xn[5] = t->Phi[50]*f->x[0] + t->Phi[51]*f->x[1] + t->Phi[52]*f->x[2] + t->Phi[53]*f->x[3] +
+            t->Phi[54]*f->x[4] + t->Phi[55]*f->x[5] + t->Phi[56]*f->x[7] + t->Phi[57]*f->x[8] +
+            t->Phi[58]*f->x[9] + t->Phi[59]*f->x[10];
+    w->xn[6] = t->Phi[60]*f->x[0] + t->Phi[61]*f->x[1] + t->Phi[62]*f->x[2] + t->Phi[63]*f->x[3] +
+            t->Phi[64]*f->x[4] + t->Phi[65]*f->x[5] + t->Phi[66]*f->x[6] + t->Phi[67]*f->x[7] +
+            t->Phi[68]*f->x[8] + t->Phi[69]*f->x[9] + t->Phi[70]*f->x[10];
+    w->xn[9] = t->Phi[73]*f->x[9];
+    w->xn[10] = t->Phi[74]*f->x[10];
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];
     check += w->xn[2] - w->xn[2];

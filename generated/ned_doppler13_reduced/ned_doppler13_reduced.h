@@ -34,6 +34,8 @@
 #define NED_DOPPLER13_REDUCED_NNZ_F 38
 #define NED_DOPPLER13_REDUCED_NNZ_G 11
 #define NED_DOPPLER13_REDUCED_NNZ_H 4
+/* stored entries of the transition's Phi: its structural nonzeros */
+#define NED_DOPPLER13_REDUCED_N_PHI 77
 /* highest order of the Taylor series of discretize */
 #define NED_DOPPLER13_REDUCED_TAYLOR_ORDER 9
 #define NED_DOPPLER13_REDUCED_N_TERMS 73   /* entries of discretize's compressed term arrays */
@@ -44,6 +46,8 @@
 #define NED_DOPPLER13_REDUCED_ERR_NONFINITE 1      /* a non-finite input or result was refused */
 /* a variance or the innovation variance is not positive */
 #define NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE 2
+/* a transition entry that must be 0 (or a unit row's 1) is not */
+#define NED_DOPPLER13_REDUCED_ERR_STRUCTURE 3
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
@@ -153,9 +157,10 @@ typedef struct {
 
 /* The transition over one step T (from discretize). */
 typedef struct {
-    ned_doppler13_reduced_scalar
-            Phi[NED_DOPPLER13_REDUCED_N_STATES][NED_DOPPLER13_REDUCED_N_STATES]; /* transition
-            matrix */
+    ned_doppler13_reduced_scalar Phi[NED_DOPPLER13_REDUCED_N_PHI]; /* transition matrix, its
+            structural nonzeros row by row: entry k is (i, j) = (ned_doppler13_reduced_Phi_row[k],
+            ned_doppler13_reduced_Phi_col[k]), every other entry is 0
+            (ned_doppler13_reduced_get_transition_matrix expands it) */
     ned_doppler13_reduced_scalar Qd[NED_DOPPLER13_REDUCED_N_PACKED]; /* Gamma (Q/T) Gamma^T, packed
             upper triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } ned_doppler13_reduced_transition;
@@ -210,6 +215,13 @@ extern const char *const ned_doppler13_reduced_measurement_names[2];
 extern const unsigned char ned_doppler13_reduced_F_row[38], ned_doppler13_reduced_F_col[38];
 extern const unsigned char ned_doppler13_reduced_G_row[11], ned_doppler13_reduced_G_col[11];
 extern const unsigned char ned_doppler13_reduced_H_row[4], ned_doppler13_reduced_H_col[4];
+/* The transition's Phi is stored compressed: t->Phi[k] is Phi(i, j) with i =
+        ned_doppler13_reduced_Phi_row[k],
+   j = ned_doppler13_reduced_Phi_col[k] (the structural nonzeros of e^{F T}, row by row, columns
+           ascending; a row of
+   random constants holds its diagonal 1 alone); every other entry of Phi is 0. */
+extern const unsigned char ned_doppler13_reduced_Phi_row[NED_DOPPLER13_REDUCED_N_PHI],
+        ned_doppler13_reduced_Phi_col[NED_DOPPLER13_REDUCED_N_PHI];
 
 /* Fill the parameters that have defaults in the model; the others become 0. */
 void ned_doppler13_reduced_default_params(ned_doppler13_reduced_params *params);
@@ -231,6 +243,20 @@ int ned_doppler13_reduced_matrices_evaluate(const ned_doppler13_reduced_params *
 int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restrict m,
         ned_doppler13_reduced_scalar T, ned_doppler13_reduced_transition *restrict t,
                 ned_doppler13_reduced_workspace *restrict work);
+
+/* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
+void ned_doppler13_reduced_get_transition_matrix(const ned_doppler13_reduced_transition *restrict t,
+                ned_doppler13_reduced_scalar Phi[restrict NED_DOPPLER13_REDUCED_N_STATES *
+                        NED_DOPPLER13_REDUCED_N_STATES]);
+
+/* Set the transition's Phi from a full N * N array in row-major order (a Phi
+   computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
+   (ERR_NONFINITE), a nonzero entry outside the structural pattern of Phi or a row
+   of random constants that is not exactly e_i (ERR_STRUCTURE: predict would not
+   read it); on error t is unchanged. */
+int ned_doppler13_reduced_set_transition_matrix(ned_doppler13_reduced_transition *restrict t,
+                const ned_doppler13_reduced_scalar Phi[restrict NED_DOPPLER13_REDUCED_N_STATES *
+                        NED_DOPPLER13_REDUCED_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).

@@ -34,6 +34,8 @@
 #define NED_DOPPLER32_AUGMENTED_NNZ_F 87
 #define NED_DOPPLER32_AUGMENTED_NNZ_G 6
 #define NED_DOPPLER32_AUGMENTED_NNZ_H 8
+/* stored entries of the transition's Phi: its structural nonzeros */
+#define NED_DOPPLER32_AUGMENTED_N_PHI 215
 /* highest order of the Taylor series of discretize */
 #define NED_DOPPLER32_AUGMENTED_TAYLOR_ORDER 9
 #define NED_DOPPLER32_AUGMENTED_N_TERMS 196   /* entries of discretize's compressed term arrays */
@@ -44,6 +46,8 @@
 #define NED_DOPPLER32_AUGMENTED_ERR_NONFINITE 1      /* a non-finite input or result was refused */
 /* a variance or the innovation variance is not positive */
 #define NED_DOPPLER32_AUGMENTED_ERR_NOT_POSITIVE 2
+/* a transition entry that must be 0 (or a unit row's 1) is not */
+#define NED_DOPPLER32_AUGMENTED_ERR_STRUCTURE 3
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
@@ -185,9 +189,10 @@ typedef struct {
 
 /* The transition over one step T (from discretize). */
 typedef struct {
-    ned_doppler32_augmented_scalar
-            Phi[NED_DOPPLER32_AUGMENTED_N_STATES][NED_DOPPLER32_AUGMENTED_N_STATES]; /* transition
-            matrix */
+    ned_doppler32_augmented_scalar Phi[NED_DOPPLER32_AUGMENTED_N_PHI]; /* transition matrix, its
+            structural nonzeros row by row: entry k is (i, j) = (ned_doppler32_augmented_Phi_row[k],
+            ned_doppler32_augmented_Phi_col[k]), every other entry is 0
+            (ned_doppler32_augmented_get_transition_matrix expands it) */
     ned_doppler32_augmented_scalar Qd[NED_DOPPLER32_AUGMENTED_N_PACKED]; /* Gamma (Q/T) Gamma^T,
             packed upper triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } ned_doppler32_augmented_transition;
@@ -242,6 +247,13 @@ extern const char *const ned_doppler32_augmented_measurement_names[2];
 extern const unsigned char ned_doppler32_augmented_F_row[87], ned_doppler32_augmented_F_col[87];
 extern const unsigned char ned_doppler32_augmented_G_row[6], ned_doppler32_augmented_G_col[6];
 extern const unsigned char ned_doppler32_augmented_H_row[8], ned_doppler32_augmented_H_col[8];
+/* The transition's Phi is stored compressed: t->Phi[k] is Phi(i, j) with i =
+        ned_doppler32_augmented_Phi_row[k],
+   j = ned_doppler32_augmented_Phi_col[k] (the structural nonzeros of e^{F T}, row by row, columns
+           ascending; a row of
+   random constants holds its diagonal 1 alone); every other entry of Phi is 0. */
+extern const unsigned char ned_doppler32_augmented_Phi_row[NED_DOPPLER32_AUGMENTED_N_PHI],
+        ned_doppler32_augmented_Phi_col[NED_DOPPLER32_AUGMENTED_N_PHI];
 
 /* Fill the parameters that have defaults in the model; the others become 0. */
 void ned_doppler32_augmented_default_params(ned_doppler32_augmented_params *params);
@@ -263,6 +275,21 @@ int ned_doppler32_augmented_matrices_evaluate(const ned_doppler32_augmented_para
 int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *restrict m,
         ned_doppler32_augmented_scalar T, ned_doppler32_augmented_transition *restrict t,
                 ned_doppler32_augmented_workspace *restrict work);
+
+/* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
+void ned_doppler32_augmented_get_transition_matrix(const ned_doppler32_augmented_transition
+        *restrict t,
+                ned_doppler32_augmented_scalar Phi[restrict NED_DOPPLER32_AUGMENTED_N_STATES *
+                        NED_DOPPLER32_AUGMENTED_N_STATES]);
+
+/* Set the transition's Phi from a full N * N array in row-major order (a Phi
+   computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
+   (ERR_NONFINITE), a nonzero entry outside the structural pattern of Phi or a row
+   of random constants that is not exactly e_i (ERR_STRUCTURE: predict would not
+   read it); on error t is unchanged. */
+int ned_doppler32_augmented_set_transition_matrix(ned_doppler32_augmented_transition *restrict t,
+                const ned_doppler32_augmented_scalar Phi[restrict NED_DOPPLER32_AUGMENTED_N_STATES *
+                        NED_DOPPLER32_AUGMENTED_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).

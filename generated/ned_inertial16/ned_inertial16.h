@@ -32,6 +32,8 @@
 #define NED_INERTIAL16_NNZ_F 54
 #define NED_INERTIAL16_NNZ_G 6
 #define NED_INERTIAL16_NNZ_H 0
+/* stored entries of the transition's Phi: its structural nonzeros */
+#define NED_INERTIAL16_N_PHI 115
 #define NED_INERTIAL16_TAYLOR_ORDER 9   /* highest order of the Taylor series of discretize */
 #define NED_INERTIAL16_N_TERMS 112   /* entries of discretize's compressed term arrays */
 #define NED_INERTIAL16_N_ACTIVE_ENTRIES 112   /* entries of Phi in rows that are not e_i */
@@ -41,6 +43,8 @@
 #define NED_INERTIAL16_ERR_NONFINITE 1      /* a non-finite input or result was refused */
 /* a variance or the innovation variance is not positive */
 #define NED_INERTIAL16_ERR_NOT_POSITIVE 2
+/* a transition entry that must be 0 (or a unit row's 1) is not */
+#define NED_INERTIAL16_ERR_STRUCTURE 3
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
@@ -148,8 +152,9 @@ typedef struct {
 
 /* The transition over one step T (from discretize). */
 typedef struct {
-    ned_inertial16_scalar Phi[NED_INERTIAL16_N_STATES][NED_INERTIAL16_N_STATES]; /* transition
-            matrix */
+    ned_inertial16_scalar Phi[NED_INERTIAL16_N_PHI]; /* transition matrix, its structural nonzeros
+            row by row: entry k is (i, j) = (ned_inertial16_Phi_row[k], ned_inertial16_Phi_col[k]),
+            every other entry is 0 (ned_inertial16_get_transition_matrix expands it) */
     ned_inertial16_scalar Qd[NED_INERTIAL16_N_PACKED]; /* Gamma (Q/T) Gamma^T, packed upper
             triangle: (i, j), i <= j, at i (2N - i - 1) / 2 + j */
 } ned_inertial16_transition;
@@ -202,6 +207,13 @@ extern const char *const ned_inertial16_measurement_names[1];
 extern const unsigned char ned_inertial16_F_row[54], ned_inertial16_F_col[54];
 extern const unsigned char ned_inertial16_G_row[6], ned_inertial16_G_col[6];
 extern const unsigned char ned_inertial16_H_row[1], ned_inertial16_H_col[1];
+/* The transition's Phi is stored compressed: t->Phi[k] is Phi(i, j) with i =
+        ned_inertial16_Phi_row[k],
+   j = ned_inertial16_Phi_col[k] (the structural nonzeros of e^{F T}, row by row, columns ascending;
+           a row of
+   random constants holds its diagonal 1 alone); every other entry of Phi is 0. */
+extern const unsigned char ned_inertial16_Phi_row[NED_INERTIAL16_N_PHI],
+        ned_inertial16_Phi_col[NED_INERTIAL16_N_PHI];
 
 /* Fill the parameters that have defaults in the model; the others become 0. */
 void ned_inertial16_default_params(ned_inertial16_params *params);
@@ -223,6 +235,20 @@ int ned_inertial16_matrices_evaluate(const ned_inertial16_params *restrict param
 int ned_inertial16_discretize(const ned_inertial16_matrices *restrict m, ned_inertial16_scalar T,
         ned_inertial16_transition *restrict t,
                 ned_inertial16_workspace *restrict work);
+
+/* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
+void ned_inertial16_get_transition_matrix(const ned_inertial16_transition *restrict t,
+                ned_inertial16_scalar Phi[restrict NED_INERTIAL16_N_STATES *
+                        NED_INERTIAL16_N_STATES]);
+
+/* Set the transition's Phi from a full N * N array in row-major order (a Phi
+   computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
+   (ERR_NONFINITE), a nonzero entry outside the structural pattern of Phi or a row
+   of random constants that is not exactly e_i (ERR_STRUCTURE: predict would not
+   read it); on error t is unchanged. */
+int ned_inertial16_set_transition_matrix(ned_inertial16_transition *restrict t,
+                const ned_inertial16_scalar Phi[restrict NED_INERTIAL16_N_STATES *
+                        NED_INERTIAL16_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).

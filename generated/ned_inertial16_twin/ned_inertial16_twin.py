@@ -18,6 +18,13 @@ Operation counts (floating-point, per call):
   predict (Python): 3776 mul + 3616 add = 7392 flops
   predict (dense, for comparison): 8208 mul + 7936 add = 16144 flops
 
+Two APIs: functions of x and P (predict, update, update_masked), which
+prove the P they are given on every call, for callers holding their own P;
+and the class Filter, which owns x and P as the generated C's filter struct
+does: it proves P once (constructor, set_covariance) and then trusts what
+its own predict and update make of it, refusing the same Phi, Q_d, z, H
+and r, and is unchanged after any refusal.
+
 The contract, the same as the generated C's (tol = 16 N eps): every function
 checks its arguments at its boundary and raises ValueError naming the
 function and the argument, returning nothing, where the C returns a status
@@ -37,6 +44,11 @@ and leaves its filter unchanged:
     ValueError
   - set_state (C only): a NaN or infinite entry of x -> C ERR_NONFINITE, Python
     ValueError
+  - set_transition_matrix (C only): a NaN or infinite entry of Phi -> C ERR_NONFINITE,
+    Python ValueError
+  - set_transition_matrix (C only): a nonzero entry outside the structural pattern of
+    Phi (Phi_row, Phi_col); a row of a random constant that is not exactly e_i -> C
+    ERR_STRUCTURE, Python ValueError
   - predict: non-finite x, Phi or Q_d, or a non-finite result -> C ERR_NONFINITE, Python
     ValueError
   - update: non-finite x, z, H or r, or a non-finite result -> C ERR_NONFINITE, Python
@@ -431,6 +443,8 @@ def discretize(F, G, q, T):
 
 # The prediction's kernel, chosen at generation time by modelgen.codegen.kernels.python_predict_kernel
 # (the rule, measured by bench/bench_python_module.py, is documented there): factored.
+# The Filter class's prediction (its P is trusted, no factor): dense, chosen by
+# modelgen.codegen.kernels.python_filter_predict_kernel.
 _LOWER = np.tril(np.ones((N_STATES, N_STATES), dtype=bool), -1)  # mirrored from the upper triangle
 _UPPER = _LOWER.T
 _VECTOR, _SQUARE = (N_STATES,), (N_STATES, N_STATES)
@@ -506,19 +520,38 @@ def update(x, P, z, H, r):
     definite or a non-finite result.  Non-finite arguments show in the
     result (or the innovation covariance) and are named then, as in predict.
     """
-    x, P, z, H, r = _array(x, float), _array(P, float), _array(z, float), _array(H, float), _array(r, float)
-    m = z.shape[0] if z.ndim == 1 else -1
-    if (x.shape, P.shape, z.shape, H.shape, r.shape) != (_VECTOR, _SQUARE, (m,), (m, N_STATES), (m,)):
-        _check_shapes("update", x=(x, _VECTOR), P=(P, _SQUARE), z=(z, (m,)), H=(H, (m, N_STATES)), r=(r, (m,)))
-    if not all(v >= 0.0 for v in r.tolist()):  # Python floats: cheaper than numpy calls for a few measurements
-        _check_finite("update", r=r)
-        raise ValueError("update: r has a negative measurement variance")
+    x, P = _array(x, float), _array(P, float)
+    if (x.shape, P.shape) != (_VECTOR, _SQUARE):
+        _check_shapes("update", x=(x, _VECTOR), P=(P, _SQUARE))
+    z, H, r = _update_arguments(z, H, r)
     exact = _factor(P) is not None  # the contract's test of P: one Cholesky factorization in the usual case
     if not exact:
         _check_covariance_entries("update", P)
-    if not m:  # nothing measured: x and P as they were
+    if not z.shape[0]:  # nothing measured: x and P as they were
         _check_result("update", {"x_result": x, "result": P}, x=x, P=P)
         return x.copy(), P.copy()
+    return _joseph_update(x, P, z, H, r, exact)
+
+
+def _update_arguments(z, H, r):
+    """z, H, r as float arrays of m, (m, N_STATES) and m entries, r >= 0 (ValueError naming the argument otherwise)."""
+    z, H, r = _array(z, float), _array(H, float), _array(r, float)
+    m = z.shape[0] if z.ndim == 1 else -1
+    if (z.shape, H.shape, r.shape) != ((m,), (m, N_STATES), (m,)):
+        _check_shapes("update", z=(z, (m,)), H=(H, (m, N_STATES)), r=(r, (m,)))
+    if not all(v >= 0.0 for v in r.tolist()):  # Python floats: cheaper than numpy calls for a few measurements
+        _check_finite("update", r=r)
+        raise ValueError("update: r has a negative measurement variance")
+    return z, H, r
+
+
+def _joseph_update(x, P, z, H, r, exact):
+    """(x, P) after the Kalman update of checked arguments (update's docstring); ValueError, naming the argument, for a non-PD S or a non-finite result.
+
+    ``exact``: P is exactly symmetric (no mirroring pass needed).  Shared by
+    update, which has proven P, and Filter.update, which trusts its own.
+    """
+    m = z.shape[0]
     HP = _dot(H, P)
     S = _dot(HP, H.T)
     S.ravel()[:: m + 1] += r  # R on the diagonal (ravel: a view of the new S)
@@ -545,6 +578,11 @@ def update_masked(x, P, z, H, r, mask=None):
     innovation squared nu^T S^-1 nu over the used ones.  mask None uses all;
     z, H and r of an unused measurement are ignored (NaN allowed).
     """
+    return _masked_update(update, x, P, z, H, r, mask)
+
+
+def _masked_update(update_used, x, P, z, H, r, mask):
+    """update_masked's work, with ``update_used(x, P, z, H, r)`` updating by the used measurements (update or the Filter's trusted update)."""
     z = np.asarray(z, dtype=float)
     m = z.shape[0] if z.ndim == 1 else -1
     used = np.ones(m, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
@@ -553,7 +591,7 @@ def update_masked(x, P, z, H, r, mask=None):
     innovation = np.zeros(m)
     if not used.any():
         return np.asarray(x, dtype=float).copy(), np.asarray(P, dtype=float).copy(), innovation, 0.0
-    x_new, P_new = update(x, P, z[used], H[used], r[used])
+    x_new, P_new = update_used(x, P, z[used], H[used], r[used])
     nu = z[used] - H[used] @ np.asarray(x, dtype=float)
     S = H[used] @ np.asarray(P, dtype=float) @ H[used].T + np.diag(r[used])
     innovation[used] = nu
@@ -563,6 +601,125 @@ def update_masked(x, P, z, H, r, mask=None):
 def reset_error_state(x):
     """Closed-loop feedback, as the C's reset_error_state: the error estimate after it is applied (zeros; P unchanged)."""
     return np.zeros_like(np.asarray(x, dtype=float))
+
+
+def _trusted_update(x, P, z, H, r):
+    """update for an x and P the caller vouches for (the Filter's own): z, H and r checked, P not tested."""
+    z, H, r = _update_arguments(z, H, r)
+    if not z.shape[0]:  # nothing measured
+        return x, P
+    return _joseph_update(x, P, z, H, r, True)
+
+
+def _dense_product(P, Phi, Qd):
+    """(Phi P Phi^T + Q_d with its upper triangle mirrored, the sum of magnitudes before the mirroring): two BLAS products.
+
+    M = Phi P (numpy), then one dgemm on the Fortran-order views of M and
+    Phi (transposes of C-order arrays: no copies) gives the result's
+    transpose M Phi^T + Q_d^T in Fortran order, i.e. Phi P Phi^T + Q_d in C
+    order, Q_d's upper triangle in the result's.  The sum reads every entry
+    of the product and of Q_d (a non-finite one shows in it).
+    """
+    M = _dot(Phi, P)
+    transposed = _gemm(1.0, M.T, Phi.T, 1.0, Qd.T, trans_a=1)  # Fortran order
+    total = _asum(transposed.ravel("K"))
+    P_new = transposed.T  # C order
+    np.copyto(P_new, transposed, where=_LOWER)  # P_new[i, j] = P_new[j, i] below the diagonal
+    return P_new, total
+
+
+class Filter:
+    """The filter as the generated C's filter struct: it owns x and P, and P is proven once.
+
+    set_covariance (and the constructor) refuses a P outside the contract
+    (module docstring) as the functional predict and update do, and stores
+    it with its upper triangle mirrored (exactly symmetric, as the C stores
+    the upper triangle).  From then on P is only what the filter's own
+    predict and update made of it, so they trust it as the C does -- no
+    Cholesky proof per call, which the functional API needs for a P it
+    receives -- and test only that their results are finite.  Phi, Q_d, z,
+    H and r are refused exactly as by the functional API (ValueError naming
+    the function and argument); on any error the filter is unchanged.
+    get_state and get_covariance return copies, so nothing outside can
+    break P's symmetry.
+
+    predict: dense kernel (modelgen.codegen.kernels.python_filter_predict_kernel: Phi P Phi^T by two BLAS products).
+    update: the functional update's Joseph form, the same arithmetic.
+    """
+
+    __slots__ = ("_x", "_P")
+
+    def __init__(self, x, P):
+        """A filter with state estimate x and covariance P (set_state and set_covariance: the same refusals)."""
+        self._x = self._P = None
+        self.set_state(x)
+        self.set_covariance(P)
+
+    def set_state(self, x):
+        """Set the state estimate to a copy of x; P is not touched.  ValueError for a wrong shape or a non-finite entry."""
+        x = np.array(x, dtype=float)  # a copy: the caller's array never becomes the filter's
+        _check_shapes("set_state", x=(x, _VECTOR))
+        _check_finite("set_state", x=x)
+        self._x = x
+
+    def set_covariance(self, P):
+        """Set the covariance to P, its upper triangle mirrored; ValueError for a P outside the contract (module docstring)."""
+        P = np.array(P, dtype=float)  # a copy, mirrored below
+        _check_shapes("set_covariance", P=(P, _SQUARE))
+        _check_finite("set_covariance", P=P)
+        if _factor(P) is None:  # the contract's test entry by entry, naming what it refuses
+            _check_covariance_entries("set_covariance", P)
+        np.copyto(P, P.T, where=_LOWER)
+        self._P = P
+
+    def get_state(self):
+        """A copy of the state estimate x."""
+        return self._x.copy()
+
+    def get_covariance(self):
+        """A copy of the covariance P (exactly symmetric)."""
+        return self._P.copy()
+
+    def reset_error_state(self):
+        """Closed-loop feedback, as the C's reset_error_state: x := 0 once the caller has applied it; P unchanged."""
+        self._x = np.zeros(N_STATES)
+
+    def predict(self, Phi, Qd):
+        """x = Phi x and P = Phi P Phi^T + Q_d (upper triangle mirrored; Q_d's lower triangle is checked, not used).
+
+        Raises ValueError, naming the argument, for non-finite Phi or Qd or
+        a non-finite result; the filter is then unchanged.  As in the
+        functional predict, one sum of magnitudes over the results tests
+        every entry of Phi (through Phi x) and of Q_d.
+        """
+        Phi, Qd = _array(Phi, float), _array(Qd, float)
+        if (Phi.shape, Qd.shape) != (_SQUARE, _SQUARE):
+            _check_shapes("predict", Phi=(Phi, _SQUARE), Qd=(Qd, _SQUARE))
+        x_new = _dot(Phi, self._x)
+        P_new, total = _dense_product(self._P, Phi, Qd)
+        if not math.isfinite(total + _asum(x_new)):
+            _refuse_non_finite("predict", {"x_result": x_new, "result": P_new}, Qd=Qd, Phi=Phi)
+        self._x, self._P = x_new, P_new
+
+    def update(self, z, H, r):
+        """Kalman update with all the measurements z (the functional update's Joseph form, bit for bit).
+
+        Raises ValueError, naming the argument, as update does (non-finite
+        z, H or r, a negative r, an innovation covariance that is not
+        positive definite, a non-finite result); the filter is then unchanged.
+        """
+        self._x, self._P = _trusted_update(self._x, self._P, z, H, r)
+
+    def update_masked(self, z, H, r, mask=None):
+        """Kalman update with the measurements whose mask entry is true (update_masked); returns (innovation, nis).
+
+        innovation is z - H x before the update for the used measurements
+        and 0 for the others, nis the normalized innovation squared over the
+        used ones; refusals as update_masked, the filter then unchanged.
+        """
+        x, P, innovation, nis = _masked_update(_trusted_update, self._x, self._P, z, H, r, mask)
+        self._x, self._P = x, P
+        return innovation, nis
 
 
 # -- the contract: what every function refuses, as the C does --------------
