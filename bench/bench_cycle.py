@@ -75,6 +75,7 @@ from modelgen.codegen.discretize_kernels import (  # noqa: E402
     DiscretizePlan,
     doubling_block,
     noise_blocks,
+    scalar_statements,
     structural_series_cost,
 )
 from modelgen.codegen.generate import describe, generate_code, write_atomically  # noqa: E402
@@ -138,9 +139,10 @@ def _parameter_values(derived: DerivedModel, values: dict) -> list[float]:
 
 # -- floors ------------------------------------------------------------------------------
 def _count(blocks) -> OperationCount:
+    """Flops of the blocks' statements, a segment loop counted as the scalar statements it stands for."""
     mul = add = 0
     for b in blocks:
-        for s in b.block.statements:
+        for s in scalar_statements(b.block.statements):
             mul += sum(len(t) - 1 for t in s.terms)
             add += max(len(s.terms) - 1, 0)
     return OperationCount(mul, add)
