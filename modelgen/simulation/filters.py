@@ -470,7 +470,7 @@ class ModelMatrices:
         self.defaults = model.parameter_defaults()
         self.shapes = [derived.F.shape, derived.G.shape, derived.Q.shape, derived.H.shape, derived.R.shape]
         self._function = sp.lambdify(model.parameter_symbols, [derived.F, derived.G, derived.Q, derived.H, derived.R],
-                                     modules="numpy", cse=True)
+                                     modules=[np], cse=True)  # module object: no `from numpy import *` (DerivedModel._numeric)
 
     def __call__(self, values: Mapping[str, float]) -> dict[str, np.ndarray]:
         args = [values[name] if name in values else self.defaults[name] for name in self.names]
