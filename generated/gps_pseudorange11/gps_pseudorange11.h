@@ -261,9 +261,9 @@ void gps_pseudorange11_get_transition_matrix(const gps_pseudorange11_transition 
 
 /* Set the transition's Phi from a full N * N array in row-major order (a Phi
    computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
-   (ERR_NONFINITE), a nonzero entry outside the structural pattern of Phi or a row
-   of random constants that is not exactly e_i (ERR_STRUCTURE: predict would not
-   read it); on error t is unchanged. */
+   anywhere (ERR_NONFINITE, tested first), then a nonzero entry outside the
+   structural pattern of Phi or a row of random constants that is not exactly
+   e_i (ERR_STRUCTURE: predict would not read it); on error t is unchanged. */
 int gps_pseudorange11_set_transition_matrix(gps_pseudorange11_transition *restrict t,
                 const gps_pseudorange11_scalar Phi[restrict GPS_PSEUDORANGE11_N_STATES *
                         GPS_PSEUDORANGE11_N_STATES]);

@@ -227,9 +227,9 @@ void ins_gps15_get_transition_matrix(const ins_gps15_transition *restrict t,
 
 /* Set the transition's Phi from a full N * N array in row-major order (a Phi
    computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
-   (ERR_NONFINITE), a nonzero entry outside the structural pattern of Phi or a row
-   of random constants that is not exactly e_i (ERR_STRUCTURE: predict would not
-   read it); on error t is unchanged. */
+   anywhere (ERR_NONFINITE, tested first), then a nonzero entry outside the
+   structural pattern of Phi or a row of random constants that is not exactly
+   e_i (ERR_STRUCTURE: predict would not read it); on error t is unchanged. */
 int ins_gps15_set_transition_matrix(ins_gps15_transition *restrict t,
                 const ins_gps15_scalar Phi[restrict INS_GPS15_N_STATES * INS_GPS15_N_STATES]);
 

@@ -45,8 +45,8 @@ and leaves its filter unchanged:
     ValueError
   - set_state (C only): a NaN or infinite entry of x -> C ERR_NONFINITE, Python
     ValueError
-  - set_transition_matrix (C only): a NaN or infinite entry of Phi -> C ERR_NONFINITE,
-    Python ValueError
+  - set_transition_matrix (C only): a NaN or infinite entry of Phi, anywhere (tested
+    first) -> C ERR_NONFINITE, Python ValueError
   - set_transition_matrix (C only): a nonzero entry outside the structural pattern of
     Phi (Phi_row, Phi_col); a row of a random constant that is not exactly e_i -> C
     ERR_STRUCTURE, Python ValueError

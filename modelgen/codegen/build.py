@@ -380,9 +380,16 @@ class CompiledFilter:
         return rows[order].astype(np.int64), cols[order].astype(np.int64)
 
     def set_transition_matrix(self, Phi: np.ndarray) -> int:
-        """The generated set_transition_matrix from a full Phi; returns its status (ERR_STRUCTURE off the pattern)."""
+        """The generated set_transition_matrix from a full Phi; returns its status (ERR_STRUCTURE off the pattern).
+
+        A float build receives Phi rounded to float, as its C caller would pass it.
+        """
+        Phi = np.asarray(Phi, dtype=float)
         buffer = self._square()
-        np.ctypeslib.as_array(buffer)[:] = np.asarray(Phi, dtype=float)
+        target = np.ctypeslib.as_array(buffer)
+        if Phi.shape != target.shape:
+            raise ValueError(f"set_transition_matrix: Phi has shape {Phi.shape}, expected {target.shape}")
+        target[:] = Phi
         return self._set_transition_matrix(ctypes.byref(self.transition), buffer)
 
     @property

@@ -20,7 +20,7 @@ CONTRACT: tuple[tuple[str, str, str], ...] = (
     ("set_covariance / predict, update (P argument)", "a NaN or infinite entry of P", "ERR_NONFINITE"),
     ("set_covariance / predict, update (P argument)", "P_ii < 0; abs(P_ij - P_ji) > tol sqrt(P_ii P_jj); abs(P_ij) > sqrt(P_ii P_jj) (1 + tol), so a zero variance carries no correlation; P not positive semidefinite within tol", "ERR_NOT_POSITIVE"),
     ("set_state (C only)", "a NaN or infinite entry of x", "ERR_NONFINITE"),
-    ("set_transition_matrix (C only)", "a NaN or infinite entry of Phi", "ERR_NONFINITE"),
+    ("set_transition_matrix (C only)", "a NaN or infinite entry of Phi, anywhere (tested first)", "ERR_NONFINITE"),
     ("set_transition_matrix (C only)", "a nonzero entry outside the structural pattern of Phi (Phi_row, Phi_col); a row of a random constant that is not exactly e_i", "ERR_STRUCTURE"),
     ("predict", "non-finite x, Phi or Q_d, or a non-finite result", "ERR_NONFINITE"),
     ("update", "non-finite x, z, H or r, or a non-finite result", "ERR_NONFINITE"),

@@ -165,3 +165,20 @@ def test_recompute_threshold_keeps_the_transition_until_the_operating_point_move
     assert fresh.set_parameters(moved) == 0 and fresh.discretize(60.0) == 0
     assert np.array_equal(c.Phi, fresh.Phi) and not np.array_equal(c.Phi, first)
     assert c.discretize(30.0) == 0 and not np.array_equal(c.Phi, fresh.Phi)
+
+
+def test_a_phi_set_from_outside_makes_the_next_discretize_recompute(paper_derived, level_flight, tmp_path):
+    """With recompute_threshold, set_transition_matrix forgets the remembered inputs: discretize at the same point gives e^{F T} again."""
+    options = CodegenOptions(recompute_threshold=1e-6)
+    built = build(paper_derived, tmp_path / "threshold_set", options)
+    named = dict(zip(paper_derived.model.parameter_names, parameter_vector(paper_derived.model, level_flight)))
+    c = built.c_filter(options)
+    assert c.set_parameters(named) == 0 and c.discretize(60.0) == 0
+    computed = c.Phi.copy()
+    other = computed.copy()
+    off_diagonal = ~np.eye(len(other), dtype=bool)
+    other[off_diagonal] *= 0.5  # the same pattern, rows of random constants still e_i
+    assert c.set_transition_matrix(other) == 0
+    assert not np.array_equal(c.Phi, computed)
+    assert c.discretize(60.0) == 0
+    assert np.array_equal(c.Phi, computed)

@@ -302,3 +302,18 @@ def test_the_filter_class_runs_degenerate_models_as_the_functional_api_does(name
         f.update(np.ones(len(r)), H, r)
         np.testing.assert_allclose(f.get_state(), x, rtol=1e-15, atol=0.0)
         np.testing.assert_allclose(f.get_covariance(), P, rtol=4 * n * EPS, atol=0.0)
+
+
+def test_a_phi_outside_the_row_classes_is_used_whole_by_the_row_class_predict(structured_py, arguments):
+    """A nonzero off the diagonal of a diagonal row (a Phi made elsewhere) is not dropped: both APIs take the dense product, x and P see the same Phi."""
+    n = len(arguments["x"])
+    diagonal_row = int(np.flatnonzero(structured_py._NOT_GENERAL)[0])
+    phi = with_entry(arguments["Phi"], (diagonal_row, (diagonal_row + 1) % n), 0.5)
+    dense = phi @ arguments["P"] @ phi.T + arguments["Qd"]
+    x_new, P_new = structured_py.predict(arguments["x"], arguments["P"], phi, arguments["Qd"])
+    f = structured_py.Filter(arguments["x"], arguments["P"])
+    f.predict(phi, arguments["Qd"])
+    bound = 64 * EPS * (np.abs(phi) @ np.abs(arguments["P"]) @ np.abs(phi).T + np.abs(arguments["Qd"]))
+    for P in (P_new, f.get_covariance()):
+        assert np.all(np.abs(P - np.triu(dense) - np.triu(dense, 1).T) <= bound)
+    assert np.array_equal(x_new, phi @ arguments["x"])

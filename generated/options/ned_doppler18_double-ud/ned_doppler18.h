@@ -254,9 +254,9 @@ void ned_doppler18_get_transition_matrix(const ned_doppler18_transition *restric
 
 /* Set the transition's Phi from a full N * N array in row-major order (a Phi
    computed elsewhere; Gamma and qw are not touched).  Refuses a non-finite entry
-   (ERR_NONFINITE), a nonzero entry outside the structural pattern of Phi or a row
-   of random constants that is not exactly e_i (ERR_STRUCTURE: predict would not
-   read it); on error t is unchanged. */
+   anywhere (ERR_NONFINITE, tested first), then a nonzero entry outside the
+   structural pattern of Phi or a row of random constants that is not exactly
+   e_i (ERR_STRUCTURE: predict would not read it); on error t is unchanged. */
 int ned_doppler18_set_transition_matrix(ned_doppler18_transition *restrict t,
                 const ned_doppler18_scalar Phi[restrict NED_DOPPLER18_N_STATES *
                         NED_DOPPLER18_N_STATES]);
