@@ -44,7 +44,7 @@ from modelgen.codegen.layout import ModelSizes, c_layout
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
 from modelgen.fileio.cache_entry import link_new_entry
-from modelgen.fileio.cache_eviction import keep_within_cap, mark_used
+from modelgen.fileio.cache_eviction import cap_bytes, keep_within_cap, mark_used
 from modelgen.fileio.output import write_bytes_atomically
 
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
@@ -95,6 +95,7 @@ ENTRY_NAMES = 4
 
 def library_cache_folder() -> Path:
     """The folder of cached libraries: $MODELGEN_CACHE_DIR, else $XDG_CACHE_HOME/modelgen, else ~/.cache/modelgen."""
+    cap_bytes()  # a bad $MODELGEN_CACHE_MAX_MB is refused here, before any work, not once a library is built
     explicit = os.environ.get(CACHE_ENV)
     if explicit:
         return Path(explicit) / "libraries"

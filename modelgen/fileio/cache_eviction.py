@@ -72,10 +72,7 @@ def cap_bytes() -> int | None:
     text = os.environ.get(CAP_ENV, "").strip()
     if not text:
         return DEFAULT_CAP_MB * 2**20
-    try:
-        megabytes = int(text)
-    except ValueError:
-        megabytes = -1
+    megabytes = int(text) if re.fullmatch(r"[0-9]{1,12}", text) else -1  # ASCII digits only: not "+5", "1_000", "-0"
     if megabytes < 0:
         raise ModelError(f"${CAP_ENV}={text!r}: the cache's size cap must be a whole number of megabytes "
                          f"(0 for no cap)")

@@ -1,6 +1,7 @@
 """The caches' size cap: least recently used entries removed first, and nothing but entries, ever."""
 
 import os
+import re
 
 import pytest
 
@@ -74,9 +75,9 @@ def test_the_cap_comes_from_the_environment_zero_for_none_and_a_bad_value_is_ref
     assert cap_bytes() is None
     kept = entry(tmp_path, "libraries", f"{key('b')}.lib", LIBRARY_MAGIC, 4 * 2**20, 1)
     assert keep_within_cap(tmp_path) == [] and kept.exists()
-    for bad in ("-1", "2.5", "lots"):
+    for bad in ("-1", "2.5", "lots", "+5", "1_000", "-0", "\u0663", "1e3"):
         monkeypatch.setenv(CAP_ENV, bad)
-        with pytest.raises(ModelError, match=rf"\$MODELGEN_CACHE_MAX_MB={bad!r}.*whole number of megabytes"):
+        with pytest.raises(ModelError, match=re.escape(f"$MODELGEN_CACHE_MAX_MB={bad!r}") + ".*whole number of megabytes"):
             cap_bytes()
 
 
@@ -124,3 +125,14 @@ def test_a_new_trajectory_entry_removes_the_least_recently_used_one_to_fit(tmp_p
     again = cached_trajectory(path, 300.0, 1.0)  # another entry (0.9 MB): kept, the older one removed
     assert not first.exists() and len(list(trajectory_cache_folder().iterdir())) == 1
     assert again.n_samples == 18000
+
+
+def test_a_bad_cap_is_refused_when_the_cache_is_looked_up_before_any_work(monkeypatch):
+    """The cap is read with the cache's folder (before a compile or a trajectory is made), not only once an entry is stored."""
+    from modelgen.codegen.build import library_cache_folder
+    from modelgen.simulation.trajectory_cache import trajectory_cache_folder
+
+    monkeypatch.setenv(CAP_ENV, "lots")
+    for folder in (library_cache_folder, trajectory_cache_folder):
+        with pytest.raises(ModelError, match=r"\$MODELGEN_CACHE_MAX_MB='lots'"):
+            folder()
