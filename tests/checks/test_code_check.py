@@ -25,7 +25,7 @@ from modelgen.checks.code_check import (
 )
 from modelgen.derive.symbolic import derive
 from modelgen.model.loading import load_model
-from modelgen.jobs import check_scenario, declared_scenario, paper_scenario, synthetic_scenario
+from modelgen.jobs import check_scenario, declared_scenario, paper_scenario
 
 
 def correlation_condition(P: np.ndarray) -> float:
