@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from modelgen.codegen.options import CodegenOptions
+from modelgen.codegen.structure import reachability
 
 
 @dataclass(frozen=True)
@@ -55,7 +56,7 @@ class ModelSizes:
             nnz_f=int(np.count_nonzero(derived.structure("F"))),
             nnz_g=int(np.count_nonzero(derived.structure("G"))),
             nnz_h=int(np.count_nonzero(derived.structure("H"))),
-            nnz_phi=int(np.count_nonzero(phi_pattern(derived.structure("F")))),
+            nnz_phi=int(np.count_nonzero(reachability(derived.structure("F"), derived.n_states))),
         )
 
     @property
@@ -65,22 +66,6 @@ class ModelSizes:
     @property
     def upper(self) -> int:
         return self.n * (self.n - 1) // 2
-
-
-def phi_pattern(F: np.ndarray) -> np.ndarray:
-    """Structural pattern of Phi = e^{F T}: which state reaches which along nonzeros of F (with the identity).
-
-    The transitive closure of I + F's pattern by repeated squaring (log2 N
-    boolean products), the same pattern as ``structure.filter_structure``'s
-    Phi, which sums paths up to length N one at a time.
-    """
-    F = np.asarray(F, dtype=bool)
-    closure = (np.eye(F.shape[0]) + F) > 0
-    while True:
-        wider = (closure.astype(float) @ closure.astype(float)) > 0
-        if np.array_equal(wider, closure):
-            return closure
-        closure = wider
 
 
 def phi_entries(pattern: np.ndarray) -> list[tuple[int, int]]:
