@@ -58,7 +58,7 @@ from modelgen.simulation.filters import IMPLEMENTATIONS, filter_factory, generat
 from modelgen.simulation.flight import fly_profile, profile_layout
 from modelgen.simulation.jit import load_compiled_machinery
 from modelgen.simulation.model_outline import ModelOutline
-from modelgen.simulation.native_loop import native_supported
+from modelgen.simulation.streaming import flies_compiled_loop as streaming_compiled_loop
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.trajectory import Trajectory, generate_trajectory
 from modelgen.simulation.trajectory_cache import cached_trajectory
@@ -244,11 +244,11 @@ def flies_compiled_loop(profile: FlightProfile, make_filter: Any) -> bool:
     """Whether :func:`fly_profile` flies ``profile`` with ``make_filter`` in the compiled loop.
 
     The compiled loop (:mod:`modelgen.simulation.native_loop`) reads only the
-    model's outline; the Python loop evaluates the symbolic H and R.  Same
-    rule as :func:`modelgen.simulation.streaming.fly_modes` (its default glue, no sinks).
+    model's outline; the Python loop evaluates the symbolic H and R.  The
+    rule of :func:`modelgen.simulation.streaming.fly_modes` (default glue, no sinks).
     """
     sensor = profile.aiding_sensor
-    return hasattr(sensor, "filter_loop") and native_supported(sensor, make_filter)
+    return hasattr(sensor, "filter_loop") and streaming_compiled_loop(sensor, make_filter)
 
 
 def received_model(setup: MonteCarloSetup) -> DerivedModel:

@@ -100,6 +100,16 @@ def load_piece(sensors: SensorData, cursor, first_cycle: int, last_cycle: int,
     sensors.sample_offset = start
 
 
+def flies_compiled_loop(sensor: Any, make_filter: Any, glue: str = "compiled", sinks: dict | None = None) -> bool:
+    """Whether :func:`fly_modes` flies ``sensor``'s modes in the compiled loop (else the Python loop).
+
+    The compiled loop (:mod:`modelgen.simulation.native_loop`) needs the
+    compiled glue, no sink of recorded rows, and a sensor and filter it
+    supports; it reads only the model's outline.
+    """
+    return glue == "compiled" and not sinks and native_supported(sensor, make_filter)
+
+
 def fly_modes(profile: FlightProfile, derived: DerivedModel | ModelOutline, trajectory: Trajectory,
               sensors: SensorData, layout: ErrorLayout, make_filter: FilterMaker, modes: Iterable[str],
               progress: Callable[[str], Progress] | None = None, piece_seconds: float = PIECE_SECONDS,
@@ -124,7 +134,7 @@ def fly_modes(profile: FlightProfile, derived: DerivedModel | ModelOutline, traj
     sinks = sinks or {}
     if glue not in GLUES:
         raise ModelError(f"streaming: unknown glue {glue!r} (choose from {', '.join(GLUES)})")
-    native = glue == "compiled" and not sinks and native_supported(sensor, make_filter)
+    native = flies_compiled_loop(sensor, make_filter, glue, sinks)
     loops: list[Any] = [
         sensor.native_loop(profile, derived, trajectory, sensors, layout, make_filter, mode,
                            progress(mode) if progress else None, record_every=record_every) if native else

@@ -8,8 +8,8 @@ import pytest
 from modelgen.errors import ModelError
 from modelgen.fileio.cache_eviction import CAP_ENV, DEFAULT_CAP_MB, KINDS, cap_bytes, cached_entries, keep_within_cap
 
-LIBRARY_MAGIC = b"modelgen-library-cache 1\n"
-TRAJECTORY_MAGIC = b"modelgen-trajectory-cache 1\n"
+from modelgen.codegen.build import ENTRY_MAGIC as LIBRARY_MAGIC
+from modelgen.simulation.trajectory_cache import ENTRY_MAGIC as TRAJECTORY_MAGIC
 
 
 def entry(root, folder, name, magic, size, used_s):

@@ -299,6 +299,8 @@ def c_context(description: FilterDescription) -> dict[str, object]:
     blocks = description.predict_blocks[0]
     parts = source_parts(description)
     roundoff = FLOAT_ROUNDOFF if options.scalar == "float" else DOUBLE_ROUNDOFF
+    unit_rows = set(structure.unit_rows)
+    probe = next(((i, j) for i, j in structure.entries("Phi") if i not in unit_rows), (0, 0))  # an entry predict reads
     return {
         **description.shared_context(),
         **spell,
@@ -391,14 +393,9 @@ def c_context(description: FilterDescription) -> dict[str, object]:
             for ref in [c_ref(s.target) for s in state_lines] + [f"f->x[{i}]" for i in structure.unit_rows]
         ],
         "free_parameters": [p.name for p in model.parameters if p.value is None],
-        "probe": next((i, j) for i, j in structure.entries("Phi") if i not in set(structure.unit_rows))
-        if len(structure.unit_rows) < n
-        else (0, 0),
+        "probe": probe,
         "predict_state_commit": [c_statement(s) for s in state_commit],
-        "probe_entry": phi_entries(structure.Phi).index(
-            next((i, j) for i, j in structure.entries("Phi") if i not in set(structure.unit_rows))
-            if len(structure.unit_rows) < n else (0, 0)
-        ),
+        "probe_entry": structure.entries("Phi").index(probe),
         "covariance_commit_rows": description.covariance_commit,
         "predict_blocks": block_functions(blocks, model.name),
         "compact": bool(compact),
