@@ -146,7 +146,7 @@ int gps_pseudorange11_matrices_evaluate(const gps_pseudorange11_params *restrict
         gps_pseudorange11_matrices *restrict m)
 {
     int e;
-    gps_pseudorange11_scalar check = 0.0;
+    gps_pseudorange11_scalar sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (pole(cos(params->latitude), params->latitude)) {
         return GPS_PSEUDORANGE11_ERR_NONFINITE; /* cos(latitude) = 0: singular operating point */
     }
@@ -236,23 +236,96 @@ int gps_pseudorange11_matrices_evaluate(const gps_pseudorange11_params *restrict
         m->r[2] = params->pseudorange_sigma_3*params->pseudorange_sigma_3;
         m->r[3] = params->pseudorange_sigma_4*params->pseudorange_sigma_4;
     }
-    for (e = 0; e < GPS_PSEUDORANGE11_NNZ_F; ++e) {
-        check += m->F[e] - m->F[e];
+    /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
+       vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
+               is
+       not finite, or an overflow of finite values) is decided value by value */
+    for (e = 0; e + 3 < GPS_PSEUDORANGE11_NNZ_F; e += 4) {
+        sums[0] += m->F[e];
+        sums[1] += m->F[e + 1];
+        sums[2] += m->F[e + 2];
+        sums[3] += m->F[e + 3];
     }
-    for (e = 0; e < GPS_PSEUDORANGE11_NNZ_G; ++e) {
-        check += m->G[e] - m->G[e];
+    for (; e < GPS_PSEUDORANGE11_NNZ_F; ++e) {
+        sums[0] += m->F[e];
     }
-    for (e = 0; e < GPS_PSEUDORANGE11_NNZ_H; ++e) {
-        check += m->H[e] - m->H[e];
+    for (e = 0; e + 3 < GPS_PSEUDORANGE11_NNZ_G; e += 4) {
+        sums[0] += m->G[e];
+        sums[1] += m->G[e + 1];
+        sums[2] += m->G[e + 2];
+        sums[3] += m->G[e + 3];
     }
-    for (e = 0; e < GPS_PSEUDORANGE11_N_NOISES; ++e) {
-        check += m->q[e] - m->q[e];
+    for (; e < GPS_PSEUDORANGE11_NNZ_G; ++e) {
+        sums[0] += m->G[e];
     }
-    for (e = 0; e < GPS_PSEUDORANGE11_N_MEASUREMENTS; ++e) {
-        check += m->r[e] - m->r[e];
+    for (e = 0; e + 3 < GPS_PSEUDORANGE11_NNZ_H; e += 4) {
+        sums[0] += m->H[e];
+        sums[1] += m->H[e + 1];
+        sums[2] += m->H[e + 2];
+        sums[3] += m->H[e + 3];
     }
-    return (check != 0.0) ? GPS_PSEUDORANGE11_ERR_NONFINITE : GPS_PSEUDORANGE11_OK;
+    for (; e < GPS_PSEUDORANGE11_NNZ_H; ++e) {
+        sums[0] += m->H[e];
+    }
+    for (e = 0; e + 3 < GPS_PSEUDORANGE11_N_NOISES; e += 4) {
+        sums[0] += m->q[e];
+        sums[1] += m->q[e + 1];
+        sums[2] += m->q[e + 2];
+        sums[3] += m->q[e + 3];
+    }
+    for (; e < GPS_PSEUDORANGE11_N_NOISES; ++e) {
+        sums[0] += m->q[e];
+    }
+    for (e = 0; e + 3 < GPS_PSEUDORANGE11_N_MEASUREMENTS; e += 4) {
+        sums[0] += m->r[e];
+        sums[1] += m->r[e + 1];
+        sums[2] += m->r[e + 2];
+        sums[3] += m->r[e + 3];
+    }
+    for (; e < GPS_PSEUDORANGE11_N_MEASUREMENTS; ++e) {
+        sums[0] += m->r[e];
+    }
+    sums[0] = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    if (sums[0] - sums[0] != 0.0) {
+        for (e = 0; e < GPS_PSEUDORANGE11_NNZ_F; ++e) {
+            if (!isfinite(m->F[e])) {
+                return GPS_PSEUDORANGE11_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < GPS_PSEUDORANGE11_NNZ_G; ++e) {
+            if (!isfinite(m->G[e])) {
+                return GPS_PSEUDORANGE11_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < GPS_PSEUDORANGE11_NNZ_H; ++e) {
+            if (!isfinite(m->H[e])) {
+                return GPS_PSEUDORANGE11_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < GPS_PSEUDORANGE11_N_NOISES; ++e) {
+            if (!isfinite(m->q[e])) {
+                return GPS_PSEUDORANGE11_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < GPS_PSEUDORANGE11_N_MEASUREMENTS; ++e) {
+            if (!isfinite(m->r[e])) {
+                return GPS_PSEUDORANGE11_ERR_NONFINITE;
+            }
+        }
+    }
+
+    return GPS_PSEUDORANGE11_OK;
 }
+
+/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
+   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
+   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
+   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+#if defined(__GNUC__)
+#define GPS_PSEUDORANGE11_BLOCK static __attribute__((noinline))
+#else
+#define GPS_PSEUDORANGE11_BLOCK static
+#endif
 
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static gps_pseudorange11_scalar power_of_two(const int e)
@@ -372,13 +445,6 @@ static int taylor_plan(const gps_pseudorange11_scalar norm, const gps_pseudorang
     return GPS_PSEUDORANGE11_OK;
 }
 
-/* Each block keeps its own stack frame: inlined into discretize, the frames of all blocks
-   would add up (the worst-case stack is measured for the Cortex-M4F, tests/embedded). */
-#if defined(__GNUC__)
-#define GPS_PSEUDORANGE11_BLOCK static __attribute__((noinline))
-#else
-#define GPS_PSEUDORANGE11_BLOCK static
-#endif
 GPS_PSEUDORANGE11_BLOCK void horner_input(const gps_pseudorange11_matrices *restrict m,
         gps_pseudorange11_discretize_scratch *restrict w, const gps_pseudorange11_scalar h)
 {
@@ -1024,8 +1090,8 @@ GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar transition_check(gps_pseudorang
             + t->Phi[47] + t->Phi[48] + t->Phi[49] + t->Phi[50] + t->Phi[51] + t->Phi[52] +
             t->Phi[53] + t->Phi[54] + t->Phi[55] + t->Phi[56] + t->Phi[57] + t->Phi[58] + t->Phi[59]
             + t->Phi[60] + t->Phi[61] + t->Phi[62] + t->Phi[63] + t->Phi[64]; w->term[0][0] = v;
-            check += v - v;
-    return check;
+            check += v;
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
 GPS_PSEUDORANGE11_BLOCK void noise_input(const gps_pseudorange11_matrices *restrict m,
@@ -1144,129 +1210,128 @@ GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar process_noise(const gps_pseudor
     w->term[1][47] = w->term[0][47]*w->term[1][55];
     v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
             w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0] = v; check += v - v;
+            t->Qd[0] = v; check += v;
     v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
             w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v - v;
+            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v;
     v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
             w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v - v;
+            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v;
     v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
             w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v - v;
+            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v;
     v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
             w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v - v;
+            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v;
     v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
             w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v - v;
+            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v;
     v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38];
-            t->Qd[6] = v; check += v - v;
+            t->Qd[6] = v; check += v;
     v = w->term[1][0]*w->term[0][39] + w->term[1][1]*w->term[0][40] + w->term[1][2]*w->term[0][41];
-            t->Qd[7] = v; check += v - v;
+            t->Qd[7] = v; check += v;
     v = w->term[1][0]*w->term[0][42] + w->term[1][1]*w->term[0][43] + w->term[1][2]*w->term[0][44];
-            t->Qd[8] = v; check += v - v;
+            t->Qd[8] = v; check += v;
     v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
             w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[11] = v; check += v - v;
+            w->term[1][11]*w->term[0][11]; t->Qd[11] = v; check += v;
     v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
             w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[12] = v; check += v - v;
+            w->term[1][11]*w->term[0][17]; t->Qd[12] = v; check += v;
     v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
             w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[13] = v; check += v - v;
+            w->term[1][11]*w->term[0][23]; t->Qd[13] = v; check += v;
     v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
             w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[14] = v; check += v - v;
+            w->term[1][11]*w->term[0][29]; t->Qd[14] = v; check += v;
     v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
             w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[15] = v; check += v - v;
+            w->term[1][11]*w->term[0][35]; t->Qd[15] = v; check += v;
     v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38];
-            t->Qd[16] = v; check += v - v;
+            t->Qd[16] = v; check += v;
     v = w->term[1][6]*w->term[0][39] + w->term[1][7]*w->term[0][40] + w->term[1][8]*w->term[0][41];
-            t->Qd[17] = v; check += v - v;
+            t->Qd[17] = v; check += v;
     v = w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] + w->term[1][8]*w->term[0][44];
-            t->Qd[18] = v; check += v - v;
+            t->Qd[18] = v; check += v;
     v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
             w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[21] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[21] = v; check +=
+            v;
     v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
             w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[22] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[22] = v; check +=
+            v;
     v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
             w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[23] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[23] = v; check +=
+            v;
     v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
             w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[24] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[24] = v; check +=
+            v;
     v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
-            w->term[1][14]*w->term[0][38]; t->Qd[25] = v; check += v - v;
+            w->term[1][14]*w->term[0][38]; t->Qd[25] = v; check += v;
     v = w->term[1][12]*w->term[0][39] + w->term[1][13]*w->term[0][40] +
-            w->term[1][14]*w->term[0][41]; t->Qd[26] = v; check += v - v;
+            w->term[1][14]*w->term[0][41]; t->Qd[26] = v; check += v;
     v = w->term[1][12]*w->term[0][42] + w->term[1][13]*w->term[0][43] +
-            w->term[1][14]*w->term[0][44]; t->Qd[27] = v; check += v - v;
+            w->term[1][14]*w->term[0][44]; t->Qd[27] = v; check += v;
     v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
             w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[30] = v; check += v
-            - v;
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[30] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
             w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[31] = v; check += v
-            - v;
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[31] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
             w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[32] = v; check += v
-            - v;
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[32] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38]; t->Qd[33] = v; check += v - v;
+            w->term[1][20]*w->term[0][38]; t->Qd[33] = v; check += v;
     v = w->term[1][18]*w->term[0][39] + w->term[1][19]*w->term[0][40] +
-            w->term[1][20]*w->term[0][41]; t->Qd[34] = v; check += v - v;
+            w->term[1][20]*w->term[0][41]; t->Qd[34] = v; check += v;
     v = w->term[1][18]*w->term[0][42] + w->term[1][19]*w->term[0][43] +
-            w->term[1][20]*w->term[0][44]; t->Qd[35] = v; check += v - v;
+            w->term[1][20]*w->term[0][44]; t->Qd[35] = v; check += v;
     v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
             w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[38] = v; check += v
-            - v;
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[38] = v; check +=
+            v;
     v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
             w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[39] = v; check += v
-            - v;
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[39] = v; check +=
+            v;
     v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
-            w->term[1][26]*w->term[0][38]; t->Qd[40] = v; check += v - v;
+            w->term[1][26]*w->term[0][38]; t->Qd[40] = v; check += v;
     v = w->term[1][24]*w->term[0][39] + w->term[1][25]*w->term[0][40] +
-            w->term[1][26]*w->term[0][41]; t->Qd[41] = v; check += v - v;
+            w->term[1][26]*w->term[0][41]; t->Qd[41] = v; check += v;
     v = w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
-            w->term[1][26]*w->term[0][44]; t->Qd[42] = v; check += v - v;
+            w->term[1][26]*w->term[0][44]; t->Qd[42] = v; check += v;
     v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
             w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[45] = v; check += v
-            - v;
-    v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
-            w->term[1][32]*w->term[0][38]; t->Qd[46] = v; check += v - v;
-    v = w->term[1][30]*w->term[0][39] + w->term[1][31]*w->term[0][40] +
-            w->term[1][32]*w->term[0][41]; t->Qd[47] = v; check += v - v;
-    v = w->term[1][30]*w->term[0][42] + w->term[1][31]*w->term[0][43] +
-            w->term[1][32]*w->term[0][44]; t->Qd[48] = v; check += v - v;
-    v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38]; t->Qd[51] = v; check += v - v;
-    v = w->term[1][36]*w->term[0][39] + w->term[1][37]*w->term[0][40] +
-            w->term[1][38]*w->term[0][41]; t->Qd[52] = v; check += v - v;
-    v = w->term[1][36]*w->term[0][42] + w->term[1][37]*w->term[0][43] +
-            w->term[1][38]*w->term[0][44]; t->Qd[53] = v; check += v - v;
-    v = w->term[1][39]*w->term[0][39] + w->term[1][40]*w->term[0][40] +
-            w->term[1][41]*w->term[0][41]; t->Qd[56] = v; check += v - v;
-    v = w->term[1][39]*w->term[0][42] + w->term[1][40]*w->term[0][43] +
-            w->term[1][41]*w->term[0][44]; t->Qd[57] = v; check += v - v;
-    v = w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
-            w->term[1][44]*w->term[0][44]; t->Qd[60] = v; check += v - v;
-    v = w->term[1][45]*w->term[0][45] + w->term[1][46]*w->term[0][46]; t->Qd[63] = v; check += v -
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[45] = v; check +=
             v;
-    v = w->term[1][46]*w->term[0][47]; t->Qd[64] = v; check += v - v;
-    v = w->term[1][47]*w->term[0][47]; t->Qd[65] = v; check += v - v;
+    v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
+            w->term[1][32]*w->term[0][38]; t->Qd[46] = v; check += v;
+    v = w->term[1][30]*w->term[0][39] + w->term[1][31]*w->term[0][40] +
+            w->term[1][32]*w->term[0][41]; t->Qd[47] = v; check += v;
+    v = w->term[1][30]*w->term[0][42] + w->term[1][31]*w->term[0][43] +
+            w->term[1][32]*w->term[0][44]; t->Qd[48] = v; check += v;
+    v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
+            w->term[1][38]*w->term[0][38]; t->Qd[51] = v; check += v;
+    v = w->term[1][36]*w->term[0][39] + w->term[1][37]*w->term[0][40] +
+            w->term[1][38]*w->term[0][41]; t->Qd[52] = v; check += v;
+    v = w->term[1][36]*w->term[0][42] + w->term[1][37]*w->term[0][43] +
+            w->term[1][38]*w->term[0][44]; t->Qd[53] = v; check += v;
+    v = w->term[1][39]*w->term[0][39] + w->term[1][40]*w->term[0][40] +
+            w->term[1][41]*w->term[0][41]; t->Qd[56] = v; check += v;
+    v = w->term[1][39]*w->term[0][42] + w->term[1][40]*w->term[0][43] +
+            w->term[1][41]*w->term[0][44]; t->Qd[57] = v; check += v;
+    v = w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
+            w->term[1][44]*w->term[0][44]; t->Qd[60] = v; check += v;
+    v = w->term[1][45]*w->term[0][45] + w->term[1][46]*w->term[0][46]; t->Qd[63] = v; check += v;
+    v = w->term[1][46]*w->term[0][47]; t->Qd[64] = v; check += v;
+    v = w->term[1][47]*w->term[0][47]; t->Qd[65] = v; check += v;
     t->Qd[9] = 0;
     t->Qd[10] = 0;
     t->Qd[19] = 0;
@@ -1285,7 +1350,7 @@ GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar process_noise(const gps_pseudor
     t->Qd[59] = 0;
     t->Qd[61] = 0;
     t->Qd[62] = 0;
-    return check;
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
 int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
@@ -1297,41 +1362,64 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
     int halvings, order, status;
     int k;
     gps_pseudorange11_scalar sum_check;
-    gps_pseudorange11_scalar check = 0.0, sums[2] = { 0.0, 0.0 };
+    gps_pseudorange11_scalar qd_check;
+    gps_pseudorange11_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (!isfinite(T)) {
         return GPS_PSEUDORANGE11_ERR_NONFINITE;
     }
     if (!(T > 0.0)) {
         return GPS_PSEUDORANGE11_ERR_NOT_POSITIVE;
     }
-    /* the sum of v - v over F, G and q (0 when all are finite) in two partial sums, two entries a
-            step,
-       which gcc -O2 vectorizes (the order of a sum of zeros and NaNs does not change whether it is
-               0) */
-    for (e = 0; e + 1 < GPS_PSEUDORANGE11_NNZ_F; e += 2) {
-        sums[0] += m->F[e] - m->F[e];
-        sums[1] += m->F[e + 1] - m->F[e + 1];
+    /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
+       vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
+               is
+       not finite, or an overflow of finite values) is decided value by value */
+    for (e = 0; e + 3 < GPS_PSEUDORANGE11_NNZ_F; e += 4) {
+        sums[0] += m->F[e];
+        sums[1] += m->F[e + 1];
+        sums[2] += m->F[e + 2];
+        sums[3] += m->F[e + 3];
     }
     for (; e < GPS_PSEUDORANGE11_NNZ_F; ++e) {
-        sums[0] += m->F[e] - m->F[e];
+        sums[0] += m->F[e];
     }
-    for (e = 0; e + 1 < GPS_PSEUDORANGE11_NNZ_G; e += 2) {
-        sums[0] += m->G[e] - m->G[e];
-        sums[1] += m->G[e + 1] - m->G[e + 1];
+    for (e = 0; e + 3 < GPS_PSEUDORANGE11_NNZ_G; e += 4) {
+        sums[0] += m->G[e];
+        sums[1] += m->G[e + 1];
+        sums[2] += m->G[e + 2];
+        sums[3] += m->G[e + 3];
     }
     for (; e < GPS_PSEUDORANGE11_NNZ_G; ++e) {
-        sums[0] += m->G[e] - m->G[e];
+        sums[0] += m->G[e];
     }
-    for (e = 0; e + 1 < GPS_PSEUDORANGE11_N_NOISES; e += 2) {
-        sums[0] += m->q[e] - m->q[e];
-        sums[1] += m->q[e + 1] - m->q[e + 1];
+    for (e = 0; e + 3 < GPS_PSEUDORANGE11_N_NOISES; e += 4) {
+        sums[0] += m->q[e];
+        sums[1] += m->q[e + 1];
+        sums[2] += m->q[e + 2];
+        sums[3] += m->q[e + 3];
     }
     for (; e < GPS_PSEUDORANGE11_N_NOISES; ++e) {
-        sums[0] += m->q[e] - m->q[e];
+        sums[0] += m->q[e];
     }
-    if (sums[0] + sums[1] != 0.0) {
-        return GPS_PSEUDORANGE11_ERR_NONFINITE;
+    sums[0] = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    if (sums[0] - sums[0] != 0.0) {
+        for (e = 0; e < GPS_PSEUDORANGE11_NNZ_F; ++e) {
+            if (!isfinite(m->F[e])) {
+                return GPS_PSEUDORANGE11_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < GPS_PSEUDORANGE11_NNZ_G; ++e) {
+            if (!isfinite(m->G[e])) {
+                return GPS_PSEUDORANGE11_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < GPS_PSEUDORANGE11_N_NOISES; ++e) {
+            if (!isfinite(m->q[e])) {
+                return GPS_PSEUDORANGE11_ERR_NONFINITE;
+            }
+        }
     }
+
     for (c = 0; c < GPS_PSEUDORANGE11_N_NOISES; ++c) {
         if (m->q[c] < 0.0) {
             return GPS_PSEUDORANGE11_ERR_NOT_POSITIVE;
@@ -1390,7 +1478,15 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
-    check += process_noise(m, t, w, T);
+    qd_check = process_noise(m, t, w, T);
+    if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
+            entry */
+        qd_check = 0.0;
+        for (e = 0; e < GPS_PSEUDORANGE11_N_PACKED; ++e) {
+            qd_check += t->Qd[e] - t->Qd[e];
+        }
+    }
+    check += qd_check;
     return (check != 0.0) ? GPS_PSEUDORANGE11_ERR_NONFINITE : GPS_PSEUDORANGE11_OK;
 }
 
@@ -1482,7 +1578,36 @@ void gps_pseudorange11_reset_error_state(gps_pseudorange11_filter *f)
     }
 }
 
-static void phi_times_p_row_0(const gps_pseudorange11_filter *restrict f, const
+/* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
+GPS_PSEUDORANGE11_BLOCK void state_predict(const gps_pseudorange11_filter *restrict f, const
+        gps_pseudorange11_transition *restrict t,
+                gps_pseudorange11_filter_scratch *restrict w)
+{
+    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
+            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[6] + t->Phi[7]*f->x[7] +
+            t->Phi[8]*f->x[8];
+    w->xn[1] = t->Phi[9]*f->x[0] + t->Phi[10]*f->x[1] + t->Phi[11]*f->x[2] + t->Phi[12]*f->x[3] +
+            t->Phi[13]*f->x[4] + t->Phi[14]*f->x[5] + t->Phi[15]*f->x[6] + t->Phi[16]*f->x[7] +
+            t->Phi[17]*f->x[8];
+    w->xn[2] = t->Phi[18]*f->x[0] + t->Phi[19]*f->x[1] + t->Phi[20]*f->x[2] + t->Phi[21]*f->x[3] +
+            t->Phi[22]*f->x[4] + t->Phi[23]*f->x[5] + t->Phi[24]*f->x[6] + t->Phi[25]*f->x[7] +
+            t->Phi[26]*f->x[8];
+    w->xn[3] = t->Phi[27]*f->x[0] + t->Phi[28]*f->x[1] + t->Phi[29]*f->x[2] + t->Phi[30]*f->x[3] +
+            t->Phi[31]*f->x[4] + t->Phi[32]*f->x[5] + t->Phi[33]*f->x[6] + t->Phi[34]*f->x[7] +
+            t->Phi[35]*f->x[8];
+    w->xn[4] = t->Phi[36]*f->x[0] + t->Phi[37]*f->x[1] + t->Phi[38]*f->x[2] + t->Phi[39]*f->x[3] +
+            t->Phi[40]*f->x[4] + t->Phi[41]*f->x[5] + t->Phi[42]*f->x[6] + t->Phi[43]*f->x[7] +
+            t->Phi[44]*f->x[8];
+    w->xn[5] = t->Phi[45]*f->x[0] + t->Phi[46]*f->x[1] + t->Phi[47]*f->x[2] + t->Phi[48]*f->x[3] +
+            t->Phi[49]*f->x[4] + t->Phi[50]*f->x[5] + t->Phi[51]*f->x[6] + t->Phi[52]*f->x[7] +
+            t->Phi[53]*f->x[8];
+    w->xn[6] = t->Phi[54]*f->x[6] + t->Phi[55]*f->x[7] + t->Phi[56]*f->x[8];
+    w->xn[7] = t->Phi[57]*f->x[6] + t->Phi[58]*f->x[7] + t->Phi[59]*f->x[8];
+    w->xn[8] = t->Phi[60]*f->x[6] + t->Phi[61]*f->x[7] + t->Phi[62]*f->x[8];
+    w->xn[9] = t->Phi[63]*f->x[9] + t->Phi[64]*f->x[10];
+}
+
+GPS_PSEUDORANGE11_BLOCK void phi_times_p_row_0(const gps_pseudorange11_filter *restrict f, const
         gps_pseudorange11_transition *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
@@ -1520,41 +1645,42 @@ static void phi_times_p_row_0(const gps_pseudorange11_filter *restrict f, const
             t->Phi[6]*f->P[6][10] + t->Phi[7]*f->P[7][10] + t->Phi[8]*f->P[8][10];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_0(const gps_pseudorange11_transition *restrict t,
-        gps_pseudorange11_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar propagate_row_0(const gps_pseudorange11_transition
+        *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[0] + w->M[1]*t->Phi[1] + w->M[2]*t->Phi[2] + w->M[3]*t->Phi[3] +
             w->M[4]*t->Phi[4] + w->M[5]*t->Phi[5] + w->M[6]*t->Phi[6] + w->M[7]*t->Phi[7] +
-            w->M[8]*t->Phi[8] + t->Qd[0]; w->Pn[0] = v; check += v - v;
+            w->M[8]*t->Phi[8] + t->Qd[0]; w->Pn[0] = v; check += v;
     v = w->M[0]*t->Phi[9] + w->M[1]*t->Phi[10] + w->M[2]*t->Phi[11] + w->M[3]*t->Phi[12] +
             w->M[4]*t->Phi[13] + w->M[5]*t->Phi[14] + w->M[6]*t->Phi[15] + w->M[7]*t->Phi[16] +
-            w->M[8]*t->Phi[17] + t->Qd[1]; w->Pn[1] = v; check += v - v;
+            w->M[8]*t->Phi[17] + t->Qd[1]; w->Pn[1] = v; check += v;
     v = w->M[0]*t->Phi[18] + w->M[1]*t->Phi[19] + w->M[2]*t->Phi[20] + w->M[3]*t->Phi[21] +
             w->M[4]*t->Phi[22] + w->M[5]*t->Phi[23] + w->M[6]*t->Phi[24] + w->M[7]*t->Phi[25] +
-            w->M[8]*t->Phi[26] + t->Qd[2]; w->Pn[2] = v; check += v - v;
+            w->M[8]*t->Phi[26] + t->Qd[2]; w->Pn[2] = v; check += v;
     v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
             w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[6]*t->Phi[33] + w->M[7]*t->Phi[34] +
-            w->M[8]*t->Phi[35] + t->Qd[3]; w->Pn[3] = v; check += v - v;
+            w->M[8]*t->Phi[35] + t->Qd[3]; w->Pn[3] = v; check += v;
     v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
             w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
-            w->M[8]*t->Phi[44] + t->Qd[4]; w->Pn[4] = v; check += v - v;
+            w->M[8]*t->Phi[44] + t->Qd[4]; w->Pn[4] = v; check += v;
     v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
             w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
-            w->M[8]*t->Phi[53] + t->Qd[5]; w->Pn[5] = v; check += v - v;
+            w->M[8]*t->Phi[53] + t->Qd[5]; w->Pn[5] = v; check += v;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[6]; w->Pn[6] = v; check
-            += v - v;
+            += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[7]; w->Pn[7] = v; check
-            += v - v;
+            += v;
     v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[8]; w->Pn[8] = v; check
-            += v - v;
-    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[9] = v; check += v - v;
-    v = w->M[10]; w->Pn[10] = v; check += v - v;
-    return check;
+            += v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[9] = v; check += v;
+    v = w->M[10]; w->Pn[10] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_1(const gps_pseudorange11_filter *restrict f, const
+GPS_PSEUDORANGE11_BLOCK void phi_times_p_row_1(const gps_pseudorange11_filter *restrict f, const
         gps_pseudorange11_transition *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[9]*f->P[0][0] + t->Phi[10]*f->P[1][0] + t->Phi[11]*f->P[2][0] +
@@ -1592,38 +1718,39 @@ static void phi_times_p_row_1(const gps_pseudorange11_filter *restrict f, const
             t->Phi[15]*f->P[6][10] + t->Phi[16]*f->P[7][10] + t->Phi[17]*f->P[8][10];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_1(const gps_pseudorange11_transition *restrict t,
-        gps_pseudorange11_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar propagate_row_1(const gps_pseudorange11_transition
+        *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[9] + w->M[1]*t->Phi[10] + w->M[2]*t->Phi[11] + w->M[3]*t->Phi[12] +
             w->M[4]*t->Phi[13] + w->M[5]*t->Phi[14] + w->M[6]*t->Phi[15] + w->M[7]*t->Phi[16] +
-            w->M[8]*t->Phi[17] + t->Qd[11]; w->Pn[11] = v; check += v - v;
+            w->M[8]*t->Phi[17] + t->Qd[11]; w->Pn[11] = v; check += v;
     v = w->M[0]*t->Phi[18] + w->M[1]*t->Phi[19] + w->M[2]*t->Phi[20] + w->M[3]*t->Phi[21] +
             w->M[4]*t->Phi[22] + w->M[5]*t->Phi[23] + w->M[6]*t->Phi[24] + w->M[7]*t->Phi[25] +
-            w->M[8]*t->Phi[26] + t->Qd[12]; w->Pn[12] = v; check += v - v;
+            w->M[8]*t->Phi[26] + t->Qd[12]; w->Pn[12] = v; check += v;
     v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
             w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[6]*t->Phi[33] + w->M[7]*t->Phi[34] +
-            w->M[8]*t->Phi[35] + t->Qd[13]; w->Pn[13] = v; check += v - v;
+            w->M[8]*t->Phi[35] + t->Qd[13]; w->Pn[13] = v; check += v;
     v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
             w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
-            w->M[8]*t->Phi[44] + t->Qd[14]; w->Pn[14] = v; check += v - v;
+            w->M[8]*t->Phi[44] + t->Qd[14]; w->Pn[14] = v; check += v;
     v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
             w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
-            w->M[8]*t->Phi[53] + t->Qd[15]; w->Pn[15] = v; check += v - v;
+            w->M[8]*t->Phi[53] + t->Qd[15]; w->Pn[15] = v; check += v;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[16]; w->Pn[16] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[17]; w->Pn[17] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[18]; w->Pn[18] = v;
-            check += v - v;
-    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[19] = v; check += v - v;
-    v = w->M[10]; w->Pn[20] = v; check += v - v;
-    return check;
+            check += v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[19] = v; check += v;
+    v = w->M[10]; w->Pn[20] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_2(const gps_pseudorange11_filter *restrict f, const
+GPS_PSEUDORANGE11_BLOCK void phi_times_p_row_2(const gps_pseudorange11_filter *restrict f, const
         gps_pseudorange11_transition *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[18]*f->P[0][0] + t->Phi[19]*f->P[1][0] + t->Phi[20]*f->P[2][0] +
@@ -1661,35 +1788,36 @@ static void phi_times_p_row_2(const gps_pseudorange11_filter *restrict f, const
             t->Phi[24]*f->P[6][10] + t->Phi[25]*f->P[7][10] + t->Phi[26]*f->P[8][10];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_2(const gps_pseudorange11_transition *restrict t,
-        gps_pseudorange11_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar propagate_row_2(const gps_pseudorange11_transition
+        *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[18] + w->M[1]*t->Phi[19] + w->M[2]*t->Phi[20] + w->M[3]*t->Phi[21] +
             w->M[4]*t->Phi[22] + w->M[5]*t->Phi[23] + w->M[6]*t->Phi[24] + w->M[7]*t->Phi[25] +
-            w->M[8]*t->Phi[26] + t->Qd[21]; w->Pn[21] = v; check += v - v;
+            w->M[8]*t->Phi[26] + t->Qd[21]; w->Pn[21] = v; check += v;
     v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
             w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[6]*t->Phi[33] + w->M[7]*t->Phi[34] +
-            w->M[8]*t->Phi[35] + t->Qd[22]; w->Pn[22] = v; check += v - v;
+            w->M[8]*t->Phi[35] + t->Qd[22]; w->Pn[22] = v; check += v;
     v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
             w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
-            w->M[8]*t->Phi[44] + t->Qd[23]; w->Pn[23] = v; check += v - v;
+            w->M[8]*t->Phi[44] + t->Qd[23]; w->Pn[23] = v; check += v;
     v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
             w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
-            w->M[8]*t->Phi[53] + t->Qd[24]; w->Pn[24] = v; check += v - v;
+            w->M[8]*t->Phi[53] + t->Qd[24]; w->Pn[24] = v; check += v;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[25]; w->Pn[25] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[26]; w->Pn[26] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[27]; w->Pn[27] = v;
-            check += v - v;
-    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[28] = v; check += v - v;
-    v = w->M[10]; w->Pn[29] = v; check += v - v;
-    return check;
+            check += v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[28] = v; check += v;
+    v = w->M[10]; w->Pn[29] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_3(const gps_pseudorange11_filter *restrict f, const
+GPS_PSEUDORANGE11_BLOCK void phi_times_p_row_3(const gps_pseudorange11_filter *restrict f, const
         gps_pseudorange11_transition *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[27]*f->P[0][0] + t->Phi[28]*f->P[1][0] + t->Phi[29]*f->P[2][0] +
@@ -1727,32 +1855,33 @@ static void phi_times_p_row_3(const gps_pseudorange11_filter *restrict f, const
             t->Phi[33]*f->P[6][10] + t->Phi[34]*f->P[7][10] + t->Phi[35]*f->P[8][10];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_3(const gps_pseudorange11_transition *restrict t,
-        gps_pseudorange11_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar propagate_row_3(const gps_pseudorange11_transition
+        *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
             w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[6]*t->Phi[33] + w->M[7]*t->Phi[34] +
-            w->M[8]*t->Phi[35] + t->Qd[30]; w->Pn[30] = v; check += v - v;
+            w->M[8]*t->Phi[35] + t->Qd[30]; w->Pn[30] = v; check += v;
     v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
             w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
-            w->M[8]*t->Phi[44] + t->Qd[31]; w->Pn[31] = v; check += v - v;
+            w->M[8]*t->Phi[44] + t->Qd[31]; w->Pn[31] = v; check += v;
     v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
             w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
-            w->M[8]*t->Phi[53] + t->Qd[32]; w->Pn[32] = v; check += v - v;
+            w->M[8]*t->Phi[53] + t->Qd[32]; w->Pn[32] = v; check += v;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[33]; w->Pn[33] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[34]; w->Pn[34] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[35]; w->Pn[35] = v;
-            check += v - v;
-    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[36] = v; check += v - v;
-    v = w->M[10]; w->Pn[37] = v; check += v - v;
-    return check;
+            check += v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[36] = v; check += v;
+    v = w->M[10]; w->Pn[37] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_4(const gps_pseudorange11_filter *restrict f, const
+GPS_PSEUDORANGE11_BLOCK void phi_times_p_row_4(const gps_pseudorange11_filter *restrict f, const
         gps_pseudorange11_transition *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[36]*f->P[0][0] + t->Phi[37]*f->P[1][0] + t->Phi[38]*f->P[2][0] +
@@ -1790,29 +1919,30 @@ static void phi_times_p_row_4(const gps_pseudorange11_filter *restrict f, const
             t->Phi[42]*f->P[6][10] + t->Phi[43]*f->P[7][10] + t->Phi[44]*f->P[8][10];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_4(const gps_pseudorange11_transition *restrict t,
-        gps_pseudorange11_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar propagate_row_4(const gps_pseudorange11_transition
+        *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
             w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
-            w->M[8]*t->Phi[44] + t->Qd[38]; w->Pn[38] = v; check += v - v;
+            w->M[8]*t->Phi[44] + t->Qd[38]; w->Pn[38] = v; check += v;
     v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
             w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
-            w->M[8]*t->Phi[53] + t->Qd[39]; w->Pn[39] = v; check += v - v;
+            w->M[8]*t->Phi[53] + t->Qd[39]; w->Pn[39] = v; check += v;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[40]; w->Pn[40] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[41]; w->Pn[41] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[42]; w->Pn[42] = v;
-            check += v - v;
-    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[43] = v; check += v - v;
-    v = w->M[10]; w->Pn[44] = v; check += v - v;
-    return check;
+            check += v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[43] = v; check += v;
+    v = w->M[10]; w->Pn[44] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_5(const gps_pseudorange11_filter *restrict f, const
+GPS_PSEUDORANGE11_BLOCK void phi_times_p_row_5(const gps_pseudorange11_filter *restrict f, const
         gps_pseudorange11_transition *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[45]*f->P[0][0] + t->Phi[46]*f->P[1][0] + t->Phi[47]*f->P[2][0] +
@@ -1850,26 +1980,27 @@ static void phi_times_p_row_5(const gps_pseudorange11_filter *restrict f, const
             t->Phi[51]*f->P[6][10] + t->Phi[52]*f->P[7][10] + t->Phi[53]*f->P[8][10];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_5(const gps_pseudorange11_transition *restrict t,
-        gps_pseudorange11_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar propagate_row_5(const gps_pseudorange11_transition
+        *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
             w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
-            w->M[8]*t->Phi[53] + t->Qd[45]; w->Pn[45] = v; check += v - v;
+            w->M[8]*t->Phi[53] + t->Qd[45]; w->Pn[45] = v; check += v;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[46]; w->Pn[46] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[47]; w->Pn[47] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[48]; w->Pn[48] = v;
-            check += v - v;
-    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[49] = v; check += v - v;
-    v = w->M[10]; w->Pn[50] = v; check += v - v;
-    return check;
+            check += v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[49] = v; check += v;
+    v = w->M[10]; w->Pn[50] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_6(const gps_pseudorange11_filter *restrict f, const
+GPS_PSEUDORANGE11_BLOCK void phi_times_p_row_6(const gps_pseudorange11_filter *restrict f, const
         gps_pseudorange11_transition *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[54]*f->P[6][0] + t->Phi[55]*f->P[7][0] + t->Phi[56]*f->P[8][0];
@@ -1885,23 +2016,24 @@ static void phi_times_p_row_6(const gps_pseudorange11_filter *restrict f, const
     w->M[10] = t->Phi[54]*f->P[6][10] + t->Phi[55]*f->P[7][10] + t->Phi[56]*f->P[8][10];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_6(const gps_pseudorange11_transition *restrict t,
-        gps_pseudorange11_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar propagate_row_6(const gps_pseudorange11_transition
+        *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[51]; w->Pn[51] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[52]; w->Pn[52] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[53]; w->Pn[53] = v;
-            check += v - v;
-    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[54] = v; check += v - v;
-    v = w->M[10]; w->Pn[55] = v; check += v - v;
-    return check;
+            check += v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[54] = v; check += v;
+    v = w->M[10]; w->Pn[55] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_7(const gps_pseudorange11_filter *restrict f, const
+GPS_PSEUDORANGE11_BLOCK void phi_times_p_row_7(const gps_pseudorange11_filter *restrict f, const
         gps_pseudorange11_transition *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[57]*f->P[6][0] + t->Phi[58]*f->P[7][0] + t->Phi[59]*f->P[8][0];
@@ -1917,21 +2049,22 @@ static void phi_times_p_row_7(const gps_pseudorange11_filter *restrict f, const
     w->M[10] = t->Phi[57]*f->P[6][10] + t->Phi[58]*f->P[7][10] + t->Phi[59]*f->P[8][10];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_7(const gps_pseudorange11_transition *restrict t,
-        gps_pseudorange11_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar propagate_row_7(const gps_pseudorange11_transition
+        *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[56]; w->Pn[56] = v;
-            check += v - v;
+            check += v;
     v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[57]; w->Pn[57] = v;
-            check += v - v;
-    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[58] = v; check += v - v;
-    v = w->M[10]; w->Pn[59] = v; check += v - v;
-    return check;
+            check += v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[58] = v; check += v;
+    v = w->M[10]; w->Pn[59] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_8(const gps_pseudorange11_filter *restrict f, const
+GPS_PSEUDORANGE11_BLOCK void phi_times_p_row_8(const gps_pseudorange11_filter *restrict f, const
         gps_pseudorange11_transition *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[60]*f->P[6][0] + t->Phi[61]*f->P[7][0] + t->Phi[62]*f->P[8][0];
@@ -1947,19 +2080,20 @@ static void phi_times_p_row_8(const gps_pseudorange11_filter *restrict f, const
     w->M[10] = t->Phi[60]*f->P[6][10] + t->Phi[61]*f->P[7][10] + t->Phi[62]*f->P[8][10];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_8(const gps_pseudorange11_transition *restrict t,
-        gps_pseudorange11_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar propagate_row_8(const gps_pseudorange11_transition
+        *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
     v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[60]; w->Pn[60] = v;
-            check += v - v;
-    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[61] = v; check += v - v;
-    v = w->M[10]; w->Pn[62] = v; check += v - v;
-    return check;
+            check += v;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64]; w->Pn[61] = v; check += v;
+    v = w->M[10]; w->Pn[62] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_9(const gps_pseudorange11_filter *restrict f, const
+GPS_PSEUDORANGE11_BLOCK void phi_times_p_row_9(const gps_pseudorange11_filter *restrict f, const
         gps_pseudorange11_transition *restrict t, gps_pseudorange11_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[63]*f->P[9][0] + t->Phi[64]*f->P[10][0];
@@ -1975,23 +2109,26 @@ static void phi_times_p_row_9(const gps_pseudorange11_filter *restrict f, const
     w->M[10] = t->Phi[63]*f->P[9][10] + t->Phi[64]*f->P[10][10];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_9(const gps_pseudorange11_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar propagate_row_9(const gps_pseudorange11_transition
+        *restrict t, gps_pseudorange11_filter_scratch *restrict w)
+{
+    gps_pseudorange11_scalar v, check = 0.0;
+    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64] + t->Qd[63]; w->Pn[63] = v; check += v;
+    v = w->M[10] + t->Qd[64]; w->Pn[64] = v; check += v;
+    return check - check;
+}
+
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar propagate_row_10(const gps_pseudorange11_filter
+        *restrict f, const gps_pseudorange11_transition *restrict t,
         gps_pseudorange11_filter_scratch *restrict w)
 {
     gps_pseudorange11_scalar v, check = 0.0;
-    v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64] + t->Qd[63]; w->Pn[63] = v; check += v - v;
-    v = w->M[10] + t->Qd[64]; w->Pn[64] = v; check += v - v;
-    return check;
-}
-
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static gps_pseudorange11_scalar propagate_row_10(const gps_pseudorange11_filter *restrict f, const
-        gps_pseudorange11_transition *restrict t, gps_pseudorange11_filter_scratch *restrict w)
-{
-    gps_pseudorange11_scalar v, check = 0.0;
-    v = f->P[10][10] + t->Qd[65]; w->Pn[65] = v; check += v - v;
-    return check;
+    v = f->P[10][10] + t->Qd[65]; w->Pn[65] = v; check += v;
+    return check - check;
 }
 
 int gps_pseudorange11_predict(gps_pseudorange11_filter *restrict f, const
@@ -2000,29 +2137,8 @@ int gps_pseudorange11_predict(gps_pseudorange11_filter *restrict f, const
 {
     gps_pseudorange11_filter_scratch *w = &work->filter;
     gps_pseudorange11_scalar check = 0.0;
-    /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
-    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
-            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[6] + t->Phi[7]*f->x[7] +
-            t->Phi[8]*f->x[8];
-    w->xn[1] = t->Phi[9]*f->x[0] + t->Phi[10]*f->x[1] + t->Phi[11]*f->x[2] + t->Phi[12]*f->x[3] +
-            t->Phi[13]*f->x[4] + t->Phi[14]*f->x[5] + t->Phi[15]*f->x[6] + t->Phi[16]*f->x[7] +
-            t->Phi[17]*f->x[8];
-    w->xn[2] = t->Phi[18]*f->x[0] + t->Phi[19]*f->x[1] + t->Phi[20]*f->x[2] + t->Phi[21]*f->x[3] +
-            t->Phi[22]*f->x[4] + t->Phi[23]*f->x[5] + t->Phi[24]*f->x[6] + t->Phi[25]*f->x[7] +
-            t->Phi[26]*f->x[8];
-    w->xn[3] = t->Phi[27]*f->x[0] + t->Phi[28]*f->x[1] + t->Phi[29]*f->x[2] + t->Phi[30]*f->x[3] +
-            t->Phi[31]*f->x[4] + t->Phi[32]*f->x[5] + t->Phi[33]*f->x[6] + t->Phi[34]*f->x[7] +
-            t->Phi[35]*f->x[8];
-    w->xn[4] = t->Phi[36]*f->x[0] + t->Phi[37]*f->x[1] + t->Phi[38]*f->x[2] + t->Phi[39]*f->x[3] +
-            t->Phi[40]*f->x[4] + t->Phi[41]*f->x[5] + t->Phi[42]*f->x[6] + t->Phi[43]*f->x[7] +
-            t->Phi[44]*f->x[8];
-    w->xn[5] = t->Phi[45]*f->x[0] + t->Phi[46]*f->x[1] + t->Phi[47]*f->x[2] + t->Phi[48]*f->x[3] +
-            t->Phi[49]*f->x[4] + t->Phi[50]*f->x[5] + t->Phi[51]*f->x[6] + t->Phi[52]*f->x[7] +
-            t->Phi[53]*f->x[8];
-    w->xn[6] = t->Phi[54]*f->x[6] + t->Phi[55]*f->x[7] + t->Phi[56]*f->x[8];
-    w->xn[7] = t->Phi[57]*f->x[6] + t->Phi[58]*f->x[7] + t->Phi[59]*f->x[8];
-    w->xn[8] = t->Phi[60]*f->x[6] + t->Phi[61]*f->x[7] + t->Phi[62]*f->x[8];
-    w->xn[9] = t->Phi[63]*f->x[9] + t->Phi[64]*f->x[10];
+    gps_pseudorange11_scalar sum_check = 0.0;
+    state_predict(f, t, w); /* x_n = Phi x */
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];
     check += w->xn[2] - w->xn[2];
@@ -2037,26 +2153,35 @@ int gps_pseudorange11_predict(gps_pseudorange11_filter *restrict f, const
     /* row by row: M = row i of Phi P (a row of Phi that is e_i reads P directly), then
        row i of Pn = M Phi^T + Q_d (each pair computed once, into the packed upper triangle) */
     phi_times_p_row_0(f, t, w);
-    check += propagate_row_0(t, w);
+    sum_check += propagate_row_0(t, w);
     phi_times_p_row_1(f, t, w);
-    check += propagate_row_1(t, w);
+    sum_check += propagate_row_1(t, w);
     phi_times_p_row_2(f, t, w);
-    check += propagate_row_2(t, w);
+    sum_check += propagate_row_2(t, w);
     phi_times_p_row_3(f, t, w);
-    check += propagate_row_3(t, w);
+    sum_check += propagate_row_3(t, w);
     phi_times_p_row_4(f, t, w);
-    check += propagate_row_4(t, w);
+    sum_check += propagate_row_4(t, w);
     phi_times_p_row_5(f, t, w);
-    check += propagate_row_5(t, w);
+    sum_check += propagate_row_5(t, w);
     phi_times_p_row_6(f, t, w);
-    check += propagate_row_6(t, w);
+    sum_check += propagate_row_6(t, w);
     phi_times_p_row_7(f, t, w);
-    check += propagate_row_7(t, w);
+    sum_check += propagate_row_7(t, w);
     phi_times_p_row_8(f, t, w);
-    check += propagate_row_8(t, w);
+    sum_check += propagate_row_8(t, w);
     phi_times_p_row_9(f, t, w);
-    check += propagate_row_9(t, w);
-    check += propagate_row_10(f, t, w);
+    sum_check += propagate_row_9(t, w);
+    sum_check += propagate_row_10(f, t, w);
+    if (sum_check != 0.0) { /* a value that is not finite, or an overflow of a row's sum: entry by
+            entry */
+        int e;
+        sum_check = 0.0;
+        for (e = 0; e < GPS_PSEUDORANGE11_N_PACKED; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+    }
+    check += sum_check;
     if (check != 0.0) {
         return GPS_PSEUDORANGE11_ERR_NONFINITE;
     }

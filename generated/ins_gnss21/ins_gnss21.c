@@ -199,7 +199,7 @@ int ins_gnss21_matrices_evaluate(const ins_gnss21_params *restrict params, ins_g
         *restrict m)
 {
     int e;
-    ins_gnss21_scalar check = 0.0;
+    ins_gnss21_scalar sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (pole(cos(params->latitude), params->latitude)) {
         return INS_GNSS21_ERR_NONFINITE; /* cos(latitude) = 0: singular operating point */
     }
@@ -464,23 +464,96 @@ int ins_gnss21_matrices_evaluate(const ins_gnss21_params *restrict params, ins_g
         m->r[4] = params->gnss_velocity_sigma_east*params->gnss_velocity_sigma_east;
         m->r[5] = params->gnss_velocity_sigma_down*params->gnss_velocity_sigma_down;
     }
-    for (e = 0; e < INS_GNSS21_NNZ_F; ++e) {
-        check += m->F[e] - m->F[e];
+    /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
+       vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
+               is
+       not finite, or an overflow of finite values) is decided value by value */
+    for (e = 0; e + 3 < INS_GNSS21_NNZ_F; e += 4) {
+        sums[0] += m->F[e];
+        sums[1] += m->F[e + 1];
+        sums[2] += m->F[e + 2];
+        sums[3] += m->F[e + 3];
     }
-    for (e = 0; e < INS_GNSS21_NNZ_G; ++e) {
-        check += m->G[e] - m->G[e];
+    for (; e < INS_GNSS21_NNZ_F; ++e) {
+        sums[0] += m->F[e];
     }
-    for (e = 0; e < INS_GNSS21_NNZ_H; ++e) {
-        check += m->H[e] - m->H[e];
+    for (e = 0; e + 3 < INS_GNSS21_NNZ_G; e += 4) {
+        sums[0] += m->G[e];
+        sums[1] += m->G[e + 1];
+        sums[2] += m->G[e + 2];
+        sums[3] += m->G[e + 3];
     }
-    for (e = 0; e < INS_GNSS21_N_NOISES; ++e) {
-        check += m->q[e] - m->q[e];
+    for (; e < INS_GNSS21_NNZ_G; ++e) {
+        sums[0] += m->G[e];
     }
-    for (e = 0; e < INS_GNSS21_N_MEASUREMENTS; ++e) {
-        check += m->r[e] - m->r[e];
+    for (e = 0; e + 3 < INS_GNSS21_NNZ_H; e += 4) {
+        sums[0] += m->H[e];
+        sums[1] += m->H[e + 1];
+        sums[2] += m->H[e + 2];
+        sums[3] += m->H[e + 3];
     }
-    return (check != 0.0) ? INS_GNSS21_ERR_NONFINITE : INS_GNSS21_OK;
+    for (; e < INS_GNSS21_NNZ_H; ++e) {
+        sums[0] += m->H[e];
+    }
+    for (e = 0; e + 3 < INS_GNSS21_N_NOISES; e += 4) {
+        sums[0] += m->q[e];
+        sums[1] += m->q[e + 1];
+        sums[2] += m->q[e + 2];
+        sums[3] += m->q[e + 3];
+    }
+    for (; e < INS_GNSS21_N_NOISES; ++e) {
+        sums[0] += m->q[e];
+    }
+    for (e = 0; e + 3 < INS_GNSS21_N_MEASUREMENTS; e += 4) {
+        sums[0] += m->r[e];
+        sums[1] += m->r[e + 1];
+        sums[2] += m->r[e + 2];
+        sums[3] += m->r[e + 3];
+    }
+    for (; e < INS_GNSS21_N_MEASUREMENTS; ++e) {
+        sums[0] += m->r[e];
+    }
+    sums[0] = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    if (sums[0] - sums[0] != 0.0) {
+        for (e = 0; e < INS_GNSS21_NNZ_F; ++e) {
+            if (!isfinite(m->F[e])) {
+                return INS_GNSS21_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < INS_GNSS21_NNZ_G; ++e) {
+            if (!isfinite(m->G[e])) {
+                return INS_GNSS21_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < INS_GNSS21_NNZ_H; ++e) {
+            if (!isfinite(m->H[e])) {
+                return INS_GNSS21_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < INS_GNSS21_N_NOISES; ++e) {
+            if (!isfinite(m->q[e])) {
+                return INS_GNSS21_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < INS_GNSS21_N_MEASUREMENTS; ++e) {
+            if (!isfinite(m->r[e])) {
+                return INS_GNSS21_ERR_NONFINITE;
+            }
+        }
+    }
+
+    return INS_GNSS21_OK;
 }
+
+/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
+   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
+   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
+   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+#if defined(__GNUC__)
+#define INS_GNSS21_BLOCK static __attribute__((noinline))
+#else
+#define INS_GNSS21_BLOCK static
+#endif
 
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static ins_gnss21_scalar power_of_two(const int e)
@@ -640,13 +713,6 @@ static int taylor_plan(const ins_gnss21_scalar norm, const ins_gnss21_scalar T, 
     return INS_GNSS21_OK;
 }
 
-/* Each block keeps its own stack frame: inlined into discretize, the frames of all blocks
-   would add up (the worst-case stack is measured for the Cortex-M4F, tests/embedded). */
-#if defined(__GNUC__)
-#define INS_GNSS21_BLOCK static __attribute__((noinline))
-#else
-#define INS_GNSS21_BLOCK static
-#endif
 INS_GNSS21_BLOCK void horner_input(const ins_gnss21_matrices *restrict m,
         ins_gnss21_discretize_scratch *restrict w, const ins_gnss21_scalar h)
 {
@@ -2157,8 +2223,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar transition_check(ins_gnss21_transition *restr
             t->Phi[183] + t->Phi[184] + t->Phi[185] + t->Phi[186] + t->Phi[187] + t->Phi[188] +
             t->Phi[189] + t->Phi[190] + t->Phi[191] + t->Phi[192] + t->Phi[193] + t->Phi[194] +
             t->Phi[195] + t->Phi[196] + t->Phi[197] + t->Phi[198] + t->Phi[199] + t->Phi[200];
-            w->term[0][0] = v; check += v - v;
-    return check;
+            w->term[0][0] = v; check += v;
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
 INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
@@ -2544,8 +2610,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11] +
             w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
             w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[0] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[0] = v; check += v;
     v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
             w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
             w->term[1][5]*w->term[0][23] + w->term[1][6]*w->term[0][24] +
@@ -2554,7 +2619,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][11]*w->term[0][29] + w->term[1][12]*w->term[0][30] +
             w->term[1][13]*w->term[0][31] + w->term[1][14]*w->term[0][32] +
             w->term[1][15]*w->term[0][33] + w->term[1][16]*w->term[0][34] +
-            w->term[1][17]*w->term[0][35]; t->Qd[1] = v; check += v - v;
+            w->term[1][17]*w->term[0][35]; t->Qd[1] = v; check += v;
     v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
             w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
             w->term[1][5]*w->term[0][41] + w->term[1][6]*w->term[0][42] +
@@ -2563,7 +2628,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][11]*w->term[0][47] + w->term[1][12]*w->term[0][48] +
             w->term[1][13]*w->term[0][49] + w->term[1][14]*w->term[0][50] +
             w->term[1][15]*w->term[0][51] + w->term[1][16]*w->term[0][52] +
-            w->term[1][17]*w->term[0][53]; t->Qd[2] = v; check += v - v;
+            w->term[1][17]*w->term[0][53]; t->Qd[2] = v; check += v;
     v = w->term[1][0]*w->term[0][54] + w->term[1][1]*w->term[0][55] + w->term[1][2]*w->term[0][56] +
             w->term[1][3]*w->term[0][57] + w->term[1][4]*w->term[0][58] +
             w->term[1][5]*w->term[0][59] + w->term[1][6]*w->term[0][60] +
@@ -2572,7 +2637,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][11]*w->term[0][65] + w->term[1][12]*w->term[0][66] +
             w->term[1][13]*w->term[0][67] + w->term[1][14]*w->term[0][68] +
             w->term[1][15]*w->term[0][69] + w->term[1][16]*w->term[0][70] +
-            w->term[1][17]*w->term[0][71]; t->Qd[3] = v; check += v - v;
+            w->term[1][17]*w->term[0][71]; t->Qd[3] = v; check += v;
     v = w->term[1][0]*w->term[0][72] + w->term[1][1]*w->term[0][73] + w->term[1][2]*w->term[0][74] +
             w->term[1][3]*w->term[0][75] + w->term[1][4]*w->term[0][76] +
             w->term[1][5]*w->term[0][77] + w->term[1][6]*w->term[0][78] +
@@ -2581,7 +2646,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][11]*w->term[0][83] + w->term[1][12]*w->term[0][84] +
             w->term[1][13]*w->term[0][85] + w->term[1][14]*w->term[0][86] +
             w->term[1][15]*w->term[0][87] + w->term[1][16]*w->term[0][88] +
-            w->term[1][17]*w->term[0][89]; t->Qd[4] = v; check += v - v;
+            w->term[1][17]*w->term[0][89]; t->Qd[4] = v; check += v;
     v = w->term[1][0]*w->term[0][90] + w->term[1][1]*w->term[0][91] + w->term[1][2]*w->term[0][92] +
             w->term[1][3]*w->term[0][93] + w->term[1][4]*w->term[0][94] +
             w->term[1][5]*w->term[0][95] + w->term[1][6]*w->term[0][96] +
@@ -2590,7 +2655,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][11]*w->term[0][101] + w->term[1][12]*w->term[0][102] +
             w->term[1][13]*w->term[0][103] + w->term[1][14]*w->term[0][104] +
             w->term[1][15]*w->term[0][105] + w->term[1][16]*w->term[0][106] +
-            w->term[1][17]*w->term[0][107]; t->Qd[5] = v; check += v - v;
+            w->term[1][17]*w->term[0][107]; t->Qd[5] = v; check += v;
     v = w->term[1][0]*w->term[0][108] + w->term[1][1]*w->term[0][109] +
             w->term[1][2]*w->term[0][110] + w->term[1][3]*w->term[0][111] +
             w->term[1][4]*w->term[0][112] + w->term[1][5]*w->term[0][113] +
@@ -2600,7 +2665,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][12]*w->term[0][120] + w->term[1][13]*w->term[0][121] +
             w->term[1][14]*w->term[0][122] + w->term[1][15]*w->term[0][123] +
             w->term[1][16]*w->term[0][124] + w->term[1][17]*w->term[0][125]; t->Qd[6] = v; check +=
-            v - v;
+            v;
     v = w->term[1][0]*w->term[0][126] + w->term[1][1]*w->term[0][127] +
             w->term[1][2]*w->term[0][128] + w->term[1][3]*w->term[0][129] +
             w->term[1][4]*w->term[0][130] + w->term[1][5]*w->term[0][131] +
@@ -2610,7 +2675,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][12]*w->term[0][138] + w->term[1][13]*w->term[0][139] +
             w->term[1][14]*w->term[0][140] + w->term[1][15]*w->term[0][141] +
             w->term[1][16]*w->term[0][142] + w->term[1][17]*w->term[0][143]; t->Qd[7] = v; check +=
-            v - v;
+            v;
     v = w->term[1][0]*w->term[0][144] + w->term[1][1]*w->term[0][145] +
             w->term[1][2]*w->term[0][146] + w->term[1][3]*w->term[0][147] +
             w->term[1][4]*w->term[0][148] + w->term[1][5]*w->term[0][149] +
@@ -2620,19 +2685,19 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][12]*w->term[0][156] + w->term[1][13]*w->term[0][157] +
             w->term[1][14]*w->term[0][158] + w->term[1][15]*w->term[0][159] +
             w->term[1][16]*w->term[0][160] + w->term[1][17]*w->term[0][161]; t->Qd[8] = v; check +=
-            v - v;
-    v = w->term[1][6]*w->term[0][162]; t->Qd[9] = v; check += v - v;
-    v = w->term[1][7]*w->term[0][163]; t->Qd[10] = v; check += v - v;
-    v = w->term[1][8]*w->term[0][164]; t->Qd[11] = v; check += v - v;
-    v = w->term[1][9]*w->term[0][165]; t->Qd[12] = v; check += v - v;
-    v = w->term[1][10]*w->term[0][166]; t->Qd[13] = v; check += v - v;
-    v = w->term[1][11]*w->term[0][167]; t->Qd[14] = v; check += v - v;
-    v = w->term[1][12]*w->term[0][168]; t->Qd[15] = v; check += v - v;
-    v = w->term[1][13]*w->term[0][169]; t->Qd[16] = v; check += v - v;
-    v = w->term[1][14]*w->term[0][170]; t->Qd[17] = v; check += v - v;
-    v = w->term[1][15]*w->term[0][171]; t->Qd[18] = v; check += v - v;
-    v = w->term[1][16]*w->term[0][172]; t->Qd[19] = v; check += v - v;
-    v = w->term[1][17]*w->term[0][173]; t->Qd[20] = v; check += v - v;
+            v;
+    v = w->term[1][6]*w->term[0][162]; t->Qd[9] = v; check += v;
+    v = w->term[1][7]*w->term[0][163]; t->Qd[10] = v; check += v;
+    v = w->term[1][8]*w->term[0][164]; t->Qd[11] = v; check += v;
+    v = w->term[1][9]*w->term[0][165]; t->Qd[12] = v; check += v;
+    v = w->term[1][10]*w->term[0][166]; t->Qd[13] = v; check += v;
+    v = w->term[1][11]*w->term[0][167]; t->Qd[14] = v; check += v;
+    v = w->term[1][12]*w->term[0][168]; t->Qd[15] = v; check += v;
+    v = w->term[1][13]*w->term[0][169]; t->Qd[16] = v; check += v;
+    v = w->term[1][14]*w->term[0][170]; t->Qd[17] = v; check += v;
+    v = w->term[1][15]*w->term[0][171]; t->Qd[18] = v; check += v;
+    v = w->term[1][16]*w->term[0][172]; t->Qd[19] = v; check += v;
+    v = w->term[1][17]*w->term[0][173]; t->Qd[20] = v; check += v;
     v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
             w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
             w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23] +
@@ -2641,8 +2706,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29] +
             w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
             w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[21] = v; check += v
-            - v;
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[21] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
             w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
             w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41] +
@@ -2651,8 +2716,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][28]*w->term[0][46] + w->term[1][29]*w->term[0][47] +
             w->term[1][30]*w->term[0][48] + w->term[1][31]*w->term[0][49] +
             w->term[1][32]*w->term[0][50] + w->term[1][33]*w->term[0][51] +
-            w->term[1][34]*w->term[0][52] + w->term[1][35]*w->term[0][53]; t->Qd[22] = v; check += v
-            - v;
+            w->term[1][34]*w->term[0][52] + w->term[1][35]*w->term[0][53]; t->Qd[22] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][54] + w->term[1][19]*w->term[0][55] +
             w->term[1][20]*w->term[0][56] + w->term[1][21]*w->term[0][57] +
             w->term[1][22]*w->term[0][58] + w->term[1][23]*w->term[0][59] +
@@ -2661,8 +2726,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][28]*w->term[0][64] + w->term[1][29]*w->term[0][65] +
             w->term[1][30]*w->term[0][66] + w->term[1][31]*w->term[0][67] +
             w->term[1][32]*w->term[0][68] + w->term[1][33]*w->term[0][69] +
-            w->term[1][34]*w->term[0][70] + w->term[1][35]*w->term[0][71]; t->Qd[23] = v; check += v
-            - v;
+            w->term[1][34]*w->term[0][70] + w->term[1][35]*w->term[0][71]; t->Qd[23] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][72] + w->term[1][19]*w->term[0][73] +
             w->term[1][20]*w->term[0][74] + w->term[1][21]*w->term[0][75] +
             w->term[1][22]*w->term[0][76] + w->term[1][23]*w->term[0][77] +
@@ -2671,8 +2736,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][28]*w->term[0][82] + w->term[1][29]*w->term[0][83] +
             w->term[1][30]*w->term[0][84] + w->term[1][31]*w->term[0][85] +
             w->term[1][32]*w->term[0][86] + w->term[1][33]*w->term[0][87] +
-            w->term[1][34]*w->term[0][88] + w->term[1][35]*w->term[0][89]; t->Qd[24] = v; check += v
-            - v;
+            w->term[1][34]*w->term[0][88] + w->term[1][35]*w->term[0][89]; t->Qd[24] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][90] + w->term[1][19]*w->term[0][91] +
             w->term[1][20]*w->term[0][92] + w->term[1][21]*w->term[0][93] +
             w->term[1][22]*w->term[0][94] + w->term[1][23]*w->term[0][95] +
@@ -2682,7 +2747,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][30]*w->term[0][102] + w->term[1][31]*w->term[0][103] +
             w->term[1][32]*w->term[0][104] + w->term[1][33]*w->term[0][105] +
             w->term[1][34]*w->term[0][106] + w->term[1][35]*w->term[0][107]; t->Qd[25] = v; check +=
-            v - v;
+            v;
     v = w->term[1][18]*w->term[0][108] + w->term[1][19]*w->term[0][109] +
             w->term[1][20]*w->term[0][110] + w->term[1][21]*w->term[0][111] +
             w->term[1][22]*w->term[0][112] + w->term[1][23]*w->term[0][113] +
@@ -2692,7 +2757,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][30]*w->term[0][120] + w->term[1][31]*w->term[0][121] +
             w->term[1][32]*w->term[0][122] + w->term[1][33]*w->term[0][123] +
             w->term[1][34]*w->term[0][124] + w->term[1][35]*w->term[0][125]; t->Qd[26] = v; check +=
-            v - v;
+            v;
     v = w->term[1][18]*w->term[0][126] + w->term[1][19]*w->term[0][127] +
             w->term[1][20]*w->term[0][128] + w->term[1][21]*w->term[0][129] +
             w->term[1][22]*w->term[0][130] + w->term[1][23]*w->term[0][131] +
@@ -2702,7 +2767,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][30]*w->term[0][138] + w->term[1][31]*w->term[0][139] +
             w->term[1][32]*w->term[0][140] + w->term[1][33]*w->term[0][141] +
             w->term[1][34]*w->term[0][142] + w->term[1][35]*w->term[0][143]; t->Qd[27] = v; check +=
-            v - v;
+            v;
     v = w->term[1][18]*w->term[0][144] + w->term[1][19]*w->term[0][145] +
             w->term[1][20]*w->term[0][146] + w->term[1][21]*w->term[0][147] +
             w->term[1][22]*w->term[0][148] + w->term[1][23]*w->term[0][149] +
@@ -2712,19 +2777,19 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][30]*w->term[0][156] + w->term[1][31]*w->term[0][157] +
             w->term[1][32]*w->term[0][158] + w->term[1][33]*w->term[0][159] +
             w->term[1][34]*w->term[0][160] + w->term[1][35]*w->term[0][161]; t->Qd[28] = v; check +=
-            v - v;
-    v = w->term[1][24]*w->term[0][162]; t->Qd[29] = v; check += v - v;
-    v = w->term[1][25]*w->term[0][163]; t->Qd[30] = v; check += v - v;
-    v = w->term[1][26]*w->term[0][164]; t->Qd[31] = v; check += v - v;
-    v = w->term[1][27]*w->term[0][165]; t->Qd[32] = v; check += v - v;
-    v = w->term[1][28]*w->term[0][166]; t->Qd[33] = v; check += v - v;
-    v = w->term[1][29]*w->term[0][167]; t->Qd[34] = v; check += v - v;
-    v = w->term[1][30]*w->term[0][168]; t->Qd[35] = v; check += v - v;
-    v = w->term[1][31]*w->term[0][169]; t->Qd[36] = v; check += v - v;
-    v = w->term[1][32]*w->term[0][170]; t->Qd[37] = v; check += v - v;
-    v = w->term[1][33]*w->term[0][171]; t->Qd[38] = v; check += v - v;
-    v = w->term[1][34]*w->term[0][172]; t->Qd[39] = v; check += v - v;
-    v = w->term[1][35]*w->term[0][173]; t->Qd[40] = v; check += v - v;
+            v;
+    v = w->term[1][24]*w->term[0][162]; t->Qd[29] = v; check += v;
+    v = w->term[1][25]*w->term[0][163]; t->Qd[30] = v; check += v;
+    v = w->term[1][26]*w->term[0][164]; t->Qd[31] = v; check += v;
+    v = w->term[1][27]*w->term[0][165]; t->Qd[32] = v; check += v;
+    v = w->term[1][28]*w->term[0][166]; t->Qd[33] = v; check += v;
+    v = w->term[1][29]*w->term[0][167]; t->Qd[34] = v; check += v;
+    v = w->term[1][30]*w->term[0][168]; t->Qd[35] = v; check += v;
+    v = w->term[1][31]*w->term[0][169]; t->Qd[36] = v; check += v;
+    v = w->term[1][32]*w->term[0][170]; t->Qd[37] = v; check += v;
+    v = w->term[1][33]*w->term[0][171]; t->Qd[38] = v; check += v;
+    v = w->term[1][34]*w->term[0][172]; t->Qd[39] = v; check += v;
+    v = w->term[1][35]*w->term[0][173]; t->Qd[40] = v; check += v;
     v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
             w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
             w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41] +
@@ -2733,8 +2798,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][46]*w->term[0][46] + w->term[1][47]*w->term[0][47] +
             w->term[1][48]*w->term[0][48] + w->term[1][49]*w->term[0][49] +
             w->term[1][50]*w->term[0][50] + w->term[1][51]*w->term[0][51] +
-            w->term[1][52]*w->term[0][52] + w->term[1][53]*w->term[0][53]; t->Qd[41] = v; check += v
-            - v;
+            w->term[1][52]*w->term[0][52] + w->term[1][53]*w->term[0][53]; t->Qd[41] = v; check +=
+            v;
     v = w->term[1][36]*w->term[0][54] + w->term[1][37]*w->term[0][55] +
             w->term[1][38]*w->term[0][56] + w->term[1][39]*w->term[0][57] +
             w->term[1][40]*w->term[0][58] + w->term[1][41]*w->term[0][59] +
@@ -2743,8 +2808,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][46]*w->term[0][64] + w->term[1][47]*w->term[0][65] +
             w->term[1][48]*w->term[0][66] + w->term[1][49]*w->term[0][67] +
             w->term[1][50]*w->term[0][68] + w->term[1][51]*w->term[0][69] +
-            w->term[1][52]*w->term[0][70] + w->term[1][53]*w->term[0][71]; t->Qd[42] = v; check += v
-            - v;
+            w->term[1][52]*w->term[0][70] + w->term[1][53]*w->term[0][71]; t->Qd[42] = v; check +=
+            v;
     v = w->term[1][36]*w->term[0][72] + w->term[1][37]*w->term[0][73] +
             w->term[1][38]*w->term[0][74] + w->term[1][39]*w->term[0][75] +
             w->term[1][40]*w->term[0][76] + w->term[1][41]*w->term[0][77] +
@@ -2753,8 +2818,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][46]*w->term[0][82] + w->term[1][47]*w->term[0][83] +
             w->term[1][48]*w->term[0][84] + w->term[1][49]*w->term[0][85] +
             w->term[1][50]*w->term[0][86] + w->term[1][51]*w->term[0][87] +
-            w->term[1][52]*w->term[0][88] + w->term[1][53]*w->term[0][89]; t->Qd[43] = v; check += v
-            - v;
+            w->term[1][52]*w->term[0][88] + w->term[1][53]*w->term[0][89]; t->Qd[43] = v; check +=
+            v;
     v = w->term[1][36]*w->term[0][90] + w->term[1][37]*w->term[0][91] +
             w->term[1][38]*w->term[0][92] + w->term[1][39]*w->term[0][93] +
             w->term[1][40]*w->term[0][94] + w->term[1][41]*w->term[0][95] +
@@ -2764,7 +2829,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][48]*w->term[0][102] + w->term[1][49]*w->term[0][103] +
             w->term[1][50]*w->term[0][104] + w->term[1][51]*w->term[0][105] +
             w->term[1][52]*w->term[0][106] + w->term[1][53]*w->term[0][107]; t->Qd[44] = v; check +=
-            v - v;
+            v;
     v = w->term[1][36]*w->term[0][108] + w->term[1][37]*w->term[0][109] +
             w->term[1][38]*w->term[0][110] + w->term[1][39]*w->term[0][111] +
             w->term[1][40]*w->term[0][112] + w->term[1][41]*w->term[0][113] +
@@ -2774,7 +2839,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][48]*w->term[0][120] + w->term[1][49]*w->term[0][121] +
             w->term[1][50]*w->term[0][122] + w->term[1][51]*w->term[0][123] +
             w->term[1][52]*w->term[0][124] + w->term[1][53]*w->term[0][125]; t->Qd[45] = v; check +=
-            v - v;
+            v;
     v = w->term[1][36]*w->term[0][126] + w->term[1][37]*w->term[0][127] +
             w->term[1][38]*w->term[0][128] + w->term[1][39]*w->term[0][129] +
             w->term[1][40]*w->term[0][130] + w->term[1][41]*w->term[0][131] +
@@ -2784,7 +2849,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][48]*w->term[0][138] + w->term[1][49]*w->term[0][139] +
             w->term[1][50]*w->term[0][140] + w->term[1][51]*w->term[0][141] +
             w->term[1][52]*w->term[0][142] + w->term[1][53]*w->term[0][143]; t->Qd[46] = v; check +=
-            v - v;
+            v;
     v = w->term[1][36]*w->term[0][144] + w->term[1][37]*w->term[0][145] +
             w->term[1][38]*w->term[0][146] + w->term[1][39]*w->term[0][147] +
             w->term[1][40]*w->term[0][148] + w->term[1][41]*w->term[0][149] +
@@ -2794,19 +2859,19 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][48]*w->term[0][156] + w->term[1][49]*w->term[0][157] +
             w->term[1][50]*w->term[0][158] + w->term[1][51]*w->term[0][159] +
             w->term[1][52]*w->term[0][160] + w->term[1][53]*w->term[0][161]; t->Qd[47] = v; check +=
-            v - v;
-    v = w->term[1][42]*w->term[0][162]; t->Qd[48] = v; check += v - v;
-    v = w->term[1][43]*w->term[0][163]; t->Qd[49] = v; check += v - v;
-    v = w->term[1][44]*w->term[0][164]; t->Qd[50] = v; check += v - v;
-    v = w->term[1][45]*w->term[0][165]; t->Qd[51] = v; check += v - v;
-    v = w->term[1][46]*w->term[0][166]; t->Qd[52] = v; check += v - v;
-    v = w->term[1][47]*w->term[0][167]; t->Qd[53] = v; check += v - v;
-    v = w->term[1][48]*w->term[0][168]; t->Qd[54] = v; check += v - v;
-    v = w->term[1][49]*w->term[0][169]; t->Qd[55] = v; check += v - v;
-    v = w->term[1][50]*w->term[0][170]; t->Qd[56] = v; check += v - v;
-    v = w->term[1][51]*w->term[0][171]; t->Qd[57] = v; check += v - v;
-    v = w->term[1][52]*w->term[0][172]; t->Qd[58] = v; check += v - v;
-    v = w->term[1][53]*w->term[0][173]; t->Qd[59] = v; check += v - v;
+            v;
+    v = w->term[1][42]*w->term[0][162]; t->Qd[48] = v; check += v;
+    v = w->term[1][43]*w->term[0][163]; t->Qd[49] = v; check += v;
+    v = w->term[1][44]*w->term[0][164]; t->Qd[50] = v; check += v;
+    v = w->term[1][45]*w->term[0][165]; t->Qd[51] = v; check += v;
+    v = w->term[1][46]*w->term[0][166]; t->Qd[52] = v; check += v;
+    v = w->term[1][47]*w->term[0][167]; t->Qd[53] = v; check += v;
+    v = w->term[1][48]*w->term[0][168]; t->Qd[54] = v; check += v;
+    v = w->term[1][49]*w->term[0][169]; t->Qd[55] = v; check += v;
+    v = w->term[1][50]*w->term[0][170]; t->Qd[56] = v; check += v;
+    v = w->term[1][51]*w->term[0][171]; t->Qd[57] = v; check += v;
+    v = w->term[1][52]*w->term[0][172]; t->Qd[58] = v; check += v;
+    v = w->term[1][53]*w->term[0][173]; t->Qd[59] = v; check += v;
     v = w->term[1][54]*w->term[0][54] + w->term[1][55]*w->term[0][55] +
             w->term[1][56]*w->term[0][56] + w->term[1][57]*w->term[0][57] +
             w->term[1][58]*w->term[0][58] + w->term[1][59]*w->term[0][59] +
@@ -2815,8 +2880,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][64]*w->term[0][64] + w->term[1][65]*w->term[0][65] +
             w->term[1][66]*w->term[0][66] + w->term[1][67]*w->term[0][67] +
             w->term[1][68]*w->term[0][68] + w->term[1][69]*w->term[0][69] +
-            w->term[1][70]*w->term[0][70] + w->term[1][71]*w->term[0][71]; t->Qd[60] = v; check += v
-            - v;
+            w->term[1][70]*w->term[0][70] + w->term[1][71]*w->term[0][71]; t->Qd[60] = v; check +=
+            v;
     v = w->term[1][54]*w->term[0][72] + w->term[1][55]*w->term[0][73] +
             w->term[1][56]*w->term[0][74] + w->term[1][57]*w->term[0][75] +
             w->term[1][58]*w->term[0][76] + w->term[1][59]*w->term[0][77] +
@@ -2825,8 +2890,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][64]*w->term[0][82] + w->term[1][65]*w->term[0][83] +
             w->term[1][66]*w->term[0][84] + w->term[1][67]*w->term[0][85] +
             w->term[1][68]*w->term[0][86] + w->term[1][69]*w->term[0][87] +
-            w->term[1][70]*w->term[0][88] + w->term[1][71]*w->term[0][89]; t->Qd[61] = v; check += v
-            - v;
+            w->term[1][70]*w->term[0][88] + w->term[1][71]*w->term[0][89]; t->Qd[61] = v; check +=
+            v;
     v = w->term[1][54]*w->term[0][90] + w->term[1][55]*w->term[0][91] +
             w->term[1][56]*w->term[0][92] + w->term[1][57]*w->term[0][93] +
             w->term[1][58]*w->term[0][94] + w->term[1][59]*w->term[0][95] +
@@ -2836,7 +2901,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][66]*w->term[0][102] + w->term[1][67]*w->term[0][103] +
             w->term[1][68]*w->term[0][104] + w->term[1][69]*w->term[0][105] +
             w->term[1][70]*w->term[0][106] + w->term[1][71]*w->term[0][107]; t->Qd[62] = v; check +=
-            v - v;
+            v;
     v = w->term[1][54]*w->term[0][108] + w->term[1][55]*w->term[0][109] +
             w->term[1][56]*w->term[0][110] + w->term[1][57]*w->term[0][111] +
             w->term[1][58]*w->term[0][112] + w->term[1][59]*w->term[0][113] +
@@ -2846,7 +2911,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][66]*w->term[0][120] + w->term[1][67]*w->term[0][121] +
             w->term[1][68]*w->term[0][122] + w->term[1][69]*w->term[0][123] +
             w->term[1][70]*w->term[0][124] + w->term[1][71]*w->term[0][125]; t->Qd[63] = v; check +=
-            v - v;
+            v;
     v = w->term[1][54]*w->term[0][126] + w->term[1][55]*w->term[0][127] +
             w->term[1][56]*w->term[0][128] + w->term[1][57]*w->term[0][129] +
             w->term[1][58]*w->term[0][130] + w->term[1][59]*w->term[0][131] +
@@ -2856,7 +2921,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][66]*w->term[0][138] + w->term[1][67]*w->term[0][139] +
             w->term[1][68]*w->term[0][140] + w->term[1][69]*w->term[0][141] +
             w->term[1][70]*w->term[0][142] + w->term[1][71]*w->term[0][143]; t->Qd[64] = v; check +=
-            v - v;
+            v;
     v = w->term[1][54]*w->term[0][144] + w->term[1][55]*w->term[0][145] +
             w->term[1][56]*w->term[0][146] + w->term[1][57]*w->term[0][147] +
             w->term[1][58]*w->term[0][148] + w->term[1][59]*w->term[0][149] +
@@ -2866,19 +2931,19 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][66]*w->term[0][156] + w->term[1][67]*w->term[0][157] +
             w->term[1][68]*w->term[0][158] + w->term[1][69]*w->term[0][159] +
             w->term[1][70]*w->term[0][160] + w->term[1][71]*w->term[0][161]; t->Qd[65] = v; check +=
-            v - v;
-    v = w->term[1][60]*w->term[0][162]; t->Qd[66] = v; check += v - v;
-    v = w->term[1][61]*w->term[0][163]; t->Qd[67] = v; check += v - v;
-    v = w->term[1][62]*w->term[0][164]; t->Qd[68] = v; check += v - v;
-    v = w->term[1][63]*w->term[0][165]; t->Qd[69] = v; check += v - v;
-    v = w->term[1][64]*w->term[0][166]; t->Qd[70] = v; check += v - v;
-    v = w->term[1][65]*w->term[0][167]; t->Qd[71] = v; check += v - v;
-    v = w->term[1][66]*w->term[0][168]; t->Qd[72] = v; check += v - v;
-    v = w->term[1][67]*w->term[0][169]; t->Qd[73] = v; check += v - v;
-    v = w->term[1][68]*w->term[0][170]; t->Qd[74] = v; check += v - v;
-    v = w->term[1][69]*w->term[0][171]; t->Qd[75] = v; check += v - v;
-    v = w->term[1][70]*w->term[0][172]; t->Qd[76] = v; check += v - v;
-    v = w->term[1][71]*w->term[0][173]; t->Qd[77] = v; check += v - v;
+            v;
+    v = w->term[1][60]*w->term[0][162]; t->Qd[66] = v; check += v;
+    v = w->term[1][61]*w->term[0][163]; t->Qd[67] = v; check += v;
+    v = w->term[1][62]*w->term[0][164]; t->Qd[68] = v; check += v;
+    v = w->term[1][63]*w->term[0][165]; t->Qd[69] = v; check += v;
+    v = w->term[1][64]*w->term[0][166]; t->Qd[70] = v; check += v;
+    v = w->term[1][65]*w->term[0][167]; t->Qd[71] = v; check += v;
+    v = w->term[1][66]*w->term[0][168]; t->Qd[72] = v; check += v;
+    v = w->term[1][67]*w->term[0][169]; t->Qd[73] = v; check += v;
+    v = w->term[1][68]*w->term[0][170]; t->Qd[74] = v; check += v;
+    v = w->term[1][69]*w->term[0][171]; t->Qd[75] = v; check += v;
+    v = w->term[1][70]*w->term[0][172]; t->Qd[76] = v; check += v;
+    v = w->term[1][71]*w->term[0][173]; t->Qd[77] = v; check += v;
     v = w->term[1][72]*w->term[0][72] + w->term[1][73]*w->term[0][73] +
             w->term[1][74]*w->term[0][74] + w->term[1][75]*w->term[0][75] +
             w->term[1][76]*w->term[0][76] + w->term[1][77]*w->term[0][77] +
@@ -2887,8 +2952,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][82]*w->term[0][82] + w->term[1][83]*w->term[0][83] +
             w->term[1][84]*w->term[0][84] + w->term[1][85]*w->term[0][85] +
             w->term[1][86]*w->term[0][86] + w->term[1][87]*w->term[0][87] +
-            w->term[1][88]*w->term[0][88] + w->term[1][89]*w->term[0][89]; t->Qd[78] = v; check += v
-            - v;
+            w->term[1][88]*w->term[0][88] + w->term[1][89]*w->term[0][89]; t->Qd[78] = v; check +=
+            v;
     v = w->term[1][72]*w->term[0][90] + w->term[1][73]*w->term[0][91] +
             w->term[1][74]*w->term[0][92] + w->term[1][75]*w->term[0][93] +
             w->term[1][76]*w->term[0][94] + w->term[1][77]*w->term[0][95] +
@@ -2898,7 +2963,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][84]*w->term[0][102] + w->term[1][85]*w->term[0][103] +
             w->term[1][86]*w->term[0][104] + w->term[1][87]*w->term[0][105] +
             w->term[1][88]*w->term[0][106] + w->term[1][89]*w->term[0][107]; t->Qd[79] = v; check +=
-            v - v;
+            v;
     v = w->term[1][72]*w->term[0][108] + w->term[1][73]*w->term[0][109] +
             w->term[1][74]*w->term[0][110] + w->term[1][75]*w->term[0][111] +
             w->term[1][76]*w->term[0][112] + w->term[1][77]*w->term[0][113] +
@@ -2908,7 +2973,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][84]*w->term[0][120] + w->term[1][85]*w->term[0][121] +
             w->term[1][86]*w->term[0][122] + w->term[1][87]*w->term[0][123] +
             w->term[1][88]*w->term[0][124] + w->term[1][89]*w->term[0][125]; t->Qd[80] = v; check +=
-            v - v;
+            v;
     v = w->term[1][72]*w->term[0][126] + w->term[1][73]*w->term[0][127] +
             w->term[1][74]*w->term[0][128] + w->term[1][75]*w->term[0][129] +
             w->term[1][76]*w->term[0][130] + w->term[1][77]*w->term[0][131] +
@@ -2918,7 +2983,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][84]*w->term[0][138] + w->term[1][85]*w->term[0][139] +
             w->term[1][86]*w->term[0][140] + w->term[1][87]*w->term[0][141] +
             w->term[1][88]*w->term[0][142] + w->term[1][89]*w->term[0][143]; t->Qd[81] = v; check +=
-            v - v;
+            v;
     v = w->term[1][72]*w->term[0][144] + w->term[1][73]*w->term[0][145] +
             w->term[1][74]*w->term[0][146] + w->term[1][75]*w->term[0][147] +
             w->term[1][76]*w->term[0][148] + w->term[1][77]*w->term[0][149] +
@@ -2928,19 +2993,19 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][84]*w->term[0][156] + w->term[1][85]*w->term[0][157] +
             w->term[1][86]*w->term[0][158] + w->term[1][87]*w->term[0][159] +
             w->term[1][88]*w->term[0][160] + w->term[1][89]*w->term[0][161]; t->Qd[82] = v; check +=
-            v - v;
-    v = w->term[1][78]*w->term[0][162]; t->Qd[83] = v; check += v - v;
-    v = w->term[1][79]*w->term[0][163]; t->Qd[84] = v; check += v - v;
-    v = w->term[1][80]*w->term[0][164]; t->Qd[85] = v; check += v - v;
-    v = w->term[1][81]*w->term[0][165]; t->Qd[86] = v; check += v - v;
-    v = w->term[1][82]*w->term[0][166]; t->Qd[87] = v; check += v - v;
-    v = w->term[1][83]*w->term[0][167]; t->Qd[88] = v; check += v - v;
-    v = w->term[1][84]*w->term[0][168]; t->Qd[89] = v; check += v - v;
-    v = w->term[1][85]*w->term[0][169]; t->Qd[90] = v; check += v - v;
-    v = w->term[1][86]*w->term[0][170]; t->Qd[91] = v; check += v - v;
-    v = w->term[1][87]*w->term[0][171]; t->Qd[92] = v; check += v - v;
-    v = w->term[1][88]*w->term[0][172]; t->Qd[93] = v; check += v - v;
-    v = w->term[1][89]*w->term[0][173]; t->Qd[94] = v; check += v - v;
+            v;
+    v = w->term[1][78]*w->term[0][162]; t->Qd[83] = v; check += v;
+    v = w->term[1][79]*w->term[0][163]; t->Qd[84] = v; check += v;
+    v = w->term[1][80]*w->term[0][164]; t->Qd[85] = v; check += v;
+    v = w->term[1][81]*w->term[0][165]; t->Qd[86] = v; check += v;
+    v = w->term[1][82]*w->term[0][166]; t->Qd[87] = v; check += v;
+    v = w->term[1][83]*w->term[0][167]; t->Qd[88] = v; check += v;
+    v = w->term[1][84]*w->term[0][168]; t->Qd[89] = v; check += v;
+    v = w->term[1][85]*w->term[0][169]; t->Qd[90] = v; check += v;
+    v = w->term[1][86]*w->term[0][170]; t->Qd[91] = v; check += v;
+    v = w->term[1][87]*w->term[0][171]; t->Qd[92] = v; check += v;
+    v = w->term[1][88]*w->term[0][172]; t->Qd[93] = v; check += v;
+    v = w->term[1][89]*w->term[0][173]; t->Qd[94] = v; check += v;
     v = w->term[1][90]*w->term[0][90] + w->term[1][91]*w->term[0][91] +
             w->term[1][92]*w->term[0][92] + w->term[1][93]*w->term[0][93] +
             w->term[1][94]*w->term[0][94] + w->term[1][95]*w->term[0][95] +
@@ -2950,7 +3015,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][102]*w->term[0][102] + w->term[1][103]*w->term[0][103] +
             w->term[1][104]*w->term[0][104] + w->term[1][105]*w->term[0][105] +
             w->term[1][106]*w->term[0][106] + w->term[1][107]*w->term[0][107]; t->Qd[95] = v; check
-            += v - v;
+            += v;
     v = w->term[1][90]*w->term[0][108] + w->term[1][91]*w->term[0][109] +
             w->term[1][92]*w->term[0][110] + w->term[1][93]*w->term[0][111] +
             w->term[1][94]*w->term[0][112] + w->term[1][95]*w->term[0][113] +
@@ -2960,7 +3025,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][102]*w->term[0][120] + w->term[1][103]*w->term[0][121] +
             w->term[1][104]*w->term[0][122] + w->term[1][105]*w->term[0][123] +
             w->term[1][106]*w->term[0][124] + w->term[1][107]*w->term[0][125]; t->Qd[96] = v; check
-            += v - v;
+            += v;
     v = w->term[1][90]*w->term[0][126] + w->term[1][91]*w->term[0][127] +
             w->term[1][92]*w->term[0][128] + w->term[1][93]*w->term[0][129] +
             w->term[1][94]*w->term[0][130] + w->term[1][95]*w->term[0][131] +
@@ -2970,7 +3035,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][102]*w->term[0][138] + w->term[1][103]*w->term[0][139] +
             w->term[1][104]*w->term[0][140] + w->term[1][105]*w->term[0][141] +
             w->term[1][106]*w->term[0][142] + w->term[1][107]*w->term[0][143]; t->Qd[97] = v; check
-            += v - v;
+            += v;
     v = w->term[1][90]*w->term[0][144] + w->term[1][91]*w->term[0][145] +
             w->term[1][92]*w->term[0][146] + w->term[1][93]*w->term[0][147] +
             w->term[1][94]*w->term[0][148] + w->term[1][95]*w->term[0][149] +
@@ -2980,19 +3045,19 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][102]*w->term[0][156] + w->term[1][103]*w->term[0][157] +
             w->term[1][104]*w->term[0][158] + w->term[1][105]*w->term[0][159] +
             w->term[1][106]*w->term[0][160] + w->term[1][107]*w->term[0][161]; t->Qd[98] = v; check
-            += v - v;
-    v = w->term[1][96]*w->term[0][162]; t->Qd[99] = v; check += v - v;
-    v = w->term[1][97]*w->term[0][163]; t->Qd[100] = v; check += v - v;
-    v = w->term[1][98]*w->term[0][164]; t->Qd[101] = v; check += v - v;
-    v = w->term[1][99]*w->term[0][165]; t->Qd[102] = v; check += v - v;
-    v = w->term[1][100]*w->term[0][166]; t->Qd[103] = v; check += v - v;
-    v = w->term[1][101]*w->term[0][167]; t->Qd[104] = v; check += v - v;
-    v = w->term[1][102]*w->term[0][168]; t->Qd[105] = v; check += v - v;
-    v = w->term[1][103]*w->term[0][169]; t->Qd[106] = v; check += v - v;
-    v = w->term[1][104]*w->term[0][170]; t->Qd[107] = v; check += v - v;
-    v = w->term[1][105]*w->term[0][171]; t->Qd[108] = v; check += v - v;
-    v = w->term[1][106]*w->term[0][172]; t->Qd[109] = v; check += v - v;
-    v = w->term[1][107]*w->term[0][173]; t->Qd[110] = v; check += v - v;
+            += v;
+    v = w->term[1][96]*w->term[0][162]; t->Qd[99] = v; check += v;
+    v = w->term[1][97]*w->term[0][163]; t->Qd[100] = v; check += v;
+    v = w->term[1][98]*w->term[0][164]; t->Qd[101] = v; check += v;
+    v = w->term[1][99]*w->term[0][165]; t->Qd[102] = v; check += v;
+    v = w->term[1][100]*w->term[0][166]; t->Qd[103] = v; check += v;
+    v = w->term[1][101]*w->term[0][167]; t->Qd[104] = v; check += v;
+    v = w->term[1][102]*w->term[0][168]; t->Qd[105] = v; check += v;
+    v = w->term[1][103]*w->term[0][169]; t->Qd[106] = v; check += v;
+    v = w->term[1][104]*w->term[0][170]; t->Qd[107] = v; check += v;
+    v = w->term[1][105]*w->term[0][171]; t->Qd[108] = v; check += v;
+    v = w->term[1][106]*w->term[0][172]; t->Qd[109] = v; check += v;
+    v = w->term[1][107]*w->term[0][173]; t->Qd[110] = v; check += v;
     v = w->term[1][108]*w->term[0][108] + w->term[1][109]*w->term[0][109] +
             w->term[1][110]*w->term[0][110] + w->term[1][111]*w->term[0][111] +
             w->term[1][112]*w->term[0][112] + w->term[1][113]*w->term[0][113] +
@@ -3002,7 +3067,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][120]*w->term[0][120] + w->term[1][121]*w->term[0][121] +
             w->term[1][122]*w->term[0][122] + w->term[1][123]*w->term[0][123] +
             w->term[1][124]*w->term[0][124] + w->term[1][125]*w->term[0][125]; t->Qd[111] = v; check
-            += v - v;
+            += v;
     v = w->term[1][108]*w->term[0][126] + w->term[1][109]*w->term[0][127] +
             w->term[1][110]*w->term[0][128] + w->term[1][111]*w->term[0][129] +
             w->term[1][112]*w->term[0][130] + w->term[1][113]*w->term[0][131] +
@@ -3012,7 +3077,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][120]*w->term[0][138] + w->term[1][121]*w->term[0][139] +
             w->term[1][122]*w->term[0][140] + w->term[1][123]*w->term[0][141] +
             w->term[1][124]*w->term[0][142] + w->term[1][125]*w->term[0][143]; t->Qd[112] = v; check
-            += v - v;
+            += v;
     v = w->term[1][108]*w->term[0][144] + w->term[1][109]*w->term[0][145] +
             w->term[1][110]*w->term[0][146] + w->term[1][111]*w->term[0][147] +
             w->term[1][112]*w->term[0][148] + w->term[1][113]*w->term[0][149] +
@@ -3022,19 +3087,19 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][120]*w->term[0][156] + w->term[1][121]*w->term[0][157] +
             w->term[1][122]*w->term[0][158] + w->term[1][123]*w->term[0][159] +
             w->term[1][124]*w->term[0][160] + w->term[1][125]*w->term[0][161]; t->Qd[113] = v; check
-            += v - v;
-    v = w->term[1][114]*w->term[0][162]; t->Qd[114] = v; check += v - v;
-    v = w->term[1][115]*w->term[0][163]; t->Qd[115] = v; check += v - v;
-    v = w->term[1][116]*w->term[0][164]; t->Qd[116] = v; check += v - v;
-    v = w->term[1][117]*w->term[0][165]; t->Qd[117] = v; check += v - v;
-    v = w->term[1][118]*w->term[0][166]; t->Qd[118] = v; check += v - v;
-    v = w->term[1][119]*w->term[0][167]; t->Qd[119] = v; check += v - v;
-    v = w->term[1][120]*w->term[0][168]; t->Qd[120] = v; check += v - v;
-    v = w->term[1][121]*w->term[0][169]; t->Qd[121] = v; check += v - v;
-    v = w->term[1][122]*w->term[0][170]; t->Qd[122] = v; check += v - v;
-    v = w->term[1][123]*w->term[0][171]; t->Qd[123] = v; check += v - v;
-    v = w->term[1][124]*w->term[0][172]; t->Qd[124] = v; check += v - v;
-    v = w->term[1][125]*w->term[0][173]; t->Qd[125] = v; check += v - v;
+            += v;
+    v = w->term[1][114]*w->term[0][162]; t->Qd[114] = v; check += v;
+    v = w->term[1][115]*w->term[0][163]; t->Qd[115] = v; check += v;
+    v = w->term[1][116]*w->term[0][164]; t->Qd[116] = v; check += v;
+    v = w->term[1][117]*w->term[0][165]; t->Qd[117] = v; check += v;
+    v = w->term[1][118]*w->term[0][166]; t->Qd[118] = v; check += v;
+    v = w->term[1][119]*w->term[0][167]; t->Qd[119] = v; check += v;
+    v = w->term[1][120]*w->term[0][168]; t->Qd[120] = v; check += v;
+    v = w->term[1][121]*w->term[0][169]; t->Qd[121] = v; check += v;
+    v = w->term[1][122]*w->term[0][170]; t->Qd[122] = v; check += v;
+    v = w->term[1][123]*w->term[0][171]; t->Qd[123] = v; check += v;
+    v = w->term[1][124]*w->term[0][172]; t->Qd[124] = v; check += v;
+    v = w->term[1][125]*w->term[0][173]; t->Qd[125] = v; check += v;
     v = w->term[1][126]*w->term[0][126] + w->term[1][127]*w->term[0][127] +
             w->term[1][128]*w->term[0][128] + w->term[1][129]*w->term[0][129] +
             w->term[1][130]*w->term[0][130] + w->term[1][131]*w->term[0][131] +
@@ -3044,7 +3109,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][138]*w->term[0][138] + w->term[1][139]*w->term[0][139] +
             w->term[1][140]*w->term[0][140] + w->term[1][141]*w->term[0][141] +
             w->term[1][142]*w->term[0][142] + w->term[1][143]*w->term[0][143]; t->Qd[126] = v; check
-            += v - v;
+            += v;
     v = w->term[1][126]*w->term[0][144] + w->term[1][127]*w->term[0][145] +
             w->term[1][128]*w->term[0][146] + w->term[1][129]*w->term[0][147] +
             w->term[1][130]*w->term[0][148] + w->term[1][131]*w->term[0][149] +
@@ -3054,19 +3119,19 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][138]*w->term[0][156] + w->term[1][139]*w->term[0][157] +
             w->term[1][140]*w->term[0][158] + w->term[1][141]*w->term[0][159] +
             w->term[1][142]*w->term[0][160] + w->term[1][143]*w->term[0][161]; t->Qd[127] = v; check
-            += v - v;
-    v = w->term[1][132]*w->term[0][162]; t->Qd[128] = v; check += v - v;
-    v = w->term[1][133]*w->term[0][163]; t->Qd[129] = v; check += v - v;
-    v = w->term[1][134]*w->term[0][164]; t->Qd[130] = v; check += v - v;
-    v = w->term[1][135]*w->term[0][165]; t->Qd[131] = v; check += v - v;
-    v = w->term[1][136]*w->term[0][166]; t->Qd[132] = v; check += v - v;
-    v = w->term[1][137]*w->term[0][167]; t->Qd[133] = v; check += v - v;
-    v = w->term[1][138]*w->term[0][168]; t->Qd[134] = v; check += v - v;
-    v = w->term[1][139]*w->term[0][169]; t->Qd[135] = v; check += v - v;
-    v = w->term[1][140]*w->term[0][170]; t->Qd[136] = v; check += v - v;
-    v = w->term[1][141]*w->term[0][171]; t->Qd[137] = v; check += v - v;
-    v = w->term[1][142]*w->term[0][172]; t->Qd[138] = v; check += v - v;
-    v = w->term[1][143]*w->term[0][173]; t->Qd[139] = v; check += v - v;
+            += v;
+    v = w->term[1][132]*w->term[0][162]; t->Qd[128] = v; check += v;
+    v = w->term[1][133]*w->term[0][163]; t->Qd[129] = v; check += v;
+    v = w->term[1][134]*w->term[0][164]; t->Qd[130] = v; check += v;
+    v = w->term[1][135]*w->term[0][165]; t->Qd[131] = v; check += v;
+    v = w->term[1][136]*w->term[0][166]; t->Qd[132] = v; check += v;
+    v = w->term[1][137]*w->term[0][167]; t->Qd[133] = v; check += v;
+    v = w->term[1][138]*w->term[0][168]; t->Qd[134] = v; check += v;
+    v = w->term[1][139]*w->term[0][169]; t->Qd[135] = v; check += v;
+    v = w->term[1][140]*w->term[0][170]; t->Qd[136] = v; check += v;
+    v = w->term[1][141]*w->term[0][171]; t->Qd[137] = v; check += v;
+    v = w->term[1][142]*w->term[0][172]; t->Qd[138] = v; check += v;
+    v = w->term[1][143]*w->term[0][173]; t->Qd[139] = v; check += v;
     v = w->term[1][144]*w->term[0][144] + w->term[1][145]*w->term[0][145] +
             w->term[1][146]*w->term[0][146] + w->term[1][147]*w->term[0][147] +
             w->term[1][148]*w->term[0][148] + w->term[1][149]*w->term[0][149] +
@@ -3076,31 +3141,31 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
             w->term[1][156]*w->term[0][156] + w->term[1][157]*w->term[0][157] +
             w->term[1][158]*w->term[0][158] + w->term[1][159]*w->term[0][159] +
             w->term[1][160]*w->term[0][160] + w->term[1][161]*w->term[0][161]; t->Qd[140] = v; check
-            += v - v;
-    v = w->term[1][150]*w->term[0][162]; t->Qd[141] = v; check += v - v;
-    v = w->term[1][151]*w->term[0][163]; t->Qd[142] = v; check += v - v;
-    v = w->term[1][152]*w->term[0][164]; t->Qd[143] = v; check += v - v;
-    v = w->term[1][153]*w->term[0][165]; t->Qd[144] = v; check += v - v;
-    v = w->term[1][154]*w->term[0][166]; t->Qd[145] = v; check += v - v;
-    v = w->term[1][155]*w->term[0][167]; t->Qd[146] = v; check += v - v;
-    v = w->term[1][156]*w->term[0][168]; t->Qd[147] = v; check += v - v;
-    v = w->term[1][157]*w->term[0][169]; t->Qd[148] = v; check += v - v;
-    v = w->term[1][158]*w->term[0][170]; t->Qd[149] = v; check += v - v;
-    v = w->term[1][159]*w->term[0][171]; t->Qd[150] = v; check += v - v;
-    v = w->term[1][160]*w->term[0][172]; t->Qd[151] = v; check += v - v;
-    v = w->term[1][161]*w->term[0][173]; t->Qd[152] = v; check += v - v;
-    v = w->term[1][162]*w->term[0][162]; t->Qd[153] = v; check += v - v;
-    v = w->term[1][163]*w->term[0][163]; t->Qd[165] = v; check += v - v;
-    v = w->term[1][164]*w->term[0][164]; t->Qd[176] = v; check += v - v;
-    v = w->term[1][165]*w->term[0][165]; t->Qd[186] = v; check += v - v;
-    v = w->term[1][166]*w->term[0][166]; t->Qd[195] = v; check += v - v;
-    v = w->term[1][167]*w->term[0][167]; t->Qd[203] = v; check += v - v;
-    v = w->term[1][168]*w->term[0][168]; t->Qd[210] = v; check += v - v;
-    v = w->term[1][169]*w->term[0][169]; t->Qd[216] = v; check += v - v;
-    v = w->term[1][170]*w->term[0][170]; t->Qd[221] = v; check += v - v;
-    v = w->term[1][171]*w->term[0][171]; t->Qd[225] = v; check += v - v;
-    v = w->term[1][172]*w->term[0][172]; t->Qd[228] = v; check += v - v;
-    v = w->term[1][173]*w->term[0][173]; t->Qd[230] = v; check += v - v;
+            += v;
+    v = w->term[1][150]*w->term[0][162]; t->Qd[141] = v; check += v;
+    v = w->term[1][151]*w->term[0][163]; t->Qd[142] = v; check += v;
+    v = w->term[1][152]*w->term[0][164]; t->Qd[143] = v; check += v;
+    v = w->term[1][153]*w->term[0][165]; t->Qd[144] = v; check += v;
+    v = w->term[1][154]*w->term[0][166]; t->Qd[145] = v; check += v;
+    v = w->term[1][155]*w->term[0][167]; t->Qd[146] = v; check += v;
+    v = w->term[1][156]*w->term[0][168]; t->Qd[147] = v; check += v;
+    v = w->term[1][157]*w->term[0][169]; t->Qd[148] = v; check += v;
+    v = w->term[1][158]*w->term[0][170]; t->Qd[149] = v; check += v;
+    v = w->term[1][159]*w->term[0][171]; t->Qd[150] = v; check += v;
+    v = w->term[1][160]*w->term[0][172]; t->Qd[151] = v; check += v;
+    v = w->term[1][161]*w->term[0][173]; t->Qd[152] = v; check += v;
+    v = w->term[1][162]*w->term[0][162]; t->Qd[153] = v; check += v;
+    v = w->term[1][163]*w->term[0][163]; t->Qd[165] = v; check += v;
+    v = w->term[1][164]*w->term[0][164]; t->Qd[176] = v; check += v;
+    v = w->term[1][165]*w->term[0][165]; t->Qd[186] = v; check += v;
+    v = w->term[1][166]*w->term[0][166]; t->Qd[195] = v; check += v;
+    v = w->term[1][167]*w->term[0][167]; t->Qd[203] = v; check += v;
+    v = w->term[1][168]*w->term[0][168]; t->Qd[210] = v; check += v;
+    v = w->term[1][169]*w->term[0][169]; t->Qd[216] = v; check += v;
+    v = w->term[1][170]*w->term[0][170]; t->Qd[221] = v; check += v;
+    v = w->term[1][171]*w->term[0][171]; t->Qd[225] = v; check += v;
+    v = w->term[1][172]*w->term[0][172]; t->Qd[228] = v; check += v;
+    v = w->term[1][173]*w->term[0][173]; t->Qd[230] = v; check += v;
     t->Qd[154] = 0;
     t->Qd[155] = 0;
     t->Qd[156] = 0;
@@ -3167,7 +3232,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
     t->Qd[226] = 0;
     t->Qd[227] = 0;
     t->Qd[229] = 0;
-    return check;
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
 int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scalar T,
@@ -3179,41 +3244,64 @@ int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scal
     int halvings, order, status;
     int k;
     ins_gnss21_scalar sum_check;
-    ins_gnss21_scalar check = 0.0, sums[2] = { 0.0, 0.0 };
+    ins_gnss21_scalar qd_check;
+    ins_gnss21_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (!isfinite(T)) {
         return INS_GNSS21_ERR_NONFINITE;
     }
     if (!(T > 0.0)) {
         return INS_GNSS21_ERR_NOT_POSITIVE;
     }
-    /* the sum of v - v over F, G and q (0 when all are finite) in two partial sums, two entries a
-            step,
-       which gcc -O2 vectorizes (the order of a sum of zeros and NaNs does not change whether it is
-               0) */
-    for (e = 0; e + 1 < INS_GNSS21_NNZ_F; e += 2) {
-        sums[0] += m->F[e] - m->F[e];
-        sums[1] += m->F[e + 1] - m->F[e + 1];
+    /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
+       vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
+               is
+       not finite, or an overflow of finite values) is decided value by value */
+    for (e = 0; e + 3 < INS_GNSS21_NNZ_F; e += 4) {
+        sums[0] += m->F[e];
+        sums[1] += m->F[e + 1];
+        sums[2] += m->F[e + 2];
+        sums[3] += m->F[e + 3];
     }
     for (; e < INS_GNSS21_NNZ_F; ++e) {
-        sums[0] += m->F[e] - m->F[e];
+        sums[0] += m->F[e];
     }
-    for (e = 0; e + 1 < INS_GNSS21_NNZ_G; e += 2) {
-        sums[0] += m->G[e] - m->G[e];
-        sums[1] += m->G[e + 1] - m->G[e + 1];
+    for (e = 0; e + 3 < INS_GNSS21_NNZ_G; e += 4) {
+        sums[0] += m->G[e];
+        sums[1] += m->G[e + 1];
+        sums[2] += m->G[e + 2];
+        sums[3] += m->G[e + 3];
     }
     for (; e < INS_GNSS21_NNZ_G; ++e) {
-        sums[0] += m->G[e] - m->G[e];
+        sums[0] += m->G[e];
     }
-    for (e = 0; e + 1 < INS_GNSS21_N_NOISES; e += 2) {
-        sums[0] += m->q[e] - m->q[e];
-        sums[1] += m->q[e + 1] - m->q[e + 1];
+    for (e = 0; e + 3 < INS_GNSS21_N_NOISES; e += 4) {
+        sums[0] += m->q[e];
+        sums[1] += m->q[e + 1];
+        sums[2] += m->q[e + 2];
+        sums[3] += m->q[e + 3];
     }
     for (; e < INS_GNSS21_N_NOISES; ++e) {
-        sums[0] += m->q[e] - m->q[e];
+        sums[0] += m->q[e];
     }
-    if (sums[0] + sums[1] != 0.0) {
-        return INS_GNSS21_ERR_NONFINITE;
+    sums[0] = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    if (sums[0] - sums[0] != 0.0) {
+        for (e = 0; e < INS_GNSS21_NNZ_F; ++e) {
+            if (!isfinite(m->F[e])) {
+                return INS_GNSS21_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < INS_GNSS21_NNZ_G; ++e) {
+            if (!isfinite(m->G[e])) {
+                return INS_GNSS21_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < INS_GNSS21_N_NOISES; ++e) {
+            if (!isfinite(m->q[e])) {
+                return INS_GNSS21_ERR_NONFINITE;
+            }
+        }
     }
+
     for (c = 0; c < INS_GNSS21_N_NOISES; ++c) {
         if (m->q[c] < 0.0) {
             return INS_GNSS21_ERR_NOT_POSITIVE;
@@ -3266,7 +3354,15 @@ int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scal
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
-    check += process_noise(m, t, w, T);
+    qd_check = process_noise(m, t, w, T);
+    if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
+            entry */
+        qd_check = 0.0;
+        for (e = 0; e < INS_GNSS21_N_PACKED; ++e) {
+            qd_check += t->Qd[e] - t->Qd[e];
+        }
+    }
+    check += qd_check;
     return (check != 0.0) ? INS_GNSS21_ERR_NONFINITE : INS_GNSS21_OK;
 }
 
@@ -3353,8 +3449,85 @@ void ins_gnss21_reset_error_state(ins_gnss21_filter *f)
     }
 }
 
-static void phi_times_p_row_0(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+/* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
+INS_GNSS21_BLOCK void state_predict(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t,
+                ins_gnss21_filter_scratch *restrict w)
+{
+    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
+            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[6] + t->Phi[7]*f->x[7] +
+            t->Phi[8]*f->x[8] + t->Phi[9]*f->x[9] + t->Phi[10]*f->x[10] + t->Phi[11]*f->x[11] +
+            t->Phi[12]*f->x[12] + t->Phi[13]*f->x[13] + t->Phi[14]*f->x[14] + t->Phi[15]*f->x[15] +
+            t->Phi[16]*f->x[16] + t->Phi[17]*f->x[17] + t->Phi[18]*f->x[18] + t->Phi[19]*f->x[19] +
+            t->Phi[20]*f->x[20];
+    w->xn[1] = t->Phi[21]*f->x[0] + t->Phi[22]*f->x[1] + t->Phi[23]*f->x[2] + t->Phi[24]*f->x[3] +
+            t->Phi[25]*f->x[4] + t->Phi[26]*f->x[5] + t->Phi[27]*f->x[6] + t->Phi[28]*f->x[7] +
+            t->Phi[29]*f->x[8] + t->Phi[30]*f->x[9] + t->Phi[31]*f->x[10] + t->Phi[32]*f->x[11] +
+            t->Phi[33]*f->x[12] + t->Phi[34]*f->x[13] + t->Phi[35]*f->x[14] + t->Phi[36]*f->x[15] +
+            t->Phi[37]*f->x[16] + t->Phi[38]*f->x[17] + t->Phi[39]*f->x[18] + t->Phi[40]*f->x[19] +
+            t->Phi[41]*f->x[20];
+    w->xn[2] = t->Phi[42]*f->x[0] + t->Phi[43]*f->x[1] + t->Phi[44]*f->x[2] + t->Phi[45]*f->x[3] +
+            t->Phi[46]*f->x[4] + t->Phi[47]*f->x[5] + t->Phi[48]*f->x[6] + t->Phi[49]*f->x[7] +
+            t->Phi[50]*f->x[8] + t->Phi[51]*f->x[9] + t->Phi[52]*f->x[10] + t->Phi[53]*f->x[11] +
+            t->Phi[54]*f->x[12] + t->Phi[55]*f->x[13] + t->Phi[56]*f->x[14] + t->Phi[57]*f->x[15] +
+            t->Phi[58]*f->x[16] + t->Phi[59]*f->x[17] + t->Phi[60]*f->x[18] + t->Phi[61]*f->x[19] +
+            t->Phi[62]*f->x[20];
+    w->xn[3] = t->Phi[63]*f->x[0] + t->Phi[64]*f->x[1] + t->Phi[65]*f->x[2] + t->Phi[66]*f->x[3] +
+            t->Phi[67]*f->x[4] + t->Phi[68]*f->x[5] + t->Phi[69]*f->x[6] + t->Phi[70]*f->x[7] +
+            t->Phi[71]*f->x[8] + t->Phi[72]*f->x[9] + t->Phi[73]*f->x[10] + t->Phi[74]*f->x[11] +
+            t->Phi[75]*f->x[12] + t->Phi[76]*f->x[13] + t->Phi[77]*f->x[14] + t->Phi[78]*f->x[15] +
+            t->Phi[79]*f->x[16] + t->Phi[80]*f->x[17] + t->Phi[81]*f->x[18] + t->Phi[82]*f->x[19] +
+            t->Phi[83]*f->x[20];
+    w->xn[4] = t->Phi[84]*f->x[0] + t->Phi[85]*f->x[1] + t->Phi[86]*f->x[2] + t->Phi[87]*f->x[3] +
+            t->Phi[88]*f->x[4] + t->Phi[89]*f->x[5] + t->Phi[90]*f->x[6] + t->Phi[91]*f->x[7] +
+            t->Phi[92]*f->x[8] + t->Phi[93]*f->x[9] + t->Phi[94]*f->x[10] + t->Phi[95]*f->x[11] +
+            t->Phi[96]*f->x[12] + t->Phi[97]*f->x[13] + t->Phi[98]*f->x[14] + t->Phi[99]*f->x[15] +
+            t->Phi[100]*f->x[16] + t->Phi[101]*f->x[17] + t->Phi[102]*f->x[18] +
+            t->Phi[103]*f->x[19] + t->Phi[104]*f->x[20];
+    w->xn[5] = t->Phi[105]*f->x[0] + t->Phi[106]*f->x[1] + t->Phi[107]*f->x[2] + t->Phi[108]*f->x[3]
+            + t->Phi[109]*f->x[4] + t->Phi[110]*f->x[5] + t->Phi[111]*f->x[6] + t->Phi[112]*f->x[7]
+            + t->Phi[113]*f->x[8] + t->Phi[114]*f->x[9] + t->Phi[115]*f->x[10] +
+            t->Phi[116]*f->x[11] + t->Phi[117]*f->x[12] + t->Phi[118]*f->x[13] +
+            t->Phi[119]*f->x[14] + t->Phi[120]*f->x[15] + t->Phi[121]*f->x[16] +
+            t->Phi[122]*f->x[17] + t->Phi[123]*f->x[18] + t->Phi[124]*f->x[19] +
+            t->Phi[125]*f->x[20];
+    w->xn[6] = t->Phi[126]*f->x[0] + t->Phi[127]*f->x[1] + t->Phi[128]*f->x[2] + t->Phi[129]*f->x[3]
+            + t->Phi[130]*f->x[4] + t->Phi[131]*f->x[5] + t->Phi[132]*f->x[6] + t->Phi[133]*f->x[7]
+            + t->Phi[134]*f->x[8] + t->Phi[135]*f->x[9] + t->Phi[136]*f->x[10] +
+            t->Phi[137]*f->x[11] + t->Phi[138]*f->x[12] + t->Phi[139]*f->x[13] +
+            t->Phi[140]*f->x[14] + t->Phi[141]*f->x[15] + t->Phi[142]*f->x[16] +
+            t->Phi[143]*f->x[17] + t->Phi[144]*f->x[18] + t->Phi[145]*f->x[19] +
+            t->Phi[146]*f->x[20];
+    w->xn[7] = t->Phi[147]*f->x[0] + t->Phi[148]*f->x[1] + t->Phi[149]*f->x[2] + t->Phi[150]*f->x[3]
+            + t->Phi[151]*f->x[4] + t->Phi[152]*f->x[5] + t->Phi[153]*f->x[6] + t->Phi[154]*f->x[7]
+            + t->Phi[155]*f->x[8] + t->Phi[156]*f->x[9] + t->Phi[157]*f->x[10] +
+            t->Phi[158]*f->x[11] + t->Phi[159]*f->x[12] + t->Phi[160]*f->x[13] +
+            t->Phi[161]*f->x[14] + t->Phi[162]*f->x[15] + t->Phi[163]*f->x[16] +
+            t->Phi[164]*f->x[17] + t->Phi[165]*f->x[18] + t->Phi[166]*f->x[19] +
+            t->Phi[167]*f->x[20];
+    w->xn[8] = t->Phi[168]*f->x[0] + t->Phi[169]*f->x[1] + t->Phi[170]*f->x[2] + t->Phi[171]*f->x[3]
+            + t->Phi[172]*f->x[4] + t->Phi[173]*f->x[5] + t->Phi[174]*f->x[6] + t->Phi[175]*f->x[7]
+            + t->Phi[176]*f->x[8] + t->Phi[177]*f->x[9] + t->Phi[178]*f->x[10] +
+            t->Phi[179]*f->x[11] + t->Phi[180]*f->x[12] + t->Phi[181]*f->x[13] +
+            t->Phi[182]*f->x[14] + t->Phi[183]*f->x[15] + t->Phi[184]*f->x[16] +
+            t->Phi[185]*f->x[17] + t->Phi[186]*f->x[18] + t->Phi[187]*f->x[19] +
+            t->Phi[188]*f->x[20];
+    w->xn[9] = t->Phi[189]*f->x[9];
+    w->xn[10] = t->Phi[190]*f->x[10];
+    w->xn[11] = t->Phi[191]*f->x[11];
+    w->xn[12] = t->Phi[192]*f->x[12];
+    w->xn[13] = t->Phi[193]*f->x[13];
+    w->xn[14] = t->Phi[194]*f->x[14];
+    w->xn[15] = t->Phi[195]*f->x[15];
+    w->xn[16] = t->Phi[196]*f->x[16];
+    w->xn[17] = t->Phi[197]*f->x[17];
+    w->xn[18] = t->Phi[198]*f->x[18];
+    w->xn[19] = t->Phi[199]*f->x[19];
+    w->xn[20] = t->Phi[200]*f->x[20];
+}
+
+INS_GNSS21_BLOCK void phi_times_p_row_0(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
             t->Phi[3]*f->P[3][0] + t->Phi[4]*f->P[4][0] + t->Phi[5]*f->P[5][0] +
@@ -3505,8 +3678,9 @@ static void phi_times_p_row_0(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[18]*f->P[18][20] + t->Phi[19]*f->P[19][20] + t->Phi[20]*f->P[20][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_0(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_0(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -3515,76 +3689,76 @@ static ins_gnss21_scalar propagate_row_0(const ins_gnss21_transition *restrict t
             w->M[8]*t->Phi[8] + w->M[9]*t->Phi[9] + w->M[10]*t->Phi[10] + w->M[11]*t->Phi[11] +
             w->M[12]*t->Phi[12] + w->M[13]*t->Phi[13] + w->M[14]*t->Phi[14] + w->M[15]*t->Phi[15] +
             w->M[16]*t->Phi[16] + w->M[17]*t->Phi[17] + w->M[18]*t->Phi[18] + w->M[19]*t->Phi[19] +
-            w->M[20]*t->Phi[20] + t->Qd[0]; w->Pn[0] = v; check += v - v;
+            w->M[20]*t->Phi[20] + t->Qd[0]; w->Pn[0] = v; check += v;
     v = w->M[0]*t->Phi[21] + w->M[1]*t->Phi[22] + w->M[2]*t->Phi[23] + w->M[3]*t->Phi[24] +
             w->M[4]*t->Phi[25] + w->M[5]*t->Phi[26] + w->M[6]*t->Phi[27] + w->M[7]*t->Phi[28] +
             w->M[8]*t->Phi[29] + w->M[9]*t->Phi[30] + w->M[10]*t->Phi[31] + w->M[11]*t->Phi[32] +
             w->M[12]*t->Phi[33] + w->M[13]*t->Phi[34] + w->M[14]*t->Phi[35] + w->M[15]*t->Phi[36] +
             w->M[16]*t->Phi[37] + w->M[17]*t->Phi[38] + w->M[18]*t->Phi[39] + w->M[19]*t->Phi[40] +
-            w->M[20]*t->Phi[41] + t->Qd[1]; w->Pn[1] = v; check += v - v;
+            w->M[20]*t->Phi[41] + t->Qd[1]; w->Pn[1] = v; check += v;
     v = w->M[0]*t->Phi[42] + w->M[1]*t->Phi[43] + w->M[2]*t->Phi[44] + w->M[3]*t->Phi[45] +
             w->M[4]*t->Phi[46] + w->M[5]*t->Phi[47] + w->M[6]*t->Phi[48] + w->M[7]*t->Phi[49] +
             w->M[8]*t->Phi[50] + w->M[9]*t->Phi[51] + w->M[10]*t->Phi[52] + w->M[11]*t->Phi[53] +
             w->M[12]*t->Phi[54] + w->M[13]*t->Phi[55] + w->M[14]*t->Phi[56] + w->M[15]*t->Phi[57] +
             w->M[16]*t->Phi[58] + w->M[17]*t->Phi[59] + w->M[18]*t->Phi[60] + w->M[19]*t->Phi[61] +
-            w->M[20]*t->Phi[62] + t->Qd[2]; w->Pn[2] = v; check += v - v;
+            w->M[20]*t->Phi[62] + t->Qd[2]; w->Pn[2] = v; check += v;
     v = w->M[0]*t->Phi[63] + w->M[1]*t->Phi[64] + w->M[2]*t->Phi[65] + w->M[3]*t->Phi[66] +
             w->M[4]*t->Phi[67] + w->M[5]*t->Phi[68] + w->M[6]*t->Phi[69] + w->M[7]*t->Phi[70] +
             w->M[8]*t->Phi[71] + w->M[9]*t->Phi[72] + w->M[10]*t->Phi[73] + w->M[11]*t->Phi[74] +
             w->M[12]*t->Phi[75] + w->M[13]*t->Phi[76] + w->M[14]*t->Phi[77] + w->M[15]*t->Phi[78] +
             w->M[16]*t->Phi[79] + w->M[17]*t->Phi[80] + w->M[18]*t->Phi[81] + w->M[19]*t->Phi[82] +
-            w->M[20]*t->Phi[83] + t->Qd[3]; w->Pn[3] = v; check += v - v;
+            w->M[20]*t->Phi[83] + t->Qd[3]; w->Pn[3] = v; check += v;
     v = w->M[0]*t->Phi[84] + w->M[1]*t->Phi[85] + w->M[2]*t->Phi[86] + w->M[3]*t->Phi[87] +
             w->M[4]*t->Phi[88] + w->M[5]*t->Phi[89] + w->M[6]*t->Phi[90] + w->M[7]*t->Phi[91] +
             w->M[8]*t->Phi[92] + w->M[9]*t->Phi[93] + w->M[10]*t->Phi[94] + w->M[11]*t->Phi[95] +
             w->M[12]*t->Phi[96] + w->M[13]*t->Phi[97] + w->M[14]*t->Phi[98] + w->M[15]*t->Phi[99] +
             w->M[16]*t->Phi[100] + w->M[17]*t->Phi[101] + w->M[18]*t->Phi[102] +
-            w->M[19]*t->Phi[103] + w->M[20]*t->Phi[104] + t->Qd[4]; w->Pn[4] = v; check += v - v;
+            w->M[19]*t->Phi[103] + w->M[20]*t->Phi[104] + t->Qd[4]; w->Pn[4] = v; check += v;
     v = w->M[0]*t->Phi[105] + w->M[1]*t->Phi[106] + w->M[2]*t->Phi[107] + w->M[3]*t->Phi[108] +
             w->M[4]*t->Phi[109] + w->M[5]*t->Phi[110] + w->M[6]*t->Phi[111] + w->M[7]*t->Phi[112] +
             w->M[8]*t->Phi[113] + w->M[9]*t->Phi[114] + w->M[10]*t->Phi[115] + w->M[11]*t->Phi[116]
             + w->M[12]*t->Phi[117] + w->M[13]*t->Phi[118] + w->M[14]*t->Phi[119] +
             w->M[15]*t->Phi[120] + w->M[16]*t->Phi[121] + w->M[17]*t->Phi[122] +
             w->M[18]*t->Phi[123] + w->M[19]*t->Phi[124] + w->M[20]*t->Phi[125] + t->Qd[5]; w->Pn[5]
-            = v; check += v - v;
+            = v; check += v;
     v = w->M[0]*t->Phi[126] + w->M[1]*t->Phi[127] + w->M[2]*t->Phi[128] + w->M[3]*t->Phi[129] +
             w->M[4]*t->Phi[130] + w->M[5]*t->Phi[131] + w->M[6]*t->Phi[132] + w->M[7]*t->Phi[133] +
             w->M[8]*t->Phi[134] + w->M[9]*t->Phi[135] + w->M[10]*t->Phi[136] + w->M[11]*t->Phi[137]
             + w->M[12]*t->Phi[138] + w->M[13]*t->Phi[139] + w->M[14]*t->Phi[140] +
             w->M[15]*t->Phi[141] + w->M[16]*t->Phi[142] + w->M[17]*t->Phi[143] +
             w->M[18]*t->Phi[144] + w->M[19]*t->Phi[145] + w->M[20]*t->Phi[146] + t->Qd[6]; w->Pn[6]
-            = v; check += v - v;
+            = v; check += v;
     v = w->M[0]*t->Phi[147] + w->M[1]*t->Phi[148] + w->M[2]*t->Phi[149] + w->M[3]*t->Phi[150] +
             w->M[4]*t->Phi[151] + w->M[5]*t->Phi[152] + w->M[6]*t->Phi[153] + w->M[7]*t->Phi[154] +
             w->M[8]*t->Phi[155] + w->M[9]*t->Phi[156] + w->M[10]*t->Phi[157] + w->M[11]*t->Phi[158]
             + w->M[12]*t->Phi[159] + w->M[13]*t->Phi[160] + w->M[14]*t->Phi[161] +
             w->M[15]*t->Phi[162] + w->M[16]*t->Phi[163] + w->M[17]*t->Phi[164] +
             w->M[18]*t->Phi[165] + w->M[19]*t->Phi[166] + w->M[20]*t->Phi[167] + t->Qd[7]; w->Pn[7]
-            = v; check += v - v;
+            = v; check += v;
     v = w->M[0]*t->Phi[168] + w->M[1]*t->Phi[169] + w->M[2]*t->Phi[170] + w->M[3]*t->Phi[171] +
             w->M[4]*t->Phi[172] + w->M[5]*t->Phi[173] + w->M[6]*t->Phi[174] + w->M[7]*t->Phi[175] +
             w->M[8]*t->Phi[176] + w->M[9]*t->Phi[177] + w->M[10]*t->Phi[178] + w->M[11]*t->Phi[179]
             + w->M[12]*t->Phi[180] + w->M[13]*t->Phi[181] + w->M[14]*t->Phi[182] +
             w->M[15]*t->Phi[183] + w->M[16]*t->Phi[184] + w->M[17]*t->Phi[185] +
             w->M[18]*t->Phi[186] + w->M[19]*t->Phi[187] + w->M[20]*t->Phi[188] + t->Qd[8]; w->Pn[8]
-            = v; check += v - v;
-    v = w->M[9]*t->Phi[189] + t->Qd[9]; w->Pn[9] = v; check += v - v;
-    v = w->M[10]*t->Phi[190] + t->Qd[10]; w->Pn[10] = v; check += v - v;
-    v = w->M[11]*t->Phi[191] + t->Qd[11]; w->Pn[11] = v; check += v - v;
-    v = w->M[12]*t->Phi[192] + t->Qd[12]; w->Pn[12] = v; check += v - v;
-    v = w->M[13]*t->Phi[193] + t->Qd[13]; w->Pn[13] = v; check += v - v;
-    v = w->M[14]*t->Phi[194] + t->Qd[14]; w->Pn[14] = v; check += v - v;
-    v = w->M[15]*t->Phi[195] + t->Qd[15]; w->Pn[15] = v; check += v - v;
-    v = w->M[16]*t->Phi[196] + t->Qd[16]; w->Pn[16] = v; check += v - v;
-    v = w->M[17]*t->Phi[197] + t->Qd[17]; w->Pn[17] = v; check += v - v;
-    v = w->M[18]*t->Phi[198] + t->Qd[18]; w->Pn[18] = v; check += v - v;
-    v = w->M[19]*t->Phi[199] + t->Qd[19]; w->Pn[19] = v; check += v - v;
-    v = w->M[20]*t->Phi[200] + t->Qd[20]; w->Pn[20] = v; check += v - v;
-    return check;
+            = v; check += v;
+    v = w->M[9]*t->Phi[189] + t->Qd[9]; w->Pn[9] = v; check += v;
+    v = w->M[10]*t->Phi[190] + t->Qd[10]; w->Pn[10] = v; check += v;
+    v = w->M[11]*t->Phi[191] + t->Qd[11]; w->Pn[11] = v; check += v;
+    v = w->M[12]*t->Phi[192] + t->Qd[12]; w->Pn[12] = v; check += v;
+    v = w->M[13]*t->Phi[193] + t->Qd[13]; w->Pn[13] = v; check += v;
+    v = w->M[14]*t->Phi[194] + t->Qd[14]; w->Pn[14] = v; check += v;
+    v = w->M[15]*t->Phi[195] + t->Qd[15]; w->Pn[15] = v; check += v;
+    v = w->M[16]*t->Phi[196] + t->Qd[16]; w->Pn[16] = v; check += v;
+    v = w->M[17]*t->Phi[197] + t->Qd[17]; w->Pn[17] = v; check += v;
+    v = w->M[18]*t->Phi[198] + t->Qd[18]; w->Pn[18] = v; check += v;
+    v = w->M[19]*t->Phi[199] + t->Qd[19]; w->Pn[19] = v; check += v;
+    v = w->M[20]*t->Phi[200] + t->Qd[20]; w->Pn[20] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_1(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_1(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[21]*f->P[0][0] + t->Phi[22]*f->P[1][0] + t->Phi[23]*f->P[2][0] +
             t->Phi[24]*f->P[3][0] + t->Phi[25]*f->P[4][0] + t->Phi[26]*f->P[5][0] +
@@ -3735,8 +3909,9 @@ static void phi_times_p_row_1(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[39]*f->P[18][20] + t->Phi[40]*f->P[19][20] + t->Phi[41]*f->P[20][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_1(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_1(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -3745,70 +3920,70 @@ static ins_gnss21_scalar propagate_row_1(const ins_gnss21_transition *restrict t
             w->M[8]*t->Phi[29] + w->M[9]*t->Phi[30] + w->M[10]*t->Phi[31] + w->M[11]*t->Phi[32] +
             w->M[12]*t->Phi[33] + w->M[13]*t->Phi[34] + w->M[14]*t->Phi[35] + w->M[15]*t->Phi[36] +
             w->M[16]*t->Phi[37] + w->M[17]*t->Phi[38] + w->M[18]*t->Phi[39] + w->M[19]*t->Phi[40] +
-            w->M[20]*t->Phi[41] + t->Qd[21]; w->Pn[21] = v; check += v - v;
+            w->M[20]*t->Phi[41] + t->Qd[21]; w->Pn[21] = v; check += v;
     v = w->M[0]*t->Phi[42] + w->M[1]*t->Phi[43] + w->M[2]*t->Phi[44] + w->M[3]*t->Phi[45] +
             w->M[4]*t->Phi[46] + w->M[5]*t->Phi[47] + w->M[6]*t->Phi[48] + w->M[7]*t->Phi[49] +
             w->M[8]*t->Phi[50] + w->M[9]*t->Phi[51] + w->M[10]*t->Phi[52] + w->M[11]*t->Phi[53] +
             w->M[12]*t->Phi[54] + w->M[13]*t->Phi[55] + w->M[14]*t->Phi[56] + w->M[15]*t->Phi[57] +
             w->M[16]*t->Phi[58] + w->M[17]*t->Phi[59] + w->M[18]*t->Phi[60] + w->M[19]*t->Phi[61] +
-            w->M[20]*t->Phi[62] + t->Qd[22]; w->Pn[22] = v; check += v - v;
+            w->M[20]*t->Phi[62] + t->Qd[22]; w->Pn[22] = v; check += v;
     v = w->M[0]*t->Phi[63] + w->M[1]*t->Phi[64] + w->M[2]*t->Phi[65] + w->M[3]*t->Phi[66] +
             w->M[4]*t->Phi[67] + w->M[5]*t->Phi[68] + w->M[6]*t->Phi[69] + w->M[7]*t->Phi[70] +
             w->M[8]*t->Phi[71] + w->M[9]*t->Phi[72] + w->M[10]*t->Phi[73] + w->M[11]*t->Phi[74] +
             w->M[12]*t->Phi[75] + w->M[13]*t->Phi[76] + w->M[14]*t->Phi[77] + w->M[15]*t->Phi[78] +
             w->M[16]*t->Phi[79] + w->M[17]*t->Phi[80] + w->M[18]*t->Phi[81] + w->M[19]*t->Phi[82] +
-            w->M[20]*t->Phi[83] + t->Qd[23]; w->Pn[23] = v; check += v - v;
+            w->M[20]*t->Phi[83] + t->Qd[23]; w->Pn[23] = v; check += v;
     v = w->M[0]*t->Phi[84] + w->M[1]*t->Phi[85] + w->M[2]*t->Phi[86] + w->M[3]*t->Phi[87] +
             w->M[4]*t->Phi[88] + w->M[5]*t->Phi[89] + w->M[6]*t->Phi[90] + w->M[7]*t->Phi[91] +
             w->M[8]*t->Phi[92] + w->M[9]*t->Phi[93] + w->M[10]*t->Phi[94] + w->M[11]*t->Phi[95] +
             w->M[12]*t->Phi[96] + w->M[13]*t->Phi[97] + w->M[14]*t->Phi[98] + w->M[15]*t->Phi[99] +
             w->M[16]*t->Phi[100] + w->M[17]*t->Phi[101] + w->M[18]*t->Phi[102] +
-            w->M[19]*t->Phi[103] + w->M[20]*t->Phi[104] + t->Qd[24]; w->Pn[24] = v; check += v - v;
+            w->M[19]*t->Phi[103] + w->M[20]*t->Phi[104] + t->Qd[24]; w->Pn[24] = v; check += v;
     v = w->M[0]*t->Phi[105] + w->M[1]*t->Phi[106] + w->M[2]*t->Phi[107] + w->M[3]*t->Phi[108] +
             w->M[4]*t->Phi[109] + w->M[5]*t->Phi[110] + w->M[6]*t->Phi[111] + w->M[7]*t->Phi[112] +
             w->M[8]*t->Phi[113] + w->M[9]*t->Phi[114] + w->M[10]*t->Phi[115] + w->M[11]*t->Phi[116]
             + w->M[12]*t->Phi[117] + w->M[13]*t->Phi[118] + w->M[14]*t->Phi[119] +
             w->M[15]*t->Phi[120] + w->M[16]*t->Phi[121] + w->M[17]*t->Phi[122] +
             w->M[18]*t->Phi[123] + w->M[19]*t->Phi[124] + w->M[20]*t->Phi[125] + t->Qd[25];
-            w->Pn[25] = v; check += v - v;
+            w->Pn[25] = v; check += v;
     v = w->M[0]*t->Phi[126] + w->M[1]*t->Phi[127] + w->M[2]*t->Phi[128] + w->M[3]*t->Phi[129] +
             w->M[4]*t->Phi[130] + w->M[5]*t->Phi[131] + w->M[6]*t->Phi[132] + w->M[7]*t->Phi[133] +
             w->M[8]*t->Phi[134] + w->M[9]*t->Phi[135] + w->M[10]*t->Phi[136] + w->M[11]*t->Phi[137]
             + w->M[12]*t->Phi[138] + w->M[13]*t->Phi[139] + w->M[14]*t->Phi[140] +
             w->M[15]*t->Phi[141] + w->M[16]*t->Phi[142] + w->M[17]*t->Phi[143] +
             w->M[18]*t->Phi[144] + w->M[19]*t->Phi[145] + w->M[20]*t->Phi[146] + t->Qd[26];
-            w->Pn[26] = v; check += v - v;
+            w->Pn[26] = v; check += v;
     v = w->M[0]*t->Phi[147] + w->M[1]*t->Phi[148] + w->M[2]*t->Phi[149] + w->M[3]*t->Phi[150] +
             w->M[4]*t->Phi[151] + w->M[5]*t->Phi[152] + w->M[6]*t->Phi[153] + w->M[7]*t->Phi[154] +
             w->M[8]*t->Phi[155] + w->M[9]*t->Phi[156] + w->M[10]*t->Phi[157] + w->M[11]*t->Phi[158]
             + w->M[12]*t->Phi[159] + w->M[13]*t->Phi[160] + w->M[14]*t->Phi[161] +
             w->M[15]*t->Phi[162] + w->M[16]*t->Phi[163] + w->M[17]*t->Phi[164] +
             w->M[18]*t->Phi[165] + w->M[19]*t->Phi[166] + w->M[20]*t->Phi[167] + t->Qd[27];
-            w->Pn[27] = v; check += v - v;
+            w->Pn[27] = v; check += v;
     v = w->M[0]*t->Phi[168] + w->M[1]*t->Phi[169] + w->M[2]*t->Phi[170] + w->M[3]*t->Phi[171] +
             w->M[4]*t->Phi[172] + w->M[5]*t->Phi[173] + w->M[6]*t->Phi[174] + w->M[7]*t->Phi[175] +
             w->M[8]*t->Phi[176] + w->M[9]*t->Phi[177] + w->M[10]*t->Phi[178] + w->M[11]*t->Phi[179]
             + w->M[12]*t->Phi[180] + w->M[13]*t->Phi[181] + w->M[14]*t->Phi[182] +
             w->M[15]*t->Phi[183] + w->M[16]*t->Phi[184] + w->M[17]*t->Phi[185] +
             w->M[18]*t->Phi[186] + w->M[19]*t->Phi[187] + w->M[20]*t->Phi[188] + t->Qd[28];
-            w->Pn[28] = v; check += v - v;
-    v = w->M[9]*t->Phi[189] + t->Qd[29]; w->Pn[29] = v; check += v - v;
-    v = w->M[10]*t->Phi[190] + t->Qd[30]; w->Pn[30] = v; check += v - v;
-    v = w->M[11]*t->Phi[191] + t->Qd[31]; w->Pn[31] = v; check += v - v;
-    v = w->M[12]*t->Phi[192] + t->Qd[32]; w->Pn[32] = v; check += v - v;
-    v = w->M[13]*t->Phi[193] + t->Qd[33]; w->Pn[33] = v; check += v - v;
-    v = w->M[14]*t->Phi[194] + t->Qd[34]; w->Pn[34] = v; check += v - v;
-    v = w->M[15]*t->Phi[195] + t->Qd[35]; w->Pn[35] = v; check += v - v;
-    v = w->M[16]*t->Phi[196] + t->Qd[36]; w->Pn[36] = v; check += v - v;
-    v = w->M[17]*t->Phi[197] + t->Qd[37]; w->Pn[37] = v; check += v - v;
-    v = w->M[18]*t->Phi[198] + t->Qd[38]; w->Pn[38] = v; check += v - v;
-    v = w->M[19]*t->Phi[199] + t->Qd[39]; w->Pn[39] = v; check += v - v;
-    v = w->M[20]*t->Phi[200] + t->Qd[40]; w->Pn[40] = v; check += v - v;
-    return check;
+            w->Pn[28] = v; check += v;
+    v = w->M[9]*t->Phi[189] + t->Qd[29]; w->Pn[29] = v; check += v;
+    v = w->M[10]*t->Phi[190] + t->Qd[30]; w->Pn[30] = v; check += v;
+    v = w->M[11]*t->Phi[191] + t->Qd[31]; w->Pn[31] = v; check += v;
+    v = w->M[12]*t->Phi[192] + t->Qd[32]; w->Pn[32] = v; check += v;
+    v = w->M[13]*t->Phi[193] + t->Qd[33]; w->Pn[33] = v; check += v;
+    v = w->M[14]*t->Phi[194] + t->Qd[34]; w->Pn[34] = v; check += v;
+    v = w->M[15]*t->Phi[195] + t->Qd[35]; w->Pn[35] = v; check += v;
+    v = w->M[16]*t->Phi[196] + t->Qd[36]; w->Pn[36] = v; check += v;
+    v = w->M[17]*t->Phi[197] + t->Qd[37]; w->Pn[37] = v; check += v;
+    v = w->M[18]*t->Phi[198] + t->Qd[38]; w->Pn[38] = v; check += v;
+    v = w->M[19]*t->Phi[199] + t->Qd[39]; w->Pn[39] = v; check += v;
+    v = w->M[20]*t->Phi[200] + t->Qd[40]; w->Pn[40] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_2(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_2(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[42]*f->P[0][0] + t->Phi[43]*f->P[1][0] + t->Phi[44]*f->P[2][0] +
             t->Phi[45]*f->P[3][0] + t->Phi[46]*f->P[4][0] + t->Phi[47]*f->P[5][0] +
@@ -3959,8 +4134,9 @@ static void phi_times_p_row_2(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[60]*f->P[18][20] + t->Phi[61]*f->P[19][20] + t->Phi[62]*f->P[20][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_2(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_2(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -3969,64 +4145,64 @@ static ins_gnss21_scalar propagate_row_2(const ins_gnss21_transition *restrict t
             w->M[8]*t->Phi[50] + w->M[9]*t->Phi[51] + w->M[10]*t->Phi[52] + w->M[11]*t->Phi[53] +
             w->M[12]*t->Phi[54] + w->M[13]*t->Phi[55] + w->M[14]*t->Phi[56] + w->M[15]*t->Phi[57] +
             w->M[16]*t->Phi[58] + w->M[17]*t->Phi[59] + w->M[18]*t->Phi[60] + w->M[19]*t->Phi[61] +
-            w->M[20]*t->Phi[62] + t->Qd[41]; w->Pn[41] = v; check += v - v;
+            w->M[20]*t->Phi[62] + t->Qd[41]; w->Pn[41] = v; check += v;
     v = w->M[0]*t->Phi[63] + w->M[1]*t->Phi[64] + w->M[2]*t->Phi[65] + w->M[3]*t->Phi[66] +
             w->M[4]*t->Phi[67] + w->M[5]*t->Phi[68] + w->M[6]*t->Phi[69] + w->M[7]*t->Phi[70] +
             w->M[8]*t->Phi[71] + w->M[9]*t->Phi[72] + w->M[10]*t->Phi[73] + w->M[11]*t->Phi[74] +
             w->M[12]*t->Phi[75] + w->M[13]*t->Phi[76] + w->M[14]*t->Phi[77] + w->M[15]*t->Phi[78] +
             w->M[16]*t->Phi[79] + w->M[17]*t->Phi[80] + w->M[18]*t->Phi[81] + w->M[19]*t->Phi[82] +
-            w->M[20]*t->Phi[83] + t->Qd[42]; w->Pn[42] = v; check += v - v;
+            w->M[20]*t->Phi[83] + t->Qd[42]; w->Pn[42] = v; check += v;
     v = w->M[0]*t->Phi[84] + w->M[1]*t->Phi[85] + w->M[2]*t->Phi[86] + w->M[3]*t->Phi[87] +
             w->M[4]*t->Phi[88] + w->M[5]*t->Phi[89] + w->M[6]*t->Phi[90] + w->M[7]*t->Phi[91] +
             w->M[8]*t->Phi[92] + w->M[9]*t->Phi[93] + w->M[10]*t->Phi[94] + w->M[11]*t->Phi[95] +
             w->M[12]*t->Phi[96] + w->M[13]*t->Phi[97] + w->M[14]*t->Phi[98] + w->M[15]*t->Phi[99] +
             w->M[16]*t->Phi[100] + w->M[17]*t->Phi[101] + w->M[18]*t->Phi[102] +
-            w->M[19]*t->Phi[103] + w->M[20]*t->Phi[104] + t->Qd[43]; w->Pn[43] = v; check += v - v;
+            w->M[19]*t->Phi[103] + w->M[20]*t->Phi[104] + t->Qd[43]; w->Pn[43] = v; check += v;
     v = w->M[0]*t->Phi[105] + w->M[1]*t->Phi[106] + w->M[2]*t->Phi[107] + w->M[3]*t->Phi[108] +
             w->M[4]*t->Phi[109] + w->M[5]*t->Phi[110] + w->M[6]*t->Phi[111] + w->M[7]*t->Phi[112] +
             w->M[8]*t->Phi[113] + w->M[9]*t->Phi[114] + w->M[10]*t->Phi[115] + w->M[11]*t->Phi[116]
             + w->M[12]*t->Phi[117] + w->M[13]*t->Phi[118] + w->M[14]*t->Phi[119] +
             w->M[15]*t->Phi[120] + w->M[16]*t->Phi[121] + w->M[17]*t->Phi[122] +
             w->M[18]*t->Phi[123] + w->M[19]*t->Phi[124] + w->M[20]*t->Phi[125] + t->Qd[44];
-            w->Pn[44] = v; check += v - v;
+            w->Pn[44] = v; check += v;
     v = w->M[0]*t->Phi[126] + w->M[1]*t->Phi[127] + w->M[2]*t->Phi[128] + w->M[3]*t->Phi[129] +
             w->M[4]*t->Phi[130] + w->M[5]*t->Phi[131] + w->M[6]*t->Phi[132] + w->M[7]*t->Phi[133] +
             w->M[8]*t->Phi[134] + w->M[9]*t->Phi[135] + w->M[10]*t->Phi[136] + w->M[11]*t->Phi[137]
             + w->M[12]*t->Phi[138] + w->M[13]*t->Phi[139] + w->M[14]*t->Phi[140] +
             w->M[15]*t->Phi[141] + w->M[16]*t->Phi[142] + w->M[17]*t->Phi[143] +
             w->M[18]*t->Phi[144] + w->M[19]*t->Phi[145] + w->M[20]*t->Phi[146] + t->Qd[45];
-            w->Pn[45] = v; check += v - v;
+            w->Pn[45] = v; check += v;
     v = w->M[0]*t->Phi[147] + w->M[1]*t->Phi[148] + w->M[2]*t->Phi[149] + w->M[3]*t->Phi[150] +
             w->M[4]*t->Phi[151] + w->M[5]*t->Phi[152] + w->M[6]*t->Phi[153] + w->M[7]*t->Phi[154] +
             w->M[8]*t->Phi[155] + w->M[9]*t->Phi[156] + w->M[10]*t->Phi[157] + w->M[11]*t->Phi[158]
             + w->M[12]*t->Phi[159] + w->M[13]*t->Phi[160] + w->M[14]*t->Phi[161] +
             w->M[15]*t->Phi[162] + w->M[16]*t->Phi[163] + w->M[17]*t->Phi[164] +
             w->M[18]*t->Phi[165] + w->M[19]*t->Phi[166] + w->M[20]*t->Phi[167] + t->Qd[46];
-            w->Pn[46] = v; check += v - v;
+            w->Pn[46] = v; check += v;
     v = w->M[0]*t->Phi[168] + w->M[1]*t->Phi[169] + w->M[2]*t->Phi[170] + w->M[3]*t->Phi[171] +
             w->M[4]*t->Phi[172] + w->M[5]*t->Phi[173] + w->M[6]*t->Phi[174] + w->M[7]*t->Phi[175] +
             w->M[8]*t->Phi[176] + w->M[9]*t->Phi[177] + w->M[10]*t->Phi[178] + w->M[11]*t->Phi[179]
             + w->M[12]*t->Phi[180] + w->M[13]*t->Phi[181] + w->M[14]*t->Phi[182] +
             w->M[15]*t->Phi[183] + w->M[16]*t->Phi[184] + w->M[17]*t->Phi[185] +
             w->M[18]*t->Phi[186] + w->M[19]*t->Phi[187] + w->M[20]*t->Phi[188] + t->Qd[47];
-            w->Pn[47] = v; check += v - v;
-    v = w->M[9]*t->Phi[189] + t->Qd[48]; w->Pn[48] = v; check += v - v;
-    v = w->M[10]*t->Phi[190] + t->Qd[49]; w->Pn[49] = v; check += v - v;
-    v = w->M[11]*t->Phi[191] + t->Qd[50]; w->Pn[50] = v; check += v - v;
-    v = w->M[12]*t->Phi[192] + t->Qd[51]; w->Pn[51] = v; check += v - v;
-    v = w->M[13]*t->Phi[193] + t->Qd[52]; w->Pn[52] = v; check += v - v;
-    v = w->M[14]*t->Phi[194] + t->Qd[53]; w->Pn[53] = v; check += v - v;
-    v = w->M[15]*t->Phi[195] + t->Qd[54]; w->Pn[54] = v; check += v - v;
-    v = w->M[16]*t->Phi[196] + t->Qd[55]; w->Pn[55] = v; check += v - v;
-    v = w->M[17]*t->Phi[197] + t->Qd[56]; w->Pn[56] = v; check += v - v;
-    v = w->M[18]*t->Phi[198] + t->Qd[57]; w->Pn[57] = v; check += v - v;
-    v = w->M[19]*t->Phi[199] + t->Qd[58]; w->Pn[58] = v; check += v - v;
-    v = w->M[20]*t->Phi[200] + t->Qd[59]; w->Pn[59] = v; check += v - v;
-    return check;
+            w->Pn[47] = v; check += v;
+    v = w->M[9]*t->Phi[189] + t->Qd[48]; w->Pn[48] = v; check += v;
+    v = w->M[10]*t->Phi[190] + t->Qd[49]; w->Pn[49] = v; check += v;
+    v = w->M[11]*t->Phi[191] + t->Qd[50]; w->Pn[50] = v; check += v;
+    v = w->M[12]*t->Phi[192] + t->Qd[51]; w->Pn[51] = v; check += v;
+    v = w->M[13]*t->Phi[193] + t->Qd[52]; w->Pn[52] = v; check += v;
+    v = w->M[14]*t->Phi[194] + t->Qd[53]; w->Pn[53] = v; check += v;
+    v = w->M[15]*t->Phi[195] + t->Qd[54]; w->Pn[54] = v; check += v;
+    v = w->M[16]*t->Phi[196] + t->Qd[55]; w->Pn[55] = v; check += v;
+    v = w->M[17]*t->Phi[197] + t->Qd[56]; w->Pn[56] = v; check += v;
+    v = w->M[18]*t->Phi[198] + t->Qd[57]; w->Pn[57] = v; check += v;
+    v = w->M[19]*t->Phi[199] + t->Qd[58]; w->Pn[58] = v; check += v;
+    v = w->M[20]*t->Phi[200] + t->Qd[59]; w->Pn[59] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_3(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_3(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[63]*f->P[0][0] + t->Phi[64]*f->P[1][0] + t->Phi[65]*f->P[2][0] +
             t->Phi[66]*f->P[3][0] + t->Phi[67]*f->P[4][0] + t->Phi[68]*f->P[5][0] +
@@ -4177,8 +4353,9 @@ static void phi_times_p_row_3(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[81]*f->P[18][20] + t->Phi[82]*f->P[19][20] + t->Phi[83]*f->P[20][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_3(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_3(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -4187,58 +4364,58 @@ static ins_gnss21_scalar propagate_row_3(const ins_gnss21_transition *restrict t
             w->M[8]*t->Phi[71] + w->M[9]*t->Phi[72] + w->M[10]*t->Phi[73] + w->M[11]*t->Phi[74] +
             w->M[12]*t->Phi[75] + w->M[13]*t->Phi[76] + w->M[14]*t->Phi[77] + w->M[15]*t->Phi[78] +
             w->M[16]*t->Phi[79] + w->M[17]*t->Phi[80] + w->M[18]*t->Phi[81] + w->M[19]*t->Phi[82] +
-            w->M[20]*t->Phi[83] + t->Qd[60]; w->Pn[60] = v; check += v - v;
+            w->M[20]*t->Phi[83] + t->Qd[60]; w->Pn[60] = v; check += v;
     v = w->M[0]*t->Phi[84] + w->M[1]*t->Phi[85] + w->M[2]*t->Phi[86] + w->M[3]*t->Phi[87] +
             w->M[4]*t->Phi[88] + w->M[5]*t->Phi[89] + w->M[6]*t->Phi[90] + w->M[7]*t->Phi[91] +
             w->M[8]*t->Phi[92] + w->M[9]*t->Phi[93] + w->M[10]*t->Phi[94] + w->M[11]*t->Phi[95] +
             w->M[12]*t->Phi[96] + w->M[13]*t->Phi[97] + w->M[14]*t->Phi[98] + w->M[15]*t->Phi[99] +
             w->M[16]*t->Phi[100] + w->M[17]*t->Phi[101] + w->M[18]*t->Phi[102] +
-            w->M[19]*t->Phi[103] + w->M[20]*t->Phi[104] + t->Qd[61]; w->Pn[61] = v; check += v - v;
+            w->M[19]*t->Phi[103] + w->M[20]*t->Phi[104] + t->Qd[61]; w->Pn[61] = v; check += v;
     v = w->M[0]*t->Phi[105] + w->M[1]*t->Phi[106] + w->M[2]*t->Phi[107] + w->M[3]*t->Phi[108] +
             w->M[4]*t->Phi[109] + w->M[5]*t->Phi[110] + w->M[6]*t->Phi[111] + w->M[7]*t->Phi[112] +
             w->M[8]*t->Phi[113] + w->M[9]*t->Phi[114] + w->M[10]*t->Phi[115] + w->M[11]*t->Phi[116]
             + w->M[12]*t->Phi[117] + w->M[13]*t->Phi[118] + w->M[14]*t->Phi[119] +
             w->M[15]*t->Phi[120] + w->M[16]*t->Phi[121] + w->M[17]*t->Phi[122] +
             w->M[18]*t->Phi[123] + w->M[19]*t->Phi[124] + w->M[20]*t->Phi[125] + t->Qd[62];
-            w->Pn[62] = v; check += v - v;
+            w->Pn[62] = v; check += v;
     v = w->M[0]*t->Phi[126] + w->M[1]*t->Phi[127] + w->M[2]*t->Phi[128] + w->M[3]*t->Phi[129] +
             w->M[4]*t->Phi[130] + w->M[5]*t->Phi[131] + w->M[6]*t->Phi[132] + w->M[7]*t->Phi[133] +
             w->M[8]*t->Phi[134] + w->M[9]*t->Phi[135] + w->M[10]*t->Phi[136] + w->M[11]*t->Phi[137]
             + w->M[12]*t->Phi[138] + w->M[13]*t->Phi[139] + w->M[14]*t->Phi[140] +
             w->M[15]*t->Phi[141] + w->M[16]*t->Phi[142] + w->M[17]*t->Phi[143] +
             w->M[18]*t->Phi[144] + w->M[19]*t->Phi[145] + w->M[20]*t->Phi[146] + t->Qd[63];
-            w->Pn[63] = v; check += v - v;
+            w->Pn[63] = v; check += v;
     v = w->M[0]*t->Phi[147] + w->M[1]*t->Phi[148] + w->M[2]*t->Phi[149] + w->M[3]*t->Phi[150] +
             w->M[4]*t->Phi[151] + w->M[5]*t->Phi[152] + w->M[6]*t->Phi[153] + w->M[7]*t->Phi[154] +
             w->M[8]*t->Phi[155] + w->M[9]*t->Phi[156] + w->M[10]*t->Phi[157] + w->M[11]*t->Phi[158]
             + w->M[12]*t->Phi[159] + w->M[13]*t->Phi[160] + w->M[14]*t->Phi[161] +
             w->M[15]*t->Phi[162] + w->M[16]*t->Phi[163] + w->M[17]*t->Phi[164] +
             w->M[18]*t->Phi[165] + w->M[19]*t->Phi[166] + w->M[20]*t->Phi[167] + t->Qd[64];
-            w->Pn[64] = v; check += v - v;
+            w->Pn[64] = v; check += v;
     v = w->M[0]*t->Phi[168] + w->M[1]*t->Phi[169] + w->M[2]*t->Phi[170] + w->M[3]*t->Phi[171] +
             w->M[4]*t->Phi[172] + w->M[5]*t->Phi[173] + w->M[6]*t->Phi[174] + w->M[7]*t->Phi[175] +
             w->M[8]*t->Phi[176] + w->M[9]*t->Phi[177] + w->M[10]*t->Phi[178] + w->M[11]*t->Phi[179]
             + w->M[12]*t->Phi[180] + w->M[13]*t->Phi[181] + w->M[14]*t->Phi[182] +
             w->M[15]*t->Phi[183] + w->M[16]*t->Phi[184] + w->M[17]*t->Phi[185] +
             w->M[18]*t->Phi[186] + w->M[19]*t->Phi[187] + w->M[20]*t->Phi[188] + t->Qd[65];
-            w->Pn[65] = v; check += v - v;
-    v = w->M[9]*t->Phi[189] + t->Qd[66]; w->Pn[66] = v; check += v - v;
-    v = w->M[10]*t->Phi[190] + t->Qd[67]; w->Pn[67] = v; check += v - v;
-    v = w->M[11]*t->Phi[191] + t->Qd[68]; w->Pn[68] = v; check += v - v;
-    v = w->M[12]*t->Phi[192] + t->Qd[69]; w->Pn[69] = v; check += v - v;
-    v = w->M[13]*t->Phi[193] + t->Qd[70]; w->Pn[70] = v; check += v - v;
-    v = w->M[14]*t->Phi[194] + t->Qd[71]; w->Pn[71] = v; check += v - v;
-    v = w->M[15]*t->Phi[195] + t->Qd[72]; w->Pn[72] = v; check += v - v;
-    v = w->M[16]*t->Phi[196] + t->Qd[73]; w->Pn[73] = v; check += v - v;
-    v = w->M[17]*t->Phi[197] + t->Qd[74]; w->Pn[74] = v; check += v - v;
-    v = w->M[18]*t->Phi[198] + t->Qd[75]; w->Pn[75] = v; check += v - v;
-    v = w->M[19]*t->Phi[199] + t->Qd[76]; w->Pn[76] = v; check += v - v;
-    v = w->M[20]*t->Phi[200] + t->Qd[77]; w->Pn[77] = v; check += v - v;
-    return check;
+            w->Pn[65] = v; check += v;
+    v = w->M[9]*t->Phi[189] + t->Qd[66]; w->Pn[66] = v; check += v;
+    v = w->M[10]*t->Phi[190] + t->Qd[67]; w->Pn[67] = v; check += v;
+    v = w->M[11]*t->Phi[191] + t->Qd[68]; w->Pn[68] = v; check += v;
+    v = w->M[12]*t->Phi[192] + t->Qd[69]; w->Pn[69] = v; check += v;
+    v = w->M[13]*t->Phi[193] + t->Qd[70]; w->Pn[70] = v; check += v;
+    v = w->M[14]*t->Phi[194] + t->Qd[71]; w->Pn[71] = v; check += v;
+    v = w->M[15]*t->Phi[195] + t->Qd[72]; w->Pn[72] = v; check += v;
+    v = w->M[16]*t->Phi[196] + t->Qd[73]; w->Pn[73] = v; check += v;
+    v = w->M[17]*t->Phi[197] + t->Qd[74]; w->Pn[74] = v; check += v;
+    v = w->M[18]*t->Phi[198] + t->Qd[75]; w->Pn[75] = v; check += v;
+    v = w->M[19]*t->Phi[199] + t->Qd[76]; w->Pn[76] = v; check += v;
+    v = w->M[20]*t->Phi[200] + t->Qd[77]; w->Pn[77] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_4(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_4(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[84]*f->P[0][0] + t->Phi[85]*f->P[1][0] + t->Phi[86]*f->P[2][0] +
             t->Phi[87]*f->P[3][0] + t->Phi[88]*f->P[4][0] + t->Phi[89]*f->P[5][0] +
@@ -4389,8 +4566,9 @@ static void phi_times_p_row_4(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[102]*f->P[18][20] + t->Phi[103]*f->P[19][20] + t->Phi[104]*f->P[20][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_4(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_4(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -4399,52 +4577,52 @@ static ins_gnss21_scalar propagate_row_4(const ins_gnss21_transition *restrict t
             w->M[8]*t->Phi[92] + w->M[9]*t->Phi[93] + w->M[10]*t->Phi[94] + w->M[11]*t->Phi[95] +
             w->M[12]*t->Phi[96] + w->M[13]*t->Phi[97] + w->M[14]*t->Phi[98] + w->M[15]*t->Phi[99] +
             w->M[16]*t->Phi[100] + w->M[17]*t->Phi[101] + w->M[18]*t->Phi[102] +
-            w->M[19]*t->Phi[103] + w->M[20]*t->Phi[104] + t->Qd[78]; w->Pn[78] = v; check += v - v;
+            w->M[19]*t->Phi[103] + w->M[20]*t->Phi[104] + t->Qd[78]; w->Pn[78] = v; check += v;
     v = w->M[0]*t->Phi[105] + w->M[1]*t->Phi[106] + w->M[2]*t->Phi[107] + w->M[3]*t->Phi[108] +
             w->M[4]*t->Phi[109] + w->M[5]*t->Phi[110] + w->M[6]*t->Phi[111] + w->M[7]*t->Phi[112] +
             w->M[8]*t->Phi[113] + w->M[9]*t->Phi[114] + w->M[10]*t->Phi[115] + w->M[11]*t->Phi[116]
             + w->M[12]*t->Phi[117] + w->M[13]*t->Phi[118] + w->M[14]*t->Phi[119] +
             w->M[15]*t->Phi[120] + w->M[16]*t->Phi[121] + w->M[17]*t->Phi[122] +
             w->M[18]*t->Phi[123] + w->M[19]*t->Phi[124] + w->M[20]*t->Phi[125] + t->Qd[79];
-            w->Pn[79] = v; check += v - v;
+            w->Pn[79] = v; check += v;
     v = w->M[0]*t->Phi[126] + w->M[1]*t->Phi[127] + w->M[2]*t->Phi[128] + w->M[3]*t->Phi[129] +
             w->M[4]*t->Phi[130] + w->M[5]*t->Phi[131] + w->M[6]*t->Phi[132] + w->M[7]*t->Phi[133] +
             w->M[8]*t->Phi[134] + w->M[9]*t->Phi[135] + w->M[10]*t->Phi[136] + w->M[11]*t->Phi[137]
             + w->M[12]*t->Phi[138] + w->M[13]*t->Phi[139] + w->M[14]*t->Phi[140] +
             w->M[15]*t->Phi[141] + w->M[16]*t->Phi[142] + w->M[17]*t->Phi[143] +
             w->M[18]*t->Phi[144] + w->M[19]*t->Phi[145] + w->M[20]*t->Phi[146] + t->Qd[80];
-            w->Pn[80] = v; check += v - v;
+            w->Pn[80] = v; check += v;
     v = w->M[0]*t->Phi[147] + w->M[1]*t->Phi[148] + w->M[2]*t->Phi[149] + w->M[3]*t->Phi[150] +
             w->M[4]*t->Phi[151] + w->M[5]*t->Phi[152] + w->M[6]*t->Phi[153] + w->M[7]*t->Phi[154] +
             w->M[8]*t->Phi[155] + w->M[9]*t->Phi[156] + w->M[10]*t->Phi[157] + w->M[11]*t->Phi[158]
             + w->M[12]*t->Phi[159] + w->M[13]*t->Phi[160] + w->M[14]*t->Phi[161] +
             w->M[15]*t->Phi[162] + w->M[16]*t->Phi[163] + w->M[17]*t->Phi[164] +
             w->M[18]*t->Phi[165] + w->M[19]*t->Phi[166] + w->M[20]*t->Phi[167] + t->Qd[81];
-            w->Pn[81] = v; check += v - v;
+            w->Pn[81] = v; check += v;
     v = w->M[0]*t->Phi[168] + w->M[1]*t->Phi[169] + w->M[2]*t->Phi[170] + w->M[3]*t->Phi[171] +
             w->M[4]*t->Phi[172] + w->M[5]*t->Phi[173] + w->M[6]*t->Phi[174] + w->M[7]*t->Phi[175] +
             w->M[8]*t->Phi[176] + w->M[9]*t->Phi[177] + w->M[10]*t->Phi[178] + w->M[11]*t->Phi[179]
             + w->M[12]*t->Phi[180] + w->M[13]*t->Phi[181] + w->M[14]*t->Phi[182] +
             w->M[15]*t->Phi[183] + w->M[16]*t->Phi[184] + w->M[17]*t->Phi[185] +
             w->M[18]*t->Phi[186] + w->M[19]*t->Phi[187] + w->M[20]*t->Phi[188] + t->Qd[82];
-            w->Pn[82] = v; check += v - v;
-    v = w->M[9]*t->Phi[189] + t->Qd[83]; w->Pn[83] = v; check += v - v;
-    v = w->M[10]*t->Phi[190] + t->Qd[84]; w->Pn[84] = v; check += v - v;
-    v = w->M[11]*t->Phi[191] + t->Qd[85]; w->Pn[85] = v; check += v - v;
-    v = w->M[12]*t->Phi[192] + t->Qd[86]; w->Pn[86] = v; check += v - v;
-    v = w->M[13]*t->Phi[193] + t->Qd[87]; w->Pn[87] = v; check += v - v;
-    v = w->M[14]*t->Phi[194] + t->Qd[88]; w->Pn[88] = v; check += v - v;
-    v = w->M[15]*t->Phi[195] + t->Qd[89]; w->Pn[89] = v; check += v - v;
-    v = w->M[16]*t->Phi[196] + t->Qd[90]; w->Pn[90] = v; check += v - v;
-    v = w->M[17]*t->Phi[197] + t->Qd[91]; w->Pn[91] = v; check += v - v;
-    v = w->M[18]*t->Phi[198] + t->Qd[92]; w->Pn[92] = v; check += v - v;
-    v = w->M[19]*t->Phi[199] + t->Qd[93]; w->Pn[93] = v; check += v - v;
-    v = w->M[20]*t->Phi[200] + t->Qd[94]; w->Pn[94] = v; check += v - v;
-    return check;
+            w->Pn[82] = v; check += v;
+    v = w->M[9]*t->Phi[189] + t->Qd[83]; w->Pn[83] = v; check += v;
+    v = w->M[10]*t->Phi[190] + t->Qd[84]; w->Pn[84] = v; check += v;
+    v = w->M[11]*t->Phi[191] + t->Qd[85]; w->Pn[85] = v; check += v;
+    v = w->M[12]*t->Phi[192] + t->Qd[86]; w->Pn[86] = v; check += v;
+    v = w->M[13]*t->Phi[193] + t->Qd[87]; w->Pn[87] = v; check += v;
+    v = w->M[14]*t->Phi[194] + t->Qd[88]; w->Pn[88] = v; check += v;
+    v = w->M[15]*t->Phi[195] + t->Qd[89]; w->Pn[89] = v; check += v;
+    v = w->M[16]*t->Phi[196] + t->Qd[90]; w->Pn[90] = v; check += v;
+    v = w->M[17]*t->Phi[197] + t->Qd[91]; w->Pn[91] = v; check += v;
+    v = w->M[18]*t->Phi[198] + t->Qd[92]; w->Pn[92] = v; check += v;
+    v = w->M[19]*t->Phi[199] + t->Qd[93]; w->Pn[93] = v; check += v;
+    v = w->M[20]*t->Phi[200] + t->Qd[94]; w->Pn[94] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_5(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_5(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[105]*f->P[0][0] + t->Phi[106]*f->P[1][0] + t->Phi[107]*f->P[2][0] +
             t->Phi[108]*f->P[3][0] + t->Phi[109]*f->P[4][0] + t->Phi[110]*f->P[5][0] +
@@ -4595,8 +4773,9 @@ static void phi_times_p_row_5(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[123]*f->P[18][20] + t->Phi[124]*f->P[19][20] + t->Phi[125]*f->P[20][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_5(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_5(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -4606,45 +4785,45 @@ static ins_gnss21_scalar propagate_row_5(const ins_gnss21_transition *restrict t
             + w->M[12]*t->Phi[117] + w->M[13]*t->Phi[118] + w->M[14]*t->Phi[119] +
             w->M[15]*t->Phi[120] + w->M[16]*t->Phi[121] + w->M[17]*t->Phi[122] +
             w->M[18]*t->Phi[123] + w->M[19]*t->Phi[124] + w->M[20]*t->Phi[125] + t->Qd[95];
-            w->Pn[95] = v; check += v - v;
+            w->Pn[95] = v; check += v;
     v = w->M[0]*t->Phi[126] + w->M[1]*t->Phi[127] + w->M[2]*t->Phi[128] + w->M[3]*t->Phi[129] +
             w->M[4]*t->Phi[130] + w->M[5]*t->Phi[131] + w->M[6]*t->Phi[132] + w->M[7]*t->Phi[133] +
             w->M[8]*t->Phi[134] + w->M[9]*t->Phi[135] + w->M[10]*t->Phi[136] + w->M[11]*t->Phi[137]
             + w->M[12]*t->Phi[138] + w->M[13]*t->Phi[139] + w->M[14]*t->Phi[140] +
             w->M[15]*t->Phi[141] + w->M[16]*t->Phi[142] + w->M[17]*t->Phi[143] +
             w->M[18]*t->Phi[144] + w->M[19]*t->Phi[145] + w->M[20]*t->Phi[146] + t->Qd[96];
-            w->Pn[96] = v; check += v - v;
+            w->Pn[96] = v; check += v;
     v = w->M[0]*t->Phi[147] + w->M[1]*t->Phi[148] + w->M[2]*t->Phi[149] + w->M[3]*t->Phi[150] +
             w->M[4]*t->Phi[151] + w->M[5]*t->Phi[152] + w->M[6]*t->Phi[153] + w->M[7]*t->Phi[154] +
             w->M[8]*t->Phi[155] + w->M[9]*t->Phi[156] + w->M[10]*t->Phi[157] + w->M[11]*t->Phi[158]
             + w->M[12]*t->Phi[159] + w->M[13]*t->Phi[160] + w->M[14]*t->Phi[161] +
             w->M[15]*t->Phi[162] + w->M[16]*t->Phi[163] + w->M[17]*t->Phi[164] +
             w->M[18]*t->Phi[165] + w->M[19]*t->Phi[166] + w->M[20]*t->Phi[167] + t->Qd[97];
-            w->Pn[97] = v; check += v - v;
+            w->Pn[97] = v; check += v;
     v = w->M[0]*t->Phi[168] + w->M[1]*t->Phi[169] + w->M[2]*t->Phi[170] + w->M[3]*t->Phi[171] +
             w->M[4]*t->Phi[172] + w->M[5]*t->Phi[173] + w->M[6]*t->Phi[174] + w->M[7]*t->Phi[175] +
             w->M[8]*t->Phi[176] + w->M[9]*t->Phi[177] + w->M[10]*t->Phi[178] + w->M[11]*t->Phi[179]
             + w->M[12]*t->Phi[180] + w->M[13]*t->Phi[181] + w->M[14]*t->Phi[182] +
             w->M[15]*t->Phi[183] + w->M[16]*t->Phi[184] + w->M[17]*t->Phi[185] +
             w->M[18]*t->Phi[186] + w->M[19]*t->Phi[187] + w->M[20]*t->Phi[188] + t->Qd[98];
-            w->Pn[98] = v; check += v - v;
-    v = w->M[9]*t->Phi[189] + t->Qd[99]; w->Pn[99] = v; check += v - v;
-    v = w->M[10]*t->Phi[190] + t->Qd[100]; w->Pn[100] = v; check += v - v;
-    v = w->M[11]*t->Phi[191] + t->Qd[101]; w->Pn[101] = v; check += v - v;
-    v = w->M[12]*t->Phi[192] + t->Qd[102]; w->Pn[102] = v; check += v - v;
-    v = w->M[13]*t->Phi[193] + t->Qd[103]; w->Pn[103] = v; check += v - v;
-    v = w->M[14]*t->Phi[194] + t->Qd[104]; w->Pn[104] = v; check += v - v;
-    v = w->M[15]*t->Phi[195] + t->Qd[105]; w->Pn[105] = v; check += v - v;
-    v = w->M[16]*t->Phi[196] + t->Qd[106]; w->Pn[106] = v; check += v - v;
-    v = w->M[17]*t->Phi[197] + t->Qd[107]; w->Pn[107] = v; check += v - v;
-    v = w->M[18]*t->Phi[198] + t->Qd[108]; w->Pn[108] = v; check += v - v;
-    v = w->M[19]*t->Phi[199] + t->Qd[109]; w->Pn[109] = v; check += v - v;
-    v = w->M[20]*t->Phi[200] + t->Qd[110]; w->Pn[110] = v; check += v - v;
-    return check;
+            w->Pn[98] = v; check += v;
+    v = w->M[9]*t->Phi[189] + t->Qd[99]; w->Pn[99] = v; check += v;
+    v = w->M[10]*t->Phi[190] + t->Qd[100]; w->Pn[100] = v; check += v;
+    v = w->M[11]*t->Phi[191] + t->Qd[101]; w->Pn[101] = v; check += v;
+    v = w->M[12]*t->Phi[192] + t->Qd[102]; w->Pn[102] = v; check += v;
+    v = w->M[13]*t->Phi[193] + t->Qd[103]; w->Pn[103] = v; check += v;
+    v = w->M[14]*t->Phi[194] + t->Qd[104]; w->Pn[104] = v; check += v;
+    v = w->M[15]*t->Phi[195] + t->Qd[105]; w->Pn[105] = v; check += v;
+    v = w->M[16]*t->Phi[196] + t->Qd[106]; w->Pn[106] = v; check += v;
+    v = w->M[17]*t->Phi[197] + t->Qd[107]; w->Pn[107] = v; check += v;
+    v = w->M[18]*t->Phi[198] + t->Qd[108]; w->Pn[108] = v; check += v;
+    v = w->M[19]*t->Phi[199] + t->Qd[109]; w->Pn[109] = v; check += v;
+    v = w->M[20]*t->Phi[200] + t->Qd[110]; w->Pn[110] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_6(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_6(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[126]*f->P[0][0] + t->Phi[127]*f->P[1][0] + t->Phi[128]*f->P[2][0] +
             t->Phi[129]*f->P[3][0] + t->Phi[130]*f->P[4][0] + t->Phi[131]*f->P[5][0] +
@@ -4795,8 +4974,9 @@ static void phi_times_p_row_6(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[144]*f->P[18][20] + t->Phi[145]*f->P[19][20] + t->Phi[146]*f->P[20][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_6(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_6(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -4806,38 +4986,38 @@ static ins_gnss21_scalar propagate_row_6(const ins_gnss21_transition *restrict t
             + w->M[12]*t->Phi[138] + w->M[13]*t->Phi[139] + w->M[14]*t->Phi[140] +
             w->M[15]*t->Phi[141] + w->M[16]*t->Phi[142] + w->M[17]*t->Phi[143] +
             w->M[18]*t->Phi[144] + w->M[19]*t->Phi[145] + w->M[20]*t->Phi[146] + t->Qd[111];
-            w->Pn[111] = v; check += v - v;
+            w->Pn[111] = v; check += v;
     v = w->M[0]*t->Phi[147] + w->M[1]*t->Phi[148] + w->M[2]*t->Phi[149] + w->M[3]*t->Phi[150] +
             w->M[4]*t->Phi[151] + w->M[5]*t->Phi[152] + w->M[6]*t->Phi[153] + w->M[7]*t->Phi[154] +
             w->M[8]*t->Phi[155] + w->M[9]*t->Phi[156] + w->M[10]*t->Phi[157] + w->M[11]*t->Phi[158]
             + w->M[12]*t->Phi[159] + w->M[13]*t->Phi[160] + w->M[14]*t->Phi[161] +
             w->M[15]*t->Phi[162] + w->M[16]*t->Phi[163] + w->M[17]*t->Phi[164] +
             w->M[18]*t->Phi[165] + w->M[19]*t->Phi[166] + w->M[20]*t->Phi[167] + t->Qd[112];
-            w->Pn[112] = v; check += v - v;
+            w->Pn[112] = v; check += v;
     v = w->M[0]*t->Phi[168] + w->M[1]*t->Phi[169] + w->M[2]*t->Phi[170] + w->M[3]*t->Phi[171] +
             w->M[4]*t->Phi[172] + w->M[5]*t->Phi[173] + w->M[6]*t->Phi[174] + w->M[7]*t->Phi[175] +
             w->M[8]*t->Phi[176] + w->M[9]*t->Phi[177] + w->M[10]*t->Phi[178] + w->M[11]*t->Phi[179]
             + w->M[12]*t->Phi[180] + w->M[13]*t->Phi[181] + w->M[14]*t->Phi[182] +
             w->M[15]*t->Phi[183] + w->M[16]*t->Phi[184] + w->M[17]*t->Phi[185] +
             w->M[18]*t->Phi[186] + w->M[19]*t->Phi[187] + w->M[20]*t->Phi[188] + t->Qd[113];
-            w->Pn[113] = v; check += v - v;
-    v = w->M[9]*t->Phi[189] + t->Qd[114]; w->Pn[114] = v; check += v - v;
-    v = w->M[10]*t->Phi[190] + t->Qd[115]; w->Pn[115] = v; check += v - v;
-    v = w->M[11]*t->Phi[191] + t->Qd[116]; w->Pn[116] = v; check += v - v;
-    v = w->M[12]*t->Phi[192] + t->Qd[117]; w->Pn[117] = v; check += v - v;
-    v = w->M[13]*t->Phi[193] + t->Qd[118]; w->Pn[118] = v; check += v - v;
-    v = w->M[14]*t->Phi[194] + t->Qd[119]; w->Pn[119] = v; check += v - v;
-    v = w->M[15]*t->Phi[195] + t->Qd[120]; w->Pn[120] = v; check += v - v;
-    v = w->M[16]*t->Phi[196] + t->Qd[121]; w->Pn[121] = v; check += v - v;
-    v = w->M[17]*t->Phi[197] + t->Qd[122]; w->Pn[122] = v; check += v - v;
-    v = w->M[18]*t->Phi[198] + t->Qd[123]; w->Pn[123] = v; check += v - v;
-    v = w->M[19]*t->Phi[199] + t->Qd[124]; w->Pn[124] = v; check += v - v;
-    v = w->M[20]*t->Phi[200] + t->Qd[125]; w->Pn[125] = v; check += v - v;
-    return check;
+            w->Pn[113] = v; check += v;
+    v = w->M[9]*t->Phi[189] + t->Qd[114]; w->Pn[114] = v; check += v;
+    v = w->M[10]*t->Phi[190] + t->Qd[115]; w->Pn[115] = v; check += v;
+    v = w->M[11]*t->Phi[191] + t->Qd[116]; w->Pn[116] = v; check += v;
+    v = w->M[12]*t->Phi[192] + t->Qd[117]; w->Pn[117] = v; check += v;
+    v = w->M[13]*t->Phi[193] + t->Qd[118]; w->Pn[118] = v; check += v;
+    v = w->M[14]*t->Phi[194] + t->Qd[119]; w->Pn[119] = v; check += v;
+    v = w->M[15]*t->Phi[195] + t->Qd[120]; w->Pn[120] = v; check += v;
+    v = w->M[16]*t->Phi[196] + t->Qd[121]; w->Pn[121] = v; check += v;
+    v = w->M[17]*t->Phi[197] + t->Qd[122]; w->Pn[122] = v; check += v;
+    v = w->M[18]*t->Phi[198] + t->Qd[123]; w->Pn[123] = v; check += v;
+    v = w->M[19]*t->Phi[199] + t->Qd[124]; w->Pn[124] = v; check += v;
+    v = w->M[20]*t->Phi[200] + t->Qd[125]; w->Pn[125] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_7(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_7(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[147]*f->P[0][0] + t->Phi[148]*f->P[1][0] + t->Phi[149]*f->P[2][0] +
             t->Phi[150]*f->P[3][0] + t->Phi[151]*f->P[4][0] + t->Phi[152]*f->P[5][0] +
@@ -4988,8 +5168,9 @@ static void phi_times_p_row_7(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[165]*f->P[18][20] + t->Phi[166]*f->P[19][20] + t->Phi[167]*f->P[20][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_7(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_7(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -4999,31 +5180,31 @@ static ins_gnss21_scalar propagate_row_7(const ins_gnss21_transition *restrict t
             + w->M[12]*t->Phi[159] + w->M[13]*t->Phi[160] + w->M[14]*t->Phi[161] +
             w->M[15]*t->Phi[162] + w->M[16]*t->Phi[163] + w->M[17]*t->Phi[164] +
             w->M[18]*t->Phi[165] + w->M[19]*t->Phi[166] + w->M[20]*t->Phi[167] + t->Qd[126];
-            w->Pn[126] = v; check += v - v;
+            w->Pn[126] = v; check += v;
     v = w->M[0]*t->Phi[168] + w->M[1]*t->Phi[169] + w->M[2]*t->Phi[170] + w->M[3]*t->Phi[171] +
             w->M[4]*t->Phi[172] + w->M[5]*t->Phi[173] + w->M[6]*t->Phi[174] + w->M[7]*t->Phi[175] +
             w->M[8]*t->Phi[176] + w->M[9]*t->Phi[177] + w->M[10]*t->Phi[178] + w->M[11]*t->Phi[179]
             + w->M[12]*t->Phi[180] + w->M[13]*t->Phi[181] + w->M[14]*t->Phi[182] +
             w->M[15]*t->Phi[183] + w->M[16]*t->Phi[184] + w->M[17]*t->Phi[185] +
             w->M[18]*t->Phi[186] + w->M[19]*t->Phi[187] + w->M[20]*t->Phi[188] + t->Qd[127];
-            w->Pn[127] = v; check += v - v;
-    v = w->M[9]*t->Phi[189] + t->Qd[128]; w->Pn[128] = v; check += v - v;
-    v = w->M[10]*t->Phi[190] + t->Qd[129]; w->Pn[129] = v; check += v - v;
-    v = w->M[11]*t->Phi[191] + t->Qd[130]; w->Pn[130] = v; check += v - v;
-    v = w->M[12]*t->Phi[192] + t->Qd[131]; w->Pn[131] = v; check += v - v;
-    v = w->M[13]*t->Phi[193] + t->Qd[132]; w->Pn[132] = v; check += v - v;
-    v = w->M[14]*t->Phi[194] + t->Qd[133]; w->Pn[133] = v; check += v - v;
-    v = w->M[15]*t->Phi[195] + t->Qd[134]; w->Pn[134] = v; check += v - v;
-    v = w->M[16]*t->Phi[196] + t->Qd[135]; w->Pn[135] = v; check += v - v;
-    v = w->M[17]*t->Phi[197] + t->Qd[136]; w->Pn[136] = v; check += v - v;
-    v = w->M[18]*t->Phi[198] + t->Qd[137]; w->Pn[137] = v; check += v - v;
-    v = w->M[19]*t->Phi[199] + t->Qd[138]; w->Pn[138] = v; check += v - v;
-    v = w->M[20]*t->Phi[200] + t->Qd[139]; w->Pn[139] = v; check += v - v;
-    return check;
+            w->Pn[127] = v; check += v;
+    v = w->M[9]*t->Phi[189] + t->Qd[128]; w->Pn[128] = v; check += v;
+    v = w->M[10]*t->Phi[190] + t->Qd[129]; w->Pn[129] = v; check += v;
+    v = w->M[11]*t->Phi[191] + t->Qd[130]; w->Pn[130] = v; check += v;
+    v = w->M[12]*t->Phi[192] + t->Qd[131]; w->Pn[131] = v; check += v;
+    v = w->M[13]*t->Phi[193] + t->Qd[132]; w->Pn[132] = v; check += v;
+    v = w->M[14]*t->Phi[194] + t->Qd[133]; w->Pn[133] = v; check += v;
+    v = w->M[15]*t->Phi[195] + t->Qd[134]; w->Pn[134] = v; check += v;
+    v = w->M[16]*t->Phi[196] + t->Qd[135]; w->Pn[135] = v; check += v;
+    v = w->M[17]*t->Phi[197] + t->Qd[136]; w->Pn[136] = v; check += v;
+    v = w->M[18]*t->Phi[198] + t->Qd[137]; w->Pn[137] = v; check += v;
+    v = w->M[19]*t->Phi[199] + t->Qd[138]; w->Pn[138] = v; check += v;
+    v = w->M[20]*t->Phi[200] + t->Qd[139]; w->Pn[139] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_8(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_8(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[168]*f->P[0][0] + t->Phi[169]*f->P[1][0] + t->Phi[170]*f->P[2][0] +
             t->Phi[171]*f->P[3][0] + t->Phi[172]*f->P[4][0] + t->Phi[173]*f->P[5][0] +
@@ -5174,8 +5355,9 @@ static void phi_times_p_row_8(const ins_gnss21_filter *restrict f, const ins_gns
             t->Phi[186]*f->P[18][20] + t->Phi[187]*f->P[19][20] + t->Phi[188]*f->P[20][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_8(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_8(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -5185,24 +5367,24 @@ static ins_gnss21_scalar propagate_row_8(const ins_gnss21_transition *restrict t
             + w->M[12]*t->Phi[180] + w->M[13]*t->Phi[181] + w->M[14]*t->Phi[182] +
             w->M[15]*t->Phi[183] + w->M[16]*t->Phi[184] + w->M[17]*t->Phi[185] +
             w->M[18]*t->Phi[186] + w->M[19]*t->Phi[187] + w->M[20]*t->Phi[188] + t->Qd[140];
-            w->Pn[140] = v; check += v - v;
-    v = w->M[9]*t->Phi[189] + t->Qd[141]; w->Pn[141] = v; check += v - v;
-    v = w->M[10]*t->Phi[190] + t->Qd[142]; w->Pn[142] = v; check += v - v;
-    v = w->M[11]*t->Phi[191] + t->Qd[143]; w->Pn[143] = v; check += v - v;
-    v = w->M[12]*t->Phi[192] + t->Qd[144]; w->Pn[144] = v; check += v - v;
-    v = w->M[13]*t->Phi[193] + t->Qd[145]; w->Pn[145] = v; check += v - v;
-    v = w->M[14]*t->Phi[194] + t->Qd[146]; w->Pn[146] = v; check += v - v;
-    v = w->M[15]*t->Phi[195] + t->Qd[147]; w->Pn[147] = v; check += v - v;
-    v = w->M[16]*t->Phi[196] + t->Qd[148]; w->Pn[148] = v; check += v - v;
-    v = w->M[17]*t->Phi[197] + t->Qd[149]; w->Pn[149] = v; check += v - v;
-    v = w->M[18]*t->Phi[198] + t->Qd[150]; w->Pn[150] = v; check += v - v;
-    v = w->M[19]*t->Phi[199] + t->Qd[151]; w->Pn[151] = v; check += v - v;
-    v = w->M[20]*t->Phi[200] + t->Qd[152]; w->Pn[152] = v; check += v - v;
-    return check;
+            w->Pn[140] = v; check += v;
+    v = w->M[9]*t->Phi[189] + t->Qd[141]; w->Pn[141] = v; check += v;
+    v = w->M[10]*t->Phi[190] + t->Qd[142]; w->Pn[142] = v; check += v;
+    v = w->M[11]*t->Phi[191] + t->Qd[143]; w->Pn[143] = v; check += v;
+    v = w->M[12]*t->Phi[192] + t->Qd[144]; w->Pn[144] = v; check += v;
+    v = w->M[13]*t->Phi[193] + t->Qd[145]; w->Pn[145] = v; check += v;
+    v = w->M[14]*t->Phi[194] + t->Qd[146]; w->Pn[146] = v; check += v;
+    v = w->M[15]*t->Phi[195] + t->Qd[147]; w->Pn[147] = v; check += v;
+    v = w->M[16]*t->Phi[196] + t->Qd[148]; w->Pn[148] = v; check += v;
+    v = w->M[17]*t->Phi[197] + t->Qd[149]; w->Pn[149] = v; check += v;
+    v = w->M[18]*t->Phi[198] + t->Qd[150]; w->Pn[150] = v; check += v;
+    v = w->M[19]*t->Phi[199] + t->Qd[151]; w->Pn[151] = v; check += v;
+    v = w->M[20]*t->Phi[200] + t->Qd[152]; w->Pn[152] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_9(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_9(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[189]*f->P[9][0];
     w->M[1] = t->Phi[189]*f->P[9][1];
@@ -5227,28 +5409,29 @@ static void phi_times_p_row_9(const ins_gnss21_filter *restrict f, const ins_gns
     w->M[20] = t->Phi[189]*f->P[9][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_9(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_9(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[9]*t->Phi[189] + t->Qd[153]; w->Pn[153] = v; check += v - v;
-    v = w->M[10]*t->Phi[190]; w->Pn[154] = v; check += v - v;
-    v = w->M[11]*t->Phi[191]; w->Pn[155] = v; check += v - v;
-    v = w->M[12]*t->Phi[192]; w->Pn[156] = v; check += v - v;
-    v = w->M[13]*t->Phi[193]; w->Pn[157] = v; check += v - v;
-    v = w->M[14]*t->Phi[194]; w->Pn[158] = v; check += v - v;
-    v = w->M[15]*t->Phi[195]; w->Pn[159] = v; check += v - v;
-    v = w->M[16]*t->Phi[196]; w->Pn[160] = v; check += v - v;
-    v = w->M[17]*t->Phi[197]; w->Pn[161] = v; check += v - v;
-    v = w->M[18]*t->Phi[198]; w->Pn[162] = v; check += v - v;
-    v = w->M[19]*t->Phi[199]; w->Pn[163] = v; check += v - v;
-    v = w->M[20]*t->Phi[200]; w->Pn[164] = v; check += v - v;
-    return check;
+    v = w->M[9]*t->Phi[189] + t->Qd[153]; w->Pn[153] = v; check += v;
+    v = w->M[10]*t->Phi[190]; w->Pn[154] = v; check += v;
+    v = w->M[11]*t->Phi[191]; w->Pn[155] = v; check += v;
+    v = w->M[12]*t->Phi[192]; w->Pn[156] = v; check += v;
+    v = w->M[13]*t->Phi[193]; w->Pn[157] = v; check += v;
+    v = w->M[14]*t->Phi[194]; w->Pn[158] = v; check += v;
+    v = w->M[15]*t->Phi[195]; w->Pn[159] = v; check += v;
+    v = w->M[16]*t->Phi[196]; w->Pn[160] = v; check += v;
+    v = w->M[17]*t->Phi[197]; w->Pn[161] = v; check += v;
+    v = w->M[18]*t->Phi[198]; w->Pn[162] = v; check += v;
+    v = w->M[19]*t->Phi[199]; w->Pn[163] = v; check += v;
+    v = w->M[20]*t->Phi[200]; w->Pn[164] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_10(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_10(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[190]*f->P[10][0];
     w->M[1] = t->Phi[190]*f->P[10][1];
@@ -5273,27 +5456,28 @@ static void phi_times_p_row_10(const ins_gnss21_filter *restrict f, const ins_gn
     w->M[20] = t->Phi[190]*f->P[10][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_10(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_10(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[10]*t->Phi[190] + t->Qd[165]; w->Pn[165] = v; check += v - v;
-    v = w->M[11]*t->Phi[191]; w->Pn[166] = v; check += v - v;
-    v = w->M[12]*t->Phi[192]; w->Pn[167] = v; check += v - v;
-    v = w->M[13]*t->Phi[193]; w->Pn[168] = v; check += v - v;
-    v = w->M[14]*t->Phi[194]; w->Pn[169] = v; check += v - v;
-    v = w->M[15]*t->Phi[195]; w->Pn[170] = v; check += v - v;
-    v = w->M[16]*t->Phi[196]; w->Pn[171] = v; check += v - v;
-    v = w->M[17]*t->Phi[197]; w->Pn[172] = v; check += v - v;
-    v = w->M[18]*t->Phi[198]; w->Pn[173] = v; check += v - v;
-    v = w->M[19]*t->Phi[199]; w->Pn[174] = v; check += v - v;
-    v = w->M[20]*t->Phi[200]; w->Pn[175] = v; check += v - v;
-    return check;
+    v = w->M[10]*t->Phi[190] + t->Qd[165]; w->Pn[165] = v; check += v;
+    v = w->M[11]*t->Phi[191]; w->Pn[166] = v; check += v;
+    v = w->M[12]*t->Phi[192]; w->Pn[167] = v; check += v;
+    v = w->M[13]*t->Phi[193]; w->Pn[168] = v; check += v;
+    v = w->M[14]*t->Phi[194]; w->Pn[169] = v; check += v;
+    v = w->M[15]*t->Phi[195]; w->Pn[170] = v; check += v;
+    v = w->M[16]*t->Phi[196]; w->Pn[171] = v; check += v;
+    v = w->M[17]*t->Phi[197]; w->Pn[172] = v; check += v;
+    v = w->M[18]*t->Phi[198]; w->Pn[173] = v; check += v;
+    v = w->M[19]*t->Phi[199]; w->Pn[174] = v; check += v;
+    v = w->M[20]*t->Phi[200]; w->Pn[175] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_11(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_11(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[191]*f->P[11][0];
     w->M[1] = t->Phi[191]*f->P[11][1];
@@ -5318,26 +5502,27 @@ static void phi_times_p_row_11(const ins_gnss21_filter *restrict f, const ins_gn
     w->M[20] = t->Phi[191]*f->P[11][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_11(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_11(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[11]*t->Phi[191] + t->Qd[176]; w->Pn[176] = v; check += v - v;
-    v = w->M[12]*t->Phi[192]; w->Pn[177] = v; check += v - v;
-    v = w->M[13]*t->Phi[193]; w->Pn[178] = v; check += v - v;
-    v = w->M[14]*t->Phi[194]; w->Pn[179] = v; check += v - v;
-    v = w->M[15]*t->Phi[195]; w->Pn[180] = v; check += v - v;
-    v = w->M[16]*t->Phi[196]; w->Pn[181] = v; check += v - v;
-    v = w->M[17]*t->Phi[197]; w->Pn[182] = v; check += v - v;
-    v = w->M[18]*t->Phi[198]; w->Pn[183] = v; check += v - v;
-    v = w->M[19]*t->Phi[199]; w->Pn[184] = v; check += v - v;
-    v = w->M[20]*t->Phi[200]; w->Pn[185] = v; check += v - v;
-    return check;
+    v = w->M[11]*t->Phi[191] + t->Qd[176]; w->Pn[176] = v; check += v;
+    v = w->M[12]*t->Phi[192]; w->Pn[177] = v; check += v;
+    v = w->M[13]*t->Phi[193]; w->Pn[178] = v; check += v;
+    v = w->M[14]*t->Phi[194]; w->Pn[179] = v; check += v;
+    v = w->M[15]*t->Phi[195]; w->Pn[180] = v; check += v;
+    v = w->M[16]*t->Phi[196]; w->Pn[181] = v; check += v;
+    v = w->M[17]*t->Phi[197]; w->Pn[182] = v; check += v;
+    v = w->M[18]*t->Phi[198]; w->Pn[183] = v; check += v;
+    v = w->M[19]*t->Phi[199]; w->Pn[184] = v; check += v;
+    v = w->M[20]*t->Phi[200]; w->Pn[185] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_12(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_12(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[192]*f->P[12][0];
     w->M[1] = t->Phi[192]*f->P[12][1];
@@ -5362,25 +5547,26 @@ static void phi_times_p_row_12(const ins_gnss21_filter *restrict f, const ins_gn
     w->M[20] = t->Phi[192]*f->P[12][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_12(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_12(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[12]*t->Phi[192] + t->Qd[186]; w->Pn[186] = v; check += v - v;
-    v = w->M[13]*t->Phi[193]; w->Pn[187] = v; check += v - v;
-    v = w->M[14]*t->Phi[194]; w->Pn[188] = v; check += v - v;
-    v = w->M[15]*t->Phi[195]; w->Pn[189] = v; check += v - v;
-    v = w->M[16]*t->Phi[196]; w->Pn[190] = v; check += v - v;
-    v = w->M[17]*t->Phi[197]; w->Pn[191] = v; check += v - v;
-    v = w->M[18]*t->Phi[198]; w->Pn[192] = v; check += v - v;
-    v = w->M[19]*t->Phi[199]; w->Pn[193] = v; check += v - v;
-    v = w->M[20]*t->Phi[200]; w->Pn[194] = v; check += v - v;
-    return check;
+    v = w->M[12]*t->Phi[192] + t->Qd[186]; w->Pn[186] = v; check += v;
+    v = w->M[13]*t->Phi[193]; w->Pn[187] = v; check += v;
+    v = w->M[14]*t->Phi[194]; w->Pn[188] = v; check += v;
+    v = w->M[15]*t->Phi[195]; w->Pn[189] = v; check += v;
+    v = w->M[16]*t->Phi[196]; w->Pn[190] = v; check += v;
+    v = w->M[17]*t->Phi[197]; w->Pn[191] = v; check += v;
+    v = w->M[18]*t->Phi[198]; w->Pn[192] = v; check += v;
+    v = w->M[19]*t->Phi[199]; w->Pn[193] = v; check += v;
+    v = w->M[20]*t->Phi[200]; w->Pn[194] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_13(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_13(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[193]*f->P[13][0];
     w->M[1] = t->Phi[193]*f->P[13][1];
@@ -5405,24 +5591,25 @@ static void phi_times_p_row_13(const ins_gnss21_filter *restrict f, const ins_gn
     w->M[20] = t->Phi[193]*f->P[13][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_13(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_13(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[13]*t->Phi[193] + t->Qd[195]; w->Pn[195] = v; check += v - v;
-    v = w->M[14]*t->Phi[194]; w->Pn[196] = v; check += v - v;
-    v = w->M[15]*t->Phi[195]; w->Pn[197] = v; check += v - v;
-    v = w->M[16]*t->Phi[196]; w->Pn[198] = v; check += v - v;
-    v = w->M[17]*t->Phi[197]; w->Pn[199] = v; check += v - v;
-    v = w->M[18]*t->Phi[198]; w->Pn[200] = v; check += v - v;
-    v = w->M[19]*t->Phi[199]; w->Pn[201] = v; check += v - v;
-    v = w->M[20]*t->Phi[200]; w->Pn[202] = v; check += v - v;
-    return check;
+    v = w->M[13]*t->Phi[193] + t->Qd[195]; w->Pn[195] = v; check += v;
+    v = w->M[14]*t->Phi[194]; w->Pn[196] = v; check += v;
+    v = w->M[15]*t->Phi[195]; w->Pn[197] = v; check += v;
+    v = w->M[16]*t->Phi[196]; w->Pn[198] = v; check += v;
+    v = w->M[17]*t->Phi[197]; w->Pn[199] = v; check += v;
+    v = w->M[18]*t->Phi[198]; w->Pn[200] = v; check += v;
+    v = w->M[19]*t->Phi[199]; w->Pn[201] = v; check += v;
+    v = w->M[20]*t->Phi[200]; w->Pn[202] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_14(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_14(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[194]*f->P[14][0];
     w->M[1] = t->Phi[194]*f->P[14][1];
@@ -5447,23 +5634,24 @@ static void phi_times_p_row_14(const ins_gnss21_filter *restrict f, const ins_gn
     w->M[20] = t->Phi[194]*f->P[14][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_14(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_14(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[14]*t->Phi[194] + t->Qd[203]; w->Pn[203] = v; check += v - v;
-    v = w->M[15]*t->Phi[195]; w->Pn[204] = v; check += v - v;
-    v = w->M[16]*t->Phi[196]; w->Pn[205] = v; check += v - v;
-    v = w->M[17]*t->Phi[197]; w->Pn[206] = v; check += v - v;
-    v = w->M[18]*t->Phi[198]; w->Pn[207] = v; check += v - v;
-    v = w->M[19]*t->Phi[199]; w->Pn[208] = v; check += v - v;
-    v = w->M[20]*t->Phi[200]; w->Pn[209] = v; check += v - v;
-    return check;
+    v = w->M[14]*t->Phi[194] + t->Qd[203]; w->Pn[203] = v; check += v;
+    v = w->M[15]*t->Phi[195]; w->Pn[204] = v; check += v;
+    v = w->M[16]*t->Phi[196]; w->Pn[205] = v; check += v;
+    v = w->M[17]*t->Phi[197]; w->Pn[206] = v; check += v;
+    v = w->M[18]*t->Phi[198]; w->Pn[207] = v; check += v;
+    v = w->M[19]*t->Phi[199]; w->Pn[208] = v; check += v;
+    v = w->M[20]*t->Phi[200]; w->Pn[209] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_15(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_15(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[195]*f->P[15][0];
     w->M[1] = t->Phi[195]*f->P[15][1];
@@ -5488,22 +5676,23 @@ static void phi_times_p_row_15(const ins_gnss21_filter *restrict f, const ins_gn
     w->M[20] = t->Phi[195]*f->P[15][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_15(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_15(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[15]*t->Phi[195] + t->Qd[210]; w->Pn[210] = v; check += v - v;
-    v = w->M[16]*t->Phi[196]; w->Pn[211] = v; check += v - v;
-    v = w->M[17]*t->Phi[197]; w->Pn[212] = v; check += v - v;
-    v = w->M[18]*t->Phi[198]; w->Pn[213] = v; check += v - v;
-    v = w->M[19]*t->Phi[199]; w->Pn[214] = v; check += v - v;
-    v = w->M[20]*t->Phi[200]; w->Pn[215] = v; check += v - v;
-    return check;
+    v = w->M[15]*t->Phi[195] + t->Qd[210]; w->Pn[210] = v; check += v;
+    v = w->M[16]*t->Phi[196]; w->Pn[211] = v; check += v;
+    v = w->M[17]*t->Phi[197]; w->Pn[212] = v; check += v;
+    v = w->M[18]*t->Phi[198]; w->Pn[213] = v; check += v;
+    v = w->M[19]*t->Phi[199]; w->Pn[214] = v; check += v;
+    v = w->M[20]*t->Phi[200]; w->Pn[215] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_16(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_16(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[196]*f->P[16][0];
     w->M[1] = t->Phi[196]*f->P[16][1];
@@ -5528,21 +5717,22 @@ static void phi_times_p_row_16(const ins_gnss21_filter *restrict f, const ins_gn
     w->M[20] = t->Phi[196]*f->P[16][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_16(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_16(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[16]*t->Phi[196] + t->Qd[216]; w->Pn[216] = v; check += v - v;
-    v = w->M[17]*t->Phi[197]; w->Pn[217] = v; check += v - v;
-    v = w->M[18]*t->Phi[198]; w->Pn[218] = v; check += v - v;
-    v = w->M[19]*t->Phi[199]; w->Pn[219] = v; check += v - v;
-    v = w->M[20]*t->Phi[200]; w->Pn[220] = v; check += v - v;
-    return check;
+    v = w->M[16]*t->Phi[196] + t->Qd[216]; w->Pn[216] = v; check += v;
+    v = w->M[17]*t->Phi[197]; w->Pn[217] = v; check += v;
+    v = w->M[18]*t->Phi[198]; w->Pn[218] = v; check += v;
+    v = w->M[19]*t->Phi[199]; w->Pn[219] = v; check += v;
+    v = w->M[20]*t->Phi[200]; w->Pn[220] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_17(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_17(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[197]*f->P[17][0];
     w->M[1] = t->Phi[197]*f->P[17][1];
@@ -5567,20 +5757,21 @@ static void phi_times_p_row_17(const ins_gnss21_filter *restrict f, const ins_gn
     w->M[20] = t->Phi[197]*f->P[17][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_17(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_17(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[17]*t->Phi[197] + t->Qd[221]; w->Pn[221] = v; check += v - v;
-    v = w->M[18]*t->Phi[198]; w->Pn[222] = v; check += v - v;
-    v = w->M[19]*t->Phi[199]; w->Pn[223] = v; check += v - v;
-    v = w->M[20]*t->Phi[200]; w->Pn[224] = v; check += v - v;
-    return check;
+    v = w->M[17]*t->Phi[197] + t->Qd[221]; w->Pn[221] = v; check += v;
+    v = w->M[18]*t->Phi[198]; w->Pn[222] = v; check += v;
+    v = w->M[19]*t->Phi[199]; w->Pn[223] = v; check += v;
+    v = w->M[20]*t->Phi[200]; w->Pn[224] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_18(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_18(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[198]*f->P[18][0];
     w->M[1] = t->Phi[198]*f->P[18][1];
@@ -5605,19 +5796,20 @@ static void phi_times_p_row_18(const ins_gnss21_filter *restrict f, const ins_gn
     w->M[20] = t->Phi[198]*f->P[18][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_18(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_18(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[18]*t->Phi[198] + t->Qd[225]; w->Pn[225] = v; check += v - v;
-    v = w->M[19]*t->Phi[199]; w->Pn[226] = v; check += v - v;
-    v = w->M[20]*t->Phi[200]; w->Pn[227] = v; check += v - v;
-    return check;
+    v = w->M[18]*t->Phi[198] + t->Qd[225]; w->Pn[225] = v; check += v;
+    v = w->M[19]*t->Phi[199]; w->Pn[226] = v; check += v;
+    v = w->M[20]*t->Phi[200]; w->Pn[227] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_19(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_19(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[199]*f->P[19][0];
     w->M[1] = t->Phi[199]*f->P[19][1];
@@ -5642,18 +5834,19 @@ static void phi_times_p_row_19(const ins_gnss21_filter *restrict f, const ins_gn
     w->M[20] = t->Phi[199]*f->P[19][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_19(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_19(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[19]*t->Phi[199] + t->Qd[228]; w->Pn[228] = v; check += v - v;
-    v = w->M[20]*t->Phi[200]; w->Pn[229] = v; check += v - v;
-    return check;
+    v = w->M[19]*t->Phi[199] + t->Qd[228]; w->Pn[228] = v; check += v;
+    v = w->M[20]*t->Phi[200]; w->Pn[229] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_20(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
-        *restrict t, ins_gnss21_filter_scratch *restrict w)
+INS_GNSS21_BLOCK void phi_times_p_row_20(const ins_gnss21_filter *restrict f, const
+        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[200]*f->P[20][0];
     w->M[1] = t->Phi[200]*f->P[20][1];
@@ -5678,13 +5871,14 @@ static void phi_times_p_row_20(const ins_gnss21_filter *restrict f, const ins_gn
     w->M[20] = t->Phi[200]*f->P[20][20];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ins_gnss21_scalar propagate_row_20(const ins_gnss21_transition *restrict t,
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_20(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
-    v = w->M[20]*t->Phi[200] + t->Qd[230]; w->Pn[230] = v; check += v - v;
-    return check;
+    v = w->M[20]*t->Phi[200] + t->Qd[230]; w->Pn[230] = v; check += v;
+    return check - check;
 }
 
 int ins_gnss21_predict(ins_gnss21_filter *restrict f, const ins_gnss21_transition *restrict t,
@@ -5692,77 +5886,8 @@ int ins_gnss21_predict(ins_gnss21_filter *restrict f, const ins_gnss21_transitio
 {
     ins_gnss21_filter_scratch *w = &work->filter;
     ins_gnss21_scalar check = 0.0;
-    /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
-    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
-            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[6] + t->Phi[7]*f->x[7] +
-            t->Phi[8]*f->x[8] + t->Phi[9]*f->x[9] + t->Phi[10]*f->x[10] + t->Phi[11]*f->x[11] +
-            t->Phi[12]*f->x[12] + t->Phi[13]*f->x[13] + t->Phi[14]*f->x[14] + t->Phi[15]*f->x[15] +
-            t->Phi[16]*f->x[16] + t->Phi[17]*f->x[17] + t->Phi[18]*f->x[18] + t->Phi[19]*f->x[19] +
-            t->Phi[20]*f->x[20];
-    w->xn[1] = t->Phi[21]*f->x[0] + t->Phi[22]*f->x[1] + t->Phi[23]*f->x[2] + t->Phi[24]*f->x[3] +
-            t->Phi[25]*f->x[4] + t->Phi[26]*f->x[5] + t->Phi[27]*f->x[6] + t->Phi[28]*f->x[7] +
-            t->Phi[29]*f->x[8] + t->Phi[30]*f->x[9] + t->Phi[31]*f->x[10] + t->Phi[32]*f->x[11] +
-            t->Phi[33]*f->x[12] + t->Phi[34]*f->x[13] + t->Phi[35]*f->x[14] + t->Phi[36]*f->x[15] +
-            t->Phi[37]*f->x[16] + t->Phi[38]*f->x[17] + t->Phi[39]*f->x[18] + t->Phi[40]*f->x[19] +
-            t->Phi[41]*f->x[20];
-    w->xn[2] = t->Phi[42]*f->x[0] + t->Phi[43]*f->x[1] + t->Phi[44]*f->x[2] + t->Phi[45]*f->x[3] +
-            t->Phi[46]*f->x[4] + t->Phi[47]*f->x[5] + t->Phi[48]*f->x[6] + t->Phi[49]*f->x[7] +
-            t->Phi[50]*f->x[8] + t->Phi[51]*f->x[9] + t->Phi[52]*f->x[10] + t->Phi[53]*f->x[11] +
-            t->Phi[54]*f->x[12] + t->Phi[55]*f->x[13] + t->Phi[56]*f->x[14] + t->Phi[57]*f->x[15] +
-            t->Phi[58]*f->x[16] + t->Phi[59]*f->x[17] + t->Phi[60]*f->x[18] + t->Phi[61]*f->x[19] +
-            t->Phi[62]*f->x[20];
-    w->xn[3] = t->Phi[63]*f->x[0] + t->Phi[64]*f->x[1] + t->Phi[65]*f->x[2] + t->Phi[66]*f->x[3] +
-            t->Phi[67]*f->x[4] + t->Phi[68]*f->x[5] + t->Phi[69]*f->x[6] + t->Phi[70]*f->x[7] +
-            t->Phi[71]*f->x[8] + t->Phi[72]*f->x[9] + t->Phi[73]*f->x[10] + t->Phi[74]*f->x[11] +
-            t->Phi[75]*f->x[12] + t->Phi[76]*f->x[13] + t->Phi[77]*f->x[14] + t->Phi[78]*f->x[15] +
-            t->Phi[79]*f->x[16] + t->Phi[80]*f->x[17] + t->Phi[81]*f->x[18] + t->Phi[82]*f->x[19] +
-            t->Phi[83]*f->x[20];
-    w->xn[4] = t->Phi[84]*f->x[0] + t->Phi[85]*f->x[1] + t->Phi[86]*f->x[2] + t->Phi[87]*f->x[3] +
-            t->Phi[88]*f->x[4] + t->Phi[89]*f->x[5] + t->Phi[90]*f->x[6] + t->Phi[91]*f->x[7] +
-            t->Phi[92]*f->x[8] + t->Phi[93]*f->x[9] + t->Phi[94]*f->x[10] + t->Phi[95]*f->x[11] +
-            t->Phi[96]*f->x[12] + t->Phi[97]*f->x[13] + t->Phi[98]*f->x[14] + t->Phi[99]*f->x[15] +
-            t->Phi[100]*f->x[16] + t->Phi[101]*f->x[17] + t->Phi[102]*f->x[18] +
-            t->Phi[103]*f->x[19] + t->Phi[104]*f->x[20];
-    w->xn[5] = t->Phi[105]*f->x[0] + t->Phi[106]*f->x[1] + t->Phi[107]*f->x[2] + t->Phi[108]*f->x[3]
-            + t->Phi[109]*f->x[4] + t->Phi[110]*f->x[5] + t->Phi[111]*f->x[6] + t->Phi[112]*f->x[7]
-            + t->Phi[113]*f->x[8] + t->Phi[114]*f->x[9] + t->Phi[115]*f->x[10] +
-            t->Phi[116]*f->x[11] + t->Phi[117]*f->x[12] + t->Phi[118]*f->x[13] +
-            t->Phi[119]*f->x[14] + t->Phi[120]*f->x[15] + t->Phi[121]*f->x[16] +
-            t->Phi[122]*f->x[17] + t->Phi[123]*f->x[18] + t->Phi[124]*f->x[19] +
-            t->Phi[125]*f->x[20];
-    w->xn[6] = t->Phi[126]*f->x[0] + t->Phi[127]*f->x[1] + t->Phi[128]*f->x[2] + t->Phi[129]*f->x[3]
-            + t->Phi[130]*f->x[4] + t->Phi[131]*f->x[5] + t->Phi[132]*f->x[6] + t->Phi[133]*f->x[7]
-            + t->Phi[134]*f->x[8] + t->Phi[135]*f->x[9] + t->Phi[136]*f->x[10] +
-            t->Phi[137]*f->x[11] + t->Phi[138]*f->x[12] + t->Phi[139]*f->x[13] +
-            t->Phi[140]*f->x[14] + t->Phi[141]*f->x[15] + t->Phi[142]*f->x[16] +
-            t->Phi[143]*f->x[17] + t->Phi[144]*f->x[18] + t->Phi[145]*f->x[19] +
-            t->Phi[146]*f->x[20];
-    w->xn[7] = t->Phi[147]*f->x[0] + t->Phi[148]*f->x[1] + t->Phi[149]*f->x[2] + t->Phi[150]*f->x[3]
-            + t->Phi[151]*f->x[4] + t->Phi[152]*f->x[5] + t->Phi[153]*f->x[6] + t->Phi[154]*f->x[7]
-            + t->Phi[155]*f->x[8] + t->Phi[156]*f->x[9] + t->Phi[157]*f->x[10] +
-            t->Phi[158]*f->x[11] + t->Phi[159]*f->x[12] + t->Phi[160]*f->x[13] +
-            t->Phi[161]*f->x[14] + t->Phi[162]*f->x[15] + t->Phi[163]*f->x[16] +
-            t->Phi[164]*f->x[17] + t->Phi[165]*f->x[18] + t->Phi[166]*f->x[19] +
-            t->Phi[167]*f->x[20];
-    w->xn[8] = t->Phi[168]*f->x[0] + t->Phi[169]*f->x[1] + t->Phi[170]*f->x[2] + t->Phi[171]*f->x[3]
-            + t->Phi[172]*f->x[4] + t->Phi[173]*f->x[5] + t->Phi[174]*f->x[6] + t->Phi[175]*f->x[7]
-            + t->Phi[176]*f->x[8] + t->Phi[177]*f->x[9] + t->Phi[178]*f->x[10] +
-            t->Phi[179]*f->x[11] + t->Phi[180]*f->x[12] + t->Phi[181]*f->x[13] +
-            t->Phi[182]*f->x[14] + t->Phi[183]*f->x[15] + t->Phi[184]*f->x[16] +
-            t->Phi[185]*f->x[17] + t->Phi[186]*f->x[18] + t->Phi[187]*f->x[19] +
-            t->Phi[188]*f->x[20];
-    w->xn[9] = t->Phi[189]*f->x[9];
-    w->xn[10] = t->Phi[190]*f->x[10];
-    w->xn[11] = t->Phi[191]*f->x[11];
-    w->xn[12] = t->Phi[192]*f->x[12];
-    w->xn[13] = t->Phi[193]*f->x[13];
-    w->xn[14] = t->Phi[194]*f->x[14];
-    w->xn[15] = t->Phi[195]*f->x[15];
-    w->xn[16] = t->Phi[196]*f->x[16];
-    w->xn[17] = t->Phi[197]*f->x[17];
-    w->xn[18] = t->Phi[198]*f->x[18];
-    w->xn[19] = t->Phi[199]*f->x[19];
-    w->xn[20] = t->Phi[200]*f->x[20];
+    ins_gnss21_scalar sum_check = 0.0;
+    state_predict(f, t, w); /* x_n = Phi x */
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];
     check += w->xn[2] - w->xn[2];
@@ -5787,47 +5912,56 @@ int ins_gnss21_predict(ins_gnss21_filter *restrict f, const ins_gnss21_transitio
     /* row by row: M = row i of Phi P (a row of Phi that is e_i reads P directly), then
        row i of Pn = M Phi^T + Q_d (each pair computed once, into the packed upper triangle) */
     phi_times_p_row_0(f, t, w);
-    check += propagate_row_0(t, w);
+    sum_check += propagate_row_0(t, w);
     phi_times_p_row_1(f, t, w);
-    check += propagate_row_1(t, w);
+    sum_check += propagate_row_1(t, w);
     phi_times_p_row_2(f, t, w);
-    check += propagate_row_2(t, w);
+    sum_check += propagate_row_2(t, w);
     phi_times_p_row_3(f, t, w);
-    check += propagate_row_3(t, w);
+    sum_check += propagate_row_3(t, w);
     phi_times_p_row_4(f, t, w);
-    check += propagate_row_4(t, w);
+    sum_check += propagate_row_4(t, w);
     phi_times_p_row_5(f, t, w);
-    check += propagate_row_5(t, w);
+    sum_check += propagate_row_5(t, w);
     phi_times_p_row_6(f, t, w);
-    check += propagate_row_6(t, w);
+    sum_check += propagate_row_6(t, w);
     phi_times_p_row_7(f, t, w);
-    check += propagate_row_7(t, w);
+    sum_check += propagate_row_7(t, w);
     phi_times_p_row_8(f, t, w);
-    check += propagate_row_8(t, w);
+    sum_check += propagate_row_8(t, w);
     phi_times_p_row_9(f, t, w);
-    check += propagate_row_9(t, w);
+    sum_check += propagate_row_9(t, w);
     phi_times_p_row_10(f, t, w);
-    check += propagate_row_10(t, w);
+    sum_check += propagate_row_10(t, w);
     phi_times_p_row_11(f, t, w);
-    check += propagate_row_11(t, w);
+    sum_check += propagate_row_11(t, w);
     phi_times_p_row_12(f, t, w);
-    check += propagate_row_12(t, w);
+    sum_check += propagate_row_12(t, w);
     phi_times_p_row_13(f, t, w);
-    check += propagate_row_13(t, w);
+    sum_check += propagate_row_13(t, w);
     phi_times_p_row_14(f, t, w);
-    check += propagate_row_14(t, w);
+    sum_check += propagate_row_14(t, w);
     phi_times_p_row_15(f, t, w);
-    check += propagate_row_15(t, w);
+    sum_check += propagate_row_15(t, w);
     phi_times_p_row_16(f, t, w);
-    check += propagate_row_16(t, w);
+    sum_check += propagate_row_16(t, w);
     phi_times_p_row_17(f, t, w);
-    check += propagate_row_17(t, w);
+    sum_check += propagate_row_17(t, w);
     phi_times_p_row_18(f, t, w);
-    check += propagate_row_18(t, w);
+    sum_check += propagate_row_18(t, w);
     phi_times_p_row_19(f, t, w);
-    check += propagate_row_19(t, w);
+    sum_check += propagate_row_19(t, w);
     phi_times_p_row_20(f, t, w);
-    check += propagate_row_20(t, w);
+    sum_check += propagate_row_20(t, w);
+    if (sum_check != 0.0) { /* a value that is not finite, or an overflow of a row's sum: entry by
+            entry */
+        int e;
+        sum_check = 0.0;
+        for (e = 0; e < INS_GNSS21_N_PACKED; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+    }
+    check += sum_check;
     if (check != 0.0) {
         return INS_GNSS21_ERR_NONFINITE;
     }

@@ -190,7 +190,7 @@ int ned_doppler32_augmented_matrices_evaluate(const ned_doppler32_augmented_para
         ned_doppler32_augmented_matrices *restrict m)
 {
     int e;
-    ned_doppler32_augmented_scalar check = 0.0;
+    ned_doppler32_augmented_scalar sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (pole(cos(params->latitude), params->latitude)) {
         return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE; /* cos(latitude) = 0: singular operating
                 point */
@@ -329,23 +329,96 @@ int ned_doppler32_augmented_matrices_evaluate(const ned_doppler32_augmented_para
         m->r[0] = params->doppler_noise_sigma_north*params->doppler_noise_sigma_north;
         m->r[1] = params->doppler_noise_sigma_east*params->doppler_noise_sigma_east;
     }
-    for (e = 0; e < NED_DOPPLER32_AUGMENTED_NNZ_F; ++e) {
-        check += m->F[e] - m->F[e];
+    /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
+       vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
+               is
+       not finite, or an overflow of finite values) is decided value by value */
+    for (e = 0; e + 3 < NED_DOPPLER32_AUGMENTED_NNZ_F; e += 4) {
+        sums[0] += m->F[e];
+        sums[1] += m->F[e + 1];
+        sums[2] += m->F[e + 2];
+        sums[3] += m->F[e + 3];
     }
-    for (e = 0; e < NED_DOPPLER32_AUGMENTED_NNZ_G; ++e) {
-        check += m->G[e] - m->G[e];
+    for (; e < NED_DOPPLER32_AUGMENTED_NNZ_F; ++e) {
+        sums[0] += m->F[e];
     }
-    for (e = 0; e < NED_DOPPLER32_AUGMENTED_NNZ_H; ++e) {
-        check += m->H[e] - m->H[e];
+    for (e = 0; e + 3 < NED_DOPPLER32_AUGMENTED_NNZ_G; e += 4) {
+        sums[0] += m->G[e];
+        sums[1] += m->G[e + 1];
+        sums[2] += m->G[e + 2];
+        sums[3] += m->G[e + 3];
     }
-    for (e = 0; e < NED_DOPPLER32_AUGMENTED_N_NOISES; ++e) {
-        check += m->q[e] - m->q[e];
+    for (; e < NED_DOPPLER32_AUGMENTED_NNZ_G; ++e) {
+        sums[0] += m->G[e];
     }
-    for (e = 0; e < NED_DOPPLER32_AUGMENTED_N_MEASUREMENTS; ++e) {
-        check += m->r[e] - m->r[e];
+    for (e = 0; e + 3 < NED_DOPPLER32_AUGMENTED_NNZ_H; e += 4) {
+        sums[0] += m->H[e];
+        sums[1] += m->H[e + 1];
+        sums[2] += m->H[e + 2];
+        sums[3] += m->H[e + 3];
     }
-    return (check != 0.0) ? NED_DOPPLER32_AUGMENTED_ERR_NONFINITE : NED_DOPPLER32_AUGMENTED_OK;
+    for (; e < NED_DOPPLER32_AUGMENTED_NNZ_H; ++e) {
+        sums[0] += m->H[e];
+    }
+    for (e = 0; e + 3 < NED_DOPPLER32_AUGMENTED_N_NOISES; e += 4) {
+        sums[0] += m->q[e];
+        sums[1] += m->q[e + 1];
+        sums[2] += m->q[e + 2];
+        sums[3] += m->q[e + 3];
+    }
+    for (; e < NED_DOPPLER32_AUGMENTED_N_NOISES; ++e) {
+        sums[0] += m->q[e];
+    }
+    for (e = 0; e + 3 < NED_DOPPLER32_AUGMENTED_N_MEASUREMENTS; e += 4) {
+        sums[0] += m->r[e];
+        sums[1] += m->r[e + 1];
+        sums[2] += m->r[e + 2];
+        sums[3] += m->r[e + 3];
+    }
+    for (; e < NED_DOPPLER32_AUGMENTED_N_MEASUREMENTS; ++e) {
+        sums[0] += m->r[e];
+    }
+    sums[0] = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    if (sums[0] - sums[0] != 0.0) {
+        for (e = 0; e < NED_DOPPLER32_AUGMENTED_NNZ_F; ++e) {
+            if (!isfinite(m->F[e])) {
+                return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_DOPPLER32_AUGMENTED_NNZ_G; ++e) {
+            if (!isfinite(m->G[e])) {
+                return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_DOPPLER32_AUGMENTED_NNZ_H; ++e) {
+            if (!isfinite(m->H[e])) {
+                return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_DOPPLER32_AUGMENTED_N_NOISES; ++e) {
+            if (!isfinite(m->q[e])) {
+                return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_DOPPLER32_AUGMENTED_N_MEASUREMENTS; ++e) {
+            if (!isfinite(m->r[e])) {
+                return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
+            }
+        }
+    }
+
+    return NED_DOPPLER32_AUGMENTED_OK;
 }
+
+/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
+   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
+   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
+   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+#if defined(__GNUC__)
+#define NED_DOPPLER32_AUGMENTED_BLOCK static __attribute__((noinline))
+#else
+#define NED_DOPPLER32_AUGMENTED_BLOCK static
+#endif
 
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static ned_doppler32_augmented_scalar power_of_two(const int e)
@@ -498,13 +571,6 @@ static int taylor_plan(const ned_doppler32_augmented_scalar norm, const
     return NED_DOPPLER32_AUGMENTED_OK;
 }
 
-/* Each block keeps its own stack frame: inlined into discretize, the frames of all blocks
-   would add up (the worst-case stack is measured for the Cortex-M4F, tests/embedded). */
-#if defined(__GNUC__)
-#define NED_DOPPLER32_AUGMENTED_BLOCK static __attribute__((noinline))
-#else
-#define NED_DOPPLER32_AUGMENTED_BLOCK static
-#endif
 NED_DOPPLER32_AUGMENTED_BLOCK void horner_input(const ned_doppler32_augmented_matrices *restrict m,
         ned_doppler32_augmented_discretize_scratch *restrict w, const ned_doppler32_augmented_scalar
         h)
@@ -2386,8 +2452,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
             t->Phi[177] + t->Phi[178] + t->Phi[179] + t->Phi[180] + t->Phi[181] + t->Phi[182] +
             t->Phi[183] + t->Phi[184] + t->Phi[185] + t->Phi[186] + t->Phi[187] + t->Phi[188] +
             t->Phi[189] + t->Phi[193] + t->Phi[194] + t->Phi[195] + t->Phi[196] + t->Phi[197] +
-            t->Phi[198]; w->term[0][0] = v; check += v - v;
-    return check;
+            t->Phi[198]; w->term[0][0] = v; check += v;
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void noise_input(const ned_doppler32_augmented_matrices *restrict m,
@@ -2505,151 +2571,151 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar process_noise(const
     w->term[1][47] = w->term[0][47]*w->term[1][53];
     v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
             w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0] = v; check += v - v;
+            t->Qd[0] = v; check += v;
     v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
             w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v - v;
+            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v;
     v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
             w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v - v;
+            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v;
     v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
             w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v - v;
+            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v;
     v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
             w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v - v;
+            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v;
     v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
             w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v - v;
+            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v;
     v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
             w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
-            w->term[1][5]*w->term[0][41]; t->Qd[6] = v; check += v - v;
-    v = w->term[1][0]*w->term[0][42]; t->Qd[10] = v; check += v - v;
-    v = w->term[1][1]*w->term[0][43]; t->Qd[11] = v; check += v - v;
-    v = w->term[1][2]*w->term[0][44]; t->Qd[12] = v; check += v - v;
-    v = w->term[1][3]*w->term[0][45]; t->Qd[13] = v; check += v - v;
-    v = w->term[1][4]*w->term[0][46]; t->Qd[14] = v; check += v - v;
-    v = w->term[1][5]*w->term[0][47]; t->Qd[15] = v; check += v - v;
+            w->term[1][5]*w->term[0][41]; t->Qd[6] = v; check += v;
+    v = w->term[1][0]*w->term[0][42]; t->Qd[10] = v; check += v;
+    v = w->term[1][1]*w->term[0][43]; t->Qd[11] = v; check += v;
+    v = w->term[1][2]*w->term[0][44]; t->Qd[12] = v; check += v;
+    v = w->term[1][3]*w->term[0][45]; t->Qd[13] = v; check += v;
+    v = w->term[1][4]*w->term[0][46]; t->Qd[14] = v; check += v;
+    v = w->term[1][5]*w->term[0][47]; t->Qd[15] = v; check += v;
     v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
             w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[32] = v; check += v - v;
+            w->term[1][11]*w->term[0][11]; t->Qd[32] = v; check += v;
     v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
             w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[33] = v; check += v - v;
+            w->term[1][11]*w->term[0][17]; t->Qd[33] = v; check += v;
     v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
             w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[34] = v; check += v - v;
+            w->term[1][11]*w->term[0][23]; t->Qd[34] = v; check += v;
     v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
             w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[35] = v; check += v - v;
+            w->term[1][11]*w->term[0][29]; t->Qd[35] = v; check += v;
     v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
             w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[36] = v; check += v - v;
+            w->term[1][11]*w->term[0][35]; t->Qd[36] = v; check += v;
     v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38] +
             w->term[1][9]*w->term[0][39] + w->term[1][10]*w->term[0][40] +
-            w->term[1][11]*w->term[0][41]; t->Qd[37] = v; check += v - v;
-    v = w->term[1][6]*w->term[0][42]; t->Qd[41] = v; check += v - v;
-    v = w->term[1][7]*w->term[0][43]; t->Qd[42] = v; check += v - v;
-    v = w->term[1][8]*w->term[0][44]; t->Qd[43] = v; check += v - v;
-    v = w->term[1][9]*w->term[0][45]; t->Qd[44] = v; check += v - v;
-    v = w->term[1][10]*w->term[0][46]; t->Qd[45] = v; check += v - v;
-    v = w->term[1][11]*w->term[0][47]; t->Qd[46] = v; check += v - v;
+            w->term[1][11]*w->term[0][41]; t->Qd[37] = v; check += v;
+    v = w->term[1][6]*w->term[0][42]; t->Qd[41] = v; check += v;
+    v = w->term[1][7]*w->term[0][43]; t->Qd[42] = v; check += v;
+    v = w->term[1][8]*w->term[0][44]; t->Qd[43] = v; check += v;
+    v = w->term[1][9]*w->term[0][45]; t->Qd[44] = v; check += v;
+    v = w->term[1][10]*w->term[0][46]; t->Qd[45] = v; check += v;
+    v = w->term[1][11]*w->term[0][47]; t->Qd[46] = v; check += v;
     v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
             w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[63] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[63] = v; check +=
+            v;
     v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
             w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[64] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[64] = v; check +=
+            v;
     v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
             w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[65] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[65] = v; check +=
+            v;
     v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
             w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[66] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[66] = v; check +=
+            v;
     v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
             w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[67] = v; check += v
-            - v;
-    v = w->term[1][12]*w->term[0][42]; t->Qd[71] = v; check += v - v;
-    v = w->term[1][13]*w->term[0][43]; t->Qd[72] = v; check += v - v;
-    v = w->term[1][14]*w->term[0][44]; t->Qd[73] = v; check += v - v;
-    v = w->term[1][15]*w->term[0][45]; t->Qd[74] = v; check += v - v;
-    v = w->term[1][16]*w->term[0][46]; t->Qd[75] = v; check += v - v;
-    v = w->term[1][17]*w->term[0][47]; t->Qd[76] = v; check += v - v;
+            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[67] = v; check +=
+            v;
+    v = w->term[1][12]*w->term[0][42]; t->Qd[71] = v; check += v;
+    v = w->term[1][13]*w->term[0][43]; t->Qd[72] = v; check += v;
+    v = w->term[1][14]*w->term[0][44]; t->Qd[73] = v; check += v;
+    v = w->term[1][15]*w->term[0][45]; t->Qd[74] = v; check += v;
+    v = w->term[1][16]*w->term[0][46]; t->Qd[75] = v; check += v;
+    v = w->term[1][17]*w->term[0][47]; t->Qd[76] = v; check += v;
     v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
             w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[93] = v; check += v
-            - v;
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[93] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
             w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[94] = v; check += v
-            - v;
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[94] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
             w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[95] = v; check += v
-            - v;
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[95] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
             w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[96] = v; check += v
-            - v;
-    v = w->term[1][18]*w->term[0][42]; t->Qd[100] = v; check += v - v;
-    v = w->term[1][19]*w->term[0][43]; t->Qd[101] = v; check += v - v;
-    v = w->term[1][20]*w->term[0][44]; t->Qd[102] = v; check += v - v;
-    v = w->term[1][21]*w->term[0][45]; t->Qd[103] = v; check += v - v;
-    v = w->term[1][22]*w->term[0][46]; t->Qd[104] = v; check += v - v;
-    v = w->term[1][23]*w->term[0][47]; t->Qd[105] = v; check += v - v;
+            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[96] = v; check +=
+            v;
+    v = w->term[1][18]*w->term[0][42]; t->Qd[100] = v; check += v;
+    v = w->term[1][19]*w->term[0][43]; t->Qd[101] = v; check += v;
+    v = w->term[1][20]*w->term[0][44]; t->Qd[102] = v; check += v;
+    v = w->term[1][21]*w->term[0][45]; t->Qd[103] = v; check += v;
+    v = w->term[1][22]*w->term[0][46]; t->Qd[104] = v; check += v;
+    v = w->term[1][23]*w->term[0][47]; t->Qd[105] = v; check += v;
     v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
             w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
             w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[122] = v; check +=
-            v - v;
+            v;
     v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
             w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
             w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[123] = v; check +=
-            v - v;
+            v;
     v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
             w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
             w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[124] = v; check +=
-            v - v;
-    v = w->term[1][24]*w->term[0][42]; t->Qd[128] = v; check += v - v;
-    v = w->term[1][25]*w->term[0][43]; t->Qd[129] = v; check += v - v;
-    v = w->term[1][26]*w->term[0][44]; t->Qd[130] = v; check += v - v;
-    v = w->term[1][27]*w->term[0][45]; t->Qd[131] = v; check += v - v;
-    v = w->term[1][28]*w->term[0][46]; t->Qd[132] = v; check += v - v;
-    v = w->term[1][29]*w->term[0][47]; t->Qd[133] = v; check += v - v;
+            v;
+    v = w->term[1][24]*w->term[0][42]; t->Qd[128] = v; check += v;
+    v = w->term[1][25]*w->term[0][43]; t->Qd[129] = v; check += v;
+    v = w->term[1][26]*w->term[0][44]; t->Qd[130] = v; check += v;
+    v = w->term[1][27]*w->term[0][45]; t->Qd[131] = v; check += v;
+    v = w->term[1][28]*w->term[0][46]; t->Qd[132] = v; check += v;
+    v = w->term[1][29]*w->term[0][47]; t->Qd[133] = v; check += v;
     v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
             w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
             w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[150] = v; check +=
-            v - v;
+            v;
     v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
             w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
             w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[151] = v; check +=
-            v - v;
-    v = w->term[1][30]*w->term[0][42]; t->Qd[155] = v; check += v - v;
-    v = w->term[1][31]*w->term[0][43]; t->Qd[156] = v; check += v - v;
-    v = w->term[1][32]*w->term[0][44]; t->Qd[157] = v; check += v - v;
-    v = w->term[1][33]*w->term[0][45]; t->Qd[158] = v; check += v - v;
-    v = w->term[1][34]*w->term[0][46]; t->Qd[159] = v; check += v - v;
-    v = w->term[1][35]*w->term[0][47]; t->Qd[160] = v; check += v - v;
+            v;
+    v = w->term[1][30]*w->term[0][42]; t->Qd[155] = v; check += v;
+    v = w->term[1][31]*w->term[0][43]; t->Qd[156] = v; check += v;
+    v = w->term[1][32]*w->term[0][44]; t->Qd[157] = v; check += v;
+    v = w->term[1][33]*w->term[0][45]; t->Qd[158] = v; check += v;
+    v = w->term[1][34]*w->term[0][46]; t->Qd[159] = v; check += v;
+    v = w->term[1][35]*w->term[0][47]; t->Qd[160] = v; check += v;
     v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
             w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
             w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[177] = v; check +=
-            v - v;
-    v = w->term[1][36]*w->term[0][42]; t->Qd[181] = v; check += v - v;
-    v = w->term[1][37]*w->term[0][43]; t->Qd[182] = v; check += v - v;
-    v = w->term[1][38]*w->term[0][44]; t->Qd[183] = v; check += v - v;
-    v = w->term[1][39]*w->term[0][45]; t->Qd[184] = v; check += v - v;
-    v = w->term[1][40]*w->term[0][46]; t->Qd[185] = v; check += v - v;
-    v = w->term[1][41]*w->term[0][47]; t->Qd[186] = v; check += v - v;
-    v = w->term[1][42]*w->term[0][42]; t->Qd[275] = v; check += v - v;
-    v = w->term[1][43]*w->term[0][43]; t->Qd[297] = v; check += v - v;
-    v = w->term[1][44]*w->term[0][44]; t->Qd[318] = v; check += v - v;
-    v = w->term[1][45]*w->term[0][45]; t->Qd[338] = v; check += v - v;
-    v = w->term[1][46]*w->term[0][46]; t->Qd[357] = v; check += v - v;
-    v = w->term[1][47]*w->term[0][47]; t->Qd[375] = v; check += v - v;
+            v;
+    v = w->term[1][36]*w->term[0][42]; t->Qd[181] = v; check += v;
+    v = w->term[1][37]*w->term[0][43]; t->Qd[182] = v; check += v;
+    v = w->term[1][38]*w->term[0][44]; t->Qd[183] = v; check += v;
+    v = w->term[1][39]*w->term[0][45]; t->Qd[184] = v; check += v;
+    v = w->term[1][40]*w->term[0][46]; t->Qd[185] = v; check += v;
+    v = w->term[1][41]*w->term[0][47]; t->Qd[186] = v; check += v;
+    v = w->term[1][42]*w->term[0][42]; t->Qd[275] = v; check += v;
+    v = w->term[1][43]*w->term[0][43]; t->Qd[297] = v; check += v;
+    v = w->term[1][44]*w->term[0][44]; t->Qd[318] = v; check += v;
+    v = w->term[1][45]*w->term[0][45]; t->Qd[338] = v; check += v;
+    v = w->term[1][46]*w->term[0][46]; t->Qd[357] = v; check += v;
+    v = w->term[1][47]*w->term[0][47]; t->Qd[375] = v; check += v;
     t->Qd[7] = 0;
     t->Qd[8] = 0;
     t->Qd[9] = 0;
@@ -3102,7 +3168,7 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar process_noise(const
     t->Qd[525] = 0;
     t->Qd[526] = 0;
     t->Qd[527] = 0;
-    return check;
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
 int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *restrict m,
@@ -3114,41 +3180,64 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
     int halvings, order, status;
     int k;
     ned_doppler32_augmented_scalar sum_check;
-    ned_doppler32_augmented_scalar check = 0.0, sums[2] = { 0.0, 0.0 };
+    ned_doppler32_augmented_scalar qd_check;
+    ned_doppler32_augmented_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (!isfinite(T)) {
         return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
     }
     if (!(T > 0.0)) {
         return NED_DOPPLER32_AUGMENTED_ERR_NOT_POSITIVE;
     }
-    /* the sum of v - v over F, G and q (0 when all are finite) in two partial sums, two entries a
-            step,
-       which gcc -O2 vectorizes (the order of a sum of zeros and NaNs does not change whether it is
-               0) */
-    for (e = 0; e + 1 < NED_DOPPLER32_AUGMENTED_NNZ_F; e += 2) {
-        sums[0] += m->F[e] - m->F[e];
-        sums[1] += m->F[e + 1] - m->F[e + 1];
+    /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
+       vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
+               is
+       not finite, or an overflow of finite values) is decided value by value */
+    for (e = 0; e + 3 < NED_DOPPLER32_AUGMENTED_NNZ_F; e += 4) {
+        sums[0] += m->F[e];
+        sums[1] += m->F[e + 1];
+        sums[2] += m->F[e + 2];
+        sums[3] += m->F[e + 3];
     }
     for (; e < NED_DOPPLER32_AUGMENTED_NNZ_F; ++e) {
-        sums[0] += m->F[e] - m->F[e];
+        sums[0] += m->F[e];
     }
-    for (e = 0; e + 1 < NED_DOPPLER32_AUGMENTED_NNZ_G; e += 2) {
-        sums[0] += m->G[e] - m->G[e];
-        sums[1] += m->G[e + 1] - m->G[e + 1];
+    for (e = 0; e + 3 < NED_DOPPLER32_AUGMENTED_NNZ_G; e += 4) {
+        sums[0] += m->G[e];
+        sums[1] += m->G[e + 1];
+        sums[2] += m->G[e + 2];
+        sums[3] += m->G[e + 3];
     }
     for (; e < NED_DOPPLER32_AUGMENTED_NNZ_G; ++e) {
-        sums[0] += m->G[e] - m->G[e];
+        sums[0] += m->G[e];
     }
-    for (e = 0; e + 1 < NED_DOPPLER32_AUGMENTED_N_NOISES; e += 2) {
-        sums[0] += m->q[e] - m->q[e];
-        sums[1] += m->q[e + 1] - m->q[e + 1];
+    for (e = 0; e + 3 < NED_DOPPLER32_AUGMENTED_N_NOISES; e += 4) {
+        sums[0] += m->q[e];
+        sums[1] += m->q[e + 1];
+        sums[2] += m->q[e + 2];
+        sums[3] += m->q[e + 3];
     }
     for (; e < NED_DOPPLER32_AUGMENTED_N_NOISES; ++e) {
-        sums[0] += m->q[e] - m->q[e];
+        sums[0] += m->q[e];
     }
-    if (sums[0] + sums[1] != 0.0) {
-        return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
+    sums[0] = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    if (sums[0] - sums[0] != 0.0) {
+        for (e = 0; e < NED_DOPPLER32_AUGMENTED_NNZ_F; ++e) {
+            if (!isfinite(m->F[e])) {
+                return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_DOPPLER32_AUGMENTED_NNZ_G; ++e) {
+            if (!isfinite(m->G[e])) {
+                return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_DOPPLER32_AUGMENTED_N_NOISES; ++e) {
+            if (!isfinite(m->q[e])) {
+                return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
+            }
+        }
     }
+
     for (c = 0; c < NED_DOPPLER32_AUGMENTED_N_NOISES; ++c) {
         if (m->q[c] < 0.0) {
             return NED_DOPPLER32_AUGMENTED_ERR_NOT_POSITIVE;
@@ -3211,7 +3300,15 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
-    check += process_noise(m, t, w, T);
+    qd_check = process_noise(m, t, w, T);
+    if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
+            entry */
+        qd_check = 0.0;
+        for (e = 0; e < NED_DOPPLER32_AUGMENTED_N_PACKED; ++e) {
+            qd_check += t->Qd[e] - t->Qd[e];
+        }
+    }
+    check += qd_check;
     return (check != 0.0) ? NED_DOPPLER32_AUGMENTED_ERR_NONFINITE : NED_DOPPLER32_AUGMENTED_OK;
 }
 
@@ -3304,9 +3401,78 @@ void ned_doppler32_augmented_reset_error_state(ned_doppler32_augmented_filter *f
     }
 }
 
-static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+/* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
+NED_DOPPLER32_AUGMENTED_BLOCK void state_predict(const ned_doppler32_augmented_filter *restrict f,
+        const ned_doppler32_augmented_transition *restrict t,
+                ned_doppler32_augmented_filter_scratch *restrict w)
+{
+    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
+            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[7] + t->Phi[7]*f->x[8] +
+            t->Phi[8]*f->x[9] + t->Phi[9]*f->x[10] + t->Phi[10]*f->x[11] + t->Phi[11]*f->x[12] +
+            t->Phi[12]*f->x[13] + t->Phi[13]*f->x[14] + t->Phi[14]*f->x[15] + t->Phi[15]*f->x[18] +
+            t->Phi[16]*f->x[19] + t->Phi[17]*f->x[20] + t->Phi[18]*f->x[21] + t->Phi[19]*f->x[22] +
+            t->Phi[20]*f->x[23] + t->Phi[21]*f->x[24] + t->Phi[22]*f->x[25] + t->Phi[23]*f->x[26] +
+            t->Phi[24]*f->x[27] + t->Phi[25]*f->x[28] + t->Phi[26]*f->x[29];
+    w->xn[1] = t->Phi[27]*f->x[0] + t->Phi[28]*f->x[1] + t->Phi[29]*f->x[2] + t->Phi[30]*f->x[3] +
+            t->Phi[31]*f->x[4] + t->Phi[32]*f->x[5] + t->Phi[33]*f->x[7] + t->Phi[34]*f->x[8] +
+            t->Phi[35]*f->x[9] + t->Phi[36]*f->x[10] + t->Phi[37]*f->x[11] + t->Phi[38]*f->x[12] +
+            t->Phi[39]*f->x[13] + t->Phi[40]*f->x[14] + t->Phi[41]*f->x[15] + t->Phi[42]*f->x[18] +
+            t->Phi[43]*f->x[19] + t->Phi[44]*f->x[20] + t->Phi[45]*f->x[21] + t->Phi[46]*f->x[22] +
+            t->Phi[47]*f->x[23] + t->Phi[48]*f->x[24] + t->Phi[49]*f->x[25] + t->Phi[50]*f->x[26] +
+            t->Phi[51]*f->x[27] + t->Phi[52]*f->x[28] + t->Phi[53]*f->x[29];
+    w->xn[2] = t->Phi[54]*f->x[0] + t->Phi[55]*f->x[1] + t->Phi[56]*f->x[2] + t->Phi[57]*f->x[3] +
+            t->Phi[58]*f->x[4] + t->Phi[59]*f->x[5] + t->Phi[60]*f->x[7] + t->Phi[61]*f->x[8] +
+            t->Phi[62]*f->x[9] + t->Phi[63]*f->x[10] + t->Phi[64]*f->x[11] + t->Phi[65]*f->x[12] +
+            t->Phi[66]*f->x[13] + t->Phi[67]*f->x[14] + t->Phi[68]*f->x[15] + t->Phi[69]*f->x[18] +
+            t->Phi[70]*f->x[19] + t->Phi[71]*f->x[20] + t->Phi[72]*f->x[21] + t->Phi[73]*f->x[22] +
+            t->Phi[74]*f->x[23] + t->Phi[75]*f->x[24] + t->Phi[76]*f->x[25] + t->Phi[77]*f->x[26] +
+            t->Phi[78]*f->x[27] + t->Phi[79]*f->x[28] + t->Phi[80]*f->x[29];
+    w->xn[3] = t->Phi[81]*f->x[0] + t->Phi[82]*f->x[1] + t->Phi[83]*f->x[2] + t->Phi[84]*f->x[3] +
+            t->Phi[85]*f->x[4] + t->Phi[86]*f->x[5] + t->Phi[87]*f->x[7] + t->Phi[88]*f->x[8] +
+            t->Phi[89]*f->x[9] + t->Phi[90]*f->x[10] + t->Phi[91]*f->x[11] + t->Phi[92]*f->x[12] +
+            t->Phi[93]*f->x[13] + t->Phi[94]*f->x[14] + t->Phi[95]*f->x[15] + t->Phi[96]*f->x[18] +
+            t->Phi[97]*f->x[19] + t->Phi[98]*f->x[20] + t->Phi[99]*f->x[21] + t->Phi[100]*f->x[22] +
+            t->Phi[101]*f->x[23] + t->Phi[102]*f->x[24] + t->Phi[103]*f->x[25] +
+            t->Phi[104]*f->x[26] + t->Phi[105]*f->x[27] + t->Phi[106]*f->x[28] +
+            t->Phi[107]*f->x[29];
+    w->xn[4] = t->Phi[108]*f->x[0] + t->Phi[109]*f->x[1] + t->Phi[110]*f->x[2] + t->Phi[111]*f->x[3]
+            + t->Phi[112]*f->x[4] + t->Phi[113]*f->x[5] + t->Phi[114]*f->x[7] + t->Phi[115]*f->x[8]
+            + t->Phi[116]*f->x[9] + t->Phi[117]*f->x[10] + t->Phi[118]*f->x[11] +
+            t->Phi[119]*f->x[12] + t->Phi[120]*f->x[13] + t->Phi[121]*f->x[14] +
+            t->Phi[122]*f->x[15] + t->Phi[123]*f->x[18] + t->Phi[124]*f->x[19] +
+            t->Phi[125]*f->x[20] + t->Phi[126]*f->x[21] + t->Phi[127]*f->x[22] +
+            t->Phi[128]*f->x[23] + t->Phi[129]*f->x[24] + t->Phi[130]*f->x[25] +
+            t->Phi[131]*f->x[26] + t->Phi[132]*f->x[27] + t->Phi[133]*f->x[28] +
+            t->Phi[134]*f->x[29];
+    w->xn[5] = t->Phi[135]*f->x[0] + t->Phi[136]*f->x[1] + t->Phi[137]*f->x[2] + t->Phi[138]*f->x[3]
+            + t->Phi[139]*f->x[4] + t->Phi[140]*f->x[5] + t->Phi[141]*f->x[7] + t->Phi[142]*f->x[8]
+            + t->Phi[143]*f->x[9] + t->Phi[144]*f->x[10] + t->Phi[145]*f->x[11] +
+            t->Phi[146]*f->x[12] + t->Phi[147]*f->x[13] + t->Phi[148]*f->x[14] +
+            t->Phi[149]*f->x[15] + t->Phi[150]*f->x[18] + t->Phi[151]*f->x[19] +
+            t->Phi[152]*f->x[20] + t->Phi[153]*f->x[21] + t->Phi[154]*f->x[22] +
+            t->Phi[155]*f->x[23] + t->Phi[156]*f->x[24] + t->Phi[157]*f->x[25] +
+            t->Phi[158]*f->x[26] + t->Phi[159]*f->x[27] + t->Phi[160]*f->x[28] +
+            t->Phi[161]*f->x[29];
+    w->xn[6] = t->Phi[162]*f->x[0] + t->Phi[163]*f->x[1] + t->Phi[164]*f->x[2] + t->Phi[165]*f->x[3]
+            + t->Phi[166]*f->x[4] + t->Phi[167]*f->x[5] + t->Phi[168]*f->x[6] + t->Phi[169]*f->x[7]
+            + t->Phi[170]*f->x[8] + t->Phi[171]*f->x[9] + t->Phi[172]*f->x[10] +
+            t->Phi[173]*f->x[11] + t->Phi[174]*f->x[12] + t->Phi[175]*f->x[13] +
+            t->Phi[176]*f->x[14] + t->Phi[177]*f->x[15] + t->Phi[178]*f->x[18] +
+            t->Phi[179]*f->x[19] + t->Phi[180]*f->x[20] + t->Phi[181]*f->x[21] +
+            t->Phi[182]*f->x[22] + t->Phi[183]*f->x[23] + t->Phi[184]*f->x[24] +
+            t->Phi[185]*f->x[25] + t->Phi[186]*f->x[26] + t->Phi[187]*f->x[27] +
+            t->Phi[188]*f->x[28] + t->Phi[189]*f->x[29];
+    w->xn[10] = t->Phi[193]*f->x[10];
+    w->xn[11] = t->Phi[194]*f->x[11];
+    w->xn[12] = t->Phi[195]*f->x[12];
+    w->xn[13] = t->Phi[196]*f->x[13];
+    w->xn[14] = t->Phi[197]*f->x[14];
+    w->xn[15] = t->Phi[198]*f->x[15];
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
             t->Phi[3]*f->P[3][0] + t->Phi[4]*f->P[4][0] + t->Phi[5]*f->P[5][0] +
@@ -3598,9 +3764,11 @@ static void phi_times_p_row_0(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[24]*f->P[27][31] + t->Phi[25]*f->P[28][31] + t->Phi[26]*f->P[29][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_0(const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[0] + w->M[1]*t->Phi[1] + w->M[2]*t->Phi[2] + w->M[3]*t->Phi[3] +
@@ -3610,7 +3778,7 @@ static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmen
             w->M[19]*t->Phi[16] + w->M[20]*t->Phi[17] + w->M[21]*t->Phi[18] + w->M[22]*t->Phi[19] +
             w->M[23]*t->Phi[20] + w->M[24]*t->Phi[21] + w->M[25]*t->Phi[22] + w->M[26]*t->Phi[23] +
             w->M[27]*t->Phi[24] + w->M[28]*t->Phi[25] + w->M[29]*t->Phi[26] + t->Qd[0]; w->Pn[0] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
             w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[7]*t->Phi[33] + w->M[8]*t->Phi[34] +
             w->M[9]*t->Phi[35] + w->M[10]*t->Phi[36] + w->M[11]*t->Phi[37] + w->M[12]*t->Phi[38] +
@@ -3618,7 +3786,7 @@ static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmen
             w->M[19]*t->Phi[43] + w->M[20]*t->Phi[44] + w->M[21]*t->Phi[45] + w->M[22]*t->Phi[46] +
             w->M[23]*t->Phi[47] + w->M[24]*t->Phi[48] + w->M[25]*t->Phi[49] + w->M[26]*t->Phi[50] +
             w->M[27]*t->Phi[51] + w->M[28]*t->Phi[52] + w->M[29]*t->Phi[53] + t->Qd[1]; w->Pn[1] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[54] + w->M[1]*t->Phi[55] + w->M[2]*t->Phi[56] + w->M[3]*t->Phi[57] +
             w->M[4]*t->Phi[58] + w->M[5]*t->Phi[59] + w->M[7]*t->Phi[60] + w->M[8]*t->Phi[61] +
             w->M[9]*t->Phi[62] + w->M[10]*t->Phi[63] + w->M[11]*t->Phi[64] + w->M[12]*t->Phi[65] +
@@ -3626,7 +3794,7 @@ static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmen
             w->M[19]*t->Phi[70] + w->M[20]*t->Phi[71] + w->M[21]*t->Phi[72] + w->M[22]*t->Phi[73] +
             w->M[23]*t->Phi[74] + w->M[24]*t->Phi[75] + w->M[25]*t->Phi[76] + w->M[26]*t->Phi[77] +
             w->M[27]*t->Phi[78] + w->M[28]*t->Phi[79] + w->M[29]*t->Phi[80] + t->Qd[2]; w->Pn[2] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[81] + w->M[1]*t->Phi[82] + w->M[2]*t->Phi[83] + w->M[3]*t->Phi[84] +
             w->M[4]*t->Phi[85] + w->M[5]*t->Phi[86] + w->M[7]*t->Phi[87] + w->M[8]*t->Phi[88] +
             w->M[9]*t->Phi[89] + w->M[10]*t->Phi[90] + w->M[11]*t->Phi[91] + w->M[12]*t->Phi[92] +
@@ -3634,7 +3802,7 @@ static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmen
             w->M[19]*t->Phi[97] + w->M[20]*t->Phi[98] + w->M[21]*t->Phi[99] + w->M[22]*t->Phi[100] +
             w->M[23]*t->Phi[101] + w->M[24]*t->Phi[102] + w->M[25]*t->Phi[103] +
             w->M[26]*t->Phi[104] + w->M[27]*t->Phi[105] + w->M[28]*t->Phi[106] +
-            w->M[29]*t->Phi[107] + t->Qd[3]; w->Pn[3] = v; check += v - v;
+            w->M[29]*t->Phi[107] + t->Qd[3]; w->Pn[3] = v; check += v;
     v = w->M[0]*t->Phi[108] + w->M[1]*t->Phi[109] + w->M[2]*t->Phi[110] + w->M[3]*t->Phi[111] +
             w->M[4]*t->Phi[112] + w->M[5]*t->Phi[113] + w->M[7]*t->Phi[114] + w->M[8]*t->Phi[115] +
             w->M[9]*t->Phi[116] + w->M[10]*t->Phi[117] + w->M[11]*t->Phi[118] + w->M[12]*t->Phi[119]
@@ -3643,7 +3811,7 @@ static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmen
             w->M[21]*t->Phi[126] + w->M[22]*t->Phi[127] + w->M[23]*t->Phi[128] +
             w->M[24]*t->Phi[129] + w->M[25]*t->Phi[130] + w->M[26]*t->Phi[131] +
             w->M[27]*t->Phi[132] + w->M[28]*t->Phi[133] + w->M[29]*t->Phi[134] + t->Qd[4]; w->Pn[4]
-            = v; check += v - v;
+            = v; check += v;
     v = w->M[0]*t->Phi[135] + w->M[1]*t->Phi[136] + w->M[2]*t->Phi[137] + w->M[3]*t->Phi[138] +
             w->M[4]*t->Phi[139] + w->M[5]*t->Phi[140] + w->M[7]*t->Phi[141] + w->M[8]*t->Phi[142] +
             w->M[9]*t->Phi[143] + w->M[10]*t->Phi[144] + w->M[11]*t->Phi[145] + w->M[12]*t->Phi[146]
@@ -3652,7 +3820,7 @@ static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmen
             w->M[21]*t->Phi[153] + w->M[22]*t->Phi[154] + w->M[23]*t->Phi[155] +
             w->M[24]*t->Phi[156] + w->M[25]*t->Phi[157] + w->M[26]*t->Phi[158] +
             w->M[27]*t->Phi[159] + w->M[28]*t->Phi[160] + w->M[29]*t->Phi[161] + t->Qd[5]; w->Pn[5]
-            = v; check += v - v;
+            = v; check += v;
     v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
             w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
             w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
@@ -3661,38 +3829,38 @@ static ned_doppler32_augmented_scalar propagate_row_0(const ned_doppler32_augmen
             w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
             w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
             w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[6]; w->Pn[6] = v; check += v - v;
-    v = w->M[7]; w->Pn[7] = v; check += v - v;
-    v = w->M[8]; w->Pn[8] = v; check += v - v;
-    v = w->M[9]; w->Pn[9] = v; check += v - v;
-    v = w->M[10]*t->Phi[193] + t->Qd[10]; w->Pn[10] = v; check += v - v;
-    v = w->M[11]*t->Phi[194] + t->Qd[11]; w->Pn[11] = v; check += v - v;
-    v = w->M[12]*t->Phi[195] + t->Qd[12]; w->Pn[12] = v; check += v - v;
-    v = w->M[13]*t->Phi[196] + t->Qd[13]; w->Pn[13] = v; check += v - v;
-    v = w->M[14]*t->Phi[197] + t->Qd[14]; w->Pn[14] = v; check += v - v;
-    v = w->M[15]*t->Phi[198] + t->Qd[15]; w->Pn[15] = v; check += v - v;
-    v = w->M[16]; w->Pn[16] = v; check += v - v;
-    v = w->M[17]; w->Pn[17] = v; check += v - v;
-    v = w->M[18]; w->Pn[18] = v; check += v - v;
-    v = w->M[19]; w->Pn[19] = v; check += v - v;
-    v = w->M[20]; w->Pn[20] = v; check += v - v;
-    v = w->M[21]; w->Pn[21] = v; check += v - v;
-    v = w->M[22]; w->Pn[22] = v; check += v - v;
-    v = w->M[23]; w->Pn[23] = v; check += v - v;
-    v = w->M[24]; w->Pn[24] = v; check += v - v;
-    v = w->M[25]; w->Pn[25] = v; check += v - v;
-    v = w->M[26]; w->Pn[26] = v; check += v - v;
-    v = w->M[27]; w->Pn[27] = v; check += v - v;
-    v = w->M[28]; w->Pn[28] = v; check += v - v;
-    v = w->M[29]; w->Pn[29] = v; check += v - v;
-    v = w->M[30]; w->Pn[30] = v; check += v - v;
-    v = w->M[31]; w->Pn[31] = v; check += v - v;
-    return check;
+            w->M[29]*t->Phi[189] + t->Qd[6]; w->Pn[6] = v; check += v;
+    v = w->M[7]; w->Pn[7] = v; check += v;
+    v = w->M[8]; w->Pn[8] = v; check += v;
+    v = w->M[9]; w->Pn[9] = v; check += v;
+    v = w->M[10]*t->Phi[193] + t->Qd[10]; w->Pn[10] = v; check += v;
+    v = w->M[11]*t->Phi[194] + t->Qd[11]; w->Pn[11] = v; check += v;
+    v = w->M[12]*t->Phi[195] + t->Qd[12]; w->Pn[12] = v; check += v;
+    v = w->M[13]*t->Phi[196] + t->Qd[13]; w->Pn[13] = v; check += v;
+    v = w->M[14]*t->Phi[197] + t->Qd[14]; w->Pn[14] = v; check += v;
+    v = w->M[15]*t->Phi[198] + t->Qd[15]; w->Pn[15] = v; check += v;
+    v = w->M[16]; w->Pn[16] = v; check += v;
+    v = w->M[17]; w->Pn[17] = v; check += v;
+    v = w->M[18]; w->Pn[18] = v; check += v;
+    v = w->M[19]; w->Pn[19] = v; check += v;
+    v = w->M[20]; w->Pn[20] = v; check += v;
+    v = w->M[21]; w->Pn[21] = v; check += v;
+    v = w->M[22]; w->Pn[22] = v; check += v;
+    v = w->M[23]; w->Pn[23] = v; check += v;
+    v = w->M[24]; w->Pn[24] = v; check += v;
+    v = w->M[25]; w->Pn[25] = v; check += v;
+    v = w->M[26]; w->Pn[26] = v; check += v;
+    v = w->M[27]; w->Pn[27] = v; check += v;
+    v = w->M[28]; w->Pn[28] = v; check += v;
+    v = w->M[29]; w->Pn[29] = v; check += v;
+    v = w->M[30]; w->Pn[30] = v; check += v;
+    v = w->M[31]; w->Pn[31] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[27]*f->P[0][0] + t->Phi[28]*f->P[1][0] + t->Phi[29]*f->P[2][0] +
             t->Phi[30]*f->P[3][0] + t->Phi[31]*f->P[4][0] + t->Phi[32]*f->P[5][0] +
@@ -3984,9 +4152,11 @@ static void phi_times_p_row_1(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[51]*f->P[27][31] + t->Phi[52]*f->P[28][31] + t->Phi[53]*f->P[29][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_1(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_1(const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
@@ -3996,7 +4166,7 @@ static ned_doppler32_augmented_scalar propagate_row_1(const ned_doppler32_augmen
             w->M[19]*t->Phi[43] + w->M[20]*t->Phi[44] + w->M[21]*t->Phi[45] + w->M[22]*t->Phi[46] +
             w->M[23]*t->Phi[47] + w->M[24]*t->Phi[48] + w->M[25]*t->Phi[49] + w->M[26]*t->Phi[50] +
             w->M[27]*t->Phi[51] + w->M[28]*t->Phi[52] + w->M[29]*t->Phi[53] + t->Qd[32]; w->Pn[32] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[54] + w->M[1]*t->Phi[55] + w->M[2]*t->Phi[56] + w->M[3]*t->Phi[57] +
             w->M[4]*t->Phi[58] + w->M[5]*t->Phi[59] + w->M[7]*t->Phi[60] + w->M[8]*t->Phi[61] +
             w->M[9]*t->Phi[62] + w->M[10]*t->Phi[63] + w->M[11]*t->Phi[64] + w->M[12]*t->Phi[65] +
@@ -4004,7 +4174,7 @@ static ned_doppler32_augmented_scalar propagate_row_1(const ned_doppler32_augmen
             w->M[19]*t->Phi[70] + w->M[20]*t->Phi[71] + w->M[21]*t->Phi[72] + w->M[22]*t->Phi[73] +
             w->M[23]*t->Phi[74] + w->M[24]*t->Phi[75] + w->M[25]*t->Phi[76] + w->M[26]*t->Phi[77] +
             w->M[27]*t->Phi[78] + w->M[28]*t->Phi[79] + w->M[29]*t->Phi[80] + t->Qd[33]; w->Pn[33] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[81] + w->M[1]*t->Phi[82] + w->M[2]*t->Phi[83] + w->M[3]*t->Phi[84] +
             w->M[4]*t->Phi[85] + w->M[5]*t->Phi[86] + w->M[7]*t->Phi[87] + w->M[8]*t->Phi[88] +
             w->M[9]*t->Phi[89] + w->M[10]*t->Phi[90] + w->M[11]*t->Phi[91] + w->M[12]*t->Phi[92] +
@@ -4012,7 +4182,7 @@ static ned_doppler32_augmented_scalar propagate_row_1(const ned_doppler32_augmen
             w->M[19]*t->Phi[97] + w->M[20]*t->Phi[98] + w->M[21]*t->Phi[99] + w->M[22]*t->Phi[100] +
             w->M[23]*t->Phi[101] + w->M[24]*t->Phi[102] + w->M[25]*t->Phi[103] +
             w->M[26]*t->Phi[104] + w->M[27]*t->Phi[105] + w->M[28]*t->Phi[106] +
-            w->M[29]*t->Phi[107] + t->Qd[34]; w->Pn[34] = v; check += v - v;
+            w->M[29]*t->Phi[107] + t->Qd[34]; w->Pn[34] = v; check += v;
     v = w->M[0]*t->Phi[108] + w->M[1]*t->Phi[109] + w->M[2]*t->Phi[110] + w->M[3]*t->Phi[111] +
             w->M[4]*t->Phi[112] + w->M[5]*t->Phi[113] + w->M[7]*t->Phi[114] + w->M[8]*t->Phi[115] +
             w->M[9]*t->Phi[116] + w->M[10]*t->Phi[117] + w->M[11]*t->Phi[118] + w->M[12]*t->Phi[119]
@@ -4021,7 +4191,7 @@ static ned_doppler32_augmented_scalar propagate_row_1(const ned_doppler32_augmen
             w->M[21]*t->Phi[126] + w->M[22]*t->Phi[127] + w->M[23]*t->Phi[128] +
             w->M[24]*t->Phi[129] + w->M[25]*t->Phi[130] + w->M[26]*t->Phi[131] +
             w->M[27]*t->Phi[132] + w->M[28]*t->Phi[133] + w->M[29]*t->Phi[134] + t->Qd[35];
-            w->Pn[35] = v; check += v - v;
+            w->Pn[35] = v; check += v;
     v = w->M[0]*t->Phi[135] + w->M[1]*t->Phi[136] + w->M[2]*t->Phi[137] + w->M[3]*t->Phi[138] +
             w->M[4]*t->Phi[139] + w->M[5]*t->Phi[140] + w->M[7]*t->Phi[141] + w->M[8]*t->Phi[142] +
             w->M[9]*t->Phi[143] + w->M[10]*t->Phi[144] + w->M[11]*t->Phi[145] + w->M[12]*t->Phi[146]
@@ -4030,7 +4200,7 @@ static ned_doppler32_augmented_scalar propagate_row_1(const ned_doppler32_augmen
             w->M[21]*t->Phi[153] + w->M[22]*t->Phi[154] + w->M[23]*t->Phi[155] +
             w->M[24]*t->Phi[156] + w->M[25]*t->Phi[157] + w->M[26]*t->Phi[158] +
             w->M[27]*t->Phi[159] + w->M[28]*t->Phi[160] + w->M[29]*t->Phi[161] + t->Qd[36];
-            w->Pn[36] = v; check += v - v;
+            w->Pn[36] = v; check += v;
     v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
             w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
             w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
@@ -4039,38 +4209,38 @@ static ned_doppler32_augmented_scalar propagate_row_1(const ned_doppler32_augmen
             w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
             w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
             w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[37]; w->Pn[37] = v; check += v - v;
-    v = w->M[7]; w->Pn[38] = v; check += v - v;
-    v = w->M[8]; w->Pn[39] = v; check += v - v;
-    v = w->M[9]; w->Pn[40] = v; check += v - v;
-    v = w->M[10]*t->Phi[193] + t->Qd[41]; w->Pn[41] = v; check += v - v;
-    v = w->M[11]*t->Phi[194] + t->Qd[42]; w->Pn[42] = v; check += v - v;
-    v = w->M[12]*t->Phi[195] + t->Qd[43]; w->Pn[43] = v; check += v - v;
-    v = w->M[13]*t->Phi[196] + t->Qd[44]; w->Pn[44] = v; check += v - v;
-    v = w->M[14]*t->Phi[197] + t->Qd[45]; w->Pn[45] = v; check += v - v;
-    v = w->M[15]*t->Phi[198] + t->Qd[46]; w->Pn[46] = v; check += v - v;
-    v = w->M[16]; w->Pn[47] = v; check += v - v;
-    v = w->M[17]; w->Pn[48] = v; check += v - v;
-    v = w->M[18]; w->Pn[49] = v; check += v - v;
-    v = w->M[19]; w->Pn[50] = v; check += v - v;
-    v = w->M[20]; w->Pn[51] = v; check += v - v;
-    v = w->M[21]; w->Pn[52] = v; check += v - v;
-    v = w->M[22]; w->Pn[53] = v; check += v - v;
-    v = w->M[23]; w->Pn[54] = v; check += v - v;
-    v = w->M[24]; w->Pn[55] = v; check += v - v;
-    v = w->M[25]; w->Pn[56] = v; check += v - v;
-    v = w->M[26]; w->Pn[57] = v; check += v - v;
-    v = w->M[27]; w->Pn[58] = v; check += v - v;
-    v = w->M[28]; w->Pn[59] = v; check += v - v;
-    v = w->M[29]; w->Pn[60] = v; check += v - v;
-    v = w->M[30]; w->Pn[61] = v; check += v - v;
-    v = w->M[31]; w->Pn[62] = v; check += v - v;
-    return check;
+            w->M[29]*t->Phi[189] + t->Qd[37]; w->Pn[37] = v; check += v;
+    v = w->M[7]; w->Pn[38] = v; check += v;
+    v = w->M[8]; w->Pn[39] = v; check += v;
+    v = w->M[9]; w->Pn[40] = v; check += v;
+    v = w->M[10]*t->Phi[193] + t->Qd[41]; w->Pn[41] = v; check += v;
+    v = w->M[11]*t->Phi[194] + t->Qd[42]; w->Pn[42] = v; check += v;
+    v = w->M[12]*t->Phi[195] + t->Qd[43]; w->Pn[43] = v; check += v;
+    v = w->M[13]*t->Phi[196] + t->Qd[44]; w->Pn[44] = v; check += v;
+    v = w->M[14]*t->Phi[197] + t->Qd[45]; w->Pn[45] = v; check += v;
+    v = w->M[15]*t->Phi[198] + t->Qd[46]; w->Pn[46] = v; check += v;
+    v = w->M[16]; w->Pn[47] = v; check += v;
+    v = w->M[17]; w->Pn[48] = v; check += v;
+    v = w->M[18]; w->Pn[49] = v; check += v;
+    v = w->M[19]; w->Pn[50] = v; check += v;
+    v = w->M[20]; w->Pn[51] = v; check += v;
+    v = w->M[21]; w->Pn[52] = v; check += v;
+    v = w->M[22]; w->Pn[53] = v; check += v;
+    v = w->M[23]; w->Pn[54] = v; check += v;
+    v = w->M[24]; w->Pn[55] = v; check += v;
+    v = w->M[25]; w->Pn[56] = v; check += v;
+    v = w->M[26]; w->Pn[57] = v; check += v;
+    v = w->M[27]; w->Pn[58] = v; check += v;
+    v = w->M[28]; w->Pn[59] = v; check += v;
+    v = w->M[29]; w->Pn[60] = v; check += v;
+    v = w->M[30]; w->Pn[61] = v; check += v;
+    v = w->M[31]; w->Pn[62] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[54]*f->P[0][0] + t->Phi[55]*f->P[1][0] + t->Phi[56]*f->P[2][0] +
             t->Phi[57]*f->P[3][0] + t->Phi[58]*f->P[4][0] + t->Phi[59]*f->P[5][0] +
@@ -4362,9 +4532,11 @@ static void phi_times_p_row_2(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[78]*f->P[27][31] + t->Phi[79]*f->P[28][31] + t->Phi[80]*f->P[29][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_2(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_2(const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[54] + w->M[1]*t->Phi[55] + w->M[2]*t->Phi[56] + w->M[3]*t->Phi[57] +
@@ -4374,7 +4546,7 @@ static ned_doppler32_augmented_scalar propagate_row_2(const ned_doppler32_augmen
             w->M[19]*t->Phi[70] + w->M[20]*t->Phi[71] + w->M[21]*t->Phi[72] + w->M[22]*t->Phi[73] +
             w->M[23]*t->Phi[74] + w->M[24]*t->Phi[75] + w->M[25]*t->Phi[76] + w->M[26]*t->Phi[77] +
             w->M[27]*t->Phi[78] + w->M[28]*t->Phi[79] + w->M[29]*t->Phi[80] + t->Qd[63]; w->Pn[63] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[81] + w->M[1]*t->Phi[82] + w->M[2]*t->Phi[83] + w->M[3]*t->Phi[84] +
             w->M[4]*t->Phi[85] + w->M[5]*t->Phi[86] + w->M[7]*t->Phi[87] + w->M[8]*t->Phi[88] +
             w->M[9]*t->Phi[89] + w->M[10]*t->Phi[90] + w->M[11]*t->Phi[91] + w->M[12]*t->Phi[92] +
@@ -4382,7 +4554,7 @@ static ned_doppler32_augmented_scalar propagate_row_2(const ned_doppler32_augmen
             w->M[19]*t->Phi[97] + w->M[20]*t->Phi[98] + w->M[21]*t->Phi[99] + w->M[22]*t->Phi[100] +
             w->M[23]*t->Phi[101] + w->M[24]*t->Phi[102] + w->M[25]*t->Phi[103] +
             w->M[26]*t->Phi[104] + w->M[27]*t->Phi[105] + w->M[28]*t->Phi[106] +
-            w->M[29]*t->Phi[107] + t->Qd[64]; w->Pn[64] = v; check += v - v;
+            w->M[29]*t->Phi[107] + t->Qd[64]; w->Pn[64] = v; check += v;
     v = w->M[0]*t->Phi[108] + w->M[1]*t->Phi[109] + w->M[2]*t->Phi[110] + w->M[3]*t->Phi[111] +
             w->M[4]*t->Phi[112] + w->M[5]*t->Phi[113] + w->M[7]*t->Phi[114] + w->M[8]*t->Phi[115] +
             w->M[9]*t->Phi[116] + w->M[10]*t->Phi[117] + w->M[11]*t->Phi[118] + w->M[12]*t->Phi[119]
@@ -4391,7 +4563,7 @@ static ned_doppler32_augmented_scalar propagate_row_2(const ned_doppler32_augmen
             w->M[21]*t->Phi[126] + w->M[22]*t->Phi[127] + w->M[23]*t->Phi[128] +
             w->M[24]*t->Phi[129] + w->M[25]*t->Phi[130] + w->M[26]*t->Phi[131] +
             w->M[27]*t->Phi[132] + w->M[28]*t->Phi[133] + w->M[29]*t->Phi[134] + t->Qd[65];
-            w->Pn[65] = v; check += v - v;
+            w->Pn[65] = v; check += v;
     v = w->M[0]*t->Phi[135] + w->M[1]*t->Phi[136] + w->M[2]*t->Phi[137] + w->M[3]*t->Phi[138] +
             w->M[4]*t->Phi[139] + w->M[5]*t->Phi[140] + w->M[7]*t->Phi[141] + w->M[8]*t->Phi[142] +
             w->M[9]*t->Phi[143] + w->M[10]*t->Phi[144] + w->M[11]*t->Phi[145] + w->M[12]*t->Phi[146]
@@ -4400,7 +4572,7 @@ static ned_doppler32_augmented_scalar propagate_row_2(const ned_doppler32_augmen
             w->M[21]*t->Phi[153] + w->M[22]*t->Phi[154] + w->M[23]*t->Phi[155] +
             w->M[24]*t->Phi[156] + w->M[25]*t->Phi[157] + w->M[26]*t->Phi[158] +
             w->M[27]*t->Phi[159] + w->M[28]*t->Phi[160] + w->M[29]*t->Phi[161] + t->Qd[66];
-            w->Pn[66] = v; check += v - v;
+            w->Pn[66] = v; check += v;
     v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
             w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
             w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
@@ -4409,38 +4581,38 @@ static ned_doppler32_augmented_scalar propagate_row_2(const ned_doppler32_augmen
             w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
             w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
             w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[67]; w->Pn[67] = v; check += v - v;
-    v = w->M[7]; w->Pn[68] = v; check += v - v;
-    v = w->M[8]; w->Pn[69] = v; check += v - v;
-    v = w->M[9]; w->Pn[70] = v; check += v - v;
-    v = w->M[10]*t->Phi[193] + t->Qd[71]; w->Pn[71] = v; check += v - v;
-    v = w->M[11]*t->Phi[194] + t->Qd[72]; w->Pn[72] = v; check += v - v;
-    v = w->M[12]*t->Phi[195] + t->Qd[73]; w->Pn[73] = v; check += v - v;
-    v = w->M[13]*t->Phi[196] + t->Qd[74]; w->Pn[74] = v; check += v - v;
-    v = w->M[14]*t->Phi[197] + t->Qd[75]; w->Pn[75] = v; check += v - v;
-    v = w->M[15]*t->Phi[198] + t->Qd[76]; w->Pn[76] = v; check += v - v;
-    v = w->M[16]; w->Pn[77] = v; check += v - v;
-    v = w->M[17]; w->Pn[78] = v; check += v - v;
-    v = w->M[18]; w->Pn[79] = v; check += v - v;
-    v = w->M[19]; w->Pn[80] = v; check += v - v;
-    v = w->M[20]; w->Pn[81] = v; check += v - v;
-    v = w->M[21]; w->Pn[82] = v; check += v - v;
-    v = w->M[22]; w->Pn[83] = v; check += v - v;
-    v = w->M[23]; w->Pn[84] = v; check += v - v;
-    v = w->M[24]; w->Pn[85] = v; check += v - v;
-    v = w->M[25]; w->Pn[86] = v; check += v - v;
-    v = w->M[26]; w->Pn[87] = v; check += v - v;
-    v = w->M[27]; w->Pn[88] = v; check += v - v;
-    v = w->M[28]; w->Pn[89] = v; check += v - v;
-    v = w->M[29]; w->Pn[90] = v; check += v - v;
-    v = w->M[30]; w->Pn[91] = v; check += v - v;
-    v = w->M[31]; w->Pn[92] = v; check += v - v;
-    return check;
+            w->M[29]*t->Phi[189] + t->Qd[67]; w->Pn[67] = v; check += v;
+    v = w->M[7]; w->Pn[68] = v; check += v;
+    v = w->M[8]; w->Pn[69] = v; check += v;
+    v = w->M[9]; w->Pn[70] = v; check += v;
+    v = w->M[10]*t->Phi[193] + t->Qd[71]; w->Pn[71] = v; check += v;
+    v = w->M[11]*t->Phi[194] + t->Qd[72]; w->Pn[72] = v; check += v;
+    v = w->M[12]*t->Phi[195] + t->Qd[73]; w->Pn[73] = v; check += v;
+    v = w->M[13]*t->Phi[196] + t->Qd[74]; w->Pn[74] = v; check += v;
+    v = w->M[14]*t->Phi[197] + t->Qd[75]; w->Pn[75] = v; check += v;
+    v = w->M[15]*t->Phi[198] + t->Qd[76]; w->Pn[76] = v; check += v;
+    v = w->M[16]; w->Pn[77] = v; check += v;
+    v = w->M[17]; w->Pn[78] = v; check += v;
+    v = w->M[18]; w->Pn[79] = v; check += v;
+    v = w->M[19]; w->Pn[80] = v; check += v;
+    v = w->M[20]; w->Pn[81] = v; check += v;
+    v = w->M[21]; w->Pn[82] = v; check += v;
+    v = w->M[22]; w->Pn[83] = v; check += v;
+    v = w->M[23]; w->Pn[84] = v; check += v;
+    v = w->M[24]; w->Pn[85] = v; check += v;
+    v = w->M[25]; w->Pn[86] = v; check += v;
+    v = w->M[26]; w->Pn[87] = v; check += v;
+    v = w->M[27]; w->Pn[88] = v; check += v;
+    v = w->M[28]; w->Pn[89] = v; check += v;
+    v = w->M[29]; w->Pn[90] = v; check += v;
+    v = w->M[30]; w->Pn[91] = v; check += v;
+    v = w->M[31]; w->Pn[92] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[81]*f->P[0][0] + t->Phi[82]*f->P[1][0] + t->Phi[83]*f->P[2][0] +
             t->Phi[84]*f->P[3][0] + t->Phi[85]*f->P[4][0] + t->Phi[86]*f->P[5][0] +
@@ -4732,9 +4904,11 @@ static void phi_times_p_row_3(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[105]*f->P[27][31] + t->Phi[106]*f->P[28][31] + t->Phi[107]*f->P[29][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_3(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_3(const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[81] + w->M[1]*t->Phi[82] + w->M[2]*t->Phi[83] + w->M[3]*t->Phi[84] +
@@ -4744,7 +4918,7 @@ static ned_doppler32_augmented_scalar propagate_row_3(const ned_doppler32_augmen
             w->M[19]*t->Phi[97] + w->M[20]*t->Phi[98] + w->M[21]*t->Phi[99] + w->M[22]*t->Phi[100] +
             w->M[23]*t->Phi[101] + w->M[24]*t->Phi[102] + w->M[25]*t->Phi[103] +
             w->M[26]*t->Phi[104] + w->M[27]*t->Phi[105] + w->M[28]*t->Phi[106] +
-            w->M[29]*t->Phi[107] + t->Qd[93]; w->Pn[93] = v; check += v - v;
+            w->M[29]*t->Phi[107] + t->Qd[93]; w->Pn[93] = v; check += v;
     v = w->M[0]*t->Phi[108] + w->M[1]*t->Phi[109] + w->M[2]*t->Phi[110] + w->M[3]*t->Phi[111] +
             w->M[4]*t->Phi[112] + w->M[5]*t->Phi[113] + w->M[7]*t->Phi[114] + w->M[8]*t->Phi[115] +
             w->M[9]*t->Phi[116] + w->M[10]*t->Phi[117] + w->M[11]*t->Phi[118] + w->M[12]*t->Phi[119]
@@ -4753,7 +4927,7 @@ static ned_doppler32_augmented_scalar propagate_row_3(const ned_doppler32_augmen
             w->M[21]*t->Phi[126] + w->M[22]*t->Phi[127] + w->M[23]*t->Phi[128] +
             w->M[24]*t->Phi[129] + w->M[25]*t->Phi[130] + w->M[26]*t->Phi[131] +
             w->M[27]*t->Phi[132] + w->M[28]*t->Phi[133] + w->M[29]*t->Phi[134] + t->Qd[94];
-            w->Pn[94] = v; check += v - v;
+            w->Pn[94] = v; check += v;
     v = w->M[0]*t->Phi[135] + w->M[1]*t->Phi[136] + w->M[2]*t->Phi[137] + w->M[3]*t->Phi[138] +
             w->M[4]*t->Phi[139] + w->M[5]*t->Phi[140] + w->M[7]*t->Phi[141] + w->M[8]*t->Phi[142] +
             w->M[9]*t->Phi[143] + w->M[10]*t->Phi[144] + w->M[11]*t->Phi[145] + w->M[12]*t->Phi[146]
@@ -4762,7 +4936,7 @@ static ned_doppler32_augmented_scalar propagate_row_3(const ned_doppler32_augmen
             w->M[21]*t->Phi[153] + w->M[22]*t->Phi[154] + w->M[23]*t->Phi[155] +
             w->M[24]*t->Phi[156] + w->M[25]*t->Phi[157] + w->M[26]*t->Phi[158] +
             w->M[27]*t->Phi[159] + w->M[28]*t->Phi[160] + w->M[29]*t->Phi[161] + t->Qd[95];
-            w->Pn[95] = v; check += v - v;
+            w->Pn[95] = v; check += v;
     v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
             w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
             w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
@@ -4771,38 +4945,38 @@ static ned_doppler32_augmented_scalar propagate_row_3(const ned_doppler32_augmen
             w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
             w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
             w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[96]; w->Pn[96] = v; check += v - v;
-    v = w->M[7]; w->Pn[97] = v; check += v - v;
-    v = w->M[8]; w->Pn[98] = v; check += v - v;
-    v = w->M[9]; w->Pn[99] = v; check += v - v;
-    v = w->M[10]*t->Phi[193] + t->Qd[100]; w->Pn[100] = v; check += v - v;
-    v = w->M[11]*t->Phi[194] + t->Qd[101]; w->Pn[101] = v; check += v - v;
-    v = w->M[12]*t->Phi[195] + t->Qd[102]; w->Pn[102] = v; check += v - v;
-    v = w->M[13]*t->Phi[196] + t->Qd[103]; w->Pn[103] = v; check += v - v;
-    v = w->M[14]*t->Phi[197] + t->Qd[104]; w->Pn[104] = v; check += v - v;
-    v = w->M[15]*t->Phi[198] + t->Qd[105]; w->Pn[105] = v; check += v - v;
-    v = w->M[16]; w->Pn[106] = v; check += v - v;
-    v = w->M[17]; w->Pn[107] = v; check += v - v;
-    v = w->M[18]; w->Pn[108] = v; check += v - v;
-    v = w->M[19]; w->Pn[109] = v; check += v - v;
-    v = w->M[20]; w->Pn[110] = v; check += v - v;
-    v = w->M[21]; w->Pn[111] = v; check += v - v;
-    v = w->M[22]; w->Pn[112] = v; check += v - v;
-    v = w->M[23]; w->Pn[113] = v; check += v - v;
-    v = w->M[24]; w->Pn[114] = v; check += v - v;
-    v = w->M[25]; w->Pn[115] = v; check += v - v;
-    v = w->M[26]; w->Pn[116] = v; check += v - v;
-    v = w->M[27]; w->Pn[117] = v; check += v - v;
-    v = w->M[28]; w->Pn[118] = v; check += v - v;
-    v = w->M[29]; w->Pn[119] = v; check += v - v;
-    v = w->M[30]; w->Pn[120] = v; check += v - v;
-    v = w->M[31]; w->Pn[121] = v; check += v - v;
-    return check;
+            w->M[29]*t->Phi[189] + t->Qd[96]; w->Pn[96] = v; check += v;
+    v = w->M[7]; w->Pn[97] = v; check += v;
+    v = w->M[8]; w->Pn[98] = v; check += v;
+    v = w->M[9]; w->Pn[99] = v; check += v;
+    v = w->M[10]*t->Phi[193] + t->Qd[100]; w->Pn[100] = v; check += v;
+    v = w->M[11]*t->Phi[194] + t->Qd[101]; w->Pn[101] = v; check += v;
+    v = w->M[12]*t->Phi[195] + t->Qd[102]; w->Pn[102] = v; check += v;
+    v = w->M[13]*t->Phi[196] + t->Qd[103]; w->Pn[103] = v; check += v;
+    v = w->M[14]*t->Phi[197] + t->Qd[104]; w->Pn[104] = v; check += v;
+    v = w->M[15]*t->Phi[198] + t->Qd[105]; w->Pn[105] = v; check += v;
+    v = w->M[16]; w->Pn[106] = v; check += v;
+    v = w->M[17]; w->Pn[107] = v; check += v;
+    v = w->M[18]; w->Pn[108] = v; check += v;
+    v = w->M[19]; w->Pn[109] = v; check += v;
+    v = w->M[20]; w->Pn[110] = v; check += v;
+    v = w->M[21]; w->Pn[111] = v; check += v;
+    v = w->M[22]; w->Pn[112] = v; check += v;
+    v = w->M[23]; w->Pn[113] = v; check += v;
+    v = w->M[24]; w->Pn[114] = v; check += v;
+    v = w->M[25]; w->Pn[115] = v; check += v;
+    v = w->M[26]; w->Pn[116] = v; check += v;
+    v = w->M[27]; w->Pn[117] = v; check += v;
+    v = w->M[28]; w->Pn[118] = v; check += v;
+    v = w->M[29]; w->Pn[119] = v; check += v;
+    v = w->M[30]; w->Pn[120] = v; check += v;
+    v = w->M[31]; w->Pn[121] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[108]*f->P[0][0] + t->Phi[109]*f->P[1][0] + t->Phi[110]*f->P[2][0] +
             t->Phi[111]*f->P[3][0] + t->Phi[112]*f->P[4][0] + t->Phi[113]*f->P[5][0] +
@@ -5094,9 +5268,11 @@ static void phi_times_p_row_4(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[132]*f->P[27][31] + t->Phi[133]*f->P[28][31] + t->Phi[134]*f->P[29][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_4(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_4(const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[108] + w->M[1]*t->Phi[109] + w->M[2]*t->Phi[110] + w->M[3]*t->Phi[111] +
@@ -5107,7 +5283,7 @@ static ned_doppler32_augmented_scalar propagate_row_4(const ned_doppler32_augmen
             w->M[21]*t->Phi[126] + w->M[22]*t->Phi[127] + w->M[23]*t->Phi[128] +
             w->M[24]*t->Phi[129] + w->M[25]*t->Phi[130] + w->M[26]*t->Phi[131] +
             w->M[27]*t->Phi[132] + w->M[28]*t->Phi[133] + w->M[29]*t->Phi[134] + t->Qd[122];
-            w->Pn[122] = v; check += v - v;
+            w->Pn[122] = v; check += v;
     v = w->M[0]*t->Phi[135] + w->M[1]*t->Phi[136] + w->M[2]*t->Phi[137] + w->M[3]*t->Phi[138] +
             w->M[4]*t->Phi[139] + w->M[5]*t->Phi[140] + w->M[7]*t->Phi[141] + w->M[8]*t->Phi[142] +
             w->M[9]*t->Phi[143] + w->M[10]*t->Phi[144] + w->M[11]*t->Phi[145] + w->M[12]*t->Phi[146]
@@ -5116,7 +5292,7 @@ static ned_doppler32_augmented_scalar propagate_row_4(const ned_doppler32_augmen
             w->M[21]*t->Phi[153] + w->M[22]*t->Phi[154] + w->M[23]*t->Phi[155] +
             w->M[24]*t->Phi[156] + w->M[25]*t->Phi[157] + w->M[26]*t->Phi[158] +
             w->M[27]*t->Phi[159] + w->M[28]*t->Phi[160] + w->M[29]*t->Phi[161] + t->Qd[123];
-            w->Pn[123] = v; check += v - v;
+            w->Pn[123] = v; check += v;
     v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
             w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
             w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
@@ -5125,38 +5301,38 @@ static ned_doppler32_augmented_scalar propagate_row_4(const ned_doppler32_augmen
             w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
             w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
             w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[124]; w->Pn[124] = v; check += v - v;
-    v = w->M[7]; w->Pn[125] = v; check += v - v;
-    v = w->M[8]; w->Pn[126] = v; check += v - v;
-    v = w->M[9]; w->Pn[127] = v; check += v - v;
-    v = w->M[10]*t->Phi[193] + t->Qd[128]; w->Pn[128] = v; check += v - v;
-    v = w->M[11]*t->Phi[194] + t->Qd[129]; w->Pn[129] = v; check += v - v;
-    v = w->M[12]*t->Phi[195] + t->Qd[130]; w->Pn[130] = v; check += v - v;
-    v = w->M[13]*t->Phi[196] + t->Qd[131]; w->Pn[131] = v; check += v - v;
-    v = w->M[14]*t->Phi[197] + t->Qd[132]; w->Pn[132] = v; check += v - v;
-    v = w->M[15]*t->Phi[198] + t->Qd[133]; w->Pn[133] = v; check += v - v;
-    v = w->M[16]; w->Pn[134] = v; check += v - v;
-    v = w->M[17]; w->Pn[135] = v; check += v - v;
-    v = w->M[18]; w->Pn[136] = v; check += v - v;
-    v = w->M[19]; w->Pn[137] = v; check += v - v;
-    v = w->M[20]; w->Pn[138] = v; check += v - v;
-    v = w->M[21]; w->Pn[139] = v; check += v - v;
-    v = w->M[22]; w->Pn[140] = v; check += v - v;
-    v = w->M[23]; w->Pn[141] = v; check += v - v;
-    v = w->M[24]; w->Pn[142] = v; check += v - v;
-    v = w->M[25]; w->Pn[143] = v; check += v - v;
-    v = w->M[26]; w->Pn[144] = v; check += v - v;
-    v = w->M[27]; w->Pn[145] = v; check += v - v;
-    v = w->M[28]; w->Pn[146] = v; check += v - v;
-    v = w->M[29]; w->Pn[147] = v; check += v - v;
-    v = w->M[30]; w->Pn[148] = v; check += v - v;
-    v = w->M[31]; w->Pn[149] = v; check += v - v;
-    return check;
+            w->M[29]*t->Phi[189] + t->Qd[124]; w->Pn[124] = v; check += v;
+    v = w->M[7]; w->Pn[125] = v; check += v;
+    v = w->M[8]; w->Pn[126] = v; check += v;
+    v = w->M[9]; w->Pn[127] = v; check += v;
+    v = w->M[10]*t->Phi[193] + t->Qd[128]; w->Pn[128] = v; check += v;
+    v = w->M[11]*t->Phi[194] + t->Qd[129]; w->Pn[129] = v; check += v;
+    v = w->M[12]*t->Phi[195] + t->Qd[130]; w->Pn[130] = v; check += v;
+    v = w->M[13]*t->Phi[196] + t->Qd[131]; w->Pn[131] = v; check += v;
+    v = w->M[14]*t->Phi[197] + t->Qd[132]; w->Pn[132] = v; check += v;
+    v = w->M[15]*t->Phi[198] + t->Qd[133]; w->Pn[133] = v; check += v;
+    v = w->M[16]; w->Pn[134] = v; check += v;
+    v = w->M[17]; w->Pn[135] = v; check += v;
+    v = w->M[18]; w->Pn[136] = v; check += v;
+    v = w->M[19]; w->Pn[137] = v; check += v;
+    v = w->M[20]; w->Pn[138] = v; check += v;
+    v = w->M[21]; w->Pn[139] = v; check += v;
+    v = w->M[22]; w->Pn[140] = v; check += v;
+    v = w->M[23]; w->Pn[141] = v; check += v;
+    v = w->M[24]; w->Pn[142] = v; check += v;
+    v = w->M[25]; w->Pn[143] = v; check += v;
+    v = w->M[26]; w->Pn[144] = v; check += v;
+    v = w->M[27]; w->Pn[145] = v; check += v;
+    v = w->M[28]; w->Pn[146] = v; check += v;
+    v = w->M[29]; w->Pn[147] = v; check += v;
+    v = w->M[30]; w->Pn[148] = v; check += v;
+    v = w->M[31]; w->Pn[149] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[135]*f->P[0][0] + t->Phi[136]*f->P[1][0] + t->Phi[137]*f->P[2][0] +
             t->Phi[138]*f->P[3][0] + t->Phi[139]*f->P[4][0] + t->Phi[140]*f->P[5][0] +
@@ -5448,9 +5624,11 @@ static void phi_times_p_row_5(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[159]*f->P[27][31] + t->Phi[160]*f->P[28][31] + t->Phi[161]*f->P[29][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_5(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_5(const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[135] + w->M[1]*t->Phi[136] + w->M[2]*t->Phi[137] + w->M[3]*t->Phi[138] +
@@ -5461,7 +5639,7 @@ static ned_doppler32_augmented_scalar propagate_row_5(const ned_doppler32_augmen
             w->M[21]*t->Phi[153] + w->M[22]*t->Phi[154] + w->M[23]*t->Phi[155] +
             w->M[24]*t->Phi[156] + w->M[25]*t->Phi[157] + w->M[26]*t->Phi[158] +
             w->M[27]*t->Phi[159] + w->M[28]*t->Phi[160] + w->M[29]*t->Phi[161] + t->Qd[150];
-            w->Pn[150] = v; check += v - v;
+            w->Pn[150] = v; check += v;
     v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
             w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
             w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
@@ -5470,38 +5648,38 @@ static ned_doppler32_augmented_scalar propagate_row_5(const ned_doppler32_augmen
             w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
             w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
             w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[151]; w->Pn[151] = v; check += v - v;
-    v = w->M[7]; w->Pn[152] = v; check += v - v;
-    v = w->M[8]; w->Pn[153] = v; check += v - v;
-    v = w->M[9]; w->Pn[154] = v; check += v - v;
-    v = w->M[10]*t->Phi[193] + t->Qd[155]; w->Pn[155] = v; check += v - v;
-    v = w->M[11]*t->Phi[194] + t->Qd[156]; w->Pn[156] = v; check += v - v;
-    v = w->M[12]*t->Phi[195] + t->Qd[157]; w->Pn[157] = v; check += v - v;
-    v = w->M[13]*t->Phi[196] + t->Qd[158]; w->Pn[158] = v; check += v - v;
-    v = w->M[14]*t->Phi[197] + t->Qd[159]; w->Pn[159] = v; check += v - v;
-    v = w->M[15]*t->Phi[198] + t->Qd[160]; w->Pn[160] = v; check += v - v;
-    v = w->M[16]; w->Pn[161] = v; check += v - v;
-    v = w->M[17]; w->Pn[162] = v; check += v - v;
-    v = w->M[18]; w->Pn[163] = v; check += v - v;
-    v = w->M[19]; w->Pn[164] = v; check += v - v;
-    v = w->M[20]; w->Pn[165] = v; check += v - v;
-    v = w->M[21]; w->Pn[166] = v; check += v - v;
-    v = w->M[22]; w->Pn[167] = v; check += v - v;
-    v = w->M[23]; w->Pn[168] = v; check += v - v;
-    v = w->M[24]; w->Pn[169] = v; check += v - v;
-    v = w->M[25]; w->Pn[170] = v; check += v - v;
-    v = w->M[26]; w->Pn[171] = v; check += v - v;
-    v = w->M[27]; w->Pn[172] = v; check += v - v;
-    v = w->M[28]; w->Pn[173] = v; check += v - v;
-    v = w->M[29]; w->Pn[174] = v; check += v - v;
-    v = w->M[30]; w->Pn[175] = v; check += v - v;
-    v = w->M[31]; w->Pn[176] = v; check += v - v;
-    return check;
+            w->M[29]*t->Phi[189] + t->Qd[151]; w->Pn[151] = v; check += v;
+    v = w->M[7]; w->Pn[152] = v; check += v;
+    v = w->M[8]; w->Pn[153] = v; check += v;
+    v = w->M[9]; w->Pn[154] = v; check += v;
+    v = w->M[10]*t->Phi[193] + t->Qd[155]; w->Pn[155] = v; check += v;
+    v = w->M[11]*t->Phi[194] + t->Qd[156]; w->Pn[156] = v; check += v;
+    v = w->M[12]*t->Phi[195] + t->Qd[157]; w->Pn[157] = v; check += v;
+    v = w->M[13]*t->Phi[196] + t->Qd[158]; w->Pn[158] = v; check += v;
+    v = w->M[14]*t->Phi[197] + t->Qd[159]; w->Pn[159] = v; check += v;
+    v = w->M[15]*t->Phi[198] + t->Qd[160]; w->Pn[160] = v; check += v;
+    v = w->M[16]; w->Pn[161] = v; check += v;
+    v = w->M[17]; w->Pn[162] = v; check += v;
+    v = w->M[18]; w->Pn[163] = v; check += v;
+    v = w->M[19]; w->Pn[164] = v; check += v;
+    v = w->M[20]; w->Pn[165] = v; check += v;
+    v = w->M[21]; w->Pn[166] = v; check += v;
+    v = w->M[22]; w->Pn[167] = v; check += v;
+    v = w->M[23]; w->Pn[168] = v; check += v;
+    v = w->M[24]; w->Pn[169] = v; check += v;
+    v = w->M[25]; w->Pn[170] = v; check += v;
+    v = w->M[26]; w->Pn[171] = v; check += v;
+    v = w->M[27]; w->Pn[172] = v; check += v;
+    v = w->M[28]; w->Pn[173] = v; check += v;
+    v = w->M[29]; w->Pn[174] = v; check += v;
+    v = w->M[30]; w->Pn[175] = v; check += v;
+    v = w->M[31]; w->Pn[176] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[162]*f->P[0][0] + t->Phi[163]*f->P[1][0] + t->Phi[164]*f->P[2][0] +
             t->Phi[165]*f->P[3][0] + t->Phi[166]*f->P[4][0] + t->Phi[167]*f->P[5][0] +
@@ -5825,9 +6003,11 @@ static void phi_times_p_row_6(const ned_doppler32_augmented_filter *restrict f, 
             t->Phi[189]*f->P[29][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_6(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_6(const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
@@ -5838,137 +6018,140 @@ static ned_doppler32_augmented_scalar propagate_row_6(const ned_doppler32_augmen
             w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
             w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
             w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[177]; w->Pn[177] = v; check += v - v;
-    v = w->M[7]; w->Pn[178] = v; check += v - v;
-    v = w->M[8]; w->Pn[179] = v; check += v - v;
-    v = w->M[9]; w->Pn[180] = v; check += v - v;
-    v = w->M[10]*t->Phi[193] + t->Qd[181]; w->Pn[181] = v; check += v - v;
-    v = w->M[11]*t->Phi[194] + t->Qd[182]; w->Pn[182] = v; check += v - v;
-    v = w->M[12]*t->Phi[195] + t->Qd[183]; w->Pn[183] = v; check += v - v;
-    v = w->M[13]*t->Phi[196] + t->Qd[184]; w->Pn[184] = v; check += v - v;
-    v = w->M[14]*t->Phi[197] + t->Qd[185]; w->Pn[185] = v; check += v - v;
-    v = w->M[15]*t->Phi[198] + t->Qd[186]; w->Pn[186] = v; check += v - v;
-    v = w->M[16]; w->Pn[187] = v; check += v - v;
-    v = w->M[17]; w->Pn[188] = v; check += v - v;
-    v = w->M[18]; w->Pn[189] = v; check += v - v;
-    v = w->M[19]; w->Pn[190] = v; check += v - v;
-    v = w->M[20]; w->Pn[191] = v; check += v - v;
-    v = w->M[21]; w->Pn[192] = v; check += v - v;
-    v = w->M[22]; w->Pn[193] = v; check += v - v;
-    v = w->M[23]; w->Pn[194] = v; check += v - v;
-    v = w->M[24]; w->Pn[195] = v; check += v - v;
-    v = w->M[25]; w->Pn[196] = v; check += v - v;
-    v = w->M[26]; w->Pn[197] = v; check += v - v;
-    v = w->M[27]; w->Pn[198] = v; check += v - v;
-    v = w->M[28]; w->Pn[199] = v; check += v - v;
-    v = w->M[29]; w->Pn[200] = v; check += v - v;
-    v = w->M[30]; w->Pn[201] = v; check += v - v;
-    v = w->M[31]; w->Pn[202] = v; check += v - v;
-    return check;
+            w->M[29]*t->Phi[189] + t->Qd[177]; w->Pn[177] = v; check += v;
+    v = w->M[7]; w->Pn[178] = v; check += v;
+    v = w->M[8]; w->Pn[179] = v; check += v;
+    v = w->M[9]; w->Pn[180] = v; check += v;
+    v = w->M[10]*t->Phi[193] + t->Qd[181]; w->Pn[181] = v; check += v;
+    v = w->M[11]*t->Phi[194] + t->Qd[182]; w->Pn[182] = v; check += v;
+    v = w->M[12]*t->Phi[195] + t->Qd[183]; w->Pn[183] = v; check += v;
+    v = w->M[13]*t->Phi[196] + t->Qd[184]; w->Pn[184] = v; check += v;
+    v = w->M[14]*t->Phi[197] + t->Qd[185]; w->Pn[185] = v; check += v;
+    v = w->M[15]*t->Phi[198] + t->Qd[186]; w->Pn[186] = v; check += v;
+    v = w->M[16]; w->Pn[187] = v; check += v;
+    v = w->M[17]; w->Pn[188] = v; check += v;
+    v = w->M[18]; w->Pn[189] = v; check += v;
+    v = w->M[19]; w->Pn[190] = v; check += v;
+    v = w->M[20]; w->Pn[191] = v; check += v;
+    v = w->M[21]; w->Pn[192] = v; check += v;
+    v = w->M[22]; w->Pn[193] = v; check += v;
+    v = w->M[23]; w->Pn[194] = v; check += v;
+    v = w->M[24]; w->Pn[195] = v; check += v;
+    v = w->M[25]; w->Pn[196] = v; check += v;
+    v = w->M[26]; w->Pn[197] = v; check += v;
+    v = w->M[27]; w->Pn[198] = v; check += v;
+    v = w->M[28]; w->Pn[199] = v; check += v;
+    v = w->M[29]; w->Pn[200] = v; check += v;
+    v = w->M[30]; w->Pn[201] = v; check += v;
+    v = w->M[31]; w->Pn[202] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_7(const ned_doppler32_augmented_filter *restrict
-        f, const ned_doppler32_augmented_transition *restrict t,
-        ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_7(const
+        ned_doppler32_augmented_filter *restrict f, const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[7][7]; w->Pn[203] = v; check += v - v;
-    v = f->P[7][8]; w->Pn[204] = v; check += v - v;
-    v = f->P[7][9]; w->Pn[205] = v; check += v - v;
-    v = f->P[7][10]*t->Phi[193]; w->Pn[206] = v; check += v - v;
-    v = f->P[7][11]*t->Phi[194]; w->Pn[207] = v; check += v - v;
-    v = f->P[7][12]*t->Phi[195]; w->Pn[208] = v; check += v - v;
-    v = f->P[7][13]*t->Phi[196]; w->Pn[209] = v; check += v - v;
-    v = f->P[7][14]*t->Phi[197]; w->Pn[210] = v; check += v - v;
-    v = f->P[7][15]*t->Phi[198]; w->Pn[211] = v; check += v - v;
-    v = f->P[7][16]; w->Pn[212] = v; check += v - v;
-    v = f->P[7][17]; w->Pn[213] = v; check += v - v;
-    v = f->P[7][18]; w->Pn[214] = v; check += v - v;
-    v = f->P[7][19]; w->Pn[215] = v; check += v - v;
-    v = f->P[7][20]; w->Pn[216] = v; check += v - v;
-    v = f->P[7][21]; w->Pn[217] = v; check += v - v;
-    v = f->P[7][22]; w->Pn[218] = v; check += v - v;
-    v = f->P[7][23]; w->Pn[219] = v; check += v - v;
-    v = f->P[7][24]; w->Pn[220] = v; check += v - v;
-    v = f->P[7][25]; w->Pn[221] = v; check += v - v;
-    v = f->P[7][26]; w->Pn[222] = v; check += v - v;
-    v = f->P[7][27]; w->Pn[223] = v; check += v - v;
-    v = f->P[7][28]; w->Pn[224] = v; check += v - v;
-    v = f->P[7][29]; w->Pn[225] = v; check += v - v;
-    v = f->P[7][30]; w->Pn[226] = v; check += v - v;
-    v = f->P[7][31]; w->Pn[227] = v; check += v - v;
-    return check;
+    v = f->P[7][7]; w->Pn[203] = v; check += v;
+    v = f->P[7][8]; w->Pn[204] = v; check += v;
+    v = f->P[7][9]; w->Pn[205] = v; check += v;
+    v = f->P[7][10]*t->Phi[193]; w->Pn[206] = v; check += v;
+    v = f->P[7][11]*t->Phi[194]; w->Pn[207] = v; check += v;
+    v = f->P[7][12]*t->Phi[195]; w->Pn[208] = v; check += v;
+    v = f->P[7][13]*t->Phi[196]; w->Pn[209] = v; check += v;
+    v = f->P[7][14]*t->Phi[197]; w->Pn[210] = v; check += v;
+    v = f->P[7][15]*t->Phi[198]; w->Pn[211] = v; check += v;
+    v = f->P[7][16]; w->Pn[212] = v; check += v;
+    v = f->P[7][17]; w->Pn[213] = v; check += v;
+    v = f->P[7][18]; w->Pn[214] = v; check += v;
+    v = f->P[7][19]; w->Pn[215] = v; check += v;
+    v = f->P[7][20]; w->Pn[216] = v; check += v;
+    v = f->P[7][21]; w->Pn[217] = v; check += v;
+    v = f->P[7][22]; w->Pn[218] = v; check += v;
+    v = f->P[7][23]; w->Pn[219] = v; check += v;
+    v = f->P[7][24]; w->Pn[220] = v; check += v;
+    v = f->P[7][25]; w->Pn[221] = v; check += v;
+    v = f->P[7][26]; w->Pn[222] = v; check += v;
+    v = f->P[7][27]; w->Pn[223] = v; check += v;
+    v = f->P[7][28]; w->Pn[224] = v; check += v;
+    v = f->P[7][29]; w->Pn[225] = v; check += v;
+    v = f->P[7][30]; w->Pn[226] = v; check += v;
+    v = f->P[7][31]; w->Pn[227] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_8(const ned_doppler32_augmented_filter *restrict
-        f, const ned_doppler32_augmented_transition *restrict t,
-        ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_8(const
+        ned_doppler32_augmented_filter *restrict f, const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[8][8]; w->Pn[228] = v; check += v - v;
-    v = f->P[8][9]; w->Pn[229] = v; check += v - v;
-    v = f->P[8][10]*t->Phi[193]; w->Pn[230] = v; check += v - v;
-    v = f->P[8][11]*t->Phi[194]; w->Pn[231] = v; check += v - v;
-    v = f->P[8][12]*t->Phi[195]; w->Pn[232] = v; check += v - v;
-    v = f->P[8][13]*t->Phi[196]; w->Pn[233] = v; check += v - v;
-    v = f->P[8][14]*t->Phi[197]; w->Pn[234] = v; check += v - v;
-    v = f->P[8][15]*t->Phi[198]; w->Pn[235] = v; check += v - v;
-    v = f->P[8][16]; w->Pn[236] = v; check += v - v;
-    v = f->P[8][17]; w->Pn[237] = v; check += v - v;
-    v = f->P[8][18]; w->Pn[238] = v; check += v - v;
-    v = f->P[8][19]; w->Pn[239] = v; check += v - v;
-    v = f->P[8][20]; w->Pn[240] = v; check += v - v;
-    v = f->P[8][21]; w->Pn[241] = v; check += v - v;
-    v = f->P[8][22]; w->Pn[242] = v; check += v - v;
-    v = f->P[8][23]; w->Pn[243] = v; check += v - v;
-    v = f->P[8][24]; w->Pn[244] = v; check += v - v;
-    v = f->P[8][25]; w->Pn[245] = v; check += v - v;
-    v = f->P[8][26]; w->Pn[246] = v; check += v - v;
-    v = f->P[8][27]; w->Pn[247] = v; check += v - v;
-    v = f->P[8][28]; w->Pn[248] = v; check += v - v;
-    v = f->P[8][29]; w->Pn[249] = v; check += v - v;
-    v = f->P[8][30]; w->Pn[250] = v; check += v - v;
-    v = f->P[8][31]; w->Pn[251] = v; check += v - v;
-    return check;
+    v = f->P[8][8]; w->Pn[228] = v; check += v;
+    v = f->P[8][9]; w->Pn[229] = v; check += v;
+    v = f->P[8][10]*t->Phi[193]; w->Pn[230] = v; check += v;
+    v = f->P[8][11]*t->Phi[194]; w->Pn[231] = v; check += v;
+    v = f->P[8][12]*t->Phi[195]; w->Pn[232] = v; check += v;
+    v = f->P[8][13]*t->Phi[196]; w->Pn[233] = v; check += v;
+    v = f->P[8][14]*t->Phi[197]; w->Pn[234] = v; check += v;
+    v = f->P[8][15]*t->Phi[198]; w->Pn[235] = v; check += v;
+    v = f->P[8][16]; w->Pn[236] = v; check += v;
+    v = f->P[8][17]; w->Pn[237] = v; check += v;
+    v = f->P[8][18]; w->Pn[238] = v; check += v;
+    v = f->P[8][19]; w->Pn[239] = v; check += v;
+    v = f->P[8][20]; w->Pn[240] = v; check += v;
+    v = f->P[8][21]; w->Pn[241] = v; check += v;
+    v = f->P[8][22]; w->Pn[242] = v; check += v;
+    v = f->P[8][23]; w->Pn[243] = v; check += v;
+    v = f->P[8][24]; w->Pn[244] = v; check += v;
+    v = f->P[8][25]; w->Pn[245] = v; check += v;
+    v = f->P[8][26]; w->Pn[246] = v; check += v;
+    v = f->P[8][27]; w->Pn[247] = v; check += v;
+    v = f->P[8][28]; w->Pn[248] = v; check += v;
+    v = f->P[8][29]; w->Pn[249] = v; check += v;
+    v = f->P[8][30]; w->Pn[250] = v; check += v;
+    v = f->P[8][31]; w->Pn[251] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_9(const ned_doppler32_augmented_filter *restrict
-        f, const ned_doppler32_augmented_transition *restrict t,
-        ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_9(const
+        ned_doppler32_augmented_filter *restrict f, const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[9][9]; w->Pn[252] = v; check += v - v;
-    v = f->P[9][10]*t->Phi[193]; w->Pn[253] = v; check += v - v;
-    v = f->P[9][11]*t->Phi[194]; w->Pn[254] = v; check += v - v;
-    v = f->P[9][12]*t->Phi[195]; w->Pn[255] = v; check += v - v;
-    v = f->P[9][13]*t->Phi[196]; w->Pn[256] = v; check += v - v;
-    v = f->P[9][14]*t->Phi[197]; w->Pn[257] = v; check += v - v;
-    v = f->P[9][15]*t->Phi[198]; w->Pn[258] = v; check += v - v;
-    v = f->P[9][16]; w->Pn[259] = v; check += v - v;
-    v = f->P[9][17]; w->Pn[260] = v; check += v - v;
-    v = f->P[9][18]; w->Pn[261] = v; check += v - v;
-    v = f->P[9][19]; w->Pn[262] = v; check += v - v;
-    v = f->P[9][20]; w->Pn[263] = v; check += v - v;
-    v = f->P[9][21]; w->Pn[264] = v; check += v - v;
-    v = f->P[9][22]; w->Pn[265] = v; check += v - v;
-    v = f->P[9][23]; w->Pn[266] = v; check += v - v;
-    v = f->P[9][24]; w->Pn[267] = v; check += v - v;
-    v = f->P[9][25]; w->Pn[268] = v; check += v - v;
-    v = f->P[9][26]; w->Pn[269] = v; check += v - v;
-    v = f->P[9][27]; w->Pn[270] = v; check += v - v;
-    v = f->P[9][28]; w->Pn[271] = v; check += v - v;
-    v = f->P[9][29]; w->Pn[272] = v; check += v - v;
-    v = f->P[9][30]; w->Pn[273] = v; check += v - v;
-    v = f->P[9][31]; w->Pn[274] = v; check += v - v;
-    return check;
+    v = f->P[9][9]; w->Pn[252] = v; check += v;
+    v = f->P[9][10]*t->Phi[193]; w->Pn[253] = v; check += v;
+    v = f->P[9][11]*t->Phi[194]; w->Pn[254] = v; check += v;
+    v = f->P[9][12]*t->Phi[195]; w->Pn[255] = v; check += v;
+    v = f->P[9][13]*t->Phi[196]; w->Pn[256] = v; check += v;
+    v = f->P[9][14]*t->Phi[197]; w->Pn[257] = v; check += v;
+    v = f->P[9][15]*t->Phi[198]; w->Pn[258] = v; check += v;
+    v = f->P[9][16]; w->Pn[259] = v; check += v;
+    v = f->P[9][17]; w->Pn[260] = v; check += v;
+    v = f->P[9][18]; w->Pn[261] = v; check += v;
+    v = f->P[9][19]; w->Pn[262] = v; check += v;
+    v = f->P[9][20]; w->Pn[263] = v; check += v;
+    v = f->P[9][21]; w->Pn[264] = v; check += v;
+    v = f->P[9][22]; w->Pn[265] = v; check += v;
+    v = f->P[9][23]; w->Pn[266] = v; check += v;
+    v = f->P[9][24]; w->Pn[267] = v; check += v;
+    v = f->P[9][25]; w->Pn[268] = v; check += v;
+    v = f->P[9][26]; w->Pn[269] = v; check += v;
+    v = f->P[9][27]; w->Pn[270] = v; check += v;
+    v = f->P[9][28]; w->Pn[271] = v; check += v;
+    v = f->P[9][29]; w->Pn[272] = v; check += v;
+    v = f->P[9][30]; w->Pn[273] = v; check += v;
+    v = f->P[9][31]; w->Pn[274] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_10(const ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_10(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[193]*f->P[10][0];
     w->M[1] = t->Phi[193]*f->P[10][1];
@@ -6004,39 +6187,41 @@ static void phi_times_p_row_10(const ned_doppler32_augmented_filter *restrict f,
     w->M[31] = t->Phi[193]*f->P[10][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_10(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[10]*t->Phi[193] + t->Qd[275]; w->Pn[275] = v; check += v - v;
-    v = w->M[11]*t->Phi[194]; w->Pn[276] = v; check += v - v;
-    v = w->M[12]*t->Phi[195]; w->Pn[277] = v; check += v - v;
-    v = w->M[13]*t->Phi[196]; w->Pn[278] = v; check += v - v;
-    v = w->M[14]*t->Phi[197]; w->Pn[279] = v; check += v - v;
-    v = w->M[15]*t->Phi[198]; w->Pn[280] = v; check += v - v;
-    v = w->M[16]; w->Pn[281] = v; check += v - v;
-    v = w->M[17]; w->Pn[282] = v; check += v - v;
-    v = w->M[18]; w->Pn[283] = v; check += v - v;
-    v = w->M[19]; w->Pn[284] = v; check += v - v;
-    v = w->M[20]; w->Pn[285] = v; check += v - v;
-    v = w->M[21]; w->Pn[286] = v; check += v - v;
-    v = w->M[22]; w->Pn[287] = v; check += v - v;
-    v = w->M[23]; w->Pn[288] = v; check += v - v;
-    v = w->M[24]; w->Pn[289] = v; check += v - v;
-    v = w->M[25]; w->Pn[290] = v; check += v - v;
-    v = w->M[26]; w->Pn[291] = v; check += v - v;
-    v = w->M[27]; w->Pn[292] = v; check += v - v;
-    v = w->M[28]; w->Pn[293] = v; check += v - v;
-    v = w->M[29]; w->Pn[294] = v; check += v - v;
-    v = w->M[30]; w->Pn[295] = v; check += v - v;
-    v = w->M[31]; w->Pn[296] = v; check += v - v;
-    return check;
-}
-
-static void phi_times_p_row_11(const ned_doppler32_augmented_filter *restrict f, const
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_10(const
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
         *restrict w)
+{
+    ned_doppler32_augmented_scalar v, check = 0.0;
+    v = w->M[10]*t->Phi[193] + t->Qd[275]; w->Pn[275] = v; check += v;
+    v = w->M[11]*t->Phi[194]; w->Pn[276] = v; check += v;
+    v = w->M[12]*t->Phi[195]; w->Pn[277] = v; check += v;
+    v = w->M[13]*t->Phi[196]; w->Pn[278] = v; check += v;
+    v = w->M[14]*t->Phi[197]; w->Pn[279] = v; check += v;
+    v = w->M[15]*t->Phi[198]; w->Pn[280] = v; check += v;
+    v = w->M[16]; w->Pn[281] = v; check += v;
+    v = w->M[17]; w->Pn[282] = v; check += v;
+    v = w->M[18]; w->Pn[283] = v; check += v;
+    v = w->M[19]; w->Pn[284] = v; check += v;
+    v = w->M[20]; w->Pn[285] = v; check += v;
+    v = w->M[21]; w->Pn[286] = v; check += v;
+    v = w->M[22]; w->Pn[287] = v; check += v;
+    v = w->M[23]; w->Pn[288] = v; check += v;
+    v = w->M[24]; w->Pn[289] = v; check += v;
+    v = w->M[25]; w->Pn[290] = v; check += v;
+    v = w->M[26]; w->Pn[291] = v; check += v;
+    v = w->M[27]; w->Pn[292] = v; check += v;
+    v = w->M[28]; w->Pn[293] = v; check += v;
+    v = w->M[29]; w->Pn[294] = v; check += v;
+    v = w->M[30]; w->Pn[295] = v; check += v;
+    v = w->M[31]; w->Pn[296] = v; check += v;
+    return check - check;
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_11(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[194]*f->P[11][0];
     w->M[1] = t->Phi[194]*f->P[11][1];
@@ -6072,38 +6257,40 @@ static void phi_times_p_row_11(const ned_doppler32_augmented_filter *restrict f,
     w->M[31] = t->Phi[194]*f->P[11][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_11(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[11]*t->Phi[194] + t->Qd[297]; w->Pn[297] = v; check += v - v;
-    v = w->M[12]*t->Phi[195]; w->Pn[298] = v; check += v - v;
-    v = w->M[13]*t->Phi[196]; w->Pn[299] = v; check += v - v;
-    v = w->M[14]*t->Phi[197]; w->Pn[300] = v; check += v - v;
-    v = w->M[15]*t->Phi[198]; w->Pn[301] = v; check += v - v;
-    v = w->M[16]; w->Pn[302] = v; check += v - v;
-    v = w->M[17]; w->Pn[303] = v; check += v - v;
-    v = w->M[18]; w->Pn[304] = v; check += v - v;
-    v = w->M[19]; w->Pn[305] = v; check += v - v;
-    v = w->M[20]; w->Pn[306] = v; check += v - v;
-    v = w->M[21]; w->Pn[307] = v; check += v - v;
-    v = w->M[22]; w->Pn[308] = v; check += v - v;
-    v = w->M[23]; w->Pn[309] = v; check += v - v;
-    v = w->M[24]; w->Pn[310] = v; check += v - v;
-    v = w->M[25]; w->Pn[311] = v; check += v - v;
-    v = w->M[26]; w->Pn[312] = v; check += v - v;
-    v = w->M[27]; w->Pn[313] = v; check += v - v;
-    v = w->M[28]; w->Pn[314] = v; check += v - v;
-    v = w->M[29]; w->Pn[315] = v; check += v - v;
-    v = w->M[30]; w->Pn[316] = v; check += v - v;
-    v = w->M[31]; w->Pn[317] = v; check += v - v;
-    return check;
-}
-
-static void phi_times_p_row_12(const ned_doppler32_augmented_filter *restrict f, const
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_11(const
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
         *restrict w)
+{
+    ned_doppler32_augmented_scalar v, check = 0.0;
+    v = w->M[11]*t->Phi[194] + t->Qd[297]; w->Pn[297] = v; check += v;
+    v = w->M[12]*t->Phi[195]; w->Pn[298] = v; check += v;
+    v = w->M[13]*t->Phi[196]; w->Pn[299] = v; check += v;
+    v = w->M[14]*t->Phi[197]; w->Pn[300] = v; check += v;
+    v = w->M[15]*t->Phi[198]; w->Pn[301] = v; check += v;
+    v = w->M[16]; w->Pn[302] = v; check += v;
+    v = w->M[17]; w->Pn[303] = v; check += v;
+    v = w->M[18]; w->Pn[304] = v; check += v;
+    v = w->M[19]; w->Pn[305] = v; check += v;
+    v = w->M[20]; w->Pn[306] = v; check += v;
+    v = w->M[21]; w->Pn[307] = v; check += v;
+    v = w->M[22]; w->Pn[308] = v; check += v;
+    v = w->M[23]; w->Pn[309] = v; check += v;
+    v = w->M[24]; w->Pn[310] = v; check += v;
+    v = w->M[25]; w->Pn[311] = v; check += v;
+    v = w->M[26]; w->Pn[312] = v; check += v;
+    v = w->M[27]; w->Pn[313] = v; check += v;
+    v = w->M[28]; w->Pn[314] = v; check += v;
+    v = w->M[29]; w->Pn[315] = v; check += v;
+    v = w->M[30]; w->Pn[316] = v; check += v;
+    v = w->M[31]; w->Pn[317] = v; check += v;
+    return check - check;
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_12(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[195]*f->P[12][0];
     w->M[1] = t->Phi[195]*f->P[12][1];
@@ -6139,37 +6326,39 @@ static void phi_times_p_row_12(const ned_doppler32_augmented_filter *restrict f,
     w->M[31] = t->Phi[195]*f->P[12][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_12(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[12]*t->Phi[195] + t->Qd[318]; w->Pn[318] = v; check += v - v;
-    v = w->M[13]*t->Phi[196]; w->Pn[319] = v; check += v - v;
-    v = w->M[14]*t->Phi[197]; w->Pn[320] = v; check += v - v;
-    v = w->M[15]*t->Phi[198]; w->Pn[321] = v; check += v - v;
-    v = w->M[16]; w->Pn[322] = v; check += v - v;
-    v = w->M[17]; w->Pn[323] = v; check += v - v;
-    v = w->M[18]; w->Pn[324] = v; check += v - v;
-    v = w->M[19]; w->Pn[325] = v; check += v - v;
-    v = w->M[20]; w->Pn[326] = v; check += v - v;
-    v = w->M[21]; w->Pn[327] = v; check += v - v;
-    v = w->M[22]; w->Pn[328] = v; check += v - v;
-    v = w->M[23]; w->Pn[329] = v; check += v - v;
-    v = w->M[24]; w->Pn[330] = v; check += v - v;
-    v = w->M[25]; w->Pn[331] = v; check += v - v;
-    v = w->M[26]; w->Pn[332] = v; check += v - v;
-    v = w->M[27]; w->Pn[333] = v; check += v - v;
-    v = w->M[28]; w->Pn[334] = v; check += v - v;
-    v = w->M[29]; w->Pn[335] = v; check += v - v;
-    v = w->M[30]; w->Pn[336] = v; check += v - v;
-    v = w->M[31]; w->Pn[337] = v; check += v - v;
-    return check;
-}
-
-static void phi_times_p_row_13(const ned_doppler32_augmented_filter *restrict f, const
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_12(const
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
         *restrict w)
+{
+    ned_doppler32_augmented_scalar v, check = 0.0;
+    v = w->M[12]*t->Phi[195] + t->Qd[318]; w->Pn[318] = v; check += v;
+    v = w->M[13]*t->Phi[196]; w->Pn[319] = v; check += v;
+    v = w->M[14]*t->Phi[197]; w->Pn[320] = v; check += v;
+    v = w->M[15]*t->Phi[198]; w->Pn[321] = v; check += v;
+    v = w->M[16]; w->Pn[322] = v; check += v;
+    v = w->M[17]; w->Pn[323] = v; check += v;
+    v = w->M[18]; w->Pn[324] = v; check += v;
+    v = w->M[19]; w->Pn[325] = v; check += v;
+    v = w->M[20]; w->Pn[326] = v; check += v;
+    v = w->M[21]; w->Pn[327] = v; check += v;
+    v = w->M[22]; w->Pn[328] = v; check += v;
+    v = w->M[23]; w->Pn[329] = v; check += v;
+    v = w->M[24]; w->Pn[330] = v; check += v;
+    v = w->M[25]; w->Pn[331] = v; check += v;
+    v = w->M[26]; w->Pn[332] = v; check += v;
+    v = w->M[27]; w->Pn[333] = v; check += v;
+    v = w->M[28]; w->Pn[334] = v; check += v;
+    v = w->M[29]; w->Pn[335] = v; check += v;
+    v = w->M[30]; w->Pn[336] = v; check += v;
+    v = w->M[31]; w->Pn[337] = v; check += v;
+    return check - check;
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_13(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[196]*f->P[13][0];
     w->M[1] = t->Phi[196]*f->P[13][1];
@@ -6205,36 +6394,38 @@ static void phi_times_p_row_13(const ned_doppler32_augmented_filter *restrict f,
     w->M[31] = t->Phi[196]*f->P[13][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_13(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[13]*t->Phi[196] + t->Qd[338]; w->Pn[338] = v; check += v - v;
-    v = w->M[14]*t->Phi[197]; w->Pn[339] = v; check += v - v;
-    v = w->M[15]*t->Phi[198]; w->Pn[340] = v; check += v - v;
-    v = w->M[16]; w->Pn[341] = v; check += v - v;
-    v = w->M[17]; w->Pn[342] = v; check += v - v;
-    v = w->M[18]; w->Pn[343] = v; check += v - v;
-    v = w->M[19]; w->Pn[344] = v; check += v - v;
-    v = w->M[20]; w->Pn[345] = v; check += v - v;
-    v = w->M[21]; w->Pn[346] = v; check += v - v;
-    v = w->M[22]; w->Pn[347] = v; check += v - v;
-    v = w->M[23]; w->Pn[348] = v; check += v - v;
-    v = w->M[24]; w->Pn[349] = v; check += v - v;
-    v = w->M[25]; w->Pn[350] = v; check += v - v;
-    v = w->M[26]; w->Pn[351] = v; check += v - v;
-    v = w->M[27]; w->Pn[352] = v; check += v - v;
-    v = w->M[28]; w->Pn[353] = v; check += v - v;
-    v = w->M[29]; w->Pn[354] = v; check += v - v;
-    v = w->M[30]; w->Pn[355] = v; check += v - v;
-    v = w->M[31]; w->Pn[356] = v; check += v - v;
-    return check;
-}
-
-static void phi_times_p_row_14(const ned_doppler32_augmented_filter *restrict f, const
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_13(const
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
         *restrict w)
+{
+    ned_doppler32_augmented_scalar v, check = 0.0;
+    v = w->M[13]*t->Phi[196] + t->Qd[338]; w->Pn[338] = v; check += v;
+    v = w->M[14]*t->Phi[197]; w->Pn[339] = v; check += v;
+    v = w->M[15]*t->Phi[198]; w->Pn[340] = v; check += v;
+    v = w->M[16]; w->Pn[341] = v; check += v;
+    v = w->M[17]; w->Pn[342] = v; check += v;
+    v = w->M[18]; w->Pn[343] = v; check += v;
+    v = w->M[19]; w->Pn[344] = v; check += v;
+    v = w->M[20]; w->Pn[345] = v; check += v;
+    v = w->M[21]; w->Pn[346] = v; check += v;
+    v = w->M[22]; w->Pn[347] = v; check += v;
+    v = w->M[23]; w->Pn[348] = v; check += v;
+    v = w->M[24]; w->Pn[349] = v; check += v;
+    v = w->M[25]; w->Pn[350] = v; check += v;
+    v = w->M[26]; w->Pn[351] = v; check += v;
+    v = w->M[27]; w->Pn[352] = v; check += v;
+    v = w->M[28]; w->Pn[353] = v; check += v;
+    v = w->M[29]; w->Pn[354] = v; check += v;
+    v = w->M[30]; w->Pn[355] = v; check += v;
+    v = w->M[31]; w->Pn[356] = v; check += v;
+    return check - check;
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_14(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[197]*f->P[14][0];
     w->M[1] = t->Phi[197]*f->P[14][1];
@@ -6270,35 +6461,37 @@ static void phi_times_p_row_14(const ned_doppler32_augmented_filter *restrict f,
     w->M[31] = t->Phi[197]*f->P[14][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_14(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[14]*t->Phi[197] + t->Qd[357]; w->Pn[357] = v; check += v - v;
-    v = w->M[15]*t->Phi[198]; w->Pn[358] = v; check += v - v;
-    v = w->M[16]; w->Pn[359] = v; check += v - v;
-    v = w->M[17]; w->Pn[360] = v; check += v - v;
-    v = w->M[18]; w->Pn[361] = v; check += v - v;
-    v = w->M[19]; w->Pn[362] = v; check += v - v;
-    v = w->M[20]; w->Pn[363] = v; check += v - v;
-    v = w->M[21]; w->Pn[364] = v; check += v - v;
-    v = w->M[22]; w->Pn[365] = v; check += v - v;
-    v = w->M[23]; w->Pn[366] = v; check += v - v;
-    v = w->M[24]; w->Pn[367] = v; check += v - v;
-    v = w->M[25]; w->Pn[368] = v; check += v - v;
-    v = w->M[26]; w->Pn[369] = v; check += v - v;
-    v = w->M[27]; w->Pn[370] = v; check += v - v;
-    v = w->M[28]; w->Pn[371] = v; check += v - v;
-    v = w->M[29]; w->Pn[372] = v; check += v - v;
-    v = w->M[30]; w->Pn[373] = v; check += v - v;
-    v = w->M[31]; w->Pn[374] = v; check += v - v;
-    return check;
-}
-
-static void phi_times_p_row_15(const ned_doppler32_augmented_filter *restrict f, const
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_14(const
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
         *restrict w)
+{
+    ned_doppler32_augmented_scalar v, check = 0.0;
+    v = w->M[14]*t->Phi[197] + t->Qd[357]; w->Pn[357] = v; check += v;
+    v = w->M[15]*t->Phi[198]; w->Pn[358] = v; check += v;
+    v = w->M[16]; w->Pn[359] = v; check += v;
+    v = w->M[17]; w->Pn[360] = v; check += v;
+    v = w->M[18]; w->Pn[361] = v; check += v;
+    v = w->M[19]; w->Pn[362] = v; check += v;
+    v = w->M[20]; w->Pn[363] = v; check += v;
+    v = w->M[21]; w->Pn[364] = v; check += v;
+    v = w->M[22]; w->Pn[365] = v; check += v;
+    v = w->M[23]; w->Pn[366] = v; check += v;
+    v = w->M[24]; w->Pn[367] = v; check += v;
+    v = w->M[25]; w->Pn[368] = v; check += v;
+    v = w->M[26]; w->Pn[369] = v; check += v;
+    v = w->M[27]; w->Pn[370] = v; check += v;
+    v = w->M[28]; w->Pn[371] = v; check += v;
+    v = w->M[29]; w->Pn[372] = v; check += v;
+    v = w->M[30]; w->Pn[373] = v; check += v;
+    v = w->M[31]; w->Pn[374] = v; check += v;
+    return check - check;
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_15(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[198]*f->P[15][0];
     w->M[1] = t->Phi[198]*f->P[15][1];
@@ -6334,293 +6527,327 @@ static void phi_times_p_row_15(const ned_doppler32_augmented_filter *restrict f,
     w->M[31] = t->Phi[198]*f->P[15][31];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_15(const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_15(const
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
+        *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[15]*t->Phi[198] + t->Qd[375]; w->Pn[375] = v; check += v - v;
-    v = w->M[16]; w->Pn[376] = v; check += v - v;
-    v = w->M[17]; w->Pn[377] = v; check += v - v;
-    v = w->M[18]; w->Pn[378] = v; check += v - v;
-    v = w->M[19]; w->Pn[379] = v; check += v - v;
-    v = w->M[20]; w->Pn[380] = v; check += v - v;
-    v = w->M[21]; w->Pn[381] = v; check += v - v;
-    v = w->M[22]; w->Pn[382] = v; check += v - v;
-    v = w->M[23]; w->Pn[383] = v; check += v - v;
-    v = w->M[24]; w->Pn[384] = v; check += v - v;
-    v = w->M[25]; w->Pn[385] = v; check += v - v;
-    v = w->M[26]; w->Pn[386] = v; check += v - v;
-    v = w->M[27]; w->Pn[387] = v; check += v - v;
-    v = w->M[28]; w->Pn[388] = v; check += v - v;
-    v = w->M[29]; w->Pn[389] = v; check += v - v;
-    v = w->M[30]; w->Pn[390] = v; check += v - v;
-    v = w->M[31]; w->Pn[391] = v; check += v - v;
-    return check;
+    v = w->M[15]*t->Phi[198] + t->Qd[375]; w->Pn[375] = v; check += v;
+    v = w->M[16]; w->Pn[376] = v; check += v;
+    v = w->M[17]; w->Pn[377] = v; check += v;
+    v = w->M[18]; w->Pn[378] = v; check += v;
+    v = w->M[19]; w->Pn[379] = v; check += v;
+    v = w->M[20]; w->Pn[380] = v; check += v;
+    v = w->M[21]; w->Pn[381] = v; check += v;
+    v = w->M[22]; w->Pn[382] = v; check += v;
+    v = w->M[23]; w->Pn[383] = v; check += v;
+    v = w->M[24]; w->Pn[384] = v; check += v;
+    v = w->M[25]; w->Pn[385] = v; check += v;
+    v = w->M[26]; w->Pn[386] = v; check += v;
+    v = w->M[27]; w->Pn[387] = v; check += v;
+    v = w->M[28]; w->Pn[388] = v; check += v;
+    v = w->M[29]; w->Pn[389] = v; check += v;
+    v = w->M[30]; w->Pn[390] = v; check += v;
+    v = w->M[31]; w->Pn[391] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_16(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_16(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[16][16]; w->Pn[392] = v; check += v - v;
-    v = f->P[16][17]; w->Pn[393] = v; check += v - v;
-    v = f->P[16][18]; w->Pn[394] = v; check += v - v;
-    v = f->P[16][19]; w->Pn[395] = v; check += v - v;
-    v = f->P[16][20]; w->Pn[396] = v; check += v - v;
-    v = f->P[16][21]; w->Pn[397] = v; check += v - v;
-    v = f->P[16][22]; w->Pn[398] = v; check += v - v;
-    v = f->P[16][23]; w->Pn[399] = v; check += v - v;
-    v = f->P[16][24]; w->Pn[400] = v; check += v - v;
-    v = f->P[16][25]; w->Pn[401] = v; check += v - v;
-    v = f->P[16][26]; w->Pn[402] = v; check += v - v;
-    v = f->P[16][27]; w->Pn[403] = v; check += v - v;
-    v = f->P[16][28]; w->Pn[404] = v; check += v - v;
-    v = f->P[16][29]; w->Pn[405] = v; check += v - v;
-    v = f->P[16][30]; w->Pn[406] = v; check += v - v;
-    v = f->P[16][31]; w->Pn[407] = v; check += v - v;
-    return check;
+    v = f->P[16][16]; w->Pn[392] = v; check += v;
+    v = f->P[16][17]; w->Pn[393] = v; check += v;
+    v = f->P[16][18]; w->Pn[394] = v; check += v;
+    v = f->P[16][19]; w->Pn[395] = v; check += v;
+    v = f->P[16][20]; w->Pn[396] = v; check += v;
+    v = f->P[16][21]; w->Pn[397] = v; check += v;
+    v = f->P[16][22]; w->Pn[398] = v; check += v;
+    v = f->P[16][23]; w->Pn[399] = v; check += v;
+    v = f->P[16][24]; w->Pn[400] = v; check += v;
+    v = f->P[16][25]; w->Pn[401] = v; check += v;
+    v = f->P[16][26]; w->Pn[402] = v; check += v;
+    v = f->P[16][27]; w->Pn[403] = v; check += v;
+    v = f->P[16][28]; w->Pn[404] = v; check += v;
+    v = f->P[16][29]; w->Pn[405] = v; check += v;
+    v = f->P[16][30]; w->Pn[406] = v; check += v;
+    v = f->P[16][31]; w->Pn[407] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_17(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_17(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[17][17]; w->Pn[408] = v; check += v - v;
-    v = f->P[17][18]; w->Pn[409] = v; check += v - v;
-    v = f->P[17][19]; w->Pn[410] = v; check += v - v;
-    v = f->P[17][20]; w->Pn[411] = v; check += v - v;
-    v = f->P[17][21]; w->Pn[412] = v; check += v - v;
-    v = f->P[17][22]; w->Pn[413] = v; check += v - v;
-    v = f->P[17][23]; w->Pn[414] = v; check += v - v;
-    v = f->P[17][24]; w->Pn[415] = v; check += v - v;
-    v = f->P[17][25]; w->Pn[416] = v; check += v - v;
-    v = f->P[17][26]; w->Pn[417] = v; check += v - v;
-    v = f->P[17][27]; w->Pn[418] = v; check += v - v;
-    v = f->P[17][28]; w->Pn[419] = v; check += v - v;
-    v = f->P[17][29]; w->Pn[420] = v; check += v - v;
-    v = f->P[17][30]; w->Pn[421] = v; check += v - v;
-    v = f->P[17][31]; w->Pn[422] = v; check += v - v;
-    return check;
+    v = f->P[17][17]; w->Pn[408] = v; check += v;
+    v = f->P[17][18]; w->Pn[409] = v; check += v;
+    v = f->P[17][19]; w->Pn[410] = v; check += v;
+    v = f->P[17][20]; w->Pn[411] = v; check += v;
+    v = f->P[17][21]; w->Pn[412] = v; check += v;
+    v = f->P[17][22]; w->Pn[413] = v; check += v;
+    v = f->P[17][23]; w->Pn[414] = v; check += v;
+    v = f->P[17][24]; w->Pn[415] = v; check += v;
+    v = f->P[17][25]; w->Pn[416] = v; check += v;
+    v = f->P[17][26]; w->Pn[417] = v; check += v;
+    v = f->P[17][27]; w->Pn[418] = v; check += v;
+    v = f->P[17][28]; w->Pn[419] = v; check += v;
+    v = f->P[17][29]; w->Pn[420] = v; check += v;
+    v = f->P[17][30]; w->Pn[421] = v; check += v;
+    v = f->P[17][31]; w->Pn[422] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_18(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_18(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[18][18]; w->Pn[423] = v; check += v - v;
-    v = f->P[18][19]; w->Pn[424] = v; check += v - v;
-    v = f->P[18][20]; w->Pn[425] = v; check += v - v;
-    v = f->P[18][21]; w->Pn[426] = v; check += v - v;
-    v = f->P[18][22]; w->Pn[427] = v; check += v - v;
-    v = f->P[18][23]; w->Pn[428] = v; check += v - v;
-    v = f->P[18][24]; w->Pn[429] = v; check += v - v;
-    v = f->P[18][25]; w->Pn[430] = v; check += v - v;
-    v = f->P[18][26]; w->Pn[431] = v; check += v - v;
-    v = f->P[18][27]; w->Pn[432] = v; check += v - v;
-    v = f->P[18][28]; w->Pn[433] = v; check += v - v;
-    v = f->P[18][29]; w->Pn[434] = v; check += v - v;
-    v = f->P[18][30]; w->Pn[435] = v; check += v - v;
-    v = f->P[18][31]; w->Pn[436] = v; check += v - v;
-    return check;
+    v = f->P[18][18]; w->Pn[423] = v; check += v;
+    v = f->P[18][19]; w->Pn[424] = v; check += v;
+    v = f->P[18][20]; w->Pn[425] = v; check += v;
+    v = f->P[18][21]; w->Pn[426] = v; check += v;
+    v = f->P[18][22]; w->Pn[427] = v; check += v;
+    v = f->P[18][23]; w->Pn[428] = v; check += v;
+    v = f->P[18][24]; w->Pn[429] = v; check += v;
+    v = f->P[18][25]; w->Pn[430] = v; check += v;
+    v = f->P[18][26]; w->Pn[431] = v; check += v;
+    v = f->P[18][27]; w->Pn[432] = v; check += v;
+    v = f->P[18][28]; w->Pn[433] = v; check += v;
+    v = f->P[18][29]; w->Pn[434] = v; check += v;
+    v = f->P[18][30]; w->Pn[435] = v; check += v;
+    v = f->P[18][31]; w->Pn[436] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_19(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_19(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[19][19]; w->Pn[437] = v; check += v - v;
-    v = f->P[19][20]; w->Pn[438] = v; check += v - v;
-    v = f->P[19][21]; w->Pn[439] = v; check += v - v;
-    v = f->P[19][22]; w->Pn[440] = v; check += v - v;
-    v = f->P[19][23]; w->Pn[441] = v; check += v - v;
-    v = f->P[19][24]; w->Pn[442] = v; check += v - v;
-    v = f->P[19][25]; w->Pn[443] = v; check += v - v;
-    v = f->P[19][26]; w->Pn[444] = v; check += v - v;
-    v = f->P[19][27]; w->Pn[445] = v; check += v - v;
-    v = f->P[19][28]; w->Pn[446] = v; check += v - v;
-    v = f->P[19][29]; w->Pn[447] = v; check += v - v;
-    v = f->P[19][30]; w->Pn[448] = v; check += v - v;
-    v = f->P[19][31]; w->Pn[449] = v; check += v - v;
-    return check;
+    v = f->P[19][19]; w->Pn[437] = v; check += v;
+    v = f->P[19][20]; w->Pn[438] = v; check += v;
+    v = f->P[19][21]; w->Pn[439] = v; check += v;
+    v = f->P[19][22]; w->Pn[440] = v; check += v;
+    v = f->P[19][23]; w->Pn[441] = v; check += v;
+    v = f->P[19][24]; w->Pn[442] = v; check += v;
+    v = f->P[19][25]; w->Pn[443] = v; check += v;
+    v = f->P[19][26]; w->Pn[444] = v; check += v;
+    v = f->P[19][27]; w->Pn[445] = v; check += v;
+    v = f->P[19][28]; w->Pn[446] = v; check += v;
+    v = f->P[19][29]; w->Pn[447] = v; check += v;
+    v = f->P[19][30]; w->Pn[448] = v; check += v;
+    v = f->P[19][31]; w->Pn[449] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_20(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_20(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[20][20]; w->Pn[450] = v; check += v - v;
-    v = f->P[20][21]; w->Pn[451] = v; check += v - v;
-    v = f->P[20][22]; w->Pn[452] = v; check += v - v;
-    v = f->P[20][23]; w->Pn[453] = v; check += v - v;
-    v = f->P[20][24]; w->Pn[454] = v; check += v - v;
-    v = f->P[20][25]; w->Pn[455] = v; check += v - v;
-    v = f->P[20][26]; w->Pn[456] = v; check += v - v;
-    v = f->P[20][27]; w->Pn[457] = v; check += v - v;
-    v = f->P[20][28]; w->Pn[458] = v; check += v - v;
-    v = f->P[20][29]; w->Pn[459] = v; check += v - v;
-    v = f->P[20][30]; w->Pn[460] = v; check += v - v;
-    v = f->P[20][31]; w->Pn[461] = v; check += v - v;
-    return check;
+    v = f->P[20][20]; w->Pn[450] = v; check += v;
+    v = f->P[20][21]; w->Pn[451] = v; check += v;
+    v = f->P[20][22]; w->Pn[452] = v; check += v;
+    v = f->P[20][23]; w->Pn[453] = v; check += v;
+    v = f->P[20][24]; w->Pn[454] = v; check += v;
+    v = f->P[20][25]; w->Pn[455] = v; check += v;
+    v = f->P[20][26]; w->Pn[456] = v; check += v;
+    v = f->P[20][27]; w->Pn[457] = v; check += v;
+    v = f->P[20][28]; w->Pn[458] = v; check += v;
+    v = f->P[20][29]; w->Pn[459] = v; check += v;
+    v = f->P[20][30]; w->Pn[460] = v; check += v;
+    v = f->P[20][31]; w->Pn[461] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_21(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_21(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[21][21]; w->Pn[462] = v; check += v - v;
-    v = f->P[21][22]; w->Pn[463] = v; check += v - v;
-    v = f->P[21][23]; w->Pn[464] = v; check += v - v;
-    v = f->P[21][24]; w->Pn[465] = v; check += v - v;
-    v = f->P[21][25]; w->Pn[466] = v; check += v - v;
-    v = f->P[21][26]; w->Pn[467] = v; check += v - v;
-    v = f->P[21][27]; w->Pn[468] = v; check += v - v;
-    v = f->P[21][28]; w->Pn[469] = v; check += v - v;
-    v = f->P[21][29]; w->Pn[470] = v; check += v - v;
-    v = f->P[21][30]; w->Pn[471] = v; check += v - v;
-    v = f->P[21][31]; w->Pn[472] = v; check += v - v;
-    return check;
+    v = f->P[21][21]; w->Pn[462] = v; check += v;
+    v = f->P[21][22]; w->Pn[463] = v; check += v;
+    v = f->P[21][23]; w->Pn[464] = v; check += v;
+    v = f->P[21][24]; w->Pn[465] = v; check += v;
+    v = f->P[21][25]; w->Pn[466] = v; check += v;
+    v = f->P[21][26]; w->Pn[467] = v; check += v;
+    v = f->P[21][27]; w->Pn[468] = v; check += v;
+    v = f->P[21][28]; w->Pn[469] = v; check += v;
+    v = f->P[21][29]; w->Pn[470] = v; check += v;
+    v = f->P[21][30]; w->Pn[471] = v; check += v;
+    v = f->P[21][31]; w->Pn[472] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_22(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_22(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[22][22]; w->Pn[473] = v; check += v - v;
-    v = f->P[22][23]; w->Pn[474] = v; check += v - v;
-    v = f->P[22][24]; w->Pn[475] = v; check += v - v;
-    v = f->P[22][25]; w->Pn[476] = v; check += v - v;
-    v = f->P[22][26]; w->Pn[477] = v; check += v - v;
-    v = f->P[22][27]; w->Pn[478] = v; check += v - v;
-    v = f->P[22][28]; w->Pn[479] = v; check += v - v;
-    v = f->P[22][29]; w->Pn[480] = v; check += v - v;
-    v = f->P[22][30]; w->Pn[481] = v; check += v - v;
-    v = f->P[22][31]; w->Pn[482] = v; check += v - v;
-    return check;
+    v = f->P[22][22]; w->Pn[473] = v; check += v;
+    v = f->P[22][23]; w->Pn[474] = v; check += v;
+    v = f->P[22][24]; w->Pn[475] = v; check += v;
+    v = f->P[22][25]; w->Pn[476] = v; check += v;
+    v = f->P[22][26]; w->Pn[477] = v; check += v;
+    v = f->P[22][27]; w->Pn[478] = v; check += v;
+    v = f->P[22][28]; w->Pn[479] = v; check += v;
+    v = f->P[22][29]; w->Pn[480] = v; check += v;
+    v = f->P[22][30]; w->Pn[481] = v; check += v;
+    v = f->P[22][31]; w->Pn[482] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_23(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_23(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[23][23]; w->Pn[483] = v; check += v - v;
-    v = f->P[23][24]; w->Pn[484] = v; check += v - v;
-    v = f->P[23][25]; w->Pn[485] = v; check += v - v;
-    v = f->P[23][26]; w->Pn[486] = v; check += v - v;
-    v = f->P[23][27]; w->Pn[487] = v; check += v - v;
-    v = f->P[23][28]; w->Pn[488] = v; check += v - v;
-    v = f->P[23][29]; w->Pn[489] = v; check += v - v;
-    v = f->P[23][30]; w->Pn[490] = v; check += v - v;
-    v = f->P[23][31]; w->Pn[491] = v; check += v - v;
-    return check;
+    v = f->P[23][23]; w->Pn[483] = v; check += v;
+    v = f->P[23][24]; w->Pn[484] = v; check += v;
+    v = f->P[23][25]; w->Pn[485] = v; check += v;
+    v = f->P[23][26]; w->Pn[486] = v; check += v;
+    v = f->P[23][27]; w->Pn[487] = v; check += v;
+    v = f->P[23][28]; w->Pn[488] = v; check += v;
+    v = f->P[23][29]; w->Pn[489] = v; check += v;
+    v = f->P[23][30]; w->Pn[490] = v; check += v;
+    v = f->P[23][31]; w->Pn[491] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_24(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_24(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[24][24]; w->Pn[492] = v; check += v - v;
-    v = f->P[24][25]; w->Pn[493] = v; check += v - v;
-    v = f->P[24][26]; w->Pn[494] = v; check += v - v;
-    v = f->P[24][27]; w->Pn[495] = v; check += v - v;
-    v = f->P[24][28]; w->Pn[496] = v; check += v - v;
-    v = f->P[24][29]; w->Pn[497] = v; check += v - v;
-    v = f->P[24][30]; w->Pn[498] = v; check += v - v;
-    v = f->P[24][31]; w->Pn[499] = v; check += v - v;
-    return check;
+    v = f->P[24][24]; w->Pn[492] = v; check += v;
+    v = f->P[24][25]; w->Pn[493] = v; check += v;
+    v = f->P[24][26]; w->Pn[494] = v; check += v;
+    v = f->P[24][27]; w->Pn[495] = v; check += v;
+    v = f->P[24][28]; w->Pn[496] = v; check += v;
+    v = f->P[24][29]; w->Pn[497] = v; check += v;
+    v = f->P[24][30]; w->Pn[498] = v; check += v;
+    v = f->P[24][31]; w->Pn[499] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_25(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_25(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[25][25]; w->Pn[500] = v; check += v - v;
-    v = f->P[25][26]; w->Pn[501] = v; check += v - v;
-    v = f->P[25][27]; w->Pn[502] = v; check += v - v;
-    v = f->P[25][28]; w->Pn[503] = v; check += v - v;
-    v = f->P[25][29]; w->Pn[504] = v; check += v - v;
-    v = f->P[25][30]; w->Pn[505] = v; check += v - v;
-    v = f->P[25][31]; w->Pn[506] = v; check += v - v;
-    return check;
+    v = f->P[25][25]; w->Pn[500] = v; check += v;
+    v = f->P[25][26]; w->Pn[501] = v; check += v;
+    v = f->P[25][27]; w->Pn[502] = v; check += v;
+    v = f->P[25][28]; w->Pn[503] = v; check += v;
+    v = f->P[25][29]; w->Pn[504] = v; check += v;
+    v = f->P[25][30]; w->Pn[505] = v; check += v;
+    v = f->P[25][31]; w->Pn[506] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_26(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_26(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[26][26]; w->Pn[507] = v; check += v - v;
-    v = f->P[26][27]; w->Pn[508] = v; check += v - v;
-    v = f->P[26][28]; w->Pn[509] = v; check += v - v;
-    v = f->P[26][29]; w->Pn[510] = v; check += v - v;
-    v = f->P[26][30]; w->Pn[511] = v; check += v - v;
-    v = f->P[26][31]; w->Pn[512] = v; check += v - v;
-    return check;
+    v = f->P[26][26]; w->Pn[507] = v; check += v;
+    v = f->P[26][27]; w->Pn[508] = v; check += v;
+    v = f->P[26][28]; w->Pn[509] = v; check += v;
+    v = f->P[26][29]; w->Pn[510] = v; check += v;
+    v = f->P[26][30]; w->Pn[511] = v; check += v;
+    v = f->P[26][31]; w->Pn[512] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_27(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_27(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[27][27]; w->Pn[513] = v; check += v - v;
-    v = f->P[27][28]; w->Pn[514] = v; check += v - v;
-    v = f->P[27][29]; w->Pn[515] = v; check += v - v;
-    v = f->P[27][30]; w->Pn[516] = v; check += v - v;
-    v = f->P[27][31]; w->Pn[517] = v; check += v - v;
-    return check;
+    v = f->P[27][27]; w->Pn[513] = v; check += v;
+    v = f->P[27][28]; w->Pn[514] = v; check += v;
+    v = f->P[27][29]; w->Pn[515] = v; check += v;
+    v = f->P[27][30]; w->Pn[516] = v; check += v;
+    v = f->P[27][31]; w->Pn[517] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_28(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_28(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[28][28]; w->Pn[518] = v; check += v - v;
-    v = f->P[28][29]; w->Pn[519] = v; check += v - v;
-    v = f->P[28][30]; w->Pn[520] = v; check += v - v;
-    v = f->P[28][31]; w->Pn[521] = v; check += v - v;
-    return check;
+    v = f->P[28][28]; w->Pn[518] = v; check += v;
+    v = f->P[28][29]; w->Pn[519] = v; check += v;
+    v = f->P[28][30]; w->Pn[520] = v; check += v;
+    v = f->P[28][31]; w->Pn[521] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_29(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_29(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[29][29]; w->Pn[522] = v; check += v - v;
-    v = f->P[29][30]; w->Pn[523] = v; check += v - v;
-    v = f->P[29][31]; w->Pn[524] = v; check += v - v;
-    return check;
+    v = f->P[29][29]; w->Pn[522] = v; check += v;
+    v = f->P[29][30]; w->Pn[523] = v; check += v;
+    v = f->P[29][31]; w->Pn[524] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_30(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_30(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[30][30]; w->Pn[525] = v; check += v - v;
-    v = f->P[30][31]; w->Pn[526] = v; check += v - v;
-    return check;
+    v = f->P[30][30]; w->Pn[525] = v; check += v;
+    v = f->P[30][31]; w->Pn[526] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_doppler32_augmented_scalar propagate_row_31(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_31(const
+        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
+        w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[31][31]; w->Pn[527] = v; check += v - v;
-    return check;
+    v = f->P[31][31]; w->Pn[527] = v; check += v;
+    return check - check;
 }
 
 int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, const
@@ -6629,69 +6856,8 @@ int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, 
 {
     ned_doppler32_augmented_filter_scratch *w = &work->filter;
     ned_doppler32_augmented_scalar check = 0.0;
-    /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
-    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
-            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[7] + t->Phi[7]*f->x[8] +
-            t->Phi[8]*f->x[9] + t->Phi[9]*f->x[10] + t->Phi[10]*f->x[11] + t->Phi[11]*f->x[12] +
-            t->Phi[12]*f->x[13] + t->Phi[13]*f->x[14] + t->Phi[14]*f->x[15] + t->Phi[15]*f->x[18] +
-            t->Phi[16]*f->x[19] + t->Phi[17]*f->x[20] + t->Phi[18]*f->x[21] + t->Phi[19]*f->x[22] +
-            t->Phi[20]*f->x[23] + t->Phi[21]*f->x[24] + t->Phi[22]*f->x[25] + t->Phi[23]*f->x[26] +
-            t->Phi[24]*f->x[27] + t->Phi[25]*f->x[28] + t->Phi[26]*f->x[29];
-    w->xn[1] = t->Phi[27]*f->x[0] + t->Phi[28]*f->x[1] + t->Phi[29]*f->x[2] + t->Phi[30]*f->x[3] +
-            t->Phi[31]*f->x[4] + t->Phi[32]*f->x[5] + t->Phi[33]*f->x[7] + t->Phi[34]*f->x[8] +
-            t->Phi[35]*f->x[9] + t->Phi[36]*f->x[10] + t->Phi[37]*f->x[11] + t->Phi[38]*f->x[12] +
-            t->Phi[39]*f->x[13] + t->Phi[40]*f->x[14] + t->Phi[41]*f->x[15] + t->Phi[42]*f->x[18] +
-            t->Phi[43]*f->x[19] + t->Phi[44]*f->x[20] + t->Phi[45]*f->x[21] + t->Phi[46]*f->x[22] +
-            t->Phi[47]*f->x[23] + t->Phi[48]*f->x[24] + t->Phi[49]*f->x[25] + t->Phi[50]*f->x[26] +
-            t->Phi[51]*f->x[27] + t->Phi[52]*f->x[28] + t->Phi[53]*f->x[29];
-    w->xn[2] = t->Phi[54]*f->x[0] + t->Phi[55]*f->x[1] + t->Phi[56]*f->x[2] + t->Phi[57]*f->x[3] +
-            t->Phi[58]*f->x[4] + t->Phi[59]*f->x[5] + t->Phi[60]*f->x[7] + t->Phi[61]*f->x[8] +
-            t->Phi[62]*f->x[9] + t->Phi[63]*f->x[10] + t->Phi[64]*f->x[11] + t->Phi[65]*f->x[12] +
-            t->Phi[66]*f->x[13] + t->Phi[67]*f->x[14] + t->Phi[68]*f->x[15] + t->Phi[69]*f->x[18] +
-            t->Phi[70]*f->x[19] + t->Phi[71]*f->x[20] + t->Phi[72]*f->x[21] + t->Phi[73]*f->x[22] +
-            t->Phi[74]*f->x[23] + t->Phi[75]*f->x[24] + t->Phi[76]*f->x[25] + t->Phi[77]*f->x[26] +
-            t->Phi[78]*f->x[27] + t->Phi[79]*f->x[28] + t->Phi[80]*f->x[29];
-    w->xn[3] = t->Phi[81]*f->x[0] + t->Phi[82]*f->x[1] + t->Phi[83]*f->x[2] + t->Phi[84]*f->x[3] +
-            t->Phi[85]*f->x[4] + t->Phi[86]*f->x[5] + t->Phi[87]*f->x[7] + t->Phi[88]*f->x[8] +
-            t->Phi[89]*f->x[9] + t->Phi[90]*f->x[10] + t->Phi[91]*f->x[11] + t->Phi[92]*f->x[12] +
-            t->Phi[93]*f->x[13] + t->Phi[94]*f->x[14] + t->Phi[95]*f->x[15] + t->Phi[96]*f->x[18] +
-            t->Phi[97]*f->x[19] + t->Phi[98]*f->x[20] + t->Phi[99]*f->x[21] + t->Phi[100]*f->x[22] +
-            t->Phi[101]*f->x[23] + t->Phi[102]*f->x[24] + t->Phi[103]*f->x[25] +
-            t->Phi[104]*f->x[26] + t->Phi[105]*f->x[27] + t->Phi[106]*f->x[28] +
-            t->Phi[107]*f->x[29];
-    w->xn[4] = t->Phi[108]*f->x[0] + t->Phi[109]*f->x[1] + t->Phi[110]*f->x[2] + t->Phi[111]*f->x[3]
-            + t->Phi[112]*f->x[4] + t->Phi[113]*f->x[5] + t->Phi[114]*f->x[7] + t->Phi[115]*f->x[8]
-            + t->Phi[116]*f->x[9] + t->Phi[117]*f->x[10] + t->Phi[118]*f->x[11] +
-            t->Phi[119]*f->x[12] + t->Phi[120]*f->x[13] + t->Phi[121]*f->x[14] +
-            t->Phi[122]*f->x[15] + t->Phi[123]*f->x[18] + t->Phi[124]*f->x[19] +
-            t->Phi[125]*f->x[20] + t->Phi[126]*f->x[21] + t->Phi[127]*f->x[22] +
-            t->Phi[128]*f->x[23] + t->Phi[129]*f->x[24] + t->Phi[130]*f->x[25] +
-            t->Phi[131]*f->x[26] + t->Phi[132]*f->x[27] + t->Phi[133]*f->x[28] +
-            t->Phi[134]*f->x[29];
-    w->xn[5] = t->Phi[135]*f->x[0] + t->Phi[136]*f->x[1] + t->Phi[137]*f->x[2] + t->Phi[138]*f->x[3]
-            + t->Phi[139]*f->x[4] + t->Phi[140]*f->x[5] + t->Phi[141]*f->x[7] + t->Phi[142]*f->x[8]
-            + t->Phi[143]*f->x[9] + t->Phi[144]*f->x[10] + t->Phi[145]*f->x[11] +
-            t->Phi[146]*f->x[12] + t->Phi[147]*f->x[13] + t->Phi[148]*f->x[14] +
-            t->Phi[149]*f->x[15] + t->Phi[150]*f->x[18] + t->Phi[151]*f->x[19] +
-            t->Phi[152]*f->x[20] + t->Phi[153]*f->x[21] + t->Phi[154]*f->x[22] +
-            t->Phi[155]*f->x[23] + t->Phi[156]*f->x[24] + t->Phi[157]*f->x[25] +
-            t->Phi[158]*f->x[26] + t->Phi[159]*f->x[27] + t->Phi[160]*f->x[28] +
-            t->Phi[161]*f->x[29];
-    w->xn[6] = t->Phi[162]*f->x[0] + t->Phi[163]*f->x[1] + t->Phi[164]*f->x[2] + t->Phi[165]*f->x[3]
-            + t->Phi[166]*f->x[4] + t->Phi[167]*f->x[5] + t->Phi[168]*f->x[6] + t->Phi[169]*f->x[7]
-            + t->Phi[170]*f->x[8] + t->Phi[171]*f->x[9] + t->Phi[172]*f->x[10] +
-            t->Phi[173]*f->x[11] + t->Phi[174]*f->x[12] + t->Phi[175]*f->x[13] +
-            t->Phi[176]*f->x[14] + t->Phi[177]*f->x[15] + t->Phi[178]*f->x[18] +
-            t->Phi[179]*f->x[19] + t->Phi[180]*f->x[20] + t->Phi[181]*f->x[21] +
-            t->Phi[182]*f->x[22] + t->Phi[183]*f->x[23] + t->Phi[184]*f->x[24] +
-            t->Phi[185]*f->x[25] + t->Phi[186]*f->x[26] + t->Phi[187]*f->x[27] +
-            t->Phi[188]*f->x[28] + t->Phi[189]*f->x[29];
-    w->xn[10] = t->Phi[193]*f->x[10];
-    w->xn[11] = t->Phi[194]*f->x[11];
-    w->xn[12] = t->Phi[195]*f->x[12];
-    w->xn[13] = t->Phi[196]*f->x[13];
-    w->xn[14] = t->Phi[197]*f->x[14];
-    w->xn[15] = t->Phi[198]*f->x[15];
+    ned_doppler32_augmented_scalar sum_check = 0.0;
+    state_predict(f, t, w); /* x_n = Phi x */
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];
     check += w->xn[2] - w->xn[2];
@@ -6727,50 +6893,59 @@ int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, 
     /* row by row: M = row i of Phi P (a row of Phi that is e_i reads P directly), then
        row i of Pn = M Phi^T + Q_d (each pair computed once, into the packed upper triangle) */
     phi_times_p_row_0(f, t, w);
-    check += propagate_row_0(t, w);
+    sum_check += propagate_row_0(t, w);
     phi_times_p_row_1(f, t, w);
-    check += propagate_row_1(t, w);
+    sum_check += propagate_row_1(t, w);
     phi_times_p_row_2(f, t, w);
-    check += propagate_row_2(t, w);
+    sum_check += propagate_row_2(t, w);
     phi_times_p_row_3(f, t, w);
-    check += propagate_row_3(t, w);
+    sum_check += propagate_row_3(t, w);
     phi_times_p_row_4(f, t, w);
-    check += propagate_row_4(t, w);
+    sum_check += propagate_row_4(t, w);
     phi_times_p_row_5(f, t, w);
-    check += propagate_row_5(t, w);
+    sum_check += propagate_row_5(t, w);
     phi_times_p_row_6(f, t, w);
-    check += propagate_row_6(t, w);
-    check += propagate_row_7(f, t, w);
-    check += propagate_row_8(f, t, w);
-    check += propagate_row_9(f, t, w);
+    sum_check += propagate_row_6(t, w);
+    sum_check += propagate_row_7(f, t, w);
+    sum_check += propagate_row_8(f, t, w);
+    sum_check += propagate_row_9(f, t, w);
     phi_times_p_row_10(f, t, w);
-    check += propagate_row_10(t, w);
+    sum_check += propagate_row_10(t, w);
     phi_times_p_row_11(f, t, w);
-    check += propagate_row_11(t, w);
+    sum_check += propagate_row_11(t, w);
     phi_times_p_row_12(f, t, w);
-    check += propagate_row_12(t, w);
+    sum_check += propagate_row_12(t, w);
     phi_times_p_row_13(f, t, w);
-    check += propagate_row_13(t, w);
+    sum_check += propagate_row_13(t, w);
     phi_times_p_row_14(f, t, w);
-    check += propagate_row_14(t, w);
+    sum_check += propagate_row_14(t, w);
     phi_times_p_row_15(f, t, w);
-    check += propagate_row_15(t, w);
-    check += propagate_row_16(f, w);
-    check += propagate_row_17(f, w);
-    check += propagate_row_18(f, w);
-    check += propagate_row_19(f, w);
-    check += propagate_row_20(f, w);
-    check += propagate_row_21(f, w);
-    check += propagate_row_22(f, w);
-    check += propagate_row_23(f, w);
-    check += propagate_row_24(f, w);
-    check += propagate_row_25(f, w);
-    check += propagate_row_26(f, w);
-    check += propagate_row_27(f, w);
-    check += propagate_row_28(f, w);
-    check += propagate_row_29(f, w);
-    check += propagate_row_30(f, w);
-    check += propagate_row_31(f, w);
+    sum_check += propagate_row_15(t, w);
+    sum_check += propagate_row_16(f, w);
+    sum_check += propagate_row_17(f, w);
+    sum_check += propagate_row_18(f, w);
+    sum_check += propagate_row_19(f, w);
+    sum_check += propagate_row_20(f, w);
+    sum_check += propagate_row_21(f, w);
+    sum_check += propagate_row_22(f, w);
+    sum_check += propagate_row_23(f, w);
+    sum_check += propagate_row_24(f, w);
+    sum_check += propagate_row_25(f, w);
+    sum_check += propagate_row_26(f, w);
+    sum_check += propagate_row_27(f, w);
+    sum_check += propagate_row_28(f, w);
+    sum_check += propagate_row_29(f, w);
+    sum_check += propagate_row_30(f, w);
+    sum_check += propagate_row_31(f, w);
+    if (sum_check != 0.0) { /* a value that is not finite, or an overflow of a row's sum: entry by
+            entry */
+        int e;
+        sum_check = 0.0;
+        for (e = 0; e < NED_DOPPLER32_AUGMENTED_N_PACKED; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+    }
+    check += sum_check;
     if (check != 0.0) {
         return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
     }

@@ -150,7 +150,7 @@ int ned_inertial16_matrices_evaluate(const ned_inertial16_params *restrict param
         ned_inertial16_matrices *restrict m)
 {
     int e;
-    ned_inertial16_scalar check = 0.0;
+    ned_inertial16_scalar sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (pole(cos(params->latitude), params->latitude)) {
         return NED_INERTIAL16_ERR_NONFINITE; /* cos(latitude) = 0: singular operating point */
     }
@@ -244,23 +244,96 @@ int ned_inertial16_matrices_evaluate(const ned_inertial16_params *restrict param
         m->q[5] = 2*params->accel_markov_rate_z*params->accel_markov_sigma_z*
                 params->accel_markov_sigma_z;
     }
-    for (e = 0; e < NED_INERTIAL16_NNZ_F; ++e) {
-        check += m->F[e] - m->F[e];
+    /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
+       vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
+               is
+       not finite, or an overflow of finite values) is decided value by value */
+    for (e = 0; e + 3 < NED_INERTIAL16_NNZ_F; e += 4) {
+        sums[0] += m->F[e];
+        sums[1] += m->F[e + 1];
+        sums[2] += m->F[e + 2];
+        sums[3] += m->F[e + 3];
     }
-    for (e = 0; e < NED_INERTIAL16_NNZ_G; ++e) {
-        check += m->G[e] - m->G[e];
+    for (; e < NED_INERTIAL16_NNZ_F; ++e) {
+        sums[0] += m->F[e];
     }
-    for (e = 0; e < NED_INERTIAL16_NNZ_H; ++e) {
-        check += m->H[e] - m->H[e];
+    for (e = 0; e + 3 < NED_INERTIAL16_NNZ_G; e += 4) {
+        sums[0] += m->G[e];
+        sums[1] += m->G[e + 1];
+        sums[2] += m->G[e + 2];
+        sums[3] += m->G[e + 3];
     }
-    for (e = 0; e < NED_INERTIAL16_N_NOISES; ++e) {
-        check += m->q[e] - m->q[e];
+    for (; e < NED_INERTIAL16_NNZ_G; ++e) {
+        sums[0] += m->G[e];
     }
-    for (e = 0; e < NED_INERTIAL16_N_MEASUREMENTS; ++e) {
-        check += m->r[e] - m->r[e];
+    for (e = 0; e + 3 < NED_INERTIAL16_NNZ_H; e += 4) {
+        sums[0] += m->H[e];
+        sums[1] += m->H[e + 1];
+        sums[2] += m->H[e + 2];
+        sums[3] += m->H[e + 3];
     }
-    return (check != 0.0) ? NED_INERTIAL16_ERR_NONFINITE : NED_INERTIAL16_OK;
+    for (; e < NED_INERTIAL16_NNZ_H; ++e) {
+        sums[0] += m->H[e];
+    }
+    for (e = 0; e + 3 < NED_INERTIAL16_N_NOISES; e += 4) {
+        sums[0] += m->q[e];
+        sums[1] += m->q[e + 1];
+        sums[2] += m->q[e + 2];
+        sums[3] += m->q[e + 3];
+    }
+    for (; e < NED_INERTIAL16_N_NOISES; ++e) {
+        sums[0] += m->q[e];
+    }
+    for (e = 0; e + 3 < NED_INERTIAL16_N_MEASUREMENTS; e += 4) {
+        sums[0] += m->r[e];
+        sums[1] += m->r[e + 1];
+        sums[2] += m->r[e + 2];
+        sums[3] += m->r[e + 3];
+    }
+    for (; e < NED_INERTIAL16_N_MEASUREMENTS; ++e) {
+        sums[0] += m->r[e];
+    }
+    sums[0] = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    if (sums[0] - sums[0] != 0.0) {
+        for (e = 0; e < NED_INERTIAL16_NNZ_F; ++e) {
+            if (!isfinite(m->F[e])) {
+                return NED_INERTIAL16_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_INERTIAL16_NNZ_G; ++e) {
+            if (!isfinite(m->G[e])) {
+                return NED_INERTIAL16_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_INERTIAL16_NNZ_H; ++e) {
+            if (!isfinite(m->H[e])) {
+                return NED_INERTIAL16_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_INERTIAL16_N_NOISES; ++e) {
+            if (!isfinite(m->q[e])) {
+                return NED_INERTIAL16_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_INERTIAL16_N_MEASUREMENTS; ++e) {
+            if (!isfinite(m->r[e])) {
+                return NED_INERTIAL16_ERR_NONFINITE;
+            }
+        }
+    }
+
+    return NED_INERTIAL16_OK;
 }
+
+/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
+   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
+   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
+   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+#if defined(__GNUC__)
+#define NED_INERTIAL16_BLOCK static __attribute__((noinline))
+#else
+#define NED_INERTIAL16_BLOCK static
+#endif
 
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static ned_inertial16_scalar power_of_two(const int e)
@@ -397,13 +470,6 @@ static int taylor_plan(const ned_inertial16_scalar norm, const ned_inertial16_sc
     return NED_INERTIAL16_OK;
 }
 
-/* Each block keeps its own stack frame: inlined into discretize, the frames of all blocks
-   would add up (the worst-case stack is measured for the Cortex-M4F, tests/embedded). */
-#if defined(__GNUC__)
-#define NED_INERTIAL16_BLOCK static __attribute__((noinline))
-#else
-#define NED_INERTIAL16_BLOCK static
-#endif
 NED_INERTIAL16_BLOCK void horner_input(const ned_inertial16_matrices *restrict m,
         ned_inertial16_discretize_scratch *restrict w, const ned_inertial16_scalar h)
 {
@@ -1534,8 +1600,8 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar transition_check(ned_inertial16_trans
             t->Phi[92] + t->Phi[93] + t->Phi[94] + t->Phi[95] + t->Phi[96] + t->Phi[97] + t->Phi[98]
             + t->Phi[99] + t->Phi[100] + t->Phi[101] + t->Phi[102] + t->Phi[103] + t->Phi[104] +
             t->Phi[105] + t->Phi[109] + t->Phi[110] + t->Phi[111] + t->Phi[112] + t->Phi[113] +
-            t->Phi[114]; w->term[0][0] = v; check += v - v;
-    return check;
+            t->Phi[114]; w->term[0][0] = v; check += v;
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
 NED_INERTIAL16_BLOCK void noise_input(const ned_inertial16_matrices *restrict m,
@@ -1652,151 +1718,151 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar process_noise(const ned_inertial16_ma
     w->term[1][47] = w->term[0][47]*w->term[1][53];
     v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
             w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0] = v; check += v - v;
+            t->Qd[0] = v; check += v;
     v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
             w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v - v;
+            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v;
     v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
             w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v - v;
+            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v;
     v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
             w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v - v;
+            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v;
     v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
             w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v - v;
+            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v;
     v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
             w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v - v;
+            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v;
     v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
             w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
-            w->term[1][5]*w->term[0][41]; t->Qd[6] = v; check += v - v;
-    v = w->term[1][0]*w->term[0][42]; t->Qd[10] = v; check += v - v;
-    v = w->term[1][1]*w->term[0][43]; t->Qd[11] = v; check += v - v;
-    v = w->term[1][2]*w->term[0][44]; t->Qd[12] = v; check += v - v;
-    v = w->term[1][3]*w->term[0][45]; t->Qd[13] = v; check += v - v;
-    v = w->term[1][4]*w->term[0][46]; t->Qd[14] = v; check += v - v;
-    v = w->term[1][5]*w->term[0][47]; t->Qd[15] = v; check += v - v;
+            w->term[1][5]*w->term[0][41]; t->Qd[6] = v; check += v;
+    v = w->term[1][0]*w->term[0][42]; t->Qd[10] = v; check += v;
+    v = w->term[1][1]*w->term[0][43]; t->Qd[11] = v; check += v;
+    v = w->term[1][2]*w->term[0][44]; t->Qd[12] = v; check += v;
+    v = w->term[1][3]*w->term[0][45]; t->Qd[13] = v; check += v;
+    v = w->term[1][4]*w->term[0][46]; t->Qd[14] = v; check += v;
+    v = w->term[1][5]*w->term[0][47]; t->Qd[15] = v; check += v;
     v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
             w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[16] = v; check += v - v;
+            w->term[1][11]*w->term[0][11]; t->Qd[16] = v; check += v;
     v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
             w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[17] = v; check += v - v;
+            w->term[1][11]*w->term[0][17]; t->Qd[17] = v; check += v;
     v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
             w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[18] = v; check += v - v;
+            w->term[1][11]*w->term[0][23]; t->Qd[18] = v; check += v;
     v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
             w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[19] = v; check += v - v;
+            w->term[1][11]*w->term[0][29]; t->Qd[19] = v; check += v;
     v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
             w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[20] = v; check += v - v;
+            w->term[1][11]*w->term[0][35]; t->Qd[20] = v; check += v;
     v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38] +
             w->term[1][9]*w->term[0][39] + w->term[1][10]*w->term[0][40] +
-            w->term[1][11]*w->term[0][41]; t->Qd[21] = v; check += v - v;
-    v = w->term[1][6]*w->term[0][42]; t->Qd[25] = v; check += v - v;
-    v = w->term[1][7]*w->term[0][43]; t->Qd[26] = v; check += v - v;
-    v = w->term[1][8]*w->term[0][44]; t->Qd[27] = v; check += v - v;
-    v = w->term[1][9]*w->term[0][45]; t->Qd[28] = v; check += v - v;
-    v = w->term[1][10]*w->term[0][46]; t->Qd[29] = v; check += v - v;
-    v = w->term[1][11]*w->term[0][47]; t->Qd[30] = v; check += v - v;
+            w->term[1][11]*w->term[0][41]; t->Qd[21] = v; check += v;
+    v = w->term[1][6]*w->term[0][42]; t->Qd[25] = v; check += v;
+    v = w->term[1][7]*w->term[0][43]; t->Qd[26] = v; check += v;
+    v = w->term[1][8]*w->term[0][44]; t->Qd[27] = v; check += v;
+    v = w->term[1][9]*w->term[0][45]; t->Qd[28] = v; check += v;
+    v = w->term[1][10]*w->term[0][46]; t->Qd[29] = v; check += v;
+    v = w->term[1][11]*w->term[0][47]; t->Qd[30] = v; check += v;
     v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
             w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[31] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[31] = v; check +=
+            v;
     v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
             w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[32] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[32] = v; check +=
+            v;
     v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
             w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[33] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[33] = v; check +=
+            v;
     v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
             w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[34] = v; check += v
-            - v;
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[34] = v; check +=
+            v;
     v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
             w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[35] = v; check += v
-            - v;
-    v = w->term[1][12]*w->term[0][42]; t->Qd[39] = v; check += v - v;
-    v = w->term[1][13]*w->term[0][43]; t->Qd[40] = v; check += v - v;
-    v = w->term[1][14]*w->term[0][44]; t->Qd[41] = v; check += v - v;
-    v = w->term[1][15]*w->term[0][45]; t->Qd[42] = v; check += v - v;
-    v = w->term[1][16]*w->term[0][46]; t->Qd[43] = v; check += v - v;
-    v = w->term[1][17]*w->term[0][47]; t->Qd[44] = v; check += v - v;
+            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[35] = v; check +=
+            v;
+    v = w->term[1][12]*w->term[0][42]; t->Qd[39] = v; check += v;
+    v = w->term[1][13]*w->term[0][43]; t->Qd[40] = v; check += v;
+    v = w->term[1][14]*w->term[0][44]; t->Qd[41] = v; check += v;
+    v = w->term[1][15]*w->term[0][45]; t->Qd[42] = v; check += v;
+    v = w->term[1][16]*w->term[0][46]; t->Qd[43] = v; check += v;
+    v = w->term[1][17]*w->term[0][47]; t->Qd[44] = v; check += v;
     v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
             w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[45] = v; check += v
-            - v;
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[45] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
             w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[46] = v; check += v
-            - v;
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[46] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
             w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[47] = v; check += v
-            - v;
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[47] = v; check +=
+            v;
     v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
             w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[48] = v; check += v
-            - v;
-    v = w->term[1][18]*w->term[0][42]; t->Qd[52] = v; check += v - v;
-    v = w->term[1][19]*w->term[0][43]; t->Qd[53] = v; check += v - v;
-    v = w->term[1][20]*w->term[0][44]; t->Qd[54] = v; check += v - v;
-    v = w->term[1][21]*w->term[0][45]; t->Qd[55] = v; check += v - v;
-    v = w->term[1][22]*w->term[0][46]; t->Qd[56] = v; check += v - v;
-    v = w->term[1][23]*w->term[0][47]; t->Qd[57] = v; check += v - v;
+            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[48] = v; check +=
+            v;
+    v = w->term[1][18]*w->term[0][42]; t->Qd[52] = v; check += v;
+    v = w->term[1][19]*w->term[0][43]; t->Qd[53] = v; check += v;
+    v = w->term[1][20]*w->term[0][44]; t->Qd[54] = v; check += v;
+    v = w->term[1][21]*w->term[0][45]; t->Qd[55] = v; check += v;
+    v = w->term[1][22]*w->term[0][46]; t->Qd[56] = v; check += v;
+    v = w->term[1][23]*w->term[0][47]; t->Qd[57] = v; check += v;
     v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
             w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[58] = v; check += v
-            - v;
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[58] = v; check +=
+            v;
     v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
             w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[59] = v; check += v
-            - v;
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[59] = v; check +=
+            v;
     v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
             w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
-            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[60] = v; check += v
-            - v;
-    v = w->term[1][24]*w->term[0][42]; t->Qd[64] = v; check += v - v;
-    v = w->term[1][25]*w->term[0][43]; t->Qd[65] = v; check += v - v;
-    v = w->term[1][26]*w->term[0][44]; t->Qd[66] = v; check += v - v;
-    v = w->term[1][27]*w->term[0][45]; t->Qd[67] = v; check += v - v;
-    v = w->term[1][28]*w->term[0][46]; t->Qd[68] = v; check += v - v;
-    v = w->term[1][29]*w->term[0][47]; t->Qd[69] = v; check += v - v;
+            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[60] = v; check +=
+            v;
+    v = w->term[1][24]*w->term[0][42]; t->Qd[64] = v; check += v;
+    v = w->term[1][25]*w->term[0][43]; t->Qd[65] = v; check += v;
+    v = w->term[1][26]*w->term[0][44]; t->Qd[66] = v; check += v;
+    v = w->term[1][27]*w->term[0][45]; t->Qd[67] = v; check += v;
+    v = w->term[1][28]*w->term[0][46]; t->Qd[68] = v; check += v;
+    v = w->term[1][29]*w->term[0][47]; t->Qd[69] = v; check += v;
     v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
             w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[70] = v; check += v
-            - v;
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[70] = v; check +=
+            v;
     v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
             w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
-            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[71] = v; check += v
-            - v;
-    v = w->term[1][30]*w->term[0][42]; t->Qd[75] = v; check += v - v;
-    v = w->term[1][31]*w->term[0][43]; t->Qd[76] = v; check += v - v;
-    v = w->term[1][32]*w->term[0][44]; t->Qd[77] = v; check += v - v;
-    v = w->term[1][33]*w->term[0][45]; t->Qd[78] = v; check += v - v;
-    v = w->term[1][34]*w->term[0][46]; t->Qd[79] = v; check += v - v;
-    v = w->term[1][35]*w->term[0][47]; t->Qd[80] = v; check += v - v;
+            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[71] = v; check +=
+            v;
+    v = w->term[1][30]*w->term[0][42]; t->Qd[75] = v; check += v;
+    v = w->term[1][31]*w->term[0][43]; t->Qd[76] = v; check += v;
+    v = w->term[1][32]*w->term[0][44]; t->Qd[77] = v; check += v;
+    v = w->term[1][33]*w->term[0][45]; t->Qd[78] = v; check += v;
+    v = w->term[1][34]*w->term[0][46]; t->Qd[79] = v; check += v;
+    v = w->term[1][35]*w->term[0][47]; t->Qd[80] = v; check += v;
     v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
             w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[81] = v; check += v
-            - v;
-    v = w->term[1][36]*w->term[0][42]; t->Qd[85] = v; check += v - v;
-    v = w->term[1][37]*w->term[0][43]; t->Qd[86] = v; check += v - v;
-    v = w->term[1][38]*w->term[0][44]; t->Qd[87] = v; check += v - v;
-    v = w->term[1][39]*w->term[0][45]; t->Qd[88] = v; check += v - v;
-    v = w->term[1][40]*w->term[0][46]; t->Qd[89] = v; check += v - v;
-    v = w->term[1][41]*w->term[0][47]; t->Qd[90] = v; check += v - v;
-    v = w->term[1][42]*w->term[0][42]; t->Qd[115] = v; check += v - v;
-    v = w->term[1][43]*w->term[0][43]; t->Qd[121] = v; check += v - v;
-    v = w->term[1][44]*w->term[0][44]; t->Qd[126] = v; check += v - v;
-    v = w->term[1][45]*w->term[0][45]; t->Qd[130] = v; check += v - v;
-    v = w->term[1][46]*w->term[0][46]; t->Qd[133] = v; check += v - v;
-    v = w->term[1][47]*w->term[0][47]; t->Qd[135] = v; check += v - v;
+            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[81] = v; check +=
+            v;
+    v = w->term[1][36]*w->term[0][42]; t->Qd[85] = v; check += v;
+    v = w->term[1][37]*w->term[0][43]; t->Qd[86] = v; check += v;
+    v = w->term[1][38]*w->term[0][44]; t->Qd[87] = v; check += v;
+    v = w->term[1][39]*w->term[0][45]; t->Qd[88] = v; check += v;
+    v = w->term[1][40]*w->term[0][46]; t->Qd[89] = v; check += v;
+    v = w->term[1][41]*w->term[0][47]; t->Qd[90] = v; check += v;
+    v = w->term[1][42]*w->term[0][42]; t->Qd[115] = v; check += v;
+    v = w->term[1][43]*w->term[0][43]; t->Qd[121] = v; check += v;
+    v = w->term[1][44]*w->term[0][44]; t->Qd[126] = v; check += v;
+    v = w->term[1][45]*w->term[0][45]; t->Qd[130] = v; check += v;
+    v = w->term[1][46]*w->term[0][46]; t->Qd[133] = v; check += v;
+    v = w->term[1][47]*w->term[0][47]; t->Qd[135] = v; check += v;
     t->Qd[7] = 0;
     t->Qd[8] = 0;
     t->Qd[9] = 0;
@@ -1857,7 +1923,7 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar process_noise(const ned_inertial16_ma
     t->Qd[131] = 0;
     t->Qd[132] = 0;
     t->Qd[134] = 0;
-    return check;
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
 int ned_inertial16_discretize(const ned_inertial16_matrices *restrict m, ned_inertial16_scalar T,
@@ -1869,41 +1935,64 @@ int ned_inertial16_discretize(const ned_inertial16_matrices *restrict m, ned_ine
     int halvings, order, status;
     int k;
     ned_inertial16_scalar sum_check;
-    ned_inertial16_scalar check = 0.0, sums[2] = { 0.0, 0.0 };
+    ned_inertial16_scalar qd_check;
+    ned_inertial16_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (!isfinite(T)) {
         return NED_INERTIAL16_ERR_NONFINITE;
     }
     if (!(T > 0.0)) {
         return NED_INERTIAL16_ERR_NOT_POSITIVE;
     }
-    /* the sum of v - v over F, G and q (0 when all are finite) in two partial sums, two entries a
-            step,
-       which gcc -O2 vectorizes (the order of a sum of zeros and NaNs does not change whether it is
-               0) */
-    for (e = 0; e + 1 < NED_INERTIAL16_NNZ_F; e += 2) {
-        sums[0] += m->F[e] - m->F[e];
-        sums[1] += m->F[e + 1] - m->F[e + 1];
+    /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
+       vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
+               is
+       not finite, or an overflow of finite values) is decided value by value */
+    for (e = 0; e + 3 < NED_INERTIAL16_NNZ_F; e += 4) {
+        sums[0] += m->F[e];
+        sums[1] += m->F[e + 1];
+        sums[2] += m->F[e + 2];
+        sums[3] += m->F[e + 3];
     }
     for (; e < NED_INERTIAL16_NNZ_F; ++e) {
-        sums[0] += m->F[e] - m->F[e];
+        sums[0] += m->F[e];
     }
-    for (e = 0; e + 1 < NED_INERTIAL16_NNZ_G; e += 2) {
-        sums[0] += m->G[e] - m->G[e];
-        sums[1] += m->G[e + 1] - m->G[e + 1];
+    for (e = 0; e + 3 < NED_INERTIAL16_NNZ_G; e += 4) {
+        sums[0] += m->G[e];
+        sums[1] += m->G[e + 1];
+        sums[2] += m->G[e + 2];
+        sums[3] += m->G[e + 3];
     }
     for (; e < NED_INERTIAL16_NNZ_G; ++e) {
-        sums[0] += m->G[e] - m->G[e];
+        sums[0] += m->G[e];
     }
-    for (e = 0; e + 1 < NED_INERTIAL16_N_NOISES; e += 2) {
-        sums[0] += m->q[e] - m->q[e];
-        sums[1] += m->q[e + 1] - m->q[e + 1];
+    for (e = 0; e + 3 < NED_INERTIAL16_N_NOISES; e += 4) {
+        sums[0] += m->q[e];
+        sums[1] += m->q[e + 1];
+        sums[2] += m->q[e + 2];
+        sums[3] += m->q[e + 3];
     }
     for (; e < NED_INERTIAL16_N_NOISES; ++e) {
-        sums[0] += m->q[e] - m->q[e];
+        sums[0] += m->q[e];
     }
-    if (sums[0] + sums[1] != 0.0) {
-        return NED_INERTIAL16_ERR_NONFINITE;
+    sums[0] = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    if (sums[0] - sums[0] != 0.0) {
+        for (e = 0; e < NED_INERTIAL16_NNZ_F; ++e) {
+            if (!isfinite(m->F[e])) {
+                return NED_INERTIAL16_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_INERTIAL16_NNZ_G; ++e) {
+            if (!isfinite(m->G[e])) {
+                return NED_INERTIAL16_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_INERTIAL16_N_NOISES; ++e) {
+            if (!isfinite(m->q[e])) {
+                return NED_INERTIAL16_ERR_NONFINITE;
+            }
+        }
     }
+
     for (c = 0; c < NED_INERTIAL16_N_NOISES; ++c) {
         if (m->q[c] < 0.0) {
             return NED_INERTIAL16_ERR_NOT_POSITIVE;
@@ -1966,7 +2055,15 @@ int ned_inertial16_discretize(const ned_inertial16_matrices *restrict m, ned_ine
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
-    check += process_noise(m, t, w, T);
+    qd_check = process_noise(m, t, w, T);
+    if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
+            entry */
+        qd_check = 0.0;
+        for (e = 0; e < NED_INERTIAL16_N_PACKED; ++e) {
+            qd_check += t->Qd[e] - t->Qd[e];
+        }
+    }
+    check += qd_check;
     return (check != 0.0) ? NED_INERTIAL16_ERR_NONFINITE : NED_INERTIAL16_OK;
 }
 
@@ -2058,7 +2155,49 @@ void ned_inertial16_reset_error_state(ned_inertial16_filter *f)
     }
 }
 
-static void phi_times_p_row_0(const ned_inertial16_filter *restrict f, const
+/* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
+NED_INERTIAL16_BLOCK void state_predict(const ned_inertial16_filter *restrict f, const
+        ned_inertial16_transition *restrict t,
+                ned_inertial16_filter_scratch *restrict w)
+{
+    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
+            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[7] + t->Phi[7]*f->x[8] +
+            t->Phi[8]*f->x[9] + t->Phi[9]*f->x[10] + t->Phi[10]*f->x[11] + t->Phi[11]*f->x[12] +
+            t->Phi[12]*f->x[13] + t->Phi[13]*f->x[14] + t->Phi[14]*f->x[15];
+    w->xn[1] = t->Phi[15]*f->x[0] + t->Phi[16]*f->x[1] + t->Phi[17]*f->x[2] + t->Phi[18]*f->x[3] +
+            t->Phi[19]*f->x[4] + t->Phi[20]*f->x[5] + t->Phi[21]*f->x[7] + t->Phi[22]*f->x[8] +
+            t->Phi[23]*f->x[9] + t->Phi[24]*f->x[10] + t->Phi[25]*f->x[11] + t->Phi[26]*f->x[12] +
+            t->Phi[27]*f->x[13] + t->Phi[28]*f->x[14] + t->Phi[29]*f->x[15];
+    w->xn[2] = t->Phi[30]*f->x[0] + t->Phi[31]*f->x[1] + t->Phi[32]*f->x[2] + t->Phi[33]*f->x[3] +
+            t->Phi[34]*f->x[4] + t->Phi[35]*f->x[5] + t->Phi[36]*f->x[7] + t->Phi[37]*f->x[8] +
+            t->Phi[38]*f->x[9] + t->Phi[39]*f->x[10] + t->Phi[40]*f->x[11] + t->Phi[41]*f->x[12] +
+            t->Phi[42]*f->x[13] + t->Phi[43]*f->x[14] + t->Phi[44]*f->x[15];
+    w->xn[3] = t->Phi[45]*f->x[0] + t->Phi[46]*f->x[1] + t->Phi[47]*f->x[2] + t->Phi[48]*f->x[3] +
+            t->Phi[49]*f->x[4] + t->Phi[50]*f->x[5] + t->Phi[51]*f->x[7] + t->Phi[52]*f->x[8] +
+            t->Phi[53]*f->x[9] + t->Phi[54]*f->x[10] + t->Phi[55]*f->x[11] + t->Phi[56]*f->x[12] +
+            t->Phi[57]*f->x[13] + t->Phi[58]*f->x[14] + t->Phi[59]*f->x[15];
+    w->xn[4] = t->Phi[60]*f->x[0] + t->Phi[61]*f->x[1] + t->Phi[62]*f->x[2] + t->Phi[63]*f->x[3] +
+            t->Phi[64]*f->x[4] + t->Phi[65]*f->x[5] + t->Phi[66]*f->x[7] + t->Phi[67]*f->x[8] +
+            t->Phi[68]*f->x[9] + t->Phi[69]*f->x[10] + t->Phi[70]*f->x[11] + t->Phi[71]*f->x[12] +
+            t->Phi[72]*f->x[13] + t->Phi[73]*f->x[14] + t->Phi[74]*f->x[15];
+    w->xn[5] = t->Phi[75]*f->x[0] + t->Phi[76]*f->x[1] + t->Phi[77]*f->x[2] + t->Phi[78]*f->x[3] +
+            t->Phi[79]*f->x[4] + t->Phi[80]*f->x[5] + t->Phi[81]*f->x[7] + t->Phi[82]*f->x[8] +
+            t->Phi[83]*f->x[9] + t->Phi[84]*f->x[10] + t->Phi[85]*f->x[11] + t->Phi[86]*f->x[12] +
+            t->Phi[87]*f->x[13] + t->Phi[88]*f->x[14] + t->Phi[89]*f->x[15];
+    w->xn[6] = t->Phi[90]*f->x[0] + t->Phi[91]*f->x[1] + t->Phi[92]*f->x[2] + t->Phi[93]*f->x[3] +
+            t->Phi[94]*f->x[4] + t->Phi[95]*f->x[5] + t->Phi[96]*f->x[6] + t->Phi[97]*f->x[7] +
+            t->Phi[98]*f->x[8] + t->Phi[99]*f->x[9] + t->Phi[100]*f->x[10] + t->Phi[101]*f->x[11] +
+            t->Phi[102]*f->x[12] + t->Phi[103]*f->x[13] + t->Phi[104]*f->x[14] +
+            t->Phi[105]*f->x[15];
+    w->xn[10] = t->Phi[109]*f->x[10];
+    w->xn[11] = t->Phi[110]*f->x[11];
+    w->xn[12] = t->Phi[111]*f->x[12];
+    w->xn[13] = t->Phi[112]*f->x[13];
+    w->xn[14] = t->Phi[113]*f->x[14];
+    w->xn[15] = t->Phi[114]*f->x[15];
+}
+
+NED_INERTIAL16_BLOCK void phi_times_p_row_0(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
@@ -2143,59 +2282,60 @@ static void phi_times_p_row_0(const ned_inertial16_filter *restrict f, const
             t->Phi[12]*f->P[13][15] + t->Phi[13]*f->P[14][15] + t->Phi[14]*f->P[15][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_0(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_0(const ned_inertial16_transition *restrict
+        t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[0] + w->M[1]*t->Phi[1] + w->M[2]*t->Phi[2] + w->M[3]*t->Phi[3] +
             w->M[4]*t->Phi[4] + w->M[5]*t->Phi[5] + w->M[7]*t->Phi[6] + w->M[8]*t->Phi[7] +
             w->M[9]*t->Phi[8] + w->M[10]*t->Phi[9] + w->M[11]*t->Phi[10] + w->M[12]*t->Phi[11] +
             w->M[13]*t->Phi[12] + w->M[14]*t->Phi[13] + w->M[15]*t->Phi[14] + t->Qd[0]; w->Pn[0] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[15] + w->M[1]*t->Phi[16] + w->M[2]*t->Phi[17] + w->M[3]*t->Phi[18] +
             w->M[4]*t->Phi[19] + w->M[5]*t->Phi[20] + w->M[7]*t->Phi[21] + w->M[8]*t->Phi[22] +
             w->M[9]*t->Phi[23] + w->M[10]*t->Phi[24] + w->M[11]*t->Phi[25] + w->M[12]*t->Phi[26] +
             w->M[13]*t->Phi[27] + w->M[14]*t->Phi[28] + w->M[15]*t->Phi[29] + t->Qd[1]; w->Pn[1] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[30] + w->M[1]*t->Phi[31] + w->M[2]*t->Phi[32] + w->M[3]*t->Phi[33] +
             w->M[4]*t->Phi[34] + w->M[5]*t->Phi[35] + w->M[7]*t->Phi[36] + w->M[8]*t->Phi[37] +
             w->M[9]*t->Phi[38] + w->M[10]*t->Phi[39] + w->M[11]*t->Phi[40] + w->M[12]*t->Phi[41] +
             w->M[13]*t->Phi[42] + w->M[14]*t->Phi[43] + w->M[15]*t->Phi[44] + t->Qd[2]; w->Pn[2] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
             w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[7]*t->Phi[51] + w->M[8]*t->Phi[52] +
             w->M[9]*t->Phi[53] + w->M[10]*t->Phi[54] + w->M[11]*t->Phi[55] + w->M[12]*t->Phi[56] +
             w->M[13]*t->Phi[57] + w->M[14]*t->Phi[58] + w->M[15]*t->Phi[59] + t->Qd[3]; w->Pn[3] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
             w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[7]*t->Phi[66] + w->M[8]*t->Phi[67] +
             w->M[9]*t->Phi[68] + w->M[10]*t->Phi[69] + w->M[11]*t->Phi[70] + w->M[12]*t->Phi[71] +
             w->M[13]*t->Phi[72] + w->M[14]*t->Phi[73] + w->M[15]*t->Phi[74] + t->Qd[4]; w->Pn[4] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[75] + w->M[1]*t->Phi[76] + w->M[2]*t->Phi[77] + w->M[3]*t->Phi[78] +
             w->M[4]*t->Phi[79] + w->M[5]*t->Phi[80] + w->M[7]*t->Phi[81] + w->M[8]*t->Phi[82] +
             w->M[9]*t->Phi[83] + w->M[10]*t->Phi[84] + w->M[11]*t->Phi[85] + w->M[12]*t->Phi[86] +
             w->M[13]*t->Phi[87] + w->M[14]*t->Phi[88] + w->M[15]*t->Phi[89] + t->Qd[5]; w->Pn[5] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
             w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
             w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
             w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[6]; w->Pn[6] = v; check += v - v;
-    v = w->M[7]; w->Pn[7] = v; check += v - v;
-    v = w->M[8]; w->Pn[8] = v; check += v - v;
-    v = w->M[9]; w->Pn[9] = v; check += v - v;
-    v = w->M[10]*t->Phi[109] + t->Qd[10]; w->Pn[10] = v; check += v - v;
-    v = w->M[11]*t->Phi[110] + t->Qd[11]; w->Pn[11] = v; check += v - v;
-    v = w->M[12]*t->Phi[111] + t->Qd[12]; w->Pn[12] = v; check += v - v;
-    v = w->M[13]*t->Phi[112] + t->Qd[13]; w->Pn[13] = v; check += v - v;
-    v = w->M[14]*t->Phi[113] + t->Qd[14]; w->Pn[14] = v; check += v - v;
-    v = w->M[15]*t->Phi[114] + t->Qd[15]; w->Pn[15] = v; check += v - v;
-    return check;
+            w->M[15]*t->Phi[105] + t->Qd[6]; w->Pn[6] = v; check += v;
+    v = w->M[7]; w->Pn[7] = v; check += v;
+    v = w->M[8]; w->Pn[8] = v; check += v;
+    v = w->M[9]; w->Pn[9] = v; check += v;
+    v = w->M[10]*t->Phi[109] + t->Qd[10]; w->Pn[10] = v; check += v;
+    v = w->M[11]*t->Phi[110] + t->Qd[11]; w->Pn[11] = v; check += v;
+    v = w->M[12]*t->Phi[111] + t->Qd[12]; w->Pn[12] = v; check += v;
+    v = w->M[13]*t->Phi[112] + t->Qd[13]; w->Pn[13] = v; check += v;
+    v = w->M[14]*t->Phi[113] + t->Qd[14]; w->Pn[14] = v; check += v;
+    v = w->M[15]*t->Phi[114] + t->Qd[15]; w->Pn[15] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_1(const ned_inertial16_filter *restrict f, const
+NED_INERTIAL16_BLOCK void phi_times_p_row_1(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[15]*f->P[0][0] + t->Phi[16]*f->P[1][0] + t->Phi[17]*f->P[2][0] +
@@ -2280,54 +2420,55 @@ static void phi_times_p_row_1(const ned_inertial16_filter *restrict f, const
             t->Phi[27]*f->P[13][15] + t->Phi[28]*f->P[14][15] + t->Phi[29]*f->P[15][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_1(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_1(const ned_inertial16_transition *restrict
+        t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[15] + w->M[1]*t->Phi[16] + w->M[2]*t->Phi[17] + w->M[3]*t->Phi[18] +
             w->M[4]*t->Phi[19] + w->M[5]*t->Phi[20] + w->M[7]*t->Phi[21] + w->M[8]*t->Phi[22] +
             w->M[9]*t->Phi[23] + w->M[10]*t->Phi[24] + w->M[11]*t->Phi[25] + w->M[12]*t->Phi[26] +
             w->M[13]*t->Phi[27] + w->M[14]*t->Phi[28] + w->M[15]*t->Phi[29] + t->Qd[16]; w->Pn[16] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[30] + w->M[1]*t->Phi[31] + w->M[2]*t->Phi[32] + w->M[3]*t->Phi[33] +
             w->M[4]*t->Phi[34] + w->M[5]*t->Phi[35] + w->M[7]*t->Phi[36] + w->M[8]*t->Phi[37] +
             w->M[9]*t->Phi[38] + w->M[10]*t->Phi[39] + w->M[11]*t->Phi[40] + w->M[12]*t->Phi[41] +
             w->M[13]*t->Phi[42] + w->M[14]*t->Phi[43] + w->M[15]*t->Phi[44] + t->Qd[17]; w->Pn[17] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
             w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[7]*t->Phi[51] + w->M[8]*t->Phi[52] +
             w->M[9]*t->Phi[53] + w->M[10]*t->Phi[54] + w->M[11]*t->Phi[55] + w->M[12]*t->Phi[56] +
             w->M[13]*t->Phi[57] + w->M[14]*t->Phi[58] + w->M[15]*t->Phi[59] + t->Qd[18]; w->Pn[18] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
             w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[7]*t->Phi[66] + w->M[8]*t->Phi[67] +
             w->M[9]*t->Phi[68] + w->M[10]*t->Phi[69] + w->M[11]*t->Phi[70] + w->M[12]*t->Phi[71] +
             w->M[13]*t->Phi[72] + w->M[14]*t->Phi[73] + w->M[15]*t->Phi[74] + t->Qd[19]; w->Pn[19] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[75] + w->M[1]*t->Phi[76] + w->M[2]*t->Phi[77] + w->M[3]*t->Phi[78] +
             w->M[4]*t->Phi[79] + w->M[5]*t->Phi[80] + w->M[7]*t->Phi[81] + w->M[8]*t->Phi[82] +
             w->M[9]*t->Phi[83] + w->M[10]*t->Phi[84] + w->M[11]*t->Phi[85] + w->M[12]*t->Phi[86] +
             w->M[13]*t->Phi[87] + w->M[14]*t->Phi[88] + w->M[15]*t->Phi[89] + t->Qd[20]; w->Pn[20] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
             w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
             w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
             w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[21]; w->Pn[21] = v; check += v - v;
-    v = w->M[7]; w->Pn[22] = v; check += v - v;
-    v = w->M[8]; w->Pn[23] = v; check += v - v;
-    v = w->M[9]; w->Pn[24] = v; check += v - v;
-    v = w->M[10]*t->Phi[109] + t->Qd[25]; w->Pn[25] = v; check += v - v;
-    v = w->M[11]*t->Phi[110] + t->Qd[26]; w->Pn[26] = v; check += v - v;
-    v = w->M[12]*t->Phi[111] + t->Qd[27]; w->Pn[27] = v; check += v - v;
-    v = w->M[13]*t->Phi[112] + t->Qd[28]; w->Pn[28] = v; check += v - v;
-    v = w->M[14]*t->Phi[113] + t->Qd[29]; w->Pn[29] = v; check += v - v;
-    v = w->M[15]*t->Phi[114] + t->Qd[30]; w->Pn[30] = v; check += v - v;
-    return check;
+            w->M[15]*t->Phi[105] + t->Qd[21]; w->Pn[21] = v; check += v;
+    v = w->M[7]; w->Pn[22] = v; check += v;
+    v = w->M[8]; w->Pn[23] = v; check += v;
+    v = w->M[9]; w->Pn[24] = v; check += v;
+    v = w->M[10]*t->Phi[109] + t->Qd[25]; w->Pn[25] = v; check += v;
+    v = w->M[11]*t->Phi[110] + t->Qd[26]; w->Pn[26] = v; check += v;
+    v = w->M[12]*t->Phi[111] + t->Qd[27]; w->Pn[27] = v; check += v;
+    v = w->M[13]*t->Phi[112] + t->Qd[28]; w->Pn[28] = v; check += v;
+    v = w->M[14]*t->Phi[113] + t->Qd[29]; w->Pn[29] = v; check += v;
+    v = w->M[15]*t->Phi[114] + t->Qd[30]; w->Pn[30] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_2(const ned_inertial16_filter *restrict f, const
+NED_INERTIAL16_BLOCK void phi_times_p_row_2(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[30]*f->P[0][0] + t->Phi[31]*f->P[1][0] + t->Phi[32]*f->P[2][0] +
@@ -2412,49 +2553,50 @@ static void phi_times_p_row_2(const ned_inertial16_filter *restrict f, const
             t->Phi[42]*f->P[13][15] + t->Phi[43]*f->P[14][15] + t->Phi[44]*f->P[15][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_2(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_2(const ned_inertial16_transition *restrict
+        t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[30] + w->M[1]*t->Phi[31] + w->M[2]*t->Phi[32] + w->M[3]*t->Phi[33] +
             w->M[4]*t->Phi[34] + w->M[5]*t->Phi[35] + w->M[7]*t->Phi[36] + w->M[8]*t->Phi[37] +
             w->M[9]*t->Phi[38] + w->M[10]*t->Phi[39] + w->M[11]*t->Phi[40] + w->M[12]*t->Phi[41] +
             w->M[13]*t->Phi[42] + w->M[14]*t->Phi[43] + w->M[15]*t->Phi[44] + t->Qd[31]; w->Pn[31] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
             w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[7]*t->Phi[51] + w->M[8]*t->Phi[52] +
             w->M[9]*t->Phi[53] + w->M[10]*t->Phi[54] + w->M[11]*t->Phi[55] + w->M[12]*t->Phi[56] +
             w->M[13]*t->Phi[57] + w->M[14]*t->Phi[58] + w->M[15]*t->Phi[59] + t->Qd[32]; w->Pn[32] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
             w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[7]*t->Phi[66] + w->M[8]*t->Phi[67] +
             w->M[9]*t->Phi[68] + w->M[10]*t->Phi[69] + w->M[11]*t->Phi[70] + w->M[12]*t->Phi[71] +
             w->M[13]*t->Phi[72] + w->M[14]*t->Phi[73] + w->M[15]*t->Phi[74] + t->Qd[33]; w->Pn[33] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[75] + w->M[1]*t->Phi[76] + w->M[2]*t->Phi[77] + w->M[3]*t->Phi[78] +
             w->M[4]*t->Phi[79] + w->M[5]*t->Phi[80] + w->M[7]*t->Phi[81] + w->M[8]*t->Phi[82] +
             w->M[9]*t->Phi[83] + w->M[10]*t->Phi[84] + w->M[11]*t->Phi[85] + w->M[12]*t->Phi[86] +
             w->M[13]*t->Phi[87] + w->M[14]*t->Phi[88] + w->M[15]*t->Phi[89] + t->Qd[34]; w->Pn[34] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
             w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
             w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
             w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[35]; w->Pn[35] = v; check += v - v;
-    v = w->M[7]; w->Pn[36] = v; check += v - v;
-    v = w->M[8]; w->Pn[37] = v; check += v - v;
-    v = w->M[9]; w->Pn[38] = v; check += v - v;
-    v = w->M[10]*t->Phi[109] + t->Qd[39]; w->Pn[39] = v; check += v - v;
-    v = w->M[11]*t->Phi[110] + t->Qd[40]; w->Pn[40] = v; check += v - v;
-    v = w->M[12]*t->Phi[111] + t->Qd[41]; w->Pn[41] = v; check += v - v;
-    v = w->M[13]*t->Phi[112] + t->Qd[42]; w->Pn[42] = v; check += v - v;
-    v = w->M[14]*t->Phi[113] + t->Qd[43]; w->Pn[43] = v; check += v - v;
-    v = w->M[15]*t->Phi[114] + t->Qd[44]; w->Pn[44] = v; check += v - v;
-    return check;
+            w->M[15]*t->Phi[105] + t->Qd[35]; w->Pn[35] = v; check += v;
+    v = w->M[7]; w->Pn[36] = v; check += v;
+    v = w->M[8]; w->Pn[37] = v; check += v;
+    v = w->M[9]; w->Pn[38] = v; check += v;
+    v = w->M[10]*t->Phi[109] + t->Qd[39]; w->Pn[39] = v; check += v;
+    v = w->M[11]*t->Phi[110] + t->Qd[40]; w->Pn[40] = v; check += v;
+    v = w->M[12]*t->Phi[111] + t->Qd[41]; w->Pn[41] = v; check += v;
+    v = w->M[13]*t->Phi[112] + t->Qd[42]; w->Pn[42] = v; check += v;
+    v = w->M[14]*t->Phi[113] + t->Qd[43]; w->Pn[43] = v; check += v;
+    v = w->M[15]*t->Phi[114] + t->Qd[44]; w->Pn[44] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_3(const ned_inertial16_filter *restrict f, const
+NED_INERTIAL16_BLOCK void phi_times_p_row_3(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[45]*f->P[0][0] + t->Phi[46]*f->P[1][0] + t->Phi[47]*f->P[2][0] +
@@ -2539,44 +2681,45 @@ static void phi_times_p_row_3(const ned_inertial16_filter *restrict f, const
             t->Phi[57]*f->P[13][15] + t->Phi[58]*f->P[14][15] + t->Phi[59]*f->P[15][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_3(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_3(const ned_inertial16_transition *restrict
+        t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
             w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[7]*t->Phi[51] + w->M[8]*t->Phi[52] +
             w->M[9]*t->Phi[53] + w->M[10]*t->Phi[54] + w->M[11]*t->Phi[55] + w->M[12]*t->Phi[56] +
             w->M[13]*t->Phi[57] + w->M[14]*t->Phi[58] + w->M[15]*t->Phi[59] + t->Qd[45]; w->Pn[45] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
             w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[7]*t->Phi[66] + w->M[8]*t->Phi[67] +
             w->M[9]*t->Phi[68] + w->M[10]*t->Phi[69] + w->M[11]*t->Phi[70] + w->M[12]*t->Phi[71] +
             w->M[13]*t->Phi[72] + w->M[14]*t->Phi[73] + w->M[15]*t->Phi[74] + t->Qd[46]; w->Pn[46] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[75] + w->M[1]*t->Phi[76] + w->M[2]*t->Phi[77] + w->M[3]*t->Phi[78] +
             w->M[4]*t->Phi[79] + w->M[5]*t->Phi[80] + w->M[7]*t->Phi[81] + w->M[8]*t->Phi[82] +
             w->M[9]*t->Phi[83] + w->M[10]*t->Phi[84] + w->M[11]*t->Phi[85] + w->M[12]*t->Phi[86] +
             w->M[13]*t->Phi[87] + w->M[14]*t->Phi[88] + w->M[15]*t->Phi[89] + t->Qd[47]; w->Pn[47] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
             w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
             w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
             w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[48]; w->Pn[48] = v; check += v - v;
-    v = w->M[7]; w->Pn[49] = v; check += v - v;
-    v = w->M[8]; w->Pn[50] = v; check += v - v;
-    v = w->M[9]; w->Pn[51] = v; check += v - v;
-    v = w->M[10]*t->Phi[109] + t->Qd[52]; w->Pn[52] = v; check += v - v;
-    v = w->M[11]*t->Phi[110] + t->Qd[53]; w->Pn[53] = v; check += v - v;
-    v = w->M[12]*t->Phi[111] + t->Qd[54]; w->Pn[54] = v; check += v - v;
-    v = w->M[13]*t->Phi[112] + t->Qd[55]; w->Pn[55] = v; check += v - v;
-    v = w->M[14]*t->Phi[113] + t->Qd[56]; w->Pn[56] = v; check += v - v;
-    v = w->M[15]*t->Phi[114] + t->Qd[57]; w->Pn[57] = v; check += v - v;
-    return check;
+            w->M[15]*t->Phi[105] + t->Qd[48]; w->Pn[48] = v; check += v;
+    v = w->M[7]; w->Pn[49] = v; check += v;
+    v = w->M[8]; w->Pn[50] = v; check += v;
+    v = w->M[9]; w->Pn[51] = v; check += v;
+    v = w->M[10]*t->Phi[109] + t->Qd[52]; w->Pn[52] = v; check += v;
+    v = w->M[11]*t->Phi[110] + t->Qd[53]; w->Pn[53] = v; check += v;
+    v = w->M[12]*t->Phi[111] + t->Qd[54]; w->Pn[54] = v; check += v;
+    v = w->M[13]*t->Phi[112] + t->Qd[55]; w->Pn[55] = v; check += v;
+    v = w->M[14]*t->Phi[113] + t->Qd[56]; w->Pn[56] = v; check += v;
+    v = w->M[15]*t->Phi[114] + t->Qd[57]; w->Pn[57] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_4(const ned_inertial16_filter *restrict f, const
+NED_INERTIAL16_BLOCK void phi_times_p_row_4(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[60]*f->P[0][0] + t->Phi[61]*f->P[1][0] + t->Phi[62]*f->P[2][0] +
@@ -2661,39 +2804,40 @@ static void phi_times_p_row_4(const ned_inertial16_filter *restrict f, const
             t->Phi[72]*f->P[13][15] + t->Phi[73]*f->P[14][15] + t->Phi[74]*f->P[15][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_4(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_4(const ned_inertial16_transition *restrict
+        t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
             w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[7]*t->Phi[66] + w->M[8]*t->Phi[67] +
             w->M[9]*t->Phi[68] + w->M[10]*t->Phi[69] + w->M[11]*t->Phi[70] + w->M[12]*t->Phi[71] +
             w->M[13]*t->Phi[72] + w->M[14]*t->Phi[73] + w->M[15]*t->Phi[74] + t->Qd[58]; w->Pn[58] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[75] + w->M[1]*t->Phi[76] + w->M[2]*t->Phi[77] + w->M[3]*t->Phi[78] +
             w->M[4]*t->Phi[79] + w->M[5]*t->Phi[80] + w->M[7]*t->Phi[81] + w->M[8]*t->Phi[82] +
             w->M[9]*t->Phi[83] + w->M[10]*t->Phi[84] + w->M[11]*t->Phi[85] + w->M[12]*t->Phi[86] +
             w->M[13]*t->Phi[87] + w->M[14]*t->Phi[88] + w->M[15]*t->Phi[89] + t->Qd[59]; w->Pn[59] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
             w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
             w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
             w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[60]; w->Pn[60] = v; check += v - v;
-    v = w->M[7]; w->Pn[61] = v; check += v - v;
-    v = w->M[8]; w->Pn[62] = v; check += v - v;
-    v = w->M[9]; w->Pn[63] = v; check += v - v;
-    v = w->M[10]*t->Phi[109] + t->Qd[64]; w->Pn[64] = v; check += v - v;
-    v = w->M[11]*t->Phi[110] + t->Qd[65]; w->Pn[65] = v; check += v - v;
-    v = w->M[12]*t->Phi[111] + t->Qd[66]; w->Pn[66] = v; check += v - v;
-    v = w->M[13]*t->Phi[112] + t->Qd[67]; w->Pn[67] = v; check += v - v;
-    v = w->M[14]*t->Phi[113] + t->Qd[68]; w->Pn[68] = v; check += v - v;
-    v = w->M[15]*t->Phi[114] + t->Qd[69]; w->Pn[69] = v; check += v - v;
-    return check;
+            w->M[15]*t->Phi[105] + t->Qd[60]; w->Pn[60] = v; check += v;
+    v = w->M[7]; w->Pn[61] = v; check += v;
+    v = w->M[8]; w->Pn[62] = v; check += v;
+    v = w->M[9]; w->Pn[63] = v; check += v;
+    v = w->M[10]*t->Phi[109] + t->Qd[64]; w->Pn[64] = v; check += v;
+    v = w->M[11]*t->Phi[110] + t->Qd[65]; w->Pn[65] = v; check += v;
+    v = w->M[12]*t->Phi[111] + t->Qd[66]; w->Pn[66] = v; check += v;
+    v = w->M[13]*t->Phi[112] + t->Qd[67]; w->Pn[67] = v; check += v;
+    v = w->M[14]*t->Phi[113] + t->Qd[68]; w->Pn[68] = v; check += v;
+    v = w->M[15]*t->Phi[114] + t->Qd[69]; w->Pn[69] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_5(const ned_inertial16_filter *restrict f, const
+NED_INERTIAL16_BLOCK void phi_times_p_row_5(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[75]*f->P[0][0] + t->Phi[76]*f->P[1][0] + t->Phi[77]*f->P[2][0] +
@@ -2778,34 +2922,35 @@ static void phi_times_p_row_5(const ned_inertial16_filter *restrict f, const
             t->Phi[87]*f->P[13][15] + t->Phi[88]*f->P[14][15] + t->Phi[89]*f->P[15][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_5(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_5(const ned_inertial16_transition *restrict
+        t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[75] + w->M[1]*t->Phi[76] + w->M[2]*t->Phi[77] + w->M[3]*t->Phi[78] +
             w->M[4]*t->Phi[79] + w->M[5]*t->Phi[80] + w->M[7]*t->Phi[81] + w->M[8]*t->Phi[82] +
             w->M[9]*t->Phi[83] + w->M[10]*t->Phi[84] + w->M[11]*t->Phi[85] + w->M[12]*t->Phi[86] +
             w->M[13]*t->Phi[87] + w->M[14]*t->Phi[88] + w->M[15]*t->Phi[89] + t->Qd[70]; w->Pn[70] =
-            v; check += v - v;
+            v; check += v;
     v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
             w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
             w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
             w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[71]; w->Pn[71] = v; check += v - v;
-    v = w->M[7]; w->Pn[72] = v; check += v - v;
-    v = w->M[8]; w->Pn[73] = v; check += v - v;
-    v = w->M[9]; w->Pn[74] = v; check += v - v;
-    v = w->M[10]*t->Phi[109] + t->Qd[75]; w->Pn[75] = v; check += v - v;
-    v = w->M[11]*t->Phi[110] + t->Qd[76]; w->Pn[76] = v; check += v - v;
-    v = w->M[12]*t->Phi[111] + t->Qd[77]; w->Pn[77] = v; check += v - v;
-    v = w->M[13]*t->Phi[112] + t->Qd[78]; w->Pn[78] = v; check += v - v;
-    v = w->M[14]*t->Phi[113] + t->Qd[79]; w->Pn[79] = v; check += v - v;
-    v = w->M[15]*t->Phi[114] + t->Qd[80]; w->Pn[80] = v; check += v - v;
-    return check;
+            w->M[15]*t->Phi[105] + t->Qd[71]; w->Pn[71] = v; check += v;
+    v = w->M[7]; w->Pn[72] = v; check += v;
+    v = w->M[8]; w->Pn[73] = v; check += v;
+    v = w->M[9]; w->Pn[74] = v; check += v;
+    v = w->M[10]*t->Phi[109] + t->Qd[75]; w->Pn[75] = v; check += v;
+    v = w->M[11]*t->Phi[110] + t->Qd[76]; w->Pn[76] = v; check += v;
+    v = w->M[12]*t->Phi[111] + t->Qd[77]; w->Pn[77] = v; check += v;
+    v = w->M[13]*t->Phi[112] + t->Qd[78]; w->Pn[78] = v; check += v;
+    v = w->M[14]*t->Phi[113] + t->Qd[79]; w->Pn[79] = v; check += v;
+    v = w->M[15]*t->Phi[114] + t->Qd[80]; w->Pn[80] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_6(const ned_inertial16_filter *restrict f, const
+NED_INERTIAL16_BLOCK void phi_times_p_row_6(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[90]*f->P[0][0] + t->Phi[91]*f->P[1][0] + t->Phi[92]*f->P[2][0] +
@@ -2906,77 +3051,81 @@ static void phi_times_p_row_6(const ned_inertial16_filter *restrict f, const
             t->Phi[105]*f->P[15][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_6(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_6(const ned_inertial16_transition *restrict
+        t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
             w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
             w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
             w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[81]; w->Pn[81] = v; check += v - v;
-    v = w->M[7]; w->Pn[82] = v; check += v - v;
-    v = w->M[8]; w->Pn[83] = v; check += v - v;
-    v = w->M[9]; w->Pn[84] = v; check += v - v;
-    v = w->M[10]*t->Phi[109] + t->Qd[85]; w->Pn[85] = v; check += v - v;
-    v = w->M[11]*t->Phi[110] + t->Qd[86]; w->Pn[86] = v; check += v - v;
-    v = w->M[12]*t->Phi[111] + t->Qd[87]; w->Pn[87] = v; check += v - v;
-    v = w->M[13]*t->Phi[112] + t->Qd[88]; w->Pn[88] = v; check += v - v;
-    v = w->M[14]*t->Phi[113] + t->Qd[89]; w->Pn[89] = v; check += v - v;
-    v = w->M[15]*t->Phi[114] + t->Qd[90]; w->Pn[90] = v; check += v - v;
-    return check;
+            w->M[15]*t->Phi[105] + t->Qd[81]; w->Pn[81] = v; check += v;
+    v = w->M[7]; w->Pn[82] = v; check += v;
+    v = w->M[8]; w->Pn[83] = v; check += v;
+    v = w->M[9]; w->Pn[84] = v; check += v;
+    v = w->M[10]*t->Phi[109] + t->Qd[85]; w->Pn[85] = v; check += v;
+    v = w->M[11]*t->Phi[110] + t->Qd[86]; w->Pn[86] = v; check += v;
+    v = w->M[12]*t->Phi[111] + t->Qd[87]; w->Pn[87] = v; check += v;
+    v = w->M[13]*t->Phi[112] + t->Qd[88]; w->Pn[88] = v; check += v;
+    v = w->M[14]*t->Phi[113] + t->Qd[89]; w->Pn[89] = v; check += v;
+    v = w->M[15]*t->Phi[114] + t->Qd[90]; w->Pn[90] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_7(const ned_inertial16_filter *restrict f, const
-        ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_7(const ned_inertial16_filter *restrict f,
+        const ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
-    v = f->P[7][7]; w->Pn[91] = v; check += v - v;
-    v = f->P[7][8]; w->Pn[92] = v; check += v - v;
-    v = f->P[7][9]; w->Pn[93] = v; check += v - v;
-    v = f->P[7][10]*t->Phi[109]; w->Pn[94] = v; check += v - v;
-    v = f->P[7][11]*t->Phi[110]; w->Pn[95] = v; check += v - v;
-    v = f->P[7][12]*t->Phi[111]; w->Pn[96] = v; check += v - v;
-    v = f->P[7][13]*t->Phi[112]; w->Pn[97] = v; check += v - v;
-    v = f->P[7][14]*t->Phi[113]; w->Pn[98] = v; check += v - v;
-    v = f->P[7][15]*t->Phi[114]; w->Pn[99] = v; check += v - v;
-    return check;
+    v = f->P[7][7]; w->Pn[91] = v; check += v;
+    v = f->P[7][8]; w->Pn[92] = v; check += v;
+    v = f->P[7][9]; w->Pn[93] = v; check += v;
+    v = f->P[7][10]*t->Phi[109]; w->Pn[94] = v; check += v;
+    v = f->P[7][11]*t->Phi[110]; w->Pn[95] = v; check += v;
+    v = f->P[7][12]*t->Phi[111]; w->Pn[96] = v; check += v;
+    v = f->P[7][13]*t->Phi[112]; w->Pn[97] = v; check += v;
+    v = f->P[7][14]*t->Phi[113]; w->Pn[98] = v; check += v;
+    v = f->P[7][15]*t->Phi[114]; w->Pn[99] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_8(const ned_inertial16_filter *restrict f, const
-        ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_8(const ned_inertial16_filter *restrict f,
+        const ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
-    v = f->P[8][8]; w->Pn[100] = v; check += v - v;
-    v = f->P[8][9]; w->Pn[101] = v; check += v - v;
-    v = f->P[8][10]*t->Phi[109]; w->Pn[102] = v; check += v - v;
-    v = f->P[8][11]*t->Phi[110]; w->Pn[103] = v; check += v - v;
-    v = f->P[8][12]*t->Phi[111]; w->Pn[104] = v; check += v - v;
-    v = f->P[8][13]*t->Phi[112]; w->Pn[105] = v; check += v - v;
-    v = f->P[8][14]*t->Phi[113]; w->Pn[106] = v; check += v - v;
-    v = f->P[8][15]*t->Phi[114]; w->Pn[107] = v; check += v - v;
-    return check;
+    v = f->P[8][8]; w->Pn[100] = v; check += v;
+    v = f->P[8][9]; w->Pn[101] = v; check += v;
+    v = f->P[8][10]*t->Phi[109]; w->Pn[102] = v; check += v;
+    v = f->P[8][11]*t->Phi[110]; w->Pn[103] = v; check += v;
+    v = f->P[8][12]*t->Phi[111]; w->Pn[104] = v; check += v;
+    v = f->P[8][13]*t->Phi[112]; w->Pn[105] = v; check += v;
+    v = f->P[8][14]*t->Phi[113]; w->Pn[106] = v; check += v;
+    v = f->P[8][15]*t->Phi[114]; w->Pn[107] = v; check += v;
+    return check - check;
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_9(const ned_inertial16_filter *restrict f, const
-        ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_9(const ned_inertial16_filter *restrict f,
+        const ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
-    v = f->P[9][9]; w->Pn[108] = v; check += v - v;
-    v = f->P[9][10]*t->Phi[109]; w->Pn[109] = v; check += v - v;
-    v = f->P[9][11]*t->Phi[110]; w->Pn[110] = v; check += v - v;
-    v = f->P[9][12]*t->Phi[111]; w->Pn[111] = v; check += v - v;
-    v = f->P[9][13]*t->Phi[112]; w->Pn[112] = v; check += v - v;
-    v = f->P[9][14]*t->Phi[113]; w->Pn[113] = v; check += v - v;
-    v = f->P[9][15]*t->Phi[114]; w->Pn[114] = v; check += v - v;
-    return check;
+    v = f->P[9][9]; w->Pn[108] = v; check += v;
+    v = f->P[9][10]*t->Phi[109]; w->Pn[109] = v; check += v;
+    v = f->P[9][11]*t->Phi[110]; w->Pn[110] = v; check += v;
+    v = f->P[9][12]*t->Phi[111]; w->Pn[111] = v; check += v;
+    v = f->P[9][13]*t->Phi[112]; w->Pn[112] = v; check += v;
+    v = f->P[9][14]*t->Phi[113]; w->Pn[113] = v; check += v;
+    v = f->P[9][15]*t->Phi[114]; w->Pn[114] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_10(const ned_inertial16_filter *restrict f, const
+NED_INERTIAL16_BLOCK void phi_times_p_row_10(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[109]*f->P[10][0];
@@ -2997,21 +3146,22 @@ static void phi_times_p_row_10(const ned_inertial16_filter *restrict f, const
     w->M[15] = t->Phi[109]*f->P[10][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_10(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_10(const ned_inertial16_transition
+        *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
-    v = w->M[10]*t->Phi[109] + t->Qd[115]; w->Pn[115] = v; check += v - v;
-    v = w->M[11]*t->Phi[110]; w->Pn[116] = v; check += v - v;
-    v = w->M[12]*t->Phi[111]; w->Pn[117] = v; check += v - v;
-    v = w->M[13]*t->Phi[112]; w->Pn[118] = v; check += v - v;
-    v = w->M[14]*t->Phi[113]; w->Pn[119] = v; check += v - v;
-    v = w->M[15]*t->Phi[114]; w->Pn[120] = v; check += v - v;
-    return check;
+    v = w->M[10]*t->Phi[109] + t->Qd[115]; w->Pn[115] = v; check += v;
+    v = w->M[11]*t->Phi[110]; w->Pn[116] = v; check += v;
+    v = w->M[12]*t->Phi[111]; w->Pn[117] = v; check += v;
+    v = w->M[13]*t->Phi[112]; w->Pn[118] = v; check += v;
+    v = w->M[14]*t->Phi[113]; w->Pn[119] = v; check += v;
+    v = w->M[15]*t->Phi[114]; w->Pn[120] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_11(const ned_inertial16_filter *restrict f, const
+NED_INERTIAL16_BLOCK void phi_times_p_row_11(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[110]*f->P[11][0];
@@ -3032,20 +3182,21 @@ static void phi_times_p_row_11(const ned_inertial16_filter *restrict f, const
     w->M[15] = t->Phi[110]*f->P[11][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_11(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_11(const ned_inertial16_transition
+        *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
-    v = w->M[11]*t->Phi[110] + t->Qd[121]; w->Pn[121] = v; check += v - v;
-    v = w->M[12]*t->Phi[111]; w->Pn[122] = v; check += v - v;
-    v = w->M[13]*t->Phi[112]; w->Pn[123] = v; check += v - v;
-    v = w->M[14]*t->Phi[113]; w->Pn[124] = v; check += v - v;
-    v = w->M[15]*t->Phi[114]; w->Pn[125] = v; check += v - v;
-    return check;
+    v = w->M[11]*t->Phi[110] + t->Qd[121]; w->Pn[121] = v; check += v;
+    v = w->M[12]*t->Phi[111]; w->Pn[122] = v; check += v;
+    v = w->M[13]*t->Phi[112]; w->Pn[123] = v; check += v;
+    v = w->M[14]*t->Phi[113]; w->Pn[124] = v; check += v;
+    v = w->M[15]*t->Phi[114]; w->Pn[125] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_12(const ned_inertial16_filter *restrict f, const
+NED_INERTIAL16_BLOCK void phi_times_p_row_12(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[111]*f->P[12][0];
@@ -3066,19 +3217,20 @@ static void phi_times_p_row_12(const ned_inertial16_filter *restrict f, const
     w->M[15] = t->Phi[111]*f->P[12][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_12(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_12(const ned_inertial16_transition
+        *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
-    v = w->M[12]*t->Phi[111] + t->Qd[126]; w->Pn[126] = v; check += v - v;
-    v = w->M[13]*t->Phi[112]; w->Pn[127] = v; check += v - v;
-    v = w->M[14]*t->Phi[113]; w->Pn[128] = v; check += v - v;
-    v = w->M[15]*t->Phi[114]; w->Pn[129] = v; check += v - v;
-    return check;
+    v = w->M[12]*t->Phi[111] + t->Qd[126]; w->Pn[126] = v; check += v;
+    v = w->M[13]*t->Phi[112]; w->Pn[127] = v; check += v;
+    v = w->M[14]*t->Phi[113]; w->Pn[128] = v; check += v;
+    v = w->M[15]*t->Phi[114]; w->Pn[129] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_13(const ned_inertial16_filter *restrict f, const
+NED_INERTIAL16_BLOCK void phi_times_p_row_13(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[112]*f->P[13][0];
@@ -3099,18 +3251,19 @@ static void phi_times_p_row_13(const ned_inertial16_filter *restrict f, const
     w->M[15] = t->Phi[112]*f->P[13][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_13(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_13(const ned_inertial16_transition
+        *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
-    v = w->M[13]*t->Phi[112] + t->Qd[130]; w->Pn[130] = v; check += v - v;
-    v = w->M[14]*t->Phi[113]; w->Pn[131] = v; check += v - v;
-    v = w->M[15]*t->Phi[114]; w->Pn[132] = v; check += v - v;
-    return check;
+    v = w->M[13]*t->Phi[112] + t->Qd[130]; w->Pn[130] = v; check += v;
+    v = w->M[14]*t->Phi[113]; w->Pn[131] = v; check += v;
+    v = w->M[15]*t->Phi[114]; w->Pn[132] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_14(const ned_inertial16_filter *restrict f, const
+NED_INERTIAL16_BLOCK void phi_times_p_row_14(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[113]*f->P[14][0];
@@ -3131,17 +3284,18 @@ static void phi_times_p_row_14(const ned_inertial16_filter *restrict f, const
     w->M[15] = t->Phi[113]*f->P[14][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_14(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_14(const ned_inertial16_transition
+        *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
-    v = w->M[14]*t->Phi[113] + t->Qd[133]; w->Pn[133] = v; check += v - v;
-    v = w->M[15]*t->Phi[114]; w->Pn[134] = v; check += v - v;
-    return check;
+    v = w->M[14]*t->Phi[113] + t->Qd[133]; w->Pn[133] = v; check += v;
+    v = w->M[15]*t->Phi[114]; w->Pn[134] = v; check += v;
+    return check - check;
 }
 
-static void phi_times_p_row_15(const ned_inertial16_filter *restrict f, const
+NED_INERTIAL16_BLOCK void phi_times_p_row_15(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[114]*f->P[15][0];
@@ -3162,13 +3316,14 @@ static void phi_times_p_row_15(const ned_inertial16_filter *restrict f, const
     w->M[15] = t->Phi[114]*f->P[15][15];
 }
 
-/* Returns 0 when every value it stored is finite, NaN otherwise. */
-static ned_inertial16_scalar propagate_row_15(const ned_inertial16_transition *restrict t,
-        ned_inertial16_filter_scratch *restrict w)
+/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
+   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_15(const ned_inertial16_transition
+        *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
-    v = w->M[15]*t->Phi[114] + t->Qd[135]; w->Pn[135] = v; check += v - v;
-    return check;
+    v = w->M[15]*t->Phi[114] + t->Qd[135]; w->Pn[135] = v; check += v;
+    return check - check;
 }
 
 int ned_inertial16_predict(ned_inertial16_filter *restrict f, const ned_inertial16_transition
@@ -3177,42 +3332,8 @@ int ned_inertial16_predict(ned_inertial16_filter *restrict f, const ned_inertial
 {
     ned_inertial16_filter_scratch *w = &work->filter;
     ned_inertial16_scalar check = 0.0;
-    /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
-    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
-            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[7] + t->Phi[7]*f->x[8] +
-            t->Phi[8]*f->x[9] + t->Phi[9]*f->x[10] + t->Phi[10]*f->x[11] + t->Phi[11]*f->x[12] +
-            t->Phi[12]*f->x[13] + t->Phi[13]*f->x[14] + t->Phi[14]*f->x[15];
-    w->xn[1] = t->Phi[15]*f->x[0] + t->Phi[16]*f->x[1] + t->Phi[17]*f->x[2] + t->Phi[18]*f->x[3] +
-            t->Phi[19]*f->x[4] + t->Phi[20]*f->x[5] + t->Phi[21]*f->x[7] + t->Phi[22]*f->x[8] +
-            t->Phi[23]*f->x[9] + t->Phi[24]*f->x[10] + t->Phi[25]*f->x[11] + t->Phi[26]*f->x[12] +
-            t->Phi[27]*f->x[13] + t->Phi[28]*f->x[14] + t->Phi[29]*f->x[15];
-    w->xn[2] = t->Phi[30]*f->x[0] + t->Phi[31]*f->x[1] + t->Phi[32]*f->x[2] + t->Phi[33]*f->x[3] +
-            t->Phi[34]*f->x[4] + t->Phi[35]*f->x[5] + t->Phi[36]*f->x[7] + t->Phi[37]*f->x[8] +
-            t->Phi[38]*f->x[9] + t->Phi[39]*f->x[10] + t->Phi[40]*f->x[11] + t->Phi[41]*f->x[12] +
-            t->Phi[42]*f->x[13] + t->Phi[43]*f->x[14] + t->Phi[44]*f->x[15];
-    w->xn[3] = t->Phi[45]*f->x[0] + t->Phi[46]*f->x[1] + t->Phi[47]*f->x[2] + t->Phi[48]*f->x[3] +
-            t->Phi[49]*f->x[4] + t->Phi[50]*f->x[5] + t->Phi[51]*f->x[7] + t->Phi[52]*f->x[8] +
-            t->Phi[53]*f->x[9] + t->Phi[54]*f->x[10] + t->Phi[55]*f->x[11] + t->Phi[56]*f->x[12] +
-            t->Phi[57]*f->x[13] + t->Phi[58]*f->x[14] + t->Phi[59]*f->x[15];
-    w->xn[4] = t->Phi[60]*f->x[0] + t->Phi[61]*f->x[1] + t->Phi[62]*f->x[2] + t->Phi[63]*f->x[3] +
-            t->Phi[64]*f->x[4] + t->Phi[65]*f->x[5] + t->Phi[66]*f->x[7] + t->Phi[67]*f->x[8] +
-            t->Phi[68]*f->x[9] + t->Phi[69]*f->x[10] + t->Phi[70]*f->x[11] + t->Phi[71]*f->x[12] +
-            t->Phi[72]*f->x[13] + t->Phi[73]*f->x[14] + t->Phi[74]*f->x[15];
-    w->xn[5] = t->Phi[75]*f->x[0] + t->Phi[76]*f->x[1] + t->Phi[77]*f->x[2] + t->Phi[78]*f->x[3] +
-            t->Phi[79]*f->x[4] + t->Phi[80]*f->x[5] + t->Phi[81]*f->x[7] + t->Phi[82]*f->x[8] +
-            t->Phi[83]*f->x[9] + t->Phi[84]*f->x[10] + t->Phi[85]*f->x[11] + t->Phi[86]*f->x[12] +
-            t->Phi[87]*f->x[13] + t->Phi[88]*f->x[14] + t->Phi[89]*f->x[15];
-    w->xn[6] = t->Phi[90]*f->x[0] + t->Phi[91]*f->x[1] + t->Phi[92]*f->x[2] + t->Phi[93]*f->x[3] +
-            t->Phi[94]*f->x[4] + t->Phi[95]*f->x[5] + t->Phi[96]*f->x[6] + t->Phi[97]*f->x[7] +
-            t->Phi[98]*f->x[8] + t->Phi[99]*f->x[9] + t->Phi[100]*f->x[10] + t->Phi[101]*f->x[11] +
-            t->Phi[102]*f->x[12] + t->Phi[103]*f->x[13] + t->Phi[104]*f->x[14] +
-            t->Phi[105]*f->x[15];
-    w->xn[10] = t->Phi[109]*f->x[10];
-    w->xn[11] = t->Phi[110]*f->x[11];
-    w->xn[12] = t->Phi[111]*f->x[12];
-    w->xn[13] = t->Phi[112]*f->x[13];
-    w->xn[14] = t->Phi[113]*f->x[14];
-    w->xn[15] = t->Phi[114]*f->x[15];
+    ned_inertial16_scalar sum_check = 0.0;
+    state_predict(f, t, w); /* x_n = Phi x */
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];
     check += w->xn[2] - w->xn[2];
@@ -3232,34 +3353,43 @@ int ned_inertial16_predict(ned_inertial16_filter *restrict f, const ned_inertial
     /* row by row: M = row i of Phi P (a row of Phi that is e_i reads P directly), then
        row i of Pn = M Phi^T + Q_d (each pair computed once, into the packed upper triangle) */
     phi_times_p_row_0(f, t, w);
-    check += propagate_row_0(t, w);
+    sum_check += propagate_row_0(t, w);
     phi_times_p_row_1(f, t, w);
-    check += propagate_row_1(t, w);
+    sum_check += propagate_row_1(t, w);
     phi_times_p_row_2(f, t, w);
-    check += propagate_row_2(t, w);
+    sum_check += propagate_row_2(t, w);
     phi_times_p_row_3(f, t, w);
-    check += propagate_row_3(t, w);
+    sum_check += propagate_row_3(t, w);
     phi_times_p_row_4(f, t, w);
-    check += propagate_row_4(t, w);
+    sum_check += propagate_row_4(t, w);
     phi_times_p_row_5(f, t, w);
-    check += propagate_row_5(t, w);
+    sum_check += propagate_row_5(t, w);
     phi_times_p_row_6(f, t, w);
-    check += propagate_row_6(t, w);
-    check += propagate_row_7(f, t, w);
-    check += propagate_row_8(f, t, w);
-    check += propagate_row_9(f, t, w);
+    sum_check += propagate_row_6(t, w);
+    sum_check += propagate_row_7(f, t, w);
+    sum_check += propagate_row_8(f, t, w);
+    sum_check += propagate_row_9(f, t, w);
     phi_times_p_row_10(f, t, w);
-    check += propagate_row_10(t, w);
+    sum_check += propagate_row_10(t, w);
     phi_times_p_row_11(f, t, w);
-    check += propagate_row_11(t, w);
+    sum_check += propagate_row_11(t, w);
     phi_times_p_row_12(f, t, w);
-    check += propagate_row_12(t, w);
+    sum_check += propagate_row_12(t, w);
     phi_times_p_row_13(f, t, w);
-    check += propagate_row_13(t, w);
+    sum_check += propagate_row_13(t, w);
     phi_times_p_row_14(f, t, w);
-    check += propagate_row_14(t, w);
+    sum_check += propagate_row_14(t, w);
     phi_times_p_row_15(f, t, w);
-    check += propagate_row_15(t, w);
+    sum_check += propagate_row_15(t, w);
+    if (sum_check != 0.0) { /* a value that is not finite, or an overflow of a row's sum: entry by
+            entry */
+        int e;
+        sum_check = 0.0;
+        for (e = 0; e < NED_INERTIAL16_N_PACKED; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+    }
+    check += sum_check;
     if (check != 0.0) {
         return NED_INERTIAL16_ERR_NONFINITE;
     }

@@ -699,7 +699,8 @@ def doubling_block(plan: DiscretizePlan) -> DiscretizeBlock:
 def noise_blocks(plan: DiscretizePlan, packed: bool, ud: bool) -> list[DiscretizeBlock]:
     """S G over Gamma's pattern, then Q_d = T (S G) diag(q) (S G)^T (or Gamma = T S G for the UD form).
 
-    The Q_d block is checked: it returns the sum of v - v over its values.
+    The Q_d block is checked: it returns 0 when the sum of its values is finite
+    (discretize rescans Q_d entry by entry when it is not: an overflow of finite values).
     It also sets every other entry of Q_d to zero (straight-line stores that
     gcc pairs into vector stores, where a loop becomes ``rep stos``).
     """

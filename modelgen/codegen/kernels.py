@@ -67,7 +67,13 @@ class Assign:
 
 @dataclass(frozen=True)
 class CheckedAssign:
-    """``v = sum of terms``, stored into every target and checked for finiteness while in a register."""
+    """``v = sum of terms``, stored into every target and added, while in a register, to its block's sum.
+
+    The block returns ``sum - sum``: 0 when the sum is finite, and then every
+    value is; otherwise (a value that is not finite, or an overflow of the sum
+    of finite values) the caller decides entry by entry.  One addition per
+    value where ``check += v - v`` took two.
+    """
 
     targets: tuple[Ref, ...]
     terms: tuple[Term, ...]
@@ -188,8 +194,8 @@ def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[K
                 terms.append((_symmetric("transition", "Qd", n, True, i, j),))  # always packed (layout)
                 add += 1
             # the new value is stored into Pn, the packed upper triangle whatever
-            # P's storage (the commit mirrors it), and checked for finiteness
-            # while in a register
+            # P's storage (the commit mirrors it), and added to the row's sum
+            # while in a register (predict rescans Pn if a sum is not finite)
             lines.append(CheckedAssign((_symmetric("scratch", "Pn", n, True, i, j),), tuple(terms)))
         blocks.append(KernelBlock(f"propagate_row_{i}", tuple(lines), checked=True))
     return blocks, OperationCount(mul, add)

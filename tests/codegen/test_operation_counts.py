@@ -25,7 +25,7 @@ from modelgen.codegen.structure import filter_structure
 from modelgen.derive.symbolic import derive
 from modelgen.model.loading import load_model
 
-KERNEL = re.compile(r"^static \w+ ((?:phi_times_p|propagate|phi_times_u)_row_\d+)\(.*?\n\{\n(.*?)\n\}\n", re.S | re.M)
+KERNEL = re.compile(r"^\w+ \w+ ((?:phi_times_p|propagate|phi_times_u)_row_\d+|state_predict)\(.*?\n\{\n(.*?)\n\}\n", re.S | re.M)
 
 
 def _count(statements: list[str]) -> tuple[int, int]:

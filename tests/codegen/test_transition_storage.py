@@ -92,3 +92,54 @@ def test_predict_with_a_set_phi_is_the_dense_prediction(compiled):
     tol = 1e-12 if compiled.dtype == np.float64 else 1e-4
     for actual, expected in ((compiled.x, phi @ x0), (compiled.P, phi @ P0 @ phi.T + qd)):
         np.testing.assert_allclose(actual, expected, rtol=tol, atol=tol * np.abs(expected).max())
+
+
+def test_a_covariance_whose_row_sum_overflows_is_predicted_not_refused(compiled):
+    """Predict checks each row's values by their sum; a sum that overflows although every value is finite is decided entry by entry.
+
+    P = c (I + J / 2) with c = max / 6 is positive definite with finite entries
+    (the largest 1.5 c), but the sum of its first row (10 c) is beyond the
+    largest value: with Phi = I, P' = P + Q_d is finite and must be accepted.
+    """
+    big = float(np.finfo(compiled.dtype).max) / 6
+    P0 = big * (np.eye(18) + 0.5 * np.ones((18, 18)))
+    with np.errstate(over="ignore"):
+        assert np.isinf(P0[0].astype(compiled.dtype).sum(dtype=compiled.dtype)) and np.isfinite(P0).all()
+    assert compiled.set_transition_matrix(np.eye(18)) == OK
+    assert compiled.set_state(np.zeros(18), P0) == OK
+    qd = compiled.Qd
+    assert compiled.predict() == OK
+    np.testing.assert_allclose(compiled.P, P0 + qd, rtol=1e-6)
+
+
+def test_a_covariance_that_overflows_is_still_refused_and_left_unchanged(compiled):
+    """The entry-by-entry fallback refuses a predicted value that is itself infinite, and the filter keeps its P."""
+    big = 1e308 if compiled.dtype == np.float64 else 3e38
+    P0 = big * np.eye(18)
+    phi = compiled.Phi
+    phi[0, 0] = 2.0  # P'(0, 0) = 4 big: beyond the largest value
+    assert compiled.set_transition_matrix(phi) == OK
+    assert compiled.set_state(np.zeros(18), P0) == OK
+    before = compiled.P
+    assert compiled.predict() == ERR_NONFINITE
+    assert np.array_equal(compiled.P, before)
+
+
+def test_model_matrices_whose_sum_overflows_are_discretized_not_refused(compiled):
+    """discretize checks F, G and q by their sum: noise densities at the largest doubles overflow it, each is finite."""
+    if compiled.options.ud:
+        pytest.skip("the UD form keeps q / T, which overflows for such q at any step that keeps Q_d finite")
+    big = float(np.finfo(compiled.dtype).max) / 2
+    q = np.ctypeslib.as_array(compiled.matrices.q)
+    saved = q.copy()
+    try:
+        q[:] = big
+        with np.errstate(over="ignore"):
+            assert np.isinf(q.sum(dtype=compiled.dtype))
+        assert compiled.discretize(1e-30) == OK  # Q_d ~ T q: finite
+        assert np.isfinite(compiled.Qd).all()
+        q[0] = np.inf
+        assert compiled.discretize(1e-30) == ERR_NONFINITE
+    finally:
+        q[:] = saved
+        assert compiled.discretize(60.0) == OK

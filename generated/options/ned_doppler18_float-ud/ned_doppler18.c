@@ -155,7 +155,7 @@ int ned_doppler18_matrices_evaluate(const ned_doppler18_params *restrict params,
         ned_doppler18_matrices *restrict m)
 {
     int e;
-    ned_doppler18_scalar check = 0.0F;
+    ned_doppler18_scalar sums[4] = { 0.0F, 0.0F, 0.0F, 0.0F };
     if (pole(cosf(params->latitude), params->latitude)) {
         return NED_DOPPLER18_ERR_NONFINITE; /* cos(latitude) = 0: singular operating point */
     }
@@ -255,23 +255,96 @@ int ned_doppler18_matrices_evaluate(const ned_doppler18_params *restrict params,
         m->r[0] = params->doppler_noise_sigma_north*params->doppler_noise_sigma_north;
         m->r[1] = params->doppler_noise_sigma_east*params->doppler_noise_sigma_east;
     }
-    for (e = 0; e < NED_DOPPLER18_NNZ_F; ++e) {
-        check += m->F[e] - m->F[e];
+    /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
+       vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
+               is
+       not finite, or an overflow of finite values) is decided value by value */
+    for (e = 0; e + 3 < NED_DOPPLER18_NNZ_F; e += 4) {
+        sums[0] += m->F[e];
+        sums[1] += m->F[e + 1];
+        sums[2] += m->F[e + 2];
+        sums[3] += m->F[e + 3];
     }
-    for (e = 0; e < NED_DOPPLER18_NNZ_G; ++e) {
-        check += m->G[e] - m->G[e];
+    for (; e < NED_DOPPLER18_NNZ_F; ++e) {
+        sums[0] += m->F[e];
     }
-    for (e = 0; e < NED_DOPPLER18_NNZ_H; ++e) {
-        check += m->H[e] - m->H[e];
+    for (e = 0; e + 3 < NED_DOPPLER18_NNZ_G; e += 4) {
+        sums[0] += m->G[e];
+        sums[1] += m->G[e + 1];
+        sums[2] += m->G[e + 2];
+        sums[3] += m->G[e + 3];
     }
-    for (e = 0; e < NED_DOPPLER18_N_NOISES; ++e) {
-        check += m->q[e] - m->q[e];
+    for (; e < NED_DOPPLER18_NNZ_G; ++e) {
+        sums[0] += m->G[e];
     }
-    for (e = 0; e < NED_DOPPLER18_N_MEASUREMENTS; ++e) {
-        check += m->r[e] - m->r[e];
+    for (e = 0; e + 3 < NED_DOPPLER18_NNZ_H; e += 4) {
+        sums[0] += m->H[e];
+        sums[1] += m->H[e + 1];
+        sums[2] += m->H[e + 2];
+        sums[3] += m->H[e + 3];
     }
-    return (check != 0.0F) ? NED_DOPPLER18_ERR_NONFINITE : NED_DOPPLER18_OK;
+    for (; e < NED_DOPPLER18_NNZ_H; ++e) {
+        sums[0] += m->H[e];
+    }
+    for (e = 0; e + 3 < NED_DOPPLER18_N_NOISES; e += 4) {
+        sums[0] += m->q[e];
+        sums[1] += m->q[e + 1];
+        sums[2] += m->q[e + 2];
+        sums[3] += m->q[e + 3];
+    }
+    for (; e < NED_DOPPLER18_N_NOISES; ++e) {
+        sums[0] += m->q[e];
+    }
+    for (e = 0; e + 3 < NED_DOPPLER18_N_MEASUREMENTS; e += 4) {
+        sums[0] += m->r[e];
+        sums[1] += m->r[e + 1];
+        sums[2] += m->r[e + 2];
+        sums[3] += m->r[e + 3];
+    }
+    for (; e < NED_DOPPLER18_N_MEASUREMENTS; ++e) {
+        sums[0] += m->r[e];
+    }
+    sums[0] = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    if (sums[0] - sums[0] != 0.0F) {
+        for (e = 0; e < NED_DOPPLER18_NNZ_F; ++e) {
+            if (!isfinite(m->F[e])) {
+                return NED_DOPPLER18_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_DOPPLER18_NNZ_G; ++e) {
+            if (!isfinite(m->G[e])) {
+                return NED_DOPPLER18_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_DOPPLER18_NNZ_H; ++e) {
+            if (!isfinite(m->H[e])) {
+                return NED_DOPPLER18_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_DOPPLER18_N_NOISES; ++e) {
+            if (!isfinite(m->q[e])) {
+                return NED_DOPPLER18_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_DOPPLER18_N_MEASUREMENTS; ++e) {
+            if (!isfinite(m->r[e])) {
+                return NED_DOPPLER18_ERR_NONFINITE;
+            }
+        }
+    }
+
+    return NED_DOPPLER18_OK;
 }
+
+/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
+   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
+   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
+   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+#if defined(__GNUC__)
+#define NED_DOPPLER18_BLOCK static __attribute__((noinline))
+#else
+#define NED_DOPPLER18_BLOCK static
+#endif
 
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static ned_doppler18_scalar power_of_two(const int e)
@@ -368,13 +441,6 @@ static int taylor_plan(const ned_doppler18_scalar norm, const ned_doppler18_scal
     return NED_DOPPLER18_OK;
 }
 
-/* Each block keeps its own stack frame: inlined into discretize, the frames of all blocks
-   would add up (the worst-case stack is measured for the Cortex-M4F, tests/embedded). */
-#if defined(__GNUC__)
-#define NED_DOPPLER18_BLOCK static __attribute__((noinline))
-#else
-#define NED_DOPPLER18_BLOCK static
-#endif
 NED_DOPPLER18_BLOCK void horner_input(const ned_doppler18_matrices *restrict m,
         ned_doppler18_discretize_scratch *restrict w, const ned_doppler18_scalar h)
 {
@@ -1507,8 +1573,8 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar transition_check(ned_doppler18_transiti
             t->Phi[92] + t->Phi[93] + t->Phi[94] + t->Phi[95] + t->Phi[96] + t->Phi[97] + t->Phi[98]
             + t->Phi[99] + t->Phi[100] + t->Phi[101] + t->Phi[102] + t->Phi[103] + t->Phi[104] +
             t->Phi[105] + t->Phi[109] + t->Phi[110] + t->Phi[111] + t->Phi[112] + t->Phi[113] +
-            t->Phi[114]; w->term[0][0] = v; check += v - v;
-    return check;
+            t->Phi[114]; w->term[0][0] = v; check += v;
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
 NED_DOPPLER18_BLOCK void noise_input(const ned_doppler18_matrices *restrict m,
@@ -1628,41 +1694,63 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
     int halvings, order, status;
     int k;
     ned_doppler18_scalar sum_check;
-    ned_doppler18_scalar check = 0.0F, sums[2] = { 0.0F, 0.0F };
+    ned_doppler18_scalar check = 0.0F, sums[4] = { 0.0F, 0.0F, 0.0F, 0.0F };
     if (!isfinite(T)) {
         return NED_DOPPLER18_ERR_NONFINITE;
     }
     if (!(T > 0.0F)) {
         return NED_DOPPLER18_ERR_NOT_POSITIVE;
     }
-    /* the sum of v - v over F, G and q (0 when all are finite) in two partial sums, two entries a
-            step,
-       which gcc -O2 vectorizes (the order of a sum of zeros and NaNs does not change whether it is
-               0) */
-    for (e = 0; e + 1 < NED_DOPPLER18_NNZ_F; e += 2) {
-        sums[0] += m->F[e] - m->F[e];
-        sums[1] += m->F[e + 1] - m->F[e + 1];
+    /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
+       vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
+               is
+       not finite, or an overflow of finite values) is decided value by value */
+    for (e = 0; e + 3 < NED_DOPPLER18_NNZ_F; e += 4) {
+        sums[0] += m->F[e];
+        sums[1] += m->F[e + 1];
+        sums[2] += m->F[e + 2];
+        sums[3] += m->F[e + 3];
     }
     for (; e < NED_DOPPLER18_NNZ_F; ++e) {
-        sums[0] += m->F[e] - m->F[e];
+        sums[0] += m->F[e];
     }
-    for (e = 0; e + 1 < NED_DOPPLER18_NNZ_G; e += 2) {
-        sums[0] += m->G[e] - m->G[e];
-        sums[1] += m->G[e + 1] - m->G[e + 1];
+    for (e = 0; e + 3 < NED_DOPPLER18_NNZ_G; e += 4) {
+        sums[0] += m->G[e];
+        sums[1] += m->G[e + 1];
+        sums[2] += m->G[e + 2];
+        sums[3] += m->G[e + 3];
     }
     for (; e < NED_DOPPLER18_NNZ_G; ++e) {
-        sums[0] += m->G[e] - m->G[e];
+        sums[0] += m->G[e];
     }
-    for (e = 0; e + 1 < NED_DOPPLER18_N_NOISES; e += 2) {
-        sums[0] += m->q[e] - m->q[e];
-        sums[1] += m->q[e + 1] - m->q[e + 1];
+    for (e = 0; e + 3 < NED_DOPPLER18_N_NOISES; e += 4) {
+        sums[0] += m->q[e];
+        sums[1] += m->q[e + 1];
+        sums[2] += m->q[e + 2];
+        sums[3] += m->q[e + 3];
     }
     for (; e < NED_DOPPLER18_N_NOISES; ++e) {
-        sums[0] += m->q[e] - m->q[e];
+        sums[0] += m->q[e];
     }
-    if (sums[0] + sums[1] != 0.0F) {
-        return NED_DOPPLER18_ERR_NONFINITE;
+    sums[0] = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    if (sums[0] - sums[0] != 0.0F) {
+        for (e = 0; e < NED_DOPPLER18_NNZ_F; ++e) {
+            if (!isfinite(m->F[e])) {
+                return NED_DOPPLER18_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_DOPPLER18_NNZ_G; ++e) {
+            if (!isfinite(m->G[e])) {
+                return NED_DOPPLER18_ERR_NONFINITE;
+            }
+        }
+        for (e = 0; e < NED_DOPPLER18_N_NOISES; ++e) {
+            if (!isfinite(m->q[e])) {
+                return NED_DOPPLER18_ERR_NONFINITE;
+            }
+        }
     }
+
     for (c = 0; c < NED_DOPPLER18_N_NOISES; ++c) {
         if (m->q[c] < 0.0F) {
             return NED_DOPPLER18_ERR_NOT_POSITIVE;

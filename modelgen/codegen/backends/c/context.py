@@ -383,7 +383,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
                                 for k in range(options.taylor_order + 1)],
         "discretize_sets_qd": "process_noise" in calls,  # the unrolled Q_d block sets every entry (no zero loop first)
         "discretize_noise_calls": [
-            ("check += " if f["checked"] else "") + f["call"]
+            ("qd_check = " if f["checked"] else "") + f["call"]
             for f in discretize
             if f["name"] in ("noise_input", "noise_input_times_step", "process_noise")
         ],

@@ -54,7 +54,7 @@ def c_statement(statement: Statement) -> str:
         return f"{c_ref(statement.target)} = {c_sum(statement.terms)};"
     assert isinstance(statement, CheckedAssign)
     stores = " ".join(f"{c_ref(t)} = v;" for t in statement.targets)
-    return f"v = {c_sum(statement.terms)}; {stores} check += v - v;"
+    return f"v = {c_sum(statement.terms)}; {stores} check += v;"
 
 
 def c_declarator(field) -> str:
