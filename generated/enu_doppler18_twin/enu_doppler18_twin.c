@@ -395,10 +395,13 @@ int enu_doppler18_twin_matrices_evaluate(const enu_doppler18_twin_params *restri
     return ENU_DOPPLER18_TWIN_OK;
 }
 
-/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
-   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
-   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
-   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
+   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
+           is
+   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
+   products more often on its own than inside a caller of thousands of statements
+   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
+   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define ENU_DOPPLER18_TWIN_BLOCK static __attribute__((noinline))
 #else
@@ -2289,11 +2292,10 @@ ENU_DOPPLER18_TWIN_BLOCK void noise_input(const enu_doppler18_twin_matrices *res
     w->term[0][86] = w->S[131]*m->G[14];
 }
 
-ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar process_noise(const enu_doppler18_twin_matrices
-        *restrict m, enu_doppler18_twin_transition *restrict t,
-        enu_doppler18_twin_discretize_scratch *restrict w, const enu_doppler18_twin_scalar T)
+ENU_DOPPLER18_TWIN_BLOCK void process_noise(const enu_doppler18_twin_matrices *restrict m,
+        enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_discretize_scratch *restrict
+        w, const enu_doppler18_twin_scalar T)
 {
-    enu_doppler18_twin_scalar v, check = 0.0;
     w->term[1][87] = T*m->q[0];
     w->term[1][88] = T*m->q[1];
     w->term[1][89] = T*m->q[2];
@@ -2390,282 +2392,6 @@ ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar process_noise(const enu_doppl
     w->term[1][84] = w->term[0][84]*w->term[1][93];
     w->term[1][85] = w->term[0][85]*w->term[1][94];
     w->term[1][86] = w->term[0][86]*w->term[1][95];
-    v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
-            w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5]
-            + w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
-            w->term[1][8]*w->term[0][8]; t->Qd[0] = v; check += v;
-    v = w->term[1][0]*w->term[0][9] + w->term[1][1]*w->term[0][10] + w->term[1][2]*w->term[0][11] +
-            w->term[1][3]*w->term[0][12] + w->term[1][4]*w->term[0][13] +
-            w->term[1][5]*w->term[0][14] + w->term[1][6]*w->term[0][15] +
-            w->term[1][7]*w->term[0][16] + w->term[1][8]*w->term[0][17]; t->Qd[1] = v; check += v;
-    v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
-            w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23] + w->term[1][6]*w->term[0][24] +
-            w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26]; t->Qd[2] = v; check += v;
-    v = w->term[1][0]*w->term[0][27] + w->term[1][1]*w->term[0][28] + w->term[1][2]*w->term[0][29] +
-            w->term[1][3]*w->term[0][30] + w->term[1][4]*w->term[0][31] +
-            w->term[1][5]*w->term[0][32] + w->term[1][6]*w->term[0][33] +
-            w->term[1][7]*w->term[0][34] + w->term[1][8]*w->term[0][35]; t->Qd[3] = v; check += v;
-    v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
-            w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
-            w->term[1][5]*w->term[0][41] + w->term[1][6]*w->term[0][42] +
-            w->term[1][7]*w->term[0][43] + w->term[1][8]*w->term[0][44]; t->Qd[4] = v; check += v;
-    v = w->term[1][0]*w->term[0][45] + w->term[1][1]*w->term[0][46] + w->term[1][2]*w->term[0][47] +
-            w->term[1][3]*w->term[0][48] + w->term[1][4]*w->term[0][49] +
-            w->term[1][5]*w->term[0][50] + w->term[1][6]*w->term[0][51] +
-            w->term[1][7]*w->term[0][52] + w->term[1][8]*w->term[0][53]; t->Qd[5] = v; check += v;
-    v = w->term[1][0]*w->term[0][54] + w->term[1][1]*w->term[0][55] + w->term[1][2]*w->term[0][56] +
-            w->term[1][3]*w->term[0][57] + w->term[1][4]*w->term[0][58] +
-            w->term[1][5]*w->term[0][59] + w->term[1][6]*w->term[0][60] +
-            w->term[1][7]*w->term[0][61] + w->term[1][8]*w->term[0][62]; t->Qd[6] = v; check += v;
-    v = w->term[1][0]*w->term[0][63] + w->term[1][1]*w->term[0][64] + w->term[1][2]*w->term[0][65] +
-            w->term[1][3]*w->term[0][66] + w->term[1][4]*w->term[0][67] +
-            w->term[1][5]*w->term[0][68] + w->term[1][6]*w->term[0][69] +
-            w->term[1][7]*w->term[0][70] + w->term[1][8]*w->term[0][71]; t->Qd[7] = v; check += v;
-    v = w->term[1][0]*w->term[0][72] + w->term[1][1]*w->term[0][73] + w->term[1][2]*w->term[0][74] +
-            w->term[1][3]*w->term[0][75] + w->term[1][4]*w->term[0][76] +
-            w->term[1][5]*w->term[0][77] + w->term[1][6]*w->term[0][78] +
-            w->term[1][7]*w->term[0][79] + w->term[1][8]*w->term[0][80]; t->Qd[8] = v; check += v;
-    v = w->term[1][3]*w->term[0][81]; t->Qd[12] = v; check += v;
-    v = w->term[1][4]*w->term[0][82]; t->Qd[13] = v; check += v;
-    v = w->term[1][5]*w->term[0][83]; t->Qd[14] = v; check += v;
-    v = w->term[1][6]*w->term[0][84]; t->Qd[15] = v; check += v;
-    v = w->term[1][7]*w->term[0][85]; t->Qd[16] = v; check += v;
-    v = w->term[1][8]*w->term[0][86]; t->Qd[17] = v; check += v;
-    v = w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11]
-            + w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[18] = v; check +=
-            v;
-    v = w->term[1][9]*w->term[0][18] + w->term[1][10]*w->term[0][19] + w->term[1][11]*w->term[0][20]
-            + w->term[1][12]*w->term[0][21] + w->term[1][13]*w->term[0][22] +
-            w->term[1][14]*w->term[0][23] + w->term[1][15]*w->term[0][24] +
-            w->term[1][16]*w->term[0][25] + w->term[1][17]*w->term[0][26]; t->Qd[19] = v; check +=
-            v;
-    v = w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29]
-            + w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
-            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[20] = v; check +=
-            v;
-    v = w->term[1][9]*w->term[0][36] + w->term[1][10]*w->term[0][37] + w->term[1][11]*w->term[0][38]
-            + w->term[1][12]*w->term[0][39] + w->term[1][13]*w->term[0][40] +
-            w->term[1][14]*w->term[0][41] + w->term[1][15]*w->term[0][42] +
-            w->term[1][16]*w->term[0][43] + w->term[1][17]*w->term[0][44]; t->Qd[21] = v; check +=
-            v;
-    v = w->term[1][9]*w->term[0][45] + w->term[1][10]*w->term[0][46] + w->term[1][11]*w->term[0][47]
-            + w->term[1][12]*w->term[0][48] + w->term[1][13]*w->term[0][49] +
-            w->term[1][14]*w->term[0][50] + w->term[1][15]*w->term[0][51] +
-            w->term[1][16]*w->term[0][52] + w->term[1][17]*w->term[0][53]; t->Qd[22] = v; check +=
-            v;
-    v = w->term[1][9]*w->term[0][54] + w->term[1][10]*w->term[0][55] + w->term[1][11]*w->term[0][56]
-            + w->term[1][12]*w->term[0][57] + w->term[1][13]*w->term[0][58] +
-            w->term[1][14]*w->term[0][59] + w->term[1][15]*w->term[0][60] +
-            w->term[1][16]*w->term[0][61] + w->term[1][17]*w->term[0][62]; t->Qd[23] = v; check +=
-            v;
-    v = w->term[1][9]*w->term[0][63] + w->term[1][10]*w->term[0][64] + w->term[1][11]*w->term[0][65]
-            + w->term[1][12]*w->term[0][66] + w->term[1][13]*w->term[0][67] +
-            w->term[1][14]*w->term[0][68] + w->term[1][15]*w->term[0][69] +
-            w->term[1][16]*w->term[0][70] + w->term[1][17]*w->term[0][71]; t->Qd[24] = v; check +=
-            v;
-    v = w->term[1][9]*w->term[0][72] + w->term[1][10]*w->term[0][73] + w->term[1][11]*w->term[0][74]
-            + w->term[1][12]*w->term[0][75] + w->term[1][13]*w->term[0][76] +
-            w->term[1][14]*w->term[0][77] + w->term[1][15]*w->term[0][78] +
-            w->term[1][16]*w->term[0][79] + w->term[1][17]*w->term[0][80]; t->Qd[25] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][81]; t->Qd[29] = v; check += v;
-    v = w->term[1][13]*w->term[0][82]; t->Qd[30] = v; check += v;
-    v = w->term[1][14]*w->term[0][83]; t->Qd[31] = v; check += v;
-    v = w->term[1][15]*w->term[0][84]; t->Qd[32] = v; check += v;
-    v = w->term[1][16]*w->term[0][85]; t->Qd[33] = v; check += v;
-    v = w->term[1][17]*w->term[0][86]; t->Qd[34] = v; check += v;
-    v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23] +
-            w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26]; t->Qd[35] = v; check += v;
-    v = w->term[1][18]*w->term[0][27] + w->term[1][19]*w->term[0][28] +
-            w->term[1][20]*w->term[0][29] + w->term[1][21]*w->term[0][30] +
-            w->term[1][22]*w->term[0][31] + w->term[1][23]*w->term[0][32] +
-            w->term[1][24]*w->term[0][33] + w->term[1][25]*w->term[0][34] +
-            w->term[1][26]*w->term[0][35]; t->Qd[36] = v; check += v;
-    v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41] +
-            w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
-            w->term[1][26]*w->term[0][44]; t->Qd[37] = v; check += v;
-    v = w->term[1][18]*w->term[0][45] + w->term[1][19]*w->term[0][46] +
-            w->term[1][20]*w->term[0][47] + w->term[1][21]*w->term[0][48] +
-            w->term[1][22]*w->term[0][49] + w->term[1][23]*w->term[0][50] +
-            w->term[1][24]*w->term[0][51] + w->term[1][25]*w->term[0][52] +
-            w->term[1][26]*w->term[0][53]; t->Qd[38] = v; check += v;
-    v = w->term[1][18]*w->term[0][54] + w->term[1][19]*w->term[0][55] +
-            w->term[1][20]*w->term[0][56] + w->term[1][21]*w->term[0][57] +
-            w->term[1][22]*w->term[0][58] + w->term[1][23]*w->term[0][59] +
-            w->term[1][24]*w->term[0][60] + w->term[1][25]*w->term[0][61] +
-            w->term[1][26]*w->term[0][62]; t->Qd[39] = v; check += v;
-    v = w->term[1][18]*w->term[0][63] + w->term[1][19]*w->term[0][64] +
-            w->term[1][20]*w->term[0][65] + w->term[1][21]*w->term[0][66] +
-            w->term[1][22]*w->term[0][67] + w->term[1][23]*w->term[0][68] +
-            w->term[1][24]*w->term[0][69] + w->term[1][25]*w->term[0][70] +
-            w->term[1][26]*w->term[0][71]; t->Qd[40] = v; check += v;
-    v = w->term[1][18]*w->term[0][72] + w->term[1][19]*w->term[0][73] +
-            w->term[1][20]*w->term[0][74] + w->term[1][21]*w->term[0][75] +
-            w->term[1][22]*w->term[0][76] + w->term[1][23]*w->term[0][77] +
-            w->term[1][24]*w->term[0][78] + w->term[1][25]*w->term[0][79] +
-            w->term[1][26]*w->term[0][80]; t->Qd[41] = v; check += v;
-    v = w->term[1][21]*w->term[0][81]; t->Qd[45] = v; check += v;
-    v = w->term[1][22]*w->term[0][82]; t->Qd[46] = v; check += v;
-    v = w->term[1][23]*w->term[0][83]; t->Qd[47] = v; check += v;
-    v = w->term[1][24]*w->term[0][84]; t->Qd[48] = v; check += v;
-    v = w->term[1][25]*w->term[0][85]; t->Qd[49] = v; check += v;
-    v = w->term[1][26]*w->term[0][86]; t->Qd[50] = v; check += v;
-    v = w->term[1][27]*w->term[0][27] + w->term[1][28]*w->term[0][28] +
-            w->term[1][29]*w->term[0][29] + w->term[1][30]*w->term[0][30] +
-            w->term[1][31]*w->term[0][31] + w->term[1][32]*w->term[0][32] +
-            w->term[1][33]*w->term[0][33] + w->term[1][34]*w->term[0][34] +
-            w->term[1][35]*w->term[0][35]; t->Qd[51] = v; check += v;
-    v = w->term[1][27]*w->term[0][36] + w->term[1][28]*w->term[0][37] +
-            w->term[1][29]*w->term[0][38] + w->term[1][30]*w->term[0][39] +
-            w->term[1][31]*w->term[0][40] + w->term[1][32]*w->term[0][41] +
-            w->term[1][33]*w->term[0][42] + w->term[1][34]*w->term[0][43] +
-            w->term[1][35]*w->term[0][44]; t->Qd[52] = v; check += v;
-    v = w->term[1][27]*w->term[0][45] + w->term[1][28]*w->term[0][46] +
-            w->term[1][29]*w->term[0][47] + w->term[1][30]*w->term[0][48] +
-            w->term[1][31]*w->term[0][49] + w->term[1][32]*w->term[0][50] +
-            w->term[1][33]*w->term[0][51] + w->term[1][34]*w->term[0][52] +
-            w->term[1][35]*w->term[0][53]; t->Qd[53] = v; check += v;
-    v = w->term[1][27]*w->term[0][54] + w->term[1][28]*w->term[0][55] +
-            w->term[1][29]*w->term[0][56] + w->term[1][30]*w->term[0][57] +
-            w->term[1][31]*w->term[0][58] + w->term[1][32]*w->term[0][59] +
-            w->term[1][33]*w->term[0][60] + w->term[1][34]*w->term[0][61] +
-            w->term[1][35]*w->term[0][62]; t->Qd[54] = v; check += v;
-    v = w->term[1][27]*w->term[0][63] + w->term[1][28]*w->term[0][64] +
-            w->term[1][29]*w->term[0][65] + w->term[1][30]*w->term[0][66] +
-            w->term[1][31]*w->term[0][67] + w->term[1][32]*w->term[0][68] +
-            w->term[1][33]*w->term[0][69] + w->term[1][34]*w->term[0][70] +
-            w->term[1][35]*w->term[0][71]; t->Qd[55] = v; check += v;
-    v = w->term[1][27]*w->term[0][72] + w->term[1][28]*w->term[0][73] +
-            w->term[1][29]*w->term[0][74] + w->term[1][30]*w->term[0][75] +
-            w->term[1][31]*w->term[0][76] + w->term[1][32]*w->term[0][77] +
-            w->term[1][33]*w->term[0][78] + w->term[1][34]*w->term[0][79] +
-            w->term[1][35]*w->term[0][80]; t->Qd[56] = v; check += v;
-    v = w->term[1][30]*w->term[0][81]; t->Qd[60] = v; check += v;
-    v = w->term[1][31]*w->term[0][82]; t->Qd[61] = v; check += v;
-    v = w->term[1][32]*w->term[0][83]; t->Qd[62] = v; check += v;
-    v = w->term[1][33]*w->term[0][84]; t->Qd[63] = v; check += v;
-    v = w->term[1][34]*w->term[0][85]; t->Qd[64] = v; check += v;
-    v = w->term[1][35]*w->term[0][86]; t->Qd[65] = v; check += v;
-    v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41] +
-            w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
-            w->term[1][44]*w->term[0][44]; t->Qd[66] = v; check += v;
-    v = w->term[1][36]*w->term[0][45] + w->term[1][37]*w->term[0][46] +
-            w->term[1][38]*w->term[0][47] + w->term[1][39]*w->term[0][48] +
-            w->term[1][40]*w->term[0][49] + w->term[1][41]*w->term[0][50] +
-            w->term[1][42]*w->term[0][51] + w->term[1][43]*w->term[0][52] +
-            w->term[1][44]*w->term[0][53]; t->Qd[67] = v; check += v;
-    v = w->term[1][36]*w->term[0][54] + w->term[1][37]*w->term[0][55] +
-            w->term[1][38]*w->term[0][56] + w->term[1][39]*w->term[0][57] +
-            w->term[1][40]*w->term[0][58] + w->term[1][41]*w->term[0][59] +
-            w->term[1][42]*w->term[0][60] + w->term[1][43]*w->term[0][61] +
-            w->term[1][44]*w->term[0][62]; t->Qd[68] = v; check += v;
-    v = w->term[1][36]*w->term[0][63] + w->term[1][37]*w->term[0][64] +
-            w->term[1][38]*w->term[0][65] + w->term[1][39]*w->term[0][66] +
-            w->term[1][40]*w->term[0][67] + w->term[1][41]*w->term[0][68] +
-            w->term[1][42]*w->term[0][69] + w->term[1][43]*w->term[0][70] +
-            w->term[1][44]*w->term[0][71]; t->Qd[69] = v; check += v;
-    v = w->term[1][36]*w->term[0][72] + w->term[1][37]*w->term[0][73] +
-            w->term[1][38]*w->term[0][74] + w->term[1][39]*w->term[0][75] +
-            w->term[1][40]*w->term[0][76] + w->term[1][41]*w->term[0][77] +
-            w->term[1][42]*w->term[0][78] + w->term[1][43]*w->term[0][79] +
-            w->term[1][44]*w->term[0][80]; t->Qd[70] = v; check += v;
-    v = w->term[1][39]*w->term[0][81]; t->Qd[74] = v; check += v;
-    v = w->term[1][40]*w->term[0][82]; t->Qd[75] = v; check += v;
-    v = w->term[1][41]*w->term[0][83]; t->Qd[76] = v; check += v;
-    v = w->term[1][42]*w->term[0][84]; t->Qd[77] = v; check += v;
-    v = w->term[1][43]*w->term[0][85]; t->Qd[78] = v; check += v;
-    v = w->term[1][44]*w->term[0][86]; t->Qd[79] = v; check += v;
-    v = w->term[1][45]*w->term[0][45] + w->term[1][46]*w->term[0][46] +
-            w->term[1][47]*w->term[0][47] + w->term[1][48]*w->term[0][48] +
-            w->term[1][49]*w->term[0][49] + w->term[1][50]*w->term[0][50] +
-            w->term[1][51]*w->term[0][51] + w->term[1][52]*w->term[0][52] +
-            w->term[1][53]*w->term[0][53]; t->Qd[80] = v; check += v;
-    v = w->term[1][45]*w->term[0][54] + w->term[1][46]*w->term[0][55] +
-            w->term[1][47]*w->term[0][56] + w->term[1][48]*w->term[0][57] +
-            w->term[1][49]*w->term[0][58] + w->term[1][50]*w->term[0][59] +
-            w->term[1][51]*w->term[0][60] + w->term[1][52]*w->term[0][61] +
-            w->term[1][53]*w->term[0][62]; t->Qd[81] = v; check += v;
-    v = w->term[1][45]*w->term[0][63] + w->term[1][46]*w->term[0][64] +
-            w->term[1][47]*w->term[0][65] + w->term[1][48]*w->term[0][66] +
-            w->term[1][49]*w->term[0][67] + w->term[1][50]*w->term[0][68] +
-            w->term[1][51]*w->term[0][69] + w->term[1][52]*w->term[0][70] +
-            w->term[1][53]*w->term[0][71]; t->Qd[82] = v; check += v;
-    v = w->term[1][45]*w->term[0][72] + w->term[1][46]*w->term[0][73] +
-            w->term[1][47]*w->term[0][74] + w->term[1][48]*w->term[0][75] +
-            w->term[1][49]*w->term[0][76] + w->term[1][50]*w->term[0][77] +
-            w->term[1][51]*w->term[0][78] + w->term[1][52]*w->term[0][79] +
-            w->term[1][53]*w->term[0][80]; t->Qd[83] = v; check += v;
-    v = w->term[1][48]*w->term[0][81]; t->Qd[87] = v; check += v;
-    v = w->term[1][49]*w->term[0][82]; t->Qd[88] = v; check += v;
-    v = w->term[1][50]*w->term[0][83]; t->Qd[89] = v; check += v;
-    v = w->term[1][51]*w->term[0][84]; t->Qd[90] = v; check += v;
-    v = w->term[1][52]*w->term[0][85]; t->Qd[91] = v; check += v;
-    v = w->term[1][53]*w->term[0][86]; t->Qd[92] = v; check += v;
-    v = w->term[1][54]*w->term[0][54] + w->term[1][55]*w->term[0][55] +
-            w->term[1][56]*w->term[0][56] + w->term[1][57]*w->term[0][57] +
-            w->term[1][58]*w->term[0][58] + w->term[1][59]*w->term[0][59] +
-            w->term[1][60]*w->term[0][60] + w->term[1][61]*w->term[0][61] +
-            w->term[1][62]*w->term[0][62]; t->Qd[93] = v; check += v;
-    v = w->term[1][54]*w->term[0][63] + w->term[1][55]*w->term[0][64] +
-            w->term[1][56]*w->term[0][65] + w->term[1][57]*w->term[0][66] +
-            w->term[1][58]*w->term[0][67] + w->term[1][59]*w->term[0][68] +
-            w->term[1][60]*w->term[0][69] + w->term[1][61]*w->term[0][70] +
-            w->term[1][62]*w->term[0][71]; t->Qd[94] = v; check += v;
-    v = w->term[1][54]*w->term[0][72] + w->term[1][55]*w->term[0][73] +
-            w->term[1][56]*w->term[0][74] + w->term[1][57]*w->term[0][75] +
-            w->term[1][58]*w->term[0][76] + w->term[1][59]*w->term[0][77] +
-            w->term[1][60]*w->term[0][78] + w->term[1][61]*w->term[0][79] +
-            w->term[1][62]*w->term[0][80]; t->Qd[95] = v; check += v;
-    v = w->term[1][57]*w->term[0][81]; t->Qd[99] = v; check += v;
-    v = w->term[1][58]*w->term[0][82]; t->Qd[100] = v; check += v;
-    v = w->term[1][59]*w->term[0][83]; t->Qd[101] = v; check += v;
-    v = w->term[1][60]*w->term[0][84]; t->Qd[102] = v; check += v;
-    v = w->term[1][61]*w->term[0][85]; t->Qd[103] = v; check += v;
-    v = w->term[1][62]*w->term[0][86]; t->Qd[104] = v; check += v;
-    v = w->term[1][63]*w->term[0][63] + w->term[1][64]*w->term[0][64] +
-            w->term[1][65]*w->term[0][65] + w->term[1][66]*w->term[0][66] +
-            w->term[1][67]*w->term[0][67] + w->term[1][68]*w->term[0][68] +
-            w->term[1][69]*w->term[0][69] + w->term[1][70]*w->term[0][70] +
-            w->term[1][71]*w->term[0][71]; t->Qd[105] = v; check += v;
-    v = w->term[1][63]*w->term[0][72] + w->term[1][64]*w->term[0][73] +
-            w->term[1][65]*w->term[0][74] + w->term[1][66]*w->term[0][75] +
-            w->term[1][67]*w->term[0][76] + w->term[1][68]*w->term[0][77] +
-            w->term[1][69]*w->term[0][78] + w->term[1][70]*w->term[0][79] +
-            w->term[1][71]*w->term[0][80]; t->Qd[106] = v; check += v;
-    v = w->term[1][66]*w->term[0][81]; t->Qd[110] = v; check += v;
-    v = w->term[1][67]*w->term[0][82]; t->Qd[111] = v; check += v;
-    v = w->term[1][68]*w->term[0][83]; t->Qd[112] = v; check += v;
-    v = w->term[1][69]*w->term[0][84]; t->Qd[113] = v; check += v;
-    v = w->term[1][70]*w->term[0][85]; t->Qd[114] = v; check += v;
-    v = w->term[1][71]*w->term[0][86]; t->Qd[115] = v; check += v;
-    v = w->term[1][72]*w->term[0][72] + w->term[1][73]*w->term[0][73] +
-            w->term[1][74]*w->term[0][74] + w->term[1][75]*w->term[0][75] +
-            w->term[1][76]*w->term[0][76] + w->term[1][77]*w->term[0][77] +
-            w->term[1][78]*w->term[0][78] + w->term[1][79]*w->term[0][79] +
-            w->term[1][80]*w->term[0][80]; t->Qd[116] = v; check += v;
-    v = w->term[1][75]*w->term[0][81]; t->Qd[120] = v; check += v;
-    v = w->term[1][76]*w->term[0][82]; t->Qd[121] = v; check += v;
-    v = w->term[1][77]*w->term[0][83]; t->Qd[122] = v; check += v;
-    v = w->term[1][78]*w->term[0][84]; t->Qd[123] = v; check += v;
-    v = w->term[1][79]*w->term[0][85]; t->Qd[124] = v; check += v;
-    v = w->term[1][80]*w->term[0][86]; t->Qd[125] = v; check += v;
-    v = w->term[1][81]*w->term[0][81]; t->Qd[150] = v; check += v;
-    v = w->term[1][82]*w->term[0][82]; t->Qd[156] = v; check += v;
-    v = w->term[1][83]*w->term[0][83]; t->Qd[161] = v; check += v;
-    v = w->term[1][84]*w->term[0][84]; t->Qd[165] = v; check += v;
-    v = w->term[1][85]*w->term[0][85]; t->Qd[168] = v; check += v;
-    v = w->term[1][86]*w->term[0][86]; t->Qd[170] = v; check += v;
     t->Qd[9] = 0;
     t->Qd[10] = 0;
     t->Qd[11] = 0;
@@ -2732,6 +2458,418 @@ ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar process_noise(const enu_doppl
     t->Qd[166] = 0;
     t->Qd[167] = 0;
     t->Qd[169] = 0;
+}
+
+ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar process_noise_row_0(enu_doppler18_twin_transition
+        *restrict t, const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
+            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
+            + w->term[1][5]*w->term[0][5] + w->term[1][6]*w->term[0][6] +
+            w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8];
+    t->Qd[1] = w->term[1][0]*w->term[0][9] + w->term[1][1]*w->term[0][10] +
+            w->term[1][2]*w->term[0][11] + w->term[1][3]*w->term[0][12] +
+            w->term[1][4]*w->term[0][13] + w->term[1][5]*w->term[0][14] +
+            w->term[1][6]*w->term[0][15] + w->term[1][7]*w->term[0][16] +
+            w->term[1][8]*w->term[0][17];
+    t->Qd[2] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
+            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
+            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23] +
+            w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
+            w->term[1][8]*w->term[0][26];
+    t->Qd[3] = w->term[1][0]*w->term[0][27] + w->term[1][1]*w->term[0][28] +
+            w->term[1][2]*w->term[0][29] + w->term[1][3]*w->term[0][30] +
+            w->term[1][4]*w->term[0][31] + w->term[1][5]*w->term[0][32] +
+            w->term[1][6]*w->term[0][33] + w->term[1][7]*w->term[0][34] +
+            w->term[1][8]*w->term[0][35];
+    t->Qd[4] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
+            w->term[1][2]*w->term[0][38] + w->term[1][3]*w->term[0][39] +
+            w->term[1][4]*w->term[0][40] + w->term[1][5]*w->term[0][41] +
+            w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] +
+            w->term[1][8]*w->term[0][44];
+    t->Qd[5] = w->term[1][0]*w->term[0][45] + w->term[1][1]*w->term[0][46] +
+            w->term[1][2]*w->term[0][47] + w->term[1][3]*w->term[0][48] +
+            w->term[1][4]*w->term[0][49] + w->term[1][5]*w->term[0][50] +
+            w->term[1][6]*w->term[0][51] + w->term[1][7]*w->term[0][52] +
+            w->term[1][8]*w->term[0][53];
+    t->Qd[6] = w->term[1][0]*w->term[0][54] + w->term[1][1]*w->term[0][55] +
+            w->term[1][2]*w->term[0][56] + w->term[1][3]*w->term[0][57] +
+            w->term[1][4]*w->term[0][58] + w->term[1][5]*w->term[0][59] +
+            w->term[1][6]*w->term[0][60] + w->term[1][7]*w->term[0][61] +
+            w->term[1][8]*w->term[0][62];
+    t->Qd[7] = w->term[1][0]*w->term[0][63] + w->term[1][1]*w->term[0][64] +
+            w->term[1][2]*w->term[0][65] + w->term[1][3]*w->term[0][66] +
+            w->term[1][4]*w->term[0][67] + w->term[1][5]*w->term[0][68] +
+            w->term[1][6]*w->term[0][69] + w->term[1][7]*w->term[0][70] +
+            w->term[1][8]*w->term[0][71];
+    t->Qd[8] = w->term[1][0]*w->term[0][72] + w->term[1][1]*w->term[0][73] +
+            w->term[1][2]*w->term[0][74] + w->term[1][3]*w->term[0][75] +
+            w->term[1][4]*w->term[0][76] + w->term[1][5]*w->term[0][77] +
+            w->term[1][6]*w->term[0][78] + w->term[1][7]*w->term[0][79] +
+            w->term[1][8]*w->term[0][80];
+    t->Qd[12] = w->term[1][3]*w->term[0][81];
+    t->Qd[13] = w->term[1][4]*w->term[0][82];
+    t->Qd[14] = w->term[1][5]*w->term[0][83];
+    t->Qd[15] = w->term[1][6]*w->term[0][84];
+    t->Qd[16] = w->term[1][7]*w->term[0][85];
+    t->Qd[17] = w->term[1][8]*w->term[0][86];
+    check = t->Qd[0] + t->Qd[1] + t->Qd[2] + t->Qd[3] + t->Qd[4] + t->Qd[5] + t->Qd[6] + t->Qd[7] +
+            t->Qd[8] + t->Qd[12] + t->Qd[13] + t->Qd[14] + t->Qd[15] + t->Qd[16] + t->Qd[17];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar process_noise_row_1(enu_doppler18_twin_transition
+        *restrict t, const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[18] = w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
+            w->term[1][11]*w->term[0][11] + w->term[1][12]*w->term[0][12] +
+            w->term[1][13]*w->term[0][13] + w->term[1][14]*w->term[0][14] +
+            w->term[1][15]*w->term[0][15] + w->term[1][16]*w->term[0][16] +
+            w->term[1][17]*w->term[0][17];
+    t->Qd[19] = w->term[1][9]*w->term[0][18] + w->term[1][10]*w->term[0][19] +
+            w->term[1][11]*w->term[0][20] + w->term[1][12]*w->term[0][21] +
+            w->term[1][13]*w->term[0][22] + w->term[1][14]*w->term[0][23] +
+            w->term[1][15]*w->term[0][24] + w->term[1][16]*w->term[0][25] +
+            w->term[1][17]*w->term[0][26];
+    t->Qd[20] = w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
+            w->term[1][11]*w->term[0][29] + w->term[1][12]*w->term[0][30] +
+            w->term[1][13]*w->term[0][31] + w->term[1][14]*w->term[0][32] +
+            w->term[1][15]*w->term[0][33] + w->term[1][16]*w->term[0][34] +
+            w->term[1][17]*w->term[0][35];
+    t->Qd[21] = w->term[1][9]*w->term[0][36] + w->term[1][10]*w->term[0][37] +
+            w->term[1][11]*w->term[0][38] + w->term[1][12]*w->term[0][39] +
+            w->term[1][13]*w->term[0][40] + w->term[1][14]*w->term[0][41] +
+            w->term[1][15]*w->term[0][42] + w->term[1][16]*w->term[0][43] +
+            w->term[1][17]*w->term[0][44];
+    t->Qd[22] = w->term[1][9]*w->term[0][45] + w->term[1][10]*w->term[0][46] +
+            w->term[1][11]*w->term[0][47] + w->term[1][12]*w->term[0][48] +
+            w->term[1][13]*w->term[0][49] + w->term[1][14]*w->term[0][50] +
+            w->term[1][15]*w->term[0][51] + w->term[1][16]*w->term[0][52] +
+            w->term[1][17]*w->term[0][53];
+    t->Qd[23] = w->term[1][9]*w->term[0][54] + w->term[1][10]*w->term[0][55] +
+            w->term[1][11]*w->term[0][56] + w->term[1][12]*w->term[0][57] +
+            w->term[1][13]*w->term[0][58] + w->term[1][14]*w->term[0][59] +
+            w->term[1][15]*w->term[0][60] + w->term[1][16]*w->term[0][61] +
+            w->term[1][17]*w->term[0][62];
+    t->Qd[24] = w->term[1][9]*w->term[0][63] + w->term[1][10]*w->term[0][64] +
+            w->term[1][11]*w->term[0][65] + w->term[1][12]*w->term[0][66] +
+            w->term[1][13]*w->term[0][67] + w->term[1][14]*w->term[0][68] +
+            w->term[1][15]*w->term[0][69] + w->term[1][16]*w->term[0][70] +
+            w->term[1][17]*w->term[0][71];
+    t->Qd[25] = w->term[1][9]*w->term[0][72] + w->term[1][10]*w->term[0][73] +
+            w->term[1][11]*w->term[0][74] + w->term[1][12]*w->term[0][75] +
+            w->term[1][13]*w->term[0][76] + w->term[1][14]*w->term[0][77] +
+            w->term[1][15]*w->term[0][78] + w->term[1][16]*w->term[0][79] +
+            w->term[1][17]*w->term[0][80];
+    t->Qd[29] = w->term[1][12]*w->term[0][81];
+    t->Qd[30] = w->term[1][13]*w->term[0][82];
+    t->Qd[31] = w->term[1][14]*w->term[0][83];
+    t->Qd[32] = w->term[1][15]*w->term[0][84];
+    t->Qd[33] = w->term[1][16]*w->term[0][85];
+    t->Qd[34] = w->term[1][17]*w->term[0][86];
+    check = t->Qd[18] + t->Qd[19] + t->Qd[20] + t->Qd[21] + t->Qd[22] + t->Qd[23] + t->Qd[24] +
+            t->Qd[25] + t->Qd[29] + t->Qd[30] + t->Qd[31] + t->Qd[32] + t->Qd[33] + t->Qd[34];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar process_noise_row_2(enu_doppler18_twin_transition
+        *restrict t, const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[35] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
+            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23] +
+            w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
+            w->term[1][26]*w->term[0][26];
+    t->Qd[36] = w->term[1][18]*w->term[0][27] + w->term[1][19]*w->term[0][28] +
+            w->term[1][20]*w->term[0][29] + w->term[1][21]*w->term[0][30] +
+            w->term[1][22]*w->term[0][31] + w->term[1][23]*w->term[0][32] +
+            w->term[1][24]*w->term[0][33] + w->term[1][25]*w->term[0][34] +
+            w->term[1][26]*w->term[0][35];
+    t->Qd[37] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
+            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
+            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41] +
+            w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
+            w->term[1][26]*w->term[0][44];
+    t->Qd[38] = w->term[1][18]*w->term[0][45] + w->term[1][19]*w->term[0][46] +
+            w->term[1][20]*w->term[0][47] + w->term[1][21]*w->term[0][48] +
+            w->term[1][22]*w->term[0][49] + w->term[1][23]*w->term[0][50] +
+            w->term[1][24]*w->term[0][51] + w->term[1][25]*w->term[0][52] +
+            w->term[1][26]*w->term[0][53];
+    t->Qd[39] = w->term[1][18]*w->term[0][54] + w->term[1][19]*w->term[0][55] +
+            w->term[1][20]*w->term[0][56] + w->term[1][21]*w->term[0][57] +
+            w->term[1][22]*w->term[0][58] + w->term[1][23]*w->term[0][59] +
+            w->term[1][24]*w->term[0][60] + w->term[1][25]*w->term[0][61] +
+            w->term[1][26]*w->term[0][62];
+    t->Qd[40] = w->term[1][18]*w->term[0][63] + w->term[1][19]*w->term[0][64] +
+            w->term[1][20]*w->term[0][65] + w->term[1][21]*w->term[0][66] +
+            w->term[1][22]*w->term[0][67] + w->term[1][23]*w->term[0][68] +
+            w->term[1][24]*w->term[0][69] + w->term[1][25]*w->term[0][70] +
+            w->term[1][26]*w->term[0][71];
+    t->Qd[41] = w->term[1][18]*w->term[0][72] + w->term[1][19]*w->term[0][73] +
+            w->term[1][20]*w->term[0][74] + w->term[1][21]*w->term[0][75] +
+            w->term[1][22]*w->term[0][76] + w->term[1][23]*w->term[0][77] +
+            w->term[1][24]*w->term[0][78] + w->term[1][25]*w->term[0][79] +
+            w->term[1][26]*w->term[0][80];
+    t->Qd[45] = w->term[1][21]*w->term[0][81];
+    t->Qd[46] = w->term[1][22]*w->term[0][82];
+    t->Qd[47] = w->term[1][23]*w->term[0][83];
+    t->Qd[48] = w->term[1][24]*w->term[0][84];
+    t->Qd[49] = w->term[1][25]*w->term[0][85];
+    t->Qd[50] = w->term[1][26]*w->term[0][86];
+    check = t->Qd[35] + t->Qd[36] + t->Qd[37] + t->Qd[38] + t->Qd[39] + t->Qd[40] + t->Qd[41] +
+            t->Qd[45] + t->Qd[46] + t->Qd[47] + t->Qd[48] + t->Qd[49] + t->Qd[50];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar process_noise_row_3(enu_doppler18_twin_transition
+        *restrict t, const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[51] = w->term[1][27]*w->term[0][27] + w->term[1][28]*w->term[0][28] +
+            w->term[1][29]*w->term[0][29] + w->term[1][30]*w->term[0][30] +
+            w->term[1][31]*w->term[0][31] + w->term[1][32]*w->term[0][32] +
+            w->term[1][33]*w->term[0][33] + w->term[1][34]*w->term[0][34] +
+            w->term[1][35]*w->term[0][35];
+    t->Qd[52] = w->term[1][27]*w->term[0][36] + w->term[1][28]*w->term[0][37] +
+            w->term[1][29]*w->term[0][38] + w->term[1][30]*w->term[0][39] +
+            w->term[1][31]*w->term[0][40] + w->term[1][32]*w->term[0][41] +
+            w->term[1][33]*w->term[0][42] + w->term[1][34]*w->term[0][43] +
+            w->term[1][35]*w->term[0][44];
+    t->Qd[53] = w->term[1][27]*w->term[0][45] + w->term[1][28]*w->term[0][46] +
+            w->term[1][29]*w->term[0][47] + w->term[1][30]*w->term[0][48] +
+            w->term[1][31]*w->term[0][49] + w->term[1][32]*w->term[0][50] +
+            w->term[1][33]*w->term[0][51] + w->term[1][34]*w->term[0][52] +
+            w->term[1][35]*w->term[0][53];
+    t->Qd[54] = w->term[1][27]*w->term[0][54] + w->term[1][28]*w->term[0][55] +
+            w->term[1][29]*w->term[0][56] + w->term[1][30]*w->term[0][57] +
+            w->term[1][31]*w->term[0][58] + w->term[1][32]*w->term[0][59] +
+            w->term[1][33]*w->term[0][60] + w->term[1][34]*w->term[0][61] +
+            w->term[1][35]*w->term[0][62];
+    t->Qd[55] = w->term[1][27]*w->term[0][63] + w->term[1][28]*w->term[0][64] +
+            w->term[1][29]*w->term[0][65] + w->term[1][30]*w->term[0][66] +
+            w->term[1][31]*w->term[0][67] + w->term[1][32]*w->term[0][68] +
+            w->term[1][33]*w->term[0][69] + w->term[1][34]*w->term[0][70] +
+            w->term[1][35]*w->term[0][71];
+    t->Qd[56] = w->term[1][27]*w->term[0][72] + w->term[1][28]*w->term[0][73] +
+            w->term[1][29]*w->term[0][74] + w->term[1][30]*w->term[0][75] +
+            w->term[1][31]*w->term[0][76] + w->term[1][32]*w->term[0][77] +
+            w->term[1][33]*w->term[0][78] + w->term[1][34]*w->term[0][79] +
+            w->term[1][35]*w->term[0][80];
+    t->Qd[60] = w->term[1][30]*w->term[0][81];
+    t->Qd[61] = w->term[1][31]*w->term[0][82];
+    t->Qd[62] = w->term[1][32]*w->term[0][83];
+    t->Qd[63] = w->term[1][33]*w->term[0][84];
+    t->Qd[64] = w->term[1][34]*w->term[0][85];
+    t->Qd[65] = w->term[1][35]*w->term[0][86];
+    check = t->Qd[51] + t->Qd[52] + t->Qd[53] + t->Qd[54] + t->Qd[55] + t->Qd[56] + t->Qd[60] +
+            t->Qd[61] + t->Qd[62] + t->Qd[63] + t->Qd[64] + t->Qd[65];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar process_noise_row_4(enu_doppler18_twin_transition
+        *restrict t, const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[66] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
+            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
+            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41] +
+            w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
+            w->term[1][44]*w->term[0][44];
+    t->Qd[67] = w->term[1][36]*w->term[0][45] + w->term[1][37]*w->term[0][46] +
+            w->term[1][38]*w->term[0][47] + w->term[1][39]*w->term[0][48] +
+            w->term[1][40]*w->term[0][49] + w->term[1][41]*w->term[0][50] +
+            w->term[1][42]*w->term[0][51] + w->term[1][43]*w->term[0][52] +
+            w->term[1][44]*w->term[0][53];
+    t->Qd[68] = w->term[1][36]*w->term[0][54] + w->term[1][37]*w->term[0][55] +
+            w->term[1][38]*w->term[0][56] + w->term[1][39]*w->term[0][57] +
+            w->term[1][40]*w->term[0][58] + w->term[1][41]*w->term[0][59] +
+            w->term[1][42]*w->term[0][60] + w->term[1][43]*w->term[0][61] +
+            w->term[1][44]*w->term[0][62];
+    t->Qd[69] = w->term[1][36]*w->term[0][63] + w->term[1][37]*w->term[0][64] +
+            w->term[1][38]*w->term[0][65] + w->term[1][39]*w->term[0][66] +
+            w->term[1][40]*w->term[0][67] + w->term[1][41]*w->term[0][68] +
+            w->term[1][42]*w->term[0][69] + w->term[1][43]*w->term[0][70] +
+            w->term[1][44]*w->term[0][71];
+    t->Qd[70] = w->term[1][36]*w->term[0][72] + w->term[1][37]*w->term[0][73] +
+            w->term[1][38]*w->term[0][74] + w->term[1][39]*w->term[0][75] +
+            w->term[1][40]*w->term[0][76] + w->term[1][41]*w->term[0][77] +
+            w->term[1][42]*w->term[0][78] + w->term[1][43]*w->term[0][79] +
+            w->term[1][44]*w->term[0][80];
+    t->Qd[74] = w->term[1][39]*w->term[0][81];
+    t->Qd[75] = w->term[1][40]*w->term[0][82];
+    t->Qd[76] = w->term[1][41]*w->term[0][83];
+    t->Qd[77] = w->term[1][42]*w->term[0][84];
+    t->Qd[78] = w->term[1][43]*w->term[0][85];
+    t->Qd[79] = w->term[1][44]*w->term[0][86];
+    check = t->Qd[66] + t->Qd[67] + t->Qd[68] + t->Qd[69] + t->Qd[70] + t->Qd[74] + t->Qd[75] +
+            t->Qd[76] + t->Qd[77] + t->Qd[78] + t->Qd[79];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar process_noise_row_5(enu_doppler18_twin_transition
+        *restrict t, const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[80] = w->term[1][45]*w->term[0][45] + w->term[1][46]*w->term[0][46] +
+            w->term[1][47]*w->term[0][47] + w->term[1][48]*w->term[0][48] +
+            w->term[1][49]*w->term[0][49] + w->term[1][50]*w->term[0][50] +
+            w->term[1][51]*w->term[0][51] + w->term[1][52]*w->term[0][52] +
+            w->term[1][53]*w->term[0][53];
+    t->Qd[81] = w->term[1][45]*w->term[0][54] + w->term[1][46]*w->term[0][55] +
+            w->term[1][47]*w->term[0][56] + w->term[1][48]*w->term[0][57] +
+            w->term[1][49]*w->term[0][58] + w->term[1][50]*w->term[0][59] +
+            w->term[1][51]*w->term[0][60] + w->term[1][52]*w->term[0][61] +
+            w->term[1][53]*w->term[0][62];
+    t->Qd[82] = w->term[1][45]*w->term[0][63] + w->term[1][46]*w->term[0][64] +
+            w->term[1][47]*w->term[0][65] + w->term[1][48]*w->term[0][66] +
+            w->term[1][49]*w->term[0][67] + w->term[1][50]*w->term[0][68] +
+            w->term[1][51]*w->term[0][69] + w->term[1][52]*w->term[0][70] +
+            w->term[1][53]*w->term[0][71];
+    t->Qd[83] = w->term[1][45]*w->term[0][72] + w->term[1][46]*w->term[0][73] +
+            w->term[1][47]*w->term[0][74] + w->term[1][48]*w->term[0][75] +
+            w->term[1][49]*w->term[0][76] + w->term[1][50]*w->term[0][77] +
+            w->term[1][51]*w->term[0][78] + w->term[1][52]*w->term[0][79] +
+            w->term[1][53]*w->term[0][80];
+    t->Qd[87] = w->term[1][48]*w->term[0][81];
+    t->Qd[88] = w->term[1][49]*w->term[0][82];
+    t->Qd[89] = w->term[1][50]*w->term[0][83];
+    t->Qd[90] = w->term[1][51]*w->term[0][84];
+    t->Qd[91] = w->term[1][52]*w->term[0][85];
+    t->Qd[92] = w->term[1][53]*w->term[0][86];
+    check = t->Qd[80] + t->Qd[81] + t->Qd[82] + t->Qd[83] + t->Qd[87] + t->Qd[88] + t->Qd[89] +
+            t->Qd[90] + t->Qd[91] + t->Qd[92];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar process_noise_row_6(enu_doppler18_twin_transition
+        *restrict t, const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[93] = w->term[1][54]*w->term[0][54] + w->term[1][55]*w->term[0][55] +
+            w->term[1][56]*w->term[0][56] + w->term[1][57]*w->term[0][57] +
+            w->term[1][58]*w->term[0][58] + w->term[1][59]*w->term[0][59] +
+            w->term[1][60]*w->term[0][60] + w->term[1][61]*w->term[0][61] +
+            w->term[1][62]*w->term[0][62];
+    t->Qd[94] = w->term[1][54]*w->term[0][63] + w->term[1][55]*w->term[0][64] +
+            w->term[1][56]*w->term[0][65] + w->term[1][57]*w->term[0][66] +
+            w->term[1][58]*w->term[0][67] + w->term[1][59]*w->term[0][68] +
+            w->term[1][60]*w->term[0][69] + w->term[1][61]*w->term[0][70] +
+            w->term[1][62]*w->term[0][71];
+    t->Qd[95] = w->term[1][54]*w->term[0][72] + w->term[1][55]*w->term[0][73] +
+            w->term[1][56]*w->term[0][74] + w->term[1][57]*w->term[0][75] +
+            w->term[1][58]*w->term[0][76] + w->term[1][59]*w->term[0][77] +
+            w->term[1][60]*w->term[0][78] + w->term[1][61]*w->term[0][79] +
+            w->term[1][62]*w->term[0][80];
+    t->Qd[99] = w->term[1][57]*w->term[0][81];
+    t->Qd[100] = w->term[1][58]*w->term[0][82];
+    t->Qd[101] = w->term[1][59]*w->term[0][83];
+    t->Qd[102] = w->term[1][60]*w->term[0][84];
+    t->Qd[103] = w->term[1][61]*w->term[0][85];
+    t->Qd[104] = w->term[1][62]*w->term[0][86];
+    check = t->Qd[93] + t->Qd[94] + t->Qd[95] + t->Qd[99] + t->Qd[100] + t->Qd[101] + t->Qd[102] +
+            t->Qd[103] + t->Qd[104];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static enu_doppler18_twin_scalar process_noise_row_7(enu_doppler18_twin_transition *restrict t,
+        const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[105] = w->term[1][63]*w->term[0][63] + w->term[1][64]*w->term[0][64] +
+            w->term[1][65]*w->term[0][65] + w->term[1][66]*w->term[0][66] +
+            w->term[1][67]*w->term[0][67] + w->term[1][68]*w->term[0][68] +
+            w->term[1][69]*w->term[0][69] + w->term[1][70]*w->term[0][70] +
+            w->term[1][71]*w->term[0][71];
+    t->Qd[106] = w->term[1][63]*w->term[0][72] + w->term[1][64]*w->term[0][73] +
+            w->term[1][65]*w->term[0][74] + w->term[1][66]*w->term[0][75] +
+            w->term[1][67]*w->term[0][76] + w->term[1][68]*w->term[0][77] +
+            w->term[1][69]*w->term[0][78] + w->term[1][70]*w->term[0][79] +
+            w->term[1][71]*w->term[0][80];
+    t->Qd[110] = w->term[1][66]*w->term[0][81];
+    t->Qd[111] = w->term[1][67]*w->term[0][82];
+    t->Qd[112] = w->term[1][68]*w->term[0][83];
+    t->Qd[113] = w->term[1][69]*w->term[0][84];
+    t->Qd[114] = w->term[1][70]*w->term[0][85];
+    t->Qd[115] = w->term[1][71]*w->term[0][86];
+    check = t->Qd[105] + t->Qd[106] + t->Qd[110] + t->Qd[111] + t->Qd[112] + t->Qd[113] + t->Qd[114]
+            + t->Qd[115];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static enu_doppler18_twin_scalar process_noise_row_8(enu_doppler18_twin_transition *restrict t,
+        const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[116] = w->term[1][72]*w->term[0][72] + w->term[1][73]*w->term[0][73] +
+            w->term[1][74]*w->term[0][74] + w->term[1][75]*w->term[0][75] +
+            w->term[1][76]*w->term[0][76] + w->term[1][77]*w->term[0][77] +
+            w->term[1][78]*w->term[0][78] + w->term[1][79]*w->term[0][79] +
+            w->term[1][80]*w->term[0][80];
+    t->Qd[120] = w->term[1][75]*w->term[0][81];
+    t->Qd[121] = w->term[1][76]*w->term[0][82];
+    t->Qd[122] = w->term[1][77]*w->term[0][83];
+    t->Qd[123] = w->term[1][78]*w->term[0][84];
+    t->Qd[124] = w->term[1][79]*w->term[0][85];
+    t->Qd[125] = w->term[1][80]*w->term[0][86];
+    check = t->Qd[116] + t->Qd[120] + t->Qd[121] + t->Qd[122] + t->Qd[123] + t->Qd[124] +
+            t->Qd[125];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static enu_doppler18_twin_scalar process_noise_row_12(enu_doppler18_twin_transition *restrict t,
+        const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[150] = w->term[1][81]*w->term[0][81];
+    check = t->Qd[150];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static enu_doppler18_twin_scalar process_noise_row_13(enu_doppler18_twin_transition *restrict t,
+        const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[156] = w->term[1][82]*w->term[0][82];
+    check = t->Qd[156];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static enu_doppler18_twin_scalar process_noise_row_14(enu_doppler18_twin_transition *restrict t,
+        const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[161] = w->term[1][83]*w->term[0][83];
+    check = t->Qd[161];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static enu_doppler18_twin_scalar process_noise_row_15(enu_doppler18_twin_transition *restrict t,
+        const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[165] = w->term[1][84]*w->term[0][84];
+    check = t->Qd[165];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static enu_doppler18_twin_scalar process_noise_row_16(enu_doppler18_twin_transition *restrict t,
+        const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[168] = w->term[1][85]*w->term[0][85];
+    check = t->Qd[168];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static enu_doppler18_twin_scalar process_noise_row_17(enu_doppler18_twin_transition *restrict t,
+        const enu_doppler18_twin_discretize_scratch *restrict w)
+{
+    enu_doppler18_twin_scalar check;
+    t->Qd[170] = w->term[1][86]*w->term[0][86];
+    check = t->Qd[170];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
@@ -2744,7 +2882,7 @@ int enu_doppler18_twin_discretize(const enu_doppler18_twin_matrices *restrict m,
     int halvings, order, status;
     int k;
     enu_doppler18_twin_scalar sum_check;
-    enu_doppler18_twin_scalar qd_check;
+    enu_doppler18_twin_scalar qd_check = 0.0;
     enu_doppler18_twin_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (!isfinite(T)) {
         return ENU_DOPPLER18_TWIN_ERR_NONFINITE;
@@ -2864,7 +3002,22 @@ int enu_doppler18_twin_discretize(const enu_doppler18_twin_matrices *restrict m,
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
-    qd_check = process_noise(m, t, w, T);
+    process_noise(m, t, w, T);
+    qd_check += process_noise_row_0(t, w);
+    qd_check += process_noise_row_1(t, w);
+    qd_check += process_noise_row_2(t, w);
+    qd_check += process_noise_row_3(t, w);
+    qd_check += process_noise_row_4(t, w);
+    qd_check += process_noise_row_5(t, w);
+    qd_check += process_noise_row_6(t, w);
+    qd_check += process_noise_row_7(t, w);
+    qd_check += process_noise_row_8(t, w);
+    qd_check += process_noise_row_12(t, w);
+    qd_check += process_noise_row_13(t, w);
+    qd_check += process_noise_row_14(t, w);
+    qd_check += process_noise_row_15(t, w);
+    qd_check += process_noise_row_16(t, w);
+    qd_check += process_noise_row_17(t, w);
     if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
             entry */
         qd_check = 0.0;
@@ -4437,9 +4590,8 @@ ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_8(const
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_9(const enu_doppler18_twin_filter
-        *restrict f, const enu_doppler18_twin_transition *restrict t,
-        enu_doppler18_twin_filter_scratch *restrict w)
+static enu_doppler18_twin_scalar propagate_row_9(const enu_doppler18_twin_filter *restrict f, const
+        enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
 {
     enu_doppler18_twin_scalar v, check = 0.0;
     v = f->P[9][9]; w->Pn[126] = v; check += v;
@@ -4456,9 +4608,8 @@ ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_9(const enu_dop
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_10(const enu_doppler18_twin_filter
-        *restrict f, const enu_doppler18_twin_transition *restrict t,
-        enu_doppler18_twin_filter_scratch *restrict w)
+static enu_doppler18_twin_scalar propagate_row_10(const enu_doppler18_twin_filter *restrict f, const
+        enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
 {
     enu_doppler18_twin_scalar v, check = 0.0;
     v = f->P[10][10]; w->Pn[135] = v; check += v;
@@ -4474,9 +4625,8 @@ ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_10(const enu_do
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_11(const enu_doppler18_twin_filter
-        *restrict f, const enu_doppler18_twin_transition *restrict t,
-        enu_doppler18_twin_filter_scratch *restrict w)
+static enu_doppler18_twin_scalar propagate_row_11(const enu_doppler18_twin_filter *restrict f, const
+        enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
 {
     enu_doppler18_twin_scalar v, check = 0.0;
     v = f->P[11][11]; w->Pn[143] = v; check += v;
@@ -4489,7 +4639,7 @@ ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_11(const enu_do
     return check - check;
 }
 
-ENU_DOPPLER18_TWIN_BLOCK void phi_times_p_row_12(const enu_doppler18_twin_filter *restrict f, const
+static void phi_times_p_row_12(const enu_doppler18_twin_filter *restrict f, const
         enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[157]*f->P[12][0];
@@ -4514,8 +4664,8 @@ ENU_DOPPLER18_TWIN_BLOCK void phi_times_p_row_12(const enu_doppler18_twin_filter
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_12(const
-        enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
+static enu_doppler18_twin_scalar propagate_row_12(const enu_doppler18_twin_transition *restrict t,
+        enu_doppler18_twin_filter_scratch *restrict w)
 {
     enu_doppler18_twin_scalar v, check = 0.0;
     v = w->M[12]*t->Phi[157] + t->Qd[150]; w->Pn[150] = v; check += v;
@@ -4527,7 +4677,7 @@ ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_12(const
     return check - check;
 }
 
-ENU_DOPPLER18_TWIN_BLOCK void phi_times_p_row_13(const enu_doppler18_twin_filter *restrict f, const
+static void phi_times_p_row_13(const enu_doppler18_twin_filter *restrict f, const
         enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[158]*f->P[13][0];
@@ -4552,8 +4702,8 @@ ENU_DOPPLER18_TWIN_BLOCK void phi_times_p_row_13(const enu_doppler18_twin_filter
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_13(const
-        enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
+static enu_doppler18_twin_scalar propagate_row_13(const enu_doppler18_twin_transition *restrict t,
+        enu_doppler18_twin_filter_scratch *restrict w)
 {
     enu_doppler18_twin_scalar v, check = 0.0;
     v = w->M[13]*t->Phi[158] + t->Qd[156]; w->Pn[156] = v; check += v;
@@ -4564,7 +4714,7 @@ ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_13(const
     return check - check;
 }
 
-ENU_DOPPLER18_TWIN_BLOCK void phi_times_p_row_14(const enu_doppler18_twin_filter *restrict f, const
+static void phi_times_p_row_14(const enu_doppler18_twin_filter *restrict f, const
         enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[159]*f->P[14][0];
@@ -4589,8 +4739,8 @@ ENU_DOPPLER18_TWIN_BLOCK void phi_times_p_row_14(const enu_doppler18_twin_filter
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_14(const
-        enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
+static enu_doppler18_twin_scalar propagate_row_14(const enu_doppler18_twin_transition *restrict t,
+        enu_doppler18_twin_filter_scratch *restrict w)
 {
     enu_doppler18_twin_scalar v, check = 0.0;
     v = w->M[14]*t->Phi[159] + t->Qd[161]; w->Pn[161] = v; check += v;
@@ -4600,7 +4750,7 @@ ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_14(const
     return check - check;
 }
 
-ENU_DOPPLER18_TWIN_BLOCK void phi_times_p_row_15(const enu_doppler18_twin_filter *restrict f, const
+static void phi_times_p_row_15(const enu_doppler18_twin_filter *restrict f, const
         enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[160]*f->P[15][0];
@@ -4625,8 +4775,8 @@ ENU_DOPPLER18_TWIN_BLOCK void phi_times_p_row_15(const enu_doppler18_twin_filter
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_15(const
-        enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
+static enu_doppler18_twin_scalar propagate_row_15(const enu_doppler18_twin_transition *restrict t,
+        enu_doppler18_twin_filter_scratch *restrict w)
 {
     enu_doppler18_twin_scalar v, check = 0.0;
     v = w->M[15]*t->Phi[160] + t->Qd[165]; w->Pn[165] = v; check += v;
@@ -4635,7 +4785,7 @@ ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_15(const
     return check - check;
 }
 
-ENU_DOPPLER18_TWIN_BLOCK void phi_times_p_row_16(const enu_doppler18_twin_filter *restrict f, const
+static void phi_times_p_row_16(const enu_doppler18_twin_filter *restrict f, const
         enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[161]*f->P[16][0];
@@ -4660,8 +4810,8 @@ ENU_DOPPLER18_TWIN_BLOCK void phi_times_p_row_16(const enu_doppler18_twin_filter
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_16(const
-        enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
+static enu_doppler18_twin_scalar propagate_row_16(const enu_doppler18_twin_transition *restrict t,
+        enu_doppler18_twin_filter_scratch *restrict w)
 {
     enu_doppler18_twin_scalar v, check = 0.0;
     v = w->M[16]*t->Phi[161] + t->Qd[168]; w->Pn[168] = v; check += v;
@@ -4669,7 +4819,7 @@ ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_16(const
     return check - check;
 }
 
-ENU_DOPPLER18_TWIN_BLOCK void phi_times_p_row_17(const enu_doppler18_twin_filter *restrict f, const
+static void phi_times_p_row_17(const enu_doppler18_twin_filter *restrict f, const
         enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[162]*f->P[17][0];
@@ -4694,8 +4844,8 @@ ENU_DOPPLER18_TWIN_BLOCK void phi_times_p_row_17(const enu_doppler18_twin_filter
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar propagate_row_17(const
-        enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_filter_scratch *restrict w)
+static enu_doppler18_twin_scalar propagate_row_17(const enu_doppler18_twin_transition *restrict t,
+        enu_doppler18_twin_filter_scratch *restrict w)
 {
     enu_doppler18_twin_scalar v, check = 0.0;
     v = w->M[17]*t->Phi[162] + t->Qd[170]; w->Pn[170] = v; check += v;

@@ -323,10 +323,13 @@ int gps_pseudorange11_twin_matrices_evaluate(const gps_pseudorange11_twin_params
     return GPS_PSEUDORANGE11_TWIN_OK;
 }
 
-/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
-   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
-   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
-   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
+   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
+           is
+   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
+   products more often on its own than inside a caller of thousands of statements
+   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
+   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define GPS_PSEUDORANGE11_TWIN_BLOCK static __attribute__((noinline))
 #else
@@ -1159,12 +1162,10 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void noise_input(const gps_pseudorange11_twin_matri
     w->term[0][47] = m->G[7];
 }
 
-GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar process_noise(const
-        gps_pseudorange11_twin_matrices *restrict m, gps_pseudorange11_twin_transition *restrict t,
-        gps_pseudorange11_twin_discretize_scratch *restrict w, const gps_pseudorange11_twin_scalar
-        T)
+GPS_PSEUDORANGE11_TWIN_BLOCK void process_noise(const gps_pseudorange11_twin_matrices *restrict m,
+        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_discretize_scratch
+        *restrict w, const gps_pseudorange11_twin_scalar T)
 {
-    gps_pseudorange11_twin_scalar v, check = 0.0;
     w->term[1][48] = T*m->q[0];
     w->term[1][49] = T*m->q[1];
     w->term[1][50] = T*m->q[2];
@@ -1221,130 +1222,6 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar process_noise(const
     w->term[1][45] = w->term[0][45]*w->term[1][54];
     w->term[1][46] = w->term[0][46]*w->term[1][55];
     w->term[1][47] = w->term[0][47]*w->term[1][55];
-    v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
-            w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0] = v; check += v;
-    v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
-            w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v;
-    v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
-            w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v;
-    v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
-            w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v;
-    v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
-            w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v;
-    v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
-            w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v;
-    v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38];
-            t->Qd[6] = v; check += v;
-    v = w->term[1][0]*w->term[0][39] + w->term[1][1]*w->term[0][40] + w->term[1][2]*w->term[0][41];
-            t->Qd[7] = v; check += v;
-    v = w->term[1][0]*w->term[0][42] + w->term[1][1]*w->term[0][43] + w->term[1][2]*w->term[0][44];
-            t->Qd[8] = v; check += v;
-    v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
-            w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[11] = v; check += v;
-    v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
-            w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[12] = v; check += v;
-    v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
-            w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[13] = v; check += v;
-    v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
-            w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[14] = v; check += v;
-    v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
-            w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[15] = v; check += v;
-    v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38];
-            t->Qd[16] = v; check += v;
-    v = w->term[1][6]*w->term[0][39] + w->term[1][7]*w->term[0][40] + w->term[1][8]*w->term[0][41];
-            t->Qd[17] = v; check += v;
-    v = w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] + w->term[1][8]*w->term[0][44];
-            t->Qd[18] = v; check += v;
-    v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[21] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
-            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[22] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
-            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[23] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
-            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[24] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
-            w->term[1][14]*w->term[0][38]; t->Qd[25] = v; check += v;
-    v = w->term[1][12]*w->term[0][39] + w->term[1][13]*w->term[0][40] +
-            w->term[1][14]*w->term[0][41]; t->Qd[26] = v; check += v;
-    v = w->term[1][12]*w->term[0][42] + w->term[1][13]*w->term[0][43] +
-            w->term[1][14]*w->term[0][44]; t->Qd[27] = v; check += v;
-    v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[30] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
-            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[31] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
-            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[32] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38]; t->Qd[33] = v; check += v;
-    v = w->term[1][18]*w->term[0][39] + w->term[1][19]*w->term[0][40] +
-            w->term[1][20]*w->term[0][41]; t->Qd[34] = v; check += v;
-    v = w->term[1][18]*w->term[0][42] + w->term[1][19]*w->term[0][43] +
-            w->term[1][20]*w->term[0][44]; t->Qd[35] = v; check += v;
-    v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[38] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
-            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[39] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
-            w->term[1][26]*w->term[0][38]; t->Qd[40] = v; check += v;
-    v = w->term[1][24]*w->term[0][39] + w->term[1][25]*w->term[0][40] +
-            w->term[1][26]*w->term[0][41]; t->Qd[41] = v; check += v;
-    v = w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
-            w->term[1][26]*w->term[0][44]; t->Qd[42] = v; check += v;
-    v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
-            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[45] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
-            w->term[1][32]*w->term[0][38]; t->Qd[46] = v; check += v;
-    v = w->term[1][30]*w->term[0][39] + w->term[1][31]*w->term[0][40] +
-            w->term[1][32]*w->term[0][41]; t->Qd[47] = v; check += v;
-    v = w->term[1][30]*w->term[0][42] + w->term[1][31]*w->term[0][43] +
-            w->term[1][32]*w->term[0][44]; t->Qd[48] = v; check += v;
-    v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38]; t->Qd[51] = v; check += v;
-    v = w->term[1][36]*w->term[0][39] + w->term[1][37]*w->term[0][40] +
-            w->term[1][38]*w->term[0][41]; t->Qd[52] = v; check += v;
-    v = w->term[1][36]*w->term[0][42] + w->term[1][37]*w->term[0][43] +
-            w->term[1][38]*w->term[0][44]; t->Qd[53] = v; check += v;
-    v = w->term[1][39]*w->term[0][39] + w->term[1][40]*w->term[0][40] +
-            w->term[1][41]*w->term[0][41]; t->Qd[56] = v; check += v;
-    v = w->term[1][39]*w->term[0][42] + w->term[1][40]*w->term[0][43] +
-            w->term[1][41]*w->term[0][44]; t->Qd[57] = v; check += v;
-    v = w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
-            w->term[1][44]*w->term[0][44]; t->Qd[60] = v; check += v;
-    v = w->term[1][45]*w->term[0][45] + w->term[1][46]*w->term[0][46]; t->Qd[63] = v; check += v;
-    v = w->term[1][46]*w->term[0][47]; t->Qd[64] = v; check += v;
-    v = w->term[1][47]*w->term[0][47]; t->Qd[65] = v; check += v;
     t->Qd[9] = 0;
     t->Qd[10] = 0;
     t->Qd[19] = 0;
@@ -1363,6 +1240,213 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar process_noise(const
     t->Qd[59] = 0;
     t->Qd[61] = 0;
     t->Qd[62] = 0;
+}
+
+GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar
+        process_noise_row_0(gps_pseudorange11_twin_transition *restrict t, const
+        gps_pseudorange11_twin_discretize_scratch *restrict w)
+{
+    gps_pseudorange11_twin_scalar check;
+    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
+            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
+            + w->term[1][5]*w->term[0][5];
+    t->Qd[1] = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] +
+            w->term[1][2]*w->term[0][8] + w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10]
+            + w->term[1][5]*w->term[0][11];
+    t->Qd[2] = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] +
+            w->term[1][2]*w->term[0][14] + w->term[1][3]*w->term[0][15] +
+            w->term[1][4]*w->term[0][16] + w->term[1][5]*w->term[0][17];
+    t->Qd[3] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
+            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
+            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23];
+    t->Qd[4] = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] +
+            w->term[1][2]*w->term[0][26] + w->term[1][3]*w->term[0][27] +
+            w->term[1][4]*w->term[0][28] + w->term[1][5]*w->term[0][29];
+    t->Qd[5] = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] +
+            w->term[1][2]*w->term[0][32] + w->term[1][3]*w->term[0][33] +
+            w->term[1][4]*w->term[0][34] + w->term[1][5]*w->term[0][35];
+    t->Qd[6] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
+            w->term[1][2]*w->term[0][38];
+    t->Qd[7] = w->term[1][0]*w->term[0][39] + w->term[1][1]*w->term[0][40] +
+            w->term[1][2]*w->term[0][41];
+    t->Qd[8] = w->term[1][0]*w->term[0][42] + w->term[1][1]*w->term[0][43] +
+            w->term[1][2]*w->term[0][44];
+    check = t->Qd[0] + t->Qd[1] + t->Qd[2] + t->Qd[3] + t->Qd[4] + t->Qd[5] + t->Qd[6] + t->Qd[7] +
+            t->Qd[8];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar
+        process_noise_row_1(gps_pseudorange11_twin_transition *restrict t, const
+        gps_pseudorange11_twin_discretize_scratch *restrict w)
+{
+    gps_pseudorange11_twin_scalar check;
+    t->Qd[11] = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
+            w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9] +
+            w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11];
+    t->Qd[12] = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] +
+            w->term[1][8]*w->term[0][14] + w->term[1][9]*w->term[0][15] +
+            w->term[1][10]*w->term[0][16] + w->term[1][11]*w->term[0][17];
+    t->Qd[13] = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] +
+            w->term[1][8]*w->term[0][20] + w->term[1][9]*w->term[0][21] +
+            w->term[1][10]*w->term[0][22] + w->term[1][11]*w->term[0][23];
+    t->Qd[14] = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
+            w->term[1][8]*w->term[0][26] + w->term[1][9]*w->term[0][27] +
+            w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29];
+    t->Qd[15] = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] +
+            w->term[1][8]*w->term[0][32] + w->term[1][9]*w->term[0][33] +
+            w->term[1][10]*w->term[0][34] + w->term[1][11]*w->term[0][35];
+    t->Qd[16] = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] +
+            w->term[1][8]*w->term[0][38];
+    t->Qd[17] = w->term[1][6]*w->term[0][39] + w->term[1][7]*w->term[0][40] +
+            w->term[1][8]*w->term[0][41];
+    t->Qd[18] = w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] +
+            w->term[1][8]*w->term[0][44];
+    check = t->Qd[11] + t->Qd[12] + t->Qd[13] + t->Qd[14] + t->Qd[15] + t->Qd[16] + t->Qd[17] +
+            t->Qd[18];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar
+        process_noise_row_2(gps_pseudorange11_twin_transition *restrict t, const
+        gps_pseudorange11_twin_discretize_scratch *restrict w)
+{
+    gps_pseudorange11_twin_scalar check;
+    t->Qd[21] = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
+            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17];
+    t->Qd[22] = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
+            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23];
+    t->Qd[23] = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
+            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29];
+    t->Qd[24] = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
+            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35];
+    t->Qd[25] = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
+            w->term[1][14]*w->term[0][38];
+    t->Qd[26] = w->term[1][12]*w->term[0][39] + w->term[1][13]*w->term[0][40] +
+            w->term[1][14]*w->term[0][41];
+    t->Qd[27] = w->term[1][12]*w->term[0][42] + w->term[1][13]*w->term[0][43] +
+            w->term[1][14]*w->term[0][44];
+    check = t->Qd[21] + t->Qd[22] + t->Qd[23] + t->Qd[24] + t->Qd[25] + t->Qd[26] + t->Qd[27];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar
+        process_noise_row_3(gps_pseudorange11_twin_transition *restrict t, const
+        gps_pseudorange11_twin_discretize_scratch *restrict w)
+{
+    gps_pseudorange11_twin_scalar check;
+    t->Qd[30] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
+            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23];
+    t->Qd[31] = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
+            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29];
+    t->Qd[32] = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
+            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35];
+    t->Qd[33] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
+            w->term[1][20]*w->term[0][38];
+    t->Qd[34] = w->term[1][18]*w->term[0][39] + w->term[1][19]*w->term[0][40] +
+            w->term[1][20]*w->term[0][41];
+    t->Qd[35] = w->term[1][18]*w->term[0][42] + w->term[1][19]*w->term[0][43] +
+            w->term[1][20]*w->term[0][44];
+    check = t->Qd[30] + t->Qd[31] + t->Qd[32] + t->Qd[33] + t->Qd[34] + t->Qd[35];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static gps_pseudorange11_twin_scalar process_noise_row_4(gps_pseudorange11_twin_transition *restrict
+        t, const gps_pseudorange11_twin_discretize_scratch *restrict w)
+{
+    gps_pseudorange11_twin_scalar check;
+    t->Qd[38] = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
+            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29];
+    t->Qd[39] = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
+            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35];
+    t->Qd[40] = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
+            w->term[1][26]*w->term[0][38];
+    t->Qd[41] = w->term[1][24]*w->term[0][39] + w->term[1][25]*w->term[0][40] +
+            w->term[1][26]*w->term[0][41];
+    t->Qd[42] = w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
+            w->term[1][26]*w->term[0][44];
+    check = t->Qd[38] + t->Qd[39] + t->Qd[40] + t->Qd[41] + t->Qd[42];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static gps_pseudorange11_twin_scalar process_noise_row_5(gps_pseudorange11_twin_transition *restrict
+        t, const gps_pseudorange11_twin_discretize_scratch *restrict w)
+{
+    gps_pseudorange11_twin_scalar check;
+    t->Qd[45] = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
+            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35];
+    t->Qd[46] = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
+            w->term[1][32]*w->term[0][38];
+    t->Qd[47] = w->term[1][30]*w->term[0][39] + w->term[1][31]*w->term[0][40] +
+            w->term[1][32]*w->term[0][41];
+    t->Qd[48] = w->term[1][30]*w->term[0][42] + w->term[1][31]*w->term[0][43] +
+            w->term[1][32]*w->term[0][44];
+    check = t->Qd[45] + t->Qd[46] + t->Qd[47] + t->Qd[48];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static gps_pseudorange11_twin_scalar process_noise_row_6(gps_pseudorange11_twin_transition *restrict
+        t, const gps_pseudorange11_twin_discretize_scratch *restrict w)
+{
+    gps_pseudorange11_twin_scalar check;
+    t->Qd[51] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
+            w->term[1][38]*w->term[0][38];
+    t->Qd[52] = w->term[1][36]*w->term[0][39] + w->term[1][37]*w->term[0][40] +
+            w->term[1][38]*w->term[0][41];
+    t->Qd[53] = w->term[1][36]*w->term[0][42] + w->term[1][37]*w->term[0][43] +
+            w->term[1][38]*w->term[0][44];
+    check = t->Qd[51] + t->Qd[52] + t->Qd[53];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static gps_pseudorange11_twin_scalar process_noise_row_7(gps_pseudorange11_twin_transition *restrict
+        t, const gps_pseudorange11_twin_discretize_scratch *restrict w)
+{
+    gps_pseudorange11_twin_scalar check;
+    t->Qd[56] = w->term[1][39]*w->term[0][39] + w->term[1][40]*w->term[0][40] +
+            w->term[1][41]*w->term[0][41];
+    t->Qd[57] = w->term[1][39]*w->term[0][42] + w->term[1][40]*w->term[0][43] +
+            w->term[1][41]*w->term[0][44];
+    check = t->Qd[56] + t->Qd[57];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static gps_pseudorange11_twin_scalar process_noise_row_8(gps_pseudorange11_twin_transition *restrict
+        t, const gps_pseudorange11_twin_discretize_scratch *restrict w)
+{
+    gps_pseudorange11_twin_scalar check;
+    t->Qd[60] = w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
+            w->term[1][44]*w->term[0][44];
+    check = t->Qd[60];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static gps_pseudorange11_twin_scalar process_noise_row_9(gps_pseudorange11_twin_transition *restrict
+        t, const gps_pseudorange11_twin_discretize_scratch *restrict w)
+{
+    gps_pseudorange11_twin_scalar check;
+    t->Qd[63] = w->term[1][45]*w->term[0][45] + w->term[1][46]*w->term[0][46];
+    t->Qd[64] = w->term[1][46]*w->term[0][47];
+    check = t->Qd[63] + t->Qd[64];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static gps_pseudorange11_twin_scalar process_noise_row_10(gps_pseudorange11_twin_transition
+        *restrict t, const gps_pseudorange11_twin_discretize_scratch *restrict w)
+{
+    gps_pseudorange11_twin_scalar check;
+    t->Qd[65] = w->term[1][47]*w->term[0][47];
+    check = t->Qd[65];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
@@ -1375,7 +1459,7 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
     int halvings, order, status;
     int k;
     gps_pseudorange11_twin_scalar sum_check;
-    gps_pseudorange11_twin_scalar qd_check;
+    gps_pseudorange11_twin_scalar qd_check = 0.0;
     gps_pseudorange11_twin_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (!isfinite(T)) {
         return GPS_PSEUDORANGE11_TWIN_ERR_NONFINITE;
@@ -1491,7 +1575,18 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
-    qd_check = process_noise(m, t, w, T);
+    process_noise(m, t, w, T);
+    qd_check += process_noise_row_0(t, w);
+    qd_check += process_noise_row_1(t, w);
+    qd_check += process_noise_row_2(t, w);
+    qd_check += process_noise_row_3(t, w);
+    qd_check += process_noise_row_4(t, w);
+    qd_check += process_noise_row_5(t, w);
+    qd_check += process_noise_row_6(t, w);
+    qd_check += process_noise_row_7(t, w);
+    qd_check += process_noise_row_8(t, w);
+    qd_check += process_noise_row_9(t, w);
+    qd_check += process_noise_row_10(t, w);
     if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
             entry */
         qd_check = 0.0;
@@ -2045,9 +2140,8 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_6(const gps_pseudorange11_twin
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_6(const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
+static gps_pseudorange11_twin_scalar propagate_row_6(const gps_pseudorange11_twin_transition
+        *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[51]; w->Pn[51] = v;
@@ -2080,9 +2174,8 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_7(const gps_pseudorange11_twin
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_7(const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
+static gps_pseudorange11_twin_scalar propagate_row_7(const gps_pseudorange11_twin_transition
+        *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[56]; w->Pn[56] = v;
@@ -2113,9 +2206,8 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_8(const gps_pseudorange11_twin
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_8(const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
+static gps_pseudorange11_twin_scalar propagate_row_8(const gps_pseudorange11_twin_transition
+        *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
     v = w->M[6]*t->Phi[60] + w->M[7]*t->Phi[61] + w->M[8]*t->Phi[62] + t->Qd[60]; w->Pn[60] = v;
@@ -2125,8 +2217,8 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_8(const
     return check - check;
 }
 
-GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_9(const gps_pseudorange11_twin_filter *restrict f,
-        const gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
+static void phi_times_p_row_9(const gps_pseudorange11_twin_filter *restrict f, const
+        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
     w->M[0] = t->Phi[63]*f->P[9][0] + t->Phi[64]*f->P[10][0];
@@ -2144,9 +2236,8 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_9(const gps_pseudorange11_twin
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_9(const
-        gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
-        *restrict w)
+static gps_pseudorange11_twin_scalar propagate_row_9(const gps_pseudorange11_twin_transition
+        *restrict t, gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
     v = w->M[9]*t->Phi[63] + w->M[10]*t->Phi[64] + t->Qd[63]; w->Pn[63] = v; check += v;
@@ -2156,9 +2247,9 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_9(const
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_10(const
-        gps_pseudorange11_twin_filter *restrict f, const gps_pseudorange11_twin_transition *restrict
-        t, gps_pseudorange11_twin_filter_scratch *restrict w)
+static gps_pseudorange11_twin_scalar propagate_row_10(const gps_pseudorange11_twin_filter *restrict
+        f, const gps_pseudorange11_twin_transition *restrict t,
+        gps_pseudorange11_twin_filter_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
     v = f->P[10][10] + t->Qd[65]; w->Pn[65] = v; check += v;

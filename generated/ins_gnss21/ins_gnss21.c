@@ -545,10 +545,13 @@ int ins_gnss21_matrices_evaluate(const ins_gnss21_params *restrict params, ins_g
     return INS_GNSS21_OK;
 }
 
-/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
-   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
-   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
-   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
+   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
+           is
+   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
+   products more often on its own than inside a caller of thousands of statements
+   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
+   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define INS_GNSS21_BLOCK static __attribute__((noinline))
 #else
@@ -2406,11 +2409,9 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][173] = w->S[209]*m->G[29];
 }
 
-INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *restrict m,
-        ins_gnss21_transition *restrict t, ins_gnss21_discretize_scratch *restrict w, const
-        ins_gnss21_scalar T)
+INS_GNSS21_BLOCK void process_noise(const ins_gnss21_matrices *restrict m, ins_gnss21_transition
+        *restrict t, ins_gnss21_discretize_scratch *restrict w, const ins_gnss21_scalar T)
 {
-    ins_gnss21_scalar v, check = 0.0;
     w->term[1][174] = T*m->q[0];
     w->term[1][175] = T*m->q[1];
     w->term[1][176] = T*m->q[2];
@@ -2603,569 +2604,6 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
     w->term[1][171] = w->term[0][171]*w->term[1][189];
     w->term[1][172] = w->term[0][172]*w->term[1][190];
     w->term[1][173] = w->term[0][173]*w->term[1][191];
-    v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
-            w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5]
-            + w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
-            w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9] +
-            w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11] +
-            w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[0] = v; check += v;
-    v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
-            w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23] + w->term[1][6]*w->term[0][24] +
-            w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
-            w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29] + w->term[1][12]*w->term[0][30] +
-            w->term[1][13]*w->term[0][31] + w->term[1][14]*w->term[0][32] +
-            w->term[1][15]*w->term[0][33] + w->term[1][16]*w->term[0][34] +
-            w->term[1][17]*w->term[0][35]; t->Qd[1] = v; check += v;
-    v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
-            w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
-            w->term[1][5]*w->term[0][41] + w->term[1][6]*w->term[0][42] +
-            w->term[1][7]*w->term[0][43] + w->term[1][8]*w->term[0][44] +
-            w->term[1][9]*w->term[0][45] + w->term[1][10]*w->term[0][46] +
-            w->term[1][11]*w->term[0][47] + w->term[1][12]*w->term[0][48] +
-            w->term[1][13]*w->term[0][49] + w->term[1][14]*w->term[0][50] +
-            w->term[1][15]*w->term[0][51] + w->term[1][16]*w->term[0][52] +
-            w->term[1][17]*w->term[0][53]; t->Qd[2] = v; check += v;
-    v = w->term[1][0]*w->term[0][54] + w->term[1][1]*w->term[0][55] + w->term[1][2]*w->term[0][56] +
-            w->term[1][3]*w->term[0][57] + w->term[1][4]*w->term[0][58] +
-            w->term[1][5]*w->term[0][59] + w->term[1][6]*w->term[0][60] +
-            w->term[1][7]*w->term[0][61] + w->term[1][8]*w->term[0][62] +
-            w->term[1][9]*w->term[0][63] + w->term[1][10]*w->term[0][64] +
-            w->term[1][11]*w->term[0][65] + w->term[1][12]*w->term[0][66] +
-            w->term[1][13]*w->term[0][67] + w->term[1][14]*w->term[0][68] +
-            w->term[1][15]*w->term[0][69] + w->term[1][16]*w->term[0][70] +
-            w->term[1][17]*w->term[0][71]; t->Qd[3] = v; check += v;
-    v = w->term[1][0]*w->term[0][72] + w->term[1][1]*w->term[0][73] + w->term[1][2]*w->term[0][74] +
-            w->term[1][3]*w->term[0][75] + w->term[1][4]*w->term[0][76] +
-            w->term[1][5]*w->term[0][77] + w->term[1][6]*w->term[0][78] +
-            w->term[1][7]*w->term[0][79] + w->term[1][8]*w->term[0][80] +
-            w->term[1][9]*w->term[0][81] + w->term[1][10]*w->term[0][82] +
-            w->term[1][11]*w->term[0][83] + w->term[1][12]*w->term[0][84] +
-            w->term[1][13]*w->term[0][85] + w->term[1][14]*w->term[0][86] +
-            w->term[1][15]*w->term[0][87] + w->term[1][16]*w->term[0][88] +
-            w->term[1][17]*w->term[0][89]; t->Qd[4] = v; check += v;
-    v = w->term[1][0]*w->term[0][90] + w->term[1][1]*w->term[0][91] + w->term[1][2]*w->term[0][92] +
-            w->term[1][3]*w->term[0][93] + w->term[1][4]*w->term[0][94] +
-            w->term[1][5]*w->term[0][95] + w->term[1][6]*w->term[0][96] +
-            w->term[1][7]*w->term[0][97] + w->term[1][8]*w->term[0][98] +
-            w->term[1][9]*w->term[0][99] + w->term[1][10]*w->term[0][100] +
-            w->term[1][11]*w->term[0][101] + w->term[1][12]*w->term[0][102] +
-            w->term[1][13]*w->term[0][103] + w->term[1][14]*w->term[0][104] +
-            w->term[1][15]*w->term[0][105] + w->term[1][16]*w->term[0][106] +
-            w->term[1][17]*w->term[0][107]; t->Qd[5] = v; check += v;
-    v = w->term[1][0]*w->term[0][108] + w->term[1][1]*w->term[0][109] +
-            w->term[1][2]*w->term[0][110] + w->term[1][3]*w->term[0][111] +
-            w->term[1][4]*w->term[0][112] + w->term[1][5]*w->term[0][113] +
-            w->term[1][6]*w->term[0][114] + w->term[1][7]*w->term[0][115] +
-            w->term[1][8]*w->term[0][116] + w->term[1][9]*w->term[0][117] +
-            w->term[1][10]*w->term[0][118] + w->term[1][11]*w->term[0][119] +
-            w->term[1][12]*w->term[0][120] + w->term[1][13]*w->term[0][121] +
-            w->term[1][14]*w->term[0][122] + w->term[1][15]*w->term[0][123] +
-            w->term[1][16]*w->term[0][124] + w->term[1][17]*w->term[0][125]; t->Qd[6] = v; check +=
-            v;
-    v = w->term[1][0]*w->term[0][126] + w->term[1][1]*w->term[0][127] +
-            w->term[1][2]*w->term[0][128] + w->term[1][3]*w->term[0][129] +
-            w->term[1][4]*w->term[0][130] + w->term[1][5]*w->term[0][131] +
-            w->term[1][6]*w->term[0][132] + w->term[1][7]*w->term[0][133] +
-            w->term[1][8]*w->term[0][134] + w->term[1][9]*w->term[0][135] +
-            w->term[1][10]*w->term[0][136] + w->term[1][11]*w->term[0][137] +
-            w->term[1][12]*w->term[0][138] + w->term[1][13]*w->term[0][139] +
-            w->term[1][14]*w->term[0][140] + w->term[1][15]*w->term[0][141] +
-            w->term[1][16]*w->term[0][142] + w->term[1][17]*w->term[0][143]; t->Qd[7] = v; check +=
-            v;
-    v = w->term[1][0]*w->term[0][144] + w->term[1][1]*w->term[0][145] +
-            w->term[1][2]*w->term[0][146] + w->term[1][3]*w->term[0][147] +
-            w->term[1][4]*w->term[0][148] + w->term[1][5]*w->term[0][149] +
-            w->term[1][6]*w->term[0][150] + w->term[1][7]*w->term[0][151] +
-            w->term[1][8]*w->term[0][152] + w->term[1][9]*w->term[0][153] +
-            w->term[1][10]*w->term[0][154] + w->term[1][11]*w->term[0][155] +
-            w->term[1][12]*w->term[0][156] + w->term[1][13]*w->term[0][157] +
-            w->term[1][14]*w->term[0][158] + w->term[1][15]*w->term[0][159] +
-            w->term[1][16]*w->term[0][160] + w->term[1][17]*w->term[0][161]; t->Qd[8] = v; check +=
-            v;
-    v = w->term[1][6]*w->term[0][162]; t->Qd[9] = v; check += v;
-    v = w->term[1][7]*w->term[0][163]; t->Qd[10] = v; check += v;
-    v = w->term[1][8]*w->term[0][164]; t->Qd[11] = v; check += v;
-    v = w->term[1][9]*w->term[0][165]; t->Qd[12] = v; check += v;
-    v = w->term[1][10]*w->term[0][166]; t->Qd[13] = v; check += v;
-    v = w->term[1][11]*w->term[0][167]; t->Qd[14] = v; check += v;
-    v = w->term[1][12]*w->term[0][168]; t->Qd[15] = v; check += v;
-    v = w->term[1][13]*w->term[0][169]; t->Qd[16] = v; check += v;
-    v = w->term[1][14]*w->term[0][170]; t->Qd[17] = v; check += v;
-    v = w->term[1][15]*w->term[0][171]; t->Qd[18] = v; check += v;
-    v = w->term[1][16]*w->term[0][172]; t->Qd[19] = v; check += v;
-    v = w->term[1][17]*w->term[0][173]; t->Qd[20] = v; check += v;
-    v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23] +
-            w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29] +
-            w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
-            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[21] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41] +
-            w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
-            w->term[1][26]*w->term[0][44] + w->term[1][27]*w->term[0][45] +
-            w->term[1][28]*w->term[0][46] + w->term[1][29]*w->term[0][47] +
-            w->term[1][30]*w->term[0][48] + w->term[1][31]*w->term[0][49] +
-            w->term[1][32]*w->term[0][50] + w->term[1][33]*w->term[0][51] +
-            w->term[1][34]*w->term[0][52] + w->term[1][35]*w->term[0][53]; t->Qd[22] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][54] + w->term[1][19]*w->term[0][55] +
-            w->term[1][20]*w->term[0][56] + w->term[1][21]*w->term[0][57] +
-            w->term[1][22]*w->term[0][58] + w->term[1][23]*w->term[0][59] +
-            w->term[1][24]*w->term[0][60] + w->term[1][25]*w->term[0][61] +
-            w->term[1][26]*w->term[0][62] + w->term[1][27]*w->term[0][63] +
-            w->term[1][28]*w->term[0][64] + w->term[1][29]*w->term[0][65] +
-            w->term[1][30]*w->term[0][66] + w->term[1][31]*w->term[0][67] +
-            w->term[1][32]*w->term[0][68] + w->term[1][33]*w->term[0][69] +
-            w->term[1][34]*w->term[0][70] + w->term[1][35]*w->term[0][71]; t->Qd[23] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][72] + w->term[1][19]*w->term[0][73] +
-            w->term[1][20]*w->term[0][74] + w->term[1][21]*w->term[0][75] +
-            w->term[1][22]*w->term[0][76] + w->term[1][23]*w->term[0][77] +
-            w->term[1][24]*w->term[0][78] + w->term[1][25]*w->term[0][79] +
-            w->term[1][26]*w->term[0][80] + w->term[1][27]*w->term[0][81] +
-            w->term[1][28]*w->term[0][82] + w->term[1][29]*w->term[0][83] +
-            w->term[1][30]*w->term[0][84] + w->term[1][31]*w->term[0][85] +
-            w->term[1][32]*w->term[0][86] + w->term[1][33]*w->term[0][87] +
-            w->term[1][34]*w->term[0][88] + w->term[1][35]*w->term[0][89]; t->Qd[24] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][90] + w->term[1][19]*w->term[0][91] +
-            w->term[1][20]*w->term[0][92] + w->term[1][21]*w->term[0][93] +
-            w->term[1][22]*w->term[0][94] + w->term[1][23]*w->term[0][95] +
-            w->term[1][24]*w->term[0][96] + w->term[1][25]*w->term[0][97] +
-            w->term[1][26]*w->term[0][98] + w->term[1][27]*w->term[0][99] +
-            w->term[1][28]*w->term[0][100] + w->term[1][29]*w->term[0][101] +
-            w->term[1][30]*w->term[0][102] + w->term[1][31]*w->term[0][103] +
-            w->term[1][32]*w->term[0][104] + w->term[1][33]*w->term[0][105] +
-            w->term[1][34]*w->term[0][106] + w->term[1][35]*w->term[0][107]; t->Qd[25] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][108] + w->term[1][19]*w->term[0][109] +
-            w->term[1][20]*w->term[0][110] + w->term[1][21]*w->term[0][111] +
-            w->term[1][22]*w->term[0][112] + w->term[1][23]*w->term[0][113] +
-            w->term[1][24]*w->term[0][114] + w->term[1][25]*w->term[0][115] +
-            w->term[1][26]*w->term[0][116] + w->term[1][27]*w->term[0][117] +
-            w->term[1][28]*w->term[0][118] + w->term[1][29]*w->term[0][119] +
-            w->term[1][30]*w->term[0][120] + w->term[1][31]*w->term[0][121] +
-            w->term[1][32]*w->term[0][122] + w->term[1][33]*w->term[0][123] +
-            w->term[1][34]*w->term[0][124] + w->term[1][35]*w->term[0][125]; t->Qd[26] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][126] + w->term[1][19]*w->term[0][127] +
-            w->term[1][20]*w->term[0][128] + w->term[1][21]*w->term[0][129] +
-            w->term[1][22]*w->term[0][130] + w->term[1][23]*w->term[0][131] +
-            w->term[1][24]*w->term[0][132] + w->term[1][25]*w->term[0][133] +
-            w->term[1][26]*w->term[0][134] + w->term[1][27]*w->term[0][135] +
-            w->term[1][28]*w->term[0][136] + w->term[1][29]*w->term[0][137] +
-            w->term[1][30]*w->term[0][138] + w->term[1][31]*w->term[0][139] +
-            w->term[1][32]*w->term[0][140] + w->term[1][33]*w->term[0][141] +
-            w->term[1][34]*w->term[0][142] + w->term[1][35]*w->term[0][143]; t->Qd[27] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][144] + w->term[1][19]*w->term[0][145] +
-            w->term[1][20]*w->term[0][146] + w->term[1][21]*w->term[0][147] +
-            w->term[1][22]*w->term[0][148] + w->term[1][23]*w->term[0][149] +
-            w->term[1][24]*w->term[0][150] + w->term[1][25]*w->term[0][151] +
-            w->term[1][26]*w->term[0][152] + w->term[1][27]*w->term[0][153] +
-            w->term[1][28]*w->term[0][154] + w->term[1][29]*w->term[0][155] +
-            w->term[1][30]*w->term[0][156] + w->term[1][31]*w->term[0][157] +
-            w->term[1][32]*w->term[0][158] + w->term[1][33]*w->term[0][159] +
-            w->term[1][34]*w->term[0][160] + w->term[1][35]*w->term[0][161]; t->Qd[28] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][162]; t->Qd[29] = v; check += v;
-    v = w->term[1][25]*w->term[0][163]; t->Qd[30] = v; check += v;
-    v = w->term[1][26]*w->term[0][164]; t->Qd[31] = v; check += v;
-    v = w->term[1][27]*w->term[0][165]; t->Qd[32] = v; check += v;
-    v = w->term[1][28]*w->term[0][166]; t->Qd[33] = v; check += v;
-    v = w->term[1][29]*w->term[0][167]; t->Qd[34] = v; check += v;
-    v = w->term[1][30]*w->term[0][168]; t->Qd[35] = v; check += v;
-    v = w->term[1][31]*w->term[0][169]; t->Qd[36] = v; check += v;
-    v = w->term[1][32]*w->term[0][170]; t->Qd[37] = v; check += v;
-    v = w->term[1][33]*w->term[0][171]; t->Qd[38] = v; check += v;
-    v = w->term[1][34]*w->term[0][172]; t->Qd[39] = v; check += v;
-    v = w->term[1][35]*w->term[0][173]; t->Qd[40] = v; check += v;
-    v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41] +
-            w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
-            w->term[1][44]*w->term[0][44] + w->term[1][45]*w->term[0][45] +
-            w->term[1][46]*w->term[0][46] + w->term[1][47]*w->term[0][47] +
-            w->term[1][48]*w->term[0][48] + w->term[1][49]*w->term[0][49] +
-            w->term[1][50]*w->term[0][50] + w->term[1][51]*w->term[0][51] +
-            w->term[1][52]*w->term[0][52] + w->term[1][53]*w->term[0][53]; t->Qd[41] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][54] + w->term[1][37]*w->term[0][55] +
-            w->term[1][38]*w->term[0][56] + w->term[1][39]*w->term[0][57] +
-            w->term[1][40]*w->term[0][58] + w->term[1][41]*w->term[0][59] +
-            w->term[1][42]*w->term[0][60] + w->term[1][43]*w->term[0][61] +
-            w->term[1][44]*w->term[0][62] + w->term[1][45]*w->term[0][63] +
-            w->term[1][46]*w->term[0][64] + w->term[1][47]*w->term[0][65] +
-            w->term[1][48]*w->term[0][66] + w->term[1][49]*w->term[0][67] +
-            w->term[1][50]*w->term[0][68] + w->term[1][51]*w->term[0][69] +
-            w->term[1][52]*w->term[0][70] + w->term[1][53]*w->term[0][71]; t->Qd[42] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][72] + w->term[1][37]*w->term[0][73] +
-            w->term[1][38]*w->term[0][74] + w->term[1][39]*w->term[0][75] +
-            w->term[1][40]*w->term[0][76] + w->term[1][41]*w->term[0][77] +
-            w->term[1][42]*w->term[0][78] + w->term[1][43]*w->term[0][79] +
-            w->term[1][44]*w->term[0][80] + w->term[1][45]*w->term[0][81] +
-            w->term[1][46]*w->term[0][82] + w->term[1][47]*w->term[0][83] +
-            w->term[1][48]*w->term[0][84] + w->term[1][49]*w->term[0][85] +
-            w->term[1][50]*w->term[0][86] + w->term[1][51]*w->term[0][87] +
-            w->term[1][52]*w->term[0][88] + w->term[1][53]*w->term[0][89]; t->Qd[43] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][90] + w->term[1][37]*w->term[0][91] +
-            w->term[1][38]*w->term[0][92] + w->term[1][39]*w->term[0][93] +
-            w->term[1][40]*w->term[0][94] + w->term[1][41]*w->term[0][95] +
-            w->term[1][42]*w->term[0][96] + w->term[1][43]*w->term[0][97] +
-            w->term[1][44]*w->term[0][98] + w->term[1][45]*w->term[0][99] +
-            w->term[1][46]*w->term[0][100] + w->term[1][47]*w->term[0][101] +
-            w->term[1][48]*w->term[0][102] + w->term[1][49]*w->term[0][103] +
-            w->term[1][50]*w->term[0][104] + w->term[1][51]*w->term[0][105] +
-            w->term[1][52]*w->term[0][106] + w->term[1][53]*w->term[0][107]; t->Qd[44] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][108] + w->term[1][37]*w->term[0][109] +
-            w->term[1][38]*w->term[0][110] + w->term[1][39]*w->term[0][111] +
-            w->term[1][40]*w->term[0][112] + w->term[1][41]*w->term[0][113] +
-            w->term[1][42]*w->term[0][114] + w->term[1][43]*w->term[0][115] +
-            w->term[1][44]*w->term[0][116] + w->term[1][45]*w->term[0][117] +
-            w->term[1][46]*w->term[0][118] + w->term[1][47]*w->term[0][119] +
-            w->term[1][48]*w->term[0][120] + w->term[1][49]*w->term[0][121] +
-            w->term[1][50]*w->term[0][122] + w->term[1][51]*w->term[0][123] +
-            w->term[1][52]*w->term[0][124] + w->term[1][53]*w->term[0][125]; t->Qd[45] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][126] + w->term[1][37]*w->term[0][127] +
-            w->term[1][38]*w->term[0][128] + w->term[1][39]*w->term[0][129] +
-            w->term[1][40]*w->term[0][130] + w->term[1][41]*w->term[0][131] +
-            w->term[1][42]*w->term[0][132] + w->term[1][43]*w->term[0][133] +
-            w->term[1][44]*w->term[0][134] + w->term[1][45]*w->term[0][135] +
-            w->term[1][46]*w->term[0][136] + w->term[1][47]*w->term[0][137] +
-            w->term[1][48]*w->term[0][138] + w->term[1][49]*w->term[0][139] +
-            w->term[1][50]*w->term[0][140] + w->term[1][51]*w->term[0][141] +
-            w->term[1][52]*w->term[0][142] + w->term[1][53]*w->term[0][143]; t->Qd[46] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][144] + w->term[1][37]*w->term[0][145] +
-            w->term[1][38]*w->term[0][146] + w->term[1][39]*w->term[0][147] +
-            w->term[1][40]*w->term[0][148] + w->term[1][41]*w->term[0][149] +
-            w->term[1][42]*w->term[0][150] + w->term[1][43]*w->term[0][151] +
-            w->term[1][44]*w->term[0][152] + w->term[1][45]*w->term[0][153] +
-            w->term[1][46]*w->term[0][154] + w->term[1][47]*w->term[0][155] +
-            w->term[1][48]*w->term[0][156] + w->term[1][49]*w->term[0][157] +
-            w->term[1][50]*w->term[0][158] + w->term[1][51]*w->term[0][159] +
-            w->term[1][52]*w->term[0][160] + w->term[1][53]*w->term[0][161]; t->Qd[47] = v; check +=
-            v;
-    v = w->term[1][42]*w->term[0][162]; t->Qd[48] = v; check += v;
-    v = w->term[1][43]*w->term[0][163]; t->Qd[49] = v; check += v;
-    v = w->term[1][44]*w->term[0][164]; t->Qd[50] = v; check += v;
-    v = w->term[1][45]*w->term[0][165]; t->Qd[51] = v; check += v;
-    v = w->term[1][46]*w->term[0][166]; t->Qd[52] = v; check += v;
-    v = w->term[1][47]*w->term[0][167]; t->Qd[53] = v; check += v;
-    v = w->term[1][48]*w->term[0][168]; t->Qd[54] = v; check += v;
-    v = w->term[1][49]*w->term[0][169]; t->Qd[55] = v; check += v;
-    v = w->term[1][50]*w->term[0][170]; t->Qd[56] = v; check += v;
-    v = w->term[1][51]*w->term[0][171]; t->Qd[57] = v; check += v;
-    v = w->term[1][52]*w->term[0][172]; t->Qd[58] = v; check += v;
-    v = w->term[1][53]*w->term[0][173]; t->Qd[59] = v; check += v;
-    v = w->term[1][54]*w->term[0][54] + w->term[1][55]*w->term[0][55] +
-            w->term[1][56]*w->term[0][56] + w->term[1][57]*w->term[0][57] +
-            w->term[1][58]*w->term[0][58] + w->term[1][59]*w->term[0][59] +
-            w->term[1][60]*w->term[0][60] + w->term[1][61]*w->term[0][61] +
-            w->term[1][62]*w->term[0][62] + w->term[1][63]*w->term[0][63] +
-            w->term[1][64]*w->term[0][64] + w->term[1][65]*w->term[0][65] +
-            w->term[1][66]*w->term[0][66] + w->term[1][67]*w->term[0][67] +
-            w->term[1][68]*w->term[0][68] + w->term[1][69]*w->term[0][69] +
-            w->term[1][70]*w->term[0][70] + w->term[1][71]*w->term[0][71]; t->Qd[60] = v; check +=
-            v;
-    v = w->term[1][54]*w->term[0][72] + w->term[1][55]*w->term[0][73] +
-            w->term[1][56]*w->term[0][74] + w->term[1][57]*w->term[0][75] +
-            w->term[1][58]*w->term[0][76] + w->term[1][59]*w->term[0][77] +
-            w->term[1][60]*w->term[0][78] + w->term[1][61]*w->term[0][79] +
-            w->term[1][62]*w->term[0][80] + w->term[1][63]*w->term[0][81] +
-            w->term[1][64]*w->term[0][82] + w->term[1][65]*w->term[0][83] +
-            w->term[1][66]*w->term[0][84] + w->term[1][67]*w->term[0][85] +
-            w->term[1][68]*w->term[0][86] + w->term[1][69]*w->term[0][87] +
-            w->term[1][70]*w->term[0][88] + w->term[1][71]*w->term[0][89]; t->Qd[61] = v; check +=
-            v;
-    v = w->term[1][54]*w->term[0][90] + w->term[1][55]*w->term[0][91] +
-            w->term[1][56]*w->term[0][92] + w->term[1][57]*w->term[0][93] +
-            w->term[1][58]*w->term[0][94] + w->term[1][59]*w->term[0][95] +
-            w->term[1][60]*w->term[0][96] + w->term[1][61]*w->term[0][97] +
-            w->term[1][62]*w->term[0][98] + w->term[1][63]*w->term[0][99] +
-            w->term[1][64]*w->term[0][100] + w->term[1][65]*w->term[0][101] +
-            w->term[1][66]*w->term[0][102] + w->term[1][67]*w->term[0][103] +
-            w->term[1][68]*w->term[0][104] + w->term[1][69]*w->term[0][105] +
-            w->term[1][70]*w->term[0][106] + w->term[1][71]*w->term[0][107]; t->Qd[62] = v; check +=
-            v;
-    v = w->term[1][54]*w->term[0][108] + w->term[1][55]*w->term[0][109] +
-            w->term[1][56]*w->term[0][110] + w->term[1][57]*w->term[0][111] +
-            w->term[1][58]*w->term[0][112] + w->term[1][59]*w->term[0][113] +
-            w->term[1][60]*w->term[0][114] + w->term[1][61]*w->term[0][115] +
-            w->term[1][62]*w->term[0][116] + w->term[1][63]*w->term[0][117] +
-            w->term[1][64]*w->term[0][118] + w->term[1][65]*w->term[0][119] +
-            w->term[1][66]*w->term[0][120] + w->term[1][67]*w->term[0][121] +
-            w->term[1][68]*w->term[0][122] + w->term[1][69]*w->term[0][123] +
-            w->term[1][70]*w->term[0][124] + w->term[1][71]*w->term[0][125]; t->Qd[63] = v; check +=
-            v;
-    v = w->term[1][54]*w->term[0][126] + w->term[1][55]*w->term[0][127] +
-            w->term[1][56]*w->term[0][128] + w->term[1][57]*w->term[0][129] +
-            w->term[1][58]*w->term[0][130] + w->term[1][59]*w->term[0][131] +
-            w->term[1][60]*w->term[0][132] + w->term[1][61]*w->term[0][133] +
-            w->term[1][62]*w->term[0][134] + w->term[1][63]*w->term[0][135] +
-            w->term[1][64]*w->term[0][136] + w->term[1][65]*w->term[0][137] +
-            w->term[1][66]*w->term[0][138] + w->term[1][67]*w->term[0][139] +
-            w->term[1][68]*w->term[0][140] + w->term[1][69]*w->term[0][141] +
-            w->term[1][70]*w->term[0][142] + w->term[1][71]*w->term[0][143]; t->Qd[64] = v; check +=
-            v;
-    v = w->term[1][54]*w->term[0][144] + w->term[1][55]*w->term[0][145] +
-            w->term[1][56]*w->term[0][146] + w->term[1][57]*w->term[0][147] +
-            w->term[1][58]*w->term[0][148] + w->term[1][59]*w->term[0][149] +
-            w->term[1][60]*w->term[0][150] + w->term[1][61]*w->term[0][151] +
-            w->term[1][62]*w->term[0][152] + w->term[1][63]*w->term[0][153] +
-            w->term[1][64]*w->term[0][154] + w->term[1][65]*w->term[0][155] +
-            w->term[1][66]*w->term[0][156] + w->term[1][67]*w->term[0][157] +
-            w->term[1][68]*w->term[0][158] + w->term[1][69]*w->term[0][159] +
-            w->term[1][70]*w->term[0][160] + w->term[1][71]*w->term[0][161]; t->Qd[65] = v; check +=
-            v;
-    v = w->term[1][60]*w->term[0][162]; t->Qd[66] = v; check += v;
-    v = w->term[1][61]*w->term[0][163]; t->Qd[67] = v; check += v;
-    v = w->term[1][62]*w->term[0][164]; t->Qd[68] = v; check += v;
-    v = w->term[1][63]*w->term[0][165]; t->Qd[69] = v; check += v;
-    v = w->term[1][64]*w->term[0][166]; t->Qd[70] = v; check += v;
-    v = w->term[1][65]*w->term[0][167]; t->Qd[71] = v; check += v;
-    v = w->term[1][66]*w->term[0][168]; t->Qd[72] = v; check += v;
-    v = w->term[1][67]*w->term[0][169]; t->Qd[73] = v; check += v;
-    v = w->term[1][68]*w->term[0][170]; t->Qd[74] = v; check += v;
-    v = w->term[1][69]*w->term[0][171]; t->Qd[75] = v; check += v;
-    v = w->term[1][70]*w->term[0][172]; t->Qd[76] = v; check += v;
-    v = w->term[1][71]*w->term[0][173]; t->Qd[77] = v; check += v;
-    v = w->term[1][72]*w->term[0][72] + w->term[1][73]*w->term[0][73] +
-            w->term[1][74]*w->term[0][74] + w->term[1][75]*w->term[0][75] +
-            w->term[1][76]*w->term[0][76] + w->term[1][77]*w->term[0][77] +
-            w->term[1][78]*w->term[0][78] + w->term[1][79]*w->term[0][79] +
-            w->term[1][80]*w->term[0][80] + w->term[1][81]*w->term[0][81] +
-            w->term[1][82]*w->term[0][82] + w->term[1][83]*w->term[0][83] +
-            w->term[1][84]*w->term[0][84] + w->term[1][85]*w->term[0][85] +
-            w->term[1][86]*w->term[0][86] + w->term[1][87]*w->term[0][87] +
-            w->term[1][88]*w->term[0][88] + w->term[1][89]*w->term[0][89]; t->Qd[78] = v; check +=
-            v;
-    v = w->term[1][72]*w->term[0][90] + w->term[1][73]*w->term[0][91] +
-            w->term[1][74]*w->term[0][92] + w->term[1][75]*w->term[0][93] +
-            w->term[1][76]*w->term[0][94] + w->term[1][77]*w->term[0][95] +
-            w->term[1][78]*w->term[0][96] + w->term[1][79]*w->term[0][97] +
-            w->term[1][80]*w->term[0][98] + w->term[1][81]*w->term[0][99] +
-            w->term[1][82]*w->term[0][100] + w->term[1][83]*w->term[0][101] +
-            w->term[1][84]*w->term[0][102] + w->term[1][85]*w->term[0][103] +
-            w->term[1][86]*w->term[0][104] + w->term[1][87]*w->term[0][105] +
-            w->term[1][88]*w->term[0][106] + w->term[1][89]*w->term[0][107]; t->Qd[79] = v; check +=
-            v;
-    v = w->term[1][72]*w->term[0][108] + w->term[1][73]*w->term[0][109] +
-            w->term[1][74]*w->term[0][110] + w->term[1][75]*w->term[0][111] +
-            w->term[1][76]*w->term[0][112] + w->term[1][77]*w->term[0][113] +
-            w->term[1][78]*w->term[0][114] + w->term[1][79]*w->term[0][115] +
-            w->term[1][80]*w->term[0][116] + w->term[1][81]*w->term[0][117] +
-            w->term[1][82]*w->term[0][118] + w->term[1][83]*w->term[0][119] +
-            w->term[1][84]*w->term[0][120] + w->term[1][85]*w->term[0][121] +
-            w->term[1][86]*w->term[0][122] + w->term[1][87]*w->term[0][123] +
-            w->term[1][88]*w->term[0][124] + w->term[1][89]*w->term[0][125]; t->Qd[80] = v; check +=
-            v;
-    v = w->term[1][72]*w->term[0][126] + w->term[1][73]*w->term[0][127] +
-            w->term[1][74]*w->term[0][128] + w->term[1][75]*w->term[0][129] +
-            w->term[1][76]*w->term[0][130] + w->term[1][77]*w->term[0][131] +
-            w->term[1][78]*w->term[0][132] + w->term[1][79]*w->term[0][133] +
-            w->term[1][80]*w->term[0][134] + w->term[1][81]*w->term[0][135] +
-            w->term[1][82]*w->term[0][136] + w->term[1][83]*w->term[0][137] +
-            w->term[1][84]*w->term[0][138] + w->term[1][85]*w->term[0][139] +
-            w->term[1][86]*w->term[0][140] + w->term[1][87]*w->term[0][141] +
-            w->term[1][88]*w->term[0][142] + w->term[1][89]*w->term[0][143]; t->Qd[81] = v; check +=
-            v;
-    v = w->term[1][72]*w->term[0][144] + w->term[1][73]*w->term[0][145] +
-            w->term[1][74]*w->term[0][146] + w->term[1][75]*w->term[0][147] +
-            w->term[1][76]*w->term[0][148] + w->term[1][77]*w->term[0][149] +
-            w->term[1][78]*w->term[0][150] + w->term[1][79]*w->term[0][151] +
-            w->term[1][80]*w->term[0][152] + w->term[1][81]*w->term[0][153] +
-            w->term[1][82]*w->term[0][154] + w->term[1][83]*w->term[0][155] +
-            w->term[1][84]*w->term[0][156] + w->term[1][85]*w->term[0][157] +
-            w->term[1][86]*w->term[0][158] + w->term[1][87]*w->term[0][159] +
-            w->term[1][88]*w->term[0][160] + w->term[1][89]*w->term[0][161]; t->Qd[82] = v; check +=
-            v;
-    v = w->term[1][78]*w->term[0][162]; t->Qd[83] = v; check += v;
-    v = w->term[1][79]*w->term[0][163]; t->Qd[84] = v; check += v;
-    v = w->term[1][80]*w->term[0][164]; t->Qd[85] = v; check += v;
-    v = w->term[1][81]*w->term[0][165]; t->Qd[86] = v; check += v;
-    v = w->term[1][82]*w->term[0][166]; t->Qd[87] = v; check += v;
-    v = w->term[1][83]*w->term[0][167]; t->Qd[88] = v; check += v;
-    v = w->term[1][84]*w->term[0][168]; t->Qd[89] = v; check += v;
-    v = w->term[1][85]*w->term[0][169]; t->Qd[90] = v; check += v;
-    v = w->term[1][86]*w->term[0][170]; t->Qd[91] = v; check += v;
-    v = w->term[1][87]*w->term[0][171]; t->Qd[92] = v; check += v;
-    v = w->term[1][88]*w->term[0][172]; t->Qd[93] = v; check += v;
-    v = w->term[1][89]*w->term[0][173]; t->Qd[94] = v; check += v;
-    v = w->term[1][90]*w->term[0][90] + w->term[1][91]*w->term[0][91] +
-            w->term[1][92]*w->term[0][92] + w->term[1][93]*w->term[0][93] +
-            w->term[1][94]*w->term[0][94] + w->term[1][95]*w->term[0][95] +
-            w->term[1][96]*w->term[0][96] + w->term[1][97]*w->term[0][97] +
-            w->term[1][98]*w->term[0][98] + w->term[1][99]*w->term[0][99] +
-            w->term[1][100]*w->term[0][100] + w->term[1][101]*w->term[0][101] +
-            w->term[1][102]*w->term[0][102] + w->term[1][103]*w->term[0][103] +
-            w->term[1][104]*w->term[0][104] + w->term[1][105]*w->term[0][105] +
-            w->term[1][106]*w->term[0][106] + w->term[1][107]*w->term[0][107]; t->Qd[95] = v; check
-            += v;
-    v = w->term[1][90]*w->term[0][108] + w->term[1][91]*w->term[0][109] +
-            w->term[1][92]*w->term[0][110] + w->term[1][93]*w->term[0][111] +
-            w->term[1][94]*w->term[0][112] + w->term[1][95]*w->term[0][113] +
-            w->term[1][96]*w->term[0][114] + w->term[1][97]*w->term[0][115] +
-            w->term[1][98]*w->term[0][116] + w->term[1][99]*w->term[0][117] +
-            w->term[1][100]*w->term[0][118] + w->term[1][101]*w->term[0][119] +
-            w->term[1][102]*w->term[0][120] + w->term[1][103]*w->term[0][121] +
-            w->term[1][104]*w->term[0][122] + w->term[1][105]*w->term[0][123] +
-            w->term[1][106]*w->term[0][124] + w->term[1][107]*w->term[0][125]; t->Qd[96] = v; check
-            += v;
-    v = w->term[1][90]*w->term[0][126] + w->term[1][91]*w->term[0][127] +
-            w->term[1][92]*w->term[0][128] + w->term[1][93]*w->term[0][129] +
-            w->term[1][94]*w->term[0][130] + w->term[1][95]*w->term[0][131] +
-            w->term[1][96]*w->term[0][132] + w->term[1][97]*w->term[0][133] +
-            w->term[1][98]*w->term[0][134] + w->term[1][99]*w->term[0][135] +
-            w->term[1][100]*w->term[0][136] + w->term[1][101]*w->term[0][137] +
-            w->term[1][102]*w->term[0][138] + w->term[1][103]*w->term[0][139] +
-            w->term[1][104]*w->term[0][140] + w->term[1][105]*w->term[0][141] +
-            w->term[1][106]*w->term[0][142] + w->term[1][107]*w->term[0][143]; t->Qd[97] = v; check
-            += v;
-    v = w->term[1][90]*w->term[0][144] + w->term[1][91]*w->term[0][145] +
-            w->term[1][92]*w->term[0][146] + w->term[1][93]*w->term[0][147] +
-            w->term[1][94]*w->term[0][148] + w->term[1][95]*w->term[0][149] +
-            w->term[1][96]*w->term[0][150] + w->term[1][97]*w->term[0][151] +
-            w->term[1][98]*w->term[0][152] + w->term[1][99]*w->term[0][153] +
-            w->term[1][100]*w->term[0][154] + w->term[1][101]*w->term[0][155] +
-            w->term[1][102]*w->term[0][156] + w->term[1][103]*w->term[0][157] +
-            w->term[1][104]*w->term[0][158] + w->term[1][105]*w->term[0][159] +
-            w->term[1][106]*w->term[0][160] + w->term[1][107]*w->term[0][161]; t->Qd[98] = v; check
-            += v;
-    v = w->term[1][96]*w->term[0][162]; t->Qd[99] = v; check += v;
-    v = w->term[1][97]*w->term[0][163]; t->Qd[100] = v; check += v;
-    v = w->term[1][98]*w->term[0][164]; t->Qd[101] = v; check += v;
-    v = w->term[1][99]*w->term[0][165]; t->Qd[102] = v; check += v;
-    v = w->term[1][100]*w->term[0][166]; t->Qd[103] = v; check += v;
-    v = w->term[1][101]*w->term[0][167]; t->Qd[104] = v; check += v;
-    v = w->term[1][102]*w->term[0][168]; t->Qd[105] = v; check += v;
-    v = w->term[1][103]*w->term[0][169]; t->Qd[106] = v; check += v;
-    v = w->term[1][104]*w->term[0][170]; t->Qd[107] = v; check += v;
-    v = w->term[1][105]*w->term[0][171]; t->Qd[108] = v; check += v;
-    v = w->term[1][106]*w->term[0][172]; t->Qd[109] = v; check += v;
-    v = w->term[1][107]*w->term[0][173]; t->Qd[110] = v; check += v;
-    v = w->term[1][108]*w->term[0][108] + w->term[1][109]*w->term[0][109] +
-            w->term[1][110]*w->term[0][110] + w->term[1][111]*w->term[0][111] +
-            w->term[1][112]*w->term[0][112] + w->term[1][113]*w->term[0][113] +
-            w->term[1][114]*w->term[0][114] + w->term[1][115]*w->term[0][115] +
-            w->term[1][116]*w->term[0][116] + w->term[1][117]*w->term[0][117] +
-            w->term[1][118]*w->term[0][118] + w->term[1][119]*w->term[0][119] +
-            w->term[1][120]*w->term[0][120] + w->term[1][121]*w->term[0][121] +
-            w->term[1][122]*w->term[0][122] + w->term[1][123]*w->term[0][123] +
-            w->term[1][124]*w->term[0][124] + w->term[1][125]*w->term[0][125]; t->Qd[111] = v; check
-            += v;
-    v = w->term[1][108]*w->term[0][126] + w->term[1][109]*w->term[0][127] +
-            w->term[1][110]*w->term[0][128] + w->term[1][111]*w->term[0][129] +
-            w->term[1][112]*w->term[0][130] + w->term[1][113]*w->term[0][131] +
-            w->term[1][114]*w->term[0][132] + w->term[1][115]*w->term[0][133] +
-            w->term[1][116]*w->term[0][134] + w->term[1][117]*w->term[0][135] +
-            w->term[1][118]*w->term[0][136] + w->term[1][119]*w->term[0][137] +
-            w->term[1][120]*w->term[0][138] + w->term[1][121]*w->term[0][139] +
-            w->term[1][122]*w->term[0][140] + w->term[1][123]*w->term[0][141] +
-            w->term[1][124]*w->term[0][142] + w->term[1][125]*w->term[0][143]; t->Qd[112] = v; check
-            += v;
-    v = w->term[1][108]*w->term[0][144] + w->term[1][109]*w->term[0][145] +
-            w->term[1][110]*w->term[0][146] + w->term[1][111]*w->term[0][147] +
-            w->term[1][112]*w->term[0][148] + w->term[1][113]*w->term[0][149] +
-            w->term[1][114]*w->term[0][150] + w->term[1][115]*w->term[0][151] +
-            w->term[1][116]*w->term[0][152] + w->term[1][117]*w->term[0][153] +
-            w->term[1][118]*w->term[0][154] + w->term[1][119]*w->term[0][155] +
-            w->term[1][120]*w->term[0][156] + w->term[1][121]*w->term[0][157] +
-            w->term[1][122]*w->term[0][158] + w->term[1][123]*w->term[0][159] +
-            w->term[1][124]*w->term[0][160] + w->term[1][125]*w->term[0][161]; t->Qd[113] = v; check
-            += v;
-    v = w->term[1][114]*w->term[0][162]; t->Qd[114] = v; check += v;
-    v = w->term[1][115]*w->term[0][163]; t->Qd[115] = v; check += v;
-    v = w->term[1][116]*w->term[0][164]; t->Qd[116] = v; check += v;
-    v = w->term[1][117]*w->term[0][165]; t->Qd[117] = v; check += v;
-    v = w->term[1][118]*w->term[0][166]; t->Qd[118] = v; check += v;
-    v = w->term[1][119]*w->term[0][167]; t->Qd[119] = v; check += v;
-    v = w->term[1][120]*w->term[0][168]; t->Qd[120] = v; check += v;
-    v = w->term[1][121]*w->term[0][169]; t->Qd[121] = v; check += v;
-    v = w->term[1][122]*w->term[0][170]; t->Qd[122] = v; check += v;
-    v = w->term[1][123]*w->term[0][171]; t->Qd[123] = v; check += v;
-    v = w->term[1][124]*w->term[0][172]; t->Qd[124] = v; check += v;
-    v = w->term[1][125]*w->term[0][173]; t->Qd[125] = v; check += v;
-    v = w->term[1][126]*w->term[0][126] + w->term[1][127]*w->term[0][127] +
-            w->term[1][128]*w->term[0][128] + w->term[1][129]*w->term[0][129] +
-            w->term[1][130]*w->term[0][130] + w->term[1][131]*w->term[0][131] +
-            w->term[1][132]*w->term[0][132] + w->term[1][133]*w->term[0][133] +
-            w->term[1][134]*w->term[0][134] + w->term[1][135]*w->term[0][135] +
-            w->term[1][136]*w->term[0][136] + w->term[1][137]*w->term[0][137] +
-            w->term[1][138]*w->term[0][138] + w->term[1][139]*w->term[0][139] +
-            w->term[1][140]*w->term[0][140] + w->term[1][141]*w->term[0][141] +
-            w->term[1][142]*w->term[0][142] + w->term[1][143]*w->term[0][143]; t->Qd[126] = v; check
-            += v;
-    v = w->term[1][126]*w->term[0][144] + w->term[1][127]*w->term[0][145] +
-            w->term[1][128]*w->term[0][146] + w->term[1][129]*w->term[0][147] +
-            w->term[1][130]*w->term[0][148] + w->term[1][131]*w->term[0][149] +
-            w->term[1][132]*w->term[0][150] + w->term[1][133]*w->term[0][151] +
-            w->term[1][134]*w->term[0][152] + w->term[1][135]*w->term[0][153] +
-            w->term[1][136]*w->term[0][154] + w->term[1][137]*w->term[0][155] +
-            w->term[1][138]*w->term[0][156] + w->term[1][139]*w->term[0][157] +
-            w->term[1][140]*w->term[0][158] + w->term[1][141]*w->term[0][159] +
-            w->term[1][142]*w->term[0][160] + w->term[1][143]*w->term[0][161]; t->Qd[127] = v; check
-            += v;
-    v = w->term[1][132]*w->term[0][162]; t->Qd[128] = v; check += v;
-    v = w->term[1][133]*w->term[0][163]; t->Qd[129] = v; check += v;
-    v = w->term[1][134]*w->term[0][164]; t->Qd[130] = v; check += v;
-    v = w->term[1][135]*w->term[0][165]; t->Qd[131] = v; check += v;
-    v = w->term[1][136]*w->term[0][166]; t->Qd[132] = v; check += v;
-    v = w->term[1][137]*w->term[0][167]; t->Qd[133] = v; check += v;
-    v = w->term[1][138]*w->term[0][168]; t->Qd[134] = v; check += v;
-    v = w->term[1][139]*w->term[0][169]; t->Qd[135] = v; check += v;
-    v = w->term[1][140]*w->term[0][170]; t->Qd[136] = v; check += v;
-    v = w->term[1][141]*w->term[0][171]; t->Qd[137] = v; check += v;
-    v = w->term[1][142]*w->term[0][172]; t->Qd[138] = v; check += v;
-    v = w->term[1][143]*w->term[0][173]; t->Qd[139] = v; check += v;
-    v = w->term[1][144]*w->term[0][144] + w->term[1][145]*w->term[0][145] +
-            w->term[1][146]*w->term[0][146] + w->term[1][147]*w->term[0][147] +
-            w->term[1][148]*w->term[0][148] + w->term[1][149]*w->term[0][149] +
-            w->term[1][150]*w->term[0][150] + w->term[1][151]*w->term[0][151] +
-            w->term[1][152]*w->term[0][152] + w->term[1][153]*w->term[0][153] +
-            w->term[1][154]*w->term[0][154] + w->term[1][155]*w->term[0][155] +
-            w->term[1][156]*w->term[0][156] + w->term[1][157]*w->term[0][157] +
-            w->term[1][158]*w->term[0][158] + w->term[1][159]*w->term[0][159] +
-            w->term[1][160]*w->term[0][160] + w->term[1][161]*w->term[0][161]; t->Qd[140] = v; check
-            += v;
-    v = w->term[1][150]*w->term[0][162]; t->Qd[141] = v; check += v;
-    v = w->term[1][151]*w->term[0][163]; t->Qd[142] = v; check += v;
-    v = w->term[1][152]*w->term[0][164]; t->Qd[143] = v; check += v;
-    v = w->term[1][153]*w->term[0][165]; t->Qd[144] = v; check += v;
-    v = w->term[1][154]*w->term[0][166]; t->Qd[145] = v; check += v;
-    v = w->term[1][155]*w->term[0][167]; t->Qd[146] = v; check += v;
-    v = w->term[1][156]*w->term[0][168]; t->Qd[147] = v; check += v;
-    v = w->term[1][157]*w->term[0][169]; t->Qd[148] = v; check += v;
-    v = w->term[1][158]*w->term[0][170]; t->Qd[149] = v; check += v;
-    v = w->term[1][159]*w->term[0][171]; t->Qd[150] = v; check += v;
-    v = w->term[1][160]*w->term[0][172]; t->Qd[151] = v; check += v;
-    v = w->term[1][161]*w->term[0][173]; t->Qd[152] = v; check += v;
-    v = w->term[1][162]*w->term[0][162]; t->Qd[153] = v; check += v;
-    v = w->term[1][163]*w->term[0][163]; t->Qd[165] = v; check += v;
-    v = w->term[1][164]*w->term[0][164]; t->Qd[176] = v; check += v;
-    v = w->term[1][165]*w->term[0][165]; t->Qd[186] = v; check += v;
-    v = w->term[1][166]*w->term[0][166]; t->Qd[195] = v; check += v;
-    v = w->term[1][167]*w->term[0][167]; t->Qd[203] = v; check += v;
-    v = w->term[1][168]*w->term[0][168]; t->Qd[210] = v; check += v;
-    v = w->term[1][169]*w->term[0][169]; t->Qd[216] = v; check += v;
-    v = w->term[1][170]*w->term[0][170]; t->Qd[221] = v; check += v;
-    v = w->term[1][171]*w->term[0][171]; t->Qd[225] = v; check += v;
-    v = w->term[1][172]*w->term[0][172]; t->Qd[228] = v; check += v;
-    v = w->term[1][173]*w->term[0][173]; t->Qd[230] = v; check += v;
     t->Qd[154] = 0;
     t->Qd[155] = 0;
     t->Qd[156] = 0;
@@ -3232,6 +2670,714 @@ INS_GNSS21_BLOCK ins_gnss21_scalar process_noise(const ins_gnss21_matrices *rest
     t->Qd[226] = 0;
     t->Qd[227] = 0;
     t->Qd[229] = 0;
+}
+
+INS_GNSS21_BLOCK ins_gnss21_scalar process_noise_row_0(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
+            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
+            + w->term[1][5]*w->term[0][5] + w->term[1][6]*w->term[0][6] +
+            w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9]
+            + w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11] +
+            w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
+            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17];
+    t->Qd[1] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
+            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
+            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23] +
+            w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
+            w->term[1][8]*w->term[0][26] + w->term[1][9]*w->term[0][27] +
+            w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29] +
+            w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
+            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35];
+    t->Qd[2] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
+            w->term[1][2]*w->term[0][38] + w->term[1][3]*w->term[0][39] +
+            w->term[1][4]*w->term[0][40] + w->term[1][5]*w->term[0][41] +
+            w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] +
+            w->term[1][8]*w->term[0][44] + w->term[1][9]*w->term[0][45] +
+            w->term[1][10]*w->term[0][46] + w->term[1][11]*w->term[0][47] +
+            w->term[1][12]*w->term[0][48] + w->term[1][13]*w->term[0][49] +
+            w->term[1][14]*w->term[0][50] + w->term[1][15]*w->term[0][51] +
+            w->term[1][16]*w->term[0][52] + w->term[1][17]*w->term[0][53];
+    t->Qd[3] = w->term[1][0]*w->term[0][54] + w->term[1][1]*w->term[0][55] +
+            w->term[1][2]*w->term[0][56] + w->term[1][3]*w->term[0][57] +
+            w->term[1][4]*w->term[0][58] + w->term[1][5]*w->term[0][59] +
+            w->term[1][6]*w->term[0][60] + w->term[1][7]*w->term[0][61] +
+            w->term[1][8]*w->term[0][62] + w->term[1][9]*w->term[0][63] +
+            w->term[1][10]*w->term[0][64] + w->term[1][11]*w->term[0][65] +
+            w->term[1][12]*w->term[0][66] + w->term[1][13]*w->term[0][67] +
+            w->term[1][14]*w->term[0][68] + w->term[1][15]*w->term[0][69] +
+            w->term[1][16]*w->term[0][70] + w->term[1][17]*w->term[0][71];
+    t->Qd[4] = w->term[1][0]*w->term[0][72] + w->term[1][1]*w->term[0][73] +
+            w->term[1][2]*w->term[0][74] + w->term[1][3]*w->term[0][75] +
+            w->term[1][4]*w->term[0][76] + w->term[1][5]*w->term[0][77] +
+            w->term[1][6]*w->term[0][78] + w->term[1][7]*w->term[0][79] +
+            w->term[1][8]*w->term[0][80] + w->term[1][9]*w->term[0][81] +
+            w->term[1][10]*w->term[0][82] + w->term[1][11]*w->term[0][83] +
+            w->term[1][12]*w->term[0][84] + w->term[1][13]*w->term[0][85] +
+            w->term[1][14]*w->term[0][86] + w->term[1][15]*w->term[0][87] +
+            w->term[1][16]*w->term[0][88] + w->term[1][17]*w->term[0][89];
+    t->Qd[5] = w->term[1][0]*w->term[0][90] + w->term[1][1]*w->term[0][91] +
+            w->term[1][2]*w->term[0][92] + w->term[1][3]*w->term[0][93] +
+            w->term[1][4]*w->term[0][94] + w->term[1][5]*w->term[0][95] +
+            w->term[1][6]*w->term[0][96] + w->term[1][7]*w->term[0][97] +
+            w->term[1][8]*w->term[0][98] + w->term[1][9]*w->term[0][99] +
+            w->term[1][10]*w->term[0][100] + w->term[1][11]*w->term[0][101] +
+            w->term[1][12]*w->term[0][102] + w->term[1][13]*w->term[0][103] +
+            w->term[1][14]*w->term[0][104] + w->term[1][15]*w->term[0][105] +
+            w->term[1][16]*w->term[0][106] + w->term[1][17]*w->term[0][107];
+    t->Qd[6] = w->term[1][0]*w->term[0][108] + w->term[1][1]*w->term[0][109] +
+            w->term[1][2]*w->term[0][110] + w->term[1][3]*w->term[0][111] +
+            w->term[1][4]*w->term[0][112] + w->term[1][5]*w->term[0][113] +
+            w->term[1][6]*w->term[0][114] + w->term[1][7]*w->term[0][115] +
+            w->term[1][8]*w->term[0][116] + w->term[1][9]*w->term[0][117] +
+            w->term[1][10]*w->term[0][118] + w->term[1][11]*w->term[0][119] +
+            w->term[1][12]*w->term[0][120] + w->term[1][13]*w->term[0][121] +
+            w->term[1][14]*w->term[0][122] + w->term[1][15]*w->term[0][123] +
+            w->term[1][16]*w->term[0][124] + w->term[1][17]*w->term[0][125];
+    t->Qd[7] = w->term[1][0]*w->term[0][126] + w->term[1][1]*w->term[0][127] +
+            w->term[1][2]*w->term[0][128] + w->term[1][3]*w->term[0][129] +
+            w->term[1][4]*w->term[0][130] + w->term[1][5]*w->term[0][131] +
+            w->term[1][6]*w->term[0][132] + w->term[1][7]*w->term[0][133] +
+            w->term[1][8]*w->term[0][134] + w->term[1][9]*w->term[0][135] +
+            w->term[1][10]*w->term[0][136] + w->term[1][11]*w->term[0][137] +
+            w->term[1][12]*w->term[0][138] + w->term[1][13]*w->term[0][139] +
+            w->term[1][14]*w->term[0][140] + w->term[1][15]*w->term[0][141] +
+            w->term[1][16]*w->term[0][142] + w->term[1][17]*w->term[0][143];
+    t->Qd[8] = w->term[1][0]*w->term[0][144] + w->term[1][1]*w->term[0][145] +
+            w->term[1][2]*w->term[0][146] + w->term[1][3]*w->term[0][147] +
+            w->term[1][4]*w->term[0][148] + w->term[1][5]*w->term[0][149] +
+            w->term[1][6]*w->term[0][150] + w->term[1][7]*w->term[0][151] +
+            w->term[1][8]*w->term[0][152] + w->term[1][9]*w->term[0][153] +
+            w->term[1][10]*w->term[0][154] + w->term[1][11]*w->term[0][155] +
+            w->term[1][12]*w->term[0][156] + w->term[1][13]*w->term[0][157] +
+            w->term[1][14]*w->term[0][158] + w->term[1][15]*w->term[0][159] +
+            w->term[1][16]*w->term[0][160] + w->term[1][17]*w->term[0][161];
+    t->Qd[9] = w->term[1][6]*w->term[0][162];
+    t->Qd[10] = w->term[1][7]*w->term[0][163];
+    t->Qd[11] = w->term[1][8]*w->term[0][164];
+    t->Qd[12] = w->term[1][9]*w->term[0][165];
+    t->Qd[13] = w->term[1][10]*w->term[0][166];
+    t->Qd[14] = w->term[1][11]*w->term[0][167];
+    t->Qd[15] = w->term[1][12]*w->term[0][168];
+    t->Qd[16] = w->term[1][13]*w->term[0][169];
+    t->Qd[17] = w->term[1][14]*w->term[0][170];
+    t->Qd[18] = w->term[1][15]*w->term[0][171];
+    t->Qd[19] = w->term[1][16]*w->term[0][172];
+    t->Qd[20] = w->term[1][17]*w->term[0][173];
+    check = t->Qd[0] + t->Qd[1] + t->Qd[2] + t->Qd[3] + t->Qd[4] + t->Qd[5] + t->Qd[6] + t->Qd[7] +
+            t->Qd[8] + t->Qd[9] + t->Qd[10] + t->Qd[11] + t->Qd[12] + t->Qd[13] + t->Qd[14] +
+            t->Qd[15] + t->Qd[16] + t->Qd[17] + t->Qd[18] + t->Qd[19] + t->Qd[20];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+INS_GNSS21_BLOCK ins_gnss21_scalar process_noise_row_1(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[21] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
+            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23] +
+            w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
+            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29] +
+            w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
+            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35];
+    t->Qd[22] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
+            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
+            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41] +
+            w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
+            w->term[1][26]*w->term[0][44] + w->term[1][27]*w->term[0][45] +
+            w->term[1][28]*w->term[0][46] + w->term[1][29]*w->term[0][47] +
+            w->term[1][30]*w->term[0][48] + w->term[1][31]*w->term[0][49] +
+            w->term[1][32]*w->term[0][50] + w->term[1][33]*w->term[0][51] +
+            w->term[1][34]*w->term[0][52] + w->term[1][35]*w->term[0][53];
+    t->Qd[23] = w->term[1][18]*w->term[0][54] + w->term[1][19]*w->term[0][55] +
+            w->term[1][20]*w->term[0][56] + w->term[1][21]*w->term[0][57] +
+            w->term[1][22]*w->term[0][58] + w->term[1][23]*w->term[0][59] +
+            w->term[1][24]*w->term[0][60] + w->term[1][25]*w->term[0][61] +
+            w->term[1][26]*w->term[0][62] + w->term[1][27]*w->term[0][63] +
+            w->term[1][28]*w->term[0][64] + w->term[1][29]*w->term[0][65] +
+            w->term[1][30]*w->term[0][66] + w->term[1][31]*w->term[0][67] +
+            w->term[1][32]*w->term[0][68] + w->term[1][33]*w->term[0][69] +
+            w->term[1][34]*w->term[0][70] + w->term[1][35]*w->term[0][71];
+    t->Qd[24] = w->term[1][18]*w->term[0][72] + w->term[1][19]*w->term[0][73] +
+            w->term[1][20]*w->term[0][74] + w->term[1][21]*w->term[0][75] +
+            w->term[1][22]*w->term[0][76] + w->term[1][23]*w->term[0][77] +
+            w->term[1][24]*w->term[0][78] + w->term[1][25]*w->term[0][79] +
+            w->term[1][26]*w->term[0][80] + w->term[1][27]*w->term[0][81] +
+            w->term[1][28]*w->term[0][82] + w->term[1][29]*w->term[0][83] +
+            w->term[1][30]*w->term[0][84] + w->term[1][31]*w->term[0][85] +
+            w->term[1][32]*w->term[0][86] + w->term[1][33]*w->term[0][87] +
+            w->term[1][34]*w->term[0][88] + w->term[1][35]*w->term[0][89];
+    t->Qd[25] = w->term[1][18]*w->term[0][90] + w->term[1][19]*w->term[0][91] +
+            w->term[1][20]*w->term[0][92] + w->term[1][21]*w->term[0][93] +
+            w->term[1][22]*w->term[0][94] + w->term[1][23]*w->term[0][95] +
+            w->term[1][24]*w->term[0][96] + w->term[1][25]*w->term[0][97] +
+            w->term[1][26]*w->term[0][98] + w->term[1][27]*w->term[0][99] +
+            w->term[1][28]*w->term[0][100] + w->term[1][29]*w->term[0][101] +
+            w->term[1][30]*w->term[0][102] + w->term[1][31]*w->term[0][103] +
+            w->term[1][32]*w->term[0][104] + w->term[1][33]*w->term[0][105] +
+            w->term[1][34]*w->term[0][106] + w->term[1][35]*w->term[0][107];
+    t->Qd[26] = w->term[1][18]*w->term[0][108] + w->term[1][19]*w->term[0][109] +
+            w->term[1][20]*w->term[0][110] + w->term[1][21]*w->term[0][111] +
+            w->term[1][22]*w->term[0][112] + w->term[1][23]*w->term[0][113] +
+            w->term[1][24]*w->term[0][114] + w->term[1][25]*w->term[0][115] +
+            w->term[1][26]*w->term[0][116] + w->term[1][27]*w->term[0][117] +
+            w->term[1][28]*w->term[0][118] + w->term[1][29]*w->term[0][119] +
+            w->term[1][30]*w->term[0][120] + w->term[1][31]*w->term[0][121] +
+            w->term[1][32]*w->term[0][122] + w->term[1][33]*w->term[0][123] +
+            w->term[1][34]*w->term[0][124] + w->term[1][35]*w->term[0][125];
+    t->Qd[27] = w->term[1][18]*w->term[0][126] + w->term[1][19]*w->term[0][127] +
+            w->term[1][20]*w->term[0][128] + w->term[1][21]*w->term[0][129] +
+            w->term[1][22]*w->term[0][130] + w->term[1][23]*w->term[0][131] +
+            w->term[1][24]*w->term[0][132] + w->term[1][25]*w->term[0][133] +
+            w->term[1][26]*w->term[0][134] + w->term[1][27]*w->term[0][135] +
+            w->term[1][28]*w->term[0][136] + w->term[1][29]*w->term[0][137] +
+            w->term[1][30]*w->term[0][138] + w->term[1][31]*w->term[0][139] +
+            w->term[1][32]*w->term[0][140] + w->term[1][33]*w->term[0][141] +
+            w->term[1][34]*w->term[0][142] + w->term[1][35]*w->term[0][143];
+    t->Qd[28] = w->term[1][18]*w->term[0][144] + w->term[1][19]*w->term[0][145] +
+            w->term[1][20]*w->term[0][146] + w->term[1][21]*w->term[0][147] +
+            w->term[1][22]*w->term[0][148] + w->term[1][23]*w->term[0][149] +
+            w->term[1][24]*w->term[0][150] + w->term[1][25]*w->term[0][151] +
+            w->term[1][26]*w->term[0][152] + w->term[1][27]*w->term[0][153] +
+            w->term[1][28]*w->term[0][154] + w->term[1][29]*w->term[0][155] +
+            w->term[1][30]*w->term[0][156] + w->term[1][31]*w->term[0][157] +
+            w->term[1][32]*w->term[0][158] + w->term[1][33]*w->term[0][159] +
+            w->term[1][34]*w->term[0][160] + w->term[1][35]*w->term[0][161];
+    t->Qd[29] = w->term[1][24]*w->term[0][162];
+    t->Qd[30] = w->term[1][25]*w->term[0][163];
+    t->Qd[31] = w->term[1][26]*w->term[0][164];
+    t->Qd[32] = w->term[1][27]*w->term[0][165];
+    t->Qd[33] = w->term[1][28]*w->term[0][166];
+    t->Qd[34] = w->term[1][29]*w->term[0][167];
+    t->Qd[35] = w->term[1][30]*w->term[0][168];
+    t->Qd[36] = w->term[1][31]*w->term[0][169];
+    t->Qd[37] = w->term[1][32]*w->term[0][170];
+    t->Qd[38] = w->term[1][33]*w->term[0][171];
+    t->Qd[39] = w->term[1][34]*w->term[0][172];
+    t->Qd[40] = w->term[1][35]*w->term[0][173];
+    check = t->Qd[21] + t->Qd[22] + t->Qd[23] + t->Qd[24] + t->Qd[25] + t->Qd[26] + t->Qd[27] +
+            t->Qd[28] + t->Qd[29] + t->Qd[30] + t->Qd[31] + t->Qd[32] + t->Qd[33] + t->Qd[34] +
+            t->Qd[35] + t->Qd[36] + t->Qd[37] + t->Qd[38] + t->Qd[39] + t->Qd[40];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+INS_GNSS21_BLOCK ins_gnss21_scalar process_noise_row_2(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[41] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
+            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
+            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41] +
+            w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
+            w->term[1][44]*w->term[0][44] + w->term[1][45]*w->term[0][45] +
+            w->term[1][46]*w->term[0][46] + w->term[1][47]*w->term[0][47] +
+            w->term[1][48]*w->term[0][48] + w->term[1][49]*w->term[0][49] +
+            w->term[1][50]*w->term[0][50] + w->term[1][51]*w->term[0][51] +
+            w->term[1][52]*w->term[0][52] + w->term[1][53]*w->term[0][53];
+    t->Qd[42] = w->term[1][36]*w->term[0][54] + w->term[1][37]*w->term[0][55] +
+            w->term[1][38]*w->term[0][56] + w->term[1][39]*w->term[0][57] +
+            w->term[1][40]*w->term[0][58] + w->term[1][41]*w->term[0][59] +
+            w->term[1][42]*w->term[0][60] + w->term[1][43]*w->term[0][61] +
+            w->term[1][44]*w->term[0][62] + w->term[1][45]*w->term[0][63] +
+            w->term[1][46]*w->term[0][64] + w->term[1][47]*w->term[0][65] +
+            w->term[1][48]*w->term[0][66] + w->term[1][49]*w->term[0][67] +
+            w->term[1][50]*w->term[0][68] + w->term[1][51]*w->term[0][69] +
+            w->term[1][52]*w->term[0][70] + w->term[1][53]*w->term[0][71];
+    t->Qd[43] = w->term[1][36]*w->term[0][72] + w->term[1][37]*w->term[0][73] +
+            w->term[1][38]*w->term[0][74] + w->term[1][39]*w->term[0][75] +
+            w->term[1][40]*w->term[0][76] + w->term[1][41]*w->term[0][77] +
+            w->term[1][42]*w->term[0][78] + w->term[1][43]*w->term[0][79] +
+            w->term[1][44]*w->term[0][80] + w->term[1][45]*w->term[0][81] +
+            w->term[1][46]*w->term[0][82] + w->term[1][47]*w->term[0][83] +
+            w->term[1][48]*w->term[0][84] + w->term[1][49]*w->term[0][85] +
+            w->term[1][50]*w->term[0][86] + w->term[1][51]*w->term[0][87] +
+            w->term[1][52]*w->term[0][88] + w->term[1][53]*w->term[0][89];
+    t->Qd[44] = w->term[1][36]*w->term[0][90] + w->term[1][37]*w->term[0][91] +
+            w->term[1][38]*w->term[0][92] + w->term[1][39]*w->term[0][93] +
+            w->term[1][40]*w->term[0][94] + w->term[1][41]*w->term[0][95] +
+            w->term[1][42]*w->term[0][96] + w->term[1][43]*w->term[0][97] +
+            w->term[1][44]*w->term[0][98] + w->term[1][45]*w->term[0][99] +
+            w->term[1][46]*w->term[0][100] + w->term[1][47]*w->term[0][101] +
+            w->term[1][48]*w->term[0][102] + w->term[1][49]*w->term[0][103] +
+            w->term[1][50]*w->term[0][104] + w->term[1][51]*w->term[0][105] +
+            w->term[1][52]*w->term[0][106] + w->term[1][53]*w->term[0][107];
+    t->Qd[45] = w->term[1][36]*w->term[0][108] + w->term[1][37]*w->term[0][109] +
+            w->term[1][38]*w->term[0][110] + w->term[1][39]*w->term[0][111] +
+            w->term[1][40]*w->term[0][112] + w->term[1][41]*w->term[0][113] +
+            w->term[1][42]*w->term[0][114] + w->term[1][43]*w->term[0][115] +
+            w->term[1][44]*w->term[0][116] + w->term[1][45]*w->term[0][117] +
+            w->term[1][46]*w->term[0][118] + w->term[1][47]*w->term[0][119] +
+            w->term[1][48]*w->term[0][120] + w->term[1][49]*w->term[0][121] +
+            w->term[1][50]*w->term[0][122] + w->term[1][51]*w->term[0][123] +
+            w->term[1][52]*w->term[0][124] + w->term[1][53]*w->term[0][125];
+    t->Qd[46] = w->term[1][36]*w->term[0][126] + w->term[1][37]*w->term[0][127] +
+            w->term[1][38]*w->term[0][128] + w->term[1][39]*w->term[0][129] +
+            w->term[1][40]*w->term[0][130] + w->term[1][41]*w->term[0][131] +
+            w->term[1][42]*w->term[0][132] + w->term[1][43]*w->term[0][133] +
+            w->term[1][44]*w->term[0][134] + w->term[1][45]*w->term[0][135] +
+            w->term[1][46]*w->term[0][136] + w->term[1][47]*w->term[0][137] +
+            w->term[1][48]*w->term[0][138] + w->term[1][49]*w->term[0][139] +
+            w->term[1][50]*w->term[0][140] + w->term[1][51]*w->term[0][141] +
+            w->term[1][52]*w->term[0][142] + w->term[1][53]*w->term[0][143];
+    t->Qd[47] = w->term[1][36]*w->term[0][144] + w->term[1][37]*w->term[0][145] +
+            w->term[1][38]*w->term[0][146] + w->term[1][39]*w->term[0][147] +
+            w->term[1][40]*w->term[0][148] + w->term[1][41]*w->term[0][149] +
+            w->term[1][42]*w->term[0][150] + w->term[1][43]*w->term[0][151] +
+            w->term[1][44]*w->term[0][152] + w->term[1][45]*w->term[0][153] +
+            w->term[1][46]*w->term[0][154] + w->term[1][47]*w->term[0][155] +
+            w->term[1][48]*w->term[0][156] + w->term[1][49]*w->term[0][157] +
+            w->term[1][50]*w->term[0][158] + w->term[1][51]*w->term[0][159] +
+            w->term[1][52]*w->term[0][160] + w->term[1][53]*w->term[0][161];
+    t->Qd[48] = w->term[1][42]*w->term[0][162];
+    t->Qd[49] = w->term[1][43]*w->term[0][163];
+    t->Qd[50] = w->term[1][44]*w->term[0][164];
+    t->Qd[51] = w->term[1][45]*w->term[0][165];
+    t->Qd[52] = w->term[1][46]*w->term[0][166];
+    t->Qd[53] = w->term[1][47]*w->term[0][167];
+    t->Qd[54] = w->term[1][48]*w->term[0][168];
+    t->Qd[55] = w->term[1][49]*w->term[0][169];
+    t->Qd[56] = w->term[1][50]*w->term[0][170];
+    t->Qd[57] = w->term[1][51]*w->term[0][171];
+    t->Qd[58] = w->term[1][52]*w->term[0][172];
+    t->Qd[59] = w->term[1][53]*w->term[0][173];
+    check = t->Qd[41] + t->Qd[42] + t->Qd[43] + t->Qd[44] + t->Qd[45] + t->Qd[46] + t->Qd[47] +
+            t->Qd[48] + t->Qd[49] + t->Qd[50] + t->Qd[51] + t->Qd[52] + t->Qd[53] + t->Qd[54] +
+            t->Qd[55] + t->Qd[56] + t->Qd[57] + t->Qd[58] + t->Qd[59];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+INS_GNSS21_BLOCK ins_gnss21_scalar process_noise_row_3(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[60] = w->term[1][54]*w->term[0][54] + w->term[1][55]*w->term[0][55] +
+            w->term[1][56]*w->term[0][56] + w->term[1][57]*w->term[0][57] +
+            w->term[1][58]*w->term[0][58] + w->term[1][59]*w->term[0][59] +
+            w->term[1][60]*w->term[0][60] + w->term[1][61]*w->term[0][61] +
+            w->term[1][62]*w->term[0][62] + w->term[1][63]*w->term[0][63] +
+            w->term[1][64]*w->term[0][64] + w->term[1][65]*w->term[0][65] +
+            w->term[1][66]*w->term[0][66] + w->term[1][67]*w->term[0][67] +
+            w->term[1][68]*w->term[0][68] + w->term[1][69]*w->term[0][69] +
+            w->term[1][70]*w->term[0][70] + w->term[1][71]*w->term[0][71];
+    t->Qd[61] = w->term[1][54]*w->term[0][72] + w->term[1][55]*w->term[0][73] +
+            w->term[1][56]*w->term[0][74] + w->term[1][57]*w->term[0][75] +
+            w->term[1][58]*w->term[0][76] + w->term[1][59]*w->term[0][77] +
+            w->term[1][60]*w->term[0][78] + w->term[1][61]*w->term[0][79] +
+            w->term[1][62]*w->term[0][80] + w->term[1][63]*w->term[0][81] +
+            w->term[1][64]*w->term[0][82] + w->term[1][65]*w->term[0][83] +
+            w->term[1][66]*w->term[0][84] + w->term[1][67]*w->term[0][85] +
+            w->term[1][68]*w->term[0][86] + w->term[1][69]*w->term[0][87] +
+            w->term[1][70]*w->term[0][88] + w->term[1][71]*w->term[0][89];
+    t->Qd[62] = w->term[1][54]*w->term[0][90] + w->term[1][55]*w->term[0][91] +
+            w->term[1][56]*w->term[0][92] + w->term[1][57]*w->term[0][93] +
+            w->term[1][58]*w->term[0][94] + w->term[1][59]*w->term[0][95] +
+            w->term[1][60]*w->term[0][96] + w->term[1][61]*w->term[0][97] +
+            w->term[1][62]*w->term[0][98] + w->term[1][63]*w->term[0][99] +
+            w->term[1][64]*w->term[0][100] + w->term[1][65]*w->term[0][101] +
+            w->term[1][66]*w->term[0][102] + w->term[1][67]*w->term[0][103] +
+            w->term[1][68]*w->term[0][104] + w->term[1][69]*w->term[0][105] +
+            w->term[1][70]*w->term[0][106] + w->term[1][71]*w->term[0][107];
+    t->Qd[63] = w->term[1][54]*w->term[0][108] + w->term[1][55]*w->term[0][109] +
+            w->term[1][56]*w->term[0][110] + w->term[1][57]*w->term[0][111] +
+            w->term[1][58]*w->term[0][112] + w->term[1][59]*w->term[0][113] +
+            w->term[1][60]*w->term[0][114] + w->term[1][61]*w->term[0][115] +
+            w->term[1][62]*w->term[0][116] + w->term[1][63]*w->term[0][117] +
+            w->term[1][64]*w->term[0][118] + w->term[1][65]*w->term[0][119] +
+            w->term[1][66]*w->term[0][120] + w->term[1][67]*w->term[0][121] +
+            w->term[1][68]*w->term[0][122] + w->term[1][69]*w->term[0][123] +
+            w->term[1][70]*w->term[0][124] + w->term[1][71]*w->term[0][125];
+    t->Qd[64] = w->term[1][54]*w->term[0][126] + w->term[1][55]*w->term[0][127] +
+            w->term[1][56]*w->term[0][128] + w->term[1][57]*w->term[0][129] +
+            w->term[1][58]*w->term[0][130] + w->term[1][59]*w->term[0][131] +
+            w->term[1][60]*w->term[0][132] + w->term[1][61]*w->term[0][133] +
+            w->term[1][62]*w->term[0][134] + w->term[1][63]*w->term[0][135] +
+            w->term[1][64]*w->term[0][136] + w->term[1][65]*w->term[0][137] +
+            w->term[1][66]*w->term[0][138] + w->term[1][67]*w->term[0][139] +
+            w->term[1][68]*w->term[0][140] + w->term[1][69]*w->term[0][141] +
+            w->term[1][70]*w->term[0][142] + w->term[1][71]*w->term[0][143];
+    t->Qd[65] = w->term[1][54]*w->term[0][144] + w->term[1][55]*w->term[0][145] +
+            w->term[1][56]*w->term[0][146] + w->term[1][57]*w->term[0][147] +
+            w->term[1][58]*w->term[0][148] + w->term[1][59]*w->term[0][149] +
+            w->term[1][60]*w->term[0][150] + w->term[1][61]*w->term[0][151] +
+            w->term[1][62]*w->term[0][152] + w->term[1][63]*w->term[0][153] +
+            w->term[1][64]*w->term[0][154] + w->term[1][65]*w->term[0][155] +
+            w->term[1][66]*w->term[0][156] + w->term[1][67]*w->term[0][157] +
+            w->term[1][68]*w->term[0][158] + w->term[1][69]*w->term[0][159] +
+            w->term[1][70]*w->term[0][160] + w->term[1][71]*w->term[0][161];
+    t->Qd[66] = w->term[1][60]*w->term[0][162];
+    t->Qd[67] = w->term[1][61]*w->term[0][163];
+    t->Qd[68] = w->term[1][62]*w->term[0][164];
+    t->Qd[69] = w->term[1][63]*w->term[0][165];
+    t->Qd[70] = w->term[1][64]*w->term[0][166];
+    t->Qd[71] = w->term[1][65]*w->term[0][167];
+    t->Qd[72] = w->term[1][66]*w->term[0][168];
+    t->Qd[73] = w->term[1][67]*w->term[0][169];
+    t->Qd[74] = w->term[1][68]*w->term[0][170];
+    t->Qd[75] = w->term[1][69]*w->term[0][171];
+    t->Qd[76] = w->term[1][70]*w->term[0][172];
+    t->Qd[77] = w->term[1][71]*w->term[0][173];
+    check = t->Qd[60] + t->Qd[61] + t->Qd[62] + t->Qd[63] + t->Qd[64] + t->Qd[65] + t->Qd[66] +
+            t->Qd[67] + t->Qd[68] + t->Qd[69] + t->Qd[70] + t->Qd[71] + t->Qd[72] + t->Qd[73] +
+            t->Qd[74] + t->Qd[75] + t->Qd[76] + t->Qd[77];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+INS_GNSS21_BLOCK ins_gnss21_scalar process_noise_row_4(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[78] = w->term[1][72]*w->term[0][72] + w->term[1][73]*w->term[0][73] +
+            w->term[1][74]*w->term[0][74] + w->term[1][75]*w->term[0][75] +
+            w->term[1][76]*w->term[0][76] + w->term[1][77]*w->term[0][77] +
+            w->term[1][78]*w->term[0][78] + w->term[1][79]*w->term[0][79] +
+            w->term[1][80]*w->term[0][80] + w->term[1][81]*w->term[0][81] +
+            w->term[1][82]*w->term[0][82] + w->term[1][83]*w->term[0][83] +
+            w->term[1][84]*w->term[0][84] + w->term[1][85]*w->term[0][85] +
+            w->term[1][86]*w->term[0][86] + w->term[1][87]*w->term[0][87] +
+            w->term[1][88]*w->term[0][88] + w->term[1][89]*w->term[0][89];
+    t->Qd[79] = w->term[1][72]*w->term[0][90] + w->term[1][73]*w->term[0][91] +
+            w->term[1][74]*w->term[0][92] + w->term[1][75]*w->term[0][93] +
+            w->term[1][76]*w->term[0][94] + w->term[1][77]*w->term[0][95] +
+            w->term[1][78]*w->term[0][96] + w->term[1][79]*w->term[0][97] +
+            w->term[1][80]*w->term[0][98] + w->term[1][81]*w->term[0][99] +
+            w->term[1][82]*w->term[0][100] + w->term[1][83]*w->term[0][101] +
+            w->term[1][84]*w->term[0][102] + w->term[1][85]*w->term[0][103] +
+            w->term[1][86]*w->term[0][104] + w->term[1][87]*w->term[0][105] +
+            w->term[1][88]*w->term[0][106] + w->term[1][89]*w->term[0][107];
+    t->Qd[80] = w->term[1][72]*w->term[0][108] + w->term[1][73]*w->term[0][109] +
+            w->term[1][74]*w->term[0][110] + w->term[1][75]*w->term[0][111] +
+            w->term[1][76]*w->term[0][112] + w->term[1][77]*w->term[0][113] +
+            w->term[1][78]*w->term[0][114] + w->term[1][79]*w->term[0][115] +
+            w->term[1][80]*w->term[0][116] + w->term[1][81]*w->term[0][117] +
+            w->term[1][82]*w->term[0][118] + w->term[1][83]*w->term[0][119] +
+            w->term[1][84]*w->term[0][120] + w->term[1][85]*w->term[0][121] +
+            w->term[1][86]*w->term[0][122] + w->term[1][87]*w->term[0][123] +
+            w->term[1][88]*w->term[0][124] + w->term[1][89]*w->term[0][125];
+    t->Qd[81] = w->term[1][72]*w->term[0][126] + w->term[1][73]*w->term[0][127] +
+            w->term[1][74]*w->term[0][128] + w->term[1][75]*w->term[0][129] +
+            w->term[1][76]*w->term[0][130] + w->term[1][77]*w->term[0][131] +
+            w->term[1][78]*w->term[0][132] + w->term[1][79]*w->term[0][133] +
+            w->term[1][80]*w->term[0][134] + w->term[1][81]*w->term[0][135] +
+            w->term[1][82]*w->term[0][136] + w->term[1][83]*w->term[0][137] +
+            w->term[1][84]*w->term[0][138] + w->term[1][85]*w->term[0][139] +
+            w->term[1][86]*w->term[0][140] + w->term[1][87]*w->term[0][141] +
+            w->term[1][88]*w->term[0][142] + w->term[1][89]*w->term[0][143];
+    t->Qd[82] = w->term[1][72]*w->term[0][144] + w->term[1][73]*w->term[0][145] +
+            w->term[1][74]*w->term[0][146] + w->term[1][75]*w->term[0][147] +
+            w->term[1][76]*w->term[0][148] + w->term[1][77]*w->term[0][149] +
+            w->term[1][78]*w->term[0][150] + w->term[1][79]*w->term[0][151] +
+            w->term[1][80]*w->term[0][152] + w->term[1][81]*w->term[0][153] +
+            w->term[1][82]*w->term[0][154] + w->term[1][83]*w->term[0][155] +
+            w->term[1][84]*w->term[0][156] + w->term[1][85]*w->term[0][157] +
+            w->term[1][86]*w->term[0][158] + w->term[1][87]*w->term[0][159] +
+            w->term[1][88]*w->term[0][160] + w->term[1][89]*w->term[0][161];
+    t->Qd[83] = w->term[1][78]*w->term[0][162];
+    t->Qd[84] = w->term[1][79]*w->term[0][163];
+    t->Qd[85] = w->term[1][80]*w->term[0][164];
+    t->Qd[86] = w->term[1][81]*w->term[0][165];
+    t->Qd[87] = w->term[1][82]*w->term[0][166];
+    t->Qd[88] = w->term[1][83]*w->term[0][167];
+    t->Qd[89] = w->term[1][84]*w->term[0][168];
+    t->Qd[90] = w->term[1][85]*w->term[0][169];
+    t->Qd[91] = w->term[1][86]*w->term[0][170];
+    t->Qd[92] = w->term[1][87]*w->term[0][171];
+    t->Qd[93] = w->term[1][88]*w->term[0][172];
+    t->Qd[94] = w->term[1][89]*w->term[0][173];
+    check = t->Qd[78] + t->Qd[79] + t->Qd[80] + t->Qd[81] + t->Qd[82] + t->Qd[83] + t->Qd[84] +
+            t->Qd[85] + t->Qd[86] + t->Qd[87] + t->Qd[88] + t->Qd[89] + t->Qd[90] + t->Qd[91] +
+            t->Qd[92] + t->Qd[93] + t->Qd[94];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+INS_GNSS21_BLOCK ins_gnss21_scalar process_noise_row_5(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[95] = w->term[1][90]*w->term[0][90] + w->term[1][91]*w->term[0][91] +
+            w->term[1][92]*w->term[0][92] + w->term[1][93]*w->term[0][93] +
+            w->term[1][94]*w->term[0][94] + w->term[1][95]*w->term[0][95] +
+            w->term[1][96]*w->term[0][96] + w->term[1][97]*w->term[0][97] +
+            w->term[1][98]*w->term[0][98] + w->term[1][99]*w->term[0][99] +
+            w->term[1][100]*w->term[0][100] + w->term[1][101]*w->term[0][101] +
+            w->term[1][102]*w->term[0][102] + w->term[1][103]*w->term[0][103] +
+            w->term[1][104]*w->term[0][104] + w->term[1][105]*w->term[0][105] +
+            w->term[1][106]*w->term[0][106] + w->term[1][107]*w->term[0][107];
+    t->Qd[96] = w->term[1][90]*w->term[0][108] + w->term[1][91]*w->term[0][109] +
+            w->term[1][92]*w->term[0][110] + w->term[1][93]*w->term[0][111] +
+            w->term[1][94]*w->term[0][112] + w->term[1][95]*w->term[0][113] +
+            w->term[1][96]*w->term[0][114] + w->term[1][97]*w->term[0][115] +
+            w->term[1][98]*w->term[0][116] + w->term[1][99]*w->term[0][117] +
+            w->term[1][100]*w->term[0][118] + w->term[1][101]*w->term[0][119] +
+            w->term[1][102]*w->term[0][120] + w->term[1][103]*w->term[0][121] +
+            w->term[1][104]*w->term[0][122] + w->term[1][105]*w->term[0][123] +
+            w->term[1][106]*w->term[0][124] + w->term[1][107]*w->term[0][125];
+    t->Qd[97] = w->term[1][90]*w->term[0][126] + w->term[1][91]*w->term[0][127] +
+            w->term[1][92]*w->term[0][128] + w->term[1][93]*w->term[0][129] +
+            w->term[1][94]*w->term[0][130] + w->term[1][95]*w->term[0][131] +
+            w->term[1][96]*w->term[0][132] + w->term[1][97]*w->term[0][133] +
+            w->term[1][98]*w->term[0][134] + w->term[1][99]*w->term[0][135] +
+            w->term[1][100]*w->term[0][136] + w->term[1][101]*w->term[0][137] +
+            w->term[1][102]*w->term[0][138] + w->term[1][103]*w->term[0][139] +
+            w->term[1][104]*w->term[0][140] + w->term[1][105]*w->term[0][141] +
+            w->term[1][106]*w->term[0][142] + w->term[1][107]*w->term[0][143];
+    t->Qd[98] = w->term[1][90]*w->term[0][144] + w->term[1][91]*w->term[0][145] +
+            w->term[1][92]*w->term[0][146] + w->term[1][93]*w->term[0][147] +
+            w->term[1][94]*w->term[0][148] + w->term[1][95]*w->term[0][149] +
+            w->term[1][96]*w->term[0][150] + w->term[1][97]*w->term[0][151] +
+            w->term[1][98]*w->term[0][152] + w->term[1][99]*w->term[0][153] +
+            w->term[1][100]*w->term[0][154] + w->term[1][101]*w->term[0][155] +
+            w->term[1][102]*w->term[0][156] + w->term[1][103]*w->term[0][157] +
+            w->term[1][104]*w->term[0][158] + w->term[1][105]*w->term[0][159] +
+            w->term[1][106]*w->term[0][160] + w->term[1][107]*w->term[0][161];
+    t->Qd[99] = w->term[1][96]*w->term[0][162];
+    t->Qd[100] = w->term[1][97]*w->term[0][163];
+    t->Qd[101] = w->term[1][98]*w->term[0][164];
+    t->Qd[102] = w->term[1][99]*w->term[0][165];
+    t->Qd[103] = w->term[1][100]*w->term[0][166];
+    t->Qd[104] = w->term[1][101]*w->term[0][167];
+    t->Qd[105] = w->term[1][102]*w->term[0][168];
+    t->Qd[106] = w->term[1][103]*w->term[0][169];
+    t->Qd[107] = w->term[1][104]*w->term[0][170];
+    t->Qd[108] = w->term[1][105]*w->term[0][171];
+    t->Qd[109] = w->term[1][106]*w->term[0][172];
+    t->Qd[110] = w->term[1][107]*w->term[0][173];
+    check = t->Qd[95] + t->Qd[96] + t->Qd[97] + t->Qd[98] + t->Qd[99] + t->Qd[100] + t->Qd[101] +
+            t->Qd[102] + t->Qd[103] + t->Qd[104] + t->Qd[105] + t->Qd[106] + t->Qd[107] + t->Qd[108]
+            + t->Qd[109] + t->Qd[110];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+INS_GNSS21_BLOCK ins_gnss21_scalar process_noise_row_6(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[111] = w->term[1][108]*w->term[0][108] + w->term[1][109]*w->term[0][109] +
+            w->term[1][110]*w->term[0][110] + w->term[1][111]*w->term[0][111] +
+            w->term[1][112]*w->term[0][112] + w->term[1][113]*w->term[0][113] +
+            w->term[1][114]*w->term[0][114] + w->term[1][115]*w->term[0][115] +
+            w->term[1][116]*w->term[0][116] + w->term[1][117]*w->term[0][117] +
+            w->term[1][118]*w->term[0][118] + w->term[1][119]*w->term[0][119] +
+            w->term[1][120]*w->term[0][120] + w->term[1][121]*w->term[0][121] +
+            w->term[1][122]*w->term[0][122] + w->term[1][123]*w->term[0][123] +
+            w->term[1][124]*w->term[0][124] + w->term[1][125]*w->term[0][125];
+    t->Qd[112] = w->term[1][108]*w->term[0][126] + w->term[1][109]*w->term[0][127] +
+            w->term[1][110]*w->term[0][128] + w->term[1][111]*w->term[0][129] +
+            w->term[1][112]*w->term[0][130] + w->term[1][113]*w->term[0][131] +
+            w->term[1][114]*w->term[0][132] + w->term[1][115]*w->term[0][133] +
+            w->term[1][116]*w->term[0][134] + w->term[1][117]*w->term[0][135] +
+            w->term[1][118]*w->term[0][136] + w->term[1][119]*w->term[0][137] +
+            w->term[1][120]*w->term[0][138] + w->term[1][121]*w->term[0][139] +
+            w->term[1][122]*w->term[0][140] + w->term[1][123]*w->term[0][141] +
+            w->term[1][124]*w->term[0][142] + w->term[1][125]*w->term[0][143];
+    t->Qd[113] = w->term[1][108]*w->term[0][144] + w->term[1][109]*w->term[0][145] +
+            w->term[1][110]*w->term[0][146] + w->term[1][111]*w->term[0][147] +
+            w->term[1][112]*w->term[0][148] + w->term[1][113]*w->term[0][149] +
+            w->term[1][114]*w->term[0][150] + w->term[1][115]*w->term[0][151] +
+            w->term[1][116]*w->term[0][152] + w->term[1][117]*w->term[0][153] +
+            w->term[1][118]*w->term[0][154] + w->term[1][119]*w->term[0][155] +
+            w->term[1][120]*w->term[0][156] + w->term[1][121]*w->term[0][157] +
+            w->term[1][122]*w->term[0][158] + w->term[1][123]*w->term[0][159] +
+            w->term[1][124]*w->term[0][160] + w->term[1][125]*w->term[0][161];
+    t->Qd[114] = w->term[1][114]*w->term[0][162];
+    t->Qd[115] = w->term[1][115]*w->term[0][163];
+    t->Qd[116] = w->term[1][116]*w->term[0][164];
+    t->Qd[117] = w->term[1][117]*w->term[0][165];
+    t->Qd[118] = w->term[1][118]*w->term[0][166];
+    t->Qd[119] = w->term[1][119]*w->term[0][167];
+    t->Qd[120] = w->term[1][120]*w->term[0][168];
+    t->Qd[121] = w->term[1][121]*w->term[0][169];
+    t->Qd[122] = w->term[1][122]*w->term[0][170];
+    t->Qd[123] = w->term[1][123]*w->term[0][171];
+    t->Qd[124] = w->term[1][124]*w->term[0][172];
+    t->Qd[125] = w->term[1][125]*w->term[0][173];
+    check = t->Qd[111] + t->Qd[112] + t->Qd[113] + t->Qd[114] + t->Qd[115] + t->Qd[116] + t->Qd[117]
+            + t->Qd[118] + t->Qd[119] + t->Qd[120] + t->Qd[121] + t->Qd[122] + t->Qd[123] +
+            t->Qd[124] + t->Qd[125];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+INS_GNSS21_BLOCK ins_gnss21_scalar process_noise_row_7(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[126] = w->term[1][126]*w->term[0][126] + w->term[1][127]*w->term[0][127] +
+            w->term[1][128]*w->term[0][128] + w->term[1][129]*w->term[0][129] +
+            w->term[1][130]*w->term[0][130] + w->term[1][131]*w->term[0][131] +
+            w->term[1][132]*w->term[0][132] + w->term[1][133]*w->term[0][133] +
+            w->term[1][134]*w->term[0][134] + w->term[1][135]*w->term[0][135] +
+            w->term[1][136]*w->term[0][136] + w->term[1][137]*w->term[0][137] +
+            w->term[1][138]*w->term[0][138] + w->term[1][139]*w->term[0][139] +
+            w->term[1][140]*w->term[0][140] + w->term[1][141]*w->term[0][141] +
+            w->term[1][142]*w->term[0][142] + w->term[1][143]*w->term[0][143];
+    t->Qd[127] = w->term[1][126]*w->term[0][144] + w->term[1][127]*w->term[0][145] +
+            w->term[1][128]*w->term[0][146] + w->term[1][129]*w->term[0][147] +
+            w->term[1][130]*w->term[0][148] + w->term[1][131]*w->term[0][149] +
+            w->term[1][132]*w->term[0][150] + w->term[1][133]*w->term[0][151] +
+            w->term[1][134]*w->term[0][152] + w->term[1][135]*w->term[0][153] +
+            w->term[1][136]*w->term[0][154] + w->term[1][137]*w->term[0][155] +
+            w->term[1][138]*w->term[0][156] + w->term[1][139]*w->term[0][157] +
+            w->term[1][140]*w->term[0][158] + w->term[1][141]*w->term[0][159] +
+            w->term[1][142]*w->term[0][160] + w->term[1][143]*w->term[0][161];
+    t->Qd[128] = w->term[1][132]*w->term[0][162];
+    t->Qd[129] = w->term[1][133]*w->term[0][163];
+    t->Qd[130] = w->term[1][134]*w->term[0][164];
+    t->Qd[131] = w->term[1][135]*w->term[0][165];
+    t->Qd[132] = w->term[1][136]*w->term[0][166];
+    t->Qd[133] = w->term[1][137]*w->term[0][167];
+    t->Qd[134] = w->term[1][138]*w->term[0][168];
+    t->Qd[135] = w->term[1][139]*w->term[0][169];
+    t->Qd[136] = w->term[1][140]*w->term[0][170];
+    t->Qd[137] = w->term[1][141]*w->term[0][171];
+    t->Qd[138] = w->term[1][142]*w->term[0][172];
+    t->Qd[139] = w->term[1][143]*w->term[0][173];
+    check = t->Qd[126] + t->Qd[127] + t->Qd[128] + t->Qd[129] + t->Qd[130] + t->Qd[131] + t->Qd[132]
+            + t->Qd[133] + t->Qd[134] + t->Qd[135] + t->Qd[136] + t->Qd[137] + t->Qd[138] +
+            t->Qd[139];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+INS_GNSS21_BLOCK ins_gnss21_scalar process_noise_row_8(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[140] = w->term[1][144]*w->term[0][144] + w->term[1][145]*w->term[0][145] +
+            w->term[1][146]*w->term[0][146] + w->term[1][147]*w->term[0][147] +
+            w->term[1][148]*w->term[0][148] + w->term[1][149]*w->term[0][149] +
+            w->term[1][150]*w->term[0][150] + w->term[1][151]*w->term[0][151] +
+            w->term[1][152]*w->term[0][152] + w->term[1][153]*w->term[0][153] +
+            w->term[1][154]*w->term[0][154] + w->term[1][155]*w->term[0][155] +
+            w->term[1][156]*w->term[0][156] + w->term[1][157]*w->term[0][157] +
+            w->term[1][158]*w->term[0][158] + w->term[1][159]*w->term[0][159] +
+            w->term[1][160]*w->term[0][160] + w->term[1][161]*w->term[0][161];
+    t->Qd[141] = w->term[1][150]*w->term[0][162];
+    t->Qd[142] = w->term[1][151]*w->term[0][163];
+    t->Qd[143] = w->term[1][152]*w->term[0][164];
+    t->Qd[144] = w->term[1][153]*w->term[0][165];
+    t->Qd[145] = w->term[1][154]*w->term[0][166];
+    t->Qd[146] = w->term[1][155]*w->term[0][167];
+    t->Qd[147] = w->term[1][156]*w->term[0][168];
+    t->Qd[148] = w->term[1][157]*w->term[0][169];
+    t->Qd[149] = w->term[1][158]*w->term[0][170];
+    t->Qd[150] = w->term[1][159]*w->term[0][171];
+    t->Qd[151] = w->term[1][160]*w->term[0][172];
+    t->Qd[152] = w->term[1][161]*w->term[0][173];
+    check = t->Qd[140] + t->Qd[141] + t->Qd[142] + t->Qd[143] + t->Qd[144] + t->Qd[145] + t->Qd[146]
+            + t->Qd[147] + t->Qd[148] + t->Qd[149] + t->Qd[150] + t->Qd[151] + t->Qd[152];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gnss21_scalar process_noise_row_9(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[153] = w->term[1][162]*w->term[0][162];
+    check = t->Qd[153];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gnss21_scalar process_noise_row_10(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[165] = w->term[1][163]*w->term[0][163];
+    check = t->Qd[165];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gnss21_scalar process_noise_row_11(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[176] = w->term[1][164]*w->term[0][164];
+    check = t->Qd[176];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gnss21_scalar process_noise_row_12(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[186] = w->term[1][165]*w->term[0][165];
+    check = t->Qd[186];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gnss21_scalar process_noise_row_13(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[195] = w->term[1][166]*w->term[0][166];
+    check = t->Qd[195];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gnss21_scalar process_noise_row_14(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[203] = w->term[1][167]*w->term[0][167];
+    check = t->Qd[203];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gnss21_scalar process_noise_row_15(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[210] = w->term[1][168]*w->term[0][168];
+    check = t->Qd[210];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gnss21_scalar process_noise_row_16(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[216] = w->term[1][169]*w->term[0][169];
+    check = t->Qd[216];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gnss21_scalar process_noise_row_17(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[221] = w->term[1][170]*w->term[0][170];
+    check = t->Qd[221];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gnss21_scalar process_noise_row_18(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[225] = w->term[1][171]*w->term[0][171];
+    check = t->Qd[225];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gnss21_scalar process_noise_row_19(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[228] = w->term[1][172]*w->term[0][172];
+    check = t->Qd[228];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gnss21_scalar process_noise_row_20(ins_gnss21_transition *restrict t, const
+        ins_gnss21_discretize_scratch *restrict w)
+{
+    ins_gnss21_scalar check;
+    t->Qd[230] = w->term[1][173]*w->term[0][173];
+    check = t->Qd[230];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
@@ -3244,7 +3390,7 @@ int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scal
     int halvings, order, status;
     int k;
     ins_gnss21_scalar sum_check;
-    ins_gnss21_scalar qd_check;
+    ins_gnss21_scalar qd_check = 0.0;
     ins_gnss21_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (!isfinite(T)) {
         return INS_GNSS21_ERR_NONFINITE;
@@ -3354,7 +3500,28 @@ int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scal
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
-    qd_check = process_noise(m, t, w, T);
+    process_noise(m, t, w, T);
+    qd_check += process_noise_row_0(t, w);
+    qd_check += process_noise_row_1(t, w);
+    qd_check += process_noise_row_2(t, w);
+    qd_check += process_noise_row_3(t, w);
+    qd_check += process_noise_row_4(t, w);
+    qd_check += process_noise_row_5(t, w);
+    qd_check += process_noise_row_6(t, w);
+    qd_check += process_noise_row_7(t, w);
+    qd_check += process_noise_row_8(t, w);
+    qd_check += process_noise_row_9(t, w);
+    qd_check += process_noise_row_10(t, w);
+    qd_check += process_noise_row_11(t, w);
+    qd_check += process_noise_row_12(t, w);
+    qd_check += process_noise_row_13(t, w);
+    qd_check += process_noise_row_14(t, w);
+    qd_check += process_noise_row_15(t, w);
+    qd_check += process_noise_row_16(t, w);
+    qd_check += process_noise_row_17(t, w);
+    qd_check += process_noise_row_18(t, w);
+    qd_check += process_noise_row_19(t, w);
+    qd_check += process_noise_row_20(t, w);
     if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
             entry */
         qd_check = 0.0;
@@ -5383,8 +5550,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_8(const ins_gnss21_transition *
     return check - check;
 }
 
-INS_GNSS21_BLOCK void phi_times_p_row_9(const ins_gnss21_filter *restrict f, const
-        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
+static void phi_times_p_row_9(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[189]*f->P[9][0];
     w->M[1] = t->Phi[189]*f->P[9][1];
@@ -5411,7 +5578,7 @@ INS_GNSS21_BLOCK void phi_times_p_row_9(const ins_gnss21_filter *restrict f, con
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_9(const ins_gnss21_transition *restrict t,
+static ins_gnss21_scalar propagate_row_9(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -5430,8 +5597,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_9(const ins_gnss21_transition *
     return check - check;
 }
 
-INS_GNSS21_BLOCK void phi_times_p_row_10(const ins_gnss21_filter *restrict f, const
-        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
+static void phi_times_p_row_10(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[190]*f->P[10][0];
     w->M[1] = t->Phi[190]*f->P[10][1];
@@ -5458,7 +5625,7 @@ INS_GNSS21_BLOCK void phi_times_p_row_10(const ins_gnss21_filter *restrict f, co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_10(const ins_gnss21_transition *restrict t,
+static ins_gnss21_scalar propagate_row_10(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -5476,8 +5643,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_10(const ins_gnss21_transition 
     return check - check;
 }
 
-INS_GNSS21_BLOCK void phi_times_p_row_11(const ins_gnss21_filter *restrict f, const
-        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
+static void phi_times_p_row_11(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[191]*f->P[11][0];
     w->M[1] = t->Phi[191]*f->P[11][1];
@@ -5504,7 +5671,7 @@ INS_GNSS21_BLOCK void phi_times_p_row_11(const ins_gnss21_filter *restrict f, co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_11(const ins_gnss21_transition *restrict t,
+static ins_gnss21_scalar propagate_row_11(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -5521,8 +5688,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_11(const ins_gnss21_transition 
     return check - check;
 }
 
-INS_GNSS21_BLOCK void phi_times_p_row_12(const ins_gnss21_filter *restrict f, const
-        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
+static void phi_times_p_row_12(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[192]*f->P[12][0];
     w->M[1] = t->Phi[192]*f->P[12][1];
@@ -5549,7 +5716,7 @@ INS_GNSS21_BLOCK void phi_times_p_row_12(const ins_gnss21_filter *restrict f, co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_12(const ins_gnss21_transition *restrict t,
+static ins_gnss21_scalar propagate_row_12(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -5565,8 +5732,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_12(const ins_gnss21_transition 
     return check - check;
 }
 
-INS_GNSS21_BLOCK void phi_times_p_row_13(const ins_gnss21_filter *restrict f, const
-        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
+static void phi_times_p_row_13(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[193]*f->P[13][0];
     w->M[1] = t->Phi[193]*f->P[13][1];
@@ -5593,7 +5760,7 @@ INS_GNSS21_BLOCK void phi_times_p_row_13(const ins_gnss21_filter *restrict f, co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_13(const ins_gnss21_transition *restrict t,
+static ins_gnss21_scalar propagate_row_13(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -5608,8 +5775,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_13(const ins_gnss21_transition 
     return check - check;
 }
 
-INS_GNSS21_BLOCK void phi_times_p_row_14(const ins_gnss21_filter *restrict f, const
-        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
+static void phi_times_p_row_14(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[194]*f->P[14][0];
     w->M[1] = t->Phi[194]*f->P[14][1];
@@ -5636,7 +5803,7 @@ INS_GNSS21_BLOCK void phi_times_p_row_14(const ins_gnss21_filter *restrict f, co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_14(const ins_gnss21_transition *restrict t,
+static ins_gnss21_scalar propagate_row_14(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -5650,8 +5817,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_14(const ins_gnss21_transition 
     return check - check;
 }
 
-INS_GNSS21_BLOCK void phi_times_p_row_15(const ins_gnss21_filter *restrict f, const
-        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
+static void phi_times_p_row_15(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[195]*f->P[15][0];
     w->M[1] = t->Phi[195]*f->P[15][1];
@@ -5678,7 +5845,7 @@ INS_GNSS21_BLOCK void phi_times_p_row_15(const ins_gnss21_filter *restrict f, co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_15(const ins_gnss21_transition *restrict t,
+static ins_gnss21_scalar propagate_row_15(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -5691,8 +5858,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_15(const ins_gnss21_transition 
     return check - check;
 }
 
-INS_GNSS21_BLOCK void phi_times_p_row_16(const ins_gnss21_filter *restrict f, const
-        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
+static void phi_times_p_row_16(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[196]*f->P[16][0];
     w->M[1] = t->Phi[196]*f->P[16][1];
@@ -5719,7 +5886,7 @@ INS_GNSS21_BLOCK void phi_times_p_row_16(const ins_gnss21_filter *restrict f, co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_16(const ins_gnss21_transition *restrict t,
+static ins_gnss21_scalar propagate_row_16(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -5731,8 +5898,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_16(const ins_gnss21_transition 
     return check - check;
 }
 
-INS_GNSS21_BLOCK void phi_times_p_row_17(const ins_gnss21_filter *restrict f, const
-        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
+static void phi_times_p_row_17(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[197]*f->P[17][0];
     w->M[1] = t->Phi[197]*f->P[17][1];
@@ -5759,7 +5926,7 @@ INS_GNSS21_BLOCK void phi_times_p_row_17(const ins_gnss21_filter *restrict f, co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_17(const ins_gnss21_transition *restrict t,
+static ins_gnss21_scalar propagate_row_17(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -5770,8 +5937,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_17(const ins_gnss21_transition 
     return check - check;
 }
 
-INS_GNSS21_BLOCK void phi_times_p_row_18(const ins_gnss21_filter *restrict f, const
-        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
+static void phi_times_p_row_18(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[198]*f->P[18][0];
     w->M[1] = t->Phi[198]*f->P[18][1];
@@ -5798,7 +5965,7 @@ INS_GNSS21_BLOCK void phi_times_p_row_18(const ins_gnss21_filter *restrict f, co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_18(const ins_gnss21_transition *restrict t,
+static ins_gnss21_scalar propagate_row_18(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -5808,8 +5975,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_18(const ins_gnss21_transition 
     return check - check;
 }
 
-INS_GNSS21_BLOCK void phi_times_p_row_19(const ins_gnss21_filter *restrict f, const
-        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
+static void phi_times_p_row_19(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[199]*f->P[19][0];
     w->M[1] = t->Phi[199]*f->P[19][1];
@@ -5836,7 +6003,7 @@ INS_GNSS21_BLOCK void phi_times_p_row_19(const ins_gnss21_filter *restrict f, co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_19(const ins_gnss21_transition *restrict t,
+static ins_gnss21_scalar propagate_row_19(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;
@@ -5845,8 +6012,8 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_19(const ins_gnss21_transition 
     return check - check;
 }
 
-INS_GNSS21_BLOCK void phi_times_p_row_20(const ins_gnss21_filter *restrict f, const
-        ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
+static void phi_times_p_row_20(const ins_gnss21_filter *restrict f, const ins_gnss21_transition
+        *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[200]*f->P[20][0];
     w->M[1] = t->Phi[200]*f->P[20][1];
@@ -5873,7 +6040,7 @@ INS_GNSS21_BLOCK void phi_times_p_row_20(const ins_gnss21_filter *restrict f, co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_20(const ins_gnss21_transition *restrict t,
+static ins_gnss21_scalar propagate_row_20(const ins_gnss21_transition *restrict t,
         ins_gnss21_filter_scratch *restrict w)
 {
     ins_gnss21_scalar v, check = 0.0;

@@ -380,10 +380,13 @@ int ins_gps15_matrices_evaluate(const ins_gps15_params *restrict params, ins_gps
     return INS_GPS15_OK;
 }
 
-/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
-   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
-   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
-   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
+   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
+           is
+   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
+   products more often on its own than inside a caller of thousands of statements
+   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
+   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define INS_GPS15_BLOCK static __attribute__((noinline))
 #else
@@ -1779,11 +1782,9 @@ INS_GPS15_BLOCK void noise_input(const ins_gps15_matrices *restrict m, ins_gps15
     w->term[0][53] = w->S[67]*m->G[11] + w->S[68]*m->G[14] + w->S[69]*m->G[17];
 }
 
-INS_GPS15_BLOCK ins_gps15_scalar process_noise(const ins_gps15_matrices *restrict m,
-        ins_gps15_transition *restrict t, ins_gps15_discretize_scratch *restrict w, const
-        ins_gps15_scalar T)
+INS_GPS15_BLOCK void process_noise(const ins_gps15_matrices *restrict m, ins_gps15_transition
+        *restrict t, ins_gps15_discretize_scratch *restrict w, const ins_gps15_scalar T)
 {
-    ins_gps15_scalar v, check = 0.0;
     w->term[1][54] = T*m->q[0];
     w->term[1][55] = T*m->q[1];
     w->term[1][56] = T*m->q[2];
@@ -1844,169 +1845,6 @@ INS_GPS15_BLOCK ins_gps15_scalar process_noise(const ins_gps15_matrices *restric
     w->term[1][51] = w->term[0][51]*w->term[1][57];
     w->term[1][52] = w->term[0][52]*w->term[1][58];
     w->term[1][53] = w->term[0][53]*w->term[1][59];
-    v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
-            w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0] = v; check += v;
-    v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
-            w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v;
-    v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
-            w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v;
-    v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
-            w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v;
-    v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
-            w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v;
-    v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
-            w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v;
-    v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
-            w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
-            w->term[1][5]*w->term[0][41]; t->Qd[6] = v; check += v;
-    v = w->term[1][0]*w->term[0][42] + w->term[1][1]*w->term[0][43] + w->term[1][2]*w->term[0][44] +
-            w->term[1][3]*w->term[0][45] + w->term[1][4]*w->term[0][46] +
-            w->term[1][5]*w->term[0][47]; t->Qd[7] = v; check += v;
-    v = w->term[1][0]*w->term[0][48] + w->term[1][1]*w->term[0][49] + w->term[1][2]*w->term[0][50] +
-            w->term[1][3]*w->term[0][51] + w->term[1][4]*w->term[0][52] +
-            w->term[1][5]*w->term[0][53]; t->Qd[8] = v; check += v;
-    v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
-            w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[15] = v; check += v;
-    v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
-            w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[16] = v; check += v;
-    v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
-            w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[17] = v; check += v;
-    v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
-            w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[18] = v; check += v;
-    v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
-            w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[19] = v; check += v;
-    v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38] +
-            w->term[1][9]*w->term[0][39] + w->term[1][10]*w->term[0][40] +
-            w->term[1][11]*w->term[0][41]; t->Qd[20] = v; check += v;
-    v = w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] + w->term[1][8]*w->term[0][44] +
-            w->term[1][9]*w->term[0][45] + w->term[1][10]*w->term[0][46] +
-            w->term[1][11]*w->term[0][47]; t->Qd[21] = v; check += v;
-    v = w->term[1][6]*w->term[0][48] + w->term[1][7]*w->term[0][49] + w->term[1][8]*w->term[0][50] +
-            w->term[1][9]*w->term[0][51] + w->term[1][10]*w->term[0][52] +
-            w->term[1][11]*w->term[0][53]; t->Qd[22] = v; check += v;
-    v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[29] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
-            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[30] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
-            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[31] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
-            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[32] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
-            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[33] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][42] + w->term[1][13]*w->term[0][43] +
-            w->term[1][14]*w->term[0][44] + w->term[1][15]*w->term[0][45] +
-            w->term[1][16]*w->term[0][46] + w->term[1][17]*w->term[0][47]; t->Qd[34] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][48] + w->term[1][13]*w->term[0][49] +
-            w->term[1][14]*w->term[0][50] + w->term[1][15]*w->term[0][51] +
-            w->term[1][16]*w->term[0][52] + w->term[1][17]*w->term[0][53]; t->Qd[35] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[42] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
-            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[43] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
-            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[44] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[45] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][42] + w->term[1][19]*w->term[0][43] +
-            w->term[1][20]*w->term[0][44] + w->term[1][21]*w->term[0][45] +
-            w->term[1][22]*w->term[0][46] + w->term[1][23]*w->term[0][47]; t->Qd[46] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][48] + w->term[1][19]*w->term[0][49] +
-            w->term[1][20]*w->term[0][50] + w->term[1][21]*w->term[0][51] +
-            w->term[1][22]*w->term[0][52] + w->term[1][23]*w->term[0][53]; t->Qd[47] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[54] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
-            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[55] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
-            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
-            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[56] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
-            w->term[1][26]*w->term[0][44] + w->term[1][27]*w->term[0][45] +
-            w->term[1][28]*w->term[0][46] + w->term[1][29]*w->term[0][47]; t->Qd[57] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][48] + w->term[1][25]*w->term[0][49] +
-            w->term[1][26]*w->term[0][50] + w->term[1][27]*w->term[0][51] +
-            w->term[1][28]*w->term[0][52] + w->term[1][29]*w->term[0][53]; t->Qd[58] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
-            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[65] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
-            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
-            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[66] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][42] + w->term[1][31]*w->term[0][43] +
-            w->term[1][32]*w->term[0][44] + w->term[1][33]*w->term[0][45] +
-            w->term[1][34]*w->term[0][46] + w->term[1][35]*w->term[0][47]; t->Qd[67] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][48] + w->term[1][31]*w->term[0][49] +
-            w->term[1][32]*w->term[0][50] + w->term[1][33]*w->term[0][51] +
-            w->term[1][34]*w->term[0][52] + w->term[1][35]*w->term[0][53]; t->Qd[68] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[75] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][42] + w->term[1][37]*w->term[0][43] +
-            w->term[1][38]*w->term[0][44] + w->term[1][39]*w->term[0][45] +
-            w->term[1][40]*w->term[0][46] + w->term[1][41]*w->term[0][47]; t->Qd[76] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][48] + w->term[1][37]*w->term[0][49] +
-            w->term[1][38]*w->term[0][50] + w->term[1][39]*w->term[0][51] +
-            w->term[1][40]*w->term[0][52] + w->term[1][41]*w->term[0][53]; t->Qd[77] = v; check +=
-            v;
-    v = w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
-            w->term[1][44]*w->term[0][44] + w->term[1][45]*w->term[0][45] +
-            w->term[1][46]*w->term[0][46] + w->term[1][47]*w->term[0][47]; t->Qd[84] = v; check +=
-            v;
-    v = w->term[1][42]*w->term[0][48] + w->term[1][43]*w->term[0][49] +
-            w->term[1][44]*w->term[0][50] + w->term[1][45]*w->term[0][51] +
-            w->term[1][46]*w->term[0][52] + w->term[1][47]*w->term[0][53]; t->Qd[85] = v; check +=
-            v;
-    v = w->term[1][48]*w->term[0][48] + w->term[1][49]*w->term[0][49] +
-            w->term[1][50]*w->term[0][50] + w->term[1][51]*w->term[0][51] +
-            w->term[1][52]*w->term[0][52] + w->term[1][53]*w->term[0][53]; t->Qd[92] = v; check +=
-            v;
     t->Qd[9] = 0;
     t->Qd[10] = 0;
     t->Qd[11] = 0;
@@ -2082,6 +1920,214 @@ INS_GPS15_BLOCK ins_gps15_scalar process_noise(const ins_gps15_matrices *restric
     t->Qd[117] = 0;
     t->Qd[118] = 0;
     t->Qd[119] = 0;
+}
+
+INS_GPS15_BLOCK ins_gps15_scalar process_noise_row_0(ins_gps15_transition *restrict t, const
+        ins_gps15_discretize_scratch *restrict w)
+{
+    ins_gps15_scalar check;
+    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
+            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
+            + w->term[1][5]*w->term[0][5];
+    t->Qd[1] = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] +
+            w->term[1][2]*w->term[0][8] + w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10]
+            + w->term[1][5]*w->term[0][11];
+    t->Qd[2] = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] +
+            w->term[1][2]*w->term[0][14] + w->term[1][3]*w->term[0][15] +
+            w->term[1][4]*w->term[0][16] + w->term[1][5]*w->term[0][17];
+    t->Qd[3] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
+            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
+            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23];
+    t->Qd[4] = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] +
+            w->term[1][2]*w->term[0][26] + w->term[1][3]*w->term[0][27] +
+            w->term[1][4]*w->term[0][28] + w->term[1][5]*w->term[0][29];
+    t->Qd[5] = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] +
+            w->term[1][2]*w->term[0][32] + w->term[1][3]*w->term[0][33] +
+            w->term[1][4]*w->term[0][34] + w->term[1][5]*w->term[0][35];
+    t->Qd[6] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
+            w->term[1][2]*w->term[0][38] + w->term[1][3]*w->term[0][39] +
+            w->term[1][4]*w->term[0][40] + w->term[1][5]*w->term[0][41];
+    t->Qd[7] = w->term[1][0]*w->term[0][42] + w->term[1][1]*w->term[0][43] +
+            w->term[1][2]*w->term[0][44] + w->term[1][3]*w->term[0][45] +
+            w->term[1][4]*w->term[0][46] + w->term[1][5]*w->term[0][47];
+    t->Qd[8] = w->term[1][0]*w->term[0][48] + w->term[1][1]*w->term[0][49] +
+            w->term[1][2]*w->term[0][50] + w->term[1][3]*w->term[0][51] +
+            w->term[1][4]*w->term[0][52] + w->term[1][5]*w->term[0][53];
+    check = t->Qd[0] + t->Qd[1] + t->Qd[2] + t->Qd[3] + t->Qd[4] + t->Qd[5] + t->Qd[6] + t->Qd[7] +
+            t->Qd[8];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+INS_GPS15_BLOCK ins_gps15_scalar process_noise_row_1(ins_gps15_transition *restrict t, const
+        ins_gps15_discretize_scratch *restrict w)
+{
+    ins_gps15_scalar check;
+    t->Qd[15] = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
+            w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9] +
+            w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11];
+    t->Qd[16] = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] +
+            w->term[1][8]*w->term[0][14] + w->term[1][9]*w->term[0][15] +
+            w->term[1][10]*w->term[0][16] + w->term[1][11]*w->term[0][17];
+    t->Qd[17] = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] +
+            w->term[1][8]*w->term[0][20] + w->term[1][9]*w->term[0][21] +
+            w->term[1][10]*w->term[0][22] + w->term[1][11]*w->term[0][23];
+    t->Qd[18] = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
+            w->term[1][8]*w->term[0][26] + w->term[1][9]*w->term[0][27] +
+            w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29];
+    t->Qd[19] = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] +
+            w->term[1][8]*w->term[0][32] + w->term[1][9]*w->term[0][33] +
+            w->term[1][10]*w->term[0][34] + w->term[1][11]*w->term[0][35];
+    t->Qd[20] = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] +
+            w->term[1][8]*w->term[0][38] + w->term[1][9]*w->term[0][39] +
+            w->term[1][10]*w->term[0][40] + w->term[1][11]*w->term[0][41];
+    t->Qd[21] = w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] +
+            w->term[1][8]*w->term[0][44] + w->term[1][9]*w->term[0][45] +
+            w->term[1][10]*w->term[0][46] + w->term[1][11]*w->term[0][47];
+    t->Qd[22] = w->term[1][6]*w->term[0][48] + w->term[1][7]*w->term[0][49] +
+            w->term[1][8]*w->term[0][50] + w->term[1][9]*w->term[0][51] +
+            w->term[1][10]*w->term[0][52] + w->term[1][11]*w->term[0][53];
+    check = t->Qd[15] + t->Qd[16] + t->Qd[17] + t->Qd[18] + t->Qd[19] + t->Qd[20] + t->Qd[21] +
+            t->Qd[22];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+INS_GPS15_BLOCK ins_gps15_scalar process_noise_row_2(ins_gps15_transition *restrict t, const
+        ins_gps15_discretize_scratch *restrict w)
+{
+    ins_gps15_scalar check;
+    t->Qd[29] = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
+            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17];
+    t->Qd[30] = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
+            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23];
+    t->Qd[31] = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
+            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29];
+    t->Qd[32] = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
+            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35];
+    t->Qd[33] = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
+            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
+            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41];
+    t->Qd[34] = w->term[1][12]*w->term[0][42] + w->term[1][13]*w->term[0][43] +
+            w->term[1][14]*w->term[0][44] + w->term[1][15]*w->term[0][45] +
+            w->term[1][16]*w->term[0][46] + w->term[1][17]*w->term[0][47];
+    t->Qd[35] = w->term[1][12]*w->term[0][48] + w->term[1][13]*w->term[0][49] +
+            w->term[1][14]*w->term[0][50] + w->term[1][15]*w->term[0][51] +
+            w->term[1][16]*w->term[0][52] + w->term[1][17]*w->term[0][53];
+    check = t->Qd[29] + t->Qd[30] + t->Qd[31] + t->Qd[32] + t->Qd[33] + t->Qd[34] + t->Qd[35];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+INS_GPS15_BLOCK ins_gps15_scalar process_noise_row_3(ins_gps15_transition *restrict t, const
+        ins_gps15_discretize_scratch *restrict w)
+{
+    ins_gps15_scalar check;
+    t->Qd[42] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
+            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23];
+    t->Qd[43] = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
+            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29];
+    t->Qd[44] = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
+            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35];
+    t->Qd[45] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
+            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
+            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41];
+    t->Qd[46] = w->term[1][18]*w->term[0][42] + w->term[1][19]*w->term[0][43] +
+            w->term[1][20]*w->term[0][44] + w->term[1][21]*w->term[0][45] +
+            w->term[1][22]*w->term[0][46] + w->term[1][23]*w->term[0][47];
+    t->Qd[47] = w->term[1][18]*w->term[0][48] + w->term[1][19]*w->term[0][49] +
+            w->term[1][20]*w->term[0][50] + w->term[1][21]*w->term[0][51] +
+            w->term[1][22]*w->term[0][52] + w->term[1][23]*w->term[0][53];
+    check = t->Qd[42] + t->Qd[43] + t->Qd[44] + t->Qd[45] + t->Qd[46] + t->Qd[47];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+INS_GPS15_BLOCK ins_gps15_scalar process_noise_row_4(ins_gps15_transition *restrict t, const
+        ins_gps15_discretize_scratch *restrict w)
+{
+    ins_gps15_scalar check;
+    t->Qd[54] = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
+            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29];
+    t->Qd[55] = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
+            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35];
+    t->Qd[56] = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
+            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
+            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41];
+    t->Qd[57] = w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
+            w->term[1][26]*w->term[0][44] + w->term[1][27]*w->term[0][45] +
+            w->term[1][28]*w->term[0][46] + w->term[1][29]*w->term[0][47];
+    t->Qd[58] = w->term[1][24]*w->term[0][48] + w->term[1][25]*w->term[0][49] +
+            w->term[1][26]*w->term[0][50] + w->term[1][27]*w->term[0][51] +
+            w->term[1][28]*w->term[0][52] + w->term[1][29]*w->term[0][53];
+    check = t->Qd[54] + t->Qd[55] + t->Qd[56] + t->Qd[57] + t->Qd[58];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gps15_scalar process_noise_row_5(ins_gps15_transition *restrict t, const
+        ins_gps15_discretize_scratch *restrict w)
+{
+    ins_gps15_scalar check;
+    t->Qd[65] = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
+            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35];
+    t->Qd[66] = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
+            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
+            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41];
+    t->Qd[67] = w->term[1][30]*w->term[0][42] + w->term[1][31]*w->term[0][43] +
+            w->term[1][32]*w->term[0][44] + w->term[1][33]*w->term[0][45] +
+            w->term[1][34]*w->term[0][46] + w->term[1][35]*w->term[0][47];
+    t->Qd[68] = w->term[1][30]*w->term[0][48] + w->term[1][31]*w->term[0][49] +
+            w->term[1][32]*w->term[0][50] + w->term[1][33]*w->term[0][51] +
+            w->term[1][34]*w->term[0][52] + w->term[1][35]*w->term[0][53];
+    check = t->Qd[65] + t->Qd[66] + t->Qd[67] + t->Qd[68];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gps15_scalar process_noise_row_6(ins_gps15_transition *restrict t, const
+        ins_gps15_discretize_scratch *restrict w)
+{
+    ins_gps15_scalar check;
+    t->Qd[75] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
+            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
+            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41];
+    t->Qd[76] = w->term[1][36]*w->term[0][42] + w->term[1][37]*w->term[0][43] +
+            w->term[1][38]*w->term[0][44] + w->term[1][39]*w->term[0][45] +
+            w->term[1][40]*w->term[0][46] + w->term[1][41]*w->term[0][47];
+    t->Qd[77] = w->term[1][36]*w->term[0][48] + w->term[1][37]*w->term[0][49] +
+            w->term[1][38]*w->term[0][50] + w->term[1][39]*w->term[0][51] +
+            w->term[1][40]*w->term[0][52] + w->term[1][41]*w->term[0][53];
+    check = t->Qd[75] + t->Qd[76] + t->Qd[77];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gps15_scalar process_noise_row_7(ins_gps15_transition *restrict t, const
+        ins_gps15_discretize_scratch *restrict w)
+{
+    ins_gps15_scalar check;
+    t->Qd[84] = w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
+            w->term[1][44]*w->term[0][44] + w->term[1][45]*w->term[0][45] +
+            w->term[1][46]*w->term[0][46] + w->term[1][47]*w->term[0][47];
+    t->Qd[85] = w->term[1][42]*w->term[0][48] + w->term[1][43]*w->term[0][49] +
+            w->term[1][44]*w->term[0][50] + w->term[1][45]*w->term[0][51] +
+            w->term[1][46]*w->term[0][52] + w->term[1][47]*w->term[0][53];
+    check = t->Qd[84] + t->Qd[85];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ins_gps15_scalar process_noise_row_8(ins_gps15_transition *restrict t, const
+        ins_gps15_discretize_scratch *restrict w)
+{
+    ins_gps15_scalar check;
+    t->Qd[92] = w->term[1][48]*w->term[0][48] + w->term[1][49]*w->term[0][49] +
+            w->term[1][50]*w->term[0][50] + w->term[1][51]*w->term[0][51] +
+            w->term[1][52]*w->term[0][52] + w->term[1][53]*w->term[0][53];
+    check = t->Qd[92];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
@@ -2094,7 +2140,7 @@ int ins_gps15_discretize(const ins_gps15_matrices *restrict m, ins_gps15_scalar 
     int halvings, order, status;
     int k;
     ins_gps15_scalar sum_check;
-    ins_gps15_scalar qd_check;
+    ins_gps15_scalar qd_check = 0.0;
     ins_gps15_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (!isfinite(T)) {
         return INS_GPS15_ERR_NONFINITE;
@@ -2214,7 +2260,16 @@ int ins_gps15_discretize(const ins_gps15_matrices *restrict m, ins_gps15_scalar 
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
-    qd_check = process_noise(m, t, w, T);
+    process_noise(m, t, w, T);
+    qd_check += process_noise_row_0(t, w);
+    qd_check += process_noise_row_1(t, w);
+    qd_check += process_noise_row_2(t, w);
+    qd_check += process_noise_row_3(t, w);
+    qd_check += process_noise_row_4(t, w);
+    qd_check += process_noise_row_5(t, w);
+    qd_check += process_noise_row_6(t, w);
+    qd_check += process_noise_row_7(t, w);
+    qd_check += process_noise_row_8(t, w);
     if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
             entry */
         qd_check = 0.0;
@@ -3378,7 +3433,7 @@ INS_GPS15_BLOCK void phi_times_p_row_8(const ins_gps15_filter *restrict f, const
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GPS15_BLOCK ins_gps15_scalar propagate_row_8(const ins_gps15_transition *restrict t,
+static ins_gps15_scalar propagate_row_8(const ins_gps15_transition *restrict t,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
@@ -3397,8 +3452,8 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_8(const ins_gps15_transition *res
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GPS15_BLOCK ins_gps15_scalar propagate_row_9(const ins_gps15_filter *restrict f,
-        ins_gps15_filter_scratch *restrict w)
+static ins_gps15_scalar propagate_row_9(const ins_gps15_filter *restrict f, ins_gps15_filter_scratch
+        *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
     v = f->P[9][9]; w->Pn[99] = v; check += v;
@@ -3412,7 +3467,7 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_9(const ins_gps15_filter *restric
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GPS15_BLOCK ins_gps15_scalar propagate_row_10(const ins_gps15_filter *restrict f,
+static ins_gps15_scalar propagate_row_10(const ins_gps15_filter *restrict f,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
@@ -3426,7 +3481,7 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_10(const ins_gps15_filter *restri
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GPS15_BLOCK ins_gps15_scalar propagate_row_11(const ins_gps15_filter *restrict f,
+static ins_gps15_scalar propagate_row_11(const ins_gps15_filter *restrict f,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
@@ -3439,7 +3494,7 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_11(const ins_gps15_filter *restri
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GPS15_BLOCK ins_gps15_scalar propagate_row_12(const ins_gps15_filter *restrict f,
+static ins_gps15_scalar propagate_row_12(const ins_gps15_filter *restrict f,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
@@ -3451,7 +3506,7 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_12(const ins_gps15_filter *restri
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GPS15_BLOCK ins_gps15_scalar propagate_row_13(const ins_gps15_filter *restrict f,
+static ins_gps15_scalar propagate_row_13(const ins_gps15_filter *restrict f,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
@@ -3462,7 +3517,7 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_13(const ins_gps15_filter *restri
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-INS_GPS15_BLOCK ins_gps15_scalar propagate_row_14(const ins_gps15_filter *restrict f,
+static ins_gps15_scalar propagate_row_14(const ins_gps15_filter *restrict f,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;

@@ -319,10 +319,13 @@ int ned_doppler13_reduced_matrices_evaluate(const ned_doppler13_reduced_params *
     return NED_DOPPLER13_REDUCED_OK;
 }
 
-/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
-   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
-   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
-   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
+   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
+           is
+   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
+   products more often on its own than inside a caller of thousands of statements
+   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
+   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define NED_DOPPLER13_REDUCED_BLOCK static __attribute__((noinline))
 #else
@@ -1326,11 +1329,10 @@ NED_DOPPLER13_REDUCED_BLOCK void noise_input(const ned_doppler13_reduced_matrice
     w->term[0][43] = w->S[57]*m->G[10];
 }
 
-NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar process_noise(const
-        ned_doppler13_reduced_matrices *restrict m, ned_doppler13_reduced_transition *restrict t,
-        ned_doppler13_reduced_discretize_scratch *restrict w, const ned_doppler13_reduced_scalar T)
+NED_DOPPLER13_REDUCED_BLOCK void process_noise(const ned_doppler13_reduced_matrices *restrict m,
+        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_discretize_scratch
+        *restrict w, const ned_doppler13_reduced_scalar T)
 {
-    ned_doppler13_reduced_scalar v, check = 0.0;
     w->term[1][44] = T*m->q[0];
     w->term[1][45] = T*m->q[1];
     w->term[1][46] = T*m->q[2];
@@ -1381,121 +1383,6 @@ NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar process_noise(const
     w->term[1][41] = w->term[0][41]*w->term[1][49];
     w->term[1][42] = w->term[0][42]*w->term[1][44];
     w->term[1][43] = w->term[0][43]*w->term[1][45];
-    v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
-            w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0] = v; check += v;
-    v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
-            w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v;
-    v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
-            w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v;
-    v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
-            w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v;
-    v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
-            w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v;
-    v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
-            w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v;
-    v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
-            w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
-            w->term[1][5]*w->term[0][41]; t->Qd[6] = v; check += v;
-    v = w->term[1][0]*w->term[0][42]; t->Qd[9] = v; check += v;
-    v = w->term[1][1]*w->term[0][43]; t->Qd[10] = v; check += v;
-    v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
-            w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[13] = v; check += v;
-    v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
-            w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[14] = v; check += v;
-    v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
-            w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[15] = v; check += v;
-    v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
-            w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[16] = v; check += v;
-    v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
-            w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[17] = v; check += v;
-    v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38] +
-            w->term[1][9]*w->term[0][39] + w->term[1][10]*w->term[0][40] +
-            w->term[1][11]*w->term[0][41]; t->Qd[18] = v; check += v;
-    v = w->term[1][6]*w->term[0][42]; t->Qd[21] = v; check += v;
-    v = w->term[1][7]*w->term[0][43]; t->Qd[22] = v; check += v;
-    v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[25] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
-            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[26] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
-            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[27] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
-            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[28] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
-            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[29] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][42]; t->Qd[32] = v; check += v;
-    v = w->term[1][13]*w->term[0][43]; t->Qd[33] = v; check += v;
-    v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[36] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
-            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[37] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
-            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[38] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[39] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][42]; t->Qd[42] = v; check += v;
-    v = w->term[1][19]*w->term[0][43]; t->Qd[43] = v; check += v;
-    v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[46] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
-            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[47] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
-            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
-            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[48] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][42]; t->Qd[51] = v; check += v;
-    v = w->term[1][25]*w->term[0][43]; t->Qd[52] = v; check += v;
-    v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
-            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[55] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
-            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
-            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[56] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][42]; t->Qd[59] = v; check += v;
-    v = w->term[1][31]*w->term[0][43]; t->Qd[60] = v; check += v;
-    v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[63] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][42]; t->Qd[66] = v; check += v;
-    v = w->term[1][37]*w->term[0][43]; t->Qd[67] = v; check += v;
-    v = w->term[1][42]*w->term[0][42]; t->Qd[81] = v; check += v;
-    v = w->term[1][43]*w->term[0][43]; t->Qd[85] = v; check += v;
     t->Qd[7] = 0;
     t->Qd[8] = 0;
     t->Qd[11] = 0;
@@ -1543,6 +1430,183 @@ NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar process_noise(const
     t->Qd[88] = 0;
     t->Qd[89] = 0;
     t->Qd[90] = 0;
+}
+
+NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar
+        process_noise_row_0(ned_doppler13_reduced_transition *restrict t, const
+        ned_doppler13_reduced_discretize_scratch *restrict w)
+{
+    ned_doppler13_reduced_scalar check;
+    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
+            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
+            + w->term[1][5]*w->term[0][5];
+    t->Qd[1] = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] +
+            w->term[1][2]*w->term[0][8] + w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10]
+            + w->term[1][5]*w->term[0][11];
+    t->Qd[2] = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] +
+            w->term[1][2]*w->term[0][14] + w->term[1][3]*w->term[0][15] +
+            w->term[1][4]*w->term[0][16] + w->term[1][5]*w->term[0][17];
+    t->Qd[3] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
+            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
+            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23];
+    t->Qd[4] = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] +
+            w->term[1][2]*w->term[0][26] + w->term[1][3]*w->term[0][27] +
+            w->term[1][4]*w->term[0][28] + w->term[1][5]*w->term[0][29];
+    t->Qd[5] = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] +
+            w->term[1][2]*w->term[0][32] + w->term[1][3]*w->term[0][33] +
+            w->term[1][4]*w->term[0][34] + w->term[1][5]*w->term[0][35];
+    t->Qd[6] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
+            w->term[1][2]*w->term[0][38] + w->term[1][3]*w->term[0][39] +
+            w->term[1][4]*w->term[0][40] + w->term[1][5]*w->term[0][41];
+    t->Qd[9] = w->term[1][0]*w->term[0][42];
+    t->Qd[10] = w->term[1][1]*w->term[0][43];
+    check = t->Qd[0] + t->Qd[1] + t->Qd[2] + t->Qd[3] + t->Qd[4] + t->Qd[5] + t->Qd[6] + t->Qd[9] +
+            t->Qd[10];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar
+        process_noise_row_1(ned_doppler13_reduced_transition *restrict t, const
+        ned_doppler13_reduced_discretize_scratch *restrict w)
+{
+    ned_doppler13_reduced_scalar check;
+    t->Qd[13] = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
+            w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9] +
+            w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11];
+    t->Qd[14] = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] +
+            w->term[1][8]*w->term[0][14] + w->term[1][9]*w->term[0][15] +
+            w->term[1][10]*w->term[0][16] + w->term[1][11]*w->term[0][17];
+    t->Qd[15] = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] +
+            w->term[1][8]*w->term[0][20] + w->term[1][9]*w->term[0][21] +
+            w->term[1][10]*w->term[0][22] + w->term[1][11]*w->term[0][23];
+    t->Qd[16] = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
+            w->term[1][8]*w->term[0][26] + w->term[1][9]*w->term[0][27] +
+            w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29];
+    t->Qd[17] = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] +
+            w->term[1][8]*w->term[0][32] + w->term[1][9]*w->term[0][33] +
+            w->term[1][10]*w->term[0][34] + w->term[1][11]*w->term[0][35];
+    t->Qd[18] = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] +
+            w->term[1][8]*w->term[0][38] + w->term[1][9]*w->term[0][39] +
+            w->term[1][10]*w->term[0][40] + w->term[1][11]*w->term[0][41];
+    t->Qd[21] = w->term[1][6]*w->term[0][42];
+    t->Qd[22] = w->term[1][7]*w->term[0][43];
+    check = t->Qd[13] + t->Qd[14] + t->Qd[15] + t->Qd[16] + t->Qd[17] + t->Qd[18] + t->Qd[21] +
+            t->Qd[22];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar
+        process_noise_row_2(ned_doppler13_reduced_transition *restrict t, const
+        ned_doppler13_reduced_discretize_scratch *restrict w)
+{
+    ned_doppler13_reduced_scalar check;
+    t->Qd[25] = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
+            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17];
+    t->Qd[26] = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
+            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23];
+    t->Qd[27] = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
+            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29];
+    t->Qd[28] = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
+            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35];
+    t->Qd[29] = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
+            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
+            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41];
+    t->Qd[32] = w->term[1][12]*w->term[0][42];
+    t->Qd[33] = w->term[1][13]*w->term[0][43];
+    check = t->Qd[25] + t->Qd[26] + t->Qd[27] + t->Qd[28] + t->Qd[29] + t->Qd[32] + t->Qd[33];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar
+        process_noise_row_3(ned_doppler13_reduced_transition *restrict t, const
+        ned_doppler13_reduced_discretize_scratch *restrict w)
+{
+    ned_doppler13_reduced_scalar check;
+    t->Qd[36] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
+            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23];
+    t->Qd[37] = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
+            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29];
+    t->Qd[38] = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
+            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35];
+    t->Qd[39] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
+            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
+            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41];
+    t->Qd[42] = w->term[1][18]*w->term[0][42];
+    t->Qd[43] = w->term[1][19]*w->term[0][43];
+    check = t->Qd[36] + t->Qd[37] + t->Qd[38] + t->Qd[39] + t->Qd[42] + t->Qd[43];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler13_reduced_scalar process_noise_row_4(ned_doppler13_reduced_transition *restrict
+        t, const ned_doppler13_reduced_discretize_scratch *restrict w)
+{
+    ned_doppler13_reduced_scalar check;
+    t->Qd[46] = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
+            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29];
+    t->Qd[47] = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
+            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35];
+    t->Qd[48] = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
+            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
+            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41];
+    t->Qd[51] = w->term[1][24]*w->term[0][42];
+    t->Qd[52] = w->term[1][25]*w->term[0][43];
+    check = t->Qd[46] + t->Qd[47] + t->Qd[48] + t->Qd[51] + t->Qd[52];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler13_reduced_scalar process_noise_row_5(ned_doppler13_reduced_transition *restrict
+        t, const ned_doppler13_reduced_discretize_scratch *restrict w)
+{
+    ned_doppler13_reduced_scalar check;
+    t->Qd[55] = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
+            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35];
+    t->Qd[56] = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
+            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
+            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41];
+    t->Qd[59] = w->term[1][30]*w->term[0][42];
+    t->Qd[60] = w->term[1][31]*w->term[0][43];
+    check = t->Qd[55] + t->Qd[56] + t->Qd[59] + t->Qd[60];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler13_reduced_scalar process_noise_row_6(ned_doppler13_reduced_transition *restrict
+        t, const ned_doppler13_reduced_discretize_scratch *restrict w)
+{
+    ned_doppler13_reduced_scalar check;
+    t->Qd[63] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
+            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
+            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41];
+    t->Qd[66] = w->term[1][36]*w->term[0][42];
+    t->Qd[67] = w->term[1][37]*w->term[0][43];
+    check = t->Qd[63] + t->Qd[66] + t->Qd[67];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler13_reduced_scalar process_noise_row_9(ned_doppler13_reduced_transition *restrict
+        t, const ned_doppler13_reduced_discretize_scratch *restrict w)
+{
+    ned_doppler13_reduced_scalar check;
+    t->Qd[81] = w->term[1][42]*w->term[0][42];
+    check = t->Qd[81];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler13_reduced_scalar process_noise_row_10(ned_doppler13_reduced_transition *restrict
+        t, const ned_doppler13_reduced_discretize_scratch *restrict w)
+{
+    ned_doppler13_reduced_scalar check;
+    t->Qd[85] = w->term[1][43]*w->term[0][43];
+    check = t->Qd[85];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
@@ -1555,7 +1619,7 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restr
     int halvings, order, status;
     int k;
     ned_doppler13_reduced_scalar sum_check;
-    ned_doppler13_reduced_scalar qd_check;
+    ned_doppler13_reduced_scalar qd_check = 0.0;
     ned_doppler13_reduced_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (!isfinite(T)) {
         return NED_DOPPLER13_REDUCED_ERR_NONFINITE;
@@ -1675,7 +1739,16 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restr
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
-    qd_check = process_noise(m, t, w, T);
+    process_noise(m, t, w, T);
+    qd_check += process_noise_row_0(t, w);
+    qd_check += process_noise_row_1(t, w);
+    qd_check += process_noise_row_2(t, w);
+    qd_check += process_noise_row_3(t, w);
+    qd_check += process_noise_row_4(t, w);
+    qd_check += process_noise_row_5(t, w);
+    qd_check += process_noise_row_6(t, w);
+    qd_check += process_noise_row_9(t, w);
+    qd_check += process_noise_row_10(t, w);
     if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
             entry */
         qd_check = 0.0;
@@ -2396,9 +2469,8 @@ NED_DOPPLER13_REDUCED_BLOCK void phi_times_p_row_6(const ned_doppler13_reduced_f
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_6(const
-        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
-        w)
+static ned_doppler13_reduced_scalar propagate_row_6(const ned_doppler13_reduced_transition *restrict
+        t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
@@ -2416,9 +2488,9 @@ NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_6(const
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_7(const
-        ned_doppler13_reduced_filter *restrict f, const ned_doppler13_reduced_transition *restrict
-        t, ned_doppler13_reduced_filter_scratch *restrict w)
+static ned_doppler13_reduced_scalar propagate_row_7(const ned_doppler13_reduced_filter *restrict f,
+        const ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch
+        *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = f->P[7][7]; w->Pn[70] = v; check += v;
@@ -2432,9 +2504,9 @@ NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_7(const
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_8(const
-        ned_doppler13_reduced_filter *restrict f, const ned_doppler13_reduced_transition *restrict
-        t, ned_doppler13_reduced_filter_scratch *restrict w)
+static ned_doppler13_reduced_scalar propagate_row_8(const ned_doppler13_reduced_filter *restrict f,
+        const ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch
+        *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = f->P[8][8]; w->Pn[76] = v; check += v;
@@ -2445,9 +2517,9 @@ NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_8(const
     return check - check;
 }
 
-NED_DOPPLER13_REDUCED_BLOCK void phi_times_p_row_9(const ned_doppler13_reduced_filter *restrict f,
-        const ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch
-        *restrict w)
+static void phi_times_p_row_9(const ned_doppler13_reduced_filter *restrict f, const
+        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
+        w)
 {
     w->M[0] = t->Phi[73]*f->P[9][0];
     w->M[1] = t->Phi[73]*f->P[9][1];
@@ -2466,9 +2538,8 @@ NED_DOPPLER13_REDUCED_BLOCK void phi_times_p_row_9(const ned_doppler13_reduced_f
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_9(const
-        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
-        w)
+static ned_doppler13_reduced_scalar propagate_row_9(const ned_doppler13_reduced_transition *restrict
+        t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = w->M[9]*t->Phi[73] + t->Qd[81]; w->Pn[81] = v; check += v;
@@ -2478,9 +2549,9 @@ NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_9(const
     return check - check;
 }
 
-NED_DOPPLER13_REDUCED_BLOCK void phi_times_p_row_10(const ned_doppler13_reduced_filter *restrict f,
-        const ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch
-        *restrict w)
+static void phi_times_p_row_10(const ned_doppler13_reduced_filter *restrict f, const
+        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
+        w)
 {
     w->M[0] = t->Phi[74]*f->P[10][0];
     w->M[1] = t->Phi[74]*f->P[10][1];
@@ -2499,9 +2570,8 @@ NED_DOPPLER13_REDUCED_BLOCK void phi_times_p_row_10(const ned_doppler13_reduced_
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_10(const
-        ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch *restrict
-        w)
+static ned_doppler13_reduced_scalar propagate_row_10(const ned_doppler13_reduced_transition
+        *restrict t, ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = w->M[10]*t->Phi[74] + t->Qd[85]; w->Pn[85] = v; check += v;
@@ -2512,8 +2582,8 @@ NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_10(const
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_11(const
-        ned_doppler13_reduced_filter *restrict f, ned_doppler13_reduced_filter_scratch *restrict w)
+static ned_doppler13_reduced_scalar propagate_row_11(const ned_doppler13_reduced_filter *restrict f,
+        ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = f->P[11][11]; w->Pn[88] = v; check += v;
@@ -2523,8 +2593,8 @@ NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_11(const
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar propagate_row_12(const
-        ned_doppler13_reduced_filter *restrict f, ned_doppler13_reduced_filter_scratch *restrict w)
+static ned_doppler13_reduced_scalar propagate_row_12(const ned_doppler13_reduced_filter *restrict f,
+        ned_doppler13_reduced_filter_scratch *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
     v = f->P[12][12]; w->Pn[90] = v; check += v;

@@ -410,10 +410,13 @@ int ned_doppler32_augmented_matrices_evaluate(const ned_doppler32_augmented_para
     return NED_DOPPLER32_AUGMENTED_OK;
 }
 
-/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
-   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
-   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
-   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
+   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
+           is
+   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
+   products more often on its own than inside a caller of thousands of statements
+   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
+   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define NED_DOPPLER32_AUGMENTED_BLOCK static __attribute__((noinline))
 #else
@@ -2509,12 +2512,10 @@ NED_DOPPLER32_AUGMENTED_BLOCK void noise_input(const ned_doppler32_augmented_mat
     w->term[0][47] = w->S[89]*m->G[5];
 }
 
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar process_noise(const
-        ned_doppler32_augmented_matrices *restrict m, ned_doppler32_augmented_transition *restrict
-        t, ned_doppler32_augmented_discretize_scratch *restrict w, const
-        ned_doppler32_augmented_scalar T)
+NED_DOPPLER32_AUGMENTED_BLOCK void process_noise(const ned_doppler32_augmented_matrices *restrict m,
+        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_discretize_scratch
+        *restrict w, const ned_doppler32_augmented_scalar T)
 {
-    ned_doppler32_augmented_scalar v, check = 0.0;
     w->term[1][48] = T*m->q[0];
     w->term[1][49] = T*m->q[1];
     w->term[1][50] = T*m->q[2];
@@ -2569,153 +2570,6 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar process_noise(const
     w->term[1][45] = w->term[0][45]*w->term[1][51];
     w->term[1][46] = w->term[0][46]*w->term[1][52];
     w->term[1][47] = w->term[0][47]*w->term[1][53];
-    v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
-            w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0] = v; check += v;
-    v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
-            w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v;
-    v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
-            w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v;
-    v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
-            w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v;
-    v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
-            w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v;
-    v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
-            w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v;
-    v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
-            w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
-            w->term[1][5]*w->term[0][41]; t->Qd[6] = v; check += v;
-    v = w->term[1][0]*w->term[0][42]; t->Qd[10] = v; check += v;
-    v = w->term[1][1]*w->term[0][43]; t->Qd[11] = v; check += v;
-    v = w->term[1][2]*w->term[0][44]; t->Qd[12] = v; check += v;
-    v = w->term[1][3]*w->term[0][45]; t->Qd[13] = v; check += v;
-    v = w->term[1][4]*w->term[0][46]; t->Qd[14] = v; check += v;
-    v = w->term[1][5]*w->term[0][47]; t->Qd[15] = v; check += v;
-    v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
-            w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[32] = v; check += v;
-    v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
-            w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[33] = v; check += v;
-    v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
-            w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[34] = v; check += v;
-    v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
-            w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[35] = v; check += v;
-    v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
-            w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[36] = v; check += v;
-    v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38] +
-            w->term[1][9]*w->term[0][39] + w->term[1][10]*w->term[0][40] +
-            w->term[1][11]*w->term[0][41]; t->Qd[37] = v; check += v;
-    v = w->term[1][6]*w->term[0][42]; t->Qd[41] = v; check += v;
-    v = w->term[1][7]*w->term[0][43]; t->Qd[42] = v; check += v;
-    v = w->term[1][8]*w->term[0][44]; t->Qd[43] = v; check += v;
-    v = w->term[1][9]*w->term[0][45]; t->Qd[44] = v; check += v;
-    v = w->term[1][10]*w->term[0][46]; t->Qd[45] = v; check += v;
-    v = w->term[1][11]*w->term[0][47]; t->Qd[46] = v; check += v;
-    v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[63] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
-            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[64] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
-            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[65] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
-            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[66] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
-            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[67] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][42]; t->Qd[71] = v; check += v;
-    v = w->term[1][13]*w->term[0][43]; t->Qd[72] = v; check += v;
-    v = w->term[1][14]*w->term[0][44]; t->Qd[73] = v; check += v;
-    v = w->term[1][15]*w->term[0][45]; t->Qd[74] = v; check += v;
-    v = w->term[1][16]*w->term[0][46]; t->Qd[75] = v; check += v;
-    v = w->term[1][17]*w->term[0][47]; t->Qd[76] = v; check += v;
-    v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[93] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
-            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[94] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
-            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[95] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[96] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][42]; t->Qd[100] = v; check += v;
-    v = w->term[1][19]*w->term[0][43]; t->Qd[101] = v; check += v;
-    v = w->term[1][20]*w->term[0][44]; t->Qd[102] = v; check += v;
-    v = w->term[1][21]*w->term[0][45]; t->Qd[103] = v; check += v;
-    v = w->term[1][22]*w->term[0][46]; t->Qd[104] = v; check += v;
-    v = w->term[1][23]*w->term[0][47]; t->Qd[105] = v; check += v;
-    v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[122] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
-            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[123] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
-            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
-            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[124] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][42]; t->Qd[128] = v; check += v;
-    v = w->term[1][25]*w->term[0][43]; t->Qd[129] = v; check += v;
-    v = w->term[1][26]*w->term[0][44]; t->Qd[130] = v; check += v;
-    v = w->term[1][27]*w->term[0][45]; t->Qd[131] = v; check += v;
-    v = w->term[1][28]*w->term[0][46]; t->Qd[132] = v; check += v;
-    v = w->term[1][29]*w->term[0][47]; t->Qd[133] = v; check += v;
-    v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
-            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[150] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
-            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
-            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[151] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][42]; t->Qd[155] = v; check += v;
-    v = w->term[1][31]*w->term[0][43]; t->Qd[156] = v; check += v;
-    v = w->term[1][32]*w->term[0][44]; t->Qd[157] = v; check += v;
-    v = w->term[1][33]*w->term[0][45]; t->Qd[158] = v; check += v;
-    v = w->term[1][34]*w->term[0][46]; t->Qd[159] = v; check += v;
-    v = w->term[1][35]*w->term[0][47]; t->Qd[160] = v; check += v;
-    v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[177] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][42]; t->Qd[181] = v; check += v;
-    v = w->term[1][37]*w->term[0][43]; t->Qd[182] = v; check += v;
-    v = w->term[1][38]*w->term[0][44]; t->Qd[183] = v; check += v;
-    v = w->term[1][39]*w->term[0][45]; t->Qd[184] = v; check += v;
-    v = w->term[1][40]*w->term[0][46]; t->Qd[185] = v; check += v;
-    v = w->term[1][41]*w->term[0][47]; t->Qd[186] = v; check += v;
-    v = w->term[1][42]*w->term[0][42]; t->Qd[275] = v; check += v;
-    v = w->term[1][43]*w->term[0][43]; t->Qd[297] = v; check += v;
-    v = w->term[1][44]*w->term[0][44]; t->Qd[318] = v; check += v;
-    v = w->term[1][45]*w->term[0][45]; t->Qd[338] = v; check += v;
-    v = w->term[1][46]*w->term[0][46]; t->Qd[357] = v; check += v;
-    v = w->term[1][47]*w->term[0][47]; t->Qd[375] = v; check += v;
     t->Qd[7] = 0;
     t->Qd[8] = 0;
     t->Qd[9] = 0;
@@ -3168,6 +3022,252 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar process_noise(const
     t->Qd[525] = 0;
     t->Qd[526] = 0;
     t->Qd[527] = 0;
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
+        process_noise_row_0(ned_doppler32_augmented_transition *restrict t, const
+        ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
+            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
+            + w->term[1][5]*w->term[0][5];
+    t->Qd[1] = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] +
+            w->term[1][2]*w->term[0][8] + w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10]
+            + w->term[1][5]*w->term[0][11];
+    t->Qd[2] = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] +
+            w->term[1][2]*w->term[0][14] + w->term[1][3]*w->term[0][15] +
+            w->term[1][4]*w->term[0][16] + w->term[1][5]*w->term[0][17];
+    t->Qd[3] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
+            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
+            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23];
+    t->Qd[4] = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] +
+            w->term[1][2]*w->term[0][26] + w->term[1][3]*w->term[0][27] +
+            w->term[1][4]*w->term[0][28] + w->term[1][5]*w->term[0][29];
+    t->Qd[5] = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] +
+            w->term[1][2]*w->term[0][32] + w->term[1][3]*w->term[0][33] +
+            w->term[1][4]*w->term[0][34] + w->term[1][5]*w->term[0][35];
+    t->Qd[6] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
+            w->term[1][2]*w->term[0][38] + w->term[1][3]*w->term[0][39] +
+            w->term[1][4]*w->term[0][40] + w->term[1][5]*w->term[0][41];
+    t->Qd[10] = w->term[1][0]*w->term[0][42];
+    t->Qd[11] = w->term[1][1]*w->term[0][43];
+    t->Qd[12] = w->term[1][2]*w->term[0][44];
+    t->Qd[13] = w->term[1][3]*w->term[0][45];
+    t->Qd[14] = w->term[1][4]*w->term[0][46];
+    t->Qd[15] = w->term[1][5]*w->term[0][47];
+    check = t->Qd[0] + t->Qd[1] + t->Qd[2] + t->Qd[3] + t->Qd[4] + t->Qd[5] + t->Qd[6] + t->Qd[10] +
+            t->Qd[11] + t->Qd[12] + t->Qd[13] + t->Qd[14] + t->Qd[15];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
+        process_noise_row_1(ned_doppler32_augmented_transition *restrict t, const
+        ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[32] = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
+            w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9] +
+            w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11];
+    t->Qd[33] = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] +
+            w->term[1][8]*w->term[0][14] + w->term[1][9]*w->term[0][15] +
+            w->term[1][10]*w->term[0][16] + w->term[1][11]*w->term[0][17];
+    t->Qd[34] = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] +
+            w->term[1][8]*w->term[0][20] + w->term[1][9]*w->term[0][21] +
+            w->term[1][10]*w->term[0][22] + w->term[1][11]*w->term[0][23];
+    t->Qd[35] = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
+            w->term[1][8]*w->term[0][26] + w->term[1][9]*w->term[0][27] +
+            w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29];
+    t->Qd[36] = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] +
+            w->term[1][8]*w->term[0][32] + w->term[1][9]*w->term[0][33] +
+            w->term[1][10]*w->term[0][34] + w->term[1][11]*w->term[0][35];
+    t->Qd[37] = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] +
+            w->term[1][8]*w->term[0][38] + w->term[1][9]*w->term[0][39] +
+            w->term[1][10]*w->term[0][40] + w->term[1][11]*w->term[0][41];
+    t->Qd[41] = w->term[1][6]*w->term[0][42];
+    t->Qd[42] = w->term[1][7]*w->term[0][43];
+    t->Qd[43] = w->term[1][8]*w->term[0][44];
+    t->Qd[44] = w->term[1][9]*w->term[0][45];
+    t->Qd[45] = w->term[1][10]*w->term[0][46];
+    t->Qd[46] = w->term[1][11]*w->term[0][47];
+    check = t->Qd[32] + t->Qd[33] + t->Qd[34] + t->Qd[35] + t->Qd[36] + t->Qd[37] + t->Qd[41] +
+            t->Qd[42] + t->Qd[43] + t->Qd[44] + t->Qd[45] + t->Qd[46];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
+        process_noise_row_2(ned_doppler32_augmented_transition *restrict t, const
+        ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[63] = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
+            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17];
+    t->Qd[64] = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
+            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23];
+    t->Qd[65] = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
+            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29];
+    t->Qd[66] = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
+            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35];
+    t->Qd[67] = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
+            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
+            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41];
+    t->Qd[71] = w->term[1][12]*w->term[0][42];
+    t->Qd[72] = w->term[1][13]*w->term[0][43];
+    t->Qd[73] = w->term[1][14]*w->term[0][44];
+    t->Qd[74] = w->term[1][15]*w->term[0][45];
+    t->Qd[75] = w->term[1][16]*w->term[0][46];
+    t->Qd[76] = w->term[1][17]*w->term[0][47];
+    check = t->Qd[63] + t->Qd[64] + t->Qd[65] + t->Qd[66] + t->Qd[67] + t->Qd[71] + t->Qd[72] +
+            t->Qd[73] + t->Qd[74] + t->Qd[75] + t->Qd[76];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
+        process_noise_row_3(ned_doppler32_augmented_transition *restrict t, const
+        ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[93] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
+            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23];
+    t->Qd[94] = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
+            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29];
+    t->Qd[95] = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
+            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35];
+    t->Qd[96] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
+            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
+            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41];
+    t->Qd[100] = w->term[1][18]*w->term[0][42];
+    t->Qd[101] = w->term[1][19]*w->term[0][43];
+    t->Qd[102] = w->term[1][20]*w->term[0][44];
+    t->Qd[103] = w->term[1][21]*w->term[0][45];
+    t->Qd[104] = w->term[1][22]*w->term[0][46];
+    t->Qd[105] = w->term[1][23]*w->term[0][47];
+    check = t->Qd[93] + t->Qd[94] + t->Qd[95] + t->Qd[96] + t->Qd[100] + t->Qd[101] + t->Qd[102] +
+            t->Qd[103] + t->Qd[104] + t->Qd[105];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler32_augmented_scalar process_noise_row_4(ned_doppler32_augmented_transition
+        *restrict t, const ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[122] = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
+            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29];
+    t->Qd[123] = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
+            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35];
+    t->Qd[124] = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
+            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
+            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41];
+    t->Qd[128] = w->term[1][24]*w->term[0][42];
+    t->Qd[129] = w->term[1][25]*w->term[0][43];
+    t->Qd[130] = w->term[1][26]*w->term[0][44];
+    t->Qd[131] = w->term[1][27]*w->term[0][45];
+    t->Qd[132] = w->term[1][28]*w->term[0][46];
+    t->Qd[133] = w->term[1][29]*w->term[0][47];
+    check = t->Qd[122] + t->Qd[123] + t->Qd[124] + t->Qd[128] + t->Qd[129] + t->Qd[130] + t->Qd[131]
+            + t->Qd[132] + t->Qd[133];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler32_augmented_scalar process_noise_row_5(ned_doppler32_augmented_transition
+        *restrict t, const ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[150] = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
+            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35];
+    t->Qd[151] = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
+            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
+            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41];
+    t->Qd[155] = w->term[1][30]*w->term[0][42];
+    t->Qd[156] = w->term[1][31]*w->term[0][43];
+    t->Qd[157] = w->term[1][32]*w->term[0][44];
+    t->Qd[158] = w->term[1][33]*w->term[0][45];
+    t->Qd[159] = w->term[1][34]*w->term[0][46];
+    t->Qd[160] = w->term[1][35]*w->term[0][47];
+    check = t->Qd[150] + t->Qd[151] + t->Qd[155] + t->Qd[156] + t->Qd[157] + t->Qd[158] + t->Qd[159]
+            + t->Qd[160];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler32_augmented_scalar process_noise_row_6(ned_doppler32_augmented_transition
+        *restrict t, const ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[177] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
+            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
+            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41];
+    t->Qd[181] = w->term[1][36]*w->term[0][42];
+    t->Qd[182] = w->term[1][37]*w->term[0][43];
+    t->Qd[183] = w->term[1][38]*w->term[0][44];
+    t->Qd[184] = w->term[1][39]*w->term[0][45];
+    t->Qd[185] = w->term[1][40]*w->term[0][46];
+    t->Qd[186] = w->term[1][41]*w->term[0][47];
+    check = t->Qd[177] + t->Qd[181] + t->Qd[182] + t->Qd[183] + t->Qd[184] + t->Qd[185] +
+            t->Qd[186];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler32_augmented_scalar process_noise_row_10(ned_doppler32_augmented_transition
+        *restrict t, const ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[275] = w->term[1][42]*w->term[0][42];
+    check = t->Qd[275];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler32_augmented_scalar process_noise_row_11(ned_doppler32_augmented_transition
+        *restrict t, const ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[297] = w->term[1][43]*w->term[0][43];
+    check = t->Qd[297];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler32_augmented_scalar process_noise_row_12(ned_doppler32_augmented_transition
+        *restrict t, const ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[318] = w->term[1][44]*w->term[0][44];
+    check = t->Qd[318];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler32_augmented_scalar process_noise_row_13(ned_doppler32_augmented_transition
+        *restrict t, const ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[338] = w->term[1][45]*w->term[0][45];
+    check = t->Qd[338];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler32_augmented_scalar process_noise_row_14(ned_doppler32_augmented_transition
+        *restrict t, const ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[357] = w->term[1][46]*w->term[0][46];
+    check = t->Qd[357];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler32_augmented_scalar process_noise_row_15(ned_doppler32_augmented_transition
+        *restrict t, const ned_doppler32_augmented_discretize_scratch *restrict w)
+{
+    ned_doppler32_augmented_scalar check;
+    t->Qd[375] = w->term[1][47]*w->term[0][47];
+    check = t->Qd[375];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
@@ -3180,7 +3280,7 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
     int halvings, order, status;
     int k;
     ned_doppler32_augmented_scalar sum_check;
-    ned_doppler32_augmented_scalar qd_check;
+    ned_doppler32_augmented_scalar qd_check = 0.0;
     ned_doppler32_augmented_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (!isfinite(T)) {
         return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
@@ -3300,7 +3400,20 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
-    qd_check = process_noise(m, t, w, T);
+    process_noise(m, t, w, T);
+    qd_check += process_noise_row_0(t, w);
+    qd_check += process_noise_row_1(t, w);
+    qd_check += process_noise_row_2(t, w);
+    qd_check += process_noise_row_3(t, w);
+    qd_check += process_noise_row_4(t, w);
+    qd_check += process_noise_row_5(t, w);
+    qd_check += process_noise_row_6(t, w);
+    qd_check += process_noise_row_10(t, w);
+    qd_check += process_noise_row_11(t, w);
+    qd_check += process_noise_row_12(t, w);
+    qd_check += process_noise_row_13(t, w);
+    qd_check += process_noise_row_14(t, w);
+    qd_check += process_noise_row_15(t, w);
     if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
             entry */
         qd_check = 0.0;
@@ -6084,9 +6197,9 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_7(con
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_8(const
-        ned_doppler32_augmented_filter *restrict f, const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+static ned_doppler32_augmented_scalar propagate_row_8(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[8][8]; w->Pn[228] = v; check += v;
@@ -6118,9 +6231,9 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_8(con
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_9(const
-        ned_doppler32_augmented_filter *restrict f, const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+static ned_doppler32_augmented_scalar propagate_row_9(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[9][9]; w->Pn[252] = v; check += v;
@@ -6189,9 +6302,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_10(const ned_doppler32_augmen
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_10(const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+static ned_doppler32_augmented_scalar propagate_row_10(const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[10]*t->Phi[193] + t->Qd[275]; w->Pn[275] = v; check += v;
@@ -6259,9 +6371,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_11(const ned_doppler32_augmen
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_11(const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+static ned_doppler32_augmented_scalar propagate_row_11(const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[11]*t->Phi[194] + t->Qd[297]; w->Pn[297] = v; check += v;
@@ -6328,9 +6439,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_12(const ned_doppler32_augmen
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_12(const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+static ned_doppler32_augmented_scalar propagate_row_12(const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[12]*t->Phi[195] + t->Qd[318]; w->Pn[318] = v; check += v;
@@ -6396,9 +6506,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_13(const ned_doppler32_augmen
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_13(const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+static ned_doppler32_augmented_scalar propagate_row_13(const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[13]*t->Phi[196] + t->Qd[338]; w->Pn[338] = v; check += v;
@@ -6463,9 +6572,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_14(const ned_doppler32_augmen
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_14(const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+static ned_doppler32_augmented_scalar propagate_row_14(const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[14]*t->Phi[197] + t->Qd[357]; w->Pn[357] = v; check += v;
@@ -6529,9 +6637,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_15(const ned_doppler32_augmen
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_15(const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_filter_scratch
-        *restrict w)
+static ned_doppler32_augmented_scalar propagate_row_15(const ned_doppler32_augmented_transition
+        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = w->M[15]*t->Phi[198] + t->Qd[375]; w->Pn[375] = v; check += v;
@@ -6556,9 +6663,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_15(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_16(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_16(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[16][16]; w->Pn[392] = v; check += v;
@@ -6582,9 +6688,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_16(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_17(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_17(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[17][17]; w->Pn[408] = v; check += v;
@@ -6607,9 +6712,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_17(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_18(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_18(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[18][18]; w->Pn[423] = v; check += v;
@@ -6631,9 +6735,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_18(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_19(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_19(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[19][19]; w->Pn[437] = v; check += v;
@@ -6654,9 +6757,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_19(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_20(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_20(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[20][20]; w->Pn[450] = v; check += v;
@@ -6676,9 +6778,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_20(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_21(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_21(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[21][21]; w->Pn[462] = v; check += v;
@@ -6697,9 +6798,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_21(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_22(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_22(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[22][22]; w->Pn[473] = v; check += v;
@@ -6717,9 +6817,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_22(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_23(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_23(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[23][23]; w->Pn[483] = v; check += v;
@@ -6736,9 +6835,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_23(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_24(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_24(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[24][24]; w->Pn[492] = v; check += v;
@@ -6754,9 +6852,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_24(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_25(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_25(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[25][25]; w->Pn[500] = v; check += v;
@@ -6771,9 +6868,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_25(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_26(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_26(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[26][26]; w->Pn[507] = v; check += v;
@@ -6787,9 +6883,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_26(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_27(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_27(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[27][27]; w->Pn[513] = v; check += v;
@@ -6802,9 +6897,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_27(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_28(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_28(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[28][28]; w->Pn[518] = v; check += v;
@@ -6816,9 +6910,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_28(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_29(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_29(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[29][29]; w->Pn[522] = v; check += v;
@@ -6829,9 +6922,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_29(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_30(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_30(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[30][30]; w->Pn[525] = v; check += v;
@@ -6841,9 +6933,8 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_30(co
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_31(const
-        ned_doppler32_augmented_filter *restrict f, ned_doppler32_augmented_filter_scratch *restrict
-        w)
+static ned_doppler32_augmented_scalar propagate_row_31(const ned_doppler32_augmented_filter
+        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
     v = f->P[31][31]; w->Pn[527] = v; check += v;

@@ -325,10 +325,13 @@ int ned_inertial16_matrices_evaluate(const ned_inertial16_params *restrict param
     return NED_INERTIAL16_OK;
 }
 
-/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
-   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
-   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
-   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
+   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
+           is
+   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
+   products more often on its own than inside a caller of thousands of statements
+   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
+   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define NED_INERTIAL16_BLOCK static __attribute__((noinline))
 #else
@@ -1657,11 +1660,10 @@ NED_INERTIAL16_BLOCK void noise_input(const ned_inertial16_matrices *restrict m,
     w->term[0][47] = w->S[89]*m->G[5];
 }
 
-NED_INERTIAL16_BLOCK ned_inertial16_scalar process_noise(const ned_inertial16_matrices *restrict m,
+NED_INERTIAL16_BLOCK void process_noise(const ned_inertial16_matrices *restrict m,
         ned_inertial16_transition *restrict t, ned_inertial16_discretize_scratch *restrict w, const
         ned_inertial16_scalar T)
 {
-    ned_inertial16_scalar v, check = 0.0;
     w->term[1][48] = T*m->q[0];
     w->term[1][49] = T*m->q[1];
     w->term[1][50] = T*m->q[2];
@@ -1716,153 +1718,6 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar process_noise(const ned_inertial16_ma
     w->term[1][45] = w->term[0][45]*w->term[1][51];
     w->term[1][46] = w->term[0][46]*w->term[1][52];
     w->term[1][47] = w->term[0][47]*w->term[1][53];
-    v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
-            w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0] = v; check += v;
-    v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
-            w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v;
-    v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
-            w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v;
-    v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
-            w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v;
-    v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
-            w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v;
-    v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
-            w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v;
-    v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
-            w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
-            w->term[1][5]*w->term[0][41]; t->Qd[6] = v; check += v;
-    v = w->term[1][0]*w->term[0][42]; t->Qd[10] = v; check += v;
-    v = w->term[1][1]*w->term[0][43]; t->Qd[11] = v; check += v;
-    v = w->term[1][2]*w->term[0][44]; t->Qd[12] = v; check += v;
-    v = w->term[1][3]*w->term[0][45]; t->Qd[13] = v; check += v;
-    v = w->term[1][4]*w->term[0][46]; t->Qd[14] = v; check += v;
-    v = w->term[1][5]*w->term[0][47]; t->Qd[15] = v; check += v;
-    v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
-            w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[16] = v; check += v;
-    v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
-            w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[17] = v; check += v;
-    v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
-            w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[18] = v; check += v;
-    v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
-            w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[19] = v; check += v;
-    v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
-            w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[20] = v; check += v;
-    v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38] +
-            w->term[1][9]*w->term[0][39] + w->term[1][10]*w->term[0][40] +
-            w->term[1][11]*w->term[0][41]; t->Qd[21] = v; check += v;
-    v = w->term[1][6]*w->term[0][42]; t->Qd[25] = v; check += v;
-    v = w->term[1][7]*w->term[0][43]; t->Qd[26] = v; check += v;
-    v = w->term[1][8]*w->term[0][44]; t->Qd[27] = v; check += v;
-    v = w->term[1][9]*w->term[0][45]; t->Qd[28] = v; check += v;
-    v = w->term[1][10]*w->term[0][46]; t->Qd[29] = v; check += v;
-    v = w->term[1][11]*w->term[0][47]; t->Qd[30] = v; check += v;
-    v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[31] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
-            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[32] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
-            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[33] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
-            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[34] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
-            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[35] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][42]; t->Qd[39] = v; check += v;
-    v = w->term[1][13]*w->term[0][43]; t->Qd[40] = v; check += v;
-    v = w->term[1][14]*w->term[0][44]; t->Qd[41] = v; check += v;
-    v = w->term[1][15]*w->term[0][45]; t->Qd[42] = v; check += v;
-    v = w->term[1][16]*w->term[0][46]; t->Qd[43] = v; check += v;
-    v = w->term[1][17]*w->term[0][47]; t->Qd[44] = v; check += v;
-    v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[45] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
-            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[46] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
-            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[47] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[48] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][42]; t->Qd[52] = v; check += v;
-    v = w->term[1][19]*w->term[0][43]; t->Qd[53] = v; check += v;
-    v = w->term[1][20]*w->term[0][44]; t->Qd[54] = v; check += v;
-    v = w->term[1][21]*w->term[0][45]; t->Qd[55] = v; check += v;
-    v = w->term[1][22]*w->term[0][46]; t->Qd[56] = v; check += v;
-    v = w->term[1][23]*w->term[0][47]; t->Qd[57] = v; check += v;
-    v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[58] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
-            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[59] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
-            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
-            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[60] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][42]; t->Qd[64] = v; check += v;
-    v = w->term[1][25]*w->term[0][43]; t->Qd[65] = v; check += v;
-    v = w->term[1][26]*w->term[0][44]; t->Qd[66] = v; check += v;
-    v = w->term[1][27]*w->term[0][45]; t->Qd[67] = v; check += v;
-    v = w->term[1][28]*w->term[0][46]; t->Qd[68] = v; check += v;
-    v = w->term[1][29]*w->term[0][47]; t->Qd[69] = v; check += v;
-    v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
-            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[70] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
-            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
-            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[71] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][42]; t->Qd[75] = v; check += v;
-    v = w->term[1][31]*w->term[0][43]; t->Qd[76] = v; check += v;
-    v = w->term[1][32]*w->term[0][44]; t->Qd[77] = v; check += v;
-    v = w->term[1][33]*w->term[0][45]; t->Qd[78] = v; check += v;
-    v = w->term[1][34]*w->term[0][46]; t->Qd[79] = v; check += v;
-    v = w->term[1][35]*w->term[0][47]; t->Qd[80] = v; check += v;
-    v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[81] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][42]; t->Qd[85] = v; check += v;
-    v = w->term[1][37]*w->term[0][43]; t->Qd[86] = v; check += v;
-    v = w->term[1][38]*w->term[0][44]; t->Qd[87] = v; check += v;
-    v = w->term[1][39]*w->term[0][45]; t->Qd[88] = v; check += v;
-    v = w->term[1][40]*w->term[0][46]; t->Qd[89] = v; check += v;
-    v = w->term[1][41]*w->term[0][47]; t->Qd[90] = v; check += v;
-    v = w->term[1][42]*w->term[0][42]; t->Qd[115] = v; check += v;
-    v = w->term[1][43]*w->term[0][43]; t->Qd[121] = v; check += v;
-    v = w->term[1][44]*w->term[0][44]; t->Qd[126] = v; check += v;
-    v = w->term[1][45]*w->term[0][45]; t->Qd[130] = v; check += v;
-    v = w->term[1][46]*w->term[0][46]; t->Qd[133] = v; check += v;
-    v = w->term[1][47]*w->term[0][47]; t->Qd[135] = v; check += v;
     t->Qd[7] = 0;
     t->Qd[8] = 0;
     t->Qd[9] = 0;
@@ -1923,6 +1778,247 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar process_noise(const ned_inertial16_ma
     t->Qd[131] = 0;
     t->Qd[132] = 0;
     t->Qd[134] = 0;
+}
+
+NED_INERTIAL16_BLOCK ned_inertial16_scalar process_noise_row_0(ned_inertial16_transition *restrict
+        t, const ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
+            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
+            + w->term[1][5]*w->term[0][5];
+    t->Qd[1] = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] +
+            w->term[1][2]*w->term[0][8] + w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10]
+            + w->term[1][5]*w->term[0][11];
+    t->Qd[2] = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] +
+            w->term[1][2]*w->term[0][14] + w->term[1][3]*w->term[0][15] +
+            w->term[1][4]*w->term[0][16] + w->term[1][5]*w->term[0][17];
+    t->Qd[3] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
+            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
+            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23];
+    t->Qd[4] = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] +
+            w->term[1][2]*w->term[0][26] + w->term[1][3]*w->term[0][27] +
+            w->term[1][4]*w->term[0][28] + w->term[1][5]*w->term[0][29];
+    t->Qd[5] = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] +
+            w->term[1][2]*w->term[0][32] + w->term[1][3]*w->term[0][33] +
+            w->term[1][4]*w->term[0][34] + w->term[1][5]*w->term[0][35];
+    t->Qd[6] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
+            w->term[1][2]*w->term[0][38] + w->term[1][3]*w->term[0][39] +
+            w->term[1][4]*w->term[0][40] + w->term[1][5]*w->term[0][41];
+    t->Qd[10] = w->term[1][0]*w->term[0][42];
+    t->Qd[11] = w->term[1][1]*w->term[0][43];
+    t->Qd[12] = w->term[1][2]*w->term[0][44];
+    t->Qd[13] = w->term[1][3]*w->term[0][45];
+    t->Qd[14] = w->term[1][4]*w->term[0][46];
+    t->Qd[15] = w->term[1][5]*w->term[0][47];
+    check = t->Qd[0] + t->Qd[1] + t->Qd[2] + t->Qd[3] + t->Qd[4] + t->Qd[5] + t->Qd[6] + t->Qd[10] +
+            t->Qd[11] + t->Qd[12] + t->Qd[13] + t->Qd[14] + t->Qd[15];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+NED_INERTIAL16_BLOCK ned_inertial16_scalar process_noise_row_1(ned_inertial16_transition *restrict
+        t, const ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[16] = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
+            w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9] +
+            w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11];
+    t->Qd[17] = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] +
+            w->term[1][8]*w->term[0][14] + w->term[1][9]*w->term[0][15] +
+            w->term[1][10]*w->term[0][16] + w->term[1][11]*w->term[0][17];
+    t->Qd[18] = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] +
+            w->term[1][8]*w->term[0][20] + w->term[1][9]*w->term[0][21] +
+            w->term[1][10]*w->term[0][22] + w->term[1][11]*w->term[0][23];
+    t->Qd[19] = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
+            w->term[1][8]*w->term[0][26] + w->term[1][9]*w->term[0][27] +
+            w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29];
+    t->Qd[20] = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] +
+            w->term[1][8]*w->term[0][32] + w->term[1][9]*w->term[0][33] +
+            w->term[1][10]*w->term[0][34] + w->term[1][11]*w->term[0][35];
+    t->Qd[21] = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] +
+            w->term[1][8]*w->term[0][38] + w->term[1][9]*w->term[0][39] +
+            w->term[1][10]*w->term[0][40] + w->term[1][11]*w->term[0][41];
+    t->Qd[25] = w->term[1][6]*w->term[0][42];
+    t->Qd[26] = w->term[1][7]*w->term[0][43];
+    t->Qd[27] = w->term[1][8]*w->term[0][44];
+    t->Qd[28] = w->term[1][9]*w->term[0][45];
+    t->Qd[29] = w->term[1][10]*w->term[0][46];
+    t->Qd[30] = w->term[1][11]*w->term[0][47];
+    check = t->Qd[16] + t->Qd[17] + t->Qd[18] + t->Qd[19] + t->Qd[20] + t->Qd[21] + t->Qd[25] +
+            t->Qd[26] + t->Qd[27] + t->Qd[28] + t->Qd[29] + t->Qd[30];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+NED_INERTIAL16_BLOCK ned_inertial16_scalar process_noise_row_2(ned_inertial16_transition *restrict
+        t, const ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[31] = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
+            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17];
+    t->Qd[32] = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
+            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23];
+    t->Qd[33] = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
+            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29];
+    t->Qd[34] = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
+            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35];
+    t->Qd[35] = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
+            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
+            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41];
+    t->Qd[39] = w->term[1][12]*w->term[0][42];
+    t->Qd[40] = w->term[1][13]*w->term[0][43];
+    t->Qd[41] = w->term[1][14]*w->term[0][44];
+    t->Qd[42] = w->term[1][15]*w->term[0][45];
+    t->Qd[43] = w->term[1][16]*w->term[0][46];
+    t->Qd[44] = w->term[1][17]*w->term[0][47];
+    check = t->Qd[31] + t->Qd[32] + t->Qd[33] + t->Qd[34] + t->Qd[35] + t->Qd[39] + t->Qd[40] +
+            t->Qd[41] + t->Qd[42] + t->Qd[43] + t->Qd[44];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+NED_INERTIAL16_BLOCK ned_inertial16_scalar process_noise_row_3(ned_inertial16_transition *restrict
+        t, const ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[45] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
+            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23];
+    t->Qd[46] = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
+            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29];
+    t->Qd[47] = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
+            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35];
+    t->Qd[48] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
+            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
+            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41];
+    t->Qd[52] = w->term[1][18]*w->term[0][42];
+    t->Qd[53] = w->term[1][19]*w->term[0][43];
+    t->Qd[54] = w->term[1][20]*w->term[0][44];
+    t->Qd[55] = w->term[1][21]*w->term[0][45];
+    t->Qd[56] = w->term[1][22]*w->term[0][46];
+    t->Qd[57] = w->term[1][23]*w->term[0][47];
+    check = t->Qd[45] + t->Qd[46] + t->Qd[47] + t->Qd[48] + t->Qd[52] + t->Qd[53] + t->Qd[54] +
+            t->Qd[55] + t->Qd[56] + t->Qd[57];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_inertial16_scalar process_noise_row_4(ned_inertial16_transition *restrict t, const
+        ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[58] = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
+            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29];
+    t->Qd[59] = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
+            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35];
+    t->Qd[60] = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
+            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
+            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41];
+    t->Qd[64] = w->term[1][24]*w->term[0][42];
+    t->Qd[65] = w->term[1][25]*w->term[0][43];
+    t->Qd[66] = w->term[1][26]*w->term[0][44];
+    t->Qd[67] = w->term[1][27]*w->term[0][45];
+    t->Qd[68] = w->term[1][28]*w->term[0][46];
+    t->Qd[69] = w->term[1][29]*w->term[0][47];
+    check = t->Qd[58] + t->Qd[59] + t->Qd[60] + t->Qd[64] + t->Qd[65] + t->Qd[66] + t->Qd[67] +
+            t->Qd[68] + t->Qd[69];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_inertial16_scalar process_noise_row_5(ned_inertial16_transition *restrict t, const
+        ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[70] = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
+            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35];
+    t->Qd[71] = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
+            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
+            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41];
+    t->Qd[75] = w->term[1][30]*w->term[0][42];
+    t->Qd[76] = w->term[1][31]*w->term[0][43];
+    t->Qd[77] = w->term[1][32]*w->term[0][44];
+    t->Qd[78] = w->term[1][33]*w->term[0][45];
+    t->Qd[79] = w->term[1][34]*w->term[0][46];
+    t->Qd[80] = w->term[1][35]*w->term[0][47];
+    check = t->Qd[70] + t->Qd[71] + t->Qd[75] + t->Qd[76] + t->Qd[77] + t->Qd[78] + t->Qd[79] +
+            t->Qd[80];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_inertial16_scalar process_noise_row_6(ned_inertial16_transition *restrict t, const
+        ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[81] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
+            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
+            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41];
+    t->Qd[85] = w->term[1][36]*w->term[0][42];
+    t->Qd[86] = w->term[1][37]*w->term[0][43];
+    t->Qd[87] = w->term[1][38]*w->term[0][44];
+    t->Qd[88] = w->term[1][39]*w->term[0][45];
+    t->Qd[89] = w->term[1][40]*w->term[0][46];
+    t->Qd[90] = w->term[1][41]*w->term[0][47];
+    check = t->Qd[81] + t->Qd[85] + t->Qd[86] + t->Qd[87] + t->Qd[88] + t->Qd[89] + t->Qd[90];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_inertial16_scalar process_noise_row_10(ned_inertial16_transition *restrict t, const
+        ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[115] = w->term[1][42]*w->term[0][42];
+    check = t->Qd[115];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_inertial16_scalar process_noise_row_11(ned_inertial16_transition *restrict t, const
+        ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[121] = w->term[1][43]*w->term[0][43];
+    check = t->Qd[121];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_inertial16_scalar process_noise_row_12(ned_inertial16_transition *restrict t, const
+        ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[126] = w->term[1][44]*w->term[0][44];
+    check = t->Qd[126];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_inertial16_scalar process_noise_row_13(ned_inertial16_transition *restrict t, const
+        ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[130] = w->term[1][45]*w->term[0][45];
+    check = t->Qd[130];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_inertial16_scalar process_noise_row_14(ned_inertial16_transition *restrict t, const
+        ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[133] = w->term[1][46]*w->term[0][46];
+    check = t->Qd[133];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_inertial16_scalar process_noise_row_15(ned_inertial16_transition *restrict t, const
+        ned_inertial16_discretize_scratch *restrict w)
+{
+    ned_inertial16_scalar check;
+    t->Qd[135] = w->term[1][47]*w->term[0][47];
+    check = t->Qd[135];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
@@ -1935,7 +2031,7 @@ int ned_inertial16_discretize(const ned_inertial16_matrices *restrict m, ned_ine
     int halvings, order, status;
     int k;
     ned_inertial16_scalar sum_check;
-    ned_inertial16_scalar qd_check;
+    ned_inertial16_scalar qd_check = 0.0;
     ned_inertial16_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (!isfinite(T)) {
         return NED_INERTIAL16_ERR_NONFINITE;
@@ -2055,7 +2151,20 @@ int ned_inertial16_discretize(const ned_inertial16_matrices *restrict m, ned_ine
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
-    qd_check = process_noise(m, t, w, T);
+    process_noise(m, t, w, T);
+    qd_check += process_noise_row_0(t, w);
+    qd_check += process_noise_row_1(t, w);
+    qd_check += process_noise_row_2(t, w);
+    qd_check += process_noise_row_3(t, w);
+    qd_check += process_noise_row_4(t, w);
+    qd_check += process_noise_row_5(t, w);
+    qd_check += process_noise_row_6(t, w);
+    qd_check += process_noise_row_10(t, w);
+    qd_check += process_noise_row_11(t, w);
+    qd_check += process_noise_row_12(t, w);
+    qd_check += process_noise_row_13(t, w);
+    qd_check += process_noise_row_14(t, w);
+    qd_check += process_noise_row_15(t, w);
     if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
             entry */
         qd_check = 0.0;
@@ -3076,8 +3185,8 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_6(const ned_inertial16_
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_7(const ned_inertial16_filter *restrict f,
-        const ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
+static ned_inertial16_scalar propagate_row_7(const ned_inertial16_filter *restrict f, const
+        ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = f->P[7][7]; w->Pn[91] = v; check += v;
@@ -3094,8 +3203,8 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_7(const ned_inertial16_
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_8(const ned_inertial16_filter *restrict f,
-        const ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
+static ned_inertial16_scalar propagate_row_8(const ned_inertial16_filter *restrict f, const
+        ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = f->P[8][8]; w->Pn[100] = v; check += v;
@@ -3111,8 +3220,8 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_8(const ned_inertial16_
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_9(const ned_inertial16_filter *restrict f,
-        const ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
+static ned_inertial16_scalar propagate_row_9(const ned_inertial16_filter *restrict f, const
+        ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = f->P[9][9]; w->Pn[108] = v; check += v;
@@ -3125,7 +3234,7 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_9(const ned_inertial16_
     return check - check;
 }
 
-NED_INERTIAL16_BLOCK void phi_times_p_row_10(const ned_inertial16_filter *restrict f, const
+static void phi_times_p_row_10(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[109]*f->P[10][0];
@@ -3148,8 +3257,8 @@ NED_INERTIAL16_BLOCK void phi_times_p_row_10(const ned_inertial16_filter *restri
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_10(const ned_inertial16_transition
-        *restrict t, ned_inertial16_filter_scratch *restrict w)
+static ned_inertial16_scalar propagate_row_10(const ned_inertial16_transition *restrict t,
+        ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[10]*t->Phi[109] + t->Qd[115]; w->Pn[115] = v; check += v;
@@ -3161,7 +3270,7 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_10(const ned_inertial16
     return check - check;
 }
 
-NED_INERTIAL16_BLOCK void phi_times_p_row_11(const ned_inertial16_filter *restrict f, const
+static void phi_times_p_row_11(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[110]*f->P[11][0];
@@ -3184,8 +3293,8 @@ NED_INERTIAL16_BLOCK void phi_times_p_row_11(const ned_inertial16_filter *restri
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_11(const ned_inertial16_transition
-        *restrict t, ned_inertial16_filter_scratch *restrict w)
+static ned_inertial16_scalar propagate_row_11(const ned_inertial16_transition *restrict t,
+        ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[11]*t->Phi[110] + t->Qd[121]; w->Pn[121] = v; check += v;
@@ -3196,7 +3305,7 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_11(const ned_inertial16
     return check - check;
 }
 
-NED_INERTIAL16_BLOCK void phi_times_p_row_12(const ned_inertial16_filter *restrict f, const
+static void phi_times_p_row_12(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[111]*f->P[12][0];
@@ -3219,8 +3328,8 @@ NED_INERTIAL16_BLOCK void phi_times_p_row_12(const ned_inertial16_filter *restri
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_12(const ned_inertial16_transition
-        *restrict t, ned_inertial16_filter_scratch *restrict w)
+static ned_inertial16_scalar propagate_row_12(const ned_inertial16_transition *restrict t,
+        ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[12]*t->Phi[111] + t->Qd[126]; w->Pn[126] = v; check += v;
@@ -3230,7 +3339,7 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_12(const ned_inertial16
     return check - check;
 }
 
-NED_INERTIAL16_BLOCK void phi_times_p_row_13(const ned_inertial16_filter *restrict f, const
+static void phi_times_p_row_13(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[112]*f->P[13][0];
@@ -3253,8 +3362,8 @@ NED_INERTIAL16_BLOCK void phi_times_p_row_13(const ned_inertial16_filter *restri
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_13(const ned_inertial16_transition
-        *restrict t, ned_inertial16_filter_scratch *restrict w)
+static ned_inertial16_scalar propagate_row_13(const ned_inertial16_transition *restrict t,
+        ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[13]*t->Phi[112] + t->Qd[130]; w->Pn[130] = v; check += v;
@@ -3263,7 +3372,7 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_13(const ned_inertial16
     return check - check;
 }
 
-NED_INERTIAL16_BLOCK void phi_times_p_row_14(const ned_inertial16_filter *restrict f, const
+static void phi_times_p_row_14(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[113]*f->P[14][0];
@@ -3286,8 +3395,8 @@ NED_INERTIAL16_BLOCK void phi_times_p_row_14(const ned_inertial16_filter *restri
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_14(const ned_inertial16_transition
-        *restrict t, ned_inertial16_filter_scratch *restrict w)
+static ned_inertial16_scalar propagate_row_14(const ned_inertial16_transition *restrict t,
+        ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[14]*t->Phi[113] + t->Qd[133]; w->Pn[133] = v; check += v;
@@ -3295,7 +3404,7 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_14(const ned_inertial16
     return check - check;
 }
 
-NED_INERTIAL16_BLOCK void phi_times_p_row_15(const ned_inertial16_filter *restrict f, const
+static void phi_times_p_row_15(const ned_inertial16_filter *restrict f, const
         ned_inertial16_transition *restrict t, ned_inertial16_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[114]*f->P[15][0];
@@ -3318,8 +3427,8 @@ NED_INERTIAL16_BLOCK void phi_times_p_row_15(const ned_inertial16_filter *restri
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_INERTIAL16_BLOCK ned_inertial16_scalar propagate_row_15(const ned_inertial16_transition
-        *restrict t, ned_inertial16_filter_scratch *restrict w)
+static ned_inertial16_scalar propagate_row_15(const ned_inertial16_transition *restrict t,
+        ned_inertial16_filter_scratch *restrict w)
 {
     ned_inertial16_scalar v, check = 0.0;
     v = w->M[15]*t->Phi[114] + t->Qd[135]; w->Pn[135] = v; check += v;

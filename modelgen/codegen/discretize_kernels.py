@@ -699,8 +699,10 @@ def doubling_block(plan: DiscretizePlan) -> DiscretizeBlock:
 def noise_blocks(plan: DiscretizePlan, packed: bool, ud: bool) -> list[DiscretizeBlock]:
     """S G over Gamma's pattern, then Q_d = T (S G) diag(q) (S G)^T (or Gamma = T S G for the UD form).
 
-    The Q_d block is checked: it returns 0 when the sum of its values is finite
-    (discretize rescans Q_d entry by entry when it is not: an overflow of finite values).
+    ``process_noise`` scales (S G) by T q and sets the entries of Q_d no pair
+    reaches to zero; ``process_noise_row_i`` then sets row i's pairs and is
+    checked: it returns 0 when the sum of its values is finite (discretize
+    rescans Q_d entry by entry when one is not: an overflow of finite values).
     It also sets every other entry of Q_d to zero (straight-line stores that
     gcc pairs into vector stores, where a loop becomes ``rep stos``).
     """
@@ -741,6 +743,7 @@ def noise_blocks(plan: DiscretizePlan, packed: bool, ud: bool) -> list[Discretiz
     by_row: dict[int, list[int]] = {}
     for i, w in plan.gamma_entries:
         by_row.setdefault(i, []).append(w)
+    rows: dict[int, list[CheckedAssign]] = {}
     for i, j in plan.qd_pairs:
         terms = tuple(
             (Ref("scratch", "term", (1, gamma[(i, w)])), Ref("scratch", "term", (0, gamma[(j, w)])))
@@ -751,11 +754,17 @@ def noise_blocks(plan: DiscretizePlan, packed: bool, ud: bool) -> list[Discretiz
             targets = (Ref("transition", "Qd", (packed_index(n, i, j),)),)
         else:
             targets = (Ref("transition", "Qd", (i, j)),) + ((Ref("transition", "Qd", (j, i)),) if i != j else ())
-        lines.append(CheckedAssign(targets, terms))
-    written = {t.index for s in lines if isinstance(s, CheckedAssign) for t in s.targets}
+        rows.setdefault(i, []).append(CheckedAssign(targets, terms))
+    written = {t.index for row in rows.values() for s in row for t in s.targets}
     every = [(k,) for k in range(n * (n + 1) // 2)] if packed else [(i, j) for i in range(n) for j in range(n)]
     lines += [Assign(Ref("transition", "Qd", index), ()) for index in every if index not in written]  # the rest of Q_d: zero stores
-    blocks.append(DiscretizeBlock(KernelBlock("process_noise", tuple(lines), checked=True), (), ("T",)))
+    blocks.append(DiscretizeBlock(KernelBlock("process_noise", tuple(lines)), (), ("T",)))
+    # Q_d row by row, each its own function (as the prediction's rows): inside one function of every
+    # row gcc -O2 spills its vector registers; its values are summed after its stores (read_back)
+    blocks += [
+        DiscretizeBlock(KernelBlock(f"process_noise_row_{i}", tuple(row), checked=True, read_back=True))
+        for i, row in sorted(rows.items())
+    ]
     return blocks
 
 

@@ -135,6 +135,9 @@ class KernelBlock:
     name: str
     statements: tuple[Statement, ...]
     checked: bool = False  # CheckedAssign statements: the function sums and returns the check
+    # the values are summed after all the stores, read back, not between them: gcc -O2 then pairs
+    # consecutive stores (and their products) into vector instructions (the Q_d rows)
+    read_back: bool = False
 
     def owners(self) -> set[str]:
         """The objects (``filter``, ``transition``, ``scratch``) the statements read or write."""

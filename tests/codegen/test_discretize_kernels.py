@@ -271,7 +271,7 @@ def test_the_transition_and_process_noise_set_every_entry_once(plan):
     assert len(plan.phi_position) == int(plan.structure.Phi.sum())
     assert added <= set(stores)
     for packed in (False, True):
-        noise = noise_blocks(plan, packed=packed, ud=False)[-1].block.statements
+        noise = [s for b in noise_blocks(plan, packed=packed, ud=False) if b.block.name.startswith("process_noise") for s in b.block.statements]
         written = [t.index for s in noise for t in (s.targets if hasattr(s, "targets") else (s.target,)) if t.array == "Qd"]
         every = [(k,) for k in range(n * (n + 1) // 2)] if packed else [(i, j) for i in range(n) for j in range(n)]
         assert sorted(written) == every
@@ -332,8 +332,12 @@ def test_discretize_scratch_of_the_papers_models_is_within_two_n_by_n_arrays(nam
     assert compressed_scratch(plan) <= 2 * n * n
 
 
-def test_process_noise_pairs_are_the_structural_pairs_of_q_d():
+def test_process_noise_pairs_are_the_structural_pairs_of_q_d_one_checked_block_per_row():
+    """The checked blocks set exactly Q_d's structural pairs, row i's in ``process_noise_row_i`` (summed after its stores)."""
     plan = plan_of("ned_doppler18")
     blocks = noise_blocks(plan, packed=False, ud=False)
-    pairs = [s.targets[0].index for s in blocks[-1].block.statements if hasattr(s, "targets")]
+    rows = [b.block for b in blocks if b.block.name.startswith("process_noise_row_")]
+    pairs = [s.targets[0].index for b in rows for s in b.statements]
     assert pairs == plan.qd_pairs
+    assert all(b.checked and b.read_back for b in rows)
+    assert all({i for i, _ in (s.targets[0].index for s in b.statements)} == {int(b.name.rsplit("_", 1)[1])} for b in rows)

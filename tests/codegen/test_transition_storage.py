@@ -143,3 +143,17 @@ def test_model_matrices_whose_sum_overflows_are_discretized_not_refused(compiled
     finally:
         q[:] = saved
         assert compiled.discretize(60.0) == OK
+
+
+def test_a_process_noise_that_overflows_is_refused(compiled):
+    """Each row of Q_d is checked by its sum; an entry that is itself infinite is found by the entry-by-entry rescan."""
+    if compiled.options.ud:
+        pytest.skip("the UD form keeps Gamma and q / T, not Q_d")
+    q = np.ctypeslib.as_array(compiled.matrices.q)
+    saved = q.copy()
+    try:
+        q[:] = float(np.finfo(compiled.dtype).max) / 2
+        assert compiled.discretize(10.0) == ERR_NONFINITE  # Q_d ~ T q: beyond the largest value
+    finally:
+        q[:] = saved
+        assert compiled.discretize(60.0) == OK

@@ -341,10 +341,13 @@ int ned_doppler18_matrices_evaluate(const ned_doppler18_params *restrict params,
     return NED_DOPPLER18_OK;
 }
 
-/* Each unrolled block (discretize, predict) is a function of its own, not inlined: inlined into
-   their caller, the frames of all blocks would add up (the worst-case stack is measured for the
-   Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and products more
-   often on its own than inside a caller of thousands of statements (bench/bench_cycle.py). */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
+   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
+           is
+   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
+   products more often on its own than inside a caller of thousands of statements
+   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
+   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define NED_DOPPLER18_BLOCK static __attribute__((noinline))
 #else
@@ -1675,11 +1678,10 @@ NED_DOPPLER18_BLOCK void noise_input(const ned_doppler18_matrices *restrict m,
     w->term[0][47] = w->S[89]*m->G[5];
 }
 
-NED_DOPPLER18_BLOCK ned_doppler18_scalar process_noise(const ned_doppler18_matrices *restrict m,
+NED_DOPPLER18_BLOCK void process_noise(const ned_doppler18_matrices *restrict m,
         ned_doppler18_transition *restrict t, ned_doppler18_discretize_scratch *restrict w, const
         ned_doppler18_scalar T)
 {
-    ned_doppler18_scalar v, check = 0.0;
     w->term[1][48] = T*m->q[0];
     w->term[1][49] = T*m->q[1];
     w->term[1][50] = T*m->q[2];
@@ -1734,153 +1736,6 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar process_noise(const ned_doppler18_matri
     w->term[1][45] = w->term[0][45]*w->term[1][51];
     w->term[1][46] = w->term[0][46]*w->term[1][52];
     w->term[1][47] = w->term[0][47]*w->term[1][53];
-    v = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] + w->term[1][2]*w->term[0][2] +
-            w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4] + w->term[1][5]*w->term[0][5];
-            t->Qd[0] = v; check += v;
-    v = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] + w->term[1][2]*w->term[0][8] +
-            w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10] +
-            w->term[1][5]*w->term[0][11]; t->Qd[1] = v; check += v;
-    v = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] + w->term[1][2]*w->term[0][14] +
-            w->term[1][3]*w->term[0][15] + w->term[1][4]*w->term[0][16] +
-            w->term[1][5]*w->term[0][17]; t->Qd[2] = v; check += v;
-    v = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] + w->term[1][2]*w->term[0][20] +
-            w->term[1][3]*w->term[0][21] + w->term[1][4]*w->term[0][22] +
-            w->term[1][5]*w->term[0][23]; t->Qd[3] = v; check += v;
-    v = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] + w->term[1][2]*w->term[0][26] +
-            w->term[1][3]*w->term[0][27] + w->term[1][4]*w->term[0][28] +
-            w->term[1][5]*w->term[0][29]; t->Qd[4] = v; check += v;
-    v = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] + w->term[1][2]*w->term[0][32] +
-            w->term[1][3]*w->term[0][33] + w->term[1][4]*w->term[0][34] +
-            w->term[1][5]*w->term[0][35]; t->Qd[5] = v; check += v;
-    v = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] + w->term[1][2]*w->term[0][38] +
-            w->term[1][3]*w->term[0][39] + w->term[1][4]*w->term[0][40] +
-            w->term[1][5]*w->term[0][41]; t->Qd[6] = v; check += v;
-    v = w->term[1][0]*w->term[0][42]; t->Qd[10] = v; check += v;
-    v = w->term[1][1]*w->term[0][43]; t->Qd[11] = v; check += v;
-    v = w->term[1][2]*w->term[0][44]; t->Qd[12] = v; check += v;
-    v = w->term[1][3]*w->term[0][45]; t->Qd[13] = v; check += v;
-    v = w->term[1][4]*w->term[0][46]; t->Qd[14] = v; check += v;
-    v = w->term[1][5]*w->term[0][47]; t->Qd[15] = v; check += v;
-    v = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] +
-            w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11]; t->Qd[18] = v; check += v;
-    v = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] + w->term[1][8]*w->term[0][14] +
-            w->term[1][9]*w->term[0][15] + w->term[1][10]*w->term[0][16] +
-            w->term[1][11]*w->term[0][17]; t->Qd[19] = v; check += v;
-    v = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] + w->term[1][8]*w->term[0][20] +
-            w->term[1][9]*w->term[0][21] + w->term[1][10]*w->term[0][22] +
-            w->term[1][11]*w->term[0][23]; t->Qd[20] = v; check += v;
-    v = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] + w->term[1][8]*w->term[0][26] +
-            w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29]; t->Qd[21] = v; check += v;
-    v = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] + w->term[1][8]*w->term[0][32] +
-            w->term[1][9]*w->term[0][33] + w->term[1][10]*w->term[0][34] +
-            w->term[1][11]*w->term[0][35]; t->Qd[22] = v; check += v;
-    v = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] + w->term[1][8]*w->term[0][38] +
-            w->term[1][9]*w->term[0][39] + w->term[1][10]*w->term[0][40] +
-            w->term[1][11]*w->term[0][41]; t->Qd[23] = v; check += v;
-    v = w->term[1][6]*w->term[0][42]; t->Qd[27] = v; check += v;
-    v = w->term[1][7]*w->term[0][43]; t->Qd[28] = v; check += v;
-    v = w->term[1][8]*w->term[0][44]; t->Qd[29] = v; check += v;
-    v = w->term[1][9]*w->term[0][45]; t->Qd[30] = v; check += v;
-    v = w->term[1][10]*w->term[0][46]; t->Qd[31] = v; check += v;
-    v = w->term[1][11]*w->term[0][47]; t->Qd[32] = v; check += v;
-    v = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17]; t->Qd[35] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
-            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23]; t->Qd[36] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
-            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29]; t->Qd[37] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
-            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35]; t->Qd[38] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
-            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41]; t->Qd[39] = v; check +=
-            v;
-    v = w->term[1][12]*w->term[0][42]; t->Qd[43] = v; check += v;
-    v = w->term[1][13]*w->term[0][43]; t->Qd[44] = v; check += v;
-    v = w->term[1][14]*w->term[0][44]; t->Qd[45] = v; check += v;
-    v = w->term[1][15]*w->term[0][45]; t->Qd[46] = v; check += v;
-    v = w->term[1][16]*w->term[0][46]; t->Qd[47] = v; check += v;
-    v = w->term[1][17]*w->term[0][47]; t->Qd[48] = v; check += v;
-    v = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23]; t->Qd[51] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
-            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29]; t->Qd[52] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
-            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35]; t->Qd[53] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41]; t->Qd[54] = v; check +=
-            v;
-    v = w->term[1][18]*w->term[0][42]; t->Qd[58] = v; check += v;
-    v = w->term[1][19]*w->term[0][43]; t->Qd[59] = v; check += v;
-    v = w->term[1][20]*w->term[0][44]; t->Qd[60] = v; check += v;
-    v = w->term[1][21]*w->term[0][45]; t->Qd[61] = v; check += v;
-    v = w->term[1][22]*w->term[0][46]; t->Qd[62] = v; check += v;
-    v = w->term[1][23]*w->term[0][47]; t->Qd[63] = v; check += v;
-    v = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29]; t->Qd[66] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
-            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35]; t->Qd[67] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
-            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
-            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41]; t->Qd[68] = v; check +=
-            v;
-    v = w->term[1][24]*w->term[0][42]; t->Qd[72] = v; check += v;
-    v = w->term[1][25]*w->term[0][43]; t->Qd[73] = v; check += v;
-    v = w->term[1][26]*w->term[0][44]; t->Qd[74] = v; check += v;
-    v = w->term[1][27]*w->term[0][45]; t->Qd[75] = v; check += v;
-    v = w->term[1][28]*w->term[0][46]; t->Qd[76] = v; check += v;
-    v = w->term[1][29]*w->term[0][47]; t->Qd[77] = v; check += v;
-    v = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
-            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35]; t->Qd[80] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
-            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
-            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41]; t->Qd[81] = v; check +=
-            v;
-    v = w->term[1][30]*w->term[0][42]; t->Qd[85] = v; check += v;
-    v = w->term[1][31]*w->term[0][43]; t->Qd[86] = v; check += v;
-    v = w->term[1][32]*w->term[0][44]; t->Qd[87] = v; check += v;
-    v = w->term[1][33]*w->term[0][45]; t->Qd[88] = v; check += v;
-    v = w->term[1][34]*w->term[0][46]; t->Qd[89] = v; check += v;
-    v = w->term[1][35]*w->term[0][47]; t->Qd[90] = v; check += v;
-    v = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41]; t->Qd[93] = v; check +=
-            v;
-    v = w->term[1][36]*w->term[0][42]; t->Qd[97] = v; check += v;
-    v = w->term[1][37]*w->term[0][43]; t->Qd[98] = v; check += v;
-    v = w->term[1][38]*w->term[0][44]; t->Qd[99] = v; check += v;
-    v = w->term[1][39]*w->term[0][45]; t->Qd[100] = v; check += v;
-    v = w->term[1][40]*w->term[0][46]; t->Qd[101] = v; check += v;
-    v = w->term[1][41]*w->term[0][47]; t->Qd[102] = v; check += v;
-    v = w->term[1][42]*w->term[0][42]; t->Qd[135] = v; check += v;
-    v = w->term[1][43]*w->term[0][43]; t->Qd[143] = v; check += v;
-    v = w->term[1][44]*w->term[0][44]; t->Qd[150] = v; check += v;
-    v = w->term[1][45]*w->term[0][45]; t->Qd[156] = v; check += v;
-    v = w->term[1][46]*w->term[0][46]; t->Qd[161] = v; check += v;
-    v = w->term[1][47]*w->term[0][47]; t->Qd[165] = v; check += v;
     t->Qd[7] = 0;
     t->Qd[8] = 0;
     t->Qd[9] = 0;
@@ -1976,6 +1831,247 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar process_noise(const ned_doppler18_matri
     t->Qd[168] = 0;
     t->Qd[169] = 0;
     t->Qd[170] = 0;
+}
+
+NED_DOPPLER18_BLOCK ned_doppler18_scalar process_noise_row_0(ned_doppler18_transition *restrict t,
+        const ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
+            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
+            + w->term[1][5]*w->term[0][5];
+    t->Qd[1] = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] +
+            w->term[1][2]*w->term[0][8] + w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10]
+            + w->term[1][5]*w->term[0][11];
+    t->Qd[2] = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] +
+            w->term[1][2]*w->term[0][14] + w->term[1][3]*w->term[0][15] +
+            w->term[1][4]*w->term[0][16] + w->term[1][5]*w->term[0][17];
+    t->Qd[3] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
+            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
+            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23];
+    t->Qd[4] = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] +
+            w->term[1][2]*w->term[0][26] + w->term[1][3]*w->term[0][27] +
+            w->term[1][4]*w->term[0][28] + w->term[1][5]*w->term[0][29];
+    t->Qd[5] = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] +
+            w->term[1][2]*w->term[0][32] + w->term[1][3]*w->term[0][33] +
+            w->term[1][4]*w->term[0][34] + w->term[1][5]*w->term[0][35];
+    t->Qd[6] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
+            w->term[1][2]*w->term[0][38] + w->term[1][3]*w->term[0][39] +
+            w->term[1][4]*w->term[0][40] + w->term[1][5]*w->term[0][41];
+    t->Qd[10] = w->term[1][0]*w->term[0][42];
+    t->Qd[11] = w->term[1][1]*w->term[0][43];
+    t->Qd[12] = w->term[1][2]*w->term[0][44];
+    t->Qd[13] = w->term[1][3]*w->term[0][45];
+    t->Qd[14] = w->term[1][4]*w->term[0][46];
+    t->Qd[15] = w->term[1][5]*w->term[0][47];
+    check = t->Qd[0] + t->Qd[1] + t->Qd[2] + t->Qd[3] + t->Qd[4] + t->Qd[5] + t->Qd[6] + t->Qd[10] +
+            t->Qd[11] + t->Qd[12] + t->Qd[13] + t->Qd[14] + t->Qd[15];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+NED_DOPPLER18_BLOCK ned_doppler18_scalar process_noise_row_1(ned_doppler18_transition *restrict t,
+        const ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[18] = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
+            w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9] +
+            w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11];
+    t->Qd[19] = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] +
+            w->term[1][8]*w->term[0][14] + w->term[1][9]*w->term[0][15] +
+            w->term[1][10]*w->term[0][16] + w->term[1][11]*w->term[0][17];
+    t->Qd[20] = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] +
+            w->term[1][8]*w->term[0][20] + w->term[1][9]*w->term[0][21] +
+            w->term[1][10]*w->term[0][22] + w->term[1][11]*w->term[0][23];
+    t->Qd[21] = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
+            w->term[1][8]*w->term[0][26] + w->term[1][9]*w->term[0][27] +
+            w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29];
+    t->Qd[22] = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] +
+            w->term[1][8]*w->term[0][32] + w->term[1][9]*w->term[0][33] +
+            w->term[1][10]*w->term[0][34] + w->term[1][11]*w->term[0][35];
+    t->Qd[23] = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] +
+            w->term[1][8]*w->term[0][38] + w->term[1][9]*w->term[0][39] +
+            w->term[1][10]*w->term[0][40] + w->term[1][11]*w->term[0][41];
+    t->Qd[27] = w->term[1][6]*w->term[0][42];
+    t->Qd[28] = w->term[1][7]*w->term[0][43];
+    t->Qd[29] = w->term[1][8]*w->term[0][44];
+    t->Qd[30] = w->term[1][9]*w->term[0][45];
+    t->Qd[31] = w->term[1][10]*w->term[0][46];
+    t->Qd[32] = w->term[1][11]*w->term[0][47];
+    check = t->Qd[18] + t->Qd[19] + t->Qd[20] + t->Qd[21] + t->Qd[22] + t->Qd[23] + t->Qd[27] +
+            t->Qd[28] + t->Qd[29] + t->Qd[30] + t->Qd[31] + t->Qd[32];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+NED_DOPPLER18_BLOCK ned_doppler18_scalar process_noise_row_2(ned_doppler18_transition *restrict t,
+        const ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[35] = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
+            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
+            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17];
+    t->Qd[36] = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
+            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
+            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23];
+    t->Qd[37] = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
+            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
+            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29];
+    t->Qd[38] = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
+            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
+            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35];
+    t->Qd[39] = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
+            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
+            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41];
+    t->Qd[43] = w->term[1][12]*w->term[0][42];
+    t->Qd[44] = w->term[1][13]*w->term[0][43];
+    t->Qd[45] = w->term[1][14]*w->term[0][44];
+    t->Qd[46] = w->term[1][15]*w->term[0][45];
+    t->Qd[47] = w->term[1][16]*w->term[0][46];
+    t->Qd[48] = w->term[1][17]*w->term[0][47];
+    check = t->Qd[35] + t->Qd[36] + t->Qd[37] + t->Qd[38] + t->Qd[39] + t->Qd[43] + t->Qd[44] +
+            t->Qd[45] + t->Qd[46] + t->Qd[47] + t->Qd[48];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+NED_DOPPLER18_BLOCK ned_doppler18_scalar process_noise_row_3(ned_doppler18_transition *restrict t,
+        const ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[51] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
+            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
+            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23];
+    t->Qd[52] = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
+            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
+            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29];
+    t->Qd[53] = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
+            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
+            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35];
+    t->Qd[54] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
+            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
+            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41];
+    t->Qd[58] = w->term[1][18]*w->term[0][42];
+    t->Qd[59] = w->term[1][19]*w->term[0][43];
+    t->Qd[60] = w->term[1][20]*w->term[0][44];
+    t->Qd[61] = w->term[1][21]*w->term[0][45];
+    t->Qd[62] = w->term[1][22]*w->term[0][46];
+    t->Qd[63] = w->term[1][23]*w->term[0][47];
+    check = t->Qd[51] + t->Qd[52] + t->Qd[53] + t->Qd[54] + t->Qd[58] + t->Qd[59] + t->Qd[60] +
+            t->Qd[61] + t->Qd[62] + t->Qd[63];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler18_scalar process_noise_row_4(ned_doppler18_transition *restrict t, const
+        ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[66] = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
+            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
+            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29];
+    t->Qd[67] = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
+            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
+            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35];
+    t->Qd[68] = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
+            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
+            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41];
+    t->Qd[72] = w->term[1][24]*w->term[0][42];
+    t->Qd[73] = w->term[1][25]*w->term[0][43];
+    t->Qd[74] = w->term[1][26]*w->term[0][44];
+    t->Qd[75] = w->term[1][27]*w->term[0][45];
+    t->Qd[76] = w->term[1][28]*w->term[0][46];
+    t->Qd[77] = w->term[1][29]*w->term[0][47];
+    check = t->Qd[66] + t->Qd[67] + t->Qd[68] + t->Qd[72] + t->Qd[73] + t->Qd[74] + t->Qd[75] +
+            t->Qd[76] + t->Qd[77];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler18_scalar process_noise_row_5(ned_doppler18_transition *restrict t, const
+        ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[80] = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
+            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
+            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35];
+    t->Qd[81] = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
+            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
+            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41];
+    t->Qd[85] = w->term[1][30]*w->term[0][42];
+    t->Qd[86] = w->term[1][31]*w->term[0][43];
+    t->Qd[87] = w->term[1][32]*w->term[0][44];
+    t->Qd[88] = w->term[1][33]*w->term[0][45];
+    t->Qd[89] = w->term[1][34]*w->term[0][46];
+    t->Qd[90] = w->term[1][35]*w->term[0][47];
+    check = t->Qd[80] + t->Qd[81] + t->Qd[85] + t->Qd[86] + t->Qd[87] + t->Qd[88] + t->Qd[89] +
+            t->Qd[90];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler18_scalar process_noise_row_6(ned_doppler18_transition *restrict t, const
+        ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[93] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
+            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
+            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41];
+    t->Qd[97] = w->term[1][36]*w->term[0][42];
+    t->Qd[98] = w->term[1][37]*w->term[0][43];
+    t->Qd[99] = w->term[1][38]*w->term[0][44];
+    t->Qd[100] = w->term[1][39]*w->term[0][45];
+    t->Qd[101] = w->term[1][40]*w->term[0][46];
+    t->Qd[102] = w->term[1][41]*w->term[0][47];
+    check = t->Qd[93] + t->Qd[97] + t->Qd[98] + t->Qd[99] + t->Qd[100] + t->Qd[101] + t->Qd[102];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler18_scalar process_noise_row_10(ned_doppler18_transition *restrict t, const
+        ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[135] = w->term[1][42]*w->term[0][42];
+    check = t->Qd[135];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler18_scalar process_noise_row_11(ned_doppler18_transition *restrict t, const
+        ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[143] = w->term[1][43]*w->term[0][43];
+    check = t->Qd[143];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler18_scalar process_noise_row_12(ned_doppler18_transition *restrict t, const
+        ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[150] = w->term[1][44]*w->term[0][44];
+    check = t->Qd[150];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler18_scalar process_noise_row_13(ned_doppler18_transition *restrict t, const
+        ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[156] = w->term[1][45]*w->term[0][45];
+    check = t->Qd[156];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler18_scalar process_noise_row_14(ned_doppler18_transition *restrict t, const
+        ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[161] = w->term[1][46]*w->term[0][46];
+    check = t->Qd[161];
+    return check - check; /* 0 when the sum of what it stored is finite, so every value is */
+}
+
+static ned_doppler18_scalar process_noise_row_15(ned_doppler18_transition *restrict t, const
+        ned_doppler18_discretize_scratch *restrict w)
+{
+    ned_doppler18_scalar check;
+    t->Qd[165] = w->term[1][47]*w->term[0][47];
+    check = t->Qd[165];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
 
@@ -1988,7 +2084,7 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
     int halvings, order, status;
     int k;
     ned_doppler18_scalar sum_check;
-    ned_doppler18_scalar qd_check;
+    ned_doppler18_scalar qd_check = 0.0;
     ned_doppler18_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
     if (!isfinite(T)) {
         return NED_DOPPLER18_ERR_NONFINITE;
@@ -2108,7 +2204,20 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
     /* Q_d = Gamma (Q / T) Gamma^T = T (S G) diag(q) (S G)^T over the pairs that can be nonzero (and
        zero elsewhere) */
     noise_input(m, w);
-    qd_check = process_noise(m, t, w, T);
+    process_noise(m, t, w, T);
+    qd_check += process_noise_row_0(t, w);
+    qd_check += process_noise_row_1(t, w);
+    qd_check += process_noise_row_2(t, w);
+    qd_check += process_noise_row_3(t, w);
+    qd_check += process_noise_row_4(t, w);
+    qd_check += process_noise_row_5(t, w);
+    qd_check += process_noise_row_6(t, w);
+    qd_check += process_noise_row_10(t, w);
+    qd_check += process_noise_row_11(t, w);
+    qd_check += process_noise_row_12(t, w);
+    qd_check += process_noise_row_13(t, w);
+    qd_check += process_noise_row_14(t, w);
+    qd_check += process_noise_row_15(t, w);
     if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
             entry */
         qd_check = 0.0;
@@ -3143,8 +3252,8 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_6(const ned_doppler18_tra
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_7(const ned_doppler18_filter *restrict f,
-        const ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
+static ned_doppler18_scalar propagate_row_7(const ned_doppler18_filter *restrict f, const
+        ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = f->P[105]; w->Pn[105] = v; check += v;
@@ -3163,8 +3272,8 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_7(const ned_doppler18_fil
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_8(const ned_doppler18_filter *restrict f,
-        const ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
+static ned_doppler18_scalar propagate_row_8(const ned_doppler18_filter *restrict f, const
+        ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = f->P[116]; w->Pn[116] = v; check += v;
@@ -3182,8 +3291,8 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_8(const ned_doppler18_fil
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_9(const ned_doppler18_filter *restrict f,
-        const ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
+static ned_doppler18_scalar propagate_row_9(const ned_doppler18_filter *restrict f, const
+        ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = f->P[126]; w->Pn[126] = v; check += v;
@@ -3198,7 +3307,7 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_9(const ned_doppler18_fil
     return check - check;
 }
 
-NED_DOPPLER18_BLOCK void phi_times_p_row_10(const ned_doppler18_filter *restrict f, const
+static void phi_times_p_row_10(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[109]*f->P[10];
@@ -3223,8 +3332,8 @@ NED_DOPPLER18_BLOCK void phi_times_p_row_10(const ned_doppler18_filter *restrict
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_10(const ned_doppler18_transition *restrict
-        t, ned_doppler18_filter_scratch *restrict w)
+static ned_doppler18_scalar propagate_row_10(const ned_doppler18_transition *restrict t,
+        ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[10]*t->Phi[109] + t->Qd[135]; w->Pn[135] = v; check += v;
@@ -3238,7 +3347,7 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_10(const ned_doppler18_tr
     return check - check;
 }
 
-NED_DOPPLER18_BLOCK void phi_times_p_row_11(const ned_doppler18_filter *restrict f, const
+static void phi_times_p_row_11(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[110]*f->P[11];
@@ -3263,8 +3372,8 @@ NED_DOPPLER18_BLOCK void phi_times_p_row_11(const ned_doppler18_filter *restrict
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_11(const ned_doppler18_transition *restrict
-        t, ned_doppler18_filter_scratch *restrict w)
+static ned_doppler18_scalar propagate_row_11(const ned_doppler18_transition *restrict t,
+        ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[11]*t->Phi[110] + t->Qd[143]; w->Pn[143] = v; check += v;
@@ -3277,7 +3386,7 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_11(const ned_doppler18_tr
     return check - check;
 }
 
-NED_DOPPLER18_BLOCK void phi_times_p_row_12(const ned_doppler18_filter *restrict f, const
+static void phi_times_p_row_12(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[111]*f->P[12];
@@ -3302,8 +3411,8 @@ NED_DOPPLER18_BLOCK void phi_times_p_row_12(const ned_doppler18_filter *restrict
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_12(const ned_doppler18_transition *restrict
-        t, ned_doppler18_filter_scratch *restrict w)
+static ned_doppler18_scalar propagate_row_12(const ned_doppler18_transition *restrict t,
+        ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[12]*t->Phi[111] + t->Qd[150]; w->Pn[150] = v; check += v;
@@ -3315,7 +3424,7 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_12(const ned_doppler18_tr
     return check - check;
 }
 
-NED_DOPPLER18_BLOCK void phi_times_p_row_13(const ned_doppler18_filter *restrict f, const
+static void phi_times_p_row_13(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[112]*f->P[13];
@@ -3340,8 +3449,8 @@ NED_DOPPLER18_BLOCK void phi_times_p_row_13(const ned_doppler18_filter *restrict
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_13(const ned_doppler18_transition *restrict
-        t, ned_doppler18_filter_scratch *restrict w)
+static ned_doppler18_scalar propagate_row_13(const ned_doppler18_transition *restrict t,
+        ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[13]*t->Phi[112] + t->Qd[156]; w->Pn[156] = v; check += v;
@@ -3352,7 +3461,7 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_13(const ned_doppler18_tr
     return check - check;
 }
 
-NED_DOPPLER18_BLOCK void phi_times_p_row_14(const ned_doppler18_filter *restrict f, const
+static void phi_times_p_row_14(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[113]*f->P[14];
@@ -3377,8 +3486,8 @@ NED_DOPPLER18_BLOCK void phi_times_p_row_14(const ned_doppler18_filter *restrict
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_14(const ned_doppler18_transition *restrict
-        t, ned_doppler18_filter_scratch *restrict w)
+static ned_doppler18_scalar propagate_row_14(const ned_doppler18_transition *restrict t,
+        ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[14]*t->Phi[113] + t->Qd[161]; w->Pn[161] = v; check += v;
@@ -3388,7 +3497,7 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_14(const ned_doppler18_tr
     return check - check;
 }
 
-NED_DOPPLER18_BLOCK void phi_times_p_row_15(const ned_doppler18_filter *restrict f, const
+static void phi_times_p_row_15(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
     w->M[0] = t->Phi[114]*f->P[15];
@@ -3413,8 +3522,8 @@ NED_DOPPLER18_BLOCK void phi_times_p_row_15(const ned_doppler18_filter *restrict
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_15(const ned_doppler18_transition *restrict
-        t, ned_doppler18_filter_scratch *restrict w)
+static ned_doppler18_scalar propagate_row_15(const ned_doppler18_transition *restrict t,
+        ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
     v = w->M[15]*t->Phi[114] + t->Qd[165]; w->Pn[165] = v; check += v;
@@ -3425,7 +3534,7 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_15(const ned_doppler18_tr
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_16(const ned_doppler18_filter *restrict f,
+static ned_doppler18_scalar propagate_row_16(const ned_doppler18_filter *restrict f,
         ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
@@ -3436,7 +3545,7 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_16(const ned_doppler18_fi
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_17(const ned_doppler18_filter *restrict f,
+static ned_doppler18_scalar propagate_row_17(const ned_doppler18_filter *restrict f,
         ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;

@@ -8,7 +8,7 @@ from modelgen.codegen.backends.c.literals import c_number, scalar_bytes, scalar_
 from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c_declarator, c_ref, c_statement
 from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.discretize_kernels import HORNER_LAST, DiscretizeBlock, SegmentAssign, horner_level_name, scalar_statements
-from modelgen.codegen.kernels import KernelBlock, compact_predict_tables
+from modelgen.codegen.kernels import CheckedAssign, KernelBlock, compact_predict_tables
 from modelgen.codegen.compact_discretize import CompactDiscretizeTables
 from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout, phi_entries
 from modelgen.codegen.structure import FilterStructure
@@ -73,6 +73,17 @@ def compact_discretize_context(structure: FilterStructure) -> dict[str, object]:
     }
 
 
+#: A block of at most this many terms (a row of a random constant or a Markov state) is left to the
+#: compiler to inline: its call would cost more than its work (bench/bench_cycle.py: -130
+#: instructions per 18-state cycle); the larger ones are functions of their own (``<M>_BLOCK``).
+SMALL_BLOCK_TERMS = 24
+
+
+def small_block(statements) -> bool:
+    """Whether a block is small enough to be inlined (see SMALL_BLOCK_TERMS)."""
+    return sum(len(s.terms) for s in scalar_statements(statements)) <= SMALL_BLOCK_TERMS
+
+
 def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, object]]:
     """Static C functions for the unrolled kernel pieces, with the parameters each uses."""
     types = {"filter": f"const {prefix}_filter", "transition": f"const {prefix}_transition", "scratch": f"{prefix}_filter_scratch"}  # noqa: E501
@@ -86,6 +97,7 @@ def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, ob
                 "arguments": ", ".join(POINTERS[o] for o in owners),
                 "lines": [c_statement(s) for s in block.statements],
                 "checked": block.checked,
+                "small": small_block(block.statements),
             }
         )
     return out
@@ -102,7 +114,7 @@ def _segment_ref(ref) -> str:
     return f"{POINTERS[ref.owner]}->{ref.array}" + "".join(f"[{i}]" for i in head) + (f"[{offset}+k]" if offset else "[k]")
 
 
-def discretize_lines(statements) -> list[str]:
+def discretize_lines(statements, read_back: bool = False) -> list[str]:
     """C lines of a discretize block: scalar statements one per line, consecutive segments as one fixed-trip loop over k.
 
     The loop (even length, contiguous rows, no aliasing between targets and
@@ -124,8 +136,11 @@ def discretize_lines(statements) -> list[str]:
         if loop is not None:
             lines.append("}")
             loop = None
-        lines.append(c_statement(s))
-    return lines + (["}"] if loop is not None else [])
+        lines.append(c_statement(s, read_back))
+    lines += ["}"] if loop is not None else []
+    if read_back:  # the block's check: the sum of what it stored, read back after the stores
+        lines.append("check = " + " + ".join(c_ref(s.targets[0]) for s in statements if isinstance(s, CheckedAssign)) + ";")
+    return lines
 
 
 def discretize_functions(blocks: list[DiscretizeBlock], prefix: str, scalar: str) -> list[dict[str, object]]:
@@ -156,8 +171,10 @@ def discretize_functions(blocks: list[DiscretizeBlock], prefix: str, scalar: str
                     (name, c_number(float(num), scalar) + (f" / {c_number(float(den), scalar)}" if den != 1 else ""))
                     for name, num, den in b.constants
                 ],
-                "lines": discretize_lines(statements),
+                "lines": discretize_lines(statements, b.block.read_back),
+                "small": small_block(statements),
                 "checked": b.block.checked,
+                "read_back": b.block.read_back,
             }
         )
     return out
@@ -383,9 +400,9 @@ def c_context(description: FilterDescription) -> dict[str, object]:
                                 for k in range(options.taylor_order + 1)],
         "discretize_sets_qd": "process_noise" in calls,  # the unrolled Q_d block sets every entry (no zero loop first)
         "discretize_noise_calls": [
-            ("qd_check = " if f["checked"] else "") + f["call"]
+            ("qd_check += " if f["checked"] else "") + f["call"]
             for f in discretize
-            if f["name"] in ("noise_input", "noise_input_times_step", "process_noise")
+            if f["name"] in ("noise_input", "noise_input_times_step") or f["name"].startswith("process_noise")
         ],
         "predict_state": [c_statement(s) for s in state_lines],
         "predict_state_check": [

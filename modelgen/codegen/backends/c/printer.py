@@ -48,11 +48,14 @@ def c_sum(terms: tuple[Term, ...]) -> str:
     return " + ".join("*".join(c_ref(r) for r in term) for term in terms) if terms else "0"
 
 
-def c_statement(statement: Statement) -> str:
-    """One kernel statement as one line of C."""
+def c_statement(statement: Statement, read_back: bool = False) -> str:
+    """One kernel statement as one line of C (a checked one with ``read_back``: the stores only, summed later)."""
     if isinstance(statement, Assign):
         return f"{c_ref(statement.target)} = {c_sum(statement.terms)};"
     assert isinstance(statement, CheckedAssign)
+    if read_back:
+        first = c_ref(statement.targets[0])
+        return f"{first} = {c_sum(statement.terms)};" + "".join(f" {c_ref(t)} = {first};" for t in statement.targets[1:])
     stores = " ".join(f"{c_ref(t)} = v;" for t in statement.targets)
     return f"v = {c_sum(statement.terms)}; {stores} check += v;"
 
