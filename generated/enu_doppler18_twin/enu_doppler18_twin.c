@@ -391,17 +391,16 @@ int enu_doppler18_twin_matrices_evaluate(const enu_doppler18_twin_params *restri
             }
         }
     }
-
     return ENU_DOPPLER18_TWIN_OK;
 }
 
-/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
-   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
-           is
-   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
-   products more often on its own than inside a caller of thousands of statements
-   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
-   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own,
+   not inlined: inlined into their caller, the frames of all blocks would add up (the
+   worst-case stack is measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes
+   a block's row segments and products more often on its own than inside a caller of
+   thousands of statements (bench/bench_cycle.py). The small ones (a row of a random
+   constant or a Markov state: at most SMALL_BLOCK_TERMS terms, in
+   modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define ENU_DOPPLER18_TWIN_BLOCK static __attribute__((noinline))
 #else
@@ -2939,7 +2938,6 @@ int enu_doppler18_twin_discretize(const enu_doppler18_twin_matrices *restrict m,
             }
         }
     }
-
     for (c = 0; c < ENU_DOPPLER18_TWIN_N_NOISES; ++c) {
         if (m->q[c] < 0.0) {
             return ENU_DOPPLER18_TWIN_ERR_NOT_POSITIVE;
@@ -3018,8 +3016,8 @@ int enu_doppler18_twin_discretize(const enu_doppler18_twin_matrices *restrict m,
     qd_check += process_noise_row_15(t, w);
     qd_check += process_noise_row_16(t, w);
     qd_check += process_noise_row_17(t, w);
-    if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
-            entry */
+    /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
+    if (qd_check != 0.0) {
         qd_check = 0.0;
         for (e = 0; e < ENU_DOPPLER18_TWIN_N_PACKED; ++e) {
             qd_check += t->Qd[e] - t->Qd[e];
@@ -4913,8 +4911,8 @@ int enu_doppler18_twin_predict(enu_doppler18_twin_filter *restrict f, const
     sum_check += propagate_row_16(t, w);
     phi_times_p_row_17(f, t, w);
     sum_check += propagate_row_17(t, w);
-    if (sum_check != 0.0) { /* a value that is not finite, or an overflow of a row's sum: entry by
-            entry */
+    /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
+    if (sum_check != 0.0) {
         int e;
         sum_check = 0.0;
         for (e = 0; e < ENU_DOPPLER18_TWIN_N_PACKED; ++e) {

@@ -313,17 +313,16 @@ int gps_pseudorange11_matrices_evaluate(const gps_pseudorange11_params *restrict
             }
         }
     }
-
     return GPS_PSEUDORANGE11_OK;
 }
 
-/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
-   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
-           is
-   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
-   products more often on its own than inside a caller of thousands of statements
-   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
-   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own,
+   not inlined: inlined into their caller, the frames of all blocks would add up (the
+   worst-case stack is measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes
+   a block's row segments and products more often on its own than inside a caller of
+   thousands of statements (bench/bench_cycle.py). The small ones (a row of a random
+   constant or a Markov state: at most SMALL_BLOCK_TERMS terms, in
+   modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define GPS_PSEUDORANGE11_BLOCK static __attribute__((noinline))
 #else
@@ -1500,7 +1499,6 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
             }
         }
     }
-
     for (c = 0; c < GPS_PSEUDORANGE11_N_NOISES; ++c) {
         if (m->q[c] < 0.0) {
             return GPS_PSEUDORANGE11_ERR_NOT_POSITIVE;
@@ -1571,8 +1569,8 @@ int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
     qd_check += process_noise_row_8(t, w);
     qd_check += process_noise_row_9(t, w);
     qd_check += process_noise_row_10(t, w);
-    if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
-            entry */
+    /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
+    if (qd_check != 0.0) {
         qd_check = 0.0;
         for (e = 0; e < GPS_PSEUDORANGE11_N_PACKED; ++e) {
             qd_check += t->Qd[e] - t->Qd[e];
@@ -2264,8 +2262,8 @@ int gps_pseudorange11_predict(gps_pseudorange11_filter *restrict f, const
     phi_times_p_row_9(f, t, w);
     sum_check += propagate_row_9(t, w);
     sum_check += propagate_row_10(f, t, w);
-    if (sum_check != 0.0) { /* a value that is not finite, or an overflow of a row's sum: entry by
-            entry */
+    /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
+    if (sum_check != 0.0) {
         int e;
         sum_check = 0.0;
         for (e = 0; e < GPS_PSEUDORANGE11_N_PACKED; ++e) {

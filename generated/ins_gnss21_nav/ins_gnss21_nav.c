@@ -588,17 +588,16 @@ int ins_gnss21_nav_matrices_evaluate(const ins_gnss21_nav_params *restrict param
             }
         }
     }
-
     return INS_GNSS21_NAV_OK;
 }
 
-/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
-   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
-           is
-   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
-   products more often on its own than inside a caller of thousands of statements
-   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
-   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own,
+   not inlined: inlined into their caller, the frames of all blocks would add up (the
+   worst-case stack is measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes
+   a block's row segments and products more often on its own than inside a caller of
+   thousands of statements (bench/bench_cycle.py). The small ones (a row of a random
+   constant or a Markov state: at most SMALL_BLOCK_TERMS terms, in
+   modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define INS_GNSS21_NAV_BLOCK static __attribute__((noinline))
 #else
@@ -3641,7 +3640,6 @@ int ins_gnss21_nav_discretize(const ins_gnss21_nav_matrices *restrict m, ins_gns
             }
         }
     }
-
     for (c = 0; c < INS_GNSS21_NAV_N_NOISES; ++c) {
         if (m->q[c] < 0.0) {
             return INS_GNSS21_NAV_ERR_NOT_POSITIVE;
@@ -3716,8 +3714,8 @@ int ins_gnss21_nav_discretize(const ins_gnss21_nav_matrices *restrict m, ins_gns
     qd_check += process_noise_row_18(t, w);
     qd_check += process_noise_row_19(t, w);
     qd_check += process_noise_row_20(t, w);
-    if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
-            entry */
+    /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
+    if (qd_check != 0.0) {
         qd_check = 0.0;
         for (e = 0; e < INS_GNSS21_NAV_N_PACKED; ++e) {
             qd_check += t->Qd[e] - t->Qd[e];
@@ -6282,8 +6280,8 @@ int ins_gnss21_nav_predict(ins_gnss21_nav_filter *restrict f, const ins_gnss21_n
     sum_check += propagate_row_19(t, w);
     phi_times_p_row_20(f, t, w);
     sum_check += propagate_row_20(t, w);
-    if (sum_check != 0.0) { /* a value that is not finite, or an overflow of a row's sum: entry by
-            entry */
+    /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
+    if (sum_check != 0.0) {
         int e;
         sum_check = 0.0;
         for (e = 0; e < INS_GNSS21_NAV_N_PACKED; ++e) {

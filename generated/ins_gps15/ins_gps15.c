@@ -376,17 +376,16 @@ int ins_gps15_matrices_evaluate(const ins_gps15_params *restrict params, ins_gps
             }
         }
     }
-
     return INS_GPS15_OK;
 }
 
-/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
-   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
-           is
-   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
-   products more often on its own than inside a caller of thousands of statements
-   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
-   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own,
+   not inlined: inlined into their caller, the frames of all blocks would add up (the
+   worst-case stack is measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes
+   a block's row segments and products more often on its own than inside a caller of
+   thousands of statements (bench/bench_cycle.py). The small ones (a row of a random
+   constant or a Markov state: at most SMALL_BLOCK_TERMS terms, in
+   modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define INS_GPS15_BLOCK static __attribute__((noinline))
 #else
@@ -2197,7 +2196,6 @@ int ins_gps15_discretize(const ins_gps15_matrices *restrict m, ins_gps15_scalar 
             }
         }
     }
-
     for (c = 0; c < INS_GPS15_N_NOISES; ++c) {
         if (m->q[c] < 0.0) {
             return INS_GPS15_ERR_NOT_POSITIVE;
@@ -2270,8 +2268,8 @@ int ins_gps15_discretize(const ins_gps15_matrices *restrict m, ins_gps15_scalar 
     qd_check += process_noise_row_6(t, w);
     qd_check += process_noise_row_7(t, w);
     qd_check += process_noise_row_8(t, w);
-    if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
-            entry */
+    /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
+    if (qd_check != 0.0) {
         qd_check = 0.0;
         for (e = 0; e < INS_GPS15_N_PACKED; ++e) {
             qd_check += t->Qd[e] - t->Qd[e];
@@ -3573,8 +3571,8 @@ int ins_gps15_predict(ins_gps15_filter *restrict f, const ins_gps15_transition *
     sum_check += propagate_row_12(f, w);
     sum_check += propagate_row_13(f, w);
     sum_check += propagate_row_14(f, w);
-    if (sum_check != 0.0) { /* a value that is not finite, or an overflow of a row's sum: entry by
-            entry */
+    /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
+    if (sum_check != 0.0) {
         int e;
         sum_check = 0.0;
         for (e = 0; e < INS_GPS15_N_PACKED; ++e) {

@@ -315,17 +315,16 @@ int ned_doppler13_reduced_matrices_evaluate(const ned_doppler13_reduced_params *
             }
         }
     }
-
     return NED_DOPPLER13_REDUCED_OK;
 }
 
-/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
-   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
-           is
-   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
-   products more often on its own than inside a caller of thousands of statements
-   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
-   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own,
+   not inlined: inlined into their caller, the frames of all blocks would add up (the
+   worst-case stack is measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes
+   a block's row segments and products more often on its own than inside a caller of
+   thousands of statements (bench/bench_cycle.py). The small ones (a row of a random
+   constant or a Markov state: at most SMALL_BLOCK_TERMS terms, in
+   modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define NED_DOPPLER13_REDUCED_BLOCK static __attribute__((noinline))
 #else
@@ -1676,7 +1675,6 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restr
             }
         }
     }
-
     for (c = 0; c < NED_DOPPLER13_REDUCED_N_NOISES; ++c) {
         if (m->q[c] < 0.0) {
             return NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE;
@@ -1749,8 +1747,8 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restr
     qd_check += process_noise_row_6(t, w);
     qd_check += process_noise_row_9(t, w);
     qd_check += process_noise_row_10(t, w);
-    if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
-            entry */
+    /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
+    if (qd_check != 0.0) {
         qd_check = 0.0;
         for (e = 0; e < NED_DOPPLER13_REDUCED_N_PACKED; ++e) {
             qd_check += t->Qd[e] - t->Qd[e];
@@ -2646,8 +2644,8 @@ int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, cons
     sum_check += propagate_row_10(t, w);
     sum_check += propagate_row_11(f, w);
     sum_check += propagate_row_12(f, w);
-    if (sum_check != 0.0) { /* a value that is not finite, or an overflow of a row's sum: entry by
-            entry */
+    /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
+    if (sum_check != 0.0) {
         int e;
         sum_check = 0.0;
         for (e = 0; e < NED_DOPPLER13_REDUCED_N_PACKED; ++e) {

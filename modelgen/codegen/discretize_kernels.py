@@ -699,12 +699,12 @@ def doubling_block(plan: DiscretizePlan) -> DiscretizeBlock:
 def noise_blocks(plan: DiscretizePlan, packed: bool, ud: bool) -> list[DiscretizeBlock]:
     """S G over Gamma's pattern, then Q_d = T (S G) diag(q) (S G)^T (or Gamma = T S G for the UD form).
 
-    ``process_noise`` scales (S G) by T q and sets the entries of Q_d no pair
-    reaches to zero; ``process_noise_row_i`` then sets row i's pairs and is
-    checked: it returns 0 when the sum of its values is finite (discretize
-    rescans Q_d entry by entry when one is not: an overflow of finite values).
-    It also sets every other entry of Q_d to zero (straight-line stores that
-    gcc pairs into vector stores, where a loop becomes ``rep stos``).
+    ``process_noise`` scales (S G) by T q and sets the entries of Q_d that no
+    pair reaches to zero (straight-line stores that gcc pairs into vector
+    stores, where a loop becomes ``rep stos``); each ``process_noise_row_i``
+    then sets row i's pairs and is checked: it returns 0 when the sum of its
+    values, read back after its stores, is finite (discretize rescans Q_d
+    entry by entry when one is not: an overflow of finite values).
     """
     structure = plan.structure
     n = structure.n_states

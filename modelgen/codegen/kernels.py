@@ -67,12 +67,13 @@ class Assign:
 
 @dataclass(frozen=True)
 class CheckedAssign:
-    """``v = sum of terms``, stored into every target and added, while in a register, to its block's sum.
+    """``v = sum of terms``, stored into every target and added to its block's sum.
 
-    The block returns ``sum - sum``: 0 when the sum is finite, and then every
-    value is; otherwise (a value that is not finite, or an overflow of the sum
-    of finite values) the caller decides entry by entry.  One addition per
-    value where ``check += v - v`` took two.
+    The value is added while in a register, or, in a ``read_back`` block, read
+    back after all of the block's stores.  The block returns ``sum - sum``: 0
+    when the sum is finite, and then every value is; otherwise (a value that is
+    not finite, or an overflow of the sum of finite values) the caller decides
+    entry by entry.  One addition per value where ``check += v - v`` took two.
     """
 
     targets: tuple[Ref, ...]

@@ -87,3 +87,14 @@ def test_the_count_rule_sees_a_changed_kernel(paper_derived):
     mul, add = emitted_predict_count(source, "ned_doppler18")
     tampered = source.replace("w->xn[0] = ", "w->xn[0] = t->Phi[0][0]*f->x[0] + ", 1)
     assert emitted_predict_count(tampered, "ned_doppler18") == (mul + 1, add + 1)
+
+
+def test_small_blocks_are_static_and_large_ones_are_not_inlined(paper_derived):
+    """A block of at most SMALL_BLOCK_TERMS (24) terms is a plain static function (the compiler inlines it); a larger one is <M>_BLOCK (noinline)."""
+    source = generate_code(paper_derived).files["ned_doppler18.c"]
+    found = {name: kind for kind, name in re.findall(r"^(static|NED_DOPPLER18_BLOCK) \w+ (\w+)\(", source, re.M)}
+    assert found["phi_times_p_row_0"] == found["propagate_row_0"] == found["state_predict"] == "NED_DOPPLER18_BLOCK"
+    assert found["process_noise_row_0"] == "NED_DOPPLER18_BLOCK"
+    # rows of a random constant (7) and of a Markov state (10): a handful of terms each
+    assert found["propagate_row_7"] == found["propagate_row_10"] == found["phi_times_p_row_10"] == "static"
+    assert found["process_noise_row_10"] == "static"

@@ -157,3 +157,30 @@ def test_a_process_noise_that_overflows_is_refused(compiled):
     finally:
         q[:] = saved
         assert compiled.discretize(60.0) == OK
+
+
+def test_a_process_noise_whose_row_sum_overflows_is_discretized_not_refused(compiled):
+    """A row of Q_d whose values are finite but whose sum overflows is decided entry by entry, and accepted.
+
+    Q_d is linear in q: q scaled so that Q_d's largest entry is a third of the
+    largest value makes some row's sum overflow while every entry stays finite.
+    """
+    if compiled.options.ud:
+        pytest.skip("the UD form keeps Gamma and q / T, not Q_d")
+    T = 1.0
+    assert compiled.discretize(T) == OK
+    nominal = compiled.Qd
+    q = np.ctypeslib.as_array(compiled.matrices.q)
+    saved = q.copy()
+    try:
+        scale = float(np.finfo(compiled.dtype).max) / 3 / np.abs(nominal).max()
+        q[:] = saved * scale
+        with np.errstate(over="ignore"):
+            row_sums = [np.triu(nominal * scale)[i].astype(compiled.dtype).sum(dtype=compiled.dtype) for i in range(18)]
+        assert np.isinf(row_sums).any()
+        assert compiled.discretize(T) == OK
+        assert np.isfinite(compiled.Qd).all()
+        np.testing.assert_allclose(compiled.Qd, nominal * scale, rtol=1e-9)
+    finally:
+        q[:] = saved
+        assert compiled.discretize(60.0) == OK

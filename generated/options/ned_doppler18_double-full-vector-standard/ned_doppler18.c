@@ -334,17 +334,16 @@ int ned_doppler18_matrices_evaluate(const ned_doppler18_params *restrict params,
             }
         }
     }
-
     return NED_DOPPLER18_OK;
 }
 
-/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
-   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
-           is
-   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
-   products more often on its own than inside a caller of thousands of statements
-   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
-   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own,
+   not inlined: inlined into their caller, the frames of all blocks would add up (the
+   worst-case stack is measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes
+   a block's row segments and products more often on its own than inside a caller of
+   thousands of statements (bench/bench_cycle.py). The small ones (a row of a random
+   constant or a Markov state: at most SMALL_BLOCK_TERMS terms, in
+   modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define NED_DOPPLER18_BLOCK static __attribute__((noinline))
 #else
@@ -2138,7 +2137,6 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
             }
         }
     }
-
     for (c = 0; c < NED_DOPPLER18_N_NOISES; ++c) {
         if (m->q[c] < 0.0) {
             return NED_DOPPLER18_ERR_NOT_POSITIVE;
@@ -2215,8 +2213,8 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
     qd_check += process_noise_row_13(t, w);
     qd_check += process_noise_row_14(t, w);
     qd_check += process_noise_row_15(t, w);
-    if (qd_check != 0.0) { /* a value that is not finite, or an overflow of the sum: entry by
-            entry */
+    /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
+    if (qd_check != 0.0) {
         qd_check = 0.0;
         for (e = 0; e < NED_DOPPLER18_N_PACKED; ++e) {
             qd_check += t->Qd[e] - t->Qd[e];
@@ -3680,8 +3678,8 @@ int ned_doppler18_predict(ned_doppler18_filter *restrict f, const ned_doppler18_
     sum_check += propagate_row_15(t, w);
     sum_check += propagate_row_16(f, w);
     sum_check += propagate_row_17(f, w);
-    if (sum_check != 0.0) { /* a value that is not finite, or an overflow of a row's sum: entry by
-            entry */
+    /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
+    if (sum_check != 0.0) {
         int e;
         sum_check = 0.0;
         for (e = 0; e < NED_DOPPLER18_N_PACKED; ++e) {

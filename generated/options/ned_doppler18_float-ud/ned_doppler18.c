@@ -332,17 +332,16 @@ int ned_doppler18_matrices_evaluate(const ned_doppler18_params *restrict params,
             }
         }
     }
-
     return NED_DOPPLER18_OK;
 }
 
-/* Each unrolled block (discretize, predict) but the small ones is a function of its own, not
-   inlined: inlined into their caller, the frames of all blocks would add up (the worst-case stack
-           is
-   measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes a block's row segments and
-   products more often on its own than inside a caller of thousands of statements
-   (bench/bench_cycle.py). The small ones (a row of a random constant or a Markov state, at most
-   SMALL_BLOCK_TERMS of modelgen/codegen/backends/c/context.py) are plain static functions. */
+/* Each unrolled block (discretize, predict) but the small ones is a function of its own,
+   not inlined: inlined into their caller, the frames of all blocks would add up (the
+   worst-case stack is measured for the Cortex-M4F, tests/embedded), and gcc -O2 vectorizes
+   a block's row segments and products more often on its own than inside a caller of
+   thousands of statements (bench/bench_cycle.py). The small ones (a row of a random
+   constant or a Markov state: at most SMALL_BLOCK_TERMS terms, in
+   modelgen/codegen/backends/c/context.py) are plain static functions. */
 #if defined(__GNUC__)
 #define NED_DOPPLER18_BLOCK static __attribute__((noinline))
 #else
@@ -1753,7 +1752,6 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
             }
         }
     }
-
     for (c = 0; c < NED_DOPPLER18_N_NOISES; ++c) {
         if (m->q[c] < 0.0F) {
             return NED_DOPPLER18_ERR_NOT_POSITIVE;

@@ -74,7 +74,7 @@ def compact_discretize_context(structure: FilterStructure) -> dict[str, object]:
 
 
 #: A block of at most this many terms (a row of a random constant or a Markov state) is left to the
-#: compiler to inline: its call would cost more than its work (bench/bench_cycle.py: -130
+#: compiler to inline: its call would cost more than its work (bench/bench_cycle.py: -133
 #: instructions per 18-state cycle); the larger ones are functions of their own (``<M>_BLOCK``).
 SMALL_BLOCK_TERMS = 24
 
@@ -405,6 +405,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
             if f["name"] in ("noise_input", "noise_input_times_step") or f["name"].startswith("process_noise")
         ],
         "predict_state": [c_statement(s) for s in state_lines],
+        "predict_state_small": small_block(state_lines),
         "predict_state_check": [
             f"check += {ref} - {ref};"
             for ref in [c_ref(s.target) for s in state_lines] + [f"f->x[{i}]" for i in structure.unit_rows]
