@@ -420,6 +420,91 @@ int enu_doppler18_matrices_evaluate(const enu_doppler18_params *restrict params,
 #define ENU_DOPPLER18_BLOCK static
 #endif
 
+/* Sums of products in two lanes (modelgen/codegen/kernels.py, lane_split): the products pair
+   up by position, the first of each pair is added in one lane and the second in the other,
+   then the two lanes are added. Under GCC or Clang with SSE2 (unless
+           ENU_DOPPLER18_SCALAR_LANE_PAIRS
+   is defined) a lane pair is an SSE2 vector, otherwise two scalars: the same operations in the
+   same order, bit for bit the same result. */
+#if defined(__GNUC__) && defined(__SSE2__) && !defined(ENU_DOPPLER18_SCALAR_LANE_PAIRS)
+typedef double lane_pair __attribute__((vector_size(2 * sizeof(double))));
+
+static inline lane_pair lane_pair_load(const double *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    memcpy(&lanes, a, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const double a, const double b)
+{
+    lane_pair lanes;
+    const double values[2] = { a, b };
+    memcpy(&lanes, values, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    return a * b;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    return acc + a * b;
+}
+
+static inline double lane_pair_sum(const lane_pair acc)
+{
+    double lanes[2];
+    memcpy(lanes, &acc, sizeof lanes);
+    return lanes[0] + lanes[1];
+}
+#else
+typedef struct {
+    enu_doppler18_scalar lane[2];
+} lane_pair;
+
+static inline lane_pair lane_pair_load(const enu_doppler18_scalar *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    lanes.lane[0] = a[0];
+    lanes.lane[1] = a[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const enu_doppler18_scalar a, const enu_doppler18_scalar b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a;
+    lanes.lane[1] = b;
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a.lane[0] * b.lane[0];
+    lanes.lane[1] = a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = acc.lane[0] + a.lane[0] * b.lane[0];
+    lanes.lane[1] = acc.lane[1] + a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline enu_doppler18_scalar lane_pair_sum(const lane_pair acc)
+{
+    return acc.lane[0] + acc.lane[1];
+}
+#endif
+
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static enu_doppler18_scalar power_of_two(const int e)
 {
@@ -2476,50 +2561,79 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar process_noise_row_0(enu_doppler18_trans
         const enu_doppler18_discretize_scratch *restrict w)
 {
     enu_doppler18_scalar check;
-    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
-            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
-            + w->term[1][5]*w->term[0][5] + w->term[1][6]*w->term[0][6] +
-            w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8];
-    t->Qd[1] = w->term[1][0]*w->term[0][9] + w->term[1][1]*w->term[0][10] +
-            w->term[1][2]*w->term[0][11] + w->term[1][3]*w->term[0][12] +
-            w->term[1][4]*w->term[0][13] + w->term[1][5]*w->term[0][14] +
-            w->term[1][6]*w->term[0][15] + w->term[1][7]*w->term[0][16] +
-            w->term[1][8]*w->term[0][17];
-    t->Qd[2] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
-            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
-            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23] +
-            w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
-            w->term[1][8]*w->term[0][26];
-    t->Qd[3] = w->term[1][0]*w->term[0][27] + w->term[1][1]*w->term[0][28] +
-            w->term[1][2]*w->term[0][29] + w->term[1][3]*w->term[0][30] +
-            w->term[1][4]*w->term[0][31] + w->term[1][5]*w->term[0][32] +
-            w->term[1][6]*w->term[0][33] + w->term[1][7]*w->term[0][34] +
-            w->term[1][8]*w->term[0][35];
-    t->Qd[4] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
-            w->term[1][2]*w->term[0][38] + w->term[1][3]*w->term[0][39] +
-            w->term[1][4]*w->term[0][40] + w->term[1][5]*w->term[0][41] +
-            w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] +
-            w->term[1][8]*w->term[0][44];
-    t->Qd[5] = w->term[1][0]*w->term[0][45] + w->term[1][1]*w->term[0][46] +
-            w->term[1][2]*w->term[0][47] + w->term[1][3]*w->term[0][48] +
-            w->term[1][4]*w->term[0][49] + w->term[1][5]*w->term[0][50] +
-            w->term[1][6]*w->term[0][51] + w->term[1][7]*w->term[0][52] +
-            w->term[1][8]*w->term[0][53];
-    t->Qd[6] = w->term[1][0]*w->term[0][54] + w->term[1][1]*w->term[0][55] +
-            w->term[1][2]*w->term[0][56] + w->term[1][3]*w->term[0][57] +
-            w->term[1][4]*w->term[0][58] + w->term[1][5]*w->term[0][59] +
-            w->term[1][6]*w->term[0][60] + w->term[1][7]*w->term[0][61] +
-            w->term[1][8]*w->term[0][62];
-    t->Qd[7] = w->term[1][0]*w->term[0][63] + w->term[1][1]*w->term[0][64] +
-            w->term[1][2]*w->term[0][65] + w->term[1][3]*w->term[0][66] +
-            w->term[1][4]*w->term[0][67] + w->term[1][5]*w->term[0][68] +
-            w->term[1][6]*w->term[0][69] + w->term[1][7]*w->term[0][70] +
-            w->term[1][8]*w->term[0][71];
-    t->Qd[8] = w->term[1][0]*w->term[0][72] + w->term[1][1]*w->term[0][73] +
-            w->term[1][2]*w->term[0][74] + w->term[1][3]*w->term[0][75] +
-            w->term[1][4]*w->term[0][76] + w->term[1][5]*w->term[0][77] +
-            w->term[1][6]*w->term[0][78] + w->term[1][7]*w->term[0][79] +
-            w->term[1][8]*w->term[0][80];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][6]));
+    t->Qd[0] = lane_pair_sum(acc) + w->term[1][8]*w->term[0][8];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][15]));
+    t->Qd[1] = lane_pair_sum(acc) + w->term[1][8]*w->term[0][17];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][24]));
+    t->Qd[2] = lane_pair_sum(acc) + w->term[1][8]*w->term[0][26];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][27]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][29]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][31]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][33]));
+    t->Qd[3] = lane_pair_sum(acc) + w->term[1][8]*w->term[0][35];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][42]));
+    t->Qd[4] = lane_pair_sum(acc) + w->term[1][8]*w->term[0][44];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][51]));
+    t->Qd[5] = lane_pair_sum(acc) + w->term[1][8]*w->term[0][53];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][60]));
+    t->Qd[6] = lane_pair_sum(acc) + w->term[1][8]*w->term[0][62];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][65]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][67]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][69]));
+    t->Qd[7] = lane_pair_sum(acc) + w->term[1][8]*w->term[0][71];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][78]));
+    t->Qd[8] = lane_pair_sum(acc) + w->term[1][8]*w->term[0][80];
     t->Qd[12] = w->term[1][3]*w->term[0][81];
     t->Qd[13] = w->term[1][4]*w->term[0][82];
     t->Qd[14] = w->term[1][5]*w->term[0][83];
@@ -2535,46 +2649,71 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar process_noise_row_1(enu_doppler18_trans
         const enu_doppler18_discretize_scratch *restrict w)
 {
     enu_doppler18_scalar check;
-    t->Qd[18] = w->term[1][9]*w->term[0][9] + w->term[1][10]*w->term[0][10] +
-            w->term[1][11]*w->term[0][11] + w->term[1][12]*w->term[0][12] +
-            w->term[1][13]*w->term[0][13] + w->term[1][14]*w->term[0][14] +
-            w->term[1][15]*w->term[0][15] + w->term[1][16]*w->term[0][16] +
-            w->term[1][17]*w->term[0][17];
-    t->Qd[19] = w->term[1][9]*w->term[0][18] + w->term[1][10]*w->term[0][19] +
-            w->term[1][11]*w->term[0][20] + w->term[1][12]*w->term[0][21] +
-            w->term[1][13]*w->term[0][22] + w->term[1][14]*w->term[0][23] +
-            w->term[1][15]*w->term[0][24] + w->term[1][16]*w->term[0][25] +
-            w->term[1][17]*w->term[0][26];
-    t->Qd[20] = w->term[1][9]*w->term[0][27] + w->term[1][10]*w->term[0][28] +
-            w->term[1][11]*w->term[0][29] + w->term[1][12]*w->term[0][30] +
-            w->term[1][13]*w->term[0][31] + w->term[1][14]*w->term[0][32] +
-            w->term[1][15]*w->term[0][33] + w->term[1][16]*w->term[0][34] +
-            w->term[1][17]*w->term[0][35];
-    t->Qd[21] = w->term[1][9]*w->term[0][36] + w->term[1][10]*w->term[0][37] +
-            w->term[1][11]*w->term[0][38] + w->term[1][12]*w->term[0][39] +
-            w->term[1][13]*w->term[0][40] + w->term[1][14]*w->term[0][41] +
-            w->term[1][15]*w->term[0][42] + w->term[1][16]*w->term[0][43] +
-            w->term[1][17]*w->term[0][44];
-    t->Qd[22] = w->term[1][9]*w->term[0][45] + w->term[1][10]*w->term[0][46] +
-            w->term[1][11]*w->term[0][47] + w->term[1][12]*w->term[0][48] +
-            w->term[1][13]*w->term[0][49] + w->term[1][14]*w->term[0][50] +
-            w->term[1][15]*w->term[0][51] + w->term[1][16]*w->term[0][52] +
-            w->term[1][17]*w->term[0][53];
-    t->Qd[23] = w->term[1][9]*w->term[0][54] + w->term[1][10]*w->term[0][55] +
-            w->term[1][11]*w->term[0][56] + w->term[1][12]*w->term[0][57] +
-            w->term[1][13]*w->term[0][58] + w->term[1][14]*w->term[0][59] +
-            w->term[1][15]*w->term[0][60] + w->term[1][16]*w->term[0][61] +
-            w->term[1][17]*w->term[0][62];
-    t->Qd[24] = w->term[1][9]*w->term[0][63] + w->term[1][10]*w->term[0][64] +
-            w->term[1][11]*w->term[0][65] + w->term[1][12]*w->term[0][66] +
-            w->term[1][13]*w->term[0][67] + w->term[1][14]*w->term[0][68] +
-            w->term[1][15]*w->term[0][69] + w->term[1][16]*w->term[0][70] +
-            w->term[1][17]*w->term[0][71];
-    t->Qd[25] = w->term[1][9]*w->term[0][72] + w->term[1][10]*w->term[0][73] +
-            w->term[1][11]*w->term[0][74] + w->term[1][12]*w->term[0][75] +
-            w->term[1][13]*w->term[0][76] + w->term[1][14]*w->term[0][77] +
-            w->term[1][15]*w->term[0][78] + w->term[1][16]*w->term[0][79] +
-            w->term[1][17]*w->term[0][80];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][9]), lane_pair_load(&w->term[0][9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][11]),
+            lane_pair_load(&w->term[0][11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][13]),
+            lane_pair_load(&w->term[0][13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][15]),
+            lane_pair_load(&w->term[0][15]));
+    t->Qd[18] = lane_pair_sum(acc) + w->term[1][17]*w->term[0][17];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][9]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][11]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][13]),
+            lane_pair_load(&w->term[0][22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][15]),
+            lane_pair_load(&w->term[0][24]));
+    t->Qd[19] = lane_pair_sum(acc) + w->term[1][17]*w->term[0][26];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][9]), lane_pair_load(&w->term[0][27]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][11]),
+            lane_pair_load(&w->term[0][29]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][13]),
+            lane_pair_load(&w->term[0][31]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][15]),
+            lane_pair_load(&w->term[0][33]));
+    t->Qd[20] = lane_pair_sum(acc) + w->term[1][17]*w->term[0][35];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][9]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][11]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][13]),
+            lane_pair_load(&w->term[0][40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][15]),
+            lane_pair_load(&w->term[0][42]));
+    t->Qd[21] = lane_pair_sum(acc) + w->term[1][17]*w->term[0][44];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][9]), lane_pair_load(&w->term[0][45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][11]),
+            lane_pair_load(&w->term[0][47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][13]),
+            lane_pair_load(&w->term[0][49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][15]),
+            lane_pair_load(&w->term[0][51]));
+    t->Qd[22] = lane_pair_sum(acc) + w->term[1][17]*w->term[0][53];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][9]), lane_pair_load(&w->term[0][54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][11]),
+            lane_pair_load(&w->term[0][56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][13]),
+            lane_pair_load(&w->term[0][58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][15]),
+            lane_pair_load(&w->term[0][60]));
+    t->Qd[23] = lane_pair_sum(acc) + w->term[1][17]*w->term[0][62];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][9]), lane_pair_load(&w->term[0][63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][11]),
+            lane_pair_load(&w->term[0][65]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][13]),
+            lane_pair_load(&w->term[0][67]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][15]),
+            lane_pair_load(&w->term[0][69]));
+    t->Qd[24] = lane_pair_sum(acc) + w->term[1][17]*w->term[0][71];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][9]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][11]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][13]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][15]),
+            lane_pair_load(&w->term[0][78]));
+    t->Qd[25] = lane_pair_sum(acc) + w->term[1][17]*w->term[0][80];
     t->Qd[29] = w->term[1][12]*w->term[0][81];
     t->Qd[30] = w->term[1][13]*w->term[0][82];
     t->Qd[31] = w->term[1][14]*w->term[0][83];
@@ -2590,41 +2729,63 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar process_noise_row_2(enu_doppler18_trans
         const enu_doppler18_discretize_scratch *restrict w)
 {
     enu_doppler18_scalar check;
-    t->Qd[35] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23] +
-            w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26];
-    t->Qd[36] = w->term[1][18]*w->term[0][27] + w->term[1][19]*w->term[0][28] +
-            w->term[1][20]*w->term[0][29] + w->term[1][21]*w->term[0][30] +
-            w->term[1][22]*w->term[0][31] + w->term[1][23]*w->term[0][32] +
-            w->term[1][24]*w->term[0][33] + w->term[1][25]*w->term[0][34] +
-            w->term[1][26]*w->term[0][35];
-    t->Qd[37] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41] +
-            w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
-            w->term[1][26]*w->term[0][44];
-    t->Qd[38] = w->term[1][18]*w->term[0][45] + w->term[1][19]*w->term[0][46] +
-            w->term[1][20]*w->term[0][47] + w->term[1][21]*w->term[0][48] +
-            w->term[1][22]*w->term[0][49] + w->term[1][23]*w->term[0][50] +
-            w->term[1][24]*w->term[0][51] + w->term[1][25]*w->term[0][52] +
-            w->term[1][26]*w->term[0][53];
-    t->Qd[39] = w->term[1][18]*w->term[0][54] + w->term[1][19]*w->term[0][55] +
-            w->term[1][20]*w->term[0][56] + w->term[1][21]*w->term[0][57] +
-            w->term[1][22]*w->term[0][58] + w->term[1][23]*w->term[0][59] +
-            w->term[1][24]*w->term[0][60] + w->term[1][25]*w->term[0][61] +
-            w->term[1][26]*w->term[0][62];
-    t->Qd[40] = w->term[1][18]*w->term[0][63] + w->term[1][19]*w->term[0][64] +
-            w->term[1][20]*w->term[0][65] + w->term[1][21]*w->term[0][66] +
-            w->term[1][22]*w->term[0][67] + w->term[1][23]*w->term[0][68] +
-            w->term[1][24]*w->term[0][69] + w->term[1][25]*w->term[0][70] +
-            w->term[1][26]*w->term[0][71];
-    t->Qd[41] = w->term[1][18]*w->term[0][72] + w->term[1][19]*w->term[0][73] +
-            w->term[1][20]*w->term[0][74] + w->term[1][21]*w->term[0][75] +
-            w->term[1][22]*w->term[0][76] + w->term[1][23]*w->term[0][77] +
-            w->term[1][24]*w->term[0][78] + w->term[1][25]*w->term[0][79] +
-            w->term[1][26]*w->term[0][80];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][24]));
+    t->Qd[35] = lane_pair_sum(acc) + w->term[1][26]*w->term[0][26];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][27]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][29]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][31]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][33]));
+    t->Qd[36] = lane_pair_sum(acc) + w->term[1][26]*w->term[0][35];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][42]));
+    t->Qd[37] = lane_pair_sum(acc) + w->term[1][26]*w->term[0][44];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][51]));
+    t->Qd[38] = lane_pair_sum(acc) + w->term[1][26]*w->term[0][53];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][60]));
+    t->Qd[39] = lane_pair_sum(acc) + w->term[1][26]*w->term[0][62];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][65]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][67]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][69]));
+    t->Qd[40] = lane_pair_sum(acc) + w->term[1][26]*w->term[0][71];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][78]));
+    t->Qd[41] = lane_pair_sum(acc) + w->term[1][26]*w->term[0][80];
     t->Qd[45] = w->term[1][21]*w->term[0][81];
     t->Qd[46] = w->term[1][22]*w->term[0][82];
     t->Qd[47] = w->term[1][23]*w->term[0][83];
@@ -2640,36 +2801,55 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar process_noise_row_3(enu_doppler18_trans
         const enu_doppler18_discretize_scratch *restrict w)
 {
     enu_doppler18_scalar check;
-    t->Qd[51] = w->term[1][27]*w->term[0][27] + w->term[1][28]*w->term[0][28] +
-            w->term[1][29]*w->term[0][29] + w->term[1][30]*w->term[0][30] +
-            w->term[1][31]*w->term[0][31] + w->term[1][32]*w->term[0][32] +
-            w->term[1][33]*w->term[0][33] + w->term[1][34]*w->term[0][34] +
-            w->term[1][35]*w->term[0][35];
-    t->Qd[52] = w->term[1][27]*w->term[0][36] + w->term[1][28]*w->term[0][37] +
-            w->term[1][29]*w->term[0][38] + w->term[1][30]*w->term[0][39] +
-            w->term[1][31]*w->term[0][40] + w->term[1][32]*w->term[0][41] +
-            w->term[1][33]*w->term[0][42] + w->term[1][34]*w->term[0][43] +
-            w->term[1][35]*w->term[0][44];
-    t->Qd[53] = w->term[1][27]*w->term[0][45] + w->term[1][28]*w->term[0][46] +
-            w->term[1][29]*w->term[0][47] + w->term[1][30]*w->term[0][48] +
-            w->term[1][31]*w->term[0][49] + w->term[1][32]*w->term[0][50] +
-            w->term[1][33]*w->term[0][51] + w->term[1][34]*w->term[0][52] +
-            w->term[1][35]*w->term[0][53];
-    t->Qd[54] = w->term[1][27]*w->term[0][54] + w->term[1][28]*w->term[0][55] +
-            w->term[1][29]*w->term[0][56] + w->term[1][30]*w->term[0][57] +
-            w->term[1][31]*w->term[0][58] + w->term[1][32]*w->term[0][59] +
-            w->term[1][33]*w->term[0][60] + w->term[1][34]*w->term[0][61] +
-            w->term[1][35]*w->term[0][62];
-    t->Qd[55] = w->term[1][27]*w->term[0][63] + w->term[1][28]*w->term[0][64] +
-            w->term[1][29]*w->term[0][65] + w->term[1][30]*w->term[0][66] +
-            w->term[1][31]*w->term[0][67] + w->term[1][32]*w->term[0][68] +
-            w->term[1][33]*w->term[0][69] + w->term[1][34]*w->term[0][70] +
-            w->term[1][35]*w->term[0][71];
-    t->Qd[56] = w->term[1][27]*w->term[0][72] + w->term[1][28]*w->term[0][73] +
-            w->term[1][29]*w->term[0][74] + w->term[1][30]*w->term[0][75] +
-            w->term[1][31]*w->term[0][76] + w->term[1][32]*w->term[0][77] +
-            w->term[1][33]*w->term[0][78] + w->term[1][34]*w->term[0][79] +
-            w->term[1][35]*w->term[0][80];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][27]), lane_pair_load(&w->term[0][27]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][29]),
+            lane_pair_load(&w->term[0][29]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][31]),
+            lane_pair_load(&w->term[0][31]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][33]),
+            lane_pair_load(&w->term[0][33]));
+    t->Qd[51] = lane_pair_sum(acc) + w->term[1][35]*w->term[0][35];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][27]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][29]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][31]),
+            lane_pair_load(&w->term[0][40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][33]),
+            lane_pair_load(&w->term[0][42]));
+    t->Qd[52] = lane_pair_sum(acc) + w->term[1][35]*w->term[0][44];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][27]), lane_pair_load(&w->term[0][45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][29]),
+            lane_pair_load(&w->term[0][47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][31]),
+            lane_pair_load(&w->term[0][49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][33]),
+            lane_pair_load(&w->term[0][51]));
+    t->Qd[53] = lane_pair_sum(acc) + w->term[1][35]*w->term[0][53];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][27]), lane_pair_load(&w->term[0][54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][29]),
+            lane_pair_load(&w->term[0][56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][31]),
+            lane_pair_load(&w->term[0][58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][33]),
+            lane_pair_load(&w->term[0][60]));
+    t->Qd[54] = lane_pair_sum(acc) + w->term[1][35]*w->term[0][62];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][27]), lane_pair_load(&w->term[0][63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][29]),
+            lane_pair_load(&w->term[0][65]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][31]),
+            lane_pair_load(&w->term[0][67]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][33]),
+            lane_pair_load(&w->term[0][69]));
+    t->Qd[55] = lane_pair_sum(acc) + w->term[1][35]*w->term[0][71];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][27]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][29]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][31]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][33]),
+            lane_pair_load(&w->term[0][78]));
+    t->Qd[56] = lane_pair_sum(acc) + w->term[1][35]*w->term[0][80];
     t->Qd[60] = w->term[1][30]*w->term[0][81];
     t->Qd[61] = w->term[1][31]*w->term[0][82];
     t->Qd[62] = w->term[1][32]*w->term[0][83];
@@ -2685,31 +2865,47 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar process_noise_row_4(enu_doppler18_trans
         const enu_doppler18_discretize_scratch *restrict w)
 {
     enu_doppler18_scalar check;
-    t->Qd[66] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41] +
-            w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
-            w->term[1][44]*w->term[0][44];
-    t->Qd[67] = w->term[1][36]*w->term[0][45] + w->term[1][37]*w->term[0][46] +
-            w->term[1][38]*w->term[0][47] + w->term[1][39]*w->term[0][48] +
-            w->term[1][40]*w->term[0][49] + w->term[1][41]*w->term[0][50] +
-            w->term[1][42]*w->term[0][51] + w->term[1][43]*w->term[0][52] +
-            w->term[1][44]*w->term[0][53];
-    t->Qd[68] = w->term[1][36]*w->term[0][54] + w->term[1][37]*w->term[0][55] +
-            w->term[1][38]*w->term[0][56] + w->term[1][39]*w->term[0][57] +
-            w->term[1][40]*w->term[0][58] + w->term[1][41]*w->term[0][59] +
-            w->term[1][42]*w->term[0][60] + w->term[1][43]*w->term[0][61] +
-            w->term[1][44]*w->term[0][62];
-    t->Qd[69] = w->term[1][36]*w->term[0][63] + w->term[1][37]*w->term[0][64] +
-            w->term[1][38]*w->term[0][65] + w->term[1][39]*w->term[0][66] +
-            w->term[1][40]*w->term[0][67] + w->term[1][41]*w->term[0][68] +
-            w->term[1][42]*w->term[0][69] + w->term[1][43]*w->term[0][70] +
-            w->term[1][44]*w->term[0][71];
-    t->Qd[70] = w->term[1][36]*w->term[0][72] + w->term[1][37]*w->term[0][73] +
-            w->term[1][38]*w->term[0][74] + w->term[1][39]*w->term[0][75] +
-            w->term[1][40]*w->term[0][76] + w->term[1][41]*w->term[0][77] +
-            w->term[1][42]*w->term[0][78] + w->term[1][43]*w->term[0][79] +
-            w->term[1][44]*w->term[0][80];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][42]),
+            lane_pair_load(&w->term[0][42]));
+    t->Qd[66] = lane_pair_sum(acc) + w->term[1][44]*w->term[0][44];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][42]),
+            lane_pair_load(&w->term[0][51]));
+    t->Qd[67] = lane_pair_sum(acc) + w->term[1][44]*w->term[0][53];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][42]),
+            lane_pair_load(&w->term[0][60]));
+    t->Qd[68] = lane_pair_sum(acc) + w->term[1][44]*w->term[0][62];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][65]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][67]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][42]),
+            lane_pair_load(&w->term[0][69]));
+    t->Qd[69] = lane_pair_sum(acc) + w->term[1][44]*w->term[0][71];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][42]),
+            lane_pair_load(&w->term[0][78]));
+    t->Qd[70] = lane_pair_sum(acc) + w->term[1][44]*w->term[0][80];
     t->Qd[74] = w->term[1][39]*w->term[0][81];
     t->Qd[75] = w->term[1][40]*w->term[0][82];
     t->Qd[76] = w->term[1][41]*w->term[0][83];
@@ -2725,26 +2921,39 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar process_noise_row_5(enu_doppler18_trans
         const enu_doppler18_discretize_scratch *restrict w)
 {
     enu_doppler18_scalar check;
-    t->Qd[80] = w->term[1][45]*w->term[0][45] + w->term[1][46]*w->term[0][46] +
-            w->term[1][47]*w->term[0][47] + w->term[1][48]*w->term[0][48] +
-            w->term[1][49]*w->term[0][49] + w->term[1][50]*w->term[0][50] +
-            w->term[1][51]*w->term[0][51] + w->term[1][52]*w->term[0][52] +
-            w->term[1][53]*w->term[0][53];
-    t->Qd[81] = w->term[1][45]*w->term[0][54] + w->term[1][46]*w->term[0][55] +
-            w->term[1][47]*w->term[0][56] + w->term[1][48]*w->term[0][57] +
-            w->term[1][49]*w->term[0][58] + w->term[1][50]*w->term[0][59] +
-            w->term[1][51]*w->term[0][60] + w->term[1][52]*w->term[0][61] +
-            w->term[1][53]*w->term[0][62];
-    t->Qd[82] = w->term[1][45]*w->term[0][63] + w->term[1][46]*w->term[0][64] +
-            w->term[1][47]*w->term[0][65] + w->term[1][48]*w->term[0][66] +
-            w->term[1][49]*w->term[0][67] + w->term[1][50]*w->term[0][68] +
-            w->term[1][51]*w->term[0][69] + w->term[1][52]*w->term[0][70] +
-            w->term[1][53]*w->term[0][71];
-    t->Qd[83] = w->term[1][45]*w->term[0][72] + w->term[1][46]*w->term[0][73] +
-            w->term[1][47]*w->term[0][74] + w->term[1][48]*w->term[0][75] +
-            w->term[1][49]*w->term[0][76] + w->term[1][50]*w->term[0][77] +
-            w->term[1][51]*w->term[0][78] + w->term[1][52]*w->term[0][79] +
-            w->term[1][53]*w->term[0][80];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][45]), lane_pair_load(&w->term[0][45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][47]),
+            lane_pair_load(&w->term[0][47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][49]),
+            lane_pair_load(&w->term[0][49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][51]),
+            lane_pair_load(&w->term[0][51]));
+    t->Qd[80] = lane_pair_sum(acc) + w->term[1][53]*w->term[0][53];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][45]), lane_pair_load(&w->term[0][54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][47]),
+            lane_pair_load(&w->term[0][56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][49]),
+            lane_pair_load(&w->term[0][58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][51]),
+            lane_pair_load(&w->term[0][60]));
+    t->Qd[81] = lane_pair_sum(acc) + w->term[1][53]*w->term[0][62];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][45]), lane_pair_load(&w->term[0][63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][47]),
+            lane_pair_load(&w->term[0][65]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][49]),
+            lane_pair_load(&w->term[0][67]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][51]),
+            lane_pair_load(&w->term[0][69]));
+    t->Qd[82] = lane_pair_sum(acc) + w->term[1][53]*w->term[0][71];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][45]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][47]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][49]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][51]),
+            lane_pair_load(&w->term[0][78]));
+    t->Qd[83] = lane_pair_sum(acc) + w->term[1][53]*w->term[0][80];
     t->Qd[87] = w->term[1][48]*w->term[0][81];
     t->Qd[88] = w->term[1][49]*w->term[0][82];
     t->Qd[89] = w->term[1][50]*w->term[0][83];
@@ -2760,21 +2969,31 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar process_noise_row_6(enu_doppler18_trans
         const enu_doppler18_discretize_scratch *restrict w)
 {
     enu_doppler18_scalar check;
-    t->Qd[93] = w->term[1][54]*w->term[0][54] + w->term[1][55]*w->term[0][55] +
-            w->term[1][56]*w->term[0][56] + w->term[1][57]*w->term[0][57] +
-            w->term[1][58]*w->term[0][58] + w->term[1][59]*w->term[0][59] +
-            w->term[1][60]*w->term[0][60] + w->term[1][61]*w->term[0][61] +
-            w->term[1][62]*w->term[0][62];
-    t->Qd[94] = w->term[1][54]*w->term[0][63] + w->term[1][55]*w->term[0][64] +
-            w->term[1][56]*w->term[0][65] + w->term[1][57]*w->term[0][66] +
-            w->term[1][58]*w->term[0][67] + w->term[1][59]*w->term[0][68] +
-            w->term[1][60]*w->term[0][69] + w->term[1][61]*w->term[0][70] +
-            w->term[1][62]*w->term[0][71];
-    t->Qd[95] = w->term[1][54]*w->term[0][72] + w->term[1][55]*w->term[0][73] +
-            w->term[1][56]*w->term[0][74] + w->term[1][57]*w->term[0][75] +
-            w->term[1][58]*w->term[0][76] + w->term[1][59]*w->term[0][77] +
-            w->term[1][60]*w->term[0][78] + w->term[1][61]*w->term[0][79] +
-            w->term[1][62]*w->term[0][80];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][54]), lane_pair_load(&w->term[0][54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][56]),
+            lane_pair_load(&w->term[0][56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][58]),
+            lane_pair_load(&w->term[0][58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][60]),
+            lane_pair_load(&w->term[0][60]));
+    t->Qd[93] = lane_pair_sum(acc) + w->term[1][62]*w->term[0][62];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][54]), lane_pair_load(&w->term[0][63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][56]),
+            lane_pair_load(&w->term[0][65]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][58]),
+            lane_pair_load(&w->term[0][67]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][60]),
+            lane_pair_load(&w->term[0][69]));
+    t->Qd[94] = lane_pair_sum(acc) + w->term[1][62]*w->term[0][71];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][54]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][56]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][58]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][60]),
+            lane_pair_load(&w->term[0][78]));
+    t->Qd[95] = lane_pair_sum(acc) + w->term[1][62]*w->term[0][80];
     t->Qd[99] = w->term[1][57]*w->term[0][81];
     t->Qd[100] = w->term[1][58]*w->term[0][82];
     t->Qd[101] = w->term[1][59]*w->term[0][83];
@@ -2790,16 +3009,23 @@ static enu_doppler18_scalar process_noise_row_7(enu_doppler18_transition *restri
         enu_doppler18_discretize_scratch *restrict w)
 {
     enu_doppler18_scalar check;
-    t->Qd[105] = w->term[1][63]*w->term[0][63] + w->term[1][64]*w->term[0][64] +
-            w->term[1][65]*w->term[0][65] + w->term[1][66]*w->term[0][66] +
-            w->term[1][67]*w->term[0][67] + w->term[1][68]*w->term[0][68] +
-            w->term[1][69]*w->term[0][69] + w->term[1][70]*w->term[0][70] +
-            w->term[1][71]*w->term[0][71];
-    t->Qd[106] = w->term[1][63]*w->term[0][72] + w->term[1][64]*w->term[0][73] +
-            w->term[1][65]*w->term[0][74] + w->term[1][66]*w->term[0][75] +
-            w->term[1][67]*w->term[0][76] + w->term[1][68]*w->term[0][77] +
-            w->term[1][69]*w->term[0][78] + w->term[1][70]*w->term[0][79] +
-            w->term[1][71]*w->term[0][80];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][63]), lane_pair_load(&w->term[0][63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][65]),
+            lane_pair_load(&w->term[0][65]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][67]),
+            lane_pair_load(&w->term[0][67]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][69]),
+            lane_pair_load(&w->term[0][69]));
+    t->Qd[105] = lane_pair_sum(acc) + w->term[1][71]*w->term[0][71];
+    acc = lane_pair_product(lane_pair_load(&w->term[1][63]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][65]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][67]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][69]),
+            lane_pair_load(&w->term[0][78]));
+    t->Qd[106] = lane_pair_sum(acc) + w->term[1][71]*w->term[0][80];
     t->Qd[110] = w->term[1][66]*w->term[0][81];
     t->Qd[111] = w->term[1][67]*w->term[0][82];
     t->Qd[112] = w->term[1][68]*w->term[0][83];
@@ -2815,11 +3041,15 @@ static enu_doppler18_scalar process_noise_row_8(enu_doppler18_transition *restri
         enu_doppler18_discretize_scratch *restrict w)
 {
     enu_doppler18_scalar check;
-    t->Qd[116] = w->term[1][72]*w->term[0][72] + w->term[1][73]*w->term[0][73] +
-            w->term[1][74]*w->term[0][74] + w->term[1][75]*w->term[0][75] +
-            w->term[1][76]*w->term[0][76] + w->term[1][77]*w->term[0][77] +
-            w->term[1][78]*w->term[0][78] + w->term[1][79]*w->term[0][79] +
-            w->term[1][80]*w->term[0][80];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][72]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][74]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][76]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][78]),
+            lane_pair_load(&w->term[0][78]));
+    t->Qd[116] = lane_pair_sum(acc) + w->term[1][80]*w->term[0][80];
     t->Qd[120] = w->term[1][75]*w->term[0][81];
     t->Qd[121] = w->term[1][76]*w->term[0][82];
     t->Qd[122] = w->term[1][77]*w->term[0][83];
@@ -3132,52 +3362,89 @@ ENU_DOPPLER18_BLOCK void state_predict(const enu_doppler18_filter *restrict f, c
         enu_doppler18_transition *restrict t,
                 enu_doppler18_filter_scratch *restrict w)
 {
-    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
-            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[6] + t->Phi[7]*f->x[8] +
-            t->Phi[8]*f->x[9] + t->Phi[9]*f->x[10] + t->Phi[10]*f->x[11] + t->Phi[11]*f->x[12] +
-            t->Phi[12]*f->x[13] + t->Phi[13]*f->x[14] + t->Phi[14]*f->x[15] + t->Phi[15]*f->x[16] +
-            t->Phi[16]*f->x[17];
-    w->xn[1] = t->Phi[17]*f->x[0] + t->Phi[18]*f->x[1] + t->Phi[19]*f->x[2] + t->Phi[20]*f->x[3] +
-            t->Phi[21]*f->x[4] + t->Phi[22]*f->x[5] + t->Phi[23]*f->x[6] + t->Phi[24]*f->x[8] +
-            t->Phi[25]*f->x[9] + t->Phi[26]*f->x[10] + t->Phi[27]*f->x[11] + t->Phi[28]*f->x[12] +
-            t->Phi[29]*f->x[13] + t->Phi[30]*f->x[14] + t->Phi[31]*f->x[15] + t->Phi[32]*f->x[16] +
-            t->Phi[33]*f->x[17];
-    w->xn[2] = t->Phi[34]*f->x[0] + t->Phi[35]*f->x[1] + t->Phi[36]*f->x[2] + t->Phi[37]*f->x[3] +
-            t->Phi[38]*f->x[4] + t->Phi[39]*f->x[5] + t->Phi[40]*f->x[6] + t->Phi[41]*f->x[8] +
-            t->Phi[42]*f->x[9] + t->Phi[43]*f->x[10] + t->Phi[44]*f->x[11] + t->Phi[45]*f->x[12] +
-            t->Phi[46]*f->x[13] + t->Phi[47]*f->x[14] + t->Phi[48]*f->x[15] + t->Phi[49]*f->x[16] +
-            t->Phi[50]*f->x[17];
-    w->xn[3] = t->Phi[51]*f->x[0] + t->Phi[52]*f->x[1] + t->Phi[53]*f->x[2] + t->Phi[54]*f->x[3] +
-            t->Phi[55]*f->x[4] + t->Phi[56]*f->x[5] + t->Phi[57]*f->x[6] + t->Phi[58]*f->x[8] +
-            t->Phi[59]*f->x[9] + t->Phi[60]*f->x[10] + t->Phi[61]*f->x[11] + t->Phi[62]*f->x[12] +
-            t->Phi[63]*f->x[13] + t->Phi[64]*f->x[14] + t->Phi[65]*f->x[15] + t->Phi[66]*f->x[16] +
-            t->Phi[67]*f->x[17];
-    w->xn[4] = t->Phi[68]*f->x[0] + t->Phi[69]*f->x[1] + t->Phi[70]*f->x[2] + t->Phi[71]*f->x[3] +
-            t->Phi[72]*f->x[4] + t->Phi[73]*f->x[5] + t->Phi[74]*f->x[6] + t->Phi[75]*f->x[8] +
-            t->Phi[76]*f->x[9] + t->Phi[77]*f->x[10] + t->Phi[78]*f->x[11] + t->Phi[79]*f->x[12] +
-            t->Phi[80]*f->x[13] + t->Phi[81]*f->x[14] + t->Phi[82]*f->x[15] + t->Phi[83]*f->x[16] +
-            t->Phi[84]*f->x[17];
-    w->xn[5] = t->Phi[85]*f->x[0] + t->Phi[86]*f->x[1] + t->Phi[87]*f->x[2] + t->Phi[88]*f->x[3] +
-            t->Phi[89]*f->x[4] + t->Phi[90]*f->x[5] + t->Phi[91]*f->x[6] + t->Phi[92]*f->x[8] +
-            t->Phi[93]*f->x[9] + t->Phi[94]*f->x[10] + t->Phi[95]*f->x[11] + t->Phi[96]*f->x[12] +
-            t->Phi[97]*f->x[13] + t->Phi[98]*f->x[14] + t->Phi[99]*f->x[15] + t->Phi[100]*f->x[16] +
-            t->Phi[101]*f->x[17];
-    w->xn[6] = t->Phi[102]*f->x[0] + t->Phi[103]*f->x[1] + t->Phi[104]*f->x[2] + t->Phi[105]*f->x[3]
-            + t->Phi[106]*f->x[4] + t->Phi[107]*f->x[5] + t->Phi[108]*f->x[6] + t->Phi[109]*f->x[8]
-            + t->Phi[110]*f->x[9] + t->Phi[111]*f->x[10] + t->Phi[112]*f->x[11] +
-            t->Phi[113]*f->x[12] + t->Phi[114]*f->x[13] + t->Phi[115]*f->x[14] +
-            t->Phi[116]*f->x[15] + t->Phi[117]*f->x[16] + t->Phi[118]*f->x[17];
-    w->xn[7] = t->Phi[119]*f->x[0] + t->Phi[120]*f->x[1] + t->Phi[121]*f->x[2] + t->Phi[122]*f->x[3]
-            + t->Phi[123]*f->x[4] + t->Phi[124]*f->x[5] + t->Phi[125]*f->x[6] + t->Phi[126]*f->x[7]
-            + t->Phi[127]*f->x[8] + t->Phi[128]*f->x[9] + t->Phi[129]*f->x[10] +
-            t->Phi[130]*f->x[11] + t->Phi[131]*f->x[12] + t->Phi[132]*f->x[13] +
-            t->Phi[133]*f->x[14] + t->Phi[134]*f->x[15] + t->Phi[135]*f->x[16] +
-            t->Phi[136]*f->x[17];
-    w->xn[8] = t->Phi[137]*f->x[0] + t->Phi[138]*f->x[1] + t->Phi[139]*f->x[2] + t->Phi[140]*f->x[3]
-            + t->Phi[141]*f->x[4] + t->Phi[142]*f->x[5] + t->Phi[143]*f->x[6] + t->Phi[144]*f->x[8]
-            + t->Phi[145]*f->x[9] + t->Phi[146]*f->x[10] + t->Phi[147]*f->x[11] +
-            t->Phi[148]*f->x[12] + t->Phi[149]*f->x[13] + t->Phi[150]*f->x[14] +
-            t->Phi[151]*f->x[15] + t->Phi[152]*f->x[16] + t->Phi[153]*f->x[17];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&t->Phi[0]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[2]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[4]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[6]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[8]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[10]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[12]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[14]), lane_pair_load(&f->x[15]));
+    w->xn[0] = lane_pair_sum(acc) + t->Phi[16]*f->x[17];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[17]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[19]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[21]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[23]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[25]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[27]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[29]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[31]), lane_pair_load(&f->x[15]));
+    w->xn[1] = lane_pair_sum(acc) + t->Phi[33]*f->x[17];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[34]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[36]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[38]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[40]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[42]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[44]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[46]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[48]), lane_pair_load(&f->x[15]));
+    w->xn[2] = lane_pair_sum(acc) + t->Phi[50]*f->x[17];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[51]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[53]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[55]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[57]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[59]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[61]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[63]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[65]), lane_pair_load(&f->x[15]));
+    w->xn[3] = lane_pair_sum(acc) + t->Phi[67]*f->x[17];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[68]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[70]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[72]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[74]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[76]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[78]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[80]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[82]), lane_pair_load(&f->x[15]));
+    w->xn[4] = lane_pair_sum(acc) + t->Phi[84]*f->x[17];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[85]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[87]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[89]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[91]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[93]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[95]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[97]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[99]), lane_pair_load(&f->x[15]));
+    w->xn[5] = lane_pair_sum(acc) + t->Phi[101]*f->x[17];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[102]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[104]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[106]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[108]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[110]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[112]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[114]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[116]), lane_pair_load(&f->x[15]));
+    w->xn[6] = lane_pair_sum(acc) + t->Phi[118]*f->x[17];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[119]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[121]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[123]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[125]), lane_pair_load(&f->x[6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[127]), lane_pair_load(&f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[129]), lane_pair_load(&f->x[10]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[131]), lane_pair_load(&f->x[12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[133]), lane_pair_load(&f->x[14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[135]), lane_pair_load(&f->x[16]));
+    w->xn[7] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[137]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[139]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[141]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[143]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[145]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[147]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[149]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[151]), lane_pair_load(&f->x[15]));
+    w->xn[8] = lane_pair_sum(acc) + t->Phi[153]*f->x[17];
     w->xn[12] = t->Phi[157]*f->x[12];
     w->xn[13] = t->Phi[158]*f->x[13];
     w->xn[14] = t->Phi[159]*f->x[14];
@@ -3305,52 +3572,89 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_0(const enu_doppler18_tra
         enu_doppler18_filter_scratch *restrict w)
 {
     enu_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[0] + w->M[1]*t->Phi[1] + w->M[2]*t->Phi[2] + w->M[3]*t->Phi[3] +
-            w->M[4]*t->Phi[4] + w->M[5]*t->Phi[5] + w->M[6]*t->Phi[6] + w->M[8]*t->Phi[7] +
-            w->M[9]*t->Phi[8] + w->M[10]*t->Phi[9] + w->M[11]*t->Phi[10] + w->M[12]*t->Phi[11] +
-            w->M[13]*t->Phi[12] + w->M[14]*t->Phi[13] + w->M[15]*t->Phi[14] + w->M[16]*t->Phi[15] +
-            w->M[17]*t->Phi[16] + t->Qd[0]; w->Pn[0] = v; check += v;
-    v = w->M[0]*t->Phi[17] + w->M[1]*t->Phi[18] + w->M[2]*t->Phi[19] + w->M[3]*t->Phi[20] +
-            w->M[4]*t->Phi[21] + w->M[5]*t->Phi[22] + w->M[6]*t->Phi[23] + w->M[8]*t->Phi[24] +
-            w->M[9]*t->Phi[25] + w->M[10]*t->Phi[26] + w->M[11]*t->Phi[27] + w->M[12]*t->Phi[28] +
-            w->M[13]*t->Phi[29] + w->M[14]*t->Phi[30] + w->M[15]*t->Phi[31] + w->M[16]*t->Phi[32] +
-            w->M[17]*t->Phi[33] + t->Qd[1]; w->Pn[1] = v; check += v;
-    v = w->M[0]*t->Phi[34] + w->M[1]*t->Phi[35] + w->M[2]*t->Phi[36] + w->M[3]*t->Phi[37] +
-            w->M[4]*t->Phi[38] + w->M[5]*t->Phi[39] + w->M[6]*t->Phi[40] + w->M[8]*t->Phi[41] +
-            w->M[9]*t->Phi[42] + w->M[10]*t->Phi[43] + w->M[11]*t->Phi[44] + w->M[12]*t->Phi[45] +
-            w->M[13]*t->Phi[46] + w->M[14]*t->Phi[47] + w->M[15]*t->Phi[48] + w->M[16]*t->Phi[49] +
-            w->M[17]*t->Phi[50] + t->Qd[2]; w->Pn[2] = v; check += v;
-    v = w->M[0]*t->Phi[51] + w->M[1]*t->Phi[52] + w->M[2]*t->Phi[53] + w->M[3]*t->Phi[54] +
-            w->M[4]*t->Phi[55] + w->M[5]*t->Phi[56] + w->M[6]*t->Phi[57] + w->M[8]*t->Phi[58] +
-            w->M[9]*t->Phi[59] + w->M[10]*t->Phi[60] + w->M[11]*t->Phi[61] + w->M[12]*t->Phi[62] +
-            w->M[13]*t->Phi[63] + w->M[14]*t->Phi[64] + w->M[15]*t->Phi[65] + w->M[16]*t->Phi[66] +
-            w->M[17]*t->Phi[67] + t->Qd[3]; w->Pn[3] = v; check += v;
-    v = w->M[0]*t->Phi[68] + w->M[1]*t->Phi[69] + w->M[2]*t->Phi[70] + w->M[3]*t->Phi[71] +
-            w->M[4]*t->Phi[72] + w->M[5]*t->Phi[73] + w->M[6]*t->Phi[74] + w->M[8]*t->Phi[75] +
-            w->M[9]*t->Phi[76] + w->M[10]*t->Phi[77] + w->M[11]*t->Phi[78] + w->M[12]*t->Phi[79] +
-            w->M[13]*t->Phi[80] + w->M[14]*t->Phi[81] + w->M[15]*t->Phi[82] + w->M[16]*t->Phi[83] +
-            w->M[17]*t->Phi[84] + t->Qd[4]; w->Pn[4] = v; check += v;
-    v = w->M[0]*t->Phi[85] + w->M[1]*t->Phi[86] + w->M[2]*t->Phi[87] + w->M[3]*t->Phi[88] +
-            w->M[4]*t->Phi[89] + w->M[5]*t->Phi[90] + w->M[6]*t->Phi[91] + w->M[8]*t->Phi[92] +
-            w->M[9]*t->Phi[93] + w->M[10]*t->Phi[94] + w->M[11]*t->Phi[95] + w->M[12]*t->Phi[96] +
-            w->M[13]*t->Phi[97] + w->M[14]*t->Phi[98] + w->M[15]*t->Phi[99] + w->M[16]*t->Phi[100] +
-            w->M[17]*t->Phi[101] + t->Qd[5]; w->Pn[5] = v; check += v;
-    v = w->M[0]*t->Phi[102] + w->M[1]*t->Phi[103] + w->M[2]*t->Phi[104] + w->M[3]*t->Phi[105] +
-            w->M[4]*t->Phi[106] + w->M[5]*t->Phi[107] + w->M[6]*t->Phi[108] + w->M[8]*t->Phi[109] +
-            w->M[9]*t->Phi[110] + w->M[10]*t->Phi[111] + w->M[11]*t->Phi[112] + w->M[12]*t->Phi[113]
-            + w->M[13]*t->Phi[114] + w->M[14]*t->Phi[115] + w->M[15]*t->Phi[116] +
-            w->M[16]*t->Phi[117] + w->M[17]*t->Phi[118] + t->Qd[6]; w->Pn[6] = v; check += v;
-    v = w->M[0]*t->Phi[119] + w->M[1]*t->Phi[120] + w->M[2]*t->Phi[121] + w->M[3]*t->Phi[122] +
-            w->M[4]*t->Phi[123] + w->M[5]*t->Phi[124] + w->M[6]*t->Phi[125] + w->M[7]*t->Phi[126] +
-            w->M[8]*t->Phi[127] + w->M[9]*t->Phi[128] + w->M[10]*t->Phi[129] + w->M[11]*t->Phi[130]
-            + w->M[12]*t->Phi[131] + w->M[13]*t->Phi[132] + w->M[14]*t->Phi[133] +
-            w->M[15]*t->Phi[134] + w->M[16]*t->Phi[135] + w->M[17]*t->Phi[136] + t->Qd[7]; w->Pn[7]
-            = v; check += v;
-    v = w->M[0]*t->Phi[137] + w->M[1]*t->Phi[138] + w->M[2]*t->Phi[139] + w->M[3]*t->Phi[140] +
-            w->M[4]*t->Phi[141] + w->M[5]*t->Phi[142] + w->M[6]*t->Phi[143] + w->M[8]*t->Phi[144] +
-            w->M[9]*t->Phi[145] + w->M[10]*t->Phi[146] + w->M[11]*t->Phi[147] + w->M[12]*t->Phi[148]
-            + w->M[13]*t->Phi[149] + w->M[14]*t->Phi[150] + w->M[15]*t->Phi[151] +
-            w->M[16]*t->Phi[152] + w->M[17]*t->Phi[153] + t->Qd[8]; w->Pn[8] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[4]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[10]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[14]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[16] + t->Qd[0]; w->Pn[0] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[17]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[19]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[21]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[23]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[25]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[27]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[29]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[31]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[33] + t->Qd[1]; w->Pn[1] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[34]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[46]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[48]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[50] + t->Qd[2]; w->Pn[2] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[51]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[53]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[55]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[57]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[59]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[61]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[65]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[67] + t->Qd[3]; w->Pn[3] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[82]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[84] + t->Qd[4]; w->Pn[4] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[99]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[101] + t->Qd[5]; w->Pn[5] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[116]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[118] + t->Qd[6]; w->Pn[6] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[16]), lane_pair_load(&t->Phi[135]));
+    v = lane_pair_sum(acc) + t->Qd[7]; w->Pn[7] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[151]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[153] + t->Qd[8]; w->Pn[8] = v; check += v;
     v = w->M[9]; w->Pn[9] = v; check += v;
     v = w->M[10]; w->Pn[10] = v; check += v;
     v = w->M[11]; w->Pn[11] = v; check += v;
@@ -3482,47 +3786,80 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_1(const enu_doppler18_tra
         enu_doppler18_filter_scratch *restrict w)
 {
     enu_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[17] + w->M[1]*t->Phi[18] + w->M[2]*t->Phi[19] + w->M[3]*t->Phi[20] +
-            w->M[4]*t->Phi[21] + w->M[5]*t->Phi[22] + w->M[6]*t->Phi[23] + w->M[8]*t->Phi[24] +
-            w->M[9]*t->Phi[25] + w->M[10]*t->Phi[26] + w->M[11]*t->Phi[27] + w->M[12]*t->Phi[28] +
-            w->M[13]*t->Phi[29] + w->M[14]*t->Phi[30] + w->M[15]*t->Phi[31] + w->M[16]*t->Phi[32] +
-            w->M[17]*t->Phi[33] + t->Qd[18]; w->Pn[18] = v; check += v;
-    v = w->M[0]*t->Phi[34] + w->M[1]*t->Phi[35] + w->M[2]*t->Phi[36] + w->M[3]*t->Phi[37] +
-            w->M[4]*t->Phi[38] + w->M[5]*t->Phi[39] + w->M[6]*t->Phi[40] + w->M[8]*t->Phi[41] +
-            w->M[9]*t->Phi[42] + w->M[10]*t->Phi[43] + w->M[11]*t->Phi[44] + w->M[12]*t->Phi[45] +
-            w->M[13]*t->Phi[46] + w->M[14]*t->Phi[47] + w->M[15]*t->Phi[48] + w->M[16]*t->Phi[49] +
-            w->M[17]*t->Phi[50] + t->Qd[19]; w->Pn[19] = v; check += v;
-    v = w->M[0]*t->Phi[51] + w->M[1]*t->Phi[52] + w->M[2]*t->Phi[53] + w->M[3]*t->Phi[54] +
-            w->M[4]*t->Phi[55] + w->M[5]*t->Phi[56] + w->M[6]*t->Phi[57] + w->M[8]*t->Phi[58] +
-            w->M[9]*t->Phi[59] + w->M[10]*t->Phi[60] + w->M[11]*t->Phi[61] + w->M[12]*t->Phi[62] +
-            w->M[13]*t->Phi[63] + w->M[14]*t->Phi[64] + w->M[15]*t->Phi[65] + w->M[16]*t->Phi[66] +
-            w->M[17]*t->Phi[67] + t->Qd[20]; w->Pn[20] = v; check += v;
-    v = w->M[0]*t->Phi[68] + w->M[1]*t->Phi[69] + w->M[2]*t->Phi[70] + w->M[3]*t->Phi[71] +
-            w->M[4]*t->Phi[72] + w->M[5]*t->Phi[73] + w->M[6]*t->Phi[74] + w->M[8]*t->Phi[75] +
-            w->M[9]*t->Phi[76] + w->M[10]*t->Phi[77] + w->M[11]*t->Phi[78] + w->M[12]*t->Phi[79] +
-            w->M[13]*t->Phi[80] + w->M[14]*t->Phi[81] + w->M[15]*t->Phi[82] + w->M[16]*t->Phi[83] +
-            w->M[17]*t->Phi[84] + t->Qd[21]; w->Pn[21] = v; check += v;
-    v = w->M[0]*t->Phi[85] + w->M[1]*t->Phi[86] + w->M[2]*t->Phi[87] + w->M[3]*t->Phi[88] +
-            w->M[4]*t->Phi[89] + w->M[5]*t->Phi[90] + w->M[6]*t->Phi[91] + w->M[8]*t->Phi[92] +
-            w->M[9]*t->Phi[93] + w->M[10]*t->Phi[94] + w->M[11]*t->Phi[95] + w->M[12]*t->Phi[96] +
-            w->M[13]*t->Phi[97] + w->M[14]*t->Phi[98] + w->M[15]*t->Phi[99] + w->M[16]*t->Phi[100] +
-            w->M[17]*t->Phi[101] + t->Qd[22]; w->Pn[22] = v; check += v;
-    v = w->M[0]*t->Phi[102] + w->M[1]*t->Phi[103] + w->M[2]*t->Phi[104] + w->M[3]*t->Phi[105] +
-            w->M[4]*t->Phi[106] + w->M[5]*t->Phi[107] + w->M[6]*t->Phi[108] + w->M[8]*t->Phi[109] +
-            w->M[9]*t->Phi[110] + w->M[10]*t->Phi[111] + w->M[11]*t->Phi[112] + w->M[12]*t->Phi[113]
-            + w->M[13]*t->Phi[114] + w->M[14]*t->Phi[115] + w->M[15]*t->Phi[116] +
-            w->M[16]*t->Phi[117] + w->M[17]*t->Phi[118] + t->Qd[23]; w->Pn[23] = v; check += v;
-    v = w->M[0]*t->Phi[119] + w->M[1]*t->Phi[120] + w->M[2]*t->Phi[121] + w->M[3]*t->Phi[122] +
-            w->M[4]*t->Phi[123] + w->M[5]*t->Phi[124] + w->M[6]*t->Phi[125] + w->M[7]*t->Phi[126] +
-            w->M[8]*t->Phi[127] + w->M[9]*t->Phi[128] + w->M[10]*t->Phi[129] + w->M[11]*t->Phi[130]
-            + w->M[12]*t->Phi[131] + w->M[13]*t->Phi[132] + w->M[14]*t->Phi[133] +
-            w->M[15]*t->Phi[134] + w->M[16]*t->Phi[135] + w->M[17]*t->Phi[136] + t->Qd[24];
-            w->Pn[24] = v; check += v;
-    v = w->M[0]*t->Phi[137] + w->M[1]*t->Phi[138] + w->M[2]*t->Phi[139] + w->M[3]*t->Phi[140] +
-            w->M[4]*t->Phi[141] + w->M[5]*t->Phi[142] + w->M[6]*t->Phi[143] + w->M[8]*t->Phi[144] +
-            w->M[9]*t->Phi[145] + w->M[10]*t->Phi[146] + w->M[11]*t->Phi[147] + w->M[12]*t->Phi[148]
-            + w->M[13]*t->Phi[149] + w->M[14]*t->Phi[150] + w->M[15]*t->Phi[151] +
-            w->M[16]*t->Phi[152] + w->M[17]*t->Phi[153] + t->Qd[25]; w->Pn[25] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[17]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[19]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[21]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[23]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[25]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[27]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[29]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[31]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[33] + t->Qd[18]; w->Pn[18] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[34]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[46]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[48]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[50] + t->Qd[19]; w->Pn[19] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[51]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[53]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[55]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[57]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[59]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[61]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[65]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[67] + t->Qd[20]; w->Pn[20] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[82]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[84] + t->Qd[21]; w->Pn[21] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[99]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[101] + t->Qd[22]; w->Pn[22] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[116]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[118] + t->Qd[23]; w->Pn[23] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[16]), lane_pair_load(&t->Phi[135]));
+    v = lane_pair_sum(acc) + t->Qd[24]; w->Pn[24] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[151]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[153] + t->Qd[25]; w->Pn[25] = v; check += v;
     v = w->M[9]; w->Pn[26] = v; check += v;
     v = w->M[10]; w->Pn[27] = v; check += v;
     v = w->M[11]; w->Pn[28] = v; check += v;
@@ -3654,42 +3991,71 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_2(const enu_doppler18_tra
         enu_doppler18_filter_scratch *restrict w)
 {
     enu_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[34] + w->M[1]*t->Phi[35] + w->M[2]*t->Phi[36] + w->M[3]*t->Phi[37] +
-            w->M[4]*t->Phi[38] + w->M[5]*t->Phi[39] + w->M[6]*t->Phi[40] + w->M[8]*t->Phi[41] +
-            w->M[9]*t->Phi[42] + w->M[10]*t->Phi[43] + w->M[11]*t->Phi[44] + w->M[12]*t->Phi[45] +
-            w->M[13]*t->Phi[46] + w->M[14]*t->Phi[47] + w->M[15]*t->Phi[48] + w->M[16]*t->Phi[49] +
-            w->M[17]*t->Phi[50] + t->Qd[35]; w->Pn[35] = v; check += v;
-    v = w->M[0]*t->Phi[51] + w->M[1]*t->Phi[52] + w->M[2]*t->Phi[53] + w->M[3]*t->Phi[54] +
-            w->M[4]*t->Phi[55] + w->M[5]*t->Phi[56] + w->M[6]*t->Phi[57] + w->M[8]*t->Phi[58] +
-            w->M[9]*t->Phi[59] + w->M[10]*t->Phi[60] + w->M[11]*t->Phi[61] + w->M[12]*t->Phi[62] +
-            w->M[13]*t->Phi[63] + w->M[14]*t->Phi[64] + w->M[15]*t->Phi[65] + w->M[16]*t->Phi[66] +
-            w->M[17]*t->Phi[67] + t->Qd[36]; w->Pn[36] = v; check += v;
-    v = w->M[0]*t->Phi[68] + w->M[1]*t->Phi[69] + w->M[2]*t->Phi[70] + w->M[3]*t->Phi[71] +
-            w->M[4]*t->Phi[72] + w->M[5]*t->Phi[73] + w->M[6]*t->Phi[74] + w->M[8]*t->Phi[75] +
-            w->M[9]*t->Phi[76] + w->M[10]*t->Phi[77] + w->M[11]*t->Phi[78] + w->M[12]*t->Phi[79] +
-            w->M[13]*t->Phi[80] + w->M[14]*t->Phi[81] + w->M[15]*t->Phi[82] + w->M[16]*t->Phi[83] +
-            w->M[17]*t->Phi[84] + t->Qd[37]; w->Pn[37] = v; check += v;
-    v = w->M[0]*t->Phi[85] + w->M[1]*t->Phi[86] + w->M[2]*t->Phi[87] + w->M[3]*t->Phi[88] +
-            w->M[4]*t->Phi[89] + w->M[5]*t->Phi[90] + w->M[6]*t->Phi[91] + w->M[8]*t->Phi[92] +
-            w->M[9]*t->Phi[93] + w->M[10]*t->Phi[94] + w->M[11]*t->Phi[95] + w->M[12]*t->Phi[96] +
-            w->M[13]*t->Phi[97] + w->M[14]*t->Phi[98] + w->M[15]*t->Phi[99] + w->M[16]*t->Phi[100] +
-            w->M[17]*t->Phi[101] + t->Qd[38]; w->Pn[38] = v; check += v;
-    v = w->M[0]*t->Phi[102] + w->M[1]*t->Phi[103] + w->M[2]*t->Phi[104] + w->M[3]*t->Phi[105] +
-            w->M[4]*t->Phi[106] + w->M[5]*t->Phi[107] + w->M[6]*t->Phi[108] + w->M[8]*t->Phi[109] +
-            w->M[9]*t->Phi[110] + w->M[10]*t->Phi[111] + w->M[11]*t->Phi[112] + w->M[12]*t->Phi[113]
-            + w->M[13]*t->Phi[114] + w->M[14]*t->Phi[115] + w->M[15]*t->Phi[116] +
-            w->M[16]*t->Phi[117] + w->M[17]*t->Phi[118] + t->Qd[39]; w->Pn[39] = v; check += v;
-    v = w->M[0]*t->Phi[119] + w->M[1]*t->Phi[120] + w->M[2]*t->Phi[121] + w->M[3]*t->Phi[122] +
-            w->M[4]*t->Phi[123] + w->M[5]*t->Phi[124] + w->M[6]*t->Phi[125] + w->M[7]*t->Phi[126] +
-            w->M[8]*t->Phi[127] + w->M[9]*t->Phi[128] + w->M[10]*t->Phi[129] + w->M[11]*t->Phi[130]
-            + w->M[12]*t->Phi[131] + w->M[13]*t->Phi[132] + w->M[14]*t->Phi[133] +
-            w->M[15]*t->Phi[134] + w->M[16]*t->Phi[135] + w->M[17]*t->Phi[136] + t->Qd[40];
-            w->Pn[40] = v; check += v;
-    v = w->M[0]*t->Phi[137] + w->M[1]*t->Phi[138] + w->M[2]*t->Phi[139] + w->M[3]*t->Phi[140] +
-            w->M[4]*t->Phi[141] + w->M[5]*t->Phi[142] + w->M[6]*t->Phi[143] + w->M[8]*t->Phi[144] +
-            w->M[9]*t->Phi[145] + w->M[10]*t->Phi[146] + w->M[11]*t->Phi[147] + w->M[12]*t->Phi[148]
-            + w->M[13]*t->Phi[149] + w->M[14]*t->Phi[150] + w->M[15]*t->Phi[151] +
-            w->M[16]*t->Phi[152] + w->M[17]*t->Phi[153] + t->Qd[41]; w->Pn[41] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[34]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[46]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[48]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[50] + t->Qd[35]; w->Pn[35] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[51]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[53]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[55]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[57]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[59]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[61]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[65]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[67] + t->Qd[36]; w->Pn[36] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[82]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[84] + t->Qd[37]; w->Pn[37] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[99]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[101] + t->Qd[38]; w->Pn[38] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[116]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[118] + t->Qd[39]; w->Pn[39] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[16]), lane_pair_load(&t->Phi[135]));
+    v = lane_pair_sum(acc) + t->Qd[40]; w->Pn[40] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[151]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[153] + t->Qd[41]; w->Pn[41] = v; check += v;
     v = w->M[9]; w->Pn[42] = v; check += v;
     v = w->M[10]; w->Pn[43] = v; check += v;
     v = w->M[11]; w->Pn[44] = v; check += v;
@@ -3821,37 +4187,62 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_3(const enu_doppler18_tra
         enu_doppler18_filter_scratch *restrict w)
 {
     enu_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[51] + w->M[1]*t->Phi[52] + w->M[2]*t->Phi[53] + w->M[3]*t->Phi[54] +
-            w->M[4]*t->Phi[55] + w->M[5]*t->Phi[56] + w->M[6]*t->Phi[57] + w->M[8]*t->Phi[58] +
-            w->M[9]*t->Phi[59] + w->M[10]*t->Phi[60] + w->M[11]*t->Phi[61] + w->M[12]*t->Phi[62] +
-            w->M[13]*t->Phi[63] + w->M[14]*t->Phi[64] + w->M[15]*t->Phi[65] + w->M[16]*t->Phi[66] +
-            w->M[17]*t->Phi[67] + t->Qd[51]; w->Pn[51] = v; check += v;
-    v = w->M[0]*t->Phi[68] + w->M[1]*t->Phi[69] + w->M[2]*t->Phi[70] + w->M[3]*t->Phi[71] +
-            w->M[4]*t->Phi[72] + w->M[5]*t->Phi[73] + w->M[6]*t->Phi[74] + w->M[8]*t->Phi[75] +
-            w->M[9]*t->Phi[76] + w->M[10]*t->Phi[77] + w->M[11]*t->Phi[78] + w->M[12]*t->Phi[79] +
-            w->M[13]*t->Phi[80] + w->M[14]*t->Phi[81] + w->M[15]*t->Phi[82] + w->M[16]*t->Phi[83] +
-            w->M[17]*t->Phi[84] + t->Qd[52]; w->Pn[52] = v; check += v;
-    v = w->M[0]*t->Phi[85] + w->M[1]*t->Phi[86] + w->M[2]*t->Phi[87] + w->M[3]*t->Phi[88] +
-            w->M[4]*t->Phi[89] + w->M[5]*t->Phi[90] + w->M[6]*t->Phi[91] + w->M[8]*t->Phi[92] +
-            w->M[9]*t->Phi[93] + w->M[10]*t->Phi[94] + w->M[11]*t->Phi[95] + w->M[12]*t->Phi[96] +
-            w->M[13]*t->Phi[97] + w->M[14]*t->Phi[98] + w->M[15]*t->Phi[99] + w->M[16]*t->Phi[100] +
-            w->M[17]*t->Phi[101] + t->Qd[53]; w->Pn[53] = v; check += v;
-    v = w->M[0]*t->Phi[102] + w->M[1]*t->Phi[103] + w->M[2]*t->Phi[104] + w->M[3]*t->Phi[105] +
-            w->M[4]*t->Phi[106] + w->M[5]*t->Phi[107] + w->M[6]*t->Phi[108] + w->M[8]*t->Phi[109] +
-            w->M[9]*t->Phi[110] + w->M[10]*t->Phi[111] + w->M[11]*t->Phi[112] + w->M[12]*t->Phi[113]
-            + w->M[13]*t->Phi[114] + w->M[14]*t->Phi[115] + w->M[15]*t->Phi[116] +
-            w->M[16]*t->Phi[117] + w->M[17]*t->Phi[118] + t->Qd[54]; w->Pn[54] = v; check += v;
-    v = w->M[0]*t->Phi[119] + w->M[1]*t->Phi[120] + w->M[2]*t->Phi[121] + w->M[3]*t->Phi[122] +
-            w->M[4]*t->Phi[123] + w->M[5]*t->Phi[124] + w->M[6]*t->Phi[125] + w->M[7]*t->Phi[126] +
-            w->M[8]*t->Phi[127] + w->M[9]*t->Phi[128] + w->M[10]*t->Phi[129] + w->M[11]*t->Phi[130]
-            + w->M[12]*t->Phi[131] + w->M[13]*t->Phi[132] + w->M[14]*t->Phi[133] +
-            w->M[15]*t->Phi[134] + w->M[16]*t->Phi[135] + w->M[17]*t->Phi[136] + t->Qd[55];
-            w->Pn[55] = v; check += v;
-    v = w->M[0]*t->Phi[137] + w->M[1]*t->Phi[138] + w->M[2]*t->Phi[139] + w->M[3]*t->Phi[140] +
-            w->M[4]*t->Phi[141] + w->M[5]*t->Phi[142] + w->M[6]*t->Phi[143] + w->M[8]*t->Phi[144] +
-            w->M[9]*t->Phi[145] + w->M[10]*t->Phi[146] + w->M[11]*t->Phi[147] + w->M[12]*t->Phi[148]
-            + w->M[13]*t->Phi[149] + w->M[14]*t->Phi[150] + w->M[15]*t->Phi[151] +
-            w->M[16]*t->Phi[152] + w->M[17]*t->Phi[153] + t->Qd[56]; w->Pn[56] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[51]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[53]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[55]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[57]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[59]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[61]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[65]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[67] + t->Qd[51]; w->Pn[51] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[82]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[84] + t->Qd[52]; w->Pn[52] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[99]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[101] + t->Qd[53]; w->Pn[53] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[116]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[118] + t->Qd[54]; w->Pn[54] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[16]), lane_pair_load(&t->Phi[135]));
+    v = lane_pair_sum(acc) + t->Qd[55]; w->Pn[55] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[151]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[153] + t->Qd[56]; w->Pn[56] = v; check += v;
     v = w->M[9]; w->Pn[57] = v; check += v;
     v = w->M[10]; w->Pn[58] = v; check += v;
     v = w->M[11]; w->Pn[59] = v; check += v;
@@ -3983,32 +4374,53 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_4(const enu_doppler18_tra
         enu_doppler18_filter_scratch *restrict w)
 {
     enu_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[68] + w->M[1]*t->Phi[69] + w->M[2]*t->Phi[70] + w->M[3]*t->Phi[71] +
-            w->M[4]*t->Phi[72] + w->M[5]*t->Phi[73] + w->M[6]*t->Phi[74] + w->M[8]*t->Phi[75] +
-            w->M[9]*t->Phi[76] + w->M[10]*t->Phi[77] + w->M[11]*t->Phi[78] + w->M[12]*t->Phi[79] +
-            w->M[13]*t->Phi[80] + w->M[14]*t->Phi[81] + w->M[15]*t->Phi[82] + w->M[16]*t->Phi[83] +
-            w->M[17]*t->Phi[84] + t->Qd[66]; w->Pn[66] = v; check += v;
-    v = w->M[0]*t->Phi[85] + w->M[1]*t->Phi[86] + w->M[2]*t->Phi[87] + w->M[3]*t->Phi[88] +
-            w->M[4]*t->Phi[89] + w->M[5]*t->Phi[90] + w->M[6]*t->Phi[91] + w->M[8]*t->Phi[92] +
-            w->M[9]*t->Phi[93] + w->M[10]*t->Phi[94] + w->M[11]*t->Phi[95] + w->M[12]*t->Phi[96] +
-            w->M[13]*t->Phi[97] + w->M[14]*t->Phi[98] + w->M[15]*t->Phi[99] + w->M[16]*t->Phi[100] +
-            w->M[17]*t->Phi[101] + t->Qd[67]; w->Pn[67] = v; check += v;
-    v = w->M[0]*t->Phi[102] + w->M[1]*t->Phi[103] + w->M[2]*t->Phi[104] + w->M[3]*t->Phi[105] +
-            w->M[4]*t->Phi[106] + w->M[5]*t->Phi[107] + w->M[6]*t->Phi[108] + w->M[8]*t->Phi[109] +
-            w->M[9]*t->Phi[110] + w->M[10]*t->Phi[111] + w->M[11]*t->Phi[112] + w->M[12]*t->Phi[113]
-            + w->M[13]*t->Phi[114] + w->M[14]*t->Phi[115] + w->M[15]*t->Phi[116] +
-            w->M[16]*t->Phi[117] + w->M[17]*t->Phi[118] + t->Qd[68]; w->Pn[68] = v; check += v;
-    v = w->M[0]*t->Phi[119] + w->M[1]*t->Phi[120] + w->M[2]*t->Phi[121] + w->M[3]*t->Phi[122] +
-            w->M[4]*t->Phi[123] + w->M[5]*t->Phi[124] + w->M[6]*t->Phi[125] + w->M[7]*t->Phi[126] +
-            w->M[8]*t->Phi[127] + w->M[9]*t->Phi[128] + w->M[10]*t->Phi[129] + w->M[11]*t->Phi[130]
-            + w->M[12]*t->Phi[131] + w->M[13]*t->Phi[132] + w->M[14]*t->Phi[133] +
-            w->M[15]*t->Phi[134] + w->M[16]*t->Phi[135] + w->M[17]*t->Phi[136] + t->Qd[69];
-            w->Pn[69] = v; check += v;
-    v = w->M[0]*t->Phi[137] + w->M[1]*t->Phi[138] + w->M[2]*t->Phi[139] + w->M[3]*t->Phi[140] +
-            w->M[4]*t->Phi[141] + w->M[5]*t->Phi[142] + w->M[6]*t->Phi[143] + w->M[8]*t->Phi[144] +
-            w->M[9]*t->Phi[145] + w->M[10]*t->Phi[146] + w->M[11]*t->Phi[147] + w->M[12]*t->Phi[148]
-            + w->M[13]*t->Phi[149] + w->M[14]*t->Phi[150] + w->M[15]*t->Phi[151] +
-            w->M[16]*t->Phi[152] + w->M[17]*t->Phi[153] + t->Qd[70]; w->Pn[70] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[82]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[84] + t->Qd[66]; w->Pn[66] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[99]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[101] + t->Qd[67]; w->Pn[67] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[116]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[118] + t->Qd[68]; w->Pn[68] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[16]), lane_pair_load(&t->Phi[135]));
+    v = lane_pair_sum(acc) + t->Qd[69]; w->Pn[69] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[151]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[153] + t->Qd[70]; w->Pn[70] = v; check += v;
     v = w->M[9]; w->Pn[71] = v; check += v;
     v = w->M[10]; w->Pn[72] = v; check += v;
     v = w->M[11]; w->Pn[73] = v; check += v;
@@ -4140,27 +4552,44 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_5(const enu_doppler18_tra
         enu_doppler18_filter_scratch *restrict w)
 {
     enu_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[85] + w->M[1]*t->Phi[86] + w->M[2]*t->Phi[87] + w->M[3]*t->Phi[88] +
-            w->M[4]*t->Phi[89] + w->M[5]*t->Phi[90] + w->M[6]*t->Phi[91] + w->M[8]*t->Phi[92] +
-            w->M[9]*t->Phi[93] + w->M[10]*t->Phi[94] + w->M[11]*t->Phi[95] + w->M[12]*t->Phi[96] +
-            w->M[13]*t->Phi[97] + w->M[14]*t->Phi[98] + w->M[15]*t->Phi[99] + w->M[16]*t->Phi[100] +
-            w->M[17]*t->Phi[101] + t->Qd[80]; w->Pn[80] = v; check += v;
-    v = w->M[0]*t->Phi[102] + w->M[1]*t->Phi[103] + w->M[2]*t->Phi[104] + w->M[3]*t->Phi[105] +
-            w->M[4]*t->Phi[106] + w->M[5]*t->Phi[107] + w->M[6]*t->Phi[108] + w->M[8]*t->Phi[109] +
-            w->M[9]*t->Phi[110] + w->M[10]*t->Phi[111] + w->M[11]*t->Phi[112] + w->M[12]*t->Phi[113]
-            + w->M[13]*t->Phi[114] + w->M[14]*t->Phi[115] + w->M[15]*t->Phi[116] +
-            w->M[16]*t->Phi[117] + w->M[17]*t->Phi[118] + t->Qd[81]; w->Pn[81] = v; check += v;
-    v = w->M[0]*t->Phi[119] + w->M[1]*t->Phi[120] + w->M[2]*t->Phi[121] + w->M[3]*t->Phi[122] +
-            w->M[4]*t->Phi[123] + w->M[5]*t->Phi[124] + w->M[6]*t->Phi[125] + w->M[7]*t->Phi[126] +
-            w->M[8]*t->Phi[127] + w->M[9]*t->Phi[128] + w->M[10]*t->Phi[129] + w->M[11]*t->Phi[130]
-            + w->M[12]*t->Phi[131] + w->M[13]*t->Phi[132] + w->M[14]*t->Phi[133] +
-            w->M[15]*t->Phi[134] + w->M[16]*t->Phi[135] + w->M[17]*t->Phi[136] + t->Qd[82];
-            w->Pn[82] = v; check += v;
-    v = w->M[0]*t->Phi[137] + w->M[1]*t->Phi[138] + w->M[2]*t->Phi[139] + w->M[3]*t->Phi[140] +
-            w->M[4]*t->Phi[141] + w->M[5]*t->Phi[142] + w->M[6]*t->Phi[143] + w->M[8]*t->Phi[144] +
-            w->M[9]*t->Phi[145] + w->M[10]*t->Phi[146] + w->M[11]*t->Phi[147] + w->M[12]*t->Phi[148]
-            + w->M[13]*t->Phi[149] + w->M[14]*t->Phi[150] + w->M[15]*t->Phi[151] +
-            w->M[16]*t->Phi[152] + w->M[17]*t->Phi[153] + t->Qd[83]; w->Pn[83] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[99]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[101] + t->Qd[80]; w->Pn[80] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[116]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[118] + t->Qd[81]; w->Pn[81] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[16]), lane_pair_load(&t->Phi[135]));
+    v = lane_pair_sum(acc) + t->Qd[82]; w->Pn[82] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[151]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[153] + t->Qd[83]; w->Pn[83] = v; check += v;
     v = w->M[9]; w->Pn[84] = v; check += v;
     v = w->M[10]; w->Pn[85] = v; check += v;
     v = w->M[11]; w->Pn[86] = v; check += v;
@@ -4292,22 +4721,35 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_6(const enu_doppler18_tra
         enu_doppler18_filter_scratch *restrict w)
 {
     enu_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[102] + w->M[1]*t->Phi[103] + w->M[2]*t->Phi[104] + w->M[3]*t->Phi[105] +
-            w->M[4]*t->Phi[106] + w->M[5]*t->Phi[107] + w->M[6]*t->Phi[108] + w->M[8]*t->Phi[109] +
-            w->M[9]*t->Phi[110] + w->M[10]*t->Phi[111] + w->M[11]*t->Phi[112] + w->M[12]*t->Phi[113]
-            + w->M[13]*t->Phi[114] + w->M[14]*t->Phi[115] + w->M[15]*t->Phi[116] +
-            w->M[16]*t->Phi[117] + w->M[17]*t->Phi[118] + t->Qd[93]; w->Pn[93] = v; check += v;
-    v = w->M[0]*t->Phi[119] + w->M[1]*t->Phi[120] + w->M[2]*t->Phi[121] + w->M[3]*t->Phi[122] +
-            w->M[4]*t->Phi[123] + w->M[5]*t->Phi[124] + w->M[6]*t->Phi[125] + w->M[7]*t->Phi[126] +
-            w->M[8]*t->Phi[127] + w->M[9]*t->Phi[128] + w->M[10]*t->Phi[129] + w->M[11]*t->Phi[130]
-            + w->M[12]*t->Phi[131] + w->M[13]*t->Phi[132] + w->M[14]*t->Phi[133] +
-            w->M[15]*t->Phi[134] + w->M[16]*t->Phi[135] + w->M[17]*t->Phi[136] + t->Qd[94];
-            w->Pn[94] = v; check += v;
-    v = w->M[0]*t->Phi[137] + w->M[1]*t->Phi[138] + w->M[2]*t->Phi[139] + w->M[3]*t->Phi[140] +
-            w->M[4]*t->Phi[141] + w->M[5]*t->Phi[142] + w->M[6]*t->Phi[143] + w->M[8]*t->Phi[144] +
-            w->M[9]*t->Phi[145] + w->M[10]*t->Phi[146] + w->M[11]*t->Phi[147] + w->M[12]*t->Phi[148]
-            + w->M[13]*t->Phi[149] + w->M[14]*t->Phi[150] + w->M[15]*t->Phi[151] +
-            w->M[16]*t->Phi[152] + w->M[17]*t->Phi[153] + t->Qd[95]; w->Pn[95] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[116]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[118] + t->Qd[93]; w->Pn[93] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[16]), lane_pair_load(&t->Phi[135]));
+    v = lane_pair_sum(acc) + t->Qd[94]; w->Pn[94] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[151]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[153] + t->Qd[95]; w->Pn[95] = v; check += v;
     v = w->M[9]; w->Pn[96] = v; check += v;
     v = w->M[10]; w->Pn[97] = v; check += v;
     v = w->M[11]; w->Pn[98] = v; check += v;
@@ -4439,17 +4881,26 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_7(const enu_doppler18_tra
         enu_doppler18_filter_scratch *restrict w)
 {
     enu_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[119] + w->M[1]*t->Phi[120] + w->M[2]*t->Phi[121] + w->M[3]*t->Phi[122] +
-            w->M[4]*t->Phi[123] + w->M[5]*t->Phi[124] + w->M[6]*t->Phi[125] + w->M[7]*t->Phi[126] +
-            w->M[8]*t->Phi[127] + w->M[9]*t->Phi[128] + w->M[10]*t->Phi[129] + w->M[11]*t->Phi[130]
-            + w->M[12]*t->Phi[131] + w->M[13]*t->Phi[132] + w->M[14]*t->Phi[133] +
-            w->M[15]*t->Phi[134] + w->M[16]*t->Phi[135] + w->M[17]*t->Phi[136] + t->Qd[105];
-            w->Pn[105] = v; check += v;
-    v = w->M[0]*t->Phi[137] + w->M[1]*t->Phi[138] + w->M[2]*t->Phi[139] + w->M[3]*t->Phi[140] +
-            w->M[4]*t->Phi[141] + w->M[5]*t->Phi[142] + w->M[6]*t->Phi[143] + w->M[8]*t->Phi[144] +
-            w->M[9]*t->Phi[145] + w->M[10]*t->Phi[146] + w->M[11]*t->Phi[147] + w->M[12]*t->Phi[148]
-            + w->M[13]*t->Phi[149] + w->M[14]*t->Phi[150] + w->M[15]*t->Phi[151] +
-            w->M[16]*t->Phi[152] + w->M[17]*t->Phi[153] + t->Qd[106]; w->Pn[106] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[16]), lane_pair_load(&t->Phi[135]));
+    v = lane_pair_sum(acc) + t->Qd[105]; w->Pn[105] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[151]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[153] + t->Qd[106]; w->Pn[106] = v; check += v;
     v = w->M[9]; w->Pn[107] = v; check += v;
     v = w->M[10]; w->Pn[108] = v; check += v;
     v = w->M[11]; w->Pn[109] = v; check += v;
@@ -4581,11 +5032,16 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_8(const enu_doppler18_tra
         enu_doppler18_filter_scratch *restrict w)
 {
     enu_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[137] + w->M[1]*t->Phi[138] + w->M[2]*t->Phi[139] + w->M[3]*t->Phi[140] +
-            w->M[4]*t->Phi[141] + w->M[5]*t->Phi[142] + w->M[6]*t->Phi[143] + w->M[8]*t->Phi[144] +
-            w->M[9]*t->Phi[145] + w->M[10]*t->Phi[146] + w->M[11]*t->Phi[147] + w->M[12]*t->Phi[148]
-            + w->M[13]*t->Phi[149] + w->M[14]*t->Phi[150] + w->M[15]*t->Phi[151] +
-            w->M[16]*t->Phi[152] + w->M[17]*t->Phi[153] + t->Qd[116]; w->Pn[116] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[151]));
+    v = lane_pair_sum(acc) + w->M[17]*t->Phi[153] + t->Qd[116]; w->Pn[116] = v; check += v;
     v = w->M[9]; w->Pn[117] = v; check += v;
     v = w->M[10]; w->Pn[118] = v; check += v;
     v = w->M[11]; w->Pn[119] = v; check += v;

@@ -335,6 +335,92 @@ int gps_pseudorange11_twin_matrices_evaluate(const gps_pseudorange11_twin_params
 #define GPS_PSEUDORANGE11_TWIN_BLOCK static
 #endif
 
+/* Sums of products in two lanes (modelgen/codegen/kernels.py, lane_split): the products pair
+   up by position, the first of each pair is added in one lane and the second in the other,
+   then the two lanes are added. Under GCC or Clang with SSE2 (unless
+           GPS_PSEUDORANGE11_TWIN_SCALAR_LANE_PAIRS
+   is defined) a lane pair is an SSE2 vector, otherwise two scalars: the same operations in the
+   same order, bit for bit the same result. */
+#if defined(__GNUC__) && defined(__SSE2__) && !defined(GPS_PSEUDORANGE11_TWIN_SCALAR_LANE_PAIRS)
+typedef double lane_pair __attribute__((vector_size(2 * sizeof(double))));
+
+static inline lane_pair lane_pair_load(const double *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    memcpy(&lanes, a, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const double a, const double b)
+{
+    lane_pair lanes;
+    const double values[2] = { a, b };
+    memcpy(&lanes, values, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    return a * b;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    return acc + a * b;
+}
+
+static inline double lane_pair_sum(const lane_pair acc)
+{
+    double lanes[2];
+    memcpy(lanes, &acc, sizeof lanes);
+    return lanes[0] + lanes[1];
+}
+#else
+typedef struct {
+    gps_pseudorange11_twin_scalar lane[2];
+} lane_pair;
+
+static inline lane_pair lane_pair_load(const gps_pseudorange11_twin_scalar *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    lanes.lane[0] = a[0];
+    lanes.lane[1] = a[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const gps_pseudorange11_twin_scalar a, const
+        gps_pseudorange11_twin_scalar b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a;
+    lanes.lane[1] = b;
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a.lane[0] * b.lane[0];
+    lanes.lane[1] = a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = acc.lane[0] + a.lane[0] * b.lane[0];
+    lanes.lane[1] = acc.lane[1] + a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline gps_pseudorange11_twin_scalar lane_pair_sum(const lane_pair acc)
+{
+    return acc.lane[0] + acc.lane[1];
+}
+#endif
+
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static gps_pseudorange11_twin_scalar power_of_two(const int e)
 {
@@ -1246,24 +1332,43 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar
         gps_pseudorange11_twin_discretize_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar check;
-    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
-            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
-            + w->term[1][5]*w->term[0][5];
-    t->Qd[1] = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] +
-            w->term[1][2]*w->term[0][8] + w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10]
-            + w->term[1][5]*w->term[0][11];
-    t->Qd[2] = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] +
-            w->term[1][2]*w->term[0][14] + w->term[1][3]*w->term[0][15] +
-            w->term[1][4]*w->term[0][16] + w->term[1][5]*w->term[0][17];
-    t->Qd[3] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
-            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
-            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23];
-    t->Qd[4] = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] +
-            w->term[1][2]*w->term[0][26] + w->term[1][3]*w->term[0][27] +
-            w->term[1][4]*w->term[0][28] + w->term[1][5]*w->term[0][29];
-    t->Qd[5] = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] +
-            w->term[1][2]*w->term[0][32] + w->term[1][3]*w->term[0][33] +
-            w->term[1][4]*w->term[0][34] + w->term[1][5]*w->term[0][35];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][4]));
+    t->Qd[0] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][10]));
+    t->Qd[1] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[2] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[3] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[4] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[5] = lane_pair_sum(acc);
     t->Qd[6] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
             w->term[1][2]*w->term[0][38];
     t->Qd[7] = w->term[1][0]*w->term[0][39] + w->term[1][1]*w->term[0][40] +
@@ -1280,21 +1385,37 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar
         gps_pseudorange11_twin_discretize_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar check;
-    t->Qd[11] = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
-            w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9] +
-            w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11];
-    t->Qd[12] = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] +
-            w->term[1][8]*w->term[0][14] + w->term[1][9]*w->term[0][15] +
-            w->term[1][10]*w->term[0][16] + w->term[1][11]*w->term[0][17];
-    t->Qd[13] = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] +
-            w->term[1][8]*w->term[0][20] + w->term[1][9]*w->term[0][21] +
-            w->term[1][10]*w->term[0][22] + w->term[1][11]*w->term[0][23];
-    t->Qd[14] = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
-            w->term[1][8]*w->term[0][26] + w->term[1][9]*w->term[0][27] +
-            w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29];
-    t->Qd[15] = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] +
-            w->term[1][8]*w->term[0][32] + w->term[1][9]*w->term[0][33] +
-            w->term[1][10]*w->term[0][34] + w->term[1][11]*w->term[0][35];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][10]));
+    t->Qd[11] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[12] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[13] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[14] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[15] = lane_pair_sum(acc);
     t->Qd[16] = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] +
             w->term[1][8]*w->term[0][38];
     t->Qd[17] = w->term[1][6]*w->term[0][39] + w->term[1][7]*w->term[0][40] +
@@ -1311,18 +1432,31 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar
         gps_pseudorange11_twin_discretize_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar check;
-    t->Qd[21] = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17];
-    t->Qd[22] = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
-            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23];
-    t->Qd[23] = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
-            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29];
-    t->Qd[24] = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
-            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[21] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[22] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[23] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[24] = lane_pair_sum(acc);
     t->Qd[25] = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
             w->term[1][14]*w->term[0][38];
     t->Qd[26] = w->term[1][12]*w->term[0][39] + w->term[1][13]*w->term[0][40] +
@@ -1338,15 +1472,25 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar
         gps_pseudorange11_twin_discretize_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar check;
-    t->Qd[30] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23];
-    t->Qd[31] = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
-            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29];
-    t->Qd[32] = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
-            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[30] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[31] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[32] = lane_pair_sum(acc);
     t->Qd[33] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
             w->term[1][20]*w->term[0][38];
     t->Qd[34] = w->term[1][18]*w->term[0][39] + w->term[1][19]*w->term[0][40] +
@@ -1361,12 +1505,19 @@ static gps_pseudorange11_twin_scalar process_noise_row_4(gps_pseudorange11_twin_
         t, const gps_pseudorange11_twin_discretize_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar check;
-    t->Qd[38] = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29];
-    t->Qd[39] = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
-            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[38] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[39] = lane_pair_sum(acc);
     t->Qd[40] = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
             w->term[1][26]*w->term[0][38];
     t->Qd[41] = w->term[1][24]*w->term[0][39] + w->term[1][25]*w->term[0][40] +
@@ -1381,9 +1532,13 @@ static gps_pseudorange11_twin_scalar process_noise_row_5(gps_pseudorange11_twin_
         t, const gps_pseudorange11_twin_discretize_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar check;
-    t->Qd[45] = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
-            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][30]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[45] = lane_pair_sum(acc);
     t->Qd[46] = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
             w->term[1][32]*w->term[0][38];
     t->Qd[47] = w->term[1][30]*w->term[0][39] + w->term[1][31]*w->term[0][40] +
@@ -1690,24 +1845,37 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void state_predict(const gps_pseudorange11_twin_fil
         const gps_pseudorange11_twin_transition *restrict t,
                 gps_pseudorange11_twin_filter_scratch *restrict w)
 {
-    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
-            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[6] + t->Phi[7]*f->x[7] +
-            t->Phi[8]*f->x[8];
-    w->xn[1] = t->Phi[9]*f->x[0] + t->Phi[10]*f->x[1] + t->Phi[11]*f->x[2] + t->Phi[12]*f->x[3] +
-            t->Phi[13]*f->x[4] + t->Phi[14]*f->x[5] + t->Phi[15]*f->x[6] + t->Phi[16]*f->x[7] +
-            t->Phi[17]*f->x[8];
-    w->xn[2] = t->Phi[18]*f->x[0] + t->Phi[19]*f->x[1] + t->Phi[20]*f->x[2] + t->Phi[21]*f->x[3] +
-            t->Phi[22]*f->x[4] + t->Phi[23]*f->x[5] + t->Phi[24]*f->x[6] + t->Phi[25]*f->x[7] +
-            t->Phi[26]*f->x[8];
-    w->xn[3] = t->Phi[27]*f->x[0] + t->Phi[28]*f->x[1] + t->Phi[29]*f->x[2] + t->Phi[30]*f->x[3] +
-            t->Phi[31]*f->x[4] + t->Phi[32]*f->x[5] + t->Phi[33]*f->x[6] + t->Phi[34]*f->x[7] +
-            t->Phi[35]*f->x[8];
-    w->xn[4] = t->Phi[36]*f->x[0] + t->Phi[37]*f->x[1] + t->Phi[38]*f->x[2] + t->Phi[39]*f->x[3] +
-            t->Phi[40]*f->x[4] + t->Phi[41]*f->x[5] + t->Phi[42]*f->x[6] + t->Phi[43]*f->x[7] +
-            t->Phi[44]*f->x[8];
-    w->xn[5] = t->Phi[45]*f->x[0] + t->Phi[46]*f->x[1] + t->Phi[47]*f->x[2] + t->Phi[48]*f->x[3] +
-            t->Phi[49]*f->x[4] + t->Phi[50]*f->x[5] + t->Phi[51]*f->x[6] + t->Phi[52]*f->x[7] +
-            t->Phi[53]*f->x[8];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&t->Phi[0]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[2]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[4]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[6]), lane_pair_load(&f->x[6]));
+    w->xn[0] = lane_pair_sum(acc) + t->Phi[8]*f->x[8];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[9]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[11]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[13]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[15]), lane_pair_load(&f->x[6]));
+    w->xn[1] = lane_pair_sum(acc) + t->Phi[17]*f->x[8];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[18]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[20]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[22]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[24]), lane_pair_load(&f->x[6]));
+    w->xn[2] = lane_pair_sum(acc) + t->Phi[26]*f->x[8];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[27]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[29]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[31]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[33]), lane_pair_load(&f->x[6]));
+    w->xn[3] = lane_pair_sum(acc) + t->Phi[35]*f->x[8];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[36]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[38]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[40]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[42]), lane_pair_load(&f->x[6]));
+    w->xn[4] = lane_pair_sum(acc) + t->Phi[44]*f->x[8];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[45]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[47]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[49]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[51]), lane_pair_load(&f->x[6]));
+    w->xn[5] = lane_pair_sum(acc) + t->Phi[53]*f->x[8];
     w->xn[6] = t->Phi[54]*f->x[6] + t->Phi[55]*f->x[7] + t->Phi[56]*f->x[8];
     w->xn[7] = t->Phi[57]*f->x[6] + t->Phi[58]*f->x[7] + t->Phi[59]*f->x[8];
     w->xn[8] = t->Phi[60]*f->x[6] + t->Phi[61]*f->x[7] + t->Phi[62]*f->x[8];
@@ -1760,24 +1928,37 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_0(const
         *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[0] + w->M[1]*t->Phi[1] + w->M[2]*t->Phi[2] + w->M[3]*t->Phi[3] +
-            w->M[4]*t->Phi[4] + w->M[5]*t->Phi[5] + w->M[6]*t->Phi[6] + w->M[7]*t->Phi[7] +
-            w->M[8]*t->Phi[8] + t->Qd[0]; w->Pn[0] = v; check += v;
-    v = w->M[0]*t->Phi[9] + w->M[1]*t->Phi[10] + w->M[2]*t->Phi[11] + w->M[3]*t->Phi[12] +
-            w->M[4]*t->Phi[13] + w->M[5]*t->Phi[14] + w->M[6]*t->Phi[15] + w->M[7]*t->Phi[16] +
-            w->M[8]*t->Phi[17] + t->Qd[1]; w->Pn[1] = v; check += v;
-    v = w->M[0]*t->Phi[18] + w->M[1]*t->Phi[19] + w->M[2]*t->Phi[20] + w->M[3]*t->Phi[21] +
-            w->M[4]*t->Phi[22] + w->M[5]*t->Phi[23] + w->M[6]*t->Phi[24] + w->M[7]*t->Phi[25] +
-            w->M[8]*t->Phi[26] + t->Qd[2]; w->Pn[2] = v; check += v;
-    v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
-            w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[6]*t->Phi[33] + w->M[7]*t->Phi[34] +
-            w->M[8]*t->Phi[35] + t->Qd[3]; w->Pn[3] = v; check += v;
-    v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
-            w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
-            w->M[8]*t->Phi[44] + t->Qd[4]; w->Pn[4] = v; check += v;
-    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
-            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
-            w->M[8]*t->Phi[53] + t->Qd[5]; w->Pn[5] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[6]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[8] + t->Qd[0]; w->Pn[0] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[15]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[17] + t->Qd[1]; w->Pn[1] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[24]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[26] + t->Qd[2]; w->Pn[2] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[27]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[29]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[31]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[33]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[35] + t->Qd[3]; w->Pn[3] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[42]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[44] + t->Qd[4]; w->Pn[4] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[51]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[53] + t->Qd[5]; w->Pn[5] = v; check += v;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[6]; w->Pn[6] = v; check
             += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[7]; w->Pn[7] = v; check
@@ -1835,21 +2016,32 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_1(const
         *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[9] + w->M[1]*t->Phi[10] + w->M[2]*t->Phi[11] + w->M[3]*t->Phi[12] +
-            w->M[4]*t->Phi[13] + w->M[5]*t->Phi[14] + w->M[6]*t->Phi[15] + w->M[7]*t->Phi[16] +
-            w->M[8]*t->Phi[17] + t->Qd[11]; w->Pn[11] = v; check += v;
-    v = w->M[0]*t->Phi[18] + w->M[1]*t->Phi[19] + w->M[2]*t->Phi[20] + w->M[3]*t->Phi[21] +
-            w->M[4]*t->Phi[22] + w->M[5]*t->Phi[23] + w->M[6]*t->Phi[24] + w->M[7]*t->Phi[25] +
-            w->M[8]*t->Phi[26] + t->Qd[12]; w->Pn[12] = v; check += v;
-    v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
-            w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[6]*t->Phi[33] + w->M[7]*t->Phi[34] +
-            w->M[8]*t->Phi[35] + t->Qd[13]; w->Pn[13] = v; check += v;
-    v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
-            w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
-            w->M[8]*t->Phi[44] + t->Qd[14]; w->Pn[14] = v; check += v;
-    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
-            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
-            w->M[8]*t->Phi[53] + t->Qd[15]; w->Pn[15] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[15]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[17] + t->Qd[11]; w->Pn[11] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[24]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[26] + t->Qd[12]; w->Pn[12] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[27]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[29]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[31]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[33]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[35] + t->Qd[13]; w->Pn[13] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[42]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[44] + t->Qd[14]; w->Pn[14] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[51]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[53] + t->Qd[15]; w->Pn[15] = v; check += v;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[16]; w->Pn[16] = v;
             check += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[17]; w->Pn[17] = v;
@@ -1907,18 +2099,27 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_2(const
         *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[18] + w->M[1]*t->Phi[19] + w->M[2]*t->Phi[20] + w->M[3]*t->Phi[21] +
-            w->M[4]*t->Phi[22] + w->M[5]*t->Phi[23] + w->M[6]*t->Phi[24] + w->M[7]*t->Phi[25] +
-            w->M[8]*t->Phi[26] + t->Qd[21]; w->Pn[21] = v; check += v;
-    v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
-            w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[6]*t->Phi[33] + w->M[7]*t->Phi[34] +
-            w->M[8]*t->Phi[35] + t->Qd[22]; w->Pn[22] = v; check += v;
-    v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
-            w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
-            w->M[8]*t->Phi[44] + t->Qd[23]; w->Pn[23] = v; check += v;
-    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
-            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
-            w->M[8]*t->Phi[53] + t->Qd[24]; w->Pn[24] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[24]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[26] + t->Qd[21]; w->Pn[21] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[27]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[29]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[31]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[33]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[35] + t->Qd[22]; w->Pn[22] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[42]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[44] + t->Qd[23]; w->Pn[23] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[51]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[53] + t->Qd[24]; w->Pn[24] = v; check += v;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[25]; w->Pn[25] = v;
             check += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[26]; w->Pn[26] = v;
@@ -1976,15 +2177,22 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_3(const
         *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
-            w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[6]*t->Phi[33] + w->M[7]*t->Phi[34] +
-            w->M[8]*t->Phi[35] + t->Qd[30]; w->Pn[30] = v; check += v;
-    v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
-            w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
-            w->M[8]*t->Phi[44] + t->Qd[31]; w->Pn[31] = v; check += v;
-    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
-            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
-            w->M[8]*t->Phi[53] + t->Qd[32]; w->Pn[32] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[27]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[29]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[31]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[33]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[35] + t->Qd[30]; w->Pn[30] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[42]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[44] + t->Qd[31]; w->Pn[31] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[51]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[53] + t->Qd[32]; w->Pn[32] = v; check += v;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[33]; w->Pn[33] = v;
             check += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[34]; w->Pn[34] = v;
@@ -2042,12 +2250,17 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_4(const
         *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[36] + w->M[1]*t->Phi[37] + w->M[2]*t->Phi[38] + w->M[3]*t->Phi[39] +
-            w->M[4]*t->Phi[40] + w->M[5]*t->Phi[41] + w->M[6]*t->Phi[42] + w->M[7]*t->Phi[43] +
-            w->M[8]*t->Phi[44] + t->Qd[38]; w->Pn[38] = v; check += v;
-    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
-            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
-            w->M[8]*t->Phi[53] + t->Qd[39]; w->Pn[39] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[42]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[44] + t->Qd[38]; w->Pn[38] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[51]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[53] + t->Qd[39]; w->Pn[39] = v; check += v;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[40]; w->Pn[40] = v;
             check += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[41]; w->Pn[41] = v;
@@ -2105,9 +2318,12 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar propagate_row_5(const
         *restrict w)
 {
     gps_pseudorange11_twin_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
-            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[6]*t->Phi[51] + w->M[7]*t->Phi[52] +
-            w->M[8]*t->Phi[53] + t->Qd[45]; w->Pn[45] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[51]));
+    v = lane_pair_sum(acc) + w->M[8]*t->Phi[53] + t->Qd[45]; w->Pn[45] = v; check += v;
     v = w->M[6]*t->Phi[54] + w->M[7]*t->Phi[55] + w->M[8]*t->Phi[56] + t->Qd[46]; w->Pn[46] = v;
             check += v;
     v = w->M[6]*t->Phi[57] + w->M[7]*t->Phi[58] + w->M[8]*t->Phi[59] + t->Qd[47]; w->Pn[47] = v;

@@ -604,6 +604,91 @@ int ins_gnss21_nav_matrices_evaluate(const ins_gnss21_nav_params *restrict param
 #define INS_GNSS21_NAV_BLOCK static
 #endif
 
+/* Sums of products in two lanes (modelgen/codegen/kernels.py, lane_split): the products pair
+   up by position, the first of each pair is added in one lane and the second in the other,
+   then the two lanes are added. Under GCC or Clang with SSE2 (unless
+           INS_GNSS21_NAV_SCALAR_LANE_PAIRS
+   is defined) a lane pair is an SSE2 vector, otherwise two scalars: the same operations in the
+   same order, bit for bit the same result. */
+#if defined(__GNUC__) && defined(__SSE2__) && !defined(INS_GNSS21_NAV_SCALAR_LANE_PAIRS)
+typedef double lane_pair __attribute__((vector_size(2 * sizeof(double))));
+
+static inline lane_pair lane_pair_load(const double *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    memcpy(&lanes, a, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const double a, const double b)
+{
+    lane_pair lanes;
+    const double values[2] = { a, b };
+    memcpy(&lanes, values, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    return a * b;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    return acc + a * b;
+}
+
+static inline double lane_pair_sum(const lane_pair acc)
+{
+    double lanes[2];
+    memcpy(lanes, &acc, sizeof lanes);
+    return lanes[0] + lanes[1];
+}
+#else
+typedef struct {
+    ins_gnss21_nav_scalar lane[2];
+} lane_pair;
+
+static inline lane_pair lane_pair_load(const ins_gnss21_nav_scalar *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    lanes.lane[0] = a[0];
+    lanes.lane[1] = a[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const ins_gnss21_nav_scalar a, const ins_gnss21_nav_scalar b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a;
+    lanes.lane[1] = b;
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a.lane[0] * b.lane[0];
+    lanes.lane[1] = a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = acc.lane[0] + a.lane[0] * b.lane[0];
+    lanes.lane[1] = acc.lane[1] + a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline ins_gnss21_nav_scalar lane_pair_sum(const lane_pair acc)
+{
+    return acc.lane[0] + acc.lane[1];
+}
+#endif
+
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static ins_gnss21_nav_scalar power_of_two(const int e)
 {
@@ -2869,86 +2954,169 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar process_noise_row_0(ins_gnss21_nav_tr
         t, const ins_gnss21_nav_discretize_scratch *restrict w)
 {
     ins_gnss21_nav_scalar check;
-    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
-            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
-            + w->term[1][5]*w->term[0][5] + w->term[1][6]*w->term[0][6] +
-            w->term[1][7]*w->term[0][7] + w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9]
-            + w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11] +
-            w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17];
-    t->Qd[1] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
-            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
-            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23] +
-            w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
-            w->term[1][8]*w->term[0][26] + w->term[1][9]*w->term[0][27] +
-            w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29] +
-            w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
-            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35];
-    t->Qd[2] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
-            w->term[1][2]*w->term[0][38] + w->term[1][3]*w->term[0][39] +
-            w->term[1][4]*w->term[0][40] + w->term[1][5]*w->term[0][41] +
-            w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] +
-            w->term[1][8]*w->term[0][44] + w->term[1][9]*w->term[0][45] +
-            w->term[1][10]*w->term[0][46] + w->term[1][11]*w->term[0][47] +
-            w->term[1][12]*w->term[0][48] + w->term[1][13]*w->term[0][49] +
-            w->term[1][14]*w->term[0][50] + w->term[1][15]*w->term[0][51] +
-            w->term[1][16]*w->term[0][52] + w->term[1][17]*w->term[0][53];
-    t->Qd[3] = w->term[1][0]*w->term[0][54] + w->term[1][1]*w->term[0][55] +
-            w->term[1][2]*w->term[0][56] + w->term[1][3]*w->term[0][57] +
-            w->term[1][4]*w->term[0][58] + w->term[1][5]*w->term[0][59] +
-            w->term[1][6]*w->term[0][60] + w->term[1][7]*w->term[0][61] +
-            w->term[1][8]*w->term[0][62] + w->term[1][9]*w->term[0][63] +
-            w->term[1][10]*w->term[0][64] + w->term[1][11]*w->term[0][65] +
-            w->term[1][12]*w->term[0][66] + w->term[1][13]*w->term[0][67] +
-            w->term[1][14]*w->term[0][68] + w->term[1][15]*w->term[0][69] +
-            w->term[1][16]*w->term[0][70] + w->term[1][17]*w->term[0][71];
-    t->Qd[4] = w->term[1][0]*w->term[0][72] + w->term[1][1]*w->term[0][73] +
-            w->term[1][2]*w->term[0][74] + w->term[1][3]*w->term[0][75] +
-            w->term[1][4]*w->term[0][76] + w->term[1][5]*w->term[0][77] +
-            w->term[1][6]*w->term[0][78] + w->term[1][7]*w->term[0][79] +
-            w->term[1][8]*w->term[0][80] + w->term[1][9]*w->term[0][81] +
-            w->term[1][10]*w->term[0][82] + w->term[1][11]*w->term[0][83] +
-            w->term[1][12]*w->term[0][84] + w->term[1][13]*w->term[0][85] +
-            w->term[1][14]*w->term[0][86] + w->term[1][15]*w->term[0][87] +
-            w->term[1][16]*w->term[0][88] + w->term[1][17]*w->term[0][89];
-    t->Qd[5] = w->term[1][0]*w->term[0][90] + w->term[1][1]*w->term[0][91] +
-            w->term[1][2]*w->term[0][92] + w->term[1][3]*w->term[0][93] +
-            w->term[1][4]*w->term[0][94] + w->term[1][5]*w->term[0][95] +
-            w->term[1][6]*w->term[0][96] + w->term[1][7]*w->term[0][97] +
-            w->term[1][8]*w->term[0][98] + w->term[1][9]*w->term[0][99] +
-            w->term[1][10]*w->term[0][100] + w->term[1][11]*w->term[0][101] +
-            w->term[1][12]*w->term[0][102] + w->term[1][13]*w->term[0][103] +
-            w->term[1][14]*w->term[0][104] + w->term[1][15]*w->term[0][105] +
-            w->term[1][16]*w->term[0][106] + w->term[1][17]*w->term[0][107];
-    t->Qd[6] = w->term[1][0]*w->term[0][108] + w->term[1][1]*w->term[0][109] +
-            w->term[1][2]*w->term[0][110] + w->term[1][3]*w->term[0][111] +
-            w->term[1][4]*w->term[0][112] + w->term[1][5]*w->term[0][113] +
-            w->term[1][6]*w->term[0][114] + w->term[1][7]*w->term[0][115] +
-            w->term[1][8]*w->term[0][116] + w->term[1][9]*w->term[0][117] +
-            w->term[1][10]*w->term[0][118] + w->term[1][11]*w->term[0][119] +
-            w->term[1][12]*w->term[0][120] + w->term[1][13]*w->term[0][121] +
-            w->term[1][14]*w->term[0][122] + w->term[1][15]*w->term[0][123] +
-            w->term[1][16]*w->term[0][124] + w->term[1][17]*w->term[0][125];
-    t->Qd[7] = w->term[1][0]*w->term[0][126] + w->term[1][1]*w->term[0][127] +
-            w->term[1][2]*w->term[0][128] + w->term[1][3]*w->term[0][129] +
-            w->term[1][4]*w->term[0][130] + w->term[1][5]*w->term[0][131] +
-            w->term[1][6]*w->term[0][132] + w->term[1][7]*w->term[0][133] +
-            w->term[1][8]*w->term[0][134] + w->term[1][9]*w->term[0][135] +
-            w->term[1][10]*w->term[0][136] + w->term[1][11]*w->term[0][137] +
-            w->term[1][12]*w->term[0][138] + w->term[1][13]*w->term[0][139] +
-            w->term[1][14]*w->term[0][140] + w->term[1][15]*w->term[0][141] +
-            w->term[1][16]*w->term[0][142] + w->term[1][17]*w->term[0][143];
-    t->Qd[8] = w->term[1][0]*w->term[0][144] + w->term[1][1]*w->term[0][145] +
-            w->term[1][2]*w->term[0][146] + w->term[1][3]*w->term[0][147] +
-            w->term[1][4]*w->term[0][148] + w->term[1][5]*w->term[0][149] +
-            w->term[1][6]*w->term[0][150] + w->term[1][7]*w->term[0][151] +
-            w->term[1][8]*w->term[0][152] + w->term[1][9]*w->term[0][153] +
-            w->term[1][10]*w->term[0][154] + w->term[1][11]*w->term[0][155] +
-            w->term[1][12]*w->term[0][156] + w->term[1][13]*w->term[0][157] +
-            w->term[1][14]*w->term[0][158] + w->term[1][15]*w->term[0][159] +
-            w->term[1][16]*w->term[0][160] + w->term[1][17]*w->term[0][161];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][10]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][12]),
+            lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[0] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][28]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][12]),
+            lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[1] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][46]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][12]),
+            lane_pair_load(&w->term[0][48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][52]));
+    t->Qd[2] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][60]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][12]),
+            lane_pair_load(&w->term[0][66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][70]));
+    t->Qd[3] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][82]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][12]),
+            lane_pair_load(&w->term[0][84]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][86]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][88]));
+    t->Qd[4] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][12]),
+            lane_pair_load(&w->term[0][102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][106]));
+    t->Qd[5] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][116]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][118]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][12]),
+            lane_pair_load(&w->term[0][120]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][122]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][124]));
+    t->Qd[6] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][132]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][134]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][136]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][12]),
+            lane_pair_load(&w->term[0][138]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][140]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][142]));
+    t->Qd[7] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][144]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][146]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][148]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][6]),
+            lane_pair_load(&w->term[0][150]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][152]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][154]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][12]),
+            lane_pair_load(&w->term[0][156]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][158]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][160]));
+    t->Qd[8] = lane_pair_sum(acc);
     t->Qd[9] = w->term[1][6]*w->term[0][162];
     t->Qd[10] = w->term[1][7]*w->term[0][163];
     t->Qd[11] = w->term[1][8]*w->term[0][164];
@@ -2971,78 +3139,151 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar process_noise_row_1(ins_gnss21_nav_tr
         t, const ins_gnss21_nav_discretize_scratch *restrict w)
 {
     ins_gnss21_nav_scalar check;
-    t->Qd[21] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23] +
-            w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29] +
-            w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
-            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35];
-    t->Qd[22] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41] +
-            w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
-            w->term[1][26]*w->term[0][44] + w->term[1][27]*w->term[0][45] +
-            w->term[1][28]*w->term[0][46] + w->term[1][29]*w->term[0][47] +
-            w->term[1][30]*w->term[0][48] + w->term[1][31]*w->term[0][49] +
-            w->term[1][32]*w->term[0][50] + w->term[1][33]*w->term[0][51] +
-            w->term[1][34]*w->term[0][52] + w->term[1][35]*w->term[0][53];
-    t->Qd[23] = w->term[1][18]*w->term[0][54] + w->term[1][19]*w->term[0][55] +
-            w->term[1][20]*w->term[0][56] + w->term[1][21]*w->term[0][57] +
-            w->term[1][22]*w->term[0][58] + w->term[1][23]*w->term[0][59] +
-            w->term[1][24]*w->term[0][60] + w->term[1][25]*w->term[0][61] +
-            w->term[1][26]*w->term[0][62] + w->term[1][27]*w->term[0][63] +
-            w->term[1][28]*w->term[0][64] + w->term[1][29]*w->term[0][65] +
-            w->term[1][30]*w->term[0][66] + w->term[1][31]*w->term[0][67] +
-            w->term[1][32]*w->term[0][68] + w->term[1][33]*w->term[0][69] +
-            w->term[1][34]*w->term[0][70] + w->term[1][35]*w->term[0][71];
-    t->Qd[24] = w->term[1][18]*w->term[0][72] + w->term[1][19]*w->term[0][73] +
-            w->term[1][20]*w->term[0][74] + w->term[1][21]*w->term[0][75] +
-            w->term[1][22]*w->term[0][76] + w->term[1][23]*w->term[0][77] +
-            w->term[1][24]*w->term[0][78] + w->term[1][25]*w->term[0][79] +
-            w->term[1][26]*w->term[0][80] + w->term[1][27]*w->term[0][81] +
-            w->term[1][28]*w->term[0][82] + w->term[1][29]*w->term[0][83] +
-            w->term[1][30]*w->term[0][84] + w->term[1][31]*w->term[0][85] +
-            w->term[1][32]*w->term[0][86] + w->term[1][33]*w->term[0][87] +
-            w->term[1][34]*w->term[0][88] + w->term[1][35]*w->term[0][89];
-    t->Qd[25] = w->term[1][18]*w->term[0][90] + w->term[1][19]*w->term[0][91] +
-            w->term[1][20]*w->term[0][92] + w->term[1][21]*w->term[0][93] +
-            w->term[1][22]*w->term[0][94] + w->term[1][23]*w->term[0][95] +
-            w->term[1][24]*w->term[0][96] + w->term[1][25]*w->term[0][97] +
-            w->term[1][26]*w->term[0][98] + w->term[1][27]*w->term[0][99] +
-            w->term[1][28]*w->term[0][100] + w->term[1][29]*w->term[0][101] +
-            w->term[1][30]*w->term[0][102] + w->term[1][31]*w->term[0][103] +
-            w->term[1][32]*w->term[0][104] + w->term[1][33]*w->term[0][105] +
-            w->term[1][34]*w->term[0][106] + w->term[1][35]*w->term[0][107];
-    t->Qd[26] = w->term[1][18]*w->term[0][108] + w->term[1][19]*w->term[0][109] +
-            w->term[1][20]*w->term[0][110] + w->term[1][21]*w->term[0][111] +
-            w->term[1][22]*w->term[0][112] + w->term[1][23]*w->term[0][113] +
-            w->term[1][24]*w->term[0][114] + w->term[1][25]*w->term[0][115] +
-            w->term[1][26]*w->term[0][116] + w->term[1][27]*w->term[0][117] +
-            w->term[1][28]*w->term[0][118] + w->term[1][29]*w->term[0][119] +
-            w->term[1][30]*w->term[0][120] + w->term[1][31]*w->term[0][121] +
-            w->term[1][32]*w->term[0][122] + w->term[1][33]*w->term[0][123] +
-            w->term[1][34]*w->term[0][124] + w->term[1][35]*w->term[0][125];
-    t->Qd[27] = w->term[1][18]*w->term[0][126] + w->term[1][19]*w->term[0][127] +
-            w->term[1][20]*w->term[0][128] + w->term[1][21]*w->term[0][129] +
-            w->term[1][22]*w->term[0][130] + w->term[1][23]*w->term[0][131] +
-            w->term[1][24]*w->term[0][132] + w->term[1][25]*w->term[0][133] +
-            w->term[1][26]*w->term[0][134] + w->term[1][27]*w->term[0][135] +
-            w->term[1][28]*w->term[0][136] + w->term[1][29]*w->term[0][137] +
-            w->term[1][30]*w->term[0][138] + w->term[1][31]*w->term[0][139] +
-            w->term[1][32]*w->term[0][140] + w->term[1][33]*w->term[0][141] +
-            w->term[1][34]*w->term[0][142] + w->term[1][35]*w->term[0][143];
-    t->Qd[28] = w->term[1][18]*w->term[0][144] + w->term[1][19]*w->term[0][145] +
-            w->term[1][20]*w->term[0][146] + w->term[1][21]*w->term[0][147] +
-            w->term[1][22]*w->term[0][148] + w->term[1][23]*w->term[0][149] +
-            w->term[1][24]*w->term[0][150] + w->term[1][25]*w->term[0][151] +
-            w->term[1][26]*w->term[0][152] + w->term[1][27]*w->term[0][153] +
-            w->term[1][28]*w->term[0][154] + w->term[1][29]*w->term[0][155] +
-            w->term[1][30]*w->term[0][156] + w->term[1][31]*w->term[0][157] +
-            w->term[1][32]*w->term[0][158] + w->term[1][33]*w->term[0][159] +
-            w->term[1][34]*w->term[0][160] + w->term[1][35]*w->term[0][161];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][28]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][30]),
+            lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[21] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][46]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][30]),
+            lane_pair_load(&w->term[0][48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][52]));
+    t->Qd[22] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][60]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][30]),
+            lane_pair_load(&w->term[0][66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][70]));
+    t->Qd[23] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][82]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][30]),
+            lane_pair_load(&w->term[0][84]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][86]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][88]));
+    t->Qd[24] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][30]),
+            lane_pair_load(&w->term[0][102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][106]));
+    t->Qd[25] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][116]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][118]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][30]),
+            lane_pair_load(&w->term[0][120]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][122]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][124]));
+    t->Qd[26] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][132]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][134]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][136]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][30]),
+            lane_pair_load(&w->term[0][138]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][140]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][142]));
+    t->Qd[27] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][144]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][146]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][148]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][24]),
+            lane_pair_load(&w->term[0][150]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][152]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][154]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][30]),
+            lane_pair_load(&w->term[0][156]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][158]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][160]));
+    t->Qd[28] = lane_pair_sum(acc);
     t->Qd[29] = w->term[1][24]*w->term[0][162];
     t->Qd[30] = w->term[1][25]*w->term[0][163];
     t->Qd[31] = w->term[1][26]*w->term[0][164];
@@ -3065,69 +3306,133 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar process_noise_row_2(ins_gnss21_nav_tr
         t, const ins_gnss21_nav_discretize_scratch *restrict w)
 {
     ins_gnss21_nav_scalar check;
-    t->Qd[41] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41] +
-            w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
-            w->term[1][44]*w->term[0][44] + w->term[1][45]*w->term[0][45] +
-            w->term[1][46]*w->term[0][46] + w->term[1][47]*w->term[0][47] +
-            w->term[1][48]*w->term[0][48] + w->term[1][49]*w->term[0][49] +
-            w->term[1][50]*w->term[0][50] + w->term[1][51]*w->term[0][51] +
-            w->term[1][52]*w->term[0][52] + w->term[1][53]*w->term[0][53];
-    t->Qd[42] = w->term[1][36]*w->term[0][54] + w->term[1][37]*w->term[0][55] +
-            w->term[1][38]*w->term[0][56] + w->term[1][39]*w->term[0][57] +
-            w->term[1][40]*w->term[0][58] + w->term[1][41]*w->term[0][59] +
-            w->term[1][42]*w->term[0][60] + w->term[1][43]*w->term[0][61] +
-            w->term[1][44]*w->term[0][62] + w->term[1][45]*w->term[0][63] +
-            w->term[1][46]*w->term[0][64] + w->term[1][47]*w->term[0][65] +
-            w->term[1][48]*w->term[0][66] + w->term[1][49]*w->term[0][67] +
-            w->term[1][50]*w->term[0][68] + w->term[1][51]*w->term[0][69] +
-            w->term[1][52]*w->term[0][70] + w->term[1][53]*w->term[0][71];
-    t->Qd[43] = w->term[1][36]*w->term[0][72] + w->term[1][37]*w->term[0][73] +
-            w->term[1][38]*w->term[0][74] + w->term[1][39]*w->term[0][75] +
-            w->term[1][40]*w->term[0][76] + w->term[1][41]*w->term[0][77] +
-            w->term[1][42]*w->term[0][78] + w->term[1][43]*w->term[0][79] +
-            w->term[1][44]*w->term[0][80] + w->term[1][45]*w->term[0][81] +
-            w->term[1][46]*w->term[0][82] + w->term[1][47]*w->term[0][83] +
-            w->term[1][48]*w->term[0][84] + w->term[1][49]*w->term[0][85] +
-            w->term[1][50]*w->term[0][86] + w->term[1][51]*w->term[0][87] +
-            w->term[1][52]*w->term[0][88] + w->term[1][53]*w->term[0][89];
-    t->Qd[44] = w->term[1][36]*w->term[0][90] + w->term[1][37]*w->term[0][91] +
-            w->term[1][38]*w->term[0][92] + w->term[1][39]*w->term[0][93] +
-            w->term[1][40]*w->term[0][94] + w->term[1][41]*w->term[0][95] +
-            w->term[1][42]*w->term[0][96] + w->term[1][43]*w->term[0][97] +
-            w->term[1][44]*w->term[0][98] + w->term[1][45]*w->term[0][99] +
-            w->term[1][46]*w->term[0][100] + w->term[1][47]*w->term[0][101] +
-            w->term[1][48]*w->term[0][102] + w->term[1][49]*w->term[0][103] +
-            w->term[1][50]*w->term[0][104] + w->term[1][51]*w->term[0][105] +
-            w->term[1][52]*w->term[0][106] + w->term[1][53]*w->term[0][107];
-    t->Qd[45] = w->term[1][36]*w->term[0][108] + w->term[1][37]*w->term[0][109] +
-            w->term[1][38]*w->term[0][110] + w->term[1][39]*w->term[0][111] +
-            w->term[1][40]*w->term[0][112] + w->term[1][41]*w->term[0][113] +
-            w->term[1][42]*w->term[0][114] + w->term[1][43]*w->term[0][115] +
-            w->term[1][44]*w->term[0][116] + w->term[1][45]*w->term[0][117] +
-            w->term[1][46]*w->term[0][118] + w->term[1][47]*w->term[0][119] +
-            w->term[1][48]*w->term[0][120] + w->term[1][49]*w->term[0][121] +
-            w->term[1][50]*w->term[0][122] + w->term[1][51]*w->term[0][123] +
-            w->term[1][52]*w->term[0][124] + w->term[1][53]*w->term[0][125];
-    t->Qd[46] = w->term[1][36]*w->term[0][126] + w->term[1][37]*w->term[0][127] +
-            w->term[1][38]*w->term[0][128] + w->term[1][39]*w->term[0][129] +
-            w->term[1][40]*w->term[0][130] + w->term[1][41]*w->term[0][131] +
-            w->term[1][42]*w->term[0][132] + w->term[1][43]*w->term[0][133] +
-            w->term[1][44]*w->term[0][134] + w->term[1][45]*w->term[0][135] +
-            w->term[1][46]*w->term[0][136] + w->term[1][47]*w->term[0][137] +
-            w->term[1][48]*w->term[0][138] + w->term[1][49]*w->term[0][139] +
-            w->term[1][50]*w->term[0][140] + w->term[1][51]*w->term[0][141] +
-            w->term[1][52]*w->term[0][142] + w->term[1][53]*w->term[0][143];
-    t->Qd[47] = w->term[1][36]*w->term[0][144] + w->term[1][37]*w->term[0][145] +
-            w->term[1][38]*w->term[0][146] + w->term[1][39]*w->term[0][147] +
-            w->term[1][40]*w->term[0][148] + w->term[1][41]*w->term[0][149] +
-            w->term[1][42]*w->term[0][150] + w->term[1][43]*w->term[0][151] +
-            w->term[1][44]*w->term[0][152] + w->term[1][45]*w->term[0][153] +
-            w->term[1][46]*w->term[0][154] + w->term[1][47]*w->term[0][155] +
-            w->term[1][48]*w->term[0][156] + w->term[1][49]*w->term[0][157] +
-            w->term[1][50]*w->term[0][158] + w->term[1][51]*w->term[0][159] +
-            w->term[1][52]*w->term[0][160] + w->term[1][53]*w->term[0][161];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][42]),
+            lane_pair_load(&w->term[0][42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][44]),
+            lane_pair_load(&w->term[0][44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][46]),
+            lane_pair_load(&w->term[0][46]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][48]),
+            lane_pair_load(&w->term[0][48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][50]),
+            lane_pair_load(&w->term[0][50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][52]),
+            lane_pair_load(&w->term[0][52]));
+    t->Qd[41] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][42]),
+            lane_pair_load(&w->term[0][60]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][44]),
+            lane_pair_load(&w->term[0][62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][46]),
+            lane_pair_load(&w->term[0][64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][48]),
+            lane_pair_load(&w->term[0][66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][50]),
+            lane_pair_load(&w->term[0][68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][52]),
+            lane_pair_load(&w->term[0][70]));
+    t->Qd[42] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][42]),
+            lane_pair_load(&w->term[0][78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][44]),
+            lane_pair_load(&w->term[0][80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][46]),
+            lane_pair_load(&w->term[0][82]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][48]),
+            lane_pair_load(&w->term[0][84]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][50]),
+            lane_pair_load(&w->term[0][86]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][52]),
+            lane_pair_load(&w->term[0][88]));
+    t->Qd[43] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][42]),
+            lane_pair_load(&w->term[0][96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][44]),
+            lane_pair_load(&w->term[0][98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][46]),
+            lane_pair_load(&w->term[0][100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][48]),
+            lane_pair_load(&w->term[0][102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][50]),
+            lane_pair_load(&w->term[0][104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][52]),
+            lane_pair_load(&w->term[0][106]));
+    t->Qd[44] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][42]),
+            lane_pair_load(&w->term[0][114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][44]),
+            lane_pair_load(&w->term[0][116]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][46]),
+            lane_pair_load(&w->term[0][118]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][48]),
+            lane_pair_load(&w->term[0][120]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][50]),
+            lane_pair_load(&w->term[0][122]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][52]),
+            lane_pair_load(&w->term[0][124]));
+    t->Qd[45] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][42]),
+            lane_pair_load(&w->term[0][132]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][44]),
+            lane_pair_load(&w->term[0][134]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][46]),
+            lane_pair_load(&w->term[0][136]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][48]),
+            lane_pair_load(&w->term[0][138]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][50]),
+            lane_pair_load(&w->term[0][140]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][52]),
+            lane_pair_load(&w->term[0][142]));
+    t->Qd[46] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][144]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][146]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][148]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][42]),
+            lane_pair_load(&w->term[0][150]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][44]),
+            lane_pair_load(&w->term[0][152]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][46]),
+            lane_pair_load(&w->term[0][154]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][48]),
+            lane_pair_load(&w->term[0][156]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][50]),
+            lane_pair_load(&w->term[0][158]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][52]),
+            lane_pair_load(&w->term[0][160]));
+    t->Qd[47] = lane_pair_sum(acc);
     t->Qd[48] = w->term[1][42]*w->term[0][162];
     t->Qd[49] = w->term[1][43]*w->term[0][163];
     t->Qd[50] = w->term[1][44]*w->term[0][164];
@@ -3150,60 +3455,115 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar process_noise_row_3(ins_gnss21_nav_tr
         t, const ins_gnss21_nav_discretize_scratch *restrict w)
 {
     ins_gnss21_nav_scalar check;
-    t->Qd[60] = w->term[1][54]*w->term[0][54] + w->term[1][55]*w->term[0][55] +
-            w->term[1][56]*w->term[0][56] + w->term[1][57]*w->term[0][57] +
-            w->term[1][58]*w->term[0][58] + w->term[1][59]*w->term[0][59] +
-            w->term[1][60]*w->term[0][60] + w->term[1][61]*w->term[0][61] +
-            w->term[1][62]*w->term[0][62] + w->term[1][63]*w->term[0][63] +
-            w->term[1][64]*w->term[0][64] + w->term[1][65]*w->term[0][65] +
-            w->term[1][66]*w->term[0][66] + w->term[1][67]*w->term[0][67] +
-            w->term[1][68]*w->term[0][68] + w->term[1][69]*w->term[0][69] +
-            w->term[1][70]*w->term[0][70] + w->term[1][71]*w->term[0][71];
-    t->Qd[61] = w->term[1][54]*w->term[0][72] + w->term[1][55]*w->term[0][73] +
-            w->term[1][56]*w->term[0][74] + w->term[1][57]*w->term[0][75] +
-            w->term[1][58]*w->term[0][76] + w->term[1][59]*w->term[0][77] +
-            w->term[1][60]*w->term[0][78] + w->term[1][61]*w->term[0][79] +
-            w->term[1][62]*w->term[0][80] + w->term[1][63]*w->term[0][81] +
-            w->term[1][64]*w->term[0][82] + w->term[1][65]*w->term[0][83] +
-            w->term[1][66]*w->term[0][84] + w->term[1][67]*w->term[0][85] +
-            w->term[1][68]*w->term[0][86] + w->term[1][69]*w->term[0][87] +
-            w->term[1][70]*w->term[0][88] + w->term[1][71]*w->term[0][89];
-    t->Qd[62] = w->term[1][54]*w->term[0][90] + w->term[1][55]*w->term[0][91] +
-            w->term[1][56]*w->term[0][92] + w->term[1][57]*w->term[0][93] +
-            w->term[1][58]*w->term[0][94] + w->term[1][59]*w->term[0][95] +
-            w->term[1][60]*w->term[0][96] + w->term[1][61]*w->term[0][97] +
-            w->term[1][62]*w->term[0][98] + w->term[1][63]*w->term[0][99] +
-            w->term[1][64]*w->term[0][100] + w->term[1][65]*w->term[0][101] +
-            w->term[1][66]*w->term[0][102] + w->term[1][67]*w->term[0][103] +
-            w->term[1][68]*w->term[0][104] + w->term[1][69]*w->term[0][105] +
-            w->term[1][70]*w->term[0][106] + w->term[1][71]*w->term[0][107];
-    t->Qd[63] = w->term[1][54]*w->term[0][108] + w->term[1][55]*w->term[0][109] +
-            w->term[1][56]*w->term[0][110] + w->term[1][57]*w->term[0][111] +
-            w->term[1][58]*w->term[0][112] + w->term[1][59]*w->term[0][113] +
-            w->term[1][60]*w->term[0][114] + w->term[1][61]*w->term[0][115] +
-            w->term[1][62]*w->term[0][116] + w->term[1][63]*w->term[0][117] +
-            w->term[1][64]*w->term[0][118] + w->term[1][65]*w->term[0][119] +
-            w->term[1][66]*w->term[0][120] + w->term[1][67]*w->term[0][121] +
-            w->term[1][68]*w->term[0][122] + w->term[1][69]*w->term[0][123] +
-            w->term[1][70]*w->term[0][124] + w->term[1][71]*w->term[0][125];
-    t->Qd[64] = w->term[1][54]*w->term[0][126] + w->term[1][55]*w->term[0][127] +
-            w->term[1][56]*w->term[0][128] + w->term[1][57]*w->term[0][129] +
-            w->term[1][58]*w->term[0][130] + w->term[1][59]*w->term[0][131] +
-            w->term[1][60]*w->term[0][132] + w->term[1][61]*w->term[0][133] +
-            w->term[1][62]*w->term[0][134] + w->term[1][63]*w->term[0][135] +
-            w->term[1][64]*w->term[0][136] + w->term[1][65]*w->term[0][137] +
-            w->term[1][66]*w->term[0][138] + w->term[1][67]*w->term[0][139] +
-            w->term[1][68]*w->term[0][140] + w->term[1][69]*w->term[0][141] +
-            w->term[1][70]*w->term[0][142] + w->term[1][71]*w->term[0][143];
-    t->Qd[65] = w->term[1][54]*w->term[0][144] + w->term[1][55]*w->term[0][145] +
-            w->term[1][56]*w->term[0][146] + w->term[1][57]*w->term[0][147] +
-            w->term[1][58]*w->term[0][148] + w->term[1][59]*w->term[0][149] +
-            w->term[1][60]*w->term[0][150] + w->term[1][61]*w->term[0][151] +
-            w->term[1][62]*w->term[0][152] + w->term[1][63]*w->term[0][153] +
-            w->term[1][64]*w->term[0][154] + w->term[1][65]*w->term[0][155] +
-            w->term[1][66]*w->term[0][156] + w->term[1][67]*w->term[0][157] +
-            w->term[1][68]*w->term[0][158] + w->term[1][69]*w->term[0][159] +
-            w->term[1][70]*w->term[0][160] + w->term[1][71]*w->term[0][161];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][54]), lane_pair_load(&w->term[0][54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][56]),
+            lane_pair_load(&w->term[0][56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][58]),
+            lane_pair_load(&w->term[0][58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][60]),
+            lane_pair_load(&w->term[0][60]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][62]),
+            lane_pair_load(&w->term[0][62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][64]),
+            lane_pair_load(&w->term[0][64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][66]),
+            lane_pair_load(&w->term[0][66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][68]),
+            lane_pair_load(&w->term[0][68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][70]),
+            lane_pair_load(&w->term[0][70]));
+    t->Qd[60] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][54]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][56]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][58]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][60]),
+            lane_pair_load(&w->term[0][78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][62]),
+            lane_pair_load(&w->term[0][80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][64]),
+            lane_pair_load(&w->term[0][82]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][66]),
+            lane_pair_load(&w->term[0][84]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][68]),
+            lane_pair_load(&w->term[0][86]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][70]),
+            lane_pair_load(&w->term[0][88]));
+    t->Qd[61] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][54]), lane_pair_load(&w->term[0][90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][56]),
+            lane_pair_load(&w->term[0][92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][58]),
+            lane_pair_load(&w->term[0][94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][60]),
+            lane_pair_load(&w->term[0][96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][62]),
+            lane_pair_load(&w->term[0][98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][64]),
+            lane_pair_load(&w->term[0][100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][66]),
+            lane_pair_load(&w->term[0][102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][68]),
+            lane_pair_load(&w->term[0][104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][70]),
+            lane_pair_load(&w->term[0][106]));
+    t->Qd[62] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][54]), lane_pair_load(&w->term[0][108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][56]),
+            lane_pair_load(&w->term[0][110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][58]),
+            lane_pair_load(&w->term[0][112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][60]),
+            lane_pair_load(&w->term[0][114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][62]),
+            lane_pair_load(&w->term[0][116]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][64]),
+            lane_pair_load(&w->term[0][118]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][66]),
+            lane_pair_load(&w->term[0][120]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][68]),
+            lane_pair_load(&w->term[0][122]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][70]),
+            lane_pair_load(&w->term[0][124]));
+    t->Qd[63] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][54]), lane_pair_load(&w->term[0][126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][56]),
+            lane_pair_load(&w->term[0][128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][58]),
+            lane_pair_load(&w->term[0][130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][60]),
+            lane_pair_load(&w->term[0][132]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][62]),
+            lane_pair_load(&w->term[0][134]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][64]),
+            lane_pair_load(&w->term[0][136]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][66]),
+            lane_pair_load(&w->term[0][138]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][68]),
+            lane_pair_load(&w->term[0][140]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][70]),
+            lane_pair_load(&w->term[0][142]));
+    t->Qd[64] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][54]), lane_pair_load(&w->term[0][144]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][56]),
+            lane_pair_load(&w->term[0][146]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][58]),
+            lane_pair_load(&w->term[0][148]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][60]),
+            lane_pair_load(&w->term[0][150]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][62]),
+            lane_pair_load(&w->term[0][152]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][64]),
+            lane_pair_load(&w->term[0][154]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][66]),
+            lane_pair_load(&w->term[0][156]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][68]),
+            lane_pair_load(&w->term[0][158]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][70]),
+            lane_pair_load(&w->term[0][160]));
+    t->Qd[65] = lane_pair_sum(acc);
     t->Qd[66] = w->term[1][60]*w->term[0][162];
     t->Qd[67] = w->term[1][61]*w->term[0][163];
     t->Qd[68] = w->term[1][62]*w->term[0][164];
@@ -3226,51 +3586,97 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar process_noise_row_4(ins_gnss21_nav_tr
         t, const ins_gnss21_nav_discretize_scratch *restrict w)
 {
     ins_gnss21_nav_scalar check;
-    t->Qd[78] = w->term[1][72]*w->term[0][72] + w->term[1][73]*w->term[0][73] +
-            w->term[1][74]*w->term[0][74] + w->term[1][75]*w->term[0][75] +
-            w->term[1][76]*w->term[0][76] + w->term[1][77]*w->term[0][77] +
-            w->term[1][78]*w->term[0][78] + w->term[1][79]*w->term[0][79] +
-            w->term[1][80]*w->term[0][80] + w->term[1][81]*w->term[0][81] +
-            w->term[1][82]*w->term[0][82] + w->term[1][83]*w->term[0][83] +
-            w->term[1][84]*w->term[0][84] + w->term[1][85]*w->term[0][85] +
-            w->term[1][86]*w->term[0][86] + w->term[1][87]*w->term[0][87] +
-            w->term[1][88]*w->term[0][88] + w->term[1][89]*w->term[0][89];
-    t->Qd[79] = w->term[1][72]*w->term[0][90] + w->term[1][73]*w->term[0][91] +
-            w->term[1][74]*w->term[0][92] + w->term[1][75]*w->term[0][93] +
-            w->term[1][76]*w->term[0][94] + w->term[1][77]*w->term[0][95] +
-            w->term[1][78]*w->term[0][96] + w->term[1][79]*w->term[0][97] +
-            w->term[1][80]*w->term[0][98] + w->term[1][81]*w->term[0][99] +
-            w->term[1][82]*w->term[0][100] + w->term[1][83]*w->term[0][101] +
-            w->term[1][84]*w->term[0][102] + w->term[1][85]*w->term[0][103] +
-            w->term[1][86]*w->term[0][104] + w->term[1][87]*w->term[0][105] +
-            w->term[1][88]*w->term[0][106] + w->term[1][89]*w->term[0][107];
-    t->Qd[80] = w->term[1][72]*w->term[0][108] + w->term[1][73]*w->term[0][109] +
-            w->term[1][74]*w->term[0][110] + w->term[1][75]*w->term[0][111] +
-            w->term[1][76]*w->term[0][112] + w->term[1][77]*w->term[0][113] +
-            w->term[1][78]*w->term[0][114] + w->term[1][79]*w->term[0][115] +
-            w->term[1][80]*w->term[0][116] + w->term[1][81]*w->term[0][117] +
-            w->term[1][82]*w->term[0][118] + w->term[1][83]*w->term[0][119] +
-            w->term[1][84]*w->term[0][120] + w->term[1][85]*w->term[0][121] +
-            w->term[1][86]*w->term[0][122] + w->term[1][87]*w->term[0][123] +
-            w->term[1][88]*w->term[0][124] + w->term[1][89]*w->term[0][125];
-    t->Qd[81] = w->term[1][72]*w->term[0][126] + w->term[1][73]*w->term[0][127] +
-            w->term[1][74]*w->term[0][128] + w->term[1][75]*w->term[0][129] +
-            w->term[1][76]*w->term[0][130] + w->term[1][77]*w->term[0][131] +
-            w->term[1][78]*w->term[0][132] + w->term[1][79]*w->term[0][133] +
-            w->term[1][80]*w->term[0][134] + w->term[1][81]*w->term[0][135] +
-            w->term[1][82]*w->term[0][136] + w->term[1][83]*w->term[0][137] +
-            w->term[1][84]*w->term[0][138] + w->term[1][85]*w->term[0][139] +
-            w->term[1][86]*w->term[0][140] + w->term[1][87]*w->term[0][141] +
-            w->term[1][88]*w->term[0][142] + w->term[1][89]*w->term[0][143];
-    t->Qd[82] = w->term[1][72]*w->term[0][144] + w->term[1][73]*w->term[0][145] +
-            w->term[1][74]*w->term[0][146] + w->term[1][75]*w->term[0][147] +
-            w->term[1][76]*w->term[0][148] + w->term[1][77]*w->term[0][149] +
-            w->term[1][78]*w->term[0][150] + w->term[1][79]*w->term[0][151] +
-            w->term[1][80]*w->term[0][152] + w->term[1][81]*w->term[0][153] +
-            w->term[1][82]*w->term[0][154] + w->term[1][83]*w->term[0][155] +
-            w->term[1][84]*w->term[0][156] + w->term[1][85]*w->term[0][157] +
-            w->term[1][86]*w->term[0][158] + w->term[1][87]*w->term[0][159] +
-            w->term[1][88]*w->term[0][160] + w->term[1][89]*w->term[0][161];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][72]), lane_pair_load(&w->term[0][72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][74]),
+            lane_pair_load(&w->term[0][74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][76]),
+            lane_pair_load(&w->term[0][76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][78]),
+            lane_pair_load(&w->term[0][78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][80]),
+            lane_pair_load(&w->term[0][80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][82]),
+            lane_pair_load(&w->term[0][82]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][84]),
+            lane_pair_load(&w->term[0][84]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][86]),
+            lane_pair_load(&w->term[0][86]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][88]),
+            lane_pair_load(&w->term[0][88]));
+    t->Qd[78] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][72]), lane_pair_load(&w->term[0][90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][74]),
+            lane_pair_load(&w->term[0][92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][76]),
+            lane_pair_load(&w->term[0][94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][78]),
+            lane_pair_load(&w->term[0][96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][80]),
+            lane_pair_load(&w->term[0][98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][82]),
+            lane_pair_load(&w->term[0][100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][84]),
+            lane_pair_load(&w->term[0][102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][86]),
+            lane_pair_load(&w->term[0][104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][88]),
+            lane_pair_load(&w->term[0][106]));
+    t->Qd[79] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][72]), lane_pair_load(&w->term[0][108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][74]),
+            lane_pair_load(&w->term[0][110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][76]),
+            lane_pair_load(&w->term[0][112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][78]),
+            lane_pair_load(&w->term[0][114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][80]),
+            lane_pair_load(&w->term[0][116]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][82]),
+            lane_pair_load(&w->term[0][118]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][84]),
+            lane_pair_load(&w->term[0][120]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][86]),
+            lane_pair_load(&w->term[0][122]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][88]),
+            lane_pair_load(&w->term[0][124]));
+    t->Qd[80] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][72]), lane_pair_load(&w->term[0][126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][74]),
+            lane_pair_load(&w->term[0][128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][76]),
+            lane_pair_load(&w->term[0][130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][78]),
+            lane_pair_load(&w->term[0][132]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][80]),
+            lane_pair_load(&w->term[0][134]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][82]),
+            lane_pair_load(&w->term[0][136]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][84]),
+            lane_pair_load(&w->term[0][138]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][86]),
+            lane_pair_load(&w->term[0][140]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][88]),
+            lane_pair_load(&w->term[0][142]));
+    t->Qd[81] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][72]), lane_pair_load(&w->term[0][144]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][74]),
+            lane_pair_load(&w->term[0][146]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][76]),
+            lane_pair_load(&w->term[0][148]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][78]),
+            lane_pair_load(&w->term[0][150]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][80]),
+            lane_pair_load(&w->term[0][152]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][82]),
+            lane_pair_load(&w->term[0][154]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][84]),
+            lane_pair_load(&w->term[0][156]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][86]),
+            lane_pair_load(&w->term[0][158]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][88]),
+            lane_pair_load(&w->term[0][160]));
+    t->Qd[82] = lane_pair_sum(acc);
     t->Qd[83] = w->term[1][78]*w->term[0][162];
     t->Qd[84] = w->term[1][79]*w->term[0][163];
     t->Qd[85] = w->term[1][80]*w->term[0][164];
@@ -3293,42 +3699,79 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar process_noise_row_5(ins_gnss21_nav_tr
         t, const ins_gnss21_nav_discretize_scratch *restrict w)
 {
     ins_gnss21_nav_scalar check;
-    t->Qd[95] = w->term[1][90]*w->term[0][90] + w->term[1][91]*w->term[0][91] +
-            w->term[1][92]*w->term[0][92] + w->term[1][93]*w->term[0][93] +
-            w->term[1][94]*w->term[0][94] + w->term[1][95]*w->term[0][95] +
-            w->term[1][96]*w->term[0][96] + w->term[1][97]*w->term[0][97] +
-            w->term[1][98]*w->term[0][98] + w->term[1][99]*w->term[0][99] +
-            w->term[1][100]*w->term[0][100] + w->term[1][101]*w->term[0][101] +
-            w->term[1][102]*w->term[0][102] + w->term[1][103]*w->term[0][103] +
-            w->term[1][104]*w->term[0][104] + w->term[1][105]*w->term[0][105] +
-            w->term[1][106]*w->term[0][106] + w->term[1][107]*w->term[0][107];
-    t->Qd[96] = w->term[1][90]*w->term[0][108] + w->term[1][91]*w->term[0][109] +
-            w->term[1][92]*w->term[0][110] + w->term[1][93]*w->term[0][111] +
-            w->term[1][94]*w->term[0][112] + w->term[1][95]*w->term[0][113] +
-            w->term[1][96]*w->term[0][114] + w->term[1][97]*w->term[0][115] +
-            w->term[1][98]*w->term[0][116] + w->term[1][99]*w->term[0][117] +
-            w->term[1][100]*w->term[0][118] + w->term[1][101]*w->term[0][119] +
-            w->term[1][102]*w->term[0][120] + w->term[1][103]*w->term[0][121] +
-            w->term[1][104]*w->term[0][122] + w->term[1][105]*w->term[0][123] +
-            w->term[1][106]*w->term[0][124] + w->term[1][107]*w->term[0][125];
-    t->Qd[97] = w->term[1][90]*w->term[0][126] + w->term[1][91]*w->term[0][127] +
-            w->term[1][92]*w->term[0][128] + w->term[1][93]*w->term[0][129] +
-            w->term[1][94]*w->term[0][130] + w->term[1][95]*w->term[0][131] +
-            w->term[1][96]*w->term[0][132] + w->term[1][97]*w->term[0][133] +
-            w->term[1][98]*w->term[0][134] + w->term[1][99]*w->term[0][135] +
-            w->term[1][100]*w->term[0][136] + w->term[1][101]*w->term[0][137] +
-            w->term[1][102]*w->term[0][138] + w->term[1][103]*w->term[0][139] +
-            w->term[1][104]*w->term[0][140] + w->term[1][105]*w->term[0][141] +
-            w->term[1][106]*w->term[0][142] + w->term[1][107]*w->term[0][143];
-    t->Qd[98] = w->term[1][90]*w->term[0][144] + w->term[1][91]*w->term[0][145] +
-            w->term[1][92]*w->term[0][146] + w->term[1][93]*w->term[0][147] +
-            w->term[1][94]*w->term[0][148] + w->term[1][95]*w->term[0][149] +
-            w->term[1][96]*w->term[0][150] + w->term[1][97]*w->term[0][151] +
-            w->term[1][98]*w->term[0][152] + w->term[1][99]*w->term[0][153] +
-            w->term[1][100]*w->term[0][154] + w->term[1][101]*w->term[0][155] +
-            w->term[1][102]*w->term[0][156] + w->term[1][103]*w->term[0][157] +
-            w->term[1][104]*w->term[0][158] + w->term[1][105]*w->term[0][159] +
-            w->term[1][106]*w->term[0][160] + w->term[1][107]*w->term[0][161];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][90]), lane_pair_load(&w->term[0][90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][92]),
+            lane_pair_load(&w->term[0][92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][94]),
+            lane_pair_load(&w->term[0][94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][96]),
+            lane_pair_load(&w->term[0][96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][98]),
+            lane_pair_load(&w->term[0][98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][100]),
+            lane_pair_load(&w->term[0][100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][102]),
+            lane_pair_load(&w->term[0][102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][104]),
+            lane_pair_load(&w->term[0][104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][106]),
+            lane_pair_load(&w->term[0][106]));
+    t->Qd[95] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][90]), lane_pair_load(&w->term[0][108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][92]),
+            lane_pair_load(&w->term[0][110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][94]),
+            lane_pair_load(&w->term[0][112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][96]),
+            lane_pair_load(&w->term[0][114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][98]),
+            lane_pair_load(&w->term[0][116]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][100]),
+            lane_pair_load(&w->term[0][118]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][102]),
+            lane_pair_load(&w->term[0][120]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][104]),
+            lane_pair_load(&w->term[0][122]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][106]),
+            lane_pair_load(&w->term[0][124]));
+    t->Qd[96] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][90]), lane_pair_load(&w->term[0][126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][92]),
+            lane_pair_load(&w->term[0][128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][94]),
+            lane_pair_load(&w->term[0][130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][96]),
+            lane_pair_load(&w->term[0][132]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][98]),
+            lane_pair_load(&w->term[0][134]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][100]),
+            lane_pair_load(&w->term[0][136]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][102]),
+            lane_pair_load(&w->term[0][138]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][104]),
+            lane_pair_load(&w->term[0][140]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][106]),
+            lane_pair_load(&w->term[0][142]));
+    t->Qd[97] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][90]), lane_pair_load(&w->term[0][144]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][92]),
+            lane_pair_load(&w->term[0][146]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][94]),
+            lane_pair_load(&w->term[0][148]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][96]),
+            lane_pair_load(&w->term[0][150]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][98]),
+            lane_pair_load(&w->term[0][152]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][100]),
+            lane_pair_load(&w->term[0][154]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][102]),
+            lane_pair_load(&w->term[0][156]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][104]),
+            lane_pair_load(&w->term[0][158]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][106]),
+            lane_pair_load(&w->term[0][160]));
+    t->Qd[98] = lane_pair_sum(acc);
     t->Qd[99] = w->term[1][96]*w->term[0][162];
     t->Qd[100] = w->term[1][97]*w->term[0][163];
     t->Qd[101] = w->term[1][98]*w->term[0][164];
@@ -3351,33 +3794,61 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar process_noise_row_6(ins_gnss21_nav_tr
         t, const ins_gnss21_nav_discretize_scratch *restrict w)
 {
     ins_gnss21_nav_scalar check;
-    t->Qd[111] = w->term[1][108]*w->term[0][108] + w->term[1][109]*w->term[0][109] +
-            w->term[1][110]*w->term[0][110] + w->term[1][111]*w->term[0][111] +
-            w->term[1][112]*w->term[0][112] + w->term[1][113]*w->term[0][113] +
-            w->term[1][114]*w->term[0][114] + w->term[1][115]*w->term[0][115] +
-            w->term[1][116]*w->term[0][116] + w->term[1][117]*w->term[0][117] +
-            w->term[1][118]*w->term[0][118] + w->term[1][119]*w->term[0][119] +
-            w->term[1][120]*w->term[0][120] + w->term[1][121]*w->term[0][121] +
-            w->term[1][122]*w->term[0][122] + w->term[1][123]*w->term[0][123] +
-            w->term[1][124]*w->term[0][124] + w->term[1][125]*w->term[0][125];
-    t->Qd[112] = w->term[1][108]*w->term[0][126] + w->term[1][109]*w->term[0][127] +
-            w->term[1][110]*w->term[0][128] + w->term[1][111]*w->term[0][129] +
-            w->term[1][112]*w->term[0][130] + w->term[1][113]*w->term[0][131] +
-            w->term[1][114]*w->term[0][132] + w->term[1][115]*w->term[0][133] +
-            w->term[1][116]*w->term[0][134] + w->term[1][117]*w->term[0][135] +
-            w->term[1][118]*w->term[0][136] + w->term[1][119]*w->term[0][137] +
-            w->term[1][120]*w->term[0][138] + w->term[1][121]*w->term[0][139] +
-            w->term[1][122]*w->term[0][140] + w->term[1][123]*w->term[0][141] +
-            w->term[1][124]*w->term[0][142] + w->term[1][125]*w->term[0][143];
-    t->Qd[113] = w->term[1][108]*w->term[0][144] + w->term[1][109]*w->term[0][145] +
-            w->term[1][110]*w->term[0][146] + w->term[1][111]*w->term[0][147] +
-            w->term[1][112]*w->term[0][148] + w->term[1][113]*w->term[0][149] +
-            w->term[1][114]*w->term[0][150] + w->term[1][115]*w->term[0][151] +
-            w->term[1][116]*w->term[0][152] + w->term[1][117]*w->term[0][153] +
-            w->term[1][118]*w->term[0][154] + w->term[1][119]*w->term[0][155] +
-            w->term[1][120]*w->term[0][156] + w->term[1][121]*w->term[0][157] +
-            w->term[1][122]*w->term[0][158] + w->term[1][123]*w->term[0][159] +
-            w->term[1][124]*w->term[0][160] + w->term[1][125]*w->term[0][161];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][108]), lane_pair_load(&w->term[0][108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][110]),
+            lane_pair_load(&w->term[0][110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][112]),
+            lane_pair_load(&w->term[0][112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][114]),
+            lane_pair_load(&w->term[0][114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][116]),
+            lane_pair_load(&w->term[0][116]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][118]),
+            lane_pair_load(&w->term[0][118]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][120]),
+            lane_pair_load(&w->term[0][120]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][122]),
+            lane_pair_load(&w->term[0][122]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][124]),
+            lane_pair_load(&w->term[0][124]));
+    t->Qd[111] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][108]), lane_pair_load(&w->term[0][126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][110]),
+            lane_pair_load(&w->term[0][128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][112]),
+            lane_pair_load(&w->term[0][130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][114]),
+            lane_pair_load(&w->term[0][132]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][116]),
+            lane_pair_load(&w->term[0][134]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][118]),
+            lane_pair_load(&w->term[0][136]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][120]),
+            lane_pair_load(&w->term[0][138]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][122]),
+            lane_pair_load(&w->term[0][140]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][124]),
+            lane_pair_load(&w->term[0][142]));
+    t->Qd[112] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][108]), lane_pair_load(&w->term[0][144]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][110]),
+            lane_pair_load(&w->term[0][146]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][112]),
+            lane_pair_load(&w->term[0][148]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][114]),
+            lane_pair_load(&w->term[0][150]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][116]),
+            lane_pair_load(&w->term[0][152]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][118]),
+            lane_pair_load(&w->term[0][154]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][120]),
+            lane_pair_load(&w->term[0][156]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][122]),
+            lane_pair_load(&w->term[0][158]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][124]),
+            lane_pair_load(&w->term[0][160]));
+    t->Qd[113] = lane_pair_sum(acc);
     t->Qd[114] = w->term[1][114]*w->term[0][162];
     t->Qd[115] = w->term[1][115]*w->term[0][163];
     t->Qd[116] = w->term[1][116]*w->term[0][164];
@@ -3400,24 +3871,43 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar process_noise_row_7(ins_gnss21_nav_tr
         t, const ins_gnss21_nav_discretize_scratch *restrict w)
 {
     ins_gnss21_nav_scalar check;
-    t->Qd[126] = w->term[1][126]*w->term[0][126] + w->term[1][127]*w->term[0][127] +
-            w->term[1][128]*w->term[0][128] + w->term[1][129]*w->term[0][129] +
-            w->term[1][130]*w->term[0][130] + w->term[1][131]*w->term[0][131] +
-            w->term[1][132]*w->term[0][132] + w->term[1][133]*w->term[0][133] +
-            w->term[1][134]*w->term[0][134] + w->term[1][135]*w->term[0][135] +
-            w->term[1][136]*w->term[0][136] + w->term[1][137]*w->term[0][137] +
-            w->term[1][138]*w->term[0][138] + w->term[1][139]*w->term[0][139] +
-            w->term[1][140]*w->term[0][140] + w->term[1][141]*w->term[0][141] +
-            w->term[1][142]*w->term[0][142] + w->term[1][143]*w->term[0][143];
-    t->Qd[127] = w->term[1][126]*w->term[0][144] + w->term[1][127]*w->term[0][145] +
-            w->term[1][128]*w->term[0][146] + w->term[1][129]*w->term[0][147] +
-            w->term[1][130]*w->term[0][148] + w->term[1][131]*w->term[0][149] +
-            w->term[1][132]*w->term[0][150] + w->term[1][133]*w->term[0][151] +
-            w->term[1][134]*w->term[0][152] + w->term[1][135]*w->term[0][153] +
-            w->term[1][136]*w->term[0][154] + w->term[1][137]*w->term[0][155] +
-            w->term[1][138]*w->term[0][156] + w->term[1][139]*w->term[0][157] +
-            w->term[1][140]*w->term[0][158] + w->term[1][141]*w->term[0][159] +
-            w->term[1][142]*w->term[0][160] + w->term[1][143]*w->term[0][161];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][126]), lane_pair_load(&w->term[0][126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][128]),
+            lane_pair_load(&w->term[0][128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][130]),
+            lane_pair_load(&w->term[0][130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][132]),
+            lane_pair_load(&w->term[0][132]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][134]),
+            lane_pair_load(&w->term[0][134]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][136]),
+            lane_pair_load(&w->term[0][136]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][138]),
+            lane_pair_load(&w->term[0][138]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][140]),
+            lane_pair_load(&w->term[0][140]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][142]),
+            lane_pair_load(&w->term[0][142]));
+    t->Qd[126] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][126]), lane_pair_load(&w->term[0][144]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][128]),
+            lane_pair_load(&w->term[0][146]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][130]),
+            lane_pair_load(&w->term[0][148]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][132]),
+            lane_pair_load(&w->term[0][150]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][134]),
+            lane_pair_load(&w->term[0][152]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][136]),
+            lane_pair_load(&w->term[0][154]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][138]),
+            lane_pair_load(&w->term[0][156]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][140]),
+            lane_pair_load(&w->term[0][158]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][142]),
+            lane_pair_load(&w->term[0][160]));
+    t->Qd[127] = lane_pair_sum(acc);
     t->Qd[128] = w->term[1][132]*w->term[0][162];
     t->Qd[129] = w->term[1][133]*w->term[0][163];
     t->Qd[130] = w->term[1][134]*w->term[0][164];
@@ -3440,15 +3930,25 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar process_noise_row_8(ins_gnss21_nav_tr
         t, const ins_gnss21_nav_discretize_scratch *restrict w)
 {
     ins_gnss21_nav_scalar check;
-    t->Qd[140] = w->term[1][144]*w->term[0][144] + w->term[1][145]*w->term[0][145] +
-            w->term[1][146]*w->term[0][146] + w->term[1][147]*w->term[0][147] +
-            w->term[1][148]*w->term[0][148] + w->term[1][149]*w->term[0][149] +
-            w->term[1][150]*w->term[0][150] + w->term[1][151]*w->term[0][151] +
-            w->term[1][152]*w->term[0][152] + w->term[1][153]*w->term[0][153] +
-            w->term[1][154]*w->term[0][154] + w->term[1][155]*w->term[0][155] +
-            w->term[1][156]*w->term[0][156] + w->term[1][157]*w->term[0][157] +
-            w->term[1][158]*w->term[0][158] + w->term[1][159]*w->term[0][159] +
-            w->term[1][160]*w->term[0][160] + w->term[1][161]*w->term[0][161];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][144]), lane_pair_load(&w->term[0][144]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][146]),
+            lane_pair_load(&w->term[0][146]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][148]),
+            lane_pair_load(&w->term[0][148]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][150]),
+            lane_pair_load(&w->term[0][150]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][152]),
+            lane_pair_load(&w->term[0][152]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][154]),
+            lane_pair_load(&w->term[0][154]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][156]),
+            lane_pair_load(&w->term[0][156]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][158]),
+            lane_pair_load(&w->term[0][158]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][160]),
+            lane_pair_load(&w->term[0][160]));
+    t->Qd[140] = lane_pair_sum(acc);
     t->Qd[141] = w->term[1][150]*w->term[0][162];
     t->Qd[142] = w->term[1][151]*w->term[0][163];
     t->Qd[143] = w->term[1][152]*w->term[0][164];
@@ -3818,56 +4318,106 @@ INS_GNSS21_NAV_BLOCK void state_predict(const ins_gnss21_nav_filter *restrict f,
         ins_gnss21_nav_transition *restrict t,
                 ins_gnss21_nav_filter_scratch *restrict w)
 {
-    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[2] + t->Phi[2]*f->x[3] + t->Phi[3]*f->x[4] +
-            t->Phi[4]*f->x[5] + t->Phi[5]*f->x[6] + t->Phi[6]*f->x[7] + t->Phi[7]*f->x[8] +
-            t->Phi[8]*f->x[9] + t->Phi[9]*f->x[10] + t->Phi[10]*f->x[11] + t->Phi[11]*f->x[12] +
-            t->Phi[12]*f->x[13] + t->Phi[13]*f->x[14] + t->Phi[14]*f->x[15] + t->Phi[15]*f->x[16] +
-            t->Phi[16]*f->x[17] + t->Phi[17]*f->x[18] + t->Phi[18]*f->x[19] + t->Phi[19]*f->x[20];
-    w->xn[1] = t->Phi[20]*f->x[0] + t->Phi[21]*f->x[1] + t->Phi[22]*f->x[2] + t->Phi[23]*f->x[3] +
-            t->Phi[24]*f->x[4] + t->Phi[25]*f->x[5] + t->Phi[26]*f->x[6] + t->Phi[27]*f->x[7] +
-            t->Phi[28]*f->x[8] + t->Phi[29]*f->x[9] + t->Phi[30]*f->x[10] + t->Phi[31]*f->x[11] +
-            t->Phi[32]*f->x[12] + t->Phi[33]*f->x[13] + t->Phi[34]*f->x[14] + t->Phi[35]*f->x[15] +
-            t->Phi[36]*f->x[16] + t->Phi[37]*f->x[17] + t->Phi[38]*f->x[18] + t->Phi[39]*f->x[19] +
-            t->Phi[40]*f->x[20];
-    w->xn[2] = t->Phi[41]*f->x[0] + t->Phi[42]*f->x[2] + t->Phi[43]*f->x[3] + t->Phi[44]*f->x[4] +
-            t->Phi[45]*f->x[5] + t->Phi[46]*f->x[6] + t->Phi[47]*f->x[7] + t->Phi[48]*f->x[8] +
-            t->Phi[49]*f->x[9] + t->Phi[50]*f->x[10] + t->Phi[51]*f->x[11] + t->Phi[52]*f->x[12] +
-            t->Phi[53]*f->x[13] + t->Phi[54]*f->x[14] + t->Phi[55]*f->x[15] + t->Phi[56]*f->x[16] +
-            t->Phi[57]*f->x[17] + t->Phi[58]*f->x[18] + t->Phi[59]*f->x[19] + t->Phi[60]*f->x[20];
-    w->xn[3] = t->Phi[61]*f->x[0] + t->Phi[62]*f->x[2] + t->Phi[63]*f->x[3] + t->Phi[64]*f->x[4] +
-            t->Phi[65]*f->x[5] + t->Phi[66]*f->x[6] + t->Phi[67]*f->x[7] + t->Phi[68]*f->x[8] +
-            t->Phi[69]*f->x[9] + t->Phi[70]*f->x[10] + t->Phi[71]*f->x[11] + t->Phi[72]*f->x[12] +
-            t->Phi[73]*f->x[13] + t->Phi[74]*f->x[14] + t->Phi[75]*f->x[15] + t->Phi[76]*f->x[16] +
-            t->Phi[77]*f->x[17] + t->Phi[78]*f->x[18] + t->Phi[79]*f->x[19] + t->Phi[80]*f->x[20];
-    w->xn[4] = t->Phi[81]*f->x[0] + t->Phi[82]*f->x[2] + t->Phi[83]*f->x[3] + t->Phi[84]*f->x[4] +
-            t->Phi[85]*f->x[5] + t->Phi[86]*f->x[6] + t->Phi[87]*f->x[7] + t->Phi[88]*f->x[8] +
-            t->Phi[89]*f->x[9] + t->Phi[90]*f->x[10] + t->Phi[91]*f->x[11] + t->Phi[92]*f->x[12] +
-            t->Phi[93]*f->x[13] + t->Phi[94]*f->x[14] + t->Phi[95]*f->x[15] + t->Phi[96]*f->x[16] +
-            t->Phi[97]*f->x[17] + t->Phi[98]*f->x[18] + t->Phi[99]*f->x[19] + t->Phi[100]*f->x[20];
-    w->xn[5] = t->Phi[101]*f->x[0] + t->Phi[102]*f->x[2] + t->Phi[103]*f->x[3] + t->Phi[104]*f->x[4]
-            + t->Phi[105]*f->x[5] + t->Phi[106]*f->x[6] + t->Phi[107]*f->x[7] + t->Phi[108]*f->x[8]
-            + t->Phi[109]*f->x[9] + t->Phi[110]*f->x[10] + t->Phi[111]*f->x[11] +
-            t->Phi[112]*f->x[12] + t->Phi[113]*f->x[13] + t->Phi[114]*f->x[14] +
-            t->Phi[115]*f->x[15] + t->Phi[116]*f->x[16] + t->Phi[117]*f->x[17] +
-            t->Phi[118]*f->x[18] + t->Phi[119]*f->x[19] + t->Phi[120]*f->x[20];
-    w->xn[6] = t->Phi[121]*f->x[0] + t->Phi[122]*f->x[2] + t->Phi[123]*f->x[3] + t->Phi[124]*f->x[4]
-            + t->Phi[125]*f->x[5] + t->Phi[126]*f->x[6] + t->Phi[127]*f->x[7] + t->Phi[128]*f->x[8]
-            + t->Phi[129]*f->x[9] + t->Phi[130]*f->x[10] + t->Phi[131]*f->x[11] +
-            t->Phi[132]*f->x[12] + t->Phi[133]*f->x[13] + t->Phi[134]*f->x[14] +
-            t->Phi[135]*f->x[15] + t->Phi[136]*f->x[16] + t->Phi[137]*f->x[17] +
-            t->Phi[138]*f->x[18] + t->Phi[139]*f->x[19] + t->Phi[140]*f->x[20];
-    w->xn[7] = t->Phi[141]*f->x[0] + t->Phi[142]*f->x[2] + t->Phi[143]*f->x[3] + t->Phi[144]*f->x[4]
-            + t->Phi[145]*f->x[5] + t->Phi[146]*f->x[6] + t->Phi[147]*f->x[7] + t->Phi[148]*f->x[8]
-            + t->Phi[149]*f->x[9] + t->Phi[150]*f->x[10] + t->Phi[151]*f->x[11] +
-            t->Phi[152]*f->x[12] + t->Phi[153]*f->x[13] + t->Phi[154]*f->x[14] +
-            t->Phi[155]*f->x[15] + t->Phi[156]*f->x[16] + t->Phi[157]*f->x[17] +
-            t->Phi[158]*f->x[18] + t->Phi[159]*f->x[19] + t->Phi[160]*f->x[20];
-    w->xn[8] = t->Phi[161]*f->x[0] + t->Phi[162]*f->x[2] + t->Phi[163]*f->x[3] + t->Phi[164]*f->x[4]
-            + t->Phi[165]*f->x[5] + t->Phi[166]*f->x[6] + t->Phi[167]*f->x[7] + t->Phi[168]*f->x[8]
-            + t->Phi[169]*f->x[9] + t->Phi[170]*f->x[10] + t->Phi[171]*f->x[11] +
-            t->Phi[172]*f->x[12] + t->Phi[173]*f->x[13] + t->Phi[174]*f->x[14] +
-            t->Phi[175]*f->x[15] + t->Phi[176]*f->x[16] + t->Phi[177]*f->x[17] +
-            t->Phi[178]*f->x[18] + t->Phi[179]*f->x[19] + t->Phi[180]*f->x[20];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&t->Phi[0]), lane_pair_of(f->x[0], f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[2]), lane_pair_load(&f->x[3]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[4]), lane_pair_load(&f->x[5]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[6]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[8]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[10]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[12]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[14]), lane_pair_load(&f->x[15]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[16]), lane_pair_load(&f->x[17]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[18]), lane_pair_load(&f->x[19]));
+    w->xn[0] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[20]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[22]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[24]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[26]), lane_pair_load(&f->x[6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[28]), lane_pair_load(&f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[30]), lane_pair_load(&f->x[10]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[32]), lane_pair_load(&f->x[12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[34]), lane_pair_load(&f->x[14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[36]), lane_pair_load(&f->x[16]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[38]), lane_pair_load(&f->x[18]));
+    w->xn[1] = lane_pair_sum(acc) + t->Phi[40]*f->x[20];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[41]), lane_pair_of(f->x[0], f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[43]), lane_pair_load(&f->x[3]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[45]), lane_pair_load(&f->x[5]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[47]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[49]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[51]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[53]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[55]), lane_pair_load(&f->x[15]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[57]), lane_pair_load(&f->x[17]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[59]), lane_pair_load(&f->x[19]));
+    w->xn[2] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[61]), lane_pair_of(f->x[0], f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[63]), lane_pair_load(&f->x[3]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[65]), lane_pair_load(&f->x[5]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[67]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[69]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[71]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[73]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[75]), lane_pair_load(&f->x[15]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[77]), lane_pair_load(&f->x[17]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[79]), lane_pair_load(&f->x[19]));
+    w->xn[3] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[81]), lane_pair_of(f->x[0], f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[83]), lane_pair_load(&f->x[3]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[85]), lane_pair_load(&f->x[5]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[87]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[89]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[91]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[93]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[95]), lane_pair_load(&f->x[15]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[97]), lane_pair_load(&f->x[17]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[99]), lane_pair_load(&f->x[19]));
+    w->xn[4] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[101]), lane_pair_of(f->x[0], f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[103]), lane_pair_load(&f->x[3]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[105]), lane_pair_load(&f->x[5]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[107]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[109]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[111]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[113]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[115]), lane_pair_load(&f->x[15]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[117]), lane_pair_load(&f->x[17]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[119]), lane_pair_load(&f->x[19]));
+    w->xn[5] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[121]), lane_pair_of(f->x[0], f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[123]), lane_pair_load(&f->x[3]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[125]), lane_pair_load(&f->x[5]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[127]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[129]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[131]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[133]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[135]), lane_pair_load(&f->x[15]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[137]), lane_pair_load(&f->x[17]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[139]), lane_pair_load(&f->x[19]));
+    w->xn[6] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[141]), lane_pair_of(f->x[0], f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[143]), lane_pair_load(&f->x[3]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[145]), lane_pair_load(&f->x[5]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[147]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[149]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[151]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[153]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[155]), lane_pair_load(&f->x[15]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[157]), lane_pair_load(&f->x[17]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[159]), lane_pair_load(&f->x[19]));
+    w->xn[7] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[161]), lane_pair_of(f->x[0], f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[163]), lane_pair_load(&f->x[3]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[165]), lane_pair_load(&f->x[5]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[167]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[169]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[171]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[173]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[175]), lane_pair_load(&f->x[15]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[177]), lane_pair_load(&f->x[17]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[179]), lane_pair_load(&f->x[19]));
+    w->xn[8] = lane_pair_sum(acc);
     w->xn[9] = t->Phi[181]*f->x[9];
     w->xn[10] = t->Phi[182]*f->x[10];
     w->xn[11] = t->Phi[183]*f->x[11];
@@ -4040,60 +4590,106 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar propagate_row_0(const ins_gnss21_nav_
         t, ins_gnss21_nav_filter_scratch *restrict w)
 {
     ins_gnss21_nav_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[0] + w->M[2]*t->Phi[1] + w->M[3]*t->Phi[2] + w->M[4]*t->Phi[3] +
-            w->M[5]*t->Phi[4] + w->M[6]*t->Phi[5] + w->M[7]*t->Phi[6] + w->M[8]*t->Phi[7] +
-            w->M[9]*t->Phi[8] + w->M[10]*t->Phi[9] + w->M[11]*t->Phi[10] + w->M[12]*t->Phi[11] +
-            w->M[13]*t->Phi[12] + w->M[14]*t->Phi[13] + w->M[15]*t->Phi[14] + w->M[16]*t->Phi[15] +
-            w->M[17]*t->Phi[16] + w->M[18]*t->Phi[17] + w->M[19]*t->Phi[18] + w->M[20]*t->Phi[19] +
-            t->Qd[0]; w->Pn[0] = v; check += v;
-    v = w->M[0]*t->Phi[20] + w->M[1]*t->Phi[21] + w->M[2]*t->Phi[22] + w->M[3]*t->Phi[23] +
-            w->M[4]*t->Phi[24] + w->M[5]*t->Phi[25] + w->M[6]*t->Phi[26] + w->M[7]*t->Phi[27] +
-            w->M[8]*t->Phi[28] + w->M[9]*t->Phi[29] + w->M[10]*t->Phi[30] + w->M[11]*t->Phi[31] +
-            w->M[12]*t->Phi[32] + w->M[13]*t->Phi[33] + w->M[14]*t->Phi[34] + w->M[15]*t->Phi[35] +
-            w->M[16]*t->Phi[36] + w->M[17]*t->Phi[37] + w->M[18]*t->Phi[38] + w->M[19]*t->Phi[39] +
-            w->M[20]*t->Phi[40] + t->Qd[1]; w->Pn[1] = v; check += v;
-    v = w->M[0]*t->Phi[41] + w->M[2]*t->Phi[42] + w->M[3]*t->Phi[43] + w->M[4]*t->Phi[44] +
-            w->M[5]*t->Phi[45] + w->M[6]*t->Phi[46] + w->M[7]*t->Phi[47] + w->M[8]*t->Phi[48] +
-            w->M[9]*t->Phi[49] + w->M[10]*t->Phi[50] + w->M[11]*t->Phi[51] + w->M[12]*t->Phi[52] +
-            w->M[13]*t->Phi[53] + w->M[14]*t->Phi[54] + w->M[15]*t->Phi[55] + w->M[16]*t->Phi[56] +
-            w->M[17]*t->Phi[57] + w->M[18]*t->Phi[58] + w->M[19]*t->Phi[59] + w->M[20]*t->Phi[60] +
-            t->Qd[2]; w->Pn[2] = v; check += v;
-    v = w->M[0]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] + w->M[4]*t->Phi[64] +
-            w->M[5]*t->Phi[65] + w->M[6]*t->Phi[66] + w->M[7]*t->Phi[67] + w->M[8]*t->Phi[68] +
-            w->M[9]*t->Phi[69] + w->M[10]*t->Phi[70] + w->M[11]*t->Phi[71] + w->M[12]*t->Phi[72] +
-            w->M[13]*t->Phi[73] + w->M[14]*t->Phi[74] + w->M[15]*t->Phi[75] + w->M[16]*t->Phi[76] +
-            w->M[17]*t->Phi[77] + w->M[18]*t->Phi[78] + w->M[19]*t->Phi[79] + w->M[20]*t->Phi[80] +
-            t->Qd[3]; w->Pn[3] = v; check += v;
-    v = w->M[0]*t->Phi[81] + w->M[2]*t->Phi[82] + w->M[3]*t->Phi[83] + w->M[4]*t->Phi[84] +
-            w->M[5]*t->Phi[85] + w->M[6]*t->Phi[86] + w->M[7]*t->Phi[87] + w->M[8]*t->Phi[88] +
-            w->M[9]*t->Phi[89] + w->M[10]*t->Phi[90] + w->M[11]*t->Phi[91] + w->M[12]*t->Phi[92] +
-            w->M[13]*t->Phi[93] + w->M[14]*t->Phi[94] + w->M[15]*t->Phi[95] + w->M[16]*t->Phi[96] +
-            w->M[17]*t->Phi[97] + w->M[18]*t->Phi[98] + w->M[19]*t->Phi[99] + w->M[20]*t->Phi[100] +
-            t->Qd[4]; w->Pn[4] = v; check += v;
-    v = w->M[0]*t->Phi[101] + w->M[2]*t->Phi[102] + w->M[3]*t->Phi[103] + w->M[4]*t->Phi[104] +
-            w->M[5]*t->Phi[105] + w->M[6]*t->Phi[106] + w->M[7]*t->Phi[107] + w->M[8]*t->Phi[108] +
-            w->M[9]*t->Phi[109] + w->M[10]*t->Phi[110] + w->M[11]*t->Phi[111] + w->M[12]*t->Phi[112]
-            + w->M[13]*t->Phi[113] + w->M[14]*t->Phi[114] + w->M[15]*t->Phi[115] +
-            w->M[16]*t->Phi[116] + w->M[17]*t->Phi[117] + w->M[18]*t->Phi[118] +
-            w->M[19]*t->Phi[119] + w->M[20]*t->Phi[120] + t->Qd[5]; w->Pn[5] = v; check += v;
-    v = w->M[0]*t->Phi[121] + w->M[2]*t->Phi[122] + w->M[3]*t->Phi[123] + w->M[4]*t->Phi[124] +
-            w->M[5]*t->Phi[125] + w->M[6]*t->Phi[126] + w->M[7]*t->Phi[127] + w->M[8]*t->Phi[128] +
-            w->M[9]*t->Phi[129] + w->M[10]*t->Phi[130] + w->M[11]*t->Phi[131] + w->M[12]*t->Phi[132]
-            + w->M[13]*t->Phi[133] + w->M[14]*t->Phi[134] + w->M[15]*t->Phi[135] +
-            w->M[16]*t->Phi[136] + w->M[17]*t->Phi[137] + w->M[18]*t->Phi[138] +
-            w->M[19]*t->Phi[139] + w->M[20]*t->Phi[140] + t->Qd[6]; w->Pn[6] = v; check += v;
-    v = w->M[0]*t->Phi[141] + w->M[2]*t->Phi[142] + w->M[3]*t->Phi[143] + w->M[4]*t->Phi[144] +
-            w->M[5]*t->Phi[145] + w->M[6]*t->Phi[146] + w->M[7]*t->Phi[147] + w->M[8]*t->Phi[148] +
-            w->M[9]*t->Phi[149] + w->M[10]*t->Phi[150] + w->M[11]*t->Phi[151] + w->M[12]*t->Phi[152]
-            + w->M[13]*t->Phi[153] + w->M[14]*t->Phi[154] + w->M[15]*t->Phi[155] +
-            w->M[16]*t->Phi[156] + w->M[17]*t->Phi[157] + w->M[18]*t->Phi[158] +
-            w->M[19]*t->Phi[159] + w->M[20]*t->Phi[160] + t->Qd[7]; w->Pn[7] = v; check += v;
-    v = w->M[0]*t->Phi[161] + w->M[2]*t->Phi[162] + w->M[3]*t->Phi[163] + w->M[4]*t->Phi[164] +
-            w->M[5]*t->Phi[165] + w->M[6]*t->Phi[166] + w->M[7]*t->Phi[167] + w->M[8]*t->Phi[168] +
-            w->M[9]*t->Phi[169] + w->M[10]*t->Phi[170] + w->M[11]*t->Phi[171] + w->M[12]*t->Phi[172]
-            + w->M[13]*t->Phi[173] + w->M[14]*t->Phi[174] + w->M[15]*t->Phi[175] +
-            w->M[16]*t->Phi[176] + w->M[17]*t->Phi[177] + w->M[18]*t->Phi[178] +
-            w->M[19]*t->Phi[179] + w->M[20]*t->Phi[180] + t->Qd[8]; w->Pn[8] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[10]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[16]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[18]));
+    v = lane_pair_sum(acc) + t->Qd[0]; w->Pn[0] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[28]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[34]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[16]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[18]), lane_pair_load(&t->Phi[38]));
+    v = lane_pair_sum(acc) + w->M[20]*t->Phi[40] + t->Qd[1]; w->Pn[1] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[41]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[43]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[51]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[53]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[55]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[57]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[59]));
+    v = lane_pair_sum(acc) + t->Qd[2]; w->Pn[2] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[61]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[65]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[67]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[69]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[71]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[73]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[75]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[77]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[79]));
+    v = lane_pair_sum(acc) + t->Qd[3]; w->Pn[3] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[99]));
+    v = lane_pair_sum(acc) + t->Qd[4]; w->Pn[4] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[101]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[103]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[105]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[107]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[109]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[111]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[119]));
+    v = lane_pair_sum(acc) + t->Qd[5]; w->Pn[5] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[139]));
+    v = lane_pair_sum(acc) + t->Qd[6]; w->Pn[6] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + t->Qd[7]; w->Pn[7] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[161]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[163]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[165]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[167]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[169]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[171]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[173]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[175]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[177]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[179]));
+    v = lane_pair_sum(acc) + t->Qd[8]; w->Pn[8] = v; check += v;
     v = w->M[9]*t->Phi[181] + t->Qd[9]; w->Pn[9] = v; check += v;
     v = w->M[10]*t->Phi[182] + t->Qd[10]; w->Pn[10] = v; check += v;
     v = w->M[11]*t->Phi[183] + t->Qd[11]; w->Pn[11] = v; check += v;
@@ -4267,54 +4863,95 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar propagate_row_1(const ins_gnss21_nav_
         t, ins_gnss21_nav_filter_scratch *restrict w)
 {
     ins_gnss21_nav_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[20] + w->M[1]*t->Phi[21] + w->M[2]*t->Phi[22] + w->M[3]*t->Phi[23] +
-            w->M[4]*t->Phi[24] + w->M[5]*t->Phi[25] + w->M[6]*t->Phi[26] + w->M[7]*t->Phi[27] +
-            w->M[8]*t->Phi[28] + w->M[9]*t->Phi[29] + w->M[10]*t->Phi[30] + w->M[11]*t->Phi[31] +
-            w->M[12]*t->Phi[32] + w->M[13]*t->Phi[33] + w->M[14]*t->Phi[34] + w->M[15]*t->Phi[35] +
-            w->M[16]*t->Phi[36] + w->M[17]*t->Phi[37] + w->M[18]*t->Phi[38] + w->M[19]*t->Phi[39] +
-            w->M[20]*t->Phi[40] + t->Qd[21]; w->Pn[21] = v; check += v;
-    v = w->M[0]*t->Phi[41] + w->M[2]*t->Phi[42] + w->M[3]*t->Phi[43] + w->M[4]*t->Phi[44] +
-            w->M[5]*t->Phi[45] + w->M[6]*t->Phi[46] + w->M[7]*t->Phi[47] + w->M[8]*t->Phi[48] +
-            w->M[9]*t->Phi[49] + w->M[10]*t->Phi[50] + w->M[11]*t->Phi[51] + w->M[12]*t->Phi[52] +
-            w->M[13]*t->Phi[53] + w->M[14]*t->Phi[54] + w->M[15]*t->Phi[55] + w->M[16]*t->Phi[56] +
-            w->M[17]*t->Phi[57] + w->M[18]*t->Phi[58] + w->M[19]*t->Phi[59] + w->M[20]*t->Phi[60] +
-            t->Qd[22]; w->Pn[22] = v; check += v;
-    v = w->M[0]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] + w->M[4]*t->Phi[64] +
-            w->M[5]*t->Phi[65] + w->M[6]*t->Phi[66] + w->M[7]*t->Phi[67] + w->M[8]*t->Phi[68] +
-            w->M[9]*t->Phi[69] + w->M[10]*t->Phi[70] + w->M[11]*t->Phi[71] + w->M[12]*t->Phi[72] +
-            w->M[13]*t->Phi[73] + w->M[14]*t->Phi[74] + w->M[15]*t->Phi[75] + w->M[16]*t->Phi[76] +
-            w->M[17]*t->Phi[77] + w->M[18]*t->Phi[78] + w->M[19]*t->Phi[79] + w->M[20]*t->Phi[80] +
-            t->Qd[23]; w->Pn[23] = v; check += v;
-    v = w->M[0]*t->Phi[81] + w->M[2]*t->Phi[82] + w->M[3]*t->Phi[83] + w->M[4]*t->Phi[84] +
-            w->M[5]*t->Phi[85] + w->M[6]*t->Phi[86] + w->M[7]*t->Phi[87] + w->M[8]*t->Phi[88] +
-            w->M[9]*t->Phi[89] + w->M[10]*t->Phi[90] + w->M[11]*t->Phi[91] + w->M[12]*t->Phi[92] +
-            w->M[13]*t->Phi[93] + w->M[14]*t->Phi[94] + w->M[15]*t->Phi[95] + w->M[16]*t->Phi[96] +
-            w->M[17]*t->Phi[97] + w->M[18]*t->Phi[98] + w->M[19]*t->Phi[99] + w->M[20]*t->Phi[100] +
-            t->Qd[24]; w->Pn[24] = v; check += v;
-    v = w->M[0]*t->Phi[101] + w->M[2]*t->Phi[102] + w->M[3]*t->Phi[103] + w->M[4]*t->Phi[104] +
-            w->M[5]*t->Phi[105] + w->M[6]*t->Phi[106] + w->M[7]*t->Phi[107] + w->M[8]*t->Phi[108] +
-            w->M[9]*t->Phi[109] + w->M[10]*t->Phi[110] + w->M[11]*t->Phi[111] + w->M[12]*t->Phi[112]
-            + w->M[13]*t->Phi[113] + w->M[14]*t->Phi[114] + w->M[15]*t->Phi[115] +
-            w->M[16]*t->Phi[116] + w->M[17]*t->Phi[117] + w->M[18]*t->Phi[118] +
-            w->M[19]*t->Phi[119] + w->M[20]*t->Phi[120] + t->Qd[25]; w->Pn[25] = v; check += v;
-    v = w->M[0]*t->Phi[121] + w->M[2]*t->Phi[122] + w->M[3]*t->Phi[123] + w->M[4]*t->Phi[124] +
-            w->M[5]*t->Phi[125] + w->M[6]*t->Phi[126] + w->M[7]*t->Phi[127] + w->M[8]*t->Phi[128] +
-            w->M[9]*t->Phi[129] + w->M[10]*t->Phi[130] + w->M[11]*t->Phi[131] + w->M[12]*t->Phi[132]
-            + w->M[13]*t->Phi[133] + w->M[14]*t->Phi[134] + w->M[15]*t->Phi[135] +
-            w->M[16]*t->Phi[136] + w->M[17]*t->Phi[137] + w->M[18]*t->Phi[138] +
-            w->M[19]*t->Phi[139] + w->M[20]*t->Phi[140] + t->Qd[26]; w->Pn[26] = v; check += v;
-    v = w->M[0]*t->Phi[141] + w->M[2]*t->Phi[142] + w->M[3]*t->Phi[143] + w->M[4]*t->Phi[144] +
-            w->M[5]*t->Phi[145] + w->M[6]*t->Phi[146] + w->M[7]*t->Phi[147] + w->M[8]*t->Phi[148] +
-            w->M[9]*t->Phi[149] + w->M[10]*t->Phi[150] + w->M[11]*t->Phi[151] + w->M[12]*t->Phi[152]
-            + w->M[13]*t->Phi[153] + w->M[14]*t->Phi[154] + w->M[15]*t->Phi[155] +
-            w->M[16]*t->Phi[156] + w->M[17]*t->Phi[157] + w->M[18]*t->Phi[158] +
-            w->M[19]*t->Phi[159] + w->M[20]*t->Phi[160] + t->Qd[27]; w->Pn[27] = v; check += v;
-    v = w->M[0]*t->Phi[161] + w->M[2]*t->Phi[162] + w->M[3]*t->Phi[163] + w->M[4]*t->Phi[164] +
-            w->M[5]*t->Phi[165] + w->M[6]*t->Phi[166] + w->M[7]*t->Phi[167] + w->M[8]*t->Phi[168] +
-            w->M[9]*t->Phi[169] + w->M[10]*t->Phi[170] + w->M[11]*t->Phi[171] + w->M[12]*t->Phi[172]
-            + w->M[13]*t->Phi[173] + w->M[14]*t->Phi[174] + w->M[15]*t->Phi[175] +
-            w->M[16]*t->Phi[176] + w->M[17]*t->Phi[177] + w->M[18]*t->Phi[178] +
-            w->M[19]*t->Phi[179] + w->M[20]*t->Phi[180] + t->Qd[28]; w->Pn[28] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[28]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[34]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[16]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[18]), lane_pair_load(&t->Phi[38]));
+    v = lane_pair_sum(acc) + w->M[20]*t->Phi[40] + t->Qd[21]; w->Pn[21] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[41]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[43]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[51]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[53]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[55]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[57]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[59]));
+    v = lane_pair_sum(acc) + t->Qd[22]; w->Pn[22] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[61]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[65]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[67]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[69]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[71]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[73]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[75]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[77]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[79]));
+    v = lane_pair_sum(acc) + t->Qd[23]; w->Pn[23] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[99]));
+    v = lane_pair_sum(acc) + t->Qd[24]; w->Pn[24] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[101]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[103]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[105]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[107]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[109]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[111]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[119]));
+    v = lane_pair_sum(acc) + t->Qd[25]; w->Pn[25] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[139]));
+    v = lane_pair_sum(acc) + t->Qd[26]; w->Pn[26] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + t->Qd[27]; w->Pn[27] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[161]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[163]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[165]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[167]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[169]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[171]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[173]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[175]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[177]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[179]));
+    v = lane_pair_sum(acc) + t->Qd[28]; w->Pn[28] = v; check += v;
     v = w->M[9]*t->Phi[181] + t->Qd[29]; w->Pn[29] = v; check += v;
     v = w->M[10]*t->Phi[182] + t->Qd[30]; w->Pn[30] = v; check += v;
     v = w->M[11]*t->Phi[183] + t->Qd[31]; w->Pn[31] = v; check += v;
@@ -4488,48 +5125,84 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar propagate_row_2(const ins_gnss21_nav_
         t, ins_gnss21_nav_filter_scratch *restrict w)
 {
     ins_gnss21_nav_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[41] + w->M[2]*t->Phi[42] + w->M[3]*t->Phi[43] + w->M[4]*t->Phi[44] +
-            w->M[5]*t->Phi[45] + w->M[6]*t->Phi[46] + w->M[7]*t->Phi[47] + w->M[8]*t->Phi[48] +
-            w->M[9]*t->Phi[49] + w->M[10]*t->Phi[50] + w->M[11]*t->Phi[51] + w->M[12]*t->Phi[52] +
-            w->M[13]*t->Phi[53] + w->M[14]*t->Phi[54] + w->M[15]*t->Phi[55] + w->M[16]*t->Phi[56] +
-            w->M[17]*t->Phi[57] + w->M[18]*t->Phi[58] + w->M[19]*t->Phi[59] + w->M[20]*t->Phi[60] +
-            t->Qd[41]; w->Pn[41] = v; check += v;
-    v = w->M[0]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] + w->M[4]*t->Phi[64] +
-            w->M[5]*t->Phi[65] + w->M[6]*t->Phi[66] + w->M[7]*t->Phi[67] + w->M[8]*t->Phi[68] +
-            w->M[9]*t->Phi[69] + w->M[10]*t->Phi[70] + w->M[11]*t->Phi[71] + w->M[12]*t->Phi[72] +
-            w->M[13]*t->Phi[73] + w->M[14]*t->Phi[74] + w->M[15]*t->Phi[75] + w->M[16]*t->Phi[76] +
-            w->M[17]*t->Phi[77] + w->M[18]*t->Phi[78] + w->M[19]*t->Phi[79] + w->M[20]*t->Phi[80] +
-            t->Qd[42]; w->Pn[42] = v; check += v;
-    v = w->M[0]*t->Phi[81] + w->M[2]*t->Phi[82] + w->M[3]*t->Phi[83] + w->M[4]*t->Phi[84] +
-            w->M[5]*t->Phi[85] + w->M[6]*t->Phi[86] + w->M[7]*t->Phi[87] + w->M[8]*t->Phi[88] +
-            w->M[9]*t->Phi[89] + w->M[10]*t->Phi[90] + w->M[11]*t->Phi[91] + w->M[12]*t->Phi[92] +
-            w->M[13]*t->Phi[93] + w->M[14]*t->Phi[94] + w->M[15]*t->Phi[95] + w->M[16]*t->Phi[96] +
-            w->M[17]*t->Phi[97] + w->M[18]*t->Phi[98] + w->M[19]*t->Phi[99] + w->M[20]*t->Phi[100] +
-            t->Qd[43]; w->Pn[43] = v; check += v;
-    v = w->M[0]*t->Phi[101] + w->M[2]*t->Phi[102] + w->M[3]*t->Phi[103] + w->M[4]*t->Phi[104] +
-            w->M[5]*t->Phi[105] + w->M[6]*t->Phi[106] + w->M[7]*t->Phi[107] + w->M[8]*t->Phi[108] +
-            w->M[9]*t->Phi[109] + w->M[10]*t->Phi[110] + w->M[11]*t->Phi[111] + w->M[12]*t->Phi[112]
-            + w->M[13]*t->Phi[113] + w->M[14]*t->Phi[114] + w->M[15]*t->Phi[115] +
-            w->M[16]*t->Phi[116] + w->M[17]*t->Phi[117] + w->M[18]*t->Phi[118] +
-            w->M[19]*t->Phi[119] + w->M[20]*t->Phi[120] + t->Qd[44]; w->Pn[44] = v; check += v;
-    v = w->M[0]*t->Phi[121] + w->M[2]*t->Phi[122] + w->M[3]*t->Phi[123] + w->M[4]*t->Phi[124] +
-            w->M[5]*t->Phi[125] + w->M[6]*t->Phi[126] + w->M[7]*t->Phi[127] + w->M[8]*t->Phi[128] +
-            w->M[9]*t->Phi[129] + w->M[10]*t->Phi[130] + w->M[11]*t->Phi[131] + w->M[12]*t->Phi[132]
-            + w->M[13]*t->Phi[133] + w->M[14]*t->Phi[134] + w->M[15]*t->Phi[135] +
-            w->M[16]*t->Phi[136] + w->M[17]*t->Phi[137] + w->M[18]*t->Phi[138] +
-            w->M[19]*t->Phi[139] + w->M[20]*t->Phi[140] + t->Qd[45]; w->Pn[45] = v; check += v;
-    v = w->M[0]*t->Phi[141] + w->M[2]*t->Phi[142] + w->M[3]*t->Phi[143] + w->M[4]*t->Phi[144] +
-            w->M[5]*t->Phi[145] + w->M[6]*t->Phi[146] + w->M[7]*t->Phi[147] + w->M[8]*t->Phi[148] +
-            w->M[9]*t->Phi[149] + w->M[10]*t->Phi[150] + w->M[11]*t->Phi[151] + w->M[12]*t->Phi[152]
-            + w->M[13]*t->Phi[153] + w->M[14]*t->Phi[154] + w->M[15]*t->Phi[155] +
-            w->M[16]*t->Phi[156] + w->M[17]*t->Phi[157] + w->M[18]*t->Phi[158] +
-            w->M[19]*t->Phi[159] + w->M[20]*t->Phi[160] + t->Qd[46]; w->Pn[46] = v; check += v;
-    v = w->M[0]*t->Phi[161] + w->M[2]*t->Phi[162] + w->M[3]*t->Phi[163] + w->M[4]*t->Phi[164] +
-            w->M[5]*t->Phi[165] + w->M[6]*t->Phi[166] + w->M[7]*t->Phi[167] + w->M[8]*t->Phi[168] +
-            w->M[9]*t->Phi[169] + w->M[10]*t->Phi[170] + w->M[11]*t->Phi[171] + w->M[12]*t->Phi[172]
-            + w->M[13]*t->Phi[173] + w->M[14]*t->Phi[174] + w->M[15]*t->Phi[175] +
-            w->M[16]*t->Phi[176] + w->M[17]*t->Phi[177] + w->M[18]*t->Phi[178] +
-            w->M[19]*t->Phi[179] + w->M[20]*t->Phi[180] + t->Qd[47]; w->Pn[47] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[41]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[43]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[51]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[53]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[55]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[57]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[59]));
+    v = lane_pair_sum(acc) + t->Qd[41]; w->Pn[41] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[61]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[65]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[67]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[69]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[71]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[73]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[75]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[77]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[79]));
+    v = lane_pair_sum(acc) + t->Qd[42]; w->Pn[42] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[99]));
+    v = lane_pair_sum(acc) + t->Qd[43]; w->Pn[43] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[101]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[103]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[105]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[107]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[109]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[111]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[119]));
+    v = lane_pair_sum(acc) + t->Qd[44]; w->Pn[44] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[139]));
+    v = lane_pair_sum(acc) + t->Qd[45]; w->Pn[45] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + t->Qd[46]; w->Pn[46] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[161]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[163]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[165]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[167]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[169]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[171]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[173]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[175]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[177]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[179]));
+    v = lane_pair_sum(acc) + t->Qd[47]; w->Pn[47] = v; check += v;
     v = w->M[9]*t->Phi[181] + t->Qd[48]; w->Pn[48] = v; check += v;
     v = w->M[10]*t->Phi[182] + t->Qd[49]; w->Pn[49] = v; check += v;
     v = w->M[11]*t->Phi[183] + t->Qd[50]; w->Pn[50] = v; check += v;
@@ -4703,42 +5376,73 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar propagate_row_3(const ins_gnss21_nav_
         t, ins_gnss21_nav_filter_scratch *restrict w)
 {
     ins_gnss21_nav_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] + w->M[4]*t->Phi[64] +
-            w->M[5]*t->Phi[65] + w->M[6]*t->Phi[66] + w->M[7]*t->Phi[67] + w->M[8]*t->Phi[68] +
-            w->M[9]*t->Phi[69] + w->M[10]*t->Phi[70] + w->M[11]*t->Phi[71] + w->M[12]*t->Phi[72] +
-            w->M[13]*t->Phi[73] + w->M[14]*t->Phi[74] + w->M[15]*t->Phi[75] + w->M[16]*t->Phi[76] +
-            w->M[17]*t->Phi[77] + w->M[18]*t->Phi[78] + w->M[19]*t->Phi[79] + w->M[20]*t->Phi[80] +
-            t->Qd[60]; w->Pn[60] = v; check += v;
-    v = w->M[0]*t->Phi[81] + w->M[2]*t->Phi[82] + w->M[3]*t->Phi[83] + w->M[4]*t->Phi[84] +
-            w->M[5]*t->Phi[85] + w->M[6]*t->Phi[86] + w->M[7]*t->Phi[87] + w->M[8]*t->Phi[88] +
-            w->M[9]*t->Phi[89] + w->M[10]*t->Phi[90] + w->M[11]*t->Phi[91] + w->M[12]*t->Phi[92] +
-            w->M[13]*t->Phi[93] + w->M[14]*t->Phi[94] + w->M[15]*t->Phi[95] + w->M[16]*t->Phi[96] +
-            w->M[17]*t->Phi[97] + w->M[18]*t->Phi[98] + w->M[19]*t->Phi[99] + w->M[20]*t->Phi[100] +
-            t->Qd[61]; w->Pn[61] = v; check += v;
-    v = w->M[0]*t->Phi[101] + w->M[2]*t->Phi[102] + w->M[3]*t->Phi[103] + w->M[4]*t->Phi[104] +
-            w->M[5]*t->Phi[105] + w->M[6]*t->Phi[106] + w->M[7]*t->Phi[107] + w->M[8]*t->Phi[108] +
-            w->M[9]*t->Phi[109] + w->M[10]*t->Phi[110] + w->M[11]*t->Phi[111] + w->M[12]*t->Phi[112]
-            + w->M[13]*t->Phi[113] + w->M[14]*t->Phi[114] + w->M[15]*t->Phi[115] +
-            w->M[16]*t->Phi[116] + w->M[17]*t->Phi[117] + w->M[18]*t->Phi[118] +
-            w->M[19]*t->Phi[119] + w->M[20]*t->Phi[120] + t->Qd[62]; w->Pn[62] = v; check += v;
-    v = w->M[0]*t->Phi[121] + w->M[2]*t->Phi[122] + w->M[3]*t->Phi[123] + w->M[4]*t->Phi[124] +
-            w->M[5]*t->Phi[125] + w->M[6]*t->Phi[126] + w->M[7]*t->Phi[127] + w->M[8]*t->Phi[128] +
-            w->M[9]*t->Phi[129] + w->M[10]*t->Phi[130] + w->M[11]*t->Phi[131] + w->M[12]*t->Phi[132]
-            + w->M[13]*t->Phi[133] + w->M[14]*t->Phi[134] + w->M[15]*t->Phi[135] +
-            w->M[16]*t->Phi[136] + w->M[17]*t->Phi[137] + w->M[18]*t->Phi[138] +
-            w->M[19]*t->Phi[139] + w->M[20]*t->Phi[140] + t->Qd[63]; w->Pn[63] = v; check += v;
-    v = w->M[0]*t->Phi[141] + w->M[2]*t->Phi[142] + w->M[3]*t->Phi[143] + w->M[4]*t->Phi[144] +
-            w->M[5]*t->Phi[145] + w->M[6]*t->Phi[146] + w->M[7]*t->Phi[147] + w->M[8]*t->Phi[148] +
-            w->M[9]*t->Phi[149] + w->M[10]*t->Phi[150] + w->M[11]*t->Phi[151] + w->M[12]*t->Phi[152]
-            + w->M[13]*t->Phi[153] + w->M[14]*t->Phi[154] + w->M[15]*t->Phi[155] +
-            w->M[16]*t->Phi[156] + w->M[17]*t->Phi[157] + w->M[18]*t->Phi[158] +
-            w->M[19]*t->Phi[159] + w->M[20]*t->Phi[160] + t->Qd[64]; w->Pn[64] = v; check += v;
-    v = w->M[0]*t->Phi[161] + w->M[2]*t->Phi[162] + w->M[3]*t->Phi[163] + w->M[4]*t->Phi[164] +
-            w->M[5]*t->Phi[165] + w->M[6]*t->Phi[166] + w->M[7]*t->Phi[167] + w->M[8]*t->Phi[168] +
-            w->M[9]*t->Phi[169] + w->M[10]*t->Phi[170] + w->M[11]*t->Phi[171] + w->M[12]*t->Phi[172]
-            + w->M[13]*t->Phi[173] + w->M[14]*t->Phi[174] + w->M[15]*t->Phi[175] +
-            w->M[16]*t->Phi[176] + w->M[17]*t->Phi[177] + w->M[18]*t->Phi[178] +
-            w->M[19]*t->Phi[179] + w->M[20]*t->Phi[180] + t->Qd[65]; w->Pn[65] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[61]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[63]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[65]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[67]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[69]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[71]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[73]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[75]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[77]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[79]));
+    v = lane_pair_sum(acc) + t->Qd[60]; w->Pn[60] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[99]));
+    v = lane_pair_sum(acc) + t->Qd[61]; w->Pn[61] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[101]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[103]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[105]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[107]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[109]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[111]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[119]));
+    v = lane_pair_sum(acc) + t->Qd[62]; w->Pn[62] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[139]));
+    v = lane_pair_sum(acc) + t->Qd[63]; w->Pn[63] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + t->Qd[64]; w->Pn[64] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[161]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[163]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[165]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[167]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[169]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[171]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[173]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[175]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[177]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[179]));
+    v = lane_pair_sum(acc) + t->Qd[65]; w->Pn[65] = v; check += v;
     v = w->M[9]*t->Phi[181] + t->Qd[66]; w->Pn[66] = v; check += v;
     v = w->M[10]*t->Phi[182] + t->Qd[67]; w->Pn[67] = v; check += v;
     v = w->M[11]*t->Phi[183] + t->Qd[68]; w->Pn[68] = v; check += v;
@@ -4912,36 +5616,62 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar propagate_row_4(const ins_gnss21_nav_
         t, ins_gnss21_nav_filter_scratch *restrict w)
 {
     ins_gnss21_nav_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[81] + w->M[2]*t->Phi[82] + w->M[3]*t->Phi[83] + w->M[4]*t->Phi[84] +
-            w->M[5]*t->Phi[85] + w->M[6]*t->Phi[86] + w->M[7]*t->Phi[87] + w->M[8]*t->Phi[88] +
-            w->M[9]*t->Phi[89] + w->M[10]*t->Phi[90] + w->M[11]*t->Phi[91] + w->M[12]*t->Phi[92] +
-            w->M[13]*t->Phi[93] + w->M[14]*t->Phi[94] + w->M[15]*t->Phi[95] + w->M[16]*t->Phi[96] +
-            w->M[17]*t->Phi[97] + w->M[18]*t->Phi[98] + w->M[19]*t->Phi[99] + w->M[20]*t->Phi[100] +
-            t->Qd[78]; w->Pn[78] = v; check += v;
-    v = w->M[0]*t->Phi[101] + w->M[2]*t->Phi[102] + w->M[3]*t->Phi[103] + w->M[4]*t->Phi[104] +
-            w->M[5]*t->Phi[105] + w->M[6]*t->Phi[106] + w->M[7]*t->Phi[107] + w->M[8]*t->Phi[108] +
-            w->M[9]*t->Phi[109] + w->M[10]*t->Phi[110] + w->M[11]*t->Phi[111] + w->M[12]*t->Phi[112]
-            + w->M[13]*t->Phi[113] + w->M[14]*t->Phi[114] + w->M[15]*t->Phi[115] +
-            w->M[16]*t->Phi[116] + w->M[17]*t->Phi[117] + w->M[18]*t->Phi[118] +
-            w->M[19]*t->Phi[119] + w->M[20]*t->Phi[120] + t->Qd[79]; w->Pn[79] = v; check += v;
-    v = w->M[0]*t->Phi[121] + w->M[2]*t->Phi[122] + w->M[3]*t->Phi[123] + w->M[4]*t->Phi[124] +
-            w->M[5]*t->Phi[125] + w->M[6]*t->Phi[126] + w->M[7]*t->Phi[127] + w->M[8]*t->Phi[128] +
-            w->M[9]*t->Phi[129] + w->M[10]*t->Phi[130] + w->M[11]*t->Phi[131] + w->M[12]*t->Phi[132]
-            + w->M[13]*t->Phi[133] + w->M[14]*t->Phi[134] + w->M[15]*t->Phi[135] +
-            w->M[16]*t->Phi[136] + w->M[17]*t->Phi[137] + w->M[18]*t->Phi[138] +
-            w->M[19]*t->Phi[139] + w->M[20]*t->Phi[140] + t->Qd[80]; w->Pn[80] = v; check += v;
-    v = w->M[0]*t->Phi[141] + w->M[2]*t->Phi[142] + w->M[3]*t->Phi[143] + w->M[4]*t->Phi[144] +
-            w->M[5]*t->Phi[145] + w->M[6]*t->Phi[146] + w->M[7]*t->Phi[147] + w->M[8]*t->Phi[148] +
-            w->M[9]*t->Phi[149] + w->M[10]*t->Phi[150] + w->M[11]*t->Phi[151] + w->M[12]*t->Phi[152]
-            + w->M[13]*t->Phi[153] + w->M[14]*t->Phi[154] + w->M[15]*t->Phi[155] +
-            w->M[16]*t->Phi[156] + w->M[17]*t->Phi[157] + w->M[18]*t->Phi[158] +
-            w->M[19]*t->Phi[159] + w->M[20]*t->Phi[160] + t->Qd[81]; w->Pn[81] = v; check += v;
-    v = w->M[0]*t->Phi[161] + w->M[2]*t->Phi[162] + w->M[3]*t->Phi[163] + w->M[4]*t->Phi[164] +
-            w->M[5]*t->Phi[165] + w->M[6]*t->Phi[166] + w->M[7]*t->Phi[167] + w->M[8]*t->Phi[168] +
-            w->M[9]*t->Phi[169] + w->M[10]*t->Phi[170] + w->M[11]*t->Phi[171] + w->M[12]*t->Phi[172]
-            + w->M[13]*t->Phi[173] + w->M[14]*t->Phi[174] + w->M[15]*t->Phi[175] +
-            w->M[16]*t->Phi[176] + w->M[17]*t->Phi[177] + w->M[18]*t->Phi[178] +
-            w->M[19]*t->Phi[179] + w->M[20]*t->Phi[180] + t->Qd[82]; w->Pn[82] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[99]));
+    v = lane_pair_sum(acc) + t->Qd[78]; w->Pn[78] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[101]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[103]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[105]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[107]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[109]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[111]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[119]));
+    v = lane_pair_sum(acc) + t->Qd[79]; w->Pn[79] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[139]));
+    v = lane_pair_sum(acc) + t->Qd[80]; w->Pn[80] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + t->Qd[81]; w->Pn[81] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[161]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[163]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[165]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[167]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[169]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[171]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[173]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[175]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[177]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[179]));
+    v = lane_pair_sum(acc) + t->Qd[82]; w->Pn[82] = v; check += v;
     v = w->M[9]*t->Phi[181] + t->Qd[83]; w->Pn[83] = v; check += v;
     v = w->M[10]*t->Phi[182] + t->Qd[84]; w->Pn[84] = v; check += v;
     v = w->M[11]*t->Phi[183] + t->Qd[85]; w->Pn[85] = v; check += v;
@@ -5115,30 +5845,51 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar propagate_row_5(const ins_gnss21_nav_
         t, ins_gnss21_nav_filter_scratch *restrict w)
 {
     ins_gnss21_nav_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[101] + w->M[2]*t->Phi[102] + w->M[3]*t->Phi[103] + w->M[4]*t->Phi[104] +
-            w->M[5]*t->Phi[105] + w->M[6]*t->Phi[106] + w->M[7]*t->Phi[107] + w->M[8]*t->Phi[108] +
-            w->M[9]*t->Phi[109] + w->M[10]*t->Phi[110] + w->M[11]*t->Phi[111] + w->M[12]*t->Phi[112]
-            + w->M[13]*t->Phi[113] + w->M[14]*t->Phi[114] + w->M[15]*t->Phi[115] +
-            w->M[16]*t->Phi[116] + w->M[17]*t->Phi[117] + w->M[18]*t->Phi[118] +
-            w->M[19]*t->Phi[119] + w->M[20]*t->Phi[120] + t->Qd[95]; w->Pn[95] = v; check += v;
-    v = w->M[0]*t->Phi[121] + w->M[2]*t->Phi[122] + w->M[3]*t->Phi[123] + w->M[4]*t->Phi[124] +
-            w->M[5]*t->Phi[125] + w->M[6]*t->Phi[126] + w->M[7]*t->Phi[127] + w->M[8]*t->Phi[128] +
-            w->M[9]*t->Phi[129] + w->M[10]*t->Phi[130] + w->M[11]*t->Phi[131] + w->M[12]*t->Phi[132]
-            + w->M[13]*t->Phi[133] + w->M[14]*t->Phi[134] + w->M[15]*t->Phi[135] +
-            w->M[16]*t->Phi[136] + w->M[17]*t->Phi[137] + w->M[18]*t->Phi[138] +
-            w->M[19]*t->Phi[139] + w->M[20]*t->Phi[140] + t->Qd[96]; w->Pn[96] = v; check += v;
-    v = w->M[0]*t->Phi[141] + w->M[2]*t->Phi[142] + w->M[3]*t->Phi[143] + w->M[4]*t->Phi[144] +
-            w->M[5]*t->Phi[145] + w->M[6]*t->Phi[146] + w->M[7]*t->Phi[147] + w->M[8]*t->Phi[148] +
-            w->M[9]*t->Phi[149] + w->M[10]*t->Phi[150] + w->M[11]*t->Phi[151] + w->M[12]*t->Phi[152]
-            + w->M[13]*t->Phi[153] + w->M[14]*t->Phi[154] + w->M[15]*t->Phi[155] +
-            w->M[16]*t->Phi[156] + w->M[17]*t->Phi[157] + w->M[18]*t->Phi[158] +
-            w->M[19]*t->Phi[159] + w->M[20]*t->Phi[160] + t->Qd[97]; w->Pn[97] = v; check += v;
-    v = w->M[0]*t->Phi[161] + w->M[2]*t->Phi[162] + w->M[3]*t->Phi[163] + w->M[4]*t->Phi[164] +
-            w->M[5]*t->Phi[165] + w->M[6]*t->Phi[166] + w->M[7]*t->Phi[167] + w->M[8]*t->Phi[168] +
-            w->M[9]*t->Phi[169] + w->M[10]*t->Phi[170] + w->M[11]*t->Phi[171] + w->M[12]*t->Phi[172]
-            + w->M[13]*t->Phi[173] + w->M[14]*t->Phi[174] + w->M[15]*t->Phi[175] +
-            w->M[16]*t->Phi[176] + w->M[17]*t->Phi[177] + w->M[18]*t->Phi[178] +
-            w->M[19]*t->Phi[179] + w->M[20]*t->Phi[180] + t->Qd[98]; w->Pn[98] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[101]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[103]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[105]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[107]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[109]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[111]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[119]));
+    v = lane_pair_sum(acc) + t->Qd[95]; w->Pn[95] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[139]));
+    v = lane_pair_sum(acc) + t->Qd[96]; w->Pn[96] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + t->Qd[97]; w->Pn[97] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[161]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[163]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[165]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[167]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[169]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[171]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[173]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[175]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[177]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[179]));
+    v = lane_pair_sum(acc) + t->Qd[98]; w->Pn[98] = v; check += v;
     v = w->M[9]*t->Phi[181] + t->Qd[99]; w->Pn[99] = v; check += v;
     v = w->M[10]*t->Phi[182] + t->Qd[100]; w->Pn[100] = v; check += v;
     v = w->M[11]*t->Phi[183] + t->Qd[101]; w->Pn[101] = v; check += v;
@@ -5312,24 +6063,40 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar propagate_row_6(const ins_gnss21_nav_
         t, ins_gnss21_nav_filter_scratch *restrict w)
 {
     ins_gnss21_nav_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[121] + w->M[2]*t->Phi[122] + w->M[3]*t->Phi[123] + w->M[4]*t->Phi[124] +
-            w->M[5]*t->Phi[125] + w->M[6]*t->Phi[126] + w->M[7]*t->Phi[127] + w->M[8]*t->Phi[128] +
-            w->M[9]*t->Phi[129] + w->M[10]*t->Phi[130] + w->M[11]*t->Phi[131] + w->M[12]*t->Phi[132]
-            + w->M[13]*t->Phi[133] + w->M[14]*t->Phi[134] + w->M[15]*t->Phi[135] +
-            w->M[16]*t->Phi[136] + w->M[17]*t->Phi[137] + w->M[18]*t->Phi[138] +
-            w->M[19]*t->Phi[139] + w->M[20]*t->Phi[140] + t->Qd[111]; w->Pn[111] = v; check += v;
-    v = w->M[0]*t->Phi[141] + w->M[2]*t->Phi[142] + w->M[3]*t->Phi[143] + w->M[4]*t->Phi[144] +
-            w->M[5]*t->Phi[145] + w->M[6]*t->Phi[146] + w->M[7]*t->Phi[147] + w->M[8]*t->Phi[148] +
-            w->M[9]*t->Phi[149] + w->M[10]*t->Phi[150] + w->M[11]*t->Phi[151] + w->M[12]*t->Phi[152]
-            + w->M[13]*t->Phi[153] + w->M[14]*t->Phi[154] + w->M[15]*t->Phi[155] +
-            w->M[16]*t->Phi[156] + w->M[17]*t->Phi[157] + w->M[18]*t->Phi[158] +
-            w->M[19]*t->Phi[159] + w->M[20]*t->Phi[160] + t->Qd[112]; w->Pn[112] = v; check += v;
-    v = w->M[0]*t->Phi[161] + w->M[2]*t->Phi[162] + w->M[3]*t->Phi[163] + w->M[4]*t->Phi[164] +
-            w->M[5]*t->Phi[165] + w->M[6]*t->Phi[166] + w->M[7]*t->Phi[167] + w->M[8]*t->Phi[168] +
-            w->M[9]*t->Phi[169] + w->M[10]*t->Phi[170] + w->M[11]*t->Phi[171] + w->M[12]*t->Phi[172]
-            + w->M[13]*t->Phi[173] + w->M[14]*t->Phi[174] + w->M[15]*t->Phi[175] +
-            w->M[16]*t->Phi[176] + w->M[17]*t->Phi[177] + w->M[18]*t->Phi[178] +
-            w->M[19]*t->Phi[179] + w->M[20]*t->Phi[180] + t->Qd[113]; w->Pn[113] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[125]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[127]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[129]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[131]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[133]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[139]));
+    v = lane_pair_sum(acc) + t->Qd[111]; w->Pn[111] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + t->Qd[112]; w->Pn[112] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[161]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[163]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[165]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[167]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[169]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[171]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[173]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[175]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[177]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[179]));
+    v = lane_pair_sum(acc) + t->Qd[113]; w->Pn[113] = v; check += v;
     v = w->M[9]*t->Phi[181] + t->Qd[114]; w->Pn[114] = v; check += v;
     v = w->M[10]*t->Phi[182] + t->Qd[115]; w->Pn[115] = v; check += v;
     v = w->M[11]*t->Phi[183] + t->Qd[116]; w->Pn[116] = v; check += v;
@@ -5503,18 +6270,29 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar propagate_row_7(const ins_gnss21_nav_
         t, ins_gnss21_nav_filter_scratch *restrict w)
 {
     ins_gnss21_nav_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[141] + w->M[2]*t->Phi[142] + w->M[3]*t->Phi[143] + w->M[4]*t->Phi[144] +
-            w->M[5]*t->Phi[145] + w->M[6]*t->Phi[146] + w->M[7]*t->Phi[147] + w->M[8]*t->Phi[148] +
-            w->M[9]*t->Phi[149] + w->M[10]*t->Phi[150] + w->M[11]*t->Phi[151] + w->M[12]*t->Phi[152]
-            + w->M[13]*t->Phi[153] + w->M[14]*t->Phi[154] + w->M[15]*t->Phi[155] +
-            w->M[16]*t->Phi[156] + w->M[17]*t->Phi[157] + w->M[18]*t->Phi[158] +
-            w->M[19]*t->Phi[159] + w->M[20]*t->Phi[160] + t->Qd[126]; w->Pn[126] = v; check += v;
-    v = w->M[0]*t->Phi[161] + w->M[2]*t->Phi[162] + w->M[3]*t->Phi[163] + w->M[4]*t->Phi[164] +
-            w->M[5]*t->Phi[165] + w->M[6]*t->Phi[166] + w->M[7]*t->Phi[167] + w->M[8]*t->Phi[168] +
-            w->M[9]*t->Phi[169] + w->M[10]*t->Phi[170] + w->M[11]*t->Phi[171] + w->M[12]*t->Phi[172]
-            + w->M[13]*t->Phi[173] + w->M[14]*t->Phi[174] + w->M[15]*t->Phi[175] +
-            w->M[16]*t->Phi[176] + w->M[17]*t->Phi[177] + w->M[18]*t->Phi[178] +
-            w->M[19]*t->Phi[179] + w->M[20]*t->Phi[180] + t->Qd[127]; w->Pn[127] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + t->Qd[126]; w->Pn[126] = v; check += v;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[161]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[163]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[165]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[167]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[169]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[171]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[173]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[175]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[177]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[179]));
+    v = lane_pair_sum(acc) + t->Qd[127]; w->Pn[127] = v; check += v;
     v = w->M[9]*t->Phi[181] + t->Qd[128]; w->Pn[128] = v; check += v;
     v = w->M[10]*t->Phi[182] + t->Qd[129]; w->Pn[129] = v; check += v;
     v = w->M[11]*t->Phi[183] + t->Qd[130]; w->Pn[130] = v; check += v;
@@ -5688,12 +6466,18 @@ INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar propagate_row_8(const ins_gnss21_nav_
         t, ins_gnss21_nav_filter_scratch *restrict w)
 {
     ins_gnss21_nav_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[161] + w->M[2]*t->Phi[162] + w->M[3]*t->Phi[163] + w->M[4]*t->Phi[164] +
-            w->M[5]*t->Phi[165] + w->M[6]*t->Phi[166] + w->M[7]*t->Phi[167] + w->M[8]*t->Phi[168] +
-            w->M[9]*t->Phi[169] + w->M[10]*t->Phi[170] + w->M[11]*t->Phi[171] + w->M[12]*t->Phi[172]
-            + w->M[13]*t->Phi[173] + w->M[14]*t->Phi[174] + w->M[15]*t->Phi[175] +
-            w->M[16]*t->Phi[176] + w->M[17]*t->Phi[177] + w->M[18]*t->Phi[178] +
-            w->M[19]*t->Phi[179] + w->M[20]*t->Phi[180] + t->Qd[140]; w->Pn[140] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_of(w->M[0], w->M[2]), lane_pair_load(&t->Phi[161]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[3]), lane_pair_load(&t->Phi[163]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[5]), lane_pair_load(&t->Phi[165]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[167]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[169]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[171]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[173]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[15]), lane_pair_load(&t->Phi[175]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[17]), lane_pair_load(&t->Phi[177]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[179]));
+    v = lane_pair_sum(acc) + t->Qd[140]; w->Pn[140] = v; check += v;
     v = w->M[9]*t->Phi[181] + t->Qd[141]; w->Pn[141] = v; check += v;
     v = w->M[10]*t->Phi[182] + t->Qd[142]; w->Pn[142] = v; check += v;
     v = w->M[11]*t->Phi[183] + t->Qd[143]; w->Pn[143] = v; check += v;

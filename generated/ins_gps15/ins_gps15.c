@@ -392,6 +392,90 @@ int ins_gps15_matrices_evaluate(const ins_gps15_params *restrict params, ins_gps
 #define INS_GPS15_BLOCK static
 #endif
 
+/* Sums of products in two lanes (modelgen/codegen/kernels.py, lane_split): the products pair
+   up by position, the first of each pair is added in one lane and the second in the other,
+   then the two lanes are added. Under GCC or Clang with SSE2 (unless INS_GPS15_SCALAR_LANE_PAIRS
+   is defined) a lane pair is an SSE2 vector, otherwise two scalars: the same operations in the
+   same order, bit for bit the same result. */
+#if defined(__GNUC__) && defined(__SSE2__) && !defined(INS_GPS15_SCALAR_LANE_PAIRS)
+typedef double lane_pair __attribute__((vector_size(2 * sizeof(double))));
+
+static inline lane_pair lane_pair_load(const double *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    memcpy(&lanes, a, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const double a, const double b)
+{
+    lane_pair lanes;
+    const double values[2] = { a, b };
+    memcpy(&lanes, values, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    return a * b;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    return acc + a * b;
+}
+
+static inline double lane_pair_sum(const lane_pair acc)
+{
+    double lanes[2];
+    memcpy(lanes, &acc, sizeof lanes);
+    return lanes[0] + lanes[1];
+}
+#else
+typedef struct {
+    ins_gps15_scalar lane[2];
+} lane_pair;
+
+static inline lane_pair lane_pair_load(const ins_gps15_scalar *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    lanes.lane[0] = a[0];
+    lanes.lane[1] = a[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const ins_gps15_scalar a, const ins_gps15_scalar b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a;
+    lanes.lane[1] = b;
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a.lane[0] * b.lane[0];
+    lanes.lane[1] = a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = acc.lane[0] + a.lane[0] * b.lane[0];
+    lanes.lane[1] = acc.lane[1] + a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline ins_gps15_scalar lane_pair_sum(const lane_pair acc)
+{
+    return acc.lane[0] + acc.lane[1];
+}
+#endif
+
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static ins_gps15_scalar power_of_two(const int e)
 {
@@ -1925,33 +2009,61 @@ INS_GPS15_BLOCK ins_gps15_scalar process_noise_row_0(ins_gps15_transition *restr
         ins_gps15_discretize_scratch *restrict w)
 {
     ins_gps15_scalar check;
-    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
-            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
-            + w->term[1][5]*w->term[0][5];
-    t->Qd[1] = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] +
-            w->term[1][2]*w->term[0][8] + w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10]
-            + w->term[1][5]*w->term[0][11];
-    t->Qd[2] = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] +
-            w->term[1][2]*w->term[0][14] + w->term[1][3]*w->term[0][15] +
-            w->term[1][4]*w->term[0][16] + w->term[1][5]*w->term[0][17];
-    t->Qd[3] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
-            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
-            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23];
-    t->Qd[4] = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] +
-            w->term[1][2]*w->term[0][26] + w->term[1][3]*w->term[0][27] +
-            w->term[1][4]*w->term[0][28] + w->term[1][5]*w->term[0][29];
-    t->Qd[5] = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] +
-            w->term[1][2]*w->term[0][32] + w->term[1][3]*w->term[0][33] +
-            w->term[1][4]*w->term[0][34] + w->term[1][5]*w->term[0][35];
-    t->Qd[6] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
-            w->term[1][2]*w->term[0][38] + w->term[1][3]*w->term[0][39] +
-            w->term[1][4]*w->term[0][40] + w->term[1][5]*w->term[0][41];
-    t->Qd[7] = w->term[1][0]*w->term[0][42] + w->term[1][1]*w->term[0][43] +
-            w->term[1][2]*w->term[0][44] + w->term[1][3]*w->term[0][45] +
-            w->term[1][4]*w->term[0][46] + w->term[1][5]*w->term[0][47];
-    t->Qd[8] = w->term[1][0]*w->term[0][48] + w->term[1][1]*w->term[0][49] +
-            w->term[1][2]*w->term[0][50] + w->term[1][3]*w->term[0][51] +
-            w->term[1][4]*w->term[0][52] + w->term[1][5]*w->term[0][53];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][4]));
+    t->Qd[0] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][10]));
+    t->Qd[1] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[2] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[3] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[4] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[5] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[6] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][46]));
+    t->Qd[7] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][52]));
+    t->Qd[8] = lane_pair_sum(acc);
     check = t->Qd[0] + t->Qd[1] + t->Qd[2] + t->Qd[3] + t->Qd[4] + t->Qd[5] + t->Qd[6] + t->Qd[7] +
             t->Qd[8];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
@@ -1961,30 +2073,55 @@ INS_GPS15_BLOCK ins_gps15_scalar process_noise_row_1(ins_gps15_transition *restr
         ins_gps15_discretize_scratch *restrict w)
 {
     ins_gps15_scalar check;
-    t->Qd[15] = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
-            w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9] +
-            w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11];
-    t->Qd[16] = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] +
-            w->term[1][8]*w->term[0][14] + w->term[1][9]*w->term[0][15] +
-            w->term[1][10]*w->term[0][16] + w->term[1][11]*w->term[0][17];
-    t->Qd[17] = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] +
-            w->term[1][8]*w->term[0][20] + w->term[1][9]*w->term[0][21] +
-            w->term[1][10]*w->term[0][22] + w->term[1][11]*w->term[0][23];
-    t->Qd[18] = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
-            w->term[1][8]*w->term[0][26] + w->term[1][9]*w->term[0][27] +
-            w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29];
-    t->Qd[19] = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] +
-            w->term[1][8]*w->term[0][32] + w->term[1][9]*w->term[0][33] +
-            w->term[1][10]*w->term[0][34] + w->term[1][11]*w->term[0][35];
-    t->Qd[20] = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] +
-            w->term[1][8]*w->term[0][38] + w->term[1][9]*w->term[0][39] +
-            w->term[1][10]*w->term[0][40] + w->term[1][11]*w->term[0][41];
-    t->Qd[21] = w->term[1][6]*w->term[0][42] + w->term[1][7]*w->term[0][43] +
-            w->term[1][8]*w->term[0][44] + w->term[1][9]*w->term[0][45] +
-            w->term[1][10]*w->term[0][46] + w->term[1][11]*w->term[0][47];
-    t->Qd[22] = w->term[1][6]*w->term[0][48] + w->term[1][7]*w->term[0][49] +
-            w->term[1][8]*w->term[0][50] + w->term[1][9]*w->term[0][51] +
-            w->term[1][10]*w->term[0][52] + w->term[1][11]*w->term[0][53];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][10]));
+    t->Qd[15] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[16] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[17] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[18] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[19] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[20] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][46]));
+    t->Qd[21] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][52]));
+    t->Qd[22] = lane_pair_sum(acc);
     check = t->Qd[15] + t->Qd[16] + t->Qd[17] + t->Qd[18] + t->Qd[19] + t->Qd[20] + t->Qd[21] +
             t->Qd[22];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
@@ -1994,27 +2131,49 @@ INS_GPS15_BLOCK ins_gps15_scalar process_noise_row_2(ins_gps15_transition *restr
         ins_gps15_discretize_scratch *restrict w)
 {
     ins_gps15_scalar check;
-    t->Qd[29] = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17];
-    t->Qd[30] = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
-            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23];
-    t->Qd[31] = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
-            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29];
-    t->Qd[32] = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
-            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35];
-    t->Qd[33] = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
-            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41];
-    t->Qd[34] = w->term[1][12]*w->term[0][42] + w->term[1][13]*w->term[0][43] +
-            w->term[1][14]*w->term[0][44] + w->term[1][15]*w->term[0][45] +
-            w->term[1][16]*w->term[0][46] + w->term[1][17]*w->term[0][47];
-    t->Qd[35] = w->term[1][12]*w->term[0][48] + w->term[1][13]*w->term[0][49] +
-            w->term[1][14]*w->term[0][50] + w->term[1][15]*w->term[0][51] +
-            w->term[1][16]*w->term[0][52] + w->term[1][17]*w->term[0][53];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[29] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[30] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[31] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[32] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[33] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][46]));
+    t->Qd[34] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][52]));
+    t->Qd[35] = lane_pair_sum(acc);
     check = t->Qd[29] + t->Qd[30] + t->Qd[31] + t->Qd[32] + t->Qd[33] + t->Qd[34] + t->Qd[35];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
@@ -2023,24 +2182,43 @@ INS_GPS15_BLOCK ins_gps15_scalar process_noise_row_3(ins_gps15_transition *restr
         ins_gps15_discretize_scratch *restrict w)
 {
     ins_gps15_scalar check;
-    t->Qd[42] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23];
-    t->Qd[43] = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
-            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29];
-    t->Qd[44] = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
-            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35];
-    t->Qd[45] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41];
-    t->Qd[46] = w->term[1][18]*w->term[0][42] + w->term[1][19]*w->term[0][43] +
-            w->term[1][20]*w->term[0][44] + w->term[1][21]*w->term[0][45] +
-            w->term[1][22]*w->term[0][46] + w->term[1][23]*w->term[0][47];
-    t->Qd[47] = w->term[1][18]*w->term[0][48] + w->term[1][19]*w->term[0][49] +
-            w->term[1][20]*w->term[0][50] + w->term[1][21]*w->term[0][51] +
-            w->term[1][22]*w->term[0][52] + w->term[1][23]*w->term[0][53];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[42] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[43] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[44] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[45] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][46]));
+    t->Qd[46] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][52]));
+    t->Qd[47] = lane_pair_sum(acc);
     check = t->Qd[42] + t->Qd[43] + t->Qd[44] + t->Qd[45] + t->Qd[46] + t->Qd[47];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
@@ -2049,21 +2227,37 @@ INS_GPS15_BLOCK ins_gps15_scalar process_noise_row_4(ins_gps15_transition *restr
         ins_gps15_discretize_scratch *restrict w)
 {
     ins_gps15_scalar check;
-    t->Qd[54] = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29];
-    t->Qd[55] = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
-            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35];
-    t->Qd[56] = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
-            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
-            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41];
-    t->Qd[57] = w->term[1][24]*w->term[0][42] + w->term[1][25]*w->term[0][43] +
-            w->term[1][26]*w->term[0][44] + w->term[1][27]*w->term[0][45] +
-            w->term[1][28]*w->term[0][46] + w->term[1][29]*w->term[0][47];
-    t->Qd[58] = w->term[1][24]*w->term[0][48] + w->term[1][25]*w->term[0][49] +
-            w->term[1][26]*w->term[0][50] + w->term[1][27]*w->term[0][51] +
-            w->term[1][28]*w->term[0][52] + w->term[1][29]*w->term[0][53];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[54] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[55] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[56] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][46]));
+    t->Qd[57] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][52]));
+    t->Qd[58] = lane_pair_sum(acc);
     check = t->Qd[54] + t->Qd[55] + t->Qd[56] + t->Qd[57] + t->Qd[58];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
@@ -2072,18 +2266,31 @@ static ins_gps15_scalar process_noise_row_5(ins_gps15_transition *restrict t, co
         ins_gps15_discretize_scratch *restrict w)
 {
     ins_gps15_scalar check;
-    t->Qd[65] = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
-            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35];
-    t->Qd[66] = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
-            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
-            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41];
-    t->Qd[67] = w->term[1][30]*w->term[0][42] + w->term[1][31]*w->term[0][43] +
-            w->term[1][32]*w->term[0][44] + w->term[1][33]*w->term[0][45] +
-            w->term[1][34]*w->term[0][46] + w->term[1][35]*w->term[0][47];
-    t->Qd[68] = w->term[1][30]*w->term[0][48] + w->term[1][31]*w->term[0][49] +
-            w->term[1][32]*w->term[0][50] + w->term[1][33]*w->term[0][51] +
-            w->term[1][34]*w->term[0][52] + w->term[1][35]*w->term[0][53];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][30]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[65] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][30]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[66] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][30]), lane_pair_load(&w->term[0][42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][46]));
+    t->Qd[67] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][30]), lane_pair_load(&w->term[0][48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][52]));
+    t->Qd[68] = lane_pair_sum(acc);
     check = t->Qd[65] + t->Qd[66] + t->Qd[67] + t->Qd[68];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
@@ -2092,15 +2299,25 @@ static ins_gps15_scalar process_noise_row_6(ins_gps15_transition *restrict t, co
         ins_gps15_discretize_scratch *restrict w)
 {
     ins_gps15_scalar check;
-    t->Qd[75] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41];
-    t->Qd[76] = w->term[1][36]*w->term[0][42] + w->term[1][37]*w->term[0][43] +
-            w->term[1][38]*w->term[0][44] + w->term[1][39]*w->term[0][45] +
-            w->term[1][40]*w->term[0][46] + w->term[1][41]*w->term[0][47];
-    t->Qd[77] = w->term[1][36]*w->term[0][48] + w->term[1][37]*w->term[0][49] +
-            w->term[1][38]*w->term[0][50] + w->term[1][39]*w->term[0][51] +
-            w->term[1][40]*w->term[0][52] + w->term[1][41]*w->term[0][53];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[75] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][46]));
+    t->Qd[76] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][52]));
+    t->Qd[77] = lane_pair_sum(acc);
     check = t->Qd[75] + t->Qd[76] + t->Qd[77];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
@@ -2109,12 +2326,19 @@ static ins_gps15_scalar process_noise_row_7(ins_gps15_transition *restrict t, co
         ins_gps15_discretize_scratch *restrict w)
 {
     ins_gps15_scalar check;
-    t->Qd[84] = w->term[1][42]*w->term[0][42] + w->term[1][43]*w->term[0][43] +
-            w->term[1][44]*w->term[0][44] + w->term[1][45]*w->term[0][45] +
-            w->term[1][46]*w->term[0][46] + w->term[1][47]*w->term[0][47];
-    t->Qd[85] = w->term[1][42]*w->term[0][48] + w->term[1][43]*w->term[0][49] +
-            w->term[1][44]*w->term[0][50] + w->term[1][45]*w->term[0][51] +
-            w->term[1][46]*w->term[0][52] + w->term[1][47]*w->term[0][53];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][42]), lane_pair_load(&w->term[0][42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][44]),
+            lane_pair_load(&w->term[0][44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][46]),
+            lane_pair_load(&w->term[0][46]));
+    t->Qd[84] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][42]), lane_pair_load(&w->term[0][48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][44]),
+            lane_pair_load(&w->term[0][50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][46]),
+            lane_pair_load(&w->term[0][52]));
+    t->Qd[85] = lane_pair_sum(acc);
     check = t->Qd[84] + t->Qd[85];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
@@ -2123,9 +2347,13 @@ static ins_gps15_scalar process_noise_row_8(ins_gps15_transition *restrict t, co
         ins_gps15_discretize_scratch *restrict w)
 {
     ins_gps15_scalar check;
-    t->Qd[92] = w->term[1][48]*w->term[0][48] + w->term[1][49]*w->term[0][49] +
-            w->term[1][50]*w->term[0][50] + w->term[1][51]*w->term[0][51] +
-            w->term[1][52]*w->term[0][52] + w->term[1][53]*w->term[0][53];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][48]), lane_pair_load(&w->term[0][48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][50]),
+            lane_pair_load(&w->term[0][50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][52]),
+            lane_pair_load(&w->term[0][52]));
+    t->Qd[92] = lane_pair_sum(acc);
     check = t->Qd[92];
     return check - check; /* 0 when the sum of what it stored is finite, so every value is */
 }
@@ -2367,42 +2595,79 @@ INS_GPS15_BLOCK void state_predict(const ins_gps15_filter *restrict f, const ins
         *restrict t,
                 ins_gps15_filter_scratch *restrict w)
 {
-    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
-            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[6] + t->Phi[7]*f->x[8] +
-            t->Phi[8]*f->x[9] + t->Phi[9]*f->x[10] + t->Phi[10]*f->x[11] + t->Phi[11]*f->x[12] +
-            t->Phi[12]*f->x[13] + t->Phi[13]*f->x[14];
-    w->xn[1] = t->Phi[14]*f->x[0] + t->Phi[15]*f->x[1] + t->Phi[16]*f->x[2] + t->Phi[17]*f->x[3] +
-            t->Phi[18]*f->x[4] + t->Phi[19]*f->x[5] + t->Phi[20]*f->x[6] + t->Phi[21]*f->x[8] +
-            t->Phi[22]*f->x[9] + t->Phi[23]*f->x[10] + t->Phi[24]*f->x[11] + t->Phi[25]*f->x[12] +
-            t->Phi[26]*f->x[13] + t->Phi[27]*f->x[14];
-    w->xn[2] = t->Phi[28]*f->x[0] + t->Phi[29]*f->x[1] + t->Phi[30]*f->x[2] + t->Phi[31]*f->x[3] +
-            t->Phi[32]*f->x[4] + t->Phi[33]*f->x[5] + t->Phi[34]*f->x[6] + t->Phi[35]*f->x[8] +
-            t->Phi[36]*f->x[9] + t->Phi[37]*f->x[10] + t->Phi[38]*f->x[11] + t->Phi[39]*f->x[12] +
-            t->Phi[40]*f->x[13] + t->Phi[41]*f->x[14];
-    w->xn[3] = t->Phi[42]*f->x[0] + t->Phi[43]*f->x[1] + t->Phi[44]*f->x[2] + t->Phi[45]*f->x[3] +
-            t->Phi[46]*f->x[4] + t->Phi[47]*f->x[5] + t->Phi[48]*f->x[6] + t->Phi[49]*f->x[8] +
-            t->Phi[50]*f->x[9] + t->Phi[51]*f->x[10] + t->Phi[52]*f->x[11] + t->Phi[53]*f->x[12] +
-            t->Phi[54]*f->x[13] + t->Phi[55]*f->x[14];
-    w->xn[4] = t->Phi[56]*f->x[0] + t->Phi[57]*f->x[1] + t->Phi[58]*f->x[2] + t->Phi[59]*f->x[3] +
-            t->Phi[60]*f->x[4] + t->Phi[61]*f->x[5] + t->Phi[62]*f->x[6] + t->Phi[63]*f->x[8] +
-            t->Phi[64]*f->x[9] + t->Phi[65]*f->x[10] + t->Phi[66]*f->x[11] + t->Phi[67]*f->x[12] +
-            t->Phi[68]*f->x[13] + t->Phi[69]*f->x[14];
-    w->xn[5] = t->Phi[70]*f->x[0] + t->Phi[71]*f->x[1] + t->Phi[72]*f->x[2] + t->Phi[73]*f->x[3] +
-            t->Phi[74]*f->x[4] + t->Phi[75]*f->x[5] + t->Phi[76]*f->x[6] + t->Phi[77]*f->x[8] +
-            t->Phi[78]*f->x[9] + t->Phi[79]*f->x[10] + t->Phi[80]*f->x[11] + t->Phi[81]*f->x[12] +
-            t->Phi[82]*f->x[13] + t->Phi[83]*f->x[14];
-    w->xn[6] = t->Phi[84]*f->x[0] + t->Phi[85]*f->x[1] + t->Phi[86]*f->x[2] + t->Phi[87]*f->x[3] +
-            t->Phi[88]*f->x[4] + t->Phi[89]*f->x[5] + t->Phi[90]*f->x[6] + t->Phi[91]*f->x[8] +
-            t->Phi[92]*f->x[9] + t->Phi[93]*f->x[10] + t->Phi[94]*f->x[11] + t->Phi[95]*f->x[12] +
-            t->Phi[96]*f->x[13] + t->Phi[97]*f->x[14];
-    w->xn[7] = t->Phi[98]*f->x[0] + t->Phi[99]*f->x[1] + t->Phi[100]*f->x[2] + t->Phi[101]*f->x[3] +
-            t->Phi[102]*f->x[4] + t->Phi[103]*f->x[5] + t->Phi[104]*f->x[6] + t->Phi[105]*f->x[7] +
-            t->Phi[106]*f->x[8] + t->Phi[107]*f->x[9] + t->Phi[108]*f->x[10] + t->Phi[109]*f->x[11]
-            + t->Phi[110]*f->x[12] + t->Phi[111]*f->x[13] + t->Phi[112]*f->x[14];
-    w->xn[8] = t->Phi[113]*f->x[0] + t->Phi[114]*f->x[1] + t->Phi[115]*f->x[2] + t->Phi[116]*f->x[3]
-            + t->Phi[117]*f->x[4] + t->Phi[118]*f->x[5] + t->Phi[119]*f->x[6] + t->Phi[120]*f->x[8]
-            + t->Phi[121]*f->x[9] + t->Phi[122]*f->x[10] + t->Phi[123]*f->x[11] +
-            t->Phi[124]*f->x[12] + t->Phi[125]*f->x[13] + t->Phi[126]*f->x[14];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&t->Phi[0]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[2]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[4]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[6]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[8]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[10]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[12]), lane_pair_load(&f->x[13]));
+    w->xn[0] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[14]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[16]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[18]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[20]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[22]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[24]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[26]), lane_pair_load(&f->x[13]));
+    w->xn[1] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[28]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[30]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[32]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[34]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[36]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[38]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[40]), lane_pair_load(&f->x[13]));
+    w->xn[2] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[42]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[44]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[46]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[48]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[50]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[52]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[54]), lane_pair_load(&f->x[13]));
+    w->xn[3] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[56]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[58]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[60]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[62]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[64]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[66]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[68]), lane_pair_load(&f->x[13]));
+    w->xn[4] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[70]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[72]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[74]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[76]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[78]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[80]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[82]), lane_pair_load(&f->x[13]));
+    w->xn[5] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[84]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[86]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[88]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[90]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[92]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[94]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[96]), lane_pair_load(&f->x[13]));
+    w->xn[6] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&t->Phi[98]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[100]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[102]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[104]), lane_pair_load(&f->x[6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[106]), lane_pair_load(&f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[108]), lane_pair_load(&f->x[10]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[110]), lane_pair_load(&f->x[12]));
+    w->xn[7] = lane_pair_sum(acc) + t->Phi[112]*f->x[14];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[113]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[115]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[117]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[119]), lane_pair_of(f->x[6], f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[121]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[123]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[125]), lane_pair_load(&f->x[13]));
+    w->xn[8] = lane_pair_sum(acc);
 }
 
 INS_GPS15_BLOCK void phi_times_p_row_0(const ins_gps15_filter *restrict f, const
@@ -2491,43 +2756,79 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_0(const ins_gps15_transition *res
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[0] + w->M[1]*t->Phi[1] + w->M[2]*t->Phi[2] + w->M[3]*t->Phi[3] +
-            w->M[4]*t->Phi[4] + w->M[5]*t->Phi[5] + w->M[6]*t->Phi[6] + w->M[8]*t->Phi[7] +
-            w->M[9]*t->Phi[8] + w->M[10]*t->Phi[9] + w->M[11]*t->Phi[10] + w->M[12]*t->Phi[11] +
-            w->M[13]*t->Phi[12] + w->M[14]*t->Phi[13] + t->Qd[0]; w->Pn[0] = v; check += v;
-    v = w->M[0]*t->Phi[14] + w->M[1]*t->Phi[15] + w->M[2]*t->Phi[16] + w->M[3]*t->Phi[17] +
-            w->M[4]*t->Phi[18] + w->M[5]*t->Phi[19] + w->M[6]*t->Phi[20] + w->M[8]*t->Phi[21] +
-            w->M[9]*t->Phi[22] + w->M[10]*t->Phi[23] + w->M[11]*t->Phi[24] + w->M[12]*t->Phi[25] +
-            w->M[13]*t->Phi[26] + w->M[14]*t->Phi[27] + t->Qd[1]; w->Pn[1] = v; check += v;
-    v = w->M[0]*t->Phi[28] + w->M[1]*t->Phi[29] + w->M[2]*t->Phi[30] + w->M[3]*t->Phi[31] +
-            w->M[4]*t->Phi[32] + w->M[5]*t->Phi[33] + w->M[6]*t->Phi[34] + w->M[8]*t->Phi[35] +
-            w->M[9]*t->Phi[36] + w->M[10]*t->Phi[37] + w->M[11]*t->Phi[38] + w->M[12]*t->Phi[39] +
-            w->M[13]*t->Phi[40] + w->M[14]*t->Phi[41] + t->Qd[2]; w->Pn[2] = v; check += v;
-    v = w->M[0]*t->Phi[42] + w->M[1]*t->Phi[43] + w->M[2]*t->Phi[44] + w->M[3]*t->Phi[45] +
-            w->M[4]*t->Phi[46] + w->M[5]*t->Phi[47] + w->M[6]*t->Phi[48] + w->M[8]*t->Phi[49] +
-            w->M[9]*t->Phi[50] + w->M[10]*t->Phi[51] + w->M[11]*t->Phi[52] + w->M[12]*t->Phi[53] +
-            w->M[13]*t->Phi[54] + w->M[14]*t->Phi[55] + t->Qd[3]; w->Pn[3] = v; check += v;
-    v = w->M[0]*t->Phi[56] + w->M[1]*t->Phi[57] + w->M[2]*t->Phi[58] + w->M[3]*t->Phi[59] +
-            w->M[4]*t->Phi[60] + w->M[5]*t->Phi[61] + w->M[6]*t->Phi[62] + w->M[8]*t->Phi[63] +
-            w->M[9]*t->Phi[64] + w->M[10]*t->Phi[65] + w->M[11]*t->Phi[66] + w->M[12]*t->Phi[67] +
-            w->M[13]*t->Phi[68] + w->M[14]*t->Phi[69] + t->Qd[4]; w->Pn[4] = v; check += v;
-    v = w->M[0]*t->Phi[70] + w->M[1]*t->Phi[71] + w->M[2]*t->Phi[72] + w->M[3]*t->Phi[73] +
-            w->M[4]*t->Phi[74] + w->M[5]*t->Phi[75] + w->M[6]*t->Phi[76] + w->M[8]*t->Phi[77] +
-            w->M[9]*t->Phi[78] + w->M[10]*t->Phi[79] + w->M[11]*t->Phi[80] + w->M[12]*t->Phi[81] +
-            w->M[13]*t->Phi[82] + w->M[14]*t->Phi[83] + t->Qd[5]; w->Pn[5] = v; check += v;
-    v = w->M[0]*t->Phi[84] + w->M[1]*t->Phi[85] + w->M[2]*t->Phi[86] + w->M[3]*t->Phi[87] +
-            w->M[4]*t->Phi[88] + w->M[5]*t->Phi[89] + w->M[6]*t->Phi[90] + w->M[8]*t->Phi[91] +
-            w->M[9]*t->Phi[92] + w->M[10]*t->Phi[93] + w->M[11]*t->Phi[94] + w->M[12]*t->Phi[95] +
-            w->M[13]*t->Phi[96] + w->M[14]*t->Phi[97] + t->Qd[6]; w->Pn[6] = v; check += v;
-    v = w->M[0]*t->Phi[98] + w->M[1]*t->Phi[99] + w->M[2]*t->Phi[100] + w->M[3]*t->Phi[101] +
-            w->M[4]*t->Phi[102] + w->M[5]*t->Phi[103] + w->M[6]*t->Phi[104] + w->M[7]*t->Phi[105] +
-            w->M[8]*t->Phi[106] + w->M[9]*t->Phi[107] + w->M[10]*t->Phi[108] + w->M[11]*t->Phi[109]
-            + w->M[12]*t->Phi[110] + w->M[13]*t->Phi[111] + w->M[14]*t->Phi[112] + t->Qd[7];
-            w->Pn[7] = v; check += v;
-    v = w->M[0]*t->Phi[113] + w->M[1]*t->Phi[114] + w->M[2]*t->Phi[115] + w->M[3]*t->Phi[116] +
-            w->M[4]*t->Phi[117] + w->M[5]*t->Phi[118] + w->M[6]*t->Phi[119] + w->M[8]*t->Phi[120] +
-            w->M[9]*t->Phi[121] + w->M[10]*t->Phi[122] + w->M[11]*t->Phi[123] + w->M[12]*t->Phi[124]
-            + w->M[13]*t->Phi[125] + w->M[14]*t->Phi[126] + t->Qd[8]; w->Pn[8] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[4]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[10]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[12]));
+    v = lane_pair_sum(acc) + t->Qd[0]; w->Pn[0] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[16]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[18]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[26]));
+    v = lane_pair_sum(acc) + t->Qd[1]; w->Pn[1] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[28]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[32]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[34]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[40]));
+    v = lane_pair_sum(acc) + t->Qd[2]; w->Pn[2] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[46]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[52]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[54]));
+    v = lane_pair_sum(acc) + t->Qd[3]; w->Pn[3] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[68]));
+    v = lane_pair_sum(acc) + t->Qd[4]; w->Pn[4] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[82]));
+    v = lane_pair_sum(acc) + t->Qd[5]; w->Pn[5] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[84]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[86]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[88]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[96]));
+    v = lane_pair_sum(acc) + t->Qd[6]; w->Pn[6] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[110]));
+    v = lane_pair_sum(acc) + w->M[14]*t->Phi[112] + t->Qd[7]; w->Pn[7] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[125]));
+    v = lane_pair_sum(acc) + t->Qd[8]; w->Pn[8] = v; check += v;
     v = w->M[9]; w->Pn[9] = v; check += v;
     v = w->M[10]; w->Pn[10] = v; check += v;
     v = w->M[11]; w->Pn[11] = v; check += v;
@@ -2623,39 +2924,71 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_1(const ins_gps15_transition *res
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[14] + w->M[1]*t->Phi[15] + w->M[2]*t->Phi[16] + w->M[3]*t->Phi[17] +
-            w->M[4]*t->Phi[18] + w->M[5]*t->Phi[19] + w->M[6]*t->Phi[20] + w->M[8]*t->Phi[21] +
-            w->M[9]*t->Phi[22] + w->M[10]*t->Phi[23] + w->M[11]*t->Phi[24] + w->M[12]*t->Phi[25] +
-            w->M[13]*t->Phi[26] + w->M[14]*t->Phi[27] + t->Qd[15]; w->Pn[15] = v; check += v;
-    v = w->M[0]*t->Phi[28] + w->M[1]*t->Phi[29] + w->M[2]*t->Phi[30] + w->M[3]*t->Phi[31] +
-            w->M[4]*t->Phi[32] + w->M[5]*t->Phi[33] + w->M[6]*t->Phi[34] + w->M[8]*t->Phi[35] +
-            w->M[9]*t->Phi[36] + w->M[10]*t->Phi[37] + w->M[11]*t->Phi[38] + w->M[12]*t->Phi[39] +
-            w->M[13]*t->Phi[40] + w->M[14]*t->Phi[41] + t->Qd[16]; w->Pn[16] = v; check += v;
-    v = w->M[0]*t->Phi[42] + w->M[1]*t->Phi[43] + w->M[2]*t->Phi[44] + w->M[3]*t->Phi[45] +
-            w->M[4]*t->Phi[46] + w->M[5]*t->Phi[47] + w->M[6]*t->Phi[48] + w->M[8]*t->Phi[49] +
-            w->M[9]*t->Phi[50] + w->M[10]*t->Phi[51] + w->M[11]*t->Phi[52] + w->M[12]*t->Phi[53] +
-            w->M[13]*t->Phi[54] + w->M[14]*t->Phi[55] + t->Qd[17]; w->Pn[17] = v; check += v;
-    v = w->M[0]*t->Phi[56] + w->M[1]*t->Phi[57] + w->M[2]*t->Phi[58] + w->M[3]*t->Phi[59] +
-            w->M[4]*t->Phi[60] + w->M[5]*t->Phi[61] + w->M[6]*t->Phi[62] + w->M[8]*t->Phi[63] +
-            w->M[9]*t->Phi[64] + w->M[10]*t->Phi[65] + w->M[11]*t->Phi[66] + w->M[12]*t->Phi[67] +
-            w->M[13]*t->Phi[68] + w->M[14]*t->Phi[69] + t->Qd[18]; w->Pn[18] = v; check += v;
-    v = w->M[0]*t->Phi[70] + w->M[1]*t->Phi[71] + w->M[2]*t->Phi[72] + w->M[3]*t->Phi[73] +
-            w->M[4]*t->Phi[74] + w->M[5]*t->Phi[75] + w->M[6]*t->Phi[76] + w->M[8]*t->Phi[77] +
-            w->M[9]*t->Phi[78] + w->M[10]*t->Phi[79] + w->M[11]*t->Phi[80] + w->M[12]*t->Phi[81] +
-            w->M[13]*t->Phi[82] + w->M[14]*t->Phi[83] + t->Qd[19]; w->Pn[19] = v; check += v;
-    v = w->M[0]*t->Phi[84] + w->M[1]*t->Phi[85] + w->M[2]*t->Phi[86] + w->M[3]*t->Phi[87] +
-            w->M[4]*t->Phi[88] + w->M[5]*t->Phi[89] + w->M[6]*t->Phi[90] + w->M[8]*t->Phi[91] +
-            w->M[9]*t->Phi[92] + w->M[10]*t->Phi[93] + w->M[11]*t->Phi[94] + w->M[12]*t->Phi[95] +
-            w->M[13]*t->Phi[96] + w->M[14]*t->Phi[97] + t->Qd[20]; w->Pn[20] = v; check += v;
-    v = w->M[0]*t->Phi[98] + w->M[1]*t->Phi[99] + w->M[2]*t->Phi[100] + w->M[3]*t->Phi[101] +
-            w->M[4]*t->Phi[102] + w->M[5]*t->Phi[103] + w->M[6]*t->Phi[104] + w->M[7]*t->Phi[105] +
-            w->M[8]*t->Phi[106] + w->M[9]*t->Phi[107] + w->M[10]*t->Phi[108] + w->M[11]*t->Phi[109]
-            + w->M[12]*t->Phi[110] + w->M[13]*t->Phi[111] + w->M[14]*t->Phi[112] + t->Qd[21];
-            w->Pn[21] = v; check += v;
-    v = w->M[0]*t->Phi[113] + w->M[1]*t->Phi[114] + w->M[2]*t->Phi[115] + w->M[3]*t->Phi[116] +
-            w->M[4]*t->Phi[117] + w->M[5]*t->Phi[118] + w->M[6]*t->Phi[119] + w->M[8]*t->Phi[120] +
-            w->M[9]*t->Phi[121] + w->M[10]*t->Phi[122] + w->M[11]*t->Phi[123] + w->M[12]*t->Phi[124]
-            + w->M[13]*t->Phi[125] + w->M[14]*t->Phi[126] + t->Qd[22]; w->Pn[22] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[16]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[18]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[26]));
+    v = lane_pair_sum(acc) + t->Qd[15]; w->Pn[15] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[28]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[32]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[34]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[40]));
+    v = lane_pair_sum(acc) + t->Qd[16]; w->Pn[16] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[46]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[52]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[54]));
+    v = lane_pair_sum(acc) + t->Qd[17]; w->Pn[17] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[68]));
+    v = lane_pair_sum(acc) + t->Qd[18]; w->Pn[18] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[82]));
+    v = lane_pair_sum(acc) + t->Qd[19]; w->Pn[19] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[84]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[86]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[88]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[96]));
+    v = lane_pair_sum(acc) + t->Qd[20]; w->Pn[20] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[110]));
+    v = lane_pair_sum(acc) + w->M[14]*t->Phi[112] + t->Qd[21]; w->Pn[21] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[125]));
+    v = lane_pair_sum(acc) + t->Qd[22]; w->Pn[22] = v; check += v;
     v = w->M[9]; w->Pn[23] = v; check += v;
     v = w->M[10]; w->Pn[24] = v; check += v;
     v = w->M[11]; w->Pn[25] = v; check += v;
@@ -2751,35 +3084,63 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_2(const ins_gps15_transition *res
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[28] + w->M[1]*t->Phi[29] + w->M[2]*t->Phi[30] + w->M[3]*t->Phi[31] +
-            w->M[4]*t->Phi[32] + w->M[5]*t->Phi[33] + w->M[6]*t->Phi[34] + w->M[8]*t->Phi[35] +
-            w->M[9]*t->Phi[36] + w->M[10]*t->Phi[37] + w->M[11]*t->Phi[38] + w->M[12]*t->Phi[39] +
-            w->M[13]*t->Phi[40] + w->M[14]*t->Phi[41] + t->Qd[29]; w->Pn[29] = v; check += v;
-    v = w->M[0]*t->Phi[42] + w->M[1]*t->Phi[43] + w->M[2]*t->Phi[44] + w->M[3]*t->Phi[45] +
-            w->M[4]*t->Phi[46] + w->M[5]*t->Phi[47] + w->M[6]*t->Phi[48] + w->M[8]*t->Phi[49] +
-            w->M[9]*t->Phi[50] + w->M[10]*t->Phi[51] + w->M[11]*t->Phi[52] + w->M[12]*t->Phi[53] +
-            w->M[13]*t->Phi[54] + w->M[14]*t->Phi[55] + t->Qd[30]; w->Pn[30] = v; check += v;
-    v = w->M[0]*t->Phi[56] + w->M[1]*t->Phi[57] + w->M[2]*t->Phi[58] + w->M[3]*t->Phi[59] +
-            w->M[4]*t->Phi[60] + w->M[5]*t->Phi[61] + w->M[6]*t->Phi[62] + w->M[8]*t->Phi[63] +
-            w->M[9]*t->Phi[64] + w->M[10]*t->Phi[65] + w->M[11]*t->Phi[66] + w->M[12]*t->Phi[67] +
-            w->M[13]*t->Phi[68] + w->M[14]*t->Phi[69] + t->Qd[31]; w->Pn[31] = v; check += v;
-    v = w->M[0]*t->Phi[70] + w->M[1]*t->Phi[71] + w->M[2]*t->Phi[72] + w->M[3]*t->Phi[73] +
-            w->M[4]*t->Phi[74] + w->M[5]*t->Phi[75] + w->M[6]*t->Phi[76] + w->M[8]*t->Phi[77] +
-            w->M[9]*t->Phi[78] + w->M[10]*t->Phi[79] + w->M[11]*t->Phi[80] + w->M[12]*t->Phi[81] +
-            w->M[13]*t->Phi[82] + w->M[14]*t->Phi[83] + t->Qd[32]; w->Pn[32] = v; check += v;
-    v = w->M[0]*t->Phi[84] + w->M[1]*t->Phi[85] + w->M[2]*t->Phi[86] + w->M[3]*t->Phi[87] +
-            w->M[4]*t->Phi[88] + w->M[5]*t->Phi[89] + w->M[6]*t->Phi[90] + w->M[8]*t->Phi[91] +
-            w->M[9]*t->Phi[92] + w->M[10]*t->Phi[93] + w->M[11]*t->Phi[94] + w->M[12]*t->Phi[95] +
-            w->M[13]*t->Phi[96] + w->M[14]*t->Phi[97] + t->Qd[33]; w->Pn[33] = v; check += v;
-    v = w->M[0]*t->Phi[98] + w->M[1]*t->Phi[99] + w->M[2]*t->Phi[100] + w->M[3]*t->Phi[101] +
-            w->M[4]*t->Phi[102] + w->M[5]*t->Phi[103] + w->M[6]*t->Phi[104] + w->M[7]*t->Phi[105] +
-            w->M[8]*t->Phi[106] + w->M[9]*t->Phi[107] + w->M[10]*t->Phi[108] + w->M[11]*t->Phi[109]
-            + w->M[12]*t->Phi[110] + w->M[13]*t->Phi[111] + w->M[14]*t->Phi[112] + t->Qd[34];
-            w->Pn[34] = v; check += v;
-    v = w->M[0]*t->Phi[113] + w->M[1]*t->Phi[114] + w->M[2]*t->Phi[115] + w->M[3]*t->Phi[116] +
-            w->M[4]*t->Phi[117] + w->M[5]*t->Phi[118] + w->M[6]*t->Phi[119] + w->M[8]*t->Phi[120] +
-            w->M[9]*t->Phi[121] + w->M[10]*t->Phi[122] + w->M[11]*t->Phi[123] + w->M[12]*t->Phi[124]
-            + w->M[13]*t->Phi[125] + w->M[14]*t->Phi[126] + t->Qd[35]; w->Pn[35] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[28]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[32]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[34]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[40]));
+    v = lane_pair_sum(acc) + t->Qd[29]; w->Pn[29] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[46]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[52]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[54]));
+    v = lane_pair_sum(acc) + t->Qd[30]; w->Pn[30] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[68]));
+    v = lane_pair_sum(acc) + t->Qd[31]; w->Pn[31] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[82]));
+    v = lane_pair_sum(acc) + t->Qd[32]; w->Pn[32] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[84]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[86]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[88]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[96]));
+    v = lane_pair_sum(acc) + t->Qd[33]; w->Pn[33] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[110]));
+    v = lane_pair_sum(acc) + w->M[14]*t->Phi[112] + t->Qd[34]; w->Pn[34] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[125]));
+    v = lane_pair_sum(acc) + t->Qd[35]; w->Pn[35] = v; check += v;
     v = w->M[9]; w->Pn[36] = v; check += v;
     v = w->M[10]; w->Pn[37] = v; check += v;
     v = w->M[11]; w->Pn[38] = v; check += v;
@@ -2875,31 +3236,55 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_3(const ins_gps15_transition *res
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[42] + w->M[1]*t->Phi[43] + w->M[2]*t->Phi[44] + w->M[3]*t->Phi[45] +
-            w->M[4]*t->Phi[46] + w->M[5]*t->Phi[47] + w->M[6]*t->Phi[48] + w->M[8]*t->Phi[49] +
-            w->M[9]*t->Phi[50] + w->M[10]*t->Phi[51] + w->M[11]*t->Phi[52] + w->M[12]*t->Phi[53] +
-            w->M[13]*t->Phi[54] + w->M[14]*t->Phi[55] + t->Qd[42]; w->Pn[42] = v; check += v;
-    v = w->M[0]*t->Phi[56] + w->M[1]*t->Phi[57] + w->M[2]*t->Phi[58] + w->M[3]*t->Phi[59] +
-            w->M[4]*t->Phi[60] + w->M[5]*t->Phi[61] + w->M[6]*t->Phi[62] + w->M[8]*t->Phi[63] +
-            w->M[9]*t->Phi[64] + w->M[10]*t->Phi[65] + w->M[11]*t->Phi[66] + w->M[12]*t->Phi[67] +
-            w->M[13]*t->Phi[68] + w->M[14]*t->Phi[69] + t->Qd[43]; w->Pn[43] = v; check += v;
-    v = w->M[0]*t->Phi[70] + w->M[1]*t->Phi[71] + w->M[2]*t->Phi[72] + w->M[3]*t->Phi[73] +
-            w->M[4]*t->Phi[74] + w->M[5]*t->Phi[75] + w->M[6]*t->Phi[76] + w->M[8]*t->Phi[77] +
-            w->M[9]*t->Phi[78] + w->M[10]*t->Phi[79] + w->M[11]*t->Phi[80] + w->M[12]*t->Phi[81] +
-            w->M[13]*t->Phi[82] + w->M[14]*t->Phi[83] + t->Qd[44]; w->Pn[44] = v; check += v;
-    v = w->M[0]*t->Phi[84] + w->M[1]*t->Phi[85] + w->M[2]*t->Phi[86] + w->M[3]*t->Phi[87] +
-            w->M[4]*t->Phi[88] + w->M[5]*t->Phi[89] + w->M[6]*t->Phi[90] + w->M[8]*t->Phi[91] +
-            w->M[9]*t->Phi[92] + w->M[10]*t->Phi[93] + w->M[11]*t->Phi[94] + w->M[12]*t->Phi[95] +
-            w->M[13]*t->Phi[96] + w->M[14]*t->Phi[97] + t->Qd[45]; w->Pn[45] = v; check += v;
-    v = w->M[0]*t->Phi[98] + w->M[1]*t->Phi[99] + w->M[2]*t->Phi[100] + w->M[3]*t->Phi[101] +
-            w->M[4]*t->Phi[102] + w->M[5]*t->Phi[103] + w->M[6]*t->Phi[104] + w->M[7]*t->Phi[105] +
-            w->M[8]*t->Phi[106] + w->M[9]*t->Phi[107] + w->M[10]*t->Phi[108] + w->M[11]*t->Phi[109]
-            + w->M[12]*t->Phi[110] + w->M[13]*t->Phi[111] + w->M[14]*t->Phi[112] + t->Qd[46];
-            w->Pn[46] = v; check += v;
-    v = w->M[0]*t->Phi[113] + w->M[1]*t->Phi[114] + w->M[2]*t->Phi[115] + w->M[3]*t->Phi[116] +
-            w->M[4]*t->Phi[117] + w->M[5]*t->Phi[118] + w->M[6]*t->Phi[119] + w->M[8]*t->Phi[120] +
-            w->M[9]*t->Phi[121] + w->M[10]*t->Phi[122] + w->M[11]*t->Phi[123] + w->M[12]*t->Phi[124]
-            + w->M[13]*t->Phi[125] + w->M[14]*t->Phi[126] + t->Qd[47]; w->Pn[47] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[42]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[44]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[46]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[48]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[50]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[52]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[54]));
+    v = lane_pair_sum(acc) + t->Qd[42]; w->Pn[42] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[68]));
+    v = lane_pair_sum(acc) + t->Qd[43]; w->Pn[43] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[82]));
+    v = lane_pair_sum(acc) + t->Qd[44]; w->Pn[44] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[84]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[86]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[88]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[96]));
+    v = lane_pair_sum(acc) + t->Qd[45]; w->Pn[45] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[110]));
+    v = lane_pair_sum(acc) + w->M[14]*t->Phi[112] + t->Qd[46]; w->Pn[46] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[125]));
+    v = lane_pair_sum(acc) + t->Qd[47]; w->Pn[47] = v; check += v;
     v = w->M[9]; w->Pn[48] = v; check += v;
     v = w->M[10]; w->Pn[49] = v; check += v;
     v = w->M[11]; w->Pn[50] = v; check += v;
@@ -2995,27 +3380,47 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_4(const ins_gps15_transition *res
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[56] + w->M[1]*t->Phi[57] + w->M[2]*t->Phi[58] + w->M[3]*t->Phi[59] +
-            w->M[4]*t->Phi[60] + w->M[5]*t->Phi[61] + w->M[6]*t->Phi[62] + w->M[8]*t->Phi[63] +
-            w->M[9]*t->Phi[64] + w->M[10]*t->Phi[65] + w->M[11]*t->Phi[66] + w->M[12]*t->Phi[67] +
-            w->M[13]*t->Phi[68] + w->M[14]*t->Phi[69] + t->Qd[54]; w->Pn[54] = v; check += v;
-    v = w->M[0]*t->Phi[70] + w->M[1]*t->Phi[71] + w->M[2]*t->Phi[72] + w->M[3]*t->Phi[73] +
-            w->M[4]*t->Phi[74] + w->M[5]*t->Phi[75] + w->M[6]*t->Phi[76] + w->M[8]*t->Phi[77] +
-            w->M[9]*t->Phi[78] + w->M[10]*t->Phi[79] + w->M[11]*t->Phi[80] + w->M[12]*t->Phi[81] +
-            w->M[13]*t->Phi[82] + w->M[14]*t->Phi[83] + t->Qd[55]; w->Pn[55] = v; check += v;
-    v = w->M[0]*t->Phi[84] + w->M[1]*t->Phi[85] + w->M[2]*t->Phi[86] + w->M[3]*t->Phi[87] +
-            w->M[4]*t->Phi[88] + w->M[5]*t->Phi[89] + w->M[6]*t->Phi[90] + w->M[8]*t->Phi[91] +
-            w->M[9]*t->Phi[92] + w->M[10]*t->Phi[93] + w->M[11]*t->Phi[94] + w->M[12]*t->Phi[95] +
-            w->M[13]*t->Phi[96] + w->M[14]*t->Phi[97] + t->Qd[56]; w->Pn[56] = v; check += v;
-    v = w->M[0]*t->Phi[98] + w->M[1]*t->Phi[99] + w->M[2]*t->Phi[100] + w->M[3]*t->Phi[101] +
-            w->M[4]*t->Phi[102] + w->M[5]*t->Phi[103] + w->M[6]*t->Phi[104] + w->M[7]*t->Phi[105] +
-            w->M[8]*t->Phi[106] + w->M[9]*t->Phi[107] + w->M[10]*t->Phi[108] + w->M[11]*t->Phi[109]
-            + w->M[12]*t->Phi[110] + w->M[13]*t->Phi[111] + w->M[14]*t->Phi[112] + t->Qd[57];
-            w->Pn[57] = v; check += v;
-    v = w->M[0]*t->Phi[113] + w->M[1]*t->Phi[114] + w->M[2]*t->Phi[115] + w->M[3]*t->Phi[116] +
-            w->M[4]*t->Phi[117] + w->M[5]*t->Phi[118] + w->M[6]*t->Phi[119] + w->M[8]*t->Phi[120] +
-            w->M[9]*t->Phi[121] + w->M[10]*t->Phi[122] + w->M[11]*t->Phi[123] + w->M[12]*t->Phi[124]
-            + w->M[13]*t->Phi[125] + w->M[14]*t->Phi[126] + t->Qd[58]; w->Pn[58] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[68]));
+    v = lane_pair_sum(acc) + t->Qd[54]; w->Pn[54] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[82]));
+    v = lane_pair_sum(acc) + t->Qd[55]; w->Pn[55] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[84]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[86]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[88]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[96]));
+    v = lane_pair_sum(acc) + t->Qd[56]; w->Pn[56] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[110]));
+    v = lane_pair_sum(acc) + w->M[14]*t->Phi[112] + t->Qd[57]; w->Pn[57] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[125]));
+    v = lane_pair_sum(acc) + t->Qd[58]; w->Pn[58] = v; check += v;
     v = w->M[9]; w->Pn[59] = v; check += v;
     v = w->M[10]; w->Pn[60] = v; check += v;
     v = w->M[11]; w->Pn[61] = v; check += v;
@@ -3111,23 +3516,39 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_5(const ins_gps15_transition *res
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[70] + w->M[1]*t->Phi[71] + w->M[2]*t->Phi[72] + w->M[3]*t->Phi[73] +
-            w->M[4]*t->Phi[74] + w->M[5]*t->Phi[75] + w->M[6]*t->Phi[76] + w->M[8]*t->Phi[77] +
-            w->M[9]*t->Phi[78] + w->M[10]*t->Phi[79] + w->M[11]*t->Phi[80] + w->M[12]*t->Phi[81] +
-            w->M[13]*t->Phi[82] + w->M[14]*t->Phi[83] + t->Qd[65]; w->Pn[65] = v; check += v;
-    v = w->M[0]*t->Phi[84] + w->M[1]*t->Phi[85] + w->M[2]*t->Phi[86] + w->M[3]*t->Phi[87] +
-            w->M[4]*t->Phi[88] + w->M[5]*t->Phi[89] + w->M[6]*t->Phi[90] + w->M[8]*t->Phi[91] +
-            w->M[9]*t->Phi[92] + w->M[10]*t->Phi[93] + w->M[11]*t->Phi[94] + w->M[12]*t->Phi[95] +
-            w->M[13]*t->Phi[96] + w->M[14]*t->Phi[97] + t->Qd[66]; w->Pn[66] = v; check += v;
-    v = w->M[0]*t->Phi[98] + w->M[1]*t->Phi[99] + w->M[2]*t->Phi[100] + w->M[3]*t->Phi[101] +
-            w->M[4]*t->Phi[102] + w->M[5]*t->Phi[103] + w->M[6]*t->Phi[104] + w->M[7]*t->Phi[105] +
-            w->M[8]*t->Phi[106] + w->M[9]*t->Phi[107] + w->M[10]*t->Phi[108] + w->M[11]*t->Phi[109]
-            + w->M[12]*t->Phi[110] + w->M[13]*t->Phi[111] + w->M[14]*t->Phi[112] + t->Qd[67];
-            w->Pn[67] = v; check += v;
-    v = w->M[0]*t->Phi[113] + w->M[1]*t->Phi[114] + w->M[2]*t->Phi[115] + w->M[3]*t->Phi[116] +
-            w->M[4]*t->Phi[117] + w->M[5]*t->Phi[118] + w->M[6]*t->Phi[119] + w->M[8]*t->Phi[120] +
-            w->M[9]*t->Phi[121] + w->M[10]*t->Phi[122] + w->M[11]*t->Phi[123] + w->M[12]*t->Phi[124]
-            + w->M[13]*t->Phi[125] + w->M[14]*t->Phi[126] + t->Qd[68]; w->Pn[68] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[78]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[80]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[82]));
+    v = lane_pair_sum(acc) + t->Qd[65]; w->Pn[65] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[84]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[86]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[88]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[96]));
+    v = lane_pair_sum(acc) + t->Qd[66]; w->Pn[66] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[110]));
+    v = lane_pair_sum(acc) + w->M[14]*t->Phi[112] + t->Qd[67]; w->Pn[67] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[125]));
+    v = lane_pair_sum(acc) + t->Qd[68]; w->Pn[68] = v; check += v;
     v = w->M[9]; w->Pn[69] = v; check += v;
     v = w->M[10]; w->Pn[70] = v; check += v;
     v = w->M[11]; w->Pn[71] = v; check += v;
@@ -3223,19 +3644,31 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_6(const ins_gps15_transition *res
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[84] + w->M[1]*t->Phi[85] + w->M[2]*t->Phi[86] + w->M[3]*t->Phi[87] +
-            w->M[4]*t->Phi[88] + w->M[5]*t->Phi[89] + w->M[6]*t->Phi[90] + w->M[8]*t->Phi[91] +
-            w->M[9]*t->Phi[92] + w->M[10]*t->Phi[93] + w->M[11]*t->Phi[94] + w->M[12]*t->Phi[95] +
-            w->M[13]*t->Phi[96] + w->M[14]*t->Phi[97] + t->Qd[75]; w->Pn[75] = v; check += v;
-    v = w->M[0]*t->Phi[98] + w->M[1]*t->Phi[99] + w->M[2]*t->Phi[100] + w->M[3]*t->Phi[101] +
-            w->M[4]*t->Phi[102] + w->M[5]*t->Phi[103] + w->M[6]*t->Phi[104] + w->M[7]*t->Phi[105] +
-            w->M[8]*t->Phi[106] + w->M[9]*t->Phi[107] + w->M[10]*t->Phi[108] + w->M[11]*t->Phi[109]
-            + w->M[12]*t->Phi[110] + w->M[13]*t->Phi[111] + w->M[14]*t->Phi[112] + t->Qd[76];
-            w->Pn[76] = v; check += v;
-    v = w->M[0]*t->Phi[113] + w->M[1]*t->Phi[114] + w->M[2]*t->Phi[115] + w->M[3]*t->Phi[116] +
-            w->M[4]*t->Phi[117] + w->M[5]*t->Phi[118] + w->M[6]*t->Phi[119] + w->M[8]*t->Phi[120] +
-            w->M[9]*t->Phi[121] + w->M[10]*t->Phi[122] + w->M[11]*t->Phi[123] + w->M[12]*t->Phi[124]
-            + w->M[13]*t->Phi[125] + w->M[14]*t->Phi[126] + t->Qd[77]; w->Pn[77] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[84]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[86]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[88]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[96]));
+    v = lane_pair_sum(acc) + t->Qd[75]; w->Pn[75] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[110]));
+    v = lane_pair_sum(acc) + w->M[14]*t->Phi[112] + t->Qd[76]; w->Pn[76] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[125]));
+    v = lane_pair_sum(acc) + t->Qd[77]; w->Pn[77] = v; check += v;
     v = w->M[9]; w->Pn[78] = v; check += v;
     v = w->M[10]; w->Pn[79] = v; check += v;
     v = w->M[11]; w->Pn[80] = v; check += v;
@@ -3331,15 +3764,23 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_7(const ins_gps15_transition *res
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[98] + w->M[1]*t->Phi[99] + w->M[2]*t->Phi[100] + w->M[3]*t->Phi[101] +
-            w->M[4]*t->Phi[102] + w->M[5]*t->Phi[103] + w->M[6]*t->Phi[104] + w->M[7]*t->Phi[105] +
-            w->M[8]*t->Phi[106] + w->M[9]*t->Phi[107] + w->M[10]*t->Phi[108] + w->M[11]*t->Phi[109]
-            + w->M[12]*t->Phi[110] + w->M[13]*t->Phi[111] + w->M[14]*t->Phi[112] + t->Qd[84];
-            w->Pn[84] = v; check += v;
-    v = w->M[0]*t->Phi[113] + w->M[1]*t->Phi[114] + w->M[2]*t->Phi[115] + w->M[3]*t->Phi[116] +
-            w->M[4]*t->Phi[117] + w->M[5]*t->Phi[118] + w->M[6]*t->Phi[119] + w->M[8]*t->Phi[120] +
-            w->M[9]*t->Phi[121] + w->M[10]*t->Phi[122] + w->M[11]*t->Phi[123] + w->M[12]*t->Phi[124]
-            + w->M[13]*t->Phi[125] + w->M[14]*t->Phi[126] + t->Qd[85]; w->Pn[85] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[104]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[106]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[110]));
+    v = lane_pair_sum(acc) + w->M[14]*t->Phi[112] + t->Qd[84]; w->Pn[84] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[125]));
+    v = lane_pair_sum(acc) + t->Qd[85]; w->Pn[85] = v; check += v;
     v = w->M[9]; w->Pn[86] = v; check += v;
     v = w->M[10]; w->Pn[87] = v; check += v;
     v = w->M[11]; w->Pn[88] = v; check += v;
@@ -3435,10 +3876,15 @@ static ins_gps15_scalar propagate_row_8(const ins_gps15_transition *restrict t,
         ins_gps15_filter_scratch *restrict w)
 {
     ins_gps15_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[113] + w->M[1]*t->Phi[114] + w->M[2]*t->Phi[115] + w->M[3]*t->Phi[116] +
-            w->M[4]*t->Phi[117] + w->M[5]*t->Phi[118] + w->M[6]*t->Phi[119] + w->M[8]*t->Phi[120] +
-            w->M[9]*t->Phi[121] + w->M[10]*t->Phi[122] + w->M[11]*t->Phi[123] + w->M[12]*t->Phi[124]
-            + w->M[13]*t->Phi[125] + w->M[14]*t->Phi[126] + t->Qd[92]; w->Pn[92] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[113]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[115]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[117]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[6], w->M[8]), lane_pair_load(&t->Phi[119]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[121]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[123]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[125]));
+    v = lane_pair_sum(acc) + t->Qd[92]; w->Pn[92] = v; check += v;
     v = w->M[9]; w->Pn[93] = v; check += v;
     v = w->M[10]; w->Pn[94] = v; check += v;
     v = w->M[11]; w->Pn[95] = v; check += v;

@@ -422,6 +422,92 @@ int ned_doppler32_augmented_matrices_evaluate(const ned_doppler32_augmented_para
 #define NED_DOPPLER32_AUGMENTED_BLOCK static
 #endif
 
+/* Sums of products in two lanes (modelgen/codegen/kernels.py, lane_split): the products pair
+   up by position, the first of each pair is added in one lane and the second in the other,
+   then the two lanes are added. Under GCC or Clang with SSE2 (unless
+           NED_DOPPLER32_AUGMENTED_SCALAR_LANE_PAIRS
+   is defined) a lane pair is an SSE2 vector, otherwise two scalars: the same operations in the
+   same order, bit for bit the same result. */
+#if defined(__GNUC__) && defined(__SSE2__) && !defined(NED_DOPPLER32_AUGMENTED_SCALAR_LANE_PAIRS)
+typedef double lane_pair __attribute__((vector_size(2 * sizeof(double))));
+
+static inline lane_pair lane_pair_load(const double *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    memcpy(&lanes, a, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const double a, const double b)
+{
+    lane_pair lanes;
+    const double values[2] = { a, b };
+    memcpy(&lanes, values, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    return a * b;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    return acc + a * b;
+}
+
+static inline double lane_pair_sum(const lane_pair acc)
+{
+    double lanes[2];
+    memcpy(lanes, &acc, sizeof lanes);
+    return lanes[0] + lanes[1];
+}
+#else
+typedef struct {
+    ned_doppler32_augmented_scalar lane[2];
+} lane_pair;
+
+static inline lane_pair lane_pair_load(const ned_doppler32_augmented_scalar *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    lanes.lane[0] = a[0];
+    lanes.lane[1] = a[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const ned_doppler32_augmented_scalar a, const
+        ned_doppler32_augmented_scalar b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a;
+    lanes.lane[1] = b;
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a.lane[0] * b.lane[0];
+    lanes.lane[1] = a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = acc.lane[0] + a.lane[0] * b.lane[0];
+    lanes.lane[1] = acc.lane[1] + a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline ned_doppler32_augmented_scalar lane_pair_sum(const lane_pair acc)
+{
+    return acc.lane[0] + acc.lane[1];
+}
+#endif
+
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static ned_doppler32_augmented_scalar power_of_two(const int e)
 {
@@ -3028,27 +3114,49 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
         ned_doppler32_augmented_discretize_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar check;
-    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
-            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
-            + w->term[1][5]*w->term[0][5];
-    t->Qd[1] = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] +
-            w->term[1][2]*w->term[0][8] + w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10]
-            + w->term[1][5]*w->term[0][11];
-    t->Qd[2] = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] +
-            w->term[1][2]*w->term[0][14] + w->term[1][3]*w->term[0][15] +
-            w->term[1][4]*w->term[0][16] + w->term[1][5]*w->term[0][17];
-    t->Qd[3] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
-            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
-            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23];
-    t->Qd[4] = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] +
-            w->term[1][2]*w->term[0][26] + w->term[1][3]*w->term[0][27] +
-            w->term[1][4]*w->term[0][28] + w->term[1][5]*w->term[0][29];
-    t->Qd[5] = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] +
-            w->term[1][2]*w->term[0][32] + w->term[1][3]*w->term[0][33] +
-            w->term[1][4]*w->term[0][34] + w->term[1][5]*w->term[0][35];
-    t->Qd[6] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
-            w->term[1][2]*w->term[0][38] + w->term[1][3]*w->term[0][39] +
-            w->term[1][4]*w->term[0][40] + w->term[1][5]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][4]));
+    t->Qd[0] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][10]));
+    t->Qd[1] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[2] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[3] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[4] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[5] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[6] = lane_pair_sum(acc);
     t->Qd[10] = w->term[1][0]*w->term[0][42];
     t->Qd[11] = w->term[1][1]*w->term[0][43];
     t->Qd[12] = w->term[1][2]*w->term[0][44];
@@ -3065,24 +3173,43 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
         ned_doppler32_augmented_discretize_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar check;
-    t->Qd[32] = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
-            w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9] +
-            w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11];
-    t->Qd[33] = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] +
-            w->term[1][8]*w->term[0][14] + w->term[1][9]*w->term[0][15] +
-            w->term[1][10]*w->term[0][16] + w->term[1][11]*w->term[0][17];
-    t->Qd[34] = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] +
-            w->term[1][8]*w->term[0][20] + w->term[1][9]*w->term[0][21] +
-            w->term[1][10]*w->term[0][22] + w->term[1][11]*w->term[0][23];
-    t->Qd[35] = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
-            w->term[1][8]*w->term[0][26] + w->term[1][9]*w->term[0][27] +
-            w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29];
-    t->Qd[36] = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] +
-            w->term[1][8]*w->term[0][32] + w->term[1][9]*w->term[0][33] +
-            w->term[1][10]*w->term[0][34] + w->term[1][11]*w->term[0][35];
-    t->Qd[37] = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] +
-            w->term[1][8]*w->term[0][38] + w->term[1][9]*w->term[0][39] +
-            w->term[1][10]*w->term[0][40] + w->term[1][11]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][10]));
+    t->Qd[32] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[33] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[34] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[35] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[36] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[37] = lane_pair_sum(acc);
     t->Qd[41] = w->term[1][6]*w->term[0][42];
     t->Qd[42] = w->term[1][7]*w->term[0][43];
     t->Qd[43] = w->term[1][8]*w->term[0][44];
@@ -3099,21 +3226,37 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
         ned_doppler32_augmented_discretize_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar check;
-    t->Qd[63] = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17];
-    t->Qd[64] = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
-            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23];
-    t->Qd[65] = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
-            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29];
-    t->Qd[66] = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
-            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35];
-    t->Qd[67] = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
-            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[63] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[64] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[65] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[66] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[67] = lane_pair_sum(acc);
     t->Qd[71] = w->term[1][12]*w->term[0][42];
     t->Qd[72] = w->term[1][13]*w->term[0][43];
     t->Qd[73] = w->term[1][14]*w->term[0][44];
@@ -3130,18 +3273,31 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
         ned_doppler32_augmented_discretize_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar check;
-    t->Qd[93] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23];
-    t->Qd[94] = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
-            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29];
-    t->Qd[95] = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
-            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35];
-    t->Qd[96] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[93] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[94] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[95] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[96] = lane_pair_sum(acc);
     t->Qd[100] = w->term[1][18]*w->term[0][42];
     t->Qd[101] = w->term[1][19]*w->term[0][43];
     t->Qd[102] = w->term[1][20]*w->term[0][44];
@@ -3157,15 +3313,25 @@ static ned_doppler32_augmented_scalar process_noise_row_4(ned_doppler32_augmente
         *restrict t, const ned_doppler32_augmented_discretize_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar check;
-    t->Qd[122] = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29];
-    t->Qd[123] = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
-            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35];
-    t->Qd[124] = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
-            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
-            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[122] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[123] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[124] = lane_pair_sum(acc);
     t->Qd[128] = w->term[1][24]*w->term[0][42];
     t->Qd[129] = w->term[1][25]*w->term[0][43];
     t->Qd[130] = w->term[1][26]*w->term[0][44];
@@ -3181,12 +3347,19 @@ static ned_doppler32_augmented_scalar process_noise_row_5(ned_doppler32_augmente
         *restrict t, const ned_doppler32_augmented_discretize_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar check;
-    t->Qd[150] = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
-            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35];
-    t->Qd[151] = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
-            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
-            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][30]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[150] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][30]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[151] = lane_pair_sum(acc);
     t->Qd[155] = w->term[1][30]*w->term[0][42];
     t->Qd[156] = w->term[1][31]*w->term[0][43];
     t->Qd[157] = w->term[1][32]*w->term[0][44];
@@ -3202,9 +3375,13 @@ static ned_doppler32_augmented_scalar process_noise_row_6(ned_doppler32_augmente
         *restrict t, const ned_doppler32_augmented_discretize_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar check;
-    t->Qd[177] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[177] = lane_pair_sum(acc);
     t->Qd[181] = w->term[1][36]*w->term[0][42];
     t->Qd[182] = w->term[1][37]*w->term[0][43];
     t->Qd[183] = w->term[1][38]*w->term[0][44];
@@ -3517,62 +3694,108 @@ NED_DOPPLER32_AUGMENTED_BLOCK void state_predict(const ned_doppler32_augmented_f
         const ned_doppler32_augmented_transition *restrict t,
                 ned_doppler32_augmented_filter_scratch *restrict w)
 {
-    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
-            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[7] + t->Phi[7]*f->x[8] +
-            t->Phi[8]*f->x[9] + t->Phi[9]*f->x[10] + t->Phi[10]*f->x[11] + t->Phi[11]*f->x[12] +
-            t->Phi[12]*f->x[13] + t->Phi[13]*f->x[14] + t->Phi[14]*f->x[15] + t->Phi[15]*f->x[18] +
-            t->Phi[16]*f->x[19] + t->Phi[17]*f->x[20] + t->Phi[18]*f->x[21] + t->Phi[19]*f->x[22] +
-            t->Phi[20]*f->x[23] + t->Phi[21]*f->x[24] + t->Phi[22]*f->x[25] + t->Phi[23]*f->x[26] +
-            t->Phi[24]*f->x[27] + t->Phi[25]*f->x[28] + t->Phi[26]*f->x[29];
-    w->xn[1] = t->Phi[27]*f->x[0] + t->Phi[28]*f->x[1] + t->Phi[29]*f->x[2] + t->Phi[30]*f->x[3] +
-            t->Phi[31]*f->x[4] + t->Phi[32]*f->x[5] + t->Phi[33]*f->x[7] + t->Phi[34]*f->x[8] +
-            t->Phi[35]*f->x[9] + t->Phi[36]*f->x[10] + t->Phi[37]*f->x[11] + t->Phi[38]*f->x[12] +
-            t->Phi[39]*f->x[13] + t->Phi[40]*f->x[14] + t->Phi[41]*f->x[15] + t->Phi[42]*f->x[18] +
-            t->Phi[43]*f->x[19] + t->Phi[44]*f->x[20] + t->Phi[45]*f->x[21] + t->Phi[46]*f->x[22] +
-            t->Phi[47]*f->x[23] + t->Phi[48]*f->x[24] + t->Phi[49]*f->x[25] + t->Phi[50]*f->x[26] +
-            t->Phi[51]*f->x[27] + t->Phi[52]*f->x[28] + t->Phi[53]*f->x[29];
-    w->xn[2] = t->Phi[54]*f->x[0] + t->Phi[55]*f->x[1] + t->Phi[56]*f->x[2] + t->Phi[57]*f->x[3] +
-            t->Phi[58]*f->x[4] + t->Phi[59]*f->x[5] + t->Phi[60]*f->x[7] + t->Phi[61]*f->x[8] +
-            t->Phi[62]*f->x[9] + t->Phi[63]*f->x[10] + t->Phi[64]*f->x[11] + t->Phi[65]*f->x[12] +
-            t->Phi[66]*f->x[13] + t->Phi[67]*f->x[14] + t->Phi[68]*f->x[15] + t->Phi[69]*f->x[18] +
-            t->Phi[70]*f->x[19] + t->Phi[71]*f->x[20] + t->Phi[72]*f->x[21] + t->Phi[73]*f->x[22] +
-            t->Phi[74]*f->x[23] + t->Phi[75]*f->x[24] + t->Phi[76]*f->x[25] + t->Phi[77]*f->x[26] +
-            t->Phi[78]*f->x[27] + t->Phi[79]*f->x[28] + t->Phi[80]*f->x[29];
-    w->xn[3] = t->Phi[81]*f->x[0] + t->Phi[82]*f->x[1] + t->Phi[83]*f->x[2] + t->Phi[84]*f->x[3] +
-            t->Phi[85]*f->x[4] + t->Phi[86]*f->x[5] + t->Phi[87]*f->x[7] + t->Phi[88]*f->x[8] +
-            t->Phi[89]*f->x[9] + t->Phi[90]*f->x[10] + t->Phi[91]*f->x[11] + t->Phi[92]*f->x[12] +
-            t->Phi[93]*f->x[13] + t->Phi[94]*f->x[14] + t->Phi[95]*f->x[15] + t->Phi[96]*f->x[18] +
-            t->Phi[97]*f->x[19] + t->Phi[98]*f->x[20] + t->Phi[99]*f->x[21] + t->Phi[100]*f->x[22] +
-            t->Phi[101]*f->x[23] + t->Phi[102]*f->x[24] + t->Phi[103]*f->x[25] +
-            t->Phi[104]*f->x[26] + t->Phi[105]*f->x[27] + t->Phi[106]*f->x[28] +
-            t->Phi[107]*f->x[29];
-    w->xn[4] = t->Phi[108]*f->x[0] + t->Phi[109]*f->x[1] + t->Phi[110]*f->x[2] + t->Phi[111]*f->x[3]
-            + t->Phi[112]*f->x[4] + t->Phi[113]*f->x[5] + t->Phi[114]*f->x[7] + t->Phi[115]*f->x[8]
-            + t->Phi[116]*f->x[9] + t->Phi[117]*f->x[10] + t->Phi[118]*f->x[11] +
-            t->Phi[119]*f->x[12] + t->Phi[120]*f->x[13] + t->Phi[121]*f->x[14] +
-            t->Phi[122]*f->x[15] + t->Phi[123]*f->x[18] + t->Phi[124]*f->x[19] +
-            t->Phi[125]*f->x[20] + t->Phi[126]*f->x[21] + t->Phi[127]*f->x[22] +
-            t->Phi[128]*f->x[23] + t->Phi[129]*f->x[24] + t->Phi[130]*f->x[25] +
-            t->Phi[131]*f->x[26] + t->Phi[132]*f->x[27] + t->Phi[133]*f->x[28] +
-            t->Phi[134]*f->x[29];
-    w->xn[5] = t->Phi[135]*f->x[0] + t->Phi[136]*f->x[1] + t->Phi[137]*f->x[2] + t->Phi[138]*f->x[3]
-            + t->Phi[139]*f->x[4] + t->Phi[140]*f->x[5] + t->Phi[141]*f->x[7] + t->Phi[142]*f->x[8]
-            + t->Phi[143]*f->x[9] + t->Phi[144]*f->x[10] + t->Phi[145]*f->x[11] +
-            t->Phi[146]*f->x[12] + t->Phi[147]*f->x[13] + t->Phi[148]*f->x[14] +
-            t->Phi[149]*f->x[15] + t->Phi[150]*f->x[18] + t->Phi[151]*f->x[19] +
-            t->Phi[152]*f->x[20] + t->Phi[153]*f->x[21] + t->Phi[154]*f->x[22] +
-            t->Phi[155]*f->x[23] + t->Phi[156]*f->x[24] + t->Phi[157]*f->x[25] +
-            t->Phi[158]*f->x[26] + t->Phi[159]*f->x[27] + t->Phi[160]*f->x[28] +
-            t->Phi[161]*f->x[29];
-    w->xn[6] = t->Phi[162]*f->x[0] + t->Phi[163]*f->x[1] + t->Phi[164]*f->x[2] + t->Phi[165]*f->x[3]
-            + t->Phi[166]*f->x[4] + t->Phi[167]*f->x[5] + t->Phi[168]*f->x[6] + t->Phi[169]*f->x[7]
-            + t->Phi[170]*f->x[8] + t->Phi[171]*f->x[9] + t->Phi[172]*f->x[10] +
-            t->Phi[173]*f->x[11] + t->Phi[174]*f->x[12] + t->Phi[175]*f->x[13] +
-            t->Phi[176]*f->x[14] + t->Phi[177]*f->x[15] + t->Phi[178]*f->x[18] +
-            t->Phi[179]*f->x[19] + t->Phi[180]*f->x[20] + t->Phi[181]*f->x[21] +
-            t->Phi[182]*f->x[22] + t->Phi[183]*f->x[23] + t->Phi[184]*f->x[24] +
-            t->Phi[185]*f->x[25] + t->Phi[186]*f->x[26] + t->Phi[187]*f->x[27] +
-            t->Phi[188]*f->x[28] + t->Phi[189]*f->x[29];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&t->Phi[0]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[2]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[4]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[6]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[8]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[10]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[12]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[14]), lane_pair_of(f->x[15], f->x[18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[16]), lane_pair_load(&f->x[19]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[18]), lane_pair_load(&f->x[21]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[20]), lane_pair_load(&f->x[23]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[22]), lane_pair_load(&f->x[25]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[24]), lane_pair_load(&f->x[27]));
+    w->xn[0] = lane_pair_sum(acc) + t->Phi[26]*f->x[29];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[27]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[29]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[31]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[33]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[35]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[37]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[39]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[41]), lane_pair_of(f->x[15], f->x[18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[43]), lane_pair_load(&f->x[19]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[45]), lane_pair_load(&f->x[21]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[47]), lane_pair_load(&f->x[23]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[49]), lane_pair_load(&f->x[25]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[51]), lane_pair_load(&f->x[27]));
+    w->xn[1] = lane_pair_sum(acc) + t->Phi[53]*f->x[29];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[54]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[56]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[58]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[60]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[62]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[64]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[66]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[68]), lane_pair_of(f->x[15], f->x[18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[70]), lane_pair_load(&f->x[19]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[72]), lane_pair_load(&f->x[21]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[74]), lane_pair_load(&f->x[23]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[76]), lane_pair_load(&f->x[25]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[78]), lane_pair_load(&f->x[27]));
+    w->xn[2] = lane_pair_sum(acc) + t->Phi[80]*f->x[29];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[81]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[83]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[85]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[87]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[89]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[91]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[93]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[95]), lane_pair_of(f->x[15], f->x[18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[97]), lane_pair_load(&f->x[19]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[99]), lane_pair_load(&f->x[21]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[101]), lane_pair_load(&f->x[23]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[103]), lane_pair_load(&f->x[25]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[105]), lane_pair_load(&f->x[27]));
+    w->xn[3] = lane_pair_sum(acc) + t->Phi[107]*f->x[29];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[108]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[110]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[112]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[114]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[116]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[118]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[120]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[122]), lane_pair_of(f->x[15],
+            f->x[18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[124]), lane_pair_load(&f->x[19]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[126]), lane_pair_load(&f->x[21]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[128]), lane_pair_load(&f->x[23]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[130]), lane_pair_load(&f->x[25]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[132]), lane_pair_load(&f->x[27]));
+    w->xn[4] = lane_pair_sum(acc) + t->Phi[134]*f->x[29];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[135]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[137]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[139]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[141]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[143]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[145]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[147]), lane_pair_load(&f->x[13]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[149]), lane_pair_of(f->x[15],
+            f->x[18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[151]), lane_pair_load(&f->x[19]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[153]), lane_pair_load(&f->x[21]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[155]), lane_pair_load(&f->x[23]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[157]), lane_pair_load(&f->x[25]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[159]), lane_pair_load(&f->x[27]));
+    w->xn[5] = lane_pair_sum(acc) + t->Phi[161]*f->x[29];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[162]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[164]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[166]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[168]), lane_pair_load(&f->x[6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[170]), lane_pair_load(&f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[172]), lane_pair_load(&f->x[10]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[174]), lane_pair_load(&f->x[12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[176]), lane_pair_load(&f->x[14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[178]), lane_pair_load(&f->x[18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[180]), lane_pair_load(&f->x[20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[182]), lane_pair_load(&f->x[22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[184]), lane_pair_load(&f->x[24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[186]), lane_pair_load(&f->x[26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[188]), lane_pair_load(&f->x[28]));
+    w->xn[6] = lane_pair_sum(acc);
     w->xn[10] = t->Phi[193]*f->x[10];
     w->xn[11] = t->Phi[194]*f->x[11];
     w->xn[12] = t->Phi[195]*f->x[12];
@@ -3882,65 +4105,108 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_0(con
         *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[0] + w->M[1]*t->Phi[1] + w->M[2]*t->Phi[2] + w->M[3]*t->Phi[3] +
-            w->M[4]*t->Phi[4] + w->M[5]*t->Phi[5] + w->M[7]*t->Phi[6] + w->M[8]*t->Phi[7] +
-            w->M[9]*t->Phi[8] + w->M[10]*t->Phi[9] + w->M[11]*t->Phi[10] + w->M[12]*t->Phi[11] +
-            w->M[13]*t->Phi[12] + w->M[14]*t->Phi[13] + w->M[15]*t->Phi[14] + w->M[18]*t->Phi[15] +
-            w->M[19]*t->Phi[16] + w->M[20]*t->Phi[17] + w->M[21]*t->Phi[18] + w->M[22]*t->Phi[19] +
-            w->M[23]*t->Phi[20] + w->M[24]*t->Phi[21] + w->M[25]*t->Phi[22] + w->M[26]*t->Phi[23] +
-            w->M[27]*t->Phi[24] + w->M[28]*t->Phi[25] + w->M[29]*t->Phi[26] + t->Qd[0]; w->Pn[0] =
-            v; check += v;
-    v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
-            w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[7]*t->Phi[33] + w->M[8]*t->Phi[34] +
-            w->M[9]*t->Phi[35] + w->M[10]*t->Phi[36] + w->M[11]*t->Phi[37] + w->M[12]*t->Phi[38] +
-            w->M[13]*t->Phi[39] + w->M[14]*t->Phi[40] + w->M[15]*t->Phi[41] + w->M[18]*t->Phi[42] +
-            w->M[19]*t->Phi[43] + w->M[20]*t->Phi[44] + w->M[21]*t->Phi[45] + w->M[22]*t->Phi[46] +
-            w->M[23]*t->Phi[47] + w->M[24]*t->Phi[48] + w->M[25]*t->Phi[49] + w->M[26]*t->Phi[50] +
-            w->M[27]*t->Phi[51] + w->M[28]*t->Phi[52] + w->M[29]*t->Phi[53] + t->Qd[1]; w->Pn[1] =
-            v; check += v;
-    v = w->M[0]*t->Phi[54] + w->M[1]*t->Phi[55] + w->M[2]*t->Phi[56] + w->M[3]*t->Phi[57] +
-            w->M[4]*t->Phi[58] + w->M[5]*t->Phi[59] + w->M[7]*t->Phi[60] + w->M[8]*t->Phi[61] +
-            w->M[9]*t->Phi[62] + w->M[10]*t->Phi[63] + w->M[11]*t->Phi[64] + w->M[12]*t->Phi[65] +
-            w->M[13]*t->Phi[66] + w->M[14]*t->Phi[67] + w->M[15]*t->Phi[68] + w->M[18]*t->Phi[69] +
-            w->M[19]*t->Phi[70] + w->M[20]*t->Phi[71] + w->M[21]*t->Phi[72] + w->M[22]*t->Phi[73] +
-            w->M[23]*t->Phi[74] + w->M[24]*t->Phi[75] + w->M[25]*t->Phi[76] + w->M[26]*t->Phi[77] +
-            w->M[27]*t->Phi[78] + w->M[28]*t->Phi[79] + w->M[29]*t->Phi[80] + t->Qd[2]; w->Pn[2] =
-            v; check += v;
-    v = w->M[0]*t->Phi[81] + w->M[1]*t->Phi[82] + w->M[2]*t->Phi[83] + w->M[3]*t->Phi[84] +
-            w->M[4]*t->Phi[85] + w->M[5]*t->Phi[86] + w->M[7]*t->Phi[87] + w->M[8]*t->Phi[88] +
-            w->M[9]*t->Phi[89] + w->M[10]*t->Phi[90] + w->M[11]*t->Phi[91] + w->M[12]*t->Phi[92] +
-            w->M[13]*t->Phi[93] + w->M[14]*t->Phi[94] + w->M[15]*t->Phi[95] + w->M[18]*t->Phi[96] +
-            w->M[19]*t->Phi[97] + w->M[20]*t->Phi[98] + w->M[21]*t->Phi[99] + w->M[22]*t->Phi[100] +
-            w->M[23]*t->Phi[101] + w->M[24]*t->Phi[102] + w->M[25]*t->Phi[103] +
-            w->M[26]*t->Phi[104] + w->M[27]*t->Phi[105] + w->M[28]*t->Phi[106] +
-            w->M[29]*t->Phi[107] + t->Qd[3]; w->Pn[3] = v; check += v;
-    v = w->M[0]*t->Phi[108] + w->M[1]*t->Phi[109] + w->M[2]*t->Phi[110] + w->M[3]*t->Phi[111] +
-            w->M[4]*t->Phi[112] + w->M[5]*t->Phi[113] + w->M[7]*t->Phi[114] + w->M[8]*t->Phi[115] +
-            w->M[9]*t->Phi[116] + w->M[10]*t->Phi[117] + w->M[11]*t->Phi[118] + w->M[12]*t->Phi[119]
-            + w->M[13]*t->Phi[120] + w->M[14]*t->Phi[121] + w->M[15]*t->Phi[122] +
-            w->M[18]*t->Phi[123] + w->M[19]*t->Phi[124] + w->M[20]*t->Phi[125] +
-            w->M[21]*t->Phi[126] + w->M[22]*t->Phi[127] + w->M[23]*t->Phi[128] +
-            w->M[24]*t->Phi[129] + w->M[25]*t->Phi[130] + w->M[26]*t->Phi[131] +
-            w->M[27]*t->Phi[132] + w->M[28]*t->Phi[133] + w->M[29]*t->Phi[134] + t->Qd[4]; w->Pn[4]
-            = v; check += v;
-    v = w->M[0]*t->Phi[135] + w->M[1]*t->Phi[136] + w->M[2]*t->Phi[137] + w->M[3]*t->Phi[138] +
-            w->M[4]*t->Phi[139] + w->M[5]*t->Phi[140] + w->M[7]*t->Phi[141] + w->M[8]*t->Phi[142] +
-            w->M[9]*t->Phi[143] + w->M[10]*t->Phi[144] + w->M[11]*t->Phi[145] + w->M[12]*t->Phi[146]
-            + w->M[13]*t->Phi[147] + w->M[14]*t->Phi[148] + w->M[15]*t->Phi[149] +
-            w->M[18]*t->Phi[150] + w->M[19]*t->Phi[151] + w->M[20]*t->Phi[152] +
-            w->M[21]*t->Phi[153] + w->M[22]*t->Phi[154] + w->M[23]*t->Phi[155] +
-            w->M[24]*t->Phi[156] + w->M[25]*t->Phi[157] + w->M[26]*t->Phi[158] +
-            w->M[27]*t->Phi[159] + w->M[28]*t->Phi[160] + w->M[29]*t->Phi[161] + t->Qd[5]; w->Pn[5]
-            = v; check += v;
-    v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
-            w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
-            w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
-            + w->M[12]*t->Phi[174] + w->M[13]*t->Phi[175] + w->M[14]*t->Phi[176] +
-            w->M[15]*t->Phi[177] + w->M[18]*t->Phi[178] + w->M[19]*t->Phi[179] +
-            w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
-            w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
-            w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[6]; w->Pn[6] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[10]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[12]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]), lane_pair_load(&t->Phi[14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[16]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[22]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[24]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[26] + t->Qd[0]; w->Pn[0] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[27]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[29]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[31]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[33]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[35]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[37]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[39]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]), lane_pair_load(&t->Phi[41]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[43]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[51]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[53] + t->Qd[1]; w->Pn[1] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[78]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[80] + t->Qd[2]; w->Pn[2] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[99]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[101]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[103]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[105]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[107] + t->Qd[3]; w->Pn[3] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[116]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[118]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[120]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]),
+            lane_pair_load(&t->Phi[122]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[124]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[132]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[134] + t->Qd[4]; w->Pn[4] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]),
+            lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[161] + t->Qd[5]; w->Pn[5] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[162]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[164]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[166]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[168]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[170]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[172]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[174]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[176]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[18]), lane_pair_load(&t->Phi[178]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[20]), lane_pair_load(&t->Phi[180]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[22]), lane_pair_load(&t->Phi[182]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[24]), lane_pair_load(&t->Phi[184]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[26]), lane_pair_load(&t->Phi[186]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[28]), lane_pair_load(&t->Phi[188]));
+    v = lane_pair_sum(acc) + t->Qd[6]; w->Pn[6] = v; check += v;
     v = w->M[7]; w->Pn[7] = v; check += v;
     v = w->M[8]; w->Pn[8] = v; check += v;
     v = w->M[9]; w->Pn[9] = v; check += v;
@@ -4270,57 +4536,94 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_1(con
         *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[27] + w->M[1]*t->Phi[28] + w->M[2]*t->Phi[29] + w->M[3]*t->Phi[30] +
-            w->M[4]*t->Phi[31] + w->M[5]*t->Phi[32] + w->M[7]*t->Phi[33] + w->M[8]*t->Phi[34] +
-            w->M[9]*t->Phi[35] + w->M[10]*t->Phi[36] + w->M[11]*t->Phi[37] + w->M[12]*t->Phi[38] +
-            w->M[13]*t->Phi[39] + w->M[14]*t->Phi[40] + w->M[15]*t->Phi[41] + w->M[18]*t->Phi[42] +
-            w->M[19]*t->Phi[43] + w->M[20]*t->Phi[44] + w->M[21]*t->Phi[45] + w->M[22]*t->Phi[46] +
-            w->M[23]*t->Phi[47] + w->M[24]*t->Phi[48] + w->M[25]*t->Phi[49] + w->M[26]*t->Phi[50] +
-            w->M[27]*t->Phi[51] + w->M[28]*t->Phi[52] + w->M[29]*t->Phi[53] + t->Qd[32]; w->Pn[32] =
-            v; check += v;
-    v = w->M[0]*t->Phi[54] + w->M[1]*t->Phi[55] + w->M[2]*t->Phi[56] + w->M[3]*t->Phi[57] +
-            w->M[4]*t->Phi[58] + w->M[5]*t->Phi[59] + w->M[7]*t->Phi[60] + w->M[8]*t->Phi[61] +
-            w->M[9]*t->Phi[62] + w->M[10]*t->Phi[63] + w->M[11]*t->Phi[64] + w->M[12]*t->Phi[65] +
-            w->M[13]*t->Phi[66] + w->M[14]*t->Phi[67] + w->M[15]*t->Phi[68] + w->M[18]*t->Phi[69] +
-            w->M[19]*t->Phi[70] + w->M[20]*t->Phi[71] + w->M[21]*t->Phi[72] + w->M[22]*t->Phi[73] +
-            w->M[23]*t->Phi[74] + w->M[24]*t->Phi[75] + w->M[25]*t->Phi[76] + w->M[26]*t->Phi[77] +
-            w->M[27]*t->Phi[78] + w->M[28]*t->Phi[79] + w->M[29]*t->Phi[80] + t->Qd[33]; w->Pn[33] =
-            v; check += v;
-    v = w->M[0]*t->Phi[81] + w->M[1]*t->Phi[82] + w->M[2]*t->Phi[83] + w->M[3]*t->Phi[84] +
-            w->M[4]*t->Phi[85] + w->M[5]*t->Phi[86] + w->M[7]*t->Phi[87] + w->M[8]*t->Phi[88] +
-            w->M[9]*t->Phi[89] + w->M[10]*t->Phi[90] + w->M[11]*t->Phi[91] + w->M[12]*t->Phi[92] +
-            w->M[13]*t->Phi[93] + w->M[14]*t->Phi[94] + w->M[15]*t->Phi[95] + w->M[18]*t->Phi[96] +
-            w->M[19]*t->Phi[97] + w->M[20]*t->Phi[98] + w->M[21]*t->Phi[99] + w->M[22]*t->Phi[100] +
-            w->M[23]*t->Phi[101] + w->M[24]*t->Phi[102] + w->M[25]*t->Phi[103] +
-            w->M[26]*t->Phi[104] + w->M[27]*t->Phi[105] + w->M[28]*t->Phi[106] +
-            w->M[29]*t->Phi[107] + t->Qd[34]; w->Pn[34] = v; check += v;
-    v = w->M[0]*t->Phi[108] + w->M[1]*t->Phi[109] + w->M[2]*t->Phi[110] + w->M[3]*t->Phi[111] +
-            w->M[4]*t->Phi[112] + w->M[5]*t->Phi[113] + w->M[7]*t->Phi[114] + w->M[8]*t->Phi[115] +
-            w->M[9]*t->Phi[116] + w->M[10]*t->Phi[117] + w->M[11]*t->Phi[118] + w->M[12]*t->Phi[119]
-            + w->M[13]*t->Phi[120] + w->M[14]*t->Phi[121] + w->M[15]*t->Phi[122] +
-            w->M[18]*t->Phi[123] + w->M[19]*t->Phi[124] + w->M[20]*t->Phi[125] +
-            w->M[21]*t->Phi[126] + w->M[22]*t->Phi[127] + w->M[23]*t->Phi[128] +
-            w->M[24]*t->Phi[129] + w->M[25]*t->Phi[130] + w->M[26]*t->Phi[131] +
-            w->M[27]*t->Phi[132] + w->M[28]*t->Phi[133] + w->M[29]*t->Phi[134] + t->Qd[35];
-            w->Pn[35] = v; check += v;
-    v = w->M[0]*t->Phi[135] + w->M[1]*t->Phi[136] + w->M[2]*t->Phi[137] + w->M[3]*t->Phi[138] +
-            w->M[4]*t->Phi[139] + w->M[5]*t->Phi[140] + w->M[7]*t->Phi[141] + w->M[8]*t->Phi[142] +
-            w->M[9]*t->Phi[143] + w->M[10]*t->Phi[144] + w->M[11]*t->Phi[145] + w->M[12]*t->Phi[146]
-            + w->M[13]*t->Phi[147] + w->M[14]*t->Phi[148] + w->M[15]*t->Phi[149] +
-            w->M[18]*t->Phi[150] + w->M[19]*t->Phi[151] + w->M[20]*t->Phi[152] +
-            w->M[21]*t->Phi[153] + w->M[22]*t->Phi[154] + w->M[23]*t->Phi[155] +
-            w->M[24]*t->Phi[156] + w->M[25]*t->Phi[157] + w->M[26]*t->Phi[158] +
-            w->M[27]*t->Phi[159] + w->M[28]*t->Phi[160] + w->M[29]*t->Phi[161] + t->Qd[36];
-            w->Pn[36] = v; check += v;
-    v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
-            w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
-            w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
-            + w->M[12]*t->Phi[174] + w->M[13]*t->Phi[175] + w->M[14]*t->Phi[176] +
-            w->M[15]*t->Phi[177] + w->M[18]*t->Phi[178] + w->M[19]*t->Phi[179] +
-            w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
-            w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
-            w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[37]; w->Pn[37] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[27]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[29]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[31]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[33]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[35]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[37]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[39]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]), lane_pair_load(&t->Phi[41]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[43]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[51]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[53] + t->Qd[32]; w->Pn[32] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[78]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[80] + t->Qd[33]; w->Pn[33] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[99]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[101]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[103]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[105]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[107] + t->Qd[34]; w->Pn[34] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[116]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[118]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[120]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]),
+            lane_pair_load(&t->Phi[122]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[124]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[132]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[134] + t->Qd[35]; w->Pn[35] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]),
+            lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[161] + t->Qd[36]; w->Pn[36] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[162]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[164]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[166]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[168]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[170]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[172]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[174]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[176]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[18]), lane_pair_load(&t->Phi[178]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[20]), lane_pair_load(&t->Phi[180]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[22]), lane_pair_load(&t->Phi[182]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[24]), lane_pair_load(&t->Phi[184]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[26]), lane_pair_load(&t->Phi[186]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[28]), lane_pair_load(&t->Phi[188]));
+    v = lane_pair_sum(acc) + t->Qd[37]; w->Pn[37] = v; check += v;
     v = w->M[7]; w->Pn[38] = v; check += v;
     v = w->M[8]; w->Pn[39] = v; check += v;
     v = w->M[9]; w->Pn[40] = v; check += v;
@@ -4650,49 +4953,80 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_2(con
         *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[54] + w->M[1]*t->Phi[55] + w->M[2]*t->Phi[56] + w->M[3]*t->Phi[57] +
-            w->M[4]*t->Phi[58] + w->M[5]*t->Phi[59] + w->M[7]*t->Phi[60] + w->M[8]*t->Phi[61] +
-            w->M[9]*t->Phi[62] + w->M[10]*t->Phi[63] + w->M[11]*t->Phi[64] + w->M[12]*t->Phi[65] +
-            w->M[13]*t->Phi[66] + w->M[14]*t->Phi[67] + w->M[15]*t->Phi[68] + w->M[18]*t->Phi[69] +
-            w->M[19]*t->Phi[70] + w->M[20]*t->Phi[71] + w->M[21]*t->Phi[72] + w->M[22]*t->Phi[73] +
-            w->M[23]*t->Phi[74] + w->M[24]*t->Phi[75] + w->M[25]*t->Phi[76] + w->M[26]*t->Phi[77] +
-            w->M[27]*t->Phi[78] + w->M[28]*t->Phi[79] + w->M[29]*t->Phi[80] + t->Qd[63]; w->Pn[63] =
-            v; check += v;
-    v = w->M[0]*t->Phi[81] + w->M[1]*t->Phi[82] + w->M[2]*t->Phi[83] + w->M[3]*t->Phi[84] +
-            w->M[4]*t->Phi[85] + w->M[5]*t->Phi[86] + w->M[7]*t->Phi[87] + w->M[8]*t->Phi[88] +
-            w->M[9]*t->Phi[89] + w->M[10]*t->Phi[90] + w->M[11]*t->Phi[91] + w->M[12]*t->Phi[92] +
-            w->M[13]*t->Phi[93] + w->M[14]*t->Phi[94] + w->M[15]*t->Phi[95] + w->M[18]*t->Phi[96] +
-            w->M[19]*t->Phi[97] + w->M[20]*t->Phi[98] + w->M[21]*t->Phi[99] + w->M[22]*t->Phi[100] +
-            w->M[23]*t->Phi[101] + w->M[24]*t->Phi[102] + w->M[25]*t->Phi[103] +
-            w->M[26]*t->Phi[104] + w->M[27]*t->Phi[105] + w->M[28]*t->Phi[106] +
-            w->M[29]*t->Phi[107] + t->Qd[64]; w->Pn[64] = v; check += v;
-    v = w->M[0]*t->Phi[108] + w->M[1]*t->Phi[109] + w->M[2]*t->Phi[110] + w->M[3]*t->Phi[111] +
-            w->M[4]*t->Phi[112] + w->M[5]*t->Phi[113] + w->M[7]*t->Phi[114] + w->M[8]*t->Phi[115] +
-            w->M[9]*t->Phi[116] + w->M[10]*t->Phi[117] + w->M[11]*t->Phi[118] + w->M[12]*t->Phi[119]
-            + w->M[13]*t->Phi[120] + w->M[14]*t->Phi[121] + w->M[15]*t->Phi[122] +
-            w->M[18]*t->Phi[123] + w->M[19]*t->Phi[124] + w->M[20]*t->Phi[125] +
-            w->M[21]*t->Phi[126] + w->M[22]*t->Phi[127] + w->M[23]*t->Phi[128] +
-            w->M[24]*t->Phi[129] + w->M[25]*t->Phi[130] + w->M[26]*t->Phi[131] +
-            w->M[27]*t->Phi[132] + w->M[28]*t->Phi[133] + w->M[29]*t->Phi[134] + t->Qd[65];
-            w->Pn[65] = v; check += v;
-    v = w->M[0]*t->Phi[135] + w->M[1]*t->Phi[136] + w->M[2]*t->Phi[137] + w->M[3]*t->Phi[138] +
-            w->M[4]*t->Phi[139] + w->M[5]*t->Phi[140] + w->M[7]*t->Phi[141] + w->M[8]*t->Phi[142] +
-            w->M[9]*t->Phi[143] + w->M[10]*t->Phi[144] + w->M[11]*t->Phi[145] + w->M[12]*t->Phi[146]
-            + w->M[13]*t->Phi[147] + w->M[14]*t->Phi[148] + w->M[15]*t->Phi[149] +
-            w->M[18]*t->Phi[150] + w->M[19]*t->Phi[151] + w->M[20]*t->Phi[152] +
-            w->M[21]*t->Phi[153] + w->M[22]*t->Phi[154] + w->M[23]*t->Phi[155] +
-            w->M[24]*t->Phi[156] + w->M[25]*t->Phi[157] + w->M[26]*t->Phi[158] +
-            w->M[27]*t->Phi[159] + w->M[28]*t->Phi[160] + w->M[29]*t->Phi[161] + t->Qd[66];
-            w->Pn[66] = v; check += v;
-    v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
-            w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
-            w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
-            + w->M[12]*t->Phi[174] + w->M[13]*t->Phi[175] + w->M[14]*t->Phi[176] +
-            w->M[15]*t->Phi[177] + w->M[18]*t->Phi[178] + w->M[19]*t->Phi[179] +
-            w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
-            w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
-            w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[67]; w->Pn[67] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[54]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[56]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[58]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[72]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[74]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[76]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[78]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[80] + t->Qd[63]; w->Pn[63] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[99]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[101]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[103]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[105]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[107] + t->Qd[64]; w->Pn[64] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[116]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[118]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[120]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]),
+            lane_pair_load(&t->Phi[122]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[124]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[132]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[134] + t->Qd[65]; w->Pn[65] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]),
+            lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[161] + t->Qd[66]; w->Pn[66] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[162]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[164]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[166]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[168]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[170]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[172]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[174]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[176]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[18]), lane_pair_load(&t->Phi[178]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[20]), lane_pair_load(&t->Phi[180]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[22]), lane_pair_load(&t->Phi[182]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[24]), lane_pair_load(&t->Phi[184]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[26]), lane_pair_load(&t->Phi[186]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[28]), lane_pair_load(&t->Phi[188]));
+    v = lane_pair_sum(acc) + t->Qd[67]; w->Pn[67] = v; check += v;
     v = w->M[7]; w->Pn[68] = v; check += v;
     v = w->M[8]; w->Pn[69] = v; check += v;
     v = w->M[9]; w->Pn[70] = v; check += v;
@@ -5022,41 +5356,66 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_3(con
         *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[81] + w->M[1]*t->Phi[82] + w->M[2]*t->Phi[83] + w->M[3]*t->Phi[84] +
-            w->M[4]*t->Phi[85] + w->M[5]*t->Phi[86] + w->M[7]*t->Phi[87] + w->M[8]*t->Phi[88] +
-            w->M[9]*t->Phi[89] + w->M[10]*t->Phi[90] + w->M[11]*t->Phi[91] + w->M[12]*t->Phi[92] +
-            w->M[13]*t->Phi[93] + w->M[14]*t->Phi[94] + w->M[15]*t->Phi[95] + w->M[18]*t->Phi[96] +
-            w->M[19]*t->Phi[97] + w->M[20]*t->Phi[98] + w->M[21]*t->Phi[99] + w->M[22]*t->Phi[100] +
-            w->M[23]*t->Phi[101] + w->M[24]*t->Phi[102] + w->M[25]*t->Phi[103] +
-            w->M[26]*t->Phi[104] + w->M[27]*t->Phi[105] + w->M[28]*t->Phi[106] +
-            w->M[29]*t->Phi[107] + t->Qd[93]; w->Pn[93] = v; check += v;
-    v = w->M[0]*t->Phi[108] + w->M[1]*t->Phi[109] + w->M[2]*t->Phi[110] + w->M[3]*t->Phi[111] +
-            w->M[4]*t->Phi[112] + w->M[5]*t->Phi[113] + w->M[7]*t->Phi[114] + w->M[8]*t->Phi[115] +
-            w->M[9]*t->Phi[116] + w->M[10]*t->Phi[117] + w->M[11]*t->Phi[118] + w->M[12]*t->Phi[119]
-            + w->M[13]*t->Phi[120] + w->M[14]*t->Phi[121] + w->M[15]*t->Phi[122] +
-            w->M[18]*t->Phi[123] + w->M[19]*t->Phi[124] + w->M[20]*t->Phi[125] +
-            w->M[21]*t->Phi[126] + w->M[22]*t->Phi[127] + w->M[23]*t->Phi[128] +
-            w->M[24]*t->Phi[129] + w->M[25]*t->Phi[130] + w->M[26]*t->Phi[131] +
-            w->M[27]*t->Phi[132] + w->M[28]*t->Phi[133] + w->M[29]*t->Phi[134] + t->Qd[94];
-            w->Pn[94] = v; check += v;
-    v = w->M[0]*t->Phi[135] + w->M[1]*t->Phi[136] + w->M[2]*t->Phi[137] + w->M[3]*t->Phi[138] +
-            w->M[4]*t->Phi[139] + w->M[5]*t->Phi[140] + w->M[7]*t->Phi[141] + w->M[8]*t->Phi[142] +
-            w->M[9]*t->Phi[143] + w->M[10]*t->Phi[144] + w->M[11]*t->Phi[145] + w->M[12]*t->Phi[146]
-            + w->M[13]*t->Phi[147] + w->M[14]*t->Phi[148] + w->M[15]*t->Phi[149] +
-            w->M[18]*t->Phi[150] + w->M[19]*t->Phi[151] + w->M[20]*t->Phi[152] +
-            w->M[21]*t->Phi[153] + w->M[22]*t->Phi[154] + w->M[23]*t->Phi[155] +
-            w->M[24]*t->Phi[156] + w->M[25]*t->Phi[157] + w->M[26]*t->Phi[158] +
-            w->M[27]*t->Phi[159] + w->M[28]*t->Phi[160] + w->M[29]*t->Phi[161] + t->Qd[95];
-            w->Pn[95] = v; check += v;
-    v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
-            w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
-            w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
-            + w->M[12]*t->Phi[174] + w->M[13]*t->Phi[175] + w->M[14]*t->Phi[176] +
-            w->M[15]*t->Phi[177] + w->M[18]*t->Phi[178] + w->M[19]*t->Phi[179] +
-            w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
-            w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
-            w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[96]; w->Pn[96] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[87]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[89]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[91]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[93]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]), lane_pair_load(&t->Phi[95]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[97]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[99]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[101]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[103]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[105]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[107] + t->Qd[93]; w->Pn[93] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[116]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[118]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[120]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]),
+            lane_pair_load(&t->Phi[122]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[124]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[132]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[134] + t->Qd[94]; w->Pn[94] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]),
+            lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[161] + t->Qd[95]; w->Pn[95] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[162]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[164]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[166]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[168]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[170]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[172]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[174]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[176]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[18]), lane_pair_load(&t->Phi[178]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[20]), lane_pair_load(&t->Phi[180]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[22]), lane_pair_load(&t->Phi[182]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[24]), lane_pair_load(&t->Phi[184]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[26]), lane_pair_load(&t->Phi[186]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[28]), lane_pair_load(&t->Phi[188]));
+    v = lane_pair_sum(acc) + t->Qd[96]; w->Pn[96] = v; check += v;
     v = w->M[7]; w->Pn[97] = v; check += v;
     v = w->M[8]; w->Pn[98] = v; check += v;
     v = w->M[9]; w->Pn[99] = v; check += v;
@@ -5386,33 +5745,52 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_4(con
         *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[108] + w->M[1]*t->Phi[109] + w->M[2]*t->Phi[110] + w->M[3]*t->Phi[111] +
-            w->M[4]*t->Phi[112] + w->M[5]*t->Phi[113] + w->M[7]*t->Phi[114] + w->M[8]*t->Phi[115] +
-            w->M[9]*t->Phi[116] + w->M[10]*t->Phi[117] + w->M[11]*t->Phi[118] + w->M[12]*t->Phi[119]
-            + w->M[13]*t->Phi[120] + w->M[14]*t->Phi[121] + w->M[15]*t->Phi[122] +
-            w->M[18]*t->Phi[123] + w->M[19]*t->Phi[124] + w->M[20]*t->Phi[125] +
-            w->M[21]*t->Phi[126] + w->M[22]*t->Phi[127] + w->M[23]*t->Phi[128] +
-            w->M[24]*t->Phi[129] + w->M[25]*t->Phi[130] + w->M[26]*t->Phi[131] +
-            w->M[27]*t->Phi[132] + w->M[28]*t->Phi[133] + w->M[29]*t->Phi[134] + t->Qd[122];
-            w->Pn[122] = v; check += v;
-    v = w->M[0]*t->Phi[135] + w->M[1]*t->Phi[136] + w->M[2]*t->Phi[137] + w->M[3]*t->Phi[138] +
-            w->M[4]*t->Phi[139] + w->M[5]*t->Phi[140] + w->M[7]*t->Phi[141] + w->M[8]*t->Phi[142] +
-            w->M[9]*t->Phi[143] + w->M[10]*t->Phi[144] + w->M[11]*t->Phi[145] + w->M[12]*t->Phi[146]
-            + w->M[13]*t->Phi[147] + w->M[14]*t->Phi[148] + w->M[15]*t->Phi[149] +
-            w->M[18]*t->Phi[150] + w->M[19]*t->Phi[151] + w->M[20]*t->Phi[152] +
-            w->M[21]*t->Phi[153] + w->M[22]*t->Phi[154] + w->M[23]*t->Phi[155] +
-            w->M[24]*t->Phi[156] + w->M[25]*t->Phi[157] + w->M[26]*t->Phi[158] +
-            w->M[27]*t->Phi[159] + w->M[28]*t->Phi[160] + w->M[29]*t->Phi[161] + t->Qd[123];
-            w->Pn[123] = v; check += v;
-    v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
-            w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
-            w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
-            + w->M[12]*t->Phi[174] + w->M[13]*t->Phi[175] + w->M[14]*t->Phi[176] +
-            w->M[15]*t->Phi[177] + w->M[18]*t->Phi[178] + w->M[19]*t->Phi[179] +
-            w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
-            w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
-            w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[124]; w->Pn[124] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[108]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[110]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[112]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[114]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[116]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[118]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[120]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]),
+            lane_pair_load(&t->Phi[122]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[124]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[126]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[128]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[130]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[132]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[134] + t->Qd[122]; w->Pn[122] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]),
+            lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[161] + t->Qd[123]; w->Pn[123] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[162]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[164]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[166]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[168]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[170]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[172]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[174]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[176]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[18]), lane_pair_load(&t->Phi[178]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[20]), lane_pair_load(&t->Phi[180]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[22]), lane_pair_load(&t->Phi[182]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[24]), lane_pair_load(&t->Phi[184]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[26]), lane_pair_load(&t->Phi[186]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[28]), lane_pair_load(&t->Phi[188]));
+    v = lane_pair_sum(acc) + t->Qd[124]; w->Pn[124] = v; check += v;
     v = w->M[7]; w->Pn[125] = v; check += v;
     v = w->M[8]; w->Pn[126] = v; check += v;
     v = w->M[9]; w->Pn[127] = v; check += v;
@@ -5742,24 +6120,37 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_5(con
         *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[135] + w->M[1]*t->Phi[136] + w->M[2]*t->Phi[137] + w->M[3]*t->Phi[138] +
-            w->M[4]*t->Phi[139] + w->M[5]*t->Phi[140] + w->M[7]*t->Phi[141] + w->M[8]*t->Phi[142] +
-            w->M[9]*t->Phi[143] + w->M[10]*t->Phi[144] + w->M[11]*t->Phi[145] + w->M[12]*t->Phi[146]
-            + w->M[13]*t->Phi[147] + w->M[14]*t->Phi[148] + w->M[15]*t->Phi[149] +
-            w->M[18]*t->Phi[150] + w->M[19]*t->Phi[151] + w->M[20]*t->Phi[152] +
-            w->M[21]*t->Phi[153] + w->M[22]*t->Phi[154] + w->M[23]*t->Phi[155] +
-            w->M[24]*t->Phi[156] + w->M[25]*t->Phi[157] + w->M[26]*t->Phi[158] +
-            w->M[27]*t->Phi[159] + w->M[28]*t->Phi[160] + w->M[29]*t->Phi[161] + t->Qd[150];
-            w->Pn[150] = v; check += v;
-    v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
-            w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
-            w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
-            + w->M[12]*t->Phi[174] + w->M[13]*t->Phi[175] + w->M[14]*t->Phi[176] +
-            w->M[15]*t->Phi[177] + w->M[18]*t->Phi[178] + w->M[19]*t->Phi[179] +
-            w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
-            w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
-            w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[151]; w->Pn[151] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[135]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[137]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[139]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[141]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[143]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[145]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[147]));
+    acc = lane_pair_add_product(acc, lane_pair_of(w->M[15], w->M[18]),
+            lane_pair_load(&t->Phi[149]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[19]), lane_pair_load(&t->Phi[151]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[21]), lane_pair_load(&t->Phi[153]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[23]), lane_pair_load(&t->Phi[155]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[25]), lane_pair_load(&t->Phi[157]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[27]), lane_pair_load(&t->Phi[159]));
+    v = lane_pair_sum(acc) + w->M[29]*t->Phi[161] + t->Qd[150]; w->Pn[150] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[162]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[164]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[166]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[168]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[170]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[172]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[174]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[176]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[18]), lane_pair_load(&t->Phi[178]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[20]), lane_pair_load(&t->Phi[180]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[22]), lane_pair_load(&t->Phi[182]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[24]), lane_pair_load(&t->Phi[184]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[26]), lane_pair_load(&t->Phi[186]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[28]), lane_pair_load(&t->Phi[188]));
+    v = lane_pair_sum(acc) + t->Qd[151]; w->Pn[151] = v; check += v;
     v = w->M[7]; w->Pn[152] = v; check += v;
     v = w->M[8]; w->Pn[153] = v; check += v;
     v = w->M[9]; w->Pn[154] = v; check += v;
@@ -6121,15 +6512,22 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_6(con
         *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[162] + w->M[1]*t->Phi[163] + w->M[2]*t->Phi[164] + w->M[3]*t->Phi[165] +
-            w->M[4]*t->Phi[166] + w->M[5]*t->Phi[167] + w->M[6]*t->Phi[168] + w->M[7]*t->Phi[169] +
-            w->M[8]*t->Phi[170] + w->M[9]*t->Phi[171] + w->M[10]*t->Phi[172] + w->M[11]*t->Phi[173]
-            + w->M[12]*t->Phi[174] + w->M[13]*t->Phi[175] + w->M[14]*t->Phi[176] +
-            w->M[15]*t->Phi[177] + w->M[18]*t->Phi[178] + w->M[19]*t->Phi[179] +
-            w->M[20]*t->Phi[180] + w->M[21]*t->Phi[181] + w->M[22]*t->Phi[182] +
-            w->M[23]*t->Phi[183] + w->M[24]*t->Phi[184] + w->M[25]*t->Phi[185] +
-            w->M[26]*t->Phi[186] + w->M[27]*t->Phi[187] + w->M[28]*t->Phi[188] +
-            w->M[29]*t->Phi[189] + t->Qd[177]; w->Pn[177] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[162]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[164]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[166]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[168]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[170]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[172]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[174]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[176]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[18]), lane_pair_load(&t->Phi[178]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[20]), lane_pair_load(&t->Phi[180]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[22]), lane_pair_load(&t->Phi[182]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[24]), lane_pair_load(&t->Phi[184]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[26]), lane_pair_load(&t->Phi[186]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[28]), lane_pair_load(&t->Phi[188]));
+    v = lane_pair_sum(acc) + t->Qd[177]; w->Pn[177] = v; check += v;
     v = w->M[7]; w->Pn[178] = v; check += v;
     v = w->M[8]; w->Pn[179] = v; check += v;
     v = w->M[9]; w->Pn[180] = v; check += v;

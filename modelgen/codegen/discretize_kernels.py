@@ -762,7 +762,7 @@ def noise_blocks(plan: DiscretizePlan, packed: bool, ud: bool) -> list[Discretiz
     # Q_d row by row, each its own function (as the prediction's rows): inside one function of every
     # row gcc -O2 spills its vector registers; its values are summed after its stores (read_back)
     blocks += [
-        DiscretizeBlock(KernelBlock(f"process_noise_row_{i}", tuple(row), checked=True, read_back=True))
+        DiscretizeBlock(KernelBlock(f"process_noise_row_{i}", tuple(row), checked=True, read_back=True, two_lanes=True))
         for i, row in sorted(rows.items())
     ]
     return blocks

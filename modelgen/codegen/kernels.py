@@ -3,13 +3,16 @@
 Everything structural is decided here, in Python, so that the templates only
 lay out text.  The kernels are language-neutral descriptions (``Ref``,
 ``Assign``, ``CheckedAssign``, ``KernelBlock``: targets, sums of products,
-row blocks); each backend prints them (``backends/c/printer.py``).  The covariance prediction P = Phi P Phi^T + Q_d is unrolled for
-C over the structural nonzeros of Phi, skips rows of Phi that are exactly
-e_i, and computes each (i, j) pair of the symmetric result once, in full or
-packed storage.  The UD form's product Phi U is unrolled the same way; its
-Gram-Schmidt sweep and the measurement updates are loops in the templates,
-and their costs are counted here.  The Python
-kernel does the same work vectorized by row class (unit, diagonal, general).
+row blocks); each backend prints them (``backends/c/printer.py``).  The
+covariance prediction P = Phi P Phi^T + Q_d is unrolled for C over the
+structural nonzeros of Phi, skips rows of Phi that are exactly e_i, and
+computes each (i, j) pair of the symmetric result once, in full or packed
+storage; its dot products (and x_n = Phi x) are summed in two lanes
+(``lane_split``), which the C prints as vector code.  The UD form's product
+Phi U is unrolled the same way; its Gram-Schmidt sweep and the measurement
+updates are loops in the templates, and their costs are counted here.  The
+Python kernel does the same work vectorized by row class (unit, diagonal,
+general).
 """
 
 from __future__ import annotations
@@ -82,6 +85,29 @@ class CheckedAssign:
 
 Statement = Assign | CheckedAssign
 
+#: The fewest pairs of products summed in two lanes: with one pair, adding the lanes costs
+#: what the two-lane product saves.
+MIN_LANE_PAIRS = 2
+
+
+def lane_split(terms: tuple[Term, ...]) -> tuple[tuple[tuple[Term, Term], ...], tuple[Term, ...]]:
+    """The two-lane order of a sum: (pairs of products, the terms added after the lanes).
+
+    The leading products of two factors pair up by position, (t0, t1),
+    (t2, t3), ...: t0 + t2 + ... is summed in one lane and t1 + t3 + ... in
+    the other, the two lanes are added, then the terms left (an odd last
+    product, a Q_d entry) in order.  With fewer than ``MIN_LANE_PAIRS`` pairs
+    the sum keeps its plain left-to-right order (no pairs).  The compact
+    kernels sum in the same order, so that both give the same bits.
+    """
+    products = 0
+    while products < len(terms) and len(terms[products]) == 2:
+        products += 1
+    if products < 2 * MIN_LANE_PAIRS:
+        return (), terms
+    pairs = tuple((terms[k], terms[k + 1]) for k in range(0, products - 1, 2))
+    return pairs, terms[2 * len(pairs):]
+
 
 def _symmetric(owner: str, array: str, n: int, packed: bool, i: int, j: int) -> Ref:
     """Entry (i, j) of a symmetric matrix in full or packed storage."""
@@ -139,6 +165,8 @@ class KernelBlock:
     # the values are summed after all the stores, read back, not between them: gcc -O2 then pairs
     # consecutive stores (and their products) into vector instructions (the Q_d rows)
     read_back: bool = False
+    # each sum of products in the two-lane order of ``lane_split`` (the printer makes vector code of it)
+    two_lanes: bool = False
 
     def owners(self) -> set[str]:
         """The objects (``filter``, ``transition``, ``scratch``) the statements read or write."""
@@ -201,7 +229,7 @@ def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[K
             # P's storage (the commit mirrors it), and added to the row's sum
             # while in a register (predict rescans Pn if a sum is not finite)
             lines.append(CheckedAssign((_symmetric("scratch", "Pn", n, True, i, j),), tuple(terms)))
-        blocks.append(KernelBlock(f"propagate_row_{i}", tuple(lines), checked=True))
+        blocks.append(KernelBlock(f"propagate_row_{i}", tuple(lines), checked=True, two_lanes=True))
     return blocks, OperationCount(mul, add)
 
 

@@ -29,7 +29,7 @@ KERNEL = re.compile(r"^\w+ \w+ ((?:phi_times_p|propagate|phi_times_u)_row_\d+|st
 
 
 def _count(statements: list[str]) -> tuple[int, int]:
-    """(``*``, ``+``) in the right-hand sides, without probes and stores of ``v``."""
+    """(``*``, ``+``) in the right-hand sides, two-lane products counted by lane, without probes and stores of ``v``."""
     mul = add = 0
     for statement in statements:
         statement = " ".join(statement.split())
@@ -38,8 +38,9 @@ def _count(statements: list[str]) -> tuple[int, int]:
         target, value = statement.split(" = ", 1) if " = " in statement else ("", "")
         if value.strip() == "v" or target.endswith("scalar v, check"):
             continue
-        mul += value.count("*")
-        add += value.count("+")
+        # a two-lane product is two multiplications, adding it to the lanes two additions, summing the lanes one
+        mul += value.count("*") + 2 * value.count("lane_pair_product(") + 2 * value.count("lane_pair_add_product(")
+        add += value.count("+") + 2 * value.count("lane_pair_add_product(") + value.count("lane_pair_sum(")
     return mul, add
 
 
@@ -49,7 +50,7 @@ def emitted_predict_count(source: str, model: str) -> tuple[int, int]:
     predict = source[source.index(f"int {model}_predict(") :]
     predict = predict[: predict.index("\n}\n")]
     predict = re.sub(r"/\*.*?\*/", "", predict, flags=re.S)  # a comment may precede the first statement
-    statements += [s for s in predict.split(";") if s.strip().startswith("w->xn[")]
+    statements += [s for s in predict.split(";") if s.strip().startswith(("w->xn[", "acc = "))]  # x_n = Phi x inline (UD)
     return _count(statements)
 
 

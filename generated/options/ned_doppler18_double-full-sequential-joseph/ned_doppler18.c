@@ -351,6 +351,91 @@ int ned_doppler18_matrices_evaluate(const ned_doppler18_params *restrict params,
 #define NED_DOPPLER18_BLOCK static
 #endif
 
+/* Sums of products in two lanes (modelgen/codegen/kernels.py, lane_split): the products pair
+   up by position, the first of each pair is added in one lane and the second in the other,
+   then the two lanes are added. Under GCC or Clang with SSE2 (unless
+           NED_DOPPLER18_SCALAR_LANE_PAIRS
+   is defined) a lane pair is an SSE2 vector, otherwise two scalars: the same operations in the
+   same order, bit for bit the same result. */
+#if defined(__GNUC__) && defined(__SSE2__) && !defined(NED_DOPPLER18_SCALAR_LANE_PAIRS)
+typedef double lane_pair __attribute__((vector_size(2 * sizeof(double))));
+
+static inline lane_pair lane_pair_load(const double *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    memcpy(&lanes, a, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const double a, const double b)
+{
+    lane_pair lanes;
+    const double values[2] = { a, b };
+    memcpy(&lanes, values, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    return a * b;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    return acc + a * b;
+}
+
+static inline double lane_pair_sum(const lane_pair acc)
+{
+    double lanes[2];
+    memcpy(lanes, &acc, sizeof lanes);
+    return lanes[0] + lanes[1];
+}
+#else
+typedef struct {
+    ned_doppler18_scalar lane[2];
+} lane_pair;
+
+static inline lane_pair lane_pair_load(const ned_doppler18_scalar *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    lanes.lane[0] = a[0];
+    lanes.lane[1] = a[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const ned_doppler18_scalar a, const ned_doppler18_scalar b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a;
+    lanes.lane[1] = b;
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a.lane[0] * b.lane[0];
+    lanes.lane[1] = a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = acc.lane[0] + a.lane[0] * b.lane[0];
+    lanes.lane[1] = acc.lane[1] + a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline ned_doppler18_scalar lane_pair_sum(const lane_pair acc)
+{
+    return acc.lane[0] + acc.lane[1];
+}
+#endif
+
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static ned_doppler18_scalar power_of_two(const int e)
 {
@@ -1834,27 +1919,49 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar process_noise_row_0(ned_doppler18_trans
         const ned_doppler18_discretize_scratch *restrict w)
 {
     ned_doppler18_scalar check;
-    t->Qd[0] = w->term[1][0]*w->term[0][0] + w->term[1][1]*w->term[0][1] +
-            w->term[1][2]*w->term[0][2] + w->term[1][3]*w->term[0][3] + w->term[1][4]*w->term[0][4]
-            + w->term[1][5]*w->term[0][5];
-    t->Qd[1] = w->term[1][0]*w->term[0][6] + w->term[1][1]*w->term[0][7] +
-            w->term[1][2]*w->term[0][8] + w->term[1][3]*w->term[0][9] + w->term[1][4]*w->term[0][10]
-            + w->term[1][5]*w->term[0][11];
-    t->Qd[2] = w->term[1][0]*w->term[0][12] + w->term[1][1]*w->term[0][13] +
-            w->term[1][2]*w->term[0][14] + w->term[1][3]*w->term[0][15] +
-            w->term[1][4]*w->term[0][16] + w->term[1][5]*w->term[0][17];
-    t->Qd[3] = w->term[1][0]*w->term[0][18] + w->term[1][1]*w->term[0][19] +
-            w->term[1][2]*w->term[0][20] + w->term[1][3]*w->term[0][21] +
-            w->term[1][4]*w->term[0][22] + w->term[1][5]*w->term[0][23];
-    t->Qd[4] = w->term[1][0]*w->term[0][24] + w->term[1][1]*w->term[0][25] +
-            w->term[1][2]*w->term[0][26] + w->term[1][3]*w->term[0][27] +
-            w->term[1][4]*w->term[0][28] + w->term[1][5]*w->term[0][29];
-    t->Qd[5] = w->term[1][0]*w->term[0][30] + w->term[1][1]*w->term[0][31] +
-            w->term[1][2]*w->term[0][32] + w->term[1][3]*w->term[0][33] +
-            w->term[1][4]*w->term[0][34] + w->term[1][5]*w->term[0][35];
-    t->Qd[6] = w->term[1][0]*w->term[0][36] + w->term[1][1]*w->term[0][37] +
-            w->term[1][2]*w->term[0][38] + w->term[1][3]*w->term[0][39] +
-            w->term[1][4]*w->term[0][40] + w->term[1][5]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][4]));
+    t->Qd[0] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][10]));
+    t->Qd[1] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[2] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[3] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[4] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[5] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][0]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][2]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][4]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[6] = lane_pair_sum(acc);
     t->Qd[10] = w->term[1][0]*w->term[0][42];
     t->Qd[11] = w->term[1][1]*w->term[0][43];
     t->Qd[12] = w->term[1][2]*w->term[0][44];
@@ -1870,24 +1977,43 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar process_noise_row_1(ned_doppler18_trans
         const ned_doppler18_discretize_scratch *restrict w)
 {
     ned_doppler18_scalar check;
-    t->Qd[18] = w->term[1][6]*w->term[0][6] + w->term[1][7]*w->term[0][7] +
-            w->term[1][8]*w->term[0][8] + w->term[1][9]*w->term[0][9] +
-            w->term[1][10]*w->term[0][10] + w->term[1][11]*w->term[0][11];
-    t->Qd[19] = w->term[1][6]*w->term[0][12] + w->term[1][7]*w->term[0][13] +
-            w->term[1][8]*w->term[0][14] + w->term[1][9]*w->term[0][15] +
-            w->term[1][10]*w->term[0][16] + w->term[1][11]*w->term[0][17];
-    t->Qd[20] = w->term[1][6]*w->term[0][18] + w->term[1][7]*w->term[0][19] +
-            w->term[1][8]*w->term[0][20] + w->term[1][9]*w->term[0][21] +
-            w->term[1][10]*w->term[0][22] + w->term[1][11]*w->term[0][23];
-    t->Qd[21] = w->term[1][6]*w->term[0][24] + w->term[1][7]*w->term[0][25] +
-            w->term[1][8]*w->term[0][26] + w->term[1][9]*w->term[0][27] +
-            w->term[1][10]*w->term[0][28] + w->term[1][11]*w->term[0][29];
-    t->Qd[22] = w->term[1][6]*w->term[0][30] + w->term[1][7]*w->term[0][31] +
-            w->term[1][8]*w->term[0][32] + w->term[1][9]*w->term[0][33] +
-            w->term[1][10]*w->term[0][34] + w->term[1][11]*w->term[0][35];
-    t->Qd[23] = w->term[1][6]*w->term[0][36] + w->term[1][7]*w->term[0][37] +
-            w->term[1][8]*w->term[0][38] + w->term[1][9]*w->term[0][39] +
-            w->term[1][10]*w->term[0][40] + w->term[1][11]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][10]));
+    t->Qd[18] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[19] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[20] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[21] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[22] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][6]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][8]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][10]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[23] = lane_pair_sum(acc);
     t->Qd[27] = w->term[1][6]*w->term[0][42];
     t->Qd[28] = w->term[1][7]*w->term[0][43];
     t->Qd[29] = w->term[1][8]*w->term[0][44];
@@ -1903,21 +2029,37 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar process_noise_row_2(ned_doppler18_trans
         const ned_doppler18_discretize_scratch *restrict w)
 {
     ned_doppler18_scalar check;
-    t->Qd[35] = w->term[1][12]*w->term[0][12] + w->term[1][13]*w->term[0][13] +
-            w->term[1][14]*w->term[0][14] + w->term[1][15]*w->term[0][15] +
-            w->term[1][16]*w->term[0][16] + w->term[1][17]*w->term[0][17];
-    t->Qd[36] = w->term[1][12]*w->term[0][18] + w->term[1][13]*w->term[0][19] +
-            w->term[1][14]*w->term[0][20] + w->term[1][15]*w->term[0][21] +
-            w->term[1][16]*w->term[0][22] + w->term[1][17]*w->term[0][23];
-    t->Qd[37] = w->term[1][12]*w->term[0][24] + w->term[1][13]*w->term[0][25] +
-            w->term[1][14]*w->term[0][26] + w->term[1][15]*w->term[0][27] +
-            w->term[1][16]*w->term[0][28] + w->term[1][17]*w->term[0][29];
-    t->Qd[38] = w->term[1][12]*w->term[0][30] + w->term[1][13]*w->term[0][31] +
-            w->term[1][14]*w->term[0][32] + w->term[1][15]*w->term[0][33] +
-            w->term[1][16]*w->term[0][34] + w->term[1][17]*w->term[0][35];
-    t->Qd[39] = w->term[1][12]*w->term[0][36] + w->term[1][13]*w->term[0][37] +
-            w->term[1][14]*w->term[0][38] + w->term[1][15]*w->term[0][39] +
-            w->term[1][16]*w->term[0][40] + w->term[1][17]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][14]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][16]));
+    t->Qd[35] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[36] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[37] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[38] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][12]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][14]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][16]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[39] = lane_pair_sum(acc);
     t->Qd[43] = w->term[1][12]*w->term[0][42];
     t->Qd[44] = w->term[1][13]*w->term[0][43];
     t->Qd[45] = w->term[1][14]*w->term[0][44];
@@ -1933,18 +2075,31 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar process_noise_row_3(ned_doppler18_trans
         const ned_doppler18_discretize_scratch *restrict w)
 {
     ned_doppler18_scalar check;
-    t->Qd[51] = w->term[1][18]*w->term[0][18] + w->term[1][19]*w->term[0][19] +
-            w->term[1][20]*w->term[0][20] + w->term[1][21]*w->term[0][21] +
-            w->term[1][22]*w->term[0][22] + w->term[1][23]*w->term[0][23];
-    t->Qd[52] = w->term[1][18]*w->term[0][24] + w->term[1][19]*w->term[0][25] +
-            w->term[1][20]*w->term[0][26] + w->term[1][21]*w->term[0][27] +
-            w->term[1][22]*w->term[0][28] + w->term[1][23]*w->term[0][29];
-    t->Qd[53] = w->term[1][18]*w->term[0][30] + w->term[1][19]*w->term[0][31] +
-            w->term[1][20]*w->term[0][32] + w->term[1][21]*w->term[0][33] +
-            w->term[1][22]*w->term[0][34] + w->term[1][23]*w->term[0][35];
-    t->Qd[54] = w->term[1][18]*w->term[0][36] + w->term[1][19]*w->term[0][37] +
-            w->term[1][20]*w->term[0][38] + w->term[1][21]*w->term[0][39] +
-            w->term[1][22]*w->term[0][40] + w->term[1][23]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][18]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][20]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][22]));
+    t->Qd[51] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[52] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[53] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][18]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][20]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][22]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[54] = lane_pair_sum(acc);
     t->Qd[58] = w->term[1][18]*w->term[0][42];
     t->Qd[59] = w->term[1][19]*w->term[0][43];
     t->Qd[60] = w->term[1][20]*w->term[0][44];
@@ -1960,15 +2115,25 @@ static ned_doppler18_scalar process_noise_row_4(ned_doppler18_transition *restri
         ned_doppler18_discretize_scratch *restrict w)
 {
     ned_doppler18_scalar check;
-    t->Qd[66] = w->term[1][24]*w->term[0][24] + w->term[1][25]*w->term[0][25] +
-            w->term[1][26]*w->term[0][26] + w->term[1][27]*w->term[0][27] +
-            w->term[1][28]*w->term[0][28] + w->term[1][29]*w->term[0][29];
-    t->Qd[67] = w->term[1][24]*w->term[0][30] + w->term[1][25]*w->term[0][31] +
-            w->term[1][26]*w->term[0][32] + w->term[1][27]*w->term[0][33] +
-            w->term[1][28]*w->term[0][34] + w->term[1][29]*w->term[0][35];
-    t->Qd[68] = w->term[1][24]*w->term[0][36] + w->term[1][25]*w->term[0][37] +
-            w->term[1][26]*w->term[0][38] + w->term[1][27]*w->term[0][39] +
-            w->term[1][28]*w->term[0][40] + w->term[1][29]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][24]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][26]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][28]));
+    t->Qd[66] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[67] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][24]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][26]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][28]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[68] = lane_pair_sum(acc);
     t->Qd[72] = w->term[1][24]*w->term[0][42];
     t->Qd[73] = w->term[1][25]*w->term[0][43];
     t->Qd[74] = w->term[1][26]*w->term[0][44];
@@ -1984,12 +2149,19 @@ static ned_doppler18_scalar process_noise_row_5(ned_doppler18_transition *restri
         ned_doppler18_discretize_scratch *restrict w)
 {
     ned_doppler18_scalar check;
-    t->Qd[80] = w->term[1][30]*w->term[0][30] + w->term[1][31]*w->term[0][31] +
-            w->term[1][32]*w->term[0][32] + w->term[1][33]*w->term[0][33] +
-            w->term[1][34]*w->term[0][34] + w->term[1][35]*w->term[0][35];
-    t->Qd[81] = w->term[1][30]*w->term[0][36] + w->term[1][31]*w->term[0][37] +
-            w->term[1][32]*w->term[0][38] + w->term[1][33]*w->term[0][39] +
-            w->term[1][34]*w->term[0][40] + w->term[1][35]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][30]), lane_pair_load(&w->term[0][30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][34]));
+    t->Qd[80] = lane_pair_sum(acc);
+    acc = lane_pair_product(lane_pair_load(&w->term[1][30]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][32]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][34]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[81] = lane_pair_sum(acc);
     t->Qd[85] = w->term[1][30]*w->term[0][42];
     t->Qd[86] = w->term[1][31]*w->term[0][43];
     t->Qd[87] = w->term[1][32]*w->term[0][44];
@@ -2005,9 +2177,13 @@ static ned_doppler18_scalar process_noise_row_6(ned_doppler18_transition *restri
         ned_doppler18_discretize_scratch *restrict w)
 {
     ned_doppler18_scalar check;
-    t->Qd[93] = w->term[1][36]*w->term[0][36] + w->term[1][37]*w->term[0][37] +
-            w->term[1][38]*w->term[0][38] + w->term[1][39]*w->term[0][39] +
-            w->term[1][40]*w->term[0][40] + w->term[1][41]*w->term[0][41];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->term[1][36]), lane_pair_load(&w->term[0][36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][38]),
+            lane_pair_load(&w->term[0][38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->term[1][40]),
+            lane_pair_load(&w->term[0][40]));
+    t->Qd[93] = lane_pair_sum(acc);
     t->Qd[97] = w->term[1][36]*w->term[0][42];
     t->Qd[98] = w->term[1][37]*w->term[0][43];
     t->Qd[99] = w->term[1][38]*w->term[0][44];
@@ -2317,35 +2493,64 @@ NED_DOPPLER18_BLOCK void state_predict(const ned_doppler18_filter *restrict f, c
         ned_doppler18_transition *restrict t,
                 ned_doppler18_filter_scratch *restrict w)
 {
-    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
-            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[7] + t->Phi[7]*f->x[8] +
-            t->Phi[8]*f->x[9] + t->Phi[9]*f->x[10] + t->Phi[10]*f->x[11] + t->Phi[11]*f->x[12] +
-            t->Phi[12]*f->x[13] + t->Phi[13]*f->x[14] + t->Phi[14]*f->x[15];
-    w->xn[1] = t->Phi[15]*f->x[0] + t->Phi[16]*f->x[1] + t->Phi[17]*f->x[2] + t->Phi[18]*f->x[3] +
-            t->Phi[19]*f->x[4] + t->Phi[20]*f->x[5] + t->Phi[21]*f->x[7] + t->Phi[22]*f->x[8] +
-            t->Phi[23]*f->x[9] + t->Phi[24]*f->x[10] + t->Phi[25]*f->x[11] + t->Phi[26]*f->x[12] +
-            t->Phi[27]*f->x[13] + t->Phi[28]*f->x[14] + t->Phi[29]*f->x[15];
-    w->xn[2] = t->Phi[30]*f->x[0] + t->Phi[31]*f->x[1] + t->Phi[32]*f->x[2] + t->Phi[33]*f->x[3] +
-            t->Phi[34]*f->x[4] + t->Phi[35]*f->x[5] + t->Phi[36]*f->x[7] + t->Phi[37]*f->x[8] +
-            t->Phi[38]*f->x[9] + t->Phi[39]*f->x[10] + t->Phi[40]*f->x[11] + t->Phi[41]*f->x[12] +
-            t->Phi[42]*f->x[13] + t->Phi[43]*f->x[14] + t->Phi[44]*f->x[15];
-    w->xn[3] = t->Phi[45]*f->x[0] + t->Phi[46]*f->x[1] + t->Phi[47]*f->x[2] + t->Phi[48]*f->x[3] +
-            t->Phi[49]*f->x[4] + t->Phi[50]*f->x[5] + t->Phi[51]*f->x[7] + t->Phi[52]*f->x[8] +
-            t->Phi[53]*f->x[9] + t->Phi[54]*f->x[10] + t->Phi[55]*f->x[11] + t->Phi[56]*f->x[12] +
-            t->Phi[57]*f->x[13] + t->Phi[58]*f->x[14] + t->Phi[59]*f->x[15];
-    w->xn[4] = t->Phi[60]*f->x[0] + t->Phi[61]*f->x[1] + t->Phi[62]*f->x[2] + t->Phi[63]*f->x[3] +
-            t->Phi[64]*f->x[4] + t->Phi[65]*f->x[5] + t->Phi[66]*f->x[7] + t->Phi[67]*f->x[8] +
-            t->Phi[68]*f->x[9] + t->Phi[69]*f->x[10] + t->Phi[70]*f->x[11] + t->Phi[71]*f->x[12] +
-            t->Phi[72]*f->x[13] + t->Phi[73]*f->x[14] + t->Phi[74]*f->x[15];
-    w->xn[5] = t->Phi[75]*f->x[0] + t->Phi[76]*f->x[1] + t->Phi[77]*f->x[2] + t->Phi[78]*f->x[3] +
-            t->Phi[79]*f->x[4] + t->Phi[80]*f->x[5] + t->Phi[81]*f->x[7] + t->Phi[82]*f->x[8] +
-            t->Phi[83]*f->x[9] + t->Phi[84]*f->x[10] + t->Phi[85]*f->x[11] + t->Phi[86]*f->x[12] +
-            t->Phi[87]*f->x[13] + t->Phi[88]*f->x[14] + t->Phi[89]*f->x[15];
-    w->xn[6] = t->Phi[90]*f->x[0] + t->Phi[91]*f->x[1] + t->Phi[92]*f->x[2] + t->Phi[93]*f->x[3] +
-            t->Phi[94]*f->x[4] + t->Phi[95]*f->x[5] + t->Phi[96]*f->x[6] + t->Phi[97]*f->x[7] +
-            t->Phi[98]*f->x[8] + t->Phi[99]*f->x[9] + t->Phi[100]*f->x[10] + t->Phi[101]*f->x[11] +
-            t->Phi[102]*f->x[12] + t->Phi[103]*f->x[13] + t->Phi[104]*f->x[14] +
-            t->Phi[105]*f->x[15];
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&t->Phi[0]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[2]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[4]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[6]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[8]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[10]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[12]), lane_pair_load(&f->x[13]));
+    w->xn[0] = lane_pair_sum(acc) + t->Phi[14]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[15]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[17]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[19]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[21]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[23]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[25]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[27]), lane_pair_load(&f->x[13]));
+    w->xn[1] = lane_pair_sum(acc) + t->Phi[29]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[30]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[32]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[34]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[36]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[38]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[40]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[42]), lane_pair_load(&f->x[13]));
+    w->xn[2] = lane_pair_sum(acc) + t->Phi[44]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[45]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[47]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[49]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[51]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[53]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[55]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[57]), lane_pair_load(&f->x[13]));
+    w->xn[3] = lane_pair_sum(acc) + t->Phi[59]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[60]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[62]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[64]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[66]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[68]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[70]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[72]), lane_pair_load(&f->x[13]));
+    w->xn[4] = lane_pair_sum(acc) + t->Phi[74]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[75]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[77]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[79]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[81]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[83]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[85]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[87]), lane_pair_load(&f->x[13]));
+    w->xn[5] = lane_pair_sum(acc) + t->Phi[89]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[90]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[92]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[94]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[96]), lane_pair_load(&f->x[6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[98]), lane_pair_load(&f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[100]), lane_pair_load(&f->x[10]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[102]), lane_pair_load(&f->x[12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[104]), lane_pair_load(&f->x[14]));
+    w->xn[6] = lane_pair_sum(acc);
     w->xn[10] = t->Phi[109]*f->x[10];
     w->xn[11] = t->Phi[110]*f->x[11];
     w->xn[12] = t->Phi[111]*f->x[12];
@@ -2455,41 +2660,64 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_0(const ned_doppler18_tra
         ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[0] + w->M[1]*t->Phi[1] + w->M[2]*t->Phi[2] + w->M[3]*t->Phi[3] +
-            w->M[4]*t->Phi[4] + w->M[5]*t->Phi[5] + w->M[7]*t->Phi[6] + w->M[8]*t->Phi[7] +
-            w->M[9]*t->Phi[8] + w->M[10]*t->Phi[9] + w->M[11]*t->Phi[10] + w->M[12]*t->Phi[11] +
-            w->M[13]*t->Phi[12] + w->M[14]*t->Phi[13] + w->M[15]*t->Phi[14] + t->Qd[0]; w->Pn[0] =
-            v; check += v;
-    v = w->M[0]*t->Phi[15] + w->M[1]*t->Phi[16] + w->M[2]*t->Phi[17] + w->M[3]*t->Phi[18] +
-            w->M[4]*t->Phi[19] + w->M[5]*t->Phi[20] + w->M[7]*t->Phi[21] + w->M[8]*t->Phi[22] +
-            w->M[9]*t->Phi[23] + w->M[10]*t->Phi[24] + w->M[11]*t->Phi[25] + w->M[12]*t->Phi[26] +
-            w->M[13]*t->Phi[27] + w->M[14]*t->Phi[28] + w->M[15]*t->Phi[29] + t->Qd[1]; w->Pn[1] =
-            v; check += v;
-    v = w->M[0]*t->Phi[30] + w->M[1]*t->Phi[31] + w->M[2]*t->Phi[32] + w->M[3]*t->Phi[33] +
-            w->M[4]*t->Phi[34] + w->M[5]*t->Phi[35] + w->M[7]*t->Phi[36] + w->M[8]*t->Phi[37] +
-            w->M[9]*t->Phi[38] + w->M[10]*t->Phi[39] + w->M[11]*t->Phi[40] + w->M[12]*t->Phi[41] +
-            w->M[13]*t->Phi[42] + w->M[14]*t->Phi[43] + w->M[15]*t->Phi[44] + t->Qd[2]; w->Pn[2] =
-            v; check += v;
-    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
-            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[7]*t->Phi[51] + w->M[8]*t->Phi[52] +
-            w->M[9]*t->Phi[53] + w->M[10]*t->Phi[54] + w->M[11]*t->Phi[55] + w->M[12]*t->Phi[56] +
-            w->M[13]*t->Phi[57] + w->M[14]*t->Phi[58] + w->M[15]*t->Phi[59] + t->Qd[3]; w->Pn[3] =
-            v; check += v;
-    v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
-            w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[7]*t->Phi[66] + w->M[8]*t->Phi[67] +
-            w->M[9]*t->Phi[68] + w->M[10]*t->Phi[69] + w->M[11]*t->Phi[70] + w->M[12]*t->Phi[71] +
-            w->M[13]*t->Phi[72] + w->M[14]*t->Phi[73] + w->M[15]*t->Phi[74] + t->Qd[4]; w->Pn[4] =
-            v; check += v;
-    v = w->M[0]*t->Phi[75] + w->M[1]*t->Phi[76] + w->M[2]*t->Phi[77] + w->M[3]*t->Phi[78] +
-            w->M[4]*t->Phi[79] + w->M[5]*t->Phi[80] + w->M[7]*t->Phi[81] + w->M[8]*t->Phi[82] +
-            w->M[9]*t->Phi[83] + w->M[10]*t->Phi[84] + w->M[11]*t->Phi[85] + w->M[12]*t->Phi[86] +
-            w->M[13]*t->Phi[87] + w->M[14]*t->Phi[88] + w->M[15]*t->Phi[89] + t->Qd[5]; w->Pn[5] =
-            v; check += v;
-    v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
-            w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
-            w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
-            w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[6]; w->Pn[6] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[10]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[12]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[14] + t->Qd[0]; w->Pn[0] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[15]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[17]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[19]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[21]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[23]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[25]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[27]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[29] + t->Qd[1]; w->Pn[1] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[34]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[42]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[44] + t->Qd[2]; w->Pn[2] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[51]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[53]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[55]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[57]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[59] + t->Qd[3]; w->Pn[3] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[72]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[74] + t->Qd[4]; w->Pn[4] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[75]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[77]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[79]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[87]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[89] + t->Qd[5]; w->Pn[5] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[104]));
+    v = lane_pair_sum(acc) + t->Qd[6]; w->Pn[6] = v; check += v;
     v = w->M[7]; w->Pn[7] = v; check += v;
     v = w->M[8]; w->Pn[8] = v; check += v;
     v = w->M[9]; w->Pn[9] = v; check += v;
@@ -2605,36 +2833,56 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_1(const ned_doppler18_tra
         ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[15] + w->M[1]*t->Phi[16] + w->M[2]*t->Phi[17] + w->M[3]*t->Phi[18] +
-            w->M[4]*t->Phi[19] + w->M[5]*t->Phi[20] + w->M[7]*t->Phi[21] + w->M[8]*t->Phi[22] +
-            w->M[9]*t->Phi[23] + w->M[10]*t->Phi[24] + w->M[11]*t->Phi[25] + w->M[12]*t->Phi[26] +
-            w->M[13]*t->Phi[27] + w->M[14]*t->Phi[28] + w->M[15]*t->Phi[29] + t->Qd[18]; w->Pn[18] =
-            v; check += v;
-    v = w->M[0]*t->Phi[30] + w->M[1]*t->Phi[31] + w->M[2]*t->Phi[32] + w->M[3]*t->Phi[33] +
-            w->M[4]*t->Phi[34] + w->M[5]*t->Phi[35] + w->M[7]*t->Phi[36] + w->M[8]*t->Phi[37] +
-            w->M[9]*t->Phi[38] + w->M[10]*t->Phi[39] + w->M[11]*t->Phi[40] + w->M[12]*t->Phi[41] +
-            w->M[13]*t->Phi[42] + w->M[14]*t->Phi[43] + w->M[15]*t->Phi[44] + t->Qd[19]; w->Pn[19] =
-            v; check += v;
-    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
-            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[7]*t->Phi[51] + w->M[8]*t->Phi[52] +
-            w->M[9]*t->Phi[53] + w->M[10]*t->Phi[54] + w->M[11]*t->Phi[55] + w->M[12]*t->Phi[56] +
-            w->M[13]*t->Phi[57] + w->M[14]*t->Phi[58] + w->M[15]*t->Phi[59] + t->Qd[20]; w->Pn[20] =
-            v; check += v;
-    v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
-            w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[7]*t->Phi[66] + w->M[8]*t->Phi[67] +
-            w->M[9]*t->Phi[68] + w->M[10]*t->Phi[69] + w->M[11]*t->Phi[70] + w->M[12]*t->Phi[71] +
-            w->M[13]*t->Phi[72] + w->M[14]*t->Phi[73] + w->M[15]*t->Phi[74] + t->Qd[21]; w->Pn[21] =
-            v; check += v;
-    v = w->M[0]*t->Phi[75] + w->M[1]*t->Phi[76] + w->M[2]*t->Phi[77] + w->M[3]*t->Phi[78] +
-            w->M[4]*t->Phi[79] + w->M[5]*t->Phi[80] + w->M[7]*t->Phi[81] + w->M[8]*t->Phi[82] +
-            w->M[9]*t->Phi[83] + w->M[10]*t->Phi[84] + w->M[11]*t->Phi[85] + w->M[12]*t->Phi[86] +
-            w->M[13]*t->Phi[87] + w->M[14]*t->Phi[88] + w->M[15]*t->Phi[89] + t->Qd[22]; w->Pn[22] =
-            v; check += v;
-    v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
-            w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
-            w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
-            w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[23]; w->Pn[23] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[15]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[17]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[19]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[21]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[23]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[25]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[27]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[29] + t->Qd[18]; w->Pn[18] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[34]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[42]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[44] + t->Qd[19]; w->Pn[19] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[51]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[53]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[55]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[57]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[59] + t->Qd[20]; w->Pn[20] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[72]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[74] + t->Qd[21]; w->Pn[21] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[75]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[77]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[79]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[87]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[89] + t->Qd[22]; w->Pn[22] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[104]));
+    v = lane_pair_sum(acc) + t->Qd[23]; w->Pn[23] = v; check += v;
     v = w->M[7]; w->Pn[24] = v; check += v;
     v = w->M[8]; w->Pn[25] = v; check += v;
     v = w->M[9]; w->Pn[26] = v; check += v;
@@ -2750,31 +2998,48 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_2(const ned_doppler18_tra
         ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[30] + w->M[1]*t->Phi[31] + w->M[2]*t->Phi[32] + w->M[3]*t->Phi[33] +
-            w->M[4]*t->Phi[34] + w->M[5]*t->Phi[35] + w->M[7]*t->Phi[36] + w->M[8]*t->Phi[37] +
-            w->M[9]*t->Phi[38] + w->M[10]*t->Phi[39] + w->M[11]*t->Phi[40] + w->M[12]*t->Phi[41] +
-            w->M[13]*t->Phi[42] + w->M[14]*t->Phi[43] + w->M[15]*t->Phi[44] + t->Qd[35]; w->Pn[35] =
-            v; check += v;
-    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
-            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[7]*t->Phi[51] + w->M[8]*t->Phi[52] +
-            w->M[9]*t->Phi[53] + w->M[10]*t->Phi[54] + w->M[11]*t->Phi[55] + w->M[12]*t->Phi[56] +
-            w->M[13]*t->Phi[57] + w->M[14]*t->Phi[58] + w->M[15]*t->Phi[59] + t->Qd[36]; w->Pn[36] =
-            v; check += v;
-    v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
-            w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[7]*t->Phi[66] + w->M[8]*t->Phi[67] +
-            w->M[9]*t->Phi[68] + w->M[10]*t->Phi[69] + w->M[11]*t->Phi[70] + w->M[12]*t->Phi[71] +
-            w->M[13]*t->Phi[72] + w->M[14]*t->Phi[73] + w->M[15]*t->Phi[74] + t->Qd[37]; w->Pn[37] =
-            v; check += v;
-    v = w->M[0]*t->Phi[75] + w->M[1]*t->Phi[76] + w->M[2]*t->Phi[77] + w->M[3]*t->Phi[78] +
-            w->M[4]*t->Phi[79] + w->M[5]*t->Phi[80] + w->M[7]*t->Phi[81] + w->M[8]*t->Phi[82] +
-            w->M[9]*t->Phi[83] + w->M[10]*t->Phi[84] + w->M[11]*t->Phi[85] + w->M[12]*t->Phi[86] +
-            w->M[13]*t->Phi[87] + w->M[14]*t->Phi[88] + w->M[15]*t->Phi[89] + t->Qd[38]; w->Pn[38] =
-            v; check += v;
-    v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
-            w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
-            w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
-            w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[39]; w->Pn[39] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[30]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[32]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[34]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[36]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[38]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[40]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[42]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[44] + t->Qd[35]; w->Pn[35] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[51]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[53]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[55]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[57]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[59] + t->Qd[36]; w->Pn[36] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[72]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[74] + t->Qd[37]; w->Pn[37] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[75]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[77]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[79]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[87]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[89] + t->Qd[38]; w->Pn[38] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[104]));
+    v = lane_pair_sum(acc) + t->Qd[39]; w->Pn[39] = v; check += v;
     v = w->M[7]; w->Pn[40] = v; check += v;
     v = w->M[8]; w->Pn[41] = v; check += v;
     v = w->M[9]; w->Pn[42] = v; check += v;
@@ -2890,26 +3155,40 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_3(const ned_doppler18_tra
         ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[45] + w->M[1]*t->Phi[46] + w->M[2]*t->Phi[47] + w->M[3]*t->Phi[48] +
-            w->M[4]*t->Phi[49] + w->M[5]*t->Phi[50] + w->M[7]*t->Phi[51] + w->M[8]*t->Phi[52] +
-            w->M[9]*t->Phi[53] + w->M[10]*t->Phi[54] + w->M[11]*t->Phi[55] + w->M[12]*t->Phi[56] +
-            w->M[13]*t->Phi[57] + w->M[14]*t->Phi[58] + w->M[15]*t->Phi[59] + t->Qd[51]; w->Pn[51] =
-            v; check += v;
-    v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
-            w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[7]*t->Phi[66] + w->M[8]*t->Phi[67] +
-            w->M[9]*t->Phi[68] + w->M[10]*t->Phi[69] + w->M[11]*t->Phi[70] + w->M[12]*t->Phi[71] +
-            w->M[13]*t->Phi[72] + w->M[14]*t->Phi[73] + w->M[15]*t->Phi[74] + t->Qd[52]; w->Pn[52] =
-            v; check += v;
-    v = w->M[0]*t->Phi[75] + w->M[1]*t->Phi[76] + w->M[2]*t->Phi[77] + w->M[3]*t->Phi[78] +
-            w->M[4]*t->Phi[79] + w->M[5]*t->Phi[80] + w->M[7]*t->Phi[81] + w->M[8]*t->Phi[82] +
-            w->M[9]*t->Phi[83] + w->M[10]*t->Phi[84] + w->M[11]*t->Phi[85] + w->M[12]*t->Phi[86] +
-            w->M[13]*t->Phi[87] + w->M[14]*t->Phi[88] + w->M[15]*t->Phi[89] + t->Qd[53]; w->Pn[53] =
-            v; check += v;
-    v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
-            w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
-            w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
-            w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[54]; w->Pn[54] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[45]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[47]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[49]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[51]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[53]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[55]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[57]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[59] + t->Qd[51]; w->Pn[51] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[72]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[74] + t->Qd[52]; w->Pn[52] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[75]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[77]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[79]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[87]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[89] + t->Qd[53]; w->Pn[53] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[104]));
+    v = lane_pair_sum(acc) + t->Qd[54]; w->Pn[54] = v; check += v;
     v = w->M[7]; w->Pn[55] = v; check += v;
     v = w->M[8]; w->Pn[56] = v; check += v;
     v = w->M[9]; w->Pn[57] = v; check += v;
@@ -3025,21 +3304,32 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_4(const ned_doppler18_tra
         ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[60] + w->M[1]*t->Phi[61] + w->M[2]*t->Phi[62] + w->M[3]*t->Phi[63] +
-            w->M[4]*t->Phi[64] + w->M[5]*t->Phi[65] + w->M[7]*t->Phi[66] + w->M[8]*t->Phi[67] +
-            w->M[9]*t->Phi[68] + w->M[10]*t->Phi[69] + w->M[11]*t->Phi[70] + w->M[12]*t->Phi[71] +
-            w->M[13]*t->Phi[72] + w->M[14]*t->Phi[73] + w->M[15]*t->Phi[74] + t->Qd[66]; w->Pn[66] =
-            v; check += v;
-    v = w->M[0]*t->Phi[75] + w->M[1]*t->Phi[76] + w->M[2]*t->Phi[77] + w->M[3]*t->Phi[78] +
-            w->M[4]*t->Phi[79] + w->M[5]*t->Phi[80] + w->M[7]*t->Phi[81] + w->M[8]*t->Phi[82] +
-            w->M[9]*t->Phi[83] + w->M[10]*t->Phi[84] + w->M[11]*t->Phi[85] + w->M[12]*t->Phi[86] +
-            w->M[13]*t->Phi[87] + w->M[14]*t->Phi[88] + w->M[15]*t->Phi[89] + t->Qd[67]; w->Pn[67] =
-            v; check += v;
-    v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
-            w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
-            w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
-            w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[68]; w->Pn[68] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[60]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[62]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[64]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[66]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[68]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[70]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[72]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[74] + t->Qd[66]; w->Pn[66] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[75]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[77]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[79]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[87]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[89] + t->Qd[67]; w->Pn[67] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[104]));
+    v = lane_pair_sum(acc) + t->Qd[68]; w->Pn[68] = v; check += v;
     v = w->M[7]; w->Pn[69] = v; check += v;
     v = w->M[8]; w->Pn[70] = v; check += v;
     v = w->M[9]; w->Pn[71] = v; check += v;
@@ -3155,16 +3445,24 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_5(const ned_doppler18_tra
         ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[75] + w->M[1]*t->Phi[76] + w->M[2]*t->Phi[77] + w->M[3]*t->Phi[78] +
-            w->M[4]*t->Phi[79] + w->M[5]*t->Phi[80] + w->M[7]*t->Phi[81] + w->M[8]*t->Phi[82] +
-            w->M[9]*t->Phi[83] + w->M[10]*t->Phi[84] + w->M[11]*t->Phi[85] + w->M[12]*t->Phi[86] +
-            w->M[13]*t->Phi[87] + w->M[14]*t->Phi[88] + w->M[15]*t->Phi[89] + t->Qd[80]; w->Pn[80] =
-            v; check += v;
-    v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
-            w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
-            w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
-            w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[81]; w->Pn[81] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[75]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[77]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[79]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[7]), lane_pair_load(&t->Phi[81]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[9]), lane_pair_load(&t->Phi[83]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[11]), lane_pair_load(&t->Phi[85]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[13]), lane_pair_load(&t->Phi[87]));
+    v = lane_pair_sum(acc) + w->M[15]*t->Phi[89] + t->Qd[80]; w->Pn[80] = v; check += v;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[104]));
+    v = lane_pair_sum(acc) + t->Qd[81]; w->Pn[81] = v; check += v;
     v = w->M[7]; w->Pn[82] = v; check += v;
     v = w->M[8]; w->Pn[83] = v; check += v;
     v = w->M[9]; w->Pn[84] = v; check += v;
@@ -3298,11 +3596,16 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_6(const ned_doppler18_tra
         ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
-    v = w->M[0]*t->Phi[90] + w->M[1]*t->Phi[91] + w->M[2]*t->Phi[92] + w->M[3]*t->Phi[93] +
-            w->M[4]*t->Phi[94] + w->M[5]*t->Phi[95] + w->M[6]*t->Phi[96] + w->M[7]*t->Phi[97] +
-            w->M[8]*t->Phi[98] + w->M[9]*t->Phi[99] + w->M[10]*t->Phi[100] + w->M[11]*t->Phi[101] +
-            w->M[12]*t->Phi[102] + w->M[13]*t->Phi[103] + w->M[14]*t->Phi[104] +
-            w->M[15]*t->Phi[105] + t->Qd[93]; w->Pn[93] = v; check += v;
+    lane_pair acc;
+    acc = lane_pair_product(lane_pair_load(&w->M[0]), lane_pair_load(&t->Phi[90]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[2]), lane_pair_load(&t->Phi[92]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[4]), lane_pair_load(&t->Phi[94]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[6]), lane_pair_load(&t->Phi[96]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[8]), lane_pair_load(&t->Phi[98]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[10]), lane_pair_load(&t->Phi[100]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[12]), lane_pair_load(&t->Phi[102]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&w->M[14]), lane_pair_load(&t->Phi[104]));
+    v = lane_pair_sum(acc) + t->Qd[93]; w->Pn[93] = v; check += v;
     v = w->M[7]; w->Pn[94] = v; check += v;
     v = w->M[8]; w->Pn[95] = v; check += v;
     v = w->M[9]; w->Pn[96] = v; check += v;

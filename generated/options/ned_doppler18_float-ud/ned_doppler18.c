@@ -348,6 +348,54 @@ int ned_doppler18_matrices_evaluate(const ned_doppler18_params *restrict params,
 #define NED_DOPPLER18_BLOCK static
 #endif
 
+/* Sums of products in two lanes (modelgen/codegen/kernels.py, lane_split): the products pair
+   up by position, the first of each pair is added in one lane and the second in the other,
+   then the two lanes are added. Under GCC or Clang with SSE2 (unless
+           NED_DOPPLER18_SCALAR_LANE_PAIRS
+   is defined) a lane pair is an SSE2 vector, otherwise two scalars: the same operations in the
+   same order, bit for bit the same result. */
+typedef struct {
+    ned_doppler18_scalar lane[2];
+} lane_pair;
+
+static inline lane_pair lane_pair_load(const ned_doppler18_scalar *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    lanes.lane[0] = a[0];
+    lanes.lane[1] = a[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const ned_doppler18_scalar a, const ned_doppler18_scalar b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a;
+    lanes.lane[1] = b;
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a.lane[0] * b.lane[0];
+    lanes.lane[1] = a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a, const
+        lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = acc.lane[0] + a.lane[0] * b.lane[0];
+    lanes.lane[1] = acc.lane[1] + a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline ned_doppler18_scalar lane_pair_sum(const lane_pair acc)
+{
+    return acc.lane[0] + acc.lane[1];
+}
+
 /* 2^e for -80 <= e <= 80, built from its IEEE-754 bits (exact, no call). */
 static ned_doppler18_scalar power_of_two(const int e)
 {
@@ -2571,36 +2619,65 @@ int ned_doppler18_predict(ned_doppler18_filter *restrict f, const ned_doppler18_
     ned_doppler18_filter_scratch *w = &work->filter;
     int i, j, k;
     ned_doppler18_scalar check = 0.0F;
+    lane_pair acc;
     /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
-    w->xn[0] = t->Phi[0]*f->x[0] + t->Phi[1]*f->x[1] + t->Phi[2]*f->x[2] + t->Phi[3]*f->x[3] +
-            t->Phi[4]*f->x[4] + t->Phi[5]*f->x[5] + t->Phi[6]*f->x[7] + t->Phi[7]*f->x[8] +
-            t->Phi[8]*f->x[9] + t->Phi[9]*f->x[10] + t->Phi[10]*f->x[11] + t->Phi[11]*f->x[12] +
-            t->Phi[12]*f->x[13] + t->Phi[13]*f->x[14] + t->Phi[14]*f->x[15];
-    w->xn[1] = t->Phi[15]*f->x[0] + t->Phi[16]*f->x[1] + t->Phi[17]*f->x[2] + t->Phi[18]*f->x[3] +
-            t->Phi[19]*f->x[4] + t->Phi[20]*f->x[5] + t->Phi[21]*f->x[7] + t->Phi[22]*f->x[8] +
-            t->Phi[23]*f->x[9] + t->Phi[24]*f->x[10] + t->Phi[25]*f->x[11] + t->Phi[26]*f->x[12] +
-            t->Phi[27]*f->x[13] + t->Phi[28]*f->x[14] + t->Phi[29]*f->x[15];
-    w->xn[2] = t->Phi[30]*f->x[0] + t->Phi[31]*f->x[1] + t->Phi[32]*f->x[2] + t->Phi[33]*f->x[3] +
-            t->Phi[34]*f->x[4] + t->Phi[35]*f->x[5] + t->Phi[36]*f->x[7] + t->Phi[37]*f->x[8] +
-            t->Phi[38]*f->x[9] + t->Phi[39]*f->x[10] + t->Phi[40]*f->x[11] + t->Phi[41]*f->x[12] +
-            t->Phi[42]*f->x[13] + t->Phi[43]*f->x[14] + t->Phi[44]*f->x[15];
-    w->xn[3] = t->Phi[45]*f->x[0] + t->Phi[46]*f->x[1] + t->Phi[47]*f->x[2] + t->Phi[48]*f->x[3] +
-            t->Phi[49]*f->x[4] + t->Phi[50]*f->x[5] + t->Phi[51]*f->x[7] + t->Phi[52]*f->x[8] +
-            t->Phi[53]*f->x[9] + t->Phi[54]*f->x[10] + t->Phi[55]*f->x[11] + t->Phi[56]*f->x[12] +
-            t->Phi[57]*f->x[13] + t->Phi[58]*f->x[14] + t->Phi[59]*f->x[15];
-    w->xn[4] = t->Phi[60]*f->x[0] + t->Phi[61]*f->x[1] + t->Phi[62]*f->x[2] + t->Phi[63]*f->x[3] +
-            t->Phi[64]*f->x[4] + t->Phi[65]*f->x[5] + t->Phi[66]*f->x[7] + t->Phi[67]*f->x[8] +
-            t->Phi[68]*f->x[9] + t->Phi[69]*f->x[10] + t->Phi[70]*f->x[11] + t->Phi[71]*f->x[12] +
-            t->Phi[72]*f->x[13] + t->Phi[73]*f->x[14] + t->Phi[74]*f->x[15];
-    w->xn[5] = t->Phi[75]*f->x[0] + t->Phi[76]*f->x[1] + t->Phi[77]*f->x[2] + t->Phi[78]*f->x[3] +
-            t->Phi[79]*f->x[4] + t->Phi[80]*f->x[5] + t->Phi[81]*f->x[7] + t->Phi[82]*f->x[8] +
-            t->Phi[83]*f->x[9] + t->Phi[84]*f->x[10] + t->Phi[85]*f->x[11] + t->Phi[86]*f->x[12] +
-            t->Phi[87]*f->x[13] + t->Phi[88]*f->x[14] + t->Phi[89]*f->x[15];
-    w->xn[6] = t->Phi[90]*f->x[0] + t->Phi[91]*f->x[1] + t->Phi[92]*f->x[2] + t->Phi[93]*f->x[3] +
-            t->Phi[94]*f->x[4] + t->Phi[95]*f->x[5] + t->Phi[96]*f->x[6] + t->Phi[97]*f->x[7] +
-            t->Phi[98]*f->x[8] + t->Phi[99]*f->x[9] + t->Phi[100]*f->x[10] + t->Phi[101]*f->x[11] +
-            t->Phi[102]*f->x[12] + t->Phi[103]*f->x[13] + t->Phi[104]*f->x[14] +
-            t->Phi[105]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[0]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[2]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[4]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[6]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[8]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[10]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[12]), lane_pair_load(&f->x[13]));
+    w->xn[0] = lane_pair_sum(acc) + t->Phi[14]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[15]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[17]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[19]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[21]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[23]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[25]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[27]), lane_pair_load(&f->x[13]));
+    w->xn[1] = lane_pair_sum(acc) + t->Phi[29]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[30]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[32]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[34]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[36]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[38]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[40]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[42]), lane_pair_load(&f->x[13]));
+    w->xn[2] = lane_pair_sum(acc) + t->Phi[44]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[45]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[47]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[49]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[51]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[53]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[55]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[57]), lane_pair_load(&f->x[13]));
+    w->xn[3] = lane_pair_sum(acc) + t->Phi[59]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[60]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[62]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[64]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[66]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[68]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[70]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[72]), lane_pair_load(&f->x[13]));
+    w->xn[4] = lane_pair_sum(acc) + t->Phi[74]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[75]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[77]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[79]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[81]), lane_pair_load(&f->x[7]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[83]), lane_pair_load(&f->x[9]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[85]), lane_pair_load(&f->x[11]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[87]), lane_pair_load(&f->x[13]));
+    w->xn[5] = lane_pair_sum(acc) + t->Phi[89]*f->x[15];
+    acc = lane_pair_product(lane_pair_load(&t->Phi[90]), lane_pair_load(&f->x[0]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[92]), lane_pair_load(&f->x[2]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[94]), lane_pair_load(&f->x[4]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[96]), lane_pair_load(&f->x[6]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[98]), lane_pair_load(&f->x[8]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[100]), lane_pair_load(&f->x[10]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[102]), lane_pair_load(&f->x[12]));
+    acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[104]), lane_pair_load(&f->x[14]));
+    w->xn[6] = lane_pair_sum(acc);
     w->xn[10] = t->Phi[109]*f->x[10];
     w->xn[11] = t->Phi[110]*f->x[11];
     w->xn[12] = t->Phi[111]*f->x[12];

@@ -5,10 +5,10 @@ from __future__ import annotations
 import math
 
 from modelgen.codegen.backends.c.literals import c_number, scalar_bytes, scalar_spellings
-from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c_declarator, c_ref, c_statement
+from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c_declarator, c_lines, c_ref, c_statement
 from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.discretize_kernels import HORNER_LAST, DiscretizeBlock, SegmentAssign, horner_level_name, scalar_statements
-from modelgen.codegen.kernels import CheckedAssign, KernelBlock, compact_predict_tables
+from modelgen.codegen.kernels import MIN_LANE_PAIRS, CheckedAssign, KernelBlock, compact_predict_tables, lane_split
 from modelgen.codegen.compact_discretize import CompactDiscretizeTables
 from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout, phi_entries
 from modelgen.codegen.structure import FilterStructure
@@ -84,6 +84,11 @@ def small_block(statements) -> bool:
     return sum(len(s.terms) for s in scalar_statements(statements)) <= SMALL_BLOCK_TERMS
 
 
+def two_lane_sums(statements, two_lanes: bool = True) -> bool:
+    """Whether some statement prints as a sum in two lanes (``kernels.lane_split``): its block declares ``lane_pair acc``."""
+    return two_lanes and any(lane_split(s.terms)[0] for s in statements if not isinstance(s, SegmentAssign))
+
+
 def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, object]]:
     """Static C functions for the unrolled kernel pieces, with the parameters each uses."""
     types = {"filter": f"const {prefix}_filter", "transition": f"const {prefix}_transition", "scratch": f"{prefix}_filter_scratch"}  # noqa: E501
@@ -95,7 +100,8 @@ def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, ob
                 "name": block.name,
                 "signature": ", ".join(f"{types[o]} *restrict {POINTERS[o]}" for o in owners),
                 "arguments": ", ".join(POINTERS[o] for o in owners),
-                "lines": [c_statement(s) for s in block.statements],
+                "lines": [line for s in block.statements for line in c_lines(s, two_lanes=block.two_lanes)],
+                "lane_pairs": two_lane_sums(block.statements, block.two_lanes),
                 "checked": block.checked,
                 "small": small_block(block.statements),
             }
@@ -114,7 +120,7 @@ def _segment_ref(ref) -> str:
     return f"{POINTERS[ref.owner]}->{ref.array}" + "".join(f"[{i}]" for i in head) + (f"[{offset}+k]" if offset else "[k]")
 
 
-def discretize_lines(statements, read_back: bool = False) -> list[str]:
+def discretize_lines(statements, read_back: bool = False, two_lanes: bool = False) -> list[str]:
     """C lines of a discretize block: scalar statements one per line, consecutive segments as one fixed-trip loop over k.
 
     The loop (even length, contiguous rows, no aliasing between targets and
@@ -122,6 +128,7 @@ def discretize_lines(statements, read_back: bool = False) -> list[str]:
     one loop for all rows loads each source segment once per step.
     """
     lines = ["int k;"] if any(isinstance(s, SegmentAssign) for s in statements) else []
+    lines += ["lane_pair acc;"] if two_lane_sums(statements, two_lanes) else []
     loop = None  # the length of the loop being printed (consecutive segments of one length share it)
     for s in statements:
         if isinstance(s, SegmentAssign):
@@ -136,7 +143,7 @@ def discretize_lines(statements, read_back: bool = False) -> list[str]:
         if loop is not None:
             lines.append("}")
             loop = None
-        lines.append(c_statement(s, read_back))
+        lines += c_lines(s, read_back, two_lanes)
     lines += ["}"] if loop is not None else []
     if read_back:  # the block's check: the sum of what it stored, read back after the stores
         lines.append("check = " + " + ".join(c_ref(s.targets[0]) for s in statements if isinstance(s, CheckedAssign)) + ";")
@@ -171,7 +178,8 @@ def discretize_functions(blocks: list[DiscretizeBlock], prefix: str, scalar: str
                     (name, c_number(float(num), scalar) + (f" / {c_number(float(den), scalar)}" if den != 1 else ""))
                     for name, num, den in b.constants
                 ],
-                "lines": discretize_lines(statements, b.block.read_back),
+                "lines": discretize_lines(statements, b.block.read_back, b.block.two_lanes),
+                "lane_pairs": two_lane_sums(statements, b.block.two_lanes),
                 "small": small_block(statements),
                 "checked": b.block.checked,
                 "read_back": b.block.read_back,
@@ -314,6 +322,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
     targets, _, block = description.evaluation
     state_lines, state_commit, _ = description.state_predict
     blocks = description.predict_blocks[0]
+    predict_functions = block_functions(blocks, model.name)
     parts = source_parts(description)
     roundoff = FLOAT_ROUNDOFF if options.scalar == "float" else DOUBLE_ROUNDOFF
     unit_rows = set(structure.unit_rows)
@@ -404,7 +413,12 @@ def c_context(description: FilterDescription) -> dict[str, object]:
             for f in discretize
             if f["name"] in ("noise_input", "noise_input_times_step") or f["name"].startswith("process_noise")
         ],
-        "predict_state": [c_statement(s) for s in state_lines],
+        "predict_state": [line for s in state_lines for line in c_lines(s, two_lanes=True)],  # x_n = Phi x in two lanes
+        "predict_state_pairs": two_lane_sums(state_lines),
+        "lane_pairs": two_lane_sums(state_lines) or any(f["lane_pairs"] for f in [*predict_functions, *discretize]),  # helpers defined
+        "min_lane_terms": 2 * MIN_LANE_PAIRS,  # the compact propagate's two-lane order (kernels.lane_split)
+        # a row of Phi long enough for it (without one, gcc -Warray-bounds sees the lanes' reads beyond small tables)
+        "compact_two_lanes": any(len(row) >= 2 * MIN_LANE_PAIRS for row in structure.rows("Phi")),
         "predict_state_small": small_block(state_lines),
         "predict_state_check": [
             f"check += {ref} - {ref};"
@@ -415,7 +429,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "predict_state_commit": [c_statement(s) for s in state_commit],
         "probe_entry": structure.entries("Phi").index(probe),
         "covariance_commit_rows": description.covariance_commit,
-        "predict_blocks": block_functions(blocks, model.name),
+        "predict_blocks": predict_functions,
         "compact": bool(compact),
         "compact_tables": {**{k: _table(v) for k, v in compact.items()}, "nnz": max(len(compact.get("col", ())), 1)},
         "struct_bytes": struct_bytes(layout, scalar_bytes(options.scalar)),

@@ -14,7 +14,7 @@ from sympy.codegen.ast import float32, float64, real
 from sympy.printing.c import C99CodePrinter
 
 from modelgen.codegen.backends.printing import RenamedSymbols, small_power
-from modelgen.codegen.kernels import Assign, CheckedAssign, Ref, Statement, Term
+from modelgen.codegen.kernels import Assign, CheckedAssign, Ref, Statement, Term, lane_split
 
 SCALAR_TYPES = {"double": float64, "float": float32}
 
@@ -58,6 +58,48 @@ def c_statement(statement: Statement, read_back: bool = False) -> str:
         return f"{first} = {c_sum(statement.terms)};" + "".join(f" {c_ref(t)} = {first};" for t in statement.targets[1:])
     stores = " ".join(f"{c_ref(t)} = v;" for t in statement.targets)
     return f"v = {c_sum(statement.terms)}; {stores} check += v;"
+
+
+def _follows(first: Ref, second: Ref) -> bool:
+    """Whether ``second`` is the entry right after ``first`` in memory (same array and row, next index)."""
+    return (
+        first.owner == second.owner != "local"
+        and first.array == second.array
+        and first.index[:-1] == second.index[:-1]
+        and second.index[-1] == first.index[-1] + 1
+    )
+
+
+def _lane_operand(first: Ref, second: Ref) -> str:
+    """Two factors as one lane pair: one load when they are consecutive entries."""
+    if _follows(first, second):
+        return f"lane_pair_load(&{c_ref(first)})"
+    return f"lane_pair_of({c_ref(first)}, {c_ref(second)})"
+
+
+def c_lines(statement: Statement, read_back: bool = False, two_lanes: bool = False) -> list[str]:
+    """A kernel statement as C; with ``two_lanes``, its sum of products in two lanes (``kernels.lane_split``).
+
+    A pair of terms is one two-lane product (SSE2 vector code, or the same
+    operations on two scalars: the same bits); the lanes are then added, then
+    the other terms.  gcc -O2 does not find these vector products itself in
+    straight-line code of several dot products (bench/bench_cycle.py).  The
+    block declares ``lane_pair acc``.
+    """
+    pairs, rest = lane_split(statement.terms) if two_lanes else ((), statement.terms)
+    if not pairs:
+        return [c_statement(statement, read_back)]
+    (a, b), *others = pairs
+    lines = [f"acc = lane_pair_product({_lane_operand(a[0], b[0])}, {_lane_operand(a[1], b[1])});"]
+    lines += [f"acc = lane_pair_add_product(acc, {_lane_operand(a[0], b[0])}, {_lane_operand(a[1], b[1])});" for a, b in others]
+    value = " + ".join(["lane_pair_sum(acc)", *("*".join(c_ref(r) for r in term) for term in rest)])
+    if isinstance(statement, Assign):
+        return lines + [f"{c_ref(statement.target)} = {value};"]
+    if read_back:
+        first = c_ref(statement.targets[0])
+        return lines + [f"{first} = {value};" + "".join(f" {c_ref(t)} = {first};" for t in statement.targets[1:])]
+    stores = " ".join(f"{c_ref(t)} = v;" for t in statement.targets)
+    return lines + [f"v = {value}; {stores} check += v;"]
 
 
 def c_declarator(field) -> str:
