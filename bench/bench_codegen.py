@@ -260,7 +260,9 @@ static unsigned long storage_bytes(void) {{ return (unsigned long)(sizeof p_v + 
 """
 
 
-def build_harness(folder: Path, glue: str, sources: list[Path], p: dict, cxx: bool = False, includes: tuple[Path, ...] = ()) -> Path:
+def build_harness(folder: Path, glue: str, sources: list[Path], p: dict, cxx: bool = False, includes: tuple[Path, ...] = (),
+                  libraries: tuple[Path, ...] = ()) -> Path:
+    """The harness with ``glue``, the ``sources`` compiled at OPT and prebuilt ``libraries`` (archives) linked in."""
     (folder / "glue.h").write_text(glue)
     exe = folder / "harness"
     incs = ["-I", str(folder), "-I", str(HERE), *[f"-I{i}" for i in includes]]
@@ -270,6 +272,7 @@ def build_harness(folder: Path, glue: str, sources: list[Path], p: dict, cxx: bo
         defines = [f"-DN={p['n']}", f"-DM={p['m']}"] if source.name == "dense_filter.c" else []
         run(["gcc", "-std=gnu99", OPT, *defines, *incs, "-c", str(source), "-o", str(obj)])
         objects.append(str(obj))
+    objects += map(str, libraries)
     flags = [OPT, f"-DBENCH_N={p['n']}", f"-DBENCH_M={p['m']}", '-DBENCH_GLUE="glue.h"', *incs]
     if cxx:
         command = ["g++", "-std=c++14", "-DNDEBUG", *flags, "-x", "c++", str(HERE / "harness.c"), "-x", "none", *objects, "-o", str(exe), "-lm"]
