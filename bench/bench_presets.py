@@ -66,8 +66,10 @@ def instructions(exe: Path, data: Path) -> float | None:
     """Callgrind instructions per cycle, None when valgrind cannot run the code."""
     try:
         return bc.callgrind_instructions(exe, data, "predict")
-    except RuntimeError:  # valgrind stops at an instruction it cannot decode
-        return None
+    except RuntimeError as error:
+        if "unhandled instruction" in str(error) or "SIGILL" in str(error):  # an instruction valgrind cannot decode
+            return None
+        raise
 
 
 def text_bytes(library: Path) -> int:

@@ -350,27 +350,21 @@ int ned_doppler18_matrices_evaluate(const ned_doppler18_params *restrict params,
 #define NED_DOPPLER18_BLOCK static
 #endif
 
-/* Sums of products in two lanes (modelgen/codegen/kernels.py, lane_split): the products pair
-   up by position, the first of each pair is added in one lane and the second in the other,
-   then the two lanes are added. Under GCC or Clang with SSE2 (unless
-           NED_DOPPLER18_SCALAR_LANE_PAIRS
-   is defined) a lane pair is an SSE2 vector, otherwise two scalars: the same operations in the
-   same order, bit for bit the same result. */
-#if defined(__GNUC__) && defined(__SSE2__) && !defined(NED_DOPPLER18_SCALAR_LANE_PAIRS)
+/* Sums of products in two lanes (modelgen/codegen/kernels.py, lane_split): the products
+   pair up by position, the first of each pair is added in one lane and the second in the
+   other, then the two lanes are added. Under GCC or Clang with SSE2 arithmetic (unless
+   NED_DOPPLER18_SCALAR_LANE_PAIRS is defined), a lane pair is an SSE2 vector, otherwise two
+   scalars: the same operations in the same order, so the same result bit for bit, as long
+   as the compiler does not fuse a product and a sum (-ffp-contract=off, which gcc's
+   -std=c99 implies). */
+#if defined(__GNUC__) && defined(__SSE2_MATH__) \
+    && !defined(NED_DOPPLER18_SCALAR_LANE_PAIRS)
 typedef double lane_pair __attribute__((vector_size(2 * sizeof(double))));
 
 static inline lane_pair lane_pair_load(const double *a) /* a[0], a[1] */
 {
     lane_pair lanes;
     memcpy(&lanes, a, sizeof lanes);
-    return lanes;
-}
-
-static inline lane_pair lane_pair_of(const double a, const double b)
-{
-    lane_pair lanes;
-    const double values[2] = { a, b };
-    memcpy(&lanes, values, sizeof lanes);
     return lanes;
 }
 
@@ -401,14 +395,6 @@ static inline lane_pair lane_pair_load(const ned_doppler18_scalar *a) /* a[0], a
     lane_pair lanes;
     lanes.lane[0] = a[0];
     lanes.lane[1] = a[1];
-    return lanes;
-}
-
-static inline lane_pair lane_pair_of(const ned_doppler18_scalar a, const ned_doppler18_scalar b)
-{
-    lane_pair lanes;
-    lanes.lane[0] = a;
-    lanes.lane[1] = b;
     return lanes;
 }
 

@@ -98,7 +98,7 @@ def lane_split(terms: tuple[Term, ...]) -> tuple[tuple[tuple[Term, Term], ...], 
     the other, the two lanes are added, then the terms left (an odd last
     product, a Q_d entry) in order.  With fewer than ``MIN_LANE_PAIRS`` pairs
     the sum keeps its plain left-to-right order (no pairs).  The compact
-    kernels sum in the same order, so that both give the same bits.
+    propagate sums in the same order, so that it gives the unrolled one's bits.
     """
     products = 0
     while products < len(terms) and len(terms[products]) == 2:
@@ -126,12 +126,12 @@ def phi_reference(structure: FilterStructure) -> Callable[[int, int], Ref]:
     return phi
 
 
-def state_predict(structure: FilterStructure) -> tuple[list[Assign], list[Assign], OperationCount]:
-    """Unrolled x_n = Phi x over the structural nonzeros of Phi.
+def state_predict(structure: FilterStructure) -> tuple[KernelBlock, list[Assign], OperationCount]:
+    """Unrolled x_n = Phi x over the structural nonzeros of Phi, its dot products in two lanes.
 
-    Returns (assignments into the scratch ``xn``, commit assignments into the
-    filter's ``x``, cost); rows of Phi that are e_i leave their state as it
-    is, so they appear in neither.
+    Returns (the block of assignments into the scratch ``xn``, commit
+    assignments into the filter's ``x``, cost); rows of Phi that are e_i
+    leave their state as it is, so they appear in neither.
     """
     rows = structure.rows("Phi")
     unit = set(structure.unit_rows)
@@ -146,7 +146,7 @@ def state_predict(structure: FilterStructure) -> tuple[list[Assign], list[Assign
         add += len(terms) - 1
         lines.append(Assign(Ref("scratch", "xn", (i,)), terms))
         commit.append(Assign(Ref("filter", "x", (i,)), ((Ref("scratch", "xn", (i,)),),)))
-    return lines, commit, OperationCount(mul, add)
+    return KernelBlock("state_predict", tuple(lines), two_lanes=True), commit, OperationCount(mul, add)
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,9 @@ vector product under GCC with SSE2, and as two scalars otherwise (or with
 from __future__ import annotations
 
 import platform
+import shutil
+import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,6 +25,7 @@ from modelgen.codegen.layout import ModelSizes
 from generated_support import write_files
 
 OK = 0
+GENERATED = Path(__file__).resolve().parents[2] / "generated"
 
 
 def m(k: int) -> Ref:
@@ -42,11 +46,13 @@ def test_products_pair_by_position_then_an_odd_product_and_the_rest_follow():
 
 
 def test_fewer_products_than_the_minimum_keep_the_plain_order():
-    """Three products (one pair and one left) are summed left to right: adding the lanes would cost what a pair saves."""
-    assert MIN_LANE_PAIRS == 2
-    terms = ((m(0), phi(0)), (m(1), phi(1)), (m(5), phi(2)), QD)
-    assert lane_split(terms) == ((), terms)
-    statement = Assign(Ref("scratch", "xn", (0,)), terms[:3])
+    """One product short of MIN_LANE_PAIRS pairs: summed left to right; one more product: in two lanes."""
+    short = tuple((m(k), phi(k)) for k in range(2 * MIN_LANE_PAIRS - 1))
+    assert lane_split(short + (QD,)) == ((), short + (QD,))
+    enough = short + ((m(9), phi(9)),)
+    assert len(lane_split(enough + (QD,))[0]) == MIN_LANE_PAIRS
+    terms = ((m(0), phi(0)), (m(1), phi(1)), (m(5), phi(2)))
+    statement = Assign(Ref("scratch", "xn", (0,)), terms)
     assert c_lines(statement, two_lanes=True) == ["w->xn[0] = w->M[0]*t->Phi[0] + w->M[1]*t->Phi[1] + w->M[5]*t->Phi[2];"]
 
 
@@ -71,14 +77,14 @@ def test_factors_in_another_row_are_not_consecutive():
         "acc = lane_pair_product(lane_pair_of(w->term[0][1], w->term[1][0]), lane_pair_load(&t->Phi[0]));")
 
 
-def _run(folder, derived, flags) -> dict[str, np.ndarray]:
+def _run(folder, derived, flags: tuple[str, ...]) -> dict[str, np.ndarray]:
     """Filter cycles at the model's check scenario (its step, then 60 times shorter), with updates, of the
     library compiled with ``flags``."""
     from modelgen.jobs import check_scenario
 
     model = derived.model
     scenario = check_scenario(derived)
-    library = compile_shared_library([folder / f"{model.name}.c"], folder / f"lib{model.name}{len(flags)}.so", ("-O2", *flags))
+    library = compile_shared_library([folder / f"{model.name}.c"], folder / f"lib{model.name}-{len(flags)}.so", flags)
     c = CompiledFilter(library, model.name, ModelSizes.of(derived), model.parameter_names)
     assert c.set_parameters(dict(scenario.parameters)) == OK
     rng = np.random.default_rng(5)
@@ -95,16 +101,31 @@ def _run(folder, derived, flags) -> dict[str, np.ndarray]:
 
 
 @pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="the vector lanes are SSE2 code (x86-64)")
+@pytest.mark.parametrize("optimization", ["-O2", "-Os"])  # at -Os gcc does not inline the scalar helpers
 @pytest.mark.parametrize("name", ["ned_doppler18", "ins_gnss21"])
-def test_vector_and_scalar_lanes_give_the_same_bits(name, derived_builtin, tmp_path):
-    """Discretize, predict and update of the SSE2 build equal the scalar-lane build bit for bit."""
+def test_vector_and_scalar_lanes_give_the_same_bits(name, optimization, derived_builtin, tmp_path):
+    """Discretize, predict and update of the SSE2 build equal the scalar-lane build bit for bit (-std=c99: no fused products)."""
     derived = derived_builtin(name)
     files = generate_code(derived).files
     source = files[f"{derived.model.name}.c"]
-    assert "lane_pair_add_product(acc" in source and "__SSE2__" in source  # the model has two-lane sums
+    assert "lane_pair_add_product(acc" in source and "__SSE2_MATH__" in source  # the model has two-lane sums
     folder = write_files(tmp_path, files)
-    vector = _run(folder, derived, ())
-    scalar = _run(folder, derived, (f"-D{derived.model.name.upper()}_SCALAR_LANE_PAIRS",))
+    vector = _run(folder, derived, (optimization,))
+    scalar = _run(folder, derived, (optimization, f"-D{derived.model.name.upper()}_SCALAR_LANE_PAIRS"))
     assert vector.pop("library").tobytes() != scalar.pop("library").tobytes()  # the SSE2 lanes were compiled in
     for key, value in vector.items():
         assert value.tobytes() == scalar[key].tobytes(), key
+
+
+@pytest.mark.skipif(shutil.which("clang") is None, reason="clang is not installed (.ci/run installs it)")
+@pytest.mark.parametrize("lanes", ["vector", "scalar"])
+def test_the_committed_c_passes_clangs_strict_checks(lanes):
+    """clang -std=c99 -pedantic -Wall -Wextra -Werror on every committed C file, both lane paths (clang warns of an unused
+    static inline helper, which gcc does not)."""
+    sources = sorted(GENERATED.glob("**/*.c"))
+    assert len(sources) >= 14
+    for source in sources:
+        define = [f"-D{source.stem.upper()}_SCALAR_LANE_PAIRS"] if lanes == "scalar" else []
+        result = subprocess.run(["clang", "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-fsyntax-only", *define, str(source)],
+                                capture_output=True, text=True)
+        assert result.returncode == 0, f"{source}:\n{result.stderr[:2000]}"

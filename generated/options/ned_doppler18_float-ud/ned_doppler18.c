@@ -348,12 +348,9 @@ int ned_doppler18_matrices_evaluate(const ned_doppler18_params *restrict params,
 #define NED_DOPPLER18_BLOCK static
 #endif
 
-/* Sums of products in two lanes (modelgen/codegen/kernels.py, lane_split): the products pair
-   up by position, the first of each pair is added in one lane and the second in the other,
-   then the two lanes are added. Under GCC or Clang with SSE2 (unless
-           NED_DOPPLER18_SCALAR_LANE_PAIRS
-   is defined) a lane pair is an SSE2 vector, otherwise two scalars: the same operations in the
-   same order, bit for bit the same result. */
+/* Sums of products in two lanes (modelgen/codegen/kernels.py, lane_split): the products
+   pair up by position, the first of each pair is added in one lane and the second in the
+   other, then the two lanes are added. */
 typedef struct {
     ned_doppler18_scalar lane[2];
 } lane_pair;
@@ -363,14 +360,6 @@ static inline lane_pair lane_pair_load(const ned_doppler18_scalar *a) /* a[0], a
     lane_pair lanes;
     lanes.lane[0] = a[0];
     lanes.lane[1] = a[1];
-    return lanes;
-}
-
-static inline lane_pair lane_pair_of(const ned_doppler18_scalar a, const ned_doppler18_scalar b)
-{
-    lane_pair lanes;
-    lanes.lane[0] = a;
-    lanes.lane[1] = b;
     return lanes;
 }
 

@@ -84,9 +84,15 @@ def small_block(statements) -> bool:
     return sum(len(s.terms) for s in scalar_statements(statements)) <= SMALL_BLOCK_TERMS
 
 
-def two_lane_sums(statements, two_lanes: bool = True) -> bool:
-    """Whether some statement prints as a sum in two lanes (``kernels.lane_split``): its block declares ``lane_pair acc``."""
-    return two_lanes and any(lane_split(s.terms)[0] for s in statements if not isinstance(s, SegmentAssign))
+def two_lane_sums(block: KernelBlock) -> bool:
+    """Whether some statement of the block prints as a sum in two lanes (``kernels.lane_split``): it declares ``lane_pair acc``."""
+    return block.two_lanes and any(lane_split(s.terms)[0] for s in block.statements if not isinstance(s, SegmentAssign))
+
+
+def lane_pair_helpers(lines: list[str]) -> list[str]:
+    """The ``lane_pair`` helpers the printed lines call (c_source.c.j2 defines only these: clang warns of unused ones)."""
+    return [name for name in ("lane_pair_load", "lane_pair_of", "lane_pair_product", "lane_pair_add_product", "lane_pair_sum")
+            if any(f"{name}(" in line for line in lines)]
 
 
 def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, object]]:
@@ -101,7 +107,7 @@ def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, ob
                 "signature": ", ".join(f"{types[o]} *restrict {POINTERS[o]}" for o in owners),
                 "arguments": ", ".join(POINTERS[o] for o in owners),
                 "lines": [line for s in block.statements for line in c_lines(s, two_lanes=block.two_lanes)],
-                "lane_pairs": two_lane_sums(block.statements, block.two_lanes),
+                "lane_pairs": two_lane_sums(block),
                 "checked": block.checked,
                 "small": small_block(block.statements),
             }
@@ -128,7 +134,6 @@ def discretize_lines(statements, read_back: bool = False, two_lanes: bool = Fals
     one loop for all rows loads each source segment once per step.
     """
     lines = ["int k;"] if any(isinstance(s, SegmentAssign) for s in statements) else []
-    lines += ["lane_pair acc;"] if two_lane_sums(statements, two_lanes) else []
     loop = None  # the length of the loop being printed (consecutive segments of one length share it)
     for s in statements:
         if isinstance(s, SegmentAssign):
@@ -179,7 +184,7 @@ def discretize_functions(blocks: list[DiscretizeBlock], prefix: str, scalar: str
                     for name, num, den in b.constants
                 ],
                 "lines": discretize_lines(statements, b.block.read_back, b.block.two_lanes),
-                "lane_pairs": two_lane_sums(statements, b.block.two_lanes),
+                "lane_pairs": two_lane_sums(b.block),
                 "small": small_block(statements),
                 "checked": b.block.checked,
                 "read_back": b.block.read_back,
@@ -320,7 +325,9 @@ def c_context(description: FilterDescription) -> dict[str, object]:
     calls = {f["name"]: f["call"] for f in discretize}
     printer = CPrinter(options.scalar, {p.sym: f"params->{p.name}" for p in model.parameters})
     targets, _, block = description.evaluation
-    state_lines, state_commit, _ = description.state_predict
+    state_block, state_commit, _ = description.state_predict
+    state_lines = state_block.statements
+    state_printed = [line for s in state_lines for line in c_lines(s, two_lanes=state_block.two_lanes)]
     blocks = description.predict_blocks[0]
     predict_functions = block_functions(blocks, model.name)
     parts = source_parts(description)
@@ -413,9 +420,9 @@ def c_context(description: FilterDescription) -> dict[str, object]:
             for f in discretize
             if f["name"] in ("noise_input", "noise_input_times_step") or f["name"].startswith("process_noise")
         ],
-        "predict_state": [line for s in state_lines for line in c_lines(s, two_lanes=True)],  # x_n = Phi x in two lanes
-        "predict_state_pairs": two_lane_sums(state_lines),
-        "lane_pairs": two_lane_sums(state_lines) or any(f["lane_pairs"] for f in [*predict_functions, *discretize]),  # helpers defined
+        "predict_state": state_printed,
+        "predict_state_pairs": two_lane_sums(state_block),
+        "lane_pair_helpers": lane_pair_helpers(state_printed + [line for f in [*predict_functions, *discretize] for line in f["lines"]]),
         "min_lane_terms": 2 * MIN_LANE_PAIRS,  # the compact propagate's two-lane order (kernels.lane_split)
         # a row of Phi long enough for it (without one, gcc -Warray-bounds sees the lanes' reads beyond small tables)
         "compact_two_lanes": any(len(row) >= 2 * MIN_LANE_PAIRS for row in structure.rows("Phi")),

@@ -48,16 +48,20 @@ def c_sum(terms: tuple[Term, ...]) -> str:
     return " + ".join("*".join(c_ref(r) for r in term) for term in terms) if terms else "0"
 
 
-def c_statement(statement: Statement, read_back: bool = False) -> str:
-    """One kernel statement as one line of C (a checked one with ``read_back``: the stores only, summed later)."""
+def c_statement(statement: Statement, read_back: bool = False, value: str | None = None) -> str:
+    """One kernel statement as one line of C (a checked one with ``read_back``: the stores only, summed later).
+
+    ``value``: the C of its sum when printed otherwise (two lanes), else the sum of its terms.
+    """
+    value = c_sum(statement.terms) if value is None else value
     if isinstance(statement, Assign):
-        return f"{c_ref(statement.target)} = {c_sum(statement.terms)};"
+        return f"{c_ref(statement.target)} = {value};"
     assert isinstance(statement, CheckedAssign)
     if read_back:
         first = c_ref(statement.targets[0])
-        return f"{first} = {c_sum(statement.terms)};" + "".join(f" {c_ref(t)} = {first};" for t in statement.targets[1:])
+        return f"{first} = {value};" + "".join(f" {c_ref(t)} = {first};" for t in statement.targets[1:])
     stores = " ".join(f"{c_ref(t)} = v;" for t in statement.targets)
-    return f"v = {c_sum(statement.terms)}; {stores} check += v;"
+    return f"v = {value}; {stores} check += v;"
 
 
 def _follows(first: Ref, second: Ref) -> bool:
@@ -81,8 +85,8 @@ def c_lines(statement: Statement, read_back: bool = False, two_lanes: bool = Fal
     """A kernel statement as C; with ``two_lanes``, its sum of products in two lanes (``kernels.lane_split``).
 
     A pair of terms is one two-lane product (SSE2 vector code, or the same
-    operations on two scalars: the same bits); the lanes are then added, then
-    the other terms.  gcc -O2 does not find these vector products itself in
+    operations on two scalars); the lanes are then added, then the other
+    terms.  gcc -O2 does not find these vector products itself in
     straight-line code of several dot products (bench/bench_cycle.py).  The
     block declares ``lane_pair acc``.
     """
@@ -93,13 +97,7 @@ def c_lines(statement: Statement, read_back: bool = False, two_lanes: bool = Fal
     lines = [f"acc = lane_pair_product({_lane_operand(a[0], b[0])}, {_lane_operand(a[1], b[1])});"]
     lines += [f"acc = lane_pair_add_product(acc, {_lane_operand(a[0], b[0])}, {_lane_operand(a[1], b[1])});" for a, b in others]
     value = " + ".join(["lane_pair_sum(acc)", *("*".join(c_ref(r) for r in term) for term in rest)])
-    if isinstance(statement, Assign):
-        return lines + [f"{c_ref(statement.target)} = {value};"]
-    if read_back:
-        first = c_ref(statement.targets[0])
-        return lines + [f"{first} = {value};" + "".join(f" {c_ref(t)} = {first};" for t in statement.targets[1:])]
-    stores = " ".join(f"{c_ref(t)} = v;" for t in statement.targets)
-    return lines + [f"v = {value}; {stores} check += v;"]
+    return lines + [c_statement(statement, read_back, value)]
 
 
 def c_declarator(field) -> str:
