@@ -1,26 +1,126 @@
-"""Shared fixtures: the paper's model, derived once per session."""
+"""Shared fixtures (the paper's model, derived once per session), the suite's parallel schedule and its options.
 
+The suite runs in parallel (pytest-xdist, ``-n auto`` in pyproject.toml): each
+worker is a process with its own session fixtures.  Tests are handed out by
+module (:func:`pytest_xdist_make_scheduler`), so that a module's fixtures are
+made once, on one worker, except in the modules of :data:`SPREAD_MODULES`,
+whose tests are independent and handed out one by one; tests marked
+``xdist_group(name)`` all run on one worker, one after another.
+"""
+
+import os
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
+#: Modules whose tests are handed to the workers one by one (they share no costly module fixture).
+SPREAD_MODULES = ("tests/test_corpus.py",)
+
+#: Modules handed out first, in this order: a worker's first module runs before any other test has left a
+#: thread behind (dask's, a figure thread), and the figure process forks only a process without threads;
+#: then the longest modules, so that no long one is left for the end.
+FIRST_MODULES = ("tests/simulation/test_flight_report.py", "tests/test_cli.py", "tests/codegen/test_c_contract.py",
+                 "tests/test_cluster.py")
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """Under ``--dist loadgroup`` (the default here): one work unit per module, per xdist_group and per spread test."""
+    if config.getoption("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadGroupScheduling
+
+    class ModuleScheduling(LoadGroupScheduling):
+        """LoadGroupScheduling with a module, not a test, as the unit of a test without a group."""
+
+        def _split_scope(self, nodeid: str) -> str:
+            scope = super()._split_scope(nodeid)
+            if scope != nodeid:  # an xdist_group
+                return scope
+            module = nodeid.split("::", 1)[0]
+            return nodeid if module in SPREAD_MODULES else module
+
+        def _assign_work_unit(self, node) -> None:
+            for module in FIRST_MODULES:
+                if module in self.workqueue:
+                    self.workqueue.move_to_end(module, last=False)  # the next unit handed out
+                    break
+            super()._assign_work_unit(node)
+
+    return ModuleScheduling(config, log)
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--regenerate-golden", action="store_true", default=False,
+        help="write the golden files (generated/<model>/ of every built-in model and generated/options/) from the "
+             "generator, then check them, instead of only checking them: "
+             "python -m pytest tests/test_generated_up_to_date.py --regenerate-golden",
+    )
+
+
+@pytest.fixture(scope="session")
+def regenerate_golden(request) -> bool:
+    """True with --regenerate-golden: the freshness tests write the golden files before comparing them."""
+    return bool(request.config.getoption("--regenerate-golden"))
+
+
+@pytest.fixture(autouse=True)
+def _signals_as_a_fresh_interpreter_has_them():
+    """Each test starts with SIGINT, SIGTERM and SIGHUP deliverable and handled as in a fresh interpreter.
+
+    A test process runs many tests: one that leaves SIGINT ignored or blocked
+    (a library's child-process start-up, a handler not put back) would make
+    the next test's interrupt tests pass or fail for the wrong reason, and its
+    child processes inherit an ignored or blocked signal.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        held = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
+        if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+        for signum in (signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(signum) is signal.SIG_IGN:
+                signal.signal(signum, signal.SIG_DFL)
+    yield
+
+
+def _run_folder(tmp_path_factory) -> Path:
+    """The temporary folder of this run, shared by its xdist workers (each has a subfolder of it)."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
 
 @pytest.fixture(scope="session", autouse=True)
 def private_compile_cache(tmp_path_factory):
-    """The suite's compiled libraries and trajectories go to a cache of its own, never the user's (child processes inherit it)."""
-    import os
+    """The suite's caches are its own, never the user's (child processes inherit them).
 
+    ``$MODELGEN_CACHE_DIR`` (compiled libraries, trajectories) and
+    ``$XDG_CACHE_HOME`` (the compiled C navigators of modelgen.navigator.cnav)
+    point into this run's temporary folder, so that a run compiles what it
+    tests instead of taking it from an earlier run.  The workers of one run
+    share them: a library one worker compiled is a hit for the others (entries
+    are linked or renamed in whole, never replaced: modelgen.codegen.build).
+    """
     from modelgen.codegen.build import CACHE_ENV
 
-    before = os.environ.get(CACHE_ENV)
-    os.environ[CACHE_ENV] = str(tmp_path_factory.mktemp("modelgen-cache"))
+    folders = {CACHE_ENV: "modelgen-cache", "XDG_CACHE_HOME": "xdg-cache"}
+    before = {name: os.environ.get(name) for name in folders}
+    for name, folder in folders.items():
+        path = _run_folder(tmp_path_factory) / folder
+        path.mkdir(exist_ok=True)
+        os.environ[name] = str(path)
     yield
-    if before is None:
-        os.environ.pop(CACHE_ENV, None)
-    else:
-        os.environ[CACHE_ENV] = before
+    for name, value in before.items():
+        if value is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = value
 
 
 @pytest.fixture(scope="session")

@@ -84,6 +84,7 @@ def test_the_readme_notebook_runs(tmp_path, monkeypatch):
     assert namespace["report"].rank <= 18
 
 
+@pytest.mark.compile
 def test_check_compiles_and_runs_a_model_against_the_reference(tmp_path):
     path = tmp_path / "tilt.yaml"
     path.write_text(TINY, encoding="utf-8")

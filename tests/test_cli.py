@@ -60,6 +60,8 @@ def test_generate_writes_python_and_c(runner, tmp_path):
     assert {"ned_doppler18.c", "ned_doppler18.h", "ned_doppler18.py"} <= written
 
 
+@pytest.mark.flight
+@pytest.mark.compile
 def test_run_does_the_main_job_end_to_end(runner, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     result = runner.invoke(main, ["run", "--no-figures", "--no-simulate"])
@@ -78,6 +80,8 @@ def test_run_does_the_main_job_end_to_end(runner, tmp_path, monkeypatch):
     assert (tmp_path / "report" / "crosscheck.json").is_file() and (tmp_path / "report" / "paper_equations.json").is_file()
 
 
+@pytest.mark.flight
+@pytest.mark.compile
 def test_simulate_flies_a_profile_with_the_generated_c_filter_and_writes_summary_and_figures(runner, tmp_path):
     out = tmp_path / "sim"
     result = runner.invoke(main, ["simulate", "--hours", "0.1", "--imu-rate", "20", "--runs", "2", "--filter", "c",
@@ -127,6 +131,7 @@ def _hidden(root):
     return sorted(p.name for p in root.iterdir() if p.name.startswith("."))
 
 
+@pytest.mark.compile
 def test_a_failing_check_exits_1_and_keeps_the_previous_output(runner, tmp_path, monkeypatch):
     import dataclasses
 
@@ -292,6 +297,7 @@ def test_concurrent_generates_into_one_folder_all_succeed_and_leave_it_whole(tmp
         assert _hidden(out) == []
 
 
+@pytest.mark.compile
 def test_sigint_during_generate_exits_130_and_leaves_nothing_half_written(tmp_path):
     import signal
     import subprocess

@@ -25,6 +25,8 @@ from modelgen.errors import ModelError
 from modelgen.simulation.montecarlo import run_monte_carlo
 from modelgen.simulation.scenario import load_profile
 
+pytestmark = pytest.mark.flight
+
 START_TIMEOUT_S = 90
 
 SMALL_STUDY = """\
@@ -101,6 +103,7 @@ def test_monte_carlo_on_a_separate_scheduler_and_worker_equals_the_run_in_this_p
     assert not np.array_equal(here.errors[0], here.errors[1])  # each run its own seed
 
 
+@pytest.mark.compile
 def test_the_generated_c_filter_is_built_once_on_the_worker_and_flies_the_same_runs(
         scheduler_address, short_flight, paper_derived):
     def cached_filter_libraries() -> list[str]:

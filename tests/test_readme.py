@@ -2,6 +2,7 @@
 
 import re
 
+import pytest
 from click.testing import CliRunner
 
 from modelgen.cli import main
@@ -14,6 +15,7 @@ def readme_model() -> str:
     return re.search(r"```yaml\n(.*?)```", text, re.S).group(1)
 
 
+@pytest.mark.compile
 def test_readme_example_generates_and_passes_the_compiled_check(tmp_path):
     path = tmp_path / "schuler_loop.yaml"
     path.write_text(readme_model())
@@ -56,6 +58,7 @@ def test_readme_test_command_is_what_ci_runs():
     assert all("-c constraints.txt" in c for c in commands[:2])
 
 
+@pytest.mark.compile
 def test_readme_vector_model_generates_and_passes_the_compiled_check(tmp_path):
     """The README's vector model (found by its name) loads, generates and passes --check."""
     text = (REPO / "README.md").read_text(encoding="utf-8")

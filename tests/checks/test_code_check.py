@@ -106,6 +106,7 @@ def paper_results(paper_derived, paper_folder, tmp_path_factory):
     return {r.implementation: r for r in check_generated(paper_folder, paper_derived, paper_scenario(paper_derived), build)}
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("implementation", ["python", "c"])
 def test_generated_filter_matches_reference_over_240_steps(paper_results, implementation):
     r = paper_results[implementation]
@@ -128,6 +129,7 @@ def perturbed_copy(folder, name, tmp_path):
     return broken
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("conditioning", ["ill", "well"])
 def test_a_wrong_coefficient_in_the_c_is_caught(conditioning, paper_derived, paper_folder, gps15_derived, gps15_folder, tmp_path):
     """The check can fail: perturb one Phi product in the C prediction by 1e-9, on either kind of problem."""
@@ -144,6 +146,7 @@ def test_a_wrong_coefficient_in_the_c_is_caught(conditioning, paper_derived, pap
     assert correct["c"].passed() and correct["python"].passed()
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("name", ["ned_inertial16", "gps_pseudorange11", "ned_doppler32_augmented", "ins_gnss21"])
 def test_every_builtin_model_passes_its_declared_check(name, tmp_path):
     """A correct model never fails: unaided, pseudo-range, augmented-transform and 21-state code over their own scenarios.

@@ -105,6 +105,7 @@ def _h_of_first(derived, first_state: int) -> float:
     return float(derived.H.subs({q.sym: (q.value if q.value is not None else 0.5) for q in derived.model.parameters})[0, first_state])
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("name", builtin_models())
 def test_consumer_using_only_index_macros_and_contract_functions_compiles_and_runs(name, derived_models, tmp_path):
     derived = derived_models[name]
@@ -153,6 +154,7 @@ def test_wrapping_keeps_preprocessor_lines_and_moves_a_macro_comment_above():
     assert wrap_line("#include " + "a" * 120) == ["#include " + "a" * 120]
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("options", all_combinations("double"), ids=lambda o: o.slug())
 def test_masked_update_equals_the_update_with_the_used_rows_and_reports_innovation_and_nis(options, paper_derived, tmp_path):
     """Both measurements of the paper's model; mask (1, 0): the second, NaN, is ignored."""
@@ -195,6 +197,7 @@ def test_masked_update_equals_the_update_with_the_used_rows_and_reports_innovati
     "options", [o for o in all_combinations("double") if o.slug() in ("double-full-vector-joseph", "double-full-sequential-standard", "double-ud")],
     ids=lambda o: o.slug(),
 )
+@pytest.mark.compile
 def test_masked_update_refuses_a_nan_in_a_used_row_and_leaves_filter_and_outputs_unchanged(options, paper_derived, tmp_path):
     files = generate_code(paper_derived, options).files
     folder = write_files(tmp_path, files)

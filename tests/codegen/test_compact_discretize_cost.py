@@ -73,26 +73,29 @@ def pattern_count(structure: FilterStructure, order: int, ud: bool, fixed_scalin
     return series, doubling, first
 
 
+#: The structures counted: the degenerate models' (no F, an empty row of F, a chain) and a 40-state augmented model's.
+STRUCTURE_NAMES = (*DEGENERATE, "large_40")
+
+
+@pytest.fixture(scope="session")
 def structures() -> dict[str, FilterStructure]:
-    """The degenerate models' structures (no F, an empty row of F, a chain) and a 40-state augmented model's."""
+    """Each of :data:`STRUCTURE_NAMES` derived once per session (at collection it cost every run 1.5 s)."""
     out = {}
     for name, text in DEGENERATE.items():
         derived = derive(load_model_text(text, filename="m.yaml"))
         out[name] = filter_structure(derived.structure("F"), derived.structure("G"), derived.structure("H"), ORDER)
     derived = derive(large_model(40))
     out["large_40"] = filter_structure(derived.structure("F"), derived.structure("G"), derived.structure("H"), ORDER)
+    assert tuple(out) == STRUCTURE_NAMES
     return out
 
 
-STRUCTURES = structures()
-
-
-@pytest.mark.parametrize("name", STRUCTURES)
+@pytest.mark.parametrize("name", STRUCTURE_NAMES)
 @pytest.mark.parametrize("ud", [False, True])
 @pytest.mark.parametrize("fixed", [False, True])
-def test_counts_from_the_tables_are_the_counts_over_the_patterns(name, ud, fixed):
+def test_counts_from_the_tables_are_the_counts_over_the_patterns(name, ud, fixed, structures):
     """Every order's series, one doubling and the first call: the tables' count is the patterns' count."""
-    structure = STRUCTURES[name]
+    structure = structures[name]
     cost = compact_discretize_cost(CompactDiscretizeTables(structure), ORDER, ud, fixed)
     series, doubling, first = pattern_count(structure, ORDER, ud, fixed)
     assert list(cost.series) == series
@@ -100,9 +103,9 @@ def test_counts_from_the_tables_are_the_counts_over_the_patterns(name, ud, fixed
     assert cost.first(ORDER) == first
 
 
-def test_the_count_sees_a_wider_span():
+def test_the_count_sees_a_wider_span(structures):
     """A span one block of 4 wider in the tables changes the count: it is read from the tables, not assumed."""
-    structure = STRUCTURES["large_40"]
+    structure = structures["large_40"]
     tables = CompactDiscretizeTables(structure)
     before = compact_discretize_cost(tables, ORDER, False, False)
     wide = next(c for c in range(structure.n_states) if len(tables.closure_rows[c]) > 1)
@@ -262,6 +265,7 @@ def test_the_line_rule_counts_the_template_statements():
     assert line_flops("        w->E[1] += m->F[e + 1] - m->F[e];") == (0, 2)
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("model", ["paper", "chain"])
 @pytest.mark.parametrize("form", ["full", "ud"])
 def test_an_instrumented_run_of_the_c_does_the_counted_flops(model, form, paper_derived, tmp_path, monkeypatch):

@@ -43,6 +43,7 @@ def _answer(library: Path) -> int:
     return lib.answer()
 
 
+@pytest.mark.compile
 def test_a_cache_hit_gives_the_same_library_without_running_the_compiler(tmp_path, counted_compiler):
     first = compile_shared_library([_source(tmp_path / "a")], tmp_path / "a" / "liba.so", cache=True)
     assert counted_compiler() == 1
@@ -52,6 +53,7 @@ def test_a_cache_hit_gives_the_same_library_without_running_the_compiler(tmp_pat
     assert [p.suffix for p in library_cache_folder().iterdir()] == [".lib"]  # one entry, no temporary file left
 
 
+@pytest.mark.compile
 def test_other_flags_other_source_or_another_header_miss_the_cache(tmp_path, counted_compiler):
     compile_shared_library([_source(tmp_path / "a")], tmp_path / "a" / "lib.so", cache=True)
     compile_shared_library([_source(tmp_path / "b")], tmp_path / "b" / "lib.so", ("-O1",), cache=True)
@@ -65,6 +67,7 @@ def test_other_flags_other_source_or_another_header_miss_the_cache(tmp_path, cou
     assert len(list(library_cache_folder().glob("*.lib"))) == 4
 
 
+@pytest.mark.compile
 def test_a_corrupt_or_foreign_file_at_an_entry_is_left_alone_and_the_library_compiled_again(tmp_path, counted_compiler):
     compile_shared_library([_source(tmp_path / "a")], tmp_path / "a" / "lib.so", cache=True)
     [entry] = library_cache_folder().glob("*.lib")
@@ -86,6 +89,7 @@ def test_a_corrupt_or_foreign_file_at_an_entry_is_left_alone_and_the_library_com
     assert second.read_bytes() == b"\x7fELF not a modelgen entry"
 
 
+@pytest.mark.compile
 def test_two_builders_compiling_the_same_code_at_once_both_succeed_and_one_entry_stays(tmp_path, counted_compiler):
     def build(name: str) -> Path:
         return compile_shared_library([_source(tmp_path / name)], tmp_path / name / "lib.so", cache=True)
@@ -111,6 +115,7 @@ def test_the_cache_folder_follows_modelgen_cache_dir_then_xdg_cache_home(monkeyp
     assert library_cache_folder() == Path.home() / ".cache" / "modelgen" / "libraries"
 
 
+@pytest.mark.compile
 def test_a_failed_compile_is_not_cached(tmp_path, counted_compiler):
     folder = tmp_path / "bad"
     folder.mkdir()

@@ -16,6 +16,8 @@ from modelgen.codegen.options import CodegenOptions
 from modelgen.derive.symbolic import parameter_vector
 from tests.codegen.generated_support import build
 
+pytestmark = pytest.mark.compile
+
 FAMILIES = [
     CodegenOptions(),
     CodegenOptions(storage="packed"),

@@ -17,6 +17,9 @@ from modelgen.codegen.options import all_combinations
 from modelgen.derive.symbolic import derive
 from modelgen.model.loading import load_model_text
 from tests.codegen.generated_support import Built, build, write_files
+from tests.parallel_support import cores_per_worker
+
+pytestmark = pytest.mark.compile
 
 MODELS = {
     "random_constants_only": """
@@ -58,7 +61,7 @@ def test_every_option_combination_compiles_strictly(name, tmp_path):
         folder = write_files(tmp_path / options.slug(), generate_code(derived, options).files)
         return compile_shared_library([folder / f"{model}.c"], folder / f"lib{model}.so", ("-O0",))
 
-    with ThreadPoolExecutor(max_workers=2) as pool:
+    with ThreadPoolExecutor(max_workers=cores_per_worker()) as pool:
         libraries = list(pool.map(compile_one, all_combinations("double") + all_combinations("float")))
     assert all(library.exists() for library in libraries)
 

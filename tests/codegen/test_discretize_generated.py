@@ -20,6 +20,8 @@ from tests.derive.test_discretization import MODELS, STEPS, bound, exact, relati
 
 import yaml
 
+pytestmark = pytest.mark.compile
+
 FLOAT_BOUND = 1e-5
 FLOAT_MAX = float(np.finfo(np.float32).max)
 

@@ -10,6 +10,8 @@ from modelgen.codegen.build import compiler
 from modelgen.codegen.generate import generate_code, write_atomically
 from modelgen.codegen.options import CodegenOptions
 
+pytestmark = pytest.mark.compile
+
 
 @pytest.fixture(scope="module")
 def folder(paper_derived, tmp_path_factory):

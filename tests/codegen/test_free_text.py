@@ -53,6 +53,7 @@ def model_text(text: str) -> str:
     )
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("text", list(HOSTILE.values()), ids=list(HOSTILE))
 def test_free_text_runs_nothing_and_stays_readable(text, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -66,6 +67,7 @@ def test_free_text_runs_nothing_and_stays_readable(text, tmp_path, monkeypatch):
     assert md_text(text) in files["README.md"]
 
 
+@pytest.mark.compile
 def test_python_docstring_escape_stays_inside_a_comment_and_a_string(tmp_path):
     source = build_text(model_text(PYTHON_ESCAPE), tmp_path / "out").code.files["freetext.py"]
     assert f"# Model freetext: {PYTHON_ESCAPE}" in source
@@ -101,6 +103,7 @@ def test_hash_comment_cannot_continue_a_makefile_comment_or_open_a_cmake_bracket
     assert hash_comment("[[bracket") == " [[bracket"
 
 
+@pytest.mark.compile
 @pytest.mark.skipif(shutil.which("make") is None, reason="no make")
 @pytest.mark.parametrize("text", [C_LINE_SPLICE, "C:\\path\\to\\"], ids=["line_splice", "windows_path"])
 def test_a_title_ending_in_a_backslash_does_not_swallow_the_next_makefile_line(text, tmp_path):

@@ -18,6 +18,7 @@ def paper_code(paper_derived):
     return generate_code(paper_derived)
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("scalar", ["double", "float"])
 def test_generated_c_compiles_as_strict_c99(paper_derived, tmp_path, scalar):
     code = generate_code(paper_derived, CodegenOptions(scalar=scalar))
@@ -122,6 +123,7 @@ def test_generated_python_refuses_arguments_of_the_wrong_shape(paper_code, tmp_p
         gen.predict(x, np.eye(17), np.eye(18), np.zeros((18, 18)))
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("form", ["covariance", "ud"])
 def test_workspace_is_only_as_large_as_the_larger_scratch_and_the_readme_states_its_size(paper_derived, tmp_path, form):
     """discretize and the filter steps share the workspace (a union), so the caller

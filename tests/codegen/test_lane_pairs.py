@@ -100,6 +100,7 @@ def _run(folder, derived, flags: tuple[str, ...]) -> dict[str, np.ndarray]:
     return out
 
 
+@pytest.mark.compile
 @pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="the vector lanes are SSE2 code (x86-64)")
 @pytest.mark.parametrize("optimization", ["-O2", "-Os"])  # at -Os gcc does not inline the scalar helpers
 @pytest.mark.parametrize("name", ["ned_doppler18", "ins_gnss21"])
@@ -117,6 +118,7 @@ def test_vector_and_scalar_lanes_give_the_same_bits(name, optimization, derived_
         assert value.tobytes() == scalar[key].tobytes(), key
 
 
+@pytest.mark.compile
 @pytest.mark.skipif(shutil.which("clang") is None, reason="clang is not installed (.ci/run installs it)")
 @pytest.mark.parametrize("lanes", ["vector", "scalar"])
 def test_the_committed_c_passes_clangs_strict_checks(lanes):

@@ -76,6 +76,7 @@ def run_filter(built, options: CodegenOptions, transition: bytes | None = None, 
     return out
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("form", FORMS)
 def test_compact_kernels_give_the_unrolled_bits(form, paper_derived, tmp_path, monkeypatch):
     """The paper's model forced onto the compact loops predicts exactly as its unrolled code does."""
@@ -117,6 +118,7 @@ def reference_discretized(derived, T: float) -> tuple[np.ndarray, np.ndarray]:
     return phi, taylor_process_noise(gamma, m["Q"], T)
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("form", [*FORMS, "float"])
 def test_compact_discretize_matches_the_reference_at_every_order_and_doubling(form, paper_derived, tmp_path, monkeypatch):
     """The compact discretize (loops over Phi's pattern) gives the reference's Phi and Q_d to the rounding of the arithmetic.
@@ -152,6 +154,7 @@ DEGENERATE = {
 }
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("name", DEGENERATE)
 @pytest.mark.parametrize("form", ["full", "ud"])
 def test_degenerate_models_forced_compact_conform(name, form, tmp_path, monkeypatch):
@@ -169,6 +172,7 @@ def derived_64():
     return derive(large_model(64))
 
 
+@pytest.mark.compile
 def test_a_64_state_model_gets_compact_code_that_conforms(derived_64, tmp_path):
     """64 states (above the threshold): compact C, far smaller than its unrolled code (1.3 MB) that passes the check."""
     code = generate_code(derived_64)

@@ -21,6 +21,7 @@ from modelgen.derive.symbolic import parameter_vector
 from modelgen.checks.embedded_check import float_tolerance, smallest_correlation_eigenvalue
 from modelgen.errors import ModelError
 from modelgen.jobs import paper_scenario
+from tests.parallel_support import cores_per_worker
 
 COMBINATIONS = all_combinations("double") + all_combinations("float")
 
@@ -45,7 +46,7 @@ def libraries(paper_derived, tmp_path_factory):
         folder = write_atomically(root / options.slug(), generate_code(paper_derived, options).files)
         return options.slug(), compile_shared_library([folder / f"{name}.c"], folder / f"lib{name}.so", ("-O1",))
 
-    with ThreadPoolExecutor(max_workers=2) as pool:
+    with ThreadPoolExecutor(max_workers=cores_per_worker()) as pool:
         return dict(pool.map(build, COMBINATIONS))
 
 
@@ -65,6 +66,7 @@ def run_filter(libraries, derived, scenario, options):
     return out, d_min
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("options", all_combinations("double"), ids=lambda o: o.slug())
 def test_double_combination_matches_numpy_reference(libraries, paper_derived, scenario, reference, options):
     run, _ = run_filter(libraries, paper_derived, scenario, options)
@@ -76,6 +78,7 @@ def test_double_combination_matches_numpy_reference(libraries, paper_derived, sc
     assert all(smallest_correlation_eigenvalue(P) > 0 for _, P in run)
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("options", all_combinations("float"), ids=lambda o: o.slug())
 def test_float_combination_stays_within_stated_tolerance_of_double_reference(libraries, paper_derived, scenario, reference, options):
     run, d_min = run_filter(libraries, paper_derived, scenario, options)
@@ -92,6 +95,7 @@ def test_float_combination_stays_within_stated_tolerance_of_double_reference(lib
         assert min(d_min) > 0  # U D U^T is positive definite at every step, even the nearly singular first
 
 
+@pytest.mark.compile
 def test_packed_storage_keeps_only_the_upper_triangle(libraries, paper_derived):
     n = paper_derived.n_states
     full = CompiledFilter(libraries["double-full-vector-joseph"], paper_derived.model.name, ModelSizes.of(paper_derived), paper_derived.model.parameter_names, options=CodegenOptions())
@@ -110,6 +114,7 @@ def test_packed_storage_keeps_only_the_upper_triangle(libraries, paper_derived):
     assert np.array_equal(packed.P, P)
 
 
+@pytest.mark.compile
 def test_ud_factorization_round_trips_and_refuses_indefinite_covariance(libraries, paper_derived):
     options = CodegenOptions(form="ud")
     n = paper_derived.n_states
@@ -132,6 +137,7 @@ def test_ud_factorization_round_trips_and_refuses_indefinite_covariance(librarie
     assert bytes(filt.filter)[8 * n :] == before[8 * n :]  # U and D untouched (x is set by the caller first)
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("options", [o for o in COMBINATIONS if not o.ud], ids=lambda o: o.slug())
 def test_covariance_form_refuses_a_covariance_that_is_not_positive_semidefinite(libraries, paper_derived, scenario,
                                                                                  options):
@@ -198,6 +204,7 @@ def test_every_combination_generates_byte_identical_output_across_processes(pape
     ],
     ids=lambda v: v if isinstance(v, str) else v.slug(),
 )
+@pytest.mark.compile
 def test_other_models_match_the_reference_in_other_combinations(name, options, tmp_path):
     from modelgen.derive.symbolic import derive
     from modelgen.model.loading import load_model

@@ -19,6 +19,8 @@ from modelgen.codegen.structure import filter_structure, reachability
 
 from generated_support import write_files
 
+pytestmark = pytest.mark.compile
+
 OK, ERR_NONFINITE, ERR_STRUCTURE = 0, 1, 3
 VALUES = {"latitude": 0.6}
 

@@ -79,6 +79,7 @@ def compiled(folders, derived, options) -> CompiledFilter:
     return filt
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("options", [VAN_LOAN, PACKED_FIXED_ORDER], ids=lambda o: o.slug())
 @pytest.mark.parametrize("T", [1.0, 60.0])
 def test_van_loan_c_and_python_equal_the_exact_reference(folders, paper_derived, paper_matrices, options, T):
@@ -94,6 +95,7 @@ def test_van_loan_c_and_python_equal_the_exact_reference(folders, paper_derived,
         assert np.array_equal(qd, qd.T)
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("T", [1.0, 60.0])
 def test_van_loan_qd_is_not_the_taylor_qd(folders, paper_derived, paper_matrices, T):
     """The option changes Q_d by far more than rounding (so the checks below can tell the two apart)."""
@@ -118,6 +120,7 @@ def test_van_loan_numpy_model_needs_the_qd_margin(paper_matrices):
     assert largest_relative(qd_rule_only, qd_ref) > 1e-12
 
 
+@pytest.mark.compile
 def test_van_loan_combination_passes_the_conformance_check(folders, paper_derived):
     """check_generated's reference follows the option; the Taylor reference would fail the same run."""
     scenario = paper_scenario(paper_derived)
@@ -129,6 +132,7 @@ def test_van_loan_combination_passes_the_conformance_check(folders, paper_derive
     assert not taylor.passed()
 
 
+@pytest.mark.compile
 def test_van_loan_c_refuses_bad_inputs_as_the_taylor_discretize(folders, paper_derived):
     filt = compiled(folders, paper_derived, VAN_LOAN)
     assert filt.discretize(float("nan")) == 1
@@ -143,6 +147,7 @@ def test_van_loan_c_refuses_bad_inputs_as_the_taylor_discretize(folders, paper_d
     assert filt.discretize(1.0) == 1
 
 
+@pytest.mark.compile
 def test_van_loan_python_refuses_bad_inputs_naming_them(folders, paper_derived, paper_matrices):
     F, G, Q = paper_matrices
     module = load_python_module(folders[VAN_LOAN.slug()] / f"{paper_derived.model.name}.py")
@@ -230,6 +235,7 @@ def test_cli_flag_changes_only_the_discretize_and_what_describes_it(tmp_path, pa
     assert _changed_lines(*header) == []
 
 
+@pytest.mark.compile
 def test_float_and_compact_van_loan_builds_compile_strictly(tmp_path, paper_derived):
     """Float with packed storage, sequential update and recompute threshold; and a 64-state model (compact kernels)."""
     cases = [
@@ -246,6 +252,7 @@ def test_float_and_compact_van_loan_builds_compile_strictly(tmp_path, paper_deri
         assert result.returncode == 0, result.stderr
 
 
+@pytest.mark.compile
 def test_recompute_threshold_keeps_the_van_loan_transition(paper_derived, tmp_path):
     options = CodegenOptions(process_noise="van-loan", recompute_threshold=1e-6)
     name = paper_derived.model.name
@@ -260,6 +267,7 @@ def test_recompute_threshold_keeps_the_van_loan_transition(paper_derived, tmp_pa
     assert filt.discretize(60.0) == 0 and np.array_equal(filt.Qd, first)
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("name", list(DEGENERATE))
 def test_degenerate_models_compile_strictly_and_discretize_as_the_python(name, tmp_path):
     """No noises, no measurements, F = 0, one state: the Van Loan C compiles (double and float) and agrees with the Python."""
@@ -285,6 +293,7 @@ def test_degenerate_models_compile_strictly_and_discretize_as_the_python(name, t
         assert np.array_equal(phi, np.eye(derived.n_states)) and np.array_equal(filt.Phi, phi)
 
 
+@pytest.mark.compile
 def test_float_van_loan_filter_stays_within_the_float_tolerance_of_the_exact_reference(paper_derived, tmp_path):
     """Single precision: the paper's 240 steps within embedded_check's float tolerance, and far closer to the exact Q_d than to eq. (9)'s."""
     options = CodegenOptions(process_noise="van-loan", scalar="float")
@@ -299,6 +308,7 @@ def test_float_van_loan_filter_stays_within_the_float_tolerance_of_the_exact_ref
     assert exact.max_scaled_P < taylor.max_scaled_P / 100
 
 
+@pytest.mark.compile
 @require_tools(toolchain.CPPCHECK)
 def test_van_loan_c_passes_cppcheck(paper_derived, tmp_path):
     """The Van Loan discretize's branches (double full with the accuracy rule; float packed, fixed order, recompute threshold)."""

@@ -45,8 +45,10 @@ def sanitizers_available() -> bool:
 
 
 def in_parallel(function, items):
-    """map over two workers (the machine has two cores)."""
-    with ThreadPoolExecutor(max_workers=2) as pool:
+    """map over this xdist worker's share of the cores (tests/parallel_support.py)."""
+    from tests.parallel_support import cores_per_worker
+
+    with ThreadPoolExecutor(max_workers=cores_per_worker()) as pool:
         return list(pool.map(function, items))
 
 

@@ -6,7 +6,7 @@ from embedded_support import in_parallel, require_tools
 from modelgen.codegen import toolchain
 from modelgen.checks.embedded_check import EMBEDDED_OPTIONS, firmware, report_markdown
 
-pytestmark = require_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_EMBEDDED_SIZE)
+pytestmark = [require_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_EMBEDDED_SIZE), pytest.mark.embedded, pytest.mark.compile]
 
 #: Stack the filter may use on the target: a 2 KiB main stack is a common small-MCU budget.
 STACK_BUDGET = 2048

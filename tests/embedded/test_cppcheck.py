@@ -8,7 +8,7 @@ from modelgen.codegen.generate import generate_code, write_atomically
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
 
-pytestmark = require_tools(toolchain.CPPCHECK)
+pytestmark = [require_tools(toolchain.CPPCHECK), pytest.mark.embedded, pytest.mark.compile]
 
 #: Every template branch: full/packed, vector/sequential, Joseph/standard, UD; double and float.
 VARIANTS = (

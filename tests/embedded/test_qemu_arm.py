@@ -8,7 +8,7 @@ from modelgen.codegen.options import CodegenOptions
 from modelgen.checks.embedded_check import EMBEDDED_OPTIONS, qemu_run, report_markdown
 from modelgen.jobs import paper_scenario
 
-pytestmark = require_tools(toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
+pytestmark = [require_tools(toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM), pytest.mark.embedded, pytest.mark.compile]
 
 DOUBLE = CodegenOptions()
 

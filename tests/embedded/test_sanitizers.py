@@ -16,7 +16,15 @@ from modelgen.checks.code_check import reference_run, scenario_tolerance
 from modelgen.checks.embedded_check import compare_run, scenario_inputs
 from modelgen.jobs import paper_scenario
 
-pytestmark = pytest.mark.skipif(not IN_CI and not sanitizers_available(), reason="the host compiler cannot build ASan/UBSan programs (libasan/libubsan absent)")
+pytestmark = [pytest.mark.embedded, pytest.mark.compile]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _skip_without_sanitizers():
+    """Probed when the module runs, not at collection (a probe compiles and links an ASan program)."""
+    if not IN_CI and not sanitizers_available():
+        pytest.skip("the host compiler cannot build ASan/UBSan programs (libasan/libubsan absent)")
+
 
 #: Together these reach every template branch: full/packed, vector/sequential, Joseph/standard, UD; double and float.
 VARIANTS = (

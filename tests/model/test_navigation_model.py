@@ -71,6 +71,7 @@ def test_ins_gps15_twin_lists_every_term_its_approximations_drop_with_its_size(i
     assert notes and "F[velocity_error_up, latitude_error] = -dg/dL (0.048)" in notes[0]
 
 
+@pytest.mark.compile
 def test_readme_navigation_example_is_under_40_lines_and_generates_and_passes_the_compiled_check(tmp_path):
     import re
 

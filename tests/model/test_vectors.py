@@ -123,7 +123,8 @@ def _scalar_file(name: str) -> bool:
     """A built-in model written as scalar error equations (not a transform, navigation-equation or vector file)."""
     from modelgen.model.vector_loading import uses_vector_syntax
 
-    data = yaml.safe_load(builtin_model_path(name).read_text(encoding="utf-8"))
+    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # at collection: libyaml's loader where there is one
+    data = yaml.load(builtin_model_path(name).read_text(encoding="utf-8"), Loader=loader)  # noqa: S506 - a safe loader
     return not ({"base", "navigation"} & set(data)) and not uses_vector_syntax(data)
 
 

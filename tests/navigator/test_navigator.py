@@ -13,6 +13,8 @@ from modelgen.navigator.mechanization import NAV_SIZE, dcm_to_quaternion, euler_
 from modelgen.navigator.outages import outage_windows
 from modelgen.model.wgs84 import EARTH_RATE
 
+pytestmark = pytest.mark.flight
+
 DATA = Path(__file__).parent / "data"
 
 
@@ -116,12 +118,14 @@ def excerpt_both():
     return run_replay(DATA / "excerpt.yaml", None, echo=lambda _: None, navigator="both")
 
 
+@pytest.mark.compile
 def test_c_navigator_agrees_with_the_python_navigator_within_1_mm(excerpt_both):
     """Generated C (compiled strictly) against the Python reference at every output epoch of the excerpt."""
     assert excerpt_both.summary["navigator"] == "c"
     assert excerpt_both.summary["c_python_max_difference_m"] <= 1e-3
 
 
+@pytest.mark.compile
 def test_c_navigator_outage_error_is_within_the_same_band(excerpt_both):
     record = excerpt_both.summary["outages"][0]
     assert 0.5 <= record["horizontal_error_end_m"] <= 6.0
@@ -138,6 +142,7 @@ def _excerpt_inputs():
                            read_rtklib_pos(config.gnss_file))
 
 
+@pytest.mark.compile
 def test_c_navigator_aligns_itself_like_the_python_reference(excerpt_both):
     """The C levels and takes its heading from its own IMU and GNSS calls: same epoch, angles to 1e-12 rad.
 
@@ -158,6 +163,7 @@ def test_c_navigator_aligns_itself_like_the_python_reference(excerpt_both):
     assert excerpt_both.summary["alignment"]["rest_samples"] == 999
 
 
+@pytest.mark.compile
 def test_c_and_python_refuse_to_align_without_an_epoch_at_rest():
     """GNSS starting when the vehicle already moves: neither navigator can level the IMU; both say so."""
     from dataclasses import replace
@@ -182,6 +188,7 @@ def test_c_and_python_refuse_to_align_without_an_epoch_at_rest():
         fly_c(config, late, navigator)
 
 
+@pytest.mark.compile
 def test_a_rest_window_longer_than_the_c_keeps_is_refused():
     """20 s at 100 Hz is more than the C's REST_MAX samples: refused before flying, and by the C itself."""
     import ctypes
@@ -206,6 +213,7 @@ def test_a_rest_window_longer_than_the_c_keeps_is_refused():
     assert status == 13 and np.isnan(out[:, 0]).all()
 
 
+@pytest.mark.compile
 def test_c_navigator_source_is_c99_without_heap(tmp_path):
     from modelgen.navigator.cnav import generate_c_navigator
     from modelgen.navigator.errorstate import model_path
@@ -225,6 +233,8 @@ def _arm_tools_missing() -> list[str]:
 
 @pytest.mark.skipif(bool(_arm_tools_missing()) and os.environ.get("CI", "").lower() not in ("1", "true", "yes"),
                     reason="ARM toolchain or qemu-arm absent locally (CI installs them)")
+@pytest.mark.embedded
+@pytest.mark.compile
 def test_float_filter_navigator_under_qemu_arm_stays_within_1_cm_of_the_double_c(excerpt_both):
     """Cortex-M4F build without heap, and the excerpt under qemu-arm: 5e-5 m when written, tolerance 1 cm."""
     from modelgen.navigator.cnav import log_arrays

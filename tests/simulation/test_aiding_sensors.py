@@ -20,6 +20,8 @@ from modelgen.simulation.sensors import SENSORS, aiding_sensor, register_sensor
 from modelgen.simulation.trajectory import generate_trajectory
 from modelgen.fileio.datafiles import read_yaml
 
+pytestmark = pytest.mark.flight
+
 
 @dataclass(frozen=True)
 class VelocityLogSettings:

@@ -14,6 +14,8 @@ from modelgen.simulation.filters import named_parameters
 from modelgen.simulation.flight_report import simulate
 from modelgen.simulation.scenario import load_profile, load_profile_data
 
+pytestmark = pytest.mark.flight
+
 BODY = ["body_rate_x", "body_rate_y", "body_rate_z", "body_specific_force_x", "body_specific_force_y", "body_specific_force_z"]
 
 

@@ -9,6 +9,8 @@ import pytest
 from modelgen.simulation.flight_report import simulate
 from modelgen.simulation.scenario import load_profile
 
+pytestmark = pytest.mark.flight
+
 
 def test_simulate_writes_summary_figures_and_the_histories_it_was_asked_for(paper_derived, tmp_path):
     scenario = load_profile("profile_000").with_changes(hours=1 / 20, imu_rate=30.0)

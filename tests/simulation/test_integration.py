@@ -17,6 +17,8 @@ from modelgen.simulation.profile_keys import Outage
 from modelgen.simulation.scenario import load_profile
 from modelgen.simulation.trajectory import generate_trajectory
 
+pytestmark = pytest.mark.flight
+
 
 class LinearErrorNavigator:
     """A linear error system e(k) = Phi e(k-1) + w(k), z = H (output) + v: seed 003's linear case.
@@ -189,6 +191,7 @@ def generated_filters(paper_derived, tmp_path_factory):
             for implementation in ("python", "c")}
 
 
+@pytest.mark.compile
 def test_generated_python_filter_runs_the_flight_like_the_reference(short_flight, paper_derived, generated_filters):
     make = generated_filters["python"]
     generated = run(short_flight, paper_derived, make_filter=make)
@@ -198,6 +201,7 @@ def test_generated_python_filter_runs_the_flight_like_the_reference(short_flight
     assert np.allclose(generated.estimation_error, reference.estimation_error, rtol=1e-6, atol=1e-9 * np.abs(reference.estimation_error).max(axis=0))
 
 
+@pytest.mark.compile
 @pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None, reason="no C compiler")
 def test_generated_c_filter_runs_the_flight_like_the_reference(short_flight, paper_derived, generated_filters):
     make = generated_filters["c"]

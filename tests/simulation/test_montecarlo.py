@@ -13,6 +13,8 @@ from modelgen.errors import ModelError
 from modelgen.simulation.montecarlo import run_monte_carlo
 from modelgen.simulation.scenario import load_profile
 
+pytestmark = pytest.mark.flight
+
 CHECK_TIMES = (400.0, 800.0, 1200.0)  # s; the Doppler updates every 60 s
 
 
@@ -152,6 +154,7 @@ def test_a_worker_killed_in_the_middle_of_a_monte_carlo_study_does_not_lose_it(s
     assert _same_runs(there, here)
 
 
+@pytest.mark.compile
 def test_fresh_workers_take_the_filter_the_caller_compiled_from_the_compile_cache(scenario, paper_derived, tmp_path,
                                                                                   monkeypatch):
     from modelgen.codegen.build import CACHE_ENV

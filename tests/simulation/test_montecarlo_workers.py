@@ -10,6 +10,8 @@ import pytest
 
 from modelgen.cluster import dask_client, import_on_workers
 
+pytestmark = pytest.mark.flight
+
 # Only modelgen.cluster at the top: the workers import this file to run its functions, and must not get the
 # Monte Carlo module from it.
 
@@ -240,6 +242,7 @@ print(sorted(name for name in sys.modules if name == "sympy" or name.startswith(
 """
 
 
+@pytest.mark.compile
 def test_a_worker_flying_the_generated_c_in_the_compiled_loop_never_imports_sympy(paper_derived, tmp_path):
     import os
     import pickle

@@ -15,7 +15,8 @@ from modelgen.simulation.scenario import load_profile
 from modelgen.simulation.streaming import fly_modes
 from modelgen.simulation.trajectory import generate_trajectory
 
-pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None, reason="no C compiler")
+pytestmark = [pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None, reason="no C compiler"),
+              pytest.mark.compile, pytest.mark.flight]
 
 MODES = ("open_loop", "closed_loop", "accumulated")
 EXACT = ("times", "outputs", "raw_outputs", "estimation_error", "sigma")

@@ -24,6 +24,8 @@ from modelgen.simulation.scenario import InitialErrors, load_profile, load_profi
 from modelgen.simulation.trajectory import generate_trajectory
 from modelgen.fileio.datafiles import read_yaml
 
+pytestmark = pytest.mark.flight
+
 IMU_RATE = 50.0  # low rate: the flight has no coning motion; keeps the file fast
 
 

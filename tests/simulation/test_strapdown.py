@@ -1,5 +1,6 @@
 """Strapdown mechanization: coning and sculling orders, and free-inertial accuracy with perfect sensors."""
 
+import functools
 import math
 
 import numpy as np
@@ -11,12 +12,26 @@ from modelgen.simulation.rotation import navigation_frame_attitude_error, quater
 from modelgen.simulation.strapdown import Strapdown
 from modelgen.simulation.trajectory import FlightPath, Segment, generate_trajectory
 
+pytestmark = pytest.mark.flight
+
 CONE_HALF_ANGLE = math.radians(1.0)
 CONE_RATE = 2 * math.pi * 5.0  # 5 Hz coning
 DURATION = 12.0  # s; 12 s x rate is a multiple of 1, 2, 3 and 4 samples
 LATITUDE = math.radians(30.0)  # where the test vehicle stands (earth rate and gravity of the real mechanization)
-GRAVITY = earth.normal_gravity(LATITUDE, 0.0)
-EARTH_RATE_NED = np.array(earth.earth_rate_ned(LATITUDE))
+
+
+@functools.lru_cache(maxsize=1)
+def gravity() -> float:
+    """Normal gravity where the vehicle stands (computed at first use: earth's functions are compiled by numba)."""
+    return earth.normal_gravity(LATITUDE, 0.0)
+
+
+@functools.lru_cache(maxsize=1)
+def earth_rate_ned() -> np.ndarray:
+    """The earth rate in NED where the vehicle stands (at first use, as :func:`gravity`)."""
+    rate = np.array(earth.earth_rate_ned(LATITUDE))
+    rate.setflags(write=False)  # shared by every test
+    return rate
 
 
 def sample_edges(rate: float) -> np.ndarray:
@@ -42,11 +57,11 @@ def imu_increments(edges: np.ndarray, attitude, body_rate_increments: np.ndarray
     moves (millimetres), so the mechanization's earth rate, transport rate and gravity are the real ones.
     """
     def frame_rate_body(t):
-        rate = EARTH_RATE_NED if frame_rate is None else frame_rate(t)
+        rate = earth_rate_ned() if frame_rate is None else frame_rate(t)
         return np.einsum("...ji,...j->...i", quaternion_to_dcm(attitude(t)), rate)
 
     def force_body(t):
-        reaction = np.einsum("...ji,j->...i", quaternion_to_dcm(attitude(t)), np.array([0.0, 0.0, -GRAVITY]))
+        reaction = np.einsum("...ji,j->...i", quaternion_to_dcm(attitude(t)), np.array([0.0, 0.0, -gravity()]))
         return reaction if specific_force_body is None else reaction + specific_force_body(t)
 
     return body_rate_increments + quadrature(frame_rate_body, edges), quadrature(force_body, edges)
@@ -139,7 +154,7 @@ def sculling_truth():
     from scipy.integrate import solve_ivp
 
     def rate(t, v):
-        coriolis = np.cross(2 * EARTH_RATE_NED + transport_rate(v), v)
+        coriolis = np.cross(2 * earth_rate_ned() + transport_rate(v), v)
         return quaternion_to_dcm(sculling_attitude(t)) @ sculling_force(t) - coriolis
 
     solution = solve_ivp(rate, (0.0, DURATION), np.zeros(3), method="DOP853", rtol=1e-13, atol=1e-15,
@@ -157,7 +172,7 @@ def sculling_velocity_error(algorithm: str, rate: float, truth) -> float:
     increments[:, 2] = np.diff(heading)
 
     def frame_rate(t):
-        return EARTH_RATE_NED + transport_rate(np.moveaxis(truth(t.ravel()), 0, -1).reshape(t.shape + (3,)))
+        return earth_rate_ned() + transport_rate(np.moveaxis(truth(t.ravel()), 0, -1).reshape(t.shape + (3,)))
 
     dtheta, dvelocity = imu_increments(edges, sculling_attitude, increments, frame_rate, sculling_force)
     ins = mechanize_standing(algorithm, rate, sculling_attitude, dtheta, dvelocity)

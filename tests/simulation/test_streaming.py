@@ -12,6 +12,8 @@ from modelgen.simulation.scenario import load_profile
 from modelgen.simulation.streaming import fly_modes
 from modelgen.simulation.trajectory import generate_trajectory
 
+pytestmark = pytest.mark.flight
+
 FIELDS = ("times", "outputs", "raw_outputs", "estimation_error", "sigma", "nees")
 
 

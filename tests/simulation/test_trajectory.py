@@ -13,6 +13,8 @@ from modelgen.simulation.trajectory import (HEADING_HELD, MEMO_COLUMNS, PITCH_HE
                                             _split_sample_increments, _truth_records, generate_trajectory,
                                             segment_table)
 
+pytestmark = pytest.mark.flight
+
 
 def _every_kind_of_segment() -> FlightPath:
     """Climb, level off, cruise, roll in, banked turn, roll out, accelerate: each angle held and moving."""

@@ -133,6 +133,7 @@ def test_a_monte_carlo_case_writes_its_values_into_the_flight_profile(small_stud
     assert profile.imu_rate == 50.0 and math.isclose(profile.path.duration, 360.0)
 
 
+@pytest.mark.flight
 def test_a_study_with_monte_carlo_flies_the_selected_case(small_study):
     from modelgen.study.studyfile import MonteCarloChoice
 
