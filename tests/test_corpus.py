@@ -34,7 +34,15 @@ the cases spread over the workers, one at a time on each.
       process: "memory: ..."             # only if it needs a process of its own (say why)
 
 or ``runs: [{argv, exit, message, timeout}, ...]`` for steps in one folder.
-Every case carries the ``corpus`` marker (``-m "not corpus"`` leaves them out).
+Every case carries the ``corpus`` marker (``-m "not corpus"`` leaves them out),
+and ``compile`` or ``flight`` when it compiles C or flies (:func:`_marks`).
+
+**Marking a test** anywhere in the suite: ``@pytest.mark.compile`` (it builds
+C with the system compiler), ``embedded`` (cross toolchains, qemu-arm,
+cppcheck, sanitizers), ``flight`` (it flies a trajectory: simulation, Monte
+Carlo, replay), or ``pytestmark = pytest.mark.flight`` for a whole module; the
+markers are registered in pyproject.toml (``--strict-markers``) and the
+README's fast subset leaves all four out.
 """
 
 from __future__ import annotations

@@ -21,15 +21,14 @@ from modelgen.codegen.description import model_hash
 from modelgen.codegen.generate import generate_code
 from modelgen.codegen.layout import ModelSizes
 from modelgen.codegen.options import all_combinations
-from modelgen.derive.symbolic import derive
-from modelgen.model.loading import builtin_models, load_model
+from modelgen.model.loading import builtin_models
 
 from generated_support import write_files
 
 
 @pytest.fixture(scope="module")
-def derived_models():
-    return {name: derive(load_model(name)) for name in builtin_models()}
+def derived_models(derived_builtin):
+    return {name: derived_builtin(name) for name in builtin_models()}  # derived once per session (tests/conftest.py)
 
 
 def consumer_source(derived, h_first: float = 0.0) -> str:

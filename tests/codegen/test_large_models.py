@@ -24,7 +24,7 @@ from modelgen.derive.discretization import DEFAULT_TOLERANCE, nominal_scaling, t
 from modelgen.derive.symbolic import derive
 from modelgen.fileio.datafiles import package_path
 from modelgen.jobs import synthetic_scenario
-from modelgen.model.loading import load_model, load_model_text
+from modelgen.model.loading import load_model_text
 from tests.codegen.generated_support import build, write_files
 from tests.codegen.large_model_support import large_model
 
@@ -40,9 +40,9 @@ def builtin_names() -> list[str]:
 
 
 @pytest.mark.parametrize("name", builtin_names())
-def test_builtin_models_stay_below_the_compact_threshold(name):
+def test_builtin_models_stay_below_the_compact_threshold(name, derived_builtin):
     """Every built-in model keeps its unrolled prediction (and so its byte-identical C)."""
-    derived = derive(load_model(name))
+    derived = derived_builtin(name)
     description = describe(derived)
     assert not description.compact
     assert kernels.unrolled_predict_flops(description.structure) < kernels.COMPACT_ABOVE_FLOPS

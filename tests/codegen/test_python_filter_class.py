@@ -28,7 +28,7 @@ from modelgen.codegen.generate import describe
 from modelgen.codegen.options import CodegenOptions
 from modelgen.derive.symbolic import derive, parameter_vector
 from modelgen.jobs import check_scenario
-from modelgen.model.loading import builtin_models, load_model
+from modelgen.model.loading import builtin_models
 from tests.codegen.generated_support import write_files
 from tests.codegen.test_contract import bad_covariances, correlated
 
@@ -266,8 +266,8 @@ def filter_run(module, derived, scenario) -> list[tuple[np.ndarray, np.ndarray]]
 
 
 @pytest.mark.parametrize("name", builtin_models())
-def test_the_filter_class_passes_the_reference_conformance_check_for_every_builtin_model(name, tmp_path):
-    derived = derive(load_model(name))
+def test_the_filter_class_passes_the_reference_conformance_check_for_every_builtin_model(name, tmp_path, derived_builtin):
+    derived = derived_builtin(name)
     options = CodegenOptions()
     scenario = check_scenario(derived)
     module = python_module(derived, tmp_path)

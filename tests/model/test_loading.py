@@ -180,9 +180,9 @@ def test_the_library_has_the_models_of_all_four_source_documents():
 
 
 @pytest.mark.parametrize("name", builtin_models())
-def test_every_builtin_model_loads_derives_linearly_and_has_c_identifiers(name):
-    model = load_model(name)
-    derived = derive(model)
+def test_every_builtin_model_loads_derives_linearly_and_has_c_identifiers(name, derived_builtin):
+    derived = derived_builtin(name)  # load_model and derive, once per session (tests/conftest.py)
+    model = derived.model
     assert derived.nonlinear == ()
     assert derived.F.shape == (len(model.states), len(model.states))
     for q in (*model.states, *model.noises, *model.parameters, *model.measurements):
