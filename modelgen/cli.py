@@ -26,6 +26,7 @@ from types import TracebackType
 import click
 
 from modelgen.errors import ModelError
+from modelgen.version import __version__
 
 #: Exit codes of every command (README, "Commands").
 EXIT_CHECK_FAILED = 1
@@ -137,7 +138,7 @@ class ModelgenGroup(click.Group):
 
 
 @click.group(cls=ModelgenGroup, context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(package_name="modelgen")
+@click.version_option(version=__version__, prog_name="modelgen")
 @click.option("--debug", is_flag=True, help="Show the Python traceback of an error instead of a one-line message.")
 def main(debug: bool) -> None:
     """Turn inertial-navigation error models into verified Kalman-filter code.
