@@ -328,13 +328,16 @@ def embedded(model: str, out_dir: str, qemu: bool, force: bool) -> None:
 
 
 @main.command()
-@click.argument("model", default="ned_doppler18")
+@click.argument("model", required=False, default=None)
 @click.option("--out", "out_dir", default="report", show_default=True, type=click.Path(file_okay=False), help="Folder for verification.md and verification.json.")
 @click.option("--table", "table_file", type=click.Path(dir_okay=False), default=None, help="Your own table of F, G, H entries (YAML; README 'Verifying your own paper').")
 @click.option("--complete", is_flag=True, default=None, help="Also report every derived nonzero the table does not list (default only for the built-in paper table).")
 @click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
-def verify(model: str, out_dir: str, table_file: str | None, complete: bool | None, force: bool) -> None:
+def verify(model: str | None, out_dir: str, table_file: str | None, complete: bool | None, force: bool) -> None:
     """Check MODEL's derived F, G, H against a paper's printed table.
+
+    MODEL defaults to the model the table names in its `model:` key (with
+    --table FILE), else to the core paper's model (ned_doppler18).
 
     Every entry is compared symbolically after converting to the table's units
     (M = 180*3600/pi); each difference is listed with the classification and

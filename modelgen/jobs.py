@@ -427,19 +427,42 @@ def derived_export(model: str | Path, fmt: str, name: str | None = None) -> str:
     return to_format(derived, fmt, name)
 
 
+def verified_model(model: str | Path | None, table: str | Path | None) -> str | Path:
+    """The model ``modelgen verify`` checks: ``model`` if given, else the one ``table`` names, else the paper's.
+
+    A table says which model it was written for in its ``model:`` key
+    (the shipped paper table names the core paper's model), so
+    ``modelgen verify --table FILE`` needs no model argument.  A table without
+    the key needs one, and the message says so.
+    """
+    from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model
+    from modelgen.fileio.datafiles import read_yaml
+
+    if model is not None:
+        return model
+    if table is None:
+        return paper_table_model(data_path(CORE_PAPER_TABLE))
+    named = read_yaml(Path(table), "paper-table file").get("model")
+    if not isinstance(named, str) or not named:
+        raise ModelError(f"{table}: the table has no 'model:' key: name the model (modelgen verify MODEL --table "
+                         f"{Path(table).name}) or add 'model: <name>' to the table")
+    return named
+
+
 def paper_check_of(
-    model: str | Path, table: str | Path | None = None, complete: bool | None = None
+    model: str | Path | None, table: str | Path | None = None, complete: bool | None = None
 ) -> tuple[str, VerificationResult | None]:
     """``modelgen verify``: the model's name and its paper check (None: no table given and none names this model).
 
-    ``table`` is a user's table file (README "Verifying your own paper");
+    ``model`` None takes the model from the table (:func:`verified_model`).
+    ``table`` is a user's table file (docs "Verifying a paper");
     ``complete`` (default: only for the shipped table) also compares the
     derived nonzeros the table does not list.
     """
     from modelgen.checks.paper_check import verify
     from modelgen.checks.paper_table import paper_table_path
 
-    loaded = load_model(model)
+    loaded = load_model(verified_model(model, table))
     if table is None and paper_table_path(loaded.name) is None:
         return loaded.name, None
     if complete is None:
