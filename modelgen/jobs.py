@@ -96,20 +96,46 @@ class DerivedModels:
 class GenerationResult:
     """One model's generated code and where it went.
 
-    ``checks`` holds the conformance results when the code was checked;
-    ``written`` is False when a failing check kept the previous output.
+    ``files`` are the paths written, in name order (none when a failing
+    check kept the previous output: ``written`` is then False); ``checks``
+    holds the conformance results when the code was checked.
     """
 
     derived: DerivedModel
     code: GeneratedCode
     folder: Path
     checks: tuple[ConformanceResult, ...] = ()
-    written: bool = True
+    files: tuple[Path, ...] = ()
+
+    @property
+    def written(self) -> bool:
+        """True if the code replaced the folder's previous output (False: a check failed, nothing was written)."""
+        return bool(self.files)
 
     @property
     def passed(self) -> bool:
         """True if every check (if any was run) is within tolerance."""
         return checks_passed(self.checks)
+
+    def __repr__(self) -> str:
+        checked = "" if not self.checks else "; checks " + ", ".join(
+            f"{r.implementation} {'ok' if r.passed() else 'FAILED'}" for r in self.checks)
+        wrote = f"{len(self.files)} files in {self.folder}" if self.written else f"nothing written to {self.folder}"
+        return f"<GenerationResult {self.derived.model.name!r}: {wrote}{checked}>"
+
+    def _repr_markdown_(self) -> str:
+        """What a notebook shows: the files (with sizes) and each check against its tolerance."""
+        lines = [f"**GenerationResult `{self.derived.model.name}`**: "
+                 + (f"{len(self.files)} files in `{self.folder}`" if self.written else
+                    f"nothing written (a check failed; `{self.folder}` keeps its previous output)"), ""]
+        if self.written:
+            lines += ["| file | bytes |", "|---|---:|"]
+            lines += [f"| `{name}` | {len(self.code.files[name].encode())} |" for name in sorted(self.code.files)]
+        if self.checks:
+            lines += ["", "| implementation | scaled dP | scaled dx | tolerance (bounds both) | verdict |", "|---|---:|---:|---:|---|"]
+            lines += [f"| {r.implementation} | {r.max_scaled_P:.1e} | {r.max_scaled_x:.1e} | {r.tolerance:.1e} | "
+                      f"{'ok' if r.passed() else 'FAILED'} |" for r in self.checks]
+        return "\n".join(lines) + "\n"
 
 
 def checks_passed(results) -> bool:
@@ -145,9 +171,9 @@ def generate(
         staged = update.stage(code.files)
         checks = tuple(check(derived, staged, options=options)) if with_check else ()
         if not checks_passed(checks):
-            return GenerationResult(derived, code, folder, checks, written=False)
+            return GenerationResult(derived, code, folder, checks)
         update.commit()
-    return GenerationResult(derived, code, folder, checks)
+    return GenerationResult(derived, code, folder, checks, tuple(folder / name for name in sorted(code.files)))
 
 
 def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -> CheckScenario:

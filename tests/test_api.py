@@ -121,3 +121,38 @@ def test_the_long_jobs_get_their_arguments_through(call, job, expected, tmp_path
         scenario, folder, runs, seed, implementation = seen["args"]
         assert (folder, runs, seed, implementation) == (out, 3, 7, "reference")
         assert scenario == jobs.flight_scenario("profile_001")
+
+
+def test_results_have_short_reprs_and_notebook_markdown(tmp_path):
+    """A notebook shows a line or a short table for each result, not 26,545 characters of matrices."""
+    model = modelgen.load_model("enu_doppler18")
+    derived = modelgen.derive(model)
+    assert repr(model) == (f"<ErrorModel 'enu_doppler18': 18 states, 9 noises, {len(model.parameters)} parameters, "
+                           "3 measurements>")
+    assert repr(derived).startswith("<DerivedModel 'enu_doppler18': 18 states, ") and len(repr(derived)) < 200
+    markdown = derived._repr_markdown_()
+    assert "| F | 18 x 18 |" in markdown and f"| F | 18 x 18 | {derived.nonzeros('F')} |" in markdown
+    assert derived.nonzeros("F") == sum(1 for entry in derived.F if entry != 0) > 0
+
+    result = modelgen.verify(derived, table=REPO / "tests" / "checks" / "data" / "enu_doppler18_user_table.yaml")
+    assert repr(result) == ("<VerificationResult 'enu_doppler18' against enu_doppler18_user_table.yaml: 9 entries, "
+                            "5 match, 4 differ, 0 paper_only, 0 derived_only; 3 unexplained>")
+    shown = result._repr_markdown_()
+    assert "## Differences" in shown and "## Every entry" not in shown and len(shown) < len(result.to_markdown())
+
+    generated = modelgen.generate(derived, out=tmp_path)
+    names = sorted(generated.code.files)
+    assert generated.files == tuple(tmp_path / "enu_doppler18" / name for name in names)
+    assert all(path.is_file() for path in generated.files) and generated.written
+    assert repr(generated) == f"<GenerationResult 'enu_doppler18': {len(names)} files in {tmp_path / 'enu_doppler18'}>"
+    assert all(f"| `{name}` |" in generated._repr_markdown_() for name in names)
+
+
+def test_a_generation_kept_back_by_a_failing_check_lists_no_files(tmp_path, monkeypatch):
+    from modelgen.checks.code_check import ConformanceResult
+
+    failing = ConformanceResult("c", 1, 1.0, 1.0, 1.0, True, True, tolerance=1e-12)
+    monkeypatch.setattr(jobs, "check", lambda *args, **kwargs: [failing])
+    result = jobs.generate(jobs.load_and_derive("ned_doppler13_reduced"), tmp_path, with_check=True)
+    assert result.files == () and not result.written and not (tmp_path / "ned_doppler13_reduced").exists()
+    assert "nothing written" in repr(result) and "c FAILED" in repr(result)
