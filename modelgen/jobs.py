@@ -199,16 +199,16 @@ def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -
 
 def paper_parameters() -> dict[str, float]:
     """Seed 000's level-flight operating point and Table 1 statistics, by ned_doppler18 parameter name."""
-    from modelgen.analysis.budget import load_error_budget
-    from modelgen.analysis.scenario import load_analysis_scenario, operating_point
+    from modelgen.table2.budget import load_error_budget
+    from modelgen.table2.scenario import load_analysis_scenario, operating_point
 
     return {**load_error_budget().parameters, **operating_point(load_analysis_scenario())}
 
 
 def paper_scenario(derived: DerivedModel) -> CheckScenario:
     """Seed 000's 4-hour scenario: level flight, Table 1 errors, T = 60 s."""
-    from modelgen.analysis.budget import load_error_budget
-    from modelgen.analysis.scenario import load_analysis_scenario
+    from modelgen.table2.budget import load_error_budget
+    from modelgen.table2.scenario import load_analysis_scenario
     from modelgen.checks.code_check import CheckScenario
 
     flight, budget = load_analysis_scenario(), load_error_budget()
@@ -380,8 +380,8 @@ def main_job(
     folder); ``progress`` announces the steps and ``echo`` relays the steps'
     own messages.
     """
-    from modelgen.analysis.covariance_report import run_covariance_analysis
-    from modelgen.analysis.systems import PaperModels
+    from modelgen.table2.report import run_covariance_analysis
+    from modelgen.table2.systems import PaperModels
     from modelgen.checks.paper_check import verify, write_verification_report
     from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model
     from modelgen.checks.twins import report_section, run_twin_checks, write_twin_reports
@@ -555,8 +555,8 @@ def observability_report(report) -> str:
 
 def covariance_analysis(folder: Path, sensitivity: bool, figures: bool, progress=None):
     """``modelgen covariance``: Table 2 and Figs 2-7 into ``folder`` (a :class:`CovarianceReport`)."""
-    from modelgen.analysis.covariance_report import run_covariance_analysis
-    from modelgen.analysis.systems import PaperModels
+    from modelgen.table2.report import run_covariance_analysis
+    from modelgen.table2.systems import PaperModels
     from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model
 
     say = progress or (lambda message: None)

@@ -65,7 +65,7 @@ def test_paper_profile_and_covariance_error_budget_transcribe_table_1_identicall
     """Table 1 is written twice (the simulation's profile_000.yaml in the scenario's
     vocabulary, the analysis's error_budget_000.yaml keyed by model state); this
     keeps the two from drifting apart, so simulation and covariance analysis fly one system."""
-    from modelgen.analysis.budget import load_error_budget
+    from modelgen.table2.budget import load_error_budget
 
     s, budget = load_profile("profile_000"), load_error_budget()
     sigma, parameter = budget.initial_sigma, budget.parameters

@@ -13,11 +13,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import brentq
 
-from modelgen.analysis.budget import ErrorBudget
+from modelgen.table2.budget import ErrorBudget
 from modelgen.analysis.covariance import discretize, optimal_filter_covariance
-from modelgen.analysis.metrics import navigation_errors
-from modelgen.analysis.scenario import AnalysisScenario, operating_point
-from modelgen.analysis.systems import PaperModels
+from modelgen.table2.metrics import navigation_errors
+from modelgen.table2.scenario import AnalysisScenario, operating_point
+from modelgen.table2.systems import PaperModels
 from modelgen.errors import ModelError
 
 DOPPLER_NOISE_PARAMETERS = ("doppler_noise_sigma_north", "doppler_noise_sigma_east")

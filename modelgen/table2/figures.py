@@ -24,9 +24,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from modelgen.analysis.suboptimal import FilterDesign  # noqa: E402
-from modelgen.analysis.systems import PURE_INERTIAL, SystemResult  # noqa: E402
-from modelgen.analysis.table2 import PaperTable  # noqa: E402
+from modelgen.table2.suboptimal import FilterDesign  # noqa: E402
+from modelgen.table2.systems import PURE_INERTIAL, SystemResult  # noqa: E402
+from modelgen.table2.comparison import PaperTable  # noqa: E402
 
 _METADATA = {"Software": None}  # no version/date strings in the PNG
 

@@ -1,4 +1,4 @@
-"""The paper's filter designs, made from the full model by transformations (modelgen.analysis.suboptimal)."""
+"""The paper's filter designs, made from the full model by transformations (modelgen.table2.suboptimal)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from modelgen.analysis.budget import load_error_budget
-from modelgen.analysis.scenario import load_analysis_scenario
-from modelgen.analysis.suboptimal import PAPER_FILTERS, filter_model, filter_parameters, gain_schedule
+from modelgen.table2.budget import load_error_budget
+from modelgen.table2.scenario import load_analysis_scenario
+from modelgen.table2.suboptimal import PAPER_FILTERS, filter_model, filter_parameters, gain_schedule
 from modelgen.errors import ModelError
 
 DESIGNS = {d.key: d for d in PAPER_FILTERS}

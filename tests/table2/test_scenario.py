@@ -1,4 +1,4 @@
-"""The flight scenario file and the level-flight operating point (modelgen.analysis.scenario)."""
+"""The flight scenario file and the level-flight operating point (modelgen.table2.scenario)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from modelgen.analysis.scenario import load_analysis_scenario, operating_point, specific_force_ned
+from modelgen.table2.scenario import load_analysis_scenario, operating_point, specific_force_ned
 from modelgen.errors import ModelError
 
 

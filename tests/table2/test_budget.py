@@ -1,4 +1,4 @@
-"""The error budget file, Table 1 (modelgen.analysis.budget) and its units."""
+"""The error budget file, Table 1 (modelgen.table2.budget) and its units."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from modelgen.analysis.budget import load_error_budget
+from modelgen.table2.budget import load_error_budget
 from modelgen.model.units import ARCSEC_PER_RAD, to_si
 from modelgen.errors import ModelError
 from modelgen.model.transform import keep_states

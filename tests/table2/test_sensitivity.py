@@ -1,11 +1,11 @@
-"""Sensitivity of the 4-h results to the chosen values (modelgen.analysis.sensitivity)."""
+"""Sensitivity of the 4-h results to the chosen values (modelgen.table2.sensitivity)."""
 
 from __future__ import annotations
 
-from modelgen.analysis.budget import load_error_budget
-from modelgen.analysis.scenario import load_analysis_scenario
-from modelgen.analysis.sensitivity import default_cases, markdown_sensitivity, run_sensitivity
-from modelgen.analysis.systems import PURE_INERTIAL
+from modelgen.table2.budget import load_error_budget
+from modelgen.table2.scenario import load_analysis_scenario
+from modelgen.table2.sensitivity import default_cases, markdown_sensitivity, run_sensitivity
+from modelgen.table2.systems import PURE_INERTIAL
 
 
 def test_cases_cover_every_lost_value_and_design_reading():

@@ -1,10 +1,10 @@
-"""run_covariance_analysis writes Table 2, its CSV and the figures (modelgen.analysis.covariance_report)."""
+"""run_covariance_analysis writes Table 2, its CSV and the figures (modelgen.table2.report)."""
 
 from __future__ import annotations
 
 import csv
 
-from modelgen.analysis.covariance_report import run_covariance_analysis
+from modelgen.table2.report import run_covariance_analysis
 
 
 def test_text_outputs_are_byte_stable_and_list_every_system(tmp_path, paper_systems):

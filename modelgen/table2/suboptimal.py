@@ -44,7 +44,7 @@ from typing import Mapping
 
 import numpy as np
 
-from modelgen.analysis.scenario import AnalysisScenario
+from modelgen.table2.scenario import AnalysisScenario
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel
 from modelgen.model.transform import keep_states, markov_to_white

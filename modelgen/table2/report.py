@@ -14,17 +14,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from modelgen.analysis.budget import ErrorBudget, load_error_budget
-from modelgen.analysis.figures import write_figures
-from modelgen.analysis.inference import infer_doppler_noise
-from modelgen.analysis.scenario import AnalysisScenario, load_analysis_scenario
-from modelgen.analysis.sensitivity import SensitivityResult, default_cases, markdown_sensitivity, run_sensitivity
-from modelgen.analysis.systems import PaperModels, SystemResult, analyse_systems
-from modelgen.analysis.table2 import COLUMNS, Row, csv_text, load_paper_table, markdown_improvement, markdown_table, table_rows
+from modelgen.table2.budget import ErrorBudget, load_error_budget
+from modelgen.table2.figures import write_figures
+from modelgen.table2.inference import infer_doppler_noise
+from modelgen.table2.scenario import AnalysisScenario, load_analysis_scenario
+from modelgen.table2.sensitivity import SensitivityResult, default_cases, markdown_sensitivity, run_sensitivity
+from modelgen.table2.systems import PaperModels, SystemResult, analyse_systems
+from modelgen.table2.comparison import COLUMNS, Row, csv_text, load_paper_table, markdown_improvement, markdown_table, table_rows
 from modelgen.model.sources import cite_sources
 
 #: a cell counts as reproduced within this fraction of the paper's value; the
-#: same bands, and why, are in tests/analysis/test_table2.py
+#: same bands, and why, are in tests/table2/test_comparison.py
 CORE_BAND = 0.05  # pure inertial and optimal filter
 SUBOPTIMAL_BAND = 0.15  # suboptimal filters I-IV
 HEADING_TEXT_BAND = 0.10  # pure-inertial heading, "0.5 deg" in the text
@@ -81,7 +81,7 @@ def _inputs(scenario: AnalysisScenario, budget: ErrorBudget, inferred: float) ->
 
 
 _READING = """\
-How the paper's filters were read (modelgen/analysis/suboptimal.py):
+How the paper's filters were read (modelgen/table2/suboptimal.py):
 - I: the 13-state model made by modelgen.model.transform: the vertical gyro's random constant dropped and its variance
   lumped into the vertical Markov drift, which together with the three accelerometer Markov biases is replaced
   by white noise of the low-frequency-equivalent strength 2 sigma^2/mu.

@@ -15,8 +15,8 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 from modelgen.fileio.datafiles import data_path, read_yaml, require
-from modelgen.analysis.systems import PURE_INERTIAL, SystemResult
-from modelgen.analysis.metrics import final_values
+from modelgen.table2.systems import PURE_INERTIAL, SystemResult
+from modelgen.table2.metrics import final_values
 from modelgen.errors import ModelError
 
 PAPER_TABLE_FILE = "paper_000_table2.yaml"

@@ -1,12 +1,12 @@
-"""The Fig 2-7 analogues overlay the paper's 4-h values and explain coinciding curves (modelgen.analysis.figures)."""
+"""The Fig 2-7 analogues overlay the paper's 4-h values and explain coinciding curves (modelgen.table2.figures)."""
 
 import numpy as np
 import pytest
 
-from modelgen.analysis.figures import coinciding_pairs, design_difference, relative_difference, write_figures
-from modelgen.analysis.suboptimal import PAPER_FILTERS
-from modelgen.analysis.systems import SystemResult
-from modelgen.analysis.table2 import load_paper_table
+from modelgen.table2.figures import coinciding_pairs, design_difference, relative_difference, write_figures
+from modelgen.table2.suboptimal import PAPER_FILTERS
+from modelgen.table2.systems import SystemResult
+from modelgen.table2.comparison import load_paper_table
 
 TIMES_H = np.linspace(0.0, 4.0, 241)
 
@@ -45,7 +45,7 @@ def test_design_difference_says_when_only_the_gain_schedule_differs():
 
 
 def test_figures_carry_the_paper_markers_and_a_caption_for_coinciding_filters(tmp_path, monkeypatch):
-    import modelgen.analysis.figures as figures
+    import modelgen.table2.figures as figures
 
     captions, markers = [], []
     real_save, real_markers = figures._save, figures._paper_markers

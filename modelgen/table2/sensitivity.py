@@ -16,11 +16,11 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
-from modelgen.analysis.budget import ErrorBudget
-from modelgen.analysis.metrics import final_values
-from modelgen.analysis.scenario import AnalysisScenario
-from modelgen.analysis.suboptimal import PAPER_FILTERS, FilterDesign
-from modelgen.analysis.systems import PURE_INERTIAL, PaperModels, analyse_systems
+from modelgen.table2.budget import ErrorBudget
+from modelgen.table2.metrics import final_values
+from modelgen.table2.scenario import AnalysisScenario
+from modelgen.table2.suboptimal import PAPER_FILTERS, FilterDesign
+from modelgen.table2.systems import PURE_INERTIAL, PaperModels, analyse_systems
 from modelgen.model.units import to_si
 
 SYSTEM_ORDER = ("optimal", "suboptimal_1", "suboptimal_2", "suboptimal_3", "suboptimal_4", PURE_INERTIAL)

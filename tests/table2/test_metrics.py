@@ -1,4 +1,4 @@
-"""Circular error probable and paper units (modelgen.analysis.metrics)."""
+"""Circular error probable and paper units (modelgen.table2.metrics)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from modelgen.analysis.metrics import cep_approximation, cep_factor, circular_error_probable, navigation_errors
+from modelgen.table2.metrics import cep_approximation, cep_factor, circular_error_probable, navigation_errors
 
 
 def test_cep_of_a_circular_distribution_is_sqrt_2_ln_2_sigma():

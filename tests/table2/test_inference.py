@@ -1,13 +1,13 @@
-"""The Doppler noise inferred from the paper's optimal velocity error (modelgen.analysis.inference)."""
+"""The Doppler noise inferred from the paper's optimal velocity error (modelgen.table2.inference)."""
 
 from __future__ import annotations
 
 import pytest
 
-from modelgen.analysis.budget import load_error_budget
-from modelgen.analysis.inference import infer_doppler_noise, optimal_velocity_error
-from modelgen.analysis.scenario import load_analysis_scenario
-from modelgen.analysis.table2 import load_paper_table
+from modelgen.table2.budget import load_error_budget
+from modelgen.table2.inference import infer_doppler_noise, optimal_velocity_error
+from modelgen.table2.scenario import load_analysis_scenario
+from modelgen.table2.comparison import load_paper_table
 from modelgen.errors import ModelError
 
 

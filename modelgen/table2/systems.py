@@ -14,7 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
-from modelgen.analysis.budget import ErrorBudget
+from modelgen.table2.budget import ErrorBudget
 from modelgen.analysis.covariance import (
     discretize,
     filter_gains,
@@ -22,9 +22,9 @@ from modelgen.analysis.covariance import (
     propagate_covariance,
     true_error_covariance,
 )
-from modelgen.analysis.metrics import navigation_errors
-from modelgen.analysis.scenario import AnalysisScenario, operating_point
-from modelgen.analysis.suboptimal import PAPER_FILTERS, FilterDesign, filter_model, filter_parameters, gain_schedule
+from modelgen.table2.metrics import navigation_errors
+from modelgen.table2.scenario import AnalysisScenario, operating_point
+from modelgen.table2.suboptimal import PAPER_FILTERS, FilterDesign, filter_model, filter_parameters, gain_schedule
 from modelgen.derive.symbolic import DerivedModel, derive
 from modelgen.model.transform import keep_states
 

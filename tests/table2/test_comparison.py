@@ -29,11 +29,11 @@ from __future__ import annotations
 
 import pytest
 
-from modelgen.analysis.budget import load_error_budget
-from modelgen.analysis.metrics import final_values
-from modelgen.analysis.scenario import load_analysis_scenario
-from modelgen.analysis.systems import PURE_INERTIAL, analyse_systems
-from modelgen.analysis.table2 import COLUMNS, IMPROVEMENT_COLUMNS, load_paper_table, table_rows
+from modelgen.table2.budget import load_error_budget
+from modelgen.table2.metrics import final_values
+from modelgen.table2.scenario import load_analysis_scenario
+from modelgen.table2.systems import PURE_INERTIAL, analyse_systems
+from modelgen.table2.comparison import COLUMNS, IMPROVEMENT_COLUMNS, load_paper_table, table_rows
 
 CORE_BAND, FIT_BAND, SUBOPTIMAL_BAND = 0.05, 0.01, 0.15
 INTEGRATED = ("optimal", "suboptimal_1", "suboptimal_2", "suboptimal_3", "suboptimal_4")
