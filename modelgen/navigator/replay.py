@@ -30,6 +30,27 @@ class ReplayResult:
     folder: Path | None
     timings: dict[str, float]
 
+    def targets(self) -> list[dict]:
+        """The stated targets and whether this flight met them (:func:`modelgen.navigator.report.targets`)."""
+        from modelgen.navigator.report import targets
+
+        return targets(self.summary, self.timings)
+
+    def __repr__(self) -> str:
+        missed = [t["quantity"] for t in self.targets() if t["met"] is False]
+        return (f"<ReplayResult {self.config.name!r}: {self.summary['outage_count']} outages, end-of-outage "
+                f"horizontal error RMS {self.summary['horizontal_error_end_rms_m']:.2f} m; "
+                f"{len(missed)} target(s) missed{': ' + '; '.join(missed) if missed else ''}>")
+
+    def _repr_markdown_(self) -> str:
+        """What a notebook shows: the targets, reached against stated, met or missed."""
+        lines = [f"**Replay `{self.config.name}`** ({self.summary['navigator']} navigator)"
+                 + (f", report in `{self.folder}`" if self.folder else ""), "",
+                 "| quantity | reached | target | |", "|---|---|---|---|"]
+        lines += [f"| {t['quantity']} | {t['reached']} | {t['target']} | "
+                  f"{'' if t['met'] is None else 'met' if t['met'] else 'missed'} |" for t in self.targets()]
+        return "\n".join(lines) + "\n"
+
 
 NAVIGATORS = ("c", "python", "both")
 #: Stated tolerance of the single-precision filter build against the double C navigator, antenna position, every epoch.

@@ -154,6 +154,45 @@ def _alignment_lines(summary: dict) -> list[str]:
             "faster than the heading speed.", ""]
 
 
+#: one line per figure of :func:`figures`, for the reports that show them
+FIGURE_CAPTIONS = {
+    "track.svg": "The drive on a local map: the navigator's track over the RTK reference, the GNSS outages in red, "
+                 "numbered at their end.",
+    "error.svg": "Horizontal error at the antenna against RTK and the filter's 3 sigma over the drive (log scale; "
+                 "the outages shaded).",
+    "biases.svg": "The navigator's gyro (deg/s) and accelerometer (mg) bias estimates, body axes, over the drive.",
+}
+
+
+def targets(summary: dict, timings: dict[str, float]) -> list[dict]:
+    """The replay's stated targets (issue 13), each ``quantity``, ``reached``, ``target``, ``anchor`` (the
+    published 15-state filter's value) and ``met`` (True, False, or None for a row that only informs)."""
+    end_rms = summary["horizontal_error_end_rms_m"]
+    outside = summary["horizontal_rms_outside_outages_m"]
+    inside = summary["outage_ends_inside_3sigma_fraction"]
+    difference = summary.get("c_python_max_difference_m")
+    return [
+        {"quantity": "end-of-outage horizontal error, RMS", "reached": f"{_fmt(end_rms)} m", "target": "<= 5.0 m",
+         "anchor": "7.44 m", "met": end_rms is not None and end_rms <= 5.0},
+        {"quantity": "end-of-outage horizontal error, median / max",
+         "reached": f"{_fmt(summary['horizontal_error_end_median_m'])} / {_fmt(summary['horizontal_error_end_max_m'])} m",
+         "target": "", "anchor": "7.02 / 13.35 m", "met": None},
+        {"quantity": "horizontal RMS outside outages", "reached": f"{_fmt(outside, 3)} m", "target": "<= 0.10 m",
+         "anchor": "0.057 m", "met": outside <= 0.10},
+        {"quantity": "outage ends inside the filter's 3 sigma",
+         "reached": f"{_fmt(100 * inside if inside is not None else None, 0)} %", "target": ">= 90 %", "anchor": "",
+         "met": inside is not None and inside >= 0.9},
+        {"quantity": "navigator CPU time, C, whole log", "reached": f"{_fmt(timings.get('fly_c_cpu_s'), 3)} s",
+         "target": "<= 0.5 s (549 s drive)", "anchor": "",
+         "met": timings["fly_c_cpu_s"] <= 0.5 if "fly_c_cpu_s" in timings else None},
+        {"quantity": "navigator wall time, Python reference", "reached": f"{_fmt(timings.get('fly_python_s'), 2)} s",
+         "target": "", "anchor": "11.9 s", "met": None},
+        {"quantity": "C against Python, largest antenna-position difference",
+         "reached": f"{difference:.2g} m" if difference is not None else "not flown (--navigator both)",
+         "target": "<= 0.001 m", "anchor": "", "met": difference <= 1e-3 if difference is not None else None},
+    ]
+
+
 def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, float], latency: float) -> str:
     """summary.md: outage table, targets, tuning and how it was chosen, counts and notes."""
     lines = [f"# Replay: {config.name}", "",
@@ -172,33 +211,14 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
                      f"{_fmt(r['horizontal_error_max_m'])} | {_fmt(r['sigma_horizontal_end_m'])} | "
                      f"{'yes' if r['inside_3sigma'] else 'no'} | {_fmt(r['drift_5s_m'])} | {_fmt(r['drift_10s_m'])} | "
                      f"{_fmt(r['drift_15s_m'])} |")
-    end_rms = summary["horizontal_error_end_rms_m"]
-    outside = summary["horizontal_rms_outside_outages_m"]
-    inside = summary["outage_ends_inside_3sigma_fraction"]
-
-    def verdict(ok: bool) -> str:
-        return "met" if ok else "missed"
-
-    difference = summary.get("c_python_max_difference_m")
-    agreement = f"{difference:.2g} m" if difference is not None else "not flown (--navigator both)"
-    agreed = verdict(difference <= 1e-3) if difference is not None else ""
-
     lines += ["", "## Targets (issue 13)", "",
               "| quantity | reached | target | anchor (published 15-state filter) | |",
-              "|---|---|---|---|---|",
-              f"| end-of-outage horizontal error, RMS | {_fmt(end_rms)} m | <= 5.0 m | 7.44 m | "
-              f"{verdict(end_rms is not None and end_rms <= 5.0)} |",
-              f"| end-of-outage horizontal error, median / max | {_fmt(summary['horizontal_error_end_median_m'])} / "
-              f"{_fmt(summary['horizontal_error_end_max_m'])} m | | 7.02 / 13.35 m | |",
-              f"| horizontal RMS outside outages | {_fmt(outside, 3)} m | <= 0.10 m | 0.057 m | "
-              f"{verdict(outside <= 0.10)} |",
-              f"| outage ends inside the filter's 3 sigma | {_fmt(100 * inside if inside is not None else None, 0)} % "
-              f"| >= 90 % | | {verdict(inside is not None and inside >= 0.9)} |",
-              f"| navigator CPU time, C, whole log | {_fmt(timings.get('fly_c_cpu_s'), 3)} s | <= 0.5 s (549 s drive) | | "
-              f"{verdict(timings['fly_c_cpu_s'] <= 0.5) if 'fly_c_cpu_s' in timings else ''} |",
-              f"| navigator wall time, Python reference | {_fmt(timings.get('fly_python_s'), 2)} s | | 11.9 s | |",
-              f"| C against Python, largest antenna-position difference | {agreement} | <= 0.001 m | | {agreed} |",
-              ""]
+              "|---|---|---|---|---|"]
+    for row in targets(summary, timings):
+        verdict = "" if row["met"] is None else ("met" if row["met"] else "missed")
+        lines.append("|" + "|".join(f" {cell} " if cell else " " for cell in
+                                    (row["quantity"], row["reached"], row["target"], row["anchor"], verdict)) + "|")
+    lines.append("")
     lines += ["## Tuning and how it was chosen", "",
               "IMU noise = data-sheet value x unit x stated factor (configuration `noise`):", "",
               "| noise | data sheet | factor | SI value used | why |", "|---|---|---|---|---|"]
@@ -270,6 +290,8 @@ def report_files(flight: Flight, errors: Errors, summary: dict, config: Navigato
     record["gnss_velocity_latency_estimated_s"] = latency
     record["noise"] = {k: {"value": e.value, "unit": e.unit, "factor": e.factor, "si": e.si, "why": e.why}
                        for k, e in config.noise.items()}
+    record["targets"] = targets(summary, timings)
+    record["figures"] = dict(FIGURE_CAPTIONS) if with_figures else {}
     files = {"summary.md": summary_markdown(summary, config, timings, latency),
              "summary.json": json.dumps(record, indent=2, allow_nan=False, default=_json_default) + "\n",
              "trajectory.pos": pos_text(flight, config),

@@ -22,6 +22,30 @@ from modelgen.simulation.rotation import dcm_to_euler, quaternion_to_dcm
 from modelgen.simulation.trajectory import Trajectory
 
 
+#: the figures' engineering units for the model's SI units: (figure unit, SI value of one figure unit)
+ENGINEERING_UNITS = {"rad": ("arcmin", math.pi / 180 / 60), "rad/s": ("deg/h", math.pi / 180 / 3600),
+                     "m/s^2": ("mg", 9.80665e-3)}
+
+
+def display_units(units: dict[str, str], positions: dict[str, str]) -> dict[str, str]:
+    """Each state's unit on the figures: a latitude or longitude error (``positions``: the profile's
+    ``filter.states.position`` mapping, state -> latitude or longitude) in metres north or east, other angles in
+    arcmin, angular rates in deg/h, accelerations in mg; anything else in its own unit."""
+    roles = {"latitude": "m north", "longitude": "m east"}
+    return {name: roles[positions[name]] if unit == "rad" and positions.get(name) in roles
+            else ENGINEERING_UNITS.get(unit, (unit, 1.0))[0] for name, unit in units.items()}
+
+
+def display_factors(units: dict[str, str], positions: dict[str, str], latitude: float, height: float) -> dict[str, float]:
+    """The factors from each state's SI value to its :func:`display_units` value; a latitude error takes
+    R_M + h, a longitude error (R_N + h) cos(latitude) at the flight's mean ``latitude`` and ``height``."""
+    from modelgen.simulation import earth
+
+    meridian, prime_vertical = earth.radii_of_curvature(latitude)
+    roles = {"latitude": meridian + height, "longitude": (prime_vertical + height) * math.cos(latitude)}
+    return {name: roles[positions[name]] if unit == "rad" and positions.get(name) in roles
+            else 1.0 / ENGINEERING_UNITS.get(unit, (unit, 1.0))[1] for name, unit in units.items()}
+
 #: major ticks made per axis of a figure prepared before its data (:func:`_ready_ticks`): more than a
 #: panel of these figures shows
 FIGURE_TICKS = 10
@@ -216,24 +240,29 @@ def _filter_panels(names: list[str]) -> list[int]:
     return list(range(min(len(names), 18)))
 
 
-def plot_filter(result: RunResult, names: list[str], units: dict[str, str], path: Path,
-                 prepared: tuple[Any, Any] | None = None) -> Path:
-    """Each state's estimation error and the filter's 3-sigma bounds; ``prepared``: the figure and axes from
+def plot_filter(result: RunResult, names: list[str], units: dict[str, str], factors: dict[str, float], path: Path,
+                prepared: tuple[Any, Any] | None = None) -> Path:
+    """Each state's estimation error and the filter's 3-sigma bounds, in the figures' units (``units`` from
+    :func:`display_units`, ``factors`` from :func:`display_factors`); ``prepared``: the figure and axes from
     :func:`filter_axes` for these ``names`` and ``units`` (else made now)."""
     hours = result.times / 3600
     fig, ax = prepared or filter_axes(names, units)
     dpi = 100
     for k, i in enumerate(_filter_panels(names)):
         a = ax.flat[k]
-        _plot_series(a, hours, result.estimation_error[:, i], dpi, lw=0.8, label="error")
-        _plot_series(a, hours, 3 * result.sigma[:, i], dpi, "r", lw=0.6, label="+-3 sigma")
-        _plot_series(a, hours, -3 * result.sigma[:, i], dpi, "r", lw=0.6)
-    fig.suptitle(f"Estimation error and filter 3-sigma, {result.mode} ({result.filter_name}); each panel in its state's unit")
+        scale = factors.get(names[i], 1.0)
+        _plot_series(a, hours, scale * result.estimation_error[:, i], dpi, lw=0.8, label="estimation error")
+        _plot_series(a, hours, 3 * scale * result.sigma[:, i], dpi, "r", lw=0.6, label="filter's +-3 sigma")
+        _plot_series(a, hours, -3 * scale * result.sigma[:, i], dpi, "r", lw=0.6)
+    ax.flat[0].legend(fontsize=7, loc="upper right")
+    fig.suptitle(f"Estimation error and the filter's 3 sigma, one run, {result.mode} ({result.filter_name})")
     fig.savefig(path, dpi=dpi)
     return path
 
 
-def plot_monte_carlo(mc: MonteCarloResult, units: dict[str, str], path: Path) -> Path:
+def plot_monte_carlo(mc: MonteCarloResult, units: dict[str, str], factors: dict[str, float], path: Path) -> Path:
+    """The runs' error against the filter's sigma per state, in the figures' units: the rms over the runs, or,
+    for one run, that run's absolute error (one run is no ensemble)."""
     from matplotlib.figure import Figure
 
     hours = mc.times / 3600
@@ -245,17 +274,20 @@ def plot_monte_carlo(mc: MonteCarloResult, units: dict[str, str], path: Path) ->
     ax = fig.subplots(rows, cols, sharex=True)
     _fixed_margins(fig, left=0.06, top=1 - 0.8 / fig.get_figheight(), hspace=0.6, wspace=0.25)
     dpi = 100
+    error = "|error| of the one run" if mc.runs == 1 else f"error rms over {runs_text(mc.runs)}"
     for i in range(n):
         a = ax.flat[i]
-        _plot_series(a, hours, rms[:, i], dpi, label=f"ensemble rms ({runs_text(mc.runs)})")
-        _plot_series(a, hours, sigma[:, i], dpi, "--", label="filter covariance sigma")
+        scale = factors.get(mc.state_names[i], 1.0)
+        _plot_series(a, hours, scale * rms[:, i], dpi, label=error)
+        _plot_series(a, hours, scale * sigma[:, i], dpi, "--", label="filter's sigma" + ("" if mc.runs == 1 else " (mean)"))
         a.set_title(f"{mc.state_names[i]} [{units.get(mc.state_names[i], '?')}]", fontsize=8)
         a.tick_params(labelsize=7)
     ax.flat[0].legend(fontsize=7)
     for a in list(ax.flat)[n:]:
         a.axis("off")
     _time_labels(ax, n, cols)
-    fig.suptitle(f"Monte Carlo: actual error rms vs covariance sigma ({mc.mode}, {runs_text(mc.runs)}); each panel in its state's unit")
+    fig.suptitle(f"{'One Monte Carlo run' if mc.runs == 1 else f'Monte Carlo, {runs_text(mc.runs)}'} ({mc.mode}): "
+                 f"{'its absolute error' if mc.runs == 1 else 'error rms'} against the filter's sigma")
     fig.savefig(path, dpi=dpi)
     return path
 
@@ -272,17 +304,30 @@ def runs_text(count: int) -> str:
     return f"{count} run" + ("" if count == 1 else "s")
 
 
+def nees_verdict(test: Any) -> str:
+    """What the NEES test says, in words that claim no more than it measured: the fraction inside the band
+    against the criterion (met or missed), for one run or the runs' mean."""
+    return (f"{'NEES of the one run' if test.runs == 1 else f'mean NEES over {runs_text(test.runs)}'} inside the "
+            f"{100 * test.confidence:.0f} % chi-square band at {100 * test.fraction_inside:.0f} % of the times "
+            f"(criterion: at least {100 * (test.confidence - 0.1):.0f} %: {'met' if test.passed() else 'missed'})")
+
+
 def plot_nees(mc: MonteCarloResult, path: Path) -> Path:
+    """The NEES (of the one run, or the runs' mean) against its chi-square band."""
     from matplotlib.figure import Figure
 
     test = mc.nees_test(0.95, start_time=mc.times[1] if len(mc.times) > 1 else 0.0)
     fig = Figure(figsize=(10, 4))
     ax = fig.subplots()
-    ax.plot(test.times / 3600, test.mean_nees, label=f"ensemble mean NEES ({runs_text(mc.runs)})")
-    ax.axhline(test.dimension, color="k", lw=0.8, label=f"n = {test.dimension}")
-    ax.axhspan(test.lower, test.upper, color="g", alpha=0.15, label="95 % chi-square band")
-    ax.set(xlabel="time [h]", ylabel="NEES", title=f"NEES consistency: {100 * test.fraction_inside:.0f} % of times inside")
-    ax.legend()
+    ax.plot(test.times / 3600, test.mean_nees,
+            label="NEES of the one run" if mc.runs == 1 else f"mean NEES over {runs_text(mc.runs)}")
+    ax.axhline(test.dimension, color="k", lw=0.8, label=f"n = {test.dimension} (its expected value)")
+    band = f"{test.runs * test.dimension} degrees of freedom" + ("" if test.runs == 1 else f", divided by {test.runs}")
+    ax.axhspan(test.lower, test.upper, color="g", alpha=0.15, label=f"95 % band (chi-square, {band})")
+    verdict = nees_verdict(test)
+    ax.set(xlabel="time [h]", ylabel="NEES", title=verdict[0].upper() + verdict[1:])
+    ax.title.set_fontsize(9)
+    ax.legend(fontsize=8)
     _fixed_margins(fig, left=0.08, bottom=0.12, top=0.9)
     fig.savefig(path, dpi=110)
     return path

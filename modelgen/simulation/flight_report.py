@@ -22,8 +22,11 @@ from __future__ import annotations
 import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
+
+import numpy as np
 
 from modelgen.derive.symbolic import DerivedModel
 from modelgen.errors import ModelError
@@ -35,6 +38,8 @@ from modelgen.simulation.flight import profile_layout, simulate_sensors
 from modelgen.simulation.flight_errors import navigation_errors
 from modelgen.simulation.flight_figures import (
     FIGURE_TICKS,
+    display_factors,
+    display_units,
     filter_axes,
     modes_axes,
     plot_filter,
@@ -46,14 +51,24 @@ from modelgen.simulation.flight_figures import (
     trajectory_axes,
 )
 from modelgen.simulation.flight_start import FlightStart, finished, in_background, start_flight, timed
-from modelgen.simulation.flight_summary import summary_markdown
+from modelgen.simulation.flight_summary import figure_captions, summary_markdown, targets
 from modelgen.simulation.history import CsvHistory
 from modelgen.simulation.jit import HAVE_NUMBA
 from modelgen.simulation.montecarlo import run_monte_carlo
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.streaming import fly_modes, history_every
 
-__all__ = ["simulate", "start_flight", "FlightStart"]
+__all__ = ["simulate", "simulation_report", "FlightReport", "start_flight", "FlightStart"]
+
+
+@dataclass(frozen=True)
+class FlightReport:
+    """What a flight's report says, for the reports that show it (``modelgen run``): its summary.md, each figure
+    with its one-line caption, and its stated targets (each ``quantity``, ``reached``, ``target``, ``met``)."""
+
+    summary: Path
+    figures: dict[Path, str]
+    targets: list[dict]
 
 
 def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, int], None]:
@@ -68,11 +83,11 @@ def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, in
     return report
 
 
-def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs: int = 20, seed: int = 0,
+def simulation_report(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs: int = 20, seed: int = 0,
              workers: int = 2, echo: Callable[[str], None] = print, implementation: str = "c",
              client: Any = None, history_csv: bool = False, journal: str | Path | None = None,
-             started: FlightStart | None = None) -> Path:
-    """Fly ``profile`` with its filter model ``derived`` (module docstring); the summary's path.
+             started: FlightStart | None = None) -> FlightReport:
+    """Fly ``profile`` with its filter model ``derived`` (module docstring): the summary, figures and targets.
 
     ``implementation`` is the filter of the three correction-mode runs: the
     generated ``c`` (compiled now) or ``python``, or the numpy ``reference``.
@@ -124,7 +139,8 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
         # without a figure process, the figures' imports (0.4 s) are done while the flight goes: its thread
         # making the IMU increments sets the pace, the flying thread's core has time to spare
         plotting = in_background(import_plotting) if started.figures is None else None
-        units = {state.name: state.unit for state in derived.model.states}
+        positions = profile.filter.states.get("position", {})
+        units = display_units({state.name: state.unit for state in derived.model.states}, positions)
         if started.figures is not None:  # their figures and axes made while the flight goes
             started.figures.prepare(plot_trajectory, trajectory_axes, (FIGURE_TICKS,))
             started.figures.prepare(plot_modes, modes_axes, (FIGURE_TICKS,))
@@ -148,13 +164,16 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
                                       journal=journal)
         timings[f"Monte Carlo ({runs_text(runs)}, {monte_carlo.where})"] = time.perf_counter() - t
 
+    factors = display_factors({state.name: state.unit for state in derived.model.states}, positions,
+                              float(np.mean(trajectory.truth[:, 1])), float(np.mean(trajectory.truth[:, 3])))
     drawings: list[tuple[Callable[..., Path], tuple]] = [
         (plot_trajectory, (trajectory, out_dir / "trajectory.png")),
         (plot_modes, (errors, out_dir / "correction_modes.png")),
-        (plot_filter, (results[profile.filter.mode], derived.model.state_names, units, out_dir / "filter_errors.png")),
+        (plot_filter, (results[profile.filter.mode], derived.model.state_names, units, factors,
+                       out_dir / "filter_errors.png")),
     ]
     if monte_carlo is not None:
-        drawings.append((plot_monte_carlo, (monte_carlo, units, out_dir / "monte_carlo.png")))
+        drawings.append((plot_monte_carlo, (monte_carlo, units, factors, out_dir / "monte_carlo.png")))
         drawings.append((plot_nees, (monte_carlo, out_dir / "nees.png")))
     if started.figures is None:
         finished(plotting)
@@ -167,6 +186,12 @@ def simulate(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs:
             started.figures.close()
     summary = out_dir / "summary.md"
     summary.write_text(cite_sources(summary_markdown(profile, derived.model.name, implementation, layout.conventions, trajectory, results, errors,
-                                monte_carlo, timings, figures)), encoding="utf-8")
+                                monte_carlo, timings, figures, units)), encoding="utf-8")
     echo(f"  wrote {summary} and {len(figures)} figures")
-    return summary
+    captions = figure_captions(profile, trajectory, results, monte_carlo, units)
+    return FlightReport(summary, {path: captions.get(path.name, path.stem) for path in figures}, targets(monte_carlo))
+
+
+def simulate(*args: Any, **kwargs: Any) -> Path:
+    """:func:`simulation_report` (same arguments), returning only the summary's path (``modelgen simulate``)."""
+    return simulation_report(*args, **kwargs).summary

@@ -7,8 +7,11 @@ suboptimal I-IV) attitude, heading, velocity and position (CEP) errors.
 The paper prints numbers only for the end of the run (Table 2 and the text of
 section 3), so those are overlaid as markers at 4 h, in the colour of their
 system's curve.  Curves that lie on top of each other are named in the legend
-with the measured difference, and the caption says what the two designs have
-in common (computed from the designs, not written per figure).
+with the measured difference.  Each figure's one-line caption
+(:func:`figure_captions`, written beside the figure in table2.md and the run's
+report) says what is drawn: the markers only where the paper prints a value,
+and which curves coincide and what their designs have in common (computed from
+the designs and the curves, not written per figure).
 PNG via matplotlib's Agg backend, without date metadata.
 """
 
@@ -36,13 +39,9 @@ _METADATA = {"Software": None}  # no version/date strings in the PNG
 COINCIDENCE = 0.01
 
 
-def _save(fig, path: Path, caption: str = "") -> Path:
-    if caption:
-        wrapped = sum(1 + len(line) // 150 for line in caption.split("\n"))
-        fig.text(0.01, 0.01, caption, fontsize=7.5, ha="left", va="bottom", wrap=True)
-        fig.tight_layout(rect=(0, min(0.5, 0.02 + 0.032 * wrapped), 1, 1))
-    else:
-        fig.tight_layout()
+def _save(fig, path: Path) -> Path:
+    """The figure laid out to its own contents (its caption is a line of the report, not a footnote) and saved."""
+    fig.tight_layout()
     fig.savefig(path, dpi=110, metadata=_METADATA)
     plt.close(fig)
     return path
@@ -116,23 +115,112 @@ def _panel(ax, results: Mapping[str, SystemResult], times_h, key: str, title: st
     ax.grid(True, alpha=0.3)
 
 
-def _caption(results: Mapping[str, SystemResult], times_h, keys: Sequence[str], designs: Mapping[str, FilterDesign]) -> str:
-    """Why the curves that coincide in these panels coincide (one line per pair of systems)."""
-    found: dict[tuple[str, str], list[tuple[str, float, float]]] = {}
+#: Figs 2-7: file, then per panel (quantity key, title, unit, series label or None for the system's own),
+#: whether the figure shows the pure-inertial system alone, its size, its y scale and what its caption says it shows
+FIGURES: tuple[tuple[str, tuple[tuple[str, str, str, str | None], ...], bool, tuple[float, float], str, str], ...] = (
+    ("fig2_pure_inertial_attitude.png",
+     (("attitude_error_north", "Fig 2: pure inertial attitude errors", "arcsec (1 sigma)", "alpha (about north)"),
+      ("attitude_error_east", "Fig 2: pure inertial attitude errors", "arcsec (1 sigma)", "beta (about east)"),
+      ("heading_error", "Fig 2: pure inertial heading error", "deg (1 sigma)", "gamma (about down)")),
+     True, (10, 4.4), "linear", "pure-inertial 1-sigma attitude errors alpha, beta (arcsec) and heading error gamma (deg)"),
+    ("fig3_pure_inertial_velocity_position.png",
+     (("velocity_error_north", "Fig 3: pure inertial velocity errors", "nmile/h (1 sigma)", "dV_n"),
+      ("velocity_error_east", "Fig 3: pure inertial velocity errors", "nmile/h (1 sigma)", "dV_e"),
+      ("position_cep", "Fig 3: pure inertial position error", "nmile", "CEP"),
+      ("position_error_north", "Fig 3: pure inertial position error", "nmile", "north (1 sigma)"),
+      ("position_error_east", "Fig 3: pure inertial position error", "nmile", "east (1 sigma)")),
+     True, (10, 4.4), "linear", "pure-inertial 1-sigma velocity errors (nmile/h) and position error (CEP, 1-sigma north and east; nmile)"),
+    ("fig4_integrated_attitude.png",
+     (("attitude_error_north", "Fig 4: integrated, alpha", "arcsec (1 sigma, log scale)", None),
+      ("attitude_error_east", "Fig 4: integrated, beta", "arcsec (1 sigma, log scale)", None)),
+     False, (11, 4.4), "log", "1-sigma attitude errors alpha and beta (arcsec) of the optimal and suboptimal I-IV filters"),
+    ("fig5_integrated_heading.png",
+     (("heading_error", "Fig 5: integrated, heading error gamma", "deg (1 sigma)", None),),
+     False, (7, 4.4), "linear", "1-sigma heading error gamma (deg) of the optimal and suboptimal I-IV filters"),
+    ("fig6_integrated_velocity.png",
+     (("velocity_error_north", "Fig 6: integrated, dV_n", "nmile/h (1 sigma)", None),
+      ("velocity_error_east", "Fig 6: integrated, dV_e", "nmile/h (1 sigma)", None)),
+     False, (11, 4.4), "linear", "1-sigma velocity errors dV_n, dV_e (nmile/h) of the optimal and suboptimal I-IV filters"),
+    ("fig7_integrated_position.png",
+     (("position_cep", "Fig 7: integrated, position error (CEP)", "nmile", None),),
+     False, (7, 4.4), "linear", "position error (CEP, nmile) of the optimal and suboptimal I-IV filters"),
+)
+
+
+def _panels(spec) -> list[tuple[str, str, list[tuple[str, str | None]]]]:
+    """A figure's panels: (title, unit, [(key, label)]), series with the same title sharing a panel."""
+    panels: dict[str, tuple[str, str, list[tuple[str, str | None]]]] = {}
+    for key, title, unit, label in spec:
+        panels.setdefault(title, (title, unit, []))[2].append((key, label))
+    return list(panels.values())
+
+
+def _drawn_markers(systems: Sequence[str], keys: Sequence[str], paper: PaperTable | None) -> list[str]:
+    """The keys of which the paper prints a 4-h value for at least one of ``systems`` (those get markers)."""
+    if paper is None:
+        return []
+    return [k for k in keys if any(paper.values.get(s, {}).get(k) is not None for s in systems)]
+
+
+def _clusters(results: Mapping[str, SystemResult], times_h, keys: Sequence[str]) -> list[tuple[list[str], float]]:
+    """Groups of systems whose curves coincide in every one of ``keys`` (joined pairwise), with the largest
+    median relative difference after the first hour among the pairs joined."""
+    groups: list[set[str]] = []
+    worst: dict[frozenset[str], float] = {}
+    pairs = None
     for key in keys:
-        for first, second, median, largest in coinciding_pairs(results, times_h, key):
-            found.setdefault((first, second), []).append((key, median, largest))
-    lines = []
-    for (first, second), entries in found.items():
-        why = design_difference(designs[first], designs[second]) if first in designs and second in designs else ""
-        quantities = ", ".join(key.replace("_", " ") for key, _, _ in entries)
-        median = max(m for _, m, _ in entries)
-        largest = max(x for _, _, x in entries)
-        lines.append(
-            f"{results[second].label} lies on {results[first].label} ({quantities}; after 1 h the relative "
-            f"difference is at most {100 * median:.2f} % in median, {100 * largest:.2f} % at worst)" + (f": {why}." if why else ".")
-        )
-    return "\n".join(lines)
+        found = {(a, b): med for a, b, med, _ in coinciding_pairs(results, times_h, key)}
+        pairs = found if pairs is None else {p: max(m, found[p]) for p, m in pairs.items() if p in found}
+    for (a, b), median in (pairs or {}).items():
+        joined = [g for g in groups if a in g or b in g]
+        merged = set().union(*joined, {a, b})
+        groups = [g for g in groups if g not in joined] + [merged]
+        worst[frozenset(merged)] = max([median, *(worst.pop(frozenset(g), 0.0) for g in joined)])
+    order = list(results)
+    return [(sorted(g, key=order.index), worst[frozenset(g)]) for g in sorted(groups, key=lambda g: order.index(min(g, key=order.index)))]
+
+
+def _coincidence_clause(results, times_h, keys, designs: Mapping[str, FilterDesign]) -> str:
+    """'sub II lies on optimal (same filter model, another gain schedule; ...)': the curves one cannot tell apart."""
+    parts = []
+    for members, median in _clusters(results, times_h, keys):
+        labels = [results[m].label for m in members]
+        gains_only = all(
+            a in designs and b in designs and design_difference(designs[a], designs[b]).startswith("same filter model")
+            for i, a in enumerate(members) for b in members[i + 1:])
+        why = "same filter model, another gain schedule; " if gains_only else ""
+        names = labels[1] if len(labels) == 2 else ", ".join(labels[1:-1]) + " and " + labels[-1]
+        parts.append(f"{names} {'lies' if len(labels) == 2 else 'lie'} on {labels[0]} ({why}median difference after "
+                     f"1 h at most {100 * median:.2g} %)")
+    return "; ".join(parts)
+
+
+def figure_captions(
+    results: Mapping[str, SystemResult],
+    times_h,
+    paper: PaperTable | None = None,
+    designs: Sequence[FilterDesign] = (),
+) -> dict[str, str]:
+    """One line per figure of :func:`write_figures` (file name -> caption): what it shows, the markers where
+    the paper prints a value (and only then), and which curves lie on which."""
+    by_key = {d.key: d for d in designs}
+    integ = {k: r for k, r in results.items() if k != PURE_INERTIAL}
+    captions = {}
+    for name, spec, pure, _, _, shows in FIGURES:
+        keys = [key for key, *_ in spec]
+        systems = [PURE_INERTIAL] if pure else list(integ)
+        marked = _drawn_markers(systems, keys, paper)
+        text = f"{name.split('_')[0].replace('fig', 'Fig ')} analogue: {shows} over the 4-h flight"
+        if marked:
+            where = "the text of section 3" if pure and "heading_error" in marked else "Table 2"
+            labels = {key: (label or key.replace("_", " ")) for key, _, _, label in spec}
+            what = "" if len(marked) == len(keys) else " of " + ", ".join(labels[k] for k in marked)
+            text += f"; diamonds: the paper's 4-h values{what} ({'Table 2 and ' + where if where != 'Table 2' else where})"
+        else:
+            text += "; the paper prints no 4-h value of it, so no marker is drawn"
+        together = "" if pure else _coincidence_clause(integ, times_h, keys, by_key)
+        captions[name] = text + (f"; {together}" if together else "") + "."
+    return captions
 
 
 def write_figures(
@@ -142,64 +230,36 @@ def write_figures(
     paper: PaperTable | None = None,
     designs: Sequence[FilterDesign] = (),
 ) -> list[Path]:
-    """Write the Fig 2-7 analogues into ``out_dir``; returns their paths.
+    """Write the Fig 2-7 analogues into ``out_dir``; returns their paths (their captions: :func:`figure_captions`).
 
-    ``paper`` (Table 2) adds the paper's 4-h values as markers; ``designs``
-    lets the captions say what coinciding filters have in common.
+    ``paper`` (Table 2) adds the paper's 4-h values as markers.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     integ = {k: r for k, r in results.items() if k != PURE_INERTIAL}
     pure = {PURE_INERTIAL: results[PURE_INERTIAL]}
-    by_key = {d.key: d for d in designs}
     paths = []
+    for name, spec, pure_only, size, scale, _ in FIGURES:
+        panels = _panels(spec)
+        fig, axes = plt.subplots(1, len(panels), figsize=size, squeeze=False)
+        for ax, (title, unit, series) in zip(axes[0], panels):
+            if pure_only:
+                for key, label in series:
+                    (line,) = ax.plot(times_h, results[PURE_INERTIAL].errors[key], label=label, linewidth=1.6)
+                    _paper_markers(ax, pure, times_h, key, paper, {PURE_INERTIAL: line.get_color()})
+                ax.set(title=title, xlabel="time since take-off (h)", ylabel=unit)
+                ax.grid(True, alpha=0.3)
+            else:
+                (key, _), = series
+                _panel(ax, integ, times_h, key, title, unit, paper)
+            ax.set_yscale(scale)
+            if scale == "log":  # plain numbers at every tick (30, 40, ... 100), not 3 x 10^1
+                from matplotlib.ticker import ScalarFormatter
 
-    def pure_series(ax, key: str, label: str) -> None:
-        """One pure-inertial series, with the paper's 4-h value of it (if printed) as a marker of its colour."""
-        (line,) = ax.plot(times_h, results[PURE_INERTIAL].errors[key], label=label, linewidth=1.6)
-        _paper_markers(ax, pure, times_h, key, paper, {PURE_INERTIAL: line.get_color()})
-
-    def pure_figure(name: str, panels: Sequence[tuple[str, str, Sequence[tuple[str, str]]]], caption: str) -> None:
-        fig, axes = plt.subplots(1, len(panels), figsize=(10, 4.4))
-        for ax, (title, unit, series) in zip(axes, panels):
-            for key, label in series:
-                pure_series(ax, key, label)
-            ax.set(title=title, xlabel="time since take-off (h)", ylabel=unit)
-            ax.grid(True, alpha=0.3)
+                ax.yaxis.set_major_formatter(ScalarFormatter())
+                ax.yaxis.set_minor_formatter(ScalarFormatter())
             handles, labels = ax.get_legend_handles_labels()
             unique = dict(zip(labels, handles))
-            ax.legend(unique.values(), unique.keys(), fontsize=8)
-        paths.append(_save(fig, out / name, caption))
-
-    pure_figure(
-        "fig2_pure_inertial_attitude.png",
-        [("Fig 2: pure inertial attitude errors", "arcsec (1 sigma)",
-          [("attitude_error_north", "alpha (about north)"), ("attitude_error_east", "beta (about east)")]),
-         ("Fig 2: pure inertial heading error", "deg (1 sigma)", [("heading_error", "gamma (about down)")])],
-        "Markers: the paper's 4-h values (alpha, beta from Table 2; gamma from the text of section 3).",
-    )
-    pure_figure(
-        "fig3_pure_inertial_velocity_position.png",
-        [("Fig 3: pure inertial velocity errors", "nmile/h (1 sigma)",
-          [("velocity_error_north", "dV_n"), ("velocity_error_east", "dV_e")]),
-         ("Fig 3: pure inertial position error", "nmile",
-          [("position_cep", "CEP"), ("position_error_north", "north (1 sigma)"), ("position_error_east", "east (1 sigma)")])],
-        "Markers: the paper's 4-h values (dV_n, dV_e and CEP, Table 2).",
-    )
-
-    def integrated(name: str, panels: Sequence[tuple[str, str, str]], size: tuple[float, float]) -> None:
-        fig, axes = plt.subplots(1, len(panels), figsize=size, squeeze=False)
-        for ax, (key, title, unit) in zip(axes[0], panels):
-            _panel(ax, integ, times_h, key, title, unit, paper)
-            ax.legend(fontsize=7)
-        caption = "\n".join(filter(None, ["Markers: the paper's Table 2 values at 4 h, in the colour of each filter.",
-                                          _caption(integ, times_h, [k for k, _, _ in panels], by_key)]))
-        paths.append(_save(fig, out / name, caption))
-
-    integrated("fig4_integrated_attitude.png", [("attitude_error_north", "Fig 4: integrated, alpha", "arcsec (1 sigma)"),
-                                                ("attitude_error_east", "Fig 4: integrated, beta", "arcsec (1 sigma)")], (11, 5))
-    integrated("fig5_integrated_heading.png", [("heading_error", "Fig 5: integrated, heading error gamma", "deg (1 sigma)")], (7, 5))
-    integrated("fig6_integrated_velocity.png", [("velocity_error_north", "Fig 6: integrated, dV_n", "nmile/h (1 sigma)"),
-                                                ("velocity_error_east", "Fig 6: integrated, dV_e", "nmile/h (1 sigma)")], (11, 5))
-    integrated("fig7_integrated_position.png", [("position_cep", "Fig 7: integrated, position error (CEP)", "nmile")], (7, 5))
+            ax.legend(unique.values(), unique.keys(), fontsize=8 if pure_only else 7)
+        paths.append(_save(fig, out / name))
     return paths

@@ -10,12 +10,12 @@ no timestamps, fixed formatting.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
 from modelgen.table2.budget import ErrorBudget, load_error_budget
-from modelgen.table2.figures import write_figures
+from modelgen.table2.figures import figure_captions, write_figures
 from modelgen.table2.inference import infer_doppler_noise
 from modelgen.table2.scenario import AnalysisScenario, load_analysis_scenario
 from modelgen.table2.sensitivity import SensitivityResult, default_cases, markdown_sensitivity, run_sensitivity
@@ -41,6 +41,22 @@ class CovarianceReport:
     markdown: str
     table: str  # the Table 2 analogue alone (what the CLI prints)
     files: list[Path]
+    captions: dict[str, str] = field(default_factory=dict)  # figure file name -> its one-line caption
+    targets: list[dict] = field(default_factory=list)  # each: quantity, reached, target, met (see targets())
+
+
+def targets(rows: list[Row]) -> list[dict]:
+    """The analysis' stated targets: every cell within its band of the paper's value (pure inertial and optimal,
+    then the suboptimal filters), each as reached against target and met or missed."""
+    found = []
+    for label, suboptimal, band in (("pure inertial and optimal", False, CORE_BAND),
+                                    ("suboptimal I-IV", True, SUBOPTIMAL_BAND)):
+        ratios = [(c, row.ratio(c.key)) for row in rows if row.key.startswith("suboptimal") == suboptimal for c in COLUMNS]
+        compared = [(c, r) for c, r in ratios if r is not None]
+        inside = sum(abs(r - 1.0) <= (HEADING_TEXT_BAND if c.key == "heading_error" else band) for c, r in compared)
+        found.append({"quantity": f"Table 2 cells of {label} reproduced", "reached": f"{inside} of {len(compared)}",
+                      "target": f"all within {100 * band:.0f} % of the paper", "met": inside == len(compared)})
+    return found
 
 
 def _gaps(rows: list[Row]) -> str:
@@ -154,6 +170,9 @@ def run_covariance_analysis(
         parts.append(
             "## Sensitivity\n\n4-h values with one choice changed at a time (CEP in nmile).\n\n" + markdown_sensitivity(sens)
         )
+    captions = figure_captions(results, scenario.times_h(), paper=paper, designs=models.designs) if figures else {}
+    if captions:
+        parts.append("## Figures\n\n" + "\n\n".join(f"![{name}]({name})\n\n{caption}" for name, caption in captions.items()))
     markdown = cite_sources("\n\n".join(parts) + "\n")
 
     files = [out / "table2.md", out / "table2.csv"]
@@ -162,4 +181,4 @@ def run_covariance_analysis(
     if figures:
         say("drawing Figs 2-7")
         files += write_figures(results, scenario.times_h(), out, paper=paper, designs=models.designs)
-    return CovarianceReport(results, rows, sens, inferred, markdown, table, files)
+    return CovarianceReport(results, rows, sens, inferred, markdown, table, files, captions, targets(rows))
