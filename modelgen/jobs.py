@@ -356,7 +356,7 @@ def run_report(verification_summary: str, runs: list[ModelRun], out_root: Path, 
     sections = [paper, conformance_section(runs, out_root)]
     sections += [s if isinstance(s, ReportSection) else ReportSection("", s) for s in extra_sections]
     lines = ["# modelgen run: the core paper's model, end to end", ""]
-    rows = [(s.title, t) for s in sections for t in s.targets]
+    rows = [(s.title.split(" (")[0], t) for s in sections for t in s.targets]  # the section's name without its gloss
     stated = [(title, t) for title, t in rows if t["met"] is not None]
     missed = [(title, t) for title, t in stated if not t["met"]]
     lines += ["## Targets", "",
