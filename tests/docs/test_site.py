@@ -23,6 +23,8 @@ def test_the_site_builds_with_warnings_as_errors(tmp_path):
     assert (tmp_path / "site" / "reference" / "api" / "index.html").is_file()
     api = (tmp_path / "site" / "reference" / "api" / "index.html").read_text(encoding="utf-8")
     assert "Load a model file (YAML) or a built-in model by name" in api  # rendered from modelgen.api's docstrings
+    pages = [p.read_text(encoding="utf-8") for p in (tmp_path / "site" / "reference").rglob("*.html")]
+    assert not any(re.search(r":(func|mod|class):<code>", page) for page in pages)  # docs/hooks.py: roles as code
 
 
 def _nav_pages(nav) -> list[str]:
