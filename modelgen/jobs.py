@@ -568,6 +568,9 @@ def verified_model(model: str | Path | None, table: str | Path | None) -> str | 
     if not isinstance(named, str) or not named:
         raise ModelError(f"{table}: the table has no 'model:' key: name the model (modelgen verify MODEL --table "
                          f"{Path(table).name}) or add 'model: <name>' to the table")
+    if named not in builtin_models():  # a name, never a path: a model file is given as MODEL
+        raise ModelError(f"{table}: the table is written for model {named!r}, which is not a built-in model: give its "
+                         f"file (modelgen verify MODEL.yaml --table {Path(table).name})")
     return named
 
 
