@@ -130,6 +130,7 @@ def test_results_have_short_reprs_and_notebook_markdown(tmp_path):
     assert repr(model) == (f"<ErrorModel 'enu_doppler18': 18 states, 9 noises, {len(model.parameters)} parameters, "
                            "3 measurements>")
     assert repr(derived).startswith("<DerivedModel 'enu_doppler18': 18 states, ") and len(repr(derived)) < 200
+    assert f"`{derived!r}`" in docs_page("python-api.md")  # the page shows the repr as it is
     markdown = derived._repr_markdown_()
     assert "| F | 18 x 18 |" in markdown and f"| F | 18 x 18 | {derived.nonzeros('F')} |" in markdown
     assert derived.nonzeros("F") == sum(1 for entry in derived.F if entry != 0) > 0
