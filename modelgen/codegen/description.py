@@ -147,12 +147,12 @@ class FilterDescription:
 
     @cached_property
     def discretize_blocks(self) -> list[DiscretizeBlock]:
-        """The unrolled discretize's functions: one per order with a nonzero power of F, doubling, check, noise."""
+        """The unrolled discretize's functions: one per order with a nonzero power of F, doubling, check, and the noise (also for F = 0)."""
         plan = self.discretize_plan
-        if not plan.active:
-            return []
-        blocks = [b for b in series_blocks(plan) if b.block.statements]
-        blocks += [doubling_block(plan), transition_check_block(plan)]
+        blocks = []
+        if plan.active:  # F has a nonzero entry (otherwise Phi = I and S = I: no series)
+            blocks += [b for b in series_blocks(plan) if b.block.statements]
+            blocks += [doubling_block(plan), transition_check_block(plan)]
         if plan.gamma_entries and (self.options.ud or plan.qd_pairs):
             blocks += noise_blocks(plan, True, self.options.ud)  # the transition's Q_d is always packed (layout)
         return blocks

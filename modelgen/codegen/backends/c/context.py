@@ -409,8 +409,10 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "discretize_sizes": {"terms": unrolled.term_size, "active": unrolled.active_size} if unrolled else {},
         "discretize_blocks": discretize,
         "discretize_calls": {f["name"]: f["call"] for f in discretize},
-        "horner_levels": [(calls[horner_level_name(1, 0)], calls[horner_level_name(1, 1)])] if discretize else [],
-        "horner_saturated": (calls[horner_level_name(0, 0, True)], calls[horner_level_name(0, 1, True)]) if discretize else (),
+        "horner_levels": [(calls[horner_level_name(1, 0)], calls[horner_level_name(1, 1)])] if horner_level_name(1, 0) in calls else [],
+        # the levels below the top: none where every stored row is read by no row of F (a clock's bias and drift)
+        "horner_saturated": tuple(calls[horner_level_name(0, parity, True)] for parity in (0, 1))
+        if horner_level_name(0, 0, True) in calls else (),
         "horner_last": calls.get(HORNER_LAST, ""),  # k = 0 where rows that no row of F reads are left out above it
         "taylor_coefficients": [c_number(1.0, options.scalar) + f" / {c_number(float(math.factorial(k + 1)), options.scalar)}"
                                 for k in range(options.taylor_order + 1)],
