@@ -309,7 +309,8 @@ int enu_doppler18_set_state(enu_doppler18_filter *restrict f, const enu_doppler1
 void enu_doppler18_reset_error_state(enu_doppler18_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
 int enu_doppler18_predict(enu_doppler18_filter *restrict f, const enu_doppler18_transition *restrict
         t, enu_doppler18_workspace *restrict work);
 

@@ -3115,7 +3115,7 @@ int enu_doppler18_twin_discretize(const enu_doppler18_twin_matrices *restrict m,
     int k;
     enu_doppler18_twin_scalar sum_check;
     enu_doppler18_twin_scalar qd_check = 0.0;
-    enu_doppler18_twin_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
+    enu_doppler18_twin_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 }, q_max = 0.0;
     if (!isfinite(T)) {
         return ENU_DOPPLER18_TWIN_ERR_NONFINITE;
     }
@@ -3175,6 +3175,11 @@ int enu_doppler18_twin_discretize(const enu_doppler18_twin_matrices *restrict m,
         if (m->q[c] < 0.0) {
             return ENU_DOPPLER18_TWIN_ERR_NOT_POSITIVE;
         }
+        q_max = m->q[c] > q_max ? m->q[c] : q_max;
+    }
+    if (!isfinite(q_max / T)) { /* T so short that Q / T, the weights of Gamma (Q/T) Gamma^T,
+            overflows */
+        return ENU_DOPPLER18_TWIN_ERR_NONFINITE;
     }
     /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
@@ -5314,8 +5319,30 @@ int enu_doppler18_twin_predict(enu_doppler18_twin_filter *restrict f, const
                 enu_doppler18_twin_workspace *restrict work)
 {
     enu_doppler18_twin_filter_scratch *w = &work->filter;
-    enu_doppler18_twin_scalar check = 0.0;
+    enu_doppler18_twin_scalar check = 0.0, qd_min;
     enu_doppler18_twin_scalar sum_check = 0.0;
+    /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
+    qd_min = t->Qd[0];
+    qd_min = t->Qd[18] < qd_min ? t->Qd[18] : qd_min;
+    qd_min = t->Qd[35] < qd_min ? t->Qd[35] : qd_min;
+    qd_min = t->Qd[51] < qd_min ? t->Qd[51] : qd_min;
+    qd_min = t->Qd[66] < qd_min ? t->Qd[66] : qd_min;
+    qd_min = t->Qd[80] < qd_min ? t->Qd[80] : qd_min;
+    qd_min = t->Qd[93] < qd_min ? t->Qd[93] : qd_min;
+    qd_min = t->Qd[105] < qd_min ? t->Qd[105] : qd_min;
+    qd_min = t->Qd[116] < qd_min ? t->Qd[116] : qd_min;
+    qd_min = t->Qd[126] < qd_min ? t->Qd[126] : qd_min;
+    qd_min = t->Qd[135] < qd_min ? t->Qd[135] : qd_min;
+    qd_min = t->Qd[143] < qd_min ? t->Qd[143] : qd_min;
+    qd_min = t->Qd[150] < qd_min ? t->Qd[150] : qd_min;
+    qd_min = t->Qd[156] < qd_min ? t->Qd[156] : qd_min;
+    qd_min = t->Qd[161] < qd_min ? t->Qd[161] : qd_min;
+    qd_min = t->Qd[165] < qd_min ? t->Qd[165] : qd_min;
+    qd_min = t->Qd[168] < qd_min ? t->Qd[168] : qd_min;
+    qd_min = t->Qd[170] < qd_min ? t->Qd[170] : qd_min;
+    if (qd_min < 0.0) {
+        return ENU_DOPPLER18_TWIN_ERR_NOT_POSITIVE;
+    }
     state_predict(f, t, w); /* x_n = Phi x */
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];

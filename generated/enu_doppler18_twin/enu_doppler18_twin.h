@@ -298,7 +298,8 @@ int enu_doppler18_twin_set_state(enu_doppler18_twin_filter *restrict f, const
 void enu_doppler18_twin_reset_error_state(enu_doppler18_twin_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
 int enu_doppler18_twin_predict(enu_doppler18_twin_filter *restrict f, const
         enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_workspace *restrict work);
 

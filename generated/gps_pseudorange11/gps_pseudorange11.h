@@ -304,7 +304,8 @@ int gps_pseudorange11_set_state(gps_pseudorange11_filter *restrict f, const gps_
 void gps_pseudorange11_reset_error_state(gps_pseudorange11_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
 int gps_pseudorange11_predict(gps_pseudorange11_filter *restrict f, const
         gps_pseudorange11_transition *restrict t, gps_pseudorange11_workspace *restrict work);
 

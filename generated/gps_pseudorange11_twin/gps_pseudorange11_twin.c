@@ -1600,7 +1600,7 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
     int k;
     gps_pseudorange11_twin_scalar sum_check;
     gps_pseudorange11_twin_scalar qd_check = 0.0;
-    gps_pseudorange11_twin_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
+    gps_pseudorange11_twin_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 }, q_max = 0.0;
     if (!isfinite(T)) {
         return GPS_PSEUDORANGE11_TWIN_ERR_NONFINITE;
     }
@@ -1660,6 +1660,11 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
         if (m->q[c] < 0.0) {
             return GPS_PSEUDORANGE11_TWIN_ERR_NOT_POSITIVE;
         }
+        q_max = m->q[c] > q_max ? m->q[c] : q_max;
+    }
+    if (!isfinite(q_max / T)) { /* T so short that Q / T, the weights of Gamma (Q/T) Gamma^T,
+            overflows */
+        return GPS_PSEUDORANGE11_TWIN_ERR_NONFINITE;
     }
     /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
@@ -2461,8 +2466,23 @@ int gps_pseudorange11_twin_predict(gps_pseudorange11_twin_filter *restrict f, co
                 gps_pseudorange11_twin_workspace *restrict work)
 {
     gps_pseudorange11_twin_filter_scratch *w = &work->filter;
-    gps_pseudorange11_twin_scalar check = 0.0;
+    gps_pseudorange11_twin_scalar check = 0.0, qd_min;
     gps_pseudorange11_twin_scalar sum_check = 0.0;
+    /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
+    qd_min = t->Qd[0];
+    qd_min = t->Qd[11] < qd_min ? t->Qd[11] : qd_min;
+    qd_min = t->Qd[21] < qd_min ? t->Qd[21] : qd_min;
+    qd_min = t->Qd[30] < qd_min ? t->Qd[30] : qd_min;
+    qd_min = t->Qd[38] < qd_min ? t->Qd[38] : qd_min;
+    qd_min = t->Qd[45] < qd_min ? t->Qd[45] : qd_min;
+    qd_min = t->Qd[51] < qd_min ? t->Qd[51] : qd_min;
+    qd_min = t->Qd[56] < qd_min ? t->Qd[56] : qd_min;
+    qd_min = t->Qd[60] < qd_min ? t->Qd[60] : qd_min;
+    qd_min = t->Qd[63] < qd_min ? t->Qd[63] : qd_min;
+    qd_min = t->Qd[65] < qd_min ? t->Qd[65] : qd_min;
+    if (qd_min < 0.0) {
+        return GPS_PSEUDORANGE11_TWIN_ERR_NOT_POSITIVE;
+    }
     state_predict(f, t, w); /* x_n = Phi x */
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];

@@ -313,7 +313,8 @@ int gps_pseudorange11_twin_set_state(gps_pseudorange11_twin_filter *restrict f, 
 void gps_pseudorange11_twin_reset_error_state(gps_pseudorange11_twin_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
 int gps_pseudorange11_twin_predict(gps_pseudorange11_twin_filter *restrict f, const
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_workspace *restrict
         work);

@@ -3876,7 +3876,7 @@ int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scal
     int k;
     ins_gnss21_scalar sum_check;
     ins_gnss21_scalar qd_check = 0.0;
-    ins_gnss21_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
+    ins_gnss21_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 }, q_max = 0.0;
     if (!isfinite(T)) {
         return INS_GNSS21_ERR_NONFINITE;
     }
@@ -3936,6 +3936,11 @@ int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scal
         if (m->q[c] < 0.0) {
             return INS_GNSS21_ERR_NOT_POSITIVE;
         }
+        q_max = m->q[c] > q_max ? m->q[c] : q_max;
+    }
+    if (!isfinite(q_max / T)) { /* T so short that Q / T, the weights of Gamma (Q/T) Gamma^T,
+            overflows */
+        return INS_GNSS21_ERR_NONFINITE;
     }
     /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
@@ -6782,8 +6787,33 @@ int ins_gnss21_predict(ins_gnss21_filter *restrict f, const ins_gnss21_transitio
                 ins_gnss21_workspace *restrict work)
 {
     ins_gnss21_filter_scratch *w = &work->filter;
-    ins_gnss21_scalar check = 0.0;
+    ins_gnss21_scalar check = 0.0, qd_min;
     ins_gnss21_scalar sum_check = 0.0;
+    /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
+    qd_min = t->Qd[0];
+    qd_min = t->Qd[21] < qd_min ? t->Qd[21] : qd_min;
+    qd_min = t->Qd[41] < qd_min ? t->Qd[41] : qd_min;
+    qd_min = t->Qd[60] < qd_min ? t->Qd[60] : qd_min;
+    qd_min = t->Qd[78] < qd_min ? t->Qd[78] : qd_min;
+    qd_min = t->Qd[95] < qd_min ? t->Qd[95] : qd_min;
+    qd_min = t->Qd[111] < qd_min ? t->Qd[111] : qd_min;
+    qd_min = t->Qd[126] < qd_min ? t->Qd[126] : qd_min;
+    qd_min = t->Qd[140] < qd_min ? t->Qd[140] : qd_min;
+    qd_min = t->Qd[153] < qd_min ? t->Qd[153] : qd_min;
+    qd_min = t->Qd[165] < qd_min ? t->Qd[165] : qd_min;
+    qd_min = t->Qd[176] < qd_min ? t->Qd[176] : qd_min;
+    qd_min = t->Qd[186] < qd_min ? t->Qd[186] : qd_min;
+    qd_min = t->Qd[195] < qd_min ? t->Qd[195] : qd_min;
+    qd_min = t->Qd[203] < qd_min ? t->Qd[203] : qd_min;
+    qd_min = t->Qd[210] < qd_min ? t->Qd[210] : qd_min;
+    qd_min = t->Qd[216] < qd_min ? t->Qd[216] : qd_min;
+    qd_min = t->Qd[221] < qd_min ? t->Qd[221] : qd_min;
+    qd_min = t->Qd[225] < qd_min ? t->Qd[225] : qd_min;
+    qd_min = t->Qd[228] < qd_min ? t->Qd[228] : qd_min;
+    qd_min = t->Qd[230] < qd_min ? t->Qd[230] : qd_min;
+    if (qd_min < 0.0) {
+        return INS_GNSS21_ERR_NOT_POSITIVE;
+    }
     state_predict(f, t, w); /* x_n = Phi x */
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];

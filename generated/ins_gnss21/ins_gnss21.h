@@ -311,7 +311,8 @@ int ins_gnss21_set_state(ins_gnss21_filter *restrict f, const ins_gnss21_scalar 
 void ins_gnss21_reset_error_state(ins_gnss21_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
 int ins_gnss21_predict(ins_gnss21_filter *restrict f, const ins_gnss21_transition *restrict t,
         ins_gnss21_workspace *restrict work);
 

@@ -324,7 +324,8 @@ int ins_gnss21_nav_set_state(ins_gnss21_nav_filter *restrict f, const ins_gnss21
 void ins_gnss21_nav_reset_error_state(ins_gnss21_nav_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
 int ins_gnss21_nav_predict(ins_gnss21_nav_filter *restrict f, const ins_gnss21_nav_transition
         *restrict t, ins_gnss21_nav_workspace *restrict work);
 

@@ -265,7 +265,8 @@ int ins_gps15_set_state(ins_gps15_filter *restrict f, const ins_gps15_scalar x[r
 void ins_gps15_reset_error_state(ins_gps15_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
 int ins_gps15_predict(ins_gps15_filter *restrict f, const ins_gps15_transition *restrict t,
         ins_gps15_workspace *restrict work);
 

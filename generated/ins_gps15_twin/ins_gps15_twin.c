@@ -2372,7 +2372,7 @@ int ins_gps15_twin_discretize(const ins_gps15_twin_matrices *restrict m, ins_gps
     int k;
     ins_gps15_twin_scalar sum_check;
     ins_gps15_twin_scalar qd_check = 0.0;
-    ins_gps15_twin_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
+    ins_gps15_twin_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 }, q_max = 0.0;
     if (!isfinite(T)) {
         return INS_GPS15_TWIN_ERR_NONFINITE;
     }
@@ -2432,6 +2432,11 @@ int ins_gps15_twin_discretize(const ins_gps15_twin_matrices *restrict m, ins_gps
         if (m->q[c] < 0.0) {
             return INS_GPS15_TWIN_ERR_NOT_POSITIVE;
         }
+        q_max = m->q[c] > q_max ? m->q[c] : q_max;
+    }
+    if (!isfinite(q_max / T)) { /* T so short that Q / T, the weights of Gamma (Q/T) Gamma^T,
+            overflows */
+        return INS_GPS15_TWIN_ERR_NONFINITE;
     }
     /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
@@ -3983,8 +3988,27 @@ int ins_gps15_twin_predict(ins_gps15_twin_filter *restrict f, const ins_gps15_tw
                 ins_gps15_twin_workspace *restrict work)
 {
     ins_gps15_twin_filter_scratch *w = &work->filter;
-    ins_gps15_twin_scalar check = 0.0;
+    ins_gps15_twin_scalar check = 0.0, qd_min;
     ins_gps15_twin_scalar sum_check = 0.0;
+    /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
+    qd_min = t->Qd[0];
+    qd_min = t->Qd[15] < qd_min ? t->Qd[15] : qd_min;
+    qd_min = t->Qd[29] < qd_min ? t->Qd[29] : qd_min;
+    qd_min = t->Qd[42] < qd_min ? t->Qd[42] : qd_min;
+    qd_min = t->Qd[54] < qd_min ? t->Qd[54] : qd_min;
+    qd_min = t->Qd[65] < qd_min ? t->Qd[65] : qd_min;
+    qd_min = t->Qd[75] < qd_min ? t->Qd[75] : qd_min;
+    qd_min = t->Qd[84] < qd_min ? t->Qd[84] : qd_min;
+    qd_min = t->Qd[92] < qd_min ? t->Qd[92] : qd_min;
+    qd_min = t->Qd[99] < qd_min ? t->Qd[99] : qd_min;
+    qd_min = t->Qd[105] < qd_min ? t->Qd[105] : qd_min;
+    qd_min = t->Qd[110] < qd_min ? t->Qd[110] : qd_min;
+    qd_min = t->Qd[114] < qd_min ? t->Qd[114] : qd_min;
+    qd_min = t->Qd[117] < qd_min ? t->Qd[117] : qd_min;
+    qd_min = t->Qd[119] < qd_min ? t->Qd[119] : qd_min;
+    if (qd_min < 0.0) {
+        return INS_GPS15_TWIN_ERR_NOT_POSITIVE;
+    }
     state_predict(f, t, w); /* x_n = Phi x */
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];

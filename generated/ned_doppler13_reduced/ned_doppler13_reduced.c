@@ -1781,7 +1781,7 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restr
     int k;
     ned_doppler13_reduced_scalar sum_check;
     ned_doppler13_reduced_scalar qd_check = 0.0;
-    ned_doppler13_reduced_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
+    ned_doppler13_reduced_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 }, q_max = 0.0;
     if (!isfinite(T)) {
         return NED_DOPPLER13_REDUCED_ERR_NONFINITE;
     }
@@ -1841,6 +1841,11 @@ int ned_doppler13_reduced_discretize(const ned_doppler13_reduced_matrices *restr
         if (m->q[c] < 0.0) {
             return NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE;
         }
+        q_max = m->q[c] > q_max ? m->q[c] : q_max;
+    }
+    if (!isfinite(q_max / T)) { /* T so short that Q / T, the weights of Gamma (Q/T) Gamma^T,
+            overflows */
+        return NED_DOPPLER13_REDUCED_ERR_NONFINITE;
     }
     /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
@@ -2872,8 +2877,25 @@ int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, cons
                 ned_doppler13_reduced_workspace *restrict work)
 {
     ned_doppler13_reduced_filter_scratch *w = &work->filter;
-    ned_doppler13_reduced_scalar check = 0.0;
+    ned_doppler13_reduced_scalar check = 0.0, qd_min;
     ned_doppler13_reduced_scalar sum_check = 0.0;
+    /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
+    qd_min = t->Qd[0];
+    qd_min = t->Qd[13] < qd_min ? t->Qd[13] : qd_min;
+    qd_min = t->Qd[25] < qd_min ? t->Qd[25] : qd_min;
+    qd_min = t->Qd[36] < qd_min ? t->Qd[36] : qd_min;
+    qd_min = t->Qd[46] < qd_min ? t->Qd[46] : qd_min;
+    qd_min = t->Qd[55] < qd_min ? t->Qd[55] : qd_min;
+    qd_min = t->Qd[63] < qd_min ? t->Qd[63] : qd_min;
+    qd_min = t->Qd[70] < qd_min ? t->Qd[70] : qd_min;
+    qd_min = t->Qd[76] < qd_min ? t->Qd[76] : qd_min;
+    qd_min = t->Qd[81] < qd_min ? t->Qd[81] : qd_min;
+    qd_min = t->Qd[85] < qd_min ? t->Qd[85] : qd_min;
+    qd_min = t->Qd[88] < qd_min ? t->Qd[88] : qd_min;
+    qd_min = t->Qd[90] < qd_min ? t->Qd[90] : qd_min;
+    if (qd_min < 0.0) {
+        return NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE;
+    }
     state_predict(f, t, w); /* x_n = Phi x */
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];

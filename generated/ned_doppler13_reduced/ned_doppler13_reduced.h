@@ -295,7 +295,8 @@ int ned_doppler13_reduced_set_state(ned_doppler13_reduced_filter *restrict f, co
 void ned_doppler13_reduced_reset_error_state(ned_doppler13_reduced_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
 int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, const
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_workspace *restrict
         work);

@@ -3460,7 +3460,7 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
     int k;
     ned_doppler32_augmented_scalar sum_check;
     ned_doppler32_augmented_scalar qd_check = 0.0;
-    ned_doppler32_augmented_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
+    ned_doppler32_augmented_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 }, q_max = 0.0;
     if (!isfinite(T)) {
         return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
     }
@@ -3520,6 +3520,11 @@ int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *r
         if (m->q[c] < 0.0) {
             return NED_DOPPLER32_AUGMENTED_ERR_NOT_POSITIVE;
         }
+        q_max = m->q[c] > q_max ? m->q[c] : q_max;
+    }
+    if (!isfinite(q_max / T)) { /* T so short that Q / T, the weights of Gamma (Q/T) Gamma^T,
+            overflows */
+        return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
     }
     /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
@@ -7345,8 +7350,44 @@ int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, 
                 ned_doppler32_augmented_workspace *restrict work)
 {
     ned_doppler32_augmented_filter_scratch *w = &work->filter;
-    ned_doppler32_augmented_scalar check = 0.0;
+    ned_doppler32_augmented_scalar check = 0.0, qd_min;
     ned_doppler32_augmented_scalar sum_check = 0.0;
+    /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
+    qd_min = t->Qd[0];
+    qd_min = t->Qd[32] < qd_min ? t->Qd[32] : qd_min;
+    qd_min = t->Qd[63] < qd_min ? t->Qd[63] : qd_min;
+    qd_min = t->Qd[93] < qd_min ? t->Qd[93] : qd_min;
+    qd_min = t->Qd[122] < qd_min ? t->Qd[122] : qd_min;
+    qd_min = t->Qd[150] < qd_min ? t->Qd[150] : qd_min;
+    qd_min = t->Qd[177] < qd_min ? t->Qd[177] : qd_min;
+    qd_min = t->Qd[203] < qd_min ? t->Qd[203] : qd_min;
+    qd_min = t->Qd[228] < qd_min ? t->Qd[228] : qd_min;
+    qd_min = t->Qd[252] < qd_min ? t->Qd[252] : qd_min;
+    qd_min = t->Qd[275] < qd_min ? t->Qd[275] : qd_min;
+    qd_min = t->Qd[297] < qd_min ? t->Qd[297] : qd_min;
+    qd_min = t->Qd[318] < qd_min ? t->Qd[318] : qd_min;
+    qd_min = t->Qd[338] < qd_min ? t->Qd[338] : qd_min;
+    qd_min = t->Qd[357] < qd_min ? t->Qd[357] : qd_min;
+    qd_min = t->Qd[375] < qd_min ? t->Qd[375] : qd_min;
+    qd_min = t->Qd[392] < qd_min ? t->Qd[392] : qd_min;
+    qd_min = t->Qd[408] < qd_min ? t->Qd[408] : qd_min;
+    qd_min = t->Qd[423] < qd_min ? t->Qd[423] : qd_min;
+    qd_min = t->Qd[437] < qd_min ? t->Qd[437] : qd_min;
+    qd_min = t->Qd[450] < qd_min ? t->Qd[450] : qd_min;
+    qd_min = t->Qd[462] < qd_min ? t->Qd[462] : qd_min;
+    qd_min = t->Qd[473] < qd_min ? t->Qd[473] : qd_min;
+    qd_min = t->Qd[483] < qd_min ? t->Qd[483] : qd_min;
+    qd_min = t->Qd[492] < qd_min ? t->Qd[492] : qd_min;
+    qd_min = t->Qd[500] < qd_min ? t->Qd[500] : qd_min;
+    qd_min = t->Qd[507] < qd_min ? t->Qd[507] : qd_min;
+    qd_min = t->Qd[513] < qd_min ? t->Qd[513] : qd_min;
+    qd_min = t->Qd[518] < qd_min ? t->Qd[518] : qd_min;
+    qd_min = t->Qd[522] < qd_min ? t->Qd[522] : qd_min;
+    qd_min = t->Qd[525] < qd_min ? t->Qd[525] : qd_min;
+    qd_min = t->Qd[527] < qd_min ? t->Qd[527] : qd_min;
+    if (qd_min < 0.0) {
+        return NED_DOPPLER32_AUGMENTED_ERR_NOT_POSITIVE;
+    }
     state_predict(f, t, w); /* x_n = Phi x */
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];

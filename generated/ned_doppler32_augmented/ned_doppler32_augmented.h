@@ -328,7 +328,8 @@ int ned_doppler32_augmented_set_state(ned_doppler32_augmented_filter *restrict f
 void ned_doppler32_augmented_reset_error_state(ned_doppler32_augmented_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
 int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, const
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_workspace *restrict
         work);

@@ -284,7 +284,8 @@ int ned_inertial16_set_state(ned_inertial16_filter *restrict f, const ned_inerti
 void ned_inertial16_reset_error_state(ned_inertial16_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
 int ned_inertial16_predict(ned_inertial16_filter *restrict f, const ned_inertial16_transition
         *restrict t, ned_inertial16_workspace *restrict work);
 

@@ -2204,7 +2204,7 @@ int ned_inertial16_twin_discretize(const ned_inertial16_twin_matrices *restrict 
     int k;
     ned_inertial16_twin_scalar sum_check;
     ned_inertial16_twin_scalar qd_check = 0.0;
-    ned_inertial16_twin_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
+    ned_inertial16_twin_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 }, q_max = 0.0;
     if (!isfinite(T)) {
         return NED_INERTIAL16_TWIN_ERR_NONFINITE;
     }
@@ -2264,6 +2264,11 @@ int ned_inertial16_twin_discretize(const ned_inertial16_twin_matrices *restrict 
         if (m->q[c] < 0.0) {
             return NED_INERTIAL16_TWIN_ERR_NOT_POSITIVE;
         }
+        q_max = m->q[c] > q_max ? m->q[c] : q_max;
+    }
+    if (!isfinite(q_max / T)) { /* T so short that Q / T, the weights of Gamma (Q/T) Gamma^T,
+            overflows */
+        return NED_INERTIAL16_TWIN_ERR_NONFINITE;
     }
     /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
@@ -3741,8 +3746,28 @@ int ned_inertial16_twin_predict(ned_inertial16_twin_filter *restrict f, const
                 ned_inertial16_twin_workspace *restrict work)
 {
     ned_inertial16_twin_filter_scratch *w = &work->filter;
-    ned_inertial16_twin_scalar check = 0.0;
+    ned_inertial16_twin_scalar check = 0.0, qd_min;
     ned_inertial16_twin_scalar sum_check = 0.0;
+    /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
+    qd_min = t->Qd[0];
+    qd_min = t->Qd[16] < qd_min ? t->Qd[16] : qd_min;
+    qd_min = t->Qd[31] < qd_min ? t->Qd[31] : qd_min;
+    qd_min = t->Qd[45] < qd_min ? t->Qd[45] : qd_min;
+    qd_min = t->Qd[58] < qd_min ? t->Qd[58] : qd_min;
+    qd_min = t->Qd[70] < qd_min ? t->Qd[70] : qd_min;
+    qd_min = t->Qd[81] < qd_min ? t->Qd[81] : qd_min;
+    qd_min = t->Qd[91] < qd_min ? t->Qd[91] : qd_min;
+    qd_min = t->Qd[100] < qd_min ? t->Qd[100] : qd_min;
+    qd_min = t->Qd[108] < qd_min ? t->Qd[108] : qd_min;
+    qd_min = t->Qd[115] < qd_min ? t->Qd[115] : qd_min;
+    qd_min = t->Qd[121] < qd_min ? t->Qd[121] : qd_min;
+    qd_min = t->Qd[126] < qd_min ? t->Qd[126] : qd_min;
+    qd_min = t->Qd[130] < qd_min ? t->Qd[130] : qd_min;
+    qd_min = t->Qd[133] < qd_min ? t->Qd[133] : qd_min;
+    qd_min = t->Qd[135] < qd_min ? t->Qd[135] : qd_min;
+    if (qd_min < 0.0) {
+        return NED_INERTIAL16_TWIN_ERR_NOT_POSITIVE;
+    }
     state_predict(f, t, w); /* x_n = Phi x */
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];

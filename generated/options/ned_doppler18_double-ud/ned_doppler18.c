@@ -1807,7 +1807,7 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
     int halvings, order, status;
     int k;
     ned_doppler18_scalar sum_check;
-    ned_doppler18_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 };
+    ned_doppler18_scalar check = 0.0, sums[4] = { 0.0, 0.0, 0.0, 0.0 }, q_max = 0.0;
     if (!isfinite(T)) {
         return NED_DOPPLER18_ERR_NONFINITE;
     }
@@ -1867,6 +1867,11 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
         if (m->q[c] < 0.0) {
             return NED_DOPPLER18_ERR_NOT_POSITIVE;
         }
+        q_max = m->q[c] > q_max ? m->q[c] : q_max;
+    }
+    if (!isfinite(q_max / T)) { /* T so short that Q / T, the weights of Gamma (Q/T) Gamma^T,
+            overflows */
+        return NED_DOPPLER18_ERR_NONFINITE;
     }
     /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
@@ -2683,6 +2688,13 @@ int ned_doppler18_predict(ned_doppler18_filter *restrict f, const ned_doppler18_
     int i, j, k;
     ned_doppler18_scalar check = 0.0;
     lane_pair acc;
+    /* a negative weight of Q_d = Gamma diag(qw) Gamma^T is refused, as set_covariance refuses a
+       negative P_ii */
+    for (k = 0; k < NED_DOPPLER18_N_NOISES; ++k) {
+        if (t->qw[k] < 0.0) {
+            return NED_DOPPLER18_ERR_NOT_POSITIVE;
+        }
+    }
     /* x_n = Phi x over the structural nonzeros of Phi (rows e_i keep their state) */
     acc = lane_pair_product(lane_pair_load(&t->Phi[0]), lane_pair_load(&f->x[0]));
     acc = lane_pair_add_product(acc, lane_pair_load(&t->Phi[2]), lane_pair_load(&f->x[2]));
@@ -3005,7 +3017,7 @@ int ned_doppler18_update_masked(ned_doppler18_filter *restrict f,
             continue;
         }
         ned_doppler18_scalar alpha = m->r[a];
-        ned_doppler18_scalar nu = z[a]; /* innovation z - h x */
+        ned_doppler18_scalar nu = z[a], nu_scaled; /* innovation z - h x, and nu / alpha */
         /* f = U^T h^T, v = D f */
         for (j = 0; j < NED_DOPPLER18_N_STATES; ++j) {
             w->f[j] = 0.0;
@@ -3036,10 +3048,10 @@ int ned_doppler18_update_masked(ned_doppler18_filter *restrict f,
         if (!isfinite(alpha)) {
             return NED_DOPPLER18_ERR_NONFINITE;
         }
-        nis_sum += nu * nu / alpha; /* the scalar steps factor nu^T S^-1 nu exactly */
-        nu /= alpha; /* the gain is b / alpha */
+        nu_scaled = nu / alpha; /* the gain is b / alpha */
+        nis_sum += nu_scaled * nu; /* nu^T S^-1 nu, factored exactly by the scalar steps */
         for (j = 0; j < NED_DOPPLER18_N_STATES; ++j) {
-            w->xn[j] += w->b[j] * nu;
+            w->xn[j] += w->b[j] * nu_scaled;
         }
     }
     for (j = 0; j < NED_DOPPLER18_N_STATES; ++j) {

@@ -2169,7 +2169,7 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
     int k;
     ned_doppler18_scalar sum_check;
     ned_doppler18_scalar qd_check = 0.0F;
-    ned_doppler18_scalar check = 0.0F, sums[4] = { 0.0F, 0.0F, 0.0F, 0.0F };
+    ned_doppler18_scalar check = 0.0F, sums[4] = { 0.0F, 0.0F, 0.0F, 0.0F }, q_max = 0.0F;
     if (!isfinite(T)) {
         return NED_DOPPLER18_ERR_NONFINITE;
     }
@@ -2229,6 +2229,11 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
         if (m->q[c] < 0.0F) {
             return NED_DOPPLER18_ERR_NOT_POSITIVE;
         }
+        q_max = m->q[c] > q_max ? m->q[c] : q_max;
+    }
+    if (!isfinite(q_max / T)) { /* T so short that Q / T, the weights of Gamma (Q/T) Gamma^T,
+            overflows */
+        return NED_DOPPLER18_ERR_NONFINITE;
     }
     /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
@@ -3839,8 +3844,30 @@ int ned_doppler18_predict(ned_doppler18_filter *restrict f, const ned_doppler18_
                 ned_doppler18_workspace *restrict work)
 {
     ned_doppler18_filter_scratch *w = &work->filter;
-    ned_doppler18_scalar check = 0.0F;
+    ned_doppler18_scalar check = 0.0F, qd_min;
     ned_doppler18_scalar sum_check = 0.0F;
+    /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
+    qd_min = t->Qd[0];
+    qd_min = t->Qd[18] < qd_min ? t->Qd[18] : qd_min;
+    qd_min = t->Qd[35] < qd_min ? t->Qd[35] : qd_min;
+    qd_min = t->Qd[51] < qd_min ? t->Qd[51] : qd_min;
+    qd_min = t->Qd[66] < qd_min ? t->Qd[66] : qd_min;
+    qd_min = t->Qd[80] < qd_min ? t->Qd[80] : qd_min;
+    qd_min = t->Qd[93] < qd_min ? t->Qd[93] : qd_min;
+    qd_min = t->Qd[105] < qd_min ? t->Qd[105] : qd_min;
+    qd_min = t->Qd[116] < qd_min ? t->Qd[116] : qd_min;
+    qd_min = t->Qd[126] < qd_min ? t->Qd[126] : qd_min;
+    qd_min = t->Qd[135] < qd_min ? t->Qd[135] : qd_min;
+    qd_min = t->Qd[143] < qd_min ? t->Qd[143] : qd_min;
+    qd_min = t->Qd[150] < qd_min ? t->Qd[150] : qd_min;
+    qd_min = t->Qd[156] < qd_min ? t->Qd[156] : qd_min;
+    qd_min = t->Qd[161] < qd_min ? t->Qd[161] : qd_min;
+    qd_min = t->Qd[165] < qd_min ? t->Qd[165] : qd_min;
+    qd_min = t->Qd[168] < qd_min ? t->Qd[168] : qd_min;
+    qd_min = t->Qd[170] < qd_min ? t->Qd[170] : qd_min;
+    if (qd_min < 0.0F) {
+        return NED_DOPPLER18_ERR_NOT_POSITIVE;
+    }
     state_predict(f, t, w); /* x_n = Phi x */
     check += w->xn[0] - w->xn[0];
     check += w->xn[1] - w->xn[1];

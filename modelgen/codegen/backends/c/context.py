@@ -10,7 +10,7 @@ from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.discretize_kernels import HORNER_LAST, DiscretizeBlock, SegmentAssign, horner_level_name, scalar_statements
 from modelgen.codegen.kernels import MIN_LANE_PAIRS, CheckedAssign, KernelBlock, compact_predict_tables, lane_split
 from modelgen.codegen.compact_discretize import CompactDiscretizeTables
-from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout, phi_entries
+from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout, packed_index, phi_entries
 from modelgen.codegen.structure import FilterStructure
 from modelgen.codegen.van_loan import QD_MARGIN
 from modelgen.derive.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range
@@ -113,6 +113,25 @@ def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, ob
             }
         )
     return out
+
+
+def qd_variance_check(n: int, name: str, zero: str, compact: bool) -> list[str]:
+    """C lines of predict that return ERR_NOT_POSITIVE when a variance Q_d(i, i) of the transition is negative.
+
+    Every diagonal entry is read (not only Q_d's structural nonzeros): the
+    Python refuses a negative one wherever it is.  Unrolled, a chain of
+    minima (one minsd with a memory operand per state on x86-64); compact, a
+    loop (predict declares ``qd_min`` and, compact, ``int d``).  A NaN leaves
+    the minimum as it was: predict refuses it as a non-finite input.
+    """
+    prefix = name.upper()
+    refuse = [f"if (qd_min < {zero}) {{", f"    return {prefix}_ERR_NOT_POSITIVE;", "}"]
+    if compact:
+        return ["qd_min = t->Qd[0];", f"for (d = 1; d < {prefix}_N_STATES; ++d) {{",
+                f"    const {name}_scalar q = t->Qd[{prefix}_PACKED_UPPER(d, d)];",
+                "    qd_min = q < qd_min ? q : qd_min;", "}", *refuse]
+    diagonal = [packed_index(n, i, i) for i in range(n)]
+    return ["qd_min = t->Qd[0];", *(f"qd_min = t->Qd[{k}] < qd_min ? t->Qd[{k}] : qd_min;" for k in diagonal[1:]), *refuse]
 
 
 def compact_tables(description: FilterDescription) -> dict[str, list[int]]:
@@ -442,7 +461,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "compact": bool(compact),
         "compact_tables": {**{k: _table(v) for k, v in compact.items()}, "nnz": max(len(compact.get("col", ())), 1)},
         "struct_bytes": struct_bytes(layout, scalar_bytes(options.scalar)),
-        "predict_reads_transition": bool(state_lines) or bool(compact) or any(b.uses("transition") for b in blocks),
+        "qd_variance_check": [] if options.ud else qd_variance_check(n, model.name, spell["zero"], bool(compact)),
         "first_free_parameter": next((p.name for p in model.parameters if p.value is None), None),
         "example_value": c_number(0.5, options.scalar),
         "example_variance": c_number(1e-4, options.scalar),
