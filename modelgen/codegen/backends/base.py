@@ -87,6 +87,7 @@ class Backend:
     files: tuple[tuple[str, str], ...]
     harness: Path | None = None
     finish: Callable[[str, str], str] | None = None  # (file name, text) -> text, e.g. line wrapping
+    verbatim: tuple[Path, ...] = ()  # files of the product copied byte for byte (the C runtime)
     runner: Runner | None = None  # flies a scenario through the built product (run)
     counter: Callable[[FilterDescription], dict[str, OperationCount]] | None = None  # its own operation counts (costs)
 
@@ -118,6 +119,7 @@ class Backend:
         files = {file.format(p=name): env.get_template(t).render(context) for file, t in self.files}
         if self.finish is not None:
             files = {file: self.finish(file, text) for file, text in files.items()}
+        files.update({path.name: path.read_text(encoding="utf-8") for path in self.verbatim})
         return files
 
     def render_template(self, description: FilterDescription, template: str, **extra: object) -> str:

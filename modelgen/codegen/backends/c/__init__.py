@@ -4,7 +4,9 @@
 ``literals`` knows the scalar type's spellings (``1.0F``, ``sqrtf``,
 ``FLT_EPSILON``), ``context`` builds the templates' variables, ``templates/``
 holds the product templates and ``harness/`` the test driver, the firmware
-main of the embedded tests and the navigator's driver.
+main of the embedded tests and the navigator's driver; ``runtime/`` is the
+fixed C runtime (factorizations, IEEE bits, two-lane sums, the Taylor
+bound): real C headers copied verbatim into every generated folder.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from modelgen.codegen.backends.base import Backend
-from modelgen.codegen.backends.c.context import c_context
+from modelgen.codegen.backends.c.context import RUNTIME_FILES, c_context
 from modelgen.codegen.backends.c.printer import wrap_c
 from modelgen.codegen.backends.c.run import c_run
 from modelgen.codegen.description import FilterDescription
@@ -43,6 +45,7 @@ BACKEND = Backend(
     templates=HERE / "templates",
     harness=HERE / "harness",
     finish=finish,
+    verbatim=RUNTIME_FILES,
     runner=c_run,
     counter=c_costs,
     files=(
