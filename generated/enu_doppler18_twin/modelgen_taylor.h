@@ -1,6 +1,7 @@
 /* modelgen C runtime: Osborne's balancing step and the Taylor series' error bound, for the scaling
  * and squaring of discretize (modelgen.derive.discretization: the Python module and the reference
  * compute the same numbers in the same order).
+ * From modelgen/codegen/backends/c/runtime/modelgen_taylor.h (copied verbatim).
  */
 #ifndef MODELGEN_TAYLOR_H
 #define MODELGEN_TAYLOR_H

@@ -1,5 +1,6 @@
 /* modelgen C runtime: the scalar's IEEE-754 bits: exponents and powers of two without a call, and
  * sign bits (the cheap first test of a vector's signs).
+ * From modelgen/codegen/backends/c/runtime/modelgen_ieee.h (copied verbatim).
  */
 #ifndef MODELGEN_IEEE_H
 #define MODELGEN_IEEE_H

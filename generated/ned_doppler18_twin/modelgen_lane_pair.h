@@ -5,6 +5,7 @@
  * (unless MODELGEN_SCALAR_LANE_PAIRS is defined), a lane pair is an SSE2 vector, otherwise two
  * scalars: the same operations in the same order, so the same result bit for bit, as long as the
  * compiler does not fuse a product and a sum (-ffp-contract=off, which gcc's -std=c99 implies).
+ * From modelgen/codegen/backends/c/runtime/modelgen_lane_pair.h (copied verbatim).
  */
 #ifndef MODELGEN_LANE_PAIR_H
 #define MODELGEN_LANE_PAIR_H

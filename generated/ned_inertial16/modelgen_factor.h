@@ -1,6 +1,7 @@
 /* modelgen C runtime: the factorizations, U D U^T of a covariance, L L^T of an innovation's.
  *
  * Status codes as the generated filters': 0 OK, 1 ERR_NONFINITE, 2 ERR_NOT_POSITIVE.
+ * From modelgen/codegen/backends/c/runtime/modelgen_factor.h (copied verbatim).
  */
 #ifndef MODELGEN_FACTOR_H
 #define MODELGEN_FACTOR_H
