@@ -5219,7 +5219,6 @@ int enu_doppler18_predict(enu_doppler18_filter *restrict f, const enu_doppler18_
     enu_doppler18_filter_scratch *w = &work->filter;
     enu_doppler18_scalar check = 0.0;
     modelgen_bits signs;
-    int d;
     enu_doppler18_scalar sum_check = 0.0;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
@@ -5241,6 +5240,7 @@ int enu_doppler18_predict(enu_doppler18_filter *restrict f, const enu_doppler18_
     signs |= modelgen_bits_of(t->Qd[168]);
     signs |= modelgen_bits_of(t->Qd[170]);
     if (signs & MODELGEN_SIGN_BIT) {
+        int d;
         for (d = 0; d < ENU_DOPPLER18_N_STATES; ++d) {
             if (t->Qd[ENU_DOPPLER18_PACKED_UPPER(d, d)] < 0.0) {
                 return ENU_DOPPLER18_ERR_NOT_POSITIVE;

@@ -5208,7 +5208,6 @@ int enu_doppler18_twin_predict(enu_doppler18_twin_filter *restrict f, const
     enu_doppler18_twin_filter_scratch *w = &work->filter;
     enu_doppler18_twin_scalar check = 0.0;
     modelgen_bits signs;
-    int d;
     enu_doppler18_twin_scalar sum_check = 0.0;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
@@ -5230,6 +5229,7 @@ int enu_doppler18_twin_predict(enu_doppler18_twin_filter *restrict f, const
     signs |= modelgen_bits_of(t->Qd[168]);
     signs |= modelgen_bits_of(t->Qd[170]);
     if (signs & MODELGEN_SIGN_BIT) {
+        int d;
         for (d = 0; d < ENU_DOPPLER18_TWIN_N_STATES; ++d) {
             if (t->Qd[ENU_DOPPLER18_TWIN_PACKED_UPPER(d, d)] < 0.0) {
                 return ENU_DOPPLER18_TWIN_ERR_NOT_POSITIVE;

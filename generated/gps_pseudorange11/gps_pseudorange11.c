@@ -2337,7 +2337,6 @@ int gps_pseudorange11_predict(gps_pseudorange11_filter *restrict f, const
     gps_pseudorange11_filter_scratch *w = &work->filter;
     gps_pseudorange11_scalar check = 0.0;
     modelgen_bits signs;
-    int d;
     gps_pseudorange11_scalar sum_check = 0.0;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
@@ -2352,6 +2351,7 @@ int gps_pseudorange11_predict(gps_pseudorange11_filter *restrict f, const
     signs |= modelgen_bits_of(t->Qd[63]);
     signs |= modelgen_bits_of(t->Qd[65]);
     if (signs & MODELGEN_SIGN_BIT) {
+        int d;
         for (d = 0; d < GPS_PSEUDORANGE11_N_STATES; ++d) {
             if (t->Qd[GPS_PSEUDORANGE11_PACKED_UPPER(d, d)] < 0.0) {
                 return GPS_PSEUDORANGE11_ERR_NOT_POSITIVE;

@@ -6692,7 +6692,6 @@ int ins_gnss21_predict(ins_gnss21_filter *restrict f, const ins_gnss21_transitio
     ins_gnss21_filter_scratch *w = &work->filter;
     ins_gnss21_scalar check = 0.0;
     modelgen_bits signs;
-    int d;
     ins_gnss21_scalar sum_check = 0.0;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
@@ -6717,6 +6716,7 @@ int ins_gnss21_predict(ins_gnss21_filter *restrict f, const ins_gnss21_transitio
     signs |= modelgen_bits_of(t->Qd[228]);
     signs |= modelgen_bits_of(t->Qd[230]);
     if (signs & MODELGEN_SIGN_BIT) {
+        int d;
         for (d = 0; d < INS_GNSS21_N_STATES; ++d) {
             if (t->Qd[INS_GNSS21_PACKED_UPPER(d, d)] < 0.0) {
                 return INS_GNSS21_ERR_NOT_POSITIVE;

@@ -3870,7 +3870,6 @@ int ins_gps15_predict(ins_gps15_filter *restrict f, const ins_gps15_transition *
     ins_gps15_filter_scratch *w = &work->filter;
     ins_gps15_scalar check = 0.0;
     modelgen_bits signs;
-    int d;
     ins_gps15_scalar sum_check = 0.0;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
@@ -3889,6 +3888,7 @@ int ins_gps15_predict(ins_gps15_filter *restrict f, const ins_gps15_transition *
     signs |= modelgen_bits_of(t->Qd[117]);
     signs |= modelgen_bits_of(t->Qd[119]);
     if (signs & MODELGEN_SIGN_BIT) {
+        int d;
         for (d = 0; d < INS_GPS15_N_STATES; ++d) {
             if (t->Qd[INS_GPS15_PACKED_UPPER(d, d)] < 0.0) {
                 return INS_GPS15_ERR_NOT_POSITIVE;

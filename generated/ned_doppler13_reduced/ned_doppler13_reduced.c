@@ -2783,7 +2783,6 @@ int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, cons
     ned_doppler13_reduced_filter_scratch *w = &work->filter;
     ned_doppler13_reduced_scalar check = 0.0;
     modelgen_bits signs;
-    int d;
     ned_doppler13_reduced_scalar sum_check = 0.0;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
@@ -2800,6 +2799,7 @@ int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, cons
     signs |= modelgen_bits_of(t->Qd[88]);
     signs |= modelgen_bits_of(t->Qd[90]);
     if (signs & MODELGEN_SIGN_BIT) {
+        int d;
         for (d = 0; d < NED_DOPPLER13_REDUCED_N_STATES; ++d) {
             if (t->Qd[NED_DOPPLER13_REDUCED_PACKED_UPPER(d, d)] < 0.0) {
                 return NED_DOPPLER13_REDUCED_ERR_NOT_POSITIVE;

@@ -7238,7 +7238,6 @@ int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, 
     ned_doppler32_augmented_filter_scratch *w = &work->filter;
     ned_doppler32_augmented_scalar check = 0.0;
     modelgen_bits signs;
-    int d;
     ned_doppler32_augmented_scalar sum_check = 0.0;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
@@ -7274,6 +7273,7 @@ int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, 
     signs |= modelgen_bits_of(t->Qd[525]);
     signs |= modelgen_bits_of(t->Qd[527]);
     if (signs & MODELGEN_SIGN_BIT) {
+        int d;
         for (d = 0; d < NED_DOPPLER32_AUGMENTED_N_STATES; ++d) {
             if (t->Qd[NED_DOPPLER32_AUGMENTED_PACKED_UPPER(d, d)] < 0.0) {
                 return NED_DOPPLER32_AUGMENTED_ERR_NOT_POSITIVE;

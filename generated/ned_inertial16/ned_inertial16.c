@@ -3637,7 +3637,6 @@ int ned_inertial16_predict(ned_inertial16_filter *restrict f, const ned_inertial
     ned_inertial16_filter_scratch *w = &work->filter;
     ned_inertial16_scalar check = 0.0;
     modelgen_bits signs;
-    int d;
     ned_inertial16_scalar sum_check = 0.0;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
@@ -3657,6 +3656,7 @@ int ned_inertial16_predict(ned_inertial16_filter *restrict f, const ned_inertial
     signs |= modelgen_bits_of(t->Qd[133]);
     signs |= modelgen_bits_of(t->Qd[135]);
     if (signs & MODELGEN_SIGN_BIT) {
+        int d;
         for (d = 0; d < NED_INERTIAL16_N_STATES; ++d) {
             if (t->Qd[NED_INERTIAL16_PACKED_UPPER(d, d)] < 0.0) {
                 return NED_INERTIAL16_ERR_NOT_POSITIVE;

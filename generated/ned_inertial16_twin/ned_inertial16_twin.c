@@ -3652,7 +3652,6 @@ int ned_inertial16_twin_predict(ned_inertial16_twin_filter *restrict f, const
     ned_inertial16_twin_filter_scratch *w = &work->filter;
     ned_inertial16_twin_scalar check = 0.0;
     modelgen_bits signs;
-    int d;
     ned_inertial16_twin_scalar sum_check = 0.0;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
@@ -3672,6 +3671,7 @@ int ned_inertial16_twin_predict(ned_inertial16_twin_filter *restrict f, const
     signs |= modelgen_bits_of(t->Qd[133]);
     signs |= modelgen_bits_of(t->Qd[135]);
     if (signs & MODELGEN_SIGN_BIT) {
+        int d;
         for (d = 0; d < NED_INERTIAL16_TWIN_N_STATES; ++d) {
             if (t->Qd[NED_INERTIAL16_TWIN_PACKED_UPPER(d, d)] < 0.0) {
                 return NED_INERTIAL16_TWIN_ERR_NOT_POSITIVE;

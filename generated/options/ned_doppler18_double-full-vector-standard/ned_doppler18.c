@@ -3823,7 +3823,6 @@ int ned_doppler18_predict(ned_doppler18_filter *restrict f, const ned_doppler18_
     ned_doppler18_filter_scratch *w = &work->filter;
     ned_doppler18_scalar check = 0.0;
     modelgen_bits signs;
-    int d;
     ned_doppler18_scalar sum_check = 0.0;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
@@ -3845,6 +3844,7 @@ int ned_doppler18_predict(ned_doppler18_filter *restrict f, const ned_doppler18_
     signs |= modelgen_bits_of(t->Qd[168]);
     signs |= modelgen_bits_of(t->Qd[170]);
     if (signs & MODELGEN_SIGN_BIT) {
+        int d;
         for (d = 0; d < NED_DOPPLER18_N_STATES; ++d) {
             if (t->Qd[NED_DOPPLER18_PACKED_UPPER(d, d)] < 0.0) {
                 return NED_DOPPLER18_ERR_NOT_POSITIVE;

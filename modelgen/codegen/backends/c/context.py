@@ -125,15 +125,18 @@ def qd_variance_check(n: int, prefix: str, zero: str, compact: bool) -> list[str
     straight-line where the prediction is unrolled, a loop where it is
     compact); only a set sign bit (a negative entry, or a -0 or a NaN,
     which are not refused here) makes predict compare entry by entry.
-    predict declares ``modelgen_bits signs`` and ``int d``.
+    predict declares ``modelgen_bits signs``; the loop index ``d`` is declared
+    here, in the narrowest block that uses it (cppcheck's variableScope).
     """
     diagonal = [packed_index(n, i, i) for i in range(n)]
     if compact:
-        signs = ["signs = 0;", f"for (d = 0; d < {prefix}_N_STATES; ++d) {{",
+        signs = ["int d;", "signs = 0;", f"for (d = 0; d < {prefix}_N_STATES; ++d) {{",
                  f"    signs |= modelgen_bits_of(t->Qd[{prefix}_PACKED_UPPER(d, d)]);", "}"]
+        declare = []
     else:
         signs = [f"signs = modelgen_bits_of(t->Qd[{diagonal[0]}]);"] + [f"signs |= modelgen_bits_of(t->Qd[{k}]);" for k in diagonal[1:]]
-    return signs + ["if (signs & MODELGEN_SIGN_BIT) {", f"    for (d = 0; d < {prefix}_N_STATES; ++d) {{",
+        declare = ["    int d;"]
+    return signs + ["if (signs & MODELGEN_SIGN_BIT) {", *declare, f"    for (d = 0; d < {prefix}_N_STATES; ++d) {{",
                     f"        if (t->Qd[{prefix}_PACKED_UPPER(d, d)] < {zero}) {{", f"            return {prefix}_ERR_NOT_POSITIVE;",
                     "        }", "    }", "}"]
 
