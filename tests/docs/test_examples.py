@@ -186,3 +186,18 @@ def test_the_c_usage_example_compiles_against_the_generated_header(tmp_path):
                           "-I", str(REPO / "generated" / "ned_doppler18"), "-o", str(tmp_path / "usage.o")],
                          capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
+
+
+@pytest.mark.compile
+def test_the_cpp_usage_example_compiles_against_the_generated_class(tmp_path):
+    """The page's C++ example compiles with g++ -std=c++17 and the strict flags against generated/'s class."""
+    compiler = shutil.which("g++")
+    if compiler is None:
+        pytest.skip("g++ is not installed")
+    (block,) = blocks("cpp", [DOCS / "generated-code.md"])
+    source = tmp_path / "usage.cpp"
+    source.write_text(block.text, encoding="utf-8")
+    run = subprocess.run([compiler, "-std=c++17", "-Wall", "-Wextra", "-Werror", "-pedantic", "-c", str(source),
+                          "-I", str(REPO / "generated" / "ned_doppler18"), "-o", str(tmp_path / "usage.o")],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
