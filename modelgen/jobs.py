@@ -308,39 +308,58 @@ class ReportSection:
         return "\n".join(lines)
 
 
+#: how the report names each implementation that a check runs (others by their own name)
+IMPLEMENTATION_NAMES = {"python": "Python", "c": "C", "cpp": "C++"}
+
+
 def conformance_section(runs: list[ModelRun], out_root: Path) -> ReportSection:
-    """The generated code's check: every model's differences from the reference beside the tolerance that bounds them."""
+    """The generated code's check: every model's differences from the reference beside the tolerance that bounds them.
+
+    One pair of columns (scaled dP, scaled dx) per implementation the checks ran (Python, C, and C++ where a C++
+    compiler is there), all bounded by the run's tolerance."""
+    order = list(IMPLEMENTATION_NAMES)
+    implementations = sorted({r.implementation for run in runs for r in run.checks},
+                             key=lambda name: (order.index(name) if name in order else len(order), name))
+    names = [IMPLEMENTATION_NAMES.get(name, name) for name in implementations]
+    bounded = f"the {2 * len(names)} scaled columns"
     text = [
-        "Check: the generated Python and the C (compiled with "
+        f"Check: the generated {', '.join(names[:-1])} and {names[-1]} " if len(names) > 1 else f"Check: the generated {''.join(names)} ",
+    ]
+    text[0] += (
+        "(the C compiled with "
         "`-std=c99 -Wall -Wextra -Werror -pedantic`) run beside `modelgen.derive.reference` over each model's "
         "check scenario (the `check:` section of its file: a physical operating point, realistic sensor "
         "noise, the source's filter step; `ned_doppler18` flies the paper's 240 steps of 60 s). "
         "'scaled dP' is max |dP_ij| / sqrt(P_ii P_jj) and 'scaled dx' max |dx_i| / sqrt(P_ii) over all steps. "
-        "The tolerance bounds the four scaled columns: the verdict is ok when each of them is below it (and P stays "
+        f"The tolerance bounds {bounded}: the verdict is ok when each of them is below it (and P stays "
         "symmetric positive definite). It is computed per run from the run's conditioning: 2 (2n + 1) u sum_k rho_k, "
         "with u = 2^-53 and rho_k the factor by which step k's arithmetic can magnify a rounding "
         "(`modelgen.checks.code_check.conformance_tolerance`). 'C elementwise dP', max |dP_ij| / |P_ij|, is shown for "
-        "information and bounded by nothing: it is large where an entry of P is near zero.",
+        "information and bounded by nothing: it is large where an entry of P is near zero."
+    )
+    scaled = "".join(f" | {n} scaled dP | {n} scaled dx" for n in names)
+    text += [
         "",
-        "| model | states | scenario | folder | predict (C) | update | Python scaled dP | Python scaled dx "
-        "| C scaled dP | C scaled dx | tolerance (bounds the four scaled columns) | C elementwise dP (not bounded) | verdict |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        f"| model | states | scenario | folder | predict (C) | update{scaled} | tolerance (bounds {bounded}) "
+        "| C elementwise dP (not bounded) | verdict |",
+        "|---|---|---|---|---|---" + "|---" * (2 * len(names)) + "|---|---|---|",
     ]
     for run in runs:
         g = run.generation
         checks = {r.implementation: r for r in run.checks}
         update = g.code.costs.get("update")
         scenario = checks["c"].scenario.split(" (")[0]
+        cells = "".join(f" | {checks[i].max_scaled_P:.1e} | {checks[i].max_scaled_x:.1e}" if i in checks else " | - | -"
+                        for i in implementations)
         text.append(
             f"| {g.derived.model.name} | {g.derived.n_states} | {scenario} | `{out_root / g.derived.model.name}` "
             f"| {g.code.costs['predict (C)'].total} flops | {update.total if update else '-'}"
-            f"{' flops' if update else ''} | {checks['python'].max_scaled_P:.1e} | {checks['python'].max_scaled_x:.1e} "
-            f"| {checks['c'].max_scaled_P:.1e} | {checks['c'].max_scaled_x:.1e} | {checks['c'].tolerance:.1e} "
+            f"{' flops' if update else ''}{cells} | {checks['c'].tolerance:.1e} "
             f"| {checks['c'].max_elementwise_P:.1e} | {'ok' if run.passed else 'FAILED'} |"
         )
     passed = sum(run.passed for run in runs)
-    target = {"quantity": "generated Python and C within the conformance tolerance", "reached": f"{passed} of {len(runs)} models",
-              "target": "every model", "met": passed == len(runs)}
+    target = {"quantity": f"generated {', '.join(names)} within the conformance tolerance",
+              "reached": f"{passed} of {len(runs)} models", "target": "every model", "met": passed == len(runs)}
     return ReportSection("Generated code, compiled and checked against the numpy reference", "\n".join(text), (target,))
 
 

@@ -88,7 +88,7 @@ def test_check_compiles_and_runs_a_model_against_the_reference(tmp_path):
     path = tmp_path / "tilt.yaml"
     path.write_text(TINY, encoding="utf-8")
     results = modelgen.check(path)
-    assert {r.implementation for r in results} == {"python", "c"}
+    assert {"python", "c"} <= {r.implementation for r in results}  # and "cpp" where a C++ compiler is there
     assert all(r.passed() for r in results)
 
 
