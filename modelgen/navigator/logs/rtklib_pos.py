@@ -83,8 +83,8 @@ def parse_header(line: str, where: str, number: int) -> Header | None:
     if kind is None:
         raise ModelError(f"{where}: solution type {solution!r} in the column header is not read "
                          f"(read: {', '.join(k for k, v in SOLUTIONS.items() if v in ('llh', 'dms', 'xyz'))})")
-    velocity_word = "vx(m/s)" if kind == "xyz" else "vn(m/s)"
-    return Header(system, kind, velocity_word in words and any(w.startswith("sdv") for w in words), number)
+    velocity_words = {"vx(m/s)", "vx"} if kind == "xyz" else {"vn(m/s)", "vn"}
+    return Header(system, kind, bool(velocity_words & set(words)) and any(w.startswith("sdv") for w in words), number)
 
 
 def _number(text: str, where: str, column: int) -> float:
