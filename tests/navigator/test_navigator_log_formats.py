@@ -358,3 +358,13 @@ def test_each_format_keys_are_checked_against_the_chosen_format(tmp_path):
         (tmp_path / "nav.yaml").write_text(base.replace(ULOG_IMU, "  file: log.ulg\n" + replacement, 1))
         with pytest.raises(ModelError, match=rf"nav\.yaml:\d+: .*{message}"):
             load_config(tmp_path / "nav.yaml")
+
+
+def test_every_format_and_each_of_its_keys_is_documented():
+    from modelgen.navigator.logs import FORMATS
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "log-formats.md").read_text(encoding="utf-8")
+    for fmt in FORMATS.values():
+        assert f"`{fmt.name}`" in text, fmt.name
+        for option in fmt.imu_options + fmt.gnss_options:
+            assert f"`{option.key}`" in text, f"{fmt.name}: {option.key}"
