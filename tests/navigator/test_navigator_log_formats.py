@@ -111,8 +111,8 @@ def test_old_ulog_gps_fields_in_integer_units_are_scaled(tmp_path):
     assert np.array_equal(imu.time, e.imu_us / 1e6)
 
 
-def _ulog(tmp_path, gps_rows, imu_topic="sensor_combined", name="log.ulg"):
-    """A short ULog: 300 IMU samples at 100 Hz in the chosen topic(s) and the given sensor_gps rows."""
+def _ulog(tmp_path, gps_rows, imu_topic="sensor_combined", name="log.ulg", skip=()):
+    """A short ULog: 300 IMU samples at 100 Hz in the chosen topic(s) (but those in ``skip``) and sensor_gps rows."""
     w = W.UlogWriter(0)
     formats = {"sensor_combined": W.SENSOR_COMBINED, "vehicle_imu": W.VEHICLE_IMU}
     topics = ["sensor_gyro", "sensor_accel"] if imu_topic == "sensor_gyro+sensor_accel" else [imu_topic]
@@ -123,6 +123,8 @@ def _ulog(tmp_path, gps_rows, imu_topic="sensor_combined", name="log.ulg"):
     gps = w.subscribe("sensor_gps")
     rate, force = [0.01, -0.02, 0.03], [0.1, 0.2, -9.8]
     for k in range(300):
+        if k in skip:
+            continue
         t = 1_000_000 + 10_000 * k
         if imu_topic == "sensor_combined":
             w.data(ids[imu_topic], {"timestamp": t, "gyro_rad": rate, "accelerometer_m_s2": force})
@@ -164,6 +166,14 @@ def test_each_ulog_imu_topic_gives_rates_and_specific_force_in_si(tmp_path, topi
     assert np.allclose(imu.specific_force, [0.1, 0.2, -9.8], rtol=1e-6)
     assert imu.time[1] - imu.time[0] == pytest.approx(0.01, abs=3e-7)  # float64 seconds since 1970: 0.24 us steps
     assert imu.time[0] == pytest.approx(1751998000.0 + 18.0 + 1.0, abs=1e-6)  # boot 1 s + UTC + 18 s leap
+
+
+def test_an_imu_gap_in_a_ulog_is_refused_naming_its_message(tmp_path):
+    path = _ulog(tmp_path, [_gps_row(k) for k in range(12)], skip=range(100, 150))
+    with pytest.raises(ModelError, match=r"log\.ulg: sensor_combined message 101: IMU gap of 0\.510 s"):
+        read_imu(_source("imu", path, "ulog"), 3.0, "refuse")
+    imu = read_imu(_source("imu", path, "ulog"), 3.0, "propagate")
+    assert [round(g.length, 3) for g in imu.gaps] == [0.51]
 
 
 def test_ulog_fix_types_map_to_rtklib_quality_and_epochs_without_a_fix_are_noted(tmp_path):
