@@ -46,7 +46,6 @@ from modelgen.navigator.logs.files import read_text
 from modelgen.navigator.logs.formats import LogFormat, LogSource
 from modelgen.navigator.logs.gps_time import GPS_EPOCH_S, NS, TIME_SYSTEMS, seconds, to_gpst_ns
 from modelgen.navigator.logs.records import GnssLog
-from modelgen.simulation.earth import ecef_to_geodetic, ned_to_ecef_matrix
 
 SECONDS_PER_WEEK = 604800
 #: The solution types of RTKLIB's column header, by the header's second word.
@@ -177,6 +176,8 @@ def _covariance(sd: np.ndarray) -> np.ndarray:
 def _ecef_to_ned(latitude: np.ndarray, longitude: np.ndarray, vectors: np.ndarray,
                  covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """ECEF vectors and covariances rotated into NED at each point: (vectors, 1-sigma of N, E, up)."""
+    from modelgen.simulation.earth import ned_to_ecef_matrix  # imported here: simulation loads numba (1 s)
+
     out = np.empty_like(vectors)
     sigma = np.empty_like(vectors)
     for k in range(len(vectors)):
@@ -249,6 +250,8 @@ def _log(path: str, header: Header, data: np.ndarray, time: np.ndarray, notes: l
     """The GnssLog of parsed rows, llh/dms as read, xyz converted to geodetic and NED."""
     velocity = sigma_velocity = None
     if header.solution == "xyz":
+        from modelgen.simulation.earth import ecef_to_geodetic  # only for ECEF files (simulation loads numba)
+
         latitude, longitude, height = ecef_to_geodetic(data[:, 0:3])
         sigma = _ecef_to_ned(latitude, longitude, np.zeros((len(data), 3)), _covariance(data[:, 5:11]))[1]
         if header.velocity:
