@@ -13,7 +13,7 @@ from modelgen.errors import ModelError
 from modelgen.navigator.cnav import cached_c_navigator, fly_c
 from modelgen.navigator.config import NavigatorConfig, load_config
 from modelgen.navigator.errorstate import generate_filter_module, model_path
-from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
+from modelgen.navigator.logs import read_gnss, read_imu
 from modelgen.navigator.metrics import errors_against_reference, summary, velocity_latency
 from modelgen.navigator.navigator import Flight, fly, prepare
 from modelgen.navigator.report import report_files
@@ -72,9 +72,11 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     start = time.perf_counter()
     config = load_config(config_path)
     echo(f"replay {config.name}: reading {config.imu_file.name} and {config.gnss_file.name}")
-    imu = read_imu_csv(config.imu_file, config.imu_columns, config.gap_factor)
-    gnss = read_rtklib_pos(config.gnss_file)
+    imu = read_imu(config.imu_source, config.gap_factor, config.gap_action)
+    gnss = read_gnss(config.gnss_source)
     inputs = prepare(config, imu, gnss)
+    for note in inputs.notes:
+        echo(f"  note: {note}")
     timings["read_s"] = time.perf_counter() - start
     model_file = model_path(config.model, config.path)
     flights: dict[str, Flight] = {}

@@ -35,34 +35,62 @@ def _gpst(t: float) -> str:
     return time.strftime("%Y/%m/%d %H:%M:%S", time.gmtime(whole)) + f".{millis:03d}"
 
 
+#: Optional output fields the .pos writer uses when the flight carries them (else the column is 0, said in the header):
+#: north-east, east-up, up-north position covariance [m^2] (RTKLIB writes them as signed square roots).
+CROSS_COVARIANCE_FIELDS = ("cov_north_east", "cov_east_up", "cov_up_north")
+
+
+def _signed_root(value: float) -> float:
+    """RTKLIB's sdne/sdeu/sdun: sign(c) * sqrt(|c|) of a covariance c."""
+    return math.copysign(math.sqrt(abs(value)), value)
+
+
 def pos_text(flight: Flight, config: NavigatorConfig) -> str:
-    """The trajectory (antenna) in RTKLIB's lat/lon/height .pos format with velocities."""
+    """The trajectory (antenna) in RTKLIB's lat/lon/height .pos format with velocities.
+
+    Times in GPST to the millisecond; sdn, sde, sdu are the filter's 1-sigma
+    position (OUTPUT_FIELDS sigma_north/east/up), sdne, sdeu, sdun its cross
+    covariances as signed roots when the flight carries them
+    (:data:`CROSS_COVARIANCE_FIELDS`), else 0 and the header says so.  The file
+    reads back with :func:`modelgen.navigator.logs.read_rtklib_pos`.
+    """
+    c = COLUMN
+    cross = all(name in c for name in CROSS_COVARIANCE_FIELDS)
     lines = [f"% program   : modelgen replay ({config.name}, model {config.model})",
              "% solution  : forward real-time GNSS/INS, antenna position; Q 6 = dead reckoning (no GNSS update)",
+             "% sd        : sdn, sde, sdu = the filter's 1-sigma position; "
+             + ("sdne, sdeu, sdun = its cross covariances (signed square roots)" if cross else
+                "sdne, sdeu, sdun = 0 (the flight carries no cross covariance)"),
              "% (lat/lon/height=WGS84/ellipsoidal as in the input solution, Q=1:fix,2:float,5:single,6:dr)",
              "%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
              "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio    vn(m/s)    ve(m/s)    vu(m/s)"]
-    c = COLUMN
     for row in flight.outputs:
         q = int(row[c["gnss_quality"]]) if row[c["gnss_used"]] else DEAD_RECKONING_Q
+        roots = [_signed_root(row[c[name]]) for name in CROSS_COVARIANCE_FIELDS] if cross else [0.0, 0.0, 0.0]
         lines.append(f"{_gpst(row[c['time']])} {math.degrees(row[c['latitude']]):14.9f} "
                      f"{math.degrees(row[c['longitude']]):14.9f} {row[c['height']]:10.4f} {q:3d} {0:3d} "
                      f"{row[c['sigma_north']]:8.4f} {row[c['sigma_east']]:8.4f} {row[c['sigma_up']]:8.4f} "
-                     f"{0.0:8.4f} {0.0:8.4f} {0.0:8.4f} {0.0:6.2f} {0.0:6.1f} "
+                     f"{roots[0]:8.4f} {roots[1]:8.4f} {roots[2]:8.4f} {0.0:6.2f} {0.0:6.1f} "
                      f"{row[c['v_north']]:10.5f} {row[c['v_east']]:10.5f} {-row[c['v_down']]:10.5f}")
     return "\n".join(lines) + "\n"
 
 
 def csv_text(flight: Flight, errors: Errors) -> str:
-    """Every output field plus the errors against RTK, one row per output epoch, degrees for angles."""
+    """Every output field plus the errors against RTK, one row per output epoch, degrees for angles.
+
+    Time to the millisecond (``%.3f`` s), latitude and longitude to 1e-9 deg
+    (0.1 mm), every other value to 10 significant digits.
+    """
     angles = {"latitude", "longitude", "roll", "pitch", "yaw"}
     header = [f"{n}_deg" if n in angles else n for n in OUTPUT_FIELDS]
     header += ["error_north_m", "error_east_m", "error_up_m", "error_horizontal_m", "sigma_horizontal_m"]
+    formats = ["{:.3f}" if n == "time" else "{:.9f}" if n in ("latitude", "longitude") else "{:.10g}"
+               for n in OUTPUT_FIELDS] + ["{:.10g}"] * 5
     rows = [",".join(header)]
     for i, row in enumerate(flight.outputs):
         values = [math.degrees(v) if n in angles else v for n, v in zip(OUTPUT_FIELDS, row)]
         values += [errors.north[i], errors.east[i], errors.up[i], errors.horizontal[i], errors.sigma_horizontal[i]]
-        rows.append(",".join(f"{v:.10g}" for v in values))
+        rows.append(",".join(f.format(v) for f, v in zip(formats, values)))
     return "\n".join(rows) + "\n"
 
 
