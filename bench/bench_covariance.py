@@ -14,11 +14,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
 
-from modelgen.analysis.budget import load_error_budget  # noqa: E402
-from modelgen.analysis.covariance_report import run_covariance_analysis  # noqa: E402
-from modelgen.analysis.scenario import load_analysis_scenario  # noqa: E402
-from modelgen.analysis.scenario import operating_point  # noqa: E402
-from modelgen.analysis.systems import PaperModels, analyse_systems  # noqa: E402
+from modelgen.table2.budget import load_error_budget  # noqa: E402
+from modelgen.table2.report import run_covariance_analysis  # noqa: E402
+from modelgen.table2.scenario import load_analysis_scenario  # noqa: E402
+from modelgen.table2.scenario import operating_point  # noqa: E402
+from modelgen.table2.systems import PaperModels, analyse_systems  # noqa: E402
 from modelgen.derive import reference  # noqa: E402
 from modelgen.derive.discretization import taylor_discretization, taylor_process_noise  # noqa: E402
 from modelgen.derive.symbolic import derive  # noqa: E402

@@ -22,7 +22,7 @@ that runs on one machine or on many) instead of a process pool of its own:
 * :func:`worker_cached` keeps what every task of a study shares (a derived
   model, a trajectory, a compiled filter) once per worker process.
 
-Workers need only ``pip install modelgen``: task functions are modelgen's own,
+Workers need only ``pip install modelgen-nav``: task functions are modelgen's own,
 and their arguments are plain data (model declarations, profiles, seeds), never
 derived objects holding compiled code.
 """

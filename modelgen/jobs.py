@@ -96,20 +96,46 @@ class DerivedModels:
 class GenerationResult:
     """One model's generated code and where it went.
 
-    ``checks`` holds the conformance results when the code was checked;
-    ``written`` is False when a failing check kept the previous output.
+    ``files`` are the paths written, in name order (none when a failing
+    check kept the previous output: ``written`` is then False); ``checks``
+    holds the conformance results when the code was checked.
     """
 
     derived: DerivedModel
     code: GeneratedCode
     folder: Path
     checks: tuple[ConformanceResult, ...] = ()
-    written: bool = True
+    files: tuple[Path, ...] = ()
+
+    @property
+    def written(self) -> bool:
+        """True if the code replaced the folder's previous output (False: a check failed, nothing was written)."""
+        return bool(self.files)
 
     @property
     def passed(self) -> bool:
         """True if every check (if any was run) is within tolerance."""
         return checks_passed(self.checks)
+
+    def __repr__(self) -> str:
+        checked = "" if not self.checks else "; checks " + ", ".join(
+            f"{r.implementation} {'ok' if r.passed() else 'FAILED'}" for r in self.checks)
+        wrote = f"{len(self.files)} files in {self.folder}" if self.written else f"nothing written to {self.folder}"
+        return f"<GenerationResult {self.derived.model.name!r}: {wrote}{checked}>"
+
+    def _repr_markdown_(self) -> str:
+        """What a notebook shows: the files (with sizes) and each check against its tolerance."""
+        lines = [f"**GenerationResult `{self.derived.model.name}`**: "
+                 + (f"{len(self.files)} files in `{self.folder}`" if self.written else
+                    f"nothing written (a check failed; `{self.folder}` keeps its previous output)"), ""]
+        if self.written:
+            lines += ["| file | bytes |", "|---|---:|"]
+            lines += [f"| `{name}` | {len(self.code.files[name].encode())} |" for name in sorted(self.code.files)]
+        if self.checks:
+            lines += ["", "| implementation | scaled dP | scaled dx | tolerance (bounds both) | verdict |", "|---|---:|---:|---:|---|"]
+            lines += [f"| {r.implementation} | {r.max_scaled_P:.1e} | {r.max_scaled_x:.1e} | {r.tolerance:.1e} | "
+                      f"{'ok' if r.passed() else 'FAILED'} |" for r in self.checks]
+        return "\n".join(lines) + "\n"
 
 
 def checks_passed(results) -> bool:
@@ -145,9 +171,9 @@ def generate(
         staged = update.stage(code.files)
         checks = tuple(check(derived, staged, options=options)) if with_check else ()
         if not checks_passed(checks):
-            return GenerationResult(derived, code, folder, checks, written=False)
+            return GenerationResult(derived, code, folder, checks)
         update.commit()
-    return GenerationResult(derived, code, folder, checks)
+    return GenerationResult(derived, code, folder, checks, tuple(folder / name for name in sorted(code.files)))
 
 
 def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -> CheckScenario:
@@ -173,16 +199,16 @@ def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -
 
 def paper_parameters() -> dict[str, float]:
     """Seed 000's level-flight operating point and Table 1 statistics, by ned_doppler18 parameter name."""
-    from modelgen.analysis.budget import load_error_budget
-    from modelgen.analysis.scenario import load_analysis_scenario, operating_point
+    from modelgen.table2.budget import load_error_budget
+    from modelgen.table2.scenario import load_analysis_scenario, operating_point
 
     return {**load_error_budget().parameters, **operating_point(load_analysis_scenario())}
 
 
 def paper_scenario(derived: DerivedModel) -> CheckScenario:
     """Seed 000's 4-hour scenario: level flight, Table 1 errors, T = 60 s."""
-    from modelgen.analysis.budget import load_error_budget
-    from modelgen.analysis.scenario import load_analysis_scenario
+    from modelgen.table2.budget import load_error_budget
+    from modelgen.table2.scenario import load_analysis_scenario
     from modelgen.checks.code_check import CheckScenario
 
     flight, budget = load_analysis_scenario(), load_error_budget()
@@ -258,38 +284,117 @@ def generate_and_check_all(
     return runs
 
 
-def run_report(verification_summary: str, runs: list[ModelRun], out_root: Path, extra_sections: list[str]) -> str:
-    """The short Markdown report of the main job (no timestamps: byte-stable)."""
-    lines = ["# modelgen run: the core paper's model, end to end", ""]
-    lines += ["## Paper check (the table of F, G, H of seed 000)", "", verification_summary, ""]
-    lines += ["## Generated code, compiled and checked against the numpy reference", ""]
-    lines += [
-        "Check: the generated Python and the C (compiled with "
+@dataclass(frozen=True)
+class ReportSection:
+    """One section of the main job's report: its Markdown, the targets it states and the figures it shows.
+
+    Each target is a mapping with ``quantity``, ``reached``, ``target`` and
+    ``met`` (True, False, or None for a row that only informs), as the step
+    that measured it states it (the replay's come from its summary); the
+    report lists them all at its top, and ``modelgen run`` does not say ok
+    while one is missed.  ``figures`` maps a path relative to the report to
+    the figure's one-line caption.
+    """
+
+    title: str
+    text: str
+    targets: tuple[dict, ...] = ()
+    figures: tuple[tuple[str, str], ...] = ()
+
+    def markdown(self) -> str:
+        lines = [f"## {self.title}", "", self.text.rstrip()]
+        for path, caption in self.figures:
+            lines += ["", f"![{Path(path).stem}]({path})", "", caption]
+        return "\n".join(lines)
+
+
+#: how the report names each implementation that a check runs (others by their own name)
+IMPLEMENTATION_NAMES = {"python": "Python", "c": "C", "cpp": "C++"}
+
+
+def conformance_section(runs: list[ModelRun], out_root: Path) -> ReportSection:
+    """The generated code's check: every model's differences from the reference beside the tolerance that bounds them.
+
+    One pair of columns (scaled dP, scaled dx) per implementation the checks ran (Python, C, and C++ where a C++
+    compiler is there), all bounded by the run's tolerance."""
+    order = list(IMPLEMENTATION_NAMES)
+    implementations = sorted({r.implementation for run in runs for r in run.checks},
+                             key=lambda name: (order.index(name) if name in order else len(order), name))
+    names = [IMPLEMENTATION_NAMES.get(name, name) for name in implementations]
+    bounded = f"the {2 * len(names)} scaled columns"
+    text = [
+        f"Check: the generated {', '.join(names[:-1])} and {names[-1]} " if len(names) > 1 else f"Check: the generated {''.join(names)} ",
+    ]
+    text[0] += (
+        "(the C compiled with "
         "`-std=c99 -Wall -Wextra -Werror -pedantic`) run beside `modelgen.derive.reference` over each model's "
         "check scenario (the `check:` section of its file: a physical operating point, realistic sensor "
         "noise, the source's filter step; `ned_doppler18` flies the paper's 240 steps of 60 s). "
-        "'scaled dP' is max |dP_ij| / sqrt(P_ii P_jj) over all steps. The tolerance is computed per run "
-        "from the run's conditioning: 2 (2n + 1) u sum_k rho_k, with u = 2^-53 and rho_k the factor by "
-        "which step k's arithmetic can magnify a rounding (`modelgen.checks.code_check.conformance_tolerance`).",
+        "'scaled dP' is max |dP_ij| / sqrt(P_ii P_jj) and 'scaled dx' max |dx_i| / sqrt(P_ii) over all steps. "
+        f"The tolerance bounds {bounded}: the verdict is ok when each of them is below it (and P stays "
+        "symmetric positive definite). It is computed per run from the run's conditioning: 2 (2n + 1) u sum_k rho_k, "
+        "with u = 2^-53 and rho_k the factor by which step k's arithmetic can magnify a rounding "
+        "(`modelgen.checks.code_check.conformance_tolerance`). 'C elementwise dP', max |dP_ij| / |P_ij|, is shown for "
+        "information and bounded by nothing: it is large where an entry of P is near zero."
+    )
+    scaled = "".join(f" | {n} scaled dP | {n} scaled dx" for n in names)
+    text += [
         "",
-        "| model | states | scenario | folder | predict (C) | update | Python scaled dP | C scaled dP | C elementwise dP | tolerance | verdict |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        f"| model | states | scenario | folder | predict (C) | update{scaled} | tolerance (bounds {bounded}) "
+        "| C elementwise dP (not bounded) | verdict |",
+        "|---|---|---|---|---|---" + "|---" * (2 * len(names)) + "|---|---|---|",
     ]
     for run in runs:
         g = run.generation
         checks = {r.implementation: r for r in run.checks}
         update = g.code.costs.get("update")
         scenario = checks["c"].scenario.split(" (")[0]
-        lines.append(
+        cells = "".join(f" | {checks[i].max_scaled_P:.1e} | {checks[i].max_scaled_x:.1e}" if i in checks else " | - | -"
+                        for i in implementations)
+        text.append(
             f"| {g.derived.model.name} | {g.derived.n_states} | {scenario} | `{out_root / g.derived.model.name}` "
             f"| {g.code.costs['predict (C)'].total} flops | {update.total if update else '-'}"
-            f"{' flops' if update else ''} | {checks['python'].max_scaled_P:.1e} | {checks['c'].max_scaled_P:.1e} "
-            f"| {checks['c'].max_elementwise_P:.1e} | {checks['c'].tolerance:.1e} | {'ok' if run.passed else 'FAILED'} |"
+            f"{' flops' if update else ''}{cells} | {checks['c'].tolerance:.1e} "
+            f"| {checks['c'].max_elementwise_P:.1e} | {'ok' if run.passed else 'FAILED'} |"
         )
+    passed = sum(run.passed for run in runs)
+    target = {"quantity": f"generated {', '.join(names)} within the conformance tolerance",
+              "reached": f"{passed} of {len(runs)} models", "target": "every model", "met": passed == len(runs)}
+    return ReportSection("Generated code, compiled and checked against the numpy reference", "\n".join(text), (target,))
+
+
+def run_report(verification_summary: str, runs: list[ModelRun], out_root: Path, extra_sections: list,
+               paper_targets: tuple[dict, ...] = ()) -> str:
+    """The Markdown report of the main job (no timestamps: byte-stable).
+
+    ``extra_sections`` are :class:`ReportSection` objects (or plain Markdown,
+    which states no target); the report opens with every section's targets,
+    met or missed, and shows every figure with its caption.
+    """
+    paper = ReportSection("Paper check (the table of F, G, H of seed 000)", verification_summary, paper_targets)
+    sections = [paper, conformance_section(runs, out_root)]
+    sections += [s if isinstance(s, ReportSection) else ReportSection("", s) for s in extra_sections]
+    lines = ["# modelgen run: the core paper's model, end to end", ""]
+    rows = [(s.title.split(" (")[0], t) for s in sections for t in s.targets]  # the section's name without its gloss
+    stated = [(title, t) for title, t in rows if t["met"] is not None]
+    missed = [(title, t) for title, t in stated if not t["met"]]
+    lines += ["## Targets", "",
+              f"{len(stated) - len(missed)} of {len(stated)} stated targets met"
+              + (f", {len(missed)} missed." if missed else ".") + " Each is measured in the section named.", "",
+              "| section | quantity | reached | target | |", "|---|---|---|---|---|"]
+    lines += [f"| {title} | {t['quantity']} | {t['reached']} | {t['target']} | "
+              f"{'' if t['met'] is None else 'met' if t['met'] else '**missed**'} |" for title, t in rows]
     lines.append("")
-    for section in extra_sections:
-        lines += [section, ""]
+    for section in sections:
+        lines += [section.markdown() if section.title else section.text.rstrip(), ""]
     return cite_sources("\n".join(lines).rstrip() + "\n")
+
+
+def missed_targets(text: str) -> list[str]:
+    """The targets the main job's report (its text) states as missed, each as 'section: quantity'."""
+    table = text.split("\n## Targets\n", 1)[1].split("\n## ", 1)[0]
+    rows = (line[2:-2].split(" | ") for line in table.splitlines() if line.endswith("| **missed** |"))
+    return [f"{section}: {quantity} ({reached}, target {target})" for section, quantity, reached, target, _ in rows]
 
 
 def paper_operating_point(derived: DerivedModel) -> dict[str, float] | None:
@@ -340,6 +445,11 @@ class MainJobResult:
         """Names of the models whose generated code failed its check."""
         return [r.generation.derived.model.name for r in self.runs if not r.passed]
 
+    @property
+    def missed_targets(self) -> list[str]:
+        """The targets the report states as missed ('section: quantity (reached, target ...)')."""
+        return missed_targets(self.text)
+
 
 def main_job(
     report: Path, out_root: Path, figures: bool = True, with_simulation: bool = True, force: bool = False,
@@ -354,8 +464,8 @@ def main_job(
     folder); ``progress`` announces the steps and ``echo`` relays the steps'
     own messages.
     """
-    from modelgen.analysis.covariance_report import run_covariance_analysis
-    from modelgen.analysis.systems import PaperModels
+    from modelgen.table2.report import run_covariance_analysis
+    from modelgen.table2.systems import PaperModels
     from modelgen.checks.paper_check import verify, write_verification_report
     from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model
     from modelgen.checks.twins import report_section, run_twin_checks, write_twin_reports
@@ -373,33 +483,49 @@ def main_job(
     write_twin_reports(twins, report)
     progress("covariance analysis (Table 2, Figs 2-7) ...")
     analysis = run_covariance_analysis(report / "covariance", PaperModels.build(derived), figures=figures, progress=echo)
-    sections = [report_section(twins)]
-    sections.append("## Covariance analysis (Table 2 analogue)\n\n" + analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)")
+    twin_text = report_section(twins).split("\n", 2)[2]
+    sections: list = [ReportSection("Hand-written models against their twins derived from the navigation equations",
+                                    twin_text, ({"quantity": "unexplained differences between hand-written models and their twins",
+                                                 "reached": str(twins.unexplained), "target": "0",
+                                                 "met": twins.unexplained == 0},))]
+    sections.append(ReportSection(
+        "Covariance analysis (Table 2 analogue)",
+        analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)",
+        tuple(analysis.targets), tuple((f"covariance/{name}", caption) for name, caption in analysis.captions.items())))
     if with_simulation:
-        from modelgen.simulation.flight_report import simulate
+        from modelgen.simulation.flight_report import simulation_report
         from modelgen.simulation.scenario import load_profile
 
         progress("simulate the paper's flight (profile_000, one run) ...")
         profile = load_profile("profile_000")
-        sim = simulate(profile, models.get(profile.filter.model), report / "simulation", runs=1, seed=1, echo=echo)
-        sections.append(f"## Simulation\n\nThe paper's profile flown once with the generated C filter: [simulation/{Path(sim).name}](simulation/{Path(sim).name}) and its figures.")
+        flown = simulation_report(profile, models.get(profile.filter.model), report / "simulation", runs=1, seed=1,
+                                  echo=echo)
+        name = flown.summary.name
+        sections.append(ReportSection(
+            "Simulation", f"The paper's profile flown once with the generated C filter: [simulation/{name}](simulation/{name}).",
+            tuple(flown.targets), tuple((f"simulation/{path.name}", caption) for path, caption in flown.figures.items())))
     if with_replay:
         progress("replay the recorded car drive with the generated C navigator ...")
         sections.append(replay_section(report / "replay", echo))
-    text = run_report(summary, runs, Path(out_root), sections)
+    paper_target = {"quantity": "differences from the paper's table that no annotation explains",
+                    "reached": str(len(result.unexplained)), "target": "0", "met": not result.unexplained}
+    text = run_report(summary, runs, Path(out_root), sections, paper_targets=(paper_target,))
     write_text_atomically(report / "README.md", text)
     return MainJobResult(text, runs, result, twins)
 
 
-def replay_section(folder: Path, echo=print) -> str:
-    """Fly the built-in recorded drive (``modelgen replay``) into ``folder``; the report's section on it."""
+def replay_section(folder: Path, echo=print) -> ReportSection:
+    """Fly the built-in recorded drive (``modelgen replay``) into ``folder``; the report's section on it.
+
+    Its targets and figure captions are the replay's own (its summary's
+    ``targets``, :data:`modelgen.navigator.report.FIGURE_CAPTIONS`).
+    """
     from modelgen.navigator.config import builtin_config_path
     from modelgen.navigator.replay import run_replay
 
-    s = run_replay(builtin_config_path(), folder, echo=echo).summary
-    return "\n".join([
-        "## Recorded car drive (real IMU and RTK GNSS)",
-        "",
+    flown = run_replay(builtin_config_path(), folder, echo=echo)
+    s = flown.summary
+    text = "\n".join([
         f"The generated C navigator ({s['navigator']}) flown forward in real time over the recorded drive with "
         f"{s['outage_count']} simulated GNSS outages: end-of-outage horizontal error RMS "
         f"{s['horizontal_error_end_rms_m']:.2f} m (median {s['horizontal_error_end_median_m']:.2f} m, max "
@@ -409,6 +535,21 @@ def replay_section(folder: Path, echo=print) -> str:
         "",
         "Details: [replay/summary.md](replay/summary.md)",
     ])
+    captions = _replay_captions(folder)
+    figures = tuple((f"replay/{name}", caption) for name, caption in captions.items() if (folder / name).is_file())
+    return ReportSection("Recorded car drive (real IMU and RTK GNSS)", text, tuple(flown.targets()), figures)
+
+
+def _replay_captions(folder: Path) -> dict[str, str]:
+    """The replay's figures and their captions, as its summary.json states them (else the navigator's table)."""
+    import json
+
+    from modelgen.navigator.report import FIGURE_CAPTIONS
+
+    try:
+        return dict(json.loads((folder / "summary.json").read_text(encoding="utf-8")).get("figures") or FIGURE_CAPTIONS)
+    except (OSError, ValueError):
+        return dict(FIGURE_CAPTIONS)
 
 
 def derived_export(model: str | Path, fmt: str, name: str | None = None) -> str:
@@ -427,19 +568,45 @@ def derived_export(model: str | Path, fmt: str, name: str | None = None) -> str:
     return to_format(derived, fmt, name)
 
 
+def verified_model(model: str | Path | None, table: str | Path | None) -> str | Path:
+    """The model ``modelgen verify`` checks: ``model`` if given, else the one ``table`` names, else the paper's.
+
+    A table says which model it was written for in its ``model:`` key
+    (the shipped paper table names the core paper's model), so
+    ``modelgen verify --table FILE`` needs no model argument.  A table without
+    the key needs one, and the message says so.
+    """
+    from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model
+    from modelgen.fileio.datafiles import read_yaml
+
+    if model is not None:
+        return model
+    if table is None:
+        return paper_table_model(data_path(CORE_PAPER_TABLE))
+    named = read_yaml(Path(table), "paper-table file").get("model")
+    if not isinstance(named, str) or not named:
+        raise ModelError(f"{table}: the table has no 'model:' key: name the model (modelgen verify MODEL --table "
+                         f"{Path(table).name}) or add 'model: <name>' to the table")
+    if named not in builtin_models():  # a name, never a path: a model file is given as MODEL
+        raise ModelError(f"{table}: the table is written for model {named!r}, which is not a built-in model: give its "
+                         f"file (modelgen verify MODEL.yaml --table {Path(table).name})")
+    return named
+
+
 def paper_check_of(
-    model: str | Path, table: str | Path | None = None, complete: bool | None = None
+    model: str | Path | None, table: str | Path | None = None, complete: bool | None = None
 ) -> tuple[str, VerificationResult | None]:
     """``modelgen verify``: the model's name and its paper check (None: no table given and none names this model).
 
-    ``table`` is a user's table file (README "Verifying your own paper");
+    ``model`` None takes the model from the table (:func:`verified_model`).
+    ``table`` is a user's table file (docs "Verifying a paper");
     ``complete`` (default: only for the shipped table) also compares the
     derived nonzeros the table does not list.
     """
     from modelgen.checks.paper_check import verify
     from modelgen.checks.paper_table import paper_table_path
 
-    loaded = load_model(model)
+    loaded = load_model(verified_model(model, table))
     if table is None and paper_table_path(loaded.name) is None:
         return loaded.name, None
     if complete is None:
@@ -506,8 +673,8 @@ def observability_report(report) -> str:
 
 def covariance_analysis(folder: Path, sensitivity: bool, figures: bool, progress=None):
     """``modelgen covariance``: Table 2 and Figs 2-7 into ``folder`` (a :class:`CovarianceReport`)."""
-    from modelgen.analysis.covariance_report import run_covariance_analysis
-    from modelgen.analysis.systems import PaperModels
+    from modelgen.table2.report import run_covariance_analysis
+    from modelgen.table2.systems import PaperModels
     from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model
 
     say = progress or (lambda message: None)

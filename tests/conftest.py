@@ -170,3 +170,14 @@ def level_flight():
     values["doppler_noise_sigma_north"] = 0.5
     values["doppler_noise_sigma_east"] = 0.5
     return values
+
+
+@pytest.fixture(scope="session")
+def paper_systems(paper_derived):
+    """The core paper's six systems (pure inertial, optimal and suboptimal I-IV) made from the derived ned_doppler18.
+
+    Shared by the covariance recursions' tests (tests/analysis) and Table 2's (tests/table2); nothing is derived again.
+    """
+    from modelgen.table2.systems import PaperModels
+
+    return PaperModels.build(paper_derived)

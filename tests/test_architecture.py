@@ -12,7 +12,8 @@ may import.  Read bottom-up:
 * ``model`` says what a model is; ``derive`` turns it into matrices and numbers;
 * ``codegen`` prints a derived model as code; ``checks`` test that code and the
   derivation; ``analysis`` and ``simulation`` use derived models (the
-  simulation also flies the generated code); the ``navigator`` builds on the
+  simulation also flies the generated code); ``table2``, the core paper's
+  covariance analysis, builds on ``analysis``' recursions; the ``navigator`` builds on the
   code generator and the simulation's Earth and strapdown kernels;
 * ``jobs`` composes them; ``cli`` only parses arguments, calls ``jobs`` and
   stages its reports with ``fileio`` (and adds the navigator's own command);
@@ -52,11 +53,13 @@ ALLOWED: dict[str, set[str]] = {
     # cluster: dask client and task runner for many independent runs (Monte Carlo, trade cases)
     "cluster": _FLOOR,
     "analysis": _DERIVED,
+    # table2: the core paper's covariance analysis (its six systems, Table 2, Figs 2-7) on analysis' recursions
+    "table2": _DERIVED | {"analysis"},
     "simulation": _DERIVED | {"codegen", "cluster"},
     "navigator": _DERIVED | {"codegen", "simulation"},
     # study: trade studies run covariance cases (analysis) and Monte Carlo (simulation) on one cluster
-    "study": _DERIVED | {"analysis", "simulation", "cluster"},
-    "jobs": _DERIVED | {"codegen", "checks", "analysis", "simulation", "navigator", "export", "cluster", "study"},
+    "study": _DERIVED | {"analysis", "table2", "simulation", "cluster"},
+    "jobs": _DERIVED | {"codegen", "checks", "analysis", "table2", "simulation", "navigator", "export", "cluster", "study"},
     "cli": _FLOOR | {"fileio", "jobs", "navigator"},
     "api": _DERIVED | {"jobs"},
     "__main__": {"cli"},

@@ -95,3 +95,45 @@ def test_filter_constants_the_model_has_are_kept_and_another_model_takes_only_ma
     assert jobs.flight_scenario(path).filter.parameters == {"doppler_noise_sigma_north": 0.1}
     other = _profile_with_filter_constants(tmp_path, {"doppler_noise_sigma_nort": 0.1})
     assert jobs.flight_scenario(other, model="ned_inertial16").filter.model == "ned_inertial16"
+
+
+def test_the_run_report_states_every_target_met_or_missed_and_shows_every_figure_with_its_caption():
+    from pathlib import Path
+
+    from modelgen.jobs import ReportSection, missed_targets, run_report
+
+    section = ReportSection("Replay", "flown.", (
+        {"quantity": "end error RMS", "reached": "3.5 m", "target": "<= 5.0 m", "met": True},
+        {"quantity": "inside 3 sigma", "reached": "64 %", "target": ">= 90 %", "met": False},
+        {"quantity": "wall time", "reached": "12 s", "target": "", "met": None}),
+        (("replay/track.svg", "The track on a map."),))
+    text = run_report("65 entries; 0 unexplained.", [], Path("generated"), [section],
+                      paper_targets=({"quantity": "unexplained", "reached": "0", "target": "0", "met": True},))
+    targets = text.split("## Targets\n", 1)[1].split("\n## ", 1)[0]
+    assert "3 of 4 stated targets met, 1 missed." in targets  # the paper's, the code's (0 of 0 models), two here
+    assert "| Replay | inside 3 sigma | 64 % | >= 90 % | **missed** |" in targets
+    assert "| Replay | end error RMS | 3.5 m | <= 5.0 m | met |" in targets and "| Replay | wall time | 12 s |  |  |" in targets
+    assert "![track](replay/track.svg)\n\nThe track on a map." in text
+    assert missed_targets(text) == ["Replay: inside 3 sigma (64 %, target >= 90 %)"]
+    assert "C elementwise dP (not bounded)" in text
+
+
+@pytest.mark.compile
+def test_the_conformance_table_shows_every_implementation_checked_beside_the_tolerance_that_bounds_it(tmp_path):
+    from pathlib import Path
+
+    from modelgen.jobs import ModelRun, conformance_section, generate, load_and_derive
+
+    result = generate(load_and_derive("ned_inertial16"), tmp_path, with_check=True)
+    section = conformance_section([ModelRun(result, list(result.checks))], Path("generated"))
+    header, _, row = [line for line in section.text.splitlines() if line.startswith("|")]
+    names = {"python": "Python", "c": "C", "cpp": "C++"}
+    shown = [names[r.implementation] for r in result.checks]
+    assert f"tolerance (bounds the {2 * len(shown)} scaled columns)" in header
+    assert all(f"| {name} scaled dP | {name} scaled dx |" in header for name in shown)
+    cells = dict(zip(*([c.strip() for c in line.strip().strip("|").split("|")] for line in (header, row))))
+    tolerance = float(cells[f"tolerance (bounds the {2 * len(shown)} scaled columns)"])
+    scaled = [float(v) for k, v in cells.items() if " scaled d" in k]
+    # the verdict follows from the numbers shown: ok exactly when every scaled column is below the tolerance
+    assert (cells["verdict"] == "ok") == all(v < tolerance for v in scaled) == result.passed
+    assert section.targets[0]["met"] is result.passed

@@ -24,6 +24,16 @@
 #ifndef MODELGEN_ENU_DOPPLER18_H
 #define MODELGEN_ENU_DOPPLER18_H
 
+/* C++ includes this header as it is (the C++ class enu_doppler18.hpp does): the functions have C
+        linkage, and
+   ENU_DOPPLER18_RESTRICT is C99's restrict in C and nothing in C++, which has no restrict. */
+#ifdef __cplusplus
+#define ENU_DOPPLER18_RESTRICT
+extern "C" {
+#else
+#define ENU_DOPPLER18_RESTRICT restrict
+#endif
+
 #define ENU_DOPPLER18_N_STATES 18
 #define ENU_DOPPLER18_N_NOISES 9
 #define ENU_DOPPLER18_N_MEASUREMENTS 3
@@ -251,8 +261,8 @@ void enu_doppler18_default_params(enu_doppler18_params *params);
    denominator such as the cos of a tan or sec is zero within rounding, e.g.
    latitude +-90 degrees) or any entry is not finite; on error *m must not be
    used (discretize and update refuse it anyway), and nothing else is touched. */
-int enu_doppler18_matrices_evaluate(const enu_doppler18_params *restrict params,
-        enu_doppler18_matrices *restrict m);
+int enu_doppler18_matrices_evaluate(const enu_doppler18_params *ENU_DOPPLER18_RESTRICT params,
+        enu_doppler18_matrices *ENU_DOPPLER18_RESTRICT m);
 
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
@@ -260,21 +270,22 @@ int enu_doppler18_matrices_evaluate(const enu_doppler18_params *restrict params,
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not
    representable (ERR_NONFINITE), a non-positive T and a negative noise PSD
    (ERR_NOT_POSITIVE); on error *t must not be used. */
-int enu_doppler18_discretize(const enu_doppler18_matrices *restrict m, enu_doppler18_scalar T,
-        enu_doppler18_transition *restrict t,
-                enu_doppler18_workspace *restrict work);
+int enu_doppler18_discretize(const enu_doppler18_matrices *ENU_DOPPLER18_RESTRICT m,
+        enu_doppler18_scalar T, enu_doppler18_transition *ENU_DOPPLER18_RESTRICT t,
+                enu_doppler18_workspace *ENU_DOPPLER18_RESTRICT work);
 
 /* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
-void enu_doppler18_get_transition_matrix(const enu_doppler18_transition *restrict t,
-                enu_doppler18_scalar Phi[restrict ENU_DOPPLER18_N_STATES * ENU_DOPPLER18_N_STATES]);
+void enu_doppler18_get_transition_matrix(const enu_doppler18_transition *ENU_DOPPLER18_RESTRICT t,
+                enu_doppler18_scalar Phi[ENU_DOPPLER18_RESTRICT ENU_DOPPLER18_N_STATES *
+                        ENU_DOPPLER18_N_STATES]);
 
 /* Set the transition's Phi from a full N * N array in row-major order (a Phi
    computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
    anywhere (ERR_NONFINITE, tested first), then a nonzero entry outside the
    structural pattern of Phi or a row of random constants that is not exactly
    e_i (ERR_STRUCTURE: predict would not read it); on error t is unchanged. */
-int enu_doppler18_set_transition_matrix(enu_doppler18_transition *restrict t,
-                const enu_doppler18_scalar Phi[restrict ENU_DOPPLER18_N_STATES *
+int enu_doppler18_set_transition_matrix(enu_doppler18_transition *ENU_DOPPLER18_RESTRICT t,
+                const enu_doppler18_scalar Phi[ENU_DOPPLER18_RESTRICT ENU_DOPPLER18_N_STATES *
                         ENU_DOPPLER18_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
@@ -284,23 +295,25 @@ int enu_doppler18_set_transition_matrix(enu_doppler18_transition *restrict t,
    variance, |P_ij - P_ji| > tol sqrt(P_ii P_jj), |P_ij| > sqrt(P_ii P_jj) (1 + tol)
    (a zero variance with a correlation) or a negative pivot of P = U D U^T
    below -tol P_jj; on error f is unchanged. */
-int enu_doppler18_set_covariance(enu_doppler18_filter *restrict f, const enu_doppler18_scalar
-        P[restrict ENU_DOPPLER18_N_STATES * ENU_DOPPLER18_N_STATES],
-                enu_doppler18_workspace *restrict work);
+int enu_doppler18_set_covariance(enu_doppler18_filter *ENU_DOPPLER18_RESTRICT f, const
+        enu_doppler18_scalar P[ENU_DOPPLER18_RESTRICT ENU_DOPPLER18_N_STATES *
+        ENU_DOPPLER18_N_STATES],
+                enu_doppler18_workspace *ENU_DOPPLER18_RESTRICT work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
-void enu_doppler18_get_covariance(const enu_doppler18_filter *restrict f, enu_doppler18_scalar
-        P[restrict ENU_DOPPLER18_N_STATES * ENU_DOPPLER18_N_STATES]);
+void enu_doppler18_get_covariance(const enu_doppler18_filter *ENU_DOPPLER18_RESTRICT f,
+        enu_doppler18_scalar P[ENU_DOPPLER18_RESTRICT ENU_DOPPLER18_N_STATES *
+        ENU_DOPPLER18_N_STATES]);
 
 /* The state estimate x (ENU_DOPPLER18_N_STATES entries, units by ENU_DOPPLER18_STATE_*) into x. */
-void enu_doppler18_get_state(const enu_doppler18_filter *restrict f, enu_doppler18_scalar x[restrict
-        ENU_DOPPLER18_N_STATES]);
+void enu_doppler18_get_state(const enu_doppler18_filter *ENU_DOPPLER18_RESTRICT f,
+        enu_doppler18_scalar x[ENU_DOPPLER18_RESTRICT ENU_DOPPLER18_N_STATES]);
 
 /* Set the state estimate to x (ENU_DOPPLER18_N_STATES entries, units by ENU_DOPPLER18_STATE_*); the
    covariance is not touched.  Refuses a non-finite entry (ERR_NONFINITE); on
    error f is unchanged.  Returns ENU_DOPPLER18_OK or ENU_DOPPLER18_ERR_NONFINITE. */
-int enu_doppler18_set_state(enu_doppler18_filter *restrict f, const enu_doppler18_scalar x[restrict
-        ENU_DOPPLER18_N_STATES]);
+int enu_doppler18_set_state(enu_doppler18_filter *ENU_DOPPLER18_RESTRICT f, const
+        enu_doppler18_scalar x[ENU_DOPPLER18_RESTRICT ENU_DOPPLER18_N_STATES]);
 
 /* Closed-loop feedback: once the caller has applied the estimated errors x to
    its navigation solution, the error estimate is reset to x := 0.  The
@@ -309,18 +322,21 @@ int enu_doppler18_set_state(enu_doppler18_filter *restrict f, const enu_doppler1
 void enu_doppler18_reset_error_state(enu_doppler18_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
-int enu_doppler18_predict(enu_doppler18_filter *restrict f, const enu_doppler18_transition *restrict
-        t, enu_doppler18_workspace *restrict work);
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
+int enu_doppler18_predict(enu_doppler18_filter *ENU_DOPPLER18_RESTRICT f, const
+        enu_doppler18_transition *ENU_DOPPLER18_RESTRICT t, enu_doppler18_workspace
+        *ENU_DOPPLER18_RESTRICT work);
 
 /* Kalman update with all the measurements z (all at once, Cholesky solve, Joseph form):
    enu_doppler18_update_masked with mask, innovation and nis NULL.  z has
    ENU_DOPPLER18_N_MEASUREMENTS entries (units by ENU_DOPPLER18_MEASUREMENT_*).
    Returns ENU_DOPPLER18_OK, ENU_DOPPLER18_ERR_NONFINITE or ENU_DOPPLER18_ERR_NOT_POSITIVE as
            below. */
-int enu_doppler18_update(enu_doppler18_filter *restrict f,
-                const enu_doppler18_scalar z[restrict 3],
-                const enu_doppler18_matrices *restrict m, enu_doppler18_workspace *restrict work);
+int enu_doppler18_update(enu_doppler18_filter *ENU_DOPPLER18_RESTRICT f,
+                const enu_doppler18_scalar z[ENU_DOPPLER18_RESTRICT 3],
+                const enu_doppler18_matrices *ENU_DOPPLER18_RESTRICT m, enu_doppler18_workspace
+                        *ENU_DOPPLER18_RESTRICT work);
 
 /* Kalman update with the measurements z[a] whose mask[a] is nonzero (an outage
    of one axis, a lost Doppler beam): the others are ignored, their z, H row and
@@ -332,10 +348,16 @@ int enu_doppler18_update(enu_doppler18_filter *restrict f,
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int enu_doppler18_update_masked(enu_doppler18_filter *restrict f,
-                const enu_doppler18_scalar z[restrict 3],
-                const unsigned char *restrict mask, const enu_doppler18_matrices *restrict m,
-                enu_doppler18_scalar *restrict innovation, enu_doppler18_scalar *restrict nis,
-                enu_doppler18_workspace *restrict work);
+int enu_doppler18_update_masked(enu_doppler18_filter *ENU_DOPPLER18_RESTRICT f,
+                const enu_doppler18_scalar z[ENU_DOPPLER18_RESTRICT 3],
+                const unsigned char *ENU_DOPPLER18_RESTRICT mask, const enu_doppler18_matrices
+                        *ENU_DOPPLER18_RESTRICT m,
+                enu_doppler18_scalar *ENU_DOPPLER18_RESTRICT innovation, enu_doppler18_scalar
+                        *ENU_DOPPLER18_RESTRICT nis,
+                enu_doppler18_workspace *ENU_DOPPLER18_RESTRICT work);
+
+#ifdef __cplusplus
+} /* extern "C" */
+#endif
 
 #endif /* MODELGEN_ENU_DOPPLER18_H */

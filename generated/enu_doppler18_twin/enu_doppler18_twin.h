@@ -24,6 +24,16 @@
 #ifndef MODELGEN_ENU_DOPPLER18_TWIN_H
 #define MODELGEN_ENU_DOPPLER18_TWIN_H
 
+/* C++ includes this header as it is (the C++ class enu_doppler18_twin.hpp does): the functions have
+        C linkage, and
+   ENU_DOPPLER18_TWIN_RESTRICT is C99's restrict in C and nothing in C++, which has no restrict. */
+#ifdef __cplusplus
+#define ENU_DOPPLER18_TWIN_RESTRICT
+extern "C" {
+#else
+#define ENU_DOPPLER18_TWIN_RESTRICT restrict
+#endif
+
 #define ENU_DOPPLER18_TWIN_N_STATES 18
 #define ENU_DOPPLER18_TWIN_N_NOISES 9
 #define ENU_DOPPLER18_TWIN_N_MEASUREMENTS 3
@@ -235,8 +245,9 @@ void enu_doppler18_twin_default_params(enu_doppler18_twin_params *params);
    denominator such as the cos of a tan or sec is zero within rounding, e.g.
    latitude +-90 degrees) or any entry is not finite; on error *m must not be
    used (discretize and update refuse it anyway), and nothing else is touched. */
-int enu_doppler18_twin_matrices_evaluate(const enu_doppler18_twin_params *restrict params,
-        enu_doppler18_twin_matrices *restrict m);
+int enu_doppler18_twin_matrices_evaluate(const enu_doppler18_twin_params
+        *ENU_DOPPLER18_TWIN_RESTRICT params, enu_doppler18_twin_matrices
+        *ENU_DOPPLER18_TWIN_RESTRICT m);
 
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
@@ -244,23 +255,25 @@ int enu_doppler18_twin_matrices_evaluate(const enu_doppler18_twin_params *restri
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not
    representable (ERR_NONFINITE), a non-positive T and a negative noise PSD
    (ERR_NOT_POSITIVE); on error *t must not be used. */
-int enu_doppler18_twin_discretize(const enu_doppler18_twin_matrices *restrict m,
-        enu_doppler18_twin_scalar T, enu_doppler18_twin_transition *restrict t,
-                enu_doppler18_twin_workspace *restrict work);
+int enu_doppler18_twin_discretize(const enu_doppler18_twin_matrices *ENU_DOPPLER18_TWIN_RESTRICT m,
+        enu_doppler18_twin_scalar T, enu_doppler18_twin_transition *ENU_DOPPLER18_TWIN_RESTRICT t,
+                enu_doppler18_twin_workspace *ENU_DOPPLER18_TWIN_RESTRICT work);
 
 /* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
-void enu_doppler18_twin_get_transition_matrix(const enu_doppler18_twin_transition *restrict t,
-                enu_doppler18_twin_scalar Phi[restrict ENU_DOPPLER18_TWIN_N_STATES *
-                        ENU_DOPPLER18_TWIN_N_STATES]);
+void enu_doppler18_twin_get_transition_matrix(const enu_doppler18_twin_transition
+        *ENU_DOPPLER18_TWIN_RESTRICT t,
+                enu_doppler18_twin_scalar Phi[ENU_DOPPLER18_TWIN_RESTRICT
+                        ENU_DOPPLER18_TWIN_N_STATES * ENU_DOPPLER18_TWIN_N_STATES]);
 
 /* Set the transition's Phi from a full N * N array in row-major order (a Phi
    computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
    anywhere (ERR_NONFINITE, tested first), then a nonzero entry outside the
    structural pattern of Phi or a row of random constants that is not exactly
    e_i (ERR_STRUCTURE: predict would not read it); on error t is unchanged. */
-int enu_doppler18_twin_set_transition_matrix(enu_doppler18_twin_transition *restrict t,
-                const enu_doppler18_twin_scalar Phi[restrict ENU_DOPPLER18_TWIN_N_STATES *
-                        ENU_DOPPLER18_TWIN_N_STATES]);
+int enu_doppler18_twin_set_transition_matrix(enu_doppler18_twin_transition
+        *ENU_DOPPLER18_TWIN_RESTRICT t,
+                const enu_doppler18_twin_scalar Phi[ENU_DOPPLER18_TWIN_RESTRICT
+                        ENU_DOPPLER18_TWIN_N_STATES * ENU_DOPPLER18_TWIN_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).
@@ -269,27 +282,27 @@ int enu_doppler18_twin_set_transition_matrix(enu_doppler18_twin_transition *rest
    variance, |P_ij - P_ji| > tol sqrt(P_ii P_jj), |P_ij| > sqrt(P_ii P_jj) (1 + tol)
    (a zero variance with a correlation) or a negative pivot of P = U D U^T
    below -tol P_jj; on error f is unchanged. */
-int enu_doppler18_twin_set_covariance(enu_doppler18_twin_filter *restrict f, const
-        enu_doppler18_twin_scalar P[restrict ENU_DOPPLER18_TWIN_N_STATES *
+int enu_doppler18_twin_set_covariance(enu_doppler18_twin_filter *ENU_DOPPLER18_TWIN_RESTRICT f,
+        const enu_doppler18_twin_scalar P[ENU_DOPPLER18_TWIN_RESTRICT ENU_DOPPLER18_TWIN_N_STATES *
         ENU_DOPPLER18_TWIN_N_STATES],
-                enu_doppler18_twin_workspace *restrict work);
+                enu_doppler18_twin_workspace *ENU_DOPPLER18_TWIN_RESTRICT work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
-void enu_doppler18_twin_get_covariance(const enu_doppler18_twin_filter *restrict f,
-        enu_doppler18_twin_scalar P[restrict ENU_DOPPLER18_TWIN_N_STATES *
+void enu_doppler18_twin_get_covariance(const enu_doppler18_twin_filter *ENU_DOPPLER18_TWIN_RESTRICT
+        f, enu_doppler18_twin_scalar P[ENU_DOPPLER18_TWIN_RESTRICT ENU_DOPPLER18_TWIN_N_STATES *
         ENU_DOPPLER18_TWIN_N_STATES]);
 
 /* The state estimate x (ENU_DOPPLER18_TWIN_N_STATES entries, units by ENU_DOPPLER18_TWIN_STATE_*)
         into x. */
-void enu_doppler18_twin_get_state(const enu_doppler18_twin_filter *restrict f,
-        enu_doppler18_twin_scalar x[restrict ENU_DOPPLER18_TWIN_N_STATES]);
+void enu_doppler18_twin_get_state(const enu_doppler18_twin_filter *ENU_DOPPLER18_TWIN_RESTRICT f,
+        enu_doppler18_twin_scalar x[ENU_DOPPLER18_TWIN_RESTRICT ENU_DOPPLER18_TWIN_N_STATES]);
 
 /* Set the state estimate to x (ENU_DOPPLER18_TWIN_N_STATES entries, units by
         ENU_DOPPLER18_TWIN_STATE_*); the
    covariance is not touched.  Refuses a non-finite entry (ERR_NONFINITE); on
    error f is unchanged.  Returns ENU_DOPPLER18_TWIN_OK or ENU_DOPPLER18_TWIN_ERR_NONFINITE. */
-int enu_doppler18_twin_set_state(enu_doppler18_twin_filter *restrict f, const
-        enu_doppler18_twin_scalar x[restrict ENU_DOPPLER18_TWIN_N_STATES]);
+int enu_doppler18_twin_set_state(enu_doppler18_twin_filter *ENU_DOPPLER18_TWIN_RESTRICT f, const
+        enu_doppler18_twin_scalar x[ENU_DOPPLER18_TWIN_RESTRICT ENU_DOPPLER18_TWIN_N_STATES]);
 
 /* Closed-loop feedback: once the caller has applied the estimated errors x to
    its navigation solution, the error estimate is reset to x := 0.  The
@@ -298,19 +311,21 @@ int enu_doppler18_twin_set_state(enu_doppler18_twin_filter *restrict f, const
 void enu_doppler18_twin_reset_error_state(enu_doppler18_twin_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
-int enu_doppler18_twin_predict(enu_doppler18_twin_filter *restrict f, const
-        enu_doppler18_twin_transition *restrict t, enu_doppler18_twin_workspace *restrict work);
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
+int enu_doppler18_twin_predict(enu_doppler18_twin_filter *ENU_DOPPLER18_TWIN_RESTRICT f, const
+        enu_doppler18_twin_transition *ENU_DOPPLER18_TWIN_RESTRICT t, enu_doppler18_twin_workspace
+        *ENU_DOPPLER18_TWIN_RESTRICT work);
 
 /* Kalman update with all the measurements z (all at once, Cholesky solve, Joseph form):
    enu_doppler18_twin_update_masked with mask, innovation and nis NULL.  z has
    ENU_DOPPLER18_TWIN_N_MEASUREMENTS entries (units by ENU_DOPPLER18_TWIN_MEASUREMENT_*).
    Returns ENU_DOPPLER18_TWIN_OK, ENU_DOPPLER18_TWIN_ERR_NONFINITE or
            ENU_DOPPLER18_TWIN_ERR_NOT_POSITIVE as below. */
-int enu_doppler18_twin_update(enu_doppler18_twin_filter *restrict f,
-                const enu_doppler18_twin_scalar z[restrict 3],
-                const enu_doppler18_twin_matrices *restrict m, enu_doppler18_twin_workspace
-                        *restrict work);
+int enu_doppler18_twin_update(enu_doppler18_twin_filter *ENU_DOPPLER18_TWIN_RESTRICT f,
+                const enu_doppler18_twin_scalar z[ENU_DOPPLER18_TWIN_RESTRICT 3],
+                const enu_doppler18_twin_matrices *ENU_DOPPLER18_TWIN_RESTRICT m,
+                        enu_doppler18_twin_workspace *ENU_DOPPLER18_TWIN_RESTRICT work);
 
 /* Kalman update with the measurements z[a] whose mask[a] is nonzero (an outage
    of one axis, a lost Doppler beam): the others are ignored, their z, H row and
@@ -322,11 +337,16 @@ int enu_doppler18_twin_update(enu_doppler18_twin_filter *restrict f,
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int enu_doppler18_twin_update_masked(enu_doppler18_twin_filter *restrict f,
-                const enu_doppler18_twin_scalar z[restrict 3],
-                const unsigned char *restrict mask, const enu_doppler18_twin_matrices *restrict m,
-                enu_doppler18_twin_scalar *restrict innovation, enu_doppler18_twin_scalar *restrict
-                        nis,
-                enu_doppler18_twin_workspace *restrict work);
+int enu_doppler18_twin_update_masked(enu_doppler18_twin_filter *ENU_DOPPLER18_TWIN_RESTRICT f,
+                const enu_doppler18_twin_scalar z[ENU_DOPPLER18_TWIN_RESTRICT 3],
+                const unsigned char *ENU_DOPPLER18_TWIN_RESTRICT mask, const
+                        enu_doppler18_twin_matrices *ENU_DOPPLER18_TWIN_RESTRICT m,
+                enu_doppler18_twin_scalar *ENU_DOPPLER18_TWIN_RESTRICT innovation,
+                        enu_doppler18_twin_scalar *ENU_DOPPLER18_TWIN_RESTRICT nis,
+                enu_doppler18_twin_workspace *ENU_DOPPLER18_TWIN_RESTRICT work);
+
+#ifdef __cplusplus
+} /* extern "C" */
+#endif
 
 #endif /* MODELGEN_ENU_DOPPLER18_TWIN_H */

@@ -24,6 +24,16 @@
 #ifndef MODELGEN_GPS_PSEUDORANGE11_H
 #define MODELGEN_GPS_PSEUDORANGE11_H
 
+/* C++ includes this header as it is (the C++ class gps_pseudorange11.hpp does): the functions have
+        C linkage, and
+   GPS_PSEUDORANGE11_RESTRICT is C99's restrict in C and nothing in C++, which has no restrict. */
+#ifdef __cplusplus
+#define GPS_PSEUDORANGE11_RESTRICT
+extern "C" {
+#else
+#define GPS_PSEUDORANGE11_RESTRICT restrict
+#endif
+
 #define GPS_PSEUDORANGE11_N_STATES 11
 #define GPS_PSEUDORANGE11_N_NOISES 8
 #define GPS_PSEUDORANGE11_N_MEASUREMENTS 4
@@ -241,8 +251,8 @@ void gps_pseudorange11_default_params(gps_pseudorange11_params *params);
    denominator such as the cos of a tan or sec is zero within rounding, e.g.
    latitude +-90 degrees) or any entry is not finite; on error *m must not be
    used (discretize and update refuse it anyway), and nothing else is touched. */
-int gps_pseudorange11_matrices_evaluate(const gps_pseudorange11_params *restrict params,
-        gps_pseudorange11_matrices *restrict m);
+int gps_pseudorange11_matrices_evaluate(const gps_pseudorange11_params *GPS_PSEUDORANGE11_RESTRICT
+        params, gps_pseudorange11_matrices *GPS_PSEUDORANGE11_RESTRICT m);
 
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
@@ -250,13 +260,14 @@ int gps_pseudorange11_matrices_evaluate(const gps_pseudorange11_params *restrict
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not
    representable (ERR_NONFINITE), a non-positive T and a negative noise PSD
    (ERR_NOT_POSITIVE); on error *t must not be used. */
-int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *restrict m,
-        gps_pseudorange11_scalar T, gps_pseudorange11_transition *restrict t,
-                gps_pseudorange11_workspace *restrict work);
+int gps_pseudorange11_discretize(const gps_pseudorange11_matrices *GPS_PSEUDORANGE11_RESTRICT m,
+        gps_pseudorange11_scalar T, gps_pseudorange11_transition *GPS_PSEUDORANGE11_RESTRICT t,
+                gps_pseudorange11_workspace *GPS_PSEUDORANGE11_RESTRICT work);
 
 /* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
-void gps_pseudorange11_get_transition_matrix(const gps_pseudorange11_transition *restrict t,
-                gps_pseudorange11_scalar Phi[restrict GPS_PSEUDORANGE11_N_STATES *
+void gps_pseudorange11_get_transition_matrix(const gps_pseudorange11_transition
+        *GPS_PSEUDORANGE11_RESTRICT t,
+                gps_pseudorange11_scalar Phi[GPS_PSEUDORANGE11_RESTRICT GPS_PSEUDORANGE11_N_STATES *
                         GPS_PSEUDORANGE11_N_STATES]);
 
 /* Set the transition's Phi from a full N * N array in row-major order (a Phi
@@ -264,9 +275,10 @@ void gps_pseudorange11_get_transition_matrix(const gps_pseudorange11_transition 
    anywhere (ERR_NONFINITE, tested first), then a nonzero entry outside the
    structural pattern of Phi or a row of random constants that is not exactly
    e_i (ERR_STRUCTURE: predict would not read it); on error t is unchanged. */
-int gps_pseudorange11_set_transition_matrix(gps_pseudorange11_transition *restrict t,
-                const gps_pseudorange11_scalar Phi[restrict GPS_PSEUDORANGE11_N_STATES *
-                        GPS_PSEUDORANGE11_N_STATES]);
+int gps_pseudorange11_set_transition_matrix(gps_pseudorange11_transition *GPS_PSEUDORANGE11_RESTRICT
+        t,
+                const gps_pseudorange11_scalar Phi[GPS_PSEUDORANGE11_RESTRICT
+                        GPS_PSEUDORANGE11_N_STATES * GPS_PSEUDORANGE11_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).
@@ -275,27 +287,27 @@ int gps_pseudorange11_set_transition_matrix(gps_pseudorange11_transition *restri
    variance, |P_ij - P_ji| > tol sqrt(P_ii P_jj), |P_ij| > sqrt(P_ii P_jj) (1 + tol)
    (a zero variance with a correlation) or a negative pivot of P = U D U^T
    below -tol P_jj; on error f is unchanged. */
-int gps_pseudorange11_set_covariance(gps_pseudorange11_filter *restrict f, const
-        gps_pseudorange11_scalar P[restrict GPS_PSEUDORANGE11_N_STATES *
+int gps_pseudorange11_set_covariance(gps_pseudorange11_filter *GPS_PSEUDORANGE11_RESTRICT f, const
+        gps_pseudorange11_scalar P[GPS_PSEUDORANGE11_RESTRICT GPS_PSEUDORANGE11_N_STATES *
         GPS_PSEUDORANGE11_N_STATES],
-                gps_pseudorange11_workspace *restrict work);
+                gps_pseudorange11_workspace *GPS_PSEUDORANGE11_RESTRICT work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
-void gps_pseudorange11_get_covariance(const gps_pseudorange11_filter *restrict f,
-        gps_pseudorange11_scalar P[restrict GPS_PSEUDORANGE11_N_STATES *
+void gps_pseudorange11_get_covariance(const gps_pseudorange11_filter *GPS_PSEUDORANGE11_RESTRICT f,
+        gps_pseudorange11_scalar P[GPS_PSEUDORANGE11_RESTRICT GPS_PSEUDORANGE11_N_STATES *
         GPS_PSEUDORANGE11_N_STATES]);
 
 /* The state estimate x (GPS_PSEUDORANGE11_N_STATES entries, units by GPS_PSEUDORANGE11_STATE_*)
         into x. */
-void gps_pseudorange11_get_state(const gps_pseudorange11_filter *restrict f,
-        gps_pseudorange11_scalar x[restrict GPS_PSEUDORANGE11_N_STATES]);
+void gps_pseudorange11_get_state(const gps_pseudorange11_filter *GPS_PSEUDORANGE11_RESTRICT f,
+        gps_pseudorange11_scalar x[GPS_PSEUDORANGE11_RESTRICT GPS_PSEUDORANGE11_N_STATES]);
 
 /* Set the state estimate to x (GPS_PSEUDORANGE11_N_STATES entries, units by
         GPS_PSEUDORANGE11_STATE_*); the
    covariance is not touched.  Refuses a non-finite entry (ERR_NONFINITE); on
    error f is unchanged.  Returns GPS_PSEUDORANGE11_OK or GPS_PSEUDORANGE11_ERR_NONFINITE. */
-int gps_pseudorange11_set_state(gps_pseudorange11_filter *restrict f, const gps_pseudorange11_scalar
-        x[restrict GPS_PSEUDORANGE11_N_STATES]);
+int gps_pseudorange11_set_state(gps_pseudorange11_filter *GPS_PSEUDORANGE11_RESTRICT f, const
+        gps_pseudorange11_scalar x[GPS_PSEUDORANGE11_RESTRICT GPS_PSEUDORANGE11_N_STATES]);
 
 /* Closed-loop feedback: once the caller has applied the estimated errors x to
    its navigation solution, the error estimate is reset to x := 0.  The
@@ -304,19 +316,21 @@ int gps_pseudorange11_set_state(gps_pseudorange11_filter *restrict f, const gps_
 void gps_pseudorange11_reset_error_state(gps_pseudorange11_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
-int gps_pseudorange11_predict(gps_pseudorange11_filter *restrict f, const
-        gps_pseudorange11_transition *restrict t, gps_pseudorange11_workspace *restrict work);
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
+int gps_pseudorange11_predict(gps_pseudorange11_filter *GPS_PSEUDORANGE11_RESTRICT f, const
+        gps_pseudorange11_transition *GPS_PSEUDORANGE11_RESTRICT t, gps_pseudorange11_workspace
+        *GPS_PSEUDORANGE11_RESTRICT work);
 
 /* Kalman update with all the measurements z (all at once, Cholesky solve, Joseph form):
    gps_pseudorange11_update_masked with mask, innovation and nis NULL.  z has
    GPS_PSEUDORANGE11_N_MEASUREMENTS entries (units by GPS_PSEUDORANGE11_MEASUREMENT_*).
    Returns GPS_PSEUDORANGE11_OK, GPS_PSEUDORANGE11_ERR_NONFINITE or
            GPS_PSEUDORANGE11_ERR_NOT_POSITIVE as below. */
-int gps_pseudorange11_update(gps_pseudorange11_filter *restrict f,
-                const gps_pseudorange11_scalar z[restrict 4],
-                const gps_pseudorange11_matrices *restrict m, gps_pseudorange11_workspace *restrict
-                        work);
+int gps_pseudorange11_update(gps_pseudorange11_filter *GPS_PSEUDORANGE11_RESTRICT f,
+                const gps_pseudorange11_scalar z[GPS_PSEUDORANGE11_RESTRICT 4],
+                const gps_pseudorange11_matrices *GPS_PSEUDORANGE11_RESTRICT m,
+                        gps_pseudorange11_workspace *GPS_PSEUDORANGE11_RESTRICT work);
 
 /* Kalman update with the measurements z[a] whose mask[a] is nonzero (an outage
    of one axis, a lost Doppler beam): the others are ignored, their z, H row and
@@ -328,11 +342,16 @@ int gps_pseudorange11_update(gps_pseudorange11_filter *restrict f,
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int gps_pseudorange11_update_masked(gps_pseudorange11_filter *restrict f,
-                const gps_pseudorange11_scalar z[restrict 4],
-                const unsigned char *restrict mask, const gps_pseudorange11_matrices *restrict m,
-                gps_pseudorange11_scalar *restrict innovation, gps_pseudorange11_scalar *restrict
-                        nis,
-                gps_pseudorange11_workspace *restrict work);
+int gps_pseudorange11_update_masked(gps_pseudorange11_filter *GPS_PSEUDORANGE11_RESTRICT f,
+                const gps_pseudorange11_scalar z[GPS_PSEUDORANGE11_RESTRICT 4],
+                const unsigned char *GPS_PSEUDORANGE11_RESTRICT mask, const
+                        gps_pseudorange11_matrices *GPS_PSEUDORANGE11_RESTRICT m,
+                gps_pseudorange11_scalar *GPS_PSEUDORANGE11_RESTRICT innovation,
+                        gps_pseudorange11_scalar *GPS_PSEUDORANGE11_RESTRICT nis,
+                gps_pseudorange11_workspace *GPS_PSEUDORANGE11_RESTRICT work);
+
+#ifdef __cplusplus
+} /* extern "C" */
+#endif
 
 #endif /* MODELGEN_GPS_PSEUDORANGE11_H */

@@ -24,6 +24,16 @@
 #ifndef MODELGEN_INS_GNSS21_H
 #define MODELGEN_INS_GNSS21_H
 
+/* C++ includes this header as it is (the C++ class ins_gnss21.hpp does): the functions have C
+        linkage, and
+   INS_GNSS21_RESTRICT is C99's restrict in C and nothing in C++, which has no restrict. */
+#ifdef __cplusplus
+#define INS_GNSS21_RESTRICT
+extern "C" {
+#else
+#define INS_GNSS21_RESTRICT restrict
+#endif
+
 #define INS_GNSS21_N_STATES 21
 #define INS_GNSS21_N_NOISES 18
 #define INS_GNSS21_N_MEASUREMENTS 6
@@ -254,8 +264,8 @@ void ins_gnss21_default_params(ins_gnss21_params *params);
    denominator such as the cos of a tan or sec is zero within rounding, e.g.
    latitude +-90 degrees) or any entry is not finite; on error *m must not be
    used (discretize and update refuse it anyway), and nothing else is touched. */
-int ins_gnss21_matrices_evaluate(const ins_gnss21_params *restrict params, ins_gnss21_matrices
-        *restrict m);
+int ins_gnss21_matrices_evaluate(const ins_gnss21_params *INS_GNSS21_RESTRICT params,
+        ins_gnss21_matrices *INS_GNSS21_RESTRICT m);
 
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
@@ -263,21 +273,23 @@ int ins_gnss21_matrices_evaluate(const ins_gnss21_params *restrict params, ins_g
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not
    representable (ERR_NONFINITE), a non-positive T and a negative noise PSD
    (ERR_NOT_POSITIVE); on error *t must not be used. */
-int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scalar T,
-        ins_gnss21_transition *restrict t,
-                ins_gnss21_workspace *restrict work);
+int ins_gnss21_discretize(const ins_gnss21_matrices *INS_GNSS21_RESTRICT m, ins_gnss21_scalar T,
+        ins_gnss21_transition *INS_GNSS21_RESTRICT t,
+                ins_gnss21_workspace *INS_GNSS21_RESTRICT work);
 
 /* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
-void ins_gnss21_get_transition_matrix(const ins_gnss21_transition *restrict t,
-                ins_gnss21_scalar Phi[restrict INS_GNSS21_N_STATES * INS_GNSS21_N_STATES]);
+void ins_gnss21_get_transition_matrix(const ins_gnss21_transition *INS_GNSS21_RESTRICT t,
+                ins_gnss21_scalar Phi[INS_GNSS21_RESTRICT INS_GNSS21_N_STATES *
+                        INS_GNSS21_N_STATES]);
 
 /* Set the transition's Phi from a full N * N array in row-major order (a Phi
    computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
    anywhere (ERR_NONFINITE, tested first), then a nonzero entry outside the
    structural pattern of Phi or a row of random constants that is not exactly
    e_i (ERR_STRUCTURE: predict would not read it); on error t is unchanged. */
-int ins_gnss21_set_transition_matrix(ins_gnss21_transition *restrict t,
-                const ins_gnss21_scalar Phi[restrict INS_GNSS21_N_STATES * INS_GNSS21_N_STATES]);
+int ins_gnss21_set_transition_matrix(ins_gnss21_transition *INS_GNSS21_RESTRICT t,
+                const ins_gnss21_scalar Phi[INS_GNSS21_RESTRICT INS_GNSS21_N_STATES *
+                        INS_GNSS21_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).
@@ -286,23 +298,23 @@ int ins_gnss21_set_transition_matrix(ins_gnss21_transition *restrict t,
    variance, |P_ij - P_ji| > tol sqrt(P_ii P_jj), |P_ij| > sqrt(P_ii P_jj) (1 + tol)
    (a zero variance with a correlation) or a negative pivot of P = U D U^T
    below -tol P_jj; on error f is unchanged. */
-int ins_gnss21_set_covariance(ins_gnss21_filter *restrict f, const ins_gnss21_scalar P[restrict
-        INS_GNSS21_N_STATES * INS_GNSS21_N_STATES],
-                ins_gnss21_workspace *restrict work);
+int ins_gnss21_set_covariance(ins_gnss21_filter *INS_GNSS21_RESTRICT f, const ins_gnss21_scalar
+        P[INS_GNSS21_RESTRICT INS_GNSS21_N_STATES * INS_GNSS21_N_STATES],
+                ins_gnss21_workspace *INS_GNSS21_RESTRICT work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
-void ins_gnss21_get_covariance(const ins_gnss21_filter *restrict f, ins_gnss21_scalar P[restrict
-        INS_GNSS21_N_STATES * INS_GNSS21_N_STATES]);
+void ins_gnss21_get_covariance(const ins_gnss21_filter *INS_GNSS21_RESTRICT f, ins_gnss21_scalar
+        P[INS_GNSS21_RESTRICT INS_GNSS21_N_STATES * INS_GNSS21_N_STATES]);
 
 /* The state estimate x (INS_GNSS21_N_STATES entries, units by INS_GNSS21_STATE_*) into x. */
-void ins_gnss21_get_state(const ins_gnss21_filter *restrict f, ins_gnss21_scalar x[restrict
-        INS_GNSS21_N_STATES]);
+void ins_gnss21_get_state(const ins_gnss21_filter *INS_GNSS21_RESTRICT f, ins_gnss21_scalar
+        x[INS_GNSS21_RESTRICT INS_GNSS21_N_STATES]);
 
 /* Set the state estimate to x (INS_GNSS21_N_STATES entries, units by INS_GNSS21_STATE_*); the
    covariance is not touched.  Refuses a non-finite entry (ERR_NONFINITE); on
    error f is unchanged.  Returns INS_GNSS21_OK or INS_GNSS21_ERR_NONFINITE. */
-int ins_gnss21_set_state(ins_gnss21_filter *restrict f, const ins_gnss21_scalar x[restrict
-        INS_GNSS21_N_STATES]);
+int ins_gnss21_set_state(ins_gnss21_filter *INS_GNSS21_RESTRICT f, const ins_gnss21_scalar
+        x[INS_GNSS21_RESTRICT INS_GNSS21_N_STATES]);
 
 /* Closed-loop feedback: once the caller has applied the estimated errors x to
    its navigation solution, the error estimate is reset to x := 0.  The
@@ -311,17 +323,19 @@ int ins_gnss21_set_state(ins_gnss21_filter *restrict f, const ins_gnss21_scalar 
 void ins_gnss21_reset_error_state(ins_gnss21_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
-int ins_gnss21_predict(ins_gnss21_filter *restrict f, const ins_gnss21_transition *restrict t,
-        ins_gnss21_workspace *restrict work);
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
+int ins_gnss21_predict(ins_gnss21_filter *INS_GNSS21_RESTRICT f, const ins_gnss21_transition
+        *INS_GNSS21_RESTRICT t, ins_gnss21_workspace *INS_GNSS21_RESTRICT work);
 
 /* Kalman update with all the measurements z (all at once, Cholesky solve, Joseph form):
    ins_gnss21_update_masked with mask, innovation and nis NULL.  z has
    INS_GNSS21_N_MEASUREMENTS entries (units by INS_GNSS21_MEASUREMENT_*).
    Returns INS_GNSS21_OK, INS_GNSS21_ERR_NONFINITE or INS_GNSS21_ERR_NOT_POSITIVE as below. */
-int ins_gnss21_update(ins_gnss21_filter *restrict f,
-                const ins_gnss21_scalar z[restrict 6],
-                const ins_gnss21_matrices *restrict m, ins_gnss21_workspace *restrict work);
+int ins_gnss21_update(ins_gnss21_filter *INS_GNSS21_RESTRICT f,
+                const ins_gnss21_scalar z[INS_GNSS21_RESTRICT 6],
+                const ins_gnss21_matrices *INS_GNSS21_RESTRICT m, ins_gnss21_workspace
+                        *INS_GNSS21_RESTRICT work);
 
 /* Kalman update with the measurements z[a] whose mask[a] is nonzero (an outage
    of one axis, a lost Doppler beam): the others are ignored, their z, H row and
@@ -333,10 +347,16 @@ int ins_gnss21_update(ins_gnss21_filter *restrict f,
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int ins_gnss21_update_masked(ins_gnss21_filter *restrict f,
-                const ins_gnss21_scalar z[restrict 6],
-                const unsigned char *restrict mask, const ins_gnss21_matrices *restrict m,
-                ins_gnss21_scalar *restrict innovation, ins_gnss21_scalar *restrict nis,
-                ins_gnss21_workspace *restrict work);
+int ins_gnss21_update_masked(ins_gnss21_filter *INS_GNSS21_RESTRICT f,
+                const ins_gnss21_scalar z[INS_GNSS21_RESTRICT 6],
+                const unsigned char *INS_GNSS21_RESTRICT mask, const ins_gnss21_matrices
+                        *INS_GNSS21_RESTRICT m,
+                ins_gnss21_scalar *INS_GNSS21_RESTRICT innovation, ins_gnss21_scalar
+                        *INS_GNSS21_RESTRICT nis,
+                ins_gnss21_workspace *INS_GNSS21_RESTRICT work);
+
+#ifdef __cplusplus
+} /* extern "C" */
+#endif
 
 #endif /* MODELGEN_INS_GNSS21_H */

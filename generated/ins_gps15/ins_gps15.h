@@ -24,6 +24,16 @@
 #ifndef MODELGEN_INS_GPS15_H
 #define MODELGEN_INS_GPS15_H
 
+/* C++ includes this header as it is (the C++ class ins_gps15.hpp does): the functions have C
+        linkage, and
+   INS_GPS15_RESTRICT is C99's restrict in C and nothing in C++, which has no restrict. */
+#ifdef __cplusplus
+#define INS_GPS15_RESTRICT
+extern "C" {
+#else
+#define INS_GPS15_RESTRICT restrict
+#endif
+
 #define INS_GPS15_N_STATES 15
 #define INS_GPS15_N_NOISES 6
 #define INS_GPS15_N_MEASUREMENTS 6
@@ -208,8 +218,8 @@ void ins_gps15_default_params(ins_gps15_params *params);
    denominator such as the cos of a tan or sec is zero within rounding, e.g.
    latitude +-90 degrees) or any entry is not finite; on error *m must not be
    used (discretize and update refuse it anyway), and nothing else is touched. */
-int ins_gps15_matrices_evaluate(const ins_gps15_params *restrict params, ins_gps15_matrices
-        *restrict m);
+int ins_gps15_matrices_evaluate(const ins_gps15_params *INS_GPS15_RESTRICT params,
+        ins_gps15_matrices *INS_GPS15_RESTRICT m);
 
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
@@ -217,21 +227,22 @@ int ins_gps15_matrices_evaluate(const ins_gps15_params *restrict params, ins_gps
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not
    representable (ERR_NONFINITE), a non-positive T and a negative noise PSD
    (ERR_NOT_POSITIVE); on error *t must not be used. */
-int ins_gps15_discretize(const ins_gps15_matrices *restrict m, ins_gps15_scalar T,
-        ins_gps15_transition *restrict t,
-                ins_gps15_workspace *restrict work);
+int ins_gps15_discretize(const ins_gps15_matrices *INS_GPS15_RESTRICT m, ins_gps15_scalar T,
+        ins_gps15_transition *INS_GPS15_RESTRICT t,
+                ins_gps15_workspace *INS_GPS15_RESTRICT work);
 
 /* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
-void ins_gps15_get_transition_matrix(const ins_gps15_transition *restrict t,
-                ins_gps15_scalar Phi[restrict INS_GPS15_N_STATES * INS_GPS15_N_STATES]);
+void ins_gps15_get_transition_matrix(const ins_gps15_transition *INS_GPS15_RESTRICT t,
+                ins_gps15_scalar Phi[INS_GPS15_RESTRICT INS_GPS15_N_STATES * INS_GPS15_N_STATES]);
 
 /* Set the transition's Phi from a full N * N array in row-major order (a Phi
    computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
    anywhere (ERR_NONFINITE, tested first), then a nonzero entry outside the
    structural pattern of Phi or a row of random constants that is not exactly
    e_i (ERR_STRUCTURE: predict would not read it); on error t is unchanged. */
-int ins_gps15_set_transition_matrix(ins_gps15_transition *restrict t,
-                const ins_gps15_scalar Phi[restrict INS_GPS15_N_STATES * INS_GPS15_N_STATES]);
+int ins_gps15_set_transition_matrix(ins_gps15_transition *INS_GPS15_RESTRICT t,
+                const ins_gps15_scalar Phi[INS_GPS15_RESTRICT INS_GPS15_N_STATES *
+                        INS_GPS15_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).
@@ -240,23 +251,23 @@ int ins_gps15_set_transition_matrix(ins_gps15_transition *restrict t,
    variance, |P_ij - P_ji| > tol sqrt(P_ii P_jj), |P_ij| > sqrt(P_ii P_jj) (1 + tol)
    (a zero variance with a correlation) or a negative pivot of P = U D U^T
    below -tol P_jj; on error f is unchanged. */
-int ins_gps15_set_covariance(ins_gps15_filter *restrict f, const ins_gps15_scalar P[restrict
-        INS_GPS15_N_STATES * INS_GPS15_N_STATES],
-                ins_gps15_workspace *restrict work);
+int ins_gps15_set_covariance(ins_gps15_filter *INS_GPS15_RESTRICT f, const ins_gps15_scalar
+        P[INS_GPS15_RESTRICT INS_GPS15_N_STATES * INS_GPS15_N_STATES],
+                ins_gps15_workspace *INS_GPS15_RESTRICT work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
-void ins_gps15_get_covariance(const ins_gps15_filter *restrict f, ins_gps15_scalar P[restrict
-        INS_GPS15_N_STATES * INS_GPS15_N_STATES]);
+void ins_gps15_get_covariance(const ins_gps15_filter *INS_GPS15_RESTRICT f, ins_gps15_scalar
+        P[INS_GPS15_RESTRICT INS_GPS15_N_STATES * INS_GPS15_N_STATES]);
 
 /* The state estimate x (INS_GPS15_N_STATES entries, units by INS_GPS15_STATE_*) into x. */
-void ins_gps15_get_state(const ins_gps15_filter *restrict f, ins_gps15_scalar x[restrict
-        INS_GPS15_N_STATES]);
+void ins_gps15_get_state(const ins_gps15_filter *INS_GPS15_RESTRICT f, ins_gps15_scalar
+        x[INS_GPS15_RESTRICT INS_GPS15_N_STATES]);
 
 /* Set the state estimate to x (INS_GPS15_N_STATES entries, units by INS_GPS15_STATE_*); the
    covariance is not touched.  Refuses a non-finite entry (ERR_NONFINITE); on
    error f is unchanged.  Returns INS_GPS15_OK or INS_GPS15_ERR_NONFINITE. */
-int ins_gps15_set_state(ins_gps15_filter *restrict f, const ins_gps15_scalar x[restrict
-        INS_GPS15_N_STATES]);
+int ins_gps15_set_state(ins_gps15_filter *INS_GPS15_RESTRICT f, const ins_gps15_scalar
+        x[INS_GPS15_RESTRICT INS_GPS15_N_STATES]);
 
 /* Closed-loop feedback: once the caller has applied the estimated errors x to
    its navigation solution, the error estimate is reset to x := 0.  The
@@ -265,17 +276,19 @@ int ins_gps15_set_state(ins_gps15_filter *restrict f, const ins_gps15_scalar x[r
 void ins_gps15_reset_error_state(ins_gps15_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
-int ins_gps15_predict(ins_gps15_filter *restrict f, const ins_gps15_transition *restrict t,
-        ins_gps15_workspace *restrict work);
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
+int ins_gps15_predict(ins_gps15_filter *INS_GPS15_RESTRICT f, const ins_gps15_transition
+        *INS_GPS15_RESTRICT t, ins_gps15_workspace *INS_GPS15_RESTRICT work);
 
 /* Kalman update with all the measurements z (all at once, Cholesky solve, Joseph form):
    ins_gps15_update_masked with mask, innovation and nis NULL.  z has
    INS_GPS15_N_MEASUREMENTS entries (units by INS_GPS15_MEASUREMENT_*).
    Returns INS_GPS15_OK, INS_GPS15_ERR_NONFINITE or INS_GPS15_ERR_NOT_POSITIVE as below. */
-int ins_gps15_update(ins_gps15_filter *restrict f,
-                const ins_gps15_scalar z[restrict 6],
-                const ins_gps15_matrices *restrict m, ins_gps15_workspace *restrict work);
+int ins_gps15_update(ins_gps15_filter *INS_GPS15_RESTRICT f,
+                const ins_gps15_scalar z[INS_GPS15_RESTRICT 6],
+                const ins_gps15_matrices *INS_GPS15_RESTRICT m, ins_gps15_workspace
+                        *INS_GPS15_RESTRICT work);
 
 /* Kalman update with the measurements z[a] whose mask[a] is nonzero (an outage
    of one axis, a lost Doppler beam): the others are ignored, their z, H row and
@@ -287,10 +300,16 @@ int ins_gps15_update(ins_gps15_filter *restrict f,
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int ins_gps15_update_masked(ins_gps15_filter *restrict f,
-                const ins_gps15_scalar z[restrict 6],
-                const unsigned char *restrict mask, const ins_gps15_matrices *restrict m,
-                ins_gps15_scalar *restrict innovation, ins_gps15_scalar *restrict nis,
-                ins_gps15_workspace *restrict work);
+int ins_gps15_update_masked(ins_gps15_filter *INS_GPS15_RESTRICT f,
+                const ins_gps15_scalar z[INS_GPS15_RESTRICT 6],
+                const unsigned char *INS_GPS15_RESTRICT mask, const ins_gps15_matrices
+                        *INS_GPS15_RESTRICT m,
+                ins_gps15_scalar *INS_GPS15_RESTRICT innovation, ins_gps15_scalar
+                        *INS_GPS15_RESTRICT nis,
+                ins_gps15_workspace *INS_GPS15_RESTRICT work);
+
+#ifdef __cplusplus
+} /* extern "C" */
+#endif
 
 #endif /* MODELGEN_INS_GPS15_H */

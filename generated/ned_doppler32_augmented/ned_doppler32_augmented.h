@@ -24,6 +24,17 @@
 #ifndef MODELGEN_NED_DOPPLER32_AUGMENTED_H
 #define MODELGEN_NED_DOPPLER32_AUGMENTED_H
 
+/* C++ includes this header as it is (the C++ class ned_doppler32_augmented.hpp does): the functions
+        have C linkage, and
+   NED_DOPPLER32_AUGMENTED_RESTRICT is C99's restrict in C and nothing in C++, which has no
+           restrict. */
+#ifdef __cplusplus
+#define NED_DOPPLER32_AUGMENTED_RESTRICT
+extern "C" {
+#else
+#define NED_DOPPLER32_AUGMENTED_RESTRICT restrict
+#endif
+
 #define NED_DOPPLER32_AUGMENTED_N_STATES 32
 #define NED_DOPPLER32_AUGMENTED_N_NOISES 6
 #define NED_DOPPLER32_AUGMENTED_N_MEASUREMENTS 2
@@ -263,8 +274,9 @@ void ned_doppler32_augmented_default_params(ned_doppler32_augmented_params *para
    denominator such as the cos of a tan or sec is zero within rounding, e.g.
    latitude +-90 degrees) or any entry is not finite; on error *m must not be
    used (discretize and update refuse it anyway), and nothing else is touched. */
-int ned_doppler32_augmented_matrices_evaluate(const ned_doppler32_augmented_params *restrict params,
-        ned_doppler32_augmented_matrices *restrict m);
+int ned_doppler32_augmented_matrices_evaluate(const ned_doppler32_augmented_params
+        *NED_DOPPLER32_AUGMENTED_RESTRICT params, ned_doppler32_augmented_matrices
+        *NED_DOPPLER32_AUGMENTED_RESTRICT m);
 
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
@@ -272,24 +284,26 @@ int ned_doppler32_augmented_matrices_evaluate(const ned_doppler32_augmented_para
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not
    representable (ERR_NONFINITE), a non-positive T and a negative noise PSD
    (ERR_NOT_POSITIVE); on error *t must not be used. */
-int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices *restrict m,
-        ned_doppler32_augmented_scalar T, ned_doppler32_augmented_transition *restrict t,
-                ned_doppler32_augmented_workspace *restrict work);
+int ned_doppler32_augmented_discretize(const ned_doppler32_augmented_matrices
+        *NED_DOPPLER32_AUGMENTED_RESTRICT m, ned_doppler32_augmented_scalar T,
+        ned_doppler32_augmented_transition *NED_DOPPLER32_AUGMENTED_RESTRICT t,
+                ned_doppler32_augmented_workspace *NED_DOPPLER32_AUGMENTED_RESTRICT work);
 
 /* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
 void ned_doppler32_augmented_get_transition_matrix(const ned_doppler32_augmented_transition
-        *restrict t,
-                ned_doppler32_augmented_scalar Phi[restrict NED_DOPPLER32_AUGMENTED_N_STATES *
-                        NED_DOPPLER32_AUGMENTED_N_STATES]);
+        *NED_DOPPLER32_AUGMENTED_RESTRICT t,
+                ned_doppler32_augmented_scalar Phi[NED_DOPPLER32_AUGMENTED_RESTRICT
+                        NED_DOPPLER32_AUGMENTED_N_STATES * NED_DOPPLER32_AUGMENTED_N_STATES]);
 
 /* Set the transition's Phi from a full N * N array in row-major order (a Phi
    computed elsewhere; Q_d is not touched).  Refuses a non-finite entry
    anywhere (ERR_NONFINITE, tested first), then a nonzero entry outside the
    structural pattern of Phi or a row of random constants that is not exactly
    e_i (ERR_STRUCTURE: predict would not read it); on error t is unchanged. */
-int ned_doppler32_augmented_set_transition_matrix(ned_doppler32_augmented_transition *restrict t,
-                const ned_doppler32_augmented_scalar Phi[restrict NED_DOPPLER32_AUGMENTED_N_STATES *
-                        NED_DOPPLER32_AUGMENTED_N_STATES]);
+int ned_doppler32_augmented_set_transition_matrix(ned_doppler32_augmented_transition
+        *NED_DOPPLER32_AUGMENTED_RESTRICT t,
+                const ned_doppler32_augmented_scalar Phi[NED_DOPPLER32_AUGMENTED_RESTRICT
+                        NED_DOPPLER32_AUGMENTED_N_STATES * NED_DOPPLER32_AUGMENTED_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
    order (its upper triangle is stored).
@@ -298,28 +312,32 @@ int ned_doppler32_augmented_set_transition_matrix(ned_doppler32_augmented_transi
    variance, |P_ij - P_ji| > tol sqrt(P_ii P_jj), |P_ij| > sqrt(P_ii P_jj) (1 + tol)
    (a zero variance with a correlation) or a negative pivot of P = U D U^T
    below -tol P_jj; on error f is unchanged. */
-int ned_doppler32_augmented_set_covariance(ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_scalar P[restrict NED_DOPPLER32_AUGMENTED_N_STATES *
+int ned_doppler32_augmented_set_covariance(ned_doppler32_augmented_filter
+        *NED_DOPPLER32_AUGMENTED_RESTRICT f, const ned_doppler32_augmented_scalar
+        P[NED_DOPPLER32_AUGMENTED_RESTRICT NED_DOPPLER32_AUGMENTED_N_STATES *
         NED_DOPPLER32_AUGMENTED_N_STATES],
-                ned_doppler32_augmented_workspace *restrict work);
+                ned_doppler32_augmented_workspace *NED_DOPPLER32_AUGMENTED_RESTRICT work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
-void ned_doppler32_augmented_get_covariance(const ned_doppler32_augmented_filter *restrict f,
-        ned_doppler32_augmented_scalar P[restrict NED_DOPPLER32_AUGMENTED_N_STATES *
+void ned_doppler32_augmented_get_covariance(const ned_doppler32_augmented_filter
+        *NED_DOPPLER32_AUGMENTED_RESTRICT f, ned_doppler32_augmented_scalar
+        P[NED_DOPPLER32_AUGMENTED_RESTRICT NED_DOPPLER32_AUGMENTED_N_STATES *
         NED_DOPPLER32_AUGMENTED_N_STATES]);
 
 /* The state estimate x (NED_DOPPLER32_AUGMENTED_N_STATES entries, units by
         NED_DOPPLER32_AUGMENTED_STATE_*) into x. */
-void ned_doppler32_augmented_get_state(const ned_doppler32_augmented_filter *restrict f,
-        ned_doppler32_augmented_scalar x[restrict NED_DOPPLER32_AUGMENTED_N_STATES]);
+void ned_doppler32_augmented_get_state(const ned_doppler32_augmented_filter
+        *NED_DOPPLER32_AUGMENTED_RESTRICT f, ned_doppler32_augmented_scalar
+        x[NED_DOPPLER32_AUGMENTED_RESTRICT NED_DOPPLER32_AUGMENTED_N_STATES]);
 
 /* Set the state estimate to x (NED_DOPPLER32_AUGMENTED_N_STATES entries, units by
         NED_DOPPLER32_AUGMENTED_STATE_*); the
    covariance is not touched.  Refuses a non-finite entry (ERR_NONFINITE); on
    error f is unchanged.  Returns NED_DOPPLER32_AUGMENTED_OK or
            NED_DOPPLER32_AUGMENTED_ERR_NONFINITE. */
-int ned_doppler32_augmented_set_state(ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_scalar x[restrict NED_DOPPLER32_AUGMENTED_N_STATES]);
+int ned_doppler32_augmented_set_state(ned_doppler32_augmented_filter
+        *NED_DOPPLER32_AUGMENTED_RESTRICT f, const ned_doppler32_augmented_scalar
+        x[NED_DOPPLER32_AUGMENTED_RESTRICT NED_DOPPLER32_AUGMENTED_N_STATES]);
 
 /* Closed-loop feedback: once the caller has applied the estimated errors x to
    its navigation solution, the error estimate is reset to x := 0.  The
@@ -328,20 +346,22 @@ int ned_doppler32_augmented_set_state(ned_doppler32_augmented_filter *restrict f
 void ned_doppler32_augmented_reset_error_state(ned_doppler32_augmented_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
-int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, const
-        ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_workspace *restrict
-        work);
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
+int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *NED_DOPPLER32_AUGMENTED_RESTRICT
+        f, const ned_doppler32_augmented_transition *NED_DOPPLER32_AUGMENTED_RESTRICT t,
+        ned_doppler32_augmented_workspace *NED_DOPPLER32_AUGMENTED_RESTRICT work);
 
 /* Kalman update with all the measurements z (all at once, Cholesky solve, Joseph form):
    ned_doppler32_augmented_update_masked with mask, innovation and nis NULL.  z has
    NED_DOPPLER32_AUGMENTED_N_MEASUREMENTS entries (units by NED_DOPPLER32_AUGMENTED_MEASUREMENT_*).
    Returns NED_DOPPLER32_AUGMENTED_OK, NED_DOPPLER32_AUGMENTED_ERR_NONFINITE or
            NED_DOPPLER32_AUGMENTED_ERR_NOT_POSITIVE as below. */
-int ned_doppler32_augmented_update(ned_doppler32_augmented_filter *restrict f,
-                const ned_doppler32_augmented_scalar z[restrict 2],
-                const ned_doppler32_augmented_matrices *restrict m,
-                        ned_doppler32_augmented_workspace *restrict work);
+int ned_doppler32_augmented_update(ned_doppler32_augmented_filter *NED_DOPPLER32_AUGMENTED_RESTRICT
+        f,
+                const ned_doppler32_augmented_scalar z[NED_DOPPLER32_AUGMENTED_RESTRICT 2],
+                const ned_doppler32_augmented_matrices *NED_DOPPLER32_AUGMENTED_RESTRICT m,
+                        ned_doppler32_augmented_workspace *NED_DOPPLER32_AUGMENTED_RESTRICT work);
 
 /* Kalman update with the measurements z[a] whose mask[a] is nonzero (an outage
    of one axis, a lost Doppler beam): the others are ignored, their z, H row and
@@ -353,12 +373,17 @@ int ned_doppler32_augmented_update(ned_doppler32_augmented_filter *restrict f,
    Refuses non-finite used z, H or R (ERR_NONFINITE), a negative used
    variance r or a non-positive innovation variance (ERR_NOT_POSITIVE); on
    error f, innovation and nis are unchanged. */
-int ned_doppler32_augmented_update_masked(ned_doppler32_augmented_filter *restrict f,
-                const ned_doppler32_augmented_scalar z[restrict 2],
-                const unsigned char *restrict mask, const ned_doppler32_augmented_matrices *restrict
-                        m,
-                ned_doppler32_augmented_scalar *restrict innovation, ned_doppler32_augmented_scalar
-                        *restrict nis,
-                ned_doppler32_augmented_workspace *restrict work);
+int ned_doppler32_augmented_update_masked(ned_doppler32_augmented_filter
+        *NED_DOPPLER32_AUGMENTED_RESTRICT f,
+                const ned_doppler32_augmented_scalar z[NED_DOPPLER32_AUGMENTED_RESTRICT 2],
+                const unsigned char *NED_DOPPLER32_AUGMENTED_RESTRICT mask, const
+                        ned_doppler32_augmented_matrices *NED_DOPPLER32_AUGMENTED_RESTRICT m,
+                ned_doppler32_augmented_scalar *NED_DOPPLER32_AUGMENTED_RESTRICT innovation,
+                        ned_doppler32_augmented_scalar *NED_DOPPLER32_AUGMENTED_RESTRICT nis,
+                ned_doppler32_augmented_workspace *NED_DOPPLER32_AUGMENTED_RESTRICT work);
+
+#ifdef __cplusplus
+} /* extern "C" */
+#endif
 
 #endif /* MODELGEN_NED_DOPPLER32_AUGMENTED_H */

@@ -23,6 +23,16 @@
 #ifndef MODELGEN_NED_INERTIAL16_H
 #define MODELGEN_NED_INERTIAL16_H
 
+/* C++ includes this header as it is (the C++ class ned_inertial16.hpp does): the functions have C
+        linkage, and
+   NED_INERTIAL16_RESTRICT is C99's restrict in C and nothing in C++, which has no restrict. */
+#ifdef __cplusplus
+#define NED_INERTIAL16_RESTRICT
+extern "C" {
+#else
+#define NED_INERTIAL16_RESTRICT restrict
+#endif
+
 #define NED_INERTIAL16_N_STATES 16
 #define NED_INERTIAL16_N_NOISES 6
 #define NED_INERTIAL16_N_MEASUREMENTS 0
@@ -223,8 +233,8 @@ void ned_inertial16_default_params(ned_inertial16_params *params);
    denominator such as the cos of a tan or sec is zero within rounding, e.g.
    latitude +-90 degrees) or any entry is not finite; on error *m must not be
    used (discretize and update refuse it anyway), and nothing else is touched. */
-int ned_inertial16_matrices_evaluate(const ned_inertial16_params *restrict params,
-        ned_inertial16_matrices *restrict m);
+int ned_inertial16_matrices_evaluate(const ned_inertial16_params *NED_INERTIAL16_RESTRICT params,
+        ned_inertial16_matrices *NED_INERTIAL16_RESTRICT m);
 
 /* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
@@ -232,13 +242,14 @@ int ned_inertial16_matrices_evaluate(const ned_inertial16_params *restrict param
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not
    representable (ERR_NONFINITE), a non-positive T and a negative noise PSD
    (ERR_NOT_POSITIVE); on error *t must not be used. */
-int ned_inertial16_discretize(const ned_inertial16_matrices *restrict m, ned_inertial16_scalar T,
-        ned_inertial16_transition *restrict t,
-                ned_inertial16_workspace *restrict work);
+int ned_inertial16_discretize(const ned_inertial16_matrices *NED_INERTIAL16_RESTRICT m,
+        ned_inertial16_scalar T, ned_inertial16_transition *NED_INERTIAL16_RESTRICT t,
+                ned_inertial16_workspace *NED_INERTIAL16_RESTRICT work);
 
 /* Phi as a full N * N array in row-major order, expanded from the compressed transition. */
-void ned_inertial16_get_transition_matrix(const ned_inertial16_transition *restrict t,
-                ned_inertial16_scalar Phi[restrict NED_INERTIAL16_N_STATES *
+void ned_inertial16_get_transition_matrix(const ned_inertial16_transition *NED_INERTIAL16_RESTRICT
+        t,
+                ned_inertial16_scalar Phi[NED_INERTIAL16_RESTRICT NED_INERTIAL16_N_STATES *
                         NED_INERTIAL16_N_STATES]);
 
 /* Set the transition's Phi from a full N * N array in row-major order (a Phi
@@ -246,8 +257,8 @@ void ned_inertial16_get_transition_matrix(const ned_inertial16_transition *restr
    anywhere (ERR_NONFINITE, tested first), then a nonzero entry outside the
    structural pattern of Phi or a row of random constants that is not exactly
    e_i (ERR_STRUCTURE: predict would not read it); on error t is unchanged. */
-int ned_inertial16_set_transition_matrix(ned_inertial16_transition *restrict t,
-                const ned_inertial16_scalar Phi[restrict NED_INERTIAL16_N_STATES *
+int ned_inertial16_set_transition_matrix(ned_inertial16_transition *NED_INERTIAL16_RESTRICT t,
+                const ned_inertial16_scalar Phi[NED_INERTIAL16_RESTRICT NED_INERTIAL16_N_STATES *
                         NED_INERTIAL16_N_STATES]);
 
 /* Set the covariance from a full symmetric P, an N * N array in row-major
@@ -257,25 +268,27 @@ int ned_inertial16_set_transition_matrix(ned_inertial16_transition *restrict t,
    variance, |P_ij - P_ji| > tol sqrt(P_ii P_jj), |P_ij| > sqrt(P_ii P_jj) (1 + tol)
    (a zero variance with a correlation) or a negative pivot of P = U D U^T
    below -tol P_jj; on error f is unchanged. */
-int ned_inertial16_set_covariance(ned_inertial16_filter *restrict f, const ned_inertial16_scalar
-        P[restrict NED_INERTIAL16_N_STATES * NED_INERTIAL16_N_STATES],
-                ned_inertial16_workspace *restrict work);
+int ned_inertial16_set_covariance(ned_inertial16_filter *NED_INERTIAL16_RESTRICT f, const
+        ned_inertial16_scalar P[NED_INERTIAL16_RESTRICT NED_INERTIAL16_N_STATES *
+        NED_INERTIAL16_N_STATES],
+                ned_inertial16_workspace *NED_INERTIAL16_RESTRICT work);
 
 /* The covariance as a full symmetric N * N array in row-major order. */
-void ned_inertial16_get_covariance(const ned_inertial16_filter *restrict f, ned_inertial16_scalar
-        P[restrict NED_INERTIAL16_N_STATES * NED_INERTIAL16_N_STATES]);
+void ned_inertial16_get_covariance(const ned_inertial16_filter *NED_INERTIAL16_RESTRICT f,
+        ned_inertial16_scalar P[NED_INERTIAL16_RESTRICT NED_INERTIAL16_N_STATES *
+        NED_INERTIAL16_N_STATES]);
 
 /* The state estimate x (NED_INERTIAL16_N_STATES entries, units by NED_INERTIAL16_STATE_*) into
         x. */
-void ned_inertial16_get_state(const ned_inertial16_filter *restrict f, ned_inertial16_scalar
-        x[restrict NED_INERTIAL16_N_STATES]);
+void ned_inertial16_get_state(const ned_inertial16_filter *NED_INERTIAL16_RESTRICT f,
+        ned_inertial16_scalar x[NED_INERTIAL16_RESTRICT NED_INERTIAL16_N_STATES]);
 
 /* Set the state estimate to x (NED_INERTIAL16_N_STATES entries, units by NED_INERTIAL16_STATE_*);
         the
    covariance is not touched.  Refuses a non-finite entry (ERR_NONFINITE); on
    error f is unchanged.  Returns NED_INERTIAL16_OK or NED_INERTIAL16_ERR_NONFINITE. */
-int ned_inertial16_set_state(ned_inertial16_filter *restrict f, const ned_inertial16_scalar
-        x[restrict NED_INERTIAL16_N_STATES]);
+int ned_inertial16_set_state(ned_inertial16_filter *NED_INERTIAL16_RESTRICT f, const
+        ned_inertial16_scalar x[NED_INERTIAL16_RESTRICT NED_INERTIAL16_N_STATES]);
 
 /* Closed-loop feedback: once the caller has applied the estimated errors x to
    its navigation solution, the error estimate is reset to x := 0.  The
@@ -284,9 +297,15 @@ int ned_inertial16_set_state(ned_inertial16_filter *restrict f, const ned_inerti
 void ned_inertial16_reset_error_state(ned_inertial16_filter *f);
 
 /* x = Phi x, P = Phi P Phi^T + Q_d.  A non-finite result is refused
-   (ERR_NONFINITE) and f is left unchanged. */
-int ned_inertial16_predict(ned_inertial16_filter *restrict f, const ned_inertial16_transition
-        *restrict t, ned_inertial16_workspace *restrict work);
+   (ERR_NONFINITE), and a negative variance of Q_d as set_covariance
+   refuses a negative P_ii (ERR_NOT_POSITIVE); on error f is left unchanged. */
+int ned_inertial16_predict(ned_inertial16_filter *NED_INERTIAL16_RESTRICT f, const
+        ned_inertial16_transition *NED_INERTIAL16_RESTRICT t, ned_inertial16_workspace
+        *NED_INERTIAL16_RESTRICT work);
 
+
+#ifdef __cplusplus
+} /* extern "C" */
+#endif
 
 #endif /* MODELGEN_NED_INERTIAL16_H */

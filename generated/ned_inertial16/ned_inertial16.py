@@ -33,9 +33,13 @@ and leaves its filter unchanged:
     singular operating point (the cos of a tan or sec, or another trigonometric
     denominator, zero within 4 eps max(1, abs(argument)): latitude +-90 deg) -> C
     ERR_NONFINITE, Python ValueError
-  - discretize: T NaN or infinite; F, G or q non-finite; e^(F T) not representable (more
-    than 64 doublings, or overflow) -> C ERR_NONFINITE, Python ValueError
+  - discretize: T NaN or infinite (Python: or not a real number: a bool, a string, a
+    complex); F, G or q non-finite; e^(F T) not representable (more than 64 doublings,
+    or overflow) -> C ERR_NONFINITE, Python ValueError
   - discretize: T <= 0; a negative noise PSD q -> C ERR_NOT_POSITIVE, Python ValueError
+  - discretize (Taylor's Q_d): a T so short that q / T, the weights of the paper's Gamma
+    (Q/T) Gamma^T, overflows: max(q) / T not finite (Van Loan's Q_d has no such weights)
+    -> C ERR_NONFINITE, Python ValueError
   - set_covariance / predict, update (P argument): a NaN or infinite entry of P -> C
     ERR_NONFINITE, Python ValueError
   - set_covariance / predict, update (P argument): P_ii < 0; abs(P_ij - P_ji) > tol
@@ -51,8 +55,11 @@ and leaves its filter unchanged:
     ERR_STRUCTURE, Python ValueError
   - predict: non-finite x, Phi or Q_d, or a non-finite result -> C ERR_NONFINITE, Python
     ValueError
-  - update: non-finite x, z, H or r, or a non-finite result -> C ERR_NONFINITE, Python
-    ValueError
+  - predict: a negative variance Q_d(i, i), as a P with one (UD form: a negative weight
+    qw of Q_d = Gamma diag(qw) Gamma^T) -> C ERR_NOT_POSITIVE, Python ValueError
+  - update: non-finite x, z, H or r, or a non-finite result, the normalized innovation
+    squared nu^T S^-1 nu included (a z so far from H x that it overflows, e.g. z =
+    1e308) -> C ERR_NONFINITE, Python ValueError
   - update: r < 0 (UD form: r <= 0); an innovation variance that is not positive -> C
     ERR_NOT_POSITIVE, Python ValueError
   - update_masked: as update, over the used measurements only: an unused one's z, H row
@@ -60,6 +67,7 @@ and leaves its filter unchanged:
 """
 
 import math
+import numbers
 
 import numpy as np
 from scipy.linalg import blas, lapack
@@ -413,6 +421,8 @@ def discretize(F, G, q, T):
     if N_NOISES and not q.min() >= 0.0:
         _check_finite("discretize", q=q)
         raise ValueError("discretize: q has a negative noise PSD")
+    if N_NOISES and not math.isfinite(max(q.tolist()) / T):  # Python floats: an overflow is inf, no warning
+        raise ValueError(f"discretize: T = {T!r} is so short that q / T, the weights of Gamma (Q/T) Gamma^T, overflows")
     norm = _balanced_norm(F)
     if not math.isfinite(norm):
         _check_finite("discretize", F=F)
@@ -462,7 +472,8 @@ def predict(x, P, Phi, Qd):
     symmetric (Q_d's lower triangle is checked, not used).
 
     Raises ValueError, naming the argument, for non-finite x, P, Phi or Qd,
-    a P outside the contract (module docstring) or a non-finite result.  A
+    a P outside the contract (module docstring), a Qd with a negative
+    variance (as a P with one) or a non-finite result.  A
     NaN or infinity in an argument makes the result non-finite (IEEE
     arithmetic: NaN and 0 * inf are NaN; x_new = Phi x reads every entry of
     Phi, the result before its mirroring every entry of P and Qd), so one
@@ -472,6 +483,7 @@ def predict(x, P, Phi, Qd):
     x, P, Phi, Qd = _array(x, float), _array(P, float), _array(Phi, float), _array(Qd, float)
     if (x.shape, P.shape, Phi.shape, Qd.shape) != _PREDICT_SHAPES:
         _check_shapes("predict", x=(x, _VECTOR), P=(P, _SQUARE), Phi=(Phi, _SQUARE), Qd=(Qd, _SQUARE))
+    _check_process_noise("predict", Qd)
     factor = _factor(P)
     if factor is None:  # the contract's test entry by entry, naming what it refuses
         _check_finite("predict", Qd=Qd)
@@ -511,9 +523,15 @@ def update(x, P, z, H, r):
     Raises ValueError, naming the argument and leaving x and P untouched,
     for non-finite x, z, H or r, a negative r, a P outside the contract
     (module docstring), an innovation covariance that is not positive
-    definite or a non-finite result.  Non-finite arguments show in the
+    definite or a non-finite result, the normalized innovation squared
+    nu^T S^-1 nu included (as the C, which computes it for update_masked).  Non-finite arguments show in the
     result (or the innovation covariance) and are named then, as in predict.
     """
+    return _update_and_nis(x, P, z, H, r)[:2]
+
+
+def _update_and_nis(x, P, z, H, r):
+    """update's (x, P) and the normalized innovation squared nu^T S^-1 nu (0 when nothing is measured)."""
     x, P = _array(x, float), _array(P, float)
     if (x.shape, P.shape) != (_VECTOR, _SQUARE):
         _check_shapes("update", x=(x, _VECTOR), P=(P, _SQUARE))
@@ -523,7 +541,7 @@ def update(x, P, z, H, r):
         _check_covariance_entries("update", P)
     if not z.shape[0]:  # nothing measured: x and P as they were
         _check_result("update", {"x_result": x, "result": P}, x=x, P=P)
-        return x.copy(), P.copy()
+        return x.copy(), P.copy(), 0.0
     return _joseph_update(x, P, z, H, r, exact)
 
 
@@ -540,28 +558,35 @@ def _update_arguments(z, H, r):
 
 
 def _joseph_update(x, P, z, H, r, exact):
-    """(x, P) after the Kalman update of checked arguments (update's docstring); ValueError, naming the argument, for a non-PD S or a non-finite result.
+    """(x, P, nis) after the Kalman update of checked arguments (update's docstring); ValueError, naming the argument, for a non-PD S or a non-finite result.
 
-    ``exact``: P is exactly symmetric (no mirroring pass needed).  Shared by
-    update, which has proven P, and Filter.update, which trusts its own.
+    nis = nu^T S^-1 nu = |L^-1 nu|^2 (S = L L^T), as the C's vector update
+    computes it: a NIS that is not finite (a z so far from H x that its
+    square overflows) is refused as the C refuses it.  ``exact``: P is
+    exactly symmetric (no mirroring pass needed).  Shared by update, which
+    has proven P, and Filter.update, which trusts its own.
     """
     m = z.shape[0]
     HP = _dot(H, P)
     S = _dot(HP, H.T)
     S.ravel()[:: m + 1] += r  # R on the diagonal (ravel: a view of the new S)
-    _, gain_t, info = _cholesky_system(S, HP, 1)  # K^T = S^-1 H P (lower triangle of S), S kept
+    factor, gain_t, info = _cholesky_system(S, HP, 1)  # K^T = S^-1 H P (lower triangle of S), S kept
     if info:
         _check_finite("update", x=x, z=z, H=H, P=P)
         raise ValueError("update: the innovation covariance H P H^T + R is not positive definite")
-    x_new = _gemv(1.0, gain_t, z - _dot(H, x), beta=1.0, y=x, trans=1)  # x + K (z - H x)
+    innovation = z - _dot(H, x)
+    x_new = _gemv(1.0, gain_t, innovation, beta=1.0, y=x, trans=1)  # x + K (z - H x)
+    whitened = _trsv(factor, innovation, lower=1)  # L^-1 nu
+    nis = _ddot(whitened, whitened)  # BLAS: an overflow is inf, without a numpy warning
     gram = _dot(gain_t.T, _gemm(-0.5, S, gain_t, 1.0, HP))  # G = K E, E = H P - S K^T / 2
     P_new = gram + gram.T  # exactly symmetric: IEEE addition commutes
     np.subtract(P, P_new, out=P_new)
     if not exact:  # P symmetric within the tolerance only: its upper triangle, mirrored
         np.copyto(P_new, P_new.T, where=_LOWER)
-    if not math.isfinite(_asum(P_new.ravel()) + _asum(x_new)):
+    if not math.isfinite(_asum(P_new.ravel()) + _asum(x_new) + nis):
         _refuse_non_finite("update", {"x_result": x_new, "result": P_new}, x=x, P=P, z=z, H=H, r=r)
-    return x_new, P_new
+        raise ValueError("update: the normalized innovation squared nu^T S^-1 nu is not finite (z is too far from H x)")
+    return x_new, P_new, nis
 
 
 def update_masked(x, P, z, H, r, mask=None):
@@ -572,11 +597,11 @@ def update_masked(x, P, z, H, r, mask=None):
     innovation squared nu^T S^-1 nu over the used ones.  mask None uses all;
     z, H and r of an unused measurement are ignored (NaN allowed).
     """
-    return _masked_update(update, x, P, z, H, r, mask)
+    return _masked_update(_update_and_nis, x, P, z, H, r, mask)
 
 
 def _masked_update(update_used, x, P, z, H, r, mask):
-    """update_masked's work, with ``update_used(x, P, z, H, r)`` updating by the used measurements (update or the Filter's trusted update)."""
+    """update_masked's work, with ``update_used(x, P, z, H, r) -> (x, P, nis)`` updating by the used measurements (update or the Filter's trusted update)."""
     z = np.asarray(z, dtype=float)
     m = z.shape[0] if z.ndim == 1 else -1
     used = np.ones(m, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
@@ -585,11 +610,9 @@ def _masked_update(update_used, x, P, z, H, r, mask):
     innovation = np.zeros(m)
     if not used.any():
         return np.asarray(x, dtype=float).copy(), np.asarray(P, dtype=float).copy(), innovation, 0.0
-    x_new, P_new = update_used(x, P, z[used], H[used], r[used])
-    nu = z[used] - H[used] @ np.asarray(x, dtype=float)
-    S = H[used] @ np.asarray(P, dtype=float) @ H[used].T + np.diag(r[used])
-    innovation[used] = nu
-    return x_new, P_new, innovation, float(nu @ np.linalg.solve(S, nu))
+    x_new, P_new, nis = update_used(x, P, z[used], H[used], r[used])
+    innovation[used] = z[used] - H[used] @ np.asarray(x, dtype=float)
+    return x_new, P_new, innovation, nis
 
 
 def reset_error_state(x):
@@ -598,10 +621,10 @@ def reset_error_state(x):
 
 
 def _trusted_update(x, P, z, H, r):
-    """update for an x and P the caller vouches for (the Filter's own): z, H and r checked, P not tested."""
+    """update for an x and P the caller vouches for (the Filter's own): z, H and r checked, P not tested; (x, P, nis)."""
     z, H, r = _update_arguments(z, H, r)
     if not z.shape[0]:  # nothing measured
-        return x, P
+        return x, P, 0.0
     return _joseph_update(x, P, z, H, r, True)
 
 
@@ -681,14 +704,16 @@ class Filter:
     def predict(self, Phi, Qd):
         """x = Phi x and P = Phi P Phi^T + Q_d (upper triangle mirrored; Q_d's lower triangle is checked, not used).
 
-        Raises ValueError, naming the argument, for non-finite Phi or Qd or
-        a non-finite result; the filter is then unchanged.  As in the
+        Raises ValueError, naming the argument, for non-finite Phi or Qd, a
+        Qd with a negative variance or a non-finite result; the filter is
+        then unchanged.  As in the
         functional predict, one sum of magnitudes over the results tests
         every entry of Phi (through Phi x) and of Q_d.
         """
         Phi, Qd = _array(Phi, float), _array(Qd, float)
         if (Phi.shape, Qd.shape) != (_SQUARE, _SQUARE):
             _check_shapes("predict", Phi=(Phi, _SQUARE), Qd=(Qd, _SQUARE))
+        _check_process_noise("predict", Qd)
         x_new = _dot(Phi, self._x)
         P_new, total = _dense_product(self._P, Phi, Qd)
         if not math.isfinite(total + _asum(x_new)):
@@ -702,7 +727,7 @@ class Filter:
         z, H or r, a negative r, an innovation covariance that is not
         positive definite, a non-finite result); the filter is then unchanged.
         """
-        self._x, self._P = _trusted_update(self._x, self._P, z, H, r)
+        self._x, self._P, _ = _trusted_update(self._x, self._P, z, H, r)
 
     def update_masked(self, z, H, r, mask=None):
         """Kalman update with the measurements whose mask entry is true (update_masked); returns (innovation, nis).
@@ -780,12 +805,22 @@ def _refuse_non_finite(function, results, **arguments):
     _check_finite(function, **results)
 
 
+def _check_process_noise(function, Qd):
+    """Refuse a Q_d with a negative variance Qd[k, k], naming it, as a P with one is refused (a NaN is left to the finiteness tests)."""
+    variance = Qd.diagonal().tolist()  # Python floats: cheaper than numpy calls for a few states
+    if min(variance) < 0.0:
+        k = next(k for k, v in enumerate(variance) if v < 0.0)
+        raise ValueError(f"{function}: Qd has a negative variance Qd[{k}, {k}]")
+
+
 def _check_step(T):
-    """T as a float; ValueError unless it is finite and positive."""
-    try:
-        T = float(T)
-    except (TypeError, ValueError):
-        raise ValueError(f"discretize: T is not a number ({T!r})") from None
+    """T as a float; ValueError unless it is a real number, finite and positive.
+
+    As the C's double: a bool, a string ('60') or a complex number is not a step.
+    """
+    if isinstance(T, (bool, np.bool_)) or not isinstance(T, numbers.Real):
+        raise ValueError(f"discretize: T is not a real number ({T!r})")
+    T = float(T)
     if not math.isfinite(T):
         raise ValueError(f"discretize: T is not finite ({T})")
     if not T > 0.0:
@@ -819,6 +854,8 @@ _trmm = blas.dtrmm
 _syrk = blas.dsyrk
 _gemm = blas.dgemm
 _gemv = blas.dgemv
+_trsv = blas.dtrsv
+_ddot = blas.ddot
 _dot = np.dot  # for small operands, less overhead than the @ operator
 _asum = blas.dasum  # sum |a_i| of a vector: finite only if every entry is (IEEE), one pass, no temporary
 

@@ -1,12 +1,12 @@
-"""Covariance analysis of the core paper (seed 000, sections 3-6).
+"""Analysis of any derived model: covariance recursions and observability.
 
-Data flow: scenario and error budget (YAML in ``modelgen/data``) -> the
-18-state model and the reduced models made from it by ``modelgen.model.transform``
--> derived, discretized matrices -> covariance recursions (pure inertial,
-optimal filter, true covariance of suboptimal filters) -> Table 2 analogue,
-sensitivity table and Figs 2-7 analogues.
+* :mod:`modelgen.analysis.covariance`: the recursions of a covariance
+  analysis on a time-invariant discrete system (open loop, optimal filter,
+  the true error covariance of a suboptimal filter's gain sequence);
+* :mod:`modelgen.analysis.observability`: the rank of a model's
+  observability matrix over a scenario and the directions it cannot see
+  (``modelgen observability``).
 
-Entry point: :func:`modelgen.analysis.covariance_report.run_covariance_analysis`.
-The observability of a model over a scenario (``modelgen observability``)
-is :mod:`modelgen.analysis.observability`.
+The core paper's own covariance analysis (its six systems, Table 2, the
+sensitivity study and Figs 2-7) is built on these in :mod:`modelgen.table2`.
 """

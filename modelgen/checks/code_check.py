@@ -1,10 +1,11 @@
 """Checking generated code against the numpy reference, step by step.
 
-Both the generated Python module and the compiled C library run the same
+Every registered backend (``modelgen.codegen.backends.registry``: the
+generated Python module, the compiled C library, the C++ class) runs the same
 scenario as ``modelgen.derive.reference`` (derived matrices, Taylor discretization,
-predict, Joseph update): a fixed operating point, ``steps`` steps of ``T``
-seconds with a measurement update after every prediction and measurements
-drawn from a seeded generator.
+predict, Joseph update) through its ``Backend.run``: a fixed operating point,
+``steps`` steps of ``T`` seconds with a measurement update after every
+prediction and measurements drawn from a seeded generator.
 
 Two measures of agreement are kept.  The *scaled* difference divides each
 |Delta P_ij| by sqrt(P_ii P_jj) (and |Delta x_i| by sqrt(P_ii)): for a diagonal
@@ -21,6 +22,7 @@ much the run's own arithmetic cancels: see :func:`step_conditioning`.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Mapping
@@ -28,10 +30,10 @@ from typing import Callable, Mapping
 import numpy as np
 
 from modelgen.derive import reference
-from modelgen.codegen.build import build_c_filter, load_python_module
-from modelgen.codegen.layout import ModelSizes
+from modelgen.codegen.backends.base import BackendUnavailable
+from modelgen.codegen.backends.registry import backends
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import DerivedModel, parameter_vector
+from modelgen.derive.symbolic import DerivedModel
 from modelgen.derive.discretization import (
     DEFAULT_TAYLOR_ORDER,
     DEFAULT_TOLERANCE,
@@ -61,6 +63,10 @@ class CheckScenario:
     def x0(self) -> np.ndarray:
         n = self.initial_covariance.shape[0]
         return np.zeros(n) if self.initial_state is None else np.asarray(self.initial_state, dtype=float).copy()
+
+    def measurements(self, derived: DerivedModel) -> np.ndarray:
+        """The seeded measurements of every step (:func:`measurement_sequence`), as ``Backend.run`` reads them."""
+        return measurement_sequence(derived, self)
 
 
 @dataclass(frozen=True)
@@ -162,55 +168,6 @@ def reference_run(
     return out
 
 
-def python_run(module_path: Path, derived: DerivedModel, scenario: CheckScenario) -> list[tuple[np.ndarray, np.ndarray]]:
-    """x and P after every step, by the generated Python module."""
-    gen = load_python_module(module_path)
-    p = gen.parameter_vector(_named_parameters(derived, scenario))
-    F, G, H = gen.system_matrix(p), gen.noise_input_matrix(p), gen.measurement_matrix(p)
-    q, r = gen.noise_psd(p), gen.measurement_variance(p)
-    phi, qd = gen.discretize(F, G, q, scenario.step)
-    x = scenario.x0()
-    P = scenario.initial_covariance.copy()
-    out = []
-    for z in measurement_sequence(derived, scenario):
-        x, P = gen.predict(x, P, phi, qd)
-        if derived.n_measurements:
-            x, P = gen.update(x, P, z, H, r)
-        out.append((x, P))
-    return out
-
-
-def c_run(
-    folder: Path,
-    derived: DerivedModel,
-    scenario: CheckScenario,
-    build_dir: Path | None = None,
-    options: CodegenOptions | None = None,
-) -> list[tuple[np.ndarray, np.ndarray]]:
-    """x and P after every step, by the compiled generated C (generated with ``options``)."""
-    model = derived.model
-    filt = build_c_filter(Path(folder), model.name, ModelSizes.of(derived), model.parameter_names, build_dir, options=options)
-    filt.set_parameters(_named_parameters(derived, scenario))
-    if filt.discretize(scenario.step) != 0:
-        raise ModelError(f"generated C for {model.name!r} refused the step T = {scenario.step}")
-    filt.set_state(scenario.x0(), scenario.initial_covariance)
-    out = []
-    for z in measurement_sequence(derived, scenario):
-        filt.predict()
-        if derived.n_measurements:
-            status = filt.update(z)
-            if status != 0:
-                raise ModelError(f"generated C update returned status {status}")
-        out.append((filt.x, filt.P))
-    return out
-
-
-def _named_parameters(derived: DerivedModel, scenario: CheckScenario) -> dict[str, float]:
-    """Every parameter by its spelled-out name, defaults filled in."""
-    values = parameter_vector(derived.model, scenario.parameters)
-    return dict(zip(derived.model.parameter_names, values))
-
-
 def compare(
     name: str,
     run: list[tuple[np.ndarray, np.ndarray]],
@@ -235,22 +192,40 @@ def check_generated(
     build_dir: Path | None = None,
     options: CodegenOptions | None = None,
 ) -> list[ConformanceResult]:
-    """Run reference, generated Python and generated C; compare each to the reference.
+    """Run every backend's files (``Backend.run``) and the reference; compare each to the reference.
 
     ``options`` must be those the code was generated with (Taylor order,
     process noise, storage, update form); the scalar type must be double.
+    The implementations run first: a scenario the generated code refuses
+    (its contract: a step so short that Q/T overflows) is bad input, said
+    in one line, before the reference computes anything of it.
     """
     options = options or CodegenOptions()
     if options.scalar != "double":
         raise ModelError("the reference check needs double-precision code; float is checked by `modelgen embedded`")
     folder = Path(folder)
+    runs = {}
+    for backend in backends():
+        try:
+            runs[backend.name] = backend.run(folder, derived, scenario, options, _build_folder(build_dir, backend.name))
+        except BackendUnavailable as missing:  # its toolchain is not installed here: said, not failed
+            warnings.warn(str(missing), stacklevel=2)
+        except ValueError as error:  # the generated Python refused an input of the scenario (its contract)
+            if backend.name != "python":  # the compiled backends refuse with a status (ModelError): a bug
+                raise
+            raise ModelError(f"the check scenario ({scenario.label}) is refused by the generated {backend.name}: {error}") from None
     ref = reference_run(derived, scenario, options.taylor_order, options.taylor_tolerance, options.process_noise)
     tol = scenario_tolerance(derived, scenario, options.taylor_order)
-    name = derived.model.name
-    return [
-        compare("python", python_run(folder / f"{name}.py", derived, scenario), ref, tol, scenario.label),
-        compare("c", c_run(folder, derived, scenario, build_dir, options), ref, tol, scenario.label),
-    ]
+    return [compare(name, run, ref, tol, scenario.label) for name, run in runs.items()]
+
+
+def _build_folder(build_dir: Path | None, backend: str) -> Path | None:
+    """The C's build folder is ``build_dir`` itself (as before the backends ran in a loop); another compiled backend's is a subfolder."""
+    if build_dir is None or backend == "c":
+        return build_dir
+    folder = Path(build_dir) / backend
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
 
 
 # -- the pass criterion --------------------------------------------------------

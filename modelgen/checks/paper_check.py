@@ -185,6 +185,17 @@ class VerificationResult:
     def to_markdown(self) -> str:
         return _markdown(self)
 
+    def __repr__(self) -> str:
+        """One line: the model, the table and the counts (the full comparison is ``.entries``)."""
+        counts = ", ".join(f"{n} {s}" for s, n in self.counts().items())
+        return (f"<VerificationResult {self.model!r} against {self.table}: {len(self.entries)} entries, {counts}; "
+                f"{len(self.unexplained)} unexplained>")
+
+    def _repr_markdown_(self) -> str:
+        """What a notebook shows: the report up to its differences (units and every entry: ``to_markdown()``)."""
+        return self.to_markdown().split("\n## Entries the table omits", 1)[0].split("\n## Readings", 1)[0] \
+            .split("\n## Units", 1)[0].rstrip() + "\n"
+
 
 # -- the comparison -----------------------------------------------------------
 def verify(derived: DerivedModel, table_path: str | Path | None = None, complete: bool = True) -> VerificationResult:

@@ -48,6 +48,8 @@ from modelgen.fileio.cache_eviction import cap_bytes, keep_within_cap, mark_used
 from modelgen.fileio.output import write_bytes_atomically
 
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
+#: The C++ backend's class and drivers: the same strictness in C++17.
+CXX_STRICT_FLAGS = ("-std=c++17", "-Wall", "-Wextra", "-Werror", "-pedantic")
 
 
 def compiler() -> str:
@@ -58,17 +60,35 @@ def compiler() -> str:
     raise ModelError("no C compiler found (set CC or install gcc)")
 
 
+def cxx_compiler() -> str | None:
+    """The C++ compiler to use: $CXX, else c++ or g++ on PATH; None when there is none."""
+    for name in (os.environ.get("CXX"), "c++", "g++", "clang++"):
+        if name and shutil.which(name):
+            return name
+    return None
+
+
 def compile_shared_library(c_files: list[Path], output: Path, extra_flags: tuple[str, ...] = ("-O2",),
-                           cache: bool = False) -> Path:
+                           cache: bool = False, language: str = "c") -> Path:
     """Compile ``c_files`` into a shared library at ``output``; raise with the compiler's output on failure.
 
     ``cache=True`` takes the library from the compile cache (module
     docstring) when the same sources were compiled with the same compiler
-    and flags before, and keeps a newly compiled one there.
+    and flags before, and keeps a newly compiled one there.  ``language``
+    ``c++``: C++17 sources (the C++ backend) with the C++ compiler, the
+    ``.hpp`` headers beside them in the key; its undefined symbols (the C
+    filter's) are resolved when it is loaded after the C library.
     """
-    cc = compiler()
-    flags = [*STRICT_FLAGS, *extra_flags, "-fPIC", "-shared"]
-    key = library_key(c_files, [*flags, "-lm"], compiler_identity(cc)) if cache else None
+    if language == "c++":
+        cc = cxx_compiler()
+        if cc is None:
+            raise ModelError("no C++ compiler found (set CXX or install g++)")
+        strict = CXX_STRICT_FLAGS
+    else:
+        cc, strict = compiler(), STRICT_FLAGS
+    flags = [*strict, *extra_flags, "-fPIC", "-shared"]
+    headers = ("*.h", "*.hpp") if language == "c++" else ("*.h",)
+    key = library_key(c_files, [*flags, "-lm"], compiler_identity(cc), headers) if cache else None
     if key is not None:
         payload = cached_library(library_cache_folder(), key)
         if payload is not None:
@@ -120,10 +140,10 @@ def _identity(path: str, modified: int) -> str:
     return f"{path}\n{result.returncode}\n{result.stdout}"
 
 
-def library_key(c_files: list[Path], flags: list[str], identity: str) -> str:
+def library_key(c_files: list[Path], flags: list[str], identity: str, header_patterns: tuple[str, ...] = ("*.h",)) -> str:
     """Digest of what a compile reads or is told: sources, the headers beside them, flags, compiler."""
     folders = sorted({Path(f).resolve().parent for f in c_files})
-    headers = sorted(h for folder in folders for h in folder.glob("*.h"))
+    headers = sorted(h for folder in folders for pattern in header_patterns for h in folder.glob(pattern))
     digest = hashlib.sha256(ENTRY_MAGIC)
     digest.update(json.dumps({"compiler": identity, "flags": flags,
                               "sources": [Path(f).name for f in c_files]}).encode("utf-8"))

@@ -14,6 +14,7 @@ import hashlib
 import json
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Callable
 
 import sympy as sp
 
@@ -29,9 +30,7 @@ from modelgen.codegen.kernels import (
     covariance_predict,
     discretize_cost,
     doubling_cost,
-    python_predict_cost,
     state_predict,
-    thornton_cost,
     ud_weights,
     ud_weights_cost,
     update_cost,
@@ -79,13 +78,24 @@ class MatrixTarget:
     k: int
 
 
+#: A backend's own operation counts of a description (``Backend.costs``): name -> count.
+CostCounter = Callable[["FilterDescription"], dict[str, OperationCount]]
+
+
 @dataclass(frozen=True)
 class FilterDescription:
-    """One model and one choice of options, with everything derived from them that backends share."""
+    """One model and one choice of options, with everything derived from them that backends share.
+
+    ``backend_costs`` are the backends' own counters (``Backend.costs``, in
+    the order of their names), whose lines every file header lists beside
+    the language-neutral ones; ``codegen.generate.describe`` passes every
+    registered backend's (this module sits below the backends).
+    """
 
     derived: DerivedModel
     options: CodegenOptions
     structure: FilterStructure
+    backend_costs: tuple[CostCounter, ...] = ()
 
     @property
     def model(self):
@@ -147,12 +157,12 @@ class FilterDescription:
 
     @cached_property
     def discretize_blocks(self) -> list[DiscretizeBlock]:
-        """The unrolled discretize's functions: one per order with a nonzero power of F, doubling, check, noise."""
+        """The unrolled discretize's functions: one per order with a nonzero power of F, doubling, check, and the noise (also for F = 0)."""
         plan = self.discretize_plan
-        if not plan.active:
-            return []
-        blocks = [b for b in series_blocks(plan) if b.block.statements]
-        blocks += [doubling_block(plan), transition_check_block(plan)]
+        blocks = []
+        if plan.active:  # F has a nonzero entry (otherwise Phi = I and S = I: no series)
+            blocks += [b for b in series_blocks(plan) if b.block.statements]
+            blocks += [doubling_block(plan), transition_check_block(plan)]
         if plan.gamma_entries and (self.options.ud or plan.qd_pairs):
             blocks += noise_blocks(plan, True, self.options.ud)  # the transition's Q_d is always packed (layout)
         return blocks
@@ -171,16 +181,13 @@ class FilterDescription:
 
     @cached_property
     def costs(self) -> dict[str, OperationCount]:
-        """Operation counts per call of each generated function (written into the file headers)."""
+        """Operation counts per call of each generated function (written into the file headers).
+
+        The language-neutral counts (evaluation, discretize, the dense
+        prediction, update) and, between them, each backend's own.
+        """
         structure, options = self.structure, self.options
         n = structure.n_states
-        state_cost = self.state_predict[2]
-        kernel_cost = self.predict_blocks[1]
-        extra = thornton_cost(structure) if options.ud else OperationCount(0, 0)
-        predict = OperationCount(
-            state_cost.multiplications + kernel_cost.multiplications + extra.multiplications,
-            state_cost.additions + kernel_cost.additions + extra.additions,
-        )
         costs = {
             EVALUATE: OperationCount(self.evaluation[2].operation_count, 0),
             "discretize": discretize_cost(structure, options.taylor_order),
@@ -188,10 +195,10 @@ class FilterDescription:
             **self.unrolled_discretize_costs,
             **self.compact_discretize_costs,
             **self.van_loan_costs,
-            "predict (C)": predict,
-            "predict (Python)": python_predict_cost(structure),
-            "predict (dense, for comparison)": OperationCount(2 * n**3 + n, 2 * n * n * (n - 1) + n * n),
         }
+        for counter in self.backend_costs:
+            costs.update(counter(self))
+        costs["predict (dense, for comparison)"] = OperationCount(2 * n**3 + n, 2 * n * n * (n - 1) + n * n)
         if self.derived.n_measurements:
             costs["update"] = update_cost(structure, options)
         return costs
@@ -266,8 +273,8 @@ class FilterDescription:
         }
 
 
-def describe_filter(derived: DerivedModel, options: CodegenOptions) -> FilterDescription:
-    """The description of ``derived``'s filter under ``options``; refuses a model that is not linear."""
+def describe_filter(derived: DerivedModel, options: CodegenOptions, backend_costs: tuple[CostCounter, ...] = ()) -> FilterDescription:
+    """The description of ``derived``'s filter under ``options`` (``backend_costs``: the backends' counters); refuses a model that is not linear."""
     if derived.nonlinear:
         raise ModelError(
             f"model {derived.model.name!r}: equations of {', '.join(derived.nonlinear)} are not linear in the "
@@ -276,7 +283,7 @@ def describe_filter(derived: DerivedModel, options: CodegenOptions) -> FilterDes
     structure = filter_structure(
         derived.structure("F"), derived.structure("G"), derived.structure("H"), options.taylor_order
     )
-    return FilterDescription(derived, options, structure)
+    return FilterDescription(derived, options, structure, tuple(backend_costs))
 
 
 def model_hash(model) -> str:

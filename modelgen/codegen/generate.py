@@ -78,7 +78,8 @@ def warn_if_large(name: str, structure: FilterStructure) -> None:
 
 def describe(derived: DerivedModel, options: CodegenOptions | None = None) -> FilterDescription:
     """The language-neutral description of ``derived``'s filter, warning first when it will be large."""
-    description = describe_filter(derived, options or CodegenOptions())
+    counters = tuple(b.costs for b in sorted(backends(), key=lambda b: b.name))  # their lines in the order of their names
+    description = describe_filter(derived, options or CodegenOptions(), counters)
     warn_if_large(derived.model.name, description.structure)
     return description
 

@@ -46,6 +46,26 @@ class DerivedModel:
     def n_measurements(self) -> int:
         return self.H.shape[0]
 
+    def nonzeros(self, matrix: str) -> int:
+        """How many entries of F, G, H, Q or R are structurally nonzero."""
+        m = getattr(self, matrix)
+        return sum(1 for entry in m if entry != 0)
+
+    def __repr__(self) -> str:
+        """One line: the model and the sizes (the default repr printed every matrix: 26,545 characters)."""
+        counts = ", ".join(f"{m} {self.nonzeros(m)}" for m in "FGH")
+        return (f"<DerivedModel {self.model.name!r}: {self.n_states} states, {self.n_noises} noises, "
+                f"{self.n_measurements} measurements; nonzeros {counts}>")
+
+    def _repr_markdown_(self) -> str:
+        """What a notebook shows: the model, its sizes and its states (the matrices are ``.F`` ... ``.R``)."""
+        title = getattr(self.model, "title", "") or ""
+        lines = [f"**DerivedModel `{self.model.name}`**" + (f": {title}" if title else ""), "",
+                 "| matrix | shape | nonzeros |", "|---|---|---:|"]
+        lines += [f"| {m} | {getattr(self, m).shape[0]} x {getattr(self, m).shape[1]} | {self.nonzeros(m)} |" for m in "FGHQR"]
+        lines += ["", "states: " + ", ".join(f"`{name}`" for name in self.model.state_names)]
+        return "\n".join(lines) + "\n"
+
     def structure(self, matrix: str) -> np.ndarray:
         """Boolean mask of the structurally nonzero entries of F, G or H."""
         m = getattr(self, matrix)

@@ -116,19 +116,51 @@ def to_json(derived: DerivedModel) -> str:
 
 
 # -- LaTeX --------------------------------------------------------------------
+#: the quantity and value columns' widths as fractions of \linewidth; with the entry column (at most
+#: "$R(12,12)$") and the column gaps the table is at most the text width (tests/export: pdflatex, A4 and letter)
+LATEX_QUANTITY_WIDTH = 0.28
+LATEX_VALUE_WIDTH = 0.50
+#: a paragraph column set ragged right (array package), so long names and values break instead of overflowing
+LATEX_TEXT_COLUMN = ">{\\raggedright\\arraybackslash}p"
+
+
+#: an entry whose LaTeX is longer than this many characters may be wider than its column: it is printed in a
+#: form TeX can break (see :func:`_latex_entry`)
+LATEX_LONG_ENTRY = 90
+
+
+def _latex_entry(entry: sp.Expr) -> str:
+    """An entry as LaTeX math that fits its column: as sympy prints it, or, when long, with a long numerator
+    split off its fraction (``\\frac{1}{R_{M} + h} (...)``) and ``\\bigl( \\bigr)`` for ``\\left( \\right)``, so that
+    TeX may break the line after any + or - (it breaks no line inside a fraction or a ``\\left``-``\\right`` pair)."""
+    text = sp.latex(entry)
+    if len(text) <= LATEX_LONG_ENTRY:
+        return text
+    text = sp.latex(entry, long_frac_ratio=1.5)
+    return text.replace("\\left(", "\\bigl(").replace("\\right)", "\\bigr)")
+
+
+def _breakable(text: str) -> str:
+    """Escaped LaTeX text that may break after each underscore (state names are long, spaceless words)."""
+    return text.replace("\\_", "\\_\\allowbreak{}")
+
+
 def to_latex(derived: DerivedModel) -> str:
     """A ``longtable`` of the nonzero entries, like a paper's table, in the model's symbols.
 
     The file is a fragment to ``\\input`` into a document that loads the
-    ``longtable`` and ``amsmath`` packages; entries are math (``sympy.latex``:
+    ``longtable``, ``array`` and ``amsmath`` packages; entries are math (``sympy.latex``:
     ``omega_ie`` prints as ``\\omega_{ie}``), names and the title are text.
     """
     model = derived.model
     title = getattr(model, "title", "") or model.name
     lines = [
         f"% F, G, H, Q, R of model {one_line(model.name)}, written by modelgen derive --format latex.",
-        "% Needs \\usepackage{longtable,amsmath}. dx/dt = F x + G w (PSD Q), z = H x + v (covariance R).",
-        "\\begin{longtable}{lll}",
+        "% Needs \\usepackage{longtable,array,amsmath}. dx/dt = F x + G w (PSD Q), z = H x + v (covariance R).",
+        "% The columns are fixed fractions of \\linewidth (names break after an underscore, values after a",
+        "% top-level + or -), so the table fits the text width of an A4 or letter page.",
+        f"\\begin{{longtable}}{{@{{}}l{LATEX_TEXT_COLUMN}{{{LATEX_QUANTITY_WIDTH}\\linewidth}}"
+        f"{LATEX_TEXT_COLUMN}{{{LATEX_VALUE_WIDTH}\\linewidth}}@{{}}}}",
         f"\\caption{{Nonzero entries of F, G, H, Q, R: {latex_text(title)}}}\\\\",
         "\\hline",
         "Entry & Row / column & Value \\\\",
@@ -137,8 +169,8 @@ def to_latex(derived: DerivedModel) -> str:
     ]
     for name, i, j, entry in matrix_entries(derived):
         rows, columns = quantities(model, name)
-        where = f"{latex_text(rows[i - 1].name)} / {latex_text(columns[j - 1].name)}"
-        lines.append(f"${name}({i},{j})$ & {where} & ${sp.latex(entry)}$ \\\\")
+        where = f"{_breakable(latex_text(rows[i - 1].name))} /\\newline {_breakable(latex_text(columns[j - 1].name))}"
+        lines.append(f"${name}({i},{j})$ & {where} & ${_latex_entry(entry)}$ \\\\")
     lines += ["\\hline", "\\end{longtable}", ""]
     return "\n".join(lines)
 

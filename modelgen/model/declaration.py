@@ -190,6 +190,11 @@ class ErrorModel:
     notes: tuple[str, ...] = field(default_factory=tuple)
     check: Any = None  # modelgen.model.check_scenario.CheckSpec: the scenario --check flies, if the file declares one
 
+    def __repr__(self) -> str:
+        """One line (the default repr printed every equation: 11,769 characters for the paper's model)."""
+        return (f"<ErrorModel {self.name!r}: {len(self.states)} states, {len(self.noises)} noises, "
+                f"{len(self.parameters)} parameters, {len(self.measurements)} measurements>")
+
     # -- convenient views ---------------------------------------------------
     @property
     def state_names(self) -> list[str]:

@@ -20,7 +20,8 @@ from typing import Any
 
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml_with_lines
-from modelgen.navigator.logs import ACCEL_UNITS, GYRO_UNITS, STANDARD_GRAVITY, ImuColumns
+from modelgen.navigator.logs import GAP_ACTIONS, STANDARD_GRAVITY, ImuColumns, LogSource, schema, source_from_config
+from modelgen.navigator.logs.imu_csv import columns_of
 
 DEG = math.pi / 180.0
 MICRO_G = 1e-6 * STANDARD_GRAVITY
@@ -44,11 +45,10 @@ NOISE_UNITS: dict[str, dict[str, float]] = {
 SCHEMA: dict[str, set[str]] = {
     "": {"navigator", "description", "model", "imu", "gnss", "noise", "initial", "alignment", "filter",
          "zupt", "nhc", "outages", "output"},
-    "imu": {"file", "columns", "units", "time_offset_s", "gap_factor", "rotation_to_body_deg"},
-    "imu.columns": {"count", "time", "accel", "gyro"},
-    "imu.units": {"accel", "gyro"},
+    # imu: and gnss: hold the keys every log format shares and each format's own (logs.registry)
+    **schema("imu"),
     "imu.rotation_to_body_deg": {"roll", "pitch", "yaw"},
-    "gnss": {"file", "lever_arm_m", "velocity_latency_s", "quality_factor", "minimum_sigma_position_m", "minimum_sigma_velocity_m_s"},
+    **schema("gnss"),
     "noise": set(NOISE_UNITS),
     **{f"noise.{k}": {"value", "unit", "factor", "why"} for k in NOISE_UNITS},
     "initial": {"roll_pitch_sigma_deg", "heading_extra_sigma_deg", "velocity_sigma_m_s", "position_sigma_m",
@@ -81,7 +81,7 @@ class NavigatorConfig:
     name: str
     model: str
     imu_file: Path
-    imu_columns: ImuColumns
+    imu_columns: ImuColumns | None  # the csv format's column map (None for other formats)
     time_offset: float
     gap_factor: float
     rotation_to_body: tuple[float, float, float]  # roll, pitch, yaw [rad]
@@ -119,6 +119,9 @@ class NavigatorConfig:
     nhc_rate_max: float  # NHC only while the bias-corrected angular rate is below this [rad/s]
     outage_schedule: dict[str, float] | None
     outage_windows: list[tuple[float, float]] | None
+    imu_source: LogSource | None = None  # the imu: section as the log readers take it (format, file, options)
+    gnss_source: LogSource | None = None
+    gap_action: str = "refuse"  # imu.gap_action: refuse a log with an IMU gap, or propagate across it
 
 
 class _Reader:
@@ -272,19 +275,13 @@ def load_config(path: str | Path) -> NavigatorConfig:
     data, lines = read_yaml_with_lines(path, "navigator configuration file")
     r = _Reader(path, data, lines)
     _check_keys(r)
-    accel_unit, gyro_unit = r.text("imu.units.accel"), r.text("imu.units.gyro")
-    if accel_unit not in ACCEL_UNITS:
-        raise ModelError(f"{r.where('imu.units.accel')}: accelerometer unit {accel_unit!r} cannot be parsed "
-                         f"(accepted: {', '.join(ACCEL_UNITS)})")
-    if gyro_unit not in GYRO_UNITS:
-        raise ModelError(f"{r.where('imu.units.gyro')}: gyro unit {gyro_unit!r} cannot be parsed "
-                         f"(accepted: {', '.join(GYRO_UNITS)})")
-    count = r.integer("imu.columns.count", minimum=7)
-    accel = tuple(int(v) for v in r.vector("imu.columns.accel", 3))
-    gyro = tuple(int(v) for v in r.vector("imu.columns.gyro", 3))
-    columns = ImuColumns(count, r.integer("imu.columns.time", minimum=1), accel, gyro, accel_unit, gyro_unit)  # type: ignore[arg-type]
-    if max(columns.time, *accel, *gyro) > count or min(*accel, *gyro) < 1:
-        raise ModelError(f"{r.where('imu.columns')}: column numbers must be within 1..{count}")
+    imu_source = source_from_config("imu", r.get("imu"), r.where, path.parent)
+    columns = columns_of(imu_source) if imu_source.format == "csv" else None
+    gap_action = r.text("imu.gap_action", "refuse")
+    if gap_action not in GAP_ACTIONS:
+        raise ModelError(f"{r.where('imu.gap_action')}: imu.gap_action must be one of {', '.join(GAP_ACTIONS)}, "
+                         f"got {gap_action!r}")
+    gnss_source = source_from_config("gnss", r.get("gnss"), r.where, path.parent)
     quality_raw = r.get("gnss.quality_factor")
     if not isinstance(quality_raw, dict) or not quality_raw:
         raise ModelError(f"{r.where('gnss.quality_factor')}: gnss.quality_factor must map RTKLIB Q values to factors")
@@ -299,11 +296,11 @@ def load_config(path: str | Path) -> NavigatorConfig:
     schedule, windows = _outages(r)
     return NavigatorConfig(
         path=str(path), name=r.text("navigator"), model=r.text("model"),
-        imu_file=r.file("imu.file"), imu_columns=columns,
+        imu_file=imu_source.path, imu_columns=columns,
         time_offset=r.number("imu.time_offset_s", 0.0), gap_factor=r.number("imu.gap_factor", 3.0, positive=True),
         rotation_to_body=tuple(r.number(f"imu.rotation_to_body_deg.{k}") * DEG for k in ("roll", "pitch", "yaw"))
         if rotation is not None else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
-        gnss_file=r.file("gnss.file"), lever_arm=r.vector("gnss.lever_arm_m", 3),  # type: ignore[arg-type]
+        gnss_file=gnss_source.path, lever_arm=r.vector("gnss.lever_arm_m", 3),  # type: ignore[arg-type]
         velocity_latency=r.number("gnss.velocity_latency_s", 0.0, non_negative=True), quality_factor=quality,
         minimum_sigma_position=r.number("gnss.minimum_sigma_position_m", non_negative=True),
         minimum_sigma_velocity=r.number("gnss.minimum_sigma_velocity_m_s", non_negative=True),
@@ -332,6 +329,7 @@ def load_config(path: str | Path) -> NavigatorConfig:
         nhc_speed_min=r.number("nhc.speed_min_m_s", non_negative=True),
         nhc_rate_max=r.number("nhc.rate_max_deg_s", 1e9, positive=True) * DEG,
         outage_schedule=schedule, outage_windows=windows,
+        imu_source=imu_source, gnss_source=gnss_source, gap_action=gap_action,
     )
 
 

@@ -20,7 +20,7 @@ from modelgen.errors import ModelError
 from modelgen.model.frames import NED_TO_ENU
 from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator.errorstate import ErrorStateFilter, feedback
-from modelgen.navigator.logs import GnssLog, ImuLog
+from modelgen.navigator.logs import GnssLog, ImuLog, check_logs, epochs_inside_gaps
 from modelgen.navigator.mechanization import (NAV_SIZE, dcm_to_euler, dcm_to_quaternion, euler_to_dcm,
                                               gravity, level_from_accelerometers, mechanize, quaternion_to_dcm, radii)
 from modelgen.navigator.outages import in_outage, outage_windows
@@ -82,7 +82,8 @@ class Inputs:
 
 
 def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
-    """Rotate the IMU into body axes, shift its time, drop GNSS epochs outside the IMU span (noted)."""
+    """Rotate the IMU into body axes, shift its time, drop GNSS epochs outside the IMU span or in its gaps (noted)."""
+    check_logs(imu, gnss, config.quality_factor, config.time_offset)  # no fix, nothing in the IMU span: refused
     if gnss.velocity is None:
         raise ModelError(f"{gnss.path}: the navigator needs GNSS velocities (vn, ve, vu columns)")
     # The data's convention (checked on the drive: the vehicle is level at rest only this way):
@@ -90,8 +91,12 @@ def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
     # sample in IMU axes is C^T v in body axes.
     to_imu = euler_to_dcm(*config.rotation_to_body)
     time = imu.time + config.time_offset
-    keep = (gnss.time >= time[0]) & (gnss.time <= time[-1])
+    in_gap = epochs_inside_gaps(gnss.time, imu.gaps, config.time_offset)  # imu.gap_action: propagate
+    keep = (gnss.time >= time[0]) & (gnss.time <= time[-1]) & ~in_gap
     notes = list(imu.notes) + list(gnss.notes)
+    if in_gap.any():
+        notes.append(f"{gnss.path}: {int(in_gap.sum())} GNSS epoch(s) inside IMU gaps not used (no IMU sample "
+                     "to apply them at)")
     dropped_before = int(np.sum(gnss.time < time[0]))
     if dropped_before:
         notes.append(f"{gnss.path}: {dropped_before} GNSS epoch(s) before the first IMU sample not used")

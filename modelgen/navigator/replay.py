@@ -13,7 +13,7 @@ from modelgen.errors import ModelError
 from modelgen.navigator.cnav import cached_c_navigator, fly_c
 from modelgen.navigator.config import NavigatorConfig, load_config
 from modelgen.navigator.errorstate import generate_filter_module, model_path
-from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
+from modelgen.navigator.logs import read_gnss, read_imu
 from modelgen.navigator.metrics import errors_against_reference, summary, velocity_latency
 from modelgen.navigator.navigator import Flight, fly, prepare
 from modelgen.navigator.report import report_files
@@ -29,6 +29,27 @@ class ReplayResult:
     summary: dict
     folder: Path | None
     timings: dict[str, float]
+
+    def targets(self) -> list[dict]:
+        """The stated targets and whether this flight met them (:func:`modelgen.navigator.report.targets`)."""
+        from modelgen.navigator.report import targets
+
+        return targets(self.summary, self.timings)
+
+    def __repr__(self) -> str:
+        missed = [t["quantity"] for t in self.targets() if t["met"] is False]
+        return (f"<ReplayResult {self.config.name!r}: {self.summary['outage_count']} outages, end-of-outage "
+                f"horizontal error RMS {self.summary['horizontal_error_end_rms_m']:.2f} m; "
+                f"{len(missed)} target(s) missed{': ' + '; '.join(missed) if missed else ''}>")
+
+    def _repr_markdown_(self) -> str:
+        """What a notebook shows: the targets, reached against stated, met or missed."""
+        lines = [f"**Replay `{self.config.name}`** ({self.summary['navigator']} navigator)"
+                 + (f", report in `{self.folder}`" if self.folder else ""), "",
+                 "| quantity | reached | target | |", "|---|---|---|---|"]
+        lines += [f"| {t['quantity']} | {t['reached']} | {t['target']} | "
+                  f"{'' if t['met'] is None else 'met' if t['met'] else 'missed'} |" for t in self.targets()]
+        return "\n".join(lines) + "\n"
 
 
 NAVIGATORS = ("c", "python", "both")
@@ -51,9 +72,11 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     start = time.perf_counter()
     config = load_config(config_path)
     echo(f"replay {config.name}: reading {config.imu_file.name} and {config.gnss_file.name}")
-    imu = read_imu_csv(config.imu_file, config.imu_columns, config.gap_factor)
-    gnss = read_rtklib_pos(config.gnss_file)
+    imu = read_imu(config.imu_source, config.gap_factor, config.gap_action)
+    gnss = read_gnss(config.gnss_source)
     inputs = prepare(config, imu, gnss)
+    for note in inputs.notes:
+        echo(f"  note: {note}")
     timings["read_s"] = time.perf_counter() - start
     model_file = model_path(config.model, config.path)
     flights: dict[str, Flight] = {}

@@ -35,34 +35,62 @@ def _gpst(t: float) -> str:
     return time.strftime("%Y/%m/%d %H:%M:%S", time.gmtime(whole)) + f".{millis:03d}"
 
 
+#: Optional output fields the .pos writer uses when the flight carries them (else the column is 0, said in the header):
+#: north-east, east-up, up-north position covariance [m^2] (RTKLIB writes them as signed square roots).
+CROSS_COVARIANCE_FIELDS = ("cov_north_east", "cov_east_up", "cov_up_north")
+
+
+def _signed_root(value: float) -> float:
+    """RTKLIB's sdne/sdeu/sdun: sign(c) * sqrt(|c|) of a covariance c."""
+    return math.copysign(math.sqrt(abs(value)), value)
+
+
 def pos_text(flight: Flight, config: NavigatorConfig) -> str:
-    """The trajectory (antenna) in RTKLIB's lat/lon/height .pos format with velocities."""
+    """The trajectory (antenna) in RTKLIB's lat/lon/height .pos format with velocities.
+
+    Times in GPST to the millisecond; sdn, sde, sdu are the filter's 1-sigma
+    position (OUTPUT_FIELDS sigma_north/east/up), sdne, sdeu, sdun its cross
+    covariances as signed roots when the flight carries them
+    (:data:`CROSS_COVARIANCE_FIELDS`), else 0 and the header says so.  The file
+    reads back with :func:`modelgen.navigator.logs.read_rtklib_pos`.
+    """
+    c = COLUMN
+    cross = all(name in c for name in CROSS_COVARIANCE_FIELDS)
     lines = [f"% program   : modelgen replay ({config.name}, model {config.model})",
              "% solution  : forward real-time GNSS/INS, antenna position; Q 6 = dead reckoning (no GNSS update)",
+             "% sd        : sdn, sde, sdu = the filter's 1-sigma position; "
+             + ("sdne, sdeu, sdun = its cross covariances (signed square roots)" if cross else
+                "sdne, sdeu, sdun = 0 (the flight carries no cross covariance)"),
              "% (lat/lon/height=WGS84/ellipsoidal as in the input solution, Q=1:fix,2:float,5:single,6:dr)",
              "%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
              "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio    vn(m/s)    ve(m/s)    vu(m/s)"]
-    c = COLUMN
     for row in flight.outputs:
         q = int(row[c["gnss_quality"]]) if row[c["gnss_used"]] else DEAD_RECKONING_Q
+        roots = [_signed_root(row[c[name]]) for name in CROSS_COVARIANCE_FIELDS] if cross else [0.0, 0.0, 0.0]
         lines.append(f"{_gpst(row[c['time']])} {math.degrees(row[c['latitude']]):14.9f} "
                      f"{math.degrees(row[c['longitude']]):14.9f} {row[c['height']]:10.4f} {q:3d} {0:3d} "
                      f"{row[c['sigma_north']]:8.4f} {row[c['sigma_east']]:8.4f} {row[c['sigma_up']]:8.4f} "
-                     f"{0.0:8.4f} {0.0:8.4f} {0.0:8.4f} {0.0:6.2f} {0.0:6.1f} "
+                     f"{roots[0]:8.4f} {roots[1]:8.4f} {roots[2]:8.4f} {0.0:6.2f} {0.0:6.1f} "
                      f"{row[c['v_north']]:10.5f} {row[c['v_east']]:10.5f} {-row[c['v_down']]:10.5f}")
     return "\n".join(lines) + "\n"
 
 
 def csv_text(flight: Flight, errors: Errors) -> str:
-    """Every output field plus the errors against RTK, one row per output epoch, degrees for angles."""
+    """Every output field plus the errors against RTK, one row per output epoch, degrees for angles.
+
+    Time to the millisecond (``%.3f`` s), latitude and longitude to 1e-9 deg
+    (0.1 mm), every other value to 10 significant digits.
+    """
     angles = {"latitude", "longitude", "roll", "pitch", "yaw"}
     header = [f"{n}_deg" if n in angles else n for n in OUTPUT_FIELDS]
     header += ["error_north_m", "error_east_m", "error_up_m", "error_horizontal_m", "sigma_horizontal_m"]
+    formats = ["{:.3f}" if n == "time" else "{:.9f}" if n in ("latitude", "longitude") else "{:.10g}"
+               for n in OUTPUT_FIELDS] + ["{:.10g}"] * 5
     rows = [",".join(header)]
     for i, row in enumerate(flight.outputs):
         values = [math.degrees(v) if n in angles else v for n, v in zip(OUTPUT_FIELDS, row)]
         values += [errors.north[i], errors.east[i], errors.up[i], errors.horizontal[i], errors.sigma_horizontal[i]]
-        rows.append(",".join(f"{v:.10g}" for v in values))
+        rows.append(",".join(f.format(v) for f, v in zip(formats, values)))
     return "\n".join(rows) + "\n"
 
 
@@ -154,6 +182,45 @@ def _alignment_lines(summary: dict) -> list[str]:
             "faster than the heading speed.", ""]
 
 
+#: one line per figure of :func:`figures`, for the reports that show them
+FIGURE_CAPTIONS = {
+    "track.svg": "The drive on a local map: the navigator's track over the RTK reference, the GNSS outages in red, "
+                 "numbered at their end.",
+    "error.svg": "Horizontal error at the antenna against RTK and the filter's 3 sigma over the drive (log scale; "
+                 "the outages shaded).",
+    "biases.svg": "The navigator's gyro (deg/s) and accelerometer (mg) bias estimates, body axes, over the drive.",
+}
+
+
+def targets(summary: dict, timings: dict[str, float]) -> list[dict]:
+    """The replay's stated targets (issue 13), each ``quantity``, ``reached``, ``target``, ``anchor`` (the
+    published 15-state filter's value) and ``met`` (True, False, or None for a row that only informs)."""
+    end_rms = summary["horizontal_error_end_rms_m"]
+    outside = summary["horizontal_rms_outside_outages_m"]
+    inside = summary["outage_ends_inside_3sigma_fraction"]
+    difference = summary.get("c_python_max_difference_m")
+    return [
+        {"quantity": "end-of-outage horizontal error, RMS", "reached": f"{_fmt(end_rms)} m", "target": "<= 5.0 m",
+         "anchor": "7.44 m", "met": end_rms is not None and end_rms <= 5.0},
+        {"quantity": "end-of-outage horizontal error, median / max",
+         "reached": f"{_fmt(summary['horizontal_error_end_median_m'])} / {_fmt(summary['horizontal_error_end_max_m'])} m",
+         "target": "", "anchor": "7.02 / 13.35 m", "met": None},
+        {"quantity": "horizontal RMS outside outages", "reached": f"{_fmt(outside, 3)} m", "target": "<= 0.10 m",
+         "anchor": "0.057 m", "met": outside <= 0.10},
+        {"quantity": "outage ends inside the filter's 3 sigma",
+         "reached": f"{_fmt(100 * inside if inside is not None else None, 0)} %", "target": ">= 90 %", "anchor": "",
+         "met": inside is not None and inside >= 0.9},
+        {"quantity": "navigator CPU time, C, whole log", "reached": f"{_fmt(timings.get('fly_c_cpu_s'), 3)} s",
+         "target": "<= 0.5 s (549 s drive)", "anchor": "",
+         "met": timings["fly_c_cpu_s"] <= 0.5 if "fly_c_cpu_s" in timings else None},
+        {"quantity": "navigator wall time, Python reference", "reached": f"{_fmt(timings.get('fly_python_s'), 2)} s",
+         "target": "", "anchor": "11.9 s", "met": None},
+        {"quantity": "C against Python, largest antenna-position difference",
+         "reached": f"{difference:.2g} m" if difference is not None else "not flown (--navigator both)",
+         "target": "<= 0.001 m", "anchor": "", "met": difference <= 1e-3 if difference is not None else None},
+    ]
+
+
 def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, float], latency: float) -> str:
     """summary.md: outage table, targets, tuning and how it was chosen, counts and notes."""
     lines = [f"# Replay: {config.name}", "",
@@ -172,33 +239,14 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
                      f"{_fmt(r['horizontal_error_max_m'])} | {_fmt(r['sigma_horizontal_end_m'])} | "
                      f"{'yes' if r['inside_3sigma'] else 'no'} | {_fmt(r['drift_5s_m'])} | {_fmt(r['drift_10s_m'])} | "
                      f"{_fmt(r['drift_15s_m'])} |")
-    end_rms = summary["horizontal_error_end_rms_m"]
-    outside = summary["horizontal_rms_outside_outages_m"]
-    inside = summary["outage_ends_inside_3sigma_fraction"]
-
-    def verdict(ok: bool) -> str:
-        return "met" if ok else "missed"
-
-    difference = summary.get("c_python_max_difference_m")
-    agreement = f"{difference:.2g} m" if difference is not None else "not flown (--navigator both)"
-    agreed = verdict(difference <= 1e-3) if difference is not None else ""
-
     lines += ["", "## Targets (issue 13)", "",
               "| quantity | reached | target | anchor (published 15-state filter) | |",
-              "|---|---|---|---|---|",
-              f"| end-of-outage horizontal error, RMS | {_fmt(end_rms)} m | <= 5.0 m | 7.44 m | "
-              f"{verdict(end_rms is not None and end_rms <= 5.0)} |",
-              f"| end-of-outage horizontal error, median / max | {_fmt(summary['horizontal_error_end_median_m'])} / "
-              f"{_fmt(summary['horizontal_error_end_max_m'])} m | | 7.02 / 13.35 m | |",
-              f"| horizontal RMS outside outages | {_fmt(outside, 3)} m | <= 0.10 m | 0.057 m | "
-              f"{verdict(outside <= 0.10)} |",
-              f"| outage ends inside the filter's 3 sigma | {_fmt(100 * inside if inside is not None else None, 0)} % "
-              f"| >= 90 % | | {verdict(inside is not None and inside >= 0.9)} |",
-              f"| navigator CPU time, C, whole log | {_fmt(timings.get('fly_c_cpu_s'), 3)} s | <= 0.5 s (549 s drive) | | "
-              f"{verdict(timings['fly_c_cpu_s'] <= 0.5) if 'fly_c_cpu_s' in timings else ''} |",
-              f"| navigator wall time, Python reference | {_fmt(timings.get('fly_python_s'), 2)} s | | 11.9 s | |",
-              f"| C against Python, largest antenna-position difference | {agreement} | <= 0.001 m | | {agreed} |",
-              ""]
+              "|---|---|---|---|---|"]
+    for row in targets(summary, timings):
+        verdict = "" if row["met"] is None else ("met" if row["met"] else "missed")
+        lines.append("|" + "|".join(f" {cell} " if cell else " " for cell in
+                                    (row["quantity"], row["reached"], row["target"], row["anchor"], verdict)) + "|")
+    lines.append("")
     lines += ["## Tuning and how it was chosen", "",
               "IMU noise = data-sheet value x unit x stated factor (configuration `noise`):", "",
               "| noise | data sheet | factor | SI value used | why |", "|---|---|---|---|---|"]
@@ -270,6 +318,8 @@ def report_files(flight: Flight, errors: Errors, summary: dict, config: Navigato
     record["gnss_velocity_latency_estimated_s"] = latency
     record["noise"] = {k: {"value": e.value, "unit": e.unit, "factor": e.factor, "si": e.si, "why": e.why}
                        for k, e in config.noise.items()}
+    record["targets"] = targets(summary, timings)
+    record["figures"] = dict(FIGURE_CAPTIONS) if with_figures else {}
     files = {"summary.md": summary_markdown(summary, config, timings, latency),
              "summary.json": json.dumps(record, indent=2, allow_nan=False, default=_json_default) + "\n",
              "trajectory.pos": pos_text(flight, config),

@@ -3,7 +3,7 @@
 The table has one row per case: the parameters' values (their units in the
 column names), the filter, and the final value of every reported error in
 the paper's units (``position_cep_nmile``...).  CSV is always written;
-Parquet is written with pyarrow (``pip install 'modelgen[parquet]'``; the
+Parquet is written with pyarrow (``pip install 'modelgen-nav[parquet]'``; the
 test extra installs it) and, without it, the summary says so rather than
 failing the study: pyarrow is large, and the core install stays light.
 
@@ -197,7 +197,7 @@ def summary_markdown(result: TradeResult, files: Sequence[Path], parquet_written
             lines.append(f"| {text} | {mc.runs} | {100 * inside:.0f} % | {mc.seconds:.1f} |")
         lines.append("")
     if not parquet_written:
-        lines += ["Parquet table not written: pyarrow is not installed (`pip install 'modelgen[parquet]'`).", ""]
+        lines += ["Parquet table not written: pyarrow is not installed (`pip install 'modelgen-nav[parquet]'`).", ""]
     lines += ["## Files", ""] + [f"- [{p.name}]({p.name})" for p in files] + [""]
     return "\n".join(lines)
 

@@ -46,11 +46,11 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from modelgen.analysis.budget import BUDGET_FILE, ErrorBudget, load_error_budget
-from modelgen.analysis.metrics import REPORTED_STATES
-from modelgen.analysis.scenario import SCENARIO_FILE, AnalysisScenario, load_analysis_scenario
-from modelgen.analysis.suboptimal import PAPER_FILTERS, FilterDesign
-from modelgen.analysis.systems import PURE_INERTIAL
+from modelgen.table2.budget import BUDGET_FILE, ErrorBudget, load_error_budget
+from modelgen.table2.metrics import REPORTED_STATES
+from modelgen.table2.scenario import SCENARIO_FILE, AnalysisScenario, load_analysis_scenario
+from modelgen.table2.suboptimal import PAPER_FILTERS, FilterDesign
+from modelgen.table2.systems import PURE_INERTIAL
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml_with_lines
 from modelgen.model.declaration import ErrorModel

@@ -3,7 +3,7 @@
 A *point* is one value of every study parameter; a *case* is a point with
 one filter.  The cases of a point share the truth system (its Phi and
 Gamma Q Gamma^T), so a task evaluates every filter of a few points
-(:func:`evaluate_points`) with :func:`modelgen.analysis.systems.analyse_systems`,
+(:func:`evaluate_points`) with :func:`modelgen.table2.systems.analyse_systems`,
 the same recursions as the paper's Table 2.  Each worker derives the truth and
 filter models once per study (:func:`modelgen.cluster.worker_cached`); tasks
 carry plain data only (the model declaration, scenario, budget, values).
@@ -24,11 +24,11 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from modelgen.analysis.budget import ErrorBudget
-from modelgen.analysis.metrics import final_values
-from modelgen.analysis.scenario import AnalysisScenario
-from modelgen.analysis.suboptimal import FilterDesign
-from modelgen.analysis.systems import PURE_INERTIAL, PaperModels, analyse_systems
+from modelgen.table2.budget import ErrorBudget
+from modelgen.table2.metrics import final_values
+from modelgen.table2.scenario import AnalysisScenario
+from modelgen.table2.suboptimal import FilterDesign
+from modelgen.table2.systems import PURE_INERTIAL, PaperModels, analyse_systems
 from modelgen.cluster import Journal, describe_client, run_tasks, worker_cached
 from modelgen.derive.symbolic import derive
 from modelgen.errors import ModelError

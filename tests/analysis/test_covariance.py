@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from modelgen.analysis.budget import load_error_budget
+from modelgen.table2.budget import load_error_budget
 from modelgen.analysis.covariance import (
     discretize,
     filter_gains,
@@ -14,8 +14,8 @@ from modelgen.analysis.covariance import (
     selection_matrix,
     true_error_covariance,
 )
-from modelgen.analysis.scenario import load_analysis_scenario, operating_point
-from modelgen.analysis.suboptimal import PAPER_FILTERS, filter_parameters
+from modelgen.table2.scenario import load_analysis_scenario, operating_point
+from modelgen.table2.suboptimal import PAPER_FILTERS, filter_parameters
 from modelgen.derive.discretization import van_loan_discretization
 from modelgen.errors import ModelError
 

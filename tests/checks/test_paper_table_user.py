@@ -98,6 +98,35 @@ def test_cli_verify_table_exits_0_when_every_difference_is_annotated(tmp_path):
     assert "6 entries, 5 match, 1 differ" in run.output
 
 
+def test_cli_verify_table_takes_the_model_from_the_tables_model_key(tmp_path):
+    """`modelgen verify --table FILE` needs no MODEL: the table names it (`model: enu_doppler18`)."""
+    named = CliRunner().invoke(main, ["verify", "--table", str(USER_TABLE), "--out", str(tmp_path / "a")])
+    given = CliRunner().invoke(main, ["verify", "enu_doppler18", "--table", str(USER_TABLE), "--out", str(tmp_path / "b")])
+    assert named.exit_code == given.exit_code == 1, named.output
+    assert "model enu_doppler18 against enu_doppler18_user_table.yaml: 9 entries" in named.output
+    assert (tmp_path / "a" / "verification.json").read_bytes() == (tmp_path / "b" / "verification.json").read_bytes()
+
+
+def test_cli_verify_table_without_model_key_or_argument_asks_for_the_model(tmp_path):
+    table = tmp_path / "anonymous.yaml"
+    table.write_text('entries:\n  - {matrix: F, row: 1, col: 2, expression: "1"}\n', encoding="utf-8")
+    run = CliRunner().invoke(main, ["verify", "--table", str(table), "--out", str(tmp_path / "r")])
+    assert run.exit_code == 2
+    assert run.output.strip() == (f"modelgen: error: {table}: the table has no 'model:' key: name the model "
+                                  "(modelgen verify MODEL --table anonymous.yaml) or add 'model: <name>' to the table")
+    assert not (tmp_path / "r").exists()
+
+
+def test_cli_verify_table_naming_a_model_that_is_not_built_in_asks_for_its_file(tmp_path):
+    """The model: key is a name, never a path: a table for a user's model needs that model's file as MODEL."""
+    table = tmp_path / "mine.yaml"
+    table.write_text('model: ../../etc/passwd\nentries:\n  - {matrix: F, row: 1, col: 2, expression: "1"}\n', encoding="utf-8")
+    run = CliRunner().invoke(main, ["verify", "--table", str(table), "--out", str(tmp_path / "r")])
+    assert run.exit_code == 2
+    assert run.output.strip() == (f"modelgen: error: {table}: the table is written for model '../../etc/passwd', which is "
+                                  "not a built-in model: give its file (modelgen verify MODEL.yaml --table mine.yaml)")
+
+
 def test_a_table_for_another_model_is_refused(paper_model):
     with pytest.raises(ModelError, match="written for model 'enu_doppler18', not 'ned_doppler18'"):
         load_paper_table(USER_TABLE, paper_model)

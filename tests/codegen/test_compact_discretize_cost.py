@@ -231,7 +231,7 @@ def measured_run(folder, name: str, T: float) -> dict[str, object]:
         if not count_text.isdigit():
             continue
         count = int(count_text)
-        for marker in ("horner_second_level(w", "horner_level(w->R[k", "doubling(w);", "changed |= balance_step("):
+        for marker in ("horner_second_level(w", "horner_level(w->R[k", "doubling(w);", "changed |= modelgen_balance_step("):
             if marker in source:
                 calls[marker] = calls.get(marker, 0) + count
         if function.endswith(COUNTED) and not (function.endswith("_discretize") and function != f"{name}_discretize"):
@@ -243,7 +243,7 @@ def measured_run(folder, name: str, T: float) -> dict[str, object]:
         "flops": OperationCount(mul, add),
         "order": 1 if not second else (2 if not levels else levels + 2),
         "halvings": calls.get("doubling(w);", 0),
-        "sweeps": calls.get("changed |= balance_step(", 0),
+        "sweeps": calls.get("changed |= modelgen_balance_step(", 0),
         "by_function": by_function,
     }
 

@@ -172,6 +172,37 @@ def test_bad_measurements_and_states_are_refused_by_both_and_leave_the_c_filter_
         py.Filter(x_nan, P)
 
 
+@pytest.mark.parametrize("options", FAMILIES, ids=lambda o: o.slug())
+def test_a_process_noise_with_a_negative_variance_is_refused_by_both_and_changes_nothing(builds, options, operating_point):
+    """Q_d(i, i) < 0 (UD form: a negative weight qw) is refused by predict as set_covariance refuses such a P (issue 28)."""
+    from modelgen.codegen.layout import packed_index
+
+    built = builds[options.slug()]
+    n = built.derived.n_states
+    c = ready_c_filter(built, options, operating_point)
+    py = built.python
+    p, phi, qd, x, P = python_inputs(py, operating_point, n)
+    f = py.Filter(x, P)
+    state = (f.get_state().tobytes(), f.get_covariance().tobytes())
+    for k in (0, n - 1):
+        stored = np.ctypeslib.as_array(c.transition.qw if options.ud else c.transition.Qd)
+        index = min(k, len(stored) - 1) if options.ud else packed_index(n, k, k)
+        saved = stored[index]
+        stored[index] = -1e-6
+        before = snapshot(c)
+        assert c.predict() == 2, k  # ERR_NOT_POSITIVE
+        assert snapshot(c) == before, k
+        stored[index] = saved
+        negative = qd.copy()
+        negative[k, k] = -1e-6
+        with pytest.raises(ValueError, match=rf"predict: Qd has a negative variance Qd\[{k}, {k}\]"):
+            py.predict(x, P, phi, negative)
+        with pytest.raises(ValueError, match=rf"predict: Qd has a negative variance Qd\[{k}, {k}\]"):
+            f.predict(phi, negative)
+        assert (f.get_state().tobytes(), f.get_covariance().tobytes()) == state, k
+    assert c.predict() == 0  # the transition restored: accepted again
+
+
 @pytest.mark.parametrize("options", [FAMILIES[0], FAMILIES[4]], ids=lambda o: o.slug())
 def test_the_python_filter_class_refuses_what_the_c_filter_refuses_and_is_then_unchanged(builds, options, operating_point):
     """The stateful API of both languages: set_covariance, update and update_masked on the same bad inputs."""
@@ -245,3 +276,80 @@ def test_the_contract_table_is_written_into_the_python_docstring_and_the_readme(
     for row in contract_markdown():
         assert row in readme
         assert row.count("|") == 4  # no cell holds a pipe
+
+
+@pytest.mark.parametrize("options", FAMILIES, ids=lambda o: o.slug())
+def test_a_measurement_whose_innovation_squared_overflows_is_refused_by_both(builds, options, operating_point):
+    """z = +-1e308: nu^T S^-1 nu overflows, a non-finite result refused by C and Python alike (issue 28: Python returned x ~ 8.6e307)."""
+    built = builds[options.slug()]
+    n = built.derived.n_states
+    c = ready_c_filter(built, options, operating_point)
+    py = built.python
+    p, phi, qd, x, P = python_inputs(py, operating_point, n)
+    H, r = py.measurement_matrix(p), py.measurement_variance(p)
+    f = py.Filter(x, P)
+    state = (f.get_state().tobytes(), f.get_covariance().tobytes())
+    for value in (1e308, -1e308):
+        z = np.zeros(len(r))
+        z[0] = value
+        before = snapshot(c)
+        assert c.update(z) == 1, value  # ERR_NONFINITE
+        assert c.update_masked(z, None)[0] == 1, value
+        assert snapshot(c) == before, value
+        for update in (lambda: py.update(x, P, z, H, r), lambda: py.update_masked(x, P, z, H, r),
+                       lambda: f.update(z, H, r), lambda: f.update_masked(z, H, r)):
+            with pytest.raises(ValueError, match="update: the normalized innovation squared"):
+                update()
+        assert (f.get_state().tobytes(), f.get_covariance().tobytes()) == state, value
+
+
+@pytest.mark.parametrize("options", [o for o in FAMILIES if o.scalar == "double"], ids=lambda o: o.slug())
+def test_a_large_but_finite_innovation_squared_is_accepted_by_both_and_agrees(builds, options, operating_point):
+    """z = 1e200 with r = 1e300: nu^2 overflows but nu^T S^-1 nu = 1e100 does not; every update accepts it (the
+    sequential and Bierman updates summed nu * nu / s, which overflowed, where the vector update's |L^-1 nu|^2 did not)."""
+    built = builds[options.slug()]
+    n = built.derived.n_states
+    c = ready_c_filter(built, options, operating_point)
+    py = built.python
+    p, phi, qd, x, P = python_inputs(py, operating_point, n)
+    H, r = py.measurement_matrix(p), py.measurement_variance(p)
+    r = r.copy()
+    r[0] = 1e300
+    np.ctypeslib.as_array(c.matrices.r)[0] = 1e300
+    z = np.zeros(len(r))
+    z[0] = 1e200
+    status, _, nis = c.update_masked(z, None)
+    assert status == 0
+    _, _, _, py_nis = py.update_masked(x, P, z, H, r)
+    assert nis == pytest.approx(1e100, rel=1e-9) and py_nis == pytest.approx(nis, rel=1e-12)
+
+
+@pytest.mark.parametrize("options", FAMILIES, ids=lambda o: o.slug())
+def test_a_step_so_short_that_q_over_T_overflows_is_refused_by_both(builds, options, operating_point):
+    """T = 1e-320: q / T, the weights of Gamma (Q/T) Gamma^T, overflows; C and Python refuse it alike (issue 28: the
+    covariance C accepted it, the Python refused it); T = 1e-300 (q / T finite) both accept in double."""
+    built = builds[options.slug()]
+    c = ready_c_filter(built, options, operating_point)
+    py = built.python
+    p = py.parameter_vector(operating_point)
+    F, G, q = py.system_matrix(p), py.noise_input_matrix(p), py.noise_psd(p)
+    assert c.discretize(1e-320) == (1 if options.scalar == "double" else 2)  # a float T of 1e-320 is 0: not positive
+    with pytest.raises(ValueError, match="discretize: T = 1e-320 is so short that q / T"):
+        py.discretize(F, G, q, 1e-320)
+    if options.scalar == "double":
+        assert c.discretize(1e-300) == 0
+        phi, _ = py.discretize(F, G, q, 1e-300)
+        np.testing.assert_array_equal(phi, c.Phi)  # one term of the series: I + F T rounds to I
+
+
+def test_a_step_that_is_not_a_real_number_is_refused_by_the_python(builds, operating_point):
+    """'60', True and complex steps are refused as the C's double would never hold them (issue 28); real types are taken."""
+    py = builds[FAMILIES[0].slug()].python
+    p = py.parameter_vector(operating_point)
+    F, G, q = py.system_matrix(p), py.noise_input_matrix(p), py.noise_psd(p)
+    for T in ("60", True, False, np.bool_(True), 60 + 0j, np.complex128(60.0), None, [60.0]):
+        with pytest.raises(ValueError, match="discretize: T is not a real number"):
+            py.discretize(F, G, q, T)
+    reference = py.discretize(F, G, q, 60.0)
+    for T in (60, np.float64(60.0), np.int64(60), np.float32(60.0)):
+        np.testing.assert_array_equal(py.discretize(F, G, q, T)[0], reference[0])

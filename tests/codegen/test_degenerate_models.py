@@ -43,6 +43,20 @@ noises:
   - {name: bias_noise, symbol: w, psd: mu}
 dynamics: {b: -mu*b + w}
 """,
+    "clock_bias_and_drift": """
+model: rx_clock
+parameters:
+  - {name: sigma_bias, symbol: sb, value: 2.0}
+states:
+  - {name: clock_bias, symbol: b, unit: m}
+  - {name: clock_drift, symbol: d, unit: m/s}
+noises:
+  - {name: bias_noise, symbol: wb, psd: "sb**2"}
+  - {name: drift_noise, symbol: wd, psd: "0.01"}
+dynamics: {b: d + wb, d: wd}
+measurements:
+  - {name: pseudorange, symbol: z, expression: b, variance: "1.0"}
+""",
     "nothing_but_a_constant": """
 model: bare
 states:

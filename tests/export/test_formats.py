@@ -88,10 +88,46 @@ def test_latex_is_one_table_row_per_entry_with_the_models_symbols(enu_derived):
     rows = [line for line in latex.splitlines() if re.match(r"^\$[FGHQR]\(\d+,\d+\)\$ & ", line)]
     assert len(rows) == len(matrix_entries(enu_derived))
     assert latex.count("\\begin{longtable}") == latex.count("\\end{longtable}") == 1
-    assert "$F(1,2)$ & attitude\\_error\\_east / attitude\\_error\\_north & $\\omega_{ie} \\sin{\\left(L \\right)}" in latex
+    assert ("$F(1,2)$ & attitude\\_\\allowbreak{}error\\_\\allowbreak{}east /\\newline "
+            "attitude\\_\\allowbreak{}error\\_\\allowbreak{}north & $\\omega_{ie} \\sin{\\left(L \\right)}") in latex
     assert "\\left(R_{M} + h\\right)^{2}" in latex  # R_M + h kept together
     body = latex.split("\\begin{longtable}")[1]
     assert body.count("{") == body.count("}")
+
+
+def test_latex_columns_add_up_to_less_than_the_text_width(enu_derived):
+    """The quantity and value columns are fractions of \\linewidth; with the widest entry label and the gaps they fit."""
+    from modelgen.export.formats import LATEX_QUANTITY_WIDTH, LATEX_VALUE_WIDTH
+
+    spec = next(line for line in to_latex(enu_derived).splitlines() if line.startswith("\\begin{longtable}"))
+    assert f"p{{{LATEX_QUANTITY_WIDTH}\\linewidth}}" in spec and f"p{{{LATEX_VALUE_WIDTH}\\linewidth}}" in spec
+    # A4 article text width 345 pt: the entry column ("$R(12,12)$", 50 pt) and two gaps of 2 x 6 pt leave 271 pt
+    assert (LATEX_QUANTITY_WIDTH + LATEX_VALUE_WIDTH) * 345 <= 345 - 50 - 24
+
+
+@pytest.mark.compile
+@pytest.mark.parametrize("paper", ["a4paper", "letterpaper"])
+def test_latex_export_of_every_builtin_model_fits_the_page(tmp_path, paper):
+    """pdflatex sets every built-in model's table without an overfull line (it used to be 153 pt too wide)."""
+    import shutil
+    import subprocess
+
+    from modelgen.jobs import load_and_derive
+    from modelgen.model.loading import builtin_models
+
+    if shutil.which("pdflatex") is None:
+        pytest.skip("pdflatex is not installed (Debian: texlive-latex-base texlive-latex-recommended)")
+    inputs = []
+    for name in builtin_models():
+        (tmp_path / f"{name}.tex").write_text(to_latex(load_and_derive(name)), encoding="utf-8")
+        inputs.append(f"\\input{{{name}.tex}}\\clearpage")
+    (tmp_path / "doc.tex").write_text(f"\\documentclass[{paper}]{{article}}\n\\usepackage{{longtable,array,amsmath}}\n"
+                                      "\\begin{document}\n" + "\n".join(inputs) + "\n\\end{document}\n", encoding="utf-8")
+    run = subprocess.run(["pdflatex", "-interaction=nonstopmode", "-halt-on-error", "doc.tex"], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    log = (tmp_path / "doc.log").read_text(encoding="utf-8", errors="replace")
+    assert run.returncode == 0, log[-2000:]
+    assert [line for line in log.splitlines() if line.startswith("Overfull \\hbox")] == []
 
 
 def test_hostile_free_text_stays_inert_text_in_latex_and_octave(hostile_model):

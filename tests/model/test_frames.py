@@ -34,8 +34,8 @@ import math
 import numpy as np
 import pytest
 
-from modelgen.analysis.budget import load_error_budget
-from modelgen.analysis.scenario import load_analysis_scenario, operating_point, specific_force_ned
+from modelgen.table2.budget import load_error_budget
+from modelgen.table2.scenario import load_analysis_scenario, operating_point, specific_force_ned
 from modelgen.derive.symbolic import derive
 from modelgen.derive.discretization import taylor_discretization, taylor_process_noise
 from modelgen.model.frames import NED_TO_ENU, body_axes_map, ned_to_enu_transformation

@@ -80,7 +80,7 @@ def test_readme_navigation_example_is_under_40_lines_and_generates_and_passes_th
     from conftest import REPO
     from modelgen.cli import main
 
-    blocks = re.findall(r"```yaml\n(.*?)```", (REPO / "README.md").read_text(encoding="utf-8"), re.S)
+    blocks = re.findall(r"```yaml\n(.*?)```", (REPO / "docs" / "model-language.md").read_text(encoding="utf-8"), re.S)
     example = next(b for b in blocks if "model: ins_gnss15_example" in b)
     assert len(example.splitlines()) < 40
     path = tmp_path / "ins_gnss15_example.yaml"

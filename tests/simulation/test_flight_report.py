@@ -37,70 +37,9 @@ def test_summary_names_no_absolute_path_and_counts_one_run_as_one_run(paper_deri
     assert "Filter: the dense numpy reference filter" in text.split("## Monte Carlo")[1]
 
 
-def test_coinciding_modes_names_a_curve_lying_on_an_earlier_one_only():
-    from modelgen.simulation.flight_report import coinciding_modes
-
-    base = np.linspace(1.0, 2.0, 50)
-    notes = coinciding_modes({"open_loop": base, "closed_loop": base * 1.5, "accumulated": base * 1.5 * (1 + 1e-6)})
-    assert list(notes) == ["accumulated"]
-    assert notes["accumulated"][0] == "closed_loop" and notes["accumulated"][1] < 1e-5
-
-
-def test_pixel_envelope_keeps_each_pixel_columns_first_last_smallest_and_largest_sample():
-    from modelgen.simulation.flight_report import pixel_envelope
-
-    rng = np.random.default_rng(3)
-    values = np.cumsum(rng.standard_normal(10_000))
-    values[1234] = np.nan
-    columns = 97
-    kept = pixel_envelope(values, columns)
-    assert np.all(np.diff(kept) > 0) and len(kept) <= 4 * columns + 1
-    assert 1234 in kept
-    edges = np.linspace(0, len(values), columns + 1).round().astype(int)
-    for start, stop in zip(edges[:-1], edges[1:]):
-        run = values[start:stop]
-        mine = values[kept[(kept >= start) & (kept < stop)]]
-        assert start in kept and stop - 1 in kept
-        assert np.nanmin(mine) == np.nanmin(run) and np.nanmax(mine) == np.nanmax(run)
-
-
-def test_pixel_envelope_keeps_every_sample_of_a_short_series_and_refuses_no_columns():
-
-    from modelgen.simulation.flight_report import pixel_envelope
-
-    assert list(pixel_envelope(np.arange(40.0), 10)) == list(range(40))
-    with pytest.raises(ValueError, match="columns must be positive"):
-        pixel_envelope(np.arange(40.0), 0)
-
-
-def _write_text(text, path):
-    path.write_text(text, encoding="utf-8")
-    return path
-
-
-def _fail(path):
-    raise RuntimeError(f"cannot draw {path.name}")
-
-
-def test_draw_figures_returns_the_paths_in_order_and_the_one_drawn_apart_is_written(tmp_path):
-    from modelgen.simulation.flight_report import draw_figures
-
-    drawings = [(_write_text, (name, tmp_path / f"{name}.txt")) for name in ("a", "b", "c")]
-    assert draw_figures(drawings, apart=1) == [tmp_path / "a.txt", tmp_path / "b.txt", tmp_path / "c.txt"]
-    assert [(tmp_path / f"{name}.txt").read_text(encoding="utf-8") for name in "abc"] == ["a", "b", "c"]
-
-
-def test_draw_figures_raises_the_error_of_a_figure_drawn_apart(tmp_path):
-
-    from modelgen.simulation.flight_report import draw_figures
-
-    with pytest.raises(RuntimeError, match="cannot draw b.txt"):
-        draw_figures([(_write_text, ("a", tmp_path / "a.txt")), (_fail, (tmp_path / "b.txt",))], apart=1)
-
-
 def test_a_flight_started_before_the_model_is_derived_flies_the_same_histories(paper_derived, tmp_path):
     from modelgen.errors import ModelError
-    from modelgen.simulation.flight_report import start_flight
+    from modelgen.simulation.flight_start import start_flight
 
     scenario = load_profile("profile_000").with_changes(hours=1 / 60, imu_rate=30.0)
     simulate(scenario, paper_derived, tmp_path / "here", runs=0, echo=lambda line: None, implementation="reference",
@@ -115,56 +54,8 @@ def test_a_flight_started_before_the_model_is_derived_flies_the_same_histories(p
                  implementation="reference", started=start_flight(scenario, 1))
 
 
-def _write_pid(path):
-    path.write_text(str(os.getpid()), encoding="utf-8")
-    return path
-
-
-def _figure_process():
-    from modelgen.simulation.flight_report import FigureProcess
-
-    process = FigureProcess.start()
-    assert process is not None or threading.active_count() > 1  # only a process running another thread does not fork
-    if process is None:
-        pytest.skip("a thread runs in this test process: it forks no figure process")
-    return process
-
-
-def test_the_figure_process_draws_in_another_process_and_returns_the_paths_in_order(tmp_path):
-    process = _figure_process()
-    try:
-        process.draw([(_write_pid, (tmp_path / f"{name}.txt",)) for name in "abc"], apart=1)
-        assert process.paths() == [tmp_path / "a.txt", tmp_path / "b.txt", tmp_path / "c.txt"]
-    finally:
-        process.close()
-    writers = {(tmp_path / f"{name}.txt").read_text(encoding="utf-8") for name in "abc"}
-    assert str(os.getpid()) not in writers and len(writers) == 2  # the figure process and its copy for "b"
-    with pytest.raises(ChildProcessError):
-        os.waitpid(process.pid, os.WNOHANG)  # waited for: gone
-
-
-def test_a_figure_the_figure_process_fails_to_draw_is_drawn_here_and_raises_its_error(tmp_path):
-    process = _figure_process()
-    try:
-        process.draw([(_write_text, ("a", tmp_path / "a.txt")), (_fail, (tmp_path / "b.txt",))], apart=0)
-        with pytest.raises(RuntimeError, match="cannot draw b.txt"):
-            process.paths()
-    finally:
-        process.close()
-
-
-def test_drawings_that_do_not_pickle_are_drawn_here(tmp_path):
-    process = _figure_process()
-    try:
-        process.draw([(lambda path: _write_pid(path), (tmp_path / "a.txt",))], apart=0)
-        assert process.paths() == [tmp_path / "a.txt"]
-    finally:
-        process.close()
-    assert (tmp_path / "a.txt").read_text(encoding="utf-8") == str(os.getpid())
-
-
 def test_figures_drawn_by_the_figure_process_are_the_bytes_drawn_here(paper_derived, tmp_path):
-    from modelgen.simulation.flight_report import start_flight
+    from modelgen.simulation.flight_start import start_flight
 
     scenario = load_profile("profile_000").with_changes(hours=1 / 60, imu_rate=30.0)
     started = start_flight(scenario, 0)

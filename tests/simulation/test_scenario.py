@@ -14,7 +14,7 @@ def test_paper_profile_loads_with_its_reasoned_values():
     s = load_profile("profile_000")
     assert s.path.duration == pytest.approx(4 * 3600)
     assert s.path.ground_speed == pytest.approx(300 * KMH)
-    assert s.path.velocity_down == pytest.approx(-100 * KMH)
+    assert s.path.velocity_down == pytest.approx(-10 * KMH)  # printed -100 km/h: a climb to 30 km (profile_000.yaml)
     assert s.imu_rate == 300 and s.sensors["doppler"].period == 60.0
     assert s.imu_budget.gyro_constant_drift == pytest.approx(math.radians(0.1) / 3600)
 
@@ -24,7 +24,7 @@ def test_paper_profile_levels_off_at_0_4_h_and_flies_east():
     t = generate_trajectory(s.path, 10.0, 1.0)
     at = lambda hours: t.truth[int(hours * 3600)]  # noqa: E731
     assert at(0.45)[6] == pytest.approx(0.0, abs=1e-9)  # level
-    assert at(0.45)[3] == pytest.approx(100 / 3.6 * 720 * 1.5, rel=1e-9)  # 5.56 km climb + 2.78 km level-off
+    assert at(0.45)[3] == pytest.approx(10 / 3.6 * 720 * 1.5, rel=1e-9)  # 2.0 km climb + 1.0 km level-off = 3.0 km
     assert at(0.45)[1] == pytest.approx(math.radians(30.0), abs=1e-9)  # due east
 
 
@@ -65,7 +65,7 @@ def test_paper_profile_and_covariance_error_budget_transcribe_table_1_identicall
     """Table 1 is written twice (the simulation's profile_000.yaml in the scenario's
     vocabulary, the analysis's error_budget_000.yaml keyed by model state); this
     keeps the two from drifting apart, so simulation and covariance analysis fly one system."""
-    from modelgen.analysis.budget import load_error_budget
+    from modelgen.table2.budget import load_error_budget
 
     s, budget = load_profile("profile_000"), load_error_budget()
     sigma, parameter = budget.initial_sigma, budget.parameters

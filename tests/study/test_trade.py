@@ -8,8 +8,8 @@ import textwrap
 import numpy as np
 import pytest
 
-from modelgen.analysis.metrics import final_values
-from modelgen.analysis.systems import PaperModels, analyse_systems
+from modelgen.table2.metrics import final_values
+from modelgen.table2.systems import PaperModels, analyse_systems
 from modelgen.model.units import to_si
 from modelgen.study.outputs import csv_text, panel_values, table_columns, write_outputs
 from modelgen.study.studyfile import load_study

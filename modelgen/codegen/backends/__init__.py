@@ -1,4 +1,4 @@
-"""Backends: each output language of the generated filter as one package (``c``, ``python``).
+"""Backends: each output language of the generated filter as one package (``c``, ``python``, ``cpp``).
 
 A backend turns the language-neutral :class:`~modelgen.codegen.description.FilterDescription`
 into files: it owns its expression printer, literals, template context,

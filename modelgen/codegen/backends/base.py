@@ -6,12 +6,50 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Mapping, Protocol
 
 import jinja2
+import numpy as np
 
 from modelgen.codegen.description import FilterDescription
 from modelgen.codegen.escape import FILTERS
+from modelgen.codegen.kernels import OperationCount
+from modelgen.codegen.options import CodegenOptions
+from modelgen.derive.symbolic import DerivedModel, parameter_vector
+from modelgen.errors import ModelError
+
+
+class Scenario(Protocol):
+    """What :meth:`Backend.run` flies: a constant operating point for ``len(measurements(derived))`` filter cycles.
+
+    ``modelgen.checks.code_check.CheckScenario`` is one; the backends know it
+    only by these members (codegen sits below checks).
+    """
+
+    parameters: Mapping[str, float]
+    initial_covariance: np.ndarray
+    step: float
+
+    def x0(self) -> np.ndarray: ...
+
+    def measurements(self, derived: DerivedModel) -> np.ndarray: ...
+
+
+def named_parameters(derived: DerivedModel, scenario: Scenario) -> dict[str, float]:
+    """Every parameter of the scenario by its spelled-out name, the model's defaults filled in."""
+    values = parameter_vector(derived.model, scenario.parameters)
+    return dict(zip(derived.model.parameter_names, values))
+
+
+class BackendUnavailable(ModelError):
+    """A backend's toolchain is missing on this machine (no C++ compiler): its run is skipped, with a warning."""
+
+
+#: x and P after every step of a scenario.
+Trajectory = list[tuple[np.ndarray, np.ndarray]]
+
+#: (folder of the generated files, derived model, scenario, the options they were generated with, a build folder or None)
+Runner = Callable[[Path, DerivedModel, Scenario, CodegenOptions, "Path | None"], Trajectory]
 
 
 @functools.lru_cache(maxsize=None)
@@ -49,6 +87,26 @@ class Backend:
     files: tuple[tuple[str, str], ...]
     harness: Path | None = None
     finish: Callable[[str, str], str] | None = None  # (file name, text) -> text, e.g. line wrapping
+    verbatim: tuple[Path, ...] = ()  # files of the product copied byte for byte (the C runtime)
+    runner: Runner | None = None  # flies a scenario through the built product (run)
+    counter: Callable[[FilterDescription], dict[str, OperationCount]] | None = None  # its own operation counts (costs)
+
+    def run(self, folder: Path, derived: DerivedModel, scenario: Scenario, options: CodegenOptions | None = None,
+            build_dir: Path | None = None) -> Trajectory:
+        """x and P after every step of ``scenario``, by this backend's files in ``folder`` (built and loaded as a user would).
+
+        ``options`` are those the files were generated with; ``build_dir``
+        keeps what a compiled language builds (None: a temporary folder).
+        Raises ValueError or ModelError when the product refuses an input of
+        the scenario (the contract).
+        """
+        if self.runner is None:
+            raise NotImplementedError(f"backend {self.name!r} cannot run a scenario")
+        return self.runner(Path(folder), derived, scenario, options or CodegenOptions(), build_dir)
+
+    def costs(self, description: FilterDescription) -> dict[str, OperationCount]:
+        """The operation counts of this backend's own kernels (``predict (C)``), written into every file header."""
+        return self.counter(description) if self.counter is not None else {}
 
     def environment(self) -> jinja2.Environment:
         """The jinja2 environment over the product (and harness) templates."""
@@ -61,6 +119,7 @@ class Backend:
         files = {file.format(p=name): env.get_template(t).render(context) for file, t in self.files}
         if self.finish is not None:
             files = {file: self.finish(file, text) for file, text in files.items()}
+        files.update({path.name: path.read_text(encoding="utf-8") for path in self.verbatim})
         return files
 
     def render_template(self, description: FilterDescription, template: str, **extra: object) -> str:

@@ -3,14 +3,21 @@
 Small integer powers print as products: ``x*x`` and ``1.0/(x*x)`` are cheaper
 than ``pow`` on every target and bit for bit the same in the C and the Python
 outputs.  Parameters print under the name the backend gives them (a struct
-member, a local, a vector entry): :class:`RenamedSymbols`.
+member, a local, a vector entry): :class:`RenamedSymbols`.  A number prints
+as its value in the scalar type (:func:`scalar_value`): one too small for
+the type is 0 there (as a C compiler would make it, with a warning that
+-Werror refuses), one too large is refused before any file is written.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Mapping
 
+import numpy as np
 import sympy as sp
+
+from modelgen.errors import ModelError
 
 
 class RenamedSymbols:
@@ -37,3 +44,20 @@ def small_power(printer, expr: sp.Pow, one: str) -> str | None:
     if int(exp) > 0:
         return product
     return f"{one}/({product})" if abs(int(exp)) > 1 else f"{one}/{text}"
+
+
+def scalar_value(number: object, scalar: str) -> float:
+    """``number`` (a sympy Float, a float) rounded to the scalar type (IEEE ``double`` or ``float``).
+
+    A nonzero value below the type's smallest subnormal rounds to 0 (printed
+    as 0, where the literal would fail a strict compile: "floating constant
+    truncated to zero"); a value beyond the type's range is refused
+    (ModelError: the literal would not compile, and no filter can hold it).
+    """
+    value = float(number)
+    if scalar == "float":
+        with np.errstate(over="ignore", under="ignore"):
+            value = float(np.float32(value))
+    if not math.isfinite(value):
+        raise ModelError(f"the constant {sp.Float(number, 4)} is outside the range of the C {scalar} type of the generated filter")
+    return value

@@ -2,17 +2,17 @@
 
 from __future__ import annotations
 
-from modelgen.codegen.backends import c, python
+from modelgen.codegen.backends import c, cpp, python
 from modelgen.codegen.backends.base import Backend
 
 
 def backends() -> tuple[Backend, ...]:
     """The registered backends, in the order their files are rendered."""
-    return (python.BACKEND, c.BACKEND)
+    return (python.BACKEND, c.BACKEND, cpp.BACKEND)
 
 
 def backend(name: str) -> Backend:
-    """The backend called ``name`` (``c``, ``python``)."""
+    """The backend called ``name`` (``python``, ``c``, ``cpp``)."""
     for b in backends():
         if b.name == name:
             return b

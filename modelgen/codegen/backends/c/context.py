@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 from modelgen.codegen.backends.c.literals import c_number, scalar_bytes, scalar_spellings
 from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c_declarator, c_lines, c_ref, c_statement
@@ -10,13 +11,19 @@ from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.discretize_kernels import HORNER_LAST, DiscretizeBlock, SegmentAssign, horner_level_name, scalar_statements
 from modelgen.codegen.kernels import MIN_LANE_PAIRS, CheckedAssign, KernelBlock, compact_predict_tables, lane_split
 from modelgen.codegen.compact_discretize import CompactDiscretizeTables
-from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout, phi_entries
+from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout, packed_index, phi_entries
 from modelgen.codegen.structure import FilterStructure
 from modelgen.codegen.van_loan import QD_MARGIN
 from modelgen.derive.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range
 from modelgen.errors import ModelError
 
 BANNER = "/* GENERATED FILE - DO NOT EDIT (modelgen) */"
+
+#: The fixed C runtime (``runtime/``): real C files, copied verbatim into every generated folder and
+#: included by its ``<model>.c`` (``modelgen_scalar.h`` by the others).
+RUNTIME = Path(__file__).resolve().parent / "runtime"
+RUNTIME_FILES = tuple(sorted(RUNTIME.glob("*.h")))
+RUNTIME_HEADERS = tuple(path for path in RUNTIME_FILES if path.name != "modelgen_scalar.h")
 HASH_BANNER = "# GENERATED FILE - DO NOT EDIT (modelgen)"
 
 
@@ -89,12 +96,6 @@ def two_lane_sums(block: KernelBlock) -> bool:
     return block.two_lanes and any(lane_split(s.terms)[0] for s in block.statements if not isinstance(s, SegmentAssign))
 
 
-def lane_pair_helpers(lines: list[str]) -> list[str]:
-    """The ``lane_pair`` helpers the printed lines call (c_source.c.j2 defines only these: clang warns of unused ones)."""
-    return [name for name in ("lane_pair_load", "lane_pair_of", "lane_pair_product", "lane_pair_add_product", "lane_pair_sum")
-            if any(f"{name}(" in line for line in lines)]
-
-
 def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, object]]:
     """Static C functions for the unrolled kernel pieces, with the parameters each uses."""
     types = {"filter": f"const {prefix}_filter", "transition": f"const {prefix}_transition", "scratch": f"{prefix}_filter_scratch"}  # noqa: E501
@@ -113,6 +114,31 @@ def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, ob
             }
         )
     return out
+
+
+def qd_variance_check(n: int, prefix: str, zero: str, compact: bool) -> list[str]:
+    """C lines of predict that return ERR_NOT_POSITIVE when a variance Q_d(i, i) of the transition is negative.
+
+    Every diagonal entry is read (not only Q_d's structural nonzeros): the
+    Python refuses a negative one wherever it is.  First their sign bits,
+    OR'ed (runtime ``modelgen_ieee.h``: one load and one OR per state,
+    straight-line where the prediction is unrolled, a loop where it is
+    compact); only a set sign bit (a negative entry, or a -0 or a NaN,
+    which are not refused here) makes predict compare entry by entry.
+    predict declares ``modelgen_bits signs``; the loop index ``d`` is declared
+    here, in the narrowest block that uses it (cppcheck's variableScope).
+    """
+    diagonal = [packed_index(n, i, i) for i in range(n)]
+    if compact:
+        signs = ["int d;", "signs = 0;", f"for (d = 0; d < {prefix}_N_STATES; ++d) {{",
+                 f"    signs |= modelgen_bits_of(t->Qd[{prefix}_PACKED_UPPER(d, d)]);", "}"]
+        declare = []
+    else:
+        signs = [f"signs = modelgen_bits_of(t->Qd[{diagonal[0]}]);"] + [f"signs |= modelgen_bits_of(t->Qd[{k}]);" for k in diagonal[1:]]
+        declare = ["    int d;"]
+    return signs + ["if (signs & MODELGEN_SIGN_BIT) {", *declare, f"    for (d = 0; d < {prefix}_N_STATES; ++d) {{",
+                    f"        if (t->Qd[{prefix}_PACKED_UPPER(d, d)] < {zero}) {{", f"            return {prefix}_ERR_NOT_POSITIVE;",
+                    "        }", "    }", "}"]
 
 
 def compact_tables(description: FilterDescription) -> dict[str, list[int]]:
@@ -163,7 +189,7 @@ def discretize_functions(blocks: list[DiscretizeBlock], prefix: str, scalar: str
     (1/k!, ...) are declared in the function as exact quotients the compiler folds.
     """
     types = {"matrices": f"{prefix}_matrices", "transition": f"{prefix}_transition", "scratch": f"{prefix}_discretize_scratch"}
-    arguments = {"h": "T * power_of_two(-halvings)", "T": "T", "c_out": "taylor_coefficient[k]", "c_in": "taylor_coefficient[k + 1]"}
+    arguments = {"h": "T * modelgen_power_of_two(-halvings)", "T": "T", "c_out": "taylor_coefficient[k]", "c_in": "taylor_coefficient[k + 1]"}
     out = []
     for b in blocks:
         statements = b.block.statements
@@ -226,13 +252,6 @@ def _balance_states(structure: FilterStructure) -> list[tuple[int, str]]:
         elif i in columns:
             out.append((i, "column"))
     return out
-
-
-def _ieee_layout(scalar: str) -> dict[str, object]:
-    """The IEEE-754 bit layout of the scalar type, for the exponent helpers of discretize."""
-    if scalar == "float":
-        return {"bits_type": "uint32_t", "mantissa_bits": 23, "exponent_mask": "0xFFu", "exponent_bias": 127}
-    return {"bits_type": "uint64_t", "mantissa_bits": 52, "exponent_mask": "0x7FFu", "exponent_bias": 1023}
 
 
 def _struct_list(layout: CLayout) -> list[dict[str, object]]:
@@ -379,7 +398,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "pivot_tolerance": f"(16 * {prefix}_N_STATES * {spell['epsilon']})",
         "update_doc": _update_doc(description),
         "part_templates": parts,
-        "source_templates": ["c_source.c.j2", *(["c_discretize_van_loan.c.j2"] if options.van_loan else []), *parts, "c_udu_factor.c.j2"],
+        "source_templates": ["c_source.c.j2", *(["c_discretize_van_loan.c.j2"] if options.van_loan else []), *parts],
         "evaluate": {
             "temporaries": [(str(s), printer.doprint(e)) for s, e in block.temporaries],
             "outputs": [(f"{t.matrix}[{t.k}]", printer.doprint(e)) for t, e in zip(targets, block.outputs)],
@@ -405,12 +424,13 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "norm_rows": _norm_rows(structure),
         "balance_scaling": list(scaling) if scaling is not None else None,
         "scaled_norm_rows": _scaled_norm_rows(structure, scaling, options.scalar) if scaling is not None else [],
-        **_ieee_layout(options.scalar),
         "discretize_sizes": {"terms": unrolled.term_size, "active": unrolled.active_size} if unrolled else {},
         "discretize_blocks": discretize,
         "discretize_calls": {f["name"]: f["call"] for f in discretize},
-        "horner_levels": [(calls[horner_level_name(1, 0)], calls[horner_level_name(1, 1)])] if discretize else [],
-        "horner_saturated": (calls[horner_level_name(0, 0, True)], calls[horner_level_name(0, 1, True)]) if discretize else (),
+        "horner_levels": [(calls[horner_level_name(1, 0)], calls[horner_level_name(1, 1)])] if horner_level_name(1, 0) in calls else [],
+        # the levels below the top: none where every stored row is read by no row of F (a clock's bias and drift)
+        "horner_saturated": tuple(calls[horner_level_name(0, parity, True)] for parity in (0, 1))
+        if horner_level_name(0, 0, True) in calls else (),
         "horner_last": calls.get(HORNER_LAST, ""),  # k = 0 where rows that no row of F reads are left out above it
         "taylor_coefficients": [c_number(1.0, options.scalar) + f" / {c_number(float(math.factorial(k + 1)), options.scalar)}"
                                 for k in range(options.taylor_order + 1)],
@@ -422,7 +442,8 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         ],
         "predict_state": state_printed,
         "predict_state_pairs": two_lane_sums(state_block),
-        "lane_pair_helpers": lane_pair_helpers(state_printed + [line for f in [*predict_functions, *discretize] for line in f["lines"]]),
+        "runtime_headers": [path.name for path in RUNTIME_HEADERS],
+        "two_lane_sums": any("lane_pair_" in line for line in state_printed + [line for f in [*predict_functions, *discretize] for line in f["lines"]]),
         "min_lane_terms": 2 * MIN_LANE_PAIRS,  # the compact propagate's two-lane order (kernels.lane_split)
         # a row of Phi long enough for it (without one, gcc -Warray-bounds sees the lanes' reads beyond small tables)
         "compact_two_lanes": any(len(row) >= 2 * MIN_LANE_PAIRS for row in structure.rows("Phi")),
@@ -440,7 +461,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "compact": bool(compact),
         "compact_tables": {**{k: _table(v) for k, v in compact.items()}, "nnz": max(len(compact.get("col", ())), 1)},
         "struct_bytes": struct_bytes(layout, scalar_bytes(options.scalar)),
-        "predict_reads_transition": bool(state_lines) or bool(compact) or any(b.uses("transition") for b in blocks),
+        "qd_variance_check": [] if options.ud else qd_variance_check(n, prefix, spell["zero"], bool(compact)),
         "first_free_parameter": next((p.name for p in model.parameters if p.value is None), None),
         "example_value": c_number(0.5, options.scalar),
         "example_variance": c_number(1e-4, options.scalar),

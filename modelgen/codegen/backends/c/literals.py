@@ -2,10 +2,17 @@
 
 from __future__ import annotations
 
+from modelgen.codegen.backends.printing import scalar_value
+
 
 def c_number(value: float | None, scalar: str) -> str:
-    """A C floating literal of ``value`` (None counts as 0) in the scalar type (``F`` suffix for float)."""
-    text = repr(float(value or 0.0))
+    """A C floating literal of ``value`` (None counts as 0) in the scalar type (``F`` suffix for float).
+
+    Rounded to the type first (``backends.printing.scalar_value``): 0 where it
+    underflows, ModelError beyond the type's range, so that the literal compiles.
+    """
+    number = float(value or 0.0)
+    text = repr(number if scalar_value(number, scalar) != 0.0 else 0.0)
     if "e" not in text and "." not in text:
         text += ".0"
     return text + ("F" if scalar == "float" else "")

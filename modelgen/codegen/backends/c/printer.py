@@ -13,7 +13,7 @@ import sympy as sp
 from sympy.codegen.ast import float32, float64, real
 from sympy.printing.c import C99CodePrinter
 
-from modelgen.codegen.backends.printing import RenamedSymbols, small_power
+from modelgen.codegen.backends.printing import RenamedSymbols, scalar_value, small_power
 from modelgen.codegen.kernels import Assign, CheckedAssign, Ref, Statement, Term, lane_split
 
 SCALAR_TYPES = {"double": float64, "float": float32}
@@ -29,6 +29,12 @@ class CPrinter(RenamedSymbols, C99CodePrinter):
         super().__init__({"type_aliases": {real: SCALAR_TYPES[scalar]}})
         self.scalar = scalar
         self._init_renames(renames)
+
+    def _print_Float(self, expr: sp.Float) -> str:
+        """The literal in the scalar type: 0 for a value that underflows it (``scalar_value``), ModelError beyond its range."""
+        if scalar_value(expr, self.scalar) == 0.0:
+            return "0.0F" if self.scalar == "float" else "0.0"
+        return super()._print_Float(expr)
 
     def _print_Pow(self, expr: sp.Pow) -> str:
         one = "1.0F" if self.scalar == "float" else "1.0"

@@ -11,12 +11,22 @@ from pathlib import Path
 
 from modelgen.codegen.backends.base import Backend
 from modelgen.codegen.backends.python.context import python_context
+from modelgen.codegen.backends.python.run import python_run
+from modelgen.codegen.description import FilterDescription
+from modelgen.codegen.kernels import OperationCount, python_predict_cost
 
 HERE = Path(__file__).resolve().parent
+
+def python_costs(description: FilterDescription) -> dict[str, OperationCount]:
+    """The Python's vectorized prediction (dense within each row class of Phi)."""
+    return {"predict (Python)": python_predict_cost(description.structure)}
+
 
 BACKEND = Backend(
     name="python",
     context=python_context,
     templates=HERE / "templates",
+    runner=python_run,
+    counter=python_costs,
     files=(("{p}.py", "python_module.py.j2"),),
 )

@@ -1,0 +1,97 @@
+/* modelgen C runtime: sums of products in two lanes (modelgen/codegen/kernels.py, lane_split).
+ *
+ * The products pair up by position, the first of each pair is added in one lane and the second in
+ * the other, then the two lanes are added.  In double, under GCC or Clang with SSE2 arithmetic
+ * (unless MODELGEN_SCALAR_LANE_PAIRS is defined), a lane pair is an SSE2 vector, otherwise two
+ * scalars: the same operations in the same order, so the same result bit for bit, as long as the
+ * compiler does not fuse a product and a sum (-ffp-contract=off, which gcc's -std=c99 implies).
+ * From modelgen/codegen/backends/c/runtime/modelgen_lane_pair.h (copied verbatim).
+ */
+#ifndef MODELGEN_LANE_PAIR_H
+#define MODELGEN_LANE_PAIR_H
+
+#include <string.h>
+
+#include "modelgen_scalar.h"
+
+#if !MODELGEN_SCALAR_FLOAT && defined(__GNUC__) && defined(__SSE2_MATH__) \
+    && !defined(MODELGEN_SCALAR_LANE_PAIRS)
+typedef double lane_pair __attribute__((vector_size(2 * sizeof(double))));
+
+static inline lane_pair lane_pair_load(const double *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    memcpy(&lanes, a, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const double a, const double b)
+{
+    lane_pair lanes;
+    const double values[2] = { a, b };
+    memcpy(&lanes, values, sizeof lanes);
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    return a * b;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a,
+                                              const lane_pair b)
+{
+    return acc + a * b;
+}
+
+static inline double lane_pair_sum(const lane_pair acc)
+{
+    double lanes[2];
+    memcpy(lanes, &acc, sizeof lanes);
+    return lanes[0] + lanes[1];
+}
+#else
+typedef struct {
+    MODELGEN_SCALAR lane[2];
+} lane_pair;
+
+static inline lane_pair lane_pair_load(const MODELGEN_SCALAR *a) /* a[0], a[1] */
+{
+    lane_pair lanes;
+    lanes.lane[0] = a[0];
+    lanes.lane[1] = a[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_of(const MODELGEN_SCALAR a, const MODELGEN_SCALAR b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a;
+    lanes.lane[1] = b;
+    return lanes;
+}
+
+static inline lane_pair lane_pair_product(const lane_pair a, const lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = a.lane[0] * b.lane[0];
+    lanes.lane[1] = a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pair a,
+                                              const lane_pair b)
+{
+    lane_pair lanes;
+    lanes.lane[0] = acc.lane[0] + a.lane[0] * b.lane[0];
+    lanes.lane[1] = acc.lane[1] + a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline MODELGEN_SCALAR lane_pair_sum(const lane_pair acc)
+{
+    return acc.lane[0] + acc.lane[1];
+}
+#endif
+
+#endif /* MODELGEN_LANE_PAIR_H */
