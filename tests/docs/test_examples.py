@@ -147,6 +147,12 @@ def test_yaml_example_is_valid(block, tmp_path):
         assert data == shipped, f"{block.where}: the page says it is tests/checks/data/enu_doppler18_user_table.yaml"
     elif "check" in data:
         pass  # flown by test_the_check_scenario_example_passes_the_compiled_check
+    elif set(data) <= {"imu", "gnss"}:  # the log sections of a replay configuration
+        from modelgen.navigator.logs import source_from_config
+
+        for section, raw in data.items():
+            (tmp_path / raw["file"]).write_bytes(b"")  # the reader is not run: the keys are checked
+            assert source_from_config(section, raw, lambda key: block.where, tmp_path).section == section
     else:
         assert _part_of(data, _shipped_yaml()), f"{block.where}: a fragment that is in no shipped file"
 

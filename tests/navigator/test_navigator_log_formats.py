@@ -347,10 +347,10 @@ def test_a_bag_without_fix_or_covariance_is_refused_as_such(tmp_path):
 def test_without_the_logs_extra_the_refusal_names_it(tmp_path, monkeypatch):
     path = _ulog(tmp_path, [_gps_row(k) for k in range(3)])
     monkeypatch.setitem(sys.modules, "pyulog", None)
-    with pytest.raises(ModelError, match=r"reading a PX4 ULog needs pyulog \(pip install 'modelgen\[logs\]'\)"):
+    with pytest.raises(ModelError, match=r"reading a PX4 ULog needs pyulog \(pip install 'modelgen-nav\[logs\]'\)"):
         read_imu(_source("imu", path, "ulog"), 3.0, "refuse")
     monkeypatch.setitem(sys.modules, "rosbags.typesys", None)
-    with pytest.raises(ModelError, match=r"reading a ROS 2 bag needs rosbags \(pip install 'modelgen\[logs\]'\)"):
+    with pytest.raises(ModelError, match=r"reading a ROS 2 bag needs rosbags \(pip install 'modelgen-nav\[logs\]'\)"):
         read_imu(_source("imu", tmp_path, "ros2bag", topic="/imu"), 3.0, "refuse")
 
 
