@@ -35,7 +35,7 @@ from modelgen.navigator.outages import in_outage, outage_windows
 from modelgen.fileio.output import write_atomically
 from modelgen.model import wgs84
 
-N_CONFIG, N_OUTPUT, N_GNSS, N_ALIGNMENT = 45, 23, 13, 6
+N_CONFIG, N_OUTPUT, N_GNSS, N_ALIGNMENT = 45, 26, 13, 6
 COUNT_NAMES = ("gnss_updates", "gnss_rejected", "gnss_released", "gnss_deweighted", "gnss_quality_skipped",
                "zupt_updates", "nhc_updates", "predicts")
 ALIGNMENT_NAMES = ("time", "roll", "pitch", "heading", "rest_end", "rest_samples")

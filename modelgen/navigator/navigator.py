@@ -28,7 +28,8 @@ from modelgen.navigator.outages import in_outage, outage_windows
 HISTORY = 16  # INS velocities kept (one per covariance step) for the GNSS velocity latency
 OUTPUT_FIELDS = ("time", "latitude", "longitude", "height", "v_north", "v_east", "v_down", "roll", "pitch", "yaw",
                  "sigma_north", "sigma_east", "sigma_up", "gyro_bias_x", "gyro_bias_y", "gyro_bias_z",
-                 "accel_bias_x", "accel_bias_y", "accel_bias_z", "in_outage", "gnss_used", "nis", "gnss_quality")
+                 "accel_bias_x", "accel_bias_y", "accel_bias_z", "in_outage", "gnss_used", "nis", "gnss_quality",
+                 "cov_north_east", "cov_east_up", "cov_up_north")
 
 
 @dataclass
@@ -365,7 +366,11 @@ def _record(t: float, nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, P: n
     sn = math.sqrt(max(P[6, 6], 0.0)) * (rm + nav[9])
     se = math.sqrt(max(P[7, 7], 0.0)) * (rn + nav[9]) * math.cos(nav[7])
     su = math.sqrt(max(P[8, 8], 0.0))
+    # cross covariances [m^2] (north-east, east-up, up-north): the 2x2 horizontal covariance with sn, se
+    cne = P[6, 7] * (rm + nav[9]) * (rn + nav[9]) * math.cos(nav[7])
+    ceu = P[7, 8] * (rn + nav[9]) * math.cos(nav[7])
+    cun = P[8, 6] * (rm + nav[9])
     return [t, lat, lon, h, v[0], v[1], v[2], roll, pitch, yaw, sn, se, su, *gyro_bias, *accel_bias,
-            float(outage), float(used), nis, float(quality)]
+            float(outage), float(used), nis, float(quality), cne, ceu, cun]
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time  # noqa: I001
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -14,7 +14,8 @@ from modelgen.navigator.cnav import cached_c_navigator, fly_c
 from modelgen.navigator.config import NavigatorConfig, load_config
 from modelgen.navigator.errorstate import generate_filter_module, model_path
 from modelgen.navigator.logs import read_gnss, read_imu
-from modelgen.navigator.metrics import errors_against_reference, summary, velocity_latency
+from modelgen.navigator.metrics import (errors_against_reference, pooled_consistency, schedule_record, summary,
+                                        velocity_latency)
 from modelgen.navigator.navigator import Flight, fly, prepare
 from modelgen.navigator.report import report_files
 from modelgen.fileio.output import write_atomically
@@ -118,6 +119,24 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     errors = errors_against_reference(flight, inputs.gnss)
     result = summary(flight, errors, inputs.gnss)
     result["navigator"] = "c" if "c" in flights else "python"
+    # consistency over schedules: the configured one and every evaluation.schedules entry, same navigator and log
+    schedules = [schedule_record("configured", flight, errors, inputs.gnss, config.target_end_rms_m)]
+    mark = time.perf_counter()
+    for entry in config.evaluation_schedules:
+        again = replace(config, outage_schedule=entry.schedule, outage_windows=entry.windows)
+        if "c" in flights:
+            other = fly_c(again, inputs, compiled)[0]
+        else:
+            other = fly(again, inputs, module)
+        schedules.append(schedule_record(entry.name, other, errors_against_reference(other, inputs.gnss), inputs.gnss,
+                                         entry.target_end_rms_m))
+    if config.evaluation_schedules:
+        timings["fly_evaluation_schedules_s"] = time.perf_counter() - mark
+        echo(f"  flew {len(config.evaluation_schedules)} further outage schedule(s) for the consistency statistics")
+    result["schedules"] = schedules
+    result["consistency_pooled"] = pooled_consistency(schedules)
+    result["evaluation_targets"] = {"target_nees_mean": list(config.target_nees_mean) if config.target_nees_mean
+                                    else None, "target_inside_95_fraction": config.target_inside_95_fraction}
     if len(flights) == 2:
         result["c_python_max_difference_m"] = max_position_difference(flights["c"], flights["python"])
         echo(f"  C and Python trajectories: largest difference {result['c_python_max_difference_m']:.3g} m")
