@@ -53,7 +53,8 @@ SCHEMA: dict[str, set[str]] = {
     **{f"noise.{k}": {"value", "unit", "factor", "why"} for k in NOISE_UNITS},
     "initial": {"roll_pitch_sigma_deg", "heading_extra_sigma_deg", "velocity_sigma_m_s", "position_sigma_m",
                 "height_sigma_m", "gyro_bias_sigma_deg_s", "accel_bias_sigma_ug"},
-    "alignment": {"rest_speed_m_s", "rest_window_s", "heading_speed_m_s"},
+    "alignment": {"rest_speed_m_s", "rest_window_s", "heading_speed_m_s", "rest_min_s", "still_window_s",
+                  "gyro_std_max_deg_s", "accel_std_max_m_s2"},
     "filter": {"predict_period_s", "nis_gate_probability", "gate_action", "gate_release_epochs"},
     "zupt": {"enabled", "window_s", "gyro_max_deg_s", "accel_std_max_m_s2", "speed_max_m_s", "sigma_m_s"},
     "nhc": {"enabled", "sigma_lateral_m_s", "sigma_vertical_m_s", "speed_min_m_s", "rate_max_deg_s"},
@@ -123,6 +124,11 @@ class NavigatorConfig:
     imu_source: LogSource | None = None  # the imu: section as the log readers take it (format, file, options)
     gnss_source: LogSource | None = None
     gap_action: str = "refuse"  # imu.gap_action: refuse a log with an IMU gap, or propagate across it
+    #: the alignment's still detector and shortest usable rest window (modelgen.navigator.alignment)
+    still_window: float = 0.5  # alignment.still_window_s [s]
+    still_gyro_std_max: float = 1.0 * DEG  # alignment.gyro_std_max_deg_s [rad/s]
+    still_accel_std_max: float = 0.2  # alignment.accel_std_max_m_s2 [m/s^2]
+    rest_min: float = 2.0  # alignment.rest_min_s [s]
     #: evaluation.schedules: further outage schedules flown on the same log for the consistency statistics
     evaluation_schedules: tuple[EvaluationSchedule, ...] = ()
     target_end_rms_m: float | None = None  # evaluation.target_end_rms_m: for the configured schedule
@@ -388,6 +394,10 @@ def load_config(path: str | Path) -> NavigatorConfig:
         rest_speed=r.number("alignment.rest_speed_m_s", positive=True),
         rest_window=r.number("alignment.rest_window_s", positive=True),
         heading_speed=r.number("alignment.heading_speed_m_s", positive=True),
+        still_window=r.number("alignment.still_window_s", 0.5, positive=True),
+        still_gyro_std_max=r.number("alignment.gyro_std_max_deg_s", 1.0, positive=True) * DEG,
+        still_accel_std_max=r.number("alignment.accel_std_max_m_s2", 0.2, positive=True),
+        rest_min=r.number("alignment.rest_min_s", 2.0, positive=True),
         predict_period=r.number("filter.predict_period_s", positive=True),
         nis_gate_probability=_probability(r, "filter.nis_gate_probability"),
         gate_action=_choice(r, "filter.gate_action", ("reject", "deweight")),

@@ -10,7 +10,8 @@ from typing import Callable
 import numpy as np
 
 from modelgen.errors import ModelError
-from modelgen.navigator.cnav import cached_c_navigator, fly_c
+from modelgen.navigator.cnav import cached_c_navigator, fly_c, rest_capacity
+from modelgen.navigator.alignment import alignment_note
 from modelgen.navigator.config import NavigatorConfig, load_config
 from modelgen.navigator.errorstate import generate_filter_module, model_path
 from modelgen.navigator.logs import read_gnss, read_imu
@@ -98,7 +99,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         timings["fly_python_s"] = time.perf_counter() - mark
     if navigator in ("c", "both"):
         mark = time.perf_counter()
-        compiled, cached = cached_c_navigator(model_file, echo)
+        compiled, cached = cached_c_navigator(model_file, echo, rest_capacity(config, inputs.time))
         timings["generate_compile_c_s"] = 0.0 if cached else time.perf_counter() - mark
         mark = time.perf_counter()
         echo("  flying (C)")
@@ -119,6 +120,10 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     errors = errors_against_reference(flight, inputs.gnss)
     result = summary(flight, errors, inputs.gnss)
     result["navigator"] = "c" if "c" in flights else "python"
+    note = alignment_note(config, flight.alignment, flight.first_epoch) if flight.alignment else None
+    if note:
+        echo(f"  warning: {note}")
+        result["notes"].append(note)
     # consistency over schedules: the configured one and every evaluation.schedules entry, same navigator and log
     schedules = [schedule_record("configured", flight, errors, inputs.gnss, config.target_end_rms_m)]
     mark = time.perf_counter()
