@@ -68,9 +68,19 @@ class DerivedModel:
 
     def structure(self, matrix: str) -> np.ndarray:
         """Boolean mask of the structurally nonzero entries of F, G or H."""
-        m = getattr(self, matrix)
-        mask = [[m[i, j] != 0 for j in range(m.shape[1])] for i in range(m.shape[0])]
-        return np.array(mask, dtype=bool).reshape(m.shape)
+        return self._structures[matrix].copy()
+
+    @cached_property
+    def _structures(self) -> dict[str, np.ndarray]:
+        """The masks of F, G, H, Q and R, made once (from the matrices' nonzero entries, not entry by entry)."""
+        out = {}
+        for name in "FGHQR":
+            m = getattr(self, name)
+            mask = np.zeros(m.shape, dtype=bool)
+            for (i, j), entry in m.todok().items():
+                mask[i, j] = entry != 0
+            out[name] = mask
+        return out
 
     @cached_property
     def _numeric(self) -> Callable[..., tuple]:
@@ -166,9 +176,17 @@ def _sparse_jacobian(rows: list[sp.Expr], variables: list[sp.Symbol], zero: Mapp
     index = {v: j for j, v in enumerate(variables)}
     entries: dict[tuple[int, int], sp.Expr] = {}
     for i, expr in enumerate(rows):
-        free = expr.free_symbols
-        for v in sorted((s for s in free if s in index), key=index.__getitem__):
-            d = expr.diff(v)
+        # the derivative of a sum is the sum of its terms' derivatives (sympy's Add._eval_derivative): a term
+        # without the variable adds an exact zero, so only the terms that contain it are differentiated
+        terms = sp.Add.make_args(expr) if expr.is_Add else None
+        by_variable: dict[sp.Symbol, list[sp.Expr]] = {}
+        if terms is not None:
+            for term in terms:
+                for s in term.free_symbols:
+                    if s in index:
+                        by_variable.setdefault(s, []).append(term)
+        for v in sorted((s for s in expr.free_symbols if s in index), key=index.__getitem__):
+            d = expr.diff(v) if terms is None else sp.Add(*[t.diff(v) for t in by_variable[v]])
             if d == 0:
                 continue
             if not d.free_symbols.isdisjoint(zero):
