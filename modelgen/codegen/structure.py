@@ -49,11 +49,17 @@ def reachability(F: np.ndarray, order: int) -> np.ndarray:
     step = F.astype(bool)
     total = np.eye(n, dtype=bool)
     power = np.eye(n, dtype=bool)
+    # float products (BLAS; integer matmul is not): the sums count paths, exact far beyond any model size.
+    # Once a power adds no new entry, no later one does (F^(k+1) = F^k F lies in the union of F F^j, j < k).
+    step_f = step.astype(np.float64)
     for _ in range(order):
-        power = (power.astype(np.int64) @ step.astype(np.int64)) > 0
+        power = (power.astype(np.float64) @ step_f) > 0
         if not power.any():
             break
-        total |= power
+        grown = total | power
+        if np.array_equal(grown, total):
+            break
+        total = grown
     return total
 
 

@@ -68,9 +68,19 @@ class DerivedModel:
 
     def structure(self, matrix: str) -> np.ndarray:
         """Boolean mask of the structurally nonzero entries of F, G or H."""
-        m = getattr(self, matrix)
-        mask = [[m[i, j] != 0 for j in range(m.shape[1])] for i in range(m.shape[0])]
-        return np.array(mask, dtype=bool).reshape(m.shape)
+        return self._structures[matrix].copy()
+
+    @cached_property
+    def _structures(self) -> dict[str, np.ndarray]:
+        """The masks of F, G, H, Q and R, made once (from the matrices' nonzero entries, not entry by entry)."""
+        out = {}
+        for name in "FGHQR":
+            m = getattr(self, name)
+            mask = np.zeros(m.shape, dtype=bool)
+            for (i, j), entry in m.todok().items():
+                mask[i, j] = entry != 0
+            out[name] = mask
+        return out
 
     @cached_property
     def _numeric(self) -> Callable[..., tuple]:
@@ -125,16 +135,16 @@ def parameter_vector(model: ErrorModel, values: Mapping[str, float]) -> list[flo
 
 def derive(model: ErrorModel) -> DerivedModel:
     """Derive F, G, H, Q, R from the model's equations (see module doc)."""
-    x = sp.Matrix(model.state_symbols)
-    w = sp.Matrix(model.noise_symbols) if model.noises else sp.zeros(0, 1)
-    f = sp.Matrix([model.dynamics[name] for name in model.state_names])
+    x = list(model.state_symbols)
+    w = list(model.noise_symbols)
+    f = [sp.sympify(model.dynamics[name]) for name in model.state_names]
     zero = {s: 0 for s in (*model.state_symbols, *model.noise_symbols)}
 
-    F = f.jacobian(x).subs(zero)
-    G = f.jacobian(w).subs(zero) if model.noises else sp.zeros(len(x), 0)
+    F = _sparse_jacobian(f, x, zero)
+    G = _sparse_jacobian(f, w, zero) if model.noises else sp.zeros(len(x), 0)
     if model.measurements:
-        h = sp.Matrix([model.measurement_expressions[m.name] for m in model.measurements])
-        H = h.jacobian(x).subs(zero)
+        h = [sp.sympify(model.measurement_expressions[m.name]) for m in model.measurements]
+        H = _sparse_jacobian(h, x, zero)
         R = sp.diag(*[model.measurement_variance[m.name] for m in model.measurements])
     else:
         H = sp.zeros(0, len(x))
@@ -154,6 +164,37 @@ def derive(model: ErrorModel) -> DerivedModel:
         R=_tidy(R),
         nonlinear=nonlinear,
     )
+
+
+def _sparse_jacobian(rows: list[sp.Expr], variables: list[sp.Symbol], zero: Mapping[sp.Symbol, int]) -> sp.Matrix:
+    """``Matrix(rows).jacobian(variables).subs(zero)``, entry for entry, differentiating only by the symbols present.
+
+    An entry whose row does not contain the variable is an exact zero (what ``diff`` returns), and
+    the substitution of zero errors and noises is made only in an entry that contains one of them
+    (elsewhere it is the identity): a 200-state model has 40,000 entries and about 1,500 nonzeros.
+    """
+    index = {v: j for j, v in enumerate(variables)}
+    entries: dict[tuple[int, int], sp.Expr] = {}
+    for i, expr in enumerate(rows):
+        # the derivative of a sum is the sum of its terms' derivatives (sympy's Add._eval_derivative): a term
+        # without the variable adds an exact zero, so only the terms that contain it are differentiated
+        terms = sp.Add.make_args(expr) if expr.is_Add else None
+        by_variable: dict[sp.Symbol, list[sp.Expr]] = {}
+        if terms is not None:
+            for term in terms:
+                for s in term.free_symbols:
+                    if s in index:
+                        by_variable.setdefault(s, []).append(term)
+        for v in sorted((s for s in expr.free_symbols if s in index), key=index.__getitem__):
+            d = expr.diff(v) if terms is None else sp.Add(*[t.diff(v) for t in by_variable[v]])
+            if d == 0:
+                continue
+            if not d.free_symbols.isdisjoint(zero):
+                d = d.subs(zero)
+                if d == 0:
+                    continue
+            entries[i, index[v]] = d
+    return sp.Matrix(sp.SparseMatrix(len(rows), len(variables), entries))
 
 
 def _tidy(m: sp.Matrix) -> sp.Matrix:
