@@ -31,6 +31,8 @@ from modelgen.model import perturbation as pt
 from modelgen.model import wgs84
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State, check_identifier, parse_expression
 from modelgen.model.file_fields import free_text, notes_text, scalar_text
+from modelgen.model.unit_check import check_model_units
+from modelgen.model.units import declared_value
 from modelgen.model.vectors import component_names, parse_vector_expression
 
 #: Keys of a model file that derives its error model from the navigation equations.
@@ -630,6 +632,8 @@ def _user_parameters(read: _Reader, data: Mapping, decl: _Declarations) -> list[
         if "value" in entry and (isinstance(entry["value"], bool) or not isinstance(entry["value"], (int, float))):
             raise ModelError(f"{read.at(key)}: parameter {entry['name']!r} value {entry['value']!r} is not a number")
         fields = {k: (float(v) if k == "value" else str(v)) for k, v in entry.items()}
+        if "value" in fields and "unit" in fields:  # given in deg/h, ppm, ug ...: converted to SI, and so is the unit
+            fields["value"], fields["unit"] = declared_value(fields["value"], fields["unit"], f"{read.at(f'{key}.unit')}: {key}.unit")
         parameter = Parameter(**fields)
         check_identifier(parameter.symbol, f"{read.at(key)}: parameter symbol")
         decl.parameters[parameter.symbol] = parameter
@@ -730,7 +734,8 @@ def _error_model(data, lines, filename, decl: _Declarations, own: list[str], equ
         Measurement(name=m.name, symbol=m.symbol, unit=m.unit, description=m.description, variance=m.variance, expression=measured[i])
         for i, m in enumerate(measurement_decls)
     ]
-    return ErrorModel.build(
+    locations = _locations(lines, filename, decl, parameters, measurements)
+    model = ErrorModel.build(
         name=str(data["model"]),
         states=decl.states,
         noises=decl.noises,
@@ -741,8 +746,11 @@ def _error_model(data, lines, filename, decl: _Declarations, own: list[str], equ
         source=free_text(data, "source", dict(lines), filename),
         frame=free_text(data, "frame", dict(lines), filename),
         notes=[*notes_text(dict(data), dict(lines), filename), *approximation_notes(data, equations, decl)],
-        locations=_locations(lines, filename, decl, parameters, measurements),
+        locations=locations,
     )
+    undeclared = [str(p.get("name")) for p in (data.get("parameters") or []) if isinstance(p, dict) and "unit" not in p]
+    check_model_units(model, locations, undeclared)
+    return model
 
 
 def _locations(lines: Mapping[str, str], filename: str, decl: _Declarations, parameters: Sequence[Parameter], measurements: Sequence[Measurement]) -> dict[str, str]:

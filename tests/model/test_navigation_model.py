@@ -94,7 +94,7 @@ JANUS = """
 model: janus_doppler
 frame: NED
 parameters:
-  - {name: q, unit: "1", value: 1.0e-6}
+  - {name: q, value: 1.0e-6}   # the PSD of both the gyro and the accelerometer noise: no one unit
   - {name: beam_sigma, symbol: sigma_b, unit: m/s, value: 0.05}
   - {name: depression_cos, symbol: cg, unit: "1", value: 0.8660254037844386}
   - {name: depression_sin, symbol: sg, unit: "1", value: 0.5}
@@ -138,7 +138,7 @@ RANGE_RATE = """
 model: range_rate
 frame: ENU
 parameters:
-  - {name: q, unit: "1", value: 1.0e-6}
+  - {name: q, value: 1.0e-6}   # the PSD of both the gyro and the accelerometer noise: no one unit
   - {name: rate_sigma, symbol: sigma_d, unit: m/s, value: 0.05}
 navigation:
   errors:
@@ -186,7 +186,7 @@ WRITTEN = """
 model: written
 frame: NED
 parameters:
-  - {name: q, unit: "1", value: 1.0e-6}
+  - {name: q, value: 1.0e-6}   # the PSD of both the gyro and the accelerometer noise: no one unit
 navigation:
   errors:
     position: {form: metres, symbol: dr}
