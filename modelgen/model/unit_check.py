@@ -17,9 +17,11 @@ Conventions (those of every shipped model):
   itself, as it stands in an equation, is that unit per sqrt(s) (rad/s);
 * a symbol whose unit the file does not declare is not checked (terms with it
   are skipped), so a model may leave units out;
-* a decimal constant (``7.292115e-5``, ``9.81``, the WGS-84 semi-major axis in
-  the derived Earth formulas) carries whatever unit its author meant, so a term
-  with one is not checked either; integers and fractions (2, 1/2) are plain numbers;
+* a constant written as a number (``6371000``, ``9.81``, ``7.292115e-5``, the
+  WGS-84 semi-major axis in the derived Earth formulas) carries whatever unit
+  its author meant, so a term with one is not checked either; small whole
+  numbers and fractions (2, -1, 1/2, 3/2: numerator and denominator at most 12)
+  are plain numbers;
 * angles are dimensionless with the radian as their size 1.
 
 A mismatch is a ModelError ``file:line: model 'm', <equation>: term 'T' is in U1,
@@ -55,8 +57,8 @@ def unit_of(expr: sp.Expr, units: Mapping[sp.Symbol, UnitOf]) -> UnitOf | None:
     Raises :class:`_Mismatch` when a sum inside it mixes units or a function's
     argument is not a plain number.
     """
-    if expr.is_Float:
-        return None  # a decimal constant (7.292115e-5, 9.81, WGS-84's a) carries the unit its author meant: not checked
+    if expr.is_Float or (expr.is_Rational and (abs(expr.p) > 12 or expr.q > 12)):
+        return None  # a physical constant (6371000, 9.81, 7.292115e-5, WGS-84's a) carries the unit its author meant: not checked
     if expr.is_Number or expr.is_NumberSymbol or expr is sp.S.ImaginaryUnit:
         return DIMENSIONLESS
     if expr.is_Symbol:
