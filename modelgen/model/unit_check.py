@@ -110,7 +110,7 @@ def unit_of(expr: sp.Expr, units: Mapping[sp.Symbol, UnitOf]) -> UnitOf | None:
 def _require_number(expr: sp.Expr, units: Mapping[sp.Symbol, UnitOf], what: str) -> None:
     unit = unit_of(expr, units)
     if unit is not None and not unit.is_radian:
-        raise _Mismatch(expr, unit, DIMENSIONLESS, f"{what} must be a plain number or an angle in rad;")
+        raise _Mismatch(expr, unit, UnitOf(1.0, (), "rad"), f"{what} must be a plain number or an angle in rad;")
 
 
 def _short(expr: sp.Expr, limit: int = 80) -> str:
@@ -174,7 +174,8 @@ def check_model_units(model, locations: Mapping[str, str] | None = None, undecla
     for i, state in enumerate(model.states):
         unit = own(state.sym)
         expected = None if unit is None else unit / SECOND
-        check_terms(model.dynamics[state.name], expected, units, where(f"dynamics.{state.name}", f"d({state.name})/dt"),
+        key = f"dynamics.{state.symbol}" if f"dynamics.{state.symbol}" in (locations or {}) else f"dynamics.{state.name}"
+        check_terms(model.dynamics[state.name], expected, units, where(key, f"d({state.name})/dt"),
                     f"the state is in {state.unit}, its rate in {expected.shown() if expected else 'an undeclared unit'}")
     for i, noise in enumerate(model.noises):
         asd = None if noise.name in skip else parse_unit(noise.unit)
