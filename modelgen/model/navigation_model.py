@@ -29,6 +29,7 @@ import sympy as sp
 from modelgen.errors import ModelError
 from modelgen.model import perturbation as pt
 from modelgen.model import wgs84
+from modelgen.model.mechanizations import MECHANIZATIONS, mechanization_named  # noqa: F401  (MECHANIZATIONS: public)
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State, check_identifier, parse_expression
 from modelgen.model.file_fields import free_text, notes_text, scalar_text
 from modelgen.model.unit_check import check_model_units
@@ -42,8 +43,7 @@ SECTION_KEYS = frozenset(
     {"mechanization", "attitude", "velocity", "position", "specific_force", "body_rate", "earth", "errors",
      "sensor_errors", "noises", "equations", "approximations", "measurements"}
 )
-#: The one named mechanization (the equations of :class:`modelgen.model.perturbation.Mechanization`).
-MECHANIZATIONS = ("local_level",)
+#: The mechanizations a file may name: modelgen.model.mechanizations.MECHANIZATIONS (default local_level).
 #: Navigation quantities that have error states, and the equations a file may write for them.
 ERROR_QUANTITIES = ("attitude", "velocity", "position")
 WRITABLE_EQUATIONS = ("velocity", "position")
@@ -670,7 +670,8 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         raise ModelError(f"{filename}: a model with a 'navigation:' section needs 'frame: NED' or 'frame: ENU' (its navigation frame)")
     frame = read.choice(free_text(data, "frame", dict(lines), filename), "frame", tuple(pt.FRAME_AXES))
     section = read.mapping(data["navigation"], "navigation", SECTION_KEYS, ("errors",))
-    read.choice(section.get("mechanization", "local_level"), "navigation.mechanization", MECHANIZATIONS)
+    mechanization = str(section.get("mechanization", "local_level"))
+    mechanization_named(mechanization, f"{read.at('navigation.mechanization')}: navigation.mechanization")
     decl = _Declarations(states=[], noises=[], parameters={})
     own = _user_parameters(read, data, decl)
     nav = _navigation_state(read, section, frame, decl)
@@ -692,6 +693,7 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         measurements=tuple(functions),
         approximations=_approximations(read, section),
         equations=_written_equations(read, section, frame, namespace),
+        mechanization_name=mechanization,
     )
     if problem.specific_force_axes == "navigation" and problem.accelerometer.scale_factor is not None:
         raise ModelError(f"{read.at('navigation.specific_force')}: accelerometer scale factors need the specific force in body axes (specific_force: {{axes: body}})")
