@@ -521,7 +521,7 @@ def _pseudorange_rate(read: _Reader, entry: Mapping, key: str, frame: str, clock
     receiver, the unit vector to satellite k at distance rho is
     u = (e_k - d/rho) / sqrt(1 - 2 e_k . d/rho + d . d/rho^2) (|e_k| = 1), and the
     rate is u . (v_k - v) with the satellite's velocity v_k (navigation axes,
-    ``satellite_velocity``, zero if not given).  ``range`` names rho per satellite.
+    ``satellite_velocity``: required, ``zero`` for still satellites on purpose).  ``range`` names rho per satellite.
     """
     sights = _lines_of_sight(read, entry, key, frame, clock, decl)
     words = _axis_words(frame, None)
@@ -529,7 +529,15 @@ def _pseudorange_rate(read: _Reader, entry: Mapping, key: str, frame: str, clock
     for k, name in enumerate(ranges):
         _offer(decl, name, f"satellite_range_{k + 1}", "m", f"distance from the receiver to satellite {k + 1}")
     velocities = [sp.zeros(3, 1)] * len(sights)
-    if "satellite_velocity" in entry:
+    if "satellite_velocity" not in entry:
+        raise ModelError(
+            f"{read.at(key)}: a pseudo-range rate needs 'satellite_velocity' (one list of 3 symbols per satellite, navigation "
+            f"axes): GNSS satellites move at about 3.9 km/s, and taking them as still makes the H entries about 50 times too "
+            f"small; write 'satellite_velocity: zero' to assume still satellites on purpose"
+        )
+    if entry["satellite_velocity"] == "zero":
+        pass  # still satellites, as the file says
+    elif "satellite_velocity" in entry:
         raw = entry["satellite_velocity"]
         if not isinstance(raw, list) or len(raw) != len(sights):
             raise ModelError(f"{read.at(f'{key}.satellite_velocity')}: {key}.satellite_velocity must list one velocity per satellite ({len(sights)})")
