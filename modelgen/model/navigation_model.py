@@ -21,7 +21,7 @@ involved, before anything is derived.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Mapping, Sequence
 
 import sympy as sp
@@ -712,8 +712,7 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
             raise
         raise ModelError(f"{read.at('navigation')}: model {data['model']!r}: {exc}") from None
     _refuse_measurements_of_removed_states(read, equations, functions)
-    model = _error_model(data, lines, filename, decl, own, equations, measurement_decls)
-    _DERIVED[model.name] = equations
+    model = replace(_error_model(data, lines, filename, decl, own, equations, measurement_decls), neglected=equations.neglected)
     return NavigationDerivation(model=model, equations=equations)
 
 
@@ -843,16 +842,14 @@ def term_magnitude(term: sp.Expr, values: Mapping[sp.Symbol, float]) -> float | 
     return abs(float(number))
 
 
-#: The engine's result of every navigation model derived in this process, by model name (see :func:`neglected_terms`).
-_DERIVED: dict[str, pt.ErrorEquations] = {}
+def neglected_terms(model: Any) -> tuple[pt.NeglectedTerm, ...]:
+    """The terms the declared approximations dropped from a navigation model (carried on the model: ``model.neglected``).
 
-
-def neglected_terms(model_name: str) -> tuple[pt.NeglectedTerm, ...]:
-    """The terms the declared approximations dropped from a navigation model loaded in this process.
-
-    Loading the model (``load_model``) derives it; its F, G, H entries plus
-    these terms are the full first-order linearization (for the cross-check).
+    Its F, G, H entries plus these terms are the full first-order
+    linearization (for the cross-check).  ``model`` is the ErrorModel or a
+    derived model (which carries it); a model written as equations has none.
     """
-    if model_name not in _DERIVED:
-        raise ModelError(f"model {model_name!r} is not a navigation model loaded in this process")
-    return _DERIVED[model_name].neglected
+    if isinstance(model, str):
+        raise ModelError(f"neglected_terms takes the loaded model, not its name {model!r} (load_model({model!r}).neglected)")
+    model = getattr(model, "model", model)  # a DerivedModel carries its ErrorModel
+    return tuple(model.neglected)
