@@ -529,8 +529,9 @@ def replay_section(folder: Path, echo=print) -> ReportSection:
         f"The generated C navigator ({s['navigator']}) flown forward in real time over the recorded drive with "
         f"{s['outage_count']} simulated GNSS outages: end-of-outage horizontal error RMS "
         f"{s['horizontal_error_end_rms_m']:.2f} m (median {s['horizontal_error_end_median_m']:.2f} m, max "
-        f"{s['horizontal_error_end_max_m']:.2f} m), {100 * s['outage_ends_inside_3sigma_fraction']:.0f} % of outage "
-        f"ends inside the filter's 3 sigma, horizontal RMS against RTK outside outages "
+        f"{s['horizontal_error_end_max_m']:.2f} m), mean normalized squared horizontal error at the outage "
+        f"ends {s['consistency']['nees_mean']:.1f} (2 for a consistent filter) with "
+        f"{100 * s['consistency']['inside_95_fraction']:.0f} % inside the 95 % region, horizontal RMS against RTK outside outages "
         f"{s['horizontal_rms_outside_outages_m']:.3f} m.",
         "",
         "Details: [replay/summary.md](replay/summary.md)",

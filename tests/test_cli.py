@@ -296,7 +296,10 @@ def test_concurrent_generates_into_one_folder_all_succeed_and_leave_it_whole(tmp
         assert [code for code, _ in results] == [0] * 8, results
         assert not any("Traceback" in text for _, text in results)
         assert sorted(p.name for p in (out / "toy_loop").iterdir()) == sorted(
-            [".modelgen-manifest.json", "CMakeLists.txt", "Makefile", "README.md", "toy_loop.c", "toy_loop.h", "toy_loop.py"]
+            [
+                    ".modelgen-manifest.json", "CMakeLists.txt", "Makefile", "README.md", "toy_loop.c", "toy_loop.h",
+                    "toy_loop.hpp", "toy_loop.py", *(f"modelgen_{part}.h" for part in ("factor", "ieee", "lane_pair", "scalar", "taylor")),
+                ]
         )
         assert _hidden(out) == []
 

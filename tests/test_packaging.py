@@ -32,7 +32,7 @@ def test_distribution_is_named_modelgen_nav_and_every_install_line_uses_it():
     project = tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))["project"]
     assert project["name"] == DISTRIBUTION
     assert project["scripts"] == {"modelgen": "modelgen.cli:main"}
-    assert f"{DISTRIBUTION}[sim,parquet,docs]" in project["optional-dependencies"]["test"]
+    assert f"{DISTRIBUTION}[sim,parquet,docs,logs]" in project["optional-dependencies"]["test"]
     documents = [REPO / "README.md", *(REPO / "docs").rglob("*.md"), *(REPO / "modelgen").rglob("*.py")]
     wrong = [f"{path.relative_to(REPO)}: {line.strip()}" for path in documents
              for line in path.read_text(encoding="utf-8").splitlines()

@@ -41,38 +41,38 @@ constexpr int N_MEASUREMENTS = ENU_DOPPLER18_N_MEASUREMENTS;
 constexpr const char *MODEL_HASH = ENU_DOPPLER18_MODEL_HASH;
 
 // State indices: x[STATE_<NAME>], P(i, j) [unit]
-constexpr int STATE_ATTITUDE_ERROR_EAST = ENU_DOPPLER18_STATE_ATTITUDE_ERROR_EAST; // [rad] misalignment angle about east (phi_E)
-constexpr int STATE_ATTITUDE_ERROR_NORTH = ENU_DOPPLER18_STATE_ATTITUDE_ERROR_NORTH; // [rad] misalignment angle about north (phi_N)
-constexpr int STATE_ATTITUDE_ERROR_UP = ENU_DOPPLER18_STATE_ATTITUDE_ERROR_UP; // [rad] misalignment angle about up, azimuth error (phi_U)
-constexpr int STATE_VELOCITY_ERROR_EAST = ENU_DOPPLER18_STATE_VELOCITY_ERROR_EAST; // [m/s] east velocity error (delta v_E)
-constexpr int STATE_VELOCITY_ERROR_NORTH = ENU_DOPPLER18_STATE_VELOCITY_ERROR_NORTH; // [m/s] north velocity error (delta v_N)
-constexpr int STATE_VELOCITY_ERROR_UP = ENU_DOPPLER18_STATE_VELOCITY_ERROR_UP; // [m/s] up velocity error (delta v_U)
-constexpr int STATE_LATITUDE_ERROR = ENU_DOPPLER18_STATE_LATITUDE_ERROR; // [rad] latitude error (delta L)
-constexpr int STATE_LONGITUDE_ERROR = ENU_DOPPLER18_STATE_LONGITUDE_ERROR; // [rad] longitude error (delta lambda)
-constexpr int STATE_HEIGHT_ERROR = ENU_DOPPLER18_STATE_HEIGHT_ERROR; // [m] height error (delta h)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_X = ENU_DOPPLER18_STATE_GYRO_CONSTANT_DRIFT_X; // [rad/s] x gyro random-constant drift (epsilon_bx)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_Y = ENU_DOPPLER18_STATE_GYRO_CONSTANT_DRIFT_Y; // [rad/s] y gyro random-constant drift (epsilon_by)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_Z = ENU_DOPPLER18_STATE_GYRO_CONSTANT_DRIFT_Z; // [rad/s] z gyro random-constant drift (epsilon_bz)
-constexpr int STATE_GYRO_MARKOV_DRIFT_X = ENU_DOPPLER18_STATE_GYRO_MARKOV_DRIFT_X; // [rad/s] x gyro first-order Markov drift (epsilon_rx)
-constexpr int STATE_GYRO_MARKOV_DRIFT_Y = ENU_DOPPLER18_STATE_GYRO_MARKOV_DRIFT_Y; // [rad/s] y gyro first-order Markov drift (epsilon_ry)
-constexpr int STATE_GYRO_MARKOV_DRIFT_Z = ENU_DOPPLER18_STATE_GYRO_MARKOV_DRIFT_Z; // [rad/s] z gyro first-order Markov drift (epsilon_rz)
-constexpr int STATE_ACCEL_MARKOV_BIAS_X = ENU_DOPPLER18_STATE_ACCEL_MARKOV_BIAS_X; // [m/s^2] x accelerometer first-order Markov bias (nabla_x)
-constexpr int STATE_ACCEL_MARKOV_BIAS_Y = ENU_DOPPLER18_STATE_ACCEL_MARKOV_BIAS_Y; // [m/s^2] y accelerometer first-order Markov bias (nabla_y)
-constexpr int STATE_ACCEL_MARKOV_BIAS_Z = ENU_DOPPLER18_STATE_ACCEL_MARKOV_BIAS_Z; // [m/s^2] z accelerometer first-order Markov bias (nabla_z)
+constexpr int STATE_ATTITUDE_ERROR_EAST = ENU_DOPPLER18_STATE_ATTITUDE_ERROR_EAST; /* [rad] misalignment angle about east (phi_E) */
+constexpr int STATE_ATTITUDE_ERROR_NORTH = ENU_DOPPLER18_STATE_ATTITUDE_ERROR_NORTH; /* [rad] misalignment angle about north (phi_N) */
+constexpr int STATE_ATTITUDE_ERROR_UP = ENU_DOPPLER18_STATE_ATTITUDE_ERROR_UP; /* [rad] misalignment angle about up, azimuth error (phi_U) */
+constexpr int STATE_VELOCITY_ERROR_EAST = ENU_DOPPLER18_STATE_VELOCITY_ERROR_EAST; /* [m/s] east velocity error (delta v_E) */
+constexpr int STATE_VELOCITY_ERROR_NORTH = ENU_DOPPLER18_STATE_VELOCITY_ERROR_NORTH; /* [m/s] north velocity error (delta v_N) */
+constexpr int STATE_VELOCITY_ERROR_UP = ENU_DOPPLER18_STATE_VELOCITY_ERROR_UP; /* [m/s] up velocity error (delta v_U) */
+constexpr int STATE_LATITUDE_ERROR = ENU_DOPPLER18_STATE_LATITUDE_ERROR; /* [rad] latitude error (delta L) */
+constexpr int STATE_LONGITUDE_ERROR = ENU_DOPPLER18_STATE_LONGITUDE_ERROR; /* [rad] longitude error (delta lambda) */
+constexpr int STATE_HEIGHT_ERROR = ENU_DOPPLER18_STATE_HEIGHT_ERROR; /* [m] height error (delta h) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_X = ENU_DOPPLER18_STATE_GYRO_CONSTANT_DRIFT_X; /* [rad/s] x gyro random-constant drift (epsilon_bx) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_Y = ENU_DOPPLER18_STATE_GYRO_CONSTANT_DRIFT_Y; /* [rad/s] y gyro random-constant drift (epsilon_by) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_Z = ENU_DOPPLER18_STATE_GYRO_CONSTANT_DRIFT_Z; /* [rad/s] z gyro random-constant drift (epsilon_bz) */
+constexpr int STATE_GYRO_MARKOV_DRIFT_X = ENU_DOPPLER18_STATE_GYRO_MARKOV_DRIFT_X; /* [rad/s] x gyro first-order Markov drift (epsilon_rx) */
+constexpr int STATE_GYRO_MARKOV_DRIFT_Y = ENU_DOPPLER18_STATE_GYRO_MARKOV_DRIFT_Y; /* [rad/s] y gyro first-order Markov drift (epsilon_ry) */
+constexpr int STATE_GYRO_MARKOV_DRIFT_Z = ENU_DOPPLER18_STATE_GYRO_MARKOV_DRIFT_Z; /* [rad/s] z gyro first-order Markov drift (epsilon_rz) */
+constexpr int STATE_ACCEL_MARKOV_BIAS_X = ENU_DOPPLER18_STATE_ACCEL_MARKOV_BIAS_X; /* [m/s^2] x accelerometer first-order Markov bias (nabla_x) */
+constexpr int STATE_ACCEL_MARKOV_BIAS_Y = ENU_DOPPLER18_STATE_ACCEL_MARKOV_BIAS_Y; /* [m/s^2] y accelerometer first-order Markov bias (nabla_y) */
+constexpr int STATE_ACCEL_MARKOV_BIAS_Z = ENU_DOPPLER18_STATE_ACCEL_MARKOV_BIAS_Z; /* [m/s^2] z accelerometer first-order Markov bias (nabla_z) */
 // Noise indices: the noise PSD q[NOISE_<NAME>]
-constexpr int NOISE_GYRO_WHITE_NOISE_X = ENU_DOPPLER18_NOISE_GYRO_WHITE_NOISE_X; // [rad/sqrt(s)] x gyro white noise (angle random walk), enters the attitude error through C_b^n
-constexpr int NOISE_GYRO_WHITE_NOISE_Y = ENU_DOPPLER18_NOISE_GYRO_WHITE_NOISE_Y; // [rad/sqrt(s)] y gyro white noise (angle random walk)
-constexpr int NOISE_GYRO_WHITE_NOISE_Z = ENU_DOPPLER18_NOISE_GYRO_WHITE_NOISE_Z; // [rad/sqrt(s)] z gyro white noise (angle random walk)
-constexpr int NOISE_GYRO_MARKOV_NOISE_X = ENU_DOPPLER18_NOISE_GYRO_MARKOV_NOISE_X; // [rad/s/sqrt(s)] driving noise of eps_r_x (PSD 2 mu sigma^2)
-constexpr int NOISE_GYRO_MARKOV_NOISE_Y = ENU_DOPPLER18_NOISE_GYRO_MARKOV_NOISE_Y; // [rad/s/sqrt(s)] driving noise of eps_r_y (PSD 2 mu sigma^2)
-constexpr int NOISE_GYRO_MARKOV_NOISE_Z = ENU_DOPPLER18_NOISE_GYRO_MARKOV_NOISE_Z; // [rad/s/sqrt(s)] driving noise of eps_r_z (PSD 2 mu sigma^2)
-constexpr int NOISE_ACCEL_MARKOV_NOISE_X = ENU_DOPPLER18_NOISE_ACCEL_MARKOV_NOISE_X; // [m/s^2/sqrt(s)] driving noise of nabla_x (PSD 2 mu sigma^2)
-constexpr int NOISE_ACCEL_MARKOV_NOISE_Y = ENU_DOPPLER18_NOISE_ACCEL_MARKOV_NOISE_Y; // [m/s^2/sqrt(s)] driving noise of nabla_y (PSD 2 mu sigma^2)
-constexpr int NOISE_ACCEL_MARKOV_NOISE_Z = ENU_DOPPLER18_NOISE_ACCEL_MARKOV_NOISE_Z; // [m/s^2/sqrt(s)] driving noise of nabla_z (PSD 2 mu sigma^2)
+constexpr int NOISE_GYRO_WHITE_NOISE_X = ENU_DOPPLER18_NOISE_GYRO_WHITE_NOISE_X; /* [rad/sqrt(s)] x gyro white noise (angle random walk), enters the attitude error through C_b^n */
+constexpr int NOISE_GYRO_WHITE_NOISE_Y = ENU_DOPPLER18_NOISE_GYRO_WHITE_NOISE_Y; /* [rad/sqrt(s)] y gyro white noise (angle random walk) */
+constexpr int NOISE_GYRO_WHITE_NOISE_Z = ENU_DOPPLER18_NOISE_GYRO_WHITE_NOISE_Z; /* [rad/sqrt(s)] z gyro white noise (angle random walk) */
+constexpr int NOISE_GYRO_MARKOV_NOISE_X = ENU_DOPPLER18_NOISE_GYRO_MARKOV_NOISE_X; /* [rad/s/sqrt(s)] driving noise of eps_r_x (PSD 2 mu sigma^2) */
+constexpr int NOISE_GYRO_MARKOV_NOISE_Y = ENU_DOPPLER18_NOISE_GYRO_MARKOV_NOISE_Y; /* [rad/s/sqrt(s)] driving noise of eps_r_y (PSD 2 mu sigma^2) */
+constexpr int NOISE_GYRO_MARKOV_NOISE_Z = ENU_DOPPLER18_NOISE_GYRO_MARKOV_NOISE_Z; /* [rad/s/sqrt(s)] driving noise of eps_r_z (PSD 2 mu sigma^2) */
+constexpr int NOISE_ACCEL_MARKOV_NOISE_X = ENU_DOPPLER18_NOISE_ACCEL_MARKOV_NOISE_X; /* [m/s^2/sqrt(s)] driving noise of nabla_x (PSD 2 mu sigma^2) */
+constexpr int NOISE_ACCEL_MARKOV_NOISE_Y = ENU_DOPPLER18_NOISE_ACCEL_MARKOV_NOISE_Y; /* [m/s^2/sqrt(s)] driving noise of nabla_y (PSD 2 mu sigma^2) */
+constexpr int NOISE_ACCEL_MARKOV_NOISE_Z = ENU_DOPPLER18_NOISE_ACCEL_MARKOV_NOISE_Z; /* [m/s^2/sqrt(s)] driving noise of nabla_z (PSD 2 mu sigma^2) */
 // Measurement indices: z[MEASUREMENT_<NAME>]
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_EAST = ENU_DOPPLER18_MEASUREMENT_VELOCITY_DIFFERENCE_EAST; // [m/s] 
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = ENU_DOPPLER18_MEASUREMENT_VELOCITY_DIFFERENCE_NORTH; // [m/s] 
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_UP = ENU_DOPPLER18_MEASUREMENT_VELOCITY_DIFFERENCE_UP; // [m/s] 
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_EAST = ENU_DOPPLER18_MEASUREMENT_VELOCITY_DIFFERENCE_EAST; /* [m/s]  */
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = ENU_DOPPLER18_MEASUREMENT_VELOCITY_DIFFERENCE_NORTH; /* [m/s]  */
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_UP = ENU_DOPPLER18_MEASUREMENT_VELOCITY_DIFFERENCE_UP; /* [m/s]  */
 
 // The C's status codes (the contract of enu_doppler18.h and README.md: what each call refuses).
 enum class Status : int {

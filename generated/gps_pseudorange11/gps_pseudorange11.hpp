@@ -41,31 +41,31 @@ constexpr int N_MEASUREMENTS = GPS_PSEUDORANGE11_N_MEASUREMENTS;
 constexpr const char *MODEL_HASH = GPS_PSEUDORANGE11_MODEL_HASH;
 
 // State indices: x[STATE_<NAME>], P(i, j) [unit]
-constexpr int STATE_POSITION_ERROR_EAST = GPS_PSEUDORANGE11_STATE_POSITION_ERROR_EAST; // [m] east position error in the local-level frame (X_p)
-constexpr int STATE_POSITION_ERROR_NORTH = GPS_PSEUDORANGE11_STATE_POSITION_ERROR_NORTH; // [m] north position error in the local-level frame (X_p)
-constexpr int STATE_POSITION_ERROR_UP = GPS_PSEUDORANGE11_STATE_POSITION_ERROR_UP; // [m] up position error in the local-level frame (X_p)
-constexpr int STATE_VELOCITY_ERROR_EAST = GPS_PSEUDORANGE11_STATE_VELOCITY_ERROR_EAST; // [m/s] east velocity error (X_v)
-constexpr int STATE_VELOCITY_ERROR_NORTH = GPS_PSEUDORANGE11_STATE_VELOCITY_ERROR_NORTH; // [m/s] north velocity error (X_v)
-constexpr int STATE_VELOCITY_ERROR_UP = GPS_PSEUDORANGE11_STATE_VELOCITY_ERROR_UP; // [m/s] up velocity error (X_v)
-constexpr int STATE_ATTITUDE_ERROR_EAST = GPS_PSEUDORANGE11_STATE_ATTITUDE_ERROR_EAST; // [rad] platform attitude error about east, psi-angle (X_phi)
-constexpr int STATE_ATTITUDE_ERROR_NORTH = GPS_PSEUDORANGE11_STATE_ATTITUDE_ERROR_NORTH; // [rad] platform attitude error about north, psi-angle (X_phi)
-constexpr int STATE_ATTITUDE_ERROR_UP = GPS_PSEUDORANGE11_STATE_ATTITUDE_ERROR_UP; // [rad] platform attitude error about up, psi-angle (X_phi)
-constexpr int STATE_CLOCK_BIAS_RANGE = GPS_PSEUDORANGE11_STATE_CLOCK_BIAS_RANGE; // [m] receiver clock bias times c (I_t, 'clock-difference range')
-constexpr int STATE_CLOCK_DRIFT_RANGE = GPS_PSEUDORANGE11_STATE_CLOCK_DRIFT_RANGE; // [m/s] receiver clock drift times c (I_f, 'frequency-difference range')
+constexpr int STATE_POSITION_ERROR_EAST = GPS_PSEUDORANGE11_STATE_POSITION_ERROR_EAST; /* [m] east position error in the local-level frame (X_p) */
+constexpr int STATE_POSITION_ERROR_NORTH = GPS_PSEUDORANGE11_STATE_POSITION_ERROR_NORTH; /* [m] north position error in the local-level frame (X_p) */
+constexpr int STATE_POSITION_ERROR_UP = GPS_PSEUDORANGE11_STATE_POSITION_ERROR_UP; /* [m] up position error in the local-level frame (X_p) */
+constexpr int STATE_VELOCITY_ERROR_EAST = GPS_PSEUDORANGE11_STATE_VELOCITY_ERROR_EAST; /* [m/s] east velocity error (X_v) */
+constexpr int STATE_VELOCITY_ERROR_NORTH = GPS_PSEUDORANGE11_STATE_VELOCITY_ERROR_NORTH; /* [m/s] north velocity error (X_v) */
+constexpr int STATE_VELOCITY_ERROR_UP = GPS_PSEUDORANGE11_STATE_VELOCITY_ERROR_UP; /* [m/s] up velocity error (X_v) */
+constexpr int STATE_ATTITUDE_ERROR_EAST = GPS_PSEUDORANGE11_STATE_ATTITUDE_ERROR_EAST; /* [rad] platform attitude error about east, psi-angle (X_phi) */
+constexpr int STATE_ATTITUDE_ERROR_NORTH = GPS_PSEUDORANGE11_STATE_ATTITUDE_ERROR_NORTH; /* [rad] platform attitude error about north, psi-angle (X_phi) */
+constexpr int STATE_ATTITUDE_ERROR_UP = GPS_PSEUDORANGE11_STATE_ATTITUDE_ERROR_UP; /* [rad] platform attitude error about up, psi-angle (X_phi) */
+constexpr int STATE_CLOCK_BIAS_RANGE = GPS_PSEUDORANGE11_STATE_CLOCK_BIAS_RANGE; /* [m] receiver clock bias times c (I_t, 'clock-difference range') */
+constexpr int STATE_CLOCK_DRIFT_RANGE = GPS_PSEUDORANGE11_STATE_CLOCK_DRIFT_RANGE; /* [m/s] receiver clock drift times c (I_f, 'frequency-difference range') */
 // Noise indices: the noise PSD q[NOISE_<NAME>]
-constexpr int NOISE_GYRO_WHITE_NOISE_EAST = GPS_PSEUDORANGE11_NOISE_GYRO_WHITE_NOISE_EAST; // [rad/sqrt(s)] gyro white noise resolved east
-constexpr int NOISE_GYRO_WHITE_NOISE_NORTH = GPS_PSEUDORANGE11_NOISE_GYRO_WHITE_NOISE_NORTH; // [rad/sqrt(s)] gyro white noise resolved north
-constexpr int NOISE_GYRO_WHITE_NOISE_UP = GPS_PSEUDORANGE11_NOISE_GYRO_WHITE_NOISE_UP; // [rad/sqrt(s)] gyro white noise resolved up
-constexpr int NOISE_ACCEL_WHITE_NOISE_EAST = GPS_PSEUDORANGE11_NOISE_ACCEL_WHITE_NOISE_EAST; // [m/s/sqrt(s)] accelerometer white noise resolved east
-constexpr int NOISE_ACCEL_WHITE_NOISE_NORTH = GPS_PSEUDORANGE11_NOISE_ACCEL_WHITE_NOISE_NORTH; // [m/s/sqrt(s)] accelerometer white noise resolved north
-constexpr int NOISE_ACCEL_WHITE_NOISE_UP = GPS_PSEUDORANGE11_NOISE_ACCEL_WHITE_NOISE_UP; // [m/s/sqrt(s)] accelerometer white noise resolved up
-constexpr int NOISE_CLOCK_BIAS_NOISE = GPS_PSEUDORANGE11_NOISE_CLOCK_BIAS_NOISE; // [m/sqrt(s)] white noise driving the clock bias range
-constexpr int NOISE_CLOCK_DRIFT_NOISE = GPS_PSEUDORANGE11_NOISE_CLOCK_DRIFT_NOISE; // [m/s/sqrt(s)] white noise driving the clock drift range
+constexpr int NOISE_GYRO_WHITE_NOISE_EAST = GPS_PSEUDORANGE11_NOISE_GYRO_WHITE_NOISE_EAST; /* [rad/sqrt(s)] gyro white noise resolved east */
+constexpr int NOISE_GYRO_WHITE_NOISE_NORTH = GPS_PSEUDORANGE11_NOISE_GYRO_WHITE_NOISE_NORTH; /* [rad/sqrt(s)] gyro white noise resolved north */
+constexpr int NOISE_GYRO_WHITE_NOISE_UP = GPS_PSEUDORANGE11_NOISE_GYRO_WHITE_NOISE_UP; /* [rad/sqrt(s)] gyro white noise resolved up */
+constexpr int NOISE_ACCEL_WHITE_NOISE_EAST = GPS_PSEUDORANGE11_NOISE_ACCEL_WHITE_NOISE_EAST; /* [m/s/sqrt(s)] accelerometer white noise resolved east */
+constexpr int NOISE_ACCEL_WHITE_NOISE_NORTH = GPS_PSEUDORANGE11_NOISE_ACCEL_WHITE_NOISE_NORTH; /* [m/s/sqrt(s)] accelerometer white noise resolved north */
+constexpr int NOISE_ACCEL_WHITE_NOISE_UP = GPS_PSEUDORANGE11_NOISE_ACCEL_WHITE_NOISE_UP; /* [m/s/sqrt(s)] accelerometer white noise resolved up */
+constexpr int NOISE_CLOCK_BIAS_NOISE = GPS_PSEUDORANGE11_NOISE_CLOCK_BIAS_NOISE; /* [m/sqrt(s)] white noise driving the clock bias range */
+constexpr int NOISE_CLOCK_DRIFT_NOISE = GPS_PSEUDORANGE11_NOISE_CLOCK_DRIFT_NOISE; /* [m/s/sqrt(s)] white noise driving the clock drift range */
 // Measurement indices: z[MEASUREMENT_<NAME>]
-constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_1 = GPS_PSEUDORANGE11_MEASUREMENT_PSEUDORANGE_DIFFERENCE_1; // [m] measured (clock-corrected) minus INS-computed pseudo-range to satellite 1, eq. (8)
-constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_2 = GPS_PSEUDORANGE11_MEASUREMENT_PSEUDORANGE_DIFFERENCE_2; // [m] measured (clock-corrected) minus INS-computed pseudo-range to satellite 2, eq. (8)
-constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_3 = GPS_PSEUDORANGE11_MEASUREMENT_PSEUDORANGE_DIFFERENCE_3; // [m] measured (clock-corrected) minus INS-computed pseudo-range to satellite 3, eq. (8)
-constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_4 = GPS_PSEUDORANGE11_MEASUREMENT_PSEUDORANGE_DIFFERENCE_4; // [m] measured (clock-corrected) minus INS-computed pseudo-range to satellite 4, eq. (8)
+constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_1 = GPS_PSEUDORANGE11_MEASUREMENT_PSEUDORANGE_DIFFERENCE_1; /* [m] measured (clock-corrected) minus INS-computed pseudo-range to satellite 1, eq. (8) */
+constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_2 = GPS_PSEUDORANGE11_MEASUREMENT_PSEUDORANGE_DIFFERENCE_2; /* [m] measured (clock-corrected) minus INS-computed pseudo-range to satellite 2, eq. (8) */
+constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_3 = GPS_PSEUDORANGE11_MEASUREMENT_PSEUDORANGE_DIFFERENCE_3; /* [m] measured (clock-corrected) minus INS-computed pseudo-range to satellite 3, eq. (8) */
+constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_4 = GPS_PSEUDORANGE11_MEASUREMENT_PSEUDORANGE_DIFFERENCE_4; /* [m] measured (clock-corrected) minus INS-computed pseudo-range to satellite 4, eq. (8) */
 
 // The C's status codes (the contract of gps_pseudorange11.h and README.md: what each call refuses).
 enum class Status : int {

@@ -41,31 +41,31 @@ constexpr int N_MEASUREMENTS = GPS_PSEUDORANGE11_TWIN_N_MEASUREMENTS;
 constexpr const char *MODEL_HASH = GPS_PSEUDORANGE11_TWIN_MODEL_HASH;
 
 // State indices: x[STATE_<NAME>], P(i, j) [unit]
-constexpr int STATE_POSITION_ERROR_EAST = GPS_PSEUDORANGE11_TWIN_STATE_POSITION_ERROR_EAST; // [m] position error (metres), computed minus true
-constexpr int STATE_POSITION_ERROR_NORTH = GPS_PSEUDORANGE11_TWIN_STATE_POSITION_ERROR_NORTH; // [m] position error (metres), computed minus true
-constexpr int STATE_POSITION_ERROR_UP = GPS_PSEUDORANGE11_TWIN_STATE_POSITION_ERROR_UP; // [m] position error (metres), computed minus true
-constexpr int STATE_VELOCITY_ERROR_EAST = GPS_PSEUDORANGE11_TWIN_STATE_VELOCITY_ERROR_EAST; // [m/s] velocity error (computed_frame), computed minus true
-constexpr int STATE_VELOCITY_ERROR_NORTH = GPS_PSEUDORANGE11_TWIN_STATE_VELOCITY_ERROR_NORTH; // [m/s] velocity error (computed_frame), computed minus true
-constexpr int STATE_VELOCITY_ERROR_UP = GPS_PSEUDORANGE11_TWIN_STATE_VELOCITY_ERROR_UP; // [m/s] velocity error (computed_frame), computed minus true
-constexpr int STATE_ATTITUDE_ERROR_EAST = GPS_PSEUDORANGE11_TWIN_STATE_ATTITUDE_ERROR_EAST; // [rad] attitude error (psi-angle), computed minus true
-constexpr int STATE_ATTITUDE_ERROR_NORTH = GPS_PSEUDORANGE11_TWIN_STATE_ATTITUDE_ERROR_NORTH; // [rad] attitude error (psi-angle), computed minus true
-constexpr int STATE_ATTITUDE_ERROR_UP = GPS_PSEUDORANGE11_TWIN_STATE_ATTITUDE_ERROR_UP; // [rad] attitude error (psi-angle), computed minus true
-constexpr int STATE_CLOCK_BIAS_RANGE = GPS_PSEUDORANGE11_TWIN_STATE_CLOCK_BIAS_RANGE; // [m] receiver clock (clock)
-constexpr int STATE_CLOCK_DRIFT_RANGE = GPS_PSEUDORANGE11_TWIN_STATE_CLOCK_DRIFT_RANGE; // [m/s] receiver clock (clock)
+constexpr int STATE_POSITION_ERROR_EAST = GPS_PSEUDORANGE11_TWIN_STATE_POSITION_ERROR_EAST; /* [m] position error (metres), computed minus true */
+constexpr int STATE_POSITION_ERROR_NORTH = GPS_PSEUDORANGE11_TWIN_STATE_POSITION_ERROR_NORTH; /* [m] position error (metres), computed minus true */
+constexpr int STATE_POSITION_ERROR_UP = GPS_PSEUDORANGE11_TWIN_STATE_POSITION_ERROR_UP; /* [m] position error (metres), computed minus true */
+constexpr int STATE_VELOCITY_ERROR_EAST = GPS_PSEUDORANGE11_TWIN_STATE_VELOCITY_ERROR_EAST; /* [m/s] velocity error (computed_frame), computed minus true */
+constexpr int STATE_VELOCITY_ERROR_NORTH = GPS_PSEUDORANGE11_TWIN_STATE_VELOCITY_ERROR_NORTH; /* [m/s] velocity error (computed_frame), computed minus true */
+constexpr int STATE_VELOCITY_ERROR_UP = GPS_PSEUDORANGE11_TWIN_STATE_VELOCITY_ERROR_UP; /* [m/s] velocity error (computed_frame), computed minus true */
+constexpr int STATE_ATTITUDE_ERROR_EAST = GPS_PSEUDORANGE11_TWIN_STATE_ATTITUDE_ERROR_EAST; /* [rad] attitude error (psi-angle), computed minus true */
+constexpr int STATE_ATTITUDE_ERROR_NORTH = GPS_PSEUDORANGE11_TWIN_STATE_ATTITUDE_ERROR_NORTH; /* [rad] attitude error (psi-angle), computed minus true */
+constexpr int STATE_ATTITUDE_ERROR_UP = GPS_PSEUDORANGE11_TWIN_STATE_ATTITUDE_ERROR_UP; /* [rad] attitude error (psi-angle), computed minus true */
+constexpr int STATE_CLOCK_BIAS_RANGE = GPS_PSEUDORANGE11_TWIN_STATE_CLOCK_BIAS_RANGE; /* [m] receiver clock (clock) */
+constexpr int STATE_CLOCK_DRIFT_RANGE = GPS_PSEUDORANGE11_TWIN_STATE_CLOCK_DRIFT_RANGE; /* [m/s] receiver clock (clock) */
 // Noise indices: the noise PSD q[NOISE_<NAME>]
-constexpr int NOISE_GYRO_WHITE_NOISE_EAST = GPS_PSEUDORANGE11_TWIN_NOISE_GYRO_WHITE_NOISE_EAST; // [rad/sqrt(s)] gyro white noise resolved east (angle random walk)
-constexpr int NOISE_GYRO_WHITE_NOISE_NORTH = GPS_PSEUDORANGE11_TWIN_NOISE_GYRO_WHITE_NOISE_NORTH; // [rad/sqrt(s)] gyro white noise resolved north (angle random walk)
-constexpr int NOISE_GYRO_WHITE_NOISE_UP = GPS_PSEUDORANGE11_TWIN_NOISE_GYRO_WHITE_NOISE_UP; // [rad/sqrt(s)] gyro white noise resolved up (angle random walk)
-constexpr int NOISE_ACCEL_WHITE_NOISE_EAST = GPS_PSEUDORANGE11_TWIN_NOISE_ACCEL_WHITE_NOISE_EAST; // [m/s/sqrt(s)] accel white noise resolved east (velocity random walk)
-constexpr int NOISE_ACCEL_WHITE_NOISE_NORTH = GPS_PSEUDORANGE11_TWIN_NOISE_ACCEL_WHITE_NOISE_NORTH; // [m/s/sqrt(s)] accel white noise resolved north (velocity random walk)
-constexpr int NOISE_ACCEL_WHITE_NOISE_UP = GPS_PSEUDORANGE11_TWIN_NOISE_ACCEL_WHITE_NOISE_UP; // [m/s/sqrt(s)] accel white noise resolved up (velocity random walk)
-constexpr int NOISE_CLOCK_BIAS_NOISE = GPS_PSEUDORANGE11_TWIN_NOISE_CLOCK_BIAS_NOISE; // [m/sqrt(s)] drives the receiver clock
-constexpr int NOISE_CLOCK_DRIFT_NOISE = GPS_PSEUDORANGE11_TWIN_NOISE_CLOCK_DRIFT_NOISE; // [m/s/sqrt(s)] drives the receiver clock
+constexpr int NOISE_GYRO_WHITE_NOISE_EAST = GPS_PSEUDORANGE11_TWIN_NOISE_GYRO_WHITE_NOISE_EAST; /* [rad/sqrt(s)] gyro white noise resolved east (angle random walk) */
+constexpr int NOISE_GYRO_WHITE_NOISE_NORTH = GPS_PSEUDORANGE11_TWIN_NOISE_GYRO_WHITE_NOISE_NORTH; /* [rad/sqrt(s)] gyro white noise resolved north (angle random walk) */
+constexpr int NOISE_GYRO_WHITE_NOISE_UP = GPS_PSEUDORANGE11_TWIN_NOISE_GYRO_WHITE_NOISE_UP; /* [rad/sqrt(s)] gyro white noise resolved up (angle random walk) */
+constexpr int NOISE_ACCEL_WHITE_NOISE_EAST = GPS_PSEUDORANGE11_TWIN_NOISE_ACCEL_WHITE_NOISE_EAST; /* [m/s/sqrt(s)] accel white noise resolved east (velocity random walk) */
+constexpr int NOISE_ACCEL_WHITE_NOISE_NORTH = GPS_PSEUDORANGE11_TWIN_NOISE_ACCEL_WHITE_NOISE_NORTH; /* [m/s/sqrt(s)] accel white noise resolved north (velocity random walk) */
+constexpr int NOISE_ACCEL_WHITE_NOISE_UP = GPS_PSEUDORANGE11_TWIN_NOISE_ACCEL_WHITE_NOISE_UP; /* [m/s/sqrt(s)] accel white noise resolved up (velocity random walk) */
+constexpr int NOISE_CLOCK_BIAS_NOISE = GPS_PSEUDORANGE11_TWIN_NOISE_CLOCK_BIAS_NOISE; /* [m/sqrt(s)] drives the receiver clock */
+constexpr int NOISE_CLOCK_DRIFT_NOISE = GPS_PSEUDORANGE11_TWIN_NOISE_CLOCK_DRIFT_NOISE; /* [m/s/sqrt(s)] drives the receiver clock */
 // Measurement indices: z[MEASUREMENT_<NAME>]
-constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_1 = GPS_PSEUDORANGE11_TWIN_MEASUREMENT_PSEUDORANGE_DIFFERENCE_1; // [m] pseudorange measurement, measured minus computed
-constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_2 = GPS_PSEUDORANGE11_TWIN_MEASUREMENT_PSEUDORANGE_DIFFERENCE_2; // [m] pseudorange measurement, measured minus computed
-constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_3 = GPS_PSEUDORANGE11_TWIN_MEASUREMENT_PSEUDORANGE_DIFFERENCE_3; // [m] pseudorange measurement, measured minus computed
-constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_4 = GPS_PSEUDORANGE11_TWIN_MEASUREMENT_PSEUDORANGE_DIFFERENCE_4; // [m] pseudorange measurement, measured minus computed
+constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_1 = GPS_PSEUDORANGE11_TWIN_MEASUREMENT_PSEUDORANGE_DIFFERENCE_1; /* [m] pseudorange measurement, measured minus computed */
+constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_2 = GPS_PSEUDORANGE11_TWIN_MEASUREMENT_PSEUDORANGE_DIFFERENCE_2; /* [m] pseudorange measurement, measured minus computed */
+constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_3 = GPS_PSEUDORANGE11_TWIN_MEASUREMENT_PSEUDORANGE_DIFFERENCE_3; /* [m] pseudorange measurement, measured minus computed */
+constexpr int MEASUREMENT_PSEUDORANGE_DIFFERENCE_4 = GPS_PSEUDORANGE11_TWIN_MEASUREMENT_PSEUDORANGE_DIFFERENCE_4; /* [m] pseudorange measurement, measured minus computed */
 
 // The C's status codes (the contract of gps_pseudorange11_twin.h and README.md: what each call refuses).
 enum class Status : int {

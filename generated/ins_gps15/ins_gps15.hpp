@@ -41,35 +41,35 @@ constexpr int N_MEASUREMENTS = INS_GPS15_N_MEASUREMENTS;
 constexpr const char *MODEL_HASH = INS_GPS15_MODEL_HASH;
 
 // State indices: x[STATE_<NAME>], P(i, j) [unit]
-constexpr int STATE_ATTITUDE_ERROR_EAST = INS_GPS15_STATE_ATTITUDE_ERROR_EAST; // [rad] misalignment angle about east (phi_E)
-constexpr int STATE_ATTITUDE_ERROR_NORTH = INS_GPS15_STATE_ATTITUDE_ERROR_NORTH; // [rad] misalignment angle about north (phi_N)
-constexpr int STATE_ATTITUDE_ERROR_UP = INS_GPS15_STATE_ATTITUDE_ERROR_UP; // [rad] misalignment angle about up, azimuth error (phi_U)
-constexpr int STATE_VELOCITY_ERROR_EAST = INS_GPS15_STATE_VELOCITY_ERROR_EAST; // [m/s] east velocity error (delta v_E)
-constexpr int STATE_VELOCITY_ERROR_NORTH = INS_GPS15_STATE_VELOCITY_ERROR_NORTH; // [m/s] north velocity error (delta v_N)
-constexpr int STATE_VELOCITY_ERROR_UP = INS_GPS15_STATE_VELOCITY_ERROR_UP; // [m/s] up velocity error (delta v_U)
-constexpr int STATE_LATITUDE_ERROR = INS_GPS15_STATE_LATITUDE_ERROR; // [rad] latitude error (delta L)
-constexpr int STATE_LONGITUDE_ERROR = INS_GPS15_STATE_LONGITUDE_ERROR; // [rad] longitude error (delta lambda)
-constexpr int STATE_HEIGHT_ERROR = INS_GPS15_STATE_HEIGHT_ERROR; // [m] height error (delta h)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_X = INS_GPS15_STATE_GYRO_CONSTANT_DRIFT_X; // [rad/s] x gyro random-constant drift (bias)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_Y = INS_GPS15_STATE_GYRO_CONSTANT_DRIFT_Y; // [rad/s] y gyro random-constant drift (bias)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_Z = INS_GPS15_STATE_GYRO_CONSTANT_DRIFT_Z; // [rad/s] z gyro random-constant drift (bias)
-constexpr int STATE_ACCEL_CONSTANT_BIAS_X = INS_GPS15_STATE_ACCEL_CONSTANT_BIAS_X; // [m/s^2] x accelerometer random-constant bias
-constexpr int STATE_ACCEL_CONSTANT_BIAS_Y = INS_GPS15_STATE_ACCEL_CONSTANT_BIAS_Y; // [m/s^2] y accelerometer random-constant bias
-constexpr int STATE_ACCEL_CONSTANT_BIAS_Z = INS_GPS15_STATE_ACCEL_CONSTANT_BIAS_Z; // [m/s^2] z accelerometer random-constant bias
+constexpr int STATE_ATTITUDE_ERROR_EAST = INS_GPS15_STATE_ATTITUDE_ERROR_EAST; /* [rad] misalignment angle about east (phi_E) */
+constexpr int STATE_ATTITUDE_ERROR_NORTH = INS_GPS15_STATE_ATTITUDE_ERROR_NORTH; /* [rad] misalignment angle about north (phi_N) */
+constexpr int STATE_ATTITUDE_ERROR_UP = INS_GPS15_STATE_ATTITUDE_ERROR_UP; /* [rad] misalignment angle about up, azimuth error (phi_U) */
+constexpr int STATE_VELOCITY_ERROR_EAST = INS_GPS15_STATE_VELOCITY_ERROR_EAST; /* [m/s] east velocity error (delta v_E) */
+constexpr int STATE_VELOCITY_ERROR_NORTH = INS_GPS15_STATE_VELOCITY_ERROR_NORTH; /* [m/s] north velocity error (delta v_N) */
+constexpr int STATE_VELOCITY_ERROR_UP = INS_GPS15_STATE_VELOCITY_ERROR_UP; /* [m/s] up velocity error (delta v_U) */
+constexpr int STATE_LATITUDE_ERROR = INS_GPS15_STATE_LATITUDE_ERROR; /* [rad] latitude error (delta L) */
+constexpr int STATE_LONGITUDE_ERROR = INS_GPS15_STATE_LONGITUDE_ERROR; /* [rad] longitude error (delta lambda) */
+constexpr int STATE_HEIGHT_ERROR = INS_GPS15_STATE_HEIGHT_ERROR; /* [m] height error (delta h) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_X = INS_GPS15_STATE_GYRO_CONSTANT_DRIFT_X; /* [rad/s] x gyro random-constant drift (bias) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_Y = INS_GPS15_STATE_GYRO_CONSTANT_DRIFT_Y; /* [rad/s] y gyro random-constant drift (bias) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_Z = INS_GPS15_STATE_GYRO_CONSTANT_DRIFT_Z; /* [rad/s] z gyro random-constant drift (bias) */
+constexpr int STATE_ACCEL_CONSTANT_BIAS_X = INS_GPS15_STATE_ACCEL_CONSTANT_BIAS_X; /* [m/s^2] x accelerometer random-constant bias */
+constexpr int STATE_ACCEL_CONSTANT_BIAS_Y = INS_GPS15_STATE_ACCEL_CONSTANT_BIAS_Y; /* [m/s^2] y accelerometer random-constant bias */
+constexpr int STATE_ACCEL_CONSTANT_BIAS_Z = INS_GPS15_STATE_ACCEL_CONSTANT_BIAS_Z; /* [m/s^2] z accelerometer random-constant bias */
 // Noise indices: the noise PSD q[NOISE_<NAME>]
-constexpr int NOISE_GYRO_WHITE_NOISE_X = INS_GPS15_NOISE_GYRO_WHITE_NOISE_X; // [rad/sqrt(s)] x gyro white noise (angle random walk)
-constexpr int NOISE_GYRO_WHITE_NOISE_Y = INS_GPS15_NOISE_GYRO_WHITE_NOISE_Y; // [rad/sqrt(s)] y gyro white noise (angle random walk)
-constexpr int NOISE_GYRO_WHITE_NOISE_Z = INS_GPS15_NOISE_GYRO_WHITE_NOISE_Z; // [rad/sqrt(s)] z gyro white noise (angle random walk)
-constexpr int NOISE_ACCEL_WHITE_NOISE_X = INS_GPS15_NOISE_ACCEL_WHITE_NOISE_X; // [m/s/sqrt(s)] x accelerometer white noise (velocity random walk)
-constexpr int NOISE_ACCEL_WHITE_NOISE_Y = INS_GPS15_NOISE_ACCEL_WHITE_NOISE_Y; // [m/s/sqrt(s)] y accelerometer white noise (velocity random walk)
-constexpr int NOISE_ACCEL_WHITE_NOISE_Z = INS_GPS15_NOISE_ACCEL_WHITE_NOISE_Z; // [m/s/sqrt(s)] z accelerometer white noise (velocity random walk)
+constexpr int NOISE_GYRO_WHITE_NOISE_X = INS_GPS15_NOISE_GYRO_WHITE_NOISE_X; /* [rad/sqrt(s)] x gyro white noise (angle random walk) */
+constexpr int NOISE_GYRO_WHITE_NOISE_Y = INS_GPS15_NOISE_GYRO_WHITE_NOISE_Y; /* [rad/sqrt(s)] y gyro white noise (angle random walk) */
+constexpr int NOISE_GYRO_WHITE_NOISE_Z = INS_GPS15_NOISE_GYRO_WHITE_NOISE_Z; /* [rad/sqrt(s)] z gyro white noise (angle random walk) */
+constexpr int NOISE_ACCEL_WHITE_NOISE_X = INS_GPS15_NOISE_ACCEL_WHITE_NOISE_X; /* [m/s/sqrt(s)] x accelerometer white noise (velocity random walk) */
+constexpr int NOISE_ACCEL_WHITE_NOISE_Y = INS_GPS15_NOISE_ACCEL_WHITE_NOISE_Y; /* [m/s/sqrt(s)] y accelerometer white noise (velocity random walk) */
+constexpr int NOISE_ACCEL_WHITE_NOISE_Z = INS_GPS15_NOISE_ACCEL_WHITE_NOISE_Z; /* [m/s/sqrt(s)] z accelerometer white noise (velocity random walk) */
 // Measurement indices: z[MEASUREMENT_<NAME>]
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_EAST = INS_GPS15_MEASUREMENT_VELOCITY_DIFFERENCE_EAST; // [m/s] 
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = INS_GPS15_MEASUREMENT_VELOCITY_DIFFERENCE_NORTH; // [m/s] 
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_UP = INS_GPS15_MEASUREMENT_VELOCITY_DIFFERENCE_UP; // [m/s] 
-constexpr int MEASUREMENT_POSITION_DIFFERENCE_NORTH = INS_GPS15_MEASUREMENT_POSITION_DIFFERENCE_NORTH; // [m] 
-constexpr int MEASUREMENT_POSITION_DIFFERENCE_EAST = INS_GPS15_MEASUREMENT_POSITION_DIFFERENCE_EAST; // [m] 
-constexpr int MEASUREMENT_POSITION_DIFFERENCE_UP = INS_GPS15_MEASUREMENT_POSITION_DIFFERENCE_UP; // [m] 
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_EAST = INS_GPS15_MEASUREMENT_VELOCITY_DIFFERENCE_EAST; /* [m/s]  */
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = INS_GPS15_MEASUREMENT_VELOCITY_DIFFERENCE_NORTH; /* [m/s]  */
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_UP = INS_GPS15_MEASUREMENT_VELOCITY_DIFFERENCE_UP; /* [m/s]  */
+constexpr int MEASUREMENT_POSITION_DIFFERENCE_NORTH = INS_GPS15_MEASUREMENT_POSITION_DIFFERENCE_NORTH; /* [m]  */
+constexpr int MEASUREMENT_POSITION_DIFFERENCE_EAST = INS_GPS15_MEASUREMENT_POSITION_DIFFERENCE_EAST; /* [m]  */
+constexpr int MEASUREMENT_POSITION_DIFFERENCE_UP = INS_GPS15_MEASUREMENT_POSITION_DIFFERENCE_UP; /* [m]  */
 
 // The C's status codes (the contract of ins_gps15.h and README.md: what each call refuses).
 enum class Status : int {

@@ -41,35 +41,35 @@ constexpr int N_MEASUREMENTS = INS_GPS15_TWIN_N_MEASUREMENTS;
 constexpr const char *MODEL_HASH = INS_GPS15_TWIN_MODEL_HASH;
 
 // State indices: x[STATE_<NAME>], P(i, j) [unit]
-constexpr int STATE_ATTITUDE_ERROR_EAST = INS_GPS15_TWIN_STATE_ATTITUDE_ERROR_EAST; // [rad] attitude error (phi-angle), computed minus true
-constexpr int STATE_ATTITUDE_ERROR_NORTH = INS_GPS15_TWIN_STATE_ATTITUDE_ERROR_NORTH; // [rad] attitude error (phi-angle), computed minus true
-constexpr int STATE_ATTITUDE_ERROR_UP = INS_GPS15_TWIN_STATE_ATTITUDE_ERROR_UP; // [rad] attitude error (phi-angle), computed minus true
-constexpr int STATE_VELOCITY_ERROR_EAST = INS_GPS15_TWIN_STATE_VELOCITY_ERROR_EAST; // [m/s] velocity error (difference), computed minus true
-constexpr int STATE_VELOCITY_ERROR_NORTH = INS_GPS15_TWIN_STATE_VELOCITY_ERROR_NORTH; // [m/s] velocity error (difference), computed minus true
-constexpr int STATE_VELOCITY_ERROR_UP = INS_GPS15_TWIN_STATE_VELOCITY_ERROR_UP; // [m/s] velocity error (difference), computed minus true
-constexpr int STATE_LATITUDE_ERROR = INS_GPS15_TWIN_STATE_LATITUDE_ERROR; // [rad] position error (geodetic), computed minus true
-constexpr int STATE_LONGITUDE_ERROR = INS_GPS15_TWIN_STATE_LONGITUDE_ERROR; // [rad] position error (geodetic), computed minus true
-constexpr int STATE_HEIGHT_ERROR = INS_GPS15_TWIN_STATE_HEIGHT_ERROR; // [m] position error (geodetic), computed minus true
-constexpr int STATE_GYRO_CONSTANT_DRIFT_X = INS_GPS15_TWIN_STATE_GYRO_CONSTANT_DRIFT_X; // [rad/s] gyro bias (random constant)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_Y = INS_GPS15_TWIN_STATE_GYRO_CONSTANT_DRIFT_Y; // [rad/s] gyro bias (random constant)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_Z = INS_GPS15_TWIN_STATE_GYRO_CONSTANT_DRIFT_Z; // [rad/s] gyro bias (random constant)
-constexpr int STATE_ACCEL_CONSTANT_BIAS_X = INS_GPS15_TWIN_STATE_ACCEL_CONSTANT_BIAS_X; // [m/s^2] accel bias (random constant)
-constexpr int STATE_ACCEL_CONSTANT_BIAS_Y = INS_GPS15_TWIN_STATE_ACCEL_CONSTANT_BIAS_Y; // [m/s^2] accel bias (random constant)
-constexpr int STATE_ACCEL_CONSTANT_BIAS_Z = INS_GPS15_TWIN_STATE_ACCEL_CONSTANT_BIAS_Z; // [m/s^2] accel bias (random constant)
+constexpr int STATE_ATTITUDE_ERROR_EAST = INS_GPS15_TWIN_STATE_ATTITUDE_ERROR_EAST; /* [rad] attitude error (phi-angle), computed minus true */
+constexpr int STATE_ATTITUDE_ERROR_NORTH = INS_GPS15_TWIN_STATE_ATTITUDE_ERROR_NORTH; /* [rad] attitude error (phi-angle), computed minus true */
+constexpr int STATE_ATTITUDE_ERROR_UP = INS_GPS15_TWIN_STATE_ATTITUDE_ERROR_UP; /* [rad] attitude error (phi-angle), computed minus true */
+constexpr int STATE_VELOCITY_ERROR_EAST = INS_GPS15_TWIN_STATE_VELOCITY_ERROR_EAST; /* [m/s] velocity error (difference), computed minus true */
+constexpr int STATE_VELOCITY_ERROR_NORTH = INS_GPS15_TWIN_STATE_VELOCITY_ERROR_NORTH; /* [m/s] velocity error (difference), computed minus true */
+constexpr int STATE_VELOCITY_ERROR_UP = INS_GPS15_TWIN_STATE_VELOCITY_ERROR_UP; /* [m/s] velocity error (difference), computed minus true */
+constexpr int STATE_LATITUDE_ERROR = INS_GPS15_TWIN_STATE_LATITUDE_ERROR; /* [rad] position error (geodetic), computed minus true */
+constexpr int STATE_LONGITUDE_ERROR = INS_GPS15_TWIN_STATE_LONGITUDE_ERROR; /* [rad] position error (geodetic), computed minus true */
+constexpr int STATE_HEIGHT_ERROR = INS_GPS15_TWIN_STATE_HEIGHT_ERROR; /* [m] position error (geodetic), computed minus true */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_X = INS_GPS15_TWIN_STATE_GYRO_CONSTANT_DRIFT_X; /* [rad/s] gyro bias (random constant) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_Y = INS_GPS15_TWIN_STATE_GYRO_CONSTANT_DRIFT_Y; /* [rad/s] gyro bias (random constant) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_Z = INS_GPS15_TWIN_STATE_GYRO_CONSTANT_DRIFT_Z; /* [rad/s] gyro bias (random constant) */
+constexpr int STATE_ACCEL_CONSTANT_BIAS_X = INS_GPS15_TWIN_STATE_ACCEL_CONSTANT_BIAS_X; /* [m/s^2] accel bias (random constant) */
+constexpr int STATE_ACCEL_CONSTANT_BIAS_Y = INS_GPS15_TWIN_STATE_ACCEL_CONSTANT_BIAS_Y; /* [m/s^2] accel bias (random constant) */
+constexpr int STATE_ACCEL_CONSTANT_BIAS_Z = INS_GPS15_TWIN_STATE_ACCEL_CONSTANT_BIAS_Z; /* [m/s^2] accel bias (random constant) */
 // Noise indices: the noise PSD q[NOISE_<NAME>]
-constexpr int NOISE_GYRO_WHITE_NOISE_X = INS_GPS15_TWIN_NOISE_GYRO_WHITE_NOISE_X; // [rad/sqrt(s)] gyro white noise x (angle random walk)
-constexpr int NOISE_GYRO_WHITE_NOISE_Y = INS_GPS15_TWIN_NOISE_GYRO_WHITE_NOISE_Y; // [rad/sqrt(s)] gyro white noise y (angle random walk)
-constexpr int NOISE_GYRO_WHITE_NOISE_Z = INS_GPS15_TWIN_NOISE_GYRO_WHITE_NOISE_Z; // [rad/sqrt(s)] gyro white noise z (angle random walk)
-constexpr int NOISE_ACCEL_WHITE_NOISE_X = INS_GPS15_TWIN_NOISE_ACCEL_WHITE_NOISE_X; // [m/s/sqrt(s)] accel white noise x (velocity random walk)
-constexpr int NOISE_ACCEL_WHITE_NOISE_Y = INS_GPS15_TWIN_NOISE_ACCEL_WHITE_NOISE_Y; // [m/s/sqrt(s)] accel white noise y (velocity random walk)
-constexpr int NOISE_ACCEL_WHITE_NOISE_Z = INS_GPS15_TWIN_NOISE_ACCEL_WHITE_NOISE_Z; // [m/s/sqrt(s)] accel white noise z (velocity random walk)
+constexpr int NOISE_GYRO_WHITE_NOISE_X = INS_GPS15_TWIN_NOISE_GYRO_WHITE_NOISE_X; /* [rad/sqrt(s)] gyro white noise x (angle random walk) */
+constexpr int NOISE_GYRO_WHITE_NOISE_Y = INS_GPS15_TWIN_NOISE_GYRO_WHITE_NOISE_Y; /* [rad/sqrt(s)] gyro white noise y (angle random walk) */
+constexpr int NOISE_GYRO_WHITE_NOISE_Z = INS_GPS15_TWIN_NOISE_GYRO_WHITE_NOISE_Z; /* [rad/sqrt(s)] gyro white noise z (angle random walk) */
+constexpr int NOISE_ACCEL_WHITE_NOISE_X = INS_GPS15_TWIN_NOISE_ACCEL_WHITE_NOISE_X; /* [m/s/sqrt(s)] accel white noise x (velocity random walk) */
+constexpr int NOISE_ACCEL_WHITE_NOISE_Y = INS_GPS15_TWIN_NOISE_ACCEL_WHITE_NOISE_Y; /* [m/s/sqrt(s)] accel white noise y (velocity random walk) */
+constexpr int NOISE_ACCEL_WHITE_NOISE_Z = INS_GPS15_TWIN_NOISE_ACCEL_WHITE_NOISE_Z; /* [m/s/sqrt(s)] accel white noise z (velocity random walk) */
 // Measurement indices: z[MEASUREMENT_<NAME>]
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_EAST = INS_GPS15_TWIN_MEASUREMENT_VELOCITY_DIFFERENCE_EAST; // [m/s] velocity measurement, computed minus measured
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = INS_GPS15_TWIN_MEASUREMENT_VELOCITY_DIFFERENCE_NORTH; // [m/s] velocity measurement, computed minus measured
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_UP = INS_GPS15_TWIN_MEASUREMENT_VELOCITY_DIFFERENCE_UP; // [m/s] velocity measurement, computed minus measured
-constexpr int MEASUREMENT_POSITION_DIFFERENCE_NORTH = INS_GPS15_TWIN_MEASUREMENT_POSITION_DIFFERENCE_NORTH; // [m] position measurement, computed minus measured
-constexpr int MEASUREMENT_POSITION_DIFFERENCE_EAST = INS_GPS15_TWIN_MEASUREMENT_POSITION_DIFFERENCE_EAST; // [m] position measurement, computed minus measured
-constexpr int MEASUREMENT_POSITION_DIFFERENCE_UP = INS_GPS15_TWIN_MEASUREMENT_POSITION_DIFFERENCE_UP; // [m] position measurement, computed minus measured
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_EAST = INS_GPS15_TWIN_MEASUREMENT_VELOCITY_DIFFERENCE_EAST; /* [m/s] velocity measurement, computed minus measured */
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = INS_GPS15_TWIN_MEASUREMENT_VELOCITY_DIFFERENCE_NORTH; /* [m/s] velocity measurement, computed minus measured */
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_UP = INS_GPS15_TWIN_MEASUREMENT_VELOCITY_DIFFERENCE_UP; /* [m/s] velocity measurement, computed minus measured */
+constexpr int MEASUREMENT_POSITION_DIFFERENCE_NORTH = INS_GPS15_TWIN_MEASUREMENT_POSITION_DIFFERENCE_NORTH; /* [m] position measurement, computed minus measured */
+constexpr int MEASUREMENT_POSITION_DIFFERENCE_EAST = INS_GPS15_TWIN_MEASUREMENT_POSITION_DIFFERENCE_EAST; /* [m] position measurement, computed minus measured */
+constexpr int MEASUREMENT_POSITION_DIFFERENCE_UP = INS_GPS15_TWIN_MEASUREMENT_POSITION_DIFFERENCE_UP; /* [m] position measurement, computed minus measured */
 
 // The C's status codes (the contract of ins_gps15_twin.h and README.md: what each call refuses).
 enum class Status : int {

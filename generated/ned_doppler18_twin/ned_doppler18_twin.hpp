@@ -41,34 +41,34 @@ constexpr int N_MEASUREMENTS = NED_DOPPLER18_TWIN_N_MEASUREMENTS;
 constexpr const char *MODEL_HASH = NED_DOPPLER18_TWIN_MODEL_HASH;
 
 // State indices: x[STATE_<NAME>], P(i, j) [unit]
-constexpr int STATE_ATTITUDE_ERROR_NORTH = NED_DOPPLER18_TWIN_STATE_ATTITUDE_ERROR_NORTH; // [rad] attitude error (phi-angle), computed minus true
-constexpr int STATE_ATTITUDE_ERROR_EAST = NED_DOPPLER18_TWIN_STATE_ATTITUDE_ERROR_EAST; // [rad] attitude error (phi-angle), computed minus true
-constexpr int STATE_HEADING_ERROR = NED_DOPPLER18_TWIN_STATE_HEADING_ERROR; // [rad] attitude error (phi-angle), computed minus true
-constexpr int STATE_VELOCITY_ERROR_NORTH = NED_DOPPLER18_TWIN_STATE_VELOCITY_ERROR_NORTH; // [m/s] velocity error (difference), computed minus true
-constexpr int STATE_VELOCITY_ERROR_EAST = NED_DOPPLER18_TWIN_STATE_VELOCITY_ERROR_EAST; // [m/s] velocity error (difference), computed minus true
-constexpr int STATE_LATITUDE_ERROR = NED_DOPPLER18_TWIN_STATE_LATITUDE_ERROR; // [rad] position error (geodetic), computed minus true
-constexpr int STATE_LONGITUDE_ERROR = NED_DOPPLER18_TWIN_STATE_LONGITUDE_ERROR; // [rad] position error (geodetic), computed minus true
-constexpr int STATE_GYRO_CONSTANT_DRIFT_X = NED_DOPPLER18_TWIN_STATE_GYRO_CONSTANT_DRIFT_X; // [rad/s] gyro bias (random constant)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_Y = NED_DOPPLER18_TWIN_STATE_GYRO_CONSTANT_DRIFT_Y; // [rad/s] gyro bias (random constant)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_Z = NED_DOPPLER18_TWIN_STATE_GYRO_CONSTANT_DRIFT_Z; // [rad/s] gyro bias (random constant)
-constexpr int STATE_GYRO_MARKOV_DRIFT_X = NED_DOPPLER18_TWIN_STATE_GYRO_MARKOV_DRIFT_X; // [rad/s] gyro bias (gauss markov)
-constexpr int STATE_GYRO_MARKOV_DRIFT_Y = NED_DOPPLER18_TWIN_STATE_GYRO_MARKOV_DRIFT_Y; // [rad/s] gyro bias (gauss markov)
-constexpr int STATE_GYRO_MARKOV_DRIFT_Z = NED_DOPPLER18_TWIN_STATE_GYRO_MARKOV_DRIFT_Z; // [rad/s] gyro bias (gauss markov)
-constexpr int STATE_ACCEL_MARKOV_BIAS_X = NED_DOPPLER18_TWIN_STATE_ACCEL_MARKOV_BIAS_X; // [m/s^2] accel bias (gauss markov)
-constexpr int STATE_ACCEL_MARKOV_BIAS_Y = NED_DOPPLER18_TWIN_STATE_ACCEL_MARKOV_BIAS_Y; // [m/s^2] accel bias (gauss markov)
-constexpr int STATE_ACCEL_MARKOV_BIAS_Z = NED_DOPPLER18_TWIN_STATE_ACCEL_MARKOV_BIAS_Z; // [m/s^2] accel bias (gauss markov)
-constexpr int STATE_DOPPLER_VELOCITY_BIAS_NORTH = NED_DOPPLER18_TWIN_STATE_DOPPLER_VELOCITY_BIAS_NORTH; // [m/s] aiding-sensor error (random constant): measured = true + bias
-constexpr int STATE_DOPPLER_VELOCITY_BIAS_EAST = NED_DOPPLER18_TWIN_STATE_DOPPLER_VELOCITY_BIAS_EAST; // [m/s] aiding-sensor error (random constant): measured = true + bias
+constexpr int STATE_ATTITUDE_ERROR_NORTH = NED_DOPPLER18_TWIN_STATE_ATTITUDE_ERROR_NORTH; /* [rad] attitude error (phi-angle), computed minus true */
+constexpr int STATE_ATTITUDE_ERROR_EAST = NED_DOPPLER18_TWIN_STATE_ATTITUDE_ERROR_EAST; /* [rad] attitude error (phi-angle), computed minus true */
+constexpr int STATE_HEADING_ERROR = NED_DOPPLER18_TWIN_STATE_HEADING_ERROR; /* [rad] attitude error (phi-angle), computed minus true */
+constexpr int STATE_VELOCITY_ERROR_NORTH = NED_DOPPLER18_TWIN_STATE_VELOCITY_ERROR_NORTH; /* [m/s] velocity error (difference), computed minus true */
+constexpr int STATE_VELOCITY_ERROR_EAST = NED_DOPPLER18_TWIN_STATE_VELOCITY_ERROR_EAST; /* [m/s] velocity error (difference), computed minus true */
+constexpr int STATE_LATITUDE_ERROR = NED_DOPPLER18_TWIN_STATE_LATITUDE_ERROR; /* [rad] position error (geodetic), computed minus true */
+constexpr int STATE_LONGITUDE_ERROR = NED_DOPPLER18_TWIN_STATE_LONGITUDE_ERROR; /* [rad] position error (geodetic), computed minus true */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_X = NED_DOPPLER18_TWIN_STATE_GYRO_CONSTANT_DRIFT_X; /* [rad/s] gyro bias (random constant) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_Y = NED_DOPPLER18_TWIN_STATE_GYRO_CONSTANT_DRIFT_Y; /* [rad/s] gyro bias (random constant) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_Z = NED_DOPPLER18_TWIN_STATE_GYRO_CONSTANT_DRIFT_Z; /* [rad/s] gyro bias (random constant) */
+constexpr int STATE_GYRO_MARKOV_DRIFT_X = NED_DOPPLER18_TWIN_STATE_GYRO_MARKOV_DRIFT_X; /* [rad/s] gyro bias (gauss markov) */
+constexpr int STATE_GYRO_MARKOV_DRIFT_Y = NED_DOPPLER18_TWIN_STATE_GYRO_MARKOV_DRIFT_Y; /* [rad/s] gyro bias (gauss markov) */
+constexpr int STATE_GYRO_MARKOV_DRIFT_Z = NED_DOPPLER18_TWIN_STATE_GYRO_MARKOV_DRIFT_Z; /* [rad/s] gyro bias (gauss markov) */
+constexpr int STATE_ACCEL_MARKOV_BIAS_X = NED_DOPPLER18_TWIN_STATE_ACCEL_MARKOV_BIAS_X; /* [m/s^2] accel bias (gauss markov) */
+constexpr int STATE_ACCEL_MARKOV_BIAS_Y = NED_DOPPLER18_TWIN_STATE_ACCEL_MARKOV_BIAS_Y; /* [m/s^2] accel bias (gauss markov) */
+constexpr int STATE_ACCEL_MARKOV_BIAS_Z = NED_DOPPLER18_TWIN_STATE_ACCEL_MARKOV_BIAS_Z; /* [m/s^2] accel bias (gauss markov) */
+constexpr int STATE_DOPPLER_VELOCITY_BIAS_NORTH = NED_DOPPLER18_TWIN_STATE_DOPPLER_VELOCITY_BIAS_NORTH; /* [m/s] aiding-sensor error (random constant): measured = true + bias */
+constexpr int STATE_DOPPLER_VELOCITY_BIAS_EAST = NED_DOPPLER18_TWIN_STATE_DOPPLER_VELOCITY_BIAS_EAST; /* [m/s] aiding-sensor error (random constant): measured = true + bias */
 // Noise indices: the noise PSD q[NOISE_<NAME>]
-constexpr int NOISE_GYRO_MARKOV_NOISE_X = NED_DOPPLER18_TWIN_NOISE_GYRO_MARKOV_NOISE_X; // [rad/s/sqrt(s)] drives the gyro bias
-constexpr int NOISE_GYRO_MARKOV_NOISE_Y = NED_DOPPLER18_TWIN_NOISE_GYRO_MARKOV_NOISE_Y; // [rad/s/sqrt(s)] drives the gyro bias
-constexpr int NOISE_GYRO_MARKOV_NOISE_Z = NED_DOPPLER18_TWIN_NOISE_GYRO_MARKOV_NOISE_Z; // [rad/s/sqrt(s)] drives the gyro bias
-constexpr int NOISE_ACCEL_MARKOV_NOISE_X = NED_DOPPLER18_TWIN_NOISE_ACCEL_MARKOV_NOISE_X; // [m/s^2/sqrt(s)] drives the accel bias
-constexpr int NOISE_ACCEL_MARKOV_NOISE_Y = NED_DOPPLER18_TWIN_NOISE_ACCEL_MARKOV_NOISE_Y; // [m/s^2/sqrt(s)] drives the accel bias
-constexpr int NOISE_ACCEL_MARKOV_NOISE_Z = NED_DOPPLER18_TWIN_NOISE_ACCEL_MARKOV_NOISE_Z; // [m/s^2/sqrt(s)] drives the accel bias
+constexpr int NOISE_GYRO_MARKOV_NOISE_X = NED_DOPPLER18_TWIN_NOISE_GYRO_MARKOV_NOISE_X; /* [rad/s/sqrt(s)] drives the gyro bias */
+constexpr int NOISE_GYRO_MARKOV_NOISE_Y = NED_DOPPLER18_TWIN_NOISE_GYRO_MARKOV_NOISE_Y; /* [rad/s/sqrt(s)] drives the gyro bias */
+constexpr int NOISE_GYRO_MARKOV_NOISE_Z = NED_DOPPLER18_TWIN_NOISE_GYRO_MARKOV_NOISE_Z; /* [rad/s/sqrt(s)] drives the gyro bias */
+constexpr int NOISE_ACCEL_MARKOV_NOISE_X = NED_DOPPLER18_TWIN_NOISE_ACCEL_MARKOV_NOISE_X; /* [m/s^2/sqrt(s)] drives the accel bias */
+constexpr int NOISE_ACCEL_MARKOV_NOISE_Y = NED_DOPPLER18_TWIN_NOISE_ACCEL_MARKOV_NOISE_Y; /* [m/s^2/sqrt(s)] drives the accel bias */
+constexpr int NOISE_ACCEL_MARKOV_NOISE_Z = NED_DOPPLER18_TWIN_NOISE_ACCEL_MARKOV_NOISE_Z; /* [m/s^2/sqrt(s)] drives the accel bias */
 // Measurement indices: z[MEASUREMENT_<NAME>]
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = NED_DOPPLER18_TWIN_MEASUREMENT_VELOCITY_DIFFERENCE_NORTH; // [m/s] expression measurement, computed minus measured
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_EAST = NED_DOPPLER18_TWIN_MEASUREMENT_VELOCITY_DIFFERENCE_EAST; // [m/s] expression measurement, computed minus measured
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = NED_DOPPLER18_TWIN_MEASUREMENT_VELOCITY_DIFFERENCE_NORTH; /* [m/s] expression measurement, computed minus measured */
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_EAST = NED_DOPPLER18_TWIN_MEASUREMENT_VELOCITY_DIFFERENCE_EAST; /* [m/s] expression measurement, computed minus measured */
 
 // The C's status codes (the contract of ned_doppler18_twin.h and README.md: what each call refuses).
 enum class Status : int {

@@ -40,29 +40,29 @@ constexpr int N_MEASUREMENTS = NED_INERTIAL16_TWIN_N_MEASUREMENTS;
 constexpr const char *MODEL_HASH = NED_INERTIAL16_TWIN_MODEL_HASH;
 
 // State indices: x[STATE_<NAME>], P(i, j) [unit]
-constexpr int STATE_ATTITUDE_ERROR_NORTH = NED_INERTIAL16_TWIN_STATE_ATTITUDE_ERROR_NORTH; // [rad] attitude error (phi-angle), computed minus true
-constexpr int STATE_ATTITUDE_ERROR_EAST = NED_INERTIAL16_TWIN_STATE_ATTITUDE_ERROR_EAST; // [rad] attitude error (phi-angle), computed minus true
-constexpr int STATE_HEADING_ERROR = NED_INERTIAL16_TWIN_STATE_HEADING_ERROR; // [rad] attitude error (phi-angle), computed minus true
-constexpr int STATE_VELOCITY_ERROR_NORTH = NED_INERTIAL16_TWIN_STATE_VELOCITY_ERROR_NORTH; // [m/s] velocity error (difference), computed minus true
-constexpr int STATE_VELOCITY_ERROR_EAST = NED_INERTIAL16_TWIN_STATE_VELOCITY_ERROR_EAST; // [m/s] velocity error (difference), computed minus true
-constexpr int STATE_LATITUDE_ERROR = NED_INERTIAL16_TWIN_STATE_LATITUDE_ERROR; // [rad] position error (geodetic), computed minus true
-constexpr int STATE_LONGITUDE_ERROR = NED_INERTIAL16_TWIN_STATE_LONGITUDE_ERROR; // [rad] position error (geodetic), computed minus true
-constexpr int STATE_GYRO_CONSTANT_DRIFT_X = NED_INERTIAL16_TWIN_STATE_GYRO_CONSTANT_DRIFT_X; // [rad/s] gyro bias (random constant)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_Y = NED_INERTIAL16_TWIN_STATE_GYRO_CONSTANT_DRIFT_Y; // [rad/s] gyro bias (random constant)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_Z = NED_INERTIAL16_TWIN_STATE_GYRO_CONSTANT_DRIFT_Z; // [rad/s] gyro bias (random constant)
-constexpr int STATE_GYRO_MARKOV_DRIFT_X = NED_INERTIAL16_TWIN_STATE_GYRO_MARKOV_DRIFT_X; // [rad/s] gyro bias (gauss markov)
-constexpr int STATE_GYRO_MARKOV_DRIFT_Y = NED_INERTIAL16_TWIN_STATE_GYRO_MARKOV_DRIFT_Y; // [rad/s] gyro bias (gauss markov)
-constexpr int STATE_GYRO_MARKOV_DRIFT_Z = NED_INERTIAL16_TWIN_STATE_GYRO_MARKOV_DRIFT_Z; // [rad/s] gyro bias (gauss markov)
-constexpr int STATE_ACCEL_MARKOV_BIAS_X = NED_INERTIAL16_TWIN_STATE_ACCEL_MARKOV_BIAS_X; // [m/s^2] accel bias (gauss markov)
-constexpr int STATE_ACCEL_MARKOV_BIAS_Y = NED_INERTIAL16_TWIN_STATE_ACCEL_MARKOV_BIAS_Y; // [m/s^2] accel bias (gauss markov)
-constexpr int STATE_ACCEL_MARKOV_BIAS_Z = NED_INERTIAL16_TWIN_STATE_ACCEL_MARKOV_BIAS_Z; // [m/s^2] accel bias (gauss markov)
+constexpr int STATE_ATTITUDE_ERROR_NORTH = NED_INERTIAL16_TWIN_STATE_ATTITUDE_ERROR_NORTH; /* [rad] attitude error (phi-angle), computed minus true */
+constexpr int STATE_ATTITUDE_ERROR_EAST = NED_INERTIAL16_TWIN_STATE_ATTITUDE_ERROR_EAST; /* [rad] attitude error (phi-angle), computed minus true */
+constexpr int STATE_HEADING_ERROR = NED_INERTIAL16_TWIN_STATE_HEADING_ERROR; /* [rad] attitude error (phi-angle), computed minus true */
+constexpr int STATE_VELOCITY_ERROR_NORTH = NED_INERTIAL16_TWIN_STATE_VELOCITY_ERROR_NORTH; /* [m/s] velocity error (difference), computed minus true */
+constexpr int STATE_VELOCITY_ERROR_EAST = NED_INERTIAL16_TWIN_STATE_VELOCITY_ERROR_EAST; /* [m/s] velocity error (difference), computed minus true */
+constexpr int STATE_LATITUDE_ERROR = NED_INERTIAL16_TWIN_STATE_LATITUDE_ERROR; /* [rad] position error (geodetic), computed minus true */
+constexpr int STATE_LONGITUDE_ERROR = NED_INERTIAL16_TWIN_STATE_LONGITUDE_ERROR; /* [rad] position error (geodetic), computed minus true */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_X = NED_INERTIAL16_TWIN_STATE_GYRO_CONSTANT_DRIFT_X; /* [rad/s] gyro bias (random constant) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_Y = NED_INERTIAL16_TWIN_STATE_GYRO_CONSTANT_DRIFT_Y; /* [rad/s] gyro bias (random constant) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_Z = NED_INERTIAL16_TWIN_STATE_GYRO_CONSTANT_DRIFT_Z; /* [rad/s] gyro bias (random constant) */
+constexpr int STATE_GYRO_MARKOV_DRIFT_X = NED_INERTIAL16_TWIN_STATE_GYRO_MARKOV_DRIFT_X; /* [rad/s] gyro bias (gauss markov) */
+constexpr int STATE_GYRO_MARKOV_DRIFT_Y = NED_INERTIAL16_TWIN_STATE_GYRO_MARKOV_DRIFT_Y; /* [rad/s] gyro bias (gauss markov) */
+constexpr int STATE_GYRO_MARKOV_DRIFT_Z = NED_INERTIAL16_TWIN_STATE_GYRO_MARKOV_DRIFT_Z; /* [rad/s] gyro bias (gauss markov) */
+constexpr int STATE_ACCEL_MARKOV_BIAS_X = NED_INERTIAL16_TWIN_STATE_ACCEL_MARKOV_BIAS_X; /* [m/s^2] accel bias (gauss markov) */
+constexpr int STATE_ACCEL_MARKOV_BIAS_Y = NED_INERTIAL16_TWIN_STATE_ACCEL_MARKOV_BIAS_Y; /* [m/s^2] accel bias (gauss markov) */
+constexpr int STATE_ACCEL_MARKOV_BIAS_Z = NED_INERTIAL16_TWIN_STATE_ACCEL_MARKOV_BIAS_Z; /* [m/s^2] accel bias (gauss markov) */
 // Noise indices: the noise PSD q[NOISE_<NAME>]
-constexpr int NOISE_GYRO_MARKOV_NOISE_X = NED_INERTIAL16_TWIN_NOISE_GYRO_MARKOV_NOISE_X; // [rad/s/sqrt(s)] drives the gyro bias
-constexpr int NOISE_GYRO_MARKOV_NOISE_Y = NED_INERTIAL16_TWIN_NOISE_GYRO_MARKOV_NOISE_Y; // [rad/s/sqrt(s)] drives the gyro bias
-constexpr int NOISE_GYRO_MARKOV_NOISE_Z = NED_INERTIAL16_TWIN_NOISE_GYRO_MARKOV_NOISE_Z; // [rad/s/sqrt(s)] drives the gyro bias
-constexpr int NOISE_ACCEL_MARKOV_NOISE_X = NED_INERTIAL16_TWIN_NOISE_ACCEL_MARKOV_NOISE_X; // [m/s^2/sqrt(s)] drives the accel bias
-constexpr int NOISE_ACCEL_MARKOV_NOISE_Y = NED_INERTIAL16_TWIN_NOISE_ACCEL_MARKOV_NOISE_Y; // [m/s^2/sqrt(s)] drives the accel bias
-constexpr int NOISE_ACCEL_MARKOV_NOISE_Z = NED_INERTIAL16_TWIN_NOISE_ACCEL_MARKOV_NOISE_Z; // [m/s^2/sqrt(s)] drives the accel bias
+constexpr int NOISE_GYRO_MARKOV_NOISE_X = NED_INERTIAL16_TWIN_NOISE_GYRO_MARKOV_NOISE_X; /* [rad/s/sqrt(s)] drives the gyro bias */
+constexpr int NOISE_GYRO_MARKOV_NOISE_Y = NED_INERTIAL16_TWIN_NOISE_GYRO_MARKOV_NOISE_Y; /* [rad/s/sqrt(s)] drives the gyro bias */
+constexpr int NOISE_GYRO_MARKOV_NOISE_Z = NED_INERTIAL16_TWIN_NOISE_GYRO_MARKOV_NOISE_Z; /* [rad/s/sqrt(s)] drives the gyro bias */
+constexpr int NOISE_ACCEL_MARKOV_NOISE_X = NED_INERTIAL16_TWIN_NOISE_ACCEL_MARKOV_NOISE_X; /* [m/s^2/sqrt(s)] drives the accel bias */
+constexpr int NOISE_ACCEL_MARKOV_NOISE_Y = NED_INERTIAL16_TWIN_NOISE_ACCEL_MARKOV_NOISE_Y; /* [m/s^2/sqrt(s)] drives the accel bias */
+constexpr int NOISE_ACCEL_MARKOV_NOISE_Z = NED_INERTIAL16_TWIN_NOISE_ACCEL_MARKOV_NOISE_Z; /* [m/s^2/sqrt(s)] drives the accel bias */
 
 // The C's status codes (the contract of ned_inertial16_twin.h and README.md: what each call refuses).
 enum class Status : int {

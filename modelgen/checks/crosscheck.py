@@ -245,11 +245,6 @@ def hand_substitution(pair: Pair, hand: ErrorModel, twin: ErrorModel) -> dict[sp
     return out
 
 
-def twin_to_hand(pair: Pair, hand: ErrorModel, twin: ErrorModel) -> dict[sp.Symbol, sp.Symbol]:
-    """The inverse renaming: twin parameter symbols back to the hand model's (for a comparison in the hand's terms)."""
-    return {t: h for h, t in hand_substitution(pair, hand, twin).items()}
-
-
 @dataclass(frozen=True)
 class Layout:
     """Where each hand-model state, noise and measurement sits in the twin (0-based twin indices)."""

@@ -104,13 +104,18 @@ GENERATOR_C = frozenset(
     STRICT_UPPER MAX_DOUBLINGS SERIES_RANGE NM MAX_IMU MAX_EPOCHS""".split()
 )
 
+#: The prefix of every header, macro and function of the fixed C runtime
+#: (modelgen/codegen/backends/c/runtime, copied into each generated folder): a
+#: model or quantity named with it could shadow a runtime header or macro.
+RUNTIME_PREFIX = "modelgen_"
+
 #: Names of the generated Python module (backends/python/templates/python_module.py.j2): its
 #: imports, module-level names and the names its functions use, and every
 #: Python builtin (a parameter becomes a local that would shadow one).  The
 #: argument ``p``, the result ``out`` and temporaries ``t<k>`` are not listed:
 #: the generator keeps a parameter so named as ``p[k]`` (codegen/generate.py).
 GENERATOR_PYTHON = frozenset(
-    """np math numpy MODEL TITLE SOURCE N_STATES N_NOISES N_MEASUREMENTS TAYLOR_ORDER TAYLOR_TOLERANCE
+    """np math numpy numbers MODEL TITLE SOURCE N_STATES N_NOISES N_MEASUREMENTS TAYLOR_ORDER TAYLOR_TOLERANCE
     SERIES_RANGE PSD_TOLERANCE STATE_NAMES NOISE_NAMES MEASUREMENT_NAMES PARAMETER_NAMES
     PARAMETER_DEFAULTS SingularOperatingPoint parameter_vector system_matrix
     noise_input_matrix measurement_matrix noise_psd measurement_variance discretize predict
@@ -155,6 +160,8 @@ def name_collision(name: str, model_name: bool = False) -> str | None:
         return "a C standard library macro or identifier"
     if name in C_PLATFORM:
         return "a POSIX or compiler-predefined macro"
+    if name.lower().startswith(RUNTIME_PREFIX):
+        return f"the {RUNTIME_PREFIX} prefix of the generated C runtime (modelgen/codegen/backends/c/runtime: its headers and macros)"
     if name in GENERATOR_C:
         return "a macro of the generated C"
     if name in GENERATOR_PYTHON:

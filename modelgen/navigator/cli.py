@@ -35,10 +35,15 @@ def replay(config: Path | None, out: Path, no_figures: bool, force: bool, naviga
     click.echo(f"{s['outage_count']} outages: end-of-outage horizontal error RMS "
                f"{s['horizontal_error_end_rms_m']:.2f} m (median {s['horizontal_error_end_median_m']:.2f} m, "
                f"max {s['horizontal_error_end_max_m']:.2f} m), "
-               f"{100 * s['outage_ends_inside_3sigma_fraction']:.0f} % inside 3 sigma; "
+               f"mean NEES {s['consistency']['nees_mean']:.1f} (2 if consistent), "
+               f"{100 * s['consistency']['inside_95_fraction']:.0f} % inside the 95 % region; "
                f"horizontal RMS outside outages {s['horizontal_rms_outside_outages_m']:.3f} m"
                if s["outage_count"] else
                f"no outages; horizontal RMS {s['horizontal_rms_outside_outages_m']:.3f} m")
+    if len(s.get("schedules", [])) > 1:
+        pooled = s["consistency_pooled"]
+        click.echo(f"{len(s['schedules'])} outage schedules pooled ({pooled['count']} outage ends): mean NEES "
+                   f"{pooled['nees_mean']:.1f}, {100 * pooled['inside_95_fraction']:.0f} % inside the 95 % region")
     if "c_python_max_difference_m" in s:
         click.echo(f"C and Python trajectories agree within {s['c_python_max_difference_m']:.3g} m")
     click.echo(f"navigator ({s['navigator']}) {result.timings['fly_s']:.2f} s, total {result.timings['total_s']:.2f} s; "

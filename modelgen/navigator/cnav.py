@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
-import os
 import tempfile
 import time
 from dataclasses import dataclass
@@ -35,19 +34,16 @@ from modelgen.navigator.outages import in_outage, outage_windows
 from modelgen.fileio.output import write_atomically
 from modelgen.model import wgs84
 
-N_CONFIG, N_OUTPUT, N_GNSS, N_ALIGNMENT = 45, 23, 13, 6
+N_CONFIG, N_OUTPUT, N_GNSS, N_ALIGNMENT = 49, 26, 13, 8
 COUNT_NAMES = ("gnss_updates", "gnss_rejected", "gnss_released", "gnss_deweighted", "gnss_quality_skipped",
                "zupt_updates", "nhc_updates", "predicts")
-ALIGNMENT_NAMES = ("time", "roll", "pitch", "heading", "rest_end", "rest_samples")
-#: IMU samples the C keeps for its alignment ({P}_NAV_REST_MAX in the header): the rest window must fit
+ALIGNMENT_NAMES = ("time", "roll", "pitch", "heading", "rest_end", "rest_samples", "rest_start", "motion_time")
+#: IMU samples the C keeps for its alignment by default ({P}_NAV_REST_MAX in the header); a configuration whose
+#: rest window needs more is built with a larger ring (:func:`rest_capacity`, -D{P}_NAV_REST_MAX)
 REST_MAX = 1024
-#: the C's alignment statuses (header: {P}_NAV_ERR_*)
+#: the C's alignment statuses (header: {P}_NAV_ERR_*); 11 and 12 are explained by the Python rules' diagnosis
 ALIGNMENT_ERRORS = {
-    11: "a usable GNSS epoch faster than alignment.heading_speed_m_s came before any epoch at rest "
-        "(slower than alignment.rest_speed_m_s): the IMU cannot be levelled",
-    12: "fewer than 10 IMU samples in the rest window before the first fast epoch",
-    13: f"the rest window held more IMU samples than the C navigator keeps ({REST_MAX}): shorten "
-        "alignment.rest_window_s",
+    13: "the rest window held more IMU samples than the C navigator was built to keep (its ring overflowed)",
 }
 
 
@@ -81,8 +77,9 @@ def generate_c_navigator(model_file: Path, folder: Path) -> Path:
 class CNavigator:
     """The compiled navigator library (one model)."""
 
-    def __init__(self, library: Path, model: str):
+    def __init__(self, library: Path, model: str, rest_max: int = REST_MAX):
         self.model = model
+        self.rest_max = rest_max  # the alignment ring it was built with
         self.lib = ctypes.CDLL(str(library))
         self.size = int(self._fn("navigator_size", [], ctypes.c_ulong)())
         dp = ctypes.POINTER(ctypes.c_double)
@@ -99,60 +96,113 @@ class CNavigator:
         return function
 
 
-def build_c_navigator(model_file: Path, folder: Path) -> CNavigator:
-    """Generate, compile (strict C99, -O2) and load the navigator for a model file."""
+def rest_define(model: str, rest_max: int) -> str:
+    """The compiler flag that sizes the C's alignment ring."""
+    return f"-D{model.upper()}_NAV_REST_MAX={int(rest_max)}"
+
+
+def build_c_navigator(model_file: Path, folder: Path, rest_max: int = REST_MAX) -> CNavigator:
+    """Generate, compile (strict C99, -O2) and load the navigator for a model file (ring of ``rest_max`` samples)."""
     folder = generate_c_navigator(model_file, folder)
     model = next(p.stem for p in folder.glob("*_navigator.c")).removesuffix("_navigator")
     library = compile_shared_library([folder / f"{model}.c", folder / f"{model}_navigator.c"],
-                                     folder / f"lib{model}_navigator.so")
-    return CNavigator(library, model)
+                                     folder / f"lib{model}_navigator.so", ("-O2", rest_define(model, rest_max)))
+    return CNavigator(library, model, rest_max)
+
+
+def rest_capacity(config: NavigatorConfig, time: np.ndarray) -> int:
+    """The ring the C needs for this configuration and log: every rest window and the detectors' windows fit.
+
+    The most samples in any ``rest_window_s`` span of the log plus two (the epoch's own sample), at least the
+    still detector's and the ZUPT's windows plus one; rounded up to a power of two, at least :data:`REST_MAX`.
+    """
+    time = np.asarray(time, float)
+    need = int(np.max(np.arange(len(time)) - np.searchsorted(time, time - config.rest_window, side="left"))) + 3
+    median_dt = float(np.median(np.diff(time)))
+    need = max(need, max(2, int(round(config.still_window / median_dt))) + 1,
+               max(2, int(round(config.zupt_window / median_dt))) + 1)
+    return max(REST_MAX, 1 << (need - 1).bit_length())
 
 
 def cache_folder() -> Path:
-    """Where compiled navigators are kept between runs: $XDG_CACHE_HOME/modelgen/navigator (or ~/.cache/...)."""
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "modelgen" / "navigator"
+    """Where compiled navigators are kept between runs: the compile cache's folder
+    (:func:`modelgen.codegen.build.library_cache_folder`: $MODELGEN_CACHE_DIR, else $XDG_CACHE_HOME/modelgen, else
+    ~/.cache/modelgen; under its size cap, every entry verified by its digest before it is loaded)."""
+    from modelgen.codegen.build import library_cache_folder
+
+    return library_cache_folder()
 
 
-def cached_c_navigator(model_file: Path, echo=lambda message: None) -> tuple[CNavigator, bool]:
-    """The compiled navigator for a model file, from the cache when its inputs are unchanged.
+def navigator_key(model_file: Path, rest_max: int) -> str:
+    """The cache key of a compiled navigator: what the library is made from, without deriving the model.
 
-    The key is the sha256 of the model file, the navigator templates, the filter's
-    templates and printer (everything under modelgen/codegen/backends) and
-    modelgen's version: any change compiles anew (the one-time compile).  Returns the navigator and whether it came from the cache.
+    The sha256 of the model file, the navigator templates, the filter's templates and printer (everything under
+    modelgen/codegen/backends), modelgen's version, the alignment ring's size and the compiler's identity.
     """
-    digest = hashlib.sha256(__version__.encode())
+    from modelgen.codegen.build import STRICT_FLAGS, compiler, compiler_identity
+
+    digest = hashlib.sha256(b"modelgen-navigator-library 2\n" + __version__.encode())
     digest.update(Path(model_file).read_bytes())
     backends = Path(__file__).resolve().parent.parent / "codegen" / "backends"  # the filter's templates and printer
     sources = sorted(Path(template_folder()).glob("*.j2")) + sorted(backends.rglob("*.j2")) + sorted(backends.rglob("*.py"))
     for template in sources:
         digest.update(template.name.encode() + template.read_bytes())
-    folder = cache_folder() / digest.hexdigest()[:20]
-    libraries = list(folder.glob("lib*_navigator.so")) if folder.is_dir() else []
-    if libraries:
-        model = libraries[0].name[3:].removesuffix("_navigator.so")
-        return CNavigator(libraries[0], model), True
-    echo("  generating and compiling the C navigator (once; cached in " + str(cache_folder()) + ")")
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=folder.parent, prefix=".build-") as build:
-        navigator = build_c_navigator(model_file, Path(build) / "navigator")
+    digest.update(f"\nrest_max {int(rest_max)}\nflags {' '.join(STRICT_FLAGS)} -O2\n".encode())
+    digest.update(compiler_identity(compiler()).encode())
+    return "navigator-" + digest.hexdigest()
+
+
+def _load_payload(payload: bytes, model: str, rest_max: int) -> CNavigator:
+    """Load a library from its bytes: written to a private temporary file, loaded, the file removed."""
+    with tempfile.TemporaryDirectory(prefix="modelgen-navigator-") as folder:
+        library = Path(folder) / f"lib{model}_navigator.so"
+        library.write_bytes(payload)
+        return CNavigator(library, model, rest_max)
+
+
+def cached_c_navigator(model_file: Path, echo=lambda message: None, rest_max: int = REST_MAX) -> tuple[CNavigator, bool]:
+    """The compiled navigator for a model file, from the compile cache when its inputs are unchanged.
+
+    Key: :func:`navigator_key`.  The entry is the compile cache's (:mod:`modelgen.codegen.build`): verified by its
+    digest before it is loaded (a corrupt or cut-short entry is not loaded: the navigator is compiled again and kept
+    under the next name) and kept within the cache's size cap.  Returns the navigator and whether it came from the
+    cache.
+    """
+    from modelgen.codegen.build import cached_library, store_library
+
+    folder = cache_folder()
+    key = navigator_key(model_file, rest_max)
+    model_name = _model_name(model_file)
+    payload = cached_library(folder, key) if model_name else None
+    if payload is not None:
+        return _load_payload(payload, model_name, rest_max), True
+    echo(f"  generating and compiling the C navigator (once; cached in {folder})")
+    with tempfile.TemporaryDirectory(prefix="modelgen-navigator-build-") as build:
+        navigator = build_c_navigator(model_file, Path(build) / "navigator", rest_max)
+        library = Path(build) / "navigator" / f"lib{navigator.model}_navigator.so"
         try:
-            os.rename(Path(build) / "navigator", folder)
-        except OSError:  # another process cached it first: use theirs
+            folder.mkdir(parents=True, exist_ok=True)
+            store_library(folder, key, library.read_bytes())
+        except OSError:  # a cache that cannot be written: the navigator is still here
             pass
-    libraries = list(folder.glob("lib*_navigator.so"))
-    return (CNavigator(libraries[0], navigator.model) if libraries else navigator), False
+    return navigator, False
 
 
-def config_array(config: NavigatorConfig, window: int, step: int, rest_samples: int = 0) -> np.ndarray:
+def _model_name(model_file: Path) -> str | None:
+    """The model's name as its file declares it (the library's symbol prefix), or None if it cannot be read."""
+    from modelgen.model.loading import load_model
+
+    try:
+        return load_model(model_file).name
+    except Exception:  # noqa: BLE001 - the build below reports the model's own error
+        return None
+
+
+def config_array(config: NavigatorConfig, window: int, step: int, still_window: int = 50) -> np.ndarray:
     """The C configuration array (its layout is documented in the generated header).
 
-    ``rest_samples``: IMU samples in the rest window at the log's median rate;
-    refused if the C cannot keep them.
+    ``window``, ``still_window``: the ZUPT's and the alignment's still-detector windows in samples.
     """
-    if rest_samples + 1 > REST_MAX:
-        raise ModelError(f"{config.path}: alignment.rest_window_s = {config.rest_window:g} s is {rest_samples} IMU "
-                         f"samples; the C navigator keeps at most {REST_MAX - 1} for its alignment")
     gates = {m: float(chi2.ppf(config.nis_gate_probability, m)) for m in (2, 3, 6)}
     cfg = np.zeros(N_CONFIG)
     cfg[0:3] = config.lever_arm
@@ -177,6 +227,8 @@ def config_array(config: NavigatorConfig, window: int, step: int, rest_samples: 
     cfg[38], cfg[39] = config.roll_pitch_sigma, config.heading_extra_sigma
     cfg[40], cfg[41], cfg[42] = config.velocity_sigma, config.position_sigma, config.height_sigma
     cfg[43], cfg[44] = config.gyro_bias_sigma, config.accel_bias_sigma
+    cfg[45], cfg[46], cfg[47] = still_window, config.still_gyro_std_max, config.still_accel_std_max
+    cfg[48] = config.rest_min
     return cfg
 
 
@@ -197,6 +249,7 @@ class LogArrays:
     use: np.ndarray  # int32
     gnss: np.ndarray  # (epochs, 13)
     windows: list[tuple[float, float]]
+    rest_max: int = REST_MAX  # the alignment ring this log and configuration need (:func:`rest_capacity`)
 
 
 def log_arrays(config: NavigatorConfig, inputs: Inputs) -> LogArrays:
@@ -208,29 +261,39 @@ def log_arrays(config: NavigatorConfig, inputs: Inputs) -> LogArrays:
     median_dt = float(np.median(np.diff(time_)))
     window = max(2, int(round(config.zupt_window / median_dt)))
     step = max(1, int(round(config.predict_period / median_dt)))
-    rest_samples = int(np.ceil(config.rest_window / median_dt)) + 1
+    from modelgen.navigator.alignment import still_window_samples
+
+    still = still_window_samples(config, time_)
     epochs = np.arange(len(g.time))
     target = np.searchsorted(time_, g.time[epochs]).astype(np.int64)
     epochs, target = epochs[target < len(time_)], target[target < len(time_)]
     gnss = np.column_stack([g.latitude, g.longitude, g.height, g.velocity, g.quality, g.sigma_position,
                             g.sigma_velocity])[epochs]
     contiguous = np.ascontiguousarray
-    return LogArrays(config_array(config, window, step, rest_samples), time_, force, rate,
+    return LogArrays(config_array(config, window, step, still), time_, force, rate,
                      contiguous(g.time[epochs]), contiguous(target), contiguous((~outage[epochs]).astype(np.int32)),
-                     contiguous(gnss), windows)
+                     contiguous(gnss), windows, rest_capacity(config, time_))
 
 
-def alignment_error(inputs: Inputs, status: int) -> ModelError:
-    """The error for a C navigator status (an alignment status names its rule)."""
+def alignment_error(config: NavigatorConfig, inputs: Inputs, status: int) -> ModelError:
+    """The error for a C navigator status: an alignment failure is explained by the Python rules' own diagnosis."""
     if status in ALIGNMENT_ERRORS:
         return ModelError(f"{inputs.gnss.path}: C navigator alignment: {ALIGNMENT_ERRORS[status]}")
+    if status in (11, 12):
+        return not_aligned_error(config, inputs)
     return ModelError(f"C navigator: a filter step failed (status {status})")
 
 
 def not_aligned_error(config: NavigatorConfig, inputs: Inputs) -> ModelError:
-    """The error when the log ended before the C navigator aligned."""
-    return ModelError(f"{inputs.gnss.path}: the vehicle never moves faster than {config.heading_speed} m/s with a "
-                      "used GNSS quality: no heading for the alignment")
+    """Why the C navigator did not align: the same rules in Python (:mod:`modelgen.navigator.alignment`) say why."""
+    from modelgen.navigator.alignment import align
+
+    try:
+        align(config, inputs)
+    except ModelError as error:
+        return error
+    return ModelError(f"{inputs.gnss.path}: the C navigator did not align where the Python rules align "
+                      "(an internal disagreement; please report it)")
 
 
 def flight_from_outputs(out: np.ndarray, arrays: LogArrays, inputs: Inputs, counts: dict[str, int],
@@ -245,6 +308,9 @@ def flight_from_outputs(out: np.ndarray, arrays: LogArrays, inputs: Inputs, coun
 def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tuple[Flight, float]:
     """Fly the log with the C navigator; return the flight and the CPU time of the C run [s]."""
     a = log_arrays(config, inputs)
+    if a.rest_max > navigator.rest_max:
+        raise ModelError(f"{config.path}: this configuration's rest window needs an alignment ring of {a.rest_max} IMU "
+                         f"samples; the C navigator was built with {navigator.rest_max} (cached_c_navigator(rest_max=))")
     state = ctypes.create_string_buffer(navigator.size)
     if navigator.configure(state, _pointer(a.cfg)):
         raise ModelError(f"{config.path}: the C navigator refused its configuration (ZUPT window {a.cfg[17]:g} "
@@ -256,7 +322,7 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tup
                            _pointer(a.use, ctypes.c_int), _pointer(a.gnss), _pointer(out))
     cpu = time.process_time() - cpu
     if status:
-        raise alignment_error(inputs, status)
+        raise alignment_error(config, inputs, status)
     result = np.full(N_ALIGNMENT, np.nan)
     if not navigator.alignment(state, _pointer(result)):
         raise not_aligned_error(config, inputs)

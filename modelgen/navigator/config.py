@@ -44,7 +44,7 @@ NOISE_UNITS: dict[str, dict[str, float]] = {
 
 SCHEMA: dict[str, set[str]] = {
     "": {"navigator", "description", "model", "imu", "gnss", "noise", "initial", "alignment", "filter",
-         "zupt", "nhc", "outages", "output"},
+         "zupt", "nhc", "outages", "evaluation", "output"},
     # imu: and gnss: hold the keys every log format shares and each format's own (logs.registry)
     **schema("imu"),
     "imu.rotation_to_body_deg": {"roll", "pitch", "yaw"},
@@ -53,11 +53,13 @@ SCHEMA: dict[str, set[str]] = {
     **{f"noise.{k}": {"value", "unit", "factor", "why"} for k in NOISE_UNITS},
     "initial": {"roll_pitch_sigma_deg", "heading_extra_sigma_deg", "velocity_sigma_m_s", "position_sigma_m",
                 "height_sigma_m", "gyro_bias_sigma_deg_s", "accel_bias_sigma_ug"},
-    "alignment": {"rest_speed_m_s", "rest_window_s", "heading_speed_m_s"},
+    "alignment": {"rest_speed_m_s", "rest_window_s", "heading_speed_m_s", "rest_min_s", "still_window_s",
+                  "gyro_std_max_deg_s", "accel_std_max_m_s2"},
     "filter": {"predict_period_s", "nis_gate_probability", "gate_action", "gate_release_epochs"},
     "zupt": {"enabled", "window_s", "gyro_max_deg_s", "accel_std_max_m_s2", "speed_max_m_s", "sigma_m_s"},
     "nhc": {"enabled", "sigma_lateral_m_s", "sigma_vertical_m_s", "speed_min_m_s", "rate_max_deg_s"},
     "outages": {"first_after_s", "length_s", "period_s", "end_margin_s", "windows"},
+    "evaluation": {"schedules", "target_end_rms_m", "target_nees_mean", "target_inside_95_fraction"},
     "output": {"folder"},
 }
 
@@ -122,6 +124,26 @@ class NavigatorConfig:
     imu_source: LogSource | None = None  # the imu: section as the log readers take it (format, file, options)
     gnss_source: LogSource | None = None
     gap_action: str = "refuse"  # imu.gap_action: refuse a log with an IMU gap, or propagate across it
+    #: the alignment's still detector and shortest usable rest window (modelgen.navigator.alignment)
+    still_window: float = 0.5  # alignment.still_window_s [s]
+    still_gyro_std_max: float = 1.0 * DEG  # alignment.gyro_std_max_deg_s [rad/s]
+    still_accel_std_max: float = 0.2  # alignment.accel_std_max_m_s2 [m/s^2]
+    rest_min: float = 2.0  # alignment.rest_min_s [s]
+    #: evaluation.schedules: further outage schedules flown on the same log for the consistency statistics
+    evaluation_schedules: tuple[EvaluationSchedule, ...] = ()
+    target_end_rms_m: float | None = None  # evaluation.target_end_rms_m: for the configured schedule
+    target_nees_mean: tuple[float, float] | None = None  # pooled over all schedules
+    target_inside_95_fraction: float | None = None  # pooled over all schedules
+
+
+@dataclass(frozen=True)
+class EvaluationSchedule:
+    """One further outage schedule of ``evaluation.schedules`` (a schedule or windows) and its optional target."""
+
+    name: str
+    schedule: dict[str, float] | None
+    windows: list[tuple[float, float]] | None
+    target_end_rms_m: float | None = None
 
 
 class _Reader:
@@ -226,31 +248,88 @@ def _noise(reader: _Reader, kind: str) -> NoiseEntry:
     return NoiseEntry(value, unit, factor, value * NOISE_UNITS[kind][unit] * factor, reader.text(f"{key}.why", ""))
 
 
-def _outages(reader: _Reader) -> tuple[dict[str, float] | None, list[tuple[float, float]] | None]:
+def _outages(reader: _Reader, key: str = "outages",
+             raw: Any = ...) -> tuple[dict[str, float] | None, list[tuple[float, float]] | None]:
     """Either a schedule (first_after_s, length_s, period_s, end_margin_s) or a list of windows, or none."""
-    raw = reader.get("outages", None)
+    if raw is ...:
+        raw = reader.get(key, None)
     if raw is None:
         return None, None
+    if not isinstance(raw, dict):
+        raise ModelError(f"{reader.where(key)}: {key} must be a mapping")
     if "windows" in raw:
         if set(raw) != {"windows"}:
-            raise ModelError(f"{reader.where('outages')}: outages: give either windows or a schedule, not both")
+            raise ModelError(f"{reader.where(key)}: {key}: give either windows or a schedule, not both")
         windows = raw["windows"]
         if not isinstance(windows, list):
-            raise ModelError(f"{reader.where('outages.windows')}: outages.windows must be a list of [start_s, length_s]")
+            raise ModelError(f"{reader.where(key)}: {key}.windows must be a list of [start_s, length_s]")
         out = []
         for item in windows:
             if (not isinstance(item, list) or len(item) != 2
                     or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in item)
                     or item[1] <= 0):
-                raise ModelError(f"{reader.where('outages.windows')}: each outage window is [start_s, length_s > 0], "
+                raise ModelError(f"{reader.where(key)}: each outage window is [start_s, length_s > 0], "
                                  f"got {item!r}")
             out.append((float(item[0]), float(item[1])))
         return None, out
-    schedule = {k: reader.number(f"outages.{k}", positive=k in ("length_s", "period_s"), non_negative=True)
-                for k in ("first_after_s", "length_s", "period_s", "end_margin_s")}
+    names = ("first_after_s", "length_s", "period_s", "end_margin_s")
+    unknown = sorted(set(raw) - set(names))
+    if unknown:
+        raise ModelError(f"{reader.where(key)}: unknown key {unknown[0]!r} in {key} (known: {', '.join(names)}, windows)")
+    schedule = {}
+    for k in names:
+        value = raw.get(k)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0 \
+                or (value == 0 and k in ("length_s", "period_s")):
+            raise ModelError(f"{reader.where(key)}: {key}.{k} must be a "
+                             f"{'positive' if k in ('length_s', 'period_s') else 'non-negative'} number, got {value!r}")
+        schedule[k] = float(value)
     if schedule["length_s"] >= schedule["period_s"]:
-        raise ModelError(f"{reader.where('outages.length_s')}: outages.length_s must be shorter than period_s")
+        raise ModelError(f"{reader.where(key)}: {key}.length_s must be shorter than period_s")
     return schedule, None
+
+
+def _evaluation(reader: _Reader) -> dict[str, Any]:
+    """evaluation: further schedules (each a name, a schedule or windows, an optional target) and the targets."""
+    raw = reader.get("evaluation", None)
+    if raw is None:
+        return {}
+    entries = reader.get("evaluation.schedules", [])
+    if not isinstance(entries, list):
+        raise ModelError(f"{reader.where('evaluation.schedules')}: evaluation.schedules must be a list of schedules")
+    schedules = []
+    for index, entry in enumerate(entries):
+        key = f"evaluation.schedules[{index}]"
+        if not isinstance(entry, dict) or not isinstance(entry.get("name"), str) or not entry["name"]:
+            raise ModelError(f"{reader.where('evaluation.schedules')}: {key} must be a mapping with a name")
+        target = entry.get("target_end_rms_m")
+        if target is not None and (isinstance(target, bool) or not isinstance(target, (int, float))
+                                   or not math.isfinite(target) or target <= 0):
+            raise ModelError(f"{reader.where('evaluation.schedules')}: {key}.target_end_rms_m must be a positive "
+                             f"number, got {target!r}")
+        rest = {k: v for k, v in entry.items() if k not in ("name", "target_end_rms_m")}
+        schedule, windows = _outages(reader, "evaluation.schedules", rest)
+        if schedule is None and windows is None:
+            raise ModelError(f"{reader.where('evaluation.schedules')}: {key} ({entry['name']!r}) gives no outages")
+        schedules.append(EvaluationSchedule(entry["name"], schedule, windows,
+                                            float(target) if target is not None else None))
+    names = [s.name for s in schedules]
+    if len(set(names)) != len(names):
+        raise ModelError(f"{reader.where('evaluation.schedules')}: evaluation.schedules: names must differ")
+    nees = reader.get("evaluation.target_nees_mean", None)
+    if nees is not None:
+        low, high = reader.vector("evaluation.target_nees_mean", 2)
+        if not 0 <= low < high:
+            raise ModelError(f"{reader.where('evaluation.target_nees_mean')}: evaluation.target_nees_mean must be "
+                             f"[low, high] with 0 <= low < high, got {nees!r}")
+        nees = (low, high)
+    inside = reader.get("evaluation.target_inside_95_fraction", None)
+    if inside is not None:
+        inside = _probability(reader, "evaluation.target_inside_95_fraction")
+    rms = reader.get("evaluation.target_end_rms_m", None)
+    return {"evaluation_schedules": tuple(schedules),
+            "target_end_rms_m": reader.number("evaluation.target_end_rms_m", positive=True) if rms is not None else None,
+            "target_nees_mean": nees, "target_inside_95_fraction": inside}
 
 
 def _probability(reader: _Reader, key: str) -> float:
@@ -315,6 +394,10 @@ def load_config(path: str | Path) -> NavigatorConfig:
         rest_speed=r.number("alignment.rest_speed_m_s", positive=True),
         rest_window=r.number("alignment.rest_window_s", positive=True),
         heading_speed=r.number("alignment.heading_speed_m_s", positive=True),
+        still_window=r.number("alignment.still_window_s", 0.5, positive=True),
+        still_gyro_std_max=r.number("alignment.gyro_std_max_deg_s", 1.0, positive=True) * DEG,
+        still_accel_std_max=r.number("alignment.accel_std_max_m_s2", 0.2, positive=True),
+        rest_min=r.number("alignment.rest_min_s", 2.0, positive=True),
         predict_period=r.number("filter.predict_period_s", positive=True),
         nis_gate_probability=_probability(r, "filter.nis_gate_probability"),
         gate_action=_choice(r, "filter.gate_action", ("reject", "deweight")),
@@ -329,7 +412,7 @@ def load_config(path: str | Path) -> NavigatorConfig:
         nhc_speed_min=r.number("nhc.speed_min_m_s", non_negative=True),
         nhc_rate_max=r.number("nhc.rate_max_deg_s", 1e9, positive=True) * DEG,
         outage_schedule=schedule, outage_windows=windows,
-        imu_source=imu_source, gnss_source=gnss_source, gap_action=gap_action,
+        imu_source=imu_source, gnss_source=gnss_source, gap_action=gap_action, **_evaluation(r),
     )
 
 

@@ -3,9 +3,12 @@
 The error is measured at the antenna: the navigator's antenna position at each
 output time against the RTK antenna position linearly interpolated to that
 time (the receiver's solution, all epochs, including those hidden from the
-filter during the outages).  The horizontal bound is the filter's own
-sigma_h = sqrt(sigma_N^2 + sigma_E^2); an outage end is "inside 3 sigma" when
-its horizontal error is at most 3 sigma_h.
+filter during the outages).  The consistency of the filter at an outage end is the normalized squared
+horizontal error ``e^T P_h^-1 e`` of the horizontal error e = (north, east)
+with the filter's own 2x2 horizontal position covariance P_h (sigma_N^2,
+sigma_E^2 and their cross covariance): for a consistent filter it follows the
+chi-square distribution with 2 degrees of freedom (mean 2), and an end is
+inside the 95 % region when it is at most chi2.ppf(0.95, 2) = 5.99.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2
 
 from modelgen.navigator.logs import GnssLog
 from modelgen.navigator.mechanization import radii
@@ -21,17 +25,27 @@ from modelgen.navigator.navigator import OUTPUT_FIELDS, Flight
 
 COLUMN = {name: i for i, name in enumerate(OUTPUT_FIELDS)}
 DRIFT_TIMES = (5.0, 10.0, 15.0)
+#: probability of the consistency region at the outage ends, and its bound for 2 degrees of freedom
+CONSISTENCY_PROBABILITY = 0.95
+NEES_BOUND_95 = float(chi2.ppf(CONSISTENCY_PROBABILITY, 2))
 
 
 @dataclass
 class Errors:
-    """Per output epoch: north, east, up error [m] and the horizontal sigma [m]."""
+    """Per output epoch: north, east, up error [m], the horizontal sigma [m] and the 2x2 horizontal covariance."""
 
     time: np.ndarray
     north: np.ndarray
     east: np.ndarray
     up: np.ndarray
     sigma_horizontal: np.ndarray
+    #: (epochs, 2, 2) horizontal position covariance [m^2], north-east order
+    covariance_horizontal: np.ndarray | None = None
+
+    def nees_horizontal(self, index: int) -> float:
+        """e^T P_h^-1 e at one output epoch (2 degrees of freedom); NaN if P_h is not positive definite."""
+        return normalized_squared_error(np.array([self.north[index], self.east[index]]),
+                                        self.covariance_horizontal[index])
 
     @property
     def horizontal(self) -> np.ndarray:
@@ -55,8 +69,31 @@ def errors_against_reference(flight: Flight, reference: GnssLog) -> Errors:
     north = (o[:, COLUMN["latitude"]] - lat) * (rm + h)
     east = (o[:, COLUMN["longitude"]] - lon) * (rn + h) * np.cos(lat)
     up = o[:, COLUMN["height"]] - h
-    sigma = np.hypot(o[:, COLUMN["sigma_north"]], o[:, COLUMN["sigma_east"]])
-    return Errors(t, north, east, up, sigma)
+    sn, se = o[:, COLUMN["sigma_north"]], o[:, COLUMN["sigma_east"]]
+    covariance = np.empty((len(t), 2, 2))
+    covariance[:, 0, 0], covariance[:, 1, 1] = sn**2, se**2
+    covariance[:, 0, 1] = covariance[:, 1, 0] = o[:, COLUMN["cov_north_east"]]
+    return Errors(t, north, east, up, np.hypot(sn, se), covariance)
+
+
+def normalized_squared_error(error: np.ndarray, covariance: np.ndarray) -> float:
+    """e^T P^-1 e (NaN when P is not positive definite)."""
+    try:
+        factor = np.linalg.cholesky(covariance)
+    except np.linalg.LinAlgError:
+        return float("nan")
+    y = np.linalg.solve(factor, error)
+    return float(y @ y)
+
+
+def consistency(nees: list[float] | np.ndarray) -> dict[str, float | int | None]:
+    """Mean normalized squared error and the fraction inside the 95 % region (2 degrees of freedom)."""
+    values = np.array([v for v in nees if v is not None and math.isfinite(v)], dtype=float)
+    return {"count": int(len(values)),
+            "nees_mean": float(values.mean()) if len(values) else None,
+            "nees_median": float(np.median(values)) if len(values) else None,
+            "inside_95_fraction": float(np.mean(values <= NEES_BOUND_95)) if len(values) else None,
+            "expected_nees_mean": 2.0, "bound_95": NEES_BOUND_95}
 
 
 def path_length(reference: GnssLog, start: float, end: float) -> float:
@@ -87,7 +124,9 @@ def outage_records(flight: Flight, errors: Errors, reference: GnssLog) -> list[d
             "horizontal_error_max_m": float(horizontal[inside].max()),
             "sigma_horizontal_end_m": float(errors.sigma_horizontal[last]),
         }
-        record["inside_3sigma"] = bool(record["horizontal_error_end_m"] <= 3.0 * record["sigma_horizontal_end_m"])
+        nees = errors.nees_horizontal(last)
+        record["nees_horizontal_end"] = nees if math.isfinite(nees) else None
+        record["inside_95"] = bool(math.isfinite(nees) and nees <= NEES_BOUND_95)
         for after in DRIFT_TIMES:
             upto = inside[errors.time[inside] <= start + after + 1e-6]
             record[f"drift_{int(after)}s_m"] = float(horizontal[upto[-1]]) if len(upto) else None
@@ -110,8 +149,7 @@ def summary(flight: Flight, errors: Errors, reference: GnssLog) -> dict[str, obj
         "horizontal_error_end_rms_m": float(np.sqrt(np.mean(ends**2))) if len(ends) else None,
         "horizontal_error_end_median_m": float(np.median(ends)) if len(ends) else None,
         "horizontal_error_end_max_m": float(ends.max()) if len(ends) else None,
-        "outage_ends_inside_3sigma_fraction": (float(np.mean([r["inside_3sigma"] for r in records]))
-                                               if records else None),
+        "consistency": consistency([r["nees_horizontal_end"] for r in records]),
         "horizontal_rms_outside_outages_m": float(np.sqrt(np.mean(horizontal[outside] ** 2))),
         "epochs": int(len(o)),
         "epochs_outside_outages": int(outside.sum()),
@@ -150,3 +188,22 @@ def velocity_latency(gnss: GnssLog, candidates: np.ndarray | None = None) -> flo
     cost = [np.mean((np.interp(mid + d, gnss.time, gnss.velocity[:, 0]) - vn) ** 2
                     + (np.interp(mid + d, gnss.time, gnss.velocity[:, 1]) - ve) ** 2) for d in candidates]
     return float(candidates[int(np.argmin(cost))])
+
+
+def schedule_record(name: str, flight: Flight, errors: Errors, reference: GnssLog,
+                    target_end_rms_m: float | None = None) -> dict[str, object]:
+    """One outage schedule flown: its end-of-outage errors, RMS and consistency (:func:`consistency`)."""
+    records = outage_records(flight, errors, reference)
+    ends = np.array([r["horizontal_error_end_m"] for r in records])
+    return {"name": name, "outage_count": len(records),
+            "outage_length_s": sorted({r["duration_s"] for r in records}),
+            "horizontal_error_end_rms_m": float(np.sqrt(np.mean(ends**2))) if len(ends) else None,
+            "target_end_rms_m": target_end_rms_m,
+            "consistency": consistency([r["nees_horizontal_end"] for r in records]),
+            "ends": [{k: r[k] for k in ("start_s", "duration_s", "horizontal_error_end_m", "sigma_horizontal_end_m",
+                                        "nees_horizontal_end", "inside_95")} for r in records]}
+
+
+def pooled_consistency(schedules: list[dict]) -> dict[str, float | int | None]:
+    """:func:`consistency` over the outage ends of every schedule flown."""
+    return consistency([end["nees_horizontal_end"] for s in schedules for end in s["ends"]])

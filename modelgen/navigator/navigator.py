@@ -18,17 +18,18 @@ from scipy.stats import chi2
 
 from modelgen.errors import ModelError
 from modelgen.model.frames import NED_TO_ENU
+from modelgen.navigator.alignment import Alignment, align  # noqa: F401  (the alignment lives in alignment.py)
 from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator.errorstate import ErrorStateFilter, feedback
 from modelgen.navigator.logs import GnssLog, ImuLog, check_logs, epochs_inside_gaps
-from modelgen.navigator.mechanization import (NAV_SIZE, dcm_to_euler, dcm_to_quaternion, euler_to_dcm,
-                                              gravity, level_from_accelerometers, mechanize, quaternion_to_dcm, radii)
+from modelgen.navigator.mechanization import dcm_to_euler, euler_to_dcm, mechanize, quaternion_to_dcm, radii
 from modelgen.navigator.outages import in_outage, outage_windows
 
 HISTORY = 16  # INS velocities kept (one per covariance step) for the GNSS velocity latency
 OUTPUT_FIELDS = ("time", "latitude", "longitude", "height", "v_north", "v_east", "v_down", "roll", "pitch", "yaw",
                  "sigma_north", "sigma_east", "sigma_up", "gyro_bias_x", "gyro_bias_y", "gyro_bias_z",
-                 "accel_bias_x", "accel_bias_y", "accel_bias_z", "in_outage", "gnss_used", "nis", "gnss_quality")
+                 "accel_bias_x", "accel_bias_y", "accel_bias_z", "in_outage", "gnss_used", "nis", "gnss_quality",
+                 "cov_north_east", "cov_east_up", "cov_up_north")
 
 
 @dataclass
@@ -48,28 +49,6 @@ class Flight:
 
 
 @dataclass
-class Alignment:
-    """The initial alignment (:func:`align`): where the flight starts and with what."""
-
-    epoch: int  # GNSS epoch it completed at (index into Inputs.gnss)
-    sample: int  # IMU sample the flight starts at (first at or after that epoch)
-    nav: np.ndarray
-    gyro_bias: np.ndarray
-    accel_bias: np.ndarray
-    roll: float
-    pitch: float
-    heading: float
-    time: float  # the epoch's time [s]
-    rest_end: float  # end of the rest window: the last epoch at rest before [s]
-    rest_samples: int  # IMU samples in the rest window
-
-    def record(self) -> dict[str, float]:
-        """The values Flight.alignment holds (the C navigator reports the same)."""
-        return {"time": self.time, "roll": self.roll, "pitch": self.pitch, "heading": self.heading,
-                "rest_end": self.rest_end, "rest_samples": float(self.rest_samples)}
-
-
-@dataclass
 class Inputs:
     """The logs prepared for the loop: body-axis IMU, aligned times, GNSS epochs after the first IMU sample."""
 
@@ -79,6 +58,7 @@ class Inputs:
     gnss: GnssLog
     notes: list[str]
     first_epoch: float  # the GNSS file's first epoch [s]: the outage schedule and the report count from it
+    source_gnss: GnssLog | None = None  # the GNSS log as read (for the alignment's diagnosis of a log that ends first)
 
 
 def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
@@ -109,7 +89,7 @@ def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
     kept = GnssLog(gnss.path, gnss.time[keep], gnss.latitude[keep], gnss.longitude[keep], gnss.height[keep],
                    gnss.quality[keep], gnss.satellites[keep], gnss.sigma_position[keep], gnss.velocity[keep],
                    gnss.sigma_velocity[keep], gnss.notes)
-    return Inputs(time, imu.specific_force @ to_imu, imu.angular_rate @ to_imu, kept, notes, float(gnss.time[0]))
+    return Inputs(time, imu.specific_force @ to_imu, imu.angular_rate @ to_imu, kept, notes, float(gnss.time[0]), gnss)
 
 
 def stationary_mask(time: np.ndarray, force: np.ndarray, rate: np.ndarray, gyro_bias: np.ndarray,
@@ -147,55 +127,6 @@ def antenna(nav: np.ndarray, lever: np.ndarray, rate_body: np.ndarray) -> tuple[
     lon = nav[8] + offset[1] / ((rn + nav[9]) * math.cos(nav[7]))
     velocity = nav[4:7] + c @ np.cross(rate_body, lever)
     return lat, lon, nav[9] - offset[2], velocity
-
-
-def align(config: NavigatorConfig, inputs: Inputs) -> Alignment:
-    """The start: GNSS epoch and IMU sample, the initial navigation state, gyro and accelerometer bias.
-
-    Heading is the GNSS course at the first epoch at least heading_speed fast
-    (horizontal) whose quality is used; roll, pitch and the gyro bias come from
-    the IMU samples of the rest_window seconds up to the last epoch before it
-    slower than rest_speed.  The generated C navigator does the same itself
-    (templates/navigator_source.c.j2, ``align``), from its per-sample and
-    per-epoch calls.
-    """
-    g = inputs.gnss
-    speed = np.hypot(g.velocity[:, 0], g.velocity[:, 1])
-    usable = np.array([config.quality_factor.get(int(q)) is not None for q in g.quality])
-    moving = np.nonzero((speed >= config.heading_speed) & usable)[0]
-    if len(moving) == 0:
-        raise ModelError(f"{g.path}: the vehicle never moves faster than {config.heading_speed} m/s: "
-                         "no heading for the alignment")
-    j = int(moving[0])
-    rest = np.nonzero(speed[:j] < config.rest_speed)[0]
-    if len(rest) == 0:
-        raise ModelError(f"{g.path}: no GNSS epoch at rest (speed < {config.rest_speed} m/s) before "
-                         f"t = {g.time[j]:.2f} s: the IMU cannot be levelled")
-    rest_end = g.time[rest[-1]]
-    samples = (inputs.time <= rest_end) & (inputs.time >= rest_end - config.rest_window)
-    if np.count_nonzero(samples) < 10:
-        raise ModelError(f"{g.path}: fewer than 10 IMU samples at rest before t = {rest_end:.2f} s")
-    roll, pitch = level_from_accelerometers(inputs.force[samples].mean(axis=0))
-    yaw = math.atan2(g.velocity[j, 1], g.velocity[j, 0])
-    gyro_bias = inputs.rate[samples].mean(axis=0)
-    # At rest the specific force's magnitude is normal gravity: the excess is an
-    # accelerometer bias along the measured direction (the part across it is
-    # indistinguishable from tilt and is left to the filter).
-    mean_force = inputs.force[samples].mean(axis=0)
-    norm = float(np.linalg.norm(mean_force))
-    accel_bias = (norm - gravity(g.latitude[j], g.height[j])) * mean_force / norm
-    k = int(np.searchsorted(inputs.time, g.time[j]))
-    c = euler_to_dcm(roll, pitch, yaw)
-    nav = np.zeros(NAV_SIZE)
-    nav[0:4] = dcm_to_quaternion(c)
-    nav[4:7] = g.velocity[j]
-    rm, rn = radii(g.latitude[j])
-    offset = c @ np.asarray(config.lever_arm)
-    nav[7] = g.latitude[j] - offset[0] / (rm + g.height[j])
-    nav[8] = g.longitude[j] - offset[1] / ((rn + g.height[j]) * math.cos(g.latitude[j]))
-    nav[9] = g.height[j] + offset[2]
-    return Alignment(j, k, nav, gyro_bias, accel_bias, roll, pitch, yaw, float(g.time[j]), float(rest_end),
-                     int(np.count_nonzero(samples)))
 
 
 def initial_covariance(config: NavigatorConfig, nav: np.ndarray, heading_sigma: float) -> np.ndarray:
@@ -248,7 +179,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
     lever = np.asarray(config.lever_arm, float)
     windows = outage_windows(config.outage_schedule, config.outage_windows, inputs.first_epoch, float(g.time[-1]))
     outage = in_outage(g.time, windows)
-    start = align(config, inputs)
+    start = align(config, inputs, outage)
     j0, k, nav, gyro_bias, accel_bias = start.epoch, start.sample, start.nav, start.gyro_bias, start.accel_bias
     speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
     sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))
@@ -365,7 +296,11 @@ def _record(t: float, nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, P: n
     sn = math.sqrt(max(P[6, 6], 0.0)) * (rm + nav[9])
     se = math.sqrt(max(P[7, 7], 0.0)) * (rn + nav[9]) * math.cos(nav[7])
     su = math.sqrt(max(P[8, 8], 0.0))
+    # cross covariances [m^2] (north-east, east-up, up-north): the 2x2 horizontal covariance with sn, se
+    cne = P[6, 7] * (rm + nav[9]) * (rn + nav[9]) * math.cos(nav[7])
+    ceu = P[7, 8] * (rn + nav[9]) * math.cos(nav[7])
+    cun = P[8, 6] * (rm + nav[9])
     return [t, lat, lon, h, v[0], v[1], v[2], roll, pitch, yaw, sn, se, su, *gyro_bias, *accel_bias,
-            float(outage), float(used), nis, float(quality)]
+            float(outage), float(used), nis, float(quality), cne, ceu, cun]
 
 

@@ -3,18 +3,20 @@
 from __future__ import annotations
 
 import time  # noqa: I001
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from modelgen.errors import ModelError
-from modelgen.navigator.cnav import cached_c_navigator, fly_c
+from modelgen.navigator.cnav import cached_c_navigator, fly_c, rest_capacity
+from modelgen.navigator.alignment import alignment_note
 from modelgen.navigator.config import NavigatorConfig, load_config
 from modelgen.navigator.errorstate import generate_filter_module, model_path
 from modelgen.navigator.logs import read_gnss, read_imu
-from modelgen.navigator.metrics import errors_against_reference, summary, velocity_latency
+from modelgen.navigator.metrics import (errors_against_reference, pooled_consistency, schedule_record, summary,
+                                        velocity_latency)
 from modelgen.navigator.navigator import Flight, fly, prepare
 from modelgen.navigator.report import report_files
 from modelgen.fileio.output import write_atomically
@@ -97,7 +99,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         timings["fly_python_s"] = time.perf_counter() - mark
     if navigator in ("c", "both"):
         mark = time.perf_counter()
-        compiled, cached = cached_c_navigator(model_file, echo)
+        compiled, cached = cached_c_navigator(model_file, echo, rest_capacity(config, inputs.time))
         timings["generate_compile_c_s"] = 0.0 if cached else time.perf_counter() - mark
         mark = time.perf_counter()
         echo("  flying (C)")
@@ -118,6 +120,28 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     errors = errors_against_reference(flight, inputs.gnss)
     result = summary(flight, errors, inputs.gnss)
     result["navigator"] = "c" if "c" in flights else "python"
+    note = alignment_note(config, flight.alignment, flight.first_epoch) if flight.alignment else None
+    if note:
+        echo(f"  warning: {note}")
+        result["notes"].append(note)
+    # consistency over schedules: the configured one and every evaluation.schedules entry, same navigator and log
+    schedules = [schedule_record("configured", flight, errors, inputs.gnss, config.target_end_rms_m)]
+    mark = time.perf_counter()
+    for entry in config.evaluation_schedules:
+        again = replace(config, outage_schedule=entry.schedule, outage_windows=entry.windows)
+        if "c" in flights:
+            other = fly_c(again, inputs, compiled)[0]
+        else:
+            other = fly(again, inputs, module)
+        schedules.append(schedule_record(entry.name, other, errors_against_reference(other, inputs.gnss), inputs.gnss,
+                                         entry.target_end_rms_m))
+    if config.evaluation_schedules:
+        timings["fly_evaluation_schedules_s"] = time.perf_counter() - mark
+        echo(f"  flew {len(config.evaluation_schedules)} further outage schedule(s) for the consistency statistics")
+    result["schedules"] = schedules
+    result["consistency_pooled"] = pooled_consistency(schedules)
+    result["evaluation_targets"] = {"target_nees_mean": list(config.target_nees_mean) if config.target_nees_mean
+                                    else None, "target_inside_95_fraction": config.target_inside_95_fraction}
     if len(flights) == 2:
         result["c_python_max_difference_m"] = max_position_difference(flights["c"], flights["python"])
         echo(f"  C and Python trajectories: largest difference {result['c_python_max_difference_m']:.3g} m")

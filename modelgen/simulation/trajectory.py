@@ -143,9 +143,6 @@ class Trajectory:
     def record_period(self) -> float:
         return self.record_every / self.imu_rate
 
-    def truth_column(self, name: str) -> np.ndarray:
-        return self.truth[:, TRUTH_COLUMNS.index(name)]
-
     def initial_state(self) -> np.ndarray:
         """Truth at t = 0: latitude, longitude, height, v_NED (3), q_b^n (4)."""
         return self.truth[0, 1:].copy()

@@ -72,7 +72,7 @@ def committed_classes() -> list[Path]:
 
 
 def test_every_committed_folder_has_its_class():
-    headers = sorted(GENERATED.glob("**/*.h"))
+    headers = sorted(h for h in GENERATED.glob("**/*.h") if not h.name.startswith("modelgen_"))  # not the C runtime
     assert len(headers) >= 20
     for header in headers:
         assert header.with_suffix(".hpp").is_file(), header

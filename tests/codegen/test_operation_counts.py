@@ -50,7 +50,8 @@ def emitted_predict_count(source: str, model: str) -> tuple[int, int]:
     predict = source[source.index(f"int {model}_predict(") :]
     predict = predict[: predict.index("\n}\n")]
     predict = re.sub(r"/\*.*?\*/", "", predict, flags=re.S)  # a comment may precede the first statement
-    statements += [s for s in predict.split(";") if s.strip().startswith(("w->xn[", "acc = "))]  # x_n = Phi x inline (UD)
+    # x_n = Phi x inline (UD); a statement may follow the closing brace of a loop before it
+    statements += [t for s in predict.split(";") if (t := s.lstrip("{} \n\t")).startswith(("w->xn[", "acc = "))]
     return _count(statements)
 
 

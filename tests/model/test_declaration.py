@@ -331,12 +331,14 @@ def test_every_macro_and_module_name_the_templates_define_is_refused_as_a_model_
     from modelgen.model.names import name_collision
 
     templates = [*(root / "templates").rglob("*.j2"), *(root / "modelgen").rglob("*.j2")]
-    sources = [*templates, *(root / "modelgen" / "codegen").rglob("*.py")]
+    runtime = [*(root / "modelgen" / "codegen").rglob("runtime/*.h")]
+    sources = [*templates, *runtime, *(root / "modelgen" / "codegen").rglob("*.py")]
     macros = {m for path in sources for m in re.findall(r"#define +([A-Za-z_][A-Za-z0-9_]*)(?=[\s(]|$)", path.read_text(), re.M)}
     module_text = "\n".join(path.read_text() for path in templates if path.name.endswith(".py.j2"))
     module_names = set(re.findall(r"^([A-Za-z][A-Za-z0-9_]*) *=", module_text, re.M))
     module_names |= set(re.findall(r"^(?:def|class) +([A-Za-z][A-Za-z0-9_]*)", module_text, re.M))
     module_names |= set(re.findall(r"^import +([a-z]+)", module_text, re.M))
-    assert macros and module_names
+    assert macros and module_names and runtime
+    assert {"MODELGEN_SCALAR_H", "MODELGEN_EPSILON"} <= macros  # the runtime headers are read
     free = sorted(n for n in macros | module_names if not n.startswith("_") and name_collision(n) is None)
     assert not free, f"generated names a model could also use: {free}"

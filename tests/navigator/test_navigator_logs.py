@@ -357,6 +357,7 @@ def _flight(times):
     outputs[:, column["sigma_north"]], outputs[:, column["sigma_east"]], outputs[:, column["sigma_up"]] = 0.12, 0.34, 0.56
     outputs[:, column["gnss_used"]] = 1
     outputs[:, column["gnss_quality"]] = 1
+    outputs[:, column["cov_north_east"]], outputs[:, column["cov_east_up"]] = -0.0144, 0.0025
     return Flight(outputs, [], float(times[0]), float(times[0]))
 
 
@@ -367,7 +368,9 @@ def test_the_pos_output_carries_the_filter_sigmas_at_millisecond_times_and_reads
     times = 1752003261.0 + np.array([0.123, 0.373, 0.6234])
     text = pos_text(_flight(times), load_config(builtin_config_path()))
     assert "2025/07/08 19:34:21.123" in text and "19:34:21.373" in text and "19:34:21.623" in text
-    assert "sdne, sdeu, sdun = 0 (the flight carries no cross covariance)" in text
+    assert "sdne, sdeu, sdun = its cross covariances (signed square roots)" in text
+    row = next(line for line in text.splitlines() if not line.startswith("%")).split()
+    assert row[10:13] == ["-0.1200", "0.0500", "0.0000"]  # sdne, sdeu, sdun: the flight's cross covariances
     (tmp_path / "out.pos").write_text(text)
     back = read_rtklib_pos(tmp_path / "out.pos")
     assert np.allclose(back.time, np.round(times, 3), atol=1e-6)

@@ -41,34 +41,34 @@ constexpr int N_MEASUREMENTS = NED_DOPPLER18_N_MEASUREMENTS;
 constexpr const char *MODEL_HASH = NED_DOPPLER18_MODEL_HASH;
 
 // State indices: x[STATE_<NAME>], P(i, j) [unit]
-constexpr int STATE_ATTITUDE_ERROR_NORTH = NED_DOPPLER18_STATE_ATTITUDE_ERROR_NORTH; // [rad] attitude error about north
-constexpr int STATE_ATTITUDE_ERROR_EAST = NED_DOPPLER18_STATE_ATTITUDE_ERROR_EAST; // [rad] attitude error about east
-constexpr int STATE_HEADING_ERROR = NED_DOPPLER18_STATE_HEADING_ERROR; // [rad] attitude (azimuth) error about down
-constexpr int STATE_VELOCITY_ERROR_NORTH = NED_DOPPLER18_STATE_VELOCITY_ERROR_NORTH; // [m/s] north velocity error
-constexpr int STATE_VELOCITY_ERROR_EAST = NED_DOPPLER18_STATE_VELOCITY_ERROR_EAST; // [m/s] east velocity error
-constexpr int STATE_LATITUDE_ERROR = NED_DOPPLER18_STATE_LATITUDE_ERROR; // [rad] latitude error
-constexpr int STATE_LONGITUDE_ERROR = NED_DOPPLER18_STATE_LONGITUDE_ERROR; // [rad] longitude error
-constexpr int STATE_GYRO_CONSTANT_DRIFT_X = NED_DOPPLER18_STATE_GYRO_CONSTANT_DRIFT_X; // [rad/s] x gyro random-constant drift, eq. (2)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_Y = NED_DOPPLER18_STATE_GYRO_CONSTANT_DRIFT_Y; // [rad/s] y gyro random-constant drift, eq. (2)
-constexpr int STATE_GYRO_CONSTANT_DRIFT_Z = NED_DOPPLER18_STATE_GYRO_CONSTANT_DRIFT_Z; // [rad/s] z gyro random-constant drift, eq. (2)
-constexpr int STATE_GYRO_MARKOV_DRIFT_X = NED_DOPPLER18_STATE_GYRO_MARKOV_DRIFT_X; // [rad/s] x gyro first-order Markov drift, eq. (3)
-constexpr int STATE_GYRO_MARKOV_DRIFT_Y = NED_DOPPLER18_STATE_GYRO_MARKOV_DRIFT_Y; // [rad/s] y gyro first-order Markov drift, eq. (3)
-constexpr int STATE_GYRO_MARKOV_DRIFT_Z = NED_DOPPLER18_STATE_GYRO_MARKOV_DRIFT_Z; // [rad/s] z gyro first-order Markov drift, eq. (3)
-constexpr int STATE_ACCEL_MARKOV_BIAS_X = NED_DOPPLER18_STATE_ACCEL_MARKOV_BIAS_X; // [m/s^2] x accelerometer Markov bias, eq. (4)
-constexpr int STATE_ACCEL_MARKOV_BIAS_Y = NED_DOPPLER18_STATE_ACCEL_MARKOV_BIAS_Y; // [m/s^2] y accelerometer Markov bias, eq. (4)
-constexpr int STATE_ACCEL_MARKOV_BIAS_Z = NED_DOPPLER18_STATE_ACCEL_MARKOV_BIAS_Z; // [m/s^2] z accelerometer Markov bias, eq. (4)
-constexpr int STATE_DOPPLER_VELOCITY_BIAS_NORTH = NED_DOPPLER18_STATE_DOPPLER_VELOCITY_BIAS_NORTH; // [m/s] Doppler velocity bias, north (random constant)
-constexpr int STATE_DOPPLER_VELOCITY_BIAS_EAST = NED_DOPPLER18_STATE_DOPPLER_VELOCITY_BIAS_EAST; // [m/s] Doppler velocity bias, east (random constant)
+constexpr int STATE_ATTITUDE_ERROR_NORTH = NED_DOPPLER18_STATE_ATTITUDE_ERROR_NORTH; /* [rad] attitude error about north */
+constexpr int STATE_ATTITUDE_ERROR_EAST = NED_DOPPLER18_STATE_ATTITUDE_ERROR_EAST; /* [rad] attitude error about east */
+constexpr int STATE_HEADING_ERROR = NED_DOPPLER18_STATE_HEADING_ERROR; /* [rad] attitude (azimuth) error about down */
+constexpr int STATE_VELOCITY_ERROR_NORTH = NED_DOPPLER18_STATE_VELOCITY_ERROR_NORTH; /* [m/s] north velocity error */
+constexpr int STATE_VELOCITY_ERROR_EAST = NED_DOPPLER18_STATE_VELOCITY_ERROR_EAST; /* [m/s] east velocity error */
+constexpr int STATE_LATITUDE_ERROR = NED_DOPPLER18_STATE_LATITUDE_ERROR; /* [rad] latitude error */
+constexpr int STATE_LONGITUDE_ERROR = NED_DOPPLER18_STATE_LONGITUDE_ERROR; /* [rad] longitude error */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_X = NED_DOPPLER18_STATE_GYRO_CONSTANT_DRIFT_X; /* [rad/s] x gyro random-constant drift, eq. (2) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_Y = NED_DOPPLER18_STATE_GYRO_CONSTANT_DRIFT_Y; /* [rad/s] y gyro random-constant drift, eq. (2) */
+constexpr int STATE_GYRO_CONSTANT_DRIFT_Z = NED_DOPPLER18_STATE_GYRO_CONSTANT_DRIFT_Z; /* [rad/s] z gyro random-constant drift, eq. (2) */
+constexpr int STATE_GYRO_MARKOV_DRIFT_X = NED_DOPPLER18_STATE_GYRO_MARKOV_DRIFT_X; /* [rad/s] x gyro first-order Markov drift, eq. (3) */
+constexpr int STATE_GYRO_MARKOV_DRIFT_Y = NED_DOPPLER18_STATE_GYRO_MARKOV_DRIFT_Y; /* [rad/s] y gyro first-order Markov drift, eq. (3) */
+constexpr int STATE_GYRO_MARKOV_DRIFT_Z = NED_DOPPLER18_STATE_GYRO_MARKOV_DRIFT_Z; /* [rad/s] z gyro first-order Markov drift, eq. (3) */
+constexpr int STATE_ACCEL_MARKOV_BIAS_X = NED_DOPPLER18_STATE_ACCEL_MARKOV_BIAS_X; /* [m/s^2] x accelerometer Markov bias, eq. (4) */
+constexpr int STATE_ACCEL_MARKOV_BIAS_Y = NED_DOPPLER18_STATE_ACCEL_MARKOV_BIAS_Y; /* [m/s^2] y accelerometer Markov bias, eq. (4) */
+constexpr int STATE_ACCEL_MARKOV_BIAS_Z = NED_DOPPLER18_STATE_ACCEL_MARKOV_BIAS_Z; /* [m/s^2] z accelerometer Markov bias, eq. (4) */
+constexpr int STATE_DOPPLER_VELOCITY_BIAS_NORTH = NED_DOPPLER18_STATE_DOPPLER_VELOCITY_BIAS_NORTH; /* [m/s] Doppler velocity bias, north (random constant) */
+constexpr int STATE_DOPPLER_VELOCITY_BIAS_EAST = NED_DOPPLER18_STATE_DOPPLER_VELOCITY_BIAS_EAST; /* [m/s] Doppler velocity bias, east (random constant) */
 // Noise indices: the noise PSD q[NOISE_<NAME>]
-constexpr int NOISE_GYRO_MARKOV_NOISE_X = NED_DOPPLER18_NOISE_GYRO_MARKOV_NOISE_X; // [rad/s/sqrt(s)] driving noise of eps_r_x, eq. (5)
-constexpr int NOISE_GYRO_MARKOV_NOISE_Y = NED_DOPPLER18_NOISE_GYRO_MARKOV_NOISE_Y; // [rad/s/sqrt(s)] driving noise of eps_r_y, eq. (5)
-constexpr int NOISE_GYRO_MARKOV_NOISE_Z = NED_DOPPLER18_NOISE_GYRO_MARKOV_NOISE_Z; // [rad/s/sqrt(s)] driving noise of eps_r_z, eq. (5)
-constexpr int NOISE_ACCEL_MARKOV_NOISE_X = NED_DOPPLER18_NOISE_ACCEL_MARKOV_NOISE_X; // [m/s^2/sqrt(s)] driving noise of nabla_x, eq. (5)
-constexpr int NOISE_ACCEL_MARKOV_NOISE_Y = NED_DOPPLER18_NOISE_ACCEL_MARKOV_NOISE_Y; // [m/s^2/sqrt(s)] driving noise of nabla_y, eq. (5)
-constexpr int NOISE_ACCEL_MARKOV_NOISE_Z = NED_DOPPLER18_NOISE_ACCEL_MARKOV_NOISE_Z; // [m/s^2/sqrt(s)] driving noise of nabla_z, eq. (5)
+constexpr int NOISE_GYRO_MARKOV_NOISE_X = NED_DOPPLER18_NOISE_GYRO_MARKOV_NOISE_X; /* [rad/s/sqrt(s)] driving noise of eps_r_x, eq. (5) */
+constexpr int NOISE_GYRO_MARKOV_NOISE_Y = NED_DOPPLER18_NOISE_GYRO_MARKOV_NOISE_Y; /* [rad/s/sqrt(s)] driving noise of eps_r_y, eq. (5) */
+constexpr int NOISE_GYRO_MARKOV_NOISE_Z = NED_DOPPLER18_NOISE_GYRO_MARKOV_NOISE_Z; /* [rad/s/sqrt(s)] driving noise of eps_r_z, eq. (5) */
+constexpr int NOISE_ACCEL_MARKOV_NOISE_X = NED_DOPPLER18_NOISE_ACCEL_MARKOV_NOISE_X; /* [m/s^2/sqrt(s)] driving noise of nabla_x, eq. (5) */
+constexpr int NOISE_ACCEL_MARKOV_NOISE_Y = NED_DOPPLER18_NOISE_ACCEL_MARKOV_NOISE_Y; /* [m/s^2/sqrt(s)] driving noise of nabla_y, eq. (5) */
+constexpr int NOISE_ACCEL_MARKOV_NOISE_Z = NED_DOPPLER18_NOISE_ACCEL_MARKOV_NOISE_Z; /* [m/s^2/sqrt(s)] driving noise of nabla_z, eq. (5) */
 // Measurement indices: z[MEASUREMENT_<NAME>]
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = NED_DOPPLER18_MEASUREMENT_VELOCITY_DIFFERENCE_NORTH; // [m/s] 
-constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_EAST = NED_DOPPLER18_MEASUREMENT_VELOCITY_DIFFERENCE_EAST; // [m/s] 
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_NORTH = NED_DOPPLER18_MEASUREMENT_VELOCITY_DIFFERENCE_NORTH; /* [m/s]  */
+constexpr int MEASUREMENT_VELOCITY_DIFFERENCE_EAST = NED_DOPPLER18_MEASUREMENT_VELOCITY_DIFFERENCE_EAST; /* [m/s]  */
 
 // The C's status codes (the contract of ned_doppler18.h and README.md: what each call refuses).
 enum class Status : int {

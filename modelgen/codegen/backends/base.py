@@ -125,8 +125,3 @@ class Backend:
     def render_template(self, description: FilterDescription, template: str, **extra: object) -> str:
         """One more template (harness or product) with this backend's context and ``extra``."""
         return self.environment().get_template(template).render({**self.context(description), **extra})
-
-    def template_paths(self) -> list[Path]:
-        """Every template file of the backend (for caches keyed on the templates)."""
-        folders = [f for f in (self.templates, self.harness) if f is not None]
-        return sorted(p for f in folders for p in f.glob("*.j2"))
