@@ -43,9 +43,9 @@ NeglectedOf = Callable[[str], Sequence[NeglectedTerm]]
 
 def engine_neglected_terms(model_name: str) -> Sequence[NeglectedTerm]:
     """The terms the derivation engine's declared approximations dropped from a twin loaded in this process."""
-    from modelgen.model.navigation_model import neglected_terms
+    from modelgen.model.loading import load_model
 
-    return neglected_terms(model_name)
+    return load_model(model_name).neglected  # carried on the model (run_twin_checks uses the derived twin's own)
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,8 @@ def run_twin_checks(derived_of: DerivedOf, neglected_of: NeglectedOf = engine_ne
     for pair in load_pairs():
         require_twin(pair.twin)
         twin = derived_of(pair.twin)
-        results.append(cross_check(pair, derived_of(pair.hand), twin, neglected_of(pair.twin)))
+        neglected = twin.model.neglected if neglected_of is engine_neglected_terms else neglected_of(pair.twin)  # carried on the model
+        results.append(cross_check(pair, derived_of(pair.hand), twin, neglected))
     paper = first_principles_check(paper_model, derived_of) if paper_model else None
     return TwinChecks(tuple(results), paper)
 

@@ -198,5 +198,46 @@ def _sparse_jacobian(rows: list[sp.Expr], variables: list[sp.Symbol], zero: Mapp
 
 
 def _tidy(m: sp.Matrix) -> sp.Matrix:
-    """Expand products so that equal entries print identically everywhere."""
-    return m.applyfunc(lambda e: sp.expand(e) if e != 0 else sp.S.Zero)
+    """Expand products so that equal entries print identically everywhere; entries that cancel to 0 become 0.
+
+    An entry such as ``v_u*cos(L)/(R*cos(L) + h*cos(L)) - v_u/(R + h)`` (a
+    psi-angle model's change of variables leaves several) is identically zero
+    but does not expand to 0: kept, it would print, enter the generated sparsity
+    and evaluate to rounding (1e-21).  :func:`is_identically_zero` decides.
+    """
+    def tidy(e: sp.Expr) -> sp.Expr:
+        if e == 0:
+            return sp.S.Zero
+        expanded = sp.expand(e)
+        return sp.S.Zero if is_identically_zero(expanded) else expanded
+
+    return m.applyfunc(tidy)
+
+
+#: Two generic points (square roots of primes: no symmetry between symbols) at which a candidate zero is screened.
+_SCREEN_POINTS = ((2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37), (41, 43, 47, 53, 59, 61, 67, 71, 73, 79, 83, 89))
+
+
+def is_identically_zero(expr: sp.Expr) -> bool:
+    """Whether ``expr`` is 0 for every value of its symbols (sympy's cancel, then simplify, decides).
+
+    A sum that is not small beside its terms at either of two generic points is
+    not zero (fast: most entries stop here); one that is small there is proved
+    zero symbolically or kept.
+    """
+    if expr == 0:
+        return True
+    if not expr.is_Add or not expr.free_symbols:
+        return False
+    symbols = sorted(expr.free_symbols, key=str)
+    for primes in _SCREEN_POINTS:
+        point = {s: sp.Rational(round(10**6 * (0.25 + 0.5 * ((primes[k % len(primes)] + k // len(primes)) ** 0.5 % 1.0))), 10**6)
+                 for k, s in enumerate(symbols)}  # exact values, evaluated to 30 digits
+        try:
+            value = complex(expr.xreplace(point).evalf(30))
+            scale = sum(abs(complex(t.xreplace(point).evalf(30))) for t in expr.args)
+        except (TypeError, ValueError, ZeroDivisionError):
+            return False
+        if not (abs(value) <= 1e-20 * scale):
+            return False
+    return sp.cancel(sp.together(expr)) == 0 or sp.simplify(expr) == 0

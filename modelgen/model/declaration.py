@@ -189,6 +189,9 @@ class ErrorModel:
     frame: str = ""
     notes: tuple[str, ...] = field(default_factory=tuple)
     check: Any = None  # modelgen.model.check_scenario.CheckSpec: the scenario --check flies, if the file declares one
+    #: A navigation model's terms its declared approximations dropped (modelgen.model.perturbation.NeglectedTerm), carried
+    #: on the model itself; empty for a model written as equations.
+    neglected: tuple = field(default_factory=tuple, compare=False)
 
     def __repr__(self) -> str:
         """One line (the default repr printed every equation: 11,769 characters for the paper's model)."""

@@ -24,6 +24,8 @@ from modelgen.model.file_fields import is_number as _is_number
 from modelgen.model.file_fields import scalar_text as _scalar_text
 from modelgen.model.navigation_model import derive_navigation_model
 from modelgen.model.transform_file import load_transformed_model
+from modelgen.model.unit_check import check_model_units
+from modelgen.model.units import declared_value
 from modelgen.model.vector_loading import load_vector_model, uses_vector_syntax
 
 _ITEM_FIELDS = {
@@ -157,6 +159,10 @@ def load_model_text(text: str, filename: str = "<model>", _loading: tuple[str, .
             }
             if "value" in fields_in:
                 fields_in["value"] = _as_float(fields_in["value"])
+                if "unit" in fields_in:  # a value given in deg/h, ppm, ug ... is converted to SI, and so is its unit
+                    fields_in["value"], fields_in["unit"] = declared_value(
+                        fields_in["value"], str(fields_in["unit"]), f"{lines.get(f'{key}[{i}].unit', place)}: {key}[{i}].unit"
+                    )
             built.append(cls(**fields_in))
         items[key] = built
 
@@ -177,6 +183,8 @@ def load_model_text(text: str, filename: str = "<model>", _loading: tuple[str, .
         notes=notes_text(data, lines, filename),
         locations=lines,
     )
+    undeclared = [str(entry["name"]) for key in _ITEM_FIELDS for entry in (data.get(key) or []) if "unit" not in entry]
+    check_model_units(model, lines, undeclared)
     return _with_check_scenario(model, data, lines, filename)
 
 

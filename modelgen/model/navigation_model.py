@@ -21,7 +21,7 @@ involved, before anything is derived.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Mapping, Sequence
 
 import sympy as sp
@@ -29,8 +29,11 @@ import sympy as sp
 from modelgen.errors import ModelError
 from modelgen.model import perturbation as pt
 from modelgen.model import wgs84
+from modelgen.model.mechanizations import MECHANIZATIONS, mechanization_named  # noqa: F401  (MECHANIZATIONS: public)
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State, check_identifier, parse_expression
 from modelgen.model.file_fields import free_text, notes_text, scalar_text
+from modelgen.model.unit_check import check_model_units
+from modelgen.model.units import declared_value
 from modelgen.model.vectors import component_names, parse_vector_expression
 
 #: Keys of a model file that derives its error model from the navigation equations.
@@ -40,8 +43,7 @@ SECTION_KEYS = frozenset(
     {"mechanization", "attitude", "velocity", "position", "specific_force", "body_rate", "earth", "errors",
      "sensor_errors", "noises", "equations", "approximations", "measurements"}
 )
-#: The one named mechanization (the equations of :class:`modelgen.model.perturbation.Mechanization`).
-MECHANIZATIONS = ("local_level",)
+#: The mechanizations a file may name: modelgen.model.mechanizations.MECHANIZATIONS (default local_level).
 #: Navigation quantities that have error states, and the equations a file may write for them.
 ERROR_QUANTITIES = ("attitude", "velocity", "position")
 WRITABLE_EQUATIONS = ("velocity", "position")
@@ -519,7 +521,7 @@ def _pseudorange_rate(read: _Reader, entry: Mapping, key: str, frame: str, clock
     receiver, the unit vector to satellite k at distance rho is
     u = (e_k - d/rho) / sqrt(1 - 2 e_k . d/rho + d . d/rho^2) (|e_k| = 1), and the
     rate is u . (v_k - v) with the satellite's velocity v_k (navigation axes,
-    ``satellite_velocity``, zero if not given).  ``range`` names rho per satellite.
+    ``satellite_velocity``: required, ``zero`` for still satellites on purpose).  ``range`` names rho per satellite.
     """
     sights = _lines_of_sight(read, entry, key, frame, clock, decl)
     words = _axis_words(frame, None)
@@ -527,7 +529,15 @@ def _pseudorange_rate(read: _Reader, entry: Mapping, key: str, frame: str, clock
     for k, name in enumerate(ranges):
         _offer(decl, name, f"satellite_range_{k + 1}", "m", f"distance from the receiver to satellite {k + 1}")
     velocities = [sp.zeros(3, 1)] * len(sights)
-    if "satellite_velocity" in entry:
+    if "satellite_velocity" not in entry:
+        raise ModelError(
+            f"{read.at(key)}: a pseudo-range rate needs 'satellite_velocity' (one list of 3 symbols per satellite, navigation "
+            f"axes): GNSS satellites move at about 3.9 km/s, and taking them as still makes the H entries about 50 times too "
+            f"small; write 'satellite_velocity: zero' to assume still satellites on purpose"
+        )
+    if entry["satellite_velocity"] == "zero":
+        pass  # still satellites, as the file says
+    elif "satellite_velocity" in entry:
         raw = entry["satellite_velocity"]
         if not isinstance(raw, list) or len(raw) != len(sights):
             raise ModelError(f"{read.at(f'{key}.satellite_velocity')}: {key}.satellite_velocity must list one velocity per satellite ({len(sights)})")
@@ -630,6 +640,8 @@ def _user_parameters(read: _Reader, data: Mapping, decl: _Declarations) -> list[
         if "value" in entry and (isinstance(entry["value"], bool) or not isinstance(entry["value"], (int, float))):
             raise ModelError(f"{read.at(key)}: parameter {entry['name']!r} value {entry['value']!r} is not a number")
         fields = {k: (float(v) if k == "value" else str(v)) for k, v in entry.items()}
+        if "value" in fields and "unit" in fields:  # given in deg/h, ppm, ug ...: converted to SI, and so is the unit
+            fields["value"], fields["unit"] = declared_value(fields["value"], fields["unit"], f"{read.at(f'{key}.unit')}: {key}.unit")
         parameter = Parameter(**fields)
         check_identifier(parameter.symbol, f"{read.at(key)}: parameter symbol")
         decl.parameters[parameter.symbol] = parameter
@@ -666,7 +678,8 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         raise ModelError(f"{filename}: a model with a 'navigation:' section needs 'frame: NED' or 'frame: ENU' (its navigation frame)")
     frame = read.choice(free_text(data, "frame", dict(lines), filename), "frame", tuple(pt.FRAME_AXES))
     section = read.mapping(data["navigation"], "navigation", SECTION_KEYS, ("errors",))
-    read.choice(section.get("mechanization", "local_level"), "navigation.mechanization", MECHANIZATIONS)
+    mechanization = str(section.get("mechanization", "local_level"))
+    mechanization_named(mechanization, f"{read.at('navigation.mechanization')}: navigation.mechanization")
     decl = _Declarations(states=[], noises=[], parameters={})
     own = _user_parameters(read, data, decl)
     nav = _navigation_state(read, section, frame, decl)
@@ -688,6 +701,7 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         measurements=tuple(functions),
         approximations=_approximations(read, section),
         equations=_written_equations(read, section, frame, namespace),
+        mechanization_name=mechanization,
     )
     if problem.specific_force_axes == "navigation" and problem.accelerometer.scale_factor is not None:
         raise ModelError(f"{read.at('navigation.specific_force')}: accelerometer scale factors need the specific force in body axes (specific_force: {{axes: body}})")
@@ -698,8 +712,7 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
             raise
         raise ModelError(f"{read.at('navigation')}: model {data['model']!r}: {exc}") from None
     _refuse_measurements_of_removed_states(read, equations, functions)
-    model = _error_model(data, lines, filename, decl, own, equations, measurement_decls)
-    _DERIVED[model.name] = equations
+    model = replace(_error_model(data, lines, filename, decl, own, equations, measurement_decls), neglected=equations.neglected)
     return NavigationDerivation(model=model, equations=equations)
 
 
@@ -730,7 +743,8 @@ def _error_model(data, lines, filename, decl: _Declarations, own: list[str], equ
         Measurement(name=m.name, symbol=m.symbol, unit=m.unit, description=m.description, variance=m.variance, expression=measured[i])
         for i, m in enumerate(measurement_decls)
     ]
-    return ErrorModel.build(
+    locations = _locations(lines, filename, decl, parameters, measurements)
+    model = ErrorModel.build(
         name=str(data["model"]),
         states=decl.states,
         noises=decl.noises,
@@ -741,8 +755,11 @@ def _error_model(data, lines, filename, decl: _Declarations, own: list[str], equ
         source=free_text(data, "source", dict(lines), filename),
         frame=free_text(data, "frame", dict(lines), filename),
         notes=[*notes_text(dict(data), dict(lines), filename), *approximation_notes(data, equations, decl)],
-        locations=_locations(lines, filename, decl, parameters, measurements),
+        locations=locations,
     )
+    undeclared = [str(p.get("name")) for p in (data.get("parameters") or []) if isinstance(p, dict) and "unit" not in p]
+    check_model_units(model, locations, undeclared)
+    return model
 
 
 def _locations(lines: Mapping[str, str], filename: str, decl: _Declarations, parameters: Sequence[Parameter], measurements: Sequence[Measurement]) -> dict[str, str]:
@@ -825,16 +842,14 @@ def term_magnitude(term: sp.Expr, values: Mapping[sp.Symbol, float]) -> float | 
     return abs(float(number))
 
 
-#: The engine's result of every navigation model derived in this process, by model name (see :func:`neglected_terms`).
-_DERIVED: dict[str, pt.ErrorEquations] = {}
+def neglected_terms(model: Any) -> tuple[pt.NeglectedTerm, ...]:
+    """The terms the declared approximations dropped from a navigation model (carried on the model: ``model.neglected``).
 
-
-def neglected_terms(model_name: str) -> tuple[pt.NeglectedTerm, ...]:
-    """The terms the declared approximations dropped from a navigation model loaded in this process.
-
-    Loading the model (``load_model``) derives it; its F, G, H entries plus
-    these terms are the full first-order linearization (for the cross-check).
+    Its F, G, H entries plus these terms are the full first-order
+    linearization (for the cross-check).  ``model`` is the ErrorModel or a
+    derived model (which carries it); a model written as equations has none.
     """
-    if model_name not in _DERIVED:
-        raise ModelError(f"model {model_name!r} is not a navigation model loaded in this process")
-    return _DERIVED[model_name].neglected
+    if isinstance(model, str):
+        raise ModelError(f"neglected_terms takes the loaded model, not its name {model!r} (load_model({model!r}).neglected)")
+    model = getattr(model, "model", model)  # a DerivedModel carries its ErrorModel
+    return tuple(model.neglected)

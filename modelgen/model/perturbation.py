@@ -54,102 +54,27 @@ import sympy as sp
 
 from modelgen.errors import ModelError
 from modelgen.model import wgs84
-
-#: Navigation frames and their axes, in component order.
-FRAME_AXES: dict[str, tuple[str, str, str]] = {"NED": ("north", "east", "down"), "ENU": ("east", "north", "up")}
-
-# Earth quantities as undefined functions of position while deriving (module doc).
-MeridianRadius = sp.Function("MeridianRadius")
-PrimeVerticalRadius = sp.Function("PrimeVerticalRadius")
-Gravity = sp.Function("Gravity")
+from modelgen.model.mechanizations.local_level import (  # noqa: F401  (the engine's names for them, re-exported)
+    FRAME_AXES,
+    Gravity,
+    LocalLevel,
+    MeridianRadius,
+    PrimeVerticalRadius,
+    earth_rate_vector,
+    gravity_vector,
+    metres_matrix,
+    metres_matrix_inverse,
+    north_east_vertical,
+    position_angle_rates,
+    position_rate,
+    EarthSymbols,
+    _vector,
+    skew,
+)
 
 ATTITUDE_FORMS = ("phi", "psi")
 VELOCITY_FORMS = ("difference", "computed_frame")
 POSITION_FORMS = ("geodetic", "metres")
-
-
-# -- vector helpers ---------------------------------------------------------------
-def skew(a: sp.Matrix) -> sp.Matrix:
-    """[a x], the matrix of the cross product a x (.)."""
-    return sp.Matrix([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-
-
-def _vector(items: Sequence[sp.Expr]) -> sp.Matrix:
-    return sp.Matrix(list(items))
-
-
-# -- the local-level mechanization ------------------------------------------------
-@dataclass(frozen=True)
-class EarthSymbols:
-    """Parameter symbols that stand for the Earth quantities in the result."""
-
-    earth_rate: sp.Symbol
-    meridian_radius: sp.Symbol
-    prime_vertical_radius: sp.Symbol
-    gravity: sp.Symbol
-    earth_radius: sp.Symbol | None = None  # used only by the single_earth_radius approximation
-
-
-def earth_rate_vector(frame: str, latitude: sp.Expr, earth_rate: sp.Expr) -> sp.Matrix:
-    """w_ie^n: NED (W cos L, 0, -W sin L), ENU (0, W cos L, W sin L)."""
-    c, s = earth_rate * sp.cos(latitude), earth_rate * sp.sin(latitude)
-    return _vector((c, 0, -s)) if frame == "NED" else _vector((0, c, s))
-
-
-def position_angle_rates(frame: str, latitude: sp.Expr, latitude_rate: sp.Expr, longitude_rate: sp.Expr) -> sp.Matrix:
-    """Rotation rate of the local-level frame for given rates of L and lambda.
-
-    NED (lambda' cos L, -L', -lambda' sin L); ENU (-L', lambda' cos L, lambda' sin L).
-    With the position rates this is the transport rate w_en^n; with position
-    errors (dL, dlambda) it is the small angle d(theta) between the true and
-    the computed local-level frames.
-    """
-    c, s = sp.cos(latitude), sp.sin(latitude)
-    if frame == "NED":
-        return _vector((longitude_rate * c, -latitude_rate, -longitude_rate * s))
-    return _vector((-latitude_rate, longitude_rate * c, longitude_rate * s))
-
-
-def north_east_vertical(frame: str, vector: sp.Matrix) -> tuple[sp.Expr, sp.Expr, sp.Expr]:
-    """(north, east, up) components of a navigation-frame vector."""
-    if frame == "NED":
-        return vector[0], vector[1], -vector[2]
-    return vector[1], vector[0], vector[2]
-
-
-def position_rate(frame: str, position: sp.Matrix, velocity: sp.Matrix) -> sp.Matrix:
-    """(L', lambda', h') = (v_N/(R_M + h), v_E/((R_N + h) cos L), v_up)."""
-    latitude, _, height = position
-    north, east, up = north_east_vertical(frame, velocity)
-    return _vector(
-        (
-            north / (MeridianRadius(latitude) + height),
-            east / ((PrimeVerticalRadius(latitude) + height) * sp.cos(latitude)),
-            up,
-        )
-    )
-
-
-def gravity_vector(frame: str, position: sp.Matrix) -> sp.Matrix:
-    """g^n = g(L, h) along the down axis (plumb-line gravity, no deflection of the vertical)."""
-    g = Gravity(position[0], position[2])
-    return _vector((0, 0, g)) if frame == "NED" else _vector((0, 0, -g))
-
-
-def metres_matrix_inverse(frame: str, position: sp.Matrix) -> sp.Matrix:
-    """M^-1: (dL, dlambda, dh) from navigation-frame metres (M is a signed permutation of a diagonal)."""
-    M = metres_matrix(frame, position)
-    return M.T.applyfunc(lambda e: 1 / e if e != 0 else sp.S.Zero)
-
-
-def metres_matrix(frame: str, position: sp.Matrix) -> sp.Matrix:
-    """M with (navigation-frame metres) = M (dL, dlambda, dh): north (R_M + h) dL, east (R_N + h) cos L dlambda."""
-    latitude, _, height = position
-    north = MeridianRadius(latitude) + height
-    east = (PrimeVerticalRadius(latitude) + height) * sp.cos(latitude)
-    if frame == "NED":
-        return sp.Matrix([[north, 0, 0], [0, east, 0], [0, 0, -1]])
-    return sp.Matrix([[0, east, 0], [north, 0, 0], [0, 0, 1]])
 
 
 @dataclass(frozen=True)
@@ -165,47 +90,8 @@ class NavigationState:
     transport_rate_position: sp.Matrix  # where w_en takes its position (the state's own unless approximated)
 
 
-@dataclass(frozen=True)
-class Mechanization:
-    """The local-level mechanization in ``frame`` (Groves 2013, eqs. 5.44-5.56):
-
-    C' = C [w_ib x] - [w_in x] C,  v' = f^n - (2 w_ie + w_en) x v + g^n,
-    (L', lambda', h') = :func:`position_rate`.
-
-    A model may write the velocity or position equation itself
-    (``velocity_equation``, ``position_equation``: functions of the state and
-    this mechanization); the attitude kinematics keep their form, with w_in
-    from :meth:`navigation_rate`.
-    """
-
-    frame: str
-    rotation_rate: sp.Symbol  # the Earth's rotation rate (parameter symbol)
-    velocity_equation: Callable[[NavigationState, "Mechanization"], sp.Matrix] | None = None
-    position_equation: Callable[[NavigationState, "Mechanization"], sp.Matrix] | None = None
-
-    def earth_rate(self, state: NavigationState) -> sp.Matrix:
-        """w_ie^n at the state's (or the approximation's) latitude."""
-        return earth_rate_vector(self.frame, state.earth_rate_position[0], self.rotation_rate)
-
-    def transport_rate(self, state: NavigationState) -> sp.Matrix:
-        """w_en^n from the state's velocity at its (or the approximation's) position."""
-        rates = position_rate(self.frame, state.transport_rate_position, state.velocity)
-        return position_angle_rates(self.frame, state.transport_rate_position[0], rates[0], rates[1])
-
-    def navigation_rate(self, state: NavigationState) -> sp.Matrix:
-        """w_in^n = w_ie^n + w_en^n."""
-        return self.earth_rate(state) + self.transport_rate(state)
-
-    def velocity_rate(self, state: NavigationState) -> sp.Matrix:
-        if self.velocity_equation is not None:
-            return self.velocity_equation(state, self)
-        coriolis = (2 * self.earth_rate(state) + self.transport_rate(state)).cross(state.velocity)
-        return state.specific_force - coriolis + gravity_vector(self.frame, state.position)
-
-    def position_rate(self, state: NavigationState) -> sp.Matrix:
-        if self.position_equation is not None:
-            return self.position_equation(state, self)
-        return position_rate(self.frame, state.position, state.velocity)
+#: The local-level mechanization, by its former name (the engine's default).
+Mechanization = LocalLevel
 
 
 # -- what the model file declares ------------------------------------------------
@@ -298,10 +184,16 @@ class NavigationProblem:
     equations: Mapping[str, Callable[[NavigationState, Mechanization], sp.Matrix]] = field(default_factory=dict)
     #: Gains (k_1 [1/s], k_2 [1/s^2]) of the baro-damped vertical channel (approximation damped_vertical_channel).
     vertical_damping_gains: tuple[sp.Symbol, sp.Symbol] = (sp.Symbol("k_v1", real=True), sp.Symbol("k_v2", real=True))
+    #: The mechanization's name in :data:`modelgen.model.mechanizations.MECHANIZATIONS`.
+    mechanization_name: str = "local_level"
 
     def mechanization(self) -> Mechanization:
-        """The local-level mechanization, with the equations the model writes itself."""
-        return Mechanization(self.frame, self.earth.earth_rate, self.equations.get("velocity"), self.equations.get("position"))
+        """The named mechanization (modelgen.model.mechanizations), with the equations the model writes itself."""
+        from modelgen.model.mechanizations import mechanization_named
+
+        return mechanization_named(self.mechanization_name)(
+            self.frame, self.earth.earth_rate, self.equations.get("velocity"), self.equations.get("position")
+        )
 
 
 @dataclass(frozen=True)
@@ -473,9 +365,10 @@ def _change_of_variables(problem: NavigationProblem) -> tuple[sp.Matrix, sp.Matr
     phi, dv, dp = _primitive_symbols_cached()
     e = problem.errors
     others = [s for s in problem.state_order if s not in _declared_navigation_states(problem)]
-    M = metres_matrix(problem.frame, problem.position)
+    mech = problem.mechanization()
+    M = mech.metres(problem.position)
     L = problem.position[0]
-    theta = lambda d: position_angle_rates(problem.frame, L, d[0], d[1])  # noqa: E731  d(theta) of a position error
+    theta = lambda d: mech.error_frame_angle(L, d)  # noqa: E731  d(theta) of a position error
     # forward: declared errors from primitive ones
     position = M * dp if e.position == "metres" else dp
     attitude = phi - theta(dp) if e.attitude == "psi" else phi

@@ -24,6 +24,8 @@ import sympy as sp
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State, check_identifier
 from modelgen.model.file_fields import as_float, free_text, is_number, notes_text, scalar_text
+from modelgen.model.unit_check import check_model_units
+from modelgen.model.units import declared_value
 from modelgen.model.vectors import (
     Value,
     component_names,
@@ -380,9 +382,9 @@ def _definitions(
     )
 
 
-def _quantities(item: _Declared, cls: type, **per_component: list[Any]) -> list[Any]:
+def _quantities(item: _Declared, cls: type, unit: str | None = None, **per_component: list[Any]) -> list[Any]:
     """One ``cls`` (State, Noise, Parameter, Measurement) per component of ``item``, with per-component fields."""
-    unit = str(item.entry.get("unit", "1"))
+    unit = str(item.entry.get("unit", "1")) if unit is None else unit
     return [
         cls(name=n, symbol=s, unit=unit, description=t, **{k: v[j] for k, v in per_component.items()})
         for j, (n, s, t) in enumerate(zip(item.names, item.symbols, item.descriptions))
@@ -416,7 +418,12 @@ def load_vector_model(data: Mapping[str, Any], lines: dict[str, str], filename: 
         if d.kind == "states":
             states += _quantities(d, State)
         elif d.kind == "parameters":
-            parameters += _quantities(d, Parameter, value=_parameter_values(d, lines))
+            values, unit = _parameter_values(d, lines), str(d.entry.get("unit", "1"))
+            if "unit" in d.entry and "value" in d.entry:  # given in deg/h, ppm, ug ...: converted to SI, and so is the unit
+                where = f"{lines.get(f'parameters[{d.index}].unit', d.place)}: parameters[{d.index}].unit"
+                converted = [declared_value(v, unit, where) for v in values]
+                values, unit = [v for v, _ in converted], converted[0][1]
+            parameters += _quantities(d, Parameter, unit=unit, value=values)
         elif d.kind == "noises":
             noises += _quantities(d, Noise, psd=_scalar_statistics(d, "psd", statistics_namespace, lines, model))
         else:
@@ -442,4 +449,6 @@ def load_vector_model(data: Mapping[str, Any], lines: dict[str, str], filename: 
         notes=notes_text(data, lines, filename),
         locations=_locations(lines, declared, dynamics_keys),
     )
+    undeclared = [n for d in declared if "unit" not in d.entry for n in d.names]
+    check_model_units(built, _locations(lines, declared, dynamics_keys), undeclared)
     return built, _expand_check(data, declared, lines)

@@ -162,7 +162,7 @@ def builtin_results(derived_builtin):
     out = {}
     for p in PAIRS:
         twin = derived_builtin(p.twin)
-        out[p.hand] = cc.cross_check(p, derived_builtin(p.hand), twin, neglected_terms(p.twin))
+        out[p.hand] = cc.cross_check(p, derived_builtin(p.hand), twin, neglected_terms(twin))
     return out
 
 

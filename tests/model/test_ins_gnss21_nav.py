@@ -131,7 +131,7 @@ def test_ins_gnss21_nav_is_21_states_in_at_most_60_lines(model):
 
 
 def test_ins_gnss21_nav_lists_what_its_three_approximations_drop_with_sizes(model):
-    terms = neglected_terms(model.name)
+    terms = neglected_terms(model)
     assert {t.approximation for t in terms} == {"constant_radii", "gravity_height_only", "free_air_gradient"}
     notes = [n for n in model.notes if n.startswith("Approximation ")]
     assert len(notes) == 3

@@ -52,7 +52,7 @@ def test_twin_F_G_H_Q_R_equal_the_hand_model_at_its_check_scenario(hand_name):
 
 def test_pseudorange_twin_drops_only_spherical_earth_and_gravity_terms_and_sizes_them():
     twin = load_model("gps_pseudorange11_twin")
-    terms = neglected_terms(twin.name)
+    terms = neglected_terms(twin)
     assert {t.approximation for t in terms} == {"gravity_height_only", "free_air_gradient", "no_height_in_radii", "single_earth_radius"}
     assert all(t.matrix == "F" for t in terms)  # H (line of sight, clock) is exact: the range is linearized, not approximated
     notes = [n for n in twin.notes if n.startswith("Approximation single_earth_radius")]
@@ -61,7 +61,7 @@ def test_pseudorange_twin_drops_only_spherical_earth_and_gravity_terms_and_sizes
 
 def test_ins_gps15_twin_lists_every_term_its_approximations_drop_with_its_size(ins_gps15_pair):
     _, twin = ins_gps15_pair
-    terms = neglected_terms(twin.name)
+    terms = neglected_terms(twin)
     by_approximation = {t.approximation for t in terms}
     assert by_approximation == {"constant_radii", "gravity_height_only", "free_air_gradient"}
     # dg/dL: normal gravity grows ~0.05 m/s^2 per radian of latitude at 34 deg: the dv_U/dL entry
@@ -94,7 +94,7 @@ JANUS = """
 model: janus_doppler
 frame: NED
 parameters:
-  - {name: q, unit: "1", value: 1.0e-6}
+  - {name: q, value: 1.0e-6}   # the PSD of both the gyro and the accelerometer noise: no one unit
   - {name: beam_sigma, symbol: sigma_b, unit: m/s, value: 0.05}
   - {name: depression_cos, symbol: cg, unit: "1", value: 0.8660254037844386}
   - {name: depression_sin, symbol: sg, unit: "1", value: 0.5}
@@ -138,7 +138,7 @@ RANGE_RATE = """
 model: range_rate
 frame: ENU
 parameters:
-  - {name: q, unit: "1", value: 1.0e-6}
+  - {name: q, value: 1.0e-6}   # the PSD of both the gyro and the accelerometer noise: no one unit
   - {name: rate_sigma, symbol: sigma_d, unit: m/s, value: 0.05}
 navigation:
   errors:
@@ -186,7 +186,7 @@ WRITTEN = """
 model: written
 frame: NED
 parameters:
-  - {name: q, unit: "1", value: 1.0e-6}
+  - {name: q, value: 1.0e-6}   # the PSD of both the gyro and the accelerometer noise: no one unit
 navigation:
   errors:
     position: {form: metres, symbol: dr}

@@ -1,0 +1,69 @@
+"""Mechanizations: the navigation equations an error model is derived from, behind one protocol.
+
+A mechanization gives the Earth rate, the transport rate, the velocity,
+position and attitude rates, gravity, and what the change of variables of the
+error states needs (the angle between the true and the computed navigation
+frames for a position error, metres per position-error unit).  The engine
+(:mod:`modelgen.model.perturbation`) perturbs whatever the protocol returns;
+a model file selects one with ``navigation.mechanization`` (default
+``local_level``); an unknown name is refused.
+
+Implemented: ``local_level`` (NED or ENU axes, geodetic position;
+:mod:`~modelgen.model.mechanizations.local_level`).  Adding one: a module
+here with a class that satisfies :class:`Mechanization`, registered in
+:data:`MECHANIZATIONS` (README, "How to add ... a mechanization").
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Protocol
+
+import sympy as sp
+
+from modelgen.errors import ModelError
+from modelgen.model.mechanizations.local_level import LocalLevel
+
+#: The engine's navigation state (modelgen.model.perturbation), named as text: the engine imports this package.
+NavigationState = "modelgen.model.perturbation.NavigationState"
+
+
+class Mechanization(Protocol):
+    """What the error-model engine asks of a mechanization (every vector resolved in its navigation frame)."""
+
+    frame: str
+
+    def earth_rate(self, state: "NavigationState") -> sp.Matrix:
+        """w_ie, the Earth's rotation rate."""
+
+    def transport_rate(self, state: "NavigationState") -> sp.Matrix:
+        """w_en, the navigation frame's rotation with respect to the Earth."""
+
+    def navigation_rate(self, state: "NavigationState") -> sp.Matrix:
+        """w_in = w_ie + w_en: the rate the attitude kinematics C' = C [w_ib x] - [w_in x] C subtract."""
+
+    def velocity_rate(self, state: "NavigationState") -> sp.Matrix:
+        """v'."""
+
+    def position_rate(self, state: "NavigationState") -> sp.Matrix:
+        """The rate of the position coordinates."""
+
+    def gravity(self, state: "NavigationState") -> sp.Matrix:
+        """g at the state's position."""
+
+    def error_frame_angle(self, latitude: sp.Expr, position_error: sp.Matrix) -> sp.Matrix:
+        """d(theta) between the true and the computed navigation frames for a position error (psi-angle, computed-frame velocity)."""
+
+    def metres(self, position: sp.Matrix) -> sp.Matrix:
+        """M with (navigation-frame metres) = M (position error): the ``metres`` position-error form."""
+
+
+#: Mechanizations by the name a model file gives in ``navigation.mechanization``: each makes its
+#: mechanization from (frame, Earth-rate symbol, written velocity equation, written position equation).
+MECHANIZATIONS: dict[str, Callable[..., Mechanization]] = {"local_level": LocalLevel}
+
+
+def mechanization_named(name: str, where: str = "navigation.mechanization") -> Callable[..., Mechanization]:
+    """The mechanization registered as ``name``, or a ModelError listing the known ones."""
+    if name not in MECHANIZATIONS:
+        raise ModelError(f"{where}: unknown mechanization {name!r} (known: {', '.join(sorted(MECHANIZATIONS))})")
+    return MECHANIZATIONS[name]

@@ -1,0 +1,28 @@
+"""The mechanization seam (issue 27): one protocol, selected by navigation.mechanization."""
+
+from __future__ import annotations
+
+import pytest
+
+from modelgen.errors import ModelError
+from modelgen.model import perturbation as pt
+from modelgen.model.mechanizations import MECHANIZATIONS, Mechanization, mechanization_named
+from modelgen.model.mechanizations.local_level import LocalLevel
+
+
+def test_local_level_is_registered_and_is_the_engines_default():
+    assert MECHANIZATIONS["local_level"] is LocalLevel
+    assert pt.Mechanization is LocalLevel
+    assert pt.NavigationProblem.__dataclass_fields__["mechanization_name"].default == "local_level"
+
+
+def test_local_level_satisfies_the_protocol():
+    for method in ("earth_rate", "transport_rate", "navigation_rate", "velocity_rate", "position_rate", "gravity",
+                   "error_frame_angle", "metres"):
+        assert callable(getattr(LocalLevel, method)), method
+        assert method in Mechanization.__dict__, method
+
+
+def test_an_unknown_mechanization_is_refused_naming_the_known_ones():
+    with pytest.raises(ModelError, match="unknown mechanization 'ecef2' \\(known: local_level\\)"):
+        mechanization_named("ecef2", "m.yaml:3: navigation.mechanization")
