@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -63,6 +64,8 @@ MAX_CASES = 100_000
 MAX_RANGE_COUNT = 10_000
 #: Monte Carlo runs per selected case, at most.
 MAX_RUNS = 100_000
+#: A parameter's name: it names a table column and a figure axis (never a path: no ``/``).
+PARAMETER_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.]{0,99}")
 
 DEFAULT_MODEL = "ned_doppler18"
 
@@ -274,6 +277,9 @@ def _values(r: _Reader, entry: dict, key_path: str) -> tuple[tuple[float, ...], 
             raise ModelError(f"{r.at(key_path + '.values')}: must be a list of numbers")
         if not raw:
             raise ModelError(f"{r.at(key_path + '.values')}: empty grid: give at least one value")
+        if len(raw) > MAX_RANGE_COUNT:
+            raise ModelError(f"{r.at(key_path + '.values')}: {len(raw)} values; a parameter may have at most "
+                             f"{MAX_RANGE_COUNT}")
         return tuple(r.number(v, f"{key_path}.values[{i}]") for i, v in enumerate(raw)), False
     if "range" in entry:
         rng = r.mapping(entry["range"], key_path + ".range", _RANGE_KEYS)
@@ -295,7 +301,12 @@ def _parameters(r: _Reader, raw: Any, budget: ErrorBudget, budget_file: str, gri
     if not isinstance(raw, dict) or not raw:
         raise ModelError(f"{r.at('parameters')}: must be a non-empty mapping of the parameters to vary")
     units, rates, initial_units = _budget_units(budget_file)
+    for name in raw:
+        if not isinstance(name, str) or not PARAMETER_NAME.fullmatch(name):
+            raise ModelError(f"{r.at(f'parameters.{name}')}: parameter name {name!r} must be letters, digits, '_' "
+                             f"and '.' (starting with a letter or '_', at most 100 characters)")
     out = []
+    grid_points = 1
     for name, entry in raw.items():
         key_path = f"parameters.{name}"
         entry = r.mapping(entry, key_path, _PARAMETER_KEYS)
@@ -337,6 +348,11 @@ def _parameters(r: _Reader, raw: Any, budget: ErrorBudget, budget_file: str, gri
             raise ModelError(f"{r.at(key_path)}: a grid parameter needs values or a range (or give the study cases)")
         if not grid and values:
             raise ModelError(f"{r.at(key_path)}: the study lists its cases: give the values there, not here")
+        grid_points *= max(len(values), 1)
+        if grid_points > MAX_CASES:  # from the counts alone: the grid is never built
+            raise ModelError(f"{r.at('parameters')}: the grid has more than {MAX_CASES} points already at parameter "
+                             f"{name!r} ({' x '.join(str(len(p.values)) for p in out)} x {len(values)}); a study may "
+                             f"have at most {MAX_CASES} cases")
         parameter = Parameter(str(name), unit, tuple(sets), values, tuple(profile_keys), log_spaced)
         for i, v in enumerate(values):
             check_point_value(parameter, v, r.at(f"{key_path}.{'values' if 'values' in entry else 'range'}[{i}]"))
@@ -357,6 +373,8 @@ def _case_points(r: _Reader, raw: Any, parameters: Sequence[Parameter], key_path
         raise ModelError(f"{r.at(key_path)}: must be a list of cases (mappings parameter -> value)")
     if not raw:
         raise ModelError(f"{r.at(key_path)}: empty list: give at least one case")
+    if len(raw) > MAX_CASES:
+        raise ModelError(f"{r.at(key_path)}: {len(raw)} cases; a study may have at most {MAX_CASES}")
     names = [p.name for p in parameters]
     out = []
     for i, case in enumerate(raw):
@@ -479,14 +497,18 @@ def load_study(path: str | Path) -> Study:
                          f"reports the paper's navigation errors (CEP from latitude_error, longitude_error)")
     grid = "cases" not in data
     parameters = _parameters(r, data["parameters"], budget, budget_file, grid)
+    filters = _filters(r, data.get("filters"))
+    if grid:
+        count = math.prod(len(p.values) for p in parameters)  # from the counts, before the grid is built
+    else:
+        count = len(data["cases"]) if isinstance(data["cases"], list) else 0
+    if count * len(filters) > MAX_CASES:
+        raise ModelError(f"{r.at('parameters' if grid else 'cases')}: {count} points x {len(filters)} filters = "
+                         f"{count * len(filters)} cases; a study may have at most {MAX_CASES}")
     if grid:
         points = list(itertools.product(*(p.values for p in parameters)))
     else:
         points = [p for p, _ in _case_points(r, data["cases"], parameters, "cases")]
-    filters = _filters(r, data.get("filters"))
-    if len(points) * len(filters) > MAX_CASES:
-        raise ModelError(f"{r.at('parameters' if grid else 'cases')}: {len(points)} points x {len(filters)} filters = "
-                         f"{len(points) * len(filters)} cases; a study may have at most {MAX_CASES}")
     plot = r.mapping(data.get("plot") or {}, "plot", _PLOT_KEYS)
     plot_x = r.text(plot.get("x", parameters[0].name), "plot.x", [p.name for p in parameters])
     metric = r.text(plot.get("metric", "position_cep"), "plot.metric", [m for m, _ in METRICS])

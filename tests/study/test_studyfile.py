@@ -175,3 +175,42 @@ def test_a_model_without_the_papers_states_is_refused(tmp_path):
 def test_study_values_are_read_not_evaluated(tmp_path):
     message = refused(tmp_path, GRID.replace("values: [0.01, 0.1]", "values: [0.01, '__import__(\"os\")']"))
     assert "not a number" in message
+
+
+def test_a_huge_grid_is_refused_from_the_value_counts_before_it_is_built(tmp_path):
+    """Issue 28: three parameters of 10,000 values (10**12 points) are refused at once, not built in memory."""
+    import time
+    import tracemalloc
+
+    text = """\
+    study: huge
+    parameters:
+      a: {unit: deg/h, sets: [gyro_markov_sigma_x], range: {from: 0.01, to: 1, count: 10000}}
+      b: {unit: deg/h, sets: [gyro_markov_sigma_y], range: {from: 0.01, to: 1, count: 10000}}
+      c: {unit: deg/h, sets: [gyro_markov_sigma_z], range: {from: 0.01, to: 1, count: 10000}}
+    filters: [optimal]
+    """
+    tracemalloc.start()
+    started = time.perf_counter()
+    try:
+        message = refused(tmp_path, text)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert time.perf_counter() - started < 20
+    assert f"a study may have at most {MAX_CASES}" in message and "study.yaml:" in message, message
+    assert "'b'" in message, message  # refused as soon as the counts pass the limit, before c's values are checked
+    assert peak < 200 * 1024**2, f"peak {peak / 1024**2:.0f} MiB"
+
+
+@pytest.mark.parametrize("name", ["../x", "a/b", "with space", "", "1st"])
+def test_a_parameter_name_that_is_not_a_plain_name_is_refused_up_front(tmp_path, name):
+    text = GRID.replace("  gyro_drift:", f"  {name!r}:").replace("x: gyro_drift", "")
+    message = refused(tmp_path, text)
+    assert "study.yaml:" in message and "parameter name" in message, message
+
+
+def test_too_many_listed_values_or_cases_are_refused(tmp_path):
+    values = ", ".join(["0.1"] * 10_001)
+    message = refused(tmp_path, GRID.replace("values: [0.01, 0.1]", f"values: [{values}]"))
+    assert "study.yaml:5" in message and "at most 10000" in message, message
