@@ -292,7 +292,9 @@ def model_hash(model) -> str:
     Written into the generated code so that a program can tell which model its
     filter was generated from; any change to the declaration changes it.
     """
-    canonical = json.dumps(dataclasses.asdict(model), sort_keys=True, default=repr, ensure_ascii=True)
+    declaration = dataclasses.asdict(model)
+    declaration.pop("neglected", None)  # what the derivation dropped, carried on the model: not part of the declaration
+    canonical = json.dumps(declaration, sort_keys=True, default=repr, ensure_ascii=True)
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()[:16]
 
 
