@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
@@ -44,8 +44,9 @@ from modelgen.navigator.mechanization import (NAV_SIZE, dcm_to_quaternion, euler
                                               level_from_accelerometers, radii)
 from modelgen.navigator.outages import in_outage, outage_windows
 
-if TYPE_CHECKING:
-    from modelgen.navigator.navigator import Inputs
+#: The prepared log (modelgen.navigator.navigator.Inputs: time, IMU samples, GNSS epochs).  Named, not
+#: imported: navigator.py calls align(), so an import back would be a cycle (tests/test_architecture.py).
+Inputs = Any
 
 MIN_REST_SAMPLES = 10
 

@@ -149,7 +149,7 @@ def test_c_navigator_aligns_itself_like_the_python_reference(excerpt_both):
     The alignment completes at the excerpt's epoch 13.75 s (999 IMU samples in the
     10 s rest window ending 2 s before), 0.25 s before its outage starts.
     """
-    from modelgen.navigator.navigator import align
+    from modelgen.navigator.alignment import align
 
     config, inputs = _excerpt_inputs()
     python = align(config, inputs).record()
@@ -171,7 +171,7 @@ def test_c_and_python_refuse_to_align_without_an_epoch_at_rest():
     from modelgen.errors import ModelError
     from modelgen.navigator.cnav import cached_c_navigator, fly_c
     from modelgen.navigator.errorstate import model_path
-    from modelgen.navigator.navigator import align
+    from modelgen.navigator.alignment import align
 
     config, inputs = _excerpt_inputs()
     g = inputs.gnss
@@ -190,26 +190,21 @@ def test_c_and_python_refuse_to_align_without_an_epoch_at_rest():
 
 @pytest.mark.compile
 def test_a_rest_window_longer_than_the_c_keeps_is_refused():
-    """20 s at 100 Hz is more than the C's REST_MAX samples: refused before flying, and by the C itself."""
-    import ctypes
+    """20 s at 100 Hz needs a larger alignment ring than the default build: the ring follows the configuration,
+    and a navigator built with a smaller ring is refused before flying, with a message naming the file."""
     from dataclasses import replace
 
     from modelgen.errors import ModelError
-    from modelgen.navigator.cnav import N_OUTPUT, REST_MAX, _pointer, cached_c_navigator, log_arrays
-    from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.cnav import REST_MAX, CNavigator, fly_c, log_arrays
 
     config, inputs = _excerpt_inputs()
-    assert log_arrays(replace(config, rest_window=20.0), inputs).rest_max > REST_MAX  # the ring follows the config
-    a = log_arrays(config, inputs)
-    a.cfg[36] = 20.0  # past the Python check: the C notices that its ring lost samples of the window
-    navigator, _ = cached_c_navigator(model_path(config.model, config.path))
-    state = ctypes.create_string_buffer(navigator.size)
-    assert navigator.configure(state, _pointer(a.cfg)) == 0
-    out = np.full((len(a.t_gnss), N_OUTPUT), np.nan)
-    status = navigator.run(state, len(a.time), _pointer(a.time), _pointer(a.force), _pointer(a.rate), len(a.t_gnss),
-                           _pointer(a.t_gnss), _pointer(a.target, ctypes.c_long), _pointer(a.use, ctypes.c_int),
-                           _pointer(a.gnss), _pointer(out))
-    assert status == 13 and np.isnan(out[:, 0]).all()
+    long_window = replace(config, rest_window=20.0)
+    assert log_arrays(long_window, inputs).rest_max > REST_MAX  # the ring follows the config
+    assert log_arrays(config, inputs).rest_max == REST_MAX
+    small = CNavigator.__new__(CNavigator)
+    small.rest_max = REST_MAX  # a navigator built with the default ring: refused before anything runs
+    with pytest.raises(ModelError, match="alignment ring"):
+        fly_c(long_window, inputs, small)
 
 
 @pytest.mark.compile
