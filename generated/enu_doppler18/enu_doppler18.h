@@ -59,7 +59,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define ENU_DOPPLER18_MODEL_HASH "a220e79497a09133"
+#define ENU_DOPPLER18_MODEL_HASH "3e7a682367e114ff"
 #define ENU_DOPPLER18_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[ENU_DOPPLER18_STATE_<NAME>], P[i * ENU_DOPPLER18_N_STATES + j] [unit] */

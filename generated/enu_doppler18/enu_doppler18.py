@@ -85,7 +85,7 @@ NOISE_NAMES = ("gyro_white_noise_x", "gyro_white_noise_y", "gyro_white_noise_z",
 MEASUREMENT_NAMES = ("velocity_difference_east", "velocity_difference_north", "velocity_difference_up")
 PARAMETER_NAMES = ("latitude", "height", "velocity_east", "velocity_north", "velocity_up", "specific_force_east", "specific_force_north", "specific_force_up", "c11", "c12", "c13", "c21", "c22", "c23", "c31", "c32", "c33", "earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "gyro_angle_random_walk", "gyro_markov_rate_x", "gyro_markov_rate_y", "gyro_markov_rate_z", "gyro_markov_sigma_x", "gyro_markov_sigma_y", "gyro_markov_sigma_z", "accel_markov_rate_x", "accel_markov_rate_y", "accel_markov_rate_z", "accel_markov_sigma_x", "accel_markov_sigma_y", "accel_markov_sigma_z", "doppler_noise_sigma_east", "doppler_noise_sigma_north", "doppler_noise_sigma_up")
 PARAMETER_DEFAULTS = {"earth_rate": 7.2921151467e-05, "gravity": 9.80665, "gyro_angle_random_walk": 0.0}
-MODEL_HASH = "a220e79497a09133"  # sha256 of the canonical model declaration, first 16 hex digits
+MODEL_HASH = "3e7a682367e114ff"  # sha256 of the canonical model declaration, first 16 hex digits
 MODELGEN_VERSION = "0.1.0"
 
 # State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.

@@ -60,7 +60,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define ENU_DOPPLER18_TWIN_MODEL_HASH "2d218a12d6353cbc"
+#define ENU_DOPPLER18_TWIN_MODEL_HASH "f58bd8b64f052a3f"
 #define ENU_DOPPLER18_TWIN_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[ENU_DOPPLER18_TWIN_STATE_<NAME>], P[i * ENU_DOPPLER18_TWIN_N_STATES + j]

@@ -85,7 +85,7 @@ NOISE_NAMES = ("gyro_white_noise_x", "gyro_white_noise_y", "gyro_white_noise_z",
 MEASUREMENT_NAMES = ("velocity_difference_east", "velocity_difference_north", "velocity_difference_up")
 PARAMETER_NAMES = ("gyro_angle_random_walk", "gyro_markov_rate", "gyro_markov_sigma", "accel_markov_rate", "accel_markov_sigma", "doppler_noise_sigma_east", "doppler_noise_sigma_north", "doppler_noise_sigma_up", "c11", "c12", "c13", "c21", "c22", "c23", "c31", "c32", "c33", "velocity_east", "velocity_north", "velocity_up", "latitude", "height", "specific_force_east", "specific_force_north", "specific_force_up", "earth_rate", "meridian_radius", "prime_vertical_radius", "gravity")
 PARAMETER_DEFAULTS = {"gyro_angle_random_walk": 0.0, "earth_rate": 7.2921151467e-05}
-MODEL_HASH = "2d218a12d6353cbc"  # sha256 of the canonical model declaration, first 16 hex digits
+MODEL_HASH = "f58bd8b64f052a3f"  # sha256 of the canonical model declaration, first 16 hex digits
 MODELGEN_VERSION = "0.1.0"
 
 # State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.

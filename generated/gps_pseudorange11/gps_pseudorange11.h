@@ -60,7 +60,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define GPS_PSEUDORANGE11_MODEL_HASH "8a5ddc93afa7b763"
+#define GPS_PSEUDORANGE11_MODEL_HASH "6015dcab4c499be1"
 #define GPS_PSEUDORANGE11_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[GPS_PSEUDORANGE11_STATE_<NAME>], P[i * GPS_PSEUDORANGE11_N_STATES + j] [unit] */

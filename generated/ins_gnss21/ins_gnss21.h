@@ -57,7 +57,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define INS_GNSS21_MODEL_HASH "4d883c400c90491c"
+#define INS_GNSS21_MODEL_HASH "5fd023a39228cfe9"
 #define INS_GNSS21_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[INS_GNSS21_STATE_<NAME>], P[i * INS_GNSS21_N_STATES + j] [unit] */

@@ -85,7 +85,7 @@ NOISE_NAMES = ("gyro_white_noise_x", "gyro_white_noise_y", "gyro_white_noise_z",
 MEASUREMENT_NAMES = ("gnss_position_difference_north", "gnss_position_difference_east", "gnss_position_difference_down", "gnss_velocity_difference_north", "gnss_velocity_difference_east", "gnss_velocity_difference_down")
 PARAMETER_NAMES = ("latitude", "height", "velocity_north", "velocity_east", "velocity_down", "c11", "c12", "c13", "c21", "c22", "c23", "c31", "c32", "c33", "body_specific_force_x", "body_specific_force_y", "body_specific_force_z", "body_rate_x", "body_rate_y", "body_rate_z", "lever_arm_x", "lever_arm_y", "lever_arm_z", "earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "gyro_angle_random_walk", "accel_velocity_random_walk", "gyro_bias_rate", "gyro_bias_sigma", "accel_bias_rate", "accel_bias_sigma", "gyro_scale_factor_rate", "gyro_scale_factor_sigma", "accel_scale_factor_rate", "accel_scale_factor_sigma", "gnss_position_sigma_north", "gnss_position_sigma_east", "gnss_position_sigma_down", "gnss_velocity_sigma_north", "gnss_velocity_sigma_east", "gnss_velocity_sigma_down")
 PARAMETER_DEFAULTS = {"earth_rate": 7.2921151467e-05}
-MODEL_HASH = "4d883c400c90491c"  # sha256 of the canonical model declaration, first 16 hex digits
+MODEL_HASH = "5fd023a39228cfe9"  # sha256 of the canonical model declaration, first 16 hex digits
 MODELGEN_VERSION = "0.1.0"
 
 # State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.

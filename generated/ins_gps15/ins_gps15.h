@@ -57,7 +57,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define INS_GPS15_MODEL_HASH "907f4f1e299ca9af"
+#define INS_GPS15_MODEL_HASH "6108228e93e2abba"
 #define INS_GPS15_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[INS_GPS15_STATE_<NAME>], P[i * INS_GPS15_N_STATES + j] [unit] */

@@ -60,7 +60,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define INS_GPS15_TWIN_MODEL_HASH "874f9877d292f73f"
+#define INS_GPS15_TWIN_MODEL_HASH "baf79c0ff969d122"
 #define INS_GPS15_TWIN_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[INS_GPS15_TWIN_STATE_<NAME>], P[i * INS_GPS15_TWIN_N_STATES + j] [unit] */

@@ -85,7 +85,7 @@ NOISE_NAMES = ("gyro_white_noise_x", "gyro_white_noise_y", "gyro_white_noise_z",
 MEASUREMENT_NAMES = ("velocity_difference_east", "velocity_difference_north", "velocity_difference_up", "position_difference_north", "position_difference_east", "position_difference_up")
 PARAMETER_NAMES = ("gyro_angle_random_walk", "accel_velocity_random_walk", "gps_velocity_sigma_east", "gps_velocity_sigma_north", "gps_velocity_sigma_up", "gps_position_sigma_north", "gps_position_sigma_east", "gps_position_sigma_up", "c11", "c12", "c13", "c21", "c22", "c23", "c31", "c32", "c33", "velocity_east", "velocity_north", "velocity_up", "latitude", "height", "specific_force_east", "specific_force_north", "specific_force_up", "earth_rate", "meridian_radius", "prime_vertical_radius", "gravity")
 PARAMETER_DEFAULTS = {"earth_rate": 7.2921151467e-05}
-MODEL_HASH = "874f9877d292f73f"  # sha256 of the canonical model declaration, first 16 hex digits
+MODEL_HASH = "baf79c0ff969d122"  # sha256 of the canonical model declaration, first 16 hex digits
 MODELGEN_VERSION = "0.1.0"
 
 # State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.

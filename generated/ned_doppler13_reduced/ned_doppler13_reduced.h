@@ -62,7 +62,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define NED_DOPPLER13_REDUCED_MODEL_HASH "11f1527c75b1e8a5"
+#define NED_DOPPLER13_REDUCED_MODEL_HASH "d3b9a630190e1020"
 #define NED_DOPPLER13_REDUCED_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[NED_DOPPLER13_REDUCED_STATE_<NAME>], P[i * NED_DOPPLER13_REDUCED_N_STATES + j]

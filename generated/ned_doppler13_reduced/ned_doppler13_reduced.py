@@ -85,7 +85,7 @@ NOISE_NAMES = ("gyro_markov_noise_x", "gyro_markov_noise_y", "gyro_markov_drift_
 MEASUREMENT_NAMES = ("velocity_difference_north", "velocity_difference_east")
 PARAMETER_NAMES = ("latitude", "velocity_north", "velocity_east", "velocity_down", "specific_force_north", "specific_force_east", "specific_force_down", "c11", "c12", "c13", "c21", "c22", "c23", "c31", "c32", "c33", "earth_rate", "earth_radius", "gyro_markov_rate_x", "gyro_markov_rate_y", "gyro_markov_rate_z", "gyro_markov_sigma_x", "gyro_markov_sigma_y", "gyro_markov_sigma_z", "accel_markov_rate_x", "accel_markov_rate_y", "accel_markov_rate_z", "accel_markov_sigma_x", "accel_markov_sigma_y", "accel_markov_sigma_z", "doppler_noise_sigma_north", "doppler_noise_sigma_east")
 PARAMETER_DEFAULTS = {"earth_rate": 7.2921151467e-05, "earth_radius": 6378137.0}
-MODEL_HASH = "11f1527c75b1e8a5"  # sha256 of the canonical model declaration, first 16 hex digits
+MODEL_HASH = "d3b9a630190e1020"  # sha256 of the canonical model declaration, first 16 hex digits
 MODELGEN_VERSION = "0.1.0"
 
 # State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.

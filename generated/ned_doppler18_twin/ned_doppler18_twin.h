@@ -60,7 +60,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define NED_DOPPLER18_TWIN_MODEL_HASH "4bab953df0f67430"
+#define NED_DOPPLER18_TWIN_MODEL_HASH "937a918215dd2894"
 #define NED_DOPPLER18_TWIN_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[NED_DOPPLER18_TWIN_STATE_<NAME>], P[i * NED_DOPPLER18_TWIN_N_STATES + j]

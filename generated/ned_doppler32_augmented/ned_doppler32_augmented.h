@@ -62,7 +62,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define NED_DOPPLER32_AUGMENTED_MODEL_HASH "934e2107248618f0"
+#define NED_DOPPLER32_AUGMENTED_MODEL_HASH "bf152cb7325a72ad"
 #define NED_DOPPLER32_AUGMENTED_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[NED_DOPPLER32_AUGMENTED_STATE_<NAME>], P[i * NED_DOPPLER32_AUGMENTED_N_STATES +

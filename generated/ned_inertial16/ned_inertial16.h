@@ -58,7 +58,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define NED_INERTIAL16_MODEL_HASH "24bf79632191f06e"
+#define NED_INERTIAL16_MODEL_HASH "c93019e3db355fd4"
 #define NED_INERTIAL16_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[NED_INERTIAL16_STATE_<NAME>], P[i * NED_INERTIAL16_N_STATES + j] [unit] */

@@ -84,7 +84,7 @@ NOISE_NAMES = ("gyro_markov_noise_x", "gyro_markov_noise_y", "gyro_markov_noise_
 MEASUREMENT_NAMES = ()
 PARAMETER_NAMES = ("latitude", "velocity_north", "velocity_east", "velocity_down", "specific_force_north", "specific_force_east", "specific_force_down", "c11", "c12", "c13", "c21", "c22", "c23", "c31", "c32", "c33", "earth_rate", "earth_radius", "gyro_markov_rate_x", "gyro_markov_rate_y", "gyro_markov_rate_z", "gyro_markov_sigma_x", "gyro_markov_sigma_y", "gyro_markov_sigma_z", "accel_markov_rate_x", "accel_markov_rate_y", "accel_markov_rate_z", "accel_markov_sigma_x", "accel_markov_sigma_y", "accel_markov_sigma_z")
 PARAMETER_DEFAULTS = {"earth_rate": 7.2921151467e-05, "earth_radius": 6378137.0}
-MODEL_HASH = "24bf79632191f06e"  # sha256 of the canonical model declaration, first 16 hex digits
+MODEL_HASH = "c93019e3db355fd4"  # sha256 of the canonical model declaration, first 16 hex digits
 MODELGEN_VERSION = "0.1.0"
 
 # State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.

@@ -59,7 +59,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define NED_INERTIAL16_TWIN_MODEL_HASH "da3563a9a7191792"
+#define NED_INERTIAL16_TWIN_MODEL_HASH "010467a89c015c6c"
 #define NED_INERTIAL16_TWIN_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[NED_INERTIAL16_TWIN_STATE_<NAME>], P[i * NED_INERTIAL16_TWIN_N_STATES + j]

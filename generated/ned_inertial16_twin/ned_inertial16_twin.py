@@ -84,7 +84,7 @@ NOISE_NAMES = ("gyro_markov_noise_x", "gyro_markov_noise_y", "gyro_markov_noise_
 MEASUREMENT_NAMES = ()
 PARAMETER_NAMES = ("gyro_markov_rate", "gyro_markov_sigma", "accel_markov_rate", "accel_markov_sigma", "c11", "c12", "c13", "c21", "c22", "c23", "c31", "c32", "c33", "velocity_north", "velocity_east", "velocity_down", "latitude", "specific_force_north", "specific_force_east", "specific_force_down", "earth_rate", "earth_radius")
 PARAMETER_DEFAULTS = {"earth_rate": 7.2921151467e-05, "earth_radius": 6378137.0}
-MODEL_HASH = "da3563a9a7191792"  # sha256 of the canonical model declaration, first 16 hex digits
+MODEL_HASH = "010467a89c015c6c"  # sha256 of the canonical model declaration, first 16 hex digits
 MODELGEN_VERSION = "0.1.0"
 
 # State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.

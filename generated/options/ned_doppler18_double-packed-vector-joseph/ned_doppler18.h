@@ -59,7 +59,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define NED_DOPPLER18_MODEL_HASH "c0aa584267d61c72"
+#define NED_DOPPLER18_MODEL_HASH "414ca908c16985cd"
 #define NED_DOPPLER18_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[NED_DOPPLER18_STATE_<NAME>], P[i * NED_DOPPLER18_N_STATES + j] [unit] */
