@@ -132,7 +132,7 @@ def align(config: NavigatorConfig, inputs: Inputs, outage: np.ndarray | None = N
         if len(motion):
             motion_time = float(time[a + motion[-1]])
             a += int(motion[-1]) + 1
-        if b - a + 1 < MIN_REST_SAMPLES or time[b] - time[a] < config.rest_min:
+        if b - a + 1 < MIN_REST_SAMPLES or time[b] - time[a] < config.rest_span_min:
             continue
         candidate = (int(e), a, b, motion_time)
     if candidate is None:
@@ -214,7 +214,7 @@ def no_rest_error(config: NavigatorConfig, inputs: Inputs, use: np.ndarray, j: i
         return ModelError(f"{at} no used GNSS epoch is at rest (slower than alignment.rest_speed_m_s = "
                           f"{config.rest_speed:g} m/s): the IMU cannot be levelled")
     return ModelError(f"{at} no GNSS epoch at rest ({len(slow)} slower than {config.rest_speed:g} m/s) has "
-                      f"{config.rest_min:g} s (alignment.rest_min_s) of IMU samples the still detector calls still "
+                      f"{config.rest_span_min:g} s (alignment.rest_min_s, at most rest_window_s) of IMU samples the still detector calls still "
                       f"before it ({100 * float(np.mean(still)):.0f} % of the samples are still; detector: "
                       f"alignment.still_window_s {config.still_window:g} s, gyro_std_max_deg_s "
                       f"{math.degrees(config.still_gyro_std_max):g}, accel_std_max_m_s2 {config.still_accel_std_max:g}): "

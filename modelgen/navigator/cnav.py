@@ -228,7 +228,7 @@ def config_array(config: NavigatorConfig, window: int, step: int, still_window: 
     cfg[40], cfg[41], cfg[42] = config.velocity_sigma, config.position_sigma, config.height_sigma
     cfg[43], cfg[44] = config.gyro_bias_sigma, config.accel_bias_sigma
     cfg[45], cfg[46], cfg[47] = still_window, config.still_gyro_std_max, config.still_accel_std_max
-    cfg[48] = config.rest_min
+    cfg[48] = config.rest_span_min
     return cfg
 
 

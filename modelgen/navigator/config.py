@@ -135,6 +135,12 @@ class NavigatorConfig:
     target_nees_mean: tuple[float, float] | None = None  # pooled over all schedules
     target_inside_95_fraction: float | None = None  # pooled over all schedules
 
+    @property
+    def rest_span_min(self) -> float:
+        """The shortest still span the alignment levels from [s]: rest_min, but never more than the rest window
+        itself (a 1-s rest window cannot hold 2 s of still data; asking for it would refuse every log)."""
+        return min(self.rest_min, self.rest_window)
+
 
 @dataclass(frozen=True)
 class EvaluationSchedule:

@@ -79,7 +79,8 @@ def test_generated_python_discretize_is_the_reference(case, T):
 
 def chain_model(n: int) -> str:
     """x_0' = x_1, ..., x_{n-2}' = x_{n-1}, x_{n-1}' = -x_{n-1}/tau: paths up to n - 1 entries long."""
-    states = "\n".join(f"  - {{name: s{k}, symbol: x{k}, unit: m}}" for k in range(n))
+    units = ["m", "m/s", *(f"m/s^{k}" for k in range(2, n))]  # x_k is the k-th derivative of x_0
+    states = "\n".join(f"  - {{name: s{k}, symbol: x{k}, unit: {units[k]}}}" for k in range(n))
     dynamics = "\n".join(f"  x{k}: x{k + 1}" for k in range(n - 1))
     return f"""
 model: chain

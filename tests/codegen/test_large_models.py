@@ -148,7 +148,7 @@ DEGENERATE = {
     "walk": "model: walk\nstates:\n  - {name: bias, symbol: b, unit: m}\n  - {name: drift, symbol: d, unit: m}\n"
     "noises:\n  - {name: bias_noise, symbol: w, psd: \"1e-4\"}\ndynamics: {b: w, d: \"0\"}\n"
     "measurements:\n  - {name: z, symbol: z, expression: b + d, variance: \"1e-2\"}\n",
-    "chain": "model: chain\nstates:\n  - {name: p, symbol: p, unit: m}\n  - {name: v, symbol: v, unit: m}\n  - {name: a, symbol: a, unit: m}\n"
+    "chain": "model: chain\nstates:\n  - {name: p, symbol: p, unit: m}\n  - {name: v, symbol: v, unit: m/s}\n  - {name: a, symbol: a, unit: m/s^2}\n"
     "noises:\n  - {name: jerk, symbol: w, psd: \"1e-4\"}\ndynamics: {p: v, v: a, a: \"-a/100 + w\"}\n"
     "measurements:\n  - {name: z, symbol: z, expression: p, variance: \"1e-2\"}\n",
 }

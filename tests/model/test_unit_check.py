@@ -120,3 +120,14 @@ def test_a_consistent_scalar_model_loads_and_a_measurement_in_the_wrong_unit_is_
 def test_units_left_out_are_not_checked():
     text = SCALAR.replace(", unit: m/s/sqrt(s)", "").replace(", unit: 1/s", "")
     load_model_text(text.replace("-mu*dv", "-mu*mu*dv"), "m.yaml")  # mu has no declared unit: the term is not checked
+
+
+@pytest.mark.parametrize("variance", ["1", "1e-2", "4"])
+def test_a_variance_written_as_a_bare_number_is_in_the_measurement_unit_squared(variance):
+    """A number alone carries its author's unit: variance '1' of a measurement in m is 1 m^2 (as '1e-2' is)."""
+    text = ("model: m\nparameters:\n  - {name: sigma, symbol: s, unit: m, value: 0.1}\n"
+            "states:\n  - {name: drift, symbol: d, unit: m}\ndynamics: {d: \"0\"}\n"
+            f"measurements:\n  - {{name: z, symbol: z, unit: m, expression: d, variance: \"{variance}\"}}\n")
+    assert load_model_text(text, filename="m.yaml").measurements[0].unit == "m"
+    with pytest.raises(ModelError, match="is in m, but the equation is in m"):  # a term with a unit is still checked
+        load_model_text(text.replace(f'variance: "{variance}"', 'variance: "4*s"'), filename="m.yaml")
