@@ -13,7 +13,7 @@ commented example.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +44,7 @@ NOISE_UNITS: dict[str, dict[str, float]] = {
 
 SCHEMA: dict[str, set[str]] = {
     "": {"navigator", "description", "model", "imu", "gnss", "noise", "initial", "alignment", "filter",
-         "zupt", "nhc", "outages", "evaluation", "output"},
+         "zupt", "nhc", "outages", "evaluation", "output", "parameters"},
     # imu: and gnss: hold the keys every log format shares and each format's own (logs.registry)
     **schema("imu"),
     "imu.rotation_to_body_deg": {"roll", "pitch", "yaw"},
@@ -52,7 +52,8 @@ SCHEMA: dict[str, set[str]] = {
     "noise": set(NOISE_UNITS),
     **{f"noise.{k}": {"value", "unit", "factor", "why"} for k in NOISE_UNITS},
     "initial": {"roll_pitch_sigma_deg", "heading_extra_sigma_deg", "velocity_sigma_m_s", "position_sigma_m",
-                "height_sigma_m", "gyro_bias_sigma_deg_s", "accel_bias_sigma_ug"},
+                "height_sigma_m", "gyro_bias_sigma_deg_s", "accel_bias_sigma_ug", "gyro_scale_factor_sigma_ppm",
+                "accel_scale_factor_sigma_ppm"},
     "alignment": {"rest_speed_m_s", "rest_window_s", "heading_speed_m_s", "rest_min_s", "still_window_s",
                   "gyro_std_max_deg_s", "accel_std_max_m_s2"},
     "filter": {"predict_period_s", "nis_gate_probability", "gate_action", "gate_release_epochs"},
@@ -134,6 +135,11 @@ class NavigatorConfig:
     target_end_rms_m: float | None = None  # evaluation.target_end_rms_m: for the configured schedule
     target_nees_mean: tuple[float, float] | None = None  # pooled over all schedules
     target_inside_95_fraction: float | None = None  # pooled over all schedules
+    #: initial.gyro/accel_scale_factor_sigma_ppm (as a fraction; used only by models with scale-factor states)
+    gyro_scale_factor_sigma: float | None = None
+    accel_scale_factor_sigma: float | None = None
+    #: parameters: model parameters the navigator does not set, by name, in the model's units
+    parameters: dict[str, float] = field(default_factory=dict)
 
     @property
     def rest_span_min(self) -> float:
@@ -419,7 +425,25 @@ def load_config(path: str | Path) -> NavigatorConfig:
         nhc_rate_max=r.number("nhc.rate_max_deg_s", 1e9, positive=True) * DEG,
         outage_schedule=schedule, outage_windows=windows,
         imu_source=imu_source, gnss_source=gnss_source, gap_action=gap_action, **_evaluation(r),
+        gyro_scale_factor_sigma=_ppm(r, "initial.gyro_scale_factor_sigma_ppm"),
+        accel_scale_factor_sigma=_ppm(r, "initial.accel_scale_factor_sigma_ppm"),
+        parameters=_model_parameters(r),
     )
+
+
+def _ppm(reader: _Reader, key: str) -> float | None:
+    """An optional sigma in ppm, as a fraction."""
+    return None if reader.get(key, None) is None else reader.number(key, positive=True) * 1e-6
+
+
+def _model_parameters(reader: _Reader) -> dict[str, float]:
+    """parameters: name -> a finite number (the model's unit); the navigator checks the names against the model."""
+    raw = reader.get("parameters", None)
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise ModelError(f"{reader.where('parameters')}: parameters must map model parameter names to numbers")
+    return {str(name): reader.number(f"parameters.{name}") for name in raw}
 
 
 def builtin_config_path() -> Path:
