@@ -134,8 +134,8 @@ def values(config, spec, zupt_window: int, predict_samples: int, still_window: i
         "velocity_sigma": config.velocity_sigma, "position_sigma": config.position_sigma,
         "height_sigma": config.height_sigma, "gyro_bias_sigma": config.gyro_bias_sigma,
         "accel_bias_sigma": config.accel_bias_sigma,
-        "gyro_scale_factor_sigma": getattr(config, "gyro_scale_factor_sigma", 0.0),
-        "accel_scale_factor_sigma": getattr(config, "accel_scale_factor_sigma", 0.0),
+        "gyro_scale_factor_sigma": config.gyro_scale_factor_sigma or 0.0,
+        "accel_scale_factor_sigma": config.accel_scale_factor_sigma or 0.0,
         "parameters": spec.free_values(config) or [0.0],
     }
     assert set(out) == {f.name for f in FIELDS}, "cconfig.values must fill every field"

@@ -13,11 +13,12 @@ from modelgen.errors import ModelError
 from modelgen.navigator.cnav import cached_c_navigator, fly_c, rest_capacity
 from modelgen.navigator.alignment import alignment_note
 from modelgen.navigator.config import NavigatorConfig, load_config
-from modelgen.navigator.errorstate import generate_filter_module, model_path
+from modelgen.navigator.errorstate import model_path
 from modelgen.navigator.logs import read_gnss, read_imu
 from modelgen.navigator.metrics import (errors_against_reference, pooled_consistency, schedule_record, summary,
                                         velocity_latency)
 from modelgen.navigator.navigator import Flight, fly, prepare
+from modelgen.navigator.spec import navigator_spec
 from modelgen.navigator.report import report_files
 from modelgen.fileio.output import write_atomically
 
@@ -82,11 +83,12 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     timings["read_s"] = time.perf_counter() - start
     model_file = model_path(config.model, config.path)
     flights: dict[str, Flight] = {}
+    mark = time.perf_counter()
+    echo(f"  deriving {config.model} (once) and generating its Python filter with modelgen")
+    spec = navigator_spec(model_file)  # the one derivation of this replay: Python, C and the embedded build use it
+    spec.check_config(config)
+    timings["generate_python_s"] = time.perf_counter() - mark
     if navigator in ("python", "both"):
-        mark = time.perf_counter()
-        echo(f"  generating the {config.model} filter (Python) with modelgen")
-        module = generate_filter_module(model_file)
-        timings["generate_python_s"] = time.perf_counter() - mark
         mark = time.perf_counter()
         state = {"next": 0.0}
 
@@ -95,11 +97,11 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
                 echo(f"  flying (Python): {100 * fraction:5.1f} %  ({time.perf_counter() - mark:.1f} s)")
                 state["next"] = fraction + 0.25
 
-        flights["python"] = fly(config, inputs, module, progress)
+        flights["python"] = fly(config, inputs, spec, progress)
         timings["fly_python_s"] = time.perf_counter() - mark
     if navigator in ("c", "both"):
         mark = time.perf_counter()
-        compiled, cached = cached_c_navigator(model_file, echo, rest_capacity(config, inputs.time))
+        compiled, cached = cached_c_navigator(spec, echo, rest_capacity(config, inputs.time))
         timings["generate_compile_c_s"] = 0.0 if cached else time.perf_counter() - mark
         mark = time.perf_counter()
         echo("  flying (C)")
@@ -113,7 +115,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
 
         mark = time.perf_counter()
         echo("  Cortex-M4F build (float filter) and the log under qemu-arm")
-        arm = embedded_replay(model_file, log_arrays(config, inputs), flights["c"].outputs)
+        arm = embedded_replay(spec, log_arrays(config, inputs, spec), flights["c"].outputs)
         timings["embedded_s"] = time.perf_counter() - mark
     flight = flights["c"] if "c" in flights else flights["python"]
     timings["fly_s"] = timings.get("fly_c_s", timings.get("fly_python_s", 0.0))
@@ -132,7 +134,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         if "c" in flights:
             other = fly_c(again, inputs, compiled)[0]
         else:
-            other = fly(again, inputs, module)
+            other = fly(again, inputs, spec)
         schedules.append(schedule_record(entry.name, other, errors_against_reference(other, inputs.gnss), inputs.gnss,
                                          entry.target_end_rms_m))
     if config.evaluation_schedules:

@@ -144,6 +144,14 @@ class NavigatorSpec:
     def has(self, kind: str) -> bool:
         return kind in self.blocks
 
+    def check_config(self, config) -> None:
+        """Refuse a configuration that lacks what this model needs (scale-factor sigmas, free parameters)."""
+        for kind in ("gyro_scale_factor", "accel_scale_factor"):
+            if kind in self.blocks and getattr(config, f"{kind}_sigma", None) is None:
+                raise ModelError(f"{config.path}: model {self.name} has {kind.replace('_', ' ')} states: give "
+                                 f"initial.{kind}_sigma_ppm")
+        self.free_values(config)
+
     # -- parameters --------------------------------------------------------------------------
     def free_values(self, config) -> list[float]:
         """Values of the free parameters (configuration's parameters:, else the model's default); refused if unset."""
@@ -193,8 +201,8 @@ class NavigatorSpec:
                 s /= (rn + nav[9]) * math.cos(nav[7])
             sigma[i] = s
         per_sensor = {"gyro_bias": config.gyro_bias_sigma, "accel_bias": config.accel_bias_sigma,
-                      "gyro_scale_factor": getattr(config, "gyro_scale_factor_sigma", 0.0),
-                      "accel_scale_factor": getattr(config, "accel_scale_factor_sigma", 0.0)}
+                      "gyro_scale_factor": config.gyro_scale_factor_sigma,
+                      "accel_scale_factor": config.accel_scale_factor_sigma}
         for kind in SENSOR_BLOCKS:
             if kind in self.blocks:
                 for i in self.blocks[kind].indices:
@@ -305,11 +313,10 @@ def _blocks(names: list[str], frame: str, where: str) -> dict[str, Block]:
 
 def _gnss_rows(derived, blocks: dict[str, Block], where: str) -> tuple[GnssRow, ...]:
     model = derived.model
-    states = [sp.Symbol(s, real=True) for s in model.state_symbols]
+    H = derived.H  # the model's own symbolic H
     rows = []
-    for name, expression in zip(model.measurement_names, model.measurement_expressions):
-        expression = sp.sympify(expression)
-        depends = {i for i, s in enumerate(states) if expression.has(s) and sp.diff(expression, s) != 0}
+    for r, name in enumerate(model.measurement_names):
+        depends = {i for i in range(H.shape[1]) if sp.simplify(H[r, i]) != 0}
         found = None
         for kind in ("velocity", "position"):
             hits = [(i, a, s) for i, a, s in zip(blocks[kind].indices, blocks[kind].axes, blocks[kind].signs)
@@ -347,7 +354,7 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
     blocks = _blocks(names, frame, where)
     rows = _gnss_rows(derived, blocks, where)
     parameter_names = tuple(model.parameter_names)
-    defaults = {k: float(v) for k, v in (model.parameter_defaults or {}).items()}
+    defaults = {k: float(v) for k, v in model.parameter_defaults().items()}
     expressions = {p: QUANTITIES[p] for p in parameter_names if p in QUANTITIES and p not in defaults}
     free = tuple(p for p in parameter_names if p not in expressions)
     spec = NavigatorSpec(model_file, derived, model.name, frame, len(names), blocks, rows, parameter_names,

@@ -30,7 +30,7 @@ def test_mechanization_at_rest_with_ideal_sensors_stays_at_rest():
     nav = np.zeros(NAV_SIZE)
     nav[0:4] = dcm_to_quaternion(c_bn)
     nav[7], nav[9] = lat, h
-    mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4))
+    mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4), np.zeros(3), np.zeros(3))
     assert np.abs(nav[4:7]).max() < 1e-3
     assert abs(nav[7] - lat) * 6.37e6 < 0.03 and abs(nav[9] - h) < 0.03
 
@@ -47,7 +47,7 @@ def test_mechanization_integrates_a_constant_forward_acceleration():
     nav = np.zeros(NAV_SIZE)
     nav[0] = 1.0
     nav[7], nav[9] = lat, h
-    mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4))
+    mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4), np.zeros(3), np.zeros(3))
     assert nav[4] == pytest.approx(10.0, abs=0.01)
     assert (nav[7] - lat) * 6.363e6 == pytest.approx(50.0, rel=2e-3)
 
