@@ -84,8 +84,9 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     model_file = model_path(config.model, config.path)
     flights: dict[str, Flight] = {}
     mark = time.perf_counter()
-    echo(f"  deriving {config.model} (once) and generating its Python filter with modelgen")
-    spec = navigator_spec(model_file)  # the one derivation of this replay: Python, C and the embedded build use it
+    echo(f"  deriving {config.model} (once) with modelgen")
+    # the one derivation of this replay: the Python navigator, the C and the embedded build all use it
+    spec = navigator_spec(model_file, with_python=navigator in ("python", "both"))
     spec.check_config(config)
     timings["generate_python_s"] = time.perf_counter() - mark
     if navigator in ("python", "both"):
