@@ -123,6 +123,8 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     errors = errors_against_reference(flight, inputs.gnss)
     result = summary(flight, errors, inputs.gnss)
     result["navigator"] = "c" if "c" in flights else "python"
+    result["model"] = {"name": spec.name, "file": str(model_file), "states": spec.n_states, "frame": spec.frame,
+                       "blocks": sorted(spec.blocks)}
     note = alignment_note(config, flight.alignment, flight.first_epoch) if flight.alignment else None
     if note:
         echo(f"  warning: {note}")
