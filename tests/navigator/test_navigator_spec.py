@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -172,3 +173,33 @@ def test_no_state_count_index_or_configuration_slot_is_written_by_hand():
         assert "N_STATES = " not in text and "N_CONFIG" not in text, path
         assert not re.search(r"cfg\[\d", text), path
         assert not re.search(r"P\[[0-9]+\]\[[0-9]+\]|P\[[0-9]+, *[0-9]+\]", text), path
+
+
+def _arm_tools_missing() -> list[str]:
+    from modelgen.codegen import toolchain
+
+    return toolchain.missing_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
+
+
+@pytest.mark.skipif(bool(_arm_tools_missing()) and os.environ.get("CI", "").lower() not in ("1", "true", "yes"),
+                    reason="ARM toolchain or qemu-arm absent locally (CI installs them)")
+@pytest.mark.embedded
+@pytest.mark.compile
+def test_the_21_state_float_navigator_under_qemu_arm_stays_within_1_cm_of_the_double_c(spec21):
+    """The 21-state Cortex-M4F build (float filter, packed configuration struct) on the excerpt under qemu-arm."""
+    from modelgen.navigator.cnav import cached_c_navigator, fly_c, log_arrays
+    from modelgen.navigator.config import load_config
+    from modelgen.navigator.embedded import embedded_replay
+    from modelgen.navigator.logs import read_gnss, read_imu
+    from modelgen.navigator.navigator import prepare
+
+    config = load_config(DATA / "excerpt_21.yaml")
+    inputs = prepare(config, read_imu(config.imu_source, config.gap_factor, config.gap_action),
+                     read_gnss(config.gnss_source))
+    arrays = log_arrays(config, inputs, spec21)
+    navigator, _ = cached_c_navigator(spec21, rest_max=arrays.rest_max)
+    reference, _ = fly_c(config, inputs, navigator)
+    result = embedded_replay(spec21, arrays, reference.outputs)
+    assert result.forbidden_symbols == []
+    assert result.max_position_difference_m <= 0.01
+    assert 0 < result.worst_case_stack["ins_gnss21_rw_nav_navigator_epoch"] < 4096
