@@ -203,3 +203,30 @@ def test_the_21_state_float_navigator_under_qemu_arm_stays_within_1_cm_of_the_do
     assert result.forbidden_symbols == []
     assert result.max_position_difference_m <= 0.01
     assert 0 < result.worst_case_stack["ins_gnss21_rw_nav_navigator_epoch"] < 4096
+
+
+def _config_with(tmp_path: Path, extra: str) -> Path:
+    text = (DATA / "excerpt_21.yaml").read_text() + extra
+    text = text.replace("excerpt_imu.csv.gz", str(DATA / "excerpt_imu.csv.gz"))
+    path = tmp_path / "replay21.yaml"
+    path.write_text(text.replace("file: excerpt.pos", f"file: {DATA / 'excerpt.pos'}"))
+    return path
+
+
+def test_the_parameters_section_reaches_the_configuration_struct(tmp_path, spec21):
+    from modelgen.navigator import cconfig
+    from modelgen.navigator.config import load_config
+
+    config = load_config(_config_with(tmp_path, "parameters:\n  earth_rate: 7.3e-5\n"))
+    assert config.parameters == {"earth_rate": 7.3e-5}
+    fields = cconfig.values(config, spec21, 50, 10, 50)
+    assert fields["parameters"] == [7.3e-5]
+    assert list(cconfig.to_structure(fields, 1).parameters) == [7.3e-5]
+    assert cconfig.namespace(fields).gyro_scale_factor_sigma == pytest.approx(3000e-6)
+
+
+def test_a_parameter_that_is_not_a_number_is_refused_with_its_line(tmp_path):
+    from modelgen.navigator.config import load_config
+
+    with pytest.raises(ModelError, match=r"replay21\.yaml:\d+: parameters\.earth_rate must be a finite number"):
+        load_config(_config_with(tmp_path, "parameters:\n  earth_rate: fast\n"))
