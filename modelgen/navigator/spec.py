@@ -141,9 +141,6 @@ class NavigatorSpec:
         """NED -> the model's frame."""
         return NED_TO_ENU if self.frame == "ENU" else np.eye(3)
 
-    def has(self, kind: str) -> bool:
-        return kind in self.blocks
-
     def check_config(self, config) -> None:
         """Refuse a configuration that lacks what this model needs (scale-factor sigmas, free parameters)."""
         for kind in ("gyro_scale_factor", "accel_scale_factor"):
