@@ -364,7 +364,7 @@ def load_config(path: str | Path) -> NavigatorConfig:
             raise ModelError(f"{r.where('gnss.quality_factor')}: gnss.quality_factor entry {q!r}: {factor!r} must be "
                              "an integer Q and a positive factor")
         quality[q] = float(factor)
-    rotation = r.get("imu.rotation_to_body_deg")
+    rotation = r.get("imu.rotation_to_body_deg", None)  # optional: IMU axes are body axes
     schedule, windows = _outages(r)
     config = NavigatorConfig(
         path=str(path), name=r.text("navigator"), model=r.text("model"),
