@@ -139,23 +139,30 @@ def _kind(node: dict[str, Any]) -> str:
             bounds.append(f"<= {node['maximum']:g}")
         return kind + (f" {', '.join(bounds)}" if bounds else "")
     if kind == "array":
-        return f"list of {node.get('minItems', '')}".strip()
+        size = node.get("minItems")
+        return f"list of {size}" if size is not None and size == node.get("maxItems") else "list"
     if kind == "object":
         return "mapping"
     return kind or "mapping"
 
 
-def _required_paths() -> set[str]:
-    """Dotted paths of the keys the schema requires where their section is given."""
-    out: set[str] = set()
+def _required_paths() -> dict[str, str]:
+    """Dotted paths of the keys the schema requires where their section is given: 'required', or for a key of one
+    of a section's alternatives (the outages' schedule) 'required in <the alternative>'."""
+    out: dict[str, str] = {}
+    schema = load_schema()
 
     def walk(node: dict[str, Any], prefix: str) -> None:
         for key in node.get("required", []):
-            out.add(f"{prefix}.{key}" if prefix else key)
+            out[f"{prefix}.{key}" if prefix else key] = "required"
+        if "$ref" in node:
+            for branch in schema["$defs"][node["$ref"].rpartition("/")[2]].get("oneOf", []):
+                for key in branch.get("required", []):
+                    out.setdefault(f"{prefix}.{key}", f"required in {branch.get('description', 'its alternative')}")
         for key, sub in _properties(node).items():
             walk(sub, f"{prefix}.{key}" if prefix else key)
 
-    walk(load_schema(), "")
+    walk(schema, "")
     return out
 
 
@@ -165,11 +172,11 @@ def key_table_markdown() -> str:
     rows = ["| key | type | unit | default | meaning |", "|---|---|---|---|---|"]
     for path, node in keys():
         plain = path.split(" (")[0]
-        needed = node.get("x-required", plain in required)
+        needed = "required" if node.get("x-required") else required.get(plain) if "x-required" not in node else None
         if "default" in node:
             default = f"`{json.dumps(node['default'])}`"
         else:
-            default = "required" if needed else "-"
+            default = needed or "-"
         description = node.get("description", "").replace("|", "\\|")
         rows.append(f"| `{path}` | {_kind(node)} | {node.get('x-unit', '')} | {default} | {description} |")
     return "\n".join(rows) + "\n"
