@@ -13,44 +13,29 @@ at least one entry so that C99 has no empty array).
 from __future__ import annotations
 
 import ctypes
-from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numpy as np
 from scipy.stats import chi2
 
+from modelgen.navigator.cconfig_fields import Field
+from modelgen.navigator.sensors import SENSORS, sensor_fields, sensor_values
+
 C_TYPES = {"double": ctypes.c_double, "int": ctypes.c_int32}
 
 
-@dataclass(frozen=True)
-class Field:
-    """One configuration field: name, C type (double or int), count (1, a number, or "P") and meaning with unit."""
-
-    name: str
-    ctype: str
-    count: int | str
-    meaning: str
-
-
-FIELDS: tuple[Field, ...] = (
+CORE_FIELDS: tuple[Field, ...] = (
     Field("lever_arm", "double", 3, "IMU to antenna in body axes [m]"),
     Field("velocity_latency", "double", 1, "GNSS velocity latency [s]"),
+    Field("gate_1", "double", 1, "NIS gate of a 1-row update (odometer, barometer)"),
     Field("gate_2", "double", 1, "NIS gate of a 2-row update (NHC)"),
     Field("gate_3", "double", 1, "NIS gate of a 3-row update (ZUPT)"),
     Field("gate_gnss", "double", 1, "NIS gate of the GNSS update (chi-square of its row count)"),
     Field("deweight", "int", 1, "1: de-weight an update above the gate (R x NIS / gate), 0: reject it"),
     Field("gate_release_epochs", "int", 1, "consecutive rejected GNSS epochs before one is accepted anyway"),
-    Field("zupt_enabled", "int", 1, "zero-velocity updates on (1) or off (0)"),
-    Field("zupt_speed_max", "double", 1, "ZUPT only below this navigator speed [m/s]"),
-    Field("zupt_sigma", "double", 1, "ZUPT sigma [m/s]"),
     Field("zupt_gyro_max", "double", 1, "ZUPT detector: every bias-corrected rate in the window below [rad/s]"),
     Field("zupt_accel_std_max", "double", 1, "ZUPT detector: standard deviation of |f| below [m/s^2]"),
     Field("zupt_window", "int", 1, "ZUPT detector window [samples]"),
-    Field("nhc_enabled", "int", 1, "non-holonomic constraint on (1) or off (0)"),
-    Field("nhc_speed_min", "double", 1, "NHC only above this speed [m/s]"),
-    Field("nhc_sigma_lateral", "double", 1, "NHC lateral sigma [m/s]"),
-    Field("nhc_sigma_vertical", "double", 1, "NHC vertical sigma [m/s]"),
-    Field("nhc_rate_max", "double", 1, "NHC only below this bias-corrected angular rate [rad/s]"),
     Field("predict_samples", "int", 1, "IMU samples per covariance step"),
     Field("gyro_white", "double", 1, "gyro white noise N_g [rad/sqrt(s)]"),
     Field("accel_white", "double", 1, "accelerometer white noise N_a [m/s/sqrt(s)]"),
@@ -78,6 +63,8 @@ FIELDS: tuple[Field, ...] = (
     Field("parameters", "double", "P", "the model's free parameters (configuration parameters: or defaults), "
                                        "in the order of NavigatorSpec.free_parameters"),
 )
+#: the one field list: the navigator's own fields, then every aiding sensor's (modelgen.navigator.sensors.SENSORS)
+FIELDS: tuple[Field, ...] = CORE_FIELDS + sensor_fields(SENSORS)
 
 
 def count_of(item: Field, n_parameters: int) -> int:
@@ -105,23 +92,23 @@ def structure(n_parameters: int) -> type[ctypes.Structure]:
     return type(f"NavigatorConfig{n_parameters}", (ctypes.Structure,), {"_fields_": members})
 
 
-def values(config, spec, zupt_window: int, predict_samples: int, still_window: int) -> dict:
-    """Every field's value for a configuration, a model spec and the log's sample counts (SI)."""
-    gates = {m: float(chi2.ppf(config.nis_gate_probability, m)) for m in (2, 3, len(spec.gnss_rows))}
+def values(config, spec, zupt_window: int, predict_samples: int, still_window: int, table=SENSORS) -> dict:
+    """Every field's value for a configuration, a model spec and the log's sample counts (SI).
+
+    ``table``: the aiding sensors whose fields are filled (the C struct's are :data:`SENSORS`').
+    """
+    gates = {m: float(chi2.ppf(config.nis_gate_probability, m)) for m in (1, 2, 3, len(spec.gnss_rows))}
     quality = [0.0] * 8
     for q, factor in config.quality_factor.items():
         if 0 <= q <= 7:
             quality[q] = factor
     out = {
         "lever_arm": list(config.lever_arm), "velocity_latency": config.velocity_latency,
-        "gate_2": gates[2], "gate_3": gates[3], "gate_gnss": gates[len(spec.gnss_rows)],
+        "gate_1": gates[1], "gate_2": gates[2], "gate_3": gates[3], "gate_gnss": gates[len(spec.gnss_rows)],
         "deweight": int(config.gate_action == "deweight"), "gate_release_epochs": config.gate_release_epochs,
-        "zupt_enabled": int(config.zupt_enabled), "zupt_speed_max": config.zupt_speed_max,
-        "zupt_sigma": config.zupt_sigma, "zupt_gyro_max": config.zupt_gyro_max,
+        "zupt_gyro_max": config.zupt_gyro_max,
         "zupt_accel_std_max": config.zupt_accel_std_max, "zupt_window": zupt_window,
-        "nhc_enabled": int(config.nhc_enabled), "nhc_speed_min": config.nhc_speed_min,
-        "nhc_sigma_lateral": config.nhc_sigma_lateral, "nhc_sigma_vertical": config.nhc_sigma_vertical,
-        "nhc_rate_max": config.nhc_rate_max, "predict_samples": predict_samples,
+        "predict_samples": predict_samples,
         "gyro_white": config.noise["gyro_white"].si, "accel_white": config.noise["accel_white"].si,
         "gyro_bias_driving": config.noise["gyro_bias_driving"].si,
         "accel_bias_driving": config.noise["accel_bias_driving"].si,
@@ -138,7 +125,8 @@ def values(config, spec, zupt_window: int, predict_samples: int, still_window: i
         "accel_scale_factor_sigma": config.accel_scale_factor_sigma or 0.0,
         "parameters": spec.free_values(config) or [0.0],
     }
-    assert set(out) == {f.name for f in FIELDS}, "cconfig.values must fill every field"
+    out.update(sensor_values(config, table))
+    assert set(out) == {f.name for f in CORE_FIELDS + sensor_fields(table)}, "cconfig.values must fill every field"
     return out
 
 

@@ -126,12 +126,29 @@ class NavigatorConfig:
     #: output.folder: the report folder when the command line gives none (relative paths from the configuration's
     #: folder), or None
     output_folder: Path | None = None
+    #: the aiding sensors' own logs by section (odometer, barometer): enabled, file, columns, unit, sigma, lever arm
+    aiding: dict[str, AidingSettings] = field(default_factory=dict)
 
     @property
     def rest_span_min(self) -> float:
         """The shortest still span the alignment levels from [s]: rest_min, but never more than the rest window
         itself (a 1-s rest window cannot hold 2 s of still data; asking for it would refuse every log)."""
         return min(self.rest_min, self.rest_window)
+
+
+@dataclass(frozen=True)
+class AidingSettings:
+    """An aiding sensor's own log and noise (the odometer: and barometer: sections; modelgen.navigator.sensors)."""
+
+    section: str
+    enabled: bool
+    file: Path | None
+    time_column: int = 1
+    value_column: int = 2
+    unit: str = ""
+    time_offset: float = 0.0  # added to the log's time stamps [s]
+    sigma: float = 1.0  # [m/s] or [m]
+    lever_arm: tuple[float, float, float] | None = None  # odometer: IMU to the wheel contact, body axes [m]
 
 
 @dataclass(frozen=True)
@@ -415,9 +432,50 @@ def load_config(path: str | Path) -> NavigatorConfig:
         accel_scale_factor_sigma=_ppm(r, "initial.accel_scale_factor_sigma_ppm"),
         parameters=_model_parameters(r),
         output_folder=_output_folder(r),
+        aiding={section: _aiding(r, section) for section in AIDING_SECTIONS},
     )
     validate(data, r.where)  # and what the checks above leave to the schema (types, ranges, required keys)
     return config
+
+
+#: the sections of the aiding sensors that read a log of their own: section -> (sigma key, has a lever arm)
+AIDING_SECTIONS = {"odometer": ("sigma_m_s", True), "barometer": ("sigma_m", False)}
+
+
+def _aiding(reader: _Reader, section: str) -> AidingSettings:
+    """An aiding sensor's section: off when absent; when enabled its file must exist and its sigma be given."""
+    from modelgen.navigator.logs.scalar_csv import STREAMS
+
+    sigma_key, has_lever_arm = AIDING_SECTIONS[section]
+    if reader.get(section, None) is None:
+        return AidingSettings(section, False, None, unit=next(iter(STREAMS[section].units)))
+    enabled = reader.flag(f"{section}.enabled", False)
+    file = None
+    if enabled:
+        if reader.get(f"{section}.file", None) is None:
+            raise ModelError(f"{reader.where(section + '.enabled')}: {section} is enabled but {section}.file names no "
+                             "log (give the CSV of time and value, or enabled: false)")
+        file = reader.file(f"{section}.file")
+        if reader.get(f"{section}.{sigma_key}", None) is None:
+            raise ModelError(f"{reader.where(section + '.enabled')}: {section} is enabled but {section}.{sigma_key} "
+                             "is not given")
+    units = STREAMS[section].units
+    unit = reader.text(f"{section}.units", next(iter(units)))
+    if unit not in units:
+        raise ModelError(f"{reader.where(section + '.units')}: {section}.units {unit!r} is not one of "
+                         f"{', '.join(units)}")
+    columns = [reader.integer(f"{section}.columns.{k}", d, minimum=1) for k, d in (("time", 1), ("value", 2))]
+    if columns[0] == columns[1]:
+        raise ModelError(f"{reader.where(section + '.columns')}: {section}.columns: time and value are both "
+                         f"column {columns[0]}")
+    lever = None
+    if has_lever_arm:
+        lever = reader.vector(f"{section}.lever_arm_m", 3) if reader.get(f"{section}.lever_arm_m", None) is not None \
+            else (0.0, 0.0, 0.0)
+    sigma = reader.number(f"{section}.{sigma_key}", positive=True) if reader.get(f"{section}.{sigma_key}", None) \
+        is not None else 1.0
+    return AidingSettings(section, enabled, file, columns[0], columns[1], unit,
+                          reader.number(f"{section}.time_offset_s", 0.0), sigma, lever)  # type: ignore[arg-type]
 
 
 def _output_folder(reader: _Reader) -> Path | None:

@@ -20,10 +20,12 @@ from modelgen.navigator.alignment import Alignment, align  # noqa: F401  (the al
 from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator import cconfig
 from modelgen.navigator.errorstate import ErrorStateFilter, rotate
-from modelgen.navigator.logs import GnssLog, ImuLog, check_logs, epochs_inside_gaps
+from modelgen.navigator.logs import GnssLog, ImuLog, ScalarLog, check_logs, epochs_inside_gaps, read_scalar
 from modelgen.navigator.mechanization import (dcm_to_euler, euler_to_dcm, gravity, mechanize, quaternion_to_dcm,
                                               radii)
 from modelgen.navigator.outages import in_outage, outage_windows
+from modelgen.navigator import sensors as aiding_sensors
+from modelgen.navigator.sensors import SENSORS, AidingSensor, StreamCursor
 from modelgen.navigator.spec import NavigatorSpec, quantities
 
 HISTORY = 16  # INS velocities kept (one per covariance step) for the GNSS velocity latency
@@ -60,6 +62,8 @@ class Inputs:
     notes: list[str]
     first_epoch: float  # the GNSS file's first epoch [s]: the outage schedule and the report count from it
     source_gnss: GnssLog | None = None  # the GNSS log as read (for the alignment's diagnosis of a log that ends first)
+    #: the enabled aiding sensors' own logs by sensor name (odometer, barometer), times on the GNSS time
+    aiding: dict[str, ScalarLog] = field(default_factory=dict)
 
 
 def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
@@ -90,7 +94,22 @@ def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
     kept = GnssLog(gnss.path, gnss.time[keep], gnss.latitude[keep], gnss.longitude[keep], gnss.height[keep],
                    gnss.quality[keep], gnss.satellites[keep], gnss.sigma_position[keep], gnss.velocity[keep],
                    gnss.sigma_velocity[keep], gnss.notes)
-    return Inputs(time, imu.specific_force @ to_imu, imu.angular_rate @ to_imu, kept, notes, float(gnss.time[0]), gnss)
+    aiding = read_aiding_logs(config)
+    for log in aiding.values():
+        notes.extend(log.notes)
+    return Inputs(time, imu.specific_force @ to_imu, imu.angular_rate @ to_imu, kept, notes, float(gnss.time[0]), gnss,
+                  aiding)
+
+
+def read_aiding_logs(config: NavigatorConfig) -> dict[str, ScalarLog]:
+    """The enabled aiding sensors' own logs (config.aiding), their time stamps shifted by their time_offset_s."""
+    out = {}
+    for section, settings in (getattr(config, "aiding", None) or {}).items():
+        if settings.enabled and settings.file is not None:
+            log = read_scalar(section, settings.file, settings.time_column, settings.value_column, settings.unit)
+            log.time = log.time + settings.time_offset
+            out[section] = log
+    return out
 
 
 def stationary_mask(time: np.ndarray, force: np.ndarray, rate: np.ndarray, gyro_bias: np.ndarray,
@@ -158,8 +177,12 @@ def corrected(sample: np.ndarray, bias: np.ndarray, scale: np.ndarray) -> np.nda
 
 
 def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
-        progress: Callable[[float], None] | None = None) -> Flight:
-    """Fly the whole log forward in real time with the spec's model; return the per-epoch outputs."""
+        progress: Callable[[float], None] | None = None, table: tuple[AidingSensor, ...] = SENSORS) -> Flight:
+    """Fly the whole log forward in real time with the spec's model; return the per-epoch outputs.
+
+    ``table``: the aiding sensors (:data:`modelgen.navigator.sensors.SENSORS`); those the configuration enables are
+    tried at every covariance step in table order, the GNSS epochs at theirs.
+    """
     g = inputs.gnss
     time, force, rate = inputs.time, inputs.force, inputs.rate
     lever = np.asarray(config.lever_arm, float)
@@ -177,7 +200,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
     from modelgen.navigator.alignment import still_window_samples
 
     cfg = cconfig.namespace(cconfig.values(config, spec, max(2, int(round(config.zupt_window / median_dt))), step,
-                                           still_window_samples(config, time)))
+                                           still_window_samples(config, time), table))
     speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
     sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))
     heading_sigma = math.hypot(math.atan2(sv, speed0), config.heading_extra_sigma)
@@ -190,12 +213,13 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
 
     still = (stationary_mask(time, force, rate, gyro_bias, config.zupt_window, config.zupt_gyro_max,
                              config.zupt_accel_std_max) if config.zupt_enabled else np.zeros(len(time), bool))
-    gates = {2: cfg.gate_2, 3: cfg.gate_3, "gnss": cfg.gate_gnss}
+    gates = {1: cfg.gate_1, 2: cfg.gate_2, 3: cfg.gate_3, "gnss": cfg.gate_gnss}
+    step_sensors = enabled_step_sensors(table, cfg, inputs)
     history = np.zeros(6)
     outputs = []
     gnss_nis: list[float] = []
     counts = {"gnss_updates": 0, "gnss_rejected": 0, "gnss_released": 0, "gnss_deweighted": 0, "gnss_quality_skipped": 0,
-              "zupt_updates": 0, "nhc_updates": 0, "predicts": 0}
+              **{s.counter: 0 for s in aiding_sensors.step_sensors(table)}, "predicts": 0}
     rejected_run = 0
     deweight = config.gate_action == "deweight"
     last_sigmas = _gnss_sigmas(config, g, j0)
@@ -219,19 +243,10 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
             kf.predict(parameters(mean_force[0:3] / mean_force[3], last_sigmas), period)
             counts["predicts"] += 1
             _remember(velocity_history, time[k], nav)
-            speed = float(np.linalg.norm(nav[4:7]))
-            if still[k] and speed < config.zupt_speed_max:
-                z, H = spec.zupt_rows(nav[4:7])
-                if kf.update(z, H, np.full(3, config.zupt_sigma**2), gates[3], deweight).accepted:
-                    counts["zupt_updates"] += 1
-                    _reset(kf, spec, nav, sensors)
-            elif (config.nhc_enabled and speed > config.nhc_speed_min
-                  and float(np.linalg.norm(rate[k] - gyro_bias)) < config.nhc_rate_max):
-                z, H = spec.nhc_rows(quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3]), nav[4:7])
-                r = np.array([config.nhc_sigma_lateral**2, config.nhc_sigma_vertical**2])
-                if kf.update(z, H, r, gates[2], deweight).accepted:
-                    counts["nhc_updates"] += 1
-                    _reset(kf, spec, nav, sensors)
+            _aid_step(step_sensors, time[k], nav, kf, spec, sensors, cfg, gates, deweight, counts,
+                      {"speed": float(np.linalg.norm(nav[4:7])), "still": bool(still[k]),
+                       "rate_norm": float(np.linalg.norm(rate[k] - gyro_bias)), "cfg": cfg},
+                      corrected(rate[k], gyro_bias, gyro_scale))
         used = 0
         nis = float("nan")
         sigmas = _gnss_sigmas(config, g, j)
@@ -268,6 +283,48 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
         progress(1.0)
     return Flight(np.array(outputs), windows, inputs.first_epoch, float(g.time[j0]), gnss_nis, gates["gnss"], counts,
                   list(inputs.notes), start.record())
+
+
+def enabled_step_sensors(table: tuple[AidingSensor, ...], cfg, inputs: Inputs) -> list[tuple]:
+    """(entry, compiled condition, stream cursor or None) of every enabled entry tried at a covariance step."""
+    out = []
+    for sensor in aiding_sensors.step_sensors(table):
+        if not getattr(cfg, sensor.enabled):
+            continue
+        cursor = None
+        if sensor.stream != "imu":
+            log = inputs.aiding.get(sensor.stream)
+            if log is None:
+                raise ModelError(f"{sensor.section} is enabled but no {sensor.stream} log was read")
+            cursor = StreamCursor(log.time, log.value)
+        out.append((sensor, aiding_sensors.compiled_condition(sensor), cursor))
+    return out
+
+
+def _aid_step(step_sensors: list[tuple], t: float, nav: np.ndarray, kf: ErrorStateFilter, spec: NavigatorSpec,
+              sensors: dict[str, np.ndarray], cfg, gates: dict, deweight: bool, counts: dict[str, int], env: dict,
+              rate_body: np.ndarray) -> None:
+    """The aiding updates at the end of a covariance step at time t: each enabled entry in table order.
+
+    A log stream's latest sample at or before t not taken yet is taken (whether or not it is then used); an
+    entry whose group already had an entry whose condition held is skipped; otherwise its condition
+    (evaluated on ``env``: speed, still, rate_norm and cfg at the step's start, and ``fresh``) decides.
+    """
+    tried: set[str] = set()
+    for sensor, condition, cursor in step_sensors:
+        fresh, measured = cursor.take(t) if cursor is not None else (True, 0.0)
+        if sensor.group and sensor.group in tried:
+            continue
+        if not eval(condition, {"__builtins__": {}}, {**env, "fresh": fresh}):  # noqa: S307 - the table's own
+            continue
+        if sensor.group:
+            tried.add(sensor.group)
+        c_bn = quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])
+        z, H = aiding_sensors.rows(sensor, spec, nav, c_bn, rate_body, measured, cfg)
+        r = np.square(aiding_sensors.sigmas(sensor, cfg))
+        if kf.update(z, H, r, gates[sensor.dof], deweight).accepted:
+            counts[sensor.counter] += 1
+            _reset(kf, spec, nav, sensors)
 
 
 def _remember(history: np.ndarray, t: float, nav: np.ndarray) -> None:

@@ -22,10 +22,11 @@ from modelgen.navigator.logs.files import MAX_LOG_BYTES
 from modelgen.navigator.logs.formats import LogFormat, LogSource, Option
 from modelgen.navigator.logs.imu_csv import ImuColumns, read_imu_csv
 from modelgen.navigator.logs.records import ACCEL_UNITS, GYRO_UNITS, STANDARD_GRAVITY, GnssLog, ImuGap, ImuLog
-from modelgen.navigator.logs.registry import FORMATS, read_gnss, read_imu, schema, source_from_config
+from modelgen.navigator.logs.registry import FORMATS, SCALAR_STREAMS, read_gnss, read_imu, read_scalar, schema, source_from_config
+from modelgen.navigator.logs.scalar_csv import ScalarLog
 from modelgen.navigator.logs.rtklib_pos import read_rtklib_pos
 
 __all__ = ["ACCEL_UNITS", "FORMATS", "GAP_ACTIONS", "GYRO_UNITS", "MAX_LOG_BYTES", "STANDARD_GRAVITY", "GnssLog",
            "ImuColumns", "ImuGap", "ImuLog", "LogFormat", "LogSource", "Option", "apply_gap_policy",
-           "check_gnss_fixes", "check_logs", "epochs_inside_gaps", "find_gaps", "read_gnss", "read_imu", "read_imu_csv",
+           "check_gnss_fixes", "check_logs", "epochs_inside_gaps", "find_gaps", "read_gnss", "read_imu", "read_imu_csv", "read_scalar", "ScalarLog", "SCALAR_STREAMS",
            "read_rtklib_pos", "schema", "source_from_config"]

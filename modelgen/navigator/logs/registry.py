@@ -18,11 +18,15 @@ from modelgen.navigator.logs.imu_csv import FORMAT as CSV
 from modelgen.navigator.logs.records import GnssLog, ImuLog
 from modelgen.navigator.logs.ros2bag import FORMAT as ROS2_BAG
 from modelgen.navigator.logs.rtklib_pos import FORMAT as RTKLIB_POS
+from modelgen.navigator.logs.scalar_csv import STREAMS as SCALAR_STREAMS
+from modelgen.navigator.logs.scalar_csv import ScalarLog, read_scalar_csv
 from modelgen.navigator.logs.ulog import FORMAT as ULOG
 
 #: One entry per format, in the order the documentation lists them.
 FORMATS: dict[str, LogFormat] = {f.name: f for f in (CSV, RTKLIB_POS, ULOG, ROS2_BAG)}
 DEFAULT_FORMAT = {"imu": "csv", "gnss": "rtklib_pos"}
+#: The aiding sensors' own logs (odometer, barometer): one time-and-value CSV reader, one entry per stream
+#: (modelgen.navigator.logs.scalar_csv.STREAMS: name, quantity, accepted units).
 #: Keys of the imu: and gnss: sections that every format shares (the navigator's, not the reader's).
 COMMON_KEYS = {
     "imu": {"file", "format", "time_offset_s", "gap_factor", "gap_action", "rotation_to_body_deg"},
@@ -77,6 +81,13 @@ def source_from_config(section: str, raw: Mapping[str, Any], where: Callable[[st
     if not (path.is_file() or (fmt.folder and path.is_dir())):
         raise ModelError(f"{where(file_key)}: {file_key}: no such file {str(path)!r}")
     return LogSource(section, name, path, options, where)
+
+
+def read_scalar(stream: str, path: Path, time_column: int, value_column: int, unit: str) -> ScalarLog:
+    """Read an aiding sensor's own log (odometer, barometer: :data:`SCALAR_STREAMS`, time and value CSV)."""
+    if stream not in SCALAR_STREAMS:
+        raise ModelError(f"{path}: no reader for the {stream} stream (known: {', '.join(SCALAR_STREAMS)})")
+    return read_scalar_csv(path, stream, time_column, value_column, unit)
 
 
 def read_imu(source: LogSource, gap_factor: float, gap_action: str) -> ImuLog:
