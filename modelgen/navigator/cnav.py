@@ -17,7 +17,7 @@ import ctypes
 import hashlib
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import jinja2
@@ -31,13 +31,15 @@ from modelgen.navigator import cconfig
 from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator.navigator import Flight, Inputs
 from modelgen.navigator.outages import in_outage, outage_windows
+from modelgen.navigator.sensors import SENSORS, log_sensors, step_sensors
 from modelgen.navigator.spec import SENSOR_BLOCKS, NavigatorSpec
 from modelgen.fileio.output import write_atomically
 from modelgen.model import wgs84
 
 N_OUTPUT, N_GNSS, N_ALIGNMENT = 26, 13, 8
+#: the C's counters: the GNSS update's, one per aiding sensor tried at a covariance step (the table's order), predicts
 COUNT_NAMES = ("gnss_updates", "gnss_rejected", "gnss_released", "gnss_deweighted", "gnss_quality_skipped",
-               "zupt_updates", "nhc_updates", "predicts")
+               *(s.counter for s in step_sensors(SENSORS)), "predicts")
 ALIGNMENT_NAMES = ("time", "roll", "pitch", "heading", "rest_end", "rest_samples", "rest_start", "motion_time")
 #: IMU samples the C keeps for its alignment by default ({P}_NAV_REST_MAX in the header); a configuration whose
 #: rest window needs more is built with a larger ring (:func:`rest_capacity`, -D{P}_NAV_REST_MAX)
@@ -45,6 +47,7 @@ REST_MAX = 1024
 #: the C's alignment statuses (header: {P}_NAV_ERR_*); 11 and 12 are explained by the Python rules' diagnosis
 ALIGNMENT_ERRORS = {
     13: "the rest window held more IMU samples than the C navigator was built to keep (its ring overflowed)",
+    14: "an aiding sample named a sensor slot the C navigator does not have",
 }
 
 
@@ -75,13 +78,27 @@ def template_context(spec: NavigatorSpec) -> dict:
     output = [None, None, None]
     for i, a, sg in zip(pos.indices, pos.axes, pos.signs):
         output[a] = (i, _literal(sg * (-1.0 if a == 2 else 1.0)))
-    return {"blocks": blocks, "sensor_targets": [(k, SENSOR_TARGETS[k]) for k in SENSOR_BLOCKS if k in spec.blocks],
+    return {**aiding_context(), "blocks": blocks, "sensor_targets": [(k, SENSOR_TARGETS[k]) for k in SENSOR_BLOCKS if k in spec.blocks],
             "parameters": parameters, "position_output": output,
             "gnss_rows": [{"kind": r.kind, "axis": r.axis, "sign": _literal(r.sign), "sigma_index": r.sigma_index}
                           for r in spec.gnss_rows],
             "frame": [[_literal(v) for v in row] for row in spec.to_frame], "frame_name": spec.frame,
             "rows_max": max(6, len(spec.gnss_rows)), "n_free": len(free), "free_names": ", ".join(free) or "none",
             "config_struct": cconfig.c_struct(spec.name, len(free))}
+
+
+def aiding_context(table=SENSORS) -> dict:
+    """What the template emits per aiding sensor of the table (close_chunk), and the counters' and slots' names."""
+    slots = [s.name for s in log_sensors(table)]
+    entries = []
+    for s in step_sensors(table):
+        entries.append({"name": s.name, "section": s.section, "meaning": s.meaning, "form": s.form,
+                        "condition": s.condition, "enabled": s.enabled, "group": s.group, "axes": list(s.axes),
+                        "lever_arm": s.lever_arm, "sigmas": list(s.sigmas), "dof": s.dof,
+                        "count": COUNT_NAMES.index(s.counter), "slot": slots.index(s.name) if s.name in slots else None})
+    return {"aiding": entries, "aiding_forms": sorted({e["form"] for e in entries}),
+            "aiding_groups": sorted({e["group"] for e in entries if e["group"]}), "aid_slots": slots,
+            "count_names": list(COUNT_NAMES), "predicts_count": COUNT_NAMES.index("predicts")}
 
 
 def render_navigator(spec: NavigatorSpec) -> dict[str, str]:
@@ -113,8 +130,9 @@ class CNavigator:
         self.size = int(self._fn("navigator_size", [], ctypes.c_ulong)())
         dp = ctypes.POINTER(ctypes.c_double)
         self.configure = self._fn("navigator_configure", [ctypes.c_void_p, ctypes.c_void_p])
-        self.run = self._fn("navigator_run", [ctypes.c_void_p, ctypes.c_long, dp, dp, dp, ctypes.c_long, dp,
-                                              ctypes.POINTER(ctypes.c_long), ctypes.POINTER(ctypes.c_int), dp, dp])
+        self.run = self._fn("navigator_run_aided", [ctypes.c_void_p, ctypes.c_long, dp, dp, dp, ctypes.c_long, dp,
+                                                    ctypes.POINTER(ctypes.c_long), ctypes.POINTER(ctypes.c_int), dp,
+                                                    ctypes.c_long, dp, ctypes.POINTER(ctypes.c_int), dp, dp])
         self.alignment = self._fn("navigator_alignment", [ctypes.c_void_p, dp])
         self.counts = self._fn("navigator_counts", [ctypes.c_void_p, ctypes.POINTER(ctypes.c_long)], None)
 
@@ -175,7 +193,7 @@ def navigator_key(model_file: Path, rest_max: int) -> str:
     backends = Path(__file__).resolve().parent.parent / "codegen" / "backends"  # the filter's templates and printer
     sources = sorted(Path(template_folder()).glob("*.j2")) + sorted(backends.rglob("*.j2")) + sorted(backends.rglob("*.py"))
     here = Path(__file__).resolve().parent
-    sources += [here / "spec.py", here / "cconfig.py", here / "cnav.py"]  # they shape the rendered C
+    sources += [here / "spec.py", here / "cconfig.py", here / "cconfig_fields.py", here / "cnav.py", here / "sensors.py"]  # they shape the rendered C
     for template in sources:
         digest.update(template.name.encode() + template.read_bytes())
     digest.update(f"\nrest_max {int(rest_max)}\nflags {' '.join(STRICT_FLAGS)} -O2\n".encode())
@@ -248,6 +266,10 @@ class LogArrays:
     gnss: np.ndarray  # (epochs, 13)
     windows: list[tuple[float, float]]
     rest_max: int = REST_MAX  # the alignment ring this log and configuration need (:func:`rest_capacity`)
+    #: the enabled aiding sensors' log samples, merged in time order: time [s], slot (NAV_N_AID order), value [SI]
+    aid_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    aid_slot: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    aid_value: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def log_arrays(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec) -> LogArrays:
@@ -262,9 +284,27 @@ def log_arrays(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec) -> 
     gnss = np.column_stack([g.latitude, g.longitude, g.height, g.velocity, g.quality, g.sigma_position,
                             g.sigma_velocity])[epochs]
     contiguous = np.ascontiguousarray
-    return LogArrays(config_values(config, spec, time_), len(spec.free_parameters), time_, force, rate,
+    values = config_values(config, spec, time_)
+    aid_time, aid_slot, aid_value = aiding_samples(inputs, values)
+    return LogArrays(values, len(spec.free_parameters), time_, force, rate,
                      contiguous(g.time[epochs]), contiguous(target), contiguous((~outage[epochs]).astype(np.int32)),
-                     contiguous(gnss), windows, rest_capacity(config, time_))
+                     contiguous(gnss), windows, rest_capacity(config, time_), aid_time, aid_slot, aid_value)
+
+
+def aiding_samples(inputs: Inputs, values: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The enabled log sensors' samples (inputs.aiding) merged in time order: time, slot, value (contiguous)."""
+    parts = []
+    for slot, sensor in enumerate(log_sensors(SENSORS)):
+        log = inputs.aiding.get(sensor.stream)
+        if log is not None and values[sensor.enabled]:
+            parts.append((np.asarray(log.time, float), np.full(len(log.time), slot, np.int32),
+                          np.asarray(log.value, float)))
+    if not parts:
+        return np.zeros(0), np.zeros(0, np.int32), np.zeros(0)
+    t, s, v = (np.concatenate(p) for p in zip(*parts))
+    order = np.argsort(t, kind="stable")
+    return (np.ascontiguousarray(t[order]), np.ascontiguousarray(s[order], dtype=np.int32),
+            np.ascontiguousarray(v[order]))
 
 
 def alignment_error(config: NavigatorConfig, inputs: Inputs, status: int) -> ModelError:
@@ -312,7 +352,8 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tup
     cpu = time.process_time()
     status = navigator.run(state, len(a.time), _pointer(a.time), _pointer(a.force), _pointer(a.rate),
                            len(a.t_gnss), _pointer(a.t_gnss), _pointer(a.target, ctypes.c_long),
-                           _pointer(a.use, ctypes.c_int), _pointer(a.gnss), _pointer(out))
+                           _pointer(a.use, ctypes.c_int), _pointer(a.gnss), len(a.aid_time), _pointer(a.aid_time),
+                           _pointer(a.aid_slot, ctypes.c_int), _pointer(a.aid_value), _pointer(out))
     cpu = time.process_time() - cpu
     if status:
         raise alignment_error(config, inputs, status)
