@@ -68,6 +68,7 @@ class Inputs:
 
 def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
     """Rotate the IMU into body axes, shift its time, drop GNSS epochs outside the IMU span or in its gaps (noted)."""
+    aiding = read_aiding_logs(config)  # the aiding sensors' own logs (odometer, barometer): refused first if bad
     check_logs(imu, gnss, config.quality_factor, config.time_offset)  # no fix, nothing in the IMU span: refused
     if gnss.velocity is None:
         raise ModelError(f"{gnss.path}: the navigator needs GNSS velocities (vn, ve, vu columns)")
@@ -94,7 +95,6 @@ def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
     kept = GnssLog(gnss.path, gnss.time[keep], gnss.latitude[keep], gnss.longitude[keep], gnss.height[keep],
                    gnss.quality[keep], gnss.satellites[keep], gnss.sigma_position[keep], gnss.velocity[keep],
                    gnss.sigma_velocity[keep], gnss.notes)
-    aiding = read_aiding_logs(config)
     for log in aiding.values():
         notes.extend(log.notes)
     return Inputs(time, imu.specific_force @ to_imu, imu.angular_rate @ to_imu, kept, notes, float(gnss.time[0]), gnss,
