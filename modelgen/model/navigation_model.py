@@ -29,12 +29,19 @@ import sympy as sp
 from modelgen.errors import ModelError
 from modelgen.model import perturbation as pt
 from modelgen.model import wgs84
-from modelgen.model.mechanizations import MECHANIZATIONS, mechanization_named  # noqa: F401  (MECHANIZATIONS: public)
+from modelgen.model.mechanizations import (  # noqa: F401  (MECHANIZATIONS: public)
+    MECHANIZATION_APPROXIMATIONS,
+    MECHANIZATION_ERROR_FORMS,
+    MECHANIZATION_FRAMES,
+    MECHANIZATIONS,
+    mechanization_named,
+)
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State, check_identifier, parse_expression
 from modelgen.model.file_fields import free_text, notes_text, scalar_text
 from modelgen.model.unit_check import check_model_units
 from modelgen.model.units import declared_value
-from modelgen.model.vectors import component_names, parse_vector_expression
+from modelgen.model.vectors import component_names as _vector_component_names
+from modelgen.model.vectors import parse_vector_expression
 
 #: Keys of a model file that derives its error model from the navigation equations.
 NAVIGATION_TOP_KEYS = frozenset({"model", "title", "source", "frame", "notes", "parameters", "navigation", "check"})
@@ -109,6 +116,17 @@ class _Reader:
         return str(value)
 
 
+#: Axis suffixes of the navigation frames the general vector notation does not know (modelgen.model.vectors: NED, ENU).
+_NAVIGATION_ONLY_FRAMES = {"ECEF": ("x", "y", "z")}
+
+
+def component_names(name: str, shape: int, frame: str, axes: str | None = None, where: str = "") -> list[str]:
+    """:func:`modelgen.model.vectors.component_names`, and the e-frame's ``_x, _y, _z`` for a navigation-frame vector."""
+    if axes is None and frame in _NAVIGATION_ONLY_FRAMES and shape == 3:
+        return [f"{name}_{a}" for a in _NAVIGATION_ONLY_FRAMES[frame]]
+    return _vector_component_names(name, shape, frame, axes, where)
+
+
 def _symbols(names: Sequence[str]) -> sp.Matrix:
     return sp.Matrix([sp.Symbol(n, real=True) for n in names])
 
@@ -141,6 +159,7 @@ class _Declarations:
 def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declarations) -> dict[str, Any]:
     """Symbols of the computed attitude, velocity, position, sensed inputs and Earth quantities."""
     axes_words = _axis_words(frame, None)
+    ecef = frame == "ECEF"
     attitude = read.mapping(section.get("attitude", {}), "navigation.attitude", ("symbols",))
     c = read.names(attitude["symbols"], "navigation.attitude.symbols", 9) if "symbols" in attitude else [f"c{i}{j}" for i in range(1, 4) for j in range(1, 4)]
     for k, s in enumerate(c):
@@ -148,10 +167,16 @@ def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declar
     velocity = read.mapping(section.get("velocity", {}), "navigation.velocity", ("symbols", "symbol"))
     v = _vector_symbols(read, velocity, "navigation.velocity", "v", frame, None)
     for s, word in zip(v, axes_words):
-        _offer(decl, s, f"velocity_{word}", "m/s", f"{word} ground speed")
+        _offer(decl, s, f"velocity_{word}", "m/s", f"e-frame velocity {word} (with respect to the Earth)" if ecef else f"{word} ground speed")
     position = read.mapping(section.get("position", {}), "navigation.position", ("symbols",))
-    p = read.names(position["symbols"], "navigation.position.symbols", 3) if "symbols" in position else ["L", "lambda_", "h"]
-    for s, name, unit, text in zip(p, ("latitude", "longitude", "height"), ("rad", "rad", "m"), ("geodetic latitude", "longitude", "height above the ellipsoid")):
+    default_position = ["r_x", "r_y", "r_z"] if ecef else ["L", "lambda_", "h"]
+    p = read.names(position["symbols"], "navigation.position.symbols", 3) if "symbols" in position else default_position
+    if ecef:
+        position_words = [("position_x", "m", "e-frame position x (Earth's centre to the IMU)"), ("position_y", "m", "e-frame position y"),
+                          ("position_z", "m", "e-frame position z (along the Earth's rotation axis)")]
+    else:
+        position_words = [("latitude", "rad", "geodetic latitude"), ("longitude", "rad", "longitude"), ("height", "m", "height above the ellipsoid")]
+    for s, (name, unit, text) in zip(p, position_words):
         _offer(decl, s, name, unit, text)
     force = read.mapping(section.get("specific_force", {}), "navigation.specific_force", ("symbols", "symbol", "axes"))
     force_axes = read.choice(force.get("axes", "body"), "navigation.specific_force.axes", ("body", "navigation"))
@@ -163,8 +188,8 @@ def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declar
     w = _vector_symbols(read, rate, "navigation.body_rate", "omega_b", frame, "body")
     for s, word in zip(w, "xyz"):
         _offer(decl, s, f"body_rate_{word}", "rad/s", f"sensed body rate w_ib^b about body {word}")
-    earth = read.mapping(section.get("earth", {}), "navigation.earth", ("earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "earth_radius"))
-    defaults = {"earth_rate": "omega_ie", "meridian_radius": "R_M", "prime_vertical_radius": "R_N", "gravity": "g", "earth_radius": "R"}
+    earth = read.mapping(section.get("earth", {}), "navigation.earth", ("earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "earth_radius", "geocentric_radius"))
+    defaults = {"earth_rate": "omega_ie", "meridian_radius": "R_M", "prime_vertical_radius": "R_N", "gravity": "g", "earth_radius": "R", "geocentric_radius": "r_e"}
     symbols = {}
     for key, default in defaults.items():
         symbols[key] = str(earth.get(key, default))
@@ -174,6 +199,7 @@ def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declar
     _offer(decl, symbols["prime_vertical_radius"], "prime_vertical_radius", "m", "prime-vertical radius of curvature at the latitude (WGS-84)")
     _offer(decl, symbols["gravity"], "gravity", "m/s^2", "normal gravity at the position (WGS-84)")
     _offer(decl, symbols["earth_radius"], "earth_radius", "m", "radius of the spherical Earth", wgs84.SEMI_MAJOR_AXIS)
+    _offer(decl, symbols["geocentric_radius"], "geocentric_radius", "m", "|r^e|: distance from the Earth's centre to the IMU (ecef gravity)")
     _offer(decl, "k_v1", "vertical_damping_gain_1", "1/s", "baro-damped vertical channel: height feedback gain k_1")
     _offer(decl, "k_v2", "vertical_damping_gain_2", "1/s^2", "baro-damped vertical channel: vertical-velocity feedback gain k_2")
     S = lambda name: sp.Symbol(name, real=True)  # noqa: E731
@@ -184,7 +210,7 @@ def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declar
         "specific_force": _symbols(f),
         "specific_force_axes": force_axes,
         "body_rate": _symbols(w),
-        "earth": pt.EarthSymbols(*(S(symbols[k]) for k in ("earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "earth_radius"))),
+        "earth": pt.EarthSymbols(*(S(symbols[k]) for k in ("earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "earth_radius", "geocentric_radius"))),
     }
 
 
@@ -198,15 +224,18 @@ _ERROR_FORMS = {"attitude": pt.ATTITUDE_FORMS, "velocity": pt.VELOCITY_FORMS, "p
 _ERROR_DEFAULTS = {"attitude": ("phi", "phi"), "velocity": ("difference", "dv"), "position": ("geodetic", "d")}
 
 
-def _error_definition(read: _Reader, section: Mapping, frame: str, decl: _Declarations) -> tuple[pt.ErrorDefinition, list[sp.Symbol]]:
+def _error_definition(
+    read: _Reader, section: Mapping, frame: str, decl: _Declarations, mechanization: str = "local_level"
+) -> tuple[pt.ErrorDefinition, list[sp.Symbol]]:
     """The declared navigation error states (in the file's order) and their definition."""
     errors = read.mapping(section.get("errors"), "navigation.errors", (*ERROR_QUANTITIES,))
     missing = [q for q in ERROR_QUANTITIES if q not in errors]
     if missing:
         raise ModelError(
-            f"{read.at('navigation.errors')}: the error definition has no {', '.join(missing)} error; the local-level "
+            f"{read.at('navigation.errors')}: the error definition has no {', '.join(missing)} error; the {mechanization.replace('_', '-')} "
             f"mechanization integrates attitude, velocity and position, and each needs its error states"
         )
+    own_forms = MECHANIZATION_ERROR_FORMS.get(mechanization) or {}
     chosen: dict[str, tuple[str, list[str]]] = {}
     order: list[sp.Symbol] = []
     approximations = section.get("approximations")
@@ -214,7 +243,13 @@ def _error_definition(read: _Reader, section: Mapping, frame: str, decl: _Declar
     for quantity in errors:
         key = f"navigation.errors.{quantity}"
         entry = read.mapping(errors[quantity], key, ("form", "symbols", "symbol", "names"))
-        form = read.choice(entry.get("form", _ERROR_DEFAULTS[quantity][0]), f"{key}.form", _ERROR_FORMS[quantity])
+        default_form = own_forms[quantity][0] if quantity in own_forms else _ERROR_DEFAULTS[quantity][0]
+        form = read.choice(entry.get("form", default_form), f"{key}.form", _ERROR_FORMS[quantity])
+        if quantity in own_forms and form not in own_forms[quantity]:
+            raise ModelError(
+                f"{read.at(f'{key}.form')}: {key}.form {form!r} is a local-level form (it follows the frame's turning with "
+                f"position); the {mechanization} mechanization's {quantity} error is {', '.join(own_forms[quantity])}"
+            )
         count = 2 if horizontal and quantity != "attitude" else 3  # no_vertical_channel: horizontal components only
         if "symbols" in entry:
             symbols = read.names(entry["symbols"], f"{key}.symbols", count)
@@ -380,7 +415,8 @@ def _reorder(vector: sp.Matrix, index: Sequence[int], sign: Sequence[int]) -> sp
 
 
 def _measurements(
-    read: _Reader, section: Mapping, frame: str, decl: _Declarations, clock: sp.Matrix | None, namespace: Callable[[], dict]
+    read: _Reader, section: Mapping, frame: str, decl: _Declarations, clock: sp.Matrix | None, namespace: Callable[[], dict],
+    mechanization: str = "local_level",
 ) -> tuple[list[pt.MeasurementFunction], list[Measurement]]:
     """The measurement functions for the engine and the Measurement declarations (names, variances)."""
     raw = section.get("measurements") or []
@@ -398,7 +434,7 @@ def _measurements(
         measured_minus_computed = read.choice(entry.get("difference", "computed_minus_measured"), f"{key}.difference", ("computed_minus_measured", "measured_minus_computed")) == "measured_minus_computed"
         if kind in ("position", "velocity"):
             index, sign = _component_order(read, entry, key, frame)
-            function, scale, units, count, extra = _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign)
+            function, scale, units, count, extra = _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign, mechanization)
         elif kind == "pseudorange":
             function, scale, units, count, extra = _pseudorange(read, entry, key, frame, clock, decl)
         elif kind == "pseudorange_rate":
@@ -443,7 +479,8 @@ def _measurement_bias(read: _Reader, entry: Mapping, key: str, count: int, units
 
 
 def _kinematic_measurement(
-    read: _Reader, entry: Mapping, key: str, kind: str, frame: str, arm: sp.Matrix | None, index: Sequence[int], sign: Sequence[int]
+    read: _Reader, entry: Mapping, key: str, kind: str, frame: str, arm: sp.Matrix | None, index: Sequence[int], sign: Sequence[int],
+    mechanization: str = "local_level",
 ) -> _MeasurementParts:
     """GNSS position (geodetic, or metres along the listed axes) or velocity of the antenna at lever arm l^b.
 
@@ -457,7 +494,12 @@ def _kinematic_measurement(
             if arm is None:
                 return state.position
             # metres to (dL, dlambda, dh) at the computed position: the lever arm stays a Cartesian offset
-            return state.position + pt.metres_matrix_inverse(frame, computed.position) * (state.attitude * arm)
+            return state.position + mech.metres_inverse(computed.position) * (state.attitude * arm)
+
+        if mechanization == "ecef":  # the position is already in metres along the e-frame axes
+            if form == "geodetic":
+                raise ModelError(f"{read.at(f'{key}.form')}: {key}: the ecef mechanization's position is r^e in metres (form: metres), not geodetic")
+            return (lambda state, computed, mech: _reorder(function(state, computed, mech), index, sign)), None, ["m"] * len(index), len(index), None
 
         if form == "geodetic":
             if "axes" in entry:
@@ -490,7 +532,7 @@ def _pseudorange(read: _Reader, entry: Mapping, key: str, frame: str, clock: sp.
     distance = sp.Symbol("satellite_distance", positive=True)
 
     def ranges(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
-        d = pt.metres_matrix(frame, computed.position) * (state.position - computed.position)
+        d = mech.metres(computed.position) * (state.position - computed.position)
         return sp.Matrix([sp.sqrt(distance**2 - 2 * distance * e.dot(d) + d.dot(d)) for e in sights])
 
     extra = sp.Matrix([clock[0]] * len(sights))
@@ -550,7 +592,7 @@ def _pseudorange_rate(read: _Reader, entry: Mapping, key: str, frame: str, clock
     rhos = [sp.Symbol(r, real=True) for r in ranges]
 
     def rates(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
-        d = pt.metres_matrix(frame, computed.position) * (state.position - computed.position)
+        d = mech.metres(computed.position) * (state.position - computed.position)
         out = []
         for e, rho, v_sat in zip(sights, rhos, velocities):
             u = (e - d / rho) / sp.sqrt(1 - 2 * e.dot(d) / rho + d.dot(d) / rho**2)
@@ -563,8 +605,11 @@ def _pseudorange_rate(read: _Reader, entry: Mapping, key: str, frame: str, clock
 
 def state_namespace(state: pt.NavigationState, mech: pt.Mechanization, frame: str, parameters: Mapping[str, sp.Symbol]) -> dict[str, Any]:
     """The names a written equation or measurement expression may use (README lists them)."""
+    if hasattr(mech, "expression_names"):  # a mechanization with names of its own (ecef: C_b_e, v_e, r_e ...)
+        return {**parameters, **mech.expression_names(state), **_body_names(state)}
     L, lam, h = state.position
     return {
+        **_body_names(state),
         **parameters,
         "C_b_n": state.attitude,
         "v_n": state.velocity,
@@ -578,6 +623,19 @@ def state_namespace(state: pt.NavigationState, mech: pt.Mechanization, frame: st
         "R_M": pt.MeridianRadius(L),
         "R_N": pt.PrimeVerticalRadius(L),
     }
+
+
+def _body_names(state: pt.NavigationState) -> dict[str, Any]:
+    """The sensed inputs in body axes: the body rate w_ib^b (``omega_ib_b``) and the specific force f^b (``f_b``).
+
+    The true state's body rate is the sensed one corrected by the gyro errors, so an
+    odometer with a lever arm (``transpose(C_b_n)*v_n + cross(omega_ib_b, l)``) gets
+    its gyro-bias columns; ``f_b`` is C^T f^n of the state.
+    """
+    names: dict[str, Any] = {"f_b": state.attitude.T * state.specific_force}
+    if state.body_rate is not None:
+        names["omega_ib_b"] = state.body_rate
+    return names
 
 
 def _expression_measurement(read: _Reader, entry: Mapping, key: str, namespace: Callable[[], dict]) -> _MeasurementParts:
@@ -650,7 +708,7 @@ def _user_parameters(read: _Reader, data: Mapping, decl: _Declarations) -> list[
     return symbols
 
 
-def _approximations(read: _Reader, section: Mapping) -> tuple[str, ...]:
+def _approximations(read: _Reader, section: Mapping, mechanization: str = "local_level") -> tuple[str, ...]:
     raw = section.get("approximations") or []
     if not isinstance(raw, list):
         raise ModelError(f"{read.at('navigation.approximations')}: 'navigation.approximations' must be a list of names")
@@ -659,6 +717,18 @@ def _approximations(read: _Reader, section: Mapping) -> tuple[str, ...]:
             raise ModelError(
                 f"{read.at(f'navigation.approximations[{i}]')}: unknown approximation {name!r} "
                 f"(known: {', '.join(sorted(pt.APPROXIMATIONS))})"
+            )
+    accepted = MECHANIZATION_APPROXIMATIONS.get(mechanization)
+    for i, name in enumerate(raw):
+        if accepted is not None and name not in accepted:
+            raise ModelError(
+                f"{read.at(f'navigation.approximations[{i}]')}: approximation {name!r} does not apply to the {mechanization} "
+                f"mechanization (it has: {', '.join(sorted(accepted)) or 'none'})"
+            )
+        if accepted is None and name == "no_gravity_gradient":
+            raise ModelError(
+                f"{read.at(f'navigation.approximations[{i}]')}: approximation 'no_gravity_gradient' is the ecef mechanization's "
+                f"(local level: constant_gravity, free_vertical_channel)"
             )
     if len(set(raw)) != len(raw):
         raise ModelError(f"{read.at('navigation.approximations')}: an approximation is listed twice: {raw}")
@@ -676,10 +746,17 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         raise ModelError(f"{filename}: missing required key 'model'")
     if "frame" not in data:
         raise ModelError(f"{filename}: a model with a 'navigation:' section needs 'frame: NED' or 'frame: ENU' (its navigation frame)")
-    frame = read.choice(free_text(data, "frame", dict(lines), filename), "frame", tuple(pt.FRAME_AXES))
+    frames = tuple(dict.fromkeys(f for fs in MECHANIZATION_FRAMES.values() for f in fs))
+    frame = read.choice(free_text(data, "frame", dict(lines), filename), "frame", frames)
     section = read.mapping(data["navigation"], "navigation", SECTION_KEYS, ("errors",))
     mechanization = str(section.get("mechanization", "local_level"))
     mechanization_named(mechanization, f"{read.at('navigation.mechanization')}: navigation.mechanization")
+    if frame not in MECHANIZATION_FRAMES[mechanization]:
+        owner = next(m for m, fs in MECHANIZATION_FRAMES.items() if frame in fs)
+        raise ModelError(
+            f"{read.at('frame')}: frame {frame!r} is the {owner} mechanization's; the {mechanization} mechanization resolves its "
+            f"vectors in {' or '.join(MECHANIZATION_FRAMES[mechanization])} (frame: {MECHANIZATION_FRAMES[mechanization][0]})"
+        )
     decl = _Declarations(states=[], noises=[], parameters={})
     own = _user_parameters(read, data, decl)
     nav = _navigation_state(read, section, frame, decl)
@@ -687,10 +764,10 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
     def namespace() -> dict[str, sp.Symbol]:
         return {s: sp.Symbol(s, real=True) for s in own}
 
-    definition, navigation_order = _error_definition(read, section, frame, decl)
+    definition, navigation_order = _error_definition(read, section, frame, decl, mechanization)
     noises = _sensor_noises(read, section, frame, decl)
     parts, aux, sensor_order = _sensor_errors(read, section, frame, decl, namespace)
-    functions, measurement_decls = _measurements(read, section, frame, decl, parts.get("receiver_clock"), namespace)
+    functions, measurement_decls = _measurements(read, section, frame, decl, parts.get("receiver_clock"), namespace, mechanization)
     problem = pt.NavigationProblem(
         frame=frame, **nav, errors=definition,
         gyro=pt.InertialSensorErrors(parts.get("gyro_bias"), parts.get("gyro_scale_factor"), *noises.get("gyro", (None, "body"))),
@@ -699,7 +776,7 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         auxiliary_dynamics={**aux, **{s: sp.S.Zero for s in decl.measurement_biases}},
         noises=tuple(sp.Symbol(n.symbol, real=True) for n in decl.noises),
         measurements=tuple(functions),
-        approximations=_approximations(read, section),
+        approximations=_approximations(read, section, mechanization),
         equations=_written_equations(read, section, frame, namespace),
         mechanization_name=mechanization,
     )

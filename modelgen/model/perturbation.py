@@ -54,6 +54,7 @@ import sympy as sp
 
 from modelgen.errors import ModelError
 from modelgen.model import wgs84
+from modelgen.model.mechanizations.ecef import GeocentricRadius
 from modelgen.model.mechanizations.local_level import (  # noqa: F401  (the engine's names for them, re-exported)
     FRAME_AXES,
     Gravity,
@@ -88,6 +89,7 @@ class NavigationState:
     body_rate: sp.Matrix | None  # w_ib^b in body axes, if the model has it
     earth_rate_position: sp.Matrix  # where w_ie takes its latitude (the state's own unless approximated)
     transport_rate_position: sp.Matrix  # where w_en takes its position (the state's own unless approximated)
+    gravity_position: sp.Matrix | None = None  # where the ecef mechanization's g^e takes its position (None: the state's own)
 
 
 #: The local-level mechanization, by its former name (the engine's default).
@@ -266,7 +268,8 @@ def _states(problem: NavigationProblem, approximations: set[str]) -> tuple[Navig
     earth_at = p if "no_earth_rate_position_terms" in approximations else true_p
     transport_at = p if "no_transport_rate_position_terms" in approximations else true_p
     true_rate = None if problem.body_rate is None else problem.body_rate - problem.gyro.error(problem.body_rate, "gyro")
-    true = NavigationState((sp.eye(3) + skew(phi)) * C, true_v, true_p, true_force, true_rate, earth_at, transport_at)
+    gravity_at = p if "no_gravity_gradient" in approximations else None
+    true = NavigationState((sp.eye(3) + skew(phi)) * C, true_v, true_p, true_force, true_rate, earth_at, transport_at, gravity_at)
     return computed, true, {"v": true_v, "p": true_p}
 
 
@@ -315,7 +318,8 @@ def _jacobian(matrix: sp.Matrix, by: Sequence[sp.Symbol]) -> sp.Matrix:
     """
     variables = set(by)
     applied = sorted(
-        (a for a in matrix.atoms(MeridianRadius, PrimeVerticalRadius, Gravity) if variables & set(a.args)), key=sp.default_sort_key
+        (a for a in matrix.atoms(MeridianRadius, PrimeVerticalRadius, Gravity, GeocentricRadius) if variables & set(a.args)),
+        key=sp.default_sort_key,
     )
     stand_in = {a: sp.Dummy(f"earth_{k}", real=True) for k, a in enumerate(applied)}
     plain = matrix.xreplace(stand_in)
@@ -376,7 +380,7 @@ def _change_of_variables(problem: NavigationProblem) -> tuple[sp.Matrix, sp.Matr
     forward = {**dict(zip(e.attitude_states, attitude)), **dict(zip(e.velocity_states, velocity)), **dict(zip(e.position_states, position))}
     # inverse: primitive errors from declared ones
     d_pos, d_att, d_vel = _vector(e.position_states), _vector(e.attitude_states), _vector(e.velocity_states)
-    dp_of = metres_matrix_inverse(problem.frame, problem.position) * d_pos if e.position == "metres" else d_pos
+    dp_of = mech.metres_inverse(problem.position) * d_pos if e.position == "metres" else d_pos
     phi_of = d_att + theta(dp_of) if e.attitude == "psi" else d_att
     dv_of = d_vel - theta(dp_of).cross(problem.velocity) if e.velocity == "computed_frame" else d_vel
     primitive = [*phi, *dv, *dp, *others]
@@ -531,13 +535,15 @@ APPROXIMATIONS: dict[str, Callable[[_Stage, NavigationProblem], _Stage]] = {
     "damped_vertical_channel": damped_vertical_channel,
     "no_earth_rate_position_terms": _applied_while_perturbing,
     "no_transport_rate_position_terms": _applied_while_perturbing,
+    "no_gravity_gradient": _applied_while_perturbing,
 }
 #: Approximations that change the perturbed equations rather than the result.
-EQUATION_APPROXIMATIONS = frozenset({"no_earth_rate_position_terms", "no_transport_rate_position_terms"})
+EQUATION_APPROXIMATIONS = frozenset({"no_earth_rate_position_terms", "no_transport_rate_position_terms", "no_gravity_gradient"})
 
 APPROXIMATION_DESCRIPTIONS: dict[str, str] = {
     "no_earth_rate_position_terms": "the true state's earth rate w_ie is taken at the computed latitude (no dL terms from it)",
     "no_transport_rate_position_terms": "the true state's transport rate w_en is taken at the computed position (no dL, dh terms from it)",
+    "no_gravity_gradient": "the true state's gravity g^e is taken at the computed position (ecef: no dg/dr coupling of the position error)",
     **{name: (function.__doc__ or "").strip().split("\n")[0] for name, function in APPROXIMATIONS.items() if function is not _applied_while_perturbing},
 }
 
@@ -584,6 +590,9 @@ def simplify_entry(expr: sp.Expr) -> sp.Expr:
 def _finish(stage: _Stage, problem: NavigationProblem) -> _Stage:
     """Earth functions to parameters, derivatives to formulas (with (L, h) shown in the Derivative objects), simplified."""
     rules = earth_derivative_rules(problem.position[0], problem.position[2], problem.earth)
+    mech = problem.mechanization()
+    if hasattr(mech, "earth_function_rules"):  # the mechanization's own Earth functions (ecef: |r^e|)
+        rules.update(mech.earth_function_rules(problem.position, problem.earth.geocentric_radius))
     derivatives = {k: v for k, v in rules.items() if isinstance(k, sp.Derivative)}
     values = {k: v for k, v in rules.items() if not isinstance(k, sp.Derivative)}
     out = []
@@ -599,12 +608,27 @@ def _finish(stage: _Stage, problem: NavigationProblem) -> _Stage:
 # -- the whole derivation -------------------------------------------------------------------
 def check_problem(problem: NavigationProblem) -> None:
     """Refuse an inconsistent problem before deriving: frame, forms, approximation names, states without equations."""
-    if problem.frame not in FRAME_AXES:
-        raise ModelError(f"navigation frame {problem.frame!r} is not one of {', '.join(FRAME_AXES)}")
+    from modelgen.model.mechanizations import MECHANIZATION_APPROXIMATIONS, MECHANIZATION_ERROR_FORMS, MECHANIZATION_FRAMES, mechanization_named
+
+    mechanization_named(problem.mechanization_name)
+    frames = MECHANIZATION_FRAMES[problem.mechanization_name]
+    if problem.frame not in frames:
+        raise ModelError(f"navigation frame {problem.frame!r} is not one of {', '.join(frames)} (the {problem.mechanization_name} mechanization's)")
     e = problem.errors
+    own_forms = MECHANIZATION_ERROR_FORMS[problem.mechanization_name] or {}
     for what, form, forms in (("attitude", e.attitude, ATTITUDE_FORMS), ("velocity", e.velocity, VELOCITY_FORMS), ("position", e.position, POSITION_FORMS)):
+        forms = own_forms.get(what, forms)
         if form not in forms:
-            raise ModelError(f"{what} error form {form!r} is not one of {', '.join(forms)}")
+            raise ModelError(f"{what} error form {form!r} is not one of {', '.join(forms)} (the {problem.mechanization_name} mechanization's)")
+    accepted = MECHANIZATION_APPROXIMATIONS[problem.mechanization_name]
+    foreign = [a for a in problem.approximations if a in APPROXIMATIONS and accepted is not None and a not in accepted]
+    if foreign:
+        raise ModelError(
+            f"approximation {foreign[0]!r} does not apply to the {problem.mechanization_name} mechanization "
+            f"(it has: {', '.join(sorted(accepted)) or 'none'})"
+        )
+    if accepted is None and "no_gravity_gradient" in problem.approximations:
+        raise ModelError("approximation 'no_gravity_gradient' is the ecef mechanization's (local level: constant_gravity, free_vertical_channel)")
     expected = 2 if "no_vertical_channel" in problem.approximations else 3
     for what, states, count in (("attitude", e.attitude_states, 3), ("velocity", e.velocity_states, expected), ("position", e.position_states, expected)):
         if len(states) != count:

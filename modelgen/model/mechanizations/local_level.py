@@ -46,6 +46,7 @@ class EarthSymbols:
     prime_vertical_radius: sp.Symbol
     gravity: sp.Symbol
     earth_radius: sp.Symbol | None = None  # used only by the single_earth_radius approximation
+    geocentric_radius: sp.Symbol | None = None  # |r^e| of the ecef mechanization's gravity
 
 
 def earth_rate_vector(frame: str, latitude: sp.Expr, earth_rate: sp.Expr) -> sp.Matrix:
@@ -154,6 +155,10 @@ class LocalLevel:
     def metres(self, position: sp.Matrix) -> sp.Matrix:
         """M with (navigation-frame metres) = M (dL, dlambda, dh) at ``position``."""
         return metres_matrix(self.frame, position)
+
+    def metres_inverse(self, position: sp.Matrix) -> sp.Matrix:
+        """M^-1: (dL, dlambda, dh) from navigation-frame metres at ``position``."""
+        return metres_matrix_inverse(self.frame, position)
 
     def gravity(self, state: NavigationState) -> sp.Matrix:
         """g^n at the state's position."""
