@@ -21,6 +21,7 @@ involved, before anything is derived.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Mapping, Sequence
 
@@ -757,6 +758,7 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
             f"{read.at('frame')}: frame {frame!r} is the {owner} mechanization's; the {mechanization} mechanization resolves its "
             f"vectors in {' or '.join(MECHANIZATION_FRAMES[mechanization])} (frame: {MECHANIZATION_FRAMES[mechanization][0]})"
         )
+    _refuse_polar_scenario(read, data, lines, filename, mechanization)
     decl = _Declarations(states=[], noises=[], parameters={})
     own = _user_parameters(read, data, decl)
     nav = _navigation_state(read, section, frame, decl)
@@ -791,6 +793,24 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
     _refuse_measurements_of_removed_states(read, equations, functions)
     model = replace(_error_model(data, lines, filename, decl, own, equations, measurement_decls), neglected=equations.neglected)
     return NavigationDerivation(model=model, equations=equations)
+
+
+def _refuse_polar_scenario(read: _Reader, data: Mapping, lines: Mapping[str, str], filename: str, mechanization: str) -> None:
+    """A local-level model whose check scenario is within POLAR_LIMIT_DEG of a pole is refused (1/cos L, tan L blow up)."""
+    from modelgen.model.check_scenario import parse_check_section
+    from modelgen.model.mechanizations.local_level import POLAR_LIMIT_DEG
+
+    if mechanization != "local_level" or not isinstance(data.get("check"), Mapping):
+        return
+    latitude = parse_check_section(data["check"], lines, filename).get("parameters", {}).get("latitude")
+    if latitude is None or abs(math.degrees(latitude)) <= POLAR_LIMIT_DEG:
+        return
+    raise ModelError(
+        f"{read.at('check.parameters.latitude')}: check.parameters.latitude {math.degrees(latitude):.6g} deg is within "
+        f"{90 - POLAR_LIMIT_DEG:g} deg of a pole: the local-level mechanization divides by cos(latitude) (longitude rate "
+        f"1/cos L = {1 / math.cos(latitude):.0f}, transport rate tan L) and is refused beyond {POLAR_LIMIT_DEG:g} deg; "
+        f"use 'mechanization: ecef' (no singularity at the poles)"
+    )
 
 
 def _refuse_measurements_of_removed_states(read: _Reader, equations: pt.ErrorEquations, functions: Sequence[pt.MeasurementFunction]) -> None:

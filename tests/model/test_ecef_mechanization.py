@@ -59,6 +59,7 @@ POINTS = [
     (-33.9, 151.2, 11000.0, (-150.0, 220.0, 3.0), -4.0, 3.0, 124.0),
     (78.0, -60.0, 50.0, (5.0, -12.0, -0.5), 0.5, -1.0, 250.0),
     (0.2, -90.0, 2000.0, (0.0, 250.0, -8.0), 10.0, 5.0, 90.0),
+    (89.9, 30.0, 1000.0, (120.0, -40.0, 0.0), 2.0, 1.0, 200.0),  # a polar flight: local level is refused there
 ]
 
 
@@ -79,12 +80,14 @@ def _geodetic(r):
     e2 = wgs84.ECCENTRICITY_SQUARED
     lam, p = math.atan2(y, x), math.hypot(x, y)
     L = math.atan2(z, p * (1 - e2))
+    def height(L):  # the better-conditioned of the two forms (p / cos L is poor near the poles)
+        RN = _radii(L)[1]
+        return p / math.cos(L) - RN if abs(L) < math.pi / 4 else z / math.sin(L) - RN * (1 - e2)
+
     for _ in range(20):
         RN = _radii(L)[1]
-        h = p / math.cos(L) - RN
-        L = math.atan2(z, p * (1 - e2 * RN / (RN + h)))
-    RN = _radii(L)[1]
-    return L, lam, p / math.cos(L) - RN
+        L = math.atan2(z, p * (1 - e2 * RN / (RN + height(L))))
+    return L, lam, height(L)
 
 
 def _C_n_e(L, lam):
@@ -188,7 +191,7 @@ def _known_parameters(derived, values):
     return {k: v for k, v in values.items() if k in names}
 
 
-@pytest.mark.parametrize("point", POINTS, ids=["45N_10E_300m", "34S_151E_11km", "78N_60W_50m", "equator_2km"])
+@pytest.mark.parametrize("point", POINTS, ids=["45N_10E_300m", "34S_151E_11km", "78N_60W_50m", "equator_2km", "polar_89.9N"])
 def test_ecef_F_G_H_equal_local_level_through_the_frame_rotation_except_the_gravity_model(models, point):
     ecef, local = models
     local_values, ecef_values, C_ne, transport, r = _point_values(point)
@@ -269,3 +272,28 @@ def test_ecef_refuses_local_level_frames_forms_and_approximations_with_file_line
     with pytest.raises(ModelError, match=r"^m\.yaml:\d+: ") as caught:
         load_model_text(text.replace(old, new), filename="m.yaml")
     assert message in str(caught.value)
+
+
+def test_a_polar_flight_works_in_ecef_and_local_level_refuses_it_naming_the_way_out():
+    """Latitude 89.9 deg: local level's 1/cos L is 573; the e-frame has no singularity."""
+    ecef_text = ECEF_MODEL.read_text()
+    local, ecef_values, _, _, r = _point_values(POINTS[-1])
+    for axis, value in zip("xyz", r):
+        ecef_text = _replace_value(ecef_text, f"position_{axis}", value)
+    ecef_text = _replace_value(ecef_text, "geocentric_radius", float(np.linalg.norm(r)))
+    polar = load_model_text(ecef_text, filename="polar_ecef.yaml")
+    F = derive(polar).numeric({**dict(polar.parameter_defaults()), **polar.check.parameter_values()})["F"]
+    assert np.isfinite(F).all() and np.abs(F[3:6, 0:3]).max() < 1e-5  # the gravity gradient, as anywhere
+    nav = (HERE.parents[1] / "modelgen" / "models" / "ins_gnss21_nav.yaml").read_text()
+    with pytest.raises(ModelError) as caught:
+        load_model_text(nav.replace("latitude: {value: 45, unit: deg}", "latitude: {value: 89.9, unit: deg}"), filename="m.yaml")
+    message = str(caught.value)
+    assert message.startswith("m.yaml:") and "latitude 89.9 deg is within 1 deg of a pole" in message
+    assert "1/cos L = 573" in message and "mechanization: ecef" in message
+    assert load_model_text(nav.replace("latitude: {value: 45, unit: deg}", "latitude: {value: 89, unit: deg}"), filename="m.yaml")
+
+
+def _replace_value(text: str, name: str, value: float) -> str:
+    import re
+
+    return re.sub(rf"{name}: [-0-9.e+]+", f"{name}: {float(value)!r}", text, count=1)

@@ -172,6 +172,6 @@ class LocalLevel:
 
 
 
-#: Latitude (rad) beyond which the local-level mechanization is refused: 1/cos(L) in the longitude
+#: Latitude (deg) beyond which the local-level mechanization is refused: 1/cos(L) in the longitude
 #: rate and tan(L) in the transport rate grow without bound at the poles (89.9 deg: 1/cos L = 573).
 POLAR_LIMIT_DEG = 89.0
