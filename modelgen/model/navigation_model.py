@@ -153,7 +153,8 @@ class _Declarations:
     states: list[State]
     noises: list[Noise]
     parameters: dict[str, Parameter]  # by symbol: parameters the engine may put into the matrices
-    measurement_biases: list[sp.Symbol] = field(default_factory=list)  # random-constant states of aiding sensors
+    measurement_biases: list[sp.Symbol] = field(default_factory=list)  # error states of aiding sensors
+    measurement_bias_dynamics: dict[sp.Symbol, sp.Expr] = field(default_factory=dict)  # their rates (absent: random constant)
     places: dict[tuple[str, str], str] = field(default_factory=dict)  # (kind, name) -> the key that declared it
 
 
@@ -323,10 +324,12 @@ def _sensor_errors(read: _Reader, section: Mapping, frame: str, decl: _Declarati
             for field in ("rate", "sigma"):
                 if field not in entry:
                     raise ModelError(f"{read.at(key)}: a Gauss-Markov sensor error needs {field!r} (inverse correlation time and steady-state sigma)")
-            rate = parse_expression(scalar_text(entry["rate"], read.at(f"{key}.rate"), f"{key}.rate"), namespace(), f"{read.at(f'{key}.rate')}: {key}.rate")
-            psd = f"2*({scalar_text(entry['rate'], read.at(key), 'rate')})*({scalar_text(entry['sigma'], read.at(key), 'sigma')})**2"
-            rates = [-rate * s + w for s, w in zip(state_symbols, noises)]
-            _add_noises(decl, noise_names, noise_symbols, [psd] * 3, units, kind, key)
+            rate_texts = _per_component(read, entry["rate"], f"{key}.rate", count)  # one value, or one per axis
+            sigma_texts = _per_component(read, entry["sigma"], f"{key}.sigma", count)
+            parsed = [parse_expression(r, namespace(), f"{read.at(f'{key}.rate')}: {key}.rate") for r in rate_texts]
+            psds = [f"2*({r})*({q})**2" for r, q in zip(rate_texts, sigma_texts)]
+            rates = [-rate * s + w for rate, s, w in zip(parsed, state_symbols, noises)]
+            _add_noises(decl, noise_names, noise_symbols, psds, units, kind, key)
         else:  # random_walk and clock: driven by white noise of the given PSD(s)
             if "psd" not in entry:
                 raise ModelError(f"{read.at(key)}: a {process.replace('_', ' ')} sensor error needs 'psd'")
@@ -364,8 +367,8 @@ def _sensor_noises(read: _Reader, section: Mapping, frame: str, decl: _Declarati
         symbols = _vector_symbols(read, entry, key, default, frame, "body" if axes == "body" else None)
         words_of = list("xyz") if axes == "body" else _axis_words(frame, None)
         names = read.names(entry["names"], f"{key}.names", 3) if "names" in entry else [f"{prefix}_{a}" for a in words_of]
-        psd = scalar_text(entry["psd"], read.at(f"{key}.psd"), f"{key}.psd")
-        for name, symbol, axis in zip(names, symbols, words_of):
+        psds = _per_component(read, entry["psd"], f"{key}.psd", 3)  # one PSD, or one per axis
+        for name, symbol, axis, psd in zip(names, symbols, words_of, psds):
             where = f"{axis}" if axes == "body" else f"resolved {axis}"
             decl.noises.append(Noise(name=name, symbol=symbol, unit=unit, psd=psd, description=f"{sensor} white noise {where} ({text})"))
             decl.places[("noise", name)] = key
@@ -442,7 +445,7 @@ def _measurements(
             function, scale, units, count, extra = _pseudorange_rate(read, entry, key, frame, clock, decl)
         else:
             function, scale, units, count, extra = _expression_measurement(read, entry, key, namespace)
-        bias = _measurement_bias(read, entry, key, count, units, decl)
+        bias = _measurement_bias(read, entry, key, count, units, decl, namespace)
         if bias is not None:  # measured = true + bias: the measured side's extra term
             extra = bias if extra is None else extra + bias
         symbols = read.names(entry["symbols"], f"{key}.symbols", count)
@@ -458,25 +461,59 @@ def _measurements(
     return functions, declared
 
 
-def _measurement_bias(read: _Reader, entry: Mapping, key: str, count: int, units: Sequence[str], decl: _Declarations) -> sp.Matrix | None:
-    """An aiding sensor's own error, one random-constant state per component (``bias: {symbols, names}``).
+def _measurement_bias(
+    read: _Reader, entry: Mapping, key: str, count: int, units: Sequence[str], decl: _Declarations, namespace: Callable[[], dict] | None = None
+) -> sp.Matrix | None:
+    """An aiding sensor's own error, one state per component (``bias: {process, symbols, names, ...}``).
 
     E.g. the Doppler radar's velocity error of seed 000: measured = true + bias, so the
     computed-minus-measured difference carries minus the bias; the states follow the
-    sensor-error states.
+    sensor-error states.  ``process``: ``random_constant`` (b' = 0, the default),
+    ``gauss_markov`` (b' = -rate b + w, ``rate`` and steady-state ``sigma``, one value or
+    one per component) or ``random_walk`` (b' = w, ``psd`` one value or one per component).
     """
     if "bias" not in entry:
         return None
-    bias = read.mapping(entry["bias"], f"{key}.bias", ("process", "symbols", "names"), ("symbols",))
-    read.choice(bias.get("process", "random_constant"), f"{key}.bias.process", ("random_constant",))
+    bias = read.mapping(entry["bias"], f"{key}.bias", ("process", "symbols", "names", "rate", "sigma", "psd", "noise_symbols", "noise_names"), ("symbols",))
+    process = read.choice(bias.get("process", "random_constant"), f"{key}.bias.process", ("random_constant", "gauss_markov", "random_walk"))
     symbols = read.names(bias["symbols"], f"{key}.bias.symbols", count)
     names = read.names(bias["names"], f"{key}.bias.names", count) if "names" in bias else [f"{s}_bias" for s in symbols]
     for name, symbol, unit in zip(names, symbols, units):
-        decl.states.append(State(name=name, symbol=symbol, unit=unit, description="aiding-sensor error (random constant): measured = true + bias"))
+        decl.states.append(State(name=name, symbol=symbol, unit=unit, description=f"aiding-sensor error ({process.replace('_', ' ')}): measured = true + bias"))
         decl.places[("state", name)] = f"{key}.bias"
     states = [sp.Symbol(s, real=True) for s in symbols]
     decl.measurement_biases.extend(states)
+    if process != "random_constant":
+        where = f"{key}.bias"
+        noise_symbols = read.names(bias["noise_symbols"], f"{where}.noise_symbols", count) if "noise_symbols" in bias else [f"w_{s}" for s in symbols]
+        noise_names = read.names(bias["noise_names"], f"{where}.noise_names", count) if "noise_names" in bias else [f"{n}_driving_noise" for n in names]
+        noises = [sp.Symbol(n, real=True) for n in noise_symbols]
+        if process == "gauss_markov":
+            for needed in ("rate", "sigma"):
+                if needed not in bias:
+                    raise ModelError(f"{read.at(where)}: a Gauss-Markov measurement bias needs {needed!r} (inverse correlation time and steady-state sigma)")
+            rates = _per_component(read, bias["rate"], f"{where}.rate", count)
+            sigmas = _per_component(read, bias["sigma"], f"{where}.sigma", count)
+            parsed = [parse_expression(r, (namespace or dict)(), f"{read.at(f'{where}.rate')}: {where}.rate") for r in rates]
+            psds = [f"2*({r})*({q})**2" for r, q in zip(rates, sigmas)]
+            decl.measurement_bias_dynamics.update({b: -r * b + w for b, r, w in zip(states, parsed, noises)})
+        else:
+            if "psd" not in bias:
+                raise ModelError(f"{read.at(where)}: a random-walk measurement bias needs 'psd'")
+            psds = _per_component(read, bias["psd"], f"{where}.psd", count)
+            decl.measurement_bias_dynamics.update({b: w for b, w in zip(states, noises)})
+        for name, symbol, psd, unit in zip(noise_names, noise_symbols, psds, units):
+            decl.noises.append(Noise(name=name, symbol=symbol, unit=f"{unit}/sqrt(s)", psd=psd, description=f"drives the measurement bias ({process.replace('_', ' ')})"))
+            decl.places[("noise", name)] = where
     return sp.Matrix(states)
+
+
+def _per_component(read: _Reader, value: Any, key: str, count: int) -> list[str]:
+    """One expression text per component: a list of ``count``, or one value for all of them."""
+    values = value if isinstance(value, list) else [value] * count
+    if len(values) != count:
+        raise ModelError(f"{read.at(key)}: {key} lists {len(values)} values for {count} components")
+    return [scalar_text(v, read.at(key), key) for v in values]
 
 
 def _kinematic_measurement(
@@ -775,7 +812,7 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         gyro=pt.InertialSensorErrors(parts.get("gyro_bias"), parts.get("gyro_scale_factor"), *noises.get("gyro", (None, "body"))),
         accelerometer=pt.InertialSensorErrors(parts.get("accel_bias"), parts.get("accel_scale_factor"), *noises.get("accel", (None, "body"))),
         state_order=tuple(navigation_order + sensor_order + decl.measurement_biases),
-        auxiliary_dynamics={**aux, **{s: sp.S.Zero for s in decl.measurement_biases}},
+        auxiliary_dynamics={**aux, **{s: decl.measurement_bias_dynamics.get(s, sp.S.Zero) for s in decl.measurement_biases}},
         noises=tuple(sp.Symbol(n.symbol, real=True) for n in decl.noises),
         measurements=tuple(functions),
         approximations=_approximations(read, section, mechanization),
