@@ -244,7 +244,7 @@ def _error_definition(
     horizontal = isinstance(approximations, list) and "no_vertical_channel" in approximations
     for quantity in errors:
         key = f"navigation.errors.{quantity}"
-        entry = read.mapping(errors[quantity], key, ("form", "symbols", "symbol", "names"))
+        entry = read.mapping(errors[quantity], key, ("form", "symbols", "symbol", "names", "axes") if quantity == "attitude" else ("form", "symbols", "symbol", "names"))
         default_form = own_forms[quantity][0] if quantity in own_forms else _ERROR_DEFAULTS[quantity][0]
         form = read.choice(entry.get("form", default_form), f"{key}.form", _ERROR_FORMS[quantity])
         if quantity in own_forms and form not in own_forms[quantity]:
@@ -253,13 +253,21 @@ def _error_definition(
                 f"position); the {mechanization} mechanization's {quantity} error is {', '.join(own_forms[quantity])}"
             )
         count = 2 if horizontal and quantity != "attitude" else 3  # no_vertical_channel: horizontal components only
+        if quantity == "attitude":
+            attitude_axes = read.choice(entry.get("axes", "navigation"), f"{key}.axes", pt.ATTITUDE_AXES)
+            if attitude_axes == "body" and form != "rotation_vector":
+                raise ModelError(f"{read.at(f'{key}.axes')}: {key}.axes body is for form rotation_vector (phi and psi are navigation-frame angles)")
+        body_attitude = quantity == "attitude" and attitude_axes == "body"
         if "symbols" in entry:
             symbols = read.names(entry["symbols"], f"{key}.symbols", count)
         elif quantity == "position" and form == "geodetic":
             symbols = ["dL", "dlambda", "dh"][:count]
         else:
-            symbols = _vector_symbols(read, entry, key, "dr" if quantity == "position" else _ERROR_DEFAULTS[quantity][1], frame, None)[:count]
-        if quantity == "attitude":
+            default_symbol = "dr" if quantity == "position" else "theta" if body_attitude else _ERROR_DEFAULTS[quantity][1]
+            symbols = _vector_symbols(read, entry, key, default_symbol, frame, "body" if body_attitude else None)[:count]
+        if body_attitude:
+            names = [f"attitude_error_{w}" for w in "xyz"]
+        elif quantity == "attitude":
             names = [f"attitude_error_{w}" for w in _axis_words(frame, None)]
         elif quantity == "velocity":
             names = [f"velocity_error_{w}" for w in _axis_words(frame, None)]
@@ -269,7 +277,9 @@ def _error_definition(
             names = [f"position_error_{w}" for w in _axis_words(frame, None)]
         names = read.names(entry["names"], f"{key}.names", count) if "names" in entry else names[:count]
         units = {"attitude": ["rad"] * 3, "velocity": ["m/s"] * 3, "position": ["rad", "rad", "m"] if form == "geodetic" else ["m"] * 3}[quantity][:count]
-        label = {"phi": "phi-angle", "psi": "psi-angle"}.get(form, form)
+        label = {"phi": "phi-angle", "psi": "psi-angle", "rotation_vector": "rotation vector"}.get(form, form)
+        if quantity == "attitude" and form == "rotation_vector":
+            label += ", body axes" if body_attitude else f", {frame} axes"
         for name, symbol, unit in zip(names, symbols, units):
             decl.states.append(State(name=name, symbol=symbol, unit=unit, description=f"{quantity} error ({label}), computed minus true"))
             decl.places[("state", name)] = key
@@ -278,7 +288,7 @@ def _error_definition(
     S = lambda names: tuple(sp.Symbol(s, real=True) for s in names)  # noqa: E731
     definition = pt.ErrorDefinition(
         chosen["attitude"][0], S(chosen["attitude"][1]), chosen["velocity"][0], S(chosen["velocity"][1]),
-        chosen["position"][0], S(chosen["position"][1]),
+        chosen["position"][0], S(chosen["position"][1]), attitude_axes,
     )
     return definition, order
 
@@ -828,7 +838,11 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
             raise
         raise ModelError(f"{read.at('navigation')}: model {data['model']!r}: {exc}") from None
     _refuse_measurements_of_removed_states(read, equations, functions)
-    model = replace(_error_model(data, lines, filename, decl, own, equations, measurement_decls), neglected=equations.neglected)
+    attitude_names = [s.name for s in decl.states if sp.Symbol(s.symbol, real=True) in definition.attitude_states]
+    model = replace(
+        _error_model(data, lines, filename, decl, own, equations, measurement_decls),
+        neglected=equations.neglected, attitude_reset=pt.attitude_reset(definition, attitude_names),
+    )
     return NavigationDerivation(model=model, equations=equations)
 
 

@@ -73,7 +73,9 @@ from modelgen.model.mechanizations.local_level import (  # noqa: F401  (the engi
     skew,
 )
 
-ATTITUDE_FORMS = ("phi", "psi")
+ATTITUDE_FORMS = ("phi", "psi", "rotation_vector")
+#: Axes a rotation-vector attitude error may be resolved in.
+ATTITUDE_AXES = ("navigation", "body")
 VELOCITY_FORMS = ("difference", "computed_frame")
 POSITION_FORMS = ("geodetic", "metres")
 
@@ -144,6 +146,39 @@ class ErrorDefinition:
     velocity_states: tuple[sp.Symbol, ...]
     position: str
     position_states: tuple[sp.Symbol, ...]
+    #: ``rotation_vector`` only: ``navigation`` (C = exp(-[theta x]) C_true, left, = phi to first order) or
+    #: ``body`` (C = C_true exp([theta x]), right, as the MEKF / error-state filters: theta = -C^T phi to first order).
+    attitude_axes: str = "navigation"
+
+
+@dataclass(frozen=True)
+class AttitudeReset:
+    """The attitude error's reset Jacobian for closed-loop feedback: P+ = G P G^T over the attitude states.
+
+    After the filter's estimate ``correction`` (the attitude states' estimate, same
+    symbols with ``_estimate``) is fed back into the computed attitude and the error
+    states are zeroed, the new error is theta+ = theta - correction - 1/2 correction x
+    theta + O(|theta|^2) for a rotation vector in either axes, in this file's
+    computed-minus-true convention (second-order Baker-Campbell-Hausdorff): G = I + 1/2
+    [correction x] (Markley 2003, Sola 2017 eq. 287, whose true-minus-computed sign
+    gives I - 1/2 [dtheta x]).  phi and psi are fed back additively to first order: G = I.
+    """
+
+    form: str
+    axes: str
+    states: tuple[str, ...]  # the attitude error states' names, in model order
+    correction: tuple[sp.Symbol, ...]  # the fed-back estimate of each
+    matrix: sp.Matrix
+
+
+def attitude_reset(errors: ErrorDefinition, names: Sequence[str]) -> AttitudeReset:
+    """The :class:`AttitudeReset` of an error definition (``names``: the attitude states' names)."""
+    correction = tuple(sp.Symbol(f"{s}_estimate", real=True) for s in errors.attitude_states)
+    if errors.attitude == "rotation_vector":
+        matrix = sp.eye(3) + skew(_vector(correction)) / 2
+    else:
+        matrix = sp.eye(3)
+    return AttitudeReset(errors.attitude, errors.attitude_axes, tuple(names), correction, matrix)
 
 
 @dataclass(frozen=True)
@@ -375,13 +410,15 @@ def _change_of_variables(problem: NavigationProblem) -> tuple[sp.Matrix, sp.Matr
     theta = lambda d: mech.error_frame_angle(L, d)  # noqa: E731  d(theta) of a position error
     # forward: declared errors from primitive ones
     position = M * dp if e.position == "metres" else dp
-    attitude = phi - theta(dp) if e.attitude == "psi" else phi
+    C = problem.attitude
+    body_axes = e.attitude == "rotation_vector" and e.attitude_axes == "body"
+    attitude = phi - theta(dp) if e.attitude == "psi" else -C.T * phi if body_axes else phi
     velocity = dv + theta(dp).cross(problem.velocity) if e.velocity == "computed_frame" else dv
     forward = {**dict(zip(e.attitude_states, attitude)), **dict(zip(e.velocity_states, velocity)), **dict(zip(e.position_states, position))}
     # inverse: primitive errors from declared ones
     d_pos, d_att, d_vel = _vector(e.position_states), _vector(e.attitude_states), _vector(e.velocity_states)
     dp_of = mech.metres_inverse(problem.position) * d_pos if e.position == "metres" else d_pos
-    phi_of = d_att + theta(dp_of) if e.attitude == "psi" else d_att
+    phi_of = d_att + theta(dp_of) if e.attitude == "psi" else -C * d_att if body_axes else d_att
     dv_of = d_vel - theta(dp_of).cross(problem.velocity) if e.velocity == "computed_frame" else d_vel
     primitive = [*phi, *dv, *dp, *others]
     declared = list(problem.state_order)
@@ -397,6 +434,13 @@ def _time_derivative(matrix: sp.Matrix, problem: NavigationProblem) -> sp.Matrix
     computed = NavigationState(problem.attitude, problem.velocity, p, _sensed_navigation_force(problem), problem.body_rate, p, p)
     variables = [*problem.velocity, *problem.position]
     rates = [*mech.velocity_rate(computed), *mech.position_rate(computed)]
+    C = problem.attitude
+    if any(not matrix.diff(c).is_zero_matrix for c in C):  # a body-axis attitude error: T holds C^T
+        if problem.body_rate is None:
+            raise ModelError("a body-axis attitude error needs the body rate (navigation.body_rate) for the rate of C_b^n")
+        attitude_rate = C * skew(problem.body_rate) - skew(mech.navigation_rate(computed)) * C  # C' = C [w_ib x] - [w_in x] C
+        variables += list(C)
+        rates += list(attitude_rate)
     out = sp.zeros(*matrix.shape)
     for variable, rate in zip(variables, rates):
         partial = matrix.diff(variable)

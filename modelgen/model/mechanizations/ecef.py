@@ -45,7 +45,7 @@ GeocentricRadius = sp.Function("GeocentricRadius")
 FRAME = "ECEF"
 AXES = ("x", "y", "z")
 #: Error forms the e-frame has: the local-level ones that depend on the frame's turning with position do not apply.
-ERROR_FORMS = {"attitude": ("phi",), "velocity": ("difference",), "position": ("metres",)}
+ERROR_FORMS = {"attitude": ("phi", "rotation_vector"), "velocity": ("difference",), "position": ("metres",)}
 
 
 def gravity_ecef(position: sp.Matrix, earth_rate: sp.Expr) -> sp.Matrix:
