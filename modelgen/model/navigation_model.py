@@ -241,7 +241,7 @@ def _error_definition(
     chosen: dict[str, tuple[str, list[str]]] = {}
     order: list[sp.Symbol] = []
     approximations = section.get("approximations")
-    horizontal = isinstance(approximations, list) and "no_vertical_channel" in approximations
+    horizontal = isinstance(approximations, list) and "no_vertical_channel" in [approximation_name(a) for a in approximations]
     for quantity in errors:
         key = f"navigation.errors.{quantity}"
         entry = read.mapping(errors[quantity], key, ("form", "symbols", "symbol", "names", "axes") if quantity == "attitude" else ("form", "symbols", "symbol", "names"))
@@ -756,18 +756,45 @@ def _user_parameters(read: _Reader, data: Mapping, decl: _Declarations) -> list[
     return symbols
 
 
-def _approximations(read: _Reader, section: Mapping, mechanization: str = "local_level") -> tuple[str, ...]:
+#: What an approximation's ``in:`` may name: the rows of F and G of a navigation quantity's error states, or H.
+APPROXIMATION_SCOPES = ("attitude", "velocity", "position", "measurements")
+#: Approximations that change the model's structure and so cannot be scoped to some rows.
+UNSCOPED_APPROXIMATIONS = frozenset({"no_vertical_channel", "damped_vertical_channel"})
+
+
+def approximation_name(entry: Any) -> Any:
+    """The name of an ``approximations`` entry: the text itself, or the ``name`` of ``{name, in}``."""
+    return entry.get("name") if isinstance(entry, dict) else entry
+
+
+def _approximations(read: _Reader, section: Mapping, mechanization: str = "local_level") -> tuple[tuple[str, ...], dict[str, tuple[str, ...]]]:
+    """The declared approximations' names in order, and the scope (``in:``) of those that have one."""
     raw = section.get("approximations") or []
     if not isinstance(raw, list):
         raise ModelError(f"{read.at('navigation.approximations')}: 'navigation.approximations' must be a list of names")
-    for i, name in enumerate(raw):
-        if name not in pt.APPROXIMATIONS:
+    scopes: dict[str, tuple[str, ...]] = {}
+    names = []
+    for i, entry in enumerate(raw):
+        key = f"navigation.approximations[{i}]"
+        if isinstance(entry, dict):
+            read.mapping(entry, key, ("name", "in"), ("name", "in"))
+            within = entry["in"] if isinstance(entry["in"], list) else [entry["in"]]
+            for quantity in within:
+                read.choice(quantity, f"{key}.in", APPROXIMATION_SCOPES)
+            if entry["name"] in UNSCOPED_APPROXIMATIONS:
+                raise ModelError(f"{read.at(key)}: approximation {entry['name']!r} changes the model's states and cannot be scoped ('in:')")
+            if entry["name"] in pt.EQUATION_APPROXIMATIONS:
+                raise ModelError(f"{read.at(key)}: approximation {entry['name']!r} changes the perturbed equations and cannot be scoped ('in:')")
+            scopes[str(entry["name"])] = tuple(str(q) for q in within)
+        names.append(approximation_name(entry))
+    for i, name in enumerate(names):
+        if not isinstance(name, str) or name not in pt.APPROXIMATIONS:
             raise ModelError(
                 f"{read.at(f'navigation.approximations[{i}]')}: unknown approximation {name!r} "
                 f"(known: {', '.join(sorted(pt.APPROXIMATIONS))})"
             )
     accepted = MECHANIZATION_APPROXIMATIONS.get(mechanization)
-    for i, name in enumerate(raw):
+    for i, name in enumerate(names):
         if accepted is not None and name not in accepted:
             raise ModelError(
                 f"{read.at(f'navigation.approximations[{i}]')}: approximation {name!r} does not apply to the {mechanization} "
@@ -778,9 +805,9 @@ def _approximations(read: _Reader, section: Mapping, mechanization: str = "local
                 f"{read.at(f'navigation.approximations[{i}]')}: approximation 'no_gravity_gradient' is the ecef mechanization's "
                 f"(local level: constant_gravity, free_vertical_channel)"
             )
-    if len(set(raw)) != len(raw):
-        raise ModelError(f"{read.at('navigation.approximations')}: an approximation is listed twice: {raw}")
-    return tuple(str(a) for a in raw)
+    if len(set(names)) != len(names):
+        raise ModelError(f"{read.at('navigation.approximations')}: an approximation is listed twice: {names}")
+    return tuple(str(a) for a in names), scopes
 
 
 def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], filename: str) -> NavigationDerivation:
@@ -813,6 +840,7 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
     def namespace() -> dict[str, sp.Symbol]:
         return {s: sp.Symbol(s, real=True) for s in own}
 
+    approximation_names, approximation_scopes = _approximations(read, section, mechanization)
     definition, navigation_order = _error_definition(read, section, frame, decl, mechanization)
     noises = _sensor_noises(read, section, frame, decl)
     parts, aux, sensor_order = _sensor_errors(read, section, frame, decl, namespace)
@@ -825,7 +853,8 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         auxiliary_dynamics={**aux, **{s: decl.measurement_bias_dynamics.get(s, sp.S.Zero) for s in decl.measurement_biases}},
         noises=tuple(sp.Symbol(n.symbol, real=True) for n in decl.noises),
         measurements=tuple(functions),
-        approximations=_approximations(read, section, mechanization),
+        approximations=approximation_names,
+        approximation_scopes=approximation_scopes,
         equations=_written_equations(read, section, frame, namespace),
         mechanization_name=mechanization,
     )
@@ -936,7 +965,8 @@ def approximation_notes(data: Mapping, equations: pt.ErrorEquations, decl: _Decl
     values = _check_values(data, decl)
     names = {"F": ([s.name for s in decl.states], [s.name for s in decl.states]),
              "G": ([s.name for s in decl.states], [n.name for n in decl.noises])}
-    approximations = data["navigation"].get("approximations") or []
+    approximations = [approximation_name(a) for a in data["navigation"].get("approximations") or []]
+    scopes = {approximation_name(a): a["in"] for a in data["navigation"].get("approximations") or [] if isinstance(a, dict)}
     notes = []
     for name in approximations:
         terms = [(t, shown) for t, shown in zip(equations.neglected, equations.readable) if t.approximation == name]
@@ -949,7 +979,9 @@ def approximation_notes(data: Mapping, equations: pt.ErrorEquations, decl: _Decl
             shown = f" = {text}" if len(text) <= 120 else ""
             parts.append(f"{t.matrix}[{row}, {column}]{shown}" + (f" ({size:.3g})" if size is not None else ""))
         dropped = "; ".join(parts) if parts else "no term in this model"
-        notes.append(f"Approximation {name} ({pt.APPROXIMATION_DESCRIPTIONS[name]}): dropped {dropped} (term, and its size at the check scenario).")
+        within = scopes.get(name)
+        scope = f", in the {', '.join(within) if isinstance(within, list) else within} rows only" if within else ""
+        notes.append(f"Approximation {name} ({pt.APPROXIMATION_DESCRIPTIONS[name]}{scope}): dropped {dropped} (term, and its size at the check scenario).")
     if approximations and not values:
         notes.append("The sizes above need a check: scenario; this model has none.")
     return notes

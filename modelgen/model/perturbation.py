@@ -223,6 +223,9 @@ class NavigationProblem:
     vertical_damping_gains: tuple[sp.Symbol, sp.Symbol] = (sp.Symbol("k_v1", real=True), sp.Symbol("k_v2", real=True))
     #: The mechanization's name in :data:`modelgen.model.mechanizations.MECHANIZATIONS`.
     mechanization_name: str = "local_level"
+    #: Approximations that apply to some rows only (``{name: constant_radii, in: [velocity]}``): name -> the
+    #: quantities (attitude, velocity, position: their error states' rows of F and G; measurements: H).
+    approximation_scopes: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
     def mechanization(self) -> Mechanization:
         """The named mechanization (modelgen.model.mechanizations), with the equations the model writes itself."""
@@ -678,6 +681,9 @@ def check_problem(problem: NavigationProblem) -> None:
         if len(states) != count:
             reason = " (no_vertical_channel: the horizontal components only)" if count == 2 else ""
             raise ModelError(f"the {what} error has {len(states)} states, {count} expected{reason}")
+    scoped_equations = sorted(set(problem.approximation_scopes) & EQUATION_APPROXIMATIONS)
+    if scoped_equations:
+        raise ModelError(f"approximation {scoped_equations[0]!r} changes the perturbed equations and cannot be scoped ('in:')")
     unknown = [a for a in problem.approximations if a not in APPROXIMATIONS]
     if unknown:
         raise ModelError(f"unknown approximation(s) {', '.join(unknown)} (known: {', '.join(sorted(APPROXIMATIONS))})")
@@ -703,14 +709,14 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
     readable: list[str] = []
     for name in problem.approximations:
         before = stage
-        if name in EQUATION_APPROXIMATIONS:
+        if name in EQUATION_APPROXIMATIONS:  # never scoped (check_problem)
             equation_flags.add(name)
             stage = _declared_stage(problem, _primitive_stage(problem, equation_flags))
             for other in problem.approximations[: problem.approximations.index(name)]:
                 if other not in EQUATION_APPROXIMATIONS:
-                    stage = APPROXIMATIONS[other](stage, problem)
+                    stage = _scoped(other, APPROXIMATIONS[other](stage, problem), stage, problem)
         else:
-            stage = APPROXIMATIONS[name](stage, problem)
+            stage = _scoped(name, APPROXIMATIONS[name](stage, problem), stage, problem)
         after = _finish(stage, problem)
         found = _differences(name, finished, after)
         neglected.extend(found)
@@ -729,6 +735,25 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
         ),
         placeholders,
     )
+
+
+def _scoped(name: str, approximated: _Stage, exact: _Stage, problem: NavigationProblem) -> _Stage:
+    """``approximated`` in the rows the approximation is scoped to (``in:``), ``exact`` elsewhere; all of it if unscoped."""
+    within = problem.approximation_scopes.get(name)
+    if not within:
+        return approximated
+    e = problem.errors
+    states = {"attitude": e.attitude_states, "velocity": e.velocity_states, "position": e.position_states}
+    rows = {problem.state_order.index(s) for q in within if q in states for s in states[q] if s in problem.state_order}
+
+    def pick(a: sp.Matrix, b: sp.Matrix, take: set[int]) -> sp.Matrix:
+        out = b.copy()
+        for i in take:
+            out[i, :] = a[i, :]
+        return out
+
+    H_rows = set(range(exact.H.rows)) if "measurements" in within else set()
+    return _Stage(pick(approximated.F, exact.F, rows), pick(approximated.G, exact.G, rows), pick(approximated.H, exact.H, H_rows))
 
 
 def readable_term(term: sp.Expr, problem: NavigationProblem) -> str:
