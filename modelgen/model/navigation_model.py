@@ -156,6 +156,7 @@ class _Declarations:
     measurement_biases: list[sp.Symbol] = field(default_factory=list)  # error states of aiding sensors
     measurement_bias_dynamics: dict[sp.Symbol, sp.Expr] = field(default_factory=dict)  # their rates (absent: random constant)
     places: dict[tuple[str, str], str] = field(default_factory=dict)  # (kind, name) -> the key that declared it
+    vectors: dict[str, sp.Matrix] = field(default_factory=dict)  # vector parameters (shape: 3) by symbol: their components
 
 
 def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declarations) -> dict[str, Any]:
@@ -734,15 +735,45 @@ def _written_equations(read: _Reader, section: Mapping, frame: str, namespace: C
 
 
 # -- the whole file --------------------------------------------------------------------------
-def _user_parameters(read: _Reader, data: Mapping, decl: _Declarations) -> list[str]:
-    """The file's own ``parameters:`` (statistics, noise levels): always declared; returns their symbols."""
+def _user_parameters(read: _Reader, data: Mapping, decl: _Declarations, frame: str = "NED") -> list[str]:
+    """The file's own ``parameters:`` (statistics, noise levels): always declared; returns their symbols.
+
+    A parameter with ``shape: 3`` is a vector (``axes: body`` or the navigation frame, the default):
+    one parameter per component (``lever`` -> ``lever_x, lever_y, lever_z`` in body axes), its
+    ``value`` a list of three; expressions see it whole, by its symbol (:attr:`_Declarations.vectors`).
+    """
     raw = data.get("parameters") or []
     if not isinstance(raw, list):
         raise ModelError(f"{read.at('parameters')}: 'parameters' must be a list of entries with a 'name'")
     symbols = []
+    expanded = []
     for i, entry in enumerate(raw):
         key = f"parameters[{i}]"
-        entry = read.mapping(entry, key, ("name", "symbol", "unit", "description", "value"), ("name",))
+        entry = read.mapping(entry, key, ("name", "symbol", "unit", "description", "value", "shape", "axes"), ("name",))
+        if "shape" not in entry:
+            if "axes" in entry:
+                raise ModelError(f"{read.at(key)}: parameter {entry['name']!r}: 'axes' is for a vector parameter (shape: 3)")
+            expanded.append((key, entry))
+            continue
+        if entry["shape"] not in (3, [3], [3, 1]):
+            raise ModelError(f"{read.at(f'{key}.shape')}: parameter {entry['name']!r}: a navigation model's parameter is a scalar or a 3-vector (shape: 3), not {entry['shape']!r}")
+        axes = read.choice(entry.get("axes", "navigation"), f"{key}.axes", ("body", "navigation"))
+        name, symbol = str(entry["name"]), str(entry.get("symbol", entry["name"]))
+        check_identifier(symbol, f"{read.at(key)}: parameter symbol")
+        where = f"{read.at(key)}: parameter {name!r}"
+        names = component_names(name, 3, frame, "body" if axes == "body" else None, where)
+        parts = component_names(symbol, 3, frame, "body" if axes == "body" else None, where)
+        values = entry.get("value")
+        if values is not None and (not isinstance(values, list) or len(values) != 3):
+            raise ModelError(f"{read.at(key)}: parameter {name!r} is a 3-vector: its value must list 3 numbers, got {values!r}")
+        for k, (component, part) in enumerate(zip(names, parts)):
+            item = {f: v for f, v in entry.items() if f not in ("shape", "axes", "value")}
+            item.update(name=component, symbol=part)
+            if values is not None:
+                item["value"] = values[k]
+            expanded.append((key, item))
+        decl.vectors[symbol] = _symbols(parts)
+    for key, entry in expanded:
         if "value" in entry and (isinstance(entry["value"], bool) or not isinstance(entry["value"], (int, float))):
             raise ModelError(f"{read.at(key)}: parameter {entry['name']!r} value {entry['value']!r} is not a number")
         fields = {k: (float(v) if k == "value" else str(v)) for k, v in entry.items()}
@@ -834,11 +865,11 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         )
     _refuse_polar_scenario(read, data, lines, filename, mechanization)
     decl = _Declarations(states=[], noises=[], parameters={})
-    own = _user_parameters(read, data, decl)
+    own = _user_parameters(read, data, decl, frame)
     nav = _navigation_state(read, section, frame, decl)
 
-    def namespace() -> dict[str, sp.Symbol]:
-        return {s: sp.Symbol(s, real=True) for s in own}
+    def namespace() -> dict[str, Any]:
+        return {**{s: sp.Symbol(s, real=True) for s in own}, **decl.vectors}
 
     approximation_names, approximation_scopes = _approximations(read, section, mechanization)
     definition, navigation_order = _error_definition(read, section, frame, decl, mechanization)
@@ -935,6 +966,8 @@ def _error_model(data, lines, filename, decl: _Declarations, own: list[str], equ
         locations=locations,
     )
     undeclared = [str(p.get("name")) for p in (data.get("parameters") or []) if isinstance(p, dict) and "unit" not in p]
+    undeclared += [name for stem in undeclared for name in (f"{stem}_{a}" for a in ("x", "y", "z", "n", "e", "d", "u"))
+                   if any(q.name == name for q in parameters)]  # a vector parameter's components
     check_model_units(model, locations, undeclared)
     return model
 

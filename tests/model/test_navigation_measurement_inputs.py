@@ -111,3 +111,32 @@ def test_per_axis_sensor_error_sigmas_and_noise_psds():
     noises = {n.name: str(n.psd) for n in model.noises}
     assert len({noises[f"gyro_bias_driving_noise_{a}"] for a in "xyz"}) == 3
     assert [float(noises[f"accel_white_noise_{a}"]) for a in "xyz"] == [1.0e-6, 2.0e-6, 4.0e-6]
+
+
+def test_a_vector_parameter_is_declared_by_component_and_used_whole_in_expressions():
+    text = ODOMETER.replace("BIAS", "").replace(
+        "  - {name: odometer_arm_x, symbol: l_x, unit: m}\n  - {name: odometer_arm_y, symbol: l_y, unit: m}\n"
+        "  - {name: odometer_arm_z, symbol: l_z, unit: m}\n",
+        "  - {name: odometer_arm, symbol: l, shape: 3, axes: body, unit: m, value: [1.5, -0.2, 0.4]}\n",
+    ).replace("cross(omega_ib_b, vector(l_x, l_y, l_z))", "cross(omega_ib_b, l)")
+    model = load_model_text(text, "m.yaml")
+    arm = {p.name: (p.symbol, p.value) for p in model.parameters if p.name.startswith("odometer_arm")}
+    assert arm == {"odometer_arm_x": ("l_x", 1.5), "odometer_arm_y": ("l_y", -0.2), "odometer_arm_z": ("l_z", 0.4)}
+    by_components = load_model_text(ODOMETER.replace("BIAS", ""), "m.yaml")
+    assert model.measurement_expressions == by_components.measurement_expressions
+
+
+@pytest.mark.parametrize(
+    "entry, message",
+    [
+        ("{name: arm, shape: 3, value: [1.0, 2.0]}", "parameter 'arm' is a 3-vector: its value must list 3 numbers"),
+        ("{name: arm, shape: [3, 3]}", "a navigation model's parameter is a scalar or a 3-vector"),
+        ("{name: arm, axes: body}", "'axes' is for a vector parameter (shape: 3)"),
+        ("{name: arm, shape: 3, axes: wing}", "parameters[3].axes 'wing' is not one of body, navigation"),
+    ],
+)
+def test_a_bad_vector_parameter_is_refused_with_file_line(entry, message):
+    text = ODOMETER.replace("BIAS", "").replace("  - {name: odometer_sigma", f"  - {entry}\n  - {{name: odometer_sigma")
+    with pytest.raises(ModelError, match=r"^m\.yaml:\d+: ") as caught:
+        load_model_text(text, "m.yaml")
+    assert message in str(caught.value)
