@@ -124,7 +124,7 @@ def _gradient(field, r, step=1.0):
 
 
 def _euler(roll, pitch, yaw):
-    cr, sr, cp, sp_, cy, sy = (math.cos(math.radians(a)) for a in (roll, pitch, yaw)), None, None, None, None, None
+    """C_b^n from roll, pitch, heading in degrees (Groves eq. 2.22)."""
     r, p, y = (math.radians(a) for a in (roll, pitch, yaw))
     Rz = np.array([[math.cos(y), -math.sin(y), 0], [math.sin(y), math.cos(y), 0], [0, 0, 1]])
     Ry = np.array([[math.cos(p), 0, math.sin(p)], [0, 1, 0], [-math.sin(p), 0, math.cos(p)]])
