@@ -74,6 +74,9 @@ def encode(a: LogArrays) -> bytes:
     """The driver's stdin (layout in modelgen/codegen/backends/c/harness/navigator_driver.c.j2)."""
     if len(a.time) > MAX_IMU or len(a.t_gnss) > MAX_EPOCHS:
         raise ModelError(f"embedded replay: the driver holds at most {MAX_IMU} IMU samples and {MAX_EPOCHS} epochs")
+    if len(a.aid_time):
+        raise ModelError("embedded replay: the qemu driver feeds IMU and GNSS only; fly the odometer and barometer "
+                         "logs on the host (--navigator c or both, without --embedded)")
     config = cconfig.pack(a.cfg, a.n_parameters)
     parts = [struct.pack("<4q", len(a.time), len(a.t_gnss), len(config), 0), config]
     for array in (a.time, a.force, a.rate, a.t_gnss, a.target.astype(float), a.use.astype(float), a.gnss):
