@@ -112,6 +112,8 @@ def _nhc_values(config) -> dict:
             "nhc_rate_max": config.nhc_rate_max}
 
 
+#: GNSS is updated at its epochs (fly()'s epoch loop, the C's navigator_epoch), with the gate release and de-weighting
+#: of filter:; its rows are the model file's own measurement, so the entry describes rather than drives that update
 GNSS = AidingSensor(
     "gnss", "gnss", "gnss", "model", (), "use && factor > 0.0", "", "GNSS position and velocity at the antenna "
     "(lever arm gnss.lever_arm_m), the model file's measurement; sigmas from the receiver (gnss.quality_factor)")
