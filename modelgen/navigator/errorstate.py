@@ -86,6 +86,7 @@ class ErrorStateFilter:
         self.x = np.zeros(N_STATES)
         self.P = np.array(P0, float)
         self.noise = noise  # gyro_angle_random_walk, accel_velocity_random_walk, ... (SI)
+        self.recorder = None  # a smoother's ForwardRecord (modelgen.navigator.smoother), or None
 
     def parameters(self, nav: np.ndarray, force_ned: np.ndarray, gnss_sigma: np.ndarray) -> np.ndarray:
         """The model's parameter vector at the navigation state (ENU quantities, C_b^ENU)."""
@@ -109,6 +110,8 @@ class ErrorStateFilter:
         g = self.module
         Phi, Qd = g.discretize(g.system_matrix(p), g.noise_input_matrix(p), g.noise_psd(p), period)
         self.x, self.P = g.predict(self.x, self.P, Phi, Qd)
+        if self.recorder is not None:
+            self.recorder.predicted(Phi, self.P)
 
     def update(self, z: np.ndarray, H: np.ndarray, r: np.ndarray, gate: float, deweight: bool = False) -> Update:
         """Gate on the NIS (innovation z - H x against H P H^T + R), then the generated update.

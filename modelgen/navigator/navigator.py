@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Callable
 
 import numpy as np
@@ -46,6 +47,8 @@ class Flight:
     notes: list[str] = field(default_factory=list)
     #: the alignment: time (the GNSS epoch it completed at) [s], roll, pitch, heading [rad], rest_end [s], rest_samples
     alignment: dict[str, float] = field(default_factory=dict)
+    #: what the smoother needs (fly(..., record=True)): modelgen.navigator.smoother.ForwardRecord, else None
+    forward_record: object | None = None
 
 
 @dataclass
@@ -172,8 +175,13 @@ def _nhc_rows(nav: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (c_nb @ v)[1:3], H
 
 
-def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[float], None] | None = None) -> Flight:
-    """Fly the whole log forward in real time; return the per-epoch outputs."""
+def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[float], None] | None = None,
+        record: bool = False) -> Flight:
+    """Fly the whole log forward in real time; return the per-epoch outputs.
+
+    ``record``: also keep what the smoother needs (transitions, covariances,
+    corrections, nominal states at the outputs) in ``Flight.forward_record``.
+    """
     g = inputs.gnss
     time, force, rate = inputs.time, inputs.force, inputs.rate
     lever = np.asarray(config.lever_arm, float)
@@ -189,6 +197,8 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
              "gyro_bias_driving_noise": config.noise["gyro_bias_driving"].si,
              "accel_bias_driving_noise": config.noise["accel_bias_driving"].si}
     kf = ErrorStateFilter(module, initial_covariance(config, nav, heading_sigma), noise)
+    sensors = {"gyro_bias": gyro_bias, "accel_bias": accel_bias}  # the arrays the feedback corrects in place
+    kf.recorder = _forward_record(kf.P) if record else None
     still = (stationary_mask(time, force, rate, gyro_bias, config.zupt_window, config.zupt_gyro_max,
                              config.zupt_accel_std_max) if config.zupt_enabled else np.zeros(len(time), bool))
     step = max(1, int(round(config.predict_period / float(np.median(np.diff(time))))))
@@ -266,12 +276,15 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
                 rejected_run += 1
         outputs.append(_record(time[k], nav, lever, rate[k] - gyro_bias, kf.P, gyro_bias, accel_bias,
                                bool(outage[j]), used, nis, int(g.quality[j])))
+        if kf.recorder is not None:
+            kf.recorder.output(nav, sensors, partial(_row, time[k], lever, rate[k], bool(outage[j]), used, nis,
+                                                     int(g.quality[j])))
         if progress is not None and (j - j0) % 200 == 0:
             progress((j - j0) / max(1, n_epochs - j0))
     if progress is not None:
         progress(1.0)
     return Flight(np.array(outputs), windows, inputs.first_epoch, float(g.time[j0]), gnss_nis, gates[6], counts,
-                  list(inputs.notes), start.record())
+                  list(inputs.notes), start.record(), kf.recorder)
 
 
 def _remember(history: np.ndarray, t: float, nav: np.ndarray) -> None:
@@ -283,8 +296,26 @@ def _remember(history: np.ndarray, t: float, nav: np.ndarray) -> None:
 
 def _reset(kf: ErrorStateFilter, nav: np.ndarray, gyro_bias: np.ndarray, accel_bias: np.ndarray) -> None:
     """Feed the estimate back and zero the error state (closed loop)."""
+    if kf.recorder is not None:
+        kf.recorder.corrected(kf.x, kf.P)
     feedback(nav, kf.x, gyro_bias, accel_bias)
     kf.x = np.zeros_like(kf.x)
+
+
+def _forward_record(P0: np.ndarray):
+    """The smoother's record of this flight, with the closed-loop feedback as its way to apply a correction."""
+    from modelgen.navigator.smoother import ForwardRecord
+
+    forward = ForwardRecord(lambda nav, sensors, dx: feedback(nav, dx, sensors["gyro_bias"], sensors["accel_bias"]))
+    forward.start(P0)
+    return forward
+
+
+def _row(t: float, lever: np.ndarray, raw_rate: np.ndarray, outage: bool, used: int, nis: float, quality: int,
+         nav: np.ndarray, sensors: dict[str, np.ndarray], P: np.ndarray) -> list[float]:
+    """An output row of a (smoothed) nominal state: :func:`_record` with its sensor estimates."""
+    return _record(t, nav, lever, raw_rate - sensors["gyro_bias"], P, sensors["gyro_bias"], sensors["accel_bias"],
+                   outage, used, nis, quality)
 
 
 def _record(t: float, nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, P: np.ndarray, gyro_bias: np.ndarray,
