@@ -59,7 +59,8 @@ SCHEMA: dict[str, set[str]] = {
     "zupt": {"enabled", "window_s", "gyro_max_deg_s", "accel_std_max_m_s2", "speed_max_m_s", "sigma_m_s"},
     "nhc": {"enabled", "sigma_lateral_m_s", "sigma_vertical_m_s", "speed_min_m_s", "rate_max_deg_s"},
     "outages": {"first_after_s", "length_s", "period_s", "end_margin_s", "windows"},
-    "evaluation": {"schedules", "target_end_rms_m", "target_nees_mean", "target_inside_95_fraction"},
+    "evaluation": {"schedules", "target_end_rms_m", "target_nees_mean", "target_inside_95_fraction",
+                   "target_smoothed_outage_rms_m", "target_smoothed_outage_max_m"},
     "output": {"folder"},
 }
 
@@ -134,6 +135,9 @@ class NavigatorConfig:
     target_end_rms_m: float | None = None  # evaluation.target_end_rms_m: for the configured schedule
     target_nees_mean: tuple[float, float] | None = None  # pooled over all schedules
     target_inside_95_fraction: float | None = None  # pooled over all schedules
+    #: replay --smooth, configured schedule: horizontal RMS over every outage epoch, and each outage's maximum [m]
+    target_smoothed_outage_rms_m: float | None = None
+    target_smoothed_outage_max_m: float | None = None
 
     @property
     def rest_span_min(self) -> float:
@@ -333,9 +337,13 @@ def _evaluation(reader: _Reader) -> dict[str, Any]:
     if inside is not None:
         inside = _probability(reader, "evaluation.target_inside_95_fraction")
     rms = reader.get("evaluation.target_end_rms_m", None)
+    smoothed = {f"target_smoothed_outage_{kind}_m": (reader.number(f"evaluation.target_smoothed_outage_{kind}_m",
+                                                                   positive=True)
+                                                     if reader.get(f"evaluation.target_smoothed_outage_{kind}_m", None)
+                                                     is not None else None) for kind in ("rms", "max")}
     return {"evaluation_schedules": tuple(schedules),
             "target_end_rms_m": reader.number("evaluation.target_end_rms_m", positive=True) if rms is not None else None,
-            "target_nees_mean": nees, "target_inside_95_fraction": inside}
+            "target_nees_mean": nees, "target_inside_95_fraction": inside, **smoothed}
 
 
 def _probability(reader: _Reader, key: str) -> float:

@@ -19,6 +19,7 @@ from modelgen.navigator.metrics import (errors_against_reference, pooled_consist
                                         velocity_latency)
 from modelgen.navigator.navigator import Flight, fly, prepare
 from modelgen.navigator.report import report_files
+from modelgen.navigator.smoother import smooth_flight, smoothing_summary
 from modelgen.fileio.output import write_atomically
 
 
@@ -61,12 +62,15 @@ EMBEDDED_TOLERANCE_M = 0.01
 
 def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], None] = print,
                with_figures: bool = True, force: bool = False, navigator: str = "c",
-               embedded: bool = False) -> ReplayResult:
+               embedded: bool = False, smooth: bool = False) -> ReplayResult:
     """Fly the configuration's logs and, if ``out`` is given, write the report folder there atomically.
 
     ``navigator``: the generated C navigator (compiled now), the Python
     reference, or both (the report then states their largest difference; the
-    C flight is the one reported).
+    C flight is the one reported).  ``smooth``: also run the RTS smoother over
+    the Python navigator's recorded forward pass (flown for it if only the C
+    flies) and report the smoothed errors beside that forward pass's
+    (:mod:`modelgen.navigator.smoother`).
     """
     if navigator not in NAVIGATORS:
         raise ModelError(f"replay: unknown navigator {navigator!r} (choose from {', '.join(NAVIGATORS)})")
@@ -95,7 +99,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
                 echo(f"  flying (Python): {100 * fraction:5.1f} %  ({time.perf_counter() - mark:.1f} s)")
                 state["next"] = fraction + 0.25
 
-        flights["python"] = fly(config, inputs, module, progress)
+        flights["python"] = fly(config, inputs, module, progress, record=smooth)
         timings["fly_python_s"] = time.perf_counter() - mark
     if navigator in ("c", "both"):
         mark = time.perf_counter()
@@ -153,13 +157,33 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
                               "tolerance_m": EMBEDDED_TOLERANCE_M}
         echo(f"  qemu-arm (float filter) against the double C navigator: largest difference "
              f"{arm.max_position_difference_m:.2g} m")
+    passes = None
+    if smooth:
+        mark = time.perf_counter()
+        passes = _smoothed_passes(config, inputs, flights.get("python"), model_file, echo)
+        result["smoothed"] = smoothing_summary(*passes, inputs.gnss, config.target_smoothed_outage_rms_m,
+                                               config.target_smoothed_outage_max_m)
+        timings["smooth_s"] = time.perf_counter() - mark
+        echo(f"  smoothed (RTS over {result['smoothed']['steps']} steps): horizontal RMS over the outage epochs "
+             f"{result['smoothed']['smoothed']['horizontal_error_outage_rms_m']:.3f} m (forward "
+             f"{result['smoothed']['forward']['horizontal_error_outage_rms_m']:.3f} m)"
+             if result["smoothed"]["smoothed"]["horizontal_error_outage_rms_m"] is not None else "  smoothed (no outages)")
     folder = None
     if out is not None:
         files = report_files(flight, errors, result, config, inputs.gnss, timings, velocity_latency(inputs.gnss),
-                             with_figures)
+                             with_figures, smoothed=passes)
         folder = write_atomically(Path(out), files, force=force)
     timings["total_s"] = time.perf_counter() - start
     return ReplayResult(config, flight, result, folder, timings)
+
+
+def _smoothed_passes(config: NavigatorConfig, inputs, recorded: Flight | None, model_file: Path,
+                     echo: Callable[[str], None]) -> tuple[Flight, Flight]:
+    """(forward, smoothed): the Python flight recorded for the smoother, flown now if it was not flown yet."""
+    if recorded is None:
+        echo("  flying the Python navigator for the smoother (the C navigator keeps no transitions)")
+        recorded = fly(config, inputs, generate_filter_module(model_file), record=True)
+    return recorded, smooth_flight(recorded)
 
 
 def max_position_difference(a: Flight, b: Flight) -> float:

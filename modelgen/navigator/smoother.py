@@ -194,3 +194,65 @@ def smooth_flight(flight):
     if outputs.shape != flight.outputs.shape:
         raise ModelError("smoother: the forward record does not match the flight's outputs")
     return replace(flight, outputs=outputs, forward_record=None)
+
+
+def _outage_mask(times: np.ndarray, outages: list[tuple[float, float]]) -> np.ndarray:
+    """Output epochs inside any outage window (start inclusive, end exclusive, as the outage records count)."""
+    inside = np.zeros(len(times), bool)
+    for start, end in outages:
+        inside |= (times >= start) & (times < end)
+    return inside
+
+
+def _pass_numbers(flight, errors, reference) -> dict[str, object]:
+    """End-of-outage RMS, RMS over every outage epoch, RMS outside, and per-outage end and maximum [m]."""
+    from modelgen.navigator.metrics import outage_records
+
+    records = outage_records(flight, errors, reference)
+    horizontal = errors.horizontal
+    inside = _outage_mask(errors.time, flight.outages)
+    ends = np.array([r["horizontal_error_end_m"] for r in records])
+    return {"horizontal_error_end_rms_m": float(np.sqrt(np.mean(ends**2))) if len(ends) else None,
+            "horizontal_error_outage_rms_m": float(np.sqrt(np.mean(horizontal[inside] ** 2))) if inside.any() else None,
+            "horizontal_error_outage_max_m": float(horizontal[inside].max()) if inside.any() else None,
+            "horizontal_rms_outside_outages_m": float(np.sqrt(np.mean(horizontal[~inside] ** 2)))
+            if (~inside).any() else None,
+            "outages": records}
+
+
+def smoothing_summary(forward, smoothed, reference, target_outage_rms_m: float | None = None,
+                      target_outage_max_m: float | None = None) -> dict[str, object]:
+    """summary.json's ``smoothed``: the forward pass the smoother ran on beside the smoothed trajectory.
+
+    ``forward`` and ``smoothed`` are flights with the same epochs; errors are
+    measured as for the forward report (:func:`modelgen.navigator.metrics.errors_against_reference`).
+    """
+    from modelgen.navigator.metrics import errors_against_reference
+
+    numbers = {name: _pass_numbers(flight, errors_against_reference(flight, reference), reference)
+               for name, flight in (("forward", forward), ("smoothed", smoothed))}
+    per_outage = [{"start_s": f["start_s"], "duration_s": f["duration_s"],
+                   "forward_horizontal_error_end_m": f["horizontal_error_end_m"],
+                   "smoothed_horizontal_error_end_m": s["horizontal_error_end_m"],
+                   "forward_horizontal_error_max_m": f["horizontal_error_max_m"],
+                   "smoothed_horizontal_error_max_m": s["horizontal_error_max_m"],
+                   "forward_sigma_horizontal_end_m": f["sigma_horizontal_end_m"],
+                   "smoothed_sigma_horizontal_end_m": s["sigma_horizontal_end_m"]}
+                  for f, s in zip(numbers["forward"]["outages"], numbers["smoothed"]["outages"])]
+    rms = numbers["smoothed"]["horizontal_error_outage_rms_m"]
+    worst = max((o["smoothed_horizontal_error_max_m"] for o in per_outage), default=None)
+    return {
+        "method": "fixed-interval Rauch-Tung-Striebel smoother in error-state form over the recorded forward pass "
+                  "(the generated filter's transitions and covariances; backward recursion in numpy/scipy)",
+        "steps": forward.forward_record.steps if getattr(forward, "forward_record", None) is not None else None,
+        "forward": {k: v for k, v in numbers["forward"].items() if k != "outages"},
+        "smoothed": {k: v for k, v in numbers["smoothed"].items() if k != "outages"},
+        "outages": per_outage,
+        "target_outage_rms_m": target_outage_rms_m,
+        "target_outage_max_m": target_outage_max_m,
+        "outage_rms_met": (rms is not None and rms <= target_outage_rms_m) if target_outage_rms_m is not None else None,
+        "outage_max_met": ((worst is not None and worst <= target_outage_max_m)
+                           if target_outage_max_m is not None else None),
+        "outages_over_max": [i + 1 for i, o in enumerate(per_outage)
+                             if target_outage_max_m is not None and o["smoothed_horizontal_error_max_m"] > target_outage_max_m],
+    }
