@@ -62,7 +62,7 @@ def pos_text(flight: Flight, config: NavigatorConfig, solution: str = FORWARD_SO
     cross = all(name in c for name in CROSS_COVARIANCE_FIELDS)
     lines = [f"% program   : modelgen replay ({config.name}, model {config.model})",
              f"% solution  : {solution}; Q 6 = dead reckoning (no GNSS update at the epoch)",
-             "% sd        : sdn, sde, sdu = the filter's 1-sigma position; "
+             "% sd        : sdn, sde, sdu = the solution's 1-sigma position; "
              + ("sdne, sdeu, sdun = its cross covariances (signed square roots)" if cross else
                 "sdne, sdeu, sdun = 0 (the flight carries no cross covariance)"),
              "% (lat/lon/height=WGS84/ellipsoidal as in the input solution, Q=1:fix,2:float,5:single,6:dr)",
@@ -373,7 +373,8 @@ def smoothed_figure(forward: Flight, smoothed: Flight, reference: GnssLog) -> st
     ax.set_xlabel("time since the first GNSS epoch [s]")
     ax.set_ylabel("horizontal error at the antenna [m]")
     ax.set_title("Forward and smoothed horizontal error against RTK (outages shaded)")
-    ax.legend(fontsize=8, loc="best")
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2)
+    fig.tight_layout()
     return _svg(fig)
 
 

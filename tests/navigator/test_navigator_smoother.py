@@ -158,3 +158,51 @@ def test_on_the_drive_excerpt_the_smoothed_outage_error_is_below_the_forward_one
     # the smoothed sigma is below the forward one in the outage (more data used), never above it anywhere
     assert np.all(e_smoothed.sigma_horizontal[inside] < e_forward.sigma_horizontal[inside])
     assert np.all(e_smoothed.sigma_horizontal <= e_forward.sigma_horizontal + 1e-9)
+
+
+@pytest.mark.flight
+def test_replay_smooth_flag_reports_smoothed_errors_beside_the_forward_ones(tmp_path):
+    """`modelgen replay --smooth` on the excerpt (C navigator): summary, targets, smoothed trajectory files."""
+    from click.testing import CliRunner
+
+    from modelgen.cli import main
+
+    out = tmp_path / "replay"
+    result = CliRunner().invoke(main, ["replay", str(DATA / "excerpt.yaml"), "--out", str(out), "--smooth"])
+    assert result.exit_code == 0, result.output
+    assert "smoothed: horizontal RMS over every outage epoch" in result.output
+    summary = json.loads((out / "summary.json").read_text())
+    smoothed = summary["smoothed"]
+    assert smoothed["steps"] > 500
+    assert smoothed["smoothed"]["horizontal_error_outage_rms_m"] < smoothed["forward"]["horizontal_error_outage_rms_m"]
+    (outage,) = smoothed["outages"]
+    assert outage["smoothed_horizontal_error_max_m"] < outage["forward_horizontal_error_max_m"]
+    # the forward beside it is the Python pass the smoother ran on: the C's end error within 1 mm
+    assert abs(outage["forward_horizontal_error_end_m"] - summary["outages"][0]["horizontal_error_end_m"]) < 1e-3
+    assert smoothed["outage_rms_met"] is None  # the excerpt states no smoothed target: nothing called met
+    assert "smoothed.svg" in summary["figures"]
+    forward_rows = (out / "trajectory.csv").read_text().splitlines()
+    smoothed_rows = (out / "smoothed.csv").read_text().splitlines()
+    assert smoothed_rows[0] == forward_rows[0] and len(smoothed_rows) == len(forward_rows)
+    assert [r.split(",")[0] for r in smoothed_rows] == [r.split(",")[0] for r in forward_rows]
+    assert "RTS-smoothed" in (out / "smoothed.pos").read_text().splitlines()[1]
+    assert (out / "smoothed.svg").read_text().lstrip().startswith("<?xml")
+    assert "## Smoothed (replay --smooth)" in (out / "summary.md").read_text()
+
+
+def test_smoothed_targets_come_from_the_configuration(tmp_path):
+    from modelgen.navigator.config import load_config
+
+    text = (DATA / "excerpt.yaml").read_text()
+    assert "target_smoothed_outage" not in text
+    path = tmp_path / "excerpt.yaml"
+    path.write_text(text.replace("imu:\n", "evaluation:\n  target_smoothed_outage_rms_m: 0.3\n"
+                                           "  target_smoothed_outage_max_m: 0.7\nimu:\n", 1)
+                    .replace("file: excerpt", f"file: {DATA}/excerpt"))
+    config = load_config(path)
+    assert (config.target_smoothed_outage_rms_m, config.target_smoothed_outage_max_m) == (0.3, 0.7)
+    path.write_text(path.read_text().replace("target_smoothed_outage_rms_m: 0.3", "target_smoothed_outage_rms_m: -1"))
+    from modelgen.errors import ModelError
+
+    with pytest.raises(ModelError, match="target_smoothed_outage_rms_m"):
+        load_config(path)
