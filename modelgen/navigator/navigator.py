@@ -47,7 +47,7 @@ class Flight:
     notes: list[str] = field(default_factory=list)
     #: the alignment: time (the GNSS epoch it completed at) [s], roll, pitch, heading [rad], rest_end [s], rest_samples
     alignment: dict[str, float] = field(default_factory=dict)
-    #: what the smoother needs (fly(..., record=True)): modelgen.navigator.smoother.ForwardRecord, else None
+    #: what the smoother needs (fly(..., record=ForwardRecord())): modelgen.navigator.smoother.ForwardRecord, else None
     forward_record: object | None = None
 
 
@@ -176,11 +176,12 @@ def _nhc_rows(nav: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[float], None] | None = None,
-        record: bool = False) -> Flight:
+        record=None) -> Flight:
     """Fly the whole log forward in real time; return the per-epoch outputs.
 
-    ``record``: also keep what the smoother needs (transitions, covariances,
-    corrections, nominal states at the outputs) in ``Flight.forward_record``.
+    ``record``: a fresh :class:`modelgen.navigator.smoother.ForwardRecord` to
+    fill with what the smoother needs (transitions, covariances, corrections,
+    nominal states at the outputs); the flight carries it as ``forward_record``.
     """
     g = inputs.gnss
     time, force, rate = inputs.time, inputs.force, inputs.rate
@@ -198,7 +199,9 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
              "accel_bias_driving_noise": config.noise["accel_bias_driving"].si}
     kf = ErrorStateFilter(module, initial_covariance(config, nav, heading_sigma), noise)
     sensors = {"gyro_bias": gyro_bias, "accel_bias": accel_bias}  # the arrays the feedback corrects in place
-    kf.recorder = _forward_record(kf.P) if record else None
+    if record is not None:
+        record.start(kf.P, _apply_correction)
+    kf.recorder = record
     still = (stationary_mask(time, force, rate, gyro_bias, config.zupt_window, config.zupt_gyro_max,
                              config.zupt_accel_std_max) if config.zupt_enabled else np.zeros(len(time), bool))
     step = max(1, int(round(config.predict_period / float(np.median(np.diff(time))))))
@@ -302,13 +305,9 @@ def _reset(kf: ErrorStateFilter, nav: np.ndarray, gyro_bias: np.ndarray, accel_b
     kf.x = np.zeros_like(kf.x)
 
 
-def _forward_record(P0: np.ndarray):
-    """The smoother's record of this flight, with the closed-loop feedback as its way to apply a correction."""
-    from modelgen.navigator.smoother import ForwardRecord
-
-    forward = ForwardRecord(lambda nav, sensors, dx: feedback(nav, dx, sensors["gyro_bias"], sensors["accel_bias"]))
-    forward.start(P0)
-    return forward
+def _apply_correction(nav: np.ndarray, sensors: dict[str, np.ndarray], dx: np.ndarray) -> None:
+    """The closed-loop feedback of a correction dx into a nominal state (the smoother applies its own with it)."""
+    feedback(nav, dx, sensors["gyro_bias"], sensors["accel_bias"])
 
 
 def _row(t: float, lever: np.ndarray, raw_rate: np.ndarray, outage: bool, used: int, nis: float, quality: int,

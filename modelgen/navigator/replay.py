@@ -19,7 +19,7 @@ from modelgen.navigator.metrics import (errors_against_reference, pooled_consist
                                         velocity_latency)
 from modelgen.navigator.navigator import Flight, fly, prepare
 from modelgen.navigator.report import report_files
-from modelgen.navigator.smoother import smooth_flight, smoothing_summary
+from modelgen.navigator.smoother import ForwardRecord, smooth_flight, smoothing_summary
 from modelgen.fileio.output import write_atomically
 
 
@@ -99,7 +99,8 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
                 echo(f"  flying (Python): {100 * fraction:5.1f} %  ({time.perf_counter() - mark:.1f} s)")
                 state["next"] = fraction + 0.25
 
-        flights["python"] = fly(config, inputs, module, progress, record=smooth)
+        flights["python"] = fly(config, inputs, module, progress,
+                                record=ForwardRecord() if smooth else None)
         timings["fly_python_s"] = time.perf_counter() - mark
     if navigator in ("c", "both"):
         mark = time.perf_counter()
@@ -182,7 +183,7 @@ def _smoothed_passes(config: NavigatorConfig, inputs, recorded: Flight | None, m
     """(forward, smoothed): the Python flight recorded for the smoother, flown now if it was not flown yet."""
     if recorded is None:
         echo("  flying the Python navigator for the smoother (the C navigator keeps no transitions)")
-        recorded = fly(config, inputs, generate_filter_module(model_file), record=True)
+        recorded = fly(config, inputs, generate_filter_module(model_file), record=ForwardRecord())
     return recorded, smooth_flight(recorded)
 
 

@@ -1,7 +1,7 @@
 """Fixed-interval Rauch-Tung-Striebel smoothing of a closed-loop error-state flight (``modelgen replay --smooth``).
 
-The forward pass (:func:`modelgen.navigator.navigator.fly` with ``record=True``)
-appends to a :class:`ForwardRecord`: at every covariance step k the transition
+The forward pass (:func:`modelgen.navigator.navigator.fly` given a fresh
+``record=ForwardRecord()``) appends to the :class:`ForwardRecord`: at every covariance step k the transition
 Phi_k (the generated ``discretize`` of the model, from step k-1 to k) and the
 prior covariance P_k^- (after the generated ``predict``); at every accepted
 update the correction dx fed back into the nominal state and the posterior
@@ -78,17 +78,18 @@ class ForwardRecord:
     new step.
     """
 
-    feedback: Feedback
+    feedback: Feedback | None = None  # set by start(): the navigator's closed-loop feedback
     transitions: list[np.ndarray | None] = field(default_factory=list)
     priors: list[np.ndarray] = field(default_factory=list)
     posteriors: list[np.ndarray] = field(default_factory=list)
     corrections: list[list[np.ndarray]] = field(default_factory=list)
     outputs: list[OutputSnapshot] = field(default_factory=list)
 
-    def start(self, P0: np.ndarray) -> None:
-        """Step 0: the initial covariance, before any predict or update."""
+    def start(self, P0: np.ndarray, feedback: Feedback) -> None:
+        """Step 0: the initial covariance, before any predict or update, and how a correction is applied."""
         if self.priors:
-            raise ModelError("smoother: the forward record was already started")
+            raise ModelError("smoother: a forward record holds one flight (this one was already started)")
+        self.feedback = feedback
         self._open(None, P0)
 
     def predicted(self, Phi: np.ndarray, P_prior: np.ndarray) -> None:
@@ -186,10 +187,10 @@ def smoothed_outputs(record: ForwardRecord) -> np.ndarray:
 
 
 def smooth_flight(flight):
-    """The flight with its outputs replaced by the smoothed ones (a flight flown with ``record=True``)."""
+    """The flight with its outputs replaced by the smoothed ones (a flight flown with a ``record``)."""
     record = getattr(flight, "forward_record", None)
-    if record is None:
-        raise ModelError("smoother: the flight was flown without its forward record (fly(..., record=True))")
+    if record is None or record.feedback is None:
+        raise ModelError("smoother: the flight was flown without its forward record (fly(..., record=ForwardRecord()))")
     outputs = smoothed_outputs(record)
     if outputs.shape != flight.outputs.shape:
         raise ModelError("smoother: the forward record does not match the flight's outputs")

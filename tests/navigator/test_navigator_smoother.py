@@ -68,9 +68,9 @@ def _closed_loop_error_state(fixes, x0, P0, Phi, Q, H, R):
     def feedback(nav, sensors, dx):
         nav -= dx
 
-    record = ForwardRecord(feedback)
+    record = ForwardRecord()
     nominal, P = x0.copy(), P0.copy()
-    record.start(P)
+    record.start(P, feedback)
     output_steps = []
     for k, zs in enumerate(fixes):
         if k > 0:
@@ -128,7 +128,7 @@ def test_a_flight_without_its_record_is_refused():
     from modelgen.navigator.navigator import Flight
     from modelgen.navigator.smoother import smooth_flight
 
-    with pytest.raises(ModelError, match="record=True"):
+    with pytest.raises(ModelError, match="without its forward record"):
         smooth_flight(Flight(np.zeros((1, 3)), [], 0.0, 0.0))
 
 
@@ -145,7 +145,8 @@ def test_on_the_drive_excerpt_the_smoothed_outage_error_is_below_the_forward_one
     config = load_config(DATA / "excerpt.yaml")
     inputs = prepare(config, read_imu(config.imu_source, config.gap_factor, config.gap_action),
                      read_gnss(config.gnss_source))
-    forward = fly(config, inputs, generate_filter_module(model_path(config.model, config.path)), record=True)
+    forward = fly(config, inputs, generate_filter_module(model_path(config.model, config.path)),
+                  record=ForwardRecord())
     smoothed = smooth_flight(forward)
     (start, end), = forward.outages
     e_forward = errors_against_reference(forward, inputs.gnss)
