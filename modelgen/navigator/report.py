@@ -344,7 +344,9 @@ def _smoothed_lines(summary: dict) -> list[str]:
               f"| largest in any outage | {_fmt(f['horizontal_error_outage_max_m'], 3)} | "
               f"{_fmt(s['horizontal_error_outage_max_m'], 3)} |",
               f"| RMS outside the outages | {_fmt(f['horizontal_rms_outside_outages_m'], 3)} | "
-              f"{_fmt(s['horizontal_rms_outside_outages_m'], 3)} |", ""]
+              f"{_fmt(s['horizontal_rms_outside_outages_m'], 3)} |",
+              f"| mean e^T P_h^-1 e over every outage epoch (2 if consistent; dimensionless) | "
+              f"{_fmt(f['nees_horizontal_outage_mean'], 1)} | {_fmt(s['nees_horizontal_outage_mean'], 1)} |", ""]
     for row in smoothed_targets(sm):
         verdict = "" if row["met"] is None else ("met" if row["met"] else "missed")
         lines.append(f"- {row['quantity']}: {row['reached']}" + (f", target {row['target']}: {verdict}"

@@ -213,7 +213,10 @@ def _pass_numbers(flight, errors, reference) -> dict[str, object]:
     horizontal = errors.horizontal
     inside = _outage_mask(errors.time, flight.outages)
     ends = np.array([r["horizontal_error_end_m"] for r in records])
-    return {"horizontal_error_end_rms_m": float(np.sqrt(np.mean(ends**2))) if len(ends) else None,
+    nees = np.array([errors.nees_horizontal(i) for i in np.nonzero(inside)[0]])
+    nees = nees[np.isfinite(nees)]
+    return {"nees_horizontal_outage_mean": float(nees.mean()) if len(nees) else None,
+            "horizontal_error_end_rms_m": float(np.sqrt(np.mean(ends**2))) if len(ends) else None,
             "horizontal_error_outage_rms_m": float(np.sqrt(np.mean(horizontal[inside] ** 2))) if inside.any() else None,
             "horizontal_error_outage_max_m": float(horizontal[inside].max()) if inside.any() else None,
             "horizontal_rms_outside_outages_m": float(np.sqrt(np.mean(horizontal[~inside] ** 2)))
