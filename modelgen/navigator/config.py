@@ -20,7 +20,8 @@ from typing import Any
 
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml_with_lines
-from modelgen.navigator.logs import GAP_ACTIONS, STANDARD_GRAVITY, ImuColumns, LogSource, schema, source_from_config
+from modelgen.navigator.config_schema import key_sets, validate
+from modelgen.navigator.logs import GAP_ACTIONS, STANDARD_GRAVITY, ImuColumns, LogSource, source_from_config
 from modelgen.navigator.logs.imu_csv import columns_of
 
 DEG = math.pi / 180.0
@@ -42,27 +43,9 @@ NOISE_UNITS: dict[str, dict[str, float]] = {
                            "ug/sqrt(Hz)": MICRO_G},
 }
 
-SCHEMA: dict[str, set[str]] = {
-    "": {"navigator", "description", "model", "imu", "gnss", "noise", "initial", "alignment", "filter",
-         "zupt", "nhc", "outages", "evaluation", "output"},
-    # imu: and gnss: hold the keys every log format shares and each format's own (logs.registry)
-    **schema("imu"),
-    "imu.rotation_to_body_deg": {"roll", "pitch", "yaw"},
-    **schema("gnss"),
-    "noise": set(NOISE_UNITS),
-    **{f"noise.{k}": {"value", "unit", "factor", "why"} for k in NOISE_UNITS},
-    "initial": {"roll_pitch_sigma_deg", "heading_extra_sigma_deg", "velocity_sigma_m_s", "position_sigma_m",
-                "height_sigma_m", "gyro_bias_sigma_deg_s", "accel_bias_sigma_ug"},
-    "alignment": {"rest_speed_m_s", "rest_window_s", "heading_speed_m_s", "rest_min_s", "still_window_s",
-                  "gyro_std_max_deg_s", "accel_std_max_m_s2"},
-    "filter": {"predict_period_s", "nis_gate_probability", "gate_action", "gate_release_epochs"},
-    "zupt": {"enabled", "window_s", "gyro_max_deg_s", "accel_std_max_m_s2", "speed_max_m_s", "sigma_m_s"},
-    "nhc": {"enabled", "sigma_lateral_m_s", "sigma_vertical_m_s", "speed_min_m_s", "rate_max_deg_s"},
-    "outages": {"first_after_s", "length_s", "period_s", "end_margin_s", "windows"},
-    "evaluation": {"schedules", "target_end_rms_m", "target_nees_mean", "target_inside_95_fraction",
-                   "target_smoothed_outage_rms_m", "target_smoothed_outage_max_m"},
-    "output": {"folder"},
-}
+#: Every mapping's known keys by dotted path, from the JSON schema (modelgen/data/replay_config.schema.json), which
+#: lists every key once with its type, unit, default and meaning (modelgen.navigator.config_schema).
+SCHEMA: dict[str, set[str]] = key_sets()
 
 
 @dataclass(frozen=True)
@@ -138,6 +121,9 @@ class NavigatorConfig:
     #: replay --smooth, configured schedule: horizontal RMS over every outage epoch, and each outage's maximum [m]
     target_smoothed_outage_rms_m: float | None = None
     target_smoothed_outage_max_m: float | None = None
+    #: output.folder: the report folder when the command line gives none (relative paths from the configuration's
+    #: folder), or None
+    output_folder: Path | None = None
 
     @property
     def rest_span_min(self) -> float:
@@ -385,9 +371,9 @@ def load_config(path: str | Path) -> NavigatorConfig:
             raise ModelError(f"{r.where('gnss.quality_factor')}: gnss.quality_factor entry {q!r}: {factor!r} must be "
                              "an integer Q and a positive factor")
         quality[q] = float(factor)
-    rotation = r.get("imu.rotation_to_body_deg")
+    rotation = r.get("imu.rotation_to_body_deg", None)  # optional: IMU axes are body axes
     schedule, windows = _outages(r)
-    return NavigatorConfig(
+    config = NavigatorConfig(
         path=str(path), name=r.text("navigator"), model=r.text("model"),
         imu_file=imu_source.path, imu_columns=columns,
         time_offset=r.number("imu.time_offset_s", 0.0), gap_factor=r.number("imu.gap_factor", 3.0, positive=True),
@@ -427,7 +413,19 @@ def load_config(path: str | Path) -> NavigatorConfig:
         nhc_rate_max=r.number("nhc.rate_max_deg_s", 1e9, positive=True) * DEG,
         outage_schedule=schedule, outage_windows=windows,
         imu_source=imu_source, gnss_source=gnss_source, gap_action=gap_action, **_evaluation(r),
+        output_folder=_output_folder(r),
     )
+    validate(data, r.where)  # and what the checks above leave to the schema (types, ranges, required keys)
+    return config
+
+
+def _output_folder(reader: _Reader) -> Path | None:
+    """output.folder as a path (relative to the configuration's folder), or None."""
+    name = reader.get("output.folder", None)
+    if name is None:
+        return None
+    name = reader.text("output.folder")
+    return Path(name) if Path(name).is_absolute() else reader.path.parent / name
 
 
 def builtin_config_path() -> Path:

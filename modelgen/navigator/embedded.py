@@ -30,7 +30,7 @@ from modelgen.codegen.build import STRICT_FLAGS
 from modelgen.codegen.generate import generate_code, harness_folder
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
-from modelgen.navigator.cnav import N_OUTPUT, LogArrays, render_navigator
+from modelgen.navigator.cnav import N_OUTPUT, REST_MAX, LogArrays, render_navigator, rest_define
 
 MAX_IMU, MAX_EPOCHS = 60000, 2500
 CORTEX_M4F_COMMON = (*toolchain.CORTEX_M4F_FLAGS, "-O2", "-fno-math-errno", "-ffunction-sections", "-fdata-sections",
@@ -82,12 +82,18 @@ def encode(a: LogArrays) -> bytes:
     return b"".join(parts)
 
 
-def cortex_m4f_build(folder: Path, name: str, out_dir: Path) -> tuple[toolchain.SectionSizes, dict[str, int], list[str]]:
-    """Compile filter and navigator for the Cortex-M4F: sizes, worst-case stack of the two calls, heap symbols."""
+def cortex_m4f_build(folder: Path, name: str, out_dir: Path,
+                     rest_max: int = REST_MAX) -> tuple[toolchain.SectionSizes, dict[str, int], list[str]]:
+    """Compile filter and navigator for the Cortex-M4F: sizes, worst-case stack of the two calls, heap symbols.
+
+    ``rest_max``: the alignment ring the configuration needs (:func:`modelgen.navigator.cnav.rest_capacity`), passed
+    as ``-D<P>_NAV_REST_MAX`` as to the host build, so that the sizes are those of the navigator that flies.
+    """
     objects = []
     for source in (f"{name}.c", f"{name}_navigator.c"):
         obj = out_dir / source.replace(".c", ".o")
-        toolchain.run([toolchain.ARM_EMBEDDED_CC, *STRICT_FLAGS, *CORTEX_M4F_COMMON, "-I", str(folder), "-c", "-o",
+        toolchain.run([toolchain.ARM_EMBEDDED_CC, *STRICT_FLAGS, *CORTEX_M4F_COMMON, rest_define(name, rest_max),
+                       "-I", str(folder), "-c", "-o",
                        str(obj), str(folder / source)], f"Cortex-M4F compile of {source}")
         objects.append(obj)
     sizes = [toolchain.section_sizes(o) for o in objects]
@@ -113,13 +119,14 @@ def embedded_replay(model_file: Path, arrays: LogArrays, reference: np.ndarray,
         folder, build = Path(work) / "src", Path(work) / "m4"
         build.mkdir()
         name = write_sources(model_file, folder)
-        sizes, worst, forbidden = cortex_m4f_build(folder, name, build)
+        sizes, worst, forbidden = cortex_m4f_build(folder, name, build, arrays.rest_max)
         exe = Path(work) / "navigator_arm"
-        toolchain.run([toolchain.ARM_LINUX_CC, *STRICT_FLAGS, "-O2", "-static", "-I", str(folder), "-o", str(exe),
+        toolchain.run([toolchain.ARM_LINUX_CC, *STRICT_FLAGS, "-O2", "-static", rest_define(name, arrays.rest_max),
+                       "-I", str(folder), "-o", str(exe),
                        str(folder / f"{name}.c"), str(folder / f"{name}_navigator.c"),
                        str(folder / "navigator_driver.c"), "-lm"], "arm-linux-gnueabihf build of the navigator")
         result = toolchain.run_driver(exe, [], stdin=encode(arrays), qemu=True, timeout=600.0)
-        struct_size = _struct_size(folder, name, Path(work))
+        struct_size = _struct_size(folder, name, Path(work), arrays.rest_max)
     out = np.frombuffer(result.stdout, dtype="<f8")
     if out.size != N_OUTPUT * len(arrays.t_gnss):
         raise ModelError(f"embedded replay: the driver wrote {out.size} values, expected {N_OUTPUT * len(arrays.t_gnss)}")
@@ -137,12 +144,13 @@ def embedded_replay(model_file: Path, arrays: LogArrays, reference: np.ndarray,
                           [float(distance[i]) for i in (outage_ends or [])])
 
 
-def _struct_size(folder: Path, name: str, work: Path) -> int:
+def _struct_size(folder: Path, name: str, work: Path, rest_max: int = REST_MAX) -> int:
     """sizeof the navigator struct on the Cortex-M4F (float filter), from a compile-time constant in an object."""
     probe = work / "probe.c"
     probe.write_text(f'#include "{name}_navigator.h"\nconst unsigned long navigator_bytes = sizeof({name}_navigator);\n')
     obj = work / "probe.o"
-    toolchain.run([toolchain.ARM_EMBEDDED_CC, *toolchain.CORTEX_M4F_FLAGS, "-std=c99", "-I", str(folder), "-c", "-o",
+    toolchain.run([toolchain.ARM_EMBEDDED_CC, *toolchain.CORTEX_M4F_FLAGS, "-std=c99", rest_define(name, rest_max),
+                   "-I", str(folder), "-c", "-o",
                    str(obj), str(probe)], "struct size probe")
     out = toolchain.run(["arm-none-eabi-objdump", "-s", "-j", ".rodata", str(obj)], "objdump").stdout.decode()
     words = [line.split()[1] for line in out.splitlines() if line.startswith(" 0000")]

@@ -85,6 +85,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         echo(f"  note: {note}")
     timings["read_s"] = time.perf_counter() - start
     model_file = model_path(config.model, config.path)
+    check_navigation_model(config, model_file)
     flights: dict[str, Flight] = {}
     if navigator in ("python", "both"):
         mark = time.perf_counter()
@@ -185,6 +186,39 @@ def _smoothed_passes(config: NavigatorConfig, inputs, recorded: Flight | None, m
         echo("  flying the Python navigator for the smoother (the C navigator keeps no transitions)")
         recorded = fly(config, inputs, generate_filter_module(model_file), record=ForwardRecord())
     return recorded, smooth_flight(recorded)
+
+
+#: The built-in navigator model; a model without a navigation: section flies only if its states are this model's.
+BUILTIN_NAVIGATOR_MODEL = "ins_gps15_nav"
+
+
+def check_navigation_model(config: NavigatorConfig, model_file: Path) -> None:
+    """Refuse, in one line and before any code is generated or compiled, a model the navigator cannot fly.
+
+    A model with a ``navigation:`` section is the navigator's to generate; a model without one flies only with
+    the error states of the built-in navigator model, in its order (the hand-written error-state layout).
+    """
+    from modelgen.fileio.datafiles import read_yaml
+    from modelgen.model.loading import load_model
+
+    data = read_yaml(model_file, "model file")
+    if "navigation" in data:
+        return
+    reference_file = model_path(BUILTIN_NAVIGATOR_MODEL, config.path)
+    reference = read_yaml(reference_file, "model file")
+    if "navigation" in reference:
+        wanted = None  # the built-in navigator model is a navigation model itself: so must every model be
+    else:
+        wanted = [s.name for s in load_model(reference_file).states]
+    states = [s.name for s in load_model(model_file).states]
+    if wanted is not None and states == wanted:
+        return
+    need = ("a model with a navigation: section" if wanted is None else
+            f"a model with a navigation: section, or the {len(wanted)} error states of {BUILTIN_NAVIGATOR_MODEL} "
+            "in their order")
+    raise ModelError(f"{config.path}: model {config.model!r} ({model_file}) is not a navigation model the replay "
+                     f"can fly: it needs {need}; this one has {len(states)} states ({', '.join(states[:4])}"
+                     f"{', ...' if len(states) > 4 else ''}) and no navigation: section")
 
 
 def max_position_difference(a: Flight, b: Flight) -> float:
