@@ -32,6 +32,8 @@ class ReplayResult:
     summary: dict
     folder: Path | None
     timings: dict[str, float]
+    #: replay --smooth: the RTS-smoothed flight (same epochs as the recorded Python forward pass), else None
+    smoothed: Flight | None = None
 
     def targets(self) -> list[dict]:
         """The stated targets and whether this flight met them (:func:`modelgen.navigator.report.targets`)."""
@@ -176,7 +178,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
                              with_figures, smoothed=passes)
         folder = write_atomically(Path(out), files, force=force)
     timings["total_s"] = time.perf_counter() - start
-    return ReplayResult(config, flight, result, folder, timings)
+    return ReplayResult(config, flight, result, folder, timings, passes[1] if passes else None)
 
 
 def _smoothed_passes(config: NavigatorConfig, inputs, recorded: Flight | None, model_file: Path,

@@ -135,22 +135,16 @@ def test_a_flight_without_its_record_is_refused():
 @pytest.mark.flight
 def test_on_the_drive_excerpt_the_smoothed_outage_error_is_below_the_forward_one():
     """The excerpt's 15-s outage: forward ends about 4 m off; the smoothed trajectory stays within 1 m."""
-    from modelgen.navigator.config import load_config
-    from modelgen.navigator.errorstate import generate_filter_module, model_path
-    from modelgen.navigator.logs import read_gnss, read_imu
+    from modelgen.navigator.logs import read_gnss
     from modelgen.navigator.metrics import errors_against_reference
-    from modelgen.navigator.navigator import fly, prepare
-    from modelgen.navigator.smoother import smooth_flight
+    from modelgen.navigator.replay import run_replay
 
-    config = load_config(DATA / "excerpt.yaml")
-    inputs = prepare(config, read_imu(config.imu_source, config.gap_factor, config.gap_action),
-                     read_gnss(config.gnss_source))
-    forward = fly(config, inputs, generate_filter_module(model_path(config.model, config.path)),
-                  record=ForwardRecord())
-    smoothed = smooth_flight(forward)
+    result = run_replay(DATA / "excerpt.yaml", None, echo=lambda _: None, navigator="python", smooth=True)
+    forward, smoothed = result.flight, result.smoothed
+    reference = read_gnss(result.config.gnss_source)
     (start, end), = forward.outages
-    e_forward = errors_against_reference(forward, inputs.gnss)
-    e_smoothed = errors_against_reference(smoothed, inputs.gnss)
+    e_forward = errors_against_reference(forward, reference)
+    e_smoothed = errors_against_reference(smoothed, reference)
     inside = (e_forward.time >= start) & (e_forward.time < end)
     forward_max, smoothed_max = e_forward.horizontal[inside].max(), e_smoothed.horizontal[inside].max()
     assert forward_max > 1.0
