@@ -13,7 +13,7 @@ commented example.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -121,6 +121,13 @@ class NavigatorConfig:
     #: replay --smooth, configured schedule: horizontal RMS over every outage epoch, and each outage's maximum [m]
     target_smoothed_outage_rms_m: float | None = None
     target_smoothed_outage_max_m: float | None = None
+
+
+    #: initial.gyro/accel_scale_factor_sigma_ppm (as a fraction; used only by models with scale-factor states)
+    gyro_scale_factor_sigma: float | None = None
+    accel_scale_factor_sigma: float | None = None
+    #: parameters: model parameters the navigator does not set, by name, in the model's units
+    parameters: dict[str, float] = field(default_factory=dict)
     #: output.folder: the report folder when the command line gives none (relative paths from the configuration's
     #: folder), or None
     output_folder: Path | None = None
@@ -413,6 +420,9 @@ def load_config(path: str | Path) -> NavigatorConfig:
         nhc_rate_max=r.number("nhc.rate_max_deg_s", 1e9, positive=True) * DEG,
         outage_schedule=schedule, outage_windows=windows,
         imu_source=imu_source, gnss_source=gnss_source, gap_action=gap_action, **_evaluation(r),
+        gyro_scale_factor_sigma=_ppm(r, "initial.gyro_scale_factor_sigma_ppm"),
+        accel_scale_factor_sigma=_ppm(r, "initial.accel_scale_factor_sigma_ppm"),
+        parameters=_model_parameters(r),
         output_folder=_output_folder(r),
     )
     validate(data, r.where)  # and what the checks above leave to the schema (types, ranges, required keys)
@@ -426,6 +436,21 @@ def _output_folder(reader: _Reader) -> Path | None:
         return None
     name = reader.text("output.folder")
     return Path(name) if Path(name).is_absolute() else reader.path.parent / name
+
+
+def _ppm(reader: _Reader, key: str) -> float | None:
+    """An optional sigma in ppm, as a fraction."""
+    return None if reader.get(key, None) is None else reader.number(key, positive=True) * 1e-6
+
+
+def _model_parameters(reader: _Reader) -> dict[str, float]:
+    """parameters: name -> a finite number (the model's unit); the navigator checks the names against the model."""
+    raw = reader.get("parameters", None)
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise ModelError(f"{reader.where('parameters')}: parameters must map model parameter names to numbers")
+    return {str(name): reader.number(f"parameters.{name}") for name in raw}
 
 
 def builtin_config_path() -> Path:

@@ -30,7 +30,9 @@ from modelgen.codegen.build import STRICT_FLAGS
 from modelgen.codegen.generate import generate_code, harness_folder
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
+from modelgen.navigator import cconfig
 from modelgen.navigator.cnav import N_OUTPUT, REST_MAX, LogArrays, render_navigator, rest_define
+from modelgen.navigator.spec import NavigatorSpec
 
 MAX_IMU, MAX_EPOCHS = 60000, 2500
 CORTEX_M4F_COMMON = (*toolchain.CORTEX_M4F_FLAGS, "-O2", "-fno-math-errno", "-ffunction-sections", "-fdata-sections",
@@ -51,18 +53,14 @@ class EmbeddedReplay:
     outage_end_differences_m: list[float] = field(default_factory=list)
 
 
-def write_sources(model_file: Path, folder: Path) -> str:
-    """Float filter, navigator and qemu driver sources into ``folder``; returns the model name."""
-    from modelgen.derive.symbolic import derive
-    from modelgen.model.loading import load_model
-
-    derived = derive(load_model(model_file))
-    name = derived.model.name
+def write_sources(spec: NavigatorSpec, folder: Path) -> str:
+    """Float filter, navigator and qemu driver sources into ``folder`` (the spec's derived model); the model name."""
+    name = spec.name
     folder.mkdir(parents=True, exist_ok=True)
-    for file_name, text in generate_code(derived, CodegenOptions(scalar="float")).files.items():
+    for file_name, text in generate_code(spec.derived, CodegenOptions(scalar="float")).files.items():
         if file_name.endswith((".c", ".h")):
             (folder / file_name).write_text(text)
-    for file_name, text in render_navigator(name).items():
+    for file_name, text in render_navigator(spec).items():
         (folder / file_name).write_text(text)
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(harness_folder())), undefined=jinja2.StrictUndefined,
                              keep_trailing_newline=True)
@@ -76,8 +74,9 @@ def encode(a: LogArrays) -> bytes:
     """The driver's stdin (layout in modelgen/codegen/backends/c/harness/navigator_driver.c.j2)."""
     if len(a.time) > MAX_IMU or len(a.t_gnss) > MAX_EPOCHS:
         raise ModelError(f"embedded replay: the driver holds at most {MAX_IMU} IMU samples and {MAX_EPOCHS} epochs")
-    parts = [struct.pack("<4q", len(a.time), len(a.t_gnss), 0, 0)]
-    for array in (a.cfg, a.time, a.force, a.rate, a.t_gnss, a.target.astype(float), a.use.astype(float), a.gnss):
+    config = cconfig.pack(a.cfg, a.n_parameters)
+    parts = [struct.pack("<4q", len(a.time), len(a.t_gnss), len(config), 0), config]
+    for array in (a.time, a.force, a.rate, a.t_gnss, a.target.astype(float), a.use.astype(float), a.gnss):
         parts.append(np.ascontiguousarray(array, dtype="<f8").tobytes())
     return b"".join(parts)
 
@@ -107,7 +106,7 @@ def cortex_m4f_build(folder: Path, name: str, out_dir: Path,
     return total, worst, forbidden
 
 
-def embedded_replay(model_file: Path, arrays: LogArrays, reference: np.ndarray,
+def embedded_replay(spec: NavigatorSpec, arrays: LogArrays, reference: np.ndarray,
                     outage_ends: list[int] | None = None) -> EmbeddedReplay:
     """Build for Cortex-M4F and for qemu-arm, fly ``arrays`` under qemu, compare with ``reference`` outputs."""
     missing = toolchain.missing_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
@@ -118,7 +117,7 @@ def embedded_replay(model_file: Path, arrays: LogArrays, reference: np.ndarray,
     with tempfile.TemporaryDirectory(prefix="modelgen-nav-arm-") as work:
         folder, build = Path(work) / "src", Path(work) / "m4"
         build.mkdir()
-        name = write_sources(model_file, folder)
+        name = write_sources(spec, folder)
         sizes, worst, forbidden = cortex_m4f_build(folder, name, build, arrays.rest_max)
         exe = Path(work) / "navigator_arm"
         toolchain.run([toolchain.ARM_LINUX_CC, *STRICT_FLAGS, "-O2", "-static", rest_define(name, arrays.rest_max),

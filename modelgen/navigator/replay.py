@@ -13,11 +13,12 @@ from modelgen.errors import ModelError
 from modelgen.navigator.cnav import cached_c_navigator, fly_c, rest_capacity
 from modelgen.navigator.alignment import alignment_note
 from modelgen.navigator.config import NavigatorConfig, load_config
-from modelgen.navigator.errorstate import generate_filter_module, model_path
+from modelgen.navigator.errorstate import model_path
 from modelgen.navigator.logs import read_gnss, read_imu
 from modelgen.navigator.metrics import (errors_against_reference, pooled_consistency, schedule_record, summary,
                                         velocity_latency)
 from modelgen.navigator.navigator import Flight, fly, prepare
+from modelgen.navigator.spec import navigator_spec
 from modelgen.navigator.report import report_files
 from modelgen.navigator.smoother import ForwardRecord, smooth_flight, smoothing_summary
 from modelgen.fileio.output import write_atomically
@@ -89,11 +90,13 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     model_file = model_path(config.model, config.path)
     check_navigation_model(config, model_file)
     flights: dict[str, Flight] = {}
+    mark = time.perf_counter()
+    echo(f"  deriving {config.model} (once) with modelgen")
+    # the one derivation of this replay: the Python navigator, the C and the embedded build all use it
+    spec = navigator_spec(model_file, with_python=navigator in ("python", "both") or smooth)
+    spec.check_config(config)
+    timings["generate_python_s"] = time.perf_counter() - mark
     if navigator in ("python", "both"):
-        mark = time.perf_counter()
-        echo(f"  generating the {config.model} filter (Python) with modelgen")
-        module = generate_filter_module(model_file)
-        timings["generate_python_s"] = time.perf_counter() - mark
         mark = time.perf_counter()
         state = {"next": 0.0}
 
@@ -102,12 +105,11 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
                 echo(f"  flying (Python): {100 * fraction:5.1f} %  ({time.perf_counter() - mark:.1f} s)")
                 state["next"] = fraction + 0.25
 
-        flights["python"] = fly(config, inputs, module, progress,
-                                record=ForwardRecord() if smooth else None)
+        flights["python"] = fly(config, inputs, spec, progress, record=ForwardRecord() if smooth else None)
         timings["fly_python_s"] = time.perf_counter() - mark
     if navigator in ("c", "both"):
         mark = time.perf_counter()
-        compiled, cached = cached_c_navigator(model_file, echo, rest_capacity(config, inputs.time))
+        compiled, cached = cached_c_navigator(spec, echo, rest_capacity(config, inputs.time))
         timings["generate_compile_c_s"] = 0.0 if cached else time.perf_counter() - mark
         mark = time.perf_counter()
         echo("  flying (C)")
@@ -121,13 +123,15 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
 
         mark = time.perf_counter()
         echo("  Cortex-M4F build (float filter) and the log under qemu-arm")
-        arm = embedded_replay(model_file, log_arrays(config, inputs), flights["c"].outputs)
+        arm = embedded_replay(spec, log_arrays(config, inputs, spec), flights["c"].outputs)
         timings["embedded_s"] = time.perf_counter() - mark
     flight = flights["c"] if "c" in flights else flights["python"]
     timings["fly_s"] = timings.get("fly_c_s", timings.get("fly_python_s", 0.0))
     errors = errors_against_reference(flight, inputs.gnss)
     result = summary(flight, errors, inputs.gnss)
     result["navigator"] = "c" if "c" in flights else "python"
+    result["model"] = {"name": spec.name, "file": str(model_file), "states": spec.n_states, "frame": spec.frame,
+                       "blocks": sorted(spec.blocks)}
     note = alignment_note(config, flight.alignment, flight.first_epoch) if flight.alignment else None
     if note:
         echo(f"  warning: {note}")
@@ -140,7 +144,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         if "c" in flights:
             other = fly_c(again, inputs, compiled)[0]
         else:
-            other = fly(again, inputs, module)
+            other = fly(again, inputs, spec)
         schedules.append(schedule_record(entry.name, other, errors_against_reference(other, inputs.gnss), inputs.gnss,
                                          entry.target_end_rms_m))
     if config.evaluation_schedules:
@@ -164,7 +168,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     passes = None
     if smooth:
         mark = time.perf_counter()
-        passes = _smoothed_passes(config, inputs, flights.get("python"), model_file, echo)
+        passes = _smoothed_passes(config, inputs, flights.get("python"), spec, echo)
         result["smoothed"] = smoothing_summary(*passes, inputs.gnss, config.target_smoothed_outage_rms_m,
                                                config.target_smoothed_outage_max_m)
         timings["smooth_s"] = time.perf_counter() - mark
@@ -181,12 +185,12 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     return ReplayResult(config, flight, result, folder, timings, passes[1] if passes else None)
 
 
-def _smoothed_passes(config: NavigatorConfig, inputs, recorded: Flight | None, model_file: Path,
+def _smoothed_passes(config: NavigatorConfig, inputs, recorded: Flight | None, spec,
                      echo: Callable[[str], None]) -> tuple[Flight, Flight]:
     """(forward, smoothed): the Python flight recorded for the smoother, flown now if it was not flown yet."""
     if recorded is None:
         echo("  flying the Python navigator for the smoother (the C navigator keeps no transitions)")
-        recorded = fly(config, inputs, generate_filter_module(model_file), record=ForwardRecord())
+        recorded = fly(config, inputs, spec, record=ForwardRecord())
     return recorded, smooth_flight(recorded)
 
 

@@ -130,13 +130,14 @@ def test_the_c_navigator_also_skips_the_hidden_heading_epoch():
     """The C aligns itself from the per-epoch use flags: the same epoch and angles as the Python rules."""
     from modelgen.navigator.cnav import cached_c_navigator, fly_c, log_arrays
     from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.spec import navigator_spec
 
     config, inputs = _excerpt()
     free = align(config, inputs)
     hidden = replace(config, outage_schedule=None, outage_windows=[(free.time - inputs.first_epoch - 1.0, 4.0)])
     python = align(hidden, inputs)
-    navigator, _ = cached_c_navigator(model_path(config.model, config.path),
-                                      rest_max=log_arrays(hidden, inputs).rest_max)
+    spec = navigator_spec(model_path(config.model, config.path), with_python=False)
+    navigator, _ = cached_c_navigator(spec, rest_max=log_arrays(hidden, inputs, spec).rest_max)
     flight, _ = fly_c(hidden, inputs, navigator)
     assert flight.alignment["time"] == python.time > free.time
     assert abs(flight.alignment["heading"] - python.heading) <= 1e-12

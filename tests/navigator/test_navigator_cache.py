@@ -32,18 +32,20 @@ def test_a_corrupt_cached_navigator_is_not_loaded_but_compiled_again(tmp_path, m
     from modelgen.codegen.build import CACHE_ENV
     from modelgen.navigator.cnav import cache_folder, cached_c_navigator, navigator_key
     from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.spec import navigator_spec
 
     monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
     model = model_path("ins_gps15_nav", str(DATA / "excerpt.yaml"))
-    _, hit = cached_c_navigator(model)
+    spec = navigator_spec(model, with_python=False)
+    _, hit = cached_c_navigator(spec)
     assert not hit
     entries = sorted(cache_folder().glob(navigator_key(model, 1024) + "*.lib"))
     assert len(entries) == 1
     data = bytearray(entries[0].read_bytes())
     data[-100] ^= 0xFF  # one byte of the library itself
     entries[0].write_bytes(bytes(data))
-    navigator, hit = cached_c_navigator(model)
+    navigator, hit = cached_c_navigator(spec)
     assert not hit and navigator.size > 0  # compiled again
     assert len(sorted(cache_folder().glob(navigator_key(model, 1024) + "*.lib"))) == 2  # kept under the next name
-    _, hit = cached_c_navigator(model)
+    _, hit = cached_c_navigator(spec)
     assert hit  # and the good entry is used from then on

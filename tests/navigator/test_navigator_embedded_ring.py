@@ -35,6 +35,7 @@ def test_the_arm_build_has_the_configurations_rest_ring_and_flies_like_the_host_
     from modelgen.navigator.errorstate import model_path
     from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
     from modelgen.navigator.navigator import prepare
+    from modelgen.navigator.spec import navigator_spec
 
     config = load_config(DATA / "excerpt.yaml")
     inputs = prepare(config, read_imu_csv(config.imu_file, config.imu_columns, config.gap_factor),
@@ -48,11 +49,12 @@ def test_the_arm_build_has_the_configurations_rest_ring_and_flies_like_the_host_
     force[before], rate[before] = inputs.force[source], inputs.rate[source]
     quiet = replace(inputs, force=force, rate=rate)
     long_window = replace(config, rest_window=20.0)
-    arrays = log_arrays(long_window, quiet)
+    spec = navigator_spec(model_path(config.model, config.path), with_python=False)
+    arrays = log_arrays(long_window, quiet, spec)
     assert arrays.rest_max > REST_MAX
-    navigator, _ = cached_c_navigator(model_path(config.model, config.path), rest_max=arrays.rest_max)
+    navigator, _ = cached_c_navigator(spec, rest_max=arrays.rest_max)
     host, _ = fly_c(long_window, quiet, navigator)
     assert host.alignment["rest_samples"] > REST_MAX  # the window really needs the larger ring
-    arm = embedded_replay(model_path(config.model, config.path), arrays, host.outputs)
+    arm = embedded_replay(spec, arrays, host.outputs)
     assert arm.forbidden_symbols == []
     assert arm.max_position_difference_m <= 0.01  # measured 2.3e-5 m

@@ -22,10 +22,11 @@ DATA = Path(__file__).parent / "data"
 def gap_flights():
     from modelgen.navigator.cnav import cached_c_navigator, fly_c
     from modelgen.navigator.config import load_config
-    from modelgen.navigator.errorstate import generate_filter_module, model_path
+    from modelgen.navigator.errorstate import model_path
     from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
     from modelgen.navigator.logs.checks import apply_gap_policy
     from modelgen.navigator.navigator import fly, prepare
+    from modelgen.navigator.spec import navigator_spec
 
     config = load_config(DATA / "excerpt.yaml")
     imu = read_imu_csv(config.imu_file, config.imu_columns, config.gap_factor)
@@ -39,9 +40,9 @@ def gap_flights():
     gapped = apply_gap_policy(gapped, config.gap_factor, config.gap_action)
     assert len(gapped.gaps) == 1 and gapped.gaps[0].length == pytest.approx(5.0, abs=0.02)
     full, with_gap = prepare(config, imu, gnss), prepare(config, gapped, gnss)
-    module = generate_filter_module(model_path(config.model, config.path))
-    navigator, _ = cached_c_navigator(model_path(config.model, config.path))
-    flights = {"python": (fly(config, full, module), fly(config, with_gap, module)),
+    spec = navigator_spec(model_path(config.model, config.path))
+    navigator, _ = cached_c_navigator(spec)
+    flights = {"python": (fly(config, full, spec), fly(config, with_gap, spec)),
                "c": (fly_c(config, full, navigator)[0], fly_c(config, with_gap, navigator)[0])}
     return first, flights
 
