@@ -3,7 +3,8 @@
 A model with a ``navigation:`` section carries its navigation problem
 (:attr:`modelgen.model.declaration.ErrorModel.navigation`): the frame, the
 mechanization object (:mod:`modelgen.model.mechanizations`) and any velocity
-or position equation the file writes itself.  The error model is the
+or position equation the file writes itself (a model written as equations is
+flown by the default mechanization, local_level in its own frame).  The error model is the
 perturbation of exactly these equations; this module takes the same
 expressions, unperturbed, for the navigator that flies the model:
 
@@ -37,7 +38,7 @@ import sympy as sp
 
 from modelgen.errors import ModelError
 from modelgen.model import wgs84
-from modelgen.model.mechanizations.local_level import Gravity, MeridianRadius, PrimeVerticalRadius
+from modelgen.model.mechanizations.local_level import Gravity, LocalLevel, MeridianRadius, PrimeVerticalRadius
 from modelgen.model.perturbation import NavigationState
 
 #: NED -> ENU (the local-level frames' components: swap north and east, up = -down).
@@ -89,27 +90,24 @@ def wgs84_earth_functions(latitude: sp.Expr, height: sp.Expr) -> dict:
 def mechanization_rates(model) -> MechanizationRates:
     """The rates of ``model``'s own mechanization (module doc); ModelError for a model the navigator cannot fly so."""
     problem = getattr(model, "navigation", None)
-    if problem is None:
-        raise ModelError(f"model {model.name}: the navigator's mechanization is generated from a model's "
-                         "navigation: section (frame, mechanization, equations); this model has none")
-    if problem.mechanization_name != "local_level" or problem.frame not in _NED_TO_FRAME:
+    name, frame = (problem.mechanization_name, problem.frame) if problem is not None else ("local_level", str(model.frame).upper())
+    if name != "local_level" or frame not in _NED_TO_FRAME:
         raise ModelError(f"model {model.name}: the navigator flies the local_level mechanization in NED or ENU "
-                         f"(this model: {problem.mechanization_name}, frame {problem.frame})")
-    mech = problem.mechanization()
-    T = _NED_TO_FRAME[problem.frame]
-    latitude, longitude, height = problem.position
+                         f"(this model: {name}, frame {frame or 'none'})")
+    mech, position, attitude, body_rate, earth_rate = _equations(problem, frame)
+    T = _NED_TO_FRAME[frame]
+    latitude, longitude, height = position
     inputs = (latitude, longitude, height, *sp.symbols("v_north v_east v_down", real=True))
     velocity = T * sp.Matrix(inputs[3:])
     force = sp.Matrix(sp.symbols("mechanization_f0:3", real=True, cls=sp.Dummy))
-    state = NavigationState(problem.attitude, velocity, problem.position, force, problem.body_rate,
-                            problem.position, problem.position)
+    state = NavigationState(attitude, velocity, position, force, body_rate, position, position)
     velocity_rate = mech.velocity_rate(state)
     if velocity_rate.jacobian(list(force)) != sp.eye(3):
         raise ModelError(f"model {model.name}: the navigator integrates the specific force as C_b^n f^b increments: "
                          "the velocity equation must have the term f_n (plus terms without the specific force)")
-    earth = {**wgs84_earth_functions(latitude, height), problem.earth.earth_rate: _earth_rate(model, problem)}
+    earth = {**wgs84_earth_functions(latitude, height), earth_rate: _earth_rate(model, str(earth_rate))}
     rates = MechanizationRates(
-        model.name, problem.frame, inputs,
+        model.name, frame, inputs,
         (T.T * velocity_rate.xreplace({s: 0 for s in force})).xreplace(earth),
         mech.position_rate(state).xreplace(earth),
         (T.T * mech.navigation_rate(state)).xreplace(earth),
@@ -118,11 +116,23 @@ def mechanization_rates(model) -> MechanizationRates:
     return rates
 
 
-def _earth_rate(model, problem) -> sp.Float:
+def _equations(problem, frame: str) -> tuple:
+    """(mechanization, position, attitude, body-rate symbols, Earth-rate symbol) of the model's navigation problem.
+
+    A model written as equations (no ``navigation:`` section) declares no mechanization: it is flown by the
+    default of a navigation section, the local_level mechanization in its own frame.
+    """
+    if problem is not None:
+        return problem.mechanization(), problem.position, problem.attitude, problem.body_rate, problem.earth.earth_rate
+    earth_rate = sp.Symbol("omega_ie", real=True)
+    position = sp.Matrix(sp.symbols("L lambda_ h", real=True))
+    return LocalLevel(frame, earth_rate), position, sp.Matrix(3, 3, sp.symbols("c1:4(1:4)", real=True)), None, earth_rate
+
+
+def _earth_rate(model, symbol: str) -> sp.Float:
     """The value of the model's Earth-rate parameter (its default; the navigation reader gives IS-GPS-200's)."""
-    name = str(problem.earth.earth_rate)
     for parameter in model.parameters:
-        if parameter.symbol == name and parameter.value is not None:
+        if (parameter.symbol == symbol or parameter.name == "earth_rate") and parameter.value is not None:
             return sp.Float(parameter.value)
     return sp.Float(wgs84.GPS_EARTH_RATE)
 
