@@ -29,6 +29,11 @@ from them:
   disagree; a parameter the table does not know comes from the configuration's
   ``parameters:`` section or the model's default.
 
+* the mechanization's physics: the model's own rates (``navigation_rates``, from
+  the equations its error model is derived from; :mod:`modelgen.derive.mechanization_rates`)
+  printed as Python (compiled) and C (:mod:`modelgen.codegen.mechanization`) for the
+  navigators' fixed integrators.
+
 A model whose states do not make the attitude, velocity and position blocks is
 refused with one error naming its file.
 """
