@@ -292,7 +292,9 @@ def model_hash(model) -> str:
     Written into the generated code so that a program can tell which model its
     filter was generated from; any change to the declaration changes it.
     """
-    declaration = dataclasses.asdict(model)
+    # the navigation problem (the equations the model was derived from, carried on it) is no part of the declaration
+    declaration = dataclasses.asdict(dataclasses.replace(model, navigation=None) if getattr(model, "navigation", None) else model)
+    declaration.pop("navigation", None)
     declaration.pop("neglected", None)  # what the derivation dropped, carried on the model: not part of the declaration
     declaration.pop("attitude_reset", None)  # derived from the declaration's error definition, like the neglected terms
     canonical = json.dumps(declaration, sort_keys=True, default=repr, ensure_ascii=True)

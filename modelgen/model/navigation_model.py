@@ -901,7 +901,7 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
     attitude_names = [s.name for s in decl.states if sp.Symbol(s.symbol, real=True) in definition.attitude_states]
     model = replace(
         _error_model(data, lines, filename, decl, own, equations, measurement_decls),
-        neglected=equations.neglected, attitude_reset=pt.attitude_reset(definition, attitude_names),
+        neglected=equations.neglected, attitude_reset=pt.attitude_reset(definition, attitude_names), navigation=problem,
     )
     return NavigationDerivation(model=model, equations=equations)
 

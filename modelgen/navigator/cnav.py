@@ -53,7 +53,7 @@ ALIGNMENT_ERRORS = {
 
 def earth_constants() -> dict[str, str]:
     """The WGS-84 constants the C navigator uses, printed from :mod:`modelgen.model.wgs84` to round-trip exactly."""
-    names = ("EARTH_RATE", "SEMI_MAJOR_AXIS", "FLATTENING", "EQUATORIAL_GRAVITY", "SOMIGLIANA_K", "GRAVITY_RATIO_M",
+    names = ("SEMI_MAJOR_AXIS", "FLATTENING", "EQUATORIAL_GRAVITY", "SOMIGLIANA_K", "GRAVITY_RATIO_M",
              "ECCENTRICITY_SQUARED")
     return {name: repr(float(getattr(wgs84, name))) for name in names}
 
@@ -84,7 +84,7 @@ def template_context(spec: NavigatorSpec) -> dict:
                           for r in spec.gnss_rows],
             "frame": [[_literal(v) for v in row] for row in spec.to_frame], "frame_name": spec.frame,
             "rows_max": max(6, len(spec.gnss_rows)), "n_free": len(free), "free_names": ", ".join(free) or "none",
-            "config_struct": cconfig.c_struct(spec.name, len(free))}
+            "config_struct": cconfig.c_struct(spec.name, len(free)), "mechanization_rates": spec.rates_c}
 
 
 def aiding_context(table=SENSORS) -> dict:
@@ -194,6 +194,8 @@ def navigator_key(model_file: Path, rest_max: int) -> str:
     sources = sorted(Path(template_folder()).glob("*.j2")) + sorted(backends.rglob("*.j2")) + sorted(backends.rglob("*.py"))
     here = Path(__file__).resolve().parent
     sources += [here / "spec.py", here / "cconfig.py", here / "cconfig_fields.py", here / "cnav.py", here / "sensors.py"]  # they shape the rendered C
+    codegen = backends.parent  # the mechanization rates' generator and their symbolic source
+    sources += [codegen / "mechanization.py", codegen.parent / "derive" / "mechanization_rates.py"]
     for template in sources:
         digest.update(template.name.encode() + template.read_bytes())
     digest.update(f"\nrest_max {int(rest_max)}\nflags {' '.join(STRICT_FLAGS)} -O2\n".encode())

@@ -1,38 +1,63 @@
-"""Strapdown mechanization in the local-level NED frame at the IMU rate (WGS-84, normal gravity).
+"""Strapdown mechanization at the IMU rate: fixed integration around the model's generated rates.
 
 The navigation state is one float array ``nav`` of :data:`NAV_SIZE` entries:
 the body-to-NED attitude quaternion (scalar first), the NED velocity [m/s],
 latitude and longitude [rad] and height [m].  :func:`mechanize` advances it
 over a run of IMU samples; the same arithmetic, line for line, is the C
-navigator's (``templates/navigator_c.c.j2``), so that both trajectories agree
+navigator's (``navigator_source.c.j2``), so that both trajectories agree
 to rounding.
 
+The physics is not written here: the velocity rate without the specific force
+(-(2 w_ie + w_en) x v + g), the position rates and w_in are the model's own
+mechanization equations (the ones its error model is derived from), generated
+as ``navigation_rates`` (:mod:`modelgen.derive.mechanization_rates`, printed by
+:mod:`modelgen.codegen.mechanization`) and passed in as ``rates``
+(:func:`model_rates`).  The exact equations are flown (WGS-84 radii, normal
+gravity with its free-air terms): a model's declared approximations simplify its
+error model only (docs/navigation-library.md, "The navigator flies the exact equations").
+
 Per sample k (interval t[k-1] -> t[k], dt the actual interval, so dropped
-samples are bridged):
+samples are bridged), the fixed, numerically delicate part:
 
 * increments by the trapezoid rule of the bias-corrected body rates and
   specific forces: dtheta = (w[k-1] + w[k]) dt / 2, dv = (f[k-1] + f[k]) dt / 2;
 * two-sample coning dtheta + dtheta_prev x dtheta / 12 and sculling
   dv + dtheta x dv / 2 + (dtheta_prev x dv + dv_prev x dtheta) / 12
   (Savage, Strapdown Analytics, ch. 7);
-* velocity: v += C_b^n dv - (2 omega_ie + omega_en) x v dt + g dt, with
-  Somigliana normal gravity at the current latitude and height;
-* attitude: q = q(-omega_in dt) * q * q(dtheta), normalized;
-* position: latitude, longitude, height from the mean of the old and new velocity.
+* velocity: v += C_b^n dv + (v' - C f)(start of the interval) dt;
+* attitude: q = q(-w_in dt) * q * q(dtheta), normalized;
+* position: the height from the mean of the old and new velocity, then
+  latitude and longitude from the mean velocity at the mean height.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Callable
 
 import numpy as np
 
-from modelgen.model.wgs84 import EARTH_RATE
 from modelgen.simulation.earth import normal_gravity as gravity  # Somigliana with the free-air terms, +Down
 from modelgen.simulation.earth import radii_of_curvature as radii  # R_M, R_N
-from modelgen.simulation.jit import compiled
+from modelgen.simulation.jit import HAVE_NUMBA, compiled
 
 NAV_SIZE = 10  # q0 q1 q2 q3, vN vE vD, latitude, longitude, height
+
+
+def model_rates(source: str, name: str) -> Callable:
+    """The generated ``navigation_rates`` of a model (:func:`modelgen.codegen.mechanization.python_source`), compiled.
+
+    Compiled with numba when it is installed (the caller :func:`mechanize` is), without its disk cache:
+    the function is made from the model file at run time.
+    """
+    namespace: dict = {"math": math}
+    exec(compile(source, f"<{name} mechanization rates>", "exec"), namespace)  # noqa: S102 - our generated code
+    function = namespace["navigation_rates"]
+    if not HAVE_NUMBA:
+        return function
+    import numba
+
+    return numba.njit(fastmath=False, nogil=True)(function)
 
 
 @compiled
@@ -75,7 +100,7 @@ def _multiply(a0, a1, a2, a3, b0, b1, b2, b3):
 @compiled
 def mechanize(nav: np.ndarray, history: np.ndarray, time: np.ndarray, force: np.ndarray, rate: np.ndarray,
               start: int, stop: int, gyro_bias: np.ndarray, accel_bias: np.ndarray, mean_force: np.ndarray,
-              gyro_scale: np.ndarray, accel_scale: np.ndarray) -> None:
+              gyro_scale: np.ndarray, accel_scale: np.ndarray, rates) -> None:
     """Advance ``nav`` over samples start..stop-1 (each from the sample before it), in place.
 
     ``force``, ``rate``: body-axis specific force and angular rate samples.
@@ -85,6 +110,8 @@ def mechanize(nav: np.ndarray, history: np.ndarray, time: np.ndarray, force: np.
     (3) are added to it, for the filter's operating point.
     ``gyro_scale``, ``accel_scale``: scale-factor estimates s (measured = (1 + s) true + b): the
     sensors are used as (raw - b) / (1 + s) (zeros for a model without scale-factor states).
+    ``rates``: the model's generated mechanization rates (:func:`model_rates`): the physics; this
+    function is the fixed integration around them.
     """
     q0, q1, q2, q3 = nav[0], nav[1], nav[2], nav[3]
     vn, ve, vd = nav[4], nav[5], nav[6]
@@ -106,13 +133,8 @@ def mechanize(nav: np.ndarray, history: np.ndarray, time: np.ndarray, force: np.
         s1 = u1 + 0.5 * (t2 * u0 - t0 * u2) + ((pt2 * u0 - pt0 * u2) + (pv2 * t0 - pv0 * t2)) / 12.0
         s2 = u2 + 0.5 * (t0 * u1 - t1 * u0) + ((pt0 * u1 - pt1 * u0) + (pv0 * t1 - pv1 * t0)) / 12.0
         pt0, pt1, pt2, pv0, pv1, pv2 = t0, t1, t2, u0, u1, u2
-        # earth and transport rates at the start of the interval
-        rm, rn = radii(lat)
-        sl, cl = math.sin(lat), math.cos(lat)
-        wie0, wie2 = EARTH_RATE * cl, -EARTH_RATE * sl
-        wen0 = ve / (rn + h)
-        wen1 = -vn / (rm + h)
-        wen2 = -ve * sl / cl / (rn + h)
+        # the model's rates (generated, ``rates``) at the start of the interval: v' - C f and w_in
+        r = rates(lat, lon, h, vn, ve, vd)
         # velocity
         c = quaternion_to_dcm(q0, q1, q2, q3)
         fn = c[0, 0] * s0 + c[0, 1] * s1 + c[0, 2] * s2
@@ -122,25 +144,21 @@ def mechanize(nav: np.ndarray, history: np.ndarray, time: np.ndarray, force: np.
         mean_force[1] += fe
         mean_force[2] += fd
         mean_force[3] += dt
-        a0, a1, a2 = 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2
-        g = gravity(lat, h)
-        vn_new = vn + fn - (a1 * vd - a2 * ve) * dt
-        ve_new = ve + fe - (a2 * vn - a0 * vd) * dt
-        vd_new = vd + fd - (a0 * ve - a1 * vn) * dt + g * dt
+        vn_new = vn + fn + r[0] * dt
+        ve_new = ve + fe + r[1] * dt
+        vd_new = vd + fd + r[2] * dt
         # attitude: body rotation, then the navigation frame's rotation
         r0, r1, r2, r3 = _rotation_quaternion(c0, c1, c2)
         q0, q1, q2, q3 = _multiply(q0, q1, q2, q3, r0, r1, r2, r3)
-        n0, n1, n2, n3 = _rotation_quaternion(-(wie0 + wen0) * dt, -wen1 * dt, -(wie2 + wen2) * dt)
+        n0, n1, n2, n3 = _rotation_quaternion(-r[6] * dt, -r[7] * dt, -r[8] * dt)
         q0, q1, q2, q3 = _multiply(n0, n1, n2, n3, q0, q1, q2, q3)
         norm = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
         q0, q1, q2, q3 = q0 / norm, q1 / norm, q2 / norm, q3 / norm
-        # position from the mean velocity
+        # position from the mean velocity: the height first, then latitude and longitude at the mean height
         mvn, mve, mvd = 0.5 * (vn + vn_new), 0.5 * (ve + ve_new), 0.5 * (vd + vd_new)
-        h_new = h - mvd * dt
-        mh = 0.5 * (h + h_new)
-        lat_new = lat + mvn / (rm + mh) * dt
-        lon = lon + mve / ((rn + mh) * cl) * dt
-        lat, h = lat_new, h_new
+        h_new = h + rates(lat, lon, h, mvn, mve, mvd)[5] * dt
+        p = rates(lat, lon, 0.5 * (h + h_new), mvn, mve, mvd)
+        lat, lon, h = lat + p[3] * dt, lon + p[4] * dt, h_new
         vn, ve, vd = vn_new, ve_new, vd_new
     nav[0], nav[1], nav[2], nav[3] = q0, q1, q2, q3
     nav[4], nav[5], nav[6] = vn, ve, vd

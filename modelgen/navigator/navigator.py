@@ -247,7 +247,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
             stop = min(target, k + step)
             mean_force[:] = 0.0
             mechanize(nav, history, time, force, rate, k + 1, stop + 1, gyro_bias, accel_bias, mean_force,
-                      gyro_scale, accel_scale)
+                      gyro_scale, accel_scale, spec.rates)
             period = time[stop] - time[k]
             k = stop
             kf.predict(parameters(mean_force[0:3] / mean_force[3], last_sigmas), period)

@@ -29,6 +29,11 @@ from them:
   disagree; a parameter the table does not know comes from the configuration's
   ``parameters:`` section or the model's default.
 
+* the mechanization's physics: the model's own rates (``navigation_rates``, from
+  the equations its error model is derived from; :mod:`modelgen.derive.mechanization_rates`)
+  printed as Python (compiled) and C (:mod:`modelgen.codegen.mechanization`) for the
+  navigators' fixed integrators.
+
 A model whose states do not make the attitude, velocity and position blocks is
 refused with one error naming its file.
 """
@@ -44,6 +49,8 @@ from types import ModuleType, SimpleNamespace
 import numpy as np
 import sympy as sp
 
+from modelgen.codegen.mechanization import c_source, python_source
+from modelgen.derive.mechanization_rates import mechanization_rates
 from modelgen.errors import ModelError
 from modelgen.model.frames import NED_TO_ENU
 
@@ -133,6 +140,11 @@ class NavigatorSpec:
     free_parameters: tuple[str, ...]  # set by the configuration's parameters: or the model's default
     defaults: dict[str, float]
     module: ModuleType | None = None
+    #: the model's mechanization rates (modelgen.derive.mechanization_rates), as Python and C source
+    #: (modelgen.codegen.mechanization), and the Python one compiled (:func:`modelgen.navigator.mechanization.model_rates`)
+    rates_python: str = ""
+    rates_c: str = ""
+    rates: object = None
     _code: object = field(default=None, repr=False)
 
     # -- frames ------------------------------------------------------------------------------
@@ -354,11 +366,23 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
     defaults = {k: float(v) for k, v in model.parameter_defaults().items()}
     expressions = {p: QUANTITIES[p] for p in parameter_names if p in QUANTITIES and p not in defaults}
     free = tuple(p for p in parameter_names if p not in expressions)
+    rates = _rates(model, where)
     spec = NavigatorSpec(model_file, derived, model.name, frame, len(names), blocks, rows, parameter_names,
-                         expressions, free, defaults)
+                         expressions, free, defaults, rates_python=python_source(rates), rates_c=c_source(rates))
     if with_python:
+        from modelgen.navigator.mechanization import model_rates
+
         spec.module = _python_module(derived)
+        spec.rates = model_rates(spec.rates_python, model.name)
     return spec
+
+
+def _rates(model, where: str):
+    """The model's own mechanization rates (one source with its error model), refusals naming the file."""
+    try:
+        return mechanization_rates(model)
+    except ModelError as exc:
+        raise ModelError(f"{where}: {exc}") from None
 
 
 def _check_forms(model_file: Path) -> None:

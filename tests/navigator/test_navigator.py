@@ -18,6 +18,14 @@ pytestmark = pytest.mark.flight
 DATA = Path(__file__).parent / "data"
 
 
+def _drive_rates():
+    """The generated mechanization rates of the drive's NED model (ins_gps15_nav), compiled."""
+    from modelgen.navigator.spec import navigator_spec
+    from modelgen.fileio.datafiles import package_path
+
+    return navigator_spec(package_path("navigator", "models", "ins_gps15_nav.yaml")).rates
+
+
 def test_mechanization_at_rest_with_ideal_sensors_stays_at_rest():
     """Level, heading 30 deg, sensing exactly -g and the earth rate: 60 s at 100 Hz drift < 1 mm/s."""
     lat, h, yaw = math.radians(40.0), 1600.0, math.radians(30.0)
@@ -30,7 +38,8 @@ def test_mechanization_at_rest_with_ideal_sensors_stays_at_rest():
     nav = np.zeros(NAV_SIZE)
     nav[0:4] = dcm_to_quaternion(c_bn)
     nav[7], nav[9] = lat, h
-    mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4), np.zeros(3), np.zeros(3))
+    mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4), np.zeros(3), np.zeros(3),
+              _drive_rates())
     assert np.abs(nav[4:7]).max() < 1e-3
     assert abs(nav[7] - lat) * 6.37e6 < 0.03 and abs(nav[9] - h) < 0.03
 
@@ -47,7 +56,8 @@ def test_mechanization_integrates_a_constant_forward_acceleration():
     nav = np.zeros(NAV_SIZE)
     nav[0] = 1.0
     nav[7], nav[9] = lat, h
-    mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4), np.zeros(3), np.zeros(3))
+    mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4), np.zeros(3), np.zeros(3),
+              _drive_rates())
     assert nav[4] == pytest.approx(10.0, abs=0.01)
     assert (nav[7] - lat) * 6.363e6 == pytest.approx(50.0, rel=2e-3)
 
