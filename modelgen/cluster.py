@@ -129,6 +129,49 @@ def local_worker_count(requested: int | None = None) -> int:
     return requested or os.cpu_count() or 1
 
 
+#: Protocols of a --scheduler address: plain TCP (``tls://`` needs certificates modelgen does not
+#: configure, ``ucx://`` the ucx-py package; distributed fails on either with a TypeError).
+SCHEDULER_PROTOCOLS = ("tcp",)
+
+
+def _check_scheduler_protocol(scheduler: str) -> None:
+    """Refuse a --scheduler address whose protocol is not plain TCP, naming the one given (no protocol: tcp)."""
+    protocol = scheduler.split("://", 1)[0].lower() if "://" in scheduler else "tcp"
+    if protocol not in SCHEDULER_PROTOCOLS:
+        raise ModelError(
+            f"--scheduler {scheduler}: not a dask scheduler address modelgen can use: protocol {protocol}:// "
+            "(tls:// needs certificates and ucx:// "
+            "the ucx-py package, neither configured by modelgen); give a tcp://HOST:PORT address"
+        )
+
+
+def _connect_within(connect: Callable[[], Any], scheduler: str, timeout_s: float) -> Any:
+    """``connect()`` run in a thread of its own, given up after ``timeout_s``.
+
+    distributed's own timeout covers the TCP connection, not the handshake:
+    a service that accepts the connection and never answers as dask does (a
+    web server) held the client for minutes.  The abandoned thread is a
+    daemon; the caller reports the address and exits.
+    """
+    outcome: dict[str, Any] = {}
+
+    def attempt() -> None:
+        try:
+            outcome["client"] = connect()
+        except BaseException as exc:  # handed to the caller's thread
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=attempt, name="modelgen-scheduler-connect", daemon=True)
+    thread.start()
+    thread.join(timeout_s)
+    if thread.is_alive():
+        raise ModelError(f"--scheduler {scheduler}: no dask scheduler answered within {timeout_s:g} s "
+                         "(the address accepts connections but does not speak dask's protocol)")
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["client"]
+
+
 @contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None,
                 timeout_s: float = CONNECT_TIMEOUT_S) -> Iterator[Any]:
@@ -147,10 +190,13 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
         if workers is not None:
             raise ModelError(f"--workers {workers}: sizes the local cluster only; the cluster at --scheduler "
                              f"{scheduler} has the workers started there")
+        _check_scheduler_protocol(scheduler)
         try:
-            client = Client(scheduler, timeout=f"{timeout_s}s")
-        except ValueError as exc:
-            raise ModelError(f"--scheduler {scheduler}: not a dask scheduler address ({exc})") from None
+            client = _connect_within(lambda: Client(scheduler, timeout=f"{timeout_s}s"), scheduler, timeout_s)
+        except ModelError:
+            raise
+        except (ValueError, TypeError) as exc:  # TypeError: a protocol distributed has no working connector for
+            raise ModelError(f"--scheduler {scheduler}: not a dask scheduler address modelgen can reach ({exc})") from None
         except (OSError, TimeoutError) as exc:
             raise ModelError(f"--scheduler {scheduler}: no dask scheduler answered within {timeout_s:g} s "
                              f"({type(exc).__name__}: {exc})") from None

@@ -218,6 +218,32 @@ def test_an_unreachable_scheduler_is_a_clear_error_within_the_timeout():
             pass
 
 
+@pytest.mark.parametrize("address", ["ucx://127.0.0.1:9", "tls://127.0.0.1:9", "UCX://127.0.0.1:9"])
+def test_a_scheduler_protocol_other_than_tcp_is_refused_naming_it(address):
+    """ucx:// and tls:// ended in a TypeError from distributed, exit 3 (issue 28)."""
+    with pytest.raises(ModelError, match=rf"--scheduler {address}: not a dask scheduler address.*protocol {address[:3].lower()}://"):
+        with dask_client(address, timeout_s=2):
+            pass
+
+
+def test_a_service_that_is_not_dask_is_a_clear_error_within_the_timeout():
+    """A listener that accepts and never answers as dask does held the client over 90 s (issue 28)."""
+    import socket
+
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(8)
+    port = listener.getsockname()[1]
+    start = time.monotonic()
+    try:
+        with pytest.raises(ModelError, match=rf"--scheduler tcp://127.0.0.1:{port}: no dask scheduler answered within 2 s"):
+            with dask_client(f"tcp://127.0.0.1:{port}", timeout_s=2):
+                pass
+    finally:
+        listener.close()
+    assert time.monotonic() - start < 10
+
+
 def test_a_journal_keeps_results_as_they_complete_and_a_stopped_study_resumes_from_it(tmp_path):
     path = tmp_path / "study.jsonl"
     calls = []

@@ -100,9 +100,20 @@ def relative_difference(value: np.ndarray, ref: np.ndarray) -> float:
     return worst
 
 
-def scaled_differences(x: np.ndarray, P: np.ndarray, x_ref: np.ndarray, P_ref: np.ndarray) -> tuple[float, float]:
-    """(max |dP_ij|/sqrt(P_ii P_jj), max |dx_i|/sqrt(P_ii)) against the reference."""
-    sigma = np.sqrt(np.diag(P_ref))
+def scaled_differences(
+    x: np.ndarray, P: np.ndarray, x_ref: np.ndarray, P_ref: np.ndarray, initial_variance: np.ndarray | None = None
+) -> tuple[float, float]:
+    """(max |dP_ij|/sqrt(P_ii P_jj), max |dx_i|/sqrt(P_ii)) against the reference.
+
+    A state the reference pinned (:func:`pinned_states`: a measurement of
+    variance 0) has no sigma of its own; its differences are scaled by its
+    sigma at the start, ``initial_variance`` (the scenario's P0 diagonal),
+    the scale of the state before it was measured exactly.
+    """
+    variance = np.diag(P_ref)
+    if initial_variance is not None:
+        variance = np.where(pinned_states(P_ref, initial_variance), initial_variance, variance)
+    sigma = np.sqrt(variance)
     dP = np.abs(P - P_ref) / np.outer(sigma, sigma)
     dx = np.abs(x - x_ref) / sigma
     return float(dP.max()), float(dx.max())
@@ -124,6 +135,31 @@ def is_positive_definite(P: np.ndarray) -> bool:
     except np.linalg.LinAlgError:
         return False
     return True
+
+
+def pinned_states(P_ref: np.ndarray, initial_variance: np.ndarray | None) -> np.ndarray:
+    """The states whose reference variance is below the unit roundoff of their initial variance.
+
+    A measurement of variance 0 pins what it measures: its variance is 0 in
+    exact arithmetic, 0 or a rounding residue (2.6e-32 of 1) in floating
+    point, which no sum of terms of the initial variance's size resolves.
+    """
+    variance = np.diag(P_ref)
+    if initial_variance is None:
+        return np.zeros(variance.shape, dtype=bool)
+    return variance <= DOUBLE_UNIT_ROUNDOFF * np.asarray(initial_variance)
+
+
+def is_positive_semidefinite_within(P: np.ndarray, pinned: np.ndarray) -> bool:
+    """P positive definite over the states not ``pinned``; a pinned state's variance 0 or positive (rounding).
+
+    The pinned states (:func:`pinned_states`) have no correlation to judge;
+    their rows are compared with the reference's by the scaled differences.
+    """
+    if np.any(np.diag(P)[pinned] < 0):
+        return False
+    keep = ~pinned
+    return bool(not keep.any() or is_positive_definite(P[np.ix_(keep, keep)]))
 
 
 def measurement_sequence(derived: DerivedModel, scenario: CheckScenario) -> np.ndarray:
@@ -174,12 +210,18 @@ def compare(
     ref: list[tuple[np.ndarray, np.ndarray]],
     tolerance: float = float("nan"),
     scenario: str = "",
+    initial_variance: np.ndarray | None = None,
 ) -> ConformanceResult:
-    """Worst relative differences of ``run`` against ``ref`` over all steps."""
-    scaled = [scaled_differences(x, P, xr, Pr) for (x, P), (xr, Pr) in zip(run, ref)]
+    """Worst relative differences of ``run`` against ``ref`` over all steps.
+
+    ``initial_variance``: the scenario's P0 diagonal, the scale of a state
+    the reference pinned (:func:`scaled_differences`); a pinned state is
+    left out of the test of definiteness.
+    """
+    scaled = [scaled_differences(x, P, xr, Pr, initial_variance) for (x, P), (xr, Pr) in zip(run, ref)]
     elementwise = max(relative_difference(P, Pr) for (_, P), (_, Pr) in zip(run, ref))
     symmetric = all(np.array_equal(P, P.T) for _, P in run)
-    positive = all(is_positive_definite(P) for _, P in run)
+    positive = all(is_positive_semidefinite_within(P, pinned_states(Pr, initial_variance)) for (_, P), (_, Pr) in zip(run, ref))
     return ConformanceResult(
         name, len(run), max(s[0] for s in scaled), max(s[1] for s in scaled), elementwise, symmetric, positive, tolerance, scenario
     )
@@ -203,6 +245,7 @@ def check_generated(
     options = options or CodegenOptions()
     if options.scalar != "double":
         raise ModelError("the reference check needs double-precision code; float is checked by `modelgen embedded`")
+    _check_ud_variances(derived, scenario, options)
     folder = Path(folder)
     runs = {}
     for backend in backends():
@@ -216,7 +259,21 @@ def check_generated(
             raise ModelError(f"the check scenario ({scenario.label}) is refused by the generated {backend.name}: {error}") from None
     ref = reference_run(derived, scenario, options.taylor_order, options.taylor_tolerance, options.process_noise)
     tol = scenario_tolerance(derived, scenario, options.taylor_order)
-    return [compare(name, run, ref, tol, scenario.label) for name, run in runs.items()]
+    initial_variance = np.diag(scenario.initial_covariance)
+    return [compare(name, run, ref, tol, scenario.label, initial_variance) for name, run in runs.items()]
+
+
+def _check_ud_variances(derived: DerivedModel, scenario: CheckScenario, options: CodegenOptions) -> None:
+    """The UD form's Bierman update divides by each measurement's variance: a variance 0 at the scenario is refused, named."""
+    if not (options.ud and derived.n_measurements):
+        return
+    variances = np.diag(derived.numeric(scenario.parameters)["R"])
+    for measurement, variance in zip(derived.model.measurements, variances):
+        if not variance > 0.0:
+            raise ModelError(
+                f"measurement {measurement.name!r} has variance {variance:g} at the check scenario ({scenario.label}): "
+                "the UD form's Bierman update needs every variance positive (form 'covariance' takes a variance 0)"
+            )
 
 
 def _build_folder(build_dir: Path | None, backend: str) -> Path | None:

@@ -17,6 +17,18 @@ from __future__ import annotations
 import sympy as sp
 
 MATRIX_NAMES = ("F", "G", "H", "Q", "R")
+#: Largest expression factored, in tree nodes: sympy's multivariate factoring
+#: grows steeply with the generators (a 10-factor product's derivative, 1,243
+#: nodes: 2.6 s per entry; 40 factors ran for minutes, issue 28).  The built-in
+#: models' largest is 40 nodes; a larger one is shown as it is (display only).
+MAX_FACTORED_NODES = 500
+
+
+def _factor(expr: sp.Expr) -> sp.Expr:
+    """``sp.factor(expr)``, or ``expr`` itself when it has more than :data:`MAX_FACTORED_NODES` nodes."""
+    from modelgen.model.vectors import tree_size
+
+    return expr if tree_size(expr, MAX_FACTORED_NODES) > MAX_FACTORED_NODES else sp.factor(expr)
 
 
 def readable(expr: sp.Expr) -> sp.Expr:
@@ -27,13 +39,13 @@ def readable(expr: sp.Expr) -> sp.Expr:
     groups: dict[sp.Expr, list[sp.Expr]] = {}  # factored denominator -> numerators, in the order met
     for term in sp.Add.make_args(expr):
         numerator, denominator = sp.fraction(term)
-        groups.setdefault(sp.factor(denominator) if denominator != 1 else sp.S.One, []).append(numerator)
+        groups.setdefault(_factor(denominator) if denominator != 1 else sp.S.One, []).append(numerator)
     terms = []
     for denominator, numerators in groups.items():
         if denominator == 1 or len(numerators) == 1:
             terms += [n / denominator for n in numerators]
         else:  # R_N*x + h*x over (R_N + h)*y: factored, the common factor cancels
-            terms.append(sp.factor(sp.Add(*numerators)) / denominator)
+            terms.append(_factor(sp.Add(*numerators)) / denominator)
     return sp.factor_terms(sp.Add(*terms))
 
 

@@ -45,6 +45,10 @@ def display_path(path: str | Path) -> str:
     return path.name
 
 
+#: Largest YAML data file read (scenarios, tables, configurations), in bytes, as a model file's limit.
+MAX_DATA_FILE_BYTES = 1_000_000
+
+
 def data_path(filename: str = "") -> Path:
     """Path of a file shipped in ``modelgen/data`` (the folder itself without a file name)."""
     return package_path("data", filename) if filename else package_path("data")
@@ -62,6 +66,9 @@ def read_yaml_with_lines(path: str | Path, what: str = "data file") -> tuple[dic
         raise ModelError(f"{path}: is a folder, not a {what}")
     if not path.is_file():
         raise ModelError(f"{path}: no such {what}")
+    size = path.stat().st_size
+    if size > MAX_DATA_FILE_BYTES:  # refused by size before a byte is parsed (a 13 MB table ran over 2 min)
+        raise ModelError(f"{path}: {size} bytes; a {what} may have at most {MAX_DATA_FILE_BYTES}")
     try:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
@@ -75,6 +82,8 @@ def read_yaml_with_lines(path: str | Path, what: str = "data file") -> tuple[dic
         raise ModelError(f"{where}: not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
     except RecursionError:
         raise ModelError(f"{path}: nested too deeply to read") from None
+    except ValueError as exc:  # an integer of over 4300 digits (Python's limit on int(str))
+        raise ModelError(f"{path}: a number too long to read ({exc})") from None
     if not isinstance(data, dict):
         raise ModelError(f"{path}: expected a mapping at the top level")
     return data, lines

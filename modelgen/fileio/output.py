@@ -428,6 +428,66 @@ def write_bytes_atomically(path: Path, data: bytes, mode: int = 0o666) -> Path:
 #: Lock and staging names inside a report folder.
 REPORT_LOCK = ".modelgen.lock"
 REPORT_STAGING_PREFIX = f".{STAGING_INFIX}"
+#: The commit record of a report folder: which staging folder is being moved in, and each file's sha256.
+REPORT_COMMIT_RECORD = ".modelgen-commit.json"
+
+
+def _write_commit_record(folder: Path, staging: Path, files: Mapping[str, str]) -> None:
+    """Record, before the first file moves, what the commit will move (written atomically: whole or absent)."""
+    body = {"staging": staging.name, "files": dict(sorted(files.items()))}
+    write_text_atomically(folder / REPORT_COMMIT_RECORD, json.dumps(body, indent=2, sort_keys=True) + "\n")
+
+
+def _finish_commit(folder: Path, staging: Path, files: Mapping[str, str], manifest: dict[str, str]) -> None:
+    """Move every staged file still in ``staging`` into ``folder``, then the manifest; remove the record and the staging folder.
+
+    The same steps finish a commit whose process was killed halfway
+    (:func:`recover_report_commit`): the files already moved are not in
+    ``staging`` any more, the rest move now, so the folder ends holding the
+    whole new report, never a mix of two runs.
+    """
+    for rel in files:
+        source, target = staging / rel, folder / rel
+        if not (source.exists() or source.is_symlink()):
+            continue  # moved before the kill
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target)  # only planned with force
+        os.replace(source, target)
+    manifest = {**manifest, **files}
+    kept = {k: v for k, v in manifest.items() if (folder / k).is_file()}
+    body = {"generator": "modelgen", "version": __version__, "files": dict(sorted(kept.items()))}
+    write_text_atomically(folder / MANIFEST_NAME, json.dumps(body, indent=2, sort_keys=True) + "\n")
+    (folder / REPORT_COMMIT_RECORD).unlink(missing_ok=True)
+    shutil.rmtree(staging, ignore_errors=True)
+
+
+def recover_report_commit(folder: Path) -> bool:
+    """Finish the commit of a report writer that was killed while moving its files in (call with the lock held).
+
+    True if a commit was finished.  A record that cannot be read (it is
+    written atomically, so only a hand edit makes one) or names no staging
+    folder of this folder is removed, and the staging leftovers with it.
+    """
+    record = Path(folder) / REPORT_COMMIT_RECORD
+    if not record.is_file():
+        return False
+    try:
+        body = json.loads(record.read_text(encoding="utf-8"))
+        staging = Path(folder) / body["staging"]
+        files = {_safe_relative(record, str(k)): str(v) for k, v in dict(body["files"]).items()}
+        if not body["staging"].startswith(REPORT_STAGING_PREFIX) or "/" in body["staging"] or not staging.is_dir():
+            raise ValueError("no staging folder")
+    except (ValueError, KeyError, TypeError, AttributeError, ModelError):
+        record.unlink(missing_ok=True)
+        return False
+    try:
+        manifest = read_manifest(Path(folder)) or {}
+    except ModelError:
+        manifest = {}
+    with signals_held():
+        _finish_commit(Path(folder), staging, files, manifest)
+    return True
 
 
 def _owned_unchanged(folder: Path, rel: str) -> bool:
@@ -455,7 +515,12 @@ class ReportUpdate:
     new files are renamed into place one by one, a file of the same name is
     replaced only if modelgen wrote it and it was not edited since (or with
     ``force``), and the folder's manifest lists every report file modelgen
-    wrote.  Staging, lock (``.modelgen.lock``) and, if modelgen made the
+    wrote.  All or nothing: before the first file moves, a commit record
+    (``.modelgen-commit.json``: the staging folder and each file's sha256)
+    is written atomically; a writer killed while moving (SIGKILL: nothing
+    runs) leaves the record, and the next writer of the folder finishes the
+    commit before anything else, so the folder never stays a mix of two
+    runs.  Staging, lock (``.modelgen.lock``) and, if modelgen made the
     folder and wrote nothing, the folder itself are removed on the way out.
     """
 
@@ -474,6 +539,7 @@ class ReportUpdate:
         self._lock = folder_lock(self.folder, self.folder / REPORT_LOCK)
         self._lock.__enter__()
         try:
+            recover_report_commit(self.folder)
             for leftover in self.folder.glob(f"{REPORT_STAGING_PREFIX}*"):
                 if leftover.is_dir() and not leftover.is_symlink():
                     shutil.rmtree(leftover)
@@ -518,15 +584,10 @@ class ReportUpdate:
             if not self.force:
                 raise
             manifest = {}
+        files = {rel: sha256_file(self.staging / rel) for rel in staged}
+        staging = self.staging
         with signals_held():
-            for rel in staged:
-                target = self.folder / rel
-                target.parent.mkdir(parents=True, exist_ok=True)
-                if target.is_dir() and not target.is_symlink():
-                    shutil.rmtree(target)  # only reached with force
-                os.replace(self.staging / rel, target)
-                manifest[rel] = sha256_file(target)
-            kept = {k: v for k, v in manifest.items() if (self.folder / k).is_file()}
-            body = {"generator": "modelgen", "version": __version__, "files": dict(sorted(kept.items()))}
-            write_text_atomically(self.folder / MANIFEST_NAME, json.dumps(body, indent=2, sort_keys=True) + "\n")
+            _write_commit_record(self.folder, staging, files)
+            self.staging = None  # the record owns it now: a commit cut short is finished by the next writer
+            _finish_commit(self.folder, staging, files, manifest)
         return [self.folder / rel for rel in staged]

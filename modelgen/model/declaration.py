@@ -28,9 +28,13 @@ _IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 # -- limits on what a model may contain (issue 10, item 7) ---------------------
 #: Longest expression text accepted, in characters.
 MAX_EXPRESSION_LENGTH = 10_000
-#: Deepest expression accepted, counted in syntax-tree levels (each operand of
-#: a chain ``a + b + c`` is one level deeper than the next).
+#: Deepest expression accepted, counted in levels of nesting: the terms of one
+#: flat sum ``a + b + c`` (or factors of one flat product) share a level.
 MAX_EXPRESSION_DEPTH = 100
+#: Most syntax-tree levels accepted, the terms of a flat sum or product each
+#: one level (Python's compiler, which sympy's parser calls, recurses through
+#: them: about 3,000 exhaust it).
+MAX_SYNTAX_DEPTH = 1000
 #: Largest constant exponent accepted, in absolute value.
 MAX_EXPONENT = 64
 #: Longest number literal accepted, in characters.
@@ -528,13 +532,15 @@ def _check_syntax(text: str, namespace: Mapping[str, sp.Symbol], where: str) -> 
     except (RecursionError, MemoryError):
         raise ModelError(f"{where}: {_excerpt(text)} is nested too deeply to parse") from None
     unknown_symbols, unknown_functions = set(), set()
-    stack = [(tree.body, 1)]
+    stack = [(tree.body, 1, 1)]  # (node, nesting depth, syntax-tree depth)
     while stack:
-        node, depth = stack.pop()
+        node, depth, syntax_depth = stack.pop()
         if depth > MAX_EXPRESSION_DEPTH:
+            raise ModelError(f"{where}: {_excerpt(text)} is nested more than {MAX_EXPRESSION_DEPTH} levels deep")
+        if syntax_depth > MAX_SYNTAX_DEPTH:
             raise ModelError(
-                f"{where}: {_excerpt(text)} is nested more than {MAX_EXPRESSION_DEPTH} levels deep "
-                "(each term of a long sum or product counts as a level)"
+                f"{where}: {_excerpt(text)} has a sum or product of more than {MAX_SYNTAX_DEPTH} terms "
+                "(or nests sums of many terms more than that deep)"
             )
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):
             if node.func.id not in ALLOWED_FUNCTIONS and node.func.id not in namespace:
@@ -548,11 +554,26 @@ def _check_syntax(text: str, namespace: Mapping[str, sp.Symbol], where: str) -> 
             if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow):
                 _check_exponent(node.right, text, where)
             children = list(ast.iter_child_nodes(node))
-        stack.extend((child, depth + 1) for child in children)
+        stack.extend((child, depth + (not _continues_chain(node, child)), syntax_depth + 1) for child in children)
     if unknown_symbols:
         raise ModelError(f"{where}: unknown symbol(s) {', '.join(sorted(unknown_symbols))} in {_excerpt(text)}")
     if unknown_functions:
         raise ModelError(f"{where}: unknown function(s) {', '.join(sorted(unknown_functions))}")
+
+
+def _continues_chain(node: Any, child: Any) -> bool:
+    """``child`` is the left operand of ``node`` in one flat sum (``+ -``) or product (``* /``): the same level.
+
+    Python parses ``a + b + c`` as ``(a + b) + c``: the chain's left
+    operands nest, but the sum is flat; a right operand or a parenthesized
+    sum inside a product is nesting.
+    """
+    import ast
+
+    additive, multiplicative = (ast.Add, ast.Sub), (ast.Mult, ast.Div)
+    if not (isinstance(node, ast.BinOp) and isinstance(child, ast.BinOp) and child is node.left):
+        return False
+    return any(isinstance(node.op, family) and isinstance(child.op, family) for family in (additive, multiplicative))
 
 
 def _check_exponent(exponent: Any, text: str, where: str) -> None:

@@ -42,7 +42,7 @@ from modelgen.model.file_fields import free_text, notes_text, scalar_text
 from modelgen.model.unit_check import check_model_units
 from modelgen.model.units import declared_value
 from modelgen.model.vectors import component_names as _vector_component_names
-from modelgen.model.vectors import parse_vector_expression
+from modelgen.model.vectors import parse_vector_expression, tree_size
 
 #: Keys of a model file that derives its error model from the navigation equations.
 NAVIGATION_TOP_KEYS = frozenset({"model", "title", "source", "frame", "notes", "parameters", "navigation", "check"})
@@ -728,10 +728,30 @@ def _written_equations(read: _Reader, section: Mapping, frame: str, namespace: C
             value = parse_vector_expression(body, state_namespace(state, mech, frame, namespace()), where)
             if not isinstance(value, sp.MatrixBase) or value.shape != (3, 1):
                 raise ModelError(f"{where}: the rate must be a 3-vector, got {'a scalar' if not isinstance(value, sp.MatrixBase) else f'{value.rows}x{value.cols}'}")
+            _check_derivative_size(value, body, where)
             return value
 
         out[quantity] = equation
     return out
+
+
+#: Most nodes a derivative of a written navigation equation's element may have.  The
+#: perturbation differentiates, composes and simplifies each element: a product of n
+#: factors has derivatives of n terms of n factors, and 40 factors took minutes (issue 28;
+#: 15 factors, 2,300 nodes, take 4 s).  The built-in velocity equation's have under 80.
+MAX_DERIVATIVE_NODES = 2000
+
+
+def _check_derivative_size(value: sp.Matrix, body: str, where: str) -> None:
+    """Refuse a written equation whose derivative by some symbol has more than :data:`MAX_DERIVATIVE_NODES` nodes."""
+    for element in value:
+        for symbol in sorted(element.free_symbols, key=str):
+            if tree_size(sp.diff(element, symbol), MAX_DERIVATIVE_NODES) > MAX_DERIVATIVE_NODES:
+                raise ModelError(
+                    f"{where}: {body[:60]!r}{'...' if len(body) > 60 else ''} has a derivative of more than "
+                    f"{MAX_DERIVATIVE_NODES} operations, too large to derive the error equations from; write it in a smaller "
+                    "form (a product of many factors grows with the square of their number)"
+                )
 
 
 # -- the whole file --------------------------------------------------------------------------

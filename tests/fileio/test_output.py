@@ -312,3 +312,65 @@ def test_a_report_that_fails_leaves_no_folder_it_created(tmp_path):
             (staged.staging / "half.md").write_text("half")
             raise RuntimeError("the analysis failed")
     assert not (tmp_path / "report").exists()
+
+
+def _report_run(folder, texts, kill_after_moves=None, force=False):
+    """Write a report of ``texts`` (name -> text) through ReportUpdate; in a child killed (os._exit, as SIGKILL: nothing runs) after ``kill_after_moves`` moves."""
+    import modelgen.fileio.output as output
+
+    with output.ReportUpdate(folder, force=force) as staged:
+        for name, text in texts.items():
+            (staged.staging / name).parent.mkdir(parents=True, exist_ok=True)
+            (staged.staging / name).write_text(text)
+        if kill_after_moves is not None:
+            moves = []
+            real_replace = os.replace
+
+            def replace_then_die(source, target):
+                if ".modelgen-staging" in str(source):  # a staged file moving in (not the record's own rename)
+                    if len(moves) == kill_after_moves:
+                        os._exit(9)
+                    moves.append(target)
+                real_replace(source, target)
+
+            output.os.replace = replace_then_die  # the child's own module: the parent's is untouched
+        return staged.commit()
+
+
+@pytest.mark.parametrize("kill_after_moves", [0, 1, 2])
+def test_a_report_commit_killed_between_moves_is_finished_by_the_next_writer_never_a_mix(tmp_path, kill_after_moves):
+    """SIGKILL mid-commit (issue 28: trade's new summary.md beside the old trade.csv, then exit 2 until --force)."""
+    folder = tmp_path / "trade"
+    first = {"summary.md": "run 1\n", "trade.csv": "a\n1\n", "figures/f.txt": "fig 1\n"}
+    second = {"summary.md": "run 2\n", "trade.csv": "a\n2\n", "figures/f.txt": "fig 2\n"}
+    _report_run(folder, first)
+    pid = os.fork()
+    if pid == 0:  # the writer that is killed while moving its files in
+        try:
+            _report_run(folder, second, kill_after_moves=kill_after_moves)
+        finally:
+            os._exit(0)
+    _, status = os.waitpid(pid, 0)
+    assert os.WEXITSTATUS(status) == 9
+    assert (folder / ".modelgen-commit.json").is_file()  # the record of the commit cut short
+    from modelgen.fileio.output import ReportUpdate
+
+    with ReportUpdate(folder):  # the next writer (any report into the folder) finishes it first
+        pass
+    assert {name: (folder / name).read_text() for name in second} == second
+    assert not (folder / ".modelgen-commit.json").exists()
+    assert not [p.name for p in folder.iterdir() if p.name.startswith(".modelgen-staging")]
+    _report_run(folder, first)  # and a third run needs no --force: the manifest knows every file
+    assert {name: (folder / name).read_text() for name in first} == first
+
+
+def test_a_report_commit_record_that_names_no_staging_folder_is_dropped(tmp_path):
+    from modelgen.fileio.output import REPORT_COMMIT_RECORD, ReportUpdate
+
+    folder = tmp_path / "r"
+    _report_run(folder, {"a.txt": "1\n"})
+    (folder / REPORT_COMMIT_RECORD).write_text('{"staging": "../elsewhere", "files": {"a.txt": "0"}}')
+    with ReportUpdate(folder):
+        pass
+    assert not (folder / REPORT_COMMIT_RECORD).exists()
+    assert (folder / "a.txt").read_text() == "1\n"
