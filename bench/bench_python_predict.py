@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Benchmark (issue 31): the generated Python predict against dense numpy and a numba CSR loop, in one process.
 
-For the paper's 18-state model (its check scenario), the 32-state augmented model and a
+For the paper's 18-state model (its check scenario, `modelgen.jobs.check_scenario`), the 32-state augmented model and a
 100-state augmented model (``tests/codegen/large_model_support``; both the synthetic
 scenario, their own check scenario for 32 beside it), every side computes the same
 function on the same inputs (Phi and Q_d from the reference discretization, P after ten
@@ -49,7 +49,7 @@ from bench_python_module import BUILTIN, dense_predict, inputs, module_for  # no
 from numba_csr_predict import make as numba_csr_kernel  # noqa: E402
 from modelgen.codegen.generate import describe  # noqa: E402
 from modelgen.derive.symbolic import derive  # noqa: E402
-from modelgen.jobs import paper_scenario, synthetic_scenario  # noqa: E402
+from modelgen.jobs import check_scenario, synthetic_scenario  # noqa: E402
 from modelgen.model.loading import load_model  # noqa: E402
 from tests.codegen.large_model_support import large_model  # noqa: E402
 
@@ -75,7 +75,7 @@ def agree(got, want, what):
 
 def measure(n: int, scenario_kind: str, folder: Path) -> dict:
     derived = derive(load_model(BUILTIN[n]) if n in BUILTIN else large_model(n))
-    scenario = paper_scenario(derived) if scenario_kind == "check" else synthetic_scenario(derived)
+    scenario = check_scenario(derived) if scenario_kind == "check" else synthetic_scenario(derived)
     a = inputs(derived, scenario)
     x, P, Phi, Qd = a["x"], a["P"], a["Phi"], a["Qd"]
     lower = np.tril(np.ones((n, n), dtype=bool), -1)
