@@ -45,13 +45,13 @@ NHC_SIGMAS = (0.03, 0.05, 0.1)
 
 def _flight(args: tuple[float, float, float, str]) -> tuple[float, float, float, float, float]:
     """Median GNSS NIS and median NHC NIS of one flight without outages or gate."""
-    from modelgen.codegen.build import load_python_module
     from modelgen.navigator import errorstate
+    from modelgen.navigator.spec import navigator_spec
     from modelgen.navigator.config import builtin_config_path, load_config
     from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
     from modelgen.navigator.navigator import fly, prepare
 
-    gyro, accel, nhc, module_path = args
+    gyro, accel, nhc, model_file = args
     config = load_config(builtin_config_path())
     noise = dict(config.noise)
     for kind, factor in (("gyro_white", gyro), ("accel_white", accel)):
@@ -70,20 +70,18 @@ def _flight(args: tuple[float, float, float, str]) -> tuple[float, float, float,
 
     errorstate.ErrorStateFilter.update = recording
     inputs = prepare(config, read_imu_csv(config.imu_file, config.imu_columns), read_rtklib_pos(config.gnss_file))
-    flight = fly(config, inputs, load_python_module(Path(module_path)))
+    flight = fly(config, inputs, navigator_spec(Path(model_file)))
     return gyro, accel, nhc, float(np.median(flight.gnss_nis)), float(np.median(nhc_nis)) if nhc_nis else math.nan
 
 
 def main() -> None:
     """Run the grid (two processes), print the table and the choice."""
-    import tempfile
 
     from modelgen.navigator.config import builtin_config_path, load_config
-    from modelgen.navigator.errorstate import generate_filter_module, model_path
+    from modelgen.navigator.errorstate import model_path
 
     base = load_config(builtin_config_path())
-    module = generate_filter_module(model_path(base.model, base.path), Path(tempfile.mkdtemp(prefix="tuning-")))
-    path = str(module.__file__)
+    path = str(model_path(base.model, base.path))  # each worker derives it once (navigator_spec)
     target6, target2 = chi2.ppf(0.5, 6), chi2.ppf(0.5, 2)
     nhc0 = base.nhc_sigma_lateral
     with ProcessPoolExecutor(2) as pool:
@@ -115,7 +113,9 @@ def stage3() -> None:
 
     base = load_config(builtin_config_path())
     inputs = prepare(base, read_imu_csv(base.imu_file, base.imu_columns), read_rtklib_pos(base.gnss_file))
-    navigator, _ = cached_c_navigator(model_path(base.model, base.path))
+    from modelgen.navigator.spec import navigator_spec
+
+    navigator, _ = cached_c_navigator(navigator_spec(model_path(base.model, base.path), with_python=False))
     print("stage 3: GNSS everywhere, C navigator")
     print("gate probability    NHC rate limit  median NIS  RMS vs receiver [m]  de-weighted epochs")
     for probability in (0.9999, 1 - 1e-6, 1 - 1e-9, 1.0):

@@ -12,7 +12,8 @@ Monte Carlo worker, every ``modelgen simulate`` and every check of unchanged
 code would otherwise compile it again.  An entry is keyed by a digest of
 everything the compiler reads or is told: the C files and the headers beside
 them, the flags, and the compiler's resolved path and ``--version`` text.  It
-lives in ``$MODELGEN_CACHE_DIR``, else ``$XDG_CACHE_HOME/modelgen``, else
+lives in ``$MODELGEN_CACHE_DIR`` (an absolute path: a relative one is refused),
+else ``$XDG_CACHE_HOME/modelgen`` (if absolute, as the XDG rule says), else
 ``~/.cache/modelgen`` (folder ``libraries``).  An entry is written under a
 temporary name and then linked to its final name, which never replaces an
 existing file: two builders of the same code both succeed and one entry
@@ -118,6 +119,9 @@ def library_cache_folder() -> Path:
     cap_bytes()  # a bad $MODELGEN_CACHE_MAX_MB is refused here, before any work, not once a library is built
     explicit = os.environ.get(CACHE_ENV)
     if explicit:
+        if not os.path.isabs(explicit):  # the cache would follow the working folder (and land in a report's)
+            raise ModelError(f"${CACHE_ENV} {explicit!r} is not an absolute path: the compile cache would move with "
+                             "the working folder; give an absolute path")
         return Path(explicit) / "libraries"
     xdg = os.environ.get("XDG_CACHE_HOME")
     base = Path(xdg) if xdg and os.path.isabs(xdg) else Path.home() / ".cache"  # the XDG rule: relative is ignored

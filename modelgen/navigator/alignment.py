@@ -25,9 +25,12 @@ its per-sample and per-epoch calls):
   the latest candidate before it, the heading from its course.
 
 Every way this can fail has its own message (:func:`no_heading_error`,
-:func:`no_rest_error`): the log ends before the vehicle moves, the fast
-epochs are all in outages or of unused quality, the vehicle never moves, no
-rest epoch, the IMU moving at every rest epoch.
+:func:`no_rest_error`): the IMU log ends before the first fast GNSS epoch,
+the log ends with the vehicle still at rest (no used epoch even as fast as
+``rest_speed_m_s``), the fast epochs are all in outages or of unused
+quality, the vehicle moves but never as fast as ``heading_speed_m_s``, no
+rest epoch, the IMU moving at every rest epoch.  A log without any GNSS fix
+is refused before the alignment (:func:`modelgen.navigator.logs.checks.check_gnss_fixes`).
 """
 
 from __future__ import annotations
@@ -199,6 +202,12 @@ def no_heading_error(config: NavigatorConfig, inputs: Inputs, use: np.ndarray) -
         return ModelError(f"{where}: the GNSS epochs faster than alignment.heading_speed_m_s = {config.heading_speed:g} "
                           f"m/s ({int(fast.sum())}) all have a quality gnss.quality_factor does not use")
     fastest = int(np.argmax(np.where(use, speed, -1.0)))
+    if speed[fastest] < config.rest_speed:
+        end = min(float(g.time[-1]), float(inputs.time[-1]))
+        return ModelError(f"{where}: the log ends at {end - inputs.first_epoch:.2f} s with the vehicle still at rest "
+                          f"(every used GNSS epoch slower than alignment.rest_speed_m_s = {config.rest_speed:g} m/s; "
+                          f"fastest {speed[fastest]:.2f} m/s): it ends before the alignment, whose heading needs a "
+                          f"GNSS epoch faster than alignment.heading_speed_m_s = {config.heading_speed:g} m/s")
     return ModelError(f"{where}: the vehicle never moves faster than alignment.heading_speed_m_s = "
                       f"{config.heading_speed:g} m/s in the log (fastest used GNSS epoch {speed[fastest]:.2f} m/s at "
                       f"{g.time[fastest] - inputs.first_epoch:.2f} s): no heading for the alignment")

@@ -11,25 +11,33 @@ from modelgen.navigator.config import builtin_config_path
 
 @click.command("replay")
 @click.argument("config", required=False, type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("report/replay"),
-              show_default=True, help="folder of the report (replaced as a whole)")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="folder of the report (replaced as a whole) [default: the configuration's output.folder, "
+                   "else report/replay]")
 @click.option("--no-figures", is_flag=True, help="skip the SVG figures")
 @click.option("--force", is_flag=True, help="replace an output folder modelgen did not write")
 @click.option("--navigator", type=click.Choice(["c", "python", "both"]), default="c", show_default=True,
               help="the generated C navigator, the Python reference, or both (compared)")
 @click.option("--embedded", is_flag=True,
               help="also build for Cortex-M4F (float filter; size, stack) and replay under qemu-arm against the double C")
-def replay(config: Path | None, out: Path, no_figures: bool, force: bool, navigator: str, embedded: bool) -> None:
+def replay(config: Path | None, out: Path | None, no_figures: bool, force: bool, navigator: str, embedded: bool) -> None:
     """Fly a GNSS/IMU log with the generated navigator (default: the built-in car drive).
 
     CONFIG is a navigator configuration (YAML); without it the built-in drive
     (modelgen/data/replay_drive_0708.yaml, 549 s, 11 simulated GNSS outages)
     is flown.  Writes the trajectory (.pos, .csv), summary.md, summary.json and
     figures into --out.
+
+    Flying your own logs: every configuration key with its unit and default,
+    the log formats (CSV IMU, RTKLIB .pos, PX4 ULog, ROS 2 bag), the outage
+    and evaluation schedules and what each summary number means are in the
+    README section "Flying your own logs" and docs/replay-configuration.md;
+    the JSON schema is modelgen/data/replay_config.schema.json.
     """
     from modelgen.navigator.replay import run_replay
 
-    result = run_replay(config or builtin_config_path(), out, echo=lambda m: click.echo(m, err=True),
+    path = config or builtin_config_path()
+    result = run_replay(path, out if out is not None else report_folder(path), echo=lambda m: click.echo(m, err=True),
                         with_figures=not no_figures, force=force, navigator=navigator, embedded=embedded)
     s = result.summary
     click.echo(f"{s['outage_count']} outages: end-of-outage horizontal error RMS "
@@ -48,3 +56,13 @@ def replay(config: Path | None, out: Path, no_figures: bool, force: bool, naviga
         click.echo(f"C and Python trajectories agree within {s['c_python_max_difference_m']:.3g} m")
     click.echo(f"navigator ({s['navigator']}) {result.timings['fly_s']:.2f} s, total {result.timings['total_s']:.2f} s; "
                f"report in {result.folder}")
+
+
+DEFAULT_REPORT = Path("report/replay")
+
+
+def report_folder(config_path: Path) -> Path:
+    """The report folder when --out is not given: the configuration's output.folder, else report/replay."""
+    from modelgen.navigator.config import load_config
+
+    return load_config(config_path).output_folder or DEFAULT_REPORT

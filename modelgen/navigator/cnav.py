@@ -22,19 +22,20 @@ from pathlib import Path
 
 import jinja2
 import numpy as np
-from scipy.stats import chi2
 
 from modelgen.version import __version__
 from modelgen.codegen.build import compile_shared_library
 from modelgen.codegen.generate import generate_code, template_folder
 from modelgen.errors import ModelError
+from modelgen.navigator import cconfig
 from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator.navigator import Flight, Inputs
 from modelgen.navigator.outages import in_outage, outage_windows
+from modelgen.navigator.spec import SENSOR_BLOCKS, NavigatorSpec
 from modelgen.fileio.output import write_atomically
 from modelgen.model import wgs84
 
-N_CONFIG, N_OUTPUT, N_GNSS, N_ALIGNMENT = 49, 26, 13, 8
+N_OUTPUT, N_GNSS, N_ALIGNMENT = 26, 13, 8
 COUNT_NAMES = ("gnss_updates", "gnss_rejected", "gnss_released", "gnss_deweighted", "gnss_quality_skipped",
                "zupt_updates", "nhc_updates", "predicts")
 ALIGNMENT_NAMES = ("time", "roll", "pitch", "heading", "rest_end", "rest_samples", "rest_start", "motion_time")
@@ -54,36 +55,64 @@ def earth_constants() -> dict[str, str]:
     return {name: repr(float(getattr(wgs84, name))) for name in names}
 
 
-def render_navigator(model: str) -> dict[str, str]:
-    """The navigator's header and source for the generated filter named ``model``."""
+#: the C navigator's member that holds each sensor block's estimate
+SENSOR_TARGETS = {"gyro_bias": "gyro_bias", "accel_bias": "accel_bias", "gyro_scale_factor": "gyro_scale",
+                  "accel_scale_factor": "accel_scale"}
+
+
+def _literal(value: float) -> str:
+    return repr(float(value))
+
+
+def template_context(spec: NavigatorSpec) -> dict:
+    """What the navigator templates loop over: the spec's blocks, rows, parameter code and configuration struct."""
+    blocks = {kind: {"entries": [(i, a, _literal(sg)) for i, a, sg in zip(b.indices, b.axes, b.signs)],
+                     "form": b.form} for kind, b in spec.blocks.items()}
+    free = list(spec.free_parameters)
+    parameters = [(name, spec.parameter_expressions[name] if name in spec.parameter_expressions
+                   else f"cfg->parameters[{free.index(name)}]") for name in spec.parameter_names]
+    pos = spec.blocks["position"]
+    output = [None, None, None]
+    for i, a, sg in zip(pos.indices, pos.axes, pos.signs):
+        output[a] = (i, _literal(sg * (-1.0 if a == 2 else 1.0)))
+    return {"blocks": blocks, "sensor_targets": [(k, SENSOR_TARGETS[k]) for k in SENSOR_BLOCKS if k in spec.blocks],
+            "parameters": parameters, "position_output": output,
+            "gnss_rows": [{"kind": r.kind, "axis": r.axis, "sign": _literal(r.sign), "sigma_index": r.sigma_index}
+                          for r in spec.gnss_rows],
+            "frame": [[_literal(v) for v in row] for row in spec.to_frame], "frame_name": spec.frame,
+            "rows_max": max(6, len(spec.gnss_rows)), "n_free": len(free), "free_names": ", ".join(free) or "none",
+            "config_struct": cconfig.c_struct(spec.name, len(free))}
+
+
+def render_navigator(spec: NavigatorSpec) -> dict[str, str]:
+    """The navigator's header and source for the spec's model (its generated filter is ``<model>.h``)."""
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(template_folder())), undefined=jinja2.StrictUndefined,
                              keep_trailing_newline=True)
-    context = {"p": model, "P": model.upper(), "version": __version__, "wgs84": earth_constants()}
+    model = spec.name
+    context = {"p": model, "P": model.upper(), "version": __version__, "wgs84": earth_constants(),
+               **template_context(spec)}
     return {f"{model}_navigator.h": env.get_template("navigator_header.h.j2").render(context),
             f"{model}_navigator.c": env.get_template("navigator_source.c.j2").render(context)}
 
 
-def generate_c_navigator(model_file: Path, folder: Path) -> Path:
-    """Write the filter and the navigator C for the model file into ``folder`` (atomically)."""
-    from modelgen.derive.symbolic import derive
-    from modelgen.model.loading import load_model
-
-    derived = derive(load_model(model_file))
-    files = {name: text for name, text in generate_code(derived).files.items() if name.endswith((".c", ".h"))}
-    files.update(render_navigator(derived.model.name))
+def generate_c_navigator(spec: NavigatorSpec, folder: Path) -> Path:
+    """Write the filter and the navigator C for the spec's (already derived) model into ``folder`` (atomically)."""
+    files = {name: text for name, text in generate_code(spec.derived).files.items() if name.endswith((".c", ".h"))}
+    files.update(render_navigator(spec))
     return write_atomically(Path(folder), files)
 
 
 class CNavigator:
     """The compiled navigator library (one model)."""
 
-    def __init__(self, library: Path, model: str, rest_max: int = REST_MAX):
-        self.model = model
+    def __init__(self, library: Path, spec: NavigatorSpec, rest_max: int = REST_MAX):
+        self.spec = spec
+        self.model = spec.name
         self.rest_max = rest_max  # the alignment ring it was built with
         self.lib = ctypes.CDLL(str(library))
         self.size = int(self._fn("navigator_size", [], ctypes.c_ulong)())
         dp = ctypes.POINTER(ctypes.c_double)
-        self.configure = self._fn("navigator_configure", [ctypes.c_void_p, dp])
+        self.configure = self._fn("navigator_configure", [ctypes.c_void_p, ctypes.c_void_p])
         self.run = self._fn("navigator_run", [ctypes.c_void_p, ctypes.c_long, dp, dp, dp, ctypes.c_long, dp,
                                               ctypes.POINTER(ctypes.c_long), ctypes.POINTER(ctypes.c_int), dp, dp])
         self.alignment = self._fn("navigator_alignment", [ctypes.c_void_p, dp])
@@ -101,13 +130,13 @@ def rest_define(model: str, rest_max: int) -> str:
     return f"-D{model.upper()}_NAV_REST_MAX={int(rest_max)}"
 
 
-def build_c_navigator(model_file: Path, folder: Path, rest_max: int = REST_MAX) -> CNavigator:
-    """Generate, compile (strict C99, -O2) and load the navigator for a model file (ring of ``rest_max`` samples)."""
-    folder = generate_c_navigator(model_file, folder)
-    model = next(p.stem for p in folder.glob("*_navigator.c")).removesuffix("_navigator")
+def build_c_navigator(spec: NavigatorSpec, folder: Path, rest_max: int = REST_MAX) -> CNavigator:
+    """Generate, compile (strict C99, -O2) and load the navigator for a spec (ring of ``rest_max`` samples)."""
+    folder = generate_c_navigator(spec, folder)
+    model = spec.name
     library = compile_shared_library([folder / f"{model}.c", folder / f"{model}_navigator.c"],
                                      folder / f"lib{model}_navigator.so", ("-O2", rest_define(model, rest_max)))
-    return CNavigator(library, model, rest_max)
+    return CNavigator(library, spec, rest_max)
 
 
 def rest_capacity(config: NavigatorConfig, time: np.ndarray) -> int:
@@ -145,6 +174,8 @@ def navigator_key(model_file: Path, rest_max: int) -> str:
     digest.update(Path(model_file).read_bytes())
     backends = Path(__file__).resolve().parent.parent / "codegen" / "backends"  # the filter's templates and printer
     sources = sorted(Path(template_folder()).glob("*.j2")) + sorted(backends.rglob("*.j2")) + sorted(backends.rglob("*.py"))
+    here = Path(__file__).resolve().parent
+    sources += [here / "spec.py", here / "cconfig.py", here / "cnav.py"]  # they shape the rendered C
     for template in sources:
         digest.update(template.name.encode() + template.read_bytes())
     digest.update(f"\nrest_max {int(rest_max)}\nflags {' '.join(STRICT_FLAGS)} -O2\n".encode())
@@ -152,16 +183,17 @@ def navigator_key(model_file: Path, rest_max: int) -> str:
     return "navigator-" + digest.hexdigest()
 
 
-def _load_payload(payload: bytes, model: str, rest_max: int) -> CNavigator:
+def _load_payload(payload: bytes, spec: NavigatorSpec, rest_max: int) -> CNavigator:
     """Load a library from its bytes: written to a private temporary file, loaded, the file removed."""
     with tempfile.TemporaryDirectory(prefix="modelgen-navigator-") as folder:
-        library = Path(folder) / f"lib{model}_navigator.so"
+        library = Path(folder) / f"lib{spec.name}_navigator.so"
         library.write_bytes(payload)
-        return CNavigator(library, model, rest_max)
+        return CNavigator(library, spec, rest_max)
 
 
-def cached_c_navigator(model_file: Path, echo=lambda message: None, rest_max: int = REST_MAX) -> tuple[CNavigator, bool]:
-    """The compiled navigator for a model file, from the compile cache when its inputs are unchanged.
+def cached_c_navigator(spec: NavigatorSpec, echo=lambda message: None,
+                       rest_max: int = REST_MAX) -> tuple[CNavigator, bool]:
+    """The compiled navigator for a spec's model file, from the compile cache when its inputs are unchanged.
 
     Key: :func:`navigator_key`.  The entry is the compile cache's (:mod:`modelgen.codegen.build`): verified by its
     digest before it is loaded (a corrupt or cut-short entry is not loaded: the navigator is compiled again and kept
@@ -171,14 +203,13 @@ def cached_c_navigator(model_file: Path, echo=lambda message: None, rest_max: in
     from modelgen.codegen.build import cached_library, store_library
 
     folder = cache_folder()
-    key = navigator_key(model_file, rest_max)
-    model_name = _model_name(model_file)
-    payload = cached_library(folder, key) if model_name else None
+    key = navigator_key(spec.model_file, rest_max)
+    payload = cached_library(folder, key)
     if payload is not None:
-        return _load_payload(payload, model_name, rest_max), True
+        return _load_payload(payload, spec, rest_max), True
     echo(f"  generating and compiling the C navigator (once; cached in {folder})")
     with tempfile.TemporaryDirectory(prefix="modelgen-navigator-build-") as build:
-        navigator = build_c_navigator(model_file, Path(build) / "navigator", rest_max)
+        navigator = build_c_navigator(spec, Path(build) / "navigator", rest_max)
         library = Path(build) / "navigator" / f"lib{navigator.model}_navigator.so"
         try:
             folder.mkdir(parents=True, exist_ok=True)
@@ -188,48 +219,14 @@ def cached_c_navigator(model_file: Path, echo=lambda message: None, rest_max: in
     return navigator, False
 
 
-def _model_name(model_file: Path) -> str | None:
-    """The model's name as its file declares it (the library's symbol prefix), or None if it cannot be read."""
-    from modelgen.model.loading import load_model
+def config_values(config: NavigatorConfig, spec: NavigatorSpec, time_: np.ndarray) -> dict:
+    """The C configuration's field values (cconfig.FIELDS) for a configuration and a log's sample times."""
+    from modelgen.navigator.alignment import still_window_samples
 
-    try:
-        return load_model(model_file).name
-    except Exception:  # noqa: BLE001 - the build below reports the model's own error
-        return None
-
-
-def config_array(config: NavigatorConfig, window: int, step: int, still_window: int = 50) -> np.ndarray:
-    """The C configuration array (its layout is documented in the generated header).
-
-    ``window``, ``still_window``: the ZUPT's and the alignment's still-detector windows in samples.
-    """
-    gates = {m: float(chi2.ppf(config.nis_gate_probability, m)) for m in (2, 3, 6)}
-    cfg = np.zeros(N_CONFIG)
-    cfg[0:3] = config.lever_arm
-    cfg[3] = config.velocity_latency
-    cfg[4], cfg[5], cfg[6] = gates[2], gates[3], gates[6]
-    cfg[7] = 1.0 if config.gate_action == "deweight" else 0.0
-    cfg[8], cfg[9], cfg[10] = float(config.zupt_enabled), config.zupt_speed_max, config.zupt_sigma
-    cfg[11], cfg[12] = float(config.nhc_enabled), config.nhc_speed_min
-    cfg[13], cfg[14] = config.nhc_sigma_lateral, config.nhc_sigma_vertical
-    cfg[15], cfg[16], cfg[17], cfg[18] = config.zupt_gyro_max, config.zupt_accel_std_max, window, step
-    cfg[19] = config.noise["gyro_white"].si
-    cfg[20] = config.noise["accel_white"].si
-    cfg[21] = config.noise["gyro_bias_driving"].si
-    cfg[22] = config.noise["accel_bias_driving"].si
-    cfg[23], cfg[24] = config.minimum_sigma_position, config.minimum_sigma_velocity
-    for q, factor in config.quality_factor.items():
-        if 0 <= q <= 7:
-            cfg[25 + q] = factor
-    cfg[33] = config.gate_release_epochs
-    cfg[34] = config.nhc_rate_max
-    cfg[35], cfg[36], cfg[37] = config.rest_speed, config.rest_window, config.heading_speed
-    cfg[38], cfg[39] = config.roll_pitch_sigma, config.heading_extra_sigma
-    cfg[40], cfg[41], cfg[42] = config.velocity_sigma, config.position_sigma, config.height_sigma
-    cfg[43], cfg[44] = config.gyro_bias_sigma, config.accel_bias_sigma
-    cfg[45], cfg[46], cfg[47] = still_window, config.still_gyro_std_max, config.still_accel_std_max
-    cfg[48] = config.rest_span_min
-    return cfg
+    median_dt = float(np.median(np.diff(time_)))
+    window = max(2, int(round(config.zupt_window / median_dt)))
+    step = max(1, int(round(config.predict_period / median_dt)))
+    return cconfig.values(config, spec, window, step, still_window_samples(config, time_))
 
 
 def _pointer(array: np.ndarray, kind=ctypes.c_double):
@@ -240,7 +237,8 @@ def _pointer(array: np.ndarray, kind=ctypes.c_double):
 class LogArrays:
     """Everything the C navigator is given for one log, as contiguous arrays (shared by ctypes and qemu runs)."""
 
-    cfg: np.ndarray
+    cfg: dict  # the configuration's field values (cconfig.FIELDS)
+    n_parameters: int  # the model's free parameters (the struct's parameters[] count)
     time: np.ndarray
     force: np.ndarray
     rate: np.ndarray
@@ -252,25 +250,19 @@ class LogArrays:
     rest_max: int = REST_MAX  # the alignment ring this log and configuration need (:func:`rest_capacity`)
 
 
-def log_arrays(config: NavigatorConfig, inputs: Inputs) -> LogArrays:
+def log_arrays(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec) -> LogArrays:
     """The log laid out for the C navigator: every IMU sample and every GNSS epoch inside the IMU span."""
     g = inputs.gnss
     time_, force, rate = (np.ascontiguousarray(a, dtype=float) for a in (inputs.time, inputs.force, inputs.rate))
     windows = outage_windows(config.outage_schedule, config.outage_windows, inputs.first_epoch, float(g.time[-1]))
     outage = in_outage(g.time, windows)
-    median_dt = float(np.median(np.diff(time_)))
-    window = max(2, int(round(config.zupt_window / median_dt)))
-    step = max(1, int(round(config.predict_period / median_dt)))
-    from modelgen.navigator.alignment import still_window_samples
-
-    still = still_window_samples(config, time_)
     epochs = np.arange(len(g.time))
     target = np.searchsorted(time_, g.time[epochs]).astype(np.int64)
     epochs, target = epochs[target < len(time_)], target[target < len(time_)]
     gnss = np.column_stack([g.latitude, g.longitude, g.height, g.velocity, g.quality, g.sigma_position,
                             g.sigma_velocity])[epochs]
     contiguous = np.ascontiguousarray
-    return LogArrays(config_array(config, window, step, still), time_, force, rate,
+    return LogArrays(config_values(config, spec, time_), len(spec.free_parameters), time_, force, rate,
                      contiguous(g.time[epochs]), contiguous(target), contiguous((~outage[epochs]).astype(np.int32)),
                      contiguous(gnss), windows, rest_capacity(config, time_))
 
@@ -302,18 +294,19 @@ def flight_from_outputs(out: np.ndarray, arrays: LogArrays, inputs: Inputs, coun
     out = out[~np.isnan(out[:, 0])]
     nis = out[(out[:, 19] == 0) & ~np.isnan(out[:, 21]), 21]
     return Flight(out, arrays.windows, inputs.first_epoch, alignment["time"], list(nis),
-                  float(arrays.cfg[6]), counts, list(inputs.notes), alignment)
+                  float(arrays.cfg["gate_gnss"]), counts, list(inputs.notes), alignment)
 
 
 def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tuple[Flight, float]:
     """Fly the log with the C navigator; return the flight and the CPU time of the C run [s]."""
-    a = log_arrays(config, inputs)
+    a = log_arrays(config, inputs, navigator.spec)
     if a.rest_max > navigator.rest_max:
         raise ModelError(f"{config.path}: this configuration's rest window needs an alignment ring of {a.rest_max} IMU "
                          f"samples; the C navigator was built with {navigator.rest_max} (cached_c_navigator(rest_max=))")
     state = ctypes.create_string_buffer(navigator.size)
-    if navigator.configure(state, _pointer(a.cfg)):
-        raise ModelError(f"{config.path}: the C navigator refused its configuration (ZUPT window {a.cfg[17]:g} "
+    struct = cconfig.to_structure(a.cfg, a.n_parameters)
+    if navigator.configure(state, ctypes.byref(struct)):
+        raise ModelError(f"{config.path}: the C navigator refused its configuration (ZUPT window {a.cfg['zupt_window']} "
                          "samples, alignment speeds and window, initial sigmas)")
     out = np.full((len(a.t_gnss), N_OUTPUT), np.nan)
     cpu = time.process_time()

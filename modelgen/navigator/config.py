@@ -13,14 +13,15 @@ commented example.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml_with_lines
-from modelgen.navigator.logs import GAP_ACTIONS, STANDARD_GRAVITY, ImuColumns, LogSource, schema, source_from_config
+from modelgen.navigator.config_schema import key_sets, validate
+from modelgen.navigator.logs import GAP_ACTIONS, STANDARD_GRAVITY, ImuColumns, LogSource, source_from_config
 from modelgen.navigator.logs.imu_csv import columns_of
 
 DEG = math.pi / 180.0
@@ -42,26 +43,9 @@ NOISE_UNITS: dict[str, dict[str, float]] = {
                            "ug/sqrt(Hz)": MICRO_G},
 }
 
-SCHEMA: dict[str, set[str]] = {
-    "": {"navigator", "description", "model", "imu", "gnss", "noise", "initial", "alignment", "filter",
-         "zupt", "nhc", "outages", "evaluation", "output"},
-    # imu: and gnss: hold the keys every log format shares and each format's own (logs.registry)
-    **schema("imu"),
-    "imu.rotation_to_body_deg": {"roll", "pitch", "yaw"},
-    **schema("gnss"),
-    "noise": set(NOISE_UNITS),
-    **{f"noise.{k}": {"value", "unit", "factor", "why"} for k in NOISE_UNITS},
-    "initial": {"roll_pitch_sigma_deg", "heading_extra_sigma_deg", "velocity_sigma_m_s", "position_sigma_m",
-                "height_sigma_m", "gyro_bias_sigma_deg_s", "accel_bias_sigma_ug"},
-    "alignment": {"rest_speed_m_s", "rest_window_s", "heading_speed_m_s", "rest_min_s", "still_window_s",
-                  "gyro_std_max_deg_s", "accel_std_max_m_s2"},
-    "filter": {"predict_period_s", "nis_gate_probability", "gate_action", "gate_release_epochs"},
-    "zupt": {"enabled", "window_s", "gyro_max_deg_s", "accel_std_max_m_s2", "speed_max_m_s", "sigma_m_s"},
-    "nhc": {"enabled", "sigma_lateral_m_s", "sigma_vertical_m_s", "speed_min_m_s", "rate_max_deg_s"},
-    "outages": {"first_after_s", "length_s", "period_s", "end_margin_s", "windows"},
-    "evaluation": {"schedules", "target_end_rms_m", "target_nees_mean", "target_inside_95_fraction"},
-    "output": {"folder"},
-}
+#: Every mapping's known keys by dotted path, from the JSON schema (modelgen/data/replay_config.schema.json), which
+#: lists every key once with its type, unit, default and meaning (modelgen.navigator.config_schema).
+SCHEMA: dict[str, set[str]] = key_sets()
 
 
 @dataclass(frozen=True)
@@ -134,6 +118,14 @@ class NavigatorConfig:
     target_end_rms_m: float | None = None  # evaluation.target_end_rms_m: for the configured schedule
     target_nees_mean: tuple[float, float] | None = None  # pooled over all schedules
     target_inside_95_fraction: float | None = None  # pooled over all schedules
+    #: initial.gyro/accel_scale_factor_sigma_ppm (as a fraction; used only by models with scale-factor states)
+    gyro_scale_factor_sigma: float | None = None
+    accel_scale_factor_sigma: float | None = None
+    #: parameters: model parameters the navigator does not set, by name, in the model's units
+    parameters: dict[str, float] = field(default_factory=dict)
+    #: output.folder: the report folder when the command line gives none (relative paths from the configuration's
+    #: folder), or None
+    output_folder: Path | None = None
 
     @property
     def rest_span_min(self) -> float:
@@ -377,9 +369,9 @@ def load_config(path: str | Path) -> NavigatorConfig:
             raise ModelError(f"{r.where('gnss.quality_factor')}: gnss.quality_factor entry {q!r}: {factor!r} must be "
                              "an integer Q and a positive factor")
         quality[q] = float(factor)
-    rotation = r.get("imu.rotation_to_body_deg")
+    rotation = r.get("imu.rotation_to_body_deg", None)  # optional: IMU axes are body axes
     schedule, windows = _outages(r)
-    return NavigatorConfig(
+    config = NavigatorConfig(
         path=str(path), name=r.text("navigator"), model=r.text("model"),
         imu_file=imu_source.path, imu_columns=columns,
         time_offset=r.number("imu.time_offset_s", 0.0), gap_factor=r.number("imu.gap_factor", 3.0, positive=True),
@@ -419,7 +411,37 @@ def load_config(path: str | Path) -> NavigatorConfig:
         nhc_rate_max=r.number("nhc.rate_max_deg_s", 1e9, positive=True) * DEG,
         outage_schedule=schedule, outage_windows=windows,
         imu_source=imu_source, gnss_source=gnss_source, gap_action=gap_action, **_evaluation(r),
+        gyro_scale_factor_sigma=_ppm(r, "initial.gyro_scale_factor_sigma_ppm"),
+        accel_scale_factor_sigma=_ppm(r, "initial.accel_scale_factor_sigma_ppm"),
+        parameters=_model_parameters(r),
+        output_folder=_output_folder(r),
     )
+    validate(data, r.where)  # and what the checks above leave to the schema (types, ranges, required keys)
+    return config
+
+
+def _output_folder(reader: _Reader) -> Path | None:
+    """output.folder as a path (relative to the configuration's folder), or None."""
+    name = reader.get("output.folder", None)
+    if name is None:
+        return None
+    name = reader.text("output.folder")
+    return Path(name) if Path(name).is_absolute() else reader.path.parent / name
+
+
+def _ppm(reader: _Reader, key: str) -> float | None:
+    """An optional sigma in ppm, as a fraction."""
+    return None if reader.get(key, None) is None else reader.number(key, positive=True) * 1e-6
+
+
+def _model_parameters(reader: _Reader) -> dict[str, float]:
+    """parameters: name -> a finite number (the model's unit); the navigator checks the names against the model."""
+    raw = reader.get("parameters", None)
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise ModelError(f"{reader.where('parameters')}: parameters must map model parameter names to numbers")
+    return {str(name): reader.number(f"parameters.{name}") for name in raw}
 
 
 def builtin_config_path() -> Path:

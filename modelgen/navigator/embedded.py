@@ -30,7 +30,9 @@ from modelgen.codegen.build import STRICT_FLAGS
 from modelgen.codegen.generate import generate_code, harness_folder
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
-from modelgen.navigator.cnav import N_OUTPUT, LogArrays, render_navigator
+from modelgen.navigator import cconfig
+from modelgen.navigator.cnav import N_OUTPUT, REST_MAX, LogArrays, render_navigator, rest_define
+from modelgen.navigator.spec import NavigatorSpec
 
 MAX_IMU, MAX_EPOCHS = 60000, 2500
 CORTEX_M4F_COMMON = (*toolchain.CORTEX_M4F_FLAGS, "-O2", "-fno-math-errno", "-ffunction-sections", "-fdata-sections",
@@ -51,18 +53,14 @@ class EmbeddedReplay:
     outage_end_differences_m: list[float] = field(default_factory=list)
 
 
-def write_sources(model_file: Path, folder: Path) -> str:
-    """Float filter, navigator and qemu driver sources into ``folder``; returns the model name."""
-    from modelgen.derive.symbolic import derive
-    from modelgen.model.loading import load_model
-
-    derived = derive(load_model(model_file))
-    name = derived.model.name
+def write_sources(spec: NavigatorSpec, folder: Path) -> str:
+    """Float filter, navigator and qemu driver sources into ``folder`` (the spec's derived model); the model name."""
+    name = spec.name
     folder.mkdir(parents=True, exist_ok=True)
-    for file_name, text in generate_code(derived, CodegenOptions(scalar="float")).files.items():
+    for file_name, text in generate_code(spec.derived, CodegenOptions(scalar="float")).files.items():
         if file_name.endswith((".c", ".h")):
             (folder / file_name).write_text(text)
-    for file_name, text in render_navigator(name).items():
+    for file_name, text in render_navigator(spec).items():
         (folder / file_name).write_text(text)
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(harness_folder())), undefined=jinja2.StrictUndefined,
                              keep_trailing_newline=True)
@@ -76,18 +74,25 @@ def encode(a: LogArrays) -> bytes:
     """The driver's stdin (layout in modelgen/codegen/backends/c/harness/navigator_driver.c.j2)."""
     if len(a.time) > MAX_IMU or len(a.t_gnss) > MAX_EPOCHS:
         raise ModelError(f"embedded replay: the driver holds at most {MAX_IMU} IMU samples and {MAX_EPOCHS} epochs")
-    parts = [struct.pack("<4q", len(a.time), len(a.t_gnss), 0, 0)]
-    for array in (a.cfg, a.time, a.force, a.rate, a.t_gnss, a.target.astype(float), a.use.astype(float), a.gnss):
+    config = cconfig.pack(a.cfg, a.n_parameters)
+    parts = [struct.pack("<4q", len(a.time), len(a.t_gnss), len(config), 0), config]
+    for array in (a.time, a.force, a.rate, a.t_gnss, a.target.astype(float), a.use.astype(float), a.gnss):
         parts.append(np.ascontiguousarray(array, dtype="<f8").tobytes())
     return b"".join(parts)
 
 
-def cortex_m4f_build(folder: Path, name: str, out_dir: Path) -> tuple[toolchain.SectionSizes, dict[str, int], list[str]]:
-    """Compile filter and navigator for the Cortex-M4F: sizes, worst-case stack of the two calls, heap symbols."""
+def cortex_m4f_build(folder: Path, name: str, out_dir: Path,
+                     rest_max: int = REST_MAX) -> tuple[toolchain.SectionSizes, dict[str, int], list[str]]:
+    """Compile filter and navigator for the Cortex-M4F: sizes, worst-case stack of the two calls, heap symbols.
+
+    ``rest_max``: the alignment ring the configuration needs (:func:`modelgen.navigator.cnav.rest_capacity`), passed
+    as ``-D<P>_NAV_REST_MAX`` as to the host build, so that the sizes are those of the navigator that flies.
+    """
     objects = []
     for source in (f"{name}.c", f"{name}_navigator.c"):
         obj = out_dir / source.replace(".c", ".o")
-        toolchain.run([toolchain.ARM_EMBEDDED_CC, *STRICT_FLAGS, *CORTEX_M4F_COMMON, "-I", str(folder), "-c", "-o",
+        toolchain.run([toolchain.ARM_EMBEDDED_CC, *STRICT_FLAGS, *CORTEX_M4F_COMMON, rest_define(name, rest_max),
+                       "-I", str(folder), "-c", "-o",
                        str(obj), str(folder / source)], f"Cortex-M4F compile of {source}")
         objects.append(obj)
     sizes = [toolchain.section_sizes(o) for o in objects]
@@ -101,7 +106,7 @@ def cortex_m4f_build(folder: Path, name: str, out_dir: Path) -> tuple[toolchain.
     return total, worst, forbidden
 
 
-def embedded_replay(model_file: Path, arrays: LogArrays, reference: np.ndarray,
+def embedded_replay(spec: NavigatorSpec, arrays: LogArrays, reference: np.ndarray,
                     outage_ends: list[int] | None = None) -> EmbeddedReplay:
     """Build for Cortex-M4F and for qemu-arm, fly ``arrays`` under qemu, compare with ``reference`` outputs."""
     missing = toolchain.missing_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
@@ -112,14 +117,15 @@ def embedded_replay(model_file: Path, arrays: LogArrays, reference: np.ndarray,
     with tempfile.TemporaryDirectory(prefix="modelgen-nav-arm-") as work:
         folder, build = Path(work) / "src", Path(work) / "m4"
         build.mkdir()
-        name = write_sources(model_file, folder)
-        sizes, worst, forbidden = cortex_m4f_build(folder, name, build)
+        name = write_sources(spec, folder)
+        sizes, worst, forbidden = cortex_m4f_build(folder, name, build, arrays.rest_max)
         exe = Path(work) / "navigator_arm"
-        toolchain.run([toolchain.ARM_LINUX_CC, *STRICT_FLAGS, "-O2", "-static", "-I", str(folder), "-o", str(exe),
+        toolchain.run([toolchain.ARM_LINUX_CC, *STRICT_FLAGS, "-O2", "-static", rest_define(name, arrays.rest_max),
+                       "-I", str(folder), "-o", str(exe),
                        str(folder / f"{name}.c"), str(folder / f"{name}_navigator.c"),
                        str(folder / "navigator_driver.c"), "-lm"], "arm-linux-gnueabihf build of the navigator")
         result = toolchain.run_driver(exe, [], stdin=encode(arrays), qemu=True, timeout=600.0)
-        struct_size = _struct_size(folder, name, Path(work))
+        struct_size = _struct_size(folder, name, Path(work), arrays.rest_max)
     out = np.frombuffer(result.stdout, dtype="<f8")
     if out.size != N_OUTPUT * len(arrays.t_gnss):
         raise ModelError(f"embedded replay: the driver wrote {out.size} values, expected {N_OUTPUT * len(arrays.t_gnss)}")
@@ -137,12 +143,13 @@ def embedded_replay(model_file: Path, arrays: LogArrays, reference: np.ndarray,
                           [float(distance[i]) for i in (outage_ends or [])])
 
 
-def _struct_size(folder: Path, name: str, work: Path) -> int:
+def _struct_size(folder: Path, name: str, work: Path, rest_max: int = REST_MAX) -> int:
     """sizeof the navigator struct on the Cortex-M4F (float filter), from a compile-time constant in an object."""
     probe = work / "probe.c"
     probe.write_text(f'#include "{name}_navigator.h"\nconst unsigned long navigator_bytes = sizeof({name}_navigator);\n')
     obj = work / "probe.o"
-    toolchain.run([toolchain.ARM_EMBEDDED_CC, *toolchain.CORTEX_M4F_FLAGS, "-std=c99", "-I", str(folder), "-c", "-o",
+    toolchain.run([toolchain.ARM_EMBEDDED_CC, *toolchain.CORTEX_M4F_FLAGS, "-std=c99", rest_define(name, rest_max),
+                   "-I", str(folder), "-c", "-o",
                    str(obj), str(probe)], "struct size probe")
     out = toolchain.run(["arm-none-eabi-objdump", "-s", "-j", ".rodata", str(obj)], "objdump").stdout.decode()
     words = [line.split()[1] for line in out.splitlines() if line.startswith(" 0000")]

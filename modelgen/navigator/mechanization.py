@@ -74,7 +74,8 @@ def _multiply(a0, a1, a2, a3, b0, b1, b2, b3):
 
 @compiled
 def mechanize(nav: np.ndarray, history: np.ndarray, time: np.ndarray, force: np.ndarray, rate: np.ndarray,
-              start: int, stop: int, gyro_bias: np.ndarray, accel_bias: np.ndarray, mean_force: np.ndarray) -> None:
+              start: int, stop: int, gyro_bias: np.ndarray, accel_bias: np.ndarray, mean_force: np.ndarray,
+              gyro_scale: np.ndarray, accel_scale: np.ndarray) -> None:
     """Advance ``nav`` over samples start..stop-1 (each from the sample before it), in place.
 
     ``force``, ``rate``: body-axis specific force and angular rate samples.
@@ -82,6 +83,8 @@ def mechanize(nav: np.ndarray, history: np.ndarray, time: np.ndarray, force: np.
     coning and sculling terms (zeros before the first interval).
     ``mean_force``: the NED specific-force increment sum (0:3) and the time
     (3) are added to it, for the filter's operating point.
+    ``gyro_scale``, ``accel_scale``: scale-factor estimates s (measured = (1 + s) true + b): the
+    sensors are used as (raw - b) / (1 + s) (zeros for a model without scale-factor states).
     """
     q0, q1, q2, q3 = nav[0], nav[1], nav[2], nav[3]
     vn, ve, vd = nav[4], nav[5], nav[6]
@@ -89,12 +92,12 @@ def mechanize(nav: np.ndarray, history: np.ndarray, time: np.ndarray, force: np.
     pt0, pt1, pt2, pv0, pv1, pv2 = history[0], history[1], history[2], history[3], history[4], history[5]
     for k in range(start, stop):
         dt = time[k] - time[k - 1]
-        t0 = 0.5 * (rate[k - 1, 0] + rate[k, 0]) * dt - gyro_bias[0] * dt
-        t1 = 0.5 * (rate[k - 1, 1] + rate[k, 1]) * dt - gyro_bias[1] * dt
-        t2 = 0.5 * (rate[k - 1, 2] + rate[k, 2]) * dt - gyro_bias[2] * dt
-        u0 = 0.5 * (force[k - 1, 0] + force[k, 0]) * dt - accel_bias[0] * dt
-        u1 = 0.5 * (force[k - 1, 1] + force[k, 1]) * dt - accel_bias[1] * dt
-        u2 = 0.5 * (force[k - 1, 2] + force[k, 2]) * dt - accel_bias[2] * dt
+        t0 = (0.5 * (rate[k - 1, 0] + rate[k, 0]) - gyro_bias[0]) / (1.0 + gyro_scale[0]) * dt
+        t1 = (0.5 * (rate[k - 1, 1] + rate[k, 1]) - gyro_bias[1]) / (1.0 + gyro_scale[1]) * dt
+        t2 = (0.5 * (rate[k - 1, 2] + rate[k, 2]) - gyro_bias[2]) / (1.0 + gyro_scale[2]) * dt
+        u0 = (0.5 * (force[k - 1, 0] + force[k, 0]) - accel_bias[0]) / (1.0 + accel_scale[0]) * dt
+        u1 = (0.5 * (force[k - 1, 1] + force[k, 1]) - accel_bias[1]) / (1.0 + accel_scale[1]) * dt
+        u2 = (0.5 * (force[k - 1, 2] + force[k, 2]) - accel_bias[2]) / (1.0 + accel_scale[2]) * dt
         # coning (two-sample, previous interval) and sculling with the rotation term
         c0 = t0 + (pt1 * t2 - pt2 * t1) / 12.0
         c1 = t1 + (pt2 * t0 - pt0 * t2) / 12.0

@@ -14,16 +14,17 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-from scipy.stats import chi2
 
 from modelgen.errors import ModelError
-from modelgen.model.frames import NED_TO_ENU
 from modelgen.navigator.alignment import Alignment, align  # noqa: F401  (the alignment lives in alignment.py)
 from modelgen.navigator.config import NavigatorConfig
-from modelgen.navigator.errorstate import ErrorStateFilter, feedback
+from modelgen.navigator import cconfig
+from modelgen.navigator.errorstate import ErrorStateFilter, rotate
 from modelgen.navigator.logs import GnssLog, ImuLog, check_logs, epochs_inside_gaps
-from modelgen.navigator.mechanization import dcm_to_euler, euler_to_dcm, mechanize, quaternion_to_dcm, radii
+from modelgen.navigator.mechanization import (dcm_to_euler, euler_to_dcm, gravity, mechanize, quaternion_to_dcm,
+                                              radii)
 from modelgen.navigator.outages import in_outage, outage_windows
+from modelgen.navigator.spec import NavigatorSpec, quantities
 
 HISTORY = 16  # INS velocities kept (one per covariance step) for the GNSS velocity latency
 OUTPUT_FIELDS = ("time", "latitude", "longitude", "height", "v_north", "v_east", "v_down", "roll", "pitch", "yaw",
@@ -108,12 +109,12 @@ def stationary_mask(time: np.ndarray, force: np.ndarray, rate: np.ndarray, gyro_
 
 
 def _gnss_sigmas(config: NavigatorConfig, gnss: GnssLog, j: int) -> np.ndarray | None:
-    """[sigma_vE, sigma_vN, sigma_vU, sigma_pN, sigma_pE, sigma_pU] of epoch j, or None if its Q is not used."""
+    """[sigma_vN, sigma_vE, sigma_vD, sigma_pN, sigma_pE, sigma_pD] of epoch j, or None if its Q is not used."""
     factor = config.quality_factor.get(int(gnss.quality[j]))
     if factor is None:
         return None
     sv, sp = gnss.sigma_velocity[j], gnss.sigma_position[j]
-    v = np.maximum(np.array([sv[1], sv[0], sv[2]]) * factor, config.minimum_sigma_velocity)
+    v = np.maximum(np.array([sv[0], sv[1], sv[2]]) * factor, config.minimum_sigma_velocity)
     p = np.maximum(np.array([sp[0], sp[1], sp[2]]) * factor, config.minimum_sigma_position)
     return np.concatenate([v, p])
 
@@ -129,19 +130,9 @@ def antenna(nav: np.ndarray, lever: np.ndarray, rate_body: np.ndarray) -> tuple[
     return lat, lon, nav[9] - offset[2], velocity
 
 
-def initial_covariance(config: NavigatorConfig, nav: np.ndarray, heading_sigma: float) -> np.ndarray:
-    """P0: attitude, velocity, position (as dL, dlambda, dh), gyro and accelerometer biases."""
-    rm, rn = radii(nav[7])
-    sigmas = [config.roll_pitch_sigma, config.roll_pitch_sigma, heading_sigma,
-              *[config.velocity_sigma] * 3,
-              config.position_sigma / (rm + nav[9]), config.position_sigma / ((rn + nav[9]) * math.cos(nav[7])),
-              config.height_sigma, *[config.gyro_bias_sigma] * 3, *[config.accel_bias_sigma] * 3]
-    return np.diag(np.square(sigmas))
-
-
 def _gnss_measurement(nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, g: GnssLog, j: int,
-                      t: float, delayed_velocity: np.ndarray) -> np.ndarray:
-    """z = antenna(INS) - GNSS: [vE, vN, vU] [m/s], [N, E, U] [m].
+                      t: float, delayed_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """antenna(INS) - GNSS: velocity [m/s] and position [m], NED.
 
     The GNSS position is extrapolated by its velocity from its epoch to the IMU
     sample time t; the GNSS velocity is compared with the INS velocity
@@ -157,42 +148,49 @@ def _gnss_measurement(nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, g: G
     lon_g = g.longitude[j] + vg[1] * dt / ((rn + g.height[j]) * math.cos(g.latitude[j]))
     h_g = g.height[j] - vg[2] * dt
     rm, rn = radii(nav[7])
-    return np.array([v[1] - vg[1], v[0] - vg[0], -(v[2] - vg[2]),
-                     (lat - lat_g) * (rm + nav[9]), (lon - lon_g) * (rn + nav[9]) * math.cos(nav[7]), h - h_g])
+    return v - vg, np.array([(lat - lat_g) * (rm + nav[9]), (lon - lon_g) * (rn + nav[9]) * math.cos(nav[7]),
+                             -(h - h_g)])
 
 
-def _nhc_rows(nav: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """z = body lateral and vertical velocity, and H = [-C_n^b [v x], C_n^b, 0] rows y, z (ENU states)."""
-    c_nb = (NED_TO_ENU @ quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])).T  # ENU -> body
-    v = NED_TO_ENU @ nav[4:7]
-    skew = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-    H = np.zeros((2, 15))
-    H[:, 0:3] = -(c_nb @ skew)[1:3]
-    H[:, 3:6] = c_nb[1:3]
-    return (c_nb @ v)[1:3], H
+def corrected(sample: np.ndarray, bias: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """A sensor sample corrected with the estimates: (raw - b) / (1 + s)."""
+    return (sample - bias) / (1.0 + scale)
 
 
-def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[float], None] | None = None) -> Flight:
-    """Fly the whole log forward in real time; return the per-epoch outputs."""
+def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
+        progress: Callable[[float], None] | None = None) -> Flight:
+    """Fly the whole log forward in real time with the spec's model; return the per-epoch outputs."""
     g = inputs.gnss
     time, force, rate = inputs.time, inputs.force, inputs.rate
     lever = np.asarray(config.lever_arm, float)
     windows = outage_windows(config.outage_schedule, config.outage_windows, inputs.first_epoch, float(g.time[-1]))
     outage = in_outage(g.time, windows)
     start = align(config, inputs, outage)
-    j0, k, nav, gyro_bias, accel_bias = start.epoch, start.sample, start.nav, start.gyro_bias, start.accel_bias
+    j0, k, nav = start.epoch, start.sample, start.nav
+    sensors = {"gyro_bias": np.array(start.gyro_bias, float), "accel_bias": np.array(start.accel_bias, float),
+               "gyro_scale_factor": np.zeros(3), "accel_scale_factor": np.zeros(3)}
+    gyro_bias, accel_bias = sensors["gyro_bias"], sensors["accel_bias"]  # updated in place by the feedback
+    gyro_scale, accel_scale = sensors["gyro_scale_factor"], sensors["accel_scale_factor"]
+    module = spec.module
+    median_dt = float(np.median(np.diff(time)))
+    step = max(1, int(round(config.predict_period / median_dt)))
+    from modelgen.navigator.alignment import still_window_samples
+
+    cfg = cconfig.namespace(cconfig.values(config, spec, max(2, int(round(config.zupt_window / median_dt))), step,
+                                           still_window_samples(config, time)))
     speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
     sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))
     heading_sigma = math.hypot(math.atan2(sv, speed0), config.heading_extra_sigma)
-    noise = {"gyro_angle_random_walk": config.noise["gyro_white"].si,
-             "accel_velocity_random_walk": config.noise["accel_white"].si,
-             "gyro_bias_driving_noise": config.noise["gyro_bias_driving"].si,
-             "accel_bias_driving_noise": config.noise["accel_bias_driving"].si}
-    kf = ErrorStateFilter(module, initial_covariance(config, nav, heading_sigma), noise)
+    kf = ErrorStateFilter(module, spec.initial_covariance(config, nav, heading_sigma, radii))
+
+    def parameters(force_ned: np.ndarray, sig: np.ndarray) -> np.ndarray:
+        c_bn = quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])
+        return spec.parameter_vector(quantities(spec, nav, c_bn, force_ned, corrected(rate[k], gyro_bias, gyro_scale),
+                                                sig, cfg, radii, gravity))
+
     still = (stationary_mask(time, force, rate, gyro_bias, config.zupt_window, config.zupt_gyro_max,
                              config.zupt_accel_std_max) if config.zupt_enabled else np.zeros(len(time), bool))
-    step = max(1, int(round(config.predict_period / float(np.median(np.diff(time))))))
-    gates = {m: float(chi2.ppf(config.nis_gate_probability, m)) for m in (2, 3, 6)}
+    gates = {2: cfg.gate_2, 3: cfg.gate_3, "gnss": cfg.gate_gnss}
     history = np.zeros(6)
     outputs = []
     gnss_nis: list[float] = []
@@ -214,27 +212,26 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
         while k < target:
             stop = min(target, k + step)
             mean_force[:] = 0.0
-            mechanize(nav, history, time, force, rate, k + 1, stop + 1, gyro_bias, accel_bias, mean_force)
+            mechanize(nav, history, time, force, rate, k + 1, stop + 1, gyro_bias, accel_bias, mean_force,
+                      gyro_scale, accel_scale)
             period = time[stop] - time[k]
             k = stop
-            kf.predict(kf.parameters(nav, mean_force[0:3] / mean_force[3], last_sigmas), period)
+            kf.predict(parameters(mean_force[0:3] / mean_force[3], last_sigmas), period)
             counts["predicts"] += 1
             _remember(velocity_history, time[k], nav)
             speed = float(np.linalg.norm(nav[4:7]))
             if still[k] and speed < config.zupt_speed_max:
-                v_enu = NED_TO_ENU @ nav[4:7]
-                H = np.zeros((3, 15))
-                H[:, 3:6] = np.eye(3)
-                if kf.update(v_enu, H, np.full(3, config.zupt_sigma**2), gates[3], deweight).accepted:
+                z, H = spec.zupt_rows(nav[4:7])
+                if kf.update(z, H, np.full(3, config.zupt_sigma**2), gates[3], deweight).accepted:
                     counts["zupt_updates"] += 1
-                    _reset(kf, nav, gyro_bias, accel_bias)
+                    _reset(kf, spec, nav, sensors)
             elif (config.nhc_enabled and speed > config.nhc_speed_min
                   and float(np.linalg.norm(rate[k] - gyro_bias)) < config.nhc_rate_max):
-                z, H = _nhc_rows(nav)
+                z, H = spec.nhc_rows(quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3]), nav[4:7])
                 r = np.array([config.nhc_sigma_lateral**2, config.nhc_sigma_vertical**2])
                 if kf.update(z, H, r, gates[2], deweight).accepted:
                     counts["nhc_updates"] += 1
-                    _reset(kf, nav, gyro_bias, accel_bias)
+                    _reset(kf, spec, nav, sensors)
         used = 0
         nis = float("nan")
         sigmas = _gnss_sigmas(config, g, j)
@@ -244,33 +241,32 @@ def fly(config: NavigatorConfig, inputs: Inputs, module, progress: Callable[[flo
             last_sigmas = sigmas
             delayed = np.array([np.interp(time[k] - config.velocity_latency, velocity_history[0], velocity_history[1 + i])
                                 for i in range(3)])
-            z = _gnss_measurement(nav, lever, rate[k] - gyro_bias, g, j, time[k], delayed)
-            p = kf.parameters(nav, mean_force[0:3] / max(mean_force[3], 1e-9), sigmas)
-            H = module.measurement_matrix(p)
-            r = np.square(sigmas)
-            gate = gates[6] if rejected_run < config.gate_release_epochs else math.inf
+            dv, dp = _gnss_measurement(nav, lever, corrected(rate[k], gyro_bias, gyro_scale), g, j, time[k], delayed)
+            z, r = spec.gnss_z(dv, dp, sigmas)
+            H = module.measurement_matrix(parameters(mean_force[0:3] / max(mean_force[3], 1e-9), sigmas))
+            gate = gates["gnss"] if rejected_run < config.gate_release_epochs else math.inf
             result = kf.update(z, H, r, gate, deweight)
             nis = result.nis
             gnss_nis.append(nis)
             if result.accepted:
                 counts["gnss_updates"] += 1
-                if nis > gates[6]:
+                if nis > gates["gnss"]:
                     counts["gnss_deweighted"] += 1
                 if rejected_run >= config.gate_release_epochs:
                     counts["gnss_released"] += 1
                 rejected_run = 0
                 used = 1
-                _reset(kf, nav, gyro_bias, accel_bias)
+                _reset(kf, spec, nav, sensors)
             else:
                 counts["gnss_rejected"] += 1
                 rejected_run += 1
-        outputs.append(_record(time[k], nav, lever, rate[k] - gyro_bias, kf.P, gyro_bias, accel_bias,
-                               bool(outage[j]), used, nis, int(g.quality[j])))
+        outputs.append(_record(spec, time[k], nav, lever, corrected(rate[k], gyro_bias, gyro_scale), kf.P, gyro_bias,
+                               accel_bias, bool(outage[j]), used, nis, int(g.quality[j])))
         if progress is not None and (j - j0) % 200 == 0:
             progress((j - j0) / max(1, n_epochs - j0))
     if progress is not None:
         progress(1.0)
-    return Flight(np.array(outputs), windows, inputs.first_epoch, float(g.time[j0]), gnss_nis, gates[6], counts,
+    return Flight(np.array(outputs), windows, inputs.first_epoch, float(g.time[j0]), gnss_nis, gates["gnss"], counts,
                   list(inputs.notes), start.record())
 
 
@@ -281,25 +277,19 @@ def _remember(history: np.ndarray, t: float, nav: np.ndarray) -> None:
     history[1:, -1] = nav[4:7]
 
 
-def _reset(kf: ErrorStateFilter, nav: np.ndarray, gyro_bias: np.ndarray, accel_bias: np.ndarray) -> None:
+def _reset(kf: ErrorStateFilter, spec: NavigatorSpec, nav: np.ndarray, sensors: dict[str, np.ndarray]) -> None:
     """Feed the estimate back and zero the error state (closed loop)."""
-    feedback(nav, kf.x, gyro_bias, accel_bias)
+    spec.feedback(nav, kf.x, sensors, radii, rotate)
     kf.x = np.zeros_like(kf.x)
 
 
-def _record(t: float, nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, P: np.ndarray, gyro_bias: np.ndarray,
+def _record(spec: NavigatorSpec, t: float, nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, P: np.ndarray, gyro_bias: np.ndarray,
             accel_bias: np.ndarray, outage: bool, used: int, nis: float, quality: int) -> list[float]:
     """One output row (OUTPUT_FIELDS): antenna position, velocity, attitude, 1-sigma position, biases."""
     lat, lon, h, v = antenna(nav, lever, rate)
     roll, pitch, yaw = dcm_to_euler(quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3]))
-    rm, rn = radii(nav[7])
-    sn = math.sqrt(max(P[6, 6], 0.0)) * (rm + nav[9])
-    se = math.sqrt(max(P[7, 7], 0.0)) * (rn + nav[9]) * math.cos(nav[7])
-    su = math.sqrt(max(P[8, 8], 0.0))
     # cross covariances [m^2] (north-east, east-up, up-north): the 2x2 horizontal covariance with sn, se
-    cne = P[6, 7] * (rm + nav[9]) * (rn + nav[9]) * math.cos(nav[7])
-    ceu = P[7, 8] * (rn + nav[9]) * math.cos(nav[7])
-    cun = P[8, 6] * (rm + nav[9])
+    sn, se, su, cne, ceu, cun = spec.position_output(P, nav, radii)
     return [t, lat, lon, h, v[0], v[1], v[2], roll, pitch, yaw, sn, se, su, *gyro_bias, *accel_bias,
             float(outage), float(used), nis, float(quality), cne, ceu, cun]
 

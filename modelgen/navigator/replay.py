@@ -13,11 +13,12 @@ from modelgen.errors import ModelError
 from modelgen.navigator.cnav import cached_c_navigator, fly_c, rest_capacity
 from modelgen.navigator.alignment import alignment_note
 from modelgen.navigator.config import NavigatorConfig, load_config
-from modelgen.navigator.errorstate import generate_filter_module, model_path
+from modelgen.navigator.errorstate import model_path
 from modelgen.navigator.logs import read_gnss, read_imu
 from modelgen.navigator.metrics import (errors_against_reference, pooled_consistency, schedule_record, summary,
                                         velocity_latency)
 from modelgen.navigator.navigator import Flight, fly, prepare
+from modelgen.navigator.spec import navigator_spec
 from modelgen.navigator.report import report_files
 from modelgen.fileio.output import write_atomically
 
@@ -81,12 +82,15 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         echo(f"  note: {note}")
     timings["read_s"] = time.perf_counter() - start
     model_file = model_path(config.model, config.path)
+    check_navigation_model(config, model_file)
     flights: dict[str, Flight] = {}
+    mark = time.perf_counter()
+    echo(f"  deriving {config.model} (once) with modelgen")
+    # the one derivation of this replay: the Python navigator, the C and the embedded build all use it
+    spec = navigator_spec(model_file, with_python=navigator in ("python", "both"))
+    spec.check_config(config)
+    timings["generate_python_s"] = time.perf_counter() - mark
     if navigator in ("python", "both"):
-        mark = time.perf_counter()
-        echo(f"  generating the {config.model} filter (Python) with modelgen")
-        module = generate_filter_module(model_file)
-        timings["generate_python_s"] = time.perf_counter() - mark
         mark = time.perf_counter()
         state = {"next": 0.0}
 
@@ -95,11 +99,11 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
                 echo(f"  flying (Python): {100 * fraction:5.1f} %  ({time.perf_counter() - mark:.1f} s)")
                 state["next"] = fraction + 0.25
 
-        flights["python"] = fly(config, inputs, module, progress)
+        flights["python"] = fly(config, inputs, spec, progress)
         timings["fly_python_s"] = time.perf_counter() - mark
     if navigator in ("c", "both"):
         mark = time.perf_counter()
-        compiled, cached = cached_c_navigator(model_file, echo, rest_capacity(config, inputs.time))
+        compiled, cached = cached_c_navigator(spec, echo, rest_capacity(config, inputs.time))
         timings["generate_compile_c_s"] = 0.0 if cached else time.perf_counter() - mark
         mark = time.perf_counter()
         echo("  flying (C)")
@@ -113,13 +117,15 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
 
         mark = time.perf_counter()
         echo("  Cortex-M4F build (float filter) and the log under qemu-arm")
-        arm = embedded_replay(model_file, log_arrays(config, inputs), flights["c"].outputs)
+        arm = embedded_replay(spec, log_arrays(config, inputs, spec), flights["c"].outputs)
         timings["embedded_s"] = time.perf_counter() - mark
     flight = flights["c"] if "c" in flights else flights["python"]
     timings["fly_s"] = timings.get("fly_c_s", timings.get("fly_python_s", 0.0))
     errors = errors_against_reference(flight, inputs.gnss)
     result = summary(flight, errors, inputs.gnss)
     result["navigator"] = "c" if "c" in flights else "python"
+    result["model"] = {"name": spec.name, "file": str(model_file), "states": spec.n_states, "frame": spec.frame,
+                       "blocks": sorted(spec.blocks)}
     note = alignment_note(config, flight.alignment, flight.first_epoch) if flight.alignment else None
     if note:
         echo(f"  warning: {note}")
@@ -132,7 +138,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         if "c" in flights:
             other = fly_c(again, inputs, compiled)[0]
         else:
-            other = fly(again, inputs, module)
+            other = fly(again, inputs, spec)
         schedules.append(schedule_record(entry.name, other, errors_against_reference(other, inputs.gnss), inputs.gnss,
                                          entry.target_end_rms_m))
     if config.evaluation_schedules:
@@ -160,6 +166,39 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         folder = write_atomically(Path(out), files, force=force)
     timings["total_s"] = time.perf_counter() - start
     return ReplayResult(config, flight, result, folder, timings)
+
+
+#: The built-in navigator model; a model without a navigation: section flies only if its states are this model's.
+BUILTIN_NAVIGATOR_MODEL = "ins_gps15_nav"
+
+
+def check_navigation_model(config: NavigatorConfig, model_file: Path) -> None:
+    """Refuse, in one line and before any code is generated or compiled, a model the navigator cannot fly.
+
+    A model with a ``navigation:`` section is the navigator's to generate; a model without one flies only with
+    the error states of the built-in navigator model, in its order (the hand-written error-state layout).
+    """
+    from modelgen.fileio.datafiles import read_yaml
+    from modelgen.model.loading import load_model
+
+    data = read_yaml(model_file, "model file")
+    if "navigation" in data:
+        return
+    reference_file = model_path(BUILTIN_NAVIGATOR_MODEL, config.path)
+    reference = read_yaml(reference_file, "model file")
+    if "navigation" in reference:
+        wanted = None  # the built-in navigator model is a navigation model itself: so must every model be
+    else:
+        wanted = [s.name for s in load_model(reference_file).states]
+    states = [s.name for s in load_model(model_file).states]
+    if wanted is not None and states == wanted:
+        return
+    need = ("a model with a navigation: section" if wanted is None else
+            f"a model with a navigation: section, or the {len(wanted)} error states of {BUILTIN_NAVIGATOR_MODEL} "
+            "in their order")
+    raise ModelError(f"{config.path}: model {config.model!r} ({model_file}) is not a navigation model the replay "
+                     f"can fly: it needs {need}; this one has {len(states)} states ({', '.join(states[:4])}"
+                     f"{', ...' if len(states) > 4 else ''}) and no navigation: section")
 
 
 def max_position_difference(a: Flight, b: Flight) -> float:

@@ -371,9 +371,9 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
               f"{config.nhc_sigma_vertical} m/s above {config.nhc_speed_min} m/s, below "
               f"{math.degrees(config.nhc_rate_max):.3g} deg/s of angular rate).", "",
               "When the mean NEES at the outage ends is far above 2 the filter is overconfident: its horizontal "
-              "covariance does not contain errors its model lacks (the 15-state model has no gyro or accelerometer "
-              "scale factors; a regression of the gyro's yaw rate on the GNSS course rate has a slope of 0.995, and "
-              "such a scale error turns into heading error in the parking lot's tight turns).", "",
+              "covariance does not contain errors its model lacks or underrates (on the built-in drive the "
+              "21-state model with gyro and accelerometer scale factors, replay_drive_0708_21.yaml, is about as "
+              "overconfident as the 15-state one: scale factors alone do not explain it).", "",
               "## Estimated biases (end of the drive, body axes)", "",
               f"gyro [deg/s]: {', '.join(f'{v:.4f}' for v in summary['final_gyro_bias_deg_s'])}; "
               f"accelerometer [mg]: {', '.join(f'{v:.2f}' for v in summary['final_accel_bias_mg'])}.", "",

@@ -115,6 +115,16 @@ def test_the_cache_folder_follows_modelgen_cache_dir_then_xdg_cache_home(monkeyp
     assert library_cache_folder() == Path.home() / ".cache" / "modelgen" / "libraries"
 
 
+def test_a_relative_modelgen_cache_dir_is_refused_not_put_under_the_working_folder(monkeypatch, tmp_path):
+    from modelgen.errors import ModelError
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv(CACHE_ENV, "cache-here")
+    with pytest.raises(ModelError, match=r"\$MODELGEN_CACHE_DIR 'cache-here' is not an absolute path"):
+        library_cache_folder()
+    assert not (tmp_path / "cache-here").exists()
+
+
 @pytest.mark.compile
 def test_a_failed_compile_is_not_cached(tmp_path, counted_compiler):
     folder = tmp_path / "bad"

@@ -30,7 +30,7 @@ def test_mechanization_at_rest_with_ideal_sensors_stays_at_rest():
     nav = np.zeros(NAV_SIZE)
     nav[0:4] = dcm_to_quaternion(c_bn)
     nav[7], nav[9] = lat, h
-    mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4))
+    mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4), np.zeros(3), np.zeros(3))
     assert np.abs(nav[4:7]).max() < 1e-3
     assert abs(nav[7] - lat) * 6.37e6 < 0.03 and abs(nav[9] - h) < 0.03
 
@@ -47,7 +47,7 @@ def test_mechanization_integrates_a_constant_forward_acceleration():
     nav = np.zeros(NAV_SIZE)
     nav[0] = 1.0
     nav[7], nav[9] = lat, h
-    mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4))
+    mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4), np.zeros(3), np.zeros(3))
     assert nav[4] == pytest.approx(10.0, abs=0.01)
     assert (nav[7] - lat) * 6.363e6 == pytest.approx(50.0, rel=2e-3)
 
@@ -132,6 +132,21 @@ def test_c_navigator_outage_error_is_within_the_same_band(excerpt_both):
     assert excerpt_both.summary["counts"]["gnss_updates"] == 240 - 60 - 55  # epochs after alignment, outside outage
 
 
+_SPECS: dict = {}
+
+
+def _excerpt_spec(name: str = "excerpt.yaml"):
+    """The excerpt configuration's model spec, derived once per test session (no Python filter)."""
+    if name not in _SPECS:
+        from modelgen.navigator.config import load_config
+        from modelgen.navigator.errorstate import model_path
+        from modelgen.navigator.spec import navigator_spec
+
+        config = load_config(DATA / name)
+        _SPECS[name] = navigator_spec(model_path(config.model, config.path), with_python=False)
+    return _SPECS[name]
+
+
 def _excerpt_inputs():
     from modelgen.navigator.config import load_config
     from modelgen.navigator.logs import read_imu_csv, read_rtklib_pos
@@ -170,7 +185,6 @@ def test_c_and_python_refuse_to_align_without_an_epoch_at_rest():
 
     from modelgen.errors import ModelError
     from modelgen.navigator.cnav import cached_c_navigator, fly_c
-    from modelgen.navigator.errorstate import model_path
     from modelgen.navigator.alignment import align
 
     config, inputs = _excerpt_inputs()
@@ -183,7 +197,7 @@ def test_c_and_python_refuse_to_align_without_an_epoch_at_rest():
     late = replace(inputs, gnss=moving)
     with pytest.raises(ModelError, match="at rest"):
         align(config, late)
-    navigator, _ = cached_c_navigator(model_path(config.model, config.path))
+    navigator, _ = cached_c_navigator(_excerpt_spec())
     with pytest.raises(ModelError, match="at rest"):
         fly_c(config, late, navigator)
 
@@ -199,10 +213,12 @@ def test_a_rest_window_longer_than_the_c_keeps_is_refused():
 
     config, inputs = _excerpt_inputs()
     long_window = replace(config, rest_window=20.0)
-    assert log_arrays(long_window, inputs).rest_max > REST_MAX  # the ring follows the config
-    assert log_arrays(config, inputs).rest_max == REST_MAX
+    spec = _excerpt_spec()
+    assert log_arrays(long_window, inputs, spec).rest_max > REST_MAX  # the ring follows the config
+    assert log_arrays(config, inputs, spec).rest_max == REST_MAX
     small = CNavigator.__new__(CNavigator)
     small.rest_max = REST_MAX  # a navigator built with the default ring: refused before anything runs
+    small.spec = spec
     with pytest.raises(ModelError, match="alignment ring"):
         fly_c(long_window, inputs, small)
 
@@ -210,9 +226,8 @@ def test_a_rest_window_longer_than_the_c_keeps_is_refused():
 @pytest.mark.compile
 def test_c_navigator_source_is_c99_without_heap(tmp_path):
     from modelgen.navigator.cnav import generate_c_navigator
-    from modelgen.navigator.errorstate import model_path
 
-    folder = generate_c_navigator(model_path("ins_gps15_nav", str(DATA / "excerpt.yaml")), tmp_path / "nav")
+    folder = generate_c_navigator(_excerpt_spec(), tmp_path / "nav")
     source = (folder / "ins_gps15_nav_navigator.c").read_text()
     for forbidden in ("malloc", "calloc", "realloc", "free("):
         assert forbidden not in source
@@ -233,11 +248,10 @@ def test_float_filter_navigator_under_qemu_arm_stays_within_1_cm_of_the_double_c
     """Cortex-M4F build without heap, and the excerpt under qemu-arm: 5e-5 m when written, tolerance 1 cm."""
     from modelgen.navigator.cnav import log_arrays
     from modelgen.navigator.embedded import embedded_replay
-    from modelgen.navigator.errorstate import model_path
 
     config, inputs = _excerpt_inputs()
-    result = embedded_replay(model_path(config.model, config.path), log_arrays(config, inputs),
-                             excerpt_both.flight.outputs)
+    spec = _excerpt_spec()
+    result = embedded_replay(spec, log_arrays(config, inputs, spec), excerpt_both.flight.outputs)
     assert result.forbidden_symbols == []
     assert result.max_position_difference_m <= 0.01
     assert 0 < result.worst_case_stack["ins_gps15_nav_navigator_epoch"] < 4096

@@ -1,0 +1,404 @@
+"""What the navigator needs to know about its error model, computed once from the derived model file.
+
+A :class:`NavigatorSpec` is made once per replay (:func:`navigator_spec`: one
+derivation) and handed to the Python navigator, the C navigator's templates and
+the embedded build.  From the model's state names -- the names the navigation
+notation gives its error states (``attitude_error_<axis>``,
+``velocity_error_<axis>``, ``position_error_<axis>`` or ``latitude_error``,
+``longitude_error``, ``height_error``; sensor errors ``gyro_bias_x``,
+``accel_bias_x``, ``gyro_scale_factor_x``, ``accel_scale_factor_x``; the
+hand-written ENU models' ``gyro_constant_drift_x`` and ``accel_constant_bias_x``
+are read as biases) and its frame (NED or ENU) it finds the state blocks, and
+from them:
+
+* the feedback of every block into the nominal state and its reset
+  (:meth:`NavigatorSpec.feedback`): attitude C_b^n = exp([phi x]) C_b^n' (the
+  phi-angle definition C' = (I - [phi x]) C), velocity v -= dv, position in
+  metres (north, east, down or up) or as dL, dlambda, dh, biases b += db,
+  scale factors s += ds (the mechanization uses (raw - b) / (1 + s));
+* P0 from the configuration's sigmas per block (:meth:`NavigatorSpec.initial_covariance`);
+* the rows of the zero-velocity update (velocity block) and of the
+  non-holonomic constraint (attitude and velocity blocks) in the model's frame;
+* the GNSS update's rows: each of the model's own measurements is a position or
+  a velocity difference (INS minus GNSS) along one axis, found from which
+  position or velocity state it depends on; its H is the model's generated H
+  (a lever arm in the model is a model parameter, set from the configuration);
+* the model's parameters at the operating point, from one table of expressions
+  (:data:`QUANTITIES`) that are valid C and, with ``->`` read as ``.``, Python,
+  so that the C navigator's parameter code and the Python navigator's cannot
+  disagree; a parameter the table does not know comes from the configuration's
+  ``parameters:`` section or the model's default.
+
+A model whose states do not make the attitude, velocity and position blocks is
+refused with one error naming its file.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import ModuleType, SimpleNamespace
+
+import numpy as np
+import sympy as sp
+
+from modelgen.errors import ModelError
+from modelgen.model.frames import NED_TO_ENU
+
+#: axis word -> (NED axis, sign): the state is sign x the NED component
+AXES = {"north": (0, 1.0), "east": (1, 1.0), "down": (2, 1.0), "up": (2, -1.0)}
+SENSOR_BLOCKS = ("gyro_bias", "accel_bias", "gyro_scale_factor", "accel_scale_factor")
+#: state-name patterns of each block (the navigation notation's names; the hand-written ENU models' bias names)
+_PATTERNS = {
+    "attitude": re.compile(r"^attitude_error_(north|east|down|up)$"),
+    "velocity": re.compile(r"^velocity_error_(north|east|down|up)$"),
+    "position": re.compile(r"^position_error_(north|east|down|up)$"),
+    "gyro_bias": re.compile(r"^(?:gyro_bias|gyro_constant_drift)_([xyz])$"),
+    "accel_bias": re.compile(r"^(?:accel_bias|accel_constant_bias)_([xyz])$"),
+    "gyro_scale_factor": re.compile(r"^gyro_scale_factor_([xyz])$"),
+    "accel_scale_factor": re.compile(r"^accel_scale_factor_([xyz])$"),
+}
+_GEODETIC = {"latitude_error": "north", "longitude_error": "east", "height_error": "up"}
+
+#: the model parameters the navigator sets at the operating point: name -> expression over the navigator's
+#: quantities (C, and Python with ``->`` read as ``.``): lat, lon, h [rad, m]; rm, rn radii [m]; vn, ve, vd NED
+#: velocity; fn, fe, fd NED specific force of the covariance step; fb[3] the same in body axes; wb[3] corrected body
+#: rate; e[3][3] C_b^frame (the model's frame); g normal gravity; sig[6] GNSS sigmas vN vE vD pN pE pD;
+#: cfg the configuration struct (:mod:`modelgen.navigator.cconfig`).
+QUANTITIES: dict[str, str] = {
+    "latitude": "lat", "longitude": "lon", "height": "h",
+    "meridian_radius": "rm", "prime_vertical_radius": "rn", "gravity": "g",
+    "velocity_north": "vn", "velocity_east": "ve", "velocity_down": "vd", "velocity_up": "-vd",
+    "specific_force_north": "fn", "specific_force_east": "fe", "specific_force_down": "fd", "specific_force_up": "-fd",
+    **{f"body_specific_force_{a}": f"fb[{i}]" for i, a in enumerate("xyz")},
+    **{f"body_rate_{a}": f"wb[{i}]" for i, a in enumerate("xyz")},
+    **{f"c{i + 1}{j + 1}": f"e[{i}][{j}]" for i in range(3) for j in range(3)},
+    **{f"lever_arm_{a}": f"cfg->lever_arm[{i}]" for i, a in enumerate("xyz")},
+    "gyro_angle_random_walk": "cfg->gyro_white", "accel_velocity_random_walk": "cfg->accel_white",
+    "gyro_bias_driving_noise": "cfg->gyro_bias_driving", "accel_bias_driving_noise": "cfg->accel_bias_driving",
+    "gps_velocity_sigma_north": "sig[0]", "gps_velocity_sigma_east": "sig[1]", "gps_velocity_sigma_up": "sig[2]",
+    "gps_position_sigma_north": "sig[3]", "gps_position_sigma_east": "sig[4]", "gps_position_sigma_up": "sig[5]",
+    # one sigma for the three axes: only the model's R uses it, and the navigator's R is the per-axis sigmas
+    "gnss_velocity_sigma": "sig[0]", "gnss_position_sigma": "sig[3]",
+}
+
+
+@dataclass(frozen=True)
+class Block:
+    """One block of error states: kind, state indices and, per state, its NED axis and sign (or body axis)."""
+
+    kind: str
+    indices: tuple[int, ...]
+    axes: tuple[int, ...]  # NED axis (navigation blocks) or body axis 0..2 (sensor blocks) of each state
+    signs: tuple[float, ...]
+    form: str = ""  # position: "metres" or "geodetic"
+
+    def ned(self, x: np.ndarray) -> np.ndarray:
+        """The block's vector in NED (or body) axes from the state vector."""
+        out = np.zeros(3)
+        for i, a, s in zip(self.indices, self.axes, self.signs):
+            out[a] = s * x[i]
+        return out
+
+
+@dataclass(frozen=True)
+class GnssRow:
+    """One GNSS measurement row of the model: position or velocity, its NED axis and sign."""
+
+    kind: str  # "position" or "velocity"
+    axis: int
+    sign: float
+
+    @property
+    def sigma_index(self) -> int:
+        """Index into the GNSS sigma vector vN vE vD pN pE pD."""
+        return self.axis + (3 if self.kind == "position" else 0)
+
+
+@dataclass
+class NavigatorSpec:
+    """Blocks, frame, measurement rows and parameter code of one derived navigation model."""
+
+    model_file: Path
+    derived: object  # modelgen.derive.symbolic.DerivedModel
+    name: str
+    frame: str
+    n_states: int
+    blocks: dict[str, Block]
+    gnss_rows: tuple[GnssRow, ...]
+    parameter_names: tuple[str, ...]
+    parameter_expressions: dict[str, str]  # the navigator's own (QUANTITIES)
+    free_parameters: tuple[str, ...]  # set by the configuration's parameters: or the model's default
+    defaults: dict[str, float]
+    module: ModuleType | None = None
+    _code: object = field(default=None, repr=False)
+
+    # -- frames ------------------------------------------------------------------------------
+    @property
+    def to_frame(self) -> np.ndarray:
+        """NED -> the model's frame."""
+        return NED_TO_ENU if self.frame == "ENU" else np.eye(3)
+
+    def check_config(self, config) -> None:
+        """Refuse a configuration that lacks what this model needs (scale-factor sigmas, free parameters)."""
+        for kind in ("gyro_scale_factor", "accel_scale_factor"):
+            if kind in self.blocks and getattr(config, f"{kind}_sigma", None) is None:
+                raise ModelError(f"{config.path}: model {self.name} has {kind.replace('_', ' ')} states: give "
+                                 f"initial.{kind}_sigma_ppm")
+        self.free_values(config)
+
+    # -- parameters --------------------------------------------------------------------------
+    def free_values(self, config) -> list[float]:
+        """Values of the free parameters (configuration's parameters:, else the model's default); refused if unset."""
+        given = dict(getattr(config, "parameters", None) or {})
+        unknown = sorted(set(given) - set(self.parameter_names))
+        if unknown:
+            raise ModelError(f"{config.path}: parameters: {', '.join(unknown)} is not a parameter of model {self.name} "
+                             f"(its parameters: {', '.join(self.parameter_names)})")
+        owned = sorted(set(given) & set(self.parameter_expressions))
+        if owned:
+            raise ModelError(f"{config.path}: parameters: {', '.join(owned)} is set by the navigator at every step "
+                             "(operating point, noise, GNSS sigma or lever arm keys); it cannot be fixed here")
+        missing = [p for p in self.free_parameters if p not in given and p not in self.defaults]
+        if missing:
+            raise ModelError(f"{config.path}: model {self.name} needs parameters the navigator does not set: "
+                             f"{', '.join(missing)} (give them under parameters:, in the model's units)")
+        return [float(given.get(p, self.defaults.get(p, 0.0))) for p in self.free_parameters]
+
+    def parameter_vector(self, quantities: dict) -> np.ndarray:
+        """The model's parameter vector from the navigator's quantities (QUANTITIES; cfg with .parameters)."""
+        if self._code is None:
+            items = []
+            for name in self.parameter_names:
+                if name in self.parameter_expressions:
+                    items.append(self.parameter_expressions[name].replace("->", "."))
+                else:
+                    items.append(f"cfg.parameters[{self.free_parameters.index(name)}]")
+            self._code = compile("(" + ", ".join(items) + ",)", f"<{self.name} parameters>", "eval")
+        return np.array(eval(self._code, {"__builtins__": {}}, quantities), float)  # noqa: S307 - our own table
+
+    # -- P0, feedback ------------------------------------------------------------------------
+    def initial_covariance(self, config, nav: np.ndarray, heading_sigma: float, radii) -> np.ndarray:
+        """P0 (diagonal) from the configuration's sigmas per block, in the blocks' own units."""
+        rm, rn = radii(nav[7])
+        sigma = np.zeros(self.n_states)
+        att = self.blocks["attitude"]
+        for i, a in zip(att.indices, att.axes):
+            sigma[i] = heading_sigma if a == 2 else config.roll_pitch_sigma
+        for i in self.blocks["velocity"].indices:
+            sigma[i] = config.velocity_sigma
+        pos = self.blocks["position"]
+        for i, a in zip(pos.indices, pos.axes):
+            s = config.height_sigma if a == 2 else config.position_sigma
+            if pos.form == "geodetic" and a == 0:
+                s /= rm + nav[9]
+            elif pos.form == "geodetic" and a == 1:
+                s /= (rn + nav[9]) * math.cos(nav[7])
+            sigma[i] = s
+        per_sensor = {"gyro_bias": config.gyro_bias_sigma, "accel_bias": config.accel_bias_sigma,
+                      "gyro_scale_factor": config.gyro_scale_factor_sigma,
+                      "accel_scale_factor": config.accel_scale_factor_sigma}
+        for kind in SENSOR_BLOCKS:
+            if kind in self.blocks:
+                for i in self.blocks[kind].indices:
+                    sigma[i] = per_sensor[kind]
+        return np.diag(np.square(sigma))
+
+    def feedback(self, nav: np.ndarray, x: np.ndarray, sensors: dict[str, np.ndarray], radii, rotate) -> None:
+        """Correct the navigation state and the sensor estimates with x (in place); the caller zeroes x.
+
+        ``rotate(nav, phi_ned)``: C_b^n = exp([phi x]) C_b^n' on the quaternion.
+        """
+        rotate(nav, self.blocks["attitude"].ned(x))
+        nav[4:7] -= self.blocks["velocity"].ned(x)
+        pos = self.blocks["position"]
+        d = pos.ned(x)  # geodetic: (dL, dlambda, -dh)
+        if pos.form == "geodetic":
+            nav[7] -= d[0]
+            nav[8] -= d[1]
+        else:
+            rm, rn = radii(nav[7])
+            nav[7] -= d[0] / (rm + nav[9])
+            nav[8] -= d[1] / ((rn + nav[9]) * math.cos(nav[7]))
+        nav[9] += d[2]
+        for kind in SENSOR_BLOCKS:
+            if kind in self.blocks:
+                sensors[kind] += self.blocks[kind].ned(x)
+
+    # -- measurement rows --------------------------------------------------------------------
+    def zupt_rows(self, v_ned: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """z = the velocity (the error when the truth is zero) and H picking the velocity block."""
+        vel = self.blocks["velocity"]
+        H = np.zeros((3, self.n_states))
+        z = np.zeros(3)
+        for r, (i, a, s) in enumerate(zip(vel.indices, vel.axes, vel.signs)):
+            H[r, i] = 1.0
+            z[r] = s * v_ned[a]
+        return z, H
+
+    def nhc_rows(self, c_bn: np.ndarray, v_ned: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """z = body lateral and vertical velocity; H = [-C_n^b [v x], C_n^b] on the attitude and velocity blocks."""
+        c_nb = c_bn.T
+        skew = np.array([[0.0, -v_ned[2], v_ned[1]], [v_ned[2], 0.0, -v_ned[0]], [-v_ned[1], v_ned[0], 0.0]])
+        attitude, velocity = -(c_nb @ skew)[1:3], c_nb[1:3]
+        H = np.zeros((2, self.n_states))
+        for block, rows in ((self.blocks["attitude"], attitude), (self.blocks["velocity"], velocity)):
+            for i, a, s in zip(block.indices, block.axes, block.signs):
+                H[:, i] = s * rows[:, a]
+        return (c_nb @ v_ned)[1:3], H
+
+    def gnss_z(self, dv_ned: np.ndarray, dp_ned: np.ndarray, sig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """z (INS minus GNSS along each model row) and R's diagonal from the per-axis sigmas vN vE vD pN pE pD."""
+        z = np.array([r.sign * (dp_ned if r.kind == "position" else dv_ned)[r.axis] for r in self.gnss_rows])
+        return z, np.array([sig[r.sigma_index] ** 2 for r in self.gnss_rows])
+
+    def position_output(self, P: np.ndarray, nav: np.ndarray, radii) -> tuple[float, ...]:
+        """sigma north, east, up [m] and covariances north-east, east-up, up-north [m^2] from P's position block."""
+        pos = self.blocks["position"]
+        rm, rn = radii(nav[7])
+        scale = [1.0, 1.0, 1.0]
+        if pos.form == "geodetic":
+            scale = [rm + nav[9], (rn + nav[9]) * math.cos(nav[7]), 1.0]
+        index, factor = [0, 0, 0], [0.0, 0.0, 0.0]  # per north, east, up: the state and its factor to metres
+        for i, a, s in zip(pos.indices, pos.axes, pos.signs):
+            index[a] = i
+            factor[a] = s * scale[a] * (-1.0 if a == 2 else 1.0)  # the third output axis is up
+        n, e, u = index
+        fn_, fe_, fu_ = factor
+        return (math.sqrt(max(P[n, n], 0.0)) * abs(fn_), math.sqrt(max(P[e, e], 0.0)) * abs(fe_),
+                math.sqrt(max(P[u, u], 0.0)) * abs(fu_), P[n, e] * fn_ * fe_, P[e, u] * fe_ * fu_, P[u, n] * fu_ * fn_)
+
+
+def _blocks(names: list[str], frame: str, where: str) -> dict[str, Block]:
+    found: dict[str, list[tuple[int, int, float]]] = {}
+    forms: dict[str, str] = {}
+    for index, name in enumerate(names):
+        if name in _GEODETIC:
+            axis, sign = AXES[_GEODETIC[name]]
+            found.setdefault("position", []).append((index, axis, sign))
+            forms["position_geodetic"] = "geodetic"
+            continue
+        for kind, pattern in _PATTERNS.items():
+            m = pattern.match(name)
+            if m:
+                word = m.group(1)
+                axis, sign = AXES[word] if kind in ("attitude", "velocity", "position") else ("xyz".index(word), 1.0)
+                found.setdefault(kind, []).append((index, axis, sign))
+                if kind == "position":
+                    forms["position_metres"] = "metres"
+                break
+    if len(forms) > 1:
+        raise ModelError(f"{where}: the position error states mix metres and latitude/longitude/height errors")
+    missing = [k for k in ("attitude", "velocity", "position") if len(found.get(k, [])) != 3]
+    if missing:
+        raise ModelError(f"{where}: the navigator cannot fly this model: it has no complete {', '.join(missing)} "
+                         "error block (three states named as the navigation: section names them, e.g. "
+                         "velocity_error_north/east/down); write the model with a navigation: section")
+    blocks = {}
+    for kind, entries in found.items():
+        axes = sorted(a for _, a, _ in entries)
+        if len(entries) != 3 or axes != [0, 1, 2]:
+            raise ModelError(f"{where}: the {kind} error block must have one state per axis "
+                             f"(got {[names[i] for i, _, _ in entries]})")
+        form = next(iter(forms.values())) if kind == "position" else ""
+        blocks[kind] = Block(kind, tuple(i for i, _, _ in entries), tuple(a for _, a, _ in entries),
+                             tuple(s for _, _, s in entries), form)
+    return blocks
+
+
+def _gnss_rows(derived, blocks: dict[str, Block], where: str) -> tuple[GnssRow, ...]:
+    model = derived.model
+    H = derived.H  # the model's own symbolic H
+    rows = []
+    for r, name in enumerate(model.measurement_names):
+        depends = {i for i in range(H.shape[1]) if sp.simplify(H[r, i]) != 0}
+        found = None
+        for kind in ("velocity", "position"):
+            hits = [(i, a, s) for i, a, s in zip(blocks[kind].indices, blocks[kind].axes, blocks[kind].signs)
+                    if i in depends]
+            if len(hits) == 1:
+                found = GnssRow(kind, hits[0][1], hits[0][2])
+                break
+        if found is None:
+            raise ModelError(f"{where}: measurement {name!r} is neither a position nor a velocity difference "
+                             "along one axis: the navigator's GNSS update cannot fill it")
+        rows.append(found)
+    return tuple(rows)
+
+
+def navigator_spec(model_file: Path, with_python: bool = True) -> NavigatorSpec:
+    """Derive the model file once and read the navigator's spec from it (and the generated Python filter)."""
+    from modelgen.derive.symbolic import derive
+    from modelgen.model.loading import load_model
+
+    model_file = Path(model_file)
+    derived = derive(load_model(model_file))
+    return spec_of(derived, model_file, with_python)
+
+
+def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpec:
+    """The spec of a derived model (and its generated Python filter, imported, if ``with_python``)."""
+    model = derived.model
+    where = str(model_file)
+    frame = str(model.frame or "").upper()
+    if frame not in ("NED", "ENU"):
+        raise ModelError(f"{where}: the navigator flies models in the NED or ENU frame (model {model.name} "
+                         f"declares {model.frame or 'no frame'})")
+    _check_forms(model_file)
+    names = list(model.state_names)
+    blocks = _blocks(names, frame, where)
+    rows = _gnss_rows(derived, blocks, where)
+    parameter_names = tuple(model.parameter_names)
+    defaults = {k: float(v) for k, v in model.parameter_defaults().items()}
+    expressions = {p: QUANTITIES[p] for p in parameter_names if p in QUANTITIES and p not in defaults}
+    free = tuple(p for p in parameter_names if p not in expressions)
+    spec = NavigatorSpec(model_file, derived, model.name, frame, len(names), blocks, rows, parameter_names,
+                         expressions, free, defaults)
+    if with_python:
+        spec.module = _python_module(derived)
+    return spec
+
+
+def _check_forms(model_file: Path) -> None:
+    """The error forms the feedback implements: attitude phi, velocity difference (a navigation: section's)."""
+    import yaml
+
+    try:
+        data = yaml.safe_load(Path(model_file).read_text())
+    except (OSError, yaml.YAMLError):
+        return  # the loader has already read it; nothing more to say here
+    section = data.get("navigation") if isinstance(data, dict) else None
+    if not isinstance(section, dict):
+        return
+    errors = section.get("errors") or {}
+    attitude = (errors.get("attitude") or {}).get("form", "phi") if isinstance(errors, dict) else "phi"
+    velocity = (errors.get("velocity") or {}).get("form", "difference") if isinstance(errors, dict) else "difference"
+    if attitude != "phi" or velocity != "difference":
+        raise ModelError(f"{model_file}: the navigator feeds back phi-angle attitude errors and velocity "
+                         f"differences (navigation.errors: attitude {attitude!r}, velocity {velocity!r})")
+
+
+def _python_module(derived) -> ModuleType:
+    """Generate the derived model's Python filter with modelgen's generator and import it."""
+    import tempfile
+
+    from modelgen.codegen.build import load_python_module
+    from modelgen.codegen.generate import generate_code
+    from modelgen.fileio.output import write_atomically
+
+    name = derived.model.name
+    with tempfile.TemporaryDirectory(prefix="modelgen-replay-") as temporary:  # an imported module needs no file
+        write_atomically(Path(temporary) / name, generate_code(derived).files)
+        return load_python_module(Path(temporary) / name / f"{name}.py")
+
+
+def quantities(spec: NavigatorSpec, nav: np.ndarray, c_bn: np.ndarray, force_ned: np.ndarray,
+               rate_body: np.ndarray, sig: np.ndarray, cfg: SimpleNamespace, radii, gravity) -> dict:
+    """The navigator's quantities at the navigation state (the names QUANTITIES' expressions use)."""
+    lat, h = nav[7], nav[9]
+    rm, rn = radii(lat)
+    return {"lat": lat, "lon": nav[8], "h": h, "rm": rm, "rn": rn, "g": gravity(lat, h),
+            "vn": nav[4], "ve": nav[5], "vd": nav[6], "fn": force_ned[0], "fe": force_ned[1], "fd": force_ned[2],
+            "fb": c_bn.T @ force_ned, "wb": rate_body, "e": spec.to_frame @ c_bn, "sig": sig, "cfg": cfg}
