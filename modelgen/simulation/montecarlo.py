@@ -55,7 +55,7 @@ from modelgen.cluster import (Journal, dask_client, describe_client, forget_cach
 from modelgen.errors import ModelError
 from modelgen.simulation.error_layout import ErrorLayout
 from modelgen.simulation.filters import IMPLEMENTATIONS, filter_factory, generated_filter_files
-from modelgen.simulation.flight import fly_profile, profile_layout
+from modelgen.simulation.flight import fly_profile, profile_layout, simulate_sensors
 from modelgen.simulation.jit import load_compiled_machinery
 from modelgen.simulation.model_outline import ModelOutline
 from modelgen.simulation.streaming import flies_compiled_loop as streaming_compiled_loop
@@ -304,8 +304,12 @@ def fly_one_run(key: str, sent: MonteCarloSetup | bytes, seed: np.random.SeedSeq
     """
     c = worker_cached(key, lambda: _prepare(pickle.loads(sent) if isinstance(sent, bytes) else sent))
     setup = c["setup"]
-    result = fly_profile(setup.profile, c["derived"], c["trajectory"], np.random.default_rng(seed), c["make_filter"],
-                         mode=setup.mode, layout=c["layout"], truth_profile=setup.truth_profile)
+    rng = np.random.default_rng(seed)
+    # the run's IMU errors streamed piece by piece over the shared trajectory: memory independent of the
+    # flight's length (a held copy of the measured increments was 207 MB at 4 h, 300 Hz); the same draws
+    sensors = simulate_sensors(setup.truth_profile or setup.profile, c["trajectory"], rng, stream_errors=True)
+    result = fly_profile(setup.profile, c["derived"], c["trajectory"], rng, c["make_filter"],
+                         mode=setup.mode, sensors=sensors, layout=c["layout"], truth_profile=setup.truth_profile)
     rows = slice(None, None, setup.store_every)
     return RunOutput(result.times[rows], result.estimation_error[rows], result.sigma[rows], result.nees[rows],
                      len(result.rejected), result.updates)
