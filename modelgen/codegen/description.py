@@ -294,6 +294,7 @@ def model_hash(model) -> str:
     """
     declaration = dataclasses.asdict(model)
     declaration.pop("neglected", None)  # what the derivation dropped, carried on the model: not part of the declaration
+    declaration.pop("attitude_reset", None)  # derived from the declaration's error definition, like the neglected terms
     canonical = json.dumps(declaration, sort_keys=True, default=repr, ensure_ascii=True)
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()[:16]
 

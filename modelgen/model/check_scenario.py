@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -92,18 +92,53 @@ def _si(value: Any, where: str) -> float:
     return float(value)
 
 
-def _named_values(raw: Any, key: str, lines: Mapping[str, str], place: str, positive: bool = False) -> dict[str, float]:
+def _named_values(raw: Any, key: str, lines: Mapping[str, str], place: str, positive: bool = False, lists: bool = False) -> dict[str, Any]:
+    """Names to SI numbers; with ``lists`` a name may also take a list (per axis of a vector stem, :func:`expand_stems`)."""
     if raw is None:
         return {}
     if not isinstance(raw, Mapping):
         raise ModelError(f"{place}: check.{key} must map names to values")
-    out = {}
+    out: dict[str, Any] = {}
     for name, value in raw.items():
         where = f"{lines.get(f'check.{key}.{name}', place)}: check.{key}.{name}"
-        number = _si(value, where)
-        if positive and number < 0:
-            raise ModelError(f"{where}: a standard deviation cannot be negative ({number!r})")
-        out[str(name)] = number
+        if lists and isinstance(value, Mapping) and isinstance(value.get("value"), list):  # {value: [..], unit: u}
+            value = [{"value": v, "unit": value.get("unit", "1")} for v in value["value"]]
+        numbers = [_si(v, f"{where}[{i}]") for i, v in enumerate(value)] if lists and isinstance(value, list) else [_si(value, where)]
+        for number in numbers:
+            if positive and number < 0:
+                raise ModelError(f"{where}: a standard deviation cannot be negative ({number!r})")
+        out[str(name)] = numbers if isinstance(value, list) and lists else numbers[0]
+    return out
+
+
+def expand_stems(values: Mapping[str, Any], state_names: Sequence[str], place: str) -> dict[str, float]:
+    """``initial_sigma`` entries by vector stem: ``gyro_bias: 0.01`` (every axis) or ``gyro_bias: [a, b, c]`` (per axis)
+    for the states ``gyro_bias_x, gyro_bias_y, gyro_bias_z``; a state's own entry wins over its stem's
+    (an augmented model's section may set one axis over its base's stem).
+
+    Refused: a list for a single state and a list of the wrong length; a key that is neither a state
+    nor a stem is kept, for the caller to name as unknown.
+    """
+    names = list(state_names)
+    out: dict[str, float] = {}
+    for key, value in values.items():
+        if key in names:
+            if isinstance(value, list):
+                raise ModelError(f"{place}: check.initial_sigma.{key}: {key!r} is one state; give one number, not a list of {len(value)}")
+            out[key] = value
+            continue
+        members = [n for n in names if n.startswith(f"{key}_") and "_" not in n[len(key) + 1:]]
+        if not members:
+            out[key] = value  # unknown: build_check_spec names it
+            continue
+        numbers = value if isinstance(value, list) else [value] * len(members)
+        if len(numbers) != len(members):
+            raise ModelError(
+                f"{place}: check.initial_sigma.{key} lists {len(numbers)} values for the {len(members)} states {', '.join(members)}"
+            )
+        for member, number in zip(members, numbers):
+            if member not in values:
+                out[member] = number
     return out
 
 
@@ -134,7 +169,7 @@ def parse_check_section(raw: Any, lines: Mapping[str, str], filename: str) -> di
     if "parameters" in raw:
         out["parameters"] = _named_values(raw["parameters"], "parameters", lines, place)
     if "initial_sigma" in raw:
-        out["initial_sigma"] = _named_values(raw["initial_sigma"], "initial_sigma", lines, place, positive=True)
+        out["initial_sigma"] = _named_values(raw["initial_sigma"], "initial_sigma", lines, place, positive=True, lists=True)
     if "initial_covariance" in raw:
         out["initial_covariance"] = _matrix(raw["initial_covariance"], f"{lines.get('check.initial_covariance', place)}: check.initial_covariance")
     if "initial_sigma" in out and "initial_covariance" in out:
@@ -198,7 +233,7 @@ def build_check_spec(
         raise ModelError(f"{place}: model {model.name!r}: check.parameters names unknown parameter(s) {', '.join(unknown)}")
     missing = [p.name for p in model.parameters if p.value is None and p.name not in params]
     if partial:  # only the names are checked (a section to be laid over an inherited one)
-        unknown = sorted(set(section.get("initial_sigma", {})) - set(model.state_names))
+        unknown = sorted(set(expand_stems(section.get("initial_sigma", {}), model.state_names, place)) - set(model.state_names))
         if unknown:
             raise ModelError(f"{place}: model {model.name!r}: check.initial_sigma names unknown state(s) {', '.join(unknown)}")
         return None
@@ -206,7 +241,7 @@ def build_check_spec(
         raise ModelError(f"{place}: model {model.name!r}: check.parameters gives no value for {', '.join(missing)} (no default)")
     n = len(model.states)
     cov = section.get("initial_covariance")
-    sigma = dict(section.get("initial_sigma", {}))
+    sigma = expand_stems(dict(section.get("initial_sigma", {})), model.state_names, place)
     if inherited:
         sigma = {k: v for k, v in sigma.items() if k in set(model.state_names)}
     if cov is not None and len(cov) != n:

@@ -192,6 +192,9 @@ class ErrorModel:
     #: A navigation model's terms its declared approximations dropped (modelgen.model.perturbation.NeglectedTerm), carried
     #: on the model itself; empty for a model written as equations.
     neglected: tuple = field(default_factory=tuple, compare=False)
+    #: A navigation model's attitude reset Jacobian for closed-loop feedback
+    #: (modelgen.model.perturbation.AttitudeReset), None for a model written as equations.
+    attitude_reset: Any = field(default=None, compare=False)
 
     def __repr__(self) -> str:
         """One line (the default repr printed every equation: 11,769 characters for the paper's model)."""

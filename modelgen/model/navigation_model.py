@@ -21,6 +21,7 @@ involved, before anything is derived.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Mapping, Sequence
 
@@ -29,12 +30,19 @@ import sympy as sp
 from modelgen.errors import ModelError
 from modelgen.model import perturbation as pt
 from modelgen.model import wgs84
-from modelgen.model.mechanizations import MECHANIZATIONS, mechanization_named  # noqa: F401  (MECHANIZATIONS: public)
+from modelgen.model.mechanizations import (  # noqa: F401  (MECHANIZATIONS: public)
+    MECHANIZATION_APPROXIMATIONS,
+    MECHANIZATION_ERROR_FORMS,
+    MECHANIZATION_FRAMES,
+    MECHANIZATIONS,
+    mechanization_named,
+)
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State, check_identifier, parse_expression
 from modelgen.model.file_fields import free_text, notes_text, scalar_text
 from modelgen.model.unit_check import check_model_units
 from modelgen.model.units import declared_value
-from modelgen.model.vectors import component_names, parse_vector_expression
+from modelgen.model.vectors import component_names as _vector_component_names
+from modelgen.model.vectors import parse_vector_expression
 
 #: Keys of a model file that derives its error model from the navigation equations.
 NAVIGATION_TOP_KEYS = frozenset({"model", "title", "source", "frame", "notes", "parameters", "navigation", "check"})
@@ -109,6 +117,17 @@ class _Reader:
         return str(value)
 
 
+#: Axis suffixes of the navigation frames the general vector notation does not know (modelgen.model.vectors: NED, ENU).
+_NAVIGATION_ONLY_FRAMES = {"ECEF": ("x", "y", "z")}
+
+
+def component_names(name: str, shape: int, frame: str, axes: str | None = None, where: str = "") -> list[str]:
+    """:func:`modelgen.model.vectors.component_names`, and the e-frame's ``_x, _y, _z`` for a navigation-frame vector."""
+    if axes is None and frame in _NAVIGATION_ONLY_FRAMES and shape == 3:
+        return [f"{name}_{a}" for a in _NAVIGATION_ONLY_FRAMES[frame]]
+    return _vector_component_names(name, shape, frame, axes, where)
+
+
 def _symbols(names: Sequence[str]) -> sp.Matrix:
     return sp.Matrix([sp.Symbol(n, real=True) for n in names])
 
@@ -134,13 +153,16 @@ class _Declarations:
     states: list[State]
     noises: list[Noise]
     parameters: dict[str, Parameter]  # by symbol: parameters the engine may put into the matrices
-    measurement_biases: list[sp.Symbol] = field(default_factory=list)  # random-constant states of aiding sensors
+    measurement_biases: list[sp.Symbol] = field(default_factory=list)  # error states of aiding sensors
+    measurement_bias_dynamics: dict[sp.Symbol, sp.Expr] = field(default_factory=dict)  # their rates (absent: random constant)
     places: dict[tuple[str, str], str] = field(default_factory=dict)  # (kind, name) -> the key that declared it
+    vectors: dict[str, sp.Matrix] = field(default_factory=dict)  # vector parameters (shape: 3) by symbol: their components
 
 
 def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declarations) -> dict[str, Any]:
     """Symbols of the computed attitude, velocity, position, sensed inputs and Earth quantities."""
     axes_words = _axis_words(frame, None)
+    ecef = frame == "ECEF"
     attitude = read.mapping(section.get("attitude", {}), "navigation.attitude", ("symbols",))
     c = read.names(attitude["symbols"], "navigation.attitude.symbols", 9) if "symbols" in attitude else [f"c{i}{j}" for i in range(1, 4) for j in range(1, 4)]
     for k, s in enumerate(c):
@@ -148,10 +170,16 @@ def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declar
     velocity = read.mapping(section.get("velocity", {}), "navigation.velocity", ("symbols", "symbol"))
     v = _vector_symbols(read, velocity, "navigation.velocity", "v", frame, None)
     for s, word in zip(v, axes_words):
-        _offer(decl, s, f"velocity_{word}", "m/s", f"{word} ground speed")
+        _offer(decl, s, f"velocity_{word}", "m/s", f"e-frame velocity {word} (with respect to the Earth)" if ecef else f"{word} ground speed")
     position = read.mapping(section.get("position", {}), "navigation.position", ("symbols",))
-    p = read.names(position["symbols"], "navigation.position.symbols", 3) if "symbols" in position else ["L", "lambda_", "h"]
-    for s, name, unit, text in zip(p, ("latitude", "longitude", "height"), ("rad", "rad", "m"), ("geodetic latitude", "longitude", "height above the ellipsoid")):
+    default_position = ["r_x", "r_y", "r_z"] if ecef else ["L", "lambda_", "h"]
+    p = read.names(position["symbols"], "navigation.position.symbols", 3) if "symbols" in position else default_position
+    if ecef:
+        position_words = [("position_x", "m", "e-frame position x (Earth's centre to the IMU)"), ("position_y", "m", "e-frame position y"),
+                          ("position_z", "m", "e-frame position z (along the Earth's rotation axis)")]
+    else:
+        position_words = [("latitude", "rad", "geodetic latitude"), ("longitude", "rad", "longitude"), ("height", "m", "height above the ellipsoid")]
+    for s, (name, unit, text) in zip(p, position_words):
         _offer(decl, s, name, unit, text)
     force = read.mapping(section.get("specific_force", {}), "navigation.specific_force", ("symbols", "symbol", "axes"))
     force_axes = read.choice(force.get("axes", "body"), "navigation.specific_force.axes", ("body", "navigation"))
@@ -163,8 +191,8 @@ def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declar
     w = _vector_symbols(read, rate, "navigation.body_rate", "omega_b", frame, "body")
     for s, word in zip(w, "xyz"):
         _offer(decl, s, f"body_rate_{word}", "rad/s", f"sensed body rate w_ib^b about body {word}")
-    earth = read.mapping(section.get("earth", {}), "navigation.earth", ("earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "earth_radius"))
-    defaults = {"earth_rate": "omega_ie", "meridian_radius": "R_M", "prime_vertical_radius": "R_N", "gravity": "g", "earth_radius": "R"}
+    earth = read.mapping(section.get("earth", {}), "navigation.earth", ("earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "earth_radius", "geocentric_radius"))
+    defaults = {"earth_rate": "omega_ie", "meridian_radius": "R_M", "prime_vertical_radius": "R_N", "gravity": "g", "earth_radius": "R", "geocentric_radius": "r_e"}
     symbols = {}
     for key, default in defaults.items():
         symbols[key] = str(earth.get(key, default))
@@ -174,6 +202,7 @@ def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declar
     _offer(decl, symbols["prime_vertical_radius"], "prime_vertical_radius", "m", "prime-vertical radius of curvature at the latitude (WGS-84)")
     _offer(decl, symbols["gravity"], "gravity", "m/s^2", "normal gravity at the position (WGS-84)")
     _offer(decl, symbols["earth_radius"], "earth_radius", "m", "radius of the spherical Earth", wgs84.SEMI_MAJOR_AXIS)
+    _offer(decl, symbols["geocentric_radius"], "geocentric_radius", "m", "|r^e|: distance from the Earth's centre to the IMU (ecef gravity)")
     _offer(decl, "k_v1", "vertical_damping_gain_1", "1/s", "baro-damped vertical channel: height feedback gain k_1")
     _offer(decl, "k_v2", "vertical_damping_gain_2", "1/s^2", "baro-damped vertical channel: vertical-velocity feedback gain k_2")
     S = lambda name: sp.Symbol(name, real=True)  # noqa: E731
@@ -184,7 +213,7 @@ def _navigation_state(read: _Reader, section: Mapping, frame: str, decl: _Declar
         "specific_force": _symbols(f),
         "specific_force_axes": force_axes,
         "body_rate": _symbols(w),
-        "earth": pt.EarthSymbols(*(S(symbols[k]) for k in ("earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "earth_radius"))),
+        "earth": pt.EarthSymbols(*(S(symbols[k]) for k in ("earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "earth_radius", "geocentric_radius"))),
     }
 
 
@@ -198,31 +227,48 @@ _ERROR_FORMS = {"attitude": pt.ATTITUDE_FORMS, "velocity": pt.VELOCITY_FORMS, "p
 _ERROR_DEFAULTS = {"attitude": ("phi", "phi"), "velocity": ("difference", "dv"), "position": ("geodetic", "d")}
 
 
-def _error_definition(read: _Reader, section: Mapping, frame: str, decl: _Declarations) -> tuple[pt.ErrorDefinition, list[sp.Symbol]]:
+def _error_definition(
+    read: _Reader, section: Mapping, frame: str, decl: _Declarations, mechanization: str = "local_level"
+) -> tuple[pt.ErrorDefinition, list[sp.Symbol]]:
     """The declared navigation error states (in the file's order) and their definition."""
     errors = read.mapping(section.get("errors"), "navigation.errors", (*ERROR_QUANTITIES,))
     missing = [q for q in ERROR_QUANTITIES if q not in errors]
     if missing:
         raise ModelError(
-            f"{read.at('navigation.errors')}: the error definition has no {', '.join(missing)} error; the local-level "
+            f"{read.at('navigation.errors')}: the error definition has no {', '.join(missing)} error; the {mechanization.replace('_', '-')} "
             f"mechanization integrates attitude, velocity and position, and each needs its error states"
         )
+    own_forms = MECHANIZATION_ERROR_FORMS.get(mechanization) or {}
     chosen: dict[str, tuple[str, list[str]]] = {}
     order: list[sp.Symbol] = []
     approximations = section.get("approximations")
-    horizontal = isinstance(approximations, list) and "no_vertical_channel" in approximations
+    horizontal = isinstance(approximations, list) and "no_vertical_channel" in [approximation_name(a) for a in approximations]
     for quantity in errors:
         key = f"navigation.errors.{quantity}"
-        entry = read.mapping(errors[quantity], key, ("form", "symbols", "symbol", "names"))
-        form = read.choice(entry.get("form", _ERROR_DEFAULTS[quantity][0]), f"{key}.form", _ERROR_FORMS[quantity])
+        entry = read.mapping(errors[quantity], key, ("form", "symbols", "symbol", "names", "axes") if quantity == "attitude" else ("form", "symbols", "symbol", "names"))
+        default_form = own_forms[quantity][0] if quantity in own_forms else _ERROR_DEFAULTS[quantity][0]
+        form = read.choice(entry.get("form", default_form), f"{key}.form", _ERROR_FORMS[quantity])
+        if quantity in own_forms and form not in own_forms[quantity]:
+            raise ModelError(
+                f"{read.at(f'{key}.form')}: {key}.form {form!r} is a local-level form (it follows the frame's turning with "
+                f"position); the {mechanization} mechanization's {quantity} error is {', '.join(own_forms[quantity])}"
+            )
         count = 2 if horizontal and quantity != "attitude" else 3  # no_vertical_channel: horizontal components only
+        if quantity == "attitude":
+            attitude_axes = read.choice(entry.get("axes", "navigation"), f"{key}.axes", pt.ATTITUDE_AXES)
+            if attitude_axes == "body" and form != "rotation_vector":
+                raise ModelError(f"{read.at(f'{key}.axes')}: {key}.axes body is for form rotation_vector (phi and psi are navigation-frame angles)")
+        body_attitude = quantity == "attitude" and attitude_axes == "body"
         if "symbols" in entry:
             symbols = read.names(entry["symbols"], f"{key}.symbols", count)
         elif quantity == "position" and form == "geodetic":
             symbols = ["dL", "dlambda", "dh"][:count]
         else:
-            symbols = _vector_symbols(read, entry, key, "dr" if quantity == "position" else _ERROR_DEFAULTS[quantity][1], frame, None)[:count]
-        if quantity == "attitude":
+            default_symbol = "dr" if quantity == "position" else "theta" if body_attitude else _ERROR_DEFAULTS[quantity][1]
+            symbols = _vector_symbols(read, entry, key, default_symbol, frame, "body" if body_attitude else None)[:count]
+        if body_attitude:
+            names = [f"attitude_error_{w}" for w in "xyz"]
+        elif quantity == "attitude":
             names = [f"attitude_error_{w}" for w in _axis_words(frame, None)]
         elif quantity == "velocity":
             names = [f"velocity_error_{w}" for w in _axis_words(frame, None)]
@@ -232,7 +278,9 @@ def _error_definition(read: _Reader, section: Mapping, frame: str, decl: _Declar
             names = [f"position_error_{w}" for w in _axis_words(frame, None)]
         names = read.names(entry["names"], f"{key}.names", count) if "names" in entry else names[:count]
         units = {"attitude": ["rad"] * 3, "velocity": ["m/s"] * 3, "position": ["rad", "rad", "m"] if form == "geodetic" else ["m"] * 3}[quantity][:count]
-        label = {"phi": "phi-angle", "psi": "psi-angle"}.get(form, form)
+        label = {"phi": "phi-angle", "psi": "psi-angle", "rotation_vector": "rotation vector"}.get(form, form)
+        if quantity == "attitude" and form == "rotation_vector":
+            label += ", body axes" if body_attitude else f", {frame} axes"
         for name, symbol, unit in zip(names, symbols, units):
             decl.states.append(State(name=name, symbol=symbol, unit=unit, description=f"{quantity} error ({label}), computed minus true"))
             decl.places[("state", name)] = key
@@ -241,7 +289,7 @@ def _error_definition(read: _Reader, section: Mapping, frame: str, decl: _Declar
     S = lambda names: tuple(sp.Symbol(s, real=True) for s in names)  # noqa: E731
     definition = pt.ErrorDefinition(
         chosen["attitude"][0], S(chosen["attitude"][1]), chosen["velocity"][0], S(chosen["velocity"][1]),
-        chosen["position"][0], S(chosen["position"][1]),
+        chosen["position"][0], S(chosen["position"][1]), attitude_axes,
     )
     return definition, order
 
@@ -287,10 +335,12 @@ def _sensor_errors(read: _Reader, section: Mapping, frame: str, decl: _Declarati
             for field in ("rate", "sigma"):
                 if field not in entry:
                     raise ModelError(f"{read.at(key)}: a Gauss-Markov sensor error needs {field!r} (inverse correlation time and steady-state sigma)")
-            rate = parse_expression(scalar_text(entry["rate"], read.at(f"{key}.rate"), f"{key}.rate"), namespace(), f"{read.at(f'{key}.rate')}: {key}.rate")
-            psd = f"2*({scalar_text(entry['rate'], read.at(key), 'rate')})*({scalar_text(entry['sigma'], read.at(key), 'sigma')})**2"
-            rates = [-rate * s + w for s, w in zip(state_symbols, noises)]
-            _add_noises(decl, noise_names, noise_symbols, [psd] * 3, units, kind, key)
+            rate_texts = _per_component(read, entry["rate"], f"{key}.rate", count)  # one value, or one per axis
+            sigma_texts = _per_component(read, entry["sigma"], f"{key}.sigma", count)
+            parsed = [parse_expression(r, namespace(), f"{read.at(f'{key}.rate')}: {key}.rate") for r in rate_texts]
+            psds = [f"2*({r})*({q})**2" for r, q in zip(rate_texts, sigma_texts)]
+            rates = [-rate * s + w for rate, s, w in zip(parsed, state_symbols, noises)]
+            _add_noises(decl, noise_names, noise_symbols, psds, units, kind, key)
         else:  # random_walk and clock: driven by white noise of the given PSD(s)
             if "psd" not in entry:
                 raise ModelError(f"{read.at(key)}: a {process.replace('_', ' ')} sensor error needs 'psd'")
@@ -328,8 +378,8 @@ def _sensor_noises(read: _Reader, section: Mapping, frame: str, decl: _Declarati
         symbols = _vector_symbols(read, entry, key, default, frame, "body" if axes == "body" else None)
         words_of = list("xyz") if axes == "body" else _axis_words(frame, None)
         names = read.names(entry["names"], f"{key}.names", 3) if "names" in entry else [f"{prefix}_{a}" for a in words_of]
-        psd = scalar_text(entry["psd"], read.at(f"{key}.psd"), f"{key}.psd")
-        for name, symbol, axis in zip(names, symbols, words_of):
+        psds = _per_component(read, entry["psd"], f"{key}.psd", 3)  # one PSD, or one per axis
+        for name, symbol, axis, psd in zip(names, symbols, words_of, psds):
             where = f"{axis}" if axes == "body" else f"resolved {axis}"
             decl.noises.append(Noise(name=name, symbol=symbol, unit=unit, psd=psd, description=f"{sensor} white noise {where} ({text})"))
             decl.places[("noise", name)] = key
@@ -380,7 +430,8 @@ def _reorder(vector: sp.Matrix, index: Sequence[int], sign: Sequence[int]) -> sp
 
 
 def _measurements(
-    read: _Reader, section: Mapping, frame: str, decl: _Declarations, clock: sp.Matrix | None, namespace: Callable[[], dict]
+    read: _Reader, section: Mapping, frame: str, decl: _Declarations, clock: sp.Matrix | None, namespace: Callable[[], dict],
+    mechanization: str = "local_level",
 ) -> tuple[list[pt.MeasurementFunction], list[Measurement]]:
     """The measurement functions for the engine and the Measurement declarations (names, variances)."""
     raw = section.get("measurements") or []
@@ -398,14 +449,14 @@ def _measurements(
         measured_minus_computed = read.choice(entry.get("difference", "computed_minus_measured"), f"{key}.difference", ("computed_minus_measured", "measured_minus_computed")) == "measured_minus_computed"
         if kind in ("position", "velocity"):
             index, sign = _component_order(read, entry, key, frame)
-            function, scale, units, count, extra = _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign)
+            function, scale, units, count, extra = _kinematic_measurement(read, entry, key, kind, frame, arm, index, sign, mechanization)
         elif kind == "pseudorange":
             function, scale, units, count, extra = _pseudorange(read, entry, key, frame, clock, decl)
         elif kind == "pseudorange_rate":
             function, scale, units, count, extra = _pseudorange_rate(read, entry, key, frame, clock, decl)
         else:
             function, scale, units, count, extra = _expression_measurement(read, entry, key, namespace)
-        bias = _measurement_bias(read, entry, key, count, units, decl)
+        bias = _measurement_bias(read, entry, key, count, units, decl, namespace)
         if bias is not None:  # measured = true + bias: the measured side's extra term
             extra = bias if extra is None else extra + bias
         symbols = read.names(entry["symbols"], f"{key}.symbols", count)
@@ -421,29 +472,64 @@ def _measurements(
     return functions, declared
 
 
-def _measurement_bias(read: _Reader, entry: Mapping, key: str, count: int, units: Sequence[str], decl: _Declarations) -> sp.Matrix | None:
-    """An aiding sensor's own error, one random-constant state per component (``bias: {symbols, names}``).
+def _measurement_bias(
+    read: _Reader, entry: Mapping, key: str, count: int, units: Sequence[str], decl: _Declarations, namespace: Callable[[], dict] | None = None
+) -> sp.Matrix | None:
+    """An aiding sensor's own error, one state per component (``bias: {process, symbols, names, ...}``).
 
     E.g. the Doppler radar's velocity error of seed 000: measured = true + bias, so the
     computed-minus-measured difference carries minus the bias; the states follow the
-    sensor-error states.
+    sensor-error states.  ``process``: ``random_constant`` (b' = 0, the default),
+    ``gauss_markov`` (b' = -rate b + w, ``rate`` and steady-state ``sigma``, one value or
+    one per component) or ``random_walk`` (b' = w, ``psd`` one value or one per component).
     """
     if "bias" not in entry:
         return None
-    bias = read.mapping(entry["bias"], f"{key}.bias", ("process", "symbols", "names"), ("symbols",))
-    read.choice(bias.get("process", "random_constant"), f"{key}.bias.process", ("random_constant",))
+    bias = read.mapping(entry["bias"], f"{key}.bias", ("process", "symbols", "names", "rate", "sigma", "psd", "noise_symbols", "noise_names"), ("symbols",))
+    process = read.choice(bias.get("process", "random_constant"), f"{key}.bias.process", ("random_constant", "gauss_markov", "random_walk"))
     symbols = read.names(bias["symbols"], f"{key}.bias.symbols", count)
     names = read.names(bias["names"], f"{key}.bias.names", count) if "names" in bias else [f"{s}_bias" for s in symbols]
     for name, symbol, unit in zip(names, symbols, units):
-        decl.states.append(State(name=name, symbol=symbol, unit=unit, description="aiding-sensor error (random constant): measured = true + bias"))
+        decl.states.append(State(name=name, symbol=symbol, unit=unit, description=f"aiding-sensor error ({process.replace('_', ' ')}): measured = true + bias"))
         decl.places[("state", name)] = f"{key}.bias"
     states = [sp.Symbol(s, real=True) for s in symbols]
     decl.measurement_biases.extend(states)
+    if process != "random_constant":
+        where = f"{key}.bias"
+        noise_symbols = read.names(bias["noise_symbols"], f"{where}.noise_symbols", count) if "noise_symbols" in bias else [f"w_{s}" for s in symbols]
+        noise_names = read.names(bias["noise_names"], f"{where}.noise_names", count) if "noise_names" in bias else [f"{n}_driving_noise" for n in names]
+        noises = [sp.Symbol(n, real=True) for n in noise_symbols]
+        if process == "gauss_markov":
+            for needed in ("rate", "sigma"):
+                if needed not in bias:
+                    raise ModelError(f"{read.at(where)}: a Gauss-Markov measurement bias needs {needed!r} (inverse correlation time and steady-state sigma)")
+            rates = _per_component(read, bias["rate"], f"{where}.rate", count)
+            sigmas = _per_component(read, bias["sigma"], f"{where}.sigma", count)
+            parsed = [parse_expression(r, (namespace or dict)(), f"{read.at(f'{where}.rate')}: {where}.rate") for r in rates]
+            psds = [f"2*({r})*({q})**2" for r, q in zip(rates, sigmas)]
+            decl.measurement_bias_dynamics.update({b: -r * b + w for b, r, w in zip(states, parsed, noises)})
+        else:
+            if "psd" not in bias:
+                raise ModelError(f"{read.at(where)}: a random-walk measurement bias needs 'psd'")
+            psds = _per_component(read, bias["psd"], f"{where}.psd", count)
+            decl.measurement_bias_dynamics.update({b: w for b, w in zip(states, noises)})
+        for name, symbol, psd, unit in zip(noise_names, noise_symbols, psds, units):
+            decl.noises.append(Noise(name=name, symbol=symbol, unit=f"{unit}/sqrt(s)", psd=psd, description=f"drives the measurement bias ({process.replace('_', ' ')})"))
+            decl.places[("noise", name)] = where
     return sp.Matrix(states)
 
 
+def _per_component(read: _Reader, value: Any, key: str, count: int) -> list[str]:
+    """One expression text per component: a list of ``count``, or one value for all of them."""
+    values = value if isinstance(value, list) else [value] * count
+    if len(values) != count:
+        raise ModelError(f"{read.at(key)}: {key} lists {len(values)} values for {count} components")
+    return [scalar_text(v, read.at(key), key) for v in values]
+
+
 def _kinematic_measurement(
-    read: _Reader, entry: Mapping, key: str, kind: str, frame: str, arm: sp.Matrix | None, index: Sequence[int], sign: Sequence[int]
+    read: _Reader, entry: Mapping, key: str, kind: str, frame: str, arm: sp.Matrix | None, index: Sequence[int], sign: Sequence[int],
+    mechanization: str = "local_level",
 ) -> _MeasurementParts:
     """GNSS position (geodetic, or metres along the listed axes) or velocity of the antenna at lever arm l^b.
 
@@ -457,7 +543,12 @@ def _kinematic_measurement(
             if arm is None:
                 return state.position
             # metres to (dL, dlambda, dh) at the computed position: the lever arm stays a Cartesian offset
-            return state.position + pt.metres_matrix_inverse(frame, computed.position) * (state.attitude * arm)
+            return state.position + mech.metres_inverse(computed.position) * (state.attitude * arm)
+
+        if mechanization == "ecef":  # the position is already in metres along the e-frame axes
+            if form == "geodetic":
+                raise ModelError(f"{read.at(f'{key}.form')}: {key}: the ecef mechanization's position is r^e in metres (form: metres), not geodetic")
+            return (lambda state, computed, mech: _reorder(function(state, computed, mech), index, sign)), None, ["m"] * len(index), len(index), None
 
         if form == "geodetic":
             if "axes" in entry:
@@ -490,7 +581,7 @@ def _pseudorange(read: _Reader, entry: Mapping, key: str, frame: str, clock: sp.
     distance = sp.Symbol("satellite_distance", positive=True)
 
     def ranges(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
-        d = pt.metres_matrix(frame, computed.position) * (state.position - computed.position)
+        d = mech.metres(computed.position) * (state.position - computed.position)
         return sp.Matrix([sp.sqrt(distance**2 - 2 * distance * e.dot(d) + d.dot(d)) for e in sights])
 
     extra = sp.Matrix([clock[0]] * len(sights))
@@ -550,7 +641,7 @@ def _pseudorange_rate(read: _Reader, entry: Mapping, key: str, frame: str, clock
     rhos = [sp.Symbol(r, real=True) for r in ranges]
 
     def rates(state: pt.NavigationState, computed: pt.NavigationState, mech: pt.Mechanization) -> sp.Matrix:
-        d = pt.metres_matrix(frame, computed.position) * (state.position - computed.position)
+        d = mech.metres(computed.position) * (state.position - computed.position)
         out = []
         for e, rho, v_sat in zip(sights, rhos, velocities):
             u = (e - d / rho) / sp.sqrt(1 - 2 * e.dot(d) / rho + d.dot(d) / rho**2)
@@ -563,8 +654,11 @@ def _pseudorange_rate(read: _Reader, entry: Mapping, key: str, frame: str, clock
 
 def state_namespace(state: pt.NavigationState, mech: pt.Mechanization, frame: str, parameters: Mapping[str, sp.Symbol]) -> dict[str, Any]:
     """The names a written equation or measurement expression may use (README lists them)."""
+    if hasattr(mech, "expression_names"):  # a mechanization with names of its own (ecef: C_b_e, v_e, r_e ...)
+        return {**parameters, **mech.expression_names(state), **_body_names(state)}
     L, lam, h = state.position
     return {
+        **_body_names(state),
         **parameters,
         "C_b_n": state.attitude,
         "v_n": state.velocity,
@@ -578,6 +672,19 @@ def state_namespace(state: pt.NavigationState, mech: pt.Mechanization, frame: st
         "R_M": pt.MeridianRadius(L),
         "R_N": pt.PrimeVerticalRadius(L),
     }
+
+
+def _body_names(state: pt.NavigationState) -> dict[str, Any]:
+    """The sensed inputs in body axes: the body rate w_ib^b (``omega_ib_b``) and the specific force f^b (``f_b``).
+
+    The true state's body rate is the sensed one corrected by the gyro errors, so an
+    odometer with a lever arm (``transpose(C_b_n)*v_n + cross(omega_ib_b, l)``) gets
+    its gyro-bias columns; ``f_b`` is C^T f^n of the state.
+    """
+    names: dict[str, Any] = {"f_b": state.attitude.T * state.specific_force}
+    if state.body_rate is not None:
+        names["omega_ib_b"] = state.body_rate
+    return names
 
 
 def _expression_measurement(read: _Reader, entry: Mapping, key: str, namespace: Callable[[], dict]) -> _MeasurementParts:
@@ -628,15 +735,45 @@ def _written_equations(read: _Reader, section: Mapping, frame: str, namespace: C
 
 
 # -- the whole file --------------------------------------------------------------------------
-def _user_parameters(read: _Reader, data: Mapping, decl: _Declarations) -> list[str]:
-    """The file's own ``parameters:`` (statistics, noise levels): always declared; returns their symbols."""
+def _user_parameters(read: _Reader, data: Mapping, decl: _Declarations, frame: str = "NED") -> list[str]:
+    """The file's own ``parameters:`` (statistics, noise levels): always declared; returns their symbols.
+
+    A parameter with ``shape: 3`` is a vector (``axes: body`` or the navigation frame, the default):
+    one parameter per component (``lever`` -> ``lever_x, lever_y, lever_z`` in body axes), its
+    ``value`` a list of three; expressions see it whole, by its symbol (:attr:`_Declarations.vectors`).
+    """
     raw = data.get("parameters") or []
     if not isinstance(raw, list):
         raise ModelError(f"{read.at('parameters')}: 'parameters' must be a list of entries with a 'name'")
     symbols = []
+    expanded = []
     for i, entry in enumerate(raw):
         key = f"parameters[{i}]"
-        entry = read.mapping(entry, key, ("name", "symbol", "unit", "description", "value"), ("name",))
+        entry = read.mapping(entry, key, ("name", "symbol", "unit", "description", "value", "shape", "axes"), ("name",))
+        if "shape" not in entry:
+            if "axes" in entry:
+                raise ModelError(f"{read.at(key)}: parameter {entry['name']!r}: 'axes' is for a vector parameter (shape: 3)")
+            expanded.append((key, entry))
+            continue
+        if entry["shape"] not in (3, [3], [3, 1]):
+            raise ModelError(f"{read.at(f'{key}.shape')}: parameter {entry['name']!r}: a navigation model's parameter is a scalar or a 3-vector (shape: 3), not {entry['shape']!r}")
+        axes = read.choice(entry.get("axes", "navigation"), f"{key}.axes", ("body", "navigation"))
+        name, symbol = str(entry["name"]), str(entry.get("symbol", entry["name"]))
+        check_identifier(symbol, f"{read.at(key)}: parameter symbol")
+        where = f"{read.at(key)}: parameter {name!r}"
+        names = component_names(name, 3, frame, "body" if axes == "body" else None, where)
+        parts = component_names(symbol, 3, frame, "body" if axes == "body" else None, where)
+        values = entry.get("value")
+        if values is not None and (not isinstance(values, list) or len(values) != 3):
+            raise ModelError(f"{read.at(key)}: parameter {name!r} is a 3-vector: its value must list 3 numbers, got {values!r}")
+        for k, (component, part) in enumerate(zip(names, parts)):
+            item = {f: v for f, v in entry.items() if f not in ("shape", "axes", "value")}
+            item.update(name=component, symbol=part)
+            if values is not None:
+                item["value"] = values[k]
+            expanded.append((key, item))
+        decl.vectors[symbol] = _symbols(parts)
+    for key, entry in expanded:
         if "value" in entry and (isinstance(entry["value"], bool) or not isinstance(entry["value"], (int, float))):
             raise ModelError(f"{read.at(key)}: parameter {entry['name']!r} value {entry['value']!r} is not a number")
         fields = {k: (float(v) if k == "value" else str(v)) for k, v in entry.items()}
@@ -650,19 +787,58 @@ def _user_parameters(read: _Reader, data: Mapping, decl: _Declarations) -> list[
     return symbols
 
 
-def _approximations(read: _Reader, section: Mapping) -> tuple[str, ...]:
+#: What an approximation's ``in:`` may name: the rows of F and G of a navigation quantity's error states, or H.
+APPROXIMATION_SCOPES = ("attitude", "velocity", "position", "measurements")
+#: Approximations that change the model's structure and so cannot be scoped to some rows.
+UNSCOPED_APPROXIMATIONS = frozenset({"no_vertical_channel", "damped_vertical_channel"})
+
+
+def approximation_name(entry: Any) -> Any:
+    """The name of an ``approximations`` entry: the text itself, or the ``name`` of ``{name, in}``."""
+    return entry.get("name") if isinstance(entry, dict) else entry
+
+
+def _approximations(read: _Reader, section: Mapping, mechanization: str = "local_level") -> tuple[tuple[str, ...], dict[str, tuple[str, ...]]]:
+    """The declared approximations' names in order, and the scope (``in:``) of those that have one."""
     raw = section.get("approximations") or []
     if not isinstance(raw, list):
         raise ModelError(f"{read.at('navigation.approximations')}: 'navigation.approximations' must be a list of names")
-    for i, name in enumerate(raw):
-        if name not in pt.APPROXIMATIONS:
+    scopes: dict[str, tuple[str, ...]] = {}
+    names = []
+    for i, entry in enumerate(raw):
+        key = f"navigation.approximations[{i}]"
+        if isinstance(entry, dict):
+            read.mapping(entry, key, ("name", "in"), ("name", "in"))
+            within = entry["in"] if isinstance(entry["in"], list) else [entry["in"]]
+            for quantity in within:
+                read.choice(quantity, f"{key}.in", APPROXIMATION_SCOPES)
+            if entry["name"] in UNSCOPED_APPROXIMATIONS:
+                raise ModelError(f"{read.at(key)}: approximation {entry['name']!r} changes the model's states and cannot be scoped ('in:')")
+            if entry["name"] in pt.EQUATION_APPROXIMATIONS:
+                raise ModelError(f"{read.at(key)}: approximation {entry['name']!r} changes the perturbed equations and cannot be scoped ('in:')")
+            scopes[str(entry["name"])] = tuple(str(q) for q in within)
+        names.append(approximation_name(entry))
+    for i, name in enumerate(names):
+        if not isinstance(name, str) or name not in pt.APPROXIMATIONS:
             raise ModelError(
                 f"{read.at(f'navigation.approximations[{i}]')}: unknown approximation {name!r} "
                 f"(known: {', '.join(sorted(pt.APPROXIMATIONS))})"
             )
-    if len(set(raw)) != len(raw):
-        raise ModelError(f"{read.at('navigation.approximations')}: an approximation is listed twice: {raw}")
-    return tuple(str(a) for a in raw)
+    accepted = MECHANIZATION_APPROXIMATIONS.get(mechanization)
+    for i, name in enumerate(names):
+        if accepted is not None and name not in accepted:
+            raise ModelError(
+                f"{read.at(f'navigation.approximations[{i}]')}: approximation {name!r} does not apply to the {mechanization} "
+                f"mechanization (it has: {', '.join(sorted(accepted)) or 'none'})"
+            )
+        if accepted is None and name == "no_gravity_gradient":
+            raise ModelError(
+                f"{read.at(f'navigation.approximations[{i}]')}: approximation 'no_gravity_gradient' is the ecef mechanization's "
+                f"(local level: constant_gravity, free_vertical_channel)"
+            )
+    if len(set(names)) != len(names):
+        raise ModelError(f"{read.at('navigation.approximations')}: an approximation is listed twice: {names}")
+    return tuple(str(a) for a in names), scopes
 
 
 def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], filename: str) -> NavigationDerivation:
@@ -676,30 +852,40 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
         raise ModelError(f"{filename}: missing required key 'model'")
     if "frame" not in data:
         raise ModelError(f"{filename}: a model with a 'navigation:' section needs 'frame: NED' or 'frame: ENU' (its navigation frame)")
-    frame = read.choice(free_text(data, "frame", dict(lines), filename), "frame", tuple(pt.FRAME_AXES))
+    frames = tuple(dict.fromkeys(f for fs in MECHANIZATION_FRAMES.values() for f in fs))
+    frame = read.choice(free_text(data, "frame", dict(lines), filename), "frame", frames)
     section = read.mapping(data["navigation"], "navigation", SECTION_KEYS, ("errors",))
     mechanization = str(section.get("mechanization", "local_level"))
     mechanization_named(mechanization, f"{read.at('navigation.mechanization')}: navigation.mechanization")
+    if frame not in MECHANIZATION_FRAMES[mechanization]:
+        owner = next(m for m, fs in MECHANIZATION_FRAMES.items() if frame in fs)
+        raise ModelError(
+            f"{read.at('frame')}: frame {frame!r} is the {owner} mechanization's; the {mechanization} mechanization resolves its "
+            f"vectors in {' or '.join(MECHANIZATION_FRAMES[mechanization])} (frame: {MECHANIZATION_FRAMES[mechanization][0]})"
+        )
+    _refuse_polar_scenario(read, data, lines, filename, mechanization)
     decl = _Declarations(states=[], noises=[], parameters={})
-    own = _user_parameters(read, data, decl)
+    own = _user_parameters(read, data, decl, frame)
     nav = _navigation_state(read, section, frame, decl)
 
-    def namespace() -> dict[str, sp.Symbol]:
-        return {s: sp.Symbol(s, real=True) for s in own}
+    def namespace() -> dict[str, Any]:
+        return {**{s: sp.Symbol(s, real=True) for s in own}, **decl.vectors}
 
-    definition, navigation_order = _error_definition(read, section, frame, decl)
+    approximation_names, approximation_scopes = _approximations(read, section, mechanization)
+    definition, navigation_order = _error_definition(read, section, frame, decl, mechanization)
     noises = _sensor_noises(read, section, frame, decl)
     parts, aux, sensor_order = _sensor_errors(read, section, frame, decl, namespace)
-    functions, measurement_decls = _measurements(read, section, frame, decl, parts.get("receiver_clock"), namespace)
+    functions, measurement_decls = _measurements(read, section, frame, decl, parts.get("receiver_clock"), namespace, mechanization)
     problem = pt.NavigationProblem(
         frame=frame, **nav, errors=definition,
         gyro=pt.InertialSensorErrors(parts.get("gyro_bias"), parts.get("gyro_scale_factor"), *noises.get("gyro", (None, "body"))),
         accelerometer=pt.InertialSensorErrors(parts.get("accel_bias"), parts.get("accel_scale_factor"), *noises.get("accel", (None, "body"))),
         state_order=tuple(navigation_order + sensor_order + decl.measurement_biases),
-        auxiliary_dynamics={**aux, **{s: sp.S.Zero for s in decl.measurement_biases}},
+        auxiliary_dynamics={**aux, **{s: decl.measurement_bias_dynamics.get(s, sp.S.Zero) for s in decl.measurement_biases}},
         noises=tuple(sp.Symbol(n.symbol, real=True) for n in decl.noises),
         measurements=tuple(functions),
-        approximations=_approximations(read, section),
+        approximations=approximation_names,
+        approximation_scopes=approximation_scopes,
         equations=_written_equations(read, section, frame, namespace),
         mechanization_name=mechanization,
     )
@@ -712,8 +898,30 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
             raise
         raise ModelError(f"{read.at('navigation')}: model {data['model']!r}: {exc}") from None
     _refuse_measurements_of_removed_states(read, equations, functions)
-    model = replace(_error_model(data, lines, filename, decl, own, equations, measurement_decls), neglected=equations.neglected)
+    attitude_names = [s.name for s in decl.states if sp.Symbol(s.symbol, real=True) in definition.attitude_states]
+    model = replace(
+        _error_model(data, lines, filename, decl, own, equations, measurement_decls),
+        neglected=equations.neglected, attitude_reset=pt.attitude_reset(definition, attitude_names),
+    )
     return NavigationDerivation(model=model, equations=equations)
+
+
+def _refuse_polar_scenario(read: _Reader, data: Mapping, lines: Mapping[str, str], filename: str, mechanization: str) -> None:
+    """A local-level model whose check scenario is within POLAR_LIMIT_DEG of a pole is refused (1/cos L, tan L blow up)."""
+    from modelgen.model.check_scenario import parse_check_section
+    from modelgen.model.mechanizations.local_level import POLAR_LIMIT_DEG
+
+    if mechanization != "local_level" or not isinstance(data.get("check"), Mapping):
+        return
+    latitude = parse_check_section(data["check"], lines, filename).get("parameters", {}).get("latitude")
+    if latitude is None or abs(math.degrees(latitude)) <= POLAR_LIMIT_DEG:
+        return
+    raise ModelError(
+        f"{read.at('check.parameters.latitude')}: check.parameters.latitude {math.degrees(latitude):.6g} deg is within "
+        f"{90 - POLAR_LIMIT_DEG:g} deg of a pole: the local-level mechanization divides by cos(latitude) (longitude rate "
+        f"1/cos L = {1 / math.cos(latitude):.0f}, transport rate tan L) and is refused beyond {POLAR_LIMIT_DEG:g} deg; "
+        f"use 'mechanization: ecef' (no singularity at the poles)"
+    )
 
 
 def _refuse_measurements_of_removed_states(read: _Reader, equations: pt.ErrorEquations, functions: Sequence[pt.MeasurementFunction]) -> None:
@@ -758,6 +966,8 @@ def _error_model(data, lines, filename, decl: _Declarations, own: list[str], equ
         locations=locations,
     )
     undeclared = [str(p.get("name")) for p in (data.get("parameters") or []) if isinstance(p, dict) and "unit" not in p]
+    undeclared += [name for stem in undeclared for name in (f"{stem}_{a}" for a in ("x", "y", "z", "n", "e", "d", "u"))
+                   if any(q.name == name for q in parameters)]  # a vector parameter's components
     check_model_units(model, locations, undeclared)
     return model
 
@@ -788,7 +998,8 @@ def approximation_notes(data: Mapping, equations: pt.ErrorEquations, decl: _Decl
     values = _check_values(data, decl)
     names = {"F": ([s.name for s in decl.states], [s.name for s in decl.states]),
              "G": ([s.name for s in decl.states], [n.name for n in decl.noises])}
-    approximations = data["navigation"].get("approximations") or []
+    approximations = [approximation_name(a) for a in data["navigation"].get("approximations") or []]
+    scopes = {approximation_name(a): a["in"] for a in data["navigation"].get("approximations") or [] if isinstance(a, dict)}
     notes = []
     for name in approximations:
         terms = [(t, shown) for t, shown in zip(equations.neglected, equations.readable) if t.approximation == name]
@@ -801,7 +1012,9 @@ def approximation_notes(data: Mapping, equations: pt.ErrorEquations, decl: _Decl
             shown = f" = {text}" if len(text) <= 120 else ""
             parts.append(f"{t.matrix}[{row}, {column}]{shown}" + (f" ({size:.3g})" if size is not None else ""))
         dropped = "; ".join(parts) if parts else "no term in this model"
-        notes.append(f"Approximation {name} ({pt.APPROXIMATION_DESCRIPTIONS[name]}): dropped {dropped} (term, and its size at the check scenario).")
+        within = scopes.get(name)
+        scope = f", in the {', '.join(within) if isinstance(within, list) else within} rows only" if within else ""
+        notes.append(f"Approximation {name} ({pt.APPROXIMATION_DESCRIPTIONS[name]}{scope}): dropped {dropped} (term, and its size at the check scenario).")
     if approximations and not values:
         notes.append("The sizes above need a check: scenario; this model has none.")
     return notes

@@ -54,6 +54,7 @@ import sympy as sp
 
 from modelgen.errors import ModelError
 from modelgen.model import wgs84
+from modelgen.model.mechanizations.ecef import GeocentricRadius
 from modelgen.model.mechanizations.local_level import (  # noqa: F401  (the engine's names for them, re-exported)
     FRAME_AXES,
     Gravity,
@@ -72,7 +73,9 @@ from modelgen.model.mechanizations.local_level import (  # noqa: F401  (the engi
     skew,
 )
 
-ATTITUDE_FORMS = ("phi", "psi")
+ATTITUDE_FORMS = ("phi", "psi", "rotation_vector")
+#: Axes a rotation-vector attitude error may be resolved in.
+ATTITUDE_AXES = ("navigation", "body")
 VELOCITY_FORMS = ("difference", "computed_frame")
 POSITION_FORMS = ("geodetic", "metres")
 
@@ -88,6 +91,7 @@ class NavigationState:
     body_rate: sp.Matrix | None  # w_ib^b in body axes, if the model has it
     earth_rate_position: sp.Matrix  # where w_ie takes its latitude (the state's own unless approximated)
     transport_rate_position: sp.Matrix  # where w_en takes its position (the state's own unless approximated)
+    gravity_position: sp.Matrix | None = None  # where the ecef mechanization's g^e takes its position (None: the state's own)
 
 
 #: The local-level mechanization, by its former name (the engine's default).
@@ -142,6 +146,39 @@ class ErrorDefinition:
     velocity_states: tuple[sp.Symbol, ...]
     position: str
     position_states: tuple[sp.Symbol, ...]
+    #: ``rotation_vector`` only: ``navigation`` (C = exp(-[theta x]) C_true, left, = phi to first order) or
+    #: ``body`` (C = C_true exp([theta x]), right, as the MEKF / error-state filters: theta = -C^T phi to first order).
+    attitude_axes: str = "navigation"
+
+
+@dataclass(frozen=True)
+class AttitudeReset:
+    """The attitude error's reset Jacobian for closed-loop feedback: P+ = G P G^T over the attitude states.
+
+    After the filter's estimate ``correction`` (the attitude states' estimate, same
+    symbols with ``_estimate``) is fed back into the computed attitude and the error
+    states are zeroed, the new error is theta+ = theta - correction - 1/2 correction x
+    theta + O(|theta|^2) for a rotation vector in either axes, in this file's
+    computed-minus-true convention (second-order Baker-Campbell-Hausdorff): G = I + 1/2
+    [correction x] (Markley 2003, Sola 2017 eq. 287, whose true-minus-computed sign
+    gives I - 1/2 [dtheta x]).  phi and psi are fed back additively to first order: G = I.
+    """
+
+    form: str
+    axes: str
+    states: tuple[str, ...]  # the attitude error states' names, in model order
+    correction: tuple[sp.Symbol, ...]  # the fed-back estimate of each
+    matrix: sp.Matrix
+
+
+def attitude_reset(errors: ErrorDefinition, names: Sequence[str]) -> AttitudeReset:
+    """The :class:`AttitudeReset` of an error definition (``names``: the attitude states' names)."""
+    correction = tuple(sp.Symbol(f"{s}_estimate", real=True) for s in errors.attitude_states)
+    if errors.attitude == "rotation_vector":
+        matrix = sp.eye(3) + skew(_vector(correction)) / 2
+    else:
+        matrix = sp.eye(3)
+    return AttitudeReset(errors.attitude, errors.attitude_axes, tuple(names), correction, matrix)
 
 
 @dataclass(frozen=True)
@@ -186,6 +223,9 @@ class NavigationProblem:
     vertical_damping_gains: tuple[sp.Symbol, sp.Symbol] = (sp.Symbol("k_v1", real=True), sp.Symbol("k_v2", real=True))
     #: The mechanization's name in :data:`modelgen.model.mechanizations.MECHANIZATIONS`.
     mechanization_name: str = "local_level"
+    #: Approximations that apply to some rows only (``{name: constant_radii, in: [velocity]}``): name -> the
+    #: quantities (attitude, velocity, position: their error states' rows of F and G; measurements: H).
+    approximation_scopes: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
     def mechanization(self) -> Mechanization:
         """The named mechanization (modelgen.model.mechanizations), with the equations the model writes itself."""
@@ -266,7 +306,8 @@ def _states(problem: NavigationProblem, approximations: set[str]) -> tuple[Navig
     earth_at = p if "no_earth_rate_position_terms" in approximations else true_p
     transport_at = p if "no_transport_rate_position_terms" in approximations else true_p
     true_rate = None if problem.body_rate is None else problem.body_rate - problem.gyro.error(problem.body_rate, "gyro")
-    true = NavigationState((sp.eye(3) + skew(phi)) * C, true_v, true_p, true_force, true_rate, earth_at, transport_at)
+    gravity_at = p if "no_gravity_gradient" in approximations else None
+    true = NavigationState((sp.eye(3) + skew(phi)) * C, true_v, true_p, true_force, true_rate, earth_at, transport_at, gravity_at)
     return computed, true, {"v": true_v, "p": true_p}
 
 
@@ -315,7 +356,8 @@ def _jacobian(matrix: sp.Matrix, by: Sequence[sp.Symbol]) -> sp.Matrix:
     """
     variables = set(by)
     applied = sorted(
-        (a for a in matrix.atoms(MeridianRadius, PrimeVerticalRadius, Gravity) if variables & set(a.args)), key=sp.default_sort_key
+        (a for a in matrix.atoms(MeridianRadius, PrimeVerticalRadius, Gravity, GeocentricRadius) if variables & set(a.args)),
+        key=sp.default_sort_key,
     )
     stand_in = {a: sp.Dummy(f"earth_{k}", real=True) for k, a in enumerate(applied)}
     plain = matrix.xreplace(stand_in)
@@ -371,13 +413,15 @@ def _change_of_variables(problem: NavigationProblem) -> tuple[sp.Matrix, sp.Matr
     theta = lambda d: mech.error_frame_angle(L, d)  # noqa: E731  d(theta) of a position error
     # forward: declared errors from primitive ones
     position = M * dp if e.position == "metres" else dp
-    attitude = phi - theta(dp) if e.attitude == "psi" else phi
+    C = problem.attitude
+    body_axes = e.attitude == "rotation_vector" and e.attitude_axes == "body"
+    attitude = phi - theta(dp) if e.attitude == "psi" else -C.T * phi if body_axes else phi
     velocity = dv + theta(dp).cross(problem.velocity) if e.velocity == "computed_frame" else dv
     forward = {**dict(zip(e.attitude_states, attitude)), **dict(zip(e.velocity_states, velocity)), **dict(zip(e.position_states, position))}
     # inverse: primitive errors from declared ones
     d_pos, d_att, d_vel = _vector(e.position_states), _vector(e.attitude_states), _vector(e.velocity_states)
-    dp_of = metres_matrix_inverse(problem.frame, problem.position) * d_pos if e.position == "metres" else d_pos
-    phi_of = d_att + theta(dp_of) if e.attitude == "psi" else d_att
+    dp_of = mech.metres_inverse(problem.position) * d_pos if e.position == "metres" else d_pos
+    phi_of = d_att + theta(dp_of) if e.attitude == "psi" else -C * d_att if body_axes else d_att
     dv_of = d_vel - theta(dp_of).cross(problem.velocity) if e.velocity == "computed_frame" else d_vel
     primitive = [*phi, *dv, *dp, *others]
     declared = list(problem.state_order)
@@ -393,6 +437,13 @@ def _time_derivative(matrix: sp.Matrix, problem: NavigationProblem) -> sp.Matrix
     computed = NavigationState(problem.attitude, problem.velocity, p, _sensed_navigation_force(problem), problem.body_rate, p, p)
     variables = [*problem.velocity, *problem.position]
     rates = [*mech.velocity_rate(computed), *mech.position_rate(computed)]
+    C = problem.attitude
+    if any(not matrix.diff(c).is_zero_matrix for c in C):  # a body-axis attitude error: T holds C^T
+        if problem.body_rate is None:
+            raise ModelError("a body-axis attitude error needs the body rate (navigation.body_rate) for the rate of C_b^n")
+        attitude_rate = C * skew(problem.body_rate) - skew(mech.navigation_rate(computed)) * C  # C' = C [w_ib x] - [w_in x] C
+        variables += list(C)
+        rates += list(attitude_rate)
     out = sp.zeros(*matrix.shape)
     for variable, rate in zip(variables, rates):
         partial = matrix.diff(variable)
@@ -531,13 +582,15 @@ APPROXIMATIONS: dict[str, Callable[[_Stage, NavigationProblem], _Stage]] = {
     "damped_vertical_channel": damped_vertical_channel,
     "no_earth_rate_position_terms": _applied_while_perturbing,
     "no_transport_rate_position_terms": _applied_while_perturbing,
+    "no_gravity_gradient": _applied_while_perturbing,
 }
 #: Approximations that change the perturbed equations rather than the result.
-EQUATION_APPROXIMATIONS = frozenset({"no_earth_rate_position_terms", "no_transport_rate_position_terms"})
+EQUATION_APPROXIMATIONS = frozenset({"no_earth_rate_position_terms", "no_transport_rate_position_terms", "no_gravity_gradient"})
 
 APPROXIMATION_DESCRIPTIONS: dict[str, str] = {
     "no_earth_rate_position_terms": "the true state's earth rate w_ie is taken at the computed latitude (no dL terms from it)",
     "no_transport_rate_position_terms": "the true state's transport rate w_en is taken at the computed position (no dL, dh terms from it)",
+    "no_gravity_gradient": "the true state's gravity g^e is taken at the computed position (ecef: no dg/dr coupling of the position error)",
     **{name: (function.__doc__ or "").strip().split("\n")[0] for name, function in APPROXIMATIONS.items() if function is not _applied_while_perturbing},
 }
 
@@ -584,6 +637,9 @@ def simplify_entry(expr: sp.Expr) -> sp.Expr:
 def _finish(stage: _Stage, problem: NavigationProblem) -> _Stage:
     """Earth functions to parameters, derivatives to formulas (with (L, h) shown in the Derivative objects), simplified."""
     rules = earth_derivative_rules(problem.position[0], problem.position[2], problem.earth)
+    mech = problem.mechanization()
+    if hasattr(mech, "earth_function_rules"):  # the mechanization's own Earth functions (ecef: |r^e|)
+        rules.update(mech.earth_function_rules(problem.position, problem.earth.geocentric_radius))
     derivatives = {k: v for k, v in rules.items() if isinstance(k, sp.Derivative)}
     values = {k: v for k, v in rules.items() if not isinstance(k, sp.Derivative)}
     out = []
@@ -599,17 +655,35 @@ def _finish(stage: _Stage, problem: NavigationProblem) -> _Stage:
 # -- the whole derivation -------------------------------------------------------------------
 def check_problem(problem: NavigationProblem) -> None:
     """Refuse an inconsistent problem before deriving: frame, forms, approximation names, states without equations."""
-    if problem.frame not in FRAME_AXES:
-        raise ModelError(f"navigation frame {problem.frame!r} is not one of {', '.join(FRAME_AXES)}")
+    from modelgen.model.mechanizations import MECHANIZATION_APPROXIMATIONS, MECHANIZATION_ERROR_FORMS, MECHANIZATION_FRAMES, mechanization_named
+
+    mechanization_named(problem.mechanization_name)
+    frames = MECHANIZATION_FRAMES[problem.mechanization_name]
+    if problem.frame not in frames:
+        raise ModelError(f"navigation frame {problem.frame!r} is not one of {', '.join(frames)} (the {problem.mechanization_name} mechanization's)")
     e = problem.errors
+    own_forms = MECHANIZATION_ERROR_FORMS[problem.mechanization_name] or {}
     for what, form, forms in (("attitude", e.attitude, ATTITUDE_FORMS), ("velocity", e.velocity, VELOCITY_FORMS), ("position", e.position, POSITION_FORMS)):
+        forms = own_forms.get(what, forms)
         if form not in forms:
-            raise ModelError(f"{what} error form {form!r} is not one of {', '.join(forms)}")
+            raise ModelError(f"{what} error form {form!r} is not one of {', '.join(forms)} (the {problem.mechanization_name} mechanization's)")
+    accepted = MECHANIZATION_APPROXIMATIONS[problem.mechanization_name]
+    foreign = [a for a in problem.approximations if a in APPROXIMATIONS and accepted is not None and a not in accepted]
+    if foreign:
+        raise ModelError(
+            f"approximation {foreign[0]!r} does not apply to the {problem.mechanization_name} mechanization "
+            f"(it has: {', '.join(sorted(accepted)) or 'none'})"
+        )
+    if accepted is None and "no_gravity_gradient" in problem.approximations:
+        raise ModelError("approximation 'no_gravity_gradient' is the ecef mechanization's (local level: constant_gravity, free_vertical_channel)")
     expected = 2 if "no_vertical_channel" in problem.approximations else 3
     for what, states, count in (("attitude", e.attitude_states, 3), ("velocity", e.velocity_states, expected), ("position", e.position_states, expected)):
         if len(states) != count:
             reason = " (no_vertical_channel: the horizontal components only)" if count == 2 else ""
             raise ModelError(f"the {what} error has {len(states)} states, {count} expected{reason}")
+    scoped_equations = sorted(set(problem.approximation_scopes) & EQUATION_APPROXIMATIONS)
+    if scoped_equations:
+        raise ModelError(f"approximation {scoped_equations[0]!r} changes the perturbed equations and cannot be scoped ('in:')")
     unknown = [a for a in problem.approximations if a not in APPROXIMATIONS]
     if unknown:
         raise ModelError(f"unknown approximation(s) {', '.join(unknown)} (known: {', '.join(sorted(APPROXIMATIONS))})")
@@ -635,14 +709,14 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
     readable: list[str] = []
     for name in problem.approximations:
         before = stage
-        if name in EQUATION_APPROXIMATIONS:
+        if name in EQUATION_APPROXIMATIONS:  # never scoped (check_problem)
             equation_flags.add(name)
             stage = _declared_stage(problem, _primitive_stage(problem, equation_flags))
             for other in problem.approximations[: problem.approximations.index(name)]:
                 if other not in EQUATION_APPROXIMATIONS:
-                    stage = APPROXIMATIONS[other](stage, problem)
+                    stage = _scoped(other, APPROXIMATIONS[other](stage, problem), stage, problem)
         else:
-            stage = APPROXIMATIONS[name](stage, problem)
+            stage = _scoped(name, APPROXIMATIONS[name](stage, problem), stage, problem)
         after = _finish(stage, problem)
         found = _differences(name, finished, after)
         neglected.extend(found)
@@ -661,6 +735,25 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
         ),
         placeholders,
     )
+
+
+def _scoped(name: str, approximated: _Stage, exact: _Stage, problem: NavigationProblem) -> _Stage:
+    """``approximated`` in the rows the approximation is scoped to (``in:``), ``exact`` elsewhere; all of it if unscoped."""
+    within = problem.approximation_scopes.get(name)
+    if not within:
+        return approximated
+    e = problem.errors
+    states = {"attitude": e.attitude_states, "velocity": e.velocity_states, "position": e.position_states}
+    rows = {problem.state_order.index(s) for q in within if q in states for s in states[q] if s in problem.state_order}
+
+    def pick(a: sp.Matrix, b: sp.Matrix, take: set[int]) -> sp.Matrix:
+        out = b.copy()
+        for i in take:
+            out[i, :] = a[i, :]
+        return out
+
+    H_rows = set(range(exact.H.rows)) if "measurements" in within else set()
+    return _Stage(pick(approximated.F, exact.F, rows), pick(approximated.G, exact.G, rows), pick(approximated.H, exact.H, H_rows))
 
 
 def readable_term(term: sp.Expr, problem: NavigationProblem) -> str:

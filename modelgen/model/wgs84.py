@@ -44,6 +44,9 @@ SOMIGLIANA_K = 0.00193185265241
 GRAVITY_RATIO_M = EARTH_RATE**2 * SEMI_MAJOR_AXIS**2 * SEMI_MINOR_AXIS / GRAVITATIONAL_CONSTANT
 #: Earth rotation rate of IS-GPS-200 [rad/s] (the value the built-in model files carry).
 GPS_EARTH_RATE = 7.2921151467e-5
+#: J2: the second zonal harmonic of WGS-84's gravitational field, as Groves (2013) eq. 2.142 and table 2.1 give it
+#: (the e-frame gravity model of the ecef mechanization).
+J2 = 1.082627e-3
 
 
 def earth_radii(latitude: float) -> tuple[float, float]:

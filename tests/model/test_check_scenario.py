@@ -152,3 +152,54 @@ def test_a_transform_check_section_must_complete_the_inherited_one(tmp_path):
     (tmp_path / "t.yaml").write_text(AUGMENT + "check:\n  steps: 10\n  initial_sigma:\n    doppler_scale_factor: 1.0e-3\n")
     model = load_model(tmp_path / "t.yaml")
     assert model.check.steps == 10 and model.check.step_s == 60.0
+
+
+# -- initial_sigma by vector stem (issue 27) -------------------------------------------------------
+_NAV = open(__import__("pathlib").Path(__file__).resolve().parents[2] / "modelgen" / "models" / "ins_gnss21_nav.yaml").read()
+_SIGMA_BY_NAME = _NAV[_NAV.index("  initial_sigma:"):]
+
+
+def _with_sigma(text: str) -> str:
+    return _NAV.replace(_SIGMA_BY_NAME, text)
+
+
+def test_initial_sigma_by_vector_stem_equals_the_same_sigmas_by_state_name():
+    by_name = load_model("ins_gnss21_nav").check
+    stems = _with_sigma(
+        "  initial_sigma: {position_error: [5.0, 5.0, 8.0], velocity_error: [0.2, 0.2, 0.3],\n"
+        "    attitude_error: {value: [0.05, 0.05, 0.5], unit: deg}, gyro_bias: {value: 0.01, unit: deg/h},\n"
+        "    accel_bias: {value: 2.5e-5, unit: g}, gyro_scale_factor: 5.0e-6, accel_scale_factor: 1.0e-4}\n"
+    )
+    by_stem = load_model_text(stems, filename="m.yaml").check
+    assert [name for name, _ in by_stem.initial_sigma] == [name for name, _ in by_name.initial_sigma]
+    np.testing.assert_allclose([v for _, v in by_stem.initial_sigma], [v for _, v in by_name.initial_sigma], rtol=1e-15)
+
+
+def test_a_state_named_beside_its_stem_wins_over_the_stem():
+    text = _with_sigma(
+        "  initial_sigma: {position_error: 5.0, position_error_down: 8.0, velocity_error: 0.2, attitude_error: 0.001,\n"
+        "    gyro_bias: 1.0e-7, accel_bias: 1.0e-4, gyro_scale_factor: 5.0e-6, accel_scale_factor: 1.0e-4}\n"
+    )
+    sigma = dict(load_model_text(text, filename="m.yaml").check.initial_sigma)
+    assert (sigma["position_error_north"], sigma["position_error_east"], sigma["position_error_down"]) == (5.0, 5.0, 8.0)
+
+
+@pytest.mark.parametrize(
+    "entry, message",
+    [
+        ("gyro_bias: [1.0e-7, 1.0e-7]", "check.initial_sigma.gyro_bias lists 2 values for the 3 states gyro_bias_x, gyro_bias_y, gyro_bias_z"),
+        ("gyro_bias_x: [1.0e-7, 1.0e-7]", "'gyro_bias_x' is one state; give one number, not a list of 2"),
+        ("gyro_drift: 1.0e-7", "unknown state(s) gyro_drift"),
+        ("gyro_bias: [1.0e-7, -1.0, 1.0e-7]", "a standard deviation cannot be negative"),
+    ],
+)
+def test_a_bad_stem_entry_is_refused_with_file_line(entry, message):
+    text = _with_sigma(
+        "  initial_sigma: {position_error: 5.0, velocity_error: 0.2, attitude_error: 0.001, accel_bias: 1.0e-4,\n"
+        f"    gyro_bias: 1.0e-7, gyro_scale_factor: 5.0e-6, accel_scale_factor: 1.0e-4, {entry}}}\n"
+    )
+    if entry.startswith("gyro_bias:"):
+        text = text.replace("    gyro_bias: 1.0e-7, ", "    ")
+    with pytest.raises(ModelError, match=r"^m\.yaml:\d+: ") as caught:
+        load_model_text(text, filename="m.yaml")
+    assert message in str(caught.value)

@@ -9,7 +9,9 @@ a model file selects one with ``navigation.mechanization`` (default
 ``local_level``); an unknown name is refused.
 
 Implemented: ``local_level`` (NED or ENU axes, geodetic position;
-:mod:`~modelgen.model.mechanizations.local_level`).  Adding one: a module
+:mod:`~modelgen.model.mechanizations.local_level`) and ``ecef`` (e-frame
+position, velocity and attitude, WGS-84 J2 gravity;
+:mod:`~modelgen.model.mechanizations.ecef`).  Adding one: a module
 here with a class that satisfies :class:`Mechanization`, registered in
 :data:`MECHANIZATIONS` (README, "How to add ... a mechanization").
 """
@@ -21,6 +23,8 @@ from typing import Callable, Protocol
 import sympy as sp
 
 from modelgen.errors import ModelError
+from modelgen.model.mechanizations import ecef
+from modelgen.model.mechanizations.ecef import Ecef
 from modelgen.model.mechanizations.local_level import LocalLevel
 
 #: The engine's navigation state (modelgen.model.perturbation), named as text: the engine imports this package.
@@ -56,10 +60,27 @@ class Mechanization(Protocol):
     def metres(self, position: sp.Matrix) -> sp.Matrix:
         """M with (navigation-frame metres) = M (position error): the ``metres`` position-error form."""
 
+    def metres_inverse(self, position: sp.Matrix) -> sp.Matrix:
+        """M^-1: the position error from navigation-frame metres."""
+
 
 #: Mechanizations by the name a model file gives in ``navigation.mechanization``: each makes its
 #: mechanization from (frame, Earth-rate symbol, written velocity equation, written position equation).
-MECHANIZATIONS: dict[str, Callable[..., Mechanization]] = {"local_level": LocalLevel}
+MECHANIZATIONS: dict[str, Callable[..., Mechanization]] = {"local_level": LocalLevel, "ecef": Ecef}
+#: The navigation frames (a model file's ``frame``) each mechanization resolves its vectors in.
+MECHANIZATION_FRAMES: dict[str, tuple[str, ...]] = {"local_level": ("NED", "ENU"), "ecef": ("ECEF",)}
+#: Error forms each mechanization has (None: every form of the engine).
+MECHANIZATION_ERROR_FORMS: dict[str, dict[str, tuple[str, ...]] | None] = {
+    "local_level": None, "ecef": ecef.ERROR_FORMS,
+}
+#: Approximations that mean something only in a local-level frame (latitude, radii of curvature, a vertical axis).
+LOCAL_LEVEL_APPROXIMATIONS = frozenset({
+    "constant_radii", "single_earth_radius", "no_height_in_radii", "gravity_height_only", "free_air_gradient",
+    "free_vertical_channel", "level_flight", "no_vertical_channel", "damped_vertical_channel",
+    "no_earth_rate_position_terms", "no_transport_rate_position_terms", "constant_gravity",
+})
+#: Approximations each mechanization accepts (None: all of the engine's).
+MECHANIZATION_APPROXIMATIONS: dict[str, frozenset[str] | None] = {"local_level": None, "ecef": frozenset({"no_gravity_gradient"})}
 
 
 def mechanization_named(name: str, where: str = "navigation.mechanization") -> Callable[..., Mechanization]:

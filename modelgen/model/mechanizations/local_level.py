@@ -46,6 +46,7 @@ class EarthSymbols:
     prime_vertical_radius: sp.Symbol
     gravity: sp.Symbol
     earth_radius: sp.Symbol | None = None  # used only by the single_earth_radius approximation
+    geocentric_radius: sp.Symbol | None = None  # |r^e| of the ecef mechanization's gravity
 
 
 def earth_rate_vector(frame: str, latitude: sp.Expr, earth_rate: sp.Expr) -> sp.Matrix:
@@ -155,6 +156,10 @@ class LocalLevel:
         """M with (navigation-frame metres) = M (dL, dlambda, dh) at ``position``."""
         return metres_matrix(self.frame, position)
 
+    def metres_inverse(self, position: sp.Matrix) -> sp.Matrix:
+        """M^-1: (dL, dlambda, dh) from navigation-frame metres at ``position``."""
+        return metres_matrix_inverse(self.frame, position)
+
     def gravity(self, state: NavigationState) -> sp.Matrix:
         """g^n at the state's position."""
         return gravity_vector(self.frame, state.position)
@@ -167,6 +172,6 @@ class LocalLevel:
 
 
 
-#: Latitude (rad) beyond which the local-level mechanization is refused: 1/cos(L) in the longitude
+#: Latitude (deg) beyond which the local-level mechanization is refused: 1/cos(L) in the longitude
 #: rate and tan(L) in the transport rate grow without bound at the poles (89.9 deg: 1/cos L = 573).
 POLAR_LIMIT_DEG = 89.0
