@@ -21,19 +21,11 @@ def _has_module(name: str) -> bool:
 
 
 def _set_up_trajectories() -> list[bool]:
-    """On a worker: for each Monte Carlo set-up it holds, whether its increments are a read-only map of a file."""
+    """On a worker: for each Monte Carlo set-up it holds, whether its trajectory is streamed (truth rows only, no increments held)."""
     from modelgen.cluster import _CACHE
 
-    mapped = []
-    for key, context in _CACHE.items():
-        if str(key).startswith("montecarlo-"):
-            array, bases = context["trajectory"].delta_theta, []
-            while array is not None:
-                bases.append(array)
-                array = getattr(array, "base", None)
-            mapped.append(not context["trajectory"].delta_theta.flags.writeable
-                          and any(isinstance(b, np.memmap) for b in bases))
-    return mapped
+    return [context["trajectory"].streamed and context["trajectory"].delta_theta is None
+            for key, context in _CACHE.items() if str(key).startswith("montecarlo-")]
 
 
 def test_fresh_workers_import_the_study_code_when_asked_without_a_task():
@@ -74,24 +66,17 @@ def test_a_module_imported_long_lived_is_warmed_up_once(tmp_path, monkeypatch):
     assert sys.modules["modelgen_warm_up_probe"].CALLS == [1]
 
 
-def test_fresh_workers_map_the_trajectory_the_caller_kept_in_the_cache(paper_derived, tmp_path, monkeypatch):
-    from modelgen.codegen.build import CACHE_ENV
+def test_fresh_workers_fly_a_streamed_trajectory_and_give_the_callers_results(paper_derived):
+    """No array of the flight's length is held by a worker (issue 31: memory flat in the flight's duration)."""
     from modelgen.simulation.montecarlo import run_monte_carlo
     from modelgen.simulation.scenario import load_profile
-    from modelgen.simulation.trajectory_cache import trajectory_cache_folder
 
-    monkeypatch.setenv(CACHE_ENV, str(tmp_path))  # a cache of its own: another test may have kept this flight already
     short = load_profile("profile_000").with_changes(hours=0.02, imu_rate=50.0)
-    folder = trajectory_cache_folder()
-    before = set(folder.iterdir()) if folder.exists() else set()
-    here = run_monte_carlo(short, paper_derived, runs=3, seed=4)  # makes the flight and keeps it
-    kept = set(folder.iterdir()) - before
-    assert len(kept) == 1 and next(iter(kept)).name.endswith(".trajectory")
+    here = run_monte_carlo(short, paper_derived, runs=3, seed=4)
     with dask_client(workers=2) as fresh:
         there = run_monte_carlo(short, paper_derived, runs=3, seed=4, client=fresh)
-        mapped = [m for flags in fresh.run(_set_up_trajectories).values() for m in flags]
-    assert mapped and all(mapped)  # every worker that flew a run mapped the entry
-    assert set(folder.iterdir()) - before == kept  # and none made another
+        streamed = [s for flags in fresh.run(_set_up_trajectories).values() for s in flags]
+    assert streamed and all(streamed)  # every worker that flew a run streamed its trajectory
     assert np.array_equal(there.errors, here.errors) and np.array_equal(there.sigma, here.sigma)
 
 
