@@ -25,17 +25,17 @@ exactly to first order:
    F = (T F_0 + dT/dt) T^-1, G = T G_0, H = H_0 T^-1, with dT/dt along the
    computed trajectory.
 4. *Approximate, by name.*  Each declared approximation is a pure function of
-   the derivation (:data:`APPROXIMATIONS`); the terms it removes are kept as
-   :class:`NeglectedTerm` records (matrix, row, column, the symbolic term),
+   the derivation (:data:`~.approximations.APPROXIMATIONS`); the terms it removes are kept as
+   :class:`~.problem.NeglectedTerm` records (matrix, row, column, the symbolic term),
    so that nothing is dropped silently.
-5. *Simplify* with one fixed pipeline (:func:`simplify_entry`), so that the
+5. *Simplify* with one fixed pipeline (:func:`~.simplification.simplify_entry`), so that the
    result is the same text run to run.
 
 The Earth's radii and gravity are carried as functions of position
 (``R_M(L)``, ``R_N(L)``, ``g(L, h)``) while deriving, so that their derivatives
 are visible as terms; at the end they become the model's parameters
 (``meridian_radius`` ...) and their derivatives the WGS-84 formulas of
-:func:`earth_derivative_rules`.
+:func:`~.simplification.earth_derivative_rules`.
 
 Sources: Shin (2005), "Estimation techniques for low-cost inertial
 navigation", ch. 4 (phi-angle NED error model); Groves (2013), "Principles of
