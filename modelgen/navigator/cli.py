@@ -20,7 +20,11 @@ from modelgen.navigator.config import builtin_config_path
               help="the generated C navigator, the Python reference, or both (compared)")
 @click.option("--embedded", is_flag=True,
               help="also build for Cortex-M4F (float filter; size, stack) and replay under qemu-arm against the double C")
-def replay(config: Path | None, out: Path | None, no_figures: bool, force: bool, navigator: str, embedded: bool) -> None:
+@click.option("--smooth", is_flag=True,
+              help="also run the RTS smoother over the forward pass (post-processing): smoothed errors beside the "
+                   "forward ones, smoothed.pos/.csv/.svg")
+def replay(config: Path | None, out: Path | None, no_figures: bool, force: bool, navigator: str, embedded: bool,
+           smooth: bool) -> None:
     """Fly a GNSS/IMU log with the generated navigator (default: the built-in car drive).
 
     CONFIG is a navigator configuration (YAML); without it the built-in drive
@@ -38,7 +42,7 @@ def replay(config: Path | None, out: Path | None, no_figures: bool, force: bool,
 
     path = config or builtin_config_path()
     result = run_replay(path, out if out is not None else report_folder(path), echo=lambda m: click.echo(m, err=True),
-                        with_figures=not no_figures, force=force, navigator=navigator, embedded=embedded)
+                        with_figures=not no_figures, force=force, navigator=navigator, embedded=embedded, smooth=smooth)
     s = result.summary
     click.echo(f"{s['outage_count']} outages: end-of-outage horizontal error RMS "
                f"{s['horizontal_error_end_rms_m']:.2f} m (median {s['horizontal_error_end_median_m']:.2f} m, "
@@ -54,6 +58,14 @@ def replay(config: Path | None, out: Path | None, no_figures: bool, force: bool,
                    f"{pooled['nees_mean']:.1f}, {100 * pooled['inside_95_fraction']:.0f} % inside the 95 % region")
     if "c_python_max_difference_m" in s:
         click.echo(f"C and Python trajectories agree within {s['c_python_max_difference_m']:.3g} m")
+    if "smoothed" in s and s["smoothed"]["smoothed"]["horizontal_error_outage_rms_m"] is not None:
+        sm = s["smoothed"]
+        verdicts = [f"{name} {'met' if met else 'missed'}" for name, met in
+                    (("RMS target", sm["outage_rms_met"]), ("maximum target", sm["outage_max_met"])) if met is not None]
+        click.echo(f"smoothed: horizontal RMS over every outage epoch {sm['smoothed']['horizontal_error_outage_rms_m']:.3f} m "
+                   f"(forward {sm['forward']['horizontal_error_outage_rms_m']:.3f} m), largest outage maximum "
+                   f"{sm['smoothed']['horizontal_error_outage_max_m']:.3f} m (forward "
+                   f"{sm['forward']['horizontal_error_outage_max_m']:.3f} m)" + (f"; {', '.join(verdicts)}" if verdicts else ""))
     click.echo(f"navigator ({s['navigator']}) {result.timings['fly_s']:.2f} s, total {result.timings['total_s']:.2f} s; "
                f"report in {result.folder}")
 

@@ -118,6 +118,11 @@ class NavigatorConfig:
     target_end_rms_m: float | None = None  # evaluation.target_end_rms_m: for the configured schedule
     target_nees_mean: tuple[float, float] | None = None  # pooled over all schedules
     target_inside_95_fraction: float | None = None  # pooled over all schedules
+    #: replay --smooth, configured schedule: horizontal RMS over every outage epoch, and each outage's maximum [m]
+    target_smoothed_outage_rms_m: float | None = None
+    target_smoothed_outage_max_m: float | None = None
+
+
     #: initial.gyro/accel_scale_factor_sigma_ppm (as a fraction; used only by models with scale-factor states)
     gyro_scale_factor_sigma: float | None = None
     accel_scale_factor_sigma: float | None = None
@@ -325,9 +330,13 @@ def _evaluation(reader: _Reader) -> dict[str, Any]:
     if inside is not None:
         inside = _probability(reader, "evaluation.target_inside_95_fraction")
     rms = reader.get("evaluation.target_end_rms_m", None)
+    smoothed = {f"target_smoothed_outage_{kind}_m": (reader.number(f"evaluation.target_smoothed_outage_{kind}_m",
+                                                                   positive=True)
+                                                     if reader.get(f"evaluation.target_smoothed_outage_{kind}_m", None)
+                                                     is not None else None) for kind in ("rms", "max")}
     return {"evaluation_schedules": tuple(schedules),
             "target_end_rms_m": reader.number("evaluation.target_end_rms_m", positive=True) if rms is not None else None,
-            "target_nees_mean": nees, "target_inside_95_fraction": inside}
+            "target_nees_mean": nees, "target_inside_95_fraction": inside, **smoothed}
 
 
 def _probability(reader: _Reader, key: str) -> float:

@@ -60,12 +60,15 @@ class ErrorStateFilter:
         self.module = module
         self.P = np.array(P0, float)
         self.x = np.zeros(len(self.P))
+        self.recorder = None  # a smoother's ForwardRecord (modelgen.navigator.smoother), or None
 
     def predict(self, p: np.ndarray, period: float) -> None:
         """Propagate x and P over ``period`` with the generated discretize and predict."""
         g = self.module
         Phi, Qd = g.discretize(g.system_matrix(p), g.noise_input_matrix(p), g.noise_psd(p), period)
         self.x, self.P = g.predict(self.x, self.P, Phi, Qd)
+        if self.recorder is not None:
+            self.recorder.predicted(Phi, self.P)
 
     def update(self, z: np.ndarray, H: np.ndarray, r: np.ndarray, gate: float, deweight: bool = False) -> Update:
         """Gate on the NIS (innovation z - H x against H P H^T + R), then the generated update.

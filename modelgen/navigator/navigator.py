@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Callable
 
 import numpy as np
@@ -47,6 +48,8 @@ class Flight:
     notes: list[str] = field(default_factory=list)
     #: the alignment: time (the GNSS epoch it completed at) [s], roll, pitch, heading [rad], rest_end [s], rest_samples
     alignment: dict[str, float] = field(default_factory=dict)
+    #: what the smoother needs (fly(..., record=ForwardRecord())): modelgen.navigator.smoother.ForwardRecord, else None
+    forward_record: object | None = None
 
 
 @dataclass
@@ -158,8 +161,13 @@ def corrected(sample: np.ndarray, bias: np.ndarray, scale: np.ndarray) -> np.nda
 
 
 def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
-        progress: Callable[[float], None] | None = None) -> Flight:
-    """Fly the whole log forward in real time with the spec's model; return the per-epoch outputs."""
+        progress: Callable[[float], None] | None = None, record=None) -> Flight:
+    """Fly the whole log forward in real time with the spec's model; return the per-epoch outputs.
+
+    ``record``: a fresh :class:`modelgen.navigator.smoother.ForwardRecord` to
+    fill with what the smoother needs (transitions, covariances, corrections,
+    nominal states at the outputs); the flight carries it as ``forward_record``.
+    """
     g = inputs.gnss
     time, force, rate = inputs.time, inputs.force, inputs.rate
     lever = np.asarray(config.lever_arm, float)
@@ -182,6 +190,9 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
     sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))
     heading_sigma = math.hypot(math.atan2(sv, speed0), config.heading_extra_sigma)
     kf = ErrorStateFilter(module, spec.initial_covariance(config, nav, heading_sigma, radii))
+    if record is not None:
+        record.start(kf.P, partial(_apply_correction, spec))
+    kf.recorder = record
 
     def parameters(force_ned: np.ndarray, sig: np.ndarray) -> np.ndarray:
         c_bn = quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])
@@ -262,12 +273,15 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
                 rejected_run += 1
         outputs.append(_record(spec, time[k], nav, lever, corrected(rate[k], gyro_bias, gyro_scale), kf.P, gyro_bias,
                                accel_bias, bool(outage[j]), used, nis, int(g.quality[j])))
+        if kf.recorder is not None:
+            kf.recorder.output(nav, sensors, partial(_row, spec, time[k], lever, rate[k], bool(outage[j]), used, nis,
+                                                     int(g.quality[j])))
         if progress is not None and (j - j0) % 200 == 0:
             progress((j - j0) / max(1, n_epochs - j0))
     if progress is not None:
         progress(1.0)
     return Flight(np.array(outputs), windows, inputs.first_epoch, float(g.time[j0]), gnss_nis, gates["gnss"], counts,
-                  list(inputs.notes), start.record())
+                  list(inputs.notes), start.record(), kf.recorder)
 
 
 def _remember(history: np.ndarray, t: float, nav: np.ndarray) -> None:
@@ -279,8 +293,23 @@ def _remember(history: np.ndarray, t: float, nav: np.ndarray) -> None:
 
 def _reset(kf: ErrorStateFilter, spec: NavigatorSpec, nav: np.ndarray, sensors: dict[str, np.ndarray]) -> None:
     """Feed the estimate back and zero the error state (closed loop)."""
+    if kf.recorder is not None:
+        kf.recorder.corrected(kf.x, kf.P)
     spec.feedback(nav, kf.x, sensors, radii, rotate)
     kf.x = np.zeros_like(kf.x)
+
+
+def _apply_correction(spec: NavigatorSpec, nav: np.ndarray, sensors: dict[str, np.ndarray], dx: np.ndarray) -> None:
+    """The closed-loop feedback of a correction dx into a nominal state (the smoother applies its own with it)."""
+    spec.feedback(nav, dx, sensors, radii, rotate)
+
+
+def _row(spec: NavigatorSpec, t: float, lever: np.ndarray, raw_rate: np.ndarray, outage: bool, used: int, nis: float,
+         quality: int, nav: np.ndarray, sensors: dict[str, np.ndarray], P: np.ndarray) -> list[float]:
+    """An output row of a (smoothed) nominal state: :func:`_record` with its sensor estimates."""
+    rate = corrected(raw_rate, sensors["gyro_bias"], sensors["gyro_scale_factor"])
+    return _record(spec, t, nav, lever, rate, P, sensors["gyro_bias"], sensors["accel_bias"], outage, used, nis,
+                   quality)
 
 
 def _record(spec: NavigatorSpec, t: float, nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, P: np.ndarray, gyro_bias: np.ndarray,

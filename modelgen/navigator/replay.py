@@ -20,6 +20,7 @@ from modelgen.navigator.metrics import (errors_against_reference, pooled_consist
 from modelgen.navigator.navigator import Flight, fly, prepare
 from modelgen.navigator.spec import navigator_spec
 from modelgen.navigator.report import report_files
+from modelgen.navigator.smoother import ForwardRecord, smooth_flight, smoothing_summary
 from modelgen.fileio.output import write_atomically
 
 
@@ -32,6 +33,8 @@ class ReplayResult:
     summary: dict
     folder: Path | None
     timings: dict[str, float]
+    #: replay --smooth: the RTS-smoothed flight (same epochs as the recorded Python forward pass), else None
+    smoothed: Flight | None = None
 
     def targets(self) -> list[dict]:
         """The stated targets and whether this flight met them (:func:`modelgen.navigator.report.targets`)."""
@@ -62,12 +65,15 @@ EMBEDDED_TOLERANCE_M = 0.01
 
 def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], None] = print,
                with_figures: bool = True, force: bool = False, navigator: str = "c",
-               embedded: bool = False) -> ReplayResult:
+               embedded: bool = False, smooth: bool = False) -> ReplayResult:
     """Fly the configuration's logs and, if ``out`` is given, write the report folder there atomically.
 
     ``navigator``: the generated C navigator (compiled now), the Python
     reference, or both (the report then states their largest difference; the
-    C flight is the one reported).
+    C flight is the one reported).  ``smooth``: also run the RTS smoother over
+    the Python navigator's recorded forward pass (flown for it if only the C
+    flies) and report the smoothed errors beside that forward pass's
+    (:mod:`modelgen.navigator.smoother`).
     """
     if navigator not in NAVIGATORS:
         raise ModelError(f"replay: unknown navigator {navigator!r} (choose from {', '.join(NAVIGATORS)})")
@@ -87,7 +93,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     mark = time.perf_counter()
     echo(f"  deriving {config.model} (once) with modelgen")
     # the one derivation of this replay: the Python navigator, the C and the embedded build all use it
-    spec = navigator_spec(model_file, with_python=navigator in ("python", "both"))
+    spec = navigator_spec(model_file, with_python=navigator in ("python", "both") or smooth)
     spec.check_config(config)
     timings["generate_python_s"] = time.perf_counter() - mark
     if navigator in ("python", "both"):
@@ -99,7 +105,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
                 echo(f"  flying (Python): {100 * fraction:5.1f} %  ({time.perf_counter() - mark:.1f} s)")
                 state["next"] = fraction + 0.25
 
-        flights["python"] = fly(config, inputs, spec, progress)
+        flights["python"] = fly(config, inputs, spec, progress, record=ForwardRecord() if smooth else None)
         timings["fly_python_s"] = time.perf_counter() - mark
     if navigator in ("c", "both"):
         mark = time.perf_counter()
@@ -159,13 +165,33 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
                               "tolerance_m": EMBEDDED_TOLERANCE_M}
         echo(f"  qemu-arm (float filter) against the double C navigator: largest difference "
              f"{arm.max_position_difference_m:.2g} m")
+    passes = None
+    if smooth:
+        mark = time.perf_counter()
+        passes = _smoothed_passes(config, inputs, flights.get("python"), spec, echo)
+        result["smoothed"] = smoothing_summary(*passes, inputs.gnss, config.target_smoothed_outage_rms_m,
+                                               config.target_smoothed_outage_max_m)
+        timings["smooth_s"] = time.perf_counter() - mark
+        echo(f"  smoothed (RTS over {result['smoothed']['steps']} steps): horizontal RMS over the outage epochs "
+             f"{result['smoothed']['smoothed']['horizontal_error_outage_rms_m']:.3f} m (forward "
+             f"{result['smoothed']['forward']['horizontal_error_outage_rms_m']:.3f} m)"
+             if result["smoothed"]["smoothed"]["horizontal_error_outage_rms_m"] is not None else "  smoothed (no outages)")
     folder = None
     if out is not None:
         files = report_files(flight, errors, result, config, inputs.gnss, timings, velocity_latency(inputs.gnss),
-                             with_figures)
+                             with_figures, smoothed=passes)
         folder = write_atomically(Path(out), files, force=force)
     timings["total_s"] = time.perf_counter() - start
-    return ReplayResult(config, flight, result, folder, timings)
+    return ReplayResult(config, flight, result, folder, timings, passes[1] if passes else None)
+
+
+def _smoothed_passes(config: NavigatorConfig, inputs, recorded: Flight | None, spec,
+                     echo: Callable[[str], None]) -> tuple[Flight, Flight]:
+    """(forward, smoothed): the Python flight recorded for the smoother, flown now if it was not flown yet."""
+    if recorded is None:
+        echo("  flying the Python navigator for the smoother (the C navigator keeps no transitions)")
+        recorded = fly(config, inputs, spec, record=ForwardRecord())
+    return recorded, smooth_flight(recorded)
 
 
 #: The built-in navigator model; a model without a navigation: section flies only if its states are this model's.

@@ -45,7 +45,11 @@ def _signed_root(value: float) -> float:
     return math.copysign(math.sqrt(abs(value)), value)
 
 
-def pos_text(flight: Flight, config: NavigatorConfig) -> str:
+FORWARD_SOLUTION = "forward real-time GNSS/INS, antenna position"
+SMOOTHED_SOLUTION = "RTS-smoothed GNSS/INS (post-processed: uses GNSS before and after each epoch), antenna position"
+
+
+def pos_text(flight: Flight, config: NavigatorConfig, solution: str = FORWARD_SOLUTION) -> str:
     """The trajectory (antenna) in RTKLIB's lat/lon/height .pos format with velocities.
 
     Times in GPST to the millisecond; sdn, sde, sdu are the filter's 1-sigma
@@ -57,8 +61,8 @@ def pos_text(flight: Flight, config: NavigatorConfig) -> str:
     c = COLUMN
     cross = all(name in c for name in CROSS_COVARIANCE_FIELDS)
     lines = [f"% program   : modelgen replay ({config.name}, model {config.model})",
-             "% solution  : forward real-time GNSS/INS, antenna position; Q 6 = dead reckoning (no GNSS update)",
-             "% sd        : sdn, sde, sdu = the filter's 1-sigma position; "
+             f"% solution  : {solution}; Q 6 = dead reckoning (no GNSS update at the epoch)",
+             "% sd        : sdn, sde, sdu = the solution's 1-sigma position; "
              + ("sdne, sdeu, sdun = its cross covariances (signed square roots)" if cross else
                 "sdne, sdeu, sdun = 0 (the flight carries no cross covariance)"),
              "% (lat/lon/height=WGS84/ellipsoidal as in the input solution, Q=1:fix,2:float,5:single,6:dr)",
@@ -238,6 +242,10 @@ FIGURE_CAPTIONS = {
 }
 
 
+SMOOTHED_CAPTION = ("Horizontal error at the antenna against RTK [m] of the forward (real-time) and the RTS-smoothed "
+                    "trajectory, with each one's filter sigma_h [m] dotted, over the drive (log scale; outages shaded).")
+
+
 def targets(summary: dict, timings: dict[str, float]) -> list[dict]:
     """The replay's stated targets, each ``quantity``, ``reached``, ``target``, ``anchor`` (the published 15-state
     filter's value on the drive) and ``met`` (True, False, or None for a row that only informs).
@@ -286,7 +294,90 @@ def targets(summary: dict, timings: dict[str, float]) -> list[dict]:
          "reached": f"{difference:.2g} m" if difference is not None else "not flown (--navigator both)",
          "target": "<= 0.001 m", "anchor": "", "met": difference <= 1e-3 if difference is not None else None},
     ]
-    return rows
+    return rows + smoothed_targets(summary.get("smoothed"))
+
+
+def smoothed_targets(smoothed: dict | None) -> list[dict]:
+    """The smoother's target rows (replay --smooth): RMS over every outage epoch and the largest outage maximum."""
+    if not smoothed:
+        return []
+    rms, target_rms = smoothed["smoothed"]["horizontal_error_outage_rms_m"], smoothed["target_outage_rms_m"]
+    maxima = [o["smoothed_horizontal_error_max_m"] for o in smoothed["outages"]]
+    target_max = smoothed["target_outage_max_m"]
+    over = smoothed.get("outages_over_max") or []
+    return [{"quantity": "smoothed horizontal error, RMS over every outage epoch (configured schedule)",
+             "reached": f"{_fmt(rms, 3)} m (forward {_fmt(smoothed['forward']['horizontal_error_outage_rms_m'], 3)} m)",
+             "target": f"<= {target_rms:g} m" if target_rms is not None else "", "anchor": "",
+             "met": smoothed["outage_rms_met"]},
+            {"quantity": f"smoothed horizontal error, largest per-outage maximum ({len(maxima)} outages)",
+             "reached": f"{_fmt(max(maxima) if maxima else None, 3)} m"
+                        + (f" (outages over the target: {', '.join(map(str, over))})" if over else ""),
+             "target": f"<= {target_max:g} m each" if target_max is not None else "", "anchor": "0.25-0.69 m",
+             "met": smoothed["outage_max_met"]}]
+
+
+def _smoothed_lines(summary: dict) -> list[str]:
+    """The smoother's section: forward and smoothed errors per outage, and over all outage epochs."""
+    sm = summary.get("smoothed")
+    if not sm:
+        return []
+    f, s = sm["forward"], sm["smoothed"]
+    lines = ["## Smoothed (replay --smooth)", "",
+             "A fixed-interval Rauch-Tung-Striebel smoother run backward over the recorded forward pass of the "
+             "Python navigator (the generated filter's transitions and covariances; the error-state resets of the "
+             "closed loop referred back step by step; the backward recursion itself is numpy/scipy, not generated). "
+             "Post-processing: each smoothed epoch uses GNSS from before and after it. The forward columns are that "
+             "Python forward pass, errors measured the same way. Files: `smoothed.pos`, `smoothed.csv`, `smoothed.svg`.", "",
+             "![smoothed](smoothed.svg)", "",
+             "| # | start_s | duration_s | forward end_m | smoothed end_m | forward max_m | smoothed max_m | "
+             "forward sigma_h end_m | smoothed sigma_h end_m |", "|---|---|---|---|---|---|---|---|---|"]
+    for k, o in enumerate(sm["outages"], start=1):
+        lines.append(f"| {k} | {_fmt(o['start_s'], 1)} | {_fmt(o['duration_s'], 1)} | "
+                     f"{_fmt(o['forward_horizontal_error_end_m'], 3)} | {_fmt(o['smoothed_horizontal_error_end_m'], 3)} | "
+                     f"{_fmt(o['forward_horizontal_error_max_m'], 3)} | {_fmt(o['smoothed_horizontal_error_max_m'], 3)} | "
+                     f"{_fmt(o['forward_sigma_horizontal_end_m'], 3)} | {_fmt(o['smoothed_sigma_horizontal_end_m'], 3)} |")
+    lines += ["", "| horizontal error [m] | forward | smoothed |", "|---|---|---|",
+              f"| RMS at the outage ends | {_fmt(f['horizontal_error_end_rms_m'], 3)} | "
+              f"{_fmt(s['horizontal_error_end_rms_m'], 3)} |",
+              f"| RMS over every outage epoch | {_fmt(f['horizontal_error_outage_rms_m'], 3)} | "
+              f"{_fmt(s['horizontal_error_outage_rms_m'], 3)} |",
+              f"| largest in any outage | {_fmt(f['horizontal_error_outage_max_m'], 3)} | "
+              f"{_fmt(s['horizontal_error_outage_max_m'], 3)} |",
+              f"| RMS outside the outages | {_fmt(f['horizontal_rms_outside_outages_m'], 3)} | "
+              f"{_fmt(s['horizontal_rms_outside_outages_m'], 3)} |",
+              f"| mean e^T P_h^-1 e over every outage epoch (2 if consistent; dimensionless) | "
+              f"{_fmt(f['nees_horizontal_outage_mean'], 1)} | {_fmt(s['nees_horizontal_outage_mean'], 1)} |", ""]
+    for row in smoothed_targets(sm):
+        verdict = "" if row["met"] is None else ("met" if row["met"] else "missed")
+        lines.append(f"- {row['quantity']}: {row['reached']}" + (f", target {row['target']}: {verdict}"
+                                                               if row["target"] else ""))
+    return lines + [""]
+
+
+def smoothed_figure(forward: Flight, smoothed: Flight, reference: GnssLog) -> str:
+    """smoothed.svg: horizontal error against RTK of the forward and the smoothed trajectory over time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from modelgen.navigator.metrics import errors_against_reference
+
+    fig, ax = plt.subplots(figsize=(9, 4))
+    for flight, color, label in ((forward, "C0", "forward (real time)"), (smoothed, "C2", "RTS-smoothed")):
+        e = errors_against_reference(flight, reference)
+        ax.semilogy(e.time - flight.first_epoch, np.maximum(e.horizontal, 1e-4), color=color, lw=0.8,
+                    label=f"{label}, horizontal error")
+        ax.semilogy(e.time - flight.first_epoch, np.maximum(e.sigma_horizontal, 1e-4), color=color, lw=0.6, ls=":",
+                    label=f"{label}, filter sigma_h")
+    for start, end in forward.outages:
+        ax.axvspan(start - forward.first_epoch, end - forward.first_epoch, color="C3", alpha=0.12)
+    ax.set_xlabel("time since the first GNSS epoch [s]")
+    ax.set_ylabel("horizontal error at the antenna [m]")
+    ax.set_title("Forward and smoothed horizontal error against RTK (outages shaded)")
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2)
+    fig.tight_layout()
+    return _svg(fig)
 
 
 def _consistency_lines(summary: dict) -> list[str]:
@@ -334,7 +425,7 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
                      f"{_fmt(r['horizontal_error_max_m'])} | {_fmt(r['sigma_horizontal_end_m'])} | "
                      f"{_fmt(r['nees_horizontal_end'], 1)} | {'yes' if r['inside_95'] else 'no'} | {_fmt(r['drift_5s_m'])} | {_fmt(r['drift_10s_m'])} | "
                      f"{_fmt(r['drift_15s_m'])} |")
-    lines += [""] + _consistency_lines(summary)
+    lines += [""] + _consistency_lines(summary) + _smoothed_lines(summary)
     lines += ["## Targets (issues 13 and 26)", "",
               "| quantity | reached | target | anchor (published 15-state filter) | |",
               "|---|---|---|---|---|"]
@@ -408,8 +499,9 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
 
 
 def report_files(flight: Flight, errors: Errors, summary: dict, config: NavigatorConfig, reference: GnssLog,
-                 timings: dict[str, float], latency: float, with_figures: bool = True) -> dict[str, str]:
-    """Every file of report/replay/ as name -> text."""
+                 timings: dict[str, float], latency: float, with_figures: bool = True,
+                 smoothed: tuple[Flight, Flight] | None = None) -> dict[str, str]:
+    """Every file of report/replay/ as name -> text; ``smoothed`` (forward, smoothed flights) adds the smoother's."""
     record = dict(summary)
     record["timings_s"] = timings
     record["gnss_velocity_latency_estimated_s"] = latency
@@ -418,12 +510,21 @@ def report_files(flight: Flight, errors: Errors, summary: dict, config: Navigato
     record["targets"] = targets(summary, timings)
     record["figures"] = ({k: v for k, v in FIGURE_CAPTIONS.items() if k != "consistency.svg" or summary.get("schedules")}
                          if with_figures else {})
+    if with_figures and smoothed is not None:
+        record["figures"]["smoothed.svg"] = SMOOTHED_CAPTION
     files = {"summary.md": summary_markdown(summary, config, timings, latency),
              "summary.json": json.dumps(record, indent=2, allow_nan=False, default=_json_default) + "\n",
              "trajectory.pos": pos_text(flight, config),
              "trajectory.csv": csv_text(flight, errors)}
     if with_figures:
         files.update(figures(flight, errors, reference, summary.get("schedules")))
+    if smoothed is not None:
+        from modelgen.navigator.metrics import errors_against_reference
+
+        files["smoothed.pos"] = pos_text(smoothed[1], config, SMOOTHED_SOLUTION)
+        files["smoothed.csv"] = csv_text(smoothed[1], errors_against_reference(smoothed[1], reference))
+        if with_figures:
+            files["smoothed.svg"] = smoothed_figure(smoothed[0], smoothed[1], reference)
     return files
 
 
