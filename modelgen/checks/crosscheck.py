@@ -134,7 +134,7 @@ class NeglectedTerm:
 
     ``row`` and ``column`` are 0-based indices into the twin's F, G or H;
     ``term`` is in the twin's parameter symbols (the derivation engine's
-    :class:`modelgen.model.perturbation.NeglectedTerm` has the same fields).
+    :class:`modelgen.model.perturbation.problem.NeglectedTerm` has the same fields).
     """
 
     matrix: str

@@ -39,7 +39,7 @@ import sympy as sp
 from modelgen.errors import ModelError
 from modelgen.model import wgs84
 from modelgen.model.mechanizations.local_level import Gravity, LocalLevel, MeridianRadius, PrimeVerticalRadius
-from modelgen.model.perturbation import NavigationState
+from modelgen.model.perturbation.problem import NavigationState
 
 #: NED -> ENU (the local-level frames' components: swap north and east, up = -down).
 _NED_TO_FRAME = {"NED": sp.eye(3), "ENU": sp.Matrix([[0, 1, 0], [1, 0, 0], [0, 0, -1]])}

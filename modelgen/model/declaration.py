@@ -193,11 +193,11 @@ class ErrorModel:
     frame: str = ""
     notes: tuple[str, ...] = field(default_factory=tuple)
     check: Any = None  # modelgen.model.check_scenario.CheckSpec: the scenario --check flies, if the file declares one
-    #: A navigation model's terms its declared approximations dropped (modelgen.model.perturbation.NeglectedTerm), carried
+    #: A navigation model's terms its declared approximations dropped (modelgen.model.perturbation.problem.NeglectedTerm), carried
     #: on the model itself; empty for a model written as equations.
     neglected: tuple = field(default_factory=tuple, compare=False)
     #: A navigation model's attitude reset Jacobian for closed-loop feedback
-    #: (modelgen.model.perturbation.AttitudeReset), None for a model written as equations.
+    #: (modelgen.model.perturbation.problem.AttitudeReset), None for a model written as equations.
     attitude_reset: Any = field(default=None, compare=False)
     #: A navigation model's navigation problem (modelgen.model.perturbation.NavigationProblem): the mechanization, frame,
     #: state symbols and sensor model its error model was derived from, so that the navigator's mechanization is

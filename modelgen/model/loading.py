@@ -22,7 +22,7 @@ from modelgen.model.file_fields import as_float as _as_float
 from modelgen.model.file_fields import free_text, notes_text
 from modelgen.model.file_fields import is_number as _is_number
 from modelgen.model.file_fields import scalar_text as _scalar_text
-from modelgen.model.navigation_model import derive_navigation_model
+from modelgen.model.navigation_model.derivation import derive_navigation_model
 from modelgen.model.transform_file import load_transformed_model
 from modelgen.model.unit_check import check_model_units
 from modelgen.model.units import declared_value

@@ -157,7 +157,7 @@ PAIRS = cc.load_pairs()
 @pytest.fixture(scope="module")
 def builtin_results(derived_builtin):
     """Each pair's cross-check, every model loaded and derived once."""
-    from modelgen.model.navigation_model import neglected_terms
+    from modelgen.model.navigation_model.approximation_notes import neglected_terms
 
     out = {}
     for p in PAIRS:

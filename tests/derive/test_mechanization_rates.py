@@ -22,7 +22,7 @@ from modelgen.derive.mechanization_rates import mechanization_rates
 from modelgen.fileio.datafiles import package_path
 from modelgen.model.loading import load_model
 from modelgen.model.mechanizations.local_level import Gravity, MeridianRadius, PrimeVerticalRadius
-from modelgen.model.perturbation import NavigationState
+from modelgen.model.perturbation.problem import NavigationState
 from modelgen.model.wgs84 import GPS_EARTH_RATE
 from modelgen.navigator.mechanization import model_rates
 from modelgen.simulation.earth import normal_gravity, radii_of_curvature

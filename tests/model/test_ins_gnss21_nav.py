@@ -37,7 +37,7 @@ import pytest
 
 from modelgen.derive.symbolic import derive
 from modelgen.model.loading import load_model
-from modelgen.model.navigation_model import neglected_terms
+from modelgen.model.navigation_model.approximation_notes import neglected_terms
 
 
 def _cross(a):

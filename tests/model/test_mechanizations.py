@@ -5,15 +5,15 @@ from __future__ import annotations
 import pytest
 
 from modelgen.errors import ModelError
-from modelgen.model import perturbation as pt
 from modelgen.model.mechanizations import MECHANIZATIONS, Mechanization, mechanization_named
 from modelgen.model.mechanizations.local_level import LocalLevel
+from modelgen.model.perturbation import problem
 
 
 def test_local_level_is_registered_and_is_the_engines_default():
     assert MECHANIZATIONS["local_level"] is LocalLevel
-    assert pt.Mechanization is LocalLevel
-    assert pt.NavigationProblem.__dataclass_fields__["mechanization_name"].default == "local_level"
+    assert problem.Mechanization is LocalLevel
+    assert problem.NavigationProblem.__dataclass_fields__["mechanization_name"].default == "local_level"
 
 
 def test_local_level_satisfies_the_protocol():

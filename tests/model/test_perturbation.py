@@ -15,7 +15,9 @@ import sympy as sp
 from scipy.linalg import expm
 
 from modelgen.errors import ModelError
-from modelgen.model import perturbation as pt
+from modelgen.model.mechanizations.local_level import EarthSymbols
+from modelgen.model.perturbation.derivation import derive_error_equations
+from modelgen.model.perturbation.problem import ErrorDefinition, InertialSensorErrors, NavigationProblem
 
 S = lambda name: sp.Symbol(name, real=True)  # noqa: E731
 VEC = lambda names: sp.Matrix([S(n) for n in names])  # noqa: E731
@@ -86,14 +88,14 @@ def problem(approximations=(), errors=None, measurements=()):
     """The NED problem of POINT with biases and scale factors (random constants), geodetic position errors."""
     C = sp.Matrix(3, 3, [S(f"c{i}{j}") for i in range(1, 4) for j in range(1, 4)])
     sensors = {k: VEC([f"{k}_{a}" for a in "xyz"]) for k in ("b_g", "b_a", "s_g", "s_a")}
-    errors = errors or pt.ErrorDefinition("phi", tuple(VEC(["phi_n", "phi_e", "phi_d"])), "difference",
+    errors = errors or ErrorDefinition("phi", tuple(VEC(["phi_n", "phi_e", "phi_d"])), "difference",
                                           tuple(VEC(["dv_n", "dv_e", "dv_d"])), "geodetic", tuple(VEC(["dL", "dlambda", "dh"])))
     others = [s for k in ("b_g", "b_a", "s_g", "s_a") for s in sensors[k]]
-    return pt.NavigationProblem(
+    return NavigationProblem(
         frame="NED", attitude=C, velocity=VEC(["v_n", "v_e", "v_d"]), position=VEC(["L", "lambda_", "h"]),
         specific_force=VEC(["f_x", "f_y", "f_z"]), specific_force_axes="body", body_rate=VEC(["w_x", "w_y", "w_z"]),
-        earth=pt.EarthSymbols(S("omega_ie"), S("R_M"), S("R_N"), S("g"), S("R")), errors=errors,
-        gyro=pt.InertialSensorErrors(sensors["b_g"], sensors["s_g"]), accelerometer=pt.InertialSensorErrors(sensors["b_a"], sensors["s_a"]),
+        earth=EarthSymbols(S("omega_ie"), S("R_M"), S("R_N"), S("g"), S("R")), errors=errors,
+        gyro=InertialSensorErrors(sensors["b_g"], sensors["s_g"]), accelerometer=InertialSensorErrors(sensors["b_a"], sensors["s_a"]),
         state_order=(*errors.attitude_states, *errors.velocity_states, *errors.position_states, *others),
         auxiliary_dynamics={s: sp.S.Zero for s in others}, noises=(), measurements=tuple(measurements), approximations=tuple(approximations),
     )
@@ -115,7 +117,7 @@ def evaluate(matrix):
 
 @pytest.fixture(scope="module")
 def exact():
-    return pt.derive_error_equations(problem())
+    return derive_error_equations(problem())
 
 
 def test_derived_F_is_the_exact_first_order_error_dynamics_of_the_mechanization(exact):
@@ -126,14 +128,14 @@ def test_derived_F_is_the_exact_first_order_error_dynamics_of_the_mechanization(
 
 
 def test_the_comparison_sees_the_radius_derivatives_that_constant_radii_drops():
-    approximated = evaluate(pt.derive_error_equations(problem(("constant_radii",))).F)[:9]
+    approximated = evaluate(derive_error_equations(problem(("constant_radii",))).F)[:9]
     reference = numeric_F()
     scale = np.abs(reference).max(axis=0) + 1e-300
     assert np.any(np.abs(approximated - reference) > 2e-6 * scale + 1e-13)
 
 
 def test_approximated_matrix_plus_its_neglected_terms_is_the_exact_matrix(exact):
-    approximated = pt.derive_error_equations(problem(("constant_radii", "constant_gravity", "no_transport_rate_position_terms")))
+    approximated = derive_error_equations(problem(("constant_radii", "constant_gravity", "no_transport_rate_position_terms")))
     restored = approximated.F.copy()
     for term in approximated.neglected:
         assert term.matrix == "F"
@@ -143,15 +145,15 @@ def test_approximated_matrix_plus_its_neglected_terms_is_the_exact_matrix(exact)
 
 
 def test_derivation_is_byte_stable():
-    first, second = (pt.derive_error_equations(problem(("constant_radii",))) for _ in range(2))
+    first, second = (derive_error_equations(problem(("constant_radii",))) for _ in range(2))
     assert sp.srepr(first.F) == sp.srepr(second.F) and sp.srepr(first.neglected) == sp.srepr(second.neglected)
 
 
 def test_metres_and_psi_are_the_geodetic_phi_model_seen_through_the_change_of_variables(exact):
     """x_new = T x_old with T constant at an instant: F_new = (T F_old + T') T^-1, checked numerically."""
-    psi = pt.ErrorDefinition("psi", tuple(VEC(["psi_n", "psi_e", "psi_d"])), "computed_frame", tuple(VEC(["dv_n", "dv_e", "dv_d"])),
+    psi = ErrorDefinition("psi", tuple(VEC(["psi_n", "psi_e", "psi_d"])), "computed_frame", tuple(VEC(["dv_n", "dv_e", "dv_d"])),
                              "metres", tuple(VEC(["dr_n", "dr_e", "dr_d"])))
-    other = pt.derive_error_equations(problem(errors=psi))
+    other = derive_error_equations(problem(errors=psi))
     # eigenvalues are invariant under a change of variables only when T' = 0; the trace of F changes by tr(T' T^-1)
     F_old, F_new = evaluate(exact.F), evaluate(other.F)
     assert F_new.shape == F_old.shape
@@ -177,17 +179,17 @@ def test_inconsistent_problems_are_refused_before_deriving(change, message):
     from dataclasses import replace
 
     with pytest.raises(ModelError, match=message.replace("(", r"\(").replace(")", r"\)")):
-        pt.derive_error_equations(replace(problem(), **change))
+        derive_error_equations(replace(problem(), **change))
 
 
 def test_no_vertical_channel_removes_vertical_velocity_and_height_and_lists_their_couplings(exact):
     full = problem()
-    horizontal = pt.ErrorDefinition("phi", full.errors.attitude_states, "difference", full.errors.velocity_states[:2],
+    horizontal = ErrorDefinition("phi", full.errors.attitude_states, "difference", full.errors.velocity_states[:2],
                                     "geodetic", full.errors.position_states[:2])
     order = tuple(s for s in full.state_order if s not in (full.errors.velocity_states[2], full.errors.position_states[2]))
     from dataclasses import replace
 
-    reduced = pt.derive_error_equations(replace(full, errors=horizontal, state_order=order, approximations=("no_vertical_channel",)))
+    reduced = derive_error_equations(replace(full, errors=horizontal, state_order=order, approximations=("no_vertical_channel",)))
     kept = [full.state_order.index(s) for s in order]
     assert reduced.states == order and reduced.F.shape == (19, 19)
     assert sp.simplify(reduced.F - exact.F.extract(kept, kept)) == sp.zeros(19, 19)
@@ -203,7 +205,7 @@ def test_no_vertical_channel_needs_the_horizontal_components_only():
     from dataclasses import replace
 
     with pytest.raises(ModelError, match="velocity error has 3 states, 2 expected"):
-        pt.derive_error_equations(replace(problem(), approximations=("no_vertical_channel",)))
+        derive_error_equations(replace(problem(), approximations=("no_vertical_channel",)))
 
 
 @pytest.mark.parametrize("position_form", ["geodetic", "metres"])
@@ -215,8 +217,8 @@ def test_damped_vertical_channel_makes_the_height_loop_stable_with_its_gains(pos
     position = VEC(["dL", "dlambda", "dh"]) if position_form == "geodetic" else VEC(["dr_n", "dr_e", "dr_d"])
     errors = replace(base.errors, position=position_form, position_states=tuple(position))
     order = (*base.errors.attitude_states, *base.errors.velocity_states, *position, *base.state_order[9:])
-    free = pt.derive_error_equations(replace(base, errors=errors, state_order=order))
-    damped = pt.derive_error_equations(replace(base, errors=errors, state_order=order, approximations=("damped_vertical_channel",)))
+    free = derive_error_equations(replace(base, errors=errors, state_order=order))
+    damped = derive_error_equations(replace(base, errors=errors, state_order=order, approximations=("damped_vertical_channel",)))
     v_d, h = 5, 8
     gains = {S("k_v1"): 0.02, S("k_v2"): 3e-4}
     change = np.array((damped.F - free.F).xreplace(gains).evalf(), dtype=float)

@@ -28,7 +28,7 @@ from modelgen.model.mechanizations.ecef import Ecef
 from modelgen.model.mechanizations.local_level import LocalLevel
 
 #: The engine's navigation state (modelgen.model.perturbation), named as text: the engine imports this package.
-NavigationState = "modelgen.model.perturbation.NavigationState"
+NavigationState = "modelgen.model.perturbation.problem.NavigationState"
 
 
 class Mechanization(Protocol):

@@ -34,7 +34,7 @@ import sympy as sp
 from modelgen.model import wgs84
 
 #: Annotations name the engine's NavigationState (modelgen.model.perturbation) as text (no import cycle).
-NavigationState = "modelgen.model.perturbation.NavigationState"
+NavigationState = "modelgen.model.perturbation.problem.NavigationState"
 
 #: |r^e|, the geocentric radius, as an undefined function of the position while deriving (like the local-level
 #: radii of curvature): the gravity gradient then reads in r = |r^e| (parameter ``geocentric_radius``), with

@@ -17,7 +17,7 @@ import sympy as sp
 
 #: Annotations name the engine's NavigationState (modelgen.model.perturbation) as text: the engine imports this
 #: module, never the other way round (tests/test_architecture.py refuses a cycle).
-NavigationState = "modelgen.model.perturbation.NavigationState"
+NavigationState = "modelgen.model.perturbation.problem.NavigationState"
 
 #: Navigation frames and their axes, in component order.
 FRAME_AXES: dict[str, tuple[str, str, str]] = {"NED": ("north", "east", "down"), "ENU": ("east", "north", "up")}
