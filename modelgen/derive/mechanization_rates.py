@@ -73,7 +73,7 @@ def wgs84_earth_functions(latitude: sp.Expr, height: sp.Expr) -> dict:
 
     R_M = a (1 - e^2) / w^(3/2), R_N = a / w^(1/2), w = 1 - e^2 sin^2 L;
     g = gamma_e (1 + k sin^2 L) / w^(1/2) (1 - 2 h (1 + f + m - 2 f sin^2 L) / a + 3 h^2 / a^2).
-    The same formulas as :func:`modelgen.model.perturbation.earth_derivative_rules` differentiates.
+    The same formulas as :func:`modelgen.model.perturbation.simplification.earth_derivative_rules` differentiates.
     """
     e2, a = sp.Float(wgs84.ECCENTRICITY_SQUARED), sp.Float(wgs84.SEMI_MAJOR_AXIS)
     f, m, k = sp.Float(wgs84.FLATTENING), sp.Float(wgs84.GRAVITY_RATIO_M), sp.Float(wgs84.SOMIGLIANA_K)

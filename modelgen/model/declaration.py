@@ -199,7 +199,7 @@ class ErrorModel:
     #: A navigation model's attitude reset Jacobian for closed-loop feedback
     #: (modelgen.model.perturbation.problem.AttitudeReset), None for a model written as equations.
     attitude_reset: Any = field(default=None, compare=False)
-    #: A navigation model's navigation problem (modelgen.model.perturbation.NavigationProblem): the mechanization, frame,
+    #: A navigation model's navigation problem (modelgen.model.perturbation.problem.NavigationProblem): the mechanization, frame,
     #: state symbols and sensor model its error model was derived from, so that the navigator's mechanization is
     #: generated from the same equations (modelgen.derive.mechanization_rates); None for a model written as equations.
     navigation: Any = field(default=None, compare=False)
