@@ -2668,6 +2668,18 @@ int gps_pseudorange11_update_masked(gps_pseudorange11_filter *restrict f,
         return GPS_PSEUDORANGE11_ERR_NONFINITE;
     }
     /* commit only once everything is known to be finite */
+    /* a state the update pinned (its variance not positive: a measurement of variance 0, then
+       rounding) keeps no variance and no correlation, as the contract wants of a zero variance */
+    for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
+        if (!(w->Pn[GPS_PSEUDORANGE11_PACKED_UPPER(i, i)] > 0.0)) {
+            for (j = 0; j < i; ++j) {
+                w->Pn[GPS_PSEUDORANGE11_PACKED_UPPER(j, i)] = 0.0;
+            }
+            for (j = i; j < GPS_PSEUDORANGE11_N_STATES; ++j) {
+                w->Pn[GPS_PSEUDORANGE11_PACKED_UPPER(i, j)] = 0.0;
+            }
+        }
+    }
     for (i = 0; i < GPS_PSEUDORANGE11_N_STATES; ++i) {
         f->x[i] = w->xn[i];
     }

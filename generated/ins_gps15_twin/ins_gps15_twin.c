@@ -4269,6 +4269,18 @@ int ins_gps15_twin_update_masked(ins_gps15_twin_filter *restrict f,
         return INS_GPS15_TWIN_ERR_NONFINITE;
     }
     /* commit only once everything is known to be finite */
+    /* a state the update pinned (its variance not positive: a measurement of variance 0, then
+       rounding) keeps no variance and no correlation, as the contract wants of a zero variance */
+    for (i = 0; i < INS_GPS15_TWIN_N_STATES; ++i) {
+        if (!(w->Pn[INS_GPS15_TWIN_PACKED_UPPER(i, i)] > 0.0)) {
+            for (j = 0; j < i; ++j) {
+                w->Pn[INS_GPS15_TWIN_PACKED_UPPER(j, i)] = 0.0;
+            }
+            for (j = i; j < INS_GPS15_TWIN_N_STATES; ++j) {
+                w->Pn[INS_GPS15_TWIN_PACKED_UPPER(i, j)] = 0.0;
+            }
+        }
+    }
     for (i = 0; i < INS_GPS15_TWIN_N_STATES; ++i) {
         f->x[i] = w->xn[i];
     }

@@ -486,6 +486,163 @@ _IDENTITY = np.eye(N_STATES)
 _IDENTITY.flags.writeable = False
 _DIAGONAL = np.diag_indices(N_STATES)
 
+# -- the compiled prediction (numba, the optional [sim] extra) -------------
+# With numba installed, predict and Filter.predict first run _compiled_predict: one compiled call
+# over the structural nonzeros of Phi, known at generation time (modelgen's
+# backends/python/context.compiled_predict_plan).  It computes the same function as the numpy
+# kernels (the same numbers within rounding, P exactly symmetric) and writes its results only when
+# every check passes; otherwise it writes nothing and the numpy path runs, which refuses or
+# accepts exactly as without numba.  Without numba (or with COMPILED set to False) only the
+# numpy path runs.  Compiled on the first call (about a second), not at import.
+try:
+    import numba
+except ImportError:  # plain numpy: the same results, slower
+    numba = None
+COMPILED = numba is not None  # False: the numpy kernels only
+_KERNEL_GENERAL = np.array([0, 1, 2, 3, 4, 5, 6], dtype=np.int64)  # rows of Phi with anything but a lone diagonal entry
+_KERNEL_DIAGONAL = np.array([7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17], dtype=np.int64)  # rows of Phi that are a lone diagonal entry
+_KERNEL_STARTS = np.array([0, 15, 30, 45, 60, 75, 90, 106], dtype=np.int64)  # the general rows' structural nonzeros (CSR)
+_KERNEL_COLUMNS = np.array([0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15], dtype=np.int64)
+_KERNEL_OFF_PATTERN = np.ones(_SQUARE, dtype=np.bool_)  # structural zeros of Phi
+_KERNEL_OFF_PATTERN[[0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17], [0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17]] = False
+_KERNEL_LAPACK_CHOLESKY = False  # prove P with LAPACK (large N) or the kernel's own loop
+_LARGEST = 1.7976931348623157e308  # |v| <= it: v is finite (False for NaN and infinities)
+
+
+def _compiled_predict(x, P, Phi, Qd, x_out, P_out, prove):
+    """x_out = Phi x, P_out = Phi P Phi^T + Q_d (upper triangle, mirrored) when every check passes: True; else False, nothing written.
+
+    Checks (any failure: False, and the caller's numpy path decides): Q_d's
+    variances >= 0; Phi zero off its structural pattern (a Phi made
+    elsewhere takes the numpy path, so x and P always see the same Phi);
+    with ``prove`` (the functional API) P exactly symmetric and positive
+    definite (a Cholesky factorization); every entry of x_out, of P_out
+    and of Q_d's lower triangle finite.  Phi P is formed for the general
+    rows only (A P, four rows of P per pass), the diagonal rows scale P.
+    x_out and P_out may be x and P (the Filter: in place), as the results
+    are written after all reads.
+    """
+    n = N_STATES
+    for i in range(n):
+        if not Qd[i, i] >= 0.0:
+            return False
+    off = False
+    for i in range(n):
+        row, mask = Phi[i], _KERNEL_OFF_PATTERN[i]
+        for j in range(n):
+            off |= (row[j] != 0.0) & mask[j]
+    if off:
+        return False
+    if prove:
+        symmetric = True
+        for i in range(n):
+            for j in range(i):
+                symmetric &= P[i, j] == P[j, i]  # False for a NaN
+        if not symmetric:
+            return False
+        if _KERNEL_LAPACK_CHOLESKY:
+            try:
+                np.linalg.cholesky(P)
+            except Exception:  # not positive definite
+                return False
+        else:
+            L = np.zeros((n, n))
+            for j in range(n):
+                Lj = L[j]
+                s = P[j, j]
+                for k in range(j):
+                    s -= Lj[k] * Lj[k]
+                if not s > 0.0:
+                    return False
+                d = math.sqrt(s)
+                Lj[j] = d
+                for i in range(j + 1, n):
+                    Li = L[i]
+                    t = P[i, j]
+                    for k in range(j):
+                        t -= Li[k] * Lj[k]
+                    Li[j] = t / d
+    general, diagonal, starts, columns = _KERNEL_GENERAL, _KERNEL_DIAGONAL, _KERNEL_STARTS, _KERNEL_COLUMNS
+    g = general.shape[0]
+    M = np.empty((g, n))  # A P: the general rows of Phi P
+    R = np.empty((n, n))
+    x_new = np.empty(n)
+    for a in range(g):
+        i = general[a]
+        row = M[a]
+        row[:] = 0.0
+        s = 0.0
+        q, end = starts[a], starts[a + 1]
+        while q + 4 <= end:
+            c0, c1, c2, c3 = columns[q], columns[q + 1], columns[q + 2], columns[q + 3]
+            v0, v1, v2, v3 = Phi[i, c0], Phi[i, c1], Phi[i, c2], Phi[i, c3]
+            s += v0 * x[c0] + v1 * x[c1] + v2 * x[c2] + v3 * x[c3]
+            p0, p1, p2, p3 = P[c0], P[c1], P[c2], P[c3]
+            for t in range(n):
+                row[t] += (v0 * p0[t] + v1 * p1[t]) + (v2 * p2[t] + v3 * p3[t])
+            q += 4
+        while q < end:
+            c = columns[q]
+            v = Phi[i, c]
+            s += v * x[c]
+            source = P[c]
+            for t in range(n):
+                row[t] += v * source[t]
+            q += 1
+        x_new[i] = s
+    for b in range(diagonal.shape[0]):
+        i = diagonal[b]
+        x_new[i] = Phi[i, i] * x[i]
+    finite = True
+    for i in range(n):
+        finite &= abs(x_new[i]) <= _LARGEST
+    for a in range(g):  # general rows against general rows: (A P) A^T over A's pattern
+        i, Ma = general[a], M[a]
+        for b in range(a, g):
+            j = general[b]
+            s = 0.0
+            for q in range(starts[b], starts[b + 1]):
+                s += Phi[j, columns[q]] * Ma[columns[q]]
+            R[i, j] = s
+            R[j, i] = s
+    for a in range(g):  # general rows against diagonal rows: (A P)_ij d_j
+        i, Ma = general[a], M[a]
+        for b in range(diagonal.shape[0]):
+            j = diagonal[b]
+            s = Ma[j] * Phi[j, j]
+            R[i, j] = s
+            R[j, i] = s
+    for b in range(diagonal.shape[0]):  # diagonal rows against diagonal rows: d_i d_j P_ij
+        i = diagonal[b]
+        d = Phi[i, i]
+        for c in range(b, diagonal.shape[0]):
+            j = diagonal[c]
+            s = d * Phi[j, j] * P[i, j]
+            R[i, j] = s
+            R[j, i] = s
+    for i in range(n):  # + Q_d (upper triangle); Q_d's lower triangle checked, not used
+        Ri, Qi = R[i], Qd[i]
+        for j in range(i):
+            finite &= abs(Qi[j]) <= _LARGEST
+        for j in range(i, n):
+            v = Ri[j] + Qi[j]
+            Ri[j] = v
+            finite &= abs(v) <= _LARGEST
+    if not finite:
+        return False
+    for i in range(n):
+        x_out[i] = x_new[i]
+        Ri, Pi = R[i], P_out[i]
+        for j in range(i, n):
+            Pi[j] = Ri[j]
+            P_out[j, i] = Ri[j]
+    return True
+
+
+if COMPILED:
+    _compiled_predict = numba.njit(nogil=True)(_compiled_predict)
+
+
 
 def predict(x, P, Phi, Qd):
     """x = Phi x and P = Phi P Phi^T + Q_d.
@@ -512,6 +669,10 @@ def predict(x, P, Phi, Qd):
     x, P, Phi, Qd = _array(x, float), _array(P, float), _array(Phi, float), _array(Qd, float)
     if (x.shape, P.shape, Phi.shape, Qd.shape) != _PREDICT_SHAPES:
         _check_shapes("predict", x=(x, _VECTOR), P=(P, _SQUARE), Phi=(Phi, _SQUARE), Qd=(Qd, _SQUARE))
+    if COMPILED:
+        x_new, P_new = np.empty(N_STATES), np.empty(_SQUARE)
+        if _compiled_predict(x, P, Phi, Qd, x_new, P_new, True):
+            return x_new, P_new
     _check_process_noise("predict", Qd)
     factor = _factor(P)
     if factor is None:  # the contract's test entry by entry, naming what it refuses
@@ -615,7 +776,22 @@ def _joseph_update(x, P, z, H, r, exact):
     if not math.isfinite(_asum(P_new.ravel()) + _asum(x_new) + nis):
         _refuse_non_finite("update", {"x_result": x_new, "result": P_new}, x=x, P=P, z=z, H=H, r=r)
         raise ValueError("update: the normalized innovation squared nu^T S^-1 nu is not finite (z is too far from H x)")
+    if not P_new.diagonal().min() > 0.0:  # a state pinned (a measurement of variance 0, then rounding)
+        _clear_pinned(P_new)
     return x_new, P_new, nis
+
+
+def _clear_pinned(P):
+    """Clear, in place, the row and column of every state whose variance is not positive, as the C's update.
+
+    A measurement of variance 0 pins what it measures: its variance is 0,
+    or a rounding below, and rounding leaves a residue in its row that the
+    contract would refuse (a zero variance carries no correlation), so the
+    filter's next predict would refuse its own P.
+    """
+    pinned = ~(P.diagonal() > 0.0)
+    P[pinned, :] = 0.0
+    P[:, pinned] = 0.0
 
 
 def update_masked(x, P, z, H, r, mask=None):
@@ -742,6 +918,8 @@ class Filter:
         Phi, Qd = _array(Phi, float), _array(Qd, float)
         if (Phi.shape, Qd.shape) != (_SQUARE, _SQUARE):
             _check_shapes("predict", Phi=(Phi, _SQUARE), Qd=(Qd, _SQUARE))
+        if COMPILED and _compiled_predict(self._x, self._P, Phi, Qd, self._x, self._P, False):
+            return  # x and P updated in place (the filter owns them)
         _check_process_noise("predict", Qd)
         x_new = _dot(Phi, self._x)
         P_new, total = _dense_product(self._P, Phi, Qd)

@@ -4271,6 +4271,18 @@ int ned_doppler18_update_masked(ned_doppler18_filter *restrict f,
         return NED_DOPPLER18_ERR_NONFINITE;
     }
     /* commit only once everything is known to be finite */
+    /* a state the update pinned (its variance not positive: a measurement of variance 0, then
+       rounding) keeps no variance and no correlation, as the contract wants of a zero variance */
+    for (i = 0; i < NED_DOPPLER18_N_STATES; ++i) {
+        if (!(w->Pn[NED_DOPPLER18_PACKED_UPPER(i, i)] > 0.0F)) {
+            for (j = 0; j < i; ++j) {
+                w->Pn[NED_DOPPLER18_PACKED_UPPER(j, i)] = 0.0F;
+            }
+            for (j = i; j < NED_DOPPLER18_N_STATES; ++j) {
+                w->Pn[NED_DOPPLER18_PACKED_UPPER(i, j)] = 0.0F;
+            }
+        }
+    }
     for (i = 0; i < NED_DOPPLER18_N_STATES; ++i) {
         f->x[i] = w->xn[i];
     }
