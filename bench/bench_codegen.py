@@ -17,7 +17,7 @@ same operating point and covariance for every implementation:
 
 Implementations: the generated C (default options, double); a
 straightforward dense C filter (bench/dense_filter.c); numpy (the dense
-reference, modelgen/derive/reference.py; wall time only); the C++ that SymForce
+reference, modelgen/derivation/reference.py; wall time only); the C++ that SymForce
 generates and the C that CasADi generates from the same structured matrices
 (bench/symbolic_kf.py: symbols only at structural nonzeros, symmetric P, so
 both tools can exploit everything modelgen knows).  SymForce is installed
@@ -50,12 +50,12 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))  # runs from a fresh clone without installing
 
-from modelgen.derive import reference  # noqa: E402
+from modelgen.derivation import reference  # noqa: E402
 from modelgen.codegen.generate import generate_code, write_atomically  # noqa: E402
 from modelgen.codegen.structure import filter_structure  # noqa: E402
 from modelgen.checks.code_check import measurement_sequence  # noqa: E402
-from modelgen.derive.symbolic import derive  # noqa: E402
-from modelgen.derive.discretization import taylor_discretization, taylor_process_noise  # noqa: E402
+from modelgen.derivation.symbolic import derive  # noqa: E402
+from modelgen.derivation.discretization import taylor_discretization, taylor_process_noise  # noqa: E402
 from modelgen.model.loading import load_model  # noqa: E402
 from modelgen.jobs import paper_scenario, synthetic_scenario  # noqa: E402
 

@@ -19,9 +19,9 @@ from modelgen.table2.report import run_covariance_analysis  # noqa: E402
 from modelgen.table2.scenario import load_analysis_scenario  # noqa: E402
 from modelgen.table2.scenario import operating_point  # noqa: E402
 from modelgen.table2.systems import PaperModels, analyse_systems  # noqa: E402
-from modelgen.derive import reference  # noqa: E402
-from modelgen.derive.discretization import taylor_discretization, taylor_process_noise  # noqa: E402
-from modelgen.derive.symbolic import derive  # noqa: E402
+from modelgen.derivation import reference  # noqa: E402
+from modelgen.derivation.discretization import taylor_discretization, taylor_process_noise  # noqa: E402
+from modelgen.derivation.symbolic import derive  # noqa: E402
 from modelgen.model.loading import load_model  # noqa: E402
 
 

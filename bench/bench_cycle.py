@@ -17,15 +17,15 @@ point and covariance:
     -> (P', x') with F, G, Q evaluated from the parameters, Phi and
     Gamma by the Taylor series of eqs. (10)-(11) of the same order as
     modelgen sums it (S = sum (F T)^k / (k+1)! by Horner's rule, Phi = I + F T S,
-    Gamma = T S G: modelgen.derive.discretization), Q_d =
+    Gamma = T S G: modelgen.derivation.discretization), Q_d =
     Gamma (Q/T) Gamma^T and the prediction.  CasADi and SymForce are given
     the model's F, G, diag(Q) as symbolic expressions of the parameters
-    (CasADi from modelgen.derive.casadi_functions, SymForce from their
+    (CasADi from modelgen.derivation.casadi_functions, SymForce from their
     text, read by symengine) and generate that one function symbolically, P packed upper in and
     out.  modelgen's side is its generated matrices_evaluate + discretize +
     predict (default options: full symmetric storage, computed once per
     pair), which also computes ||F||_D (D fixed at generation time) and chooses the order at run time
-    (modelgen.derive.discretization.taylor_plan): the order the competitors get is
+    (modelgen.derivation.discretization.taylor_plan): the order the competitors get is
     the one that rule picks at that T (T = 60 s: 9, the paper's; T = 1 s: 5 for the
     paper's model), so both sides sum the same series;
 (c) the measurement update (vector update, Joseph form; the tools: the
@@ -81,8 +81,8 @@ from modelgen.codegen.discretize_kernels import (  # noqa: E402
 from modelgen.codegen.generate import describe, generate_code, write_atomically  # noqa: E402
 from modelgen.codegen.kernels import OperationCount, update_cost  # noqa: E402
 from modelgen.codegen.options import CodegenOptions  # noqa: E402
-from modelgen.derive import reference  # noqa: E402
-from modelgen.derive.discretization import (  # noqa: E402
+from modelgen.derivation import reference  # noqa: E402
+from modelgen.derivation.discretization import (  # noqa: E402
     DEFAULT_TOLERANCE,
     balanced_norm,
     nominal_scaling,
@@ -90,7 +90,7 @@ from modelgen.derive.discretization import (  # noqa: E402
     taylor_plan,
     taylor_process_noise,
 )
-from modelgen.derive.symbolic import DerivedModel, derive  # noqa: E402
+from modelgen.derivation.symbolic import DerivedModel, derive  # noqa: E402
 from modelgen.jobs import paper_scenario, synthetic_scenario  # noqa: E402
 from modelgen.model.loading import load_model  # noqa: E402
 
@@ -132,7 +132,7 @@ def problem(name: str) -> dict:
 
 
 def _parameter_values(derived: DerivedModel, values: dict) -> list[float]:
-    from modelgen.derive.symbolic import parameter_vector
+    from modelgen.derivation.symbolic import parameter_vector
 
     return list(parameter_vector(derived.model, values))
 
@@ -232,7 +232,7 @@ def casadi_cycle(p: dict, order: int, folder: Path) -> dict:
     import casadi as ca
     import sympy as sp
 
-    from modelgen.derive.casadi_functions import build_casadi_model, sympy_to_casadi
+    from modelgen.derivation.casadi_functions import build_casadi_model, sympy_to_casadi
 
     start = time.perf_counter()
     derived = p["derived"]

@@ -5,7 +5,7 @@ Run: python bench/bench_derivation.py [--repeat N].  Not a test: timings depend 
 Two sides, in one process, each from a cleared sympy cache, best of N runs:
 
 * baseline: ``ins_gnss21`` (the hand-written scalar error equations): read the YAML,
-  validate, and derive F, G, H, Q, R (``modelgen.derive.symbolic.derive``);
+  validate, and derive F, G, H, Q, R (``modelgen.derivation.symbolic.derive``);
 * navigation: ``ins_gnss21_nav`` (the same 21-state filter as navigation equations):
   read the YAML, perturb the mechanization and derive the error model with every
   declared approximation and its dropped terms (``modelgen.model.perturbation``),
@@ -38,7 +38,7 @@ RESULTS = REPO / "bench" / "results"
 
 from sympy.core.cache import clear_cache  # noqa: E402
 
-from modelgen.derive.symbolic import derive  # noqa: E402
+from modelgen.derivation.symbolic import derive  # noqa: E402
 from modelgen.model.loading import load_model  # noqa: E402
 
 from modelgen.codegen.generate import generate_code  # noqa: E402

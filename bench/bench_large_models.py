@@ -56,9 +56,9 @@ from bench_codegen import GLUE_DENSE, build_harness, callgrind_instructions, glu
 from modelgen.checks.code_check import measurement_sequence  # noqa: E402
 from modelgen.codegen import kernels  # noqa: E402
 from modelgen.codegen.generate import describe, generate_code, write_atomically  # noqa: E402
-from modelgen.derive import reference  # noqa: E402
-from modelgen.derive.discretization import taylor_discretization, taylor_process_noise  # noqa: E402
-from modelgen.derive.symbolic import derive  # noqa: E402
+from modelgen.derivation import reference  # noqa: E402
+from modelgen.derivation.discretization import taylor_discretization, taylor_process_noise  # noqa: E402
+from modelgen.derivation.symbolic import derive  # noqa: E402
 from modelgen.jobs import synthetic_scenario  # noqa: E402
 from modelgen.model.loading import load_model  # noqa: E402
 from tests.codegen.large_model_support import large_model  # noqa: E402

@@ -6,7 +6,7 @@ Each side from a cleared sympy cache, best of N runs, CPU time of this process
 (``time.process_time``: one core) and wall time: read the YAML, perturb the
 mechanization and derive the error model (``modelgen.model.perturbation``, with
 its approximations and dropped terms), then F, G, H, Q, R
-(``modelgen.derive.symbolic.derive``).
+(``modelgen.derivation.symbolic.derive``).
 
 * local_level: ``ins_gnss21_nav`` (NED, phi-angle, NED metres; built in);
 * ecef: ``tests/model/ins_gnss21_ecef.yaml`` (e-frame r, v, C_b^e, phi-angle, J2 gravity).
@@ -29,7 +29,7 @@ RESULTS = REPO / "bench" / "results"
 
 from sympy.core.cache import clear_cache  # noqa: E402
 
-from modelgen.derive.symbolic import derive  # noqa: E402
+from modelgen.derivation.symbolic import derive  # noqa: E402
 from modelgen.model.loading import load_model  # noqa: E402
 
 TARGET_S = 5.0

@@ -223,7 +223,7 @@ def efficiency_of(one: dict, two: dict) -> dict:
 
 
 def monte_carlo_part(args) -> dict:
-    from modelgen.derive.symbolic import derive
+    from modelgen.derivation.symbolic import derive
     from modelgen.model.loading import load_model
     from modelgen.simulation.montecarlo import run_monte_carlo, setup_key, worker_setup
     from modelgen.simulation.scenario import load_profile

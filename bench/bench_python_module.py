@@ -40,7 +40,7 @@ The functions:
   the Joseph form ``(P - K H P) - (P - K H P) H^T K^T + K R K^T``, mirrored;
   bare, and checked as predict (plus ``r >= 0``);
 * ``discretize`` -- generated ``discretize(F, G, q, T)`` against
-  ``modelgen.derive.discretization`` (the numpy reference: the same balancing,
+  ``modelgen.derivation.discretization`` (the numpy reference: the same balancing,
   order rule, Taylor series and doublings) and ``taylor_process_noise``;
   bare, and checked (finite F, G, q, ``q >= 0``, finite positive T, finite
   results).
@@ -93,9 +93,9 @@ from modelgen.codegen import kernels  # noqa: E402
 from modelgen.codegen.build import load_python_module  # noqa: E402
 from modelgen.codegen.backends.registry import backend  # noqa: E402
 from modelgen.codegen.generate import describe, write_atomically  # noqa: E402
-from modelgen.derive import reference  # noqa: E402
-from modelgen.derive.discretization import DEFAULT_TOLERANCE, taylor_discretization, taylor_process_noise  # noqa: E402
-from modelgen.derive.symbolic import derive  # noqa: E402
+from modelgen.derivation import reference  # noqa: E402
+from modelgen.derivation.discretization import DEFAULT_TOLERANCE, taylor_discretization, taylor_process_noise  # noqa: E402
+from modelgen.derivation.symbolic import derive  # noqa: E402
 from modelgen.jobs import paper_scenario, synthetic_scenario  # noqa: E402
 from modelgen.model.loading import load_model  # noqa: E402
 from tests.codegen.large_model_support import large_model  # noqa: E402
@@ -418,7 +418,7 @@ symmetric (upper triangle mirrored):
   made of it, as the C does; it checks Phi, Q_d, z, H, r (finite, r >= 0) and finite results like the
   functional API.  Its time includes restoring x and P after each call (two attribute assignments);
 * bare numpy: the same products with no checks at all (`Phi @ P @ Phi.T + Qd`; the Joseph update with
-  `np.linalg.solve`; `modelgen.derive.discretization` for discretize) -- the issue's baseline;
+  `np.linalg.solve`; `modelgen.derivation.discretization` for discretize) -- the issue's baseline;
 * checked numpy: bare numpy plus the functional API's contract in plain numpy (`np.isfinite(a).all()`
   per argument and result, `np.array_equal(P, P.T)`, `np.linalg.cholesky(P)`, `r >= 0` / `q >= 0`).
 

@@ -48,7 +48,7 @@ import numpy as np  # noqa: E402
 from bench_python_module import BUILTIN, dense_predict, inputs, module_for  # noqa: E402
 from numba_csr_predict import make as numba_csr_kernel  # noqa: E402
 from modelgen.codegen.generate import describe  # noqa: E402
-from modelgen.derive.symbolic import derive  # noqa: E402
+from modelgen.derivation.symbolic import derive  # noqa: E402
 from modelgen.jobs import check_scenario, synthetic_scenario  # noqa: E402
 from modelgen.model.loading import load_model  # noqa: E402
 from tests.codegen.large_model_support import large_model  # noqa: E402

@@ -52,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.model.loading import load_model
 from modelgen.simulation.filter_loop import MODES
 from modelgen.simulation.filters import filter_factory

@@ -15,7 +15,7 @@ the same matrices (the paper's level-flight operating point) and step:
 Per side and step: callgrind instructions per call (deterministic, so the
 machine's load does not enter), the workspace struct's bytes, and the
 largest error of Phi and Q_d against scipy's expm of Van Loan's block
-(modelgen.derive.discretization.van_loan_discretization) relative to their
+(modelgen.derivation.discretization.van_loan_discretization) relative to their
 largest entry.  The Taylor Q_d's error is its approximation, not rounding.
 """
 
@@ -35,8 +35,8 @@ from modelgen.codegen.build import CompiledFilter, compile_shared_library
 from modelgen.codegen.generate import describe, generate_code, write_atomically
 from modelgen.codegen.layout import ModelSizes
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.discretization import van_loan_discretization
-from modelgen.derive.symbolic import parameter_vector
+from modelgen.derivation.discretization import van_loan_discretization
+from modelgen.derivation.symbolic import parameter_vector
 from modelgen.jobs import load_and_derive, paper_parameters
 
 HERE = Path(__file__).resolve().parent

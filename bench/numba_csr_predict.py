@@ -108,7 +108,7 @@ def main() -> None:
 
     from bench_python_module import BUILTIN, dense_predict, inputs, per_call_us
     from modelgen.codegen.generate import describe
-    from modelgen.derive.symbolic import derive
+    from modelgen.derivation.symbolic import derive
     from modelgen.jobs import paper_scenario, synthetic_scenario
     from modelgen.model.loading import load_model
     from tests.codegen.large_model_support import large_model

@@ -12,7 +12,7 @@ generated C++ function takes (parameters, T, packed upper P, x) and returns
     Gamma = T S G,  Q_d = Gamma diag(q / T) Gamma^T,  P' = Phi P Phi^T + Q_d,  x' = Phi x,
 
 the paper's eqs. (9)-(11) as modelgen sums them (Phi = I + F T S is eq. (10)
-to order N + 1, modelgen.derive.discretization), exactly what CasADi is
+to order N + 1, modelgen.derivation.discretization), exactly what CasADi is
 given in bench_cycle.py.
 SymForce runs with its default symengine back end; the expression text
 (written by modelgen from its own derived model, not from a user) is read by

@@ -2,7 +2,7 @@
 
 Data flows one way through layers (README "Architecture"; enforced by
 tests/test_architecture.py): ``version``, ``errors`` and ``fileio`` at the
-bottom, then ``model`` (what a model is), ``derive`` (its matrices), then
+bottom, then ``model`` (what a model is), ``derivation`` (its matrices), then
 ``codegen``, ``checks``, ``export``, ``analysis``, ``simulation`` and
 ``navigator``, composed by ``jobs``, called from ``cli`` and from the Python
 API (``modelgen.api``), which this package offers at its top::
@@ -12,17 +12,15 @@ API (``modelgen.api``), which this package offers at its top::
     result = modelgen.verify("enu_doppler18", table="my_table.yaml")
 
 The API functions are imported on first use, so ``import modelgen`` stays
-cheap (no sympy, numpy or CasADi).  ``modelgen.derive`` is both the derive
-subpackage and the API function: calling it derives a model, its attributes
-are the subpackage's modules (``modelgen.derive.symbolic``).
+cheap (no sympy, numpy or CasADi).  ``modelgen.derive`` is the API function
+(:func:`modelgen.api.derive`); the subpackage that derives the matrices is
+``modelgen.derivation``.
 """
 
 from __future__ import annotations
 
-import types
 from typing import Any
 
-import modelgen.derive as _derive_package
 from modelgen.errors import ModelError
 from modelgen.version import __version__
 
@@ -38,26 +36,7 @@ __all__ = [
     "covariance_analysis",
     "simulate",
 ]
-_API = frozenset(__all__) - {"ModelError", "__version__", "derive"}
-
-
-class _CallableDerivePackage(types.ModuleType):
-    """The ``modelgen.derive`` subpackage, callable as the API's :func:`modelgen.api.derive`.
-
-    ``modelgen.derive`` is a subpackage, and Python sets a subpackage as an
-    attribute of its parent whenever it is imported, so a plain function of
-    that name would be replaced by the module.  Making the module callable
-    keeps both meanings working.
-    """
-
-    def __call__(self, model: Any):
-        from modelgen.api import derive
-
-        return derive(model)
-
-
-_derive_package.__class__ = _CallableDerivePackage
-derive = _derive_package
+_API = frozenset(__all__) - {"ModelError", "__version__"}
 
 
 def __getattr__(name: str) -> Any:

@@ -18,7 +18,7 @@ the command line and the API always do the same thing::
 
 Every function takes a model as a built-in name, a model file's path, a
 loaded :class:`~modelgen.model.declaration.ErrorModel` or a derived
-:class:`~modelgen.derive.symbolic.DerivedModel`, and raises
+:class:`~modelgen.derivation.symbolic.DerivedModel`, and raises
 :class:`modelgen.errors.ModelError` for bad input.
 """
 
@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any, Callable, Union
 
 import modelgen.jobs as jobs
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel
 

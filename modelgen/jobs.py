@@ -2,7 +2,7 @@
 
 Every command of :mod:`modelgen.cli` calls one function here and prints what
 it returns.  A job loads and derives a model once and hands the
-:class:`~modelgen.derive.symbolic.DerivedModel` to every step that needs it
+:class:`~modelgen.derivation.symbolic.DerivedModel` to every step that needs it
 (paper check, code generation, covariance analysis, simulation): no step
 derives it again, and no step recognises a model by its name; which model is
 the paper's comes from the paper table's data (its ``model:`` key).
@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import DerivedModel, derive
+from modelgen.derivation.symbolic import DerivedModel, derive
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path
 from modelgen.fileio.output import FolderUpdate, write_text_atomically
@@ -198,7 +198,7 @@ def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -
 
 
 def paper_parameters() -> dict[str, float]:
-    """Seed 000's level-flight operating point and Table 1 statistics, by ned_doppler18 parameter name."""
+    """The core paper's level-flight operating point and Table 1 statistics, by ned_doppler18 parameter name."""
     from modelgen.table2.budget import load_error_budget
     from modelgen.table2.scenario import load_analysis_scenario, operating_point
 
@@ -206,7 +206,7 @@ def paper_parameters() -> dict[str, float]:
 
 
 def paper_scenario(derived: DerivedModel) -> CheckScenario:
-    """Seed 000's 4-hour scenario: level flight, Table 1 errors, T = 60 s."""
+    """The core paper's 4-hour scenario: level flight, Table 1 errors, T = 60 s."""
     from modelgen.table2.budget import load_error_budget
     from modelgen.table2.scenario import load_analysis_scenario
     from modelgen.checks.code_check import CheckScenario
@@ -327,7 +327,7 @@ def conformance_section(runs: list[ModelRun], out_root: Path) -> ReportSection:
     ]
     text[0] += (
         "(the C compiled with "
-        "`-std=c99 -Wall -Wextra -Werror -pedantic`) run beside `modelgen.derive.reference` over each model's "
+        "`-std=c99 -Wall -Wextra -Werror -pedantic`) run beside `modelgen.derivation.reference` over each model's "
         "check scenario (the `check:` section of its file: a physical operating point, realistic sensor "
         "noise, the source's filter step; `ned_doppler18` flies the paper's 240 steps of 60 s). "
         "'scaled dP' is max |dP_ij| / sqrt(P_ii P_jj) and 'scaled dx' max |dx_i| / sqrt(P_ii) over all steps. "

@@ -148,14 +148,14 @@ def derived_builtin():
 
 @pytest.fixture(scope="session")
 def paper_derived(paper_model):
-    from modelgen.derive.symbolic import derive
+    from modelgen.derivation.symbolic import derive
 
     return derive(paper_model)
 
 
 @pytest.fixture(scope="session")
 def level_flight():
-    """Seed 000's level-flight operating point (east at 30 N), with Table 1 statistics."""
+    """The core paper's level-flight operating point (east at 30 N), with Table 1 statistics."""
     import numpy as np
 
     values = dict(

@@ -13,7 +13,7 @@ import pytest
 import modelgen
 import modelgen.api as api
 import modelgen.jobs as jobs
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.symbolic import DerivedModel
 
 from conftest import REPO
 
@@ -56,9 +56,9 @@ def test_importing_modelgen_loads_no_heavy_library():
 
 
 def test_derive_is_both_the_subpackage_and_the_function():
-    import modelgen.derive.symbolic as symbolic
+    import modelgen.derivation.symbolic as symbolic
 
-    assert modelgen.derive.symbolic is symbolic
+    assert modelgen.derivation.symbolic is symbolic
     derived = modelgen.derive("ned_doppler18")
     assert isinstance(derived, DerivedModel) and derived.n_states == 18
     assert modelgen.derive(derived) is derived

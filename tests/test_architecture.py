@@ -2,14 +2,14 @@
 
 Every module of ``modelgen`` is parsed (``ast``), and every ``import`` in it,
 including those inside functions, becomes an edge of the import graph.  A
-module belongs to a *part*: its subpackage (``model``, ``derive``,
+module belongs to a *part*: its subpackage (``model``, ``derivation``,
 ``codegen``...) or, for a top-level module, its own name (``cli``, ``jobs``,
 ``errors``).  :data:`ALLOWED` is the layering, as data: the parts each part
 may import.  Read bottom-up:
 
 * ``errors`` and ``version`` import nothing;
 * ``fileio`` (finding shipped files, reading YAML, atomic writing) is the I/O floor;
-* ``model`` says what a model is; ``derive`` turns it into matrices and numbers;
+* ``model`` says what a model is; ``derivation`` turns it into matrices and numbers;
 * ``codegen`` prints a derived model as code; ``checks`` test that code and the
   derivation; ``analysis`` and ``simulation`` use derived models (the
   simulation also flies the generated code); ``table2``, the core paper's
@@ -17,8 +17,7 @@ may import.  Read bottom-up:
   code generator and the simulation's Earth and strapdown kernels;
 * ``jobs`` composes them; ``cli`` only parses arguments, calls ``jobs`` and
   stages its reports with ``fileio`` (and adds the navigator's own command);
-  ``api`` is the Python API over ``jobs``, offered by the package root (which
-  imports the derive subpackage only to make it callable as the API's derive).
+  ``api`` is the Python API over ``jobs``, offered by the package root (lazily, on first use).
 
 A new import that runs against this table fails here, and so does a cycle
 between parts or between modules.
@@ -35,17 +34,17 @@ PACKAGE = REPO / "modelgen"
 
 _FLOOR = {"version", "errors"}
 _MODEL = _FLOOR | {"fileio", "model"}
-_DERIVED = _MODEL | {"derive"}
+_DERIVED = _MODEL | {"derivation"}
 
 #: part -> the parts it may import (besides itself).
 ALLOWED: dict[str, set[str]] = {
     # the package root: the Python API on top (lazily), the version and ModelError re-exported
-    "modelgen": {"errors", "version", "derive", "api"},
+    "modelgen": {"errors", "version", "api"},
     "version": set(),
     "errors": set(),
     "fileio": _FLOOR,
     "model": _FLOOR | {"fileio"},
-    "derive": _MODEL,
+    "derivation": _MODEL,
     "codegen": _DERIVED,
     "checks": _DERIVED | {"codegen"},
     # export: F, G, H, Q, R for other tools (LaTeX, Octave, CasADi, JSON); free text through codegen's escapers
@@ -67,7 +66,7 @@ ALLOWED: dict[str, set[str]] = {
 
 
 def module_name(path: Path, root: Path = REPO) -> str:
-    """``modelgen/derive/symbolic.py`` -> ``modelgen.derive.symbolic`` (a package is its ``__init__``)."""
+    """``modelgen/derivation/symbolic.py`` -> ``modelgen.derivation.symbolic`` (a package is its ``__init__``)."""
     parts = list(path.relative_to(root).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()
@@ -179,7 +178,7 @@ def test_the_layering_table_itself_has_no_cycle():
 def test_a_cycle_and_a_forbidden_import_are_found():
     assert cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert cycle({"a": {"b"}, "b": set()}) is None
-    assert "derive" not in ALLOWED["model"] and "cli" not in ALLOWED["jobs"]
+    assert "derivation" not in ALLOWED["model"] and "cli" not in ALLOWED["jobs"]
 
 
 def test_every_package_folder_has_a_docstring_paragraph():

@@ -119,11 +119,11 @@ const unsigned char enu_doppler18_twin_Phi_col[ENU_DOPPLER18_TWIN_N_PHI] = { 0, 
 #define ENU_DOPPLER18_TWIN_N_ACTIVE 160
 /* Halvings of T that discretize may take before it gives up (T / 2^64), and
    the relative accuracy of Phi against e^{F T} that chooses the doublings and the order
-   (modelgen.derive.discretization.taylor_plan; at least the unit roundoff). */
+   (modelgen.derivation.discretization.taylor_plan; at least the unit roundoff). */
 #define ENU_DOPPLER18_TWIN_MAX_DOUBLINGS 64
 /* The norm that chooses them is ||F||_D = max_i sum_j |F_ij| d_j / d_i with D = diag(2^e) fixed at
    generation time: Osborne's balancing of F at the model's check operating point
-   (modelgen.derive.discretization.nominal_scaling), e = { -6, -8, -5, 4, 6, 2, -5, 40, 11, -40,
+   (modelgen.derivation.discretization.nominal_scaling), e = { -6, -8, -5, 4, 6, 2, -5, 40, 11, -40,
            -40, -40, -40, -40, -40, -40, -40, -40 }.
    Any fixed D gives a valid bound; the Python module and the reference use the same D. */
 #define ENU_DOPPLER18_TWIN_TAYLOR_TOLERANCE 1e-12
@@ -420,8 +420,9 @@ int enu_doppler18_twin_matrices_evaluate(const enu_doppler18_twin_params *restri
 #else
 #define ENU_DOPPLER18_TWIN_BLOCK static
 #endif
-/* ||F||_D = max_i sum_j |F_ij| d_j / d_i (modelgen/derive/discretization.py) with D = 2^e fixed at
-   generation time: Osborne's balancing of F at the model's check operating point (nominal_scaling;
+/* ||F||_D = max_i sum_j |F_ij| d_j / d_i (modelgen/derivation/discretization.py), D = 2^e fixed
+   at generation time: Osborne's balancing of F at the model's check operating point
+           (nominal_scaling;
    any D gives a valid bound, so one D serves every operating point); the sums in the reference's
    order (row by row), d_j / d_i an exact power of two. */
 static enu_doppler18_twin_scalar balanced_norm(const enu_doppler18_twin_matrices *restrict m)
@@ -497,7 +498,7 @@ static const enu_doppler18_twin_scalar taylor_coefficient[10] = {
 };
 
 /* The doublings s and the order m summed for ||F||_D = norm and step T
-   (modelgen.derive.discretization.taylor_plan); ERR_NONFINITE beyond MAX_DOUBLINGS. */
+   (modelgen.derivation.discretization.taylor_plan); ERR_NONFINITE beyond MAX_DOUBLINGS. */
 static int taylor_plan(const enu_doppler18_twin_scalar norm, const enu_doppler18_twin_scalar T, int
         *halvings, int *order)
 {
@@ -3068,7 +3069,7 @@ int enu_doppler18_twin_discretize(const enu_doppler18_twin_matrices *restrict m,
             overflows */
         return ENU_DOPPLER18_TWIN_ERR_NONFINITE;
     }
-    /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
+    /* Scaling and squaring (modelgen/derivation/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
        S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds. */
     status = taylor_plan(balanced_norm(m), T, &halvings, &order);

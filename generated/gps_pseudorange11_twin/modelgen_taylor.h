@@ -1,5 +1,5 @@
 /* modelgen C runtime: Osborne's balancing step and the Taylor series' error bound, for the scaling
- * and squaring of discretize (modelgen.derive.discretization: the Python module and the reference
+ * and squaring of discretize (modelgen.derivation.discretization: the Python module and the reference
  * compute the same numbers in the same order).
  * From modelgen/codegen/backends/c/runtime/modelgen_taylor.h (copied verbatim).
  */
@@ -9,7 +9,7 @@
 #include "modelgen_ieee.h"
 #include "modelgen_scalar.h"
 
-/* One state's step of Osborne's balancing (modelgen.derive.discretization.sweep_exponent): 2^k ~
+/* One state's step of Osborne's balancing (modelgen.derivation.discretization.sweep_exponent): 2^k ~
    sqrt(row / column) within [-8, 8], the exponent kept within [-40, 40]; 1 when it changed. */
 static inline int modelgen_balance_step(const MODELGEN_SCALAR row, const MODELGEN_SCALAR column,
                                         signed char *exponent)
@@ -37,7 +37,7 @@ static inline int modelgen_balance_step(const MODELGEN_SCALAR row, const MODELGE
 /* 2^(s+1) e^theta rho_(m-1)(theta), rho_m(theta) = theta^(m+1) / (m+1)! (m+2) / (m+2-theta): the
    bound on the relative error of Phi of order m after s doublings (growth = e^theta), one order of
    margin for the entries that couple blocks of F, power = theta^m / m!; the same operations in the
-   same order as modelgen.derive.discretization.step_error_bound. */
+   same order as modelgen.derivation.discretization.step_error_bound. */
 static inline MODELGEN_SCALAR modelgen_series_bound(const MODELGEN_SCALAR growth,
                                                     const MODELGEN_SCALAR theta,
                                                     const MODELGEN_SCALAR power,

@@ -141,11 +141,11 @@ const unsigned char ins_gnss21_nav_Phi_col[INS_GNSS21_NAV_N_PHI] = { 0, 2, 3, 4,
 #define INS_GNSS21_NAV_N_ACTIVE 193
 /* Halvings of T that discretize may take before it gives up (T / 2^64), and
    the relative accuracy of Phi against e^{F T} that chooses the doublings and the order
-   (modelgen.derive.discretization.taylor_plan; at least the unit roundoff). */
+   (modelgen.derivation.discretization.taylor_plan; at least the unit roundoff). */
 #define INS_GNSS21_NAV_MAX_DOUBLINGS 64
 /* The norm that chooses them is ||F||_D = max_i sum_j |F_ij| d_j / d_i with D = diag(2^e) fixed at
    generation time: Osborne's balancing of F at the model's check operating point
-   (modelgen.derive.discretization.nominal_scaling), e = { 16, 40, 10, 4, 3, 1, -9, -9, -7, -40,
+   (modelgen.derivation.discretization.nominal_scaling), e = { 16, 40, 10, 4, 3, 1, -9, -9, -7, -40,
            -40, -40, -40, -40, -40, -40, -40, -40, -40, -40, -40 }.
    Any fixed D gives a valid bound; the Python module and the reference use the same D. */
 #define INS_GNSS21_NAV_TAYLOR_TOLERANCE 1e-12
@@ -616,8 +616,9 @@ int ins_gnss21_nav_matrices_evaluate(const ins_gnss21_nav_params *restrict param
 #else
 #define INS_GNSS21_NAV_BLOCK static
 #endif
-/* ||F||_D = max_i sum_j |F_ij| d_j / d_i (modelgen/derive/discretization.py) with D = 2^e fixed at
-   generation time: Osborne's balancing of F at the model's check operating point (nominal_scaling;
+/* ||F||_D = max_i sum_j |F_ij| d_j / d_i (modelgen/derivation/discretization.py), D = 2^e fixed
+   at generation time: Osborne's balancing of F at the model's check operating point
+           (nominal_scaling;
    any D gives a valid bound, so one D serves every operating point); the sums in the reference's
    order (row by row), d_j / d_i an exact power of two. */
 static ins_gnss21_nav_scalar balanced_norm(const ins_gnss21_nav_matrices *restrict m)
@@ -709,7 +710,7 @@ static const ins_gnss21_nav_scalar taylor_coefficient[10] = {
 };
 
 /* The doublings s and the order m summed for ||F||_D = norm and step T
-   (modelgen.derive.discretization.taylor_plan); ERR_NONFINITE beyond MAX_DOUBLINGS. */
+   (modelgen.derivation.discretization.taylor_plan); ERR_NONFINITE beyond MAX_DOUBLINGS. */
 static int taylor_plan(const ins_gnss21_nav_scalar norm, const ins_gnss21_nav_scalar T, int
         *halvings, int *order)
 {
@@ -4039,7 +4040,7 @@ int ins_gnss21_nav_discretize(const ins_gnss21_nav_matrices *restrict m, ins_gns
             overflows */
         return INS_GNSS21_NAV_ERR_NONFINITE;
     }
-    /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
+    /* Scaling and squaring (modelgen/derivation/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
        S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds. */
     status = taylor_plan(balanced_norm(m), T, &halvings, &order);

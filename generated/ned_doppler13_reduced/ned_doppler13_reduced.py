@@ -350,9 +350,9 @@ def _balanced_norm(F):
     """max_i sum_j |F_ij| d_j / d_i with D = 2^e fixed at generation time.
 
     D is Osborne's balancing of F at the model's check operating point
-    (modelgen.derive.discretization.nominal_scaling); any D gives a valid
+    (modelgen.derivation.discretization.nominal_scaling); any D gives a valid
     bound, so one D serves every operating point.  The same sums, in the same
-    order, as the C discretize and modelgen.derive.discretization.balanced_norm
+    order, as the C discretize and modelgen.derivation.discretization.balanced_norm
     with that scaling, so all three choose the same s and order.
     """
     if not _F_ROWS.size:
@@ -371,7 +371,7 @@ def _step_error_bound(theta, order, halvings):
 
     The bound on the relative error of Phi against e^(F T) after s halvings
     of the step and order m, with one order of margin for the entries that
-    couple two blocks of F (modelgen.derive.discretization.step_error_bound).
+    couple two blocks of F (modelgen.derivation.discretization.step_error_bound).
     """
     m = order - 1
     if not theta < m + 2:
@@ -383,7 +383,7 @@ def _step_error_bound(theta, order, halvings):
 
 
 def _taylor_plan(norm, T):
-    """(s, m): the doublings and the order summed (modelgen.derive.discretization.taylor_plan).
+    """(s, m): the doublings and the order summed (modelgen.derivation.discretization.taylor_plan).
 
     TAYLOR_TOLERANCE None: order TAYLOR_ORDER, s the smallest with
     ||F||_D h <= SERIES_RANGE.  Otherwise the smallest s for which order
@@ -417,7 +417,7 @@ def discretize(F, G, q, T):
     then doubled s times: Phi(2h) = Phi(h)^2 and
     S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds
     (on E = Phi - I, as the reference does).
-    Dense matrix products (BLAS), as modelgen.derive.discretization does.
+    Dense matrix products (BLAS), as modelgen.derivation.discretization does.
     Raises ValueError, naming the argument, for a non-finite or non-positive
     T, a non-finite F, G or q, a negative q, or an e^{F T} that is not
     representable (more than 64 doublings) or overflows.

@@ -24,9 +24,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from modelgen.derive.symbolic import DerivedModel
-from modelgen.derive.discretization import taylor_discretization, taylor_process_noise
-from modelgen.derive.reference import kalman_gain
+from modelgen.derivation.symbolic import DerivedModel
+from modelgen.derivation.discretization import taylor_discretization, taylor_process_noise
+from modelgen.derivation.reference import kalman_gain
 from modelgen.errors import ModelError
 
 

@@ -40,8 +40,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from modelgen.derive.symbolic import DerivedModel
-from modelgen.derive.discretization import van_loan_discretization
+from modelgen.derivation.symbolic import DerivedModel
+from modelgen.derivation.discretization import van_loan_discretization
 from modelgen.fileio.datafiles import read_yaml_with_lines
 from modelgen.errors import ModelError
 

@@ -2,7 +2,7 @@
 
 Every registered backend (``modelgen.codegen.backends.registry``: the
 generated Python module, the compiled C library, the C++ class) runs the same
-scenario as ``modelgen.derive.reference`` (derived matrices, Taylor discretization,
+scenario as ``modelgen.derivation.reference`` (derived matrices, Taylor discretization,
 predict, Joseph update) through its ``Backend.run``: a fixed operating point,
 ``steps`` steps of ``T`` seconds with a measurement update after every
 prediction and measurements drawn from a seeded generator.
@@ -29,12 +29,12 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from modelgen.derive import reference
+from modelgen.derivation import reference
 from modelgen.codegen.backends.base import BackendUnavailable
 from modelgen.codegen.backends.registry import backends
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import DerivedModel
-from modelgen.derive.discretization import (
+from modelgen.derivation.symbolic import DerivedModel
+from modelgen.derivation.discretization import (
     DEFAULT_TAYLOR_ORDER,
     DEFAULT_TOLERANCE,
     taylor_discretization,
@@ -184,7 +184,7 @@ def reference_run(
     ``process_noise`` is the option's (CodegenOptions.process_noise):
     ``taylor`` the Taylor series and Gamma (Q/T) Gamma^T of the given order
     and tolerance, ``van-loan`` scipy's exact exponential of Van Loan's block
-    (modelgen.derive.discretization.van_loan_discretization).
+    (modelgen.derivation.discretization.van_loan_discretization).
     """
     m = derived.numeric(scenario.parameters)
     if process_noise == "van-loan":

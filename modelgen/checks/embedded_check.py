@@ -52,7 +52,7 @@ import numpy as np
 from modelgen.codegen import toolchain
 from modelgen.codegen.options import CodegenOptions
 from modelgen.checks.code_check import FLOAT_UNIT_ROUNDOFF, CheckScenario, measurement_sequence, reference_run, scaled_differences, scenario_tolerance
-from modelgen.derive.symbolic import DerivedModel, parameter_vector
+from modelgen.derivation.symbolic import DerivedModel, parameter_vector
 from modelgen.errors import ModelError
 
 

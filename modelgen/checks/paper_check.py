@@ -33,7 +33,7 @@ from typing import Any
 
 import sympy as sp
 
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.fileio.output import write_text_atomically
 from modelgen.model.sources import cite_sources

@@ -57,7 +57,7 @@ from modelgen.checks.crosscheck import (
     hand_substitution,
 )
 from modelgen.checks.hints import constant_ratio, same
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml, read_yaml_with_lines
 from modelgen.fileio.output import write_text_atomically

@@ -32,7 +32,7 @@ from modelgen.checks.paper_equations import (
     paper_equations_path,
     write_paper_equations_report,
 )
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import read_yaml
 from modelgen.model.loading import builtin_model_path

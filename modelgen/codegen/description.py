@@ -49,8 +49,8 @@ from modelgen.codegen.layout import ModelSizes
 from modelgen.codegen.van_loan import van_loan_costs
 from modelgen.codegen.options import CodegenOptions
 from modelgen.codegen.structure import FilterStructure, filter_structure
-from modelgen.derive.discretization import nominal_scaling
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.discretization import nominal_scaling
+from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
 
 #: Name of the model-matrix evaluation in the operation counts (the C function's name).

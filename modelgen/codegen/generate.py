@@ -23,7 +23,7 @@ from modelgen.codegen.description import FilterDescription, describe_filter
 from modelgen.codegen.kernels import OperationCount, estimated_code_bytes
 from modelgen.codegen.options import CodegenOptions
 from modelgen.codegen.structure import FilterStructure
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.symbolic import DerivedModel
 from modelgen.fileio.output import write_atomically  # noqa: F401  (re-exported: the one atomic writer lives in modelgen.fileio.output)
 
 __all__ = [

@@ -46,7 +46,7 @@ def golden_files(derived) -> dict[str, dict[str, str]]:
 
 def write_golden_files(folder: Path) -> list[Path]:
     """Write every golden variant of the paper's model under ``folder`` (atomically, one folder each)."""
-    from modelgen.derive.symbolic import derive
+    from modelgen.derivation.symbolic import derive
     from modelgen.model.loading import load_model
 
     derived = derive(load_model(GOLDEN_MODEL))

@@ -472,7 +472,7 @@ def discretize_cost(structure: FilterStructure, order: int) -> OperationCount:
     pairs = n * (n + 1) // 2
     mul += pairs * 2 * nw
     add += pairs * nw
-    if np.any(structure.F):  # up to 8 balancing sweeps and the norm over F (modelgen.derive.discretization)
+    if np.any(structure.F):  # up to 8 balancing sweeps and the norm over F (modelgen.derivation.discretization)
         off = nnz_f - int(np.trace(structure.F.astype(int)))
         mul += 8 * 2 * off + 2 * nnz_f
         add += 8 * 2 * off + nnz_f

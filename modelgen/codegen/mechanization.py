@@ -1,10 +1,10 @@
 """The navigator's mechanization rates printed as a Python and a C function, with the backends' printers.
 
-:func:`modelgen.derive.mechanization_rates.mechanization_rates` gives the
+:func:`modelgen.derivation.mechanization_rates.mechanization_rates` gives the
 rates of a navigation model's own mechanization as expressions; here they
 become ``navigation_rates(latitude, longitude, height, v_north, v_east, v_down)``
 returning (Python) or writing (C, ``out[9]``) the nine outputs of
-:data:`~modelgen.derive.mechanization_rates.OUTPUT_NAMES`, with common
+:data:`~modelgen.derivation.mechanization_rates.OUTPUT_NAMES`, with common
 subexpressions as temporaries ``t0, t1 ...``.  The navigator's integrators
 (modelgen/navigator/mechanization.py and the C navigator's ``mechanize``)
 call them; nothing of the physics is written by hand.
@@ -16,7 +16,7 @@ import sympy as sp
 
 from modelgen.codegen.backends.c.printer import CPrinter
 from modelgen.codegen.backends.python.printer import PyPrinter
-from modelgen.derive.mechanization_rates import INPUT_NAMES, OUTPUT_NAMES, MechanizationRates
+from modelgen.derivation.mechanization_rates import INPUT_NAMES, OUTPUT_NAMES, MechanizationRates
 
 FUNCTION = "navigation_rates"
 

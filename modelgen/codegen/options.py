@@ -22,7 +22,7 @@ always the double-precision numpy filter (the readable twin of the default C).
   (the paper's 9 by default), and ``taylor_tolerance`` -- the relative
   accuracy of Phi against e^{F T} that discretize guarantees (default 1e-12):
   at run time it sums only the orders and doublings that bound needs
-  (modelgen.derive.discretization.taylor_plan); None sums every order up to
+  (modelgen.derivation.discretization.taylor_plan); None sums every order up to
   ``taylor_order`` and doubles until the remainder is below the unit
   roundoff (the paper's fixed order).
 
@@ -49,7 +49,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from modelgen.derive.discretization import DEFAULT_TAYLOR_ORDER, DEFAULT_TOLERANCE
+from modelgen.derivation.discretization import DEFAULT_TAYLOR_ORDER, DEFAULT_TOLERANCE
 from modelgen.errors import ModelError
 
 SCALARS = ("double", "float")

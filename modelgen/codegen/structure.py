@@ -5,7 +5,7 @@ entries can be nonzero follows from the symbolic F, G, H alone: an entry of
 Phi = e^{F T} can be nonzero only if state j reaches state i along a path of
 nonzero F entries.  The Taylor series of order N alone reaches paths of at
 most N entries, but its doublings (scaling and squaring, see
-modelgen.derive.discretization) reach any length, so the pattern is the closure.  A state whose row of F is
+modelgen.derivation.discretization) reach any length, so the pattern is the closure.  A state whose row of F is
 empty (a random constant) has Phi row e_i exactly: its products are copies.
 """
 

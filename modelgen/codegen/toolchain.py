@@ -31,7 +31,7 @@ import numpy as np
 from modelgen.codegen.build import STRICT_FLAGS, compiler
 from modelgen.codegen.generate import generate_code, render_c_template
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.fileio.output import write_atomically
 

@@ -12,7 +12,7 @@ exponential", IEEE TAC 23(3), 1978): with W = G Q G^T and
     M = [[-F, W], [0, F^T]],   e^{M T} = [[E11, E12], [0, E22]],
 
 Phi = E22^T and Q_d = Phi E12 (the numpy reference is
-modelgen.derive.discretization.van_loan_discretization).
+modelgen.derivation.discretization.van_loan_discretization).
 
 The generated Python module calls scipy.linalg.expm on the 2N x 2N block:
 a library does a dense Pade approximant well.  The generated C has no
@@ -21,11 +21,11 @@ compact loops over dense N x N arrays (no unrolling: the code size does not
 grow with the model), exploiting the block-triangular form:
 
 * the norm: Osborne-balanced ||M||_D of the whole 2N x 2N block
-  (modelgen.derive.discretization.balanced_norm applies to any square
+  (modelgen.derivation.discretization.balanced_norm applies to any square
   matrix; the balancing scales the W block against the two F blocks, so that
   the units of Q do not enter the norm), and the doublings s and the order m
   from the same accuracy rule as the Taylor discretize
-  (modelgen.derive.discretization.taylor_plan, Taylor order and tolerance of
+  (modelgen.derivation.discretization.taylor_plan, Taylor order and tolerance of
   the options).  So the rule bounds the error of the whole e^{M h} in the
   balanced norm, E12 (hence Q_d) included;
 * the series over h = T / 2^s: the k-th term of e^{M h} is
@@ -61,7 +61,7 @@ import numpy as np
 
 from modelgen.codegen.kernels import OperationCount
 from modelgen.codegen.structure import FilterStructure
-from modelgen.derive.discretization import (
+from modelgen.derivation.discretization import (
     DEFAULT_TAYLOR_ORDER,
     DOUBLE_ROUNDOFF,
     balanced_norm,

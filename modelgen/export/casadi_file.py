@@ -7,7 +7,7 @@ parameter order, with the model's default value as the input's default
 shows as NaN entries instead of a silent 0).  Called with names
 (``f(latitude=0.52, velocity_east=83.3)``) it fills the others from the
 defaults.  Every sympy entry is translated by
-:func:`modelgen.derive.casadi_functions.sympy_to_casadi`; zero entries stay
+:func:`modelgen.derivation.casadi_functions.sympy_to_casadi`; zero entries stay
 structural zeros.  The text is what ``casadi.Function.save``
 writes, so ``casadi.Function.load(path)`` reads the file back in CasADi
 (Python, MATLAB, C++).
@@ -22,8 +22,8 @@ from pathlib import Path
 import casadi as ca
 import sympy as sp
 
-from modelgen.derive.casadi_functions import sympy_to_casadi
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.casadi_functions import sympy_to_casadi
+from modelgen.derivation.symbolic import DerivedModel
 from modelgen.export.readable import MATRIX_NAMES, nonzero_entries
 
 

@@ -21,7 +21,7 @@ from typing import Any
 import sympy as sp
 
 from modelgen.codegen.escape import latex_text, octave_comment, octave_string, one_line
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.export.readable import MATRIX_NAMES, nonzero_entries, readable
 from modelgen.model.declaration import ErrorModel, Quantity

@@ -1,6 +1,6 @@
 """One deterministic simplification of a derived entry, for people to read.
 
-Derived entries are stored expanded (``modelgen.derive.symbolic`` expands
+Derived entries are stored expanded (``modelgen.derivation.symbolic`` expands
 them so that equal entries print identically), which prints denominators
 such as ``R_M**2 + 2*R_M*h + h**2``.  :func:`readable` undoes that for
 display only: each term's denominator is factored (``(R_M + h)**2``), the

@@ -1,7 +1,7 @@
 """Error-model definition: states, noises, parameters, equations.
 
 An :class:`ErrorModel` is the single source of truth from which F, G, H, Q and
-R are derived (``modelgen.derive.symbolic``).  It holds *equations*, never
+R are derived (``modelgen.derivation.symbolic``).  It holds *equations*, never
 matrices: the right-hand side of every state's differential equation and the
 expression of every measurement, as sympy expressions in declared symbols.
 
@@ -201,7 +201,7 @@ class ErrorModel:
     attitude_reset: Any = field(default=None, compare=False)
     #: A navigation model's navigation problem (modelgen.model.perturbation.problem.NavigationProblem): the mechanization, frame,
     #: state symbols and sensor model its error model was derived from, so that the navigator's mechanization is
-    #: generated from the same equations (modelgen.derive.mechanization_rates); None for a model written as equations.
+    #: generated from the same equations (modelgen.derivation.mechanization_rates); None for a model written as equations.
     navigation: Any = field(default=None, compare=False)
 
     def __repr__(self) -> str:

@@ -45,7 +45,7 @@ def level_attitude(frame: str, heading: float) -> list[list[float]]:
     """C_b^n of a level vehicle with the given heading (rad, from north towards east).
 
     Body axes follow each frame's usual convention: forward-right-down for
-    NED models (seed 000: heading east gives [[0,-1,0],[1,0,0],[0,0,1]]),
+    NED models (the core paper: heading east gives [[0,-1,0],[1,0,0],[0,0,1]]),
     right-forward-up for ENU models (Qin).
     """
     c, s = math.cos(heading), math.sin(heading)

@@ -1,6 +1,6 @@
-"""The INS/GPS pseudo-range model (seed 003), built in code for any number of satellites.
+"""The INS/GPS pseudo-range model (the accumulated-correction paper), built in code for any number of satellites.
 
-The model files in ``modelgen/models`` cover fixed state sets.  Seed 003's
+The model files in ``modelgen/models`` cover fixed state sets.  The accumulated-correction paper's
 INS/GPS pseudo-range filter has one measurement per tracked satellite, so it
 is built here for any number of satellites by :func:`pseudorange_model`;
 ``modelgen/models/gps_pseudorange11.yaml`` is its 4-satellite instance (a test
@@ -16,7 +16,7 @@ from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter
 from modelgen.model.wgs84 import GPS_EARTH_RATE, SEMI_MAJOR_AXIS
 
 
-# -- seed 003: INS/GPS pseudo-range model ---------------------------------------
+# -- the accumulated-correction paper: INS/GPS pseudo-range model ---------------------------------------
 _PSEUDORANGE_STATES = (
     State("position_error_east", "m", "east position error in the local-level frame (X_p)", "dr_E"),
     State("position_error_north", "m", "north position error in the local-level frame (X_p)", "dr_N"),
@@ -87,16 +87,16 @@ _PSEUDORANGE_DYNAMICS = {
     "psi_E": "(omega_ie*sin(L) + v_E*tan(L)/R)*psi_N - (omega_ie*cos(L) + v_E/R)*psi_U - w_g_E",
     "psi_N": "-(omega_ie*sin(L) + v_E*tan(L)/R)*psi_E - v_N/R*psi_U - w_g_N",
     "psi_U": "(omega_ie*cos(L) + v_E/R)*psi_E + v_N/R*psi_N - w_g_U",
-    # receiver clock: bias range driven by drift range (seed 003, eq. (3): rho' = rho - sum I_t - dt sum I_f)
+    # receiver clock: bias range driven by drift range (the accumulated-correction paper, eq. (3): rho' = rho - sum I_t - dt sum I_f)
     "I_t": "I_f + w_t",
     "I_f": "w_f",
 }
 
 
 def pseudorange_model(n_satellites: int, name: str | None = None) -> ErrorModel:
-    """Seed 003's 11-state INS/GPS pseudo-range error model for ``n_satellites``.
+    """The accumulated-correction paper's 11-state INS/GPS pseudo-range error model for ``n_satellites``.
 
-    States (seed 003, section 3): position error X_p, velocity error X_v,
+    States (the accumulated-correction paper, section 3): position error X_p, velocity error X_v,
     platform attitude error X_phi, clock bias range I_t, clock drift range
     I_f.  Decisions (the paper prints no F):
 
@@ -113,7 +113,7 @@ def pseudorange_model(n_satellites: int, name: str | None = None) -> ErrorModel:
       needed.
     * Clock: I_t' = I_f + w_t, I_f' = w_f (two-state clock, PSDs from the
       oscillator's Allan-variance coefficients).
-    * Measurement k (seed 003 eq. (8)): Z_k = rho'_GPS,k - rho_C,k, measured
+    * Measurement k (the accumulated-correction paper eq. (8)): Z_k = rho'_GPS,k - rho_C,k, measured
       (clock-corrected) minus computed from the INS position.  With the INS
       position error dr = r_INS - r_true and e_k the unit vector from the
       receiver to satellite k, rho_C = |r_s - r_true - dr| = rho - e_k . dr

@@ -1,7 +1,7 @@
 """The source documents and how reports cite them.
 
 Model files, data files and code comments refer to the four source documents
-as "seed 000" ... "seed 003" (short, and stable while the texts are OCR'd).
+as "the core paper" ... "the accumulated-correction paper" (short, and stable while the texts are OCR'd).
 A reader of a report needs the author and the title instead, so report
 writers pass their text through :func:`cite_sources`, which replaces each
 mention (and a file name printed after it) with a full citation from
@@ -19,7 +19,7 @@ from modelgen.fileio.datafiles import data_path, read_yaml
 
 SOURCES_FILE = "sources.yaml"
 
-#: "seed 000", optionally followed by the file name in parentheses, as data files print it
+#: "the core paper", optionally followed by the file name in parentheses, as data files print it
 _MENTION = re.compile(r"\bseed (\d{3})(?: \((\d{3}_[0-9a-f]{16}\.txt)\))?")
 
 

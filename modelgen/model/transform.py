@@ -112,7 +112,7 @@ def keep_states(
       dV_dn without dV_dn is not the same measurement) and still depends on
       some state.  Dropping the Doppler biases of the 18-state model therefore
       also drops both Doppler measurements, which is the 16-state
-      pure-inertial form (seed 000, section 3).  Passing ``measurements``
+      pure-inertial form (the core paper, section 3).  Passing ``measurements``
       (names or symbols) keeps exactly those, with dropped states set to zero;
       a kept measurement whose row would vanish is refused.
     """

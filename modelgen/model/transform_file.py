@@ -5,7 +5,7 @@ file) and a list of ``transforms`` applied in order, so that a reduced or
 augmented filter goes through the whole pipeline with one command::
 
     model: ned_doppler13_reduced
-    title: Suboptimal filter I of seed 000 (13 states)
+    title: Suboptimal filter I of the core paper (13 states)
     base: ned_doppler18
     transforms:
       - markov_to_white: {states: [nabla_x, nabla_y, nabla_z]}

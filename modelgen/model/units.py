@@ -1,4 +1,4 @@
-"""Units of the core paper (seed 000) and their conversion to SI.
+"""Units of the core paper (the core paper) and their conversion to SI.
 
 The error model is in SI (rad, m/s, rad/s, m/s^2); the paper quotes inputs in
 arc-seconds, arc-minutes, deg/h, g and km/h and results in arc-seconds and

@@ -10,7 +10,7 @@ to rounding.
 The physics is not written here: the velocity rate without the specific force
 (-(2 w_ie + w_en) x v + g), the position rates and w_in are the model's own
 mechanization equations (the ones its error model is derived from), generated
-as ``navigation_rates`` (:mod:`modelgen.derive.mechanization_rates`, printed by
+as ``navigation_rates`` (:mod:`modelgen.derivation.mechanization_rates`, printed by
 :mod:`modelgen.codegen.mechanization`) and passed in as ``rates``
 (:func:`model_rates`).  The exact equations are flown (WGS-84 radii, normal
 gravity with its free-air terms): a model's declared approximations simplify its

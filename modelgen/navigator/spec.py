@@ -30,7 +30,7 @@ from them:
   ``parameters:`` section or the model's default.
 
 * the mechanization's physics: the model's own rates (``navigation_rates``, from
-  the equations its error model is derived from; :mod:`modelgen.derive.mechanization_rates`)
+  the equations its error model is derived from; :mod:`modelgen.derivation.mechanization_rates`)
   printed as Python (compiled) and C (:mod:`modelgen.codegen.mechanization`) for the
   navigators' fixed integrators.
 
@@ -50,9 +50,9 @@ import numpy as np
 import sympy as sp
 
 from modelgen.codegen.mechanization import c_source, python_source
-from modelgen.derive.mechanization_rates import mechanization_rates
+from modelgen.derivation.mechanization_rates import mechanization_rates
 from modelgen.errors import ModelError
-from modelgen.model.frames import NED_TO_ENU
+from modelgen.model.ned_enu import NED_TO_ENU
 
 #: axis word -> (NED axis, sign): the state is sign x the NED component
 AXES = {"north": (0, 1.0), "east": (1, 1.0), "down": (2, 1.0), "up": (2, -1.0)}
@@ -129,7 +129,7 @@ class NavigatorSpec:
     """Blocks, frame, measurement rows and parameter code of one derived navigation model."""
 
     model_file: Path
-    derived: object  # modelgen.derive.symbolic.DerivedModel
+    derived: object  # modelgen.derivation.symbolic.DerivedModel
     name: str
     frame: str
     n_states: int
@@ -140,7 +140,7 @@ class NavigatorSpec:
     free_parameters: tuple[str, ...]  # set by the configuration's parameters: or the model's default
     defaults: dict[str, float]
     module: ModuleType | None = None
-    #: the model's mechanization rates (modelgen.derive.mechanization_rates), as Python and C source
+    #: the model's mechanization rates (modelgen.derivation.mechanization_rates), as Python and C source
     #: (modelgen.codegen.mechanization), and the Python one compiled (:func:`modelgen.navigator.mechanization.model_rates`)
     rates_python: str = ""
     rates_c: str = ""
@@ -342,7 +342,7 @@ def _gnss_rows(derived, blocks: dict[str, Block], where: str) -> tuple[GnssRow, 
 
 def navigator_spec(model_file: Path, with_python: bool = True) -> NavigatorSpec:
     """Derive the model file once and read the navigator's spec from it (and the generated Python filter)."""
-    from modelgen.derive.symbolic import derive
+    from modelgen.derivation.symbolic import derive
     from modelgen.model.loading import load_model
 
     model_file = Path(model_file)

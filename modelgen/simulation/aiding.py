@@ -39,7 +39,7 @@ from modelgen.simulation.strapdown import ALGORITHMS
 from modelgen.simulation.trajectory import Trajectory
 
 if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
-    from modelgen.derive.symbolic import DerivedModel
+    from modelgen.derivation.symbolic import DerivedModel
 
 #: the maker of a fresh filter from (x0, P0), see :func:`modelgen.simulation.filters.filter_factory`
 FilterMaker = Callable[[np.ndarray, np.ndarray], KalmanFilter]

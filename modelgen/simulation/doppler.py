@@ -1,6 +1,6 @@
-"""Doppler radar velocity sensor (seeds 000 and 002).
+"""Doppler radar velocity sensor (the core paper and 002).
 
-Principle (seed 002, eqs. (2-9)-(2-10)): a beam leaving the aircraft along the
+Principle (the Doppler error thesis, eqs. (2-9)-(2-10)): a beam leaving the aircraft along the
 unit vector b and scattered back by the ground is shifted by
 
     f_d = 2 V cos(gamma) / lambda = 2 (v . b) / lambda,
@@ -9,7 +9,7 @@ gamma being the angle between the ground velocity v and the beam.  With four
 beams in the Janus configuration (two forward at azimuth +-a, two aft at
 180 deg +- a, all depressed by d below the body x-y plane) the three body-axis
 velocity components follow from the four frequencies by least squares,
-v^b = lambda/2 (B^T B)^-1 B^T f.  Tool errors (seed 002 §3.3.1): a random
+v^b = lambda/2 (B^T B)^-1 B^T f.  Tool errors (the Doppler error thesis §3.3.1): a random
 constant frequency bias per beam (beam asymmetry), frequency noise, and an
 antenna mounting misalignment (the real beams are rotated from the nominal
 ones the solution assumes).  The attitude-induced error (§3.3.2) appears when
@@ -18,7 +18,7 @@ error psi: C~ v^b = (I - psi x) C v^b, an error of -psi x v^n.
 
 Two measurement models are offered:
 
-* ``ned`` -- seed 000 eq. (6): the Doppler delivers the NED ground velocity
+* ``ned`` -- the core paper eq. (6): the Doppler delivers the NED ground velocity
   with a random-constant bias and white noise per axis.  This is exactly the
   18-state model's measurement, used for the consistency (NEES) tests.
 * ``beams`` -- the physical four-beam radar above; its body velocity is
@@ -92,7 +92,7 @@ class DopplerRecord:
 
 
 def doppler_shift(velocity_body: np.ndarray, directions: np.ndarray, wavelength: float) -> np.ndarray:
-    """f_d = 2 (v . b) / lambda for every beam (seed 002, eq. (2-10)); rows of v give rows of f."""
+    """f_d = 2 (v . b) / lambda for every beam (the Doppler error thesis, eq. (2-10)); rows of v give rows of f."""
     return 2.0 * np.asarray(velocity_body) @ directions.T / wavelength
 
 

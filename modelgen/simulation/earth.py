@@ -1,7 +1,7 @@
 """The WGS-84 earth: radii of curvature, normal gravity, earth rate, transport rate.
 
 Everything here is in the local-level North-East-Down navigation frame (the
-frame of the core paper's model, seed 000) and in SI units.  The functions are
+frame of the core paper's model, the core paper) and in SI units.  The functions are
 scalar and compiled (:mod:`modelgen.simulation.jit`) because the trajectory
 generator and the strapdown mechanization call them at every IMU step; both call
 the *same* functions, so that a mechanization fed with ideal increments follows

@@ -35,7 +35,7 @@ from modelgen.simulation import earth
 from modelgen.simulation.rotation import misalignment, rotate_attitude
 
 if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
-    from modelgen.derive.symbolic import DerivedModel
+    from modelgen.derivation.symbolic import DerivedModel
     from modelgen.simulation.model_outline import ModelOutline
 
 NED_AXIS = {"north": (0, 1.0), "east": (1, 1.0), "down": (2, 1.0), "up": (2, -1.0)}

@@ -1,6 +1,6 @@
 """The filter loop: a Kalman filter against a navigator, in the three correction modes.
 
-Correction modes (seed 003 §1; seed 000 §2; seed 001 §3.2):
+Correction modes (the accumulated-correction paper §1; the core paper §2; the INS/GPS paper §3.2):
 
 * ``open_loop`` -- output compensation: the INS runs free, the filter estimates
   its whole error x^ and the output is INS (-) x^.
@@ -10,14 +10,14 @@ Correction modes (seed 003 §1; seed 000 §2; seed 001 §3.2):
   compensation) and those filter states are reset to zero.  Markov states are
   not fed back (a fed-back Markov estimate would have to decay inside the
   mechanization); they stay in the filter.
-* ``accumulated`` -- seed 003's accumulated-error correction: the INS and the
+* ``accumulated`` -- the accumulated-correction paper's accumulated-error correction: the INS and the
   sensors run free as in open loop, but the fed-back part of every estimate is
   added to an accumulator A and reset in the filter as in closed loop; A is
   carried between updates by the same transition matrix as the errors
-  (A(k) = Phi A(k-1), which is seed 003's extrapolation of accumulated velocity
+  (A(k) = Phi A(k-1), which is the accumulated-correction paper's extrapolation of accumulated velocity
   corrections into position, eq. (10)), the sensor outputs are corrected by A
   before they enter the filter (eq. (3)) and the output is INS (-) A.  The
-  theorem of seed 003: in the linear case this output equals the closed-loop
+  theorem of the accumulated-correction paper: in the linear case this output equals the closed-loop
   output; ``tests/simulation`` checks it to numerical precision.
 
 Faults: a measurement marked invalid (outage) skips the update; an innovation

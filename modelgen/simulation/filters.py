@@ -12,8 +12,8 @@ filter:
 
 Three implementations plug in:
 
-* :class:`ReferenceFilter` -- ``modelgen.derive.reference`` (dense numpy) with
-  ``modelgen.derive.discretization`` and ``modelgen.derive.symbolic``;
+* :class:`ReferenceFilter` -- ``modelgen.derivation.reference`` (dense numpy) with
+  ``modelgen.derivation.discretization`` and ``modelgen.derivation.symbolic``;
 * :class:`GeneratedPythonFilter` -- a module written by ``modelgen generate``
   (``generated/<model>/<model>.py``: parameter_vector, system_matrix,
   noise_input_matrix, noise_psd, discretize, predict, update);
@@ -37,11 +37,11 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Protocol
 
 import numpy as np
 
-from modelgen.derive import reference
+from modelgen.derivation import reference
 from modelgen.errors import ModelError
 
 if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
-    from modelgen.derive.symbolic import DerivedModel
+    from modelgen.derivation.symbolic import DerivedModel
     from modelgen.simulation.model_outline import ModelOutline
 
 
@@ -71,7 +71,7 @@ def check_finite_measurement(z: np.ndarray, H: np.ndarray, R: np.ndarray, where:
 
 
 class ReferenceFilter:
-    """Dense numpy filter: derivation + Taylor discretization + modelgen.derive.reference."""
+    """Dense numpy filter: derivation + Taylor discretization + modelgen.derivation.reference."""
 
     name = "reference"
 
@@ -84,7 +84,7 @@ class ReferenceFilter:
 
     def transition(self, parameters, period):
         # imported here: it brings scipy.linalg, which a worker flying the generated C never needs
-        from modelgen.derive.discretization import taylor_discretization, taylor_process_noise
+        from modelgen.derivation.discretization import taylor_discretization, taylor_process_noise
 
         m = self.matrices(parameters)
         phi, gamma = taylor_discretization(m["F"], m["G"], period, self.taylor_order)
@@ -425,7 +425,7 @@ def named_parameters(derived: DerivedModel, available: Mapping[str, float], vali
     """The model's parameters from a larger vocabulary; a missing one is refused by name."""
     chosen = {name: available[name] for name in derived.model.parameter_names if name in available}
     if validate:
-        from modelgen.derive.symbolic import parameter_vector  # sympy-based: here, where a derived model validates
+        from modelgen.derivation.symbolic import parameter_vector  # sympy-based: here, where a derived model validates
 
         missing = [p for p in derived.model.parameters if p.name not in chosen and p.value is None]
         if missing:

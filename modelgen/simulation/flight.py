@@ -27,7 +27,7 @@ from modelgen.simulation.streaming import PIECE_SECONDS, fly_modes
 from modelgen.simulation.trajectory import Trajectory
 
 if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
-    from modelgen.derive.symbolic import DerivedModel
+    from modelgen.derivation.symbolic import DerivedModel
     from modelgen.simulation.model_outline import ModelOutline
 
 

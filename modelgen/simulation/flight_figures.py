@@ -145,7 +145,7 @@ def plot_trajectory(trajectory: Trajectory, path: Path, prepared: tuple[Any, Any
 
 
 #: line styles of the correction modes: drawn widest first, so a mode whose curve
-#: lies on another's (closed loop and accumulated, by seed 003's theorem) stays visible
+#: lies on another's (closed loop and accumulated, by the accumulated-correction paper's theorem) stays visible
 _MODE_STYLES = {
     "open_loop": {"linewidth": 3.2, "alpha": 0.55},
     "closed_loop": {"linewidth": 1.8, "linestyle": "--"},

@@ -7,7 +7,7 @@ threads started before the filter model is derived
 thread builds the filter code; draw the other sensor errors; fly the filter
 (the generated C by default, in the compiled loop of
 :mod:`modelgen.simulation.native_loop`) on them in the three correction modes
-(open loop, closed loop, seed 003's accumulated correction) in one pass over
+(open loop, closed loop, the accumulated-correction paper's accumulated correction) in one pass over
 the data, plus the free INS; run a Monte Carlo ensemble and test its NEES;
 plot (:mod:`modelgen.simulation.flight_figures`, drawn in a copy of the
 process forked at the start, :mod:`modelgen.simulation.figure_process`) and
@@ -28,7 +28,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.model.sources import cite_sources
 from modelgen.simulation.figure_process import draw_figures, import_plotting

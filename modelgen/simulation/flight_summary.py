@@ -15,7 +15,7 @@ IMPLEMENTATION_TEXT = {
     "c": "the generated C (modelgen generate, default options), compiled for this run and driven, with the "
          "strapdown and the glue, by one compiled loop (modelgen/simulation/native_loop.py)",
     "python": "the generated Python module (modelgen generate, default options)",
-    "reference": "the dense numpy reference filter (modelgen/derive/reference.py)",
+    "reference": "the dense numpy reference filter (modelgen/derivation/reference.py)",
 }
 
 

@@ -1,12 +1,12 @@
 """GPS receivers: a position/velocity receiver and a pseudo-range receiver.
 
-* :func:`simulate_position_velocity` -- the loosely coupled receiver of seed 001:
+* :func:`simulate_position_velocity` -- the loosely coupled receiver of the INS/GPS paper:
   latitude, longitude, height and NED velocity with white noise; outages mark
-  measurements invalid (seed 001 §3.2: "when GPS is invalid, no correction").
-* :func:`simulate_pseudoranges` -- the receiver of seed 003: ranges to the
+  measurements invalid (the INS/GPS paper §3.2: "when GPS is invalid, no correction").
+* :func:`simulate_pseudoranges` -- the receiver of the accumulated-correction paper: ranges to the
   satellites above an elevation mask plus the receiver clock bias b (metres) and
   white noise; b and the clock drift d follow the two-state clock model
-  b' = d + w_b, d' = w_d (seed 003's "clock-bias distance I_t" and
+  b' = d + w_b, d' = w_d (the accumulated-correction paper's "clock-bias distance I_t" and
   "frequency-difference distance I_f").
 * :class:`Constellation` -- a simple Walker 24/6/1 constellation (55 deg,
   26 560 km circular orbits) in earth-fixed axes; signal travel time and

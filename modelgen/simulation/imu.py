@@ -6,7 +6,7 @@ Per axis of the body (x forward, y right, z down), the measured rates are
     accelerometer:  f~     = (1 + s_a) f     + nabla_c + nabla_r + n_a
 
 with eps_c, nabla_c random constants, eps_r, nabla_r first-order Markov
-processes (seed 000 eqs. (2)-(5): d eps_r/dt = -mu eps_r + w, E[w w] = 2 mu
+processes (the core paper eqs. (2)-(5): d eps_r/dt = -mu eps_r + w, E[w w] = 2 mu
 sigma^2), n white noise and s optional scale-factor errors.  Every error here
 is *measured minus true*; how a model's states relate to that (the core
 paper's gyro drift enters its equations as +C eps, i.e. its eps is true minus

@@ -45,7 +45,7 @@ from modelgen.simulation.strapdown import Strapdown
 from modelgen.simulation.trajectory import Trajectory
 
 if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
-    from modelgen.derive.symbolic import DerivedModel
+    from modelgen.derivation.symbolic import DerivedModel
     from modelgen.simulation.model_outline import ModelOutline
 
 #: sensor quantity -> (kind, NED axis or position index, sign)

@@ -8,7 +8,7 @@ rows, the C filter's parameter struct) and the structure of F, G and H (the
 sizes of the C structs, :class:`modelgen.codegen.layout.ModelSizes`).  The
 symbolic matrices themselves are the caller's business: the generated code
 already holds them.  A :class:`ModelOutline` stands in for the
-:class:`~modelgen.derive.symbolic.DerivedModel` there (the same attributes
+:class:`~modelgen.derivation.symbolic.DerivedModel` there (the same attributes
 under the same names), so that such a worker never imports sympy (0.2 s of
 its start) nor unpickles sympy expressions.
 """

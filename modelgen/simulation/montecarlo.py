@@ -63,7 +63,7 @@ from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.trajectory import Trajectory, generate_trajectory
 
 if TYPE_CHECKING:  # sympy-based: a worker flying the compiled loop never imports them (module docstring)
-    from modelgen.derive.symbolic import DerivedModel
+    from modelgen.derivation.symbolic import DerivedModel
     from modelgen.model.declaration import ErrorModel
 
 

@@ -1,9 +1,9 @@
-"""Pseudo-range aiding (seed 003): the simulated INS against the 11-state model.
+"""Pseudo-range aiding (the accumulated-correction paper): the simulated INS against the 11-state model.
 
 :data:`PSEUDORANGE` is the pseudo-range receiver's aiding-sensor plug-in
 (profile section ``pseudorange`` with its ``constellation``, ``filter.aiding:
 pseudorange``).  :class:`PseudorangeNavigator`, its measurement function,
-implements the Navigator protocol of :mod:`modelgen.simulation.filter_loop` for seed 003's INS/GPS pseudo-range
+implements the Navigator protocol of :mod:`modelgen.simulation.filter_loop` for the accumulated-correction paper's INS/GPS pseudo-range
 model (``gps_pseudorange11``, ``modelgen.model.pseudorange.pseudorange_model(n)``):
 the same :class:`~modelgen.simulation.strapdown.Strapdown` mechanization as
 the Doppler/GPS navigator, plus a receiver-clock estimate, with the errors
@@ -40,7 +40,7 @@ mapped explicitly onto the model's states (its header fixes them):
   carries as b^' = d^ (zero, and never corrected, in open-loop and
   accumulated modes): I_t = b - b^, I_f = d - d^.
 
-Measurement each pseudo-range epoch (seed 003 eqs. (3), (7), (8)): the n
+Measurement each pseudo-range epoch (the accumulated-correction paper eqs. (3), (7), (8)): the n
 visible satellites of highest elevation seen from the INS position (n = the
 model's satellite count), z_k = rho_k - b^_c - |r_s,k - r_c|, with r_c the
 corrected INS position and b^_c the clock estimate of the output the
@@ -82,7 +82,7 @@ from modelgen.simulation.strapdown import Strapdown
 from modelgen.simulation.trajectory import Trajectory
 
 if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
-    from modelgen.derive.symbolic import DerivedModel
+    from modelgen.derivation.symbolic import DerivedModel
 
 #: the model's states, in the order the navigator maps them (pseudorange_model(n), gps_pseudorange11)
 STATE_NAMES = (
@@ -276,7 +276,7 @@ class PseudorangeAiding:
     quantities: tuple[str, ...] = ()  # the rows are the model's satellites, mapped here
 
     def read_settings(self, section: ProfileSection) -> PseudorangeSettings:
-        """The receiver (seed 003) and its constellation; defaults when the section is absent."""
+        """The receiver (the accumulated-correction paper) and its constellation; defaults when the section is absent."""
         c = section.section("constellation")
         constellation = Constellation(
             satellites=int(c.number("satellites", 24.0)),

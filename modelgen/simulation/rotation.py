@@ -4,7 +4,7 @@ Conventions used throughout the simulation:
 
 * quaternions are scalar-first ``[q0, q1, q2, q3]``; ``q_b^n`` rotates body
   vectors into navigation (NED) axes, so that ``C_b^n = dcm(q_b^n)``;
-* a rotation vector ``phi`` is the equivalent rotation vector of seed 001: the
+* a rotation vector ``phi`` is the equivalent rotation vector of the INS/GPS paper: the
   frame turns by ``|phi|`` about ``phi``; its quaternion is
   ``[cos(|phi|/2), sin(|phi|/2) phi/|phi|]``;
 * Euler angles are roll, pitch, yaw about body x (forward), y (right),

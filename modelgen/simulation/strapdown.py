@@ -1,7 +1,7 @@
 """Strapdown mechanization in the local-level (NED) navigation frame.
 
 Attitude is a quaternion q_b^n updated with the equivalent rotation vector
-(seed 001, §3.1): every N IMU samples (the rotation-vector update period N T)
+(the INS/GPS paper, §3.1): every N IMU samples (the rotation-vector update period N T)
 the rotation vector phi of the body over that period is built from the N angle
 increments with a coning correction, and the navigation frame's own rotation
 zeta = (omega_ie^n + omega_en^n) N T is removed:
@@ -36,7 +36,7 @@ It is resolved in navigation axes with (I - 1/2 zeta x) C_b^n(k-1), and gravity
 and Coriolis  [g^n - (2 omega_ie^n + omega_en^n) x v^n] N T  are added with
 the earth quantities taken at the extrapolated mid-period position and velocity.
 Latitude, longitude and height follow by the trapezoidal rule.  The vertical
-channel, which diverges in a free inertial system (seed 000 ignores it), can be
+channel, which diverges in a free inertial system (the core paper ignores it), can be
 damped with a reference (barometric) altitude by a second-order loop.
 
 The loop is compiled (:mod:`modelgen.simulation.jit`); its state lives in a

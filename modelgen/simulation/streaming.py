@@ -39,7 +39,7 @@ from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.trajectory import Trajectory
 
 if TYPE_CHECKING:  # sympy-based, named in annotations only: a run of the compiled loop imports no sympy
-    from modelgen.derive.symbolic import DerivedModel
+    from modelgen.derivation.symbolic import DerivedModel
     from modelgen.simulation.model_outline import ModelOutline
 
 #: default piece length: 30 s of IMU data (9,000 samples at 300 Hz, 432 kB of increments); Python is

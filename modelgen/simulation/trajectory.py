@@ -4,7 +4,7 @@ A flight path (the ``start`` and ``segments`` of a flight profile) is a
 start state and a list of segments; within a segment the
 controls are constant: horizontal (along-track) acceleration, turn rate
 (heading rate), vertical acceleration (rate of change of the down velocity,
-which is how the core paper describes its climb and level-off, seed 000 §3) and
+which is how the core paper describes its climb and level-off, the core paper §3) and
 roll rate.  Horizontal ground speed, heading, down velocity, roll and height
 are then closed-form in time; latitude and longitude are integrated (RK4 on the
 IMU grid).  The body x axis points along the velocity (pitch = flight-path

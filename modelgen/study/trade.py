@@ -30,7 +30,7 @@ from modelgen.table2.scenario import AnalysisScenario
 from modelgen.table2.suboptimal import FilterDesign
 from modelgen.table2.systems import PURE_INERTIAL, PaperModels, analyse_systems
 from modelgen.cluster import Journal, describe_client, run_tasks, worker_cached
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import read_yaml_with_lines
 from modelgen.model.declaration import ErrorModel

@@ -1,4 +1,4 @@
-"""The error budget (seed 000, Table 1): initial covariance and error statistics."""
+"""The error budget (the core paper, Table 1): initial covariance and error statistics."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """The analysis scenario (scenario_000.yaml): operating point (model parameters) and flight phases.
 
 The core paper evaluates F at one level-flight operating point for the whole
-run (seed 000, section 3: "we use the level-flight attitude matrix"); the
+run (the core paper, section 3: "we use the level-flight attitude matrix"); the
 phases of the printed flight profile only tell when the aircraft manoeuvres
 (suboptimal filter II recomputes its gain more often then).
 """

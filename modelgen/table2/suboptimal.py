@@ -1,4 +1,4 @@
-"""The paper's filters (seed 000, sections 4-5) as designs applied to the full model.
+"""The paper's filters (the core paper, sections 4-5) as designs applied to the full model.
 
 Each design says which error sources the filter leaves out and how often it
 recomputes its gain; its model is MADE from the 18-state model with

@@ -25,7 +25,7 @@ from modelgen.analysis.covariance import (
 from modelgen.table2.metrics import navigation_errors
 from modelgen.table2.scenario import AnalysisScenario, operating_point
 from modelgen.table2.suboptimal import PAPER_FILTERS, FilterDesign, filter_model, filter_parameters, gain_schedule
-from modelgen.derive.symbolic import DerivedModel, derive
+from modelgen.derivation.symbolic import DerivedModel, derive
 from modelgen.model.transform import keep_states
 
 PURE_INERTIAL = "pure_inertial"

@@ -16,7 +16,7 @@ from modelgen.analysis.covariance import (
 )
 from modelgen.table2.scenario import load_analysis_scenario, operating_point
 from modelgen.table2.suboptimal import PAPER_FILTERS, filter_parameters
-from modelgen.derive.discretization import van_loan_discretization
+from modelgen.derivation.discretization import van_loan_discretization
 from modelgen.errors import ModelError
 
 STEPS = 60  # one hour is enough to exercise every recursion

@@ -16,7 +16,7 @@ import yaml
 from click.testing import CliRunner
 
 from modelgen.cli import main
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.operating_point import level_flight, pseudorange_parameters
 from modelgen.model.pseudorange import pseudorange_model
@@ -113,7 +113,7 @@ def test_doppler_aided_level_flight_has_rank_12_and_a_turn_raises_it_to_16(ned):
     assert set(report.unobservable_states()) == {"longitude_error", "accel_markov_bias_z"}
 
 
-# -- seed 001's INS/GPS model ----------------------------------------------------------------
+# -- the INS/GPS paper's INS/GPS model ----------------------------------------------------------------
 def test_position_and_velocity_are_observable_with_position_and_velocity_measurements(ins_gps):
     report = analyse(ins_gps, single_segment(gps_values(ins_gps.model, EAST), 1.0, 60))
     for name in ("velocity_error_east", "velocity_error_north", "velocity_error_up", "latitude_error", "longitude_error", "height_error"):
@@ -152,7 +152,7 @@ def test_a_turn_makes_the_ins_gps_model_fully_observable(ins_gps):
     assert report.rank == 15 and report.unobservable == ()
 
 
-# -- seed 003's pseudo-range model --------------------------------------------------------------
+# -- the accumulated-correction paper's pseudo-range model --------------------------------------------------------------
 def pseudorange_values(model, satellites) -> dict[str, float]:
     values = level_flight(model, LATITUDE, 200.0, EAST)
     values.update(gyro_angle_random_walk=1e-5, accel_velocity_random_walk=1e-4, clock_bias_psd=1.0, clock_drift_psd=0.01)
@@ -208,7 +208,7 @@ def test_position_measurement_observes_a_double_integrator_and_velocity_does_not
 
 def test_state_scales_do_not_change_the_rank_or_the_unobservable_states(ned):
     scenario = single_segment(ned_values(ned.model, EAST), 60.0, 60)
-    # typical magnitudes (Table 1 of seed 000): rad, m/s, rad/s, m/s^2
+    # typical magnitudes (Table 1 of the core paper): rad, m/s, rad/s, m/s^2
     scales = {n: 6e-4 for n in ("attitude_error_north", "attitude_error_east")}
     scales.update(heading_error=6e-3, velocity_error_north=1.0, velocity_error_east=1.0, latitude_error=1e-4, longitude_error=1e-4)
     scales.update(doppler_velocity_bias_north=0.4, doppler_velocity_bias_east=0.4)

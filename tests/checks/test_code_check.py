@@ -23,7 +23,7 @@ from modelgen.checks.code_check import (
     relative_difference,
     step_conditioning,
 )
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.model.loading import load_model
 from modelgen.jobs import check_scenario, declared_scenario, paper_scenario
 
@@ -56,7 +56,7 @@ def gps15_folder(gps15_derived, tmp_path_factory):
 
 
 def test_paper_model_declares_the_paper_scenario(paper_derived):
-    """ned_doppler18's check: section is seed 000's scenario: 240 steps of 60 s, Table 1, level flight."""
+    """ned_doppler18's check: section is the core paper's scenario: 240 steps of 60 s, Table 1, level flight."""
     declared, paper = declared_scenario(paper_derived), paper_scenario(paper_derived)
     assert declared.steps == paper.steps == 240 and declared.step == paper.step == 60.0
     np.testing.assert_allclose(declared.initial_covariance, paper.initial_covariance, rtol=1e-15, atol=0)

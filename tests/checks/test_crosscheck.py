@@ -9,7 +9,7 @@ import pytest
 import sympy as sp
 
 from modelgen.checks import crosscheck as cc
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel
 

@@ -9,7 +9,7 @@ import sympy as sp
 from click.testing import CliRunner
 
 from modelgen.cli import main
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel
 from modelgen.checks.paper_table import CLASSIFICATIONS, load_paper_table, paper_table_path

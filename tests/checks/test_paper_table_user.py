@@ -19,7 +19,7 @@ from click.testing import CliRunner
 from modelgen.checks.paper_check import verify
 from modelgen.checks.paper_table import load_paper_table, paper_table_path
 from modelgen.cli import main
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path
 from modelgen.model.loading import load_model

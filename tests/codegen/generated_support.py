@@ -10,7 +10,7 @@ from modelgen.codegen.build import CompiledFilter, compile_shared_library, load_
 from modelgen.codegen.generate import GeneratedCode, generate_code
 from modelgen.codegen.layout import ModelSizes
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import DerivedModel, derive
+from modelgen.derivation.symbolic import DerivedModel, derive
 from modelgen.model.loading import load_model_text
 
 

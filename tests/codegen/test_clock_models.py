@@ -20,8 +20,8 @@ from modelgen.codegen.build import CompiledFilter, compile_shared_library
 from modelgen.codegen.generate import generate_code
 from modelgen.codegen.layout import ModelSizes
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.discretization import DEFAULT_TOLERANCE, taylor_discretization, taylor_process_noise, van_loan_discretization
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.discretization import DEFAULT_TOLERANCE, taylor_discretization, taylor_process_noise, van_loan_discretization
+from modelgen.derivation.symbolic import derive
 from modelgen.model.loading import load_model_text
 from tests.codegen.generated_support import write_files
 

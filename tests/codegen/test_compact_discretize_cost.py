@@ -27,8 +27,8 @@ from modelgen.codegen.generate import describe, generate_code
 from modelgen.codegen.kernels import OperationCount, discretize_cost
 from modelgen.codegen.options import CodegenOptions
 from modelgen.codegen.structure import FilterStructure, filter_structure
-from modelgen.derive.discretization import nominal_scaling
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.discretization import nominal_scaling
+from modelgen.derivation.symbolic import derive
 from modelgen.model.loading import load_model_text
 from tests.codegen.generated_support import write_files
 from tests.codegen.large_model_support import large_model

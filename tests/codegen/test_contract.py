@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import parameter_vector
+from modelgen.derivation.symbolic import parameter_vector
 from tests.codegen.generated_support import build
 
 pytestmark = pytest.mark.compile

@@ -14,7 +14,7 @@ import pytest
 from modelgen.codegen.build import compile_shared_library
 from modelgen.codegen.generate import generate_code
 from modelgen.codegen.options import all_combinations
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.model.loading import load_model_text
 from tests.codegen.generated_support import Built, build, write_files
 from tests.parallel_support import cores_per_worker

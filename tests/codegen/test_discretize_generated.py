@@ -1,6 +1,6 @@
 """The generated C and Python discretize as the reference does, accurate against expm from 1 ms to a day.
 
-Same model, operating points and bounds as tests/derive/test_discretization.py
+Same model, operating points and bounds as tests/derivation/test_discretization.py
 (1e-13 of the largest exact entry up to 600 s, 1e-10 up to a day); the
 float C is held to 1e-5 for Phi and 1e-4 for Q_d (measured 1.4e-5 at a day),
 and must refuse where the exact result exceeds the float range (the INS/GPS
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import derive, parameter_vector
-from modelgen.derive.discretization import DEFAULT_TOLERANCE, nominal_scaling, taylor_discretization, taylor_process_noise
+from modelgen.derivation.symbolic import derive, parameter_vector
+from modelgen.derivation.discretization import DEFAULT_TOLERANCE, nominal_scaling, taylor_discretization, taylor_process_noise
 from modelgen.model.loading import load_model
 from tests.codegen.generated_support import build
 from tests.derive.test_discretization import MODELS, STEPS, bound, exact, relative_error
@@ -115,7 +115,7 @@ def test_paths_longer_than_the_taylor_order_reach_phi_in_c_and_python(tmp_path):
 
 def test_generated_python_balanced_norm_is_the_reference_bit_for_bit(case):
     """Same D (balanced at generation time), same sums in the same order: the module and the reference pick the same plan."""
-    from modelgen.derive.discretization import balanced_norm
+    from modelgen.derivation.discretization import balanced_norm
 
     derived, values, builds = case
     py = next(iter(builds.values()))[1].python

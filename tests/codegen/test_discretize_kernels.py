@@ -30,9 +30,9 @@ from modelgen.codegen.discretize_kernels import (
     structural_series_cost,
     transition_check_block,
 )
-from modelgen.derive.discretization import _taylor_terms
+from modelgen.derivation.discretization import _taylor_terms
 from modelgen.codegen.structure import filter_structure
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.model.loading import load_model
 
 MODELS = ["ned_doppler18", "ned_inertial16", "enu_doppler18", "ins_gps15", "gps_pseudorange11", "ned_doppler32_augmented"]
@@ -219,7 +219,7 @@ def run_chain(plan: DiscretizePlan, F: np.ndarray, h: float, order: int, doublin
 
 @pytest.mark.parametrize("order", [1, 2, 3, 4, 5, 9])
 def test_the_emitted_chain_is_the_reference_series_at_every_order(plan, order):
-    """Phi and S of the statements (run in Python) equal modelgen.derive.discretization's Horner sums to rounding."""
+    """Phi and S of the statements (run in Python) equal modelgen.derivation.discretization's Horner sums to rounding."""
     F = np.where(plan.structure.F, np.random.default_rng(order).standard_normal(plan.structure.F.shape), 0.0)
     h = 0.4 / max(np.abs(F).sum(axis=1).max(), 1.0)
     phi, S = run_chain(plan, F, h, order)

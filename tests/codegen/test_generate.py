@@ -8,7 +8,7 @@ import pytest
 
 from modelgen.codegen.build import STRICT_FLAGS, compiler, load_python_module
 from modelgen.codegen.generate import CodegenOptions, generate_code, write_atomically
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel, Noise, Parameter, State
 

@@ -20,8 +20,8 @@ from modelgen.checks.code_check import check_generated
 from modelgen.codegen import kernels
 from modelgen.codegen.generate import describe, generate_code
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.discretization import DEFAULT_TOLERANCE, nominal_scaling, taylor_discretization, taylor_process_noise
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.discretization import DEFAULT_TOLERANCE, nominal_scaling, taylor_discretization, taylor_process_noise
+from modelgen.derivation.symbolic import derive
 from modelgen.fileio.datafiles import package_path
 from modelgen.jobs import synthetic_scenario
 from modelgen.model.loading import load_model_text
@@ -112,7 +112,7 @@ def discretized(built, options: CodegenOptions, T: float) -> tuple[np.ndarray, n
 
 
 def reference_discretized(derived, T: float) -> tuple[np.ndarray, np.ndarray]:
-    """Phi and Q_d of the checks' reference (numpy, modelgen.derive.discretization) at the same operating point."""
+    """Phi and Q_d of the checks' reference (numpy, modelgen.derivation.discretization) at the same operating point."""
     m = derived.numeric(synthetic_scenario(derived).parameters)
     phi, gamma = taylor_discretization(m["F"], m["G"], T, 9, DEFAULT_TOLERANCE, nominal_scaling(derived))
     return phi, taylor_process_noise(gamma, m["Q"], T)

@@ -22,7 +22,7 @@ from modelgen.codegen.generate import generate_code
 from modelgen.codegen.kernels import thornton_cost
 from modelgen.codegen.options import CodegenOptions, all_combinations
 from modelgen.codegen.structure import filter_structure
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.model.loading import load_model
 
 KERNEL = re.compile(r"^\w+ \w+ ((?:phi_times_p|propagate|phi_times_u)_row_\d+|state_predict)\(.*?\n\{\n(.*?)\n\}\n", re.S | re.M)

@@ -17,7 +17,7 @@ from modelgen.codegen.generate import generate_code, write_atomically
 from modelgen.codegen.layout import ModelSizes, packed_index, upper_index
 from modelgen.codegen.options import CodegenOptions, all_combinations
 from modelgen.checks.code_check import compare, measurement_sequence, reference_run, scenario_tolerance
-from modelgen.derive.symbolic import parameter_vector
+from modelgen.derivation.symbolic import parameter_vector
 from modelgen.checks.embedded_check import float_tolerance, smallest_correlation_eigenvalue
 from modelgen.errors import ModelError
 from modelgen.jobs import paper_scenario
@@ -184,7 +184,7 @@ def test_every_combination_generates_byte_identical_output_across_processes(pape
 
     script = (
         "import sys; from modelgen.codegen.generate import generate_code; from modelgen.codegen.options import all_combinations; "
-        "from modelgen.derive.symbolic import derive; from modelgen.model.loading import load_model; import hashlib; "
+        "from modelgen.derivation.symbolic import derive; from modelgen.model.loading import load_model; import hashlib; "
         "d = derive(load_model('ned_doppler18')); "
         "print(hashlib.sha256(repr([sorted(generate_code(d, o).files.items()) for o in all_combinations('float')[::3]]).encode()).hexdigest())"
     )
@@ -206,7 +206,7 @@ def test_every_combination_generates_byte_identical_output_across_processes(pape
 )
 @pytest.mark.compile
 def test_other_models_match_the_reference_in_other_combinations(name, options, tmp_path):
-    from modelgen.derive.symbolic import derive
+    from modelgen.derivation.symbolic import derive
     from modelgen.model.loading import load_model
     from modelgen.jobs import synthetic_scenario
 

@@ -19,7 +19,7 @@ from modelgen.codegen.generate import describe, generate_code
 from modelgen.codegen.kernels import CheckedAssign, covariance_predict
 from modelgen.codegen.layout import ModelSizes, c_layout
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 
 
 def _m_refs(statement) -> tuple[list, list]:

@@ -26,7 +26,7 @@ from modelgen.codegen.backends.registry import backend
 from modelgen.codegen.build import load_python_module
 from modelgen.codegen.generate import describe
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import derive, parameter_vector
+from modelgen.derivation.symbolic import derive, parameter_vector
 from modelgen.jobs import check_scenario
 from modelgen.model.loading import builtin_models
 from tests.codegen.generated_support import write_files

@@ -18,7 +18,7 @@ import pytest
 from modelgen.codegen.backends.registry import backend
 from modelgen.codegen.build import load_python_module
 from modelgen.codegen.generate import describe
-from modelgen.derive import reference
+from modelgen.derivation import reference
 from tests.codegen.generated_support import write_files
 
 

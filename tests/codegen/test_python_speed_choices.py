@@ -25,8 +25,8 @@ from modelgen.codegen.backends.python import context as python_context
 from modelgen.codegen.backends.registry import backend
 from modelgen.codegen.build import load_python_module
 from modelgen.codegen.generate import describe
-from modelgen.derive import reference
-from modelgen.derive.discretization import balanced_norm, nominal_scaling
+from modelgen.derivation import reference
+from modelgen.derivation.discretization import balanced_norm, nominal_scaling
 from tests.codegen.generated_support import write_files
 
 

@@ -9,7 +9,7 @@ from modelgen.codegen import generate as generate_module
 from modelgen.codegen.generate import GeneratedSizeWarning, LARGE_CODE_BYTES, generate_code, warn_if_large
 from modelgen.codegen.kernels import estimated_code_bytes
 from modelgen.codegen.structure import filter_structure
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.model.loading import load_model
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 
 from modelgen.codegen.structure import filter_structure, reachability
-from modelgen.derive.discretization import taylor_discretization, taylor_process_noise
+from modelgen.derivation.discretization import taylor_discretization, taylor_process_noise
 
 
 def test_reachability_of_a_chain_is_its_upper_triangle():

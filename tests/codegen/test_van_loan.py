@@ -2,7 +2,7 @@
 
 The generated C (block Taylor series with scaling and squaring) and Python
 (scipy expm) must give the Phi and Q_d of the numpy reference
-modelgen.derive.discretization.van_loan_discretization on the paper's model,
+modelgen.derivation.discretization.van_loan_discretization on the paper's model,
 the option must change only the discretize, the UD form must be refused with
 it, and the C must compile strictly in float and for a compact (large) model.
 """
@@ -26,8 +26,8 @@ from modelgen.codegen.generate import generate_code, write_atomically
 from modelgen.codegen.layout import ModelSizes
 from modelgen.codegen.options import CodegenOptions
 from modelgen.codegen.van_loan import QD_MARGIN, van_loan_plan, van_loan_series
-from modelgen.derive.discretization import van_loan_discretization
-from modelgen.derive.symbolic import derive, parameter_vector
+from modelgen.derivation.discretization import van_loan_discretization
+from modelgen.derivation.symbolic import derive, parameter_vector
 from modelgen.errors import ModelError
 from modelgen.jobs import paper_parameters, paper_scenario
 from modelgen.model.loading import load_model_text

@@ -23,7 +23,7 @@ def test_the_documented_error_message_is_what_modelgen_prints(tmp_path):
 
 
 def test_the_transform_example_builds_a_14_state_model(tmp_path):
-    from modelgen.derive.symbolic import derive
+    from modelgen.derivation.symbolic import derive
     from modelgen.model.loading import load_model
 
     path = tmp_path / "reduced.yaml"

@@ -61,7 +61,7 @@ def gnss21_runs(tmp_path_factory):
     """The 21-state INS/GNSS filter in float (covariance and U-D) at the IMU step 5 ms and the GNSS step 1 s."""
     import dataclasses
 
-    from modelgen.derive.symbolic import derive
+    from modelgen.derivation.symbolic import derive
     from modelgen.model.loading import load_model
     from modelgen.jobs import check_scenario
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.model.loading import load_model
 
 

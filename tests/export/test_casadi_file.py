@@ -7,7 +7,7 @@ import numpy as np
 from click.testing import CliRunner
 
 from modelgen.cli import main
-from modelgen.derive.symbolic import parameter_vector
+from modelgen.derivation.symbolic import parameter_vector
 from modelgen.export.casadi_file import casadi_function, to_casadi
 from modelgen.export.readable import MATRIX_NAMES, nonzero_entries
 from modelgen.model.loading import load_model

@@ -13,7 +13,7 @@ import sympy as sp
 from click.testing import CliRunner
 
 from modelgen.cli import main
-from modelgen.derive.symbolic import derive, parameter_vector
+from modelgen.derivation.symbolic import derive, parameter_vector
 from modelgen.errors import ModelError
 from modelgen.export.formats import matrix_entries, octave_function_name, octave_locals, to_json, to_latex, to_octave, to_text
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State

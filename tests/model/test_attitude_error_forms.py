@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.loading import load_model, load_model_text
 from modelgen.model.loading import builtin_model_path

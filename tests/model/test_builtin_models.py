@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.operating_point import level_attitude, level_flight, line_of_sight, pseudorange_parameters
 from modelgen.model.pseudorange import pseudorange_model
@@ -123,7 +123,7 @@ def enu_navigation_errors(gyro_sign: int = -1):
 
 
 def ned_navigation_errors():
-    """Seed 000's NED model by perturbation: one radius R, no vertical channel (dV_d = 0).
+    """The core paper's NED model by perturbation: one radius R, no vertical channel (dV_d = 0).
 
     w_ie = (W cos phi, 0, -W sin phi), w_en = (V_e/R, -V_n/R, -V_e tan phi/R);
     the paper's sign for the gyro drift (+C eps) is added by the caller.
@@ -147,7 +147,7 @@ def rows_jacobian(expressions: sp.Matrix, model) -> sp.Matrix:
     return expressions.jacobian(sp.Matrix(model.state_symbols))
 
 
-# -- NED models (seed 000) ------------------------------------------------------------
+# -- NED models (the core paper) ------------------------------------------------------------
 @pytest.mark.parametrize("name", ["ned_doppler18", "ned_inertial16"])
 def test_ned_navigation_rows_of_F_equal_the_perturbed_navigation_equations(models, name):
     d = models[name]
@@ -198,7 +198,7 @@ def test_ned_inertial16_at_rest_has_schuler_foucault_and_earth_rate_modes(models
     np.testing.assert_allclose(positive_frequencies(F), stationary_frequencies(lat, g, R), rtol=1e-9)
 
 
-# -- ENU models (seeds 002 and 001) -------------------------------------------------------
+# -- ENU models (the Doppler error thesis and 001) -------------------------------------------------------
 def test_enu_doppler18_F_and_G_equal_the_perturbed_navigation_equations(models):
     d = models["enu_doppler18"]
     m = d.model
@@ -281,7 +281,7 @@ def test_enu_vertical_channel_is_unstable_at_the_free_air_rate(models):
     assert 1 / rate == pytest.approx(571, abs=1)
 
 
-# -- seed 003: pseudo-range model -----------------------------------------------------
+# -- the accumulated-correction paper: pseudo-range model -----------------------------------------------------
 def benson_transformation(latitude: float, radius: float, velocity: tuple[float, float, float]) -> np.ndarray:
     """x_psi = T x_phi for the 9 navigation states (Benson 1975).
 
@@ -373,7 +373,7 @@ def test_pseudorange_model_has_one_row_per_satellite_from_its_line_of_sight(n):
 
 
 def test_pseudorange_row_is_the_linearized_measured_minus_computed_range():
-    """Z = rho'_GPS - rho_C (seed 003 eq. (8)) computed from positions equals H x."""
+    """Z = rho'_GPS - rho_C (the accumulated-correction paper eq. (8)) computed from positions equals H x."""
     d = derive(pseudorange_model(1))
     az, el = 1.1, 0.6
     e = np.array(line_of_sight(az, el))

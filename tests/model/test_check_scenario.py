@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.loading import load_model, load_model_text
 from modelgen.jobs import check_scenario

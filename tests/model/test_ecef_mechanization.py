@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model import wgs84
 from modelgen.model.loading import load_model, load_model_text

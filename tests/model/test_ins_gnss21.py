@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from modelgen.derive.symbolic import derive, parameter_vector
+from modelgen.derivation.symbolic import derive, parameter_vector
 from modelgen.model.loading import load_model
 from modelgen.jobs import check_scenario
 

@@ -35,7 +35,7 @@ import re
 import numpy as np
 import pytest
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.model.loading import load_model
 from modelgen.model.navigation_model.approximation_notes import neglected_terms
 

@@ -11,7 +11,7 @@ import re
 
 import pytest
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.declaration import check_identifier
 from modelgen.model.loading import builtin_models, load_model, load_model_text

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.loading import load_model_text
 

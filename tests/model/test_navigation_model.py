@@ -13,7 +13,7 @@ import re
 import numpy as np
 import pytest
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.model.loading import load_model
 from modelgen.model.navigation_model.approximation_notes import neglected_terms
 
@@ -113,7 +113,7 @@ navigation:
 
 
 def test_janus_doppler_beam_rows_are_b_transpose_C_transpose_on_dv_and_on_v_cross_phi():
-    """z_k = b_k . C^T v (seed 002's Janus beams); perturbed: H = [0, b^T C^T, -b^T C^T [v x]] (no C C^T = I needed)."""
+    """z_k = b_k . C^T v (the Doppler error thesis's Janus beams); perturbed: H = [0, b^T C^T, -b^T C^T [v x]] (no C C^T = I needed)."""
     from modelgen.model.loading import load_model_text
 
     model = load_model_text(JANUS, "janus.yaml")

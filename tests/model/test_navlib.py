@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from modelgen.errors import ModelError
 from modelgen.model import navlib, wgs84
-from modelgen.model.frames import NED_TO_ENU
+from modelgen.model.ned_enu import NED_TO_ENU
 from modelgen.simulation import earth
 
 LATITUDES_DEG = (-89.0, -60.0, -33.3, 0.0, 12.5, 45.0, 60.0, 89.9)

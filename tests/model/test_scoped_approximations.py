@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.loading import builtin_model_path, load_model, load_model_text
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from modelgen.derive.symbolic import derive
-from modelgen.derive.discretization import van_loan_discretization
+from modelgen.derivation.symbolic import derive
+from modelgen.derivation.discretization import van_loan_discretization
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State
 from modelgen.model.transform import augment, keep_states, markov_to_white

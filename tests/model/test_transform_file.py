@@ -3,7 +3,7 @@
 import pytest
 import sympy as sp
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.loading import load_model, load_model_text
 from modelgen.model.transform import keep_states, markov_to_white

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.loading import load_model, load_model_text
 from modelgen.model.wgs84 import EARTH_RATE
@@ -202,7 +202,7 @@ def test_bad_vector_files_are_refused_with_file_line_and_shapes(old, new, messag
 
 def test_enu_vectors_are_stored_east_north_up_and_equal_the_ned_model_permuted():
     """The same earth-rate coupling written in ENU and in NED: F_enu = P F_ned P^T with P the NED->ENU map."""
-    from modelgen.model.frames import NED_TO_ENU
+    from modelgen.model.ned_enu import NED_TO_ENU
 
     def model(frame: str, rate: str) -> str:
         return textwrap.dedent(

@@ -142,7 +142,7 @@ def test_measurement_function_at_the_truth_returns_the_noise_free_simulation(sho
 
 
 def test_pseudorange_measurement_at_the_true_state_and_clock_is_zero_without_noise():
-    from modelgen.derive.symbolic import derive
+    from modelgen.derivation.symbolic import derive
     from modelgen.model.loading import load_model
 
     profile = load_profile("profile_003").with_changes(hours=60 / 3600, imu_rate=50.0)

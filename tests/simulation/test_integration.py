@@ -1,4 +1,4 @@
-"""Integration: seed 003's equivalence theorem, outages, the innovation gate, non-finite refusal,
+"""Integration: the accumulated-correction paper's equivalence theorem, outages, the innovation gate, non-finite refusal,
 and the generated filters on simulated data."""
 
 import dataclasses
@@ -21,7 +21,7 @@ pytestmark = pytest.mark.flight
 
 
 class LinearErrorNavigator:
-    """A linear error system e(k) = Phi e(k-1) + w(k), z = H (output) + v: seed 003's linear case.
+    """A linear error system e(k) = Phi e(k-1) + w(k), z = H (output) + v: the accumulated-correction paper's linear case.
 
     The "navigation output" is truth + e with truth = 0, so outputs are errors.
     """
@@ -78,9 +78,9 @@ def linear_case(paper_derived, level_flight):
 
 
 def test_accumulated_correction_equals_closed_loop_feedback_in_the_linear_case(linear_case):
-    # Seed 003's theorem: subtracting the accumulated estimates from the free
+    # The accumulated-correction paper's theorem: subtracting the accumulated estimates from the free
     # subsystem's output is closed-loop feedback.  Corrected outputs agree to
-    # rounding (1e-9 of their size) over 120 updates; seed 000 adds that open
+    # rounding (1e-9 of their size) over 120 updates; the core paper adds that open
     # loop is the same for a linear filter.
     closed, accumulated, open_loop = (linear_case(m) for m in ("closed_loop", "accumulated", "open_loop"))
     scale = np.abs(closed.outputs).max(axis=0) + 1e-300
@@ -91,7 +91,7 @@ def test_accumulated_correction_equals_closed_loop_feedback_in_the_linear_case(l
 
 def test_accumulation_without_extrapolation_is_not_closed_loop(linear_case):
     # The accumulated corrections must be carried by Phi between updates
-    # (seed 003 eq. (10): accumulated velocity corrections extrapolated into
+    # (the accumulated-correction paper eq. (10): accumulated velocity corrections extrapolated into
     # position); holding them constant breaks the equivalence.
     closed = linear_case("closed_loop")
     naive = linear_case("accumulated", propagate_accumulator=False)
@@ -225,7 +225,7 @@ def test_unknown_filter_implementation_is_refused_by_name(paper_derived, tmp_pat
 def test_seed_001_set_up_runs_ins_gps15_at_20_hz_with_a_300_hz_mechanization():
     # profile_001: 300 Hz strapdown (three-sample, 15 samples per cycle), 20 Hz GPS position and
     # velocity into the 15-state ENU model; its gyro bias enters as -C eps (measured - true).
-    from modelgen.derive.symbolic import derive
+    from modelgen.derivation.symbolic import derive
     from modelgen.model.loading import load_model
 
     scenario = load_profile("profile_001").with_changes(hours=1 / 60)

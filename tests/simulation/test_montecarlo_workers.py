@@ -144,7 +144,7 @@ def test_a_worker_flying_the_reference_takes_the_callers_derived_model_instead_o
                                                                                               monkeypatch):
     import pickle
 
-    import modelgen.derive.symbolic as symbolic
+    import modelgen.derivation.symbolic as symbolic
     from modelgen.simulation import montecarlo
 
     paper_derived._numeric  # the caller's model has made its lambdified matrices: code, which cannot travel
@@ -253,7 +253,7 @@ def test_a_worker_flying_the_generated_c_in_the_compiled_loop_never_imports_symp
 
 @pytest.mark.parametrize("name", ["profile_000", "profile_001", "profile_003"])
 def test_the_callers_layout_from_the_first_filter_cycle_is_the_layout_of_the_whole_flight(name):
-    from modelgen.derive.symbolic import derive
+    from modelgen.derivation.symbolic import derive
     from modelgen.model.loading import load_model
     from modelgen.simulation import montecarlo
     from modelgen.simulation.flight import profile_layout

@@ -5,7 +5,7 @@ import shutil
 import numpy as np
 import pytest
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.loading import load_model
 from modelgen.simulation.filters import filter_factory

@@ -1,4 +1,4 @@
-"""Pseudo-range aiding (seed 003): the 11-state filter on the simulated INS and receiver."""
+"""Pseudo-range aiding (the accumulated-correction paper): the 11-state filter on the simulated INS and receiver."""
 
 import dataclasses
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.pseudorange import pseudorange_model
 from modelgen.model.loading import load_model
@@ -145,7 +145,7 @@ def test_filter_is_consistent_nees_in_the_chi_square_band_and_position_within_3_
 
 
 def test_accumulated_correction_agrees_with_closed_loop_within_a_tenth_of_sigma(scenario, derived, trajectory):
-    """Seed 003's theorem is exact only for a linear system; here the nonlinearity
+    """The accumulated-correction paper's theorem is exact only for a linear system; here the nonlinearity
     (mechanization, 20' heading error, H at the corrected position) leaves a
     difference that must stay negligible against the filter's own uncertainty.
     """

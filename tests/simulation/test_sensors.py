@@ -1,4 +1,4 @@
-"""Sensor models: Doppler radar (seed 002), GPS receivers, IMU error processes, WGS-84 earth."""
+"""Sensor models: Doppler radar (the Doppler error thesis), GPS receivers, IMU error processes, WGS-84 earth."""
 
 import math
 
@@ -27,7 +27,7 @@ from modelgen.simulation.rotation import euler_quaternion, quaternion_to_dcm, ro
 
 
 def test_doppler_shift_is_two_v_cos_gamma_over_lambda():
-    # seed 002 eq. (2-10): a beam at angle gamma to the velocity
+    # the Doppler error thesis eq. (2-10): a beam at angle gamma to the velocity
     beams = JanusBeams()
     b = beams.directions()
     v = np.array([80.0, 5.0, 2.0])

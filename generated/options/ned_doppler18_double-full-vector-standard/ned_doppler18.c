@@ -109,12 +109,12 @@ const unsigned char ned_doppler18_Phi_col[NED_DOPPLER18_N_PHI] = { 0, 1, 2, 3, 4
 #define NED_DOPPLER18_N_ACTIVE 112
 /* Halvings of T that discretize may take before it gives up (T / 2^64), and
    the relative accuracy of Phi against e^{F T} that chooses the doublings and the order
-   (modelgen.derive.discretization.taylor_plan; at least the unit roundoff). */
+   (modelgen.derivation.discretization.taylor_plan; at least the unit roundoff). */
 #define NED_DOPPLER18_MAX_DOUBLINGS 64
 /* The norm that chooses them is ||F||_D = max_i sum_j |F_ij| d_j / d_i with D = diag(2^e) fixed at
    generation time: Osborne's balancing of F at the model's check operating point
-   (modelgen.derive.discretization.nominal_scaling), e = { -2, -2, -1, 10, 11, 0, 40, -40, -40, -40,
-           -40, -40, -40, -40, -40, 0, 0, 0 }.
+   (modelgen.derivation.discretization.nominal_scaling), e = { -2, -2, -1, 10, 11, 0, 40, -40, -40,
+           -40, -40, -40, -40, -40, -40, 0, 0, 0 }.
    Any fixed D gives a valid bound; the Python module and the reference use the same D. */
 #define NED_DOPPLER18_TAYLOR_TOLERANCE 1e-12
 /* Rows of Phi that are exactly e_i (states with an empty row of F). */
@@ -362,8 +362,9 @@ int ned_doppler18_matrices_evaluate(const ned_doppler18_params *restrict params,
 #else
 #define NED_DOPPLER18_BLOCK static
 #endif
-/* ||F||_D = max_i sum_j |F_ij| d_j / d_i (modelgen/derive/discretization.py) with D = 2^e fixed at
-   generation time: Osborne's balancing of F at the model's check operating point (nominal_scaling;
+/* ||F||_D = max_i sum_j |F_ij| d_j / d_i (modelgen/derivation/discretization.py), D = 2^e fixed
+   at generation time: Osborne's balancing of F at the model's check operating point
+           (nominal_scaling;
    any D gives a valid bound, so one D serves every operating point); the sums in the reference's
    order (row by row), d_j / d_i an exact power of two. */
 static ned_doppler18_scalar balanced_norm(const ned_doppler18_matrices *restrict m)
@@ -428,7 +429,7 @@ static const ned_doppler18_scalar taylor_coefficient[10] = {
 };
 
 /* The doublings s and the order m summed for ||F||_D = norm and step T
-   (modelgen.derive.discretization.taylor_plan); ERR_NONFINITE beyond MAX_DOUBLINGS. */
+   (modelgen.derivation.discretization.taylor_plan); ERR_NONFINITE beyond MAX_DOUBLINGS. */
 static int taylor_plan(const ned_doppler18_scalar norm, const ned_doppler18_scalar T, int *halvings,
         int *order)
 {
@@ -2212,7 +2213,7 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
             overflows */
         return NED_DOPPLER18_ERR_NONFINITE;
     }
-    /* Scaling and squaring (modelgen/derive/discretization.py): the series over h = T / 2^s,
+    /* Scaling and squaring (modelgen/derivation/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
        S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds. */
     status = taylor_plan(balanced_norm(m), T, &halvings, &order);

@@ -15,7 +15,7 @@ from modelgen.codegen.description import FilterDescription
 from modelgen.codegen.escape import FILTERS
 from modelgen.codegen.kernels import OperationCount
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import DerivedModel, parameter_vector
+from modelgen.derivation.symbolic import DerivedModel, parameter_vector
 from modelgen.errors import ModelError
 
 

@@ -1,6 +1,6 @@
 """discretize as straight-line code that follows the structure of F, Phi, Gamma and Q_d.
 
-The Taylor series of modelgen.derive.discretization is summed by Horner's
+The Taylor series of modelgen.derivation.discretization is summed by Horner's
 rule over compressed storage, A = F h:
 
     R_m = I / (m+1)!,   R_k = I / (k+1)! + A R_(k+1),   S = R_0,   E = Phi - I = A S,

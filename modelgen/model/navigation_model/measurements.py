@@ -119,7 +119,7 @@ def _measurement_bias(
 ) -> sp.Matrix | None:
     """An aiding sensor's own error, one state per component (``bias: {process, symbols, names, ...}``).
 
-    E.g. the Doppler radar's velocity error of seed 000: measured = true + bias, so the
+    E.g. the Doppler radar's velocity error of the core paper: measured = true + bias, so the
     computed-minus-measured difference carries minus the bias; the states follow the
     sensor-error states.  ``process``: ``random_constant`` (b' = 0, the default),
     ``gauss_markov`` (b' = -rate b + w, ``rate`` and steady-state ``sigma``, one value or

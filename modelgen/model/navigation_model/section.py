@@ -34,7 +34,7 @@ ERROR_QUANTITIES = ("attitude", "velocity", "position")
 WRITABLE_EQUATIONS = ("velocity", "position")
 #: Sensor-error quantities: what each one is in the sensor model.
 SENSOR_ERROR_KINDS = ("gyro_bias", "gyro_scale_factor", "accel_bias", "accel_scale_factor", "receiver_clock")
-#: Sensor errors that may be declared more than once: the bias is then their sum (seed 000 eq. (2): gyro
+#: Sensor errors that may be declared more than once: the bias is then their sum (the core paper eq. (2): gyro
 #: drift = random constant + first-order Markov process).
 SUMMED_SENSOR_ERROR_KINDS = ("gyro_bias", "accel_bias")
 #: Processes of sensor-error states.

@@ -51,7 +51,7 @@ def simplify_entry(expr: sp.Expr) -> sp.Expr:
     """The one simplification pipeline: ``expand`` (sums of products; equal bases combine).
 
     Deterministic and fast (no heuristic ``simplify``): the same expression
-    gives the same text on every run, and what ``modelgen.derive.symbolic``
+    gives the same text on every run, and what ``modelgen.derivation.symbolic``
     does to every model's entries (``expand``) leaves it unchanged.
     """
     return sp.expand(expr) if expr != 0 else sp.S.Zero

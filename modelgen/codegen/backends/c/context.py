@@ -14,7 +14,7 @@ from modelgen.codegen.compact_discretize import CompactDiscretizeTables
 from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout, packed_index, phi_entries
 from modelgen.codegen.structure import FilterStructure
 from modelgen.codegen.van_loan import QD_MARGIN
-from modelgen.derive.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range
+from modelgen.derivation.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range
 from modelgen.errors import ModelError
 
 BANNER = "/* GENERATED FILE - DO NOT EDIT (modelgen) */"

@@ -8,7 +8,7 @@ from modelgen.codegen.backends.base import Scenario, Trajectory, named_parameter
 from modelgen.codegen.build import build_c_filter
 from modelgen.codegen.layout import ModelSizes
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
 
 

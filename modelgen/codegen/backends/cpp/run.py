@@ -25,7 +25,7 @@ from modelgen.codegen.backends.cpp.context import cpp_context
 from modelgen.codegen.build import compile_shared_library, cxx_compiler
 from modelgen.codegen.description import describe_filter
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
 
 HERE = Path(__file__).resolve().parent

@@ -10,7 +10,7 @@ from modelgen.codegen.backends.python.printer import parameter_locals
 from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.expressions import Block, eliminate_common_subexpressions, poles
 from modelgen.codegen.kernels import python_filter_predict_kernel, python_predict_kernel, python_predict_plan
-from modelgen.derive.discretization import DOUBLE_ROUNDOFF, nominal_scaling, series_range
+from modelgen.derivation.discretization import DOUBLE_ROUNDOFF, nominal_scaling, series_range
 
 BANNER = "# GENERATED FILE - DO NOT EDIT (modelgen)"
 

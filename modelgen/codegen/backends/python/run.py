@@ -7,7 +7,7 @@ from pathlib import Path
 from modelgen.codegen.backends.base import Scenario, Trajectory, named_parameters
 from modelgen.codegen.build import load_python_module
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derive.symbolic import DerivedModel
+from modelgen.derivation.symbolic import DerivedModel
 
 
 def python_run(folder: Path, derived: DerivedModel, scenario: Scenario, options: CodegenOptions,

@@ -1,9 +1,9 @@
 """North-East-Down <-> East-North-Up: mapping error states between the two.
 
-Seed 000's model (``ned_inertial16`` / ``ned_doppler18``) and seed 002's
+The core paper's model (``ned_inertial16`` / ``ned_doppler18``) and the Doppler error thesis's
 (``enu_doppler18``) describe the same physics in different axes.  A linear
 map T takes an NED error state to the ENU one, so that a covariance maps as
-P_enu = T P_ned T^T; ``tests/model/test_frames.py`` uses it to show that both
+P_enu = T P_ned T^T; ``tests/model/test_ned_enu.py`` uses it to show that both
 models propagate the same covariance on the states they share.
 
 The map, group by group (P = NED -> ENU component permutation, D -> -U):
@@ -14,7 +14,7 @@ The map, group by group (P = NED -> ENU component permutation, D -> -U):
 * sensor errors are in body axes; each model's attitude matrix C_b^n takes
   its own body axes to its own navigation axes, so body components map by
   B = C_enu^T P C_ned.  Accelerometer biases: nabla_enu = B nabla_ned.
-  Gyro drifts: seed 000 writes d(alpha)/dt = ... + C eps, the ENU model
+  Gyro drifts: the core paper writes d(alpha)/dt = ... + C eps, the ENU model
   (Qin's form, first principles with eps = measured - true rate) ... - C eps,
   so the two eps are opposite in sign: eps_enu = -B eps_ned.
 """

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import sympy as sp
 
-from modelgen.derive.symbolic import derive, is_identically_zero
+from modelgen.derivation.symbolic import derive, is_identically_zero
 from modelgen.model.loading import load_model
 
 HERE = Path(__file__).resolve().parent

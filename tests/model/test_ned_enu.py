@@ -1,10 +1,10 @@
-"""Seed 000 (NED) and seed 002 (ENU) describe the same physics: their covariances must agree.
+"""The core paper (NED) and the Doppler error thesis (ENU) describe the same physics: their covariances must agree.
 
 The NED pure-inertial model ``ned_inertial16`` and the ENU model
-``enu_doppler18`` are propagated open loop (seed 000, eq. (9)) over the
+``enu_doppler18`` are propagated open loop (the core paper, eq. (9)) over the
 paper's scenario (30 N, level flight east, 4 h, T = 60 s, Table 1 error
 budget: modelgen/data/scenario_000.yaml and error_budget_000.yaml).  With the
-state map T of modelgen.model.frames (N <-> E, D = -U, body-axis sensor errors
+state map T of modelgen.model.ned_enu (N <-> E, D = -U, body-axis sensor errors
 through the attitude matrices, opposite gyro-drift sign conventions), the
 ENU covariance must be T P_ned T^T on the shared states.
 
@@ -23,7 +23,7 @@ What can agree exactly, and what cannot:
   about an hour.  The NED model ignores the vertical channel, so these
   entries cannot agree.
 * Accelerometer bias model: the ENU model could take a random constant
-  instead of seed 000's Markov bias; the bias variances would still agree
+  instead of the core paper's Markov bias; the bias variances would still agree
   (the Markov process is stationary) but not the velocity/position entries.
 """
 
@@ -36,13 +36,13 @@ import pytest
 
 from modelgen.table2.budget import load_error_budget
 from modelgen.table2.scenario import load_analysis_scenario, operating_point, specific_force_ned
-from modelgen.derive.symbolic import derive
-from modelgen.derive.discretization import taylor_discretization, taylor_process_noise
-from modelgen.model.frames import NED_TO_ENU, body_axes_map, ned_to_enu_transformation
+from modelgen.derivation.symbolic import derive
+from modelgen.derivation.discretization import taylor_discretization, taylor_process_noise
+from modelgen.model.ned_enu import NED_TO_ENU, body_axes_map, ned_to_enu_transformation
 from modelgen.model.operating_point import level_attitude
 from modelgen.model.wgs84 import earth_radii
 from modelgen.model.loading import load_model
-from modelgen.derive.reference import predict_covariance
+from modelgen.derivation.reference import predict_covariance
 from modelgen.model.transform import keep_states
 
 VERTICAL = ("velocity_error_up", "height_error")
@@ -113,7 +113,7 @@ def enu_values(case, values_ned: dict[str, float], derived, radii: tuple[float, 
         "meridian_radius": r_m,
         "prime_vertical_radius": r_n,
         "gravity": scenario.gravity,
-        "gyro_angle_random_walk": 0.0,  # seed 000 has no gyro white noise
+        "gyro_angle_random_walk": 0.0,  # the core paper has no gyro white noise
     }
     values.update({f"c{i + 1}{j + 1}": c_enu[i, j] for i in range(3) for j in range(3)})
     B = body_axes_map(ned_attitude(values_ned), c_enu)
@@ -185,7 +185,7 @@ def test_enu_without_vertical_channel_propagates_the_same_covariance_as_ned(case
 
 
 def test_agreement_needs_the_opposite_gyro_drift_sign_conventions(case):
-    """Seed 000 writes +C eps, the ENU model -C eps: mapping eps without the sign breaks the cross terms."""
+    """The core paper writes +C eps, the ENU model -C eps: mapping eps without the sign breaks the cross terms."""
     mapped, enu, *_ = mapped_runs(case, gyro_sign_fix=False)
     assert normalized_difference(mapped[-1], enu[-1]) > 0.1
 

@@ -2,7 +2,7 @@
 
 Two methods, so that each checks the other:
 
-* the paper's truncated Taylor series (seed 000, eqs. (10)-(11)),
+* the paper's truncated Taylor series (the core paper, eqs. (10)-(11)),
   Phi = sum_{k=0..N} (F T)^k / k!,  Gamma = T sum_{k=0..N} (F T)^k / (k+1)! G,
   with the discrete noise covariance Gamma (Q/T) Gamma^T.  Dividing the
   continuous power spectral density Q by T turns it into the covariance of the
@@ -54,7 +54,7 @@ Psi converges faster still, and what remains is the rounding of s
 doublings (s = 1 at the paper's 60 s step, 11 at one day).  Measured
 against scipy's expm on the paper's model, the largest error of Phi is below
 1e-15 of its largest entry up to T = 600 s and below 1e-11 up to T = 1 day
-(tests/derive/test_discretization.py states 1e-13 and 1e-10).  The generated C and
+(tests/derivation/test_discretization.py states 1e-13 and 1e-10).  The generated C and
 Python compute the same D (given the same ``scaling``), norm and s, so the three agree.  s is capped at
 64 (||F||_D T up to about 2e18): beyond, e^{F T} is refused as not
 representable.
@@ -91,7 +91,7 @@ model with order 4 is 3.4e-12 off at that entry against 1.2e-15 in the
 balanced norm.  The rule therefore keeps one order of margin
 (CROSS_BLOCK_MARGIN): it asks 2^(s+1) e^theta rho_(m-1)(theta) <= tol,
 which bounds those entries too (measured against expm on every built-in
-model, tests/derive/test_discretization.py), the stated bound.  The same holds for Psi: its series is the integral of the
+model, tests/derivation/test_discretization.py), the stated bound.  The same holds for Psi: its series is the integral of the
 series of Phi, term by term smaller by 1/(k+1), and each doubling
 Psi(2h) = Psi(h) + Phi(h) Psi(h) carries Phi's relative error.  The plan
 (``taylor_plan``) takes the smallest s for which the highest generated order
@@ -113,7 +113,7 @@ import numpy as np
 
 from modelgen.errors import ModelError
 
-DEFAULT_TAYLOR_ORDER = 9  # seed 000, eq. (10): terms up to F^9 T^9 / 9!
+DEFAULT_TAYLOR_ORDER = 9  # the core paper, eq. (10): terms up to F^9 T^9 / 9!
 DEFAULT_TOLERANCE = 1e-12  # relative error of Phi against e^{F T} that the accuracy rule guarantees
 CROSS_BLOCK_MARGIN = 1  # orders kept beyond the balanced-norm bound, for entries that couple blocks of F (docstring)
 MAX_DOUBLINGS = 64  # T / 2^64: far below any step a navigation filter takes

@@ -4,7 +4,7 @@ The same :class:`~modelgen.model.declaration.ErrorModel` equations are rebuilt a
 ``SX`` expressions by walking the sympy expression tree node by node (no
 round trip through strings, so nothing depends on how either library prints),
 and F = df/dx, G = df/dw, H = dh/dx are taken with CasADi's own automatic
-differentiation.  Agreement with :func:`modelgen.derive.symbolic.derive` at random
+differentiation.  Agreement with :func:`modelgen.derivation.symbolic.derive` at random
 operating points is evidence that neither backend mis-derives a Jacobian.
 """
 
@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from modelgen.derive.symbolic import parameter_vector
+from modelgen.derivation.symbolic import parameter_vector
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel
 
@@ -131,7 +131,7 @@ class CasadiModel:
     def numeric(self, values: Mapping[str, float]) -> dict[str, np.ndarray]:
         """F, G, H as float arrays at the given parameter values.
 
-        Same convention as :meth:`modelgen.derive.symbolic.DerivedModel.numeric`:
+        Same convention as :meth:`modelgen.derivation.symbolic.DerivedModel.numeric`:
         ``values`` maps parameter names (or symbols) to numbers; parameters
         with a default may be omitted.
         """

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from modelgen.derive.casadi_functions import build_casadi_model, sympy_to_casadi
-from modelgen.derive.symbolic import derive
+from modelgen.derivation.casadi_functions import build_casadi_model, sympy_to_casadi
+from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ALLOWED_FUNCTIONS, ErrorModel, Parameter, State
 from modelgen.model.loading import builtin_models, load_model

@@ -1,7 +1,7 @@
 """Discretization is accurate for any finite T, in the reference, the generated Python and the generated C.
 
 The paper's 9th-order Taylor series alone is 64 % off at T = 3600 s for the
-paper's model; with scaling and squaring (modelgen.derive.discretization) Phi and
+paper's model; with scaling and squaring (modelgen.derivation.discretization) Phi and
 Gamma match scipy's expm (Phi = e^{F T}; Gamma = int_0^T e^{F s} ds G from
 the block exponential of [[F, G], [0, 0]] T) from T = 1 ms to one day, on the
 paper's model and on the 15-state INS/GPS model.  Stated bounds, relative to
@@ -17,9 +17,9 @@ import pytest
 import yaml
 from scipy.linalg import expm
 
-from modelgen.derive import reference
-from modelgen.derive.symbolic import derive
-from modelgen.derive.discretization import (
+from modelgen.derivation import reference
+from modelgen.derivation.symbolic import derive
+from modelgen.derivation.discretization import (
     _taylor_terms,
     balanced_norm,
     series_range,
@@ -166,7 +166,7 @@ def test_order_below_one_is_refused(level_matrices):
 
 
 def test_vectorized_sweep_exponents_equal_the_scalar_rule():
-    from modelgen.derive.discretization import sweep_exponents
+    from modelgen.derivation.discretization import sweep_exponents
 
     rng = np.random.default_rng(2)
     row = np.where(rng.random(200) < 0.2, 0.0, 10.0 ** rng.uniform(-30, 30, 200))
@@ -181,7 +181,7 @@ def test_vectorized_sweep_exponents_equal_the_scalar_rule():
 @pytest.mark.parametrize("order", [1, 2, 5, 9])
 def test_truncation_bound_bounds_the_remainder_of_the_exponential_series(theta, order):
     """rho_m(theta) >= e^theta - sum_{k<=m} theta^k / k!: the scalar series is the worst case of the norm bound."""
-    from modelgen.derive.discretization import truncation_bound
+    from modelgen.derivation.discretization import truncation_bound
 
     remainder = math.fsum(theta**k / math.factorial(k) for k in range(order + 1, order + 60))
     assert remainder <= truncation_bound(theta, order)
@@ -191,7 +191,7 @@ def test_truncation_bound_bounds_the_remainder_of_the_exponential_series(theta, 
 
 def test_accuracy_rule_sums_fewer_orders_for_short_steps_and_none_past_the_highest(level_matrices):
     """Paper's model: order 5 at T = 1 s, the full order 9 without doubling at T = 60 s, doublings beyond."""
-    from modelgen.derive.discretization import taylor_plan
+    from modelgen.derivation.discretization import taylor_plan
 
     norm = balanced_norm(level_matrices["F"])
     plans = {T: taylor_plan(norm, T, 9) for T in STEPS}
@@ -201,7 +201,7 @@ def test_accuracy_rule_sums_fewer_orders_for_short_steps_and_none_past_the_highe
 
 
 def test_a_tolerance_of_none_or_within_rounding_is_the_fixed_order(level_matrices):
-    from modelgen.derive.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, doublings, taylor_plan
+    from modelgen.derivation.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, doublings, taylor_plan
 
     norm = balanced_norm(level_matrices["F"])
     for T in STEPS:
@@ -217,7 +217,7 @@ BUILTIN = ["ned_doppler18", "ned_inertial16", "enu_doppler18", "ins_gps15", "gps
 @pytest.mark.parametrize("name", BUILTIN)
 def test_accuracy_rule_meets_its_tolerance_against_expm_on_every_builtin_model(name):
     """Phi and Gamma within 1e-12 of the largest exact entry from 10 ms to 10 minutes, with the order the rule picks."""
-    from modelgen.derive.discretization import DEFAULT_TOLERANCE
+    from modelgen.derivation.discretization import DEFAULT_TOLERANCE
     from modelgen.jobs import check_scenario
 
     derived = derive(load_model(name))
@@ -232,7 +232,7 @@ def test_accuracy_rule_meets_its_tolerance_against_expm_on_every_builtin_model(n
 def test_error_bound_is_infinite_not_an_overflow_far_beyond_the_series_reach():
     import math
 
-    from modelgen.derive.discretization import step_error_bound
+    from modelgen.derivation.discretization import step_error_bound
 
     assert step_error_bound(1.0e4, 9, 0) == math.inf  # e^10000 is not a float; the bound says "too far", no exception
     assert math.isfinite(step_error_bound(0.5, 9, 0))

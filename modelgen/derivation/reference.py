@@ -10,7 +10,7 @@ import numpy as np
 
 
 def predict_covariance(P: np.ndarray, phi: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    """P(k+1/k) = Phi P(k/k) Phi^T + Gamma Q Gamma^T (seed 000, eq. (12))."""
+    """P(k+1/k) = Phi P(k/k) Phi^T + Gamma Q Gamma^T (the core paper, eq. (12))."""
     return phi @ P @ phi.T + qd
 
 

@@ -18,7 +18,7 @@ import pytest
 import sympy as sp
 
 from modelgen.codegen.mechanization import c_source, python_source
-from modelgen.derive.mechanization_rates import mechanization_rates
+from modelgen.derivation.mechanization_rates import mechanization_rates
 from modelgen.fileio.datafiles import package_path
 from modelgen.model.loading import load_model
 from modelgen.model.mechanizations.local_level import Gravity, MeridianRadius, PrimeVerticalRadius

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from modelgen.derive.symbolic import derive, parameter_vector
+from modelgen.derivation.symbolic import derive, parameter_vector
 from modelgen.errors import ModelError
 from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State
 
