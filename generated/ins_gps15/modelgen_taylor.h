@@ -1,6 +1,6 @@
 /* modelgen C runtime: Osborne's balancing step and the Taylor series' error bound, for the scaling
- * and squaring of discretize (modelgen.derivation.discretization: the Python module and the reference
- * compute the same numbers in the same order).
+ * and squaring of discretize (modelgen.derivation.discretization: the Python module and the
+ * reference compute the same numbers in the same order).
  * From modelgen/codegen/backends/c/runtime/modelgen_taylor.h (copied verbatim).
  */
 #ifndef MODELGEN_TAYLOR_H
@@ -9,8 +9,9 @@
 #include "modelgen_ieee.h"
 #include "modelgen_scalar.h"
 
-/* One state's step of Osborne's balancing (modelgen.derivation.discretization.sweep_exponent): 2^k ~
-   sqrt(row / column) within [-8, 8], the exponent kept within [-40, 40]; 1 when it changed. */
+/* One state's step of Osborne's balancing (modelgen.derivation.discretization.sweep_exponent):
+   2^k ~ sqrt(row / column) within [-8, 8], the exponent kept within [-40, 40]; 1 when it
+   changed. */
 static inline int modelgen_balance_step(const MODELGEN_SCALAR row, const MODELGEN_SCALAR column,
                                         signed char *exponent)
 {

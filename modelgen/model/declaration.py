@@ -204,6 +204,18 @@ class ErrorModel:
     #: generated from the same equations (modelgen.derivation.mechanization_rates); None for a model written as equations.
     navigation: Any = field(default=None, compare=False)
 
+    def __getstate__(self) -> dict:
+        """Pickled without :attr:`navigation`: its measurement functions are closures (not picklable), and a
+        worker process (Monte Carlo, figures) needs the matrices, not the mechanization the navigator generates."""
+        state = dict(self.__dict__)
+        state["navigation"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        """Restore a pickled model (frozen: through object.__setattr__)."""
+        for key, value in state.items():
+            object.__setattr__(self, key, value)
+
     def __repr__(self) -> str:
         """One line (the default repr printed every equation: 11,769 characters for the paper's model)."""
         return (f"<ErrorModel {self.name!r}: {len(self.states)} states, {len(self.noises)} noises, "

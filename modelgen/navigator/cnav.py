@@ -195,7 +195,7 @@ def navigator_key(model_file: Path, rest_max: int) -> str:
     here = Path(__file__).resolve().parent
     sources += [here / "spec.py", here / "cconfig.py", here / "cconfig_fields.py", here / "cnav.py", here / "sensors.py"]  # they shape the rendered C
     codegen = backends.parent  # the mechanization rates' generator and their symbolic source
-    sources += [codegen / "mechanization.py", codegen.parent / "derive" / "mechanization_rates.py"]
+    sources += [codegen / "mechanization.py", codegen.parent / "derivation" / "mechanization_rates.py"]
     for template in sources:
         digest.update(template.name.encode() + template.read_bytes())
     digest.update(f"\nrest_max {int(rest_max)}\nflags {' '.join(STRICT_FLAGS)} -O2\n".encode())

@@ -16,7 +16,7 @@ from modelgen.derivation.symbolic import derive, parameter_vector
 from modelgen.derivation.discretization import DEFAULT_TOLERANCE, nominal_scaling, taylor_discretization, taylor_process_noise
 from modelgen.model.loading import load_model
 from tests.codegen.generated_support import build
-from tests.derive.test_discretization import MODELS, STEPS, bound, exact, relative_error
+from tests.derivation.test_discretization import MODELS, STEPS, bound, exact, relative_error
 
 import yaml
 
