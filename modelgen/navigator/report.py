@@ -479,7 +479,9 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
               "When the mean NEES at the outage ends is far above 2 the filter is overconfident: its horizontal "
               "covariance does not contain errors its model lacks or underrates (on the built-in drive the "
               "21-state model with gyro and accelerometer scale factors, replay_drive_0708_21.yaml, is about as "
-              "overconfident as the 15-state one: scale factors alone do not explain it).", "",
+              "overconfident as the 15-state one: scale factors alone do not explain it; stage 4's R x f for "
+              "the aiding updates' time correlation about halves the pooled mean NEES there, so the updates' "
+              "correlation does not explain all of it either).", "",
               "## Estimated biases (end of the drive, body axes)", "",
               f"gyro [deg/s]: {', '.join(f'{v:.4f}' for v in summary['final_gyro_bias_deg_s'])}; "
               f"accelerometer [mg]: {', '.join(f'{v:.2f}' for v in summary['final_accel_bias_mg'])}.", "",

@@ -66,7 +66,7 @@ def test_the_innovations_are_recorded_with_gnss_present_and_tune_sets_r_times_f(
     a tuned sigma is the old one x sqrt(f), a variance factor the old one x f, both from the rows' statistics."""
     config, inputs, spec = excerpt
     sources, flight = tuning.record_innovations(config, inputs, spec)
-    assert not flight.outages and len(sources["gnss"].time) == 240 - 60
+    assert not flight.outages and len(sources["gnss"].time) == len(flight.outputs) > 150  # one per epoch flown
     g = sources["gnss"]
     for nu, S, nis in zip(g.nu[:20], g.S[:20], g.nis[:20]):
         assert nis == pytest.approx(float(nu @ np.linalg.solve(S, nu)), rel=1e-9)
