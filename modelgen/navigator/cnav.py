@@ -143,6 +143,69 @@ class CNavigator:
         return function
 
 
+class GeneratedC:
+    """The generated C backward pass (``<model>_smooth``, ``<model>_smooth_refer``) in the compiled navigator library.
+
+    Every buffer is the caller's (numpy arrays here, the C allocates nothing): the record's arrays, the
+    outputs and the work area ``<model>_smooth_workspace``.
+    """
+
+    def __init__(self, navigator: CNavigator):
+        self.bind(navigator.lib, navigator.model, navigator.spec.n_states)
+
+    @classmethod
+    def of_library(cls, lib: ctypes.CDLL, model: str, n_states: int) -> "GeneratedC":
+        """The backward pass of any library with a generated double-precision filter of ``model`` in it."""
+        backward = cls.__new__(cls)
+        backward.bind(lib, model, n_states)
+        return backward
+
+    def bind(self, lib: ctypes.CDLL, model: str, n_states: int) -> None:
+        dp, lp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_long)
+        self.n = n_states
+        self.name = f"generated C ({model}_smooth)"
+        self._smooth = getattr(lib, f"{model}_smooth")
+        self._smooth.argtypes = [ctypes.c_long, dp, dp, dp, dp, lp, dp, dp, lp, ctypes.c_void_p]
+        self._smooth.restype = ctypes.c_int
+        self._refer = getattr(lib, f"{model}_smooth_refer")
+        self._refer.argtypes = [dp, dp, ctypes.c_long, dp]
+        self._refer.restype = ctypes.c_int
+        # the work area: factor, gain and difference (n x n each) and before (n), doubles
+        self._work = np.zeros(3 * self.n * self.n + self.n)
+
+    def smooth(self, arrays) -> tuple[np.ndarray, np.ndarray]:
+        steps = len(arrays.P_post)
+        n = self.n
+        Phi, P_prior, P_post = (np.ascontiguousarray(a, float) for a in (arrays.Phi, arrays.P_prior, arrays.P_post))
+        corrections = np.ascontiguousarray(arrays.corrections, float).reshape(-1, n)
+        if not len(corrections):
+            corrections = np.zeros((1, n))  # a pointer to something; no row is read
+        start = np.ascontiguousarray(arrays.start, dtype=ctypes.c_long)
+        s = np.zeros((steps, n))
+        Ps = np.zeros((steps, n, n))
+        failed = ctypes.c_long(-1)
+        status = self._smooth(steps, _pointer(Phi), _pointer(P_prior), _pointer(P_post), _pointer(corrections),
+                              _pointer(start, ctypes.c_long), _pointer(s), _pointer(Ps), ctypes.byref(failed),
+                              self._work.ctypes.data_as(ctypes.c_void_p))
+        if status != 0:
+            raise ModelError(f"smoother: the generated C backward pass refused the forward record at step "
+                             f"{failed.value} (status {status}: {SMOOTH_STATUS.get(status, 'unknown')})")
+        return s, Ps
+
+    def refer(self, s: np.ndarray, Ps: np.ndarray, corrections) -> tuple[np.ndarray, np.ndarray]:
+        s, Ps = np.array(s, float), np.array(Ps, float)
+        rows = np.ascontiguousarray(np.array(list(corrections), float).reshape(-1, self.n))
+        status = self._refer(_pointer(s), _pointer(Ps), len(rows), _pointer(rows))
+        if status != 0:
+            raise ModelError("smoother: the generated C backward pass made a non-finite smoothed error")
+        return s, Ps
+
+
+#: The generated filter's status codes as the backward pass returns them.
+SMOOTH_STATUS = {1: "non-finite input or result", 2: "a prior covariance is not positive definite",
+                 3: "a transition entry outside the pattern of Phi, or correction_start does not index the corrections"}
+
+
 def rest_define(model: str, rest_max: int) -> str:
     """The compiler flag that sizes the C's alignment ring."""
     return f"-D{model.upper()}_NAV_REST_MAX={int(rest_max)}"

@@ -10,7 +10,7 @@ from typing import Callable
 import numpy as np
 
 from modelgen.errors import ModelError
-from modelgen.navigator.cnav import cached_c_navigator, fly_c, rest_capacity
+from modelgen.navigator.cnav import GeneratedC, cached_c_navigator, fly_c, rest_capacity
 from modelgen.navigator.alignment import alignment_note
 from modelgen.navigator.config import NavigatorConfig, load_config
 from modelgen.navigator.errorstate import model_path
@@ -20,7 +20,7 @@ from modelgen.navigator.metrics import (errors_against_reference, pooled_consist
 from modelgen.navigator.navigator import Flight, fly, prepare
 from modelgen.navigator.spec import navigator_spec
 from modelgen.navigator.report import report_files
-from modelgen.navigator.smoother import ForwardRecord, smooth_flight, smoothing_summary
+from modelgen.navigator.smoother import ForwardRecord, GeneratedPython, smooth_flight, smoothing_summary
 from modelgen.fileio.output import write_atomically
 
 
@@ -168,9 +168,11 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     passes = None
     if smooth:
         mark = time.perf_counter()
-        passes = _smoothed_passes(config, inputs, flights.get("python"), spec, echo)
+        backward = GeneratedC(compiled) if "c" in flights else GeneratedPython(spec.module)
+        passes, backward_s = _smoothed_passes(config, inputs, flights.get("python"), spec, echo, backward)
+        timings["smooth_backward_s"] = backward_s
         result["smoothed"] = smoothing_summary(*passes, inputs.gnss, config.target_smoothed_outage_rms_m,
-                                               config.target_smoothed_outage_max_m)
+                                               config.target_smoothed_outage_max_m, backward.name, backward_s)
         timings["smooth_s"] = time.perf_counter() - mark
         echo(f"  smoothed (RTS over {result['smoothed']['steps']} steps): horizontal RMS over the outage epochs "
              f"{result['smoothed']['smoothed']['horizontal_error_outage_rms_m']:.3f} m (forward "
@@ -186,12 +188,20 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
 
 
 def _smoothed_passes(config: NavigatorConfig, inputs, recorded: Flight | None, spec,
-                     echo: Callable[[str], None]) -> tuple[Flight, Flight]:
-    """(forward, smoothed): the Python flight recorded for the smoother, flown now if it was not flown yet."""
+                     echo: Callable[[str], None], backward) -> tuple[tuple[Flight, Flight], float]:
+    """((forward, smoothed), seconds of the backward pass and the smoothed outputs).
+
+    The forward pass is the Python flight recorded for the smoother (flown now if it was not flown yet: the
+    C navigator keeps no transitions); the backward pass is the model's generated one, ``backward``
+    (the C's in the navigator library when the C flew, else the generated Python's).
+    """
     if recorded is None:
         echo("  flying the Python navigator for the smoother (the C navigator keeps no transitions)")
         recorded = fly(config, inputs, spec, record=ForwardRecord())
-    return recorded, smooth_flight(recorded)
+    echo(f"  backward pass: {backward.name}")
+    mark = time.perf_counter()
+    smoothed = smooth_flight(recorded, backward)
+    return (recorded, smoothed), time.perf_counter() - mark
 
 
 #: The built-in navigator model; a model without a navigation: section flies only if its states are this model's.

@@ -120,7 +120,7 @@ def smoother_context(description: FilterDescription) -> dict[str, object]:
     size = len(reset.states)
     return {"reset": {
         "states": repr(reset.states),
-        "index": index_expression(list(reset.states)),
+        "index": repr(list(reset.states)),
         "locals": [(str(symbol), index) for symbol, index in zip(reset.symbols, reset.states)],
         "entries": [(reset.states[a], reset.states[b], printer.doprint(reset.matrix[a, b]))
                     for a in range(size) for b in range(size)],
