@@ -43,8 +43,10 @@ backward pass runs on are those of the generated filter (its ``discretize`` and
 (:mod:`modelgen.codegen.smoother`): the generated Python module's ``smooth``
 and ``smooth_refer`` (:class:`GeneratedPython`) or the generated C's
 ``<model>_smooth`` and ``<model>_smooth_refer`` in the compiled navigator library
-(:class:`modelgen.navigator.cnav.GeneratedC`), on the record of the Python
-forward pass (the C navigator keeps no transitions).  The reset of a correction
+(:class:`modelgen.navigator.cnav.GeneratedC`), on the forward record of the
+navigator that flew: the Python's :class:`ForwardRecord`, or the C navigator's
+(``<model>_navigator_set_record``: caller-provided buffers sized from the log and
+the configuration, :func:`modelgen.navigator.cnav.fly_c` with ``record=True``).  The reset of a correction
 is the model's derived one (the identity for the phi-angle attitude the
 navigator flies, I + [dtheta x]/2 for a rotation vector).  A numpy version of
 the recursion is kept in the tests as the reference the generated code is held to.
@@ -211,23 +213,24 @@ def smoothed_nominals(record: ForwardRecord, backward,
     return result
 
 
-def smoothed_outputs(record: ForwardRecord, backward) -> np.ndarray:
+def smoothed_outputs(record: ForwardRecord, backward, steps: SmoothedSteps | None = None) -> np.ndarray:
     """The output rows of the smoothed trajectory (same epochs and columns as the forward outputs)."""
     rows = [snapshot.row(nav, sensors, P)
-            for snapshot, (nav, sensors, P) in zip(record.outputs, smoothed_nominals(record, backward))]
+            for snapshot, (nav, sensors, P) in zip(record.outputs, smoothed_nominals(record, backward, steps))]
     return np.array(rows, float)
 
 
-def smooth_flight(flight, backward):
+def smooth_flight(flight, backward, steps: SmoothedSteps | None = None):
     """The flight with its outputs replaced by the smoothed ones (a flight flown with a ``record``).
 
     ``backward``: the generated backward pass to run (:class:`GeneratedPython`, or the C's
-    :class:`modelgen.navigator.cnav.GeneratedC`).
+    :class:`modelgen.navigator.cnav.GeneratedC`); ``steps``: its result, if it was run already.
     """
     record = getattr(flight, "forward_record", None)
     if record is None or record.feedback is None:
-        raise ModelError("smoother: the flight was flown without its forward record (fly(..., record=ForwardRecord()))")
-    outputs = smoothed_outputs(record, backward)
+        raise ModelError("smoother: the flight was flown without its forward record (fly(..., record=ForwardRecord()) "
+                         "or fly_c(..., record=True))")
+    outputs = smoothed_outputs(record, backward, steps)
     if outputs.shape != flight.outputs.shape:
         raise ModelError("smoother: the forward record does not match the flight's outputs")
     return replace(flight, outputs=outputs, forward_record=None)
@@ -283,8 +286,9 @@ def smoothing_summary(forward, smoothed, reference, target_outage_rms_m: float |
     rms = numbers["smoothed"]["horizontal_error_outage_rms_m"]
     worst = max((o["smoothed_horizontal_error_max_m"] for o in per_outage), default=None)
     return {
-        "method": "fixed-interval Rauch-Tung-Striebel smoother in error-state form over the recorded Python forward "
-                  "pass (the generated filter's transitions and covariances; the model's generated backward pass)",
+        "method": "fixed-interval Rauch-Tung-Striebel smoother in error-state form over the reported navigator's "
+                  "recorded forward pass (the generated filter's transitions and covariances; the model's generated "
+                  "backward pass)",
         "backward_pass": backward_name,
         "backward_pass_s": backward_seconds,
         "steps": forward.forward_record.steps if getattr(forward, "forward_record", None) is not None else None,

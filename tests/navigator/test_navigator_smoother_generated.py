@@ -131,14 +131,15 @@ def _linear_system(derived, seed: int):
     return Phi, Q, H, np.diag(rng.uniform(0.1, 0.5, 4))
 
 
-def test_generated_python_and_c_equal_the_reference_on_a_recorded_forward_pass_of_the_drive_excerpt(tmp_path):
-    """The Python forward pass of the excerpt (ins_gps15_nav), recorded: generated Python and C within 1e-12."""
-    from modelgen.navigator.cnav import build_c_navigator
+@pytest.fixture(scope="module")
+def excerpt_records(tmp_path_factory):
+    """The excerpt (ins_gps15_nav) flown by the Python and the C navigator, each keeping its forward record."""
+    from modelgen.navigator.cnav import build_c_navigator, fly_c
     from modelgen.navigator.config import load_config
     from modelgen.navigator.errorstate import model_path
     from modelgen.navigator.logs import read_gnss, read_imu
     from modelgen.navigator.navigator import fly, prepare
-    from modelgen.navigator.smoother import ForwardRecord, backward_pass
+    from modelgen.navigator.smoother import ForwardRecord
     from modelgen.navigator.spec import navigator_spec
 
     config = load_config(DATA / "excerpt.yaml")
@@ -146,19 +147,70 @@ def test_generated_python_and_c_equal_the_reference_on_a_recorded_forward_pass_o
                      read_gnss(config.gnss_source))
     spec = navigator_spec(model_path(config.model, config.path))
     record = ForwardRecord()
-    fly(config, inputs, spec, record=record)
-    assert record.steps > 500 and sum(len(c) for c in record.corrections) > 50
-    reference = backward_pass(record, NumpyReference())
-    for backward in (GeneratedPython(spec.module), GeneratedC(build_c_navigator(spec, tmp_path))):
-        steps = backward_pass(record, backward)
-        scale = _scale(reference.covariance)
-        assert np.abs(steps.covariance - reference.covariance).max() / scale.max() <= 1e-12, backward.name
-        assert (np.abs(steps.covariance - reference.covariance) / scale).max() <= 1e-10, backward.name
-        sigma = np.sqrt(np.einsum("kii->ki", reference.covariance))
-        assert (np.abs(steps.error - reference.error) / sigma).max() <= 1e-10, backward.name
-        assert np.abs(steps.error - reference.error).max() <= 1e-12 * np.abs(reference.error).max(), backward.name
-    # the smoother moved something: not a pass that returns its input
-    assert np.abs(reference.error).max() > 0 and np.trace(reference.covariance[0]) < np.trace(record.posteriors[0])
+    python_flight = fly(config, inputs, spec, record=record)
+    navigator = build_c_navigator(spec, tmp_path_factory.mktemp("excerpt_c"))
+    c_flight, _ = fly_c(config, inputs, navigator, record=True)
+    return {"config": config, "inputs": inputs, "spec": spec, "navigator": navigator, "python": python_flight,
+            "c": c_flight}
+
+
+def test_generated_python_and_c_equal_the_reference_on_a_recorded_forward_pass_of_the_drive_excerpt(excerpt_records):
+    """The excerpt's forward records (the Python's and the C's): generated Python and C within 1e-12 of the reference."""
+    from modelgen.navigator.smoother import backward_pass
+
+    spec, navigator = excerpt_records["spec"], excerpt_records["navigator"]
+    for flown in ("python", "c"):
+        record = excerpt_records[flown].forward_record
+        assert record.steps > 500 and sum(len(c) for c in record.corrections) > 50
+        reference = backward_pass(record, NumpyReference())
+        for backward in (GeneratedPython(spec.module), GeneratedC(navigator)):
+            steps = backward_pass(record, backward)
+            scale = _scale(reference.covariance)
+            assert np.abs(steps.covariance - reference.covariance).max() / scale.max() <= 1e-12, (flown, backward.name)
+            assert (np.abs(steps.covariance - reference.covariance) / scale).max() <= 1e-10, (flown, backward.name)
+            sigma = np.sqrt(np.einsum("kii->ki", reference.covariance))
+            assert (np.abs(steps.error - reference.error) / sigma).max() <= 1e-10, (flown, backward.name)
+            assert np.abs(steps.error - reference.error).max() <= 1e-12 * np.abs(reference.error).max(), \
+                (flown, backward.name)
+        # the smoother moved something: not a pass that returns its input
+        assert np.abs(reference.error).max() > 0 and np.trace(reference.covariance[0]) < np.trace(record.posteriors[0])
+
+
+def test_the_c_navigator_records_the_forward_pass_the_python_records(excerpt_records):
+    """The C's own record (caller-provided buffers) holds the Python's steps, corrections and outputs."""
+    python, c = excerpt_records["python"].forward_record, excerpt_records["c"].forward_record
+    a, b = record_arrays(python), record_arrays(c)
+    np.testing.assert_array_equal(a.start, b.start)
+    assert [(o.step, o.corrections_before) for o in python.outputs] == [(o.step, o.corrections_before) for o in c.outputs]
+    assert np.abs(a.Phi - b.Phi).max() <= 1e-12
+    assert (np.abs(a.P_post - b.P_post) / _scale(a.P_post).clip(1e-300)).max() <= 1e-9
+    assert (np.abs(a.P_prior - b.P_prior) / _scale(a.P_prior).clip(1e-300)).max() <= 1e-9
+    assert np.abs(a.corrections - b.corrections).max() <= 1e-9 * np.abs(a.corrections).max()
+    assert max(np.abs(x.nav - y.nav).max() for x, y in zip(python.outputs, c.outputs)) <= 1e-9
+    # the smoothed trajectories from either record agree (same epochs, antenna positions within a micrometre)
+    from modelgen.navigator.replay import max_position_difference
+    from modelgen.navigator.smoother import smooth_flight
+
+    spec = excerpt_records["spec"]
+    smoothed_c = smooth_flight(excerpt_records["c"], GeneratedC(excerpt_records["navigator"]))
+    smoothed_python = smooth_flight(excerpt_records["python"], GeneratedPython(spec.module))
+    assert max_position_difference(smoothed_c, smoothed_python) <= 1e-6
+
+
+def test_a_c_record_too_small_for_the_log_stops_the_flight(excerpt_records, monkeypatch):
+    from modelgen.errors import ModelError
+    from modelgen.navigator import cnav
+
+    sized = cnav.RecordBuffers.sized
+
+    def small(arrays, n, table=cnav.SENSORS):
+        full = sized(arrays, n, table)
+        return cnav.RecordBuffers(full.Phi[:100], full.P_prior[:100], full.P_post[:100], full.correction_start[:101],
+                                  full.corrections, full.nominal, full.output_step, full.output_corrections_before)
+
+    monkeypatch.setattr(cnav.RecordBuffers, "sized", staticmethod(small))
+    with pytest.raises(ModelError, match="forward record was full"):
+        cnav.fly_c(excerpt_records["config"], excerpt_records["inputs"], excerpt_records["navigator"], record=True)
 
 
 def test_smoothing_through_resets_equals_the_textbook_rts_of_the_same_pass_without_resets(phi_model):
