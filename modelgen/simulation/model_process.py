@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import signal
 import sys
 import threading
 import traceback
@@ -105,6 +106,7 @@ class ModelProcess:
         if pid == 0:  # the copy: prepare, answer, leave without running this process's exit handlers
             status = 1
             try:
+                signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's to handle
                 here.close()
                 try:
                     answer: tuple = ("prepared", prepare_model(profile, implementation, runs))
