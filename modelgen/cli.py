@@ -169,11 +169,13 @@ def derive(model: str, fmt: str, out_file: str | None, force: bool) -> None:
     together); --format exports them for LaTeX, Octave/MATLAB, CasADi or JSON.
     """
     from modelgen.errors import ModelError
-    from modelgen.fileio.output import write_text_atomically
+    from modelgen.fileio.output import refuse_non_regular, write_text_atomically
     from modelgen.jobs import derived_export
 
     if fmt == "casadi" and out_file is None:
         raise ModelError("--format casadi writes a file: give --out FILE (e.g. --out model.casadi)")
+    if out_file is not None:
+        refuse_non_regular(Path(out_file))  # before the derivation: a device or pipe is never replaced
     if out_file is not None and Path(out_file).exists() and not force:
         raise ModelError(f"{out_file}: already exists and modelgen does not overwrite a file unasked: "
                          f"give another --out, or --force to replace it")
