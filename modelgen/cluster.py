@@ -123,7 +123,7 @@ def forget_cached(key: Any) -> None:
     _CACHE.pop(key, None)
 
 
-#: Local worker processes per core at most (issue 28: --workers 100000 tried to start them all).  Each is a Python
+#: Local worker processes per core at most (--workers 100000 would try to start them all).  Each is a Python
 #: process with numpy, sympy and numba (about 300 MB); beyond a few per core they only wait for the cores.
 MAX_WORKERS_PER_CORE = 4
 #: ... and never fewer than this many allowed, whatever the core count.
@@ -202,7 +202,7 @@ def _workers_ignore_interrupts() -> Iterator[None]:
     """SIGINT ignored while the local cluster's worker processes are spawned: they inherit it.
 
     Ctrl-C reaches every process of the terminal's process group: each
-    worker then printed its own KeyboardInterrupt traceback (issue 28) while
+    worker would print its own KeyboardInterrupt traceback while
     this process, which handles the interrupt (exit 130, one line), closes
     the cluster and so ends them.  Only SIG_IGN survives the exec of a
     spawned worker (a handler of this process would not), so a Ctrl-C in

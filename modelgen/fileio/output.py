@@ -421,7 +421,7 @@ def write_atomically(folder: Path, files: Mapping[str, str], force: bool = False
 
 
 def refuse_non_regular(path: Path) -> None:
-    """Refuse to replace ``path`` when it exists and is not a regular file (issue 28: a device node was replaced).
+    """Refuse to replace ``path`` when it exists and is not a regular file (never a device node).
 
     A rename over a device (``/dev/full``), a named pipe or a socket would
     put a regular file in its place; a symbolic link is refused too (the

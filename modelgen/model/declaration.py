@@ -429,8 +429,8 @@ def _check_not_negative(statistic: sp.Expr, where: str, defaults: Mapping[sp.Sym
     without being zero (``-sigma**2``): it is negative for every nonzero
     sigma, which is always a sign error; and an expression of parameters
     that all have defaults which is negative, or not a real number, at those
-    defaults (``-2*mu*sigma**2``, ``-g``, ``sqrt(-g)``; issue 28: only
-    ``generate --check`` caught them, and named no file).
+    defaults (``-2*mu*sigma**2``, ``-g``, ``sqrt(-g)``: otherwise only
+    ``generate --check`` would catch them, naming no file).
     """
     if statistic.is_negative or (statistic.is_nonpositive and statistic.is_zero is not True):
         raise ModelError(f"{where}: {statistic} is negative (a variance or spectral density must be >= 0)")

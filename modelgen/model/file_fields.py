@@ -43,7 +43,7 @@ def scalar_text(value: Any, place: str, key: str) -> str:
 
 
 #: A number written as text: a plain decimal with an optional exponent, or inf/nan (refused later as not finite).
-#: Python's float() also reads '1_000' and surrounding white space: lax forms a model file may not use (issue 28).
+#: Python's float() also reads '1_000' and surrounding white space: lax forms a model file may not use.
 _NUMBER_TEXT = re.compile(r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|inf|infinity|nan)", re.IGNORECASE)
 
 

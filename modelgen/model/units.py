@@ -59,7 +59,7 @@ def _finite_number(value: Any, where: str) -> float:
     """A YAML number, or text that is a plain decimal (``'1.5e-3'``), as a finite float.
 
     ``float()`` alone also reads ``True``, ``'1_000'`` and text padded with
-    white space: lax forms a file may not use (issue 28).
+    white space: lax forms a file may not use.
     """
     if isinstance(value, bool) or not (isinstance(value, numbers.Real) or is_number(value)):
         raise ModelError(f"{where}: {value!r} is not a number")

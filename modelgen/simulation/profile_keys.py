@@ -26,7 +26,7 @@ KMH = 1000.0 / 3600.0
 DPH = DEG / HOUR  # deg/h -> rad/s
 
 
-#: Bounds of a flight (issue 28: an hours or IMU rate without bound ran out of memory or for hours).  The longest
+#: Bounds of a flight (an hours or IMU rate without bound would run out of memory, or for days).  The longest
 #: flight is 10 days; 10 kHz is five times the fastest tactical IMUs' 2 kHz; the samples of a flight are at most
 #: those of 10 days at 300 Hz (the core paper's rate): the truth, the IMU and the strapdown are flown per sample.
 MAX_FLIGHT_HOURS = 240.0

@@ -107,8 +107,8 @@ def read_sensor_errors(read: SectionReader, section: Mapping, frame: str, decl: 
 
 
 def _declare_once(read: SectionReader, key: str, declared: dict[str, str], idents: Sequence[str]) -> None:
-    """Refuse, at the entry itself, a name or symbol an earlier sensor error declared (issue 28: a list of 1000
-    repeats was read, derived and then refused after 300 s)."""
+    """Refuse, at the entry itself, a name or symbol an earlier sensor error declared (a list of 1000
+    repeats is not read and derived for minutes before it is refused)."""
     for ident in idents:
         if ident in declared:
             raise ModelError(f"{read.at(key)}: {ident!r} is declared twice ({declared[ident]} and {key}); give this "
