@@ -49,6 +49,7 @@ _REEXPORTED = {
     "write_verification_report": "modelgen.checks.paper_check",
     "differences_summary": "modelgen.checks.paper_equations",
     "write_paper_equations_report": "modelgen.checks.paper_equations",
+    "check_worker_count": "modelgen.cluster",
 }
 
 

@@ -72,8 +72,8 @@ class FigureProcess:
                 here.close()
                 _serve_figures(there)
                 status = 0
-            except BaseException:
-                traceback.print_exc()
+            except BaseException:  # noqa: S110 - silent: the batch is then drawn here (paths), which raises the error
+                pass
             finally:
                 os._exit(status)
         there.close()
@@ -234,7 +234,7 @@ def draw_figures(drawings: list[tuple[Callable[..., Path], tuple]], apart: int) 
     copy fail, the figure is drawn again here, so that its error is raised.
     """
     if not hasattr(os, "fork") or threading.active_count() > 1 or len(drawings) < 2:
-        return [function(*args) for function, args in drawings]
+        return [_draw(function, args) for function, args in drawings]
     sys.stdout.flush()
     sys.stderr.flush()
     pid = os.fork()
@@ -244,15 +244,25 @@ def draw_figures(drawings: list[tuple[Callable[..., Path], tuple]], apart: int) 
             function, args = drawings[apart]
             function(*args)
             status = 0
-        except BaseException:
-            traceback.print_exc()
+        except BaseException:  # noqa: S110 - silent: the figure is drawn again here, which raises the error
+            pass
         finally:
             os._exit(status)
     try:
-        paths = [function(*args) for index, (function, args) in enumerate(drawings) if index != apart]
+        paths = [_draw(function, args) for index, (function, args) in enumerate(drawings) if index != apart]
     finally:
         _, status = os.waitpid(pid, 0)
     function, args = drawings[apart]
-    path = args[-1] if os.waitstatus_to_exitcode(status) == 0 else function(*args)
+    path = args[-1] if os.waitstatus_to_exitcode(status) == 0 else _draw(function, args)
     paths.insert(apart, Path(path))
     return paths
+
+
+def _draw(function: Callable[..., Path], args: tuple) -> Path:
+    """``function(*args)``; an OSError that names no file (a full disk while the PNG is written) names its path."""
+    try:
+        return function(*args)
+    except OSError as exc:
+        if exc.filename is None and args:
+            raise OSError(exc.errno, exc.strerror or str(exc), str(args[-1])) from exc
+        raise
