@@ -167,23 +167,30 @@ class NavigatorSpec:
 
         The receiver's sigmas are per NED axis: the rows z' = T z, H' = T H (T = C_e^n per kind, row by row of the
         model's rows) have the diagonal R of those sigmas, the same update as the e-frame rows with
-        R^e = C_n^e R C_e^n.  Row i of T is the m-th row of its kind in the model's order, along NED axis m.
+        R^e = C_n^e R C_e^n.  Row i of T is the m-th row of its kind in the model's order, along NED axis m
+        (:meth:`gnss_rotation_rows`).
         """
+        along = self.gnss_rotation_rows()
         m = len(self.gnss_rows)
         T = np.zeros((m, m))
+        for i, (axis, _) in enumerate(along):
+            for j, other in enumerate(self.gnss_rows):
+                if other.kind == self.gnss_rows[i].kind:
+                    T[i, j] = c_ne[other.axis, axis] * other.sign
+        return T, [sigma for _, sigma in along]
+
+    def gnss_rotation_rows(self) -> list[tuple[int, int]]:
+        """(NED axis, sigma index) of each turned GNSS row (:meth:`gnss_rotation`); the C's tables come from it."""
         order: dict[str, int] = {}
-        sigma = []
-        for i, row in enumerate(self.gnss_rows):
+        out = []
+        for row in self.gnss_rows:
             axis = order.get(row.kind, 0)
             order[row.kind] = axis + 1
-            sigma.append(axis + (3 if row.kind == "position" else 0))
-            for j, other in enumerate(self.gnss_rows):
-                if other.kind == row.kind:
-                    T[i, j] = c_ne[other.axis, axis] * other.sign
+            out.append((axis, axis + (3 if row.kind == "position" else 0)))
         if any(count != 3 for count in order.values()):
             raise ModelError(f"{self.model_file}: the ecef model's GNSS rows must be whole e-frame vectors "
                              "(three position and/or three velocity rows)")
-        return T, sigma
+        return out
 
     def check_config(self, config) -> None:
         """Refuse a configuration that lacks what this model needs (scale-factor sigmas, free parameters)."""
