@@ -448,8 +448,8 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
     expressions = {p: QUANTITIES[p] for p in parameter_names if p in QUANTITIES and p not in defaults}
     free = tuple(p for p in parameter_names if p not in expressions)
     rates = _rates(model, where)
-    if frame == "ECEF" and blocks["position"].form != "metres":
-        raise ModelError(f"{where}: an ecef model's position error must be e-frame metres (position_error_x/y/z)")
+    if frame == "ECEF":
+        _check_ecef(model_file, blocks, rows)
     spec = NavigatorSpec(model_file, derived, model.name, frame, len(names), blocks, rows, parameter_names,
                          expressions, free, defaults, rates_python=python_source(rates), rates_c=c_source(rates))
     if with_python:
@@ -466,6 +466,29 @@ def _rates(model, where: str):
         return mechanization_rates(model)
     except ModelError as exc:
         raise ModelError(f"{where}: {exc}") from None
+
+
+def _check_ecef(model_file: Path, blocks: dict[str, Block], rows: tuple[GnssRow, ...]) -> None:
+    """What the navigator needs of an ecef model, refused at the line of the model file that lacks it.
+
+    It flies r^e, so the position error must be e-frame metres; its GNSS update turns the e-frame rows along NED
+    (:meth:`NavigatorSpec.gnss_rotation`), so the measurements must be whole e-frame vectors: three position and/or
+    three velocity rows, and at least one of them.
+    """
+    from modelgen.fileio.datafiles import read_yaml_with_lines
+
+    _, lines = read_yaml_with_lines(model_file, "model file")
+    here = lines.get("navigation", str(model_file))
+    if blocks["position"].form != "metres":
+        where = lines.get("navigation.errors.position", here)
+        raise ModelError(f"{where}: an ecef model's position error must be e-frame metres (form: metres, states "
+                         "position_error_x/y/z): the navigator flies r^e")
+    counts = {kind: sum(r.kind == kind for r in rows) for kind in ("position", "velocity")}
+    if not rows or any(c not in (0, 3) for c in counts.values()):
+        where = lines.get("navigation.measurements", here)
+        raise ModelError(f"{where}: the navigator's GNSS update of an ecef model needs its measurements as whole "
+                         "e-frame vectors: three position and/or three velocity rows, INS minus GNSS (this model: "
+                         f"{counts['position']} position, {counts['velocity']} velocity)")
 
 
 def _check_forms(model_file: Path) -> None:
