@@ -83,8 +83,20 @@ def template_context(spec: NavigatorSpec) -> dict:
             "gnss_rows": [{"kind": r.kind, "axis": r.axis, "sign": _literal(r.sign), "sigma_index": r.sigma_index}
                           for r in spec.gnss_rows],
             "frame": [[_literal(v) for v in row] for row in spec.to_frame], "frame_name": spec.frame,
+            "ecef": spec.ecef, "gnss_rotation": _gnss_rotation(spec),
             "rows_max": max(6, len(spec.gnss_rows)), "n_free": len(free), "free_names": ", ".join(free) or "none",
             "config_struct": cconfig.c_struct(spec.name, len(free)), "mechanization_rates": spec.rates_c}
+
+
+def _gnss_rotation(spec: NavigatorSpec) -> dict | None:
+    """The C's tables of NavigatorSpec.gnss_rotation (an ecef model): per GNSS row its kind (0 velocity, 1 position),
+    e-frame axis, sign, the NED axis it is turned along and its sigma index."""
+    if not spec.ecef:
+        return None
+    along = spec.gnss_rotation_rows()
+    return {"kind": [int(r.kind == "position") for r in spec.gnss_rows], "axis": [r.axis for r in spec.gnss_rows],
+            "sign": [_literal(r.sign) for r in spec.gnss_rows], "ned": [a for a, _ in along],
+            "sigma": [s for _, s in along]}
 
 
 def aiding_context(table=SENSORS) -> dict:
@@ -257,7 +269,8 @@ def navigator_key(model_file: Path, rest_max: int) -> str:
     backends = Path(__file__).resolve().parent.parent / "codegen" / "backends"  # the filter's templates and printer
     sources = sorted(Path(template_folder()).glob("*.j2")) + sorted(backends.rglob("*.j2")) + sorted(backends.rglob("*.py"))
     here = Path(__file__).resolve().parent
-    sources += [here / "spec.py", here / "cconfig.py", here / "cconfig_fields.py", here / "cnav.py", here / "sensors.py"]  # they shape the rendered C
+    sources += [here / "spec.py", here / "cconfig.py", here / "cconfig_fields.py", here / "cnav.py", here / "sensors.py",
+                here / "ecef.py"]  # they shape the rendered C
     codegen = backends.parent  # the mechanization rates' generator and their symbolic source
     sources += [codegen / "mechanization.py", codegen.parent / "derivation" / "mechanization_rates.py"]
     for template in sources:
