@@ -195,7 +195,8 @@ def test_a_full_disk_gives_one_line_exit_2_and_nothing_half_written(runner, tmp_
     monkeypatch.setattr(output, "_write_text", full)
     result = runner.invoke(main, ["generate", str(_toy(tmp_path, "0.25")), "--out", str(out)])
     assert result.exit_code == 2
-    assert f"modelgen: error: {written[-1]}: No space left on device" in result.output
+    # the file the user asked for, not its copy in the staging folder (issue 28)
+    assert f"modelgen: error: {out / 'toy_loop' / written[-1].name}: No space left on device" in result.output
     assert "Traceback" not in result.output
     assert _snapshot(out / "toy_loop") == before and _hidden(out) == []
 
@@ -306,10 +307,19 @@ def test_concurrent_generates_into_one_folder_all_succeed_and_leave_it_whole(tmp
 
 @pytest.mark.compile
 def test_sigint_during_generate_exits_130_and_leaves_nothing_half_written(tmp_path):
+    """SIGINT while the new output is being written or checked: exit 130, the old output whole, no staging left.
+
+    Each interrupt is sent at a known point of the run, not after a fixed sleep (which, on a loaded machine,
+    lands while the interpreter is still starting): once the run's staging folder beside the output exists
+    (modelgen.fileio.output: the files are being written, then compiled and checked there), and then later
+    by 0.25 to 2 s, while the check runs or after the new output was committed.
+    """
     import signal
     import subprocess
     import sys
     import time
+
+    from modelgen.fileio.output import STAGING_INFIX
 
     model, out = _toy(tmp_path), tmp_path / "out"
     subprocess.run([sys.executable, "-m", "modelgen", "generate", str(model), "--out", str(out)], check=True,
@@ -317,10 +327,15 @@ def test_sigint_during_generate_exits_130_and_leaves_nothing_half_written(tmp_pa
     before = _snapshot(out / "toy_loop")
     (out / "toy_loop" / "main.c").write_text("int main(void) { return 0; }\n")
     codes = []
-    for delay in (0.5, 1.0, 1.5, 2.0):
+    for after_staging in (0.0, 0.25, 0.75, 2.0):
         proc = subprocess.Popen([sys.executable, "-m", "modelgen", "generate", str(_toy(tmp_path, "0.25")), "--out", str(out), "--check"],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        time.sleep(delay)
+        deadline = time.monotonic() + 120
+        while not any(STAGING_INFIX in p.name for p in out.iterdir()):  # the readiness signal: the run is writing
+            assert proc.poll() is None, f"exited {proc.returncode} before staging its output: {proc.stdout.read()}"
+            assert time.monotonic() < deadline, "no staging folder within 120 s"
+            time.sleep(0.005)
+        time.sleep(after_staging)
         proc.send_signal(signal.SIGINT)
         code, text = proc.wait(120), proc.stdout.read()
         # 130: interrupted, nothing written; 0 or death by SIGINT: the signal came after the output was complete
@@ -334,7 +349,8 @@ def test_sigint_during_generate_exits_130_and_leaves_nothing_half_written(tmp_pa
         del after["main.c"]
         assert after.keys() == before.keys()  # the old or the new output, whole
         assert _hidden(out) == []
-    assert 130 in codes  # at least one run was really interrupted mid-way
+    # the interrupt sent as soon as the staging folder appeared came mid-way (the compile and check take seconds)
+    assert codes[0] == 130, codes
 
 
 def test_observability_without_scenario_uses_the_models_check_scenario(runner):
@@ -343,3 +359,17 @@ def test_observability_without_scenario_uses_the_models_check_scenario(runner):
     assert result.exit_code == 0, result.output
     assert "scenario: the model's check scenario (steps of 1 s)" in result.output
     assert "rank of the observability matrix: 19 of 21" in result.output  # level, unaccelerated: tilt ~ accel bias
+
+
+@pytest.mark.parametrize("force", [[], ["--force"]])
+def test_derive_out_onto_a_named_pipe_is_refused_and_the_pipe_kept(runner, tmp_path, force):
+    """Issue 28: ``derive --out /dev/full --force`` (as root) replaced the device node with a regular file."""
+    import os
+
+    pipe = tmp_path / "pipe"
+    os.mkfifo(pipe)
+    result = runner.invoke(main, ["derive", "ned_doppler18", "--format", "json", "--out", str(pipe), *force])
+    assert result.exit_code == 2
+    assert result.output.strip() == (f"modelgen: error: {pipe}: is a named pipe, and modelgen replaces only regular "
+                                     "files (even with --force): move it away or give another --out")
+    assert pipe.is_fifo() and sorted(p.name for p in tmp_path.iterdir()) == ["pipe"]

@@ -260,7 +260,7 @@ def targets(summary: dict, timings: dict[str, float]) -> list[dict]:
     filter's value on the drive) and ``met`` (True, False, or None for a row that only informs).
 
     The end-of-outage RMS of each schedule and the pooled consistency are targets when the configuration states
-    them (``evaluation``: issue 26's for the built-in drive); the rest are issue 13's.
+    them (``evaluation``: the built-in drive's configuration states them); the rest are the navigator's own.
     """
     outside = summary["horizontal_rms_outside_outages_m"]
     difference = summary.get("c_python_max_difference_m")
@@ -333,10 +333,11 @@ def _smoothed_lines(summary: dict) -> list[str]:
     f, s = sm["forward"], sm["smoothed"]
     lines = ["## Smoothed (replay --smooth)", "",
              "A fixed-interval Rauch-Tung-Striebel smoother run backward over the recorded forward pass of the "
-             "Python navigator (the generated filter's transitions and covariances; the error-state resets of the "
-             "closed loop referred back step by step; the backward recursion itself is numpy/scipy, not generated). "
+             "reported navigator (the generated filter's transitions and covariances; the error-state resets of the "
+             "closed loop referred back step by step with the model's reset Jacobian), by the model's generated "
+             f"backward pass ({sm.get('backward_pass') or 'generated'}). "
              "Post-processing: each smoothed epoch uses GNSS from before and after it. The forward columns are that "
-             "Python forward pass, errors measured the same way. Files: `smoothed.pos`, `smoothed.csv`, `smoothed.svg`.", "",
+             "forward pass, errors measured the same way. Files: `smoothed.pos`, `smoothed.csv`, `smoothed.svg`.", "",
              "![smoothed](smoothed.svg)", "",
              "| # | start_s | duration_s | forward end_m | smoothed end_m | forward max_m | smoothed max_m | "
              "forward sigma_h end_m | smoothed sigma_h end_m |", "|---|---|---|---|---|---|---|---|---|"]
@@ -435,7 +436,7 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
                      f"{_fmt(r['nees_horizontal_end'], 1)} | {'yes' if r['inside_95'] else 'no'} | {_fmt(r['drift_5s_m'])} | {_fmt(r['drift_10s_m'])} | "
                      f"{_fmt(r['drift_15s_m'])} |")
     lines += [""] + _consistency_lines(summary) + _smoothed_lines(summary)
-    lines += ["## Targets (issues 13 and 26)", "",
+    lines += ["## Targets", "",
               "| quantity | reached | target | anchor (published 15-state filter) | |",
               "|---|---|---|---|---|"]
     for row in targets(summary, timings):
