@@ -176,6 +176,8 @@ def correlation(arguments: list[str]) -> None:
         same = math.isclose(held, t["after"], rel_tol=0.01)
         print(f"  {shipped.path}: {t['key']} = {held:.4g} ({'the value above' if same else 'NOT the value above'})")
     if out_json:
+        # the configuration named as the package names it, so the committed result does not hold this machine's path
+        result = {**result, "configuration": Path(str(result["configuration"])).name}
         Path(out_json).write_text(json.dumps(result, indent=2) + "\n")
         print(f"written {out_json}")
 

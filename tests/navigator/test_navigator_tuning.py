@@ -103,3 +103,31 @@ def test_the_gnss_variance_factors_reach_r_in_python_and_in_c_alike(excerpt):
     c_flight, _ = fly_c(changed, inputs, navigator)
     assert max_position_difference(c_flight, python) <= 1e-3
     assert max_position_difference(c_flight, fly_c(config, inputs, navigator)[0]) > 1e-3
+
+
+STAGE4_RESULTS = Path(__file__).parents[2] / "bench" / "results"
+CONFIG_FIELDS = {"gnss.position_variance_factor": "gnss_position_variance_factor",
+                 "gnss.velocity_variance_factor": "gnss_velocity_variance_factor",
+                 "nhc.sigma_lateral_m_s": "nhc_sigma_lateral", "nhc.sigma_vertical_m_s": "nhc_sigma_vertical",
+                 "zupt.sigma_m_s": "zupt_sigma"}
+
+
+@pytest.mark.parametrize("config_name, result_name", [
+    ("replay_drive_0708.yaml", "navigator_tuning_stage4_15.json"),
+    ("replay_drive_0708_21.yaml", "navigator_tuning_stage4_21.json")])
+def test_the_shipped_configurations_hold_the_numbers_stage_4_measured(config_name, result_name):
+    """Every key stage 4 tuned (bench/navigator_tuning.py --correlation --json, its result committed in
+    bench/results) holds that measured value in the shipped configuration to the 3 figures written there,
+    and the configuration's tuning: record names every such key."""
+    import json
+
+    from modelgen.navigator.config import builtin_config_path, load_config
+
+    config = load_config(builtin_config_path().parent / config_name)
+    result = json.loads((STAGE4_RESULTS / result_name).read_text())
+    assert result["model"] == config.model
+    assert {t["key"] for t in result["tuned"]} == set(CONFIG_FIELDS)
+    for tuned in result["tuned"]:
+        held = getattr(config, CONFIG_FIELDS[tuned["key"]])
+        assert held == pytest.approx(tuned["after"], rel=5e-3), tuned["key"]
+        assert tuned["key"] in config.tuning
