@@ -140,6 +140,6 @@ def test_ins_gnss21_nav_lists_what_its_four_approximations_drop_with_sizes(model
                   r"H\[Z_re, position_error_north\]", r"H\[Z_re, position_error_down\]"):
         assert re.search(entry, notes[0])
     # dg/dh: WGS-84 normal-gravity gradient against 2 g / (R_N + h), the textbook's: 0.5 % of 3.1e-6 s^-2
-    assert re.search(r"F\[velocity_error_down, position_error_down\] = -\(R_N\*dg/dh \+ dg/dh\*h \+ 2\*g\)/\(R_N \+ h\) \(1\.58e-08\)", notes[2])
+    assert re.search(r"F\[velocity_error_down, position_error_down\] = -\(R_N\*dg/dh \+ dg/dh\*h \+ 2\*g\)/\(R_N \+ h\) \(1\.58e-08\)", notes[3])
     # dR_N/dL in the east position rate: d((R_N + h) cos L)/dt
     assert re.search(r"F\[position_error_east, position_error_east\] = dR_N/dL\*v_n/[^;]*\(4\.57e-08\)", notes[1])
