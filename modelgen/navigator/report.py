@@ -224,12 +224,17 @@ def _fmt(value: object, digits: int = 2) -> str:
     return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
 
 
-def _tuning_lines(config) -> list[str]:
+def _table_cell(text: str) -> str:
+    """A configuration's free text as one Markdown table cell: one line, its ``|`` escaped."""
+    return " ".join(text.split()).replace("|", "\\|")
+
+
+def _tuning_lines(config: NavigatorConfig) -> list[str]:
     """The configuration's own statement of which numbers were tuned and how (its ``tuning:`` section)."""
-    if not getattr(config, "tuning", None):
+    if not config.tuning:
         return []
     lines = ["Tuned numbers as the configuration states them (`tuning:`):", "", "| key | how |", "|---|---|"]
-    lines += [f"| `{key}` | {how} |" for key, how in config.tuning.items()]
+    lines += [f"| {_table_cell(key)} | {_table_cell(how)} |" for key, how in config.tuning.items()]
     return lines + [""]
 
 

@@ -131,3 +131,15 @@ def test_the_shipped_configurations_hold_the_numbers_stage_4_measured(config_nam
         held = getattr(config, CONFIG_FIELDS[tuned["key"]])
         assert held == pytest.approx(tuned["after"], rel=5e-3), tuned["key"]
         assert tuned["key"] in config.tuning
+
+
+def test_a_tuning_statement_with_a_bar_and_a_newline_stays_one_table_row_of_the_summary():
+    """The `tuning:` texts are the user's free text: each becomes exactly one Markdown row, its '|' escaped."""
+    from modelgen.navigator.config import builtin_config_path, load_config
+    from modelgen.navigator.report import _tuning_lines
+
+    config = dataclasses.replace(load_config(builtin_config_path()), tuning={"zupt.sigma_m_s": "a | b\n| c |"})
+    lines = _tuning_lines(config)
+    rows = [line for line in lines if line.startswith("| ") and "zupt" in line]
+    assert rows == ["| zupt.sigma_m_s | a \\| b \\| c \\| |"]
+    assert not _tuning_lines(dataclasses.replace(config, tuning={}))
