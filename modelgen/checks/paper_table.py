@@ -29,7 +29,7 @@ from typing import Any, Mapping
 import sympy as sp
 
 from modelgen.errors import ModelError
-from modelgen.fileio.datafiles import data_path, read_yaml
+from modelgen.fileio.datafiles import data_path, read_yaml, read_yaml_with_lines
 from modelgen.model.declaration import ErrorModel, parse_expression
 from modelgen.model.vectors import MAX_TREE_NODES, fold_graph, tree_size
 
@@ -187,7 +187,7 @@ def load_paper_table(path: str | Path, model: ErrorModel | None = None) -> Paper
     """
     path = Path(path)
     where = path.name
-    data = read_yaml(path, "paper-table file")
+    data, lines = read_yaml_with_lines(path, "paper-table file")
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
         raise ModelError(f"{where}: unknown key {unknown[0]!r} (expected one of {sorted(_TOP_KEYS)})")
@@ -217,10 +217,10 @@ def load_paper_table(path: str | Path, model: ErrorModel | None = None) -> Paper
     }
     _check_unit_counts(units, shape, where)
 
-    entries = _entries(data["entries"], "entries", shape, namespace, where)
-    equation_1 = _entries(data.get("equation_1_entries") or [], "equation_1_entries", shape, namespace, where)
+    entries = _entries(data["entries"], "entries", shape, namespace, where, lines)
+    equation_1 = _entries(data.get("equation_1_entries") or [], "equation_1_entries", shape, namespace, where, lines)
     annotations = tuple(
-        _annotation(item, f"{where}: annotations[{i}]", shape)
+        _annotation(item, f"{lines.get(f'annotations[{i}]', where)}: annotations[{i}]", shape)
         for i, item in enumerate(_list(data.get("annotations") or [], f"{where}: annotations"))
     )
     seen: set[tuple[str, Key, str]] = set()
@@ -360,11 +360,12 @@ def _entries(
     shape: Mapping[str, tuple[int, int]],
     namespace: Mapping[str, sp.Symbol],
     where: str,
+    lines: Mapping[str, str] | None = None,
 ) -> tuple[PaperEntry, ...]:
-    """Parse entries, then resolve the references between them."""
+    """Parse entries, then resolve the references between them; ``lines``: ``file:line`` by key path."""
     parsed: dict[Key, tuple[dict, sp.Expr, str]] = {}
     for i, item in enumerate(_list(raw, f"{where}: {kind}")):
-        place = f"{where}: {kind}[{i}]"
+        place = f"{(lines or {}).get(f'{kind}[{i}]', where)}: {kind}[{i}]"
         item = _mapping(item, place, {"matrix", "row", "col", "printed", "expression"}, {"reading", "why"})
         key = _check_index(item["matrix"], item["row"], item["col"], shape, place)
         label = f"{key[0]}({key[1]},{key[2]})"
