@@ -20,7 +20,6 @@ your own paper" and ``modelgen/data/verify_table.schema.json``.
 
 from __future__ import annotations
 
-import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,8 +29,8 @@ import sympy as sp
 
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml, read_yaml_with_lines
-from modelgen.model.declaration import ErrorModel, parse_expression
-from modelgen.model.vectors import MAX_TREE_NODES, fold_graph, tree_size
+from modelgen.model.declaration import ErrorModel, _check_defined, parse_expression
+from modelgen.model.vectors import MAX_TREE_NODES, tree_size
 
 MATRICES = ("F", "G", "H")
 STATUSES = ("match", "differ", "paper_only", "derived_only")
@@ -47,10 +46,6 @@ CLASSIFICATIONS = (
 #: table-omitted entries against the paper's eq. (1).
 ANNOTATION_TARGETS = ("table", "equation_1")
 
-#: Most terms an entry may expand to: the comparison expands each entry, and a
-#: small tree can expand to an astronomical sum (F(1,k) = (F(1,k-1) + L)*(F(1,k-1) - h)
-#: squares the term count with each entry).  A printed entry expands to a handful.
-MAX_EXPANDED_TERMS = 5_000
 _REFERENCE = re.compile(r"\b([FGH])\(\s*(\d+)\s*,\s*(\d+)\s*\)")
 _TOP_KEYS = {
     "source",
@@ -407,11 +402,8 @@ def _entries(
                 f"{place}: grows to more than {MAX_TREE_NODES} operations once the entries it refers to are "
                 "written out; write it in a smaller form"
             )
-        if _expanded_terms(value, MAX_EXPANDED_TERMS) > MAX_EXPANDED_TERMS:
-            raise ModelError(
-                f"{place}: expands to more than {MAX_EXPANDED_TERMS} terms once the entries it refers to are "
-                "written out (the comparison expands every entry); write it in a smaller form"
-            )
+        if subs:  # the comparison expands it: bounded, defined and finite as a model's expressions are
+            _check_defined(value, f"{key[0]}({key[1]},{key[2]}) with the entries it refers to written out", place)
         resolved[key] = value
         return value
 
@@ -442,27 +434,6 @@ def _placeholders(text: str) -> tuple[str, dict[str, sp.Symbol]]:
         return name
 
     return _REFERENCE.sub(swap, text), refs
-
-
-def _expanded_terms(expr: sp.Basic, cap: int) -> int:
-    """An upper bound on the terms ``sp.expand`` makes of ``expr`` or of any part of it, at most ``cap + 1``.
-
-    A sum has the terms of its parts, a product their product, a power by a
-    positive integer n the base's terms to the n; anything else (a symbol, a
-    function, a quotient's denominator) is one term, its arguments counted on
-    their own, as expand expands them.
-    """
-
-    def terms(node: sp.Basic, parts: list[int]) -> int:
-        if isinstance(node, sp.Add):
-            return min(cap + 1, sum(parts))
-        if isinstance(node, sp.Mul):
-            return min(cap + 1, math.prod(parts))
-        if isinstance(node, sp.Pow) and node.exp.is_Integer and node.exp > 1 and parts[0] > 1:
-            return cap + 1 if node.exp > cap else min(cap + 1, parts[0] ** int(node.exp))
-        return 1
-
-    return max(fold_graph(expr, terms).values())
 
 
 def _reference_key(name: str) -> Key | None:

@@ -237,31 +237,22 @@ def _checked_result(result: Value, text: str, where: str) -> Value:
 def tree_size(expr: sp.Basic, cap: int) -> int:
     """Nodes of ``expr``'s tree (shared subexpressions counted each time they occur), at most ``cap + 1``.
 
-    Computed on the shared graph (:func:`fold_graph`), so it costs time in
+    Computed on the shared graph, bottom-up and memoized, so it costs time in
     proportion to the distinct subexpressions even when the tree is
     exponentially larger (see :data:`MAX_TREE_NODES`).
     """
-    return fold_graph(expr, lambda node, sizes: min(cap + 1, 1 + sum(sizes)))[id(expr)]
-
-
-def fold_graph(expr: sp.Basic, combine: Callable[[sp.Basic, list], Any]) -> dict[int, Any]:
-    """``combine(node, values of its arguments)`` for every distinct node of ``expr``, bottom-up, by ``id``.
-
-    Memoized on the shared graph: each distinct subexpression is combined once,
-    however often the tree repeats it; no recursion, so no depth limit.
-    """
-    values: dict[int, Any] = {}
+    sizes: dict[int, int] = {}
     stack: list[tuple[sp.Basic, bool]] = [(expr, False)]
     while stack:
         node, children_done = stack.pop()
-        if id(node) in values:
+        if id(node) in sizes:
             continue
         if not children_done:
             stack.append((node, True))
-            stack.extend((arg, False) for arg in node.args if id(arg) not in values)
+            stack.extend((arg, False) for arg in node.args if id(arg) not in sizes)
             continue
-        values[id(node)] = combine(node, [values[id(arg)] for arg in node.args])
-    return values
+        sizes[id(node)] = min(cap + 1, 1 + sum(sizes[id(arg)] for arg in node.args))
+    return sizes[id(expr)]
 
 
 class _Evaluator:
