@@ -28,12 +28,14 @@ from pathlib import Path
 
 import numpy as np
 
-from modelgen.codegen.build import STRICT_FLAGS, compiler
+from modelgen.codegen.build import (
+    STRICT_FLAGS, cached_library, compiler, compiler_identity, library_cache_folder, library_key, store_library,
+)
 from modelgen.codegen.generate import generate_code, render_c_template
 from modelgen.codegen.options import CodegenOptions
 from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
-from modelgen.fileio.output import write_atomically
+from modelgen.fileio.output import write_atomically, write_bytes_atomically
 
 ARM_EMBEDDED_CC = "arm-none-eabi-gcc"
 ARM_EMBEDDED_SIZE = "arm-none-eabi-size"
@@ -101,12 +103,25 @@ def build_host_driver(folder: Path, model: str, output: Path, flags: tuple[str, 
 
 
 def build_arm_linux_driver(folder: Path, model: str, output: Path) -> Path:
-    """The driver and filter for arm-linux-gnueabihf, statically linked (for qemu-arm)."""
+    """The driver and filter for arm-linux-gnueabihf, statically linked (for qemu-arm), through the compile cache.
+
+    The executable is kept in the compile cache (:mod:`modelgen.codegen.build`)
+    under a digest of the two sources, the headers beside them, the flags and
+    the cross compiler's identity: the same filter flown over another scenario
+    (the scenario is the driver's input, not its code) is not built again.
+    """
     folder = Path(folder)
-    run(
-        [ARM_LINUX_CC, *STRICT_FLAGS, "-O2", "-static", "-I", str(folder), "-o", str(output), str(folder / f"{model}.c"), str(folder / "driver.c"), "-lm"],
-        "arm-linux-gnueabihf build",
-    )
+    sources = [folder / f"{model}.c", folder / "driver.c"]
+    flags = [*STRICT_FLAGS, "-O2", "-static"]
+    # -I is the sources' own folder, whose headers the key holds; its path is not part of what is built
+    key = library_key(sources, [*flags, "-I<sources>", "-lm"], compiler_identity(ARM_LINUX_CC))
+    cache = library_cache_folder()
+    payload = cached_library(cache, key)
+    if payload is not None:
+        write_bytes_atomically(Path(output), payload, mode=0o755)
+        return Path(output)
+    run([ARM_LINUX_CC, *flags, "-I", str(folder), "-o", str(output), *map(str, sources), "-lm"], "arm-linux-gnueabihf build")
+    store_library(cache, key, Path(output).read_bytes())
     return Path(output)
 
 
