@@ -52,7 +52,7 @@ PARAMETERS = ("noise.gyro_white.factor", "noise.gyro_bias_driving.factor", "nois
 #: loud IMU (on the drive: white-noise factor 60-110, NHC sigma 8 mm/s after 25 flights), which is the
 #: one-update-ahead prediction it scores and not the information the updates hold.  The bias driving noises keep
 #: the data sheet's values: with them free too the search walks along a ridge (15 states, 66 flights: gyro 1 ->
-#: 0.05, accelerometer 1 -> 24) for a gain of 8 in log L, which is below what chance gives once the innovations'
+#: 0.05, accelerometer 1 -> 24, still moving) for a gain of 8 in log L, which is below what chance gives once the innovations'
 #: correlation is counted (n updates correlated with factor f hold n / f independent ones; f is 6-35 here, and
 #: twice the gain against a chi-square quantile of 2 degrees of freedom, 6.0, asks for a gain of 3 f); the
 #: white-noise factor's gain is about 2,300 (bench/results/navigator_tuning_stage5_three_noises_*.log).
