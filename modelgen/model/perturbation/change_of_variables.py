@@ -25,7 +25,7 @@ from modelgen.model.perturbation.problem import (
 
 def _change_of_variables(problem: NavigationProblem) -> tuple[sp.Matrix, sp.Matrix]:
     """(T, T^-1) with declared = T primitive, as Jacobians of the forward and inverse maps."""
-    phi, dv, dp = primitive_symbols()
+    phi, dv, dp = primitive_symbols(problem.position.rows)
     e = problem.errors
     others = [s for s in problem.state_order if s not in declared_navigation_states(problem)]
     mech = problem.mechanization()

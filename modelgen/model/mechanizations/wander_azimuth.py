@@ -1,0 +1,211 @@
+"""The wander-azimuth mechanization: a local-level frame w turned about the vertical by the wander angle alpha.
+
+Groves (2013) section 5.3.5; Titterton & Weston (2004) section 3.5.4; Savage
+(2000) ch. 4 and 12.  The w-frame is NED turned about the down axis: north is
+(cos alpha, sin alpha, 0) in w axes (C_n^w = R_z(-alpha)), so that with the free
+wander law
+
+    alpha' = -lambda' sin L
+
+the transport rate has no vertical component, omega_ew^w = (rho_x, rho_y, 0),
+and nothing divides by cos L.  The navigation equations are
+
+    C' = C [w_ib x] - [(w_ie + w_ew) x] C,   v' = f^w - (2 w_ie + w_ew) x v + g^w,
+    (C_e^w)' = -[w_ew x] C_e^w,             h' = -v_z,
+
+with w_ie^w = W k, k = C_e^w (0, 0, 1) = (cos alpha cos L, sin alpha cos L, -sin L)
+the Earth's axis in w axes (the third column of C_e^w), and the horizontal
+transport rate written in k (Savage eq. 4.4.1.1-x, Titterton & Weston eq. 3.80):
+
+    rho_H = (1/(R_N + h)) (v_y, -v_x) - D (-k_y, k_x) (k_x v_x + k_y v_y),
+    D = e^2/(1 - e^2) R_M / ((R_M + h) (R_N + h))   [= (1/(R_M + h) - 1/(R_N + h)) / cos^2 L],
+
+gravity g^w = (0, 0, g(L, h)) (WGS-84 normal gravity along the down axis, as the
+local-level mechanization).  Every term is finite at the poles.
+
+Position is carried as C_e^w and h.  The engine perturbs coordinates, so the
+position is given to it as a chart about the operating point C_0:
+C_e^w = exp(-[theta x]) C_0 (theta = 0 at the point, theta' = (I + 1/2 [theta x]) w_ew
+to first order) and h: four coordinates, one more than the position has (the
+wander angle).  The error states are the ones that need no true wander angle
+(Benson 1975's psi-angle, Savage's dR^N; Scherzinger & Reid 1994): in the
+computed w-frame,
+
+    psi (C_b^w = (I - [psi x]) C_e^w C_b^e true),  dv = v^w - C_e^w v^e_true,  dr = C_e^w (r^e - r^e_true) (metres),
+
+so ``attitude: psi``, ``velocity: computed_frame`` and ``position: metres``.
+The frame angle d(theta) = theta_c - theta_t between the computed and the true
+w-frames has a vertical component (the wander-angle error combined with the
+longitude error) that no declared error depends on: it is carried as a
+placeholder state during the derivation and dropped at the end, after checking
+that nothing depends on it (:func:`modelgen.model.perturbation.derivation`).
+The horizontal frame angle follows from the horizontal position error as the
+transport rate from the velocity: d(theta)_H = K dr_H, K = rho_H / v_H above.
+
+The derived F, G, H read the position through k (parameters ``wander_dcm_13``,
+``wander_dcm_23``, ``wander_dcm_33``: C_e^w's third column), h and the radii and
+gravity at sin L = -k_z: no latitude, longitude or wander angle on its own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import sympy as sp
+
+from modelgen.model import wgs84
+from modelgen.model.mechanizations.local_level import EarthSymbols, _vector, skew
+
+#: Annotations name the engine's NavigationState (modelgen.model.perturbation) as text (no import cycle).
+NavigationState = "modelgen.model.perturbation.problem.NavigationState"
+
+FRAME = "WANDER"
+AXES = ("x", "y", "z")
+#: The error forms the wander frame has: the ones that need no true wander angle (module doc).
+ERROR_FORMS = {"attitude": ("psi",), "velocity": ("computed_frame",), "position": ("metres",)}
+
+# Earth quantities as undefined functions of the chart (theta_x, theta_y[, h]) while deriving: their
+# derivatives follow from sin L = -k_z(theta), d(sin L)/d(theta_x) = k_y, d(sin L)/d(theta_y) = -k_x.
+WanderMeridianRadius = sp.Function("WanderMeridianRadius")
+WanderPrimeVerticalRadius = sp.Function("WanderPrimeVerticalRadius")
+WanderGravity = sp.Function("WanderGravity")
+EARTH_FUNCTIONS = (WanderMeridianRadius, WanderPrimeVerticalRadius, WanderGravity)
+
+#: The chart's rotation-vector coordinates (zero at the operating point; never in a result).
+CHART = tuple(sp.Symbol(f"wander_chart_theta_{a}", real=True) for a in AXES)
+
+
+def chart_position(height: sp.Symbol) -> sp.Matrix:
+    """The engine's position coordinates of the computed state: (theta_x, theta_y, theta_z, h)."""
+    return _vector((*CHART, height))
+
+
+def earth_axis(axis: sp.Matrix, position: sp.Matrix) -> sp.Matrix:
+    """k = C_e^w (0, 0, 1) at chart coordinates theta: (I - [theta x]) k_0 = k_0 + k_0 x theta."""
+    theta = _vector(position[:3])
+    return axis + axis.cross(theta)
+
+
+def curvature(axis: sp.Matrix, position: sp.Matrix) -> sp.Matrix:
+    """K (2x2): rho_H = K v_H, and d(theta)_H = K dr_H (module doc)."""
+    k = earth_axis(axis, position)
+    theta_x, theta_y, _, h = position
+    RM, RN = WanderMeridianRadius(theta_x, theta_y) + h, WanderPrimeVerticalRadius(theta_x, theta_y) + h
+    e2 = sp.Float(wgs84.ECCENTRICITY_SQUARED)
+    D = e2 / (1 - e2) * WanderMeridianRadius(theta_x, theta_y) / (RM * RN)
+    a = 1 / RN
+    return sp.Matrix([[D * k[0] * k[1], a + D * k[1] ** 2], [-a - D * k[0] ** 2, -D * k[0] * k[1]]])
+
+
+def curvature_inverse(axis: sp.Matrix, position: sp.Matrix) -> sp.Matrix:
+    """K^-1 = (R_M + h)(R_N + h) adj(K) (det K = 1/((R_M + h)(R_N + h)) since k_x^2 + k_y^2 = cos^2 L)."""
+    K = curvature(axis, position)
+    theta_x, theta_y, _, h = position
+    RM, RN = WanderMeridianRadius(theta_x, theta_y) + h, WanderPrimeVerticalRadius(theta_x, theta_y) + h
+    return (RM * RN) * sp.Matrix([[K[1, 1], -K[0, 1]], [-K[1, 0], K[0, 0]]])
+
+
+@dataclass(frozen=True)
+class WanderAzimuth:
+    """The free wander-azimuth mechanization (module doc); a model may write the velocity rate itself."""
+
+    frame: str
+    rotation_rate: sp.Symbol  # the Earth's rotation rate (parameter symbol)
+    velocity_equation: Callable[["NavigationState", "WanderAzimuth"], sp.Matrix] | None = None
+    position_equation: Callable[["NavigationState", "WanderAzimuth"], sp.Matrix] | None = None
+    #: k_0 = C_e^w (0, 0, 1) at the operating point (parameter symbols), set by the reader.
+    axis: sp.Matrix = sp.Matrix([sp.Symbol("Cew13", real=True), sp.Symbol("Cew23", real=True), sp.Symbol("Cew33", real=True)])
+
+    def earth_rate(self, state: NavigationState) -> sp.Matrix:
+        """w_ie^w = W k."""
+        return self.rotation_rate * earth_axis(self.axis, state.position)
+
+    def transport_rate(self, state: NavigationState) -> sp.Matrix:
+        """w_ew^w = (K v_H, 0): no vertical component (free wander)."""
+        rho = curvature(self.axis, state.position) * _vector(state.velocity[:2])
+        return _vector((rho[0], rho[1], 0))
+
+    def navigation_rate(self, state: NavigationState) -> sp.Matrix:
+        """w_iw^w = w_ie^w + w_ew^w."""
+        return self.earth_rate(state) + self.transport_rate(state)
+
+    def gravity(self, state: NavigationState) -> sp.Matrix:
+        """g^w = (0, 0, g): normal gravity along the down axis."""
+        theta_x, theta_y, _, h = state.position
+        return _vector((0, 0, WanderGravity(theta_x, theta_y, h)))
+
+    def velocity_rate(self, state: NavigationState) -> sp.Matrix:
+        """v' = f^w - (2 w_ie + w_ew) x v + g^w."""
+        if self.velocity_equation is not None:
+            return self.velocity_equation(state, self)
+        coriolis = (2 * self.earth_rate(state) + self.transport_rate(state)).cross(state.velocity)
+        return state.specific_force - coriolis + self.gravity(state)
+
+    def position_rate(self, state: NavigationState) -> sp.Matrix:
+        """(theta', h') = ((I + 1/2 [theta x]) w_ew, -v_z): the chart's rates (C_e^w' = -[w_ew x] C_e^w)."""
+        theta = _vector(state.position[:3])
+        rho = self.transport_rate(state)
+        rate = rho + theta.cross(rho) / 2
+        return _vector((*rate, -state.velocity[2]))
+
+    def error_frame_angle(self, latitude: sp.Expr, position_error: sp.Matrix) -> sp.Matrix:
+        """d(theta): the chart's rotation-vector difference is the angle of the computed w-frame against the true one."""
+        return _vector(position_error[:3])
+
+    def metres(self, position: sp.Matrix) -> sp.Matrix:
+        """(dr_x, dr_y, dr_z, d(theta)_z) from (d(theta), dh): dr_H = K^-1 d(theta)_H, dr_z = -dh (4 x 4)."""
+        Ki = curvature_inverse(self.axis, position)
+        return sp.Matrix([[Ki[0, 0], Ki[0, 1], 0, 0], [Ki[1, 0], Ki[1, 1], 0, 0], [0, 0, 0, -1], [0, 0, 1, 0]])
+
+    def metres_inverse(self, position: sp.Matrix) -> sp.Matrix:
+        """(d(theta), dh) from (dr, d(theta)_z): d(theta)_H = K dr_H (4 x 4)."""
+        K = curvature(self.axis, position)
+        return sp.Matrix([[K[0, 0], K[0, 1], 0, 0], [K[1, 0], K[1, 1], 0, 0], [0, 0, 0, 1], [0, 0, -1, 0]])
+
+    def to_computed_axes(self, state: NavigationState, computed: NavigationState, vector: sp.Matrix) -> sp.Matrix:
+        """A vector in the state's w axes resolved in the computed w axes: C_w^w_c = I - [(theta_c - theta_s) x]."""
+        angle = _vector(computed.position[:3]) - _vector(state.position[:3])
+        return vector - skew(angle) * vector
+
+    def displacement(self, state: NavigationState, computed: NavigationState) -> sp.Matrix:
+        """The state's position in metres along the computed w axes, up to a constant: M (theta, h) at the computed point."""
+        return self.metres(computed.position)[:3, :] * state.position
+
+    def earth_function_rules(self, position: sp.Matrix, earth: EarthSymbols) -> dict:
+        """The chart at the operating point (theta = 0), the Earth functions as parameters and their derivatives.
+
+        With s = sin L = -k_z and w = 1 - e^2 s^2 (TR8350.2, as the local-level rules with d/dL = cos L d/ds):
+        dR_M/ds = 3 e^2 s R_M / w, dR_N/ds = e^2 s R_N / w,
+        dg/ds = g s (2 k / (1 + k s^2) + e^2 / w + 8 f h / (a eta)), dg/dh as local level.
+        """
+        theta_x, theta_y, _, h = position
+        e2, a = sp.Float(wgs84.ECCENTRICITY_SQUARED), sp.Float(wgs84.SEMI_MAJOR_AXIS)
+        f, m, k = sp.Float(wgs84.FLATTENING), sp.Float(wgs84.GRAVITY_RATIO_M), sp.Float(wgs84.SOMIGLIANA_K)
+        s = -self.axis[2]
+        w = 1 - e2 * s**2
+        eta = 1 - 2 * h * (1 + f + m - 2 * f * s**2) / a + 3 * h**2 / a**2
+        g, RM, RN = earth.gravity, earth.meridian_radius, earth.prime_vertical_radius
+        d_s = {theta_x: self.axis[1], theta_y: -self.axis[0]}  # d(sin L)/d(theta)
+        rules: dict = {}
+        radius_m, radius_n, gravity = WanderMeridianRadius(theta_x, theta_y), WanderPrimeVerticalRadius(theta_x, theta_y), WanderGravity(theta_x, theta_y, h)
+        for c, ds in d_s.items():
+            rules[sp.Derivative(radius_m, c)] = 3 * e2 * s * RM / w * ds
+            rules[sp.Derivative(radius_n, c)] = e2 * s * RN / w * ds
+            rules[sp.Derivative(gravity, c)] = g * s * (2 * k / (1 + k * s**2) + e2 / w + 8 * f * h / (a * eta)) * ds
+        rules[sp.Derivative(gravity, h)] = g * (-2 * (1 + f + m - 2 * f * s**2) / a + 6 * h / a**2) / eta
+        rules.update({radius_m: RM, radius_n: RN, gravity: g})
+        rules.update({c: 0 for c in position[:3]})
+        return rules
+
+    def expression_names(self, state: NavigationState) -> dict[str, Any]:
+        """The names a written velocity equation may use in the w-frame."""
+        return {
+            "C_b_w": state.attitude,
+            "v_w": state.velocity,
+            "height": state.position[3],
+            "f_w": state.specific_force,
+            "omega_ie_w": self.earth_rate(state),
+            "omega_ew_w": self.transport_rate(state),
+            "g_w": self.gravity(state),
+        }
