@@ -510,7 +510,7 @@ def trade(study_file: str, scheduler: str | None, workers: int | None, out_dir: 
     click.echo("wrote " + ", ".join(str(p) for p in files))
 
 
-from modelgen.navigator.cli import replay  # noqa: E402  (issue 13: `modelgen replay`)
+from modelgen.navigator.cli import replay  # noqa: E402  (`modelgen replay`: the navigator flown on recorded logs)
 
 main.add_command(replay)
 

@@ -213,7 +213,7 @@ def paper_scenario(derived: DerivedModel) -> CheckScenario:
 
     flight, budget = load_analysis_scenario(), load_error_budget()
     values = paper_parameters()
-    label = "the core paper's scenario (seed 000: level flight east at 30 N, Table 1, 240 steps of 60 s)"
+    label = "the core paper's scenario (level flight east at 30 N, Table 1, 240 steps of 60 s)"
     return CheckScenario(values, budget.initial_covariance(derived.model), step=flight.step_s, steps=flight.steps, label=label)
 
 
@@ -371,7 +371,7 @@ def run_report(verification_summary: str, runs: list[ModelRun], out_root: Path, 
     which states no target); the report opens with every section's targets,
     met or missed, and shows every figure with its caption.
     """
-    paper = ReportSection("Paper check (the table of F, G, H of seed 000)", verification_summary, paper_targets)
+    paper = ReportSection("Paper check (the table of F, G, H of the core paper)", verification_summary, paper_targets)
     sections = [paper, conformance_section(runs, out_root)]
     sections += [s if isinstance(s, ReportSection) else ReportSection("", s) for s in extra_sections]
     lines = ["# modelgen run: the core paper's model, end to end", ""]

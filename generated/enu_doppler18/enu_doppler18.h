@@ -264,7 +264,7 @@ void enu_doppler18_default_params(enu_doppler18_params *params);
 int enu_doppler18_matrices_evaluate(const enu_doppler18_params *ENU_DOPPLER18_RESTRICT params,
         enu_doppler18_matrices *ENU_DOPPLER18_RESTRICT m);
 
-/* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
+/* The transition over a step T by the Taylor series (the core paper, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
    Q_d = Gamma (Q/T) Gamma^T (eq. (9)).
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not

@@ -254,7 +254,7 @@ void gps_pseudorange11_default_params(gps_pseudorange11_params *params);
 int gps_pseudorange11_matrices_evaluate(const gps_pseudorange11_params *GPS_PSEUDORANGE11_RESTRICT
         params, gps_pseudorange11_matrices *GPS_PSEUDORANGE11_RESTRICT m);
 
-/* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
+/* The transition over a step T by the Taylor series (the core paper, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
    Q_d = Gamma (Q/T) Gamma^T (eq. (9)).
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not

@@ -276,7 +276,7 @@ void ins_gnss21_nav_default_params(ins_gnss21_nav_params *params);
 int ins_gnss21_nav_matrices_evaluate(const ins_gnss21_nav_params *INS_GNSS21_NAV_RESTRICT params,
         ins_gnss21_nav_matrices *INS_GNSS21_NAV_RESTRICT m);
 
-/* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
+/* The transition over a step T by the Taylor series (the core paper, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
    Q_d = Gamma (Q/T) Gamma^T (eq. (9)).
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not

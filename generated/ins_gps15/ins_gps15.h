@@ -221,7 +221,7 @@ void ins_gps15_default_params(ins_gps15_params *params);
 int ins_gps15_matrices_evaluate(const ins_gps15_params *INS_GPS15_RESTRICT params,
         ins_gps15_matrices *INS_GPS15_RESTRICT m);
 
-/* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
+/* The transition over a step T by the Taylor series (the core paper, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
    Q_d = Gamma (Q/T) Gamma^T (eq. (9)).
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not

@@ -278,7 +278,7 @@ int ned_doppler32_augmented_matrices_evaluate(const ned_doppler32_augmented_para
         *NED_DOPPLER32_AUGMENTED_RESTRICT params, ned_doppler32_augmented_matrices
         *NED_DOPPLER32_AUGMENTED_RESTRICT m);
 
-/* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
+/* The transition over a step T by the Taylor series (the core paper, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
    Q_d = Gamma (Q/T) Gamma^T (eq. (9)).
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not

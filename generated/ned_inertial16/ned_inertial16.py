@@ -399,7 +399,7 @@ def _taylor_plan(norm, T):
 
 
 def discretize(F, G, q, T):
-    """Phi and Q_d by the Taylor series (seed 000, eqs. (10)-(11)), to TAYLOR_TOLERANCE.
+    """Phi and Q_d by the Taylor series (the core paper, eqs. (10)-(11)), to TAYLOR_TOLERANCE.
 
     Q_d = Gamma (Q/T) Gamma^T with Q = diag(q) the continuous noise PSD.
     Scaling and squaring keeps it accurate for any finite T: the series is
@@ -666,7 +666,7 @@ def predict(x, P, Phi, Qd):
 
 
 def update(x, P, z, H, r):
-    """Kalman update: gain, state, Joseph-form covariance (seed 000, eq. (12)).
+    """Kalman update: gain, state, Joseph-form covariance (the core paper, eq. (12)).
 
     ``r`` is the diagonal of R.  With S = H P H^T + R and K = P H^T S^-1,
     the Joseph form (I - K H) P (I - K H)^T + K R K^T expands, as in the

@@ -40,7 +40,7 @@ ARM_EMBEDDED_SIZE = "arm-none-eabi-size"
 ARM_LINUX_CC = "arm-linux-gnueabihf-gcc"
 QEMU_ARM = "qemu-arm"
 CPPCHECK = "cppcheck"
-#: Cortex-M4F with its single-precision FPU, hard-float ABI, Thumb-2 (issue 6).
+#: Cortex-M4F with its single-precision FPU, hard-float ABI, Thumb-2.
 CORTEX_M4F_FLAGS = ("-mcpu=cortex-m4", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-mthumb")
 SANITIZER_FLAGS = ("-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer", "-g")
 #: Symbols a no-heap, no-I/O image must not contain.

@@ -19,7 +19,7 @@ import sympy as sp
 MATRIX_NAMES = ("F", "G", "H", "Q", "R")
 #: Largest expression factored, in tree nodes: sympy's multivariate factoring
 #: grows steeply with the generators (a 10-factor product's derivative, 1,243
-#: nodes: 2.6 s per entry; 40 factors ran for minutes, issue 28).  The built-in
+#: nodes: 2.6 s per entry; 40 factors ran for minutes in the hostile-input audit).  The built-in
 #: models' largest is 40 nodes; a larger one is shown as it is (display only).
 MAX_FACTORED_NODES = 500
 

@@ -25,7 +25,7 @@ from modelgen.model.names import C_KEYWORDS, name_collision  # noqa: F401  (C_KE
 
 _IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
-# -- limits on what a model may contain (issue 10, item 7) ---------------------
+# -- limits on what a model may contain (hostile-input bounds) --------------------
 #: Longest expression text accepted, in characters.
 MAX_EXPRESSION_LENGTH = 10_000
 #: Deepest expression accepted, counted in levels of nesting: the terms of one
@@ -84,7 +84,7 @@ def check_identifier(name: str, where: str, model_name: bool = False) -> None:
         raise ModelError(f"{where}: {name!r} collides with {collision}")
 
 
-# -- free text (issue 10, item 1) ----------------------------------------------
+# -- free text (no code in free text) ---------------------------------------------
 #: Characters refused in free text besides the C0/C1 controls (Unicode
 #: category Cc): bidirectional overrides and isolates, which make text read
 #: differently from what a compiler sees ("Trojan Source"), the invisible

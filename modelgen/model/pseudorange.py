@@ -158,7 +158,7 @@ def pseudorange_model(n_satellites: int, name: str | None = None) -> ErrorModel:
         dynamics=_PSEUDORANGE_DYNAMICS,
         measurements=measurements,
         title=f"INS/GPS pseudo-range, 11-state error model (psi-angle, ENU, metres), {n_satellites} satellites",
-        source="seed 003, Zou, Zhuang, Ding (2001), section 3; dynamics: psi-angle model (Benson 1975)",
+        source="the accumulated-correction paper, Zou, Zhuang, Ding (2001), section 3; dynamics: psi-angle model (Benson 1975)",
         frame="ENU",
         notes=("Built by modelgen.model.pseudorange.pseudorange_model.",),
     )

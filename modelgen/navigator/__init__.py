@@ -1,4 +1,4 @@
-"""A complete GNSS/INS navigator flown on recorded logs (issue 13).
+"""A complete GNSS/INS navigator flown on recorded logs.
 
 One module per idea: :mod:`logs` reads the IMU CSV and the RTKLIB .pos file,
 :mod:`config` the navigator configuration, :mod:`mechanization` is the

@@ -251,7 +251,7 @@ def targets(summary: dict, timings: dict[str, float]) -> list[dict]:
     filter's value on the drive) and ``met`` (True, False, or None for a row that only informs).
 
     The end-of-outage RMS of each schedule and the pooled consistency are targets when the configuration states
-    them (``evaluation``: issue 26's for the built-in drive); the rest are issue 13's.
+    them (``evaluation``: the built-in drive's configuration states them); the rest are the navigator's own.
     """
     outside = summary["horizontal_rms_outside_outages_m"]
     difference = summary.get("c_python_max_difference_m")
@@ -426,7 +426,7 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
                      f"{_fmt(r['nees_horizontal_end'], 1)} | {'yes' if r['inside_95'] else 'no'} | {_fmt(r['drift_5s_m'])} | {_fmt(r['drift_10s_m'])} | "
                      f"{_fmt(r['drift_15s_m'])} |")
     lines += [""] + _consistency_lines(summary) + _smoothed_lines(summary)
-    lines += ["## Targets (issues 13 and 26)", "",
+    lines += ["## Targets", "",
               "| quantity | reached | target | anchor (published 15-state filter) | |",
               "|---|---|---|---|---|"]
     for row in targets(summary, timings):

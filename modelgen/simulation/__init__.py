@@ -1,4 +1,4 @@
-"""Navigation simulation (issue 5): the generated filters on simulated flights.
+"""Navigation simulation: the generated filters on simulated flights.
 
 Data flows one way through the modules:
 

@@ -54,7 +54,7 @@ def summary_markdown(profile, model_name, implementation, conventions, trajector
     cl, ac = errors["closed_loop"], errors["accumulated"]
     lines += [
         "",
-        "Seed 003's theorem says accumulated correction equals closed-loop feedback in the linear case "
+        "The accumulated-correction paper's theorem says accumulated correction equals closed-loop feedback in the linear case "
         "(tests/simulation/test_integration.py checks it to 1e-9).  On this nonlinear flight the largest "
         f"difference between the two corrected outputs is {np.max(np.hypot(*(cl.position - ac.position).T)):.3g} m in position "
         f"and {np.max(np.abs(cl.attitude - ac.attitude)) / ARCSEC:.3g} arcsec in attitude.",

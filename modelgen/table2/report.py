@@ -157,7 +157,7 @@ def run_covariance_analysis(
         ]
     )
     parts = [
-        "# Covariance analysis of the Doppler-aided strapdown INS (seed 000), reproduced",
+        "# Covariance analysis of the Doppler-aided strapdown INS (the core paper), reproduced",
         "## Inputs and choices\n\n" + _inputs(scenario, budget, inferred),
         "## Table 2\n\n" + markdown_table(rows),
         "## Improvement ratios\n\n(pure inertial - integrated) / pure inertial, as the paper's note defines it.\n\n"

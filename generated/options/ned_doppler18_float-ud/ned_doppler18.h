@@ -248,7 +248,7 @@ void ned_doppler18_default_params(ned_doppler18_params *params);
 int ned_doppler18_matrices_evaluate(const ned_doppler18_params *NED_DOPPLER18_RESTRICT params,
         ned_doppler18_matrices *NED_DOPPLER18_RESTRICT m);
 
-/* The transition over a step T by the Taylor series (seed 000, eqs. (10)-(11)),
+/* The transition over a step T by the Taylor series (the core paper, eqs. (10)-(11)),
    with scaling and squaring so that it is accurate for any finite T, and
    Q_d = Gamma (Q/T) Gamma^T (eq. (9)).
    Refuses a non-finite T, non-finite matrices or an e^{F T} that is not

@@ -110,7 +110,7 @@ def read_written_equations(read: SectionReader, section: Mapping, frame: str, na
 
 #: Most nodes a derivative of a written navigation equation's element may have.  The
 #: perturbation differentiates, composes and simplifies each element: a product of n
-#: factors has derivatives of n terms of n factors, and 40 factors took minutes (issue 28;
+#: factors has derivatives of n terms of n factors, and 40 factors took minutes (hostile-input audit;
 #: 15 factors, 2,300 nodes, take 4 s).  The built-in velocity equation's have under 80.
 MAX_DERIVATIVE_NODES = 2000
 
