@@ -24,5 +24,5 @@ def test_local_level_satisfies_the_protocol():
 
 
 def test_an_unknown_mechanization_is_refused_naming_the_known_ones():
-    with pytest.raises(ModelError, match="unknown mechanization 'ecef2' \\(known: ecef, local_level\\)"):
+    with pytest.raises(ModelError, match="unknown mechanization 'ecef2' \\(known: ecef, local_level, wander_azimuth\\)"):
         mechanization_named("ecef2", "m.yaml:3: navigation.mechanization")

@@ -99,7 +99,7 @@ class Ecef:
             return self.position_equation(state, self)
         return state.velocity
 
-    def error_frame_angle(self, latitude: sp.Expr, position_error: sp.Matrix) -> sp.Matrix:
+    def error_frame_angle(self, position: sp.Matrix, position_error: sp.Matrix) -> sp.Matrix:
         """0: the e-frame is the same at the true and the computed position."""
         return sp.zeros(3, 1)
 

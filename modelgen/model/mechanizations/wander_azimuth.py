@@ -70,7 +70,15 @@ ERROR_FORMS = {"attitude": ("psi",), "velocity": ("computed_frame",), "position"
 WanderMeridianRadius = sp.Function("WanderMeridianRadius")
 WanderPrimeVerticalRadius = sp.Function("WanderPrimeVerticalRadius")
 WanderGravity = sp.Function("WanderGravity")
-EARTH_FUNCTIONS = (WanderMeridianRadius, WanderPrimeVerticalRadius, WanderGravity)
+#: D = e^2/(1 - e^2) R_M / ((R_M + h)(R_N + h)) = (1/(R_M + h) - 1/(R_N + h)) / cos^2 L, finite at the poles, as a
+#: function of its own while deriving: the products of the curvature K and its exact inverse then cancel
+#: symbolically (with its value written out, K^-1 K = I only through the WGS-84 relation between R_M and R_N).
+WanderCurvatureDifference = sp.Function("WanderCurvatureDifference")
+EARTH_FUNCTIONS = (WanderMeridianRadius, WanderPrimeVerticalRadius, WanderGravity, WanderCurvatureDifference)
+
+#: C_e^w's third column k_0 at the operating point (the Earth's axis in w axes): symbols and parameter names.
+AXIS_SYMBOLS = ("Cew13", "Cew23", "Cew33")
+AXIS_NAMES = ("wander_dcm_13", "wander_dcm_23", "wander_dcm_33")
 
 #: The chart's rotation-vector coordinates (zero at the operating point; never in a result).
 CHART = tuple(sp.Symbol(f"wander_chart_theta_{a}", real=True) for a in AXES)
@@ -87,23 +95,25 @@ def earth_axis(axis: sp.Matrix, position: sp.Matrix) -> sp.Matrix:
     return axis + axis.cross(theta)
 
 
+def frame_angle_jacobian(position: sp.Matrix) -> sp.Matrix:
+    """J = I - 1/2 [theta x]: d(theta) = J (theta_c - theta_t) at chart coordinates theta_c (first order)."""
+    return sp.eye(3) - skew(_vector(position[:3])) / 2
+
+
 def curvature(axis: sp.Matrix, position: sp.Matrix) -> sp.Matrix:
     """K (2x2): rho_H = K v_H, and d(theta)_H = K dr_H (module doc)."""
     k = earth_axis(axis, position)
     theta_x, theta_y, _, h = position
-    RM, RN = WanderMeridianRadius(theta_x, theta_y) + h, WanderPrimeVerticalRadius(theta_x, theta_y) + h
-    e2 = sp.Float(wgs84.ECCENTRICITY_SQUARED)
-    D = e2 / (1 - e2) * WanderMeridianRadius(theta_x, theta_y) / (RM * RN)
-    a = 1 / RN
+    D = WanderCurvatureDifference(theta_x, theta_y, h)
+    a = 1 / (WanderPrimeVerticalRadius(theta_x, theta_y) + h)
     return sp.Matrix([[D * k[0] * k[1], a + D * k[1] ** 2], [-a - D * k[0] ** 2, -D * k[0] * k[1]]])
 
 
 def curvature_inverse(axis: sp.Matrix, position: sp.Matrix) -> sp.Matrix:
-    """K^-1 = (R_M + h)(R_N + h) adj(K) (det K = 1/((R_M + h)(R_N + h)) since k_x^2 + k_y^2 = cos^2 L)."""
+    """K^-1 = adj(K) / det K, det K = a (a + D (k_x^2 + k_y^2)) = 1/((R_M + h)(R_N + h)) (a = 1/(R_N + h))."""
     K = curvature(axis, position)
-    theta_x, theta_y, _, h = position
-    RM, RN = WanderMeridianRadius(theta_x, theta_y) + h, WanderPrimeVerticalRadius(theta_x, theta_y) + h
-    return (RM * RN) * sp.Matrix([[K[1, 1], -K[0, 1]], [-K[1, 0], K[0, 0]]])
+    determinant = sp.expand(K[0, 0] * K[1, 1] - K[0, 1] * K[1, 0])
+    return sp.Matrix([[K[1, 1], -K[0, 1]], [-K[1, 0], K[0, 0]]]) / determinant
 
 
 @dataclass(frozen=True)
@@ -114,8 +124,11 @@ class WanderAzimuth:
     rotation_rate: sp.Symbol  # the Earth's rotation rate (parameter symbol)
     velocity_equation: Callable[["NavigationState", "WanderAzimuth"], sp.Matrix] | None = None
     position_equation: Callable[["NavigationState", "WanderAzimuth"], sp.Matrix] | None = None
-    #: k_0 = C_e^w (0, 0, 1) at the operating point (parameter symbols), set by the reader.
-    axis: sp.Matrix = sp.Matrix([sp.Symbol("Cew13", real=True), sp.Symbol("Cew23", real=True), sp.Symbol("Cew33", real=True)])
+
+    @property
+    def axis(self) -> sp.Matrix:
+        """k_0 = C_e^w (0, 0, 1) at the operating point: the parameter symbols :data:`AXIS_SYMBOLS`."""
+        return sp.Matrix([sp.Symbol(s, real=True) for s in AXIS_SYMBOLS])
 
     def earth_rate(self, state: NavigationState) -> sp.Matrix:
         """w_ie^w = W k."""
@@ -149,19 +162,31 @@ class WanderAzimuth:
         rate = rho + theta.cross(rho) / 2
         return _vector((*rate, -state.velocity[2]))
 
-    def error_frame_angle(self, latitude: sp.Expr, position_error: sp.Matrix) -> sp.Matrix:
-        """d(theta): the chart's rotation-vector difference is the angle of the computed w-frame against the true one."""
-        return _vector(position_error[:3])
+    def error_frame_angle(self, position: sp.Matrix, position_error: sp.Matrix) -> sp.Matrix:
+        """d(theta), the angle of the computed w-frame against the true one, from the chart difference at ``position``.
+
+        exp(-[theta_c x]) exp([theta_t x]) = I - [(I - 1/2 [theta_c x]) (theta_c - theta_t) x] to first order in the
+        difference (Baker-Campbell-Hausdorff): the chart's coordinates are the frame angle only at the operating
+        point, and dT/dt needs their first-order change along the trajectory.
+        """
+        return frame_angle_jacobian(position) * _vector(position_error[:3])
 
     def metres(self, position: sp.Matrix) -> sp.Matrix:
-        """(dr_x, dr_y, dr_z, d(theta)_z) from (d(theta), dh): dr_H = K^-1 d(theta)_H, dr_z = -dh (4 x 4)."""
+        """(dr_x, dr_y, dr_z, d(theta)_z) from (chart difference, dh): dr_H = K^-1 d(theta)_H, dr_z = -dh (4 x 4)."""
         Ki = curvature_inverse(self.axis, position)
-        return sp.Matrix([[Ki[0, 0], Ki[0, 1], 0, 0], [Ki[1, 0], Ki[1, 1], 0, 0], [0, 0, 0, -1], [0, 0, 1, 0]])
+        J = frame_angle_jacobian(position)
+        horizontal = Ki * J[:2, :]
+        return sp.Matrix([
+            [*horizontal.row(0), 0], [*horizontal.row(1), 0], [0, 0, 0, -1], [*J.row(2), 0],
+        ])
 
     def metres_inverse(self, position: sp.Matrix) -> sp.Matrix:
-        """(d(theta), dh) from (dr, d(theta)_z): d(theta)_H = K dr_H (4 x 4)."""
+        """(chart difference, dh) from (dr, d(theta)_z): J^-1 (K dr_H, d(theta)_z), dh = -dr_z (4 x 4, first order in theta)."""
         K = curvature(self.axis, position)
-        return sp.Matrix([[K[0, 0], K[0, 1], 0, 0], [K[1, 0], K[1, 1], 0, 0], [0, 0, 0, 1], [0, 0, -1, 0]])
+        angle = sp.Matrix([[K[0, 0], K[0, 1], 0, 0], [K[1, 0], K[1, 1], 0, 0], [0, 0, 0, 1]])
+        theta = _vector(position[:3])
+        J_inverse = sp.eye(3) + skew(theta) / 2
+        return sp.Matrix.vstack(J_inverse * angle, sp.Matrix([[0, 0, -1, 0]]))
 
     def to_computed_axes(self, state: NavigationState, computed: NavigationState, vector: sp.Matrix) -> sp.Matrix:
         """A vector in the state's w axes resolved in the computed w axes: C_w^w_c = I - [(theta_c - theta_s) x]."""
@@ -194,9 +219,32 @@ class WanderAzimuth:
             rules[sp.Derivative(radius_n, c)] = e2 * s * RN / w * ds
             rules[sp.Derivative(gravity, c)] = g * s * (2 * k / (1 + k * s**2) + e2 / w + 8 * f * h / (a * eta)) * ds
         rules[sp.Derivative(gravity, h)] = g * (-2 * (1 + f + m - 2 * f * s**2) / a + 6 * h / a**2) / eta
-        rules.update({radius_m: RM, radius_n: RN, gravity: g})
+        # D = c R_M / ((R_M + h)(R_N + h)), c = e^2/(1 - e^2)
+        ratio = e2 / (1 - e2)
+        difference = WanderCurvatureDifference(theta_x, theta_y, h)
+        for coordinate, ds in d_s.items():
+            dRM, dRN = 3 * e2 * s * RM / w * ds, e2 * s * RN / w * ds
+            rules[sp.Derivative(difference, coordinate)] = ratio * (
+                dRM / ((RM + h) * (RN + h)) - RM * dRM / ((RM + h) ** 2 * (RN + h)) - RM * dRN / ((RM + h) * (RN + h) ** 2)
+            )
+        rules[sp.Derivative(difference, h)] = -ratio * RM * (RM + RN + 2 * h) / ((RM + h) * (RN + h)) ** 2
+        rules.update({radius_m: RM, radius_n: RN, gravity: g, difference: ratio * RM / ((RM + h) * (RN + h))})
         rules.update({c: 0 for c in position[:3]})
         return rules
+
+    def at_operating_point(self, matrix: sp.Matrix, cancel: bool = False) -> sp.Matrix:
+        """``matrix`` at the chart's origin (theta = 0), the Earth functions and their derivatives kept (for the rules
+        of :meth:`earth_function_rules`); with ``cancel``, each entry a cancelled rational function (exact: no
+        floating-point number is in the matrices before those rules), so that K^-1 K and the like cancel."""
+        functions = [a for a in matrix.atoms(sp.Derivative, *EARTH_FUNCTIONS)]
+        derivatives = [a for a in functions if isinstance(a, sp.Derivative)]
+        applied = [a for a in functions if not isinstance(a, sp.Derivative)]
+        stand_in = {a: sp.Dummy(f"earth_{k}", real=True) for k, a in enumerate(sorted(derivatives, key=sp.default_sort_key) + sorted(applied, key=sp.default_sort_key))}
+        plain = matrix.xreplace({a: stand_in[a] for a in derivatives}).xreplace({a: stand_in[a] for a in applied})
+        plain = plain.xreplace({c: 0 for c in CHART})
+        if cancel:
+            plain = plain.applyfunc(lambda e: sp.cancel(e) if e != 0 else e)
+        return plain.xreplace({v: k for k, v in stand_in.items()})
 
     def expression_names(self, state: NavigationState) -> dict[str, Any]:
         """The names a written velocity equation may use in the w-frame."""

@@ -30,8 +30,7 @@ def _change_of_variables(problem: NavigationProblem) -> tuple[sp.Matrix, sp.Matr
     others = [s for s in problem.state_order if s not in declared_navigation_states(problem)]
     mech = problem.mechanization()
     M = mech.metres(problem.position)
-    L = problem.position[0]
-    theta = lambda d: mech.error_frame_angle(L, d)  # noqa: E731  d(theta) of a position error
+    theta = lambda d: mech.error_frame_angle(problem.position, d)  # noqa: E731  d(theta) of a position error
     # forward: declared errors from primitive ones
     position = M * dp if e.position == "metres" else dp
     C = problem.attitude
@@ -80,4 +79,10 @@ def declared_stage(problem: NavigationProblem, primitive: Stage) -> Stage:
     if T == sp.eye(T.rows):
         return primitive
     T_dot = _time_derivative(T, problem)
-    return Stage((T * primitive.F + T_dot) * T_inv, T * primitive.G, primitive.H * T_inv)
+    mech = problem.mechanization()
+    if not hasattr(mech, "at_operating_point"):
+        return Stage((T * primitive.F + T_dot) * T_inv, T * primitive.G, primitive.H * T_inv)
+    # a mechanization whose position is a chart about the operating point (wander azimuth): the factors there,
+    # and the products as cancelled rational functions (its exact K^-1 K = I)
+    T, T_dot, T_inv, F0, G0, H0 = (mech.at_operating_point(m) for m in (T, T_dot, T_inv, primitive.F, primitive.G, primitive.H))
+    return Stage(*(mech.at_operating_point(m, cancel=True) for m in ((T * F0 + T_dot) * T_inv, T * G0, H0 * T_inv)))
