@@ -96,7 +96,15 @@ def _mapped_echo(update, err: bool = False):
 _FORCE_REPORT_HELP = "Overwrite report files of the same name that modelgen did not write or that were edited since."
 _SCHEDULER_HELP = ("Address of an existing dask scheduler (tcp://HOST:8786) to run the runs on; default: a local "
                    "cluster started for this command.")
-_WORKERS_HELP = "Worker processes of the local cluster (default: one per core)."
+_WORKERS_HELP = "Worker processes of the local cluster (default: one per core; at most 4 per core)."
+
+
+def _check_workers(ctx: click.Context, param: click.Parameter, value: int | None) -> int | None:
+    """--workers is refused over its limit as it is parsed, before a model is derived or a flight started."""
+    from modelgen.jobs import check_worker_count
+
+    check_worker_count(value)
+    return value
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -161,11 +169,13 @@ def derive(model: str, fmt: str, out_file: str | None, force: bool) -> None:
     together); --format exports them for LaTeX, Octave/MATLAB, CasADi or JSON.
     """
     from modelgen.errors import ModelError
-    from modelgen.fileio.output import write_text_atomically
+    from modelgen.fileio.output import refuse_non_regular, write_text_atomically
     from modelgen.jobs import derived_export
 
     if fmt == "casadi" and out_file is None:
         raise ModelError("--format casadi writes a file: give --out FILE (e.g. --out model.casadi)")
+    if out_file is not None:
+        refuse_non_regular(Path(out_file))  # before the derivation: a device or pipe is never replaced
     if out_file is not None and Path(out_file).exists() and not force:
         raise ModelError(f"{out_file}: already exists and modelgen does not overwrite a file unasked: "
                          f"give another --out, or --force to replace it")
@@ -449,7 +459,7 @@ def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool, force: bool
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="report/simulation", show_default=True, help="Directory for summary.md and the PNG figures.")
 @click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
 @click.option("--scheduler", default=None, metavar="ADDRESS", help=_SCHEDULER_HELP)
-@click.option("--workers", type=click.IntRange(min=1), default=None, help=_WORKERS_HELP)
+@click.option("--workers", type=click.IntRange(min=1), default=None, help=_WORKERS_HELP, callback=_check_workers)
 @click.option("--history-csv", is_flag=True, help="Also write each correction mode's history (output, estimation error, sigma, NEES per recorded cycle) to history_<mode>.csv as it is flown.")
 @click.option("--model", "model", default=None, metavar="MODEL", help="Filter model (a built-in name or a model file) instead of the profile's filter.model; its parameters are taken by name from the simulation, its filter.parameters constants or its own defaults (README: 'Flying your own model').")
 @click.option("--journal", "journal", type=click.Path(dir_okay=False), default=None, metavar="FILE", help="Keep each completed Monte Carlo run in FILE (JSON lines, written as runs complete); run again with the same FILE to fly only the runs missing from it. A journal of another study (profile, model, filter, seed, runs) is refused.")
@@ -486,7 +496,7 @@ def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | Non
 @main.command()
 @click.argument("study_file", metavar="STUDY.yaml")
 @click.option("--scheduler", default=None, metavar="ADDRESS", help=_SCHEDULER_HELP)
-@click.option("--workers", type=click.IntRange(min=1), default=None, help=_WORKERS_HELP)
+@click.option("--workers", type=click.IntRange(min=1), default=None, help=_WORKERS_HELP, callback=_check_workers)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="report/trade", show_default=True, help="Directory for trade.csv, trade.parquet, the figure and summary.md.")
 @click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
 @click.option("--journal", "journal", type=click.Path(dir_okay=False), default=None, metavar="FILE", help="Keep each completed covariance task in FILE (JSON lines, written as tasks complete); run again with the same FILE to take a stopped study up where it stopped.")

@@ -34,6 +34,7 @@ import importlib
 import json
 import logging
 import os
+import signal
 import sys
 import threading
 import uuid
@@ -122,10 +123,34 @@ def forget_cached(key: Any) -> None:
     _CACHE.pop(key, None)
 
 
-def local_worker_count(requested: int | None = None) -> int:
-    """Workers of the local cluster: ``requested``, else one per core of this machine."""
-    if requested is not None and requested < 1:
+#: Local worker processes per core at most (--workers 100000 would try to start them all).  Each is a Python
+#: process with numpy, sympy and numba (about 300 MB); beyond a few per core they only wait for the cores.
+MAX_WORKERS_PER_CORE = 4
+#: ... and never fewer than this many allowed, whatever the core count.
+MIN_WORKERS_ALLOWED = 8
+
+
+def max_local_workers() -> int:
+    """The most worker processes a local cluster may have on this machine."""
+    return max(MIN_WORKERS_ALLOWED, MAX_WORKERS_PER_CORE * (os.cpu_count() or 1))
+
+
+def check_worker_count(requested: int | None) -> None:
+    """Refuse a --workers below 1 or over :func:`max_local_workers`, naming the limit."""
+    if requested is None:
+        return
+    if requested < 1:
         raise ModelError(f"--workers: need at least one worker, got {requested}")
+    limit = max_local_workers()
+    if requested > limit:
+        raise ModelError(f"--workers {requested}: at most {limit} worker processes on this machine "
+                         f"({MAX_WORKERS_PER_CORE} per core, {os.cpu_count() or 1} cores; each worker is a "
+                         "Python process of its own)")
+
+
+def local_worker_count(requested: int | None = None) -> int:
+    """Workers of the local cluster: ``requested`` (at most :func:`max_local_workers`), else one per core of this machine."""
+    check_worker_count(requested)
     return requested or os.cpu_count() or 1
 
 
@@ -173,6 +198,28 @@ def _connect_within(connect: Callable[[], Any], scheduler: str, timeout_s: float
 
 
 @contextmanager
+def _workers_ignore_interrupts() -> Iterator[None]:
+    """SIGINT ignored while the local cluster's worker processes are spawned: they inherit it.
+
+    Ctrl-C reaches every process of the terminal's process group: each
+    worker would print its own KeyboardInterrupt traceback while
+    this process, which handles the interrupt (exit 130, one line), closes
+    the cluster and so ends them.  Only SIG_IGN survives the exec of a
+    spawned worker (a handler of this process would not), so a Ctrl-C in
+    the second or two the workers take to start is dropped; the next one
+    is taken.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous if previous is not None else signal.default_int_handler)
+
+
+@contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None,
                 timeout_s: float = CONNECT_TIMEOUT_S) -> Iterator[Any]:
     """A ``distributed.Client`` on ``scheduler`` (an address) or on a new local cluster of ``workers`` processes.
@@ -205,7 +252,8 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
         finally:
             client.close()
         return
-    with dask.config.set(LOCAL_CLUSTER_CONFIG):  # the scheduler reads it here, the worker processes get it at spawn
+    # the scheduler reads the configuration here, the worker processes get it (and SIGINT ignored) at spawn
+    with dask.config.set(LOCAL_CLUSTER_CONFIG), _workers_ignore_interrupts():
         cluster = LocalCluster(n_workers=local_worker_count(workers), threads_per_worker=1, processes=True,
                                host="127.0.0.1", dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
     try:

@@ -28,14 +28,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from modelgen.codegen.options import CodegenOptions
-from modelgen.derivation.symbolic import DerivedModel, derive
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path
 from modelgen.fileio.output import FolderUpdate, write_text_atomically
-from modelgen.model.loading import builtin_models, load_model
 from modelgen.model.sources import cite_sources
 
 if TYPE_CHECKING:
+    from modelgen.derivation.symbolic import DerivedModel
     from modelgen.checks.code_check import CheckScenario, ConformanceResult
     from modelgen.checks.paper_check import VerificationResult
     from modelgen.checks.paper_equations import PaperEquationsResult
@@ -50,6 +49,7 @@ _REEXPORTED = {
     "write_verification_report": "modelgen.checks.paper_check",
     "differences_summary": "modelgen.checks.paper_equations",
     "write_paper_equations_report": "modelgen.checks.paper_equations",
+    "check_worker_count": "modelgen.cluster",
 }
 
 
@@ -60,6 +60,28 @@ def __getattr__(name: str) -> Any:
         globals()[name] = value
         return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def load_model(model: str | Path):
+    """:func:`modelgen.model.loading.load_model`, imported on first use: sympy (30 MiB, 0.5 s) only for the jobs
+    that load a model here (``modelgen simulate`` derives its model in a forked process, the flight imports none)."""
+    from modelgen.model.loading import load_model as load
+
+    return load(model)
+
+
+def builtin_models() -> list[str]:
+    """:func:`modelgen.model.loading.builtin_models`, imported on first use (see :func:`load_model`)."""
+    from modelgen.model.loading import builtin_models as names
+
+    return names()
+
+
+def derive(model):
+    """:func:`modelgen.derivation.symbolic.derive`, imported on first use (see :func:`load_model`)."""
+    from modelgen.derivation.symbolic import derive as derived
+
+    return derived(model)
 
 
 def load_and_derive(model: str | Path) -> DerivedModel:
@@ -162,6 +184,8 @@ def generate(
     that were edited since.
     """
     from modelgen.codegen.generate import generate_code
+
+    from modelgen.derivation.symbolic import DerivedModel
 
     derived = model if isinstance(model, DerivedModel) else load_and_derive(model)
     options = options or CodegenOptions()
@@ -736,9 +760,14 @@ def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation
     """
     from modelgen.cluster import dask_client, describe_client
     from modelgen.simulation.flight_report import simulate, start_flight
+    from modelgen.simulation.model_process import ModelProcess
 
+    # the generated C filter needs only plain data of the derived model: the model is derived, its code generated
+    # and its layout made in a forked copy of this process (before the flight's threads start), so that the flight
+    # holds none of sympy (bench/bench_simulate_memory.py); the Python and reference filters need the model here
+    preparing = ModelProcess.start(scenario, implementation, runs) if implementation == "c" else None
     started = start_flight(scenario, seed)  # the truth and IMU errors are made while the model is derived
-    derived = load_and_derive(scenario.filter.model)
+    derived = preparing.result() if preparing is not None else load_and_derive(scenario.filter.model)
     if runs < 2 and scheduler is None:
         return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation,
                         history_csv=history_csv, journal=journal, started=started)

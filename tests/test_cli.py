@@ -195,7 +195,8 @@ def test_a_full_disk_gives_one_line_exit_2_and_nothing_half_written(runner, tmp_
     monkeypatch.setattr(output, "_write_text", full)
     result = runner.invoke(main, ["generate", str(_toy(tmp_path, "0.25")), "--out", str(out)])
     assert result.exit_code == 2
-    assert f"modelgen: error: {written[-1]}: No space left on device" in result.output
+    # the file the user asked for, not its copy in the staging folder (issue 28)
+    assert f"modelgen: error: {out / 'toy_loop' / written[-1].name}: No space left on device" in result.output
     assert "Traceback" not in result.output
     assert _snapshot(out / "toy_loop") == before and _hidden(out) == []
 
@@ -343,3 +344,17 @@ def test_observability_without_scenario_uses_the_models_check_scenario(runner):
     assert result.exit_code == 0, result.output
     assert "scenario: the model's check scenario (steps of 1 s)" in result.output
     assert "rank of the observability matrix: 19 of 21" in result.output  # level, unaccelerated: tilt ~ accel bias
+
+
+@pytest.mark.parametrize("force", [[], ["--force"]])
+def test_derive_out_onto_a_named_pipe_is_refused_and_the_pipe_kept(runner, tmp_path, force):
+    """Issue 28: ``derive --out /dev/full --force`` (as root) replaced the device node with a regular file."""
+    import os
+
+    pipe = tmp_path / "pipe"
+    os.mkfifo(pipe)
+    result = runner.invoke(main, ["derive", "ned_doppler18", "--format", "json", "--out", str(pipe), *force])
+    assert result.exit_code == 2
+    assert result.output.strip() == (f"modelgen: error: {pipe}: is a named pipe, and modelgen replaces only regular "
+                                     "files (even with --force): move it away or give another --out")
+    assert pipe.is_fifo() and sorted(p.name for p in tmp_path.iterdir()) == ["pipe"]

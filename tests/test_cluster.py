@@ -301,3 +301,47 @@ def test_modelgen_simulate_journal_keeps_the_runs_and_refuses_another_study(tmp_
     assert other.returncode == 2
     assert "runs.jsonl:1: journal of another study or task split" in other.stderr
     assert journal.read_text() == kept
+
+
+def test_more_local_workers_than_four_per_core_are_refused_naming_the_limit():
+    """Issue 28: --workers 100000 tried to start them all."""
+    from modelgen.cluster import check_worker_count, local_worker_count, max_local_workers
+
+    limit = max_local_workers()
+    assert limit == max(8, 4 * (os.cpu_count() or 1))
+    assert local_worker_count(limit) == limit
+    with pytest.raises(ModelError, match=rf"^--workers 100000: at most {limit} worker processes on this machine"):
+        local_worker_count(100000)
+    with pytest.raises(ModelError, match="at least one worker"):
+        check_worker_count(0)
+
+
+_INTERRUPTED_CLIENT = r'''
+import sys, time
+from modelgen.cluster import dask_client
+try:
+    with dask_client(workers=2) as client:
+        assert client.submit(sum, [1, 2]).result() == 3
+        print("ready", flush=True)
+        time.sleep(60)
+except KeyboardInterrupt:
+    print("interrupted", file=sys.stderr, flush=True)
+    sys.exit(130)
+'''
+
+
+def test_ctrl_c_reaching_the_local_clusters_workers_prints_no_traceback_of_theirs():
+    """Ctrl-C goes to the terminal's whole process group: each worker printed its KeyboardInterrupt traceback
+    (issue 28: SIGINT during a Monte Carlo); the workers ignore it, and this process ends them."""
+    child = subprocess.Popen([sys.executable, "-c", _INTERRUPTED_CLIENT], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True, start_new_session=True, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
+    try:
+        assert child.stdout.readline().strip() == "ready"
+        time.sleep(1.0)  # the workers idle, as they do between runs
+        os.killpg(child.pid, signal.SIGINT)
+        _, err = child.communicate(timeout=START_TIMEOUT_S)
+    finally:
+        if child.poll() is None:
+            os.killpg(child.pid, signal.SIGKILL)
+            child.wait()
+    assert child.returncode == 130 and err.strip() == "interrupted", err

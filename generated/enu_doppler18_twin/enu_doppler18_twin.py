@@ -1176,3 +1176,93 @@ def _check_covariance_entries(function, P):
         np.linalg.cholesky(correlation)
     except np.linalg.LinAlgError:
         raise ValueError(f"{function}: P is not positive semidefinite") from None
+
+
+# ---------------------------------------------------------------------------
+# Fixed-interval Rauch-Tung-Striebel smoother: the backward pass of this model
+# (modelgen/codegen/smoother.py).  It runs on what a closed-loop forward pass
+# stores per covariance step k: Phi[k] (the transition from step k-1; Phi[0] is
+# not read), P_prior[k] (after predict), P_post[k] (after the step's updates
+# and resets) and the corrections fed back at the step, in order.
+# Every reset of this model is e -> e - dx (G = I: phi or psi attitude angles,
+# additive states), so undoing one adds dx and leaves the covariance as it is.
+SMOOTHER_RESET_STATES = ()
+
+
+def reset_inverse(dx):
+    """G(dx)^-1: the inverse of the reset Jacobian of a correction dx (18 x 18)."""
+    dx = _array(dx, float)
+    _check_shapes("reset_inverse", dx=(dx, (N_STATES,)))
+    inverse = np.eye(N_STATES)
+    return inverse
+
+
+def smooth_refer(s, Ps, corrections):
+    """A smoothed error and covariance after the corrections referred to the nominal before them (last undone first).
+
+    A correction's reset is undone as e = G(dx)^-1 e' + dx, P = G^-1 P' G^-T.
+    Returns new arrays (s, Ps).
+    """
+    s = np.array(s, dtype=float)
+    Ps = np.array(Ps, dtype=float)
+    _check_shapes("smooth_refer", s=(s, (N_STATES,)), Ps=(Ps, (N_STATES, N_STATES)))
+    for dx in reversed(list(corrections)):
+        dx = _array(dx, float)
+        _check_shapes("smooth_refer", correction=(dx, (N_STATES,)))
+        s += dx
+    return s, Ps
+
+
+def smooth_step(s_next, Ps_next, P_post, Phi_next, P_prior_next, corrections_next=()):
+    """One backward step: (s_k, P^s_k) from (s_{k+1}, P^s_{k+1}) and step k's posterior, step k+1's Phi, prior, corrections.
+
+    A_k = P_post Phi_next^T P_prior_next^-1 (Cholesky factor of P_prior_next),
+    s_k = A_k s^-, P^s_k = P_post + A_k (P^s- - P_prior_next) A_k^T with s^-,
+    P^s- referred to before step k+1's corrections (:func:`smooth_refer`).
+    Raises ValueError for a wrong shape, a non-finite entry or a P_prior_next
+    that is not positive definite.
+    """
+    P_post, Phi_next, P_prior_next = _array(P_post, float), _array(Phi_next, float), _array(P_prior_next, float)
+    square = (N_STATES, N_STATES)
+    _check_shapes("smooth_step", P_post=(P_post, square), Phi_next=(Phi_next, square),
+                  P_prior_next=(P_prior_next, square))
+    _check_finite("smooth_step", P_post=P_post, Phi_next=Phi_next, P_prior_next=P_prior_next)
+    s_before, Ps_before = smooth_refer(s_next, Ps_next, corrections_next)
+    factor, info = lapack.dpotrf(P_prior_next, lower=1, clean=0)
+    if info != 0:
+        raise ValueError("smooth_step: P_prior_next is not positive definite")
+    gain_t, info = lapack.dpotrs(factor, Phi_next @ P_post, lower=1)  # A^T = P^-1 Phi P_post (P^-, P_post symmetric)
+    gain = gain_t.T
+    s = gain @ s_before
+    Ps = P_post + gain @ (Ps_before - P_prior_next) @ gain_t
+    Ps = 0.5 * (Ps + Ps.T)
+    _check_finite("smooth_step", result=Ps)
+    return s, Ps
+
+
+def smooth(Phi, P_prior, P_post, corrections, correction_start):
+    """The whole backward pass over ``steps`` recorded steps, last to first: (s, Ps), shapes (steps, N), (steps, N, N).
+
+    Phi, P_prior, P_post: (steps, N, N); corrections: (M, N), the corrections of
+    step k being rows correction_start[k] to correction_start[k + 1] - 1
+    (correction_start has steps + 1 entries).  s[k] is relative to the nominal
+    after step k's corrections; s[-1] = 0 and Ps[-1] = P_post[-1].
+    """
+    Phi, P_prior, P_post = _array(Phi, float), _array(P_prior, float), _array(P_post, float)
+    corrections = _array(corrections, float).reshape(-1, N_STATES)
+    start = np.asarray(correction_start, dtype=np.int64)
+    steps = P_post.shape[0] if P_post.ndim == 3 else 0
+    if steps == 0:
+        raise ValueError("smooth: no step recorded")
+    square = (steps, N_STATES, N_STATES)
+    _check_shapes("smooth", Phi=(Phi, square), P_prior=(P_prior, square), P_post=(P_post, square),
+                  correction_start=(start, (steps + 1,)))
+    if start[0] != 0 or start[-1] != len(corrections) or (np.diff(start) < 0).any():
+        raise ValueError("smooth: correction_start does not index the corrections")
+    s = np.zeros((steps, N_STATES))
+    Ps = np.empty(square)
+    Ps[-1] = P_post[-1]
+    for k in range(steps - 2, -1, -1):
+        s[k], Ps[k] = smooth_step(s[k + 1], Ps[k + 1], P_post[k], Phi[k + 1], P_prior[k + 1],
+                                  corrections[start[k + 1]:start[k + 2]])
+    return s, Ps

@@ -350,6 +350,67 @@ int gps_pseudorange11_update_masked(gps_pseudorange11_filter *GPS_PSEUDORANGE11_
                         gps_pseudorange11_scalar *GPS_PSEUDORANGE11_RESTRICT nis,
                 gps_pseudorange11_workspace *GPS_PSEUDORANGE11_RESTRICT work);
 
+/* Fixed-interval Rauch-Tung-Striebel smoother, the backward pass of this model, on what a
+   closed-loop forward pass stores per covariance step k: Phi_k (the transition from step k-1),
+   P_k^- (after predict), P_k^+ (after the step's updates and resets) and the corrections dx fed
+   back at the step, in order.  Every reset of this model maps e to e - dx (G = I).   The caller
+           provides every buffer (no allocation): the work area below and the arrays. */
+typedef struct {
+    gps_pseudorange11_scalar factor[GPS_PSEUDORANGE11_N_STATES * GPS_PSEUDORANGE11_N_STATES];     /*
+            Cholesky factor of P_{k+1}^-, then (P^s - P^-) A^T */
+    gps_pseudorange11_scalar gain[GPS_PSEUDORANGE11_N_STATES * GPS_PSEUDORANGE11_N_STATES];       /*
+            Phi_{k+1} P_k^+, then A_k^T */
+    gps_pseudorange11_scalar difference[GPS_PSEUDORANGE11_N_STATES * GPS_PSEUDORANGE11_N_STATES]; /*
+            P^s_{k+1} before the corrections - P_{k+1}^- */
+    gps_pseudorange11_scalar before[GPS_PSEUDORANGE11_N_STATES];                         /* s_{k+1}
+            before the corrections */
+} gps_pseudorange11_smooth_workspace;
+
+/* Refer a smoothed error s (GPS_PSEUDORANGE11_N_STATES) and its covariance Ps (N * N, row-major)
+        after
+   n_corrections corrections (rows of N entries, in the order they were fed back) to the nominal
+   before them, in place: the last is undone first, e = G(dx)^-1 e' + dx, P = G^-1 P' G^-T.
+   Returns GPS_PSEUDORANGE11_OK, or GPS_PSEUDORANGE11_ERR_NONFINITE for a non-finite result (s and
+           Ps are then not usable). */
+int gps_pseudorange11_smooth_refer(gps_pseudorange11_scalar s[GPS_PSEUDORANGE11_RESTRICT
+        GPS_PSEUDORANGE11_N_STATES],
+                gps_pseudorange11_scalar Ps[GPS_PSEUDORANGE11_RESTRICT GPS_PSEUDORANGE11_N_STATES *
+                        GPS_PSEUDORANGE11_N_STATES], long n_corrections,
+                const gps_pseudorange11_scalar *GPS_PSEUDORANGE11_RESTRICT corrections);
+
+/* One backward step: s_k and Ps_k from s_{k+1} (s_next), P^s_{k+1} (Ps_next), step k's P_k^+
+   (P_post), step k+1's Phi (Phi_next), P^- (P_prior_next) and corrections:
+   A_k = P_k^+ Phi_{k+1}^T (P_{k+1}^-)^-1 (Cholesky), s_k = A_k s^-, P^s_k = P_k^+ + A_k (P^s- -
+           P^-) A_k^T,
+   s^- and P^s- referred to before the corrections (gps_pseudorange11_smooth_refer).  Matrices N * N
+           row-major;
+   s may be s_next and Ps may be Ps_next.  Refuses a non-finite input or result (ERR_NONFINITE), a
+   Phi_next with a nonzero outside the structural pattern of Phi (ERR_STRUCTURE) and a P_prior_next
+   that is not positive definite (ERR_NOT_POSITIVE). */
+int gps_pseudorange11_smooth_step(const gps_pseudorange11_scalar *s_next, const
+        gps_pseudorange11_scalar *Ps_next, const gps_pseudorange11_scalar *P_post,
+                const gps_pseudorange11_scalar *Phi_next, const gps_pseudorange11_scalar
+                        *P_prior_next, long n_corrections,
+                const gps_pseudorange11_scalar *corrections_next, gps_pseudorange11_scalar *s,
+                        gps_pseudorange11_scalar *Ps,
+                gps_pseudorange11_smooth_workspace *GPS_PSEUDORANGE11_RESTRICT work);
+
+/* The whole backward pass over steps recorded steps, last to first.  Phi, P_prior, P_post: steps
+   matrices of N * N each (Phi[0] is not read); corrections: rows of N entries, those of step k
+   being rows correction_start[k] to correction_start[k + 1] - 1 (steps + 1 entries, from 0).
+   Writes s (steps * N: s_k relative to the nominal after step k's corrections) and Ps (steps * N *
+           N);
+   s_{steps-1} = 0, Ps_{steps-1} = P_post_{steps-1}.  Returns gps_pseudorange11_smooth_step's status
+           at the first
+   step refused (its index into *failed_step unless failed_step is NULL; the steps from it down are
+   then not usable) or ERR_STRUCTURE for a correction_start that does not index the corrections. */
+int gps_pseudorange11_smooth(long steps, const gps_pseudorange11_scalar *Phi, const
+        gps_pseudorange11_scalar *P_prior,
+                const gps_pseudorange11_scalar *P_post, const gps_pseudorange11_scalar *corrections,
+                        const long *correction_start,
+                gps_pseudorange11_scalar *s, gps_pseudorange11_scalar *Ps, long *failed_step,
+                        gps_pseudorange11_smooth_workspace *GPS_PSEUDORANGE11_RESTRICT work);
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif

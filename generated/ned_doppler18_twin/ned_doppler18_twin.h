@@ -329,6 +329,67 @@ int ned_doppler18_twin_update_masked(ned_doppler18_twin_filter *NED_DOPPLER18_TW
                         ned_doppler18_twin_scalar *NED_DOPPLER18_TWIN_RESTRICT nis,
                 ned_doppler18_twin_workspace *NED_DOPPLER18_TWIN_RESTRICT work);
 
+/* Fixed-interval Rauch-Tung-Striebel smoother, the backward pass of this model, on what a
+   closed-loop forward pass stores per covariance step k: Phi_k (the transition from step k-1),
+   P_k^- (after predict), P_k^+ (after the step's updates and resets) and the corrections dx fed
+   back at the step, in order.  Every reset of this model maps e to e - dx (G = I).   The caller
+           provides every buffer (no allocation): the work area below and the arrays. */
+typedef struct {
+    ned_doppler18_twin_scalar factor[NED_DOPPLER18_TWIN_N_STATES * NED_DOPPLER18_TWIN_N_STATES];
+            /* Cholesky factor of P_{k+1}^-, then (P^s - P^-) A^T */
+    ned_doppler18_twin_scalar gain[NED_DOPPLER18_TWIN_N_STATES * NED_DOPPLER18_TWIN_N_STATES];
+            /* Phi_{k+1} P_k^+, then A_k^T */
+    ned_doppler18_twin_scalar difference[NED_DOPPLER18_TWIN_N_STATES * NED_DOPPLER18_TWIN_N_STATES];
+            /* P^s_{k+1} before the corrections - P_{k+1}^- */
+    ned_doppler18_twin_scalar before[NED_DOPPLER18_TWIN_N_STATES];                         /*
+            s_{k+1} before the corrections */
+} ned_doppler18_twin_smooth_workspace;
+
+/* Refer a smoothed error s (NED_DOPPLER18_TWIN_N_STATES) and its covariance Ps (N * N, row-major)
+        after
+   n_corrections corrections (rows of N entries, in the order they were fed back) to the nominal
+   before them, in place: the last is undone first, e = G(dx)^-1 e' + dx, P = G^-1 P' G^-T.
+   Returns NED_DOPPLER18_TWIN_OK, or NED_DOPPLER18_TWIN_ERR_NONFINITE for a non-finite result (s and
+           Ps are then not usable). */
+int ned_doppler18_twin_smooth_refer(ned_doppler18_twin_scalar s[NED_DOPPLER18_TWIN_RESTRICT
+        NED_DOPPLER18_TWIN_N_STATES],
+                ned_doppler18_twin_scalar Ps[NED_DOPPLER18_TWIN_RESTRICT NED_DOPPLER18_TWIN_N_STATES
+                        * NED_DOPPLER18_TWIN_N_STATES], long n_corrections,
+                const ned_doppler18_twin_scalar *NED_DOPPLER18_TWIN_RESTRICT corrections);
+
+/* One backward step: s_k and Ps_k from s_{k+1} (s_next), P^s_{k+1} (Ps_next), step k's P_k^+
+   (P_post), step k+1's Phi (Phi_next), P^- (P_prior_next) and corrections:
+   A_k = P_k^+ Phi_{k+1}^T (P_{k+1}^-)^-1 (Cholesky), s_k = A_k s^-, P^s_k = P_k^+ + A_k (P^s- -
+           P^-) A_k^T,
+   s^- and P^s- referred to before the corrections (ned_doppler18_twin_smooth_refer).  Matrices N *
+           N row-major;
+   s may be s_next and Ps may be Ps_next.  Refuses a non-finite input or result (ERR_NONFINITE), a
+   Phi_next with a nonzero outside the structural pattern of Phi (ERR_STRUCTURE) and a P_prior_next
+   that is not positive definite (ERR_NOT_POSITIVE). */
+int ned_doppler18_twin_smooth_step(const ned_doppler18_twin_scalar *s_next, const
+        ned_doppler18_twin_scalar *Ps_next, const ned_doppler18_twin_scalar *P_post,
+                const ned_doppler18_twin_scalar *Phi_next, const ned_doppler18_twin_scalar
+                        *P_prior_next, long n_corrections,
+                const ned_doppler18_twin_scalar *corrections_next, ned_doppler18_twin_scalar *s,
+                        ned_doppler18_twin_scalar *Ps,
+                ned_doppler18_twin_smooth_workspace *NED_DOPPLER18_TWIN_RESTRICT work);
+
+/* The whole backward pass over steps recorded steps, last to first.  Phi, P_prior, P_post: steps
+   matrices of N * N each (Phi[0] is not read); corrections: rows of N entries, those of step k
+   being rows correction_start[k] to correction_start[k + 1] - 1 (steps + 1 entries, from 0).
+   Writes s (steps * N: s_k relative to the nominal after step k's corrections) and Ps (steps * N *
+           N);
+   s_{steps-1} = 0, Ps_{steps-1} = P_post_{steps-1}.  Returns ned_doppler18_twin_smooth_step's
+           status at the first
+   step refused (its index into *failed_step unless failed_step is NULL; the steps from it down are
+   then not usable) or ERR_STRUCTURE for a correction_start that does not index the corrections. */
+int ned_doppler18_twin_smooth(long steps, const ned_doppler18_twin_scalar *Phi, const
+        ned_doppler18_twin_scalar *P_prior,
+                const ned_doppler18_twin_scalar *P_post, const ned_doppler18_twin_scalar
+                        *corrections, const long *correction_start,
+                ned_doppler18_twin_scalar *s, ned_doppler18_twin_scalar *Ps, long *failed_step,
+                        ned_doppler18_twin_smooth_workspace *NED_DOPPLER18_TWIN_RESTRICT work);
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif

@@ -15,9 +15,15 @@ expressions, unperturbed, for the navigator that flies the model:
 * w_in = w_ie + w_en, the rate the attitude update takes out of the body rotation
   (C' = C [w_ib x] - [w_in x] C; the quaternion update with coning is fixed code).
 
-They are resolved in NED, the navigator's state, whatever the model's frame:
-for an ENU model the velocity enters as v^ENU = T v^NED and the rates leave
-as T^T (rate^ENU), so the ENU equations are flown, not NED ones.
+For a local-level model they are resolved in NED, the navigator's state,
+whatever the model's frame: for an ENU model the velocity enters as
+v^ENU = T v^NED and the rates leave as T^T (rate^ENU), so the ENU equations are
+flown, not NED ones.  For the ``ecef`` mechanization the navigator's state is
+the e-frame's own (r^e, v^e, C_b^e): the inputs are (x, y, z, v_x, v_y, v_z),
+the outputs v' - C_b^e f^b = -2 w_ie x v + g^e(r) (the J2 gravity of the
+mechanization object, |r^e| written out), r' = v and w_ie^e; the navigator's
+integrator is the same (its position update, the third component first and then
+the first two at the mean third, is r += mean(v) dt when the rate is v).
 
 The approximations a model declares (``constant_radii``, ``gravity_height_only``,
 ``free_air_gradient`` ...) are simplifications of its *error* model: they act
@@ -38,6 +44,7 @@ import sympy as sp
 
 from modelgen.errors import ModelError
 from modelgen.model import wgs84
+from modelgen.model.mechanizations.ecef import GeocentricRadius
 from modelgen.model.mechanizations.local_level import Gravity, LocalLevel, MeridianRadius, PrimeVerticalRadius
 from modelgen.model.perturbation.problem import NavigationState
 
@@ -49,18 +56,27 @@ INPUT_NAMES = ("latitude", "longitude", "height", "v_north", "v_east", "v_down")
 OUTPUT_NAMES = ("velocity_rate_north", "velocity_rate_east", "velocity_rate_down",
                 "latitude_rate", "longitude_rate", "height_rate",
                 "navigation_rate_north", "navigation_rate_east", "navigation_rate_down")
+#: The same of the ecef mechanization: e-frame position and velocity in, e-frame rates out.
+ECEF_INPUT_NAMES = ("x", "y", "z", "v_x", "v_y", "v_z")
+ECEF_OUTPUT_NAMES = ("velocity_rate_x", "velocity_rate_y", "velocity_rate_z", "x_rate", "y_rate", "z_rate",
+                     "earth_rate_x", "earth_rate_y", "earth_rate_z")
+#: The mechanizations the navigator flies (a model of another is refused naming its file).
+FLOWN = ("local_level", "ecef")
 
 
 @dataclass(frozen=True)
 class MechanizationRates:
-    """The navigator's rates as expressions of :attr:`inputs` (latitude, longitude, height, NED velocity)."""
+    """The navigator's rates as expressions of :attr:`inputs` (latitude, longitude, height, NED velocity; or e-frame
+    position and velocity for the ecef mechanization)."""
 
     model: str
     frame: str
     inputs: tuple[sp.Symbol, ...]
-    velocity: sp.Matrix  # v' without C_b^n f^b, NED [m/s^2]
-    position: sp.Matrix  # (L', lambda', h') [rad/s, rad/s, m/s]
-    navigation_rate: sp.Matrix  # w_in, NED [rad/s]
+    velocity: sp.Matrix  # v' without C_b^n f^b, NED (ECEF: e-frame) [m/s^2]
+    position: sp.Matrix  # (L', lambda', h') [rad/s, rad/s, m/s] (ECEF: r' [m/s])
+    navigation_rate: sp.Matrix  # w_in, NED (ECEF: w_ie^e) [rad/s]
+    input_names: tuple[str, ...] = INPUT_NAMES
+    output_names: tuple[str, ...] = OUTPUT_NAMES
 
     @property
     def outputs(self) -> list[sp.Expr]:
@@ -91,9 +107,11 @@ def mechanization_rates(model) -> MechanizationRates:
     """The rates of ``model``'s own mechanization (module doc); ModelError for a model the navigator cannot fly so."""
     problem = getattr(model, "navigation", None)
     name, frame = (problem.mechanization_name, problem.frame) if problem is not None else ("local_level", str(model.frame).upper())
+    if name == "ecef" and frame == "ECEF":
+        return _ecef_rates(model, problem)
     if name != "local_level" or frame not in _NED_TO_FRAME:
-        raise ModelError(f"model {model.name}: the navigator flies the local_level mechanization in NED or ENU "
-                         f"(this model: {name}, frame {frame or 'none'})")
+        raise ModelError(f"model {model.name}: the navigator flies the local_level mechanization in NED or ENU and "
+                         f"the ecef mechanization in ECEF (this model: {name}, frame {frame or 'none'})")
     mech, position, attitude, body_rate, earth_rate = _equations(problem, frame)
     T = _NED_TO_FRAME[frame]
     latitude, longitude, height = position
@@ -111,6 +129,30 @@ def mechanization_rates(model) -> MechanizationRates:
         (T.T * velocity_rate.xreplace({s: 0 for s in force})).xreplace(earth),
         mech.position_rate(state).xreplace(earth),
         (T.T * mech.navigation_rate(state)).xreplace(earth),
+    )
+    _refuse_other_symbols(model, rates)
+    return rates
+
+
+def _ecef_rates(model, problem) -> MechanizationRates:
+    """The ecef mechanization's rates in e-frame axes (module doc): the same mechanization object as the error model's."""
+    mech, position, attitude, body_rate, earth_rate = _equations(problem, "ECEF")
+    velocity = sp.Matrix(sp.symbols("v_x v_y v_z", real=True))
+    inputs = (*position, *velocity)
+    force = sp.Matrix(sp.symbols("mechanization_f0:3", real=True, cls=sp.Dummy))
+    state = NavigationState(attitude, velocity, position, force, body_rate, position, position)
+    velocity_rate = mech.velocity_rate(state)
+    if velocity_rate.jacobian(list(force)) != sp.eye(3):
+        raise ModelError(f"model {model.name}: the navigator integrates the specific force as C_b^e f^b increments: "
+                         "the velocity equation must have the term f_e (plus terms without the specific force)")
+    x, y, z = position
+    earth = {GeocentricRadius(x, y, z): sp.sqrt(x**2 + y**2 + z**2), earth_rate: _earth_rate(model, str(earth_rate))}
+    rates = MechanizationRates(
+        model.name, "ECEF", tuple(inputs),
+        velocity_rate.xreplace({s: 0 for s in force}).xreplace(earth),
+        mech.position_rate(state).xreplace(earth),
+        mech.navigation_rate(state).xreplace(earth),
+        ECEF_INPUT_NAMES, ECEF_OUTPUT_NAMES,
     )
     _refuse_other_symbols(model, rates)
     return rates

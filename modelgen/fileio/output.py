@@ -39,11 +39,12 @@ import json
 import os
 import shutil
 import signal
+import stat
 import tempfile
 import threading
 from contextlib import contextmanager
 from pathlib import Path, PurePosixPath
-from typing import Iterator, Mapping
+from typing import Callable, Iterator, Mapping
 
 from modelgen.version import __version__
 from modelgen.errors import ModelError
@@ -243,8 +244,23 @@ def _apply_umask_to_folder(path: Path) -> None:
 
 def _write_text(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "x", encoding="utf-8", newline="\n") as handle:
-        handle.write(text)
+    try:
+        with open(path, "x", encoding="utf-8", newline="\n") as handle:
+            handle.write(text)
+    except OSError as exc:
+        if exc.filename is None:  # a write into a full disk names no file: name the one being written
+            raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+        raise
+
+
+def _name_final_file(error: BaseException | None, staging: Path | None, final: Callable[[Path], Path]) -> None:
+    """An OSError about a file in a staging folder names the file the user asked for (``final`` of it)."""
+    if not isinstance(error, OSError) or staging is None:
+        return
+    for attribute in ("filename", "filename2"):
+        name = getattr(error, attribute)
+        if isinstance(name, str) and Path(name).is_relative_to(staging):
+            setattr(error, attribute, str(final(Path(name))))
 
 
 def _move_entries(source: Path, target: Path, entries: list[str]) -> list[str]:
@@ -344,6 +360,8 @@ class FolderUpdate:
         return self
 
     def __exit__(self, *exc_info) -> None:
+        _name_final_file(exc_info[1] if len(exc_info) > 1 else None, self.staging,
+                         lambda path: self.folder / path.relative_to(self.staging))
         try:
             self.staging = _discard_staging(self.staging)
         finally:
@@ -402,6 +420,25 @@ def write_atomically(folder: Path, files: Mapping[str, str], force: bool = False
         return update.commit()
 
 
+def refuse_non_regular(path: Path) -> None:
+    """Refuse to replace ``path`` when it exists and is not a regular file (never a device node).
+
+    A rename over a device (``/dev/full``), a named pipe or a socket would
+    put a regular file in its place; a symbolic link is refused too (the
+    rename would replace the link, not what it points to).
+    """
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return
+    if stat.S_ISREG(mode):
+        return
+    what = ("a symbolic link" if stat.S_ISLNK(mode) else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+            else "a named pipe" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
+    raise ModelError(f"{path}: is {what}, and modelgen replaces only regular files (even with --force): "
+                     "move it away or give another --out")
+
+
 def write_text_atomically(path: Path, text: str) -> Path:
     """Write one file through a temporary file and a rename: readers see the old or the new text, never a part."""
     return write_bytes_atomically(path, text.encode("utf-8"))
@@ -413,12 +450,18 @@ def write_bytes_atomically(path: Path, data: bytes, mode: int = 0o666) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.is_dir() and not path.is_symlink():
         raise OSError(errno.EISDIR, "is a folder, not a file", str(path))
+    refuse_non_regular(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)
         os.chmod(tmp, mode & ~current_umask())
         os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        if exc.filename is None:  # a write or close into a full disk names no file: name the one being written
+            raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -551,6 +594,7 @@ class ReportUpdate:
         return self
 
     def __exit__(self, *exc_info) -> None:
+        _name_final_file(exc_info[1] if len(exc_info) > 1 else None, self.staging, self.final)
         try:
             self.staging = _discard_staging(self.staging)
         finally:
@@ -570,6 +614,8 @@ class ReportUpdate:
         for rel in staged:
             target = self.folder / rel
             exists = target.exists() or target.is_symlink()
+            if exists and not (target.is_dir() and not target.is_symlink()):
+                refuse_non_regular(target)  # a device, pipe or link in the report folder is never replaced, even with --force
             if exists and not self.force and (target.is_dir() or not _owned_unchanged(self.folder, rel)):
                 raise ModelError(
                     f"{target}: was not written by modelgen, or was edited since; move it away, "

@@ -339,10 +339,12 @@ class ErrorModel:
             )
             for i, m in enumerate(measurements)
         }
+        defaults = {p.sym: p.value for p in parameters if p.value is not None}
         for i, w in enumerate(noises):
-            _check_not_negative(noise_psd[w.name], where(f"noises[{i}].psd", f"noise {w.name!r} psd"))
+            _check_not_negative(noise_psd[w.name], where(f"noises[{i}].psd", f"noise {w.name!r} psd"), defaults)
         for i, m in enumerate(measurements):
-            _check_not_negative(meas_var[m.name], where(f"measurements[{i}].variance", f"measurement {m.name!r} variance"))
+            _check_not_negative(meas_var[m.name], where(f"measurements[{i}].variance", f"measurement {m.name!r} variance"),
+                                defaults)
         # One linearity rule for every command (derive, generate, ...): a linear
         # Kalman filter cannot represent x*y, sin(x) or x**2, so such an equation
         # is refused here rather than silently linearized later.
@@ -420,15 +422,32 @@ def _check_declarations(
                 raise ModelError(f"{place}: value {p.value!r} is not finite")
 
 
-def _check_not_negative(statistic: sp.Expr, where: str) -> None:
+def _check_not_negative(statistic: sp.Expr, where: str, defaults: Mapping[sp.Symbol, float] | None = None) -> None:
     """Refuse a power spectral density or variance that is negative.
 
-    Refused: a negative number, and an expression sympy proves nonpositive
+    Refused: a negative number, an expression sympy proves nonpositive
     without being zero (``-sigma**2``): it is negative for every nonzero
-    sigma, which is always a sign error.
+    sigma, which is always a sign error; and an expression of parameters
+    that all have defaults which is negative, or not a real number, at those
+    defaults (``-2*mu*sigma**2``, ``-g``, ``sqrt(-g)``: otherwise only
+    ``generate --check`` would catch them, naming no file).
     """
     if statistic.is_negative or (statistic.is_nonpositive and statistic.is_zero is not True):
         raise ModelError(f"{where}: {statistic} is negative (a variance or spectral density must be >= 0)")
+    symbols = statistic.free_symbols
+    if not defaults or not symbols or not symbols <= set(defaults):
+        return
+    at = ", ".join(f"{s} = {defaults[s]:g}" for s in sorted(symbols, key=str))
+    try:
+        value = complex(statistic.xreplace({s: sp.Float(defaults[s]) for s in symbols}).evalf())
+    except (TypeError, ValueError, OverflowError, ZeroDivisionError):
+        raise ModelError(f"{where}: {_excerpt(str(statistic))} is not a number at the parameters' defaults ({at})") from None
+    if value.imag != 0 or value.real != value.real:
+        raise ModelError(f"{where}: {_excerpt(str(statistic))} is not a real number at the parameters' defaults ({at}); "
+                         "a variance or spectral density must be >= 0")
+    if value.real < 0:
+        raise ModelError(f"{where}: {_excerpt(str(statistic))} is {value.real:.6g} at the parameters' defaults ({at}); "
+                         "a variance or spectral density must be >= 0")
 
 
 def nonlinear_variables(expr: sp.Expr, variables: set[sp.Symbol]) -> list[sp.Symbol]:

@@ -8,6 +8,7 @@ so neither file reader depends on the other's internals.
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 from modelgen.errors import ModelError
@@ -41,17 +42,18 @@ def scalar_text(value: Any, place: str, key: str) -> str:
     return value if isinstance(value, str) else str(value)
 
 
+#: A number written as text: a plain decimal with an optional exponent, or inf/nan (refused later as not finite).
+#: Python's float() also reads '1_000' and surrounding white space: lax forms a model file may not use.
+_NUMBER_TEXT = re.compile(r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|inf|infinity|nan)", re.IGNORECASE)
+
+
 def is_number(value: Any) -> bool:
-    """Whether a YAML value is a number (or text that reads as one); true and false are not."""
+    """Whether a YAML value is a number (or text that reads as one: ``'1.5e-3'``); true, false and ``'1_000'`` are not."""
     if isinstance(value, bool):
         return False
     if isinstance(value, (int, float)):
         return True
-    try:
-        float(str(value))
-    except ValueError:
-        return False
-    return True
+    return isinstance(value, str) and _NUMBER_TEXT.fullmatch(value) is not None
 
 
 def as_float(value: Any) -> float:

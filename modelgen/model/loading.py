@@ -295,7 +295,7 @@ def load_model(path: str | Path, _loading: tuple[str, ...] = ()) -> ErrorModel:
     :func:`load_model_text`.
     """
     path = Path(path)
-    if not path.exists() and path.suffix == "" and builtin_model_path(str(path)) is not None:
+    if not path.is_file() and path.suffix == "" and builtin_model_path(str(path)) is not None:
         path = builtin_model_path(str(path))  # type: ignore[assignment]
     if not path.exists():
         raise ModelError(f"{path}: no such model file, and not a built-in model ({', '.join(builtin_models())})")

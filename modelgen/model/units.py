@@ -9,11 +9,14 @@ written once.
 from __future__ import annotations
 
 import math
+import numbers
 import re
 from dataclasses import dataclass
+from typing import Any
 from fractions import Fraction
 
 from modelgen.errors import ModelError
+from modelgen.model.file_fields import is_number
 
 ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi  # the paper's M (eq. (7) table)
 STANDARD_GRAVITY = 9.80665  # m/s^2; the "g" of "1e-4 g" in Table 1
@@ -49,13 +52,21 @@ def to_si(value: float, unit: str, where: str = "value") -> float:
         factor = _TO_SI[unit]
     except KeyError:
         raise ModelError(f"{where}: unknown unit {unit!r} (known: {', '.join(sorted(_TO_SI))})") from None
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ModelError(f"{where}: {value!r} is not a number") from None
+    return _finite_number(value, where) * factor
+
+
+def _finite_number(value: Any, where: str) -> float:
+    """A YAML number, or text that is a plain decimal (``'1.5e-3'``), as a finite float.
+
+    ``float()`` alone also reads ``True``, ``'1_000'`` and text padded with
+    white space: lax forms a file may not use.
+    """
+    if isinstance(value, bool) or not (isinstance(value, numbers.Real) or is_number(value)):
+        raise ModelError(f"{where}: {value!r} is not a number")
+    number = float(value)
     if not math.isfinite(number):
         raise ModelError(f"{where}: {value!r} is not finite")
-    return number * factor
+    return number
 
 
 def from_si(value, unit: str):
@@ -228,12 +239,7 @@ def unit_to_si(value: float, unit: str, where: str, expected: str | None = None)
             raise ModelError(f"{where}: the quantity is declared in {expected!r}, not in SI; values given with a unit are converted to SI")
     if unit in _TO_SI:
         return to_si(value, unit, where)
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ModelError(f"{where}: {value!r} is not a number") from None
-    if not math.isfinite(number):
-        raise ModelError(f"{where}: {value!r} is not finite")
+    number = _finite_number(value, where)
     return number * parsed.factor
 
 

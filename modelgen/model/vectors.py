@@ -352,8 +352,6 @@ def normalize_shape(shape: Any, where: str) -> tuple[int, int]:
         return (3, 1)
     if isinstance(shape, list) and [type(s) for s in shape] == [int, int] and shape == [3, 3]:
         return (3, 3)
-    if isinstance(shape, list) and [type(s) for s in shape] in ([int], [int, int]) and shape in ([3], [3, 1]):
-        return (3, 1)
     raise ModelError(
         f"{where}: shape {shape!r} is not supported; use 3 (a 3-vector) or [3, 3] (a 3x3 matrix), "
         "or leave 'shape' out for a scalar"

@@ -83,8 +83,20 @@ def template_context(spec: NavigatorSpec) -> dict:
             "gnss_rows": [{"kind": r.kind, "axis": r.axis, "sign": _literal(r.sign), "sigma_index": r.sigma_index}
                           for r in spec.gnss_rows],
             "frame": [[_literal(v) for v in row] for row in spec.to_frame], "frame_name": spec.frame,
+            "ecef": spec.ecef, "gnss_rotation": _gnss_rotation(spec),
             "rows_max": max(6, len(spec.gnss_rows)), "n_free": len(free), "free_names": ", ".join(free) or "none",
             "config_struct": cconfig.c_struct(spec.name, len(free)), "mechanization_rates": spec.rates_c}
+
+
+def _gnss_rotation(spec: NavigatorSpec) -> dict | None:
+    """The C's tables of NavigatorSpec.gnss_rotation (an ecef model): per GNSS row its kind (0 velocity, 1 position),
+    e-frame axis, sign, the NED axis it is turned along and its sigma index."""
+    if not spec.ecef:
+        return None
+    along = spec.gnss_rotation_rows()
+    return {"kind": [int(r.kind == "position") for r in spec.gnss_rows], "axis": [r.axis for r in spec.gnss_rows],
+            "sign": [_literal(r.sign) for r in spec.gnss_rows], "ned": [a for a, _ in along],
+            "sigma": [s for _, s in along]}
 
 
 def aiding_context(table=SENSORS) -> dict:
@@ -135,12 +147,76 @@ class CNavigator:
                                                     ctypes.c_long, dp, ctypes.POINTER(ctypes.c_int), dp, dp])
         self.alignment = self._fn("navigator_alignment", [ctypes.c_void_p, dp])
         self.counts = self._fn("navigator_counts", [ctypes.c_void_p, ctypes.POINTER(ctypes.c_long)], None)
+        self.set_record = self._fn("navigator_set_record", [ctypes.c_void_p, ctypes.c_void_p])
 
     def _fn(self, name: str, argtypes: list, restype=ctypes.c_int):
         function = getattr(self.lib, f"{self.model}_{name}")
         function.argtypes = argtypes
         function.restype = restype
         return function
+
+
+class GeneratedC:
+    """The generated C backward pass (``<model>_smooth``, ``<model>_smooth_refer``) in the compiled navigator library.
+
+    Every buffer is the caller's (numpy arrays here, the C allocates nothing): the record's arrays, the
+    outputs and the work area ``<model>_smooth_workspace``.
+    """
+
+    def __init__(self, navigator: CNavigator):
+        self.bind(navigator.lib, navigator.model, navigator.spec.n_states)
+
+    @classmethod
+    def of_library(cls, lib: ctypes.CDLL, model: str, n_states: int) -> "GeneratedC":
+        """The backward pass of any library with a generated double-precision filter of ``model`` in it."""
+        backward = cls.__new__(cls)
+        backward.bind(lib, model, n_states)
+        return backward
+
+    def bind(self, lib: ctypes.CDLL, model: str, n_states: int) -> None:
+        dp, lp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_long)
+        self.n = n_states
+        self.name = f"generated C ({model}_smooth)"
+        self._smooth = getattr(lib, f"{model}_smooth")
+        self._smooth.argtypes = [ctypes.c_long, dp, dp, dp, dp, lp, dp, dp, lp, ctypes.c_void_p]
+        self._smooth.restype = ctypes.c_int
+        self._refer = getattr(lib, f"{model}_smooth_refer")
+        self._refer.argtypes = [dp, dp, ctypes.c_long, dp]
+        self._refer.restype = ctypes.c_int
+        # the work area: factor, gain and difference (n x n each) and before (n), doubles
+        self._work = np.zeros(3 * self.n * self.n + self.n)
+
+    def smooth(self, arrays) -> tuple[np.ndarray, np.ndarray]:
+        steps = len(arrays.P_post)
+        n = self.n
+        Phi, P_prior, P_post = (np.ascontiguousarray(a, float) for a in (arrays.Phi, arrays.P_prior, arrays.P_post))
+        corrections = np.ascontiguousarray(arrays.corrections, float).reshape(-1, n)
+        if not len(corrections):
+            corrections = np.zeros((1, n))  # a pointer to something; no row is read
+        start = np.ascontiguousarray(arrays.start, dtype=ctypes.c_long)
+        s = np.zeros((steps, n))
+        Ps = np.zeros((steps, n, n))
+        failed = ctypes.c_long(-1)
+        status = self._smooth(steps, _pointer(Phi), _pointer(P_prior), _pointer(P_post), _pointer(corrections),
+                              _pointer(start, ctypes.c_long), _pointer(s), _pointer(Ps), ctypes.byref(failed),
+                              self._work.ctypes.data_as(ctypes.c_void_p))
+        if status != 0:
+            raise ModelError(f"smoother: the generated C backward pass refused the forward record at step "
+                             f"{failed.value} (status {status}: {SMOOTH_STATUS.get(status, 'unknown')})")
+        return s, Ps
+
+    def refer(self, s: np.ndarray, Ps: np.ndarray, corrections) -> tuple[np.ndarray, np.ndarray]:
+        s, Ps = np.array(s, float), np.array(Ps, float)
+        rows = np.ascontiguousarray(np.array(list(corrections), float).reshape(-1, self.n))
+        status = self._refer(_pointer(s), _pointer(Ps), len(rows), _pointer(rows))
+        if status != 0:
+            raise ModelError("smoother: the generated C backward pass made a non-finite smoothed error")
+        return s, Ps
+
+
+#: The generated filter's status codes as the backward pass returns them.
+SMOOTH_STATUS = {1: "non-finite input or result", 2: "a prior covariance is not positive definite",
+                 3: "a transition entry outside the pattern of Phi, or correction_start does not index the corrections"}
 
 
 def rest_define(model: str, rest_max: int) -> str:
@@ -193,7 +269,8 @@ def navigator_key(model_file: Path, rest_max: int) -> str:
     backends = Path(__file__).resolve().parent.parent / "codegen" / "backends"  # the filter's templates and printer
     sources = sorted(Path(template_folder()).glob("*.j2")) + sorted(backends.rglob("*.j2")) + sorted(backends.rglob("*.py"))
     here = Path(__file__).resolve().parent
-    sources += [here / "spec.py", here / "cconfig.py", here / "cconfig_fields.py", here / "cnav.py", here / "sensors.py"]  # they shape the rendered C
+    sources += [here / "spec.py", here / "cconfig.py", here / "cconfig_fields.py", here / "cnav.py", here / "sensors.py",
+                here / "ecef.py"]  # they shape the rendered C
     codegen = backends.parent  # the mechanization rates' generator and their symbolic source
     sources += [codegen / "mechanization.py", codegen.parent / "derivation" / "mechanization_rates.py"]
     for template in sources:
@@ -339,8 +416,101 @@ def flight_from_outputs(out: np.ndarray, arrays: LogArrays, inputs: Inputs, coun
                   float(arrays.cfg["gate_gnss"]), counts, list(inputs.notes), alignment)
 
 
-def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tuple[Flight, float]:
-    """Fly the log with the C navigator; return the flight and the CPU time of the C run [s]."""
+#: Entries of a recorded nominal state (NAV_RECORD_NOMINAL): the navigation vector, then the sensor estimates.
+NAV_SIZE = 10
+RECORD_SENSORS = ("gyro_bias", "accel_bias", "gyro_scale_factor", "accel_scale_factor")
+
+
+class RecordStruct(ctypes.Structure):
+    """<model>_navigator_record: the forward record's buffers (the caller's), capacities and counts."""
+
+    _fields_ = [("step_capacity", ctypes.c_long), ("correction_capacity", ctypes.c_long),
+                ("output_capacity", ctypes.c_long), ("Phi", ctypes.POINTER(ctypes.c_double)),
+                ("P_prior", ctypes.POINTER(ctypes.c_double)), ("P_post", ctypes.POINTER(ctypes.c_double)),
+                ("correction_start", ctypes.POINTER(ctypes.c_long)), ("corrections", ctypes.POINTER(ctypes.c_double)),
+                ("nominal", ctypes.POINTER(ctypes.c_double)), ("output_step", ctypes.POINTER(ctypes.c_long)),
+                ("output_corrections_before", ctypes.POINTER(ctypes.c_long)), ("steps", ctypes.c_long),
+                ("n_corrections", ctypes.c_long), ("outputs", ctypes.c_long)]
+
+
+@dataclass
+class RecordBuffers:
+    """The numpy arrays a C forward record is written into, sized from the log and the configuration."""
+
+    Phi: np.ndarray
+    P_prior: np.ndarray
+    P_post: np.ndarray
+    correction_start: np.ndarray
+    corrections: np.ndarray
+    nominal: np.ndarray
+    output_step: np.ndarray
+    output_corrections_before: np.ndarray
+
+    @classmethod
+    def sized(cls, arrays: "LogArrays", n: int, table=SENSORS) -> "RecordBuffers":
+        """Capacities: a covariance step closes every predict_samples IMU samples or at a GNSS epoch (steps <=
+        n_imu / predict_samples + epochs + the alignment's), each step tries every step sensor once and each
+        epoch makes at most one GNSS update (corrections <= steps x step sensors + epochs), one output per epoch."""
+        epochs = len(arrays.t_gnss)
+        steps = len(arrays.time) // max(1, int(arrays.cfg["predict_samples"])) + epochs + 2
+        corrections = steps * len(step_sensors(table)) + epochs
+        return cls(np.zeros((steps, n, n)), np.zeros((steps, n, n)), np.zeros((steps, n, n)),
+                   np.zeros(steps + 1, dtype=ctypes.c_long), np.zeros((max(corrections, 1), n)),
+                   np.zeros((max(epochs, 1), NAV_SIZE + 12)), np.zeros(max(epochs, 1), dtype=ctypes.c_long),
+                   np.zeros(max(epochs, 1), dtype=ctypes.c_long))
+
+    def structure(self) -> RecordStruct:
+        return RecordStruct(len(self.P_post), len(self.corrections), len(self.nominal), _pointer(self.Phi),
+                            _pointer(self.P_prior), _pointer(self.P_post), _pointer(self.correction_start, ctypes.c_long),
+                            _pointer(self.corrections), _pointer(self.nominal), _pointer(self.output_step, ctypes.c_long),
+                            _pointer(self.output_corrections_before, ctypes.c_long), 0, 0, 0)
+
+
+def forward_record_from_c(buffers: RecordBuffers, counts: RecordStruct, spec: NavigatorSpec, arrays: "LogArrays",
+                          out: np.ndarray, lever: np.ndarray):
+    """The C's forward record as a :class:`modelgen.navigator.smoother.ForwardRecord` (the smoother's input).
+
+    ``out``: the C's output rows (all epochs, NaN before the alignment): the recorded outputs are its aligned
+    rows in order; each becomes an output row again by the navigator's own row function at its IMU sample.
+    """
+    from functools import partial
+
+    from modelgen.navigator.navigator import _apply_correction, _row
+    from modelgen.navigator.smoother import ForwardRecord, OutputSnapshot
+
+    steps, n_corrections, outputs = counts.steps, counts.n_corrections, counts.outputs
+    aligned = np.flatnonzero(~np.isnan(out[:, 0]))
+    if steps < 1 or outputs != len(aligned):
+        raise ModelError(f"smoother: the C navigator's forward record holds {outputs} outputs for {len(aligned)} "
+                         "aligned epochs")
+    record = ForwardRecord()
+    record.feedback = partial(_apply_correction, spec)
+    start = buffers.correction_start[:steps + 1]
+    for k in range(steps):
+        record.transitions.append(buffers.Phi[k].copy() if k else None)
+        record.priors.append(buffers.P_prior[k].copy())
+        record.posteriors.append(buffers.P_post[k].copy())
+        record.corrections.append([buffers.corrections[i].copy() for i in range(start[k], start[k + 1])])
+    if start[steps] != n_corrections:
+        raise ModelError("smoother: the C navigator's forward record does not index its corrections")
+    for i, j in enumerate(aligned):
+        row = out[j]
+        nominal = buffers.nominal[i]
+        sensors = {name: nominal[NAV_SIZE + 3 * b:NAV_SIZE + 3 * b + 3].copy() for b, name in enumerate(RECORD_SENSORS)}
+        k = int(arrays.target[j])
+        record.outputs.append(OutputSnapshot(int(buffers.output_step[i]), int(buffers.output_corrections_before[i]),
+                                             nominal[:NAV_SIZE].copy(), sensors,
+                                             partial(_row, spec, float(arrays.time[k]), lever, arrays.rate[k],
+                                                     bool(row[19]), int(row[20]), float(row[21]), int(row[22]))))
+    return record
+
+
+def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator, record: bool = False) -> tuple[Flight, float]:
+    """Fly the log with the C navigator; return the flight and the CPU time of the C run [s].
+
+    ``record``: also keep the forward record the smoother needs, in buffers sized from the log and the
+    configuration (:class:`RecordBuffers`; the C allocates nothing); the flight carries it as ``forward_record``.
+    """
     a = log_arrays(config, inputs, navigator.spec)
     if a.rest_max > navigator.rest_max:
         raise ModelError(f"{config.path}: this configuration's rest window needs an alignment ring of {a.rest_max} IMU "
@@ -350,6 +520,12 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tup
     if navigator.configure(state, ctypes.byref(struct)):
         raise ModelError(f"{config.path}: the C navigator refused its configuration (ZUPT window {a.cfg['zupt_window']} "
                          "samples, alignment speeds and window, initial sigmas)")
+    buffers = counts = None
+    if record:
+        buffers = RecordBuffers.sized(a, navigator.spec.n_states)
+        counts = buffers.structure()
+        if navigator.set_record(state, ctypes.byref(counts)):
+            raise ModelError("smoother: the C navigator refused the forward record's buffers")
     out = np.full((len(a.t_gnss), N_OUTPUT), np.nan)
     cpu = time.process_time()
     status = navigator.run(state, len(a.time), _pointer(a.time), _pointer(a.force), _pointer(a.rate),
@@ -357,6 +533,8 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tup
                            _pointer(a.use, ctypes.c_int), _pointer(a.gnss), len(a.aid_time), _pointer(a.aid_time),
                            _pointer(a.aid_slot, ctypes.c_int), _pointer(a.aid_value), _pointer(out))
     cpu = time.process_time() - cpu
+    if status == RECORD_FULL:
+        raise ModelError("smoother: the C navigator's forward record was full (RecordBuffers.sized's bound is wrong)")
     if status:
         raise alignment_error(config, inputs, status)
     result = np.full(N_ALIGNMENT, np.nan)
@@ -365,4 +543,12 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator) -> tup
     raw = (ctypes.c_long * len(COUNT_NAMES))()
     navigator.counts(state, raw)
     alignment = {name: float(v) for name, v in zip(ALIGNMENT_NAMES, result)}
-    return flight_from_outputs(out, a, inputs, dict(zip(COUNT_NAMES, (int(v) for v in raw))), alignment), cpu
+    flight = flight_from_outputs(out, a, inputs, dict(zip(COUNT_NAMES, (int(v) for v in raw))), alignment)
+    if record:
+        flight.forward_record = forward_record_from_c(buffers, counts, navigator.spec, a, out,
+                                                      np.asarray(config.lever_arm, float))
+    return flight, cpu
+
+
+#: NAV_ERR_RECORD_FULL of the navigator header.
+RECORD_FULL = 15

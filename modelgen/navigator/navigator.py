@@ -20,6 +20,7 @@ from modelgen.errors import ModelError
 from modelgen.navigator.alignment import Alignment, align  # noqa: F401  (the alignment lives in alignment.py)
 from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator import cconfig
+from modelgen.navigator import ecef
 from modelgen.navigator.errorstate import ErrorStateFilter, rotate
 from modelgen.navigator.logs import GnssLog, ImuLog, ScalarLog, check_logs, epochs_inside_gaps, read_scalar
 from modelgen.navigator.mechanization import (dcm_to_euler, euler_to_dcm, gravity, mechanize, quaternion_to_dcm,
@@ -141,8 +142,24 @@ def _gnss_sigmas(config: NavigatorConfig, gnss: GnssLog, j: int) -> np.ndarray |
     return np.concatenate([v, p])
 
 
-def antenna(nav: np.ndarray, lever: np.ndarray, rate_body: np.ndarray) -> tuple[float, float, float, np.ndarray]:
-    """Antenna latitude, longitude, height and NED velocity from the IMU state and the lever arm."""
+def antenna_ecef(nav: np.ndarray, lever: np.ndarray, rate_body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Antenna e-frame position and velocity of an e-frame state (ecef model): r + C l, v + C (w x l)."""
+    c = quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])
+    return nav[7:10] + c @ lever, nav[4:7] + c @ np.cross(rate_body, lever)
+
+
+def antenna(nav: np.ndarray, lever: np.ndarray, rate_body: np.ndarray,
+            frame_ecef: bool = False) -> tuple[float, float, float, np.ndarray]:
+    """Antenna latitude, longitude, height and NED velocity from the IMU state and the lever arm.
+
+    ``frame_ecef``: ``nav`` is an e-frame state (:mod:`modelgen.navigator.ecef`); the velocity is rotated into NED
+    at the IMU's position.
+    """
+    if frame_ecef:
+        r, v = antenna_ecef(nav, lever, rate_body)
+        lat, lon, h = ecef.geodetic(nav[7:10])
+        lat_a, lon_a, h_a = ecef.geodetic(r)
+        return lat_a, lon_a, h_a, ecef.ned_to_ecef(lat, lon).T @ v
     c = quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])
     offset = c @ lever
     rm, rn = radii(nav[7])
@@ -174,6 +191,25 @@ def _gnss_measurement(nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, g: G
                              -(h - h_g)])
 
 
+def _gnss_measurement_ecef(nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, g: GnssLog, j: int,
+                           t: float, delayed_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """antenna(INS) - GNSS of an e-frame state: velocity [m/s] and position [m] in e-frame axes.
+
+    The GNSS fix is extrapolated to t as :func:`_gnss_measurement` does (along NED by its velocity), then
+    converted to the e-frame; its NED velocity is rotated into the e-frame at the fix.
+    """
+    r, v = antenna_ecef(nav, lever, rate)
+    v = v - nav[4:7] + delayed_velocity
+    dt = t - g.time[j]
+    vg = g.velocity[j]
+    rm, rn = radii(g.latitude[j])
+    lat_g = g.latitude[j] + vg[0] * dt / (rm + g.height[j])
+    lon_g = g.longitude[j] + vg[1] * dt / ((rn + g.height[j]) * math.cos(g.latitude[j]))
+    h_g = g.height[j] - vg[2] * dt
+    r_g = ecef.geodetic_to_ecef(lat_g, lon_g, h_g)
+    return v - ecef.ned_to_ecef(g.latitude[j], g.longitude[j]) @ vg, r - r_g
+
+
 def corrected(sample: np.ndarray, bias: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """A sensor sample corrected with the estimates: (raw - b) / (1 + s)."""
     return (sample - bias) / (1.0 + scale)
@@ -197,6 +233,8 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
     outage = in_outage(g.time, windows)
     start = align(config, inputs, outage)
     j0, k, nav = start.epoch, start.sample, start.nav
+    if spec.ecef:  # the alignment is geodetic/NED; an ecef model flies r^e, v^e, C_b^e
+        nav = ecef.state_from_ned(nav)
     sensors = {"gyro_bias": np.array(start.gyro_bias, float), "accel_bias": np.array(start.accel_bias, float),
                "gyro_scale_factor": np.zeros(3), "accel_scale_factor": np.zeros(3)}
     gyro_bias, accel_bias = sensors["gyro_bias"], sensors["accel_bias"]  # updated in place by the feedback
@@ -266,9 +304,13 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
             last_sigmas = sigmas
             delayed = np.array([np.interp(time[k] - config.velocity_latency, velocity_history[0], velocity_history[1 + i])
                                 for i in range(3)])
-            dv, dp = _gnss_measurement(nav, lever, corrected(rate[k], gyro_bias, gyro_scale), g, j, time[k], delayed)
+            measurement = _gnss_measurement_ecef if spec.ecef else _gnss_measurement
+            dv, dp = measurement(nav, lever, corrected(rate[k], gyro_bias, gyro_scale), g, j, time[k], delayed)
             z, r = spec.gnss_z(dv, dp, sigmas)
             H = module.measurement_matrix(parameters(mean_force[0:3] / max(mean_force[3], 1e-9), sigmas))
+            if spec.ecef:  # the e-frame rows turned along NED, where the receiver's sigmas are
+                T, sigma_index = spec.gnss_rotation(ecef.ned_to_ecef(*ecef.geodetic(nav[7:10])[:2]))
+                z, H, r = T @ z, T @ H, np.square(sigmas[sigma_index])
             gate = gates["gnss"] if rejected_run < config.gate_release_epochs else math.inf
             result = kf.update(z, H, r, gate, deweight)
             nis = result.nis
@@ -371,8 +413,9 @@ def _row(spec: NavigatorSpec, t: float, lever: np.ndarray, raw_rate: np.ndarray,
 def _record(spec: NavigatorSpec, t: float, nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, P: np.ndarray, gyro_bias: np.ndarray,
             accel_bias: np.ndarray, outage: bool, used: int, nis: float, quality: int) -> list[float]:
     """One output row (OUTPUT_FIELDS): antenna position, velocity, attitude, 1-sigma position, biases."""
-    lat, lon, h, v = antenna(nav, lever, rate)
-    roll, pitch, yaw = dcm_to_euler(quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3]))
+    lat, lon, h, v = antenna(nav, lever, rate, spec.ecef)
+    c_bn = ecef.local_view(nav)[4] if spec.ecef else quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])
+    roll, pitch, yaw = dcm_to_euler(c_bn)
     # cross covariances [m^2] (north-east, east-up, up-north): the 2x2 horizontal covariance with sn, se
     sn, se, su, cne, ceu, cun = spec.position_output(P, nav, radii)
     return [t, lat, lon, h, v[0], v[1], v[2], roll, pitch, yaw, sn, se, su, *gyro_bias, *accel_bias,

@@ -10,7 +10,7 @@ from typing import Callable
 import numpy as np
 
 from modelgen.errors import ModelError
-from modelgen.navigator.cnav import cached_c_navigator, fly_c, rest_capacity
+from modelgen.navigator.cnav import GeneratedC, cached_c_navigator, fly_c, rest_capacity
 from modelgen.navigator.alignment import alignment_note
 from modelgen.navigator.config import NavigatorConfig, load_config
 from modelgen.navigator.errorstate import model_path
@@ -20,7 +20,7 @@ from modelgen.navigator.metrics import (errors_against_reference, pooled_consist
 from modelgen.navigator.navigator import Flight, fly, prepare
 from modelgen.navigator.spec import navigator_spec
 from modelgen.navigator.report import report_files
-from modelgen.navigator.smoother import ForwardRecord, smooth_flight, smoothing_summary
+from modelgen.navigator.smoother import ForwardRecord, GeneratedPython, backward_pass, smooth_flight, smoothing_summary
 from modelgen.fileio.output import write_atomically
 
 
@@ -93,7 +93,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     mark = time.perf_counter()
     echo(f"  deriving {config.model} (once) with modelgen")
     # the one derivation of this replay: the Python navigator, the C and the embedded build all use it
-    spec = navigator_spec(model_file, with_python=navigator in ("python", "both") or smooth)
+    spec = navigator_spec(model_file, with_python=navigator in ("python", "both"))
     spec.check_config(config)
     timings["generate_python_s"] = time.perf_counter() - mark
     if navigator in ("python", "both"):
@@ -105,7 +105,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
                 echo(f"  flying (Python): {100 * fraction:5.1f} %  ({time.perf_counter() - mark:.1f} s)")
                 state["next"] = fraction + 0.25
 
-        flights["python"] = fly(config, inputs, spec, progress, record=ForwardRecord() if smooth else None)
+        flights["python"] = fly(config, inputs, spec, progress, record=ForwardRecord() if smooth and navigator == "python" else None)
         timings["fly_python_s"] = time.perf_counter() - mark
     if navigator in ("c", "both"):
         mark = time.perf_counter()
@@ -113,7 +113,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         timings["generate_compile_c_s"] = 0.0 if cached else time.perf_counter() - mark
         mark = time.perf_counter()
         echo("  flying (C)")
-        flights["c"], timings["fly_c_cpu_s"] = fly_c(config, inputs, compiled)
+        flights["c"], timings["fly_c_cpu_s"] = fly_c(config, inputs, compiled, record=smooth)
         timings["fly_c_s"] = time.perf_counter() - mark
     if embedded:
         if "c" not in flights:
@@ -168,9 +168,14 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     passes = None
     if smooth:
         mark = time.perf_counter()
-        passes = _smoothed_passes(config, inputs, flights.get("python"), spec, echo)
+        # the forward record of the reported flight: the C's (its own buffers) when the C flew, else the Python's;
+        # the backward pass is the model's generated one in the same language
+        recorded = flights["c"] if "c" in flights else flights["python"]
+        backward = GeneratedC(compiled) if "c" in flights else GeneratedPython(spec.module)
+        passes, backward_s = _smoothed_passes(recorded, echo, backward)
+        timings["smooth_backward_s"] = backward_s
         result["smoothed"] = smoothing_summary(*passes, inputs.gnss, config.target_smoothed_outage_rms_m,
-                                               config.target_smoothed_outage_max_m)
+                                               config.target_smoothed_outage_max_m, backward.name, backward_s)
         timings["smooth_s"] = time.perf_counter() - mark
         echo(f"  smoothed (RTS over {result['smoothed']['steps']} steps): horizontal RMS over the outage epochs "
              f"{result['smoothed']['smoothed']['horizontal_error_outage_rms_m']:.3f} m (forward "
@@ -185,13 +190,21 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     return ReplayResult(config, flight, result, folder, timings, passes[1] if passes else None)
 
 
-def _smoothed_passes(config: NavigatorConfig, inputs, recorded: Flight | None, spec,
-                     echo: Callable[[str], None]) -> tuple[Flight, Flight]:
-    """(forward, smoothed): the Python flight recorded for the smoother, flown now if it was not flown yet."""
-    if recorded is None:
-        echo("  flying the Python navigator for the smoother (the C navigator keeps no transitions)")
-        recorded = fly(config, inputs, spec, record=ForwardRecord())
-    return recorded, smooth_flight(recorded)
+def _smoothed_passes(recorded: Flight, echo: Callable[[str], None], backward) -> tuple[tuple[Flight, Flight], float]:
+    """((forward, smoothed), seconds of the backward pass alone) of a flight flown with its record.
+
+    ``backward``: the model's generated backward pass (the C's in the navigator library when the C flew and
+    recorded, else the generated Python's).
+    """
+    echo(f"  backward pass: {backward.name} on the {'C' if isinstance(backward, GeneratedC) else 'Python'} "
+         "navigator's forward record")
+    record = getattr(recorded, "forward_record", None)
+    if record is None:
+        raise ModelError("replay: the flight to smooth was flown without its forward record")
+    mark = time.perf_counter()
+    steps = backward_pass(record, backward)
+    seconds = time.perf_counter() - mark
+    return (recorded, smooth_flight(recorded, backward, steps)), seconds
 
 
 #: The built-in navigator model; a model without a navigation: section flies only if its states are this model's.

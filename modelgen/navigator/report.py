@@ -324,10 +324,11 @@ def _smoothed_lines(summary: dict) -> list[str]:
     f, s = sm["forward"], sm["smoothed"]
     lines = ["## Smoothed (replay --smooth)", "",
              "A fixed-interval Rauch-Tung-Striebel smoother run backward over the recorded forward pass of the "
-             "Python navigator (the generated filter's transitions and covariances; the error-state resets of the "
-             "closed loop referred back step by step; the backward recursion itself is numpy/scipy, not generated). "
+             "reported navigator (the generated filter's transitions and covariances; the error-state resets of the "
+             "closed loop referred back step by step with the model's reset Jacobian), by the model's generated "
+             f"backward pass ({sm.get('backward_pass') or 'generated'}). "
              "Post-processing: each smoothed epoch uses GNSS from before and after it. The forward columns are that "
-             "Python forward pass, errors measured the same way. Files: `smoothed.pos`, `smoothed.csv`, `smoothed.svg`.", "",
+             "forward pass, errors measured the same way. Files: `smoothed.pos`, `smoothed.csv`, `smoothed.svg`.", "",
              "![smoothed](smoothed.svg)", "",
              "| # | start_s | duration_s | forward end_m | smoothed end_m | forward max_m | smoothed max_m | "
              "forward sigma_h end_m | smoothed sigma_h end_m |", "|---|---|---|---|---|---|---|---|---|"]

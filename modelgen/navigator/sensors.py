@@ -201,6 +201,8 @@ def rows(sensor: AidingSensor, spec, nav: np.ndarray, c_bn: np.ndarray, rate_bod
                                   np.asarray(getattr(cfg, sensor.lever_arm), float) if sensor.lever_arm else None,
                                   sensor.axes, measured)
     if sensor.form == "height":
+        if spec.ecef:
+            return height_rows_ecef(spec, nav[7:10], measured)
         return height_rows(spec, nav[9], measured)
     raise ValueError(f"aiding sensor {sensor.name}: form {sensor.form!r} is built elsewhere or unknown")
 
@@ -234,6 +236,19 @@ def height_rows(spec, height: float, measured: float) -> tuple[np.ndarray, np.nd
         if a == 2:
             H[0, i] = -s  # the block's down component is s * x; the up error is minus it
     return np.array([height - measured]), H
+
+
+def height_rows_ecef(spec, position: np.ndarray, measured: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`height_rows` of an ecef model: z = h(r^e) - measured; the up error is -(C_n^e's down column) . dr^e."""
+    from modelgen.navigator.ecef import geodetic, ned_to_ecef
+
+    lat, lon, h = geodetic(position)
+    c_ne = ned_to_ecef(lat, lon)
+    pos = spec.blocks["position"]
+    H = np.zeros((1, spec.n_states))
+    for i, a, s in zip(pos.indices, pos.axes, pos.signs):
+        H[0, i] = -s * c_ne[a, 2]
+    return np.array([h - measured]), H
 
 
 class StreamCursor:

@@ -39,8 +39,17 @@ the same first-order sense.
 
 What is generated and what is not: the transitions and covariances the
 backward pass runs on are those of the generated filter (its ``discretize`` and
-``predict``); the backward recursion itself is written here with numpy and
-scipy (Cholesky factor of P_{k+1}^- and ``cho_solve``), not generated.
+``predict``), and the backward recursion itself is the model's generated code
+(:mod:`modelgen.codegen.smoother`): the generated Python module's ``smooth``
+and ``smooth_refer`` (:class:`GeneratedPython`) or the generated C's
+``<model>_smooth`` and ``<model>_smooth_refer`` in the compiled navigator library
+(:class:`modelgen.navigator.cnav.GeneratedC`), on the forward record of the
+navigator that flew: the Python's :class:`ForwardRecord`, or the C navigator's
+(``<model>_navigator_set_record``: caller-provided buffers sized from the log and
+the configuration, :func:`modelgen.navigator.cnav.fly_c` with ``record=True``).  The reset of a correction
+is the model's derived one (the identity for the phi-angle attitude the
+navigator flies, I + [dtheta x]/2 for a rotation vector).  A numpy version of
+the recursion is kept in the tests as the reference the generated code is held to.
 """
 
 from __future__ import annotations
@@ -49,7 +58,6 @@ from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
 
 from modelgen.errors import ModelError
 
@@ -127,71 +135,102 @@ class SmoothedSteps:
     covariance: np.ndarray  # (steps, n, n)
 
 
-def smoothing_gain(P_posterior: np.ndarray, Phi_next: np.ndarray, P_prior_next: np.ndarray) -> np.ndarray:
-    """A_k = P_k^+ Phi_{k+1}^T (P_{k+1}^-)^-1 through the Cholesky factor of P_{k+1}^- (symmetric)."""
-    try:
-        factor = cho_factor(P_prior_next, lower=True, check_finite=True)
-    except np.linalg.LinAlgError:
-        raise ModelError("smoother: a prior covariance of the forward pass is not positive definite") from None
-    # A^T = (P^-)^-1 Phi P^+ because P^- and P^+ are symmetric
-    return cho_solve(factor, Phi_next @ P_posterior).T
+class GeneratedPython:
+    """The generated Python module's backward pass (``smooth``, ``smooth_refer`` of the model's filter module)."""
+
+    def __init__(self, module):
+        self.module = module
+        self.name = f"generated Python ({module.MODEL}.smooth)"
+
+    def smooth(self, arrays: "RecordArrays") -> tuple[np.ndarray, np.ndarray]:
+        try:
+            return self.module.smooth(arrays.Phi, arrays.P_prior, arrays.P_post, arrays.corrections, arrays.start)
+        except ValueError as exc:
+            raise ModelError(f"smoother: the generated backward pass refused the forward record ({exc})") from None
+
+    def refer(self, s: np.ndarray, Ps: np.ndarray, corrections: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        try:
+            return self.module.smooth_refer(s, Ps, corrections)
+        except ValueError as exc:
+            raise ModelError(f"smoother: the generated backward pass refused a correction ({exc})") from None
 
 
-def backward_pass(record: ForwardRecord) -> SmoothedSteps:
-    """The RTS recursion of the module docstring over every recorded step, last to first."""
-    n_steps = record.steps
-    if n_steps == 0:
+@dataclass
+class RecordArrays:
+    """A forward record as the generated backward pass takes it: per step Phi, P^-, P^+; the corrections, CSR."""
+
+    Phi: np.ndarray  # (steps, n, n); Phi[0] (the alignment's) is zero, never read
+    P_prior: np.ndarray
+    P_post: np.ndarray
+    corrections: np.ndarray  # (M, n), in the order they were fed back
+    start: np.ndarray  # (steps + 1,): step k's corrections are rows start[k] .. start[k + 1] - 1
+
+
+def record_arrays(record: ForwardRecord) -> RecordArrays:
+    """The record's lists as contiguous arrays (what the generated Python and C backward passes read)."""
+    if record.steps == 0:
         raise ModelError("smoother: the forward record is empty (the forward pass was not recorded)")
     n = len(record.priors[0])
-    error = np.zeros((n_steps, n))
-    covariance = np.empty((n_steps, n, n))
-    covariance[-1] = record.posteriors[-1]
-    for k in range(n_steps - 2, -1, -1):
-        gain = smoothing_gain(record.posteriors[k], record.transitions[k + 1], record.priors[k + 1])
-        before_corrections = error[k + 1] + _total(record.corrections[k + 1], n)
-        error[k] = gain @ before_corrections
-        P = record.posteriors[k] + gain @ (covariance[k + 1] - record.priors[k + 1]) @ gain.T
-        covariance[k] = 0.5 * (P + P.T)
-    return SmoothedSteps(error, covariance)
+    Phi = np.zeros((record.steps, n, n))
+    for k, transition in enumerate(record.transitions):
+        if transition is not None:
+            Phi[k] = transition
+    counts = [len(c) for c in record.corrections]
+    corrections = np.array([dx for step in record.corrections for dx in step], float).reshape(-1, n)
+    return RecordArrays(Phi, np.array(record.priors, float), np.array(record.posteriors, float), corrections,
+                        np.concatenate([[0], np.cumsum(counts)]).astype(np.int64))
 
 
-def _total(corrections: list[np.ndarray], n: int) -> np.ndarray:
-    """The sum of a step's corrections (first order: the reset Jacobian is the identity)."""
-    return np.sum(corrections, axis=0) if corrections else np.zeros(n)
+def backward_pass(record: ForwardRecord, backward) -> SmoothedSteps:
+    """The RTS recursion of the module docstring over every recorded step, last to first, by generated code.
+
+    ``backward``: :class:`GeneratedPython` or :class:`modelgen.navigator.cnav.GeneratedC`.
+    """
+    error, covariance = backward.smooth(record_arrays(record))
+    return SmoothedSteps(np.asarray(error, float), np.asarray(covariance, float))
 
 
-def smoothed_error_at_output(record: ForwardRecord, steps: SmoothedSteps, snapshot: OutputSnapshot) -> np.ndarray:
-    """s referred to the output's own nominal: plus the corrections made at its step after it was written."""
+def smoothed_at_output(record: ForwardRecord, steps: SmoothedSteps, snapshot: OutputSnapshot,
+                       backward) -> tuple[np.ndarray, np.ndarray]:
+    """s and P^s referred to the output's own nominal: back through the corrections made at its step after it."""
     later = record.corrections[snapshot.step][snapshot.corrections_before:]
-    return steps.error[snapshot.step] + _total(later, steps.error.shape[1])
+    if not later:
+        return steps.error[snapshot.step], steps.covariance[snapshot.step]
+    return backward.refer(steps.error[snapshot.step], steps.covariance[snapshot.step], later)
 
 
-def smoothed_nominals(record: ForwardRecord,
+def smoothed_nominals(record: ForwardRecord, backward,
                       steps: SmoothedSteps | None = None) -> list[tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]]:
     """Per output epoch: the smoothed navigation vector, sensor estimates, and P^s (the feedback applied to a copy)."""
-    steps = backward_pass(record) if steps is None else steps
+    steps = backward_pass(record, backward) if steps is None else steps
     result = []
     for snapshot in record.outputs:
         nav = snapshot.nav.copy()
         sensors = {k: v.copy() for k, v in snapshot.sensors.items()}
-        record.feedback(nav, sensors, smoothed_error_at_output(record, steps, snapshot))
-        result.append((nav, sensors, steps.covariance[snapshot.step]))
+        s, Ps = smoothed_at_output(record, steps, snapshot, backward)
+        record.feedback(nav, sensors, s)
+        result.append((nav, sensors, Ps))
     return result
 
 
-def smoothed_outputs(record: ForwardRecord) -> np.ndarray:
+def smoothed_outputs(record: ForwardRecord, backward, steps: SmoothedSteps | None = None) -> np.ndarray:
     """The output rows of the smoothed trajectory (same epochs and columns as the forward outputs)."""
     rows = [snapshot.row(nav, sensors, P)
-            for snapshot, (nav, sensors, P) in zip(record.outputs, smoothed_nominals(record))]
+            for snapshot, (nav, sensors, P) in zip(record.outputs, smoothed_nominals(record, backward, steps))]
     return np.array(rows, float)
 
 
-def smooth_flight(flight):
-    """The flight with its outputs replaced by the smoothed ones (a flight flown with a ``record``)."""
+def smooth_flight(flight, backward, steps: SmoothedSteps | None = None):
+    """The flight with its outputs replaced by the smoothed ones (a flight flown with a ``record``).
+
+    ``backward``: the generated backward pass to run (:class:`GeneratedPython`, or the C's
+    :class:`modelgen.navigator.cnav.GeneratedC`); ``steps``: its result, if it was run already.
+    """
     record = getattr(flight, "forward_record", None)
     if record is None or record.feedback is None:
-        raise ModelError("smoother: the flight was flown without its forward record (fly(..., record=ForwardRecord()))")
-    outputs = smoothed_outputs(record)
+        raise ModelError("smoother: the flight was flown without its forward record (fly(..., record=ForwardRecord()) "
+                         "or fly_c(..., record=True))")
+    outputs = smoothed_outputs(record, backward, steps)
     if outputs.shape != flight.outputs.shape:
         raise ModelError("smoother: the forward record does not match the flight's outputs")
     return replace(flight, outputs=outputs, forward_record=None)
@@ -225,7 +264,8 @@ def _pass_numbers(flight, errors, reference) -> dict[str, object]:
 
 
 def smoothing_summary(forward, smoothed, reference, target_outage_rms_m: float | None = None,
-                      target_outage_max_m: float | None = None) -> dict[str, object]:
+                      target_outage_max_m: float | None = None, backward_name: str | None = None,
+                      backward_seconds: float | None = None) -> dict[str, object]:
     """summary.json's ``smoothed``: the forward pass the smoother ran on beside the smoothed trajectory.
 
     ``forward`` and ``smoothed`` are flights with the same epochs; errors are
@@ -246,8 +286,11 @@ def smoothing_summary(forward, smoothed, reference, target_outage_rms_m: float |
     rms = numbers["smoothed"]["horizontal_error_outage_rms_m"]
     worst = max((o["smoothed_horizontal_error_max_m"] for o in per_outage), default=None)
     return {
-        "method": "fixed-interval Rauch-Tung-Striebel smoother in error-state form over the recorded forward pass "
-                  "(the generated filter's transitions and covariances; backward recursion in numpy/scipy)",
+        "method": "fixed-interval Rauch-Tung-Striebel smoother in error-state form over the reported navigator's "
+                  "recorded forward pass (the generated filter's transitions and covariances; the model's generated "
+                  "backward pass)",
+        "backward_pass": backward_name,
+        "backward_pass_s": backward_seconds,
         "steps": forward.forward_record.steps if getattr(forward, "forward_record", None) is not None else None,
         "forward": {k: v for k, v in numbers["forward"].items() if k != "outages"},
         "smoothed": {k: v for k, v in numbers["smoothed"].items() if k != "outages"},

@@ -54,14 +54,16 @@ from modelgen.derivation.mechanization_rates import mechanization_rates
 from modelgen.errors import ModelError
 from modelgen.model.ned_enu import NED_TO_ENU
 
-#: axis word -> (NED axis, sign): the state is sign x the NED component
-AXES = {"north": (0, 1.0), "east": (1, 1.0), "down": (2, 1.0), "up": (2, -1.0)}
+#: axis word -> (NED axis, sign): the state is sign x the NED component; x, y, z: the e-frame axes (ecef)
+AXES = {"north": (0, 1.0), "east": (1, 1.0), "down": (2, 1.0), "up": (2, -1.0), "x": (0, 1.0), "y": (1, 1.0), "z": (2, 1.0)}
+#: the axis words of each frame's navigation blocks
+FRAME_AXES = {"NED": ("north", "east", "down", "up"), "ENU": ("north", "east", "down", "up"), "ECEF": ("x", "y", "z")}
 SENSOR_BLOCKS = ("gyro_bias", "accel_bias", "gyro_scale_factor", "accel_scale_factor")
 #: state-name patterns of each block (the navigation notation's names; the hand-written ENU models' bias names)
 _PATTERNS = {
-    "attitude": re.compile(r"^attitude_error_(north|east|down|up)$"),
-    "velocity": re.compile(r"^velocity_error_(north|east|down|up)$"),
-    "position": re.compile(r"^position_error_(north|east|down|up)$"),
+    "attitude": re.compile(r"^attitude_error_(north|east|down|up|x|y|z)$"),
+    "velocity": re.compile(r"^velocity_error_(north|east|down|up|x|y|z)$"),
+    "position": re.compile(r"^position_error_(north|east|down|up|x|y|z)$"),
     "gyro_bias": re.compile(r"^(?:gyro_bias|gyro_constant_drift)_([xyz])$"),
     "accel_bias": re.compile(r"^(?:accel_bias|accel_constant_bias)_([xyz])$"),
     "gyro_scale_factor": re.compile(r"^gyro_scale_factor_([xyz])$"),
@@ -73,9 +75,11 @@ _GEODETIC = {"latitude_error": "north", "longitude_error": "east", "height_error
 #: quantities (C, and Python with ``->`` read as ``.``): lat, lon, h [rad, m]; rm, rn radii [m]; vn, ve, vd NED
 #: velocity; fn, fe, fd NED specific force of the covariance step; fb[3] the same in body axes; wb[3] corrected body
 #: rate; e[3][3] C_b^frame (the model's frame); g normal gravity; sig[6] GNSS sigmas vN vE vD pN pE pD;
-#: cfg the configuration struct (:mod:`modelgen.navigator.cconfig`).
+#: rx, ry, rz the e-frame position and rr its length |r^e| [m] (for an ecef model; the others are then its
+#: geodetic and NED equivalents); cfg the configuration struct (:mod:`modelgen.navigator.cconfig`).
 QUANTITIES: dict[str, str] = {
     "latitude": "lat", "longitude": "lon", "height": "h",
+    "position_x": "rx", "position_y": "ry", "position_z": "rz", "geocentric_radius": "rr",
     "meridian_radius": "rm", "prime_vertical_radius": "rn", "gravity": "g",
     "velocity_north": "vn", "velocity_east": "ve", "velocity_down": "vd", "velocity_up": "-vd",
     "specific_force_north": "fn", "specific_force_east": "fe", "specific_force_down": "fd", "specific_force_up": "-fd",
@@ -98,7 +102,7 @@ class Block:
 
     kind: str
     indices: tuple[int, ...]
-    axes: tuple[int, ...]  # NED axis (navigation blocks) or body axis 0..2 (sensor blocks) of each state
+    axes: tuple[int, ...]  # NED (ECEF: e-frame) axis of navigation blocks or body axis 0..2 (sensor blocks)
     signs: tuple[float, ...]
     form: str = ""  # position: "metres" or "geodetic"
 
@@ -112,7 +116,7 @@ class Block:
 
 @dataclass(frozen=True)
 class GnssRow:
-    """One GNSS measurement row of the model: position or velocity, its NED axis and sign."""
+    """One GNSS measurement row of the model: position or velocity, its NED (ECEF: e-frame) axis and sign."""
 
     kind: str  # "position" or "velocity"
     axis: int
@@ -149,9 +153,44 @@ class NavigatorSpec:
 
     # -- frames ------------------------------------------------------------------------------
     @property
+    def ecef(self) -> bool:
+        """The model's mechanization is ecef: the navigation state is r^e, v^e, C_b^e (:mod:`modelgen.navigator.ecef`)."""
+        return self.frame == "ECEF"
+
+    @property
     def to_frame(self) -> np.ndarray:
-        """NED -> the model's frame."""
+        """The navigation state's frame (NED, or ECEF for an ecef model) -> the model's frame."""
         return NED_TO_ENU if self.frame == "ENU" else np.eye(3)
+
+    def gnss_rotation(self, c_ne: np.ndarray) -> tuple[np.ndarray, list[int]]:
+        """(T, sigma indices) turning the ecef model's e-frame GNSS rows into rows along NED (ECEF only).
+
+        The receiver's sigmas are per NED axis: the rows z' = T z, H' = T H (T = C_e^n per kind, row by row of the
+        model's rows) have the diagonal R of those sigmas, the same update as the e-frame rows with
+        R^e = C_n^e R C_e^n.  Row i of T is the m-th row of its kind in the model's order, along NED axis m
+        (:meth:`gnss_rotation_rows`).
+        """
+        along = self.gnss_rotation_rows()
+        m = len(self.gnss_rows)
+        T = np.zeros((m, m))
+        for i, (axis, _) in enumerate(along):
+            for j, other in enumerate(self.gnss_rows):
+                if other.kind == self.gnss_rows[i].kind:
+                    T[i, j] = c_ne[other.axis, axis] * other.sign
+        return T, [sigma for _, sigma in along]
+
+    def gnss_rotation_rows(self) -> list[tuple[int, int]]:
+        """(NED axis, sigma index) of each turned GNSS row (:meth:`gnss_rotation`); the C's tables come from it."""
+        order: dict[str, int] = {}
+        out = []
+        for row in self.gnss_rows:
+            axis = order.get(row.kind, 0)
+            order[row.kind] = axis + 1
+            out.append((axis, axis + (3 if row.kind == "position" else 0)))
+        if any(count != 3 for count in order.values()):
+            raise ModelError(f"{self.model_file}: the ecef model's GNSS rows must be whole e-frame vectors "
+                             "(three position and/or three velocity rows)")
+        return out
 
     def check_config(self, config) -> None:
         """Refuse a configuration that lacks what this model needs (scale-factor sigmas, free parameters)."""
@@ -194,6 +233,8 @@ class NavigatorSpec:
     # -- P0, feedback ------------------------------------------------------------------------
     def initial_covariance(self, config, nav: np.ndarray, heading_sigma: float, radii) -> np.ndarray:
         """P0 (diagonal) from the configuration's sigmas per block, in the blocks' own units."""
+        if self.ecef:
+            return self._initial_covariance_ecef(config, nav, heading_sigma)
         rm, rn = radii(nav[7])
         sigma = np.zeros(self.n_states)
         att = self.blocks["attitude"]
@@ -218,6 +259,30 @@ class NavigatorSpec:
                     sigma[i] = per_sensor[kind]
         return np.diag(np.square(sigma))
 
+    def _initial_covariance_ecef(self, config, nav: np.ndarray, heading_sigma: float) -> np.ndarray:
+        """P0 of an ecef model: the per-NED-axis sigmas of the attitude, velocity and position rotated into e-frame axes."""
+        from modelgen.navigator.ecef import geodetic, ned_to_ecef
+
+        c_ne = ned_to_ecef(*geodetic(nav[7:10])[:2])
+        ned = {"attitude": (config.roll_pitch_sigma, config.roll_pitch_sigma, heading_sigma),
+               "velocity": (config.velocity_sigma,) * 3,
+               "position": (config.position_sigma, config.position_sigma, config.height_sigma)}
+        P = np.zeros((self.n_states, self.n_states))
+        for kind, sigmas in ned.items():
+            block = self.blocks[kind]
+            rotated = c_ne @ np.diag(np.square(sigmas)) @ c_ne.T
+            for r, (i, a, s) in enumerate(zip(block.indices, block.axes, block.signs)):
+                for j, b, t in zip(block.indices, block.axes, block.signs):
+                    P[i, j] = s * t * rotated[a, b]
+        per_sensor = {"gyro_bias": config.gyro_bias_sigma, "accel_bias": config.accel_bias_sigma,
+                      "gyro_scale_factor": config.gyro_scale_factor_sigma,
+                      "accel_scale_factor": config.accel_scale_factor_sigma}
+        for kind in SENSOR_BLOCKS:
+            if kind in self.blocks:
+                for i in self.blocks[kind].indices:
+                    P[i, i] = per_sensor[kind] ** 2
+        return P
+
     def feedback(self, nav: np.ndarray, x: np.ndarray, sensors: dict[str, np.ndarray], radii, rotate) -> None:
         """Correct the navigation state and the sensor estimates with x (in place); the caller zeroes x.
 
@@ -227,7 +292,10 @@ class NavigatorSpec:
         nav[4:7] -= self.blocks["velocity"].ned(x)
         pos = self.blocks["position"]
         d = pos.ned(x)  # geodetic: (dL, dlambda, -dh)
-        if pos.form == "geodetic":
+        if self.ecef:  # r^e -= dr^e
+            nav[7:10] -= d
+            d = np.zeros(3)
+        elif pos.form == "geodetic":
             nav[7] -= d[0]
             nav[8] -= d[1]
         else:
@@ -269,6 +337,15 @@ class NavigatorSpec:
     def position_output(self, P: np.ndarray, nav: np.ndarray, radii) -> tuple[float, ...]:
         """sigma north, east, up [m] and covariances north-east, east-up, up-north [m^2] from P's position block."""
         pos = self.blocks["position"]
+        if self.ecef:
+            from modelgen.navigator.ecef import covariance_to_ned, geodetic, ned_to_ecef
+
+            block = np.array([[pos.signs[r] * pos.signs[c] * P[pos.indices[r], pos.indices[c]] for c in range(3)]
+                              for r in range(3)])
+            order = np.argsort(pos.axes)  # rows by e-frame axis
+            ned = covariance_to_ned(block[np.ix_(order, order)], ned_to_ecef(*geodetic(nav[7:10])[:2]))
+            return (math.sqrt(max(ned[0, 0], 0.0)), math.sqrt(max(ned[1, 1], 0.0)), math.sqrt(max(ned[2, 2], 0.0)),
+                    ned[0, 1], -ned[1, 2], -ned[2, 0])
         rm, rn = radii(nav[7])
         scale = [1.0, 1.0, 1.0]
         if pos.form == "geodetic":
@@ -284,6 +361,7 @@ class NavigatorSpec:
 
 
 def _blocks(names: list[str], frame: str, where: str) -> dict[str, Block]:
+    words = FRAME_AXES[frame]
     found: dict[str, list[tuple[int, int, float]]] = {}
     forms: dict[str, str] = {}
     for index, name in enumerate(names):
@@ -296,6 +374,9 @@ def _blocks(names: list[str], frame: str, where: str) -> dict[str, Block]:
             m = pattern.match(name)
             if m:
                 word = m.group(1)
+                if kind in ("attitude", "velocity", "position") and word not in words:
+                    raise ModelError(f"{where}: state {name!r}: a model in the {frame} frame names its navigation "
+                                     f"error axes {', '.join(words)}")
                 axis, sign = AXES[word] if kind in ("attitude", "velocity", "position") else ("xyz".index(word), 1.0)
                 found.setdefault(kind, []).append((index, axis, sign))
                 if kind == "position":
@@ -355,8 +436,8 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
     model = derived.model
     where = str(model_file)
     frame = str(model.frame or "").upper()
-    if frame not in ("NED", "ENU"):
-        raise ModelError(f"{where}: the navigator flies models in the NED or ENU frame (model {model.name} "
+    if frame not in ("NED", "ENU", "ECEF"):
+        raise ModelError(f"{where}: the navigator flies models in the NED, ENU or ECEF frame (model {model.name} "
                          f"declares {model.frame or 'no frame'})")
     _check_forms(model_file)
     names = list(model.state_names)
@@ -367,6 +448,8 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
     expressions = {p: QUANTITIES[p] for p in parameter_names if p in QUANTITIES and p not in defaults}
     free = tuple(p for p in parameter_names if p not in expressions)
     rates = _rates(model, where)
+    if frame == "ECEF":
+        _check_ecef(model_file, blocks, rows)
     spec = NavigatorSpec(model_file, derived, model.name, frame, len(names), blocks, rows, parameter_names,
                          expressions, free, defaults, rates_python=python_source(rates), rates_c=c_source(rates))
     if with_python:
@@ -383,6 +466,29 @@ def _rates(model, where: str):
         return mechanization_rates(model)
     except ModelError as exc:
         raise ModelError(f"{where}: {exc}") from None
+
+
+def _check_ecef(model_file: Path, blocks: dict[str, Block], rows: tuple[GnssRow, ...]) -> None:
+    """What the navigator needs of an ecef model, refused at the line of the model file that lacks it.
+
+    It flies r^e, so the position error must be e-frame metres; its GNSS update turns the e-frame rows along NED
+    (:meth:`NavigatorSpec.gnss_rotation`), so the measurements must be whole e-frame vectors: three position and/or
+    three velocity rows, and at least one of them.
+    """
+    from modelgen.fileio.datafiles import read_yaml_with_lines
+
+    _, lines = read_yaml_with_lines(model_file, "model file")
+    here = lines.get("navigation", str(model_file))
+    if blocks["position"].form != "metres":
+        where = lines.get("navigation.errors.position", here)
+        raise ModelError(f"{where}: an ecef model's position error must be e-frame metres (form: metres, states "
+                         "position_error_x/y/z): the navigator flies r^e")
+    counts = {kind: sum(r.kind == kind for r in rows) for kind in ("position", "velocity")}
+    if not rows or any(c not in (0, 3) for c in counts.values()):
+        where = lines.get("navigation.measurements", here)
+        raise ModelError(f"{where}: the navigator's GNSS update of an ecef model needs its measurements as whole "
+                         "e-frame vectors: three position and/or three velocity rows, INS minus GNSS (this model: "
+                         f"{counts['position']} position, {counts['velocity']} velocity)")
 
 
 def _check_forms(model_file: Path) -> None:
@@ -420,9 +526,27 @@ def _python_module(derived) -> ModuleType:
 
 def quantities(spec: NavigatorSpec, nav: np.ndarray, c_bn: np.ndarray, force_ned: np.ndarray,
                rate_body: np.ndarray, sig: np.ndarray, cfg: SimpleNamespace, radii, gravity) -> dict:
-    """The navigator's quantities at the navigation state (the names QUANTITIES' expressions use)."""
+    """The navigator's quantities at the navigation state (the names QUANTITIES' expressions use).
+
+    ``c_bn``, ``force_ned``: the attitude matrix and the specific force in the navigation state's frame (C_b^e, f^e
+    for an ecef model: lat, lon, h, vn, ve, vd, fn, fe, fd are then their geodetic and NED equivalents).
+    """
+    fb = c_bn.T @ force_ned
+    if spec.ecef:
+        from modelgen.navigator.ecef import geodetic, ned_to_ecef
+
+        lat, lon, h = geodetic(nav[7:10])
+        c_en = ned_to_ecef(lat, lon).T
+        v, f = c_en @ nav[4:7], c_en @ force_ned
+        rm, rn = radii(lat)
+        r = nav[7:10]
+        return {"lat": lat, "lon": lon, "h": h, "rm": rm, "rn": rn, "g": gravity(lat, h),
+                "vn": v[0], "ve": v[1], "vd": v[2], "fn": f[0], "fe": f[1], "fd": f[2], "fb": fb, "wb": rate_body,
+                "e": c_bn, "sig": sig, "cfg": cfg, "rx": r[0], "ry": r[1], "rz": r[2],
+                "rr": math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])}
     lat, h = nav[7], nav[9]
     rm, rn = radii(lat)
     return {"lat": lat, "lon": nav[8], "h": h, "rm": rm, "rn": rn, "g": gravity(lat, h),
             "vn": nav[4], "ve": nav[5], "vd": nav[6], "fn": force_ned[0], "fe": force_ned[1], "fd": force_ned[2],
-            "fb": c_bn.T @ force_ned, "wb": rate_body, "e": spec.to_frame @ c_bn, "sig": sig, "cfg": cfg}
+            "fb": fb, "wb": rate_body, "e": spec.to_frame @ c_bn, "sig": sig, "cfg": cfg, "rx": 0.0, "ry": 0.0,
+            "rz": 0.0, "rr": 0.0}

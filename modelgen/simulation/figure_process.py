@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import os
+import pickle
 import signal
 import sys
 import threading
@@ -71,8 +72,8 @@ class FigureProcess:
                 here.close()
                 _serve_figures(there)
                 status = 0
-            except BaseException:
-                traceback.print_exc()
+            except BaseException:  # noqa: S110 - silent: the batch is then drawn here (paths), which raises the error
+                pass
             finally:
                 os._exit(status)
         there.close()
@@ -85,7 +86,7 @@ class FigureProcess:
         pickle: nothing is written then) are drawn here by :meth:`paths`.
         """
         try:
-            self.connection.send(("draw", drawings, apart))
+            send_out_of_band(self.connection, ("draw", drawings, apart))
             sent = True
         except Exception:
             sent = False
@@ -118,6 +119,44 @@ class FigureProcess:
         self._end()
 
 
+#: the message announcing a message sent by :func:`send_out_of_band`
+OUT_OF_BAND = "out-of-band"
+
+
+def send_out_of_band(connection: Any, message: Any) -> None:
+    """Send ``message`` through ``connection`` with its arrays' data out of band (pickle protocol 5).
+
+    ``connection.send`` pickles the whole message into one bytes object
+    first: for a long flight's drawings (its truth and histories) a copy of
+    all their data, tens of MiB of this process's peak memory.  Here only the
+    pickle's frame is made; each array's data goes from its own memory
+    straight to the pipe, and :func:`receive_out_of_band` puts the message
+    together again (writable arrays, equal to the ones sent).
+    """
+    buffers: list[pickle.PickleBuffer] = []
+    frame = pickle.dumps(message, protocol=5, buffer_callback=buffers.append)
+    connection.send(OUT_OF_BAND)
+    connection.send((len(frame), [len(buffer.raw()) for buffer in buffers]))
+    connection.send_bytes(frame)
+    for buffer in buffers:
+        connection.send_bytes(buffer.raw())
+
+
+def receive_out_of_band(connection: Any) -> Any:
+    """The message :func:`send_out_of_band` sent (its announcement already received)."""
+    _, sizes = connection.recv()
+    frame = connection.recv_bytes()
+    buffers = []
+    for size in sizes:
+        buffer = bytearray(size)
+        if size:
+            connection.recv_bytes_into(buffer)
+        else:
+            connection.recv_bytes()
+        buffers.append(buffer)
+    return pickle.loads(frame, buffers=buffers)
+
+
 def _end_figure_process(pid: int, connection: Any) -> None:
     """Send the figure process its last message (None), close the pipe and wait for the process to leave."""
     try:
@@ -148,6 +187,11 @@ def _serve_figures(connection: Any) -> None:
             return
         if message is None:
             return
+        if message == OUT_OF_BAND:
+            try:
+                message = receive_out_of_band(connection)
+            except EOFError:
+                return
         if message[0] == "prepare":
             _, name, make, args = message
             try:
@@ -190,7 +234,7 @@ def draw_figures(drawings: list[tuple[Callable[..., Path], tuple]], apart: int) 
     copy fail, the figure is drawn again here, so that its error is raised.
     """
     if not hasattr(os, "fork") or threading.active_count() > 1 or len(drawings) < 2:
-        return [function(*args) for function, args in drawings]
+        return [_draw(function, args) for function, args in drawings]
     sys.stdout.flush()
     sys.stderr.flush()
     pid = os.fork()
@@ -200,15 +244,25 @@ def draw_figures(drawings: list[tuple[Callable[..., Path], tuple]], apart: int) 
             function, args = drawings[apart]
             function(*args)
             status = 0
-        except BaseException:
-            traceback.print_exc()
+        except BaseException:  # noqa: S110 - silent: the figure is drawn again here, which raises the error
+            pass
         finally:
             os._exit(status)
     try:
-        paths = [function(*args) for index, (function, args) in enumerate(drawings) if index != apart]
+        paths = [_draw(function, args) for index, (function, args) in enumerate(drawings) if index != apart]
     finally:
         _, status = os.waitpid(pid, 0)
     function, args = drawings[apart]
-    path = args[-1] if os.waitstatus_to_exitcode(status) == 0 else function(*args)
+    path = args[-1] if os.waitstatus_to_exitcode(status) == 0 else _draw(function, args)
     paths.insert(apart, Path(path))
     return paths
+
+
+def _draw(function: Callable[..., Path], args: tuple) -> Path:
+    """``function(*args)``; an OSError that names no file (a full disk while the PNG is written) names its path."""
+    try:
+        return function(*args)
+    except OSError as exc:
+        if exc.filename is None and args:
+            raise OSError(exc.errno, exc.strerror or str(exc), str(args[-1])) from exc
+        raise

@@ -24,11 +24,10 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.model.sources import cite_sources
 from modelgen.simulation.figure_process import draw_figures, import_plotting
@@ -54,9 +53,13 @@ from modelgen.simulation.flight_start import FlightStart, finished, in_backgroun
 from modelgen.simulation.flight_summary import figure_captions, summary_markdown, targets
 from modelgen.simulation.history import CsvHistory
 from modelgen.simulation.jit import HAVE_NUMBA
+from modelgen.simulation.model_process import PreparedModel
 from modelgen.simulation.montecarlo import run_monte_carlo
 from modelgen.simulation.scenario import FlightProfile
-from modelgen.simulation.streaming import fly_modes, history_every
+from modelgen.simulation.streaming import flies_compiled_loop, fly_modes, history_every
+
+if TYPE_CHECKING:  # sympy-based: a flight given a PreparedModel imports no sympy
+    from modelgen.derivation.symbolic import DerivedModel
 
 __all__ = ["simulate", "simulation_report", "FlightReport", "start_flight", "FlightStart"]
 
@@ -83,7 +86,14 @@ def _echo_progress(echo: Callable[[str], None], label: str) -> Callable[[int, in
     return report
 
 
-def simulation_report(profile: FlightProfile, derived: DerivedModel, out_dir: Path, runs: int = 20, seed: int = 0,
+def state_units(derived: "DerivedModel | PreparedModel") -> dict[str, str]:
+    """Each state's unit, by name."""
+    if isinstance(derived, PreparedModel):
+        return dict(derived.units)
+    return {state.name: state.unit for state in derived.model.states}
+
+
+def simulation_report(profile: FlightProfile, derived: "DerivedModel | PreparedModel", out_dir: Path, runs: int = 20, seed: int = 0,
              workers: int = 2, echo: Callable[[str], None] = print, implementation: str = "c",
              client: Any = None, history_csv: bool = False, journal: str | Path | None = None,
              started: FlightStart | None = None) -> FlightReport:
@@ -94,7 +104,8 @@ def simulation_report(profile: FlightProfile, derived: DerivedModel, out_dir: Pa
     The Monte Carlo runs fly the same filter, as dask tasks on ``client``
     (a local cluster of ``workers`` when None).
     ``derived`` is the profile's ``filter.model``, derived by the caller (the
-    main job hands down the model it derived once).  ``history_csv`` also
+    main job hands down the model it derived once), or what the flight needs of it, prepared
+    (:class:`~modelgen.simulation.model_process.PreparedModel`: ``modelgen simulate``'s C filter; the same numbers).  ``history_csv`` also
     writes each mode's history, as it is flown, to ``history_<mode>.csv``
     (:mod:`modelgen.simulation.history`) in ``out_dir``.  ``journal`` keeps
     the completed Monte Carlo runs (:func:`modelgen.simulation.montecarlo.run_monte_carlo`).
@@ -116,12 +127,19 @@ def simulation_report(profile: FlightProfile, derived: DerivedModel, out_dir: Pa
     with tempfile.TemporaryDirectory(prefix="modelgen-simulate-") as code_dir, ThreadPoolExecutor(1) as helpers:
         # the filter code is generated and compiled (a compiler process) while the truth is made and the IMU
         # errors (the seed's first draws, they need no truth) are drawn, both in threads of ``started``
-        building = helpers.submit(timed, filter_factory, derived, implementation, code_dir)
+        prepared = derived if isinstance(derived, PreparedModel) else None
+        if prepared is not None:
+            if implementation != "c":
+                raise ModelError(f"simulate: a prepared model flies the generated C filter, not {implementation!r}")
+            building = helpers.submit(timed, filter_factory, prepared.outline, implementation, code_dir, prepared.files)
+        else:
+            building = helpers.submit(timed, filter_factory, derived, implementation, code_dir)
         trajectory, seconds = started.trajectory()
         later = "its positions and " if trajectory.positions_in_pieces else ""
         timings[f"trajectory (truth; {later}IMU increments are generated piece by piece in the flight)"] = seconds
         echo(f"  trajectory: truth of {trajectory.n_samples} IMU samples in {seconds:.1f} s")
-        layout = profile_layout(profile, derived, trajectory)
+        if prepared is None:
+            layout, flown = profile_layout(profile, derived, trajectory), derived
         imu_stream, drawn = started.imu_errors()
         rng = started.rng
         timings["IMU errors (drawn alongside the trajectory)"] = drawn
@@ -131,6 +149,11 @@ def simulation_report(profile: FlightProfile, derived: DerivedModel, out_dir: Pa
         make_filter, build = building.result()
         timings[f"filter code ({implementation}: generate, compile or import; alongside the above)"] = build
         echo(f"  filter: {implementation} ({build:.1f} s to build, alongside the trajectory and sensors)")
+        if prepared is not None and flies_compiled_loop(profile.aiding_sensor, make_filter):
+            layout, flown = prepared.layout, prepared.outline  # all that the compiled loop reads of the model
+        elif prepared is not None:  # the Python loop evaluates the symbolic H and R: the derived model (sympy)
+            flown = prepared.symbolic_model()
+            layout = profile_layout(profile, flown, trajectory)
         t = time.perf_counter()
         n_cycles = len(trajectory.truth) - 1
         record_every = history_every(n_cycles)
@@ -140,13 +163,13 @@ def simulation_report(profile: FlightProfile, derived: DerivedModel, out_dir: Pa
         # making the IMU increments sets the pace, the flying thread's core has time to spare
         plotting = in_background(import_plotting) if started.figures is None else None
         positions = profile.filter.states.get("position", {})
-        units = display_units({state.name: state.unit for state in derived.model.states}, positions)
+        units = display_units(state_units(derived), positions)
         if started.figures is not None:  # their figures and axes made while the flight goes
             started.figures.prepare(plot_trajectory, trajectory_axes, (FIGURE_TICKS,))
             started.figures.prepare(plot_modes, modes_axes, (FIGURE_TICKS,))
             started.figures.prepare(plot_filter, filter_axes, (derived.model.state_names, units, FIGURE_TICKS))
         try:
-            results = fly_modes(profile, derived, trajectory, sensors, layout, make_filter, MODES,
+            results = fly_modes(profile, flown, trajectory, sensors, layout, make_filter, MODES,
                                 progress=lambda mode: _echo_progress(echo, f"{mode} filter"),
                                 record_every=record_every, histories=histories)
         finally:
@@ -159,12 +182,12 @@ def simulation_report(profile: FlightProfile, derived: DerivedModel, out_dir: Pa
     monte_carlo = None
     if runs > 0:
         t = time.perf_counter()
-        monte_carlo = run_monte_carlo(profile, derived, runs, seed=seed + 1, workers=workers, client=client,
+        monte_carlo = run_monte_carlo(profile, flown, runs, seed=seed + 1, workers=workers, client=client,
                                       progress=_echo_progress(echo, "Monte Carlo runs"), implementation=implementation,
-                                      journal=journal)
+                                      journal=journal, setup=prepared.monte_carlo if prepared is not None else None)
         timings[f"Monte Carlo ({runs_text(runs)}, {monte_carlo.where})"] = time.perf_counter() - t
 
-    factors = display_factors({state.name: state.unit for state in derived.model.states}, positions,
+    factors = display_factors(state_units(derived), positions,
                               float(np.mean(trajectory.truth[:, 1])), float(np.mean(trajectory.truth[:, 3])))
     drawings: list[tuple[Callable[..., Path], tuple]] = [
         (plot_trajectory, (trajectory, out_dir / "trajectory.png")),

@@ -20,8 +20,9 @@ half-written history behind.
 from __future__ import annotations
 
 import csv
+from contextlib import contextmanager
 from pathlib import Path
-from typing import TextIO
+from typing import Iterator, TextIO
 
 from modelgen.simulation.filter_loop import RunResult
 
@@ -43,17 +44,30 @@ class CsvHistory:
         self.state_names = list(state_names)
         self._file: TextIO = open(self.path, "w", newline="", encoding="utf-8")
         self._writer = csv.writer(self._file)
-        self._writer.writerow(history_columns(self.state_names))
+        with self._naming_the_file():
+            self._writer.writerow(history_columns(self.state_names))
         self.rows = 0
+
+    @contextmanager
+    def _naming_the_file(self) -> Iterator[None]:
+        """An OSError of a write (a full disk: it names no file) names this history's file."""
+        try:
+            yield
+        except OSError as exc:
+            if exc.filename is None:
+                raise OSError(exc.errno, exc.strerror or str(exc), str(self.path)) from exc
+            raise
 
     def write(self, result: RunResult, start: int, stop: int) -> None:
         """Append the result's recorded rows [start, stop) (each row once, in order)."""
-        for row in range(start, stop):
-            self._writer.writerow([repr(float(result.times[row])), *map(repr, result.outputs[row].tolist()),
-                                   *map(repr, result.estimation_error[row].tolist()),
-                                   *map(repr, result.sigma[row].tolist()), repr(float(result.nees[row]))])
-        self.rows += stop - start
-        self._file.flush()
+        with self._naming_the_file():
+            for row in range(start, stop):
+                self._writer.writerow([repr(float(result.times[row])), *map(repr, result.outputs[row].tolist()),
+                                       *map(repr, result.estimation_error[row].tolist()),
+                                       *map(repr, result.sigma[row].tolist()), repr(float(result.nees[row]))])
+            self.rows += stop - start
+            self._file.flush()
 
     def close(self) -> None:
-        self._file.close()
+        with self._naming_the_file():
+            self._file.close()

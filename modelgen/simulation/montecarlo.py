@@ -239,6 +239,21 @@ def worker_setup(profile: FlightProfile, truth_profile: FlightProfile | None, de
                            caller_layout(profile, derived, outline))
 
 
+def study_setup(profile: FlightProfile, derived: DerivedModel, implementation: str, mode: str | None = None,
+                store_every: int | None = None, truth_profile: FlightProfile | None = None) -> MonteCarloSetup:
+    """The set-up :func:`run_monte_carlo` ships to its workers for this study (made ahead of it, and handed to it
+    as ``setup``, by a caller that keeps no derived model: :mod:`modelgen.simulation.model_process`)."""
+    mode = mode or profile.filter.mode
+    store_every = store_every or default_store_every(profile)
+    key = setup_key(profile, truth_profile, derived.model, mode, store_every, implementation)
+    return worker_setup(profile, truth_profile, derived, mode, store_every, implementation, key)
+
+
+def default_store_every(profile: FlightProfile) -> int:
+    """A Monte Carlo run keeps every this many filter cycles: one row per aiding measurement."""
+    return max(1, int(round(profile.aiding_period / profile.filter.period)))
+
+
 def flies_compiled_loop(profile: FlightProfile, make_filter: Any) -> bool:
     """Whether :func:`fly_profile` flies ``profile`` with ``make_filter`` in the compiled loop.
 
@@ -334,7 +349,7 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
                     progress: Callable[[int, int], None] | None = None,
                     truth_profile: FlightProfile | None = None, implementation: str = "reference",
                     on_run: Callable[[int, RunOutput], None] | None = None,
-                    journal: str | Path | None = None) -> MonteCarloResult:
+                    journal: str | Path | None = None, setup: MonteCarloSetup | None = None) -> MonteCarloResult:
     """``runs`` independent flights of ``profile`` with the filter model ``derived`` (module docstring).
 
     ``client``: a ``distributed.Client`` (:func:`modelgen.cluster.dask_client`)
@@ -346,7 +361,9 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
     worker).  ``on_run(i, output)`` receives each run as it completes.
     ``journal``: a file that keeps each completed run (:func:`run_journal`);
     a study stopped part-way is taken up again from it, flying only the
-    missing runs, and a journal of another study is refused.
+    missing runs, and a journal of another study is refused.  ``setup``: the study's set-up made ahead
+    (:func:`study_setup`, same profile, mode, filter and truth profile); ``derived`` may then be its
+    outline, and no symbolic model is needed here.
     """
     if runs < 1:
         raise ModelError(f"Monte Carlo: need at least one run, got {runs}")
@@ -354,13 +371,17 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
         raise ModelError(f"Monte Carlo: unknown filter implementation {implementation!r} "
                          f"(choose from {', '.join(IMPLEMENTATIONS)})")
     mode = mode or profile.filter.mode
-    store_every = store_every or max(1, int(round(profile.aiding_period / profile.filter.period)))
-    key = setup_key(profile, truth_profile, derived.model, mode, store_every, implementation)
+    store_every = store_every or default_store_every(profile)
+    if setup is not None and (setup.mode, setup.store_every, setup.implementation) != (mode, store_every, implementation):
+        raise ModelError(f"Monte Carlo: the set-up {setup.key} is for mode {setup.mode!r}, every {setup.store_every} "
+                         f"cycles, filter {setup.implementation!r}, not {mode!r}, {store_every}, {implementation!r}")
+    key = setup.key if setup is not None else setup_key(profile, truth_profile, derived.model, mode, store_every,
+                                                         implementation)
     if client is None and workers > 1 and runs > 1:
         with dask_client(workers=min(workers, runs)) as local:
             return run_monte_carlo(profile, derived, runs, seed, mode, client=local, store_every=store_every,
                                    progress=progress, truth_profile=truth_profile, implementation=implementation,
-                                   on_run=on_run, journal=journal)
+                                   on_run=on_run, journal=journal, setup=setup)
     kept = run_journal(journal, key, seed, runs) if journal is not None else None
     seeds = np.random.SeedSequence(seed).spawn(runs)
     start = time.perf_counter()
@@ -369,10 +390,16 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
     if client is not None and not finished:
         # first: fresh workers import (and warm up) side by side while the set-up is made here
         import_on_workers(client, __name__, warm_up="warm_worker")
-        setup = worker_setup(profile, truth_profile, derived, mode, store_every, implementation, key)
+        if setup is None:
+            setup = worker_setup(profile, truth_profile, derived, mode, store_every, implementation, key)
         # the set-up (the code: ~400 kB of text) travels once, pickled, as a task of its own, not once per run
         shared = client.submit(held, pickle.dumps(setup, protocol=pickle.HIGHEST_PROTOCOL), pure=False,
                                key=f"modelgen-montecarlo-setup-{key}-{uuid.uuid4().hex[:8]}")
+    elif setup is not None:  # this process flies the set-up made ahead (its code, layout and model)
+        shared = setup
+        if not finished:
+            made = setup
+            worker_cached(key, lambda: _prepare(made))
     else:  # this process flies with the caller's derived model (and makes the layout with the whole trajectory)
         code = generated_filter_files(derived) if implementation != "reference" and not finished else None
         setup = shared = MonteCarloSetup(profile, truth_profile, ModelOutline.of(derived), mode, store_every,

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from modelgen.errors import ModelError
+from modelgen.model.file_fields import is_number
 
 DEG = math.pi / 180.0
 ARCSEC = DEG / 3600.0
@@ -23,6 +24,28 @@ ARCMIN = DEG / 60.0
 HOUR = 3600.0
 KMH = 1000.0 / 3600.0
 DPH = DEG / HOUR  # deg/h -> rad/s
+
+
+#: Bounds of a flight (an hours or IMU rate without bound would run out of memory, or for days).  The longest
+#: flight is 10 days; 10 kHz is five times the fastest tactical IMUs' 2 kHz; the samples of a flight are at most
+#: those of 10 days at 300 Hz (the core paper's rate): the truth, the IMU and the strapdown are flown per sample.
+MAX_FLIGHT_HOURS = 240.0
+MAX_IMU_RATE_HZ = 10_000.0
+MAX_IMU_SAMPLES = int(MAX_FLIGHT_HOURS * HOUR * 300)
+
+
+def check_flight_size(hours: float | None, rate_hz: float | None, where_hours: str, where_rate: str) -> None:
+    """Refuse a flight longer than :data:`MAX_FLIGHT_HOURS`, an IMU faster than :data:`MAX_IMU_RATE_HZ`, or both
+    together over :data:`MAX_IMU_SAMPLES` samples, naming the limit (either may be None: not known yet)."""
+    if hours is not None and hours > MAX_FLIGHT_HOURS:
+        raise ModelError(f"{where_hours}: a flight of {hours:g} h is longer than modelgen flies: at most "
+                         f"{MAX_FLIGHT_HOURS:g} h (10 days)")
+    if rate_hz is not None and rate_hz > MAX_IMU_RATE_HZ:
+        raise ModelError(f"{where_rate}: an IMU rate of {rate_hz:g} Hz is faster than modelgen flies: at most "
+                         f"{MAX_IMU_RATE_HZ:g} Hz")
+    if hours is not None and rate_hz is not None and hours * HOUR * rate_hz > MAX_IMU_SAMPLES:
+        raise ModelError(f"{where_rate}: {rate_hz:g} Hz for {hours:g} h ({where_hours}) is {hours * HOUR * rate_hz:.3g} IMU samples, "
+                         f"more than modelgen flies: at most {MAX_IMU_SAMPLES:.3g} ({MAX_FLIGHT_HOURS:g} h at 300 Hz)")
 
 
 @dataclass(frozen=True)
@@ -69,10 +92,9 @@ class ProfileSection:
             return default
         value = self.data[key]
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            try:
-                value = float(str(value))
-            except ValueError:
-                raise ModelError(f"{self.at(key)}: {value!r} is not a number") from None
+            if not is_number(value):  # plain decimal text only: float() would also read '1_000'
+                raise ModelError(f"{self.at(key)}: {value!r} is not a number")
+            value = float(value)
         value = float(value)
         if not math.isfinite(value):
             raise ModelError(f"{self.at(key)}: {value!r} is not finite")

@@ -21,7 +21,7 @@ from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml_with_lines
 from modelgen.simulation.aiding import AidingSensor
 from modelgen.simulation.imu import ImuErrorBudget
-from modelgen.simulation.profile_keys import ARCMIN, ARCSEC, DEG, DPH, HOUR, KMH, ProfileSection
+from modelgen.simulation.profile_keys import ARCMIN, ARCSEC, DEG, DPH, HOUR, KMH, ProfileSection, check_flight_size
 from modelgen.simulation.sensors import SENSORS
 from modelgen.simulation.strapdown import ALGORITHMS, VerticalDamping
 from modelgen.simulation.trajectory import FlightPath, Segment
@@ -130,6 +130,9 @@ class FlightProfile:
             out = replace(out, filter=replace(out.filter, model=str(model)))
         if hours is not None:
             out = replace(out, path=out.path.truncated(hours * HOUR))
+        check_flight_size(out.path.duration / HOUR, out.imu_rate,
+                          "--hours" if hours is not None else f"{self.source_file}: segments",
+                          "--imu-rate" if "imu_rate" in changes else f"{self.source_file}: imu.rate_hz")
         return out
 
 
@@ -191,9 +194,13 @@ def load_profile_data(data: Any, filename: str, lines: dict[str, str] | None = N
             roll_rate=s.number("roll_rate_dps", 0.0, DEG),
         ))
         s.done()
+    latitude = start.number("latitude_deg", scale=DEG)
+    if not abs(latitude) < math.pi / 2:  # 100 deg is no latitude; at +-90 the north and east axes are undefined
+        raise ModelError(f"{start.at('latitude_deg')}: latitude {latitude / DEG:g} deg is not between -90 and 90 deg "
+                         "(the poles themselves are excluded: the NED axes and tan(latitude) are undefined there)")
     path = FlightPath(
         name=name,
-        latitude=start.number("latitude_deg", scale=DEG),
+        latitude=latitude,
         longitude=start.number("longitude_deg", scale=DEG),
         height=start.number("height_m", 0.0),
         ground_speed=start.number("ground_speed_kmh", scale=KMH),
@@ -207,6 +214,7 @@ def load_profile_data(data: Any, filename: str, lines: dict[str, str] | None = N
     imu = top.section("imu")
     g = imu.number("g_mps2", 9.80665)
     imu_rate = imu.number("rate_hz", positive=True)
+    check_flight_size(path.duration / HOUR, imu_rate, f"{filename}: segments", imu.at("rate_hz"))
     coning = imu.text("coning", "two", tuple(ALGORITHMS))
     budget = ImuErrorBudget(
         gyro_constant_drift=imu.number("gyro_constant_drift_dph", 0.0, DPH),
@@ -281,7 +289,7 @@ def builtin_profiles() -> list[str]:
 def load_profile(path: str | Path) -> FlightProfile:
     """Load a flight-profile file, or a built-in one by name (``profile_000``)."""
     p = Path(path)
-    if not p.exists() and p.suffix == "":
+    if not p.is_file() and p.suffix == "":
         candidate = data_path(f"{p.name}.yaml")
         if candidate.is_file():
             p = candidate

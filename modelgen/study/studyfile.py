@@ -57,6 +57,7 @@ from modelgen.fileio.datafiles import data_path, read_yaml_with_lines
 from modelgen.model.declaration import ErrorModel
 from modelgen.model.loading import load_model
 from modelgen.model.units import to_si
+from modelgen.simulation.profile_keys import check_flight_size
 
 #: A study larger than this is refused (a typo in a range's count must not fill a cluster for days).
 MAX_CASES = 100_000
@@ -452,6 +453,7 @@ def _monte_carlo(r: _Reader, raw: Any, parameters: Sequence[Parameter], filters:
     rate = r.number(mc["imu_rate_hz"], "monte_carlo.imu_rate_hz") if "imu_rate_hz" in mc else None
     if rate is not None and not rate > 0:
         raise ModelError(f"{r.at('monte_carlo.imu_rate_hz')}: must be a positive rate, got {rate:g}")
+    check_flight_size(hours, rate, r.at("monte_carlo.hours"), r.at("monte_carlo.imu_rate_hz"))
     runs = r.whole(mc["runs"], "monte_carlo.runs", 1, MAX_RUNS)
     seed = r.whole(mc.get("seed", 0), "monte_carlo.seed", 0, 2**63 - 1)
     lacking = [p.name for p in parameters if not p.profile_keys]
@@ -472,7 +474,7 @@ def _monte_carlo(r: _Reader, raw: Any, parameters: Sequence[Parameter], filters:
 def load_study(path: str | Path) -> Study:
     """Read and check a study file (module docstring); nothing is run."""
     path = Path(path)
-    if not path.exists() and path.suffix == "" and data_path(f"studies/{path.name}.yaml").is_file():
+    if not path.is_file() and path.suffix == "" and data_path(f"studies/{path.name}.yaml").is_file():
         path = data_path(f"studies/{path.name}.yaml")
     data, lines = read_yaml_with_lines(path, "study file")
     r = _Reader(path, lines)

@@ -374,3 +374,84 @@ def test_a_report_commit_record_that_names_no_staging_folder_is_dropped(tmp_path
         pass
     assert not (folder / REPORT_COMMIT_RECORD).exists()
     assert (folder / "a.txt").read_text() == "1\n"
+
+
+# -- issue 28 minors: only regular files are replaced; a full disk names the file -----------------------------
+
+
+def _non_regular(tmp_path, kind):
+    path = tmp_path / f"target_{kind}"
+    if kind == "pipe":
+        os.mkfifo(path)
+    else:
+        (tmp_path / "elsewhere.txt").write_text("the link's target")
+        os.symlink(tmp_path / "elsewhere.txt", path)
+    return path
+
+
+@pytest.mark.parametrize("kind", ["pipe", "link"])
+def test_a_file_write_never_replaces_what_is_not_a_regular_file(tmp_path, kind):
+    """Issue 28: ``derive --out /dev/full --force`` put a regular file where the device node was."""
+    path = _non_regular(tmp_path, kind)
+    with pytest.raises(ModelError, match=r"is (a named pipe|a symbolic link), and modelgen replaces only regular files"):
+        write_text_atomically(path, "text")
+    assert path.is_symlink() if kind == "link" else path.is_fifo()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+@pytest.mark.parametrize("kind", ["pipe", "link"])
+def test_a_report_never_replaces_what_is_not_a_regular_file_even_with_force(tmp_path, kind):
+    path = _non_regular(tmp_path, kind)
+    with pytest.raises(ModelError, match=r"is (a named pipe|a symbolic link), and modelgen replaces only regular files"):
+        _report(tmp_path, {path.name: "report"}, force=True)
+    assert path.is_symlink() if kind == "link" else path.is_fifo()
+    assert leftovers(tmp_path) == []
+
+
+class _FullDisk:
+    """A file object whose writes fail as on a full disk: ENOSPC naming no file (what close() and write() raise)."""
+
+    def __init__(self, handle):
+        self.handle = handle
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc_info):
+        self.handle.close()
+
+    def write(self, data):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+
+def test_a_full_disk_names_the_file_being_written_and_leaves_no_temporary_file(tmp_path, monkeypatch):
+    real = os.fdopen
+    monkeypatch.setattr(output.os, "fdopen", lambda fd, mode: _FullDisk(real(fd, mode)))
+    with pytest.raises(OSError) as raised:
+        write_text_atomically(tmp_path / "summary.md", "text")
+    assert raised.value.errno == errno.ENOSPC and raised.value.filename == str(tmp_path / "summary.md")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_in_a_staged_output_names_the_final_file_not_the_staging_one(tmp_path, monkeypatch):
+    real = open
+
+    def full_open(path, mode="r", *args, **kwargs):
+        handle = real(path, mode, *args, **kwargs)
+        return _FullDisk(handle) if "x" in mode else handle
+
+    monkeypatch.setattr(output, "open", full_open, raising=False)
+    with pytest.raises(OSError) as raised:
+        write_atomically(tmp_path / "m", FILES)
+    assert raised.value.errno == errno.ENOSPC
+    written = Path(raised.value.filename)
+    assert written.parent == tmp_path / "m" and written.name in FILES  # where the user will look, not .m.staging-*/
+    assert leftovers(tmp_path) == []
+
+
+def test_a_full_disk_in_a_report_names_the_final_file(tmp_path):
+    with pytest.raises(OSError) as raised:
+        with ReportUpdate(tmp_path / "r") as staged:
+            raise OSError(errno.ENOSPC, "No space left on device", str(staged.staging / "figure.png"))
+    assert raised.value.filename == str(tmp_path / "r" / "figure.png")
+    assert leftovers(tmp_path) == []

@@ -348,3 +348,10 @@ def test_transform_free_text_is_checked():
         load_model_text('model: small\ntitle: "a\\eb"\nbase: ned_doppler18\n', "file.yaml")
     with pytest.raises(ModelError, match=r"collides with"):
         load_model_text("model: stdio\nbase: ned_doppler18\n", "file.yaml")
+
+
+def test_a_folder_named_like_a_built_in_model_does_not_shadow_it(tmp_path, monkeypatch):
+    """Issue 28: a ./ned_doppler18 folder (``generate ned_doppler18 --out .`` makes one) hid the built-in model."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "ned_doppler18").mkdir()
+    assert len(load_model("ned_doppler18").states) == 18

@@ -131,3 +131,15 @@ def test_a_variance_written_as_a_bare_number_is_in_the_measurement_unit_squared(
     assert load_model_text(text, filename="m.yaml").measurements[0].unit == "m"
     with pytest.raises(ModelError, match="is in m, but the equation is in m"):  # a term with a unit is still checked
         load_model_text(text.replace(f'variance: "{variance}"', 'variance: "4*s"'), filename="m.yaml")
+
+
+@pytest.mark.parametrize("lax", ["1_000", " 1.5", True])
+def test_a_value_with_a_unit_in_a_lax_form_is_refused_as_not_a_number(lax):
+    """Issue 28: float() read '1_000' (and True as 1) where a file gave a number with its unit."""
+    from modelgen.model.units import to_si, unit_to_si
+
+    with pytest.raises(ModelError, match=r"^x.yaml:3: .* is not a number$"):
+        to_si(lax, "deg/h", "x.yaml:3: value")
+    with pytest.raises(ModelError, match=r"^x.yaml:3: .* is not a number$"):
+        unit_to_si(lax, "ppm", "x.yaml:3: value")
+    assert to_si("1.5e-3", "m", "x") == 1.5e-3 and unit_to_si(2, "ppm", "x") == pytest.approx(2e-6)

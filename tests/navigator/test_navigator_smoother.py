@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from modelgen.navigator.smoother import ForwardRecord, backward_pass, smoothed_nominals
+from tests.navigator.rts_reference import NumpyReference
 
 DATA = Path(__file__).parent / "data"
 
@@ -101,7 +102,7 @@ def test_error_state_smoother_with_resets_matches_the_textbook_full_state_rts():
     x0, P0 = np.array([0.5, 1.0]), np.diag([4.0, 4.0])
     reference, reference_P = _textbook_rts(fixes, x0, P0, Phi, Q, H, R)
     record, output_steps = _closed_loop_error_state(fixes, x0, P0, Phi, Q, H, R)
-    smoothed = smoothed_nominals(record)
+    smoothed = smoothed_nominals(record, NumpyReference())
     states = np.array([nav for nav, _, _ in smoothed])
     covariances = np.array([P for _, _, P in smoothed])
     assert len(states) == len(fixes)
@@ -117,7 +118,7 @@ def test_smoothed_error_is_zero_at_the_last_step_and_the_covariance_shrinks():
     Phi, Q = _constant_velocity(0.1, 0.5)
     record, _ = _closed_loop_error_state(fixes, np.zeros(2), np.eye(2), Phi, Q, np.array([[1.0, 0.0]]),
                                          np.array([[0.09]]))
-    steps = backward_pass(record)
+    steps = backward_pass(record, NumpyReference())
     assert np.all(steps.error[-1] == 0.0)
     in_gap = [np.trace(steps.covariance[k]) < np.trace(record.posteriors[k]) for k in range(20, 40)]
     assert all(in_gap)
@@ -129,7 +130,7 @@ def test_a_flight_without_its_record_is_refused():
     from modelgen.navigator.smoother import smooth_flight
 
     with pytest.raises(ModelError, match="without its forward record"):
-        smooth_flight(Flight(np.zeros((1, 3)), [], 0.0, 0.0))
+        smooth_flight(Flight(np.zeros((1, 3)), [], 0.0, 0.0), NumpyReference())
 
 
 @pytest.mark.flight

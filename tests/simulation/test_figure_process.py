@@ -77,3 +77,34 @@ def test_drawings_that_do_not_pickle_are_drawn_here(tmp_path):
     finally:
         process.close()
     assert (tmp_path / "a.txt").read_text(encoding="utf-8") == str(os.getpid())
+
+
+def _full_disk(path):
+    import errno
+
+    raise OSError(errno.ENOSPC, "No space left on device")  # as PIL's close() raises it: naming no file
+
+
+def test_a_full_disk_while_drawing_names_the_figure_and_no_process_prints_a_traceback(tmp_path, capfd):
+    """Issue 28: ``simulate`` into a full disk printed the copy's traceback, then an error naming no file."""
+    from modelgen.simulation.figure_process import draw_figures
+
+    if threading.active_count() > 1:
+        pytest.skip("a thread runs in this test process: draw_figures forks no copy")
+    for apart in (0, 1):
+        with pytest.raises(OSError) as raised:
+            draw_figures([(_write_text, ("a", tmp_path / "a.txt")), (_full_disk, (tmp_path / "b.png",))], apart=apart)
+        assert raised.value.filename == str(tmp_path / "b.png")
+    assert "Traceback" not in capfd.readouterr().err
+
+
+def test_a_full_disk_in_the_figure_process_names_the_figure_and_prints_no_traceback(tmp_path, capfd):
+    process = _figure_process()
+    try:
+        process.draw([(_write_text, ("a", tmp_path / "a.txt")), (_full_disk, (tmp_path / "b.png",))], apart=1)
+        with pytest.raises(OSError) as raised:
+            process.paths()
+    finally:
+        process.close()
+    assert raised.value.filename == str(tmp_path / "b.png")
+    assert "Traceback" not in capfd.readouterr().err

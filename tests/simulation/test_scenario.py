@@ -104,3 +104,58 @@ def test_gps_profiles_fly_a_free_vertical_channel_like_their_models_and_bad_valu
     d["altitude_reference"]["vertical_channel"] = "baro"
     with pytest.raises(ModelError, match="vertical_channel"):
         load_profile_data(d, "x.yaml")
+
+
+# -- issue 28 minors: latitudes, flight bounds, lax number text, a folder named like a built-in ----------------
+
+
+def _profile_file(tmp_path, d):
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    return path
+
+
+@pytest.mark.parametrize("latitude", [100.0, 90.0, -90.0, -91.0])
+def test_a_latitude_at_or_beyond_a_pole_is_refused_with_file_and_line(tmp_path, latitude):
+    d = data()
+    d["start"]["latitude_deg"] = latitude
+    path = _profile_file(tmp_path, d)
+    with pytest.raises(ModelError, match=rf"^{path}:\d+: start.latitude_deg: latitude {latitude:g} deg is not between"):
+        load_profile(path)
+
+
+def test_a_latitude_just_short_of_the_pole_loads(tmp_path):
+    d = data()
+    d["start"]["latitude_deg"] = 89.5
+    assert load_profile(_profile_file(tmp_path, d)).path.latitude == pytest.approx(math.radians(89.5))
+
+
+def test_a_flight_longer_than_ten_days_or_an_imu_over_10_khz_is_refused_before_anything_is_flown(tmp_path):
+    profile = load_profile("profile_000")
+    with pytest.raises(ModelError, match=r"^--hours: a flight of 1e\+09 h is longer than modelgen flies: at most 240 h"):
+        profile.with_changes(hours=1e9)
+    with pytest.raises(ModelError, match=r"^--imu-rate: an IMU rate of 1e\+06 Hz is faster than modelgen flies"):
+        profile.with_changes(imu_rate=1e6)
+    with pytest.raises(ModelError, match=r"^--imu-rate: 5000 Hz for 200 h \(--hours\) is 3.6e\+09 IMU samples"):
+        profile.with_changes(hours=200.0, imu_rate=5000.0)
+    assert profile.with_changes(hours=240.0).path.duration == pytest.approx(240 * 3600)
+    d = data()
+    d["imu"]["rate_hz"] = 20000
+    path = _profile_file(tmp_path, d)
+    with pytest.raises(ModelError, match=rf"^{path}:\d+: imu.rate_hz: an IMU rate of 20000 Hz is faster"):
+        load_profile(path)
+
+
+def test_number_text_in_a_lax_form_is_refused_and_plain_text_is_read():
+    d = data()
+    d["start"]["latitude_deg"] = "1_0"
+    with pytest.raises(ModelError, match=r"start.latitude_deg: '1_0' is not a number"):
+        load_profile_data(d, "x.yaml")
+    d["start"]["latitude_deg"] = "1.5e1"
+    assert load_profile_data(d, "x.yaml").path.latitude == pytest.approx(math.radians(15.0))
+
+
+def test_a_folder_named_like_a_built_in_profile_does_not_shadow_it(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "profile_000").mkdir()
+    assert load_profile("profile_000").path.duration == pytest.approx(4 * 3600)

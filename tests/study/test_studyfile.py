@@ -214,3 +214,24 @@ def test_too_many_listed_values_or_cases_are_refused(tmp_path):
     values = ", ".join(["0.1"] * 10_001)
     message = refused(tmp_path, GRID.replace("values: [0.01, 0.1]", f"values: [{values}]"))
     assert "study.yaml:5" in message and "at most 10000" in message, message
+
+
+def test_monte_carlo_hours_and_imu_rate_are_bounded_with_file_and_line(tmp_path):
+    """Issue 28: a Monte Carlo of unbounded hours or IMU rate ran for hours or out of memory."""
+    keyed = GRID.replace("sets: [gyro_markov_sigma_x, initial_sigma.gyro_constant_drift_x]",
+                         "sets: [gyro_markov_sigma_x, initial_sigma.gyro_constant_drift_x]\n    profile: [imu.gyro_markov_drift_dph]")
+    keyed = keyed.replace("sets: [doppler_noise_sigma_north, doppler_noise_sigma_east]",
+                          "sets: [doppler_noise_sigma_north, doppler_noise_sigma_east]\n    profile: [doppler.white_noise_mps]")
+    mc = keyed + "monte_carlo:\n  profile: profile_000\n  runs: 2\n  cases: [{gyro_drift: 0.1, doppler_noise: 0.2}]\n"
+    assert load_study(write(tmp_path, mc + "  hours: 240\n")).monte_carlo.hours == 240
+    message = refused(tmp_path, mc + "  hours: 1.0e+6\n")
+    assert message.startswith(f"{tmp_path / 'study.yaml'}:") and "monte_carlo.hours: a flight of 1e+06 h is longer" in message
+    message = refused(tmp_path, mc + "  imu_rate_hz: 1.0e+6\n")
+    assert "monte_carlo.imu_rate_hz: an IMU rate of 1e+06 Hz is faster than modelgen flies" in message
+    assert "IMU samples" in refused(tmp_path, mc + "  hours: 200\n  imu_rate_hz: 5000\n")
+
+
+def test_a_folder_named_like_a_built_in_study_does_not_shadow_it(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "paper_gyro_doppler_1000").mkdir()
+    assert load_study("paper_gyro_doppler_1000").parameters

@@ -33,6 +33,10 @@ class RenamedSymbols:
             return self.renames[expr]
         return super()._print_Symbol(expr)  # type: ignore[misc]
 
+    def _print_Mul(self, expr: sp.Mul) -> str:
+        text = small_power_quotient(self, expr)
+        return text if text is not None else super()._print_Mul(expr)  # type: ignore[misc]
+
 
 def small_power(printer, expr: sp.Pow, one: str) -> str | None:
     """Print x**k for |k| <= 4 as repeated products, or None to fall back to the printer's own."""
@@ -44,6 +48,25 @@ def small_power(printer, expr: sp.Pow, one: str) -> str | None:
     if int(exp) > 0:
         return product
     return f"{one}/({product})" if abs(int(exp)) > 1 else f"{one}/{text}"
+
+
+def small_power_quotient(printer, expr: sp.Mul) -> str | None:
+    """``a/(x*x*x)`` for a product whose only denominator is x**-k, 2 <= k <= 4; None to print it as sympy does.
+
+    sympy prints a single denominator factor unparenthesized (``a/x**3`` is right as Python), which the
+    product form of :func:`small_power` would make ``a/x*x*x``.
+    """
+    factors = expr.args
+    below = [f for f in factors if f.is_Pow and f.exp.is_Rational and f.exp.is_negative]
+    if len(below) != 1 or not (below[0].is_Pow and below[0].exp.is_Integer and 2 <= -int(below[0].exp) <= 4):
+        return None
+    denominator = printer._print(sp.Pow(below[0].base, -below[0].exp, evaluate=False))
+    numerator = sp.Mul(*[f for f in factors if f is not below[0]])
+    sign = ""
+    if numerator.could_extract_minus_sign():
+        sign, numerator = "-", -numerator
+    top = printer._print(sp.Float(1.0)) if numerator == 1 else printer.parenthesize(numerator, sp.printing.precedence.PRECEDENCE["Mul"], strict=True)
+    return f"{sign}{top}/({denominator})"
 
 
 def scalar_value(number: object, scalar: str) -> float:

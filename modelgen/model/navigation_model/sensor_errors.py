@@ -28,6 +28,10 @@ from modelgen.model.navigation_model.section import (
 )
 
 
+#: A summed bias (gyro_bias, accel_bias) is the sum of at most this many processes (the core paper's is two:
+#: a random constant and a Markov process; each summand adds three states).
+MAX_SUMMANDS = 4
+
 _UNITS = {
     "gyro_bias": "rad/s", "gyro_scale_factor": "1", "accel_bias": "m/s^2", "accel_scale_factor": "1",
 }
@@ -41,12 +45,18 @@ def read_sensor_errors(read: SectionReader, section: Mapping, frame: str, decl: 
     parts: dict[str, sp.Matrix] = {}
     dynamics: dict[sp.Symbol, sp.Expr] = {}
     order: list[sp.Symbol] = []
+    declared: dict[str, str] = {}  # each state's and noise's name and symbol -> the entry that declared it
+    summands: dict[str, int] = {}
     for i, item in enumerate(raw):
         key = f"navigation.sensor_errors[{i}]"
         entry = read.mapping(item, key, ("of", "process", "symbols", "symbol", "names", "rate", "sigma", "psd", "noise_symbols", "noise_names"), ("of", "process"))
         kind = read.choice(entry["of"], f"{key}.of", SENSOR_ERROR_KINDS)
         if kind in parts and kind not in SUMMED_SENSOR_ERROR_KINDS:
             raise ModelError(f"{read.at(key)}: sensor error {kind!r} is declared twice (only {', '.join(SUMMED_SENSOR_ERROR_KINDS)} may be, as a sum)")
+        summands[kind] = summands.get(kind, 0) + 1
+        if summands[kind] > MAX_SUMMANDS:
+            raise ModelError(f"{read.at(key)}: sensor error {kind!r} is declared {summands[kind]} times; a bias is the sum "
+                             f"of at most {MAX_SUMMANDS} processes")
         process = read.choice(entry["process"], f"{key}.process", PROCESSES)
         if (process == "clock") != (kind == "receiver_clock"):
             raise ModelError(f"{read.at(f'{key}.process')}: process 'clock' is the receiver clock's (bias and drift), and only its")
@@ -66,6 +76,8 @@ def read_sensor_errors(read: SectionReader, section: Mapping, frame: str, decl: 
             decl.places[("state", name)] = key
         noise_symbols = read.names(entry["noise_symbols"], f"{key}.noise_symbols", count) if "noise_symbols" in entry else [f"w_{s}" for s in symbols]
         noise_names = read.names(entry["noise_names"], f"{key}.noise_names", count) if "noise_names" in entry else [f"{kind}_driving_noise_{a}" for a in suffixes]
+        driven = process != "random_constant"  # a random constant has no driving noise: its noise names are unused
+        _declare_once(read, key, declared, [*names, *symbols, *(noise_names + noise_symbols if driven else [])])
         noises = [sp.Symbol(s, real=True) for s in noise_symbols]
         if process == "random_constant":
             rates = [sp.S.Zero] * count
@@ -92,6 +104,17 @@ def read_sensor_errors(read: SectionReader, section: Mapping, frame: str, decl: 
         parts[kind] = parts[kind] + sp.Matrix(state_symbols) if kind in parts else sp.Matrix(state_symbols)
         order.extend(state_symbols)
     return parts, dynamics, order
+
+
+def _declare_once(read: SectionReader, key: str, declared: dict[str, str], idents: Sequence[str]) -> None:
+    """Refuse, at the entry itself, a name or symbol an earlier sensor error declared (a list of 1000
+    repeats is not read and derived for minutes before it is refused)."""
+    for ident in idents:
+        if ident in declared:
+            raise ModelError(f"{read.at(key)}: {ident!r} is declared twice ({declared[ident]} and {key}); give this "
+                             "sensor error other symbols and names")
+    for ident in idents:
+        declared[ident] = key
 
 
 def _add_noises(

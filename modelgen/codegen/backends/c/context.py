@@ -12,6 +12,7 @@ from modelgen.codegen.discretize_kernels import HORNER_LAST, DiscretizeBlock, Se
 from modelgen.codegen.kernels import MIN_LANE_PAIRS, CheckedAssign, KernelBlock, compact_predict_tables, lane_split
 from modelgen.codegen.compact_discretize import CompactDiscretizeTables
 from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout, packed_index, phi_entries
+from modelgen.codegen.smoother import reset_inverse
 from modelgen.codegen.structure import FilterStructure
 from modelgen.codegen.van_loan import QD_MARGIN
 from modelgen.derivation.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range
@@ -305,7 +306,20 @@ def source_parts(description: FilterDescription) -> list[str]:
             parts.append("c_update_sequential.c.j2")
         else:
             parts.append("c_update_vector.c.j2")
+    parts.append("c_smoother.c.j2")
     return parts
+
+
+def smoother_context(description: FilterDescription) -> dict[str, object]:
+    """The backward pass's reset block: its states and G(dx)^-1 printed row-major over them (None: G = I)."""
+    reset = reset_inverse(description.derived)
+    if reset is None:
+        return {"reset": None}
+    printer = CPrinter(description.options.scalar, {symbol: f"dx[{i}]" for symbol, i in zip(reset.symbols, reset.states)})
+    size = len(reset.states)
+    return {"reset": {"size": size, "states": [str(i) for i in reset.states],
+                      "entries": [(a * size + b, printer.doprint(reset.matrix[a, b]))
+                                  for a in range(size) for b in range(size)]}}
 
 
 def _update_doc(description: FilterDescription) -> str:
@@ -398,6 +412,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "pivot_tolerance": f"(16 * {prefix}_N_STATES * {spell['epsilon']})",
         "update_doc": _update_doc(description),
         "part_templates": parts,
+        "smoother": smoother_context(description),
         "source_templates": ["c_source.c.j2", *(["c_discretize_van_loan.c.j2"] if options.van_loan else []), *parts],
         "evaluate": {
             "temporaries": [(str(s), printer.doprint(e)) for s, e in block.temporaries],

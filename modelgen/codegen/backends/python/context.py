@@ -6,10 +6,11 @@ import json
 
 import numpy as np
 
-from modelgen.codegen.backends.python.printer import parameter_locals
+from modelgen.codegen.backends.python.printer import PyPrinter, parameter_locals
 from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.expressions import Block, eliminate_common_subexpressions, poles
 from modelgen.codegen.kernels import python_filter_predict_kernel, python_predict_kernel, python_predict_plan
+from modelgen.codegen.smoother import reset_inverse
 from modelgen.derivation.discretization import DOUBLE_ROUNDOFF, nominal_scaling, series_range
 
 BANNER = "# GENERATED FILE - DO NOT EDIT (modelgen)"
@@ -110,6 +111,22 @@ def compiled_predict_plan(structure) -> dict[str, str]:
     }
 
 
+def smoother_context(description: FilterDescription) -> dict[str, object]:
+    """The backward pass's constants: the model's non-identity reset block and its inverse, printed (None: G = I)."""
+    reset = reset_inverse(description.derived)
+    if reset is None:
+        return {"reset": None}
+    printer = PyPrinter()
+    size = len(reset.states)
+    return {"reset": {
+        "states": repr(reset.states),
+        "index": repr(list(reset.states)),
+        "locals": [(str(symbol), index) for symbol, index in zip(reset.symbols, reset.states)],
+        "entries": [(reset.states[a], reset.states[b], printer.doprint(reset.matrix[a, b]))
+                    for a in range(size) for b in range(size)],
+    }}
+
+
 def python_context(description: FilterDescription) -> dict[str, object]:
     """Everything python_module.py.j2 reads (always the double-precision numpy filter)."""
     structure, model, options = description.structure, description.model, description.options
@@ -123,6 +140,7 @@ def python_context(description: FilterDescription) -> dict[str, object]:
         "compiled": compiled_predict_plan(structure),
         "general_rows": index_expression(python_predict_plan(structure)["general"]),
         "van_loan": options.van_loan,
+        "smoother": smoother_context(description),
         "balance_in_python": int(structure.F.sum()) <= PYTHON_BALANCING_ENTRIES,
         "balance_factors": _balance_factors(structure, nominal_scaling(description.derived)),
         "series_range": repr(series_range(options.taylor_order, DOUBLE_ROUNDOFF)),
