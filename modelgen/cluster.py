@@ -247,6 +247,12 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
         except (OSError, TimeoutError) as exc:
             raise ModelError(f"--scheduler {scheduler}: no dask scheduler answered within {timeout_s:g} s "
                              f"({type(exc).__name__}: {exc})") from None
+        except MemoryError:  # a service that answers, not as dask does: its reply's first bytes read as a frame length
+            raise ModelError(f"--scheduler {scheduler}: the address answered, but not as a dask scheduler "
+                             "(its reply decodes as a message too large to hold)") from None
+        except Exception as exc:  # any other reply distributed cannot read
+            raise ModelError(f"--scheduler {scheduler}: the address answered, but not as a dask scheduler "
+                             f"({type(exc).__name__}{': ' + str(exc)[:80] if str(exc) else ''})") from None
         try:
             yield client
         finally:

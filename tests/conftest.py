@@ -4,7 +4,8 @@ The suite runs in parallel (pytest-xdist, ``-n auto`` in pyproject.toml): each
 worker is a process with its own session fixtures.  Tests are handed out by
 module (:func:`pytest_xdist_make_scheduler`), so that a module's fixtures are
 made once, on one worker, except in the modules of :data:`SPREAD_MODULES`,
-whose tests are independent and handed out one by one; tests marked
+whose tests are independent and handed out one by one, and of the long
+tests of :data:`SOLO_TESTS`, handed out on their own; tests marked
 ``xdist_group(name)`` all run on one worker, one after another.
 """
 
@@ -24,16 +25,20 @@ REPO = Path(__file__).resolve().parents[1]
 #: Modules whose tests are handed to the workers one by one (they share no costly module fixture).
 SPREAD_MODULES = ("tests/test_corpus.py",)
 
+#: Tests handed out on their own, not with their module: each takes minutes and uses none of its module's
+#: fixtures, so that the rest of the module runs on another worker meanwhile.
+SOLO_TESTS = ("tests/test_cli.py::test_run_does_the_main_job_end_to_end",)
+
 #: Modules handed out first, in this order: a worker's first module runs before any other test has left a
 #: thread behind (dask's, a figure thread), and the figure process forks only a process without threads;
-#: then the longest modules, so that no long one is left for the end.
-FIRST_MODULES = ("tests/simulation/test_flight_report.py", "tests/test_cli.py", "tests/codegen/test_c_contract.py",
+#: then the longest tests and modules, so that no long one is left for the end.
+FIRST_MODULES = ("tests/simulation/test_flight_report.py", *SOLO_TESTS, "tests/test_cli.py", "tests/codegen/test_c_contract.py",
                  "tests/test_cluster.py")
 
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
-    """Under ``--dist loadgroup`` (the default here): one work unit per module, per xdist_group and per spread test."""
+    """Under ``--dist loadgroup`` (the default here): one work unit per module, per xdist_group, per spread and per solo test."""
     if config.getoption("dist") != "loadgroup":
         return None
     from xdist.scheduler import LoadGroupScheduling
@@ -46,7 +51,7 @@ def pytest_xdist_make_scheduler(config, log):
             if scope != nodeid:  # an xdist_group
                 return scope
             module = nodeid.split("::", 1)[0]
-            return nodeid if module in SPREAD_MODULES else module
+            return nodeid if module in SPREAD_MODULES or nodeid in SOLO_TESTS else module
 
         def _assign_work_unit(self, node) -> None:
             for module in FIRST_MODULES:

@@ -307,10 +307,19 @@ def test_concurrent_generates_into_one_folder_all_succeed_and_leave_it_whole(tmp
 
 @pytest.mark.compile
 def test_sigint_during_generate_exits_130_and_leaves_nothing_half_written(tmp_path):
+    """SIGINT while the new output is being written or checked: exit 130, the old output whole, no staging left.
+
+    Each interrupt is sent at a known point of the run, not after a fixed sleep (which, on a loaded machine,
+    lands while the interpreter is still starting): once the run's staging folder beside the output exists
+    (modelgen.fileio.output: the files are being written, then compiled and checked there), and then later
+    by 0.25 to 2 s, while the check runs or after the new output was committed.
+    """
     import signal
     import subprocess
     import sys
     import time
+
+    from modelgen.fileio.output import STAGING_INFIX
 
     model, out = _toy(tmp_path), tmp_path / "out"
     subprocess.run([sys.executable, "-m", "modelgen", "generate", str(model), "--out", str(out)], check=True,
@@ -318,10 +327,15 @@ def test_sigint_during_generate_exits_130_and_leaves_nothing_half_written(tmp_pa
     before = _snapshot(out / "toy_loop")
     (out / "toy_loop" / "main.c").write_text("int main(void) { return 0; }\n")
     codes = []
-    for delay in (0.5, 1.0, 1.5, 2.0):
+    for after_staging in (0.0, 0.25, 0.75, 2.0):
         proc = subprocess.Popen([sys.executable, "-m", "modelgen", "generate", str(_toy(tmp_path, "0.25")), "--out", str(out), "--check"],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        time.sleep(delay)
+        deadline = time.monotonic() + 120
+        while not any(STAGING_INFIX in p.name for p in out.iterdir()):  # the readiness signal: the run is writing
+            assert proc.poll() is None, f"exited {proc.returncode} before staging its output: {proc.stdout.read()}"
+            assert time.monotonic() < deadline, "no staging folder within 120 s"
+            time.sleep(0.005)
+        time.sleep(after_staging)
         proc.send_signal(signal.SIGINT)
         code, text = proc.wait(120), proc.stdout.read()
         # 130: interrupted, nothing written; 0 or death by SIGINT: the signal came after the output was complete
@@ -335,7 +349,8 @@ def test_sigint_during_generate_exits_130_and_leaves_nothing_half_written(tmp_pa
         del after["main.c"]
         assert after.keys() == before.keys()  # the old or the new output, whole
         assert _hidden(out) == []
-    assert 130 in codes  # at least one run was really interrupted mid-way
+    # the interrupt sent as soon as the staging folder appeared came mid-way (the compile and check take seconds)
+    assert codes[0] == 130, codes
 
 
 def test_observability_without_scenario_uses_the_models_check_scenario(runner):

@@ -244,6 +244,35 @@ def test_a_service_that_is_not_dask_is_a_clear_error_within_the_timeout():
     assert time.monotonic() - start < 10
 
 
+def test_a_service_that_answers_but_not_as_dask_is_a_clear_error_not_out_of_memory():
+    """A web server's reply read as a dask frame length asked for exabytes: "out of memory", exit 2, misleading."""
+    import socket
+    import threading
+
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(8)
+    port = listener.getsockname()[1]
+
+    def answer_as_a_web_server() -> None:
+        try:
+            while True:
+                connection, _ = listener.accept()
+                connection.sendall(b"HTTP/1.1 200 OK\r\nContent-Length: 5\r\n\r\nhello")
+        except OSError:  # the listener closed
+            pass
+
+    threading.Thread(target=answer_as_a_web_server, daemon=True).start()
+    start = time.monotonic()
+    try:
+        with pytest.raises(ModelError, match=rf"--scheduler tcp://127.0.0.1:{port}: the address answered, but not as a dask scheduler"):
+            with dask_client(f"tcp://127.0.0.1:{port}", timeout_s=5):
+                pass
+    finally:
+        listener.close()
+    assert time.monotonic() - start < 10
+
+
 def test_a_journal_keeps_results_as_they_complete_and_a_stopped_study_resumes_from_it(tmp_path):
     path = tmp_path / "study.jsonl"
     calls = []

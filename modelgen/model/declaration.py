@@ -21,6 +21,7 @@ import sympy as sp
 
 from modelgen.errors import ModelError
 
+from modelgen.model.file_fields import underflows_to_zero
 from modelgen.model.names import C_KEYWORDS, name_collision  # noqa: F401  (C_KEYWORDS: public)
 
 _IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -539,6 +540,11 @@ def _check_number(literal: str, text: str, where: str) -> None:
         )
     if abs(float(literal)) > DOUBLE_MAX:
         raise ModelError(f"{where}: the number {literal} in {_excerpt(text)} is beyond the range of a double")
+    if underflows_to_zero(literal):
+        raise ModelError(
+            f"{where}: the number {literal} in {_excerpt(text)} is nonzero but below the smallest double "
+            "(about 4.9e-324): it would be read as 0"
+        )
 
 
 def _excerpt(text: str, limit: int = 80) -> str:

@@ -56,9 +56,22 @@ def is_number(value: Any) -> bool:
     return isinstance(value, str) and _NUMBER_TEXT.fullmatch(value) is not None
 
 
-def as_float(value: Any) -> float:
-    """A parameter value as a float; an integer beyond a double becomes inf, which is then refused."""
+def as_float(value: Any, where: str) -> float:
+    """A parameter value as a float; an integer beyond a double becomes inf, which is then refused.
+
+    A nonzero number written so small that a double holds it as 0 (``1e-999``)
+    is refused at ``where``: read as 0 it would change the model silently.
+    """
     try:
-        return float(value)
+        number = float(value)
     except OverflowError:
         return float("inf") if int(value) > 0 else float("-inf")
+    if number == 0.0 and underflows_to_zero(str(value)):
+        raise ModelError(f"{where}: the value {str(value)[:40]} is nonzero but below the smallest double (about 4.9e-324): it would be read as 0")
+    return number
+
+
+def underflows_to_zero(literal: str) -> bool:
+    """Whether a decimal literal has a nonzero digit before its exponent yet reads as the double 0."""
+    mantissa = re.split(r"[eE]", literal.strip(), maxsplit=1)[0]
+    return re.search(r"[1-9]", mantissa) is not None and float(literal) == 0.0

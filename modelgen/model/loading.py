@@ -158,7 +158,7 @@ def load_model_text(text: str, filename: str = "<model>", _loading: tuple[str, .
                 for k, v in entry.items()
             }
             if "value" in fields_in:
-                fields_in["value"] = _as_float(fields_in["value"])
+                fields_in["value"] = _as_float(fields_in["value"], lines.get(f"{key}[{i}].value", place))
                 if "unit" in fields_in:  # a value given in deg/h, ppm, ug ... is converted to SI, and so is its unit
                     fields_in["value"], fields_in["unit"] = declared_value(
                         fields_in["value"], str(fields_in["unit"]), f"{lines.get(f'{key}[{i}].unit', place)}: {key}[{i}].unit"

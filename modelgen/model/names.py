@@ -119,7 +119,8 @@ GENERATOR_PYTHON = frozenset(
     SERIES_RANGE PSD_TOLERANCE STATE_NAMES NOISE_NAMES MEASUREMENT_NAMES PARAMETER_NAMES
     PARAMETER_DEFAULTS SingularOperatingPoint parameter_vector system_matrix
     noise_input_matrix measurement_matrix noise_psd measurement_variance discretize predict
-    update MODEL_HASH MODELGEN_VERSION matrices_evaluate update_masked reset_error_state Filter COMPILED numba""".split()
+    update MODEL_HASH MODELGEN_VERSION matrices_evaluate update_masked reset_error_state Filter COMPILED numba
+    SMOOTHER_RESET_STATES reset_inverse smooth smooth_refer smooth_step""".split()
 ) | frozenset(name for name in dir(builtins) if not name.startswith("_"))
 
 #: C99 standard headers (C99 7.1.2) and common POSIX headers: a model named

@@ -175,7 +175,7 @@ def _parameter_values(item: _Declared, lines: Mapping[str, str]) -> list[float |
     if item.shape == (1, 1):
         if not is_number(raw):
             raise ModelError(f"{place}: parameter {item.name!r} value {raw!r} is not a number")
-        return [as_float(raw)]
+        return [as_float(raw, place)]
     rows, columns = item.shape
     flat: list[Any] = []
     if isinstance(raw, list) and len(raw) == rows and columns == 1:
@@ -185,7 +185,7 @@ def _parameter_values(item: _Declared, lines: Mapping[str, str]) -> list[float |
     expected = "a list of 3 numbers" if columns == 1 else "a list of 3 rows of 3 numbers ([[..], [..], [..]])"
     if not flat or not all(is_number(v) for v in flat):
         raise ModelError(f"{place}: {item.what} value must be {expected}, got {raw!r}")
-    return [as_float(v) for v in flat]
+    return [as_float(v, place) for v in flat]
 
 
 def _per_component_texts(item: _Declared, field_name: str, lines: Mapping[str, str]) -> list[tuple[str, str]]:

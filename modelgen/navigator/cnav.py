@@ -29,14 +29,15 @@ from modelgen.codegen.generate import generate_code, template_folder
 from modelgen.errors import ModelError
 from modelgen.navigator import cconfig
 from modelgen.navigator.config import NavigatorConfig
-from modelgen.navigator.navigator import Flight, Inputs
+from modelgen.navigator.navigator import OUTPUT_FIELDS, Flight, Inputs
 from modelgen.navigator.outages import in_outage, outage_windows
 from modelgen.navigator.sensors import SENSORS, log_sensors, step_sensors
 from modelgen.navigator.spec import SENSOR_BLOCKS, NavigatorSpec
 from modelgen.fileio.output import write_atomically
 from modelgen.model import wgs84
 
-N_OUTPUT, N_GNSS, N_ALIGNMENT = 26, 13, 8
+N_GNSS, N_ALIGNMENT = 13, 8
+N_OUTPUT = len(OUTPUT_FIELDS)  # entries of one output record, C and Python alike
 #: the C's counters: the GNSS update's, one per aiding sensor tried at a covariance step (the table's order), predicts
 COUNT_NAMES = ("gnss_updates", "gnss_rejected", "gnss_released", "gnss_deweighted", "gnss_quality_skipped",
                *(s.counter for s in step_sensors(SENSORS)), "predicts")
@@ -85,7 +86,8 @@ def template_context(spec: NavigatorSpec) -> dict:
             "frame": [[_literal(v) for v in row] for row in spec.to_frame], "frame_name": spec.frame,
             "ecef": spec.ecef, "gnss_rotation": _gnss_rotation(spec),
             "rows_max": max(6, len(spec.gnss_rows)), "n_free": len(free), "free_names": ", ".join(free) or "none",
-            "config_struct": cconfig.c_struct(spec.name, len(free)), "mechanization_rates": spec.rates_c}
+            "config_struct": cconfig.c_struct(spec.name, len(free)), "mechanization_rates": spec.rates_c,
+            "out": {name: i for i, name in enumerate(OUTPUT_FIELDS)}, "n_output": N_OUTPUT}
 
 
 def _gnss_rotation(spec: NavigatorSpec) -> dict | None:
@@ -408,12 +410,12 @@ def not_aligned_error(config: NavigatorConfig, inputs: Inputs) -> ModelError:
 
 
 def flight_from_outputs(out: np.ndarray, arrays: LogArrays, inputs: Inputs, counts: dict[str, int],
-                        alignment: dict[str, float]) -> Flight:
+                        alignment: dict[str, float], estimated: tuple[str, ...] = ()) -> Flight:
     """A Flight from the C output records (rows before the alignment and after the log's end dropped)."""
     out = out[~np.isnan(out[:, 0])]
     nis = out[(out[:, 19] == 0) & ~np.isnan(out[:, 21]), 21]
     return Flight(out, arrays.windows, inputs.first_epoch, alignment["time"], list(nis),
-                  float(arrays.cfg["gate_gnss"]), counts, list(inputs.notes), alignment)
+                  float(arrays.cfg["gate_gnss"]), counts, list(inputs.notes), alignment, estimated=estimated)
 
 
 #: Entries of a recorded nominal state (NAV_RECORD_NOMINAL): the navigation vector, then the sensor estimates.
@@ -543,7 +545,8 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator, record
     raw = (ctypes.c_long * len(COUNT_NAMES))()
     navigator.counts(state, raw)
     alignment = {name: float(v) for name, v in zip(ALIGNMENT_NAMES, result)}
-    flight = flight_from_outputs(out, a, inputs, dict(zip(COUNT_NAMES, (int(v) for v in raw))), alignment)
+    flight = flight_from_outputs(out, a, inputs, dict(zip(COUNT_NAMES, (int(v) for v in raw))), alignment,
+                                 navigator.spec.estimated_sensors)
     if record:
         flight.forward_record = forward_record_from_c(buffers, counts, navigator.spec, a, out,
                                                       np.asarray(config.lever_arm, float))

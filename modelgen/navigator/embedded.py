@@ -34,7 +34,7 @@ from modelgen.navigator import cconfig
 from modelgen.navigator.cnav import N_OUTPUT, REST_MAX, LogArrays, render_navigator, rest_define
 from modelgen.navigator.spec import NavigatorSpec
 
-MAX_IMU, MAX_EPOCHS = 60000, 2500
+MAX_IMU, MAX_EPOCHS, MAX_AID = 60000, 2500, 60000
 CORTEX_M4F_COMMON = (*toolchain.CORTEX_M4F_FLAGS, "-O2", "-fno-math-errno", "-ffunction-sections", "-fdata-sections",
                      "-fstack-usage", "-fcallgraph-info=su")
 
@@ -65,21 +65,20 @@ def write_sources(spec: NavigatorSpec, folder: Path) -> str:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(harness_folder())), undefined=jinja2.StrictUndefined,
                              keep_trailing_newline=True)
     driver = env.get_template("navigator_driver.c.j2").render(p=name, P=name.upper(), version=__version__,
-                                                              max_imu=MAX_IMU, max_epochs=MAX_EPOCHS)
+                                                              max_imu=MAX_IMU, max_epochs=MAX_EPOCHS, max_aid=MAX_AID)
     (folder / "navigator_driver.c").write_text(driver)
     return name
 
 
 def encode(a: LogArrays) -> bytes:
     """The driver's stdin (layout in modelgen/codegen/backends/c/harness/navigator_driver.c.j2)."""
-    if len(a.time) > MAX_IMU or len(a.t_gnss) > MAX_EPOCHS:
-        raise ModelError(f"embedded replay: the driver holds at most {MAX_IMU} IMU samples and {MAX_EPOCHS} epochs")
-    if len(a.aid_time):
-        raise ModelError("embedded replay: the qemu driver feeds IMU and GNSS only; fly the odometer and barometer "
-                         "logs on the host (--navigator c or both, without --embedded)")
+    if len(a.time) > MAX_IMU or len(a.t_gnss) > MAX_EPOCHS or len(a.aid_time) > MAX_AID:
+        raise ModelError(f"embedded replay: the driver holds at most {MAX_IMU} IMU samples, {MAX_EPOCHS} epochs and "
+                         f"{MAX_AID} aiding samples (this log: {len(a.time)}, {len(a.t_gnss)}, {len(a.aid_time)})")
     config = cconfig.pack(a.cfg, a.n_parameters)
-    parts = [struct.pack("<4q", len(a.time), len(a.t_gnss), len(config), 0), config]
-    for array in (a.time, a.force, a.rate, a.t_gnss, a.target.astype(float), a.use.astype(float), a.gnss):
+    parts = [struct.pack("<4q", len(a.time), len(a.t_gnss), len(config), len(a.aid_time)), config]
+    for array in (a.time, a.force, a.rate, a.t_gnss, a.target.astype(float), a.use.astype(float), a.gnss,
+                  a.aid_time, a.aid_slot.astype(float), a.aid_value):
         parts.append(np.ascontiguousarray(array, dtype="<f8").tobytes())
     return b"".join(parts)
 

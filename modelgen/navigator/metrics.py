@@ -159,6 +159,9 @@ def summary(flight: Flight, errors: Errors, reference: GnssLog) -> dict[str, obj
         "counts": dict(flight.counts),
         "final_gyro_bias_deg_s": [float(math.degrees(v)) for v in final[COLUMN["gyro_bias_x"]:COLUMN["gyro_bias_z"] + 1]],
         "final_accel_bias_mg": [float(v / 9.80665 * 1e3) for v in final[COLUMN["accel_bias_x"]:COLUMN["accel_bias_z"] + 1]],
+        # the scale factors only where the model estimates them (a 15-state model holds them at 0)
+        **{f"final_{kind}_ppm": [float(v * 1e6) for v in final[COLUMN[f"{kind}_x"]:COLUMN[f"{kind}_z"] + 1]]
+           for kind in ("gyro_scale_factor", "accel_scale_factor") if kind in flight.estimated},
         "alignment_time_s": round(flight.alignment_time - flight.first_epoch, 3),
         "alignment": ({"roll_deg": math.degrees(flight.alignment["roll"]),
                        "pitch_deg": math.degrees(flight.alignment["pitch"]),

@@ -34,7 +34,8 @@ HISTORY = 16  # INS velocities kept (one per covariance step) for the GNSS veloc
 OUTPUT_FIELDS = ("time", "latitude", "longitude", "height", "v_north", "v_east", "v_down", "roll", "pitch", "yaw",
                  "sigma_north", "sigma_east", "sigma_up", "gyro_bias_x", "gyro_bias_y", "gyro_bias_z",
                  "accel_bias_x", "accel_bias_y", "accel_bias_z", "in_outage", "gnss_used", "nis", "gnss_quality",
-                 "cov_north_east", "cov_east_up", "cov_up_north")
+                 "cov_north_east", "cov_east_up", "cov_up_north", "gyro_scale_factor_x", "gyro_scale_factor_y",
+                 "gyro_scale_factor_z", "accel_scale_factor_x", "accel_scale_factor_y", "accel_scale_factor_z")
 
 
 @dataclass
@@ -53,6 +54,9 @@ class Flight:
     alignment: dict[str, float] = field(default_factory=dict)
     #: what the smoother needs (fly(..., record=ForwardRecord())): modelgen.navigator.smoother.ForwardRecord, else None
     forward_record: object | None = None
+    #: the sensor-error blocks the model estimates (NavigatorSpec.estimated_sensors): the output columns of the
+    #: others hold their fixed value, 0
+    estimated: tuple[str, ...] = ()
 
 
 @dataclass
@@ -327,8 +331,8 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
             else:
                 counts["gnss_rejected"] += 1
                 rejected_run += 1
-        outputs.append(_record(spec, time[k], nav, lever, corrected(rate[k], gyro_bias, gyro_scale), kf.P, gyro_bias,
-                               accel_bias, bool(outage[j]), used, nis, int(g.quality[j])))
+        outputs.append(_record(spec, time[k], nav, lever, corrected(rate[k], gyro_bias, gyro_scale), kf.P, sensors,
+                               bool(outage[j]), used, nis, int(g.quality[j])))
         if kf.recorder is not None:
             kf.recorder.output(nav, sensors, partial(_row, spec, time[k], lever, rate[k], bool(outage[j]), used, nis,
                                                      int(g.quality[j])))
@@ -337,7 +341,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
     if progress is not None:
         progress(1.0)
     return Flight(np.array(outputs), windows, inputs.first_epoch, float(g.time[j0]), gnss_nis, gates["gnss"], counts,
-                  list(inputs.notes), start.record(), kf.recorder)
+                  list(inputs.notes), start.record(), kf.recorder, spec.estimated_sensors)
 
 
 def enabled_step_sensors(table: tuple[AidingSensor, ...], cfg, inputs: Inputs) -> list[tuple]:
@@ -406,19 +410,19 @@ def _row(spec: NavigatorSpec, t: float, lever: np.ndarray, raw_rate: np.ndarray,
          quality: int, nav: np.ndarray, sensors: dict[str, np.ndarray], P: np.ndarray) -> list[float]:
     """An output row of a (smoothed) nominal state: :func:`_record` with its sensor estimates."""
     rate = corrected(raw_rate, sensors["gyro_bias"], sensors["gyro_scale_factor"])
-    return _record(spec, t, nav, lever, rate, P, sensors["gyro_bias"], sensors["accel_bias"], outage, used, nis,
-                   quality)
+    return _record(spec, t, nav, lever, rate, P, sensors, outage, used, nis, quality)
 
 
-def _record(spec: NavigatorSpec, t: float, nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, P: np.ndarray, gyro_bias: np.ndarray,
-            accel_bias: np.ndarray, outage: bool, used: int, nis: float, quality: int) -> list[float]:
-    """One output row (OUTPUT_FIELDS): antenna position, velocity, attitude, 1-sigma position, biases."""
+def _record(spec: NavigatorSpec, t: float, nav: np.ndarray, lever: np.ndarray, rate: np.ndarray, P: np.ndarray,
+            sensors: dict[str, np.ndarray], outage: bool, used: int, nis: float, quality: int) -> list[float]:
+    """One output row (OUTPUT_FIELDS): antenna position, velocity, attitude, 1-sigma position, sensor estimates."""
     lat, lon, h, v = antenna(nav, lever, rate, spec.ecef)
     c_bn = ecef.local_view(nav)[4] if spec.ecef else quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])
     roll, pitch, yaw = dcm_to_euler(c_bn)
     # cross covariances [m^2] (north-east, east-up, up-north): the 2x2 horizontal covariance with sn, se
     sn, se, su, cne, ceu, cun = spec.position_output(P, nav, radii)
-    return [t, lat, lon, h, v[0], v[1], v[2], roll, pitch, yaw, sn, se, su, *gyro_bias, *accel_bias,
-            float(outage), float(used), nis, float(quality), cne, ceu, cun]
+    return [t, lat, lon, h, v[0], v[1], v[2], roll, pitch, yaw, sn, se, su, *sensors["gyro_bias"], *sensors["accel_bias"],
+            float(outage), float(used), nis, float(quality), cne, ceu, cun, *sensors["gyro_scale_factor"],
+            *sensors["accel_scale_factor"]]
 
 

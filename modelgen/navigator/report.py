@@ -164,6 +164,17 @@ def figures(flight: Flight, errors: Errors, reference: GnssLog, schedules: list[
     a1.legend(fontsize=8)
     a1.set_title("Bias estimates (body axes)")
     out["biases.svg"] = _svg(fig)
+    scales = [kind for kind in ("gyro_scale_factor", "accel_scale_factor") if kind in flight.estimated]
+    if scales:  # the model estimates scale factors: their own figure
+        fig, axes = plt.subplots(len(scales), 1, figsize=(9, 3 * len(scales)), sharex=True, squeeze=False)
+        for ax, kind in zip(axes[:, 0], scales):
+            for axis in "xyz":
+                ax.plot(t_rel, o[:, COLUMN[f"{kind}_{axis}"]] * 1e6, lw=0.8, label=axis)
+            ax.set_ylabel(f"{'gyro' if kind.startswith('gyro') else 'accelerometer'} scale factor [ppm]")
+            ax.legend(fontsize=8)
+        axes[-1, 0].set_xlabel("time since the first GNSS epoch [s]")
+        axes[0, 0].set_title("Scale-factor estimates (body axes)")
+        out["scale_factors.svg"] = _svg(fig)
     if schedules:
         out["consistency.svg"] = consistency_figure(schedules)
     return out
@@ -234,6 +245,8 @@ FIGURE_CAPTIONS = {
     "error.svg": "Horizontal error at the antenna against RTK [m] and the filter's horizontal sigma "
                  "sqrt(sigma_N^2 + sigma_E^2) [m] over the drive (log scale; the outages shaded).",
     "biases.svg": "The navigator's gyro (deg/s) and accelerometer (mg) bias estimates, body axes, over the drive.",
+    "scale_factors.svg": "The navigator's gyro and accelerometer scale-factor estimates [ppm], body axes, over the "
+                         "drive (drawn for a model with scale-factor states).",
     "consistency.svg": "Left: the normalized squared horizontal error e^T P_h^-1 e (e the north-east error at the "
                        "antenna against RTK, P_h the filter's 2x2 horizontal covariance; dimensionless) at the end of "
                        "every outage of every schedule flown, against the outage's end time, with the chi-square "
@@ -468,7 +481,11 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
               "overconfident as the 15-state one: scale factors alone do not explain it).", "",
               "## Estimated biases (end of the drive, body axes)", "",
               f"gyro [deg/s]: {', '.join(f'{v:.4f}' for v in summary['final_gyro_bias_deg_s'])}; "
-              f"accelerometer [mg]: {', '.join(f'{v:.2f}' for v in summary['final_accel_bias_mg'])}.", "",
+              f"accelerometer [mg]: {', '.join(f'{v:.2f}' for v in summary['final_accel_bias_mg'])}"
+              + "".join(f"; {label} [ppm]: {', '.join(f'{v:.0f}' for v in summary[key])}"
+                        for key, label in (("final_gyro_scale_factor_ppm", "gyro scale factor"),
+                                           ("final_accel_scale_factor_ppm", "accelerometer scale factor"))
+                        if key in summary) + ".", "",
               "## Counts", "",
               ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in summary["counts"].items())
               + f"; alignment at {summary['alignment_time_s']} s after the first GNSS epoch; "
@@ -493,10 +510,20 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
         lines += ["## Input notes", ""] + [f"- {n}" for n in summary["notes"]] + [""]
     lines += ["## Files", "",
               "`trajectory.pos` (RTKLIB format: opens in RTKLIB's rtkplot), `trajectory.csv`, `summary.json`, "
-              "`track.svg`, `error.svg`, `biases.svg`, `consistency.svg`.", "",
-              "![track](track.svg)", "", "![error](error.svg)", "", "![biases](biases.svg)", "",
-              "![consistency](consistency.svg)", ""]
+              + ", ".join(f"`{name}`" for name in FIGURE_CAPTIONS if _drawn(name, summary)) + ".", ""]
+    lines += [line for name in FIGURE_CAPTIONS if _drawn(name, summary)
+              for line in (f"![{name.removesuffix('.svg')}]({name})", "")]
     return "\n".join(lines)
+
+
+def _drawn(figure: str, summary: dict) -> bool:
+    """Whether :func:`figures` draws ``figure`` for this summary (the consistency figure needs the schedules, the
+    scale-factor figure a model with scale-factor states)."""
+    if figure == "consistency.svg":
+        return bool(summary.get("schedules"))
+    if figure == "scale_factors.svg":
+        return any(key in summary for key in ("final_gyro_scale_factor_ppm", "final_accel_scale_factor_ppm"))
+    return True
 
 
 def report_files(flight: Flight, errors: Errors, summary: dict, config: NavigatorConfig, reference: GnssLog,
@@ -509,8 +536,7 @@ def report_files(flight: Flight, errors: Errors, summary: dict, config: Navigato
     record["noise"] = {k: {"value": e.value, "unit": e.unit, "factor": e.factor, "si": e.si, "why": e.why}
                        for k, e in config.noise.items()}
     record["targets"] = targets(summary, timings)
-    record["figures"] = ({k: v for k, v in FIGURE_CAPTIONS.items() if k != "consistency.svg" or summary.get("schedules")}
-                         if with_figures else {})
+    record["figures"] = ({k: v for k, v in FIGURE_CAPTIONS.items() if _drawn(k, summary)} if with_figures else {})
     if with_figures and smoothed is not None:
         record["figures"]["smoothed.svg"] = SMOOTHED_CAPTION
     files = {"summary.md": summary_markdown(summary, config, timings, latency),

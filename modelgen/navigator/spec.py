@@ -151,6 +151,11 @@ class NavigatorSpec:
     rates: object = None
     _code: object = field(default=None, repr=False)
 
+    @property
+    def estimated_sensors(self) -> tuple[str, ...]:
+        """The sensor-error blocks (SENSOR_BLOCKS) the model has states for: the others keep their value, 0."""
+        return tuple(kind for kind in SENSOR_BLOCKS if kind in self.blocks)
+
     # -- frames ------------------------------------------------------------------------------
     @property
     def ecef(self) -> bool:

@@ -136,6 +136,17 @@ def test_c_navigator_agrees_with_the_python_navigator_within_1_mm(excerpt_both):
 
 
 @pytest.mark.compile
+def test_a_model_without_scale_factor_states_reports_none_and_draws_no_scale_factor_figure(excerpt_both):
+    """The 15-state model holds its scale factors at 0: the summary states no estimate of them, the report no figure."""
+    from modelgen.navigator.metrics import COLUMN
+
+    assert excerpt_both.flight.estimated == ("gyro_bias", "accel_bias")
+    assert "final_gyro_scale_factor_ppm" not in excerpt_both.summary
+    assert np.all(excerpt_both.flight.outputs[:, COLUMN["gyro_scale_factor_x"]:COLUMN["accel_scale_factor_z"] + 1] == 0)
+    assert excerpt_both.folder is None or not (excerpt_both.folder / "scale_factors.svg").exists()
+
+
+@pytest.mark.compile
 def test_c_navigator_outage_error_is_within_the_same_band(excerpt_both):
     record = excerpt_both.summary["outages"][0]
     assert 0.5 <= record["horizontal_error_end_m"] <= 6.0

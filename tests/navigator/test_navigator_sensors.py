@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -214,3 +215,31 @@ def test_the_odometer_reader_converts_units_and_skips_a_header(tmp_path):
     log = read_scalar("odometer", tmp_path / "o.csv", 1, 2, "km/h")
     assert np.allclose(log.value, [10.0, 20.0]) and list(log.time) == [1.0, 3.0]
     assert "1 odometer row(s)" in log.notes[0] and math.isfinite(log.value.sum())
+
+
+def _arm_tools_missing() -> list[str]:
+    from modelgen.codegen import toolchain
+
+    return toolchain.missing_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
+
+
+@pytest.mark.skipif(bool(_arm_tools_missing()) and os.environ.get("CI", "").lower() not in ("1", "true", "yes"),
+                    reason="ARM toolchain or qemu-arm absent locally (CI installs them)")
+@pytest.mark.embedded
+@pytest.mark.compile
+def test_odometer_and_barometer_fly_under_qemu_arm_within_1_cm_of_the_double_c(tmp_path):
+    """The qemu driver feeds the aiding logs too (it refused them): float filter against double C, 1 cm."""
+    from modelgen.navigator.replay import run_replay
+
+    config, gnss = _reference()
+    _write_odometer(tmp_path / "odometer.csv", gnss, config.velocity_latency)
+    _write_barometer(tmp_path / "barometer.csv", gnss)
+    extra = {"odometer": {"enabled": True, "file": str(tmp_path / "odometer.csv"), "units": "km/h",
+                          "columns": {"time": 1, "value": 2}, "sigma_m_s": ODOMETER_SIGMA_M_S,
+                          "lever_arm_m": [-1.2, 0.0, 0.5]},
+             "barometer": {"enabled": True, "file": str(tmp_path / "barometer.csv"), "sigma_m": BAROMETER_SIGMA_M}}
+    result = run_replay(_config_with(tmp_path, extra), None, echo=lambda _: None, navigator="c", embedded=True)
+    assert result.summary["counts"]["odometer_updates"] > 100 and result.summary["counts"]["barometer_updates"] > 100
+    embedded = result.summary["embedded"]
+    assert embedded["heap_or_stdio_symbols"] == []
+    assert embedded["qemu_max_position_difference_m"] <= 0.01, embedded  # 1.2e-4 m when written

@@ -76,6 +76,32 @@ def test_the_21_state_model_flies_alike_in_python_and_c_on_the_excerpt():
     assert s["c_python_max_difference_m"] <= 1e-3
     assert 0.5 <= s["outages"][0]["horizontal_error_end_m"] <= 6.0
     assert s["horizontal_rms_outside_outages_m"] <= 0.10
+    # the scale-factor estimates reach the output record, the summary and the trajectory file
+    from modelgen.navigator.metrics import COLUMN
+    from modelgen.navigator.report import csv_text
+
+    final = both.flight.outputs[-1]
+    for kind in ("gyro_scale_factor", "accel_scale_factor"):
+        estimates = final[COLUMN[f"{kind}_x"]:COLUMN[f"{kind}_z"] + 1]
+        assert np.all(estimates != 0.0) and np.all(np.abs(estimates) < 0.05)  # estimated, and physical (< 5 %)
+        assert s[f"final_{kind}_ppm"] == pytest.approx(list(estimates * 1e6), rel=1e-12)
+    assert both.flight.estimated == spec_blocks_21
+    assert "gyro_scale_factor_x" in csv_text(both.flight, errors_against(both)).splitlines()[0]
+    from modelgen.navigator.logs import read_gnss
+    from modelgen.navigator.report import figures
+
+    drawn = figures(both.flight, errors_against(both), read_gnss(both.config.gnss_source))
+    assert "scale_factors.svg" in drawn and "ppm" in drawn["scale_factors.svg"]
+
+
+spec_blocks_21 = ("gyro_bias", "accel_bias", "gyro_scale_factor", "accel_scale_factor")
+
+
+def errors_against(result):
+    from modelgen.navigator.logs import read_gnss
+    from modelgen.navigator.metrics import errors_against_reference
+
+    return errors_against_reference(result.flight, read_gnss(result.config.gnss_source))
 
 
 def _model_without_velocity_block(tmp_path: Path) -> Path:
