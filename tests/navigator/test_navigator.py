@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +11,7 @@ import pytest
 from modelgen.navigator.mechanization import NAV_SIZE, dcm_to_quaternion, euler_to_dcm, gravity, mechanize
 from modelgen.navigator.outages import outage_windows
 from modelgen.model.wgs84 import EARTH_RATE
+from tests.navigator.qemu_support import needs_qemu_arm
 
 pytestmark = pytest.mark.flight
 
@@ -255,14 +255,8 @@ def test_c_navigator_source_is_c99_without_heap(tmp_path):
     assert "GENERATED FILE - DO NOT EDIT" in source
 
 
-def _arm_tools_missing() -> list[str]:
-    from modelgen.codegen import toolchain
 
-    return toolchain.missing_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
-
-
-@pytest.mark.skipif(bool(_arm_tools_missing()) and os.environ.get("CI", "").lower() not in ("1", "true", "yes"),
-                    reason="ARM toolchain or qemu-arm absent locally (CI installs them)")
+@needs_qemu_arm
 @pytest.mark.embedded
 @pytest.mark.compile
 def test_float_filter_navigator_under_qemu_arm_stays_within_1_cm_of_the_double_c(excerpt_both):

@@ -7,24 +7,19 @@ its navigator cannot align where the host's did (before the fix: the qemu driver
 
 from __future__ import annotations
 
-import os
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from modelgen.codegen import toolchain
+from tests.navigator.qemu_support import needs_qemu_arm
 
 DATA = Path(__file__).parent / "data"
 
 
-def _arm_tools_missing() -> list[str]:
-    return toolchain.missing_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
 
-
-@pytest.mark.skipif(bool(_arm_tools_missing()) and os.environ.get("CI", "").lower() not in ("1", "true", "yes"),
-                    reason="ARM toolchain or qemu-arm absent locally (CI installs them)")
+@needs_qemu_arm
 @pytest.mark.embedded
 @pytest.mark.compile
 @pytest.mark.flight

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +24,7 @@ from modelgen.navigator.logs import ScalarLog, read_gnss
 from modelgen.navigator.metrics import COLUMN, errors_against_reference
 from modelgen.navigator.sensors import FORMS, SENSORS, AidingSensor, compiled_condition, stream_values
 from modelgen.navigator.cconfig_fields import Field
+from tests.navigator.qemu_support import needs_qemu_arm
 
 pytestmark = pytest.mark.flight
 
@@ -217,14 +217,8 @@ def test_the_odometer_reader_converts_units_and_skips_a_header(tmp_path):
     assert "1 odometer row(s)" in log.notes[0] and math.isfinite(log.value.sum())
 
 
-def _arm_tools_missing() -> list[str]:
-    from modelgen.codegen import toolchain
 
-    return toolchain.missing_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
-
-
-@pytest.mark.skipif(bool(_arm_tools_missing()) and os.environ.get("CI", "").lower() not in ("1", "true", "yes"),
-                    reason="ARM toolchain or qemu-arm absent locally (CI installs them)")
+@needs_qemu_arm
 @pytest.mark.embedded
 @pytest.mark.compile
 def test_odometer_and_barometer_fly_under_qemu_arm_within_1_cm_of_the_double_c(tmp_path):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
@@ -11,6 +10,7 @@ import pytest
 
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import package_path
+from tests.navigator.qemu_support import needs_qemu_arm
 
 pytestmark = pytest.mark.flight
 
@@ -203,14 +203,8 @@ def test_no_state_count_index_or_configuration_slot_is_written_by_hand():
         assert not re.search(r"P\[[0-9]+\]\[[0-9]+\]|P\[[0-9]+, *[0-9]+\]", text), path
 
 
-def _arm_tools_missing() -> list[str]:
-    from modelgen.codegen import toolchain
 
-    return toolchain.missing_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
-
-
-@pytest.mark.skipif(bool(_arm_tools_missing()) and os.environ.get("CI", "").lower() not in ("1", "true", "yes"),
-                    reason="ARM toolchain or qemu-arm absent locally (CI installs them)")
+@needs_qemu_arm
 @pytest.mark.embedded
 @pytest.mark.compile
 def test_the_21_state_float_navigator_under_qemu_arm_stays_within_1_cm_of_the_double_c(spec21):
