@@ -18,12 +18,23 @@ faster) chooses the NHC's angular-rate limit and the NIS gate probability,
 again with GNSS everywhere, by the horizontal RMS against the receiver's own
 solution and the number of de-weighted GNSS epochs.
 
+Stage 4 (``--correlation [CONFIG]``, issue 26 item 4): the aiding updates' time
+correlation, measured from the innovations of one flight with GNSS present
+everywhere (:mod:`modelgen.navigator.tuning`): per row the decorrelation time
+and the correlation factor f (integrated autocorrelation), which set R x f for
+the GNSS position and velocity rows (gnss.position/velocity_variance_factor)
+and sigma x sqrt(f) for the NHC and ZUPT; then the same flight again with the
+tuned numbers and every sensor's NIS against chi-square.  Run it on the
+configuration as it was before stage 4 (the tuned keys at 1 / their stage-2
+values): it measures from that filter.
+
 No outage is flown and no outage error is computed here: the choice cannot
 see them.  Prints a table and the chosen values, which go into
 modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
 
-    python bench/navigator_tuning.py            # all stages (about 5 minutes)
+    python bench/navigator_tuning.py            # stages 1-3 (about 5 minutes)
     python bench/navigator_tuning.py --stage3   # stage 3 only (seconds)
+    python bench/navigator_tuning.py --correlation [CONFIG] [--json FILE]   # stage 4 (about a minute)
 """
 
 from __future__ import annotations
@@ -40,6 +51,9 @@ from scipy.stats import chi2
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 FACTORS = (3.0, 5.0, 7.0, 10.0)
+#: the values stages 1-3 left the keys stage 4 sets at (the GNSS variance factors were 1: not there before)
+STAGE4_FROM = {"gnss_position_variance_factor": 1.0, "gnss_velocity_variance_factor": 1.0,
+               "nhc_sigma_lateral": 0.03, "nhc_sigma_vertical": 0.03, "zupt_sigma": 0.02}
 NHC_SIGMAS = (0.03, 0.05, 0.1)
 
 
@@ -129,8 +143,49 @@ def stage3() -> None:
                   f"{s['counts']['gnss_deweighted']:18d}")
 
 
+def correlation(arguments: list[str]) -> None:
+    """Stage 4: correlation factors from the innovations with GNSS present, the tuned numbers, NIS after."""
+    import json
+
+    from modelgen.navigator import tuning
+    from modelgen.navigator.config import builtin_config_path, load_config
+    from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.logs import read_gnss, read_imu
+    from modelgen.navigator.navigator import prepare
+    from modelgen.navigator.spec import navigator_spec
+
+    out_json = None
+    if "--json" in arguments:
+        i = arguments.index("--json")
+        out_json = arguments[i + 1]
+        arguments = arguments[:i] + arguments[i + 2:]
+    shipped = load_config(arguments[0] if arguments else builtin_config_path())
+    # stage 4 measures from the filter of stages 1-3: the keys it sets at their values before it
+    config = dataclasses.replace(shipped, **STAGE4_FROM)
+    inputs = prepare(config, read_imu(config.imu_source, config.gap_factor, config.gap_action),
+                     read_gnss(config.gnss_source))
+    spec = navigator_spec(model_path(config.model, config.path))
+    result = tuning.correlation_tuning(config, inputs, spec)
+    print(tuning.format_result(result))
+    fields = {"gnss.position_variance_factor": "gnss_position_variance_factor",
+              "gnss.velocity_variance_factor": "gnss_velocity_variance_factor",
+              "nhc.sigma_lateral_m_s": "nhc_sigma_lateral", "nhc.sigma_vertical_m_s": "nhc_sigma_vertical",
+              "zupt.sigma_m_s": "zupt_sigma"}
+    for t in result["tuned"]:
+        held = getattr(shipped, fields[t["key"]])
+        same = math.isclose(held, t["after"], rel_tol=0.01)
+        print(f"  {shipped.path}: {t['key']} = {held:.4g} ({'the value above' if same else 'NOT the value above'})")
+    if out_json:
+        # the configuration named as the package names it, so the committed result does not hold this machine's path
+        result = {**result, "configuration": Path(str(result["configuration"])).name}
+        Path(out_json).write_text(json.dumps(result, indent=2) + "\n")
+        print(f"written {out_json}")
+
+
 if __name__ == "__main__":
     if sys.argv[1:] == ["--stage3"]:
         stage3()
+    elif sys.argv[1:2] == ["--correlation"]:
+        correlation(sys.argv[2:])
     else:
         main()

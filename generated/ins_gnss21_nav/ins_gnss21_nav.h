@@ -59,7 +59,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define INS_GNSS21_NAV_MODEL_HASH "f901aa776e29aa18"
+#define INS_GNSS21_NAV_MODEL_HASH "4817fec037772bff"
 #define INS_GNSS21_NAV_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[INS_GNSS21_NAV_STATE_<NAME>], P[i * INS_GNSS21_NAV_N_STATES + j] [unit] */

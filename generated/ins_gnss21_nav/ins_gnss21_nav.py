@@ -85,7 +85,7 @@ NOISE_NAMES = ("gyro_white_noise_x", "gyro_white_noise_y", "gyro_white_noise_z",
 MEASUREMENT_NAMES = ("position_difference_Z_rn", "position_difference_Z_re", "position_difference_Z_rd", "velocity_difference_Z_vn", "velocity_difference_Z_ve", "velocity_difference_Z_vd")
 PARAMETER_NAMES = ("gyro_angle_random_walk", "accel_velocity_random_walk", "gyro_bias_rate", "gyro_bias_sigma", "accel_bias_rate", "accel_bias_sigma", "scale_factor_rate", "gyro_scale_factor_sigma", "accel_scale_factor_sigma", "gnss_position_sigma", "gnss_velocity_sigma", "c11", "c12", "c13", "c21", "c22", "c23", "c31", "c32", "c33", "velocity_north", "velocity_east", "velocity_down", "latitude", "height", "body_specific_force_x", "body_specific_force_y", "body_specific_force_z", "body_rate_x", "body_rate_y", "body_rate_z", "earth_rate", "meridian_radius", "prime_vertical_radius", "gravity", "lever_arm_x", "lever_arm_y", "lever_arm_z")
 PARAMETER_DEFAULTS = {"earth_rate": 7.2921151467e-05}
-MODEL_HASH = "f901aa776e29aa18"  # sha256 of the canonical model declaration, first 16 hex digits
+MODEL_HASH = "4817fec037772bff"  # sha256 of the canonical model declaration, first 16 hex digits
 MODELGEN_VERSION = "0.1.0"
 
 # State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.

@@ -133,6 +133,12 @@ class NavigatorConfig:
     output_folder: Path | None = None
     #: the aiding sensors' own logs by section (odometer, barometer): enabled, file, columns, unit, sigma, lever arm
     aiding: dict[str, AidingSettings] = field(default_factory=dict)
+    #: gnss.position/velocity_variance_factor: R x factor on the GNSS position and velocity rows (errors correlated
+    #: over several epochs; modelgen.navigator.tuning measures the factor from the innovations with GNSS present)
+    gnss_position_variance_factor: float = 1.0
+    gnss_velocity_variance_factor: float = 1.0
+    #: tuning: dotted key -> how its value was obtained (printed in the summary)
+    tuning: dict[str, str] = field(default_factory=dict)
 
     @property
     def rest_span_min(self) -> float:
@@ -442,6 +448,9 @@ def load_config(path: str | Path) -> NavigatorConfig:
         parameters=_model_parameters(r),
         output_folder=_output_folder(r),
         aiding={section: _aiding(r, section) for section in AIDING_SECTIONS},
+        gnss_position_variance_factor=r.number("gnss.position_variance_factor", 1.0, positive=True),
+        gnss_velocity_variance_factor=r.number("gnss.velocity_variance_factor", 1.0, positive=True),
+        tuning={str(k): str(v) for k, v in (r.get("tuning", None) or {}).items()},
     )
     validate(data, r.where)  # and what the checks above leave to the schema (types, ranges, required keys)
     return config

@@ -61,6 +61,8 @@ class ErrorStateFilter:
         self.P = np.array(P0, float)
         self.x = np.zeros(len(self.P))
         self.recorder = None  # a smoother's ForwardRecord (modelgen.navigator.smoother), or None
+        #: called as monitor(source, time, nu, S, r, nis) at every update tried (modelgen.navigator.tuning), or None
+        self.monitor = None
 
     def predict(self, p: np.ndarray, period: float) -> None:
         """Propagate x and P over ``period`` with the generated discretize and predict."""
@@ -70,12 +72,14 @@ class ErrorStateFilter:
         if self.recorder is not None:
             self.recorder.predicted(Phi, self.P)
 
-    def update(self, z: np.ndarray, H: np.ndarray, r: np.ndarray, gate: float, deweight: bool = False) -> Update:
+    def update(self, z: np.ndarray, H: np.ndarray, r: np.ndarray, gate: float, deweight: bool = False,
+               source: str = "", time: float = math.nan) -> Update:
         """Gate on the NIS (innovation z - H x against H P H^T + R), then the generated update.
 
         Above the gate the update is refused, or with ``deweight`` made with R
         scaled by NIS / gate (so that it would just pass the gate: a robust,
-        Huber-like weight instead of a hard rejection).
+        Huber-like weight instead of a hard rejection).  ``source`` (the aiding
+        sensor's name) and ``time`` are only handed to :attr:`monitor`.
         """
         nu = z - H @ self.x
         S = H @ self.P @ H.T + np.diag(r)
@@ -83,6 +87,8 @@ class ErrorStateFilter:
             nis = float(nu @ np.linalg.solve(S, nu))
         except np.linalg.LinAlgError:
             raise ModelError("navigator: singular innovation covariance") from None
+        if self.monitor is not None:
+            self.monitor(source, time, nu, S, np.asarray(r, float), nis)
         if not math.isfinite(nis):
             return Update(nis, len(z), False)
         if nis > gate:

@@ -136,14 +136,18 @@ def stationary_mask(time: np.ndarray, force: np.ndarray, rate: np.ndarray, gyro_
 
 
 def _gnss_sigmas(config: NavigatorConfig, gnss: GnssLog, j: int) -> np.ndarray | None:
-    """[sigma_vN, sigma_vE, sigma_vD, sigma_pN, sigma_pE, sigma_pD] of epoch j, or None if its Q is not used."""
+    """[sigma_vN, sigma_vE, sigma_vD, sigma_pN, sigma_pE, sigma_pD] of epoch j, or None if its Q is not used.
+
+    The receiver's sigma x the quality factor, floored, x the square root of the variance factor."""
     factor = config.quality_factor.get(int(gnss.quality[j]))
     if factor is None:
         return None
     sv, sp = gnss.sigma_velocity[j], gnss.sigma_position[j]
     v = np.maximum(np.array([sv[0], sv[1], sv[2]]) * factor, config.minimum_sigma_velocity)
     p = np.maximum(np.array([sp[0], sp[1], sp[2]]) * factor, config.minimum_sigma_position)
-    return np.concatenate([v, p])
+    # R x variance factor (gnss.position/velocity_variance_factor): sigma x its square root
+    return np.concatenate([v * math.sqrt(config.gnss_velocity_variance_factor),
+                           p * math.sqrt(config.gnss_position_variance_factor)])
 
 
 def antenna_ecef(nav: np.ndarray, lever: np.ndarray, rate_body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -221,7 +225,7 @@ def corrected(sample: np.ndarray, bias: np.ndarray, scale: np.ndarray) -> np.nda
 
 def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
         progress: Callable[[float], None] | None = None, record=None,
-        table: tuple[AidingSensor, ...] = SENSORS) -> Flight:
+        table: tuple[AidingSensor, ...] = SENSORS, monitor: Callable | None = None) -> Flight:
     """Fly the whole log forward in real time with the spec's model; return the per-epoch outputs.
 
     ``record``: a fresh :class:`modelgen.navigator.smoother.ForwardRecord` to
@@ -229,6 +233,9 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
     nominal states at the outputs); the flight carries it as ``forward_record``.
     ``table``: the aiding sensors (:data:`modelgen.navigator.sensors.SENSORS`); those the configuration enables are
     tried at every covariance step in table order, the GNSS epochs at theirs.
+    ``monitor``: called at every update tried as ``monitor(source, time, nu, S, r, nis)`` (the sensor's name, the
+    update's time, the innovation, its covariance H P H^T + R, R's diagonal, the NIS;
+    :mod:`modelgen.navigator.tuning` records the innovations with it).
     """
     g = inputs.gnss
     time, force, rate = inputs.time, inputs.force, inputs.rate
@@ -257,6 +264,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
     if record is not None:
         record.start(kf.P, partial(_apply_correction, spec))
     kf.recorder = record
+    kf.monitor = monitor
 
     def parameters(force_ned: np.ndarray, sig: np.ndarray) -> np.ndarray:
         c_bn = quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])
@@ -316,7 +324,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
                 T, sigma_index = spec.gnss_rotation(ecef.ned_to_ecef(*ecef.geodetic(nav[7:10])[:2]))
                 z, H, r = T @ z, T @ H, np.square(sigmas[sigma_index])
             gate = gates["gnss"] if rejected_run < config.gate_release_epochs else math.inf
-            result = kf.update(z, H, r, gate, deweight)
+            result = kf.update(z, H, r, gate, deweight, "gnss", float(time[k]))
             nis = result.nis
             gnss_nis.append(nis)
             if result.accepted:
@@ -381,7 +389,7 @@ def _aid_step(step_sensors: list[tuple], t: float, nav: np.ndarray, kf: ErrorSta
         c_bn = quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])
         z, H = aiding_sensors.rows(sensor, spec, nav, c_bn, rate_body, measured, cfg)
         r = np.square(aiding_sensors.sigmas(sensor, cfg))
-        if kf.update(z, H, r, gates[sensor.dof], deweight).accepted:
+        if kf.update(z, H, r, gates[sensor.dof], deweight, sensor.name, t).accepted:
             counts[sensor.counter] += 1
             _reset(kf, spec, nav, sensors)
 

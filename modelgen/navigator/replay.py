@@ -151,6 +151,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         timings["fly_evaluation_schedules_s"] = time.perf_counter() - mark
         echo(f"  flew {len(config.evaluation_schedules)} further outage schedule(s) for the consistency statistics")
     result["schedules"] = schedules
+    result["tuning"] = dict(config.tuning)  # which numbers of the configuration were tuned, and how
     result["consistency_pooled"] = pooled_consistency(schedules)
     result["evaluation_targets"] = {"target_nees_mean": list(config.target_nees_mean) if config.target_nees_mean
                                     else None, "target_inside_95_fraction": config.target_inside_95_fraction}

@@ -224,6 +224,20 @@ def _fmt(value: object, digits: int = 2) -> str:
     return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
 
 
+def _table_cell(text: str) -> str:
+    """A configuration's free text as one Markdown table cell: one line, its ``|`` escaped."""
+    return " ".join(text.split()).replace("|", "\\|")
+
+
+def _tuning_lines(config: NavigatorConfig) -> list[str]:
+    """The configuration's own statement of which numbers were tuned and how (its ``tuning:`` section)."""
+    if not config.tuning:
+        return []
+    lines = ["Tuned numbers as the configuration states them (`tuning:`):", "", "| key | how |", "|---|---|"]
+    lines += [f"| {_table_cell(key)} | {_table_cell(how)} |" for key, how in config.tuning.items()]
+    return lines + [""]
+
+
 def _alignment_lines(summary: dict) -> list[str]:
     """The alignment as the navigator that flew did it (the C aligns itself, by the Python reference's rules)."""
     a = summary.get("alignment")
@@ -459,8 +473,12 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
               "white noises, the one whose median NIS of the 6-row GNSS update (no gate) is closest to the "
               "chi-square median for 6 degrees of freedom, 5.35; (2) the NHC sigma, by the NHC update's own median "
               "NIS against 1.39 (2 degrees of freedom); (3) the NHC's angular-rate limit and the gate probability, by "
-              "the median GNSS NIS, the RMS against the receiver and the number of de-weighted epochs. The bias "
+              "the median GNSS NIS, the RMS against the receiver and the number of de-weighted epochs; (4, "
+              "`--correlation`) the time correlation of each aiding update's innovations (GNSS position, GNSS "
+              "velocity, NHC, ZUPT): the integrated autocorrelation f of the standardized innovations of a flight "
+              "with GNSS everywhere, R x f (a variance factor x f, a sigma x sqrt(f)). The bias "
               "driving noises are the data sheet's, not tuned. The configuration file records each stage's numbers.", "",
+              *_tuning_lines(config),
               f"GNSS NIS in this flight (outside outages): mean {_fmt(summary['gnss_nis_mean'])}, median "
               f"{_fmt(summary['gnss_nis_median'])}; gate {_fmt(summary['gnss_nis_gate'])} (chi-square, 6 degrees of "
               f"freedom, probability {config.nis_gate_probability}); above it an update is "
@@ -470,7 +488,9 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
               f"GNSS velocity latency used {config.velocity_latency:.3f} s; estimated from the .pos file alone "
               f"(velocity against position differences): {latency:.3f} s.", "",
               f"GNSS sigmas: the receiver's, times {config.quality_factor} by quality Q, floors "
-              f"{config.minimum_sigma_position} m and {config.minimum_sigma_velocity} m/s.", "",
+              f"{config.minimum_sigma_position} m and {config.minimum_sigma_velocity} m/s; variance factors "
+              f"{config.gnss_position_variance_factor:g} (position) and {config.gnss_velocity_variance_factor:g} "
+              "(velocity).", "",
               f"ZUPT {'on' if config.zupt_enabled else 'off'} (sigma {config.zupt_sigma} m/s), NHC "
               f"{'on' if config.nhc_enabled else 'off'} (sigma {config.nhc_sigma_lateral} / "
               f"{config.nhc_sigma_vertical} m/s above {config.nhc_speed_min} m/s, below "
@@ -478,7 +498,9 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
               "When the mean NEES at the outage ends is far above 2 the filter is overconfident: its horizontal "
               "covariance does not contain errors its model lacks or underrates (on the built-in drive the "
               "21-state model with gyro and accelerometer scale factors, replay_drive_0708_21.yaml, is about as "
-              "overconfident as the 15-state one: scale factors alone do not explain it).", "",
+              "overconfident as the 15-state one: scale factors alone do not explain it; stage 4's R x f for "
+              "the aiding updates' time correlation about halves the pooled mean NEES there, so the updates' "
+              "correlation does not explain all of it either).", "",
               "## Estimated biases (end of the drive, body axes)", "",
               f"gyro [deg/s]: {', '.join(f'{v:.4f}' for v in summary['final_gyro_bias_deg_s'])}; "
               f"accelerometer [mg]: {', '.join(f'{v:.2f}' for v in summary['final_accel_bias_mg'])}"

@@ -112,8 +112,10 @@ def test_a_velocity_equation_the_model_writes_is_the_one_flown(tmp_path):
 
 
 def test_error_model_approximations_do_not_reach_the_mechanization(tmp_path):
-    """Without constant_radii, gravity_height_only, free_air_gradient the error model differs, the rates do not."""
-    path = _variant(tmp_path, "exact_error_model", "approximations: [constant_radii, gravity_height_only, free_air_gradient]",
+    """Without lever_arm_at_computed_position, constant_radii, gravity_height_only, free_air_gradient the error
+    model differs, the rates do not."""
+    path = _variant(tmp_path, "exact_error_model",
+                    "approximations: [lever_arm_at_computed_position, constant_radii, gravity_height_only, free_air_gradient]",
                     "approximations: []")
     exact, drive = load_model(path), load_model(NED_MODEL)
     assert exact.dynamics != drive.dynamics  # the error models differ (dR/dL, dg/dL, the gravity gradient)

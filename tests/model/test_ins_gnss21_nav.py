@@ -130,12 +130,16 @@ def test_ins_gnss21_nav_is_21_states_in_at_most_60_lines(model):
     assert len(builtin_model_path("ins_gnss21_nav").read_text().splitlines()) <= 60
 
 
-def test_ins_gnss21_nav_lists_what_its_three_approximations_drop_with_sizes(model):
+def test_ins_gnss21_nav_lists_what_its_four_approximations_drop_with_sizes(model):
     terms = neglected_terms(model)
-    assert {t.approximation for t in terms} == {"constant_radii", "gravity_height_only", "free_air_gradient"}
+    assert {t.approximation for t in terms} == {"lever_arm_at_computed_position", "constant_radii", "gravity_height_only", "free_air_gradient"}
     notes = [n for n in model.notes if n.startswith("Approximation ")]
-    assert len(notes) == 3
+    assert len(notes) == 4
+    # the lever arm turned into (dL, dlambda, dh) at the computed position: the O(l/R) H terms, each by name
+    for entry in (r"H\[Z_rn, position_error_north\]", r"H\[Z_rn, position_error_down\] = \(c11\*l_x \+ c12\*l_y \+ c13\*l_z\)/\(R_M \+ h\) \(1\.81e-07\)",
+                  r"H\[Z_re, position_error_north\]", r"H\[Z_re, position_error_down\]"):
+        assert re.search(entry, notes[0])
     # dg/dh: WGS-84 normal-gravity gradient against 2 g / (R_N + h), the textbook's: 0.5 % of 3.1e-6 s^-2
-    assert re.search(r"F\[velocity_error_down, position_error_down\] = -\(R_N\*dg/dh \+ dg/dh\*h \+ 2\*g\)/\(R_N \+ h\) \(1\.58e-08\)", notes[2])
+    assert re.search(r"F\[velocity_error_down, position_error_down\] = -\(R_N\*dg/dh \+ dg/dh\*h \+ 2\*g\)/\(R_N \+ h\) \(1\.58e-08\)", notes[3])
     # dR_N/dL in the east position rate: d((R_N + h) cos L)/dt
-    assert re.search(r"F\[position_error_east, position_error_east\] = dR_N/dL\*v_n/[^;]*\(4\.57e-08\)", notes[0])
+    assert re.search(r"F\[position_error_east, position_error_east\] = dR_N/dL\*v_n/[^;]*\(4\.57e-08\)", notes[1])

@@ -18,9 +18,9 @@ from modelgen.errors import ModelError
 from modelgen.model.loading import builtin_model_path, load_model, load_model_text
 
 NAV = builtin_model_path("ins_gnss21_nav").read_text()
-WHOLE = "approximations: [constant_radii, gravity_height_only, free_air_gradient]"
-SCOPED = NAV.replace(WHOLE, "approximations: [{name: constant_radii, in: [velocity, attitude]}, gravity_height_only, free_air_gradient]")
-WITHOUT = NAV.replace(WHOLE, "approximations: [gravity_height_only, free_air_gradient]")
+WHOLE = "approximations: [lever_arm_at_computed_position, constant_radii, gravity_height_only, free_air_gradient]"
+SCOPED = NAV.replace(WHOLE, "approximations: [lever_arm_at_computed_position, {name: constant_radii, in: [velocity, attitude]}, gravity_height_only, free_air_gradient]")
+WITHOUT = NAV.replace(WHOLE, "approximations: [lever_arm_at_computed_position, gravity_height_only, free_air_gradient]")
 
 
 def _numbers(text, name):

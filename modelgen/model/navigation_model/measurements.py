@@ -167,17 +167,21 @@ def _kinematic_measurement(
 ) -> MeasurementParts:
     """GNSS position (geodetic, or metres along the listed axes) or velocity of the antenna at lever arm l^b.
 
-    Antenna position: p + D (C l), D = (1/(R_M + h), 1/((R_N + h) cos L), up) per
-    metre at the computed position (so that in metres the lever arm is the
-    Cartesian offset C l, as in Groves 2013 eq. 14.x); antenna velocity: v + C (w_ib x l) - w_ie x (C l) (Groves 2013, eqs. 14.x).
+    Antenna position: p + D(p) (C l), D = (1/(R_M + h), 1/((R_N + h) cos L), up) per
+    metre at the state's own position p (so that in metres the lever arm is the
+    Cartesian offset C l, as in Groves 2013 eq. 14.x); its variation with the
+    position error, O(l/R), stays in H unless the model declares
+    ``lever_arm_at_computed_position`` (D at the computed position); antenna velocity: v + C (w_ib x l) - w_ie x (C l) (Groves 2013, eqs. 14.x).
     """
     form = read.choice(entry.get("form", "metres" if kind == "position" else "navigation"), f"{key}.form", ("metres", "geodetic") if kind == "position" else ("navigation",))
     if kind == "position":
         def function(state: NavigationState, computed: NavigationState, mech: Mechanization) -> sp.Matrix:
             if arm is None:
                 return state.position
-            # metres to (dL, dlambda, dh) at the computed position: the lever arm stays a Cartesian offset
-            return state.position + mech.metres_inverse(computed.position) * (state.attitude * arm)
+            # metres to (dL, dlambda, dh) at the state's own position (exact to first order in l/R), or at
+            # the computed one under lever_arm_at_computed_position (the O(l/R) dR/dL and d/dh terms dropped)
+            at = state.position if state.lever_arm_position is None else state.lever_arm_position
+            return state.position + mech.metres_inverse(at) * (state.attitude * arm)
 
         if mechanization == "wander_azimuth":  # metres along the computed wander axes (the chart has no geodetic form)
             if form == "geodetic":

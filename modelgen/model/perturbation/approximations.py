@@ -1,8 +1,8 @@
 """Step 4 of the perturbation: the approximations a model may declare, by name.
 
 Each approximation is a pure function of the derivation's :class:`~modelgen.model.perturbation.problem.Stage`
-(:data:`APPROXIMATIONS`), except the three of :data:`EQUATION_APPROXIMATIONS`,
-which change the perturbed equations themselves; :func:`scoped` applies one to
+(:data:`APPROXIMATIONS`), except those of :data:`EQUATION_APPROXIMATIONS`,
+which change the perturbed equations (or measurements) themselves; :func:`scoped` applies one to
 the rows its ``in:`` names only.  Their first docstring lines are the
 descriptions the model's notes print (:data:`APPROXIMATION_DESCRIPTIONS`).
 """
@@ -123,7 +123,7 @@ def _applied_while_perturbing(stage: Stage, problem: NavigationProblem) -> Stage
 
 
 #: Approximations a model may declare, by name: each transforms the derivation;
-#: the two whose names say "position terms" act on the equations themselves.
+#: those of :data:`EQUATION_APPROXIMATIONS` act on the equations (and measurements) themselves.
 APPROXIMATIONS: dict[str, Callable[[Stage, NavigationProblem], Stage]] = {
     "constant_radii": constant_radii,
     "single_earth_radius": single_earth_radius,
@@ -138,14 +138,21 @@ APPROXIMATIONS: dict[str, Callable[[Stage, NavigationProblem], Stage]] = {
     "no_earth_rate_position_terms": _applied_while_perturbing,
     "no_transport_rate_position_terms": _applied_while_perturbing,
     "no_gravity_gradient": _applied_while_perturbing,
+    "lever_arm_at_computed_position": _applied_while_perturbing,
 }
 #: Approximations that change the perturbed equations rather than the result.
-EQUATION_APPROXIMATIONS = frozenset({"no_earth_rate_position_terms", "no_transport_rate_position_terms", "no_gravity_gradient"})
+EQUATION_APPROXIMATIONS = frozenset(
+    {"no_earth_rate_position_terms", "no_transport_rate_position_terms", "no_gravity_gradient", "lever_arm_at_computed_position"}
+)
 
 APPROXIMATION_DESCRIPTIONS: dict[str, str] = {
     "no_earth_rate_position_terms": "the true state's earth rate w_ie is taken at the computed latitude (no dL terms from it)",
     "no_transport_rate_position_terms": "the true state's transport rate w_en is taken at the computed position (no dL, dh terms from it)",
     "no_gravity_gradient": "the true state's gravity g^e is taken at the computed position (ecef: no dg/dr coupling of the position error)",
+    "lever_arm_at_computed_position": (
+        "a position measurement's lever arm is turned from metres into (dL, dlambda, dh) at the computed position"
+        " (no O(l/R) d(1/(R + h))/dh, dR/dL or tan L terms from it)"
+    ),
     **{name: (function.__doc__ or "").strip().split("\n")[0] for name, function in APPROXIMATIONS.items() if function is not _applied_while_perturbing},
 }
 

@@ -39,7 +39,9 @@ def _states(problem: NavigationProblem, approximations: set[str]) -> tuple[Navig
     True attitude (I + [phi x]) C; true specific force in navigation axes
     (I + [phi x]) (C f~ - C df), df = measured - true from the sensor model.
     The true state's earth and transport rates take the computed position
-    under the approximations named for that.
+    under the approximations named for that, and so does the conversion of a
+    measurement's lever arm from metres to (dL, dlambda, dh) under
+    ``lever_arm_at_computed_position`` (otherwise it is taken at the true position).
     """
     phi, _, _ = primitive_symbols()
     true_v = _vector(sp.symbols("true_v0:3", real=True, cls=sp.Dummy))
@@ -55,7 +57,8 @@ def _states(problem: NavigationProblem, approximations: set[str]) -> tuple[Navig
     transport_at = p if "no_transport_rate_position_terms" in approximations else true_p
     true_rate = None if problem.body_rate is None else problem.body_rate - problem.gyro.error(problem.body_rate, "gyro")
     gravity_at = p if "no_gravity_gradient" in approximations else None
-    true = NavigationState((sp.eye(3) + skew(phi)) * C, true_v, true_p, true_force, true_rate, earth_at, transport_at, gravity_at)
+    lever_arm_at = p if "lever_arm_at_computed_position" in approximations else None
+    true = NavigationState((sp.eye(3) + skew(phi)) * C, true_v, true_p, true_force, true_rate, earth_at, transport_at, gravity_at, lever_arm_at)
     return computed, true, {"v": true_v, "p": true_p}
 
 

@@ -38,6 +38,7 @@ class NavigationState:
     earth_rate_position: sp.Matrix  # where w_ie takes its latitude (the state's own unless approximated)
     transport_rate_position: sp.Matrix  # where w_en takes its position (the state's own unless approximated)
     gravity_position: sp.Matrix | None = None  # where the ecef mechanization's g^e takes its position (None: the state's own)
+    lever_arm_position: sp.Matrix | None = None  # where a lever arm's metres become (dL, dlambda, dh) (None: the state's own)
 
 
 #: The local-level mechanization, by its former name (the engine's default).

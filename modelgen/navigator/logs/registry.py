@@ -31,7 +31,7 @@ DEFAULT_FORMAT = {"imu": "csv", "gnss": "rtklib_pos"}
 COMMON_KEYS = {
     "imu": {"file", "format", "time_offset_s", "gap_factor", "gap_action", "rotation_to_body_deg"},
     "gnss": {"file", "format", "lever_arm_m", "velocity_latency_s", "quality_factor", "minimum_sigma_position_m",
-             "minimum_sigma_velocity_m_s"},
+             "minimum_sigma_velocity_m_s", "position_variance_factor", "velocity_variance_factor"},
 }
 
 

@@ -1,0 +1,145 @@
+"""Measurement noise from the innovations with GNSS present (modelgen.navigator.tuning, issue 26 item 4)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from modelgen.navigator import tuning
+
+DATA = Path(__file__).parent / "data"
+
+
+def _ar1(phi: float, n: int, seed: int = 3) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    w = rng.standard_normal(n)
+    x = np.empty(n)
+    x[0] = w[0]
+    for i in range(1, n):
+        x[i] = phi * x[i - 1] + math.sqrt(1 - phi**2) * w[i]
+    return x
+
+
+def test_the_correlation_factor_of_a_first_order_markov_series_is_its_integrated_time():
+    """AR(1) with rho_k = phi^k: f = (1 + phi) / (1 - phi) (19 at phi 0.9), tau = -dt / ln(phi); white: f = 1."""
+    period = 0.25
+    time = np.arange(40000) * period
+    rho = tuning.autocorrelation(time, _ar1(0.9, len(time)), period)
+    f, lags = tuning.correlation_factor(rho)
+    assert f == pytest.approx(19.0, rel=0.15)
+    assert 10 < lags < len(rho)
+    assert tuning.decorrelation_time(rho, period) == pytest.approx(-period / math.log(0.9), rel=0.1)
+    white, _ = tuning.correlation_factor(tuning.autocorrelation(time, _ar1(0.0, len(time)), period))
+    assert white == pytest.approx(1.0, abs=0.1)
+
+
+def test_pairs_are_not_formed_across_a_pause_in_the_updates():
+    """Two runs of a constant +1 / -1 series with a pause between: no lag pairs the runs (rho stays 1)."""
+    period = 0.1
+    time = np.r_[np.arange(100) * period, 50.0 + np.arange(100) * period]
+    e = np.r_[np.ones(100), -np.ones(100)]
+    rho = tuning.autocorrelation(time, e, period, max_lag_s=5.0)
+    assert np.allclose(rho[np.isfinite(rho)], 1.0)
+
+
+@pytest.fixture(scope="module")
+def excerpt():
+    from modelgen.navigator.config import load_config
+    from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.logs import read_gnss, read_imu
+    from modelgen.navigator.navigator import prepare
+    from modelgen.navigator.spec import navigator_spec
+
+    config = load_config(DATA / "excerpt.yaml")
+    inputs = prepare(config, read_imu(config.imu_source, config.gap_factor, config.gap_action),
+                     read_gnss(config.gnss_source))
+    return config, inputs, navigator_spec(model_path(config.model, config.path))
+
+
+@pytest.mark.flight
+def test_the_innovations_are_recorded_with_gnss_present_and_tune_sets_r_times_f(excerpt):
+    """Every GNSS epoch after the alignment is recorded (the excerpt's outage is not flown); NIS = nu S^-1 nu;
+    a tuned sigma is the old one x sqrt(f), a variance factor the old one x f, both from the rows' statistics."""
+    config, inputs, spec = excerpt
+    sources, flight = tuning.record_innovations(config, inputs, spec)
+    assert not flight.outages and len(sources["gnss"].time) == len(flight.outputs) > 150  # one per epoch flown
+    g = sources["gnss"]
+    for nu, S, nis in zip(g.nu[:20], g.S[:20], g.nis[:20]):
+        assert nis == pytest.approx(float(nu @ np.linalg.solve(S, nu)), rel=1e-9)
+    stats = tuning.row_statistics(sources, tuning.row_labels(spec))
+    assert {s.source for s in stats} >= {"gnss", "nhc"}
+    tuned = {t.key: t for t in tuning.tune(config, stats, spec)}
+    position = [s.factor for s in stats if s.source == "gnss" and s.label.startswith("position")]
+    assert tuned["gnss.position_variance_factor"].after == pytest.approx(config.gnss_position_variance_factor
+                                                                          * np.mean(position))
+    lateral = next(s for s in stats if s.source == "nhc" and s.label == "lateral")
+    assert tuned["nhc.sigma_lateral_m_s"].after == pytest.approx(config.nhc_sigma_lateral * math.sqrt(lateral.factor))
+    assert all(t.factor >= 1.0 for t in tuned.values())
+    assert tuning.apply(config, list(tuned.values())).nhc_sigma_lateral == tuned["nhc.sigma_lateral_m_s"].after
+
+
+@pytest.mark.flight
+@pytest.mark.compile
+def test_the_gnss_variance_factors_reach_r_in_python_and_in_c_alike(excerpt):
+    """Position variance x 9, velocity x 4: Python's recorded R is that much larger at the first update, and the
+    C navigator flies the changed configuration within 1 mm of the Python one."""
+    from modelgen.navigator.cnav import cached_c_navigator, fly_c
+    from modelgen.navigator.navigator import fly
+    from modelgen.navigator.replay import max_position_difference
+
+    config, inputs, spec = excerpt
+    changed = dataclasses.replace(config, gnss_position_variance_factor=9.0, gnss_velocity_variance_factor=4.0)
+    before, after = tuning.InnovationRecorder(), tuning.InnovationRecorder()
+    fly(config, inputs, spec, monitor=before)
+    python = fly(changed, inputs, spec, monitor=after)
+    kinds = np.array([r.kind for r in spec.gnss_rows])
+    ratio = after.sources["gnss"].r[0] / before.sources["gnss"].r[0]
+    assert np.allclose(ratio[kinds == "position"], 9.0) and np.allclose(ratio[kinds == "velocity"], 4.0)
+    navigator, _ = cached_c_navigator(spec)
+    c_flight, _ = fly_c(changed, inputs, navigator)
+    assert max_position_difference(c_flight, python) <= 1e-3
+    assert max_position_difference(c_flight, fly_c(config, inputs, navigator)[0]) > 1e-3
+
+
+STAGE4_RESULTS = Path(__file__).parents[2] / "bench" / "results"
+CONFIG_FIELDS = {"gnss.position_variance_factor": "gnss_position_variance_factor",
+                 "gnss.velocity_variance_factor": "gnss_velocity_variance_factor",
+                 "nhc.sigma_lateral_m_s": "nhc_sigma_lateral", "nhc.sigma_vertical_m_s": "nhc_sigma_vertical",
+                 "zupt.sigma_m_s": "zupt_sigma"}
+
+
+@pytest.mark.parametrize("config_name, result_name", [
+    ("replay_drive_0708.yaml", "navigator_tuning_stage4_15.json"),
+    ("replay_drive_0708_21.yaml", "navigator_tuning_stage4_21.json")])
+def test_the_shipped_configurations_hold_the_numbers_stage_4_measured(config_name, result_name):
+    """Every key stage 4 tuned (bench/navigator_tuning.py --correlation --json, its result committed in
+    bench/results) holds that measured value in the shipped configuration to the 3 figures written there,
+    and the configuration's tuning: record names every such key."""
+    import json
+
+    from modelgen.navigator.config import builtin_config_path, load_config
+
+    config = load_config(builtin_config_path().parent / config_name)
+    result = json.loads((STAGE4_RESULTS / result_name).read_text())
+    assert result["model"] == config.model
+    assert {t["key"] for t in result["tuned"]} == set(CONFIG_FIELDS)
+    for tuned in result["tuned"]:
+        held = getattr(config, CONFIG_FIELDS[tuned["key"]])
+        assert held == pytest.approx(tuned["after"], rel=5e-3), tuned["key"]
+        assert tuned["key"] in config.tuning
+
+
+def test_a_tuning_statement_with_a_bar_and_a_newline_stays_one_table_row_of_the_summary():
+    """The `tuning:` texts are the user's free text: each becomes exactly one Markdown row, its '|' escaped."""
+    from modelgen.navigator.config import builtin_config_path, load_config
+    from modelgen.navigator.report import _tuning_lines
+
+    config = dataclasses.replace(load_config(builtin_config_path()), tuning={"zupt.sigma_m_s": "a | b\n| c |"})
+    lines = _tuning_lines(config)
+    rows = [line for line in lines if line.startswith("| ") and "zupt" in line]
+    assert rows == ["| zupt.sigma_m_s | a \\| b \\| c \\| |"]
+    assert not _tuning_lines(dataclasses.replace(config, tuning={}))
