@@ -65,16 +65,19 @@ AXES = ("x", "y", "z")
 #: The error forms the wander frame has: the ones that need no true wander angle (module doc).
 ERROR_FORMS = {"attitude": ("psi",), "velocity": ("computed_frame",), "position": ("metres",)}
 
-# Earth quantities as undefined functions of the chart (theta_x, theta_y[, h]) while deriving: their
+# Earth quantities as undefined functions of the chart (theta_x, theta_y, h) while deriving: their
 # derivatives follow from sin L = -k_z(theta), d(sin L)/d(theta_x) = k_y, d(sin L)/d(theta_y) = -k_x.
-WanderMeridianRadius = sp.Function("WanderMeridianRadius")
-WanderPrimeVerticalRadius = sp.Function("WanderPrimeVerticalRadius")
+#: A = 1/(R_N + h), the transverse curvature: the curvature K is a polynomial in A and D (below).
+WanderTransverseCurvature = sp.Function("WanderTransverseCurvature")
 WanderGravity = sp.Function("WanderGravity")
-#: D = e^2/(1 - e^2) R_M / ((R_M + h)(R_N + h)) = (1/(R_M + h) - 1/(R_N + h)) / cos^2 L, finite at the poles, as a
-#: function of its own while deriving: the products of the curvature K and its exact inverse then cancel
-#: symbolically (with its value written out, K^-1 K = I only through the WGS-84 relation between R_M and R_N).
+#: D = e^2/(1 - e^2) R_M / ((R_M + h)(R_N + h)) = (1/(R_M + h) - 1/(R_N + h)) / cos^2 L, finite at the poles.
 WanderCurvatureDifference = sp.Function("WanderCurvatureDifference")
-EARTH_FUNCTIONS = (WanderMeridianRadius, WanderPrimeVerticalRadius, WanderGravity, WanderCurvatureDifference)
+#: Q = 1/det K: K^-1 = adj(K) Q is a polynomial too, its derivatives Q' = -Q^2 (det K)' (:func:`inverse_determinant_rules`),
+#: and every product of the change of variables reduces by Q det K = 1 (:func:`reduce_inverse_determinant`): no gcd.
+#: Its value, det K = A (A + D (k_x^2 + k_y^2)) = 1/((R_M + h)(R_N + h)) (k_x^2 + k_y^2 = cos^2 L), is set in
+#: :meth:`WanderAzimuth.earth_function_rules`.
+WanderInverseDeterminant = sp.Function("WanderInverseDeterminant")
+EARTH_FUNCTIONS = (WanderTransverseCurvature, WanderGravity, WanderCurvatureDifference, WanderInverseDeterminant)
 
 #: C_e^w's third column k_0 at the operating point (the Earth's axis in w axes): symbols and parameter names.
 AXIS_SYMBOLS = ("Cew13", "Cew23", "Cew33")
@@ -101,19 +104,49 @@ def frame_angle_jacobian(position: sp.Matrix) -> sp.Matrix:
 
 
 def curvature(axis: sp.Matrix, position: sp.Matrix) -> sp.Matrix:
-    """K (2x2): rho_H = K v_H, and d(theta)_H = K dr_H (module doc)."""
+    """K (2x2): rho_H = K v_H, and d(theta)_H = K dr_H (module doc); polynomial in A = 1/(R_N + h) and D."""
     k = earth_axis(axis, position)
     theta_x, theta_y, _, h = position
     D = WanderCurvatureDifference(theta_x, theta_y, h)
-    a = 1 / (WanderPrimeVerticalRadius(theta_x, theta_y) + h)
+    a = WanderTransverseCurvature(theta_x, theta_y, h)
     return sp.Matrix([[D * k[0] * k[1], a + D * k[1] ** 2], [-a - D * k[0] ** 2, -D * k[0] * k[1]]])
 
 
-def curvature_inverse(axis: sp.Matrix, position: sp.Matrix) -> sp.Matrix:
-    """K^-1 = adj(K) / det K, det K = a (a + D (k_x^2 + k_y^2)) = 1/((R_M + h)(R_N + h)) (a = 1/(R_N + h))."""
+def curvature_determinant(axis: sp.Matrix, position: sp.Matrix) -> sp.Expr:
+    """det K = A (A + D (k_x^2 + k_y^2)) as a polynomial (= 1/((R_M + h)(R_N + h)) on the WGS-84 ellipsoid)."""
     K = curvature(axis, position)
-    determinant = sp.expand(K[0, 0] * K[1, 1] - K[0, 1] * K[1, 0])
-    return sp.Matrix([[K[1, 1], -K[0, 1]], [-K[1, 0], K[0, 0]]]) / determinant
+    return sp.expand(K[0, 0] * K[1, 1] - K[0, 1] * K[1, 0])
+
+
+def curvature_inverse(axis: sp.Matrix, position: sp.Matrix) -> sp.Matrix:
+    """K^-1 = adj(K) Q, Q = 1/det K the function :data:`WanderInverseDeterminant` (no division: a polynomial)."""
+    K = curvature(axis, position)
+    theta_x, theta_y, _, h = position
+    return sp.Matrix([[K[1, 1], -K[0, 1]], [-K[1, 0], K[0, 0]]]) * WanderInverseDeterminant(theta_x, theta_y, h)
+
+
+def inverse_determinant_rules(axis: sp.Matrix, position: sp.Matrix) -> dict:
+    """dQ/dc = -Q^2 d(det K)/dc for the chart coordinates and the height (Q = 1/det K)."""
+    theta_x, theta_y, _, h = position
+    Q = WanderInverseDeterminant(theta_x, theta_y, h)
+    determinant = curvature_determinant(axis, position)
+    return {sp.Derivative(Q, c): -Q**2 * determinant.diff(c) for c in (theta_x, theta_y, h)}
+
+
+def reduce_inverse_determinant(expr: sp.Expr, inverse: sp.Symbol, determinant: sp.Expr) -> sp.Expr:
+    """``expr``, a polynomial in ``inverse`` = 1/``determinant`` and other symbols, reduced modulo
+    inverse * determinant - 1: the remainder of one polynomial division (lex order, ``inverse`` first).
+
+    {inverse * determinant - 1} is a Groebner basis of its ideal (one generator), so the remainder is the
+    unique normal form: an expression equal to a polynomial free of ``inverse`` (K^-1 K = I, an entry that is
+    zero) reduces to exactly that polynomial, and no gcd is computed.
+    """
+    expr = sp.expand(expr)
+    if expr == 0 or not expr.has(inverse):
+        return expr
+    generators = [inverse, *sorted(determinant.free_symbols, key=sp.default_sort_key)]
+    _, remainder = sp.reduced(expr, [inverse * determinant - 1], *generators, order="lex")
+    return remainder
 
 
 @dataclass(frozen=True)
@@ -202,7 +235,9 @@ class WanderAzimuth:
 
         With s = sin L = -k_z and w = 1 - e^2 s^2 (TR8350.2, as the local-level rules with d/dL = cos L d/ds):
         dR_M/ds = 3 e^2 s R_M / w, dR_N/ds = e^2 s R_N / w,
-        dg/ds = g s (2 k / (1 + k s^2) + e^2 / w + 8 f h / (a eta)), dg/dh as local level.
+        dg/ds = g s (2 k / (1 + k s^2) + e^2 / w + 8 f h / (a eta)), dg/dh as local level;
+        A = 1/(R_N + h), D = c R_M / ((R_M + h)(R_N + h)) (c = e^2/(1 - e^2)) and Q = 1/det K = (R_M + h)(R_N + h)
+        (det K = A (A + D cos^2 L) = A / (R_M + h): R_N - R_M = c R_M cos^2 L on the ellipsoid).
         """
         theta_x, theta_y, _, h = position
         e2, a = sp.Float(wgs84.ECCENTRICITY_SQUARED), sp.Float(wgs84.SEMI_MAJOR_AXIS)
@@ -212,39 +247,54 @@ class WanderAzimuth:
         eta = 1 - 2 * h * (1 + f + m - 2 * f * s**2) / a + 3 * h**2 / a**2
         g, RM, RN = earth.gravity, earth.meridian_radius, earth.prime_vertical_radius
         d_s = {theta_x: self.axis[1], theta_y: -self.axis[0]}  # d(sin L)/d(theta)
-        rules: dict = {}
-        radius_m, radius_n, gravity = WanderMeridianRadius(theta_x, theta_y), WanderPrimeVerticalRadius(theta_x, theta_y), WanderGravity(theta_x, theta_y, h)
-        for c, ds in d_s.items():
-            rules[sp.Derivative(radius_m, c)] = 3 * e2 * s * RM / w * ds
-            rules[sp.Derivative(radius_n, c)] = e2 * s * RN / w * ds
-            rules[sp.Derivative(gravity, c)] = g * s * (2 * k / (1 + k * s**2) + e2 / w + 8 * f * h / (a * eta)) * ds
-        rules[sp.Derivative(gravity, h)] = g * (-2 * (1 + f + m - 2 * f * s**2) / a + 6 * h / a**2) / eta
-        # D = c R_M / ((R_M + h)(R_N + h)), c = e^2/(1 - e^2)
         ratio = e2 / (1 - e2)
+        transverse = WanderTransverseCurvature(theta_x, theta_y, h)
+        gravity = WanderGravity(theta_x, theta_y, h)
         difference = WanderCurvatureDifference(theta_x, theta_y, h)
-        for coordinate, ds in d_s.items():
+        rules: dict = {}
+        for c, ds in d_s.items():
             dRM, dRN = 3 * e2 * s * RM / w * ds, e2 * s * RN / w * ds
-            rules[sp.Derivative(difference, coordinate)] = ratio * (
+            rules[sp.Derivative(transverse, c)] = -dRN / (RN + h) ** 2
+            rules[sp.Derivative(gravity, c)] = g * s * (2 * k / (1 + k * s**2) + e2 / w + 8 * f * h / (a * eta)) * ds
+            rules[sp.Derivative(difference, c)] = ratio * (
                 dRM / ((RM + h) * (RN + h)) - RM * dRM / ((RM + h) ** 2 * (RN + h)) - RM * dRN / ((RM + h) * (RN + h) ** 2)
             )
+        rules[sp.Derivative(transverse, h)] = -1 / (RN + h) ** 2
+        rules[sp.Derivative(gravity, h)] = g * (-2 * (1 + f + m - 2 * f * s**2) / a + 6 * h / a**2) / eta
         rules[sp.Derivative(difference, h)] = -ratio * RM * (RM + RN + 2 * h) / ((RM + h) * (RN + h)) ** 2
-        rules.update({radius_m: RM, radius_n: RN, gravity: g, difference: ratio * RM / ((RM + h) * (RN + h))})
+        rules.update({
+            transverse: 1 / (RN + h), gravity: g, difference: ratio * RM / ((RM + h) * (RN + h)),
+            WanderInverseDeterminant(theta_x, theta_y, h): (RM + h) * (RN + h),
+        })
         rules.update({c: 0 for c in position[:3]})
         return rules
 
-    def at_operating_point(self, matrix: sp.Matrix, cancel: bool = False) -> sp.Matrix:
+    def at_operating_point(self, matrix: sp.Matrix, position: sp.Matrix, reduce: bool = False) -> sp.Matrix:
         """``matrix`` at the chart's origin (theta = 0), the Earth functions and their derivatives kept (for the rules
-        of :meth:`earth_function_rules`); with ``cancel``, each entry a cancelled rational function (exact: no
-        floating-point number is in the matrices before those rules), so that K^-1 K and the like cancel."""
+        of :meth:`earth_function_rules`), Q's derivatives written as -Q^2 (det K)' (:func:`inverse_determinant_rules`).
+
+        Every entry is then a polynomial in the Earth functions, their derivatives and Q = 1/det K; with ``reduce``,
+        each is reduced modulo Q det K = 1 (:func:`reduce_inverse_determinant`), so that K^-1 K = I and the like
+        cancel exactly (a polynomial division; the previous ``cancel`` of rational functions took minutes).
+        """
+        matrix = matrix.xreplace(inverse_determinant_rules(self.axis, position))
         functions = [a for a in matrix.atoms(sp.Derivative, *EARTH_FUNCTIONS)]
-        derivatives = [a for a in functions if isinstance(a, sp.Derivative)]
-        applied = [a for a in functions if not isinstance(a, sp.Derivative)]
-        stand_in = {a: sp.Dummy(f"earth_{k}", real=True) for k, a in enumerate(sorted(derivatives, key=sp.default_sort_key) + sorted(applied, key=sp.default_sort_key))}
-        plain = matrix.xreplace({a: stand_in[a] for a in derivatives}).xreplace({a: stand_in[a] for a in applied})
-        plain = plain.xreplace({c: 0 for c in CHART})
-        if cancel:
-            plain = plain.applyfunc(lambda e: sp.cancel(e) if e != 0 else e)
-        return plain.xreplace({v: k for k, v in stand_in.items()})
+        inverse = WanderInverseDeterminant(*position[:2], position[3])
+        if reduce:
+            functions += [inverse, *curvature_determinant(self.axis, position).atoms(*EARTH_FUNCTIONS)]
+        derivatives = sorted({a for a in functions if isinstance(a, sp.Derivative)}, key=sp.default_sort_key)
+        applied = sorted({a for a in functions if not isinstance(a, sp.Derivative)}, key=sp.default_sort_key)
+        stand_in = {a: sp.Dummy(f"earth_{k}", real=True) for k, a in enumerate(derivatives + applied)}
+        at_origin = {c: 0 for c in CHART}
+
+        def plain(m: sp.Matrix) -> sp.Matrix:
+            return m.xreplace({a: stand_in[a] for a in derivatives}).xreplace({a: stand_in[a] for a in applied}).xreplace(at_origin)
+
+        out = plain(matrix)
+        if reduce:
+            determinant = plain(sp.Matrix([curvature_determinant(self.axis, position)]))[0]
+            out = out.applyfunc(lambda e: reduce_inverse_determinant(e, stand_in[inverse], determinant))
+        return out.xreplace({v: k for k, v in stand_in.items()})
 
     def expression_names(self, state: NavigationState) -> dict[str, Any]:
         """The names a written velocity equation may use in the w-frame."""
