@@ -132,7 +132,7 @@ def _refuse_polar_scenario(read: SectionReader, data: Mapping, lines: Mapping[st
         f"{read.at('check.parameters.latitude')}: check.parameters.latitude {math.degrees(latitude):.6g} deg is within "
         f"{90 - POLAR_LIMIT_DEG:g} deg of a pole: the local-level mechanization divides by cos(latitude) (longitude rate "
         f"1/cos L = {1 / math.cos(latitude):.0f}, transport rate tan L) and is refused beyond {POLAR_LIMIT_DEG:g} deg; "
-        f"use 'mechanization: ecef' (no singularity at the poles)"
+        f"use 'mechanization: wander_azimuth' or 'mechanization: ecef' (no singularity at the poles)"
     )
 
 
