@@ -336,3 +336,15 @@ def test_the_wander_curvature_determinant_is_one_over_the_product_of_the_radii()
     value = float(determinant.xreplace(at).xreplace(point))
     inverse = float(rules[w.WanderInverseDeterminant(*position[:2], h)].xreplace(point))
     assert abs(value * inverse - 1) < 1e-14
+
+
+def test_wander_position_rows_are_exactly_minus_the_transport_rate_cross_dr_plus_dv(wander):
+    """dr' = -[w_ew x] dr + dv with w_ew = (rho_x, rho_y, 0): the curvature terms of dT/dt cancel exactly (the reduction
+    by Q det K = 1, D cos^2 L = B - A, |k| = 1 and the ellipsoid's dR_N/dL), so the zeros are zeros, not ~1e-23 sums."""
+    F = wander.F
+    for i, j in ((0, 0), (0, 1), (1, 0), (1, 1), (2, 2)):  # rho_z = 0: only the dr_z column and row remain
+        assert F[i, j] == 0, (i, j, F[i, j])
+    for i in range(3):
+        for j in range(3):
+            assert F[i, 3 + j] == (1 if i == j else 0)
+    assert "velocity_z" not in {p.name for p in wander.model.parameters}  # F and H of the psi-angle model need no v_z

@@ -50,7 +50,7 @@ gravity at sin L = -k_z: no latitude, longitude or wander angle on its own.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import sympy as sp
 
@@ -65,19 +65,26 @@ AXES = ("x", "y", "z")
 #: The error forms the wander frame has: the ones that need no true wander angle (module doc).
 ERROR_FORMS = {"attitude": ("psi",), "velocity": ("computed_frame",), "position": ("metres",)}
 
-# Earth quantities as undefined functions of the chart (theta_x, theta_y, h) while deriving: their
-# derivatives follow from sin L = -k_z(theta), d(sin L)/d(theta_x) = k_y, d(sin L)/d(theta_y) = -k_x.
+# Earth quantities as undefined functions of the chart (theta_x, theta_y, h) while deriving.  They depend on the
+# chart through s = sin L = -k_z(theta) only: d/d(theta_x) = k_y d/ds, d/d(theta_y) = -k_x d/ds (:func:`derivative_rules`).
 #: A = 1/(R_N + h), the transverse curvature: the curvature K is a polynomial in A and D (below).
 WanderTransverseCurvature = sp.Function("WanderTransverseCurvature")
+#: B = 1/(R_M + h), the meridian curvature (only in the rules: D' in h, and D cos^2 L = B - A).
+WanderMeridianCurvature = sp.Function("WanderMeridianCurvature")
 WanderGravity = sp.Function("WanderGravity")
-#: D = e^2/(1 - e^2) R_M / ((R_M + h)(R_N + h)) = (1/(R_M + h) - 1/(R_N + h)) / cos^2 L, finite at the poles.
+#: D = e^2/(1 - e^2) R_M / ((R_M + h)(R_N + h)) = (B - A) / cos^2 L, finite at the poles.
 WanderCurvatureDifference = sp.Function("WanderCurvatureDifference")
-#: Q = 1/det K: K^-1 = adj(K) Q is a polynomial too, its derivatives Q' = -Q^2 (det K)' (:func:`inverse_determinant_rules`),
-#: and every product of the change of variables reduces by Q det K = 1 (:func:`reduce_inverse_determinant`): no gcd.
-#: Its value, det K = A (A + D (k_x^2 + k_y^2)) = 1/((R_M + h)(R_N + h)) (k_x^2 + k_y^2 = cos^2 L), is set in
-#: :meth:`WanderAzimuth.earth_function_rules`.
+#: dD/ds and dg/ds (s = sin L), values in :meth:`WanderAzimuth.earth_function_rules`.
+WanderCurvatureDifferenceSlope = sp.Function("WanderCurvatureDifferenceSlope")
+WanderGravitySlope = sp.Function("WanderGravitySlope")
+#: Q = 1/det K: K^-1 = adj(K) Q is a polynomial too, its derivatives Q' = -Q^2 (det K)' (:func:`derivative_rules`),
+#: and every product of the change of variables is reduced modulo Q det K = 1 and the ellipsoid's relations
+#: (:func:`reduce_by_relations`): polynomial division, no gcd.  det K = A (A + D cos^2 L) = A B.
 WanderInverseDeterminant = sp.Function("WanderInverseDeterminant")
-EARTH_FUNCTIONS = (WanderTransverseCurvature, WanderGravity, WanderCurvatureDifference, WanderInverseDeterminant)
+EARTH_FUNCTIONS = (
+    WanderTransverseCurvature, WanderMeridianCurvature, WanderGravity, WanderCurvatureDifference,
+    WanderCurvatureDifferenceSlope, WanderGravitySlope, WanderInverseDeterminant,
+)
 
 #: C_e^w's third column k_0 at the operating point (the Earth's axis in w axes): symbols and parameter names.
 AXIS_SYMBOLS = ("Cew13", "Cew23", "Cew33")
@@ -125,28 +132,54 @@ def curvature_inverse(axis: sp.Matrix, position: sp.Matrix) -> sp.Matrix:
     return sp.Matrix([[K[1, 1], -K[0, 1]], [-K[1, 0], K[0, 0]]]) * WanderInverseDeterminant(theta_x, theta_y, h)
 
 
-def inverse_determinant_rules(axis: sp.Matrix, position: sp.Matrix) -> dict:
-    """dQ/dc = -Q^2 d(det K)/dc for the chart coordinates and the height (Q = 1/det K)."""
+def _functions(position: sp.Matrix) -> tuple[sp.Expr, ...]:
+    """A, B, D, dD/ds, g, dg/ds, Q applied to the chart (theta_x, theta_y, h)."""
+    arguments = (position[0], position[1], position[3])
+    return tuple(f(*arguments) for f in (
+        WanderTransverseCurvature, WanderMeridianCurvature, WanderCurvatureDifference, WanderCurvatureDifferenceSlope,
+        WanderGravity, WanderGravitySlope, WanderInverseDeterminant))
+
+
+def derivative_rules(axis: sp.Matrix, position: sp.Matrix) -> dict:
+    """The first derivatives of the Earth functions at the chart's origin, exact on the ellipsoid:
+
+    d/d(theta_x) = k_y d/ds, d/d(theta_y) = -k_x d/ds (s = sin L = -k_z); dA/dh = -A^2, dD/dh = -D (A + B)
+    (D = c R_M A B); dA/ds = -A^2 dR_N/ds = -s D A^2 Q, since dR_N/ds = (R_N - R_M) s / cos^2 L (the ellipsoid's
+    d(R_N cos L)/dL = -R_M sin L) = s D / (A B); dQ/dc = -Q^2 d(det K)/dc.  dD/ds, dg/ds and dg/dh stay symbols.
+    """
     theta_x, theta_y, _, h = position
-    Q = WanderInverseDeterminant(theta_x, theta_y, h)
+    kx, ky, kz = axis
+    A, B, D, D_s, g, g_s, Q = _functions(position)
+    A_s = kz * D * A**2 * Q  # -s D A^2 Q, s = -k_z
+    rules = {
+        sp.Derivative(A, theta_x): ky * A_s, sp.Derivative(A, theta_y): -kx * A_s, sp.Derivative(A, h): -A**2,
+        sp.Derivative(D, theta_x): ky * D_s, sp.Derivative(D, theta_y): -kx * D_s, sp.Derivative(D, h): -D * (A + B),
+        sp.Derivative(g, theta_x): ky * g_s, sp.Derivative(g, theta_y): -kx * g_s,
+    }
     determinant = curvature_determinant(axis, position)
-    return {sp.Derivative(Q, c): -Q**2 * determinant.diff(c) for c in (theta_x, theta_y, h)}
+    rules.update({sp.Derivative(Q, c): -Q**2 * determinant.diff(c).xreplace(rules) for c in (theta_x, theta_y, h)})
+    return rules
 
 
-def reduce_inverse_determinant(expr: sp.Expr, inverse: sp.Symbol, determinant: sp.Expr) -> sp.Expr:
-    """``expr``, a polynomial in ``inverse`` = 1/``determinant`` and other symbols, reduced modulo
-    inverse * determinant - 1: the remainder of one polynomial division (lex order, ``inverse`` first).
+def relations(axis: sp.Matrix, position: sp.Matrix) -> list[sp.Expr]:
+    """The polynomials that vanish at the operating point: Q det K - 1, D (k_x^2 + k_y^2) - (B - A), |k|^2 - 1."""
+    kx, ky, kz = axis
+    A, B, D, _, _, _, Q = _functions(position)
+    return [Q * curvature_determinant(axis, position) - 1, D * (kx**2 + ky**2) - B + A, kx**2 + ky**2 + kz**2 - 1]
 
-    {inverse * determinant - 1} is a Groebner basis of its ideal (one generator), so the remainder is the
-    unique normal form: an expression equal to a polynomial free of ``inverse`` (K^-1 K = I, an entry that is
-    zero) reduces to exactly that polynomial, and no gcd is computed.
+
+def reduce_by_relations(expr: sp.Expr, basis: Sequence[sp.Expr], generators: Sequence[sp.Symbol]) -> sp.Expr:
+    """``expr``, a polynomial, reduced modulo the ideal of ``basis`` (a Groebner basis in ``generators``, lex).
+
+    The remainder is the ideal's unique normal form: an entry that is zero on the ellipsoid (K^-1 K = I,
+    the cancelled curvature terms of dT/dt) reduces to exactly 0, and no gcd is computed.
     """
     expr = sp.expand(expr)
-    if expr == 0 or not expr.has(inverse):
+    if expr == 0:
         return expr
-    generators = [inverse, *sorted(determinant.free_symbols, key=sp.default_sort_key)]
-    _, remainder = sp.reduced(expr, [inverse * determinant - 1], *generators, order="lex")
-    return remainder
+    # the other symbols after the basis's generators: a lex Groebner basis stays one (same leading terms)
+    variables = [*generators, *sorted(expr.free_symbols - set(generators), key=sp.default_sort_key)]
+    return sp.reduced(expr, list(basis), *variables, order="lex")[1]
 
 
 @dataclass(frozen=True)
@@ -231,13 +264,13 @@ class WanderAzimuth:
         return self.metres(computed.position)[:3, :] * state.position
 
     def earth_function_rules(self, position: sp.Matrix, earth: EarthSymbols) -> dict:
-        """The chart at the operating point (theta = 0), the Earth functions as parameters and their derivatives.
+        """The Earth functions at the chart's origin (theta = 0) as parameters and WGS-84 formulas.
 
         With s = sin L = -k_z and w = 1 - e^2 s^2 (TR8350.2, as the local-level rules with d/dL = cos L d/ds):
         dR_M/ds = 3 e^2 s R_M / w, dR_N/ds = e^2 s R_N / w,
         dg/ds = g s (2 k / (1 + k s^2) + e^2 / w + 8 f h / (a eta)), dg/dh as local level;
-        A = 1/(R_N + h), D = c R_M / ((R_M + h)(R_N + h)) (c = e^2/(1 - e^2)) and Q = 1/det K = (R_M + h)(R_N + h)
-        (det K = A (A + D cos^2 L) = A / (R_M + h): R_N - R_M = c R_M cos^2 L on the ellipsoid).
+        A = 1/(R_N + h), B = 1/(R_M + h), D = c R_M A B (c = e^2/(1 - e^2)) and Q = 1/det K = (R_M + h)(R_N + h)
+        (det K = A (A + D cos^2 L) = A B: R_N - R_M = c R_M cos^2 L on the ellipsoid).
         """
         theta_x, theta_y, _, h = position
         e2, a = sp.Float(wgs84.ECCENTRICITY_SQUARED), sp.Float(wgs84.SEMI_MAJOR_AXIS)
@@ -246,42 +279,30 @@ class WanderAzimuth:
         w = 1 - e2 * s**2
         eta = 1 - 2 * h * (1 + f + m - 2 * f * s**2) / a + 3 * h**2 / a**2
         g, RM, RN = earth.gravity, earth.meridian_radius, earth.prime_vertical_radius
-        d_s = {theta_x: self.axis[1], theta_y: -self.axis[0]}  # d(sin L)/d(theta)
         ratio = e2 / (1 - e2)
-        transverse = WanderTransverseCurvature(theta_x, theta_y, h)
-        gravity = WanderGravity(theta_x, theta_y, h)
-        difference = WanderCurvatureDifference(theta_x, theta_y, h)
-        rules: dict = {}
-        for c, ds in d_s.items():
-            dRM, dRN = 3 * e2 * s * RM / w * ds, e2 * s * RN / w * ds
-            rules[sp.Derivative(transverse, c)] = -dRN / (RN + h) ** 2
-            rules[sp.Derivative(gravity, c)] = g * s * (2 * k / (1 + k * s**2) + e2 / w + 8 * f * h / (a * eta)) * ds
-            rules[sp.Derivative(difference, c)] = ratio * (
-                dRM / ((RM + h) * (RN + h)) - RM * dRM / ((RM + h) ** 2 * (RN + h)) - RM * dRN / ((RM + h) * (RN + h) ** 2)
-            )
-        rules[sp.Derivative(transverse, h)] = -1 / (RN + h) ** 2
-        rules[sp.Derivative(gravity, h)] = g * (-2 * (1 + f + m - 2 * f * s**2) / a + 6 * h / a**2) / eta
-        rules[sp.Derivative(difference, h)] = -ratio * RM * (RM + RN + 2 * h) / ((RM + h) * (RN + h)) ** 2
-        rules.update({
-            transverse: 1 / (RN + h), gravity: g, difference: ratio * RM / ((RM + h) * (RN + h)),
-            WanderInverseDeterminant(theta_x, theta_y, h): (RM + h) * (RN + h),
-        })
+        dRM, dRN = 3 * e2 * s * RM / w, e2 * s * RN / w
+        A, B, D, D_s, gravity, g_s, Q = _functions(position)
+        rules: dict = {
+            A: 1 / (RN + h), B: 1 / (RM + h), D: ratio * RM / ((RM + h) * (RN + h)), Q: (RM + h) * (RN + h), gravity: g,
+            D_s: ratio * (dRM / ((RM + h) * (RN + h)) - RM * dRM / ((RM + h) ** 2 * (RN + h)) - RM * dRN / ((RM + h) * (RN + h) ** 2)),
+            g_s: g * s * (2 * k / (1 + k * s**2) + e2 / w + 8 * f * h / (a * eta)),
+            sp.Derivative(gravity, h): g * (-2 * (1 + f + m - 2 * f * s**2) / a + 6 * h / a**2) / eta,
+        }
         rules.update({c: 0 for c in position[:3]})
         return rules
 
     def at_operating_point(self, matrix: sp.Matrix, position: sp.Matrix, reduce: bool = False) -> sp.Matrix:
-        """``matrix`` at the chart's origin (theta = 0), the Earth functions and their derivatives kept (for the rules
-        of :meth:`earth_function_rules`), Q's derivatives written as -Q^2 (det K)' (:func:`inverse_determinant_rules`).
+        """``matrix`` at the chart's origin (theta = 0), the derivatives of the Earth functions written with
+        :func:`derivative_rules`, the functions and dg/dh kept (for the rules of :meth:`earth_function_rules`).
 
-        Every entry is then a polynomial in the Earth functions, their derivatives and Q = 1/det K; with ``reduce``,
-        each is reduced modulo Q det K = 1 (:func:`reduce_inverse_determinant`), so that K^-1 K = I and the like
-        cancel exactly (a polynomial division; the previous ``cancel`` of rational functions took minutes).
+        Every entry is then a polynomial in the Earth functions, dg/dh and Q = 1/det K; with ``reduce``, each is
+        reduced modulo :func:`relations` (:func:`reduce_by_relations`), so that K^-1 K = I and the like cancel
+        exactly (one polynomial division per entry; the ``cancel`` of rational functions it replaces took minutes).
         """
-        matrix = matrix.xreplace(inverse_determinant_rules(self.axis, position))
+        matrix = matrix.xreplace(derivative_rules(self.axis, position))
         functions = [a for a in matrix.atoms(sp.Derivative, *EARTH_FUNCTIONS)]
-        inverse = WanderInverseDeterminant(*position[:2], position[3])
         if reduce:
-            functions += [inverse, *curvature_determinant(self.axis, position).atoms(*EARTH_FUNCTIONS)]
+            functions += list(_functions(position))
         derivatives = sorted({a for a in functions if isinstance(a, sp.Derivative)}, key=sp.default_sort_key)
         applied = sorted({a for a in functions if not isinstance(a, sp.Derivative)}, key=sp.default_sort_key)
         stand_in = {a: sp.Dummy(f"earth_{k}", real=True) for k, a in enumerate(derivatives + applied)}
@@ -292,8 +313,11 @@ class WanderAzimuth:
 
         out = plain(matrix)
         if reduce:
-            determinant = plain(sp.Matrix([curvature_determinant(self.axis, position)]))[0]
-            out = out.applyfunc(lambda e: reduce_inverse_determinant(e, stand_in[inverse], determinant))
+            A, B, D, _, _, _, Q = (stand_in[a] for a in _functions(position))
+            kx, ky, kz = self.axis
+            generators = [Q, B, A, D, kz, kx, ky]  # lex: B, Q A^2 and k_z^2 are eliminated
+            basis = sp.groebner(list(plain(sp.Matrix(relations(self.axis, position)))), *generators, order="lex").exprs
+            out = out.applyfunc(lambda e: reduce_by_relations(e, basis, generators))
         return out.xreplace({v: k for k, v in stand_in.items()})
 
     def expression_names(self, state: NavigationState) -> dict[str, Any]:
