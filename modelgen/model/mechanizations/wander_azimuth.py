@@ -291,34 +291,32 @@ class WanderAzimuth:
         rules.update({c: 0 for c in position[:3]})
         return rules
 
-    def at_operating_point(self, matrix: sp.Matrix, position: sp.Matrix, reduce: bool = False) -> sp.Matrix:
-        """``matrix`` at the chart's origin (theta = 0), the derivatives of the Earth functions written with
-        :func:`derivative_rules`, the functions and dg/dh kept (for the rules of :meth:`earth_function_rules`).
+    def declared_products(self, factors: Sequence[sp.Matrix], position: sp.Matrix) -> tuple[sp.Matrix, sp.Matrix, sp.Matrix]:
+        """(T F_0 + T') T^-1, T G_0, H_0 T^-1 from the factors (T, T', T^-1, F_0, G_0, H_0), at the chart's origin.
 
-        Every entry is then a polynomial in the Earth functions, dg/dh and Q = 1/det K; with ``reduce``, each is
-        reduced modulo :func:`relations` (:func:`reduce_by_relations`), so that K^-1 K = I and the like cancel
-        exactly (one polynomial division per entry; the ``cancel`` of rational functions it replaces took minutes).
+        One pass over each factor: the derivatives of the Earth functions become :func:`derivative_rules`, the
+        functions and dg/dh plain symbols, theta 0.  Every product entry is then a polynomial in those and
+        Q = 1/det K, reduced modulo :func:`relations` (:func:`reduce_by_relations`), so that K^-1 K = I and the
+        curvature terms of T' cancel exactly (one polynomial division per entry; the ``cancel`` of rational
+        functions it replaces took minutes); the functions are put back for :meth:`earth_function_rules`.
         """
-        matrix = matrix.xreplace(derivative_rules(self.axis, position))
-        functions = [a for a in matrix.atoms(sp.Derivative, *EARTH_FUNCTIONS)]
-        if reduce:
-            functions += list(_functions(position))
-        derivatives = sorted({a for a in functions if isinstance(a, sp.Derivative)}, key=sp.default_sort_key)
-        applied = sorted({a for a in functions if not isinstance(a, sp.Derivative)}, key=sp.default_sort_key)
-        stand_in = {a: sp.Dummy(f"earth_{k}", real=True) for k, a in enumerate(derivatives + applied)}
+        functions = _functions(position)
+        gravity_gradient = sp.Derivative(functions[4], position[3])
+        stand_in = {f: sp.Dummy(f"earth_{k}", real=True) for k, f in enumerate((*functions, gravity_gradient))}
         at_origin = {c: 0 for c in CHART}
-
-        def plain(m: sp.Matrix) -> sp.Matrix:
-            return m.xreplace({a: stand_in[a] for a in derivatives}).xreplace({a: stand_in[a] for a in applied}).xreplace(at_origin)
-
-        out = plain(matrix)
-        if reduce:
-            A, B, D, _, _, _, Q = (stand_in[a] for a in _functions(position))
-            kx, ky, kz = self.axis
-            generators = [Q, B, A, D, kz, kx, ky]  # lex: B, Q A^2 and k_z^2 are eliminated
-            basis = sp.groebner(list(plain(sp.Matrix(relations(self.axis, position)))), *generators, order="lex").exprs
-            out = out.applyfunc(lambda e: reduce_by_relations(e, basis, generators))
-        return out.xreplace({v: k for k, v in stand_in.items()})
+        mapping = {k: v.xreplace(stand_in).xreplace(at_origin) for k, v in derivative_rules(self.axis, position).items()}
+        mapping.update(stand_in)
+        mapping.update(at_origin)
+        T, T_dot, T_inv, F0, G0, H0 = (m.xreplace(mapping) for m in factors)
+        A, B, D, _, _, _, Q = (stand_in[f] for f in functions)
+        kx, ky, kz = self.axis
+        generators = [Q, B, A, D, kz, kx, ky]  # lex: B, Q A^2 and k_z^2 are eliminated
+        basis = sp.groebner([r.xreplace(mapping) for r in relations(self.axis, position)], *generators, order="lex").exprs
+        back = {v: k for k, v in stand_in.items()}
+        return tuple(
+            m.applyfunc(lambda e: reduce_by_relations(e, basis, generators)).xreplace(back)
+            for m in ((T * F0 + T_dot) * T_inv, T * G0, H0 * T_inv)
+        )
 
     def expression_names(self, state: NavigationState) -> dict[str, Any]:
         """The names a written velocity equation may use in the w-frame."""

@@ -80,10 +80,8 @@ def declared_stage(problem: NavigationProblem, primitive: Stage) -> Stage:
         return primitive
     T_dot = _time_derivative(T, problem)
     mech = problem.mechanization()
-    if not hasattr(mech, "at_operating_point"):
+    if not hasattr(mech, "declared_products"):
         return Stage((T * primitive.F + T_dot) * T_inv, T * primitive.G, primitive.H * T_inv)
-    # a mechanization whose position is a chart about the operating point (wander azimuth): the factors there,
-    # and the products reduced exactly (its K^-1 K = I: polynomials in 1/det K, reduced by (1/det K) det K = 1)
-    at = lambda m, reduce=False: mech.at_operating_point(m, problem.position, reduce)  # noqa: E731
-    T, T_dot, T_inv, F0, G0, H0 = (at(m) for m in (T, T_dot, T_inv, primitive.F, primitive.G, primitive.H))
-    return Stage(*(at(m, True) for m in ((T * F0 + T_dot) * T_inv, T * G0, H0 * T_inv)))
+    # a mechanization whose position is a chart about the operating point (wander azimuth): the products there,
+    # reduced exactly (its K^-1 K = I: polynomials in 1/det K, reduced by (1/det K) det K = 1 and the ellipsoid's relations)
+    return Stage(*mech.declared_products((T, T_dot, T_inv, primitive.F, primitive.G, primitive.H), problem.position))
