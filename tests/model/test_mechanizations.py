@@ -16,10 +16,11 @@ def test_local_level_is_registered_and_is_the_engines_default():
     assert problem.NavigationProblem.__dataclass_fields__["mechanization_name"].default == "local_level"
 
 
-def test_local_level_satisfies_the_protocol():
+@pytest.mark.parametrize("name", sorted(MECHANIZATIONS))
+def test_every_mechanization_satisfies_the_protocol(name):
     for method in ("earth_rate", "transport_rate", "navigation_rate", "velocity_rate", "position_rate", "gravity",
-                   "error_frame_angle", "metres"):
-        assert callable(getattr(LocalLevel, method)), method
+                   "error_frame_angle", "metres", "metres_inverse"):
+        assert callable(getattr(MECHANIZATIONS[name], method)), method
         assert method in Mechanization.__dict__, method
 
 

@@ -16,6 +16,12 @@ by the wander angle, free wander: no vertical transport rate, valid through the 
 :mod:`~modelgen.model.mechanizations.wander_azimuth`).  Adding one: a module
 here with a class that satisfies :class:`Mechanization`, registered in
 :data:`MECHANIZATIONS` (README, "How to add ... a mechanization").
+
+Two hooks are optional: ``earth_function_rules(position, earth)``, the mechanization's own Earth
+functions and their derivatives as parameters and formulas (ecef: |r^e|; wander azimuth: its curvatures),
+and ``declared_products(factors, position)``, which forms F, G, H of the declared errors from the
+factors of the change of variables itself (wander azimuth: at its chart's origin, reduced modulo the
+ellipsoid's relations so that K^-1 K = I cancels without a gcd).
 """
 
 from __future__ import annotations
