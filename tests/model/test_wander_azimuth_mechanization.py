@@ -16,7 +16,8 @@ wander-azimuth frame (psi-angle, computed-frame velocity, metres).  Three checks
   equal central finite differences of the wander-azimuth navigation equations and
   the error definitions, written here in numpy from latitude, longitude and the
   wander angle (no modelgen code, no curvature matrix K): computed and true states
-  are propagated and the declared errors differenced.
+  are propagated and the declared errors differenced; each block to 1e-6 of itself, and
+  the lever-arm position rows to 1e-9 (their O(l/R) terms are kept: exact first order).
 * The polar flight loads in wander azimuth with finite matrices (local level refuses it and
   names both ways out: tests/model/test_ecef_mechanization.py).
 """
@@ -163,25 +164,34 @@ def _error_rate(computed, f_b, w_b, dx, noise, tau=5.0):
 
 
 def _antenna(state, w_b, lever):
-    """(r^e, v^w) of the antenna at lever arm l: r + C_w^e C_b^w l, v + C (w x l) - w_ie x (C l)."""
+    """(C_w^e C_b^w l, v^w of the antenna): the lever arm in the e-frame, v + C (w x l) - w_ie x (C l)."""
     C_bw, v, C_ew, h = state
     arm = C_bw @ lever
-    return _position(C_ew, h) + C_ew.T @ arm, v + C_bw @ np.cross(w_b, lever) - np.cross(W * C_ew[:, 2], arm)
+    return C_ew.T @ arm, v + C_bw @ np.cross(w_b, lever) - np.cross(W * C_ew[:, 2], arm)
 
 
 def _measurement(computed, w_b, lever, dx):
-    """INS minus GNSS: metres and velocity of the antenna along the computed wander axes."""
+    """INS minus GNSS: metres and velocity of the antenna along the computed wander axes.
+
+    The position difference is dr (C_e^w (r_c - r_t), the error definition) plus the lever arms' difference, so that
+    r^e's rounding (1e-9 m) does not swamp the attitude columns."""
     C_ew = computed[2]
     true = _true_state(computed, dx)
     _, w_t = _true_sensors(np.zeros(3), w_b, dx, np.zeros(6))
-    r_c, v_c = _antenna(computed, w_b, lever)
-    r_t, v_t = _antenna(true, w_t, lever)
-    return np.concatenate([C_ew @ (r_c - r_t), v_c - C_ew @ true[2].T @ v_t])
+    arm_c, v_c = _antenna(computed, w_b, lever)
+    arm_t, v_t = _antenna(true, w_t, lever)
+    return np.concatenate([dx[0:3] + C_ew @ (arm_c - arm_t), v_c - C_ew @ true[2].T @ v_t])
 
 
-#: Finite-difference steps of the 21 error states and the 6 IMU noises (large enough to beat rounding in r^e).
+#: Finite-difference steps of the 21 error states and the 6 IMU noises (large enough to beat rounding in r^e);
+#: H's velocity rows (100 m/s against 1e-14 rounding) take larger attitude and scale-factor steps; its position rows
+#: (no r^e in them, see _measurement) a small attitude step, so that their O(l/R) terms (2e-7) show.
 STEPS = np.array([50.0] * 3 + [0.05] * 3 + [2e-5] * 3 + [1e-6] * 3 + [1e-3] * 3 + [1e-4] * 6)
+H_STEPS = np.array([50.0] * 3 + [0.05] * 3 + [1e-3] * 3 + [1e-6] * 3 + [1e-3] * 3 + [5e-4] * 6)
+H_POSITION_STEPS = np.array([50.0] * 3 + [0.05] * 3 + [1e-5] * 3 + [1e-6] * 3 + [1e-3] * 3 + [5e-4] * 6)
 NOISE_STEPS = np.array([1e-6] * 3 + [1e-3] * 3)
+#: The error-state blocks: position, velocity, attitude, gyro bias, accelerometer bias, the two scale factors.
+BLOCKS = [slice(3 * k, 3 * k + 3) for k in range(7)]
 
 
 def _finite_differences(computed, f_b, w_b, lever):
@@ -192,7 +202,10 @@ def _finite_differences(computed, f_b, w_b, lever):
         dx = np.zeros(21)
         dx[j] = step
         F[:, j] = (_error_rate(computed, f_b, w_b, dx, none) - _error_rate(computed, f_b, w_b, -dx, none)) / (2 * step)
-        H[:, j] = (_measurement(computed, w_b, lever, dx) - _measurement(computed, w_b, lever, -dx)) / (2 * step)
+        for rows, steps in ((slice(0, 3), H_POSITION_STEPS), (slice(3, 6), H_STEPS)):
+            dz = np.zeros(21)
+            dz[j] = steps[j]
+            H[rows, j] = (_measurement(computed, w_b, lever, dz) - _measurement(computed, w_b, lever, -dz))[rows] / (2 * steps[j])
     for j, step in enumerate(NOISE_STEPS):
         w = np.zeros(6)
         w[j] = step
@@ -272,12 +285,21 @@ def test_wander_F_G_H_equal_finite_differences_of_the_wander_navigation_equation
     F, G, H = numeric["F"], numeric["G"], numeric["H"]
     assert np.isfinite(F).all() and np.isfinite(G).all() and np.isfinite(H).all()
     F_fd, G_fd, H_fd = _finite_differences(state, F_B, W_B, LEVER)
-    scale = STEPS  # compare the error each column makes over its step (the blocks differ by 10 orders)
-    for rows, name in ((slice(0, 3), "position"), (slice(3, 6), "velocity"), (slice(6, 9), "attitude")):
-        made, expected = F[rows, :] * scale, F_fd[rows, :] * scale
-        assert np.abs(made - expected).max() <= 1e-6 * np.abs(expected).max(), name
+    for made, expected, steps, rows in ((F, F_fd, STEPS, BLOCKS[:3]), (H, H_fd, H_STEPS, BLOCKS[:2])):
+        for row in rows:
+            # the error each column makes over its step: a block that makes < 1e-9 of its rows' largest is zero
+            scaled_made, scaled_expected = made[row, :] * steps, expected[row, :] * steps
+            scale = np.abs(scaled_expected).max()
+            assert np.abs(scaled_made - scaled_expected).max() <= 1e-6 * scale, (row, "all columns")
+            for column in BLOCKS:
+                block = np.abs(scaled_expected[:, column]).max()
+                if block > 1e-9 * scale:  # and each block to 1e-6 of itself
+                    assert np.abs(made[row, column] - expected[row, column]).max() <= 1e-6 * np.abs(expected[row, column]).max(), (row, column)
     assert np.abs(G[:9, :6] - G_fd).max() <= 1e-6 * np.abs(G_fd).max()
-    assert np.abs(H * scale - H_fd * scale).max() <= 1e-6 * np.abs(H_fd * scale).max()
+    # the lever-arm position rows are exact to first order: their O(l/R) terms (2e-7 of C [l x], the ones the local-level
+    # twin drops) are in H, to 1e-9
+    for column in BLOCKS[:3]:
+        assert np.abs(H[:3, column] - H_fd[:3, column]).max() <= 1e-9 * np.abs(H_fd[:3, column]).max(), column
     # the sensor-error rows: first-order Gauss-Markov processes, nothing from the navigation states
     assert not F[9:, :9].any() and np.allclose(np.diag(F[9:, 9:]), -np.array([2.8e-4] * 6 + [2.8e-5] * 6), rtol=0, atol=0)
 
