@@ -364,3 +364,17 @@ def test_wander_position_rows_are_exactly_minus_the_transport_rate_cross_dr_plus
         for j in range(3):
             assert F[i, 3 + j] == (1 if i == j else 0)
     assert "velocity_z" not in {p.name for p in wander.model.parameters}  # F and H of the psi-angle model need no v_z
+
+
+def test_a_non_polynomial_measurement_in_wander_azimuth_is_derived_unreduced():
+    """A speed |v| (sqrt: not a polynomial, so not reduced by the ellipsoid's relations) is derived as v^T dv / |v|."""
+    text = WANDER_MODEL.read_text()
+    velocity = '''    - {of: velocity, lever_arm: {symbol: l}, symbols: [Z_vx, Z_vy, Z_vz], variance: "sigma_v**2"}\n'''
+    speed = '''    - {of: expression, expression: "sqrt(dot(v_w, v_w))", symbols: [Z_s], units: [m/s], variance: "sigma_v**2"}\n'''
+    assert velocity in text
+    text = text.replace(velocity, velocity + speed).replace("velocity_y: 81.91520442889918,", "velocity_y: 81.91520442889918, velocity_z: 1.5,")
+    model = load_model_text(text, filename="wander_speed.yaml")
+    values = {**dict(model.parameter_defaults()), **model.check.parameter_values()}
+    H = derive(model).numeric(values)["H"]
+    v = np.array([values[f"velocity_{a}"] for a in "xyz"])
+    assert np.abs(H[-1, 3:6] - v / np.linalg.norm(v)).max() <= 1e-15 and not H[-1, :3].any() and not H[-1, 6:].any()

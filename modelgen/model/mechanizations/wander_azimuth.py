@@ -179,7 +179,14 @@ def reduce_by_relations(expr: sp.Expr, basis: Sequence[sp.Expr], generators: Seq
         return expr
     # the other symbols after the basis's generators: a lex Groebner basis stays one (same leading terms)
     variables = [*generators, *sorted(expr.free_symbols - set(generators), key=sp.default_sort_key)]
-    return sp.reduced(expr, list(basis), *variables, order="lex")[1]
+    try:
+        return sp.reduced(expr, list(basis), *variables, order="lex")[1]
+    except sp.PolynomialError:  # not a polynomial in the others (a measurement's sqrt): they are coefficients
+        pass
+    try:
+        return sp.reduced(expr, list(basis), *generators, order="lex")[1]
+    except sp.PolynomialError:  # not a polynomial in the Earth functions either: exact as it is, only not reduced
+        return expr
 
 
 @dataclass(frozen=True)
