@@ -679,6 +679,13 @@ def _check_defined(expr: sp.Expr, text: str, where: str) -> None:
         raise ModelError(
             f"{where}: {shown()} multiplies out to more than {MAX_EXPANDED_TERMS} terms; write it in a smaller form"
         )
+    power = _largest_power_of_a_sum(expr)
+    if power > MAX_EXPONENT:
+        raise ModelError(
+            f"{where}: {shown()} raises a sum to the power {power} once the definitions it uses are written out "
+            f"(at most {MAX_EXPONENT}: its expansion's coefficients grow with the power, past what sympy multiplies "
+            "out in reasonable time)"
+        )
     stack = [expr]
     while stack:
         e = stack.pop()
@@ -723,6 +730,17 @@ def _is_zero(e: sp.Expr) -> bool:
     except (TypeError, ValueError, ArithmeticError, RecursionError):
         pass
     return sp.count_ops(e) <= 40 and sp.simplify(e) == 0
+
+
+def _largest_power_of_a_sum(expr: sp.Expr) -> int:
+    """The largest integer exponent |n| of a power whose base is a sum, anywhere in ``expr`` (0 if none).
+
+    A literal exponent is bounded by :data:`MAX_EXPONENT` in the text; powers of definitions that are powers
+    themselves (``a1 = (x + y)**64``, ``a2 = a1**64``) combine to (x + y)**4096, which has few terms but binomial
+    coefficients of over a thousand digits: the term count does not see it.
+    """
+    return max((abs(int(e.exp)) for e in sp.preorder_traversal(expr)
+                if isinstance(e, sp.Pow) and e.exp.is_Integer and isinstance(e.base, sp.Add)), default=0)
 
 
 def _expanded_terms(expr: sp.Expr) -> int:
