@@ -142,6 +142,40 @@ def qd_variance_check(n: int, prefix: str, zero: str, compact: bool) -> list[str
                     "        }", "    }", "}"]
 
 
+def _runs(columns: list[int]) -> list[tuple[int, int]]:
+    """Consecutive runs (first, past the last) of ascending columns."""
+    runs: list[list[int]] = []
+    for j in columns:
+        if runs and runs[-1][1] == j:
+            runs[-1][1] = j + 1
+        else:
+            runs.append([j, j + 1])
+    return [(a, b) for a, b in runs]
+
+
+def kept_check_lines(kept: list[tuple[int, int]], zero: str) -> list[str]:
+    """C lines of predict that check the pairs it leaves in P (``kernels.kept_pairs_to_check``) finite: ``kept_check`` 0 or NaN.
+
+    Their sum in two partial sums (one load and one add per entry) is finite
+    only if every entry is; a sum that is not (an entry that is not finite,
+    or an overflow of finite ones) is decided entry by entry.  predict
+    declares ``kept[2]`` (zero) and ``kept_check``.
+    """
+    if not kept:
+        return []
+    rows: dict[int, list[int]] = {}
+    for i, j in kept:
+        rows.setdefault(i, []).append(j)
+    lines = [f"kept[{k % 2}] += f->P[{i}][{j}];" for k, (i, j) in enumerate(kept)]
+    lines.append("kept_check = kept[0] + kept[1];")
+    lines += [f"if (kept_check - kept_check != {zero}) {{", "    int j;", f"    kept_check = {zero};"]
+    for i, columns in rows.items():
+        for a, b in _runs(columns):
+            lines += [f"    for (j = {a}; j < {b}; ++j) {{", f"        kept_check += f->P[{i}][j] - f->P[{i}][j];", "    }"]
+    lines += ["} else {", f"    kept_check = {zero};", "}"]
+    return lines
+
+
 def compact_tables(description: FilterDescription) -> dict[str, list[int]]:
     """Phi's CSR tables for the compact prediction kernels; empty when the prediction is unrolled."""
     return compact_predict_tables(description.structure) if description.compact else {}
@@ -472,6 +506,9 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "predict_state_commit": [c_statement(s) for s in state_commit],
         "probe_entry": structure.entries("Phi").index(probe),
         "covariance_commit_rows": description.covariance_commit,
+        "predict_commit_rows": description.predict_commit,
+        "predict_keeps": bool(description.kept_pairs),  # Pn's rescan covers the computed entries only
+        "kept_check": kept_check_lines(description.kept_pairs_to_check, spell["zero"]),
         "predict_blocks": predict_functions,
         "compact": bool(compact),
         "compact_tables": {**{k: _table(v) for k, v in compact.items()}, "nnz": max(len(compact.get("col", ())), 1)},
