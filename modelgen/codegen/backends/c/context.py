@@ -9,7 +9,7 @@ from modelgen.codegen.backends.c.literals import c_number, scalar_bytes, scalar_
 from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c_declarator, c_lines, c_ref, c_statement
 from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.discretize_kernels import HORNER_LAST, DiscretizeBlock, SegmentAssign, horner_level_name, scalar_statements
-from modelgen.codegen.kernels import MIN_LANE_PAIRS, CheckedAssign, KernelBlock, compact_predict_tables, lane_split
+from modelgen.codegen.kernels import MIN_LANE_PAIRS, Assign, CheckedAssign, KernelBlock, Ref, compact_predict_tables, lane_split
 from modelgen.codegen.compact_discretize import CompactDiscretizeTables
 from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout, packed_index, phi_entries
 from modelgen.codegen.smoother import reset_inverse
@@ -97,6 +97,59 @@ def two_lane_sums(block: KernelBlock) -> bool:
     return block.two_lanes and any(lane_split(s.terms)[0] for s in block.statements if not isinstance(s, SegmentAssign))
 
 
+#: A row of M = Phi P with fewer terms (a Markov state's, one) stays scalar sums, which gcc -O2 pairs
+#: itself: 18 states, the loop for those rows too cost 160 instructions a cycle more.
+MIN_BROADCAST_TERMS = 2
+
+
+def _broadcast_row(block: KernelBlock) -> list[tuple[Ref, int]] | None:
+    """(Phi entry, row k of P) of each term when the block is row i of M = Phi P in full storage, else None.
+
+    That is: one statement per column c = 0..N-1, M[c] = sum_q Phi(e_q) P[k_q][c]
+    with the same factors and rows for every column (``phi_times_p_row_i``).
+    """
+    statements = block.statements
+    if not statements or not all(isinstance(s, Assign) and s.target.array == "M" and s.target.index == (c,)
+                                 for c, s in enumerate(statements)):
+        return None
+    first = statements[0].terms
+    if not first or not all(len(t) == 2 and t[0].owner == "transition" and t[1].owner == "filter" and t[1].array == "P"
+                            and len(t[1].index) == 2 and t[1].index[1] == 0 for t in first):
+        return None
+    row = [(factor, source.index[0]) for factor, source in first]
+    for c, s in enumerate(statements):
+        if s.terms != tuple((factor, Ref("filter", "P", (k, c))) for factor, k in row):
+            return None
+    return row
+
+
+def m_row_lines(block: KernelBlock) -> list[str] | None:
+    """Row i of M = Phi P as a loop over column pairs: each factor Phi(i, k) broadcast once, then P's rows two columns a step.
+
+    The sums are those of the scalar statements, term by term in the same
+    order in each lane (so the same bits); a lane pair is an SSE2 vector
+    (runtime ``modelgen_lane_pair.h``), so each term is one load, one
+    multiplication and one addition for two columns (bench/bench_cycle.py,
+    32 states: 24,757 -> 22,720 instructions a cycle against the unrolled
+    scalar sums, whose 27 factors gcc -O2 spills and copies).  An odd N
+    leaves the last column to a scalar sum.  None when the block is not
+    such a row (packed storage, the UD form).
+    """
+    row = _broadcast_row(block)
+    if row is None or len(row) < MIN_BROADCAST_TERMS or len(block.statements) < 2:
+        return None
+    n = len(block.statements)
+    lines = ["int c;", f"lane_pair b[{len(row)}];"]
+    lines += [f"b[{q}] = lane_pair_of({c_ref(f)}, {c_ref(f)});" for q, (f, _) in enumerate(row)]
+    lines.append(f"for (c = 0; c + 1 < {n}; c += 2) {{")
+    lines.append(f"    lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[{row[0][1]}][c]));")
+    lines += [f"    acc = lane_pair_add_product(acc, b[{q}], lane_pair_load(&f->P[{k}][c]));" for q, (_, k) in enumerate(row) if q]
+    lines += ["    lane_pair_store(&w->M[c], acc);", "}"]
+    if n % 2:
+        lines += c_lines(block.statements[-1])
+    return lines
+
+
 def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, object]]:
     """Static C functions for the unrolled kernel pieces, with the parameters each uses."""
     types = {"filter": f"const {prefix}_filter", "transition": f"const {prefix}_transition", "scratch": f"{prefix}_filter_scratch"}  # noqa: E501
@@ -108,7 +161,7 @@ def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, ob
                 "name": block.name,
                 "signature": ", ".join(f"{types[o]} *restrict {POINTERS[o]}" for o in owners),
                 "arguments": ", ".join(POINTERS[o] for o in owners),
-                "lines": [line for s in block.statements for line in c_lines(s, two_lanes=block.two_lanes)],
+                "lines": m_row_lines(block) or [line for s in block.statements for line in c_lines(s, two_lanes=block.two_lanes)],
                 "lane_pairs": two_lane_sums(block),
                 "checked": block.checked,
                 "small": small_block(block.statements),
