@@ -240,6 +240,39 @@ def _segment_ref(ref) -> str:
     return f"{POINTERS[ref.owner]}->{ref.array}" + "".join(f"[{i}]" for i in head) + (f"[{offset}+k]" if offset else "[k]")
 
 
+def _shift(ref: Ref) -> Ref:
+    return Ref(ref.owner, ref.array, ref.index[:-1] + (ref.index[-1] + 1,))
+
+
+def _column_pair(first, second) -> bool:
+    """Whether two scalar statements are one in two lanes: x[p] and x[p+1], each term a common factor times y[q] and y[q+1].
+
+    Then both are one lane-pair sum with the common factors broadcast, term by
+    term in the same order in each lane (the same bits); the target is read
+    by no term (no aliasing between the lanes).
+    """
+    if not (type(first) is Assign and type(second) is Assign) or len(first.terms) != len(second.terms) or not first.terms:
+        return False
+    if not first.target.index or second.target != _shift(first.target):
+        return False
+    for a, b in zip(first.terms, second.terms):
+        if len(a) != 2 or len(b) != 2 or a[0] != b[0] or not a[1].index or b[1] != _shift(a[1]):
+            return False
+        if (a[0].owner, a[0].array) == (first.target.owner, first.target.array) or \
+                (a[1].owner, a[1].array) == (first.target.owner, first.target.array):
+            return False
+    return True
+
+
+def _column_pair_line(first) -> str:
+    """The C of two statements of :func:`_column_pair` (``first`` and its shift), as one lane-pair sum stored once."""
+    (f, s), *rest = first.terms
+    value = f"lane_pair_product(lane_pair_of({c_ref(f)}, {c_ref(f)}), lane_pair_load(&{c_ref(s)}))"
+    for f, s in rest:
+        value = f"lane_pair_add_product({value}, lane_pair_of({c_ref(f)}, {c_ref(f)}), lane_pair_load(&{c_ref(s)}))"
+    return f"lane_pair_store(&{c_ref(first.target)}, {value});"
+
+
 def discretize_lines(statements, read_back: bool = False, two_lanes: bool = False) -> list[str]:
     """C lines of a discretize block: scalar statements one per line, consecutive segments as one fixed-trip loop over k.
 
@@ -249,7 +282,18 @@ def discretize_lines(statements, read_back: bool = False, two_lanes: bool = Fals
     """
     lines = ["int k;"] if any(isinstance(s, SegmentAssign) for s in statements) else []
     loop = None  # the length of the loop being printed (consecutive segments of one length share it)
-    for s in statements:
+    statements = list(statements)
+    paired = set()  # the second statements of column pairs, printed with the first
+    for n, s in enumerate(statements):
+        if n in paired:
+            continue
+        if not read_back and n + 1 < len(statements) and _column_pair(s, statements[n + 1]):
+            if loop is not None:
+                lines.append("}")
+                loop = None
+            lines.append(_column_pair_line(s))
+            paired.add(n + 1)
+            continue
         if isinstance(s, SegmentAssign):
             if loop != s.length:
                 lines += ["}"] if loop is not None else []
