@@ -264,13 +264,13 @@ def _column_pair(first, second) -> bool:
     return True
 
 
-def _column_pair_line(first) -> str:
+def _column_pair_lines(first) -> list[str]:
     """The C of two statements of :func:`_column_pair` (``first`` and its shift), as one lane-pair sum stored once."""
     (f, s), *rest = first.terms
-    value = f"lane_pair_product(lane_pair_of({c_ref(f)}, {c_ref(f)}), lane_pair_load(&{c_ref(s)}))"
-    for f, s in rest:
-        value = f"lane_pair_add_product({value}, lane_pair_of({c_ref(f)}, {c_ref(f)}), lane_pair_load(&{c_ref(s)}))"
-    return f"lane_pair_store(&{c_ref(first.target)}, {value});"
+    lines = ["{", f"    lane_pair pair = lane_pair_product(lane_pair_of({c_ref(f)}, {c_ref(f)}), lane_pair_load(&{c_ref(s)}));"]
+    lines += [f"    pair = lane_pair_add_product(pair, lane_pair_of({c_ref(f)}, {c_ref(f)}), lane_pair_load(&{c_ref(s)}));"
+              for f, s in rest]
+    return lines + [f"    lane_pair_store(&{c_ref(first.target)}, pair);", "}"]
 
 
 def discretize_lines(statements, read_back: bool = False, two_lanes: bool = False) -> list[str]:
@@ -291,7 +291,7 @@ def discretize_lines(statements, read_back: bool = False, two_lanes: bool = Fals
             if loop is not None:
                 lines.append("}")
                 loop = None
-            lines.append(_column_pair_line(s))
+            lines += _column_pair_lines(s)
             paired.add(n + 1)
             continue
         if isinstance(s, SegmentAssign):
